@@ -1,0 +1,131 @@
+//! Criterion benchmarks: the bus, a whole virtual episode against bare physics, recording
+//! cost, and brain inference. Results and the commands live in BENCHMARKS.md.
+
+use criterion::{criterion_group, criterion_main, BatchSize, Criterion};
+use ratelab::checkpoint::load_policy;
+use ratelab::plant::CartPole;
+use ratelab::policy::Scripted;
+use ratelab::recording::{RecordOptions, Recording};
+use ratelab::topic::Topic;
+use ratelab::{run, ClockKind, Nanos, RunConfig, RunOptions};
+use std::hint::black_box;
+use std::path::Path;
+use std::sync::Arc;
+
+fn topic(c: &mut Criterion) {
+    let t: Topic<[f32; 5]> = Topic::new("/obs", 1).unwrap();
+    let mut i = 0u64;
+    c.bench_function("topic/publish+latest (1 thread)", |b| {
+        b.iter(|| {
+            i += 1;
+            t.publish(black_box([i as f32; 5]), Nanos(i), None);
+            black_box(t.latest())
+        })
+    });
+    // Two threads: a publisher hammering the topic while we publish+read.
+    let shared: Arc<Topic<[f32; 5]>> = Arc::new(Topic::new("/obs", 1).unwrap());
+    let stop = Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let other = {
+        let (t, stop) = (shared.clone(), stop.clone());
+        std::thread::spawn(move || {
+            let mut k = 0u64;
+            while !stop.load(std::sync::atomic::Ordering::Relaxed) {
+                k += 1;
+                t.publish([0.0; 5], Nanos(k), None);
+            }
+        })
+    };
+    c.bench_function("topic/publish+latest (2 threads, contended)", |b| {
+        b.iter(|| {
+            shared.publish(black_box([1.0; 5]), Nanos(0), None);
+            black_box(shared.latest())
+        })
+    });
+    stop.store(true, std::sync::atomic::Ordering::Relaxed);
+    other.join().unwrap();
+}
+
+fn episode(c: &mut Criterion) {
+    let cfg = RunConfig {
+        clock: ClockKind::Virtual,
+        ..RunConfig::default()
+    };
+    let mut g = c.benchmark_group("episode (10 s virtual, 1000 physics steps)");
+    g.bench_function(
+        "bare MuJoCo: reset + 500 control steps (1000 mj_step)",
+        |b| {
+            let mut plant = CartPole::new().unwrap();
+            b.iter(|| {
+                plant.reset(0);
+                let mut p = Scripted;
+                for _ in 0..500 {
+                    use ratelab::policy::Policy;
+                    let a = p.act(&plant.observe());
+                    black_box(plant.step(a[0]));
+                }
+            })
+        },
+    );
+    g.bench_function("ratelab graph: virtual run, 501 actuator ticks", |b| {
+        b.iter(|| {
+            black_box(
+                run(
+                    &cfg,
+                    Box::new(Scripted),
+                    RunOptions {
+                        keep_trace: false,
+                        ..Default::default()
+                    },
+                )
+                .unwrap(),
+            )
+        })
+    });
+    g.bench_function("ratelab graph + rerun recording", |b| {
+        let dir = tempfile::tempdir().unwrap();
+        let mut n = 0;
+        b.iter_batched(
+            || {
+                n += 1;
+                let path = dir.path().join(format!("bench-{n}.rrd"));
+                Recording::create(&path, &cfg, "scripted", &RecordOptions::default())
+                    .unwrap()
+                    .0
+            },
+            |rec| {
+                let opts = RunOptions {
+                    keep_trace: false,
+                    observers: vec![rec.observer()],
+                    ..Default::default()
+                };
+                let r = run(&cfg, Box::new(Scripted), opts).unwrap();
+                rec.finish(&r.metrics, &r.end).unwrap();
+            },
+            BatchSize::PerIteration,
+        )
+    });
+    g.finish();
+}
+
+fn brains(c: &mut Criterion) {
+    let fixtures = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/fixtures");
+    let obs = [0.01f32, -0.02, 0.999, 0.03, 0.1];
+    let mut g = c.benchmark_group("brain inference (one call)");
+    g.bench_function("scripted", |b| {
+        let mut p = Scripted;
+        b.iter(|| {
+            use ratelab::policy::Policy;
+            black_box(p.act(black_box(&obs)))
+        })
+    });
+    for name in ["ppo_ch2.1_seed0.pt", "ppo_ch2.1_seed0.onnx"] {
+        let path = fixtures.join(name);
+        if let Ok(mut p) = load_policy(path.to_str().unwrap()) {
+            g.bench_function(name, |b| b.iter(|| black_box(p.act(black_box(&obs)))));
+        }
+    }
+    g.finish();
+}
+
+criterion_group!(benches, topic, episode, brains);
+criterion_main!(benches);

@@ -1,0 +1,242 @@
+//! The command line (clap): `ratelab [run|bench|...]` and the run flags shared by all.
+
+use clap::{Args, Parser, Subcommand};
+use ratelab::config::{check_rate, duration_from_secs, phase_offset_from_ms, ClockKind};
+use std::path::PathBuf;
+
+/// ratelab: a graph of nodes at fixed rates keeping a MuJoCo cartpole upright.
+///
+/// Without a subcommand, `ratelab` opens the terminal lab when stdout is a terminal and
+/// runs headless (like `ratelab run`) otherwise, or with --headless.
+#[derive(Debug, Parser)]
+#[command(name = "ratelab", version, about, long_about = None)]
+pub struct Cli {
+    /// What to do (default: the lab on a terminal, a headless run otherwise).
+    #[command(subcommand)]
+    pub command: Option<Command>,
+    /// Run headless even on a terminal.
+    #[arg(long, global = true)]
+    pub headless: bool,
+    /// Run settings (for the default action).
+    #[command(flatten)]
+    pub run: RunArgs,
+}
+
+/// Subcommands.
+#[derive(Debug, Subcommand)]
+pub enum Command {
+    /// Run the graph once, headless, and print the chapter's summary.
+    Run(RunArgs),
+    /// Open the terminal lab (the default on a terminal).
+    Lab(RunArgs),
+    /// Re-run a lab session's virtual-clock runs headless from its command log.
+    Replay(ReplayArgs),
+    /// Real-clock timing benchmark: per-node tick lateness and CPU at given rates.
+    Bench(BenchArgs),
+    /// Run an exercise (ex1, ex2, ex3): prediction first, then the measurement.
+    Exercise(ExerciseArgs),
+    /// Run a grid of settings; print a table and a plot, write CSV/JSON.
+    Sweep(SweepArgs),
+    /// Find, per seed, the highest control rate at which the pole falls.
+    Cliff(CliffArgs),
+}
+
+/// `ratelab replay`.
+#[derive(Debug, Clone, Args)]
+pub struct ReplayArgs {
+    /// The session log (JSON) the lab saved.
+    pub file: PathBuf,
+    /// Write metrics-<n>.json for each replayed run into this folder.
+    #[arg(long, value_name = "DIR")]
+    pub out: Option<PathBuf>,
+}
+
+/// `ratelab exercise`.
+#[derive(Debug, Clone, Args)]
+pub struct ExerciseArgs {
+    /// ex1 (rate cliff), ex2 (queue-depth trap) or ex3 (jitter and phase offsets).
+    pub which: String,
+    /// The folder holding the exercise files and bands.toml.
+    #[arg(long, default_value = "exercises")]
+    pub dir: PathBuf,
+}
+
+fn parse_seed(s: &str) -> Result<u64, String> {
+    s.trim()
+        .parse()
+        .map_err(|_| format!("not a seed (a whole number ≥ 0): '{s}'"))
+}
+
+/// `ratelab sweep`.
+#[derive(Debug, Clone, Args)]
+pub struct SweepArgs {
+    /// Control rates, Hz (comma-separated).
+    #[arg(long, value_delimiter = ',', default_value = "50,25,20,15,10,5", value_parser = parse_rate("control-hz"))]
+    pub control_hz: Vec<f64>,
+    /// Sensor rates, Hz.
+    #[arg(long, value_delimiter = ',', default_value = "50", value_parser = parse_rate("sensor-hz"))]
+    pub sensor_hz: Vec<f64>,
+    /// Queue depths.
+    #[arg(long, value_delimiter = ',', default_value = "1", value_parser = parse_depth)]
+    pub queue_depth: Vec<usize>,
+    /// Seeds.
+    #[arg(long, value_delimiter = ',', default_value = "0,1,2", value_parser = parse_seed)]
+    pub seeds: Vec<u64>,
+    /// Clocks (virtual runs in parallel; real runs one at a time, in real time).
+    #[arg(long, value_delimiter = ',', default_value = "virtual", value_parser = parse_clock)]
+    pub clock: Vec<ClockKind>,
+    /// The brain for every run.
+    #[arg(long, default_value = "scripted")]
+    pub policy: String,
+    /// Seconds per run.
+    #[arg(long, default_value = "10", value_parser = parse_duration)]
+    pub duration: f64,
+    /// Write the table as CSV.
+    #[arg(long, value_name = "FILE")]
+    pub csv: Option<PathBuf>,
+    /// Write the table as JSON.
+    #[arg(long, value_name = "FILE")]
+    pub json: Option<PathBuf>,
+}
+
+/// `ratelab cliff`.
+#[derive(Debug, Clone, Args)]
+pub struct CliffArgs {
+    /// Seeds (one line of output each).
+    #[arg(long, value_delimiter = ',', default_value = "0,1,2", value_parser = parse_seed)]
+    pub seeds: Vec<u64>,
+    /// Sensor rate, Hz.
+    #[arg(long, default_value = "50", value_parser = parse_rate("sensor-hz"))]
+    pub sensor_hz: f64,
+    /// Queue depth.
+    #[arg(long, default_value = "1", value_parser = parse_depth)]
+    pub queue_depth: usize,
+    /// The brain.
+    #[arg(long, default_value = "scripted")]
+    pub policy: String,
+    /// Seconds per run.
+    #[arg(long, default_value = "10", value_parser = parse_duration)]
+    pub duration: f64,
+    /// Lowest rate searched, Hz.
+    #[arg(long, default_value = "1", value_parser = parse_rate("min-hz"))]
+    pub min_hz: f64,
+    /// Highest rate searched, Hz.
+    #[arg(long, default_value = "50", value_parser = parse_rate("max-hz"))]
+    pub max_hz: f64,
+    /// Resolution, Hz.
+    #[arg(long, default_value = "0.1", value_parser = parse_rate("step"))]
+    pub step: f64,
+}
+
+fn parse_rate(flag: &'static str) -> impl Fn(&str) -> Result<f64, String> + Clone {
+    move |s: &str| {
+        let hz: f64 = s
+            .trim()
+            .parse()
+            .map_err(|_| format!("not a number: '{s}'"))?;
+        check_rate(flag, hz).map_err(|e| e.to_string())
+    }
+}
+
+fn parse_duration(s: &str) -> Result<f64, String> {
+    let secs: f64 = s
+        .trim()
+        .parse()
+        .map_err(|_| format!("not a number of seconds: '{s}'"))?;
+    duration_from_secs(secs)
+        .map(|_| secs)
+        .map_err(|e| e.to_string())
+}
+
+fn parse_depth(s: &str) -> Result<usize, String> {
+    let d: usize = s
+        .trim()
+        .parse()
+        .map_err(|_| format!("not a whole number: '{s}'"))?;
+    if d == 0 {
+        return Err("--queue-depth must be at least 1, got 0".into());
+    }
+    Ok(d)
+}
+
+fn parse_clock(s: &str) -> Result<ClockKind, String> {
+    s.parse()
+        .map_err(|e: ratelab::config::ConfigError| e.to_string())
+}
+
+fn parse_offset(s: &str) -> Result<f64, String> {
+    let ms: f64 = s
+        .trim()
+        .parse()
+        .map_err(|_| format!("not a number of ms: '{s}'"))?;
+    phase_offset_from_ms(ms)
+        .map(|_| ms)
+        .map_err(|e| e.to_string())
+}
+
+/// Settings of one run.
+#[derive(Debug, Clone, Args)]
+pub struct RunArgs {
+    /// Reset seed (the course env's numpy draws).
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Run length in seconds of run time (headless default 10; the lab runs until you stop it).
+    #[arg(long, allow_negative_numbers = true, value_parser = parse_duration)]
+    pub duration: Option<f64>,
+    /// Sensor rate, Hz, in (0, 10000].
+    #[arg(long, default_value = "50", allow_negative_numbers = true, value_parser = parse_rate("sensor-hz"))]
+    pub sensor_hz: f64,
+    /// Policy (control) rate, Hz, in (0, 10000].
+    #[arg(long, default_value = "50", allow_negative_numbers = true, value_parser = parse_rate("control-hz"))]
+    pub control_hz: f64,
+    /// History depth of /obs and /action (≥ 1).
+    #[arg(long, default_value = "1", allow_negative_numbers = true, value_parser = parse_depth)]
+    pub queue_depth: usize,
+    /// Executor: real (one thread per node) or virtual (deterministic).
+    #[arg(long, default_value = "real", value_parser = parse_clock)]
+    pub clock: ClockKind,
+    /// The brain: `scripted`, or a checkpoint (.pt/.pth, .safetensors, .onnx).
+    #[arg(long, default_value = "scripted")]
+    pub policy: String,
+    /// Break the controller: control rate 5 Hz (the chapter's cliff demo).
+    #[arg(long = "break")]
+    pub break_: bool,
+    /// Quick deterministic check: virtual clock, 2 s.
+    #[arg(long)]
+    pub smoke: bool,
+    /// Write metrics.json (and trace.csv) into this folder.
+    #[arg(long, value_name = "DIR")]
+    pub out: Option<PathBuf>,
+    /// Record the run to a rerun .rrd (default: recordings/<clock>-control<hz>-q<depth>-seed<seed>.rrd).
+    #[arg(long, value_name = "PATH", num_args = 0..=1)]
+    pub record: Option<Option<PathBuf>>,
+    /// Overwrite an existing --record file.
+    #[arg(long)]
+    pub force: bool,
+    /// Stream live to a rerun viewer on PATH as well (implies --record).
+    #[arg(long)]
+    pub spawn: bool,
+    /// Lab: save the session's command log here (default: beside the recording).
+    #[arg(long, value_name = "FILE")]
+    pub session: Option<PathBuf>,
+    /// Real clock: spin this many µs before each deadline instead of sleeping.
+    #[arg(long, default_value_t = 300, value_name = "US")]
+    pub spin_margin_us: u64,
+    /// Real clock: first-tick offsets of sensor,policy,actuator in ms (e.g. 0,5,10).
+    #[arg(long, value_delimiter = ',', num_args = 1..=3, value_parser = parse_offset, value_name = "MS,MS,MS")]
+    pub phase_offset_ms: Vec<f64>,
+}
+
+/// Settings of the real-clock timing benchmark.
+#[derive(Debug, Clone, Args)]
+pub struct BenchArgs {
+    /// Rates to measure, Hz (every node at the same rate).
+    #[arg(long, value_delimiter = ',', default_value = "50,1000", value_parser = parse_rate("hz"))]
+    pub hz: Vec<f64>,
+    /// Seconds per rate.
+    #[arg(long, default_value = "5", value_parser = parse_duration)]
+    pub duration: f64,
+    /// Spin margin, µs.
+    #[arg(long, default_value_t = 300)]
+    pub spin_margin_us: u64,
+}

@@ -1,0 +1,196 @@
+//! The headless run: one graph, the chapter's summary, optional metrics.json and trace.csv.
+
+use crate::cli::RunArgs;
+use anyhow::Context;
+use indicatif::{ProgressBar, ProgressStyle};
+use ratelab::config::{phase_offset_from_ms, BREAK_CONTROL_HZ};
+use ratelab::metrics::StepRecord;
+use ratelab::recording::{check_output_path, default_path, RecordOptions, Recording};
+use ratelab::scheduler::{EndReason, StopFlag};
+use ratelab::{run, ClockKind, Nanos, RunConfig, RunOptions, RunReport};
+use std::io::{IsTerminal, Write};
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::time::Duration;
+
+/// Headless runs last this long unless `--duration` says otherwise, s.
+pub const DEFAULT_DURATION_S: f64 = 10.0;
+
+/// The run settings the flags describe (`--smoke` and `--break` applied).
+pub fn config_from_args(a: &RunArgs) -> anyhow::Result<RunConfig> {
+    let mut cfg = RunConfig {
+        seed: a.seed,
+        duration: ratelab::config::duration_from_secs(a.duration.unwrap_or(DEFAULT_DURATION_S))?,
+        sensor_hz: a.sensor_hz,
+        control_hz: if a.break_ {
+            BREAK_CONTROL_HZ
+        } else {
+            a.control_hz
+        },
+        queue_depth: a.queue_depth,
+        clock: a.clock,
+        spin_margin: Nanos(a.spin_margin_us * 1_000),
+        ..RunConfig::default()
+    };
+    for (slot, ms) in cfg.phase_offsets.iter_mut().zip(&a.phase_offset_ms) {
+        *slot = phase_offset_from_ms(*ms)?;
+    }
+    if a.smoke {
+        cfg.clock = ClockKind::Virtual;
+        cfg.duration = Nanos(2 * Nanos::SECOND.0);
+    }
+    cfg.validate()?;
+    Ok(cfg)
+}
+
+/// Run headless and print the summary. Returns the report.
+pub fn run_headless(a: &RunArgs, stop: StopFlag) -> anyhow::Result<RunReport> {
+    let cfg = config_from_args(a)?;
+    let brain = ratelab::checkpoint::load_policy(&a.policy)?;
+    if let Some(dir) = &a.out {
+        std::fs::create_dir_all(dir)
+            .with_context(|| format!("cannot create --out folder {}", dir.display()))?;
+    }
+    let bar = (cfg.clock == ClockKind::Real && std::io::stdout().is_terminal()).then(|| {
+        let bar = ProgressBar::new(cfg.duration.0 / 1_000_000);
+        bar.set_style(
+            ProgressStyle::with_template("{spinner} real clock [{bar:40}] {pos}/{len} ms run time")
+                .expect("static template")
+                .progress_chars("=> "),
+        );
+        bar.enable_steady_tick(Duration::from_millis(100));
+        bar
+    });
+    let ticker = bar.clone().map(|bar| {
+        let stop = stop.clone();
+        std::thread::spawn(move || {
+            let start = std::time::Instant::now();
+            while !stop.is_stopped() && !bar.is_finished() {
+                bar.set_position(start.elapsed().as_millis() as u64);
+                std::thread::sleep(Duration::from_millis(50));
+            }
+        })
+    });
+    let recording = open_recording(a, &cfg, &brain.label())?;
+    let mut opts = RunOptions {
+        stop: stop.clone(),
+        ..RunOptions::new()
+    };
+    if let Some(r) = &recording {
+        opts.observers.push(r.observer());
+        let r = r.clone();
+        opts.on_node_tick = Some(Arc::new(move |node, now, late| {
+            r.node_tick(node, now, late)
+        }));
+    }
+    let report = run(&cfg, brain, opts)?;
+    if let Some(r) = &recording {
+        r.finish(&report.metrics, &report.end)?;
+    }
+    if let Some(bar) = bar {
+        bar.finish_and_clear();
+    }
+    if let Some(t) = ticker {
+        let _ = t.join();
+    }
+    print_summary(&report);
+    if let Some(dir) = &a.out {
+        write_outputs(dir, &report)?;
+    }
+    if let Some(r) = &recording {
+        println!("[ratelab] recording: {}", r.path().display());
+        println!("[ratelab] open it with: rerun {}", r.path().display());
+    }
+    Ok(report)
+}
+
+/// The `--record`/`--spawn` recording, checked and opened before the run starts.
+pub fn open_recording(
+    a: &RunArgs,
+    cfg: &RunConfig,
+    policy: &str,
+) -> anyhow::Result<Option<Recording>> {
+    if a.record.is_none() && !a.spawn {
+        return Ok(None);
+    }
+    let path: PathBuf = match a.record.clone().flatten() {
+        Some(p) => p,
+        None => default_path(Path::new("recordings"), cfg),
+    };
+    check_output_path(&path, a.force)?;
+    let (recording, notice) =
+        Recording::create(&path, cfg, policy, &RecordOptions { spawn: a.spawn })?;
+    if let Some(n) = notice {
+        eprintln!("[ratelab] {n}");
+    }
+    Ok(Some(recording))
+}
+
+/// The chapter's summary, one `[ratelab]` line each, on stdout.
+pub fn print_summary(report: &RunReport) {
+    let mut out = std::io::stdout().lock();
+    for line in report
+        .metrics
+        .summary_lines(Some(report.wall.as_secs_f64()))
+    {
+        let _ = writeln!(out, "[ratelab] {line}");
+    }
+    match &report.end.reason {
+        EndReason::Interrupted => {
+            let _ = writeln!(
+                out,
+                "[ratelab] interrupted at t={:.2}s",
+                report.end.at.as_secs_f64()
+            );
+        }
+        reason @ EndReason::NodeFailed { .. } => {
+            let _ = writeln!(out, "[ratelab] {reason}");
+        }
+        _ => {}
+    }
+}
+
+/// `metrics.json` (pretty, stable key order) and `trace.csv` (one row per actuator tick).
+pub fn write_outputs(dir: &Path, report: &RunReport) -> anyhow::Result<()> {
+    let json = serde_json::to_string_pretty(&report.metrics)? + "\n";
+    let path = dir.join("metrics.json");
+    std::fs::write(&path, json).with_context(|| format!("cannot write {}", path.display()))?;
+    write_trace(&dir.join("trace.csv"), &report.trace)
+}
+
+fn write_trace(path: &Path, trace: &[StepRecord]) -> anyhow::Result<()> {
+    let mut w =
+        csv::Writer::from_path(path).with_context(|| format!("cannot write {}", path.display()))?;
+    w.write_record([
+        "step",
+        "t_ns",
+        "pole_angle",
+        "cart_pos",
+        "action",
+        "latency_ns",
+        "nonfinite",
+        "obs_published",
+        "obs_dropped",
+        "action_published",
+        "action_dropped",
+        "fell",
+    ])?;
+    for r in trace {
+        w.write_record([
+            r.step.to_string(),
+            r.t.0.to_string(),
+            format!("{:e}", r.pole_angle),
+            format!("{:e}", r.cart_pos),
+            format!("{:e}", r.action),
+            r.latency.map_or_else(String::new, |l| l.0.to_string()),
+            r.nonfinite.to_string(),
+            r.obs.published.to_string(),
+            r.obs.dropped.to_string(),
+            r.action_topic.published.to_string(),
+            r.action_topic.dropped.to_string(),
+            r.fell.to_string(),
+        ])?;
+    }
+    w.flush()?;
+    Ok(())
+}

@@ -1,0 +1,159 @@
+//! The `ratelab` binary: the terminal lab, the headless run, and the tools around them.
+
+mod bench;
+mod cli;
+mod exercise;
+mod headless;
+mod sweep;
+mod tui;
+
+use clap::error::ErrorKind;
+use clap::Parser;
+use cli::{Cli, Command};
+use ratelab::scheduler::StopFlag;
+use std::io::IsTerminal;
+use std::process::ExitCode;
+
+/// Exit code for bad input (as clap uses for usage errors).
+const EXIT_USAGE: u8 = 2;
+
+/// Open the terminal lab with the run flags.
+fn lab(args: &cli::RunArgs, stop: StopFlag) -> anyhow::Result<()> {
+    use ratelab::session::{SessionSettings, Speed, UNBOUNDED};
+    let mut cfg = headless::config_from_args(args)?;
+    if args.duration.is_none() && !args.smoke {
+        cfg.duration = UNBOUNDED;
+    }
+    ratelab::checkpoint::load_policy(&args.policy)?; // a bad --policy fails before the screen opens
+    let record = match &args.record {
+        None if !args.spawn => None,
+        Some(Some(p)) => Some(p.clone()),
+        _ => Some(ratelab::recording::default_path(
+            std::path::Path::new("recordings"),
+            &cfg,
+        )),
+    };
+    if let Some(p) = &record {
+        ratelab::recording::check_output_path(p, args.force)?;
+    }
+    let session_file = args
+        .session
+        .clone()
+        .or_else(|| record.as_ref().map(|p| p.with_extension("session.json")));
+    let alt_policy = (args.policy != "scripted").then(|| args.policy.clone());
+    let settings = SessionSettings {
+        cfg,
+        policy: args.policy.clone(),
+        alt_policy,
+        record,
+        spawn: args.spawn,
+        session_file,
+        start_paused: false,
+        speed: Speed::Times(1.0),
+    };
+    tui::run_lab(settings, stop)
+}
+
+/// Re-run a session's virtual runs and compare with what the live runs measured.
+fn replay(args: &cli::ReplayArgs) -> anyhow::Result<()> {
+    use ratelab::session::{replay_run, SessionLog};
+    let log = SessionLog::load(&args.file)?;
+    if let Some(dir) = &args.out {
+        std::fs::create_dir_all(dir)?;
+    }
+    let mut mismatches = 0;
+    for (i, run) in log.runs.iter().enumerate() {
+        let n = i + 1;
+        if run.clock != ratelab::ClockKind::Virtual {
+            println!(
+                "[ratelab] run {n}: real clock — not replayable exactly (concurrency), skipped"
+            );
+            continue;
+        }
+        if run.end_ns == 0 {
+            println!("[ratelab] run {n}: ended before its first tick, nothing to replay");
+            continue;
+        }
+        let metrics = replay_run(&log, i)?;
+        println!(
+            "[ratelab] run {n}: {} command(s) replayed",
+            run.commands.len()
+        );
+        for line in metrics.summary_lines(None).iter().skip(1) {
+            println!("[ratelab]   {line}");
+        }
+        let json = serde_json::to_string_pretty(&metrics)? + "\n";
+        match &run.metrics {
+            Some(live) if serde_json::to_string_pretty(live)? + "\n" == json => {
+                println!("[ratelab]   identical to the live run's metrics ✓")
+            }
+            Some(_) => {
+                mismatches += 1;
+                println!("[ratelab]   DIFFERS from the live run's metrics ✗")
+            }
+            None => println!("[ratelab]   (the live run recorded no metrics)"),
+        }
+        if let Some(dir) = &args.out {
+            std::fs::write(dir.join(format!("metrics-{n}.json")), json)?;
+        }
+    }
+    anyhow::ensure!(
+        mismatches == 0,
+        "{mismatches} replayed run(s) differ from the live session"
+    );
+    Ok(())
+}
+
+fn main() -> ExitCode {
+    let cli = match Cli::try_parse() {
+        Ok(cli) => cli,
+        Err(e) => {
+            if matches!(e.kind(), ErrorKind::DisplayHelp | ErrorKind::DisplayVersion) {
+                let _ = e.print();
+                return ExitCode::SUCCESS;
+            }
+            // One clear line: clap's first line names the flag, the value and the rule.
+            let text = e.render().to_string();
+            eprintln!(
+                "{}",
+                text.lines().next().unwrap_or("error: invalid arguments")
+            );
+            return ExitCode::from(EXIT_USAGE);
+        }
+    };
+    let stop = StopFlag::new();
+    {
+        let stop = stop.clone();
+        // Ctrl-C / SIGTERM: stop the graph cleanly (summaries and files still written);
+        // a second one exits at once.
+        let _ = ctrlc::set_handler(move || {
+            if stop.is_stopped() {
+                std::process::exit(130);
+            }
+            stop.stop();
+        });
+    }
+    let result = match &cli.command {
+        Some(Command::Run(args)) => headless::run_headless(args, stop).map(|_| ()),
+        Some(Command::Lab(args)) => lab(args, stop),
+        Some(Command::Replay(args)) => replay(args),
+        Some(Command::Bench(args)) => bench::run_bench(args, stop),
+        Some(Command::Exercise(args)) => exercise::run_exercise(&args.which, &args.dir),
+        Some(Command::Sweep(args)) => sweep::run_sweep(args),
+        Some(Command::Cliff(args)) => sweep::run_cliff(args),
+        None => {
+            if !cli.headless && std::io::stdout().is_terminal() && std::io::stdin().is_terminal() {
+                lab(&cli.run, stop)
+            } else {
+                headless::run_headless(&cli.run, stop).map(|_| ())
+            }
+        }
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            ExitCode::from(EXIT_USAGE)
+        }
+    }
+}

@@ -1,0 +1,229 @@
+//! `ratelab sweep` (a parameter grid to CSV/JSON with a plot) and `ratelab cliff`.
+
+use crate::cli::{CliffArgs, SweepArgs};
+use anyhow::Context;
+use indicatif::{ProgressBar, ProgressStyle};
+use ratelab::checkpoint::load_policy;
+use ratelab::config::duration_from_secs;
+use ratelab::metrics::Metrics;
+use ratelab::policy::Policy;
+use ratelab::sweep::{find_cliff, run_grid, Grid, Point};
+use ratelab::{ClockKind, RunConfig};
+use std::io::IsTerminal;
+
+fn progress_bar(total: usize) -> Option<ProgressBar> {
+    std::io::stderr().is_terminal().then(|| {
+        let bar = ProgressBar::new(total as u64);
+        bar.set_style(
+            ProgressStyle::with_template("{bar:40} {pos}/{len} runs").expect("static template"),
+        );
+        bar
+    })
+}
+
+/// Run a sweep and print/write its table.
+pub fn run_sweep(a: &SweepArgs) -> anyhow::Result<()> {
+    let spec = a.policy.clone();
+    load_policy(&spec)?; // fail fast, before any run
+    let brain = move || {
+        load_policy(&spec)
+            .map_err(|e| e.to_string())
+            .map(|b| b as Box<dyn Policy>)
+    };
+    let grid = Grid {
+        clocks: a.clock.clone(),
+        sensor_hz: a.sensor_hz.clone(),
+        control_hz: a.control_hz.clone(),
+        queue_depth: a.queue_depth.clone(),
+        seeds: a.seeds.clone(),
+        base: RunConfig {
+            duration: duration_from_secs(a.duration)?,
+            ..RunConfig::default()
+        },
+    };
+    let total = grid.points().len();
+    let bar = progress_bar(total);
+    let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let rows = run_grid(&grid, &brain, threads, &|done, _| {
+        if let Some(b) = &bar {
+            b.set_position(done as u64);
+        }
+    })?;
+    if let Some(b) = bar {
+        b.finish_and_clear();
+    }
+    print_table(&rows);
+    println!();
+    print_plot(&rows);
+    if let Some(p) = &a.csv {
+        write_csv(p, &rows).with_context(|| format!("cannot write {}", p.display()))?;
+        println!("wrote {}", p.display());
+    }
+    if let Some(p) = &a.json {
+        let items: Vec<_> = rows
+            .iter()
+            .map(|(p, m)| serde_json::json!({ "point": p, "metrics": m }))
+            .collect();
+        std::fs::write(p, serde_json::to_string_pretty(&items)? + "\n")
+            .with_context(|| format!("cannot write {}", p.display()))?;
+        println!("wrote {}", p.display());
+    }
+    Ok(())
+}
+
+fn print_table(rows: &[(Point, Metrics)]) {
+    println!(
+        "{:<7} {:>9} {:>10} {:>5} {:>4} | {:>8} {:>6} {:>9} {:>11} {:>14}",
+        "clock",
+        "sensor Hz",
+        "control Hz",
+        "depth",
+        "seed",
+        "balanced",
+        "steps",
+        "fell at s",
+        "obs dropped",
+        "mean lat (ms)"
+    );
+    for (p, m) in rows {
+        println!(
+            "{:<7} {:>9} {:>10} {:>5} {:>4} | {:>8} {:>6} {:>9} {:>11} {:>14.2}",
+            p.clock.as_str(),
+            p.sensor_hz,
+            p.control_hz,
+            p.queue_depth,
+            p.seed,
+            if m.balanced { "Y" } else { "n" },
+            m.steps,
+            m.fell_at_s.map_or("-".into(), |t| format!("{t:.2}")),
+            m.obs_dropped,
+            m.mean_latency_ms
+        );
+    }
+}
+
+/// Outcome and latency against the control rate, as text: one line per rate (over every
+/// other grid dimension), with a bar for the mean latency.
+fn print_plot(rows: &[(Point, Metrics)]) {
+    let mut rates: Vec<f64> = rows.iter().map(|(p, _)| p.control_hz).collect();
+    rates.sort_by(|a, b| b.total_cmp(a));
+    rates.dedup();
+    let max_lat = rows
+        .iter()
+        .map(|(_, m)| m.mean_latency_ms)
+        .fold(1e-9, f64::max);
+    println!("control Hz | balanced | mean sense->act latency");
+    for hz in rates {
+        let at: Vec<&Metrics> = rows
+            .iter()
+            .filter(|(p, _)| p.control_hz == hz)
+            .map(|(_, m)| m)
+            .collect();
+        let ok = at.iter().filter(|m| m.balanced).count();
+        let lat = at.iter().map(|m| m.mean_latency_ms).sum::<f64>() / at.len() as f64;
+        let bar = "#".repeat(((lat / max_lat) * 40.0).round() as usize);
+        println!(
+            "{:>10} | {:>3}/{:<4} | {:<40} {:.1} ms",
+            hz,
+            ok,
+            at.len(),
+            bar,
+            lat
+        );
+    }
+}
+
+fn write_csv(path: &std::path::Path, rows: &[(Point, Metrics)]) -> anyhow::Result<()> {
+    let mut w = csv::Writer::from_path(path)?;
+    w.write_record([
+        "clock",
+        "sensor_hz",
+        "control_hz",
+        "queue_depth",
+        "seed",
+        "balanced",
+        "steps",
+        "fell_at_s",
+        "obs_published",
+        "obs_dropped",
+        "action_published",
+        "action_dropped",
+        "mean_latency_ms",
+        "latency_p99_ms",
+        "policy",
+    ])?;
+    for (p, m) in rows {
+        w.write_record([
+            p.clock.as_str().to_string(),
+            p.sensor_hz.to_string(),
+            p.control_hz.to_string(),
+            p.queue_depth.to_string(),
+            p.seed.to_string(),
+            m.balanced.to_string(),
+            m.steps.to_string(),
+            m.fell_at_s.map_or(String::new(), |t| t.to_string()),
+            m.obs_published.to_string(),
+            m.obs_dropped.to_string(),
+            m.action_published.to_string(),
+            m.action_dropped.to_string(),
+            m.mean_latency_ms.to_string(),
+            m.latency_p99_ms.to_string(),
+            m.policy.clone(),
+        ])?;
+    }
+    w.flush()?;
+    Ok(())
+}
+
+/// For each seed, the highest control rate at which the pole falls, to `step` Hz.
+pub fn run_cliff(a: &CliffArgs) -> anyhow::Result<()> {
+    let spec = a.policy.clone();
+    load_policy(&spec)?;
+    let brain = move || {
+        load_policy(&spec)
+            .map_err(|e| e.to_string())
+            .map(|b| b as Box<dyn Policy>)
+    };
+    let results: Vec<_> = std::thread::scope(|s| {
+        let handles: Vec<_> = a
+            .seeds
+            .iter()
+            .map(|&seed| {
+                let brain = &brain;
+                s.spawn(move || {
+                    let base = RunConfig {
+                        clock: ClockKind::Virtual,
+                        seed,
+                        sensor_hz: a.sensor_hz,
+                        queue_depth: a.queue_depth,
+                        duration: duration_from_secs(a.duration)?,
+                        ..RunConfig::default()
+                    };
+                    Ok::<_, anyhow::Error>(find_cliff(&base, brain, a.min_hz, a.max_hz, a.step)?)
+                })
+            })
+            .collect();
+        handles
+            .into_iter()
+            .map(|h| h.join().expect("cliff worker panicked"))
+            .collect()
+    });
+    for r in results {
+        let c = r?;
+        match (c.falls_at_hz, c.balances_at_hz) {
+            (Some(f), Some(b)) => println!(
+                "seed {}: {:.1} Hz (falls there; balances at {:.1} Hz; {} runs)",
+                c.seed, f, b, c.runs
+            ),
+            (Some(f), None) => println!(
+                "seed {}: {:.1} Hz (falls even at the top of the range)",
+                c.seed, f
+            ),
+            (None, _) => println!(
+                "seed {}: none (balances at every rate in [{}, {}] Hz)",
+                c.seed, a.min_hz, a.max_hz
+            ),
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,400 @@
+//! The lab's state: folds telemetry from the engine and the user's keys; builds a [`View`]
+//! each frame. Keys become engine [`Control`]s; nothing here blocks the graph.
+
+use super::keymap::{depth_down, depth_up, rate_down, rate_up, Msg};
+use super::view::{LatencyView, NodeView, TopicView, Verdict, View};
+use crossbeam_channel::Sender;
+use ratelab::config::{check_rate, BREAK_CONTROL_HZ};
+use ratelab::metrics::{LatencyStats, StepRecord};
+use ratelab::run::Command;
+use ratelab::scheduler::EndReason;
+use ratelab::session::{Control, Speed, Telemetry, SPEEDS};
+use ratelab::Nanos;
+use std::collections::VecDeque;
+
+/// Seconds of pole-angle history kept (and drawn).
+pub const HISTORY_S: f64 = 10.0;
+/// Window for msg/s, drops and measured rates.
+pub const WINDOW: Nanos = Nanos::SECOND;
+/// Latency histogram bucket width.
+pub const BUCKET: Nanos = Nanos(20_000_000);
+/// Number of latency buckets shown (the last collects everything above).
+pub const BUCKETS: usize = 11;
+
+/// A short name for the status line: `scripted`, or the checkpoint's file name.
+fn short_brain(spec: &str) -> String {
+    std::path::Path::new(spec).file_name().map_or_else(|| spec.to_string(), |f| f.to_string_lossy().into_owned())
+}
+
+/// The lab's state.
+pub struct App {
+    tx: Sender<Control>,
+    clock: String,
+    speed: Speed,
+    paused: bool,
+    now: Nanos,
+    seed: u64,
+    brain: String,
+    policy_spec: String,
+    alt_policy: Option<String>,
+    depth: usize,
+    recording: Option<String>,
+    rates: [f64; 3],
+    steps: VecDeque<StepRecord>,
+    history: VecDeque<(f64, f64)>,
+    latency: LatencyStats,
+    ticks: [VecDeque<(Nanos, Nanos)>; 3],
+    last: Option<StepRecord>,
+    verdict: Verdict,
+    help: bool,
+    typing: Option<String>,
+    message: Option<String>,
+    /// Set when the user asked to quit.
+    pub quit: bool,
+}
+
+impl App {
+    /// A lab sending controls on `tx`. `policy` is the starting brain spec and `alt_policy`
+    /// the checkpoint the `p` key swaps with `scripted`.
+    pub fn new(
+        tx: Sender<Control>,
+        policy: String,
+        alt_policy: Option<String>,
+        speed: Speed,
+    ) -> Self {
+        Self {
+            tx,
+            clock: String::new(),
+            speed,
+            paused: false,
+            now: Nanos::ZERO,
+            seed: 0,
+            brain: String::new(),
+            policy_spec: policy,
+            alt_policy,
+            depth: 1,
+            recording: None,
+            rates: [50.0; 3],
+            steps: VecDeque::new(),
+            history: VecDeque::new(),
+            latency: LatencyStats::default(),
+            ticks: Default::default(),
+            last: None,
+            verdict: Verdict::Balanced,
+            help: false,
+            typing: None,
+            message: None,
+            quit: false,
+        }
+    }
+
+    /// Is an exact rate being typed?
+    pub fn typing(&self) -> bool {
+        self.typing.is_some()
+    }
+
+    fn send(&mut self, c: Control) {
+        let _ = self.tx.send(c);
+    }
+
+    fn apply(&mut self, cmd: Command) {
+        self.send(Control::Apply(cmd));
+    }
+
+    /// Fold one telemetry message.
+    pub fn on_telemetry(&mut self, t: Telemetry) {
+        match t {
+            Telemetry::Started {
+                cfg,
+                policy,
+                recording,
+            } => {
+                self.clock = cfg.clock.to_string();
+                self.seed = cfg.seed;
+                self.rates = [cfg.sensor_hz, cfg.control_hz, cfg.actuator_hz];
+                self.depth = cfg.queue_depth;
+                self.brain = policy;
+                self.recording = recording.map(|p| p.display().to_string());
+                self.now = Nanos::ZERO;
+                self.steps.clear();
+                self.history.clear();
+                self.latency = LatencyStats::default();
+                self.ticks = Default::default();
+                self.last = None;
+                self.verdict = Verdict::Balanced;
+            }
+            Telemetry::Step(s) => {
+                self.now = self.now.max(s.t);
+                if let Some(l) = s.latency {
+                    self.latency.record(l);
+                }
+                self.history.push_back((s.t.as_secs_f64(), s.pole_angle));
+                while self
+                    .history
+                    .front()
+                    .is_some_and(|(t, _)| s.t.as_secs_f64() - t > HISTORY_S)
+                {
+                    self.history.pop_front();
+                }
+                self.steps.push_back(s);
+                while self
+                    .steps
+                    .front()
+                    .is_some_and(|f| s.t.saturating_sub(f.t) > WINDOW)
+                {
+                    self.steps.pop_front();
+                }
+                if s.fell {
+                    self.verdict = Verdict::Fell(s.t.as_secs_f64());
+                }
+                self.last = Some(s);
+            }
+            Telemetry::NodeTick {
+                node,
+                now,
+                lateness,
+            } => {
+                if let Some(q) = self.ticks.get_mut(node) {
+                    q.push_back((now, lateness));
+                    while q
+                        .front()
+                        .is_some_and(|(t, _)| now.saturating_sub(*t) > WINDOW)
+                    {
+                        q.pop_front();
+                    }
+                }
+            }
+            Telemetry::Status {
+                now,
+                paused,
+                speed,
+                rates,
+                depth,
+                policy,
+            } => {
+                self.now = self.now.max(now);
+                self.paused = paused;
+                self.speed = speed;
+                self.rates = rates;
+                self.depth = depth;
+                self.brain = policy;
+            }
+            Telemetry::Applied(text) => self.message = Some(text),
+            Telemetry::Ended { metrics, reason } => {
+                self.verdict = match &reason {
+                    EndReason::NodeFailed { node, message } => {
+                        Verdict::Failed(format!("{node}: {message}"))
+                    }
+                    _ => match metrics.fell_at_s {
+                        Some(t) => Verdict::Fell(t),
+                        None => Verdict::Done,
+                    },
+                };
+                self.message = Some(format!(
+                    "run ended ({reason}) — r reset · R next seed · c other clock · q quit"
+                ));
+            }
+            Telemetry::Error(e) => self.message = Some(e),
+        }
+    }
+
+    /// Handle one key message.
+    pub fn on_msg(&mut self, m: Msg) {
+        match m {
+            Msg::ControlDown => self.set_control(rate_down(self.rates[1])),
+            Msg::ControlUp => self.set_control(rate_up(self.rates[1])),
+            Msg::Break => self.set_control(BREAK_CONTROL_HZ),
+            Msg::SensorDown => self.set_sensor(rate_down(self.rates[0])),
+            Msg::SensorUp => self.set_sensor(rate_up(self.rates[0])),
+            Msg::DepthDown => self.set_depth(depth_down(self.depth)),
+            Msg::DepthUp => self.set_depth(depth_up(self.depth)),
+            Msg::TypeRate => self.typing = Some(String::new()),
+            Msg::Input(c) => {
+                if let Some(t) = &mut self.typing {
+                    if t.len() < 8 {
+                        t.push(c);
+                    }
+                }
+            }
+            Msg::Backspace => {
+                if let Some(t) = &mut self.typing {
+                    t.pop();
+                }
+            }
+            Msg::Cancel => self.typing = None,
+            Msg::Submit => {
+                let text = self.typing.take().unwrap_or_default();
+                match text
+                    .parse::<f64>()
+                    .map_err(|_| ())
+                    .and_then(|hz| check_rate("control-hz", hz).map_err(|_| ()))
+                {
+                    Ok(hz) => self.set_control(hz),
+                    Err(()) => {
+                        self.message = Some(format!("not a rate in (0, 10000] Hz: '{text}'"))
+                    }
+                }
+            }
+            Msg::TogglePause => self.send(Control::TogglePause),
+            Msg::Step => self.send(Control::Step),
+            Msg::Reset => self.send(Control::Reset { next_seed: false }),
+            Msg::NextSeed => self.send(Control::Reset { next_seed: true }),
+            Msg::SwitchClock => self.send(Control::SwitchClock),
+            Msg::Slower | Msg::Faster => {
+                let i = SPEEDS.iter().position(|s| *s == self.speed).unwrap_or(2);
+                let j = if m == Msg::Slower {
+                    i.saturating_sub(1)
+                } else {
+                    (i + 1).min(SPEEDS.len() - 1)
+                };
+                self.speed = SPEEDS[j];
+                self.send(Control::SetSpeed(self.speed));
+            }
+            Msg::SwapBrain => match self.alt_policy.clone() {
+                Some(alt) => {
+                    let spec = if self.policy_spec == "scripted" {
+                        alt
+                    } else {
+                        "scripted".to_string()
+                    };
+                    self.policy_spec = spec.clone();
+                    self.apply(Command::SetPolicy { spec });
+                }
+                None => {
+                    self.message = Some(
+                        "no --policy file given: nothing to swap the scripted brain with".into(),
+                    )
+                }
+            },
+            Msg::ToggleHelp => self.help = !self.help,
+            Msg::Quit => {
+                self.send(Control::Quit);
+                self.quit = true;
+            }
+        }
+    }
+
+    fn set_control(&mut self, hz: f64) {
+        self.rates[1] = hz;
+        self.apply(Command::SetControlHz { hz });
+    }
+
+    fn set_sensor(&mut self, hz: f64) {
+        self.rates[0] = hz;
+        self.apply(Command::SetSensorHz { hz });
+    }
+
+    fn set_depth(&mut self, depth: usize) {
+        self.depth = depth;
+        self.apply(Command::SetQueueDepth { depth });
+    }
+
+    fn topic_view(
+        &self,
+        name: &'static str,
+        pick: fn(&StepRecord) -> ratelab::topic::TopicStats,
+    ) -> TopicView {
+        let (first, last) = (self.steps.front(), self.steps.back());
+        let (rate, dropping) = match (first, last) {
+            (Some(f), Some(l)) if l.t > f.t => {
+                let span = (l.t - f.t).as_secs_f64();
+                (
+                    (pick(l).published - pick(f).published) as f64 / span,
+                    pick(l).dropped > pick(f).dropped,
+                )
+            }
+            _ => (0.0, false),
+        };
+        TopicView {
+            name,
+            msg_per_s: rate,
+            dropped: last.map_or(0, |l| pick(l).dropped),
+            dropping,
+        }
+    }
+
+    fn node_view(&self, i: usize, name: &'static str) -> NodeView {
+        let q = &self.ticks[i];
+        let (measured_hz, lateness_p99_us) = if self.clock == "real" && q.len() >= 2 {
+            let span = (q.back().expect("len ≥ 2").0 - q.front().expect("len ≥ 2").0).as_secs_f64();
+            let mut late: Vec<u64> = q.iter().map(|(_, l)| l.0).collect();
+            late.sort_unstable();
+            let p99 = late[((late.len() as f64 * 0.99).ceil() as usize).clamp(1, late.len()) - 1];
+            (
+                Some((q.len() - 1) as f64 / span.max(1e-9)),
+                Some(p99 as f64 / 1e3),
+            )
+        } else {
+            (None, None)
+        };
+        NodeView {
+            name,
+            set_hz: self.rates[i],
+            measured_hz,
+            lateness_p99_us,
+        }
+    }
+
+    fn latency_view(&self) -> LatencyView {
+        let h = self.latency.histogram();
+        let mut buckets: Vec<(String, u64)> = (0..BUCKETS)
+            .map(|i| {
+                let label = if i + 1 == BUCKETS {
+                    format!(">{}", i as u64 * BUCKET.0 / 1_000_000)
+                } else {
+                    format!("{}", i as u64 * BUCKET.0 / 1_000_000)
+                };
+                (label, 0)
+            })
+            .collect();
+        if self.latency.count() > 0 {
+            for v in h.iter_recorded() {
+                let i = ((v.value_iterated_to() / BUCKET.0) as usize).min(BUCKETS - 1);
+                buckets[i].1 += v.count_at_value();
+            }
+        }
+        let (p50_ms, p99_ms, max_ms) = self.latency.summary_ms();
+        LatencyView {
+            buckets,
+            count: self.latency.count(),
+            p50_ms,
+            p99_ms,
+            max_ms,
+        }
+    }
+
+    /// The frame's view model.
+    pub fn view(&self) -> View {
+        View {
+            clock: self.clock.clone(),
+            speed: if self.clock == "virtual" {
+                self.speed.to_string()
+            } else {
+                String::new()
+            },
+            paused: self.paused,
+            sim_time_s: self.now.as_secs_f64(),
+            seed: self.seed,
+            brain: short_brain(&self.policy_spec),
+            depth: self.depth,
+            recording: self.recording.clone(),
+            nodes: [
+                self.node_view(0, "sensor"),
+                self.node_view(1, "policy"),
+                self.node_view(2, "actuator"),
+            ],
+            topics: [
+                self.topic_view("/obs", |s| s.obs),
+                self.topic_view("/action", |s| s.action_topic),
+            ],
+            pole_angle: self.last.map_or(0.0, |s| s.pole_angle),
+            cart_pos: self.last.map_or(0.0, |s| s.cart_pos),
+            verdict: self.verdict.clone(),
+            angle_history: self.history.iter().copied().collect(),
+            latency: self.latency_view(),
+            help: self.help,
+            typing: self.typing.clone(),
+            message: self.message.clone(),
+        }
+    }
+}

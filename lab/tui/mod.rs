@@ -1,0 +1,281 @@
+//! The terminal lab: a live dashboard of the graph, with the rate and the queue under the
+//! user's fingers. `main` is init → run → always restore; the loop is generic over the
+//! ratatui `Backend` so tests drive it with `TestBackend`.
+
+pub mod app;
+pub mod keymap;
+pub mod view;
+
+use anyhow::Context;
+use app::App;
+use crossbeam_channel::{bounded, select, tick, unbounded, Receiver};
+use crossterm::event::Event as TermEvent;
+use ratatui::backend::Backend;
+use ratatui::Terminal;
+use ratelab::scheduler::StopFlag;
+use ratelab::session::{Control, Engine, SessionSettings, Telemetry};
+use std::time::Duration;
+
+/// Frames per second of the display.
+pub const FPS: u64 = 30;
+/// Pending input events kept at most: a held key or a paste burst beyond this is dropped,
+/// so seconds of stale input never queue up.
+pub const INPUT_QUEUE: usize = 16;
+
+/// Run the event loop until the user quits or `stop` is set: input, telemetry and a
+/// ~30 fps tick, one `select!`. Draws on every tick and after every key.
+///
+/// # Errors
+/// A drawing error from the backend.
+pub fn run_loop<B: Backend>(
+    terminal: &mut Terminal<B>,
+    app: &mut App,
+    input: &Receiver<TermEvent>,
+    telemetry: &Receiver<Telemetry>,
+    stop: &StopFlag,
+) -> anyhow::Result<()>
+where
+    B::Error: Send + Sync + 'static,
+{
+    let ticker = tick(Duration::from_millis(1000 / FPS));
+    let draw = |terminal: &mut Terminal<B>, app: &App| -> anyhow::Result<()> {
+        let view = app.view();
+        terminal
+            .draw(|f| f.render_widget(&view, f.area()))
+            .context("drawing")?;
+        Ok(())
+    };
+    draw(terminal, app)?;
+    while !app.quit && !stop.is_stopped() {
+        select! {
+            recv(input) -> ev => {
+                let Ok(ev) = ev else { break };
+                for ev in std::iter::once(ev).chain(input.try_iter()) {
+                    if let TermEvent::Key(k) = ev {
+                        if let Some(m) = keymap::map_key(k, app.typing()) {
+                            app.on_msg(m);
+                        }
+                    }
+                }
+                draw(terminal, app)?;
+            }
+            recv(telemetry) -> t => {
+                let Ok(t) = t else { break };
+                app.on_telemetry(t);
+                for t in telemetry.try_iter() {
+                    app.on_telemetry(t);
+                }
+            }
+            recv(ticker) -> _ => draw(terminal, app)?,
+        }
+    }
+    Ok(())
+}
+
+/// Open the lab on the real terminal: start the engine, read keys on a thread, run the
+/// loop, and always restore the terminal (ratatui's panic hook restores it on a panic).
+pub fn run_lab(settings: SessionSettings, stop: StopFlag) -> anyhow::Result<()> {
+    let (ctl_tx, ctl_rx) = unbounded::<Control>();
+    let (tel_tx, tel_rx) = unbounded::<Telemetry>();
+    let mut app = App::new(
+        ctl_tx.clone(),
+        settings.policy.clone(),
+        settings.alt_policy.clone(),
+        settings.speed,
+    );
+    let session_file = settings.session_file.clone();
+    let engine = Engine::new(settings, ctl_rx, tel_tx).spawn();
+    let (in_tx, in_rx) = bounded::<TermEvent>(INPUT_QUEUE);
+    std::thread::Builder::new()
+        .name("input".into())
+        .spawn(move || {
+            while let Ok(ev) = crossterm::event::read() {
+                // Full queue: drop the event rather than let stale input pile up.
+                let _ = in_tx.try_send(ev);
+            }
+        })
+        .context("spawning the input thread")?;
+    let mut terminal = ratatui::try_init().context("cannot open the terminal")?;
+    let result = run_loop(&mut terminal, &mut app, &in_rx, &tel_rx, &stop);
+    ratatui::restore();
+    let _ = ctl_tx.send(Control::Quit);
+    let _ = engine.join();
+    if let Some(p) = session_file {
+        println!(
+            "[ratelab] session log: {} (replay: ratelab replay {})",
+            p.display(),
+            p.display()
+        );
+    }
+    result
+}
+
+#[cfg(test)]
+mod tests {
+    use super::app::App;
+    use super::keymap::Msg;
+    use ratatui::backend::TestBackend;
+    use ratatui::Terminal;
+    use ratelab::graph::StepObserver;
+    use ratelab::metrics::StepRecord;
+    use ratelab::policy::Scripted;
+    use ratelab::scheduler::EndReason;
+    use ratelab::session::{Control, Speed, Telemetry};
+    use ratelab::{run, ClockKind, RunConfig, RunOptions};
+    use std::sync::{Arc, Mutex};
+
+    struct Collect(Arc<Mutex<Vec<StepRecord>>>);
+    impl StepObserver for Collect {
+        fn on_step(&mut self, r: &StepRecord) {
+            self.0.lock().unwrap().push(*r);
+        }
+    }
+
+    /// An app fed with a real (deterministic) virtual run's telemetry.
+    fn app_after(cfg: RunConfig, ended: bool) -> (App, crossbeam_channel::Receiver<Control>) {
+        let (tx, rx) = crossbeam_channel::unbounded();
+        let mut app = App::new(tx, "scripted".into(), None, Speed::Times(1.0));
+        let steps = Arc::new(Mutex::new(Vec::new()));
+        let opts = RunOptions {
+            observers: vec![Box::new(Collect(steps.clone()))],
+            ..RunOptions::new()
+        };
+        let report = run(&cfg, Box::new(Scripted), opts).unwrap();
+        app.on_telemetry(Telemetry::Started {
+            cfg: cfg.clone(),
+            policy: "scripted balancer".into(),
+            recording: None,
+        });
+        for s in steps.lock().unwrap().iter() {
+            app.on_telemetry(Telemetry::Step(*s));
+        }
+        if ended {
+            app.on_telemetry(Telemetry::Ended {
+                metrics: report.metrics,
+                reason: report.end.reason,
+            });
+        }
+        (app, rx)
+    }
+
+    fn render(app: &App, w: u16, h: u16) -> String {
+        let mut t = Terminal::new(TestBackend::new(w, h)).unwrap();
+        let view = app.view();
+        t.draw(|f| f.render_widget(&view, f.area())).unwrap();
+        t.backend().to_string()
+    }
+
+    fn virtual_cfg(control_hz: f64, secs: u64) -> RunConfig {
+        RunConfig {
+            clock: ClockKind::Virtual,
+            control_hz,
+            duration: ratelab::Nanos(secs * 1_000_000_000),
+            ..RunConfig::default()
+        }
+    }
+
+    #[test]
+    fn snapshot_start() {
+        let (app, _rx) = app_after(virtual_cfg(50.0, 2), false);
+        insta::assert_snapshot!("start_80x24", render(&app, 80, 24));
+        insta::assert_snapshot!("start_120x40", render(&app, 120, 40));
+    }
+
+    #[test]
+    fn snapshot_dropping_obs_at_5_hz() {
+        let (app, _rx) = app_after(virtual_cfg(5.0, 0).with_duration_ms(800), false);
+        let v = app.view();
+        assert!(
+            v.topics[0].dropping && v.topics[0].dropped > 0,
+            "{:?}",
+            v.topics[0]
+        );
+        let text = render(&app, 80, 24);
+        assert!(
+            text.contains('⚠') && text.contains('═'),
+            "dropping arrow needs a symbol and a style:\n{text}"
+        );
+        insta::assert_snapshot!("dropping_80x24", text);
+        insta::assert_snapshot!("dropping_120x40", render(&app, 120, 40));
+    }
+
+    #[test]
+    fn snapshot_fall() {
+        let (app, _rx) = app_after(virtual_cfg(5.0, 10), true);
+        let text = render(&app, 80, 24);
+        assert!(text.contains("FELL at t="), "{text}");
+        insta::assert_snapshot!("fell_80x24", text);
+        insta::assert_snapshot!("fell_120x40", render(&app, 120, 40));
+    }
+
+    #[test]
+    fn snapshot_help_overlay() {
+        let (mut app, _rx) = app_after(virtual_cfg(50.0, 1), false);
+        app.on_msg(Msg::ToggleHelp);
+        insta::assert_snapshot!("help_80x24", render(&app, 80, 24));
+        insta::assert_snapshot!("help_120x40", render(&app, 120, 40));
+    }
+
+    #[test]
+    fn snapshot_too_small() {
+        let (app, _rx) = app_after(virtual_cfg(50.0, 1), false);
+        let text = render(&app, 60, 20);
+        assert!(text.contains("resize to at least 80×24"));
+        insta::assert_snapshot!("too_small_60x20", text);
+        // Re-layout after a resize: the same app renders fully at 80×24.
+        assert!(render(&app, 80, 24).contains("cartpole"));
+    }
+
+    #[test]
+    fn keys_become_engine_controls() {
+        let (mut app, rx) = app_after(virtual_cfg(50.0, 1), false);
+        app.on_msg(Msg::ControlDown);
+        app.on_msg(Msg::DepthUp);
+        app.on_msg(Msg::Break);
+        app.on_msg(Msg::TypeRate);
+        for c in "12.5".chars() {
+            app.on_msg(Msg::Input(c));
+        }
+        app.on_msg(Msg::Submit);
+        app.on_msg(Msg::TypeRate);
+        app.on_msg(Msg::Input('0'));
+        app.on_msg(Msg::Submit); // 0 Hz: refused, nothing sent
+        app.on_msg(Msg::SwapBrain); // no --policy file: refused with a message
+        app.on_msg(Msg::Faster);
+        app.on_msg(Msg::Quit);
+        use ratelab::run::Command::*;
+        let sent: Vec<Control> = rx.try_iter().collect();
+        assert_eq!(
+            sent,
+            vec![
+                Control::Apply(SetControlHz { hz: 40.0 }),
+                Control::Apply(SetQueueDepth { depth: 2 }),
+                Control::Apply(SetControlHz { hz: 5.0 }),
+                Control::Apply(SetControlHz { hz: 12.5 }),
+                Control::SetSpeed(Speed::Times(2.0)),
+                Control::Quit,
+            ]
+        );
+        assert!(app.view().message.unwrap().contains("--policy"));
+        assert!(app.quit);
+    }
+
+    #[test]
+    fn frozen_after_a_fall_and_node_failures_are_named() {
+        let (mut app, _rx) = app_after(virtual_cfg(5.0, 10), true);
+        assert!(matches!(app.view().verdict, super::view::Verdict::Fell(_)));
+        let metrics = run(&virtual_cfg(50.0, 1), Box::new(Scripted), RunOptions::new())
+            .unwrap()
+            .metrics;
+        app.on_telemetry(Telemetry::Ended {
+            metrics,
+            reason: EndReason::NodeFailed {
+                node: "policy".into(),
+                message: "boom".into(),
+            },
+        });
+        let text = render(&app, 80, 24);
+        assert!(text.contains("NODE FAILED"), "{text}");
+        assert!(text.contains("node 'policy' failed: boom"), "{text}");
+    }
+}

@@ -1,0 +1,438 @@
+//! The view model (an immutable snapshot the app builds each frame) and its rendering:
+//! pure functions from a [`View`] to a buffer, one `render_*` helper per panel.
+
+use super::keymap::HELP;
+use ratatui::buffer::Buffer;
+use ratatui::layout::{Alignment, Constraint, Layout, Rect};
+use ratatui::style::{Color, Modifier, Style, Stylize};
+use ratatui::symbols::Marker;
+use ratatui::text::{Line, Span};
+use ratatui::widgets::canvas::{Canvas, Line as CanvasLine, Rectangle};
+use ratatui::widgets::{
+    Axis, Bar, BarChart, BarGroup, Block, Chart, Clear, Dataset, GraphType, Paragraph, Widget,
+};
+
+/// The smallest terminal the lab lays out in.
+pub const MIN_SIZE: (u16, u16) = (80, 24);
+/// Fall limit shown on the drawings, rad (±12°).
+pub const LIMIT_RAD: f64 = ratelab::plant::THETA_LIMIT_RAD;
+
+/// One node box.
+#[derive(Clone, Debug, PartialEq)]
+pub struct NodeView {
+    /// Name.
+    pub name: &'static str,
+    /// Rate as set, Hz.
+    pub set_hz: f64,
+    /// Real clock: measured rate over the last second, Hz.
+    pub measured_hz: Option<f64>,
+    /// Real clock: p99 tick lateness over recent ticks, µs.
+    pub lateness_p99_us: Option<f64>,
+}
+
+/// One topic arrow.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TopicView {
+    /// `/obs` or `/action`.
+    pub name: &'static str,
+    /// Messages per second over the last second of run time.
+    pub msg_per_s: f64,
+    /// Dropped since the run started.
+    pub dropped: u64,
+    /// Dropped within the last second (the arrow is "dropping").
+    pub dropping: bool,
+}
+
+/// The run's verdict badge.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Verdict {
+    /// Pole up so far.
+    Balanced,
+    /// The pole fell at this run time, s.
+    Fell(f64),
+    /// The run reached its duration with the pole up.
+    Done,
+    /// A node failed.
+    Failed(String),
+}
+
+/// Latency histogram panel.
+#[derive(Clone, Debug, PartialEq, Default)]
+pub struct LatencyView {
+    /// (label, count) per bucket.
+    pub buckets: Vec<(String, u64)>,
+    /// Samples.
+    pub count: u64,
+    /// p50, p99, max, ms.
+    pub p50_ms: f64,
+    /// p99, ms.
+    pub p99_ms: f64,
+    /// max, ms.
+    pub max_ms: f64,
+}
+
+/// Everything one frame shows.
+#[derive(Clone, Debug, PartialEq)]
+pub struct View {
+    /// `virtual` / `real`.
+    pub clock: String,
+    /// Virtual pacing (`×1`, `max`), empty under the real clock.
+    pub speed: String,
+    /// Paused?
+    pub paused: bool,
+    /// Run time, s.
+    pub sim_time_s: f64,
+    /// Seed.
+    pub seed: u64,
+    /// Brain label.
+    pub brain: String,
+    /// Queue depth.
+    pub depth: usize,
+    /// Recording path, if recording.
+    pub recording: Option<String>,
+    /// sensor, policy, actuator.
+    pub nodes: [NodeView; 3],
+    /// /obs, /action.
+    pub topics: [TopicView; 2],
+    /// Pole angle, rad.
+    pub pole_angle: f64,
+    /// Cart position, m.
+    pub cart_pos: f64,
+    /// Badge.
+    pub verdict: Verdict,
+    /// (t s, θ rad) over the last ~10 s.
+    pub angle_history: Vec<(f64, f64)>,
+    /// Latency histogram over the run.
+    pub latency: LatencyView,
+    /// Help overlay shown?
+    pub help: bool,
+    /// An exact rate being typed.
+    pub typing: Option<String>,
+    /// The latest notice (a command applied, an error).
+    pub message: Option<String>,
+}
+
+fn hz(x: f64) -> String {
+    let s = format!("{x:.2}");
+    s.trim_end_matches('0').trim_end_matches('.').to_string()
+}
+
+impl Widget for &View {
+    fn render(self, area: Rect, buf: &mut Buffer) {
+        if area.width < MIN_SIZE.0 || area.height < MIN_SIZE.1 {
+            render_too_small(area, buf);
+            return;
+        }
+        let hist_h = if area.height >= 34 { 10 } else { 6 };
+        let [status, graph, middle, latency, footer] = Layout::vertical([
+            Constraint::Length(1),
+            Constraint::Length(6),
+            Constraint::Min(8),
+            Constraint::Length(hist_h),
+            Constraint::Length(1),
+        ])
+        .areas(area);
+        render_status(self, status, buf);
+        render_graph(self, graph, buf);
+        let [cart, chart] =
+            Layout::horizontal([Constraint::Percentage(40), Constraint::Percentage(60)])
+                .areas(middle);
+        render_cartpole(self, cart, buf);
+        render_angle_chart(self, chart, buf);
+        render_latency(self, latency, buf);
+        render_footer(self, footer, buf);
+        if self.help {
+            render_help(area, buf);
+        }
+    }
+}
+
+fn render_too_small(area: Rect, buf: &mut Buffer) {
+    let text = vec![
+        Line::from("ratelab".bold()),
+        Line::from(format!("resize to at least {}×{}", MIN_SIZE.0, MIN_SIZE.1)),
+        Line::from(format!("(now {}×{})", area.width, area.height)),
+    ];
+    let h = 3.min(area.height);
+    let y = area.y + area.height.saturating_sub(h) / 2;
+    Paragraph::new(text).alignment(Alignment::Center).render(
+        Rect {
+            y,
+            height: h,
+            ..area
+        },
+        buf,
+    );
+}
+
+fn render_status(v: &View, area: Rect, buf: &mut Buffer) {
+    let mut spans = vec![
+        " ratelab ".black().on_cyan().bold(),
+        format!(" clock {}", v.clock).into(),
+    ];
+    if !v.speed.is_empty() {
+        spans.push(format!(" {}", v.speed).into());
+    }
+    if v.paused {
+        spans.push(" PAUSED".yellow().bold());
+    }
+    spans.extend([
+        format!(
+            " │ t {:.2} s │ seed {} │ depth {} │ brain {} │ ",
+            v.sim_time_s, v.seed, v.depth, v.brain
+        )
+        .into(),
+        match &v.recording {
+            Some(p) => Span::from(format!("rec ● {p}")).red(),
+            None => Span::from("rec off").dim(),
+        },
+    ]);
+    Paragraph::new(Line::from(spans)).render(area, buf);
+}
+
+fn render_graph(v: &View, area: Rect, buf: &mut Buffer) {
+    let block = Block::bordered().title(" graph: sensor → /obs → policy → /action → actuator ");
+    let inner = block.inner(area);
+    block.render(area, buf);
+    let cols = Layout::horizontal([
+        Constraint::Ratio(1, 5),
+        Constraint::Ratio(1, 5),
+        Constraint::Ratio(1, 5),
+        Constraint::Ratio(1, 5),
+        Constraint::Ratio(1, 5),
+    ])
+    .split(inner);
+    for (i, node) in v.nodes.iter().enumerate() {
+        render_node(node, cols[i * 2], buf);
+    }
+    for (i, topic) in v.topics.iter().enumerate() {
+        render_arrow(topic, cols[i * 2 + 1], buf);
+    }
+}
+
+fn render_node(n: &NodeView, area: Rect, buf: &mut Buffer) {
+    let mut lines = vec![Line::from(format!("{} Hz set", hz(n.set_hz)))];
+    match (n.measured_hz, n.lateness_p99_us) {
+        (Some(m), Some(l)) => {
+            lines.push(Line::from(format!("{m:.1} Hz meas")));
+            lines.push(Line::from(format!("p99 {l:.0} µs late")).dim());
+        }
+        _ => lines.push(Line::from("virtual time").dim()),
+    }
+    Paragraph::new(lines)
+        .alignment(Alignment::Center)
+        .block(Block::bordered().title(Line::from(n.name).bold().centered()))
+        .render(area, buf);
+}
+
+fn render_arrow(t: &TopicView, area: Rect, buf: &mut Buffer) {
+    let w = area.width.saturating_sub(1) as usize;
+    let (shaft, style, mark) = if t.dropping {
+        (
+            "═",
+            Style::new().fg(Color::Yellow).add_modifier(Modifier::BOLD),
+            "⚠",
+        )
+    } else {
+        ("─", Style::new().fg(Color::Green), "✓")
+    };
+    let lines = vec![
+        Line::from(t.name.bold()).centered(),
+        Line::from(Span::styled(
+            format!("{}▶", shaft.repeat(w.saturating_sub(1))),
+            style,
+        )),
+        Line::from(format!("{:.1} msg/s", t.msg_per_s)).centered(),
+        Line::from(Span::styled(format!("{} dropped {mark}", t.dropped), style)).centered(),
+    ];
+    Paragraph::new(lines).render(area, buf);
+}
+
+fn badge(v: &View) -> Span<'static> {
+    match &v.verdict {
+        Verdict::Balanced => " BALANCED ✓ ".black().on_green().bold(),
+        Verdict::Done => " BALANCED ✓ (run complete) ".black().on_green().bold(),
+        Verdict::Fell(t) => Span::from(format!(" FELL at t={t:.2}s ✗ "))
+            .white()
+            .on_red()
+            .bold(),
+        Verdict::Failed(_) => " NODE FAILED ✗ ".white().on_red().bold(),
+    }
+}
+
+fn render_cartpole(v: &View, area: Rect, buf: &mut Buffer) {
+    let x = v.cart_pos;
+    let theta = v.pole_angle;
+    let title = Line::from(vec![" cartpole ".into(), badge(v)]);
+    Canvas::default()
+        .block(Block::bordered().title(title))
+        .marker(Marker::Braille)
+        .x_bounds([-2.6, 2.6])
+        .y_bounds([-0.3, 1.2])
+        .paint(move |ctx| {
+            ctx.draw(&CanvasLine {
+                x1: -2.4,
+                y1: -0.05,
+                x2: 2.4,
+                y2: -0.05,
+                color: Color::Gray,
+            });
+            // Fall limits: ±12° from the pivot.
+            for sign in [-1.0, 1.0] {
+                let a = sign * LIMIT_RAD;
+                ctx.draw(&CanvasLine {
+                    x1: x,
+                    y1: 0.05,
+                    x2: x + a.sin(),
+                    y2: 0.05 + a.cos(),
+                    color: Color::DarkGray,
+                });
+            }
+            ctx.draw(&Rectangle {
+                x: x - 0.2,
+                y: -0.05,
+                width: 0.4,
+                height: 0.15,
+                color: Color::Blue,
+            });
+            let color = if theta.abs() > LIMIT_RAD {
+                Color::Red
+            } else {
+                Color::Yellow
+            };
+            ctx.draw(&CanvasLine {
+                x1: x,
+                y1: 0.05,
+                x2: x + theta.sin(),
+                y2: 0.05 + theta.cos(),
+                color,
+            });
+        })
+        .render(area, buf);
+}
+
+fn render_angle_chart(v: &View, area: Rect, buf: &mut Buffer) {
+    let t1 = v.sim_time_s.max(10.0);
+    let t0 = t1 - 10.0;
+    let upper = [(t0, LIMIT_RAD), (t1, LIMIT_RAD)];
+    let lower = [(t0, -LIMIT_RAD), (t1, -LIMIT_RAD)];
+    let data: Vec<(f64, f64)> = v
+        .angle_history
+        .iter()
+        .map(|&(t, a)| (t, a.clamp(-0.3, 0.3)))
+        .collect();
+    let datasets = vec![
+        Dataset::default()
+            .name("θ")
+            .marker(Marker::Braille)
+            .graph_type(GraphType::Line)
+            .yellow()
+            .data(&data),
+        Dataset::default()
+            .name("±12°")
+            .marker(Marker::Braille)
+            .graph_type(GraphType::Line)
+            .red()
+            .data(&upper),
+        Dataset::default()
+            .marker(Marker::Braille)
+            .graph_type(GraphType::Line)
+            .red()
+            .data(&lower),
+    ];
+    Chart::new(datasets)
+        .block(Block::bordered().title(" pole angle (rad), last 10 s "))
+        .x_axis(
+            Axis::default()
+                .bounds([t0, t1])
+                .labels([format!("{t0:.0}s"), format!("{t1:.0}s")]),
+        )
+        .y_axis(
+            Axis::default()
+                .bounds([-0.3, 0.3])
+                .labels(["-0.3", "0", "0.3"]),
+        )
+        .render(area, buf);
+}
+
+fn render_latency(v: &View, area: Rect, buf: &mut Buffer) {
+    let l = &v.latency;
+    let title = format!(
+        " sense→act latency over the run: n={} │ p50 {:.1} ms │ p99 {:.1} ms │ max {:.1} ms ",
+        l.count, l.p50_ms, l.p99_ms, l.max_ms
+    );
+    let bars: Vec<Bar> = l
+        .buckets
+        .iter()
+        .map(|(label, n)| Bar::default().value(*n).label(Line::from(label.clone())))
+        .collect();
+    let inner_w = area.width.saturating_sub(2);
+    let n = l.buckets.len().max(1) as u16;
+    let bar_w = (inner_w / n).saturating_sub(1).clamp(1, 12);
+    BarChart::default()
+        .block(Block::bordered().title(title))
+        .data(BarGroup::default().bars(&bars))
+        .bar_width(bar_w)
+        .bar_gap(1)
+        .bar_style(Style::new().fg(Color::Cyan))
+        .value_style(Style::new().fg(Color::Black).bg(Color::Cyan))
+        .render(area, buf);
+}
+
+fn render_footer(v: &View, area: Rect, buf: &mut Buffer) {
+    let ended = v.verdict != Verdict::Balanced;
+    let line = if let (true, Some(m)) = (ended, &v.message) {
+        Line::from(Span::from(format!(" {m}")).bold())
+    } else if let Some(t) = &v.typing {
+        Line::from(vec![
+            " control rate (Hz): ".bold(),
+            format!("{t}▏").into(),
+            "  Enter apply · Esc cancel".dim(),
+        ])
+    } else {
+        let mut spans: Vec<Span> = vec![
+            " -/+ ".bold(),
+            "rate ".into(),
+            "s/S ".bold(),
+            "sensor ".into(),
+            "[/] ".bold(),
+            "depth ".into(),
+            "b ".bold(),
+            "break ".into(),
+            "␣ ".bold(),
+            "pause ".into(),
+            "r ".bold(),
+            "reset ".into(),
+            "c ".bold(),
+            "clock ".into(),
+            "? ".bold(),
+            "help ".into(),
+            "q ".bold(),
+            "quit".into(),
+        ];
+        if let Some(m) = &v.message {
+            spans.push(Span::from(format!("  │ {m}")).italic());
+        }
+        Line::from(spans)
+    };
+    Paragraph::new(line).render(area, buf);
+}
+
+fn render_help(area: Rect, buf: &mut Buffer) {
+    let w = 72.min(area.width);
+    let h = (HELP.len() as u16 + 2).min(area.height);
+    let popup = Rect {
+        x: area.x + (area.width - w) / 2,
+        y: area.y + (area.height - h) / 2,
+        width: w,
+        height: h,
+    };
+    Clear.render(popup, buf);
+    let lines: Vec<Line> = HELP
+        .iter()
+        .map(|(k, d)| Line::from(vec![format!("{k:>16}  ").bold(), (*d).into()]))
+        .collect();
+    Paragraph::new(lines)
+        .block(Block::bordered().title(" keys (? to close) "))
+        .render(popup, buf);
+}

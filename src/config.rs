@@ -1,0 +1,215 @@
+//! Run settings and their validation: one place decides what a usable run is.
+
+use crate::rate::{period_for_hz, MAX_HZ};
+use crate::time::Nanos;
+use std::fmt;
+use std::str::FromStr;
+
+/// The chapter's actuator rate: the plant's 50 Hz control step.
+pub const ACTUATOR_HZ: f64 = 50.0;
+/// `--break` sets the control rate to this (the chapter's demonstration of the cliff).
+pub const BREAK_CONTROL_HZ: f64 = 5.0;
+
+/// Which executor runs the graph.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum ClockKind {
+    /// Deterministic discrete-event executor (one thread, virtual time).
+    Virtual,
+    /// One OS thread per node against the monotonic clock.
+    Real,
+}
+
+impl ClockKind {
+    /// `virtual` or `real`.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            ClockKind::Virtual => "virtual",
+            ClockKind::Real => "real",
+        }
+    }
+
+    /// The other clock.
+    pub fn other(self) -> ClockKind {
+        match self {
+            ClockKind::Virtual => ClockKind::Real,
+            ClockKind::Real => ClockKind::Virtual,
+        }
+    }
+}
+
+impl fmt::Display for ClockKind {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+impl FromStr for ClockKind {
+    type Err = ConfigError;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s {
+            "virtual" => Ok(ClockKind::Virtual),
+            "real" => Ok(ClockKind::Real),
+            other => Err(ConfigError::Clock(other.to_string())),
+        }
+    }
+}
+
+/// A setting that cannot be used. Each message is one line.
+#[derive(Debug, thiserror::Error, PartialEq)]
+pub enum ConfigError {
+    /// A rate outside (0, 10 000] Hz or not finite.
+    #[error("--{flag} must be a finite rate in (0, {max}] Hz, got {hz}", max = MAX_HZ)]
+    Rate {
+        /// The flag's name (`sensor-hz`, `control-hz`).
+        flag: &'static str,
+        /// The rejected value.
+        hz: f64,
+    },
+    /// Queue depth 0.
+    #[error("--queue-depth must be at least 1, got {0}")]
+    Depth(usize),
+    /// Duration not finite or ≤ 0.
+    #[error("--duration must be a finite number of seconds > 0, got {0}")]
+    Duration(f64),
+    /// Unknown clock name.
+    #[error("--clock must be 'real' or 'virtual', got '{0}'")]
+    Clock(String),
+    /// A phase offset not finite, negative, or not below one second.
+    #[error("--phase-offset-ms values must be finite and in [0, 1000) ms, got {0}")]
+    PhaseOffset(f64),
+}
+
+/// Everything that defines one run of the graph.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RunConfig {
+    /// Reset seed (numpy-compatible draws).
+    pub seed: u64,
+    /// How long to run (run time).
+    pub duration: Nanos,
+    /// Sensor rate, Hz.
+    pub sensor_hz: f64,
+    /// Policy (control) rate, Hz.
+    pub control_hz: f64,
+    /// Actuator rate, Hz (the plant's control rate).
+    pub actuator_hz: f64,
+    /// History depth of `/obs` and `/action`.
+    pub queue_depth: usize,
+    /// Which executor.
+    pub clock: ClockKind,
+    /// Real clock: spin this long before each deadline instead of sleeping.
+    pub spin_margin: Nanos,
+    /// Real clock: first deadline of sensor, policy, actuator.
+    pub phase_offsets: [Nanos; 3],
+}
+
+impl Default for RunConfig {
+    fn default() -> Self {
+        Self {
+            seed: 0,
+            duration: Nanos(10 * Nanos::SECOND.0),
+            sensor_hz: 50.0,
+            control_hz: 50.0,
+            actuator_hz: ACTUATOR_HZ,
+            queue_depth: 1,
+            clock: ClockKind::Real,
+            spin_margin: crate::rate::DEFAULT_SPIN_MARGIN,
+            phase_offsets: [Nanos::ZERO; 3],
+        }
+    }
+}
+
+/// Check a rate flag.
+///
+/// # Errors
+/// [`ConfigError::Rate`] naming `flag`.
+pub fn check_rate(flag: &'static str, hz: f64) -> Result<f64, ConfigError> {
+    period_for_hz(hz)
+        .map(|_| hz)
+        .map_err(|_| ConfigError::Rate { flag, hz })
+}
+
+/// Parse a duration in seconds.
+///
+/// # Errors
+/// [`ConfigError::Duration`] when not finite or ≤ 0.
+pub fn duration_from_secs(secs: f64) -> Result<Nanos, ConfigError> {
+    match Nanos::from_secs_f64(secs) {
+        Some(d) if secs > 0.0 && d.0 > 0 => Ok(d),
+        _ => Err(ConfigError::Duration(secs)),
+    }
+}
+
+/// Parse a phase offset in milliseconds.
+///
+/// # Errors
+/// [`ConfigError::PhaseOffset`] when not finite, negative, or ≥ 1000 ms.
+pub fn phase_offset_from_ms(ms: f64) -> Result<Nanos, ConfigError> {
+    if ms.is_finite() && (0.0..1000.0).contains(&ms) {
+        Ok(Nanos((ms * 1e6).round() as u64))
+    } else {
+        Err(ConfigError::PhaseOffset(ms))
+    }
+}
+
+impl RunConfig {
+    /// The same settings with another duration, in milliseconds.
+    pub fn with_duration_ms(self, ms: u64) -> Self {
+        Self {
+            duration: Nanos::from_millis(ms),
+            ..self
+        }
+    }
+
+    /// Check every setting.
+    ///
+    /// # Errors
+    /// The first [`ConfigError`] found.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        check_rate("sensor-hz", self.sensor_hz)?;
+        check_rate("control-hz", self.control_hz)?;
+        check_rate("actuator-hz", self.actuator_hz)?;
+        if self.queue_depth == 0 {
+            return Err(ConfigError::Depth(0));
+        }
+        if self.duration.0 == 0 {
+            return Err(ConfigError::Duration(0.0));
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn validation_names_the_flag() {
+        let cfg = RunConfig {
+            control_hz: 0.0,
+            ..RunConfig::default()
+        };
+        assert_eq!(
+            cfg.validate(),
+            Err(ConfigError::Rate {
+                flag: "control-hz",
+                hz: 0.0
+            })
+        );
+        let cfg = RunConfig {
+            queue_depth: 0,
+            ..RunConfig::default()
+        };
+        assert!(cfg
+            .validate()
+            .unwrap_err()
+            .to_string()
+            .contains("--queue-depth"));
+        assert!(RunConfig::default().validate().is_ok());
+        assert!(duration_from_secs(-1.0).is_err());
+        assert!(duration_from_secs(f64::NAN).is_err());
+        assert_eq!(duration_from_secs(2.0), Ok(Nanos(2_000_000_000)));
+        assert_eq!("virtual".parse::<ClockKind>(), Ok(ClockKind::Virtual));
+        assert!("wall".parse::<ClockKind>().is_err());
+    }
+}

@@ -1,0 +1,33 @@
+//! ratelab: the runtime of robot software — nodes at fixed rates exchanging messages on
+//! topics — driving a MuJoCo cartpole, under a deterministic virtual clock or a real one.
+//!
+//! The semantics (drop rule, tie-break order, zero-order hold, metrics) are ported from the
+//! course chapter 2.8 ("Concepts of ROS, without ROS"); time is integer nanoseconds.
+//! This crate knows nothing of terminals: the lab (`lab/`) draws it.
+//!
+//! Layout, one module per idea: [`time`], [`clock`], [`topic`], [`rate`], [`node`],
+//! [`plant`], [`policy`], [`graph`], [`scheduler`], [`metrics`], [`config`], [`run`].
+#![warn(missing_docs)]
+
+pub mod checkpoint;
+pub mod clock;
+pub mod config;
+pub mod exercise;
+pub mod graph;
+pub mod metrics;
+pub mod node;
+pub mod np_random;
+pub mod plant;
+pub mod policy;
+pub mod rate;
+pub mod recording;
+pub mod run;
+pub mod scheduler;
+pub mod session;
+pub mod sweep;
+pub mod time;
+pub mod topic;
+
+pub use config::{ClockKind, RunConfig};
+pub use run::{run, RunOptions, RunReport};
+pub use time::Nanos;

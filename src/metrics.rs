@@ -1,0 +1,333 @@
+//! Metrics: what a run measured, per step and in total, and the chapter's summary.
+//!
+//! The actuator appends one [`StepRecord`] per tick to a [`RunLog`]. Sense→act latency of
+//! a tick is `now - origin_stamp` of the action it applied (ch2.8, `ActuatorNode`); its
+//! statistics use an HDR histogram (3 significant digits) plus an exact integer mean.
+//! [`Metrics`] is the run's summary and the schema of `metrics.json` (the chapter's keys,
+//! plus percentiles, `fell_at_s`, `policy` and ratelab's extras).
+
+use crate::time::Nanos;
+use crate::topic::TopicStats;
+use hdrhistogram::Histogram;
+use serde::{Deserialize, Serialize};
+
+/// One actuator tick.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct StepRecord {
+    /// Control step number, from 1.
+    pub step: u64,
+    /// Run time of the tick.
+    pub t: Nanos,
+    /// Pole angle after the step, rad.
+    pub pole_angle: f64,
+    /// Cart position after the step, m.
+    pub cart_pos: f64,
+    /// The control applied (clipped to [-1, 1]).
+    pub action: f64,
+    /// Sense→act latency of the applied action; `None` before the first action arrives.
+    pub latency: Option<Nanos>,
+    /// True when the brain's newest action was non-finite and the last good one was held.
+    pub nonfinite: bool,
+    /// `/obs` counters at this tick.
+    pub obs: TopicStats,
+    /// `/action` counters at this tick.
+    pub action_topic: TopicStats,
+    /// True on the tick the pole fell.
+    pub fell: bool,
+}
+
+/// Latency (or lateness) statistics over a run: an HDR histogram in nanoseconds with an
+/// exact integer sum for the mean.
+#[derive(Clone, Debug)]
+pub struct LatencyStats {
+    hist: Histogram<u64>,
+    sum_ns: u128,
+}
+
+impl Default for LatencyStats {
+    fn default() -> Self {
+        Self {
+            // 1 ns .. 1 hour at 3 significant digits.
+            hist: Histogram::new_with_bounds(1, 3_600_000_000_000, 3)
+                .expect("static bounds are valid"),
+            sum_ns: 0,
+        }
+    }
+}
+
+impl LatencyStats {
+    /// Record one sample (saturated at one hour).
+    pub fn record(&mut self, value: Nanos) {
+        self.hist.saturating_record(value.0);
+        self.sum_ns += u128::from(value.0);
+    }
+
+    /// Number of samples.
+    pub fn count(&self) -> u64 {
+        self.hist.len()
+    }
+
+    /// Exact mean, or `None` with no samples.
+    pub fn mean(&self) -> Option<f64> {
+        (self.count() > 0).then(|| self.sum_ns as f64 / self.count() as f64)
+    }
+
+    /// The value at quantile `q` in [0, 1] (HDR precision), or `None` with no samples.
+    pub fn quantile(&self, q: f64) -> Option<Nanos> {
+        (self.count() > 0).then(|| Nanos(self.hist.value_at_quantile(q)))
+    }
+
+    /// The largest sample (HDR precision), or `None` with no samples.
+    pub fn max(&self) -> Option<Nanos> {
+        (self.count() > 0).then(|| Nanos(self.hist.max()))
+    }
+
+    /// The underlying histogram (for drawing buckets).
+    pub fn histogram(&self) -> &Histogram<u64> {
+        &self.hist
+    }
+
+    /// p50/p99/max in ms, rounded to µs; zeros with no samples.
+    pub fn summary_ms(&self) -> (f64, f64, f64) {
+        let ms = |n: Option<Nanos>| round_to(n.map_or(0.0, |n| n.as_millis_f64()), 3);
+        (
+            ms(self.quantile(0.5)),
+            ms(self.quantile(0.99)),
+            ms(self.max()),
+        )
+    }
+}
+
+/// Round `x` to `digits` decimals (report figures only).
+pub fn round_to(x: f64, digits: i32) -> f64 {
+    let p = 10f64.powi(digits);
+    (x * p).round() / p
+}
+
+/// Everything the actuator measured during a run.
+#[derive(Clone, Debug, Default)]
+pub struct RunLog {
+    /// One record per actuator tick, in order (empty when the trace is not kept).
+    pub trace: Vec<StepRecord>,
+    /// Whether to keep every [`StepRecord`] (headless runs do; long lab runs may not).
+    pub keep_trace: bool,
+    /// The newest record.
+    pub last: Option<StepRecord>,
+    /// Actuator ticks so far.
+    pub steps: u64,
+    /// Sense→act latency over every tick that applied a sensed action.
+    pub latency: LatencyStats,
+    /// Ticks whose newest action was non-finite (the last good action was held).
+    pub nonfinite_actions: u64,
+    /// Run time of the fall, if the pole fell.
+    pub fell_at: Option<Nanos>,
+}
+
+impl RunLog {
+    /// An empty log; `keep_trace` keeps every step record.
+    pub fn new(keep_trace: bool) -> Self {
+        Self {
+            keep_trace,
+            ..Self::default()
+        }
+    }
+
+    /// Account one actuator tick.
+    pub fn push(&mut self, rec: StepRecord) {
+        self.steps = rec.step;
+        if let Some(lat) = rec.latency {
+            self.latency.record(lat);
+        }
+        if rec.nonfinite {
+            self.nonfinite_actions += 1;
+        }
+        if rec.fell && self.fell_at.is_none() {
+            self.fell_at = Some(rec.t);
+        }
+        if self.keep_trace {
+            self.trace.push(rec);
+        }
+        self.last = Some(rec);
+    }
+}
+
+/// Tick-timing statistics of one node under the real clock.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub struct NodeTiming {
+    /// Node name.
+    pub node: String,
+    /// Ticks run.
+    pub ticks: u64,
+    /// Deadlines skipped because a tick overran a whole period.
+    pub skipped: u64,
+    /// Lateness (actual − scheduled wake-up) percentiles, µs.
+    pub lateness_p50_us: f64,
+    /// 99th percentile lateness, µs.
+    pub lateness_p99_us: f64,
+    /// Largest lateness, µs.
+    pub lateness_max_us: f64,
+    /// Thread CPU time over the run, ms.
+    pub cpu_ms: f64,
+    /// Measured tick rate over the run, Hz.
+    pub measured_hz: f64,
+}
+
+/// A run's summary: the schema of `metrics.json`. Keys follow the chapter's report, then
+/// ratelab's additions. Under the virtual clock every field is a pure function of the
+/// settings (no wall-clock figure), so two runs serialize byte for byte the same.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub struct Metrics {
+    /// The pole stayed up for the whole run.
+    pub balanced: bool,
+    /// `virtual` or `real`.
+    pub clock: String,
+    /// Policy rate at the start of the run, Hz.
+    pub control_hz: f64,
+    /// Sensor rate at the start of the run, Hz.
+    pub sensor_hz: f64,
+    /// Actuator (plant) rate, Hz.
+    pub actuator_hz: f64,
+    /// History depth of both topics at the start of the run.
+    pub queue_depth: usize,
+    /// Reset seed.
+    pub seed: u64,
+    /// Requested duration, s.
+    pub duration_s: f64,
+    /// Actuator steps run.
+    pub steps: u64,
+    /// Run time when the graph stopped (the fall, or the duration), s.
+    pub sim_time_s: f64,
+    /// Pole angle after the last step, rad.
+    pub final_pole_angle: f64,
+    /// Mean sense→act latency, ms (0 when no action was applied).
+    pub mean_latency_ms: f64,
+    /// Median sense→act latency, ms.
+    pub latency_p50_ms: f64,
+    /// 99th-percentile sense→act latency, ms.
+    pub latency_p99_ms: f64,
+    /// Largest sense→act latency, ms.
+    pub latency_max_ms: f64,
+    /// Messages published on `/obs`.
+    pub obs_published: u64,
+    /// `/obs` messages evicted unread.
+    pub obs_dropped: u64,
+    /// `/obs` messages per second of run time.
+    pub obs_msg_per_s: f64,
+    /// Messages published on `/action`.
+    pub action_published: u64,
+    /// `/action` messages evicted unread.
+    pub action_dropped: u64,
+    /// `/action` messages per second of run time.
+    pub action_msg_per_s: f64,
+    /// Run time of the fall, s, or `null` when balanced.
+    pub fell_at_s: Option<f64>,
+    /// Brain label.
+    pub policy: String,
+    /// Actuator ticks whose newest action was non-finite (held the last good action).
+    pub nonfinite_actions: u64,
+    /// Real clock only: per-node tick timing.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub node_timing: Option<Vec<NodeTiming>>,
+}
+
+impl Metrics {
+    /// The chapter's human summary (five lines, no terminal codes). `wall_s` is the
+    /// wall time the run took, when known (not part of the metrics: it varies run to run).
+    pub fn summary_lines(&self, wall_s: Option<f64>) -> Vec<String> {
+        let wall = wall_s.map_or_else(String::new, |w| format!(" ({w:.2}s wall)"));
+        let verdict = match self.fell_at_s {
+            None => format!(
+                "BALANCED (pole up the whole run) — {} control steps in {:.2}s sim{wall}",
+                self.steps, self.sim_time_s
+            ),
+            Some(t) => format!(
+                "FELL at t={t:.2}s — {} control steps in {:.2}s sim{wall}",
+                self.steps, self.sim_time_s
+            ),
+        };
+        let mut lines = vec![
+            format!("clock={}  policy={}", self.clock, self.policy),
+            format!(
+                "rates: sensor {} Hz | control {} Hz | actuator {} Hz | queue_depth {}",
+                self.sensor_hz, self.control_hz, self.actuator_hz, self.queue_depth
+            ),
+            verdict,
+            format!(
+                "topics: /obs {:.1} msg/s ({} dropped) | /action {:.1} msg/s ({} dropped)",
+                self.obs_msg_per_s, self.obs_dropped, self.action_msg_per_s, self.action_dropped
+            ),
+            format!(
+                "mean sense->act latency: {:.1} ms  (p50 {:.1} | p99 {:.1} | max {:.1} ms; control period {})",
+                self.mean_latency_ms,
+                self.latency_p50_ms,
+                self.latency_p99_ms,
+                self.latency_max_ms,
+                crate::rate::period_for_hz(self.control_hz).map_or_else(|_| "?".into(), |p| p.to_string())
+            ),
+        ];
+        if self.nonfinite_actions > 0 {
+            lines.push(format!(
+                "non-finite actions held over: {} (the actuator kept the last good action)",
+                self.nonfinite_actions
+            ));
+        }
+        if let Some(timing) = &self.node_timing {
+            for t in timing {
+                lines.push(format!(
+                    "node {:<8} {:>7.2} Hz measured | lateness p50 {:.0} µs, p99 {:.0} µs, max {:.0} µs | cpu {:.0} ms",
+                    t.node, t.measured_hz, t.lateness_p50_us, t.lateness_p99_us, t.lateness_max_us, t.cpu_ms
+                ));
+            }
+        }
+        lines
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn latency_stats_mean_is_exact_and_quantiles_close() {
+        let mut s = LatencyStats::default();
+        assert_eq!(s.mean(), None);
+        for ms in [0u64, 20, 40] {
+            s.record(Nanos::from_millis(ms));
+        }
+        assert_eq!(s.mean(), Some(20_000_000.0));
+        let p50 = s.quantile(0.5).unwrap().as_millis_f64();
+        assert!((p50 - 20.0).abs() < 0.05, "{p50}");
+        assert!((s.max().unwrap().as_millis_f64() - 40.0).abs() < 0.05);
+    }
+
+    #[test]
+    fn run_log_accounts_falls_once() {
+        let mut log = RunLog::new(true);
+        let base = StepRecord {
+            step: 1,
+            t: Nanos(0),
+            pole_angle: 0.0,
+            cart_pos: 0.0,
+            action: 0.0,
+            latency: None,
+            nonfinite: false,
+            obs: TopicStats::default(),
+            action_topic: TopicStats::default(),
+            fell: false,
+        };
+        log.push(base);
+        log.push(StepRecord {
+            step: 2,
+            t: Nanos(20),
+            fell: true,
+            nonfinite: true,
+            latency: Some(Nanos(5)),
+            ..base
+        });
+        assert_eq!(log.steps, 2);
+        assert_eq!(log.fell_at, Some(Nanos(20)));
+        assert_eq!(log.nonfinite_actions, 1);
+        assert_eq!(log.latency.count(), 1);
+        assert_eq!(log.trace.len(), 2);
+    }
+}

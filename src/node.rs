@@ -1,0 +1,30 @@
+//! Nodes: a unit of work with a name, a rate, a tie-break priority and a `tick`.
+//!
+//! Nodes talk to each other only through topics they were handed. A scheduler (virtual
+//! or real, see [`crate::scheduler`]) calls [`Node::tick`] at the node's rate. The
+//! priority breaks ties between nodes due at the same instant: lower ticks first, so the
+//! chapter's order sensor (0) → policy (1) → actuator (2) samples, thinks, then acts.
+
+use crate::rate::Rate;
+use crate::time::Nanos;
+
+/// What the scheduler should do after a tick.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Flow {
+    /// Keep running.
+    Continue,
+    /// Stop the whole graph (the actuator returns this when the pole falls).
+    Stop,
+}
+
+/// A node of the graph.
+pub trait Node: Send {
+    /// The node's name (`sensor`, `policy`, `actuator`).
+    fn name(&self) -> &str;
+    /// Tie-break order among nodes due at the same instant; lower first.
+    fn priority(&self) -> u8;
+    /// The node's rate (shared: it can change while the graph runs).
+    fn rate(&self) -> &Rate;
+    /// Do one tick's work at run time `now`.
+    fn tick(&mut self, now: Nanos) -> Flow;
+}

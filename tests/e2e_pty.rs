@@ -1,0 +1,130 @@
+//! End to end: the real `ratelab` binary in a pseudo-terminal, read through a vt100 parser.
+
+use portable_pty::{native_pty_system, CommandBuilder, PtySize};
+use std::io::{Read, Write};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+struct Lab {
+    parser: Arc<Mutex<vt100::Parser>>,
+    writer: Box<dyn Write + Send>,
+    child: Box<dyn portable_pty::Child + Send + Sync>,
+}
+
+impl Lab {
+    fn start(args: &[&str]) -> Lab {
+        let pty = native_pty_system()
+            .openpty(PtySize {
+                rows: 30,
+                cols: 100,
+                pixel_width: 0,
+                pixel_height: 0,
+            })
+            .expect("a pseudo-terminal");
+        let mut cmd = CommandBuilder::new(env!("CARGO_BIN_EXE_ratelab"));
+        cmd.args(args);
+        cmd.env("TERM", "xterm-256color");
+        cmd.cwd(std::env::temp_dir());
+        let child = pty.slave.spawn_command(cmd).expect("spawn ratelab");
+        drop(pty.slave);
+        let parser = Arc::new(Mutex::new(vt100::Parser::new(
+            std::num::NonZeroU16::new(30).unwrap(),
+            std::num::NonZeroU16::new(100).unwrap(),
+            0,
+        )));
+        let mut reader = pty.master.try_clone_reader().unwrap();
+        let p = parser.clone();
+        std::thread::spawn(move || {
+            let mut buf = [0u8; 8192];
+            while let Ok(n) = reader.read(&mut buf) {
+                if n == 0 {
+                    break;
+                }
+                p.lock().unwrap().process(&buf[..n]);
+            }
+        });
+        let writer = pty.master.take_writer().unwrap();
+        // Keep the master alive as long as the writer is (portable-pty ties them together).
+        std::mem::forget(pty.master);
+        Lab {
+            parser,
+            writer,
+            child,
+        }
+    }
+
+    fn screen(&self) -> String {
+        self.parser.lock().unwrap().screen().contents()
+    }
+
+    fn wait_for(&self, needle: &str, timeout: Duration) -> String {
+        let start = Instant::now();
+        loop {
+            let s = self.screen();
+            if s.contains(needle) {
+                return s;
+            }
+            assert!(
+                start.elapsed() < timeout,
+                "'{needle}' not on screen after {timeout:?}:\n{s}"
+            );
+            std::thread::sleep(Duration::from_millis(50));
+        }
+    }
+
+    fn keys(&mut self, keys: &str) {
+        for k in keys.chars() {
+            write!(self.writer, "{k}").unwrap();
+            self.writer.flush().unwrap();
+            std::thread::sleep(Duration::from_millis(40));
+        }
+    }
+
+    fn quit(mut self) {
+        self.keys("q");
+        let start = Instant::now();
+        let status = loop {
+            if let Some(s) = self.child.try_wait().unwrap() {
+                break s;
+            }
+            assert!(
+                start.elapsed() < Duration::from_secs(15),
+                "ratelab did not exit after q"
+            );
+            std::thread::sleep(Duration::from_millis(50));
+        };
+        assert!(status.success(), "exit status {status:?}");
+        std::thread::sleep(Duration::from_millis(200));
+        assert!(
+            !self.parser.lock().unwrap().screen().alternate_screen(),
+            "still on the alternate screen"
+        );
+    }
+}
+
+#[test]
+fn virtual_lab_falls_off_the_rate_cliff_and_quits_cleanly() {
+    let mut lab = Lab::start(&["--clock", "virtual"]);
+    lab.wait_for("BALANCED", Duration::from_secs(30));
+    lab.wait_for("clock virtual", Duration::from_secs(5));
+    // Step the control rate down the ladder: 50 → … → 5 Hz (11 presses).
+    lab.keys("-----------");
+    lab.wait_for("5 Hz set", Duration::from_secs(10));
+    let screen = lab.wait_for("FELL at t=", Duration::from_secs(30));
+    assert!(screen.contains("dropped"), "{screen}");
+    lab.quit();
+}
+
+#[test]
+fn real_clock_lab_keeps_the_pole_up_for_3_s() {
+    let lab = Lab::start(&["--clock", "real"]);
+    lab.wait_for("clock real", Duration::from_secs(30));
+    std::thread::sleep(Duration::from_secs(3));
+    let screen = lab.wait_for("BALANCED", Duration::from_secs(5));
+    assert!(!screen.contains("FELL"), "{screen}");
+    assert!(
+        screen.contains("Hz meas"),
+        "the real clock shows measured rates:\n{screen}"
+    );
+    lab.quit();
+}

@@ -1,0 +1,106 @@
+//! The exercises' checks. The measurement checks always run. Each prediction check is
+//! reported as ignored (never passed) while its exercise file has no prediction; once the
+//! learner writes one, it checks that the prediction is complete and prints it beside the
+//! measured outcome.
+
+use ratelab::exercise::{
+    check_ex1, check_ex2, check_ex3, load_bands, measure_ex1, measure_ex2, measure_ex3,
+    required_keys, Bands, ExerciseFile,
+};
+use std::path::PathBuf;
+
+fn path(name: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("exercises")
+        .join(name)
+}
+
+fn bands() -> Bands {
+    load_bands(&path("bands.toml")).expect("exercises/bands.toml")
+}
+
+fn assert_all(checks: Vec<ratelab::exercise::Check>) {
+    let failed: Vec<_> = checks
+        .iter()
+        .filter(|c| !c.passed)
+        .map(|c| c.name.clone())
+        .collect();
+    assert!(failed.is_empty(), "failed: {failed:?}");
+    assert!(!checks.is_empty());
+}
+
+#[test]
+fn ex1_measurement_rate_cliff() {
+    let b = bands();
+    let runs = measure_ex1(&b.ex1).unwrap();
+    assert_eq!(runs.len(), b.ex1.control_hz.len() * b.ex1.seeds.len());
+    assert_all(check_ex1(&b.ex1, &runs));
+}
+
+#[test]
+fn ex2_measurement_queue_trap() {
+    let b = bands();
+    let pairs = measure_ex2(&b.ex2).unwrap();
+    assert_eq!(pairs.len(), b.ex2.seeds.len());
+    assert_all(check_ex2(&b.ex2, &pairs));
+}
+
+#[test]
+fn ex3_measurement_jitter_and_phase_offsets() {
+    let b = bands();
+    let (matched, offset) = measure_ex3(&b.ex3).unwrap();
+    assert_all(check_ex3(&b.ex3, &matched, &offset));
+}
+
+fn prediction_recorded(ex: &str, file: &str) {
+    let f = ExerciseFile::load(&path(file)).unwrap();
+    assert!(
+        f.has_prediction(required_keys(ex)),
+        "{file}: write every prediction key ({:?}) and a `why`",
+        required_keys(ex)
+    );
+    println!("{ex} prediction:\n{}", f.prediction_text());
+}
+
+#[test]
+#[cfg_attr(
+    ex1_prediction_empty,
+    ignore = "ex1: write your prediction in exercises/ex1_rate_cliff.toml"
+)]
+fn ex1_prediction_recorded() {
+    prediction_recorded("ex1", "ex1_rate_cliff.toml");
+}
+
+#[test]
+#[cfg_attr(
+    ex2_prediction_empty,
+    ignore = "ex2: write your prediction in exercises/ex2_queue_trap.toml"
+)]
+fn ex2_prediction_recorded() {
+    prediction_recorded("ex2", "ex2_queue_trap.toml");
+}
+
+#[test]
+#[cfg_attr(
+    ex3_prediction_empty,
+    ignore = "ex3: write your prediction in exercises/ex3_jitter_phase.toml"
+)]
+fn ex3_prediction_recorded() {
+    prediction_recorded("ex3", "ex3_jitter_phase.toml");
+}
+
+#[test]
+fn exercise_files_are_valid() {
+    for file in [
+        "ex1_rate_cliff.toml",
+        "ex2_queue_trap.toml",
+        "ex3_jitter_phase.toml",
+    ] {
+        let f = ExerciseFile::load(&path(file)).unwrap();
+        assert!(
+            !f.title.is_empty() && !f.objective.is_empty() && !f.instructions.is_empty(),
+            "{file}"
+        );
+        assert!(f.estimated_minutes > 0, "{file}");
+    }
+}
