@@ -127,5 +127,21 @@ fn brains(c: &mut Criterion) {
     g.finish();
 }
 
-criterion_group!(benches, topic, episode, brains);
+fn exercises(c: &mut Criterion) {
+    let bands = ratelab::exercise::load_bands(
+        &Path::new(env!("CARGO_MANIFEST_DIR")).join("exercises/bands.toml"),
+    )
+    .unwrap();
+    let mut g = c.benchmark_group("exercises");
+    g.sample_size(10);
+    g.bench_function("ex1 + ex2 measurement (24 ten-second virtual runs)", |b| {
+        b.iter(|| {
+            black_box(ratelab::exercise::measure_ex1(&bands.ex1).unwrap());
+            black_box(ratelab::exercise::measure_ex2(&bands.ex2).unwrap());
+        })
+    });
+    g.finish();
+}
+
+criterion_group!(benches, topic, episode, brains, exercises);
 criterion_main!(benches);

@@ -7,8 +7,65 @@ use ratelab::policy::Scripted;
 use ratelab::scheduler::StopFlag;
 use ratelab::{run, ClockKind, Nanos, RunConfig, RunOptions};
 
+/// Time `frames` renders of the lab at 120×40 fed with a 5 Hz virtual run (a dropping
+/// /obs, a full histogram and chart): building the view model and drawing it.
+pub fn render_bench(frames: usize) -> anyhow::Result<()> {
+    use crate::tui::app::App;
+    use ratatui::backend::TestBackend;
+    use ratatui::Terminal;
+    use ratelab::metrics::StepRecord;
+    use ratelab::session::{Speed, Telemetry};
+    use std::sync::{Arc, Mutex};
+    struct Collect(Arc<Mutex<Vec<StepRecord>>>);
+    impl ratelab::graph::StepObserver for Collect {
+        fn on_step(&mut self, r: &StepRecord) {
+            self.0.lock().expect("not poisoned").push(*r);
+        }
+    }
+    let cfg = RunConfig {
+        clock: ClockKind::Virtual,
+        control_hz: 8.0,
+        ..RunConfig::default()
+    };
+    let steps = Arc::new(Mutex::new(Vec::new()));
+    let opts = RunOptions {
+        observers: vec![Box::new(Collect(steps.clone()))],
+        ..RunOptions::new()
+    };
+    run(&cfg, Box::new(Scripted), opts)?;
+    let (tx, _rx) = crossbeam_channel::unbounded();
+    let mut app = App::new(tx, "scripted".into(), None, Speed::Times(1.0));
+    app.on_telemetry(Telemetry::Started {
+        cfg,
+        policy: "scripted".into(),
+        recording: None,
+    });
+    for s in steps.lock().expect("not poisoned").iter() {
+        app.on_telemetry(Telemetry::Step(*s));
+    }
+    let mut terminal = Terminal::new(TestBackend::new(120, 40))?;
+    let mut times = ratelab::metrics::LatencyStats::default();
+    for _ in 0..frames {
+        let start = std::time::Instant::now();
+        let view = app.view();
+        terminal.draw(|f| f.render_widget(&view, f.area()))?;
+        times.record(Nanos::from(start.elapsed()));
+    }
+    println!(
+        "lab frame at 120x40 (view model + draw), {frames} frames: mean {} | p50 {} | p99 {} | max {}",
+        Nanos(times.mean().unwrap_or(0.0) as u64),
+        times.quantile(0.5).unwrap_or_default(),
+        times.quantile(0.99).unwrap_or_default(),
+        times.max().unwrap_or_default()
+    );
+    Ok(())
+}
+
 /// Run the benchmark and print one table row per node and rate.
 pub fn run_bench(a: &BenchArgs, stop: StopFlag) -> anyhow::Result<()> {
+    if a.render {
+        return render_bench(2000);
+    }
     println!(
         "real-clock timing: every node at one rate, {} s each, spin margin {} µs, {} cores",
         a.duration,

@@ -239,4 +239,7 @@ pub struct BenchArgs {
     /// Spin margin, µs.
     #[arg(long, default_value_t = 300)]
     pub spin_margin_us: u64,
+    /// Instead: time the lab's frame rendering at 120×40 (view model + draw).
+    #[arg(long)]
+    pub render: bool,
 }

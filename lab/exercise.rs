@@ -75,9 +75,13 @@ pub fn run_exercise(which: &str, dir: &Path) -> anyhow::Result<()> {
                 first_fall.map_or("no rate".into(), |(_, hz)| hz.to_string())
             );
             print_checks(&check_ex1(b, &runs));
-            println!("\nReconcile: latency climbs steadily as the rate drops (the actuator holds each action for");
-            println!("longer), yet the pole survives until the held action is so old that a correction arrives");
-            println!("after the pole is past saving. A good controller is robust until, suddenly, it is not.");
+            println!("\nReconcile: latency grows as the rate drops (the actuator holds each action longer), but");
+            println!("not strictly: a 15 Hz policy ticks between sensor readings and acts on readings up to 20 ms");
+            println!("older than a 10 Hz policy, whose ticks coincide with the sensor's. Phase matters, not only");
+            println!("rate. The pole survives until the held action is so old that the correction arrives after");
+            println!(
+                "the pole is past saving. A good controller is robust until, suddenly, it is not."
+            );
             println!(
                 "Find the cliff to 0.1 Hz with: ratelab cliff --seeds {}",
                 join(&b.seeds)

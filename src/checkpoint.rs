@@ -395,7 +395,7 @@ impl OnnxPolicy {
                 )
             })
             .and_then(|m| m.into_optimized())
-            .and_then(|m| TypedSimplePlan::new(m))
+            .and_then(TypedSimplePlan::new)
             .map_err(|e| contract(e.to_string()))?;
         Ok(Self {
             plan: pinned,

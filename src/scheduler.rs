@@ -121,6 +121,11 @@ impl VirtualScheduler {
         self.now
     }
 
+    /// The index of the node that ticks next.
+    pub fn next_node(&self) -> Option<usize> {
+        self.heap.peek().map(|Reverse((_, _, i))| *i)
+    }
+
     /// Run the next tick. Returns its time, the node's index and the node's [`Flow`].
     pub fn tick_next(&mut self, nodes: &mut [Box<dyn Node>]) -> Option<(Nanos, usize, Flow)> {
         let Reverse((due, prio, i)) = self.heap.pop()?;
@@ -219,7 +224,8 @@ fn thread_cpu_time() -> Nanos {
     Nanos(ts.tv_sec as u64 * 1_000_000_000 + ts.tv_nsec as u64)
 }
 
-fn panic_message(p: &(dyn std::any::Any + Send)) -> String {
+/// The message of a caught panic.
+pub fn panic_message(p: &(dyn std::any::Any + Send)) -> String {
     p.downcast_ref::<&str>()
         .map(|s| s.to_string())
         .or_else(|| p.downcast_ref::<String>().cloned())

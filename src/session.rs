@@ -443,15 +443,7 @@ impl Engine {
             ClockKind::Virtual => self.virtual_run(cfg, graph, &recording),
             ClockKind::Real => self.real_run(cfg, graph, &recording),
         };
-        let metrics = summarize(
-            &RunConfig {
-                duration: end.at,
-                ..cfg.clone()
-            },
-            &handles,
-            &end,
-            None,
-        );
+        let metrics = live_metrics(cfg, &handles, &end, None);
         if let Some(r) = &recording {
             let _ = r.finish(&metrics, &end);
         }
@@ -615,8 +607,7 @@ impl Engine {
                 }
             };
             let budget = Instant::now();
-            loop {
-                let Some(due) = sched.next_due() else { break };
+            while let Some(due) = sched.next_due() {
                 if due > cfg.duration {
                     ended = Some(RunEnd {
                         at: cfg.duration.min(sched.now()),
@@ -627,14 +618,23 @@ impl Engine {
                 if target.is_some_and(|t| due > t) {
                     break;
                 }
-                let (actuator_ticked, stopped) = run_instant(&mut sched, &mut nodes);
-                if stopped {
-                    ended = Some(RunEnd {
-                        at: sched.now(),
-                        reason: EndReason::NodeStopped,
-                    });
-                    break;
-                }
+                let actuator_ticked = match run_instant(&mut sched, &mut nodes) {
+                    InstantOutcome::Ran { actuator } => actuator,
+                    InstantOutcome::Stopped => {
+                        ended = Some(RunEnd {
+                            at: sched.now(),
+                            reason: EndReason::NodeStopped,
+                        });
+                        break;
+                    }
+                    InstantOutcome::Failed(reason) => {
+                        ended = Some(RunEnd {
+                            at: sched.now(),
+                            reason,
+                        });
+                        break;
+                    }
+                };
                 if step_pending && actuator_ticked {
                     step_pending = false;
                     break;
@@ -645,15 +645,7 @@ impl Engine {
                 }
             }
             if let Some(end) = &ended {
-                let metrics = summarize(
-                    &RunConfig {
-                        duration: end.at,
-                        ..cfg.clone()
-                    },
-                    &handles,
-                    end,
-                    None,
-                );
+                let metrics = live_metrics(cfg, &handles, end, None);
                 self.status(sched.now(), paused, &handles);
                 let _ = self.tx.send(Telemetry::Ended {
                     metrics,
@@ -731,15 +723,7 @@ impl Engine {
                     .join()
                     .expect("runner thread");
                 let end = run.end.clone();
-                let metrics = summarize(
-                    &RunConfig {
-                        duration: end.at,
-                        ..cfg.clone()
-                    },
-                    &handles,
-                    &end,
-                    Some(run.timing),
-                );
+                let metrics = live_metrics(cfg, &handles, &end, Some(run.timing));
                 let _ = self.tx.send(Telemetry::Ended {
                     metrics,
                     reason: end.reason.clone(),
@@ -792,25 +776,70 @@ impl Engine {
     }
 }
 
-/// Run every tick due at the next instant. Returns (an actuator ticked, a node stopped).
+/// What running one virtual instant did.
+#[derive(Debug, PartialEq)]
+enum InstantOutcome {
+    /// Every tick due ran; whether the actuator was among them.
+    Ran {
+        /// The actuator ticked.
+        actuator: bool,
+    },
+    /// A node stopped the graph (the fall).
+    Stopped,
+    /// A node panicked: the graph stops and the lab names the node.
+    Failed(EndReason),
+}
+
+/// Run every tick due at the next instant. A panicking node is caught and reported.
 fn run_instant(
     sched: &mut VirtualScheduler,
     nodes: &mut [Box<dyn crate::node::Node>],
-) -> (bool, bool) {
+) -> InstantOutcome {
     let Some(t) = sched.next_due() else {
-        return (false, false);
+        return InstantOutcome::Ran { actuator: false };
     };
     let mut actuator = false;
     while sched.next_due() == Some(t) {
-        let Some((_, i, flow)) = sched.tick_next(nodes) else {
-            break;
-        };
-        actuator |= nodes[i].name() == "actuator";
-        if flow == Flow::Stop {
-            return (actuator, true);
+        let name = sched
+            .next_node()
+            .map(|i| nodes[i].name().to_string())
+            .unwrap_or_default();
+        match std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| sched.tick_next(nodes))) {
+            Err(p) => {
+                let message = crate::scheduler::panic_message(&*p);
+                return InstantOutcome::Failed(EndReason::NodeFailed {
+                    node: name,
+                    message,
+                });
+            }
+            Ok(None) => break,
+            Ok(Some((_, i, flow))) => {
+                actuator |= nodes[i].name() == "actuator";
+                if flow == Flow::Stop {
+                    return InstantOutcome::Stopped;
+                }
+            }
         }
     }
-    (actuator, false)
+    InstantOutcome::Ran { actuator }
+}
+
+/// The summary of a live run that ended at `end.at` (its duration, for an open-ended run).
+fn live_metrics(
+    cfg: &RunConfig,
+    h: &GraphHandles,
+    end: &RunEnd,
+    timing: Option<Vec<crate::metrics::NodeTiming>>,
+) -> Metrics {
+    summarize(
+        &RunConfig {
+            duration: end.at,
+            ..cfg.clone()
+        },
+        h,
+        end,
+        timing,
+    )
 }
 
 /// A command in words, for logs.
@@ -820,5 +849,49 @@ pub fn describe(cmd: &Command) -> String {
         Command::SetSensorHz { hz } => format!("sensor rate → {hz} Hz"),
         Command::SetQueueDepth { depth } => format!("queue depth → {depth}"),
         Command::SetPolicy { spec } => format!("brain → {spec}"),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::node::Node;
+    use crate::rate::Rate;
+
+    struct Flaky(Rate, &'static str, bool);
+    impl Node for Flaky {
+        fn name(&self) -> &str {
+            self.1
+        }
+        fn priority(&self) -> u8 {
+            u8::from(self.2)
+        }
+        fn rate(&self) -> &Rate {
+            &self.0
+        }
+        fn tick(&mut self, now: Nanos) -> Flow {
+            assert!(!(self.2 && now > Nanos::ZERO), "policy exploded");
+            Flow::Continue
+        }
+    }
+
+    #[test]
+    fn a_panicking_node_is_named_not_fatal() {
+        let mut nodes: Vec<Box<dyn Node>> = vec![
+            Box::new(Flaky(Rate::new(50.0).unwrap(), "sensor", false)),
+            Box::new(Flaky(Rate::new(50.0).unwrap(), "policy", true)),
+        ];
+        let mut sched = VirtualScheduler::new(&nodes);
+        assert_eq!(
+            run_instant(&mut sched, &mut nodes),
+            InstantOutcome::Ran { actuator: false }
+        );
+        match run_instant(&mut sched, &mut nodes) {
+            InstantOutcome::Failed(EndReason::NodeFailed { node, message }) => {
+                assert_eq!(node, "policy");
+                assert!(message.contains("policy exploded"), "{message}");
+            }
+            other => panic!("{other:?}"),
+        }
     }
 }

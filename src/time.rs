@@ -33,7 +33,7 @@ impl Nanos {
     /// negative, or too large for `u64` nanoseconds.
     pub fn from_secs_f64(secs: f64) -> Option<Nanos> {
         let ns = (secs * 1e9).round();
-        (secs.is_finite() && secs >= 0.0 && ns < u64::MAX as f64).then(|| Nanos(ns as u64))
+        (secs.is_finite() && secs >= 0.0 && ns < u64::MAX as f64).then_some(Nanos(ns as u64))
     }
 
     /// From whole milliseconds.

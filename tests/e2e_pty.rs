@@ -106,7 +106,7 @@ impl Lab {
 fn virtual_lab_falls_off_the_rate_cliff_and_quits_cleanly() {
     let mut lab = Lab::start(&["--clock", "virtual"]);
     lab.wait_for("BALANCED", Duration::from_secs(30));
-    lab.wait_for("clock virtual", Duration::from_secs(5));
+    lab.wait_for("virtual clock", Duration::from_secs(5));
     // Step the control rate down the ladder: 50 → … → 5 Hz (11 presses).
     lab.keys("-----------");
     lab.wait_for("5 Hz set", Duration::from_secs(10));
@@ -118,13 +118,17 @@ fn virtual_lab_falls_off_the_rate_cliff_and_quits_cleanly() {
 #[test]
 fn real_clock_lab_keeps_the_pole_up_for_3_s() {
     let lab = Lab::start(&["--clock", "real"]);
-    lab.wait_for("clock real", Duration::from_secs(30));
+    lab.wait_for("real clock", Duration::from_secs(30));
     std::thread::sleep(Duration::from_secs(3));
     let screen = lab.wait_for("BALANCED", Duration::from_secs(5));
     assert!(!screen.contains("FELL"), "{screen}");
     assert!(
         screen.contains("Hz meas"),
         "the real clock shows measured rates:\n{screen}"
+    );
+    assert!(
+        screen.contains("µs late"),
+        "the real clock shows tick lateness:\n{screen}"
     );
     lab.quit();
 }

@@ -23,7 +23,9 @@ pub const BUCKETS: usize = 11;
 
 /// A short name for the status line: `scripted`, or the checkpoint's file name.
 fn short_brain(spec: &str) -> String {
-    std::path::Path::new(spec).file_name().map_or_else(|| spec.to_string(), |f| f.to_string_lossy().into_owned())
+    std::path::Path::new(spec)
+        .file_name()
+        .map_or_else(|| spec.to_string(), |f| f.to_string_lossy().into_owned())
 }
 
 /// The lab's state.

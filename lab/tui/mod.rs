@@ -96,10 +96,21 @@ pub fn run_lab(settings: SessionSettings, stop: StopFlag) -> anyhow::Result<()> 
         })
         .context("spawning the input thread")?;
     let mut terminal = ratatui::try_init().context("cannot open the terminal")?;
+    // ratatui's hook restores the terminal on a panic; keep that for the UI thread only.
+    // A node's panic is caught by the executor and shown in the lab (NODE FAILED), so it
+    // must neither restore the terminal under the running UI nor print over it.
+    let restore_and_report = std::panic::take_hook();
+    std::panic::set_hook(Box::new(move |info| {
+        if std::thread::current().name() == Some("main") {
+            restore_and_report(info);
+        }
+    }));
     let result = run_loop(&mut terminal, &mut app, &in_rx, &tel_rx, &stop);
     ratatui::restore();
     let _ = ctl_tx.send(Control::Quit);
-    let _ = engine.join();
+    if engine.join().is_err() {
+        anyhow::bail!("the lab's engine stopped unexpectedly");
+    }
     if let Some(p) = session_file {
         println!(
             "[ratelab] session log: {} (replay: ratelab replay {})",

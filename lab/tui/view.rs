@@ -126,7 +126,7 @@ impl Widget for &View {
         let hist_h = if area.height >= 34 { 10 } else { 6 };
         let [status, graph, middle, latency, footer] = Layout::vertical([
             Constraint::Length(1),
-            Constraint::Length(6),
+            Constraint::Length(7),
             Constraint::Min(8),
             Constraint::Length(hist_h),
             Constraint::Length(1),
@@ -168,7 +168,7 @@ fn render_too_small(area: Rect, buf: &mut Buffer) {
 fn render_status(v: &View, area: Rect, buf: &mut Buffer) {
     let mut spans = vec![
         " ratelab ".black().on_cyan().bold(),
-        format!(" clock {}", v.clock).into(),
+        format!(" {} clock", v.clock).into(),
     ];
     if !v.speed.is_empty() {
         spans.push(format!(" {}", v.speed).into());
@@ -178,7 +178,7 @@ fn render_status(v: &View, area: Rect, buf: &mut Buffer) {
     }
     spans.extend([
         format!(
-            " │ t {:.2} s │ seed {} │ depth {} │ brain {} │ ",
+            " │ t {:.2} s │ seed {} │ depth {} │ {} │ ",
             v.sim_time_s, v.seed, v.depth, v.brain
         )
         .into(),
