@@ -52,13 +52,13 @@ fn episode(c: &mut Criterion) {
     };
     let mut g = c.benchmark_group("episode (10 s virtual, 1000 physics steps)");
     g.bench_function(
-        "bare MuJoCo: reset + 500 control steps (1000 mj_step)",
+        "bare MuJoCo: new plant + reset + 501 control steps (1002 mj_step)",
         |b| {
-            let mut plant = CartPole::new().unwrap();
             b.iter(|| {
+                let mut plant = CartPole::new().unwrap();
                 plant.reset(0);
                 let mut p = Scripted;
-                for _ in 0..500 {
+                for _ in 0..501 {
                     use ratelab::policy::Policy;
                     let a = p.act(&plant.observe());
                     black_box(plant.step(a[0]));
@@ -66,6 +66,9 @@ fn episode(c: &mut Criterion) {
             })
         },
     );
+    g.bench_function("plant construction only (model copy + mjData)", |b| {
+        b.iter(|| black_box(CartPole::new().unwrap()))
+    });
     g.bench_function("ratelab graph: virtual run, 501 actuator ticks", |b| {
         b.iter(|| {
             black_box(

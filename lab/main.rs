@@ -16,6 +16,13 @@ use std::process::ExitCode;
 
 /// Exit code for bad input (as clap uses for usage errors).
 const EXIT_USAGE: u8 = 2;
+/// Exit code of a run stopped by Ctrl-C or SIGTERM (after writing its outputs).
+const EXIT_INTERRUPTED: u8 = 130;
+
+/// A headless run; its summary, outputs and recording are complete even when interrupted.
+fn headless(args: &cli::RunArgs, stop: StopFlag) -> anyhow::Result<()> {
+    headless::run_headless(args, stop).map(|_| ())
+}
 
 /// Open the terminal lab with the run flags.
 fn lab(args: &cli::RunArgs, stop: StopFlag) -> anyhow::Result<()> {
@@ -122,19 +129,23 @@ fn main() -> ExitCode {
         }
     };
     let stop = StopFlag::new();
+    // Set only by a signal (a fall also sets `stop`, under the real clock).
+    let interrupted = StopFlag::new();
     {
         let stop = stop.clone();
+        let interrupted = interrupted.clone();
         // Ctrl-C / SIGTERM: stop the graph cleanly (summaries and files still written);
         // a second one exits at once.
         let _ = ctrlc::set_handler(move || {
-            if stop.is_stopped() {
-                std::process::exit(130);
+            if interrupted.is_stopped() {
+                std::process::exit(i32::from(EXIT_INTERRUPTED));
             }
+            interrupted.stop();
             stop.stop();
         });
     }
     let result = match &cli.command {
-        Some(Command::Run(args)) => headless::run_headless(args, stop).map(|_| ()),
+        Some(Command::Run(args)) => headless(args, stop),
         Some(Command::Lab(args)) => lab(args, stop),
         Some(Command::Replay(args)) => replay(args),
         Some(Command::Bench(args)) => bench::run_bench(args, stop),
@@ -145,11 +156,12 @@ fn main() -> ExitCode {
             if !cli.headless && std::io::stdout().is_terminal() && std::io::stdin().is_terminal() {
                 lab(&cli.run, stop)
             } else {
-                headless::run_headless(&cli.run, stop).map(|_| ())
+                headless(&cli.run, stop)
             }
         }
     };
     match result {
+        Ok(()) if interrupted.is_stopped() => ExitCode::from(EXIT_INTERRUPTED),
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("error: {e:#}");

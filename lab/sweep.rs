@@ -54,7 +54,11 @@ pub fn run_sweep(a: &SweepArgs) -> anyhow::Result<()> {
     }
     print_table(&rows);
     println!();
-    print_plot(&rows);
+    if std::io::stdout().is_terminal() {
+        draw_chart(&rows)?;
+    } else {
+        print_plot(&rows);
+    }
     if let Some(p) = &a.csv {
         write_csv(p, &rows).with_context(|| format!("cannot write {}", p.display()))?;
         println!("wrote {}", p.display());
@@ -102,31 +106,98 @@ fn print_table(rows: &[(Point, Metrics)]) {
     }
 }
 
+/// Per control rate (over every other grid dimension): the fraction of runs that balanced
+/// and the mean sense→act latency, ms.
+fn by_rate(rows: &[(Point, Metrics)]) -> Vec<(f64, f64, f64)> {
+    let mut rates: Vec<f64> = rows.iter().map(|(p, _)| p.control_hz).collect();
+    rates.sort_by(f64::total_cmp);
+    rates.dedup();
+    rates
+        .into_iter()
+        .map(|hz| {
+            let at: Vec<&Metrics> = rows
+                .iter()
+                .filter(|(p, _)| p.control_hz == hz)
+                .map(|(_, m)| m)
+                .collect();
+            let ok = at.iter().filter(|m| m.balanced).count() as f64 / at.len() as f64;
+            let lat = at.iter().map(|m| m.mean_latency_ms).sum::<f64>() / at.len() as f64;
+            (hz, ok, lat)
+        })
+        .collect()
+}
+
+/// Outcome and latency against the control rate as two ratatui charts, drawn inline
+/// below the table (the terminal is left in its normal mode afterwards).
+fn draw_chart(rows: &[(Point, Metrics)]) -> anyhow::Result<()> {
+    use ratatui::layout::{Constraint, Layout};
+    use ratatui::style::Stylize;
+    use ratatui::symbols::Marker;
+    use ratatui::widgets::{Axis, Block, Chart, Dataset, GraphType};
+    use ratatui::{TerminalOptions, Viewport};
+    let points = by_rate(rows);
+    let ok: Vec<(f64, f64)> = points.iter().map(|&(hz, ok, _)| (hz, ok)).collect();
+    let lat: Vec<(f64, f64)> = points.iter().map(|&(hz, _, l)| (hz, l)).collect();
+    let x_max = points.iter().map(|p| p.0).fold(1.0, f64::max);
+    let lat_max = points.iter().map(|p| p.2).fold(1.0, f64::max) * 1.1;
+    let x_axis = || {
+        Axis::default()
+            .title("control Hz")
+            .bounds([0.0, x_max])
+            .labels(["0".to_string(), format!("{x_max}")])
+    };
+    let mut terminal = ratatui::try_init_with_options(TerminalOptions {
+        viewport: Viewport::Inline(14),
+    })?;
+    let drawn = terminal.draw(|f| {
+        let [left, right] = Layout::horizontal([Constraint::Percentage(50); 2]).areas(f.area());
+        let balanced = Chart::new(vec![Dataset::default()
+            .name("balanced")
+            .marker(Marker::Braille)
+            .graph_type(GraphType::Line)
+            .green()
+            .data(&ok)])
+        .block(Block::bordered().title(" fraction of runs balanced "))
+        .x_axis(x_axis())
+        .y_axis(
+            Axis::default()
+                .bounds([0.0, 1.05])
+                .labels(["0", "0.5", "1"]),
+        );
+        let latency = Chart::new(vec![Dataset::default()
+            .name("mean latency")
+            .marker(Marker::Braille)
+            .graph_type(GraphType::Line)
+            .cyan()
+            .data(&lat)])
+        .block(Block::bordered().title(" mean sense→act latency (ms) "))
+        .x_axis(x_axis())
+        .y_axis(
+            Axis::default()
+                .bounds([0.0, lat_max])
+                .labels(["0".to_string(), format!("{lat_max:.0}")]),
+        );
+        f.render_widget(balanced, left);
+        f.render_widget(latency, right);
+    });
+    ratatui::restore();
+    drawn?;
+    println!();
+    Ok(())
+}
+
 /// Outcome and latency against the control rate, as text: one line per rate (over every
 /// other grid dimension), with a bar for the mean latency.
 fn print_plot(rows: &[(Point, Metrics)]) {
-    let mut rates: Vec<f64> = rows.iter().map(|(p, _)| p.control_hz).collect();
-    rates.sort_by(|a, b| b.total_cmp(a));
-    rates.dedup();
-    let max_lat = rows
-        .iter()
-        .map(|(_, m)| m.mean_latency_ms)
-        .fold(1e-9, f64::max);
+    let points = by_rate(rows);
+    let max_lat = points.iter().map(|p| p.2).fold(1e-9, f64::max);
     println!("control Hz | balanced | mean sense->act latency");
-    for hz in rates {
-        let at: Vec<&Metrics> = rows
-            .iter()
-            .filter(|(p, _)| p.control_hz == hz)
-            .map(|(_, m)| m)
-            .collect();
-        let ok = at.iter().filter(|m| m.balanced).count();
-        let lat = at.iter().map(|m| m.mean_latency_ms).sum::<f64>() / at.len() as f64;
+    for &(hz, ok, lat) in points.iter().rev() {
         let bar = "#".repeat(((lat / max_lat) * 40.0).round() as usize);
         println!(
-            "{:>10} | {:>3}/{:<4} | {:<40} {:.1} ms",
+            "{:>10} | {:>7.0}% | {:<40} {:.1} ms",
             hz,
-            ok,
-            at.len(),
+            ok * 100.0,
             bar,
             lat
         );

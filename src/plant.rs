@@ -9,6 +9,7 @@
 use crate::np_random::NumpyGenerator;
 use crate::time::Nanos;
 use mujoco_rs::prelude::*;
+use std::sync::Mutex;
 
 /// Observation width: `[cart_pos, cart_vel, cos θ, sin θ, pole_angvel]`.
 pub const OBS_DIM: usize = 5;
@@ -100,9 +101,20 @@ impl CartPole {
     /// # Errors
     /// [`PlantError::Model`] if MuJoCo rejects the MJCF.
     pub fn new() -> Result<Self, PlantError> {
-        let model = MjModel::from_xml_string(MJCF).map_err(|e| PlantError::Model(e.to_string()))?;
-        let data = MjData::new(Box::new(model));
-        Ok(Self { data, steps: 0 })
+        // Parse and compile the MJCF once per process; every plant gets a copy
+        // (`mj_copyModel`), which is much cheaper than compiling (sweeps build thousands).
+        static COMPILED: Mutex<Option<MjModel>> = Mutex::new(None);
+        let mut compiled = COMPILED.lock().unwrap_or_else(|e| e.into_inner());
+        if compiled.is_none() {
+            *compiled =
+                Some(MjModel::from_xml_string(MJCF).map_err(|e| PlantError::Model(e.to_string()))?);
+        }
+        let model = compiled.as_ref().expect("compiled above").clone();
+        drop(compiled);
+        Ok(Self {
+            data: MjData::new(Box::new(model)),
+            steps: 0,
+        })
     }
 
     /// Reset to the course env's seeded start: with `Generator(PCG64(seed))`, draw

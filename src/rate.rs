@@ -93,7 +93,7 @@ impl DeadlineWaiter {
         let margin_ns = u32::try_from(margin.0).unwrap_or(u32::MAX);
         Self {
             sleeper: spin_sleep::SpinSleeper::new(margin_ns)
-                .with_spin_strategy(spin_sleep::SpinStrategy::SpinLoopHint),
+                .with_spin_strategy(spin_sleep::SpinStrategy::YieldThread),
         }
     }
 

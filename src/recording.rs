@@ -30,7 +30,7 @@ use crate::plant::THETA_LIMIT_RAD;
 use crate::rate::Rate;
 use crate::scheduler::{EndReason, RunEnd};
 use crate::time::Nanos;
-use re_chunk::{Chunk, ChunkBuilder, RowId};
+use re_chunk::{Chunk, ChunkBuilder, RowId, TimeColumn};
 use rerun::blueprint::{
     Blueprint, GraphView, Horizontal, Spatial3DView, TextLogView, TimeSeriesView, Vertical,
 };
@@ -45,12 +45,22 @@ pub const APP_ID: &str = "ratelab";
 
 /// Buffered rows are sent as chunks this often (control steps), so a run cut short loses
 /// at most this much even without a clean exit (a clean exit always sends everything).
-pub const FLUSH_EVERY_STEPS: u64 = 50;
+pub const FLUSH_EVERY_STEPS: u64 = 250;
 
-/// Rows gathered per entity, sent as chunks in a fixed order.
+/// A scalar series gathered as columns: run time (ns), control step, value.
+#[derive(Default)]
+struct ScalarColumn {
+    t_ns: Vec<i64>,
+    step: Vec<i64>,
+    value: Vec<f64>,
+}
+
+/// Rows gathered per entity, sent as chunks in a fixed order. Scalars are kept as plain
+/// columns and serialized once per flush (one arrow array per series, not one per row).
 #[derive(Default)]
 struct ChunkBuffer {
     rows: BTreeMap<String, ChunkBuilder>,
+    scalars: BTreeMap<String, ScalarColumn>,
 }
 
 impl ChunkBuffer {
@@ -65,10 +75,30 @@ impl ChunkBuffer {
         );
     }
 
+    fn scalar(&mut self, entity: &str, t: Nanos, step: u64, value: f64) {
+        if !self.scalars.contains_key(entity) {
+            self.scalars
+                .insert(entity.to_string(), ScalarColumn::default());
+        }
+        let col = self.scalars.get_mut(entity).expect("inserted above");
+        col.t_ns.push(i64::try_from(t.0).unwrap_or(i64::MAX));
+        col.step.push(i64::try_from(step).unwrap_or(i64::MAX));
+        col.value.push(value);
+    }
+
     fn send(&mut self, rec: &RecordingStream) {
         for (_, builder) in std::mem::take(&mut self.rows) {
             if let Ok(chunk) = builder.build() {
                 rec.send_chunk(chunk);
+            }
+        }
+        for (entity, col) in std::mem::take(&mut self.scalars) {
+            let index = [
+                TimeColumn::new_duration_nanos("sim_time", col.t_ns),
+                TimeColumn::new_sequence("control_step", col.step),
+            ];
+            if let Ok(columns) = rerun::Scalars::new(col.value).columns_of_unit_batches() {
+                let _ = rec.send_columns(entity, index, columns);
             }
         }
     }
@@ -364,11 +394,7 @@ impl Recording {
                 .with_level(rerun::components::TextLogLevel::INFO),
         );
         for (name, limit) in [("upper", THETA_LIMIT_RAD), ("lower", -THETA_LIMIT_RAD)] {
-            buf.add(
-                &format!("plant/fall_limit/{name}"),
-                &start,
-                &rerun::Scalars::single(limit),
-            );
+            buf.scalar(&format!("plant/fall_limit/{name}"), Nanos::ZERO, 0, limit);
         }
         buf.send(&self.rec);
     }
@@ -423,14 +449,14 @@ impl Recording {
             &format!("end ({}): {}", end.reason, summary[2..].join(" | ")),
             level,
         );
-        let at = time_point(end.at, metrics.steps);
         {
             let mut buf = self.lock();
             for (name, limit) in [("upper", THETA_LIMIT_RAD), ("lower", -THETA_LIMIT_RAD)] {
-                buf.add(
+                buf.scalar(
                     &format!("plant/fall_limit/{name}"),
-                    &at,
-                    &rerun::Scalars::single(limit),
+                    end.at,
+                    metrics.steps,
+                    limit,
                 );
             }
         }
@@ -562,23 +588,11 @@ impl StepObserver for RecordingObserver {
                 rerun::Angle::from_radians(theta as f32),
             )),
         );
-        buf.add(
-            "plant/pole_angle_rad",
-            &time,
-            &rerun::Scalars::single(theta),
-        );
-        buf.add(
-            "plant/cart_pos_m",
-            &time,
-            &rerun::Scalars::single(s.cart_pos),
-        );
-        buf.add("policy/action", &time, &rerun::Scalars::single(s.action));
+        buf.scalar("plant/pole_angle_rad", s.t, s.step, theta);
+        buf.scalar("plant/cart_pos_m", s.t, s.step, s.cart_pos);
+        buf.scalar("policy/action", s.t, s.step, s.action);
         if let Some(lat) = s.latency {
-            buf.add(
-                "latency/sense_to_act_ms",
-                &time,
-                &rerun::Scalars::single(lat.as_millis_f64()),
-            );
+            buf.scalar("latency/sense_to_act_ms", s.t, s.step, lat.as_millis_f64());
         }
         // Bus counters and msg/s over the last second of run time.
         self.window
@@ -600,20 +614,23 @@ impl StepObserver for RecordingObserver {
             }
         };
         for (topic, stats, then) in [("obs", s.obs, obs0), ("action", s.action_topic, act0)] {
-            buf.add(
+            buf.scalar(
                 &format!("bus/{topic}/published"),
-                &time,
-                &rerun::Scalars::single(stats.published as f64),
+                s.t,
+                s.step,
+                stats.published as f64,
             );
-            buf.add(
+            buf.scalar(
                 &format!("bus/{topic}/dropped"),
-                &time,
-                &rerun::Scalars::single(stats.dropped as f64),
+                s.t,
+                s.step,
+                stats.dropped as f64,
             );
-            buf.add(
+            buf.scalar(
                 &format!("bus/{topic}/msg_per_s"),
-                &time,
-                &rerun::Scalars::single(rate(stats.published, then)),
+                s.t,
+                s.step,
+                rate(stats.published, then),
             );
         }
         if s.fell {

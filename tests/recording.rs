@@ -244,3 +244,40 @@ fn bad_record_paths_fail_before_the_run() {
     }
     assert_eq!(std::fs::read(&existing).unwrap(), b"keep me");
 }
+
+#[test]
+fn ctrl_c_during_a_recorded_real_run_leaves_a_complete_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("cut.rrd");
+    let child = std::process::Command::new(env!("CARGO_BIN_EXE_ratelab"))
+        .args([
+            "run",
+            "--clock",
+            "real",
+            "--duration",
+            "20",
+            "--record",
+            path.to_str().unwrap(),
+        ])
+        .stdout(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(std::time::Duration::from_millis(2500));
+    // SAFETY: sending SIGINT to our own child process.
+    unsafe { libc::kill(child.id() as libc::pid_t, libc::SIGINT) };
+    let out = child.wait_with_output().unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert_eq!(out.status.code(), Some(130), "{stdout}");
+    assert!(stdout.contains("interrupted at t="), "{stdout}");
+    let rows: usize = chunks(&path)
+        .iter()
+        .filter(|c| c.entity_path().to_string() == "/plant/pole_angle_rad")
+        .map(|c| c.num_rows())
+        .sum();
+    assert!(rows > 50, "about 2.5 s of 50 Hz steps recorded, got {rows}");
+    let events: Vec<Chunk> = chunks(&path)
+        .into_iter()
+        .filter(|c| c.entity_path().to_string() == "/events")
+        .collect();
+    assert!(!events.is_empty());
+}

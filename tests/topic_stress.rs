@@ -1,0 +1,82 @@
+//! The topic under contention: counts that must add up exactly whatever the interleaving.
+
+use ratelab::topic::Topic;
+use ratelab::Nanos;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+
+const PUBLISHERS: u64 = 4;
+const EACH: u64 = 20_000;
+
+fn publish_all(topic: &Arc<Topic<u64>>) -> Vec<u64> {
+    let handles: Vec<_> = (0..PUBLISHERS)
+        .map(|p| {
+            let t = topic.clone();
+            std::thread::spawn(move || {
+                (0..EACH)
+                    .map(|i| t.publish(p * EACH + i, Nanos(i), None))
+                    .collect::<Vec<u64>>()
+            })
+        })
+        .collect();
+    let mut seqs: Vec<u64> = handles
+        .into_iter()
+        .flat_map(|h| h.join().unwrap())
+        .collect();
+    seqs.sort_unstable();
+    seqs
+}
+
+#[test]
+fn unread_topic_drops_all_but_depth_exactly() {
+    for depth in [1usize, 3, 64] {
+        let topic = Arc::new(Topic::new("/stress", depth).unwrap());
+        let seqs = publish_all(&topic);
+        let n = PUBLISHERS * EACH;
+        // Every publish got its own sequence number: no lost or duplicated update.
+        assert_eq!(seqs, (0..n).collect::<Vec<u64>>());
+        let stats = topic.stats();
+        assert_eq!(stats.published, n);
+        // Nothing was ever read, so every evicted message was dropped: all but the last `depth`.
+        assert_eq!(stats.dropped, n - depth as u64, "depth {depth}");
+        assert_eq!(topic.buffered(), depth);
+        assert_eq!(topic.latest().unwrap().seq, n - 1);
+    }
+}
+
+#[test]
+fn concurrent_reader_sees_time_move_forward_and_counts_stay_bounded() {
+    let depth = 4;
+    let topic = Arc::new(Topic::new("/stress", depth).unwrap());
+    let done = Arc::new(AtomicBool::new(false));
+    let reader = {
+        let (t, done) = (topic.clone(), done.clone());
+        std::thread::spawn(move || {
+            let mut seen = Vec::new();
+            while !done.load(Ordering::Relaxed) {
+                if let Some(m) = t.latest() {
+                    seen.push(m.seq);
+                }
+            }
+            seen
+        })
+    };
+    let seqs = publish_all(&topic);
+    done.store(true, Ordering::Relaxed);
+    let seen = reader.join().unwrap();
+    let n = PUBLISHERS * EACH;
+    assert_eq!(seqs.len() as u64, n);
+    let stats = topic.stats();
+    assert_eq!(stats.published, n);
+    // latest() never goes back in time.
+    assert!(seen.windows(2).all(|w| w[0] <= w[1]));
+    // Reads can only save messages from being counted as drops.
+    assert!(stats.dropped <= n - depth as u64);
+    // A final read marks everything buffered as seen: publishing `depth` more then drops nothing.
+    topic.latest();
+    let before = topic.stats().dropped;
+    for i in 0..depth as u64 {
+        topic.publish(i, Nanos(0), None);
+    }
+    assert_eq!(topic.stats().dropped, before);
+}
