@@ -114,8 +114,10 @@ pub struct Ex3Bands {
     pub rate_hz: f64,
     /// Offsets for sensor, policy, actuator, ms.
     pub phase_offset_ms: [f64; 3],
-    /// Robust bound on /obs drops with the offsets.
-    pub max_obs_drops_with_offsets: u64,
+    /// Robust bound on /obs drops with the offsets, as a fraction of published.
+    pub max_obs_drop_fraction_with_offsets: f64,
+    /// The offsets' latency cost: mean sense→act latency with them is at least this, ms.
+    pub min_mean_latency_ms_with_offsets: f64,
 }
 
 /// `exercises/bands.toml`.
@@ -367,10 +369,18 @@ pub fn check_ex3(b: &Ex3Bands, matched: &Metrics, offset: &Metrics) -> Vec<Check
         check("the pole stays up with phase offsets", offset.balanced),
         check(
             format!(
-                "with offsets, /obs drops <= {}",
-                b.max_obs_drops_with_offsets
+                "with offsets, /obs drops <= {:.0}% of published",
+                b.max_obs_drop_fraction_with_offsets * 100.0
             ),
-            offset.obs_dropped <= b.max_obs_drops_with_offsets,
+            offset.obs_dropped as f64
+                <= b.max_obs_drop_fraction_with_offsets * offset.obs_published as f64,
+        ),
+        check(
+            format!(
+                "with offsets, mean sense->act latency >= {} ms",
+                b.min_mean_latency_ms_with_offsets
+            ),
+            offset.mean_latency_ms >= b.min_mean_latency_ms_with_offsets,
         ),
     ]
 }
