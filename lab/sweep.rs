@@ -11,6 +11,15 @@ use ratelab::sweep::{find_cliff, run_grid, Grid, Point};
 use ratelab::{ClockKind, RunConfig};
 use std::io::IsTerminal;
 
+/// A factory of fresh brains for parallel runs; the spec is checked once, before any run.
+fn brain_factory(
+    spec: &str,
+) -> anyhow::Result<impl Fn() -> Result<Box<dyn Policy>, String> + Sync> {
+    load_policy(spec)?;
+    let spec = spec.to_string();
+    Ok(move || load_policy(&spec).map_err(|e| e.to_string()))
+}
+
 fn progress_bar(total: usize) -> Option<ProgressBar> {
     std::io::stderr().is_terminal().then(|| {
         let bar = ProgressBar::new(total as u64);
@@ -23,13 +32,7 @@ fn progress_bar(total: usize) -> Option<ProgressBar> {
 
 /// Run a sweep and print/write its table.
 pub fn run_sweep(a: &SweepArgs) -> anyhow::Result<()> {
-    let spec = a.policy.clone();
-    load_policy(&spec)?; // fail fast, before any run
-    let brain = move || {
-        load_policy(&spec)
-            .map_err(|e| e.to_string())
-            .map(|b| b as Box<dyn Policy>)
-    };
+    let brain = brain_factory(&a.policy)?;
     let grid = Grid {
         clocks: a.clock.clone(),
         sensor_hz: a.sensor_hz.clone(),
@@ -131,9 +134,8 @@ fn by_rate(rows: &[(Point, Metrics)]) -> Vec<(f64, f64, f64)> {
 /// below the table (the terminal is left in its normal mode afterwards).
 fn draw_chart(rows: &[(Point, Metrics)]) -> anyhow::Result<()> {
     use ratatui::layout::{Constraint, Layout};
-    use ratatui::style::Stylize;
-    use ratatui::symbols::Marker;
-    use ratatui::widgets::{Axis, Block, Chart, Dataset, GraphType};
+    use ratatui::style::Color;
+    use ratatui::widgets::Axis;
     use ratatui::{TerminalOptions, Viewport};
     let points = by_rate(rows);
     let ok: Vec<(f64, f64)> = points.iter().map(|&(hz, ok, _)| (hz, ok)).collect();
@@ -151,31 +153,21 @@ fn draw_chart(rows: &[(Point, Metrics)]) -> anyhow::Result<()> {
     })?;
     let drawn = terminal.draw(|f| {
         let [left, right] = Layout::horizontal([Constraint::Percentage(50); 2]).areas(f.area());
-        let balanced = Chart::new(vec![Dataset::default()
-            .name("balanced")
-            .marker(Marker::Braille)
-            .graph_type(GraphType::Line)
-            .green()
-            .data(&ok)])
-        .block(Block::bordered().title(" fraction of runs balanced "))
-        .x_axis(x_axis())
-        .y_axis(
-            Axis::default()
-                .bounds([0.0, 1.05])
-                .labels(["0", "0.5", "1"]),
+        let balanced = line_chart(
+            " fraction of runs balanced ",
+            "balanced",
+            Color::Green,
+            &ok,
+            x_axis(),
+            [0.0, 1.05],
         );
-        let latency = Chart::new(vec![Dataset::default()
-            .name("mean latency")
-            .marker(Marker::Braille)
-            .graph_type(GraphType::Line)
-            .cyan()
-            .data(&lat)])
-        .block(Block::bordered().title(" mean sense→act latency (ms) "))
-        .x_axis(x_axis())
-        .y_axis(
-            Axis::default()
-                .bounds([0.0, lat_max])
-                .labels(["0".to_string(), format!("{lat_max:.0}")]),
+        let latency = line_chart(
+            " mean sense→act latency (ms) ",
+            "mean latency",
+            Color::Cyan,
+            &lat,
+            x_axis(),
+            [0.0, lat_max],
         );
         f.render_widget(balanced, left);
         f.render_widget(latency, right);
@@ -184,6 +176,32 @@ fn draw_chart(rows: &[(Point, Metrics)]) -> anyhow::Result<()> {
     drawn?;
     println!();
     Ok(())
+}
+
+/// One titled line chart of `data` with a y axis over `y` (labelled at its ends).
+fn line_chart<'a>(
+    title: &'a str,
+    name: &'a str,
+    color: ratatui::style::Color,
+    data: &'a [(f64, f64)],
+    x_axis: ratatui::widgets::Axis<'a>,
+    y: [f64; 2],
+) -> ratatui::widgets::Chart<'a> {
+    use ratatui::widgets::{Axis, Block, Chart, Dataset, GraphType};
+    let dataset = Dataset::default()
+        .name(name)
+        .marker(ratatui::symbols::Marker::Braille)
+        .graph_type(GraphType::Line)
+        .style(color)
+        .data(data);
+    Chart::new(vec![dataset])
+        .block(Block::bordered().title(title))
+        .x_axis(x_axis)
+        .y_axis(
+            Axis::default()
+                .bounds(y)
+                .labels([format!("{:.0}", y[0]), format!("{:.1}", y[1])]),
+        )
 }
 
 /// Outcome and latency against the control rate, as text: one line per rate (over every
@@ -248,13 +266,7 @@ fn write_csv(path: &std::path::Path, rows: &[(Point, Metrics)]) -> anyhow::Resul
 
 /// For each seed, the highest control rate at which the pole falls, to `step` Hz.
 pub fn run_cliff(a: &CliffArgs) -> anyhow::Result<()> {
-    let spec = a.policy.clone();
-    load_policy(&spec)?;
-    let brain = move || {
-        load_policy(&spec)
-            .map_err(|e| e.to_string())
-            .map(|b| b as Box<dyn Policy>)
-    };
+    let brain = brain_factory(&a.policy)?;
     let results: Vec<_> = std::thread::scope(|s| {
         let handles: Vec<_> = a
             .seeds
