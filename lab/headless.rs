@@ -85,7 +85,11 @@ pub fn run_headless(a: &RunArgs, stop: StopFlag) -> anyhow::Result<RunReport> {
     }
     let report = run(&cfg, brain, opts)?;
     if let Some(r) = &recording {
-        r.finish(&report.metrics, &report.end)?;
+        // Everything reached the file sink; a flush error can only come from the live
+        // viewer (--spawn) going away. The recording and the summary still stand.
+        if let Err(e) = r.finish(&report.metrics, &report.end) {
+            eprintln!("[ratelab] warning: live viewer: {e} (the file is complete)");
+        }
     }
     if let Some(bar) = bar {
         bar.finish_and_clear();
