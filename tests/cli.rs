@@ -139,3 +139,106 @@ fn break_flag_falls_headless_when_piped() {
         "{out}"
     );
 }
+
+#[test]
+fn exercise_refuses_without_a_prediction_then_runs_with_one() {
+    let repo = Path::new(env!("CARGO_MANIFEST_DIR")).join("exercises");
+    let o = ratelab(&["exercise", "ex2", "--dir", repo.to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(
+        stderr(&o).contains("has no prediction yet"),
+        "{}",
+        stderr(&o)
+    );
+
+    let dir = tempfile::tempdir().unwrap();
+    for f in ["bands.toml", "ex2_queue_trap.toml"] {
+        std::fs::copy(repo.join(f), dir.path().join(f)).unwrap();
+    }
+    let file = dir.path().join("ex2_queue_trap.toml");
+    let text = std::fs::read_to_string(&file)
+        .unwrap()
+        .replace("# deep_queue_obs_drops =\n", "deep_queue_obs_drops = 0\n")
+        .replace("# deep_queue_balances =\n", "deep_queue_balances = false\n")
+        .replace(
+            "why = \"\"",
+            "why = \"the policy still reads only the newest reading\"",
+        );
+    std::fs::write(&file, text).unwrap();
+    let o = ratelab(&["exercise", "ex2", "--dir", dir.path().to_str().unwrap()]);
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(
+        out.contains("deep_queue_obs_drops = 0"),
+        "the prediction is shown beside the outcome:\n{out}"
+    );
+    assert!(
+        out.contains("[ok] depth 100 drops 0 /obs on every seed"),
+        "{out}"
+    );
+    assert!(out.contains("Reconcile:"), "{out}");
+}
+
+#[test]
+fn sweep_writes_csv_and_json_and_plots_as_text_when_piped() {
+    let dir = tempfile::tempdir().unwrap();
+    let (csv, json) = (dir.path().join("s.csv"), dir.path().join("s.json"));
+    let o = ratelab(&[
+        "sweep",
+        "--control-hz",
+        "50,5",
+        "--queue-depth",
+        "1,100",
+        "--seeds",
+        "0,1",
+        "--duration",
+        "3",
+        "--csv",
+        csv.to_str().unwrap(),
+        "--json",
+        json.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        out.contains("control Hz | balanced | mean sense->act latency"),
+        "{out}"
+    );
+    let rows = std::fs::read_to_string(&csv).unwrap();
+    assert_eq!(rows.lines().count(), 1 + 2 * 2 * 2, "{rows}");
+    assert!(rows
+        .lines()
+        .next()
+        .unwrap()
+        .starts_with("clock,sensor_hz,control_hz,queue_depth,seed,balanced"));
+    let items: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    assert_eq!(items.as_array().unwrap().len(), 8);
+    assert_eq!(items[0]["point"]["control_hz"], 50.0);
+    assert_eq!(items[0]["metrics"]["balanced"], true);
+    assert_usage_error(&["sweep", "--control-hz", "50,0"], "--control-hz");
+}
+
+#[test]
+fn cliff_prints_one_rate_per_seed_with_one_decimal() {
+    // A narrow search band keeps the test quick; the full search is `ratelab cliff`.
+    let o = ratelab(&["cliff", "--seeds", "0,1", "--min-hz", "7", "--max-hz", "9"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let out = String::from_utf8_lossy(&o.stdout);
+    let lines: Vec<&str> = out.lines().collect();
+    assert_eq!(lines.len(), 2, "{out}");
+    for (seed, line) in lines.iter().enumerate() {
+        let rate = line
+            .strip_prefix(&format!("seed {seed}: "))
+            .and_then(|rest| rest.split(" Hz").next())
+            .unwrap_or_else(|| panic!("{line}"));
+        let hz: f64 = rate.parse().unwrap();
+        assert_eq!(
+            rate.split('.').nth(1).map(str::len),
+            Some(1),
+            "one decimal: {line}"
+        );
+        // Measured with integer-nanosecond time: between 7 and 8 Hz for seeds 0-2.
+        assert!((7.0..8.0).contains(&hz), "{line}");
+    }
+}

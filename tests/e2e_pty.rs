@@ -132,3 +132,36 @@ fn real_clock_lab_keeps_the_pole_up_for_3_s() {
     );
     lab.quit();
 }
+
+#[test]
+fn sigterm_restores_the_terminal() {
+    let mut lab = Lab::start(&["--clock", "virtual"]);
+    lab.wait_for("BALANCED", Duration::from_secs(60));
+    let pid = lab.child.process_id().expect("a pid") as libc::pid_t;
+    // SAFETY: signalling our own child process.
+    unsafe { libc::kill(pid, libc::SIGTERM) };
+    let start = Instant::now();
+    let status = loop {
+        if let Some(s) = lab.child.try_wait().unwrap() {
+            break s;
+        }
+        assert!(
+            start.elapsed() < Duration::from_secs(15),
+            "ratelab ignored SIGTERM"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    };
+    assert_eq!(status.exit_code(), 130, "{status:?}");
+    std::thread::sleep(Duration::from_millis(200));
+    let parser = lab.parser.lock().unwrap();
+    assert!(
+        !parser.screen().alternate_screen(),
+        "SIGTERM left the alternate screen on"
+    );
+    assert!(
+        !parser.screen().hide_cursor(),
+        "SIGTERM left the cursor hidden"
+    );
+    drop(parser);
+    lab.keys(""); // the pty is still writable: nothing hangs
+}

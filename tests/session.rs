@@ -128,3 +128,34 @@ fn replay_cli_reproduces_and_refuses_garbage() {
     assert_eq!(o.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&o.stderr).contains("not a ratelab session log"));
 }
+
+#[test]
+fn brain_swaps_are_logged_and_replayed() {
+    let ppo = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../shared/fixtures/ppo_ch2.1_seed0.pt");
+    assert!(ppo.is_file(), "fixture missing: {}", ppo.display());
+    let dir = tempfile::tempdir().unwrap();
+    let mut script = steps(20);
+    script.push(Control::Apply(Command::SetPolicy {
+        spec: ppo.to_str().unwrap().into(),
+    }));
+    script.extend(steps(20));
+    script.push(Control::Apply(Command::SetPolicy {
+        spec: "/no/such/brain.pt".into(),
+    })); // refused
+    script.extend(steps(20));
+    script.push(Control::Apply(Command::SetPolicy {
+        spec: "scripted".into(),
+    }));
+    script.extend(steps(20));
+    script.push(Control::Quit);
+    let log = drive(&script, &dir.path().join("s.json"));
+    let run = &log.runs[0];
+    let swaps: Vec<&Command> = run.commands.iter().map(|c| &c.command).collect();
+    assert_eq!(swaps.len(), 2, "the refused swap is not logged: {swaps:?}");
+    let replayed = serde_json::to_string(&replay_run(&log, 0).unwrap()).unwrap();
+    assert_eq!(
+        replayed,
+        serde_json::to_string(run.metrics.as_ref().unwrap()).unwrap()
+    );
+}
