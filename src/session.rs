@@ -439,11 +439,14 @@ impl Engine {
         });
         self.save_log();
         let handles = graph.handles.clone();
-        let (next, end) = match cfg.clock {
-            ClockKind::Virtual => self.virtual_run(cfg, graph, &recording),
+        let (next, end, timing) = match cfg.clock {
+            ClockKind::Virtual => {
+                let (next, end) = self.virtual_run(cfg, graph, &recording);
+                (next, end, None)
+            }
             ClockKind::Real => self.real_run(cfg, graph, &recording),
         };
-        let metrics = live_metrics(cfg, &handles, &end, None);
+        let metrics = live_metrics(cfg, &handles, &end, timing);
         if let Some(r) = &recording {
             let _ = r.finish(&metrics, &end);
         }
@@ -679,7 +682,7 @@ impl Engine {
         cfg: &RunConfig,
         graph: Graph,
         recording: &Option<Recording>,
-    ) -> (Next, RunEnd) {
+    ) -> (Next, RunEnd, Option<Vec<crate::metrics::NodeTiming>>) {
         let Graph { nodes, handles } = graph;
         let stop = StopFlag::new();
         let pause = Arc::new(AtomicBool::new(self.settings.start_paused));
@@ -714,6 +717,7 @@ impl Engine {
         let now = || Nanos::from(start.elapsed());
         let mut last_status = Instant::now();
         let mut result: Option<RunEnd> = None;
+        let mut timing = None;
         let mut runner = Some(runner);
         loop {
             if result.is_none() && runner.as_ref().is_some_and(|r| r.is_finished()) {
@@ -723,7 +727,8 @@ impl Engine {
                     .join()
                     .expect("runner thread");
                 let end = run.end.clone();
-                let metrics = live_metrics(cfg, &handles, &end, Some(run.timing));
+                timing = Some(run.timing);
+                let metrics = live_metrics(cfg, &handles, &end, timing.clone());
                 let _ = self.tx.send(Telemetry::Ended {
                     metrics,
                     reason: end.reason.clone(),
@@ -757,16 +762,22 @@ impl Engine {
                 stop.stop();
                 let end = match (result, runner.take()) {
                     (Some(end), _) => end,
-                    (None, Some(r)) => r.join().map(|run| run.end).unwrap_or(RunEnd {
-                        at: now(),
-                        reason: EndReason::Interrupted,
-                    }),
+                    (None, Some(r)) => match r.join() {
+                        Ok(run) => {
+                            timing = Some(run.timing);
+                            run.end
+                        }
+                        Err(_) => RunEnd {
+                            at: now(),
+                            reason: EndReason::Interrupted,
+                        },
+                    },
                     (None, None) => RunEnd {
                         at: now(),
                         reason: EndReason::Interrupted,
                     },
                 };
-                return (next, end);
+                return (next, end, timing);
             }
             if last_status.elapsed() >= Duration::from_millis(33) {
                 self.status(now(), pause.load(Ordering::SeqCst), &handles);

@@ -80,25 +80,32 @@ impl Lab {
         }
     }
 
-    fn quit(mut self) {
-        self.keys("q");
+    /// Wait (at most 15 s) for the process to exit.
+    fn exit_status(&mut self, after: &str) -> portable_pty::ExitStatus {
         let start = Instant::now();
-        let status = loop {
+        loop {
             if let Some(s) = self.child.try_wait().unwrap() {
-                break s;
+                return s;
             }
             assert!(
                 start.elapsed() < Duration::from_secs(15),
-                "ratelab did not exit after q"
+                "ratelab did not exit after {after}"
             );
             std::thread::sleep(Duration::from_millis(50));
-        };
+        }
+    }
+
+    fn quit(mut self) {
+        self.keys("q");
+        let status = self.exit_status("q");
         assert!(status.success(), "exit status {status:?}");
         std::thread::sleep(Duration::from_millis(200));
+        let parser = self.parser.lock().unwrap();
         assert!(
-            !self.parser.lock().unwrap().screen().alternate_screen(),
+            !parser.screen().alternate_screen(),
             "still on the alternate screen"
         );
+        assert!(!parser.screen().hide_cursor(), "the cursor was left hidden");
     }
 }
 
@@ -140,17 +147,7 @@ fn sigterm_restores_the_terminal() {
     let pid = lab.child.process_id().expect("a pid") as libc::pid_t;
     // SAFETY: signalling our own child process.
     unsafe { libc::kill(pid, libc::SIGTERM) };
-    let start = Instant::now();
-    let status = loop {
-        if let Some(s) = lab.child.try_wait().unwrap() {
-            break s;
-        }
-        assert!(
-            start.elapsed() < Duration::from_secs(15),
-            "ratelab ignored SIGTERM"
-        );
-        std::thread::sleep(Duration::from_millis(50));
-    };
+    let status = lab.exit_status("SIGTERM");
     assert_eq!(status.exit_code(), 130, "{status:?}");
     std::thread::sleep(Duration::from_millis(200));
     let parser = lab.parser.lock().unwrap();

@@ -159,3 +159,39 @@ fn brain_swaps_are_logged_and_replayed() {
         serde_json::to_string(run.metrics.as_ref().unwrap()).unwrap()
     );
 }
+
+#[test]
+fn a_real_clock_run_is_logged_with_node_timing_and_not_replayed() {
+    let dir = tempfile::tempdir().unwrap();
+    let (ctl_tx, ctl_rx) = unbounded();
+    let (tel_tx, _tel_rx) = unbounded::<Telemetry>();
+    let settings = SessionSettings {
+        cfg: RunConfig {
+            clock: ClockKind::Real,
+            duration: UNBOUNDED,
+            ..RunConfig::default()
+        },
+        policy: "scripted".into(),
+        alt_policy: None,
+        record: None,
+        spawn: false,
+        session_file: Some(dir.path().join("real.json")),
+        start_paused: false,
+        speed: Speed::Times(1.0),
+    };
+    let engine = Engine::new(settings, ctl_rx, tel_tx).spawn();
+    std::thread::sleep(std::time::Duration::from_millis(600));
+    ctl_tx.send(Control::Quit).unwrap();
+    let log = engine.join().unwrap();
+    let m = log.runs[0].metrics.as_ref().unwrap();
+    let timing = m
+        .node_timing
+        .as_ref()
+        .expect("real-clock runs keep their node timing");
+    assert_eq!(timing.len(), 3);
+    assert!(m.steps > 10, "{m:?}");
+    assert!(matches!(
+        replay_run(&log, 0),
+        Err(ratelab::session::ReplayError::RealClock(1))
+    ));
+}
