@@ -8,14 +8,19 @@ use ratelab::session::{
 };
 use ratelab::{ClockKind, RunConfig};
 
-fn drive(script: &[Control], file: &std::path::Path) -> SessionLog {
-    let (ctl_tx, ctl_rx) = unbounded();
-    let (tel_tx, tel_rx) = unbounded::<Telemetry>();
-    let settings = SessionSettings {
+/// An open-ended session with the scripted brain, logged to `file`.
+fn settings(
+    clock: ClockKind,
+    seed: u64,
+    start_paused: bool,
+    speed: Speed,
+    file: &std::path::Path,
+) -> SessionSettings {
+    SessionSettings {
         cfg: RunConfig {
-            clock: ClockKind::Virtual,
+            clock,
+            seed,
             duration: UNBOUNDED,
-            seed: 1,
             ..RunConfig::default()
         },
         policy: "scripted".into(),
@@ -23,9 +28,15 @@ fn drive(script: &[Control], file: &std::path::Path) -> SessionLog {
         record: None,
         spawn: false,
         session_file: Some(file.to_path_buf()),
-        start_paused: true,
-        speed: Speed::Max,
-    };
+        start_paused,
+        speed,
+    }
+}
+
+fn drive(script: &[Control], file: &std::path::Path) -> SessionLog {
+    let (ctl_tx, ctl_rx) = unbounded();
+    let (tel_tx, tel_rx) = unbounded::<Telemetry>();
+    let settings = settings(ClockKind::Virtual, 1, true, Speed::Max, file);
     let engine = Engine::new(settings, ctl_rx, tel_tx).spawn();
     for c in script {
         ctl_tx.send(c.clone()).unwrap();
@@ -165,20 +176,13 @@ fn a_real_clock_run_is_logged_with_node_timing_and_not_replayed() {
     let dir = tempfile::tempdir().unwrap();
     let (ctl_tx, ctl_rx) = unbounded();
     let (tel_tx, _tel_rx) = unbounded::<Telemetry>();
-    let settings = SessionSettings {
-        cfg: RunConfig {
-            clock: ClockKind::Real,
-            duration: UNBOUNDED,
-            ..RunConfig::default()
-        },
-        policy: "scripted".into(),
-        alt_policy: None,
-        record: None,
-        spawn: false,
-        session_file: Some(dir.path().join("real.json")),
-        start_paused: false,
-        speed: Speed::Times(1.0),
-    };
+    let settings = settings(
+        ClockKind::Real,
+        0,
+        false,
+        Speed::Times(1.0),
+        &dir.path().join("real.json"),
+    );
     let engine = Engine::new(settings, ctl_rx, tel_tx).spawn();
     std::thread::sleep(std::time::Duration::from_millis(600));
     ctl_tx.send(Control::Quit).unwrap();
