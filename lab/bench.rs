@@ -13,36 +13,12 @@ pub fn render_bench(frames: usize) -> anyhow::Result<()> {
     use crate::tui::app::App;
     use ratatui::backend::TestBackend;
     use ratatui::Terminal;
-    use ratelab::metrics::StepRecord;
-    use ratelab::session::{Speed, Telemetry};
-    use std::sync::{Arc, Mutex};
-    struct Collect(Arc<Mutex<Vec<StepRecord>>>);
-    impl ratelab::graph::StepObserver for Collect {
-        fn on_step(&mut self, r: &StepRecord) {
-            self.0.lock().expect("not poisoned").push(*r);
-        }
-    }
     let cfg = RunConfig {
         clock: ClockKind::Virtual,
         control_hz: 8.0,
         ..RunConfig::default()
     };
-    let steps = Arc::new(Mutex::new(Vec::new()));
-    let opts = RunOptions {
-        observers: vec![Box::new(Collect(steps.clone()))],
-        ..RunOptions::new()
-    };
-    run(&cfg, Box::new(Scripted), opts)?;
-    let (tx, _rx) = crossbeam_channel::unbounded();
-    let mut app = App::new(tx, "scripted".into(), None, Speed::Times(1.0));
-    app.on_telemetry(Telemetry::Started {
-        cfg,
-        policy: "scripted".into(),
-        recording: None,
-    });
-    for s in steps.lock().expect("not poisoned").iter() {
-        app.on_telemetry(Telemetry::Step(*s));
-    }
+    let (app, _controls) = App::after_virtual_run(cfg, false)?;
     let mut terminal = Terminal::new(TestBackend::new(120, 40))?;
     let mut times = ratelab::metrics::LatencyStats::default();
     for _ in 0..frames {

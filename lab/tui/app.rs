@@ -21,6 +21,15 @@ pub const BUCKET: Nanos = Nanos(20_000_000);
 /// Number of latency buckets shown (the last collects everything above).
 pub const BUCKETS: usize = 11;
 
+/// Collects every step record of a run (for [`App::after_virtual_run`]).
+struct Collect(std::sync::Arc<std::sync::Mutex<Vec<StepRecord>>>);
+
+impl ratelab::graph::StepObserver for Collect {
+    fn on_step(&mut self, r: &StepRecord) {
+        self.0.lock().unwrap_or_else(|e| e.into_inner()).push(*r);
+    }
+}
+
 /// A short name for the status line: `scripted`, or the checkpoint's file name.
 fn short_brain(spec: &str) -> String {
     std::path::Path::new(spec)
@@ -88,6 +97,41 @@ impl App {
             message: None,
             quit: false,
         }
+    }
+
+    /// A lab (scripted brain) fed with the telemetry of one deterministic virtual run with
+    /// `cfg`, ending with `Ended` when `ended`; returns it with the receiver of its controls.
+    /// For view snapshots and the render benchmark.
+    ///
+    /// # Errors
+    /// The run could not start.
+    pub fn after_virtual_run(
+        cfg: ratelab::RunConfig,
+        ended: bool,
+    ) -> Result<(Self, crossbeam_channel::Receiver<Control>), ratelab::run::RunError> {
+        let (tx, rx) = crossbeam_channel::unbounded();
+        let mut app = Self::new(tx, "scripted".into(), None, Speed::Times(1.0));
+        let steps = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
+        let opts = ratelab::RunOptions {
+            observers: vec![Box::new(Collect(steps.clone()))],
+            ..ratelab::RunOptions::new()
+        };
+        let report = ratelab::run(&cfg, Box::new(ratelab::policy::Scripted), opts)?;
+        app.on_telemetry(Telemetry::Started {
+            cfg,
+            policy: "scripted balancer".into(),
+            recording: None,
+        });
+        for s in steps.lock().unwrap_or_else(|e| e.into_inner()).iter() {
+            app.on_telemetry(Telemetry::Step(*s));
+        }
+        if ended {
+            app.on_telemetry(Telemetry::Ended {
+                metrics: report.metrics,
+                reason: report.end.reason,
+            });
+        }
+        Ok((app, rx))
     }
 
     /// Is an exact rate being typed?

@@ -127,46 +127,14 @@ mod tests {
     use super::keymap::Msg;
     use ratatui::backend::TestBackend;
     use ratatui::Terminal;
-    use ratelab::graph::StepObserver;
-    use ratelab::metrics::StepRecord;
     use ratelab::policy::Scripted;
     use ratelab::scheduler::EndReason;
     use ratelab::session::{Control, Speed, Telemetry};
     use ratelab::{run, ClockKind, RunConfig, RunOptions};
-    use std::sync::{Arc, Mutex};
-
-    struct Collect(Arc<Mutex<Vec<StepRecord>>>);
-    impl StepObserver for Collect {
-        fn on_step(&mut self, r: &StepRecord) {
-            self.0.lock().unwrap().push(*r);
-        }
-    }
 
     /// An app fed with a real (deterministic) virtual run's telemetry.
     fn app_after(cfg: RunConfig, ended: bool) -> (App, crossbeam_channel::Receiver<Control>) {
-        let (tx, rx) = crossbeam_channel::unbounded();
-        let mut app = App::new(tx, "scripted".into(), None, Speed::Times(1.0));
-        let steps = Arc::new(Mutex::new(Vec::new()));
-        let opts = RunOptions {
-            observers: vec![Box::new(Collect(steps.clone()))],
-            ..RunOptions::new()
-        };
-        let report = run(&cfg, Box::new(Scripted), opts).unwrap();
-        app.on_telemetry(Telemetry::Started {
-            cfg: cfg.clone(),
-            policy: "scripted balancer".into(),
-            recording: None,
-        });
-        for s in steps.lock().unwrap().iter() {
-            app.on_telemetry(Telemetry::Step(*s));
-        }
-        if ended {
-            app.on_telemetry(Telemetry::Ended {
-                metrics: report.metrics,
-                reason: report.end.reason,
-            });
-        }
-        (app, rx)
+        App::after_virtual_run(cfg, ended).unwrap()
     }
 
     fn render(app: &App, w: u16, h: u16) -> String {
