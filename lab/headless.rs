@@ -85,10 +85,13 @@ pub fn run_headless(a: &RunArgs, stop: StopFlag) -> anyhow::Result<RunReport> {
     }
     let report = run(&cfg, brain, opts)?;
     if let Some(r) = &recording {
-        // Everything reached the file sink; a flush error can only come from the live
-        // viewer (--spawn) going away. The recording and the summary still stand.
-        if let Err(e) = r.finish(&report.metrics, &report.end) {
-            eprintln!("[ratelab] warning: live viewer: {e} (the file is complete)");
+        match r.finish(&report.metrics, &report.end) {
+            // With --spawn the flush also waits for the live viewer; one that could not start
+            // (no display) or went away costs neither the file nor the summary.
+            Err(e) if a.spawn => {
+                eprintln!("[ratelab] warning: live viewer: {e} (the file is written)")
+            }
+            other => other?,
         }
     }
     if let Some(bar) = bar {
