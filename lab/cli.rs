@@ -159,6 +159,13 @@ fn parse_depth(s: &str) -> Result<usize, String> {
     Ok(d)
 }
 
+fn parse_rt_priority(s: &str) -> Result<u8, String> {
+    let out_of_range = || format!("--rt-priority must be in 1..=99, got {s}");
+    let p: u8 = s.trim().parse().map_err(|_| out_of_range())?;
+    ratelab::realtime::check_priority(p).map_err(|_| out_of_range())?;
+    Ok(p)
+}
+
 fn parse_clock(s: &str) -> Result<ClockKind, String> {
     s.parse()
         .map_err(|e: ratelab::config::ConfigError| e.to_string())
@@ -225,6 +232,10 @@ pub struct RunArgs {
     /// Real clock: first-tick offsets of sensor,policy,actuator in ms (e.g. 0,5,10).
     #[arg(long, value_delimiter = ',', num_args = 1..=3, value_parser = parse_offset, value_name = "MS,MS,MS")]
     pub phase_offset_ms: Vec<f64>,
+    /// Real clock: run node threads under SCHED_FIFO at this priority, 1..=99 (needs
+    /// CAP_SYS_NICE or `ulimit -r`; refused → a warning, default policy).
+    #[arg(long, value_parser = parse_rt_priority, value_name = "PRIO", allow_negative_numbers = true)]
+    pub rt_priority: Option<u8>,
 }
 
 /// Settings of the real-clock timing benchmark.
@@ -239,6 +250,13 @@ pub struct BenchArgs {
     /// Spin margin, µs.
     #[arg(long, default_value_t = 300)]
     pub spin_margin_us: u64,
+    /// Run node threads (and the bare wait) under SCHED_FIFO at this priority, 1..=99.
+    #[arg(long, value_parser = parse_rt_priority, value_name = "PRIO", allow_negative_numbers = true)]
+    pub rt_priority: Option<u8>,
+    /// Stagger the nodes' first deadlines by a third of a period each (sensor 0, policy
+    /// P/3, actuator 2P/3) so that no two are due at once.
+    #[arg(long)]
+    pub stagger: bool,
     /// Instead: time the lab's frame rendering at 120×40 (view model + draw).
     #[arg(long)]
     pub render: bool,

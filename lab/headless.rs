@@ -30,6 +30,7 @@ pub fn config_from_args(a: &RunArgs) -> anyhow::Result<RunConfig> {
         queue_depth: a.queue_depth,
         clock: a.clock,
         spin_margin: Nanos(a.spin_margin_us * 1_000),
+        rt_priority: a.rt_priority,
         ..RunConfig::default()
     };
     for (slot, ms) in cfg.phase_offsets.iter_mut().zip(&a.phase_offset_ms) {
@@ -101,6 +102,12 @@ pub fn run_headless(a: &RunArgs, stop: StopFlag) -> anyhow::Result<RunReport> {
         let _ = t.join();
     }
     print_summary(&report);
+    if cfg.rt_priority.is_some() && cfg.clock == ClockKind::Virtual {
+        eprintln!("[ratelab] note: --rt-priority applies to the real clock only; ignored");
+    }
+    if let Some(w) = report.metrics.sched_warning() {
+        eprintln!("[ratelab] warning: {w}");
+    }
     if let Some(dir) = &a.out {
         write_outputs(dir, &report)?;
     }

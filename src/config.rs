@@ -75,6 +75,9 @@ pub enum ConfigError {
     /// Unknown clock name.
     #[error("--clock must be 'real' or 'virtual', got '{0}'")]
     Clock(String),
+    /// A real-time priority outside 1..=99.
+    #[error("--rt-priority must be in 1..=99, got {0}")]
+    RtPriority(u8),
     /// A phase offset not finite, negative, or not below one second.
     #[error("--phase-offset-ms values must be finite and in [0, 1000) ms, got {0}")]
     PhaseOffset(f64),
@@ -101,6 +104,9 @@ pub struct RunConfig {
     pub spin_margin: Nanos,
     /// Real clock: first deadline of sensor, policy, actuator.
     pub phase_offsets: [Nanos; 3],
+    /// Real clock: run the node threads under `SCHED_FIFO` at this priority (1..=99) when
+    /// the kernel allows (see [`crate::scheduler::RealOptions::rt_priority`]); `None` keeps the default policy.
+    pub rt_priority: Option<u8>,
 }
 
 impl Default for RunConfig {
@@ -115,6 +121,7 @@ impl Default for RunConfig {
             clock: ClockKind::Real,
             spin_margin: crate::rate::DEFAULT_SPIN_MARGIN,
             phase_offsets: [Nanos::ZERO; 3],
+            rt_priority: None,
         }
     }
 }
@@ -174,6 +181,9 @@ impl RunConfig {
         }
         if self.duration.0 == 0 {
             return Err(ConfigError::Duration(0.0));
+        }
+        if let Some(p) = self.rt_priority {
+            crate::realtime::check_priority(p).map_err(|_| ConfigError::RtPriority(p))?;
         }
         Ok(())
     }

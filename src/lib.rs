@@ -6,7 +6,7 @@
 //! This crate knows nothing of terminals: the lab (`lab/`) draws it.
 //!
 //! Layout, one module per idea: [`time`], [`clock`], [`topic`], [`rate`], [`node`],
-//! [`plant`], [`policy`], [`graph`], [`scheduler`], [`metrics`], [`config`], [`run`].
+//! [`plant`], [`policy`], [`graph`], [`scheduler`] (+ [`realtime`]), [`metrics`], [`config`], [`run`].
 #![warn(missing_docs)]
 
 pub mod checkpoint;
@@ -20,6 +20,7 @@ pub mod np_random;
 pub mod plant;
 pub mod policy;
 pub mod rate;
+pub mod realtime;
 pub mod recording;
 pub mod run;
 pub mod scheduler;

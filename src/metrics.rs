@@ -170,6 +170,12 @@ pub struct NodeTiming {
     pub cpu_ms: f64,
     /// Measured tick rate over the run, Hz.
     pub measured_hz: f64,
+    /// The scheduling policy the node's thread ran under (`SCHED_OTHER`, `SCHED_FIFO 50`).
+    #[serde(default)]
+    pub sched: String,
+    /// Why a requested real-time priority was not granted (the thread ran as `sched` says).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sched_error: Option<String>,
 }
 
 /// A run's summary: the schema of `metrics.json`. Keys follow the chapter's report, then
@@ -231,6 +237,25 @@ pub struct Metrics {
 }
 
 impl Metrics {
+    /// One line naming the node threads whose requested real-time priority was refused, the
+    /// policy they ran under instead and the kernel's reason; `None` when nothing was refused.
+    pub fn sched_warning(&self) -> Option<String> {
+        let refused: Vec<&NodeTiming> = self
+            .node_timing
+            .iter()
+            .flatten()
+            .filter(|t| t.sched_error.is_some())
+            .collect();
+        let first = refused.first()?;
+        let names: Vec<&str> = refused.iter().map(|t| t.node.as_str()).collect();
+        Some(format!(
+            "{} ran under {}: {}",
+            names.join(", "),
+            first.sched,
+            first.sched_error.as_deref().unwrap_or_default()
+        ))
+    }
+
     /// The chapter's human summary (five lines, no terminal codes). `wall_s` is the
     /// wall time the run took, when known (not part of the metrics: it varies run to run).
     pub fn summary_lines(&self, wall_s: Option<f64>) -> Vec<String> {
@@ -274,8 +299,8 @@ impl Metrics {
         if let Some(timing) = &self.node_timing {
             for t in timing {
                 lines.push(format!(
-                    "node {:<8} {:>7.2} Hz measured | lateness p50 {:.0} µs, p99 {:.0} µs, max {:.0} µs | cpu {:.0} ms",
-                    t.node, t.measured_hz, t.lateness_p50_us, t.lateness_p99_us, t.lateness_max_us, t.cpu_ms
+                    "node {:<8} {:>7.2} Hz measured | lateness p50 {:.0} µs, p99 {:.0} µs, max {:.0} µs | cpu {:.0} ms | {}",
+                    t.node, t.measured_hz, t.lateness_p50_us, t.lateness_p99_us, t.lateness_max_us, t.cpu_ms, t.sched
                 ));
             }
         }

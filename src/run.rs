@@ -176,6 +176,7 @@ pub fn run(
             let real = RealOptions {
                 spin_margin: cfg.spin_margin,
                 phase_offsets: cfg.phase_offsets.to_vec(),
+                rt_priority: cfg.rt_priority,
                 on_tick: opts.on_node_tick.clone(),
                 pause: None,
             };

@@ -187,6 +187,14 @@ pub struct RealOptions {
     pub on_tick: Option<TickHook>,
     /// While set, no node ticks (the lab's pause); deadlines missed meanwhile are skipped.
     pub pause: Option<Arc<AtomicBool>>,
+    /// Run every node thread under `SCHED_FIFO` at this priority (1..=99), if the kernel
+    /// allows; a refusal is reported in [`NodeTiming::sched_error`] and the node runs on
+    /// under its default policy. See [`crate::realtime`].
+    ///
+    /// One priority for all nodes, on purpose: ordering them by tie-break priority (sensor
+    /// highest) was measured (BENCHMARKS.md) and moved all waiting for a core onto the
+    /// actuator, whose spinning peers never yield to a lower priority.
+    pub rt_priority: Option<u8>,
 }
 
 impl Default for RealOptions {
@@ -196,6 +204,7 @@ impl Default for RealOptions {
             phase_offsets: Vec::new(),
             on_tick: None,
             pause: None,
+            rt_priority: None,
         }
     }
 }
@@ -210,8 +219,9 @@ pub struct RealRun {
     pub nodes: Vec<Box<dyn Node>>,
 }
 
-/// This thread's CPU time (Linux `CLOCK_THREAD_CPUTIME_ID`).
-fn thread_cpu_time() -> Nanos {
+/// The calling thread's CPU time so far (Linux `CLOCK_THREAD_CPUTIME_ID`; zero if it
+/// cannot be read).
+pub fn thread_cpu_time() -> Nanos {
     let mut ts = libc::timespec {
         tv_sec: 0,
         tv_nsec: 0,
@@ -255,9 +265,14 @@ pub fn run_real(
             let name = node.name().to_string();
             let on_tick = opts.on_tick.clone();
             let pause = opts.pause.clone();
+            let rt_priority = opts.rt_priority;
             std::thread::Builder::new()
                 .name(name.clone())
                 .spawn(move || {
+                    let sched_error = rt_priority
+                        .and_then(|p| crate::realtime::set_current_thread_fifo(p).err())
+                        .map(|e| e.to_string());
+                    let sched = crate::realtime::current_thread_sched().to_string();
                     let cpu0 = thread_cpu_time();
                     let mut lateness = LatencyStats::default();
                     let (mut ticks, mut skipped) = (0u64, 0u64);
@@ -315,6 +330,8 @@ pub fn run_real(
                         } else {
                             0.0
                         },
+                        sched,
+                        sched_error,
                     };
                     (node, timing, result.err().map(|p| panic_message(&*p)))
                 })

@@ -684,6 +684,13 @@ impl Engine {
         recording: &Option<Recording>,
     ) -> (Next, RunEnd, Option<Vec<crate::metrics::NodeTiming>>) {
         let Graph { nodes, handles } = graph;
+        if let Some(Err(e)) = cfg.rt_priority.map(crate::realtime::probe_fifo) {
+            // Told now, not only when the run ends: node threads inherit this thread's
+            // privileges, so they will be refused the same way.
+            let _ = self.tx.send(Telemetry::Applied(format!(
+                "warning: node threads keep their default policy: {e}"
+            )));
+        }
         let stop = StopFlag::new();
         let pause = Arc::new(AtomicBool::new(self.settings.start_paused));
         let tx = self.tx.clone();
@@ -692,6 +699,7 @@ impl Engine {
         let opts = RealOptions {
             spin_margin: cfg.spin_margin,
             phase_offsets: cfg.phase_offsets.to_vec(),
+            rt_priority: cfg.rt_priority,
             on_tick: Some(Arc::new(move |name: &str, now: Nanos, lateness: Nanos| {
                 let node = names.iter().position(|n| *n == name).unwrap_or(0);
                 let _ = tx.send(Telemetry::NodeTick {

@@ -45,6 +45,20 @@ fn bad_depth_duration_clock_are_refused() {
 }
 
 #[test]
+fn bad_rt_priorities_are_refused() {
+    for bad in ["0", "100", "-1", "256", "high"] {
+        assert_usage_error(
+            &["run", "--rt-priority", bad],
+            "--rt-priority must be in 1..=99",
+        );
+        assert_usage_error(
+            &["bench", "--rt-priority", bad],
+            "--rt-priority must be in 1..=99",
+        );
+    }
+}
+
+#[test]
 fn bad_policies_are_refused() {
     assert_usage_error(
         &["run", "--smoke", "--policy", "/no/such/ppo.pt"],
@@ -240,5 +254,29 @@ fn cliff_prints_one_rate_per_seed_with_one_decimal() {
         );
         // Measured with integer-nanosecond time: between 7 and 8 Hz for seeds 0-2.
         assert!((7.0..8.0).contains(&hz), "{line}");
+    }
+}
+
+#[test]
+fn bench_prints_the_bare_wait_floor_then_each_node() {
+    // Shape only: timings on a shared machine are not asserted anywhere.
+    let o = ratelab(&["bench", "--hz", "200", "--duration", "0.5", "--stagger"]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(out.contains("staggered by P/3"), "{out}");
+    let rows: Vec<Vec<&str>> = out
+        .lines()
+        .filter(|l| l.trim_start().starts_with("200 "))
+        .map(|l| l.split_whitespace().collect())
+        .collect();
+    assert_eq!(rows.len(), 4, "{out}");
+    assert_eq!(&rows[0][1..3], ["bare", "wait"], "{out}");
+    for (row, node) in rows[1..].iter().zip(["sensor", "policy", "actuator"]) {
+        assert_eq!(row[1], node, "{out}");
+        // 0.5 s at 200 Hz: 100 deadlines, each either ticked or skipped.
+        let ticks: u64 = row[2].parse().unwrap();
+        let skipped: u64 = row[7].parse().unwrap();
+        assert!((98..=101).contains(&(ticks + skipped)), "{out}");
+        assert!(row[8].starts_with("SCHED_"), "{out}");
     }
 }

@@ -236,9 +236,12 @@ impl App {
                         None => Verdict::Done,
                     },
                 };
-                self.message = Some(format!(
-                    "run ended ({reason}) — r reset · R next seed · c other clock · q quit"
-                ));
+                self.message = Some(match metrics.sched_warning() {
+                    Some(w) => format!("run ended ({reason}) — {w}"),
+                    None => format!(
+                        "run ended ({reason}) — r reset · R next seed · c other clock · q quit"
+                    ),
+                });
             }
             Telemetry::Error(e) => self.message = Some(e),
         }
