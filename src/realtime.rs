@@ -9,8 +9,10 @@
 //! thread needs it.
 //!
 //! Asking for it needs `CAP_SYS_NICE` or an `RLIMIT_RTPRIO` (`ulimit -r`) at least the
-//! priority asked for. Without either, the request is refused and the node keeps
-//! `SCHED_OTHER`; ratelab reports that and runs on (a lab run never fails over it).
+//! priority asked for (and, under cgroup v1 real-time group scheduling, a non-zero
+//! `cpu.rt_runtime_us` for the process's cgroup, which containers often lack). Otherwise the
+//! request is refused and the node keeps `SCHED_OTHER`; ratelab reports that and runs on
+//! (a lab run never fails over it).
 //!
 //! Two cautions, both visible in `ratelab bench`:
 //! - The kernel's real-time throttle (`/proc/sys/kernel/sched_rt_runtime_us`, by default
@@ -37,9 +39,10 @@ pub enum RealtimeError {
     /// The priority is outside [`MIN_RT_PRIORITY`]..=[`MAX_RT_PRIORITY`].
     #[error("real-time priority must be in 1..=99, got {0}")]
     Range(u8),
-    /// The kernel refused (typically `EPERM`: no `CAP_SYS_NICE` and `ulimit -r` too low).
+    /// The kernel refused (typically `EPERM`: no `CAP_SYS_NICE` and `ulimit -r` too low, or a
+    /// cgroup with no real-time budget).
     #[error(
-        "SCHED_FIFO priority {priority} refused: {reason} (needs CAP_SYS_NICE or `ulimit -r` >= {priority})"
+        "SCHED_FIFO priority {priority} refused: {reason} (needs CAP_SYS_NICE or `ulimit -r` >= {priority}, and a real-time budget in a container)"
     )]
     Refused {
         /// The priority asked for.

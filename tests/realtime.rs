@@ -19,8 +19,33 @@ use std::process::Command;
 
 const PRIO: u8 = 7;
 
+/// Whether real-time group scheduling (cgroup v1, `CONFIG_RT_GROUP_SCHED`) gives this
+/// process's cgroup no real-time budget, as container runtimes do by default: then every
+/// request is refused, privileged or not.
+fn rt_group_budget_is_zero() -> bool {
+    // "4:cpu,cpuacct:/docker/abc" → the cgroup path of the cpu controller.
+    let cgroups = std::fs::read_to_string("/proc/self/cgroup").unwrap_or_default();
+    let Some(path) = cgroups.lines().find_map(|l| {
+        let mut parts = l.splitn(3, ':');
+        let (_, controllers, path) = (parts.next()?, parts.next()?, parts.next()?);
+        controllers
+            .split(',')
+            .any(|c| c == "cpu")
+            .then(|| path.to_string())
+    }) else {
+        return false; // cgroup v2 only: no real-time group budget
+    };
+    ["cpu", "cpu,cpuacct"].iter().any(|mount| {
+        let file = format!("/sys/fs/cgroup/{mount}{path}/cpu.rt_runtime_us");
+        std::fs::read_to_string(file).is_ok_and(|v| v.trim() == "0")
+    })
+}
+
 /// The kernel's rule for the calling thread asking for `SCHED_FIFO priority`.
 fn kernel_would_grant(priority: u8) -> bool {
+    if rt_group_budget_is_zero() {
+        return false;
+    }
     let cap = caps::has_cap(None, CapSet::Effective, Capability::CAP_SYS_NICE).unwrap();
     let mut lim = libc::rlimit {
         rlim_cur: 0,
@@ -179,7 +204,7 @@ fn the_binary_warns_in_one_line_when_refused_and_still_balances() {
     let warnings: Vec<&str> = stderr.lines().filter(|l| l.contains("warning")).collect();
     assert_eq!(
         warnings,
-        ["[ratelab] warning: sensor, policy, actuator ran under SCHED_OTHER: SCHED_FIFO priority 7 refused: Operation not permitted (needs CAP_SYS_NICE or `ulimit -r` >= 7)"],
+        ["[ratelab] warning: sensor, policy, actuator ran under SCHED_OTHER: SCHED_FIFO priority 7 refused: Operation not permitted (needs CAP_SYS_NICE or `ulimit -r` >= 7, and a real-time budget in a container)"],
         "{stderr}"
     );
     assert!(stdout.contains("| SCHED_OTHER"), "{stdout}");
