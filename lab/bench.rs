@@ -3,9 +3,13 @@
 
 use crate::cli::BenchArgs;
 use ratelab::config::duration_from_secs;
+use ratelab::metrics::NodeTiming;
+use ratelab::node::{Flow, Node};
 use ratelab::policy::Scripted;
-use ratelab::scheduler::StopFlag;
+use ratelab::rate::Rate;
+use ratelab::scheduler::{run_real, RealOptions, StopFlag};
 use ratelab::{run, ClockKind, Nanos, RunConfig, RunOptions};
+use std::time::Duration;
 
 /// Time `frames` renders of the lab at 120×40 fed with a 5 Hz virtual run (a dropping
 /// /obs, a full histogram and chart): building the view model and drawing it.
@@ -37,54 +41,39 @@ pub fn render_bench(frames: usize) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// The machine's own floor at `hz`: one thread, no node and no other thread of ours, waiting
-/// for the same absolute deadlines with the same waiter (spin margin, policy) for `duration`.
-/// Returns (p50, p99, max) lateness, the thread's CPU share in % and its policy.
-fn bare_wait(
-    hz: f64,
-    duration: Nanos,
-    spin_margin: Nanos,
-    rt_priority: Option<u8>,
-    stop: &StopFlag,
-) -> anyhow::Result<(Nanos, Nanos, Nanos, f64, String)> {
-    use ratelab::clock::{Clock, MonotonicClock};
-    use ratelab::rate::{next_deadline, period_for_hz, DeadlineWaiter};
-    let period = period_for_hz(hz)?;
-    let stop = stop.clone();
-    let handle = std::thread::spawn(move || {
-        if let Some(p) = rt_priority {
-            // A refusal shows in the policy printed beside the row.
-            let _ = ratelab::realtime::set_current_thread_fifo(p);
-        }
-        let sched = ratelab::realtime::current_thread_sched().to_string();
-        let waiter = DeadlineWaiter::new(spin_margin);
-        let cpu0 = ratelab::scheduler::thread_cpu_time();
-        let clock = MonotonicClock::start();
-        let mut lateness = ratelab::metrics::LatencyStats::default();
-        let mut deadline = Nanos::ZERO;
-        while !stop.is_stopped() {
-            waiter.wait_until(clock.instant_at(deadline));
-            let now = clock.now();
-            if now >= duration {
-                break;
-            }
-            lateness.record(now.saturating_sub(deadline));
-            deadline = next_deadline(deadline, now, period).0;
-        }
-        let cpu = ratelab::scheduler::thread_cpu_time().saturating_sub(cpu0);
-        let cpu_pct = 100.0 * cpu.as_secs_f64() / duration.as_secs_f64();
-        (lateness, cpu_pct, sched)
-    });
-    let (lateness, cpu_pct, sched) = handle
-        .join()
-        .map_err(|_| anyhow::anyhow!("the bare-wait thread panicked"))?;
-    Ok((
-        lateness.quantile(0.5).unwrap_or_default(),
-        lateness.quantile(0.99).unwrap_or_default(),
-        lateness.max().unwrap_or_default(),
-        cpu_pct,
-        sched,
-    ))
+/// The bare wait: a node with no work, so that [`run_real`] alone, with the same waiter,
+/// margin and policy as the graph's nodes, measures the machine's own floor.
+struct BareWait(Rate);
+
+impl Node for BareWait {
+    fn name(&self) -> &str {
+        "bare wait"
+    }
+    fn priority(&self) -> u8 {
+        0
+    }
+    fn rate(&self) -> &Rate {
+        &self.0
+    }
+    fn tick(&mut self, _now: Nanos) -> Flow {
+        Flow::Continue
+    }
+}
+
+/// One table row: a node's tick timing at `hz`, CPU as a share of `wall`.
+fn print_row(hz: f64, t: &NodeTiming, wall: Duration) {
+    println!(
+        "{:>8}  {:<10} {:>7} {:>9.1} {:>9.1} {:>9.1} {:>9.2} {:>8}  {}",
+        hz,
+        t.node,
+        t.ticks,
+        t.lateness_p50_us,
+        t.lateness_p99_us,
+        t.lateness_max_us,
+        100.0 * t.cpu_ms / (wall.as_secs_f64() * 1e3),
+        t.skipped,
+        t.sched
+    );
 }
 
 /// Run the benchmark and print one table row per node and rate, after a row for the bare
@@ -107,20 +96,21 @@ pub fn run_bench(a: &BenchArgs, stop: StopFlag) -> anyhow::Result<()> {
         "rate Hz", "node", "ticks", "p50 µs", "p99 µs", "max µs", "cpu %", "skipped"
     );
     for &hz in &a.hz {
-        let (p50, p99, max, cpu_pct, sched) =
-            bare_wait(hz, duration, spin_margin, a.rt_priority, &stop)?;
-        println!(
-            "{:>8}  {:<10} {:>7} {:>9.1} {:>9.1} {:>9.1} {:>9.2} {:>8}  {}",
-            hz,
-            "bare wait",
-            "",
-            p50.as_micros_f64(),
-            p99.as_micros_f64(),
-            max.as_micros_f64(),
-            cpu_pct,
-            "",
-            sched
+        let rate = Rate::new(hz)?;
+        let period = rate.period();
+        let floor = run_real(
+            vec![Box::new(BareWait(rate))],
+            duration,
+            &stop,
+            &RealOptions {
+                spin_margin,
+                rt_priority: a.rt_priority,
+                ..RealOptions::default()
+            },
         );
+        for t in &floor.timing {
+            print_row(hz, t, Duration::from_nanos(duration.0));
+        }
         let cfg = RunConfig {
             clock: ClockKind::Real,
             duration,
@@ -130,8 +120,7 @@ pub fn run_bench(a: &BenchArgs, stop: StopFlag) -> anyhow::Result<()> {
             spin_margin,
             rt_priority: a.rt_priority,
             phase_offsets: if a.stagger {
-                let p = ratelab::rate::period_for_hz(hz)?;
-                [Nanos::ZERO, Nanos(p.0 / 3), Nanos(2 * p.0 / 3)]
+                [Nanos::ZERO, Nanos(period.0 / 3), Nanos(2 * period.0 / 3)]
             } else {
                 [Nanos::ZERO; 3]
             },
@@ -144,19 +133,7 @@ pub fn run_bench(a: &BenchArgs, stop: StopFlag) -> anyhow::Result<()> {
         };
         let report = run(&cfg, Box::new(Scripted), opts)?;
         for t in report.metrics.node_timing.iter().flatten() {
-            let cpu_pct = 100.0 * t.cpu_ms / (report.wall.as_secs_f64() * 1e3);
-            println!(
-                "{:>8}  {:<10} {:>7} {:>9.1} {:>9.1} {:>9.1} {:>9.2} {:>8}  {}",
-                hz,
-                t.node,
-                t.ticks,
-                t.lateness_p50_us,
-                t.lateness_p99_us,
-                t.lateness_max_us,
-                cpu_pct,
-                t.skipped,
-                t.sched
-            );
+            print_row(hz, t, report.wall);
         }
         if let Some(w) = report.metrics.sched_warning() {
             eprintln!("[ratelab] warning: {w}");

@@ -72,13 +72,6 @@ pub enum ThreadSched {
     Unknown,
 }
 
-impl ThreadSched {
-    /// Whether this is one of the fixed-priority real-time policies.
-    pub fn is_realtime(self) -> bool {
-        matches!(self, ThreadSched::Fifo(_) | ThreadSched::RoundRobin(_))
-    }
-}
-
 impl fmt::Display for ThreadSched {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
@@ -189,6 +182,5 @@ mod tests {
     fn policies_print_as_sched7_names() {
         assert_eq!(ThreadSched::Fifo(50).to_string(), "SCHED_FIFO 50");
         assert_eq!(ThreadSched::Other.to_string(), "SCHED_OTHER");
-        assert!(ThreadSched::Fifo(1).is_realtime() && !ThreadSched::Other.is_realtime());
     }
 }

@@ -219,9 +219,8 @@ pub struct RealRun {
     pub nodes: Vec<Box<dyn Node>>,
 }
 
-/// The calling thread's CPU time so far (Linux `CLOCK_THREAD_CPUTIME_ID`; zero if it
-/// cannot be read).
-pub fn thread_cpu_time() -> Nanos {
+/// This thread's CPU time (Linux `CLOCK_THREAD_CPUTIME_ID`).
+fn thread_cpu_time() -> Nanos {
     let mut ts = libc::timespec {
         tv_sec: 0,
         tv_nsec: 0,
