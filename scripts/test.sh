@@ -5,4 +5,4 @@ set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 "$root/scripts/setup-mujoco.sh"
 cd "$root"
-exec cargo test --locked "$@"
+exec cargo test --release --locked "$@"

@@ -17,6 +17,7 @@ fn virtual_run(seed: u64, control_hz: f64, depth: usize) -> RunReport {
 
 #[test]
 fn balances_all_501_steps_at_10_hz_and_above() {
+    let _machine = crate::machine::shared();
     for seed in 0..3 {
         for hz in [50.0, 25.0, 20.0, 15.0, 10.0] {
             let m = virtual_run(seed, hz, 1).metrics;
@@ -33,6 +34,7 @@ fn balances_all_501_steps_at_10_hz_and_above() {
 
 #[test]
 fn falls_at_5_hz_on_every_seed_and_a_deep_queue_does_not_save_it() {
+    let _machine = crate::machine::shared();
     for seed in 0..3 {
         let shallow = virtual_run(seed, 5.0, 1);
         let deep = virtual_run(seed, 5.0, 100);
@@ -145,6 +147,7 @@ fn nonfinite_actions_are_held_not_applied() {
 
 #[test]
 fn real_clock_balances_at_50_hz_for_3_s() {
+    let _machine = crate::machine::alone();
     let cfg = RunConfig {
         duration: Nanos(3 * Nanos::SECOND.0),
         ..RunConfig::default()
@@ -167,6 +170,7 @@ fn real_clock_balances_at_50_hz_for_3_s() {
 
 #[test]
 fn real_clock_falls_at_5_hz() {
+    let _machine = crate::machine::alone();
     let cfg = RunConfig {
         duration: Nanos(3 * Nanos::SECOND.0),
         control_hz: 5.0,

@@ -111,6 +111,7 @@ impl Lab {
 
 #[test]
 fn virtual_lab_falls_off_the_rate_cliff_and_quits_cleanly() {
+    let _machine = crate::machine::alone();
     let mut lab = Lab::start(&["--clock", "virtual"]);
     lab.wait_for("BALANCED", Duration::from_secs(60));
     lab.wait_for("virtual clock", Duration::from_secs(5));
@@ -124,6 +125,7 @@ fn virtual_lab_falls_off_the_rate_cliff_and_quits_cleanly() {
 
 #[test]
 fn real_clock_lab_keeps_the_pole_up_for_3_s() {
+    let _machine = crate::machine::alone();
     let lab = Lab::start(&["--clock", "real"]);
     lab.wait_for("real clock", Duration::from_secs(60));
     std::thread::sleep(Duration::from_secs(3));
@@ -142,6 +144,7 @@ fn real_clock_lab_keeps_the_pole_up_for_3_s() {
 
 #[test]
 fn sigterm_restores_the_terminal() {
+    let _machine = crate::machine::alone();
     let mut lab = Lab::start(&["--clock", "virtual"]);
     lab.wait_for("BALANCED", Duration::from_secs(60));
     let pid = lab.child.process_id().expect("a pid") as libc::pid_t;

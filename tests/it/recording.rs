@@ -247,6 +247,7 @@ fn bad_record_paths_fail_before_the_run() {
 
 #[test]
 fn ctrl_c_during_a_recorded_real_run_leaves_a_complete_file() {
+    let _machine = crate::machine::alone();
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("cut.rrd");
     let child = std::process::Command::new(env!("CARGO_BIN_EXE_ratelab"))

@@ -152,6 +152,7 @@ fn assert_node_policies(expect: bool, timing: &[NodeTiming], warning: Option<&st
 
 #[test]
 fn node_threads_run_under_the_policy_they_were_granted() {
+    let _machine = crate::machine::alone();
     // Node threads are created by this thread and inherit its capabilities.
     let (expect, timing, warning, balanced) =
         std::thread::spawn(real_run_with_priority).join().unwrap();
@@ -161,6 +162,7 @@ fn node_threads_run_under_the_policy_they_were_granted() {
 
 #[test]
 fn a_refused_priority_leaves_the_nodes_running_and_says_so() {
+    let _machine = crate::machine::alone();
     let (expect, timing, warning, balanced) = std::thread::spawn(|| {
         drop_sys_nice();
         real_run_with_priority()
@@ -173,6 +175,7 @@ fn a_refused_priority_leaves_the_nodes_running_and_says_so() {
 
 #[test]
 fn the_binary_warns_in_one_line_when_refused_and_still_balances() {
+    let _machine = crate::machine::alone();
     let mut cmd = Command::new(env!("CARGO_BIN_EXE_ratelab"));
     cmd.args(["run", "--duration", "1", "--rt-priority", "7"]);
     // Only a process that could pass CAP_SYS_NICE on needs to (and can) drop it.
@@ -212,6 +215,7 @@ fn the_binary_warns_in_one_line_when_refused_and_still_balances() {
 
 #[test]
 fn the_binary_reports_the_granted_policy_per_node() {
+    let _machine = crate::machine::alone();
     let expect = kernel_would_grant(PRIO);
     let out = Command::new(env!("CARGO_BIN_EXE_ratelab"))
         .args(["run", "--duration", "1", "--rt-priority", "7"])
@@ -256,6 +260,7 @@ fn the_probe_predicts_what_node_threads_get() {
 
 #[test]
 fn the_lab_engine_warns_when_the_run_starts_not_when_it_ends() {
+    let _machine = crate::machine::alone();
     use crossbeam_channel::unbounded;
     use ratelab::session::{Control, Engine, SessionSettings, Speed, Telemetry, UNBOUNDED};
     std::thread::spawn(|| {

@@ -173,6 +173,7 @@ fn brain_swaps_are_logged_and_replayed() {
 
 #[test]
 fn a_real_clock_run_is_logged_with_node_timing_and_not_replayed() {
+    let _machine = crate::machine::alone();
     let dir = tempfile::tempdir().unwrap();
     let (ctl_tx, ctl_rx) = unbounded();
     let (tel_tx, _tel_rx) = unbounded::<Telemetry>();

@@ -15,14 +15,6 @@ fn path(name: &str) -> PathBuf {
         .join(name)
 }
 
-/// The measurement tests take turns: the virtual sweeps use every core, and the real-clock
-/// ex3 must not share the machine with them.
-static MACHINE: std::sync::Mutex<()> = std::sync::Mutex::new(());
-
-fn machine() -> std::sync::MutexGuard<'static, ()> {
-    MACHINE.lock().unwrap_or_else(|e| e.into_inner())
-}
-
 fn bands() -> Bands {
     load_bands(&path("bands.toml")).expect("exercises/bands.toml")
 }
@@ -39,7 +31,7 @@ fn assert_all(checks: Vec<ratelab::exercise::Check>) {
 
 #[test]
 fn ex1_measurement_rate_cliff() {
-    let _turn = machine();
+    let _machine = crate::machine::shared();
     let b = bands();
     let runs = measure_ex1(&b.ex1).unwrap();
     assert_eq!(runs.len(), b.ex1.control_hz.len() * b.ex1.seeds.len());
@@ -48,7 +40,7 @@ fn ex1_measurement_rate_cliff() {
 
 #[test]
 fn ex2_measurement_queue_trap() {
-    let _turn = machine();
+    let _machine = crate::machine::shared();
     let b = bands();
     let pairs = measure_ex2(&b.ex2).unwrap();
     assert_eq!(pairs.len(), b.ex2.seeds.len());
@@ -57,7 +49,7 @@ fn ex2_measurement_queue_trap() {
 
 #[test]
 fn ex3_measurement_jitter_and_phase_offsets() {
-    let _turn = machine();
+    let _machine = crate::machine::alone();
     let b = bands();
     let (matched, offset) = measure_ex3(&b.ex3).unwrap();
     assert_all(check_ex3(&b.ex3, &matched, &offset));

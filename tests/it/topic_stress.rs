@@ -29,6 +29,7 @@ fn publish_all(topic: &Arc<Topic<u64>>) -> Vec<u64> {
 
 #[test]
 fn unread_topic_drops_all_but_depth_exactly() {
+    let _machine = crate::machine::shared();
     for depth in [1usize, 3, 64] {
         let topic = Arc::new(Topic::new("/stress", depth).unwrap());
         let seqs = publish_all(&topic);
@@ -46,6 +47,7 @@ fn unread_topic_drops_all_but_depth_exactly() {
 
 #[test]
 fn concurrent_reader_sees_time_move_forward_and_counts_stay_bounded() {
+    let _machine = crate::machine::shared();
     let depth = 4;
     let topic = Arc::new(Topic::new("/stress", depth).unwrap());
     let done = Arc::new(AtomicBool::new(false));

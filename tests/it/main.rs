@@ -1,0 +1,34 @@
+//! The integration and end-to-end suite, as one test binary made of modules: one link of
+//! rerun, candle, tract and MuJoCo instead of one per file (see BENCHMARKS.md, set-up time).
+//!
+//! Tests of one binary run concurrently, so the ones that measure time take the machine
+//! alone ([`machine::alone`]: real-clock runs, the lab in a pseudo-terminal), and the
+//! CPU-heavy ones ([`machine::shared`]: sweeps, exercise measurements, stress) never run
+//! beside them. Light tests take neither.
+
+mod brains;
+mod chapter_bands;
+mod cli;
+mod e2e_pty;
+mod exercises;
+mod realtime;
+mod recording;
+mod session;
+mod topic_stress;
+
+pub mod machine {
+    //! Turns on the machine between timing-sensitive and CPU-heavy tests.
+    use std::sync::{RwLock, RwLockReadGuard, RwLockWriteGuard};
+
+    static MACHINE: RwLock<()> = RwLock::new(());
+
+    /// For a test that measures time (real clock, PTY): no heavy test runs meanwhile.
+    pub fn alone() -> RwLockWriteGuard<'static, ()> {
+        MACHINE.write().unwrap_or_else(|e| e.into_inner())
+    }
+
+    /// For a CPU-heavy test: it may run beside other heavy tests, never beside a timing one.
+    pub fn shared() -> RwLockReadGuard<'static, ()> {
+        MACHINE.read().unwrap_or_else(|e| e.into_inner())
+    }
+}
