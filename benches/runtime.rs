@@ -110,6 +110,126 @@ fn episode(c: &mut Criterion) {
     g.finish();
 }
 
+/// The longest chain a graph may have (8 nodes): sensor (positions) → estimator → policy
+/// → four safety nodes → actuator, everything at 50 Hz.
+const EIGHT_NODES: &str = r#"
+name = "eight"
+[[node]]
+name = "sensor"
+kind = "sensor"
+rate_hz = 50
+publishes = "/meas"
+[[node]]
+name = "estimator"
+kind = "estimator"
+rate_hz = 50
+subscribes = "/meas"
+publishes = "/state"
+[[node]]
+name = "policy"
+kind = "policy"
+rate_hz = 50
+subscribes = "/state"
+publishes = "/f0"
+[[node]]
+name = "s1"
+kind = "safety"
+rate_hz = 50
+subscribes = "/f0"
+publishes = "/f1"
+[[node]]
+name = "s2"
+kind = "safety"
+rate_hz = 50
+subscribes = "/f1"
+publishes = "/f2"
+[[node]]
+name = "s3"
+kind = "safety"
+rate_hz = 50
+subscribes = "/f2"
+publishes = "/f3"
+[[node]]
+name = "s4"
+kind = "safety"
+rate_hz = 50
+subscribes = "/f3"
+publishes = "/f4"
+[[node]]
+name = "actuator"
+kind = "actuator"
+rate_hz = 50
+subscribes = "/f4"
+[[topic]]
+name = "/meas"
+type = "position"
+depth = 1
+[[topic]]
+name = "/state"
+type = "state"
+depth = 1
+[[topic]]
+name = "/f0"
+type = "force"
+depth = 1
+[[topic]]
+name = "/f1"
+type = "force"
+depth = 1
+[[topic]]
+name = "/f2"
+type = "force"
+depth = 1
+[[topic]]
+name = "/f3"
+type = "force"
+depth = 1
+[[topic]]
+name = "/f4"
+type = "force"
+depth = 1
+"#;
+
+/// Per node tick: the chapter's 3-node graph against the 8-node chain, 10 s virtual runs
+/// (criterion's throughput is node ticks, so the two rows compare per tick).
+fn graph_size(c: &mut Criterion) {
+    let mut g = c.benchmark_group("graph size (10 s virtual run, per node tick)");
+    for (label, graph) in [
+        (
+            "3 nodes (graphs/cartpole.toml)",
+            ratelab::graph::GraphSpec::chapter(),
+        ),
+        (
+            "8 nodes (sensor, estimator, policy, 4 safety, actuator)",
+            ratelab::graph::GraphSpec::parse(EIGHT_NODES, "eight").unwrap(),
+        ),
+    ] {
+        let cfg = RunConfig {
+            clock: ClockKind::Virtual,
+            graph,
+            ..RunConfig::default()
+        };
+        let ticks = 501 * cfg.graph.nodes.len() as u64;
+        g.throughput(criterion::Throughput::Elements(ticks));
+        g.bench_function(label, |b| {
+            b.iter(|| {
+                let r = run(
+                    &cfg,
+                    Box::new(Scripted),
+                    RunOptions {
+                        keep_trace: false,
+                        ..Default::default()
+                    },
+                )
+                .unwrap();
+                assert!(r.metrics.balanced);
+                black_box(r)
+            })
+        });
+    }
+    g.finish();
+}
+
 fn brains(c: &mut Criterion) {
     let fixtures = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/fixtures");
     let obs = [0.01f32, -0.02, 0.999, 0.03, 0.1];
@@ -139,12 +259,18 @@ fn exercises(c: &mut Criterion) {
     g.sample_size(10);
     g.bench_function("ex1 + ex2 measurement (24 ten-second virtual runs)", |b| {
         b.iter(|| {
-            black_box(ratelab::exercise::measure_ex1(&bands.ex1).unwrap());
-            black_box(ratelab::exercise::measure_ex2(&bands.ex2).unwrap());
+            black_box(
+                ratelab::exercise::measure_ex1(&bands.ex1, &ratelab::graph::GraphSpec::chapter())
+                    .unwrap(),
+            );
+            black_box(
+                ratelab::exercise::measure_ex2(&bands.ex2, &ratelab::graph::GraphSpec::chapter())
+                    .unwrap(),
+            );
         })
     });
     g.finish();
 }
 
-criterion_group!(benches, topic, episode, brains, exercises);
+criterion_group!(benches, topic, episode, graph_size, brains, exercises);
 criterion_main!(benches);

@@ -17,11 +17,11 @@ pub fn render_bench(frames: usize) -> anyhow::Result<()> {
     use crate::tui::app::App;
     use ratatui::backend::TestBackend;
     use ratatui::Terminal;
-    let cfg = RunConfig {
+    let mut cfg = RunConfig {
         clock: ClockKind::Virtual,
-        control_hz: 8.0,
         ..RunConfig::default()
     };
+    cfg.set_control_hz(8.0)?;
     let (app, _controls) = App::after_virtual_run(cfg, false)?;
     let mut terminal = Terminal::new(TestBackend::new(120, 40))?;
     let mut times = ratelab::metrics::LatencyStats::default();
@@ -49,7 +49,7 @@ impl Node for BareWait {
     fn name(&self) -> &str {
         "bare wait"
     }
-    fn priority(&self) -> u8 {
+    fn priority(&self) -> u32 {
         0
     }
     fn rate(&self) -> &Rate {
@@ -82,8 +82,9 @@ pub fn run_bench(a: &BenchArgs, stop: StopFlag) -> anyhow::Result<()> {
     if a.render {
         return render_bench(2000);
     }
-    let spin_margin = Nanos(a.spin_margin_us * 1_000);
+    let spin_margin = Nanos(a.spin_margin_us.saturating_mul(1_000));
     let duration = duration_from_secs(a.duration)?;
+    let graph = crate::headless::graph_from_args(&a.graph)?;
     println!(
         "real-clock timing: every node at one rate{}, {} s each, spin margin {} µs, {} cores",
         if a.stagger { ", staggered by P/3" } else { "" },
@@ -111,18 +112,24 @@ pub fn run_bench(a: &BenchArgs, stop: StopFlag) -> anyhow::Result<()> {
         for t in &floor.timing {
             print_row(hz, t, Duration::from_nanos(duration.0));
         }
+        // Every node at `hz`, the actuator too: a timing run, not a physical one (the
+        // plant still steps 20 ms per actuator tick), so the graph file's 50 Hz rule for
+        // the actuator is deliberately set aside here.
+        let mut graph = graph.clone();
+        for n in &mut graph.nodes {
+            n.rate_hz = hz;
+        }
+        let count = graph.nodes.len() as u64;
         let cfg = RunConfig {
             clock: ClockKind::Real,
             duration,
-            sensor_hz: hz,
-            control_hz: hz,
-            actuator_hz: hz,
+            graph,
             spin_margin,
             rt_priority: a.rt_priority,
             phase_offsets: if a.stagger {
-                [Nanos::ZERO, Nanos(period.0 / 3), Nanos(2 * period.0 / 3)]
+                (0..count).map(|i| Nanos(i * period.0 / count)).collect()
             } else {
-                [Nanos::ZERO; 3]
+                Vec::new()
             },
             ..RunConfig::default()
         };

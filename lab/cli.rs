@@ -51,6 +51,42 @@ pub struct ReplayArgs {
     pub out: Option<PathBuf>,
 }
 
+/// The graph to run and overrides of its rates and depths (every command that runs one).
+#[derive(Debug, Clone, Default, Args)]
+pub struct GraphArgs {
+    /// The node graph (TOML; see graphs/). Default: the chapter's, graphs/cartpole.toml.
+    #[arg(long, value_name = "FILE")]
+    pub graph: Option<PathBuf>,
+    /// Set a node's rate, Hz (repeatable): --rate estimator=10.
+    #[arg(long = "rate", value_name = "NODE=HZ", value_parser = parse_node_rate)]
+    pub rates: Vec<(String, f64)>,
+    /// Set a topic's history depth (repeatable): --depth /obs=100.
+    #[arg(long = "depth", value_name = "TOPIC=N", value_parser = parse_topic_depth)]
+    pub depths: Vec<(String, usize)>,
+}
+
+fn split_assignment<'a>(s: &'a str, what: &str) -> Result<(&'a str, &'a str), String> {
+    s.split_once('=')
+        .map(|(k, v)| (k.trim(), v.trim()))
+        .filter(|(k, _)| !k.is_empty())
+        .ok_or_else(|| format!("expected {what}, got '{s}'"))
+}
+
+fn parse_node_rate(s: &str) -> Result<(String, f64), String> {
+    let (node, hz) = split_assignment(s, "NODE=HZ")?;
+    let hz: f64 = hz
+        .parse()
+        .map_err(|_| format!("not a rate in Hz: '{hz}'"))?;
+    check_rate("rate", hz).map_err(|e| e.to_string())?;
+    Ok((node.to_string(), hz))
+}
+
+fn parse_topic_depth(s: &str) -> Result<(String, usize), String> {
+    let (topic, depth) = split_assignment(s, "TOPIC=N")?;
+    let depth = parse_depth(depth)?;
+    Ok((topic.to_string(), depth))
+}
+
 /// `ratelab exercise`.
 #[derive(Debug, Clone, Args)]
 pub struct ExerciseArgs {
@@ -59,6 +95,9 @@ pub struct ExerciseArgs {
     /// The folder holding the exercise files and bands.toml.
     #[arg(long, default_value = "exercises")]
     pub dir: PathBuf,
+    /// The graph the exercise runs on (its bands were measured on the default).
+    #[command(flatten)]
+    pub graph: GraphArgs,
 }
 
 fn parse_seed(s: &str) -> Result<u64, String> {
@@ -97,6 +136,9 @@ pub struct SweepArgs {
     /// Write the table as JSON.
     #[arg(long, value_name = "FILE")]
     pub json: Option<PathBuf>,
+    /// The graph (the grid's rates are its chain sensor's and policy's).
+    #[command(flatten)]
+    pub graph: GraphArgs,
 }
 
 /// `ratelab cliff`.
@@ -126,6 +168,9 @@ pub struct CliffArgs {
     /// Resolution, Hz.
     #[arg(long, default_value = "0.1", value_parser = parse_rate("step"))]
     pub step: f64,
+    /// The graph (the searched rate is its chain policy's).
+    #[command(flatten)]
+    pub graph: GraphArgs,
 }
 
 fn parse_rate(flag: &'static str) -> impl Fn(&str) -> Result<f64, String> + Clone {
@@ -190,15 +235,18 @@ pub struct RunArgs {
     /// Run length in seconds of run time (headless default 10; the lab runs until you stop it).
     #[arg(long, allow_negative_numbers = true, value_parser = parse_duration)]
     pub duration: Option<f64>,
-    /// Sensor rate, Hz, in (0, 10000].
-    #[arg(long, default_value = "50", allow_negative_numbers = true, value_parser = parse_rate("sensor-hz"))]
-    pub sensor_hz: f64,
-    /// Policy (control) rate, Hz, in (0, 10000].
-    #[arg(long, default_value = "50", allow_negative_numbers = true, value_parser = parse_rate("control-hz"))]
-    pub control_hz: f64,
-    /// History depth of /obs and /action (≥ 1).
-    #[arg(long, default_value = "1", allow_negative_numbers = true, value_parser = parse_depth)]
-    pub queue_depth: usize,
+    /// The graph and overrides of its rates and depths.
+    #[command(flatten)]
+    pub graph: GraphArgs,
+    /// Sensor rate, Hz, in (0, 10000]: the chain's sensor (default: the graph's).
+    #[arg(long, allow_negative_numbers = true, value_parser = parse_rate("sensor-hz"))]
+    pub sensor_hz: Option<f64>,
+    /// Policy (control) rate, Hz, in (0, 10000]: the chain's policy (default: the graph's).
+    #[arg(long, allow_negative_numbers = true, value_parser = parse_rate("control-hz"))]
+    pub control_hz: Option<f64>,
+    /// History depth of every topic, ≥ 1 (default: the graph's).
+    #[arg(long, allow_negative_numbers = true, value_parser = parse_depth)]
+    pub queue_depth: Option<usize>,
     /// Executor: real (one thread per node) or virtual (deterministic).
     #[arg(long, default_value = "real", value_parser = parse_clock)]
     pub clock: ClockKind,
@@ -229,8 +277,9 @@ pub struct RunArgs {
     /// Real clock: spin this many µs before each deadline instead of sleeping.
     #[arg(long, default_value_t = 300, value_name = "US")]
     pub spin_margin_us: u64,
-    /// Real clock: first-tick offsets of sensor,policy,actuator in ms (e.g. 0,5,10).
-    #[arg(long, value_delimiter = ',', num_args = 1..=3, value_parser = parse_offset, value_name = "MS,MS,MS")]
+    /// First-tick offset of each node in tie-break order, ms (e.g. 0,5,10 for sensor,
+    /// policy, actuator); both clocks.
+    #[arg(long, value_delimiter = ',', num_args = 1..=8, value_parser = parse_offset, value_name = "MS,…")]
     pub phase_offset_ms: Vec<f64>,
     /// Real clock: run node threads under SCHED_FIFO at this priority, 1..=99 (needs
     /// CAP_SYS_NICE or `ulimit -r`; refused → a warning, default policy).
@@ -253,11 +302,14 @@ pub struct BenchArgs {
     /// Run node threads (and the bare wait) under SCHED_FIFO at this priority, 1..=99.
     #[arg(long, value_parser = parse_rt_priority, value_name = "PRIO", allow_negative_numbers = true)]
     pub rt_priority: Option<u8>,
-    /// Stagger the nodes' first deadlines by a third of a period each (sensor 0, policy
-    /// P/3, actuator 2P/3) so that no two are due at once.
+    /// Stagger the nodes' first deadlines by P/n each (n nodes; the chapter's three: sensor
+    /// 0, policy P/3, actuator 2P/3) so that no two are due at once.
     #[arg(long)]
     pub stagger: bool,
     /// Instead: time the lab's frame rendering at 120×40 (view model + draw).
     #[arg(long)]
     pub render: bool,
+    /// The graph whose nodes are timed (every node at each --hz).
+    #[command(flatten)]
+    pub graph: GraphArgs,
 }

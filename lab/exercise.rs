@@ -20,7 +20,11 @@ fn print_checks(checks: &[Check]) {
 }
 
 /// Run exercise `which` from the exercise folder `dir`.
-pub fn run_exercise(which: &str, dir: &Path) -> anyhow::Result<()> {
+pub fn run_exercise(
+    which: &str,
+    dir: &Path,
+    graph: &ratelab::graph::GraphSpec,
+) -> anyhow::Result<()> {
     let Some((ex, file)) = FILES.iter().find(|(e, _)| *e == which) else {
         bail!("unknown exercise '{which}' (expected ex1, ex2 or ex3)");
     };
@@ -44,7 +48,7 @@ pub fn run_exercise(which: &str, dir: &Path) -> anyhow::Result<()> {
     match *ex {
         "ex1" => {
             let b = &bands.ex1;
-            let runs = measure_ex1(b)?;
+            let runs = measure_ex1(b, graph)?;
             println!(
                 "{:>9} | {} | mean sense->act latency",
                 "control",
@@ -89,7 +93,7 @@ pub fn run_exercise(which: &str, dir: &Path) -> anyhow::Result<()> {
         }
         "ex2" => {
             let b = &bands.ex2;
-            let pairs = measure_ex2(b)?;
+            let pairs = measure_ex2(b, graph)?;
             println!("control {} Hz | seed | depth | /obs dropped | balanced | fell at step | mean latency", b.control_hz);
             for (seed, (s, d)) in b.seeds.iter().zip(&pairs) {
                 for m in [s, d] {
@@ -117,7 +121,7 @@ pub fn run_exercise(which: &str, dir: &Path) -> anyhow::Result<()> {
                 "Running {} s on the real clock twice (this takes real time)...",
                 b.duration_s
             );
-            let (matched, offset) = measure_ex3(b)?;
+            let (matched, offset) = measure_ex3(b, graph)?;
             println!("offsets (ms)     | /obs dropped | /action dropped | balanced | mean latency");
             for (label, m) in [
                 ("none".to_string(), &matched),

@@ -1,9 +1,10 @@
 //! The headless run: one graph, the chapter's summary, optional metrics.json and trace.csv.
 
-use crate::cli::RunArgs;
+use crate::cli::{GraphArgs, RunArgs};
 use anyhow::Context;
 use indicatif::{ProgressBar, ProgressStyle};
 use ratelab::config::{phase_offset_from_ms, BREAK_CONTROL_HZ};
+use ratelab::graph::GraphSpec;
 use ratelab::metrics::StepRecord;
 use ratelab::recording::{check_output_path, default_path, RecordOptions, Recording};
 use ratelab::scheduler::{EndReason, StopFlag};
@@ -16,25 +17,61 @@ use std::time::Duration;
 /// Headless runs last this long unless `--duration` says otherwise, s.
 pub const DEFAULT_DURATION_S: f64 = 10.0;
 
+/// The graph the flags name (`--graph`, default the chapter's), with `--rate` and
+/// `--depth` applied.
+pub fn graph_from_args(g: &GraphArgs) -> anyhow::Result<GraphSpec> {
+    let mut spec = match &g.graph {
+        Some(path) => GraphSpec::load(path)?,
+        None => GraphSpec::chapter(),
+    };
+    for (node, hz) in &g.rates {
+        spec.set_rate(node, *hz)
+            .map_err(|e| anyhow::anyhow!("--rate {node}={hz}: {e}"))?;
+    }
+    for (topic, depth) in &g.depths {
+        spec.set_depth(topic, *depth)
+            .map_err(|e| anyhow::anyhow!("--depth {topic}={depth}: {e}"))?;
+    }
+    Ok(spec)
+}
+
 /// The run settings the flags describe (`--smoke` and `--break` applied).
 pub fn config_from_args(a: &RunArgs) -> anyhow::Result<RunConfig> {
     let mut cfg = RunConfig {
         seed: a.seed,
         duration: ratelab::config::duration_from_secs(a.duration.unwrap_or(DEFAULT_DURATION_S))?,
-        sensor_hz: a.sensor_hz,
-        control_hz: if a.break_ {
-            BREAK_CONTROL_HZ
-        } else {
-            a.control_hz
-        },
-        queue_depth: a.queue_depth,
+        graph: graph_from_args(&a.graph)?,
         clock: a.clock,
-        spin_margin: Nanos(a.spin_margin_us * 1_000),
+        spin_margin: Nanos(a.spin_margin_us.saturating_mul(1_000)),
         rt_priority: a.rt_priority,
         ..RunConfig::default()
     };
-    for (slot, ms) in cfg.phase_offsets.iter_mut().zip(&a.phase_offset_ms) {
-        *slot = phase_offset_from_ms(*ms)?;
+    if let Some(hz) = a.sensor_hz {
+        cfg.set_sensor_hz(hz)?;
+    }
+    match (a.break_, a.control_hz) {
+        (true, _) => cfg.set_control_hz(BREAK_CONTROL_HZ)?,
+        (false, Some(hz)) => cfg.set_control_hz(hz)?,
+        (false, None) => {}
+    }
+    if let Some(depth) = a.queue_depth {
+        cfg.set_queue_depth(depth)?;
+    }
+    if !a.phase_offset_ms.is_empty() {
+        let nodes = cfg.graph.node_names();
+        anyhow::ensure!(
+            a.phase_offset_ms.len() == nodes.len(),
+            "--phase-offset-ms takes one value per node ({} for graph '{}': {}), got {}",
+            nodes.len(),
+            cfg.graph.name,
+            nodes.join(", "),
+            a.phase_offset_ms.len()
+        );
+        cfg.phase_offsets = a
+            .phase_offset_ms
+            .iter()
+            .map(|&ms| phase_offset_from_ms(ms))
+            .collect::<Result<_, _>>()?;
     }
     if a.smoke {
         cfg.clock = ClockKind::Virtual;
@@ -80,7 +117,7 @@ pub fn run_headless(a: &RunArgs, stop: StopFlag) -> anyhow::Result<RunReport> {
     if let Some(r) = &recording {
         opts.observers.push(r.observer());
         let r = r.clone();
-        opts.on_node_tick = Some(Arc::new(move |node, now, late| {
+        opts.on_node_tick = Some(Arc::new(move |_, node, now, late| {
             r.node_tick(node, now, late)
         }));
     }
@@ -109,7 +146,7 @@ pub fn run_headless(a: &RunArgs, stop: StopFlag) -> anyhow::Result<RunReport> {
         eprintln!("[ratelab] warning: {w}");
     }
     if let Some(dir) = &a.out {
-        write_outputs(dir, &report)?;
+        write_outputs(dir, &report, &cfg.graph)?;
     }
     if let Some(r) = &recording {
         println!("[ratelab] recording: {}", r.path().display());
@@ -165,17 +202,19 @@ pub fn print_summary(report: &RunReport) {
 }
 
 /// `metrics.json` (pretty, stable key order) and `trace.csv` (one row per actuator tick).
-pub fn write_outputs(dir: &Path, report: &RunReport) -> anyhow::Result<()> {
+pub fn write_outputs(dir: &Path, report: &RunReport, graph: &GraphSpec) -> anyhow::Result<()> {
     let json = serde_json::to_string_pretty(&report.metrics)? + "\n";
     let path = dir.join("metrics.json");
     std::fs::write(&path, json).with_context(|| format!("cannot write {}", path.display()))?;
-    write_trace(&dir.join("trace.csv"), &report.trace)
+    write_trace(&dir.join("trace.csv"), &report.trace, graph)
 }
 
-fn write_trace(path: &Path, trace: &[StepRecord]) -> anyhow::Result<()> {
+/// One row per actuator tick; per topic (in the graph's topic order) a `<topic>_published`
+/// and `<topic>_dropped` column (`/obs` → `obs_published`), as the chapter's trace has.
+fn write_trace(path: &Path, trace: &[StepRecord], graph: &GraphSpec) -> anyhow::Result<()> {
     let mut w =
         csv::Writer::from_path(path).with_context(|| format!("cannot write {}", path.display()))?;
-    w.write_record([
+    let mut header: Vec<String> = [
         "step",
         "t_ns",
         "pole_angle",
@@ -183,14 +222,18 @@ fn write_trace(path: &Path, trace: &[StepRecord]) -> anyhow::Result<()> {
         "action",
         "latency_ns",
         "nonfinite",
-        "obs_published",
-        "obs_dropped",
-        "action_published",
-        "action_dropped",
-        "fell",
-    ])?;
+    ]
+    .map(String::from)
+    .to_vec();
+    for t in &graph.topics {
+        let name = ratelab::recording::bus_name(&t.name);
+        header.push(format!("{name}_published"));
+        header.push(format!("{name}_dropped"));
+    }
+    header.push("fell".into());
+    w.write_record(&header)?;
     for r in trace {
-        w.write_record([
+        let mut row = vec![
             r.step.to_string(),
             r.t.0.to_string(),
             format!("{:e}", r.pole_angle),
@@ -198,12 +241,13 @@ fn write_trace(path: &Path, trace: &[StepRecord]) -> anyhow::Result<()> {
             format!("{:e}", r.action),
             r.latency.map_or_else(String::new, |l| l.0.to_string()),
             r.nonfinite.to_string(),
-            r.obs.published.to_string(),
-            r.obs.dropped.to_string(),
-            r.action_topic.published.to_string(),
-            r.action_topic.dropped.to_string(),
-            r.fell.to_string(),
-        ])?;
+        ];
+        for t in r.topics.as_slice() {
+            row.push(t.published.to_string());
+            row.push(t.dropped.to_string());
+        }
+        row.push(r.fell.to_string());
+        w.write_record(&row)?;
     }
     w.flush()?;
     Ok(())

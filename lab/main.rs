@@ -82,6 +82,7 @@ fn replay(args: &cli::ReplayArgs) -> anyhow::Result<()> {
             continue;
         }
         let metrics = replay_run(&log, i)?;
+        let same = log.matches(i, &metrics);
         println!(
             "[ratelab] run {n}: {} command(s) replayed",
             run.commands.len()
@@ -90,11 +91,9 @@ fn replay(args: &cli::ReplayArgs) -> anyhow::Result<()> {
             println!("[ratelab]   {line}");
         }
         let json = serde_json::to_string_pretty(&metrics)? + "\n";
-        match &run.metrics {
-            Some(live) if serde_json::to_string_pretty(live)? + "\n" == json => {
-                println!("[ratelab]   identical to the live run's metrics ✓")
-            }
-            Some(_) => {
+        match same {
+            Some(true) => println!("[ratelab]   identical to the live run's metrics ✓"),
+            Some(false) => {
                 mismatches += 1;
                 println!("[ratelab]   DIFFERS from the live run's metrics ✗")
             }
@@ -149,7 +148,8 @@ fn main() -> ExitCode {
         Some(Command::Lab(args)) => lab(args, stop),
         Some(Command::Replay(args)) => replay(args),
         Some(Command::Bench(args)) => bench::run_bench(args, stop),
-        Some(Command::Exercise(args)) => exercise::run_exercise(&args.which, &args.dir),
+        Some(Command::Exercise(args)) => headless::graph_from_args(&args.graph)
+            .and_then(|g| exercise::run_exercise(&args.which, &args.dir, &g)),
         Some(Command::Sweep(args)) => sweep::run_sweep(args),
         Some(Command::Cliff(args)) => sweep::run_cliff(args),
         None => {
@@ -164,7 +164,11 @@ fn main() -> ExitCode {
         Ok(()) if interrupted.is_stopped() => ExitCode::from(EXIT_INTERRUPTED),
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("error: {e:#}");
+            // A graph file's error is `FILE:LINE:COL: reason`, as compilers print them.
+            match e.downcast_ref::<ratelab::graph::spec::SpecError>() {
+                Some(spec) => eprintln!("{spec}"),
+                None => eprintln!("error: {e:#}"),
+            }
             ExitCode::from(EXIT_USAGE)
         }
     }

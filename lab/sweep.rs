@@ -41,6 +41,7 @@ pub fn run_sweep(a: &SweepArgs) -> anyhow::Result<()> {
         seeds: a.seeds.clone(),
         base: RunConfig {
             duration: duration_from_secs(a.duration)?,
+            graph: crate::headless::graph_from_args(&a.graph)?,
             ..RunConfig::default()
         },
     };
@@ -267,21 +268,24 @@ fn write_csv(path: &std::path::Path, rows: &[(Point, Metrics)]) -> anyhow::Resul
 /// For each seed, the highest control rate at which the pole falls, to `step` Hz.
 pub fn run_cliff(a: &CliffArgs) -> anyhow::Result<()> {
     let brain = brain_factory(&a.policy)?;
+    let graph = crate::headless::graph_from_args(&a.graph)?;
     let results: Vec<_> = std::thread::scope(|s| {
         let handles: Vec<_> = a
             .seeds
             .iter()
             .map(|&seed| {
                 let brain = &brain;
+                let graph = &graph;
                 s.spawn(move || {
-                    let base = RunConfig {
+                    let mut base = RunConfig {
                         clock: ClockKind::Virtual,
                         seed,
-                        sensor_hz: a.sensor_hz,
-                        queue_depth: a.queue_depth,
+                        graph: graph.clone(),
                         duration: duration_from_secs(a.duration)?,
                         ..RunConfig::default()
                     };
+                    base.set_sensor_hz(a.sensor_hz)?;
+                    base.set_queue_depth(a.queue_depth)?;
                     Ok::<_, anyhow::Error>(find_cliff(&base, brain, a.min_hz, a.max_hz, a.step)?)
                 })
             })

@@ -1,5 +1,6 @@
 //! Run settings and their validation: one place decides what a usable run is.
 
+use crate::graph::spec::{GraphSpec, OverrideError};
 use crate::rate::{period_for_hz, MAX_HZ};
 use crate::time::Nanos;
 use std::fmt;
@@ -7,6 +8,10 @@ use std::str::FromStr;
 
 /// The chapter's actuator rate: the plant's 50 Hz control step.
 pub const ACTUATOR_HZ: f64 = 50.0;
+/// The longest run any path accepts (run time): a day. A virtual run costs a few µs of CPU
+/// per actuator step and keeps its trace only when asked, so this bounds time and memory.
+pub const MAX_DURATION: Nanos = Nanos(24 * 3600 * Nanos::SECOND.0);
+
 /// `--break` sets the control rate to this (the chapter's demonstration of the cliff).
 pub const BREAK_CONTROL_HZ: f64 = 5.0;
 
@@ -69,6 +74,9 @@ pub enum ConfigError {
     /// Queue depth 0.
     #[error("--queue-depth must be at least 1, got {0}")]
     Depth(usize),
+    /// A graph override (`--rate`, `--depth`, a chapter shorthand) that does not fit.
+    #[error(transparent)]
+    Graph(#[from] OverrideError),
     /// Duration not finite or ≤ 0.
     #[error("--duration must be a finite number of seconds > 0, got {0}")]
     Duration(f64),
@@ -86,41 +94,33 @@ pub enum ConfigError {
 /// Everything that defines one run of the graph.
 #[derive(Clone, Debug, PartialEq)]
 pub struct RunConfig {
-    /// Reset seed (numpy-compatible draws).
+    /// Reset seed (numpy-compatible draws; also seeds sensor noise).
     pub seed: u64,
     /// How long to run (run time).
     pub duration: Nanos,
-    /// Sensor rate, Hz.
-    pub sensor_hz: f64,
-    /// Policy (control) rate, Hz.
-    pub control_hz: f64,
-    /// Actuator rate, Hz (the plant's control rate).
-    pub actuator_hz: f64,
-    /// History depth of `/obs` and `/action`.
-    pub queue_depth: usize,
+    /// The graph, with the rates and depths the run starts with.
+    pub graph: GraphSpec,
     /// Which executor.
     pub clock: ClockKind,
     /// Real clock: spin this long before each deadline instead of sleeping.
     pub spin_margin: Nanos,
-    /// Real clock: first deadline of sensor, policy, actuator.
-    pub phase_offsets: [Nanos; 3],
+    /// First deadline of each node, by node index (missing = 0): phase offsets.
+    pub phase_offsets: Vec<Nanos>,
     /// Real clock: run the node threads under `SCHED_FIFO` at this priority (1..=99) when
     /// the kernel allows (see [`crate::scheduler::RealOptions::rt_priority`]); `None` keeps the default policy.
     pub rt_priority: Option<u8>,
 }
 
 impl Default for RunConfig {
+    /// The chapter's graph at its rates, seed 0, 10 s, real clock.
     fn default() -> Self {
         Self {
             seed: 0,
             duration: Nanos(10 * Nanos::SECOND.0),
-            sensor_hz: 50.0,
-            control_hz: 50.0,
-            actuator_hz: ACTUATOR_HZ,
-            queue_depth: 1,
+            graph: GraphSpec::chapter(),
             clock: ClockKind::Real,
             spin_margin: crate::rate::DEFAULT_SPIN_MARGIN,
-            phase_offsets: [Nanos::ZERO; 3],
+            phase_offsets: Vec::new(),
             rt_priority: None,
         }
     }
@@ -160,6 +160,74 @@ pub fn phase_offset_from_ms(ms: f64) -> Result<Nanos, ConfigError> {
 }
 
 impl RunConfig {
+    /// The chain sensor's rate at the start, Hz (the chapter's `sensor_hz`).
+    pub fn sensor_hz(&self) -> f64 {
+        self.graph.sensor_hz()
+    }
+
+    /// The chain policy's rate at the start, Hz (the chapter's control rate).
+    pub fn control_hz(&self) -> f64 {
+        self.graph.control_hz()
+    }
+
+    /// The actuator's rate, Hz.
+    pub fn actuator_hz(&self) -> f64 {
+        self.graph.actuator_hz()
+    }
+
+    /// The policy input's depth at the start (the chapter's one queue depth).
+    pub fn queue_depth(&self) -> usize {
+        self.graph.queue_depth()
+    }
+
+    /// Set the chain sensor's rate (`--sensor-hz`).
+    ///
+    /// # Errors
+    /// [`ConfigError::Rate`] naming the flag.
+    pub fn set_sensor_hz(&mut self, hz: f64) -> Result<(), ConfigError> {
+        check_rate("sensor-hz", hz)?;
+        let id = self.graph.chain.sensor;
+        Ok(self.graph.set_rate_of(id, hz)?)
+    }
+
+    /// Set the chain policy's rate (`--control-hz`).
+    ///
+    /// # Errors
+    /// [`ConfigError::Rate`] naming the flag.
+    pub fn set_control_hz(&mut self, hz: f64) -> Result<(), ConfigError> {
+        check_rate("control-hz", hz)?;
+        let id = self.graph.chain.policy;
+        Ok(self.graph.set_rate_of(id, hz)?)
+    }
+
+    /// Set every topic's depth (`--queue-depth`).
+    ///
+    /// # Errors
+    /// [`ConfigError::Depth`] for 0, or a depth past the graph's bound.
+    pub fn set_queue_depth(&mut self, depth: usize) -> Result<(), ConfigError> {
+        if depth == 0 {
+            return Err(ConfigError::Depth(0));
+        }
+        Ok(self.graph.set_all_depths(depth)?)
+    }
+
+    /// These settings with the chapter's rates and depth (builder style, for tests and
+    /// sweeps): `sensor_hz`, `control_hz`, `queue_depth`.
+    ///
+    /// # Errors
+    /// As [`RunConfig::set_sensor_hz`], [`RunConfig::set_control_hz`], [`RunConfig::set_queue_depth`].
+    pub fn with_chapter(
+        mut self,
+        sensor_hz: f64,
+        control_hz: f64,
+        queue_depth: usize,
+    ) -> Result<Self, ConfigError> {
+        self.set_sensor_hz(sensor_hz)?;
+        self.set_control_hz(control_hz)?;
+        self.set_queue_depth(queue_depth)?;
+        Ok(self)
+    }
+
     /// The same settings with another duration, in milliseconds.
     pub fn with_duration_ms(self, ms: u64) -> Self {
         Self {
@@ -173,10 +241,10 @@ impl RunConfig {
     /// # Errors
     /// The first [`ConfigError`] found.
     pub fn validate(&self) -> Result<(), ConfigError> {
-        check_rate("sensor-hz", self.sensor_hz)?;
-        check_rate("control-hz", self.control_hz)?;
-        check_rate("actuator-hz", self.actuator_hz)?;
-        if self.queue_depth == 0 {
+        for n in &self.graph.nodes {
+            check_rate("rate", n.rate_hz)?;
+        }
+        if self.graph.topics.iter().any(|t| t.depth == 0) {
             return Err(ConfigError::Depth(0));
         }
         if self.duration.0 == 0 {
@@ -195,26 +263,21 @@ mod tests {
 
     #[test]
     fn validation_names_the_flag() {
-        let cfg = RunConfig {
-            control_hz: 0.0,
-            ..RunConfig::default()
-        };
+        let mut cfg = RunConfig::default();
         assert_eq!(
-            cfg.validate(),
+            cfg.set_control_hz(0.0),
             Err(ConfigError::Rate {
                 flag: "control-hz",
                 hz: 0.0
             })
         );
-        let cfg = RunConfig {
-            queue_depth: 0,
-            ..RunConfig::default()
-        };
         assert!(cfg
-            .validate()
+            .set_queue_depth(0)
             .unwrap_err()
             .to_string()
             .contains("--queue-depth"));
+        cfg.set_control_hz(5.0).unwrap();
+        assert_eq!(cfg.control_hz(), 5.0);
         assert!(RunConfig::default().validate().is_ok());
         assert!(duration_from_secs(-1.0).is_err());
         assert!(duration_from_secs(f64::NAN).is_err());

@@ -7,6 +7,7 @@
 //!   phase offsets remove them.
 
 use crate::config::{duration_from_secs, phase_offset_from_ms, ClockKind, RunConfig};
+use crate::graph::GraphSpec;
 use crate::metrics::Metrics;
 use crate::policy::{Policy, Scripted};
 use crate::sweep::{run_grid, Grid, SweepError};
@@ -227,7 +228,7 @@ fn threads() -> usize {
 ///
 /// # Errors
 /// [`ExerciseError`] when a run cannot start.
-pub fn measure_ex1(b: &Ex1Bands) -> Result<Vec<Metrics>, ExerciseError> {
+pub fn measure_ex1(b: &Ex1Bands, graph: &GraphSpec) -> Result<Vec<Metrics>, ExerciseError> {
     let grid = Grid {
         clocks: vec![ClockKind::Virtual],
         sensor_hz: vec![b.sensor_hz],
@@ -236,6 +237,7 @@ pub fn measure_ex1(b: &Ex1Bands) -> Result<Vec<Metrics>, ExerciseError> {
         seeds: b.seeds.clone(),
         base: RunConfig {
             duration: duration_from_secs(b.duration_s)?,
+            graph: graph.clone(),
             ..RunConfig::default()
         },
     };
@@ -285,7 +287,10 @@ pub fn check_ex1(b: &Ex1Bands, runs: &[Metrics]) -> Vec<Check> {
 ///
 /// # Errors
 /// [`ExerciseError`] when a run cannot start.
-pub fn measure_ex2(b: &Ex2Bands) -> Result<Vec<(Metrics, Metrics)>, ExerciseError> {
+pub fn measure_ex2(
+    b: &Ex2Bands,
+    graph: &GraphSpec,
+) -> Result<Vec<(Metrics, Metrics)>, ExerciseError> {
     let grid = Grid {
         clocks: vec![ClockKind::Virtual],
         sensor_hz: vec![b.sensor_hz],
@@ -294,6 +299,7 @@ pub fn measure_ex2(b: &Ex2Bands) -> Result<Vec<(Metrics, Metrics)>, ExerciseErro
         seeds: b.seeds.clone(),
         base: RunConfig {
             duration: duration_from_secs(b.duration_s)?,
+            graph: graph.clone(),
             ..RunConfig::default()
         },
     };
@@ -333,18 +339,20 @@ pub fn check_ex2(b: &Ex2Bands, pairs: &[(Metrics, Metrics)]) -> Vec<Check> {
 ///
 /// # Errors
 /// [`ExerciseError`] when a run cannot start.
-pub fn measure_ex3(b: &Ex3Bands) -> Result<(Metrics, Metrics), ExerciseError> {
-    let base = RunConfig {
+pub fn measure_ex3(b: &Ex3Bands, graph: &GraphSpec) -> Result<(Metrics, Metrics), ExerciseError> {
+    let mut base = RunConfig {
         clock: ClockKind::Real,
         duration: duration_from_secs(b.duration_s)?,
-        sensor_hz: b.rate_hz,
-        control_hz: b.rate_hz,
+        graph: graph.clone(),
         ..RunConfig::default()
     };
-    let mut offsets = [crate::time::Nanos::ZERO; 3];
-    for (slot, ms) in offsets.iter_mut().zip(b.phase_offset_ms) {
-        *slot = phase_offset_from_ms(ms)?;
-    }
+    base.set_sensor_hz(b.rate_hz)?;
+    base.set_control_hz(b.rate_hz)?;
+    let offsets = b
+        .phase_offset_ms
+        .iter()
+        .map(|&ms| phase_offset_from_ms(ms))
+        .collect::<Result<Vec<_>, _>>()?;
     let run = |cfg: &RunConfig| -> Result<Metrics, ExerciseError> {
         let opts = crate::run::RunOptions {
             keep_trace: false,

@@ -6,7 +6,8 @@
 //! This crate knows nothing of terminals: the lab (`lab/`) draws it.
 //!
 //! Layout, one module per idea: [`time`], [`clock`], [`topic`], [`rate`], [`node`],
-//! [`plant`], [`policy`], [`graph`], [`scheduler`] (+ [`realtime`]), [`metrics`], [`config`], [`run`].
+//! [`plant`], [`policy`], [`msg`], [`graph`] (+ its file format, [`graph::spec`]),
+//! [`scheduler`] (+ [`realtime`]), [`metrics`], [`config`], [`run`], [`session`].
 #![warn(missing_docs)]
 
 pub mod checkpoint;
@@ -15,6 +16,7 @@ pub mod config;
 pub mod exercise;
 pub mod graph;
 pub mod metrics;
+pub mod msg;
 pub mod node;
 pub mod np_random;
 pub mod plant;

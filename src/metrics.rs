@@ -6,10 +6,51 @@
 //! [`Metrics`] is the run's summary and the schema of `metrics.json` (the chapter's keys,
 //! plus percentiles, `fell_at_s`, `policy` and ratelab's extras).
 
+use crate::graph::spec::MAX_TOPICS;
+use crate::graph::TopicId;
 use crate::time::Nanos;
 use crate::topic::TopicStats;
 use hdrhistogram::Histogram;
 use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+
+/// Every topic's counters at one instant, by [`TopicId`]: a fixed-size copy (no allocation
+/// per actuator step), at most [`MAX_TOPICS`] entries.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct TopicCounters {
+    len: u8,
+    stats: [TopicStats; MAX_TOPICS],
+}
+
+impl FromIterator<TopicStats> for TopicCounters {
+    /// From each topic's stats, in [`TopicId`] order (entries past [`MAX_TOPICS`] are ignored;
+    /// a validated graph has no more).
+    fn from_iter<I: IntoIterator<Item = TopicStats>>(stats: I) -> Self {
+        let mut c = TopicCounters::default();
+        for s in stats.into_iter().take(MAX_TOPICS) {
+            c.stats[c.len as usize] = s;
+            c.len += 1;
+        }
+        c
+    }
+}
+
+impl TopicCounters {
+    /// Topic `id`'s counters (zeros for an id past the end).
+    pub fn get(&self, id: TopicId) -> TopicStats {
+        self.as_slice().get(id.0).copied().unwrap_or_default()
+    }
+    /// All of them, by [`TopicId`].
+    pub fn as_slice(&self) -> &[TopicStats] {
+        &self.stats[..self.len as usize]
+    }
+}
+
+impl Serialize for TopicCounters {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        self.as_slice().serialize(s)
+    }
+}
 
 /// One actuator tick.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
@@ -28,10 +69,8 @@ pub struct StepRecord {
     pub latency: Option<Nanos>,
     /// True when the brain's newest action was non-finite and the last good one was held.
     pub nonfinite: bool,
-    /// `/obs` counters at this tick.
-    pub obs: TopicStats,
-    /// `/action` counters at this tick.
-    pub action_topic: TopicStats,
+    /// Every topic's counters at this tick, by [`TopicId`].
+    pub topics: TopicCounters,
     /// True on the tick the pole fell.
     pub fell: bool,
 }
@@ -234,6 +273,55 @@ pub struct Metrics {
     /// Real clock only: per-node tick timing.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub node_timing: Option<Vec<NodeTiming>>,
+    /// The graph's name (`cartpole` for the chapter's).
+    #[serde(default)]
+    pub graph: String,
+    /// Per node, by name: kind, rate, ticks (and lateness under the real clock).
+    #[serde(default)]
+    pub nodes: BTreeMap<String, NodeMetrics>,
+    /// Per topic, by name: type, depth, published, dropped, msg/s.
+    #[serde(default)]
+    pub topics: BTreeMap<String, TopicMetrics>,
+}
+
+/// One node's figures in `metrics.json`.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub struct NodeMetrics {
+    /// `sensor`, `estimator`, `policy`, `safety` or `actuator`.
+    pub kind: String,
+    /// Tie-break rank: at a shared instant, lower ticks first.
+    pub rank: usize,
+    /// Rate at the start of the run, Hz.
+    pub rate_hz: f64,
+    /// Ticks run.
+    pub ticks: u64,
+    /// Real clock only: lateness p99, µs.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub lateness_p99_us: Option<f64>,
+    /// Real clock only: largest lateness, µs.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub lateness_max_us: Option<f64>,
+}
+
+/// One topic's figures in `metrics.json`.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub struct TopicMetrics {
+    /// `state`, `position` or `force`.
+    #[serde(rename = "type")]
+    pub msg: String,
+    /// The publishing node.
+    pub publisher: String,
+    /// The subscribing node, if any.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub subscriber: Option<String>,
+    /// History depth at the end of the run.
+    pub depth: usize,
+    /// Messages published.
+    pub published: u64,
+    /// Messages evicted unread (the chapter's drop rule).
+    pub dropped: u64,
+    /// Messages per second of run time.
+    pub msg_per_s: f64,
 }
 
 impl Metrics {
@@ -256,6 +344,54 @@ impl Metrics {
         ))
     }
 
+    /// `sensor 50 Hz | control 50 Hz | actuator 50 Hz | queue_depth 1`: every node by
+    /// tie-break rank (a graph's one policy is the chapter's "control"), then the depth (one
+    /// figure when every topic shares it, else per topic).
+    fn rates_line(&self) -> String {
+        let mut nodes: Vec<(&String, &NodeMetrics)> = self.nodes.iter().collect();
+        nodes.sort_by_key(|(_, n)| n.rank);
+        let one_policy = nodes.iter().filter(|(_, n)| n.kind == "policy").count() == 1;
+        let mut parts: Vec<String> = nodes
+            .iter()
+            .map(|(name, n)| {
+                let label = if one_policy && n.kind == "policy" {
+                    "control"
+                } else {
+                    name.as_str()
+                };
+                format!("{label} {} Hz", n.rate_hz)
+            })
+            .collect();
+        let topics = self.topics_by_publisher();
+        let depth0 = topics.first().map_or(self.queue_depth, |(_, t)| t.depth);
+        if topics.iter().all(|(_, t)| t.depth == depth0) {
+            parts.push(format!("queue_depth {depth0}"));
+        } else {
+            let depths: Vec<String> = topics
+                .iter()
+                .map(|(name, t)| format!("{name} {}", t.depth))
+                .collect();
+            parts.push(format!("depths {}", depths.join(", ")));
+        }
+        parts.join(" | ")
+    }
+
+    /// `/obs 50.0 msg/s (0 dropped) | /action …`, topics in their publishers' rank order.
+    fn topics_line(&self) -> String {
+        self.topics_by_publisher()
+            .iter()
+            .map(|(name, t)| format!("{name} {:.1} msg/s ({} dropped)", t.msg_per_s, t.dropped))
+            .collect::<Vec<_>>()
+            .join(" | ")
+    }
+
+    fn topics_by_publisher(&self) -> Vec<(&String, &TopicMetrics)> {
+        let rank = |node: &str| self.nodes.get(node).map_or(usize::MAX, |n| n.rank);
+        let mut topics: Vec<(&String, &TopicMetrics)> = self.topics.iter().collect();
+        topics.sort_by_key(|(name, t)| (rank(&t.publisher), name.as_str()));
+        topics
+    }
+
     /// The chapter's human summary (five lines, no terminal codes). `wall_s` is the
     /// wall time the run took, when known (not part of the metrics: it varies run to run).
     pub fn summary_lines(&self, wall_s: Option<f64>) -> Vec<String> {
@@ -272,15 +408,9 @@ impl Metrics {
         };
         let mut lines = vec![
             format!("clock={}  policy={}", self.clock, self.policy),
-            format!(
-                "rates: sensor {} Hz | control {} Hz | actuator {} Hz | queue_depth {}",
-                self.sensor_hz, self.control_hz, self.actuator_hz, self.queue_depth
-            ),
+            format!("rates: {}", self.rates_line()),
             verdict,
-            format!(
-                "topics: /obs {:.1} msg/s ({} dropped) | /action {:.1} msg/s ({} dropped)",
-                self.obs_msg_per_s, self.obs_dropped, self.action_msg_per_s, self.action_dropped
-            ),
+            format!("topics: {}", self.topics_line()),
             format!(
                 "mean sense->act latency: {:.1} ms  (p50 {:.1} | p99 {:.1} | max {:.1} ms; control period {})",
                 self.mean_latency_ms,
@@ -336,8 +466,7 @@ mod tests {
             action: 0.0,
             latency: None,
             nonfinite: false,
-            obs: TopicStats::default(),
-            action_topic: TopicStats::default(),
+            topics: TopicCounters::default(),
             fell: false,
         };
         log.push(base);

@@ -4,6 +4,7 @@
 //! or real, see [`crate::scheduler`]) calls [`Node::tick`] at the node's rate. The
 //! priority breaks ties between nodes due at the same instant: lower ticks first, so the
 //! chapter's order sensor (0) → policy (1) → actuator (2) samples, thinks, then acts.
+//! The node kinds of a graph are in [`crate::graph::nodes`].
 
 use crate::rate::Rate;
 use crate::time::Nanos;
@@ -19,10 +20,11 @@ pub enum Flow {
 
 /// A node of the graph.
 pub trait Node: Send {
-    /// The node's name (`sensor`, `policy`, `actuator`).
+    /// The node's name (from the graph file: `sensor`, `policy`, `actuator`, …).
     fn name(&self) -> &str;
-    /// Tie-break order among nodes due at the same instant; lower first.
-    fn priority(&self) -> u8;
+    /// Tie-break rank among nodes due at the same instant; lower first (a graph's nodes
+    /// carry their index in the tie-break order, see [`crate::graph::spec`]).
+    fn priority(&self) -> u32;
     /// The node's rate (shared: it can change while the graph runs).
     fn rate(&self) -> &Rate;
     /// Do one tick's work at run time `now`.

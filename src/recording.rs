@@ -6,11 +6,12 @@
 //!   cart position) and `world/cart/pole` (capsule, 1.0 m × 0.02 m, rotated θ about +y);
 //! - `plant/pole_angle_rad`, `plant/fall_limit/{upper,lower}`, `plant/cart_pos_m`,
 //!   `policy/action`, `latency/sense_to_act_ms`;
-//! - `bus/{obs,action}/{published,dropped,msg_per_s}` (msg/s over a 1 s sliding window);
-//! - `graph`: the node graph as rerun `GraphNodes`/`GraphEdges`. Rerun's edges carry no
-//!   labels, so topics are drawn as nodes of their own (`/obs`, `/action`), as ROS's
-//!   rqt_graph does: sensor → /obs → policy → /action → actuator; labels show the rates
-//!   and depths and are re-logged when they change;
+//! - `bus/<topic>/{published,dropped,msg_per_s}` per topic of the graph (`/obs` → `bus/obs`;
+//!   msg/s over a 1 s sliding window);
+//! - `graph`: the node graph as rerun `GraphNodes`/`GraphEdges`, built from the graph's
+//!   shape. Rerun's edges carry no labels, so topics are drawn as nodes of their own, as
+//!   ROS's rqt_graph does: sensor → /obs → policy → /action → actuator; labels show the
+//!   rates and depths and are re-logged when they change;
 //! - `nodes/<name>/lateness_us`: per-tick lateness of each node (real clock only);
 //! - `events`: text logs for the start (all settings), rate and depth changes, the fall and
 //!   the end (the summary); the settings are also recording properties.
@@ -24,10 +25,9 @@
 //! only, is logged from the node threads through the ordinary batcher.)
 
 use crate::config::{ClockKind, RunConfig};
-use crate::graph::{GraphHandles, StepObserver};
+use crate::graph::{GraphHandles, GraphSpec, NodeId, StepObserver};
 use crate::metrics::{Metrics, StepRecord};
 use crate::plant::THETA_LIMIT_RAD;
-use crate::rate::Rate;
 use crate::scheduler::{EndReason, RunEnd};
 use crate::time::Nanos;
 use re_chunk::{Chunk, ChunkBuilder, RowId, TimeColumn};
@@ -145,14 +145,24 @@ fn hz_label(hz: f64) -> String {
     s.trim_end_matches('0').trim_end_matches('.').to_string()
 }
 
-/// `recordings/<clock>-control<hz>-q<depth>-seed<seed>[-<n>].rrd` under `dir`: the first
+/// `<graph>-` for any graph but the chapter's (`cartpole`), which keeps the names it had.
+fn graph_prefix(cfg: &RunConfig) -> String {
+    if cfg.graph.name == "cartpole" {
+        String::new()
+    } else {
+        format!("{}-", cfg.graph.name)
+    }
+}
+
+/// `recordings/[<graph>-]<clock>-control<hz>-q<depth>-seed<seed>[-<n>].rrd` under `dir`: the first
 /// name not already taken (`-2`, `-3`, … are appended), so nothing is overwritten.
 pub fn default_path(dir: &Path, cfg: &RunConfig) -> PathBuf {
     let stem = format!(
-        "{}-control{}-q{}-seed{}",
+        "{}{}-control{}-q{}-seed{}",
+        graph_prefix(cfg),
         cfg.clock,
-        hz_label(cfg.control_hz),
-        cfg.queue_depth,
+        hz_label(cfg.control_hz()),
+        cfg.queue_depth(),
         cfg.seed
     );
     let first = dir.join(format!("{stem}.rrd"));
@@ -263,10 +273,11 @@ impl Recording {
         let mut builder = RecordingStreamBuilder::new(APP_ID).with_blueprint(blueprint());
         if cfg.clock == ClockKind::Virtual {
             let id = format!(
-                "ratelab-virtual-sensor{}-control{}-q{}-seed{}-d{}",
-                hz_label(cfg.sensor_hz),
-                hz_label(cfg.control_hz),
-                cfg.queue_depth,
+                "ratelab-{}virtual-sensor{}-control{}-q{}-seed{}-d{}",
+                graph_prefix(cfg),
+                hz_label(cfg.sensor_hz()),
+                hz_label(cfg.control_hz()),
+                cfg.queue_depth(),
                 cfg.seed,
                 cfg.duration.0
             );
@@ -332,20 +343,22 @@ impl Recording {
             ("policy", policy.to_string()),
             ("seed", cfg.seed.to_string()),
             ("duration_s", cfg.duration.as_secs_f64().to_string()),
-            ("sensor_hz", cfg.sensor_hz.to_string()),
-            ("control_hz", cfg.control_hz.to_string()),
-            ("actuator_hz", cfg.actuator_hz.to_string()),
-            ("queue_depth", cfg.queue_depth.to_string()),
+            ("sensor_hz", cfg.sensor_hz().to_string()),
+            ("control_hz", cfg.control_hz().to_string()),
+            ("actuator_hz", cfg.actuator_hz().to_string()),
+            ("queue_depth", cfg.queue_depth().to_string()),
+            ("graph", cfg.graph.to_string()),
         ];
         let mut values = rerun::AnyValues::default();
         for (k, v) in &settings {
             values = values.with_component::<rerun::components::Text>(*k, [v.as_str()]);
         }
         let name = format!(
-            "{} clock, control {} Hz, depth {}, seed {}",
+            "{}{} clock, control {} Hz, depth {}, seed {}",
+            graph_prefix(cfg),
             cfg.clock,
-            hz_label(cfg.control_hz),
-            cfg.queue_depth,
+            hz_label(cfg.control_hz()),
+            cfg.queue_depth(),
             cfg.seed
         );
         let properties = rerun::EntityPath::properties();
@@ -417,7 +430,7 @@ impl Recording {
     pub fn observer(&self) -> Box<dyn StepObserver> {
         Box::new(RecordingObserver {
             rec: self.clone(),
-            rates: None,
+            handles: None,
             last_labels: None,
             window: VecDeque::new(),
         })
@@ -480,39 +493,47 @@ impl Recording {
     }
 }
 
-struct Rates {
-    sensor: Rate,
-    control: Rate,
-    actuator: Rate,
+/// The entity name of a topic's bus series: `/obs` → `obs`, `/a/b` → `a_b`.
+pub fn bus_name(topic: &str) -> String {
+    topic.trim_start_matches('/').replace('/', "_")
 }
 
 struct RecordingObserver {
     rec: Recording,
-    rates: Option<Rates>,
-    /// Node labels as last logged: (sensor Hz, control Hz, depth).
-    last_labels: Option<(f64, f64, usize)>,
-    /// (t, obs published, action published) over the last second.
-    window: VecDeque<(Nanos, u64, u64)>,
+    handles: Option<GraphHandles>,
+    /// Node rates and topic depths as last logged in the graph's labels.
+    last_labels: Option<(Vec<f64>, Vec<usize>)>,
+    /// (t, published per topic) over the last second.
+    window: VecDeque<(Nanos, Vec<u64>)>,
 }
 
 impl RecordingObserver {
+    /// The node graph, from the graph's shape: nodes and topics as rerun graph nodes (rerun's
+    /// edges carry no labels), publisher → topic → subscriber.
     fn graph_rows(
         &self,
         buf: &mut ChunkBuffer,
         time: &TimePoint,
-        sensor_hz: f64,
-        control_hz: f64,
-        actuator_hz: f64,
-        depth: usize,
+        spec: &GraphSpec,
+        rates: &[f64],
+        depths: &[usize],
     ) {
-        let ids = ["sensor", "/obs", "policy", "/action", "actuator"];
-        let labels = [
-            format!("sensor {} Hz", hz_label(sensor_hz)),
-            format!("/obs (depth {depth})"),
-            format!("policy {} Hz", hz_label(control_hz)),
-            format!("/action (depth {depth})"),
-            format!("actuator {} Hz", hz_label(actuator_hz)),
-        ];
+        let mut ids = Vec::new();
+        let mut labels = Vec::new();
+        let mut edges = Vec::new();
+        for (i, n) in spec.nodes.iter().enumerate() {
+            ids.push(n.name.clone());
+            labels.push(format!("{} {} Hz", n.name, hz_label(rates[i])));
+            if let Some(t) = n.publishes {
+                let topic = &spec.topics[t.0];
+                ids.push(topic.name.clone());
+                labels.push(format!("{} (depth {})", topic.name, depths[t.0]));
+                edges.push((n.name.clone(), topic.name.clone()));
+                if let Some(sub) = topic.subscriber {
+                    edges.push((topic.name.clone(), spec.node(sub).name.clone()));
+                }
+            }
+        }
         buf.add(
             "graph",
             time,
@@ -521,24 +542,43 @@ impl RecordingObserver {
         buf.add(
             "graph",
             time,
-            &rerun::GraphEdges::new([
-                ("sensor", "/obs"),
-                ("/obs", "policy"),
-                ("policy", "/action"),
-                ("/action", "actuator"),
-            ])
-            .with_directed_edges(),
+            &rerun::GraphEdges::new(edges).with_directed_edges(),
         );
+    }
+}
+
+/// What changed between two sets of labels, in words.
+fn describe_change(
+    spec: &GraphSpec,
+    old: &(Vec<f64>, Vec<usize>),
+    new: &(Vec<f64>, Vec<usize>),
+) -> String {
+    if let Some(i) = (0..old.0.len()).find(|&i| old.0[i] != new.0[i]) {
+        let who = if NodeId(i) == spec.chain.policy {
+            "control".to_string()
+        } else {
+            spec.nodes[i].name.clone()
+        };
+        return format!(
+            "{who} rate {} → {} Hz",
+            hz_label(old.0[i]),
+            hz_label(new.0[i])
+        );
+    }
+    let changed: Vec<usize> = (0..old.1.len()).filter(|&i| old.1[i] != new.1[i]).collect();
+    match changed.as_slice() {
+        [one] if spec.topics.len() > 1 => format!(
+            "{} depth {} → {}",
+            spec.topics[*one].name, old.1[*one], new.1[*one]
+        ),
+        [first, ..] => format!("queue depth {} → {}", old.1[*first], new.1[*first]),
+        [] => "graph changed".to_string(),
     }
 }
 
 impl StepObserver for RecordingObserver {
     fn attach(&mut self, h: &GraphHandles) {
-        self.rates = Some(Rates {
-            sensor: h.sensor_rate.clone(),
-            control: h.control_rate.clone(),
-            actuator: h.actuator_rate.clone(),
-        });
+        self.handles = Some(h.clone());
     }
 
     fn on_step(&mut self, s: &StepRecord) {
@@ -548,29 +588,22 @@ impl StepObserver for RecordingObserver {
         let time = time_point(s.t, s.step);
         let rec = self.rec.clone();
         let mut buf = rec.lock();
-        if let Some(rates) = &self.rates {
-            let now = (rates.sensor.hz(), rates.control.hz(), s.obs.depth);
-            if self.last_labels != Some(now) {
-                if let Some((sensor, control, depth)) = self.last_labels {
-                    let change = if sensor != now.0 {
-                        format!("sensor rate {} → {} Hz", hz_label(sensor), hz_label(now.0))
-                    } else if control != now.1 {
-                        format!(
-                            "control rate {} → {} Hz",
-                            hz_label(control),
-                            hz_label(now.1)
-                        )
-                    } else {
-                        format!("queue depth {depth} → {}", now.2)
-                    };
+        let topics = s.topics.as_slice();
+        if let Some(h) = &self.handles {
+            let now = (
+                h.rates_hz(),
+                topics.iter().map(|t| t.depth).collect::<Vec<_>>(),
+            );
+            if self.last_labels.as_ref() != Some(&now) {
+                if let Some(old) = &self.last_labels {
                     buf.add(
                         "events",
                         &time,
-                        &rerun::TextLog::new(change)
+                        &rerun::TextLog::new(describe_change(&h.spec, old, &now))
                             .with_level(rerun::components::TextLogLevel::INFO),
                     );
                 }
-                self.graph_rows(&mut buf, &time, now.0, now.1, rates.actuator.hz(), now.2);
+                self.graph_rows(&mut buf, &time, &h.spec, &now.0, &now.1);
                 self.last_labels = Some(now);
             }
         }
@@ -596,15 +629,15 @@ impl StepObserver for RecordingObserver {
         }
         // Bus counters and msg/s over the last second of run time.
         self.window
-            .push_back((s.t, s.obs.published, s.action_topic.published));
+            .push_back((s.t, topics.iter().map(|t| t.published).collect()));
         while self
             .window
             .front()
-            .is_some_and(|(t, _, _)| s.t.saturating_sub(*t) > Nanos::SECOND)
+            .is_some_and(|(t, _)| s.t.saturating_sub(*t) > Nanos::SECOND)
         {
             self.window.pop_front();
         }
-        let (t0, obs0, act0) = self.window.front().copied().unwrap_or((s.t, 0, 0));
+        let (t0, then) = self.window.front().cloned().unwrap_or((s.t, Vec::new()));
         let span = s.t.saturating_sub(t0).as_secs_f64();
         let rate = |now: u64, then: u64| {
             if span > 0.0 {
@@ -613,7 +646,14 @@ impl StepObserver for RecordingObserver {
                 0.0
             }
         };
-        for (topic, stats, then) in [("obs", s.obs, obs0), ("action", s.action_topic, act0)] {
+        let names: Vec<String> = self.handles.as_ref().map_or_else(Vec::new, |h| {
+            h.spec.topics.iter().map(|t| bus_name(&t.name)).collect()
+        });
+        for ((topic, stats), then) in names
+            .iter()
+            .zip(topics)
+            .zip(then.iter().copied().chain(std::iter::repeat(0)))
+        {
             buf.scalar(
                 &format!("bus/{topic}/published"),
                 s.t,
@@ -659,11 +699,11 @@ mod tests {
     #[test]
     fn default_paths_never_collide() {
         let dir = tempfile::tempdir().unwrap();
-        let cfg = RunConfig {
+        let mut cfg = RunConfig {
             clock: ClockKind::Virtual,
-            control_hz: 7.5,
             ..RunConfig::default()
         };
+        cfg.set_control_hz(7.5).unwrap();
         let first = default_path(dir.path(), &cfg);
         assert_eq!(
             first.file_name().unwrap(),

@@ -1,8 +1,8 @@
 //! One run, end to end: settings + brain → plant, graph, executor → [`RunReport`].
 
 use crate::config::{ClockKind, RunConfig};
-use crate::graph::{lock, Graph, GraphHandles, GraphRates, StepObserver};
-use crate::metrics::{round_to, Metrics, NodeTiming, StepRecord};
+use crate::graph::{lock, Graph, GraphHandles, StepObserver};
+use crate::metrics::{round_to, Metrics, NodeMetrics, NodeTiming, StepRecord, TopicMetrics};
 use crate::plant::{CartPole, PlantError};
 use crate::policy::{BrainSlot, Policy};
 use crate::scheduler::{run_real, RealOptions, RunEnd, StopFlag, VirtualScheduler};
@@ -38,8 +38,22 @@ pub enum Command {
         /// New rate.
         hz: f64,
     },
-    /// Set both topics' history depth.
+    /// Set every topic's history depth.
     SetQueueDepth {
+        /// New depth (≥ 1).
+        depth: usize,
+    },
+    /// Set one node's rate, Hz.
+    SetNodeHz {
+        /// The node's name.
+        node: String,
+        /// New rate.
+        hz: f64,
+    },
+    /// Set one topic's history depth.
+    SetTopicDepth {
+        /// The topic's name.
+        topic: String,
         /// New depth (≥ 1).
         depth: usize,
     },
@@ -51,6 +65,32 @@ pub enum Command {
 }
 
 impl Command {
+    /// Check the command against `graph` as the command line checks the same values: rates
+    /// in (0, 10 000] Hz (the actuator at 50), depths in 1..=[`crate::graph::spec::MAX_DEPTH`],
+    /// names that exist, a brain that loads.
+    ///
+    /// # Errors
+    /// One line saying what is wrong.
+    pub fn validate(&self, graph: &crate::graph::GraphSpec) -> Result<(), String> {
+        let mut g = graph.clone();
+        match self {
+            Command::SetControlHz { hz } => crate::config::check_rate("control-hz", *hz)
+                .and_then(|_| Ok(g.set_rate_of(graph.chain.policy, *hz)?))
+                .map_err(|e| e.to_string()),
+            Command::SetSensorHz { hz } => crate::config::check_rate("sensor-hz", *hz)
+                .and_then(|_| Ok(g.set_rate_of(graph.chain.sensor, *hz)?))
+                .map_err(|e| e.to_string()),
+            Command::SetQueueDepth { depth } => g.set_all_depths(*depth).map_err(|e| e.to_string()),
+            Command::SetNodeHz { node, hz } => g.set_rate(node, *hz).map_err(|e| e.to_string()),
+            Command::SetTopicDepth { topic, depth } => {
+                g.set_depth(topic, *depth).map_err(|e| e.to_string())
+            }
+            Command::SetPolicy { spec } => crate::checkpoint::load_policy(spec)
+                .map(|_| ())
+                .map_err(|e| e.to_string()),
+        }
+    }
+
     /// Apply to a running graph.
     ///
     /// # Errors
@@ -58,10 +98,24 @@ impl Command {
     /// (the graph is unchanged).
     pub fn apply(&self, h: &GraphHandles) -> Result<(), String> {
         match self {
-            Command::SetControlHz { hz } => h.control_rate.set_hz(*hz).map_err(|e| e.to_string()),
-            Command::SetSensorHz { hz } => h.sensor_rate.set_hz(*hz).map_err(|e| e.to_string()),
+            Command::SetControlHz { hz } => h.control_rate().set_hz(*hz).map_err(|e| e.to_string()),
+            Command::SetSensorHz { hz } => h.sensor_rate().set_hz(*hz).map_err(|e| e.to_string()),
             Command::SetQueueDepth { depth } => {
                 h.set_queue_depth(*depth).map_err(|e| e.to_string())
+            }
+            Command::SetNodeHz { node, hz } => {
+                // The file's rules (the actuator's fixed rate) hold for live changes too.
+                let mut spec = h.spec.as_ref().clone();
+                spec.set_rate(node, *hz).map_err(|e| e.to_string())?;
+                let id = spec.node_id(node).expect("set_rate found it");
+                h.rate(id).set_hz(*hz).map_err(|e| e.to_string())
+            }
+            Command::SetTopicDepth { topic, depth } => {
+                let id = h
+                    .spec
+                    .topic_id(topic)
+                    .ok_or_else(|| format!("no topic '{topic}' in graph '{}'", h.spec.name))?;
+                h.topic(id).set_depth(*depth).map_err(|e| e.to_string())
             }
             Command::SetPolicy { spec } => {
                 let brain = crate::checkpoint::load_policy(spec).map_err(|e| e.to_string())?;
@@ -132,26 +186,17 @@ pub fn build_graph(
     cfg.validate()?;
     let mut plant = CartPole::new()?;
     plant.reset(cfg.seed);
-    let rates = GraphRates {
-        sensor_hz: cfg.sensor_hz,
-        control_hz: cfg.control_hz,
-        actuator_hz: cfg.actuator_hz,
-    };
     Ok(Graph::build(
-        plant,
-        brain,
-        rates,
-        cfg.queue_depth,
-        keep_trace,
-        observers,
+        &cfg.graph, plant, brain, cfg.seed, keep_trace, observers,
     )?)
 }
 
 /// Run the graph once under `cfg.clock` and summarize it.
 ///
 /// # Errors
-/// [`RunError`] when the run cannot start. A node that panics under the real clock ends
-/// the run with [`crate::scheduler::EndReason::NodeFailed`] instead.
+/// [`RunError`] when the run cannot start. A node that panics (under either clock) ends
+/// the run with [`crate::scheduler::EndReason::NodeFailed`] instead: the report has what
+/// was measured up to then.
 pub fn run(
     cfg: &RunConfig,
     brain: Box<dyn Policy>,
@@ -160,9 +205,9 @@ pub fn run(
     let brain = BrainSlot::new(brain);
     let Graph { mut nodes, handles } = build_graph(cfg, brain, opts.keep_trace, opts.observers)?;
     let start = Instant::now();
-    let (end, timing) = match cfg.clock {
+    let (end, ticks, timing) = match cfg.clock {
         ClockKind::Virtual => {
-            let mut sched = VirtualScheduler::new(&nodes);
+            let mut sched = VirtualScheduler::with_offsets(&nodes, &cfg.phase_offsets);
             let mut pending = opts.commands.iter().peekable();
             let end = sched.run(&mut nodes, cfg.duration, &opts.stop, &mut |t| {
                 while let Some(c) = pending.next_if(|c| c.at_ns <= t.0) {
@@ -170,7 +215,7 @@ pub fn run(
                     let _ = c.command.apply(&handles);
                 }
             });
-            (end, None)
+            (end, sched.ticks().to_vec(), None)
         }
         ClockKind::Real => {
             let real = RealOptions {
@@ -181,11 +226,12 @@ pub fn run(
                 pause: None,
             };
             let r = run_real(nodes, cfg.duration, &opts.stop, &real);
-            (r.end, Some(r.timing))
+            let ticks = r.timing.iter().map(|t| t.ticks).collect();
+            (r.end, ticks, Some(r.timing))
         }
     };
     let wall = start.elapsed();
-    let metrics = summarize(cfg, &handles, &end, timing);
+    let metrics = summarize(cfg, &handles, &end, &ticks, timing);
     let trace = std::mem::take(&mut lock(&handles.log).trace);
     Ok(RunReport {
         metrics,
@@ -195,16 +241,20 @@ pub fn run(
     })
 }
 
-/// The summary of a finished (or running) graph, from its handles.
+/// The summary of a finished (or running) graph, from its handles. `ticks` holds each
+/// node's tick count (by node index; empty when unknown).
 pub fn summarize(
     cfg: &RunConfig,
     h: &GraphHandles,
     end: &RunEnd,
+    ticks: &[u64],
     timing: Option<Vec<NodeTiming>>,
 ) -> Metrics {
     let log = lock(&h.log);
-    let obs = h.obs.stats();
-    let action = h.action.stats();
+    let spec = &cfg.graph;
+    let stats = h.topic_stats();
+    let obs = stats.get(spec.chain.obs);
+    let action = stats.get(spec.chain.action);
     let sim_time = log.fell_at.unwrap_or(end.at);
     let per_s = |n: u64| {
         if sim_time.0 == 0 {
@@ -214,13 +264,47 @@ pub fn summarize(
         }
     };
     let (p50, p99, max) = log.latency.summary_ms();
+    let nodes = spec
+        .nodes
+        .iter()
+        .enumerate()
+        .map(|(i, n)| {
+            let t = timing.as_ref().and_then(|t| t.get(i));
+            let m = NodeMetrics {
+                kind: n.kind.as_str().to_string(),
+                rank: i,
+                rate_hz: n.rate_hz,
+                ticks: ticks.get(i).copied().unwrap_or(0),
+                lateness_p99_us: t.map(|t| t.lateness_p99_us),
+                lateness_max_us: t.map(|t| t.lateness_max_us),
+            };
+            (n.name.clone(), m)
+        })
+        .collect();
+    let topics = spec
+        .topics
+        .iter()
+        .zip(stats.as_slice())
+        .map(|(t, s)| {
+            let m = TopicMetrics {
+                msg: t.msg.as_str().to_string(),
+                publisher: spec.node(t.publisher).name.clone(),
+                subscriber: t.subscriber.map(|n| spec.node(n).name.clone()),
+                depth: s.depth,
+                published: s.published,
+                dropped: s.dropped,
+                msg_per_s: per_s(s.published),
+            };
+            (t.name.clone(), m)
+        })
+        .collect();
     Metrics {
         balanced: log.fell_at.is_none(),
         clock: cfg.clock.as_str().to_string(),
-        control_hz: cfg.control_hz,
-        sensor_hz: cfg.sensor_hz,
-        actuator_hz: cfg.actuator_hz,
-        queue_depth: cfg.queue_depth,
+        control_hz: cfg.control_hz(),
+        sensor_hz: cfg.sensor_hz(),
+        actuator_hz: cfg.actuator_hz(),
+        queue_depth: cfg.queue_depth(),
         seed: cfg.seed,
         duration_s: cfg.duration.as_secs_f64(),
         steps: log.steps,
@@ -242,5 +326,8 @@ pub fn summarize(
         policy: h.brain.label(),
         nonfinite_actions: log.nonfinite_actions,
         node_timing: timing,
+        graph: spec.name.clone(),
+        nodes,
+        topics,
     }
 }

@@ -79,11 +79,27 @@ pub struct RunEnd {
     pub reason: EndReason,
 }
 
-/// The virtual-clock executor, steppable one tick at a time (the lab paces it against the
-/// wall clock for display; pacing never changes the order of ticks).
+/// What running one virtual instant did.
+#[derive(Debug, PartialEq)]
+pub enum InstantOutcome {
+    /// Every tick due at the instant ran; bit `i` of `ticked` is set when node `i` ticked.
+    Ran {
+        /// The nodes that ticked, as a bit set over node indices.
+        ticked: u64,
+    },
+    /// A node stopped the graph (the fall).
+    Stopped,
+    /// A node panicked: the graph stops and the run names the node.
+    Failed(EndReason),
+}
+
+/// The virtual-clock executor, steppable one instant at a time (the lab paces it against
+/// the wall clock for display; pacing never changes the order of ticks). Every virtual run
+/// (headless, sweep, replay, exercises, the lab) goes through [`VirtualScheduler::run_instant`].
 pub struct VirtualScheduler {
-    heap: BinaryHeap<Reverse<(Nanos, u8, usize)>>,
+    heap: BinaryHeap<Reverse<(Nanos, u32, usize)>>,
     now: Nanos,
+    ticks: Vec<u64>,
 }
 
 impl VirtualScheduler {
@@ -108,6 +124,7 @@ impl VirtualScheduler {
         Self {
             heap,
             now: Nanos::ZERO,
+            ticks: vec![0; nodes.len()],
         }
     }
 
@@ -121,30 +138,65 @@ impl VirtualScheduler {
         self.now
     }
 
-    /// The index of the node that ticks next.
-    pub fn next_node(&self) -> Option<usize> {
-        self.heap.peek().map(|Reverse((_, _, i))| *i)
+    /// Ticks run so far, per node index.
+    pub fn ticks(&self) -> &[u64] {
+        &self.ticks
     }
 
     /// Run the next tick. Returns its time, the node's index and the node's [`Flow`].
+    /// A panic in the node propagates; [`VirtualScheduler::run_instant`] catches it.
     pub fn tick_next(&mut self, nodes: &mut [Box<dyn Node>]) -> Option<(Nanos, usize, Flow)> {
         let Reverse((due, prio, i)) = self.heap.pop()?;
         self.now = due;
+        self.ticks[i] += 1;
         let flow = nodes[i].tick(due);
         self.heap
             .push(Reverse((due + nodes[i].rate().period(), prio, i)));
         Some((due, i, flow))
     }
 
-    /// Run until `duration` (ticks due at exactly `duration` run), a stop, or the flag.
-    /// `before_tick(t)` runs before every tick with that tick's time (the place to apply
-    /// commands scheduled at virtual instants).
+    /// Run every tick due at the next instant, in tie-break order. A node that panics is
+    /// caught, named, and ends the graph ([`InstantOutcome::Failed`]).
+    pub fn run_instant(&mut self, nodes: &mut [Box<dyn Node>]) -> InstantOutcome {
+        let Some(t) = self.next_due() else {
+            return InstantOutcome::Ran { ticked: 0 };
+        };
+        let mut ticked = 0u64;
+        while self.next_due() == Some(t) {
+            let next = self.next_node().unwrap_or(0);
+            match std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| self.tick_next(nodes))) {
+                Err(p) => {
+                    return InstantOutcome::Failed(EndReason::NodeFailed {
+                        node: nodes[next].name().to_string(),
+                        message: panic_message(&*p),
+                    })
+                }
+                Ok(None) => break,
+                Ok(Some((_, i, flow))) => {
+                    ticked |= 1 << (i % 64);
+                    if flow == Flow::Stop {
+                        return InstantOutcome::Stopped;
+                    }
+                }
+            }
+        }
+        InstantOutcome::Ran { ticked }
+    }
+
+    /// The index of the node that ticks next.
+    pub fn next_node(&self) -> Option<usize> {
+        self.heap.peek().map(|Reverse((_, _, i))| *i)
+    }
+
+    /// Run instant by instant until `duration` (ticks due at exactly `duration` run), a
+    /// stop, a failed node, or the flag. `before_instant(t)` runs before every instant with
+    /// its time (the place to apply commands scheduled at virtual instants).
     pub fn run(
         &mut self,
         nodes: &mut [Box<dyn Node>],
         duration: Nanos,
         stop: &StopFlag,
-        before_tick: &mut dyn FnMut(Nanos),
+        before_instant: &mut dyn FnMut(Nanos),
     ) -> RunEnd {
         loop {
             if stop.is_stopped() {
@@ -154,7 +206,7 @@ impl VirtualScheduler {
                 };
             }
             match self.next_due() {
-                Some(due) if due <= duration => before_tick(due),
+                Some(due) if due <= duration => before_instant(due),
                 _ => {
                     return RunEnd {
                         at: duration,
@@ -162,19 +214,28 @@ impl VirtualScheduler {
                     }
                 }
             }
-            if let Some((t, _, Flow::Stop)) = self.tick_next(nodes) {
-                return RunEnd {
-                    at: t,
-                    reason: EndReason::NodeStopped,
-                };
+            match self.run_instant(nodes) {
+                InstantOutcome::Ran { .. } => {}
+                InstantOutcome::Stopped => {
+                    return RunEnd {
+                        at: self.now,
+                        reason: EndReason::NodeStopped,
+                    }
+                }
+                InstantOutcome::Failed(reason) => {
+                    return RunEnd {
+                        at: self.now,
+                        reason,
+                    }
+                }
             }
         }
     }
 }
 
 /// Called on a node's own thread after each tick under the real clock, with the node's
-/// name, the tick's run time and its lateness (actual − scheduled).
-pub type TickHook = Arc<dyn Fn(&str, Nanos, Nanos) + Send + Sync>;
+/// index and name, the tick's run time and its lateness (actual − scheduled).
+pub type TickHook = Arc<dyn Fn(usize, &str, Nanos, Nanos) + Send + Sync>;
 
 /// Options of the real-clock executor.
 #[derive(Clone)]
@@ -300,7 +361,7 @@ pub fn run_real(
                         ticks += 1;
                         let flow = node.tick(now);
                         if let Some(hook) = &on_tick {
-                            hook(&name, now, late);
+                            hook(i, &name, now, late);
                         }
                         if flow == Flow::Stop {
                             stop_at.fetch_min(now.0, Ordering::SeqCst);
@@ -393,7 +454,7 @@ mod tests {
 
     struct Probe {
         name: &'static str,
-        prio: u8,
+        prio: u32,
         rate: Rate,
         log: Arc<Mutex<Vec<(u64, &'static str)>>>,
         stop_at: Option<Nanos>,
@@ -403,7 +464,7 @@ mod tests {
         fn name(&self) -> &str {
             self.name
         }
-        fn priority(&self) -> u8 {
+        fn priority(&self) -> u32 {
             self.prio
         }
         fn rate(&self) -> &Rate {
@@ -492,6 +553,51 @@ mod tests {
     }
 
     #[test]
+    fn a_panicking_node_under_the_virtual_clock_is_named_not_fatal() {
+        struct Flaky(Rate, &'static str, bool);
+        impl Node for Flaky {
+            fn name(&self) -> &str {
+                self.1
+            }
+            fn priority(&self) -> u32 {
+                u32::from(self.2)
+            }
+            fn rate(&self) -> &Rate {
+                &self.0
+            }
+            fn tick(&mut self, now: Nanos) -> Flow {
+                assert!(!(self.2 && now > Nanos::ZERO), "policy exploded");
+                Flow::Continue
+            }
+        }
+        let nodes = || -> Vec<Box<dyn Node>> {
+            vec![
+                Box::new(Flaky(Rate::new(50.0).unwrap(), "sensor", false)),
+                Box::new(Flaky(Rate::new(50.0).unwrap(), "policy", true)),
+            ]
+        };
+        let mut n = nodes();
+        let mut sched = VirtualScheduler::new(&n);
+        assert_eq!(
+            sched.run_instant(&mut n),
+            InstantOutcome::Ran { ticked: 0b11 }
+        );
+        match sched.run_instant(&mut n) {
+            InstantOutcome::Failed(EndReason::NodeFailed { node, message }) => {
+                assert_eq!(node, "policy");
+                assert!(message.contains("policy exploded"), "{message}");
+            }
+            other => panic!("{other:?}"),
+        }
+        // The whole-run path reports the same instead of unwinding through the caller.
+        let mut n = nodes();
+        let end =
+            VirtualScheduler::new(&n).run(&mut n, Nanos::SECOND, &StopFlag::new(), &mut |_| {});
+        assert_eq!(end.at, Nanos(20_000_000));
+        assert!(matches!(end.reason, EndReason::NodeFailed { ref node, .. } if node == "policy"));
+    }
+
+    #[test]
     fn rate_change_applies_from_next_tick() {
         let log = Arc::new(Mutex::new(Vec::new()));
         let mut nodes = probes(&log, [50.0, 50.0, 50.0]);
@@ -533,7 +639,7 @@ mod tests {
             fn name(&self) -> &str {
                 "boom"
             }
-            fn priority(&self) -> u8 {
+            fn priority(&self) -> u32 {
                 0
             }
             fn rate(&self) -> &Rate {

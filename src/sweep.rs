@@ -68,16 +68,17 @@ impl Grid {
         out
     }
 
-    /// The run settings of `p`.
-    pub fn config(&self, p: &Point) -> RunConfig {
-        RunConfig {
+    /// The run settings of `p`: the base graph with the point's chain rates and depth.
+    ///
+    /// # Errors
+    /// [`SweepError::Config`] for a rate or depth the graph cannot take.
+    pub fn config(&self, p: &Point) -> Result<RunConfig, SweepError> {
+        let cfg = RunConfig {
             clock: p.clock,
-            sensor_hz: p.sensor_hz,
-            control_hz: p.control_hz,
-            queue_depth: p.queue_depth,
             seed: p.seed,
             ..self.base.clone()
-        }
+        };
+        Ok(cfg.with_chapter(p.sensor_hz, p.control_hz, p.queue_depth)?)
     }
 }
 
@@ -90,6 +91,12 @@ pub enum SweepError {
     /// The brain could not be built.
     #[error("{0}")]
     Brain(String),
+    /// A point's settings do not fit the graph.
+    #[error(transparent)]
+    Config(#[from] crate::config::ConfigError),
+    /// A worker thread failed outside any run (a bug): its panic message.
+    #[error("sweep worker failed: {0}")]
+    Worker(String),
 }
 
 /// Run every point of `grid`, `threads` at a time (real-clock points run one at a time so
@@ -112,7 +119,7 @@ pub fn run_grid(
             keep_trace: false,
             ..RunOptions::default()
         };
-        let m = run(&grid.config(p), b, opts)?.metrics;
+        let m = run(&grid.config(p)?, b, opts)?.metrics;
         progress(
             done.fetch_add(1, std::sync::atomic::Ordering::SeqCst) + 1,
             total,
@@ -139,7 +146,11 @@ pub fn run_grid(
             .collect();
         handles
             .into_iter()
-            .map(|h| h.join().expect("sweep worker panicked"))
+            .map(|h| {
+                h.join().unwrap_or_else(|p| {
+                    Err(SweepError::Worker(crate::scheduler::panic_message(&*p)))
+                })
+            })
             .collect()
     });
     for chunk in virt_results {
@@ -189,10 +200,8 @@ pub fn find_cliff(
     let mut runs = 0;
     for k in (bottom..=top).rev() {
         let hz = (k as f64 * step_hz * 1e6).round() / 1e6;
-        let cfg = RunConfig {
-            control_hz: hz,
-            ..base.clone()
-        };
+        let mut cfg = base.clone();
+        cfg.set_control_hz(hz)?;
         let opts = RunOptions {
             keep_trace: false,
             ..RunOptions::default()

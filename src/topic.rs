@@ -33,6 +33,9 @@ pub struct TopicStats {
     pub published: u64,
     /// Messages evicted from a full buffer before any read caught up with them.
     pub dropped: u64,
+    /// Messages a subscriber has read or read past (a latest-wins read marks everything
+    /// buffered as seen). Every message is seen, dropped, or still buffered unseen.
+    pub seen: u64,
     /// The current history depth (buffer bound), ≥ 1.
     pub depth: usize,
 }
@@ -50,6 +53,7 @@ struct Inner<T> {
     read_high_water: Option<u64>,
     published: u64,
     dropped: u64,
+    seen: u64,
 }
 
 impl<T> Inner<T> {
@@ -87,6 +91,7 @@ impl<T: Clone> Topic<T> {
                 read_high_water: None,
                 published: 0,
                 dropped: 0,
+                seen: 0,
             }),
         })
     }
@@ -126,6 +131,12 @@ impl<T: Clone> Topic<T> {
     pub fn latest(&self) -> Option<Message<T>> {
         let mut inner = self.lock();
         let newest = inner.buf.back()?.clone();
+        let hw = inner.read_high_water;
+        // Seqs are consecutive in the buffer: the unseen ones are the newest `newest − hw`.
+        let unseen = hw
+            .map_or(inner.buf.len() as u64, |hw| newest.seq.saturating_sub(hw))
+            .min(inner.buf.len() as u64);
+        inner.seen += unseen;
         inner.read_high_water = Some(
             inner
                 .read_high_water
@@ -157,8 +168,19 @@ impl<T: Clone> Topic<T> {
         TopicStats {
             published: inner.published,
             dropped: inner.dropped,
+            seen: inner.seen,
             depth: inner.depth,
         }
+    }
+
+    /// Buffered messages no subscriber has seen yet.
+    pub fn unseen_buffered(&self) -> usize {
+        let inner = self.lock();
+        inner
+            .buf
+            .iter()
+            .filter(|m| inner.read_high_water.is_none_or(|hw| m.seq > hw))
+            .count()
     }
 
     /// Messages currently buffered (≤ depth).
@@ -233,6 +255,7 @@ mod tests {
             TopicStats {
                 published: 100,
                 dropped: 0,
+                seen: 100,
                 depth: 1
             }
         );
@@ -261,6 +284,33 @@ mod tests {
         assert_eq!(topic.stats().dropped, 4);
         assert_eq!(topic.set_depth(0), Err(ZeroDepth));
         assert!(Topic::<u8>::new("/z", 0).is_err());
+    }
+
+    #[test]
+    fn every_message_is_seen_dropped_or_waiting() {
+        let topic = t(3);
+        let account = |t: &Topic<u32>| {
+            let s = t.stats();
+            assert_eq!(
+                s.published,
+                s.seen + s.dropped + t.unseen_buffered() as u64,
+                "{s:?}"
+            );
+        };
+        for i in 0..5 {
+            topic.publish(i, Nanos(u64::from(i)), None);
+            account(&topic);
+        }
+        topic.latest(); // sees 2, 3, 4
+        assert_eq!(topic.stats().seen, 3);
+        account(&topic);
+        topic.publish(5, Nanos(5), None);
+        topic.set_depth(1).unwrap(); // evicts 3, 4 (seen)
+        account(&topic);
+        topic.latest();
+        topic.latest(); // nothing new to see
+        assert_eq!(topic.stats().seen, 4);
+        account(&topic);
     }
 
     #[test]

@@ -2,9 +2,10 @@
 //! each frame. Keys become engine [`Control`]s; nothing here blocks the graph.
 
 use super::keymap::{depth_down, depth_up, rate_down, rate_up, Msg};
-use super::view::{LatencyView, NodeView, TopicView, Verdict, View};
+use super::view::{LatencyView, NodeView, Selected, TopicView, Verdict, View};
 use crossbeam_channel::Sender;
 use ratelab::config::{check_rate, BREAK_CONTROL_HZ};
+use ratelab::graph::{GraphSpec, NodeId, TopicId};
 use ratelab::metrics::{LatencyStats, StepRecord};
 use ratelab::run::Command;
 use ratelab::scheduler::EndReason;
@@ -48,13 +49,19 @@ pub struct App {
     brain: String,
     policy_spec: String,
     alt_policy: Option<String>,
-    depth: usize,
     recording: Option<String>,
-    rates: [f64; 3],
+    /// The running graph's shape.
+    graph: GraphSpec,
+    /// Each node's set rate, by node index.
+    rates: Vec<f64>,
+    /// Each topic's depth, by topic index.
+    depths: Vec<usize>,
+    /// What Tab selected.
+    selected: Option<Selected>,
     steps: VecDeque<StepRecord>,
     history: VecDeque<(f64, f64)>,
     latency: LatencyStats,
-    ticks: [VecDeque<(Nanos, Nanos)>; 3],
+    ticks: Vec<VecDeque<(Nanos, Nanos)>>,
     last: Option<StepRecord>,
     verdict: Verdict,
     help: bool,
@@ -83,13 +90,15 @@ impl App {
             brain: String::new(),
             policy_spec: policy,
             alt_policy,
-            depth: 1,
             recording: None,
-            rates: [50.0; 3],
+            graph: GraphSpec::chapter(),
+            rates: Vec::new(),
+            depths: Vec::new(),
+            selected: None,
             steps: VecDeque::new(),
             history: VecDeque::new(),
             latency: LatencyStats::default(),
-            ticks: Default::default(),
+            ticks: Vec::new(),
             last: None,
             verdict: Verdict::Balanced,
             help: false,
@@ -157,15 +166,19 @@ impl App {
             } => {
                 self.clock = cfg.clock.to_string();
                 self.seed = cfg.seed;
-                self.rates = [cfg.sensor_hz, cfg.control_hz, cfg.actuator_hz];
-                self.depth = cfg.queue_depth;
+                self.rates = cfg.graph.nodes.iter().map(|n| n.rate_hz).collect();
+                self.depths = cfg.graph.topics.iter().map(|t| t.depth).collect();
+                self.ticks = vec![VecDeque::new(); cfg.graph.nodes.len()];
+                if self.graph != cfg.graph {
+                    self.selected = None;
+                }
+                self.graph = cfg.graph;
                 self.brain = policy;
                 self.recording = recording.map(|p| p.display().to_string());
                 self.now = Nanos::ZERO;
                 self.steps.clear();
                 self.history.clear();
                 self.latency = LatencyStats::default();
-                self.ticks = Default::default();
                 self.last = None;
                 self.verdict = Verdict::Balanced;
             }
@@ -215,14 +228,14 @@ impl App {
                 paused,
                 speed,
                 rates,
-                depth,
+                depths,
                 policy,
             } => {
                 self.now = self.now.max(now);
                 self.paused = paused;
                 self.speed = speed;
                 self.rates = rates;
-                self.depth = depth;
+                self.depths = depths;
                 self.brain = policy;
             }
             Telemetry::Applied(text) => self.message = Some(text),
@@ -247,16 +260,45 @@ impl App {
         }
     }
 
+    /// The node `-`/`+`/`=` act on: the selected node, else the chain's policy.
+    fn rate_target(&self) -> NodeId {
+        match self.selected {
+            Some(Selected::Node(n)) => n,
+            _ => self.graph.chain.policy,
+        }
+    }
+
+    fn rate_of(&self, n: NodeId) -> f64 {
+        self.rates
+            .get(n.0)
+            .copied()
+            .unwrap_or(self.graph.node(n).rate_hz)
+    }
+
     /// Handle one key message.
     pub fn on_msg(&mut self, m: Msg) {
         match m {
-            Msg::ControlDown => self.set_control(rate_down(self.rates[1])),
-            Msg::ControlUp => self.set_control(rate_up(self.rates[1])),
-            Msg::Break => self.set_control(BREAK_CONTROL_HZ),
-            Msg::SensorDown => self.set_sensor(rate_down(self.rates[0])),
-            Msg::SensorUp => self.set_sensor(rate_up(self.rates[0])),
-            Msg::DepthDown => self.set_depth(depth_down(self.depth)),
-            Msg::DepthUp => self.set_depth(depth_up(self.depth)),
+            Msg::RateDown => {
+                let n = self.rate_target();
+                self.set_rate(n, rate_down(self.rate_of(n)));
+            }
+            Msg::RateUp => {
+                let n = self.rate_target();
+                self.set_rate(n, rate_up(self.rate_of(n)));
+            }
+            Msg::Break => self.set_rate(self.graph.chain.policy, BREAK_CONTROL_HZ),
+            Msg::SensorDown => {
+                let n = self.graph.chain.sensor;
+                self.set_rate(n, rate_down(self.rate_of(n)));
+            }
+            Msg::SensorUp => {
+                let n = self.graph.chain.sensor;
+                self.set_rate(n, rate_up(self.rate_of(n)));
+            }
+            Msg::DepthDown => self.change_depth(depth_down),
+            Msg::DepthUp => self.change_depth(depth_up),
+            Msg::SelectNext => self.selected = self.cycle(1),
+            Msg::SelectPrev => self.selected = self.cycle(-1),
             Msg::TypeRate => self.typing = Some(String::new()),
             Msg::Input(c) => {
                 if let Some(t) = &mut self.typing {
@@ -276,9 +318,9 @@ impl App {
                 match text
                     .parse::<f64>()
                     .map_err(|_| ())
-                    .and_then(|hz| check_rate("control-hz", hz).map_err(|_| ()))
+                    .and_then(|hz| check_rate("rate", hz).map_err(|_| ()))
                 {
-                    Ok(hz) => self.set_control(hz),
+                    Ok(hz) => self.set_rate(self.rate_target(), hz),
                     Err(()) => {
                         self.message = Some(format!("not a rate in (0, 10000] Hz: '{text}'"))
                     }
@@ -316,6 +358,15 @@ impl App {
                 }
             },
             Msg::ToggleHelp => self.help = !self.help,
+            Msg::Back => {
+                if self.help {
+                    self.help = false;
+                } else if self.selected.is_some() {
+                    self.selected = None;
+                } else {
+                    self.on_msg(Msg::Quit);
+                }
+            }
             Msg::Quit => {
                 self.send(Control::Quit);
                 self.quit = true;
@@ -323,26 +374,65 @@ impl App {
         }
     }
 
-    fn set_control(&mut self, hz: f64) {
-        self.rates[1] = hz;
-        self.apply(Command::SetControlHz { hz });
+    /// The selection `step` places on from the current one, around the ring
+    /// nothing → node 0 … node n−1 → topic 0 … topic m−1 → nothing.
+    fn cycle(&self, step: isize) -> Option<Selected> {
+        let nodes = self.graph.nodes.len();
+        let ring = nodes + self.graph.topics.len() + 1;
+        let pos = match self.selected {
+            None => 0,
+            Some(Selected::Node(n)) => 1 + n.0,
+            Some(Selected::Topic(t)) => 1 + nodes + t.0,
+        };
+        let next = (pos as isize + step).rem_euclid(ring as isize) as usize;
+        match next {
+            0 => None,
+            p if p <= nodes => Some(Selected::Node(NodeId(p - 1))),
+            p => Some(Selected::Topic(TopicId(p - 1 - nodes))),
+        }
     }
 
-    fn set_sensor(&mut self, hz: f64) {
-        self.rates[0] = hz;
-        self.apply(Command::SetSensorHz { hz });
+    /// Set node `n`'s rate. The chapter's nodes keep the chapter's commands, so a session
+    /// log of the default graph reads as before.
+    fn set_rate(&mut self, n: NodeId, hz: f64) {
+        if let Some(r) = self.rates.get_mut(n.0) {
+            *r = hz;
+        }
+        let cmd = if n == self.graph.chain.policy {
+            Command::SetControlHz { hz }
+        } else if n == self.graph.chain.sensor {
+            Command::SetSensorHz { hz }
+        } else {
+            Command::SetNodeHz {
+                node: self.graph.node(n).name.clone(),
+                hz,
+            }
+        };
+        self.apply(cmd);
     }
 
-    fn set_depth(&mut self, depth: usize) {
-        self.depth = depth;
-        self.apply(Command::SetQueueDepth { depth });
+    /// Step the selected topic's depth, or every topic's (as one command) when none is.
+    fn change_depth(&mut self, step: fn(usize) -> usize) {
+        match self.selected {
+            Some(Selected::Topic(t)) => {
+                let depth = step(self.depths.get(t.0).copied().unwrap_or(1));
+                if let Some(d) = self.depths.get_mut(t.0) {
+                    *d = depth;
+                }
+                let topic = self.graph.topic(t).name.clone();
+                self.apply(Command::SetTopicDepth { topic, depth });
+            }
+            _ => {
+                let depth = step(self.depths.first().copied().unwrap_or(1));
+                self.depths.iter_mut().for_each(|d| *d = depth);
+                self.apply(Command::SetQueueDepth { depth });
+            }
+        }
     }
 
-    fn topic_view(
-        &self,
-        name: &'static str,
-        pick: fn(&StepRecord) -> ratelab::topic::TopicStats,
-    ) -> TopicView {
+    fn topic_view(&self, id: TopicId) -> TopicView {
+        let spec = self.graph.topic(id);
+        let pick = |s: &StepRecord| s.topics.get(id);
         let (first, last) = (self.steps.front(), self.steps.back());
         let (rate, dropping) = match (first, last) {
             (Some(f), Some(l)) if l.t > f.t => {
@@ -355,15 +445,20 @@ impl App {
             _ => (0.0, false),
         };
         TopicView {
-            name,
+            name: spec.name.clone(),
+            publisher: spec.publisher.0,
+            subscriber: spec.subscriber.map(|n| n.0),
+            depth: self.depths.get(id.0).copied().unwrap_or(spec.depth),
             msg_per_s: rate,
             dropped: last.map_or(0, |l| pick(l).dropped),
             dropping,
+            selected: self.selected == Some(Selected::Topic(id)),
         }
     }
 
-    fn node_view(&self, i: usize, name: &'static str) -> NodeView {
-        let q = &self.ticks[i];
+    fn node_view(&self, id: NodeId, layer: usize) -> NodeView {
+        let empty = VecDeque::new();
+        let q = self.ticks.get(id.0).unwrap_or(&empty);
         let (measured_hz, lateness_p99_us) = if self.clock == "real" && q.len() >= 2 {
             let span = (q.back().expect("len ≥ 2").0 - q.front().expect("len ≥ 2").0).as_secs_f64();
             let mut late: Vec<u64> = q.iter().map(|(_, l)| l.0).collect();
@@ -377,10 +472,12 @@ impl App {
             (None, None)
         };
         NodeView {
-            name,
-            set_hz: self.rates[i],
+            name: self.graph.node(id).name.clone(),
+            layer,
+            set_hz: self.rate_of(id),
             measured_hz,
             lateness_p99_us,
+            selected: self.selected == Some(Selected::Node(id)),
         }
     }
 
@@ -425,17 +522,17 @@ impl App {
             sim_time_s: self.now.as_secs_f64(),
             seed: self.seed,
             brain: short_brain(&self.policy_spec),
-            depth: self.depth,
             recording: self.recording.clone(),
-            nodes: [
-                self.node_view(0, "sensor"),
-                self.node_view(1, "policy"),
-                self.node_view(2, "actuator"),
-            ],
-            topics: [
-                self.topic_view("/obs", |s| s.obs),
-                self.topic_view("/action", |s| s.action_topic),
-            ],
+            nodes: self
+                .graph
+                .layers()
+                .into_iter()
+                .enumerate()
+                .map(|(i, layer)| self.node_view(NodeId(i), layer))
+                .collect(),
+            topics: (0..self.graph.topics.len())
+                .map(|i| self.topic_view(TopicId(i)))
+                .collect(),
             pole_angle: self.last.map_or(0.0, |s| s.pole_angle),
             cart_pos: self.last.map_or(0.0, |s| s.cart_pos),
             verdict: self.verdict.clone(),

@@ -1,29 +1,36 @@
-//! Keys → messages: a pure function, so the bindings are tested without a terminal.
+//! Keys → messages: one table of bindings ([`BINDINGS`]) from which the keymap
+//! ([`map_key`]), the help overlay, the footer and the README's key list are all built
+//! (gitui keeps its bindings as data the same way), and a pure mapping function, so the
+//! bindings are tested without a terminal.
 
 use crossterm::event::{KeyCode, KeyEvent, KeyEventKind, KeyModifiers};
 
 /// What a key asks for.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Msg {
-    /// Control rate one step down the ladder.
-    ControlDown,
-    /// Control rate one step up the ladder.
-    ControlUp,
-    /// Start typing an exact control rate.
+    /// The selected node's rate (the policy's when no node is selected) one step down.
+    RateDown,
+    /// … one step up.
+    RateUp,
+    /// Start typing an exact rate for the selected node (or the policy).
     TypeRate,
     /// Sensor rate down the ladder.
     SensorDown,
     /// Sensor rate up the ladder.
     SensorUp,
-    /// Queue depth down (1, 2, 5, 10, 100).
+    /// The selected topic's depth (every topic's when none is selected) down (1, 2, 5, 10, 100).
     DepthDown,
-    /// Queue depth up.
+    /// … up.
     DepthUp,
+    /// Select the next node or topic (nothing → nodes → topics → nothing).
+    SelectNext,
+    /// Select the previous one.
+    SelectPrev,
     /// Control rate to 5 Hz.
     Break,
     /// Pause / resume.
     TogglePause,
-    /// One control step while paused (virtual clock).
+    /// One actuator step while paused (virtual clock).
     Step,
     /// New run, same seed.
     Reset,
@@ -39,6 +46,8 @@ pub enum Msg {
     SwapBrain,
     /// Show / hide the key help.
     ToggleHelp,
+    /// Close the help or the selection; quit when neither is open.
+    Back,
     /// Leave the lab.
     Quit,
     /// While typing a rate: a character.
@@ -51,68 +60,169 @@ pub enum Msg {
     Cancel,
 }
 
+/// One row of the key table: the keys, how the help and README name them, what they do,
+/// and the word the footer shows (if the footer shows them).
+pub struct Binding {
+    /// Each key and the message it sends.
+    pub keys: &'static [(KeyCode, Msg)],
+    /// The keys as the help overlay and the README write them.
+    pub label: &'static str,
+    /// What they do.
+    pub help: &'static str,
+    /// The footer's compact form: (keys, word), or `None` when the footer leaves it out.
+    pub footer: Option<(&'static str, &'static str)>,
+}
+
+use KeyCode::{BackTab, Char, Esc, Left, Right, Tab};
+
+/// Every binding of the lab (Ctrl-C always quits as well).
+pub const BINDINGS: &[Binding] = &[
+    Binding {
+        keys: &[
+            (Char('-'), Msg::RateDown),
+            (Left, Msg::RateDown),
+            (Char('+'), Msg::RateUp),
+            (Right, Msg::RateUp),
+        ],
+        label: "- / + (← / →)",
+        help: "rate down / up: the selected node's, else the policy's",
+        footer: Some(("-/+", "rate")),
+    },
+    Binding {
+        keys: &[(Char('='), Msg::TypeRate)],
+        label: "=",
+        help: "type an exact rate for it (Enter applies, Esc cancels)",
+        footer: None,
+    },
+    Binding {
+        keys: &[(Char('s'), Msg::SensorDown), (Char('S'), Msg::SensorUp)],
+        label: "s / S",
+        help: "sensor rate down / up",
+        footer: None,
+    },
+    Binding {
+        keys: &[(Char('['), Msg::DepthDown), (Char(']'), Msg::DepthUp)],
+        label: "[ / ]",
+        help: "depth down / up: the selected topic's, else every topic's",
+        footer: Some(("[/]", "depth")),
+    },
+    Binding {
+        keys: &[(Tab, Msg::SelectNext), (BackTab, Msg::SelectPrev)],
+        label: "Tab / Shift-Tab",
+        help: "select the next / previous node or topic",
+        footer: Some(("Tab", "select")),
+    },
+    Binding {
+        keys: &[(Char('b'), Msg::Break)],
+        label: "b",
+        help: "break: control rate to 5 Hz",
+        footer: Some(("b", "break")),
+    },
+    Binding {
+        keys: &[(Char(' '), Msg::TogglePause)],
+        label: "space",
+        help: "pause / resume",
+        footer: Some(("␣", "pause")),
+    },
+    Binding {
+        keys: &[(Char('.'), Msg::Step)],
+        label: ".",
+        help: "one actuator step while paused (virtual clock)",
+        footer: None,
+    },
+    Binding {
+        keys: &[(Char('r'), Msg::Reset), (Char('R'), Msg::NextSeed)],
+        label: "r / R",
+        help: "reset (same seed) / next seed",
+        footer: Some(("r", "reset")),
+    },
+    Binding {
+        keys: &[(Char('c'), Msg::SwitchClock)],
+        label: "c",
+        help: "switch clock (restart under the other one)",
+        footer: Some(("c", "clock")),
+    },
+    Binding {
+        keys: &[(Char('<'), Msg::Slower), (Char('>'), Msg::Faster)],
+        label: "< / >",
+        help: "slower / faster (virtual clock; ×0.25 … ×8, max)",
+        footer: None,
+    },
+    Binding {
+        keys: &[(Char('p'), Msg::SwapBrain)],
+        label: "p",
+        help: "swap brain: scripted ↔ the --policy file",
+        footer: None,
+    },
+    Binding {
+        keys: &[(Char('?'), Msg::ToggleHelp)],
+        label: "?",
+        help: "this help",
+        footer: Some(("?", "help")),
+    },
+    Binding {
+        keys: &[(Esc, Msg::Back)],
+        label: "Esc",
+        help: "close the help or the selection; else quit",
+        footer: None,
+    },
+    Binding {
+        keys: &[(Char('q'), Msg::Quit)],
+        label: "q / Ctrl-C",
+        help: "quit",
+        footer: Some(("q", "quit")),
+    },
+];
+
+/// Lines the help overlay adds after the bindings: (label, text).
+pub const HELP_NOTES: [(&str, &str); 3] = [
+    (
+        "rate ladder (Hz)",
+        "50 40 30 25 20 15 12 10 8 7 6 5 4 3 2 1",
+    ),
+    ("depth ladder", "1 2 5 10 100"),
+    ("after a fall", "the lab freezes; r, R, c or q"),
+];
+
 /// Map a key event. `typing` is true while an exact rate is being typed.
 pub fn map_key(key: KeyEvent, typing: bool) -> Option<Msg> {
     if key.kind == KeyEventKind::Release {
         return None;
     }
-    if key.modifiers.contains(KeyModifiers::CONTROL) && key.code == KeyCode::Char('c') {
+    if key.modifiers.contains(KeyModifiers::CONTROL) && key.code == Char('c') {
         return Some(Msg::Quit);
     }
     if typing {
         return match key.code {
-            KeyCode::Char(c) if c.is_ascii_digit() || c == '.' => Some(Msg::Input(c)),
+            Char(c) if c.is_ascii_digit() || c == '.' => Some(Msg::Input(c)),
             KeyCode::Backspace => Some(Msg::Backspace),
             KeyCode::Enter => Some(Msg::Submit),
-            KeyCode::Esc => Some(Msg::Cancel),
+            Esc => Some(Msg::Cancel),
             _ => None,
         };
     }
-    Some(match key.code {
-        KeyCode::Char('-') | KeyCode::Left => Msg::ControlDown,
-        KeyCode::Char('+') | KeyCode::Right => Msg::ControlUp,
-        KeyCode::Char('=') => Msg::TypeRate,
-        KeyCode::Char('s') => Msg::SensorDown,
-        KeyCode::Char('S') => Msg::SensorUp,
-        KeyCode::Char('[') => Msg::DepthDown,
-        KeyCode::Char(']') => Msg::DepthUp,
-        KeyCode::Char('b') => Msg::Break,
-        KeyCode::Char(' ') => Msg::TogglePause,
-        KeyCode::Char('.') => Msg::Step,
-        KeyCode::Char('r') => Msg::Reset,
-        KeyCode::Char('R') => Msg::NextSeed,
-        KeyCode::Char('c') => Msg::SwitchClock,
-        KeyCode::Char('<') => Msg::Slower,
-        KeyCode::Char('>') => Msg::Faster,
-        KeyCode::Char('p') => Msg::SwapBrain,
-        KeyCode::Char('?') => Msg::ToggleHelp,
-        KeyCode::Char('q') | KeyCode::Esc => Msg::Quit,
-        _ => return None,
-    })
+    BINDINGS
+        .iter()
+        .flat_map(|b| b.keys.iter())
+        .find(|(code, _)| *code == key.code)
+        .map(|(_, msg)| *msg)
 }
 
-/// The key help: (keys, what they do), in the order the overlay lists them.
-pub const HELP: [(&str, &str); 16] = [
-    ("- / + (← / →)", "control rate down / up the ladder"),
-    (
-        "=",
-        "type an exact control rate (Enter applies, Esc cancels)",
-    ),
-    ("s / S", "sensor rate down / up"),
-    ("[ / ]", "queue depth down / up (1, 2, 5, 10, 100)"),
-    ("b", "break: control rate to 5 Hz"),
-    ("space", "pause / resume"),
-    (".", "one control step while paused (virtual clock)"),
-    ("r / R", "reset (same seed) / next seed"),
-    ("c", "switch clock (restart under the other one)"),
-    ("< / >", "slower / faster (virtual clock; ×0.25 … ×8, max)"),
-    ("p", "swap brain: scripted ↔ the --policy file"),
-    ("?", "this help"),
-    ("q / Esc / Ctrl-C", "quit"),
-    ("", ""),
-    ("ladder (Hz)", "50 40 30 25 20 15 12 10 8 7 6 5 4 3 2 1"),
-    ("after a fall", "the lab freezes; r, R, c or q"),
-];
+#[cfg(test)]
+/// The README's key list, as a markdown table built from [`BINDINGS`] (a test checks that
+/// README.md holds exactly this).
+#[cfg(test)]
+pub fn readme_key_table() -> String {
+    let mut out = String::from("| keys | what they do |\n| --- | --- |\n");
+    for b in BINDINGS {
+        let label = b.label.replace('|', "\\|");
+        out.push_str(&format!("| `{label}` | {} |\n", b.help));
+    }
+    for (label, text) in HELP_NOTES {
+        out.push_str(&format!("| {label} | {text} |\n"));
+    }
+    out
+}
 
 /// The control/sensor rate ladder, Hz, high to low.
 pub const RATE_LADDER: [f64; 16] = [
@@ -164,17 +274,33 @@ mod tests {
     }
 
     #[test]
+    fn no_key_is_bound_twice() {
+        let mut seen = Vec::new();
+        for (code, _) in BINDINGS.iter().flat_map(|b| b.keys.iter()) {
+            assert!(!seen.contains(code), "{code:?} bound twice");
+            seen.push(*code);
+        }
+    }
+
+    #[test]
+    fn the_readme_lists_every_binding() {
+        let readme = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/../README.md"))
+            .expect("README.md");
+        let table = readme_key_table();
+        assert!(
+            readme.contains(&table),
+            "README.md's key list is out of date; it should read:\n{table}"
+        );
+    }
+
+    #[test]
     fn default_bindings() {
-        assert_eq!(
-            map_key(key(KeyCode::Char('-')), false),
-            Some(Msg::ControlDown)
-        );
-        assert_eq!(map_key(key(KeyCode::Left), false), Some(Msg::ControlDown));
-        assert_eq!(
-            map_key(key(KeyCode::Char('+')), false),
-            Some(Msg::ControlUp)
-        );
-        assert_eq!(map_key(key(KeyCode::Right), false), Some(Msg::ControlUp));
+        assert_eq!(map_key(key(KeyCode::Char('-')), false), Some(Msg::RateDown));
+        assert_eq!(map_key(key(KeyCode::Left), false), Some(Msg::RateDown));
+        assert_eq!(map_key(key(KeyCode::Char('+')), false), Some(Msg::RateUp));
+        assert_eq!(map_key(key(KeyCode::Right), false), Some(Msg::RateUp));
+        assert_eq!(map_key(key(KeyCode::Tab), false), Some(Msg::SelectNext));
+        assert_eq!(map_key(key(KeyCode::BackTab), false), Some(Msg::SelectPrev));
         assert_eq!(map_key(key(KeyCode::Char('=')), false), Some(Msg::TypeRate));
         assert_eq!(
             map_key(key(KeyCode::Char('s')), false),
@@ -209,7 +335,7 @@ mod tests {
             Some(Msg::ToggleHelp)
         );
         assert_eq!(map_key(key(KeyCode::Char('q')), false), Some(Msg::Quit));
-        assert_eq!(map_key(key(KeyCode::Esc), false), Some(Msg::Quit));
+        assert_eq!(map_key(key(KeyCode::Esc), false), Some(Msg::Back));
         assert_eq!(
             map_key(
                 KeyEvent::new(KeyCode::Char('c'), KeyModifiers::CONTROL),

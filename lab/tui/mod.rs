@@ -145,12 +145,113 @@ mod tests {
     }
 
     fn virtual_cfg(control_hz: f64, secs: u64) -> RunConfig {
-        RunConfig {
+        let mut cfg = RunConfig {
             clock: ClockKind::Virtual,
-            control_hz,
             duration: ratelab::Nanos(secs * 1_000_000_000),
             ..RunConfig::default()
+        };
+        cfg.set_control_hz(control_hz).unwrap();
+        cfg
+    }
+
+    fn graph_cfg(file: &str, secs: u64) -> RunConfig {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("..")
+            .join(file);
+        RunConfig {
+            clock: ClockKind::Virtual,
+            duration: ratelab::Nanos(secs * 1_000_000_000),
+            graph: ratelab::graph::GraphSpec::load(&path).unwrap(),
+            ..RunConfig::default()
         }
+    }
+
+    #[test]
+    fn snapshot_shipped_graphs_at_80x24() {
+        for (name, file) in [
+            ("estimator", "graphs/cartpole-estimator.toml"),
+            ("safety", "graphs/cartpole-safety.toml"),
+        ] {
+            let (app, _rx) = app_after(graph_cfg(file, 2), false);
+            let text = render(&app, 80, 24);
+            for n in &app.view().nodes {
+                assert!(
+                    text.contains(&n.name),
+                    "{name}: node {} not shown:\n{text}",
+                    n.name
+                );
+            }
+            for t in &app.view().topics {
+                assert!(
+                    text.contains(&t.name),
+                    "{name}: topic {} not shown:\n{text}",
+                    t.name
+                );
+            }
+            insta::assert_snapshot!(format!("graph_{name}_80x24"), text);
+        }
+    }
+
+    #[test]
+    fn tab_selects_and_the_keys_follow_the_selection() {
+        let (mut app, rx) = app_after(graph_cfg("graphs/cartpole-estimator.toml", 1), false);
+        // Nothing selected: the chapter's keys (policy rate, every depth).
+        app.on_msg(Msg::RateDown);
+        app.on_msg(Msg::DepthUp);
+        // Tab → sensor, Tab → estimator: its rate.
+        app.on_msg(Msg::SelectNext);
+        app.on_msg(Msg::SelectNext);
+        assert!(app.view().nodes[1].selected);
+        app.on_msg(Msg::RateDown);
+        // Shift-Tab twice back to nothing, once more → the last topic: its depth.
+        app.on_msg(Msg::SelectPrev);
+        app.on_msg(Msg::SelectPrev);
+        app.on_msg(Msg::SelectPrev);
+        assert!(app.view().topics.last().unwrap().selected);
+        app.on_msg(Msg::DepthUp);
+        let text = render(&app, 80, 24);
+        assert!(
+            text.contains("/action selected: [/] its depth (5)"),
+            "{text}"
+        );
+        // Esc clears the selection, then closes help, and only then quits.
+        app.on_msg(Msg::ToggleHelp);
+        app.on_msg(Msg::Back);
+        assert!(!app.view().help && !app.quit);
+        app.on_msg(Msg::Back);
+        assert!(app.view().topics.iter().all(|t| !t.selected) && !app.quit);
+        app.on_msg(Msg::Back);
+        assert!(app.quit);
+        use ratelab::run::Command::*;
+        let sent: Vec<Control> = rx.try_iter().collect();
+        assert_eq!(
+            sent,
+            vec![
+                Control::Apply(SetControlHz { hz: 40.0 }),
+                Control::Apply(SetQueueDepth { depth: 2 }),
+                Control::Apply(SetNodeHz {
+                    node: "estimator".into(),
+                    hz: 50.0
+                }),
+                Control::Apply(SetTopicDepth {
+                    topic: "/action".into(),
+                    depth: 5
+                }),
+                Control::Quit,
+            ]
+        );
+    }
+
+    #[test]
+    fn a_long_recording_path_is_shortened_from_the_left() {
+        assert_eq!(
+            super::view::shorten_left("recordings/abc.rrd", 40),
+            "recordings/abc.rrd"
+        );
+        assert_eq!(
+            super::view::shorten_left("recordings/abcdef.rrd", 10),
+            "…bcdef.rrd"
+        );
     }
 
     #[test]
@@ -208,7 +309,7 @@ mod tests {
     #[test]
     fn keys_become_engine_controls() {
         let (mut app, rx) = app_after(virtual_cfg(50.0, 1), false);
-        app.on_msg(Msg::ControlDown);
+        app.on_msg(Msg::RateDown);
         app.on_msg(Msg::DepthUp);
         app.on_msg(Msg::Break);
         app.on_msg(Msg::TypeRate);

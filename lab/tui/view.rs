@@ -1,7 +1,7 @@
 //! The view model (an immutable snapshot the app builds each frame) and its rendering:
 //! pure functions from a [`View`] to a buffer, one `render_*` helper per panel.
 
-use super::keymap::HELP;
+use super::keymap::{BINDINGS, HELP_NOTES};
 use ratatui::buffer::Buffer;
 use ratatui::layout::{Alignment, Constraint, Layout, Rect};
 use ratatui::style::{Color, Modifier, Style, Stylize};
@@ -11,17 +11,31 @@ use ratatui::widgets::canvas::{Canvas, Line as CanvasLine, Rectangle};
 use ratatui::widgets::{
     Axis, Bar, BarChart, BarGroup, Block, Chart, Clear, Dataset, GraphType, Paragraph, Widget,
 };
+use ratelab::graph::{NodeId, TopicId};
 
 /// The smallest terminal the lab lays out in.
 pub const MIN_SIZE: (u16, u16) = (80, 24);
 /// Fall limit shown on the drawings, rad (±12°).
 pub const LIMIT_RAD: f64 = ratelab::plant::THETA_LIMIT_RAD;
 
+/// What Tab selected: the target of the rate and depth keys.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Selected {
+    /// A node.
+    Node(NodeId),
+    /// A topic.
+    Topic(TopicId),
+}
+
 /// One node box.
 #[derive(Clone, Debug, PartialEq)]
 pub struct NodeView {
     /// Name.
-    pub name: &'static str,
+    pub name: String,
+    /// Column of the layout, left to right (publisher before subscriber).
+    pub layer: usize,
+    /// Selected with Tab?
+    pub selected: bool,
     /// Rate as set, Hz.
     pub set_hz: f64,
     /// Real clock: measured rate over the last second, Hz.
@@ -33,8 +47,16 @@ pub struct NodeView {
 /// One topic arrow.
 #[derive(Clone, Debug, PartialEq)]
 pub struct TopicView {
-    /// `/obs` or `/action`.
-    pub name: &'static str,
+    /// Its name (`/obs`).
+    pub name: String,
+    /// The publishing node's index.
+    pub publisher: usize,
+    /// The subscribing node's index, if any.
+    pub subscriber: Option<usize>,
+    /// History depth now.
+    pub depth: usize,
+    /// Selected with Tab?
+    pub selected: bool,
     /// Messages per second over the last second of run time.
     pub msg_per_s: f64,
     /// Dropped since the run started.
@@ -86,14 +108,12 @@ pub struct View {
     pub seed: u64,
     /// Brain label.
     pub brain: String,
-    /// Queue depth.
-    pub depth: usize,
     /// Recording path, if recording.
     pub recording: Option<String>,
-    /// sensor, policy, actuator.
-    pub nodes: [NodeView; 3],
-    /// /obs, /action.
-    pub topics: [TopicView; 2],
+    /// The graph's nodes, in tie-break order.
+    pub nodes: Vec<NodeView>,
+    /// The graph's topics.
+    pub topics: Vec<TopicView>,
     /// Pole angle, rad.
     pub pole_angle: f64,
     /// Cart position, m.
@@ -176,52 +196,181 @@ fn render_status(v: &View, area: Rect, buf: &mut Buffer) {
     if v.paused {
         spans.push(" PAUSED".yellow().bold());
     }
-    spans.extend([
+    spans.push(
         format!(
-            " │ t {:.2} s │ seed {} │ depth {} │ {} │ ",
-            v.sim_time_s, v.seed, v.depth, v.brain
+            " │ t {:.2} s │ seed {} │ {} │ {} │ ",
+            v.sim_time_s,
+            v.seed,
+            depth_summary(&v.topics),
+            v.brain
         )
         .into(),
-        match &v.recording {
-            Some(p) => Span::from(format!("rec ● {p}")).red(),
-            None => Span::from("rec off").dim(),
-        },
-    ]);
+    );
+    let used: usize = spans.iter().map(|s| s.content.chars().count()).sum();
+    spans.push(match &v.recording {
+        Some(p) => Span::from(format!(
+            "rec ● {}",
+            shorten_left(p, (area.width as usize).saturating_sub(used + 6))
+        ))
+        .red(),
+        None => Span::from("rec off").dim(),
+    });
     Paragraph::new(Line::from(spans)).render(area, buf);
 }
 
+/// `depth 1` when every topic has one depth, else each: `depths 1/5/1`.
+fn depth_summary(topics: &[TopicView]) -> String {
+    match topics.first() {
+        Some(first) if topics.iter().all(|t| t.depth == first.depth) => {
+            format!("depth {}", first.depth)
+        }
+        Some(_) => format!(
+            "depths {}",
+            topics
+                .iter()
+                .map(|t| t.depth.to_string())
+                .collect::<Vec<_>>()
+                .join("/")
+        ),
+        None => "no topics".to_string(),
+    }
+}
+
+/// With a selection: what is selected and what the keys now do to it.
+fn selection_title(v: &View) -> Option<String> {
+    if let Some(n) = v.nodes.iter().find(|n| n.selected) {
+        return Some(format!(
+            " {} selected: -/+ its rate · Tab next · Esc clears ",
+            n.name
+        ));
+    }
+    v.topics.iter().find(|t| t.selected).map(|t| {
+        format!(
+            " {} selected: [/] its depth ({}) · Tab next · Esc clears ",
+            t.name, t.depth
+        )
+    })
+}
+
+/// `s` cut from the left to at most `max` characters (`…ings/run.rrd`), so the end of a
+/// path, its file name, stays readable.
+pub fn shorten_left(s: &str, max: usize) -> String {
+    let n = s.chars().count();
+    if n <= max {
+        return s.to_string();
+    }
+    let keep = max.saturating_sub(1);
+    let tail: String = s.chars().skip(n - keep).collect();
+    format!("…{tail}")
+}
+
+/// The graph panel's title: the nodes and topics in layout order.
+fn graph_title(v: &View) -> String {
+    let names: Vec<&str> = layout_columns(v)
+        .iter()
+        .flat_map(|c| match c {
+            Column::Nodes(ns) => ns
+                .iter()
+                .map(|&i| v.nodes[i].name.as_str())
+                .collect::<Vec<_>>(),
+            Column::Topics(ts) => ts.iter().map(|&i| v.topics[i].name.as_str()).collect(),
+        })
+        .collect();
+    format!(" graph: {} ", names.join(" → "))
+}
+
+/// A column of the graph panel: the nodes of one layer, or the topics they publish.
+enum Column {
+    Nodes(Vec<usize>),
+    Topics(Vec<usize>),
+}
+
+/// Left to right: each layer's nodes, then the topics they publish.
+fn layout_columns(v: &View) -> Vec<Column> {
+    let layers = v.nodes.iter().map(|n| n.layer).max().map_or(0, |l| l + 1);
+    let mut cols = Vec::new();
+    for l in 0..layers {
+        let nodes: Vec<usize> = (0..v.nodes.len())
+            .filter(|&i| v.nodes[i].layer == l)
+            .collect();
+        if nodes.is_empty() {
+            continue;
+        }
+        let topics: Vec<usize> = (0..v.topics.len())
+            .filter(|&t| nodes.contains(&v.topics[t].publisher))
+            .collect();
+        cols.push(Column::Nodes(nodes));
+        if !topics.is_empty() {
+            cols.push(Column::Topics(topics));
+        }
+    }
+    cols
+}
+
 fn render_graph(v: &View, area: Rect, buf: &mut Buffer) {
-    let block = Block::bordered().title(" graph: sensor → /obs → policy → /action → actuator ");
+    let block = match selection_title(v) {
+        Some(t) => Block::bordered().title(Line::from(t).black().on_yellow().bold()),
+        None => Block::bordered().title(graph_title(v)),
+    };
     let inner = block.inner(area);
     block.render(area, buf);
-    let cols = Layout::horizontal([
-        Constraint::Ratio(1, 5),
-        Constraint::Ratio(1, 5),
-        Constraint::Ratio(1, 5),
-        Constraint::Ratio(1, 5),
-        Constraint::Ratio(1, 5),
-    ])
-    .split(inner);
-    for (i, node) in v.nodes.iter().enumerate() {
-        render_node(node, cols[i * 2], buf);
-    }
-    for (i, topic) in v.topics.iter().enumerate() {
-        render_arrow(topic, cols[i * 2 + 1], buf);
+    let cols = layout_columns(v);
+    let n = cols.len().max(1) as u32;
+    let areas = Layout::horizontal((0..n).map(|_| Constraint::Ratio(1, n))).split(inner);
+    for (col, rect) in cols.iter().zip(areas.iter()) {
+        let count = match col {
+            Column::Nodes(x) | Column::Topics(x) => x.len().max(1) as u32,
+        };
+        let cells = Layout::vertical((0..count).map(|_| Constraint::Ratio(1, count))).split(*rect);
+        match col {
+            Column::Nodes(ns) => {
+                for (&i, cell) in ns.iter().zip(cells.iter()) {
+                    render_node(&v.nodes[i], *cell, buf);
+                }
+            }
+            Column::Topics(ts) => {
+                for (&i, cell) in ts.iter().zip(cells.iter()) {
+                    render_arrow(&v.topics[i], *cell, buf);
+                }
+            }
+        }
     }
 }
 
 fn render_node(n: &NodeView, area: Rect, buf: &mut Buffer) {
-    let mut lines = vec![Line::from(format!("{} Hz set", hz(n.set_hz)))];
+    let wide = area.width >= 14;
+    let set = if wide {
+        format!("{} Hz set", hz(n.set_hz))
+    } else {
+        format!("{} Hz", hz(n.set_hz))
+    };
+    let mut lines = vec![Line::from(set)];
     match (n.measured_hz, n.lateness_p99_us) {
         (Some(m), Some(l)) => {
-            lines.push(Line::from(format!("{m:.1} Hz meas")));
+            lines.push(Line::from(if wide {
+                format!("{m:.1} Hz meas")
+            } else {
+                format!("{m:.1} meas")
+            }));
             lines.push(Line::from(format!("p99 {l:.0} µs late")).dim());
         }
-        _ => lines.push(Line::from("virtual time").dim()),
+        _ => lines.push(Line::from(if wide { "virtual time" } else { "virtual" }).dim()),
     }
+    let (title, border) = if n.selected {
+        (
+            Line::from(n.name.clone())
+                .black()
+                .on_yellow()
+                .bold()
+                .centered(),
+            Style::new().fg(Color::Yellow),
+        )
+    } else {
+        (Line::from(n.name.clone()).bold().centered(), Style::new())
+    };
     Paragraph::new(lines)
         .alignment(Alignment::Center)
-        .block(Block::bordered().title(Line::from(n.name).bold().centered()))
+        .block(Block::bordered().border_style(border).title(title))
         .render(area, buf);
 }
 
@@ -236,8 +385,19 @@ fn render_arrow(t: &TopicView, area: Rect, buf: &mut Buffer) {
     } else {
         ("─", Style::new().fg(Color::Green), "✓")
     };
+    let name = if t.selected {
+        Line::from(
+            format!("{} d{}", t.name, t.depth)
+                .black()
+                .on_yellow()
+                .bold(),
+        )
+        .centered()
+    } else {
+        Line::from(t.name.clone().bold()).centered()
+    };
     let lines = vec![
-        Line::from(t.name.bold()).centered(),
+        name,
         Line::from(Span::styled(
             format!("{}▶", shaft.repeat(w.saturating_sub(1))),
             style,
@@ -385,31 +545,16 @@ fn render_footer(v: &View, area: Rect, buf: &mut Buffer) {
         Line::from(Span::from(format!(" {m}")).bold())
     } else if let Some(t) = &v.typing {
         Line::from(vec![
-            " control rate (Hz): ".bold(),
+            " rate (Hz): ".bold(),
             format!("{t}▏").into(),
             "  Enter apply · Esc cancel".dim(),
         ])
     } else {
-        let mut spans: Vec<Span> = vec![
-            " -/+ ".bold(),
-            "rate ".into(),
-            "s/S ".bold(),
-            "sensor ".into(),
-            "[/] ".bold(),
-            "depth ".into(),
-            "b ".bold(),
-            "break ".into(),
-            "␣ ".bold(),
-            "pause ".into(),
-            "r ".bold(),
-            "reset ".into(),
-            "c ".bold(),
-            "clock ".into(),
-            "? ".bold(),
-            "help ".into(),
-            "q ".bold(),
-            "quit".into(),
-        ];
+        let mut spans: Vec<Span> = vec![" ".into()];
+        for (keys, word) in BINDINGS.iter().filter_map(|b| b.footer) {
+            spans.push(format!("{keys} ").bold());
+            spans.push(format!("{word} ").into());
+        }
         if let Some(m) = &v.message {
             spans.push(Span::from(format!("  │ {m}")).italic());
         }
@@ -419,8 +564,18 @@ fn render_footer(v: &View, area: Rect, buf: &mut Buffer) {
 }
 
 fn render_help(area: Rect, buf: &mut Buffer) {
-    let w = 72.min(area.width);
-    let h = (HELP.len() as u16 + 2).min(area.height);
+    let mut lines: Vec<Line> = BINDINGS
+        .iter()
+        .map(|b| Line::from(vec![format!("{:>16}  ", b.label).bold(), b.help.into()]))
+        .collect();
+    lines.push(Line::from(""));
+    lines.extend(
+        HELP_NOTES
+            .iter()
+            .map(|(k, d)| Line::from(vec![format!("{k:>16}  ").bold(), (*d).into()])),
+    );
+    let w = 90.min(area.width);
+    let h = (lines.len() as u16 + 2).min(area.height);
     let popup = Rect {
         x: area.x + (area.width - w) / 2,
         y: area.y + (area.height - h) / 2,
@@ -428,11 +583,7 @@ fn render_help(area: Rect, buf: &mut Buffer) {
         height: h,
     };
     Clear.render(popup, buf);
-    let lines: Vec<Line> = HELP
-        .iter()
-        .map(|(k, d)| Line::from(vec![format!("{k:>16}  ").bold(), (*d).into()]))
-        .collect();
     Paragraph::new(lines)
-        .block(Block::bordered().title(" keys (? to close) "))
+        .block(Block::bordered().title(" keys (? or Esc to close) "))
         .render(popup, buf);
 }

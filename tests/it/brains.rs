@@ -10,9 +10,7 @@ use std::path::{Path, PathBuf};
 
 /// `../shared/fixtures`, beside the checkout. A missing fixture fails the test (never skips).
 fn fixture(name: &str) -> PathBuf {
-    let p = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../shared/fixtures")
-        .join(name);
+    let p = Path::new(crate::REPO).join("../shared/fixtures").join(name);
     assert!(
         p.is_file(),
         "fixture missing: {} (CI puts ../shared beside the checkout)",

@@ -7,11 +7,11 @@ use ratelab::{run, ClockKind, Nanos, RunConfig, RunOptions, RunReport};
 fn virtual_run(seed: u64, control_hz: f64, depth: usize) -> RunReport {
     let cfg = RunConfig {
         seed,
-        control_hz,
-        queue_depth: depth,
         clock: ClockKind::Virtual,
         ..RunConfig::default()
-    };
+    }
+    .with_chapter(50.0, control_hz, depth)
+    .unwrap();
     run(&cfg, Box::new(Scripted), RunOptions::new()).expect("run starts")
 }
 
@@ -171,11 +171,11 @@ fn real_clock_balances_at_50_hz_for_3_s() {
 #[test]
 fn real_clock_falls_at_5_hz() {
     let _machine = crate::machine::alone();
-    let cfg = RunConfig {
+    let mut cfg = RunConfig {
         duration: Nanos(3 * Nanos::SECOND.0),
-        control_hz: 5.0,
         ..RunConfig::default()
     };
+    cfg.set_control_hz(5.0).unwrap();
     let r = run(&cfg, Box::new(Scripted), RunOptions::new()).unwrap();
     assert!(!r.metrics.balanced);
     assert!(r.metrics.obs_dropped > 0);

@@ -156,7 +156,7 @@ fn break_flag_falls_headless_when_piped() {
 
 #[test]
 fn exercise_refuses_without_a_prediction_then_runs_with_one() {
-    let repo = Path::new(env!("CARGO_MANIFEST_DIR")).join("exercises");
+    let repo = Path::new(crate::REPO).join("exercises");
     let o = ratelab(&["exercise", "ex2", "--dir", repo.to_str().unwrap()]);
     assert_eq!(o.status.code(), Some(2));
     assert!(

@@ -165,3 +165,47 @@ fn sigterm_restores_the_terminal() {
     drop(parser);
     lab.keys(""); // the pty is still writable: nothing hangs
 }
+
+#[test]
+fn any_graph_in_the_lab_tab_selects_and_esc_backs_out() {
+    let _machine = crate::machine::alone();
+    let graph = std::path::Path::new(crate::REPO).join("graphs/cartpole-estimator.toml");
+    let mut lab = Lab::start(&["--clock", "virtual", "--graph", graph.to_str().unwrap()]);
+    let screen = lab.wait_for("BALANCED", Duration::from_secs(60));
+    for name in [
+        "sensor",
+        "/meas",
+        "estimator",
+        "/state",
+        "policy",
+        "/action",
+        "actuator",
+    ] {
+        assert!(screen.contains(name), "{name} not drawn:\n{screen}");
+    }
+    // Tab, Tab: the estimator; `-` steps its rate down the ladder (100 → 50 Hz).
+    lab.keys("\t\t");
+    lab.wait_for("estimator selected", Duration::from_secs(5));
+    lab.keys("-");
+    lab.wait_for("estimator rate → 5", Duration::from_secs(5));
+    // Esc closes the help, then the selection, and only then quits.
+    lab.keys("?");
+    lab.wait_for("keys (? or Esc to close)", Duration::from_secs(5));
+    lab.keys("\x1b");
+    std::thread::sleep(Duration::from_millis(300));
+    let screen = lab.wait_for("estimator selected", Duration::from_secs(5));
+    assert!(
+        !screen.contains("Esc to close"),
+        "help still open:\n{screen}"
+    );
+    lab.keys("\x1b");
+    std::thread::sleep(Duration::from_millis(300));
+    assert!(
+        lab.child.try_wait().unwrap().is_none(),
+        "Esc quit with a selection open"
+    );
+    assert!(!lab.screen().contains("estimator selected"));
+    lab.keys("\x1b");
+    let status = lab.exit_status("Esc");
+    assert!(status.success(), "{status:?}");
+}

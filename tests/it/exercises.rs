@@ -7,12 +7,11 @@ use ratelab::exercise::{
     check_ex1, check_ex2, check_ex3, load_bands, measure_ex1, measure_ex2, measure_ex3,
     required_keys, Bands, ExerciseFile,
 };
+use ratelab::graph::GraphSpec;
 use std::path::PathBuf;
 
 fn path(name: &str) -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("exercises")
-        .join(name)
+    PathBuf::from(crate::REPO).join("exercises").join(name)
 }
 
 fn bands() -> Bands {
@@ -33,7 +32,7 @@ fn assert_all(checks: Vec<ratelab::exercise::Check>) {
 fn ex1_measurement_rate_cliff() {
     let _machine = crate::machine::shared();
     let b = bands();
-    let runs = measure_ex1(&b.ex1).unwrap();
+    let runs = measure_ex1(&b.ex1, &GraphSpec::chapter()).unwrap();
     assert_eq!(runs.len(), b.ex1.control_hz.len() * b.ex1.seeds.len());
     assert_all(check_ex1(&b.ex1, &runs));
 }
@@ -42,7 +41,7 @@ fn ex1_measurement_rate_cliff() {
 fn ex2_measurement_queue_trap() {
     let _machine = crate::machine::shared();
     let b = bands();
-    let pairs = measure_ex2(&b.ex2).unwrap();
+    let pairs = measure_ex2(&b.ex2, &GraphSpec::chapter()).unwrap();
     assert_eq!(pairs.len(), b.ex2.seeds.len());
     assert_all(check_ex2(&b.ex2, &pairs));
 }
@@ -51,7 +50,7 @@ fn ex2_measurement_queue_trap() {
 fn ex3_measurement_jitter_and_phase_offsets() {
     let _machine = crate::machine::alone();
     let b = bands();
-    let (matched, offset) = measure_ex3(&b.ex3).unwrap();
+    let (matched, offset) = measure_ex3(&b.ex3, &GraphSpec::chapter()).unwrap();
     assert_all(check_ex3(&b.ex3, &matched, &offset));
 }
 

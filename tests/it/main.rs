@@ -6,11 +6,15 @@
 //! CPU-heavy ones ([`machine::shared`]: sweeps, exercise measurements, stress) never run
 //! beside them. Light tests take neither.
 
+/// The repository's top folder (this suite belongs to the `lab/` package).
+pub const REPO: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/..");
+
 mod brains;
 mod chapter_bands;
 mod cli;
 mod e2e_pty;
 mod exercises;
+mod graphs;
 mod realtime;
 mod recording;
 mod session;

@@ -117,10 +117,8 @@ fn fresh_recording_has_the_entities_timelines_and_one_angle_row_per_step() {
 fn two_virtual_recordings_are_identical() {
     let dir = tempfile::tempdir().unwrap();
     let (a, b) = (dir.path().join("a.rrd"), dir.path().join("b.rrd"));
-    let cfg = RunConfig {
-        control_hz: 7.0,
-        ..virtual_cfg()
-    };
+    let mut cfg = virtual_cfg();
+    cfg.set_control_hz(7.0).unwrap();
     record(&a, &cfg, None);
     record(&b, &cfg, None);
     same_chunks(&chunks(&a), &chunks(&b)).unwrap();
@@ -131,8 +129,7 @@ fn two_virtual_recordings_are_identical() {
 }
 
 fn reference() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("recordings/reference-virtual-control50-seed0.rrd")
+    PathBuf::from(crate::REPO).join("recordings/reference-virtual-control50-seed0.rrd")
 }
 
 #[test]

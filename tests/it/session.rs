@@ -77,12 +77,9 @@ fn scripted_session_replays_byte_for_byte() {
     // Controls were applied at virtual instants on the 20 ms actuator grid or between.
     assert!(first.commands[0].at_ns > 0);
     // The second run kept the settings as the user left them, with the next seed.
+    let second = log.runs[1].config("run 2").unwrap();
     assert_eq!(
-        (
-            log.runs[1].seed,
-            log.runs[1].control_hz,
-            log.runs[1].queue_depth
-        ),
+        (second.seed, second.control_hz(), second.queue_depth()),
         (2, 7.0, 1)
     );
     assert!(
@@ -142,8 +139,7 @@ fn replay_cli_reproduces_and_refuses_garbage() {
 
 #[test]
 fn brain_swaps_are_logged_and_replayed() {
-    let ppo = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../shared/fixtures/ppo_ch2.1_seed0.pt");
+    let ppo = std::path::Path::new(crate::REPO).join("../shared/fixtures/ppo_ch2.1_seed0.pt");
     assert!(ppo.is_file(), "fixture missing: {}", ppo.display());
     let dir = tempfile::tempdir().unwrap();
     let mut script = steps(20);

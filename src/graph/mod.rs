@@ -1,0 +1,248 @@
+//! The graph: nodes at fixed rates exchanging messages on topics, around one cartpole.
+//!
+//! Its shape is data: a [`GraphSpec`] read from a graph file ([`spec`]; the chapter's
+//! sensor → `/obs` → policy → `/action` → actuator is `graphs/cartpole.toml`, the default).
+//! [`Graph::build`] turns a spec into runnable nodes ([`nodes`]) and the [`GraphHandles`]
+//! every view uses (rates, topics, brain, plant, the run log), all indexed by the spec's
+//! [`NodeId`]/[`TopicId`].
+
+pub mod estimator;
+pub mod nodes;
+pub mod spec;
+
+use crate::metrics::{RunLog, StepRecord, TopicCounters};
+use crate::msg::AnyTopic;
+use crate::node::Node;
+use crate::plant::CartPole;
+use crate::policy::BrainSlot;
+use crate::rate::{InvalidRate, Rate};
+use crate::topic::ZeroDepth;
+use nodes::{Actuator, GraphNode, NodeCore, Sensor, SensorNoise, SensorOutput, Work};
+pub use spec::{Chain, GraphSpec, MsgType, NodeId, NodeKind, TopicId};
+use std::sync::{Arc, Mutex, MutexGuard};
+
+/// The plant shared by the sensors (read) and the actuator (steps).
+pub type SharedPlant = Arc<Mutex<CartPole>>;
+
+/// Lock a shared value, tolerating poison (each holder leaves it consistent).
+pub fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
+    m.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+/// Something told about every actuator tick (a recorder, the lab's telemetry).
+/// Called on the actuator's thread: it must not block.
+pub trait StepObserver: Send {
+    /// The graph was built: a chance to keep handles (rates, topics) for later ticks.
+    fn attach(&mut self, _handles: &GraphHandles) {}
+    /// One actuator tick happened.
+    fn on_step(&mut self, rec: &StepRecord);
+}
+
+/// Handles to change and read a running graph: rates, depths, the brain. Cheap to clone
+/// and `Send`, so the lab's thread can hold one while the graph runs elsewhere.
+#[derive(Clone)]
+pub struct GraphHandles {
+    /// The graph's shape (rates and depths as the run started).
+    pub spec: Arc<GraphSpec>,
+    /// Each node's rate, by [`NodeId`].
+    pub rates: Vec<Rate>,
+    /// Each topic, by [`TopicId`].
+    pub topics: Vec<AnyTopic>,
+    /// The brain every policy node runs.
+    pub brain: BrainSlot,
+    /// The plant.
+    pub plant: SharedPlant,
+    /// What the actuator measured.
+    pub log: Arc<Mutex<RunLog>>,
+}
+
+impl GraphHandles {
+    /// Node `id`'s rate.
+    pub fn rate(&self, id: NodeId) -> &Rate {
+        &self.rates[id.0]
+    }
+
+    /// The chain policy's rate (the chapter's control rate).
+    pub fn control_rate(&self) -> &Rate {
+        self.rate(self.spec.chain.policy)
+    }
+
+    /// The chain sensor's rate.
+    pub fn sensor_rate(&self) -> &Rate {
+        self.rate(self.spec.chain.sensor)
+    }
+
+    /// Topic `id`.
+    pub fn topic(&self, id: TopicId) -> &AnyTopic {
+        &self.topics[id.0]
+    }
+
+    /// Every topic's counters now, by [`TopicId`].
+    pub fn topic_stats(&self) -> TopicCounters {
+        self.topics.iter().map(AnyTopic::stats).collect()
+    }
+
+    /// Every node's current rate, Hz, by [`NodeId`].
+    pub fn rates_hz(&self) -> Vec<f64> {
+        self.rates.iter().map(Rate::hz).collect()
+    }
+
+    /// Set every topic's history depth (the chapter's one queue depth).
+    ///
+    /// # Errors
+    /// [`ZeroDepth`] for 0 (nothing changes).
+    pub fn set_queue_depth(&self, depth: usize) -> Result<(), ZeroDepth> {
+        if depth == 0 {
+            return Err(ZeroDepth);
+        }
+        for t in &self.topics {
+            t.set_depth(depth)?;
+        }
+        Ok(())
+    }
+
+    /// The graph's shape as it is now: the spec with the current rates and depths.
+    pub fn current_spec(&self) -> GraphSpec {
+        let mut spec = (*self.spec).clone();
+        for (n, r) in spec.nodes.iter_mut().zip(&self.rates) {
+            n.rate_hz = r.hz();
+        }
+        for (t, h) in spec.topics.iter_mut().zip(&self.topics) {
+            t.depth = h.stats().depth;
+        }
+        spec
+    }
+}
+
+/// A built graph: the nodes (in tie-break order) plus the handles.
+pub struct Graph {
+    /// The nodes, by [`NodeId`].
+    pub nodes: Vec<Box<dyn Node>>,
+    /// Handles into the running graph.
+    pub handles: GraphHandles,
+}
+
+/// Why a graph cannot be built.
+#[derive(Debug, thiserror::Error)]
+pub enum GraphError {
+    /// A rate out of range.
+    #[error(transparent)]
+    Rate(#[from] InvalidRate),
+    /// Queue depth 0.
+    #[error(transparent)]
+    Depth(#[from] ZeroDepth),
+}
+
+impl Graph {
+    /// Build `spec` around `plant` (already reset). Every policy node runs `brain`; sensor
+    /// noise is seeded from `seed`. `observers` are told about every actuator tick;
+    /// `keep_trace` keeps every step record.
+    ///
+    /// # Errors
+    /// [`GraphError`] for a bad rate or a zero depth (a validated spec has neither).
+    pub fn build(
+        spec: &GraphSpec,
+        plant: CartPole,
+        brain: BrainSlot,
+        seed: u64,
+        keep_trace: bool,
+        mut observers: Vec<Box<dyn StepObserver>>,
+    ) -> Result<Graph, GraphError> {
+        let plant = Arc::new(Mutex::new(plant));
+        let topics = spec
+            .topics
+            .iter()
+            .map(|t| AnyTopic::new(&t.name, t.msg, t.depth))
+            .collect::<Result<Vec<_>, _>>()?;
+        let rates = spec
+            .nodes
+            .iter()
+            .map(|n| Rate::new(n.rate_hz))
+            .collect::<Result<Vec<_>, _>>()?;
+        let log = Arc::new(Mutex::new(RunLog::new(keep_trace)));
+        let handles = GraphHandles {
+            spec: Arc::new(spec.clone()),
+            rates: rates.clone(),
+            topics: topics.clone(),
+            brain: brain.clone(),
+            plant: plant.clone(),
+            log: log.clone(),
+        };
+        for o in &mut observers {
+            o.attach(&handles);
+        }
+        let mut observers = Some(observers);
+        let nodes = spec
+            .nodes
+            .iter()
+            .enumerate()
+            .map(|(i, n)| {
+                let core = NodeCore {
+                    name: n.name.clone(),
+                    id: NodeId(i),
+                    rate: rates[i].clone(),
+                };
+                let input = n.subscribes.map(|t| &topics[t.0]);
+                let output = n.publishes.map(|t| &topics[t.0]);
+                let work = match (n.kind, (input, output)) {
+                    (NodeKind::Sensor, (_, Some(out))) => {
+                        let p = &n.params;
+                        Work::Sensor(Sensor {
+                            plant: plant.clone(),
+                            output: match out {
+                                AnyTopic::State(t) => SensorOutput::State(t.clone()),
+                                AnyTopic::Position(t) => SensorOutput::Position(t.clone()),
+                                AnyTopic::Force(_) => {
+                                    unreachable!("validated: a sensor publishes state or position")
+                                }
+                            },
+                            noise: (p.noise_pos_m > 0.0 || p.noise_angle_rad > 0.0).then(|| {
+                                SensorNoise::new(seed, NodeId(i), p.noise_pos_m, p.noise_angle_rad)
+                            }),
+                        })
+                    }
+                    (
+                        NodeKind::Estimator,
+                        (Some(AnyTopic::Position(i)), Some(AnyTopic::State(o))),
+                    ) => Work::Estimator {
+                        input: i.clone(),
+                        output: o.clone(),
+                        filter: estimator::VelocityFilter::new(n.params.cutoff_hz),
+                        last_seq: None,
+                        origin: None,
+                    },
+                    (NodeKind::Policy, (Some(AnyTopic::State(i)), Some(AnyTopic::Force(o)))) => {
+                        Work::Policy {
+                            brain: brain.clone(),
+                            input: i.clone(),
+                            output: o.clone(),
+                        }
+                    }
+                    (NodeKind::Safety, (Some(AnyTopic::Force(i)), Some(AnyTopic::Force(o)))) => {
+                        Work::Safety {
+                            input: i.clone(),
+                            output: o.clone(),
+                            max_force_n: n.params.max_force_n,
+                        }
+                    }
+                    (NodeKind::Actuator, (Some(AnyTopic::Force(i)), None)) => {
+                        Work::Actuator(Box::new(Actuator {
+                            plant: plant.clone(),
+                            input: i.clone(),
+                            topics: topics.clone(),
+                            log: log.clone(),
+                            observers: observers.take().unwrap_or_default(),
+                            held: None,
+                        }))
+                    }
+                    _ => unreachable!(
+                        "validated spec: node '{}' is wired as its kind requires",
+                        n.name
+                    ),
+                };
+                Box::new(GraphNode::new(core, work)) as Box<dyn Node>
+            })
+            .collect();
+        Ok(Graph { nodes, handles })
+    }
+}

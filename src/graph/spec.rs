@@ -1,0 +1,1123 @@
+//! Graph files: the node graph as data. A TOML file names the nodes (kind, rate, parameters,
+//! the topics each publishes and subscribes to) and the topics (message type, history
+//! depth); [`GraphSpec::parse`] reads it with `toml` + `serde`, checks every rule, and
+//! computes the tie-break order. Every view of a graph (executors, metrics, recordings,
+//! the lab) is built from the one [`GraphSpec`].
+//!
+//! ```toml
+//! name = "cartpole"
+//!
+//! [[node]]
+//! name = "sensor"
+//! kind = "sensor"          # sensor | estimator | policy | safety | actuator
+//! rate_hz = 50
+//! publishes = "/obs"
+//!
+//! [[topic]]
+//! name = "/obs"
+//! type = "state"           # state | position | force
+//! depth = 1                # history depth (keep-last), ≥ 1
+//! ```
+//!
+//! Rules (each broken rule is a [`SpecError`] with the line and column of the culprit):
+//! - at most [`MAX_NODES`] nodes, names unique; exactly one actuator (it owns the plant step
+//!   and the zero-order hold);
+//! - each kind has a fixed shape: a sensor publishes `state` or `position`; an estimator
+//!   reads `position` and publishes `state`; a policy reads `state` and publishes `force`;
+//!   a safety node reads `force` and publishes `force`; the actuator reads `force`;
+//! - every topic is declared once, has exactly one publisher and at most one subscriber
+//!   (the chapter's topic keeps one read mark; per-subscription queues come with QoS), and
+//!   its type matches both ends;
+//! - rates in (0, 10 000] Hz; the actuator at the plant's 50 Hz (each tick steps 20 ms of
+//!   physics); depths ≥ 1; no field the format does not know.
+//!
+//! Tie-break among nodes due at the same instant: upstream before downstream, i.e. a
+//! topological order of the topic graph (publisher before subscriber; unordered nodes keep
+//! file order). That reproduces the chapter's sensor < policy < actuator (ch2.8,
+//! `run_virtual`'s priorities). A node's explicit `priority` (an integer, lower first)
+//! overrides: nodes tick in ascending priority, a node without one taking its topological
+//! position; edges into a node with an explicit priority do not order it. A cycle among
+//! nodes without explicit priorities is an error.
+
+use crate::config::ACTUATOR_HZ;
+use crate::rate::{period_for_hz, MAX_HZ};
+use serde::{Deserialize, Serialize};
+use std::fmt;
+use std::ops::Range;
+use std::path::Path;
+use toml::Spanned;
+
+/// The most nodes a graph may have (the lab lays out up to this many).
+pub const MAX_NODES: usize = 8;
+/// The most topics a graph may have: every node but the actuator publishes at most one.
+pub const MAX_TOPICS: usize = MAX_NODES - 1;
+/// A graph file larger than this is refused before it is parsed, bytes.
+pub const MAX_FILE_BYTES: u64 = 64 * 1024;
+/// The largest history depth a graph file or flag may set (a bound on memory per topic).
+pub const MAX_DEPTH: usize = 1_000_000;
+/// The motor's gear: a force command of 1 is this many newtons (`cartpole.xml`, gear 10).
+pub const GEAR_N: f64 = 10.0;
+
+/// The chapter's graph, shipped as `graphs/cartpole.toml` and built in: the default.
+pub const DEFAULT_GRAPH_TOML: &str = include_str!("../../graphs/cartpole.toml");
+/// The name the built-in default graph is reported under.
+pub const DEFAULT_GRAPH_ORIGIN: &str = "graphs/cartpole.toml";
+
+/// What a node does.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum NodeKind {
+    /// Reads the plant and publishes a measurement (`state` or `position`).
+    Sensor,
+    /// Turns `position` measurements into a `state` estimate ([`crate::graph::estimator`]).
+    Estimator,
+    /// Runs a brain on `state` and publishes a `force` command.
+    Policy,
+    /// Clamps a `force` command to `max_force_n` and republishes it.
+    Safety,
+    /// Applies the newest `force` (zero-order hold) and steps the plant; exactly one.
+    Actuator,
+}
+
+impl NodeKind {
+    /// The kind's name as the file spells it.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            NodeKind::Sensor => "sensor",
+            NodeKind::Estimator => "estimator",
+            NodeKind::Policy => "policy",
+            NodeKind::Safety => "safety",
+            NodeKind::Actuator => "actuator",
+        }
+    }
+    /// The message types this kind may read (none for a sensor) and publish (none for the
+    /// actuator).
+    fn shape(self) -> (Option<MsgType>, &'static [MsgType]) {
+        match self {
+            NodeKind::Sensor => (None, &[MsgType::State, MsgType::Position]),
+            NodeKind::Estimator => (Some(MsgType::Position), &[MsgType::State]),
+            NodeKind::Policy => (Some(MsgType::State), &[MsgType::Force]),
+            NodeKind::Safety => (Some(MsgType::Force), &[MsgType::Force]),
+            NodeKind::Actuator => (Some(MsgType::Force), &[]),
+        }
+    }
+}
+
+/// What a topic carries.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum MsgType {
+    /// The full state as the chapter's observation: `float32[5]` = cart position m, cart
+    /// velocity m/s, cos θ, sin θ, pole angular velocity rad/s.
+    State,
+    /// A position measurement: cart position m and pole angle rad (no velocities).
+    Position,
+    /// A force command on the cart, newtons (the motor's range is ±[`GEAR_N`]).
+    Force,
+}
+
+impl MsgType {
+    /// The type's name as the file spells it.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            MsgType::State => "state",
+            MsgType::Position => "position",
+            MsgType::Force => "force",
+        }
+    }
+}
+
+/// Index of a node in [`GraphSpec::nodes`], which is the tie-break order.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
+pub struct NodeId(pub usize);
+
+/// Index of a topic in [`GraphSpec::topics`] (file order).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
+pub struct TopicId(pub usize);
+
+/// A node's kind-specific parameters (all optional in the file; defaults below).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize, Default)]
+pub struct NodeParams {
+    /// Sensor: standard deviation of Gaussian noise on the cart position, m (default 0).
+    pub noise_pos_m: f64,
+    /// Sensor: standard deviation of Gaussian noise on the pole angle, rad (default 0).
+    pub noise_angle_rad: f64,
+    /// Estimator: cut-off of the first-order low-pass on the velocities, Hz (default 10).
+    pub cutoff_hz: f64,
+    /// Safety: the largest force magnitude passed on, N (default the motor's 10 N).
+    pub max_force_n: f64,
+}
+
+/// One node of a validated graph.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct NodeSpec {
+    /// Unique name.
+    pub name: String,
+    /// What it does.
+    pub kind: NodeKind,
+    /// Rate at the start of a run, Hz, in (0, 10 000].
+    pub rate_hz: f64,
+    /// The explicit tie-break priority, if the file gave one.
+    pub priority: Option<i64>,
+    /// The topic it reads, if any.
+    pub subscribes: Option<TopicId>,
+    /// The topic it publishes, if any.
+    pub publishes: Option<TopicId>,
+    /// Kind parameters.
+    pub params: NodeParams,
+}
+
+/// One topic of a validated graph.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct TopicSpec {
+    /// Name, by convention starting with `/`.
+    pub name: String,
+    /// Message type.
+    pub msg: MsgType,
+    /// History depth at the start of a run (keep-last), ≥ 1.
+    pub depth: usize,
+    /// The one publisher.
+    pub publisher: NodeId,
+    /// The subscriber, if any.
+    pub subscriber: Option<NodeId>,
+}
+
+/// The chapter's roles in any valid graph: the chain that ends at the actuator. The
+/// chapter's flags (`--sensor-hz`, `--control-hz`) and `metrics.json`'s flat keys
+/// (`obs_*`, `action_*`) speak of these.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Chain {
+    /// The sensor at the head of the actuator's chain.
+    pub sensor: NodeId,
+    /// The policy that drives the actuator (through any safety nodes).
+    pub policy: NodeId,
+    /// The actuator.
+    pub actuator: NodeId,
+    /// The topic the policy reads (`/obs` in the chapter).
+    pub obs: TopicId,
+    /// The topic the policy publishes (`/action` in the chapter).
+    pub action: TopicId,
+}
+
+/// A parsed, validated graph; nodes in tie-break order.
+#[derive(Clone, Debug, PartialEq)]
+pub struct GraphSpec {
+    /// The graph's name.
+    pub name: String,
+    /// Nodes, in tie-break order ([`NodeId`] indexes this).
+    pub nodes: Vec<NodeSpec>,
+    /// Topics, in file order ([`TopicId`] indexes this).
+    pub topics: Vec<TopicSpec>,
+    /// The chapter's roles.
+    pub chain: Chain,
+}
+
+/// A graph file that cannot be used: one line `FILE:LINE:COL: reason`.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("{origin}:{line}:{col}: {reason}")]
+pub struct SpecError {
+    /// The file (or what stands for it, e.g. a session log's run).
+    pub origin: String,
+    /// 1-based line.
+    pub line: usize,
+    /// 1-based column (characters).
+    pub col: usize,
+    /// What is wrong.
+    pub reason: String,
+}
+
+/// A change to a graph's settings that cannot be made (a `--rate`/`--depth` override, a
+/// lab key): one line naming the node or topic.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("{0}")]
+pub struct OverrideError(pub String);
+
+// ---- the file, as serde reads it ------------------------------------------------------
+
+#[derive(Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+struct RawGraph {
+    name: Option<Spanned<String>>,
+    #[serde(default, rename = "node")]
+    nodes: Vec<Spanned<RawNode>>,
+    #[serde(default, rename = "topic")]
+    topics: Vec<Spanned<RawTopic>>,
+}
+
+#[derive(Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+struct RawNode {
+    name: Spanned<String>,
+    kind: Spanned<NodeKind>,
+    rate_hz: Spanned<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    priority: Option<Spanned<i64>>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    subscribes: Option<Spanned<String>>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    publishes: Option<Spanned<String>>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    noise_pos_m: Option<Spanned<f64>>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    noise_angle_rad: Option<Spanned<f64>>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    cutoff_hz: Option<Spanned<f64>>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    max_force_n: Option<Spanned<f64>>,
+}
+
+#[derive(Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+struct RawTopic {
+    name: Spanned<String>,
+    #[serde(rename = "type")]
+    msg: Spanned<MsgType>,
+    depth: Spanned<i64>,
+}
+
+/// Byte offset → 1-based (line, column in characters).
+fn line_col(text: &str, offset: usize) -> (usize, usize) {
+    let offset = offset.min(text.len());
+    let before = text.get(..offset).unwrap_or(text);
+    let line = before.matches('\n').count() + 1;
+    let col = before.rsplit('\n').next().map_or(0, |l| l.chars().count()) + 1;
+    (line, col)
+}
+
+struct Ctx<'a> {
+    origin: &'a str,
+    text: &'a str,
+}
+
+impl Ctx<'_> {
+    fn err(&self, span: Range<usize>, reason: impl Into<String>) -> SpecError {
+        let (line, col) = line_col(self.text, span.start);
+        SpecError {
+            origin: self.origin.to_string(),
+            line,
+            col,
+            reason: reason.into(),
+        }
+    }
+}
+
+fn check_rate_hz(hz: f64) -> Result<(), String> {
+    period_for_hz(hz)
+        .map(|_| ())
+        .map_err(|_| format!("rate_hz must be a finite rate in (0, {MAX_HZ}] Hz, got {hz}"))
+}
+
+fn check_actuator_rate(hz: f64) -> Result<(), String> {
+    if hz == ACTUATOR_HZ {
+        Ok(())
+    } else {
+        Err(format!(
+            "the actuator steps the plant 20 ms per tick, so its rate must be {ACTUATOR_HZ} Hz, got {hz}"
+        ))
+    }
+}
+
+fn check_depth(depth: i64) -> Result<usize, String> {
+    match usize::try_from(depth) {
+        Ok(d) if (1..=MAX_DEPTH).contains(&d) => Ok(d),
+        _ => Err(format!("depth must be in 1..={MAX_DEPTH}, got {depth}")),
+    }
+}
+
+impl GraphSpec {
+    /// The chapter's three-node graph (`graphs/cartpole.toml`, compiled in).
+    pub fn chapter() -> GraphSpec {
+        GraphSpec::parse(DEFAULT_GRAPH_TOML, DEFAULT_GRAPH_ORIGIN)
+            .expect("the shipped default graph is valid")
+    }
+
+    /// Read a graph file: refused when it is not a regular file or is larger than
+    /// [`MAX_FILE_BYTES`], then parsed as [`GraphSpec::parse`].
+    ///
+    /// # Errors
+    /// A [`SpecError`] (line 1, column 1 for file-level problems).
+    pub fn load(path: &Path) -> Result<GraphSpec, SpecError> {
+        let origin = path.display().to_string();
+        let at_start = |reason: String| SpecError {
+            origin: origin.clone(),
+            line: 1,
+            col: 1,
+            reason,
+        };
+        let meta = std::fs::metadata(path).map_err(|e| at_start(format!("cannot read: {e}")))?;
+        if !meta.is_file() {
+            return Err(at_start("not a regular file".into()));
+        }
+        if meta.len() > MAX_FILE_BYTES {
+            return Err(at_start(format!(
+                "{} bytes: a graph file is at most {MAX_FILE_BYTES} bytes",
+                meta.len()
+            )));
+        }
+        let mut text = String::new();
+        use std::io::Read;
+        std::fs::File::open(path)
+            .and_then(|f| f.take(MAX_FILE_BYTES + 1).read_to_string(&mut text))
+            .map_err(|e| at_start(format!("cannot read: {e}")))?;
+        GraphSpec::parse(&text, &origin)
+    }
+
+    /// Parse and validate graph-file `text`; `origin` names it in errors.
+    ///
+    /// # Errors
+    /// The first broken rule, as a [`SpecError`] at the culprit's position.
+    pub fn parse(text: &str, origin: &str) -> Result<GraphSpec, SpecError> {
+        let cx = Ctx { origin, text };
+        let raw: RawGraph = toml::from_str(text).map_err(|e| {
+            let span = e.span().unwrap_or(0..0);
+            let msg = e.message().lines().next().unwrap_or("invalid TOML").trim();
+            cx.err(span, msg.to_string())
+        })?;
+        build(&cx, raw)
+    }
+
+    /// The graph as a graph file (TOML) that [`GraphSpec::parse`] reads back to an equal
+    /// spec, with the current rates and depths. Session logs store this text, so a replay
+    /// does not depend on the file it came from.
+    pub fn to_toml(&self) -> String {
+        let s = |v: String| Spanned::new(0..0, v);
+        let f = |v: f64| Spanned::new(0..0, v);
+        let topic_name = |t: Option<TopicId>| t.map(|t| s(self.topics[t.0].name.clone()));
+        let raw = RawGraph {
+            name: Some(s(self.name.clone())),
+            nodes: self
+                .nodes
+                .iter()
+                .map(|n| {
+                    let p = &n.params;
+                    let sensor = n.kind == NodeKind::Sensor;
+                    Spanned::new(
+                        0..0,
+                        RawNode {
+                            name: s(n.name.clone()),
+                            kind: Spanned::new(0..0, n.kind),
+                            rate_hz: f(n.rate_hz),
+                            priority: n.priority.map(|p| Spanned::new(0..0, p)),
+                            subscribes: topic_name(n.subscribes),
+                            publishes: topic_name(n.publishes),
+                            noise_pos_m: (sensor && p.noise_pos_m != 0.0).then(|| f(p.noise_pos_m)),
+                            noise_angle_rad: (sensor && p.noise_angle_rad != 0.0)
+                                .then(|| f(p.noise_angle_rad)),
+                            cutoff_hz: (n.kind == NodeKind::Estimator).then(|| f(p.cutoff_hz)),
+                            max_force_n: (n.kind == NodeKind::Safety).then(|| f(p.max_force_n)),
+                        },
+                    )
+                })
+                .collect(),
+            topics: self
+                .topics
+                .iter()
+                .map(|t| {
+                    Spanned::new(
+                        0..0,
+                        RawTopic {
+                            name: s(t.name.clone()),
+                            msg: Spanned::new(0..0, t.msg),
+                            depth: Spanned::new(0..0, t.depth as i64),
+                        },
+                    )
+                })
+                .collect(),
+        };
+        toml::to_string(&raw).expect("a graph always serializes")
+    }
+
+    /// The node named `name`.
+    pub fn node_id(&self, name: &str) -> Option<NodeId> {
+        self.nodes.iter().position(|n| n.name == name).map(NodeId)
+    }
+
+    /// The topic named `name`.
+    pub fn topic_id(&self, name: &str) -> Option<TopicId> {
+        self.topics.iter().position(|t| t.name == name).map(TopicId)
+    }
+
+    /// Node `id`.
+    pub fn node(&self, id: NodeId) -> &NodeSpec {
+        &self.nodes[id.0]
+    }
+
+    /// Topic `id`.
+    pub fn topic(&self, id: TopicId) -> &TopicSpec {
+        &self.topics[id.0]
+    }
+
+    /// Set node `name`'s rate, under the file's rules.
+    ///
+    /// # Errors
+    /// [`OverrideError`] for an unknown node or a rate the node cannot take.
+    pub fn set_rate(&mut self, name: &str, hz: f64) -> Result<(), OverrideError> {
+        let id = self.node_id(name).ok_or_else(|| {
+            OverrideError(format!(
+                "graph '{}' has no node '{name}' (nodes: {})",
+                self.name,
+                self.node_names().join(", ")
+            ))
+        })?;
+        self.set_rate_of(id, hz)
+    }
+
+    /// Set node `id`'s rate, under the file's rules.
+    ///
+    /// # Errors
+    /// [`OverrideError`] for a rate the node cannot take.
+    pub fn set_rate_of(&mut self, id: NodeId, hz: f64) -> Result<(), OverrideError> {
+        let node = &mut self.nodes[id.0];
+        check_rate_hz(hz).map_err(|e| OverrideError(format!("node '{}': {e}", node.name)))?;
+        if node.kind == NodeKind::Actuator {
+            check_actuator_rate(hz).map_err(OverrideError)?;
+        }
+        node.rate_hz = hz;
+        Ok(())
+    }
+
+    /// Set topic `name`'s history depth.
+    ///
+    /// # Errors
+    /// [`OverrideError`] for an unknown topic or a depth outside 1..=[`MAX_DEPTH`].
+    pub fn set_depth(&mut self, name: &str, depth: usize) -> Result<(), OverrideError> {
+        let id = self.topic_id(name).ok_or_else(|| {
+            OverrideError(format!(
+                "graph '{}' has no topic '{name}' (topics: {})",
+                self.name,
+                self.topics
+                    .iter()
+                    .map(|t| t.name.as_str())
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ))
+        })?;
+        let d = check_depth(i64::try_from(depth).unwrap_or(i64::MAX))
+            .map_err(|e| OverrideError(format!("topic '{name}': {e}")))?;
+        self.topics[id.0].depth = d;
+        Ok(())
+    }
+
+    /// Set every topic's depth (the chapter's `--queue-depth`).
+    ///
+    /// # Errors
+    /// [`OverrideError`] for a depth outside 1..=[`MAX_DEPTH`] (nothing changes).
+    pub fn set_all_depths(&mut self, depth: usize) -> Result<(), OverrideError> {
+        check_depth(i64::try_from(depth).unwrap_or(i64::MAX))
+            .map_err(|e| OverrideError(format!("--queue-depth: {e}")))?;
+        for t in &mut self.topics {
+            t.depth = depth;
+        }
+        Ok(())
+    }
+
+    /// Node names in tie-break order.
+    pub fn node_names(&self) -> Vec<&str> {
+        self.nodes.iter().map(|n| n.name.as_str()).collect()
+    }
+
+    /// The chain's policy rate (the chapter's control rate), Hz.
+    pub fn control_hz(&self) -> f64 {
+        self.node(self.chain.policy).rate_hz
+    }
+
+    /// The chain's sensor rate, Hz.
+    pub fn sensor_hz(&self) -> f64 {
+        self.node(self.chain.sensor).rate_hz
+    }
+
+    /// The actuator's rate, Hz.
+    pub fn actuator_hz(&self) -> f64 {
+        self.node(self.chain.actuator).rate_hz
+    }
+
+    /// The depth of the policy's input topic (the chapter's one queue depth), at the start.
+    pub fn queue_depth(&self) -> usize {
+        self.topic(self.chain.obs).depth
+    }
+
+    /// Layers for drawing left to right: a node's layer is one more than its publisher's
+    /// (sensors at 0), following subscriptions; nodes in a cycle stay where they were reached.
+    pub fn layers(&self) -> Vec<usize> {
+        let mut layer = vec![0usize; self.nodes.len()];
+        // Longest path over at most MAX_NODES relaxations; a cycle stops growing at the bound.
+        for _ in 0..self.nodes.len() {
+            for (i, n) in self.nodes.iter().enumerate() {
+                if let Some(t) = n.subscribes {
+                    let p = self.topics[t.0].publisher.0;
+                    if p != i {
+                        layer[i] = layer[i].max((layer[p] + 1).min(self.nodes.len() - 1));
+                    }
+                }
+            }
+        }
+        layer
+    }
+}
+
+/// Validate `raw` into a spec.
+fn build(cx: &Ctx<'_>, raw: RawGraph) -> Result<GraphSpec, SpecError> {
+    let whole = 0..0;
+    let name = raw
+        .name
+        .as_ref()
+        .map_or_else(|| "graph".to_string(), |n| n.get_ref().clone());
+    if let Some(n) = &raw.name {
+        if n.get_ref().trim().is_empty() || n.get_ref().len() > 64 {
+            return Err(cx.err(n.span(), "name must be 1 to 64 characters"));
+        }
+    }
+    if raw.nodes.len() > MAX_NODES {
+        return Err(cx.err(
+            raw.nodes[MAX_NODES].span(),
+            format!("a graph has at most {MAX_NODES} nodes"),
+        ));
+    }
+    if raw.nodes.is_empty() {
+        return Err(cx.err(
+            whole,
+            "no [[node]]: a graph needs at least a sensor, a policy and an actuator",
+        ));
+    }
+
+    // Topics first: names, types, depths.
+    let mut topics: Vec<TopicSpec> = Vec::new();
+    let mut topic_spans = Vec::new();
+    for t in &raw.topics {
+        let t_ref = t.get_ref();
+        let tname = t_ref.name.get_ref();
+        if !valid_topic_name(tname) {
+            return Err(cx.err(
+                t_ref.name.span(),
+                format!("topic name '{tname}' must start with '/' and use only letters, digits, '_' and '/' (at most 64 characters)"),
+            ));
+        }
+        if topics.iter().any(|x| x.name == *tname) {
+            return Err(cx.err(t_ref.name.span(), format!("duplicate topic '{tname}'")));
+        }
+        let depth =
+            check_depth(*t_ref.depth.get_ref()).map_err(|e| cx.err(t_ref.depth.span(), e))?;
+        topics.push(TopicSpec {
+            name: tname.clone(),
+            msg: *t_ref.msg.get_ref(),
+            depth,
+            publisher: NodeId(usize::MAX),
+            subscriber: None,
+        });
+        topic_spans.push(t_ref.name.span());
+    }
+    if topics.len() > MAX_TOPICS {
+        return Err(cx.err(
+            topic_spans[MAX_TOPICS].clone(),
+            format!("a graph has at most {MAX_TOPICS} topics"),
+        ));
+    }
+    let find_topic = |topics: &[TopicSpec], r: &Spanned<String>| -> Result<usize, SpecError> {
+        topics
+            .iter()
+            .position(|t| t.name == *r.get_ref())
+            .ok_or_else(|| {
+                cx.err(
+                    r.span(),
+                    format!(
+                        "unknown topic '{}': declare it in a [[topic]] table",
+                        r.get_ref()
+                    ),
+                )
+            })
+    };
+
+    // Nodes in file order.
+    let mut file_nodes: Vec<NodeSpec> = Vec::new();
+    let mut node_spans = Vec::new();
+    let mut actuators = Vec::new();
+    for n in &raw.nodes {
+        let r = n.get_ref();
+        let nname = r.name.get_ref();
+        if !valid_node_name(nname) {
+            return Err(cx.err(
+                r.name.span(),
+                format!("node name '{nname}' must be 1 to 32 letters, digits, '_' or '-'"),
+            ));
+        }
+        if file_nodes.iter().any(|x| x.name == *nname) {
+            return Err(cx.err(r.name.span(), format!("duplicate node '{nname}'")));
+        }
+        let kind = *r.kind.get_ref();
+        let hz = *r.rate_hz.get_ref();
+        check_rate_hz(hz).map_err(|e| cx.err(r.rate_hz.span(), e))?;
+        if kind == NodeKind::Actuator {
+            check_actuator_rate(hz).map_err(|e| cx.err(r.rate_hz.span(), e))?;
+            actuators.push(r.name.span());
+        }
+        let id = NodeId(file_nodes.len());
+        let (reads, writes) = kind.shape();
+        let subscribes = match (&r.subscribes, reads) {
+            (None, Some(want)) => {
+                return Err(cx.err(
+                    r.name.span(),
+                    format!(
+                        "a {} node must subscribe to a {} topic",
+                        kind.as_str(),
+                        want.as_str()
+                    ),
+                ))
+            }
+            (Some(s), None) => {
+                return Err(cx.err(
+                    s.span(),
+                    format!("a {} node subscribes to nothing", kind.as_str()),
+                ))
+            }
+            (None, None) => None,
+            (Some(s), Some(want)) => {
+                let ti = find_topic(&topics, s)?;
+                let t = &mut topics[ti];
+                if t.msg != want {
+                    return Err(cx.err(
+                        s.span(),
+                        format!(
+                            "type mismatch: '{}' carries {} but a {} node reads {}",
+                            t.name,
+                            t.msg.as_str(),
+                            kind.as_str(),
+                            want.as_str()
+                        ),
+                    ));
+                }
+                if let Some(other) = t.subscriber {
+                    return Err(cx.err(
+                        s.span(),
+                        format!(
+                            "topic '{}' already has a subscriber ('{}'): one subscriber per topic",
+                            t.name, file_nodes[other.0].name
+                        ),
+                    ));
+                }
+                t.subscriber = Some(id);
+                Some(TopicId(ti))
+            }
+        };
+        let publishes = match (&r.publishes, writes.is_empty()) {
+            (None, false) => {
+                return Err(cx.err(
+                    r.name.span(),
+                    format!("a {} node must publish a topic", kind.as_str()),
+                ))
+            }
+            (Some(p), true) => {
+                return Err(cx.err(
+                    p.span(),
+                    format!("a {} node publishes nothing", kind.as_str()),
+                ))
+            }
+            (None, true) => None,
+            (Some(p), false) => {
+                let ti = find_topic(&topics, p)?;
+                let t = &mut topics[ti];
+                if !writes.contains(&t.msg) {
+                    let names: Vec<&str> = writes.iter().map(|m| m.as_str()).collect();
+                    return Err(cx.err(
+                        p.span(),
+                        format!(
+                            "type mismatch: '{}' carries {} but a {} node publishes {}",
+                            t.name,
+                            t.msg.as_str(),
+                            kind.as_str(),
+                            names.join(" or ")
+                        ),
+                    ));
+                }
+                if t.publisher.0 != usize::MAX {
+                    return Err(cx.err(
+                        p.span(),
+                        format!(
+                            "topic '{}' already has a publisher ('{}'): one publisher per topic",
+                            t.name, file_nodes[t.publisher.0].name
+                        ),
+                    ));
+                }
+                t.publisher = id;
+                Some(TopicId(ti))
+            }
+        };
+        let params = node_params(cx, kind, r)?;
+        file_nodes.push(NodeSpec {
+            name: nname.clone(),
+            kind,
+            rate_hz: hz,
+            priority: r.priority.as_ref().map(|p| *p.get_ref()),
+            subscribes,
+            publishes,
+            params,
+        });
+        node_spans.push(r.name.span());
+    }
+    match actuators.len() {
+        1 => {}
+        0 => {
+            return Err(cx.err(
+                whole,
+                "no actuator: a graph needs exactly one (it steps the plant)",
+            ))
+        }
+        _ => {
+            return Err(cx.err(
+                actuators[1].clone(),
+                "a second actuator: a graph has exactly one (it steps the plant)",
+            ))
+        }
+    }
+    for (i, t) in topics.iter().enumerate() {
+        if t.publisher.0 == usize::MAX {
+            let why = if t.subscriber.is_some() {
+                "has a subscriber but no publisher"
+            } else {
+                "is declared but no node publishes it"
+            };
+            return Err(cx.err(topic_spans[i].clone(), format!("topic '{}' {why}", t.name)));
+        }
+    }
+
+    // Tie-break order: topological, explicit priorities override.
+    let order = tie_break_order(&file_nodes, &topics).map_err(|cycle| {
+        let first = cycle[0];
+        let path: Vec<String> = cycle
+            .iter()
+            .chain(std::iter::once(&first))
+            .map(|&i| file_nodes[i].name.clone())
+            .collect();
+        cx.err(
+            node_spans[first].clone(),
+            format!(
+                "cycle {}: give one of its nodes an explicit `priority`",
+                path.join(" → ")
+            ),
+        )
+    })?;
+    let mut new_index = vec![0usize; file_nodes.len()];
+    for (new, &old) in order.iter().enumerate() {
+        new_index[old] = new;
+    }
+    let nodes: Vec<NodeSpec> = order.iter().map(|&i| file_nodes[i].clone()).collect();
+    for t in &mut topics {
+        t.publisher = NodeId(new_index[t.publisher.0]);
+        t.subscriber = t.subscriber.map(|s| NodeId(new_index[s.0]));
+    }
+    let mut spec = GraphSpec {
+        name,
+        nodes,
+        topics,
+        chain: Chain {
+            sensor: NodeId(0),
+            policy: NodeId(0),
+            actuator: NodeId(0),
+            obs: TopicId(0),
+            action: TopicId(0),
+        },
+    };
+    spec.chain = find_chain(&spec).map_err(|reason| {
+        let at = node_spans[order[spec_actuator(&spec).0]].clone();
+        cx.err(at, reason)
+    })?;
+    Ok(spec)
+}
+
+fn spec_actuator(spec: &GraphSpec) -> NodeId {
+    NodeId(
+        spec.nodes
+            .iter()
+            .position(|n| n.kind == NodeKind::Actuator)
+            .unwrap_or(0),
+    )
+}
+
+/// Walk upstream from the actuator: safety nodes, the policy, an estimator, the sensor.
+fn find_chain(spec: &GraphSpec) -> Result<Chain, String> {
+    let actuator = spec_actuator(spec);
+    let upstream = |n: NodeId| -> Option<(TopicId, NodeId)> {
+        let t = spec.nodes[n.0].subscribes?;
+        Some((t, spec.topics[t.0].publisher))
+    };
+    let mut cur = actuator;
+    let mut action = None;
+    let mut seen = 0;
+    let (policy, action) = loop {
+        let (t, p) = upstream(cur).ok_or("the actuator is not driven by a policy")?;
+        seen += 1;
+        if seen > MAX_NODES {
+            return Err(
+                "the actuator's input chain loops through safety nodes and never reaches a policy"
+                    .into(),
+            );
+        }
+        match spec.nodes[p.0].kind {
+            NodeKind::Policy => break (p, action.unwrap_or(t)),
+            NodeKind::Safety => {
+                action = Some(t);
+                cur = p;
+            }
+            _ => return Err("the actuator is not driven by a policy".into()),
+        }
+    };
+    // `action` is the policy's output: the topic just downstream of it.
+    let action = spec.nodes[policy.0].publishes.unwrap_or(action);
+    let (obs, mut src) = upstream(policy).ok_or("the policy reads nothing")?;
+    if spec.nodes[src.0].kind == NodeKind::Estimator {
+        src = upstream(src).ok_or("the estimator reads nothing")?.1;
+    }
+    Ok(Chain {
+        sensor: src,
+        policy,
+        actuator,
+        obs,
+        action,
+    })
+}
+
+/// A topological order (Kahn; ready nodes in file order), with explicit priorities
+/// overriding. Err: the nodes left in a cycle.
+fn tie_break_order(nodes: &[NodeSpec], topics: &[TopicSpec]) -> Result<Vec<usize>, Vec<usize>> {
+    let n = nodes.len();
+    let mut indegree = vec![0usize; n];
+    let mut edges: Vec<(usize, usize)> = Vec::new();
+    for t in topics {
+        if let Some(s) = t.subscriber {
+            if nodes[s.0].priority.is_none() {
+                edges.push((t.publisher.0, s.0));
+                indegree[s.0] += 1;
+            }
+        }
+    }
+    let mut placed = vec![false; n];
+    let mut topo = Vec::with_capacity(n);
+    while topo.len() < n {
+        let Some(next) = (0..n).find(|&i| !placed[i] && indegree[i] == 0) else {
+            // Every unplaced node waits on another: report a cycle through the first.
+            let start = (0..n).find(|&i| !placed[i]).expect("some node is unplaced");
+            let mut cycle = vec![start];
+            let mut cur = start;
+            loop {
+                let prev = edges
+                    .iter()
+                    .find(|&&(from, to)| to == cur && !placed[from])
+                    .map(|&(from, _)| from)
+                    .expect("an unplaced node with indegree > 0 has an unplaced publisher");
+                if let Some(pos) = cycle.iter().position(|&c| c == prev) {
+                    // Collected against the flow (subscriber ← publisher): reverse it, and
+                    // start at the node that comes first in the file.
+                    let mut c = cycle.split_off(pos);
+                    c.reverse();
+                    let first = (0..c.len()).min_by_key(|&i| c[i]).unwrap_or(0);
+                    c.rotate_left(first);
+                    return Err(c);
+                }
+                cycle.push(prev);
+                cur = prev;
+            }
+        };
+        placed[next] = true;
+        topo.push(next);
+        for &(from, to) in &edges {
+            if from == next {
+                indegree[to] -= 1;
+            }
+        }
+    }
+    let mut pos = vec![0usize; n];
+    for (p, &i) in topo.iter().enumerate() {
+        pos[i] = p;
+    }
+    let mut order = topo.clone();
+    order.sort_by_key(|&i| (nodes[i].priority.unwrap_or(pos[i] as i64), pos[i]));
+    Ok(order)
+}
+
+fn node_params(cx: &Ctx<'_>, kind: NodeKind, r: &RawNode) -> Result<NodeParams, SpecError> {
+    let only =
+        |field: &Option<Spanned<f64>>, name: &str, owner: NodeKind| -> Result<(), SpecError> {
+            match field {
+                Some(v) if kind != owner => Err(cx.err(
+                    v.span(),
+                    format!(
+                        "'{name}' is a parameter of {} nodes, not of a {} node",
+                        owner.as_str(),
+                        kind.as_str()
+                    ),
+                )),
+                _ => Ok(()),
+            }
+        };
+    only(&r.noise_pos_m, "noise_pos_m", NodeKind::Sensor)?;
+    only(&r.noise_angle_rad, "noise_angle_rad", NodeKind::Sensor)?;
+    only(&r.cutoff_hz, "cutoff_hz", NodeKind::Estimator)?;
+    only(&r.max_force_n, "max_force_n", NodeKind::Safety)?;
+    let value =
+        |field: &Option<Spanned<f64>>, default: f64, range: Range<f64>, what: &str| match field {
+            None => Ok(default),
+            Some(v) => {
+                let x = *v.get_ref();
+                if x.is_finite() && x >= range.start && x <= range.end {
+                    Ok(x)
+                } else {
+                    Err(cx.err(
+                        v.span(),
+                        format!(
+                            "{what} must be in [{}, {}], got {x}",
+                            range.start, range.end
+                        ),
+                    ))
+                }
+            }
+        };
+    Ok(NodeParams {
+        noise_pos_m: value(&r.noise_pos_m, 0.0, 0.0..1.0, "noise_pos_m (m)")?,
+        noise_angle_rad: value(&r.noise_angle_rad, 0.0, 0.0..0.5, "noise_angle_rad (rad)")?,
+        cutoff_hz: value(&r.cutoff_hz, 10.0, 0.01..MAX_HZ, "cutoff_hz (Hz)")?,
+        max_force_n: value(&r.max_force_n, GEAR_N, 0.0..GEAR_N, "max_force_n (N)")?,
+    })
+}
+
+fn valid_node_name(s: &str) -> bool {
+    (1..=32).contains(&s.len())
+        && s.chars()
+            .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-')
+}
+
+fn valid_topic_name(s: &str) -> bool {
+    (2..=64).contains(&s.len())
+        && s.starts_with('/')
+        && s.chars()
+            .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '/')
+}
+
+impl fmt::Display for GraphSpec {
+    /// One line: `cartpole: sensor 50 Hz → /obs → policy 50 Hz → …` in tie-break order.
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}:", self.name)?;
+        for (i, n) in self.nodes.iter().enumerate() {
+            write!(
+                f,
+                "{} {} {} Hz",
+                if i == 0 { "" } else { " |" },
+                n.name,
+                n.rate_hz
+            )?;
+            if let Some(t) = n.publishes {
+                write!(f, " → {}", self.topics[t.0].name)?;
+            }
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn parse(text: &str) -> Result<GraphSpec, SpecError> {
+        GraphSpec::parse(text, "g.toml")
+    }
+
+    const CHAIN: &str = r#"
+name = "t"
+[[node]]
+name = "actuator"
+kind = "actuator"
+rate_hz = 50
+subscribes = "/action"
+[[node]]
+name = "policy"
+kind = "policy"
+rate_hz = 50
+subscribes = "/obs"
+publishes = "/action"
+[[node]]
+name = "sensor"
+kind = "sensor"
+rate_hz = 50
+publishes = "/obs"
+[[topic]]
+name = "/obs"
+type = "state"
+depth = 1
+[[topic]]
+name = "/action"
+type = "force"
+depth = 1
+"#;
+
+    #[test]
+    fn the_default_graph_orders_sensor_policy_actuator() {
+        let g = GraphSpec::chapter();
+        assert_eq!(g.node_names(), ["sensor", "policy", "actuator"]);
+        assert_eq!(g.chain.obs, g.topic_id("/obs").unwrap());
+        assert_eq!(g.chain.action, g.topic_id("/action").unwrap());
+        assert_eq!(
+            (g.sensor_hz(), g.control_hz(), g.actuator_hz()),
+            (50.0, 50.0, 50.0)
+        );
+        assert_eq!(g.queue_depth(), 1);
+    }
+
+    #[test]
+    fn file_order_does_not_change_the_topological_order() {
+        let g = parse(CHAIN).unwrap();
+        assert_eq!(g.node_names(), ["sensor", "policy", "actuator"]);
+        assert_eq!(g.layers(), vec![0, 1, 2]);
+    }
+
+    #[test]
+    fn explicit_priority_overrides() {
+        let text = CHAIN.replace(
+            "name = \"actuator\"\nkind = \"actuator\"",
+            "name = \"actuator\"\nkind = \"actuator\"\npriority = -1",
+        );
+        let g = parse(&text).unwrap();
+        assert_eq!(g.node_names(), ["actuator", "sensor", "policy"]);
+    }
+
+    #[test]
+    fn round_trips_through_toml() {
+        for text in [DEFAULT_GRAPH_TOML, CHAIN] {
+            let g = parse(text).unwrap();
+            let back = GraphSpec::parse(&g.to_toml(), "again").unwrap();
+            assert_eq!(g, back);
+        }
+    }
+
+    #[test]
+    fn errors_point_at_the_culprit() {
+        let e = parse(&CHAIN.replace("kind = \"policy\"", "kind = \"planner\"")).unwrap_err();
+        assert_eq!((e.line, e.col), (10, 8), "{e}");
+        assert!(e.reason.contains("unknown variant"), "{e}");
+        let e = parse(&CHAIN.replace("depth = 1\n[[topic]]", "depth = 0\n[[topic]]")).unwrap_err();
+        assert_eq!(e.line, 22, "{e}");
+        assert!(
+            e.to_string().starts_with("g.toml:22:9: depth must be"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn overrides_follow_the_file_rules() {
+        let mut g = GraphSpec::chapter();
+        g.set_rate("policy", 5.0).unwrap();
+        assert_eq!(g.control_hz(), 5.0);
+        assert!(g.set_rate("policy", 0.0).is_err());
+        assert!(g
+            .set_rate("actuator", 40.0)
+            .unwrap_err()
+            .0
+            .contains("50 Hz"));
+        assert!(g
+            .set_rate("planner", 5.0)
+            .unwrap_err()
+            .0
+            .contains("no node 'planner'"));
+        g.set_depth("/obs", 100).unwrap();
+        assert_eq!(g.queue_depth(), 100);
+        assert!(g.set_depth("/obs", 0).is_err());
+        assert!(g.set_depth("/nope", 1).is_err());
+    }
+}

@@ -1,0 +1,104 @@
+//! Message types: what topics carry. Few, and named for what they carry (a graph file names
+//! them `state`, `position`, `force`; see [`crate::graph::spec::MsgType`]).
+//!
+//! [`AnyTopic`] is a topic of any of them, for the views that only count messages (metrics,
+//! the lab, recordings) and for changes that do not look inside (depth).
+
+use crate::graph::spec::MsgType;
+use crate::plant::Observation;
+use crate::topic::{Topic, TopicStats, ZeroDepth};
+use std::sync::Arc;
+
+/// The full state, as the chapter's observation: `float32[5]` = cart position m, cart
+/// velocity m/s, cos θ, sin θ, pole angular velocity rad/s.
+pub type StateMsg = Observation;
+
+/// A position measurement: what a sensor without velocity sensing reports.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PositionMsg {
+    /// Cart position, m.
+    pub cart_pos_m: f64,
+    /// Pole angle from upright, rad, in [-π, π).
+    pub pole_angle_rad: f64,
+}
+
+/// A force command on the cart, newtons. The motor's range is ±[`crate::graph::spec::GEAR_N`]
+/// (gear 10 on a control in [-1, 1]); the plant clips beyond it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ForceMsg {
+    /// Force, N (may be non-finite if a brain misbehaves; the actuator refuses those).
+    pub newtons: f64,
+}
+
+/// A topic of any message type.
+#[derive(Clone, Debug)]
+pub enum AnyTopic {
+    /// Carries [`StateMsg`].
+    State(Arc<Topic<StateMsg>>),
+    /// Carries [`PositionMsg`].
+    Position(Arc<Topic<PositionMsg>>),
+    /// Carries [`ForceMsg`].
+    Force(Arc<Topic<ForceMsg>>),
+}
+
+impl AnyTopic {
+    /// A new topic of type `msg`.
+    ///
+    /// # Errors
+    /// [`ZeroDepth`] for depth 0.
+    pub fn new(name: &str, msg: MsgType, depth: usize) -> Result<AnyTopic, ZeroDepth> {
+        Ok(match msg {
+            MsgType::State => AnyTopic::State(Arc::new(Topic::new(name, depth)?)),
+            MsgType::Position => AnyTopic::Position(Arc::new(Topic::new(name, depth)?)),
+            MsgType::Force => AnyTopic::Force(Arc::new(Topic::new(name, depth)?)),
+        })
+    }
+
+    /// Counters and depth.
+    pub fn stats(&self) -> TopicStats {
+        match self {
+            AnyTopic::State(t) => t.stats(),
+            AnyTopic::Position(t) => t.stats(),
+            AnyTopic::Force(t) => t.stats(),
+        }
+    }
+
+    /// Change the history depth (see [`Topic::set_depth`]).
+    ///
+    /// # Errors
+    /// [`ZeroDepth`] for 0.
+    pub fn set_depth(&self, depth: usize) -> Result<(), ZeroDepth> {
+        match self {
+            AnyTopic::State(t) => t.set_depth(depth),
+            AnyTopic::Position(t) => t.set_depth(depth),
+            AnyTopic::Force(t) => t.set_depth(depth),
+        }
+    }
+
+    /// Messages buffered now.
+    pub fn buffered(&self) -> usize {
+        match self {
+            AnyTopic::State(t) => t.buffered(),
+            AnyTopic::Position(t) => t.buffered(),
+            AnyTopic::Force(t) => t.buffered(),
+        }
+    }
+
+    /// Buffered messages no subscriber has seen yet (see [`Topic::unseen_buffered`]).
+    pub fn unseen_buffered(&self) -> usize {
+        match self {
+            AnyTopic::State(t) => t.unseen_buffered(),
+            AnyTopic::Position(t) => t.unseen_buffered(),
+            AnyTopic::Force(t) => t.unseen_buffered(),
+        }
+    }
+
+    /// The topic's name.
+    pub fn name(&self) -> &str {
+        match self {
+            AnyTopic::State(t) => t.name(),
+            AnyTopic::Position(t) => t.name(),
+            AnyTopic::Force(t) => t.name(),
+        }
+    }
+}

@@ -1,0 +1,289 @@
+//! The engine: owns the graph on its own thread, runs one run after another as the front
+//! end asks (reset, next seed, switch clock), applies and logs commands, streams telemetry.
+
+use super::log::{LoggedRun, SessionLog};
+use super::protocol::{describe, Control, Speed, Telemetry};
+use crate::checkpoint::load_policy;
+use crate::config::{ClockKind, RunConfig};
+use crate::graph::{GraphHandles, StepObserver};
+use crate::metrics::{Metrics, NodeTiming, StepRecord};
+use crate::policy::BrainSlot;
+use crate::recording::{RecordOptions, Recording};
+use crate::run::{build_graph, summarize, Command, TimedCommand};
+use crate::scheduler::RunEnd;
+use crate::time::Nanos;
+use crossbeam_channel::{Receiver, Sender};
+use std::path::PathBuf;
+
+/// How the lab's engine starts.
+#[derive(Clone, Debug)]
+pub struct SessionSettings {
+    /// The first run's settings (`duration` may be [`super::UNBOUNDED`]).
+    pub cfg: RunConfig,
+    /// The first run's brain spec.
+    pub policy: String,
+    /// The checkpoint the `p` key swaps with `scripted`, if one was given.
+    pub alt_policy: Option<String>,
+    /// Record each run (the first to this path; later ones get `-2`, `-3`, … suffixes).
+    pub record: Option<PathBuf>,
+    /// Stream recordings to a viewer as well.
+    pub spawn: bool,
+    /// Where to save the session log after every run and command.
+    pub session_file: Option<PathBuf>,
+    /// Start paused.
+    pub start_paused: bool,
+    /// Initial virtual speed.
+    pub speed: Speed,
+}
+
+/// Streams step records to the front end.
+struct TelemetryObserver(Sender<Telemetry>);
+
+impl StepObserver for TelemetryObserver {
+    fn on_step(&mut self, rec: &StepRecord) {
+        let _ = self.0.send(Telemetry::Step(*rec));
+    }
+}
+
+/// The engine: run sessions until [`Control::Quit`]; returns the session log.
+pub struct Engine {
+    pub(super) settings: SessionSettings,
+    pub(super) rx: Receiver<Control>,
+    pub(super) tx: Sender<Telemetry>,
+    log: SessionLog,
+    pub(super) speed: Speed,
+    run_index: usize,
+}
+
+/// What ended a run from the engine's side.
+pub(super) enum Next {
+    Reset { next_seed: bool },
+    SwitchClock,
+    Quit,
+}
+
+impl Engine {
+    /// A new engine; call [`Engine::run`] on its own thread.
+    pub fn new(settings: SessionSettings, rx: Receiver<Control>, tx: Sender<Telemetry>) -> Self {
+        let speed = settings.speed;
+        Self {
+            settings,
+            rx,
+            tx,
+            log: SessionLog::new(),
+            speed,
+            run_index: 0,
+        }
+    }
+
+    /// Spawn the engine on a thread named `engine`.
+    pub fn spawn(self) -> std::thread::JoinHandle<SessionLog> {
+        std::thread::Builder::new()
+            .name("engine".into())
+            .spawn(move || self.run())
+            .expect("spawning the engine")
+    }
+
+    fn save_log(&self) {
+        if let Some(p) = &self.settings.session_file {
+            if let Err(e) = self.log.save(p) {
+                let _ = self.tx.send(Telemetry::Error(format!(
+                    "cannot save session {}: {e}",
+                    p.display()
+                )));
+            }
+        }
+    }
+
+    /// Run until quit. Returns the session log.
+    pub fn run(mut self) -> SessionLog {
+        let mut cfg = self.settings.cfg.clone();
+        let mut policy = self.settings.policy.clone();
+        loop {
+            let next = match self.one_run(&cfg, &policy) {
+                Ok((next, graph, last_policy)) => {
+                    // The next run keeps the settings as the user left them.
+                    cfg.graph = graph;
+                    policy = last_policy;
+                    next
+                }
+                Err(e) => {
+                    let _ = self.tx.send(Telemetry::Error(e));
+                    // Wait for the user's decision.
+                    match self.rx.recv() {
+                        Ok(Control::Reset { next_seed }) => Next::Reset { next_seed },
+                        Ok(Control::SwitchClock) => Next::SwitchClock,
+                        _ => Next::Quit,
+                    }
+                }
+            };
+            match next {
+                Next::Quit => break,
+                Next::Reset { next_seed } => {
+                    if next_seed {
+                        cfg.seed += 1;
+                    }
+                }
+                Next::SwitchClock => cfg.clock = cfg.clock.other(),
+            }
+        }
+        self.save_log();
+        self.log
+    }
+
+    fn recording_path(&self) -> Option<PathBuf> {
+        let base = self.settings.record.as_ref()?;
+        if self.run_index == 1 {
+            return Some(base.clone());
+        }
+        let stem = base
+            .file_stem()
+            .map_or("run".into(), |s| s.to_string_lossy().into_owned());
+        Some(base.with_file_name(format!("{stem}-{}.rrd", self.run_index)))
+    }
+
+    /// One run; returns what the user asked next, and the graph (rates, depths) and brain
+    /// it ended with.
+    fn one_run(
+        &mut self,
+        cfg: &RunConfig,
+        policy: &str,
+    ) -> Result<(Next, crate::graph::GraphSpec, String), String> {
+        self.run_index += 1;
+        let brain = load_policy(policy).map_err(|e| e.to_string())?;
+        let recording = match self.recording_path() {
+            Some(path) => {
+                crate::recording::check_output_path(&path, true).map_err(|e| e.to_string())?;
+                let (r, notice) = Recording::create(
+                    &path,
+                    cfg,
+                    &brain.label(),
+                    &RecordOptions {
+                        spawn: self.settings.spawn,
+                    },
+                )
+                .map_err(|e| e.to_string())?;
+                if let Some(n) = notice {
+                    let _ = self.tx.send(Telemetry::Error(n));
+                }
+                Some(r)
+            }
+            None => None,
+        };
+        let mut observers: Vec<Box<dyn StepObserver>> =
+            vec![Box::new(TelemetryObserver(self.tx.clone()))];
+        if let Some(r) = &recording {
+            observers.push(r.observer());
+        }
+        let slot = BrainSlot::new(brain);
+        let graph = build_graph(cfg, slot, false, observers).map_err(|e| e.to_string())?;
+        let _ = self.tx.send(Telemetry::Started {
+            cfg: cfg.clone(),
+            policy: graph.handles.brain.label(),
+            recording: recording.as_ref().map(|r| r.path().to_path_buf()),
+        });
+        self.log.runs.push(LoggedRun::starting(cfg, policy));
+        self.save_log();
+        let handles = graph.handles.clone();
+        let (next, end, ticks, timing) = match cfg.clock {
+            ClockKind::Virtual => {
+                let (next, end, ticks) = self.virtual_run(cfg, graph, &recording);
+                (next, end, ticks, None)
+            }
+            ClockKind::Real => {
+                let (next, end, timing) = self.real_run(cfg, graph, &recording);
+                let ticks = timing.iter().flatten().map(|t| t.ticks).collect();
+                (next, end, ticks, timing)
+            }
+        };
+        let metrics = live_metrics(cfg, &handles, &end, &ticks, timing);
+        if let Some(r) = &recording {
+            let _ = r.finish(&metrics, &end);
+        }
+        let current = self.log.runs.last_mut().expect("pushed above");
+        current.end_ns = end.at.0;
+        current.metrics = Some(metrics);
+        let last_policy = self.current_policy_spec(policy);
+        self.save_log();
+        Ok((next, handles.current_spec(), last_policy))
+    }
+
+    fn current_policy_spec(&self, initial: &str) -> String {
+        let run = self.log.runs.last().expect("a run");
+        run.commands
+            .iter()
+            .rev()
+            .find_map(|c| match &c.command {
+                Command::SetPolicy { spec } => Some(spec.clone()),
+                _ => None,
+            })
+            .unwrap_or_else(|| initial.to_string())
+    }
+
+    pub(super) fn status(&self, now: Nanos, paused: bool, h: &GraphHandles) {
+        let _ = self.tx.send(Telemetry::Status {
+            now,
+            paused,
+            speed: self.speed,
+            rates: h.rates_hz(),
+            depths: h.topic_stats().as_slice().iter().map(|t| t.depth).collect(),
+            policy: h.brain.label(),
+        });
+    }
+
+    /// Apply a graph command, logging it at `at`. Returns false when it was refused.
+    pub(super) fn apply(
+        &mut self,
+        cmd: Command,
+        at: Nanos,
+        h: &GraphHandles,
+        recording: &Option<Recording>,
+    ) -> bool {
+        match cmd.apply(h) {
+            Ok(()) => {
+                let text = describe(&cmd);
+                if let Some(r) = recording {
+                    if let Command::SetPolicy { .. } = cmd {
+                        r.event(at, &text, "INFO");
+                    }
+                }
+                self.log
+                    .runs
+                    .last_mut()
+                    .expect("a run")
+                    .commands
+                    .push(TimedCommand {
+                        at_ns: at.0,
+                        command: cmd,
+                    });
+                self.save_log();
+                let _ = self.tx.send(Telemetry::Applied(text));
+                true
+            }
+            Err(e) => {
+                let _ = self.tx.send(Telemetry::Error(e));
+                false
+            }
+        }
+    }
+}
+
+/// The summary of a live run that ended at `end.at` (its duration, for an open-ended run).
+pub(super) fn live_metrics(
+    cfg: &RunConfig,
+    h: &GraphHandles,
+    end: &RunEnd,
+    ticks: &[u64],
+    timing: Option<Vec<NodeTiming>>,
+) -> Metrics {
+    summarize(
+        &RunConfig {
+            duration: end.at,
+            ..cfg.clone()
+        },
+        h,
+        end,
+        ticks,
+        timing,
+    )
+}

@@ -1,0 +1,309 @@
+//! The session log (JSON): every run of a lab session with the commands applied and the
+//! virtual instants they took effect at, and its exact replay.
+
+use crate::checkpoint::load_policy;
+use crate::config::{ClockKind, RunConfig, ACTUATOR_HZ, MAX_DURATION};
+use crate::graph::GraphSpec;
+use crate::metrics::Metrics;
+use crate::run::{RunOptions, TimedCommand};
+use crate::time::Nanos;
+use serde::{Deserialize, Serialize};
+use std::io::Read;
+use std::path::Path;
+
+/// The session-log format this version writes. Version 1 (before graphs were data) named
+/// the chapter's rates and depth; version 2 stores each run's graph as a graph file.
+pub const SESSION_VERSION: u32 = 2;
+
+/// A session log larger than this is refused before it is read, bytes (a long lab session
+/// logs kilobytes).
+pub const MAX_SESSION_BYTES: u64 = 4 * 1024 * 1024;
+
+/// The most runs, and the most commands per run, a session log may hold.
+pub const MAX_LOGGED: usize = 10_000;
+
+/// One run of a session, as logged for replay.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LoggedRun {
+    /// `virtual` or `real` (only virtual runs replay exactly).
+    pub clock: ClockKind,
+    /// Seed.
+    pub seed: u64,
+    /// Version 2: the graph, as a graph file (TOML), with the rates and depths the run
+    /// started with: its contents, so a replay does not depend on the file it came from.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub graph: Option<String>,
+    /// Version 1 only: the sensor rate at the start, Hz.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sensor_hz: Option<f64>,
+    /// Version 1 only: the control rate at the start, Hz.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub control_hz: Option<f64>,
+    /// Version 1 only: the actuator rate, Hz (50).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub actuator_hz: Option<f64>,
+    /// Version 1 only: both topics' depth at the start.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub queue_depth: Option<usize>,
+    /// First deadline of each node, ns (phase offsets), when any was set.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub phase_offsets_ns: Vec<u64>,
+    /// Brain at the start.
+    pub policy: String,
+    /// Run time at which the run ended (the last instant run), ns.
+    pub end_ns: u64,
+    /// The commands, in order, with the virtual time they took effect.
+    pub commands: Vec<TimedCommand>,
+    /// The summary at the end, as the live run measured it.
+    pub metrics: Option<Metrics>,
+}
+
+impl LoggedRun {
+    /// A run about to start with `cfg` and brain `policy` (no commands, no end yet).
+    pub fn starting(cfg: &RunConfig, policy: &str) -> LoggedRun {
+        LoggedRun {
+            clock: cfg.clock,
+            seed: cfg.seed,
+            graph: Some(cfg.graph.to_toml()),
+            sensor_hz: None,
+            control_hz: None,
+            actuator_hz: None,
+            queue_depth: None,
+            phase_offsets_ns: cfg.phase_offsets.iter().map(|n| n.0).collect(),
+            policy: policy.to_string(),
+            end_ns: 0,
+            commands: Vec::new(),
+            metrics: None,
+        }
+    }
+
+    /// The settings to replay it with: duration = its end time. `origin` names the run in
+    /// errors (`FILE: run N`).
+    ///
+    /// # Errors
+    /// [`ReplayError::Invalid`] for a graph or a value the command line would refuse.
+    pub fn config(&self, origin: &str) -> Result<RunConfig, ReplayError> {
+        let bad = |field: &str, reason: String| {
+            ReplayError::Invalid(format!("{origin}: {field}: {reason}"))
+        };
+        let mut cfg = RunConfig {
+            clock: self.clock,
+            seed: self.seed,
+            duration: Nanos(self.end_ns),
+            phase_offsets: self.phase_offsets_ns.iter().map(|&n| Nanos(n)).collect(),
+            ..RunConfig::default()
+        };
+        match (&self.graph, self.sensor_hz, self.control_hz, self.queue_depth) {
+            (Some(text), None, None, None) => {
+                cfg.graph = GraphSpec::parse(text, &format!("{origin}: graph"))
+                    .map_err(|e| ReplayError::Invalid(e.to_string()))?;
+            }
+            (None, Some(sensor), Some(control), Some(depth)) => {
+                if self.actuator_hz.is_some_and(|a| a != ACTUATOR_HZ) {
+                    return Err(bad("actuator_hz", format!("must be {ACTUATOR_HZ} Hz")));
+                }
+                cfg.set_sensor_hz(sensor).map_err(|e| bad("sensor_hz", e.to_string()))?;
+                cfg.set_control_hz(control).map_err(|e| bad("control_hz", e.to_string()))?;
+                cfg.set_queue_depth(depth).map_err(|e| bad("queue_depth", e.to_string()))?;
+            }
+            _ => {
+                return Err(bad(
+                    "graph",
+                    "a run has either a graph (version 2) or sensor_hz, control_hz and queue_depth (version 1)".into(),
+                ))
+            }
+        }
+        if cfg.phase_offsets.len() > cfg.graph.nodes.len() {
+            return Err(bad(
+                "phase_offsets_ns",
+                format!(
+                    "{} values for {} nodes",
+                    cfg.phase_offsets.len(),
+                    cfg.graph.nodes.len()
+                ),
+            ));
+        }
+        if let Some(o) = cfg.phase_offsets.iter().find(|o| **o >= Nanos::SECOND) {
+            return Err(bad(
+                "phase_offsets_ns",
+                format!("{} ns is not below one second", o.0),
+            ));
+        }
+        if self.end_ns > MAX_DURATION.0 {
+            return Err(bad(
+                "end_ns",
+                format!(
+                    "{} ns is longer than the longest run ({MAX_DURATION})",
+                    self.end_ns
+                ),
+            ));
+        }
+        let mut at = 0;
+        for (i, c) in self.commands.iter().enumerate() {
+            let field = format!("commands[{i}]");
+            if c.at_ns < at {
+                return Err(bad(
+                    &field,
+                    format!("at_ns {} is before the previous command's {at}", c.at_ns),
+                ));
+            }
+            if c.at_ns > self.end_ns {
+                return Err(bad(
+                    &field,
+                    format!(
+                        "at_ns {} is after the run's end_ns {}",
+                        c.at_ns, self.end_ns
+                    ),
+                ));
+            }
+            at = c.at_ns;
+            c.command.validate(&cfg.graph).map_err(|e| bad(&field, e))?;
+        }
+        Ok(cfg)
+    }
+}
+
+/// A session's command log: every run, in order.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SessionLog {
+    /// Format version: 1 or 2 ([`SESSION_VERSION`]).
+    pub version: u32,
+    /// The runs.
+    pub runs: Vec<LoggedRun>,
+}
+
+/// Why a replay could not run.
+#[derive(Debug, thiserror::Error)]
+pub enum ReplayError {
+    /// Unreadable file.
+    #[error("cannot read session {0}")]
+    Read(String),
+    /// Not a session log.
+    #[error("{path}: not a ratelab session log ({detail})")]
+    Parse {
+        /// The file.
+        path: String,
+        /// The parser's complaint.
+        detail: String,
+    },
+    /// A value the command line would refuse, or an unknown version.
+    #[error("{0}")]
+    Invalid(String),
+    /// Real-clock runs are not reproducible.
+    #[error("run {0} used the real clock, which cannot be replayed exactly")]
+    RealClock(usize),
+    /// A run could not start.
+    #[error(transparent)]
+    Run(#[from] crate::run::RunError),
+    /// The brain could not be loaded.
+    #[error(transparent)]
+    Policy(#[from] crate::checkpoint::PolicyError),
+}
+
+impl SessionLog {
+    /// An empty log of the current version.
+    pub fn new() -> Self {
+        SessionLog {
+            version: SESSION_VERSION,
+            runs: Vec::new(),
+        }
+    }
+
+    /// Read a session log (JSON) and check every run as the command line checks the same
+    /// values: refused when not a regular file, larger than [`MAX_SESSION_BYTES`], of an
+    /// unknown version, or holding any value a flag would refuse.
+    ///
+    /// # Errors
+    /// [`ReplayError`] naming the file, and the run and field at fault.
+    pub fn load(path: &Path) -> Result<Self, ReplayError> {
+        let shown = path.display().to_string();
+        let read_err = |e: String| ReplayError::Read(format!("{shown}: {e}"));
+        let meta = std::fs::metadata(path).map_err(|e| read_err(e.to_string()))?;
+        if !meta.is_file() {
+            return Err(read_err("not a regular file".into()));
+        }
+        if meta.len() > MAX_SESSION_BYTES {
+            return Err(read_err(format!(
+                "{} bytes: a session log is at most {MAX_SESSION_BYTES}",
+                meta.len()
+            )));
+        }
+        let mut text = String::new();
+        std::fs::File::open(path)
+            .and_then(|f| f.take(MAX_SESSION_BYTES + 1).read_to_string(&mut text))
+            .map_err(|e| read_err(e.to_string()))?;
+        let log: SessionLog = serde_json::from_str(&text).map_err(|e| ReplayError::Parse {
+            path: shown.clone(),
+            detail: e.to_string(),
+        })?;
+        if !(1..=SESSION_VERSION).contains(&log.version) {
+            return Err(ReplayError::Invalid(format!(
+                "{shown}: version {} is not one this ratelab reads (1..={SESSION_VERSION})",
+                log.version
+            )));
+        }
+        if log.runs.len() > MAX_LOGGED || log.runs.iter().any(|r| r.commands.len() > MAX_LOGGED) {
+            return Err(ReplayError::Invalid(format!(
+                "{shown}: more than {MAX_LOGGED} runs or commands"
+            )));
+        }
+        for (i, r) in log.runs.iter().enumerate() {
+            r.config(&format!("{shown}: run {}", i + 1))?;
+        }
+        Ok(log)
+    }
+
+    /// Write it (pretty JSON), atomically (write then rename).
+    ///
+    /// # Errors
+    /// The I/O error.
+    pub fn save(&self, path: &Path) -> std::io::Result<()> {
+        let tmp = path.with_extension("json.part");
+        std::fs::write(
+            &tmp,
+            serde_json::to_string_pretty(self).expect("serializable") + "\n",
+        )?;
+        std::fs::rename(tmp, path)
+    }
+
+    /// Whether `replayed` (run `index` replayed) matches the live run's metrics byte for byte,
+    /// as `metrics.json` would print them; `None` when the live run logged none. A version-1
+    /// log predates the `graph`/`nodes`/`topics` keys, so those are left out of its comparison.
+    pub fn matches(&self, index: usize, replayed: &Metrics) -> Option<bool> {
+        let live = self.runs.get(index)?.metrics.as_ref()?;
+        let mut replayed = serde_json::to_value(replayed).ok()?;
+        if self.version < 2 {
+            if let Some(m) = replayed.as_object_mut() {
+                for key in ["graph", "nodes", "topics"] {
+                    m.remove(key);
+                }
+            }
+        }
+        let live = serde_json::to_value(live).ok()?;
+        Some(
+            serde_json::to_string_pretty(&live).ok()?
+                == serde_json::to_string_pretty(&replayed).ok()?,
+        )
+    }
+}
+
+/// Re-run logged run `index` headless under the virtual clock.
+///
+/// # Errors
+/// [`ReplayError`]; real-clock runs are refused.
+pub fn replay_run(log: &SessionLog, index: usize) -> Result<Metrics, ReplayError> {
+    let r = &log.runs[index];
+    if r.clock != ClockKind::Virtual {
+        return Err(ReplayError::RealClock(index + 1));
+    }
+    let cfg = r.config(&format!("run {}", index + 1))?;
+    let brain = load_policy(&r.policy)?;
+    let opts = RunOptions {
+        commands: r.commands.clone(),
+        keep_trace: false,
+        ..RunOptions::default()
+    };
+    Ok(crate::run::run(&cfg, brain, opts)?.metrics)
+}

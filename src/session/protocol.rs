@@ -1,0 +1,127 @@
+//! The engine's protocol with its front end: [`Control`] in, [`Telemetry`] out, and the
+//! virtual clock's [`Speed`] ladder.
+
+use crate::config::RunConfig;
+use crate::metrics::{Metrics, StepRecord};
+use crate::run::Command;
+use crate::scheduler::EndReason;
+use crate::time::Nanos;
+use std::path::PathBuf;
+
+/// "Run until stopped": the duration of an open-ended lab run.
+pub const UNBOUNDED: Nanos = Nanos(u64::MAX / 4);
+
+/// Virtual-clock pacing: wall seconds per virtual second, or as fast as possible.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Speed {
+    /// Virtual time runs at this multiple of wall time.
+    Times(f64),
+    /// No pacing.
+    Max,
+}
+
+/// The speed ladder of the lab's `<`/`>` keys.
+pub const SPEEDS: [Speed; 7] = [
+    Speed::Times(0.25),
+    Speed::Times(0.5),
+    Speed::Times(1.0),
+    Speed::Times(2.0),
+    Speed::Times(4.0),
+    Speed::Times(8.0),
+    Speed::Max,
+];
+
+impl std::fmt::Display for Speed {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Speed::Times(x) => write!(f, "×{x}"),
+            Speed::Max => f.write_str("max"),
+        }
+    }
+}
+
+/// What the front end asks of the engine.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Control {
+    /// Change the graph (rates, depth, brain).
+    Apply(Command),
+    /// Pause or resume.
+    TogglePause,
+    /// While paused (virtual clock): run until the next actuator tick.
+    Step,
+    /// Start a new run with the current settings: same seed, or the next one.
+    Reset {
+        /// Use `seed + 1`.
+        next_seed: bool,
+    },
+    /// Restart the run with the current settings under the other clock.
+    SwitchClock,
+    /// Virtual pacing.
+    SetSpeed(Speed),
+    /// End the session.
+    Quit,
+}
+
+/// What the engine reports.
+#[derive(Clone, Debug)]
+pub enum Telemetry {
+    /// A run started.
+    Started {
+        /// Its settings (rates, depth and clock as they start).
+        cfg: RunConfig,
+        /// The brain's label.
+        policy: String,
+        /// Where it is being recorded, if anywhere.
+        recording: Option<PathBuf>,
+    },
+    /// One actuator tick.
+    Step(StepRecord),
+    /// One node tick under the real clock: node index (tie-break rank), run time and
+    /// lateness.
+    NodeTick {
+        /// Node index ([`crate::graph::NodeId`]).
+        node: usize,
+        /// Run time.
+        now: Nanos,
+        /// Actual − scheduled.
+        lateness: Nanos,
+    },
+    /// Periodic status.
+    Status {
+        /// Run time now (virtual: the last instant run).
+        now: Nanos,
+        /// Paused?
+        paused: bool,
+        /// Virtual pacing.
+        speed: Speed,
+        /// Each node's set rate, Hz, by node index.
+        rates: Vec<f64>,
+        /// Each topic's depth, by topic index.
+        depths: Vec<usize>,
+        /// The brain's label.
+        policy: String,
+    },
+    /// A command was applied (for the front end's log line).
+    Applied(String),
+    /// The run ended (fall, duration, node failure); the state is frozen until reset or quit.
+    Ended {
+        /// Its summary.
+        metrics: Metrics,
+        /// How it ended.
+        reason: EndReason,
+    },
+    /// Something went wrong that the user should read (one line).
+    Error(String),
+}
+
+/// A command in words, for logs.
+pub fn describe(cmd: &Command) -> String {
+    match cmd {
+        Command::SetControlHz { hz } => format!("control rate → {hz} Hz"),
+        Command::SetSensorHz { hz } => format!("sensor rate → {hz} Hz"),
+        Command::SetQueueDepth { depth } => format!("queue depth → {depth}"),
+        Command::SetNodeHz { node, hz } => format!("{node} rate → {hz} Hz"),
+        Command::SetTopicDepth { topic, depth } => format!("{topic} depth → {depth}"),
+        Command::SetPolicy { spec } => format!("brain → {spec}"),
+    }
+}

@@ -1,0 +1,137 @@
+//! A real-clock run in the lab: the graph on its executor's threads, controls applied at
+//! once (from each node's next tick).
+
+use super::engine::{live_metrics, Engine, Next};
+use super::protocol::{Control, Telemetry};
+use crate::config::RunConfig;
+use crate::graph::Graph;
+use crate::metrics::NodeTiming;
+use crate::recording::Recording;
+use crate::scheduler::{run_real, EndReason, RealOptions, RunEnd, StopFlag};
+use crate::time::Nanos;
+use crossbeam_channel::RecvTimeoutError;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+impl Engine {
+    /// Run `graph` under the real clock until the user moves on. Returns what they asked
+    /// next, how the run ended and each node's timing.
+    pub(super) fn real_run(
+        &mut self,
+        cfg: &RunConfig,
+        graph: Graph,
+        recording: &Option<Recording>,
+    ) -> (Next, RunEnd, Option<Vec<NodeTiming>>) {
+        let Graph { nodes, handles } = graph;
+        if let Some(Err(e)) = cfg.rt_priority.map(crate::realtime::probe_fifo) {
+            // Told now, not only when the run ends: node threads inherit this thread's
+            // privileges, so they will be refused the same way.
+            let _ = self.tx.send(Telemetry::Applied(format!(
+                "warning: node threads keep their default policy: {e}"
+            )));
+        }
+        let stop = StopFlag::new();
+        let pause = Arc::new(AtomicBool::new(self.settings.start_paused));
+        let tx = self.tx.clone();
+        let rec = recording.clone();
+        let opts = RealOptions {
+            spin_margin: cfg.spin_margin,
+            phase_offsets: cfg.phase_offsets.to_vec(),
+            rt_priority: cfg.rt_priority,
+            on_tick: Some(Arc::new(
+                move |node: usize, name: &str, now: Nanos, lateness: Nanos| {
+                    let _ = tx.send(Telemetry::NodeTick {
+                        node,
+                        now,
+                        lateness,
+                    });
+                    if let Some(r) = &rec {
+                        r.node_tick(name, now, lateness);
+                    }
+                },
+            )),
+            pause: Some(pause.clone()),
+        };
+        let start = Instant::now();
+        let runner = {
+            let stop = stop.clone();
+            let duration = cfg.duration;
+            std::thread::Builder::new()
+                .name("real-clock".into())
+                .spawn(move || run_real(nodes, duration, &stop, &opts))
+                .expect("spawning the real-clock runner")
+        };
+        let now = || Nanos::from(start.elapsed());
+        let mut last_status = Instant::now();
+        let mut result: Option<RunEnd> = None;
+        let mut timing = None;
+        let mut runner = Some(runner);
+        loop {
+            if result.is_none() && runner.as_ref().is_some_and(|r| r.is_finished()) {
+                let run = runner
+                    .take()
+                    .expect("checked")
+                    .join()
+                    .expect("runner thread");
+                let end = run.end.clone();
+                let ticks: Vec<u64> = run.timing.iter().map(|t| t.ticks).collect();
+                timing = Some(run.timing);
+                let metrics = live_metrics(cfg, &handles, &end, &ticks, timing.clone());
+                let _ = self.tx.send(Telemetry::Ended {
+                    metrics,
+                    reason: end.reason.clone(),
+                });
+                result = Some(end);
+            }
+            let next = match self.rx.recv_timeout(Duration::from_millis(30)) {
+                Ok(Control::Apply(cmd)) => {
+                    if result.is_none() {
+                        self.apply(cmd, now(), &handles, recording);
+                    }
+                    None
+                }
+                Ok(Control::TogglePause) => {
+                    let p = !pause.load(Ordering::SeqCst);
+                    pause.store(p, Ordering::SeqCst);
+                    None
+                }
+                Ok(Control::Step | Control::SetSpeed(_)) => {
+                    let _ = self.tx.send(Telemetry::Error(
+                        "single-step and speed apply to the virtual clock only".into(),
+                    ));
+                    None
+                }
+                Ok(Control::Reset { next_seed }) => Some(Next::Reset { next_seed }),
+                Ok(Control::SwitchClock) => Some(Next::SwitchClock),
+                Ok(Control::Quit) | Err(RecvTimeoutError::Disconnected) => Some(Next::Quit),
+                Err(RecvTimeoutError::Timeout) => None,
+            };
+            if let Some(next) = next {
+                stop.stop();
+                let end = match (result, runner.take()) {
+                    (Some(end), _) => end,
+                    (None, Some(r)) => match r.join() {
+                        Ok(run) => {
+                            timing = Some(run.timing);
+                            run.end
+                        }
+                        Err(_) => RunEnd {
+                            at: now(),
+                            reason: EndReason::Interrupted,
+                        },
+                    },
+                    (None, None) => RunEnd {
+                        at: now(),
+                        reason: EndReason::Interrupted,
+                    },
+                };
+                return (next, end, timing);
+            }
+            if last_status.elapsed() >= Duration::from_millis(33) {
+                self.status(now(), pause.load(Ordering::SeqCst), &handles);
+                last_status = Instant::now();
+            }
+        }
+    }
+}

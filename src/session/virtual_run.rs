@@ -1,0 +1,187 @@
+//! A virtual-clock run in the lab: one instant at a time, paced against the wall clock at
+//! the chosen speed. Pacing decides only *when* an instant runs, never its order.
+
+use super::engine::{live_metrics, Engine, Next};
+use super::protocol::{Control, Speed, Telemetry};
+use crate::config::RunConfig;
+use crate::graph::Graph;
+use crate::recording::Recording;
+use crate::scheduler::{EndReason, InstantOutcome, RunEnd, VirtualScheduler};
+use crate::time::Nanos;
+use crossbeam_channel::RecvTimeoutError;
+use std::time::{Duration, Instant};
+
+impl Engine {
+    /// Run `graph` under the virtual clock until the user moves on. Returns what they
+    /// asked next, how the run ended and each node's tick count.
+    pub(super) fn virtual_run(
+        &mut self,
+        cfg: &RunConfig,
+        graph: Graph,
+        recording: &Option<Recording>,
+    ) -> (Next, RunEnd, Vec<u64>) {
+        let Graph { mut nodes, handles } = graph;
+        let actuator_bit = 1u64 << (cfg.graph.chain.actuator.0 % 64);
+        let mut sched = VirtualScheduler::with_offsets(&nodes, &cfg.phase_offsets);
+        let mut paused = self.settings.start_paused;
+        let mut step_pending = false;
+        let mut ended: Option<RunEnd> = None;
+        // Pacing anchor: virtual time `anchor_v` corresponds to wall instant `anchor_w`.
+        let mut anchor_v = Nanos::ZERO;
+        let mut anchor_w = Instant::now();
+        let mut last_status = Instant::now() - Duration::from_secs(1);
+        loop {
+            // Controls, between instants.
+            loop {
+                let msg = if paused || ended.is_some() {
+                    match self.rx.recv_timeout(Duration::from_millis(30)) {
+                        Ok(m) => m,
+                        Err(RecvTimeoutError::Timeout) => break,
+                        Err(RecvTimeoutError::Disconnected) => {
+                            return (
+                                Next::Quit,
+                                self.end_now(&sched, ended),
+                                sched.ticks().to_vec(),
+                            )
+                        }
+                    }
+                } else {
+                    match self.rx.try_recv() {
+                        Ok(m) => m,
+                        Err(_) => break,
+                    }
+                };
+                match msg {
+                    Control::Apply(cmd) => {
+                        if ended.is_none() {
+                            let at = sched.next_due().unwrap_or(sched.now());
+                            self.apply(cmd, at, &handles, recording);
+                        }
+                    }
+                    Control::TogglePause => {
+                        paused = !paused;
+                        anchor_v = sched.now();
+                        anchor_w = Instant::now();
+                    }
+                    Control::Step => {
+                        if paused {
+                            step_pending = true;
+                        }
+                    }
+                    Control::SetSpeed(s) => {
+                        self.speed = s;
+                        anchor_v = sched.now();
+                        anchor_w = Instant::now();
+                    }
+                    Control::Reset { next_seed } => {
+                        return (
+                            Next::Reset { next_seed },
+                            self.end_now(&sched, ended),
+                            sched.ticks().to_vec(),
+                        )
+                    }
+                    Control::SwitchClock => {
+                        return (
+                            Next::SwitchClock,
+                            self.end_now(&sched, ended),
+                            sched.ticks().to_vec(),
+                        )
+                    }
+                    Control::Quit => {
+                        return (
+                            Next::Quit,
+                            self.end_now(&sched, ended),
+                            sched.ticks().to_vec(),
+                        )
+                    }
+                }
+                if step_pending {
+                    break;
+                }
+            }
+            if last_status.elapsed() >= Duration::from_millis(33) {
+                self.status(sched.now(), paused, &handles);
+                last_status = Instant::now();
+            }
+            if ended.is_some() || (paused && !step_pending) {
+                continue;
+            }
+            // Which instants may run now?
+            let target = if step_pending {
+                None // one control step: until the actuator ticks
+            } else {
+                match self.speed {
+                    Speed::Max => None,
+                    Speed::Times(x) => {
+                        Some(anchor_v + Nanos((anchor_w.elapsed().as_nanos() as f64 * x) as u64))
+                    }
+                }
+            };
+            let budget = Instant::now();
+            while let Some(due) = sched.next_due() {
+                if due > cfg.duration {
+                    ended = Some(RunEnd {
+                        at: cfg.duration.min(sched.now()),
+                        reason: EndReason::Duration,
+                    });
+                    break;
+                }
+                if target.is_some_and(|t| due > t) {
+                    break;
+                }
+                let actuator_ticked = match sched.run_instant(&mut nodes) {
+                    InstantOutcome::Ran { ticked } => ticked & actuator_bit != 0,
+                    InstantOutcome::Stopped => {
+                        ended = Some(RunEnd {
+                            at: sched.now(),
+                            reason: EndReason::NodeStopped,
+                        });
+                        break;
+                    }
+                    InstantOutcome::Failed(reason) => {
+                        ended = Some(RunEnd {
+                            at: sched.now(),
+                            reason,
+                        });
+                        break;
+                    }
+                };
+                if step_pending && actuator_ticked {
+                    step_pending = false;
+                    break;
+                }
+                // Stay responsive at max speed: come back for controls every few ms.
+                if budget.elapsed() > Duration::from_millis(8) {
+                    break;
+                }
+            }
+            if let Some(end) = &ended {
+                let metrics = live_metrics(cfg, &handles, end, sched.ticks(), None);
+                self.status(sched.now(), paused, &handles);
+                let _ = self.tx.send(Telemetry::Ended {
+                    metrics,
+                    reason: end.reason.clone(),
+                });
+                continue;
+            }
+            // Sleep until the next instant is due on the wall (or a few ms at most).
+            if let (Some(due), Speed::Times(x)) = (sched.next_due(), self.speed) {
+                if !step_pending {
+                    let wait_v = due.saturating_sub(anchor_v).0 as f64 / x;
+                    let wake = anchor_w + Duration::from_nanos(wait_v as u64);
+                    let now = Instant::now();
+                    if wake > now {
+                        std::thread::sleep((wake - now).min(Duration::from_millis(10)));
+                    }
+                }
+            }
+        }
+    }
+
+    fn end_now(&self, sched: &VirtualScheduler, ended: Option<RunEnd>) -> RunEnd {
+        ended.unwrap_or(RunEnd {
+            at: sched.now(),
+            reason: EndReason::Interrupted,
+        })
+    }
+}
