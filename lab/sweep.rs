@@ -107,6 +107,9 @@ fn print_table(rows: &[(Point, Metrics)]) {
             m.obs_dropped,
             m.mean_latency_ms
         );
+        if let Some(failed) = &m.node_failed {
+            println!("        ↳ node failed: {failed}");
+        }
     }
 }
 

@@ -8,9 +8,10 @@ use std::str::FromStr;
 
 /// The chapter's actuator rate: the plant's 50 Hz control step.
 pub const ACTUATOR_HZ: f64 = 50.0;
-/// The longest run any path accepts (run time): a day. A virtual run costs a few µs of CPU
-/// per actuator step and keeps its trace only when asked, so this bounds time and memory.
-pub const MAX_DURATION: Nanos = Nanos(24 * 3600 * Nanos::SECOND.0);
+/// The longest run any path accepts (run time): an hour. A headless run keeps one trace
+/// record per actuator step (about 180 000 at 50 Hz for an hour, tens of MB), and a virtual
+/// hour at the highest rates takes minutes; a lab run ends there, so its log replays.
+pub const MAX_DURATION: Nanos = Nanos(3600 * Nanos::SECOND.0);
 
 /// `--break` sets the control rate to this (the chapter's demonstration of the cliff).
 pub const BREAK_CONTROL_HZ: f64 = 5.0;

@@ -273,6 +273,10 @@ pub struct Metrics {
     /// Real clock only: per-node tick timing.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub node_timing: Option<Vec<NodeTiming>>,
+    /// The node that failed (panicked) and ended the run, with its message; absent when
+    /// none did. A failed run is not `balanced`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub node_failed: Option<String>,
     /// The graph's name (`cartpole` for the chapter's).
     #[serde(default)]
     pub graph: String,
@@ -396,12 +400,16 @@ impl Metrics {
     /// wall time the run took, when known (not part of the metrics: it varies run to run).
     pub fn summary_lines(&self, wall_s: Option<f64>) -> Vec<String> {
         let wall = wall_s.map_or_else(String::new, |w| format!(" ({w:.2}s wall)"));
-        let verdict = match self.fell_at_s {
-            None => format!(
+        let verdict = match (&self.node_failed, self.fell_at_s) {
+            (Some(failed), _) => format!(
+                "NODE FAILED ({failed}) — {} control steps in {:.2}s sim{wall}",
+                self.steps, self.sim_time_s
+            ),
+            (None, None) => format!(
                 "BALANCED (pole up the whole run) — {} control steps in {:.2}s sim{wall}",
                 self.steps, self.sim_time_s
             ),
-            Some(t) => format!(
+            (None, Some(t)) => format!(
                 "FELL at t={t:.2}s — {} control steps in {:.2}s sim{wall}",
                 self.steps, self.sim_time_s
             ),

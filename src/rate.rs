@@ -119,12 +119,15 @@ impl Default for DeadlineWaiter {
 /// after `now`), as ROS timers do, rather than firing a burst to catch up.
 /// Returns the deadline and the number of ticks skipped.
 pub fn next_deadline(scheduled: Nanos, now: Nanos, period: Nanos) -> (Nanos, u64) {
-    let next = scheduled + period;
+    let next = scheduled.saturating_add(period);
     if now < next || period.0 == 0 {
         return (next, 0);
     }
     let missed = (now.0 - next.0) / period.0 + 1;
-    (Nanos(next.0 + missed * period.0), missed)
+    (
+        Nanos(next.0.saturating_add(missed.saturating_mul(period.0))),
+        missed,
+    )
 }
 
 #[cfg(test)]

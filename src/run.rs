@@ -298,8 +298,14 @@ pub fn summarize(
             (t.name.clone(), m)
         })
         .collect();
+    let node_failed = match &end.reason {
+        crate::scheduler::EndReason::NodeFailed { node, message } => {
+            Some(format!("{node}: {message}"))
+        }
+        _ => None,
+    };
     Metrics {
-        balanced: log.fell_at.is_none(),
+        balanced: log.fell_at.is_none() && node_failed.is_none(),
         clock: cfg.clock.as_str().to_string(),
         control_hz: cfg.control_hz(),
         sensor_hz: cfg.sensor_hz(),
@@ -326,6 +332,7 @@ pub fn summarize(
         policy: h.brain.label(),
         nonfinite_actions: log.nonfinite_actions,
         node_timing: timing,
+        node_failed,
         graph: spec.name.clone(),
         nodes,
         topics,

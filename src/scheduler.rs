@@ -150,8 +150,11 @@ impl VirtualScheduler {
         self.now = due;
         self.ticks[i] += 1;
         let flow = nodes[i].tick(due);
-        self.heap
-            .push(Reverse((due + nodes[i].rate().period(), prio, i)));
+        self.heap.push(Reverse((
+            due.saturating_add(nodes[i].rate().period()),
+            prio,
+            i,
+        )));
         Some((due, i, flow))
     }
 
@@ -595,6 +598,23 @@ mod tests {
             VirtualScheduler::new(&n).run(&mut n, Nanos::SECOND, &StopFlag::new(), &mut |_| {});
         assert_eq!(end.at, Nanos(20_000_000));
         assert!(matches!(end.reason, EndReason::NodeFailed { ref node, .. } if node == "policy"));
+    }
+
+    #[test]
+    fn the_slowest_rate_never_overflows_run_time() {
+        // 1e-300 Hz: a period past u64 nanoseconds, saturated to "never".
+        let log = Arc::new(Mutex::new(Vec::new()));
+        let mut nodes = probes(&log, [50.0, 1e-300, 50.0]);
+        let mut sched = VirtualScheduler::new(&nodes);
+        let end = sched.run(&mut nodes, Nanos::SECOND, &StopFlag::new(), &mut |_| {});
+        assert_eq!(end.reason, EndReason::Duration);
+        let policy_ticks = log
+            .lock()
+            .unwrap()
+            .iter()
+            .filter(|(_, n)| *n == "policy")
+            .count();
+        assert_eq!(policy_ticks, 1, "ticks once at 0, next due never");
     }
 
     #[test]

@@ -249,6 +249,34 @@ mod tests {
     }
 
     #[test]
+    fn a_node_that_panics_is_reported_not_fatal() {
+        struct Exploding;
+        impl Policy for Exploding {
+            fn act(&mut self, _: &crate::plant::Observation) -> crate::plant::Action {
+                panic!("weights on fire")
+            }
+            fn label(&self) -> String {
+                "exploding".into()
+            }
+        }
+        let g = Grid {
+            clocks: vec![ClockKind::Virtual],
+            sensor_hz: vec![50.0],
+            control_hz: vec![50.0],
+            queue_depth: vec![1],
+            seeds: vec![0, 1],
+            base: RunConfig::default(),
+        };
+        let brain = || Ok(Box::new(Exploding) as Box<dyn Policy>);
+        let rows = run_grid(&g, &brain, 2, &|_, _| {}).unwrap();
+        for (_, m) in rows {
+            assert!(!m.balanced);
+            assert_eq!(m.node_failed.as_deref(), Some("policy: weights on fire"));
+            assert!(m.summary_lines(None)[2].starts_with("NODE FAILED (policy: weights on fire)"));
+        }
+    }
+
+    #[test]
     fn sweep_results_do_not_depend_on_thread_count() {
         let g = Grid {
             clocks: vec![ClockKind::Virtual],

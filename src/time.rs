@@ -61,6 +61,12 @@ impl Nanos {
         Nanos(self.0.saturating_sub(earlier.0))
     }
 
+    /// `self + other`, or `u64::MAX` ns (584 years: never) when that overflows. The executors
+    /// add periods with it, so a rate as slow as the flags allow cannot overflow run time.
+    pub fn saturating_add(self, other: Nanos) -> Nanos {
+        Nanos(self.0.saturating_add(other.0))
+    }
+
     /// As a `std::time::Duration`.
     pub fn to_duration(self) -> std::time::Duration {
         std::time::Duration::from_nanos(self.0)

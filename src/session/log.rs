@@ -272,16 +272,17 @@ impl SessionLog {
     /// as `metrics.json` would print them; `None` when the live run logged none. A version-1
     /// log predates the `graph`/`nodes`/`topics` keys, so those are left out of its comparison.
     pub fn matches(&self, index: usize, replayed: &Metrics) -> Option<bool> {
-        let live = self.runs.get(index)?.metrics.as_ref()?;
+        let mut live = serde_json::to_value(self.runs.get(index)?.metrics.as_ref()?).ok()?;
         let mut replayed = serde_json::to_value(replayed).ok()?;
         if self.version < 2 {
-            if let Some(m) = replayed.as_object_mut() {
-                for key in ["graph", "nodes", "topics"] {
-                    m.remove(key);
+            for m in [&mut live, &mut replayed] {
+                if let Some(m) = m.as_object_mut() {
+                    for key in ["graph", "nodes", "topics"] {
+                        m.remove(key);
+                    }
                 }
             }
         }
-        let live = serde_json::to_value(live).ok()?;
         Some(
             serde_json::to_string_pretty(&live).ok()?
                 == serde_json::to_string_pretty(&replayed).ok()?,

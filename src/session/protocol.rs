@@ -8,8 +8,9 @@ use crate::scheduler::EndReason;
 use crate::time::Nanos;
 use std::path::PathBuf;
 
-/// "Run until stopped": the duration of an open-ended lab run.
-pub const UNBOUNDED: Nanos = Nanos(u64::MAX / 4);
+/// "Run until stopped": the duration of an open-ended lab run, the longest any run may be
+/// ([`crate::config::MAX_DURATION`]), so that its session log replays.
+pub const UNBOUNDED: Nanos = crate::config::MAX_DURATION;
 
 /// Virtual-clock pacing: wall seconds per virtual second, or as fast as possible.
 #[derive(Clone, Copy, Debug, PartialEq)]

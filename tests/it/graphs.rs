@@ -435,12 +435,16 @@ fn random_graph() -> impl Strategy<Value = String> {
         })
 }
 
-/// One virtual run of `graph` for 1 s: the metrics as JSON, the trace, and per topic
+/// What one run of a random graph left: the metrics as JSON, the trace, and per topic
 /// (published, seen, dropped, unseen still buffered).
-fn run_random(
-    graph: &GraphSpec,
-    seed: u64,
-) -> (String, Vec<StepRecord>, Vec<(u64, u64, u64, u64)>) {
+struct RandomRun {
+    json: String,
+    trace: Vec<StepRecord>,
+    counts: Vec<[u64; 4]>,
+}
+
+/// One virtual run of `graph` for 1 s.
+fn run_random(graph: &GraphSpec, seed: u64) -> RandomRun {
     let cfg = RunConfig {
         clock: ClockKind::Virtual,
         seed,
@@ -459,11 +463,15 @@ fn run_random(
         .iter()
         .map(|t| {
             let s = t.stats();
-            (s.published, s.seen, s.dropped, t.unseen_buffered() as u64)
+            [s.published, s.seen, s.dropped, t.unseen_buffered() as u64]
         })
         .collect();
     let trace = std::mem::take(&mut ratelab::graph::lock(&g.handles.log).trace);
-    (serde_json::to_string_pretty(&m).unwrap(), trace, counts)
+    RandomRun {
+        json: serde_json::to_string_pretty(&m).unwrap(),
+        trace,
+        counts,
+    }
 }
 
 proptest! {
@@ -474,12 +482,12 @@ proptest! {
         let _machine = crate::machine::shared();
         let graph = GraphSpec::parse(&text, "random.toml").map_err(|e| TestCaseError::fail(e.to_string()))?;
         prop_assert!((3..=8).contains(&graph.nodes.len()));
-        let (a_json, a_trace, counts) = run_random(&graph, seed);
-        for (i, (published, seen, dropped, unseen)) in counts.iter().enumerate() {
+        let a = run_random(&graph, seed);
+        for (i, [published, seen, dropped, unseen]) in a.counts.iter().enumerate() {
             prop_assert_eq!(*published, seen + dropped + unseen, "topic {}", graph.topics[i].name);
         }
-        let (b_json, b_trace, _) = run_random(&graph, seed);
-        prop_assert_eq!(a_json, b_json);
-        prop_assert_eq!(a_trace, b_trace);
+        let b = run_random(&graph, seed);
+        prop_assert_eq!(a.json, b.json);
+        prop_assert_eq!(a.trace, b.trace);
     }
 }

@@ -196,3 +196,189 @@ fn a_real_clock_run_is_logged_with_node_timing_and_not_replayed() {
         Err(ratelab::session::ReplayError::RealClock(1))
     ));
 }
+
+/// A session log with one virtual run that changed rate and depth, as JSON to edit.
+fn valid_log(dir: &std::path::Path) -> serde_json::Value {
+    let file = dir.join("valid.json");
+    let mut script = steps(10);
+    script.push(Control::Apply(Command::SetControlHz { hz: 20.0 }));
+    script.extend(steps(10));
+    script.push(Control::Apply(Command::SetQueueDepth { depth: 5 }));
+    script.extend(steps(10));
+    script.push(Control::Quit);
+    drive(&script, &file);
+    serde_json::from_str(&std::fs::read_to_string(&file).unwrap()).unwrap()
+}
+
+/// `ratelab replay` on `text`: (exit code, stderr).
+fn replay_text(dir: &std::path::Path, text: &str) -> (Option<i32>, String) {
+    let file = dir.join("edited.json");
+    std::fs::write(&file, text).unwrap();
+    replay_path(&file)
+}
+
+fn replay_path(file: &std::path::Path) -> (Option<i32>, String) {
+    let start = std::time::Instant::now();
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_ratelab"))
+        .args(["replay"])
+        .arg(file)
+        .output()
+        .unwrap();
+    assert!(
+        start.elapsed() < std::time::Duration::from_secs(10),
+        "replay took {:?}",
+        start.elapsed()
+    );
+    (
+        o.status.code(),
+        String::from_utf8_lossy(&o.stderr).into_owned(),
+    )
+}
+
+#[test]
+fn hand_edited_session_logs_are_checked_like_the_command_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let log = valid_log(dir.path());
+    assert_eq!(log["version"], 2);
+    let (code, err) = replay_text(dir.path(), &log.to_string());
+    assert_eq!(code, Some(0), "the unedited log replays: {err}");
+    type Edit = fn(&mut serde_json::Value);
+    let cases: [(&str, Edit, &str); 12] = [
+        (
+            "unknown version",
+            |v| v["version"] = 99.into(),
+            "version 99",
+        ),
+        (
+            "rate 0",
+            |v| v["runs"][0]["commands"][0]["hz"] = 0.0.into(),
+            "commands[0]: --control-hz",
+        ),
+        (
+            "negative rate",
+            |v| v["runs"][0]["commands"][0]["hz"] = (-5.0).into(),
+            "commands[0]: --control-hz",
+        ),
+        (
+            "depth 0",
+            |v| v["runs"][0]["commands"][1]["depth"] = 0.into(),
+            "commands[1]",
+        ),
+        (
+            "depth 2^64",
+            |v| {
+                v["runs"][0]["commands"][1]["depth"] = serde_json::Value::Number(
+                    serde_json::Number::from_f64(1.8446744073709552e19).unwrap(),
+                )
+            },
+            "not a ratelab session log",
+        ),
+        (
+            "out of order",
+            |v| v["runs"][0]["commands"][1]["at_ns"] = 0.into(),
+            "before the previous",
+        ),
+        (
+            "end after the longest run",
+            |v| v["runs"][0]["end_ns"] = 10_000_000_000_000u64.into(),
+            "end_ns",
+        ),
+        (
+            "end at u64::MAX",
+            |v| v["runs"][0]["end_ns"] = u64::MAX.into(),
+            "end_ns",
+        ),
+        (
+            "a tiny actuator rate in the graph",
+            |v| {
+                let g = v["runs"][0]["graph"].as_str().unwrap().replacen(
+                    "rate_hz = 50.0\nsubscribes = \"/action\"",
+                    "rate_hz = 1e-9\nsubscribes = \"/action\"",
+                    1,
+                );
+                v["runs"][0]["graph"] = g.into();
+            },
+            "graph:",
+        ),
+        (
+            "a missing brain",
+            |v| v["runs"][0]["policy"] = "/no/such/brain.pt".into(),
+            "brain.pt",
+        ),
+        (
+            "a swap to a missing brain",
+            |v| {
+                v["runs"][0]["commands"][0] = serde_json::json!({"at_ns": 200000000u64, "cmd": "set_policy", "spec": "/no/such.onnx"});
+            },
+            "commands[0]",
+        ),
+        (
+            "an unknown field",
+            |v| v["runs"][0]["speed"] = 3.into(),
+            "unknown field",
+        ),
+    ];
+    for (name, edit, want) in cases {
+        let mut v = log.clone();
+        edit(&mut v);
+        let (code, err) = replay_text(dir.path(), &v.to_string());
+        assert_eq!(code, Some(2), "{name}: {err}");
+        assert_eq!(err.lines().count(), 1, "{name}: one line: {err}");
+        assert!(err.contains(want), "{name}: want '{want}' in: {err}");
+        assert!(!err.contains("panicked"), "{name}: {err}");
+    }
+}
+
+#[test]
+fn replay_refuses_what_is_not_a_regular_file_and_caps_the_size() {
+    let dir = tempfile::tempdir().unwrap();
+    for special in ["/dev/zero", "/dev/urandom"] {
+        let (code, err) = replay_path(std::path::Path::new(special));
+        assert_eq!(code, Some(2), "{special}: {err}");
+        assert!(err.contains("not a regular file"), "{special}: {err}");
+    }
+    let fifo = dir.path().join("fifo");
+    let c = std::ffi::CString::new(fifo.to_str().unwrap()).unwrap();
+    // SAFETY: a valid, NUL-terminated path.
+    assert_eq!(unsafe { libc::mkfifo(c.as_ptr(), 0o600) }, 0);
+    let (code, err) = replay_path(&fifo);
+    assert_eq!(code, Some(2), "{err}");
+    assert!(err.contains("not a regular file"), "{err}");
+    let big = dir.path().join("big.json");
+    std::fs::write(&big, vec![b' '; 5 * 1024 * 1024]).unwrap();
+    let (code, err) = replay_path(&big);
+    assert_eq!(code, Some(2), "{err}");
+    assert!(err.contains("at most"), "{err}");
+}
+
+#[test]
+fn a_version_1_log_still_replays() {
+    // The format before graphs were data: the chapter's rates and depth per run.
+    let dir = tempfile::tempdir().unwrap();
+    let mut v = valid_log(dir.path());
+    let run = v["runs"][0].as_object_mut().unwrap();
+    run.remove("graph");
+    run.insert("sensor_hz".into(), 50.0.into());
+    run.insert("control_hz".into(), 50.0.into());
+    run.insert("actuator_hz".into(), 50.0.into());
+    run.insert("queue_depth".into(), 1.into());
+    let metrics = run["metrics"].as_object_mut().unwrap();
+    for key in ["graph", "nodes", "topics"] {
+        metrics.remove(key);
+    }
+    v["version"] = 1.into();
+    let file = dir.path().join("v1.json");
+    std::fs::write(&file, v.to_string()).unwrap();
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_ratelab"))
+        .args(["replay"])
+        .arg(&file)
+        .output()
+        .unwrap();
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        o.status.success(),
+        "{out}{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    assert!(out.contains("identical to the live run"), "{out}");
+}
