@@ -347,10 +347,11 @@ impl Recording {
             ("control_hz", cfg.control_hz().to_string()),
             ("actuator_hz", cfg.actuator_hz().to_string()),
             ("queue_depth", cfg.queue_depth().to_string()),
-            ("graph", cfg.graph.to_string()),
         ];
+        // The chapter's graph keeps the recording it had; any other names itself.
+        let graph = (cfg.graph.name != "cartpole").then(|| ("graph", cfg.graph.to_string()));
         let mut values = rerun::AnyValues::default();
-        for (k, v) in &settings {
+        for (k, v) in settings.iter().chain(graph.iter()) {
             values = values.with_component::<rerun::components::Text>(*k, [v.as_str()]);
         }
         let name = format!(
