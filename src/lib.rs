@@ -6,7 +6,8 @@
 //! This crate knows nothing of terminals: the lab (`lab/`) draws it.
 //!
 //! Layout, one module per idea: [`time`], [`clock`], [`topic`], [`rate`], [`node`],
-//! [`plant`], [`policy`], [`graph`], [`scheduler`] (+ [`realtime`]), [`metrics`], [`config`], [`run`].
+//! [`plant`], [`policy`], [`graph`], [`scheduler`] (+ [`realtime`]), [`metrics`], [`config`], [`run`];
+//! files the user names are read through [`input`] and written through [`output`].
 #![warn(missing_docs)]
 
 pub mod checkpoint;
@@ -14,9 +15,11 @@ pub mod clock;
 pub mod config;
 pub mod exercise;
 pub mod graph;
+pub mod input;
 pub mod metrics;
 pub mod node;
 pub mod np_random;
+pub mod output;
 pub mod plant;
 pub mod policy;
 pub mod rate;
