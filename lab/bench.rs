@@ -84,6 +84,16 @@ pub fn run_bench(a: &BenchArgs, stop: StopFlag) -> anyhow::Result<()> {
     }
     let spin_margin = Nanos(a.spin_margin_us * 1_000);
     let duration = duration_from_secs(a.duration)?;
+    for &hz in &a.hz {
+        let period = Rate::new(hz)?.period();
+        if spin_margin >= period {
+            anyhow::bail!(
+                "--spin-margin-us must be below every node's period (here {} µs, at --hz {hz}), got {}",
+                period.0 / 1_000,
+                a.spin_margin_us
+            );
+        }
+    }
     println!(
         "real-clock timing: every node at one rate{}, {} s each, spin margin {} µs, {} cores",
         if a.stagger { ", staggered by P/3" } else { "" },

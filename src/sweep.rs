@@ -156,6 +156,39 @@ pub fn run_grid(
         .collect())
 }
 
+/// `f` applied to every item on a pool of `threads` workers (at least one, at most one per
+/// item), each taking the next item as it finishes the last; results in item order. A
+/// panic in `f` is re-raised here.
+pub fn run_pool<T: Sync, R: Send>(
+    items: &[T],
+    threads: usize,
+    f: impl Fn(&T) -> R + Sync,
+) -> Vec<R> {
+    let next = std::sync::atomic::AtomicUsize::new(0);
+    let workers = threads.clamp(1, items.len().max(1));
+    let mut done: Vec<(usize, R)> = std::thread::scope(|s| {
+        let handles: Vec<_> = (0..workers)
+            .map(|_| {
+                s.spawn(|| {
+                    let mut out = Vec::new();
+                    loop {
+                        let i = next.fetch_add(1, std::sync::atomic::Ordering::SeqCst);
+                        let Some(item) = items.get(i) else { break };
+                        out.push((i, f(item)));
+                    }
+                    out
+                })
+            })
+            .collect();
+        handles
+            .into_iter()
+            .flat_map(|h| h.join().unwrap_or_else(|p| std::panic::resume_unwind(p)))
+            .collect()
+    });
+    done.sort_by_key(|(i, _)| *i);
+    done.into_iter().map(|(_, r)| r).collect()
+}
+
 /// The cliff of one seed: the highest control rate at which the pole falls.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct Cliff {
@@ -222,6 +255,24 @@ mod tests {
     use super::*;
     use crate::policy::Scripted;
     use crate::time::Nanos;
+
+    #[test]
+    fn the_pool_keeps_order_and_uses_at_most_its_workers() {
+        let live = std::sync::atomic::AtomicUsize::new(0);
+        let peak = std::sync::atomic::AtomicUsize::new(0);
+        let items: Vec<u64> = (0..200).collect();
+        let out = run_pool(&items, 3, |&x| {
+            use std::sync::atomic::Ordering::SeqCst;
+            let now = live.fetch_add(1, SeqCst) + 1;
+            peak.fetch_max(now, SeqCst);
+            std::thread::yield_now();
+            live.fetch_sub(1, SeqCst);
+            x * 2
+        });
+        assert_eq!(out, items.iter().map(|x| x * 2).collect::<Vec<_>>());
+        assert!(peak.load(std::sync::atomic::Ordering::SeqCst) <= 3);
+        assert!(run_pool(&[] as &[u8], 4, |_| 0).is_empty());
+    }
 
     #[test]
     fn grid_order_is_seed_fastest() {
