@@ -3,7 +3,7 @@
 use crate::cli::RunArgs;
 use anyhow::Context;
 use indicatif::{ProgressBar, ProgressStyle};
-use ratelab::config::{phase_offset_from_ms, BREAK_CONTROL_HZ};
+use ratelab::config::{phase_offsets_from_ms, BREAK_CONTROL_HZ, NODE_ORDER};
 use ratelab::metrics::StepRecord;
 use ratelab::recording::{check_output_path, default_path, RecordOptions, Recording};
 use ratelab::scheduler::{EndReason, StopFlag};
@@ -29,13 +29,12 @@ pub fn config_from_args(a: &RunArgs) -> anyhow::Result<RunConfig> {
         },
         queue_depth: a.queue_depth,
         clock: a.clock,
-        spin_margin: Nanos(a.spin_margin_us * 1_000),
+        spin_margin: Nanos(a.spin_margin_us.saturating_mul(1_000)),
         rt_priority: a.rt_priority,
         ..RunConfig::default()
     };
-    for (slot, ms) in cfg.phase_offsets.iter_mut().zip(&a.phase_offset_ms) {
-        *slot = phase_offset_from_ms(*ms)?;
-    }
+    let offsets = phase_offsets_from_ms(&a.phase_offset_ms, &NODE_ORDER)?;
+    cfg.phase_offsets.copy_from_slice(&offsets);
     if a.smoke {
         cfg.clock = ClockKind::Virtual;
         cfg.duration = Nanos(2 * Nanos::SECOND.0);
@@ -51,6 +50,10 @@ pub fn run_headless(a: &RunArgs, stop: StopFlag) -> anyhow::Result<RunReport> {
     if let Some(dir) = &a.out {
         std::fs::create_dir_all(dir)
             .with_context(|| format!("cannot create --out folder {}", dir.display()))?;
+        // Refuse before the run, not after it: the outputs will not be writable.
+        for name in ["metrics.json", "trace.csv"] {
+            ratelab::output::check_target(&dir.join(name), a.force)?;
+        }
     }
     let bar = (cfg.clock == ClockKind::Real && std::io::stdout().is_terminal()).then(|| {
         let bar = ProgressBar::new(cfg.duration.0 / 1_000_000);
@@ -109,11 +112,20 @@ pub fn run_headless(a: &RunArgs, stop: StopFlag) -> anyhow::Result<RunReport> {
         eprintln!("[ratelab] warning: {w}");
     }
     if let Some(dir) = &a.out {
-        write_outputs(dir, &report)?;
+        write_outputs(dir, &report, a.force)?;
     }
     if let Some(r) = &recording {
         println!("[ratelab] recording: {}", r.path().display());
         println!("[ratelab] open it with: rerun {}", r.path().display());
+    }
+    if let EndReason::NodeFailed { node, message } = &report.end.reason {
+        // The summary and files above are kept for diagnosis, but a run whose node died
+        // did not succeed, whatever the pole did meanwhile.
+        anyhow::bail!(
+            "node '{node}' failed at t={:.2}s: {}",
+            report.end.at.as_secs_f64(),
+            message.lines().next().unwrap_or("panic")
+        );
     }
     Ok(report)
 }
@@ -132,8 +144,13 @@ pub fn open_recording(
         None => default_path(Path::new("recordings"), cfg),
     };
     check_output_path(&path, a.force)?;
-    let (recording, notice) =
-        Recording::create(&path, cfg, policy, &RecordOptions { spawn: a.spawn })?;
+    let (recording, notice) = Recording::create_with(
+        &path,
+        cfg,
+        policy,
+        &RecordOptions { spawn: a.spawn },
+        a.force,
+    )?;
     if let Some(n) = notice {
         eprintln!("[ratelab] {n}");
     }
@@ -164,17 +181,23 @@ pub fn print_summary(report: &RunReport) {
     }
 }
 
-/// `metrics.json` (pretty, stable key order) and `trace.csv` (one row per actuator tick).
-pub fn write_outputs(dir: &Path, report: &RunReport) -> anyhow::Result<()> {
+/// `metrics.json` (pretty, stable key order) and `trace.csv` (one row per actuator tick),
+/// each through [`ratelab::output`] (never over an existing file unless `force`).
+pub fn write_outputs(dir: &Path, report: &RunReport, force: bool) -> anyhow::Result<()> {
+    // Both names are checked before either is written, so a refusal writes nothing.
+    let (metrics, trace) = (dir.join("metrics.json"), dir.join("trace.csv"));
+    ratelab::output::check_target(&metrics, force)?;
+    ratelab::output::check_target(&trace, force)?;
     let json = serde_json::to_string_pretty(&report.metrics)? + "\n";
-    let path = dir.join("metrics.json");
-    std::fs::write(&path, json).with_context(|| format!("cannot write {}", path.display()))?;
-    write_trace(&dir.join("trace.csv"), &report.trace)
+    ratelab::output::write_file(&metrics, force, json.as_bytes())?;
+    ratelab::output::write_with(&trace, force, |w| {
+        write_trace(w, &report.trace).map_err(std::io::Error::other)
+    })?;
+    Ok(())
 }
 
-fn write_trace(path: &Path, trace: &[StepRecord]) -> anyhow::Result<()> {
-    let mut w =
-        csv::Writer::from_path(path).with_context(|| format!("cannot write {}", path.display()))?;
+fn write_trace(out: &mut dyn Write, trace: &[StepRecord]) -> anyhow::Result<()> {
+    let mut w = csv::Writer::from_writer(out);
     w.write_record([
         "step",
         "t_ns",

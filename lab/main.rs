@@ -42,11 +42,23 @@ fn lab(args: &cli::RunArgs, stop: StopFlag) -> anyhow::Result<()> {
     };
     if let Some(p) = &record {
         ratelab::recording::check_output_path(p, args.force)?;
+        if args.force && p.is_file() {
+            // The session opens its recordings without overwriting; --force was given, so
+            // the old file makes way now (the check above refused links and non-files).
+            std::fs::remove_file(p)
+                .map_err(|e| anyhow::anyhow!("cannot replace {}: {e}", p.display()))?;
+        }
     }
     let session_file = args
         .session
         .clone()
         .or_else(|| record.as_ref().map(|p| p.with_extension("session.json")));
+    if let Some(p) = &session_file {
+        // The session log is saved over and over during the session: an existing file
+        // is only replaced with --force (and never through a link or into a non-file).
+        ratelab::output::check_target(p, args.force)
+            .map_err(|e| anyhow::anyhow!("--session {e}"))?;
+    }
     let alt_policy = (args.policy != "scripted").then(|| args.policy.clone());
     let settings = SessionSettings {
         cfg,
@@ -66,7 +78,11 @@ fn replay(args: &cli::ReplayArgs) -> anyhow::Result<()> {
     use ratelab::session::{replay_run, SessionLog};
     let log = SessionLog::load(&args.file)?;
     if let Some(dir) = &args.out {
-        std::fs::create_dir_all(dir)?;
+        std::fs::create_dir_all(dir)
+            .map_err(|e| anyhow::anyhow!("cannot create --out folder {}: {e}", dir.display()))?;
+        for n in 1..=log.runs.len() {
+            ratelab::output::check_target(&dir.join(format!("metrics-{n}.json")), args.force)?;
+        }
     }
     let mut mismatches = 0;
     for (i, run) in log.runs.iter().enumerate() {
@@ -101,7 +117,11 @@ fn replay(args: &cli::ReplayArgs) -> anyhow::Result<()> {
             None => println!("[ratelab]   (the live run recorded no metrics)"),
         }
         if let Some(dir) = &args.out {
-            std::fs::write(dir.join(format!("metrics-{n}.json")), json)?;
+            ratelab::output::write_file(
+                &dir.join(format!("metrics-{n}.json")),
+                args.force,
+                json.as_bytes(),
+            )?;
         }
     }
     anyhow::ensure!(
@@ -109,6 +129,26 @@ fn replay(args: &cli::ReplayArgs) -> anyhow::Result<()> {
         "{mismatches} replayed run(s) differ from the live session"
     );
     Ok(())
+}
+
+/// A clap error as one line that keeps its point: clap's first line names the flag, the
+/// value and the rule, except when it ends with a colon and lists its subject on the lines
+/// below (missing required arguments), which are then joined onto it.
+fn one_line(text: &str) -> String {
+    let mut lines = text.lines().map(str::trim).filter(|l| !l.is_empty());
+    let first = lines
+        .next()
+        .unwrap_or("error: invalid arguments")
+        .to_string();
+    if !first.ends_with(':') {
+        return first;
+    }
+    let listed: Vec<&str> = lines
+        .take_while(|l| {
+            !l.starts_with("Usage:") && !l.starts_with("For more") && !l.starts_with("tip:")
+        })
+        .collect();
+    format!("{first} {}", listed.join(", "))
 }
 
 fn main() -> ExitCode {
@@ -119,12 +159,7 @@ fn main() -> ExitCode {
                 let _ = e.print();
                 return ExitCode::SUCCESS;
             }
-            // One clear line: clap's first line names the flag, the value and the rule.
-            let text = e.render().to_string();
-            eprintln!(
-                "{}",
-                text.lines().next().unwrap_or("error: invalid arguments")
-            );
+            eprintln!("{}", one_line(&e.render().to_string()));
             return ExitCode::from(EXIT_USAGE);
         }
     };
