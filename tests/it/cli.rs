@@ -122,6 +122,7 @@ fn run_to(dir: &Path, extra: &[&str]) -> (Vec<u8>, Vec<u8>) {
         "2",
         "--out",
         dir.to_str().unwrap(),
+        "--force", // each folder is written twice (plain, then --break)
     ];
     args.extend_from_slice(extra);
     let o = ratelab(&args);

@@ -11,6 +11,7 @@ mod chapter_bands;
 mod cli;
 mod e2e_pty;
 mod exercises;
+mod hostile;
 mod realtime;
 mod recording;
 mod session;
