@@ -207,8 +207,10 @@ fn check_directory_records(bytes: &[u8]) -> Result<(), String> {
                 return Err(lie());
             }
         }
+        // With a zip64 record, the classic fields may hold placeholders instead of values.
         let placeholder = entries == 0xffff || size == 0xffff_ffff || offset == 0xffff_ffff;
-        if !(zip64 && placeholder) && !fits(entries, size, offset) {
+        let deferred = zip64 && placeholder;
+        if !deferred && !fits(entries, size, offset) {
             return Err(lie());
         }
     }

@@ -31,6 +31,10 @@ struct Outcome {
 
 /// Run `ratelab args` in `cwd`, killing it after `timeout`; `during(pid)` runs once the
 /// child has started (e.g. to send it a signal). Peak memory comes from `wait4`.
+#[allow(
+    clippy::zombie_processes,
+    reason = "the child is reaped by wait4, which also reports its peak memory"
+)]
 fn run_child(
     args: &[&str],
     cwd: &Path,
@@ -96,6 +100,13 @@ fn run_child(
 /// Run and assert the refusal contract; returns the one stderr line.
 fn assert_refused(args: &[&str], cwd: &Path, needle: &str) -> String {
     let o = run_child(args, cwd, REFUSE_WITHIN * 3, |_| {});
+    // The measurements, for `--nocapture` (BENCHMARKS-style figures for the worst cases).
+    println!(
+        "{:>7.1} MiB {:>6} ms  {}",
+        o.peak_mib,
+        o.wall.as_millis(),
+        args.join(" ")
+    );
     let what = format!("{args:?}: {o:?}");
     assert!(!o.timed_out, "hung: {what}");
     assert_eq!(o.code, Some(2), "exit code: {what}");
