@@ -246,9 +246,9 @@ pub struct RunArgs {
     #[arg(long, value_name = "FILE")]
     pub session: Option<PathBuf>,
     /// Real clock: spin this many µs before each deadline instead of sleeping (below every
-    /// node's period, at most 1000000).
-    #[arg(long, default_value = "300", value_name = "US", allow_negative_numbers = true, value_parser = parse_spin_margin)]
-    pub spin_margin_us: u64,
+    /// node's period, at most 1000000; default 300, or half the fastest period if shorter).
+    #[arg(long, value_name = "US", allow_negative_numbers = true, value_parser = parse_spin_margin)]
+    pub spin_margin_us: Option<u64>,
     /// Real clock: first-tick offsets in ms, exactly one per node, in node order
     /// (sensor,policy,actuator; e.g. 0,5,10), each in [0, 1000).
     #[arg(long, value_delimiter = ',', allow_negative_numbers = true, value_parser = parse_offset, value_name = "MS,MS,MS")]
@@ -268,9 +268,10 @@ pub struct BenchArgs {
     /// Seconds per rate, in (0, 3600].
     #[arg(long, allow_negative_numbers = true, default_value = "5", value_parser = parse_duration)]
     pub duration: f64,
-    /// Spin margin, µs (below the period of every rate measured, at most 1000000).
-    #[arg(long, default_value = "300", allow_negative_numbers = true, value_parser = parse_spin_margin)]
-    pub spin_margin_us: u64,
+    /// Spin margin, µs (below the period of every rate measured, at most 1000000; default
+    /// 300, or half the period if shorter).
+    #[arg(long, allow_negative_numbers = true, value_parser = parse_spin_margin)]
+    pub spin_margin_us: Option<u64>,
     /// Run node threads (and the bare wait) under SCHED_FIFO at this priority, 1..=99.
     #[arg(long, value_parser = parse_rt_priority, value_name = "PRIO", allow_negative_numbers = true)]
     pub rt_priority: Option<u8>,

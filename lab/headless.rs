@@ -29,7 +29,7 @@ pub fn config_from_args(a: &RunArgs) -> anyhow::Result<RunConfig> {
         },
         queue_depth: a.queue_depth,
         clock: a.clock,
-        spin_margin: Nanos(a.spin_margin_us.saturating_mul(1_000)),
+        spin_margin: Nanos(a.spin_margin_us.unwrap_or(0) * 1_000),
         rt_priority: a.rt_priority,
         ..RunConfig::default()
     };
@@ -38,6 +38,9 @@ pub fn config_from_args(a: &RunArgs) -> anyhow::Result<RunConfig> {
     if a.smoke {
         cfg.clock = ClockKind::Virtual;
         cfg.duration = Nanos(2 * Nanos::SECOND.0);
+    }
+    if a.spin_margin_us.is_none() {
+        cfg.spin_margin = cfg.default_spin_margin();
     }
     cfg.validate()?;
     Ok(cfg)

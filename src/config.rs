@@ -231,18 +231,33 @@ impl RunConfig {
         if let Some(p) = self.rt_priority {
             crate::realtime::check_priority(p).map_err(|_| ConfigError::RtPriority(p))?;
         }
-        let fastest = [self.sensor_hz, self.control_hz, self.actuator_hz]
-            .into_iter()
-            .filter_map(|hz| period_for_hz(hz).ok())
-            .min()
-            .unwrap_or(Nanos(u64::MAX));
-        if self.spin_margin >= fastest || self.spin_margin > crate::rate::MAX_SPIN_MARGIN {
+        // The spin margin matters to the real clock only (the virtual one never waits).
+        let fastest = self.fastest_period();
+        if self.clock == ClockKind::Real
+            && (self.spin_margin >= fastest || self.spin_margin > crate::rate::MAX_SPIN_MARGIN)
+        {
             return Err(ConfigError::SpinMargin {
                 margin_us: self.spin_margin.0 / 1_000,
                 period_us: fastest.0 / 1_000,
             });
         }
         Ok(())
+    }
+
+    /// The shortest period among the nodes' rates (`u64::MAX` ns if none is valid).
+    pub fn fastest_period(&self) -> Nanos {
+        [self.sensor_hz, self.control_hz, self.actuator_hz]
+            .into_iter()
+            .filter_map(|hz| period_for_hz(hz).ok())
+            .min()
+            .unwrap_or(Nanos(u64::MAX))
+    }
+
+    /// The spin margin to use when none was asked for: [`crate::rate::DEFAULT_SPIN_MARGIN`],
+    /// or half the fastest node's period if that is shorter (a node never spins a whole
+    /// period).
+    pub fn default_spin_margin(&self) -> Nanos {
+        crate::rate::DEFAULT_SPIN_MARGIN.min(Nanos(self.fastest_period().0 / 2))
     }
 }
 
@@ -295,8 +310,21 @@ mod tests {
         let spin = |us: u64| RunConfig {
             spin_margin: Nanos(us * 1_000),
             sensor_hz: 1000.0,
+            clock: ClockKind::Real,
             ..RunConfig::default()
         };
+        // The virtual clock never spins: any margin is fine there.
+        let virtual_spin = RunConfig {
+            clock: ClockKind::Virtual,
+            ..spin(5_000)
+        };
+        assert!(virtual_spin.validate().is_ok());
+        assert_eq!(spin(0).default_spin_margin(), Nanos(300_000));
+        let fast = RunConfig {
+            control_hz: 10_000.0,
+            ..spin(0)
+        };
+        assert_eq!(fast.default_spin_margin(), Nanos(50_000));
         assert!(spin(999).validate().is_ok());
         assert!(matches!(
             spin(1_000).validate(),

@@ -7,6 +7,7 @@ use crate::config::{ClockKind, RunConfig};
 use crate::metrics::Metrics;
 use crate::policy::Policy;
 use crate::run::{run, RunError, RunOptions};
+use crate::time::Nanos;
 use serde::Serialize;
 
 /// Builds a fresh brain for each run (runs may be on different threads).
@@ -68,15 +69,20 @@ impl Grid {
         out
     }
 
-    /// The run settings of `p`.
+    /// The run settings of `p`. The base's spin margin is capped at half the point's
+    /// fastest period (a grid has no margin of its own to get wrong per point).
     pub fn config(&self, p: &Point) -> RunConfig {
-        RunConfig {
+        let cfg = RunConfig {
             clock: p.clock,
             sensor_hz: p.sensor_hz,
             control_hz: p.control_hz,
             queue_depth: p.queue_depth,
             seed: p.seed,
             ..self.base.clone()
+        };
+        RunConfig {
+            spin_margin: cfg.spin_margin.min(Nanos(cfg.fastest_period().0 / 2)),
+            ..cfg
         }
     }
 }
@@ -254,7 +260,6 @@ pub fn find_cliff(
 mod tests {
     use super::*;
     use crate::policy::Scripted;
-    use crate::time::Nanos;
 
     #[test]
     fn the_pool_keeps_order_and_uses_at_most_its_workers() {

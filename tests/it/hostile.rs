@@ -1137,10 +1137,34 @@ fn durations_counts_and_margins_out_of_range_are_refused_with_the_range() {
     }
     // Not below the fastest node's period (50 Hz → 20 000 µs).
     assert_refused(
-        &["run", "--smoke", "--spin-margin-us", "20000"],
+        &[
+            "run",
+            "--clock",
+            "real",
+            "--duration",
+            "1",
+            "--spin-margin-us",
+            "20000",
+        ],
         d,
         "20000 µs",
     );
+    // Unasked for, the margin never reaches a period: a 10 kHz real run is accepted.
+    let o = run_child(
+        &[
+            "run",
+            "--clock",
+            "real",
+            "--duration",
+            "0.2",
+            "--control-hz",
+            "10000",
+        ],
+        d,
+        Duration::from_secs(20),
+        |_| {},
+    );
+    assert!(!o.stderr.contains("--spin-margin-us"), "{o:?}");
     assert_refused(
         &["bench", "--hz", "1000", "--spin-margin-us", "1000"],
         d,
