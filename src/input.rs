@@ -169,4 +169,23 @@ mod tests {
         );
         std::fs::remove_dir_all(&dir).unwrap();
     }
+
+    #[test]
+    fn forbidden_is_not_reported_as_missing() {
+        // Built from the error kind: a test run as root could not be denied a real file.
+        let p = Path::new("/x/brain.pt");
+        let denied = std::io::Error::from(std::io::ErrorKind::PermissionDenied);
+        assert_eq!(
+            io_error(p, &denied).to_string(),
+            "/x/brain.pt: permission denied"
+        );
+        let missing = std::io::Error::from(std::io::ErrorKind::NotFound);
+        assert_eq!(io_error(p, &missing).to_string(), "/x/brain.pt: not found");
+        let other = std::io::Error::from_raw_os_error(libc::EIO);
+        let text = io_error(p, &other).to_string();
+        assert!(
+            text.starts_with("/x/brain.pt: ") && text.contains("os error 5"),
+            "{text}"
+        );
+    }
 }

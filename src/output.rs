@@ -254,6 +254,30 @@ mod tests {
     }
 
     #[test]
+    fn write_errors_name_the_file_and_leave_nothing() {
+        let d = scratch("fail");
+        let f = d.join("table.csv");
+        let e = write_with(&f, false, |_| {
+            Err(std::io::Error::from_raw_os_error(libc::ENOSPC))
+        })
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.contains("table.csv") && e.contains("No space left on device"),
+            "{e}"
+        );
+        assert_eq!(std::fs::read_dir(&d).unwrap().count(), 0);
+        let e = write_file(Path::new("/proc/ratelab-denied/x.json"), false, b"x")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.starts_with("cannot write /proc/ratelab-denied/x.json: "),
+            "{e}"
+        );
+        std::fs::remove_dir_all(&d).unwrap();
+    }
+
+    #[test]
     fn a_name_taken_meanwhile_is_not_replaced() {
         let d = scratch("race");
         let f = d.join("rec.rrd");

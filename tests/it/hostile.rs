@@ -413,6 +413,44 @@ fn tensors_larger_than_their_storage_are_refused_before_allocating() {
 }
 
 #[test]
+fn the_largest_checkpoint_the_limits_accept_stays_under_the_cap() {
+    let _machine = crate::machine::shared();
+    // Just under the tensor budget: a 2800-wide actor whose 2800×2800 weight is one float
+    // broadcast (stride 0), so the file is tiny and all the memory is ratelab's.
+    let dir = tempfile::tempdir().unwrap();
+    let mut t = actor(2800);
+    t[2].stride = vec![0, 0];
+    t[2].numel = 1;
+    t[2].data = 0.001f32.to_le_bytes().to_vec();
+    let p = write_pt(dir.path(), "wide.pt", &t, 6);
+    let o = run_child(
+        &["run", "--smoke", "--policy", p.to_str().unwrap()],
+        dir.path(),
+        Duration::from_secs(60),
+        |_| {},
+    );
+    println!(
+        "{:>7.1} MiB {:>6} ms  wide.pt (accepted)",
+        o.peak_mib,
+        o.wall.as_millis()
+    );
+    assert_eq!(o.code, Some(0), "{o:?}");
+    assert!(o.stdout.contains("hidden 2800"), "{o:?}");
+    assert!(o.peak_mib < CAP_MIB, "{o:?}");
+    // Just under the pickle's object budget: a 500 KB string cloned 60 times (30 MB built
+    // by the unpickler), then refused for not being a state_dict.
+    let mut p = Pickle::new();
+    p.str(&"x".repeat(500_000)).op(b"q\x00");
+    for _ in 0..60 {
+        p.op(b"h\x00");
+    }
+    let pkl = p.op(b"t").stop();
+    let mut pkl = pkl;
+    pkl.insert(2, b'(');
+    assert_policy_refused(&write_raw_pt(dir.path(), "clones.pt", &pkl), "state_dict");
+}
+
+#[test]
 fn malformed_rebuild_calls_and_storages_are_refused_in_one_line() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
