@@ -83,6 +83,25 @@ pub fn run_headless(a: &RunArgs, stop: StopFlag) -> anyhow::Result<RunReport> {
         stop: stop.clone(),
         ..RunOptions::new()
     };
+    // A long virtual run (up to an hour of run time, seconds to minutes of wall time) shows
+    // its run time going by; the observer only reads step times, so results do not change.
+    let virtual_bar = (cfg.clock == ClockKind::Virtual
+        && cfg.duration >= Nanos(60 * Nanos::SECOND.0)
+        && std::io::stdout().is_terminal())
+    .then(|| {
+        let bar = ProgressBar::new(cfg.duration.0 / 1_000_000);
+        bar.set_style(
+            ProgressStyle::with_template(
+                "{spinner} virtual clock [{bar:40}] {pos}/{len} ms run time ({elapsed})",
+            )
+            .expect("static template")
+            .progress_chars("=> "),
+        );
+        bar
+    });
+    if let Some(bar) = &virtual_bar {
+        opts.observers.push(Box::new(ProgressObserver(bar.clone())));
+    }
     if let Some(r) = &recording {
         opts.observers.push(r.observer());
         let r = r.clone();
@@ -91,6 +110,9 @@ pub fn run_headless(a: &RunArgs, stop: StopFlag) -> anyhow::Result<RunReport> {
         }));
     }
     let report = run(&cfg, brain, opts)?;
+    if let Some(bar) = virtual_bar {
+        bar.finish_and_clear();
+    }
     if let Some(r) = &recording {
         match r.finish(&report.metrics, &report.end) {
             // With --spawn the flush also waits for the live viewer; one that could not start
@@ -131,6 +153,15 @@ pub fn run_headless(a: &RunArgs, stop: StopFlag) -> anyhow::Result<RunReport> {
         );
     }
     Ok(report)
+}
+
+/// Moves a progress bar to each actuator step's run time, in ms.
+struct ProgressObserver(ProgressBar);
+
+impl ratelab::graph::StepObserver for ProgressObserver {
+    fn on_step(&mut self, rec: &StepRecord) {
+        self.0.set_position(rec.t.0 / 1_000_000);
+    }
 }
 
 /// The `--record`/`--spawn` recording, checked and opened before the run starts.
