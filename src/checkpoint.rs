@@ -726,8 +726,13 @@ impl Tensor1x5<'_> {
 }
 
 impl Policy for OnnxPolicy {
+    /// An error or a panic inside tract gives a non-finite action, which the actuator
+    /// holds its last good action against and counts (never a crashed policy node).
     fn act(&mut self, obs: &Observation) -> Action {
-        [self.forward(obs).unwrap_or(f32::NAN)]
+        [guarded(|| self.forward(obs))
+            .ok()
+            .and_then(Result::ok)
+            .unwrap_or(f32::NAN)]
     }
 
     fn label(&self) -> String {
