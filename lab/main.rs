@@ -185,8 +185,8 @@ fn main() -> ExitCode {
         Some(Command::Replay(args)) => replay(args),
         Some(Command::Bench(args)) => bench::run_bench(args, stop),
         Some(Command::Exercise(args)) => exercise::run_exercise(&args.which, &args.dir),
-        Some(Command::Sweep(args)) => sweep::run_sweep(args),
-        Some(Command::Cliff(args)) => sweep::run_cliff(args),
+        Some(Command::Sweep(args)) => sweep::run_sweep(args, &stop),
+        Some(Command::Cliff(args)) => sweep::run_cliff(args, &stop),
         None => {
             if !cli.headless && std::io::stdout().is_terminal() && std::io::stdin().is_terminal() {
                 lab(&cli.run, stop)

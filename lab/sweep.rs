@@ -6,7 +6,8 @@ use ratelab::checkpoint::load_policy;
 use ratelab::config::duration_from_secs;
 use ratelab::metrics::Metrics;
 use ratelab::policy::Policy;
-use ratelab::sweep::{find_cliff, run_grid, Grid, Point};
+use ratelab::scheduler::StopFlag;
+use ratelab::sweep::{find_cliff, run_grid_until, Grid, Point};
 use ratelab::{ClockKind, RunConfig};
 use std::io::IsTerminal;
 
@@ -37,7 +38,8 @@ pub fn progress_bar(total: usize, unit: &str) -> Option<ProgressBar> {
 }
 
 /// Run a sweep and print/write its table.
-pub fn run_sweep(a: &SweepArgs) -> anyhow::Result<()> {
+/// Ctrl-C (`stop`) ends the run in progress at once and prints what completed.
+pub fn run_sweep(a: &SweepArgs, stop: &StopFlag) -> anyhow::Result<()> {
     let brain = brain_factory(&a.policy)?;
     let grid = Grid {
         clocks: a.clock.clone(),
@@ -56,13 +58,22 @@ pub fn run_sweep(a: &SweepArgs) -> anyhow::Result<()> {
     let total = grid.points().len();
     let bar = progress_bar(total, "runs");
     let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
-    let rows = run_grid(&grid, &brain, threads, &|done, _| {
-        if let Some(b) = &bar {
-            b.set_position(done as u64);
-        }
-    })?;
+    let rows = run_grid_until(
+        &grid,
+        &brain,
+        threads,
+        &|done, _| {
+            if let Some(b) = &bar {
+                b.set_position(done as u64);
+            }
+        },
+        stop,
+    )?;
     if let Some(b) = bar {
         b.finish_and_clear();
+    }
+    if stop.is_stopped() {
+        println!("interrupted: {} of {total} runs completed", rows.len());
     }
     print_table(&rows);
     println!();
@@ -280,8 +291,8 @@ pub const MAX_CLIFF_RATES: f64 = 5000.0;
 
 /// For each seed, the highest control rate at which the pole falls, to `step` Hz. Seeds
 /// run on a pool of workers sized to the machine's cores (as `sweep` does), results in
-/// seed order.
-pub fn run_cliff(a: &CliffArgs) -> anyhow::Result<()> {
+/// seed order. After Ctrl-C (`stop`) no further seed starts.
+pub fn run_cliff(a: &CliffArgs, stop: &StopFlag) -> anyhow::Result<()> {
     if a.min_hz > a.max_hz {
         anyhow::bail!(
             "--min-hz ({}) must not be above --max-hz ({})",
@@ -304,6 +315,9 @@ pub fn run_cliff(a: &CliffArgs) -> anyhow::Result<()> {
     let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
     let bar = progress_bar(a.seeds.len(), "seeds");
     let results = ratelab::sweep::run_pool(&a.seeds, threads, |&seed| {
+        if stop.is_stopped() {
+            return None;
+        }
         let base = RunConfig {
             clock: ClockKind::Virtual,
             seed,
@@ -316,12 +330,16 @@ pub fn run_cliff(a: &CliffArgs) -> anyhow::Result<()> {
         if let Some(b) = &bar {
             b.inc(1);
         }
-        r
+        Some(r)
     });
     if let Some(b) = bar {
         b.finish_and_clear();
     }
-    for r in results {
+    let done = results.iter().flatten().count();
+    if done < a.seeds.len() {
+        println!("interrupted: {done} of {} seeds searched", a.seeds.len());
+    }
+    for r in results.into_iter().flatten() {
         let c = r?;
         match (c.falls_at_hz, c.balances_at_hz) {
             (Some(f), Some(b)) => println!(

@@ -7,6 +7,7 @@ use crate::config::{ClockKind, RunConfig};
 use crate::metrics::Metrics;
 use crate::policy::Policy;
 use crate::run::{run, RunError, RunOptions};
+use crate::scheduler::{EndReason, StopFlag};
 use crate::time::Nanos;
 use serde::Serialize;
 
@@ -109,21 +110,44 @@ pub fn run_grid(
     threads: usize,
     progress: &(dyn Fn(usize, usize) + Sync),
 ) -> Result<Vec<(Point, Metrics)>, SweepError> {
+    run_grid_until(grid, brain, threads, progress, &StopFlag::new())
+}
+
+/// [`run_grid`] that stops early when `stop` is set (Ctrl-C): the run in progress ends at
+/// once (its partial metrics are dropped), no further point starts, and the points that
+/// completed are returned, in grid order.
+///
+/// # Errors
+/// The first [`SweepError`].
+pub fn run_grid_until(
+    grid: &Grid,
+    brain: BrainFactory<'_>,
+    threads: usize,
+    progress: &(dyn Fn(usize, usize) + Sync),
+    stop: &StopFlag,
+) -> Result<Vec<(Point, Metrics)>, SweepError> {
     let points = grid.points();
     let total = points.len();
     let done = std::sync::atomic::AtomicUsize::new(0);
-    let run_one = |p: &Point| -> Result<Metrics, SweepError> {
+    let run_one = |p: &Point| -> Result<Option<Metrics>, SweepError> {
+        if stop.is_stopped() {
+            return Ok(None);
+        }
         let b = brain().map_err(SweepError::Brain)?;
         let opts = RunOptions {
             keep_trace: false,
+            stop: stop.clone(),
             ..RunOptions::default()
         };
-        let m = run(&grid.config(p), b, opts)?.metrics;
+        let report = run(&grid.config(p), b, opts)?;
+        if report.end.reason == EndReason::Interrupted {
+            return Ok(None);
+        }
         progress(
             done.fetch_add(1, std::sync::atomic::Ordering::SeqCst) + 1,
             total,
         );
-        Ok(m)
+        Ok(Some(report.metrics))
     };
     let (virt, real): (Vec<usize>, Vec<usize>) =
         (0..total).partition(|&i| points[i].clock == ClockKind::Virtual);
@@ -132,7 +156,8 @@ pub fn run_grid(
     let chunks: Vec<Vec<usize>> = (0..threads)
         .map(|t| virt.iter().copied().skip(t).step_by(threads).collect())
         .collect();
-    let virt_results: Vec<Result<Vec<(usize, Metrics)>, SweepError>> = std::thread::scope(|s| {
+    type Done = Vec<(usize, Option<Metrics>)>;
+    let virt_results: Vec<Result<Done, SweepError>> = std::thread::scope(|s| {
         let handles: Vec<_> = chunks
             .iter()
             .map(|idx| {
@@ -150,15 +175,20 @@ pub fn run_grid(
     });
     for chunk in virt_results {
         for (i, m) in chunk? {
-            results[i] = Some(m);
+            results[i] = m;
         }
     }
     for i in real {
-        results[i] = Some(run_one(&points[i])?);
+        results[i] = run_one(&points[i])?;
     }
+    let stopped = stop.is_stopped();
     Ok(points
         .into_iter()
-        .zip(results.into_iter().map(|m| m.expect("every point ran")))
+        .zip(results)
+        .filter_map(|(p, m)| {
+            assert!(stopped || m.is_some(), "every point ran");
+            m.map(|m| (p, m))
+        })
         .collect())
 }
 
@@ -277,6 +307,39 @@ mod tests {
         assert_eq!(out, items.iter().map(|x| x * 2).collect::<Vec<_>>());
         assert!(peak.load(std::sync::atomic::Ordering::SeqCst) <= 3);
         assert!(run_pool(&[] as &[u8], 4, |_| 0).is_empty());
+    }
+
+    #[test]
+    fn a_stopped_sweep_returns_only_what_completed() {
+        let g = Grid {
+            clocks: vec![ClockKind::Virtual],
+            sensor_hz: vec![50.0],
+            control_hz: vec![50.0, 20.0, 10.0, 5.0],
+            queue_depth: vec![1],
+            seeds: vec![0],
+            base: RunConfig {
+                duration: Nanos(Nanos::SECOND.0),
+                ..RunConfig::default()
+            },
+        };
+        let brain = || Ok(Box::new(Scripted) as Box<dyn Policy>);
+        let stop = StopFlag::new();
+        // Stop after the second run completes: one thread, so runs go in grid order.
+        let rows = run_grid_until(
+            &g,
+            &brain,
+            1,
+            &|done, _| {
+                if done == 2 {
+                    stop.stop();
+                }
+            },
+            &stop,
+        )
+        .unwrap();
+        let hz: Vec<f64> = rows.iter().map(|(p, _)| p.control_hz).collect();
+        assert_eq!(hz, vec![50.0, 20.0]);
+        assert_eq!(rows, run_grid(&g, &brain, 1, &|_, _| {}).unwrap()[..2]);
     }
 
     #[test]

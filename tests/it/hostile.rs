@@ -1141,6 +1141,52 @@ fn sigint_stops_a_slow_real_clock_run_within_a_second() {
 }
 
 #[test]
+fn sigint_stops_a_real_clock_sweep_within_a_second_and_keeps_what_completed() {
+    let _machine = crate::machine::alone();
+    let dir = tempfile::tempdir().unwrap();
+    let mut sent = None;
+    let o = run_child(
+        &[
+            "sweep",
+            "--clock",
+            "real",
+            "--control-hz",
+            "50",
+            "--seeds",
+            "0,1,2",
+            "--duration",
+            "2",
+        ],
+        dir.path(),
+        Duration::from_secs(30),
+        |pid| {
+            // The first run (2 s) completes, the second is cut short.
+            std::thread::sleep(Duration::from_millis(3000));
+            sent = Some(Instant::now());
+            // SAFETY: signalling our own child.
+            unsafe { libc::kill(pid, libc::SIGINT) };
+        },
+    );
+    let after = sent.unwrap().elapsed();
+    assert_eq!(o.code, Some(130), "{o:?}");
+    // Normally 1 of 3 (the first 2 s run completed); a slow start may make it 0.
+    let done: usize = o
+        .stdout
+        .lines()
+        .find_map(|l| l.strip_prefix("interrupted: "))
+        .and_then(|l| l.split(' ').next())
+        .and_then(|n| n.parse().ok())
+        .unwrap_or_else(|| panic!("no 'interrupted' line: {o:?}"));
+    assert!(done < 3, "{o:?}");
+    let rows = o.stdout.lines().filter(|l| l.starts_with("real ")).count();
+    assert_eq!(rows, done, "the completed runs are in the table: {o:?}");
+    assert!(
+        after < Duration::from_secs(1),
+        "stopped {after:?} after SIGINT"
+    );
+}
+
+#[test]
 fn durations_counts_and_margins_out_of_range_are_refused_with_the_range() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
