@@ -82,14 +82,35 @@ pub fn run_bench(a: &BenchArgs, stop: StopFlag) -> anyhow::Result<()> {
     if a.render {
         return render_bench(2000);
     }
-    let spin_margin = Nanos(a.spin_margin_us.saturating_mul(1_000));
     let duration = duration_from_secs(a.duration)?;
     let graph = crate::headless::graph_from_args(&a.graph)?;
+    if let Some(us) = a.spin_margin_us {
+        for &hz in &a.hz {
+            let period = Rate::new(hz)?.period();
+            if Nanos(us.saturating_mul(1_000)) >= period {
+                anyhow::bail!(
+                    "--spin-margin-us must be below every node's period (here {} µs, at --hz {hz}), got {us}",
+                    period.0 / 1_000
+                );
+            }
+        }
+    }
+    // Asked for, or the default capped at half the period (never a whole period spun).
+    let margin_for = |period: Nanos| match a.spin_margin_us {
+        Some(us) => Nanos(us.saturating_mul(1_000)),
+        None => ratelab::rate::DEFAULT_SPIN_MARGIN.min(Nanos(period.0 / 2)),
+    };
     println!(
         "real-clock timing: every node at one rate{}, {} s each, spin margin {} µs, {} cores",
-        if a.stagger { ", staggered by P/3" } else { "" },
+        if a.stagger { ", staggered by P/n" } else { "" },
         a.duration,
-        a.spin_margin_us,
+        a.spin_margin_us.map_or_else(
+            || format!(
+                "{} (at most P/2)",
+                ratelab::rate::DEFAULT_SPIN_MARGIN.0 / 1_000
+            ),
+            |us| us.to_string()
+        ),
         std::thread::available_parallelism().map_or(1, |n| n.get())
     );
     println!(
@@ -99,6 +120,7 @@ pub fn run_bench(a: &BenchArgs, stop: StopFlag) -> anyhow::Result<()> {
     for &hz in &a.hz {
         let rate = Rate::new(hz)?;
         let period = rate.period();
+        let spin_margin = margin_for(period);
         let floor = run_real(
             vec![Box::new(BareWait(rate))],
             duration,

@@ -49,6 +49,9 @@ pub struct ReplayArgs {
     /// Write metrics-<n>.json for each replayed run into this folder.
     #[arg(long, value_name = "DIR")]
     pub out: Option<PathBuf>,
+    /// Overwrite existing metrics-<n>.json files.
+    #[arg(long)]
+    pub force: bool,
 }
 
 /// The graph to run and overrides of its rates and depths (every command that runs one).
@@ -103,23 +106,34 @@ pub struct ExerciseArgs {
 fn parse_seed(s: &str) -> Result<u64, String> {
     s.trim()
         .parse()
-        .map_err(|_| format!("not a seed (a whole number ≥ 0): '{s}'"))
+        .map_err(|_| format!("a seed is a whole number in 0..={}, got '{s}'", u64::MAX))
+}
+
+fn parse_spin_margin(s: &str) -> Result<u64, String> {
+    let max = ratelab::rate::MAX_SPIN_MARGIN.0 / 1_000;
+    s.trim()
+        .parse()
+        .ok()
+        .filter(|&us| us <= max)
+        .ok_or_else(|| {
+            format!("--spin-margin-us must be a whole number of µs in 0..={max}, below every node's period; got '{s}'")
+        })
 }
 
 /// `ratelab sweep`.
 #[derive(Debug, Clone, Args)]
 pub struct SweepArgs {
     /// Control rates, Hz (comma-separated).
-    #[arg(long, value_delimiter = ',', default_value = "50,25,20,15,10,5", value_parser = parse_rate("control-hz"))]
+    #[arg(long, allow_negative_numbers = true, value_delimiter = ',', default_value = "50,25,20,15,10,5", value_parser = parse_rate("control-hz"))]
     pub control_hz: Vec<f64>,
     /// Sensor rates, Hz.
-    #[arg(long, value_delimiter = ',', default_value = "50", value_parser = parse_rate("sensor-hz"))]
+    #[arg(long, allow_negative_numbers = true, value_delimiter = ',', default_value = "50", value_parser = parse_rate("sensor-hz"))]
     pub sensor_hz: Vec<f64>,
     /// Queue depths.
-    #[arg(long, value_delimiter = ',', default_value = "1", value_parser = parse_depth)]
+    #[arg(long, allow_negative_numbers = true, value_delimiter = ',', default_value = "1", value_parser = parse_depth)]
     pub queue_depth: Vec<usize>,
     /// Seeds.
-    #[arg(long, value_delimiter = ',', default_value = "0,1,2", value_parser = parse_seed)]
+    #[arg(long, value_delimiter = ',', default_value = "0,1,2", allow_negative_numbers = true, value_parser = parse_seed)]
     pub seeds: Vec<u64>,
     /// Clocks (virtual runs in parallel; real runs one at a time, in real time).
     #[arg(long, value_delimiter = ',', default_value = "virtual", value_parser = parse_clock)]
@@ -127,8 +141,8 @@ pub struct SweepArgs {
     /// The brain for every run.
     #[arg(long, default_value = "scripted")]
     pub policy: String,
-    /// Seconds per run.
-    #[arg(long, default_value = "10", value_parser = parse_duration)]
+    /// Seconds per run, in (0, 3600].
+    #[arg(long, allow_negative_numbers = true, default_value = "10", value_parser = parse_duration)]
     pub duration: f64,
     /// Write the table as CSV.
     #[arg(long, value_name = "FILE")]
@@ -139,34 +153,37 @@ pub struct SweepArgs {
     /// The graph (the grid's rates are its chain sensor's and policy's).
     #[command(flatten)]
     pub graph: GraphArgs,
+    /// Overwrite existing --csv/--json files.
+    #[arg(long)]
+    pub force: bool,
 }
 
 /// `ratelab cliff`.
 #[derive(Debug, Clone, Args)]
 pub struct CliffArgs {
     /// Seeds (one line of output each).
-    #[arg(long, value_delimiter = ',', default_value = "0,1,2", value_parser = parse_seed)]
+    #[arg(long, value_delimiter = ',', default_value = "0,1,2", allow_negative_numbers = true, value_parser = parse_seed)]
     pub seeds: Vec<u64>,
     /// Sensor rate, Hz.
-    #[arg(long, default_value = "50", value_parser = parse_rate("sensor-hz"))]
+    #[arg(long, allow_negative_numbers = true, default_value = "50", value_parser = parse_rate("sensor-hz"))]
     pub sensor_hz: f64,
     /// Queue depth.
-    #[arg(long, default_value = "1", value_parser = parse_depth)]
+    #[arg(long, allow_negative_numbers = true, default_value = "1", value_parser = parse_depth)]
     pub queue_depth: usize,
     /// The brain.
     #[arg(long, default_value = "scripted")]
     pub policy: String,
-    /// Seconds per run.
-    #[arg(long, default_value = "10", value_parser = parse_duration)]
+    /// Seconds per run, in (0, 3600].
+    #[arg(long, allow_negative_numbers = true, default_value = "10", value_parser = parse_duration)]
     pub duration: f64,
     /// Lowest rate searched, Hz.
-    #[arg(long, default_value = "1", value_parser = parse_rate("min-hz"))]
+    #[arg(long, allow_negative_numbers = true, default_value = "1", value_parser = parse_rate("min-hz"))]
     pub min_hz: f64,
     /// Highest rate searched, Hz.
-    #[arg(long, default_value = "50", value_parser = parse_rate("max-hz"))]
+    #[arg(long, allow_negative_numbers = true, default_value = "50", value_parser = parse_rate("max-hz"))]
     pub max_hz: f64,
-    /// Resolution, Hz.
-    #[arg(long, default_value = "0.1", value_parser = parse_rate("step"))]
+    /// Resolution, Hz (at most 5000 rates between --min-hz and --max-hz).
+    #[arg(long, allow_negative_numbers = true, default_value = "0.1", value_parser = parse_rate("step"))]
     pub step: f64,
     /// The graph (the searched rate is its chain policy's).
     #[command(flatten)]
@@ -230,9 +247,10 @@ fn parse_offset(s: &str) -> Result<f64, String> {
 #[derive(Debug, Clone, Args)]
 pub struct RunArgs {
     /// Reset seed (the course env's numpy draws).
-    #[arg(long, default_value_t = 0)]
+    #[arg(long, default_value = "0", allow_negative_numbers = true, value_parser = parse_seed)]
     pub seed: u64,
-    /// Run length in seconds of run time (headless default 10; the lab runs until you stop it).
+    /// Run length in seconds of run time, in (0, 3600] (headless default 10; the lab runs
+    /// until you stop it).
     #[arg(long, allow_negative_numbers = true, value_parser = parse_duration)]
     pub duration: Option<f64>,
     /// The graph and overrides of its rates and depths.
@@ -265,7 +283,8 @@ pub struct RunArgs {
     /// Record the run to a rerun .rrd (default: recordings/<clock>-control<hz>-q<depth>-seed<seed>.rrd).
     #[arg(long, value_name = "PATH", num_args = 0..=1)]
     pub record: Option<Option<PathBuf>>,
-    /// Overwrite an existing --record file.
+    /// Overwrite existing output files (--record, --out's files, --session); without it
+    /// nothing is ever overwritten. Links and non-regular files are refused either way.
     #[arg(long)]
     pub force: bool,
     /// Stream live to a rerun viewer on PATH as well (implies --record).
@@ -274,12 +293,13 @@ pub struct RunArgs {
     /// Lab: save the session's command log here (default: beside the recording).
     #[arg(long, value_name = "FILE")]
     pub session: Option<PathBuf>,
-    /// Real clock: spin this many µs before each deadline instead of sleeping.
-    #[arg(long, default_value_t = 300, value_name = "US")]
-    pub spin_margin_us: u64,
-    /// First-tick offset of each node in tie-break order, ms (e.g. 0,5,10 for sensor,
-    /// policy, actuator); both clocks.
-    #[arg(long, value_delimiter = ',', num_args = 1..=8, value_parser = parse_offset, value_name = "MS,…")]
+    /// Real clock: spin this many µs before each deadline instead of sleeping (below every
+    /// node's period, at most 1000000; default 300, or half the fastest period if shorter).
+    #[arg(long, value_name = "US", allow_negative_numbers = true, value_parser = parse_spin_margin)]
+    pub spin_margin_us: Option<u64>,
+    /// First-tick offsets in ms, exactly one per node, in tie-break order (the chapter's
+    /// sensor,policy,actuator: e.g. 0,5,10), each in [0, 1000); both clocks.
+    #[arg(long, value_delimiter = ',', allow_negative_numbers = true, value_parser = parse_offset, value_name = "MS,…")]
     pub phase_offset_ms: Vec<f64>,
     /// Real clock: run node threads under SCHED_FIFO at this priority, 1..=99 (needs
     /// CAP_SYS_NICE or `ulimit -r`; refused → a warning, default policy).
@@ -291,14 +311,15 @@ pub struct RunArgs {
 #[derive(Debug, Clone, Args)]
 pub struct BenchArgs {
     /// Rates to measure, Hz (every node at the same rate).
-    #[arg(long, value_delimiter = ',', default_value = "50,1000", value_parser = parse_rate("hz"))]
+    #[arg(long, allow_negative_numbers = true, value_delimiter = ',', default_value = "50,1000", value_parser = parse_rate("hz"))]
     pub hz: Vec<f64>,
-    /// Seconds per rate.
-    #[arg(long, default_value = "5", value_parser = parse_duration)]
+    /// Seconds per rate, in (0, 3600].
+    #[arg(long, allow_negative_numbers = true, default_value = "5", value_parser = parse_duration)]
     pub duration: f64,
-    /// Spin margin, µs.
-    #[arg(long, default_value_t = 300)]
-    pub spin_margin_us: u64,
+    /// Spin margin, µs (below the period of every rate measured, at most 1000000; default
+    /// 300, or half the period if shorter).
+    #[arg(long, allow_negative_numbers = true, value_parser = parse_spin_margin)]
+    pub spin_margin_us: Option<u64>,
     /// Run node threads (and the bare wait) under SCHED_FIFO at this priority, 1..=99.
     #[arg(long, value_parser = parse_rt_priority, value_name = "PRIO", allow_negative_numbers = true)]
     pub rt_priority: Option<u8>,

@@ -19,6 +19,27 @@ fn print_checks(checks: &[Check]) {
     }
 }
 
+/// Run `f` with a spinner and the elapsed time on stderr (when it is a terminal): the
+/// measurements take from seconds to a minute.
+fn with_spinner<T>(what: &str, f: impl FnOnce() -> T) -> T {
+    use std::io::IsTerminal;
+    let bar = std::io::stderr().is_terminal().then(|| {
+        let bar = indicatif::ProgressBar::new_spinner();
+        bar.set_style(
+            indicatif::ProgressStyle::with_template("{spinner} {msg} ({elapsed})")
+                .expect("static template"),
+        );
+        bar.set_message(what.to_string());
+        bar.enable_steady_tick(std::time::Duration::from_millis(200));
+        bar
+    });
+    let out = f();
+    if let Some(b) = bar {
+        b.finish_and_clear();
+    }
+    out
+}
+
 /// Run exercise `which` from the exercise folder `dir`.
 pub fn run_exercise(
     which: &str,
@@ -48,7 +69,7 @@ pub fn run_exercise(
     match *ex {
         "ex1" => {
             let b = &bands.ex1;
-            let runs = measure_ex1(b, graph)?;
+            let runs = with_spinner("measuring ex1", || measure_ex1(b, graph))?;
             println!(
                 "{:>9} | {} | mean sense->act latency",
                 "control",
@@ -93,7 +114,7 @@ pub fn run_exercise(
         }
         "ex2" => {
             let b = &bands.ex2;
-            let pairs = measure_ex2(b, graph)?;
+            let pairs = with_spinner("measuring ex2", || measure_ex2(b, graph))?;
             println!("control {} Hz | seed | depth | /obs dropped | balanced | fell at step | mean latency", b.control_hz);
             for (seed, (s, d)) in b.seeds.iter().zip(&pairs) {
                 for m in [s, d] {
@@ -121,7 +142,7 @@ pub fn run_exercise(
                 "Running {} s on the real clock twice (this takes real time)...",
                 b.duration_s
             );
-            let (matched, offset) = measure_ex3(b, graph)?;
+            let (matched, offset) = with_spinner("measuring ex3", || measure_ex3(b, graph))?;
             println!("offsets (ms)     | /obs dropped | /action dropped | balanced | mean latency");
             for (label, m) in [
                 ("none".to_string(), &matched),

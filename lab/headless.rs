@@ -3,7 +3,7 @@
 use crate::cli::{GraphArgs, RunArgs};
 use anyhow::Context;
 use indicatif::{ProgressBar, ProgressStyle};
-use ratelab::config::{phase_offset_from_ms, BREAK_CONTROL_HZ};
+use ratelab::config::{phase_offsets_from_ms, BREAK_CONTROL_HZ};
 use ratelab::graph::GraphSpec;
 use ratelab::metrics::StepRecord;
 use ratelab::recording::{check_output_path, default_path, RecordOptions, Recording};
@@ -42,7 +42,7 @@ pub fn config_from_args(a: &RunArgs) -> anyhow::Result<RunConfig> {
         duration: ratelab::config::duration_from_secs(a.duration.unwrap_or(DEFAULT_DURATION_S))?,
         graph: graph_from_args(&a.graph)?,
         clock: a.clock,
-        spin_margin: Nanos(a.spin_margin_us.saturating_mul(1_000)),
+        spin_margin: Nanos(a.spin_margin_us.unwrap_or(0).saturating_mul(1_000)),
         rt_priority: a.rt_priority,
         ..RunConfig::default()
     };
@@ -57,25 +57,13 @@ pub fn config_from_args(a: &RunArgs) -> anyhow::Result<RunConfig> {
     if let Some(depth) = a.queue_depth {
         cfg.set_queue_depth(depth)?;
     }
-    if !a.phase_offset_ms.is_empty() {
-        let nodes = cfg.graph.node_names();
-        anyhow::ensure!(
-            a.phase_offset_ms.len() == nodes.len(),
-            "--phase-offset-ms takes one value per node ({} for graph '{}': {}), got {}",
-            nodes.len(),
-            cfg.graph.name,
-            nodes.join(", "),
-            a.phase_offset_ms.len()
-        );
-        cfg.phase_offsets = a
-            .phase_offset_ms
-            .iter()
-            .map(|&ms| phase_offset_from_ms(ms))
-            .collect::<Result<_, _>>()?;
-    }
+    cfg.phase_offsets = phase_offsets_from_ms(&a.phase_offset_ms, &cfg.graph.node_names())?;
     if a.smoke {
         cfg.clock = ClockKind::Virtual;
         cfg.duration = Nanos(2 * Nanos::SECOND.0);
+    }
+    if a.spin_margin_us.is_none() {
+        cfg.spin_margin = cfg.default_spin_margin();
     }
     cfg.validate()?;
     Ok(cfg)
@@ -88,6 +76,10 @@ pub fn run_headless(a: &RunArgs, stop: StopFlag) -> anyhow::Result<RunReport> {
     if let Some(dir) = &a.out {
         std::fs::create_dir_all(dir)
             .with_context(|| format!("cannot create --out folder {}", dir.display()))?;
+        // Refuse before the run, not after it: the outputs will not be writable.
+        for name in ["metrics.json", "trace.csv"] {
+            ratelab::output::check_target(&dir.join(name), a.force)?;
+        }
     }
     let bar = (cfg.clock == ClockKind::Real && std::io::stdout().is_terminal()).then(|| {
         let bar = ProgressBar::new(cfg.duration.0 / 1_000_000);
@@ -114,6 +106,25 @@ pub fn run_headless(a: &RunArgs, stop: StopFlag) -> anyhow::Result<RunReport> {
         stop: stop.clone(),
         ..RunOptions::new()
     };
+    // A long virtual run (up to an hour of run time, seconds to minutes of wall time) shows
+    // its run time going by; the observer only reads step times, so results do not change.
+    let virtual_bar = (cfg.clock == ClockKind::Virtual
+        && cfg.duration >= Nanos(60 * Nanos::SECOND.0)
+        && std::io::stdout().is_terminal())
+    .then(|| {
+        let bar = ProgressBar::new(cfg.duration.0 / 1_000_000);
+        bar.set_style(
+            ProgressStyle::with_template(
+                "{spinner} virtual clock [{bar:40}] {pos}/{len} ms run time ({elapsed})",
+            )
+            .expect("static template")
+            .progress_chars("=> "),
+        );
+        bar
+    });
+    if let Some(bar) = &virtual_bar {
+        opts.observers.push(Box::new(ProgressObserver(bar.clone())));
+    }
     if let Some(r) = &recording {
         opts.observers.push(r.observer());
         let r = r.clone();
@@ -122,6 +133,9 @@ pub fn run_headless(a: &RunArgs, stop: StopFlag) -> anyhow::Result<RunReport> {
         }));
     }
     let report = run(&cfg, brain, opts)?;
+    if let Some(bar) = virtual_bar {
+        bar.finish_and_clear();
+    }
     if let Some(r) = &recording {
         match r.finish(&report.metrics, &report.end) {
             // With --spawn the flush also waits for the live viewer; one that could not start
@@ -146,13 +160,31 @@ pub fn run_headless(a: &RunArgs, stop: StopFlag) -> anyhow::Result<RunReport> {
         eprintln!("[ratelab] warning: {w}");
     }
     if let Some(dir) = &a.out {
-        write_outputs(dir, &report, &cfg.graph)?;
+        write_outputs(dir, &report, &cfg.graph, a.force)?;
     }
     if let Some(r) = &recording {
         println!("[ratelab] recording: {}", r.path().display());
         println!("[ratelab] open it with: rerun {}", r.path().display());
     }
+    if let EndReason::NodeFailed { node, message } = &report.end.reason {
+        // The summary and files above are kept for diagnosis, but a run whose node died
+        // did not succeed, whatever the pole did meanwhile.
+        anyhow::bail!(
+            "node '{node}' failed at t={:.2}s: {}",
+            report.end.at.as_secs_f64(),
+            message.lines().next().unwrap_or("panic")
+        );
+    }
     Ok(report)
+}
+
+/// Moves a progress bar to each actuator step's run time, in ms.
+struct ProgressObserver(ProgressBar);
+
+impl ratelab::graph::StepObserver for ProgressObserver {
+    fn on_step(&mut self, rec: &StepRecord) {
+        self.0.set_position(rec.t.0 / 1_000_000);
+    }
 }
 
 /// The `--record`/`--spawn` recording, checked and opened before the run starts.
@@ -169,8 +201,13 @@ pub fn open_recording(
         None => default_path(Path::new("recordings"), cfg),
     };
     check_output_path(&path, a.force)?;
-    let (recording, notice) =
-        Recording::create(&path, cfg, policy, &RecordOptions { spawn: a.spawn })?;
+    let (recording, notice) = Recording::create_with(
+        &path,
+        cfg,
+        policy,
+        &RecordOptions { spawn: a.spawn },
+        a.force,
+    )?;
     if let Some(n) = notice {
         eprintln!("[ratelab] {n}");
     }
@@ -201,19 +238,30 @@ pub fn print_summary(report: &RunReport) {
     }
 }
 
-/// `metrics.json` (pretty, stable key order) and `trace.csv` (one row per actuator tick).
-pub fn write_outputs(dir: &Path, report: &RunReport, graph: &GraphSpec) -> anyhow::Result<()> {
+/// `metrics.json` (pretty, stable key order) and `trace.csv` (one row per actuator tick),
+/// each through [`ratelab::output`] (never over an existing file unless `force`).
+pub fn write_outputs(
+    dir: &Path,
+    report: &RunReport,
+    graph: &GraphSpec,
+    force: bool,
+) -> anyhow::Result<()> {
+    // Both names are checked before either is written, so a refusal writes nothing.
+    let (metrics, trace) = (dir.join("metrics.json"), dir.join("trace.csv"));
+    ratelab::output::check_target(&metrics, force)?;
+    ratelab::output::check_target(&trace, force)?;
     let json = serde_json::to_string_pretty(&report.metrics)? + "\n";
-    let path = dir.join("metrics.json");
-    std::fs::write(&path, json).with_context(|| format!("cannot write {}", path.display()))?;
-    write_trace(&dir.join("trace.csv"), &report.trace, graph)
+    ratelab::output::write_file(&metrics, force, json.as_bytes())?;
+    ratelab::output::write_with(&trace, force, |w| {
+        write_trace(w, &report.trace, graph).map_err(std::io::Error::other)
+    })?;
+    Ok(())
 }
 
 /// One row per actuator tick; per topic (in the graph's topic order) a `<topic>_published`
 /// and `<topic>_dropped` column (`/obs` → `obs_published`), as the chapter's trace has.
-fn write_trace(path: &Path, trace: &[StepRecord], graph: &GraphSpec) -> anyhow::Result<()> {
-    let mut w =
-        csv::Writer::from_path(path).with_context(|| format!("cannot write {}", path.display()))?;
+fn write_trace(out: &mut dyn Write, trace: &[StepRecord], graph: &GraphSpec) -> anyhow::Result<()> {
+    let mut w = csv::Writer::from_writer(out);
     let mut header: Vec<String> = [
         "step",
         "t_ns",

@@ -41,14 +41,22 @@ fn lab(args: &cli::RunArgs, stop: StopFlag) -> anyhow::Result<()> {
         )),
     };
     if let Some(p) = &record {
+        // Checked before the screen opens; the session then replaces it only with --force.
         ratelab::recording::check_output_path(p, args.force)?;
     }
     let session_file = args
         .session
         .clone()
         .or_else(|| record.as_ref().map(|p| p.with_extension("session.json")));
+    if let Some(p) = &session_file {
+        // The session log is saved over and over during the session: an existing file
+        // is only replaced with --force (and never through a link or into a non-file).
+        ratelab::output::check_target(p, args.force)
+            .map_err(|e| anyhow::anyhow!("--session {e}"))?;
+    }
     let alt_policy = (args.policy != "scripted").then(|| args.policy.clone());
     let settings = SessionSettings {
+        force: args.force,
         cfg,
         policy: args.policy.clone(),
         alt_policy,
@@ -66,7 +74,11 @@ fn replay(args: &cli::ReplayArgs) -> anyhow::Result<()> {
     use ratelab::session::{replay_run, SessionLog};
     let log = SessionLog::load(&args.file)?;
     if let Some(dir) = &args.out {
-        std::fs::create_dir_all(dir)?;
+        std::fs::create_dir_all(dir)
+            .map_err(|e| anyhow::anyhow!("cannot create --out folder {}: {e}", dir.display()))?;
+        for n in 1..=log.runs.len() {
+            ratelab::output::check_target(&dir.join(format!("metrics-{n}.json")), args.force)?;
+        }
     }
     let mut mismatches = 0;
     for (i, run) in log.runs.iter().enumerate() {
@@ -100,7 +112,11 @@ fn replay(args: &cli::ReplayArgs) -> anyhow::Result<()> {
             None => println!("[ratelab]   (the live run recorded no metrics)"),
         }
         if let Some(dir) = &args.out {
-            std::fs::write(dir.join(format!("metrics-{n}.json")), json)?;
+            ratelab::output::write_file(
+                &dir.join(format!("metrics-{n}.json")),
+                args.force,
+                json.as_bytes(),
+            )?;
         }
     }
     anyhow::ensure!(
@@ -108,6 +124,26 @@ fn replay(args: &cli::ReplayArgs) -> anyhow::Result<()> {
         "{mismatches} replayed run(s) differ from the live session"
     );
     Ok(())
+}
+
+/// A clap error as one line that keeps its point: clap's first line names the flag, the
+/// value and the rule, except when it ends with a colon and lists its subject on the lines
+/// below (missing required arguments), which are then joined onto it.
+fn one_line(text: &str) -> String {
+    let mut lines = text.lines().map(str::trim).filter(|l| !l.is_empty());
+    let first = lines
+        .next()
+        .unwrap_or("error: invalid arguments")
+        .to_string();
+    if !first.ends_with(':') {
+        return first;
+    }
+    let listed: Vec<&str> = lines
+        .take_while(|l| {
+            !l.starts_with("Usage:") && !l.starts_with("For more") && !l.starts_with("tip:")
+        })
+        .collect();
+    format!("{first} {}", listed.join(", "))
 }
 
 fn main() -> ExitCode {
@@ -118,12 +154,7 @@ fn main() -> ExitCode {
                 let _ = e.print();
                 return ExitCode::SUCCESS;
             }
-            // One clear line: clap's first line names the flag, the value and the rule.
-            let text = e.render().to_string();
-            eprintln!(
-                "{}",
-                text.lines().next().unwrap_or("error: invalid arguments")
-            );
+            eprintln!("{}", one_line(&e.render().to_string()));
             return ExitCode::from(EXIT_USAGE);
         }
     };
@@ -150,8 +181,8 @@ fn main() -> ExitCode {
         Some(Command::Bench(args)) => bench::run_bench(args, stop),
         Some(Command::Exercise(args)) => headless::graph_from_args(&args.graph)
             .and_then(|g| exercise::run_exercise(&args.which, &args.dir, &g)),
-        Some(Command::Sweep(args)) => sweep::run_sweep(args),
-        Some(Command::Cliff(args)) => sweep::run_cliff(args),
+        Some(Command::Sweep(args)) => sweep::run_sweep(args, &stop),
+        Some(Command::Cliff(args)) => sweep::run_cliff(args, &stop),
         None => {
             if !cli.headless && std::io::stdout().is_terminal() && std::io::stdin().is_terminal() {
                 lab(&cli.run, stop)

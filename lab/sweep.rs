@@ -1,13 +1,13 @@
 //! `ratelab sweep` (a parameter grid to CSV/JSON with a plot) and `ratelab cliff`.
 
 use crate::cli::{CliffArgs, SweepArgs};
-use anyhow::Context;
 use indicatif::{ProgressBar, ProgressStyle};
 use ratelab::checkpoint::load_policy;
 use ratelab::config::duration_from_secs;
 use ratelab::metrics::Metrics;
 use ratelab::policy::Policy;
-use ratelab::sweep::{find_cliff, run_grid, Grid, Point};
+use ratelab::scheduler::StopFlag;
+use ratelab::sweep::{find_cliff, run_grid_until, Grid, Point};
 use ratelab::{ClockKind, RunConfig};
 use std::io::IsTerminal;
 
@@ -20,18 +20,26 @@ fn brain_factory(
     Ok(move || load_policy(&spec).map_err(|e| e.to_string()))
 }
 
-fn progress_bar(total: usize) -> Option<ProgressBar> {
+/// A progress bar on stderr (when it is a terminal), redrawn every 200 ms so that even a
+/// run of many seconds shows the time going by.
+pub fn progress_bar(total: usize, unit: &str) -> Option<ProgressBar> {
     std::io::stderr().is_terminal().then(|| {
         let bar = ProgressBar::new(total as u64);
         bar.set_style(
-            ProgressStyle::with_template("{bar:40} {pos}/{len} runs").expect("static template"),
+            ProgressStyle::with_template(&format!(
+                "{{spinner}} [{{bar:40}}] {{pos}}/{{len}} {unit}, {{elapsed}} (about {{eta}} left)"
+            ))
+            .expect("static template")
+            .progress_chars("=> "),
         );
+        bar.enable_steady_tick(std::time::Duration::from_millis(200));
         bar
     })
 }
 
 /// Run a sweep and print/write its table.
-pub fn run_sweep(a: &SweepArgs) -> anyhow::Result<()> {
+/// Ctrl-C (`stop`) ends the run in progress at once and prints what completed.
+pub fn run_sweep(a: &SweepArgs, stop: &StopFlag) -> anyhow::Result<()> {
     let brain = brain_factory(&a.policy)?;
     let grid = Grid {
         clocks: a.clock.clone(),
@@ -45,16 +53,28 @@ pub fn run_sweep(a: &SweepArgs) -> anyhow::Result<()> {
             ..RunConfig::default()
         },
     };
+    for p in [&a.csv, &a.json].into_iter().flatten() {
+        ratelab::output::check_target(p, a.force)?; // refuse before hours of runs, not after
+    }
     let total = grid.points().len();
-    let bar = progress_bar(total);
+    let bar = progress_bar(total, "runs");
     let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
-    let rows = run_grid(&grid, &brain, threads, &|done, _| {
-        if let Some(b) = &bar {
-            b.set_position(done as u64);
-        }
-    })?;
+    let rows = run_grid_until(
+        &grid,
+        &brain,
+        threads,
+        &|done, _| {
+            if let Some(b) = &bar {
+                b.set_position(done as u64);
+            }
+        },
+        stop,
+    )?;
     if let Some(b) = bar {
         b.finish_and_clear();
+    }
+    if stop.is_stopped() {
+        println!("interrupted: {} of {total} runs completed", rows.len());
     }
     print_table(&rows);
     println!();
@@ -64,7 +84,9 @@ pub fn run_sweep(a: &SweepArgs) -> anyhow::Result<()> {
         print_plot(&rows);
     }
     if let Some(p) = &a.csv {
-        write_csv(p, &rows).with_context(|| format!("cannot write {}", p.display()))?;
+        ratelab::output::write_with(p, a.force, |w| {
+            write_csv(w, &rows).map_err(std::io::Error::other)
+        })?;
         println!("wrote {}", p.display());
     }
     if let Some(p) = &a.json {
@@ -72,8 +94,8 @@ pub fn run_sweep(a: &SweepArgs) -> anyhow::Result<()> {
             .iter()
             .map(|(p, m)| serde_json::json!({ "point": p, "metrics": m }))
             .collect();
-        std::fs::write(p, serde_json::to_string_pretty(&items)? + "\n")
-            .with_context(|| format!("cannot write {}", p.display()))?;
+        let json = serde_json::to_string_pretty(&items)? + "\n";
+        ratelab::output::write_file(p, a.force, json.as_bytes())?;
         println!("wrote {}", p.display());
     }
     Ok(())
@@ -226,8 +248,8 @@ fn print_plot(rows: &[(Point, Metrics)]) {
     }
 }
 
-fn write_csv(path: &std::path::Path, rows: &[(Point, Metrics)]) -> anyhow::Result<()> {
-    let mut w = csv::Writer::from_path(path)?;
+fn write_csv(out: &mut dyn std::io::Write, rows: &[(Point, Metrics)]) -> anyhow::Result<()> {
+    let mut w = csv::Writer::from_writer(out);
     w.write_record([
         "clock",
         "sensor_hz",
@@ -268,37 +290,63 @@ fn write_csv(path: &std::path::Path, rows: &[(Point, Metrics)]) -> anyhow::Resul
     Ok(())
 }
 
-/// For each seed, the highest control rate at which the pole falls, to `step` Hz.
-pub fn run_cliff(a: &CliffArgs) -> anyhow::Result<()> {
+/// At most this many control rates are searched per seed (`--step` against the range).
+pub const MAX_CLIFF_RATES: f64 = 5000.0;
+
+/// For each seed, the highest control rate at which the pole falls, to `step` Hz. Seeds
+/// run on a pool of workers sized to the machine's cores (as `sweep` does), results in
+/// seed order. After Ctrl-C (`stop`) no further seed starts.
+pub fn run_cliff(a: &CliffArgs, stop: &StopFlag) -> anyhow::Result<()> {
+    if a.min_hz > a.max_hz {
+        anyhow::bail!(
+            "--min-hz ({}) must not be above --max-hz ({})",
+            a.min_hz,
+            a.max_hz
+        );
+    }
+    let rates = ((a.max_hz - a.min_hz) / a.step).floor() + 1.0;
+    if rates.is_nan() || rates > MAX_CLIFF_RATES {
+        anyhow::bail!(
+            "--step {} is too fine for --min-hz {} to --max-hz {}: at most {MAX_CLIFF_RATES} rates are searched (use --step ≥ {:.4})",
+            a.step,
+            a.min_hz,
+            a.max_hz,
+            (a.max_hz - a.min_hz) / (MAX_CLIFF_RATES - 1.0)
+        );
+    }
+    let duration = duration_from_secs(a.duration)?;
     let brain = brain_factory(&a.policy)?;
     let graph = crate::headless::graph_from_args(&a.graph)?;
-    let results: Vec<_> = std::thread::scope(|s| {
-        let handles: Vec<_> = a
-            .seeds
-            .iter()
-            .map(|&seed| {
-                let brain = &brain;
-                let graph = &graph;
-                s.spawn(move || {
-                    let mut base = RunConfig {
-                        clock: ClockKind::Virtual,
-                        seed,
-                        graph: graph.clone(),
-                        duration: duration_from_secs(a.duration)?,
-                        ..RunConfig::default()
-                    };
-                    base.set_sensor_hz(a.sensor_hz)?;
-                    base.set_queue_depth(a.queue_depth)?;
-                    Ok::<_, anyhow::Error>(find_cliff(&base, brain, a.min_hz, a.max_hz, a.step)?)
-                })
-            })
-            .collect();
-        handles
-            .into_iter()
-            .map(|h| h.join().expect("cliff worker panicked"))
-            .collect()
+    let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let bar = progress_bar(a.seeds.len(), "seeds");
+    let results = ratelab::sweep::run_pool(&a.seeds, threads, |&seed| {
+        if stop.is_stopped() {
+            return None;
+        }
+        let base = RunConfig {
+            clock: ClockKind::Virtual,
+            seed,
+            graph: graph.clone(),
+            duration,
+            ..RunConfig::default()
+        }
+        .with_chapter(a.sensor_hz, graph.control_hz(), a.queue_depth);
+        let r = base
+            .map_err(ratelab::sweep::SweepError::from)
+            .and_then(|base| find_cliff(&base, &brain, a.min_hz, a.max_hz, a.step));
+        if let Some(b) = &bar {
+            b.inc(1);
+        }
+        Some(r)
     });
-    for r in results {
+    if let Some(b) = bar {
+        b.finish_and_clear();
+    }
+    let done = results.iter().flatten().count();
+    if done < a.seeds.len() {
+        println!("interrupted: {done} of {} seeds searched", a.seeds.len());
+    }
+    for r in results.into_iter().flatten() {
         let c = r?;
         match (c.falls_at_hz, c.balances_at_hz) {
             (Some(f), Some(b)) => println!(

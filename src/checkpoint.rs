@@ -6,17 +6,54 @@
 //! hidden width `h` is inferred from `actor_mean.0.weight`, as the chapter does. The brain
 //! acts with the deterministic mean (no sampling); the plant clips to [-1, 1].
 //!
-//! Formats are read with well-kept crates: candle-core's PyTorch reader (a restricted
-//! unpickler that only rebuilds tensors — like `torch.load(weights_only=True)`, it never
-//! executes code from the file) and its safetensors support; tract-onnx for ONNX
-//! (contract v1: input `float32[1,5]`, output `float32[1,1]`).
+//! Every file is untrusted input: loading any file is bounded in memory (well under
+//! 256 MiB resident), in time (well under 5 s) and in recursion, and any refusal is one
+//! line naming the file. Files are read once, from regular files only, with a size cap per
+//! format ([`MAX_FILE_BYTES`], [`MAX_ONNX_BYTES`]); third-party readers run under
+//! [`guarded`], which turns their panics into errors without printing them.
+//!
+//! - PyTorch: [`torch`] checks the zip archive (CRCs, local headers), pre-scans the pickle
+//!   program with limits and an allow-list of globals (as `torch.load(weights_only=True)`),
+//!   then lets candle-core's unpickler build the object tree, and checks every tensor's
+//!   shape against its storage before anything is allocated. Its docs say why.
+//! - safetensors: the safetensors crate (built for untrusted input: it checks every
+//!   tensor's extent against the buffer) over the capped buffer.
+//! - ONNX (contract v1: input `float32[1,5]`, output `float32[1,1]`), run by tract-onnx:
+//!   before tract builds anything, the decoded model is checked: operator set in
+//!   [`ONNX_OPSETS`], no external data, no string tensors, every declared tensor within
+//!   [`MAX_ONNX_ELEMENTS`], at most [`MAX_ONNX_ITEMS`] nodes and edges; after typing
+//!   with the batch pinned to 1, every intermediate tensor is checked the same way.
 
+use crate::input::{read_regular_file, InputError};
 use crate::plant::{Action, Observation, ACT_DIM, OBS_DIM};
 use crate::policy::{Policy, Scripted};
 use candle_core::{DType, Device, Tensor};
 use std::collections::HashMap;
+use std::ops::RangeInclusive;
 use std::path::{Path, PathBuf};
 use tract_onnx::prelude::*;
+
+pub mod torch;
+
+pub use torch::MAX_FILE_BYTES;
+
+/// The largest ONNX file read, bytes. Decoding protobuf can take a few hundred times a
+/// message's encoded size (an empty node is 2 bytes on disk and a few hundred in memory),
+/// so the cap is tighter than for the other formats; the course's actor is 19 KB, and
+/// 512 KiB hold a contract-v1 actor about 350 wide.
+pub const MAX_ONNX_BYTES: u64 = 512 << 10;
+
+/// The ONNX operator sets (default domain) accepted: tested from 9 (the oldest tract
+/// supports) to 20 (the course's exporter). Others are refused rather than guessed at.
+pub const ONNX_OPSETS: RangeInclusive<i64> = 9..=20;
+
+/// The most nodes, tensors, node inputs and outputs, and attributes of an ONNX model, all
+/// graphs together (the course's actor has a few dozen).
+pub const MAX_ONNX_ITEMS: u64 = 10_000;
+
+/// The most elements of any one tensor of an ONNX model (declared or inferred), and
+/// twice this over all its declared tensors together.
+pub const MAX_ONNX_ELEMENTS: u64 = 4 << 20;
 
 /// The actor's six tensors, in order.
 pub const ACTOR_KEYS: [&str; 6] = [
@@ -37,6 +74,9 @@ pub enum PolicyError {
     /// The path is not a regular file.
     #[error("policy path is not a file: {0}")]
     NotAFile(PathBuf),
+    /// The file cannot be read (permissions, size cap, I/O): the reason, naming the file.
+    #[error("cannot read policy file {0}")]
+    Unreadable(InputError),
     /// Not a checkpoint of any supported format.
     #[error("{path}: not a {format} checkpoint ({detail})")]
     Format {
@@ -98,6 +138,28 @@ pub enum PolicyError {
         /// What does not fit.
         detail: String,
     },
+    /// An actor tensor held in a storage type ratelab cannot read (e.g. `torch.BoolStorage`).
+    #[error(
+        "{path}: tensor '{tensor}' is stored as {storage}, which cannot be converted to float32"
+    )]
+    Storage {
+        /// The file.
+        path: PathBuf,
+        /// The tensor.
+        tensor: String,
+        /// The storage type.
+        storage: String,
+    },
+    /// The actor's hidden layers have width 0 (nothing to compute with).
+    #[error("{path}: the actor's hidden width is 0 (tensor '{tensor}' has shape {found:?})")]
+    ZeroWidth {
+        /// The file.
+        path: PathBuf,
+        /// The tensor.
+        tensor: String,
+        /// Its shape.
+        found: Vec<usize>,
+    },
     /// A tensor operation failed (should not happen after validation).
     #[error("{path}: {detail}")]
     Tensor {
@@ -112,37 +174,67 @@ pub enum PolicyError {
 /// `.pt`/`.pth` PyTorch zip, `.safetensors`, `.onnx`).
 ///
 /// # Errors
-/// [`PolicyError`]: the file is missing, unreadable, of no supported format, or does not
-/// hold the ch2.1 actor (missing keys, shapes, observation width, dtypes, ONNX contract).
+/// [`PolicyError`]: the file is missing, unreadable, not a regular file, too large, of no
+/// supported format, hostile (see the module docs), or does not hold the ch2.1 actor
+/// (missing keys, shapes, width 0, observation width, dtypes, ONNX contract).
 pub fn load_policy(spec: &str) -> Result<Box<dyn Policy>, PolicyError> {
     if spec == "scripted" {
         return Ok(Box::new(Scripted));
     }
     let path = Path::new(spec);
-    if !path.exists() {
-        return Err(PolicyError::NotFound(path.to_path_buf()));
-    }
-    if !path.is_file() {
-        return Err(PolicyError::NotAFile(path.to_path_buf()));
-    }
     let ext = path
         .extension()
         .and_then(|e| e.to_str())
         .map(str::to_ascii_lowercase);
     match ext.as_deref() {
-        Some("pt" | "pth") => Ok(Box::new(MlpPolicy::from_tensors(
-            path,
-            read_torch(path)?,
-            "ch2.1 PPO checkpoint",
-        )?)),
+        Some("pt" | "pth") => {
+            let bytes = read_input(path, MAX_FILE_BYTES)?;
+            let read = guarded(|| torch::read(&bytes, Some(&ACTOR_KEYS[..])))
+                .and_then(|r| r)
+                .map_err(|e| format_err(path, "PyTorch", e))?;
+            if let Some((tensor, storage)) = ACTOR_KEYS
+                .iter()
+                .find_map(|k| read.unsupported.get(*k).map(|s| (k.to_string(), s.clone())))
+            {
+                return Err(PolicyError::Storage {
+                    path: path.to_path_buf(),
+                    tensor,
+                    storage,
+                });
+            }
+            Ok(Box::new(MlpPolicy::from_tensors(
+                path,
+                read.tensors,
+                "ch2.1 PPO checkpoint",
+            )?))
+        }
         Some("safetensors") => Ok(Box::new(MlpPolicy::from_tensors(
             path,
             read_safetensors(path)?,
             "ch2.1 PPO safetensors",
         )?)),
         Some("onnx") => Ok(Box::new(OnnxPolicy::load(path)?)),
-        _ => Err(PolicyError::UnknownType(path.to_path_buf())),
+        _ => {
+            // A missing file is named as missing, whatever its extension.
+            match std::fs::metadata(path) {
+                Err(e) => Err(input_err(path, crate::input::io_error(path, &e))),
+                Ok(m) if !m.is_file() => Err(PolicyError::NotAFile(path.to_path_buf())),
+                Ok(_) => Err(PolicyError::UnknownType(path.to_path_buf())),
+            }
+        }
     }
+}
+
+fn input_err(path: &Path, e: InputError) -> PolicyError {
+    match e {
+        InputError::NotFound(_) => PolicyError::NotFound(path.to_path_buf()),
+        InputError::NotRegular { .. } => PolicyError::NotAFile(path.to_path_buf()),
+        other => PolicyError::Unreadable(other),
+    }
+}
+
+fn read_input(path: &Path, max: u64) -> Result<Vec<u8>, PolicyError> {
+    read_regular_file(path, max).map_err(|e| input_err(path, e))
 }
 
 fn format_err(path: &Path, format: &'static str, detail: impl std::fmt::Display) -> PolicyError {
@@ -155,34 +247,63 @@ fn format_err(path: &Path, format: &'static str, detail: impl std::fmt::Display)
     }
 }
 
+thread_local! {
+    /// Set while [`guarded`] runs on this thread: its panics are caught, not printed.
+    static QUIET_PANICS: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
+}
+
 /// Run a third-party reader, turning a panic inside it into an error (a malformed file
-/// must never take the process down).
-fn guarded<T>(f: impl FnOnce() -> T) -> Result<T, String> {
-    std::panic::catch_unwind(std::panic::AssertUnwindSafe(f)).map_err(|p| {
-        p.downcast_ref::<&str>()
-            .map(|s| s.to_string())
-            .or_else(|| p.downcast_ref::<String>().cloned())
-            .unwrap_or_else(|| "reader panicked".into())
+/// must never take the process down). The panic's message is not printed: a wrapper
+/// around the process's panic hook (installed once) stays silent while this thread is
+/// inside `guarded`, and defers to the previous hook everywhere else.
+///
+/// # Errors
+/// The panic's message (first line), prefixed with "the reader failed".
+pub fn guarded<T>(f: impl FnOnce() -> T) -> Result<T, String> {
+    static HOOK: std::sync::Once = std::sync::Once::new();
+    HOOK.call_once(|| {
+        let previous = std::panic::take_hook();
+        std::panic::set_hook(Box::new(move |info| {
+            if !QUIET_PANICS.with(std::cell::Cell::get) {
+                previous(info);
+            }
+        }));
+    });
+    let was = QUIET_PANICS.with(|q| q.replace(true));
+    let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(f));
+    QUIET_PANICS.with(|q| q.set(was));
+    result.map_err(|p| {
+        let msg = crate::scheduler::panic_message(&*p);
+        format!(
+            "the reader failed: {}",
+            msg.lines().next().unwrap_or("panic")
+        )
     })
 }
 
-/// Every tensor of a PyTorch `state_dict` saved with `torch.save` (zip format).
+/// Every tensor of a PyTorch `state_dict` saved with `torch.save` (zip format) whose
+/// storage type ratelab represents (others, e.g. `BoolStorage`, are left out), read as
+/// untrusted input (see [`torch`]).
 ///
 /// # Errors
-/// [`PolicyError::Format`] when the file is not such an archive.
+/// [`PolicyError::Format`] when the file is not such an archive or is refused by the
+/// checks; the input errors of [`load_policy`].
 pub fn read_torch(path: &Path) -> Result<HashMap<String, Tensor>, PolicyError> {
-    let tensors = guarded(|| candle_core::pickle::read_all(path))
-        .map_err(|p| format_err(path, "PyTorch", p))?
-        .map_err(|e| format_err(path, "PyTorch", e))?;
-    Ok(tensors.into_iter().collect())
+    let bytes = read_input(path, MAX_FILE_BYTES)?;
+    guarded(|| torch::read(&bytes, None))
+        .and_then(|r| r)
+        .map(|t| t.tensors)
+        .map_err(|e| format_err(path, "PyTorch", e))
 }
 
-/// Every tensor of a `.safetensors` file.
+/// Every tensor of a `.safetensors` file (at most [`MAX_FILE_BYTES`]).
 ///
 /// # Errors
-/// [`PolicyError::Format`] when the file is not safetensors.
+/// [`PolicyError::Format`] when the file is not safetensors; the input errors of
+/// [`load_policy`].
 pub fn read_safetensors(path: &Path) -> Result<HashMap<String, Tensor>, PolicyError> {
-    guarded(|| candle_core::safetensors::load(path, &Device::Cpu))
+    let bytes = read_input(path, MAX_FILE_BYTES)?;
+    guarded(|| candle_core::safetensors::load_buffer(&bytes, &Device::Cpu))
         .map_err(|p| format_err(path, "safetensors", p))?
         .map_err(|e| format_err(path, "safetensors", e))
 }
@@ -267,6 +388,13 @@ impl MlpPolicy {
             });
         }
         let (hidden, obs_width) = (dims0[0], dims0[1]);
+        if hidden == 0 {
+            return Err(PolicyError::ZeroWidth {
+                path: path.to_path_buf(),
+                tensor: ACTOR_KEYS[0].into(),
+                found: dims0,
+            });
+        }
         if obs_width != OBS_DIM {
             return Err(PolicyError::ObsWidth {
                 path: path.to_path_buf(),
@@ -378,17 +506,25 @@ fn fits(fact: &TypedFact, width: usize) -> bool {
 }
 
 impl OnnxPolicy {
-    /// Load and check an ONNX model against contract v1.
+    /// Load and check an ONNX model against contract v1 (see the module docs for the
+    /// checks made before tract builds anything).
     ///
     /// # Errors
-    /// [`PolicyError::Format`] when the file is not ONNX, [`PolicyError::OnnxContract`]
-    /// when its input or output does not fit.
+    /// [`PolicyError::Format`] when the file is not ONNX or is refused by the checks,
+    /// [`PolicyError::OnnxContract`] when its input or output does not fit; the input
+    /// errors of [`load_policy`].
     pub fn load(path: &Path) -> Result<Self, PolicyError> {
         let contract = |detail: String| PolicyError::OnnxContract {
             path: path.to_path_buf(),
             detail,
         };
-        let model = guarded(|| tract_onnx::onnx().model_for_path(path))
+        let bytes = read_input(path, MAX_ONNX_BYTES)?;
+        let proto = guarded(|| tract_onnx::onnx().proto_model_for_read(&mut &bytes[..]))
+            .map_err(|p| format_err(path, "ONNX", p))?
+            .map_err(|e| format_err(path, "ONNX", e))?;
+        drop(bytes);
+        check_onnx_proto(&proto).map_err(|e| format_err(path, "ONNX", e))?;
+        let model = guarded(|| tract_onnx::onnx().model_for_proto_model(&proto))
             .map_err(|p| format_err(path, "ONNX", p))?
             .map_err(|e| format_err(path, "ONNX", e))?;
         let (n_in, n_out) = (model.inputs.len(), model.outputs.len());
@@ -397,8 +533,8 @@ impl OnnxPolicy {
                 "{n_in} inputs and {n_out} outputs, expected 1 and 1"
             )));
         }
-        let typed = model
-            .into_typed()
+        let typed = guarded(|| model.into_typed())
+            .map_err(|p| format_err(path, "ONNX", p))?
             .map_err(|e| format_err(path, "ONNX", e))?;
         let input = typed
             .input_fact(0)
@@ -414,20 +550,27 @@ impl OnnxPolicy {
         if !fits(&output, ACT_DIM) {
             return Err(contract(format!("output is {}", describe_fact(&output))));
         }
-        // Pin the batch to 1, then optimize for that shape.
-        let pinned = tract_onnx::onnx()
-            .model_for_path(path)
-            .and_then(|m| {
-                m.with_input_fact(
-                    0,
-                    InferenceFact::dt_shape(f32::datum_type(), tvec!(1, OBS_DIM)),
-                )
-            })
-            .and_then(|m| m.into_optimized())
-            .and_then(TypedSimplePlan::new)
+        drop(typed);
+        // Pin the batch to 1, check every intermediate tensor's size, then optimize.
+        let pinned = guarded(|| {
+            tract_onnx::onnx()
+                .model_for_proto_model(&proto)
+                .and_then(|m| {
+                    m.with_input_fact(
+                        0,
+                        InferenceFact::dt_shape(f32::datum_type(), tvec!(1, OBS_DIM)),
+                    )
+                })
+                .and_then(|m| m.into_typed())
+        })
+        .map_err(|p| format_err(path, "ONNX", p))?
+        .map_err(|e| contract(e.to_string()))?;
+        check_volumes(&pinned).map_err(|e| format_err(path, "ONNX", e))?;
+        let plan = guarded(|| pinned.into_optimized().and_then(TypedSimplePlan::new))
+            .map_err(|p| format_err(path, "ONNX", p))?
             .map_err(|e| contract(e.to_string()))?;
         Ok(Self {
-            plan: pinned,
+            plan,
             label: format!("ONNX policy ({})", path.display()),
         })
     }
@@ -443,6 +586,137 @@ impl OnnxPolicy {
     }
 }
 
+/// ONNX `TensorProto.data_type` of strings.
+const ONNX_STRING: i32 = 8;
+
+/// Check a decoded ONNX model before tract builds anything from it: operator set,
+/// external data, string tensors, declared tensor sizes (in every graph and subgraph).
+fn check_onnx_proto(proto: &tract_onnx::pb::ModelProto) -> Result<(), String> {
+    let opset = proto
+        .opset_import
+        .iter()
+        .find(|o| o.domain.is_empty() || o.domain == "ai.onnx")
+        .map(|o| o.version)
+        .ok_or("no operator set for the default domain")?;
+    if !ONNX_OPSETS.contains(&opset) {
+        return Err(format!(
+            "operator set {opset} is outside the supported {}..={}",
+            ONNX_OPSETS.start(),
+            ONNX_OPSETS.end()
+        ));
+    }
+    let graph = proto.graph.as_ref().ok_or("the model has no graph")?;
+    let mut total = 0u64;
+    let mut items = 0u64;
+    check_graph(graph, &mut total, &mut items, 0)
+}
+
+fn check_graph(
+    g: &tract_onnx::pb::GraphProto,
+    total: &mut u64,
+    items: &mut u64,
+    depth: u32,
+) -> Result<(), String> {
+    if depth > 8 {
+        return Err("subgraphs nested deeper than 8 levels".into());
+    }
+    // tract builds a node with facts for each of these: bound how many (a contract-v1
+    // actor has a few dozen; measured: 260 000 empty nodes cost tract about 300 MiB).
+    *items += (g.node.len()
+        + g.initializer.len()
+        + g.sparse_initializer.len()
+        + g.input.len()
+        + g.output.len()
+        + g.value_info.len()
+        + g.node
+            .iter()
+            .map(|n| n.input.len() + n.output.len() + n.attribute.len())
+            .sum::<usize>()) as u64;
+    if *items > MAX_ONNX_ITEMS {
+        return Err(format!(
+            "more than {MAX_ONNX_ITEMS} nodes, tensors, edges and attributes"
+        ));
+    }
+    for t in &g.initializer {
+        check_tensor(t, total)?;
+    }
+    for s in &g.sparse_initializer {
+        for t in s.values.iter().chain(&s.indices) {
+            check_tensor(t, total)?;
+        }
+    }
+    for node in &g.node {
+        for a in &node.attribute {
+            for t in a.t.iter().chain(&a.tensors) {
+                check_tensor(t, total)?;
+            }
+            for s in a.sparse_tensor.iter().chain(&a.sparse_tensors) {
+                for t in s.values.iter().chain(&s.indices) {
+                    check_tensor(t, total)?;
+                }
+            }
+            for sub in a.g.iter().chain(&a.graphs) {
+                check_graph(sub, total, items, depth + 1)?;
+            }
+        }
+    }
+    Ok(())
+}
+
+fn check_tensor(t: &tract_onnx::pb::TensorProto, total: &mut u64) -> Result<(), String> {
+    if t.data_location == Some(1) || !t.external_data.is_empty() {
+        return Err(format!(
+            "tensor '{}' refers to external data (only self-contained models are loaded)",
+            t.name
+        ));
+    }
+    if t.data_type == ONNX_STRING {
+        return Err(format!("tensor '{}' holds strings", t.name));
+    }
+    let n = t
+        .dims
+        .iter()
+        .try_fold(1u64, |n, &d| u64::try_from(d).ok().and_then(|d| n.checked_mul(d)))
+        .filter(|&n| n <= MAX_ONNX_ELEMENTS)
+        .ok_or_else(|| {
+            format!(
+                "tensor '{}' declares shape {:?} (negative, or more than {MAX_ONNX_ELEMENTS} elements)",
+                t.name, t.dims
+            )
+        })?;
+    *total += n;
+    if *total > 2 * MAX_ONNX_ELEMENTS {
+        return Err(format!(
+            "tensors declare more than {} elements in all",
+            2 * MAX_ONNX_ELEMENTS
+        ));
+    }
+    Ok(())
+}
+
+/// Every tensor the typed model computes must be concrete and within [`MAX_ONNX_ELEMENTS`].
+fn check_volumes(model: &TypedModel) -> Result<(), String> {
+    for node in model.nodes() {
+        for out in &node.outputs {
+            let volume = out
+                .fact
+                .shape
+                .as_concrete()
+                .and_then(|dims| dims.iter().try_fold(1u64, |n, &d| n.checked_mul(d as u64)));
+            match volume {
+                Some(v) if v <= MAX_ONNX_ELEMENTS => {}
+                _ => {
+                    return Err(format!(
+                        "node '{}' computes a tensor of shape {:?} (more than {MAX_ONNX_ELEMENTS} elements, or not fixed)",
+                        node.name, out.fact.shape
+                    ))
+                }
+            }
+        }
+    }
+    Ok(())
+}
+
 struct Tensor1x5<'a>(&'a Observation);
 
 impl Tensor1x5<'_> {
@@ -452,8 +726,13 @@ impl Tensor1x5<'_> {
 }
 
 impl Policy for OnnxPolicy {
+    /// An error or a panic inside tract gives a non-finite action, which the actuator
+    /// holds its last good action against and counts (never a crashed policy node).
     fn act(&mut self, obs: &Observation) -> Action {
-        [self.forward(obs).unwrap_or(f32::NAN)]
+        [guarded(|| self.forward(obs))
+            .ok()
+            .and_then(Result::ok)
+            .unwrap_or(f32::NAN)]
     }
 
     fn label(&self) -> String {

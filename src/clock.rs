@@ -25,9 +25,16 @@ impl MonotonicClock {
         }
     }
 
-    /// The `Instant` at which this clock reads `t` (for absolute-deadline sleeps).
+    /// The `Instant` at which this clock reads `t` (for absolute-deadline sleeps). A `t`
+    /// beyond what `Instant` can hold gives an instant about a century away.
     pub fn instant_at(&self, t: Nanos) -> Instant {
-        self.start + t.to_duration()
+        self.start
+            .checked_add(t.to_duration())
+            .or_else(|| {
+                self.start
+                    .checked_add(std::time::Duration::from_secs(100 * 365 * 86_400))
+            })
+            .unwrap_or(self.start)
     }
 }
 

@@ -8,13 +8,18 @@ use std::str::FromStr;
 
 /// The chapter's actuator rate: the plant's 50 Hz control step.
 pub const ACTUATOR_HZ: f64 = 50.0;
-/// The longest run any path accepts (run time): an hour. A headless run keeps one trace
-/// record per actuator step (about 180 000 at 50 Hz for an hour, tens of MB), and a virtual
-/// hour at the highest rates takes minutes; a lab run ends there, so its log replays.
-pub const MAX_DURATION: Nanos = Nanos(3600 * Nanos::SECOND.0);
 
 /// `--break` sets the control rate to this (the chapter's demonstration of the cliff).
 pub const BREAK_CONTROL_HZ: f64 = 5.0;
+
+/// The longest run accepted, seconds (`--duration`, an exercise's bands, `bench`, a session
+/// log's run): one hour. A headless run keeps one trace record per actuator step (about
+/// 180 000 at 50 Hz for an hour, tens of MB), and a virtual hour at the highest rates takes
+/// minutes; a lab run ends there, so its log replays.
+pub const MAX_DURATION_S: f64 = 3600.0;
+
+/// [`MAX_DURATION_S`] as run time.
+pub const MAX_DURATION: Nanos = Nanos(3600 * Nanos::SECOND.0);
 
 /// Which executor runs the graph.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
@@ -78,8 +83,8 @@ pub enum ConfigError {
     /// A graph override (`--rate`, `--depth`, a chapter shorthand) that does not fit.
     #[error(transparent)]
     Graph(#[from] OverrideError),
-    /// Duration not finite or ≤ 0.
-    #[error("--duration must be a finite number of seconds > 0, got {0}")]
+    /// Duration not finite, ≤ 0, or above [`MAX_DURATION_S`].
+    #[error("--duration must be in (0, {max}] seconds, got {0}", max = MAX_DURATION_S)]
     Duration(f64),
     /// Unknown clock name.
     #[error("--clock must be 'real' or 'virtual', got '{0}'")]
@@ -90,6 +95,24 @@ pub enum ConfigError {
     /// A phase offset not finite, negative, or not below one second.
     #[error("--phase-offset-ms values must be finite and in [0, 1000) ms, got {0}")]
     PhaseOffset(f64),
+    /// Not exactly one phase offset per node.
+    #[error("--phase-offset-ms takes exactly {nodes} values (one per node, in order {order}), got {got}")]
+    PhaseOffsetCount {
+        /// Nodes in the graph.
+        nodes: usize,
+        /// Their names, comma-separated, in order.
+        order: String,
+        /// Values given.
+        got: usize,
+    },
+    /// A spin margin that is not below every node's period (or above one second).
+    #[error("--spin-margin-us must be below every node's period (here {period_us} µs, the fastest) and at most 1000000, got {margin_us}")]
+    SpinMargin {
+        /// The margin, µs.
+        margin_us: u64,
+        /// The shortest node period, µs.
+        period_us: u64,
+    },
 }
 
 /// Everything that defines one run of the graph.
@@ -140,12 +163,32 @@ pub fn check_rate(flag: &'static str, hz: f64) -> Result<f64, ConfigError> {
 /// Parse a duration in seconds.
 ///
 /// # Errors
-/// [`ConfigError::Duration`] when not finite or ≤ 0.
+/// [`ConfigError::Duration`] when not finite, ≤ 0, or above [`MAX_DURATION_S`].
 pub fn duration_from_secs(secs: f64) -> Result<Nanos, ConfigError> {
     match Nanos::from_secs_f64(secs) {
-        Some(d) if secs > 0.0 && d.0 > 0 => Ok(d),
+        Some(d) if secs > 0.0 && d.0 > 0 && secs <= MAX_DURATION_S => Ok(d),
         _ => Err(ConfigError::Duration(secs)),
     }
+}
+
+/// The phase offsets of a graph's nodes from `--phase-offset-ms` values: none given →
+/// all 0; otherwise exactly one value per node (`names`, in node order).
+///
+/// # Errors
+/// [`ConfigError::PhaseOffsetCount`] for another number of values,
+/// [`ConfigError::PhaseOffset`] for a value out of range.
+pub fn phase_offsets_from_ms(ms: &[f64], names: &[&str]) -> Result<Vec<Nanos>, ConfigError> {
+    if ms.is_empty() {
+        return Ok(vec![Nanos::ZERO; names.len()]);
+    }
+    if ms.len() != names.len() {
+        return Err(ConfigError::PhaseOffsetCount {
+            nodes: names.len(),
+            order: names.join(","),
+            got: ms.len(),
+        });
+    }
+    ms.iter().map(|&m| phase_offset_from_ms(m)).collect()
 }
 
 /// Parse a phase offset in milliseconds.
@@ -254,7 +297,34 @@ impl RunConfig {
         if let Some(p) = self.rt_priority {
             crate::realtime::check_priority(p).map_err(|_| ConfigError::RtPriority(p))?;
         }
+        // The spin margin matters to the real clock only (the virtual one never waits).
+        let fastest = self.fastest_period();
+        if self.clock == ClockKind::Real
+            && (self.spin_margin >= fastest || self.spin_margin > crate::rate::MAX_SPIN_MARGIN)
+        {
+            return Err(ConfigError::SpinMargin {
+                margin_us: self.spin_margin.0 / 1_000,
+                period_us: fastest.0 / 1_000,
+            });
+        }
         Ok(())
+    }
+
+    /// The shortest period among the nodes' rates (`u64::MAX` ns if none is valid).
+    pub fn fastest_period(&self) -> Nanos {
+        self.graph
+            .nodes
+            .iter()
+            .filter_map(|n| period_for_hz(n.rate_hz).ok())
+            .min()
+            .unwrap_or(Nanos(u64::MAX))
+    }
+
+    /// The spin margin to use when none was asked for: [`crate::rate::DEFAULT_SPIN_MARGIN`],
+    /// or half the fastest node's period if that is shorter (a node never spins a whole
+    /// period).
+    pub fn default_spin_margin(&self) -> Nanos {
+        crate::rate::DEFAULT_SPIN_MARGIN.min(Nanos(self.fastest_period().0 / 2))
     }
 }
 
@@ -282,6 +352,50 @@ mod tests {
         assert!(RunConfig::default().validate().is_ok());
         assert!(duration_from_secs(-1.0).is_err());
         assert!(duration_from_secs(f64::NAN).is_err());
+        assert!(duration_from_secs(MAX_DURATION_S).is_ok());
+        assert!(duration_from_secs(MAX_DURATION_S + 1.0)
+            .unwrap_err()
+            .to_string()
+            .contains("(0, 3600]"));
+        let names = ["sensor", "policy", "actuator"];
+        assert_eq!(phase_offsets_from_ms(&[], &names), Ok(vec![Nanos::ZERO; 3]));
+        assert_eq!(
+            phase_offsets_from_ms(&[0.0, 5.0, 10.0], &names).unwrap()[2],
+            Nanos(10_000_000)
+        );
+        for n in [1, 2, 4, 5] {
+            let e = phase_offsets_from_ms(&vec![1.0; n], &names).unwrap_err();
+            assert!(e.to_string().contains("exactly 3 values"), "{e}");
+        }
+        let four = ["a", "b", "c", "d"];
+        assert!(phase_offsets_from_ms(&[0.0; 4], &four).is_ok());
+        let spin = |us: u64| {
+            let mut cfg = RunConfig {
+                spin_margin: Nanos(us * 1_000),
+                clock: ClockKind::Real,
+                ..RunConfig::default()
+            };
+            cfg.set_sensor_hz(1000.0).unwrap();
+            cfg
+        };
+        // The virtual clock never spins: any margin is fine there.
+        let virtual_spin = RunConfig {
+            clock: ClockKind::Virtual,
+            ..spin(5_000)
+        };
+        assert!(virtual_spin.validate().is_ok());
+        assert_eq!(spin(0).default_spin_margin(), Nanos(300_000));
+        let mut fast = spin(0);
+        fast.set_control_hz(10_000.0).unwrap();
+        assert_eq!(fast.default_spin_margin(), Nanos(50_000));
+        assert!(spin(999).validate().is_ok());
+        assert!(matches!(
+            spin(1_000).validate(),
+            Err(ConfigError::SpinMargin {
+                margin_us: 1_000,
+                period_us: 1_000
+            })
+        ));
         assert_eq!(duration_from_secs(2.0), Ok(Nanos(2_000_000_000)));
         assert_eq!("virtual".parse::<ClockKind>(), Ok(ClockKind::Virtual));
         assert!("wall".parse::<ClockKind>().is_err());

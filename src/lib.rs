@@ -7,7 +7,8 @@
 //!
 //! Layout, one module per idea: [`time`], [`clock`], [`topic`], [`rate`], [`node`],
 //! [`plant`], [`policy`], [`msg`], [`graph`] (+ its file format, [`graph::spec`]),
-//! [`scheduler`] (+ [`realtime`]), [`metrics`], [`config`], [`run`], [`session`].
+//! [`scheduler`] (+ [`realtime`]), [`metrics`], [`config`], [`run`], [`session`];
+//! files the user names are read through [`input`] and written through [`output`].
 #![warn(missing_docs)]
 
 pub mod checkpoint;
@@ -15,10 +16,12 @@ pub mod clock;
 pub mod config;
 pub mod exercise;
 pub mod graph;
+pub mod input;
 pub mod metrics;
 pub mod msg;
 pub mod node;
 pub mod np_random;
+pub mod output;
 pub mod plant;
 pub mod policy;
 pub mod rate;

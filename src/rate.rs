@@ -17,6 +17,14 @@ pub const MAX_HZ: f64 = 10_000.0;
 /// The default spin margin: sleep to this long before a deadline, then spin.
 pub const DEFAULT_SPIN_MARGIN: Nanos = Nanos(300_000);
 
+/// The largest spin margin accepted (`--spin-margin-us` ≤ 1 000 000): one second. It must
+/// also be below every node's period ([`crate::config::RunConfig::validate`]).
+pub const MAX_SPIN_MARGIN: Nanos = Nanos(1_000_000_000);
+
+/// How often a long wait looks at its stop condition: a stop request or the run's end is
+/// noticed within this, however slow the node's rate.
+pub const STOP_POLL: std::time::Duration = std::time::Duration::from_millis(10);
+
 /// A rate that cannot be used.
 #[derive(Debug, thiserror::Error, PartialEq)]
 #[error("rate must be a finite number in (0, {max}] Hz, got {hz}", max = MAX_HZ)]
@@ -104,6 +112,31 @@ impl DeadlineWaiter {
             self.sleeper.sleep(deadline - now);
         }
     }
+
+    /// Block until `deadline`, or until `stop()` returns true, whichever comes first: a
+    /// wait longer than [`STOP_POLL`] plus the spin margin sleeps in [`STOP_POLL`] slices,
+    /// checking `stop` between them, then approaches the deadline as
+    /// [`DeadlineWaiter::wait_until`] does (the same precision at the deadline). Returns
+    /// `true` when the deadline was reached, `false` when `stop` cut the wait short.
+    pub fn wait_until_or(&self, deadline: Instant, stop: &dyn Fn() -> bool) -> bool {
+        let slice_limit = STOP_POLL
+            + std::time::Duration::from_nanos(u64::from(self.sleeper.native_accuracy_ns()));
+        loop {
+            if stop() {
+                return false;
+            }
+            let now = Instant::now();
+            if deadline <= now {
+                return true;
+            }
+            let left = deadline - now;
+            if left <= slice_limit {
+                self.sleeper.sleep(left);
+                return true;
+            }
+            std::thread::sleep(STOP_POLL);
+        }
+    }
 }
 
 impl Default for DeadlineWaiter {
@@ -158,6 +191,23 @@ mod tests {
         assert_eq!(r2.hz(), 5.0);
         assert!(r.set_hz(0.0).is_err());
         assert_eq!(r2.hz(), 5.0);
+    }
+
+    #[test]
+    fn long_waits_wake_for_a_stop() {
+        let w = DeadlineWaiter::default();
+        let start = Instant::now();
+        let far = start + std::time::Duration::from_secs(3600);
+        let stop_at = start + std::time::Duration::from_millis(50);
+        assert!(!w.wait_until_or(far, &|| Instant::now() >= stop_at));
+        let took = start.elapsed();
+        assert!(
+            took < std::time::Duration::from_millis(500),
+            "a stop took {took:?} to notice"
+        );
+        let near = Instant::now() + std::time::Duration::from_millis(30);
+        assert!(w.wait_until_or(near, &|| false));
+        assert!(Instant::now() >= near);
     }
 
     #[test]

@@ -23,6 +23,11 @@
 //! is off and the recording id derives from the settings, so two runs with the same settings
 //! write recordings that `rerun rrd compare` finds identical. (Per-node lateness, real clock
 //! only, is logged from the node threads through the ordinary batcher.)
+//!
+//! Files follow [`crate::output`]'s rule: rerun writes a temporary file beside the final
+//! name (`.<name>.<pid>-<n>.tmp`), moved into place when the recording is finished (or
+//! dropped); an existing file is replaced only when the recording was opened with
+//! `force`, and a symbolic link or non-regular file at the final name is refused.
 
 use crate::config::{ClockKind, RunConfig};
 use crate::graph::{GraphHandles, GraphSpec, NodeId, StepObserver};
@@ -117,9 +122,12 @@ fn time_point(t: Nanos, step: u64) -> TimePoint {
         )
 }
 
-/// Why a recording cannot be written. One line each.
+/// Why a recording cannot be written. One line each, naming the file.
 #[derive(Debug, thiserror::Error)]
 pub enum RecordingError {
+    /// A symbolic link or a non-regular file at the path, or a move into place that failed.
+    #[error("--record {0}")]
+    Output(crate::output::OutputError),
     /// The path is a folder.
     #[error("--record path is a directory: {0}")]
     IsDirectory(PathBuf),
@@ -134,9 +142,29 @@ pub enum RecordingError {
         /// The OS's reason.
         detail: String,
     },
-    /// rerun refused.
-    #[error("rerun: {0}")]
-    Rerun(String),
+    /// rerun refused or failed to write.
+    #[error("recording {path}: {detail}")]
+    Rerun {
+        /// The recording's final path.
+        path: PathBuf,
+        /// rerun's reason.
+        detail: String,
+    },
+}
+
+impl From<crate::output::OutputError> for RecordingError {
+    fn from(e: crate::output::OutputError) -> Self {
+        use crate::output::OutputError;
+        match e {
+            OutputError::Exists(p) => RecordingError::Exists(p),
+            OutputError::NotRegular {
+                path,
+                kind: "a folder",
+            } => RecordingError::IsDirectory(path),
+            OutputError::Io { path, detail } => RecordingError::Unwritable { path, detail },
+            other => RecordingError::Output(other),
+        }
+    }
 }
 
 /// Format a rate for a file name: `50`, `7.5`.
@@ -175,34 +203,36 @@ pub fn default_path(dir: &Path, cfg: &RunConfig) -> PathBuf {
         .expect("unbounded")
 }
 
-/// Check that `path` can be written before a run starts: not a folder, not an existing file
-/// (unless `force`), and creatable (the file is created empty and left for the recorder).
+/// Check that `path` can be written before a run starts: not a folder, a symbolic link or
+/// another non-regular file, not an existing file (unless `force`), and in a folder where
+/// files can be created (a temporary file is created there and removed; the final name is
+/// never touched).
 ///
 /// # Errors
 /// [`RecordingError`] naming the problem.
 pub fn check_output_path(path: &Path, force: bool) -> Result<(), RecordingError> {
-    if path.is_dir() {
-        return Err(RecordingError::IsDirectory(path.to_path_buf()));
+    let (pending, _file) = crate::output::PendingFile::create(path, force)?;
+    drop(pending); // removes the probe
+    Ok(())
+}
+
+/// Moves a recording's temporary file into place once, when finished or dropped.
+struct Committer(Mutex<Option<crate::output::PendingFile>>);
+
+impl Committer {
+    fn commit(&self) -> Result<(), crate::output::OutputError> {
+        match self.0.lock().unwrap_or_else(|e| e.into_inner()).take() {
+            Some(mut p) => p.commit(),
+            None => Ok(()),
+        }
     }
-    if path.exists() && !force {
-        return Err(RecordingError::Exists(path.to_path_buf()));
+}
+
+impl Drop for Committer {
+    fn drop(&mut self) {
+        // Best effort: a recording dropped unfinished keeps what it wrote.
+        let _ = self.commit();
     }
-    if let Some(parent) = path.parent().filter(|p| !p.as_os_str().is_empty()) {
-        std::fs::create_dir_all(parent).map_err(|e| RecordingError::Unwritable {
-            path: path.to_path_buf(),
-            detail: e.to_string(),
-        })?;
-    }
-    std::fs::OpenOptions::new()
-        .write(true)
-        .create(true)
-        .truncate(true)
-        .open(path)
-        .map(drop)
-        .map_err(|e| RecordingError::Unwritable {
-            path: path.to_path_buf(),
-            detail: e.to_string(),
-        })
 }
 
 /// How to record.
@@ -221,6 +251,8 @@ pub struct Recording {
     buffer: Arc<Mutex<ChunkBuffer>>,
     /// The latest control step logged (stamps events that arrive between steps).
     last_step: Arc<std::sync::atomic::AtomicU64>,
+    /// The temporary file rerun writes, moved to `path` by [`Recording::finish`].
+    file: Arc<Committer>,
 }
 
 fn blueprint() -> Blueprint {
@@ -257,19 +289,39 @@ pub fn viewer_on_path() -> bool {
 }
 
 impl Recording {
-    /// Open a recording of a run with `cfg` and the brain `policy` at `path` (checked with
-    /// [`check_output_path`] first). With `opts.spawn` and a `rerun` viewer on PATH, data is
-    /// also streamed live. Returns the recording and, when `spawn` was asked for but no
-    /// viewer was found, a one-line notice.
+    /// Open a recording of a run with `cfg` and the brain `policy` at `path`, which must
+    /// not exist yet ([`Recording::create_with`] without `force`).
     ///
     /// # Errors
-    /// [`RecordingError`] when the file cannot be created or rerun refuses.
+    /// As [`Recording::create_with`].
     pub fn create(
         path: &Path,
         cfg: &RunConfig,
         policy: &str,
         opts: &RecordOptions,
     ) -> Result<(Self, Option<String>), RecordingError> {
+        Self::create_with(path, cfg, policy, opts, false)
+    }
+
+    /// Open a recording of a run with `cfg` and the brain `policy` at `path`; an existing
+    /// regular file there is replaced (when the recording is finished) only if `force`.
+    /// With `opts.spawn` and a `rerun` viewer on PATH, data is also streamed live. Returns
+    /// the recording and, when `spawn` was asked for but no viewer was found, a one-line
+    /// notice.
+    ///
+    /// # Errors
+    /// [`RecordingError`] when the path is refused ([`check_output_path`]'s rules), the
+    /// file cannot be created, or rerun refuses.
+    pub fn create_with(
+        path: &Path,
+        cfg: &RunConfig,
+        policy: &str,
+        opts: &RecordOptions,
+        force: bool,
+    ) -> Result<(Self, Option<String>), RecordingError> {
+        let (pending, file) = crate::output::PendingFile::create(path, force)?;
+        drop(file);
+        let tmp = pending.temp_path().to_path_buf();
         let mut builder = RecordingStreamBuilder::new(APP_ID).with_blueprint(blueprint());
         if cfg.clock == ClockKind::Virtual {
             let id = format!(
@@ -290,7 +342,10 @@ impl Recording {
                     ..rerun::log::ChunkBatcherConfig::DEFAULT
                 });
         }
-        let rec_err = |e: rerun::RecordingStreamError| RecordingError::Rerun(e.to_string());
+        let rec_err = |e: rerun::RecordingStreamError| RecordingError::Rerun {
+            path: path.to_path_buf(),
+            detail: e.to_string(),
+        };
         let mut notice = None;
         let live = opts.spawn && viewer_on_path();
         if opts.spawn && !live {
@@ -300,10 +355,12 @@ impl Recording {
         }
         let rec = if live {
             // Start the viewer, then write to the file and stream to the viewer at once.
-            rerun::spawn(&rerun::SpawnOptions::default())
-                .map_err(|e| RecordingError::Rerun(e.to_string()))?;
+            rerun::spawn(&rerun::SpawnOptions::default()).map_err(|e| RecordingError::Rerun {
+                path: path.to_path_buf(),
+                detail: e.to_string(),
+            })?;
             let file =
-                rerun::sink::FileSink::new(path).map_err(|e| RecordingError::Unwritable {
+                rerun::sink::FileSink::new(&tmp).map_err(|e| RecordingError::Unwritable {
                     path: path.to_path_buf(),
                     detail: e.to_string(),
                 })?;
@@ -311,7 +368,7 @@ impl Recording {
                 .set_sinks((file, rerun::sink::GrpcSink::default()))
                 .map_err(rec_err)?
         } else {
-            builder.save(path).map_err(rec_err)?
+            builder.save(&tmp).map_err(rec_err)?
         };
         if cfg.clock == ClockKind::Virtual {
             rec.set_log_time_enabled(false);
@@ -322,6 +379,7 @@ impl Recording {
             clock: cfg.clock,
             buffer: Arc::default(),
             last_step: Arc::default(),
+            file: Arc::new(Committer(Mutex::new(Some(pending)))),
         };
         recording.log_settings(cfg, policy);
         Ok((recording, notice))
@@ -447,11 +505,12 @@ impl Recording {
         );
     }
 
-    /// Log the end of the run (the summary) at its end time and flush the file, so the
-    /// recording is complete whichever way the run ended.
+    /// Log the end of the run (the summary) at its end time, flush the file and move it
+    /// into place, so the recording is complete whichever way the run ended.
     ///
     /// # Errors
-    /// [`RecordingError::Rerun`] when the flush fails.
+    /// [`RecordingError::Rerun`] when the flush fails, [`RecordingError`] when the file
+    /// cannot be moved into place (e.g. its name was taken meanwhile, without `force`).
     pub fn finish(&self, metrics: &Metrics, end: &RunEnd) -> Result<(), RecordingError> {
         let summary = metrics.summary_lines(None);
         let level = match end.reason {
@@ -474,7 +533,8 @@ impl Recording {
                 );
             }
         }
-        self.flush()
+        self.flush()?;
+        Ok(self.file.commit()?)
     }
 
     /// Send every buffered row and flush the file.
@@ -485,7 +545,10 @@ impl Recording {
         self.lock().send(&self.rec);
         self.rec
             .flush_blocking()
-            .map_err(|e| RecordingError::Rerun(e.to_string()))
+            .map_err(|e| RecordingError::Rerun {
+                path: self.path.clone(),
+                detail: e.to_string(),
+            })
     }
 
     /// The clock this recording was stamped with.
@@ -732,6 +795,17 @@ mod tests {
             Err(RecordingError::Exists(_))
         ));
         assert!(check_output_path(&f, true).is_ok());
+        assert_eq!(
+            std::fs::read(&f).unwrap(),
+            b"old",
+            "a check never touches the file"
+        );
+        let link = dir.path().join("link.rrd");
+        std::os::unix::fs::symlink(&f, &link).unwrap();
+        assert!(matches!(
+            check_output_path(&link, true),
+            Err(RecordingError::Output(_))
+        ));
         assert!(matches!(
             check_output_path(Path::new("/proc/ratelab/x.rrd"), false),
             Err(RecordingError::Unwritable { .. })

@@ -341,7 +341,11 @@ pub fn run_real(
                     let (mut ticks, mut skipped) = (0u64, 0u64);
                     let mut deadline = first;
                     let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| loop {
-                        waiter.wait_until(clock.instant_at(deadline));
+                        // Wake for the deadline, the run's end or a stop, whichever is
+                        // first: a slow node must not sleep past either.
+                        waiter.wait_until_or(clock.instant_at(deadline.min(duration)), &|| {
+                            stop.is_stopped()
+                        });
                         let mut was_paused = false;
                         while pause.as_ref().is_some_and(|p| p.load(Ordering::SeqCst))
                             && !stop.is_stopped()

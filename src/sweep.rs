@@ -7,6 +7,8 @@ use crate::config::{ClockKind, RunConfig};
 use crate::metrics::Metrics;
 use crate::policy::Policy;
 use crate::run::{run, RunError, RunOptions};
+use crate::scheduler::{EndReason, StopFlag};
+use crate::time::Nanos;
 use serde::Serialize;
 
 /// Builds a fresh brain for each run (runs may be on different threads).
@@ -68,7 +70,9 @@ impl Grid {
         out
     }
 
-    /// The run settings of `p`: the base graph with the point's chain rates and depth.
+    /// The run settings of `p`: the base graph with the point's chain rates and depth. The
+    /// base's spin margin is capped at half the point's fastest period (a grid has no
+    /// margin of its own to get wrong per point).
     ///
     /// # Errors
     /// [`SweepError::Config`] for a rate or depth the graph cannot take.
@@ -78,7 +82,11 @@ impl Grid {
             seed: p.seed,
             ..self.base.clone()
         };
-        Ok(cfg.with_chapter(p.sensor_hz, p.control_hz, p.queue_depth)?)
+        let cfg = cfg.with_chapter(p.sensor_hz, p.control_hz, p.queue_depth)?;
+        Ok(RunConfig {
+            spin_margin: cfg.spin_margin.min(Nanos(cfg.fastest_period().0 / 2)),
+            ..cfg
+        })
     }
 }
 
@@ -110,21 +118,44 @@ pub fn run_grid(
     threads: usize,
     progress: &(dyn Fn(usize, usize) + Sync),
 ) -> Result<Vec<(Point, Metrics)>, SweepError> {
+    run_grid_until(grid, brain, threads, progress, &StopFlag::new())
+}
+
+/// [`run_grid`] that stops early when `stop` is set (Ctrl-C): the run in progress ends at
+/// once (its partial metrics are dropped), no further point starts, and the points that
+/// completed are returned, in grid order.
+///
+/// # Errors
+/// The first [`SweepError`].
+pub fn run_grid_until(
+    grid: &Grid,
+    brain: BrainFactory<'_>,
+    threads: usize,
+    progress: &(dyn Fn(usize, usize) + Sync),
+    stop: &StopFlag,
+) -> Result<Vec<(Point, Metrics)>, SweepError> {
     let points = grid.points();
     let total = points.len();
     let done = std::sync::atomic::AtomicUsize::new(0);
-    let run_one = |p: &Point| -> Result<Metrics, SweepError> {
+    let run_one = |p: &Point| -> Result<Option<Metrics>, SweepError> {
+        if stop.is_stopped() {
+            return Ok(None);
+        }
         let b = brain().map_err(SweepError::Brain)?;
         let opts = RunOptions {
             keep_trace: false,
+            stop: stop.clone(),
             ..RunOptions::default()
         };
-        let m = run(&grid.config(p)?, b, opts)?.metrics;
+        let report = run(&grid.config(p)?, b, opts)?;
+        if report.end.reason == EndReason::Interrupted {
+            return Ok(None);
+        }
         progress(
             done.fetch_add(1, std::sync::atomic::Ordering::SeqCst) + 1,
             total,
         );
-        Ok(m)
+        Ok(Some(report.metrics))
     };
     let (virt, real): (Vec<usize>, Vec<usize>) =
         (0..total).partition(|&i| points[i].clock == ClockKind::Virtual);
@@ -133,7 +164,8 @@ pub fn run_grid(
     let chunks: Vec<Vec<usize>> = (0..threads)
         .map(|t| virt.iter().copied().skip(t).step_by(threads).collect())
         .collect();
-    let virt_results: Vec<Result<Vec<(usize, Metrics)>, SweepError>> = std::thread::scope(|s| {
+    type Done = Vec<(usize, Option<Metrics>)>;
+    let virt_results: Vec<Result<Done, SweepError>> = std::thread::scope(|s| {
         let handles: Vec<_> = chunks
             .iter()
             .map(|idx| {
@@ -155,16 +187,54 @@ pub fn run_grid(
     });
     for chunk in virt_results {
         for (i, m) in chunk? {
-            results[i] = Some(m);
+            results[i] = m;
         }
     }
     for i in real {
-        results[i] = Some(run_one(&points[i])?);
+        results[i] = run_one(&points[i])?;
     }
+    let stopped = stop.is_stopped();
     Ok(points
         .into_iter()
-        .zip(results.into_iter().map(|m| m.expect("every point ran")))
+        .zip(results)
+        .filter_map(|(p, m)| {
+            assert!(stopped || m.is_some(), "every point ran");
+            m.map(|m| (p, m))
+        })
         .collect())
+}
+
+/// `f` applied to every item on a pool of `threads` workers (at least one, at most one per
+/// item), each taking the next item as it finishes the last; results in item order. A
+/// panic in `f` is re-raised here.
+pub fn run_pool<T: Sync, R: Send>(
+    items: &[T],
+    threads: usize,
+    f: impl Fn(&T) -> R + Sync,
+) -> Vec<R> {
+    let next = std::sync::atomic::AtomicUsize::new(0);
+    let workers = threads.clamp(1, items.len().max(1));
+    let mut done: Vec<(usize, R)> = std::thread::scope(|s| {
+        let handles: Vec<_> = (0..workers)
+            .map(|_| {
+                s.spawn(|| {
+                    let mut out = Vec::new();
+                    loop {
+                        let i = next.fetch_add(1, std::sync::atomic::Ordering::SeqCst);
+                        let Some(item) = items.get(i) else { break };
+                        out.push((i, f(item)));
+                    }
+                    out
+                })
+            })
+            .collect();
+        handles
+            .into_iter()
+            .flat_map(|h| h.join().unwrap_or_else(|p| std::panic::resume_unwind(p)))
+            .collect()
+    });
+    done.sort_by_key(|(i, _)| *i);
+    done.into_iter().map(|(_, r)| r).collect()
 }
 
 /// The cliff of one seed: the highest control rate at which the pole falls.
@@ -230,7 +300,57 @@ pub fn find_cliff(
 mod tests {
     use super::*;
     use crate::policy::Scripted;
-    use crate::time::Nanos;
+
+    #[test]
+    fn the_pool_keeps_order_and_uses_at_most_its_workers() {
+        let live = std::sync::atomic::AtomicUsize::new(0);
+        let peak = std::sync::atomic::AtomicUsize::new(0);
+        let items: Vec<u64> = (0..200).collect();
+        let out = run_pool(&items, 3, |&x| {
+            use std::sync::atomic::Ordering::SeqCst;
+            let now = live.fetch_add(1, SeqCst) + 1;
+            peak.fetch_max(now, SeqCst);
+            std::thread::yield_now();
+            live.fetch_sub(1, SeqCst);
+            x * 2
+        });
+        assert_eq!(out, items.iter().map(|x| x * 2).collect::<Vec<_>>());
+        assert!(peak.load(std::sync::atomic::Ordering::SeqCst) <= 3);
+        assert!(run_pool(&[] as &[u8], 4, |_| 0).is_empty());
+    }
+
+    #[test]
+    fn a_stopped_sweep_returns_only_what_completed() {
+        let g = Grid {
+            clocks: vec![ClockKind::Virtual],
+            sensor_hz: vec![50.0],
+            control_hz: vec![50.0, 20.0, 10.0, 5.0],
+            queue_depth: vec![1],
+            seeds: vec![0],
+            base: RunConfig {
+                duration: Nanos(Nanos::SECOND.0),
+                ..RunConfig::default()
+            },
+        };
+        let brain = || Ok(Box::new(Scripted) as Box<dyn Policy>);
+        let stop = StopFlag::new();
+        // Stop after the second run completes: one thread, so runs go in grid order.
+        let rows = run_grid_until(
+            &g,
+            &brain,
+            1,
+            &|done, _| {
+                if done == 2 {
+                    stop.stop();
+                }
+            },
+            &stop,
+        )
+        .unwrap();
+        let hz: Vec<f64> = rows.iter().map(|(p, _)| p.control_hz).collect();
+        assert_eq!(hz, vec![50.0, 20.0]);
+        assert_eq!(rows, run_grid(&g, &brain, 1, &|_, _| {}).unwrap()[..2]);
+    }
 
     #[test]
     fn grid_order_is_seed_fastest() {

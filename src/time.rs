@@ -79,16 +79,19 @@ impl From<std::time::Duration> for Nanos {
     }
 }
 
+/// Saturating: a deadline past the end of `u64` time (a period of a rate like 1e-300 Hz)
+/// is "never", not an overflow.
 impl Add for Nanos {
     type Output = Nanos;
     fn add(self, rhs: Nanos) -> Nanos {
-        Nanos(self.0 + rhs.0)
+        Nanos(self.0.saturating_add(rhs.0))
     }
 }
 
+/// Saturating, as [`Add`].
 impl AddAssign for Nanos {
     fn add_assign(&mut self, rhs: Nanos) {
-        self.0 += rhs.0;
+        self.0 = self.0.saturating_add(rhs.0);
     }
 }
 

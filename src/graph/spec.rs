@@ -344,21 +344,13 @@ impl GraphSpec {
             col: 1,
             reason,
         };
-        let meta = std::fs::metadata(path).map_err(|e| at_start(format!("cannot read: {e}")))?;
-        if !meta.is_file() {
-            return Err(at_start("not a regular file".into()));
-        }
-        if meta.len() > MAX_FILE_BYTES {
-            return Err(at_start(format!(
-                "{} bytes: a graph file is at most {MAX_FILE_BYTES} bytes",
-                meta.len()
-            )));
-        }
-        let mut text = String::new();
-        use std::io::Read;
-        std::fs::File::open(path)
-            .and_then(|f| f.take(MAX_FILE_BYTES + 1).read_to_string(&mut text))
-            .map_err(|e| at_start(format!("cannot read: {e}")))?;
+        let bytes = crate::input::read_regular_file(path, MAX_FILE_BYTES).map_err(|e| {
+            // The error names the file first; the line's `FILE:1:1:` already does.
+            let text = e.to_string();
+            let prefix = format!("{origin}: ");
+            at_start(text.strip_prefix(&prefix).unwrap_or(&text).to_string())
+        })?;
+        let text = String::from_utf8(bytes).map_err(|_| at_start("not UTF-8 text".into()))?;
         GraphSpec::parse(&text, &origin)
     }
 

@@ -34,6 +34,10 @@ pub struct SessionSettings {
     pub start_paused: bool,
     /// Initial virtual speed.
     pub speed: Speed,
+    /// Replace existing recordings (the lab's `--force`); without it a run whose recording
+    /// file exists is refused, never overwritten. The session log is checked once, by the
+    /// caller, before the session starts, and then rewritten by the session as it goes.
+    pub force: bool,
 }
 
 /// Streams step records to the front end.
@@ -153,14 +157,16 @@ impl Engine {
         let brain = load_policy(policy).map_err(|e| e.to_string())?;
         let recording = match self.recording_path() {
             Some(path) => {
-                crate::recording::check_output_path(&path, true).map_err(|e| e.to_string())?;
-                let (r, notice) = Recording::create(
+                crate::recording::check_output_path(&path, self.settings.force)
+                    .map_err(|e| e.to_string())?;
+                let (r, notice) = Recording::create_with(
                     &path,
                     cfg,
                     &brain.label(),
                     &RecordOptions {
                         spawn: self.settings.spawn,
                     },
+                    self.settings.force,
                 )
                 .map_err(|e| e.to_string())?;
                 if let Some(n) = notice {

@@ -8,7 +8,6 @@ use crate::metrics::Metrics;
 use crate::run::{RunOptions, TimedCommand};
 use crate::time::Nanos;
 use serde::{Deserialize, Serialize};
-use std::io::Read;
 use std::path::Path;
 
 /// The session-log format this version writes. Version 1 (before graphs were data) named
@@ -219,21 +218,12 @@ impl SessionLog {
     /// [`ReplayError`] naming the file, and the run and field at fault.
     pub fn load(path: &Path) -> Result<Self, ReplayError> {
         let shown = path.display().to_string();
-        let read_err = |e: String| ReplayError::Read(format!("{shown}: {e}"));
-        let meta = std::fs::metadata(path).map_err(|e| read_err(e.to_string()))?;
-        if !meta.is_file() {
-            return Err(read_err("not a regular file".into()));
-        }
-        if meta.len() > MAX_SESSION_BYTES {
-            return Err(read_err(format!(
-                "{} bytes: a session log is at most {MAX_SESSION_BYTES}",
-                meta.len()
-            )));
-        }
-        let mut text = String::new();
-        std::fs::File::open(path)
-            .and_then(|f| f.take(MAX_SESSION_BYTES + 1).read_to_string(&mut text))
-            .map_err(|e| read_err(e.to_string()))?;
+        let bytes = crate::input::read_regular_file(path, MAX_SESSION_BYTES)
+            .map_err(|e| ReplayError::Read(e.to_string()))?;
+        let text = String::from_utf8(bytes).map_err(|_| ReplayError::Parse {
+            path: shown.clone(),
+            detail: "not UTF-8 text".into(),
+        })?;
         let log: SessionLog = serde_json::from_str(&text).map_err(|e| ReplayError::Parse {
             path: shown.clone(),
             detail: e.to_string(),
@@ -255,17 +245,17 @@ impl SessionLog {
         Ok(log)
     }
 
-    /// Write it (pretty JSON), atomically (write then rename).
+    /// Write it (pretty JSON) through [`crate::output`]: a temporary file beside `path`,
+    /// moved into place; never through a symbolic link or into a non-regular file. The
+    /// session rewrites its own log after every run and command, so an existing regular
+    /// file is replaced: whoever starts a session checks the name once first
+    /// ([`crate::output::check_target`], honouring `--force`).
     ///
     /// # Errors
-    /// The I/O error.
-    pub fn save(&self, path: &Path) -> std::io::Result<()> {
-        let tmp = path.with_extension("json.part");
-        std::fs::write(
-            &tmp,
-            serde_json::to_string_pretty(self).expect("serializable") + "\n",
-        )?;
-        std::fs::rename(tmp, path)
+    /// [`crate::output::OutputError`] naming the file.
+    pub fn save(&self, path: &Path) -> Result<(), crate::output::OutputError> {
+        let text = serde_json::to_string_pretty(self).expect("serializable") + "\n";
+        crate::output::write_file(path, true, text.as_bytes())
     }
 
     /// Whether `replayed` (run `index` replayed) matches the live run's metrics byte for byte,

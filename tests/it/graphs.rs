@@ -354,7 +354,7 @@ fn overrides_that_do_not_fit_the_graph_exit_2() {
         (&["--rate", "actuator=40"][..], "must be 50 Hz"),
         (&["--depth", "/nope=3"][..], "no topic '/nope'"),
         (&["--rate", "policy"][..], "NODE=HZ"),
-        (&["--phase-offset-ms", "0,5"][..], "one value per node"),
+        (&["--phase-offset-ms", "0,5"][..], "one per node"),
     ] {
         let o = Command::new(env!("CARGO_BIN_EXE_ratelab"))
             .args(["run", "--smoke"])

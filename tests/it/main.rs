@@ -15,6 +15,7 @@ mod cli;
 mod e2e_pty;
 mod exercises;
 mod graphs;
+mod hostile;
 mod realtime;
 mod recording;
 mod session;

@@ -30,6 +30,7 @@ fn settings(
         session_file: Some(file.to_path_buf()),
         start_paused,
         speed,
+        force: false,
     }
 }
 

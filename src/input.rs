@@ -1,0 +1,191 @@
+//! Reading input files the user names (checkpoints, exercise files): regular files only,
+//! with a size cap, and one-line errors that name the path and keep the OS's reason.
+//!
+//! A FIFO, a device (`/dev/zero`) or a folder is refused before a single byte is read: the
+//! file is opened with `O_NONBLOCK` (so opening a FIFO with no writer cannot hang) and
+//! checked with `fstat` on the open descriptor (so a swap between check and read cannot
+//! slip a FIFO in). The read itself stops one byte past the cap, whatever the file claims.
+
+use std::io::Read;
+use std::os::unix::fs::OpenOptionsExt;
+use std::path::{Path, PathBuf};
+
+/// Why an input file cannot be read. One line each, naming the file.
+#[derive(Debug, thiserror::Error, PartialEq, Eq)]
+pub enum InputError {
+    /// The path does not exist.
+    #[error("{0}: not found")]
+    NotFound(PathBuf),
+    /// The OS refused access (permissions), as opposed to a missing file.
+    #[error("{0}: permission denied")]
+    PermissionDenied(PathBuf),
+    /// The path exists but is not a regular file (folder, FIFO, device, socket).
+    #[error("{path}: not a regular file ({kind})")]
+    NotRegular {
+        /// The path.
+        path: PathBuf,
+        /// What it is instead.
+        kind: &'static str,
+    },
+    /// The file is larger than the cap for its kind.
+    #[error("{path}: too large ({size} bytes; at most {max} bytes are read)")]
+    TooLarge {
+        /// The path.
+        path: PathBuf,
+        /// Its size in bytes (at least `max + 1`).
+        size: u64,
+        /// The cap in bytes.
+        max: u64,
+    },
+    /// Any other I/O error, with the OS's reason.
+    #[error("{path}: {detail}")]
+    Io {
+        /// The path.
+        path: PathBuf,
+        /// The OS's reason.
+        detail: String,
+    },
+}
+
+/// A one-line description of a file type that is not a regular file.
+pub fn file_kind(ft: std::fs::FileType) -> &'static str {
+    use std::os::unix::fs::FileTypeExt;
+    if ft.is_dir() {
+        "a folder"
+    } else if ft.is_fifo() {
+        "a FIFO"
+    } else if ft.is_char_device() {
+        "a character device"
+    } else if ft.is_block_device() {
+        "a block device"
+    } else if ft.is_socket() {
+        "a socket"
+    } else if ft.is_symlink() {
+        "a symbolic link"
+    } else if ft.is_file() {
+        "a regular file"
+    } else {
+        "not a regular file"
+    }
+}
+
+/// Map an I/O error on `path` to an [`InputError`] that keeps its point (missing versus
+/// forbidden versus anything else).
+pub fn io_error(path: &Path, e: &std::io::Error) -> InputError {
+    match e.kind() {
+        std::io::ErrorKind::NotFound => InputError::NotFound(path.to_path_buf()),
+        std::io::ErrorKind::PermissionDenied => InputError::PermissionDenied(path.to_path_buf()),
+        _ => InputError::Io {
+            path: path.to_path_buf(),
+            detail: e.to_string(),
+        },
+    }
+}
+
+/// Read all of `path`, which must be a regular file of at most `max_bytes` bytes.
+///
+/// # Errors
+/// [`InputError`]: missing, not permitted, not a regular file, larger than `max_bytes`
+/// (checked on the descriptor and again while reading, so a growing file is caught too),
+/// or another I/O error.
+pub fn read_regular_file(path: &Path, max_bytes: u64) -> Result<Vec<u8>, InputError> {
+    let file = std::fs::OpenOptions::new()
+        .read(true)
+        .custom_flags(libc::O_NONBLOCK | libc::O_NOCTTY)
+        .open(path)
+        .map_err(|e| io_error(path, &e))?;
+    let meta = file.metadata().map_err(|e| io_error(path, &e))?;
+    if !meta.file_type().is_file() {
+        return Err(InputError::NotRegular {
+            path: path.to_path_buf(),
+            kind: file_kind(meta.file_type()),
+        });
+    }
+    if meta.len() > max_bytes {
+        return Err(InputError::TooLarge {
+            path: path.to_path_buf(),
+            size: meta.len(),
+            max: max_bytes,
+        });
+    }
+    let mut bytes = Vec::with_capacity(usize::try_from(meta.len()).unwrap_or(0));
+    file.take(max_bytes.saturating_add(1))
+        .read_to_end(&mut bytes)
+        .map_err(|e| io_error(path, &e))?;
+    if bytes.len() as u64 > max_bytes {
+        return Err(InputError::TooLarge {
+            path: path.to_path_buf(),
+            size: bytes.len() as u64,
+            max: max_bytes,
+        });
+    }
+    Ok(bytes)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn refuses_what_is_not_a_small_regular_file() {
+        let dir = std::env::temp_dir().join(format!("ratelab-input-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let f = dir.join("f.bin");
+        std::fs::write(&f, [7u8; 10]).unwrap();
+        assert_eq!(read_regular_file(&f, 10).unwrap(), vec![7u8; 10]);
+        assert!(matches!(
+            read_regular_file(&f, 9),
+            Err(InputError::TooLarge {
+                size: 10,
+                max: 9,
+                ..
+            })
+        ));
+        assert!(matches!(
+            read_regular_file(&dir, 9),
+            Err(InputError::NotRegular {
+                kind: "a folder",
+                ..
+            })
+        ));
+        assert!(matches!(
+            read_regular_file(Path::new("/dev/zero"), 1 << 20),
+            Err(InputError::NotRegular {
+                kind: "a character device",
+                ..
+            })
+        ));
+        let fifo = dir.join("fifo");
+        let c = std::ffi::CString::new(fifo.to_str().unwrap()).unwrap();
+        // SAFETY: a valid NUL-terminated path.
+        assert_eq!(unsafe { libc::mkfifo(c.as_ptr(), 0o600) }, 0);
+        assert!(matches!(
+            read_regular_file(&fifo, 10),
+            Err(InputError::NotRegular { kind: "a FIFO", .. })
+        ));
+        assert_eq!(
+            read_regular_file(&dir.join("missing"), 10),
+            Err(InputError::NotFound(dir.join("missing")))
+        );
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn forbidden_is_not_reported_as_missing() {
+        // Built from the error kind: a test run as root could not be denied a real file.
+        let p = Path::new("/x/brain.pt");
+        let denied = std::io::Error::from(std::io::ErrorKind::PermissionDenied);
+        assert_eq!(
+            io_error(p, &denied).to_string(),
+            "/x/brain.pt: permission denied"
+        );
+        let missing = std::io::Error::from(std::io::ErrorKind::NotFound);
+        assert_eq!(io_error(p, &missing).to_string(), "/x/brain.pt: not found");
+        let other = std::io::Error::from_raw_os_error(libc::EIO);
+        let text = io_error(p, &other).to_string();
+        assert!(
+            text.starts_with("/x/brain.pt: ") && text.contains("os error 5"),
+            "{text}"
+        );
+    }
+}

@@ -1,0 +1,291 @@
+//! Writing output files (`--out` metrics and trace, `--record` recordings, sweep CSV/JSON,
+//! the lab's session log): one rule for every writer.
+//!
+//! - Never overwrite an existing file unless the user passed `--force`.
+//! - Never write through a symbolic link at the final name, and never write to anything that
+//!   is not a regular file (a FIFO would block the run forever, a device would swallow it),
+//!   `--force` or not.
+//! - Write to a temporary file in the same folder, then move it into place in one step: a
+//!   reader never sees half a file, and an interrupted write never destroys the old one.
+//!   Without `--force` the move is a hard link, which the kernel refuses atomically when the
+//!   name is taken meanwhile; with `--force` it is a `rename`, which replaces the directory
+//!   entry (a symbolic link put there meanwhile is replaced, not followed).
+//!
+//! Every error is one line naming the file, with the OS's reason where there is one.
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU64, Ordering};
+
+/// Why an output file cannot be written. One line each, naming the file.
+#[derive(Debug, thiserror::Error)]
+pub enum OutputError {
+    /// The file exists and overwriting was not allowed.
+    #[error("{0}: file exists (pass --force to overwrite)")]
+    Exists(PathBuf),
+    /// A symbolic link sits at the final name.
+    #[error("{0}: is a symbolic link; refusing to write through it")]
+    Symlink(PathBuf),
+    /// Something other than a regular file sits at the final name.
+    #[error("{path}: exists and is not a regular file ({kind}); refusing to write to it")]
+    NotRegular {
+        /// The path.
+        path: PathBuf,
+        /// What it is.
+        kind: &'static str,
+    },
+    /// An I/O error while creating, writing or moving the file.
+    #[error("cannot write {path}: {detail}")]
+    Io {
+        /// The final path.
+        path: PathBuf,
+        /// The OS's reason.
+        detail: String,
+    },
+}
+
+fn io_err(path: &Path, e: &std::io::Error) -> OutputError {
+    OutputError::Io {
+        path: path.to_path_buf(),
+        detail: e.to_string(),
+    }
+}
+
+/// Check that `path` may be written: nothing there, or (with `force`) a regular file.
+/// A symbolic link or a non-regular file is refused whatever `force` says.
+///
+/// # Errors
+/// [`OutputError`] naming the problem.
+pub fn check_target(path: &Path, force: bool) -> Result<(), OutputError> {
+    match std::fs::symlink_metadata(path) {
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(()),
+        Err(e) => Err(io_err(path, &e)),
+        Ok(m) if m.file_type().is_symlink() => Err(OutputError::Symlink(path.to_path_buf())),
+        Ok(m) if !m.file_type().is_file() => Err(OutputError::NotRegular {
+            path: path.to_path_buf(),
+            kind: crate::input::file_kind(m.file_type()),
+        }),
+        Ok(_) if !force => Err(OutputError::Exists(path.to_path_buf())),
+        Ok(_) => Ok(()),
+    }
+}
+
+/// A temporary file beside its final name, moved into place by [`PendingFile::commit`]
+/// and removed if dropped uncommitted.
+#[derive(Debug)]
+pub struct PendingFile {
+    tmp: PathBuf,
+    dest: PathBuf,
+    force: bool,
+    done: bool,
+}
+
+impl PendingFile {
+    /// Check `dest` ([`check_target`]), create its folder, and create a new, empty
+    /// temporary file beside it (`.<name>.<pid>-<n>.tmp`, created exclusively).
+    ///
+    /// # Errors
+    /// [`OutputError`] from the check or the creation.
+    pub fn create(dest: &Path, force: bool) -> Result<(Self, std::fs::File), OutputError> {
+        static COUNTER: AtomicU64 = AtomicU64::new(0);
+        check_target(dest, force)?;
+        let name = dest
+            .file_name()
+            .ok_or_else(|| OutputError::Io {
+                path: dest.to_path_buf(),
+                detail: "not a file name".into(),
+            })?
+            .to_string_lossy()
+            .into_owned();
+        let dir = match dest.parent() {
+            Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+            _ => PathBuf::from("."),
+        };
+        std::fs::create_dir_all(&dir).map_err(|e| io_err(dest, &e))?;
+        let tmp = dir.join(format!(
+            ".{name}.{}-{}.tmp",
+            std::process::id(),
+            COUNTER.fetch_add(1, Ordering::Relaxed)
+        ));
+        let file = std::fs::OpenOptions::new()
+            .write(true)
+            .create_new(true)
+            .open(&tmp)
+            .map_err(|e| io_err(dest, &e))?;
+        Ok((
+            Self {
+                tmp,
+                dest: dest.to_path_buf(),
+                force,
+                done: false,
+            },
+            file,
+        ))
+    }
+
+    /// The temporary file's path (for writers that open the file themselves).
+    pub fn temp_path(&self) -> &Path {
+        &self.tmp
+    }
+
+    /// The final path.
+    pub fn path(&self) -> &Path {
+        &self.dest
+    }
+
+    /// Move the temporary file to its final name (see the module's rule). Committing twice
+    /// does nothing.
+    ///
+    /// # Errors
+    /// [`OutputError`]: the name was taken meanwhile (without `force`), a link or
+    /// non-regular file appeared there, or the move failed; the temporary file is removed.
+    pub fn commit(&mut self) -> Result<(), OutputError> {
+        if self.done {
+            return Ok(());
+        }
+        self.done = true;
+        let result = self.move_into_place();
+        let _ = std::fs::remove_file(&self.tmp);
+        result
+    }
+
+    fn move_into_place(&self) -> Result<(), OutputError> {
+        check_target(&self.dest, self.force)?;
+        if self.force {
+            return std::fs::rename(&self.tmp, &self.dest).map_err(|e| io_err(&self.dest, &e));
+        }
+        match std::fs::hard_link(&self.tmp, &self.dest) {
+            Ok(()) => Ok(()),
+            Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {
+                Err(OutputError::Exists(self.dest.clone()))
+            }
+            // A file system without hard links: checked just above, rename.
+            Err(e) if matches!(e.raw_os_error(), Some(libc::EPERM | libc::EOPNOTSUPP)) => {
+                std::fs::rename(&self.tmp, &self.dest).map_err(|e| io_err(&self.dest, &e))
+            }
+            Err(e) => Err(io_err(&self.dest, &e)),
+        }
+    }
+}
+
+impl Drop for PendingFile {
+    fn drop(&mut self) {
+        if !self.done {
+            let _ = std::fs::remove_file(&self.tmp);
+        }
+    }
+}
+
+/// Write `path` through a temporary file by calling `fill` on a buffered writer, then move
+/// it into place (the module's rule; `force` allows replacing an existing regular file).
+///
+/// # Errors
+/// [`OutputError`] naming `path`; an error from `fill` is reported with the path too.
+pub fn write_with(
+    path: &Path,
+    force: bool,
+    fill: impl FnOnce(&mut dyn Write) -> std::io::Result<()>,
+) -> Result<(), OutputError> {
+    let (mut pending, file) = PendingFile::create(path, force)?;
+    let mut w = std::io::BufWriter::new(file);
+    fill(&mut w)
+        .and_then(|()| w.flush())
+        .map_err(|e| io_err(path, &e))?;
+    let file = w.into_inner().map_err(|e| io_err(path, e.error()))?;
+    file.sync_all().map_err(|e| io_err(path, &e))?;
+    drop(file);
+    pending.commit()
+}
+
+/// Write `bytes` to `path` by [`write_with`].
+///
+/// # Errors
+/// As [`write_with`].
+pub fn write_file(path: &Path, force: bool, bytes: &[u8]) -> Result<(), OutputError> {
+    write_with(path, force, |w| w.write_all(bytes))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn scratch(name: &str) -> PathBuf {
+        let d = std::env::temp_dir().join(format!("ratelab-output-{name}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&d);
+        std::fs::create_dir_all(&d).unwrap();
+        d
+    }
+
+    #[test]
+    fn never_overwrites_without_force_and_never_follows_links() {
+        let d = scratch("rule");
+        let f = d.join("out.json");
+        write_file(&f, false, b"one").unwrap();
+        assert!(matches!(
+            write_file(&f, false, b"two"),
+            Err(OutputError::Exists(_))
+        ));
+        assert_eq!(std::fs::read(&f).unwrap(), b"one");
+        write_file(&f, true, b"three").unwrap();
+        assert_eq!(std::fs::read(&f).unwrap(), b"three");
+        let victim = d.join("victim");
+        std::fs::write(&victim, b"canary").unwrap();
+        let link = d.join("link.json");
+        std::os::unix::fs::symlink(&victim, &link).unwrap();
+        for force in [false, true] {
+            assert!(matches!(
+                write_file(&link, force, b"x"),
+                Err(OutputError::Symlink(_))
+            ));
+        }
+        assert_eq!(std::fs::read(&victim).unwrap(), b"canary");
+        assert!(matches!(
+            write_file(&d, true, b"x"),
+            Err(OutputError::NotRegular { .. })
+        ));
+        // No temporary file is left behind by any of it.
+        let left: Vec<_> = std::fs::read_dir(&d)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .filter(|n| n.ends_with(".tmp"))
+            .collect();
+        assert!(left.is_empty(), "{left:?}");
+        std::fs::remove_dir_all(&d).unwrap();
+    }
+
+    #[test]
+    fn write_errors_name_the_file_and_leave_nothing() {
+        let d = scratch("fail");
+        let f = d.join("table.csv");
+        let e = write_with(&f, false, |_| {
+            Err(std::io::Error::from_raw_os_error(libc::ENOSPC))
+        })
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.contains("table.csv") && e.contains("No space left on device"),
+            "{e}"
+        );
+        assert_eq!(std::fs::read_dir(&d).unwrap().count(), 0);
+        let e = write_file(Path::new("/proc/ratelab-denied/x.json"), false, b"x")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.starts_with("cannot write /proc/ratelab-denied/x.json: "),
+            "{e}"
+        );
+        std::fs::remove_dir_all(&d).unwrap();
+    }
+
+    #[test]
+    fn a_name_taken_meanwhile_is_not_replaced() {
+        let d = scratch("race");
+        let f = d.join("rec.rrd");
+        let (mut pending, _file) = PendingFile::create(&f, false).unwrap();
+        std::fs::write(&f, b"someone else's").unwrap();
+        assert!(matches!(pending.commit(), Err(OutputError::Exists(_))));
+        assert_eq!(std::fs::read(&f).unwrap(), b"someone else's");
+        assert!(!pending.temp_path().exists());
+        std::fs::remove_dir_all(&d).unwrap();
+    }
+}
