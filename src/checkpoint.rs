@@ -247,31 +247,14 @@ fn format_err(path: &Path, format: &'static str, detail: impl std::fmt::Display)
     }
 }
 
-thread_local! {
-    /// Set while [`guarded`] runs on this thread: its panics are caught, not printed.
-    static QUIET_PANICS: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
-}
-
 /// Run a third-party reader, turning a panic inside it into an error (a malformed file
-/// must never take the process down). The panic's message is not printed: a wrapper
-/// around the process's panic hook (installed once) stays silent while this thread is
-/// inside `guarded`, and defers to the previous hook everywhere else.
+/// must never take the process down). The panic's message is not printed
+/// ([`crate::scheduler::catch_quietly`]).
 ///
 /// # Errors
 /// The panic's message (first line), prefixed with "the reader failed".
 pub fn guarded<T>(f: impl FnOnce() -> T) -> Result<T, String> {
-    static HOOK: std::sync::Once = std::sync::Once::new();
-    HOOK.call_once(|| {
-        let previous = std::panic::take_hook();
-        std::panic::set_hook(Box::new(move |info| {
-            if !QUIET_PANICS.with(std::cell::Cell::get) {
-                previous(info);
-            }
-        }));
-    });
-    let was = QUIET_PANICS.with(|q| q.replace(true));
-    let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(f));
-    QUIET_PANICS.with(|q| q.set(was));
+    let result = crate::scheduler::catch_quietly(f);
     result.map_err(|p| {
         let msg = crate::scheduler::panic_message(&*p);
         format!(

@@ -167,7 +167,7 @@ impl VirtualScheduler {
         let mut ticked = 0u64;
         while self.next_due() == Some(t) {
             let next = self.next_node().unwrap_or(0);
-            match std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| self.tick_next(nodes))) {
+            match catch_quietly(|| self.tick_next(nodes)) {
                 Err(p) => {
                     return InstantOutcome::Failed(EndReason::NodeFailed {
                         node: nodes[next].name().to_string(),
@@ -297,6 +297,34 @@ fn thread_cpu_time() -> Nanos {
     Nanos(ts.tv_sec as u64 * 1_000_000_000 + ts.tv_nsec as u64)
 }
 
+thread_local! {
+    /// Set while [`catch_quietly`] runs on this thread: its panics are caught, not printed.
+    static QUIET_PANICS: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
+}
+
+/// Run `f`, catching a panic inside it without printing it: the caller reports it (a node
+/// that failed, a checkpoint reader that choked) in one line of its own. A wrapper around
+/// the process's panic hook (installed once) stays silent while this thread is inside
+/// `catch_quietly`, and defers to the previous hook everywhere else.
+///
+/// # Errors
+/// The panic's payload (see [`panic_message`]).
+pub fn catch_quietly<T>(f: impl FnOnce() -> T) -> std::thread::Result<T> {
+    static HOOK: std::sync::Once = std::sync::Once::new();
+    HOOK.call_once(|| {
+        let previous = std::panic::take_hook();
+        std::panic::set_hook(Box::new(move |info| {
+            if !QUIET_PANICS.with(std::cell::Cell::get) {
+                previous(info);
+            }
+        }));
+    });
+    let was = QUIET_PANICS.with(|q| q.replace(true));
+    let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(f));
+    QUIET_PANICS.with(|q| q.set(was));
+    result
+}
+
 /// The message of a caught panic.
 pub fn panic_message(p: &(dyn std::any::Any + Send)) -> String {
     p.downcast_ref::<&str>()
@@ -340,7 +368,7 @@ pub fn run_real(
                     let mut lateness = LatencyStats::default();
                     let (mut ticks, mut skipped) = (0u64, 0u64);
                     let mut deadline = first;
-                    let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| loop {
+                    let result = catch_quietly(|| loop {
                         // Wake for the deadline, the run's end or a stop, whichever is
                         // first: a slow node must not sleep past either.
                         waiter.wait_until_or(clock.instant_at(deadline.min(duration)), &|| {
@@ -379,7 +407,7 @@ pub fn run_real(
                             next_deadline(deadline, clock.now(), node.rate().period());
                         deadline = next;
                         skipped += missed;
-                    }));
+                    });
                     if result.is_err() {
                         stop.stop();
                     }

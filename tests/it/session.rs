@@ -383,3 +383,48 @@ fn a_version_1_log_still_replays() {
     );
     assert!(out.contains("identical to the live run"), "{out}");
 }
+
+#[test]
+fn the_labs_later_recordings_never_replace_a_file_without_force() {
+    let dir = tempfile::tempdir().unwrap();
+    let canary = dir.path().join("rec-2.rrd");
+    std::fs::write(&canary, b"keep me").unwrap();
+    for force in [false, true] {
+        let (ctl_tx, ctl_rx) = unbounded();
+        let (tel_tx, tel_rx) = unbounded::<Telemetry>();
+        let mut s = settings(
+            ClockKind::Virtual,
+            0,
+            true,
+            Speed::Max,
+            &dir.path().join(format!("s-{force}.json")),
+        );
+        s.record = Some(dir.path().join("rec.rrd"));
+        s.force = force;
+        let engine = Engine::new(s, ctl_rx, tel_tx).spawn();
+        for c in steps(5) {
+            ctl_tx.send(c).unwrap();
+        }
+        ctl_tx.send(Control::Reset { next_seed: false }).unwrap(); // run 2 → rec-2.rrd
+        ctl_tx.send(Control::Quit).unwrap();
+        engine.join().unwrap();
+        let errors: Vec<String> = tel_rx
+            .try_iter()
+            .filter_map(|t| match t {
+                Telemetry::Error(e) => Some(e),
+                _ => None,
+            })
+            .collect();
+        if force {
+            assert!(errors.is_empty(), "{errors:?}");
+            assert_ne!(std::fs::read(&canary).unwrap(), b"keep me");
+        } else {
+            assert!(
+                errors.iter().any(|e| e.contains("rec-2.rrd")),
+                "the second run is refused, naming the file: {errors:?}"
+            );
+            assert_eq!(std::fs::read(&canary).unwrap(), b"keep me");
+            std::fs::remove_file(dir.path().join("rec.rrd")).unwrap();
+        }
+    }
+}
