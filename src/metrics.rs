@@ -324,6 +324,8 @@ pub struct TopicMetrics {
     pub published: u64,
     /// Messages evicted unread (the chapter's drop rule).
     pub dropped: u64,
+    /// Reads that found nothing new (the subscriber read a message it had already read).
+    pub stale_reads: u64,
     /// Messages per second of run time.
     pub msg_per_s: f64,
 }

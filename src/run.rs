@@ -293,6 +293,7 @@ pub fn summarize(
                 depth: s.depth,
                 published: s.published,
                 dropped: s.dropped,
+                stale_reads: s.stale_reads,
                 msg_per_s: per_s(s.published),
             };
             (t.name.clone(), m)

@@ -36,6 +36,14 @@ pub struct TopicStats {
     /// Messages a subscriber has read or read past (a latest-wins read marks everything
     /// buffered as seen). Every message is seen, dropped, or still buffered unseen.
     pub seen: u64,
+    /// Reads that returned a message the subscriber had already read: nothing new arrived
+    /// since its last read (a publisher slower than its subscriber). The mirror image of a
+    /// drop: there a message is never read, here one is read again.
+    pub stale_reads: u64,
+    /// Stamp of the newest message published (zero before the first). With
+    /// [`TopicStats::published`] at two instants it gives the exact rate of the messages
+    /// published between them: `Δpublished / Δlast_stamp`.
+    pub last_stamp: Nanos,
     /// The current history depth (buffer bound), ≥ 1.
     pub depth: usize,
 }
@@ -54,6 +62,8 @@ struct Inner<T> {
     published: u64,
     dropped: u64,
     seen: u64,
+    stale_reads: u64,
+    last_stamp: Nanos,
 }
 
 impl<T> Inner<T> {
@@ -92,6 +102,8 @@ impl<T: Clone> Topic<T> {
                 published: 0,
                 dropped: 0,
                 seen: 0,
+                stale_reads: 0,
+                last_stamp: Nanos::ZERO,
             }),
         })
     }
@@ -123,6 +135,7 @@ impl<T: Clone> Topic<T> {
             origin_stamp,
         });
         inner.published += 1;
+        inner.last_stamp = stamp;
         seq
     }
 
@@ -132,6 +145,9 @@ impl<T: Clone> Topic<T> {
         let mut inner = self.lock();
         let newest = inner.buf.back()?.clone();
         let hw = inner.read_high_water;
+        if hw.is_some_and(|hw| newest.seq <= hw) {
+            inner.stale_reads += 1;
+        }
         // Seqs are consecutive in the buffer: the unseen ones are the newest `newest − hw`.
         let unseen = hw
             .map_or(inner.buf.len() as u64, |hw| newest.seq.saturating_sub(hw))
@@ -169,6 +185,8 @@ impl<T: Clone> Topic<T> {
             published: inner.published,
             dropped: inner.dropped,
             seen: inner.seen,
+            stale_reads: inner.stale_reads,
+            last_stamp: inner.last_stamp,
             depth: inner.depth,
         }
     }
@@ -256,6 +274,8 @@ mod tests {
                 published: 100,
                 dropped: 0,
                 seen: 100,
+                stale_reads: 0,
+                last_stamp: Nanos(99),
                 depth: 1
             }
         );
@@ -284,6 +304,27 @@ mod tests {
         assert_eq!(topic.stats().dropped, 4);
         assert_eq!(topic.set_depth(0), Err(ZeroDepth));
         assert!(Topic::<u8>::new("/z", 0).is_err());
+    }
+
+    #[test]
+    fn stale_reads_are_the_mirror_of_drops() {
+        // A publisher at a fifth of the subscriber's rate: each message is read five times.
+        let topic = t(1);
+        assert!(topic.latest().is_none());
+        assert_eq!(
+            topic.stats().stale_reads,
+            0,
+            "nothing to read is not a stale read"
+        );
+        for i in 0..3 {
+            topic.publish(i, Nanos(u64::from(i) * 5), None);
+            for _ in 0..5 {
+                assert_eq!(topic.latest().unwrap().data, i);
+            }
+        }
+        let s = topic.stats();
+        assert_eq!((s.stale_reads, s.dropped, s.seen), (12, 0, 3));
+        assert_eq!(s.last_stamp, Nanos(10));
     }
 
     #[test]

@@ -15,7 +15,8 @@ use std::collections::VecDeque;
 
 /// Seconds of pole-angle history kept (and drawn).
 pub const HISTORY_S: f64 = 10.0;
-/// Window for msg/s, drops and measured rates.
+/// Window for msg/s, drops, stale reads and measured rates. msg/s is the count of messages
+/// published in the window over the span of their publish stamps, so a 5 Hz topic reads 5.0.
 pub const WINDOW: Nanos = Nanos::SECOND;
 /// Latency histogram bucket width.
 pub const BUCKET: Nanos = Nanos(20_000_000);
@@ -434,15 +435,20 @@ impl App {
         let spec = self.graph.topic(id);
         let pick = |s: &StepRecord| s.topics.get(id);
         let (first, last) = (self.steps.front(), self.steps.back());
-        let (rate, dropping) = match (first, last) {
-            (Some(f), Some(l)) if l.t > f.t => {
-                let span = (l.t - f.t).as_secs_f64();
-                (
-                    (pick(l).published - pick(f).published) as f64 / span,
-                    pick(l).dropped > pick(f).dropped,
-                )
+        let (rate, dropping, staling) = match (first, last) {
+            (Some(f), Some(l)) => {
+                let (f, l) = (pick(f), pick(l));
+                // The messages published between the two snapshots span exactly
+                // (f.last_stamp, l.last_stamp]: count over that span, not over a bucket.
+                let span = l.last_stamp.saturating_sub(f.last_stamp);
+                let rate = if span.0 > 0 {
+                    (l.published - f.published) as f64 / span.as_secs_f64()
+                } else {
+                    0.0
+                };
+                (rate, l.dropped > f.dropped, l.stale_reads > f.stale_reads)
             }
-            _ => (0.0, false),
+            _ => (0.0, false, false),
         };
         TopicView {
             name: spec.name.clone(),
@@ -452,6 +458,8 @@ impl App {
             msg_per_s: rate,
             dropped: last.map_or(0, |l| pick(l).dropped),
             dropping,
+            stale_reads: last.map_or(0, |l| pick(l).stale_reads),
+            staling,
             selected: self.selected == Some(Selected::Topic(id)),
         }
     }

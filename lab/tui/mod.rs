@@ -243,6 +243,31 @@ mod tests {
     }
 
     #[test]
+    fn msg_per_s_comes_from_stamps_and_a_slow_sensor_shows_stale_reads() {
+        // A 5 Hz policy publishes exactly 5 /action messages a second, a 50 Hz sensor 50.
+        let (app, _rx) = app_after(virtual_cfg(5.0, 3), false);
+        let v = app.view();
+        assert_eq!((v.topics[0].msg_per_s, v.topics[1].msg_per_s), (50.0, 5.0));
+        // A 5 Hz sensor under a 50 Hz policy: no drops, but the policy reads each reading
+        // ten times: 9 stale reads per reading.
+        let mut cfg = virtual_cfg(50.0, 2);
+        cfg.set_sensor_hz(5.0).unwrap();
+        let (app, _rx) = app_after(cfg, false);
+        let v = app.view();
+        let obs = &v.topics[0];
+        assert_eq!((obs.dropped, obs.msg_per_s), (0, 5.0));
+        // Up to the last step (the pole falls on the way): policy ticks every 20 ms, the
+        // sensor every 200 ms, each reading read fresh once (sensor first at shared instants).
+        let ms = (v.sim_time_s * 1000.0).round() as u64;
+        let (ticks, readings) = (ms / 20 + 1, ms / 200 + 1);
+        assert_eq!(obs.stale_reads, ticks - readings, "{obs:?} at {ms} ms");
+        assert!(obs.staling);
+        let text = render(&app, 80, 24);
+        assert!(text.contains(&format!("{} stale ↺", obs.stale_reads)), "{text}");
+        insta::assert_snapshot!("slow_sensor_stale_80x24", text);
+    }
+
+    #[test]
     fn a_long_recording_path_is_shortened_from_the_left() {
         assert_eq!(
             super::view::shorten_left("recordings/abc.rrd", 40),

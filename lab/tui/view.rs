@@ -63,6 +63,10 @@ pub struct TopicView {
     pub dropped: u64,
     /// Dropped within the last second (the arrow is "dropping").
     pub dropping: bool,
+    /// Reads that found nothing new since the run started (the mirror of a drop).
+    pub stale_reads: u64,
+    /// Stale reads within the last second (the subscriber is re-reading old data).
+    pub staling: bool,
 }
 
 /// The run's verdict badge.
@@ -396,7 +400,7 @@ fn render_arrow(t: &TopicView, area: Rect, buf: &mut Buffer) {
     } else {
         Line::from(t.name.clone().bold()).centered()
     };
-    let lines = vec![
+    let mut lines = vec![
         name,
         Line::from(Span::styled(
             format!("{}▶", shaft.repeat(w.saturating_sub(1))),
@@ -405,6 +409,16 @@ fn render_arrow(t: &TopicView, area: Rect, buf: &mut Buffer) {
         Line::from(format!("{:.1} msg/s", t.msg_per_s)).centered(),
         Line::from(Span::styled(format!("{} dropped {mark}", t.dropped), style)).centered(),
     ];
+    if t.stale_reads > 0 {
+        // The mirror image of a drop, with a symbol of its own: old data read again.
+        let style = if t.staling {
+            Style::new().fg(Color::Magenta).add_modifier(Modifier::BOLD)
+        } else {
+            Style::new().fg(Color::DarkGray)
+        };
+        lines
+            .push(Line::from(Span::styled(format!("{} stale ↺", t.stale_reads), style)).centered());
+    }
     Paragraph::new(lines).render(area, buf);
 }
 
