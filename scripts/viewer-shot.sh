@@ -9,6 +9,8 @@
 # display with the Composite extension off (with it on, rerun's window is all black under
 # Xvfb) and the Vulkan backend (the GL one cannot draw to R32Float). rerun saves the picture,
 # then may exit non-zero ("Failed to take store hub"), so the script judges by the picture.
+# The viewer's start-up notifications (a Docker notice, a Wgpu validation message) sometimes
+# cover the top-right corner when the picture is taken: take it again if one hides something.
 set -euo pipefail
 
 if [ $# -lt 2 ] || [ $# -gt 3 ]; then
