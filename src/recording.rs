@@ -38,6 +38,7 @@
 //! only, is logged from the node threads through the ordinary batcher.)
 
 mod layout;
+mod live;
 mod shape;
 
 pub use shape::{GraphShape, NodeShape, TopicShape};
@@ -583,16 +584,19 @@ impl Recording {
         }
         let rec = if live {
             // Start the viewer, then write to the file and stream to the viewer at once.
-            rerun::spawn(&rerun::SpawnOptions::default())
+            let viewer = rerun::spawn(&rerun::SpawnOptions::default())
                 .map_err(|e| RecordingError::Rerun(e.to_string()))?;
             let file =
                 rerun::sink::FileSink::new(path).map_err(|e| RecordingError::Unwritable {
                     path: path.to_path_buf(),
                     detail: e.to_string(),
                 })?;
-            builder
-                .set_sinks((file, rerun::sink::GrpcSink::default()))
-                .map_err(rec_err)?
+            // The live sink never holds up the file, even when the viewer cannot start.
+            let sinks: Vec<Box<dyn rerun::sink::LogSink>> = vec![
+                Box::new(file),
+                Box::new(live::LiveSink::new(viewer.child_pid)),
+            ];
+            builder.set_sinks(sinks).map_err(rec_err)?
         } else {
             builder.save(path).map_err(rec_err)?
         };

@@ -620,3 +620,43 @@ fn mid_run_changes_are_events_graph_labels_and_marks() {
     assert!(labels.iter().any(|l| l == "/obs · depth 5"), "{labels:?}");
     assert!(labels.iter().any(|l| l == "policy · 10 Hz"), "{labels:?}");
 }
+
+#[test]
+fn spawn_with_a_viewer_that_cannot_start_still_writes_the_whole_file() {
+    // A `rerun` on PATH that exits at once, as the real one does without a display. The
+    // live sink used to queue at most 100 messages for it and then block the file too.
+    use std::os::unix::fs::PermissionsExt;
+    let dir = tempfile::tempdir().unwrap();
+    let bin = dir.path().join("bin");
+    std::fs::create_dir(&bin).unwrap();
+    let fake = bin.join("rerun");
+    std::fs::write(&fake, "#!/bin/sh\nexit 1\n").unwrap();
+    std::fs::set_permissions(&fake, std::fs::Permissions::from_mode(0o755)).unwrap();
+    let path = dir.path().join("spawn.rrd");
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_ratelab"))
+        .args(["run", "--clock", "virtual", "--spawn", "--record"])
+        .arg(&path)
+        .env("PATH", format!("{}:/usr/bin:/bin", bin.display()))
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(60);
+    while child.try_wait().unwrap().is_none() {
+        if std::time::Instant::now() > deadline {
+            child.kill().unwrap();
+            panic!("the run hangs on a viewer that never started");
+        }
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+    let out = child.wait_with_output().unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{stdout}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(stdout.contains("BALANCED"), "{stdout}");
+    assert_eq!(angle_rows(&chunks(&path)), 501);
+    check_views(&path);
+}
