@@ -5,7 +5,7 @@
 //! nodes and topics, so nothing below names a node or a topic):
 //! - `world` (z up): `world/rail` (the cart rests on it), `world/cart` (translated by the cart
 //!   position) with `world/cart/body` (box 0.2 × 0.1 × 0.1 m), `world/cart/fall_limits`
-//!   (two lines at ±12°), `world/cart/force` (the applied force as an arrow, 0.04 m per N)
+//!   (two lines at ±12°, labelled by `…/labels`), `world/cart/force` (the applied force as an arrow, 0.04 m per N)
 //!   and `world/cart/pole` (rotated θ about +y) with `world/cart/pole/body` (capsule 1.0 m);
 //! - `plant/pole_angle_rad`, `plant/fall_limit/{upper,lower}`, `plant/changes` (a mark at the
 //!   start and at every mid-run change), `plant/cart_pos_m`, `plant/rail_end/{right,left}`,
@@ -27,7 +27,10 @@
 //! The blueprint (module `layout`) lays these out as a learner reads them: the cartpole, the
 //! node graph and the summary; the pole angle, the action, the cart position, the latency
 //! (and, under the real clock, the lateness); the bus counters and the events. Every view
-//! names its entities explicitly, so none matches nothing.
+//! names its entities explicitly, so none matches nothing. The layout is sent twice: when
+//! the graph is built (plots with no scale known up front fit themselves while the run goes)
+//! and at the end, each plot's y range then padded around every value its series took. The
+//! blueprint stores' ids derive from the settings too (virtual clock).
 //!
 //! Determinism: rows are not left to rerun's background batcher, whose chunk boundaries and
 //! order depend on thread timing. Each entity's rows are gathered into chunks here and sent

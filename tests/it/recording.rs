@@ -660,3 +660,53 @@ fn spawn_with_a_viewer_that_cannot_start_still_writes_the_whole_file() {
     assert_eq!(angle_rows(&chunks(&path)), 501);
     check_views(&path);
 }
+
+#[test]
+fn a_brain_swap_is_an_event_and_a_mark() {
+    // The lab session reports a brain swap (which the graph cannot see) with
+    // `Recording::change`, at the instant it applied it.
+    struct SwapAt(Recording, u64);
+    impl ratelab::graph::StepObserver for SwapAt {
+        fn on_step(&mut self, r: &ratelab::metrics::StepRecord) {
+            if r.step == self.1 {
+                self.0.change(r.t, "brain → scripted");
+            }
+        }
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("swap.rrd");
+    let cfg = virtual_cfg().with_duration_ms(2000);
+    let (rec, _) = Recording::create(&path, &cfg, "scripted", &RecordOptions::default()).unwrap();
+    let opts = RunOptions {
+        observers: vec![rec.observer(), Box::new(SwapAt(rec.clone(), 40))],
+        ..RunOptions::new()
+    };
+    let r = run(&cfg, Box::new(Scripted), opts).unwrap();
+    rec.finish(&r.metrics, &r.end).unwrap();
+    drop(rec);
+    let all = chunks(&path);
+    let events: Vec<String> = all
+        .iter()
+        .filter(|c| c.entity_path().to_string() == "/events")
+        .flat_map(|c| c.iter_slices::<String>(rerun::TextLog::descriptor_text().component))
+        .flatten()
+        .map(|s| s.as_str().to_string())
+        .collect();
+    assert!(
+        events.iter().any(|e| e == "brain → scripted"),
+        "{events:#?}"
+    );
+    let marks: Vec<i64> = all
+        .iter()
+        .filter(|c| !c.is_static() && c.entity_path().to_string() == "/plant/changes")
+        .flat_map(|c| {
+            c.timelines()
+                .iter()
+                .find(|(name, _)| name.as_str() == "control_step")
+                .map(|(_, col)| col.times_raw().to_vec())
+                .unwrap_or_default()
+        })
+        .collect();
+    assert_eq!(marks, [0, 40], "the start and the swap");
+    check_views(&path);
+}
