@@ -1,20 +1,36 @@
 //! Recordings: a run written to a rerun `.rrd` for offline review (rerun 0.36.3).
 //!
 //! Timelines: `sim_time` (a duration on the runtime clock, virtual or real) and
-//! `control_step` (a sequence). Entities:
-//! - `world/rail`, `world/cart` (box, half sizes 0.1 × 0.05 × 0.05, translated by the
-//!   cart position) and `world/cart/pole` (capsule, 1.0 m × 0.02 m, rotated θ about +y);
-//! - `plant/pole_angle_rad`, `plant/fall_limit/{upper,lower}`, `plant/cart_pos_m`,
-//!   `policy/action`, `latency/sense_to_act_ms`;
-//! - `bus/<topic>/{published,dropped,msg_per_s}` per topic of the graph (`/obs` → `bus/obs`;
-//!   msg/s over a 1 s sliding window);
-//! - `graph`: the node graph as rerun `GraphNodes`/`GraphEdges`, built from the graph's
-//!   shape. Rerun's edges carry no labels, so topics are drawn as nodes of their own, as
-//!   ROS's rqt_graph does: sensor → /obs → policy → /action → actuator; labels show the
-//!   rates and depths and are re-logged when they change;
+//! `control_step` (a sequence). Entities, for a graph described by a [`GraphShape`] (lists of
+//! nodes and topics, so nothing below names a node or a topic):
+//! - `world` (z up): `world/rail` (the cart rests on it), `world/cart` (translated by the cart
+//!   position) with `world/cart/body` (box 0.2 × 0.1 × 0.1 m), `world/cart/fall_limits`
+//!   (two lines at ±12°, labelled by `…/labels`), `world/cart/force` (the applied force as an arrow, 0.04 m per N)
+//!   and `world/cart/pole` (rotated θ about +y) with `world/cart/pole/body` (capsule 1.0 m);
+//! - `plant/pole_angle_rad`, `plant/fall_limit/{upper,lower}`, `plant/changes` (a mark at the
+//!   start and at every mid-run change), `plant/cart_pos_m`, `plant/rail_end/{right,left}`,
+//!   `plant/cart_limit/{right,left}`;
+//! - `action/published_N` (the force the policy asked for, at each message it published),
+//!   `action/applied_N` (the force the actuator applied at each step: the zero-order hold);
+//! - `latency/sense_to_act_ms`, `latency/control_period_ms` (the controller's period);
+//! - `bus/<topic>/{published,dropped,msg_per_s}` for every topic (msg/s over a 1 s sliding
+//!   window), one colour per topic;
+//! - `graph`: the node graph as rerun `GraphNodes`/`GraphEdges`. Rerun's edges carry no
+//!   labels, so topics are drawn as nodes of their own, as ROS's rqt_graph does, in another
+//!   colour; positions run left to right from the sources; labels show the rates and depths
+//!   and are re-logged when they change;
 //! - `nodes/<name>/lateness_us`: per-tick lateness of each node (real clock only);
-//! - `events`: text logs for the start (all settings), rate and depth changes, the fall and
-//!   the end (the summary); the settings are also recording properties.
+//! - `events`: text logs for the start, rate and depth changes, brain swaps, the fall and the
+//!   end; `summary`: the run's summary as a markdown document; the settings are also
+//!   recording properties.
+//!
+//! The blueprint (module `layout`) lays these out as a learner reads them: the cartpole, the
+//! node graph and the summary; the pole angle, the action, the cart position, the latency
+//! (and, under the real clock, the lateness); the bus counters and the events. Every view
+//! names its entities explicitly, so none matches nothing. The layout is sent twice: when
+//! the graph is built (plots with no scale known up front fit themselves while the run goes)
+//! and at the end, each plot's y range then padded around every value its series took. The
+//! blueprint stores' ids derive from the settings too (virtual clock).
 //!
 //! Determinism: rows are not left to rerun's background batcher, whose chunk boundaries and
 //! order depend on thread timing. Each entity's rows are gathered into chunks here and sent
@@ -29,18 +45,26 @@
 //! dropped); an existing file is replaced only when the recording was opened with
 //! `force`, and a symbolic link or non-regular file at the final name is refused.
 
+mod layout;
+mod live;
+mod shape;
+
+pub use shape::{GraphShape, NodeShape, TopicShape};
+
 use crate::config::{ClockKind, RunConfig};
-use crate::graph::{GraphHandles, GraphSpec, NodeId, StepObserver};
+use crate::graph::{GraphHandles, StepObserver};
 use crate::metrics::{Metrics, StepRecord};
-use crate::plant::THETA_LIMIT_RAD;
+use crate::plant::{CART_LIMIT_M, THETA_LIMIT_RAD};
 use crate::scheduler::{EndReason, RunEnd};
 use crate::time::Nanos;
+use crate::topic::TopicStats;
+use layout::{Item, ViewSpec};
 use re_chunk::{Chunk, ChunkBuilder, RowId, TimeColumn};
-use rerun::blueprint::{
-    Blueprint, GraphView, Horizontal, Spatial3DView, TextLogView, TimeSeriesView, Vertical,
-};
+use rerun::external::re_sdk_types::blueprint::archetypes as bp;
+use rerun::external::re_sdk_types::blueprint::components as bpc;
+use rerun::external::re_sdk_types::blueprint::datatypes as bpd;
 use rerun::time::{TimePoint, Timeline};
-use rerun::{RecordingStream, RecordingStreamBuilder};
+use rerun::{Color, RecordingStream, RecordingStreamBuilder};
 use std::collections::{BTreeMap, VecDeque};
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
@@ -66,6 +90,27 @@ struct ScalarColumn {
 struct ChunkBuffer {
     rows: BTreeMap<String, ChunkBuilder>,
     scalars: BTreeMap<String, ScalarColumn>,
+    /// The smallest and largest value of every scalar series so far (kept across sends):
+    /// the final layout fits each plot's y range to them.
+    extents: Extents,
+}
+
+/// (min, max) per scalar entity path.
+type Extents = BTreeMap<String, (f64, f64)>;
+
+fn widen(extents: &mut Extents, entity: &str, value: f64) {
+    if !value.is_finite() {
+        return;
+    }
+    match extents.get_mut(entity) {
+        Some((lo, hi)) => {
+            *lo = lo.min(value);
+            *hi = hi.max(value);
+        }
+        None => {
+            extents.insert(entity.to_string(), (value, value));
+        }
+    }
 }
 
 impl ChunkBuffer {
@@ -89,6 +134,7 @@ impl ChunkBuffer {
         col.t_ns.push(i64::try_from(t.0).unwrap_or(i64::MAX));
         col.step.push(i64::try_from(step).unwrap_or(i64::MAX));
         col.value.push(value);
+        widen(&mut self.extents, entity, value);
     }
 
     fn send(&mut self, rec: &RecordingStream) {
@@ -173,6 +219,11 @@ fn hz_label(hz: f64) -> String {
     s.trim_end_matches('0').trim_end_matches('.').to_string()
 }
 
+/// The entity name of a topic's bus series: `/obs` → `obs`, `/a/b` → `a_b`.
+pub fn bus_name(topic: &str) -> String {
+    topic.trim_start_matches('/').replace('/', "_")
+}
+
 /// `<graph>-` for any graph but the chapter's (`cartpole`), which keeps the names it had.
 fn graph_prefix(cfg: &RunConfig) -> String {
     if cfg.graph.name == "cartpole" {
@@ -182,8 +233,8 @@ fn graph_prefix(cfg: &RunConfig) -> String {
     }
 }
 
-/// `recordings/[<graph>-]<clock>-control<hz>-q<depth>-seed<seed>[-<n>].rrd` under `dir`: the first
-/// name not already taken (`-2`, `-3`, … are appended), so nothing is overwritten.
+/// `recordings/[<graph>-]<clock>-control<hz>-q<depth>-seed<seed>[-<n>].rrd` under `dir`: the
+/// first name not already taken (`-2`, `-3`, … are appended), so nothing is overwritten.
 pub fn default_path(dir: &Path, cfg: &RunConfig) -> PathBuf {
     let stem = format!(
         "{}{}-control{}-q{}-seed{}",
@@ -235,6 +286,39 @@ impl Drop for Committer {
     }
 }
 
+/// The force the motor applies per unit of control (the `gear` of `assets/cartpole.xml`), N:
+/// the graph's [`crate::graph::spec::GEAR_N`].
+pub const FORCE_PER_CONTROL_N: f64 = crate::graph::spec::GEAR_N;
+
+/// Half the rail's length (the slider's range in `assets/cartpole.xml`), m.
+pub const RAIL_HALF_LENGTH_M: f64 = 2.9;
+
+/// Colours for per-topic and per-node series (readable on rerun's dark background).
+const PALETTE: [(u8, u8, u8); 6] = [
+    (64, 196, 220),
+    (245, 150, 50),
+    (190, 120, 240),
+    (120, 210, 110),
+    (240, 100, 150),
+    (230, 210, 80),
+];
+
+fn palette(i: usize) -> Color {
+    let (r, g, b) = PALETTE[i % PALETTE.len()];
+    Color::from_rgb(r, g, b)
+}
+
+const ANGLE_COLOR: (u8, u8, u8) = (90, 160, 255);
+const LIMIT_COLOR: (u8, u8, u8) = (235, 80, 80);
+const NEUTRAL_COLOR: (u8, u8, u8) = (150, 150, 150);
+const FORCE_COLOR: (u8, u8, u8) = (120, 220, 120);
+const NODE_COLOR: (u8, u8, u8) = (110, 170, 255);
+const TOPIC_COLOR: (u8, u8, u8) = (245, 170, 60);
+
+fn rgb((r, g, b): (u8, u8, u8)) -> Color {
+    Color::from_rgb(r, g, b)
+}
+
 /// How to record.
 #[derive(Clone, Debug, Default)]
 pub struct RecordOptions {
@@ -248,37 +332,252 @@ pub struct Recording {
     rec: RecordingStream,
     path: PathBuf,
     clock: ClockKind,
+    /// The settings the run started with (for the blueprint's scales and ids).
+    cfg: RunConfig,
     buffer: Arc<Mutex<ChunkBuffer>>,
     /// The latest control step logged (stamps events that arrive between steps).
     last_step: Arc<std::sync::atomic::AtomicU64>,
+    /// The graph, once the observer is attached (for the final layout).
+    shape: Arc<Mutex<Option<GraphShape>>>,
     /// The temporary file rerun writes, moved to `path` by [`Recording::finish`].
     file: Arc<Committer>,
 }
 
-fn blueprint() -> Blueprint {
-    Blueprint::new(Horizontal::new([
-        Vertical::new([
-            Spatial3DView::new("cartpole").with_origin("/world").into(),
-            GraphView::new("node graph").with_origin("/graph").into(),
-            TextLogView::new("events").with_origin("/events").into(),
-        ])
-        .into(),
-        Vertical::new([
-            TimeSeriesView::new("pole angle (rad) and fall limits")
-                .with_contents(["/plant/pole_angle_rad", "/plant/fall_limit/**"])
-                .into(),
-            TimeSeriesView::new("sense→act latency (ms)")
-                .with_origin("/latency")
-                .into(),
-            TimeSeriesView::new("bus: dropped")
-                .with_contents(["/bus/*/dropped"])
-                .into(),
-            TimeSeriesView::new("bus: msg/s")
-                .with_contents(["/bus/*/msg_per_s"])
-                .into(),
-        ])
-        .into(),
-    ]))
+/// A y range with a margin around `[lo, hi]`, so no line sits on the plot's edge.
+fn axis(lo: f64, hi: f64) -> bp::ScalarAxis {
+    let pad = if hi > lo { (hi - lo) * 0.1 } else { 1.0 };
+    bp::ScalarAxis::new().with_range(rerun::components::Range1D::new(lo - pad, hi + pad))
+}
+
+/// A time series view of the series `entities` (exact paths), its legend top left. Its y
+/// range spans `base` (a scale chosen up front) and, when the run is over, every value the
+/// series took (`extents`); with neither, rerun fits the data itself.
+fn plot(
+    key: &str,
+    name: &str,
+    entities: Vec<String>,
+    base: Option<(f64, f64)>,
+    extents: Option<&Extents>,
+) -> ViewSpec {
+    let seen = extents.map(|ext| {
+        entities
+            .iter()
+            .filter_map(|e| ext.get(e.trim_start_matches('/')))
+            .fold(None, |acc: Option<(f64, f64)>, &(lo, hi)| {
+                Some(acc.map_or((lo, hi), |(a, b)| (a.min(lo), b.max(hi))))
+            })
+    });
+    let range = match (base, seen.flatten()) {
+        (Some((a, b)), Some((lo, hi))) => Some((a.min(lo), b.max(hi))),
+        (Some(r), None) | (None, Some(r)) => Some(r),
+        (None, None) => None,
+    };
+    let view = ViewSpec::new(key, "TimeSeries", name)
+        .contents(entities)
+        .property(
+            "PlotLegend",
+            &bp::PlotLegend::new().with_corner(bpc::Corner2D::LeftTop),
+        );
+    match range {
+        Some((lo, hi)) => view.property("ScalarAxis", &axis(lo, hi)),
+        None => view,
+    }
+}
+
+/// The viewer layout for a run of `shape` with the settings `cfg`; `extents` (the values
+/// every series took) once the run is over.
+fn layout_for(shape: &GraphShape, cfg: &RunConfig, extents: Option<&Extents>) -> Item {
+    let paths = |list: &[&str]| list.iter().map(|p| p.to_string()).collect::<Vec<_>>();
+    let deg = THETA_LIMIT_RAD.to_degrees();
+    let angle = plot(
+        "angle",
+        &format!("pole angle θ (rad), fall limits ±{deg:.0}°"),
+        paths(&[
+            "/plant/pole_angle_rad",
+            "/plant/fall_limit/upper",
+            "/plant/fall_limit/lower",
+            "/plant/changes",
+        ]),
+        Some((-CHANGE_MARK_RAD, CHANGE_MARK_RAD)),
+        extents,
+    );
+    let force = FORCE_PER_CONTROL_N;
+    let action = plot(
+        "action",
+        "force on the cart (N): published vs applied",
+        paths(&["/action/published_N", "/action/applied_N"]),
+        Some((-force, force)),
+        extents,
+    );
+    let cart = plot(
+        "cart",
+        "cart position (m)",
+        paths(&[
+            "/plant/cart_pos_m",
+            "/plant/rail_end/right",
+            "/plant/rail_end/left",
+            "/plant/cart_limit/right",
+            "/plant/cart_limit/left",
+        ]),
+        Some((-RAIL_HALF_LENGTH_M, RAIL_HALF_LENGTH_M)),
+        extents,
+    );
+    // Latency, lateness and the bus series have no scale known up front (a lab session may
+    // change rates mid-run): rerun fits them while the run goes, the final layout pads them.
+    let latency = plot(
+        "latency",
+        "sense→act latency (ms)",
+        paths(&["/latency/sense_to_act_ms", "/latency/control_period_ms"]),
+        extents.map(|_| (0.0, 0.0)),
+        extents,
+    );
+    let mut signals: Vec<(f32, Item)> = [angle, action, cart, latency]
+        .into_iter()
+        .map(|v| (1.0, Item::View(v)))
+        .collect();
+    if cfg.clock == ClockKind::Real {
+        let lateness = plot(
+            "lateness",
+            "node tick lateness (µs, real clock)",
+            shape
+                .nodes
+                .iter()
+                .map(|n| format!("/nodes/{}/lateness_us", n.name))
+                .collect(),
+            extents.map(|_| (0.0, 0.0)),
+            extents,
+        );
+        signals.push((1.0, Item::View(lateness)));
+    }
+
+    let bus = |measure: &str, title: &str| {
+        plot(
+            &format!("bus-{measure}"),
+            title,
+            shape
+                .topics
+                .iter()
+                .map(|t| format!("/bus/{}/{measure}", t.entity()))
+                .collect(),
+            extents.map(|_| (0.0, 0.0)),
+            extents,
+        )
+    };
+    let published = bus("published", "bus: published (total)");
+    let msg_per_s = bus("msg_per_s", "bus: msg/s (1 s window)");
+    let dropped = bus("dropped", "bus: dropped (total)");
+    let events = ViewSpec::new("events", "TextLog", "events")
+        .contents(["/events"])
+        .property(
+            "TextLogColumns",
+            &bp::TextLogColumns::new()
+                .with_timeline_columns([bpd::TimelineColumn {
+                    visible: true.into(),
+                    timeline: "sim_time".into(),
+                }])
+                .with_text_log_columns([
+                    bpd::TextLogColumn {
+                        visible: false.into(),
+                        kind: bpd::TextLogColumnKind::EntityPath,
+                    },
+                    bpd::TextLogColumn {
+                        visible: false.into(),
+                        kind: bpd::TextLogColumnKind::LogLevel,
+                    },
+                    bpd::TextLogColumn {
+                        visible: true.into(),
+                        kind: bpd::TextLogColumnKind::Body,
+                    },
+                ]),
+        );
+
+    let world = ViewSpec::new("cartpole", "3D", "cartpole")
+        .origin("/world")
+        .property(
+            "EyeControls3D",
+            &bp::EyeControls3D::new()
+                .with_kind(bpc::Eye3DKind::Orbital)
+                .with_position([0.0, -2.1, 1.1])
+                .with_look_target([0.0, 0.0, 0.35])
+                .with_eye_up([0.0, 0.0, 1.0]),
+        )
+        .property(
+            "LineGrid3D",
+            &bp::LineGrid3D::new()
+                .with_plane(rerun::components::Plane3D::new(
+                    [0.0, 0.0, 1.0],
+                    GROUND_Z_M as f32,
+                ))
+                .with_spacing(0.25),
+        );
+    let (_, bounds) = graph_positions(shape);
+    let graph = ViewSpec::new("graph", "Graph", "node graph: nodes blue, topics amber")
+        .origin("/graph")
+        .property("VisualBounds2D", &bp::VisualBounds2D::new(bounds))
+        .property("ForceLink", &bp::ForceLink::new().with_enabled(false))
+        .property(
+            "ForceManyBody",
+            &bp::ForceManyBody::new().with_enabled(false),
+        )
+        .property(
+            "ForcePosition",
+            &bp::ForcePosition::new().with_enabled(false),
+        )
+        .property(
+            "ForceCollisionRadius",
+            &bp::ForceCollisionRadius::new().with_enabled(false),
+        )
+        .property("ForceCenter", &bp::ForceCenter::new().with_enabled(false));
+    let summary = ViewSpec::new("summary", "TextDocument", "summary").contents(["/summary"]);
+
+    Item::Horizontal(vec![
+        (
+            0.36,
+            Item::Vertical(vec![
+                (0.42, Item::View(world)),
+                (0.2, Item::View(graph)),
+                (0.38, Item::View(summary)),
+            ]),
+        ),
+        (0.34, Item::Vertical(signals)),
+        (
+            0.30,
+            Item::Vertical(vec![
+                (1.0, Item::View(published)),
+                (1.0, Item::View(dropped)),
+                (1.0, Item::View(msg_per_s)),
+                (1.0, Item::View(events)),
+            ]),
+        ),
+    ])
+}
+
+/// Where the ground grid lies: just under the rail (the rail's top is the cart's bottom).
+const GROUND_Z_M: f64 = -0.08;
+/// The cart body's half height; the pole's hinge is at the body's centre, as in MuJoCo.
+const CART_HALF_HEIGHT_M: f64 = 0.05;
+/// The rail's half thickness.
+const RAIL_HALF_THICKNESS_M: f64 = 0.01;
+
+/// Node-graph positions (id → x, y) in graph units, and the bounds that frame them.
+fn graph_positions(shape: &GraphShape) -> (Vec<(String, [f32; 2])>, bpc::VisualBounds2D) {
+    const DX: f32 = 150.0;
+    const DY: f32 = 70.0;
+    let mut rows: BTreeMap<usize, usize> = BTreeMap::new();
+    let mut out = Vec::new();
+    for (id, col) in shape.columns() {
+        let row = rows.entry(col).or_insert(0);
+        out.push((id, [col as f32 * DX, *row as f32 * DY]));
+        *row += 1;
+    }
+    let max_x = out.iter().map(|(_, p)| p[0]).fold(0.0, f32::max);
+    let max_y = out.iter().map(|(_, p)| p[1]).fold(0.0, f32::max);
+    let range = |lo: f32, hi: f32| rerun::datatypes::Range1D([f64::from(lo), f64::from(hi)]);
+    let bounds = bpc::VisualBounds2D(rerun::datatypes::Range2D {
+        x_range: range(-0.45 * DX, max_x + 0.45 * DX),
+        y_range: range(-0.6 * DY, max_y + 0.6 * DY),
+    });
+    (out, bounds)
 }
 
 /// A spawnable viewer on PATH?
@@ -286,6 +585,19 @@ pub fn viewer_on_path() -> bool {
     std::env::var_os("PATH")
         .map(|paths| std::env::split_paths(&paths).any(|d| d.join("rerun").is_file()))
         .unwrap_or(false)
+}
+
+/// One-line settings of a run, for the start event and the summary.
+fn settings_line(cfg: &RunConfig) -> String {
+    format!(
+        "{}control {} Hz, sensor {} Hz, depth {}, seed {}, {} clock",
+        graph_prefix(cfg).replace('-', ": "),
+        hz_label(cfg.control_hz()),
+        hz_label(cfg.sensor_hz()),
+        cfg.queue_depth(),
+        cfg.seed,
+        cfg.clock
+    )
 }
 
 impl Recording {
@@ -307,7 +619,8 @@ impl Recording {
     /// regular file there is replaced (when the recording is finished) only if `force`.
     /// With `opts.spawn` and a `rerun` viewer on PATH, data is also streamed live. Returns
     /// the recording and, when `spawn` was asked for but no viewer was found, a one-line
-    /// notice.
+    /// notice. The viewer layout is sent when the graph is known (the
+    /// [`Recording::observer`] is attached to it).
     ///
     /// # Errors
     /// [`RecordingError`] when the path is refused ([`check_output_path`]'s rules), the
@@ -322,17 +635,8 @@ impl Recording {
         let (pending, file) = crate::output::PendingFile::create(path, force)?;
         drop(file);
         let tmp = pending.temp_path().to_path_buf();
-        let mut builder = RecordingStreamBuilder::new(APP_ID).with_blueprint(blueprint());
-        if cfg.clock == ClockKind::Virtual {
-            let id = format!(
-                "ratelab-{}virtual-sensor{}-control{}-q{}-seed{}-d{}",
-                graph_prefix(cfg),
-                hz_label(cfg.sensor_hz()),
-                hz_label(cfg.control_hz()),
-                cfg.queue_depth(),
-                cfg.seed,
-                cfg.duration.0
-            );
+        let mut builder = RecordingStreamBuilder::new(APP_ID);
+        if let Some(id) = deterministic_id(cfg) {
             builder = builder
                 .recording_id(id)
                 .batcher_config(rerun::log::ChunkBatcherConfig {
@@ -355,18 +659,23 @@ impl Recording {
         }
         let rec = if live {
             // Start the viewer, then write to the file and stream to the viewer at once.
-            rerun::spawn(&rerun::SpawnOptions::default()).map_err(|e| RecordingError::Rerun {
-                path: path.to_path_buf(),
-                detail: e.to_string(),
+            let viewer = rerun::spawn(&rerun::SpawnOptions::default()).map_err(|e| {
+                RecordingError::Rerun {
+                    path: path.to_path_buf(),
+                    detail: e.to_string(),
+                }
             })?;
             let file =
                 rerun::sink::FileSink::new(&tmp).map_err(|e| RecordingError::Unwritable {
                     path: path.to_path_buf(),
                     detail: e.to_string(),
                 })?;
-            builder
-                .set_sinks((file, rerun::sink::GrpcSink::default()))
-                .map_err(rec_err)?
+            // The live sink never holds up the file, even when the viewer cannot start.
+            let sinks: Vec<Box<dyn rerun::sink::LogSink>> = vec![
+                Box::new(file),
+                Box::new(live::LiveSink::new(viewer.child_pid)),
+            ];
+            builder.set_sinks(sinks).map_err(rec_err)?
         } else {
             builder.save(&tmp).map_err(rec_err)?
         };
@@ -377,9 +686,11 @@ impl Recording {
             rec,
             path: path.to_path_buf(),
             clock: cfg.clock,
+            cfg: cfg.clone(),
             buffer: Arc::default(),
-            last_step: Arc::default(),
             file: Arc::new(Committer(Mutex::new(Some(pending)))),
+            last_step: Arc::default(),
+            shape: Arc::default(),
         };
         recording.log_settings(cfg, policy);
         Ok((recording, notice))
@@ -395,6 +706,40 @@ impl Recording {
         &self.rec
     }
 
+    /// Send the viewer layout for a graph of `shape`: when the graph is built (`extents`
+    /// none: plots without a scale known up front fit themselves while the run goes), and
+    /// again when the run is over, every plot's y range then padded around what its series
+    /// took, so nothing sits on a plot's edge. The second layout is a blueprint of its own,
+    /// activated after the first.
+    fn send_layout(
+        &self,
+        shape: &GraphShape,
+        extents: Option<&Extents>,
+    ) -> Result<(), RecordingError> {
+        let root = layout_for(shape, &self.cfg, extents);
+        let stage = if extents.is_some() { "final" } else { "start" };
+        let id = deterministic_id(&self.cfg).map(|id| format!("{id}-blueprint-{stage}"));
+        let (msgs, activate) =
+            layout::blueprint_messages(APP_ID, id, &root, "sim_time").map_err(|detail| {
+                RecordingError::Rerun {
+                    path: self.path.clone(),
+                    detail,
+                }
+            })?;
+        self.rec.send_blueprint(msgs, activate);
+        Ok(())
+    }
+
+    /// The graph is built: keep its shape, name and colour its series, send the layout.
+    fn attach(&self, shape: &GraphShape) {
+        *self.shape.lock().unwrap_or_else(|e| e.into_inner()) = Some(shape.clone());
+        self.log_styles(shape);
+        if let Err(e) = self.send_layout(shape, None) {
+            // The data is still recorded; the viewer falls back to its own layout.
+            self.event(Nanos::ZERO, &format!("no viewer layout: {e}"), "WARN");
+        }
+    }
+
     fn log_settings(&self, cfg: &RunConfig, policy: &str) {
         let settings = [
             ("clock", cfg.clock.to_string()),
@@ -406,7 +751,7 @@ impl Recording {
             ("actuator_hz", cfg.actuator_hz().to_string()),
             ("queue_depth", cfg.queue_depth().to_string()),
         ];
-        // The chapter's graph keeps the recording it had; any other names itself.
+        // The chapter's graph keeps the settings it had; any other names itself.
         let graph = (cfg.graph.name != "cartpole").then(|| ("graph", cfg.graph.to_string()));
         let mut values = rerun::AnyValues::default();
         for (k, v) in settings.iter().chain(graph.iter()) {
@@ -435,40 +780,193 @@ impl Recording {
             &fixed,
             &values,
         );
+        self.log_scene(&mut buf);
+        buf.add(
+            "summary",
+            &fixed,
+            &rerun::TextDocument::from_markdown(format!(
+                "### Run in progress\n\n- {}\n- policy: {policy}\n\nThe summary appears here when the run ends.",
+                settings_line(cfg)
+            )),
+        );
+        let start = time_point(Nanos::ZERO, 0);
+        buf.add(
+            "events",
+            &start,
+            &rerun::TextLog::new(format!(
+                "start: control {} Hz, sensor {} Hz, depth {}",
+                hz_label(cfg.control_hz()),
+                hz_label(cfg.sensor_hz()),
+                cfg.queue_depth()
+            ))
+            .with_level(rerun::components::TextLogLevel::INFO),
+        );
+        buf.send(&self.rec);
+    }
+
+    /// The static 3D scene: z up, the rail under the cart, the cart, the pole and the ±12°
+    /// fall limits (which move with the cart).
+    fn log_scene(&self, buf: &mut ChunkBuffer) {
+        let fixed = TimePoint::default();
+        buf.add("world", &fixed, &rerun::ViewCoordinates::RIGHT_HAND_Z_UP());
+        let rail_z = -(CART_HALF_HEIGHT_M + RAIL_HALF_THICKNESS_M) as f32;
         buf.add(
             "world/rail",
             &fixed,
-            &rerun::Boxes3D::from_half_sizes([(2.9, 0.01, 0.01)])
-                .with_colors([rerun::Color::from_rgb(110, 110, 110)]),
+            &rerun::Boxes3D::from_centers_and_half_sizes(
+                [(0.0, 0.0, rail_z)],
+                [(
+                    RAIL_HALF_LENGTH_M as f32,
+                    0.015,
+                    RAIL_HALF_THICKNESS_M as f32,
+                )],
+            )
+            .with_colors([rgb(NEUTRAL_COLOR)]),
         );
         buf.add(
             "world/cart/body",
             &fixed,
-            &rerun::Boxes3D::from_half_sizes([(0.1, 0.05, 0.05)])
-                .with_colors([rerun::Color::from_rgb(60, 110, 200)]),
+            &rerun::Boxes3D::from_half_sizes([(0.1, 0.05, CART_HALF_HEIGHT_M as f32)])
+                .with_colors([Color::from_rgb(60, 110, 200)])
+                .with_fill_mode(rerun::components::FillMode::Solid),
         );
         buf.add(
             "world/cart/pole/body",
             &fixed,
             &rerun::Capsules3D::from_lengths_and_radii([1.0], [0.02])
-                .with_colors([rerun::Color::from_rgb(230, 150, 50)]),
+                .with_colors([Color::from_rgb(230, 150, 50)]),
         );
-        let start = time_point(Nanos::ZERO, 0);
-        let text = settings
-            .iter()
-            .map(|(k, v)| format!("{k}={v}"))
-            .collect::<Vec<_>>()
-            .join(" ");
+        let reach = 1.1;
+        let (sin, cos) = (THETA_LIMIT_RAD.sin() * reach, THETA_LIMIT_RAD.cos() * reach);
+        let deg = THETA_LIMIT_RAD.to_degrees();
+        let tips = [
+            [-sin as f32, 0.0, cos as f32],
+            [sin as f32, 0.0, cos as f32],
+        ];
         buf.add(
-            "events",
-            &start,
-            &rerun::TextLog::new(format!("start: {text}"))
-                .with_level(rerun::components::TextLogLevel::INFO),
+            "world/cart/fall_limits",
+            &fixed,
+            &rerun::LineStrips3D::new(tips.map(|tip| [[0.0, 0.0, 0.0], tip]))
+                .with_colors([rgb(LIMIT_COLOR)])
+                .with_radii([0.004]),
         );
-        for (name, limit) in [("upper", THETA_LIMIT_RAD), ("lower", -THETA_LIMIT_RAD)] {
-            buf.scalar(&format!("plant/fall_limit/{name}"), Nanos::ZERO, 0, limit);
+        buf.add(
+            "world/cart/fall_limits/labels",
+            &fixed,
+            &rerun::Points3D::new(tips)
+                .with_colors([rgb(LIMIT_COLOR)])
+                .with_radii([0.01])
+                .with_labels([format!("−{deg:.0}°"), format!("+{deg:.0}°")]),
+        );
+    }
+
+    /// Per-series names and colours, the node graph's first drawing and the reference lines
+    /// at the start, for a graph of `shape`.
+    fn log_styles(&self, shape: &GraphShape) {
+        let fixed = TimePoint::default();
+        let lines = |name: &str, color: (u8, u8, u8), width: f32| {
+            rerun::SeriesLines::new()
+                .with_names([name])
+                .with_colors([rgb(color)])
+                .with_widths([width])
+        };
+        let mut buf = self.lock();
+        buf.add(
+            "plant/pole_angle_rad",
+            &fixed,
+            &lines("pole angle", ANGLE_COLOR, 2.0),
+        );
+        // Both sides of a limit share one name, so the legend shows it once.
+        for side in ["upper", "lower"] {
+            buf.add(
+                &format!("plant/fall_limit/{side}"),
+                &fixed,
+                &lines(
+                    &format!("fall limits ±{THETA_LIMIT_RAD} rad"),
+                    LIMIT_COLOR,
+                    1.5,
+                ),
+            );
+        }
+        buf.add(
+            "plant/changes",
+            &fixed,
+            &rerun::SeriesPoints::new()
+                .with_names(["start, changes (events)"])
+                .with_colors([Color::from_rgb(240, 240, 240)])
+                .with_markers([rerun::components::MarkerShape::Down])
+                .with_marker_sizes([5.0]),
+        );
+        buf.add("plant/cart_pos_m", &fixed, &lines("cart", ANGLE_COLOR, 2.0));
+        for side in ["right", "left"] {
+            buf.add(
+                &format!("plant/rail_end/{side}"),
+                &fixed,
+                &lines(
+                    &format!("rail ends ±{RAIL_HALF_LENGTH_M} m"),
+                    NEUTRAL_COLOR,
+                    1.5,
+                ),
+            );
+            buf.add(
+                &format!("plant/cart_limit/{side}"),
+                &fixed,
+                &lines(&format!("run ends ±{CART_LIMIT_M} m"), LIMIT_COLOR, 1.5),
+            );
+        }
+        buf.add(
+            "action/published_N",
+            &fixed,
+            &rerun::SeriesPoints::new()
+                .with_names(["published (policy)"])
+                .with_colors([rgb(ANGLE_COLOR)])
+                .with_markers([rerun::components::MarkerShape::Circle])
+                .with_marker_sizes([3.0]),
+        );
+        buf.add(
+            "action/applied_N",
+            &fixed,
+            &lines("applied (actuator, held)", FORCE_COLOR, 1.5)
+                .with_interpolation_mode(rerun::components::InterpolationMode::StepAfter),
+        );
+        buf.add(
+            "latency/sense_to_act_ms",
+            &fixed,
+            &lines("latency", ANGLE_COLOR, 2.0),
+        );
+        let controller = shape.controller.clone().unwrap_or_default();
+        buf.add(
+            "latency/control_period_ms",
+            &fixed,
+            &lines(&format!("{controller} period"), NEUTRAL_COLOR, 1.5)
+                .with_interpolation_mode(rerun::components::InterpolationMode::StepAfter),
+        );
+        for (i, topic) in shape.topics.iter().enumerate() {
+            for measure in ["published", "dropped", "msg_per_s"] {
+                buf.add(
+                    &format!("bus/{}/{measure}", topic.entity()),
+                    &fixed,
+                    &rerun::SeriesLines::new()
+                        .with_names([topic.name.as_str()])
+                        .with_colors([palette(i)])
+                        .with_widths([2.0]),
+                );
+            }
+        }
+        if self.clock == ClockKind::Real {
+            for (i, node) in shape.nodes.iter().enumerate() {
+                buf.add(
+                    &format!("nodes/{}/lateness_us", node.name),
+                    &fixed,
+                    &rerun::SeriesLines::new()
+                        .with_names([node.name.as_str()])
+                        .with_colors([palette(i)])
+                        .with_widths([1.5]),
+                );
+            }
         }
         buf.send(&self.rec);
+        reference_lines(&mut buf, Nanos::ZERO, 0);
     }
 
     fn lock(&self) -> std::sync::MutexGuard<'_, ChunkBuffer> {
@@ -485,28 +983,44 @@ impl Recording {
         );
     }
 
-    /// An observer to hand to the graph: logs every actuator tick.
+    /// Log a mid-run change made from outside the graph (a brain swap) at run time `t`: an
+    /// event, and a mark on the pole-angle plot.
+    pub fn change(&self, t: Nanos, text: &str) {
+        let step = self.last_step.load(std::sync::atomic::Ordering::Relaxed);
+        let mut buf = self.lock();
+        buf.add(
+            "events",
+            &time_point(t, step),
+            &rerun::TextLog::new(text).with_level(rerun::components::TextLogLevel::INFO),
+        );
+        buf.scalar("plant/changes", t, step, CHANGE_MARK_RAD);
+    }
+
+    /// An observer to hand to the graph: logs every actuator tick. When it is attached to
+    /// the graph, the viewer layout for that graph is sent.
     pub fn observer(&self) -> Box<dyn StepObserver> {
         Box::new(RecordingObserver {
             rec: self.clone(),
-            handles: None,
-            last_labels: None,
+            shape: GraphShape::default(),
+            last_state: None,
             window: VecDeque::new(),
+            next_command: 0,
         })
     }
 
     /// Log one node tick's lateness (real clock), on the node's own thread.
     pub fn node_tick(&self, node: &str, now: Nanos, lateness: Nanos) {
+        let entity = format!("nodes/{node}/lateness_us");
+        let us = lateness.as_micros_f64();
+        widen(&mut self.lock().extents, &entity, us);
         self.rec
             .set_time("sim_time", std::time::Duration::from_nanos(now.0));
-        let _ = self.rec.log(
-            format!("nodes/{node}/lateness_us"),
-            &rerun::Scalars::single(lateness.as_micros_f64()),
-        );
+        let _ = self.rec.log(entity, &rerun::Scalars::single(us));
     }
 
-    /// Log the end of the run (the summary) at its end time, flush the file and move it
-    /// into place, so the recording is complete whichever way the run ended.
+    /// Log the end of the run (an event and the summary document) at its end time, flush
+    /// the file and move it into place, so the recording is complete whichever way the run
+    /// ended.
     ///
     /// # Errors
     /// [`RecordingError::Rerun`] when the flush fails, [`RecordingError`] when the file
@@ -517,21 +1031,31 @@ impl Recording {
             EndReason::NodeFailed { .. } => rerun::components::TextLogLevel::ERROR,
             _ => rerun::components::TextLogLevel::INFO,
         };
+        let verdict = summary.get(2).cloned().unwrap_or_default();
         self.event(
             end.at,
-            &format!("end ({}): {}", end.reason, summary[2..].join(" | ")),
+            &format!("end: {}, {} steps", end.reason, metrics.steps),
             level,
         );
+        let mut doc = format!("**{verdict}** ({}).\n\n", end.reason);
+        for (i, line) in summary.iter().enumerate() {
+            if i != 2 {
+                doc.push_str(&format!("- {line}\n"));
+            }
+        }
         {
             let mut buf = self.lock();
-            for (name, limit) in [("upper", THETA_LIMIT_RAD), ("lower", -THETA_LIMIT_RAD)] {
-                buf.scalar(
-                    &format!("plant/fall_limit/{name}"),
-                    end.at,
-                    metrics.steps,
-                    limit,
-                );
-            }
+            buf.add(
+                "summary",
+                &TimePoint::default(),
+                &rerun::TextDocument::from_markdown(doc),
+            );
+            reference_lines(&mut buf, end.at, metrics.steps);
+        }
+        let shape = self.shape.lock().unwrap_or_else(|e| e.into_inner()).clone();
+        if let Some(shape) = shape {
+            let extents = self.lock().extents.clone();
+            self.send_layout(&shape, Some(&extents))?;
         }
         self.flush()?;
         Ok(self.file.commit()?)
@@ -557,92 +1081,145 @@ impl Recording {
     }
 }
 
-/// The entity name of a topic's bus series: `/obs` → `obs`, `/a/b` → `a_b`.
-pub fn bus_name(topic: &str) -> String {
-    topic.trim_start_matches('/').replace('/', "_")
+/// The recording id of a virtual run: derived from its settings, so two runs with the same
+/// settings write the same recording. `None` under the real clock (a random id).
+fn deterministic_id(cfg: &RunConfig) -> Option<String> {
+    (cfg.clock == ClockKind::Virtual).then(|| {
+        format!(
+            "ratelab-{}virtual-sensor{}-control{}-q{}-seed{}-d{}",
+            graph_prefix(cfg),
+            hz_label(cfg.sensor_hz()),
+            hz_label(cfg.control_hz()),
+            cfg.queue_depth(),
+            cfg.seed,
+            cfg.duration.0
+        )
+    })
+}
+
+/// Where the change marks sit on the pole-angle plot: just above the upper fall limit.
+const CHANGE_MARK_RAD: f64 = 0.24;
+
+/// The constant reference series (fall limits, rail ends, cart limits) at `t`: logged at the
+/// start, at every flush and at the end, so their lines span the run.
+fn reference_lines(buf: &mut ChunkBuffer, t: Nanos, step: u64) {
+    for (name, sign) in [("upper", 1.0), ("lower", -1.0)] {
+        buf.scalar(
+            &format!("plant/fall_limit/{name}"),
+            t,
+            step,
+            sign * THETA_LIMIT_RAD,
+        );
+    }
+    for (name, sign) in [("right", 1.0), ("left", -1.0)] {
+        buf.scalar(
+            &format!("plant/rail_end/{name}"),
+            t,
+            step,
+            sign * RAIL_HALF_LENGTH_M,
+        );
+        buf.scalar(
+            &format!("plant/cart_limit/{name}"),
+            t,
+            step,
+            sign * CART_LIMIT_M,
+        );
+    }
 }
 
 struct RecordingObserver {
     rec: Recording,
-    handles: Option<GraphHandles>,
-    /// Node rates and topic depths as last logged in the graph's labels.
-    last_labels: Option<(Vec<f64>, Vec<usize>)>,
+    shape: GraphShape,
+    /// Rates and depths as last logged.
+    last_state: Option<(Vec<f64>, Vec<usize>)>,
     /// (t, published per topic) over the last second.
     window: VecDeque<(Nanos, Vec<u64>)>,
+    /// The next command sequence number not yet logged as published.
+    next_command: u64,
 }
 
 impl RecordingObserver {
-    /// The node graph, from the graph's shape: nodes and topics as rerun graph nodes (rerun's
-    /// edges carry no labels), publisher → topic → subscriber.
-    fn graph_rows(
-        &self,
-        buf: &mut ChunkBuffer,
-        time: &TimePoint,
-        spec: &GraphSpec,
-        rates: &[f64],
-        depths: &[usize],
-    ) {
-        let mut ids = Vec::new();
-        let mut labels = Vec::new();
-        let mut edges = Vec::new();
-        for (i, n) in spec.nodes.iter().enumerate() {
-            ids.push(n.name.clone());
-            labels.push(format!("{} {} Hz", n.name, hz_label(rates[i])));
-            if let Some(t) = n.publishes {
-                let topic = &spec.topics[t.0];
-                ids.push(topic.name.clone());
-                labels.push(format!("{} (depth {})", topic.name, depths[t.0]));
-                edges.push((n.name.clone(), topic.name.clone()));
-                if let Some(sub) = topic.subscriber {
-                    edges.push((topic.name.clone(), spec.node(sub).name.clone()));
-                }
+    /// The node graph with its current labels: nodes (blue) and topics (amber) placed left
+    /// to right, edges publisher → topic → subscriber.
+    fn graph_rows(&self, buf: &mut ChunkBuffer, time: &TimePoint) {
+        let shape = &self.shape;
+        let (positions, _) = graph_positions(shape);
+        let label = |id: &str| {
+            if let Some(n) = shape.nodes.iter().find(|n| n.name == id) {
+                (format!("{id} · {} Hz", hz_label(n.rate.hz())), NODE_COLOR)
+            } else {
+                let depth = shape
+                    .topics
+                    .iter()
+                    .find(|t| t.name == id)
+                    .map_or(0, |t| (t.stats)().depth);
+                (format!("{id} · depth {depth}"), TOPIC_COLOR)
             }
-        }
+        };
+        let (labels, colors): (Vec<String>, Vec<Color>) = positions
+            .iter()
+            .map(|(id, _)| {
+                let (l, c) = label(id);
+                (l, rgb(c))
+            })
+            .unzip();
         buf.add(
             "graph",
             time,
-            &rerun::GraphNodes::new(ids).with_labels(labels),
+            &rerun::GraphNodes::new(positions.iter().map(|(id, _)| id.as_str()))
+                .with_positions(positions.iter().map(|(_, p)| *p))
+                .with_labels(labels)
+                .with_colors(colors),
         );
+        let mut edges = Vec::new();
+        for t in &shape.topics {
+            edges.push((t.publisher.clone(), t.name.clone()));
+            for s in &t.subscribers {
+                edges.push((t.name.clone(), s.clone()));
+            }
+        }
         buf.add(
             "graph",
             time,
             &rerun::GraphEdges::new(edges).with_directed_edges(),
         );
     }
-}
 
-/// What changed between two sets of labels, in words.
-fn describe_change(
-    spec: &GraphSpec,
-    old: &(Vec<f64>, Vec<usize>),
-    new: &(Vec<f64>, Vec<usize>),
-) -> String {
-    if let Some(i) = (0..old.0.len()).find(|&i| old.0[i] != new.0[i]) {
-        let who = if NodeId(i) == spec.chain.policy {
-            "control".to_string()
-        } else {
-            spec.nodes[i].name.clone()
-        };
-        return format!(
-            "{who} rate {} → {} Hz",
-            hz_label(old.0[i]),
-            hz_label(new.0[i])
-        );
-    }
-    let changed: Vec<usize> = (0..old.1.len()).filter(|&i| old.1[i] != new.1[i]).collect();
-    match changed.as_slice() {
-        [one] if spec.topics.len() > 1 => format!(
-            "{} depth {} → {}",
-            spec.topics[*one].name, old.1[*one], new.1[*one]
-        ),
-        [first, ..] => format!("queue depth {} → {}", old.1[*first], new.1[*first]),
-        [] => "graph changed".to_string(),
+    /// What changed between two (rates, depths) states, as one event line.
+    fn describe_change(
+        &self,
+        old: &(Vec<f64>, Vec<usize>),
+        new: &(Vec<f64>, Vec<usize>),
+    ) -> String {
+        let mut parts = Vec::new();
+        for (i, node) in self.shape.nodes.iter().enumerate() {
+            if old.0.get(i) != new.0.get(i) {
+                parts.push(format!(
+                    "{} rate {} → {} Hz",
+                    node.name,
+                    old.0.get(i).map_or("?".into(), |h| hz_label(*h)),
+                    new.0.get(i).map_or("?".into(), |h| hz_label(*h))
+                ));
+            }
+        }
+        for (i, topic) in self.shape.topics.iter().enumerate() {
+            if old.1.get(i) != new.1.get(i) {
+                parts.push(format!(
+                    "{} depth {} → {}",
+                    topic.name,
+                    old.1.get(i).copied().unwrap_or_default(),
+                    new.1.get(i).copied().unwrap_or_default()
+                ));
+            }
+        }
+        parts.join("; ")
     }
 }
 
 impl StepObserver for RecordingObserver {
     fn attach(&mut self, h: &GraphHandles) {
-        self.handles = Some(h.clone());
+        self.shape = GraphShape::from_handles(h);
+        self.rec.attach(&self.shape);
     }
 
     fn on_step(&mut self, s: &StepRecord) {
@@ -652,26 +1229,25 @@ impl StepObserver for RecordingObserver {
         let time = time_point(s.t, s.step);
         let rec = self.rec.clone();
         let mut buf = rec.lock();
-        let topics = s.topics.as_slice();
-        if let Some(h) = &self.handles {
-            let now = (
-                h.rates_hz(),
-                topics.iter().map(|t| t.depth).collect::<Vec<_>>(),
-            );
-            if self.last_labels.as_ref() != Some(&now) {
-                if let Some(old) = &self.last_labels {
+        let state = self.shape.state();
+        if self.last_state.as_ref() != Some(&state) {
+            match &self.last_state {
+                Some(old) => {
                     buf.add(
                         "events",
                         &time,
-                        &rerun::TextLog::new(describe_change(&h.spec, old, &now))
+                        &rerun::TextLog::new(self.describe_change(old, &state))
                             .with_level(rerun::components::TextLogLevel::INFO),
                     );
+                    buf.scalar("plant/changes", s.t, s.step, CHANGE_MARK_RAD);
                 }
-                self.graph_rows(&mut buf, &time, &h.spec, &now.0, &now.1);
-                self.last_labels = Some(now);
+                None => buf.scalar("plant/changes", Nanos::ZERO, 0, CHANGE_MARK_RAD),
             }
+            self.graph_rows(&mut buf, &time);
+            self.last_state = Some(state);
         }
         let theta = s.pole_angle;
+        let force = s.action * FORCE_PER_CONTROL_N;
         buf.add(
             "world/cart",
             &time,
@@ -685,15 +1261,37 @@ impl StepObserver for RecordingObserver {
                 rerun::Angle::from_radians(theta as f32),
             )),
         );
+        buf.add(
+            "world/cart/force",
+            &time,
+            &rerun::Arrows3D::from_vectors([[(force * 0.04) as f32, 0.0, 0.0]])
+                .with_origins([[0.0, -0.06, 0.0]])
+                .with_colors([rgb(FORCE_COLOR)])
+                .with_radii([0.012])
+                .with_labels([format!("{force:+.1} N")]),
+        );
         buf.scalar("plant/pole_angle_rad", s.t, s.step, theta);
         buf.scalar("plant/cart_pos_m", s.t, s.step, s.cart_pos);
-        buf.scalar("policy/action", s.t, s.step, s.action);
+        buf.scalar("action/applied_N", s.t, s.step, force);
+        if let Some(commands) = &self.shape.commands {
+            for msg in commands.peek_from(self.next_command) {
+                self.next_command = msg.seq + 1;
+                let asked = msg.data.newtons;
+                if asked.is_finite() {
+                    buf.scalar("action/published_N", msg.stamp, s.step, asked);
+                }
+            }
+        }
         if let Some(lat) = s.latency {
             buf.scalar("latency/sense_to_act_ms", s.t, s.step, lat.as_millis_f64());
         }
+        if let Some(period) = self.shape.controller_period_ms() {
+            buf.scalar("latency/control_period_ms", s.t, s.step, period);
+        }
         // Bus counters and msg/s over the last second of run time.
+        let stats: Vec<TopicStats> = self.shape.topics.iter().map(|t| (t.stats)()).collect();
         self.window
-            .push_back((s.t, topics.iter().map(|t| t.published).collect()));
+            .push_back((s.t, stats.iter().map(|st| st.published).collect()));
         while self
             .window
             .front()
@@ -701,49 +1299,35 @@ impl StepObserver for RecordingObserver {
         {
             self.window.pop_front();
         }
-        let (t0, then) = self.window.front().cloned().unwrap_or((s.t, Vec::new()));
+        let (t0, then) = self
+            .window
+            .front()
+            .cloned()
+            .unwrap_or_else(|| (s.t, vec![0; stats.len()]));
         let span = s.t.saturating_sub(t0).as_secs_f64();
-        let rate = |now: u64, then: u64| {
-            if span > 0.0 {
-                (now - then) as f64 / span
+        for (i, (topic, st)) in self.shape.topics.iter().zip(&stats).enumerate() {
+            let entity = topic.entity();
+            let rate = if span > 0.0 {
+                (st.published - then.get(i).copied().unwrap_or(0)) as f64 / span
             } else {
                 0.0
-            }
-        };
-        let names: Vec<String> = self.handles.as_ref().map_or_else(Vec::new, |h| {
-            h.spec.topics.iter().map(|t| bus_name(&t.name)).collect()
-        });
-        for ((topic, stats), then) in names
-            .iter()
-            .zip(topics)
-            .zip(then.iter().copied().chain(std::iter::repeat(0)))
-        {
+            };
             buf.scalar(
-                &format!("bus/{topic}/published"),
+                &format!("bus/{entity}/published"),
                 s.t,
                 s.step,
-                stats.published as f64,
+                st.published as f64,
             );
             buf.scalar(
-                &format!("bus/{topic}/dropped"),
+                &format!("bus/{entity}/dropped"),
                 s.t,
                 s.step,
-                stats.dropped as f64,
+                st.dropped as f64,
             );
-            buf.scalar(
-                &format!("bus/{topic}/msg_per_s"),
-                s.t,
-                s.step,
-                rate(stats.published, then),
-            );
+            buf.scalar(&format!("bus/{entity}/msg_per_s"), s.t, s.step, rate);
         }
         if s.fell {
-            let text = format!(
-                "FELL at t={:.2}s (step {}, θ = {:.3} rad)",
-                s.t.as_secs_f64(),
-                s.step,
-                theta
-            );
+            let text = format!("FELL at t={:.2}s, θ = {:.3} rad", s.t.as_secs_f64(), theta);
             buf.add(
                 "events",
                 &time,
@@ -751,6 +1335,7 @@ impl StepObserver for RecordingObserver {
             );
         }
         if s.step % FLUSH_EVERY_STEPS == 0 || s.fell {
+            reference_lines(&mut buf, s.t, s.step);
             buf.send(&rec.rec);
         }
     }
@@ -758,7 +1343,63 @@ impl StepObserver for RecordingObserver {
 
 #[cfg(test)]
 mod tests {
+    use super::shape::tests::shape;
     use super::*;
+
+    #[test]
+    fn views_list_every_topic_and_use_only_trailing_subtree_queries() {
+        let s = shape(
+            &[
+                ("/obs", "sensor", &["policy"]),
+                ("/action", "policy", &["actuator"]),
+                ("/debug", "policy", &[]),
+            ],
+            &["sensor", "policy", "actuator"],
+        );
+        for clock in [ClockKind::Virtual, ClockKind::Real] {
+            let cfg = RunConfig {
+                clock,
+                ..RunConfig::default()
+            };
+            let root = layout_for(&s, &cfg, None);
+            let views = root.views();
+            for v in &views {
+                let (title, queries) = v.title_and_queries();
+                assert!(!queries.is_empty(), "{title}");
+                for q in queries {
+                    let body = q.strip_suffix("/**").unwrap_or(q);
+                    assert!(!body.contains('*'), "{title}: {q}");
+                }
+            }
+            let dropped = views
+                .iter()
+                .map(|v| v.title_and_queries())
+                .find(|(t, _)| t.contains("dropped"))
+                .unwrap();
+            assert_eq!(
+                dropped.1,
+                [
+                    "/bus/obs/dropped",
+                    "/bus/action/dropped",
+                    "/bus/debug/dropped"
+                ]
+            );
+            let lateness = views
+                .iter()
+                .map(|v| v.title_and_queries())
+                .find(|(t, _)| t.contains("lateness"));
+            assert_eq!(lateness.is_some(), clock == ClockKind::Real);
+        }
+    }
+
+    #[test]
+    fn force_and_rail_scales_are_the_model_s() {
+        let mjcf = include_str!("assets/cartpole.xml");
+        assert!(mjcf.contains(&format!("gear=\"{FORCE_PER_CONTROL_N}\"")));
+        assert!(mjcf.contains(&format!(
+            "range=\"-{RAIL_HALF_LENGTH_M} {RAIL_HALF_LENGTH_M}\""
+        )));
+    }
 
     #[test]
     fn default_paths_never_collide() {

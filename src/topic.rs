@@ -205,6 +205,17 @@ impl<T: Clone> Topic<T> {
     pub fn buffered(&self) -> usize {
         self.lock().buf.len()
     }
+
+    /// The buffered messages with `seq >= from`, oldest first, without reading them: the read
+    /// high-water mark, and so the drop count, is unchanged. For onlookers such as a recorder.
+    pub fn peek_from(&self, from: u64) -> Vec<Message<T>> {
+        self.lock()
+            .buf
+            .iter()
+            .filter(|m| m.seq >= from)
+            .cloned()
+            .collect()
+    }
 }
 
 impl<T> std::fmt::Debug for Topic<T> {
@@ -234,6 +245,19 @@ mod tests {
         topic.publish(3, Nanos(3), None); // 2 was read: not a drop
         assert_eq!(topic.stats().dropped, 2);
         assert_eq!(topic.stats().published, 4);
+    }
+
+    #[test]
+    fn peeking_is_not_reading() {
+        let topic = t(2);
+        topic.publish(0, Nanos(0), None);
+        topic.publish(1, Nanos(1), None);
+        let seen: Vec<u32> = topic.peek_from(1).into_iter().map(|m| m.data).collect();
+        assert_eq!(seen, [1]);
+        assert_eq!(topic.peek_from(0).len(), 2);
+        topic.publish(2, Nanos(2), None); // 0 evicted: never read, peeking does not count
+        assert_eq!(topic.stats().dropped, 1);
+        assert!(topic.peek_from(3).is_empty());
     }
 
     #[test]

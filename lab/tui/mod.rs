@@ -263,7 +263,10 @@ mod tests {
         assert_eq!(obs.stale_reads, ticks - readings, "{obs:?} at {ms} ms");
         assert!(obs.staling);
         let text = render(&app, 80, 24);
-        assert!(text.contains(&format!("{} stale ↺", obs.stale_reads)), "{text}");
+        assert!(
+            text.contains(&format!("{} stale ↺", obs.stale_reads)),
+            "{text}"
+        );
         insta::assert_snapshot!("slow_sensor_stale_80x24", text);
     }
 

@@ -250,7 +250,7 @@ impl Engine {
                 let text = describe(&cmd);
                 if let Some(r) = recording {
                     if let Command::SetPolicy { .. } = cmd {
-                        r.event(at, &text, "INFO");
+                        r.change(at, &text);
                     }
                 }
                 self.log

@@ -3,14 +3,28 @@
 
 use ratelab::policy::Scripted;
 use ratelab::recording::{RecordOptions, Recording};
+use ratelab::run::{Command, TimedCommand};
 use ratelab::scheduler::StopFlag;
 use ratelab::{run, ClockKind, RunConfig, RunOptions};
 use re_chunk::Chunk;
-use re_log_types::{LogMsg, StoreKind};
-use std::collections::BTreeSet;
+use re_log_types::{
+    EntityPath, EntityPathFilter, EntityPathSubs, LogMsg, ResolvedEntityPathRule, RuleEffect,
+    StoreKind,
+};
+use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
 fn record(path: &Path, cfg: &RunConfig, stop: Option<StopFlag>) -> ratelab::metrics::Metrics {
+    record_with(path, cfg, stop, Vec::new())
+}
+
+/// [`record`] with commands applied at virtual instants, as a lab session logs them.
+fn record_with(
+    path: &Path,
+    cfg: &RunConfig,
+    stop: Option<StopFlag>,
+    commands: Vec<TimedCommand>,
+) -> ratelab::metrics::Metrics {
     let (rec, _) = Recording::create(
         path,
         cfg,
@@ -18,8 +32,14 @@ fn record(path: &Path, cfg: &RunConfig, stop: Option<StopFlag>) -> ratelab::metr
         &RecordOptions::default(),
     )
     .unwrap();
+    let ticks = rec.clone();
     let mut opts = RunOptions {
         observers: vec![rec.observer()],
+        // As `ratelab run` does: per-node lateness (logged by the real clock only).
+        on_node_tick: Some(std::sync::Arc::new(move |_, node: &str, now, late| {
+            ticks.node_tick(node, now, late)
+        })),
+        commands,
         ..RunOptions::new()
     };
     if let Some(s) = stop {
@@ -42,6 +62,15 @@ fn chunks(path: &Path) -> Vec<Chunk> {
         }
     }
     out
+}
+
+/// Pole-angle rows on the timelines (the static row naming the series is not a sample).
+fn angle_rows(chunks: &[Chunk]) -> u64 {
+    chunks
+        .iter()
+        .filter(|c| !c.is_static() && c.entity_path().to_string() == "/plant/pole_angle_rad")
+        .map(|c| c.num_rows() as u64)
+        .sum()
 }
 
 fn virtual_cfg() -> RunConfig {
@@ -76,7 +105,13 @@ fn fresh_recording_has_the_entities_timelines_and_one_angle_row_per_step() {
         "/plant/pole_angle_rad",
         "/plant/fall_limit/upper",
         "/plant/cart_pos_m",
-        "/policy/action",
+        "/plant/changes",
+        "/action/published_N",
+        "/action/applied_N",
+        "/latency/control_period_ms",
+        "/world/cart/force",
+        "/world/cart/fall_limits",
+        "/summary",
         "/latency/sense_to_act_ms",
         "/bus/obs/dropped",
         "/bus/obs/msg_per_s",
@@ -103,12 +138,7 @@ fn fresh_recording_has_the_entities_timelines_and_one_angle_row_per_step() {
         !timelines.contains("log_time"),
         "virtual recordings carry no wall-clock timeline"
     );
-    let angle_rows: usize = chunks
-        .iter()
-        .filter(|c| c.entity_path().to_string() == "/plant/pole_angle_rad")
-        .map(|c| c.num_rows())
-        .sum();
-    assert_eq!(angle_rows as u64, m.steps);
+    assert_eq!(angle_rows(&chunks), m.steps);
     let size = std::fs::metadata(&path).unwrap().len();
     assert!(size < 2 * 1024 * 1024, "a 10 s recording is {size} bytes");
 }
@@ -170,12 +200,7 @@ fn a_run_cut_short_leaves_a_complete_file() {
     assert_eq!(r.end.reason, ratelab::scheduler::EndReason::Interrupted);
     rec.finish(&r.metrics, &r.end).unwrap();
     drop(rec);
-    let rows: usize = chunks(&path)
-        .iter()
-        .filter(|c| c.entity_path().to_string() == "/plant/pole_angle_rad")
-        .map(|c| c.num_rows())
-        .sum();
-    assert_eq!(rows as u64, r.metrics.steps);
+    assert_eq!(angle_rows(&chunks(&path)), r.metrics.steps);
     assert_eq!(r.metrics.steps, 100);
 }
 
@@ -267,15 +292,413 @@ fn ctrl_c_during_a_recorded_real_run_leaves_a_complete_file() {
     let stdout = String::from_utf8_lossy(&out.stdout);
     assert_eq!(out.status.code(), Some(130), "{stdout}");
     assert!(stdout.contains("interrupted at t="), "{stdout}");
-    let rows: usize = chunks(&path)
-        .iter()
-        .filter(|c| c.entity_path().to_string() == "/plant/pole_angle_rad")
-        .map(|c| c.num_rows())
-        .sum();
+    let rows = angle_rows(&chunks(&path));
     assert!(rows > 50, "about 2.5 s of 50 Hz steps recorded, got {rows}");
     let events: Vec<Chunk> = chunks(&path)
         .into_iter()
         .filter(|c| c.entity_path().to_string() == "/events")
         .collect();
     assert!(!events.is_empty());
+}
+
+/// One view of a recording's blueprint, as decoded from the file.
+#[derive(Debug, Default)]
+struct BlueprintView {
+    class: String,
+    name: String,
+    origin: String,
+    queries: Vec<String>,
+    /// The y range (`ScalarAxis`) of a time series view, when it has one.
+    y_range: Option<[f64; 2]>,
+}
+
+/// The views of the blueprint the `.rrd` at `path` activates last (`view/<id>` and
+/// `view/<id>/ViewContents` of that blueprint store).
+fn blueprint_views(path: &Path) -> Vec<BlueprintView> {
+    use rerun::external::re_sdk_types::blueprint::archetypes::{
+        ScalarAxis, ViewBlueprint, ViewContents,
+    };
+    let file = std::io::BufReader::new(std::fs::File::open(path).unwrap());
+    let mut stores: BTreeMap<String, Vec<Chunk>> = BTreeMap::new();
+    let mut active = None;
+    for msg in re_log_encoding::DecoderApp::decode_lazy(file) {
+        match msg.expect("decodes") {
+            LogMsg::ArrowMsg(store, arrow) if store.kind() == StoreKind::Blueprint => {
+                stores
+                    .entry(format!("{store:?}"))
+                    .or_default()
+                    .push(Chunk::from_arrow_msg(&arrow).unwrap());
+            }
+            LogMsg::BlueprintActivationCommand(cmd) if cmd.make_active => {
+                active = Some(format!("{:?}", cmd.blueprint_id));
+            }
+            _ => {}
+        }
+    }
+    let active = active.expect("the file activates a blueprint");
+    let text = |chunk: &Chunk, component| -> Vec<String> {
+        chunk
+            .iter_slices::<String>(component)
+            .flatten()
+            .map(|s| s.as_str().to_string())
+            .collect()
+    };
+    let mut views: BTreeMap<String, BlueprintView> = BTreeMap::new();
+    for chunk in stores
+        .remove(&active)
+        .expect("the active blueprint is in the file")
+    {
+        let path = chunk.entity_path().to_string();
+        let parts: Vec<&str> = path.trim_start_matches('/').split('/').collect();
+        match parts.as_slice() {
+            ["view", id] => {
+                let v = views.entry(id.to_string()).or_default();
+                let class = ViewBlueprint::descriptor_class_identifier().component;
+                let origin = ViewBlueprint::descriptor_space_origin().component;
+                let name = ViewBlueprint::descriptor_display_name().component;
+                if let Some(c) = text(&chunk, class).pop() {
+                    v.class = c;
+                }
+                if let Some(o) = text(&chunk, origin).pop() {
+                    v.origin = o;
+                }
+                if let Some(n) = text(&chunk, name).pop() {
+                    v.name = n;
+                }
+            }
+            ["view", id, "ViewContents"] => {
+                let query = ViewContents::descriptor_query().component;
+                views.entry(id.to_string()).or_default().queries = text(&chunk, query);
+            }
+            ["view", id, "ScalarAxis"] => {
+                let range = ScalarAxis::descriptor_range().component;
+                if let Some(r) = chunk
+                    .iter_component::<rerun::components::Range1D>(range)
+                    .flat_map(|batch| batch.to_vec())
+                    .last()
+                {
+                    views.entry(id.to_string()).or_default().y_range = Some(r.0 .0);
+                }
+            }
+            _ => {}
+        }
+    }
+    views.into_values().collect()
+}
+
+/// Every entity of the recording store with the components it carries data for.
+fn entity_components(path: &Path) -> BTreeMap<EntityPath, BTreeSet<String>> {
+    let mut out: BTreeMap<EntityPath, BTreeSet<String>> = BTreeMap::new();
+    for c in chunks(path) {
+        out.entry(c.entity_path().clone())
+            .or_default()
+            .extend(c.component_descriptors().map(|d| d.component.to_string()));
+    }
+    out
+}
+
+/// The component a view of `class` needs at least one matched entity to carry.
+fn data_component(class: &str) -> Option<&'static str> {
+    match class {
+        "TimeSeries" => Some("Scalars:scalars"),
+        "TextLog" => Some("TextLog:text"),
+        "TextDocument" => Some("TextDocument:text"),
+        "Graph" => Some("GraphNodes:node_ids"),
+        _ => None,
+    }
+}
+
+/// What in `views` matches nothing in `entities`, one line per problem: a view whose origin
+/// has no entity under it, or an inclusion expression (after `$origin` substitution, with
+/// rerun's own rule semantics) that matches no entity carrying the view's data component.
+fn unmatched(
+    views: &[BlueprintView],
+    entities: &BTreeMap<EntityPath, BTreeSet<String>>,
+) -> Vec<String> {
+    let mut problems = Vec::new();
+    for v in views {
+        let origin = EntityPath::parse_forgiving(&v.origin);
+        if !entities.keys().any(|e| e.starts_with(&origin)) {
+            problems.push(format!("{:?}: origin {} has no entity", v.name, v.origin));
+        }
+        let subs = EntityPathSubs::new_with_origin(&origin);
+        let filter = EntityPathFilter::from_query_expressions(v.queries.iter().map(String::as_str));
+        for (rule, effect) in filter.rules() {
+            if *effect != RuleEffect::Include {
+                continue;
+            }
+            let hit = ResolvedEntityPathRule::parse_strict(rule, &subs).is_ok_and(|r| {
+                entities.iter().any(|(e, comps)| {
+                    r.matches(e) && data_component(&v.class).is_none_or(|c| comps.contains(c))
+                })
+            });
+            if !hit {
+                problems.push(format!("{:?}: {} matches nothing", v.name, &**rule));
+            }
+        }
+    }
+    problems
+}
+
+fn check_views(path: &Path) -> Vec<BlueprintView> {
+    let views = blueprint_views(path);
+    let problems = unmatched(&views, &entity_components(path));
+    assert!(problems.is_empty(), "{problems:#?}");
+    let all = chunks(path);
+    for v in views.iter().filter(|v| v.class == "TimeSeries") {
+        let [lo, hi] = v
+            .y_range
+            .unwrap_or_else(|| panic!("{:?} has no y range in the final layout", v.name));
+        let values: Vec<f64> = all
+            .iter()
+            .filter(|c| v.queries.contains(&c.entity_path().to_string()))
+            .flat_map(|c| c.iter_slices::<f64>(rerun::Scalars::descriptor_scalars().component))
+            .flat_map(|batch| batch.to_vec())
+            .collect();
+        assert!(!values.is_empty(), "{:?} shows no samples", v.name);
+        let (min, max) = values
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), x| {
+                (a.min(*x), b.max(*x))
+            });
+        assert!(
+            lo < min && max < hi,
+            "{:?}: data {min}..{max} touches the edge of {lo}..{hi}",
+            v.name
+        );
+    }
+    views
+}
+
+fn classes(views: &[BlueprintView]) -> BTreeSet<&str> {
+    views.iter().map(|v| v.class.as_str()).collect()
+}
+
+#[test]
+fn every_view_matches_data_in_a_virtual_run_and_a_fall() {
+    let dir = tempfile::tempdir().unwrap();
+    let balanced = dir.path().join("balanced.rrd");
+    record(&balanced, &virtual_cfg(), None);
+    let views = check_views(&balanced);
+    for class in ["3D", "Graph", "TextDocument", "TextLog", "TimeSeries"] {
+        assert!(
+            classes(&views).contains(class),
+            "no {class} view: {views:#?}"
+        );
+    }
+    assert_eq!(views.len(), 11, "{views:#?}");
+    assert!(
+        !views.iter().any(|v| v.name.contains("lateness")),
+        "no lateness under the virtual clock"
+    );
+    let fall = dir.path().join("fall.rrd");
+    let mut five = virtual_cfg();
+    five.set_control_hz(5.0).unwrap();
+    let m = record(&fall, &five, None);
+    assert!(m.fell_at_s.is_some(), "5 Hz falls");
+    check_views(&fall);
+}
+
+#[test]
+fn every_view_matches_data_in_a_real_clock_run() {
+    let _machine = crate::machine::alone();
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("real.rrd");
+    record(
+        &path,
+        &RunConfig {
+            clock: ClockKind::Real,
+            ..RunConfig::default().with_duration_ms(1500)
+        },
+        None,
+    );
+    let views = check_views(&path);
+    assert_eq!(
+        views.len(),
+        12,
+        "the virtual run's 11 and lateness: {views:#?}"
+    );
+    let lateness = views
+        .iter()
+        .find(|v| v.name.contains("lateness"))
+        .expect("a lateness view under the real clock");
+    assert_eq!(lateness.queries.len(), 3, "{lateness:?}");
+}
+
+#[test]
+fn a_query_that_matches_nothing_is_caught() {
+    // The blueprint before issue #11: `*` inside a path is not a wildcard in rerun.
+    use rerun::blueprint::{Blueprint, TimeSeriesView, Vertical};
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("bad.rrd");
+    let rec = rerun::RecordingStreamBuilder::new("ratelab")
+        .with_blueprint(Blueprint::new(Vertical::new([
+            TimeSeriesView::new("bus: dropped")
+                .with_contents(["/bus/*/dropped"])
+                .into(),
+            TimeSeriesView::new("obs dropped")
+                .with_contents(["/bus/obs/dropped"])
+                .into(),
+            TimeSeriesView::new("bus").with_origin("/bus").into(),
+        ])))
+        .save(&path)
+        .unwrap();
+    rec.set_time_sequence("control_step", 1);
+    rec.log("bus/obs/dropped", &rerun::Scalars::single(0.0))
+        .unwrap();
+    rec.flush_blocking().unwrap();
+    drop(rec);
+    let views = blueprint_views(&path);
+    assert_eq!(views.len(), 3, "{views:#?}");
+    let problems = unmatched(&views, &entity_components(&path));
+    assert_eq!(
+        problems,
+        [r#""bus: dropped": /bus/*/dropped matches nothing"#],
+        "only the wildcard query fails"
+    );
+}
+
+#[test]
+fn mid_run_changes_are_events_graph_labels_and_marks() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("changes.rrd");
+    let at = |s: u64, command| TimedCommand {
+        at_ns: s * 1_000_000_000,
+        command,
+    };
+    record_with(
+        &path,
+        &virtual_cfg(),
+        None,
+        vec![
+            at(3, Command::SetQueueDepth { depth: 5 }),
+            at(5, Command::SetControlHz { hz: 10.0 }),
+        ],
+    );
+    check_views(&path);
+    let all = chunks(&path);
+    let of = |entity: &str| -> Vec<&Chunk> {
+        all.iter()
+            .filter(|c| c.entity_path().to_string() == entity)
+            .collect()
+    };
+    let events: Vec<String> = of("/events")
+        .into_iter()
+        .flat_map(|c| c.iter_slices::<String>(rerun::TextLog::descriptor_text().component))
+        .flatten()
+        .map(|s| s.as_str().to_string())
+        .collect();
+    for needle in [
+        "/obs depth 1 → 5; /action depth 1 → 5",
+        "policy rate 50 → 10 Hz",
+    ] {
+        assert!(
+            events.iter().any(|e| e == needle),
+            "{needle} in {events:#?}"
+        );
+    }
+    let marks: usize = of("/plant/changes")
+        .into_iter()
+        .filter(|c| !c.is_static())
+        .map(|c| c.num_rows())
+        .sum();
+    assert_eq!(marks, 3, "the start and two changes");
+    let labels: Vec<String> = of("/graph")
+        .into_iter()
+        .flat_map(|c| c.iter_slices::<String>(rerun::GraphNodes::descriptor_labels().component))
+        .flatten()
+        .map(|s| s.as_str().to_string())
+        .collect();
+    assert!(labels.iter().any(|l| l == "/obs · depth 5"), "{labels:?}");
+    assert!(labels.iter().any(|l| l == "policy · 10 Hz"), "{labels:?}");
+}
+
+#[test]
+fn spawn_with_a_viewer_that_cannot_start_still_writes_the_whole_file() {
+    // A `rerun` on PATH that exits at once, as the real one does without a display. The
+    // live sink used to queue at most 100 messages for it and then block the file too.
+    use std::os::unix::fs::PermissionsExt;
+    let dir = tempfile::tempdir().unwrap();
+    let bin = dir.path().join("bin");
+    std::fs::create_dir(&bin).unwrap();
+    let fake = bin.join("rerun");
+    std::fs::write(&fake, "#!/bin/sh\nexit 1\n").unwrap();
+    std::fs::set_permissions(&fake, std::fs::Permissions::from_mode(0o755)).unwrap();
+    let path = dir.path().join("spawn.rrd");
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_ratelab"))
+        .args(["run", "--clock", "virtual", "--spawn", "--record"])
+        .arg(&path)
+        .env("PATH", format!("{}:/usr/bin:/bin", bin.display()))
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(60);
+    while child.try_wait().unwrap().is_none() {
+        if std::time::Instant::now() > deadline {
+            child.kill().unwrap();
+            panic!("the run hangs on a viewer that never started");
+        }
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+    let out = child.wait_with_output().unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{stdout}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(stdout.contains("BALANCED"), "{stdout}");
+    assert_eq!(angle_rows(&chunks(&path)), 501);
+    check_views(&path);
+}
+
+#[test]
+fn a_brain_swap_is_an_event_and_a_mark() {
+    // The lab session reports a brain swap (which the graph cannot see) with
+    // `Recording::change`, at the instant it applied it.
+    struct SwapAt(Recording, u64);
+    impl ratelab::graph::StepObserver for SwapAt {
+        fn on_step(&mut self, r: &ratelab::metrics::StepRecord) {
+            if r.step == self.1 {
+                self.0.change(r.t, "brain → scripted");
+            }
+        }
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("swap.rrd");
+    let cfg = virtual_cfg().with_duration_ms(2000);
+    let (rec, _) = Recording::create(&path, &cfg, "scripted", &RecordOptions::default()).unwrap();
+    let opts = RunOptions {
+        observers: vec![rec.observer(), Box::new(SwapAt(rec.clone(), 40))],
+        ..RunOptions::new()
+    };
+    let r = run(&cfg, Box::new(Scripted), opts).unwrap();
+    rec.finish(&r.metrics, &r.end).unwrap();
+    drop(rec);
+    let all = chunks(&path);
+    let events: Vec<String> = all
+        .iter()
+        .filter(|c| c.entity_path().to_string() == "/events")
+        .flat_map(|c| c.iter_slices::<String>(rerun::TextLog::descriptor_text().component))
+        .flatten()
+        .map(|s| s.as_str().to_string())
+        .collect();
+    assert!(
+        events.iter().any(|e| e == "brain → scripted"),
+        "{events:#?}"
+    );
+    let marks: Vec<i64> = all
+        .iter()
+        .filter(|c| !c.is_static() && c.entity_path().to_string() == "/plant/changes")
+        .flat_map(|c| {
+            c.timelines()
+                .iter()
+                .find(|(name, _)| name.as_str() == "control_step")
+                .map(|(_, col)| col.times_raw().to_vec())
+                .unwrap_or_default()
+        })
+        .collect();
+    assert_eq!(marks, [0, 40], "the start and the swap");
+    check_views(&path);
 }

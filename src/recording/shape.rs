@@ -1,0 +1,219 @@
+//! The graph as a recording draws it: lists of nodes and topics.
+//!
+//! Everything the recording derives from the graph (the node graph, the `bus/<topic>/…`
+//! entities, the blueprint's per-topic and per-node series) comes from a [`GraphShape`],
+//! which is built in one place, [`GraphShape::from_handles`].
+
+use crate::graph::GraphHandles;
+use crate::msg::{AnyTopic, ForceMsg};
+use crate::rate::Rate;
+use crate::topic::{Topic, TopicStats};
+use std::collections::BTreeMap;
+use std::sync::Arc;
+
+/// One node of the graph as the recording draws it.
+#[derive(Clone, Debug)]
+pub struct NodeShape {
+    /// The node's name (as in `nodes/<name>/lateness_us`).
+    pub name: String,
+    /// Its rate, read live (a lab session changes it mid-run).
+    pub rate: Rate,
+}
+
+/// One topic of the graph as the recording draws it.
+#[derive(Clone)]
+pub struct TopicShape {
+    /// The topic's name, `/obs`-style.
+    pub name: String,
+    /// The node that publishes on it.
+    pub publisher: String,
+    /// The nodes that read it.
+    pub subscribers: Vec<String>,
+    /// Its counters and depth, read live.
+    pub stats: Arc<dyn Fn() -> TopicStats + Send + Sync>,
+}
+
+impl TopicShape {
+    /// The entity path part of the topic: its name without the leading `/`.
+    pub(crate) fn entity(&self) -> String {
+        super::bus_name(&self.name)
+    }
+}
+
+/// The graph as the recording needs it: lists of nodes and topics (built in one place,
+/// [`GraphShape::from_handles`]), from which the node graph, the `bus/<topic>/…` entities and
+/// the blueprint's per-topic and per-node series are all derived.
+#[derive(Clone, Default)]
+pub struct GraphShape {
+    /// The nodes, in the executor's order.
+    pub nodes: Vec<NodeShape>,
+    /// The topics.
+    pub topics: Vec<TopicShape>,
+    /// The node whose period is the control period (the latency plot's reference line).
+    pub controller: Option<String>,
+    /// The topic the policy publishes its force on: each message on it is logged as a
+    /// published action (the actuator applies it, or a safety node's version of it).
+    pub commands: Option<Arc<Topic<ForceMsg>>>,
+}
+
+impl GraphShape {
+    /// The shape of a running graph, from its spec and handles: every node with its live
+    /// rate, every topic with its publisher, subscriber and live counters; the chain's
+    /// policy sets the control period, and its output topic is the published force.
+    pub fn from_handles(h: &GraphHandles) -> Self {
+        let spec = &h.spec;
+        Self {
+            nodes: spec
+                .nodes
+                .iter()
+                .zip(&h.rates)
+                .map(|(n, rate)| NodeShape {
+                    name: n.name.clone(),
+                    rate: rate.clone(),
+                })
+                .collect(),
+            topics: spec
+                .topics
+                .iter()
+                .zip(&h.topics)
+                .map(|(t, topic)| {
+                    let topic = topic.clone();
+                    TopicShape {
+                        name: t.name.clone(),
+                        publisher: spec.node(t.publisher).name.clone(),
+                        subscribers: t
+                            .subscriber
+                            .map(|s| spec.node(s).name.clone())
+                            .into_iter()
+                            .collect(),
+                        stats: Arc::new(move || topic.stats()),
+                    }
+                })
+                .collect(),
+            controller: Some(spec.node(spec.chain.policy).name.clone()),
+            commands: match h.topic(spec.chain.action) {
+                AnyTopic::Force(t) => Some(t.clone()),
+                _ => None,
+            },
+        }
+    }
+
+    /// Left-to-right columns for the node graph: sources in column 0, each topic one column
+    /// right of its publisher, each subscriber one right of the topic (longest path; a cycle
+    /// stops growing after as many rounds as there are vertices). Returns (id, column) for
+    /// nodes then topics.
+    pub(crate) fn columns(&self) -> Vec<(String, usize)> {
+        let mut col: BTreeMap<String, usize> = BTreeMap::new();
+        for n in &self.nodes {
+            col.insert(n.name.clone(), 0);
+        }
+        for t in &self.topics {
+            col.insert(t.name.clone(), 1);
+        }
+        for _ in 0..(self.nodes.len() + self.topics.len()) {
+            let mut changed = false;
+            for t in &self.topics {
+                let from = col.get(&t.publisher).copied().unwrap_or(0) + 1;
+                if from > col[&t.name] {
+                    col.insert(t.name.clone(), from);
+                    changed = true;
+                }
+                for s in &t.subscribers {
+                    let to = col[&t.name] + 1;
+                    if col.get(s).is_some_and(|c| to > *c) {
+                        col.insert(s.clone(), to);
+                        changed = true;
+                    }
+                }
+            }
+            if !changed {
+                break;
+            }
+        }
+        self.nodes
+            .iter()
+            .map(|n| n.name.clone())
+            .chain(self.topics.iter().map(|t| t.name.clone()))
+            .map(|id| {
+                let c = col[&id];
+                (id, c)
+            })
+            .collect()
+    }
+
+    /// Rates and depths now, to notice a change.
+    pub(crate) fn state(&self) -> (Vec<f64>, Vec<usize>) {
+        (
+            self.nodes.iter().map(|n| n.rate.hz()).collect(),
+            self.topics.iter().map(|t| (t.stats)().depth).collect(),
+        )
+    }
+
+    pub(crate) fn controller_period_ms(&self) -> Option<f64> {
+        let name = self.controller.as_ref()?;
+        let node = self.nodes.iter().find(|n| &n.name == name)?;
+        Some(node.rate.period().as_millis_f64())
+    }
+}
+
+#[cfg(test)]
+pub(crate) mod tests {
+    use super::*;
+    use crate::recording::graph_positions;
+
+    /// A shape with `topics` (name, publisher, subscribers) and `nodes` at 50 Hz; the second
+    /// node is the controller.
+    pub(crate) fn shape(topics: &[(&str, &str, &[&str])], nodes: &[&str]) -> GraphShape {
+        GraphShape {
+            nodes: nodes
+                .iter()
+                .map(|n| NodeShape {
+                    name: n.to_string(),
+                    rate: Rate::new(50.0).unwrap(),
+                })
+                .collect(),
+            topics: topics
+                .iter()
+                .map(|(name, publisher, subs)| TopicShape {
+                    name: name.to_string(),
+                    publisher: publisher.to_string(),
+                    subscribers: subs.iter().map(|s| s.to_string()).collect(),
+                    stats: Arc::new(TopicStats::default),
+                })
+                .collect(),
+            controller: Some(nodes[1].to_string()),
+            commands: None,
+        }
+    }
+
+    #[test]
+    fn the_graph_reads_left_to_right_whatever_the_list_order() {
+        // Listed out of order on purpose: columns follow publisher → topic → subscriber.
+        let s = shape(
+            &[
+                ("/action", "policy", &["actuator"]),
+                ("/obs", "sensor", &["policy", "logger"]),
+            ],
+            &["actuator", "policy", "sensor", "logger"],
+        );
+        let cols: BTreeMap<String, usize> = s.columns().into_iter().collect();
+        assert_eq!(cols["sensor"], 0);
+        assert_eq!(cols["/obs"], 1);
+        assert_eq!(cols["policy"], 2);
+        assert_eq!(cols["logger"], 2);
+        assert_eq!(cols["/action"], 3);
+        assert_eq!(cols["actuator"], 4);
+        // Two nodes in one column are stacked, not overlapped.
+        let (positions, _) = graph_positions(&s);
+        let at: BTreeMap<String, [f32; 2]> = positions.into_iter().collect();
+        assert_eq!(at["policy"][0], at["logger"][0]);
+        assert_ne!(at["policy"][1], at["logger"][1]);
+        assert!(at["sensor"][0] < at["/obs"][0] && at["/action"][0] < at["actuator"][0]);
+    }
+
+    #[test]
+    fn a_cycle_does_not_hang_the_layout() {
+        let s = shape(&[("/a", "x", &["y"]), ("/b", "y", &["x"])], &["x", "y"]);
+        assert_eq!(s.columns().len(), 4);
+    }
+}
