@@ -65,30 +65,51 @@ pub enum Command {
 }
 
 impl Command {
-    /// Check the command against `graph` as the command line checks the same values: rates
-    /// in (0, 10 000] Hz (the actuator at 50), depths in 1..=[`crate::graph::spec::MAX_DEPTH`],
-    /// names that exist, a brain that loads.
+    /// Apply to the settings a run starts with: `graph`'s rates and depths, the brain
+    /// spec `policy`. The checks are the command line's: rates in (0, 10 000] Hz (the
+    /// actuator at 50), depths in 1..=[`crate::graph::spec::MAX_DEPTH`], names that exist.
+    /// A brain is not loaded here (see [`Command::validate`]).
+    ///
+    /// # Errors
+    /// One line saying what is wrong; nothing changes.
+    pub fn apply_to_settings(
+        &self,
+        graph: &mut crate::graph::GraphSpec,
+        policy: &mut String,
+    ) -> Result<(), String> {
+        let (sensor, controller) = (graph.chain.sensor, graph.chain.policy);
+        match self {
+            Command::SetControlHz { hz } => crate::config::check_rate("control-hz", *hz)
+                .and_then(|_| Ok(graph.set_rate_of(controller, *hz)?))
+                .map_err(|e| e.to_string()),
+            Command::SetSensorHz { hz } => crate::config::check_rate("sensor-hz", *hz)
+                .and_then(|_| Ok(graph.set_rate_of(sensor, *hz)?))
+                .map_err(|e| e.to_string()),
+            Command::SetQueueDepth { depth } => {
+                graph.set_all_depths(*depth).map_err(|e| e.to_string())
+            }
+            Command::SetNodeHz { node, hz } => graph.set_rate(node, *hz).map_err(|e| e.to_string()),
+            Command::SetTopicDepth { topic, depth } => {
+                graph.set_depth(topic, *depth).map_err(|e| e.to_string())
+            }
+            Command::SetPolicy { spec } => {
+                policy.clone_from(spec);
+                Ok(())
+            }
+        }
+    }
+
+    /// Check the command against `graph` as the command line checks the same values
+    /// ([`Command::apply_to_settings`] on a copy), and that a brain it names loads.
     ///
     /// # Errors
     /// One line saying what is wrong.
     pub fn validate(&self, graph: &crate::graph::GraphSpec) -> Result<(), String> {
-        let mut g = graph.clone();
-        match self {
-            Command::SetControlHz { hz } => crate::config::check_rate("control-hz", *hz)
-                .and_then(|_| Ok(g.set_rate_of(graph.chain.policy, *hz)?))
-                .map_err(|e| e.to_string()),
-            Command::SetSensorHz { hz } => crate::config::check_rate("sensor-hz", *hz)
-                .and_then(|_| Ok(g.set_rate_of(graph.chain.sensor, *hz)?))
-                .map_err(|e| e.to_string()),
-            Command::SetQueueDepth { depth } => g.set_all_depths(*depth).map_err(|e| e.to_string()),
-            Command::SetNodeHz { node, hz } => g.set_rate(node, *hz).map_err(|e| e.to_string()),
-            Command::SetTopicDepth { topic, depth } => {
-                g.set_depth(topic, *depth).map_err(|e| e.to_string())
-            }
-            Command::SetPolicy { spec } => crate::checkpoint::load_policy(spec)
-                .map(|_| ())
-                .map_err(|e| e.to_string()),
+        self.apply_to_settings(&mut graph.clone(), &mut String::new())?;
+        if let Command::SetPolicy { spec } = self {
+            crate::checkpoint::load_policy(spec).map_err(|e| e.to_string())?;
         }
+        Ok(())
     }
 
     /// Apply to a running graph.

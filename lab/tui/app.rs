@@ -18,6 +18,8 @@ pub const HISTORY_S: f64 = 10.0;
 /// Window for msg/s, drops, stale reads and measured rates. msg/s is the count of messages
 /// published in the window over the span of their publish stamps, so a 5 Hz topic reads 5.0.
 pub const WINDOW: Nanos = Nanos::SECOND;
+/// How long a new notice leads the footer (before the keys), wall time.
+pub const FRESH: std::time::Duration = std::time::Duration::from_secs(4);
 /// Latency histogram bucket width.
 pub const BUCKET: Nanos = Nanos(20_000_000);
 /// Number of latency buckets shown (the last collects everything above).
@@ -68,6 +70,8 @@ pub struct App {
     help: bool,
     typing: Option<String>,
     message: Option<String>,
+    /// When the message was set (a fresh one leads the footer for [`FRESH`]).
+    message_at: Option<std::time::Instant>,
     /// Set when the user asked to quit.
     pub quit: bool,
 }
@@ -105,6 +109,7 @@ impl App {
             help: false,
             typing: None,
             message: None,
+            message_at: None,
             quit: false,
         }
     }
@@ -142,6 +147,12 @@ impl App {
             });
         }
         Ok((app, rx))
+    }
+
+    /// Show a notice (a change applied, an error) in the footer.
+    fn say(&mut self, text: String) {
+        self.message = Some(text);
+        self.message_at = Some(std::time::Instant::now());
     }
 
     /// Is an exact rate being typed?
@@ -239,7 +250,7 @@ impl App {
                 self.depths = depths;
                 self.brain = policy;
             }
-            Telemetry::Applied(text) => self.message = Some(text),
+            Telemetry::Applied(text) => self.say(text),
             Telemetry::Ended { metrics, reason } => {
                 self.verdict = match &reason {
                     EndReason::NodeFailed { node, message } => {
@@ -250,14 +261,14 @@ impl App {
                         None => Verdict::Done,
                     },
                 };
-                self.message = Some(match metrics.sched_warning() {
-                    Some(w) => format!("run ended ({reason}) — {w}"),
+                self.say(match metrics.sched_warning() {
+                    Some(w) => format!("{reason} — {w}"),
                     None => format!(
-                        "run ended ({reason}) — r reset · R next seed · c other clock · q quit"
+                        "{reason} — keys set the next run · r/R reset · c clock · q quit"
                     ),
                 });
             }
-            Telemetry::Error(e) => self.message = Some(e),
+            Telemetry::Error(e) => self.say(e),
         }
     }
 
@@ -322,9 +333,7 @@ impl App {
                     .and_then(|hz| check_rate("rate", hz).map_err(|_| ()))
                 {
                     Ok(hz) => self.set_rate(self.rate_target(), hz),
-                    Err(()) => {
-                        self.message = Some(format!("not a rate in (0, 10000] Hz: '{text}'"))
-                    }
+                    Err(()) => self.say(format!("not a rate in (0, 10000] Hz: '{text}'")),
                 }
             }
             Msg::TogglePause => self.send(Control::TogglePause),
@@ -352,11 +361,8 @@ impl App {
                     self.policy_spec = spec.clone();
                     self.apply(Command::SetPolicy { spec });
                 }
-                None => {
-                    self.message = Some(
-                        "no --policy file given: nothing to swap the scripted brain with".into(),
-                    )
-                }
+                None => self
+                    .say("no --policy file given: nothing to swap the scripted brain with".into()),
             },
             Msg::ToggleHelp => self.help = !self.help,
             Msg::Back => {
@@ -549,6 +555,7 @@ impl App {
             help: self.help,
             typing: self.typing.clone(),
             message: self.message.clone(),
+            message_fresh: self.message_at.is_some_and(|at| at.elapsed() < FRESH),
         }
     }
 }

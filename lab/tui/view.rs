@@ -134,6 +134,8 @@ pub struct View {
     pub typing: Option<String>,
     /// The latest notice (a command applied, an error).
     pub message: Option<String>,
+    /// The notice is new: it leads the footer, so it is read even at 80 columns.
+    pub message_fresh: bool,
 }
 
 fn hz(x: f64) -> String {
@@ -562,6 +564,11 @@ fn render_footer(v: &View, area: Rect, buf: &mut Buffer) {
             " rate (Hz): ".bold(),
             format!("{t}▏").into(),
             "  Enter apply · Esc cancel".dim(),
+        ])
+    } else if let (true, Some(m)) = (v.message_fresh, &v.message) {
+        Line::from(vec![
+            Span::from(format!(" ● {m}")).bold(),
+            "  (? keys)".dim(),
         ])
     } else {
         let mut spans: Vec<Span> = vec![" ".into()];

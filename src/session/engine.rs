@@ -57,6 +57,8 @@ pub struct Engine {
     log: SessionLog,
     pub(super) speed: Speed,
     run_index: usize,
+    /// Changes made while a run was frozen (after a fall or its end): they set the next run.
+    next_run: Vec<Command>,
 }
 
 /// What ended a run from the engine's side.
@@ -77,6 +79,7 @@ impl Engine {
             log: SessionLog::new(),
             speed,
             run_index: 0,
+            next_run: Vec::new(),
         }
     }
 
@@ -106,9 +109,13 @@ impl Engine {
         loop {
             let next = match self.one_run(&cfg, &policy) {
                 Ok((next, graph, last_policy)) => {
-                    // The next run keeps the settings as the user left them.
+                    // The next run keeps the settings as the user left them, and takes the
+                    // changes made while this one was frozen (checked when they were made).
                     cfg.graph = graph;
                     policy = last_policy;
+                    for cmd in self.next_run.drain(..) {
+                        let _ = cmd.apply_to_settings(&mut cfg.graph, &mut policy);
+                    }
                     next
                 }
                 Err(e) => {
@@ -227,14 +234,44 @@ impl Engine {
     }
 
     pub(super) fn status(&self, now: Nanos, paused: bool, h: &GraphHandles) {
+        let next = self.next_spec(h);
         let _ = self.tx.send(Telemetry::Status {
             now,
             paused,
             speed: self.speed,
-            rates: h.rates_hz(),
-            depths: h.topic_stats().as_slice().iter().map(|t| t.depth).collect(),
+            // While frozen, what the next run will start with (the deferred changes applied).
+            rates: next.nodes.iter().map(|n| n.rate_hz).collect(),
+            depths: next.topics.iter().map(|t| t.depth).collect(),
             policy: h.brain.label(),
         });
+    }
+
+    /// The graph the next run starts with: this run's as it is now, with the changes made
+    /// while it was frozen.
+    fn next_spec(&self, h: &GraphHandles) -> crate::graph::GraphSpec {
+        let mut next = h.current_spec();
+        let mut brain = String::new();
+        for cmd in &self.next_run {
+            let _ = cmd.apply_to_settings(&mut next, &mut brain);
+        }
+        next
+    }
+
+    /// A change made while the run is frozen: checked now, applied when the next run starts
+    /// (r, R or c), so the keys still work after a fall.
+    pub(super) fn defer(&mut self, cmd: Command, h: &GraphHandles) {
+        match cmd.validate(&self.next_spec(h)) {
+            Ok(()) => {
+                let _ = self.tx.send(Telemetry::Applied(format!(
+                    "{} (from the next run)",
+                    describe(&cmd)
+                )));
+                self.next_run.push(cmd);
+            }
+            Err(e) => {
+                let _ = self.tx.send(Telemetry::Error(e));
+            }
+        }
     }
 
     /// Apply a graph command, logging it at `at`. Returns false when it was refused.

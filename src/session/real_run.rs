@@ -88,12 +88,18 @@ impl Engine {
                 Ok(Control::Apply(cmd)) => {
                     if result.is_none() {
                         self.apply(cmd, now(), &handles, recording);
+                    } else {
+                        self.defer(cmd, &handles);
                     }
                     None
                 }
                 Ok(Control::TogglePause) => {
-                    let p = !pause.load(Ordering::SeqCst);
-                    pause.store(p, Ordering::SeqCst);
+                    // Wall time cannot stop: a paused real-clock run would only skip ticks
+                    // while its clock (and every latency) ran on. Refused, and said so.
+                    let _ = self.tx.send(Telemetry::Error(
+                        "pause is for the virtual clock: real time does not stop (c switches clock)"
+                            .into(),
+                    ));
                     None
                 }
                 Ok(Control::Step | Control::SetSpeed(_)) => {

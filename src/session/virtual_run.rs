@@ -56,6 +56,8 @@ impl Engine {
                         if ended.is_none() {
                             let at = sched.next_due().unwrap_or(sched.now());
                             self.apply(cmd, at, &handles, recording);
+                        } else {
+                            self.defer(cmd, &handles);
                         }
                     }
                     Control::TogglePause => {

@@ -209,3 +209,66 @@ fn any_graph_in_the_lab_tab_selects_and_esc_backs_out() {
     let status = lab.exit_status("Esc");
     assert!(status.success(), "{status:?}");
 }
+
+/// Keys typed as a person types them: one every 0.4 s.
+fn type_slowly(lab: &mut Lab, keys: &str) {
+    for k in keys.chars() {
+        lab.keys(&k.to_string());
+        std::thread::sleep(Duration::from_millis(400));
+    }
+}
+
+#[test]
+fn the_queue_trap_recipe_works_at_human_speed() {
+    // exercises/README.md: `b`; after the fall `]` until depth 100, then `r`: the drops
+    // vanish from /obs and the pole still falls.
+    let _machine = crate::machine::alone();
+    let mut lab = Lab::start(&["--clock", "virtual"]);
+    lab.wait_for("BALANCED", Duration::from_secs(60));
+    type_slowly(&mut lab, "b");
+    lab.wait_for("FELL at t=", Duration::from_secs(30));
+    type_slowly(&mut lab, "]]]]");
+    lab.wait_for("(from the next run)", Duration::from_secs(5));
+    type_slowly(&mut lab, "r");
+    let screen = lab.wait_for("depth 100", Duration::from_secs(10));
+    assert!(
+        screen.contains("5 Hz set"),
+        "the break survives the reset:\n{screen}"
+    );
+    let screen = lab.wait_for("FELL at t=", Duration::from_secs(30));
+    let graph_rows: Vec<&str> = screen.lines().skip(1).take(6).collect();
+    assert!(
+        graph_rows.iter().any(|l| l.contains("0 dropped ✓")) && !screen.contains("dropped ⚠"),
+        "a deep queue drops nothing:\n{screen}"
+    );
+    lab.quit();
+}
+
+#[test]
+fn pause_stops_virtual_time_and_is_refused_under_the_real_clock() {
+    let _machine = crate::machine::alone();
+    let mut lab = Lab::start(&["--clock", "virtual"]);
+    lab.wait_for("BALANCED", Duration::from_secs(60));
+    type_slowly(&mut lab, " ");
+    let paused = lab.wait_for("PAUSED", Duration::from_secs(5));
+    let t = |s: &str| {
+        s.split("│ t ")
+            .nth(1)
+            .and_then(|r| r.split(' ').next())
+            .map(str::to_string)
+    };
+    std::thread::sleep(Duration::from_secs(1));
+    assert_eq!(
+        t(&paused),
+        t(&lab.screen()),
+        "virtual time stands still while paused"
+    );
+    lab.quit();
+
+    let mut lab = Lab::start(&["--clock", "real"]);
+    lab.wait_for("real clock", Duration::from_secs(60));
+    type_slowly(&mut lab, " ");
+    let screen = lab.wait_for("pause is for the virtual clock", Duration::from_secs(5));
+    assert!(!screen.contains("PAUSED"), "{screen}");
+    lab.quit();
+}

@@ -428,3 +428,28 @@ fn the_labs_later_recordings_never_replace_a_file_without_force() {
         }
     }
 }
+
+#[test]
+fn keys_pressed_after_a_fall_set_the_next_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("frozen.json");
+    let mut script = vec![Control::Apply(Command::SetControlHz { hz: 5.0 })];
+    script.extend(steps(80)); // falls at 0.84 s; later steps are ignored while frozen
+    script.push(Control::Apply(Command::SetQueueDepth { depth: 100 }));
+    script.push(Control::Apply(Command::SetControlHz { hz: 0.0 })); // refused, even frozen
+    script.push(Control::Reset { next_seed: false });
+    script.extend(steps(5));
+    script.push(Control::Quit);
+    let log = drive(&script, &file);
+    assert_eq!(log.runs.len(), 2);
+    assert!(!log.runs[0].metrics.as_ref().unwrap().balanced);
+    let second = log.runs[1].config("run 2").unwrap();
+    assert_eq!((second.control_hz(), second.queue_depth()), (5.0, 100));
+    // The deferred change is part of the second run's starting graph, not a logged
+    // command of the first (which replays as it ran).
+    assert_eq!(log.runs[0].commands.len(), 1);
+    assert_eq!(
+        serde_json::to_string(&replay_run(&log, 0).unwrap()).unwrap(),
+        serde_json::to_string(log.runs[0].metrics.as_ref().unwrap()).unwrap()
+    );
+}
