@@ -263,9 +263,9 @@ impl App {
                 };
                 self.say(match metrics.sched_warning() {
                     Some(w) => format!("{reason} — {w}"),
-                    None => format!(
-                        "{reason} — keys set the next run · r/R reset · c clock · q quit"
-                    ),
+                    None => {
+                        format!("{reason} — keys set the next run · r/R reset · c clock · q quit")
+                    }
                 });
             }
             Telemetry::Error(e) => self.say(e),

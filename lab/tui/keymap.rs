@@ -181,7 +181,10 @@ pub const HELP_NOTES: [(&str, &str); 3] = [
         "50 40 30 25 20 15 12 10 8 7 6 5 4 3 2 1",
     ),
     ("depth ladder", "1 2 5 10 100"),
-    ("after a fall", "the lab freezes; keys set the next run, r/R/c start it"),
+    (
+        "after a fall",
+        "the lab freezes; keys set the next run, r/R/c start it",
+    ),
 ];
 
 /// Map a key event. `typing` is true while an exact rate is being typed.

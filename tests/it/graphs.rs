@@ -491,3 +491,43 @@ proptest! {
         prop_assert_eq!(a.trace, b.trace);
     }
 }
+
+#[test]
+fn every_metrics_key_and_trace_column_is_documented() {
+    let doc = std::fs::read_to_string(repo("docs/metrics.md")).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let o = Command::new(env!("CARGO_BIN_EXE_ratelab"))
+        .args(["run", "--clock", "virtual", "--graph"])
+        .arg(repo("graphs/cartpole-estimator.toml"))
+        .arg("--out")
+        .arg(dir.path())
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(String::from_utf8_lossy(&o.stdout).contains("docs/metrics.md"));
+    let metrics: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.path().join("metrics.json")).unwrap()).unwrap();
+    let mut keys: Vec<String> = metrics.as_object().unwrap().keys().cloned().collect();
+    for map in ["nodes", "topics"] {
+        for entry in metrics[map].as_object().unwrap().values() {
+            keys.extend(entry.as_object().unwrap().keys().cloned());
+        }
+    }
+    keys.extend(["node_timing", "node_failed", "lateness_p99_us"].map(String::from));
+    for key in keys {
+        assert!(
+            doc.contains(&format!("`{key}`")),
+            "metrics key `{key}` is not in docs/metrics.md"
+        );
+    }
+    let trace = std::fs::read_to_string(dir.path().join("trace.csv")).unwrap();
+    for column in trace.lines().next().unwrap().split(',') {
+        let documented = doc.contains(&format!("`{column}`"))
+            || column.ends_with("_published")
+            || column.ends_with("_dropped");
+        assert!(
+            documented,
+            "trace column `{column}` is not in docs/metrics.md"
+        );
+    }
+}
