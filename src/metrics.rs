@@ -71,6 +71,10 @@ pub struct StepRecord {
     pub nonfinite: bool,
     /// Every topic's counters at this tick, by [`TopicId`].
     pub topics: TopicCounters,
+    /// The force the policy published since the previous actuator tick, if it did: (publish
+    /// stamp, N), the newest one. Beside [`StepRecord::action`] (what was applied) it shows
+    /// the zero-order hold.
+    pub published: Option<(Nanos, f64)>,
     /// True on the tick the pole fell.
     pub fell: bool,
 }
@@ -477,6 +481,7 @@ mod tests {
             latency: None,
             nonfinite: false,
             topics: TopicCounters::default(),
+            published: None,
             fell: false,
         };
         log.push(base);

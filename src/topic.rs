@@ -206,6 +206,12 @@ impl<T: Clone> Topic<T> {
         self.lock().buf.len()
     }
 
+    /// The newest buffered message, without reading it (the read high-water mark, and so
+    /// the drop count, is unchanged). For onlookers.
+    pub fn peek_newest(&self) -> Option<Message<T>> {
+        self.lock().buf.back().cloned()
+    }
+
     /// The buffered messages with `seq >= from`, oldest first, without reading them: the read
     /// high-water mark, and so the drop count, is unchanged. For onlookers such as a recorder.
     pub fn peek_from(&self, from: u64) -> Vec<Message<T>> {

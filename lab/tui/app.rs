@@ -5,6 +5,7 @@ use super::keymap::{depth_down, depth_up, rate_down, rate_up, Msg};
 use super::view::{LatencyView, NodeView, Selected, TopicView, Verdict, View};
 use crossbeam_channel::Sender;
 use ratelab::config::{check_rate, BREAK_CONTROL_HZ};
+use ratelab::graph::spec::GEAR_N;
 use ratelab::graph::{GraphSpec, NodeId, TopicId};
 use ratelab::metrics::{LatencyStats, StepRecord};
 use ratelab::run::Command;
@@ -63,6 +64,10 @@ pub struct App {
     selected: Option<Selected>,
     steps: VecDeque<StepRecord>,
     history: VecDeque<(f64, f64)>,
+    /// (t s, applied force N) per actuator step over the last [`HISTORY_S`].
+    applied: VecDeque<(f64, f64)>,
+    /// (t s, published force N) per policy publication seen over the last [`HISTORY_S`].
+    published: VecDeque<(f64, f64)>,
     latency: LatencyStats,
     ticks: Vec<VecDeque<(Nanos, Nanos)>>,
     last: Option<StepRecord>,
@@ -102,6 +107,8 @@ impl App {
             selected: None,
             steps: VecDeque::new(),
             history: VecDeque::new(),
+            applied: VecDeque::new(),
+            published: VecDeque::new(),
             latency: LatencyStats::default(),
             ticks: Vec::new(),
             last: None,
@@ -190,6 +197,8 @@ impl App {
                 self.now = Nanos::ZERO;
                 self.steps.clear();
                 self.history.clear();
+                self.applied.clear();
+                self.published.clear();
                 self.latency = LatencyStats::default();
                 self.last = None;
                 self.verdict = Verdict::Balanced;
@@ -199,13 +208,16 @@ impl App {
                 if let Some(l) = s.latency {
                     self.latency.record(l);
                 }
-                self.history.push_back((s.t.as_secs_f64(), s.pole_angle));
-                while self
-                    .history
-                    .front()
-                    .is_some_and(|(t, _)| s.t.as_secs_f64() - t > HISTORY_S)
-                {
-                    self.history.pop_front();
+                let now_s = s.t.as_secs_f64();
+                self.history.push_back((now_s, s.pole_angle));
+                self.applied.push_back((now_s, s.action * GEAR_N));
+                if let Some((at, newtons)) = s.published {
+                    self.published.push_back((at.as_secs_f64(), newtons));
+                }
+                for q in [&mut self.history, &mut self.applied, &mut self.published] {
+                    while q.front().is_some_and(|(t, _)| now_s - t > HISTORY_S) {
+                        q.pop_front();
+                    }
                 }
                 self.steps.push_back(s);
                 while self
@@ -551,6 +563,14 @@ impl App {
             cart_pos: self.last.map_or(0.0, |s| s.cart_pos),
             verdict: self.verdict.clone(),
             angle_history: self.history.iter().copied().collect(),
+            // Each applied force holds until the next step: a staircase.
+            applied_force: self
+                .applied
+                .iter()
+                .zip(self.applied.iter().skip(1))
+                .flat_map(|(&(t, u), &(t_next, _))| [(t, u), (t_next, u)])
+                .collect(),
+            published_force: self.published.iter().copied().collect(),
             latency: self.latency_view(),
             help: self.help,
             typing: self.typing.clone(),

@@ -271,6 +271,26 @@ mod tests {
     }
 
     #[test]
+    fn snapshot_the_hold_at_a_slow_policy() {
+        // 8 Hz policy, 50 Hz actuator: each published force (a dot, every 125 ms) is applied
+        // for six or seven actuator steps (the staircase).
+        let (app, _rx) = app_after(virtual_cfg(8.0, 3), false);
+        let v = app.view();
+        assert_eq!(v.published_force.len(), 25, "8 Hz for 3 s, inclusive");
+        let held = v
+            .applied_force
+            .chunks(2)
+            .zip(v.applied_force.chunks(2).skip(1))
+            .filter(|(a, b)| a[0].1 == b[0].1)
+            .count();
+        assert!(held > 100, "most steps re-apply the held force: {held}");
+        let text = render(&app, 120, 40);
+        assert!(text.contains("the hold"), "{text}");
+        insta::assert_snapshot!("hold_80x24", render(&app, 80, 24));
+        insta::assert_snapshot!("hold_120x40", text);
+    }
+
+    #[test]
     fn a_long_recording_path_is_shortened_from_the_left() {
         assert_eq!(
             super::view::shorten_left("recordings/abc.rrd", 40),

@@ -126,6 +126,11 @@ pub struct View {
     pub verdict: Verdict,
     /// (t s, θ rad) over the last ~10 s.
     pub angle_history: Vec<(f64, f64)>,
+    /// The force the actuator applied, N, as a staircase over the last ~10 s (each step's
+    /// force held until the next: the zero-order hold).
+    pub applied_force: Vec<(f64, f64)>,
+    /// (t s, N) of each force the policy published over the last ~10 s.
+    pub published_force: Vec<(f64, f64)>,
     /// Latency histogram over the run.
     pub latency: LatencyView,
     /// Help overlay shown?
@@ -164,7 +169,10 @@ impl Widget for &View {
             Layout::horizontal([Constraint::Percentage(40), Constraint::Percentage(60)])
                 .areas(middle);
         render_cartpole(self, cart, buf);
-        render_angle_chart(self, chart, buf);
+        let [angle, hold] =
+            Layout::vertical([Constraint::Percentage(56), Constraint::Percentage(44)]).areas(chart);
+        render_angle_chart(self, angle, buf);
+        render_hold_chart(self, hold, buf);
         render_latency(self, latency, buf);
         render_footer(self, footer, buf);
         if self.help {
@@ -518,15 +526,72 @@ fn render_angle_chart(v: &View, area: Rect, buf: &mut Buffer) {
     ];
     Chart::new(datasets)
         .block(Block::bordered().title(" pole angle (rad), last 10 s "))
-        .x_axis(
-            Axis::default()
-                .bounds([t0, t1])
-                .labels([format!("{t0:.0}s"), format!("{t1:.0}s")]),
-        )
+        .x_axis(time_axis(t0, t1, area))
         .y_axis(
             Axis::default()
                 .bounds([-0.3, 0.3])
                 .labels(["-0.3", "0", "0.3"]),
+        )
+        .render(area, buf);
+}
+
+/// The last 10 s; labelled only where the chart has room for the axis (two rows).
+fn time_axis(t0: f64, t1: f64, area: Rect) -> Axis<'static> {
+    let axis = Axis::default().bounds([t0, t1]);
+    if area.height >= 8 {
+        axis.labels([format!("{t0:.0}s"), format!("{t1:.0}s")])
+    } else {
+        axis
+    }
+}
+
+/// The zero-order hold, live: the force the policy published (dots, at its ticks) and the
+/// force the actuator applied (a staircase: each step's force held until the next).
+fn render_hold_chart(v: &View, area: Rect, buf: &mut Buffer) {
+    let t1 = v.sim_time_s.max(10.0);
+    let t0 = t1 - 10.0;
+    let limit = ratelab::graph::spec::GEAR_N;
+    let clamp = |pts: &[(f64, f64)]| -> Vec<(f64, f64)> {
+        pts.iter()
+            .map(|&(t, f)| (t, f.clamp(-limit, limit)))
+            .collect()
+    };
+    let (applied, published) = (clamp(&v.applied_force), clamp(&v.published_force));
+    let datasets = vec![
+        Dataset::default()
+            .name("applied")
+            .marker(Marker::Braille)
+            .graph_type(GraphType::Line)
+            .green()
+            .data(&applied),
+        Dataset::default()
+            .name("published")
+            .marker(Marker::Braille)
+            .graph_type(GraphType::Scatter)
+            .magenta()
+            .data(&published),
+    ];
+    // Three labels need three rows of plot; a short band gets the two ends.
+    let labels: &[&str] = if area.height >= 5 {
+        &["-10", "0", "10"]
+    } else {
+        &["-10", "10"]
+    };
+    let title = Line::from(vec![
+        " force (N): ".into(),
+        "published".magenta(),
+        " · ".into(),
+        "applied".green(),
+        " — the hold ".into(),
+    ]);
+    Chart::new(datasets)
+        .block(Block::bordered().title(title))
+        .hidden_legend_constraints((Constraint::Length(0), Constraint::Length(0)))
+        .x_axis(time_axis(t0, t1, area))
+        .y_axis(
+            Axis::default()
+                .bounds([-limit, limit])
+                .labels(labels.iter().copied()),
         )
         .render(area, buf);
 }

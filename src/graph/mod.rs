@@ -233,6 +233,11 @@ impl Graph {
                             log: log.clone(),
                             observers: observers.take().unwrap_or_default(),
                             held: None,
+                            policy_output: match &topics[spec.chain.action.0] {
+                                AnyTopic::Force(t) => Some(t.clone()),
+                                _ => None,
+                            },
+                            reported: None,
                         }))
                     }
                     _ => unreachable!(

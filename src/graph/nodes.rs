@@ -141,6 +141,10 @@ pub struct Actuator {
     pub observers: Vec<Box<dyn StepObserver>>,
     /// The last finite command applied (in [-1, 1] units of the motor), with its origin.
     pub held: Option<(f32, Option<Nanos>)>,
+    /// The policy's output topic, watched (never read) for what it published.
+    pub policy_output: Option<Arc<Topic<ForceMsg>>>,
+    /// `seq` of the newest policy message already reported.
+    pub reported: Option<u64>,
 }
 
 impl GraphNode {
@@ -256,7 +260,15 @@ impl Actuator {
             let outcome = plant.step(u);
             (outcome, plant.steps())
         };
+        let published = self.policy_output.as_ref().and_then(|t| {
+            let m = t.peek_newest()?;
+            (self.reported != Some(m.seq)).then(|| {
+                self.reported = Some(m.seq);
+                (m.stamp, m.data.newtons)
+            })
+        });
         let rec = StepRecord {
+            published,
             step,
             t: now,
             pole_angle: outcome.state.theta,
