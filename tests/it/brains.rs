@@ -278,7 +278,7 @@ fn hidden_width_is_inferred_not_assumed() {
     assert!((a[0] - 17.0).abs() < 1e-3, "{a:?}");
 }
 
-mod onnx_contract {
+pub(crate) mod onnx_contract {
     use super::*;
     use prost::Message;
     use tract_onnx::pb::{
@@ -287,7 +287,9 @@ mod onnx_contract {
         TensorShapeProto, TypeProto, ValueInfoProto,
     };
 
-    fn value_info(name: &str, elem_type: i32, dims: &[i64]) -> ValueInfoProto {
+    /// A tensor's name, element type and fixed shape, as an ONNX graph declares its inputs
+    /// and outputs (shared with the hostile-input tests).
+    pub(crate) fn value_info(name: &str, elem_type: i32, dims: &[i64]) -> ValueInfoProto {
         ValueInfoProto {
             name: name.into(),
             r#type: Some(TypeProto {

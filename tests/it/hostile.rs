@@ -712,31 +712,13 @@ fn special_and_oversized_files_are_refused_without_reading_them() {
 mod onnx {
     use super::*;
     use tract_onnx::pb::{
-        tensor_shape_proto::{dimension, Dimension},
-        type_proto, GraphProto, ModelProto, NodeProto, OperatorSetIdProto, StringStringEntryProto,
-        TensorProto, TensorShapeProto, TypeProto, ValueInfoProto,
+        GraphProto, ModelProto, NodeProto, OperatorSetIdProto, StringStringEntryProto, TensorProto,
+        ValueInfoProto,
     };
 
+    /// A float tensor's declaration (the ONNX contract tests' builder).
     fn value_info(name: &str, dims: &[i64]) -> ValueInfoProto {
-        ValueInfoProto {
-            name: name.into(),
-            r#type: Some(TypeProto {
-                value: Some(type_proto::Value::TensorType(type_proto::Tensor {
-                    elem_type: 1,
-                    shape: Some(TensorShapeProto {
-                        dim: dims
-                            .iter()
-                            .map(|&d| Dimension {
-                                value: Some(dimension::Value::DimValue(d)),
-                                ..Default::default()
-                            })
-                            .collect(),
-                    }),
-                })),
-                ..Default::default()
-            }),
-            ..Default::default()
-        }
+        crate::brains::onnx_contract::value_info(name, 1, dims)
     }
 
     /// `action = obs @ W` at operator set `opset`, with an extra initializer `extra`.
