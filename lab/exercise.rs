@@ -3,7 +3,7 @@
 use anyhow::{bail, Context};
 use ratelab::exercise::{
     check_ex1, check_ex2, check_ex3, load_bands, measure_ex1, measure_ex2, measure_ex3,
-    required_keys, Check, ExerciseFile,
+    required_keys, Check, ExerciseFile, Outcome,
 };
 use std::path::Path;
 
@@ -95,9 +95,16 @@ pub fn run_exercise(
                     .iter()
                     .any(|m| !m.balanced)
             });
+            println!("(Y: balanced the whole run; n@T: fell at run time T s; one cell per seed, as in the header.)");
             println!(
                 "\nOutcome: the pole first fails at {} Hz.",
                 first_fall.map_or("no rate".into(), |(_, hz)| hz.to_string())
+            );
+            say_reconcile(
+                &f,
+                &Outcome::Ex1 {
+                    fails_at_hz: first_fall.map(|(_, hz)| *hz),
+                },
             );
             print_checks(&check_ex1(b, &runs));
             println!("\nReconcile: latency grows as the rate drops (the actuator holds each action longer), but");
@@ -130,6 +137,17 @@ pub fn run_exercise(
                     );
                 }
             }
+            say_reconcile(
+                &f,
+                &Outcome::Ex2 {
+                    deep_queue_obs_drops: pairs
+                        .iter()
+                        .map(|(_, d)| d.obs_dropped)
+                        .max()
+                        .unwrap_or(0),
+                    deep_queue_balances: pairs.iter().all(|(_, d)| d.balanced),
+                },
+            );
             print_checks(&check_ex2(b, &pairs));
             println!("\nReconcile: the deep queue stops the drop counter — nothing is evicted before the next");
             println!("read — but the policy still reads only the LATEST message, every 200 ms. The backlog it");
@@ -157,6 +175,12 @@ pub fn run_exercise(
                     m.mean_latency_ms
                 );
             }
+            say_reconcile(
+                &f,
+                &Outcome::Ex3 {
+                    matched_obs_drops: matched.obs_dropped,
+                },
+            );
             print_checks(&check_ex3(b, &matched, &offset));
             println!("\nReconcile: with matched rates all three threads wake at the same instant and race; each");
             println!("time the sensor publishes twice before the policy reads, a reading is dropped. Latest-wins");
@@ -165,6 +189,14 @@ pub fn run_exercise(
         }
     }
     Ok(())
+}
+
+/// The learner's prediction against the outcome, in words.
+fn say_reconcile(f: &ExerciseFile, outcome: &Outcome) {
+    println!();
+    for line in f.reconcile(outcome) {
+        println!("{line}");
+    }
 }
 
 fn indent(s: &str) -> String {

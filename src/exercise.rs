@@ -190,6 +190,87 @@ impl ExerciseFile {
     }
 }
 
+/// What an exercise measured, in the terms of its prediction's keys.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Outcome {
+    /// ex1: the highest control rate on the grid at which a seed fell (`None`: none fell).
+    Ex1 {
+        /// Rate, Hz.
+        fails_at_hz: Option<f64>,
+    },
+    /// ex2: the deep queue's `/obs` drops (the most over the seeds) and whether every seed
+    /// balanced with it.
+    Ex2 {
+        /// Drops.
+        deep_queue_obs_drops: u64,
+        /// Every seed balanced.
+        deep_queue_balances: bool,
+    },
+    /// ex3: `/obs` drops with matched rates and no offsets.
+    Ex3 {
+        /// Drops.
+        matched_obs_drops: u64,
+    },
+}
+
+/// A prediction value as a number (TOML integer or float).
+fn number(v: &toml::Value) -> Option<f64> {
+    v.as_float().or_else(|| v.as_integer().map(|i| i as f64))
+}
+
+impl ExerciseFile {
+    /// The prediction beside the outcome, one sentence per predicted key, in words: "You
+    /// predicted the pole first fails at 10 Hz; it first fell at 5 Hz." A key the learner
+    /// left out, or gave in another type, is said so.
+    pub fn reconcile(&self, outcome: &Outcome) -> Vec<String> {
+        let p = |k: &str| self.prediction.get(k);
+        let unreadable =
+            |k: &str| format!("Your prediction `{k}` is missing or not of the expected type.");
+        match *outcome {
+            Outcome::Ex1 { fails_at_hz } => {
+                let measured = fails_at_hz.map_or("it never fell in the range".to_string(), |hz| {
+                    format!("it first fell at {hz} Hz")
+                });
+                vec![match p("fails_at_hz").and_then(number) {
+                    Some(hz) if Some(hz) == fails_at_hz => {
+                        format!("You predicted the pole first fails at {hz} Hz; {measured}: right.")
+                    }
+                    Some(hz) => format!("You predicted the pole first fails at {hz} Hz; {measured}."),
+                    None => unreadable("fails_at_hz"),
+                }]
+            }
+            Outcome::Ex2 {
+                deep_queue_obs_drops,
+                deep_queue_balances,
+            } => {
+                let drops = match p("deep_queue_obs_drops").and_then(number) {
+                    Some(n) => format!(
+                        "You predicted {n} /obs drops with the deep queue; there were {deep_queue_obs_drops}."
+                    ),
+                    None => unreadable("deep_queue_obs_drops"),
+                };
+                let measured = if deep_queue_balances {
+                    "it stayed up"
+                } else {
+                    "it fell"
+                };
+                let survives = match p("deep_queue_balances").and_then(toml::Value::as_bool) {
+                    Some(true) => format!("You predicted the deep queue keeps the pole up; {measured}."),
+                    Some(false) => format!("You predicted the pole falls even with the deep queue; {measured}."),
+                    None => unreadable("deep_queue_balances"),
+                };
+                vec![drops, survives]
+            }
+            Outcome::Ex3 { matched_obs_drops } => vec![match p("matched_obs_drops").and_then(number) {
+                Some(n) => format!(
+                    "You predicted {n} /obs drops with matched rates; there were {matched_obs_drops} (the real clock varies run to run)."
+                ),
+                None => unreadable("matched_obs_drops"),
+            }],
+        }
+    }
+}
+
 /// The keys each exercise's prediction must have (besides `why`).
 pub fn required_keys(exercise: &str) -> &'static [&'static str] {
     match exercise {
@@ -391,4 +472,48 @@ pub fn check_ex3(b: &Ex3Bands, matched: &Metrics, offset: &Metrics) -> Vec<Check
             offset.mean_latency_ms >= b.min_mean_latency_ms_with_offsets,
         ),
     ]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn file(prediction: &str) -> ExerciseFile {
+        toml::from_str(&format!(
+            "title = \"t\"\nestimated_minutes = 1\nobjective = \"o\"\ninstructions = \"i\"\n[prediction]\n{prediction}"
+        ))
+        .unwrap()
+    }
+
+    #[test]
+    fn predictions_are_reconciled_in_words() {
+        let f = file("fails_at_hz = 10\nwhy = \"w\"");
+        assert_eq!(
+            f.reconcile(&Outcome::Ex1 {
+                fails_at_hz: Some(5.0)
+            }),
+            ["You predicted the pole first fails at 10 Hz; it first fell at 5 Hz."]
+        );
+        let f = file("fails_at_hz = 5.0\nwhy = \"w\"");
+        assert!(f.reconcile(&Outcome::Ex1 {
+            fails_at_hz: Some(5.0)
+        })[0]
+            .ends_with(": right."));
+        let f = file("deep_queue_obs_drops = 0\ndeep_queue_balances = true\nwhy = \"w\"");
+        assert_eq!(
+            f.reconcile(&Outcome::Ex2 {
+                deep_queue_obs_drops: 0,
+                deep_queue_balances: false
+            }),
+            [
+                "You predicted 0 /obs drops with the deep queue; there were 0.",
+                "You predicted the deep queue keeps the pole up; it fell."
+            ]
+        );
+        let f = file("matched_obs_drops = \"many\"\nwhy = \"w\"");
+        assert!(f.reconcile(&Outcome::Ex3 {
+            matched_obs_drops: 7
+        })[0]
+            .contains("not of the expected type"));
+    }
 }

@@ -192,6 +192,11 @@ fn exercise_refuses_without_a_prediction_then_runs_with_one() {
         "{out}"
     );
     assert!(out.contains("Reconcile:"), "{out}");
+    assert!(
+        out.contains("You predicted 0 /obs drops with the deep queue; there were 0.")
+            && out.contains("You predicted the pole falls even with the deep queue; it fell."),
+        "the prediction is compared with the outcome in words:\n{out}"
+    );
 }
 
 #[test]
