@@ -548,6 +548,10 @@ impl App {
             sim_time_s: self.now.as_secs_f64(),
             seed: self.seed,
             brain: short_brain(&self.policy_spec),
+            brain_caption: self
+                .brain
+                .split_once(" — ")
+                .map(|(_, caption)| caption.to_string()),
             recording: self.recording.clone(),
             nodes: self
                 .graph

@@ -291,6 +291,25 @@ mod tests {
     }
 
     #[test]
+    fn a_known_brain_shows_its_caption() {
+        let (mut app, _rx) = app_after(virtual_cfg(50.0, 1), false);
+        assert!(
+            app.view().brain_caption.is_none(),
+            "the scripted brain needs none"
+        );
+        app.on_telemetry(Telemetry::Status {
+            now: ratelab::Nanos(0),
+            paused: false,
+            speed: Speed::Times(1.0),
+            rates: vec![50.0; 3],
+            depths: vec![1; 2],
+            policy: "ch2.1 PPO checkpoint (x.pt, hidden 64) — an imperfect learner".into(),
+        });
+        let text = render(&app, 120, 40);
+        assert!(text.contains("brain: an imperfect learner"), "{text}");
+    }
+
+    #[test]
     fn a_long_recording_path_is_shortened_from_the_left() {
         assert_eq!(
             super::view::shorten_left("recordings/abc.rrd", 40),

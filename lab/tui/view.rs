@@ -112,6 +112,9 @@ pub struct View {
     pub seed: u64,
     /// Brain label.
     pub brain: String,
+    /// What the brain is, when its checkpoint is known (a caption; see
+    /// `ratelab::checkpoint::caption`).
+    pub brain_caption: Option<String>,
     /// Recording path, if recording.
     pub recording: Option<String>,
     /// The graph's nodes, in tie-break order.
@@ -322,10 +325,14 @@ fn layout_columns(v: &View) -> Vec<Column> {
 }
 
 fn render_graph(v: &View, area: Rect, buf: &mut Buffer) {
-    let block = match selection_title(v) {
+    let mut block = match selection_title(v) {
         Some(t) => Block::bordered().title(Line::from(t).black().on_yellow().bold()),
         None => Block::bordered().title(graph_title(v)),
     };
+    // What the brain is, when known: a fall with no drops is then no mystery.
+    if let Some(caption) = &v.brain_caption {
+        block = block.title_bottom(Line::from(format!(" brain: {caption} ")).dim());
+    }
     let inner = block.inner(area);
     block.render(area, buf);
     let cols = layout_columns(v);

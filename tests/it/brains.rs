@@ -370,3 +370,38 @@ pub(crate) mod onnx_contract {
         assert!(e.to_string().contains("output"), "{e}");
     }
 }
+
+#[test]
+fn known_checkpoints_and_sidecars_give_the_brain_a_caption() {
+    // The course's fixtures are known by their SHA-256.
+    for name in ["ppo_ch2.1_seed0.pt", "ppo_ch2.1_seed0.onnx"] {
+        let label = load_policy(fixture(name).to_str().unwrap())
+            .unwrap()
+            .label();
+        assert!(
+            label.ends_with("— ch2.1 PPO (200k steps): imperfect, falls at 5.84 s even at 50 Hz"),
+            "{label}"
+        );
+    }
+    // A sidecar beside a checkpoint names it (first line), before the table of known ones.
+    let dir = tempfile::tempdir().unwrap();
+    let copy = dir.path().join("mine.onnx");
+    std::fs::copy(fixture("ppo_ch2.1_seed0.onnx"), &copy).unwrap();
+    std::fs::write(
+        dir.path().join("mine.onnx.caption"),
+        "my own actor, 1M steps\nignored\n",
+    )
+    .unwrap();
+    let label = load_policy(copy.to_str().unwrap()).unwrap().label();
+    assert!(label.ends_with("— my own actor, 1M steps"), "{label}");
+    // One byte more and it is not the fixture any more: no caption without a sidecar.
+    let plain = dir.path().join("plain.pt");
+    let mut bytes = std::fs::read(fixture("ppo_ch2.1_seed0.pt")).unwrap();
+    bytes.push(0);
+    std::fs::write(&plain, bytes).unwrap();
+    assert!(ratelab::checkpoint::caption(&plain).is_none());
+    assert_eq!(
+        load_policy("scripted").unwrap().label(),
+        "scripted balancer (built-in, checkpoint-free)"
+    );
+}
