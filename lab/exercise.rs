@@ -114,8 +114,9 @@ pub fn run_exercise(
             println!(
                 "the pole is past saving. A good controller is robust until, suddenly, it is not."
             );
+            println!("Near the edge a seed can fall at one rate and balance just below it: the cliff is ragged.");
             println!(
-                "Find the cliff to 0.1 Hz with: ratelab cliff --seeds {}",
+                "Find it to 0.1 Hz, with the balanced fraction per rate around it: ratelab cliff --seeds {}",
                 join(&b.seeds)
             );
         }

@@ -7,7 +7,7 @@ use ratelab::config::duration_from_secs;
 use ratelab::metrics::Metrics;
 use ratelab::policy::Policy;
 use ratelab::scheduler::StopFlag;
-use ratelab::sweep::{find_cliff, run_grid_until, Grid, Point};
+use ratelab::sweep::{find_cliff, run_grid, run_grid_until, Grid, Point};
 use ratelab::{ClockKind, RunConfig};
 use std::io::IsTerminal;
 
@@ -346,8 +346,11 @@ pub fn run_cliff(a: &CliffArgs, stop: &StopFlag) -> anyhow::Result<()> {
     if done < a.seeds.len() {
         println!("interrupted: {done} of {} seeds searched", a.seeds.len());
     }
-    for r in results.into_iter().flatten() {
-        let c = r?;
+    let cliffs = results
+        .into_iter()
+        .flatten()
+        .collect::<Result<Vec<_>, _>>()?;
+    for c in &cliffs {
         match (c.falls_at_hz, c.balances_at_hz) {
             (Some(f), Some(b)) => println!(
                 "seed {}: {:.1} Hz (falls there; balances at {:.1} Hz; {} runs)",
@@ -362,6 +365,75 @@ pub fn run_cliff(a: &CliffArgs, stop: &StopFlag) -> anyhow::Result<()> {
                 c.seed, a.min_hz, a.max_hz
             ),
         }
+    }
+    if !stop.is_stopped() {
+        print_edge(a, &graph, &brain, duration, &cliffs)?;
+    }
+    Ok(())
+}
+
+/// The most rows the edge plot shows.
+const EDGE_ROWS: usize = 41;
+
+/// Around the cliff, every rate on the search grid for every seed: the balanced fraction
+/// per rate, as a text plot. The edge is ragged, not a line: phase decides too.
+fn print_edge(
+    a: &CliffArgs,
+    graph: &ratelab::graph::GraphSpec,
+    brain: ratelab::sweep::BrainFactory<'_>,
+    duration: ratelab::Nanos,
+    cliffs: &[ratelab::sweep::Cliff],
+) -> anyhow::Result<()> {
+    let falls: Vec<f64> = cliffs.iter().filter_map(|c| c.falls_at_hz).collect();
+    let (Some(lowest), Some(highest)) = (
+        falls.iter().copied().reduce(f64::min),
+        falls.iter().copied().reduce(f64::max),
+    ) else {
+        return Ok(());
+    };
+    let lo = (lowest - 0.5).max(a.min_hz);
+    let hi = (highest + 0.5).min(a.max_hz);
+    // Rates are whole multiples of the step (as the search's), at most EDGE_ROWS of them.
+    let step = a.step.max((hi - lo) / (EDGE_ROWS - 1) as f64);
+    let (k0, k1) = ((lo / step).ceil() as i64, (hi / step).floor() as i64);
+    let rates: Vec<f64> = (k0..=k1)
+        .rev()
+        .map(|k| (k as f64 * step * 1e6).round() / 1e6)
+        .filter(|&hz| ratelab::config::check_rate("control-hz", hz).is_ok())
+        .collect();
+    let grid = Grid {
+        clocks: vec![ClockKind::Virtual],
+        sensor_hz: vec![a.sensor_hz],
+        control_hz: rates.clone(),
+        queue_depth: vec![a.queue_depth],
+        seeds: a.seeds.clone(),
+        base: RunConfig {
+            duration,
+            graph: graph.clone(),
+            ..RunConfig::default()
+        },
+    };
+    let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let rows = run_grid(&grid, brain, threads, &|_, _| {})?;
+    println!(
+        "\nThe edge is ragged, not a line: whether a seed survives depends on the phase between the\n\
+         policy's ticks and the sensor's readings as much as on the rate, so a seed can fall at one\n\
+         rate and balance just below it. Balanced fraction per rate (seeds {}):",
+        a.seeds
+            .iter()
+            .map(u64::to_string)
+            .collect::<Vec<_>>()
+            .join(",")
+    );
+    for hz in rates {
+        let at: Vec<bool> = rows
+            .iter()
+            .filter(|(p, _)| p.control_hz == hz)
+            .map(|(_, m)| m.balanced)
+            .collect();
+        let ok = at.iter().filter(|b| **b).count();
+        let bar = (ok * 10).div_ceil(at.len().max(1));
+        println!("{hz:>8.2} Hz |{:<10}| {ok}/{}", "█".repeat(bar), at.len());
     }
     Ok(())
 }

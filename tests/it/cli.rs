@@ -245,8 +245,16 @@ fn cliff_prints_one_rate_per_seed_with_one_decimal() {
     let o = ratelab(&["cliff", "--seeds", "0,1", "--min-hz", "7", "--max-hz", "9"]);
     assert!(o.status.success(), "{}", stderr(&o));
     let out = String::from_utf8_lossy(&o.stdout);
-    let lines: Vec<&str> = out.lines().collect();
+    let lines: Vec<&str> = out.lines().filter(|l| l.starts_with("seed ")).collect();
     assert_eq!(lines.len(), 2, "{out}");
+    // Then the ragged edge: every rate around the cliff, the fraction of seeds that balanced.
+    assert!(out.contains("The edge is ragged"), "{out}");
+    let plot: Vec<&str> = out.lines().filter(|l| l.contains(" Hz |")).collect();
+    assert!(plot.len() >= 5, "{out}");
+    assert!(
+        plot.iter().all(|l| l.ends_with("/2")),
+        "two seeds per rate:\n{out}"
+    );
     for (seed, line) in lines.iter().enumerate() {
         let rate = line
             .strip_prefix(&format!("seed {seed}: "))
