@@ -161,8 +161,6 @@ pub fn run_headless(a: &RunArgs, stop: StopFlag) -> anyhow::Result<RunReport> {
     }
     if let Some(dir) = &a.out {
         write_outputs(dir, &report, &cfg.graph, a.force)?;
-    }
-    if let Some(dir) = &a.out {
         println!(
             "[ratelab] wrote {}/metrics.json and trace.csv (what each key and column means: docs/metrics.md)",
             dir.display()

@@ -19,7 +19,7 @@ pub const BREAK_CONTROL_HZ: f64 = 5.0;
 pub const MAX_DURATION_S: f64 = 3600.0;
 
 /// [`MAX_DURATION_S`] as run time.
-pub const MAX_DURATION: Nanos = Nanos(3600 * Nanos::SECOND.0);
+pub const MAX_DURATION: Nanos = Nanos(MAX_DURATION_S as u64 * Nanos::SECOND.0);
 
 /// Which executor runs the graph.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
