@@ -15,11 +15,11 @@ use std::sync::Arc;
 fn topic(c: &mut Criterion) {
     let t: Topic<[f32; 5]> = Topic::new("/obs", 1).unwrap();
     let mut i = 0u64;
-    c.bench_function("topic/publish+latest (1 thread)", |b| {
+    c.bench_function("topic/publish+read (1 thread)", |b| {
         b.iter(|| {
             i += 1;
             t.publish(black_box([i as f32; 5]), Nanos(i), None);
-            black_box(t.latest())
+            black_box(t.read(Nanos(i)))
         })
     });
     // Two threads: a publisher hammering the topic while we publish+read.
@@ -35,10 +35,10 @@ fn topic(c: &mut Criterion) {
             }
         })
     };
-    c.bench_function("topic/publish+latest (2 threads, contended)", |b| {
+    c.bench_function("topic/publish+read (2 threads, contended)", |b| {
         b.iter(|| {
             shared.publish(black_box([1.0; 5]), Nanos(0), None);
-            black_box(shared.latest())
+            black_box(shared.read(Nanos(0)))
         })
     });
     stop.store(true, std::sync::atomic::Ordering::Relaxed);

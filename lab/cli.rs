@@ -2,6 +2,7 @@
 
 use clap::{Args, Parser, Subcommand};
 use ratelab::config::{check_rate, duration_from_secs, phase_offset_from_ms, ClockKind};
+use ratelab::qos::Fault;
 use std::path::PathBuf;
 
 /// ratelab: a graph of nodes at fixed rates keeping a MuJoCo cartpole upright.
@@ -66,6 +67,51 @@ pub struct GraphArgs {
     /// Set a topic's history depth (repeatable): --depth /obs=100.
     #[arg(long = "depth", value_name = "TOPIC=N", value_parser = parse_topic_depth)]
     pub depths: Vec<(String, usize)>,
+    /// Set a topic's QoS with the graph file's keys (repeatable):
+    /// --qos /obs:history=keep_last,depth=100,delivery=fifo  --qos /action:deadline_ms=40,lifespan_ms=60.
+    /// Keys: history, depth, delivery, deadline_ms, lifespan_ms, reliability, on_deadline_missed.
+    #[arg(long = "qos", value_name = "TOPIC:KEY=VALUE,…", value_parser = parse_topic_pairs)]
+    pub qos: Vec<(String, String)>,
+    /// Put a topic on a seeded lossy link (repeatable): --link /cmd:loss=0.2,delay_ms=10,jitter_ms=3
+    /// (keys: loss, delay_ms, jitter_ms, retransmit_ms).
+    #[arg(long = "link", value_name = "TOPIC:KEY=VALUE,…", value_parser = parse_topic_pairs)]
+    pub links: Vec<(String, String)>,
+    /// Set a node's liveliness lease, ms (repeatable): --lease policy=100.
+    #[arg(long = "lease", value_name = "NODE=MS", value_parser = parse_node_ms)]
+    pub leases: Vec<(String, f64)>,
+    /// Stall a node at run time T for D, seconds (repeatable): --stall policy@2+0.5.
+    #[arg(long = "stall", value_name = "NODE@T+D", value_parser = parse_stall)]
+    pub stalls: Vec<Fault>,
+    /// Kill a node at run time T, seconds (repeatable): --kill policy@3.
+    #[arg(long = "kill", value_name = "NODE@T", value_parser = parse_kill)]
+    pub kills: Vec<Fault>,
+}
+
+fn parse_topic_pairs(s: &str) -> Result<(String, String), String> {
+    let (topic, pairs) = s
+        .split_once(':')
+        .map(|(t, p)| (t.trim(), p.trim()))
+        .filter(|(t, p)| !t.is_empty() && !p.is_empty())
+        .ok_or_else(|| format!("expected TOPIC:KEY=VALUE[,KEY=VALUE…], got '{s}'"))?;
+    ratelab::qos::split_pairs(pairs)?;
+    Ok((topic.to_string(), pairs.to_string()))
+}
+
+fn parse_node_ms(s: &str) -> Result<(String, f64), String> {
+    let (node, ms) = split_assignment(s, "NODE=MS")?;
+    let ms: f64 = ms
+        .parse()
+        .map_err(|_| format!("not a time in ms: '{ms}'"))?;
+    ratelab::qos::ms_to_nanos("lease", ms, false)?;
+    Ok((node.to_string(), ms))
+}
+
+fn parse_stall(s: &str) -> Result<Fault, String> {
+    Fault::parse(s, false)
+}
+
+fn parse_kill(s: &str) -> Result<Fault, String> {
+    Fault::parse(s, true)
 }
 
 fn split_assignment<'a>(s: &'a str, what: &str) -> Result<(&'a str, &'a str), String> {

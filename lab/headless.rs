@@ -32,7 +32,34 @@ pub fn graph_from_args(g: &GraphArgs) -> anyhow::Result<GraphSpec> {
         spec.set_depth(topic, *depth)
             .map_err(|e| anyhow::anyhow!("--depth {topic}={depth}: {e}"))?;
     }
+    for (flag, list) in [("--qos", &g.qos), ("--link", &g.links)] {
+        for (topic, pairs) in list {
+            if flag == "--link" {
+                if let Some((k, _)) = ratelab::qos::split_pairs(pairs)
+                    .map_err(|e| anyhow::anyhow!("{flag} {topic}:{pairs}: {e}"))?
+                    .into_iter()
+                    .find(|(k, _)| !["loss", "delay_ms", "jitter_ms", "retransmit_ms"].contains(k))
+                {
+                    anyhow::bail!("--link {topic}:{pairs}: '{k}' is not a link key (loss, delay_ms, jitter_ms, retransmit_ms); use --qos");
+                }
+            }
+            spec.set_qos(topic, pairs)
+                .map_err(|e| anyhow::anyhow!("{flag} {topic}:{pairs}: {e}"))?;
+        }
+    }
+    for (node, ms) in &g.leases {
+        spec.set_lease(node, *ms)
+            .map_err(|e| anyhow::anyhow!("--lease {node}={ms}: {e}"))?;
+    }
+    for w in spec.qos_warnings() {
+        eprintln!("[ratelab] {w}");
+    }
     Ok(spec)
+}
+
+/// The faults the flags inject (`--stall`, then `--kill`).
+pub fn faults_from_args(g: &GraphArgs) -> Vec<ratelab::qos::Fault> {
+    g.stalls.iter().chain(&g.kills).cloned().collect()
 }
 
 /// The run settings the flags describe (`--smoke` and `--break` applied).
@@ -44,6 +71,7 @@ pub fn config_from_args(a: &RunArgs) -> anyhow::Result<RunConfig> {
         clock: a.clock,
         spin_margin: Nanos(a.spin_margin_us.unwrap_or(0).saturating_mul(1_000)),
         rt_priority: a.rt_priority,
+        faults: faults_from_args(&a.graph),
         ..RunConfig::default()
     };
     if let Some(hz) = a.sensor_hz {
@@ -263,8 +291,19 @@ pub fn write_outputs(
 }
 
 /// One row per actuator tick; per topic (in the graph's topic order) a `<topic>_published`
-/// and `<topic>_dropped` column (`/obs` → `obs_published`), as the chapter's trace has.
+/// and `<topic>_dropped` column (`/obs` → `obs_published`), as the chapter's trace has; then
+/// `<topic>_<counter>` for each QoS counter the topic reports
+/// ([`ratelab::qos::QosCounter::reported`]; none for a topic with the chapter's QoS).
 fn write_trace(out: &mut dyn Write, trace: &[StepRecord], graph: &GraphSpec) -> anyhow::Result<()> {
+    let last = trace.last().map(|r| r.topics).unwrap_or_default();
+    let qos_columns: Vec<Vec<ratelab::qos::QosCounter>> = graph
+        .topics
+        .iter()
+        .enumerate()
+        .map(|(i, t)| {
+            ratelab::qos::QosCounter::reported(&[t.qos], &last.get(ratelab::graph::TopicId(i)))
+        })
+        .collect();
     let mut w = csv::Writer::from_writer(out);
     let mut header: Vec<String> = [
         "step",
@@ -282,6 +321,12 @@ fn write_trace(out: &mut dyn Write, trace: &[StepRecord], graph: &GraphSpec) -> 
         header.push(format!("{name}_published"));
         header.push(format!("{name}_dropped"));
     }
+    for (t, counters) in graph.topics.iter().zip(&qos_columns) {
+        let name = ratelab::recording::bus_name(&t.name);
+        for c in counters {
+            header.push(format!("{name}_{}", c.key()));
+        }
+    }
     header.push("fell".into());
     w.write_record(&header)?;
     for r in trace {
@@ -297,6 +342,11 @@ fn write_trace(out: &mut dyn Write, trace: &[StepRecord], graph: &GraphSpec) -> 
         for t in r.topics.as_slice() {
             row.push(t.published.to_string());
             row.push(t.dropped.to_string());
+        }
+        for (t, counters) in r.topics.as_slice().iter().zip(&qos_columns) {
+            for c in counters {
+                row.push(c.value(t).to_string());
+            }
         }
         row.push(r.fell.to_string());
         w.write_record(&row)?;

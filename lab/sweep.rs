@@ -50,6 +50,7 @@ pub fn run_sweep(a: &SweepArgs, stop: &StopFlag) -> anyhow::Result<()> {
         base: RunConfig {
             duration: duration_from_secs(a.duration)?,
             graph: crate::headless::graph_from_args(&a.graph)?,
+            faults: crate::headless::faults_from_args(&a.graph),
             ..RunConfig::default()
         },
     };
@@ -317,6 +318,7 @@ pub fn run_cliff(a: &CliffArgs, stop: &StopFlag) -> anyhow::Result<()> {
     let duration = duration_from_secs(a.duration)?;
     let brain = brain_factory(&a.policy)?;
     let graph = crate::headless::graph_from_args(&a.graph)?;
+    let faults = crate::headless::faults_from_args(&a.graph);
     let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
     let bar = progress_bar(a.seeds.len(), "seeds");
     let results = ratelab::sweep::run_pool(&a.seeds, threads, |&seed| {
@@ -328,6 +330,7 @@ pub fn run_cliff(a: &CliffArgs, stop: &StopFlag) -> anyhow::Result<()> {
             seed,
             graph: graph.clone(),
             duration,
+            faults: faults.clone(),
             ..RunConfig::default()
         }
         .with_chapter(a.sensor_hz, graph.control_hz(), a.queue_depth);

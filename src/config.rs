@@ -18,6 +18,8 @@ pub const BREAK_CONTROL_HZ: f64 = 5.0;
 /// minutes; a lab run ends there, so its log replays.
 pub const MAX_DURATION_S: f64 = 3600.0;
 
+/// The most faults one run may inject (`--stall`, `--kill`).
+pub const MAX_FAULTS: usize = 64;
 /// [`MAX_DURATION_S`] as run time.
 pub const MAX_DURATION: Nanos = Nanos(MAX_DURATION_S as u64 * Nanos::SECOND.0);
 
@@ -89,6 +91,9 @@ pub enum ConfigError {
     /// Unknown clock name.
     #[error("--clock must be 'real' or 'virtual', got '{0}'")]
     Clock(String),
+    /// A fault names no node of the graph, or there are too many.
+    #[error("--stall/--kill: {0}")]
+    Fault(String),
     /// A real-time priority outside 1..=99.
     #[error("--rt-priority must be in 1..=99, got {0}")]
     RtPriority(u8),
@@ -133,6 +138,8 @@ pub struct RunConfig {
     /// Real clock: run the node threads under `SCHED_FIFO` at this priority (1..=99) when
     /// the kernel allows (see [`crate::scheduler::RealOptions::rt_priority`]); `None` keeps the default policy.
     pub rt_priority: Option<u8>,
+    /// Faults injected into nodes (`--stall`, `--kill`), in the order given.
+    pub faults: Vec<crate::qos::Fault>,
 }
 
 impl Default for RunConfig {
@@ -146,6 +153,7 @@ impl Default for RunConfig {
             spin_margin: crate::rate::DEFAULT_SPIN_MARGIN,
             phase_offsets: Vec::new(),
             rt_priority: None,
+            faults: Vec::new(),
         }
     }
 }
@@ -296,6 +304,21 @@ impl RunConfig {
         }
         if let Some(p) = self.rt_priority {
             crate::realtime::check_priority(p).map_err(|_| ConfigError::RtPriority(p))?;
+        }
+        if self.faults.len() > MAX_FAULTS {
+            return Err(ConfigError::Fault(format!(
+                "at most {MAX_FAULTS} faults, got {}",
+                self.faults.len()
+            )));
+        }
+        for f in &self.faults {
+            if self.graph.node_id(&f.node).is_none() {
+                return Err(ConfigError::Fault(format!(
+                    "{f}: unknown node '{}' (nodes: {})",
+                    f.node,
+                    self.graph.node_names().join(", ")
+                )));
+            }
         }
         // The spin margin matters to the real clock only (the virtual one never waits).
         let fastest = self.fastest_period();

@@ -24,6 +24,7 @@ pub mod np_random;
 pub mod output;
 pub mod plant;
 pub mod policy;
+pub mod qos;
 pub mod rate;
 pub mod realtime;
 pub mod recording;

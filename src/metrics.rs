@@ -164,6 +164,33 @@ pub struct RunLog {
     pub nonfinite_actions: u64,
     /// Run time of the fall, if the pole fell.
     pub fell_at: Option<Nanos>,
+    /// When the actuator's deadline watchdog stopped the run (`on_deadline_missed =
+    /// "stop"`), with the topic and its deadline: a verdict distinct from a fall.
+    pub watchdog: Option<Watchdog>,
+}
+
+/// The actuator's watchdog fired: no message on `topic` for longer than `deadline`.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Watchdog {
+    /// Run time it fired.
+    pub at: Nanos,
+    /// The actuator's input topic.
+    pub topic: String,
+    /// Its deadline.
+    pub deadline: Nanos,
+}
+
+impl std::fmt::Display for Watchdog {
+    /// `stopped by watchdog at 1.24 s: no message on /cmd for more than 40 ms`.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "stopped by watchdog at {:.2} s: no message on {} for more than {}",
+            self.at.as_secs_f64(),
+            self.topic,
+            self.deadline
+        )
+    }
 }
 
 impl RunLog {
@@ -172,6 +199,17 @@ impl RunLog {
         Self {
             keep_trace,
             ..Self::default()
+        }
+    }
+
+    /// The actuator's watchdog stopped the run at `at` (the first firing counts).
+    pub fn watchdog(&mut self, at: Nanos, topic: &str, deadline: Nanos) {
+        if self.watchdog.is_none() {
+            self.watchdog = Some(Watchdog {
+                at,
+                topic: topic.to_string(),
+                deadline,
+            });
         }
     }
 
@@ -290,6 +328,11 @@ pub struct Metrics {
     /// Per topic, by name: type, depth, published, dropped, msg/s.
     #[serde(default)]
     pub topics: BTreeMap<String, TopicMetrics>,
+    /// When the actuator's deadline watchdog ended the run (`on_deadline_missed = "stop"`):
+    /// `stopped by watchdog at T s: no message on TOPIC for more than D`. Absent otherwise.
+    /// Such a run is not `balanced`, and did not fall.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub stopped_by_watchdog: Option<String>,
 }
 
 /// One node's figures in `metrics.json`.
@@ -309,6 +352,15 @@ pub struct NodeMetrics {
     /// Real clock only: largest lateness, µs.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub lateness_max_us: Option<f64>,
+    /// Its liveliness lease, ms, when one is set (QoS).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub liveliness_lease_ms: Option<f64>,
+    /// Times it went from alive to not alive (with a lease).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub not_alive: Option<u64>,
+    /// Ticks a fault (`--stall`, `--kill`) swallowed, when one was injected.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub faulted_ticks: Option<u64>,
 }
 
 /// One topic's figures in `metrics.json`.
@@ -332,6 +384,14 @@ pub struct TopicMetrics {
     pub stale_reads: u64,
     /// Messages per second of run time.
     pub msg_per_s: f64,
+    /// Its QoS in short (`KA100 fifo dl 40 ms`), when not the chapter's.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub qos: Option<String>,
+    /// The QoS counters it reports ([`crate::qos::QosCounter::reported`]): `expired`,
+    /// `refused`, `lost`, `retransmitted`, `offered_deadline_missed`,
+    /// `requested_deadline_missed`.
+    #[serde(flatten)]
+    pub qos_counters: BTreeMap<String, u64>,
 }
 
 impl Metrics {
@@ -395,6 +455,60 @@ impl Metrics {
             .join(" | ")
     }
 
+    /// QoS lines, only when something is set: `qos: /cmd KL1 latest dl 40 ms link 20%: 41
+    /// lost, 12 offered deadline missed …`, `liveliness: policy not alive 1×`, and the
+    /// watchdog's verdict.
+    fn qos_lines(&self) -> Vec<String> {
+        let mut lines = Vec::new();
+        let topics: Vec<String> = self
+            .topics_by_publisher()
+            .iter()
+            .filter(|(_, t)| t.qos.is_some() || !t.qos_counters.is_empty())
+            .map(|(name, t)| {
+                let counts: Vec<String> = t
+                    .qos_counters
+                    .iter()
+                    .map(|(k, v)| format!("{v} {}", k.replace('_', " ")))
+                    .collect();
+                format!(
+                    "{name} {}{}{}",
+                    t.qos.as_deref().unwrap_or("KL latest"),
+                    if counts.is_empty() { "" } else { ": " },
+                    counts.join(", ")
+                )
+            })
+            .collect();
+        if !topics.is_empty() {
+            lines.push(format!("qos: {}", topics.join(" | ")));
+        }
+        let mut nodes: Vec<(&String, &NodeMetrics)> = self
+            .nodes
+            .iter()
+            .filter(|(_, n)| n.not_alive.is_some() || n.faulted_ticks.is_some())
+            .collect();
+        nodes.sort_by_key(|(_, n)| n.rank);
+        if !nodes.is_empty() {
+            let parts: Vec<String> = nodes
+                .iter()
+                .map(|(name, n)| {
+                    let mut p = name.to_string();
+                    if let (Some(lease), Some(k)) = (n.liveliness_lease_ms, n.not_alive) {
+                        p.push_str(&format!(" not alive {k}× (lease {lease} ms)"));
+                    }
+                    if let Some(f) = n.faulted_ticks {
+                        p.push_str(&format!(" {f} ticks lost to faults"));
+                    }
+                    p
+                })
+                .collect();
+            lines.push(format!("liveliness: {}", parts.join(" | ")));
+        }
+        if let Some(w) = &self.stopped_by_watchdog {
+            lines.push(format!("STOPPED BY WATCHDOG: {w}"));
+        }
+        lines
+    }
+
     fn topics_by_publisher(&self) -> Vec<(&String, &TopicMetrics)> {
         let rank = |node: &str| self.nodes.get(node).map_or(usize::MAX, |n| n.rank);
         let mut topics: Vec<(&String, &TopicMetrics)> = self.topics.iter().collect();
@@ -434,6 +548,7 @@ impl Metrics {
                 crate::rate::period_for_hz(self.control_hz).map_or_else(|_| "?".into(), |p| p.to_string())
             ),
         ];
+        lines.extend(self.qos_lines());
         if self.nonfinite_actions > 0 {
             lines.push(format!(
                 "non-finite actions held over: {} (the actuator kept the last good action)",

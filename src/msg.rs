@@ -6,6 +6,8 @@
 
 use crate::graph::spec::MsgType;
 use crate::plant::Observation;
+use crate::qos::TopicQos;
+use crate::time::Nanos;
 use crate::topic::{Topic, TopicStats, ZeroDepth};
 use std::sync::Arc;
 
@@ -42,24 +44,71 @@ pub enum AnyTopic {
 }
 
 impl AnyTopic {
-    /// A new topic of type `msg`.
+    /// A new topic of type `msg` with the chapter's QoS.
     ///
     /// # Errors
     /// [`ZeroDepth`] for depth 0.
     pub fn new(name: &str, msg: MsgType, depth: usize) -> Result<AnyTopic, ZeroDepth> {
+        Self::with_qos(name, msg, depth, TopicQos::default(), 0)
+    }
+
+    /// A new topic of type `msg` with `qos`, its link seeded by `link_seed`.
+    ///
+    /// # Errors
+    /// [`ZeroDepth`] for depth 0.
+    pub fn with_qos(
+        name: &str,
+        msg: MsgType,
+        depth: usize,
+        qos: TopicQos,
+        link_seed: u64,
+    ) -> Result<AnyTopic, ZeroDepth> {
         Ok(match msg {
-            MsgType::State => AnyTopic::State(Arc::new(Topic::new(name, depth)?)),
-            MsgType::Position => AnyTopic::Position(Arc::new(Topic::new(name, depth)?)),
-            MsgType::Force => AnyTopic::Force(Arc::new(Topic::new(name, depth)?)),
+            MsgType::State => {
+                AnyTopic::State(Arc::new(Topic::with_qos(name, depth, qos, link_seed)?))
+            }
+            MsgType::Position => {
+                AnyTopic::Position(Arc::new(Topic::with_qos(name, depth, qos, link_seed)?))
+            }
+            MsgType::Force => {
+                AnyTopic::Force(Arc::new(Topic::with_qos(name, depth, qos, link_seed)?))
+            }
         })
     }
 
-    /// Counters and depth.
+    /// Counters and depth as of the topic's latest operation.
     pub fn stats(&self) -> TopicStats {
         match self {
             AnyTopic::State(t) => t.stats(),
             AnyTopic::Position(t) => t.stats(),
             AnyTopic::Force(t) => t.stats(),
+        }
+    }
+
+    /// Counters and depth at run time `now` (see [`Topic::stats_at`]).
+    pub fn stats_at(&self, now: Nanos) -> TopicStats {
+        match self {
+            AnyTopic::State(t) => t.stats_at(now),
+            AnyTopic::Position(t) => t.stats_at(now),
+            AnyTopic::Force(t) => t.stats_at(now),
+        }
+    }
+
+    /// The QoS in force.
+    pub fn qos(&self) -> TopicQos {
+        match self {
+            AnyTopic::State(t) => t.qos(),
+            AnyTopic::Position(t) => t.qos(),
+            AnyTopic::Force(t) => t.qos(),
+        }
+    }
+
+    /// Change the QoS while running (see [`Topic::set_qos`]).
+    pub fn set_qos(&self, qos: TopicQos) {
+        match self {
+            AnyTopic::State(t) => t.set_qos(qos),
+            AnyTopic::Position(t) => t.set_qos(qos),
+            AnyTopic::Force(t) => t.set_qos(qos),
         }
     }
 

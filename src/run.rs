@@ -3,10 +3,13 @@
 use crate::config::{ClockKind, RunConfig};
 use crate::graph::{lock, Graph, GraphHandles, StepObserver};
 use crate::metrics::{round_to, Metrics, NodeMetrics, NodeTiming, StepRecord, TopicMetrics};
+use crate::msg::AnyTopic;
 use crate::plant::{CartPole, PlantError};
 use crate::policy::{BrainSlot, Policy};
+use crate::qos::QosCounter;
 use crate::scheduler::{run_real, RealOptions, RunEnd, StopFlag, VirtualScheduler};
 use crate::time::Nanos;
+use std::collections::BTreeMap;
 use std::time::{Duration, Instant};
 
 /// A run that could not start.
@@ -57,6 +60,14 @@ pub enum Command {
         /// New depth (≥ 1).
         depth: usize,
     },
+    /// Set one topic's QoS keys (`KEY=VALUE[,KEY=VALUE…]`, the graph file's keys; see
+    /// [`crate::qos`]): the lab's `f` (delivery), `d` (deadline) and `L` (link loss).
+    SetTopicQos {
+        /// The topic's name.
+        topic: String,
+        /// The keys and values.
+        pairs: String,
+    },
     /// Swap the policy node's brain (`scripted` or a checkpoint path).
     SetPolicy {
         /// The brain spec, as `--policy` takes it.
@@ -91,6 +102,9 @@ impl Command {
             Command::SetNodeHz { node, hz } => graph.set_rate(node, *hz).map_err(|e| e.to_string()),
             Command::SetTopicDepth { topic, depth } => {
                 graph.set_depth(topic, *depth).map_err(|e| e.to_string())
+            }
+            Command::SetTopicQos { topic, pairs } => {
+                graph.set_qos(topic, pairs).map_err(|e| e.to_string())
             }
             Command::SetPolicy { spec } => {
                 policy.clone_from(spec);
@@ -137,6 +151,16 @@ impl Command {
                     .topic_id(topic)
                     .ok_or_else(|| format!("no topic '{topic}' in graph '{}'", h.spec.name))?;
                 h.topic(id).set_depth(*depth).map_err(|e| e.to_string())
+            }
+            Command::SetTopicQos { topic, pairs } => {
+                // The file's rules hold for live changes: check on the graph as it is now.
+                let mut spec = h.current_spec();
+                spec.set_qos(topic, pairs).map_err(|e| e.to_string())?;
+                let id = spec.topic_id(topic).expect("set_qos found it");
+                let t = spec.topic(id);
+                h.topic(id).set_depth(t.depth).map_err(|e| e.to_string())?;
+                h.topic(id).set_qos(t.qos);
+                Ok(())
             }
             Command::SetPolicy { spec } => {
                 let brain = crate::checkpoint::load_policy(spec).map_err(|e| e.to_string())?;
@@ -208,7 +232,13 @@ pub fn build_graph(
     let mut plant = CartPole::new()?;
     plant.reset(cfg.seed);
     Ok(Graph::build(
-        &cfg.graph, plant, brain, cfg.seed, keep_trace, observers,
+        &cfg.graph,
+        plant,
+        brain,
+        cfg.seed,
+        keep_trace,
+        observers,
+        &cfg.faults,
     )?)
 }
 
@@ -273,7 +303,7 @@ pub fn summarize(
 ) -> Metrics {
     let log = lock(&h.log);
     let spec = &cfg.graph;
-    let stats = h.topic_stats();
+    let stats = h.topic_stats_at(end.at);
     let obs = stats.get(spec.chain.obs);
     let action = stats.get(spec.chain.action);
     let sim_time = log.fell_at.unwrap_or(end.at);
@@ -298,7 +328,22 @@ pub fn summarize(
                 ticks: ticks.get(i).copied().unwrap_or(0),
                 lateness_p99_us: t.map(|t| t.lateness_p99_us),
                 lateness_max_us: t.map(|t| t.lateness_max_us),
+                liveliness_lease_ms: None,
+                not_alive: None,
+                faulted_ticks: None,
             };
+            let mut m = m;
+            if let Some(live) = h.liveliness.get(i) {
+                let status = live.status_at(end.at);
+                let lease = n.liveliness_lease.or(live.lease());
+                m.liveliness_lease_ms = lease.map(Nanos::as_millis_f64);
+                m.not_alive = lease.map(|_| status.not_alive);
+                m.faulted_ticks = cfg
+                    .faults
+                    .iter()
+                    .any(|f| f.node == n.name)
+                    .then_some(status.faulted_ticks);
+            }
             (n.name.clone(), m)
         })
         .collect();
@@ -306,7 +351,8 @@ pub fn summarize(
         .topics
         .iter()
         .zip(stats.as_slice())
-        .map(|(t, s)| {
+        .enumerate()
+        .map(|(i, (t, s))| {
             let m = TopicMetrics {
                 msg: t.msg.as_str().to_string(),
                 publisher: spec.node(t.publisher).name.clone(),
@@ -316,7 +362,18 @@ pub fn summarize(
                 dropped: s.dropped,
                 stale_reads: s.stale_reads,
                 msg_per_s: per_s(s.published),
+                qos: None,
+                qos_counters: BTreeMap::new(),
             };
+            let mut m = m;
+            let now_qos = h.topics.get(i).map_or(t.qos, AnyTopic::qos);
+            if !(t.qos.is_default() && now_qos.is_default()) {
+                m.qos = Some(now_qos.short(s.depth));
+            }
+            m.qos_counters = QosCounter::reported(&[t.qos, now_qos], s)
+                .into_iter()
+                .map(|c| (c.key().to_string(), c.value(s)))
+                .collect();
             (t.name.clone(), m)
         })
         .collect();
@@ -327,7 +384,8 @@ pub fn summarize(
         _ => None,
     };
     Metrics {
-        balanced: log.fell_at.is_none() && node_failed.is_none(),
+        balanced: log.fell_at.is_none() && node_failed.is_none() && log.watchdog.is_none(),
+        stopped_by_watchdog: log.watchdog.as_ref().map(ToString::to_string),
         clock: cfg.clock.as_str().to_string(),
         control_hz: cfg.control_hz(),
         sensor_hz: cfg.sensor_hz(),

@@ -6,14 +6,16 @@
 //! ratelab keeps time as whole nanoseconds since the start of a run, so `k * period`
 //! is exact and ties are real ties, broken only by node priority.
 
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use std::fmt;
 use std::ops::{Add, AddAssign, Sub};
 
 /// A point in run time or a span of time, in whole nanoseconds (`u64`: about 584 years).
 ///
 /// `Display` scales to the most readable unit: `850 ns`, `12.5 µs`, `20 ms`, `1.5 s`.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize)]
+#[derive(
+    Clone, Copy, Debug, Default, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize,
+)]
 pub struct Nanos(pub u64);
 
 impl Nanos {

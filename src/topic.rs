@@ -4,11 +4,23 @@
 //! messages (its history depth, in QoS terms). Publishing into a full buffer evicts the
 //! oldest message; that eviction is a **drop** exactly when the evicted message was never
 //! read, i.e. its `seq` is above the read high-water mark. Reading with
-//! [`Topic::latest`] returns the newest message and moves the high-water mark past
+//! [`Topic::read`] returns the newest message and moves the high-water mark past
 //! everything buffered: a latest-wins subscriber that caught up skips the backlog.
 //! The drop counter is how a rate mismatch becomes visible.
+//!
+//! A topic also carries its [`TopicQos`] ([`crate::qos`]): keep-all history with a cap
+//! (a publish into a cap full of unread messages is *refused*), FIFO delivery (a read takes
+//! the oldest unread message), a lifespan (a message older than it is discarded, *expired*,
+//! before a read can return it), a deadline (misses counted per period on the publisher's
+//! side, *offered*, and on the subscriber's, *requested*) and a seeded lossy link (messages
+//! in flight for `delay ± jitter`; a best-effort link *loses* some, a reliable one
+//! *retransmits* them). Time enters through the `now` every operation takes, so under the
+//! virtual clock all of it is deterministic. Every message published is accounted for:
+//! `published = seen + dropped + expired + lost + refused + unseen buffered + in flight`.
 
+use crate::qos::{Delivery, History, Link, Reliability, TopicQos, MAX_ATTEMPTS};
 use crate::time::Nanos;
+use rand_distr::{Bernoulli, Distribution, Uniform};
 use std::collections::VecDeque;
 use std::sync::{Mutex, MutexGuard};
 
@@ -34,7 +46,7 @@ pub struct TopicStats {
     /// Messages evicted from a full buffer before any read caught up with them.
     pub dropped: u64,
     /// Messages a subscriber has read or read past (a latest-wins read marks everything
-    /// buffered as seen). Every message is seen, dropped, or still buffered unseen.
+    /// buffered as seen).
     pub seen: u64,
     /// Reads that returned a message the subscriber had already read: nothing new arrived
     /// since its last read (a publisher slower than its subscriber). The mirror image of a
@@ -44,8 +56,24 @@ pub struct TopicStats {
     /// [`TopicStats::published`] at two instants it gives the exact rate of the messages
     /// published between them: `Δpublished / Δlast_stamp`.
     pub last_stamp: Nanos,
-    /// The current history depth (buffer bound), ≥ 1.
+    /// The current history depth (keep-last depth or keep-all cap), ≥ 1.
     pub depth: usize,
+    /// Unread messages discarded because they outlived the lifespan.
+    pub expired: u64,
+    /// Publishes refused by a keep-all queue full of unread messages.
+    pub refused: u64,
+    /// Messages the link lost (best effort), or gave up on after [`MAX_ATTEMPTS`] sends.
+    pub lost: u64,
+    /// Extra sends of a reliable link.
+    pub retransmitted: u64,
+    /// Messages on the link, not yet arrived.
+    pub in_flight: u64,
+    /// Deadline periods the publisher let pass without publishing (ROS 2's *offered
+    /// deadline missed*): a gap of `g` between messages misses `⌈g / deadline⌉ − 1`.
+    pub offered_deadline_missed: u64,
+    /// Deadline periods that passed with no message arriving at the subscriber (ROS 2's
+    /// *requested deadline missed*); beyond the offered ones, a link's losses and delays.
+    pub requested_deadline_missed: u64,
 }
 
 /// Why a depth cannot be set.
@@ -53,9 +81,31 @@ pub struct TopicStats {
 #[error("queue depth must be at least 1")]
 pub struct ZeroDepth;
 
+/// Deadline periods missed in a gap of `gap` between two messages (or between the last one
+/// and an observation): a deadline timer restarted at each message fires at every whole
+/// `deadline` strictly inside the gap, so a message exactly on the deadline is on time.
+pub fn deadline_misses(gap: Nanos, deadline: Nanos) -> u64 {
+    if gap.0 == 0 || deadline.0 == 0 {
+        0
+    } else {
+        (gap.0 - 1) / deadline.0
+    }
+}
+
+struct LinkState {
+    rng: rand_pcg::Pcg64,
+    /// The newest arrival time scheduled: a message never overtakes an earlier one.
+    last_arrival: Nanos,
+}
+
 struct Inner<T> {
     buf: VecDeque<Message<T>>,
+    /// Messages on the link with their arrival times (non-decreasing).
+    in_flight: VecDeque<(Nanos, Message<T>)>,
     depth: usize,
+    qos: TopicQos,
+    link_seed: u64,
+    link: Option<LinkState>,
     next_seq: u64,
     /// Newest `seq` a subscriber has seen; `None` before the first read.
     read_high_water: Option<u64>,
@@ -63,16 +113,124 @@ struct Inner<T> {
     dropped: u64,
     seen: u64,
     stale_reads: u64,
+    expired: u64,
+    refused: u64,
+    lost: u64,
+    retransmitted: u64,
+    offered_missed: u64,
+    requested_missed: u64,
     last_stamp: Nanos,
+    /// When the publisher last published (the offered deadline's timer; 0 at the start).
+    last_publish: Nanos,
+    /// When a message last arrived at the subscriber (the requested deadline's timer).
+    last_arrival: Nanos,
+    /// The latest `now` any operation brought.
+    now: Nanos,
 }
 
 impl<T> Inner<T> {
+    fn unseen(&self, seq: u64) -> bool {
+        self.read_high_water.is_none_or(|hw| seq > hw)
+    }
+
+    /// Index of the first unseen buffered message (buffers are in `seq` order).
+    fn first_unseen(&self) -> usize {
+        match self.read_high_water {
+            None => 0,
+            Some(hw) => self.buf.partition_point(|m| m.seq <= hw),
+        }
+    }
+
     fn evict_oldest(&mut self) {
         if let Some(old) = self.buf.pop_front() {
-            if self.read_high_water.is_none_or(|hw| old.seq > hw) {
+            if self.unseen(old.seq) {
                 self.dropped += 1;
             }
         }
+    }
+
+    /// A message reaches the subscriber's queue at `at`, under the history rule.
+    fn arrive(&mut self, at: Nanos, msg: Message<T>) {
+        if let Some(d) = self.qos.deadline {
+            self.requested_missed += deadline_misses(at.saturating_sub(self.last_arrival), d);
+        }
+        self.last_arrival = self.last_arrival.max(at);
+        match self.qos.history {
+            History::KeepLast => {
+                if self.buf.len() >= self.depth {
+                    self.evict_oldest();
+                }
+            }
+            History::KeepAll => {
+                // Read messages make room; unread ones are never discarded.
+                while self.buf.len() >= self.depth
+                    && self.buf.front().is_some_and(|m| !self.unseen(m.seq))
+                {
+                    self.buf.pop_front();
+                }
+                if self.buf.len() >= self.depth {
+                    self.refused += 1;
+                    return;
+                }
+            }
+        }
+        self.buf.push_back(msg);
+    }
+
+    /// Bring the topic to `now`: deliver what the link has carried by then, discard what
+    /// has outlived the lifespan.
+    fn settle(&mut self, now: Nanos) {
+        self.now = self.now.max(now);
+        while self.in_flight.front().is_some_and(|(at, _)| *at <= now) {
+            if let Some((at, msg)) = self.in_flight.pop_front() {
+                self.arrive(at, msg);
+            }
+        }
+        if let Some(life) = self.qos.lifespan {
+            while self
+                .buf
+                .front()
+                .is_some_and(|m| now.saturating_sub(m.stamp) > life)
+            {
+                if let Some(old) = self.buf.pop_front() {
+                    if self.unseen(old.seq) {
+                        self.expired += 1;
+                    }
+                }
+            }
+        }
+    }
+
+    /// Send `msg` over `link`: `None` when it is lost, else its arrival time.
+    fn send(&mut self, link: Link, stamp: Nanos) -> Option<Nanos> {
+        let reliable = self.qos.reliability == Reliability::Reliable;
+        let seed = self.link_seed;
+        let st = self.link.get_or_insert_with(|| LinkState {
+            rng: rand_pcg::Pcg64::new(u128::from(seed), 0x6c69_6e6b), // "link"
+            last_arrival: Nanos::ZERO,
+        });
+        let lose = Bernoulli::new(link.loss.clamp(0.0, 1.0)).ok()?;
+        let mut sent_at = stamp;
+        let mut attempts = 1;
+        while lose.sample(&mut st.rng) {
+            if !reliable || attempts >= MAX_ATTEMPTS {
+                self.lost += 1;
+                return None;
+            }
+            attempts += 1;
+            self.retransmitted += 1;
+            sent_at = sent_at.saturating_add(link.retransmit);
+        }
+        let j = i64::try_from(link.jitter.0).unwrap_or(i64::MAX);
+        let offset = if j > 0 {
+            Uniform::new_inclusive(-j, j).map_or(0, |u| u.sample(&mut st.rng))
+        } else {
+            0
+        };
+        let delay = Nanos(link.delay.0.saturating_add_signed(offset));
+        let at = sent_at.saturating_add(delay).max(st.last_arrival);
+        st.last_arrival = at;
+        Some(at)
     }
 }
 
@@ -84,11 +242,26 @@ pub struct Topic<T> {
 }
 
 impl<T: Clone> Topic<T> {
-    /// A topic named `name` (by convention `/obs`, `/action`) holding at most `depth` messages.
+    /// A topic named `name` (by convention `/obs`, `/action`) holding at most `depth`
+    /// messages, with the chapter's QoS (keep-last, latest, nothing else).
     ///
     /// # Errors
     /// [`ZeroDepth`] when `depth` is 0.
     pub fn new(name: impl Into<String>, depth: usize) -> Result<Self, ZeroDepth> {
+        Self::with_qos(name, depth, TopicQos::default(), 0)
+    }
+
+    /// A topic with `qos`; `link_seed` seeds its link's losses and jitter (same seed, same
+    /// fates: a virtual run with a lossy link stays byte-identical).
+    ///
+    /// # Errors
+    /// [`ZeroDepth`] when `depth` is 0.
+    pub fn with_qos(
+        name: impl Into<String>,
+        depth: usize,
+        qos: TopicQos,
+        link_seed: u64,
+    ) -> Result<Self, ZeroDepth> {
         if depth == 0 {
             return Err(ZeroDepth);
         }
@@ -96,14 +269,27 @@ impl<T: Clone> Topic<T> {
             name: name.into(),
             inner: Mutex::new(Inner {
                 buf: VecDeque::with_capacity(depth.min(1024)),
+                in_flight: VecDeque::new(),
                 depth,
+                qos,
+                link_seed,
+                link: None,
                 next_seq: 0,
                 read_high_water: None,
                 published: 0,
                 dropped: 0,
                 seen: 0,
                 stale_reads: 0,
+                expired: 0,
+                refused: 0,
+                lost: 0,
+                retransmitted: 0,
+                offered_missed: 0,
+                requested_missed: 0,
                 last_stamp: Nanos::ZERO,
+                last_publish: Nanos::ZERO,
+                last_arrival: Nanos::ZERO,
+                now: Nanos::ZERO,
             }),
         })
     }
@@ -119,46 +305,63 @@ impl<T: Clone> Topic<T> {
         self.inner.lock().unwrap_or_else(|e| e.into_inner())
     }
 
-    /// Append a message stamped `stamp`, evicting (and maybe dropping) the oldest when full.
+    /// Publish a message at run time `stamp` (the publisher's now). Without a link it
+    /// reaches the queue at once, evicting (and maybe dropping) the oldest when full, or
+    /// refused by a full keep-all queue; over a link it arrives later or is lost.
     /// Returns the new message's `seq`.
     pub fn publish(&self, data: T, stamp: Nanos, origin_stamp: Option<Nanos>) -> u64 {
         let mut inner = self.lock();
-        if inner.buf.len() >= inner.depth {
-            inner.evict_oldest();
+        inner.settle(stamp);
+        if let Some(d) = inner.qos.deadline {
+            inner.offered_missed += deadline_misses(stamp.saturating_sub(inner.last_publish), d);
         }
+        inner.last_publish = inner.last_publish.max(stamp);
         let seq = inner.next_seq;
         inner.next_seq += 1;
-        inner.buf.push_back(Message {
+        inner.published += 1;
+        inner.last_stamp = stamp;
+        let msg = Message {
             data,
             stamp,
             seq,
             origin_stamp,
-        });
-        inner.published += 1;
-        inner.last_stamp = stamp;
+        };
+        match inner.qos.link {
+            None => inner.arrive(stamp, msg),
+            Some(link) => match inner.send(link, stamp) {
+                None => {}
+                Some(at) if at <= stamp && inner.in_flight.is_empty() => inner.arrive(stamp, msg),
+                Some(at) => inner.in_flight.push_back((at, msg)),
+            },
+        }
         seq
     }
 
-    /// The newest message, or `None` if nothing has been published yet. Advances the
-    /// read high-water mark past everything buffered.
-    pub fn latest(&self) -> Option<Message<T>> {
+    /// Read at run time `now`, by the topic's delivery: the newest message (latest; moves
+    /// the read high-water mark past everything buffered) or the oldest unread one (FIFO).
+    /// With nothing new it returns the last message read again (a *stale read*); `None`
+    /// when nothing is buffered (nothing published yet, or all of it expired).
+    pub fn read(&self, now: Nanos) -> Option<Message<T>> {
         let mut inner = self.lock();
-        let newest = inner.buf.back()?.clone();
-        let hw = inner.read_high_water;
-        if hw.is_some_and(|hw| newest.seq <= hw) {
-            inner.stale_reads += 1;
-        }
-        // Seqs are consecutive in the buffer: the unseen ones are the newest `newest − hw`.
-        let unseen = hw
-            .map_or(inner.buf.len() as u64, |hw| newest.seq.saturating_sub(hw))
-            .min(inner.buf.len() as u64);
-        inner.seen += unseen;
-        inner.read_high_water = Some(
-            inner
-                .read_high_water
-                .map_or(newest.seq, |hw| hw.max(newest.seq)),
-        );
-        Some(newest)
+        inner.settle(now);
+        let first_unseen = inner.first_unseen();
+        let pick = match inner.qos.delivery {
+            _ if first_unseen >= inner.buf.len() => {
+                inner.stale_reads += u64::from(!inner.buf.is_empty());
+                return inner.buf.back().cloned();
+            }
+            Delivery::Latest => {
+                inner.seen += (inner.buf.len() - first_unseen) as u64;
+                inner.buf.len() - 1
+            }
+            Delivery::Fifo => {
+                inner.seen += 1;
+                first_unseen
+            }
+        };
+        let msg = inner.buf[pick].clone();
+        inner.read_high_water = Some(inner.read_high_water.map_or(msg.seq, |hw| hw.max(msg.seq)));
+        Some(msg)
     }
 
     /// Change the history depth while running. Shrinking keeps the newest messages and
@@ -178,9 +381,39 @@ impl<T: Clone> Topic<T> {
         Ok(())
     }
 
-    /// Counters and depth, read together under one lock.
+    /// The QoS in force.
+    pub fn qos(&self) -> TopicQos {
+        self.lock().qos
+    }
+
+    /// Change the QoS while running (the lab's keys). Messages already on the link keep
+    /// their arrival times; the deadline timers keep running from the last message.
+    pub fn set_qos(&self, qos: TopicQos) {
+        self.lock().qos = qos;
+    }
+
+    /// Counters and depth as of the topic's latest operation.
     pub fn stats(&self) -> TopicStats {
+        let now = self.lock().now;
+        self.stats_at(now)
+    }
+
+    /// Counters and depth at run time `now`, read together under one lock, without changing
+    /// the topic: deadline periods missed up to `now` count even before the next message
+    /// (ROS 2's deadline timer fires without one).
+    pub fn stats_at(&self, now: Nanos) -> TopicStats {
         let inner = self.lock();
+        let (mut offered, mut requested) = (inner.offered_missed, inner.requested_missed);
+        if let Some(d) = inner.qos.deadline {
+            offered += deadline_misses(now.saturating_sub(inner.last_publish), d);
+            // Arrivals due by `now` that no operation has delivered yet still reset the timer.
+            let mut last = inner.last_arrival;
+            for (at, _) in inner.in_flight.iter().take_while(|(at, _)| *at <= now) {
+                requested += deadline_misses(at.saturating_sub(last), d);
+                last = last.max(*at);
+            }
+            requested += deadline_misses(now.saturating_sub(last), d);
+        }
         TopicStats {
             published: inner.published,
             dropped: inner.dropped,
@@ -188,17 +421,26 @@ impl<T: Clone> Topic<T> {
             stale_reads: inner.stale_reads,
             last_stamp: inner.last_stamp,
             depth: inner.depth,
+            expired: inner.expired,
+            refused: inner.refused,
+            lost: inner.lost,
+            retransmitted: inner.retransmitted,
+            in_flight: inner.in_flight.len() as u64,
+            offered_deadline_missed: offered,
+            requested_deadline_missed: requested,
         }
+    }
+
+    /// When the last message arrived at the subscriber (0 before the first), for a deadline
+    /// reaction: the actuator compares it with its deadline.
+    pub fn last_arrival(&self) -> Nanos {
+        self.lock().last_arrival
     }
 
     /// Buffered messages no subscriber has seen yet.
     pub fn unseen_buffered(&self) -> usize {
         let inner = self.lock();
-        inner
-            .buf
-            .iter()
-            .filter(|m| inner.read_high_water.is_none_or(|hw| m.seq > hw))
-            .count()
+        inner.buf.len() - inner.first_unseen()
     }
 
     /// Messages currently buffered (≤ depth).
@@ -236,6 +478,10 @@ impl<T> std::fmt::Debug for Topic<T> {
 mod tests {
     use super::*;
 
+    /// The tests of the chapter's rule read at any time: without lifespan or link, time
+    /// does not matter.
+    const NOW: Nanos = Nanos(1_000);
+
     fn t(depth: usize) -> Topic<u32> {
         Topic::new("/t", depth).unwrap()
     }
@@ -247,7 +493,7 @@ mod tests {
         topic.publish(1, Nanos(1), None); // 0 evicted unread
         topic.publish(2, Nanos(2), None); // 1 evicted unread
         assert_eq!(topic.stats().dropped, 2);
-        assert_eq!(topic.latest().unwrap().data, 2);
+        assert_eq!(topic.read(NOW).unwrap().data, 2);
         topic.publish(3, Nanos(3), None); // 2 was read: not a drop
         assert_eq!(topic.stats().dropped, 2);
         assert_eq!(topic.stats().published, 4);
@@ -268,7 +514,7 @@ mod tests {
 
     #[test]
     fn nothing_published_reads_none() {
-        assert!(t(3).latest().is_none());
+        assert!(t(3).read(NOW).is_none());
         assert_eq!(t(3).stats().dropped, 0);
     }
 
@@ -282,7 +528,7 @@ mod tests {
         topic.publish(3, Nanos(3), None); // evicts 0, unread
         assert_eq!(topic.stats().dropped, 1);
         // Reading the newest marks everything buffered as seen.
-        assert_eq!(topic.latest().unwrap().seq, 3);
+        assert_eq!(topic.read(NOW).unwrap().seq, 3);
         for i in 4..7 {
             topic.publish(i, Nanos(i as u64), None); // evicts 1, 2, 3: all seen
         }
@@ -296,7 +542,7 @@ mod tests {
         let topic = t(1);
         for i in 0..100 {
             topic.publish(i, Nanos(i as u64), None);
-            assert_eq!(topic.latest().unwrap().data, i);
+            assert_eq!(topic.read(NOW).unwrap().data, i);
         }
         assert_eq!(
             topic.stats(),
@@ -306,7 +552,8 @@ mod tests {
                 seen: 100,
                 stale_reads: 0,
                 last_stamp: Nanos(99),
-                depth: 1
+                depth: 1,
+                ..TopicStats::default()
             }
         );
     }
@@ -320,7 +567,7 @@ mod tests {
         topic.set_depth(2).unwrap(); // evicts 0, 1, 2 unread
         assert_eq!(topic.stats().dropped, 3);
         assert_eq!(topic.buffered(), 2);
-        assert_eq!(topic.latest().unwrap().data, 4);
+        assert_eq!(topic.read(NOW).unwrap().data, 4);
         topic.set_depth(1).unwrap(); // evicts 3: it was below the high-water mark (read past)
         assert_eq!(topic.stats().dropped, 3);
         // Growing keeps everything and the rule stays exact.
@@ -340,7 +587,7 @@ mod tests {
     fn stale_reads_are_the_mirror_of_drops() {
         // A publisher at a fifth of the subscriber's rate: each message is read five times.
         let topic = t(1);
-        assert!(topic.latest().is_none());
+        assert!(topic.read(NOW).is_none());
         assert_eq!(
             topic.stats().stale_reads,
             0,
@@ -349,7 +596,7 @@ mod tests {
         for i in 0..3 {
             topic.publish(i, Nanos(u64::from(i) * 5), None);
             for _ in 0..5 {
-                assert_eq!(topic.latest().unwrap().data, i);
+                assert_eq!(topic.read(NOW).unwrap().data, i);
             }
         }
         let s = topic.stats();
@@ -372,14 +619,14 @@ mod tests {
             topic.publish(i, Nanos(u64::from(i)), None);
             account(&topic);
         }
-        topic.latest(); // sees 2, 3, 4
+        topic.read(NOW); // sees 2, 3, 4
         assert_eq!(topic.stats().seen, 3);
         account(&topic);
         topic.publish(5, Nanos(5), None);
         topic.set_depth(1).unwrap(); // evicts 3, 4 (seen)
         account(&topic);
-        topic.latest();
-        topic.latest(); // nothing new to see
+        topic.read(NOW);
+        topic.read(NOW); // nothing new to see
         assert_eq!(topic.stats().seen, 4);
         account(&topic);
     }
@@ -388,10 +635,255 @@ mod tests {
     fn messages_carry_stamps_and_origin() {
         let topic = t(2);
         topic.publish(9, Nanos(40), Some(Nanos(20)));
-        let m = topic.latest().unwrap();
+        let m = topic.read(NOW).unwrap();
         assert_eq!(
             (m.stamp, m.seq, m.origin_stamp),
             (Nanos(40), 0, Some(Nanos(20)))
         );
+    }
+
+    // ---- QoS ----------------------------------------------------------------------------
+
+    use crate::qos::{apply_key, split_pairs};
+
+    fn q(depth: usize, pairs: &str) -> Topic<u32> {
+        let mut qos = TopicQos::default();
+        let mut d = depth;
+        for (k, v) in split_pairs(pairs).unwrap() {
+            apply_key(&mut qos, &mut d, k, v).unwrap();
+        }
+        Topic::with_qos("/q", d, qos, 7).unwrap()
+    }
+
+    fn ms(v: u64) -> Nanos {
+        Nanos::from_millis(v)
+    }
+
+    /// published = seen + dropped + expired + lost + refused + unseen buffered + in flight.
+    fn accounted(t: &Topic<u32>) {
+        let s = t.stats();
+        assert_eq!(
+            s.published,
+            s.seen
+                + s.dropped
+                + s.expired
+                + s.lost
+                + s.refused
+                + t.unseen_buffered() as u64
+                + s.in_flight,
+            "{s:?}"
+        );
+    }
+
+    #[test]
+    fn fifo_hands_out_the_oldest_unread_one_at_a_time() {
+        let topic = q(100, "delivery=fifo");
+        for i in 0..5 {
+            topic.publish(i, ms(u64::from(i) * 20), Some(ms(u64::from(i) * 20)));
+        }
+        let got: Vec<u32> = (0..5).map(|_| topic.read(ms(100)).unwrap().data).collect();
+        assert_eq!(got, [0, 1, 2, 3, 4]);
+        let s = topic.stats();
+        assert_eq!((s.seen, s.dropped, s.stale_reads), (5, 0, 0));
+        assert_eq!(
+            topic.read(ms(100)).unwrap().data,
+            4,
+            "nothing new: the last one again"
+        );
+        assert_eq!(topic.stats().stale_reads, 1);
+        accounted(&topic);
+    }
+
+    #[test]
+    fn fifo_behind_a_fast_publisher_falls_ever_further_behind() {
+        // The stale queue: 50 Hz in, 10 Hz out, depth 100. No drop until the queue is full,
+        // and the age of what is read grows by 80 ms every read.
+        let topic = q(100, "delivery=fifo");
+        let mut ages = Vec::new();
+        for step in 0..50u64 {
+            let now = ms(step * 20);
+            topic.publish(0, now, Some(now));
+            if step % 5 == 0 {
+                let m = topic.read(now).unwrap();
+                ages.push((now - m.origin_stamp.unwrap()).0 / 1_000_000);
+            }
+        }
+        assert_eq!(ages, [0, 80, 160, 240, 320, 400, 480, 560, 640, 720]);
+        assert_eq!(topic.stats().dropped, 0);
+        // The same stream under latest: the age of what is read stays 0; 4 of 5 skipped.
+        let latest = q(100, "delivery=latest");
+        for step in 0..50u64 {
+            let now = ms(step * 20);
+            latest.publish(0, now, Some(now));
+            if step % 5 == 0 {
+                assert_eq!(latest.read(now).unwrap().origin_stamp, Some(now));
+            }
+        }
+        accounted(&topic);
+        accounted(&latest);
+    }
+
+    #[test]
+    fn keep_all_refuses_into_a_cap_full_of_unread_and_makes_room_from_read_ones() {
+        let topic = q(3, "history=keep_all,delivery=fifo");
+        for i in 0..5 {
+            topic.publish(i, ms(u64::from(i)), None);
+        }
+        let s = topic.stats();
+        assert_eq!(
+            (s.refused, s.dropped),
+            (2, 0),
+            "3 and 4 refused, nothing lost silently"
+        );
+        assert_eq!(topic.read(ms(5)).unwrap().data, 0);
+        topic.publish(5, ms(5), None); // 0 was read: it makes room
+        assert_eq!(topic.stats().refused, 2);
+        let rest: Vec<u32> = (0..3).map(|_| topic.read(ms(6)).unwrap().data).collect();
+        assert_eq!(rest, [1, 2, 5]);
+        accounted(&topic);
+        // Under latest a read reads past everything, so everything makes room.
+        let latest = q(2, "history=keep_all");
+        for i in 0..4 {
+            latest.publish(i, ms(u64::from(i)), None);
+            latest.read(ms(u64::from(i)));
+        }
+        assert_eq!(latest.stats().refused, 0);
+        accounted(&latest);
+    }
+
+    #[test]
+    fn lifespan_expires_unread_messages_and_leaves_nothing_stale_to_read() {
+        let topic = q(10, "lifespan_ms=50");
+        topic.publish(0, ms(0), None);
+        topic.publish(1, ms(20), None);
+        assert_eq!(
+            topic.read(ms(60)).unwrap().data,
+            1,
+            "0 is 60 ms old: expired"
+        );
+        let s = topic.stats();
+        assert_eq!((s.expired, s.seen), (1, 1));
+        assert_eq!(
+            topic.read(ms(70)).unwrap().data,
+            1,
+            "exactly 50 ms old still lives"
+        );
+        assert_eq!(topic.stats().stale_reads, 1);
+        assert!(
+            topic.read(ms(71)).is_none(),
+            "read and then outlived: gone, not a stale read"
+        );
+        let s = topic.stats();
+        assert_eq!(
+            (s.expired, s.stale_reads),
+            (1, 1),
+            "it had been read: not counted expired"
+        );
+        accounted(&topic);
+    }
+
+    #[test]
+    fn deadline_misses_count_per_period_on_both_sides() {
+        assert_eq!(
+            deadline_misses(ms(40), ms(40)),
+            0,
+            "on the deadline is on time"
+        );
+        assert_eq!(deadline_misses(ms(41), ms(40)), 1);
+        assert_eq!(deadline_misses(ms(100), ms(40)), 2);
+        assert_eq!(deadline_misses(ms(120), ms(40)), 2);
+        assert_eq!(deadline_misses(Nanos(0), ms(40)), 0);
+        let topic = q(1, "deadline_ms=40");
+        topic.publish(0, ms(0), None);
+        topic.publish(1, ms(100), None); // a 100 ms gap: 2 periods missed
+        let s = topic.stats();
+        assert_eq!(
+            (s.offered_deadline_missed, s.requested_deadline_missed),
+            (2, 2)
+        );
+        // Observed before the next message: the timer has fired already.
+        let s = topic.stats_at(ms(181));
+        assert_eq!(
+            (s.offered_deadline_missed, s.requested_deadline_missed),
+            (4, 4)
+        );
+        topic.publish(2, ms(190), None); // the 90 ms gap missed 2: the same 4, committed
+        assert_eq!(topic.stats().offered_deadline_missed, 4);
+        // A live change: no deadline, no count.
+        assert_eq!(
+            q(1, "depth=1").stats_at(ms(1000)).offered_deadline_missed,
+            0
+        );
+    }
+
+    #[test]
+    fn a_link_delays_and_keeps_order() {
+        let topic = q(10, "delay_ms=10,jitter_ms=5");
+        topic.publish(0, ms(0), None);
+        assert!(topic.read(ms(4)).is_none(), "nothing arrives before 5 ms");
+        assert_eq!(topic.stats().in_flight, 1);
+        assert!(topic.read(ms(15)).is_some(), "everything arrives by 15 ms");
+        assert_eq!(topic.stats().in_flight, 0);
+        let mut last = None;
+        let fifo = q(100, "delay_ms=10,jitter_ms=5,delivery=fifo");
+        for i in 0..20u64 {
+            fifo.publish(i as u32, ms(i * 2), None);
+        }
+        while let Some(m) = fifo.read(ms(100)) {
+            if last == Some(m.seq) {
+                break;
+            }
+            assert!(last.is_none_or(|l| m.seq > l), "in order");
+            last = Some(m.seq);
+        }
+        assert_eq!(last, Some(19));
+        accounted(&topic);
+        accounted(&fifo);
+    }
+
+    #[test]
+    fn best_effort_loses_and_reliable_retransmits() {
+        let be = q(1000, "loss=0.2,delivery=fifo");
+        let rel = q(
+            1000,
+            "loss=0.2,reliability=reliable,delivery=fifo,delay_ms=1",
+        );
+        for i in 0..1000u64 {
+            be.publish(0, ms(i), None);
+            rel.publish(0, ms(i), None);
+        }
+        let (b, r) = (be.stats(), rel.stats_at(ms(2000)));
+        assert!((150..250).contains(&b.lost), "about 20% of 1000: {b:?}");
+        assert_eq!(b.retransmitted, 0);
+        assert_eq!(r.lost, 0);
+        assert!(
+            (200..300).contains(&r.retransmitted),
+            "about 0.25 per message: {r:?}"
+        );
+        rel.read(ms(2000)); // everything has arrived by now
+        assert_eq!(rel.stats().in_flight, 0);
+        accounted(&be);
+        accounted(&rel);
+        // Same seed, same fates.
+        let again = q(1000, "loss=0.2,delivery=fifo");
+        for i in 0..1000u64 {
+            again.publish(0, ms(i), None);
+        }
+        assert_eq!(again.stats(), be.stats());
+    }
+
+    #[test]
+    fn a_lost_message_misses_the_requested_deadline_not_the_offered_one() {
+        let topic = q(1, "loss=0.5,deadline_ms=25");
+        for i in 0..200u64 {
+            topic.publish(0, ms(i * 20), None);
+        }
+        let s = topic.stats();
+        assert_eq!(
+            s.offered_deadline_missed, 0,
+            "the publisher kept its 20 ms period"
+        );
+        assert!(s.requested_deadline_missed > 20, "{s:?}");
+        assert!(s.lost > 50);
     }
 }

@@ -145,7 +145,7 @@ impl App {
             recording: None,
         });
         for s in steps.lock().unwrap_or_else(|e| e.into_inner()).iter() {
-            app.on_telemetry(Telemetry::Step(*s));
+            app.on_telemetry(Telemetry::Step(Box::new(*s)));
         }
         if ended {
             app.on_telemetry(Telemetry::Ended {
@@ -204,6 +204,7 @@ impl App {
                 self.verdict = Verdict::Balanced;
             }
             Telemetry::Step(s) => {
+                let s = *s;
                 self.now = self.now.max(s.t);
                 if let Some(l) = s.latency {
                     self.latency.record(l);

@@ -15,6 +15,7 @@ use crate::msg::AnyTopic;
 use crate::node::Node;
 use crate::plant::CartPole;
 use crate::policy::BrainSlot;
+use crate::qos::{Fault, Liveliness};
 use crate::rate::{InvalidRate, Rate};
 use crate::topic::ZeroDepth;
 use nodes::{Actuator, GraphNode, NodeCore, Sensor, SensorNoise, SensorOutput, Work};
@@ -54,6 +55,8 @@ pub struct GraphHandles {
     pub plant: SharedPlant,
     /// What the actuator measured.
     pub log: Arc<Mutex<RunLog>>,
+    /// Each node's liveliness, by [`NodeId`].
+    pub liveliness: Vec<Arc<Liveliness>>,
 }
 
 impl GraphHandles {
@@ -77,9 +80,14 @@ impl GraphHandles {
         &self.topics[id.0]
     }
 
-    /// Every topic's counters now, by [`TopicId`].
+    /// Every topic's counters as of their latest operations, by [`TopicId`].
     pub fn topic_stats(&self) -> TopicCounters {
         self.topics.iter().map(AnyTopic::stats).collect()
+    }
+
+    /// Every topic's counters at run time `now`, by [`TopicId`].
+    pub fn topic_stats_at(&self, now: crate::time::Nanos) -> TopicCounters {
+        self.topics.iter().map(|t| t.stats_at(now)).collect()
     }
 
     /// Every node's current rate, Hz, by [`NodeId`].
@@ -109,6 +117,10 @@ impl GraphHandles {
         }
         for (t, h) in spec.topics.iter_mut().zip(&self.topics) {
             t.depth = h.stats().depth;
+            t.qos = h.qos();
+        }
+        for (n, l) in spec.nodes.iter_mut().zip(&self.liveliness) {
+            n.liveliness_lease = l.lease();
         }
         spec
     }
@@ -135,8 +147,9 @@ pub enum GraphError {
 
 impl Graph {
     /// Build `spec` around `plant` (already reset). Every policy node runs `brain`; sensor
-    /// noise is seeded from `seed`. `observers` are told about every actuator tick;
-    /// `keep_trace` keeps every step record.
+    /// noise and links are seeded from `seed`. `observers` are told about every actuator
+    /// tick; `keep_trace` keeps every step record. `faults` name nodes by name (unknown
+    /// names are ignored here; [`crate::RunConfig::validate`] refuses them).
     ///
     /// # Errors
     /// [`GraphError`] for a bad rate or a zero depth (a validated spec has neither).
@@ -147,13 +160,23 @@ impl Graph {
         seed: u64,
         keep_trace: bool,
         mut observers: Vec<Box<dyn StepObserver>>,
+        faults: &[Fault],
     ) -> Result<Graph, GraphError> {
         let plant = Arc::new(Mutex::new(plant));
         let topics = spec
             .topics
             .iter()
-            .map(|t| AnyTopic::new(&t.name, t.msg, t.depth))
+            .enumerate()
+            .map(|(i, t)| {
+                let link_seed = seed.rotate_left(16) ^ (i as u64 + 1);
+                AnyTopic::with_qos(&t.name, t.msg, t.depth, t.qos, link_seed)
+            })
             .collect::<Result<Vec<_>, _>>()?;
+        let liveliness: Vec<Arc<Liveliness>> = spec
+            .nodes
+            .iter()
+            .map(|n| Arc::new(Liveliness::new(n.liveliness_lease)))
+            .collect();
         let rates = spec
             .nodes
             .iter()
@@ -167,6 +190,7 @@ impl Graph {
             brain: brain.clone(),
             plant: plant.clone(),
             log: log.clone(),
+            liveliness: liveliness.clone(),
         };
         for o in &mut observers {
             o.attach(&handles);
@@ -181,6 +205,12 @@ impl Graph {
                     name: n.name.clone(),
                     id: NodeId(i),
                     rate: rates[i].clone(),
+                    liveliness: liveliness[i].clone(),
+                    faults: faults
+                        .iter()
+                        .filter(|f| f.node == n.name)
+                        .cloned()
+                        .collect(),
                 };
                 let input = n.subscribes.map(|t| &topics[t.0]);
                 let output = n.publishes.map(|t| &topics[t.0]);

@@ -24,6 +24,7 @@ use crate::metrics::{RunLog, StepRecord};
 use crate::msg::{AnyTopic, ForceMsg, PositionMsg, StateMsg};
 use crate::node::{Flow, Node};
 use crate::policy::BrainSlot;
+use crate::qos::{Fault, Liveliness, OnDeadlineMissed};
 use crate::rate::Rate;
 use crate::time::Nanos;
 use crate::topic::Topic;
@@ -38,6 +39,10 @@ pub struct NodeCore {
     pub id: NodeId,
     /// Its rate (shared with the graph's handles).
     pub rate: Rate,
+    /// Its liveliness, asserted by every tick (shared with the graph's handles).
+    pub liveliness: Arc<Liveliness>,
+    /// Faults injected into it (`--stall`, `--kill`).
+    pub faults: Vec<Fault>,
 }
 
 /// A node of some kind around its [`NodeCore`].
@@ -165,6 +170,11 @@ impl Node for GraphNode {
         &self.core.rate
     }
     fn tick(&mut self, now: Nanos) -> Flow {
+        if self.core.faults.iter().any(|f| f.covers(now)) {
+            self.core.liveliness.fault_tick();
+            return Flow::Continue; // stalled or killed: no work, no liveliness
+        }
+        self.core.liveliness.assert_at(now);
         match &mut self.work {
             Work::Sensor(s) => {
                 let state = lock(&s.plant).state();
@@ -201,7 +211,7 @@ impl Node for GraphNode {
                 last_seq,
                 origin,
             } => {
-                if let Some(msg) = input.latest() {
+                if let Some(msg) = input.read(now) {
                     if *last_seq != Some(msg.seq) {
                         *last_seq = Some(msg.seq);
                         *origin = msg.origin_stamp.or(Some(msg.stamp));
@@ -216,7 +226,7 @@ impl Node for GraphNode {
                 input,
                 output,
             } => {
-                let Some(msg) = input.latest() else {
+                let Some(msg) = input.read(now) else {
                     return Flow::Continue; // nothing sensed yet
                 };
                 let action = brain.lock().act(&msg.data);
@@ -231,7 +241,7 @@ impl Node for GraphNode {
                 output,
                 max_force_n,
             } => {
-                if let Some(msg) = input.latest() {
+                if let Some(msg) = input.read(now) {
                     let newtons = msg.data.newtons.clamp(-*max_force_n, *max_force_n);
                     output.publish(ForceMsg { newtons }, now, msg.origin_stamp);
                 }
@@ -245,7 +255,7 @@ impl Node for GraphNode {
 impl Actuator {
     fn tick(&mut self, now: Nanos) -> Flow {
         let mut nonfinite = false;
-        if let Some(msg) = self.input.latest() {
+        if let Some(msg) = self.input.read(now) {
             if msg.data.newtons.is_finite() {
                 // Exact: a brain's f32 command × 10 is exact in f64, and so is ÷ 10.
                 let command = (msg.data.newtons / GEAR_N) as f32;
@@ -254,7 +264,21 @@ impl Actuator {
                 nonfinite = true; // hold the last good force instead
             }
         }
-        let (u, origin) = self.held.unwrap_or((0.0, None));
+        let (mut u, mut origin) = self.held.unwrap_or((0.0, None));
+        // The deadline reaction (QoS): no message within the deadline.
+        let qos = self.input.qos();
+        if let Some(deadline) = qos.deadline {
+            if now.saturating_sub(self.input.last_arrival()) > deadline {
+                match qos.on_deadline_missed {
+                    OnDeadlineMissed::Hold => {}
+                    OnDeadlineMissed::Zero => (u, origin) = (0.0, None),
+                    OnDeadlineMissed::Stop => {
+                        lock(&self.log).watchdog(now, self.input.name(), deadline);
+                        return Flow::Stop;
+                    }
+                }
+            }
+        }
         let (outcome, step) = {
             let mut plant = lock(&self.plant);
             let outcome = plant.step(u);
@@ -276,7 +300,7 @@ impl Actuator {
             action: outcome.applied,
             latency: origin.map(|o| now.saturating_sub(o)),
             nonfinite,
-            topics: self.topics.iter().map(AnyTopic::stats).collect(),
+            topics: self.topics.iter().map(|t| t.stats_at(now)).collect(),
             fell: outcome.terminated,
         };
         lock(&self.log).push(rec);

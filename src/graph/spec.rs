@@ -17,6 +17,9 @@
 //! name = "/obs"
 //! type = "state"           # state | position | force
 //! depth = 1                # history depth (keep-last), ≥ 1
+//! # QoS, all optional (crate::qos; ROS 2's names): history = "keep_all", delivery = "fifo",
+//! # deadline_ms = 40, lifespan_ms = 60, reliability = "reliable", on_deadline_missed = "zero",
+//! # link = { loss = 0.05, delay_ms = 10, jitter_ms = 3 }
 //! ```
 //!
 //! Rules (each broken rule is a [`SpecError`] with the line and column of the culprit):
@@ -29,7 +32,12 @@
 //!   (the chapter's topic keeps one read mark; per-subscription queues come with QoS), and
 //!   its type matches both ends;
 //! - rates in (0, 10 000] Hz; the actuator at the plant's 50 Hz (each tick steps 20 ms of
-//!   physics); depths ≥ 1; no field the format does not know.
+//!   physics); depths ≥ 1; no field the format does not know;
+//! - QoS values in range (deadline and lifespan > 0, loss in [0, 1], …) and combined
+//!   sensibly (`on_deadline_missed` only on the actuator's input and with a deadline; no
+//!   reliable link that loses everything). A deadline shorter than its publisher's period
+//!   is allowed (a rate change can make it so mid-run) but is reported by
+//!   [`GraphSpec::qos_warnings`].
 //!
 //! Tie-break among nodes due at the same instant: upstream before downstream, i.e. a
 //! topological order of the topic graph (publisher before subscriber; unordered nodes keep
@@ -40,7 +48,9 @@
 //! nodes without explicit priorities is an error.
 
 use crate::config::ACTUATOR_HZ;
+use crate::qos::{self, Delivery, History, Link, OnDeadlineMissed, Reliability, TopicQos};
 use crate::rate::{period_for_hz, MAX_HZ};
+use crate::time::Nanos;
 use serde::{Deserialize, Serialize};
 use std::fmt;
 use std::ops::Range;
@@ -165,6 +175,9 @@ pub struct NodeSpec {
     pub publishes: Option<TopicId>,
     /// Kind parameters.
     pub params: NodeParams,
+    /// Its liveliness lease: not heard from (not ticked) for longer than this, it is
+    /// reported *not alive* (ROS 2's liveliness lease duration). `None`: not monitored.
+    pub liveliness_lease: Option<Nanos>,
 }
 
 /// One topic of a validated graph.
@@ -174,8 +187,10 @@ pub struct TopicSpec {
     pub name: String,
     /// Message type.
     pub msg: MsgType,
-    /// History depth at the start of a run (keep-last), ≥ 1.
+    /// History depth at the start of a run (keep-last depth, or keep-all cap), ≥ 1.
     pub depth: usize,
+    /// The rest of its QoS at the start of a run ([`crate::qos`]).
+    pub qos: TopicQos,
     /// The one publisher.
     pub publisher: NodeId,
     /// The subscriber, if any.
@@ -264,6 +279,8 @@ struct RawNode {
     cutoff_hz: Option<Spanned<f64>>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     max_force_n: Option<Spanned<f64>>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    liveliness_lease_ms: Option<Spanned<f64>>,
 }
 
 #[derive(Deserialize, Serialize)]
@@ -273,6 +290,80 @@ struct RawTopic {
     #[serde(rename = "type")]
     msg: Spanned<MsgType>,
     depth: Spanned<i64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    history: Option<Spanned<History>>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    delivery: Option<Spanned<Delivery>>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    deadline_ms: Option<Spanned<f64>>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    lifespan_ms: Option<Spanned<f64>>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    reliability: Option<Spanned<Reliability>>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    on_deadline_missed: Option<Spanned<OnDeadlineMissed>>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    link: Option<Spanned<RawLink>>,
+}
+
+#[derive(Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+struct RawLink {
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    loss: Option<Spanned<f64>>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    delay_ms: Option<Spanned<f64>>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    jitter_ms: Option<Spanned<f64>>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    retransmit_ms: Option<Spanned<f64>>,
+}
+
+/// Milliseconds as a graph file writes them (exact for whole microseconds).
+fn nanos_ms(n: Nanos) -> f64 {
+    n.0 as f64 / 1e6
+}
+
+/// A topic's QoS from its table, each key through [`qos::apply_key`] (the `--qos` rules),
+/// errors at the key's position.
+fn topic_qos(cx: &Ctx<'_>, t: &RawTopic, depth: &mut usize) -> Result<TopicQos, SpecError> {
+    let mut q = TopicQos::default();
+    let mut set = |key: &str, value: String, span: Range<usize>| {
+        qos::apply_key(&mut q, depth, key, &value).map_err(|e| cx.err(span, e))
+    };
+    if let Some(v) = &t.deadline_ms {
+        set("deadline_ms", v.get_ref().to_string(), v.span())?;
+    }
+    if let Some(v) = &t.lifespan_ms {
+        set("lifespan_ms", v.get_ref().to_string(), v.span())?;
+    }
+    if let Some(l) = &t.link {
+        let l_ref = l.get_ref();
+        set("loss", "0".into(), l.span())?; // a link, even if every key is left out
+        for (key, v) in [
+            ("loss", &l_ref.loss),
+            ("delay_ms", &l_ref.delay_ms),
+            ("jitter_ms", &l_ref.jitter_ms),
+            ("retransmit_ms", &l_ref.retransmit_ms),
+        ] {
+            if let Some(v) = v {
+                set(key, v.get_ref().to_string(), v.span())?;
+            }
+        }
+    }
+    if let Some(v) = &t.history {
+        q.history = *v.get_ref();
+    }
+    if let Some(v) = &t.delivery {
+        q.delivery = *v.get_ref();
+    }
+    if let Some(v) = &t.reliability {
+        q.reliability = *v.get_ref();
+    }
+    if let Some(v) = &t.on_deadline_missed {
+        q.on_deadline_missed = *v.get_ref();
+    }
+    Ok(q)
 }
 
 /// Byte offset → 1-based (line, column in characters).
@@ -397,6 +488,7 @@ impl GraphSpec {
                                 .then(|| f(p.noise_angle_rad)),
                             cutoff_hz: (n.kind == NodeKind::Estimator).then(|| f(p.cutoff_hz)),
                             max_force_n: (n.kind == NodeKind::Safety).then(|| f(p.max_force_n)),
+                            liveliness_lease_ms: n.liveliness_lease.map(|l| f(nanos_ms(l))),
                         },
                     )
                 })
@@ -405,12 +497,36 @@ impl GraphSpec {
                 .topics
                 .iter()
                 .map(|t| {
+                    let q = &t.qos;
+                    let d = TopicQos::default();
+                    let keep = |differs: bool| differs.then_some(());
                     Spanned::new(
                         0..0,
                         RawTopic {
                             name: s(t.name.clone()),
                             msg: Spanned::new(0..0, t.msg),
                             depth: Spanned::new(0..0, t.depth as i64),
+                            history: keep(q.history != d.history)
+                                .map(|()| Spanned::new(0..0, q.history)),
+                            delivery: keep(q.delivery != d.delivery)
+                                .map(|()| Spanned::new(0..0, q.delivery)),
+                            deadline_ms: q.deadline.map(|v| f(nanos_ms(v))),
+                            lifespan_ms: q.lifespan.map(|v| f(nanos_ms(v))),
+                            reliability: keep(q.reliability != d.reliability)
+                                .map(|()| Spanned::new(0..0, q.reliability)),
+                            on_deadline_missed: keep(q.on_deadline_missed != d.on_deadline_missed)
+                                .map(|()| Spanned::new(0..0, q.on_deadline_missed)),
+                            link: q.link.map(|l: Link| {
+                                Spanned::new(
+                                    0..0,
+                                    RawLink {
+                                        loss: Some(f(l.loss)),
+                                        delay_ms: Some(f(nanos_ms(l.delay))),
+                                        jitter_ms: Some(f(nanos_ms(l.jitter))),
+                                        retransmit_ms: Some(f(nanos_ms(l.retransmit))),
+                                    },
+                                )
+                            }),
                         },
                     )
                 })
@@ -503,6 +619,74 @@ impl GraphSpec {
         Ok(())
     }
 
+    /// Set topic `name`'s QoS keys from a `KEY=VALUE[,KEY=VALUE…]` list (the graph file's
+    /// keys; `--qos`, `--link`). All or nothing: on an error the topic is unchanged.
+    ///
+    /// # Errors
+    /// [`OverrideError`] naming the topic for an unknown topic, key or value, or a bad
+    /// combination ([`qos::check_combination`]).
+    pub fn set_qos(&mut self, name: &str, pairs: &str) -> Result<(), OverrideError> {
+        let id = self.topic_id(name).ok_or_else(|| {
+            OverrideError(format!(
+                "unknown topic '{name}' (topics: {})",
+                self.topics
+                    .iter()
+                    .map(|t| t.name.as_str())
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ))
+        })?;
+        let err = |e: String| OverrideError(format!("topic '{name}': {e}"));
+        let t = &self.topics[id.0];
+        let (mut q, mut depth) = (t.qos, t.depth);
+        for (k, v) in qos::split_pairs(pairs).map_err(err)? {
+            qos::apply_key(&mut q, &mut depth, k, v).map_err(err)?;
+        }
+        let to_actuator = t
+            .subscriber
+            .is_some_and(|n| self.nodes[n.0].kind == NodeKind::Actuator);
+        qos::check_combination(&q, to_actuator).map_err(err)?;
+        let t = &mut self.topics[id.0];
+        (t.qos, t.depth) = (q, depth);
+        Ok(())
+    }
+
+    /// Set node `name`'s liveliness lease, ms (`--lease NODE=MS`).
+    ///
+    /// # Errors
+    /// [`OverrideError`] for an unknown node or a lease not in (0, [`qos::MAX_QOS_MS`]].
+    pub fn set_lease(&mut self, name: &str, ms: f64) -> Result<(), OverrideError> {
+        let id = self.node_id(name).ok_or_else(|| {
+            OverrideError(format!(
+                "unknown node '{name}' (nodes: {})",
+                self.node_names().join(", ")
+            ))
+        })?;
+        let lease = qos::ms_to_nanos("liveliness_lease_ms", ms, false)
+            .map_err(|e| OverrideError(format!("node '{name}': {e}")))?;
+        self.nodes[id.0].liveliness_lease = Some(lease);
+        Ok(())
+    }
+
+    /// Settings that are allowed but probably not meant: a deadline shorter than its
+    /// publisher's period misses every period. One line each, naming the topic.
+    pub fn qos_warnings(&self) -> Vec<String> {
+        self.topics
+            .iter()
+            .filter_map(|t| {
+                let d = t.qos.deadline?;
+                let p = self.nodes[t.publisher.0].rate_hz;
+                let period = period_for_hz(p).ok()?;
+                (d < period).then(|| {
+                    format!(
+                        "warning: topic '{}': deadline {d} is shorter than the period of its publisher '{}' ({period} at {p} Hz): every period will be missed",
+                        t.name, self.nodes[t.publisher.0].name
+                    )
+                })
+            })
+            .collect()
+    }
+
     /// Node names in tie-break order.
     pub fn node_names(&self) -> Vec<&str> {
         self.nodes.iter().map(|n| n.name.as_str()).collect()
@@ -587,12 +771,14 @@ fn build(cx: &Ctx<'_>, raw: RawGraph) -> Result<GraphSpec, SpecError> {
         if topics.iter().any(|x| x.name == *tname) {
             return Err(cx.err(t_ref.name.span(), format!("duplicate topic '{tname}'")));
         }
-        let depth =
+        let mut depth =
             check_depth(*t_ref.depth.get_ref()).map_err(|e| cx.err(t_ref.depth.span(), e))?;
+        let qos = topic_qos(cx, t_ref, &mut depth)?;
         topics.push(TopicSpec {
             name: tname.clone(),
             msg: *t_ref.msg.get_ref(),
             depth,
+            qos,
             publisher: NodeId(usize::MAX),
             subscriber: None,
         });
@@ -734,6 +920,14 @@ fn build(cx: &Ctx<'_>, raw: RawGraph) -> Result<GraphSpec, SpecError> {
             }
         };
         let params = node_params(cx, kind, r)?;
+        let liveliness_lease = r
+            .liveliness_lease_ms
+            .as_ref()
+            .map(|v| {
+                qos::ms_to_nanos("liveliness_lease_ms", *v.get_ref(), false)
+                    .map_err(|e| cx.err(v.span(), e))
+            })
+            .transpose()?;
         file_nodes.push(NodeSpec {
             name: nname.clone(),
             kind,
@@ -742,6 +936,7 @@ fn build(cx: &Ctx<'_>, raw: RawGraph) -> Result<GraphSpec, SpecError> {
             subscribes,
             publishes,
             params,
+            liveliness_lease,
         });
         node_spans.push(r.name.span());
     }
@@ -769,6 +964,19 @@ fn build(cx: &Ctx<'_>, raw: RawGraph) -> Result<GraphSpec, SpecError> {
             };
             return Err(cx.err(topic_spans[i].clone(), format!("topic '{}' {why}", t.name)));
         }
+        let to_actuator = t
+            .subscriber
+            .is_some_and(|n| file_nodes[n.0].kind == NodeKind::Actuator);
+        qos::check_combination(&t.qos, to_actuator).map_err(|e| {
+            let raw = raw.topics[i].get_ref();
+            let at = raw
+                .on_deadline_missed
+                .as_ref()
+                .map(Spanned::span)
+                .or_else(|| raw.link.as_ref().map(Spanned::span))
+                .unwrap_or_else(|| topic_spans[i].clone());
+            cx.err(at, format!("topic '{}': {e}", t.name))
+        })?;
     }
 
     // Tie-break order: topological, explicit priorities override.

@@ -45,7 +45,7 @@ struct TelemetryObserver(Sender<Telemetry>);
 
 impl StepObserver for TelemetryObserver {
     fn on_step(&mut self, rec: &StepRecord) {
-        let _ = self.0.send(Telemetry::Step(*rec));
+        let _ = self.0.send(Telemetry::Step(Box::new(*rec)));
     }
 }
 

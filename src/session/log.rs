@@ -48,6 +48,9 @@ pub struct LoggedRun {
     /// First deadline of each node, ns (phase offsets), when any was set.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub phase_offsets_ns: Vec<u64>,
+    /// Faults injected (`--stall`, `--kill`), when any was.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub faults: Vec<crate::qos::Fault>,
     /// Brain at the start.
     pub policy: String,
     /// Run time at which the run ended (the last instant run), ns.
@@ -70,6 +73,7 @@ impl LoggedRun {
             actuator_hz: None,
             queue_depth: None,
             phase_offsets_ns: cfg.phase_offsets.iter().map(|n| n.0).collect(),
+            faults: cfg.faults.clone(),
             policy: policy.to_string(),
             end_ns: 0,
             commands: Vec::new(),
@@ -91,6 +95,7 @@ impl LoggedRun {
             seed: self.seed,
             duration: Nanos(self.end_ns),
             phase_offsets: self.phase_offsets_ns.iter().map(|&n| Nanos(n)).collect(),
+            faults: self.faults.clone(),
             ..RunConfig::default()
         };
         match (&self.graph, self.sensor_hz, self.control_hz, self.queue_depth) {
@@ -137,6 +142,20 @@ impl LoggedRun {
                     self.end_ns
                 ),
             ));
+        }
+        if self.faults.len() > crate::config::MAX_FAULTS {
+            return Err(bad(
+                "faults",
+                format!("at most {} faults", crate::config::MAX_FAULTS),
+            ));
+        }
+        for (i, f) in self.faults.iter().enumerate() {
+            if cfg.graph.node_id(&f.node).is_none() {
+                return Err(bad(
+                    &format!("faults[{i}]"),
+                    format!("unknown node '{}'", f.node),
+                ));
+            }
         }
         let mut at = 0;
         for (i, c) in self.commands.iter().enumerate() {

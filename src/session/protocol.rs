@@ -76,7 +76,7 @@ pub enum Telemetry {
         recording: Option<PathBuf>,
     },
     /// One actuator tick.
-    Step(StepRecord),
+    Step(Box<StepRecord>),
     /// One node tick under the real clock: node index (tie-break rank), run time and
     /// lateness.
     NodeTick {
@@ -123,6 +123,7 @@ pub fn describe(cmd: &Command) -> String {
         Command::SetQueueDepth { depth } => format!("queue depth → {depth}"),
         Command::SetNodeHz { node, hz } => format!("{node} rate → {hz} Hz"),
         Command::SetTopicDepth { topic, depth } => format!("{topic} depth → {depth}"),
+        Command::SetTopicQos { topic, pairs } => format!("{topic} QoS → {pairs}"),
         Command::SetPolicy { spec } => format!("brain → {spec}"),
     }
 }

@@ -514,6 +514,44 @@ fn every_metrics_key_and_trace_column_is_documented() {
         }
     }
     keys.extend(["node_timing", "node_failed", "lateness_p99_us"].map(String::from));
+    // With every QoS setting on, the QoS keys too.
+    let qos_dir = tempfile::tempdir().unwrap();
+    let o = Command::new(env!("CARGO_BIN_EXE_ratelab"))
+        .args(["run", "--clock", "virtual", "--duration", "2", "--graph"])
+        .arg(repo("graphs/cartpole-safety.toml"))
+        .args([
+            "--link",
+            "/cmd:loss=0.5,delay_ms=5",
+            "--qos",
+            "/cmd:reliability=reliable,deadline_ms=30,on_deadline_missed=stop",
+        ])
+        .args([
+            "--qos",
+            "/obs:history=keep_all,depth=3,lifespan_ms=30",
+            "--lease",
+            "policy=50",
+            "--stall",
+            "policy@0.5+0.2",
+        ])
+        .arg("--out")
+        .arg(qos_dir.path())
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let qos: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(qos_dir.path().join("metrics.json")).unwrap())
+            .unwrap();
+    keys.extend(qos.as_object().unwrap().keys().cloned());
+    for map in ["nodes", "topics"] {
+        for entry in qos[map].as_object().unwrap().values() {
+            keys.extend(entry.as_object().unwrap().keys().cloned());
+        }
+    }
+    assert!(
+        keys.contains(&"stopped_by_watchdog".to_string()),
+        "the run was meant to stop by watchdog"
+    );
+    assert!(keys.contains(&"retransmitted".to_string()) && keys.contains(&"expired".to_string()));
     for key in keys {
         assert!(
             doc.contains(&format!("`{key}`")),
@@ -521,10 +559,24 @@ fn every_metrics_key_and_trace_column_is_documented() {
         );
     }
     let trace = std::fs::read_to_string(dir.path().join("trace.csv")).unwrap();
-    for column in trace.lines().next().unwrap().split(',') {
+    let qos_trace = std::fs::read_to_string(qos_dir.path().join("trace.csv")).unwrap();
+    assert!(qos_trace
+        .lines()
+        .next()
+        .unwrap()
+        .contains("cmd_retransmitted"));
+    let headers = [
+        trace.lines().next().unwrap(),
+        qos_trace.lines().next().unwrap(),
+    ];
+    for column in headers.iter().flat_map(|h| h.split(',')) {
         let documented = doc.contains(&format!("`{column}`"))
             || column.ends_with("_published")
-            || column.ends_with("_dropped");
+            || column.ends_with("_dropped")
+            || ratelab::qos::QosCounter::ALL.iter().any(|c| {
+                column.ends_with(&format!("_{}", c.key()))
+                    && doc.contains(&format!("`{}`", c.key()))
+            });
         assert!(
             documented,
             "trace column `{column}` is not in docs/metrics.md"

@@ -16,6 +16,7 @@ mod e2e_pty;
 mod exercises;
 mod graphs;
 mod hostile;
+mod qos;
 mod realtime;
 mod recording;
 mod session;
