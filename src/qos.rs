@@ -148,7 +148,13 @@ impl TopicQos {
     /// The QoS in a few characters, for the lab's edges: `KL1 latest`, `KA100 fifo`, then
     /// `dl 40ms`, `ls 60ms`, `link 5%`, `rel` when set.
     pub fn short(&self, depth: usize) -> String {
-        let mut s = format!(
+        self.short_parts(depth).join(" ")
+    }
+
+    /// [`TopicQos::short`] in its parts (`["KL1 latest", "dl 40 ms", "link 5% rel"]`), for
+    /// a view that wraps them.
+    pub fn short_parts(&self, depth: usize) -> Vec<String> {
+        let mut parts = vec![format!(
             "{}{depth} {}",
             match self.history {
                 History::KeepLast => "KL",
@@ -158,20 +164,22 @@ impl TopicQos {
                 Delivery::Latest => "latest",
                 Delivery::Fifo => "fifo",
             }
-        );
+        )];
         if let Some(d) = self.deadline {
-            s.push_str(&format!(" dl {d}"));
+            parts.push(format!("dl {d}"));
         }
         if let Some(l) = self.lifespan {
-            s.push_str(&format!(" ls {l}"));
+            parts.push(format!("ls {l}"));
         }
         if let Some(l) = &self.link {
-            s.push_str(&format!(" link {}%", fmt_percent(l.loss)));
-            if self.reliability == Reliability::Reliable {
-                s.push_str(" rel");
-            }
+            let rel = if self.reliability == Reliability::Reliable {
+                " rel"
+            } else {
+                ""
+            };
+            parts.push(format!("link {}%{rel}", fmt_percent(l.loss)));
         }
-        s
+        parts
     }
 }
 
@@ -242,7 +250,7 @@ pub fn check_combination(q: &TopicQos, subscriber_is_actuator: bool) -> Result<(
 pub const KEYS: &str = "history, depth, delivery, deadline_ms, lifespan_ms, reliability, on_deadline_missed, loss, delay_ms, jitter_ms, retransmit_ms";
 
 /// Set one key (a `--qos` pair) on `qos` and `depth`, with the graph file's names and
-/// values. A link key on a topic without a link starts one (no loss, no delay). Keys are
+/// values (`deadline_ms=none` and `lifespan_ms=none` turn them off). A link key on a topic without a link starts one (no loss, no delay). Keys are
 /// set one at a time; call [`check_combination`] after the last.
 ///
 /// # Errors
@@ -282,8 +290,17 @@ pub fn apply_key(
             *depth = d;
         }
         "delivery" => qos.delivery = word(key, value)?,
-        "deadline_ms" => qos.deadline = Some(ms_to_nanos("deadline_ms", num(value)?, false)?),
-        "lifespan_ms" => qos.lifespan = Some(ms_to_nanos("lifespan_ms", num(value)?, false)?),
+        "deadline_ms" | "lifespan_ms" => {
+            let v = match value.trim() {
+                "none" => None,
+                v => Some(ms_to_nanos(key, num(v)?, false)?),
+            };
+            if key == "deadline_ms" {
+                qos.deadline = v;
+            } else {
+                qos.lifespan = v;
+            }
+        }
         "reliability" => {
             qos.reliability = word(key, value)?;
         }
@@ -639,6 +656,9 @@ mod tests {
             "an explicit timeout stays"
         );
         assert_eq!(q.short(1), "KL1 latest link 0%");
+        let (q, _) =
+            set("deadline_ms=40,lifespan_ms=50,deadline_ms=none,lifespan_ms=none").unwrap();
+        assert_eq!((q.deadline, q.lifespan), (None, None));
     }
 
     #[test]

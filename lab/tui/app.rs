@@ -8,6 +8,7 @@ use ratelab::config::{check_rate, BREAK_CONTROL_HZ};
 use ratelab::graph::spec::GEAR_N;
 use ratelab::graph::{GraphSpec, NodeId, TopicId};
 use ratelab::metrics::{LatencyStats, StepRecord};
+use ratelab::qos::{Delivery, QosCounter, TopicQos};
 use ratelab::run::Command;
 use ratelab::scheduler::EndReason;
 use ratelab::session::{Control, Speed, Telemetry, SPEEDS};
@@ -42,6 +43,33 @@ fn short_brain(spec: &str) -> String {
         .map_or_else(|| spec.to_string(), |f| f.to_string_lossy().into_owned())
 }
 
+/// The deadlines `d` cycles through on the selected topic, ms (0: none).
+pub const DEADLINES_MS: [f64; 5] = [0.0, 25.0, 50.0, 100.0, 200.0];
+/// The link losses `L` cycles through on the selected topic (probabilities).
+pub const LOSSES: [f64; 4] = [0.0, 0.01, 0.05, 0.2];
+
+/// The first value of the ascending `cycle` above `now`, or the first of all after the
+/// last (a value from a file or flag that is not in the cycle joins it where it fits).
+fn next_in_cycle(cycle: &[f64], now: f64) -> f64 {
+    cycle
+        .iter()
+        .copied()
+        .find(|&v| v > now + 1e-9)
+        .unwrap_or(cycle[0])
+}
+
+/// A QoS counter as the lab's edges label it.
+fn short_counter(c: QosCounter) -> &'static str {
+    match c {
+        QosCounter::Expired => "expired",
+        QosCounter::Refused => "refused",
+        QosCounter::Lost => "lost",
+        QosCounter::Retransmitted => "retx",
+        QosCounter::OfferedDeadlineMissed => "dl miss (pub)",
+        QosCounter::RequestedDeadlineMissed => "dl miss",
+    }
+}
+
 /// The lab's state.
 pub struct App {
     tx: Sender<Control>,
@@ -60,6 +88,10 @@ pub struct App {
     rates: Vec<f64>,
     /// Each topic's depth, by topic index.
     depths: Vec<usize>,
+    /// Each topic's QoS, by topic index.
+    qos: Vec<TopicQos>,
+    /// Each node's liveliness, by node index (`None`: no lease).
+    alive: Vec<Option<bool>>,
     /// What Tab selected.
     selected: Option<Selected>,
     steps: VecDeque<StepRecord>,
@@ -104,6 +136,8 @@ impl App {
             graph: GraphSpec::chapter(),
             rates: Vec::new(),
             depths: Vec::new(),
+            qos: Vec::new(),
+            alive: Vec::new(),
             selected: None,
             steps: VecDeque::new(),
             history: VecDeque::new(),
@@ -187,6 +221,13 @@ impl App {
                 self.seed = cfg.seed;
                 self.rates = cfg.graph.nodes.iter().map(|n| n.rate_hz).collect();
                 self.depths = cfg.graph.topics.iter().map(|t| t.depth).collect();
+                self.qos = cfg.graph.topics.iter().map(|t| t.qos).collect();
+                self.alive = cfg
+                    .graph
+                    .nodes
+                    .iter()
+                    .map(|n| n.liveliness_lease.map(|_| true))
+                    .collect();
                 self.ticks = vec![VecDeque::new(); cfg.graph.nodes.len()];
                 if self.graph != cfg.graph {
                     self.selected = None;
@@ -254,6 +295,8 @@ impl App {
                 speed,
                 rates,
                 depths,
+                qos,
+                alive,
                 policy,
             } => {
                 self.now = self.now.max(now);
@@ -261,6 +304,8 @@ impl App {
                 self.speed = speed;
                 self.rates = rates;
                 self.depths = depths;
+                self.qos = qos;
+                self.alive = alive;
                 self.brain = policy;
             }
             Telemetry::Applied(text) => self.say(text),
@@ -322,6 +367,7 @@ impl App {
             }
             Msg::DepthDown => self.change_depth(depth_down),
             Msg::DepthUp => self.change_depth(depth_up),
+            Msg::ToggleDelivery | Msg::CycleDeadline | Msg::CycleLoss => self.change_qos(m),
             Msg::SelectNext => self.selected = self.cycle(1),
             Msg::SelectPrev => self.selected = self.cycle(-1),
             Msg::TypeRate => self.typing = Some(String::new()),
@@ -431,6 +477,46 @@ impl App {
         self.apply(cmd);
     }
 
+    /// The selected topic's QoS, one key at a time: `f` latest ↔ fifo, `d` the next
+    /// deadline of [`DEADLINES_MS`], `L` the next link loss of [`LOSSES`]. Each change is a
+    /// logged command, so it replays.
+    fn change_qos(&mut self, m: Msg) {
+        let Some(Selected::Topic(t)) = self.selected else {
+            self.say(
+                "select a topic with Tab first: f, d and L change the selected topic's QoS".into(),
+            );
+            return;
+        };
+        let q = self
+            .qos
+            .get(t.0)
+            .copied()
+            .unwrap_or(self.graph.topic(t).qos);
+        let pairs = match m {
+            Msg::ToggleDelivery => match q.delivery {
+                Delivery::Latest => "delivery=fifo".to_string(),
+                Delivery::Fifo => "delivery=latest".to_string(),
+            },
+            Msg::CycleDeadline => {
+                let now_ms = q.deadline.map(|d| d.as_millis_f64());
+                let next = next_in_cycle(&DEADLINES_MS, now_ms.unwrap_or(0.0));
+                if next == 0.0 {
+                    // Off again: without a deadline there is no reaction either.
+                    "deadline_ms=none,on_deadline_missed=hold".to_string()
+                } else {
+                    format!("deadline_ms={next}")
+                }
+            }
+            Msg::CycleLoss => {
+                let loss = q.link.map_or(0.0, |l| l.loss);
+                format!("loss={}", next_in_cycle(&LOSSES, loss))
+            }
+            _ => return,
+        };
+        let topic = self.graph.topic(t).name.clone();
+        self.apply(Command::SetTopicQos { topic, pairs });
+    }
+
     /// Step the selected topic's depth, or every topic's (as one command) when none is.
     fn change_depth(&mut self, step: fn(usize) -> usize) {
         match self.selected {
@@ -452,6 +538,7 @@ impl App {
 
     fn topic_view(&self, id: TopicId) -> TopicView {
         let spec = self.graph.topic(id);
+        let qos = self.qos.get(id.0).copied().unwrap_or(spec.qos);
         let pick = |s: &StepRecord| s.topics.get(id);
         let (first, last) = (self.steps.front(), self.steps.back());
         let (rate, dropping, staling) = match (first, last) {
@@ -479,6 +566,16 @@ impl App {
             dropping,
             stale_reads: last.map_or(0, |l| pick(l).stale_reads),
             staling,
+            qos: (!(qos.is_default() && spec.qos.is_default()))
+                .then(|| qos.short_parts(self.depths.get(id.0).copied().unwrap_or(spec.depth))),
+            qos_counts: last.map_or_else(Vec::new, |l| {
+                let s = pick(l);
+                QosCounter::reported(&[spec.qos, qos], &s)
+                    .into_iter()
+                    .filter(|c| *c != QosCounter::OfferedDeadlineMissed)
+                    .map(|c| (short_counter(c), c.value(&s)))
+                    .collect()
+            }),
             selected: self.selected == Some(Selected::Topic(id)),
         }
     }
@@ -505,6 +602,7 @@ impl App {
             measured_hz,
             lateness_p99_us,
             selected: self.selected == Some(Selected::Node(id)),
+            alive: self.alive.get(id.0).copied().flatten(),
         }
     }
 

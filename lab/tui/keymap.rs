@@ -22,6 +22,12 @@ pub enum Msg {
     DepthDown,
     /// … up.
     DepthUp,
+    /// The selected topic's delivery: latest ↔ fifo.
+    ToggleDelivery,
+    /// The selected topic's deadline: the next of none, 25, 50, 100, 200 ms.
+    CycleDeadline,
+    /// The selected topic's link loss: the next of 0, 1 %, 5 %, 20 %.
+    CycleLoss,
     /// Select the next node or topic (nothing → nodes → topics → nothing).
     SelectNext,
     /// Select the previous one.
@@ -105,6 +111,16 @@ pub const BINDINGS: &[Binding] = &[
         label: "[ / ]",
         help: "depth down / up: the selected topic's, else every topic's",
         footer: Some(("[/]", "depth")),
+    },
+    Binding {
+        keys: &[
+            (Char('f'), Msg::ToggleDelivery),
+            (Char('d'), Msg::CycleDeadline),
+            (Char('L'), Msg::CycleLoss),
+        ],
+        label: "f / d / L",
+        help: "the selected topic's QoS: latest ↔ fifo / deadline (none, 25, 50, 100, 200 ms) / link loss (0, 1, 5, 20 %)",
+        footer: None,
     },
     Binding {
         keys: &[(Tab, Msg::SelectNext), (BackTab, Msg::SelectPrev)],

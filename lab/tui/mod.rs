@@ -193,6 +193,85 @@ mod tests {
     }
 
     #[test]
+    fn qos_shows_on_the_edges_and_a_dead_node_is_drawn_so() {
+        let mut cfg = graph_cfg("graphs/cartpole-safety.toml", 2);
+        cfg.graph
+            .set_qos(
+                "/cmd",
+                "loss=0.2,delay_ms=5,deadline_ms=30,on_deadline_missed=zero",
+            )
+            .unwrap();
+        cfg.graph.set_qos("/obs", "delivery=fifo,depth=10").unwrap();
+        cfg.graph.set_lease("policy", 60.0).unwrap();
+        cfg.faults = vec![ratelab::qos::Fault::parse("policy@1.8", true).unwrap()];
+        let depths: Vec<usize> = cfg.graph.topics.iter().map(|t| t.depth).collect();
+        let qos = cfg.graph.topics.iter().map(|t| t.qos).collect();
+        let (mut app, rx) = app_after(cfg, false);
+        // What the engine reports at 2 s: the policy, killed at 1.8 s, is past its lease.
+        app.on_telemetry(Telemetry::Status {
+            now: ratelab::Nanos(2_000_000_000),
+            paused: false,
+            speed: Speed::Times(1.0),
+            rates: vec![50.0; 4],
+            depths,
+            qos,
+            alive: vec![None, Some(false), None, None],
+            policy: "scripted balancer".into(),
+        });
+        let text = render(&app, 120, 40);
+        for want in [
+            "KL1 latest",
+            "dl 30 ms",
+            "link 20%",
+            "KL10 fifo",
+            "20 lost",
+            "17 dl miss",
+            "NOT ALIVE",
+        ] {
+            assert!(text.contains(want), "'{want}' not shown:\n{text}");
+        }
+        assert!(
+            !text.contains("KL1 latest\n"),
+            "the chapter's QoS is not labelled"
+        );
+        insta::assert_snapshot!("qos_120x40", text);
+        let small = render(&app, 80, 24);
+        assert!(
+            small.contains("20 lost") && small.contains("NOT AL"),
+            "{small}"
+        );
+        insta::assert_snapshot!("qos_80x24", small);
+        // f, d and L act on the selected topic only, as logged commands.
+        app.on_msg(Msg::ToggleDelivery);
+        assert!(
+            rx.try_iter().next().is_none(),
+            "nothing selected: nothing sent"
+        );
+        while !app.view().topics.last().unwrap().selected {
+            app.on_msg(Msg::SelectNext);
+        }
+        app.on_msg(Msg::ToggleDelivery);
+        app.on_msg(Msg::CycleDeadline);
+        app.on_msg(Msg::CycleLoss);
+        use ratelab::run::Command::SetTopicQos;
+        let sent: Vec<Control> = rx.try_iter().collect();
+        let qos = |pairs: &str| {
+            Control::Apply(SetTopicQos {
+                topic: "/cmd".into(),
+                pairs: pairs.into(),
+            })
+        };
+        assert_eq!(
+            sent,
+            vec![
+                qos("delivery=fifo"),
+                qos("deadline_ms=50"), // 30 ms from the flags: the next one up
+                qos("loss=0"),         // 20 % is the last of the cycle
+            ]
+        );
+    }
+
+    #[test]
     fn tab_selects_and_the_keys_follow_the_selection() {
         let (mut app, rx) = app_after(graph_cfg("graphs/cartpole-estimator.toml", 1), false);
         // Nothing selected: the chapter's keys (policy rate, every depth).
@@ -303,6 +382,8 @@ mod tests {
             speed: Speed::Times(1.0),
             rates: vec![50.0; 3],
             depths: vec![1; 2],
+            qos: vec![ratelab::qos::TopicQos::default(); 2],
+            alive: vec![None; 3],
             policy: "ch2.1 PPO checkpoint (x.pt, hidden 64) — an imperfect learner".into(),
         });
         let text = render(&app, 120, 40);

@@ -42,6 +42,9 @@ pub struct NodeView {
     pub measured_hz: Option<f64>,
     /// Real clock: p99 tick lateness over recent ticks, µs.
     pub lateness_p99_us: Option<f64>,
+    /// Liveliness with a lease: `Some(false)` when not heard from within it; `None`
+    /// without a lease.
+    pub alive: Option<bool>,
 }
 
 /// One topic arrow.
@@ -67,6 +70,10 @@ pub struct TopicView {
     pub stale_reads: u64,
     /// Stale reads within the last second (the subscriber is re-reading old data).
     pub staling: bool,
+    /// Its QoS in short, in parts (`KA100 fifo`, `dl 40 ms`), when not the chapter's.
+    pub qos: Option<Vec<String>>,
+    /// The QoS counters it reports, labelled for the edge (`lost`, `dl missed`, …).
+    pub qos_counts: Vec<(&'static str, u64)>,
 }
 
 /// The run's verdict badge.
@@ -158,9 +165,15 @@ impl Widget for &View {
             return;
         }
         let hist_h = if area.height >= 34 { 10 } else { 6 };
+        let graph_h = graph_height(
+            self,
+            area.width,
+            area.height,
+            area.height.saturating_sub(hist_h + 10),
+        );
         let [status, graph, middle, latency, footer] = Layout::vertical([
             Constraint::Length(1),
-            Constraint::Length(7),
+            Constraint::Length(graph_h),
             Constraint::Min(8),
             Constraint::Length(hist_h),
             Constraint::Length(1),
@@ -263,7 +276,7 @@ fn selection_title(v: &View) -> Option<String> {
     }
     v.topics.iter().find(|t| t.selected).map(|t| {
         format!(
-            " {} selected: [/] its depth ({}) · Tab next · Esc clears ",
+            " {} selected: [/] its depth ({}) · f/d/L its QoS · Tab next · Esc clears ",
             t.name, t.depth
         )
     })
@@ -377,6 +390,9 @@ fn render_node(n: &NodeView, area: Rect, buf: &mut Buffer) {
         }
         _ => lines.push(Line::from(if wide { "virtual time" } else { "virtual" }).dim()),
     }
+    if n.alive == Some(false) {
+        lines.insert(0, Line::from("✗ NOT ALIVE").white().on_red().bold());
+    }
     let (title, border) = if n.selected {
         (
             Line::from(n.name.clone())
@@ -395,8 +411,25 @@ fn render_node(n: &NodeView, area: Rect, buf: &mut Buffer) {
         .render(area, buf);
 }
 
-fn render_arrow(t: &TopicView, area: Rect, buf: &mut Buffer) {
-    let w = area.width.saturating_sub(1) as usize;
+/// `parts` packed greedily into lines of at most `w` characters.
+fn pack(parts: impl IntoIterator<Item = String>, sep: &str, w: usize) -> Vec<String> {
+    let mut packed: Vec<String> = Vec::new();
+    for p in parts {
+        match packed.last_mut() {
+            Some(l) if l.chars().count() + sep.chars().count() + p.chars().count() <= w => {
+                l.push_str(sep);
+                l.push_str(&p);
+            }
+            _ => packed.push(p),
+        }
+    }
+    packed
+}
+
+/// An arrow's lines at width `w`: name, shaft, msg/s, dropped (and stale reads). With QoS
+/// set: name, shaft, drops, the QoS counters, the QoS in short, msg/s, stale reads, packed
+/// to the width, most telling first (a short panel, at 80×24, cuts from the end).
+fn arrow_lines(t: &TopicView, w: usize) -> Vec<Line<'static>> {
     let (shaft, style, mark) = if t.dropping {
         (
             "═",
@@ -417,26 +450,81 @@ fn render_arrow(t: &TopicView, area: Rect, buf: &mut Buffer) {
     } else {
         Line::from(t.name.clone().bold()).centered()
     };
-    let mut lines = vec![
-        name,
-        Line::from(Span::styled(
-            format!("{}▶", shaft.repeat(w.saturating_sub(1))),
-            style,
-        )),
-        Line::from(format!("{:.1} msg/s", t.msg_per_s)).centered(),
-        Line::from(Span::styled(format!("{} dropped {mark}", t.dropped), style)).centered(),
-    ];
-    if t.stale_reads > 0 {
+    let shaft = Line::from(Span::styled(
+        format!("{}▶", shaft.repeat(w.saturating_sub(1))),
+        style,
+    ));
+    let rate = Line::from(format!("{:.1} msg/s", t.msg_per_s)).centered();
+    let dropped =
+        Line::from(Span::styled(format!("{} dropped {mark}", t.dropped), style)).centered();
+    let stale = (t.stale_reads > 0).then(|| {
         // The mirror image of a drop, with a symbol of its own: old data read again.
         let style = if t.staling {
             Style::new().fg(Color::Magenta).add_modifier(Modifier::BOLD)
         } else {
             Style::new().fg(Color::DarkGray)
         };
-        lines
-            .push(Line::from(Span::styled(format!("{} stale ↺", t.stale_reads), style)).centered());
+        Line::from(Span::styled(format!("{} stale ↺", t.stale_reads), style)).centered()
+    });
+    let Some(parts) = &t.qos else {
+        let mut lines = vec![name, shaft, rate, dropped];
+        lines.extend(stale);
+        return lines;
+    };
+    let mut lines = vec![name, shaft, dropped];
+    let counting = t.qos_counts.iter().any(|(_, n)| *n > 0);
+    let counts = pack(
+        t.qos_counts.iter().map(|(label, n)| format!("{n} {label}")),
+        " · ",
+        w,
+    );
+    let style = if counting {
+        Style::new().fg(Color::Red).add_modifier(Modifier::BOLD)
+    } else {
+        Style::new().fg(Color::DarkGray)
+    };
+    lines.extend(
+        counts
+            .into_iter()
+            .map(|l| Line::from(Span::styled(l, style)).centered()),
+    );
+    lines.extend(
+        pack(parts.iter().cloned(), " ", w)
+            .into_iter()
+            .map(|l| Line::from(l).dim().centered()),
+    );
+    lines.push(rate);
+    lines.extend(stale);
+    lines
+}
+
+fn render_arrow(t: &TopicView, area: Rect, buf: &mut Buffer) {
+    let w = area.width.saturating_sub(1) as usize;
+    Paragraph::new(arrow_lines(t, w)).render(area, buf);
+}
+
+/// The graph panel's height: 7 rows, more when an arrow's QoS lines need them and the
+/// terminal is tall enough (30 rows) to spare them, within `max`.
+fn graph_height(v: &View, width: u16, height: u16, max: u16) -> u16 {
+    if height < 30 {
+        return 7;
     }
-    Paragraph::new(lines).render(area, buf);
+    let cols = layout_columns(v);
+    let n = cols.len().max(1) as u16;
+    let w = (width.saturating_sub(2) / n).saturating_sub(1) as usize;
+    let tallest = cols
+        .iter()
+        .filter_map(|c| match c {
+            Column::Topics(ts) => Some(
+                ts.iter()
+                    .map(|&i| arrow_lines(&v.topics[i], w).len())
+                    .sum::<usize>(),
+            ),
+            Column::Nodes(_) => None,
+        })
+        .max()
+        .unwrap_or(0) as u16;
+    (tallest + 2).clamp(7, max.max(7))
 }
 
 fn badge(v: &View) -> Span<'static> {

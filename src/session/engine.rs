@@ -242,6 +242,12 @@ impl Engine {
             // While frozen, what the next run will start with (the deferred changes applied).
             rates: next.nodes.iter().map(|n| n.rate_hz).collect(),
             depths: next.topics.iter().map(|t| t.depth).collect(),
+            qos: next.topics.iter().map(|t| t.qos).collect(),
+            alive: h
+                .liveliness
+                .iter()
+                .map(|l| l.lease().map(|_| l.status_at(now).alive))
+                .collect(),
             policy: h.brain.label(),
         });
     }

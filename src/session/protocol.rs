@@ -99,6 +99,11 @@ pub enum Telemetry {
         rates: Vec<f64>,
         /// Each topic's depth, by topic index.
         depths: Vec<usize>,
+        /// Each topic's QoS, by topic index (as [`Telemetry::Status::depths`]: while
+        /// frozen, the next run's).
+        qos: Vec<crate::qos::TopicQos>,
+        /// Each node's liveliness now, by node index: `None` without a lease.
+        alive: Vec<Option<bool>>,
         /// The brain's label.
         policy: String,
     },

@@ -467,7 +467,10 @@ fn qos_changes_and_faults_are_logged_and_replay_byte_for_byte() {
     )
     .unwrap();
     s.cfg.graph.set_lease("policy", 60.0).unwrap();
-    s.cfg.faults = vec![Fault::parse("policy@0.5+0.1", false).unwrap()];
+    s.cfg.faults = vec![
+        Fault::parse("policy@0.5+0.1", false).unwrap(),
+        Fault::parse("policy@1.2", true).unwrap(),
+    ];
     let engine = Engine::new(s, ctl_rx, tel_tx).spawn();
     let mut script = steps(20);
     script.push(Control::Apply(Command::SetTopicQos {
@@ -484,22 +487,42 @@ fn qos_changes_and_faults_are_logged_and_replay_byte_for_byte() {
         pairs: "deadline_ms=30".into(),
     }));
     script.extend(steps(40));
-    script.push(Control::Quit);
     for c in script {
         ctl_tx.send(c).unwrap();
     }
+    // Paused after 80 steps (1.58 s), the engine reports its status every 33 ms of wall time.
+    std::thread::sleep(std::time::Duration::from_millis(300));
+    ctl_tx.send(Control::Quit).unwrap();
     let log = engine.join().unwrap();
-    drop(tel_rx);
+    // The engine told the front end the policy was not alive once killed, and the
+    // QoS as the commands left it.
+    let statuses: Vec<Telemetry> = tel_rx
+        .try_iter()
+        .filter(|t| matches!(t, Telemetry::Status { .. }))
+        .collect();
+    assert!(
+        statuses
+            .iter()
+            .any(|t| matches!(t, Telemetry::Status { alive, .. } if alive[1] == Some(false))),
+        "no status showed the killed policy not alive"
+    );
+    assert!(statuses
+        .iter()
+        .any(|t| matches!(t, Telemetry::Status { qos, .. } if qos[2].deadline.is_some())));
     let run = &log.runs[0];
     assert_eq!(run.commands.len(), 3, "{:?}", run.commands);
-    assert_eq!(run.faults.len(), 1);
+    assert_eq!(run.faults.len(), 2);
     let live = run.metrics.as_ref().unwrap();
     assert!(
         live.topics["/cmd"].qos_counters.contains_key("lost"),
         "{live:?}"
     );
     assert_eq!(live.topics["/obs"].qos.as_deref(), Some("KL10 fifo"));
-    assert_eq!(live.nodes["policy"].faulted_ticks, Some(5));
+    assert_eq!(
+        live.nodes["policy"].faulted_ticks,
+        Some(5 + 20),
+        "stalled 0.5–0.6 s (5 ticks), killed from 1.2 s to the last instant run, 1.58 s (20)"
+    );
     let on_disk = SessionLog::load(&file).unwrap();
     assert_eq!(on_disk, log);
     let a = serde_json::to_string_pretty(&replay_run(&on_disk, 0).unwrap()).unwrap();
