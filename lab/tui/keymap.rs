@@ -119,7 +119,7 @@ pub const BINDINGS: &[Binding] = &[
             (Char('L'), Msg::CycleLoss),
         ],
         label: "f / d / L",
-        help: "the selected topic's QoS: latest ↔ fifo / deadline (none, 25, 50, 100, 200 ms) / link loss (0, 1, 5, 20 %)",
+        help: "QoS of the selected topic: fifo ↔ latest / deadline / loss",
         footer: None,
     },
     Binding {
