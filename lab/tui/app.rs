@@ -7,7 +7,7 @@ use crossbeam_channel::Sender;
 use ratelab::config::{check_rate, BREAK_CONTROL_HZ};
 use ratelab::graph::spec::GEAR_N;
 use ratelab::graph::{GraphSpec, NodeId, TopicId};
-use ratelab::metrics::{LatencyStats, StepRecord};
+use ratelab::metrics::{ExactLatency, StepRecord};
 use ratelab::run::Command;
 use ratelab::scheduler::EndReason;
 use ratelab::session::{Control, Speed, Telemetry, SPEEDS};
@@ -68,7 +68,7 @@ pub struct App {
     applied: VecDeque<(f64, f64)>,
     /// (t s, published force N) per policy publication seen over the last [`HISTORY_S`].
     published: VecDeque<(f64, f64)>,
-    latency: LatencyStats,
+    latency: ExactLatency,
     ticks: Vec<VecDeque<(Nanos, Nanos)>>,
     last: Option<StepRecord>,
     verdict: Verdict,
@@ -109,7 +109,7 @@ impl App {
             history: VecDeque::new(),
             applied: VecDeque::new(),
             published: VecDeque::new(),
-            latency: LatencyStats::default(),
+            latency: ExactLatency::default(),
             ticks: Vec::new(),
             last: None,
             verdict: Verdict::Balanced,
@@ -199,7 +199,7 @@ impl App {
                 self.history.clear();
                 self.applied.clear();
                 self.published.clear();
-                self.latency = LatencyStats::default();
+                self.latency = ExactLatency::default();
                 self.last = None;
                 self.verdict = Verdict::Balanced;
             }
