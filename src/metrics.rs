@@ -57,7 +57,7 @@ impl Serialize for TopicCounters {
 /// One actuator tick.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
 pub struct StepRecord {
-    /// Control step number, from 1.
+    /// Actuator step number, from 1 (each steps the plant 20 ms).
     pub step: u64,
     /// Run time of the tick.
     pub t: Nanos,
@@ -248,7 +248,11 @@ impl ExactLatency {
         if !self.is_exact() {
             return self.stats.max();
         }
-        self.blocks.last().and_then(|b| b.last()).copied().map(Nanos)
+        self.blocks
+            .last()
+            .and_then(|b| b.last())
+            .copied()
+            .map(Nanos)
     }
 
     /// The HDR histogram of every sample (3 significant digits), for drawing buckets.
@@ -378,8 +382,21 @@ pub struct Metrics {
     pub seed: u64,
     /// Requested duration, s.
     pub duration_s: f64,
-    /// Actuator steps run.
+    /// Actuator steps run (each applies the held force and steps the plant 20 ms): the
+    /// chapter's name, which its summary called "control steps"; the same as
+    /// [`Metrics::actuator_steps`].
     pub steps: u64,
+    /// Actuator (plant) steps run: the same figure as `steps`, named for what it counts.
+    #[serde(default)]
+    pub actuator_steps: u64,
+    /// Ticks of the chain's policy node (the brain ran this often; at 5 Hz a tenth of the
+    /// actuator steps).
+    #[serde(default)]
+    pub policy_ticks: u64,
+    /// The policy's rate in force when the run ended, Hz (`control_hz` is the rate it
+    /// started with; live changes in the lab and replayed sessions move it).
+    #[serde(default)]
+    pub control_hz_end: f64,
     /// Run time when the graph stopped (the fall, or the duration), s.
     pub sim_time_s: f64,
     /// Pole angle after the last step, rad.
@@ -540,21 +557,30 @@ impl Metrics {
 
     /// The chapter's human summary (five lines, no terminal codes). `wall_s` is the
     /// wall time the run took, when known (not part of the metrics: it varies run to run).
+    /// The chapter's "control steps" are named for what they count, actuator steps (the
+    /// plant's 20 ms steps), beside the policy's ticks; the policy period is the one in
+    /// force at the end (with the starting one when a live change moved it).
     pub fn summary_lines(&self, wall_s: Option<f64>) -> Vec<String> {
         let wall = wall_s.map_or_else(String::new, |w| format!(" ({w:.2}s wall)"));
+        let counted = format!(
+            "{} actuator steps, {} policy ticks in {:.2}s sim{wall}",
+            self.steps, self.policy_ticks, self.sim_time_s
+        );
         let verdict = match (&self.node_failed, self.fell_at_s) {
-            (Some(failed), _) => format!(
-                "NODE FAILED ({failed}) — {} control steps in {:.2}s sim{wall}",
-                self.steps, self.sim_time_s
-            ),
-            (None, None) => format!(
-                "BALANCED (pole up the whole run) — {} control steps in {:.2}s sim{wall}",
-                self.steps, self.sim_time_s
-            ),
-            (None, Some(t)) => format!(
-                "FELL at t={t:.2}s — {} control steps in {:.2}s sim{wall}",
-                self.steps, self.sim_time_s
-            ),
+            (Some(failed), _) => format!("NODE FAILED ({failed}) — {counted}"),
+            (None, None) => format!("BALANCED (pole up the whole run) — {counted}"),
+            (None, Some(t)) => format!("FELL at t={t:.2}s — {counted}"),
+        };
+        let period =
+            |hz: f64| crate::rate::period_for_hz(hz).map_or_else(|_| "?".into(), |p| p.to_string());
+        let policy_period = if self.control_hz_end == self.control_hz {
+            format!("policy period {}", period(self.control_hz_end))
+        } else {
+            format!(
+                "policy period {} at the end, {} at the start",
+                period(self.control_hz_end),
+                period(self.control_hz)
+            )
         };
         let mut lines = vec![
             format!("clock={}  policy={}", self.clock, self.policy),
@@ -562,12 +588,11 @@ impl Metrics {
             verdict,
             format!("topics: {}", self.topics_line()),
             format!(
-                "mean sense->act latency: {:.1} ms  (p50 {:.1} | p99 {:.1} | max {:.1} ms; control period {})",
+                "mean sense->act latency: {:.1} ms  (p50 {:.1} | p99 {:.1} | max {:.1} ms; {policy_period})",
                 self.mean_latency_ms,
                 self.latency_p50_ms,
                 self.latency_p99_ms,
                 self.latency_max_ms,
-                crate::rate::period_for_hz(self.control_hz).map_or_else(|_| "?".into(), |p| p.to_string())
             ),
         ];
         if self.nonfinite_actions > 0 {
@@ -637,8 +662,14 @@ mod tests {
         let mut values = Vec::new();
         let mut s = ExactLatency::default();
         for i in 0..20_000u64 {
-            x = x.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-            let v = if i % 3 == 0 { 20_000_000 } else { (x >> 33) % 300_000_000 };
+            x = x
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            let v = if i % 3 == 0 {
+                20_000_000
+            } else {
+                (x >> 33) % 300_000_000
+            };
             values.push(v);
             s.record(Nanos(v));
         }
@@ -658,7 +689,10 @@ mod tests {
 
     #[test]
     fn exact_storage_is_bounded_by_the_longest_run() {
-        assert_eq!(MAX_EXACT_SAMPLES, 180_001, "3600 s of 50 Hz ticks, inclusive");
+        assert_eq!(
+            MAX_EXACT_SAMPLES, 180_001,
+            "3600 s of 50 Hz ticks, inclusive"
+        );
         let mut s: ExactLatency = (0..MAX_EXACT_SAMPLES as u64).map(|_| Nanos(7)).collect();
         assert!(s.is_exact());
         s.record(Nanos::from_millis(500));
