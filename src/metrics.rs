@@ -2,10 +2,12 @@
 //!
 //! The actuator appends one [`StepRecord`] per tick to a [`RunLog`]. Sense→act latency of
 //! a tick is `now - origin_stamp` of the action it applied (ch2.8, `ActuatorNode`); its
-//! statistics use an HDR histogram (3 significant digits) plus an exact integer mean.
+//! statistics are exact ([`ExactLatency`]: every sample kept, an integer mean), with an HDR
+//! histogram beside them for drawing.
 //! [`Metrics`] is the run's summary and the schema of `metrics.json` (the chapter's keys,
 //! plus percentiles, `fell_at_s`, `policy` and ratelab's extras).
 
+use crate::config::{ACTUATOR_HZ, MAX_DURATION_S};
 use crate::graph::spec::MAX_TOPICS;
 use crate::graph::TopicId;
 use crate::time::Nanos;
@@ -55,7 +57,7 @@ impl Serialize for TopicCounters {
 /// One actuator tick.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
 pub struct StepRecord {
-    /// Control step number, from 1.
+    /// Actuator step number, from 1 (each steps the plant 20 ms).
     pub step: u64,
     /// Run time of the tick.
     pub t: Nanos,
@@ -79,8 +81,10 @@ pub struct StepRecord {
     pub fell: bool,
 }
 
-/// Latency (or lateness) statistics over a run: an HDR histogram in nanoseconds with an
-/// exact integer sum for the mean.
+/// Latency (or lateness) statistics over a run: an HDR histogram in nanoseconds (3
+/// significant digits: percentiles are within 0.1% of the sample, rounded up) with an exact
+/// integer sum for the mean. Constant memory, for counts without a bound (node lateness
+/// under the real clock); sense→act latency uses [`ExactLatency`].
 #[derive(Clone, Debug)]
 pub struct LatencyStats {
     hist: Histogram<u64>,
@@ -141,6 +145,142 @@ impl LatencyStats {
     }
 }
 
+/// The most sense→act samples a run can have: one per actuator tick, the actuator at the
+/// plant's fixed [`ACTUATOR_HZ`] (a graph cannot change it) for at most [`MAX_DURATION_S`]
+/// (ticks at 0, 20 ms, …, 3600 s): 180 001. [`ExactLatency`] keeps that many samples
+/// (8 bytes each, about 1.4 MB) for exact order statistics.
+pub const MAX_EXACT_SAMPLES: usize = (MAX_DURATION_S * ACTUATOR_HZ) as usize + 1;
+
+/// Samples per block of [`ExactLatency`]'s sorted list (a block splits past twice this).
+const BLOCK: usize = 512;
+
+/// Sense→act latency with **exact** order statistics: every sample is kept, sorted, so the
+/// percentiles are samples (nearest rank, as the HDR histogram ranks them) and a latency
+/// the virtual clock makes exact (80 ms, 180 ms) prints exactly, where the histogram's 3
+/// significant digits printed 80.019 and 180.1.
+///
+/// The samples live in a sorted list of blocks (each at most `2 × 512`), so one insert
+/// costs a binary search and a move within one block, and a percentile a walk over the
+/// blocks' lengths (at most about 350 at [`MAX_EXACT_SAMPLES`]): cheap enough to read every
+/// frame in the lab. Storage is bounded: past [`MAX_EXACT_SAMPLES`] (more than a run can
+/// have) further samples count in the histogram and the mean only, and the percentiles
+/// come from the histogram (3 significant digits). The HDR histogram is kept beside the
+/// samples for drawing buckets; the mean is exact (an integer sum).
+#[derive(Clone, Debug, Default)]
+pub struct ExactLatency {
+    /// Sorted samples, ns: every block sorted, each block's values ≤ the next block's.
+    blocks: Vec<Vec<u64>>,
+    /// Samples in `blocks`.
+    kept: usize,
+    /// Every sample (histogram and exact sum).
+    stats: LatencyStats,
+}
+
+impl ExactLatency {
+    /// Record one sample.
+    pub fn record(&mut self, value: Nanos) {
+        self.stats.record(value);
+        if self.kept >= MAX_EXACT_SAMPLES {
+            return;
+        }
+        self.kept += 1;
+        let v = value.0;
+        // The first block whose last value is above `v` (ties go after equal values), or
+        // the last block.
+        let last = self.blocks.len().saturating_sub(1);
+        let i = self
+            .blocks
+            .partition_point(|b| b.last().is_some_and(|&x| x <= v))
+            .min(last);
+        match self.blocks.get_mut(i) {
+            None => self.blocks.push(vec![v]),
+            Some(b) => {
+                let j = b.partition_point(|&x| x <= v);
+                b.insert(j, v);
+                if b.len() > 2 * BLOCK {
+                    let tail = b.split_off(BLOCK);
+                    self.blocks.insert(i + 1, tail);
+                }
+            }
+        }
+    }
+
+    /// Number of samples.
+    pub fn count(&self) -> u64 {
+        self.stats.count()
+    }
+
+    /// Whether every sample is kept (the percentiles are exact): true unless more than
+    /// [`MAX_EXACT_SAMPLES`] were recorded.
+    pub fn is_exact(&self) -> bool {
+        self.kept as u64 == self.count()
+    }
+
+    /// Exact mean, ns, or `None` with no samples.
+    pub fn mean(&self) -> Option<f64> {
+        self.stats.mean()
+    }
+
+    /// The sample of 0-based rank `k` in sorted order.
+    fn kth(&self, mut k: usize) -> Option<u64> {
+        for b in &self.blocks {
+            if k < b.len() {
+                return Some(b[k]);
+            }
+            k -= b.len();
+        }
+        None
+    }
+
+    /// The sample at quantile `q` in [0, 1] by nearest rank (`⌈q·n⌉`, at least the first),
+    /// or `None` with no samples.
+    pub fn quantile(&self, q: f64) -> Option<Nanos> {
+        if !self.is_exact() {
+            return self.stats.quantile(q);
+        }
+        let n = self.kept;
+        let rank = ((q.clamp(0.0, 1.0) * n as f64).ceil() as usize).clamp(1, n.max(1));
+        self.kth(rank - 1).map(Nanos)
+    }
+
+    /// The largest sample, or `None` with no samples.
+    pub fn max(&self) -> Option<Nanos> {
+        if !self.is_exact() {
+            return self.stats.max();
+        }
+        self.blocks
+            .last()
+            .and_then(|b| b.last())
+            .copied()
+            .map(Nanos)
+    }
+
+    /// The HDR histogram of every sample (3 significant digits), for drawing buckets.
+    pub fn histogram(&self) -> &Histogram<u64> {
+        self.stats.histogram()
+    }
+
+    /// p50/p99/max in ms, rounded to µs; zeros with no samples.
+    pub fn summary_ms(&self) -> (f64, f64, f64) {
+        let ms = |n: Option<Nanos>| round_to(n.map_or(0.0, |n| n.as_millis_f64()), 3);
+        (
+            ms(self.quantile(0.5)),
+            ms(self.quantile(0.99)),
+            ms(self.max()),
+        )
+    }
+}
+
+impl FromIterator<Nanos> for ExactLatency {
+    fn from_iter<I: IntoIterator<Item = Nanos>>(samples: I) -> Self {
+        let mut s = Self::default();
+        for v in samples {
+            s.record(v);
+        }
+        s
+    }
+}
+
 /// Round `x` to `digits` decimals (report figures only).
 pub fn round_to(x: f64, digits: i32) -> f64 {
     let p = 10f64.powi(digits);
@@ -158,8 +298,8 @@ pub struct RunLog {
     pub last: Option<StepRecord>,
     /// Actuator ticks so far.
     pub steps: u64,
-    /// Sense→act latency over every tick that applied a sensed action.
-    pub latency: LatencyStats,
+    /// Sense→act latency over every tick that applied a sensed action (exact percentiles).
+    pub latency: ExactLatency,
     /// Ticks whose newest action was non-finite (the last good action was held).
     pub nonfinite_actions: u64,
     /// Run time of the fall, if the pole fell.
@@ -280,8 +420,21 @@ pub struct Metrics {
     pub seed: u64,
     /// Requested duration, s.
     pub duration_s: f64,
-    /// Actuator steps run.
+    /// Actuator steps run (each applies the held force and steps the plant 20 ms): the
+    /// chapter's name, which its summary called "control steps"; the same as
+    /// [`Metrics::actuator_steps`].
     pub steps: u64,
+    /// Actuator (plant) steps run: the same figure as `steps`, named for what it counts.
+    #[serde(default)]
+    pub actuator_steps: u64,
+    /// Ticks of the chain's policy node (the brain ran this often; at 5 Hz a tenth of the
+    /// actuator steps).
+    #[serde(default)]
+    pub policy_ticks: u64,
+    /// The policy's rate in force when the run ended, Hz (`control_hz` is the rate it
+    /// started with; live changes in the lab and replayed sessions move it).
+    #[serde(default)]
+    pub control_hz_end: f64,
     /// Run time when the graph stopped (the fall, or the duration), s.
     pub sim_time_s: f64,
     /// Pole angle after the last step, rad.
@@ -518,21 +671,30 @@ impl Metrics {
 
     /// The chapter's human summary (five lines, no terminal codes). `wall_s` is the
     /// wall time the run took, when known (not part of the metrics: it varies run to run).
+    /// The chapter's "control steps" are named for what they count, actuator steps (the
+    /// plant's 20 ms steps), beside the policy's ticks; the policy period is the one in
+    /// force at the end (with the starting one when a live change moved it).
     pub fn summary_lines(&self, wall_s: Option<f64>) -> Vec<String> {
         let wall = wall_s.map_or_else(String::new, |w| format!(" ({w:.2}s wall)"));
+        let counted = format!(
+            "{} actuator steps, {} policy ticks in {:.2}s sim{wall}",
+            self.steps, self.policy_ticks, self.sim_time_s
+        );
         let verdict = match (&self.node_failed, self.fell_at_s) {
-            (Some(failed), _) => format!(
-                "NODE FAILED ({failed}) — {} control steps in {:.2}s sim{wall}",
-                self.steps, self.sim_time_s
-            ),
-            (None, None) => format!(
-                "BALANCED (pole up the whole run) — {} control steps in {:.2}s sim{wall}",
-                self.steps, self.sim_time_s
-            ),
-            (None, Some(t)) => format!(
-                "FELL at t={t:.2}s — {} control steps in {:.2}s sim{wall}",
-                self.steps, self.sim_time_s
-            ),
+            (Some(failed), _) => format!("NODE FAILED ({failed}) — {counted}"),
+            (None, None) => format!("BALANCED (pole up the whole run) — {counted}"),
+            (None, Some(t)) => format!("FELL at t={t:.2}s — {counted}"),
+        };
+        let period =
+            |hz: f64| crate::rate::period_for_hz(hz).map_or_else(|_| "?".into(), |p| p.to_string());
+        let policy_period = if self.control_hz_end == self.control_hz {
+            format!("policy period {}", period(self.control_hz_end))
+        } else {
+            format!(
+                "policy period {} at the end, {} at the start",
+                period(self.control_hz_end),
+                period(self.control_hz)
+            )
         };
         let mut lines = vec![
             format!("clock={}  policy={}", self.clock, self.policy),
@@ -540,12 +702,11 @@ impl Metrics {
             verdict,
             format!("topics: {}", self.topics_line()),
             format!(
-                "mean sense->act latency: {:.1} ms  (p50 {:.1} | p99 {:.1} | max {:.1} ms; control period {})",
+                "mean sense->act latency: {:.1} ms  (p50 {:.1} | p99 {:.1} | max {:.1} ms; {policy_period})",
                 self.mean_latency_ms,
                 self.latency_p50_ms,
                 self.latency_p99_ms,
                 self.latency_max_ms,
-                crate::rate::period_for_hz(self.control_hz).map_or_else(|_| "?".into(), |p| p.to_string())
             ),
         ];
         lines.extend(self.qos_lines());
@@ -582,6 +743,82 @@ mod tests {
         let p50 = s.quantile(0.5).unwrap().as_millis_f64();
         assert!((p50 - 20.0).abs() < 0.05, "{p50}");
         assert!((s.max().unwrap().as_millis_f64() - 40.0).abs() < 0.05);
+    }
+
+    #[test]
+    fn exact_latencies_print_exactly() {
+        // A 5 Hz policy over a 50 Hz actuator: 0, 20, …, 180 ms, again and again. The HDR
+        // histogram printed p50 80.019 and p99 180.1 ms here.
+        let s: ExactLatency = (0..43u64)
+            .map(|i| Nanos::from_millis(20 * (i % 10)))
+            .collect();
+        assert!(s.is_exact());
+        assert_eq!(s.quantile(0.5), Some(Nanos::from_millis(80)));
+        assert_eq!(s.quantile(0.99), Some(Nanos::from_millis(180)));
+        assert_eq!(s.max(), Some(Nanos::from_millis(180)));
+        assert_eq!(s.summary_ms(), (80.0, 180.0, 180.0));
+        assert_eq!(
+            format!("p50 {:.1} | p99 {:.1}", s.summary_ms().0, s.summary_ms().1),
+            "p50 80.0 | p99 180.0"
+        );
+        // A period that is not a whole number of µs: exact to the ns, rounded to µs for print.
+        let t: ExactLatency = [142_857_142u64, 9_900_001].map(Nanos).into_iter().collect();
+        assert_eq!(t.max(), Some(Nanos(142_857_142)));
+        assert_eq!(t.summary_ms().2, 142.857);
+        let empty = ExactLatency::default();
+        assert_eq!((empty.quantile(0.5), empty.max()), (None, None));
+        assert_eq!(empty.summary_ms(), (0.0, 0.0, 0.0));
+    }
+
+    #[test]
+    fn exact_order_statistics_match_a_sort_across_blocks() {
+        // Many blocks (splits), duplicates, and values arriving out of order.
+        let mut x = 12345u64;
+        let mut values = Vec::new();
+        let mut s = ExactLatency::default();
+        for i in 0..20_000u64 {
+            x = x
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            let v = if i % 3 == 0 {
+                20_000_000
+            } else {
+                (x >> 33) % 300_000_000
+            };
+            values.push(v);
+            s.record(Nanos(v));
+        }
+        values.sort_unstable();
+        let n = values.len();
+        for q in [0.0, 0.001, 0.25, 0.5, 0.9, 0.99, 0.999, 1.0] {
+            let rank = ((q * n as f64).ceil() as usize).max(1);
+            assert_eq!(s.quantile(q), Some(Nanos(values[rank - 1])), "q {q}");
+        }
+        assert_eq!(s.max(), Some(Nanos(*values.last().unwrap())));
+        let mean = values.iter().map(|&v| v as f64).sum::<f64>() / n as f64;
+        assert!((s.mean().unwrap() - mean).abs() < 1e-3);
+        // The same ranking as the histogram's, to its precision.
+        let h = s.histogram().value_at_quantile(0.5) as f64;
+        assert!((h - s.quantile(0.5).unwrap().0 as f64).abs() <= h * 1e-3);
+    }
+
+    #[test]
+    fn exact_storage_is_bounded_by_the_longest_run() {
+        assert_eq!(
+            MAX_EXACT_SAMPLES, 180_001,
+            "3600 s of 50 Hz ticks, inclusive"
+        );
+        let mut s: ExactLatency = (0..MAX_EXACT_SAMPLES as u64).map(|_| Nanos(7)).collect();
+        assert!(s.is_exact());
+        s.record(Nanos::from_millis(500));
+        // Past the bound: counted (mean, histogram) but not kept; percentiles from the
+        // histogram, still sound.
+        assert!(!s.is_exact());
+        assert_eq!(s.count(), MAX_EXACT_SAMPLES as u64 + 1);
+        assert_eq!(s.kept, MAX_EXACT_SAMPLES);
+        assert_eq!(s.quantile(0.5), Some(Nanos(7)));
+        let max = s.max().unwrap().as_millis_f64();
+        assert!((max - 500.0).abs() < 0.5, "{max}");
     }
 
     #[test]

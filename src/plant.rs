@@ -1,6 +1,6 @@
 //! The plant: the chapter's cartpole, simulated by MuJoCo 3.17 (through `mujoco-rs`).
 //!
-//! The plant owns simulated time: one [`CartPole::step`] is one 50 Hz control step
+//! The plant owns simulated time: one [`CartPole::step`] is one 50 Hz plant step (one actuator tick)
 //! (the action held for [`FRAME_SKIP`] physics steps of 10 ms). The model is
 //! `assets/cartpole.xml`, written from the course env's physical facts: a 1 kg cart on a
 //! frictionless ±2.9 m slider driven by one motor (gear 10, ctrl in [-1, 1]); a 0.1 kg,
@@ -20,9 +20,9 @@ pub type Observation = [f32; OBS_DIM];
 /// An action, float32; the plant clips it to [-1, 1].
 pub type Action = [f32; ACT_DIM];
 
-/// Physics steps per control step (the action is held for this many).
+/// Physics steps per plant step (the action is held for this many).
 pub const FRAME_SKIP: usize = 2;
-/// The plant's control period: 2 × 10 ms physics steps.
+/// The plant's step period (the actuator's period): 2 × 10 ms physics steps.
 pub const CONTROL_PERIOD: Nanos = Nanos(20_000_000);
 /// Fall limit on |θ|, rad (≈ 12°).
 pub const THETA_LIMIT_RAD: f64 = 0.2095;
@@ -72,7 +72,7 @@ impl CartPoleState {
     }
 }
 
-/// What one control step did.
+/// What one plant step did.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct StepOutcome {
     /// The state after the step.
@@ -153,7 +153,7 @@ impl CartPole {
     }
 
     /// Apply `action` (clipped to [-1, 1]; a non-finite action must be filtered by the
-    /// caller) for one control step of [`FRAME_SKIP`] physics steps.
+    /// caller) for one plant step of [`FRAME_SKIP`] physics steps.
     pub fn step(&mut self, action: f32) -> StepOutcome {
         let applied = f64::from(action).clamp(-1.0, 1.0);
         self.data.ctrl_mut()[0] = applied;
@@ -169,12 +169,12 @@ impl CartPole {
         }
     }
 
-    /// Control steps taken since the last reset.
+    /// Plant steps taken since the last reset.
     pub fn steps(&self) -> u64 {
         self.steps
     }
 
-    /// Simulated time since the last reset (control steps × 20 ms).
+    /// Simulated time since the last reset (plant steps × 20 ms).
     pub fn sim_time(&self) -> Nanos {
         Nanos(self.steps * CONTROL_PERIOD.0)
     }

@@ -34,7 +34,7 @@
 //!
 //! Determinism: rows are not left to rerun's background batcher, whose chunk boundaries and
 //! order depend on thread timing. Each entity's rows are gathered into chunks here and sent
-//! every [`FLUSH_EVERY_STEPS`] control steps (and at the end), entities in sorted order, all
+//! every [`FLUSH_EVERY_STEPS`] actuator steps (and at the end), entities in sorted order, all
 //! stamped on the runtime clock. Under the virtual clock the wall-clock `log_time` timeline
 //! is off and the recording id derives from the settings, so two runs with the same settings
 //! write recordings that `rerun rrd compare` finds identical. (Per-node lateness, real clock
@@ -72,7 +72,7 @@ use std::sync::{Arc, Mutex};
 /// The rerun application id of ratelab recordings.
 pub const APP_ID: &str = "ratelab";
 
-/// Buffered rows are sent as chunks this often (control steps), so a run cut short loses
+/// Buffered rows are sent as chunks this often (actuator steps), so a run cut short loses
 /// at most this much even without a clean exit (a clean exit always sends everything).
 pub const FLUSH_EVERY_STEPS: u64 = 250;
 
@@ -335,7 +335,7 @@ pub struct Recording {
     /// The settings the run started with (for the blueprint's scales and ids).
     cfg: RunConfig,
     buffer: Arc<Mutex<ChunkBuffer>>,
-    /// The latest control step logged (stamps events that arrive between steps).
+    /// The latest actuator step logged (stamps events that arrive between steps).
     last_step: Arc<std::sync::atomic::AtomicU64>,
     /// The graph, once the observer is attached (for the final layout).
     shape: Arc<Mutex<Option<GraphShape>>>,
@@ -1034,7 +1034,7 @@ impl Recording {
         let verdict = summary.get(2).cloned().unwrap_or_default();
         self.event(
             end.at,
-            &format!("end: {}, {} steps", end.reason, metrics.steps),
+            &format!("end: {}, {} actuator steps", end.reason, metrics.steps),
             level,
         );
         let mut doc = format!("**{verdict}** ({}).\n\n", end.reason);

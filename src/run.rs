@@ -394,6 +394,12 @@ pub fn summarize(
         seed: cfg.seed,
         duration_s: cfg.duration.as_secs_f64(),
         steps: log.steps,
+        actuator_steps: log.steps,
+        policy_ticks: ticks.get(spec.chain.policy.0).copied().unwrap_or(0),
+        control_hz_end: h
+            .rates
+            .get(spec.chain.policy.0)
+            .map_or(cfg.control_hz(), crate::rate::Rate::hz),
         sim_time_s: sim_time.as_secs_f64(),
         final_pole_angle: log
             .last

@@ -2,12 +2,15 @@
 //! each frame. Keys become engine [`Control`]s; nothing here blocks the graph.
 
 use super::keymap::{depth_down, depth_up, rate_down, rate_up, Msg};
-use super::view::{LatencyView, NodeView, Selected, TopicView, Verdict, View};
+use super::live::{Live, WINDOW};
+use super::view::{
+    LatencyView, NodeView, SegmentView, Selected, TopicView, Verdict, View, WindowLatency,
+};
 use crossbeam_channel::Sender;
 use ratelab::config::{check_rate, BREAK_CONTROL_HZ};
 use ratelab::graph::spec::GEAR_N;
 use ratelab::graph::{GraphSpec, NodeId, TopicId};
-use ratelab::metrics::{LatencyStats, StepRecord};
+use ratelab::metrics::StepRecord;
 use ratelab::qos::{Delivery, QosCounter, TopicQos};
 use ratelab::run::Command;
 use ratelab::scheduler::EndReason;
@@ -17,9 +20,9 @@ use std::collections::VecDeque;
 
 /// Seconds of pole-angle history kept (and drawn).
 pub const HISTORY_S: f64 = 10.0;
-/// Window for msg/s, drops, stale reads and measured rates. msg/s is the count of messages
-/// published in the window over the span of their publish stamps, so a 5 Hz topic reads 5.0.
-pub const WINDOW: Nanos = Nanos::SECOND;
+/// Window for the real clock's measured node rates and tick lateness. (Topics and latency
+/// count over [`super::live::WINDOW`] and the segment since the last change.)
+pub const TICK_WINDOW: Nanos = Nanos::SECOND;
 /// How long a new notice leads the footer (before the keys), wall time.
 pub const FRESH: std::time::Duration = std::time::Duration::from_secs(4);
 /// Latency histogram bucket width.
@@ -94,13 +97,13 @@ pub struct App {
     alive: Vec<Option<bool>>,
     /// What Tab selected.
     selected: Option<Selected>,
-    steps: VecDeque<StepRecord>,
+    /// The window (last 5 s) and the segment since the last change.
+    live: Live,
     history: VecDeque<(f64, f64)>,
     /// (t s, applied force N) per actuator step over the last [`HISTORY_S`].
     applied: VecDeque<(f64, f64)>,
     /// (t s, published force N) per policy publication seen over the last [`HISTORY_S`].
     published: VecDeque<(f64, f64)>,
-    latency: LatencyStats,
     ticks: Vec<VecDeque<(Nanos, Nanos)>>,
     last: Option<StepRecord>,
     verdict: Verdict,
@@ -139,11 +142,10 @@ impl App {
             qos: Vec::new(),
             alive: Vec::new(),
             selected: None,
-            steps: VecDeque::new(),
+            live: Live::default(),
             history: VecDeque::new(),
             applied: VecDeque::new(),
             published: VecDeque::new(),
-            latency: LatencyStats::default(),
             ticks: Vec::new(),
             last: None,
             verdict: Verdict::Balanced,
@@ -165,11 +167,26 @@ impl App {
         cfg: ratelab::RunConfig,
         ended: bool,
     ) -> Result<(Self, crossbeam_channel::Receiver<Control>), ratelab::run::RunError> {
+        Self::after_virtual_session(cfg, Vec::new(), ended)
+    }
+
+    /// As [`App::after_virtual_run`], with `commands` applied at their run times (sorted by
+    /// time), each reported as the engine reports it: `Changed` before the first step at or
+    /// after its time.
+    ///
+    /// # Errors
+    /// The run could not start.
+    pub fn after_virtual_session(
+        cfg: ratelab::RunConfig,
+        commands: Vec<ratelab::run::TimedCommand>,
+        ended: bool,
+    ) -> Result<(Self, crossbeam_channel::Receiver<Control>), ratelab::run::RunError> {
         let (tx, rx) = crossbeam_channel::unbounded();
         let mut app = Self::new(tx, "scripted".into(), None, Speed::Times(1.0));
         let steps = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
         let opts = ratelab::RunOptions {
             observers: vec![Box::new(Collect(steps.clone()))],
+            commands: commands.clone(),
             ..ratelab::RunOptions::new()
         };
         let report = ratelab::run(&cfg, Box::new(ratelab::policy::Scripted), opts)?;
@@ -178,7 +195,27 @@ impl App {
             policy: "scripted balancer".into(),
             recording: None,
         });
+        let mut pending = commands.iter().peekable();
+        let (mut graph, mut brain) = (app.graph.clone(), "scripted".to_string());
         for s in steps.lock().unwrap_or_else(|e| e.into_inner()).iter() {
+            while let Some(c) = pending.next_if(|c| c.at_ns <= s.t.0) {
+                app.on_telemetry(Telemetry::Changed {
+                    at: Nanos(c.at_ns),
+                    text: ratelab::session::describe(&c.command),
+                });
+                // The engine's next status shows the new settings.
+                let _ = c.command.apply_to_settings(&mut graph, &mut brain);
+                app.on_telemetry(Telemetry::Status {
+                    now: Nanos(c.at_ns),
+                    paused: false,
+                    speed: app.speed,
+                    rates: graph.nodes.iter().map(|n| n.rate_hz).collect(),
+                    depths: graph.topics.iter().map(|t| t.depth).collect(),
+                    qos: graph.topics.iter().map(|t| t.qos).collect(),
+                    alive: app.alive.clone(),
+                    policy: app.brain.clone(),
+                });
+            }
             app.on_telemetry(Telemetry::Step(Box::new(*s)));
         }
         if ended {
@@ -236,20 +273,17 @@ impl App {
                 self.brain = policy;
                 self.recording = recording.map(|p| p.display().to_string());
                 self.now = Nanos::ZERO;
-                self.steps.clear();
+                self.live = Live::default();
                 self.history.clear();
                 self.applied.clear();
                 self.published.clear();
-                self.latency = LatencyStats::default();
                 self.last = None;
                 self.verdict = Verdict::Balanced;
             }
             Telemetry::Step(s) => {
                 let s = *s;
                 self.now = self.now.max(s.t);
-                if let Some(l) = s.latency {
-                    self.latency.record(l);
-                }
+                self.live.push(s);
                 let now_s = s.t.as_secs_f64();
                 self.history.push_back((now_s, s.pole_angle));
                 self.applied.push_back((now_s, s.action * GEAR_N));
@@ -260,14 +294,6 @@ impl App {
                     while q.front().is_some_and(|(t, _)| now_s - t > HISTORY_S) {
                         q.pop_front();
                     }
-                }
-                self.steps.push_back(s);
-                while self
-                    .steps
-                    .front()
-                    .is_some_and(|f| s.t.saturating_sub(f.t) > WINDOW)
-                {
-                    self.steps.pop_front();
                 }
                 if s.fell {
                     self.verdict = Verdict::Fell(s.t.as_secs_f64());
@@ -283,7 +309,7 @@ impl App {
                     q.push_back((now, lateness));
                     while q
                         .front()
-                        .is_some_and(|(t, _)| now.saturating_sub(*t) > WINDOW)
+                        .is_some_and(|(t, _)| now.saturating_sub(*t) > TICK_WINDOW)
                     {
                         q.pop_front();
                     }
@@ -309,6 +335,10 @@ impl App {
                 self.brain = policy;
             }
             Telemetry::Applied(text) => self.say(text),
+            Telemetry::Changed { at, text } => {
+                self.live.change(at, text.clone());
+                self.say(text);
+            }
             Telemetry::Ended { metrics, reason } => {
                 self.verdict = match &reason {
                     EndReason::NodeFailed { node, message } => {
@@ -539,37 +569,24 @@ impl App {
     fn topic_view(&self, id: TopicId) -> TopicView {
         let spec = self.graph.topic(id);
         let qos = self.qos.get(id.0).copied().unwrap_or(spec.qos);
-        let pick = |s: &StepRecord| s.topics.get(id);
-        let (first, last) = (self.steps.front(), self.steps.back());
-        let (rate, dropping, staling) = match (first, last) {
-            (Some(f), Some(l)) => {
-                let (f, l) = (pick(f), pick(l));
-                // The messages published between the two snapshots span exactly
-                // (f.last_stamp, l.last_stamp]: count over that span, not over a bucket.
-                let span = l.last_stamp.saturating_sub(f.last_stamp);
-                let rate = if span.0 > 0 {
-                    (l.published - f.published) as f64 / span.as_secs_f64()
-                } else {
-                    0.0
-                };
-                (rate, l.dropped > f.dropped, l.stale_reads > f.stale_reads)
-            }
-            _ => (0.0, false, false),
-        };
+        let window = self.live.window_topic(id);
+        let segment = self.live.segment_topic(id);
         TopicView {
             name: spec.name.clone(),
             publisher: spec.publisher.0,
             subscriber: spec.subscriber.map(|n| n.0),
             depth: self.depths.get(id.0).copied().unwrap_or(spec.depth),
-            msg_per_s: rate,
-            dropped: last.map_or(0, |l| pick(l).dropped),
-            dropping,
-            stale_reads: last.map_or(0, |l| pick(l).stale_reads),
-            staling,
+            msg_per_s: window.msg_per_s,
+            dropped: window.dropped,
+            dropping: window.dropped > 0,
+            stale_reads: window.stale_reads,
+            staling: window.stale_reads > 0,
+            segment_dropped: segment.dropped,
+            segment_stale_reads: segment.stale_reads,
             qos: (!(qos.is_default() && spec.qos.is_default()))
                 .then(|| qos.short_parts(self.depths.get(id.0).copied().unwrap_or(spec.depth))),
-            qos_counts: last.map_or_else(Vec::new, |l| {
-                let s = pick(l);
+            qos_counts: self.last.map_or_else(Vec::new, |l| {
+                let s = l.topics.get(id);
                 QosCounter::reported(&[spec.qos, qos], &s)
                     .into_iter()
                     .filter(|c| *c != QosCounter::OfferedDeadlineMissed)
@@ -606,8 +623,10 @@ impl App {
         }
     }
 
+    /// The latency panel: the segment's histogram and percentiles, and the window's.
     fn latency_view(&self) -> LatencyView {
-        let h = self.latency.histogram();
+        let latency = &self.live.segment().latency;
+        let h = latency.histogram();
         let mut buckets: Vec<(String, u64)> = (0..BUCKETS)
             .map(|i| {
                 let label = if i + 1 == BUCKETS {
@@ -618,19 +637,50 @@ impl App {
                 (label, 0)
             })
             .collect();
-        if self.latency.count() > 0 {
+        if latency.count() > 0 {
             for v in h.iter_recorded() {
                 let i = ((v.value_iterated_to() / BUCKET.0) as usize).min(BUCKETS - 1);
                 buckets[i].1 += v.count_at_value();
             }
         }
-        let (p50_ms, p99_ms, max_ms) = self.latency.summary_ms();
+        let (p50_ms, p99_ms, max_ms) = latency.summary_ms();
+        let (n, stats) = self.live.window_latency();
+        let ms = |n: Nanos| ratelab::metrics::round_to(n.as_millis_f64(), 3);
         LatencyView {
             buckets,
-            count: self.latency.count(),
+            count: latency.count(),
             p50_ms,
             p99_ms,
             max_ms,
+            window: WindowLatency {
+                count: n as u64,
+                p50_ms: stats.map_or(0.0, |s| ms(s.0)),
+                p99_ms: stats.map_or(0.0, |s| ms(s.1)),
+                max_ms: stats.map_or(0.0, |s| ms(s.2)),
+            },
+        }
+    }
+
+    /// The segment since the last change, for the segment line and the angle chart.
+    fn segment_view(&self) -> SegmentView {
+        let seg = self.live.segment();
+        let (span, full) = self.live.window_span();
+        SegmentView {
+            index: seg.index,
+            start_s: seg.start.as_secs_f64(),
+            cause: seg.cause.clone(),
+            window_s: if full {
+                WINDOW.as_secs_f64()
+            } else {
+                span.as_secs_f64()
+            },
+            window_full: full,
+            marks_s: self
+                .live
+                .marks()
+                .map(Nanos::as_secs_f64)
+                .filter(|&t| t > 0.0)
+                .collect(),
         }
     }
 
@@ -675,6 +725,7 @@ impl App {
                 .collect(),
             published_force: self.published.iter().copied().collect(),
             latency: self.latency_view(),
+            segment: self.segment_view(),
             help: self.help,
             typing: self.typing.clone(),
             message: self.message.clone(),

@@ -143,7 +143,7 @@ pub const BINDINGS: &[Binding] = &[
     Binding {
         keys: &[(Char('.'), Msg::Step)],
         label: ".",
-        help: "one actuator step while paused (virtual clock)",
+        help: "one actuator step (20 ms) while paused (virtual clock)",
         footer: None,
     },
     Binding {

@@ -4,6 +4,7 @@
 
 pub mod app;
 pub mod keymap;
+pub mod live;
 pub mod view;
 
 use anyhow::Context;
@@ -347,6 +348,91 @@ mod tests {
             "{text}"
         );
         insta::assert_snapshot!("slow_sensor_stale_80x24", text);
+    }
+
+    #[test]
+    fn after_50_5_50_hz_the_window_and_the_segment_see_only_the_matched_rates() {
+        // The sequence: 50 Hz, a dip to 5 Hz (4.0 s to 4.6 s: /obs drops), back to
+        // 50 Hz until 12 s. The run's totals mix the three settings; the window (last 5 s)
+        // and the segment (since the change at 4.6 s) see matched rates only.
+        use ratelab::run::{Command, TimedCommand};
+        let at = |ms: u64, hz: f64| TimedCommand {
+            at_ns: ms * 1_000_000,
+            command: Command::SetControlHz { hz },
+        };
+        let commands = vec![at(4_000, 5.0), at(4_600, 50.0)];
+        let (app, _rx) =
+            App::after_virtual_session(virtual_cfg(50.0, 12), commands.clone(), false).unwrap();
+        let run_total = run(
+            &virtual_cfg(50.0, 12),
+            Box::new(Scripted),
+            RunOptions {
+                commands,
+                ..RunOptions::new()
+            },
+        )
+        .unwrap()
+        .metrics;
+        assert!(run_total.balanced, "the dip is short enough to survive");
+        assert!(run_total.obs_dropped > 0, "the dip dropped /obs messages");
+        let v = app.view();
+        let obs = &v.topics[0];
+        // One drop in the segment, at its first instant: the sensor's tick at 4.60 s runs
+        // before the policy's first 50 Hz tick and evicts the 4.58 s reading, which the 5 Hz
+        // policy never read. None since (the window's 0), against the run's total.
+        assert_eq!((obs.dropped, obs.segment_dropped), (0, 1), "{obs:?}");
+        assert!(run_total.obs_dropped > 10, "{}", run_total.obs_dropped);
+        assert!(!obs.dropping);
+        assert_eq!((obs.msg_per_s, v.topics[1].msg_per_s), (50.0, 50.0));
+        assert_eq!(v.segment.index, 3);
+        assert_eq!(v.segment.start_s, 4.6);
+        assert_eq!(v.segment.marks_s, [4.0, 4.6]);
+        assert!(v.segment.window_full);
+        // Matched rates act on the reading of the same instant: the segment's latency is 0,
+        // where the run's p99 includes the dip's 180 ms.
+        assert_eq!((v.latency.p99_ms, v.latency.window.p99_ms), (0.0, 0.0));
+        assert!(
+            run_total.latency_max_ms >= 100.0,
+            "{}",
+            run_total.latency_max_ms
+        );
+        assert_eq!(v.latency.count, 371, "steps from 4.60 s to 12 s");
+        assert_eq!(v.latency.window.count, 250, "steps in (7 s, 12 s]");
+        let small = render(&app, 80, 24);
+        assert!(small.contains("last 5 s"), "{small}");
+        assert!(
+            small.contains("totals since 4.60 s: /obs 1 dropped"),
+            "{small}"
+        );
+        assert!(small.contains("latency since 4.60 s: n=371"), "{small}");
+        insta::assert_snapshot!("segments_80x24", small);
+        let big = render(&app, 120, 40);
+        assert!(
+            big.contains(
+                "arrows: last 5 s │ totals since the change at 4.60 s (control rate → 50 Hz)"
+            ),
+            "{big}"
+        );
+        insta::assert_snapshot!("segments_120x40", big);
+        // In the middle of the dip: the window and the segment see the dip only.
+        let (app, _rx) = App::after_virtual_session(
+            virtual_cfg(50.0, 0).with_duration_ms(4_500),
+            vec![at(4_000, 5.0)],
+            false,
+        )
+        .unwrap();
+        let v = app.view();
+        let obs = &v.topics[0];
+        assert!(obs.dropping && obs.dropped == obs.segment_dropped && obs.dropped > 0);
+        assert_eq!(v.topics[1].msg_per_s, 5.0);
+        let text = render(&app, 120, 40);
+        assert!(
+            text.contains(
+                "arrows: last 0.5 s │ totals since the change at 4.00 s: /obs 22 dropped"
+            ),
+            "{text}"
+        );
+        insta::assert_snapshot!("segment_in_the_dip_120x40", text);
     }
 
     #[test]

@@ -60,20 +60,62 @@ pub struct TopicView {
     pub depth: usize,
     /// Selected with Tab?
     pub selected: bool,
-    /// Messages per second over the last second of run time.
+    /// Messages per second over the window (the last 5 s, never across a change): the
+    /// count over the span of their publish stamps.
     pub msg_per_s: f64,
-    /// Dropped since the run started.
+    /// Dropped within the window.
     pub dropped: u64,
-    /// Dropped within the last second (the arrow is "dropping").
+    /// Any dropped within the window (the arrow is "dropping").
     pub dropping: bool,
-    /// Reads that found nothing new since the run started (the mirror of a drop).
+    /// Reads within the window that found nothing new (the mirror of a drop).
     pub stale_reads: u64,
-    /// Stale reads within the last second (the subscriber is re-reading old data).
+    /// Any stale reads within the window (the subscriber is re-reading old data).
     pub staling: bool,
     /// Its QoS in short, in parts (`KA100 fifo`, `dl 40 ms`), when not the chapter's.
     pub qos: Option<Vec<String>>,
-    /// The QoS counters it reports, labelled for the edge (`lost`, `dl missed`, …).
+    /// The QoS counters it reports since the run started, labelled for the edge (`lost`,
+    /// `dl miss`, …).
     pub qos_counts: Vec<(&'static str, u64)>,
+    /// Dropped since the last change of settings (or the run's start).
+    pub segment_dropped: u64,
+    /// Stale reads since the last change of settings (or the run's start).
+    pub segment_stale_reads: u64,
+}
+
+/// The window and the segment: what the live numbers count over.
+#[derive(Clone, Debug, PartialEq, Default)]
+pub struct SegmentView {
+    /// 1 for the run's start, then one more per change of rate, depth or brain.
+    pub index: u32,
+    /// Run time the segment started, s.
+    pub start_s: f64,
+    /// The change that started it (`None`: the run's start).
+    pub cause: Option<String>,
+    /// The window's span, s: 5, or less right after the start or a change.
+    pub window_s: f64,
+    /// The window spans its whole 5 s.
+    pub window_full: bool,
+    /// Run times of the changes over the last ~10 s, s (marks on the angle chart).
+    pub marks_s: Vec<f64>,
+}
+
+impl SegmentView {
+    /// `last 5 s` or, while the window is shorter, `last 2.3 s`.
+    pub fn window_label(&self) -> String {
+        if self.window_full {
+            format!("last {} s", hz(self.window_s))
+        } else {
+            format!("last {:.1} s", self.window_s)
+        }
+    }
+
+    /// `the start` or `12.30 s`.
+    pub fn since(&self) -> String {
+        match self.cause {
+            None => "the start".to_string(),
+            Some(_) => format!("{:.2} s", self.start_s),
+        }
+    }
 }
 
 /// The run's verdict badge.
@@ -89,12 +131,26 @@ pub enum Verdict {
     Failed(String),
 }
 
-/// Latency histogram panel.
+/// Sense→act latency over the window, ms (exact order statistics).
+#[derive(Clone, Debug, PartialEq, Default)]
+pub struct WindowLatency {
+    /// Samples.
+    pub count: u64,
+    /// p50, ms.
+    pub p50_ms: f64,
+    /// p99, ms.
+    pub p99_ms: f64,
+    /// max, ms.
+    pub max_ms: f64,
+}
+
+/// Latency panel: the histogram and percentiles since the last change (exact order
+/// statistics), and the window's percentiles.
 #[derive(Clone, Debug, PartialEq, Default)]
 pub struct LatencyView {
-    /// (label, count) per bucket.
+    /// (label, count) per bucket, since the last change.
     pub buckets: Vec<(String, u64)>,
-    /// Samples.
+    /// Samples since the last change.
     pub count: u64,
     /// p50, p99, max, ms.
     pub p50_ms: f64,
@@ -102,6 +158,8 @@ pub struct LatencyView {
     pub p99_ms: f64,
     /// max, ms.
     pub max_ms: f64,
+    /// The same over the window.
+    pub window: WindowLatency,
 }
 
 /// Everything one frame shows.
@@ -141,8 +199,10 @@ pub struct View {
     pub applied_force: Vec<(f64, f64)>,
     /// (t s, N) of each force the policy published over the last ~10 s.
     pub published_force: Vec<(f64, f64)>,
-    /// Latency histogram over the run.
+    /// Latency since the last change, and over the window.
     pub latency: LatencyView,
+    /// The window and the segment the numbers count over.
+    pub segment: SegmentView,
     /// Help overlay shown?
     pub help: bool,
     /// An exact rate being typed.
@@ -164,16 +224,17 @@ impl Widget for &View {
             render_too_small(area, buf);
             return;
         }
-        let hist_h = if area.height >= 34 { 10 } else { 6 };
+        let hist_h = if area.height >= 34 { 10 } else { 5 };
         let graph_h = graph_height(
             self,
             area.width,
             area.height,
-            area.height.saturating_sub(hist_h + 10),
+            area.height.saturating_sub(hist_h + 11),
         );
-        let [status, graph, middle, latency, footer] = Layout::vertical([
+        let [status, graph, segment, middle, latency, footer] = Layout::vertical([
             Constraint::Length(1),
             Constraint::Length(graph_h),
+            Constraint::Length(1),
             Constraint::Min(8),
             Constraint::Length(hist_h),
             Constraint::Length(1),
@@ -181,6 +242,7 @@ impl Widget for &View {
         .areas(area);
         render_status(self, status, buf);
         render_graph(self, graph, buf);
+        render_segment(self, segment, buf);
         let [cart, chart] =
             Layout::horizontal([Constraint::Percentage(40), Constraint::Percentage(60)])
                 .areas(middle);
@@ -457,7 +519,7 @@ fn arrow_lines(t: &TopicView, w: usize) -> Vec<Line<'static>> {
     let rate = Line::from(format!("{:.1} msg/s", t.msg_per_s)).centered();
     let dropped =
         Line::from(Span::styled(format!("{} dropped {mark}", t.dropped), style)).centered();
-    let stale = (t.stale_reads > 0).then(|| {
+    let stale = (t.segment_stale_reads > 0).then(|| {
         // The mirror image of a drop, with a symbol of its own: old data read again.
         let style = if t.staling {
             Style::new().fg(Color::Magenta).add_modifier(Modifier::BOLD)
@@ -600,7 +662,15 @@ fn render_angle_chart(v: &View, area: Rect, buf: &mut Buffer) {
         .iter()
         .map(|&(t, a)| (t, a.clamp(-0.3, 0.3)))
         .collect();
-    let datasets = vec![
+    // A vertical mark at each change of settings: a new segment starts there.
+    let marks: Vec<[(f64, f64); 2]> = v
+        .segment
+        .marks_s
+        .iter()
+        .filter(|&&t| t >= t0 && t <= t1)
+        .map(|&t| [(t, -0.3), (t, 0.3)])
+        .collect();
+    let mut datasets = vec![
         Dataset::default()
             .name("θ")
             .marker(Marker::Braille)
@@ -619,6 +689,14 @@ fn render_angle_chart(v: &View, area: Rect, buf: &mut Buffer) {
             .red()
             .data(&lower),
     ];
+    for (i, m) in marks.iter().enumerate() {
+        let d = Dataset::default()
+            .marker(Marker::Braille)
+            .graph_type(GraphType::Line)
+            .cyan()
+            .data(m);
+        datasets.push(if i == 0 { d.name("change") } else { d });
+    }
     Chart::new(datasets)
         .block(Block::bordered().title(" pole angle (rad), last 10 s "))
         .x_axis(time_axis(t0, t1, area))
@@ -691,12 +769,98 @@ fn render_hold_chart(v: &View, area: Rect, buf: &mut Buffer) {
         .render(area, buf);
 }
 
+/// The segment line: what the arrows count over (the window), then each topic's totals since
+/// the last change of settings (or the start), saying since when, with the change when the
+/// width allows.
+fn render_segment(v: &View, area: Rect, buf: &mut Buffer) {
+    let seg = &v.segment;
+    let topics = |short: bool| -> Vec<Span<'static>> {
+        let mut spans: Vec<Span> = Vec::new();
+        for (i, t) in v.topics.iter().enumerate() {
+            if i > 0 {
+                spans.push(" · ".dim());
+            }
+            spans.push(format!("{} ", t.name).into());
+            let dropped = if short {
+                format!("{} drop", t.segment_dropped)
+            } else {
+                format!("{} dropped", t.segment_dropped)
+            };
+            spans.push(if t.segment_dropped > 0 {
+                dropped.yellow().bold()
+            } else {
+                dropped.into()
+            });
+            if t.segment_stale_reads > 0 {
+                spans.push(format!(", {} stale", t.segment_stale_reads).magenta());
+            }
+        }
+        spans
+    };
+    let since = seg.since();
+    let mut heads: Vec<String> = Vec::new();
+    if let Some(cause) = &seg.cause {
+        heads.push(format!(" totals since the change at {since} ({cause}): "));
+        heads.push(format!(" totals since the change at {since}: "));
+    }
+    heads.push(format!(" totals since {since}: "));
+    // From the most to the least said, the first that fits.
+    let mut candidates: Vec<Vec<Span>> = Vec::new();
+    for head in &heads {
+        let mut line = vec![
+            " arrows: ".dim(),
+            seg.window_label().bold(),
+            " │".dim(),
+            Span::from(head.clone()).dim(),
+        ];
+        line.extend(topics(false));
+        candidates.push(line);
+    }
+    for short in [false, true] {
+        let mut line = vec![
+            " ".into(),
+            seg.window_label().bold(),
+            " │".dim(),
+            Span::from(format!(" since {since}: ")).dim(),
+        ];
+        line.extend(topics(short));
+        candidates.push(line);
+    }
+    let width = |l: &Vec<Span>| l.iter().map(|s| s.content.chars().count()).sum::<usize>();
+    let last = candidates.len() - 1;
+    let line = candidates
+        .iter()
+        .position(|l| width(l) <= area.width as usize)
+        .map_or_else(|| candidates[last].clone(), |i| candidates[i].clone());
+    Paragraph::new(Line::from(line)).render(area, buf);
+}
+
 fn render_latency(v: &View, area: Rect, buf: &mut Buffer) {
     let l = &v.latency;
-    let title = format!(
-        " sense→act latency over the run: n={} │ p50 {:.1} ms │ p99 {:.1} ms │ max {:.1} ms ",
-        l.count, l.p50_ms, l.p99_ms, l.max_ms
+    let figures = format!(
+        "since {}: n={} │ p50 {:.1} │ p99 {:.1} │ max {:.1} ms ",
+        v.segment.since(),
+        l.count,
+        l.p50_ms,
+        l.p99_ms,
+        l.max_ms
     );
+    // "sense→act" when the width allows it.
+    let title = [" sense→act latency ", " latency "]
+        .iter()
+        .map(|head| format!("{head}{figures}"))
+        .find(|t| t.chars().count() + 2 <= area.width as usize)
+        .unwrap_or_else(|| format!(" latency {figures}"));
+    let w = &l.window;
+    let window = Line::from(vec![
+        " ".into(),
+        v.segment.window_label().bold(),
+        format!(
+            ": n={} │ p50 {:.1} │ p99 {:.1} │ max {:.1} ms ",
+            w.count, w.p50_ms, w.p99_ms, w.max_ms
+        )
+        .into(),
+    ]);
     let bars: Vec<Bar> = l
         .buckets
         .iter()
@@ -706,7 +870,7 @@ fn render_latency(v: &View, area: Rect, buf: &mut Buffer) {
     let n = l.buckets.len().max(1) as u16;
     let bar_w = (inner_w / n).saturating_sub(1).clamp(1, 12);
     BarChart::default()
-        .block(Block::bordered().title(title))
+        .block(Block::bordered().title(title).title_bottom(window))
         .data(BarGroup::default().bars(&bars))
         .bar_width(bar_w)
         .bar_gap(1)

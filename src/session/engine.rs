@@ -306,7 +306,7 @@ impl Engine {
                         command: cmd,
                     });
                 self.save_log();
-                let _ = self.tx.send(Telemetry::Applied(text));
+                let _ = self.tx.send(Telemetry::Changed { at, text });
                 true
             }
             Err(e) => {

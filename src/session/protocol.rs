@@ -107,8 +107,19 @@ pub enum Telemetry {
         /// The brain's label.
         policy: String,
     },
-    /// A command was applied (for the front end's log line).
+    /// A notice for the front end's log line (a change set for the next run, a refused
+    /// real-time priority).
     Applied(String),
+    /// A change of rate, depth or brain took effect in the running graph at run time `at`
+    /// (virtual: the instant before which it was applied; real: when the engine applied
+    /// it). It starts a new segment of the run: the front end's totals since the last
+    /// change restart there.
+    Changed {
+        /// Run time the change took effect.
+        at: Nanos,
+        /// The change in words ([`describe`]).
+        text: String,
+    },
     /// The run ended (fall, duration, node failure); the state is frozen until reset or quit.
     Ended {
         /// Its summary.

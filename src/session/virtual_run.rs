@@ -110,7 +110,7 @@ impl Engine {
             }
             // Which instants may run now?
             let target = if step_pending {
-                None // one control step: until the actuator ticks
+                None // one actuator step: until the actuator ticks
             } else {
                 match self.speed {
                     Speed::Max => None,

@@ -59,6 +59,28 @@ fn falls_at_5_hz_on_every_seed_and_a_deep_queue_does_not_save_it() {
 }
 
 #[test]
+fn the_summary_counts_actuator_steps_and_policy_ticks() {
+    // --break: the policy at 5 Hz, the plant at 50. The chapter's summary called the
+    // actuator's 43 steps "control steps" although the policy ran 5 times.
+    let m = virtual_run(0, 5.0, 1).metrics;
+    assert_eq!((m.steps, m.actuator_steps, m.policy_ticks), (43, 43, 5));
+    assert_eq!((m.control_hz, m.control_hz_end), (5.0, 5.0));
+    let lines = m.summary_lines(None);
+    assert_eq!(
+        lines[2],
+        "FELL at t=0.84s — 43 actuator steps, 5 policy ticks in 0.84s sim"
+    );
+    assert!(
+        lines[4].ends_with("(p50 80.0 | p99 180.0 | max 180.0 ms; policy period 200 ms)"),
+        "{}",
+        lines[4]
+    );
+    // Matched rates: one policy tick per actuator step.
+    let m = virtual_run(0, 50.0, 1).metrics;
+    assert_eq!((m.steps, m.policy_ticks), (501, 501));
+}
+
+#[test]
 fn latency_grows_as_the_control_rate_drops() {
     let at50 = virtual_run(0, 50.0, 1).metrics;
     let at10 = virtual_run(0, 10.0, 1).metrics;

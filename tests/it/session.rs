@@ -126,7 +126,24 @@ fn replay_cli_reproduces_and_refuses_garbage() {
         String::from_utf8_lossy(&o.stderr)
     );
     assert!(stdout.contains("identical to the live run"), "{stdout}");
+    // The period reported is the one in force when the run ended (10 Hz), beside the one
+    // it started with; the steps are named for what they are.
+    assert!(
+        stdout.contains("policy period 100 ms at the end, 20 ms at the start)"),
+        "{stdout}"
+    );
+    assert!(
+        stdout.contains("actuator steps, ") && !stdout.contains("control steps"),
+        "{stdout}"
+    );
     assert!(out.join("metrics-1.json").is_file());
+    let m: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("metrics-1.json")).unwrap()).unwrap();
+    assert_eq!(
+        (m["control_hz"].as_f64(), m["control_hz_end"].as_f64()),
+        (Some(50.0), Some(10.0))
+    );
+    assert_eq!(m["actuator_steps"], m["steps"]);
 
     let junk = dir.path().join("junk.json");
     std::fs::write(&junk, "{not json").unwrap();

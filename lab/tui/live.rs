@@ -1,0 +1,452 @@
+//! What the lab's live numbers count over, so that they mean what they say after the
+//! settings change mid-run:
+//!
+//! - the **window**: the last [`WINDOW`] (5 s) of run time, "what is happening now" — msg/s,
+//!   drops and stale reads per topic, and the latency percentiles. It never reaches back
+//!   across a change of settings: right after one it is shorter, and says so.
+//! - the **segment**: everything since the last change of rate, depth or brain (or since the
+//!   run started) — per-topic totals and the latency histogram. Each change starts a new
+//!   segment and leaves a mark for the angle chart.
+//!
+//! Both are computed from the actuator's [`StepRecord`]s, which carry every topic's
+//! cumulative counters: a window or a segment is the difference between two records. Memory
+//! is bounded: the window keeps at most one record per actuator tick over [`WINDOW`] (the
+//! actuator runs at 50 Hz: 251 records; never more than [`MAX_WINDOW_RECORDS`]), the
+//! segment's latency at most [`ratelab::metrics::MAX_EXACT_SAMPLES`] samples, the marks at
+//! most [`MAX_MARKS`] over the last [`MARK_HISTORY`].
+
+use ratelab::graph::TopicId;
+use ratelab::metrics::{ExactLatency, StepRecord};
+use ratelab::topic::TopicStats;
+use ratelab::Nanos;
+use std::collections::VecDeque;
+
+/// The window: the last 5 s of run time.
+pub const WINDOW: Nanos = Nanos(5 * Nanos::SECOND.0);
+/// Records the window keeps at most, whatever arrives (the 50 Hz actuator sends 251 in
+/// [`WINDOW`]).
+pub const MAX_WINDOW_RECORDS: usize = 1024;
+/// How far back segment marks are kept (the charts show the last 10 s).
+pub const MARK_HISTORY: Nanos = Nanos(10 * Nanos::SECOND.0);
+/// Segment marks kept at most.
+pub const MAX_MARKS: usize = 256;
+
+/// One topic's figures over the window or the segment.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct TopicCounts {
+    /// Messages published.
+    pub published: u64,
+    /// Messages dropped (evicted unread).
+    pub dropped: u64,
+    /// Reads that found nothing new.
+    pub stale_reads: u64,
+    /// Messages per second: the messages published over the span of their publish stamps
+    /// (so a 5 Hz topic reads 5.0); 0 with fewer than two stamps to span.
+    pub msg_per_s: f64,
+}
+
+impl TopicCounts {
+    /// The counts between two snapshots of one topic: `base` (zeros when `None`: the run's
+    /// start) and `last`. The messages published between them span exactly
+    /// `(base.last_stamp, last.last_stamp]`: msg/s is their count over that span.
+    pub fn between(base: Option<TopicStats>, last: TopicStats) -> Self {
+        let base = base.unwrap_or_default();
+        let published = last.published.saturating_sub(base.published);
+        let span = last.last_stamp.saturating_sub(base.last_stamp);
+        Self {
+            published,
+            dropped: last.dropped.saturating_sub(base.dropped),
+            stale_reads: last.stale_reads.saturating_sub(base.stale_reads),
+            msg_per_s: if span.0 > 0 && base.published > 0 {
+                // Both integers, so an exact rate divides exactly (249 in 4.98 s is 50.0).
+                published as f64 * Nanos::SECOND.0 as f64 / span.0 as f64
+            } else {
+                0.0
+            },
+        }
+    }
+}
+
+/// p50, p99 and max of `samples`, ns, by nearest rank (the sample at rank `⌈q·n⌉`), as
+/// [`ExactLatency`] ranks them; `None` when empty. Sorts `samples`.
+pub fn order_stats(samples: &mut [u64]) -> Option<(Nanos, Nanos, Nanos)> {
+    let n = samples.len();
+    if n == 0 {
+        return None;
+    }
+    samples.sort_unstable();
+    let at = |q: f64| Nanos(samples[((q * n as f64).ceil() as usize).clamp(1, n) - 1]);
+    Some((at(0.5), at(0.99), Nanos(samples[n - 1])))
+}
+
+/// The segment since the last change of settings.
+#[derive(Clone, Debug, Default)]
+pub struct Segment {
+    /// 1 for the run's start, then one more per change.
+    pub index: u32,
+    /// Run time it started.
+    pub start: Nanos,
+    /// What started it (`None`: the run's start).
+    pub cause: Option<String>,
+    /// The newest record from before `start` (`None`: the segment starts with the run).
+    baseline: Option<StepRecord>,
+    /// Sense→act latency of the steps since `start`.
+    pub latency: ExactLatency,
+}
+
+/// The lab's window and segment, fed with every step record and every change.
+#[derive(Clone, Debug)]
+pub struct Live {
+    /// Records over the window, oldest first; the oldest may be the one just before the
+    /// window (the window's baseline).
+    window: VecDeque<StepRecord>,
+    segment: Segment,
+    /// Run times of the changes over the last [`MARK_HISTORY`].
+    marks: VecDeque<Nanos>,
+    last: Option<StepRecord>,
+}
+
+impl Default for Live {
+    fn default() -> Self {
+        Self {
+            window: VecDeque::new(),
+            segment: Segment {
+                index: 1,
+                ..Segment::default()
+            },
+            marks: VecDeque::new(),
+            last: None,
+        }
+    }
+}
+
+impl Live {
+    /// Account one actuator step.
+    pub fn push(&mut self, s: StepRecord) {
+        if s.t < self.segment.start {
+            // Taken before the change but received after it (the real clock's threads):
+            // the baseline, not the segment.
+            if self.segment.baseline.is_none_or(|b| b.t <= s.t) {
+                self.segment.baseline = Some(s);
+            }
+        } else if let Some(l) = s.latency {
+            self.segment.latency.record(l);
+        }
+        self.window.push_back(s);
+        let now = self.last.map_or(s.t, |l| l.t.max(s.t));
+        // Keep one record at or before now − WINDOW: the window's baseline.
+        while self.window.len() > MAX_WINDOW_RECORDS
+            || self
+                .window
+                .get(1)
+                .is_some_and(|r| r.t <= now.saturating_sub(WINDOW) && now >= WINDOW)
+        {
+            self.window.pop_front();
+        }
+        while self
+            .marks
+            .front()
+            .is_some_and(|m| now.saturating_sub(*m) > MARK_HISTORY)
+        {
+            self.marks.pop_front();
+        }
+        if self.last.is_none_or(|l| l.t <= s.t) {
+            self.last = Some(s);
+        }
+    }
+
+    /// A change of settings took effect at run time `at`: a new segment starts there.
+    pub fn change(&mut self, at: Nanos, cause: String) {
+        let baseline = self
+            .window
+            .iter()
+            .filter(|r| r.t < at)
+            .max_by_key(|r| r.t)
+            .copied()
+            .or(self.segment.baseline.filter(|b| b.t < at));
+        // Steps from at or after the change that arrived before it (real clock) belong here.
+        let latency = self
+            .window
+            .iter()
+            .filter(|r| r.t >= at)
+            .filter_map(|r| r.latency)
+            .collect();
+        self.segment = Segment {
+            index: self.segment.index + 1,
+            start: at,
+            cause: Some(cause),
+            baseline,
+            latency,
+        };
+        self.marks.push_back(at);
+        while self.marks.len() > MAX_MARKS {
+            self.marks.pop_front();
+        }
+    }
+
+    /// The current segment.
+    pub fn segment(&self) -> &Segment {
+        &self.segment
+    }
+
+    /// The newest record.
+    pub fn last(&self) -> Option<&StepRecord> {
+        self.last.as_ref()
+    }
+
+    /// The window's baseline, the record whose counters the window counts from (its events
+    /// are after it): the segment's baseline when the last change is within the window (so
+    /// the window never mixes two settings), else the record just before the window; `None`
+    /// when the window reaches back to the run's start (it counts from zero).
+    fn window_base(&self) -> Option<&StepRecord> {
+        let front = self.window.front()?;
+        let now = self.last.map_or(front.t, |l| l.t);
+        match &self.segment.baseline {
+            Some(b) if b.t >= front.t => Some(b),
+            None if now < WINDOW => None,
+            _ => Some(front),
+        }
+    }
+
+    /// The window's span, and whether it is the whole [`WINDOW`] (false right after the
+    /// run's start or a change: the window is shorter then).
+    pub fn window_span(&self) -> (Nanos, bool) {
+        let Some(last) = self.last() else {
+            return (Nanos::ZERO, false);
+        };
+        let from = self.window_base().map_or(self.segment.start, |b| b.t);
+        let span = last.t.saturating_sub(from);
+        (span.min(WINDOW), span >= WINDOW)
+    }
+
+    /// Topic `id` over the window. msg/s is the count over the span between the first and
+    /// the last publish stamp in the window: from the first record that holds a message
+    /// published in the window (its newest stamp), so a gap before the window (a change from
+    /// a slower rate) does not dilute it.
+    pub fn window_topic(&self, id: TopicId) -> TopicCounts {
+        let Some(last) = self.last() else {
+            return TopicCounts::default();
+        };
+        let base = self.window_base();
+        let counts = TopicCounts::between(base.map(|b| b.topics.get(id)), last.topics.get(id));
+        let before = base.map_or(0, |b| b.topics.get(id).published);
+        let first = self
+            .window
+            .iter()
+            .filter(|r| base.is_none_or(|b| r.t > b.t))
+            .map(|r| r.topics.get(id))
+            .find(|s| s.published > before);
+        TopicCounts {
+            msg_per_s: first.map_or(0.0, |f| {
+                TopicCounts::between(Some(f), last.topics.get(id)).msg_per_s
+            }),
+            ..counts
+        }
+    }
+
+    /// Topic `id` since the segment started.
+    pub fn segment_topic(&self, id: TopicId) -> TopicCounts {
+        match self.last() {
+            Some(l) => TopicCounts::between(
+                self.segment.baseline.map(|b| b.topics.get(id)),
+                l.topics.get(id),
+            ),
+            None => TopicCounts::default(),
+        }
+    }
+
+    /// Sense→act latency over the window: (samples, p50/p99/max).
+    pub fn window_latency(&self) -> (usize, Option<(Nanos, Nanos, Nanos)>) {
+        let after = self.window_base().map(|b| b.t);
+        let mut samples: Vec<u64> = self
+            .window
+            .iter()
+            .filter(|r| after.is_none_or(|a| r.t > a))
+            .filter_map(|r| r.latency.map(|l| l.0))
+            .collect();
+        (samples.len(), order_stats(&mut samples))
+    }
+
+    /// Run times of the changes over the last [`MARK_HISTORY`], oldest first.
+    pub fn marks(&self) -> impl Iterator<Item = Nanos> + '_ {
+        self.marks.iter().copied()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use ratelab::metrics::TopicCounters;
+
+    const MS: u64 = 1_000_000;
+
+    /// A 50 Hz actuator's record at `t_ms` for one topic published at `hz` from t = 0 (so
+    /// `published` and `last_stamp` are what a 5 Hz publisher leaves), with `dropped` and
+    /// `stale` so far and a latency of `lat_ms`.
+    fn rec(t_ms: u64, hz: u64, dropped: u64, stale: u64, lat_ms: u64) -> StepRecord {
+        let period = 1000 / hz;
+        let topic = TopicStats {
+            published: t_ms / period + 1,
+            dropped,
+            stale_reads: stale,
+            last_stamp: Nanos(t_ms / period * period * MS),
+            depth: 1,
+            ..TopicStats::default()
+        };
+        StepRecord {
+            step: t_ms / 20 + 1,
+            t: Nanos(t_ms * MS),
+            pole_angle: 0.0,
+            cart_pos: 0.0,
+            action: 0.0,
+            latency: Some(Nanos(lat_ms * MS)),
+            nonfinite: false,
+            topics: TopicCounters::from_iter([topic]),
+            published: None,
+            fell: false,
+        }
+    }
+
+    const T: TopicId = TopicId(0);
+
+    #[test]
+    fn a_5_hz_topic_reads_5_msg_per_s_over_the_window() {
+        let mut live = Live::default();
+        for t in (0..=12_000).step_by(20) {
+            live.push(rec(t, 5, 0, 0, 0));
+            if t == 2_000 {
+                // Younger than the window: from the start, and labelled with its span.
+                assert_eq!(live.window_span(), (Nanos(2_000 * MS), false));
+                assert_eq!(live.window_topic(T).msg_per_s, 5.0);
+            }
+        }
+        let w = live.window_topic(T);
+        assert_eq!((w.msg_per_s, w.published), (5.0, 25));
+        assert_eq!(live.window_span(), (WINDOW, true));
+        // One record per actuator tick over 5 s, and the one before: bounded.
+        assert_eq!(live.window.len(), 251);
+        // The segment (no change yet) is the whole run: 61 messages at t = 0, 0.2, …, 12 s.
+        assert_eq!(live.segment_topic(T).published, 61);
+    }
+
+    #[test]
+    fn drops_count_within_the_window_only() {
+        let mut live = Live::default();
+        let mut dropped = 0;
+        for t in (0..=12_000).step_by(20) {
+            if (1_000..2_000).contains(&t) && t % 100 == 0 {
+                dropped += 1; // ten drops between 1 s and 2 s
+            }
+            live.push(rec(t, 50, dropped, 0, 0));
+            if t == 4_000 {
+                assert_eq!(live.window_topic(T).dropped, 10, "within the last 5 s");
+            }
+            if t == 6_900 {
+                // The window is (1.9 s, 6.9 s]: none of the drops is in it.
+                assert_eq!(live.window_topic(T).dropped, 0);
+            }
+        }
+        assert_eq!(
+            live.window_topic(T).dropped,
+            0,
+            "nothing dropped in the last 5 s"
+        );
+        assert_eq!(live.segment_topic(T).dropped, 10, "the totals keep them");
+    }
+
+    #[test]
+    fn a_change_starts_a_segment_and_the_window_never_crosses_it() {
+        let mut live = Live::default();
+        let mut stale = 0;
+        for t in (0..=6_000).step_by(20) {
+            stale += 1;
+            live.push(rec(t, 50, t / 100, stale, 40));
+        }
+        assert_eq!(live.segment_topic(T).dropped, 60);
+        assert_eq!(live.segment().latency.count(), 301);
+        // The change takes effect before the tick at 6.02 s.
+        live.change(Nanos(6_020 * MS), "control rate → 5 Hz".into());
+        assert_eq!(live.segment().index, 2);
+        assert_eq!(
+            live.segment_topic(T),
+            TopicCounts::default(),
+            "totals restart"
+        );
+        assert_eq!(live.segment().latency.count(), 0);
+        for t in (6_020..=7_000).step_by(20) {
+            stale += 1;
+            live.push(rec(t, 50, 60, stale, 180));
+        }
+        let seg = live.segment_topic(T);
+        assert_eq!((seg.dropped, seg.stale_reads, seg.published), (0, 50, 50));
+        // The window counts from the last step before the change (6.00 s), not over the
+        // last 5 s across it.
+        assert_eq!(live.window_span(), (Nanos(1_000 * MS), false));
+        let w = live.window_topic(T);
+        assert_eq!((w.dropped, w.stale_reads, w.msg_per_s), (0, 50, 50.0));
+        // Latency since the change only: exactly 180 ms.
+        assert_eq!(live.window_latency().0, 50);
+        assert_eq!(
+            live.window_latency().1,
+            Some((Nanos(180 * MS), Nanos(180 * MS), Nanos(180 * MS)))
+        );
+        assert_eq!(live.segment().latency.summary_ms(), (180.0, 180.0, 180.0));
+        assert_eq!(live.marks().collect::<Vec<_>>(), [Nanos(6_020 * MS)]);
+        // 5 s after the change the window is whole again, and still after the change.
+        for t in (7_020..=12_000).step_by(20) {
+            live.push(rec(t, 50, 60, stale, 180));
+        }
+        assert_eq!(live.window_span(), (WINDOW, true));
+        assert_eq!(live.window_topic(T).stale_reads, 0);
+        // Marks older than the charts' 10 s go.
+        for t in (12_020..=16_100).step_by(20) {
+            live.push(rec(t, 50, 60, stale, 180));
+        }
+        assert_eq!(live.marks().count(), 0);
+    }
+
+    #[test]
+    fn a_step_from_before_a_change_arriving_after_it_is_the_baseline() {
+        // Real clock: the engine applies the change at 1.01 s; the actuator's step of 1.00 s
+        // is still on its way. It belongs to the old segment.
+        let mut live = Live::default();
+        for t in (0..=980).step_by(20) {
+            live.push(rec(t, 50, t / 200, 0, 0));
+        }
+        live.change(Nanos(1_010 * MS), "queue depth → 5".into());
+        live.push(rec(1_000, 50, 5, 0, 0));
+        live.push(rec(1_020, 50, 5, 0, 20));
+        let seg = live.segment_topic(T);
+        assert_eq!((seg.published, seg.dropped), (1, 0));
+        assert_eq!(live.segment().latency.count(), 1);
+    }
+
+    #[test]
+    fn window_order_statistics_rank_as_the_exact_latency_does() {
+        let mut samples: Vec<u64> = (0..43).map(|i| 20 * MS * (i % 10)).collect();
+        let exact: ExactLatency = samples.iter().map(|&v| Nanos(v)).collect();
+        assert_eq!(
+            order_stats(&mut samples),
+            Some((
+                exact.quantile(0.5).unwrap(),
+                exact.quantile(0.99).unwrap(),
+                exact.max().unwrap()
+            ))
+        );
+        assert_eq!(order_stats(&mut []), None);
+    }
+
+    #[test]
+    fn memory_is_bounded_over_an_hour_of_changes() {
+        let mut live = Live::default();
+        for t in (0..=3_600_000).step_by(20) {
+            live.push(rec(t, 50, 0, 0, 0));
+            if t % 20_000 == 0 {
+                live.change(Nanos((t + 10) * MS), "sensor rate → 50 Hz".into());
+            }
+        }
+        assert!(live.window.len() <= 252, "{}", live.window.len());
+        assert!(live.marks.len() <= MAX_MARKS);
+        assert_eq!(live.segment().index, 181 + 1);
+    }
+}
