@@ -25,7 +25,7 @@
 //! - `graph`: the node graph as rerun `GraphNodes`/`GraphEdges`. Rerun's edges carry no
 //!   labels, so topics are drawn as nodes of their own, as ROS's rqt_graph does, in another
 //!   colour; positions run left to right from the sources; labels show the rates and depths
-//!   (a topic with QoS beyond the depth shows it in short, `/cmd · KL1 latest dl 30 ms link
+//!   (a topic with QoS beyond the depth shows it in short on a second line, `KL1 latest dl 30 ms link
 //!   20%`) and are re-logged when they change;
 //! - `nodes/<name>/lateness_us`: per-tick lateness of each node (real clock only);
 //! - `events`: text logs for the start, rate, depth and QoS changes, brain swaps, the fall and
@@ -350,7 +350,7 @@ const TOPIC_COLOR: (u8, u8, u8) = (245, 170, 60);
 const QOS_COLORS: [(u8, u8, u8); 6] = [
     (230, 210, 80),  // expired
     (190, 120, 240), // refused
-    (240, 100, 150), // lost
+    (64, 196, 220),  // lost
     (120, 210, 110), // retransmitted
     (245, 150, 50),  // offered deadline missed
     (235, 80, 80),   // requested deadline missed
@@ -1284,9 +1284,13 @@ impl RecordingObserver {
             } else {
                 let topic = shape.topics.iter().find(|t| t.name == id);
                 let depth = topic.map_or(0, |t| (t.stats)().depth);
-                // A topic with QoS beyond the depth shows it in short (`KL1 latest dl 30 ms`).
+                // A topic with QoS beyond the depth shows it in short (`KL1 latest dl 30 ms`)
+                // on a second line, so the label stays about as wide as its neighbours.
                 match topic.map(|t| (t.live_qos)()).filter(|q| !q.is_default()) {
-                    Some(q) => (format!("{id} · {}", q.short(depth)), TOPIC_COLOR),
+                    Some(q) => (
+                        format!("{id} · depth {depth}\n{}", q.short(depth)),
+                        TOPIC_COLOR,
+                    ),
                     None => (format!("{id} · depth {depth}"), TOPIC_COLOR),
                 }
             }
