@@ -15,18 +15,33 @@
 //! - `latency/sense_to_act_ms`, `latency/control_period_ms` (the controller's period);
 //! - `bus/<topic>/{published,dropped,msg_per_s}` for every topic (msg/s over a 1 s sliding
 //!   window), one colour per topic;
+//! - QoS ([`crate::qos`]): `bus/<topic>/<counter>` (`expired`, `refused`, `lost`,
+//!   `retransmitted`, `offered_deadline_missed`, `requested_deadline_missed`) for each counter
+//!   a topic reports ([`QosCounter::reported`]: its QoS can make it count, or it has
+//!   counted), from the first step it is reported to the end, read at each actuator step
+//!   (deadline periods missed up to that step count before the next message); and
+//!   `nodes/<name>/not_alive` (times the node lost its liveliness) for each node with a
+//!   liveliness lease. A graph with the chapter's QoS logs none of them;
 //! - `graph`: the node graph as rerun `GraphNodes`/`GraphEdges`. Rerun's edges carry no
 //!   labels, so topics are drawn as nodes of their own, as ROS's rqt_graph does, in another
 //!   colour; positions run left to right from the sources; labels show the rates and depths
-//!   and are re-logged when they change;
+//!   (a topic with QoS beyond the depth shows it in short on a second line, `KL1 latest dl 30 ms link
+//!   20%`) and are re-logged when they change;
 //! - `nodes/<name>/lateness_us`: per-tick lateness of each node (real clock only);
-//! - `events`: text logs for the start, rate and depth changes, brain swaps, the fall and the
-//!   end; `summary`: the run's summary as a markdown document; the settings are also
-//!   recording properties.
+//! - `events`: text logs for the start, rate, depth and QoS changes, brain swaps, the fall and
+//!   the end; and the QoS events: `deadline missed on /cmd: requested +1 (3 in all)` (WARN)
+//!   when a topic's offered or requested deadline counter rises, stamped at the actuator
+//!   step that sees the rise (so up to one actuator period after the deadline timer fired);
+//!   `node policy not alive (lease 60 ms)` (WARN) at the instant its lease ran out (its last
+//!   tick plus the lease) and `node policy alive again` (INFO) at the tick that brought it
+//!   back; `stopped by watchdog at … s: no message on /cmd for more than 30 ms` (WARN) at
+//!   the run's end when the actuator's deadline reaction stopped it. `summary`: the run's
+//!   summary as a markdown document; the settings are also recording properties.
 //!
 //! The blueprint (module `layout`) lays these out as a learner reads them: the cartpole, the
 //! node graph and the summary; the pole angle, the action, the cart position, the latency
-//! (and, under the real clock, the lateness); the bus counters and the events. Every view
+//! (and, under the real clock, the lateness); the bus counters (with the QoS counters in a
+//! view of their own when the graph has any) and the events. Every view
 //! names its entities explicitly, so none matches nothing. The layout is sent twice: when
 //! the graph is built (plots with no scale known up front fit themselves while the run goes)
 //! and at the end, each plot's y range then padded around every value its series took. The
@@ -49,12 +64,14 @@ mod layout;
 mod live;
 mod shape;
 
+use shape::GraphState;
 pub use shape::{GraphShape, NodeShape, TopicShape};
 
 use crate::config::{ClockKind, RunConfig};
 use crate::graph::{GraphHandles, StepObserver};
 use crate::metrics::{Metrics, StepRecord};
 use crate::plant::{CART_LIMIT_M, THETA_LIMIT_RAD};
+use crate::qos::QosCounter;
 use crate::scheduler::{EndReason, RunEnd};
 use crate::time::Nanos;
 use crate::topic::TopicStats;
@@ -153,6 +170,19 @@ impl ChunkBuffer {
             }
         }
     }
+}
+
+/// A series' name, colour and width (a static row), for a series that appears mid-run.
+fn series_style(buf: &mut ChunkBuffer, entity: &str, name: &str, color: (u8, u8, u8)) {
+    buf.add(
+        entity,
+        &TimePoint::default(),
+        &rerun::SeriesLines::new()
+            .with_names([name])
+            .with_colors([rgb(color)])
+            .with_widths([2.0])
+            .with_interpolation_mode(rerun::components::InterpolationMode::StepAfter),
+    );
 }
 
 /// The runtime-clock time point of control step `step` at run time `t`.
@@ -315,6 +345,64 @@ const FORCE_COLOR: (u8, u8, u8) = (120, 220, 120);
 const NODE_COLOR: (u8, u8, u8) = (110, 170, 255);
 const TOPIC_COLOR: (u8, u8, u8) = (245, 170, 60);
 
+/// One colour per QoS counter (in [`QosCounter::ALL`]'s order), and for a node's
+/// not-alive count: a counter keeps its colour whichever topic it is on.
+const QOS_COLORS: [(u8, u8, u8); 6] = [
+    (230, 210, 80),  // expired
+    (190, 120, 240), // refused
+    (64, 196, 220),  // lost
+    (120, 210, 110), // retransmitted
+    (245, 150, 50),  // offered deadline missed
+    (235, 80, 80),   // requested deadline missed
+];
+const NOT_ALIVE_COLOR: (u8, u8, u8) = (110, 170, 255);
+
+/// A QoS counter as a series name says it: `requested deadline missed`.
+fn counter_words(c: QosCounter) -> String {
+    c.key().replace('_', " ")
+}
+
+/// The entity of a topic's QoS counter: `bus/<topic>/<counter key>`.
+fn qos_entity(topic: &TopicShape, c: QosCounter) -> String {
+    format!("bus/{}/{}", topic.entity(), c.key())
+}
+
+/// The entity of a node's not-alive count: `nodes/<name>/not_alive`.
+fn not_alive_entity(node: &str) -> String {
+    format!("nodes/{node}/not_alive")
+}
+
+/// The QoS series a layout shows (exact paths, `/`-rooted), topics in order then nodes:
+/// when the run is over, every QoS series that was logged (`extents` holds every scalar
+/// series); at the start, the counters the topics' QoS enables and the not-alive count of
+/// every node with a lease. Empty for the chapter's QoS (the layout then has no QoS view).
+fn qos_series(shape: &GraphShape, extents: Option<&Extents>) -> Vec<String> {
+    let mut out = Vec::new();
+    for t in &shape.topics {
+        for c in QosCounter::ALL {
+            let e = qos_entity(t, c);
+            let shown = match extents {
+                Some(ext) => ext.contains_key(&e),
+                None => c.enabled_by(&t.qos),
+            };
+            if shown {
+                out.push(format!("/{e}"));
+            }
+        }
+    }
+    for n in &shape.nodes {
+        let e = not_alive_entity(&n.name);
+        let shown = match extents {
+            Some(ext) => ext.contains_key(&e),
+            None => n.lease().is_some(),
+        };
+        if shown {
+            out.push(format!("/{e}"));
+        }
+    }
+    out
+}
+
 fn rgb((r, g, b): (u8, u8, u8)) -> Color {
     Color::from_rgb(r, g, b)
 }
@@ -466,6 +554,18 @@ fn layout_for(shape: &GraphShape, cfg: &RunConfig, extents: Option<&Extents>) ->
     let published = bus("published", "bus: published (total)");
     let msg_per_s = bus("msg_per_s", "bus: msg/s (1 s window)");
     let dropped = bus("dropped", "bus: dropped (total)");
+    // QoS counters only where a topic's QoS can make them count (or they did): the
+    // chapter's graph has no such view.
+    let qos = qos_series(shape, extents);
+    let qos = (!qos.is_empty()).then(|| {
+        plot(
+            "bus-qos",
+            "QoS: counters (total)",
+            qos,
+            extents.map(|_| (0.0, 0.0)),
+            extents,
+        )
+    });
     let events = ViewSpec::new("events", "TextLog", "events")
         .contents(["/events"])
         .property(
@@ -542,12 +642,19 @@ fn layout_for(shape: &GraphShape, cfg: &RunConfig, extents: Option<&Extents>) ->
         (0.34, Item::Vertical(signals)),
         (
             0.30,
-            Item::Vertical(vec![
-                (1.0, Item::View(published)),
-                (1.0, Item::View(dropped)),
-                (1.0, Item::View(msg_per_s)),
-                (1.0, Item::View(events)),
-            ]),
+            Item::Vertical(
+                [
+                    Some(published),
+                    Some(dropped),
+                    qos,
+                    Some(msg_per_s),
+                    Some(events),
+                ]
+                .into_iter()
+                .flatten()
+                .map(|v| (1.0, Item::View(v)))
+                .collect(),
+            ),
         ),
     ])
 }
@@ -1005,6 +1112,9 @@ impl Recording {
             last_state: None,
             window: VecDeque::new(),
             next_command: 0,
+            qos_logged: Vec::new(),
+            deadline_seen: Vec::new(),
+            live_seen: Vec::new(),
         })
     }
 
@@ -1032,12 +1142,20 @@ impl Recording {
             _ => rerun::components::TextLogLevel::INFO,
         };
         let verdict = summary.get(2).cloned().unwrap_or_default();
+        // The actuator's watchdog ends the run as a node stop, as a fall does: say which.
+        let reason = match &metrics.stopped_by_watchdog {
+            Some(_) => "stopped by watchdog".to_string(),
+            None => end.reason.to_string(),
+        };
+        if let Some(watchdog) = &metrics.stopped_by_watchdog {
+            self.event(end.at, watchdog, rerun::components::TextLogLevel::WARN);
+        }
         self.event(
             end.at,
-            &format!("end: {}, {} actuator steps", end.reason, metrics.steps),
+            &format!("end: {reason}, {} actuator steps", metrics.steps),
             level,
         );
-        let mut doc = format!("**{verdict}** ({}).\n\n", end.reason);
+        let mut doc = format!("**{verdict}** ({reason}).\n\n");
         for (i, line) in summary.iter().enumerate() {
             if i != 2 {
                 doc.push_str(&format!("- {line}\n"));
@@ -1130,12 +1248,28 @@ fn reference_lines(buf: &mut ChunkBuffer, t: Nanos, step: u64) {
 struct RecordingObserver {
     rec: Recording,
     shape: GraphShape,
-    /// Rates and depths as last logged.
-    last_state: Option<(Vec<f64>, Vec<usize>)>,
+    /// Rates, depths and QoS as last logged.
+    last_state: Option<GraphState>,
     /// (t, published per topic) over the last second.
     window: VecDeque<(Nanos, Vec<u64>)>,
     /// The next command sequence number not yet logged as published.
     next_command: u64,
+    /// Per topic, the QoS counters logged so far: once reported, a series goes on to the
+    /// end of the run.
+    qos_logged: Vec<Vec<QosCounter>>,
+    /// Per topic, (offered, requested) deadline periods missed at the last step.
+    deadline_seen: Vec<(u64, u64)>,
+    /// Per node, its liveliness as last seen (`None` until it is logged: a node with a
+    /// lease, or one that has lost its liveliness).
+    live_seen: Vec<Option<LiveSeen>>,
+}
+
+/// A node's liveliness as the recording last saw it.
+#[derive(Clone, Copy)]
+struct LiveSeen {
+    alive: bool,
+    not_alive: u64,
+    last_asserted: Nanos,
 }
 
 impl RecordingObserver {
@@ -1148,12 +1282,17 @@ impl RecordingObserver {
             if let Some(n) = shape.nodes.iter().find(|n| n.name == id) {
                 (format!("{id} · {} Hz", hz_label(n.rate.hz())), NODE_COLOR)
             } else {
-                let depth = shape
-                    .topics
-                    .iter()
-                    .find(|t| t.name == id)
-                    .map_or(0, |t| (t.stats)().depth);
-                (format!("{id} · depth {depth}"), TOPIC_COLOR)
+                let topic = shape.topics.iter().find(|t| t.name == id);
+                let depth = topic.map_or(0, |t| (t.stats)().depth);
+                // A topic with QoS beyond the depth shows it in short (`KL1 latest dl 30 ms`)
+                // on a second line, so the label stays about as wide as its neighbours.
+                match topic.map(|t| (t.live_qos)()).filter(|q| !q.is_default()) {
+                    Some(q) => (
+                        format!("{id} · depth {depth}\n{}", q.short(depth)),
+                        TOPIC_COLOR,
+                    ),
+                    None => (format!("{id} · depth {depth}"), TOPIC_COLOR),
+                }
             }
         };
         let (labels, colors): (Vec<String>, Vec<Color>) = positions
@@ -1185,34 +1324,169 @@ impl RecordingObserver {
         );
     }
 
-    /// What changed between two (rates, depths) states, as one event line.
-    fn describe_change(
-        &self,
-        old: &(Vec<f64>, Vec<usize>),
-        new: &(Vec<f64>, Vec<usize>),
-    ) -> String {
+    /// What changed between two states, as one event line.
+    fn describe_change(&self, old: &GraphState, new: &GraphState) -> String {
         let mut parts = Vec::new();
         for (i, node) in self.shape.nodes.iter().enumerate() {
-            if old.0.get(i) != new.0.get(i) {
+            if old.rates.get(i) != new.rates.get(i) {
                 parts.push(format!(
                     "{} rate {} → {} Hz",
                     node.name,
-                    old.0.get(i).map_or("?".into(), |h| hz_label(*h)),
-                    new.0.get(i).map_or("?".into(), |h| hz_label(*h))
+                    old.rates.get(i).map_or("?".into(), |h| hz_label(*h)),
+                    new.rates.get(i).map_or("?".into(), |h| hz_label(*h))
                 ));
             }
         }
         for (i, topic) in self.shape.topics.iter().enumerate() {
-            if old.1.get(i) != new.1.get(i) {
-                parts.push(format!(
-                    "{} depth {} → {}",
-                    topic.name,
-                    old.1.get(i).copied().unwrap_or_default(),
-                    new.1.get(i).copied().unwrap_or_default()
-                ));
+            let (d0, d1) = (
+                old.depths.get(i).copied().unwrap_or_default(),
+                new.depths.get(i).copied().unwrap_or_default(),
+            );
+            if d0 != d1 {
+                parts.push(format!("{} depth {d0} → {d1}", topic.name));
+            }
+            if let (Some(q0), Some(q1)) = (old.qos.get(i), new.qos.get(i)) {
+                if q0 != q1 {
+                    parts.push(format!(
+                        "{} QoS {} → {}",
+                        topic.name,
+                        q0.short(d1),
+                        q1.short(d1)
+                    ));
+                }
             }
         }
         parts.join("; ")
+    }
+
+    /// The QoS counters and events of this step (nothing for the chapter's QoS): each topic's
+    /// reported counters as series under its `bus/<topic>/` entity, an event when a deadline
+    /// counter rose, each leased node's not-alive count, and an event when a node's
+    /// liveliness changed.
+    fn qos_rows(&mut self, buf: &mut ChunkBuffer, s: &StepRecord) {
+        let time = time_point(s.t, s.step);
+        let n = self.shape.topics.len();
+        self.qos_logged.resize(n, Vec::new());
+        self.deadline_seen.resize(n, (0, 0));
+        for (i, topic) in self.shape.topics.iter().enumerate() {
+            // The actuator's counters at this step (deadline periods missed up to now
+            // count before the next message); the topic's own as a fallback.
+            let st = s
+                .topics
+                .as_slice()
+                .get(i)
+                .copied()
+                .unwrap_or_else(|| (topic.stats)());
+            let logged = &mut self.qos_logged[i];
+            for c in QosCounter::reported(&[topic.qos, (topic.live_qos)()], &st) {
+                if !logged.contains(&c) {
+                    logged.push(c);
+                    let color =
+                        QOS_COLORS[QosCounter::ALL.iter().position(|a| *a == c).unwrap_or(0)];
+                    series_style(
+                        buf,
+                        &qos_entity(topic, c),
+                        &format!("{} {}", topic.name, counter_words(c)),
+                        color,
+                    );
+                }
+            }
+            logged.sort_by_key(|c| QosCounter::ALL.iter().position(|a| a == c));
+            for c in logged.iter() {
+                buf.scalar(&qos_entity(topic, *c), s.t, s.step, c.value(&st) as f64);
+            }
+            let (offered, requested) = (st.offered_deadline_missed, st.requested_deadline_missed);
+            let (o0, r0) = self.deadline_seen[i];
+            if offered > o0 || requested > r0 {
+                let mut sides = Vec::new();
+                if offered > o0 {
+                    sides.push(format!("offered +{} ({offered} in all)", offered - o0));
+                }
+                if requested > r0 {
+                    sides.push(format!(
+                        "requested +{} ({requested} in all)",
+                        requested - r0
+                    ));
+                }
+                buf.add(
+                    "events",
+                    &time,
+                    &rerun::TextLog::new(format!(
+                        "deadline missed on {}: {}",
+                        topic.name,
+                        sides.join(", ")
+                    ))
+                    .with_level(rerun::components::TextLogLevel::WARN),
+                );
+            }
+            self.deadline_seen[i] = (offered.max(o0), requested.max(r0));
+        }
+        self.live_seen.resize(self.shape.nodes.len(), None);
+        for (i, node) in self.shape.nodes.iter().enumerate() {
+            let Some(live) = &node.liveliness else {
+                continue;
+            };
+            let status = live.status_at(s.t);
+            let lease = live.lease();
+            let seen = match self.live_seen[i] {
+                Some(seen) => seen,
+                None if lease.is_some() || status.not_alive > 0 => {
+                    let entity = not_alive_entity(&node.name);
+                    series_style(
+                        buf,
+                        &entity,
+                        &format!("{} not alive (times)", node.name),
+                        NOT_ALIVE_COLOR,
+                    );
+                    LiveSeen {
+                        alive: true,
+                        not_alive: 0,
+                        last_asserted: Nanos::ZERO,
+                    }
+                }
+                None => continue,
+            };
+            buf.scalar(
+                &not_alive_entity(&node.name),
+                s.t,
+                s.step,
+                status.not_alive as f64,
+            );
+            // Each loss at the instant its lease ran out (the node's last tick before it
+            // plus the lease), each return at the tick that brought the node back. A node
+            // still not alive has not ticked since its last assertion, so that instant is
+            // exact; one that lapsed and came back between two steps is dated from the
+            // tick seen at the step before.
+            if status.not_alive > seen.not_alive {
+                let before = if status.alive {
+                    seen.last_asserted
+                } else {
+                    status.last_asserted
+                };
+                let lapsed_at = before.saturating_add(lease.unwrap_or(Nanos::ZERO)).min(s.t);
+                let lease_text = lease.map_or(String::new(), |l| format!(" (lease {l})"));
+                buf.add(
+                    "events",
+                    &time_point(lapsed_at, s.step),
+                    &rerun::TextLog::new(format!("node {} not alive{lease_text}", node.name))
+                        .with_level(rerun::components::TextLogLevel::WARN),
+                );
+            }
+            let came_back = status.alive && (!seen.alive || status.not_alive > seen.not_alive);
+            if came_back {
+                buf.add(
+                    "events",
+                    &time_point(status.last_asserted, s.step),
+                    &rerun::TextLog::new(format!("node {} alive again", node.name))
+                        .with_level(rerun::components::TextLogLevel::INFO),
+                );
+            }
+            self.live_seen[i] = Some(LiveSeen {
+                alive: status.alive,
+                not_alive: status.not_alive,
+                last_asserted: status.last_asserted,
+            });
+        }
     }
 }
 
@@ -1326,6 +1600,7 @@ impl StepObserver for RecordingObserver {
             );
             buf.scalar(&format!("bus/{entity}/msg_per_s"), s.t, s.step, rate);
         }
+        self.qos_rows(&mut buf, s);
         if s.fell {
             let text = format!("FELL at t={:.2}s, θ = {:.3} rad", s.t.as_secs_f64(), theta);
             buf.add(
@@ -1390,6 +1665,52 @@ mod tests {
                 .find(|(t, _)| t.contains("lateness"));
             assert_eq!(lateness.is_some(), clock == ClockKind::Real);
         }
+    }
+
+    #[test]
+    fn qos_counters_get_a_view_only_where_qos_can_move_them() {
+        let mut s = shape(
+            &[
+                ("/obs", "sensor", &["policy"]),
+                ("/action", "policy", &["actuator"]),
+            ],
+            &["sensor", "policy", "actuator"],
+        );
+        let cfg = RunConfig::default();
+        let qos_view = |s: &GraphShape, extents: Option<&Extents>| {
+            layout_for(s, &cfg, extents)
+                .views()
+                .iter()
+                .map(|v| v.title_and_queries())
+                .find(|(t, _)| t.starts_with("QoS"))
+                .map(|(_, q)| q.to_vec())
+        };
+        assert_eq!(qos_view(&s, None), None, "the chapter's QoS adds no view");
+        let mut qos = crate::qos::TopicQos {
+            deadline: Some(Nanos::from_millis(40)),
+            ..Default::default()
+        };
+        qos.history = crate::qos::History::KeepAll;
+        s.topics[1].qos = qos;
+        s.nodes[1].liveliness = Some(Arc::new(crate::qos::Liveliness::new(Some(
+            Nanos::from_millis(60),
+        ))));
+        s.nodes[2].liveliness = Some(Arc::new(crate::qos::Liveliness::new(None)));
+        assert_eq!(
+            qos_view(&s, None).unwrap(),
+            [
+                "/bus/action/refused",
+                "/bus/action/offered_deadline_missed",
+                "/bus/action/requested_deadline_missed",
+                "/nodes/policy/not_alive"
+            ]
+        );
+        // At the end: what was logged, whatever the QoS says now.
+        let mut ext = Extents::new();
+        widen(&mut ext, "bus/obs/lost", 3.0);
+        widen(&mut ext, "bus/obs/published", 3.0);
+        assert_eq!(qos_view(&s, Some(&ext)).unwrap(), ["/bus/obs/lost"]);
+        assert_eq!(qos_view(&s, Some(&Extents::new())), None);
     }
 
     #[test]

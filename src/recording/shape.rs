@@ -6,6 +6,7 @@
 
 use crate::graph::GraphHandles;
 use crate::msg::{AnyTopic, ForceMsg};
+use crate::qos::{Liveliness, TopicQos};
 use crate::rate::Rate;
 use crate::topic::{Topic, TopicStats};
 use std::collections::BTreeMap;
@@ -18,6 +19,15 @@ pub struct NodeShape {
     pub name: String,
     /// Its rate, read live (a lab session changes it mid-run).
     pub rate: Rate,
+    /// Its liveliness, read live (`None` when not known: nothing about it is recorded).
+    pub liveliness: Option<Arc<Liveliness>>,
+}
+
+impl NodeShape {
+    /// Its liveliness lease now, if it has one.
+    pub(crate) fn lease(&self) -> Option<crate::time::Nanos> {
+        self.liveliness.as_ref().and_then(|l| l.lease())
+    }
 }
 
 /// One topic of the graph as the recording draws it.
@@ -31,6 +41,10 @@ pub struct TopicShape {
     pub subscribers: Vec<String>,
     /// Its counters and depth, read live.
     pub stats: Arc<dyn Fn() -> TopicStats + Send + Sync>,
+    /// Its QoS (apart from the depth) as the run started.
+    pub qos: TopicQos,
+    /// Its QoS, read live (a lab session changes it mid-run).
+    pub live_qos: Arc<dyn Fn() -> TopicQos + Send + Sync>,
 }
 
 impl TopicShape {
@@ -38,6 +52,15 @@ impl TopicShape {
     pub(crate) fn entity(&self) -> String {
         super::bus_name(&self.name)
     }
+}
+
+/// What a lab session can change in a running graph, as last seen: each node's rate, each
+/// topic's depth and QoS.
+#[derive(Clone, Debug, PartialEq)]
+pub(crate) struct GraphState {
+    pub(crate) rates: Vec<f64>,
+    pub(crate) depths: Vec<usize>,
+    pub(crate) qos: Vec<TopicQos>,
 }
 
 /// The graph as the recording needs it: lists of nodes and topics (built in one place,
@@ -67,9 +90,11 @@ impl GraphShape {
                 .nodes
                 .iter()
                 .zip(&h.rates)
-                .map(|(n, rate)| NodeShape {
+                .enumerate()
+                .map(|(i, (n, rate))| NodeShape {
                     name: n.name.clone(),
                     rate: rate.clone(),
+                    liveliness: h.liveliness.get(i).cloned(),
                 })
                 .collect(),
             topics: spec
@@ -78,6 +103,7 @@ impl GraphShape {
                 .zip(&h.topics)
                 .map(|(t, topic)| {
                     let topic = topic.clone();
+                    let live = topic.clone();
                     TopicShape {
                         name: t.name.clone(),
                         publisher: spec.node(t.publisher).name.clone(),
@@ -87,6 +113,8 @@ impl GraphShape {
                             .into_iter()
                             .collect(),
                         stats: Arc::new(move || topic.stats()),
+                        qos: t.qos,
+                        live_qos: Arc::new(move || live.qos()),
                     }
                 })
                 .collect(),
@@ -141,12 +169,13 @@ impl GraphShape {
             .collect()
     }
 
-    /// Rates and depths now, to notice a change.
-    pub(crate) fn state(&self) -> (Vec<f64>, Vec<usize>) {
-        (
-            self.nodes.iter().map(|n| n.rate.hz()).collect(),
-            self.topics.iter().map(|t| (t.stats)().depth).collect(),
-        )
+    /// Rates, depths and QoS now, to notice a change.
+    pub(crate) fn state(&self) -> GraphState {
+        GraphState {
+            rates: self.nodes.iter().map(|n| n.rate.hz()).collect(),
+            depths: self.topics.iter().map(|t| (t.stats)().depth).collect(),
+            qos: self.topics.iter().map(|t| (t.live_qos)()).collect(),
+        }
     }
 
     pub(crate) fn controller_period_ms(&self) -> Option<f64> {
@@ -170,6 +199,7 @@ pub(crate) mod tests {
                 .map(|n| NodeShape {
                     name: n.to_string(),
                     rate: Rate::new(50.0).unwrap(),
+                    liveliness: None,
                 })
                 .collect(),
             topics: topics
@@ -179,6 +209,8 @@ pub(crate) mod tests {
                     publisher: publisher.to_string(),
                     subscribers: subs.iter().map(|s| s.to_string()).collect(),
                     stats: Arc::new(TopicStats::default),
+                    qos: TopicQos::default(),
+                    live_qos: Arc::new(TopicQos::default),
                 })
                 .collect(),
             controller: Some(nodes[1].to_string()),

@@ -702,3 +702,216 @@ fn a_brain_swap_is_an_event_and_a_mark() {
     assert_eq!(marks, [0, 40], "the start and the swap");
     check_views(&path);
 }
+
+/// The screenshot's QoS run: the safety graph with `--link /cmd:loss=0.2 --qos
+/// /cmd:deadline_ms=30,on_deadline_missed=zero --lease policy=60 --stall policy@2+0.3`.
+fn qos_cfg() -> RunConfig {
+    let mut graph = ratelab::graph::GraphSpec::load(
+        &PathBuf::from(crate::REPO).join("graphs/cartpole-safety.toml"),
+    )
+    .unwrap();
+    graph.set_qos("/cmd", "loss=0.2").unwrap();
+    graph
+        .set_qos("/cmd", "deadline_ms=30,on_deadline_missed=zero")
+        .unwrap();
+    graph.set_lease("policy", 60.0).unwrap();
+    RunConfig {
+        graph,
+        faults: vec![ratelab::qos::Fault::parse("policy@2+0.3", false).unwrap()],
+        ..virtual_cfg()
+    }
+}
+
+/// The event lines of a recording with their `sim_time` (ns) and `control_step`.
+fn events_with_times(path: &Path) -> Vec<(i64, i64, String)> {
+    let mut out = Vec::new();
+    for c in chunks(path)
+        .into_iter()
+        .filter(|c| c.entity_path().to_string() == "/events")
+    {
+        let col = |name: &str| -> Vec<i64> {
+            c.timelines()
+                .iter()
+                .find(|(n, _)| n.as_str() == name)
+                .map(|(_, col)| col.times_raw().to_vec())
+                .unwrap_or_else(|| vec![0; c.num_rows()])
+        };
+        let (t, step) = (col("sim_time"), col("control_step"));
+        let texts: Vec<String> = c
+            .iter_slices::<String>(rerun::TextLog::descriptor_text().component)
+            .map(|s| {
+                s.first()
+                    .map(|x| x.as_str().to_string())
+                    .unwrap_or_default()
+            })
+            .collect();
+        for (i, text) in texts.into_iter().enumerate() {
+            out.push((t[i], step[i], text));
+        }
+    }
+    out.sort();
+    out
+}
+
+/// The last value of a scalar series and its number of samples.
+fn last_scalar(all: &[Chunk], entity: &str) -> Option<(f64, usize)> {
+    let mut samples: Vec<(i64, f64)> = Vec::new();
+    for c in all
+        .iter()
+        .filter(|c| !c.is_static() && c.entity_path().to_string() == entity)
+    {
+        let steps: Vec<i64> = c
+            .timelines()
+            .iter()
+            .find(|(n, _)| n.as_str() == "control_step")
+            .map(|(_, col)| col.times_raw().to_vec())
+            .unwrap_or_default();
+        let values: Vec<f64> = c
+            .iter_slices::<f64>(rerun::Scalars::descriptor_scalars().component)
+            .flat_map(|b| b.to_vec())
+            .collect();
+        samples.extend(steps.into_iter().zip(values));
+    }
+    samples.sort_by_key(|(s, _)| *s);
+    samples.last().map(|(_, v)| (*v, samples.len()))
+}
+
+#[test]
+fn a_qos_run_plots_its_counters_and_logs_its_events() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("qos.rrd");
+    let m = record(&path, &qos_cfg(), None);
+    let cmd = &m.topics["/cmd"];
+    let all = chunks(&path);
+    // Each counter metrics.json reports is a series under the topic's bus entity, one sample
+    // per step, ending at the run's total; no series for a counter the QoS cannot move.
+    assert_eq!(
+        cmd.qos_counters.keys().collect::<Vec<_>>(),
+        [
+            "lost",
+            "offered_deadline_missed",
+            "requested_deadline_missed"
+        ]
+    );
+    for (key, total) in &cmd.qos_counters {
+        let (last, n) = last_scalar(&all, &format!("/bus/cmd/{key}"))
+            .unwrap_or_else(|| panic!("no /bus/cmd/{key} series"));
+        assert_eq!(n as u64, m.steps, "{key}: one sample per step");
+        assert_eq!(last, *total as f64, "{key}");
+    }
+    assert!(cmd.qos_counters["lost"] > 50, "{cmd:?}");
+    assert!(
+        cmd.qos_counters["requested_deadline_missed"] > 20,
+        "{cmd:?}"
+    );
+    for absent in [
+        "/bus/cmd/expired",
+        "/bus/cmd/refused",
+        "/bus/cmd/retransmitted",
+        "/bus/obs/lost",
+    ] {
+        assert!(last_scalar(&all, absent).is_none(), "{absent} is logged");
+    }
+    let (not_alive, _) = last_scalar(&all, "/nodes/policy/not_alive").expect("policy has a lease");
+    assert_eq!(not_alive, 1.0, "one stall, one loss");
+    assert!(
+        last_scalar(&all, "/nodes/sensor/not_alive").is_none(),
+        "no lease, no series"
+    );
+    // Events: one per rise of the requested deadline counter, at the step that saw it; the
+    // stall's loss of liveliness at the instant the lease ran out (last tick 1.98 s + 60 ms)
+    // and the return at the stall's end.
+    let events = events_with_times(&path);
+    let missed: Vec<&(i64, i64, String)> = events
+        .iter()
+        .filter(|(_, _, e)| e.starts_with("deadline missed on /cmd: requested +"))
+        .collect();
+    assert!(
+        !missed.is_empty() && missed.len() as u64 <= cmd.qos_counters["requested_deadline_missed"]
+    );
+    let total = format!("({} in all)", cmd.qos_counters["requested_deadline_missed"]);
+    assert!(missed.last().unwrap().2.ends_with(&total), "{missed:?}");
+    let at = |text: &str| -> (i64, i64) {
+        let (t, s, _) = events
+            .iter()
+            .find(|(_, _, e)| e == text)
+            .unwrap_or_else(|| panic!("no '{text}' in {events:#?}"));
+        (*t, *s)
+    };
+    let (lost_t, lost_step) = at("node policy not alive (lease 60 ms)");
+    assert_eq!(lost_t, 2_040_000_000);
+    assert!(
+        lost_step as f64 * 0.02 >= 2.04,
+        "seen at or after the instant: {lost_step}"
+    );
+    assert_eq!(at("node policy alive again").0, 2_300_000_000);
+    // The graph labels the topic with its QoS in short.
+    let labels: Vec<String> = all
+        .iter()
+        .filter(|c| c.entity_path().to_string() == "/graph")
+        .flat_map(|c| c.iter_slices::<String>(rerun::GraphNodes::descriptor_labels().component))
+        .flatten()
+        .map(|s| s.as_str().to_string())
+        .collect();
+    assert!(
+        labels
+            .iter()
+            .any(|l| l == "/cmd · depth 1\nKL1 latest dl 30 ms link 20%"),
+        "{labels:?}"
+    );
+    assert!(labels.iter().any(|l| l == "/obs · depth 1"), "{labels:?}");
+}
+
+#[test]
+fn every_view_matches_data_in_a_qos_run_and_the_counters_have_a_view() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("qos.rrd");
+    record(&path, &qos_cfg(), None);
+    let views = check_views(&path);
+    assert_eq!(
+        views.len(),
+        12,
+        "the chapter's 11 and the QoS counters: {views:#?}"
+    );
+    let qos = views
+        .iter()
+        .find(|v| v.name.starts_with("QoS"))
+        .expect("a QoS view");
+    assert_eq!(
+        qos.queries,
+        [
+            "/bus/cmd/lost",
+            "/bus/cmd/offered_deadline_missed",
+            "/bus/cmd/requested_deadline_missed",
+            "/nodes/policy/not_alive"
+        ]
+    );
+    // The watchdog: a stalled safety node starves /cmd past its deadline; the recording
+    // says so and does not call it a fall.
+    let stop = dir.path().join("stop.rrd");
+    let mut cfg = qos_cfg();
+    cfg.graph
+        .set_qos("/cmd", "loss=0,on_deadline_missed=stop")
+        .unwrap();
+    cfg.faults = vec![ratelab::qos::Fault::parse("safety@2+0.3", false).unwrap()];
+    let m = record(&stop, &cfg, None);
+    let verdict = m
+        .stopped_by_watchdog
+        .clone()
+        .expect("the watchdog stops it");
+    check_views(&stop);
+    let events = events_with_times(&stop);
+    let end = events
+        .iter()
+        .rev()
+        .find(|(_, _, e)| e.starts_with("end:"))
+        .unwrap();
+    assert!(end.2.starts_with("end: stopped by watchdog"), "{events:#?}");
+    assert!(
+        events.iter().any(|(t, _, e)| *e == verdict && *t == end.0),
+        "{verdict} at the end in {events:#?}"
+    );
+    assert!(!events
+        .iter()
+        .any(|(_, _, e)| e.contains("FELL") || e.contains("fell")));
+}
