@@ -220,7 +220,7 @@ impl App {
         }
         if ended {
             app.on_telemetry(Telemetry::Ended {
-                metrics: report.metrics,
+                metrics: Box::new(report.metrics),
                 reason: report.end.reason,
             });
         }

@@ -582,7 +582,7 @@ mod tests {
             .unwrap()
             .metrics;
         app.on_telemetry(Telemetry::Ended {
-            metrics,
+            metrics: Box::new(metrics),
             reason: EndReason::NodeFailed {
                 node: "policy".into(),
                 message: "boom".into(),

@@ -123,7 +123,7 @@ pub enum Telemetry {
     /// The run ended (fall, duration, node failure); the state is frozen until reset or quit.
     Ended {
         /// Its summary.
-        metrics: Metrics,
+        metrics: Box<Metrics>,
         /// How it ended.
         reason: EndReason,
     },

@@ -79,7 +79,7 @@ impl Engine {
                 timing = Some(run.timing);
                 let metrics = live_metrics(cfg, &handles, &end, &ticks, timing.clone());
                 let _ = self.tx.send(Telemetry::Ended {
-                    metrics,
+                    metrics: Box::new(metrics),
                     reason: end.reason.clone(),
                 });
                 result = Some(end);

@@ -161,7 +161,7 @@ impl Engine {
                 let metrics = live_metrics(cfg, &handles, end, sched.ticks(), None);
                 self.status(sched.now(), paused, &handles);
                 let _ = self.tx.send(Telemetry::Ended {
-                    metrics,
+                    metrics: Box::new(metrics),
                     reason: end.reason.clone(),
                 });
                 continue;
