@@ -38,9 +38,12 @@ pub fn graph_from_args(g: &GraphArgs) -> anyhow::Result<GraphSpec> {
                 if let Some((k, _)) = ratelab::qos::split_pairs(pairs)
                     .map_err(|e| anyhow::anyhow!("{flag} {topic}:{pairs}: {e}"))?
                     .into_iter()
-                    .find(|(k, _)| !["loss", "delay_ms", "jitter_ms", "retransmit_ms"].contains(k))
+                    .find(|(k, _)| !ratelab::qos::LINK_KEYS.contains(k))
                 {
-                    anyhow::bail!("--link {topic}:{pairs}: '{k}' is not a link key (loss, delay_ms, jitter_ms, retransmit_ms); use --qos");
+                    anyhow::bail!(
+                        "--link {topic}:{pairs}: '{k}' is not a link key ({}); use --qos",
+                        ratelab::qos::LINK_KEYS.join(", ")
+                    );
                 }
             }
             spec.set_qos(topic, pairs)

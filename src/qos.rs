@@ -246,6 +246,9 @@ pub fn check_combination(q: &TopicQos, subscriber_is_actuator: bool) -> Result<(
     Ok(())
 }
 
+/// The keys of a link (a graph file's `link = { … }` table, `--link`), in that table's order.
+pub const LINK_KEYS: [&str; 4] = ["loss", "delay_ms", "jitter_ms", "retransmit_ms"];
+
 /// Names of the keys [`apply_key`] knows, for messages.
 pub const KEYS: &str = "history, depth, delivery, deadline_ms, lifespan_ms, reliability, on_deadline_missed, loss, delay_ms, jitter_ms, retransmit_ms";
 

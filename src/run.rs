@@ -9,7 +9,6 @@ use crate::policy::{BrainSlot, Policy};
 use crate::qos::QosCounter;
 use crate::scheduler::{run_real, RealOptions, RunEnd, StopFlag, VirtualScheduler};
 use crate::time::Nanos;
-use std::collections::BTreeMap;
 use std::time::{Duration, Instant};
 
 /// A run that could not start.
@@ -321,6 +320,11 @@ pub fn summarize(
         .enumerate()
         .map(|(i, n)| {
             let t = timing.as_ref().and_then(|t| t.get(i));
+            // Liveliness as it ended (the lease may have been set live, after the start).
+            let live = h.liveliness.get(i);
+            let status = live.map(|l| l.status_at(end.at));
+            let lease = n.liveliness_lease.or(live.and_then(|l| l.lease()));
+            let faulted = cfg.faults.iter().any(|f| f.node == n.name);
             let m = NodeMetrics {
                 kind: n.kind.as_str().to_string(),
                 rank: i,
@@ -328,22 +332,10 @@ pub fn summarize(
                 ticks: ticks.get(i).copied().unwrap_or(0),
                 lateness_p99_us: t.map(|t| t.lateness_p99_us),
                 lateness_max_us: t.map(|t| t.lateness_max_us),
-                liveliness_lease_ms: None,
-                not_alive: None,
-                faulted_ticks: None,
+                liveliness_lease_ms: lease.map(Nanos::as_millis_f64),
+                not_alive: status.and_then(|s| lease.map(|_| s.not_alive)),
+                faulted_ticks: status.and_then(|s| faulted.then_some(s.faulted_ticks)),
             };
-            let mut m = m;
-            if let Some(live) = h.liveliness.get(i) {
-                let status = live.status_at(end.at);
-                let lease = n.liveliness_lease.or(live.lease());
-                m.liveliness_lease_ms = lease.map(Nanos::as_millis_f64);
-                m.not_alive = lease.map(|_| status.not_alive);
-                m.faulted_ticks = cfg
-                    .faults
-                    .iter()
-                    .any(|f| f.node == n.name)
-                    .then_some(status.faulted_ticks);
-            }
             (n.name.clone(), m)
         })
         .collect();
@@ -353,6 +345,7 @@ pub fn summarize(
         .zip(stats.as_slice())
         .enumerate()
         .map(|(i, (t, s))| {
+            let now_qos = h.topics.get(i).map_or(t.qos, AnyTopic::qos);
             let m = TopicMetrics {
                 msg: t.msg.as_str().to_string(),
                 publisher: spec.node(t.publisher).name.clone(),
@@ -362,18 +355,13 @@ pub fn summarize(
                 dropped: s.dropped,
                 stale_reads: s.stale_reads,
                 msg_per_s: per_s(s.published),
-                qos: None,
-                qos_counters: BTreeMap::new(),
+                qos: (!(t.qos.is_default() && now_qos.is_default()))
+                    .then(|| now_qos.short(s.depth)),
+                qos_counters: QosCounter::reported(&[t.qos, now_qos], s)
+                    .into_iter()
+                    .map(|c| (c.key().to_string(), c.value(s)))
+                    .collect(),
             };
-            let mut m = m;
-            let now_qos = h.topics.get(i).map_or(t.qos, AnyTopic::qos);
-            if !(t.qos.is_default() && now_qos.is_default()) {
-                m.qos = Some(now_qos.short(s.depth));
-            }
-            m.qos_counters = QosCounter::reported(&[t.qos, now_qos], s)
-                .into_iter()
-                .map(|c| (c.key().to_string(), c.value(s)))
-                .collect();
             (t.name.clone(), m)
         })
         .collect();

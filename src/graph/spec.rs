@@ -340,12 +340,13 @@ fn topic_qos(cx: &Ctx<'_>, t: &RawTopic, depth: &mut usize) -> Result<TopicQos, 
     if let Some(l) = &t.link {
         let l_ref = l.get_ref();
         set("loss", "0".into(), l.span())?; // a link, even if every key is left out
-        for (key, v) in [
-            ("loss", &l_ref.loss),
-            ("delay_ms", &l_ref.delay_ms),
-            ("jitter_ms", &l_ref.jitter_ms),
-            ("retransmit_ms", &l_ref.retransmit_ms),
-        ] {
+        let values = [
+            &l_ref.loss,
+            &l_ref.delay_ms,
+            &l_ref.jitter_ms,
+            &l_ref.retransmit_ms,
+        ];
+        for (key, v) in qos::LINK_KEYS.into_iter().zip(values) {
             if let Some(v) = v {
                 set(key, v.get_ref().to_string(), v.span())?;
             }
@@ -560,14 +561,34 @@ impl GraphSpec {
     /// # Errors
     /// [`OverrideError`] for an unknown node or a rate the node cannot take.
     pub fn set_rate(&mut self, name: &str, hz: f64) -> Result<(), OverrideError> {
-        let id = self.node_id(name).ok_or_else(|| {
+        let id = self.known_node(name)?;
+        self.set_rate_of(id, hz)
+    }
+
+    /// Node `name`'s id, or the override error naming the graph's nodes.
+    fn known_node(&self, name: &str) -> Result<NodeId, OverrideError> {
+        self.node_id(name).ok_or_else(|| {
             OverrideError(format!(
                 "graph '{}' has no node '{name}' (nodes: {})",
                 self.name,
                 self.node_names().join(", ")
             ))
-        })?;
-        self.set_rate_of(id, hz)
+        })
+    }
+
+    /// Topic `name`'s id, or the override error naming the graph's topics.
+    fn known_topic(&self, name: &str) -> Result<TopicId, OverrideError> {
+        self.topic_id(name).ok_or_else(|| {
+            OverrideError(format!(
+                "graph '{}' has no topic '{name}' (topics: {})",
+                self.name,
+                self.topics
+                    .iter()
+                    .map(|t| t.name.as_str())
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ))
+        })
     }
 
     /// Set node `id`'s rate, under the file's rules.
@@ -589,17 +610,7 @@ impl GraphSpec {
     /// # Errors
     /// [`OverrideError`] for an unknown topic or a depth outside 1..=[`MAX_DEPTH`].
     pub fn set_depth(&mut self, name: &str, depth: usize) -> Result<(), OverrideError> {
-        let id = self.topic_id(name).ok_or_else(|| {
-            OverrideError(format!(
-                "graph '{}' has no topic '{name}' (topics: {})",
-                self.name,
-                self.topics
-                    .iter()
-                    .map(|t| t.name.as_str())
-                    .collect::<Vec<_>>()
-                    .join(", ")
-            ))
-        })?;
+        let id = self.known_topic(name)?;
         let d = check_depth(i64::try_from(depth).unwrap_or(i64::MAX))
             .map_err(|e| OverrideError(format!("topic '{name}': {e}")))?;
         self.topics[id.0].depth = d;
@@ -626,16 +637,7 @@ impl GraphSpec {
     /// [`OverrideError`] naming the topic for an unknown topic, key or value, or a bad
     /// combination ([`qos::check_combination`]).
     pub fn set_qos(&mut self, name: &str, pairs: &str) -> Result<(), OverrideError> {
-        let id = self.topic_id(name).ok_or_else(|| {
-            OverrideError(format!(
-                "unknown topic '{name}' (topics: {})",
-                self.topics
-                    .iter()
-                    .map(|t| t.name.as_str())
-                    .collect::<Vec<_>>()
-                    .join(", ")
-            ))
-        })?;
+        let id = self.known_topic(name)?;
         let err = |e: String| OverrideError(format!("topic '{name}': {e}"));
         let t = &self.topics[id.0];
         let (mut q, mut depth) = (t.qos, t.depth);
@@ -656,12 +658,7 @@ impl GraphSpec {
     /// # Errors
     /// [`OverrideError`] for an unknown node or a lease not in (0, [`qos::MAX_QOS_MS`]].
     pub fn set_lease(&mut self, name: &str, ms: f64) -> Result<(), OverrideError> {
-        let id = self.node_id(name).ok_or_else(|| {
-            OverrideError(format!(
-                "unknown node '{name}' (nodes: {})",
-                self.node_names().join(", ")
-            ))
-        })?;
+        let id = self.known_node(name)?;
         let lease = qos::ms_to_nanos("liveliness_lease_ms", ms, false)
             .map_err(|e| OverrideError(format!("node '{name}': {e}")))?;
         self.nodes[id.0].liveliness_lease = Some(lease);

@@ -319,7 +319,7 @@ fn a_deadline_shorter_than_the_period_is_a_warning_not_an_error() {
 fn bad_qos_flags_exit_2_with_one_line() {
     for (args, needle) in [
         (vec!["--qos", "/obs:colour=red"], "unknown QoS key 'colour'"),
-        (vec!["--qos", "/nope:depth=2"], "unknown topic '/nope'"),
+        (vec!["--qos", "/nope:depth=2"], "has no topic '/nope'"),
         (vec!["--qos", "/obs"], "expected TOPIC:KEY=VALUE"),
         (
             vec!["--qos", "/obs:lifespan_ms=0"],
@@ -332,7 +332,7 @@ fn bad_qos_flags_exit_2_with_one_line() {
         (vec!["--link", "/obs:loss=2"], "loss must be a probability"),
         (vec!["--link", "/obs:delivery=fifo"], "not a link key"),
         (vec!["--lease", "policy=0"], "must be > 0"),
-        (vec!["--lease", "nobody=10"], "unknown node 'nobody'"),
+        (vec!["--lease", "nobody=10"], "has no node 'nobody'"),
         (vec!["--stall", "policy@1"], "expected NODE@T+D"),
         (vec!["--stall", "nobody@1+1"], "unknown node 'nobody'"),
         (vec!["--kill", "policy@-1"], "must be in [0, 3600] s"),
