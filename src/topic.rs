@@ -133,11 +133,18 @@ impl<T> Inner<T> {
         self.read_high_water.is_none_or(|hw| seq > hw)
     }
 
-    /// Index of the first unseen buffered message (buffers are in `seq` order).
+    /// Index of the first unseen buffered message (buffers are in `seq` order). The ends
+    /// are checked first: with everything or nothing buffered seen (always so at depth 1)
+    /// there is nothing to search.
+    #[inline]
     fn first_unseen(&self) -> usize {
-        match self.read_high_water {
-            None => 0,
-            Some(hw) => self.buf.partition_point(|m| m.seq <= hw),
+        let Some(hw) = self.read_high_water else {
+            return 0;
+        };
+        match (self.buf.front(), self.buf.back()) {
+            (Some(first), _) if first.seq > hw => 0,
+            (_, Some(last)) if last.seq <= hw => self.buf.len(),
+            _ => self.buf.partition_point(|m| m.seq <= hw),
         }
     }
 
@@ -151,6 +158,17 @@ impl<T> Inner<T> {
 
     /// A message reaches the subscriber's queue at `at`, under the history rule.
     fn arrive(&mut self, at: Nanos, msg: Message<T>) {
+        if self.admit(at) {
+            self.buf.push_back(msg);
+        }
+    }
+
+    /// The deadline and history accounting of a message arriving at `at`: true when it is
+    /// to be queued (room was made under the history rule), false when a full keep-all
+    /// queue refused it. Split from [`Inner::arrive`] so that a publish without a link
+    /// builds its message in the queue itself (the chapter's topic's hot path).
+    #[inline(always)]
+    fn admit(&mut self, at: Nanos) -> bool {
         if let Some(d) = self.qos.deadline {
             self.requested_missed += deadline_misses(at.saturating_sub(self.last_arrival), d);
         }
@@ -170,17 +188,28 @@ impl<T> Inner<T> {
                 }
                 if self.buf.len() >= self.depth {
                     self.refused += 1;
-                    return;
+                    return false;
                 }
             }
         }
-        self.buf.push_back(msg);
+        true
     }
 
     /// Bring the topic to `now`: deliver what the link has carried by then, discard what
-    /// has outlived the lifespan.
+    /// has outlived the lifespan. With nothing on the link and no lifespan (the chapter's
+    /// topic) there is nothing to do but note the time.
+    #[inline]
     fn settle(&mut self, now: Nanos) {
         self.now = self.now.max(now);
+        if self.in_flight.is_empty() && self.qos.lifespan.is_none() {
+            return;
+        }
+        self.deliver_and_expire(now);
+    }
+
+    /// [`Inner::settle`]'s work when there is a link or a lifespan.
+    #[inline(never)]
+    fn deliver_and_expire(&mut self, now: Nanos) {
         while self.in_flight.front().is_some_and(|(at, _)| *at <= now) {
             if let Some((at, msg)) = self.in_flight.pop_front() {
                 self.arrive(at, msg);
@@ -201,7 +230,9 @@ impl<T> Inner<T> {
         }
     }
 
-    /// Send `msg` over `link`: `None` when it is lost, else its arrival time.
+    /// Send `msg` over `link`: `None` when it is lost, else its arrival time. Kept out of
+    /// line: only a topic with a link calls it.
+    #[inline(never)]
     fn send(&mut self, link: Link, stamp: Nanos) -> Option<Nanos> {
         let reliable = self.qos.reliability == Reliability::Reliable;
         let seed = self.link_seed;
@@ -320,18 +351,22 @@ impl<T: Clone> Topic<T> {
         inner.next_seq += 1;
         inner.published += 1;
         inner.last_stamp = stamp;
-        let msg = Message {
+        let msg = || Message {
             data,
             stamp,
             seq,
             origin_stamp,
         };
         match inner.qos.link {
-            None => inner.arrive(stamp, msg),
+            None => {
+                if inner.admit(stamp) {
+                    inner.buf.push_back(msg());
+                }
+            }
             Some(link) => match inner.send(link, stamp) {
                 None => {}
-                Some(at) if at <= stamp && inner.in_flight.is_empty() => inner.arrive(stamp, msg),
-                Some(at) => inner.in_flight.push_back((at, msg)),
+                Some(at) if at <= stamp && inner.in_flight.is_empty() => inner.arrive(stamp, msg()),
+                Some(at) => inner.in_flight.push_back((at, msg())),
             },
         }
         seq
