@@ -104,6 +104,10 @@ struct Inner<T> {
     in_flight: VecDeque<(Nanos, Message<T>)>,
     depth: usize,
     qos: TopicQos,
+    /// True when `qos` is the chapter's as far as publish and read are concerned (keep
+    /// last, latest, no deadline, lifespan or link): they then take the pre-QoS topic's
+    /// short path (while nothing is left on a link from an earlier QoS).
+    plain: bool,
     link_seed: u64,
     link: Option<LinkState>,
     next_seq: u64,
@@ -126,6 +130,15 @@ struct Inner<T> {
     last_arrival: Nanos,
     /// The latest `now` any operation brought.
     now: Nanos,
+}
+
+/// See `Inner::plain`.
+fn is_plain(q: &TopicQos) -> bool {
+    q.history == History::KeepLast
+        && q.delivery == Delivery::Latest
+        && q.deadline.is_none()
+        && q.lifespan.is_none()
+        && q.link.is_none()
 }
 
 impl<T> Inner<T> {
@@ -303,6 +316,7 @@ impl<T: Clone> Topic<T> {
                 in_flight: VecDeque::new(),
                 depth,
                 qos,
+                plain: is_plain(&qos),
                 link_seed,
                 link: None,
                 next_seq: 0,
@@ -342,6 +356,27 @@ impl<T: Clone> Topic<T> {
     /// Returns the new message's `seq`.
     pub fn publish(&self, data: T, stamp: Nanos, origin_stamp: Option<Nanos>) -> u64 {
         let mut inner = self.lock();
+        if inner.plain && inner.in_flight.is_empty() {
+            // The chapter's topic: what the general path below does when there is no
+            // deadline, lifespan or link, with the timers kept for a later QoS change.
+            inner.now = inner.now.max(stamp);
+            inner.last_publish = inner.last_publish.max(stamp);
+            inner.last_arrival = inner.last_arrival.max(stamp);
+            if inner.buf.len() >= inner.depth {
+                inner.evict_oldest();
+            }
+            let seq = inner.next_seq;
+            inner.next_seq += 1;
+            inner.published += 1;
+            inner.last_stamp = stamp;
+            inner.buf.push_back(Message {
+                data,
+                stamp,
+                seq,
+                origin_stamp,
+            });
+            return seq;
+        }
         inner.settle(stamp);
         if let Some(d) = inner.qos.deadline {
             inner.offered_missed += deadline_misses(stamp.saturating_sub(inner.last_publish), d);
@@ -378,6 +413,25 @@ impl<T: Clone> Topic<T> {
     /// when nothing is buffered (nothing published yet, or all of it expired).
     pub fn read(&self, now: Nanos) -> Option<Message<T>> {
         let mut inner = self.lock();
+        if inner.plain && inner.in_flight.is_empty() {
+            // The chapter's latest-wins read: the general path below, for no lifespan, no
+            // link and latest delivery.
+            inner.now = inner.now.max(now);
+            let first_unseen = inner.first_unseen();
+            let len = inner.buf.len();
+            let newest = inner.buf.back()?.clone();
+            if first_unseen >= len {
+                inner.stale_reads += 1;
+            } else {
+                inner.seen += (len - first_unseen) as u64;
+                inner.read_high_water = Some(
+                    inner
+                        .read_high_water
+                        .map_or(newest.seq, |hw| hw.max(newest.seq)),
+                );
+            }
+            return Some(newest);
+        }
         inner.settle(now);
         let first_unseen = inner.first_unseen();
         let pick = match inner.qos.delivery {
@@ -424,7 +478,9 @@ impl<T: Clone> Topic<T> {
     /// Change the QoS while running (the lab's keys). Messages already on the link keep
     /// their arrival times; the deadline timers keep running from the last message.
     pub fn set_qos(&self, qos: TopicQos) {
-        self.lock().qos = qos;
+        let mut inner = self.lock();
+        inner.qos = qos;
+        inner.plain = is_plain(&qos);
     }
 
     /// Counters and depth as of the topic's latest operation.
