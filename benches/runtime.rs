@@ -5,6 +5,7 @@ use criterion::{criterion_group, criterion_main, BatchSize, Criterion};
 use ratelab::checkpoint::load_policy;
 use ratelab::plant::CartPole;
 use ratelab::policy::Scripted;
+use ratelab::qos::{apply_key, split_pairs, TopicQos};
 use ratelab::recording::{RecordOptions, Recording};
 use ratelab::topic::Topic;
 use ratelab::{run, ClockKind, Nanos, RunConfig, RunOptions};
@@ -12,16 +13,66 @@ use std::hint::black_box;
 use std::path::Path;
 use std::sync::Arc;
 
+#[path = "support/baseline_topic.rs"]
+mod baseline_topic;
+
+/// One publish + one read per iteration on one thread, at a 20 ms publish period (run time
+/// advances 20 ms per iteration, so a deadline of 40 ms is never missed and a lifespan of
+/// 60 ms never expires the message read): the pre-QoS topic (a frozen copy, the baseline)
+/// against today's with every QoS setting off, with deadline + lifespan, FIFO delivery and
+/// a lossy link, side by side in one group.
 fn topic(c: &mut Criterion) {
-    let t: Topic<[f32; 5]> = Topic::new("/obs", 1).unwrap();
-    let mut i = 0u64;
-    c.bench_function("topic/publish+read (1 thread)", |b| {
-        b.iter(|| {
-            i += 1;
-            t.publish(black_box([i as f32; 5]), Nanos(i), None);
-            black_box(t.read(Nanos(i)))
-        })
-    });
+    const PERIOD: u64 = 20_000_000;
+    let mut g = c.benchmark_group("topic publish+read, 1 thread");
+    {
+        let t: baseline_topic::Topic<[f32; 5]> = baseline_topic::Topic::new("/obs", 1).unwrap();
+        let mut i = 0u64;
+        g.bench_function("baseline: pre-QoS topic (e7a8428), publish + latest", |b| {
+            b.iter(|| {
+                i += 1;
+                t.publish(black_box([i as f32; 5]), Nanos(i * PERIOD), None);
+                black_box(t.latest())
+            })
+        });
+    }
+    for (label, depth, pairs) in [
+        ("QoS off (keep_last 1, latest)", 1, None),
+        (
+            "deadline 40 ms + lifespan 60 ms",
+            1,
+            Some("deadline_ms=40,lifespan_ms=60"),
+        ),
+        ("fifo, keep_last 100", 100, Some("delivery=fifo")),
+        (
+            "lossy link (5% loss, 1 ms delay, best effort)",
+            1,
+            Some("loss=0.05,delay_ms=1"),
+        ),
+    ] {
+        let mut qos = TopicQos::default();
+        let mut d = depth;
+        for (k, v) in pairs.map(|p| split_pairs(p).unwrap()).unwrap_or_default() {
+            apply_key(&mut qos, &mut d, k, v).unwrap();
+        }
+        let t: Topic<[f32; 5]> = Topic::with_qos("/obs", d, qos, 0).unwrap();
+        let mut i = 0u64;
+        g.bench_function(label, |b| {
+            b.iter(|| {
+                i += 1;
+                let now = Nanos(i * PERIOD);
+                t.publish(black_box([i as f32; 5]), now, None);
+                black_box(t.read(now))
+            })
+        });
+        // What the run measured is what was asked: nothing missed, expired or refused.
+        let s = t.stats();
+        assert_eq!(
+            (s.offered_deadline_missed, s.expired, s.refused, s.dropped),
+            (0, 0, 0, 0),
+            "{label}: {s:?}"
+        );
+    }
+    g.finish();
     // Two threads: a publisher hammering the topic while we publish+read.
     let shared: Arc<Topic<[f32; 5]>> = Arc::new(Topic::new("/obs", 1).unwrap());
     let stop = Arc::new(std::sync::atomic::AtomicBool::new(false));

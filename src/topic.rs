@@ -104,6 +104,10 @@ struct Inner<T> {
     in_flight: VecDeque<(Nanos, Message<T>)>,
     depth: usize,
     qos: TopicQos,
+    /// True when `qos` is the chapter's as far as publish and read are concerned (keep
+    /// last, latest, no deadline, lifespan or link): they then take the pre-QoS topic's
+    /// short path (while nothing is left on a link from an earlier QoS).
+    plain: bool,
     link_seed: u64,
     link: Option<LinkState>,
     next_seq: u64,
@@ -128,16 +132,32 @@ struct Inner<T> {
     now: Nanos,
 }
 
+/// See `Inner::plain`.
+fn is_plain(q: &TopicQos) -> bool {
+    q.history == History::KeepLast
+        && q.delivery == Delivery::Latest
+        && q.deadline.is_none()
+        && q.lifespan.is_none()
+        && q.link.is_none()
+}
+
 impl<T> Inner<T> {
     fn unseen(&self, seq: u64) -> bool {
         self.read_high_water.is_none_or(|hw| seq > hw)
     }
 
-    /// Index of the first unseen buffered message (buffers are in `seq` order).
+    /// Index of the first unseen buffered message (buffers are in `seq` order). The ends
+    /// are checked first: with everything or nothing buffered seen (always so at depth 1)
+    /// there is nothing to search.
+    #[inline]
     fn first_unseen(&self) -> usize {
-        match self.read_high_water {
-            None => 0,
-            Some(hw) => self.buf.partition_point(|m| m.seq <= hw),
+        let Some(hw) = self.read_high_water else {
+            return 0;
+        };
+        match (self.buf.front(), self.buf.back()) {
+            (Some(first), _) if first.seq > hw => 0,
+            (_, Some(last)) if last.seq <= hw => self.buf.len(),
+            _ => self.buf.partition_point(|m| m.seq <= hw),
         }
     }
 
@@ -151,6 +171,17 @@ impl<T> Inner<T> {
 
     /// A message reaches the subscriber's queue at `at`, under the history rule.
     fn arrive(&mut self, at: Nanos, msg: Message<T>) {
+        if self.admit(at) {
+            self.buf.push_back(msg);
+        }
+    }
+
+    /// The deadline and history accounting of a message arriving at `at`: true when it is
+    /// to be queued (room was made under the history rule), false when a full keep-all
+    /// queue refused it. Split from [`Inner::arrive`] so that a publish without a link
+    /// builds its message in the queue itself (the chapter's topic's hot path).
+    #[inline(always)]
+    fn admit(&mut self, at: Nanos) -> bool {
         if let Some(d) = self.qos.deadline {
             self.requested_missed += deadline_misses(at.saturating_sub(self.last_arrival), d);
         }
@@ -170,17 +201,28 @@ impl<T> Inner<T> {
                 }
                 if self.buf.len() >= self.depth {
                     self.refused += 1;
-                    return;
+                    return false;
                 }
             }
         }
-        self.buf.push_back(msg);
+        true
     }
 
     /// Bring the topic to `now`: deliver what the link has carried by then, discard what
-    /// has outlived the lifespan.
+    /// has outlived the lifespan. With nothing on the link and no lifespan (the chapter's
+    /// topic) there is nothing to do but note the time.
+    #[inline]
     fn settle(&mut self, now: Nanos) {
         self.now = self.now.max(now);
+        if self.in_flight.is_empty() && self.qos.lifespan.is_none() {
+            return;
+        }
+        self.deliver_and_expire(now);
+    }
+
+    /// [`Inner::settle`]'s work when there is a link or a lifespan.
+    #[inline(never)]
+    fn deliver_and_expire(&mut self, now: Nanos) {
         while self.in_flight.front().is_some_and(|(at, _)| *at <= now) {
             if let Some((at, msg)) = self.in_flight.pop_front() {
                 self.arrive(at, msg);
@@ -201,7 +243,9 @@ impl<T> Inner<T> {
         }
     }
 
-    /// Send `msg` over `link`: `None` when it is lost, else its arrival time.
+    /// Send `msg` over `link`: `None` when it is lost, else its arrival time. Kept out of
+    /// line: only a topic with a link calls it.
+    #[inline(never)]
     fn send(&mut self, link: Link, stamp: Nanos) -> Option<Nanos> {
         let reliable = self.qos.reliability == Reliability::Reliable;
         let seed = self.link_seed;
@@ -272,6 +316,7 @@ impl<T: Clone> Topic<T> {
                 in_flight: VecDeque::new(),
                 depth,
                 qos,
+                plain: is_plain(&qos),
                 link_seed,
                 link: None,
                 next_seq: 0,
@@ -311,6 +356,27 @@ impl<T: Clone> Topic<T> {
     /// Returns the new message's `seq`.
     pub fn publish(&self, data: T, stamp: Nanos, origin_stamp: Option<Nanos>) -> u64 {
         let mut inner = self.lock();
+        if inner.plain && inner.in_flight.is_empty() {
+            // The chapter's topic: what the general path below does when there is no
+            // deadline, lifespan or link, with the timers kept for a later QoS change.
+            inner.now = inner.now.max(stamp);
+            inner.last_publish = inner.last_publish.max(stamp);
+            inner.last_arrival = inner.last_arrival.max(stamp);
+            if inner.buf.len() >= inner.depth {
+                inner.evict_oldest();
+            }
+            let seq = inner.next_seq;
+            inner.next_seq += 1;
+            inner.published += 1;
+            inner.last_stamp = stamp;
+            inner.buf.push_back(Message {
+                data,
+                stamp,
+                seq,
+                origin_stamp,
+            });
+            return seq;
+        }
         inner.settle(stamp);
         if let Some(d) = inner.qos.deadline {
             inner.offered_missed += deadline_misses(stamp.saturating_sub(inner.last_publish), d);
@@ -320,18 +386,22 @@ impl<T: Clone> Topic<T> {
         inner.next_seq += 1;
         inner.published += 1;
         inner.last_stamp = stamp;
-        let msg = Message {
+        let msg = || Message {
             data,
             stamp,
             seq,
             origin_stamp,
         };
         match inner.qos.link {
-            None => inner.arrive(stamp, msg),
+            None => {
+                if inner.admit(stamp) {
+                    inner.buf.push_back(msg());
+                }
+            }
             Some(link) => match inner.send(link, stamp) {
                 None => {}
-                Some(at) if at <= stamp && inner.in_flight.is_empty() => inner.arrive(stamp, msg),
-                Some(at) => inner.in_flight.push_back((at, msg)),
+                Some(at) if at <= stamp && inner.in_flight.is_empty() => inner.arrive(stamp, msg()),
+                Some(at) => inner.in_flight.push_back((at, msg())),
             },
         }
         seq
@@ -343,6 +413,25 @@ impl<T: Clone> Topic<T> {
     /// when nothing is buffered (nothing published yet, or all of it expired).
     pub fn read(&self, now: Nanos) -> Option<Message<T>> {
         let mut inner = self.lock();
+        if inner.plain && inner.in_flight.is_empty() {
+            // The chapter's latest-wins read: the general path below, for no lifespan, no
+            // link and latest delivery.
+            inner.now = inner.now.max(now);
+            let first_unseen = inner.first_unseen();
+            let len = inner.buf.len();
+            let newest = inner.buf.back()?.clone();
+            if first_unseen >= len {
+                inner.stale_reads += 1;
+            } else {
+                inner.seen += (len - first_unseen) as u64;
+                inner.read_high_water = Some(
+                    inner
+                        .read_high_water
+                        .map_or(newest.seq, |hw| hw.max(newest.seq)),
+                );
+            }
+            return Some(newest);
+        }
         inner.settle(now);
         let first_unseen = inner.first_unseen();
         let pick = match inner.qos.delivery {
@@ -389,7 +478,9 @@ impl<T: Clone> Topic<T> {
     /// Change the QoS while running (the lab's keys). Messages already on the link keep
     /// their arrival times; the deadline timers keep running from the last message.
     pub fn set_qos(&self, qos: TopicQos) {
-        self.lock().qos = qos;
+        let mut inner = self.lock();
+        inner.qos = qos;
+        inner.plain = is_plain(&qos);
     }
 
     /// Counters and depth as of the topic's latest operation.
