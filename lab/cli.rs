@@ -40,6 +40,62 @@ pub enum Command {
     Sweep(SweepArgs),
     /// Find, per seed, the highest control rate at which the pole falls.
     Cliff(CliffArgs),
+    /// Run a graph with each placement group in its own OS process, over Zenoh.
+    Launch(LaunchArgs),
+    /// Run one placement group of a graph, joining a launcher (`launch` starts these).
+    Node(NodeArgs),
+    /// A table of a running multi-process graph: nodes, rates, topics, wire latency.
+    Top(TopArgs),
+}
+
+/// `ratelab launch`.
+#[derive(Debug, Clone, Args)]
+pub struct LaunchArgs {
+    /// The graph file (default: the chapter's, graphs/cartpole.toml).
+    #[arg(value_name = "GRAPH")]
+    pub file: Option<PathBuf>,
+    /// One OS process per placement group (the nodes' `process = "…"`; by default the
+    /// plant's nodes share `robot` and every other node runs alone), connected over Zenoh.
+    /// Without it the graph runs in this one process, as `ratelab run`.
+    #[arg(long)]
+    pub processes: bool,
+    /// The Zenoh endpoint to listen on (default tcp/127.0.0.1:<a free port>).
+    #[arg(long, value_name = "tcp/HOST:PORT")]
+    pub listen: Option<String>,
+    /// Start no processes: wait for each group to join with `ratelab node … --connect`.
+    #[arg(long)]
+    pub no_spawn: bool,
+    /// The run flags.
+    #[command(flatten)]
+    pub run: RunArgs,
+}
+
+/// `ratelab node`.
+#[derive(Debug, Clone, Args)]
+pub struct NodeArgs {
+    /// The graph file (default: the chapter's); it must be the launcher's, byte for byte.
+    #[arg(long, value_name = "FILE")]
+    pub graph: Option<PathBuf>,
+    /// The placement group to run.
+    #[arg(long, value_name = "NAME")]
+    pub process: String,
+    /// The launcher's endpoint (repeatable).
+    #[arg(long, value_name = "tcp/HOST:PORT", required = true)]
+    pub connect: Vec<String>,
+    /// Endpoints to listen on for other processes (default tcp/127.0.0.1:<any port>).
+    #[arg(long, value_name = "tcp/HOST:PORT")]
+    pub listen: Vec<String>,
+}
+
+/// `ratelab top`.
+#[derive(Debug, Clone, Args)]
+pub struct TopArgs {
+    /// The endpoint of a running launcher or node (repeatable).
+    #[arg(long, value_name = "tcp/HOST:PORT", required = true)]
+    pub connect: Vec<String>,
+    /// Print one table and exit (for scripts).
+    #[arg(long)]
+    pub once: bool,
 }
 
 /// `ratelab replay`.

@@ -4,6 +4,7 @@ mod bench;
 mod cli;
 mod exercise;
 mod headless;
+mod launch;
 mod sweep;
 mod tui;
 
@@ -187,6 +188,9 @@ fn main() -> ExitCode {
         }),
         Some(Command::Sweep(args)) => sweep::run_sweep(args, &stop),
         Some(Command::Cliff(args)) => sweep::run_cliff(args, &stop),
+        Some(Command::Launch(args)) => launch::run_launch(args, stop),
+        Some(Command::Node(args)) => launch::run_node(args, stop),
+        Some(Command::Top(args)) => launch::run_top(args, stop),
         None => {
             if !cli.headless && std::io::stdout().is_terminal() && std::io::stdin().is_terminal() {
                 lab(&cli.run, stop)

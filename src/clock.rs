@@ -25,6 +25,12 @@ impl MonotonicClock {
         }
     }
 
+    /// A clock reading zero at `start` (which may be in the future: it then reads zero
+    /// until `start`).
+    pub fn starting_at(start: Instant) -> Self {
+        Self { start }
+    }
+
     /// The `Instant` at which this clock reads `t` (for absolute-deadline sleeps). A `t`
     /// beyond what `Instant` can hold gives an instant about a century away.
     pub fn instant_at(&self, t: Nanos) -> Instant {

@@ -7,13 +7,15 @@
 //!
 //! Layout, one module per idea: [`time`], [`clock`], [`topic`], [`rate`], [`node`],
 //! [`plant`], [`policy`], [`msg`], [`graph`] (+ its file format, [`graph::spec`]),
-//! [`scheduler`] (+ [`realtime`]), [`metrics`], [`config`], [`run`], [`session`];
+//! [`scheduler`] (+ [`realtime`]), [`metrics`], [`config`], [`run`], [`session`],
+//! [`distributed`] (the graph across processes, over Zenoh);
 //! files the user names are read through [`input`] and written through [`output`].
 #![warn(missing_docs)]
 
 pub mod checkpoint;
 pub mod clock;
 pub mod config;
+pub mod distributed;
 pub mod exercise;
 pub mod graph;
 pub mod input;

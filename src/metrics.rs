@@ -373,7 +373,7 @@ impl RunLog {
 }
 
 /// Tick-timing statistics of one node under the real clock.
-#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Default, Serialize, Deserialize, PartialEq)]
 pub struct NodeTiming {
     /// Node name.
     pub node: String,

@@ -464,7 +464,7 @@ struct LiveInner {
 }
 
 /// A node's liveliness at one instant.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 pub struct LivelinessStatus {
     /// False when a lease is set and the node has not ticked within it.
     pub alive: bool,

@@ -274,6 +274,7 @@ pub fn run(
                 rt_priority: cfg.rt_priority,
                 on_tick: opts.on_node_tick.clone(),
                 pause: None,
+                start: None,
             };
             let r = run_real(nodes, cfg.duration, &opts.stop, &real);
             let ticks = r.timing.iter().map(|t| t.ticks).collect();
@@ -291,6 +292,86 @@ pub fn run(
     })
 }
 
+/// What [`summarize`] reads of a graph, as data: the whole graph's state when it ran in one
+/// process, or one process's view of it under `ratelab launch --processes` (sent to the
+/// launcher as JSON and merged there, [`crate::distributed`]). Vectors are indexed by
+/// [`crate::graph::NodeId`] / [`crate::graph::TopicId`].
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct GraphState {
+    /// Each topic's counters at the end.
+    pub topics: Vec<crate::topic::TopicStats>,
+    /// Each topic's QoS in force at the end.
+    pub topic_qos: Vec<crate::qos::TopicQos>,
+    /// Each node's liveliness lease and status at the end.
+    pub liveliness: Vec<(Option<Nanos>, crate::qos::LivelinessStatus)>,
+    /// Each node's rate at the end, Hz.
+    pub rates_hz: Vec<f64>,
+    /// Each node's tick count (empty when unknown).
+    pub ticks: Vec<u64>,
+    /// Real clock: each node's tick timing.
+    pub timing: Option<Vec<NodeTiming>>,
+    /// The brain's label.
+    pub brain: String,
+    /// What the actuator measured.
+    pub actuator: ActuatorSummary,
+}
+
+/// The actuator's figures in a [`GraphState`] (ms values rounded as `metrics.json` prints them).
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct ActuatorSummary {
+    /// Actuator ticks.
+    pub steps: u64,
+    /// Run time of the fall.
+    pub fell_at: Option<Nanos>,
+    /// The watchdog's verdict, as printed.
+    pub watchdog: Option<String>,
+    /// Sense→act latency mean, ms (6 decimals).
+    pub mean_latency_ms: f64,
+    /// Sense→act latency p50, p99 and max, ms (3 decimals).
+    pub latency_ms: (f64, f64, f64),
+    /// The pole angle at the last step (or the plant's, before any), rad.
+    pub final_pole_angle: f64,
+    /// Ticks whose newest action was non-finite.
+    pub nonfinite_actions: u64,
+}
+
+impl GraphState {
+    /// The state of the graph behind `h` at run time `at`, with each node's `ticks` (by node
+    /// index; empty when unknown) and real-clock `timing`.
+    pub fn capture(
+        h: &GraphHandles,
+        at: Nanos,
+        ticks: &[u64],
+        timing: Option<Vec<NodeTiming>>,
+    ) -> GraphState {
+        let log = lock(&h.log);
+        GraphState {
+            topics: h.topic_stats_at(at).as_slice().to_vec(),
+            topic_qos: h.topics.iter().map(AnyTopic::qos).collect(),
+            liveliness: h
+                .liveliness
+                .iter()
+                .map(|l| (l.lease(), l.status_at(at)))
+                .collect(),
+            rates_hz: h.rates_hz(),
+            ticks: ticks.to_vec(),
+            timing,
+            brain: h.brain.label(),
+            actuator: ActuatorSummary {
+                steps: log.steps,
+                fell_at: log.fell_at,
+                watchdog: log.watchdog.as_ref().map(ToString::to_string),
+                mean_latency_ms: round_to(log.latency.mean().unwrap_or(0.0) / 1e6, 6),
+                latency_ms: log.latency.summary_ms(),
+                final_pole_angle: log
+                    .last
+                    .map_or_else(|| lock(&h.plant).state().theta, |r| r.pole_angle),
+                nonfinite_actions: log.nonfinite_actions,
+            },
+        }
+    }
+}
+
 /// The summary of a finished (or running) graph, from its handles. `ticks` holds each
 /// node's tick count (by node index; empty when unknown).
 pub fn summarize(
@@ -300,9 +381,14 @@ pub fn summarize(
     ticks: &[u64],
     timing: Option<Vec<NodeTiming>>,
 ) -> Metrics {
-    let log = lock(&h.log);
+    summarize_state(cfg, &GraphState::capture(h, end.at, ticks, timing), end)
+}
+
+/// The summary (`metrics.json`) of a graph's [`GraphState`] at the end of a run.
+pub fn summarize_state(cfg: &RunConfig, st: &GraphState, end: &RunEnd) -> Metrics {
     let spec = &cfg.graph;
-    let stats = h.topic_stats_at(end.at);
+    let log = &st.actuator;
+    let stats: crate::metrics::TopicCounters = st.topics.iter().copied().collect();
     let obs = stats.get(spec.chain.obs);
     let action = stats.get(spec.chain.action);
     let sim_time = log.fell_at.unwrap_or(end.at);
@@ -313,23 +399,23 @@ pub fn summarize(
             round_to(n as f64 / sim_time.as_secs_f64(), 3)
         }
     };
-    let (p50, p99, max) = log.latency.summary_ms();
+    let (p50, p99, max) = log.latency_ms;
     let nodes = spec
         .nodes
         .iter()
         .enumerate()
         .map(|(i, n)| {
-            let t = timing.as_ref().and_then(|t| t.get(i));
+            let t = st.timing.as_ref().and_then(|t| t.get(i));
             // Liveliness as it ended (the lease may have been set live, after the start).
-            let live = h.liveliness.get(i);
-            let status = live.map(|l| l.status_at(end.at));
-            let lease = n.liveliness_lease.or(live.and_then(|l| l.lease()));
+            let live = st.liveliness.get(i);
+            let status = live.map(|l| l.1);
+            let lease = n.liveliness_lease.or(live.and_then(|l| l.0));
             let faulted = cfg.faults.iter().any(|f| f.node == n.name);
             let m = NodeMetrics {
                 kind: n.kind.as_str().to_string(),
                 rank: i,
                 rate_hz: n.rate_hz,
-                ticks: ticks.get(i).copied().unwrap_or(0),
+                ticks: st.ticks.get(i).copied().unwrap_or(0),
                 lateness_p99_us: t.map(|t| t.lateness_p99_us),
                 lateness_max_us: t.map(|t| t.lateness_max_us),
                 liveliness_lease_ms: lease.map(Nanos::as_millis_f64),
@@ -345,7 +431,7 @@ pub fn summarize(
         .zip(stats.as_slice())
         .enumerate()
         .map(|(i, (t, s))| {
-            let now_qos = h.topics.get(i).map_or(t.qos, AnyTopic::qos);
+            let now_qos = st.topic_qos.get(i).copied().unwrap_or(t.qos);
             let m = TopicMetrics {
                 msg: t.msg.as_str().to_string(),
                 publisher: spec.node(t.publisher).name.clone(),
@@ -373,7 +459,7 @@ pub fn summarize(
     };
     Metrics {
         balanced: log.fell_at.is_none() && node_failed.is_none() && log.watchdog.is_none(),
-        stopped_by_watchdog: log.watchdog.as_ref().map(ToString::to_string),
+        stopped_by_watchdog: log.watchdog.clone(),
         clock: cfg.clock.as_str().to_string(),
         control_hz: cfg.control_hz(),
         sensor_hz: cfg.sensor_hz(),
@@ -383,16 +469,15 @@ pub fn summarize(
         duration_s: cfg.duration.as_secs_f64(),
         steps: log.steps,
         actuator_steps: log.steps,
-        policy_ticks: ticks.get(spec.chain.policy.0).copied().unwrap_or(0),
-        control_hz_end: h
-            .rates
+        policy_ticks: st.ticks.get(spec.chain.policy.0).copied().unwrap_or(0),
+        control_hz_end: st
+            .rates_hz
             .get(spec.chain.policy.0)
-            .map_or(cfg.control_hz(), crate::rate::Rate::hz),
+            .copied()
+            .unwrap_or(cfg.control_hz()),
         sim_time_s: sim_time.as_secs_f64(),
-        final_pole_angle: log
-            .last
-            .map_or_else(|| lock(&h.plant).state().theta, |r| r.pole_angle),
-        mean_latency_ms: round_to(log.latency.mean().unwrap_or(0.0) / 1e6, 6),
+        final_pole_angle: log.final_pole_angle,
+        mean_latency_ms: log.mean_latency_ms,
         latency_p50_ms: p50,
         latency_p99_ms: p99,
         latency_max_ms: max,
@@ -403,9 +488,9 @@ pub fn summarize(
         action_dropped: action.dropped,
         action_msg_per_s: per_s(action.published),
         fell_at_s: log.fell_at.map(Nanos::as_secs_f64),
-        policy: h.brain.label(),
+        policy: st.brain.clone(),
         nonfinite_actions: log.nonfinite_actions,
-        node_timing: timing,
+        node_timing: st.timing.clone(),
         node_failed,
         graph: spec.name.clone(),
         nodes,

@@ -42,7 +42,7 @@ impl StopFlag {
 }
 
 /// Why a run ended.
-#[derive(Clone, Debug, PartialEq, Eq)]
+#[derive(Clone, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub enum EndReason {
     /// The run reached its duration.
     Duration,
@@ -71,7 +71,7 @@ impl std::fmt::Display for EndReason {
 }
 
 /// How a run ended and at what run time.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct RunEnd {
     /// Run time at the end: the stopping tick's time, or the duration.
     pub at: Nanos,
@@ -259,6 +259,9 @@ pub struct RealOptions {
     /// highest) was measured (BENCHMARKS.md) and moved all waiting for a core onto the
     /// actuator, whose spinning peers never yield to a lower priority.
     pub rt_priority: Option<u8>,
+    /// The instant the run's time is zero (`None`: when [`run_real`] starts). Processes of
+    /// one graph share it, so their stamps share one clock ([`crate::distributed`]).
+    pub start: Option<std::time::Instant>,
 }
 
 impl Default for RealOptions {
@@ -269,6 +272,7 @@ impl Default for RealOptions {
             on_tick: None,
             pause: None,
             rt_priority: None,
+            start: None,
         }
     }
 }
@@ -343,7 +347,9 @@ pub fn run_real(
     stop: &StopFlag,
     opts: &RealOptions,
 ) -> RealRun {
-    let clock = MonotonicClock::start();
+    let clock = opts
+        .start
+        .map_or_else(MonotonicClock::start, MonotonicClock::starting_at);
     let waiter = DeadlineWaiter::new(opts.spin_margin);
     let stop_at = Arc::new(AtomicU64::new(u64::MAX));
     let handles: Vec<_> = nodes

@@ -39,7 +39,7 @@ pub struct Message<T> {
 }
 
 /// A topic's counters at one instant.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub struct TopicStats {
     /// Messages published so far.
     pub published: u64,
@@ -543,6 +543,23 @@ impl<T: Clone> Topic<T> {
     /// the drop count, is unchanged). For onlookers.
     pub fn peek_newest(&self) -> Option<Message<T>> {
         self.lock().buf.back().cloned()
+    }
+
+    /// The sequence number the next publish will take (= messages published so far, with
+    /// any [`Topic::count_lost`]).
+    pub fn next_seq(&self) -> u64 {
+        self.lock().next_seq
+    }
+
+    /// Account `n` messages published elsewhere that never reached this copy of the topic
+    /// (a gap in the sequence numbers arriving over the wire, [`crate::distributed`]): they
+    /// count as published and `lost`, and take their sequence numbers, so the next message
+    /// keeps its publisher's `seq` and `published = seen + dropped + … + lost` still holds.
+    pub fn count_lost(&self, n: u64) {
+        let mut inner = self.lock();
+        inner.next_seq += n;
+        inner.published += n;
+        inner.lost += n;
     }
 
     /// The buffered messages with `seq >= from`, oldest first, without reading them: the read

@@ -137,6 +137,9 @@ impl MsgType {
     }
 }
 
+/// The process that holds the plant's nodes by default ([`GraphSpec::process_of`]).
+pub const DEFAULT_ROBOT_PROCESS: &str = "robot";
+
 /// Index of a node in [`GraphSpec::nodes`], which is the tie-break order.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
 pub struct NodeId(pub usize);
@@ -178,6 +181,10 @@ pub struct NodeSpec {
     /// Its liveliness lease: not heard from (not ticked) for longer than this, it is
     /// reported *not alive* (ROS 2's liveliness lease duration). `None`: not monitored.
     pub liveliness_lease: Option<Nanos>,
+    /// The placement group (OS process) it runs in under `ratelab launch --processes`, as
+    /// the file gave it; `None` takes the default placement ([`GraphSpec::process_of`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub process: Option<String>,
 }
 
 /// One topic of a validated graph.
@@ -281,6 +288,8 @@ struct RawNode {
     max_force_n: Option<Spanned<f64>>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     liveliness_lease_ms: Option<Spanned<f64>>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    process: Option<Spanned<String>>,
 }
 
 #[derive(Deserialize, Serialize)]
@@ -490,6 +499,7 @@ impl GraphSpec {
                             cutoff_hz: (n.kind == NodeKind::Estimator).then(|| f(p.cutoff_hz)),
                             max_force_n: (n.kind == NodeKind::Safety).then(|| f(p.max_force_n)),
                             liveliness_lease_ms: n.liveliness_lease.map(|l| f(nanos_ms(l))),
+                            process: n.process.clone().map(s),
                         },
                     )
                 })
@@ -534,6 +544,33 @@ impl GraphSpec {
                 .collect(),
         };
         toml::to_string(&raw).expect("a graph always serializes")
+    }
+
+    /// The placement group (OS process) node `id` runs in under `ratelab launch
+    /// --processes`: the file's `process = "…"`, or by default `robot` for the nodes that
+    /// touch the simulator (sensors and the actuator, as drivers touch hardware) and the
+    /// node's own name for every other node.
+    pub fn process_of(&self, id: NodeId) -> String {
+        let n = self.node(id);
+        match (&n.process, n.kind) {
+            (Some(p), _) => p.clone(),
+            (None, NodeKind::Sensor | NodeKind::Actuator) => DEFAULT_ROBOT_PROCESS.to_string(),
+            (None, _) => n.name.clone(),
+        }
+    }
+
+    /// The placement: each process with its nodes (in tie-break order), processes in the
+    /// order of their first node.
+    pub fn placement(&self) -> Vec<(String, Vec<NodeId>)> {
+        let mut out: Vec<(String, Vec<NodeId>)> = Vec::new();
+        for i in 0..self.nodes.len() {
+            let p = self.process_of(NodeId(i));
+            match out.iter_mut().find(|(name, _)| *name == p) {
+                Some((_, ids)) => ids.push(NodeId(i)),
+                None => out.push((p, vec![NodeId(i)])),
+            }
+        }
+        out
     }
 
     /// The node named `name`.
@@ -925,6 +962,18 @@ fn build(cx: &Ctx<'_>, raw: RawGraph) -> Result<GraphSpec, SpecError> {
                     .map_err(|e| cx.err(v.span(), e))
             })
             .transpose()?;
+        let process = match &r.process {
+            Some(p) if !valid_node_name(p.get_ref()) => {
+                return Err(cx.err(
+                    p.span(),
+                    format!(
+                        "process name '{}' must be 1 to 32 letters, digits, '_' or '-'",
+                        p.get_ref()
+                    ),
+                ))
+            }
+            p => p.as_ref().map(|p| p.get_ref().clone()),
+        };
         file_nodes.push(NodeSpec {
             name: nname.clone(),
             kind,
@@ -934,6 +983,7 @@ fn build(cx: &Ctx<'_>, raw: RawGraph) -> Result<GraphSpec, SpecError> {
             publishes,
             params,
             liveliness_lease,
+            process,
         });
         node_spans.push(r.name.span());
     }

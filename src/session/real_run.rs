@@ -52,6 +52,7 @@ impl Engine {
                 },
             )),
             pause: Some(pause.clone()),
+            start: None,
         };
         let start = Instant::now();
         let runner = {

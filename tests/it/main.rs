@@ -12,6 +12,7 @@ pub const REPO: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/..");
 mod brains;
 mod chapter_bands;
 mod cli;
+mod distributed;
 mod e2e_pty;
 mod exercises;
 mod graphs;

@@ -1,0 +1,270 @@
+//! `ratelab launch`, `ratelab node` and `ratelab top`: the graph across processes
+//! ([`ratelab::distributed`]), from the command line.
+
+use crate::cli::{LaunchArgs, NodeArgs, TopArgs};
+use crate::headless;
+use ratelab::distributed::launcher::{launch, LaunchOptions};
+use ratelab::distributed::member::{run_member, LiveStats, MemberOptions};
+use ratelab::distributed::zenoh::{self, Wait};
+use ratelab::distributed::{check_endpoint, open_session};
+use ratelab::graph::spec::{DEFAULT_GRAPH_TOML, MAX_FILE_BYTES};
+use ratelab::scheduler::StopFlag;
+use ratelab::RunReport;
+use std::collections::BTreeMap;
+use std::path::Path;
+use std::time::{Duration, Instant};
+
+/// The graph file's bytes (the chapter's when `path` is `None`), bounded as `--graph` reads it.
+fn graph_bytes(path: Option<&Path>) -> anyhow::Result<Vec<u8>> {
+    match path {
+        None => Ok(DEFAULT_GRAPH_TOML.as_bytes().to_vec()),
+        Some(p) => Ok(ratelab::input::read_regular_file(p, MAX_FILE_BYTES)?),
+    }
+}
+
+/// `ratelab launch [GRAPH] [--processes]`.
+pub fn run_launch(a: &LaunchArgs, stop: StopFlag) -> anyhow::Result<()> {
+    let mut run = a.run.clone();
+    match (&a.file, &run.graph.graph) {
+        (Some(_), Some(_)) => anyhow::bail!("give the graph once: as GRAPH or as --graph"),
+        (Some(f), None) => run.graph.graph = Some(f.clone()),
+        _ => {}
+    }
+    if !a.processes {
+        return headless::run_headless(&run, stop).map(|_| ());
+    }
+    if run.record.is_some() || run.spawn || run.session.is_some() {
+        anyhow::bail!("--record, --spawn and --session are not available with --processes yet: record an in-process run");
+    }
+    let cfg = headless::config_from_args(&run)?;
+    ratelab::checkpoint::load_policy(&run.policy)?; // a bad --policy fails before any process starts
+    if let Some(dir) = &run.out {
+        std::fs::create_dir_all(dir)
+            .map_err(|e| anyhow::anyhow!("cannot create --out folder {}: {e}", dir.display()))?;
+        ratelab::output::check_target(&dir.join("metrics.json"), run.force)?;
+    }
+    let graph_path = run.graph.graph.clone();
+    let opts = LaunchOptions {
+        graph_bytes: graph_bytes(graph_path.as_deref())?,
+        graph_path,
+        listen: a.listen.clone(),
+        policy: run.policy.clone(),
+        exe: if a.no_spawn {
+            None
+        } else {
+            Some(std::env::current_exe()?)
+        },
+    };
+    let placement: Vec<String> = cfg
+        .graph
+        .placement()
+        .iter()
+        .map(|(p, ids)| {
+            let names: Vec<&str> = ids
+                .iter()
+                .map(|i| cfg.graph.node(*i).name.as_str())
+                .collect();
+            format!("{p} [{}]", names.join(", "))
+        })
+        .collect();
+    println!(
+        "[ratelab] launch: graph '{}' in {} processes: {}",
+        cfg.graph.name,
+        placement.len(),
+        placement.join(", ")
+    );
+    let report = launch(&cfg, &opts, &stop, &|line| {
+        println!("[ratelab] launch: {line}")
+    })?;
+    let report = RunReport {
+        metrics: report.metrics,
+        trace: Vec::new(),
+        end: report.end,
+        wall: report.wall,
+    };
+    headless::print_summary(&report);
+    if let Some(dir) = &run.out {
+        let json = serde_json::to_string_pretty(&report.metrics)? + "\n";
+        ratelab::output::write_file(&dir.join("metrics.json"), run.force, json.as_bytes())?;
+        println!("[ratelab] wrote {}", dir.join("metrics.json").display());
+    }
+    Ok(())
+}
+
+/// `ratelab node --process NAME --connect EP`.
+pub fn run_node(a: &NodeArgs, stop: StopFlag) -> anyhow::Result<()> {
+    let origin = a.graph.as_ref().map_or_else(
+        || "graphs/cartpole.toml".to_string(),
+        |p| p.display().to_string(),
+    );
+    let opts = MemberOptions {
+        graph_bytes: graph_bytes(a.graph.as_deref())?,
+        graph_origin: origin,
+        process: a.process.clone(),
+        connect: a.connect.clone(),
+        listen: a.listen.clone(),
+    };
+    run_member(&opts, &stop).map_err(|e| anyhow::anyhow!("node '{}': {e}", a.process))
+}
+
+/// `ratelab top`: refresh a table of every graph reachable from `--connect`.
+pub fn run_top(a: &TopArgs, stop: StopFlag) -> anyhow::Result<()> {
+    for ep in &a.connect {
+        check_endpoint("--connect", ep, false)?;
+    }
+    let session = open_session(&["tcp/127.0.0.1:0".to_string()], &a.connect)?;
+    let (tx, rx) = crossbeam_channel::unbounded::<LiveStats>();
+    let _sub = session
+        .declare_subscriber("ratelab/*/@stats/*")
+        .callback(move |s| {
+            if let Ok(m) =
+                ratelab::distributed::wire::decode_json::<LiveStats>(&s.payload().to_bytes())
+            {
+                let _ = tx.send(m);
+            }
+        })
+        .wait()
+        .map_err(|e| anyhow::anyhow!("zenoh: {e}"))?;
+    // Per process: the newest figures and the ones before, for rates.
+    let mut seen: BTreeMap<String, (LiveStats, Option<LiveStats>)> = BTreeMap::new();
+    let started = Instant::now();
+    let mut last_print = Instant::now();
+    loop {
+        while let Ok(m) = rx.try_recv() {
+            let prev = seen.remove(&m.process).map(|(p, _)| p);
+            seen.insert(m.process.clone(), (m, prev));
+        }
+        let alive = alive_nodes(&session);
+        if a.once {
+            let have_rates = seen.values().all(|(_, p)| p.is_some());
+            if (!seen.is_empty() && have_rates) || started.elapsed() > Duration::from_secs(3) {
+                if seen.is_empty() {
+                    anyhow::bail!(
+                        "no running ratelab graph answered at {} within 3 s",
+                        a.connect.join(", ")
+                    );
+                }
+                print!("{}", table(&seen, &alive));
+                return Ok(());
+            }
+        } else if last_print.elapsed() >= Duration::from_secs(1) {
+            last_print = Instant::now();
+            // Clear the screen and home the cursor (a plain refreshing table, like `top`).
+            print!("\x1b[2J\x1b[H{}", table(&seen, &alive));
+            if seen.is_empty() {
+                println!("(waiting for a graph at {})", a.connect.join(", "));
+            }
+        }
+        if stop.is_stopped() {
+            return Ok(());
+        }
+        std::thread::sleep(Duration::from_millis(100));
+    }
+}
+
+/// The nodes whose liveliness tokens are alive now: `(process, node)`.
+fn alive_nodes(session: &zenoh::Session) -> Vec<(String, String)> {
+    let Ok(replies) = session
+        .liveliness()
+        .get("ratelab/*/@node/*/*")
+        .timeout(Duration::from_millis(300))
+        .wait()
+    else {
+        return Vec::new();
+    };
+    let mut out = Vec::new();
+    while let Ok(r) = replies.recv() {
+        if let Ok(s) = r.result() {
+            let parts: Vec<&str> = s.key_expr().as_str().split('/').collect();
+            if let [_, _, _, p, n] = parts.as_slice() {
+                out.push(((*p).to_string(), (*n).to_string()));
+            }
+        }
+    }
+    out
+}
+
+/// The table `top` prints.
+fn table(
+    seen: &BTreeMap<String, (LiveStats, Option<LiveStats>)>,
+    alive: &[(String, String)],
+) -> String {
+    use std::fmt::Write;
+    let mut s = String::new();
+    let t = seen.values().map(|(m, _)| m.t_ns).max().unwrap_or(0);
+    let _ = writeln!(
+        s,
+        "ratelab top: {} process(es), run time {:.2} s",
+        seen.len(),
+        t as f64 / 1e9
+    );
+    let _ = writeln!(
+        s,
+        "{:<10} {:>7} {:<10} {:<9} {:>8} {:>8} {:>10} {:<6}",
+        "PROCESS", "PID", "NODE", "KIND", "RATE_HZ", "TICKS", "MEAS_HZ", "ALIVE"
+    );
+    let mut wire: BTreeMap<String, (u64, f64, f64)> = BTreeMap::new();
+    let mut topics = Vec::new();
+    for (p, (m, prev)) in seen {
+        let dt = prev
+            .as_ref()
+            .map(|q| m.t_ns.saturating_sub(q.t_ns) as f64 / 1e9)
+            .filter(|d| *d > 0.0);
+        for (name, kind, hz, ticks) in &m.nodes {
+            let before = prev
+                .as_ref()
+                .and_then(|q| q.nodes.iter().find(|n| n.0 == *name))
+                .map(|n| n.3);
+            let meas = match (dt, before) {
+                (Some(dt), Some(b)) => format!("{:.1}", ticks.saturating_sub(b) as f64 / dt),
+                _ => "-".into(),
+            };
+            let is_alive = alive.iter().any(|(ap, an)| ap == p && an == name);
+            let _ = writeln!(
+                s,
+                "{:<10} {:>7} {:<10} {:<9} {:>8.1} {:>8} {:>10} {:<6}",
+                p,
+                m.pid,
+                name,
+                kind,
+                hz,
+                ticks,
+                meas,
+                if is_alive { "yes" } else { "GONE" }
+            );
+        }
+        for (name, st) in &m.topics {
+            let before = prev
+                .as_ref()
+                .and_then(|q| q.topics.iter().find(|x| x.0 == *name))
+                .map(|x| x.1.published);
+            let rate = match (dt, before) {
+                (Some(dt), Some(b)) => format!("{:.1}", st.published.saturating_sub(b) as f64 / dt),
+                _ => "-".into(),
+            };
+            topics.push((name.clone(), rate, *st));
+        }
+        for (name, n, p50, p99) in &m.wire {
+            wire.insert(name.clone(), (*n, *p50, *p99));
+        }
+    }
+    let _ = writeln!(
+        s,
+        "\n{:<10} {:>8} {:>10} {:>8} {:>6} {:>9} {:>9}",
+        "TOPIC", "MSG/S", "PUBLISHED", "DROPPED", "LOST", "WIRE_P50", "WIRE_P99"
+    );
+    topics.sort_by(|a, b| a.0.cmp(&b.0));
+    for (name, rate, st) in topics {
+        let (p50, p99) = wire
+            .get(&name)
+            .map_or(("in-proc".to_string(), "-".to_string()), |(_, a, b)| {
+                (format!("{a:.0} µs"), format!("{b:.0} µs"))
+            });
+        let _ = writeln!(
+            s,
+            "{:<10} {:>8} {:>10} {:>8} {:>6} {:>9} {:>9}",
+            name, rate, st.published, st.dropped, st.lost, p50, p99
+        );
+    }
+    s
+}

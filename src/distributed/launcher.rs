@@ -1,0 +1,610 @@
+//! The launcher (`ratelab launch --processes`): starts one `ratelab node` process per
+//! placement group, admits them (the graph file's hash must match), runs the graph (the
+//! time authority under the virtual clock; the common start under the real one), stops
+//! every process it started, and merges their reports into one `metrics.json`.
+
+use super::wire::{self, Setup, ToLauncher, ToMember};
+use super::{check_endpoint, check_keys, open_session, DistError, Keys, REPLY_TIMEOUT};
+use crate::config::{ClockKind, RunConfig};
+use crate::graph::spec::GraphSpec;
+use crate::graph::NodeId;
+use crate::metrics::Metrics;
+use crate::node::{Flow, Node};
+use crate::rate::Rate;
+use crate::run::{summarize_state, GraphState};
+use crate::scheduler::{EndReason, RunEnd, StopFlag, VirtualScheduler};
+use crate::time::Nanos;
+use crossbeam_channel::{Receiver, RecvTimeoutError};
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+use std::process::{Child, Command, Stdio};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+use zenoh::Wait;
+
+/// How to launch.
+#[derive(Clone, Debug)]
+pub struct LaunchOptions {
+    /// The graph file (`None`: the chapter's, compiled in) and its bytes (hashed at join).
+    pub graph_path: Option<PathBuf>,
+    /// The graph file's bytes.
+    pub graph_bytes: Vec<u8>,
+    /// Where to listen (`tcp/HOST:PORT`; default `tcp/127.0.0.1:<a free port>`).
+    pub listen: Option<String>,
+    /// The brain spec (`--policy`).
+    pub policy: String,
+    /// The `ratelab` binary to start the placement groups with (`None`: start none, and
+    /// wait for them to be started by hand with `ratelab node`).
+    pub exe: Option<PathBuf>,
+}
+
+/// What a launched run produced.
+pub struct LaunchReport {
+    /// The merged summary.
+    pub metrics: Metrics,
+    /// How it ended.
+    pub end: RunEnd,
+    /// Wall time of the run (after every process was ready).
+    pub wall: Duration,
+    /// The endpoint the launcher listened on.
+    pub endpoint: String,
+}
+
+/// The launcher's link to its processes: publishers per process and the reply channel.
+struct Link {
+    keys: Keys,
+    session: zenoh::Session,
+    up: Receiver<ToLauncher>,
+}
+
+impl Link {
+    fn tell(&self, process: &str, m: &ToMember) -> Result<(), DistError> {
+        self.session
+            .put(self.keys.control(process), wire::encode_json(m))
+            .wait()?;
+        Ok(())
+    }
+
+    fn recv(&self, timeout: Duration) -> Option<ToLauncher> {
+        match self.up.recv_timeout(timeout) {
+            Ok(m) => Some(m),
+            Err(RecvTimeoutError::Timeout | RecvTimeoutError::Disconnected) => None,
+        }
+    }
+}
+
+/// A remote node as the launcher's scheduler sees it: its tick is granted to its process.
+struct Proxy {
+    name: String,
+    id: NodeId,
+    rate: Rate,
+    process: String,
+    /// The input topic's publisher is in another process: the tick waits for its message.
+    input: Option<usize>,
+    output: Option<usize>,
+    shared: Arc<Mutex<Shared>>,
+}
+
+struct Shared {
+    link: Link,
+    /// The newest seq published per topic, as the publishing process reported.
+    published: Vec<Option<u64>>,
+}
+
+impl Node for Proxy {
+    fn name(&self) -> &str {
+        &self.name
+    }
+    fn priority(&self) -> u32 {
+        self.id.0 as u32
+    }
+    fn rate(&self) -> &Rate {
+        &self.rate
+    }
+    fn tick(&mut self, now: Nanos) -> Flow {
+        let mut sh = crate::graph::lock(&self.shared);
+        let need = self.input.and_then(|t| sh.published[t]);
+        let grant = ToMember::Grant {
+            t_ns: now.0,
+            node: self.id.0,
+            need,
+        };
+        if let Err(e) = sh.link.tell(&self.process, &grant) {
+            panic!("cannot reach process '{}': {e}", self.process);
+        }
+        loop {
+            match sh.link.recv(REPLY_TIMEOUT) {
+                None => panic!(
+                    "process '{}' did not answer within {} s",
+                    self.process,
+                    REPLY_TIMEOUT.as_secs()
+                ),
+                Some(ToLauncher::Done {
+                    process,
+                    stop,
+                    published,
+                    failed,
+                }) if process == self.process => {
+                    if let Some(msg) = failed {
+                        panic!("{msg}");
+                    }
+                    if let (Some(t), Some(seq)) = (self.output, published) {
+                        sh.published[t] = Some(seq);
+                    }
+                    return if stop { Flow::Stop } else { Flow::Continue };
+                }
+                Some(_) => {}
+            }
+        }
+    }
+}
+
+/// The child processes; every one still running is killed when this is dropped.
+struct Children(Vec<(String, Child)>);
+
+impl Children {
+    /// Wait up to `grace` for each to exit, then kill the rest.
+    fn reap(&mut self, grace: Duration) {
+        let deadline = Instant::now() + grace;
+        for (_, c) in &mut self.0 {
+            while Instant::now() < deadline {
+                if let Ok(Some(_)) = c.try_wait() {
+                    break;
+                }
+                std::thread::sleep(Duration::from_millis(20));
+            }
+            if let Ok(None) = c.try_wait() {
+                let _ = c.kill();
+            }
+            let _ = c.wait();
+        }
+        self.0.clear();
+    }
+
+    /// A child that exited: its process name and status.
+    fn exited(&mut self) -> Option<(String, String)> {
+        for (p, c) in &mut self.0 {
+            if let Ok(Some(status)) = c.try_wait() {
+                return Some((p.clone(), status.to_string()));
+            }
+        }
+        None
+    }
+}
+
+impl Drop for Children {
+    fn drop(&mut self) {
+        for (_, c) in &mut self.0 {
+            let _ = c.kill();
+            let _ = c.wait();
+        }
+    }
+}
+
+/// A free TCP port on `host` (the OS picks it; it is free when this returns).
+fn free_port(host: &str) -> Result<u16, DistError> {
+    std::net::TcpListener::bind((host, 0))
+        .and_then(|l| l.local_addr())
+        .map(|a| a.port())
+        .map_err(|e| DistError::Usage(format!("no free port on {host}: {e}")))
+}
+
+/// Merge the processes' views into the graph's: each node's figures from its own process,
+/// each topic's from its subscriber's process (whose copy saw every message that crossed),
+/// or its publisher's when nobody subscribes; the actuator's measurements from the
+/// actuator's process, the brain's label from the policy's. `None` without the actuator's
+/// process's report.
+pub fn merge_states(spec: &GraphSpec, states: &BTreeMap<String, GraphState>) -> Option<GraphState> {
+    let of = |id: NodeId| states.get(&spec.process_of(id));
+    let mut merged = of(spec.chain.actuator)?.clone();
+    for i in 0..spec.nodes.len() {
+        let Some(st) = of(NodeId(i)) else { continue };
+        take(&mut merged.rates_hz, &st.rates_hz, i);
+        take(&mut merged.ticks, &st.ticks, i);
+        take(&mut merged.liveliness, &st.liveliness, i);
+        if let (Some(d), Some(s)) = (
+            merged.timing.as_mut().and_then(|t| t.get_mut(i)),
+            st.timing.as_ref().and_then(|t| t.get(i)),
+        ) {
+            *d = s.clone();
+        }
+    }
+    for (i, t) in spec.topics.iter().enumerate() {
+        let holder = t.subscriber.unwrap_or(t.publisher);
+        if let Some(st) = of(holder) {
+            take(&mut merged.topics, &st.topics, i);
+            take(&mut merged.topic_qos, &st.topic_qos, i);
+        }
+    }
+    if let Some(st) = of(spec.chain.policy) {
+        merged.brain.clone_from(&st.brain);
+    }
+    Some(merged)
+}
+
+/// `dst[i] = src[i]` where both exist.
+fn take<T: Clone>(dst: &mut [T], src: &[T], i: usize) {
+    if let (Some(d), Some(s)) = (dst.get_mut(i), src.get(i)) {
+        d.clone_from(s);
+    }
+}
+
+/// Launch `cfg`'s graph over its placement, one process per group, and run it once.
+/// `say` is told progress lines (the endpoint, processes joining or gone).
+///
+/// # Errors
+/// [`DistError`]: a bad or busy endpoint, a process that does not join (or joins with
+/// another graph file), a process that fails before the run.
+pub fn launch(
+    cfg: &RunConfig,
+    opts: &LaunchOptions,
+    stop: &StopFlag,
+    say: &dyn Fn(&str),
+) -> Result<LaunchReport, DistError> {
+    cfg.validate().map_err(crate::run::RunError::from)?;
+    let spec = &cfg.graph;
+    check_keys(spec)?;
+    let endpoint = match &opts.listen {
+        Some(ep) => {
+            check_endpoint("--listen", ep, true)?;
+            match ep.rsplit_once(':') {
+                Some((host, "0")) => {
+                    let h = host.trim_start_matches("tcp/");
+                    format!("tcp/{h}:{}", free_port(h)?)
+                }
+                _ => ep.clone(),
+            }
+        }
+        None => format!("tcp/127.0.0.1:{}", free_port("127.0.0.1")?),
+    };
+    let session = open_session(std::slice::from_ref(&endpoint), &[])?;
+    say(&format!("listening on {endpoint}"));
+    let keys = Keys::new(&spec.name);
+    let (up_tx, up_rx) = crossbeam_channel::bounded::<ToLauncher>(65_536);
+    let _up_sub = session
+        .declare_subscriber(keys.up())
+        .callback(move |s| {
+            if let Ok(m) = wire::decode_json::<ToLauncher>(&s.payload().to_bytes()) {
+                let _ = up_tx.try_send(m);
+            }
+        })
+        .wait()?;
+    // Processes going away: their node tokens are withdrawn.
+    let (gone_tx, gone_rx) = crossbeam_channel::unbounded::<String>();
+    let token_prefix = format!("{}/@node/", keys.prefix());
+    let _live_sub = session
+        .liveliness()
+        .declare_subscriber(format!("{}/@node/**", keys.prefix()))
+        .callback(move |s| {
+            if s.kind() == zenoh::sample::SampleKind::Delete {
+                let k = s.key_expr().as_str();
+                if let Some(p) = k
+                    .strip_prefix(&token_prefix)
+                    .and_then(|r| r.split('/').next())
+                {
+                    let _ = gone_tx.send(p.to_string());
+                }
+            }
+        })
+        .wait()?;
+    let _launcher_token = session
+        .liveliness()
+        .declare_token(keys.launcher_token())
+        .wait()?;
+    let placement = spec.placement();
+    let mut children = Children(Vec::new());
+    if let Some(exe) = &opts.exe {
+        for (p, _) in &placement {
+            let mut cmd = Command::new(exe);
+            cmd.arg("node");
+            if let Some(g) = &opts.graph_path {
+                cmd.arg("--graph").arg(g);
+            }
+            // Its own process group: a Ctrl-C at the terminal reaches the launcher only,
+            // which then stops every process in order (their reports are merged).
+            use std::os::unix::process::CommandExt as _;
+            cmd.args(["--process", p, "--connect", &endpoint])
+                .process_group(0)
+                .stdin(Stdio::null())
+                .stdout(Stdio::null())
+                .stderr(Stdio::inherit());
+            // A node dies with the launcher, however the launcher ends.
+            // SAFETY: prctl is async-signal-safe and touches only this (child) process.
+            unsafe {
+                use std::os::unix::process::CommandExt;
+                cmd.pre_exec(|| {
+                    libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGTERM);
+                    Ok(())
+                });
+            }
+            let child = cmd
+                .spawn()
+                .map_err(|e| DistError::Usage(format!("cannot start {}: {e}", exe.display())))?;
+            children.0.push((p.clone(), child));
+        }
+    } else {
+        say(&format!(
+            "waiting for {} to join: ratelab node --process NAME --connect {endpoint}",
+            placement
+                .iter()
+                .map(|(p, _)| p.as_str())
+                .collect::<Vec<_>>()
+                .join(", ")
+        ));
+    }
+    let link = Link {
+        keys: keys.clone(),
+        session: session.clone(),
+        up: up_rx,
+    };
+    let hash = super::graph_hash(&opts.graph_bytes);
+    let setup = Setup {
+        graph_toml: spec.to_toml(),
+        seed: cfg.seed,
+        duration_ns: cfg.duration.0,
+        clock: cfg.clock,
+        policy: opts.policy.clone(),
+        faults: cfg.faults.clone(),
+        phase_offsets_ns: cfg.phase_offsets.iter().map(|n| n.0).collect(),
+        spin_margin_ns: cfg.spin_margin.0,
+        rt_priority: cfg.rt_priority,
+    };
+    // Admission: each process joins with the graph file's hash, then reports ready.
+    let names: Vec<String> = placement.iter().map(|(p, _)| p.clone()).collect();
+    let admit = |m: &ToLauncher| -> Result<bool, DistError> {
+        let ToLauncher::Join {
+            process,
+            graph_sha256,
+            ..
+        } = m
+        else {
+            return Ok(false);
+        };
+        if !names.contains(process) {
+            link.tell(
+                process,
+                &ToMember::Reject {
+                    reason: format!(
+                        "graph '{}' has no process '{process}' (its processes: {})",
+                        spec.name,
+                        names.join(", ")
+                    ),
+                },
+            )?;
+            return Ok(false);
+        }
+        if *graph_sha256 != hash {
+            let reason = format!(
+                "process '{process}' was given a different graph file than the launcher (SHA-256 {}… against {}…)",
+                &graph_sha256[..graph_sha256.len().min(12)],
+                &hash[..12]
+            );
+            link.tell(
+                process,
+                &ToMember::Reject {
+                    reason: reason.clone(),
+                },
+            )?;
+            std::thread::sleep(Duration::from_millis(300)); // let the refusal reach it
+            return Err(DistError::Usage(reason));
+        }
+        link.tell(
+            process,
+            &ToMember::Welcome {
+                setup: Box::new(setup.clone()),
+            },
+        )?;
+        Ok(true)
+    };
+    let mut joined = Vec::new();
+    let mut ready = Vec::new();
+    let deadline = Instant::now()
+        + if opts.exe.is_some() {
+            REPLY_TIMEOUT
+        } else {
+            Duration::from_secs(3600)
+        };
+    while ready.len() < names.len() {
+        if stop.is_stopped() {
+            return Err(DistError::Peer("interrupted before the run started".into()));
+        }
+        if Instant::now() >= deadline {
+            let missing: Vec<&str> = names
+                .iter()
+                .filter(|p| !ready.contains(*p))
+                .map(String::as_str)
+                .collect();
+            return Err(DistError::Peer(format!(
+                "process(es) {} did not become ready within {} s",
+                missing.join(", "),
+                REPLY_TIMEOUT.as_secs()
+            )));
+        }
+        if let Some((p, status)) = children.exited() {
+            return Err(DistError::Peer(format!(
+                "process '{p}' exited ({status}) before the run started"
+            )));
+        }
+        match link.recv(Duration::from_millis(50)) {
+            Some(m @ ToLauncher::Join { .. }) => {
+                if admit(&m)? {
+                    joined.push(m.process().to_string());
+                }
+            }
+            Some(ToLauncher::Ready { process }) if joined.contains(&process) => {
+                if !ready.contains(&process) {
+                    say(&format!("process '{process}' ready"));
+                    ready.push(process);
+                }
+            }
+            _ => {}
+        }
+    }
+    let start = Instant::now();
+    let mut reports: BTreeMap<String, GraphState> = BTreeMap::new();
+    let end = match cfg.clock {
+        ClockKind::Virtual => {
+            let shared = Arc::new(Mutex::new(Shared {
+                link,
+                published: vec![None; spec.topics.len()],
+            }));
+            let rates = spec
+                .nodes
+                .iter()
+                .map(|n| Rate::new(n.rate_hz))
+                .collect::<Result<Vec<_>, _>>()
+                .map_err(|e| DistError::Usage(e.to_string()))?;
+            let mut proxies: Vec<Box<dyn Node>> = spec
+                .nodes
+                .iter()
+                .enumerate()
+                .map(|(i, n)| {
+                    let id = NodeId(i);
+                    let remote_input = n.subscribes.filter(|t| {
+                        spec.process_of(spec.topic(*t).publisher) != spec.process_of(id)
+                    });
+                    Box::new(Proxy {
+                        name: n.name.clone(),
+                        id,
+                        rate: rates[i].clone(),
+                        process: spec.process_of(id),
+                        input: remote_input.map(|t| t.0),
+                        output: n.publishes.map(|t| t.0),
+                        shared: shared.clone(),
+                    }) as Box<dyn Node>
+                })
+                .collect();
+            let mut sched = VirtualScheduler::with_offsets(&proxies, &cfg.phase_offsets);
+            let end = sched.run(&mut proxies, cfg.duration, stop, &mut |_| {});
+            drop(proxies);
+            let sh = Arc::try_unwrap(shared)
+                .map_err(|_| DistError::Peer("the scheduler kept its link".into()))?
+                .into_inner()
+                .unwrap_or_else(|e| e.into_inner());
+            collect_reports(&sh.link, &names, &end, &mut reports);
+            end
+        }
+        ClockKind::Real => {
+            let start_mono = wire::mono_now_ns() + 300_000_000;
+            for p in &names {
+                link.tell(
+                    p,
+                    &ToMember::Start {
+                        start_mono_ns: start_mono,
+                    },
+                )?;
+            }
+            let run_time = || Nanos(wire::mono_now_ns().saturating_sub(start_mono));
+            let mut end: Option<RunEnd> = None;
+            let mut ended: Vec<String> = Vec::new();
+            let mut stop_sent = false;
+            let mut gone: Vec<String> = Vec::new();
+            loop {
+                while let Ok(p) = gone_rx.try_recv() {
+                    if end.is_none()
+                        && names.contains(&p)
+                        && !ended.contains(&p)
+                        && !gone.contains(&p)
+                    {
+                        gone.push(p.clone());
+                        say(&format!(
+                            "process '{p}' is gone at t={:.2}s (its liveliness token was withdrawn); the others run on",
+                            run_time().as_secs_f64()
+                        ));
+                    }
+                }
+                if stop.is_stopped() && end.is_none() {
+                    end = Some(RunEnd {
+                        at: run_time().min(cfg.duration),
+                        reason: EndReason::Interrupted,
+                    });
+                }
+                if let (Some(e), false) = (&end, stop_sent) {
+                    for p in &names {
+                        let _ = link.tell(p, &ToMember::Stop { at_ns: e.at.0 });
+                    }
+                    stop_sent = true;
+                }
+                match link.recv(Duration::from_millis(50)) {
+                    Some(m @ ToLauncher::Join { .. }) => {
+                        // A process restarted mid-run rejoins on the same clock.
+                        if end.is_none() && admit(&m)? {
+                            gone.retain(|g| g != m.process());
+                            say(&format!("process '{}' rejoined", m.process()));
+                        }
+                    }
+                    Some(ToLauncher::Ready { process }) if end.is_none() => {
+                        link.tell(
+                            &process,
+                            &ToMember::Start {
+                                start_mono_ns: start_mono,
+                            },
+                        )?;
+                    }
+                    Some(ToLauncher::Ended { process, end: e }) => {
+                        ended.push(process);
+                        if e.reason != EndReason::Duration && end.is_none() {
+                            end = Some(e);
+                        }
+                    }
+                    Some(ToLauncher::Report { process, state }) => {
+                        reports.insert(process, *state);
+                        if names.iter().all(|p| reports.contains_key(p)) {
+                            break;
+                        }
+                    }
+                    _ => {}
+                }
+                let grace = Nanos::from(REPLY_TIMEOUT);
+                let over = run_time() > cfg.duration + grace
+                    || stop_sent && run_time() > end.as_ref().map_or(Nanos::ZERO, |e| e.at) + grace;
+                if over {
+                    break;
+                }
+            }
+            end.unwrap_or(RunEnd {
+                at: cfg.duration,
+                reason: EndReason::Duration,
+            })
+        }
+    };
+    let wall = start.elapsed();
+    children.reap(Duration::from_secs(5));
+    for p in &names {
+        if !reports.contains_key(p) {
+            say(&format!(
+                "process '{p}' did not report: its figures are missing (zeros)"
+            ));
+        }
+    }
+    let state = merge_states(spec, &reports).ok_or_else(|| {
+        DistError::Peer(format!(
+            "process '{}' (the actuator's) did not report",
+            spec.process_of(spec.chain.actuator)
+        ))
+    })?;
+    Ok(LaunchReport {
+        metrics: summarize_state(cfg, &state, &end),
+        end,
+        wall,
+        endpoint,
+    })
+}
+
+/// Stop every process at `end` and gather its report.
+fn collect_reports(
+    link: &Link,
+    names: &[String],
+    end: &RunEnd,
+    reports: &mut BTreeMap<String, GraphState>,
+) {
+    for p in names {
+        let _ = link.tell(p, &ToMember::Stop { at_ns: end.at.0 });
+    }
+    let deadline = Instant::now() + REPLY_TIMEOUT;
+    while Instant::now() < deadline && !names.iter().all(|p| reports.contains_key(p)) {
+        if let Some(ToLauncher::Report { process, state }) = link.recv(Duration::from_millis(50)) {
+            reports.insert(process, *state);
+        }
+    }
+}

@@ -1,0 +1,652 @@
+//! One placement group in its own OS process (`ratelab node`): joins the launcher, builds
+//! the graph, ticks its own nodes, forwards the topics it publishes to other processes and
+//! takes in those it subscribes to, then reports its view of the run.
+//!
+//! Every process builds the whole graph (so topic and node indices agree everywhere) but
+//! ticks only its nodes. A topic it publishes for another process is kept as the chapter's
+//! plain latest-wins buffer here (its QoS lives with the subscriber's copy, which sees every
+//! message in publish order and so counts exactly what the in-process topic would); after
+//! each tick of the publishing node, its newest message is sent as a
+//! [`WireSample`](super::wire::WireSample).
+
+use super::wire::{self, ToLauncher, ToMember, WireSample};
+use super::{check_endpoint, open_session, DistError, Keys, REPLY_TIMEOUT};
+use crate::config::RunConfig;
+use crate::graph::spec::GraphSpec;
+use crate::graph::{Graph, NodeId, TopicId};
+use crate::metrics::{LatencyStats, NodeTiming};
+use crate::msg::AnyTopic;
+use crate::node::{Flow, Node};
+use crate::policy::BrainSlot;
+use crate::qos::TopicQos;
+use crate::run::GraphState;
+use crate::scheduler::{catch_quietly, panic_message, run_real, RealOptions, StopFlag};
+use crate::time::Nanos;
+use crossbeam_channel::{Receiver, RecvTimeoutError};
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, Condvar, Mutex};
+use std::time::{Duration, Instant};
+use zenoh::Wait;
+
+/// How a placement group is started.
+#[derive(Clone, Debug)]
+pub struct MemberOptions {
+    /// The graph file's bytes (hashed at join) and its name for messages.
+    pub graph_bytes: Vec<u8>,
+    /// The graph file's name, for messages.
+    pub graph_origin: String,
+    /// The placement group to run.
+    pub process: String,
+    /// Endpoints to connect to (the launcher's).
+    pub connect: Vec<String>,
+    /// Endpoints to listen on (default `tcp/127.0.0.1:0`: peers find it by gossip).
+    pub listen: Vec<String>,
+}
+
+/// The sequence numbers that have arrived per inbound topic, for the lockstep's waits.
+struct Arrivals {
+    seqs: Mutex<Vec<Option<u64>>>,
+    cv: Condvar,
+}
+
+impl Arrivals {
+    /// Wait until topic `t` has received `seq` (or anything after it).
+    fn wait_for(&self, t: TopicId, seq: u64, stop: &StopFlag) -> bool {
+        let deadline = Instant::now() + REPLY_TIMEOUT;
+        let mut seqs = crate::graph::lock(&self.seqs);
+        loop {
+            if seqs.get(t.0).copied().flatten().is_some_and(|s| s >= seq) {
+                return true;
+            }
+            let now = Instant::now();
+            if now >= deadline || stop.is_stopped() {
+                return false;
+            }
+            let wait = (deadline - now).min(Duration::from_millis(100));
+            seqs = self
+                .cv
+                .wait_timeout(seqs, wait)
+                .map(|(g, _)| g)
+                .unwrap_or_else(|e| e.into_inner().0);
+        }
+    }
+}
+
+/// Live counters a process publishes for `ratelab top` (key `ratelab/<graph>/@stats/<p>`).
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct LiveStats {
+    /// The process.
+    pub process: String,
+    /// Its OS process id.
+    pub pid: u32,
+    /// Run time of these figures, ns.
+    pub t_ns: u64,
+    /// Its nodes: name, kind, rate Hz, ticks so far.
+    pub nodes: Vec<(String, String, f64, u64)>,
+    /// The topics whose counters it holds (it runs their subscriber, or their publisher when
+    /// nobody subscribes): name and counters.
+    pub topics: Vec<(String, crate::topic::TopicStats)>,
+    /// Per inbound topic: name, samples received, over-the-wire latency p50 and p99, µs.
+    pub wire: Vec<(String, u64, f64, f64)>,
+}
+
+/// Run placement group `opts.process` until the launcher ends the run (or `stop`).
+///
+/// # Errors
+/// [`DistError`]: bad endpoints, no launcher, a rejected join (another graph file), a run
+/// that cannot be built.
+pub fn run_member(opts: &MemberOptions, stop: &StopFlag) -> Result<(), DistError> {
+    let text = std::str::from_utf8(&opts.graph_bytes)
+        .map_err(|_| DistError::Usage(format!("{}: not UTF-8 text", opts.graph_origin)))?;
+    let file_spec =
+        GraphSpec::parse(text, &opts.graph_origin).map_err(|e| DistError::Usage(e.to_string()))?;
+    let placement = file_spec.placement();
+    if !placement.iter().any(|(p, _)| *p == opts.process) {
+        let names: Vec<&str> = placement.iter().map(|(p, _)| p.as_str()).collect();
+        return Err(DistError::Usage(format!(
+            "graph '{}' has no process '{}' (its processes: {})",
+            file_spec.name,
+            opts.process,
+            names.join(", ")
+        )));
+    }
+    if opts.connect.is_empty() {
+        return Err(DistError::Usage(
+            "--connect tcp/HOST:PORT is required: the launcher's endpoint".into(),
+        ));
+    }
+    for ep in &opts.connect {
+        check_endpoint("--connect", ep, false)?;
+    }
+    for ep in &opts.listen {
+        check_endpoint("--listen", ep, true)?;
+    }
+    let listen = if opts.listen.is_empty() {
+        vec!["tcp/127.0.0.1:0".to_string()]
+    } else {
+        opts.listen.clone()
+    };
+    let session = open_session(&listen, &opts.connect)?;
+    let keys = Keys::new(&file_spec.name);
+    let (ctl_tx, ctl_rx) = crossbeam_channel::bounded::<ToMember>(4096);
+    let _ctl_sub = session
+        .declare_subscriber(keys.control(&opts.process))
+        .callback(move |s| {
+            if let Ok(m) = wire::decode_json::<ToMember>(&s.payload().to_bytes()) {
+                let _ = ctl_tx.try_send(m);
+            }
+        })
+        .wait()?;
+    // The launcher's token: withdrawn, the run is over for us too.
+    let launcher_gone = StopFlag::new();
+    let _launcher_watch = {
+        let gone = launcher_gone.clone();
+        session
+            .liveliness()
+            .declare_subscriber(keys.launcher_token())
+            .callback(move |s| {
+                if s.kind() == zenoh::sample::SampleKind::Delete {
+                    gone.stop();
+                }
+            })
+            .wait()?
+    };
+    let up = session.declare_publisher(keys.up()).wait()?;
+    wait_matching(&up, stop, "the launcher")?;
+    let send = |m: &ToLauncher| up.put(wire::encode_json(m)).wait();
+    send(&ToLauncher::Join {
+        process: opts.process.clone(),
+        graph_sha256: super::graph_hash(&opts.graph_bytes),
+        pid: std::process::id(),
+    })?;
+    let setup = match recv(&ctl_rx, stop)? {
+        ToMember::Welcome { setup } => setup,
+        ToMember::Reject { reason } => return Err(DistError::Usage(reason)),
+        other => {
+            return Err(DistError::Peer(format!(
+                "expected a welcome, got {other:?}"
+            )))
+        }
+    };
+    let spec = GraphSpec::parse(&setup.graph_toml, "the launcher's graph")
+        .map_err(|e| DistError::Usage(e.to_string()))?;
+    let cfg = RunConfig {
+        seed: setup.seed,
+        duration: Nanos(setup.duration_ns),
+        graph: spec.clone(),
+        clock: setup.clock,
+        spin_margin: Nanos(setup.spin_margin_ns),
+        phase_offsets: setup.phase_offsets_ns.iter().copied().map(Nanos).collect(),
+        rt_priority: setup.rt_priority,
+        faults: setup.faults.clone(),
+    };
+    let mine: Vec<NodeId> = spec
+        .placement()
+        .into_iter()
+        .find(|(p, _)| *p == opts.process)
+        .map(|(_, ids)| ids)
+        .unwrap_or_default();
+    let owns = |id: NodeId| mine.contains(&id);
+    let brain_spec = if mine.contains(&spec.chain.policy) {
+        setup.policy.as_str()
+    } else {
+        "scripted"
+    };
+    let brain = crate::checkpoint::load_policy(brain_spec)
+        .map_err(|e| DistError::Usage(format!("--policy {brain_spec}: {e}")))?;
+    let Graph { nodes, handles } =
+        crate::run::build_graph(&cfg, BrainSlot::new(brain), false, Vec::new())?;
+    // Topics crossing the boundary.
+    let inbound: Vec<TopicId> = (0..spec.topics.len())
+        .map(TopicId)
+        .filter(|&t| {
+            let ts = spec.topic(t);
+            ts.subscriber.is_some_and(owns) && !owns(ts.publisher)
+        })
+        .collect();
+    let outbound: Vec<TopicId> = (0..spec.topics.len())
+        .map(TopicId)
+        .filter(|&t| {
+            let ts = spec.topic(t);
+            owns(ts.publisher) && ts.subscriber.is_some_and(|s| !owns(s))
+        })
+        .collect();
+    for &t in &outbound {
+        // The publisher's side is a plain buffer; the subscriber's copy keeps the QoS.
+        let _ = handles.topic(t).set_depth(1);
+        handles.topic(t).set_qos(TopicQos::default());
+    }
+    let arrivals = Arc::new(Arrivals {
+        seqs: Mutex::new(vec![None; spec.topics.len()]),
+        cv: Condvar::new(),
+    });
+    let wire_latency: Arc<Vec<Mutex<LatencyStats>>> = Arc::new(
+        (0..spec.topics.len())
+            .map(|_| Mutex::new(LatencyStats::default()))
+            .collect(),
+    );
+    let mut subscribers = Vec::new();
+    for &t in &inbound {
+        let topic = handles.topic(t).clone();
+        let arrivals = arrivals.clone();
+        let lat = wire_latency.clone();
+        let offset = Mutex::new(None);
+        subscribers.push(
+            session
+                .declare_subscriber(keys.topic(&spec.topic(t).name))
+                .callback(move |s| {
+                    let Ok(sample) = WireSample::decode(&s.payload().to_bytes()) else {
+                        return;
+                    };
+                    let (seq, sent) = (sample.seq, sample.sent_mono_ns);
+                    if sample
+                        .deliver(&topic, &mut crate::graph::lock(&offset))
+                        .is_err()
+                    {
+                        return;
+                    }
+                    let took = wire::mono_now_ns().saturating_sub(sent);
+                    crate::graph::lock(&lat[t.0]).record(Nanos(took));
+                    let mut seqs = crate::graph::lock(&arrivals.seqs);
+                    seqs[t.0] = Some(seq);
+                    arrivals.cv.notify_all();
+                })
+                .wait()?,
+        );
+    }
+    let mut publishers = Vec::new();
+    for &t in &outbound {
+        publishers.push((
+            t,
+            session
+                .declare_publisher(keys.topic(&spec.topic(t).name))
+                .wait()?,
+        ));
+    }
+    // Discovery: a token per node, per publisher and per subscriber (with the QoS).
+    let mut tokens = Vec::new();
+    for &id in &mine {
+        let n = spec.node(id);
+        tokens.push(
+            session
+                .liveliness()
+                .declare_token(keys.node_token(&opts.process, &n.name))
+                .wait()?,
+        );
+        for (role, t) in [("pub", n.publishes), ("sub", n.subscribes)] {
+            if let Some(t) = t {
+                let ts = spec.topic(t);
+                let key = keys.endpoint_token(role, &ts.name, &ts.qos.short(ts.depth), &n.name);
+                tokens.push(session.liveliness().declare_token(key).wait()?);
+            }
+        }
+    }
+    for (_, p) in &publishers {
+        wait_matching(p, stop, "the subscribing process")?;
+    }
+    send(&ToLauncher::Ready {
+        process: opts.process.clone(),
+    })?;
+    // What each local node publishes across the boundary, and the last seq sent.
+    let mut by_topic: Vec<Option<zenoh::pubsub::Publisher<'static>>> =
+        (0..spec.topics.len()).map(|_| None).collect();
+    for (t, p) in publishers {
+        by_topic[t.0] = Some(p);
+    }
+    let forward: Arc<Vec<Option<(AnyTopic, zenoh::pubsub::Publisher<'static>)>>> = Arc::new(
+        (0..spec.nodes.len())
+            .map(|i| {
+                let t = spec.node(NodeId(i)).publishes?;
+                let p = by_topic[t.0].take()?;
+                Some((handles.topic(t).clone(), p))
+            })
+            .collect(),
+    );
+    let sent: Arc<Vec<Mutex<Option<u64>>>> =
+        Arc::new((0..spec.nodes.len()).map(|_| Mutex::new(None)).collect());
+    let forward_after = {
+        let (forward, sent) = (forward.clone(), sent.clone());
+        move |node: usize| -> Option<u64> {
+            let (topic, publisher) = forward.get(node)?.as_ref()?;
+            let mut last = crate::graph::lock(&sent[node]);
+            let sample = WireSample::newest_of(topic, *last)?;
+            *last = Some(sample.seq);
+            let _ = publisher.put(sample.encode()).wait();
+            Some(sample.seq)
+        }
+    };
+    let ticks: Arc<Vec<AtomicU64>> =
+        Arc::new((0..spec.nodes.len()).map(|_| AtomicU64::new(0)).collect());
+    let run_time = Arc::new(AtomicU64::new(0));
+    // Live counters for `ratelab top`, twice a second.
+    let stats_pub = session
+        .declare_publisher(keys.stats(&opts.process))
+        .wait()?;
+    let stats_done = StopFlag::new();
+    let stats_thread = {
+        let (handles, ticks, run_time, lat) = (
+            handles.clone(),
+            ticks.clone(),
+            run_time.clone(),
+            wire_latency.clone(),
+        );
+        let (spec, mine, inbound, done, process) = (
+            spec.clone(),
+            mine.clone(),
+            inbound.clone(),
+            stats_done.clone(),
+            opts.process.clone(),
+        );
+        std::thread::Builder::new()
+            .name("stats".into())
+            .spawn(move || {
+                while !done.is_stopped() {
+                    let msg = live_stats(
+                        &process, &spec, &mine, &inbound, &handles, &ticks, &lat, &run_time,
+                    );
+                    let _ = stats_pub.put(wire::encode_json(&msg)).wait();
+                    std::thread::sleep(Duration::from_millis(500));
+                }
+            })
+            .map_err(|e| DistError::Peer(format!("cannot start a thread: {e}")))?
+    };
+    let local: Vec<usize> = mine.iter().map(|id| id.0).collect();
+    let result = match cfg.clock {
+        crate::ClockKind::Virtual => lockstep(
+            nodes,
+            &local,
+            &spec,
+            &handles,
+            &ctl_rx,
+            stop,
+            &arrivals,
+            &forward_after,
+            &ticks,
+            &run_time,
+            &|m| send(m),
+            &opts.process,
+            &launcher_gone,
+        ),
+        crate::ClockKind::Real => {
+            let start = match recv(&ctl_rx, stop)? {
+                ToMember::Start { start_mono_ns } => start_mono_ns,
+                ToMember::Stop { .. } => {
+                    stats_done.stop();
+                    return Ok(());
+                }
+                other => return Err(DistError::Peer(format!("expected a start, got {other:?}"))),
+            };
+            let mut picked: Vec<(usize, Box<dyn Node>)> = nodes
+                .into_iter()
+                .enumerate()
+                .filter(|(i, _)| local.contains(i))
+                .collect();
+            let index: Vec<usize> = picked.iter().map(|(i, _)| *i).collect();
+            let local_nodes: Vec<Box<dyn Node>> = picked.drain(..).map(|(_, n)| n).collect();
+            let hook_ticks = ticks.clone();
+            let hook_time = run_time.clone();
+            let hook_index = index.clone();
+            let fwd = forward_after.clone();
+            let real = RealOptions {
+                spin_margin: cfg.spin_margin,
+                phase_offsets: index
+                    .iter()
+                    .map(|&i| cfg.phase_offsets.get(i).copied().unwrap_or(Nanos::ZERO))
+                    .collect(),
+                rt_priority: cfg.rt_priority,
+                on_tick: Some(Arc::new(move |k: usize, _: &str, now: Nanos, _| {
+                    let i = hook_index[k];
+                    hook_ticks[i].fetch_add(1, Ordering::Relaxed);
+                    hook_time.fetch_max(now.0, Ordering::Relaxed);
+                    fwd(i);
+                })),
+                pause: None,
+                start: Some(wire::instant_at_mono(start)),
+            };
+            // The launcher's stop (another process ended the run, or Ctrl-C there).
+            let run_stop = StopFlag::new();
+            let finished = StopFlag::new();
+            let watcher = {
+                let (rx, run_stop, outer) = (ctl_rx.clone(), run_stop.clone(), stop.clone());
+                let (finished, gone) = (finished.clone(), launcher_gone.clone());
+                std::thread::spawn(move || loop {
+                    match rx.recv_timeout(Duration::from_millis(50)) {
+                        Ok(ToMember::Stop { at_ns }) => {
+                            run_stop.stop();
+                            return Some(Nanos(at_ns));
+                        }
+                        Ok(_) => {}
+                        Err(RecvTimeoutError::Disconnected) => return None,
+                        Err(RecvTimeoutError::Timeout)
+                            if outer.is_stopped() || gone.is_stopped() =>
+                        {
+                            run_stop.stop();
+                            return None;
+                        }
+                        Err(RecvTimeoutError::Timeout) if finished.is_stopped() => return None,
+                        Err(RecvTimeoutError::Timeout) => {}
+                    }
+                })
+            };
+            let r = run_real(local_nodes, cfg.duration, &run_stop, &real);
+            let mut timing: Vec<NodeTiming> = spec
+                .nodes
+                .iter()
+                .map(|n| NodeTiming {
+                    node: n.name.clone(),
+                    ..NodeTiming::default()
+                })
+                .collect();
+            for (k, t) in r.timing.into_iter().enumerate() {
+                timing[index[k]] = t;
+            }
+            let stopped_by_launcher =
+                run_stop.is_stopped() && r.end.reason == crate::scheduler::EndReason::Interrupted;
+            if !stopped_by_launcher {
+                send(&ToLauncher::Ended {
+                    process: opts.process.clone(),
+                    end: r.end.clone(),
+                })?;
+            }
+            // Report at the run's end as the launcher saw it (its stop), else our own.
+            finished.stop();
+            let launcher_at = watcher.join().ok().flatten();
+            let at = match launcher_at {
+                Some(at) if stopped_by_launcher => at,
+                _ => r.end.at,
+            };
+            let ticks_now: Vec<u64> = ticks.iter().map(|t| t.load(Ordering::Relaxed)).collect();
+            Ok(GraphState::capture(&handles, at, &ticks_now, Some(timing)))
+        }
+    };
+    stats_done.stop();
+    let _ = stats_thread.join();
+    let state = result?;
+    send(&ToLauncher::Report {
+        process: opts.process.clone(),
+        state: Box::new(state),
+    })?;
+    // Let the report leave before the session closes.
+    std::thread::sleep(Duration::from_millis(200));
+    drop(tokens);
+    drop(subscribers);
+    let _ = session.close().wait();
+    Ok(())
+}
+
+/// The virtual clock: tick what the launcher grants, in its order, until it stops the run.
+#[allow(clippy::too_many_arguments)]
+fn lockstep(
+    mut nodes: Vec<Box<dyn Node>>,
+    local: &[usize],
+    spec: &GraphSpec,
+    handles: &crate::graph::GraphHandles,
+    ctl: &Receiver<ToMember>,
+    stop: &StopFlag,
+    arrivals: &Arrivals,
+    forward_after: &dyn Fn(usize) -> Option<u64>,
+    ticks: &[AtomicU64],
+    run_time: &AtomicU64,
+    send: &dyn Fn(&ToLauncher) -> zenoh::Result<()>,
+    process: &str,
+    launcher_gone: &StopFlag,
+) -> Result<GraphState, DistError> {
+    loop {
+        // Grants may be far apart (a slow node): wait for as long as the launcher lives.
+        let m = match ctl.recv_timeout(Duration::from_millis(100)) {
+            Ok(m) => m,
+            Err(RecvTimeoutError::Timeout) if launcher_gone.is_stopped() => {
+                return Err(DistError::Peer("the launcher went away".into()))
+            }
+            Err(RecvTimeoutError::Timeout) if stop.is_stopped() => {
+                return Err(DistError::Peer("interrupted".into()))
+            }
+            Err(RecvTimeoutError::Timeout) => continue,
+            Err(RecvTimeoutError::Disconnected) => {
+                return Err(DistError::Peer("the launcher's channel closed".into()))
+            }
+        };
+        match m {
+            ToMember::Grant { t_ns, node, need } => {
+                let t = Nanos(t_ns);
+                let mut failed = None;
+                if let (Some(seq), Some(input)) =
+                    (need, spec.nodes.get(node).and_then(|n| n.subscribes))
+                {
+                    if !arrivals.wait_for(input, seq, stop) {
+                        failed = Some(format!(
+                            "message {seq} on {} did not arrive within {} s",
+                            spec.topic(input).name,
+                            REPLY_TIMEOUT.as_secs()
+                        ));
+                    }
+                }
+                let mut flow = Flow::Continue;
+                if failed.is_none() {
+                    match nodes.get_mut(node).filter(|_| local.contains(&node)) {
+                        None => failed = Some(format!("node {node} is not in process '{process}'")),
+                        Some(n) => match catch_quietly(|| n.tick(t)) {
+                            Ok(f) => flow = f,
+                            Err(p) => failed = Some(panic_message(&*p)),
+                        },
+                    }
+                }
+                ticks[node.min(ticks.len() - 1)].fetch_add(1, Ordering::Relaxed);
+                run_time.fetch_max(t_ns, Ordering::Relaxed);
+                let published = if failed.is_none() {
+                    forward_after(node)
+                } else {
+                    None
+                };
+                send(&ToLauncher::Done {
+                    process: process.to_string(),
+                    stop: flow == Flow::Stop,
+                    published,
+                    failed,
+                })?;
+            }
+            ToMember::Stop { at_ns } => {
+                let ticks: Vec<u64> = ticks.iter().map(|t| t.load(Ordering::Relaxed)).collect();
+                return Ok(GraphState::capture(handles, Nanos(at_ns), &ticks, None));
+            }
+            _ => {}
+        }
+    }
+}
+
+/// The next control message, or an error after [`REPLY_TIMEOUT`] or a stop.
+fn recv(rx: &Receiver<ToMember>, stop: &StopFlag) -> Result<ToMember, DistError> {
+    let deadline = Instant::now() + REPLY_TIMEOUT;
+    loop {
+        match rx.recv_timeout(Duration::from_millis(50)) {
+            Ok(m) => return Ok(m),
+            Err(RecvTimeoutError::Disconnected) => {
+                return Err(DistError::Peer("the launcher's channel closed".into()))
+            }
+            Err(RecvTimeoutError::Timeout) => {
+                if stop.is_stopped() {
+                    return Err(DistError::Peer("interrupted".into()));
+                }
+                if Instant::now() >= deadline {
+                    return Err(DistError::Peer(format!(
+                        "the launcher did not answer within {} s",
+                        REPLY_TIMEOUT.as_secs()
+                    )));
+                }
+            }
+        }
+    }
+}
+
+/// Wait until `p` has a matching subscriber (`who`, for the error).
+fn wait_matching(
+    p: &zenoh::pubsub::Publisher<'_>,
+    stop: &StopFlag,
+    who: &str,
+) -> Result<(), DistError> {
+    let deadline = Instant::now() + REPLY_TIMEOUT;
+    loop {
+        if p.matching_status().wait().is_ok_and(|m| m.matching()) {
+            return Ok(());
+        }
+        if stop.is_stopped() {
+            return Err(DistError::Peer("interrupted".into()));
+        }
+        if Instant::now() >= deadline {
+            return Err(DistError::Peer(format!(
+                "{who} did not subscribe to {} within {} s",
+                p.key_expr(),
+                REPLY_TIMEOUT.as_secs()
+            )));
+        }
+        std::thread::sleep(Duration::from_millis(10));
+    }
+}
+
+/// This process's [`LiveStats`] now.
+#[allow(clippy::too_many_arguments)]
+fn live_stats(
+    process: &str,
+    spec: &GraphSpec,
+    mine: &[NodeId],
+    inbound: &[TopicId],
+    handles: &crate::graph::GraphHandles,
+    ticks: &[AtomicU64],
+    lat: &[Mutex<LatencyStats>],
+    run_time: &AtomicU64,
+) -> LiveStats {
+    let owns = |id: NodeId| mine.contains(&id);
+    let rates = handles.rates_hz();
+    LiveStats {
+        process: process.to_string(),
+        pid: std::process::id(),
+        t_ns: run_time.load(Ordering::Relaxed),
+        nodes: mine
+            .iter()
+            .map(|&id| {
+                let n = spec.node(id);
+                (
+                    n.name.clone(),
+                    n.kind.as_str().to_string(),
+                    rates[id.0],
+                    ticks[id.0].load(Ordering::Relaxed),
+                )
+            })
+            .collect(),
+        topics: spec
+            .topics
+            .iter()
+            .enumerate()
+            .filter(|(_, t)| t.subscriber.map_or(owns(t.publisher), owns))
+            .map(|(i, t)| (t.name.clone(), handles.topic(TopicId(i)).stats()))
+            .collect(),
+        wire: inbound
+            .iter()
+            .map(|&t| {
+                let l = crate::graph::lock(&lat[t.0]);
+                let us = |q: f64| l.quantile(q).map_or(0.0, |n| n.as_micros_f64());
+                (spec.topic(t).name.clone(), l.count(), us(0.5), us(0.99))
+            })
+            .collect(),
+    }
+}

@@ -1,0 +1,235 @@
+//! One graph, many processes: placement groups connected over Zenoh.
+//!
+//! The graph file places each node in a process (`process = "robot"`; by default the plant's
+//! nodes share `robot`, every other node runs alone: [`GraphSpec::process_of`]). Under
+//! `ratelab launch --processes` the launcher ([`launcher`]) starts one OS process per
+//! placement group (`ratelab node`, [`member`]) and they talk over Zenoh, peer to peer
+//! (multicast scouting off; the launcher listens on `tcp/127.0.0.1:PORT`, the others connect
+//! to it and find each other by gossip, as rmw_zenoh's defaults do).
+//!
+//! - **Topics** are key expressions `ratelab/<graph>/<topic>` ([`Keys`]). Each process
+//!   builds the whole graph but ticks only its own nodes; a topic whose publisher and
+//!   subscriber sit in different processes is forwarded as [`wire::WireSample`]s and
+//!   published into the subscriber's copy of the topic, which keeps the chapter's buffer,
+//!   drop rule and QoS, so `dropped` means what it means in-process. Gaps in the
+//!   publisher's sequence numbers count as `lost` on the wire.
+//! - **Discovery and liveliness** are Zenoh liveliness tokens, one per node and one per
+//!   publisher and subscriber carrying its QoS in short (rmw_zenoh encodes its graph the same
+//!   way, `docs/design.md`): `ratelab top` lists them, and the launcher sees a process go.
+//! - **Time.** Under the real clock the processes share the host's monotonic clock and one
+//!   run-time zero, so stamps and sense→act latency stay exact on one host. Under the
+//!   virtual clock the launcher is the time authority: it runs the one
+//!   [`crate::scheduler::VirtualScheduler`] over the whole graph and grants each tick to the
+//!   node's process, which first waits for the input message the tick must see; the same
+//!   seed gives byte-identical metrics in one process and in several.
+
+pub mod launcher;
+pub mod member;
+pub mod wire;
+
+/// The Zenoh crate ratelab is built with (for `ratelab top`'s session).
+pub use zenoh;
+
+use crate::graph::spec::GraphSpec;
+use sha2::Digest;
+use zenoh::Wait;
+
+/// How long a process waits for a peer's answer (a join, a ready, a granted tick).
+pub const REPLY_TIMEOUT: std::time::Duration = std::time::Duration::from_secs(20);
+
+/// Most placement groups one graph may have (each is an OS process).
+pub const MAX_PROCESSES: usize = 16;
+
+/// Something that stops a multi-process run, as one line.
+#[derive(Debug, thiserror::Error)]
+pub enum DistError {
+    /// A bad endpoint or process name, a graph that cannot be split, a port in use.
+    #[error("{0}")]
+    Usage(String),
+    /// Zenoh could not open a session or declare something.
+    #[error("zenoh: {0}")]
+    Zenoh(String),
+    /// A peer did not answer in time, or went away.
+    #[error("{0}")]
+    Peer(String),
+    /// The run could not be built.
+    #[error(transparent)]
+    Run(#[from] crate::run::RunError),
+}
+
+impl From<zenoh::Error> for DistError {
+    fn from(e: zenoh::Error) -> Self {
+        DistError::Zenoh(e.to_string().lines().next().unwrap_or("error").to_string())
+    }
+}
+
+/// Check a Zenoh endpoint as ratelab uses them: `tcp/HOST:PORT`, HOST a name or address
+/// that resolves, PORT in 0..=65535 (0 only for `--listen`: any free port).
+///
+/// # Errors
+/// [`DistError::Usage`] naming the flag.
+pub fn check_endpoint(flag: &str, ep: &str, listen: bool) -> Result<(), DistError> {
+    use std::net::ToSocketAddrs;
+    let bad = |why: &str| DistError::Usage(format!("{flag} {ep}: {why}"));
+    let rest = ep
+        .strip_prefix("tcp/")
+        .ok_or_else(|| bad("expected tcp/HOST:PORT (only the TCP transport is built)"))?;
+    let (host, port) = rest
+        .rsplit_once(':')
+        .ok_or_else(|| bad("expected tcp/HOST:PORT"))?;
+    let port: u16 = port
+        .parse()
+        .map_err(|_| bad("the port must be a number in 0..=65535"))?;
+    if port == 0 && !listen {
+        return Err(bad("port 0 means any port: connect to a real one"));
+    }
+    let host = host.trim_start_matches('[').trim_end_matches(']');
+    if host.is_empty() || host.len() > 253 {
+        return Err(bad("no host"));
+    }
+    (host, port)
+        .to_socket_addrs()
+        .map_err(|e| bad(&format!("the host does not resolve ({e})")))?
+        .next()
+        .ok_or_else(|| bad("the host does not resolve"))?;
+    Ok(())
+}
+
+/// The key expressions of one graph, all under `ratelab/<graph>`.
+#[derive(Clone, Debug)]
+pub struct Keys {
+    prefix: String,
+}
+
+impl Keys {
+    /// The keys of graph `name` (characters a key expression cannot hold become `_`).
+    pub fn new(name: &str) -> Keys {
+        let chunk: String = name
+            .chars()
+            .map(|c| {
+                if c.is_ascii_alphanumeric() || c == '_' || c == '-' || c == '.' {
+                    c
+                } else {
+                    '_'
+                }
+            })
+            .collect();
+        Keys {
+            prefix: format!("ratelab/{chunk}"),
+        }
+    }
+
+    /// `ratelab/<graph>`.
+    pub fn prefix(&self) -> &str {
+        &self.prefix
+    }
+
+    /// A topic's key: `ratelab/<graph>/obs` for `/obs`.
+    pub fn topic(&self, name: &str) -> String {
+        format!("{}/{}", self.prefix, name.trim_matches('/'))
+    }
+
+    /// Where the launcher tells process `p` what to do.
+    pub fn control(&self, p: &str) -> String {
+        format!("{}/@ctl/{p}", self.prefix)
+    }
+
+    /// The launcher's liveliness token: while it exists, the run's authority is alive.
+    pub fn launcher_token(&self) -> String {
+        format!("{}/@launcher", self.prefix)
+    }
+
+    /// Where every process tells the launcher.
+    pub fn up(&self) -> String {
+        format!("{}/@up", self.prefix)
+    }
+
+    /// A node's liveliness token: `ratelab/<graph>/@node/<process>/<node>`.
+    pub fn node_token(&self, process: &str, node: &str) -> String {
+        format!("{}/@node/{process}/{node}", self.prefix)
+    }
+
+    /// A publisher's or subscriber's token (`role` is `pub` or `sub`), carrying the topic's
+    /// QoS in short (spaces as `_`): `ratelab/<graph>/@pub/obs/KL1_latest/sensor`.
+    pub fn endpoint_token(&self, role: &str, topic: &str, qos: &str, node: &str) -> String {
+        let qos: String = qos
+            .chars()
+            .map(|c| if c.is_ascii_alphanumeric() { c } else { '_' })
+            .collect();
+        format!(
+            "{}/@{role}/{}/{qos}/{node}",
+            self.prefix,
+            topic.trim_matches('/')
+        )
+    }
+
+    /// Where each process publishes its live counters for `ratelab top`.
+    pub fn stats(&self, p: &str) -> String {
+        format!("{}/@stats/{p}", self.prefix)
+    }
+}
+
+/// Check that every topic of `spec` makes a valid key expression.
+///
+/// # Errors
+/// [`DistError::Usage`] naming the topic.
+pub fn check_keys(spec: &GraphSpec) -> Result<(), DistError> {
+    let keys = Keys::new(&spec.name);
+    for t in &spec.topics {
+        let k = keys.topic(&t.name);
+        if zenoh::key_expr::KeyExpr::try_from(k.clone()).is_err() || k.contains("//") {
+            return Err(DistError::Usage(format!(
+                "topic '{}' does not make a Zenoh key expression ('{k}')",
+                t.name
+            )));
+        }
+    }
+    if spec.placement().len() > MAX_PROCESSES {
+        return Err(DistError::Usage(format!(
+            "graph '{}' places its nodes in {} processes (at most {MAX_PROCESSES})",
+            spec.name,
+            spec.placement().len()
+        )));
+    }
+    Ok(())
+}
+
+/// SHA-256 of a graph file's bytes, hex: exchanged at join, so processes given different
+/// files refuse to run together.
+pub fn graph_hash(bytes: &[u8]) -> String {
+    sha2::Sha256::digest(bytes)
+        .iter()
+        .map(|b| format!("{b:02x}"))
+        .collect()
+}
+
+/// Open a Zenoh session in peer mode with multicast scouting off, listening on `listen` and
+/// connecting to `connect` (endpoints already checked).
+///
+/// # Errors
+/// [`DistError::Usage`] when an endpoint cannot be used (a port in use), else
+/// [`DistError::Zenoh`].
+pub fn open_session(listen: &[String], connect: &[String]) -> Result<zenoh::Session, DistError> {
+    let mut config = zenoh::Config::default();
+    let json = |v: &[String]| serde_json::to_string(v).unwrap_or_else(|_| "[]".into());
+    let set = |c: &mut zenoh::Config, k: &str, v: &str| {
+        c.insert_json5(k, v)
+            .map_err(|e| DistError::Zenoh(format!("config {k}: {e}")))
+    };
+    set(&mut config, "mode", "\"peer\"")?;
+    set(&mut config, "scouting/multicast/enabled", "false")?;
+    set(&mut config, "listen/endpoints", &json(listen))?;
+    set(&mut config, "connect/endpoints", &json(connect))?;
+    // Fail at once on an endpoint that cannot be listened on or connected to, rather than
+    // retrying in the background: the caller exits 2 with one line.
+    set(&mut config, "listen/exit_on_failure", "true")?;
+    set(&mut config, "connect/exit_on_failure", "true")?;
+    set(&mut config, "connect/timeout_ms", "5000")?;
+    zenoh::open(config).wait().map_err(|e| {
+        let msg = e.to_string();
+        let first = msg.lines().next().unwrap_or("error").to_string();
+        DistError::Usage(format!(
+            "cannot open a Zenoh session (listen {listen:?}, connect {connect:?}): {first}"
+        ))
+    })
+}

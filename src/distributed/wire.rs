@@ -1,0 +1,379 @@
+//! What crosses a process boundary: topic samples and the launcher's control messages.
+//!
+//! A topic sample is [`WireSample`]: the publisher's `seq`, publish stamp and origin stamp
+//! (the same three numbers an in-process [`crate::topic::Message`] carries), the send time
+//! on the host's monotonic clock (for the over-the-wire latency) and the payload, encoded
+//! with `postcard` (serde's compact binary format). Control messages ([`ToMember`],
+//! [`ToLauncher`]) are JSON (`serde_json`): few, and readable when debugging with
+//! `z_sub`. Every decode is bounded ([`MAX_SAMPLE_BYTES`], [`MAX_CONTROL_BYTES`]): the
+//! bytes come from the network.
+
+use crate::config::ClockKind;
+use crate::msg::{AnyTopic, ForceMsg, PositionMsg};
+use crate::qos::Fault;
+use crate::run::GraphState;
+use crate::scheduler::RunEnd;
+use crate::time::Nanos;
+use serde::{Deserialize, Serialize};
+
+/// The largest topic sample accepted, bytes (a state sample is about 40).
+pub const MAX_SAMPLE_BYTES: usize = 1024;
+/// The largest control message accepted, bytes (a report with its counters is a few KB; a
+/// graph file is at most [`crate::input`]'s bound).
+pub const MAX_CONTROL_BYTES: usize = 4 << 20;
+
+/// A message's payload on the wire, by message type.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub enum WireData {
+    /// [`crate::msg::StateMsg`].
+    State([f32; crate::plant::OBS_DIM]),
+    /// [`PositionMsg`]: cart position m, pole angle rad.
+    Position(f64, f64),
+    /// [`ForceMsg`]: newtons.
+    Force(f64),
+}
+
+/// One topic sample on the wire.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct WireSample {
+    /// The publisher's sequence number for the topic (from 0).
+    pub seq: u64,
+    /// Run time of the publish, ns (the graph's processes share the run's clock).
+    pub stamp_ns: u64,
+    /// The origin stamp (the sensor reading it derives from), ns.
+    pub origin_ns: Option<u64>,
+    /// When it was sent, on the host's `CLOCK_MONOTONIC`, ns: receive time minus this is
+    /// the over-the-wire latency (exact on one host; across hosts, see docs/distributed.md).
+    pub sent_mono_ns: u64,
+    /// The payload.
+    pub data: WireData,
+}
+
+impl WireSample {
+    /// The newest message of `topic` with `seq > after` (none: nothing new), as a sample.
+    pub fn newest_of(topic: &AnyTopic, after: Option<u64>) -> Option<WireSample> {
+        let fresh = |seq: u64| after.is_none_or(|a| seq > a);
+        let (seq, stamp, origin, data) = match topic {
+            AnyTopic::State(t) => {
+                let m = t.peek_newest().filter(|m| fresh(m.seq))?;
+                (m.seq, m.stamp, m.origin_stamp, WireData::State(m.data))
+            }
+            AnyTopic::Position(t) => {
+                let m = t.peek_newest().filter(|m| fresh(m.seq))?;
+                let d = WireData::Position(m.data.cart_pos_m, m.data.pole_angle_rad);
+                (m.seq, m.stamp, m.origin_stamp, d)
+            }
+            AnyTopic::Force(t) => {
+                let m = t.peek_newest().filter(|m| fresh(m.seq))?;
+                (
+                    m.seq,
+                    m.stamp,
+                    m.origin_stamp,
+                    WireData::Force(m.data.newtons),
+                )
+            }
+        };
+        Some(WireSample {
+            seq,
+            stamp_ns: stamp.0,
+            origin_ns: origin.map(|o| o.0),
+            sent_mono_ns: mono_now_ns(),
+            data,
+        })
+    }
+
+    /// Publish this sample into the local copy `topic` of its topic, as its publisher did.
+    /// `offset` (the publisher's `seq` minus the copy's, kept by the caller per topic, `None`
+    /// before the first sample) lets a subscriber join late: what was published before its
+    /// first sample is not its loss. After that, a gap in `seq` is counted as lost on the wire
+    /// ([`crate::topic::Topic::count_lost`]) before the sample is published. A publisher that
+    /// restarted (its `seq` went back) is taken as a new one.
+    ///
+    /// # Errors
+    /// The payload's type is not the topic's (a graph that differs between processes).
+    pub fn deliver(self, topic: &AnyTopic, offset: &mut Option<i128>) -> Result<(), String> {
+        let stamp = Nanos(self.stamp_ns);
+        let origin = self.origin_ns.map(Nanos);
+        let seq = i128::from(self.seq);
+        macro_rules! put {
+            ($t:expr, $v:expr) => {{
+                let next = i128::from($t.next_seq());
+                let off = match *offset {
+                    Some(off) if seq - off >= next - 1 => off,
+                    _ => seq - next, // the first sample, or a restarted publisher
+                };
+                *offset = Some(off);
+                let gap = u64::try_from(seq - off - next).unwrap_or(0);
+                if gap > 0 {
+                    $t.count_lost(gap);
+                }
+                $t.publish($v, stamp, origin);
+            }};
+        }
+        match (topic, self.data) {
+            (AnyTopic::State(t), WireData::State(v)) => put!(t, v),
+            (AnyTopic::Position(t), WireData::Position(x, th)) => put!(
+                t,
+                PositionMsg {
+                    cart_pos_m: x,
+                    pole_angle_rad: th,
+                }
+            ),
+            (AnyTopic::Force(t), WireData::Force(n)) => put!(t, ForceMsg { newtons: n }),
+            _ => return Err(format!("a sample of the wrong type on {}", topic.name())),
+        }
+        Ok(())
+    }
+
+    /// Encode (postcard).
+    pub fn encode(&self) -> Vec<u8> {
+        postcard::to_allocvec(self).unwrap_or_default()
+    }
+
+    /// Decode, refusing anything over [`MAX_SAMPLE_BYTES`] or malformed.
+    ///
+    /// # Errors
+    /// One line.
+    pub fn decode(bytes: &[u8]) -> Result<WireSample, String> {
+        if bytes.len() > MAX_SAMPLE_BYTES {
+            return Err(format!(
+                "a sample of {} bytes (at most {MAX_SAMPLE_BYTES})",
+                bytes.len()
+            ));
+        }
+        postcard::from_bytes(bytes).map_err(|e| format!("a malformed sample: {e}"))
+    }
+}
+
+/// The host's `CLOCK_MONOTONIC`, ns: the clock every process on one host shares (Rust's
+/// `Instant` reads the same clock on Linux).
+pub fn mono_now_ns() -> u64 {
+    let mut ts = libc::timespec {
+        tv_sec: 0,
+        tv_nsec: 0,
+    };
+    // SAFETY: `ts` is a valid, writable timespec; the clock id is a constant.
+    let rc = unsafe { libc::clock_gettime(libc::CLOCK_MONOTONIC, &mut ts) };
+    if rc != 0 {
+        return 0;
+    }
+    (ts.tv_sec as u64).saturating_mul(1_000_000_000) + ts.tv_nsec as u64
+}
+
+/// The `Instant` at `CLOCK_MONOTONIC` reading `mono_ns` (past or future).
+pub fn instant_at_mono(mono_ns: u64) -> std::time::Instant {
+    let (now_mono, now) = (mono_now_ns(), std::time::Instant::now());
+    if mono_ns >= now_mono {
+        now + std::time::Duration::from_nanos(mono_ns - now_mono)
+    } else {
+        now.checked_sub(std::time::Duration::from_nanos(now_mono - mono_ns))
+            .unwrap_or(now)
+    }
+}
+
+/// What a placement group needs to run its part of the graph: the launcher's settings.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Setup {
+    /// The resolved graph (every override applied), as a graph file.
+    pub graph_toml: String,
+    /// Reset seed.
+    pub seed: u64,
+    /// Run length, ns.
+    pub duration_ns: u64,
+    /// Which clock.
+    pub clock: ClockKind,
+    /// The brain spec (`--policy`).
+    pub policy: String,
+    /// Faults to inject.
+    pub faults: Vec<Fault>,
+    /// Each node's first deadline, ns.
+    pub phase_offsets_ns: Vec<u64>,
+    /// Real clock: the spin margin, ns.
+    pub spin_margin_ns: u64,
+    /// Real clock: `SCHED_FIFO` priority.
+    pub rt_priority: Option<u8>,
+}
+
+/// Launcher → one placement group (key `ratelab/<graph>/@ctl/<process>`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "msg", rename_all = "snake_case")]
+pub enum ToMember {
+    /// Joined: here are the settings.
+    Welcome {
+        /// The settings.
+        setup: Box<Setup>,
+    },
+    /// Not joined, and why (one line).
+    Reject {
+        /// Why.
+        reason: String,
+    },
+    /// Real clock: start; run time zero is at this `CLOCK_MONOTONIC` reading, ns.
+    Start {
+        /// Run time zero.
+        start_mono_ns: u64,
+    },
+    /// Virtual clock: tick `node` at run time `t_ns`, once the local copy of its input
+    /// topic has the message of seq `need` (published elsewhere).
+    Grant {
+        /// Run time, ns.
+        t_ns: u64,
+        /// The node (index in the graph).
+        node: usize,
+        /// The input message the tick must see, if its publisher is remote.
+        need: Option<u64>,
+    },
+    /// The run ended at run time `at_ns`: report and leave.
+    Stop {
+        /// Run time of the end, ns.
+        at_ns: u64,
+    },
+}
+
+/// A placement group → the launcher (key `ratelab/<graph>/@up`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "msg", rename_all = "snake_case")]
+pub enum ToLauncher {
+    /// Asks to join, with the SHA-256 of its graph file (hex).
+    Join {
+        /// Its process name.
+        process: String,
+        /// SHA-256 of the graph file it was given, hex.
+        graph_sha256: String,
+        /// Its OS process id.
+        pid: u32,
+    },
+    /// Built, connected, every outbound topic matched: ready to run.
+    Ready {
+        /// Its process name.
+        process: String,
+    },
+    /// Virtual clock: the granted tick ran.
+    Done {
+        /// Its process name.
+        process: String,
+        /// The node stopped the graph (the fall).
+        stop: bool,
+        /// The seq the node published in the tick, if any.
+        published: Option<u64>,
+        /// The node panicked: its message.
+        failed: Option<String>,
+    },
+    /// Real clock: its part of the graph ended on its own (a fall, a failed node, the
+    /// duration).
+    Ended {
+        /// Its process name.
+        process: String,
+        /// How.
+        end: RunEnd,
+    },
+    /// Its state at the end of the run.
+    Report {
+        /// Its process name.
+        process: String,
+        /// Its view of the graph.
+        state: Box<GraphState>,
+    },
+}
+
+impl ToLauncher {
+    /// The sender's process name.
+    pub fn process(&self) -> &str {
+        match self {
+            ToLauncher::Join { process, .. }
+            | ToLauncher::Ready { process }
+            | ToLauncher::Done { process, .. }
+            | ToLauncher::Ended { process, .. }
+            | ToLauncher::Report { process, .. } => process,
+        }
+    }
+}
+
+/// Encode a control message (JSON).
+pub fn encode_json<T: Serialize>(msg: &T) -> Vec<u8> {
+    serde_json::to_vec(msg).unwrap_or_default()
+}
+
+/// Decode a control message, refusing anything over [`MAX_CONTROL_BYTES`] or malformed.
+///
+/// # Errors
+/// One line.
+pub fn decode_json<T: for<'de> Deserialize<'de>>(bytes: &[u8]) -> Result<T, String> {
+    if bytes.len() > MAX_CONTROL_BYTES {
+        return Err(format!(
+            "a control message of {} bytes (at most {MAX_CONTROL_BYTES})",
+            bytes.len()
+        ));
+    }
+    serde_json::from_slice(bytes).map_err(|e| format!("a malformed control message: {e}"))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_sample_round_trips_and_hostile_bytes_are_refused() {
+        let s = WireSample {
+            seq: 7,
+            stamp_ns: 20_000_000,
+            origin_ns: Some(0),
+            sent_mono_ns: 5,
+            data: WireData::State([0.1, -0.2, 1.0, 0.0, 3.5]),
+        };
+        assert_eq!(WireSample::decode(&s.encode()).unwrap(), s);
+        assert!(WireSample::decode(&[0xff; 3]).is_err());
+        assert!(WireSample::decode(&vec![0; MAX_SAMPLE_BYTES + 1]).is_err());
+        assert!(decode_json::<ToMember>(b"{\"msg\":\"nope\"}").is_err());
+    }
+
+    #[test]
+    fn delivery_keeps_the_publishers_numbering_and_counts_gaps_as_lost() {
+        let t = AnyTopic::new("/action", crate::graph::MsgType::Force, 1).unwrap();
+        let sample = |seq| WireSample {
+            seq,
+            stamp_ns: seq * 20_000_000,
+            origin_ns: None,
+            sent_mono_ns: 0,
+            data: WireData::Force(1.0),
+        };
+        let mut off = None;
+        sample(0).deliver(&t, &mut off).unwrap();
+        sample(3).deliver(&t, &mut off).unwrap(); // 1 and 2 never arrived
+        let st = t.stats();
+        assert_eq!((st.published, st.lost, st.dropped), (4, 2, 1));
+        let AnyTopic::Force(f) = &t else {
+            unreachable!()
+        };
+        assert_eq!(f.peek_newest().unwrap().seq, 3);
+        let wrong = WireSample {
+            data: WireData::Position(0.0, 0.0),
+            ..sample(4)
+        };
+        assert!(wrong.deliver(&t, &mut off).is_err());
+        // A publisher that restarted counts from 0 again: a new numbering, nothing lost.
+        sample(0).deliver(&t, &mut off).unwrap();
+        sample(1).deliver(&t, &mut off).unwrap();
+        assert_eq!(t.stats().lost, 2);
+        assert_eq!(t.stats().published, 6);
+    }
+
+    #[test]
+    fn a_late_subscriber_does_not_count_what_came_before_it_as_lost() {
+        let t = AnyTopic::new("/obs", crate::graph::MsgType::Force, 1).unwrap();
+        let mut off = None;
+        for seq in [100, 101, 103] {
+            WireSample {
+                seq,
+                stamp_ns: seq,
+                origin_ns: None,
+                sent_mono_ns: 0,
+                data: WireData::Force(0.0),
+            }
+            .deliver(&t, &mut off)
+            .unwrap();
+        }
+        let st = t.stats();
+        assert_eq!((st.published, st.lost), (4, 1));
+    }
+}
