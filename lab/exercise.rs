@@ -10,7 +10,7 @@ use ratelab::metrics::Metrics;
 use std::path::Path;
 
 /// Every exercise and its file, in order.
-pub const FILES: [(&str, &str); 5] = [
+const FILES: [(&str, &str); 5] = [
     ("ex1", "ex1_rate_cliff.toml"),
     ("ex2", "ex2_queue_trap.toml"),
     ("ex3", "ex3_jitter_phase.toml"),
@@ -278,7 +278,7 @@ fn print_ex4(b: &Ex4Bands, f: &ExerciseFile, runs: &[Ex4Run]) {
             r.seed,
             m.topics.get(&b.topic).map_or(0, |t| t.dropped),
             if r.lifespan_ms.is_some() {
-                r.expired().to_string()
+                r.expired(&b.topic).to_string()
             } else {
                 "-".into()
             },

@@ -775,13 +775,14 @@ impl Ex4Run {
         }
     }
 
-    /// `/obs` messages the lifespan expired.
-    pub fn expired(&self) -> u64 {
+    /// Messages the lifespan expired on `topic` (the exercise's).
+    pub fn expired(&self, topic: &str) -> u64 {
         self.metrics
             .topics
-            .values()
-            .filter_map(|t| t.qos_counters.get("expired"))
-            .sum()
+            .get(topic)
+            .and_then(|t| t.qos_counters.get("expired"))
+            .copied()
+            .unwrap_or(0)
     }
 }
 
@@ -814,13 +815,13 @@ pub fn measure_ex4(b: &Ex4Bands, graph: &GraphSpec) -> Result<Vec<Ex4Run>, Exerc
             Delivery::Latest => "latest",
             Delivery::Fifo => "fifo",
         };
-        let mut pairs = format!(
-            "history=keep_last,depth={},delivery={delivery_word}",
+        // Every key the rows differ in is set, so a row is what its label says whatever
+        // the command line set on the topic.
+        let lifespan_word = lifespan.map_or("none".to_string(), |l| l.to_string());
+        let pairs = format!(
+            "history=keep_last,depth={},delivery={delivery_word},lifespan_ms={lifespan_word}",
             b.depth
         );
-        if let Some(l) = lifespan {
-            pairs += &format!(",lifespan_ms={l}");
-        }
         g.set_qos(&b.topic, &pairs)?;
         for &seed in &b.seeds {
             jobs.push((delivery, lifespan, seed, g.clone()));
@@ -925,7 +926,7 @@ pub fn check_ex4(b: &Ex4Bands, runs: &[Ex4Run]) -> Vec<Check> {
             !rs.is_empty()
                 && rs
                     .iter()
-                    .all(|r| r.expired() > 0 && r.metrics.latency_max_ms <= l + period_ms),
+                    .all(|r| r.expired(&b.topic) > 0 && r.metrics.latency_max_ms <= l + period_ms),
         ));
         if i == 0 {
             checks.push(check(
@@ -977,21 +978,24 @@ impl Ex5Case {
         Ex5Case::Reliable,
     ];
 
-    /// The `--qos` pairs on the topic (`None`: the graph as it is).
+    /// The `--qos` pairs on the topic (`None`: the graph as it is). Every key the cases
+    /// differ in is set, so a case is what its label says whatever the command line set on
+    /// the topic (a link delay or jitter given there stays: a way to explore).
     pub fn pairs(self, b: &Ex5Bands) -> Option<String> {
         let (low, high, d) = (b.low_loss, b.high_loss, b.deadline_ms);
-        match self {
-            Ex5Case::Lossless => None,
-            Ex5Case::LowLoss => Some(format!("loss={low}")),
-            Ex5Case::HighLoss => Some(format!("loss={high}")),
-            Ex5Case::DeadlineHold => Some(format!(
-                "loss={high},deadline_ms={d},on_deadline_missed=hold"
-            )),
-            Ex5Case::DeadlineZero => Some(format!(
-                "loss={high},deadline_ms={d},on_deadline_missed=zero"
-            )),
-            Ex5Case::Reliable => Some(format!("loss={high},reliability=reliable")),
-        }
+        let no_deadline = "deadline_ms=none,on_deadline_missed=hold";
+        Some(match self {
+            Ex5Case::Lossless => return None,
+            Ex5Case::LowLoss => format!("loss={low},reliability=best_effort,{no_deadline}"),
+            Ex5Case::HighLoss => format!("loss={high},reliability=best_effort,{no_deadline}"),
+            Ex5Case::DeadlineHold => format!(
+                "loss={high},reliability=best_effort,deadline_ms={d},on_deadline_missed=hold"
+            ),
+            Ex5Case::DeadlineZero => format!(
+                "loss={high},reliability=best_effort,deadline_ms={d},on_deadline_missed=zero"
+            ),
+            Ex5Case::Reliable => format!("loss={high},reliability=reliable,{no_deadline}"),
+        })
     }
 
     /// A row label: `20% loss, best effort`, `80%, deadline 30 ms + zero`.

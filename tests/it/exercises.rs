@@ -86,6 +86,11 @@ fn ex4_measurement_stale_queue() {
             .collect::<Vec<_>>()
     };
     assert_eq!(json(&runs), json(&again));
+    // A row is what its label says whatever the command line set on the topic.
+    let mut g = GraphSpec::chapter();
+    g.set_qos(&b.ex4.topic, "delivery=fifo,lifespan_ms=30,depth=5")
+        .unwrap();
+    assert_eq!(json(&measure_ex4(&b.ex4, &g).unwrap()), json(&runs));
 }
 
 #[test]
@@ -111,6 +116,22 @@ fn ex5_measurement_watchdog() {
     };
     assert!(low_loss_balances && !high_loss_balances);
     assert_eq!(keeps_it_up, [false, true, true], "hold, zero, reliable");
+    // A case is what its label says whatever the command line set on the topic (but for
+    // the graph as it is, the first row).
+    let mut other = g.clone();
+    other
+        .set_qos(
+            &b.ex5.topic,
+            "loss=0.5,reliability=reliable,deadline_ms=50,on_deadline_missed=stop",
+        )
+        .unwrap();
+    let json = |rs: &[ratelab::exercise::Ex5Run]| {
+        rs.iter()
+            .filter(|r| r.case != Ex5Case::Lossless)
+            .map(|r| serde_json::to_string(&r.metrics).unwrap())
+            .collect::<Vec<_>>()
+    };
+    assert_eq!(json(&measure_ex5(&b.ex5, &other).unwrap()), json(&runs));
     // The chapter's graph has no /cmd: ex5 needs its own, ex4 runs on the chapter's.
     assert!(default_graph("ex4", &path("")).unwrap().is_none());
     assert!(measure_ex5(&b.ex5, &GraphSpec::chapter()).is_err());
