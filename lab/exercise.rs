@@ -290,7 +290,7 @@ fn print_ex4(b: &Ex4Bands, f: &ExerciseFile, runs: &[Ex4Run]) {
         );
     }
     println!("(latency: sense->act, ms; at the fall: the latency of the action applied at the step the pole fell;");
-    println!(" dropped: {} readings evicted unread; expired: readings the lifespan discarded unread; n@T: fell at run time T s)", b.topic);
+    println!(" dropped: readings evicted unread; expired: readings the lifespan discarded unread; n@T: fell at T s)");
     let outcome = outcome_ex4(b, runs);
     say_reconcile(f, &outcome);
     print_checks(&check_ex4(b, runs));
