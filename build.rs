@@ -29,6 +29,26 @@ fn main() {
             "exercises/ex3_jitter_phase.toml",
             &["matched_obs_drops"][..],
         ),
+        (
+            "ex4",
+            "exercises/ex4_stale_queue.toml",
+            &[
+                "latest_balances",
+                "fifo_balances",
+                "fifo_latency_at_fall_ms",
+                "lifespan_balances",
+            ][..],
+        ),
+        (
+            "ex5",
+            "exercises/ex5_watchdog.toml",
+            &[
+                "survives_low_loss",
+                "survives_high_loss",
+                "keeps_it_up",
+                "reliable_latency_ms",
+            ][..],
+        ),
     ] {
         let file = root.join(file);
         println!("cargo:rerun-if-changed={}", file.display());

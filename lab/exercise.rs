@@ -1,16 +1,21 @@
-//! `ratelab exercise ex1|ex2|ex3`: predict, run, reconcile.
+//! `ratelab exercise ex1|ex2|ex3|ex4|ex5`: predict, run, reconcile.
 
 use anyhow::{bail, Context};
 use ratelab::exercise::{
-    check_ex1, check_ex2, check_ex3, load_bands, measure_ex1, measure_ex2, measure_ex3,
-    required_keys, Check, ExerciseFile, Outcome,
+    check_ex1, check_ex2, check_ex3, check_ex4, check_ex5, load_bands, measure_ex1, measure_ex2,
+    measure_ex3, measure_ex4, measure_ex5, outcome_ex4, outcome_ex5, required_keys, Check,
+    Ex4Bands, Ex4Run, Ex5Bands, Ex5Case, Ex5Run, ExerciseFile, Outcome,
 };
+use ratelab::metrics::Metrics;
 use std::path::Path;
 
-const FILES: [(&str, &str); 3] = [
+/// Every exercise and its file, in order.
+const FILES: [(&str, &str); 5] = [
     ("ex1", "ex1_rate_cliff.toml"),
     ("ex2", "ex2_queue_trap.toml"),
     ("ex3", "ex3_jitter_phase.toml"),
+    ("ex4", "ex4_stale_queue.toml"),
+    ("ex5", "ex5_watchdog.toml"),
 ];
 
 fn print_checks(checks: &[Check]) {
@@ -40,6 +45,20 @@ fn with_spinner<T>(what: &str, f: impl FnOnce() -> T) -> T {
     out
 }
 
+/// `ratelab exercise`: the graph (the chapter's, or the one the exercise's bands name, with
+/// the command line's overrides), then [`run_exercise`].
+pub fn run_from_args(args: &crate::cli::ExerciseArgs) -> anyhow::Result<()> {
+    let mut graph = args.graph.clone();
+    if graph.graph.is_none() {
+        graph.graph = ratelab::exercise::default_graph(&args.which, &args.dir)?;
+    }
+    let g = crate::headless::graph_from_args(&graph)?;
+    if !crate::headless::faults_from_args(&graph).is_empty() {
+        bail!("--stall/--kill: the exercises inject no faults; use `ratelab run` or `ratelab lab` with them");
+    }
+    run_exercise(&args.which, &args.dir, &g)
+}
+
 /// Run exercise `which` from the exercise folder `dir`.
 pub fn run_exercise(
     which: &str,
@@ -47,7 +66,7 @@ pub fn run_exercise(
     graph: &ratelab::graph::GraphSpec,
 ) -> anyhow::Result<()> {
     let Some((ex, file)) = FILES.iter().find(|(e, _)| *e == which) else {
-        bail!("unknown exercise '{which}' (expected ex1, ex2 or ex3)");
+        bail!("unknown exercise '{which}' (expected ex1, ex2, ex3, ex4 or ex5)");
     };
     let path = dir.join(file);
     let f = ExerciseFile::load(&path)?;
@@ -155,6 +174,16 @@ pub fn run_exercise(
             println!("buffers is never used, the decisions are exactly as old, and the pole falls at the same");
             println!("step. Drops were the symptom of a rate mismatch; the disease is latency. Throughput is not control.");
         }
+        "ex4" => {
+            let b = &bands.ex4;
+            let runs = with_spinner("measuring ex4", || measure_ex4(b, graph))?;
+            print_ex4(b, &f, &runs);
+        }
+        "ex5" => {
+            let b = &bands.ex5;
+            let runs = with_spinner("measuring ex5", || measure_ex5(b, graph))?;
+            print_ex5(b, &f, &runs);
+        }
         _ => {
             let b = &bands.ex3;
             println!(
@@ -211,6 +240,265 @@ pub fn run_exercise(
         }
     }
     Ok(())
+}
+
+/// A run's verdict in a table cell: `Y`, `n@0.34s` (fell at run time 0.34 s), or
+/// `W@0.34s` (stopped by the watchdog).
+fn verdict(m: &Metrics) -> String {
+    match (m.balanced, m.fell_at_s) {
+        (true, _) => "Y".into(),
+        (false, Some(t)) => format!("n@{t:.2}s"),
+        (false, None) if m.stopped_by_watchdog.is_some() => format!("W@{:.2}s", m.sim_time_s),
+        (false, None) => "n".into(),
+    }
+}
+
+fn print_ex4(b: &Ex4Bands, f: &ExerciseFile, runs: &[Ex4Run]) {
+    let head = format!(
+        "{} keep-last {}, policy {} Hz",
+        b.topic, b.depth, b.control_hz
+    );
+    let w = head.len().max(22);
+    println!(
+        "{head:<w$} | seed | {:>7} | expired | balanced | latency mean |   max | at the fall",
+        "dropped"
+    );
+    let mut last = String::new();
+    for r in runs {
+        let label = r.label();
+        let shown = if label == last {
+            String::new()
+        } else {
+            label.clone()
+        };
+        last = label;
+        let m = &r.metrics;
+        println!(
+            "{shown:<w$} | {:>4} | {:>7} | {:>7} | {:>8} | {:>9.1} ms | {:>5.1} | {:>11}",
+            r.seed,
+            m.topics.get(&b.topic).map_or(0, |t| t.dropped),
+            if r.lifespan_ms.is_some() {
+                r.expired(&b.topic).to_string()
+            } else {
+                "-".into()
+            },
+            verdict(m),
+            m.mean_latency_ms,
+            m.latency_max_ms,
+            r.latency_at_fall_ms
+                .map_or("-".into(), |l| format!("{l:.1} ms")),
+        );
+    }
+    println!("(latency: sense->act, ms; at the fall: the latency of the action applied at the step the pole fell;");
+    println!(" dropped: readings evicted unread; expired: readings the lifespan discarded unread; n@T: fell at T s)");
+    let outcome = outcome_ex4(b, runs);
+    say_reconcile(f, &outcome);
+    print_checks(&check_ex4(b, runs));
+    // The explanation, with its numbers from the bands and the runs, and each claim about a
+    // verdict said only when the runs bear it out.
+    let per_tick = b.sensor_hz / b.control_hz;
+    let aging_ms = (per_tick - 1.0) * 1e3 / b.sensor_hz;
+    let of = |label: &str| -> Vec<&Ex4Run> { runs.iter().filter(|r| r.label() == label).collect() };
+    let latest_max = of("latest")
+        .iter()
+        .map(|r| r.metrics.latency_max_ms)
+        .fold(0.0, f64::max);
+    let mut text = format!(
+        "Reconcile: under latest the policy reads the newest reading and reads past the rest; the deep \
+         queue holds them, nothing is dropped, and no action is older than {latest_max:.0} ms. Under fifo \
+         the policy takes the OLDEST unread reading, one per tick, while {per_tick} arrive: the backlog \
+         grows by {} a tick, and each reading acted on is {aging_ms:.0} ms older than the one before. \
+         Nothing is dropped, so the drop counter says all is well",
+        per_tick - 1.0
+    );
+    let fifo_falls: Vec<f64> = of("fifo")
+        .iter()
+        .filter_map(|r| r.metrics.fell_at_s)
+        .collect();
+    match outcome {
+        Outcome::Ex4 {
+            fifo_latency_at_fall_ms: Some((lo, hi)),
+            ..
+        } if fifo_falls.len() == of("fifo").len() => {
+            let t = fifo_falls.iter().copied().fold(0.0, f64::max);
+            text += &format!(
+                ", while the pole is down by {t:.2} s on every seed, acting on readings {lo:.0} to {hi:.0} ms old."
+            );
+        }
+        _ => text += ", while the decisions age.",
+    }
+    if let Some((&first, longer)) = b.lifespan_ms.split_first() {
+        text += &format!(
+            " A lifespan discards a reading older than it before a read can return it: at {first} ms \
+             fifo acts at worst on a reading {first} ms old when read"
+        );
+        text += if of(&format!("fifo, lifespan {first} ms"))
+            .iter()
+            .all(|r| r.metrics.balanced)
+        {
+            ", and the pole stays up."
+        } else {
+            "."
+        };
+        text += " The readings latest reads past are discarded again, and counted as expired: the drops \
+                 are back, under another name.";
+        for &l in longer {
+            let rs = of(&format!("fifo, lifespan {l} ms"));
+            if rs.iter().all(|r| !r.metrics.balanced) {
+                text += &format!(
+                    " At {l} ms the bound is too loose: the pole falls later ({}), but it falls.",
+                    rs.iter()
+                        .filter_map(|r| r.metrics.fell_at_s)
+                        .map(|t| format!("{t:.2} s"))
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                );
+            }
+        }
+    }
+    text += " A slow subscriber of a fast sensor wants the newest reading, not a queue of old ones: \
+             ROS 2's sensor-data QoS profile keeps only the last few, best effort, for this reason.";
+    println!();
+    paragraph(&text);
+}
+
+/// Print `text` wrapped at 96 columns.
+fn paragraph(text: &str) {
+    let mut line = String::new();
+    for word in text.split_whitespace() {
+        if !line.is_empty() && line.len() + 1 + word.len() > 96 {
+            println!("{line}");
+            line.clear();
+        }
+        if !line.is_empty() {
+            line.push(' ');
+        }
+        line.push_str(word);
+    }
+    if !line.is_empty() {
+        println!("{line}");
+    }
+}
+
+fn print_ex5(b: &Ex5Bands, f: &ExerciseFile, runs: &[Ex5Run]) {
+    let w = Ex5Case::ALL
+        .iter()
+        .map(|c| c.label(b).len())
+        .max()
+        .unwrap_or(0)
+        .max(b.topic.len() + 20);
+    println!(
+        "{:<w$} | {} | latency mean |   max | lost |  retx | dl missed | no cmd",
+        format!("{} (safety -> actuator)", b.topic),
+        seeds_header(&b.seeds)
+    );
+    for case in Ex5Case::ALL {
+        let rs: Vec<&Ex5Run> = runs.iter().filter(|r| r.case == case).collect();
+        let cells: Vec<String> = rs
+            .iter()
+            .map(|r| format!("{:^7}", verdict(&r.metrics)))
+            .collect();
+        let mean =
+            rs.iter().map(|r| r.metrics.mean_latency_ms).sum::<f64>() / rs.len().max(1) as f64;
+        let max = rs
+            .iter()
+            .map(|r| r.metrics.latency_max_ms)
+            .fold(0.0, f64::max);
+        let sum = |key: &str| rs.iter().map(|r| r.counter(b, key)).sum::<u64>();
+        println!(
+            "{:<w$} | {} | {:>9.1} ms | {:>5.1} | {:>4} | {:>5} | {:>9} | {:>6}",
+            case.label(b),
+            cells.join(" "),
+            mean,
+            max,
+            sum("lost"),
+            sum("retransmitted"),
+            if matches!(case, Ex5Case::DeadlineHold | Ex5Case::DeadlineZero) {
+                sum("requested_deadline_missed").to_string()
+            } else {
+                "-".into()
+            },
+            rs.iter().map(|r| r.steps_without_command).sum::<u64>(),
+        );
+    }
+    println!("(latency: sense->act, ms, the mean of the seeds' means and the largest; lost, retx (retransmitted),");
+    println!(" dl missed (deadline periods with no command arriving; -: no deadline) and no cmd (actuator steps");
+    println!(" that applied no command: no latency) are summed over the seeds; Y: balanced; n@T: fell at T s)");
+    let outcome = outcome_ex5(b, runs);
+    say_reconcile(f, &outcome);
+    print_checks(&check_ex5(b, runs));
+    let of = |c: Ex5Case| -> Vec<&Ex5Run> { runs.iter().filter(|r| r.case == c).collect() };
+    let max_of = |c: Ex5Case| {
+        of(c)
+            .iter()
+            .map(|r| r.metrics.latency_max_ms)
+            .fold(0.0, f64::max)
+    };
+    let up = |c: Ex5Case| of(c).iter().all(|r| r.metrics.balanced);
+    let pct = |p: f64| format!("{}%", p * 100.0);
+    let (low, high) = (pct(b.low_loss), pct(b.high_loss));
+    let mut text = format!(
+        "Reconcile: a lost command is a held command. At {low} loss the actuator re-applies the \
+         previous command for a tick or a few (the oldest command applied was {:.0} ms old)",
+        max_of(Ex5Case::LowLoss)
+    );
+    text += if up(Ex5Case::LowLoss) {
+        ", within what ex1's rate cliff allows, and the pole stays up: the zero-order hold already \
+         is a loss strategy."
+    } else {
+        "."
+    };
+    text += &format!(
+        " At {high} the holds run to {:.0} ms{}",
+        max_of(Ex5Case::HighLoss),
+        if up(Ex5Case::HighLoss) {
+            "."
+        } else {
+            " and the pole falls."
+        }
+    );
+    text += &format!(
+        " A deadline alone changes only the counters: hold is the default reaction. With zero the \
+         actuator stops pushing once its command is older than the deadline ({} ms: a command lost \
+         once is held, the next tick still without one applies no force).",
+        b.deadline_ms
+    );
+    if up(Ex5Case::DeadlineZero) && !up(Ex5Case::HighLoss) {
+        text += " Here a stale push is worse than none, and the pole stays up.";
+    }
+    text +=
+        " Motor drivers do the same with a command timeout (ROS 2's diff_drive_controller stops \
+             the wheels after cmd_vel_timeout).";
+    let timeout =
+        ratelab::qos::Link::default_retransmit(ratelab::Nanos::ZERO, ratelab::Nanos::ZERO);
+    let attempts = ratelab::qos::MAX_ATTEMPTS;
+    text += &format!(
+        " Reliable delivery sends a lost command again, up to {attempts} times (at {high} loss all \
+         {attempts} sends fail for {:.1}% of commands), and a retransmission comes a timeout later \
+         ({timeout} here: the link has no delay), too late for its tick, which applies an older \
+         command.",
+        b.high_loss.powi(i32::try_from(attempts).unwrap_or(i32::MAX)) * 100.0
+    );
+    if let Outcome::Ex5 {
+        reliable_latency_ms,
+        lossless_latency_ms,
+        ..
+    } = outcome
+    {
+        text += &format!(
+            " That is its latency cost: {reliable_latency_ms:.1} ms on average, against \
+             {lossless_latency_ms:.1} ms without the link."
+        );
+    }
+    text += " On a slow link the timeout is a round trip, and a reliable link keeps order, so one \
+             loss delays every command behind it. Try it:";
+    println!();
+    paragraph(&text);
+    println!(
+        "  ratelab run --clock virtual --graph graphs/cartpole-safety.toml --link {}:loss={},delay_ms=30,jitter_ms=10",
+        b.topic, b.low_loss
+    );
+    println!("and the same with --qos {}:reliability=reliable.", b.topic);
 }
 
 /// The learner's prediction against the outcome, in words.

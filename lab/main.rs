@@ -180,12 +180,7 @@ fn main() -> ExitCode {
         Some(Command::Lab(args)) => lab(args, stop),
         Some(Command::Replay(args)) => replay(args),
         Some(Command::Bench(args)) => bench::run_bench(args, stop),
-        Some(Command::Exercise(args)) => headless::graph_from_args(&args.graph).and_then(|g| {
-            if !headless::faults_from_args(&args.graph).is_empty() {
-                anyhow::bail!("--stall/--kill: the exercises inject no faults; use `ratelab run` or `ratelab lab` with them");
-            }
-            exercise::run_exercise(&args.which, &args.dir, &g)
-        }),
+        Some(Command::Exercise(args)) => exercise::run_from_args(args),
         Some(Command::Sweep(args)) => sweep::run_sweep(args, &stop),
         Some(Command::Cliff(args)) => sweep::run_cliff(args, &stop),
         Some(Command::Launch(args)) => launch::run_launch(args, stop),

@@ -6,14 +6,19 @@
 //! - ex3, jitter and phase offsets (real clock): matched rates drop from races alone, and
 //!   their latency is about 20 ms where the virtual clock gives 0; phase offsets remove the
 //!   drops and fix the latency (at the sensor-to-actuator offset, 10 ms).
+//! - ex4, the stale queue (QoS): a slow policy behind a deep `/obs` queue, latest-wins
+//!   against FIFO delivery, then FIFO with a lifespan.
+//! - ex5, the watchdog (QoS): the safety graph's `/cmd` across a lossy link, best effort
+//!   against a deadline with `hold` or `zero`, and reliable delivery.
 
 use crate::config::{duration_from_secs, phase_offset_from_ms, ClockKind, RunConfig};
 use crate::graph::GraphSpec;
 use crate::metrics::Metrics;
 use crate::policy::{Policy, Scripted};
-use crate::sweep::{run_grid, Grid, SweepError};
+use crate::qos::Delivery;
+use crate::sweep::{run_grid, run_pool, Grid, SweepError};
 use serde::Deserialize;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 /// Errors reading exercise files.
 #[derive(Debug, thiserror::Error)]
@@ -40,6 +45,9 @@ pub enum ExerciseError {
     /// A setting in the bands is invalid.
     #[error("bands: {0}")]
     Config(#[from] crate::config::ConfigError),
+    /// A QoS or rate the bands set does not fit the graph.
+    #[error("bands: {0}")]
+    Setting(#[from] crate::graph::spec::OverrideError),
 }
 
 fn read_toml<T: for<'de> Deserialize<'de>>(path: &Path) -> Result<T, ExerciseError> {
@@ -135,6 +143,46 @@ impl Ex3Bands {
     }
 }
 
+/// ex4's settings: the stale queue.
+#[derive(Clone, Debug, Deserialize)]
+pub struct Ex4Bands {
+    /// Seeds.
+    pub seeds: Vec<u64>,
+    /// Sensor rate, Hz.
+    pub sensor_hz: f64,
+    /// The slow policy's rate, Hz.
+    pub control_hz: f64,
+    /// Run length, s.
+    pub duration_s: f64,
+    /// The sensor's topic, whose QoS the exercise sets.
+    pub topic: String,
+    /// Its history depth (keep last).
+    pub depth: usize,
+    /// Lifespans tried on the FIFO queue, ms, shortest first.
+    pub lifespan_ms: Vec<f64>,
+    /// A run that balances has at least this many actuator steps.
+    pub min_steps: u64,
+}
+
+/// ex5's settings: the watchdog.
+#[derive(Clone, Debug, Deserialize)]
+pub struct Ex5Bands {
+    /// The graph, relative to the bands file's folder.
+    pub graph: String,
+    /// The actuator's input, which crosses the link.
+    pub topic: String,
+    /// Seeds.
+    pub seeds: Vec<u64>,
+    /// Run length, s.
+    pub duration_s: f64,
+    /// The link's loss the zero-order hold rides out.
+    pub low_loss: f64,
+    /// The link's loss the exercise's reactions are compared at.
+    pub high_loss: f64,
+    /// The deadline on the actuator's input, ms.
+    pub deadline_ms: f64,
+}
+
 /// `exercises/bands.toml`.
 #[derive(Clone, Debug, Deserialize)]
 pub struct Bands {
@@ -146,6 +194,24 @@ pub struct Bands {
     pub ex2: Ex2Bands,
     /// ex3.
     pub ex3: Ex3Bands,
+    /// ex4.
+    pub ex4: Ex4Bands,
+    /// ex5.
+    pub ex5: Ex5Bands,
+}
+
+/// The graph an exercise runs on when none is given: ex5's (resolved against the folder of
+/// the bands file, `dir`); `None` for the chapter's.
+///
+/// # Errors
+/// [`ExerciseError`] when the bands cannot be read.
+pub fn default_graph(exercise: &str, dir: &Path) -> Result<Option<PathBuf>, ExerciseError> {
+    if exercise != "ex5" {
+        return Ok(None);
+    }
+    Ok(Some(
+        dir.join(load_bands(&dir.join("bands.toml"))?.ex5.graph),
+    ))
 }
 
 /// Read `exercises/bands.toml`.
@@ -225,7 +291,41 @@ pub enum Outcome {
         /// Drops.
         matched_obs_drops: u64,
     },
+    /// ex4: which deliveries kept the pole up on every seed, and FIFO's latency at the fall.
+    Ex4 {
+        /// Latest-wins balanced on every seed.
+        latest_balances: bool,
+        /// FIFO balanced on every seed.
+        fifo_balances: bool,
+        /// The smallest and largest sense→act latency at the fall over the seeds where FIFO
+        /// fell, ms (`None`: it never fell).
+        fifo_latency_at_fall_ms: Option<(f64, f64)>,
+        /// FIFO with the shortest lifespan balanced on every seed.
+        lifespan_balances: bool,
+        /// That lifespan, ms.
+        lifespan_ms: f64,
+    },
+    /// ex5: what kept the pole up on every seed, and reliable delivery's latency.
+    Ex5 {
+        /// Best effort at the low loss balanced on every seed.
+        low_loss_balances: bool,
+        /// Best effort at the high loss (the zero-order hold) balanced on every seed.
+        high_loss_balances: bool,
+        /// At the high loss, with the deadline: `hold`, `zero`, and reliable delivery,
+        /// each true when it balanced on every seed.
+        keeps_it_up: [bool; 3],
+        /// Reliable delivery's mean sense→act latency (mean over the seeds), ms.
+        reliable_latency_ms: f64,
+        /// The lossless link's, ms.
+        lossless_latency_ms: f64,
+        /// The low and the high loss, for the words.
+        losses: (f64, f64),
+    },
 }
+
+/// The names a learner gives the reactions at the high loss (ex5's `keeps_it_up`), in
+/// [`Outcome::Ex5`]'s `keeps_it_up` order.
+pub const EX5_REACTIONS: [&str; 3] = ["hold", "zero", "reliable"];
 
 /// A prediction value as a number (TOML integer or float).
 fn number(v: &toml::Value) -> Option<f64> {
@@ -281,6 +381,121 @@ impl ExerciseFile {
                 ),
                 None => unreadable("matched_obs_drops"),
             }],
+            Outcome::Ex4 {
+                latest_balances,
+                fifo_balances,
+                fifo_latency_at_fall_ms,
+                lifespan_balances,
+                lifespan_ms,
+            } => {
+                let survives = |key: &str, what: &str, measured: bool| {
+                    let measured = if measured {
+                        "it stayed up on every seed"
+                    } else {
+                        "it fell"
+                    };
+                    match p(key).and_then(toml::Value::as_bool) {
+                        Some(true) => format!("You predicted the pole stays up {what}; {measured}."),
+                        Some(false) => format!("You predicted the pole falls {what}; {measured}."),
+                        None => unreadable(key),
+                    }
+                };
+                let latency = match (p("fifo_latency_at_fall_ms").and_then(number), fifo_latency_at_fall_ms) {
+                    (None, _) => unreadable("fifo_latency_at_fall_ms"),
+                    (Some(n), None) => format!(
+                        "You predicted {n} ms of sense->act latency at the FIFO fall; FIFO never fell."
+                    ),
+                    (Some(n), Some((lo, hi))) => format!(
+                        "You predicted {n} ms of sense->act latency at the FIFO fall; it was {}.",
+                        if lo == hi { format!("{lo:.0} ms") } else { format!("{lo:.0} to {hi:.0} ms over the seeds") }
+                    ),
+                };
+                vec![
+                    survives("latest_balances", "with latest", latest_balances),
+                    survives("fifo_balances", "with fifo", fifo_balances),
+                    latency,
+                    survives(
+                        "lifespan_balances",
+                        &format!("with fifo and a {lifespan_ms} ms lifespan"),
+                        lifespan_balances,
+                    ),
+                ]
+            }
+            Outcome::Ex5 {
+                low_loss_balances,
+                high_loss_balances,
+                keeps_it_up,
+                reliable_latency_ms,
+                lossless_latency_ms,
+                losses: (low, high),
+            } => {
+                let survives = |key: &str, what: &str, measured: bool| {
+                    let measured = if measured {
+                        "it stayed up on every seed"
+                    } else {
+                        "it fell"
+                    };
+                    match p(key).and_then(toml::Value::as_bool) {
+                        Some(true) => format!("You predicted the pole stays up {what}; {measured}."),
+                        Some(false) => format!("You predicted the pole falls {what}; {measured}."),
+                        None => unreadable(key),
+                    }
+                };
+                let pct = |p: f64| format!("{}%", p * 100.0);
+                let named = |set: &[bool; 3]| -> String {
+                    let v: Vec<&str> = EX5_REACTIONS
+                        .iter()
+                        .zip(set)
+                        .filter_map(|(n, &up)| up.then_some(*n))
+                        .collect();
+                    if v.is_empty() { "none".into() } else { v.join(", ") }
+                };
+                let kept = match p("keeps_it_up").and_then(toml::Value::as_array) {
+                    Some(list) => {
+                        let names: Option<Vec<&str>> = list.iter().map(toml::Value::as_str).collect();
+                        match names {
+                            Some(names) if names.iter().all(|n| EX5_REACTIONS.contains(n)) => {
+                                let mut said = [false; 3];
+                                for (i, r) in EX5_REACTIONS.iter().enumerate() {
+                                    said[i] = names.contains(r);
+                                }
+                                format!(
+                                    "You predicted these keep the pole up at {} loss: {}; what did: {}{}",
+                                    pct(high),
+                                    named(&said),
+                                    named(&keeps_it_up),
+                                    if said == keeps_it_up { ": right." } else { "." }
+                                )
+                            }
+                            _ => format!(
+                                "Your prediction `keeps_it_up` lists names other than {}.",
+                                EX5_REACTIONS.join(", ")
+                            ),
+                        }
+                    }
+                    None => unreadable("keeps_it_up"),
+                };
+                let latency = match p("reliable_latency_ms").and_then(number) {
+                    Some(n) => format!(
+                        "You predicted {n} ms of mean sense->act latency with reliable delivery; it was {reliable_latency_ms:.1} ms (the lossless link: {lossless_latency_ms:.1} ms)."
+                    ),
+                    None => unreadable("reliable_latency_ms"),
+                };
+                vec![
+                    survives(
+                        "survives_low_loss",
+                        &format!("at {} loss, best effort", pct(low)),
+                        low_loss_balances,
+                    ),
+                    survives(
+                        "survives_high_loss",
+                        &format!("at {} loss, best effort", pct(high)),
+                        high_loss_balances,
+                    ),
+                    kept,
+                    latency,
+                ]
+            }
         }
     }
 }
@@ -291,6 +506,18 @@ pub fn required_keys(exercise: &str) -> &'static [&'static str] {
         "ex1" => &["fails_at_hz"],
         "ex2" => &["deep_queue_obs_drops", "deep_queue_balances"],
         "ex3" => &["matched_obs_drops"],
+        "ex4" => &[
+            "latest_balances",
+            "fifo_balances",
+            "fifo_latency_at_fall_ms",
+            "lifespan_balances",
+        ],
+        "ex5" => &[
+            "survives_low_loss",
+            "survives_high_loss",
+            "keeps_it_up",
+            "reliable_latency_ms",
+        ],
         _ => &[],
     }
 }
@@ -500,6 +727,466 @@ pub fn check_ex3(b: &Ex3Bands, matched: &Metrics, offset: &Metrics) -> Vec<Check
     ]
 }
 
+/// One virtual run of an exercise on `graph` with `seed`, keeping its trace (the latency at
+/// the fall and the steps without a command are read from it).
+fn run_virtual(
+    graph: GraphSpec,
+    seed: u64,
+    duration_s: f64,
+) -> Result<crate::run::RunReport, ExerciseError> {
+    let cfg = RunConfig {
+        clock: ClockKind::Virtual,
+        duration: duration_from_secs(duration_s)?,
+        graph,
+        seed,
+        ..RunConfig::default()
+    };
+    Ok(
+        crate::run::run(&cfg, Box::new(Scripted), crate::run::RunOptions::new())
+            .map_err(SweepError::from)?,
+    )
+}
+
+/// One ex4 run: a delivery (and lifespan) on the sensor's topic, one seed.
+#[derive(Clone, Debug)]
+pub struct Ex4Run {
+    /// `latest` or `fifo`.
+    pub delivery: Delivery,
+    /// The lifespan, ms, if any.
+    pub lifespan_ms: Option<f64>,
+    /// Seed.
+    pub seed: u64,
+    /// The run's summary.
+    pub metrics: Metrics,
+    /// Sense→act latency at the step of the fall, ms (`None`: it did not fall).
+    pub latency_at_fall_ms: Option<f64>,
+}
+
+impl Ex4Run {
+    /// `latest`, `fifo`, `fifo, lifespan 20 ms`.
+    pub fn label(&self) -> String {
+        let d = match self.delivery {
+            Delivery::Latest => "latest",
+            Delivery::Fifo => "fifo",
+        };
+        match self.lifespan_ms {
+            Some(l) => format!("{d}, lifespan {l} ms"),
+            None => d.to_string(),
+        }
+    }
+
+    /// Messages the lifespan expired on `topic` (the exercise's).
+    pub fn expired(&self, topic: &str) -> u64 {
+        self.metrics
+            .topics
+            .get(topic)
+            .and_then(|t| t.qos_counters.get("expired"))
+            .copied()
+            .unwrap_or(0)
+    }
+}
+
+/// ex4's configurations, in table order: latest, FIFO, then FIFO with each lifespan.
+fn seed_of<'a>(rs: &[&'a Ex4Run], seed: u64) -> Option<&'a Ex4Run> {
+    rs.iter().find(|r| r.seed == seed).copied()
+}
+
+fn ex4_configs(b: &Ex4Bands) -> Vec<(Delivery, Option<f64>)> {
+    let mut c = vec![(Delivery::Latest, None), (Delivery::Fifo, None)];
+    c.extend(b.lifespan_ms.iter().map(|&l| (Delivery::Fifo, Some(l))));
+    c
+}
+
+/// ex4's measurements: every configuration ([`Ex4Run::label`]) on every seed, seed fastest.
+///
+/// # Errors
+/// [`ExerciseError`] when a setting does not fit `graph` or a run cannot start.
+pub fn measure_ex4(b: &Ex4Bands, graph: &GraphSpec) -> Result<Vec<Ex4Run>, ExerciseError> {
+    let mut base = RunConfig {
+        graph: graph.clone(),
+        ..RunConfig::default()
+    };
+    base.set_sensor_hz(b.sensor_hz)?;
+    base.set_control_hz(b.control_hz)?;
+    let mut jobs = Vec::new();
+    for (delivery, lifespan) in ex4_configs(b) {
+        let mut g = base.graph.clone();
+        let delivery_word = match delivery {
+            Delivery::Latest => "latest",
+            Delivery::Fifo => "fifo",
+        };
+        // Every key the rows differ in is set, so a row is what its label says whatever
+        // the command line set on the topic.
+        let lifespan_word = lifespan.map_or("none".to_string(), |l| l.to_string());
+        let pairs = format!(
+            "history=keep_last,depth={},delivery={delivery_word},lifespan_ms={lifespan_word}",
+            b.depth
+        );
+        g.set_qos(&b.topic, &pairs)?;
+        for &seed in &b.seeds {
+            jobs.push((delivery, lifespan, seed, g.clone()));
+        }
+    }
+    run_pool(&jobs, threads(), |(delivery, lifespan, seed, g)| {
+        let r = run_virtual(g.clone(), *seed, b.duration_s)?;
+        let latency_at_fall_ms = r
+            .metrics
+            .fell_at_s
+            .and(r.trace.last())
+            .and_then(|s| s.latency)
+            .map(|l| l.as_millis_f64());
+        Ok(Ex4Run {
+            delivery: *delivery,
+            lifespan_ms: *lifespan,
+            seed: *seed,
+            metrics: r.metrics,
+            latency_at_fall_ms,
+        })
+    })
+    .into_iter()
+    .collect()
+}
+
+/// ex4's outcome in the terms of its prediction.
+pub fn outcome_ex4(b: &Ex4Bands, runs: &[Ex4Run]) -> Outcome {
+    let all_up = |d: Delivery, l: Option<f64>| {
+        runs.iter()
+            .filter(|r| r.delivery == d && r.lifespan_ms == l)
+            .all(|r| r.metrics.balanced)
+    };
+    let falls: Vec<f64> = runs
+        .iter()
+        .filter(|r| r.delivery == Delivery::Fifo && r.lifespan_ms.is_none())
+        .filter_map(|r| r.latency_at_fall_ms)
+        .collect();
+    let shortest = b.lifespan_ms.first().copied();
+    Outcome::Ex4 {
+        latest_balances: all_up(Delivery::Latest, None),
+        fifo_balances: all_up(Delivery::Fifo, None),
+        fifo_latency_at_fall_ms: (!falls.is_empty()).then(|| {
+            (
+                falls.iter().copied().fold(f64::INFINITY, f64::min),
+                falls.iter().copied().fold(f64::NEG_INFINITY, f64::max),
+            )
+        }),
+        lifespan_balances: shortest.is_some() && all_up(Delivery::Fifo, shortest),
+        lifespan_ms: shortest.unwrap_or(0.0),
+    }
+}
+
+/// ex4's checks.
+pub fn check_ex4(b: &Ex4Bands, runs: &[Ex4Run]) -> Vec<Check> {
+    let of = |d: Delivery, l: Option<f64>| -> Vec<&Ex4Run> {
+        runs.iter()
+            .filter(|r| r.delivery == d && r.lifespan_ms == l)
+            .collect()
+    };
+    let (latest, fifo) = (of(Delivery::Latest, None), of(Delivery::Fifo, None));
+    let period_ms = 1e3 / b.control_hz;
+    let mut checks =
+        vec![
+        check(
+            format!("latest: balances on every seed with >= {} steps", b.min_steps),
+            !latest.is_empty()
+                && latest
+                    .iter()
+                    .all(|r| r.metrics.balanced && r.metrics.steps >= b.min_steps),
+        ),
+        check(
+            "fifo: falls on every seed",
+            !fifo.is_empty() && fifo.iter().all(|r| !r.metrics.balanced),
+        ),
+        check(
+            format!(
+                "depth {}: 0 {} drops with latest and with fifo, every seed",
+                b.depth, b.topic
+            ),
+            latest
+                .iter()
+                .chain(&fifo)
+                .all(|r| r.metrics.topics.get(&b.topic).is_some_and(|t| t.dropped == 0)),
+        ),
+        check(
+            "fifo: the latency at the fall exceeds the largest latency latest ever had, per seed",
+            fifo.iter().all(|f| {
+                seed_of(&latest, f.seed).is_some_and(|l| {
+                    f.latency_at_fall_ms
+                        .is_some_and(|at| at > l.metrics.latency_max_ms)
+                })
+            }),
+        ),
+    ];
+    for (i, &l) in b.lifespan_ms.iter().enumerate() {
+        let rs = of(Delivery::Fifo, Some(l));
+        checks.push(check(
+            format!(
+                "fifo + lifespan {l} ms: readings expire, and no action is older than the lifespan plus a policy period ({} ms)",
+                l + period_ms
+            ),
+            !rs.is_empty()
+                && rs
+                    .iter()
+                    .all(|r| r.expired(&b.topic) > 0 && r.metrics.latency_max_ms <= l + period_ms),
+        ));
+        if i == 0 {
+            checks.push(check(
+                format!(
+                    "fifo + lifespan {l} ms: balances on every seed with >= {} steps",
+                    b.min_steps
+                ),
+                rs.iter()
+                    .all(|r| r.metrics.balanced && r.metrics.steps >= b.min_steps),
+            ));
+        } else {
+            checks.push(check(
+                format!("fifo + lifespan {l} ms: falls on every seed, later than fifo without one"),
+                rs.iter().all(|r| {
+                    !r.metrics.balanced
+                        && seed_of(&fifo, r.seed).is_some_and(|f| r.metrics.steps > f.metrics.steps)
+                }),
+            ));
+        }
+    }
+    checks
+}
+
+/// ex5's cases, in table order.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Ex5Case {
+    /// The graph as it is: no link.
+    Lossless,
+    /// Best effort at the low loss (the actuator holds the last command).
+    LowLoss,
+    /// Best effort at the high loss.
+    HighLoss,
+    /// The high loss, with the deadline and `on_deadline_missed = "hold"`.
+    DeadlineHold,
+    /// The high loss, with the deadline and `on_deadline_missed = "zero"`.
+    DeadlineZero,
+    /// The high loss, reliable delivery.
+    Reliable,
+}
+
+impl Ex5Case {
+    /// Every case, in table order.
+    pub const ALL: [Ex5Case; 6] = [
+        Ex5Case::Lossless,
+        Ex5Case::LowLoss,
+        Ex5Case::HighLoss,
+        Ex5Case::DeadlineHold,
+        Ex5Case::DeadlineZero,
+        Ex5Case::Reliable,
+    ];
+
+    /// The `--qos` pairs on the topic (`None`: the graph as it is). Every key the cases
+    /// differ in is set, so a case is what its label says whatever the command line set on
+    /// the topic (a link delay or jitter given there stays: a way to explore).
+    pub fn pairs(self, b: &Ex5Bands) -> Option<String> {
+        let (low, high, d) = (b.low_loss, b.high_loss, b.deadline_ms);
+        let no_deadline = "deadline_ms=none,on_deadline_missed=hold";
+        Some(match self {
+            Ex5Case::Lossless => return None,
+            Ex5Case::LowLoss => format!("loss={low},reliability=best_effort,{no_deadline}"),
+            Ex5Case::HighLoss => format!("loss={high},reliability=best_effort,{no_deadline}"),
+            Ex5Case::DeadlineHold => format!(
+                "loss={high},reliability=best_effort,deadline_ms={d},on_deadline_missed=hold"
+            ),
+            Ex5Case::DeadlineZero => format!(
+                "loss={high},reliability=best_effort,deadline_ms={d},on_deadline_missed=zero"
+            ),
+            Ex5Case::Reliable => format!("loss={high},reliability=reliable,{no_deadline}"),
+        })
+    }
+
+    /// A row label: `20% loss, best effort`, `80%, deadline 30 ms + zero`.
+    pub fn label(self, b: &Ex5Bands) -> String {
+        let pct = |p: f64| format!("{}%", p * 100.0);
+        let (low, high, d) = (pct(b.low_loss), pct(b.high_loss), b.deadline_ms);
+        match self {
+            Ex5Case::Lossless => "no link (lossless)".into(),
+            Ex5Case::LowLoss => format!("{low} loss, best effort"),
+            Ex5Case::HighLoss => format!("{high} loss, best effort"),
+            Ex5Case::DeadlineHold => format!("{high}, deadline {d} ms + hold"),
+            Ex5Case::DeadlineZero => format!("{high}, deadline {d} ms + zero"),
+            Ex5Case::Reliable => format!("{high}, reliable"),
+        }
+    }
+}
+
+/// One ex5 run.
+#[derive(Clone, Debug)]
+pub struct Ex5Run {
+    /// The case.
+    pub case: Ex5Case,
+    /// Seed.
+    pub seed: u64,
+    /// The run's summary.
+    pub metrics: Metrics,
+    /// Actuator steps that applied no command (before the first arrived, or zeroed by the
+    /// watchdog): they have no sense→act latency, so the latency figures leave them out.
+    pub steps_without_command: u64,
+}
+
+impl Ex5Run {
+    /// A QoS counter of the exercise's topic (0 when not reported).
+    pub fn counter(&self, b: &Ex5Bands, key: &str) -> u64 {
+        self.metrics
+            .topics
+            .get(&b.topic)
+            .and_then(|t| t.qos_counters.get(key))
+            .copied()
+            .unwrap_or(0)
+    }
+}
+
+/// ex5's measurements: every case on every seed, seed fastest, on `graph` (the safety
+/// graph: see [`default_graph`]).
+///
+/// # Errors
+/// [`ExerciseError`] when a setting does not fit `graph` or a run cannot start.
+pub fn measure_ex5(b: &Ex5Bands, graph: &GraphSpec) -> Result<Vec<Ex5Run>, ExerciseError> {
+    let mut jobs = Vec::new();
+    for case in Ex5Case::ALL {
+        let mut g = graph.clone();
+        if let Some(pairs) = case.pairs(b) {
+            g.set_qos(&b.topic, &pairs)?;
+        }
+        for &seed in &b.seeds {
+            jobs.push((case, seed, g.clone()));
+        }
+    }
+    run_pool(&jobs, threads(), |(case, seed, g)| {
+        let r = run_virtual(g.clone(), *seed, b.duration_s)?;
+        let steps_without_command = r.trace.iter().filter(|s| s.latency.is_none()).count() as u64;
+        Ok(Ex5Run {
+            case: *case,
+            seed: *seed,
+            metrics: r.metrics,
+            steps_without_command,
+        })
+    })
+    .into_iter()
+    .collect()
+}
+
+fn ex5_of(runs: &[Ex5Run], case: Ex5Case) -> Vec<&Ex5Run> {
+    runs.iter().filter(|r| r.case == case).collect()
+}
+
+fn mean_latency(runs: &[&Ex5Run]) -> f64 {
+    runs.iter().map(|r| r.metrics.mean_latency_ms).sum::<f64>() / runs.len().max(1) as f64
+}
+
+/// ex5's outcome in the terms of its prediction.
+pub fn outcome_ex5(b: &Ex5Bands, runs: &[Ex5Run]) -> Outcome {
+    let up = |c: Ex5Case| {
+        let rs = ex5_of(runs, c);
+        !rs.is_empty() && rs.iter().all(|r| r.metrics.balanced)
+    };
+    Outcome::Ex5 {
+        low_loss_balances: up(Ex5Case::LowLoss),
+        high_loss_balances: up(Ex5Case::HighLoss),
+        keeps_it_up: [
+            up(Ex5Case::DeadlineHold),
+            up(Ex5Case::DeadlineZero),
+            up(Ex5Case::Reliable),
+        ],
+        reliable_latency_ms: mean_latency(&ex5_of(runs, Ex5Case::Reliable)),
+        lossless_latency_ms: mean_latency(&ex5_of(runs, Ex5Case::Lossless)),
+        losses: (b.low_loss, b.high_loss),
+    }
+}
+
+/// ex5's checks.
+pub fn check_ex5(b: &Ex5Bands, runs: &[Ex5Run]) -> Vec<Check> {
+    let all = |c: Ex5Case, f: &dyn Fn(&Ex5Run) -> bool| {
+        let rs = ex5_of(runs, c);
+        !rs.is_empty() && rs.iter().all(|r| f(r))
+    };
+    let label = |c: Ex5Case| c.label(b);
+    let best_effort = ex5_of(runs, Ex5Case::HighLoss);
+    vec![
+        check(
+            format!("{}: balances on every seed", label(Ex5Case::Lossless)),
+            all(Ex5Case::Lossless, &|r| r.metrics.balanced),
+        ),
+        check(
+            format!("{}: balances on every seed, with commands lost", label(Ex5Case::LowLoss)),
+            all(Ex5Case::LowLoss, &|r| r.metrics.balanced && r.counter(b, "lost") > 0),
+        ),
+        check(
+            format!("{}: falls on every seed", label(Ex5Case::HighLoss)),
+            all(Ex5Case::HighLoss, &|r| !r.metrics.balanced && r.metrics.fell_at_s.is_some()),
+        ),
+        check(
+            format!(
+                "{}: counts deadline misses, and falls at the same step as without a deadline, per seed",
+                label(Ex5Case::DeadlineHold)
+            ),
+            all(Ex5Case::DeadlineHold, &|r| {
+                r.counter(b, "requested_deadline_missed") > 0
+                    && best_effort.iter().any(|e| {
+                        e.seed == r.seed
+                            && !e.metrics.balanced
+                            && e.metrics.steps == r.metrics.steps
+                            && e.metrics.fell_at_s == r.metrics.fell_at_s
+                    })
+            }),
+        ),
+        check(
+            format!("{}: balances on every seed", label(Ex5Case::DeadlineZero)),
+            all(Ex5Case::DeadlineZero, &|r| r.metrics.balanced),
+        ),
+        check(
+            format!(
+                "{}: applies no command older than the deadline (latency max <= {} ms), and zeroes some steps",
+                label(Ex5Case::DeadlineZero),
+                b.deadline_ms
+            ),
+            all(Ex5Case::DeadlineZero, &|r| {
+                r.metrics.latency_max_ms <= b.deadline_ms && r.steps_without_command > 0
+            }),
+        ),
+        check(
+            format!(
+                "{}: balances on every seed, with commands retransmitted",
+                label(Ex5Case::Reliable)
+            ),
+            all(Ex5Case::Reliable, &|r| {
+                r.metrics.balanced && r.counter(b, "retransmitted") > 0
+            }),
+        ),
+        check(
+            format!(
+                "{}: loses under a tenth of the share of commands best effort loses (it gives up only after {} sends)",
+                label(Ex5Case::Reliable),
+                crate::qos::MAX_ATTEMPTS
+            ),
+            {
+                let share = |c: Ex5Case| {
+                    let rs = ex5_of(runs, c);
+                    let lost: u64 = rs.iter().map(|r| r.counter(b, "lost")).sum();
+                    let sent: u64 = rs
+                        .iter()
+                        .filter_map(|r| r.metrics.topics.get(&b.topic))
+                        .map(|t| t.published)
+                        .sum();
+                    lost as f64 / sent.max(1) as f64
+                };
+                share(Ex5Case::Reliable) < share(Ex5Case::HighLoss) / 10.0
+            },
+        ),
+        check(
+            format!(
+                "{}: mean latency above the lossless link's (the price of retransmitting)",
+                label(Ex5Case::Reliable)
+            ),
+            mean_latency(&ex5_of(runs, Ex5Case::Reliable))
+                > mean_latency(&ex5_of(runs, Ex5Case::Lossless)),
+        ),
+    ]
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -568,6 +1255,70 @@ mod tests {
             ..matched.clone()
         };
         assert_eq!(failed(&zero, &offset).len(), 1);
+    }
+
+    #[test]
+    fn ex4_and_ex5_predictions_are_reconciled_in_words() {
+        let f = file(
+            "latest_balances = true\nfifo_balances = true\nfifo_latency_at_fall_ms = 100\nlifespan_balances = false\nwhy = \"w\"",
+        );
+        let ex4 = Outcome::Ex4 {
+            latest_balances: true,
+            fifo_balances: false,
+            fifo_latency_at_fall_ms: Some((240.0, 340.0)),
+            lifespan_balances: true,
+            lifespan_ms: 20.0,
+        };
+        assert_eq!(
+            f.reconcile(&ex4),
+            [
+                "You predicted the pole stays up with latest; it stayed up on every seed.",
+                "You predicted the pole stays up with fifo; it fell.",
+                "You predicted 100 ms of sense->act latency at the FIFO fall; it was 240 to 340 ms over the seeds.",
+                "You predicted the pole falls with fifo and a 20 ms lifespan; it stayed up on every seed."
+            ]
+        );
+        let never = Outcome::Ex4 {
+            latest_balances: true,
+            fifo_balances: true,
+            fifo_latency_at_fall_ms: None,
+            lifespan_balances: true,
+            lifespan_ms: 20.0,
+        };
+        assert!(f.reconcile(&never)[2].ends_with("FIFO never fell."));
+        let f = file(
+            "survives_low_loss = true\nsurvives_high_loss = false\nkeeps_it_up = [\"reliable\", \"zero\"]\nreliable_latency_ms = 5\nwhy = \"w\"",
+        );
+        let ex5 = Outcome::Ex5 {
+            low_loss_balances: true,
+            high_loss_balances: false,
+            keeps_it_up: [false, true, true],
+            reliable_latency_ms: 16.5,
+            lossless_latency_ms: 0.0,
+            losses: (0.2, 0.8),
+        };
+        assert_eq!(
+            f.reconcile(&ex5),
+            [
+                "You predicted the pole stays up at 20% loss, best effort; it stayed up on every seed.",
+                "You predicted the pole falls at 80% loss, best effort; it fell.",
+                "You predicted these keep the pole up at 80% loss: zero, reliable; what did: zero, reliable: right.",
+                "You predicted 5 ms of mean sense->act latency with reliable delivery; it was 16.5 ms (the lossless link: 0.0 ms)."
+            ]
+        );
+        for bad in ["[\"stop\"]", "[1]", "\"zero\""] {
+            let f = file(&format!(
+                "survives_low_loss = true\nsurvives_high_loss = false\nkeeps_it_up = {bad}\nreliable_latency_ms = 5\nwhy = \"w\""
+            ));
+            let said = &f.reconcile(&ex5)[2];
+            assert!(
+                said.contains("other than hold, zero, reliable")
+                    || said.contains("not of the expected type"),
+                "{bad}: {said}"
+            );
+        }
+        let f = file("keeps_it_up = []\nwhy = \"w\"");
+        assert!(f.reconcile(&ex5)[2].contains("up at 80% loss: none; what did"));
     }
 
     #[test]

@@ -105,9 +105,18 @@ struct Inner<T> {
     depth: usize,
     qos: TopicQos,
     /// True when `qos` is the chapter's as far as publish and read are concerned (keep
-    /// last, latest, no deadline, lifespan or link): they then take the pre-QoS topic's
-    /// short path (while nothing is left on a link from an earlier QoS).
+    /// last, latest, no deadline, lifespan or link).
+    plain_qos: bool,
+    /// True when publish and read take the pre-QoS topic's short path: `plain_qos` and
+    /// nothing left on the link from an earlier QoS. That path leaves the timers (`now`,
+    /// `last_publish`, `last_arrival`) as they were when it was entered: no deadline needs
+    /// them meanwhile, and [`Inner::timers`] derives them when one does.
     plain: bool,
+    /// `next_seq` when the short path was last entered: a message published since arrived
+    /// at its stamp (keep last, no link: every publish is admitted at once).
+    plain_from_seq: u64,
+    /// The latest read time on the short path (the read's part of `now` there).
+    last_read: Nanos,
     link_seed: u64,
     link: Option<LinkState>,
     next_seq: u64,
@@ -128,7 +137,7 @@ struct Inner<T> {
     last_publish: Nanos,
     /// When a message last arrived at the subscriber (the requested deadline's timer).
     last_arrival: Nanos,
-    /// The latest `now` any operation brought.
+    /// The latest `now` any operation brought (on the short path: see [`Inner::timers`]).
     now: Nanos,
 }
 
@@ -142,6 +151,46 @@ fn is_plain(q: &TopicQos) -> bool {
 }
 
 impl<T> Inner<T> {
+    /// `(now, last_publish, last_arrival)` as updating them at every operation would have
+    /// kept them. Off the short path they are the fields. On it they are the fields as the
+    /// path was entered, brought up to date with what it did since: `last_stamp` is the
+    /// newest publish, which arrived at its stamp if it was published on the short path, and
+    /// `last_read` the latest read there. Both are times of operations that happened, so
+    /// taking them into a maximum never overshoots; and the newest publish is the latest
+    /// because a graph's topic has one publisher, whose stamps (its node's clock) never
+    /// decrease (were they to, a deadline switched on would count from the newest publish
+    /// rather than the latest).
+    fn timers(&self) -> (Nanos, Nanos, Nanos) {
+        if !self.plain {
+            return (self.now, self.last_publish, self.last_arrival);
+        }
+        let arrival = if self.next_seq != self.plain_from_seq {
+            self.last_arrival.max(self.last_stamp)
+        } else {
+            self.last_arrival
+        };
+        (
+            self.now.max(self.last_stamp).max(self.last_read),
+            self.last_publish.max(self.last_stamp),
+            arrival,
+        )
+    }
+
+    /// Take the short path when the QoS allows it and the link is empty; leave it
+    /// otherwise, with the timers brought up to date first.
+    fn choose_path(&mut self) {
+        let plain = self.plain_qos && self.in_flight.is_empty();
+        if plain == self.plain {
+            return;
+        }
+        if self.plain {
+            (self.now, self.last_publish, self.last_arrival) = self.timers();
+        } else {
+            self.plain_from_seq = self.next_seq;
+        }
+        self.plain = plain;
+    }
+
     fn unseen(&self, seq: u64) -> bool {
         self.read_high_water.is_none_or(|hw| seq > hw)
     }
@@ -316,7 +365,10 @@ impl<T: Clone> Topic<T> {
                 in_flight: VecDeque::new(),
                 depth,
                 qos,
+                plain_qos: is_plain(&qos),
                 plain: is_plain(&qos),
+                plain_from_seq: 0,
+                last_read: Nanos::ZERO,
                 link_seed,
                 link: None,
                 next_seq: 0,
@@ -356,12 +408,9 @@ impl<T: Clone> Topic<T> {
     /// Returns the new message's `seq`.
     pub fn publish(&self, data: T, stamp: Nanos, origin_stamp: Option<Nanos>) -> u64 {
         let mut inner = self.lock();
-        if inner.plain && inner.in_flight.is_empty() {
+        if inner.plain {
             // The chapter's topic: what the general path below does when there is no
-            // deadline, lifespan or link, with the timers kept for a later QoS change.
-            inner.now = inner.now.max(stamp);
-            inner.last_publish = inner.last_publish.max(stamp);
-            inner.last_arrival = inner.last_arrival.max(stamp);
+            // deadline, lifespan or link (the timers: see `Inner::timers`).
             if inner.buf.len() >= inner.depth {
                 inner.evict_oldest();
             }
@@ -404,6 +453,9 @@ impl<T: Clone> Topic<T> {
                 Some(at) => inner.in_flight.push_back((at, msg())),
             },
         }
+        if inner.plain_qos {
+            inner.choose_path();
+        }
         seq
     }
 
@@ -413,26 +465,33 @@ impl<T: Clone> Topic<T> {
     /// when nothing is buffered (nothing published yet, or all of it expired).
     pub fn read(&self, now: Nanos) -> Option<Message<T>> {
         let mut inner = self.lock();
-        if inner.plain && inner.in_flight.is_empty() {
+        if inner.plain {
             // The chapter's latest-wins read: the general path below, for no lifespan, no
-            // link and latest delivery.
-            inner.now = inner.now.max(now);
-            let first_unseen = inner.first_unseen();
-            let len = inner.buf.len();
+            // link and latest delivery. The buffer is in `seq` order, so it is stale exactly
+            // when its newest message is at or below the high-water mark.
+            inner.last_read = inner.last_read.max(now);
             let newest = inner.buf.back()?.clone();
-            if first_unseen >= len {
-                inner.stale_reads += 1;
-            } else {
-                inner.seen += (len - first_unseen) as u64;
-                inner.read_high_water = Some(
-                    inner
-                        .read_high_water
-                        .map_or(newest.seq, |hw| hw.max(newest.seq)),
-                );
+            match inner.read_high_water {
+                Some(hw) if newest.seq <= hw => inner.stale_reads += 1,
+                hw => {
+                    // Everything buffered above the mark is seen now: at depth 1 (the
+                    // chapter's topic) the one message, without a search.
+                    let len = inner.buf.len();
+                    let unseen = if len == 1 || hw.is_none() {
+                        len
+                    } else {
+                        len - inner.first_unseen()
+                    };
+                    inner.seen += unseen as u64;
+                    inner.read_high_water = Some(newest.seq);
+                }
             }
             return Some(newest);
         }
         inner.settle(now);
+        if inner.plain_qos {
+            inner.choose_path();
+        }
         let first_unseen = inner.first_unseen();
         let pick = match inner.qos.delivery {
             _ if first_unseen >= inner.buf.len() => {
@@ -476,16 +535,19 @@ impl<T: Clone> Topic<T> {
     }
 
     /// Change the QoS while running (the lab's keys). Messages already on the link keep
-    /// their arrival times; the deadline timers keep running from the last message.
+    /// their arrival times; the deadline timers keep running from the last message (a
+    /// deadline switched on counts from the last publish and the last arrival, whatever
+    /// QoS they were under).
     pub fn set_qos(&self, qos: TopicQos) {
         let mut inner = self.lock();
         inner.qos = qos;
-        inner.plain = is_plain(&qos);
+        inner.plain_qos = is_plain(&qos);
+        inner.choose_path();
     }
 
     /// Counters and depth as of the topic's latest operation.
     pub fn stats(&self) -> TopicStats {
-        let now = self.lock().now;
+        let now = self.lock().timers().0;
         self.stats_at(now)
     }
 
@@ -525,7 +587,7 @@ impl<T: Clone> Topic<T> {
     /// When the last message arrived at the subscriber (0 before the first), for a deadline
     /// reaction: the actuator compares it with its deadline.
     pub fn last_arrival(&self) -> Nanos {
-        self.lock().last_arrival
+        self.lock().timers().2
     }
 
     /// Buffered messages no subscriber has seen yet.
@@ -978,6 +1040,133 @@ mod tests {
             again.publish(0, ms(i), None);
         }
         assert_eq!(again.stats(), be.stats());
+    }
+
+    #[test]
+    fn a_deadline_switched_on_after_plain_messages_counts_from_the_last_message() {
+        // The chapter's topic takes the short path, which keeps no timers per message; a
+        // deadline switched on live still counts from the last publish and arrival.
+        let topic = t(1);
+        for i in 0..3u64 {
+            topic.publish(0, ms(i * 20), None); // 0, 20, 40 ms
+        }
+        assert_eq!(topic.read(ms(50)).unwrap().stamp, ms(40));
+        topic.set_qos(q(1, "deadline_ms=15").qos());
+        assert_eq!(topic.last_arrival(), ms(40));
+        // As of the last operation (the read at 50 ms): 10 ms since the last message.
+        let s = topic.stats();
+        assert_eq!(
+            (s.offered_deadline_missed, s.requested_deadline_missed),
+            (0, 0)
+        );
+        // At 100 ms: a 60 ms gap from the message at 40 ms misses 3 periods of 15 ms.
+        let s = topic.stats_at(ms(100));
+        assert_eq!(
+            (s.offered_deadline_missed, s.requested_deadline_missed),
+            (3, 3)
+        );
+        topic.publish(0, ms(100), None);
+        assert_eq!(topic.stats().offered_deadline_missed, 3, "committed");
+        // A read later than the last publish counts as the topic's latest time as well.
+        let topic = t(1);
+        topic.publish(0, ms(40), None);
+        topic.read(ms(70));
+        topic.set_qos(q(1, "deadline_ms=15").qos());
+        assert_eq!(
+            topic.stats().requested_deadline_missed,
+            1,
+            "30 ms: 1 period"
+        );
+        // A message the link lost before the QoS went plain never arrived: switched back on,
+        // the requested deadline still counts from the last message that did.
+        let topic = q(1, "loss=1");
+        topic.publish(0, ms(10), None);
+        assert_eq!(topic.stats().lost, 1);
+        topic.set_qos(TopicQos::default());
+        topic.set_qos(q(1, "deadline_ms=40").qos());
+        assert_eq!(topic.last_arrival(), Nanos::ZERO);
+        let s = topic.stats_at(ms(100));
+        assert_eq!(
+            (s.offered_deadline_missed, s.requested_deadline_missed),
+            (2, 2)
+        );
+    }
+
+    #[test]
+    fn the_short_path_counts_as_the_general_one_across_live_qos_changes() {
+        // The same operations on two topics: `a` with the QoS of each phase, taking the
+        // short path whenever it is plain; `b` with the same QoS plus a lifespan of an hour,
+        // which expires nothing here but keeps it on the general path (timers updated at
+        // every operation). Every read, counter and timer must agree, at every step.
+        let phases = [
+            "",
+            "deadline_ms=30",
+            "",
+            "loss=0.3,delay_ms=15,jitter_ms=5",
+            "",
+            "deadline_ms=25,loss=0.2,delay_ms=5,reliability=reliable",
+            "depth=3",
+            "deadline_ms=45",
+            "",
+        ];
+        let qos = |pairs: &str, hour: bool| {
+            let mut qos = TopicQos::default();
+            let mut d = 1;
+            let all = match (pairs, hour) {
+                ("", false) => String::new(),
+                ("", true) => "lifespan_ms=3600000".to_string(),
+                (p, false) => p.to_string(),
+                (p, true) => format!("{p},lifespan_ms=3600000"),
+            };
+            if !all.is_empty() {
+                for (k, v) in split_pairs(&all).unwrap() {
+                    apply_key(&mut qos, &mut d, k, v).unwrap();
+                }
+            }
+            (qos, d)
+        };
+        for seed in 1..=20u64 {
+            let mut x = seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1;
+            let mut rand = move |n: u64| {
+                x ^= x << 13;
+                x ^= x >> 7;
+                x ^= x << 17;
+                x % n
+            };
+            let a = Topic::<u32>::with_qos("/a", 1, TopicQos::default(), 7).unwrap();
+            let b = Topic::<u32>::with_qos("/b", 1, qos("", true).0, 7).unwrap();
+            let mut now = Nanos::ZERO;
+            for (i, phase) in phases.iter().enumerate() {
+                if i > 0 {
+                    let ((qa, da), (qb, db)) = (qos(phase, false), qos(phase, true));
+                    a.set_depth(da).unwrap();
+                    b.set_depth(db).unwrap();
+                    a.set_qos(qa);
+                    b.set_qos(qb);
+                    assert_eq!(a.qos().lifespan, None);
+                    // Right after the change, before any operation.
+                    let later = now.saturating_add(ms(rand(100)));
+                    assert_eq!(a.stats(), b.stats(), "seed {seed} phase {phase}");
+                    assert_eq!(a.stats_at(later), b.stats_at(later), "seed {seed}");
+                    assert_eq!(a.last_arrival(), b.last_arrival(), "seed {seed}");
+                }
+                for _ in 0..rand(40) {
+                    now = now.saturating_add(ms(rand(30)));
+                    if rand(3) == 0 {
+                        assert_eq!(a.read(now), b.read(now), "seed {seed} phase {phase}");
+                    } else {
+                        let v = rand(1000) as u32;
+                        a.publish(v, now, Some(now));
+                        b.publish(v, now, Some(now));
+                    }
+                    let later = now.saturating_add(ms(rand(100)));
+                    assert_eq!(a.stats(), b.stats(), "seed {seed} phase {phase}");
+                    assert_eq!(a.stats_at(later), b.stats_at(later), "seed {seed}");
+                    assert_eq!(a.last_arrival(), b.last_arrival(), "seed {seed}");
+                }
+            }
+            accounted(&a);
+        }
     }
 
     #[test]

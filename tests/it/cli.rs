@@ -294,3 +294,105 @@ fn bench_prints_the_bare_wait_floor_then_each_node() {
         assert!(row[8].starts_with("SCHED_"), "{out}");
     }
 }
+
+/// An exercise folder in `root`: `exercises/` with the bands and `files`, and `graphs/` (ex5
+/// names its graph relative to the bands).
+fn exercise_copy(root: &Path, files: &[&str]) -> std::path::PathBuf {
+    let repo = Path::new(crate::REPO);
+    let dir = root.join("exercises");
+    std::fs::create_dir_all(&dir).unwrap();
+    std::fs::create_dir_all(root.join("graphs")).unwrap();
+    for f in files.iter().chain(&["bands.toml"]) {
+        std::fs::copy(repo.join("exercises").join(f), dir.join(f)).unwrap();
+    }
+    std::fs::copy(
+        repo.join("graphs/cartpole-safety.toml"),
+        root.join("graphs/cartpole-safety.toml"),
+    )
+    .unwrap();
+    dir
+}
+
+#[test]
+fn exercise_ex5_runs_on_the_graph_its_bands_name_and_reconciles() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = exercise_copy(tmp.path(), &["ex5_watchdog.toml"]);
+    let d = dir.to_str().unwrap();
+    let o = ratelab(&["exercise", "ex5", "--dir", d]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(
+        stderr(&o).contains("has no prediction yet"),
+        "{}",
+        stderr(&o)
+    );
+    let file = dir.join("ex5_watchdog.toml");
+    let text = std::fs::read_to_string(&file)
+        .unwrap()
+        .replace("# survives_low_loss =\n", "survives_low_loss = false\n")
+        .replace("# survives_high_loss =\n", "survives_high_loss = false\n")
+        .replace(
+            "# keeps_it_up =\n",
+            "keeps_it_up = [\"hold\", \"reliable\"]\n",
+        )
+        .replace("# reliable_latency_ms =\n", "reliable_latency_ms = 20\n")
+        .replace("why = \"\"", "why = \"a lost command is an old command\"");
+    std::fs::write(&file, text).unwrap();
+    let o = ratelab(&["exercise", "ex5", "--dir", d]);
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(out.contains("80%, deadline 30 ms + zero |"), "{out}");
+    assert!(out.contains("[ok]") && !out.contains("[!!]"), "{out}");
+    assert!(
+        out.contains("You predicted the pole falls at 20% loss, best effort; it stayed up on every seed.")
+            && out.contains("You predicted these keep the pole up at 80% loss: hold, reliable; what did: zero, reliable."),
+        "{out}"
+    );
+    assert!(out.contains("Reconcile:"), "{out}");
+    // Overrides apply to that graph; faults are refused as for every exercise.
+    let o = ratelab(&["exercise", "ex5", "--dir", d, "--stall", "safety@1+1"]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(stderr(&o).contains("inject no faults"), "{}", stderr(&o));
+    // Without its graph beside the bands, a one-line error naming it.
+    std::fs::remove_file(tmp.path().join("graphs/cartpole-safety.toml")).unwrap();
+    let o = ratelab(&["exercise", "ex5", "--dir", d]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains("cartpole-safety.toml"),
+        "{}",
+        stderr(&o)
+    );
+    let o = ratelab(&["exercise", "ex6", "--dir", d]);
+    assert!(
+        stderr(&o).contains("expected ex1, ex2, ex3, ex4 or ex5"),
+        "{}",
+        stderr(&o)
+    );
+}
+
+#[test]
+fn exercise_ex4_shows_the_stale_queue_and_reconciles() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = exercise_copy(tmp.path(), &["ex4_stale_queue.toml"]);
+    let file = dir.join("ex4_stale_queue.toml");
+    let text = std::fs::read_to_string(&file)
+        .unwrap()
+        .replace("# latest_balances =\n", "latest_balances = true\n")
+        .replace("# fifo_balances =\n", "fifo_balances = true\n")
+        .replace(
+            "# fifo_latency_at_fall_ms =\n",
+            "fifo_latency_at_fall_ms = 100\n",
+        )
+        .replace("# lifespan_balances =\n", "lifespan_balances = true\n")
+        .replace("why = \"\"", "why = \"nothing is dropped\"");
+    std::fs::write(&file, text).unwrap();
+    let o = ratelab(&["exercise", "ex4", "--dir", dir.to_str().unwrap()]);
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(out.contains("fifo, lifespan 20 ms"), "{out}");
+    assert!(out.contains("[ok]") && !out.contains("[!!]"), "{out}");
+    assert!(
+        out.contains("You predicted the pole stays up with fifo; it fell.")
+            && out.contains("You predicted 100 ms of sense->act latency at the FIFO fall; it was "),
+        "{out}"
+    );
+}

@@ -4,8 +4,9 @@
 //! measured outcome.
 
 use ratelab::exercise::{
-    check_ex1, check_ex2, check_ex3, load_bands, measure_ex1, measure_ex2, measure_ex3,
-    required_keys, Bands, ExerciseFile,
+    check_ex1, check_ex2, check_ex3, check_ex4, check_ex5, default_graph, load_bands, measure_ex1,
+    measure_ex2, measure_ex3, measure_ex4, measure_ex5, outcome_ex4, outcome_ex5, required_keys,
+    Bands, Ex5Case, ExerciseFile, Outcome,
 };
 use ratelab::graph::GraphSpec;
 use std::path::PathBuf;
@@ -54,6 +55,88 @@ fn ex3_measurement_jitter_and_phase_offsets() {
     assert_all(check_ex3(&b.ex3, &matched, &offset));
 }
 
+#[test]
+fn ex4_measurement_stale_queue() {
+    let _machine = crate::machine::shared();
+    let b = bands();
+    let runs = measure_ex4(&b.ex4, &GraphSpec::chapter()).unwrap();
+    assert_eq!(
+        runs.len(),
+        (2 + b.ex4.lifespan_ms.len()) * b.ex4.seeds.len()
+    );
+    assert_all(check_ex4(&b.ex4, &runs));
+    // The outcome the learner's prediction is compared with.
+    let Outcome::Ex4 {
+        latest_balances,
+        fifo_balances,
+        fifo_latency_at_fall_ms: Some((lo, hi)),
+        lifespan_balances,
+        ..
+    } = outcome_ex4(&b.ex4, &runs)
+    else {
+        panic!("fifo fell: there is a latency at the fall");
+    };
+    assert!(latest_balances && !fifo_balances && lifespan_balances);
+    assert!(lo <= hi);
+    // Virtual runs: the exercise measures the same thing twice.
+    let again = measure_ex4(&b.ex4, &GraphSpec::chapter()).unwrap();
+    let json = |rs: &[ratelab::exercise::Ex4Run]| {
+        rs.iter()
+            .map(|r| serde_json::to_string(&r.metrics).unwrap())
+            .collect::<Vec<_>>()
+    };
+    assert_eq!(json(&runs), json(&again));
+    // A row is what its label says whatever the command line set on the topic.
+    let mut g = GraphSpec::chapter();
+    g.set_qos(&b.ex4.topic, "delivery=fifo,lifespan_ms=30,depth=5")
+        .unwrap();
+    assert_eq!(json(&measure_ex4(&b.ex4, &g).unwrap()), json(&runs));
+}
+
+#[test]
+fn ex5_measurement_watchdog() {
+    let _machine = crate::machine::shared();
+    let b = bands();
+    let graph = default_graph("ex5", &path(""))
+        .unwrap()
+        .expect("ex5 names its graph");
+    let g = GraphSpec::load(&graph).unwrap();
+    assert_eq!(g.name, "cartpole-safety");
+    let runs = measure_ex5(&b.ex5, &g).unwrap();
+    assert_eq!(runs.len(), Ex5Case::ALL.len() * b.ex5.seeds.len());
+    assert_all(check_ex5(&b.ex5, &runs));
+    let Outcome::Ex5 {
+        low_loss_balances,
+        high_loss_balances,
+        keeps_it_up,
+        ..
+    } = outcome_ex5(&b.ex5, &runs)
+    else {
+        unreachable!("ex5's outcome")
+    };
+    assert!(low_loss_balances && !high_loss_balances);
+    assert_eq!(keeps_it_up, [false, true, true], "hold, zero, reliable");
+    // A case is what its label says whatever the command line set on the topic (but for
+    // the graph as it is, the first row).
+    let mut other = g.clone();
+    other
+        .set_qos(
+            &b.ex5.topic,
+            "loss=0.5,reliability=reliable,deadline_ms=50,on_deadline_missed=stop",
+        )
+        .unwrap();
+    let json = |rs: &[ratelab::exercise::Ex5Run]| {
+        rs.iter()
+            .filter(|r| r.case != Ex5Case::Lossless)
+            .map(|r| serde_json::to_string(&r.metrics).unwrap())
+            .collect::<Vec<_>>()
+    };
+    assert_eq!(json(&measure_ex5(&b.ex5, &other).unwrap()), json(&runs));
+    // The chapter's graph has no /cmd: ex5 needs its own, ex4 runs on the chapter's.
+    assert!(default_graph("ex4", &path("")).unwrap().is_none());
+    assert!(measure_ex5(&b.ex5, &GraphSpec::chapter()).is_err());
+}
+
 fn prediction_recorded(ex: &str, file: &str) {
     let f = ExerciseFile::load(&path(file)).unwrap();
     assert!(
@@ -92,11 +175,31 @@ fn ex3_prediction_recorded() {
 }
 
 #[test]
+#[cfg_attr(
+    ex4_prediction_empty,
+    ignore = "ex4: write your prediction in exercises/ex4_stale_queue.toml"
+)]
+fn ex4_prediction_recorded() {
+    prediction_recorded("ex4", "ex4_stale_queue.toml");
+}
+
+#[test]
+#[cfg_attr(
+    ex5_prediction_empty,
+    ignore = "ex5: write your prediction in exercises/ex5_watchdog.toml"
+)]
+fn ex5_prediction_recorded() {
+    prediction_recorded("ex5", "ex5_watchdog.toml");
+}
+
+#[test]
 fn exercise_files_are_valid() {
     for file in [
         "ex1_rate_cliff.toml",
         "ex2_queue_trap.toml",
         "ex3_jitter_phase.toml",
+        "ex4_stale_queue.toml",
+        "ex5_watchdog.toml",
     ] {
         let f = ExerciseFile::load(&path(file)).unwrap();
         assert!(
