@@ -76,6 +76,7 @@ pub fn run_launch(a: &LaunchArgs, stop: StopFlag) -> anyhow::Result<()> {
     let report = launch(&cfg, &opts, &stop, &|line| {
         println!("[ratelab] launch: {line}")
     })?;
+    let (wire, lockstep) = (report.wire, report.lockstep);
     let report = RunReport {
         metrics: report.metrics,
         trace: Vec::new(),
@@ -83,6 +84,17 @@ pub fn run_launch(a: &LaunchArgs, stop: StopFlag) -> anyhow::Result<()> {
         wall: report.wall,
     };
     headless::print_summary(&report);
+    for w in &wire {
+        println!(
+            "[ratelab] wire {} into '{}': {} samples, p50 {} µs | p99 {} µs | max {} µs",
+            w.topic, w.process, w.samples, w.p50_us, w.p99_us, w.max_us
+        );
+    }
+    if let Some((ticks, us)) = lockstep {
+        println!(
+            "[ratelab] lockstep: {ticks} ticks granted, {us:.0} µs of wall time each (round trip + tick)"
+        );
+    }
     if let Some(dir) = &run.out {
         let json = serde_json::to_string_pretty(&report.metrics)? + "\n";
         ratelab::output::write_file(&dir.join("metrics.json"), run.force, json.as_bytes())?;

@@ -48,6 +48,11 @@ pub struct LaunchReport {
     pub wall: Duration,
     /// The endpoint the launcher listened on.
     pub endpoint: String,
+    /// Over-the-wire latency per topic that crossed processes.
+    pub wire: Vec<wire::WireLink>,
+    /// Virtual clock: ticks granted, and the wall time per granted tick, µs (the lockstep's
+    /// cost: a round trip to the node's process and its tick).
+    pub lockstep: Option<(u64, f64)>,
 }
 
 /// The launcher's link to its processes: publishers per process and the reply channel.
@@ -442,6 +447,8 @@ pub fn launch(
     }
     let start = Instant::now();
     let mut reports: BTreeMap<String, GraphState> = BTreeMap::new();
+    let mut wires: Vec<wire::WireLink> = Vec::new();
+    let mut lockstep = None;
     let end = match cfg.clock {
         ClockKind::Virtual => {
             let shared = Arc::new(Mutex::new(Shared {
@@ -476,12 +483,17 @@ pub fn launch(
                 .collect();
             let mut sched = VirtualScheduler::with_offsets(&proxies, &cfg.phase_offsets);
             let end = sched.run(&mut proxies, cfg.duration, stop, &mut |_| {});
+            let granted: u64 = sched.ticks().iter().sum();
+            lockstep = Some((
+                granted,
+                start.elapsed().as_secs_f64() * 1e6 / granted.max(1) as f64,
+            ));
             drop(proxies);
             let sh = Arc::try_unwrap(shared)
                 .map_err(|_| DistError::Peer("the scheduler kept its link".into()))?
                 .into_inner()
                 .unwrap_or_else(|e| e.into_inner());
-            collect_reports(&sh.link, &names, &end, &mut reports);
+            collect_reports(&sh.link, &names, &end, &mut reports, &mut wires);
             end
         }
         ClockKind::Real => {
@@ -547,7 +559,13 @@ pub fn launch(
                             end = Some(e);
                         }
                     }
-                    Some(ToLauncher::Report { process, state }) => {
+                    Some(ToLauncher::Report {
+                        process,
+                        state,
+                        wire,
+                    }) => {
+                        wires.retain(|w| w.process != process);
+                        wires.extend(wire);
                         reports.insert(process, *state);
                         if names.iter().all(|p| reports.contains_key(p)) {
                             break;
@@ -588,6 +606,8 @@ pub fn launch(
         end,
         wall,
         endpoint,
+        wire: wires,
+        lockstep,
     })
 }
 
@@ -597,13 +617,20 @@ fn collect_reports(
     names: &[String],
     end: &RunEnd,
     reports: &mut BTreeMap<String, GraphState>,
+    wires: &mut Vec<wire::WireLink>,
 ) {
     for p in names {
         let _ = link.tell(p, &ToMember::Stop { at_ns: end.at.0 });
     }
     let deadline = Instant::now() + REPLY_TIMEOUT;
     while Instant::now() < deadline && !names.iter().all(|p| reports.contains_key(p)) {
-        if let Some(ToLauncher::Report { process, state }) = link.recv(Duration::from_millis(50)) {
+        if let Some(ToLauncher::Report {
+            process,
+            state,
+            wire,
+        }) = link.recv(Duration::from_millis(50))
+        {
+            wires.extend(wire);
             reports.insert(process, *state);
         }
     }

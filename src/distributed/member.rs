@@ -462,9 +462,27 @@ pub fn run_member(opts: &MemberOptions, stop: &StopFlag) -> Result<(), DistError
     stats_done.stop();
     let _ = stats_thread.join();
     let state = result?;
+    let wire = inbound
+        .iter()
+        .map(|&t| {
+            let l = crate::graph::lock(&wire_latency[t.0]);
+            let us = |n: Option<Nanos>| {
+                n.map_or(0.0, |n| crate::metrics::round_to(n.as_micros_f64(), 1))
+            };
+            wire::WireLink {
+                topic: spec.topic(t).name.clone(),
+                process: opts.process.clone(),
+                samples: l.count(),
+                p50_us: us(l.quantile(0.5)),
+                p99_us: us(l.quantile(0.99)),
+                max_us: us(l.max()),
+            }
+        })
+        .collect();
     send(&ToLauncher::Report {
         process: opts.process.clone(),
         state: Box::new(state),
+        wire,
     })?;
     // Let the report leave before the session closes.
     std::thread::sleep(Duration::from_millis(200));

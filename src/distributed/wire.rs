@@ -194,6 +194,24 @@ pub struct Setup {
     pub rt_priority: Option<u8>,
 }
 
+/// The over-the-wire latency of one topic into one process: from the publisher's send to
+/// the subscriber's delivery, on the host's monotonic clock (exact on one host).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct WireLink {
+    /// The topic.
+    pub topic: String,
+    /// The receiving process.
+    pub process: String,
+    /// Samples received.
+    pub samples: u64,
+    /// Latency p50, µs.
+    pub p50_us: f64,
+    /// Latency p99, µs.
+    pub p99_us: f64,
+    /// Latency max, µs.
+    pub max_us: f64,
+}
+
 /// Launcher → one placement group (key `ratelab/<graph>/@ctl/<process>`).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "msg", rename_all = "snake_case")]
@@ -273,6 +291,8 @@ pub enum ToLauncher {
         process: String,
         /// Its view of the graph.
         state: Box<GraphState>,
+        /// The over-the-wire latency of each topic it received from another process.
+        wire: Vec<WireLink>,
     },
 }
 
