@@ -14,7 +14,7 @@ use crate::rate::Rate;
 use crate::run::{summarize_state, GraphState};
 use crate::scheduler::{EndReason, RunEnd, StopFlag, VirtualScheduler};
 use crate::time::Nanos;
-use crossbeam_channel::{Receiver, RecvTimeoutError};
+use crossbeam_channel::Receiver;
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 use std::process::{Child, Command, Stdio};
@@ -71,10 +71,7 @@ impl Link {
     }
 
     fn recv(&self, timeout: Duration) -> Option<ToLauncher> {
-        match self.up.recv_timeout(timeout) {
-            Ok(m) => Some(m),
-            Err(RecvTimeoutError::Timeout | RecvTimeoutError::Disconnected) => None,
-        }
+        self.up.recv_timeout(timeout).ok()
     }
 }
 
@@ -431,16 +428,14 @@ pub fn launch(
             )));
         }
         match link.recv(Duration::from_millis(50)) {
-            Some(m @ ToLauncher::Join { .. }) => {
-                if admit(&m)? {
-                    joined.push(m.process().to_string());
-                }
+            Some(m @ ToLauncher::Join { .. }) if admit(&m)? => {
+                joined.push(m.process().to_string());
             }
-            Some(ToLauncher::Ready { process }) if joined.contains(&process) => {
-                if !ready.contains(&process) {
-                    say(&format!("process '{process}' ready"));
-                    ready.push(process);
-                }
+            Some(ToLauncher::Ready { process })
+                if joined.contains(&process) && !ready.contains(&process) =>
+            {
+                say(&format!("process '{process}' ready"));
+                ready.push(process);
             }
             _ => {}
         }
@@ -538,12 +533,10 @@ pub fn launch(
                     stop_sent = true;
                 }
                 match link.recv(Duration::from_millis(50)) {
-                    Some(m @ ToLauncher::Join { .. }) => {
-                        // A process restarted mid-run rejoins on the same clock.
-                        if end.is_none() && admit(&m)? {
-                            gone.retain(|g| g != m.process());
-                            say(&format!("process '{}' rejoined", m.process()));
-                        }
+                    // A process restarted mid-run rejoins on the same clock.
+                    Some(m @ ToLauncher::Join { .. }) if end.is_none() && admit(&m)? => {
+                        gone.retain(|g| g != m.process());
+                        say(&format!("process '{}' rejoined", m.process()));
                     }
                     Some(ToLauncher::Ready { process }) if end.is_none() => {
                         link.tell(
