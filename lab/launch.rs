@@ -31,6 +31,9 @@ pub fn run_launch(a: &LaunchArgs, stop: StopFlag) -> anyhow::Result<()> {
         _ => {}
     }
     if !a.processes {
+        if a.listen.is_some() || a.no_spawn {
+            anyhow::bail!("--listen and --no-spawn need --processes");
+        }
         return headless::run_headless(&run, stop).map(|_| ());
     }
     if run.record.is_some() || run.spawn || run.session.is_some() {
@@ -76,7 +79,7 @@ pub fn run_launch(a: &LaunchArgs, stop: StopFlag) -> anyhow::Result<()> {
     let report = launch(&cfg, &opts, &stop, &|line| {
         println!("[ratelab] launch: {line}")
     })?;
-    let (wire, lockstep) = (report.wire, report.lockstep);
+    let (wire, lockstep, missing) = (report.wire, report.lockstep, report.missing);
     let report = RunReport {
         metrics: report.metrics,
         trace: Vec::new(),
@@ -100,6 +103,11 @@ pub fn run_launch(a: &LaunchArgs, stop: StopFlag) -> anyhow::Result<()> {
         ratelab::output::write_file(&dir.join("metrics.json"), run.force, json.as_bytes())?;
         println!("[ratelab] wrote {}", dir.join("metrics.json").display());
     }
+    anyhow::ensure!(
+        missing.is_empty(),
+        "process(es) {} did not report: their nodes' figures are missing from the summary",
+        missing.join(", ")
+    );
     Ok(())
 }
 
@@ -143,8 +151,9 @@ pub fn run_top(a: &TopArgs, stop: StopFlag) -> anyhow::Result<()> {
     let mut last_print = Instant::now();
     loop {
         while let Ok(m) = rx.try_recv() {
-            let prev = seen.remove(&m.process).map(|(p, _)| p);
-            seen.insert(m.process.clone(), (m, prev));
+            let key = format!("{}/{}", m.graph, m.process);
+            let prev = seen.remove(&key).map(|(p, _)| p);
+            seen.insert(key, (m, prev));
         }
         let alive = alive_nodes(&session);
         if a.once {
@@ -161,8 +170,12 @@ pub fn run_top(a: &TopArgs, stop: StopFlag) -> anyhow::Result<()> {
             }
         } else if last_print.elapsed() >= Duration::from_secs(1) {
             last_print = Instant::now();
-            // Clear the screen and home the cursor (a plain refreshing table, like `top`).
-            print!("\x1b[2J\x1b[H{}", table(&seen, &alive));
+            // Clear the screen and home the cursor (a plain refreshing table, like `top`); a
+            // pipe gets one table after another.
+            if std::io::IsTerminal::is_terminal(&std::io::stdout()) {
+                print!("\x1b[2J\x1b[H");
+            }
+            print!("{}", table(&seen, &alive));
             if seen.is_empty() {
                 println!("(waiting for a graph at {})", a.connect.join(", "));
             }
@@ -217,7 +230,8 @@ fn table(
     );
     let mut wire: BTreeMap<String, (u64, f64, f64)> = BTreeMap::new();
     let mut topics = Vec::new();
-    for (p, (m, prev)) in seen {
+    for (m, prev) in seen.values() {
+        let p = &m.process;
         let dt = prev
             .as_ref()
             .map(|q| m.t_ns.saturating_sub(q.t_ns) as f64 / 1e9)

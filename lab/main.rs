@@ -203,7 +203,12 @@ fn main() -> ExitCode {
                 Some(spec) => eprintln!("{spec}"),
                 None => eprintln!("error: {e:#}"),
             }
-            ExitCode::from(EXIT_USAGE)
+            // Whatever failed after a Ctrl-C failed because of it.
+            ExitCode::from(if interrupted.is_stopped() {
+                EXIT_INTERRUPTED
+            } else {
+                EXIT_USAGE
+            })
         }
     }
 }

@@ -619,9 +619,9 @@ impl<T: Clone> Topic<T> {
     /// keeps its publisher's `seq` and `published = seen + dropped + … + lost` still holds.
     pub fn count_lost(&self, n: u64) {
         let mut inner = self.lock();
-        inner.next_seq += n;
-        inner.published += n;
-        inner.lost += n;
+        inner.next_seq = inner.next_seq.saturating_add(n);
+        inner.published = inner.published.saturating_add(n);
+        inner.lost = inner.lost.saturating_add(n);
     }
 
     /// The buffered messages with `seq >= from`, oldest first, without reading them: the read

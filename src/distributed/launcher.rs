@@ -50,9 +50,21 @@ pub struct LaunchReport {
     pub endpoint: String,
     /// Over-the-wire latency per topic that crossed processes.
     pub wire: Vec<wire::WireLink>,
+    /// Processes that did not report (gone, or failed): their figures are missing.
+    pub missing: Vec<String>,
     /// Virtual clock: ticks granted, and the wall time per granted tick, µs (the lockstep's
     /// cost: a round trip to the node's process and its tick).
     pub lockstep: Option<(u64, f64)>,
+}
+
+/// What the launcher made of a join.
+enum Admission {
+    /// Welcomed: it gets the settings.
+    Welcomed,
+    /// Refused, and told why.
+    Refused(String),
+    /// Not a join, or from a name no key can answer.
+    Ignored,
 }
 
 /// The launcher's link to its processes: publishers per process and the reply channel.
@@ -66,6 +78,7 @@ impl Link {
     fn tell(&self, process: &str, m: &ToMember) -> Result<(), DistError> {
         self.session
             .put(self.keys.control(process), wire::encode_json(m))
+            .congestion_control(zenoh::qos::CongestionControl::Block)
             .wait()?;
         Ok(())
     }
@@ -85,6 +98,8 @@ struct Proxy {
     input: Option<usize>,
     output: Option<usize>,
     shared: Arc<Mutex<Shared>>,
+    /// Processes whose liveliness tokens were withdrawn.
+    gone: Arc<Mutex<Vec<String>>>,
 }
 
 struct Shared {
@@ -114,13 +129,18 @@ impl Node for Proxy {
         if let Err(e) = sh.link.tell(&self.process, &grant) {
             panic!("cannot reach process '{}': {e}", self.process);
         }
+        let deadline = Instant::now() + REPLY_TIMEOUT;
         loop {
-            match sh.link.recv(REPLY_TIMEOUT) {
-                None => panic!(
+            if crate::graph::lock(&self.gone).contains(&self.process) {
+                panic!("process '{}' is gone", self.process);
+            }
+            match sh.link.recv(Duration::from_millis(50)) {
+                None if Instant::now() >= deadline => panic!(
                     "process '{}' did not answer within {} s",
                     self.process,
                     REPLY_TIMEOUT.as_secs()
                 ),
+                None => {}
                 Some(ToLauncher::Done {
                     process,
                     stop,
@@ -185,6 +205,7 @@ impl Drop for Children {
 
 /// A free TCP port on `host` (the OS picks it; it is free when this returns).
 fn free_port(host: &str) -> Result<u16, DistError> {
+    let host = host.trim_start_matches('[').trim_end_matches(']');
     std::net::TcpListener::bind((host, 0))
         .and_then(|l| l.local_addr())
         .map(|a| a.port())
@@ -220,6 +241,33 @@ pub fn merge_states(spec: &GraphSpec, states: &BTreeMap<String, GraphState>) -> 
     }
     if let Some(st) = of(spec.chain.policy) {
         merged.brain.clone_from(&st.brain);
+    }
+    // A topic that crossed processes: what its publisher sent is published; what the
+    // subscriber's copy never received (in flight at the end, or sent while it was down)
+    // was lost on the wire. Without the subscriber's report only the sending side is known.
+    for (i, t) in spec.topics.iter().enumerate() {
+        let Some(sub) = t.subscriber else { continue };
+        let (from, to) = (spec.process_of(t.publisher), spec.process_of(sub));
+        if from == to {
+            continue;
+        }
+        let sent = states.get(&from).and_then(|s| s.topics.get(i)).copied();
+        let (Some(sent), Some(m)) = (sent, merged.topics.get_mut(i)) else {
+            continue;
+        };
+        if states.contains_key(&to) {
+            if sent.published > m.published {
+                m.lost += sent.published - m.published;
+                m.published = sent.published;
+            }
+        } else {
+            *m = crate::topic::TopicStats {
+                published: sent.published,
+                last_stamp: sent.last_stamp,
+                depth: t.depth,
+                ..Default::default()
+            };
+        }
     }
     Some(merged)
 }
@@ -273,6 +321,8 @@ pub fn launch(
         .wait()?;
     // Processes going away: their node tokens are withdrawn.
     let (gone_tx, gone_rx) = crossbeam_channel::unbounded::<String>();
+    let gone_now: Arc<Mutex<Vec<String>>> = Arc::default();
+    let gone_cb = gone_now.clone();
     let token_prefix = format!("{}/@node/", keys.prefix());
     let _live_sub = session
         .liveliness()
@@ -284,6 +334,7 @@ pub fn launch(
                     .strip_prefix(&token_prefix)
                     .and_then(|r| r.split('/').next())
                 {
+                    crate::graph::lock(&gone_cb).push(p.to_string());
                     let _ = gone_tx.send(p.to_string());
                 }
             }
@@ -326,12 +377,15 @@ pub fn launch(
         }
     } else {
         say(&format!(
-            "waiting for {} to join: ratelab node --process NAME --connect {endpoint}",
+            "waiting for {} to join: ratelab node{} --process NAME --connect {endpoint}",
             placement
                 .iter()
                 .map(|(p, _)| p.as_str())
                 .collect::<Vec<_>>()
-                .join(", ")
+                .join(", "),
+            opts.graph_path
+                .as_ref()
+                .map_or(String::new(), |g| format!(" --graph {}", g.display()))
         ));
     }
     let link = Link {
@@ -351,52 +405,73 @@ pub fn launch(
         spin_margin_ns: cfg.spin_margin.0,
         rt_priority: cfg.rt_priority,
     };
-    // Admission: each process joins with the graph file's hash, then reports ready.
+    // Admission: each process joins with the graph file's hash, then reports ready. Nothing
+    // a joiner sends can end the run: a bad join is refused to that joiner alone.
     let names: Vec<String> = placement.iter().map(|(p, _)| p.clone()).collect();
-    let admit = |m: &ToLauncher| -> Result<bool, DistError> {
+    let robot = spec.process_of(spec.chain.actuator);
+    let admit = |m: &ToLauncher, running: bool, gone: &[String], joined: &[String]| -> Admission {
         let ToLauncher::Join {
             process,
             graph_sha256,
             ..
         } = m
         else {
-            return Ok(false);
+            return Admission::Ignored;
         };
-        if !names.contains(process) {
-            link.tell(
-                process,
-                &ToMember::Reject {
-                    reason: format!(
-                        "graph '{}' has no process '{process}' (its processes: {})",
-                        spec.name,
-                        names.join(", ")
-                    ),
-                },
-            )?;
-            return Ok(false);
+        if !crate::graph::spec::valid_node_name(process) {
+            return Admission::Ignored; // no key to answer on
         }
-        if *graph_sha256 != hash {
-            let reason = format!(
-                "process '{process}' was given a different graph file than the launcher (SHA-256 {}… against {}…)",
-                &graph_sha256[..graph_sha256.len().min(12)],
-                &hash[..12]
-            );
-            link.tell(
+        let refuse = |reason: String| {
+            let _ = link.tell(
                 process,
                 &ToMember::Reject {
                     reason: reason.clone(),
                 },
-            )?;
-            std::thread::sleep(Duration::from_millis(300)); // let the refusal reach it
-            return Err(DistError::Usage(reason));
+            );
+            Admission::Refused(reason)
+        };
+        if !names.contains(process) {
+            return refuse(format!(
+                "graph '{}' has no process '{process}' (its processes: {})",
+                spec.name,
+                names.join(", ")
+            ));
         }
-        link.tell(
+        let well_formed =
+            graph_sha256.len() == 64 && graph_sha256.bytes().all(|b| b.is_ascii_hexdigit());
+        if !well_formed {
+            return refuse(format!("process '{process}' sent a malformed join"));
+        }
+        if *graph_sha256 != hash {
+            let theirs: String = graph_sha256.chars().take(12).collect();
+            return refuse(format!(
+                "process '{process}' was given a different graph file than the launcher (SHA-256 {theirs}… against {}…)",
+                &hash[..12]
+            ));
+        }
+        if running {
+            if cfg.clock == ClockKind::Virtual {
+                return refuse(format!("process '{process}' cannot rejoin: under the virtual clock the run is in lockstep (rejoining works under the real clock)"));
+            }
+            if *process == robot {
+                return refuse(format!("process '{process}' cannot rejoin: it holds the plant, whose state died with it"));
+            }
+            if !gone.contains(process) {
+                return refuse(format!(
+                    "process '{process}' is already running in this graph"
+                ));
+            }
+        } else if joined.contains(process) {
+            return refuse(format!("process '{process}' has already joined this graph"));
+        }
+        let _ = link.tell(
             process,
             &ToMember::Welcome {
                 setup: Box::new(setup.clone()),
+                launcher_mono_ns: wire::mono_now_ns(),
             },
-        )?;
-        Ok(true)
+        );
+        Admission::Welcomed
     };
     let mut joined = Vec::new();
     let mut ready = Vec::new();
@@ -428,9 +503,18 @@ pub fn launch(
             )));
         }
         match link.recv(Duration::from_millis(50)) {
-            Some(m @ ToLauncher::Join { .. }) if admit(&m)? => {
-                joined.push(m.process().to_string());
-            }
+            Some(m @ ToLauncher::Join { .. }) => match admit(&m, false, &[], &joined) {
+                Admission::Welcomed => joined.push(m.process().to_string()),
+                // Before the run, a process with another graph file is the user's mistake.
+                Admission::Refused(r)
+                    if names.iter().any(|p| p == m.process()) && r.contains("graph file") =>
+                {
+                    std::thread::sleep(Duration::from_millis(300)); // let the refusal reach it
+                    return Err(DistError::Usage(r));
+                }
+                Admission::Refused(r) => say(&format!("refused a join: {r}")),
+                Admission::Ignored => {}
+            },
             Some(ToLauncher::Ready { process })
                 if joined.contains(&process) && !ready.contains(&process) =>
             {
@@ -473,6 +557,7 @@ pub fn launch(
                         input: remote_input.map(|t| t.0),
                         output: n.publishes.map(|t| t.0),
                         shared: shared.clone(),
+                        gone: gone_now.clone(),
                     }) as Box<dyn Node>
                 })
                 .collect();
@@ -488,7 +573,14 @@ pub fn launch(
                 .map_err(|_| DistError::Peer("the scheduler kept its link".into()))?
                 .into_inner()
                 .unwrap_or_else(|e| e.into_inner());
-            collect_reports(&sh.link, &names, &end, &mut reports, &mut wires);
+            // Every message sent is delivered before the reports: the last ones too.
+            let need: Vec<(usize, u64)> = sh
+                .published
+                .iter()
+                .enumerate()
+                .filter_map(|(t, s)| s.map(|s| (t, s)))
+                .collect();
+            collect_reports(&sh.link, &names, &end, need, &mut reports, &mut wires);
             end
         }
         ClockKind::Real => {
@@ -506,6 +598,7 @@ pub fn launch(
             let mut ended: Vec<String> = Vec::new();
             let mut stop_sent = false;
             let mut gone: Vec<String> = Vec::new();
+            let mut rejoining: Vec<String> = Vec::new();
             loop {
                 while let Ok(p) = gone_rx.try_recv() {
                     if end.is_none()
@@ -514,6 +607,16 @@ pub fn launch(
                         && !gone.contains(&p)
                     {
                         gone.push(p.clone());
+                        if p == robot {
+                            // The plant died with it: the run cannot go on.
+                            end = Some(RunEnd {
+                                at: run_time().min(cfg.duration),
+                                reason: EndReason::NodeFailed {
+                                    node: spec.node(spec.chain.actuator).name.clone(),
+                                    message: format!("process '{p}' (the plant's) is gone"),
+                                },
+                            });
+                        }
                         say(&format!(
                             "process '{p}' is gone at t={:.2}s (its liveliness token was withdrawn); the others run on",
                             run_time().as_secs_f64()
@@ -528,17 +631,33 @@ pub fn launch(
                 }
                 if let (Some(e), false) = (&end, stop_sent) {
                     for p in &names {
-                        let _ = link.tell(p, &ToMember::Stop { at_ns: e.at.0 });
+                        let _ = link.tell(
+                            p,
+                            &ToMember::Stop {
+                                at_ns: e.at.0,
+                                need: Vec::new(),
+                            },
+                        );
                     }
                     stop_sent = true;
                 }
                 match link.recv(Duration::from_millis(50)) {
                     // A process restarted mid-run rejoins on the same clock.
-                    Some(m @ ToLauncher::Join { .. }) if end.is_none() && admit(&m)? => {
-                        gone.retain(|g| g != m.process());
-                        say(&format!("process '{}' rejoined", m.process()));
+                    Some(m @ ToLauncher::Join { .. }) if end.is_none() => {
+                        match admit(&m, true, &gone, &[]) {
+                            Admission::Welcomed => {
+                                gone.retain(|g| g != m.process());
+                                rejoining.push(m.process().to_string());
+                                say(&format!("process '{}' rejoined", m.process()));
+                            }
+                            Admission::Refused(r) => say(&format!("refused a join: {r}")),
+                            Admission::Ignored => {}
+                        }
                     }
-                    Some(ToLauncher::Ready { process }) if end.is_none() => {
+                    Some(ToLauncher::Ready { process })
+                        if end.is_none() && rejoining.contains(&process) =>
+                    {
+                        rejoining.retain(|p| *p != process);
                         link.tell(
                             &process,
                             &ToMember::Start {
@@ -560,11 +679,15 @@ pub fn launch(
                         wires.retain(|w| w.process != process);
                         wires.extend(wire);
                         reports.insert(process, *state);
-                        if names.iter().all(|p| reports.contains_key(p)) {
-                            break;
-                        }
                     }
                     _ => {}
+                }
+                // Every process has reported, or is gone for good.
+                let settled = |p: &String| {
+                    reports.contains_key(p) || (gone.contains(p) && !rejoining.contains(p))
+                };
+                if names.iter().all(settled) {
+                    break;
                 }
                 let grace = Nanos::from(REPLY_TIMEOUT);
                 let over = run_time() > cfg.duration + grace
@@ -581,13 +704,11 @@ pub fn launch(
     };
     let wall = start.elapsed();
     children.reap(Duration::from_secs(5));
-    for p in &names {
-        if !reports.contains_key(p) {
-            say(&format!(
-                "process '{p}' did not report: its figures are missing (zeros)"
-            ));
-        }
-    }
+    let missing: Vec<String> = names
+        .iter()
+        .filter(|p| !reports.contains_key(*p))
+        .cloned()
+        .collect();
     let state = merge_states(spec, &reports).ok_or_else(|| {
         DistError::Peer(format!(
             "process '{}' (the actuator's) did not report",
@@ -600,6 +721,7 @@ pub fn launch(
         wall,
         endpoint,
         wire: wires,
+        missing,
         lockstep,
     })
 }
@@ -609,11 +731,18 @@ fn collect_reports(
     link: &Link,
     names: &[String],
     end: &RunEnd,
+    need: Vec<(usize, u64)>,
     reports: &mut BTreeMap<String, GraphState>,
     wires: &mut Vec<wire::WireLink>,
 ) {
     for p in names {
-        let _ = link.tell(p, &ToMember::Stop { at_ns: end.at.0 });
+        let _ = link.tell(
+            p,
+            &ToMember::Stop {
+                at_ns: end.at.0,
+                need: need.clone(),
+            },
+        );
     }
     let deadline = Instant::now() + REPLY_TIMEOUT;
     while Instant::now() < deadline && !names.iter().all(|p| reports.contains_key(p)) {

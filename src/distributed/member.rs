@@ -75,6 +75,8 @@ impl Arrivals {
 /// Live counters a process publishes for `ratelab top` (key `ratelab/<graph>/@stats/<p>`).
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct LiveStats {
+    /// The graph's name.
+    pub graph: String,
     /// The process.
     pub process: String,
     /// Its OS process id.
@@ -144,6 +146,7 @@ pub fn run_member(opts: &MemberOptions, stop: &StopFlag) -> Result<(), DistError
         session
             .liveliness()
             .declare_subscriber(keys.launcher_token())
+            .history(true)
             .callback(move |s| {
                 if s.kind() == zenoh::sample::SampleKind::Delete {
                     gone.stop();
@@ -151,16 +154,33 @@ pub fn run_member(opts: &MemberOptions, stop: &StopFlag) -> Result<(), DistError
             })
             .wait()?
     };
-    let up = session.declare_publisher(keys.up()).wait()?;
-    wait_matching(&up, stop, "the launcher")?;
+    // Control messages and samples are never dropped under congestion (Zenoh's default
+    // drops): a lost grant or report would stall the run.
+    let block = zenoh::qos::CongestionControl::Block;
+    let up = session
+        .declare_publisher(keys.up())
+        .congestion_control(block)
+        .wait()?;
+    wait_matching(&up, stop, None, "the launcher")?;
     let send = |m: &ToLauncher| up.put(wire::encode_json(m)).wait();
     send(&ToLauncher::Join {
         process: opts.process.clone(),
         graph_sha256: super::graph_hash(&opts.graph_bytes),
         pid: std::process::id(),
     })?;
-    let setup = match recv(&ctl_rx, stop)? {
-        ToMember::Welcome { setup } => setup,
+    let setup = match recv(&ctl_rx, stop, &launcher_gone)? {
+        ToMember::Welcome {
+            setup,
+            launcher_mono_ns,
+        } => {
+            let apart_s = wire::mono_now_ns().abs_diff(launcher_mono_ns) as f64 / 1e9;
+            if setup.clock == crate::ClockKind::Real && apart_s > 2.0 {
+                return Err(DistError::Usage(format!(
+                    "the real clock needs every process on the launcher's host (the monotonic clocks differ by {apart_s:.0} s); across hosts use --clock virtual"
+                )));
+            }
+            setup
+        }
         ToMember::Reject { reason } => return Err(DistError::Usage(reason)),
         other => {
             return Err(DistError::Peer(format!(
@@ -180,6 +200,8 @@ pub fn run_member(opts: &MemberOptions, stop: &StopFlag) -> Result<(), DistError
         rt_priority: setup.rt_priority,
         faults: setup.faults.clone(),
     };
+    cfg.validate()
+        .map_err(|e| DistError::Usage(format!("the launcher's settings: {e}")))?;
     let mine: Vec<NodeId> = spec
         .placement()
         .into_iter()
@@ -260,6 +282,7 @@ pub fn run_member(opts: &MemberOptions, stop: &StopFlag) -> Result<(), DistError
             t,
             session
                 .declare_publisher(keys.topic(&spec.topic(t).name))
+                .congestion_control(block)
                 .wait()?,
         ));
     }
@@ -282,7 +305,7 @@ pub fn run_member(opts: &MemberOptions, stop: &StopFlag) -> Result<(), DistError
         }
     }
     for (_, p) in &publishers {
-        wait_matching(p, stop, "the subscribing process")?;
+        wait_matching(p, stop, Some(&launcher_gone), "the subscribing process")?;
     }
     send(&ToLauncher::Ready {
         process: opts.process.clone(),
@@ -304,7 +327,7 @@ pub fn run_member(opts: &MemberOptions, stop: &StopFlag) -> Result<(), DistError
     );
     let sent: Arc<Vec<Mutex<Option<u64>>>> =
         Arc::new((0..spec.nodes.len()).map(|_| Mutex::new(None)).collect());
-    let forward_after = {
+    let forward_after: Arc<dyn Fn(usize) -> Option<u64> + Send + Sync> = Arc::new({
         let (forward, sent) = (forward.clone(), sent.clone());
         move |node: usize| -> Option<u64> {
             let (topic, publisher) = forward.get(node)?.as_ref()?;
@@ -314,7 +337,7 @@ pub fn run_member(opts: &MemberOptions, stop: &StopFlag) -> Result<(), DistError
             let _ = publisher.put(sample.encode()).wait();
             Some(sample.seq)
         }
-    };
+    });
     let ticks: Arc<Vec<AtomicU64>> =
         Arc::new((0..spec.nodes.len()).map(|_| AtomicU64::new(0)).collect());
     let run_time = Arc::new(AtomicU64::new(0));
@@ -360,104 +383,33 @@ pub fn run_member(opts: &MemberOptions, stop: &StopFlag) -> Result<(), DistError
             &ctl_rx,
             stop,
             &arrivals,
-            &forward_after,
+            &*forward_after,
             &ticks,
             &run_time,
             &|m| send(m),
             &opts.process,
             &launcher_gone,
         ),
-        crate::ClockKind::Real => {
-            let start = match recv(&ctl_rx, stop)? {
-                ToMember::Start { start_mono_ns } => start_mono_ns,
-                ToMember::Stop { .. } => {
-                    stats_done.stop();
-                    return Ok(());
-                }
-                other => return Err(DistError::Peer(format!("expected a start, got {other:?}"))),
-            };
-            let mut picked: Vec<(usize, Box<dyn Node>)> = nodes
-                .into_iter()
-                .enumerate()
-                .filter(|(i, _)| local.contains(i))
-                .collect();
-            let index: Vec<usize> = picked.iter().map(|(i, _)| *i).collect();
-            let local_nodes: Vec<Box<dyn Node>> = picked.drain(..).map(|(_, n)| n).collect();
-            let hook_ticks = ticks.clone();
-            let hook_time = run_time.clone();
-            let hook_index = index.clone();
-            let fwd = forward_after.clone();
-            let real = RealOptions {
-                spin_margin: cfg.spin_margin,
-                phase_offsets: index
-                    .iter()
-                    .map(|&i| cfg.phase_offsets.get(i).copied().unwrap_or(Nanos::ZERO))
-                    .collect(),
-                rt_priority: cfg.rt_priority,
-                on_tick: Some(Arc::new(move |k: usize, _: &str, now: Nanos, _| {
-                    let i = hook_index[k];
-                    hook_ticks[i].fetch_add(1, Ordering::Relaxed);
-                    hook_time.fetch_max(now.0, Ordering::Relaxed);
-                    fwd(i);
-                })),
-                pause: None,
-                start: Some(wire::instant_at_mono(start)),
-            };
-            // The launcher's stop (another process ended the run, or Ctrl-C there).
-            let run_stop = StopFlag::new();
-            let finished = StopFlag::new();
-            let watcher = {
-                let (rx, run_stop, outer) = (ctl_rx.clone(), run_stop.clone(), stop.clone());
-                let (finished, gone) = (finished.clone(), launcher_gone.clone());
-                std::thread::spawn(move || loop {
-                    match rx.recv_timeout(Duration::from_millis(50)) {
-                        Ok(ToMember::Stop { at_ns }) => {
-                            run_stop.stop();
-                            return Some(Nanos(at_ns));
-                        }
-                        Ok(_) => {}
-                        Err(RecvTimeoutError::Disconnected) => return None,
-                        Err(RecvTimeoutError::Timeout)
-                            if outer.is_stopped() || gone.is_stopped() =>
-                        {
-                            run_stop.stop();
-                            return None;
-                        }
-                        Err(RecvTimeoutError::Timeout) if finished.is_stopped() => return None,
-                        Err(RecvTimeoutError::Timeout) => {}
-                    }
-                })
-            };
-            let r = run_real(local_nodes, cfg.duration, &run_stop, &real);
-            let mut timing: Vec<NodeTiming> = spec
-                .nodes
-                .iter()
-                .map(|n| NodeTiming {
-                    node: n.name.clone(),
-                    ..NodeTiming::default()
-                })
-                .collect();
-            for (k, t) in r.timing.into_iter().enumerate() {
-                timing[index[k]] = t;
-            }
-            let stopped_by_launcher =
-                run_stop.is_stopped() && r.end.reason == crate::scheduler::EndReason::Interrupted;
-            if !stopped_by_launcher {
-                send(&ToLauncher::Ended {
-                    process: opts.process.clone(),
-                    end: r.end.clone(),
-                })?;
-            }
-            // Report at the run's end as the launcher saw it (its stop), else our own.
-            finished.stop();
-            let launcher_at = watcher.join().ok().flatten();
-            let at = match launcher_at {
-                Some(at) if stopped_by_launcher => at,
-                _ => r.end.at,
-            };
-            let ticks_now: Vec<u64> = ticks.iter().map(|t| t.load(Ordering::Relaxed)).collect();
-            Ok(GraphState::capture(&handles, at, &ticks_now, Some(timing)))
-        }
+        crate::ClockKind::Real => match recv(&ctl_rx, stop, &launcher_gone)? {
+            // Ended before it started: report the graph as built.
+            ToMember::Stop { .. } => Ok(GraphState::capture(&handles, Nanos::ZERO, &[], None)),
+            ToMember::Start { start_mono_ns } => real_clock(
+                nodes,
+                &local,
+                &cfg,
+                &handles,
+                start_mono_ns,
+                &ctl_rx,
+                stop,
+                &launcher_gone,
+                &forward_after,
+                &ticks,
+                &run_time,
+                &|m| send(m),
+                &opts.process,
+            ),
+            other => Err(DistError::Peer(format!("expected a start, got {other:?}"))),
+        },
     };
     stats_done.stop();
     let _ = stats_thread.join();
@@ -490,6 +442,118 @@ pub fn run_member(opts: &MemberOptions, stop: &StopFlag) -> Result<(), DistError
     drop(subscribers);
     let _ = session.close().wait();
     Ok(())
+}
+
+/// The real clock: run the local nodes on their own threads from the shared start instant
+/// (a process that joined late starts each node at its next tick on the run's grid), until
+/// the duration, a local stop (the fall) or the launcher's stop.
+#[allow(clippy::too_many_arguments)]
+fn real_clock(
+    nodes: Vec<Box<dyn Node>>,
+    local: &[usize],
+    cfg: &RunConfig,
+    handles: &crate::graph::GraphHandles,
+    start: u64,
+    ctl_rx: &Receiver<ToMember>,
+    stop: &StopFlag,
+    launcher_gone: &StopFlag,
+    forward_after: &Arc<dyn Fn(usize) -> Option<u64> + Send + Sync>,
+    ticks: &Arc<Vec<AtomicU64>>,
+    run_time: &Arc<AtomicU64>,
+    send: &dyn Fn(&ToLauncher) -> zenoh::Result<()>,
+    process: &str,
+) -> Result<GraphState, DistError> {
+    let spec = &cfg.graph;
+    // Joined late (a restart): the first tick of each node is its next one on the grid.
+    let late = Nanos(wire::mono_now_ns().saturating_sub(start));
+    let mut picked: Vec<(usize, Box<dyn Node>)> = nodes
+        .into_iter()
+        .enumerate()
+        .filter(|(i, _)| local.contains(i))
+        .collect();
+    let index: Vec<usize> = picked.iter().map(|(i, _)| *i).collect();
+    let local_nodes: Vec<Box<dyn Node>> = picked.drain(..).map(|(_, n)| n).collect();
+    let hook_ticks = ticks.clone();
+    let hook_time = run_time.clone();
+    let hook_index = index.clone();
+    let fwd = forward_after.clone();
+    let real = RealOptions {
+        spin_margin: cfg.spin_margin,
+        phase_offsets: index
+            .iter()
+            .map(|&i| {
+                let first = cfg.phase_offsets.get(i).copied().unwrap_or(Nanos::ZERO);
+                let period = handles.rates[i].period();
+                if late <= first || period.0 == 0 {
+                    first
+                } else {
+                    let k = (late.0 - first.0).div_ceil(period.0);
+                    Nanos(first.0.saturating_add(k.saturating_mul(period.0)))
+                }
+            })
+            .collect(),
+        rt_priority: cfg.rt_priority,
+        on_tick: Some(Arc::new(move |k: usize, _: &str, now: Nanos, _| {
+            let i = hook_index[k];
+            hook_ticks[i].fetch_add(1, Ordering::Relaxed);
+            hook_time.fetch_max(now.0, Ordering::Relaxed);
+            fwd(i);
+        })),
+        pause: None,
+        start: Some(wire::instant_at_mono(start)),
+    };
+    // The launcher's stop (another process ended the run, or Ctrl-C there).
+    let run_stop = StopFlag::new();
+    let finished = StopFlag::new();
+    let watcher = {
+        let (rx, run_stop, outer) = (ctl_rx.clone(), run_stop.clone(), stop.clone());
+        let (finished, gone) = (finished.clone(), launcher_gone.clone());
+        std::thread::spawn(move || loop {
+            match rx.recv_timeout(Duration::from_millis(50)) {
+                Ok(ToMember::Stop { at_ns, .. }) => {
+                    run_stop.stop();
+                    return Some(Nanos(at_ns));
+                }
+                Ok(_) => {}
+                Err(RecvTimeoutError::Disconnected) => return None,
+                Err(RecvTimeoutError::Timeout) if outer.is_stopped() || gone.is_stopped() => {
+                    run_stop.stop();
+                    return None;
+                }
+                Err(RecvTimeoutError::Timeout) if finished.is_stopped() => return None,
+                Err(RecvTimeoutError::Timeout) => {}
+            }
+        })
+    };
+    let r = run_real(local_nodes, cfg.duration, &run_stop, &real);
+    let mut timing: Vec<NodeTiming> = spec
+        .nodes
+        .iter()
+        .map(|n| NodeTiming {
+            node: n.name.clone(),
+            ..NodeTiming::default()
+        })
+        .collect();
+    for (k, t) in r.timing.into_iter().enumerate() {
+        timing[index[k]] = t;
+    }
+    let stopped_by_launcher =
+        run_stop.is_stopped() && r.end.reason == crate::scheduler::EndReason::Interrupted;
+    if !stopped_by_launcher {
+        send(&ToLauncher::Ended {
+            process: process.to_string(),
+            end: r.end.clone(),
+        })?;
+    }
+    // Report at the run's end as the launcher saw it (its stop), else our own.
+    finished.stop();
+    let launcher_at = watcher.join().ok().flatten();
+    let at = match launcher_at {
+        Some(at) if stopped_by_launcher => at,
+        _ => r.end.at,
+    };
+    let ticks_now: Vec<u64> = ticks.iter().map(|t| t.load(Ordering::Relaxed)).collect();
+    Ok(GraphState::capture(&handles, at, &ticks_now, Some(timing)))
 }
 
 /// The virtual clock: tick what the launcher grants, in its order, until it stops the run.
@@ -563,7 +627,20 @@ fn lockstep(
                     failed,
                 })?;
             }
-            ToMember::Stop { at_ns } => {
+            ToMember::Stop { at_ns, need } => {
+                // The last messages sent to us are delivered before the counters are read.
+                for (t, seq) in need {
+                    let inbound = spec.topics.get(t).is_some_and(|ts| {
+                        ts.subscriber.is_some_and(|s| local.contains(&s.0))
+                            && !local.contains(&ts.publisher.0)
+                    });
+                    if inbound && !arrivals.wait_for(TopicId(t), seq, stop) {
+                        return Err(DistError::Peer(format!(
+                            "message {seq} on {} did not arrive before the end",
+                            spec.topic(TopicId(t)).name
+                        )));
+                    }
+                }
                 let ticks: Vec<u64> = ticks.iter().map(|t| t.load(Ordering::Relaxed)).collect();
                 return Ok(GraphState::capture(handles, Nanos(at_ns), &ticks, None));
             }
@@ -572,34 +649,33 @@ fn lockstep(
     }
 }
 
-/// The next control message, or an error after [`REPLY_TIMEOUT`] or a stop.
-fn recv(rx: &Receiver<ToMember>, stop: &StopFlag) -> Result<ToMember, DistError> {
-    let deadline = Instant::now() + REPLY_TIMEOUT;
+/// The next control message: waits as long as the launcher lives (its liveliness token),
+/// so processes started by hand may join minutes apart; an error on a stop or when the
+/// launcher is gone.
+fn recv(rx: &Receiver<ToMember>, stop: &StopFlag, gone: &StopFlag) -> Result<ToMember, DistError> {
     loop {
         match rx.recv_timeout(Duration::from_millis(50)) {
             Ok(m) => return Ok(m),
             Err(RecvTimeoutError::Disconnected) => {
                 return Err(DistError::Peer("the launcher's channel closed".into()))
             }
-            Err(RecvTimeoutError::Timeout) => {
-                if stop.is_stopped() {
-                    return Err(DistError::Peer("interrupted".into()));
-                }
-                if Instant::now() >= deadline {
-                    return Err(DistError::Peer(format!(
-                        "the launcher did not answer within {} s",
-                        REPLY_TIMEOUT.as_secs()
-                    )));
-                }
+            Err(RecvTimeoutError::Timeout) if gone.is_stopped() => {
+                return Err(DistError::Peer("the launcher went away".into()))
             }
+            Err(RecvTimeoutError::Timeout) if stop.is_stopped() => {
+                return Err(DistError::Peer("interrupted".into()))
+            }
+            Err(RecvTimeoutError::Timeout) => {}
         }
     }
 }
 
-/// Wait until `p` has a matching subscriber (`who`, for the error).
+/// Wait until `p` has a matching subscriber (`who`, for the error): while the launcher
+/// lives when `gone` watches it, else for [`REPLY_TIMEOUT`].
 fn wait_matching(
     p: &zenoh::pubsub::Publisher<'_>,
     stop: &StopFlag,
+    gone: Option<&StopFlag>,
     who: &str,
 ) -> Result<(), DistError> {
     let deadline = Instant::now() + REPLY_TIMEOUT;
@@ -610,7 +686,10 @@ fn wait_matching(
         if stop.is_stopped() {
             return Err(DistError::Peer("interrupted".into()));
         }
-        if Instant::now() >= deadline {
+        if gone.is_some_and(StopFlag::is_stopped) {
+            return Err(DistError::Peer("the launcher went away".into()));
+        }
+        if gone.is_none() && Instant::now() >= deadline {
             return Err(DistError::Peer(format!(
                 "{who} did not subscribe to {} within {} s",
                 p.key_expr(),
@@ -636,6 +715,7 @@ fn live_stats(
     let owns = |id: NodeId| mine.contains(&id);
     let rates = handles.rates_hz();
     LiveStats {
+        graph: spec.name.clone(),
         process: process.to_string(),
         pid: std::process::id(),
         t_ns: run_time.load(Ordering::Relaxed),

@@ -184,6 +184,17 @@ pub fn check_keys(spec: &GraphSpec) -> Result<(), DistError> {
             )));
         }
     }
+    // Every process builds its own plant; only the one the actuator steps moves.
+    let plant = spec.process_of(spec.chain.actuator);
+    for (i, n) in spec.nodes.iter().enumerate() {
+        let p = spec.process_of(crate::graph::NodeId(i));
+        if n.kind == crate::graph::NodeKind::Sensor && p != plant {
+            return Err(DistError::Usage(format!(
+                "sensor '{}' is placed in process '{p}' but the actuator in '{plant}': the nodes that touch the plant must share one process",
+                n.name
+            )));
+        }
+    }
     if spec.placement().len() > MAX_PROCESSES {
         return Err(DistError::Usage(format!(
             "graph '{}' places its nodes in {} processes (at most {MAX_PROCESSES})",

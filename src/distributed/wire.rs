@@ -22,6 +22,10 @@ pub const MAX_SAMPLE_BYTES: usize = 1024;
 /// graph file is at most [`crate::input`]'s bound).
 pub const MAX_CONTROL_BYTES: usize = 4 << 20;
 
+/// The largest sequence number accepted: an hour at 10 kHz is 3.6 × 10⁷ messages; this
+/// leaves room and keeps every counter far from overflow.
+pub const MAX_SEQ: u64 = 1 << 40;
+
 /// A message's payload on the wire, by message type.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub enum WireData {
@@ -130,7 +134,8 @@ impl WireSample {
         postcard::to_allocvec(self).unwrap_or_default()
     }
 
-    /// Decode, refusing anything over [`MAX_SAMPLE_BYTES`] or malformed.
+    /// Decode, refusing anything over [`MAX_SAMPLE_BYTES`] or malformed (a `seq` beyond
+    /// [`MAX_SEQ`] too: no run publishes that many, and counters must not overflow).
     ///
     /// # Errors
     /// One line.
@@ -141,7 +146,12 @@ impl WireSample {
                 bytes.len()
             ));
         }
-        postcard::from_bytes(bytes).map_err(|e| format!("a malformed sample: {e}"))
+        let s: WireSample =
+            postcard::from_bytes(bytes).map_err(|e| format!("a malformed sample: {e}"))?;
+        if s.seq > MAX_SEQ {
+            return Err(format!("a sample numbered {} (at most {MAX_SEQ})", s.seq));
+        }
+        Ok(s)
     }
 }
 
@@ -220,6 +230,9 @@ pub enum ToMember {
     Welcome {
         /// The settings.
         setup: Box<Setup>,
+        /// The launcher's `CLOCK_MONOTONIC` when it sent this, ns: a real-clock run needs
+        /// one host's clock (a member compares it with its own).
+        launcher_mono_ns: u64,
     },
     /// Not joined, and why (one line).
     Reject {
@@ -241,10 +254,15 @@ pub enum ToMember {
         /// The input message the tick must see, if its publisher is remote.
         need: Option<u64>,
     },
-    /// The run ended at run time `at_ns`: report and leave.
+    /// The run ended at run time `at_ns`: once the local copies of the input topics hold
+    /// the messages `need` (topic index, seq: the last its publisher sent; virtual clock),
+    /// report and leave.
     Stop {
         /// Run time of the end, ns.
         at_ns: u64,
+        /// Messages still to arrive before the report.
+        #[serde(default)]
+        need: Vec<(usize, u64)>,
     },
 }
 
@@ -344,6 +362,11 @@ mod tests {
         assert_eq!(WireSample::decode(&s.encode()).unwrap(), s);
         assert!(WireSample::decode(&[0xff; 3]).is_err());
         assert!(WireSample::decode(&vec![0; MAX_SAMPLE_BYTES + 1]).is_err());
+        let huge = WireSample {
+            seq: u64::MAX,
+            ..s.clone()
+        };
+        assert!(WireSample::decode(&huge.encode()).is_err());
         assert!(decode_json::<ToMember>(b"{\"msg\":\"nope\"}").is_err());
     }
 

@@ -1225,7 +1225,8 @@ fn node_params(cx: &Ctx<'_>, kind: NodeKind, r: &RawNode) -> Result<NodeParams, 
     })
 }
 
-fn valid_node_name(s: &str) -> bool {
+/// A node or process name: 1 to 32 letters, digits, `_` or `-` (also a key-expression chunk).
+pub fn valid_node_name(s: &str) -> bool {
     (1..=32).contains(&s.len())
         && s.chars()
             .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-')
