@@ -553,7 +553,7 @@ fn real_clock(
         _ => r.end.at,
     };
     let ticks_now: Vec<u64> = ticks.iter().map(|t| t.load(Ordering::Relaxed)).collect();
-    Ok(GraphState::capture(&handles, at, &ticks_now, Some(timing)))
+    Ok(GraphState::capture(handles, at, &ticks_now, Some(timing)))
 }
 
 /// The virtual clock: tick what the launcher grants, in its order, until it stops the run.
