@@ -228,7 +228,7 @@ fn table(
         "{:<10} {:>7} {:<10} {:<9} {:>8} {:>8} {:>10} {:<6}",
         "PROCESS", "PID", "NODE", "KIND", "RATE_HZ", "TICKS", "MEAS_HZ", "ALIVE"
     );
-    let mut wire: BTreeMap<String, (u64, f64, f64)> = BTreeMap::new();
+    let mut wire: BTreeMap<String, (f64, f64)> = BTreeMap::new();
     let mut topics = Vec::new();
     for (m, prev) in seen.values() {
         let p = &m.process;
@@ -270,8 +270,8 @@ fn table(
             };
             topics.push((name.clone(), rate, *st));
         }
-        for (name, n, p50, p99) in &m.wire {
-            wire.insert(name.clone(), (*n, *p50, *p99));
+        for w in &m.wire {
+            wire.insert(w.topic.clone(), (w.p50_us, w.p99_us));
         }
     }
     let _ = writeln!(
@@ -283,7 +283,7 @@ fn table(
     for (name, rate, st) in topics {
         let (p50, p99) = wire
             .get(&name)
-            .map_or(("in-proc".to_string(), "-".to_string()), |(_, a, b)| {
+            .map_or(("in-proc".to_string(), "-".to_string()), |(a, b)| {
                 (format!("{a:.0} µs"), format!("{b:.0} µs"))
             });
         let _ = writeln!(

@@ -340,6 +340,19 @@ impl ExerciseFile {
         let p = |k: &str| self.prediction.get(k);
         let unreadable =
             |k: &str| format!("Your prediction `{k}` is missing or not of the expected type.");
+        // ex4 and ex5: a predicted survival (`key`, true or false) beside the measured one.
+        let survives = |key: &str, what: &str, measured: bool| {
+            let measured = if measured {
+                "it stayed up on every seed"
+            } else {
+                "it fell"
+            };
+            match p(key).and_then(toml::Value::as_bool) {
+                Some(true) => format!("You predicted the pole stays up {what}; {measured}."),
+                Some(false) => format!("You predicted the pole falls {what}; {measured}."),
+                None => unreadable(key),
+            }
+        };
         match *outcome {
             Outcome::Ex1 { fails_at_hz } => {
                 let measured = fails_at_hz.map_or("it never fell in the range".to_string(), |hz| {
@@ -388,18 +401,6 @@ impl ExerciseFile {
                 lifespan_balances,
                 lifespan_ms,
             } => {
-                let survives = |key: &str, what: &str, measured: bool| {
-                    let measured = if measured {
-                        "it stayed up on every seed"
-                    } else {
-                        "it fell"
-                    };
-                    match p(key).and_then(toml::Value::as_bool) {
-                        Some(true) => format!("You predicted the pole stays up {what}; {measured}."),
-                        Some(false) => format!("You predicted the pole falls {what}; {measured}."),
-                        None => unreadable(key),
-                    }
-                };
                 let latency = match (p("fifo_latency_at_fall_ms").and_then(number), fifo_latency_at_fall_ms) {
                     (None, _) => unreadable("fifo_latency_at_fall_ms"),
                     (Some(n), None) => format!(
@@ -429,18 +430,6 @@ impl ExerciseFile {
                 lossless_latency_ms,
                 losses: (low, high),
             } => {
-                let survives = |key: &str, what: &str, measured: bool| {
-                    let measured = if measured {
-                        "it stayed up on every seed"
-                    } else {
-                        "it fell"
-                    };
-                    match p(key).and_then(toml::Value::as_bool) {
-                        Some(true) => format!("You predicted the pole stays up {what}; {measured}."),
-                        Some(false) => format!("You predicted the pole falls {what}; {measured}."),
-                        None => unreadable(key),
-                    }
-                };
                 let pct = |p: f64| format!("{}%", p * 100.0);
                 let named = |set: &[bool; 3]| -> String {
                     let v: Vec<&str> = EX5_REACTIONS

@@ -63,6 +63,8 @@ enum Admission {
     Welcomed,
     /// Refused, and told why.
     Refused(String),
+    /// Refused: a process of this graph with another graph file (told why).
+    OtherGraph(String),
     /// Not a join, or from a name no key can answer.
     Ignored,
 }
@@ -444,10 +446,12 @@ pub fn launch(
         }
         if *graph_sha256 != hash {
             let theirs: String = graph_sha256.chars().take(12).collect();
-            return refuse(format!(
+            let reason = format!(
                 "process '{process}' was given a different graph file than the launcher (SHA-256 {theirs}… against {}…)",
                 &hash[..12]
-            ));
+            );
+            let _ = refuse(reason.clone());
+            return Admission::OtherGraph(reason);
         }
         if running {
             if cfg.clock == ClockKind::Virtual {
@@ -506,9 +510,7 @@ pub fn launch(
             Some(m @ ToLauncher::Join { .. }) => match admit(&m, false, &[], &joined) {
                 Admission::Welcomed => joined.push(m.process().to_string()),
                 // Before the run, a process with another graph file is the user's mistake.
-                Admission::Refused(r)
-                    if names.iter().any(|p| p == m.process()) && r.contains("graph file") =>
-                {
+                Admission::OtherGraph(r) => {
                     std::thread::sleep(Duration::from_millis(300)); // let the refusal reach it
                     return Err(DistError::Usage(r));
                 }
@@ -650,7 +652,9 @@ pub fn launch(
                                 rejoining.push(m.process().to_string());
                                 say(&format!("process '{}' rejoined", m.process()));
                             }
-                            Admission::Refused(r) => say(&format!("refused a join: {r}")),
+                            Admission::Refused(r) | Admission::OtherGraph(r) => {
+                                say(&format!("refused a join: {r}"))
+                            }
                             Admission::Ignored => {}
                         }
                     }

@@ -88,8 +88,8 @@ pub struct LiveStats {
     /// The topics whose counters it holds (it runs their subscriber, or their publisher when
     /// nobody subscribes): name and counters.
     pub topics: Vec<(String, crate::topic::TopicStats)>,
-    /// Per inbound topic: name, samples received, over-the-wire latency p50 and p99, µs.
-    pub wire: Vec<(String, u64, f64, f64)>,
+    /// Per inbound topic, its over-the-wire latency so far.
+    pub wire: Vec<wire::WireLink>,
 }
 
 /// Run placement group `opts.process` until the launcher ends the run (or `stop`).
@@ -378,6 +378,7 @@ pub fn run_member(opts: &MemberOptions, stop: &StopFlag) -> Result<(), DistError
         crate::ClockKind::Virtual => lockstep(
             nodes,
             &local,
+            &inbound,
             &spec,
             &handles,
             &ctl_rx,
@@ -414,23 +415,7 @@ pub fn run_member(opts: &MemberOptions, stop: &StopFlag) -> Result<(), DistError
     stats_done.stop();
     let _ = stats_thread.join();
     let state = result?;
-    let wire = inbound
-        .iter()
-        .map(|&t| {
-            let l = crate::graph::lock(&wire_latency[t.0]);
-            let us = |n: Option<Nanos>| {
-                n.map_or(0.0, |n| crate::metrics::round_to(n.as_micros_f64(), 1))
-            };
-            wire::WireLink {
-                topic: spec.topic(t).name.clone(),
-                process: opts.process.clone(),
-                samples: l.count(),
-                p50_us: us(l.quantile(0.5)),
-                p99_us: us(l.quantile(0.99)),
-                max_us: us(l.max()),
-            }
-        })
-        .collect();
+    let wire = wire_links(&opts.process, &spec, &inbound, &wire_latency);
     send(&ToLauncher::Report {
         process: opts.process.clone(),
         state: Box::new(state),
@@ -561,6 +546,7 @@ fn real_clock(
 fn lockstep(
     mut nodes: Vec<Box<dyn Node>>,
     local: &[usize],
+    inbound: &[TopicId],
     spec: &GraphSpec,
     handles: &crate::graph::GraphHandles,
     ctl: &Receiver<ToMember>,
@@ -630,11 +616,7 @@ fn lockstep(
             ToMember::Stop { at_ns, need } => {
                 // The last messages sent to us are delivered before the counters are read.
                 for (t, seq) in need {
-                    let inbound = spec.topics.get(t).is_some_and(|ts| {
-                        ts.subscriber.is_some_and(|s| local.contains(&s.0))
-                            && !local.contains(&ts.publisher.0)
-                    });
-                    if inbound && !arrivals.wait_for(TopicId(t), seq, stop) {
+                    if inbound.contains(&TopicId(t)) && !arrivals.wait_for(TopicId(t), seq, stop) {
                         return Err(DistError::Peer(format!(
                             "message {seq} on {} did not arrive before the end",
                             spec.topic(TopicId(t)).name
@@ -738,13 +720,32 @@ fn live_stats(
             .filter(|(_, t)| t.subscriber.map_or(owns(t.publisher), owns))
             .map(|(i, t)| (t.name.clone(), handles.topic(TopicId(i)).stats()))
             .collect(),
-        wire: inbound
-            .iter()
-            .map(|&t| {
-                let l = crate::graph::lock(&lat[t.0]);
-                let us = |q: f64| l.quantile(q).map_or(0.0, |n| n.as_micros_f64());
-                (spec.topic(t).name.clone(), l.count(), us(0.5), us(0.99))
-            })
-            .collect(),
+        wire: wire_links(process, spec, inbound, lat),
     }
+}
+
+/// The over-the-wire latency of each inbound topic so far (µs, to 0.1).
+fn wire_links(
+    process: &str,
+    spec: &GraphSpec,
+    inbound: &[TopicId],
+    lat: &[Mutex<LatencyStats>],
+) -> Vec<wire::WireLink> {
+    inbound
+        .iter()
+        .map(|&t| {
+            let l = crate::graph::lock(&lat[t.0]);
+            let us = |n: Option<Nanos>| {
+                n.map_or(0.0, |n| crate::metrics::round_to(n.as_micros_f64(), 1))
+            };
+            wire::WireLink {
+                topic: spec.topic(t).name.clone(),
+                process: process.to_string(),
+                samples: l.count(),
+                p50_us: us(l.quantile(0.5)),
+                p99_us: us(l.quantile(0.99)),
+                max_us: us(l.max()),
+            }
+        })
+        .collect()
 }
