@@ -28,8 +28,9 @@ pub struct Cli {
 pub enum Command {
     /// Run the graph once, headless, and print the chapter's summary.
     Run(RunArgs),
-    /// Open the terminal lab (the default on a terminal).
-    Lab(RunArgs),
+    /// Open the terminal lab (the default on a terminal); `--attach` watches a graph that
+    /// runs across processes.
+    Lab(LabArgs),
     /// Re-run a lab session's virtual-clock runs headless from its command log.
     Replay(ReplayArgs),
     /// Real-clock timing benchmark: per-node tick lateness and CPU at given rates.
@@ -59,12 +60,29 @@ pub struct LaunchArgs {
     /// Without it the graph runs in this one process, as `ratelab run`.
     #[arg(long)]
     pub processes: bool,
-    /// The Zenoh endpoint to listen on (default tcp/127.0.0.1:<a free port>).
+    /// The Zenoh endpoint to listen on (default tcp/127.0.0.1:7447, or a free port when that
+    /// is taken).
     #[arg(long, value_name = "tcp/HOST:PORT")]
     pub listen: Option<String>,
     /// Start no processes: wait for each group to join with `ratelab node … --connect`.
     #[arg(long)]
     pub no_spawn: bool,
+    /// The run flags.
+    #[command(flatten)]
+    pub run: RunArgs,
+}
+
+/// `ratelab lab`.
+#[derive(Debug, Clone, Args)]
+pub struct LabArgs {
+    /// Watch a graph already running across processes (`ratelab launch --processes`)
+    /// instead of running one here: nodes alive, rates, topics, latency, the plant. Read-only;
+    /// the run flags do not apply.
+    #[arg(long)]
+    pub attach: bool,
+    /// With --attach: the launcher's endpoint (repeatable).
+    #[arg(long, value_name = "tcp/HOST:PORT", requires = "attach", default_value = ratelab::distributed::DEFAULT_ENDPOINT)]
+    pub connect: Vec<String>,
     /// The run flags.
     #[command(flatten)]
     pub run: RunArgs,

@@ -3,14 +3,17 @@
 
 use crate::cli::{LaunchArgs, NodeArgs, TopArgs};
 use crate::headless;
-use ratelab::distributed::launcher::{launch, LaunchOptions};
+use ratelab::distributed::launcher::{launch, LaunchOptions, LaunchReport};
 use ratelab::distributed::member::{run_member, LiveStats, MemberOptions};
+use ratelab::distributed::monitor::Watch;
 use ratelab::distributed::zenoh::{self, Wait};
 use ratelab::distributed::{check_endpoint, open_session};
 use ratelab::graph::spec::{DEFAULT_GRAPH_TOML, MAX_FILE_BYTES};
 use ratelab::scheduler::StopFlag;
+use ratelab::session::Telemetry;
 use ratelab::RunReport;
 use std::collections::BTreeMap;
+use std::io::IsTerminal;
 use std::path::Path;
 use std::time::{Duration, Instant};
 
@@ -22,8 +25,10 @@ fn graph_bytes(path: Option<&Path>) -> anyhow::Result<Vec<u8>> {
     }
 }
 
-/// `ratelab launch [GRAPH] [--processes]`.
-pub fn run_launch(a: &LaunchArgs, stop: StopFlag) -> anyhow::Result<()> {
+/// `ratelab launch [GRAPH] [--processes]`. On a terminal (and without `--headless`) a launch
+/// across processes opens the lab on it (as `ratelab lab --attach` would); otherwise it
+/// prints progress lines and the summary.
+pub fn run_launch(a: &LaunchArgs, force_headless: bool, stop: StopFlag) -> anyhow::Result<()> {
     let mut run = a.run.clone();
     match (&a.file, &run.graph.graph) {
         (Some(_), Some(_)) => anyhow::bail!("give the graph once: as GRAPH or as --graph"),
@@ -36,11 +41,16 @@ pub fn run_launch(a: &LaunchArgs, stop: StopFlag) -> anyhow::Result<()> {
         }
         return headless::run_headless(&run, stop).map(|_| ());
     }
-    if run.record.is_some() || run.spawn || run.session.is_some() {
-        anyhow::bail!("--record, --spawn and --session are not available with --processes yet: record an in-process run");
+    if run.session.is_some() {
+        anyhow::bail!("--session is not available with --processes: a launch takes no live commands to log (its lab only watches)");
     }
-    let cfg = headless::config_from_args(&run)?;
-    ratelab::checkpoint::load_policy(&run.policy)?; // a bad --policy fails before any process starts
+    let on_terminal =
+        !force_headless && std::io::stdout().is_terminal() && std::io::stdin().is_terminal();
+    let mut cfg = headless::config_from_args(&run)?;
+    if on_terminal && run.duration.is_none() && !run.smoke {
+        cfg.duration = ratelab::session::UNBOUNDED; // as the lab: until you quit
+    }
+    let brain = ratelab::checkpoint::load_policy(&run.policy)?; // a bad --policy fails before any process starts
     if let Some(dir) = &run.out {
         std::fs::create_dir_all(dir)
             .map_err(|e| anyhow::anyhow!("cannot create --out folder {}: {e}", dir.display()))?;
@@ -76,9 +86,14 @@ pub fn run_launch(a: &LaunchArgs, stop: StopFlag) -> anyhow::Result<()> {
         placement.len(),
         placement.join(", ")
     );
-    let report = launch(&cfg, &opts, &stop, &|line| {
-        println!("[ratelab] launch: {line}")
-    })?;
+    let recording = headless::open_recording(&run, &cfg, &brain.label())?;
+    let report = if on_terminal || recording.is_some() {
+        launch_watched(cfg, opts, &stop, on_terminal, recording.as_ref())?
+    } else {
+        launch(&cfg, &opts, &stop, &|line| {
+            println!("[ratelab] launch: {line}")
+        })?
+    };
     let (wire, lockstep, missing) = (report.wire, report.lockstep, report.missing);
     let report = RunReport {
         metrics: report.metrics,
@@ -103,12 +118,196 @@ pub fn run_launch(a: &LaunchArgs, stop: StopFlag) -> anyhow::Result<()> {
         ratelab::output::write_file(&dir.join("metrics.json"), run.force, json.as_bytes())?;
         println!("[ratelab] wrote {}", dir.join("metrics.json").display());
     }
+    if let Some(r) = &recording {
+        println!("[ratelab] recording: {}", r.path().display());
+        println!("[ratelab] open it with: rerun {}", r.path().display());
+    }
     anyhow::ensure!(
         missing.is_empty(),
         "process(es) {} did not report: their nodes' figures are missing from the summary",
         missing.join(", ")
     );
     Ok(())
+}
+
+/// Run the launch on a thread and watch it ([`Watch`]): with `lab`, the lab on the
+/// terminal (when the user quits, the launch is stopped: every process it started); with
+/// `recording`, every merged step into it ([`ratelab::distributed::monitor::record`]),
+/// finished with the merged summary. The launcher's progress lines are printed as they come
+/// without the lab, and after the terminal is restored with it (the lab shows them
+/// meanwhile).
+fn launch_watched(
+    cfg: ratelab::RunConfig,
+    opts: LaunchOptions,
+    stop: &StopFlag,
+    lab: bool,
+    recording: Option<&ratelab::recording::Recording>,
+) -> anyhow::Result<LaunchReport> {
+    let (line_tx, line_rx) = crossbeam_channel::unbounded::<String>();
+    let launcher = {
+        let (stop, cfg) = (stop.clone(), cfg.clone());
+        std::thread::Builder::new()
+            .name("launcher".into())
+            .spawn(move || {
+                launch(&cfg, &opts, &stop, &|line| {
+                    let _ = line_tx.send(line.to_string());
+                })
+            })?
+    };
+    let joined = |launcher: std::thread::JoinHandle<Result<LaunchReport, _>>| match launcher.join()
+    {
+        Ok(r) => Ok(r?),
+        Err(_) => Err(anyhow::anyhow!("the launcher stopped unexpectedly")),
+    };
+    let mut held = Vec::new();
+    let mut line = |l: String| {
+        if lab {
+            held.push(l);
+        } else {
+            println!("[ratelab] launch: {l}");
+        }
+    };
+    // The launcher says where it listens first; the watcher connects there.
+    let endpoint = loop {
+        match line_rx.recv_timeout(Duration::from_millis(100)) {
+            Ok(l) => {
+                let ep = l.strip_prefix("listening on ").map(str::to_string);
+                line(l);
+                if let Some(ep) = ep {
+                    break ep;
+                }
+            }
+            Err(_) if launcher.is_finished() => return joined(launcher),
+            Err(_) => {}
+        }
+    };
+    let watch = match Watch::connect(
+        std::slice::from_ref(&endpoint),
+        Some(&cfg.graph.name),
+        ratelab::distributed::REPLY_TIMEOUT,
+        stop,
+    ) {
+        Ok(w) => w,
+        Err(e) => {
+            stop.stop();
+            let _ = joined(launcher);
+            return Err(e.into());
+        }
+    };
+    let policy = watch.setup.policy.clone();
+    let (lab_tx, lab_rx) = crossbeam_channel::unbounded::<Telemetry>();
+    let (rec_tx, rec_rx) = crossbeam_channel::unbounded::<Telemetry>();
+    let mut sinks = Vec::new();
+    if lab {
+        sinks.push(lab_tx);
+    }
+    let recorder = match recording {
+        Some(rec) => {
+            sinks.push(rec_tx);
+            let (rec, cfg) = (rec.clone(), cfg.clone());
+            Some(
+                std::thread::Builder::new()
+                    .name("recorder".into())
+                    .spawn(move || ratelab::distributed::monitor::record(&rec, &cfg, &rec_rx))?,
+            )
+        }
+        None => {
+            drop(rec_rx);
+            None
+        }
+    };
+    let (watch_stop, watcher) = spawn_watch(watch, sinks)?;
+    let lab_result = if lab {
+        let r = crate::tui::run_attached(policy, &cfg.graph, &lab_rx, stop);
+        stop.stop(); // the user quit: end the launch, if it is still running
+        r
+    } else {
+        while !launcher.is_finished() {
+            if let Ok(l) = line_rx.recv_timeout(Duration::from_millis(100)) {
+                line(l);
+            }
+        }
+        Ok(())
+    };
+    let report = joined(launcher);
+    for l in line_rx.try_iter() {
+        line(l);
+    }
+    // The processes' last figures left before their reports: they are in by now.
+    std::thread::sleep(Duration::from_millis(300));
+    watch_stop.stop();
+    let watched = watcher.join();
+    if let Some(r) = recorder {
+        r.join()
+            .map_err(|_| anyhow::anyhow!("the recorder stopped unexpectedly"))??;
+    }
+    for l in held {
+        println!("[ratelab] launch: {l}");
+    }
+    lab_result?;
+    let report = report?;
+    if let Some(rec) = recording {
+        rec.finish(&report.metrics, &report.end)?;
+    }
+    match watched {
+        Ok(r) => r?,
+        Err(_) => anyhow::bail!("the watcher stopped unexpectedly"),
+    }
+    Ok(report)
+}
+
+/// Start `watch` on a thread, its telemetry copied to every sink; returns its stop flag and
+/// the thread.
+fn spawn_watch(
+    watch: Watch,
+    sinks: Vec<crossbeam_channel::Sender<Telemetry>>,
+) -> anyhow::Result<(
+    StopFlag,
+    std::thread::JoinHandle<Result<(), ratelab::distributed::DistError>>,
+)> {
+    let stop = StopFlag::new();
+    let watch_stop = stop.clone();
+    let handle = std::thread::Builder::new()
+        .name("watch".into())
+        .spawn(move || {
+            let (tx, rx) = crossbeam_channel::unbounded::<Telemetry>();
+            let tee = std::thread::spawn(move || {
+                for t in rx {
+                    for s in &sinks {
+                        let _ = s.send(t.clone());
+                    }
+                }
+            });
+            let r = watch.run(&tx, &watch_stop);
+            drop(tx);
+            let _ = tee.join();
+            r
+        })?;
+    Ok((stop, handle))
+}
+
+/// `ratelab lab --attach [--connect EP]`: the lab on a graph running across processes.
+pub fn run_attach(connect: &[String], stop: StopFlag) -> anyhow::Result<()> {
+    for ep in connect {
+        check_endpoint("--connect", ep, false)?;
+    }
+    if !(std::io::stdout().is_terminal() && std::io::stdin().is_terminal()) {
+        anyhow::bail!(
+            "--attach opens the lab on a terminal; without one, `ratelab top --connect {}` prints the same figures as text",
+            connect.join(" --connect ")
+        );
+    }
+    let watch = Watch::connect(connect, None, Duration::from_secs(5), &stop)?;
+    let (policy, spec) = (watch.setup.policy.clone(), watch.cfg.graph.clone());
+    let (tx, rx) = crossbeam_channel::unbounded::<Telemetry>();
+    let (watch_stop, watcher) = spawn_watch(watch, vec![tx])?;
+    let lab = crate::tui::run_attached(policy, &spec, &rx, &stop);
+    watch_stop.stop();
+    match watcher.join() {
+        Ok(r) => r?,
+        Err(_) => anyhow::bail!("the watcher stopped unexpectedly"),
+    }
+    lab
 }
 
 /// `ratelab node --process NAME --connect EP`.

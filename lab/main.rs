@@ -177,13 +177,14 @@ fn main() -> ExitCode {
     }
     let result = match &cli.command {
         Some(Command::Run(args)) => headless(args, stop),
-        Some(Command::Lab(args)) => lab(args, stop),
+        Some(Command::Lab(args)) if args.attach => launch::run_attach(&args.connect, stop),
+        Some(Command::Lab(args)) => lab(&args.run, stop),
         Some(Command::Replay(args)) => replay(args),
         Some(Command::Bench(args)) => bench::run_bench(args, stop),
         Some(Command::Exercise(args)) => exercise::run_from_args(args),
         Some(Command::Sweep(args)) => sweep::run_sweep(args, &stop),
         Some(Command::Cliff(args)) => sweep::run_cliff(args, &stop),
-        Some(Command::Launch(args)) => launch::run_launch(args, stop),
+        Some(Command::Launch(args)) => launch::run_launch(args, cli.headless, stop),
         Some(Command::Node(args)) => launch::run_node(args, stop),
         Some(Command::Top(args)) => launch::run_top(args, stop),
         None => {

@@ -46,6 +46,12 @@ impl TopicCounters {
     pub fn as_slice(&self) -> &[TopicStats] {
         &self.stats[..self.len as usize]
     }
+    /// Replace topic `id`'s counters (an id past the end is ignored).
+    pub fn set(&mut self, id: TopicId, stats: TopicStats) {
+        if let Some(s) = self.stats[..self.len as usize].get_mut(id.0) {
+            *s = stats;
+        }
+    }
 }
 
 impl Serialize for TopicCounters {
@@ -54,8 +60,37 @@ impl Serialize for TopicCounters {
     }
 }
 
+impl<'de> Deserialize<'de> for TopicCounters {
+    /// A list of at most [`MAX_TOPICS`] counters (more is an error: the bytes may come from
+    /// the network, `crate::distributed`).
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        struct Bounded;
+        impl<'de> serde::de::Visitor<'de> for Bounded {
+            type Value = TopicCounters;
+            fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+                write!(f, "a list of at most {MAX_TOPICS} topic counters")
+            }
+            fn visit_seq<A: serde::de::SeqAccess<'de>>(
+                self,
+                mut seq: A,
+            ) -> Result<TopicCounters, A::Error> {
+                let mut c = TopicCounters::default();
+                while let Some(s) = seq.next_element::<TopicStats>()? {
+                    if c.len as usize == MAX_TOPICS {
+                        return Err(serde::de::Error::invalid_length(MAX_TOPICS + 1, &self));
+                    }
+                    c.stats[c.len as usize] = s;
+                    c.len += 1;
+                }
+                Ok(c)
+            }
+        }
+        d.deserialize_seq(Bounded)
+    }
+}
+
 /// One actuator tick.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct StepRecord {
     /// Actuator step number, from 1 (each steps the plant 20 ms).
     pub step: u64,

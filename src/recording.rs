@@ -1106,16 +1106,29 @@ impl Recording {
     /// An observer to hand to the graph: logs every actuator tick. When it is attached to
     /// the graph, the viewer layout for that graph is sent.
     pub fn observer(&self) -> Box<dyn StepObserver> {
-        Box::new(RecordingObserver {
+        Box::new(self.new_observer(GraphShape::default()))
+    }
+
+    /// An observer of a graph known as data rather than by its handles: one that runs in
+    /// other processes, whose figures arrive over the network
+    /// ([`crate::distributed::monitor::record`]). The viewer layout for `shape` is sent now;
+    /// [`StepObserver::attach`] is not needed (and would replace `shape`).
+    pub fn observer_for(&self, shape: GraphShape) -> Box<dyn StepObserver> {
+        self.attach(&shape);
+        Box::new(self.new_observer(shape))
+    }
+
+    fn new_observer(&self, shape: GraphShape) -> RecordingObserver {
+        RecordingObserver {
             rec: self.clone(),
-            shape: GraphShape::default(),
+            shape,
             last_state: None,
             window: VecDeque::new(),
             next_command: 0,
             qos_logged: Vec::new(),
             deadline_seen: Vec::new(),
             live_seen: Vec::new(),
-        })
+        }
     }
 
     /// Log one node tick's lateness (real clock), on the node's own thread.

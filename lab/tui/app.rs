@@ -46,6 +46,10 @@ fn short_brain(spec: &str) -> String {
         .map_or_else(|| spec.to_string(), |f| f.to_string_lossy().into_owned())
 }
 
+/// What a key that would change the graph says in an attached lab (a graph across
+/// processes, which takes no live changes yet).
+pub const READ_ONLY: &str = "read-only: live changes do not cross processes yet";
+
 /// The deadlines `d` cycles through on the selected topic, ms (0: none).
 pub const DEADLINES_MS: [f64; 5] = [0.0, 25.0, 50.0, 100.0, 200.0];
 /// The link losses `L` cycles through on the selected topic (probabilities).
@@ -112,6 +116,9 @@ pub struct App {
     message: Option<String>,
     /// When the message was set (a fresh one leads the footer for [`FRESH`]).
     message_at: Option<std::time::Instant>,
+    /// Watching a graph that runs across processes (`ratelab lab --attach`): the header's
+    /// note (`2 processes`); keys that would change the graph are refused.
+    attached: Option<String>,
     /// Set when the user asked to quit.
     pub quit: bool,
 }
@@ -153,8 +160,15 @@ impl App {
             typing: None,
             message: None,
             message_at: None,
+            attached: None,
             quit: false,
         }
+    }
+
+    /// Mark the lab as watching a graph across processes; `label` (`2 processes`) joins the
+    /// header and each node box names its process.
+    pub fn set_attached(&mut self, label: String) {
+        self.attached = Some(label);
     }
 
     /// A lab (scripted brain) fed with the telemetry of one deterministic virtual run with
@@ -239,6 +253,10 @@ impl App {
     }
 
     fn send(&mut self, c: Control) {
+        if self.attached.is_some() && !matches!(c, Control::Quit) {
+            self.say(READ_ONLY.to_string());
+            return;
+        }
         let _ = self.tx.send(c);
     }
 
@@ -349,9 +367,10 @@ impl App {
                         None => Verdict::Done,
                     },
                 };
-                self.say(match metrics.sched_warning() {
-                    Some(w) => format!("{reason} — {w}"),
-                    None => {
+                self.say(match (metrics.sched_warning(), &self.attached) {
+                    (Some(w), _) => format!("{reason} — {w}"),
+                    (None, Some(_)) => format!("{reason} — the launch is over · q quit"),
+                    (None, None) => {
                         format!("{reason} — keys set the next run · r/R reset · c clock · q quit")
                     }
                 });
@@ -600,15 +619,21 @@ impl App {
     fn node_view(&self, id: NodeId, layer: usize) -> NodeView {
         let empty = VecDeque::new();
         let q = self.ticks.get(id.0).unwrap_or(&empty);
+        // No tick within the window (a node whose process died): it runs at 0 Hz now.
+        let silent = q
+            .back()
+            .is_some_and(|(t, _)| self.now.saturating_sub(*t) > TICK_WINDOW);
         let (measured_hz, lateness_p99_us) = if self.clock == "real" && q.len() >= 2 {
             let span = (q.back().expect("len ≥ 2").0 - q.front().expect("len ≥ 2").0).as_secs_f64();
             let mut late: Vec<u64> = q.iter().map(|(_, l)| l.0).collect();
             late.sort_unstable();
             let p99 = late[((late.len() as f64 * 0.99).ceil() as usize).clamp(1, late.len()) - 1];
-            (
-                Some((q.len() - 1) as f64 / span.max(1e-9)),
-                Some(p99 as f64 / 1e3),
-            )
+            let hz = if silent {
+                0.0
+            } else {
+                (q.len() - 1) as f64 / span.max(1e-9)
+            };
+            (Some(hz), Some(p99 as f64 / 1e3))
         } else {
             (None, None)
         };
@@ -620,6 +645,7 @@ impl App {
             lateness_p99_us,
             selected: self.selected == Some(Selected::Node(id)),
             alive: self.alive.get(id.0).copied().flatten(),
+            process: self.attached.as_ref().map(|_| self.graph.process_of(id)),
         }
     }
 
@@ -730,6 +756,7 @@ impl App {
             typing: self.typing.clone(),
             message: self.message.clone(),
             message_fresh: self.message_at.is_some_and(|at| at.elapsed() < FRESH),
+            attached: self.attached.clone(),
         }
     }
 }

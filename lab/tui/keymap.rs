@@ -66,6 +66,17 @@ pub enum Msg {
     Cancel,
 }
 
+impl Msg {
+    /// Does it only change what the lab shows (a selection, the help, leaving)? Those are the
+    /// keys an attached lab, which watches a graph across processes, acts on.
+    pub fn only_views(self) -> bool {
+        matches!(
+            self,
+            Msg::SelectNext | Msg::SelectPrev | Msg::ToggleHelp | Msg::Back | Msg::Quit
+        )
+    }
+}
+
 /// One row of the key table: the keys, how the help and README name them, what they do,
 /// and the word the footer shows (if the footer shows them).
 pub struct Binding {
@@ -77,6 +88,13 @@ pub struct Binding {
     pub help: &'static str,
     /// The footer's compact form: (keys, word), or `None` when the footer leaves it out.
     pub footer: Option<(&'static str, &'static str)>,
+}
+
+impl Binding {
+    /// Do all its keys only change what the lab shows ([`Msg::only_views`])?
+    pub fn only_views(&self) -> bool {
+        self.keys.iter().all(|(_, m)| m.only_views())
+    }
 }
 
 use KeyCode::{BackTab, Char, Esc, Left, Right, Tab};

@@ -86,6 +86,57 @@ pub fn run_lab(settings: SessionSettings, stop: StopFlag) -> anyhow::Result<()> 
     );
     let session_file = settings.session_file.clone();
     let engine = Engine::new(settings, ctl_rx, tel_tx).spawn();
+    let result = on_terminal(&mut app, &tel_rx, &stop);
+    let _ = ctl_tx.send(Control::Quit);
+    if engine.join().is_err() {
+        anyhow::bail!("the lab's engine stopped unexpectedly");
+    }
+    if let Some(p) = session_file {
+        println!(
+            "[ratelab] session log: {} (replay: ratelab replay {})",
+            p.display(),
+            p.display()
+        );
+    }
+    result
+}
+
+/// Open the lab on a graph running across processes (`ratelab lab --attach`, or the lab of
+/// `ratelab launch --processes`): the same dashboard, fed with `telemetry` by a watcher
+/// ([`ratelab::distributed::monitor::Watch`]) instead of an engine in this process. It only
+/// watches: a key that would change the graph is answered with [`app::READ_ONLY`]. `policy`
+/// is the brain's spec, `spec` the graph. Returns when the user quits (or `stop` is set).
+///
+/// # Errors
+/// The terminal cannot be opened or drawn on.
+pub fn run_attached(
+    policy: String,
+    spec: &ratelab::graph::GraphSpec,
+    telemetry: &Receiver<Telemetry>,
+    stop: &StopFlag,
+) -> anyhow::Result<()> {
+    // Nothing listens for controls: an attached lab refuses them itself.
+    let (ctl_tx, _) = unbounded::<Control>();
+    let mut app = App::new(ctl_tx, policy, None, ratelab::session::Speed::Times(1.0));
+    app.set_attached(attached_label(spec));
+    on_terminal(&mut app, telemetry, stop)
+}
+
+/// The header's note on an attached graph: `2 processes`.
+pub fn attached_label(spec: &ratelab::graph::GraphSpec) -> String {
+    match spec.placement().len() {
+        1 => "1 process".to_string(),
+        n => format!("{n} processes"),
+    }
+}
+
+/// Read keys on a thread, open the terminal, run the loop until the user quits, and always
+/// restore the terminal.
+fn on_terminal(
+    app: &mut App,
+    telemetry: &Receiver<Telemetry>,
+    stop: &StopFlag,
+) -> anyhow::Result<()> {
     let (in_tx, in_rx) = bounded::<TermEvent>(INPUT_QUEUE);
     std::thread::Builder::new()
         .name("input".into())
@@ -106,19 +157,8 @@ pub fn run_lab(settings: SessionSettings, stop: StopFlag) -> anyhow::Result<()> 
             restore_and_report(info);
         }
     }));
-    let result = run_loop(&mut terminal, &mut app, &in_rx, &tel_rx, &stop);
+    let result = run_loop(&mut terminal, app, &in_rx, telemetry, stop);
     ratatui::restore();
-    let _ = ctl_tx.send(Control::Quit);
-    if engine.join().is_err() {
-        anyhow::bail!("the lab's engine stopped unexpectedly");
-    }
-    if let Some(p) = session_file {
-        println!(
-            "[ratelab] session log: {} (replay: ratelab replay {})",
-            p.display(),
-            p.display()
-        );
-    }
     result
 }
 
@@ -591,5 +631,56 @@ mod tests {
         let text = render(&app, 80, 24);
         assert!(text.contains("NODE FAILED"), "{text}");
         assert!(text.contains("node 'policy' failed: boom"), "{text}");
+    }
+
+    #[test]
+    fn an_attached_lab_names_each_nodes_process_and_draws_a_gone_one() {
+        let (mut app, rx) = app_after(virtual_cfg(50.0, 2), false);
+        let spec = ratelab::graph::GraphSpec::chapter();
+        app.set_attached(super::attached_label(&spec));
+        app.on_telemetry(Telemetry::Status {
+            now: ratelab::Nanos::SECOND,
+            paused: false,
+            speed: Speed::Times(1.0),
+            rates: vec![50.0; 3],
+            depths: vec![1, 1],
+            qos: vec![ratelab::qos::TopicQos::default(); 2],
+            alive: vec![Some(true), Some(false), Some(true)],
+            policy: "scripted".into(),
+        });
+        for (w, h) in [(80, 24), (120, 40)] {
+            let text = render(&app, w, h);
+            for needle in [
+                "2 processes",
+                "sensor@robot",
+                "policy@policy",
+                "actuator@robot",
+                "NOT ALIVE",
+            ] {
+                assert!(text.contains(needle), "{needle} at {w}x{h}:\n{text}");
+            }
+            assert_eq!(text.matches("NOT ALIVE").count(), 1, "{text}");
+            // The footer offers only the keys that act: no rate or depth keys.
+            let footer = text.lines().last().unwrap_or_default();
+            assert!(footer.contains("read-only"), "{footer}");
+            assert!(
+                !footer.contains("rate") && !footer.contains("depth"),
+                "{footer}"
+            );
+        }
+        // A key that would change the graph is refused in words, and sends nothing.
+        app.on_msg(Msg::RateUp);
+        let msg = app.view().message.unwrap_or_default();
+        assert!(msg.contains("read-only"), "{msg}");
+        assert!(rx.try_recv().is_err(), "an attached lab sent a control");
+        // The run's end in an attached lab offers no next run.
+        let report = run(&virtual_cfg(50.0, 1), Box::new(Scripted), RunOptions::new()).unwrap();
+        app.on_telemetry(Telemetry::Ended {
+            metrics: Box::new(report.metrics),
+            reason: EndReason::Duration,
+        });
+        let msg = app.view().message.unwrap_or_default();
+        assert!(msg.contains("the launch is over"), "{msg}");
+        assert!(!msg.contains("r/R reset"), "{msg}");
     }
 }

@@ -43,8 +43,11 @@ pub struct NodeView {
     /// Real clock: p99 tick lateness over recent ticks, µs.
     pub lateness_p99_us: Option<f64>,
     /// Liveliness with a lease: `Some(false)` when not heard from within it; `None`
-    /// without a lease.
+    /// without a lease. Attached to a graph across processes: its liveliness token.
     pub alive: Option<bool>,
+    /// Attached to a graph across processes: the process it runs in (the box's title
+    /// reads `policy@policy`).
+    pub process: Option<String>,
 }
 
 /// One topic arrow.
@@ -211,6 +214,8 @@ pub struct View {
     pub message: Option<String>,
     /// The notice is new: it leads the footer, so it is read even at 80 columns.
     pub message_fresh: bool,
+    /// Watching a graph across processes: the header's note (`2 processes`).
+    pub attached: Option<String>,
 }
 
 fn hz(x: f64) -> String {
@@ -282,6 +287,9 @@ fn render_status(v: &View, area: Rect, buf: &mut Buffer) {
         " ratelab ".black().on_cyan().bold(),
         format!(" {} clock", v.clock).into(),
     ];
+    if let Some(a) = &v.attached {
+        spans.push(format!(" · {a}").bold());
+    }
     if !v.speed.is_empty() {
         spans.push(format!(" {}", v.speed).into());
     }
@@ -455,17 +463,17 @@ fn render_node(n: &NodeView, area: Rect, buf: &mut Buffer) {
     if n.alive == Some(false) {
         lines.insert(0, Line::from("✗ NOT ALIVE").white().on_red().bold());
     }
+    let name = match &n.process {
+        Some(p) => format!("{}@{p}", n.name),
+        None => n.name.clone(),
+    };
     let (title, border) = if n.selected {
         (
-            Line::from(n.name.clone())
-                .black()
-                .on_yellow()
-                .bold()
-                .centered(),
+            Line::from(name).black().on_yellow().bold().centered(),
             Style::new().fg(Color::Yellow),
         )
     } else {
-        (Line::from(n.name.clone()).bold().centered(), Style::new())
+        (Line::from(name).bold().centered(), Style::new())
     };
     Paragraph::new(lines)
         .alignment(Alignment::Center)
@@ -895,8 +903,15 @@ fn render_footer(v: &View, area: Rect, buf: &mut Buffer) {
             "  (? keys)".dim(),
         ])
     } else {
-        let mut spans: Vec<Span> = vec![" ".into()];
-        for (keys, word) in BINDINGS.iter().filter_map(|b| b.footer) {
+        // Attached to a graph across processes, only the keys that change the view act.
+        let mut spans: Vec<Span> = match v.attached {
+            Some(_) => vec![" read-only │ ".dim()],
+            None => vec![" ".into()],
+        };
+        let shown = BINDINGS
+            .iter()
+            .filter(|b| v.attached.is_none() || b.only_views());
+        for (keys, word) in shown.filter_map(|b| b.footer) {
             spans.push(format!("{keys} ").bold());
             spans.push(format!("{word} ").into());
         }

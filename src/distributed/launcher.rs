@@ -29,7 +29,8 @@ pub struct LaunchOptions {
     pub graph_path: Option<PathBuf>,
     /// The graph file's bytes.
     pub graph_bytes: Vec<u8>,
-    /// Where to listen (`tcp/HOST:PORT`; default `tcp/127.0.0.1:<a free port>`).
+    /// Where to listen (`tcp/HOST:PORT`; default [`super::DEFAULT_ENDPOINT`], or a free port
+    /// on 127.0.0.1 when that is taken).
     pub listen: Option<String>,
     /// The brain spec (`--policy`).
     pub policy: String,
@@ -296,22 +297,34 @@ pub fn launch(
     cfg.validate().map_err(crate::run::RunError::from)?;
     let spec = &cfg.graph;
     check_keys(spec)?;
-    let endpoint = match &opts.listen {
+    let (session, endpoint) = match &opts.listen {
         Some(ep) => {
             check_endpoint("--listen", ep, true)?;
-            match ep.rsplit_once(':') {
+            let ep = match ep.rsplit_once(':') {
                 Some((host, "0")) => {
                     let h = host.trim_start_matches("tcp/");
                     format!("tcp/{h}:{}", free_port(h)?)
                 }
                 _ => ep.clone(),
-            }
+            };
+            (open_session(std::slice::from_ref(&ep), &[])?, ep)
         }
-        None => format!("tcp/127.0.0.1:{}", free_port("127.0.0.1")?),
+        // Zenoh's usual port when it is free (watchers look there), else any free one.
+        None => match open_session(&[super::DEFAULT_ENDPOINT.to_string()], &[]) {
+            Ok(s) => (s, super::DEFAULT_ENDPOINT.to_string()),
+            Err(_) => {
+                let ep = format!("tcp/127.0.0.1:{}", free_port("127.0.0.1")?);
+                (open_session(std::slice::from_ref(&ep), &[])?, ep)
+            }
+        },
     };
-    let session = open_session(std::slice::from_ref(&endpoint), &[])?;
-    say(&format!("listening on {endpoint}"));
     let keys = Keys::new(&spec.name);
+    // Every progress line also goes to whoever watches (`ratelab lab --attach`).
+    let say = |line: &str| {
+        say(line);
+        let _ = session.put(keys.log(), line).wait();
+    };
+    say(&format!("listening on {endpoint}"));
     let (up_tx, up_rx) = crossbeam_channel::bounded::<ToLauncher>(65_536);
     let _up_sub = session
         .declare_subscriber(keys.up())
@@ -407,6 +420,14 @@ pub fn launch(
         spin_margin_ns: cfg.spin_margin.0,
         rt_priority: cfg.rt_priority,
     };
+    // Watchers ask for the run's settings here (`ratelab lab --attach`).
+    let setup_json = wire::encode_json(&setup);
+    let _setup_queryable = session
+        .declare_queryable(keys.setup())
+        .callback(move |q| {
+            let _ = q.reply(q.key_expr().clone(), setup_json.clone()).wait();
+        })
+        .wait()?;
     // Admission: each process joins with the graph file's hash, then reports ready. Nothing
     // a joiner sends can end the run: a bad join is refused to that joiner alone.
     let names: Vec<String> = placement.iter().map(|(p, _)| p.clone()).collect();
@@ -719,8 +740,17 @@ pub fn launch(
             spec.process_of(spec.chain.actuator)
         ))
     })?;
+    let metrics = summarize_state(cfg, &state, &end);
+    let over = wire::RunOver {
+        metrics: metrics.clone(),
+        end: end.clone(),
+    };
+    let _ = session
+        .put(keys.ended(), wire::encode_json(&over))
+        .congestion_control(zenoh::qos::CongestionControl::Block)
+        .wait();
     Ok(LaunchReport {
-        metrics: summarize_state(cfg, &state, &end),
+        metrics,
         end,
         wall,
         endpoint,

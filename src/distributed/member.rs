@@ -14,7 +14,7 @@ use super::{check_endpoint, open_session, DistError, Keys, REPLY_TIMEOUT};
 use crate::config::RunConfig;
 use crate::graph::spec::GraphSpec;
 use crate::graph::{Graph, NodeId, TopicId};
-use crate::metrics::{LatencyStats, NodeTiming};
+use crate::metrics::{LatencyStats, NodeTiming, StepRecord};
 use crate::msg::AnyTopic;
 use crate::node::{Flow, Node};
 use crate::policy::BrainSlot;
@@ -90,6 +90,58 @@ pub struct LiveStats {
     pub topics: Vec<(String, crate::topic::TopicStats)>,
     /// Per inbound topic, its over-the-wire latency so far.
     pub wire: Vec<wire::WireLink>,
+    /// The actuator's steps since the previous figures, oldest first (its process only; at
+    /// most [`MAX_BATCH_STEPS`], the oldest dropped beyond): what `ratelab lab --attach`
+    /// draws the plant, the latency and the topics' counters from.
+    #[serde(default)]
+    pub steps: Vec<StepRecord>,
+    /// Real clock: each tick of its nodes since the previous figures, as (node index, run
+    /// time ns, lateness ns), oldest first (at most [`MAX_BATCH_TICKS`]).
+    #[serde(default)]
+    pub ticks: Vec<(usize, u64, u64)>,
+    /// The process's part of the run is over: these are its last figures, and its
+    /// liveliness tokens going next is a process leaving, not dying.
+    #[serde(default)]
+    pub done: bool,
+}
+
+/// How often each process publishes its [`LiveStats`].
+pub const STATS_PERIOD: Duration = Duration::from_millis(100);
+/// The most actuator steps one [`LiveStats`] carries (the virtual lockstep runs about a
+/// thousand a second; a step is about 1 KB of JSON with a few topics).
+pub const MAX_BATCH_STEPS: usize = 1000;
+/// The most node ticks one [`LiveStats`] carries.
+pub const MAX_BATCH_TICKS: usize = 20_000;
+
+/// What happened since the stats thread last published: steps and ticks, bounded.
+#[derive(Default)]
+struct Batch {
+    steps: std::collections::VecDeque<StepRecord>,
+    ticks: std::collections::VecDeque<(usize, u64, u64)>,
+}
+
+impl Batch {
+    fn push_step(&mut self, s: StepRecord) {
+        if self.steps.len() == MAX_BATCH_STEPS {
+            self.steps.pop_front();
+        }
+        self.steps.push_back(s);
+    }
+    fn push_tick(&mut self, t: (usize, u64, u64)) {
+        if self.ticks.len() == MAX_BATCH_TICKS {
+            self.ticks.pop_front();
+        }
+        self.ticks.push_back(t);
+    }
+}
+
+/// Hands every actuator step to the stats thread.
+struct StepTap(Arc<Mutex<Batch>>);
+
+impl crate::graph::StepObserver for StepTap {
+    fn on_step(&mut self, rec: &StepRecord) {
+        crate::graph::lock(&self.0).push_step(*rec);
+    }
 }
 
 /// Run placement group `opts.process` until the launcher ends the run (or `stop`).
@@ -188,20 +240,8 @@ pub fn run_member(opts: &MemberOptions, stop: &StopFlag) -> Result<(), DistError
             )))
         }
     };
-    let spec = GraphSpec::parse(&setup.graph_toml, "the launcher's graph")
-        .map_err(|e| DistError::Usage(e.to_string()))?;
-    let cfg = RunConfig {
-        seed: setup.seed,
-        duration: Nanos(setup.duration_ns),
-        graph: spec.clone(),
-        clock: setup.clock,
-        spin_margin: Nanos(setup.spin_margin_ns),
-        phase_offsets: setup.phase_offsets_ns.iter().copied().map(Nanos).collect(),
-        rt_priority: setup.rt_priority,
-        faults: setup.faults.clone(),
-    };
-    cfg.validate()
-        .map_err(|e| DistError::Usage(format!("the launcher's settings: {e}")))?;
+    let cfg = setup.run_config()?;
+    let spec = cfg.graph.clone();
     let mine: Vec<NodeId> = spec
         .placement()
         .into_iter()
@@ -216,8 +256,13 @@ pub fn run_member(opts: &MemberOptions, stop: &StopFlag) -> Result<(), DistError
     };
     let brain = crate::checkpoint::load_policy(brain_spec)
         .map_err(|e| DistError::Usage(format!("--policy {brain_spec}: {e}")))?;
-    let Graph { nodes, handles } =
-        crate::run::build_graph(&cfg, BrainSlot::new(brain), false, Vec::new())?;
+    let batch: Arc<Mutex<Batch>> = Arc::default();
+    let Graph { nodes, handles } = crate::run::build_graph(
+        &cfg,
+        BrainSlot::new(brain),
+        false,
+        vec![Box::new(StepTap(batch.clone()))],
+    )?;
     // Topics crossing the boundary.
     let inbound: Vec<TopicId> = (0..spec.topics.len())
         .map(TopicId)
@@ -341,17 +386,20 @@ pub fn run_member(opts: &MemberOptions, stop: &StopFlag) -> Result<(), DistError
     let ticks: Arc<Vec<AtomicU64>> =
         Arc::new((0..spec.nodes.len()).map(|_| AtomicU64::new(0)).collect());
     let run_time = Arc::new(AtomicU64::new(0));
-    // Live counters for `ratelab top`, twice a second.
+    // Live counters for `ratelab top` and `ratelab lab --attach`, every [`STATS_PERIOD`],
+    // and once more after the run (its last steps).
     let stats_pub = session
         .declare_publisher(keys.stats(&opts.process))
+        .congestion_control(block)
         .wait()?;
     let stats_done = StopFlag::new();
     let stats_thread = {
-        let (handles, ticks, run_time, lat) = (
+        let (handles, ticks, run_time, lat, batch) = (
             handles.clone(),
             ticks.clone(),
             run_time.clone(),
             wire_latency.clone(),
+            batch.clone(),
         );
         let (spec, mine, inbound, done, process) = (
             spec.clone(),
@@ -362,14 +410,22 @@ pub fn run_member(opts: &MemberOptions, stop: &StopFlag) -> Result<(), DistError
         );
         std::thread::Builder::new()
             .name("stats".into())
-            .spawn(move || {
-                while !done.is_stopped() {
-                    let msg = live_stats(
-                        &process, &spec, &mine, &inbound, &handles, &ticks, &lat, &run_time,
-                    );
-                    let _ = stats_pub.put(wire::encode_json(&msg)).wait();
-                    std::thread::sleep(Duration::from_millis(500));
+            .spawn(move || loop {
+                let last = done.is_stopped();
+                let mut msg = live_stats(
+                    &process, &spec, &mine, &inbound, &handles, &ticks, &lat, &run_time,
+                );
+                {
+                    let mut b = crate::graph::lock(&batch);
+                    msg.steps = b.steps.drain(..).collect();
+                    msg.ticks = b.ticks.drain(..).collect();
                 }
+                msg.done = last;
+                let _ = stats_pub.put(wire::encode_json(&msg)).wait();
+                if last {
+                    break;
+                }
+                std::thread::sleep(STATS_PERIOD);
             })
             .map_err(|e| DistError::Peer(format!("cannot start a thread: {e}")))?
     };
@@ -408,6 +464,7 @@ pub fn run_member(opts: &MemberOptions, stop: &StopFlag) -> Result<(), DistError
                 &run_time,
                 &|m| send(m),
                 &opts.process,
+                &batch,
             ),
             other => Err(DistError::Peer(format!("expected a start, got {other:?}"))),
         },
@@ -447,8 +504,10 @@ fn real_clock(
     run_time: &Arc<AtomicU64>,
     send: &dyn Fn(&ToLauncher) -> zenoh::Result<()>,
     process: &str,
+    batch: &Arc<Mutex<Batch>>,
 ) -> Result<GraphState, DistError> {
     let spec = &cfg.graph;
+    let hook_batch = batch.clone();
     // Joined late (a restart): the first tick of each node is its next one on the grid.
     let late = Nanos(wire::mono_now_ns().saturating_sub(start));
     let mut picked: Vec<(usize, Box<dyn Node>)> = nodes
@@ -478,12 +537,15 @@ fn real_clock(
             })
             .collect(),
         rt_priority: cfg.rt_priority,
-        on_tick: Some(Arc::new(move |k: usize, _: &str, now: Nanos, _| {
-            let i = hook_index[k];
-            hook_ticks[i].fetch_add(1, Ordering::Relaxed);
-            hook_time.fetch_max(now.0, Ordering::Relaxed);
-            fwd(i);
-        })),
+        on_tick: Some(Arc::new(
+            move |k: usize, _: &str, now: Nanos, late: Nanos| {
+                let i = hook_index[k];
+                crate::graph::lock(&hook_batch).push_tick((i, now.0, late.0));
+                hook_ticks[i].fetch_add(1, Ordering::Relaxed);
+                hook_time.fetch_max(now.0, Ordering::Relaxed);
+                fwd(i);
+            },
+        )),
         pause: None,
         start: Some(wire::instant_at_mono(start)),
     };
@@ -721,6 +783,9 @@ fn live_stats(
             .map(|(i, t)| (t.name.clone(), handles.topic(TopicId(i)).stats()))
             .collect(),
         wire: wire_links(process, spec, inbound, lat),
+        steps: Vec::new(),
+        ticks: Vec::new(),
+        done: false,
     }
 }
 

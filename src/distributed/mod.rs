@@ -25,6 +25,7 @@
 
 pub mod launcher;
 pub mod member;
+pub mod monitor;
 pub mod wire;
 
 /// The Zenoh crate ratelab is built with (for `ratelab top`'s session).
@@ -33,6 +34,11 @@ pub use zenoh;
 use crate::graph::spec::GraphSpec;
 use sha2::Digest;
 use zenoh::Wait;
+
+/// Where a launcher listens when not told (`--listen`), and where `ratelab lab --attach`
+/// looks when not told (`--connect`): Zenoh's usual port on loopback, as rmw_zenoh's router
+/// uses it. A launcher that finds it taken listens on a free port instead (and says which).
+pub const DEFAULT_ENDPOINT: &str = "tcp/127.0.0.1:7447";
 
 /// How long a process waits for a peer's answer (a join, a ready, a granted tick).
 pub const REPLY_TIMEOUT: std::time::Duration = std::time::Duration::from_secs(20);
@@ -161,6 +167,21 @@ impl Keys {
             self.prefix,
             topic.trim_matches('/')
         )
+    }
+
+    /// Where the launcher answers with the run's settings ([`wire::Setup`]), for watchers.
+    pub fn setup(&self) -> String {
+        format!("{}/@setup", self.prefix)
+    }
+
+    /// Where the launcher says the run is over ([`wire::RunOver`]).
+    pub fn ended(&self) -> String {
+        format!("{}/@ended", self.prefix)
+    }
+
+    /// Where the launcher publishes its progress lines (a process joined, is gone, …).
+    pub fn log(&self) -> String {
+        format!("{}/@log", self.prefix)
     }
 
     /// Where each process publishes its live counters for `ratelab top`.

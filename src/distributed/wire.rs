@@ -204,6 +204,41 @@ pub struct Setup {
     pub rt_priority: Option<u8>,
 }
 
+impl Setup {
+    /// The run these settings describe: the graph parsed from [`Setup::graph_toml`], with
+    /// every other setting, validated.
+    ///
+    /// # Errors
+    /// [`super::DistError::Usage`] naming what is wrong (the bytes came from the network).
+    pub fn run_config(&self) -> Result<crate::config::RunConfig, super::DistError> {
+        let spec = crate::graph::spec::GraphSpec::parse(&self.graph_toml, "the launcher's graph")
+            .map_err(|e| super::DistError::Usage(e.to_string()))?;
+        let cfg = crate::config::RunConfig {
+            seed: self.seed,
+            duration: Nanos(self.duration_ns),
+            graph: spec,
+            clock: self.clock,
+            spin_margin: Nanos(self.spin_margin_ns),
+            phase_offsets: self.phase_offsets_ns.iter().copied().map(Nanos).collect(),
+            rt_priority: self.rt_priority,
+            faults: self.faults.clone(),
+        };
+        cfg.validate()
+            .map_err(|e| super::DistError::Usage(format!("the launcher's settings: {e}")))?;
+        Ok(cfg)
+    }
+}
+
+/// The launcher's word that the run is over (key `ratelab/<graph>/@ended`): the merged
+/// summary, as `launch` prints it, for whoever watches (`ratelab lab --attach`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct RunOver {
+    /// The merged metrics.
+    pub metrics: crate::metrics::Metrics,
+    /// How the run ended.
+    pub end: RunEnd,
+}
+
 /// The over-the-wire latency of one topic into one process: from the publisher's send to
 /// the subscriber's delivery, on the host's monotonic clock (exact on one host).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]

@@ -84,45 +84,102 @@ impl GraphShape {
     /// rate, every topic with its publisher, subscriber and live counters; the chain's
     /// policy sets the control period, and its output topic is the published force.
     pub fn from_handles(h: &GraphHandles) -> Self {
-        let spec = &h.spec;
+        let commands = match h.topic(h.spec.chain.action) {
+            AnyTopic::Force(t) => Some(t.clone()),
+            _ => None,
+        };
+        Self::build(
+            &h.spec,
+            &h.rates,
+            &h.liveliness,
+            |i| {
+                let topic = h.topics[i].clone();
+                Arc::new(move || topic.stats())
+            },
+            |i| {
+                let topic = h.topics[i].clone();
+                Arc::new(move || topic.qos())
+            },
+            commands,
+        )
+    }
+
+    /// The shape of a graph that runs elsewhere (in other processes), as data: each node at
+    /// its rate in `spec` (no liveliness), each topic's counters read from `stats` (by
+    /// [`crate::graph::TopicId`]; zeros for a topic it lacks), its QoS as `spec` has it, and
+    /// the published force read from `commands`.
+    pub fn from_spec(
+        spec: &crate::graph::GraphSpec,
+        stats: Arc<std::sync::Mutex<Vec<TopicStats>>>,
+        commands: Option<Arc<Topic<ForceMsg>>>,
+    ) -> Result<Self, crate::rate::InvalidRate> {
+        let rates = spec
+            .nodes
+            .iter()
+            .map(|n| Rate::new(n.rate_hz))
+            .collect::<Result<Vec<_>, _>>()?;
+        Ok(Self::build(
+            spec,
+            &rates,
+            &[],
+            |i| {
+                let stats = stats.clone();
+                Arc::new(move || {
+                    crate::graph::lock(&stats)
+                        .get(i)
+                        .copied()
+                        .unwrap_or_default()
+                })
+            },
+            |i| {
+                let qos = spec.topics[i].qos;
+                Arc::new(move || qos)
+            },
+            commands,
+        ))
+    }
+
+    /// The one place the shape is put together: nodes with `rates` (and `liveliness`,
+    /// where known), topics with the readers `stats(i)` and `live_qos(i)`.
+    fn build(
+        spec: &crate::graph::GraphSpec,
+        rates: &[Rate],
+        liveliness: &[Arc<Liveliness>],
+        stats: impl Fn(usize) -> Arc<dyn Fn() -> TopicStats + Send + Sync>,
+        live_qos: impl Fn(usize) -> Arc<dyn Fn() -> TopicQos + Send + Sync>,
+        commands: Option<Arc<Topic<ForceMsg>>>,
+    ) -> Self {
         Self {
             nodes: spec
                 .nodes
                 .iter()
-                .zip(&h.rates)
+                .zip(rates)
                 .enumerate()
                 .map(|(i, (n, rate))| NodeShape {
                     name: n.name.clone(),
                     rate: rate.clone(),
-                    liveliness: h.liveliness.get(i).cloned(),
+                    liveliness: liveliness.get(i).cloned(),
                 })
                 .collect(),
             topics: spec
                 .topics
                 .iter()
-                .zip(&h.topics)
-                .map(|(t, topic)| {
-                    let topic = topic.clone();
-                    let live = topic.clone();
-                    TopicShape {
-                        name: t.name.clone(),
-                        publisher: spec.node(t.publisher).name.clone(),
-                        subscribers: t
-                            .subscriber
-                            .map(|s| spec.node(s).name.clone())
-                            .into_iter()
-                            .collect(),
-                        stats: Arc::new(move || topic.stats()),
-                        qos: t.qos,
-                        live_qos: Arc::new(move || live.qos()),
-                    }
+                .enumerate()
+                .map(|(i, t)| TopicShape {
+                    name: t.name.clone(),
+                    publisher: spec.node(t.publisher).name.clone(),
+                    subscribers: t
+                        .subscriber
+                        .map(|s| spec.node(s).name.clone())
+                        .into_iter()
+                        .collect(),
+                    stats: stats(i),
+                    qos: t.qos,
+                    live_qos: live_qos(i),
                 })
                 .collect(),
             controller: Some(spec.node(spec.chain.policy).name.clone()),
-            commands: match h.topic(spec.chain.action) {
-                AnyTopic::Force(t) => Some(t.clone()),
-                _ => None,
-            },
+            commands,
         }
     }
 

@@ -21,8 +21,9 @@ fn text(b: &[u8]) -> String {
     String::from_utf8_lossy(b).into_owned()
 }
 
-/// Every process whose command line mentions `needle` (the launcher's endpoint).
-fn processes_mentioning(needle: &str) -> Vec<u32> {
+/// Every `ratelab node` process whose command line mentions `needle` (the launcher's
+/// endpoint).
+pub(crate) fn processes_mentioning(needle: &str) -> Vec<u32> {
     let mut out = Vec::new();
     for e in std::fs::read_dir("/proc").into_iter().flatten().flatten() {
         let Ok(pid) = e.file_name().to_string_lossy().parse::<u32>() else {
@@ -42,7 +43,7 @@ fn processes_mentioning(needle: &str) -> Vec<u32> {
 }
 
 /// A free localhost port.
-fn free_port() -> u16 {
+pub(crate) fn free_port() -> u16 {
     std::net::TcpListener::bind("127.0.0.1:0")
         .unwrap()
         .local_addr()
@@ -366,6 +367,8 @@ fn bad_endpoints_busy_ports_and_unknown_processes_exit_2() {
     ] {
         let o = ratelab(&["node", "--process", "policy", "--connect", bad]);
         assert_one_line_exit_2(&o, "--connect");
+        let o = ratelab(&["lab", "--attach", "--connect", bad]);
+        assert_one_line_exit_2(&o, "--connect");
         let o = ratelab(&[
             "launch",
             "--processes",
@@ -406,6 +409,12 @@ fn bad_endpoints_busy_ports_and_unknown_processes_exit_2() {
     ]);
     assert_eq!(o.status.code(), Some(2), "{}", text(&o.stderr));
     assert!(!text(&o.stderr).contains("panicked"));
+    // The attached lab needs a terminal: without one it points at `top`.
+    let o = ratelab(&["lab", "--attach", "--connect", &ep]);
+    assert_one_line_exit_2(&o, "ratelab top --connect");
+    // --connect belongs to --attach.
+    let o = ratelab(&["lab", "--connect", &ep]);
+    assert_one_line_exit_2(&o, "--attach");
 }
 
 #[test]

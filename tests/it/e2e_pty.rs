@@ -272,3 +272,128 @@ fn pause_stops_virtual_time_and_is_refused_under_the_real_clock() {
     assert!(!screen.contains("PAUSED"), "{screen}");
     lab.quit();
 }
+
+/// `ratelab launch --processes` on a terminal opens the lab on the graph it runs across
+/// processes: nodes named with their process, measured rates and topic counters that cross
+/// the boundary, a key that would change the graph refused; quitting stops every process.
+#[test]
+fn launch_across_processes_opens_the_lab_and_quitting_leaves_nothing_behind() {
+    let _machine = crate::machine::alone();
+    let port = crate::distributed::free_port();
+    let ep = format!("tcp/127.0.0.1:{port}");
+    let mut lab = Lab::start(&["launch", "--processes", "--clock", "real", "--listen", &ep]);
+    lab.wait_for("2 processes", Duration::from_secs(60));
+    for node in ["sensor@robot", "policy@policy", "actuator@robot"] {
+        lab.wait_for(node, Duration::from_secs(10));
+    }
+    // Ticks of the policy's process (its measured rate) and the robot's steps arrive.
+    lab.wait_for("Hz meas", Duration::from_secs(20));
+    let s = lab.wait_for("BALANCED", Duration::from_secs(10));
+    assert!(s.contains("real clock"), "{s}");
+    // The /obs counters are the policy process's copy: 50 Hz published, none dropped at 50 Hz.
+    lab.wait_for("msg/s", Duration::from_secs(10));
+    assert_eq!(
+        crate::distributed::processes_mentioning(&format!(":{port}")).len(),
+        2,
+        "two node processes while the lab runs"
+    );
+    lab.keys("+");
+    lab.wait_for("read-only: live changes", Duration::from_secs(5));
+    lab.quit();
+    std::thread::sleep(Duration::from_millis(500));
+    assert!(
+        crate::distributed::processes_mentioning(&format!(":{port}")).is_empty(),
+        "a node process outlived the launch"
+    );
+}
+
+/// `ratelab lab --attach` on a running launch: a node process killed with SIGKILL is drawn
+/// NOT ALIVE (its liveliness token went with it), and one started again is drawn alive.
+#[test]
+fn the_attached_lab_marks_a_killed_node_not_alive_and_sees_it_rejoin() {
+    let _machine = crate::machine::alone();
+    let port = crate::distributed::free_port();
+    let ep = format!("tcp/127.0.0.1:{port}");
+    let bin = env!("CARGO_BIN_EXE_ratelab");
+    let mut launcher = std::process::Command::new(bin)
+        .args([
+            "launch",
+            "--processes",
+            "--clock",
+            "real",
+            "--duration",
+            "40",
+            "--listen",
+            &ep,
+        ])
+        .current_dir(crate::REPO)
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    let lab = Lab::start(&["lab", "--attach", "--connect", &ep]);
+    lab.wait_for("policy@policy", Duration::from_secs(60));
+    lab.wait_for("Hz meas", Duration::from_secs(20));
+    assert!(!lab.screen().contains("NOT ALIVE"), "{}", lab.screen());
+    let policy: Vec<u32> = crate::distributed::processes_mentioning(&format!(":{port}"))
+        .into_iter()
+        .filter(|pid| {
+            std::fs::read(format!("/proc/{pid}/cmdline"))
+                .map(|c| String::from_utf8_lossy(&c).contains("policy"))
+                .unwrap_or(false)
+        })
+        .collect();
+    assert_eq!(policy.len(), 1, "one policy process: {policy:?}");
+    // SAFETY: plain kill(2) on a process this test's launcher started.
+    unsafe { libc::kill(policy[0] as i32, libc::SIGKILL) };
+    let s = lab.wait_for("NOT ALIVE", Duration::from_secs(10));
+    assert!(
+        s.contains("is gone"),
+        "the launcher's line is shown too:\n{s}"
+    );
+    // Its ticks stopped: its measured rate falls to 0 once a second has passed.
+    lab.wait_for("0.0 Hz meas", Duration::from_secs(5));
+    let mut again = std::process::Command::new(bin)
+        .args(["node", "--process", "policy", "--connect", &ep])
+        .current_dir(crate::REPO)
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    let start = Instant::now();
+    while lab.screen().contains("NOT ALIVE") {
+        assert!(
+            start.elapsed() < Duration::from_secs(20),
+            "the restarted policy is not drawn alive:\n{}",
+            lab.screen()
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    lab.quit();
+    // SAFETY: plain kill(2) on our child: SIGTERM ends the launch cleanly.
+    unsafe { libc::kill(launcher.id() as i32, libc::SIGTERM) };
+    let status = launcher.wait().unwrap();
+    // Interrupted (130), or over already (0) when the pole fell while the policy was down
+    // (the robot held the last force for a second or so).
+    assert!(
+        matches!(status.code(), Some(130) | Some(0)),
+        "the launch ended with {status:?}"
+    );
+    let _ = again.wait();
+    assert!(crate::distributed::processes_mentioning(&format!(":{port}")).is_empty());
+}
+
+/// Nothing to attach to: one line, exit 2, the terminal restored.
+#[test]
+fn attaching_where_no_graph_runs_says_so() {
+    let port = crate::distributed::free_port();
+    let ep = format!("tcp/127.0.0.1:{port}");
+    let mut lab = Lab::start(&["lab", "--attach", "--connect", &ep]);
+    let status = lab.exit_status("no graph to attach to");
+    assert_eq!(status.exit_code(), 2);
+    let s = lab.screen();
+    assert!(
+        s.contains("cannot open a Zenoh session") || s.contains("no running ratelab graph"),
+        "{s}"
+    );
+}

@@ -915,3 +915,56 @@ fn every_view_matches_data_in_a_qos_run_and_the_counters_have_a_view() {
         .iter()
         .any(|(_, _, e)| e.contains("FELL") || e.contains("fell")));
 }
+
+/// `launch --processes --record`: the launcher records what it watches of the processes:
+/// every actuator step (from the robot's process), each topic's counters from the process
+/// that holds them, the launcher's lines as events, the merged summary; every view of the
+/// layout finds its data.
+#[test]
+fn a_launch_across_processes_records_every_step() {
+    let _m = crate::machine::shared();
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("procs.rrd");
+    let o = ratelab(
+        &[
+            "launch",
+            "--processes",
+            "--clock",
+            "virtual",
+            "--duration",
+            "2",
+            "--record",
+            path.to_str().unwrap(),
+            "--out",
+            dir.path().to_str().unwrap(),
+        ],
+        dir.path(),
+    );
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        o.status.success(),
+        "{out}{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    assert!(out.contains("recording: "), "{out}");
+    let m: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.path().join("metrics.json")).unwrap())
+            .unwrap();
+    let all = chunks(&path);
+    assert_eq!(angle_rows(&all), m["steps"].as_u64().unwrap());
+    // /obs is held by the policy's process: the recording shows its counters (as that
+    // process last published them), not the robot's forwarding copy.
+    let (published, n) = last_scalar(&all, "/bus/obs/published").unwrap();
+    assert_eq!(n as u64, m["steps"].as_u64().unwrap());
+    let total = m["topics"]["/obs"]["published"].as_f64().unwrap();
+    assert!(
+        published > 0.0 && published <= total,
+        "{published} of {total}"
+    );
+    check_views(&path);
+    let events = events_with_times(&path);
+    assert!(
+        events.iter().any(|(_, _, e)| e.starts_with("end: ")),
+        "no end event: {events:?}"
+    );
+}

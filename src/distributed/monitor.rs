@@ -1,0 +1,648 @@
+//! Watching a running multi-process graph from outside it: `ratelab lab --attach`, and the
+//! lab that `ratelab launch --processes` opens on a terminal.
+//!
+//! A watcher is one more Zenoh peer. It turns what the graph's processes publish into the
+//! lab's own [`Telemetry`], so the one lab (its `App` and `View`) draws a graph in one process
+//! and a graph across several alike:
+//!
+//! - the run's settings ([`Setup`]) come from the launcher, as the answer to a query on
+//!   `ratelab/<graph>/@setup` ([`Watch::connect`]);
+//! - every process publishes its [`LiveStats`] every [`super::member::STATS_PERIOD`]: the actuator's process
+//!   carries its steps (the plant, the sense→act latency), each process its nodes' ticks
+//!   (real clock: measured rates and lateness) and the counters of the topics it holds;
+//! - a topic's counters live in its subscriber's process (its copy keeps the chapter's buffer
+//!   and QoS, `docs/distributed.md`), so each step's counters of a topic held elsewhere are
+//!   replaced by the holder's newest ([`Fold::merge_step`]); they lag by at most one
+//!   [`super::member::STATS_PERIOD`] plus the wire;
+//! - a node is alive while its liveliness token is (`ratelab/<graph>/@node/<process>/<node>`),
+//!   as rmw_zenoh tracks its graph; the lab draws one whose token went as NOT ALIVE;
+//! - the launcher's progress lines (`@log`) become notices, and its merged summary
+//!   (`@ended`, [`RunOver`]) ends the run in the lab.
+//!
+//! [`record`] writes the same telemetry to a rerun recording (`launch --processes --record`).
+
+use super::member::LiveStats;
+use super::wire::{self, RunOver, Setup};
+use super::{check_endpoint, open_session, DistError, Keys};
+use crate::config::RunConfig;
+use crate::graph::spec::GraphSpec;
+use crate::graph::{NodeId, TopicId};
+use crate::metrics::StepRecord;
+use crate::msg::ForceMsg;
+use crate::recording::{GraphShape, Recording};
+use crate::scheduler::StopFlag;
+use crate::session::{Speed, Telemetry};
+use crate::time::Nanos;
+use crate::topic::{Topic, TopicStats};
+use crossbeam_channel::Sender;
+use std::collections::BTreeSet;
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+use zenoh::Wait;
+
+/// How often a watcher sends the lab a status (liveliness, run time).
+pub const STATUS_PERIOD: Duration = Duration::from_millis(250);
+
+/// Events a watcher buffers between Zenoh's callbacks and its fold, at most.
+const EVENTS: usize = 4096;
+
+/// Folds what a multi-process graph publishes into the lab's [`Telemetry`]: pure, so its
+/// rules are unit-tested without a network.
+pub struct Fold {
+    spec: GraphSpec,
+    /// The process holding each topic's counters (its subscriber's, else its publisher's).
+    holders: Vec<String>,
+    /// Each topic's newest counters from its holder, when the holder is not the plant's.
+    held: Vec<Option<TopicStats>>,
+    /// The process of the actuator, whose steps the lab draws.
+    plant: String,
+    /// `(process, node)` whose liveliness tokens are alive.
+    alive: BTreeSet<(String, String)>,
+    /// Processes that said their part of the run is over ([`LiveStats::done`]): their tokens
+    /// going is a process leaving, not dying.
+    left: BTreeSet<String>,
+    /// Liveliness has been heard at least once (before, every node is "unknown").
+    heard: bool,
+    /// Newest run time seen.
+    now: Nanos,
+    /// The launcher said the run is over: the lab is frozen on it.
+    over: bool,
+    /// The brain's label.
+    policy: String,
+}
+
+impl Fold {
+    /// A fold for the run `cfg` with the brain `policy` (its label in the lab).
+    pub fn new(cfg: &RunConfig, policy: &str) -> Fold {
+        let spec = cfg.graph.clone();
+        let holders = spec
+            .topics
+            .iter()
+            .map(|t| spec.process_of(t.subscriber.unwrap_or(t.publisher)))
+            .collect();
+        Fold {
+            held: vec![None; spec.topics.len()],
+            plant: spec.process_of(spec.chain.actuator),
+            holders,
+            spec,
+            alive: BTreeSet::new(),
+            left: BTreeSet::new(),
+            heard: false,
+            now: Nanos::ZERO,
+            over: false,
+            policy: policy.to_string(),
+        }
+    }
+
+    /// `step` (from the actuator's process) with the counters of every topic held by
+    /// another process replaced by that holder's newest: the actuator's process only
+    /// forwards those topics, so its own copies do not count what their subscribers do.
+    pub fn merge_step(&self, step: &StepRecord) -> StepRecord {
+        let mut out = *step;
+        for (i, holder) in self.holders.iter().enumerate() {
+            if *holder != self.plant {
+                if let Some(s) = self.held[i] {
+                    out.topics.set(TopicId(i), s);
+                }
+            }
+        }
+        out
+    }
+
+    /// One process's figures: the counters it holds, then its ticks and (the plant's
+    /// process) its steps as the lab's telemetry. Figures of another graph, or of a process
+    /// the graph does not have, are ignored.
+    pub fn stats(&mut self, m: LiveStats) -> Vec<Telemetry> {
+        let mut out = Vec::new();
+        if m.graph != self.spec.name || !self.spec.placement().iter().any(|(p, _)| *p == m.process)
+        {
+            return out;
+        }
+        if m.done {
+            self.left.insert(m.process.clone());
+        } else {
+            self.left.remove(&m.process); // a process started again
+        }
+        for (name, st) in &m.topics {
+            if let Some(i) = self.spec.topics.iter().position(|t| t.name == *name) {
+                if self.holders[i] == m.process && m.process != self.plant {
+                    self.held[i] = Some(*st);
+                }
+            }
+        }
+        for &(node, now, late) in &m.ticks {
+            // Only the process's own nodes.
+            if node < self.spec.nodes.len() && self.spec.process_of(NodeId(node)) == m.process {
+                out.push(Telemetry::NodeTick {
+                    node,
+                    now: Nanos(now),
+                    lateness: Nanos(late),
+                });
+            }
+        }
+        if m.process == self.plant {
+            for s in &m.steps {
+                self.now = self.now.max(s.t);
+                out.push(Telemetry::Step(Box::new(self.merge_step(s))));
+            }
+        }
+        self.now = self.now.max(Nanos(m.t_ns));
+        out
+    }
+
+    /// A node's liveliness token appeared (`alive`) or was withdrawn. A process that said
+    /// its part of the run is over keeps its nodes drawn alive as they leave.
+    pub fn liveliness(&mut self, process: &str, node: &str, alive: bool) {
+        self.heard = true;
+        let key = (process.to_string(), node.to_string());
+        if alive {
+            self.alive.insert(key);
+        } else if !self.left.contains(process) {
+            self.alive.remove(&key);
+        }
+    }
+
+    /// Is node `id` alive (its token present)? `None` before any liveliness was heard.
+    pub fn is_alive(&self, id: NodeId) -> Option<bool> {
+        self.heard.then(|| {
+            self.alive
+                .contains(&(self.spec.process_of(id), self.spec.node(id).name.clone()))
+        })
+    }
+
+    /// The run is over (the launcher's word): liveliness is no longer followed (the
+    /// processes leaving is not news), and the lab gets the merged summary.
+    pub fn ended(&mut self, over: RunOver) -> Telemetry {
+        self.over = true;
+        self.now = self.now.max(over.end.at);
+        Telemetry::Ended {
+            metrics: Box::new(over.metrics),
+            reason: over.end.reason,
+        }
+    }
+
+    /// Has the launcher said the run is over?
+    pub fn is_over(&self) -> bool {
+        self.over
+    }
+
+    /// The lab's status now: run time, the settings the run started with (live changes do
+    /// not cross processes), each node's liveliness.
+    pub fn status(&self) -> Telemetry {
+        Telemetry::Status {
+            now: self.now,
+            paused: false,
+            speed: Speed::Times(1.0),
+            rates: self.spec.nodes.iter().map(|n| n.rate_hz).collect(),
+            depths: self.spec.topics.iter().map(|t| t.depth).collect(),
+            qos: self.spec.topics.iter().map(|t| t.qos).collect(),
+            alive: (0..self.spec.nodes.len())
+                .map(|i| self.is_alive(NodeId(i)))
+                .collect(),
+            policy: self.policy.clone(),
+        }
+    }
+}
+
+/// What the Zenoh callbacks hand the fold.
+enum Event {
+    Stats(Box<LiveStats>),
+    Alive(String, String, bool),
+    Launcher(bool),
+    Log(String),
+    Over(Box<RunOver>),
+}
+
+/// A watcher connected to a running graph.
+pub struct Watch {
+    session: zenoh::Session,
+    keys: Keys,
+    /// The run's settings, as the launcher sent them.
+    pub setup: Setup,
+    /// The run they describe.
+    pub cfg: RunConfig,
+    /// The endpoints it connected to.
+    pub connect: Vec<String>,
+}
+
+impl Watch {
+    /// Connect to `connect` (a launcher's or a node's endpoint) and ask for the running
+    /// graph's settings, for up to `wait`: the first graph that answers (named `graph`, when
+    /// given).
+    ///
+    /// # Errors
+    /// [`DistError::Usage`] for a bad endpoint, or when no graph answers within `wait`
+    /// (one line naming the endpoints); [`DistError::Peer`] when `stop` is set meanwhile.
+    pub fn connect(
+        connect: &[String],
+        graph: Option<&str>,
+        wait: Duration,
+        stop: &StopFlag,
+    ) -> Result<Watch, DistError> {
+        if connect.is_empty() {
+            return Err(DistError::Usage(
+                "--connect tcp/HOST:PORT is required: a running launcher's endpoint".into(),
+            ));
+        }
+        for ep in connect {
+            check_endpoint("--connect", ep, false)?;
+        }
+        let session = open_session(&["tcp/127.0.0.1:0".to_string()], connect)?;
+        let selector = match graph {
+            Some(g) => Keys::new(g).setup(),
+            None => "ratelab/*/@setup".to_string(),
+        };
+        let deadline = Instant::now() + wait;
+        loop {
+            if let Some(setup) = ask_setup(&session, &selector) {
+                let cfg = setup.run_config()?;
+                return Ok(Watch {
+                    session,
+                    keys: Keys::new(&cfg.graph.name),
+                    setup,
+                    cfg,
+                    connect: connect.to_vec(),
+                });
+            }
+            if stop.is_stopped() {
+                return Err(DistError::Peer("interrupted".into()));
+            }
+            if Instant::now() >= deadline {
+                return Err(DistError::Usage(format!(
+                    "no running ratelab graph{} answered at {} within {} s",
+                    graph.map_or(String::new(), |g| format!(" '{g}'")),
+                    connect.join(", "),
+                    wait.as_secs()
+                )));
+            }
+            std::thread::sleep(Duration::from_millis(100));
+        }
+    }
+
+    /// Send the lab the run's telemetry until `stop` is set or the lab hangs up (its
+    /// receiver is dropped): `Started` at once, then steps, ticks, notices and a status every
+    /// [`STATUS_PERIOD`], and `Ended` when the launcher says so.
+    ///
+    /// # Errors
+    /// [`DistError::Zenoh`] when a subscription cannot be declared.
+    pub fn run(self, tx: &Sender<Telemetry>, stop: &StopFlag) -> Result<(), DistError> {
+        let (ev_tx, ev_rx) = crossbeam_channel::bounded::<Event>(EVENTS);
+        let keys = &self.keys;
+        // A full queue drops the event (the fold is behind; Zenoh's threads never wait).
+        let send = |tx: &Sender<Event>, e: Event| {
+            let _ = tx.try_send(e);
+        };
+        let t = ev_tx.clone();
+        let _stats = self
+            .session
+            .declare_subscriber(keys.stats("*"))
+            .callback(move |s| {
+                if let Ok(m) = wire::decode_json::<LiveStats>(&s.payload().to_bytes()) {
+                    send(&t, Event::Stats(Box::new(m)));
+                }
+            })
+            .wait()?;
+        let t = ev_tx.clone();
+        let prefix = format!("{}/@node/", keys.prefix());
+        let _nodes = self
+            .session
+            .liveliness()
+            .declare_subscriber(format!("{}/@node/**", keys.prefix()))
+            .history(true)
+            .callback(move |s| {
+                let alive = s.kind() == zenoh::sample::SampleKind::Put;
+                let rest = s.key_expr().as_str().strip_prefix(&prefix).unwrap_or("");
+                if let Some((p, n)) = rest.split_once('/') {
+                    send(&t, Event::Alive(p.to_string(), n.to_string(), alive));
+                }
+            })
+            .wait()?;
+        let t = ev_tx.clone();
+        let _launcher = self
+            .session
+            .liveliness()
+            .declare_subscriber(keys.launcher_token())
+            .history(true)
+            .callback(move |s| {
+                send(
+                    &t,
+                    Event::Launcher(s.kind() == zenoh::sample::SampleKind::Put),
+                );
+            })
+            .wait()?;
+        let t = ev_tx.clone();
+        let _log = self
+            .session
+            .declare_subscriber(keys.log())
+            .callback(move |s| {
+                let bytes = s.payload().to_bytes();
+                // A progress line: short text, shown as it is.
+                if bytes.len() <= 1024 {
+                    let line = String::from_utf8_lossy(&bytes);
+                    send(
+                        &t,
+                        Event::Log(line.lines().next().unwrap_or("").to_string()),
+                    );
+                }
+            })
+            .wait()?;
+        let t = ev_tx;
+        let _over = self
+            .session
+            .declare_subscriber(keys.ended())
+            .callback(move |s| {
+                if let Ok(m) = wire::decode_json::<RunOver>(&s.payload().to_bytes()) {
+                    send(&t, Event::Over(Box::new(m)));
+                }
+            })
+            .wait()?;
+
+        let mut fold = Fold::new(&self.cfg, &self.setup.policy);
+        let started = Telemetry::Started {
+            cfg: self.cfg.clone(),
+            policy: self.setup.policy.clone(),
+            recording: None,
+        };
+        if tx.send(started).is_err() {
+            return Ok(());
+        }
+        let mut last_status = Instant::now();
+        let mut launcher_seen = false;
+        while !stop.is_stopped() {
+            let mut out = Vec::new();
+            match ev_rx.recv_timeout(STATUS_PERIOD / 2) {
+                Ok(Event::Stats(m)) => out = fold.stats(*m),
+                Ok(Event::Alive(p, n, alive)) if !fold.is_over() => fold.liveliness(&p, &n, alive),
+                Ok(Event::Launcher(true)) => launcher_seen = true,
+                Ok(Event::Launcher(false)) if !fold.is_over() && launcher_seen => {
+                    out.push(Telemetry::Error(
+                        "the launcher is gone: the run is over (no summary was received)".into(),
+                    ));
+                    launcher_seen = false;
+                }
+                Ok(Event::Log(line)) => out.push(Telemetry::Applied(format!("launch: {line}"))),
+                Ok(Event::Over(over)) if !fold.is_over() => {
+                    out.push(fold.status());
+                    out.push(fold.ended(*over));
+                }
+                Ok(_) | Err(_) => {}
+            }
+            if last_status.elapsed() >= STATUS_PERIOD && !fold.is_over() {
+                last_status = Instant::now();
+                out.push(fold.status());
+            }
+            for t in out {
+                if tx.send(t).is_err() {
+                    return Ok(()); // the lab is gone
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Record what a watcher sees of a run across processes into `rec`, until `telemetry` is
+/// closed: each merged step (the plant, the latency, every topic's counters as its holder
+/// reported them; the force the policy published, from the step), each node tick's
+/// lateness (real clock), the launcher's lines as events, and each node's liveliness token
+/// going and coming back as events. The caller finishes the recording with the merged
+/// summary ([`Recording::finish`]).
+///
+/// What differs from an in-process recording: a topic held by another process shows its
+/// counters as that process last published them (at most [`super::member::STATS_PERIOD`] behind); the
+/// published force is the newest per actuator step; leases are not recorded (liveliness is
+/// the tokens'). So it is not byte-identical to the in-process recording, even under the
+/// virtual clock (`metrics.json` is).
+///
+/// # Errors
+/// [`DistError::Usage`] when a node's rate in `cfg` is invalid (a validated config has none).
+pub fn record(
+    rec: &Recording,
+    cfg: &RunConfig,
+    telemetry: &crossbeam_channel::Receiver<Telemetry>,
+) -> Result<(), DistError> {
+    let spec = &cfg.graph;
+    let counters: Arc<Mutex<Vec<TopicStats>>> =
+        Arc::new(Mutex::new(vec![TopicStats::default(); spec.topics.len()]));
+    let commands = Arc::new(
+        Topic::new(spec.topic(spec.chain.action).name.clone(), 1)
+            .map_err(|e| DistError::Usage(e.to_string()))?,
+    );
+    let shape = GraphShape::from_spec(spec, counters.clone(), Some(commands.clone()))
+        .map_err(|e| DistError::Usage(e.to_string()))?;
+    let mut observer = rec.observer_for(shape);
+    let mut alive: Vec<Option<bool>> = vec![None; spec.nodes.len()];
+    let mut now = Nanos::ZERO;
+    for t in telemetry {
+        match t {
+            Telemetry::Step(s) => {
+                now = now.max(s.t);
+                *crate::graph::lock(&counters) = s.topics.as_slice().to_vec();
+                if let Some((at, newtons)) = s.published {
+                    commands.publish(ForceMsg { newtons }, at, None);
+                }
+                observer.on_step(&s);
+            }
+            Telemetry::NodeTick {
+                node,
+                now: at,
+                lateness,
+            } => {
+                if let Some(n) = spec.nodes.get(node) {
+                    rec.node_tick(&n.name, at, lateness);
+                }
+            }
+            Telemetry::Applied(line) => rec.event(now, &line, "INFO"),
+            Telemetry::Error(line) => rec.event(now, &line, "WARN"),
+            Telemetry::Status { alive: next, .. } => {
+                for (i, (was, is)) in alive.iter_mut().zip(next).enumerate() {
+                    let name = &spec.nodes[i].name;
+                    match (*was, is) {
+                        (Some(true), Some(false)) => rec.event(
+                            now,
+                            &format!("node {name} not alive (its process's liveliness token was withdrawn)"),
+                            "WARN",
+                        ),
+                        (Some(false), Some(true)) => {
+                            rec.event(now, &format!("node {name} alive again"), "INFO")
+                        }
+                        _ => {}
+                    }
+                    *was = is;
+                }
+            }
+            _ => {}
+        }
+    }
+    Ok(())
+}
+
+/// Ask once (for up to a second) for a graph's settings; the first answer that decodes.
+fn ask_setup(session: &zenoh::Session, selector: &str) -> Option<Setup> {
+    let replies = session
+        .get(selector)
+        .timeout(Duration::from_secs(1))
+        .wait()
+        .ok()?;
+    while let Ok(r) = replies.recv() {
+        if let Ok(s) = r.result() {
+            if let Ok(setup) = wire::decode_json::<Setup>(&s.payload().to_bytes()) {
+                return Some(setup);
+            }
+        }
+    }
+    None
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::metrics::TopicCounters;
+
+    fn cfg() -> RunConfig {
+        RunConfig {
+            graph: GraphSpec::chapter(),
+            ..RunConfig::default()
+        }
+    }
+
+    fn stats(published: u64, dropped: u64) -> TopicStats {
+        TopicStats {
+            published,
+            dropped,
+            depth: 1,
+            ..TopicStats::default()
+        }
+    }
+
+    fn live(process: &str, topics: Vec<(&str, TopicStats)>, steps: Vec<StepRecord>) -> LiveStats {
+        LiveStats {
+            graph: "cartpole".into(),
+            process: process.into(),
+            pid: 1,
+            t_ns: 0,
+            nodes: Vec::new(),
+            topics: topics
+                .into_iter()
+                .map(|(n, s)| (n.to_string(), s))
+                .collect(),
+            wire: Vec::new(),
+            steps,
+            ticks: Vec::new(),
+            done: false,
+        }
+    }
+
+    fn step(t_ms: u64, obs: TopicStats, action: TopicStats) -> StepRecord {
+        StepRecord {
+            step: 1,
+            t: Nanos(t_ms * 1_000_000),
+            pole_angle: 0.0,
+            cart_pos: 0.0,
+            action: 0.0,
+            latency: None,
+            nonfinite: false,
+            topics: [obs, action].into_iter().collect::<TopicCounters>(),
+            published: None,
+            fell: false,
+        }
+    }
+
+    #[test]
+    fn a_topic_held_by_another_process_takes_its_holders_counters() {
+        let mut f = Fold::new(&cfg(), "scripted");
+        // The chapter's graph: /obs is read in `policy`, /action in `robot`.
+        let obs_at_policy = stats(10, 7);
+        assert!(f
+            .stats(live("policy", vec![("/obs", obs_at_policy)], vec![]))
+            .is_empty());
+        // The robot's own copy of /obs only forwards (its counters are not the topic's).
+        let out = f.stats(live(
+            "robot",
+            vec![("/action", stats(2, 0))],
+            vec![step(20, stats(10, 9), stats(2, 0))],
+        ));
+        let [Telemetry::Step(s)] = out.as_slice() else {
+            panic!("one step expected, got {}", out.len())
+        };
+        assert_eq!(s.topics.get(TopicId(0)), obs_at_policy);
+        // /action is held by the robot's process itself: its step's figures stand.
+        assert_eq!(s.topics.get(TopicId(1)), stats(2, 0));
+    }
+
+    #[test]
+    fn figures_of_another_graph_or_an_unknown_process_are_ignored() {
+        let mut f = Fold::new(&cfg(), "scripted");
+        let mut other = live("policy", vec![("/obs", stats(5, 5))], vec![]);
+        other.graph = "elsewhere".into();
+        f.stats(other);
+        f.stats(live("intruder", vec![("/obs", stats(6, 6))], vec![]));
+        let out = f.stats(live(
+            "robot",
+            vec![],
+            vec![step(20, stats(1, 0), stats(0, 0))],
+        ));
+        let [Telemetry::Step(s)] = out.as_slice() else {
+            panic!("one step expected")
+        };
+        assert_eq!(s.topics.get(TopicId(0)), stats(1, 0));
+        // Steps only come from the actuator's process.
+        assert!(f
+            .stats(live(
+                "policy",
+                vec![],
+                vec![step(40, stats(1, 0), stats(0, 0))]
+            ))
+            .is_empty());
+    }
+
+    #[test]
+    fn a_node_is_alive_while_its_token_is() {
+        let mut f = Fold::new(&cfg(), "scripted");
+        let policy = NodeId(1);
+        assert_eq!(
+            f.is_alive(policy),
+            None,
+            "unknown before any token is heard"
+        );
+        f.liveliness("robot", "sensor", true);
+        f.liveliness("policy", "policy", true);
+        assert_eq!(f.is_alive(policy), Some(true));
+        f.liveliness("policy", "policy", false);
+        assert_eq!(f.is_alive(policy), Some(false));
+        // A token of the same name in another process is not this node's.
+        f.liveliness("robot", "policy", true);
+        assert_eq!(f.is_alive(policy), Some(false));
+        let Telemetry::Status { alive, .. } = f.status() else {
+            panic!("a status")
+        };
+        assert_eq!(alive, vec![Some(true), Some(false), Some(false)]);
+        // A process whose part of the run is over leaves: its nodes are not drawn dead.
+        let mut last = live("robot", vec![], vec![]);
+        last.done = true;
+        f.stats(last);
+        f.liveliness("robot", "sensor", false);
+        assert_eq!(f.is_alive(NodeId(0)), Some(true));
+        // Started again, it can die again.
+        f.stats(live("robot", vec![], vec![]));
+        f.liveliness("robot", "sensor", false);
+        assert_eq!(f.is_alive(NodeId(0)), Some(false));
+    }
+
+    #[test]
+    fn ticks_are_taken_only_for_the_senders_own_nodes() {
+        let mut f = Fold::new(&cfg(), "scripted");
+        let mut m = live("policy", vec![], vec![]);
+        m.ticks = vec![(1, 20_000_000, 50_000), (0, 20_000_000, 1), (99, 0, 0)];
+        let out = f.stats(m);
+        assert_eq!(out.len(), 1);
+        assert!(matches!(
+            out[0],
+            Telemetry::NodeTick {
+                node: 1,
+                lateness: Nanos(50_000),
+                ..
+            }
+        ));
+    }
+}
