@@ -351,12 +351,22 @@ pub fn run_top(a: &TopArgs, stop: StopFlag) -> anyhow::Result<()> {
     loop {
         while let Ok(m) = rx.try_recv() {
             let key = format!("{}/{}", m.graph, m.process);
-            let prev = seen.remove(&key).map(|(p, _)| p);
+            // Rates over about a second: the figures before stay until the new ones are a
+            // second newer (processes publish every 100 ms).
+            let prev = match seen.remove(&key) {
+                Some((_, Some(p))) if m.t_ns.saturating_sub(p.t_ns) < 1_000_000_000 => Some(p),
+                Some((cur, _)) => Some(cur),
+                None => None,
+            };
             seen.insert(key, (m, prev));
         }
         let alive = alive_nodes(&session);
         if a.once {
-            let have_rates = seen.values().all(|(_, p)| p.is_some());
+            // Rates over half a second at least.
+            let have_rates = seen.values().all(|(m, p)| {
+                p.as_ref()
+                    .is_some_and(|p| m.t_ns.saturating_sub(p.t_ns) >= 500_000_000)
+            });
             if (!seen.is_empty() && have_rates) || started.elapsed() > Duration::from_secs(3) {
                 if seen.is_empty() {
                     anyhow::bail!(

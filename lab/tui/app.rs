@@ -119,6 +119,8 @@ pub struct App {
     /// Watching a graph that runs across processes (`ratelab lab --attach`): the header's
     /// note (`2 processes`); keys that would change the graph are refused.
     attached: Option<String>,
+    /// Attached: each topic's over-the-wire latency (p50, p99 µs) when it crosses processes.
+    wire: Vec<Option<(f64, f64)>>,
     /// Set when the user asked to quit.
     pub quit: bool,
 }
@@ -161,6 +163,7 @@ impl App {
             message: None,
             message_at: None,
             attached: None,
+            wire: Vec::new(),
             quit: false,
         }
     }
@@ -297,6 +300,7 @@ impl App {
                 self.published.clear();
                 self.last = None;
                 self.verdict = Verdict::Balanced;
+                self.wire.clear();
             }
             Telemetry::Step(s) => {
                 let s = *s;
@@ -376,6 +380,14 @@ impl App {
                 });
             }
             Telemetry::Error(e) => self.say(e),
+            Telemetry::Wire(links) => {
+                self.wire.resize(self.graph.topics.len(), None);
+                for (i, p50, p99) in links {
+                    if let Some(w) = self.wire.get_mut(i) {
+                        *w = Some((p50, p99));
+                    }
+                }
+            }
         }
     }
 
@@ -613,6 +625,7 @@ impl App {
                     .collect()
             }),
             selected: self.selected == Some(Selected::Topic(id)),
+            wire_us: self.wire.get(id.0).copied().flatten(),
         }
     }
 

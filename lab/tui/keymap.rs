@@ -209,7 +209,7 @@ pub const BINDINGS: &[Binding] = &[
 ];
 
 /// Lines the help overlay adds after the bindings: (label, text).
-pub const HELP_NOTES: [(&str, &str); 3] = [
+pub const HELP_NOTES: [(&str, &str); 4] = [
     (
         "rate ladder (Hz)",
         "50 40 30 25 20 15 12 10 8 7 6 5 4 3 2 1",
@@ -218,6 +218,10 @@ pub const HELP_NOTES: [(&str, &str); 3] = [
     (
         "after a fall",
         "the lab freezes; keys set the next run, r/R/c start it",
+    ),
+    (
+        "wire p50/p99 µs",
+        "across processes: a topic's latency over the wire",
     ),
 ];
 

@@ -648,6 +648,7 @@ mod tests {
             alive: vec![Some(true), Some(false), Some(true)],
             policy: "scripted".into(),
         });
+        app.on_telemetry(Telemetry::Wire(vec![(0, 214.4, 402.7)]));
         for (w, h) in [(80, 24), (120, 40)] {
             let text = render(&app, w, h);
             for needle in [
@@ -660,6 +661,7 @@ mod tests {
                 assert!(text.contains(needle), "{needle} at {w}x{h}:\n{text}");
             }
             assert_eq!(text.matches("NOT ALIVE").count(), 1, "{text}");
+            assert_eq!(text.matches("wire 214/403 µs").count(), 1, "{text}");
             // The footer offers only the keys that act: no rate or depth keys.
             let footer = text.lines().last().unwrap_or_default();
             assert!(footer.contains("read-only"), "{footer}");

@@ -83,6 +83,9 @@ pub struct TopicView {
     pub segment_dropped: u64,
     /// Stale reads since the last change of settings (or the run's start).
     pub segment_stale_reads: u64,
+    /// Attached to a graph across processes, a topic that crosses them: its over-the-wire
+    /// latency so far, (p50, p99) µs.
+    pub wire_us: Option<(f64, f64)>,
 }
 
 /// The window and the segment: what the live numbers count over.
@@ -536,9 +539,13 @@ fn arrow_lines(t: &TopicView, w: usize) -> Vec<Line<'static>> {
         };
         Line::from(Span::styled(format!("{} stale ↺", t.stale_reads), style)).centered()
     });
+    let wire = t
+        .wire_us
+        .map(|(p50, p99)| Line::from(format!("wire {p50:.0}/{p99:.0} µs").dim()).centered());
     let Some(parts) = &t.qos else {
         let mut lines = vec![name, shaft, rate, dropped];
         lines.extend(stale);
+        lines.extend(wire);
         return lines;
     };
     let mut lines = vec![name, shaft, dropped];
@@ -565,6 +572,7 @@ fn arrow_lines(t: &TopicView, w: usize) -> Vec<Line<'static>> {
     );
     lines.push(rate);
     lines.extend(stale);
+    lines.extend(wire);
     lines
 }
 

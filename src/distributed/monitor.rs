@@ -130,6 +130,20 @@ impl Fold {
                 }
             }
         }
+        if !m.wire.is_empty() {
+            let links: Vec<(usize, f64, f64)> = m
+                .wire
+                .iter()
+                .filter_map(|w| {
+                    let i = self.spec.topics.iter().position(|t| t.name == w.topic)?;
+                    // Only the holder (the subscriber's process) measures its arrivals.
+                    (self.holders[i] == m.process).then_some((i, w.p50_us, w.p99_us))
+                })
+                .collect();
+            if !links.is_empty() {
+                out.push(Telemetry::Wire(links));
+            }
+        }
         for &(node, now, late) in &m.ticks {
             // Only the process's own nodes.
             if node < self.spec.nodes.len() && self.spec.process_of(NodeId(node)) == m.process {
@@ -627,6 +641,27 @@ mod tests {
         f.stats(live("robot", vec![], vec![]));
         f.liveliness("robot", "sensor", false);
         assert_eq!(f.is_alive(NodeId(0)), Some(false));
+    }
+
+    #[test]
+    fn wire_latency_is_taken_from_the_receiving_process() {
+        let mut f = Fold::new(&cfg(), "scripted");
+        let link = |topic: &str, process: &str| wire::WireLink {
+            topic: topic.into(),
+            process: process.into(),
+            samples: 10,
+            p50_us: 120.0,
+            p99_us: 300.0,
+            max_us: 400.0,
+        };
+        let mut m = live("policy", vec![], vec![]);
+        // /obs arrives in `policy`; a claim about /action from `policy` is not its to make.
+        m.wire = vec![link("/obs", "policy"), link("/action", "policy")];
+        let out = f.stats(m);
+        let [Telemetry::Wire(links)] = out.as_slice() else {
+            panic!("one wire report expected")
+        };
+        assert_eq!(links, &vec![(0, 120.0, 300.0)]);
     }
 
     #[test]
