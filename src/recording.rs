@@ -1595,7 +1595,11 @@ impl StepObserver for RecordingObserver {
         for (i, (topic, st)) in self.shape.topics.iter().zip(&stats).enumerate() {
             let entity = topic.entity();
             let rate = if span > 0.0 {
-                (st.published - then.get(i).copied().unwrap_or(0)) as f64 / span
+                // Saturating: a topic's counters from another process may start over (it
+                // was restarted) or arrive from a peer that misbehaves.
+                st.published
+                    .saturating_sub(then.get(i).copied().unwrap_or(0)) as f64
+                    / span
             } else {
                 0.0
             };

@@ -52,8 +52,13 @@ pub struct Fold {
     spec: GraphSpec,
     /// The process holding each topic's counters (its subscriber's, else its publisher's).
     holders: Vec<String>,
-    /// Each topic's newest counters from its holder, when the holder is not the plant's.
+    /// Each topic's newest counters from its holder, when the holder is not the plant's
+    /// (continued across the holder's restarts: see [`Fold::stats`]).
     held: Vec<Option<TopicStats>>,
+    /// Per topic, what earlier runs of its holder process counted before it was restarted.
+    before: Vec<TopicStats>,
+    /// Each process's OS process id as last heard: a new one is a restart.
+    pids: std::collections::BTreeMap<String, u32>,
     /// The process of the actuator, whose steps the lab draws.
     plant: String,
     /// `(process, node)` whose liveliness tokens are alive.
@@ -82,6 +87,8 @@ impl Fold {
             .collect();
         Fold {
             held: vec![None; spec.topics.len()],
+            before: vec![TopicStats::default(); spec.topics.len()],
+            pids: std::collections::BTreeMap::new(),
             plant: spec.process_of(spec.chain.actuator),
             holders,
             spec,
@@ -123,10 +130,25 @@ impl Fold {
         } else {
             self.left.remove(&m.process); // a process started again
         }
+        // A process started again (another pid) counts its topics from zero: what the one
+        // before counted is kept, so the run's totals go on from where they were.
+        let restarted = self
+            .pids
+            .insert(m.process.clone(), m.pid)
+            .is_some_and(|pid| pid != m.pid);
+        if restarted {
+            for i in 0..self.held.len() {
+                if self.holders[i] == m.process {
+                    if let Some(h) = self.held[i] {
+                        self.before[i] = h;
+                    }
+                }
+            }
+        }
         for (name, st) in &m.topics {
             if let Some(i) = self.spec.topics.iter().position(|t| t.name == *name) {
                 if self.holders[i] == m.process && m.process != self.plant {
-                    self.held[i] = Some(*st);
+                    self.held[i] = Some(continued(&self.before[i], st));
                 }
             }
         }
@@ -215,6 +237,29 @@ impl Fold {
                 .collect(),
             policy: self.policy.clone(),
         }
+    }
+}
+
+/// A restarted holder's counters `now`, continued from what the processes before it counted
+/// (`before`): every count added; the newest stamp, the depth and what is in flight are
+/// `now`'s.
+fn continued(before: &TopicStats, now: &TopicStats) -> TopicStats {
+    TopicStats {
+        published: before.published.saturating_add(now.published),
+        dropped: before.dropped.saturating_add(now.dropped),
+        seen: before.seen.saturating_add(now.seen),
+        stale_reads: before.stale_reads.saturating_add(now.stale_reads),
+        expired: before.expired.saturating_add(now.expired),
+        refused: before.refused.saturating_add(now.refused),
+        lost: before.lost.saturating_add(now.lost),
+        retransmitted: before.retransmitted.saturating_add(now.retransmitted),
+        offered_deadline_missed: before
+            .offered_deadline_missed
+            .saturating_add(now.offered_deadline_missed),
+        requested_deadline_missed: before
+            .requested_deadline_missed
+            .saturating_add(now.requested_deadline_missed),
+        ..*now
     }
 }
 
@@ -582,6 +627,27 @@ mod tests {
         assert_eq!(s.topics.get(TopicId(0)), obs_at_policy);
         // /action is held by the robot's process itself: its step's figures stand.
         assert_eq!(s.topics.get(TopicId(1)), stats(2, 0));
+    }
+
+    #[test]
+    fn a_restarted_holder_continues_the_counts_of_the_one_before() {
+        let mut f = Fold::new(&cfg(), "scripted");
+        f.stats(live("policy", vec![("/obs", stats(100, 3))], vec![]));
+        // The policy's process is started again: its copy of /obs counts from zero.
+        let mut again = live("policy", vec![("/obs", stats(5, 1))], vec![]);
+        again.pid = 2;
+        f.stats(again.clone());
+        let step = f.merge_step(&step(20, stats(0, 0), stats(0, 0)));
+        assert_eq!(step.topics.get(TopicId(0)), stats(105, 4));
+        // Later figures of the same process add to the same base.
+        again.topics = vec![("/obs".into(), stats(9, 1))];
+        f.stats(again);
+        let step = f.merge_step(&step_at(40));
+        assert_eq!(step.topics.get(TopicId(0)), stats(109, 4));
+    }
+
+    fn step_at(t_ms: u64) -> StepRecord {
+        step(t_ms, stats(0, 0), stats(0, 0))
     }
 
     #[test]

@@ -212,6 +212,9 @@ fn a_killed_node_is_noticed_and_a_restarted_one_rejoins() {
             &ep,
             "--out",
             dir.path().to_str().unwrap(),
+            // The recording follows the restart too (the restarted process counts anew).
+            "--record",
+            dir.path().join("run.rrd").to_str().unwrap(),
         ])
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
@@ -287,6 +290,7 @@ fn a_killed_node_is_noticed_and_a_restarted_one_rejoins() {
             .any(|l| l.contains("sim_time") || l.contains("steps")),
         "{lines:?}"
     );
+    assert!(dir.path().join("run.rrd").is_file(), "{lines:?}");
     let restarted = again.wait().unwrap();
     assert!(restarted.success(), "the restarted node ends with the run");
     // The restarted policy ticked and published for the rest of the run (its process's
