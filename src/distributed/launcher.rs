@@ -749,6 +749,9 @@ pub fn launch(
         .put(keys.ended(), wire::encode_json(&over))
         .congestion_control(zenoh::qos::CongestionControl::Block)
         .wait();
+    // Let it leave before the session closes (and the launcher's token with it: a watcher
+    // takes a token gone without this word for a launcher that died).
+    std::thread::sleep(Duration::from_millis(200));
     Ok(LaunchReport {
         metrics,
         end,

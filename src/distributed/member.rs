@@ -555,7 +555,13 @@ fn real_clock(
     let watcher = {
         let (rx, run_stop, outer) = (ctl_rx.clone(), run_stop.clone(), stop.clone());
         let (finished, gone) = (finished.clone(), launcher_gone.clone());
+        // The figures' run time is now, not the last tick (a slow node ticks seldom).
+        let (clock, end) = (run_time.clone(), cfg.duration.0);
         std::thread::spawn(move || loop {
+            clock.fetch_max(
+                wire::mono_now_ns().saturating_sub(start).min(end),
+                Ordering::Relaxed,
+            );
             match rx.recv_timeout(Duration::from_millis(50)) {
                 Ok(ToMember::Stop { at_ns, .. }) => {
                     run_stop.stop();

@@ -43,6 +43,10 @@ use zenoh::Wait;
 /// How often a watcher sends the lab a status (liveliness, run time).
 pub const STATUS_PERIOD: Duration = Duration::from_millis(250);
 
+/// The plant's steps a watcher holds back at most, waiting for other processes' figures
+/// (200 s at 50 Hz; about 1 KB each).
+pub const MAX_PENDING_STEPS: usize = 10_000;
+
 /// Events a watcher buffers between Zenoh's callbacks and its fold, at most.
 const EVENTS: usize = 4096;
 
@@ -70,6 +74,12 @@ pub struct Fold {
     heard: bool,
     /// Newest run time seen.
     now: Nanos,
+    /// The plant's steps not yet handed on: each waits until every other process holding a
+    /// topic has published figures at least as new (or left, or died), so the counters it is
+    /// shown with are not older than it (at most [`MAX_PENDING_STEPS`]).
+    pending: std::collections::VecDeque<StepRecord>,
+    /// Each process's newest figures' run time.
+    reported: std::collections::BTreeMap<String, Nanos>,
     /// The launcher said the run is over: the lab is frozen on it.
     over: bool,
     /// The brain's label.
@@ -96,6 +106,8 @@ impl Fold {
             left: BTreeSet::new(),
             heard: false,
             now: Nanos::ZERO,
+            pending: std::collections::VecDeque::new(),
+            reported: std::collections::BTreeMap::new(),
             over: false,
             policy: policy.to_string(),
         }
@@ -176,13 +188,45 @@ impl Fold {
                 });
             }
         }
+        self.reported.insert(m.process.clone(), Nanos(m.t_ns));
         if m.process == self.plant {
             for s in &m.steps {
-                self.now = self.now.max(s.t);
-                out.push(Telemetry::Step(Box::new(self.merge_step(s))));
+                if self.pending.len() == MAX_PENDING_STEPS {
+                    let s = self.pending.pop_front().expect("full");
+                    out.push(Telemetry::Step(Box::new(self.merge_step(&s))));
+                }
+                self.pending.push_back(*s);
             }
         }
         self.now = self.now.max(Nanos(m.t_ns));
+        out.extend(self.release());
+        out
+    }
+
+    /// The plant's steps that may be shown now: those no process holding a topic is behind
+    /// (every such process alive and not done has published figures of that run time or
+    /// later), with the holders' counters merged in ([`Fold::merge_step`]).
+    pub fn release(&mut self) -> Vec<Telemetry> {
+        let behind = self
+            .holders
+            .iter()
+            .filter(|p| **p != self.plant && !self.left.contains(*p))
+            .filter(|p| {
+                // A holder whose nodes' tokens are gone is not waited for.
+                !self.heard || self.alive.iter().any(|(ap, _)| ap == *p)
+            })
+            .map(|p| self.reported.get(p).copied().unwrap_or(Nanos::ZERO))
+            .min();
+        let mut out = Vec::new();
+        while let Some(s) = self.pending.front() {
+            // Once the run is over nothing more is waited for.
+            if !self.over && behind.is_some_and(|t| t < s.t) {
+                break;
+            }
+            let s = self.pending.pop_front().expect("a front");
+            self.now = self.now.max(s.t);
+            out.push(Telemetry::Step(Box::new(self.merge_step(&s))));
+        }
         out
     }
 
@@ -431,7 +475,10 @@ impl Watch {
             let mut out = Vec::new();
             match ev_rx.recv_timeout(STATUS_PERIOD / 2) {
                 Ok(Event::Stats(m)) => out = fold.stats(*m),
-                Ok(Event::Alive(p, n, alive)) if !fold.is_over() => fold.liveliness(&p, &n, alive),
+                Ok(Event::Alive(p, n, alive)) if !fold.is_over() => {
+                    fold.liveliness(&p, &n, alive);
+                    out = fold.release();
+                }
                 Ok(Event::Launcher(true)) => launcher_seen = true,
                 Ok(Event::Launcher(false)) if !fold.is_over() && launcher_seen => {
                     out.push(Telemetry::Error(
@@ -441,8 +488,10 @@ impl Watch {
                 }
                 Ok(Event::Log(line)) => out.push(Telemetry::Applied(format!("launch: {line}"))),
                 Ok(Event::Over(over)) if !fold.is_over() => {
+                    let end = fold.ended(*over);
+                    out = fold.release();
                     out.push(fold.status());
-                    out.push(fold.ended(*over));
+                    out.push(end);
                 }
                 Ok(_) | Err(_) => {}
             }
@@ -607,14 +656,19 @@ mod tests {
         }
     }
 
+    /// `m` with figures of run time `t_ms`.
+    fn at(t_ms: u64, mut m: LiveStats) -> LiveStats {
+        m.t_ns = t_ms * 1_000_000;
+        m
+    }
+
     #[test]
     fn a_topic_held_by_another_process_takes_its_holders_counters() {
         let mut f = Fold::new(&cfg(), "scripted");
         // The chapter's graph: /obs is read in `policy`, /action in `robot`.
         let obs_at_policy = stats(10, 7);
-        assert!(f
-            .stats(live("policy", vec![("/obs", obs_at_policy)], vec![]))
-            .is_empty());
+        let policy = live("policy", vec![("/obs", obs_at_policy)], vec![]);
+        assert!(f.stats(at(20, policy)).is_empty());
         // The robot's own copy of /obs only forwards (its counters are not the topic's).
         let out = f.stats(live(
             "robot",
@@ -656,7 +710,11 @@ mod tests {
         let mut other = live("policy", vec![("/obs", stats(5, 5))], vec![]);
         other.graph = "elsewhere".into();
         f.stats(other);
-        f.stats(live("intruder", vec![("/obs", stats(6, 6))], vec![]));
+        f.stats(at(
+            1000,
+            live("intruder", vec![("/obs", stats(6, 6))], vec![]),
+        ));
+        f.stats(at(1000, live("policy", vec![], vec![])));
         let out = f.stats(live(
             "robot",
             vec![],
@@ -707,6 +765,52 @@ mod tests {
         f.stats(live("robot", vec![], vec![]));
         f.liveliness("robot", "sensor", false);
         assert_eq!(f.is_alive(NodeId(0)), Some(false));
+    }
+
+    #[test]
+    fn the_plants_steps_wait_for_the_holders_figures_of_their_time() {
+        let mut f = Fold::new(&cfg(), "scripted");
+        let steps = vec![step_at(20), step_at(40), step_at(60)];
+        f.stats(at(10, live("policy", vec![("/obs", stats(1, 0))], vec![])));
+        assert!(f.stats(at(60, live("robot", vec![], steps))).is_empty());
+        // The policy's figures of 40 ms release the steps up to 40 ms, with its counters.
+        let out = f.stats(at(40, live("policy", vec![("/obs", stats(3, 1))], vec![])));
+        assert_eq!(out.len(), 2);
+        let Telemetry::Step(s) = &out[1] else {
+            panic!("a step")
+        };
+        assert_eq!(
+            (s.t, s.topics.get(TopicId(0))),
+            (Nanos(40_000_000), stats(3, 1))
+        );
+        // A holder that died is not waited for.
+        f.liveliness("robot", "sensor", true);
+        f.liveliness("policy", "policy", false);
+        let out = f.release();
+        assert!(matches!(out.as_slice(), [Telemetry::Step(s)] if s.t == Nanos(60_000_000)));
+        // The run's end hands on whatever still waits.
+        f.liveliness("policy", "policy", true);
+        f.stats(at(80, live("robot", vec![], vec![step_at(80)])));
+        assert!(f.release().is_empty());
+        let over = RunOver {
+            metrics: crate::run(
+                &RunConfig {
+                    duration: Nanos(20_000_000),
+                    clock: crate::ClockKind::Virtual,
+                    ..cfg()
+                },
+                Box::new(crate::policy::Scripted),
+                crate::RunOptions::new(),
+            )
+            .unwrap()
+            .metrics,
+            end: crate::scheduler::RunEnd {
+                at: Nanos(80_000_000),
+                reason: crate::scheduler::EndReason::Duration,
+            },
+        };
+        f.ended(over);
+        assert_eq!(f.release().len(), 1);
     }
 
     #[test]

@@ -967,4 +967,11 @@ fn a_launch_across_processes_records_every_step() {
         events.iter().any(|(_, _, e)| e.starts_with("end: ")),
         "no end event: {events:?}"
     );
+    // The launcher's last word arrived before it left: its going is not taken for a death.
+    assert!(
+        !events
+            .iter()
+            .any(|(_, _, e)| e.contains("launcher is gone")),
+        "{events:?}"
+    );
 }
