@@ -42,6 +42,23 @@ pub(crate) fn processes_mentioning(needle: &str) -> Vec<u32> {
     out
 }
 
+/// The `ratelab node` processes of placement group `process` connected to the launcher on
+/// `port`.
+pub(crate) fn node_processes(port: u16, process: &str) -> Vec<u32> {
+    processes_mentioning(&format!(":{port}"))
+        .into_iter()
+        .filter(|pid| {
+            std::fs::read(format!("/proc/{pid}/cmdline"))
+                .map(|c| {
+                    text(&c)
+                        .replace('\0', " ")
+                        .contains(&format!("--process {process} "))
+                })
+                .unwrap_or(false)
+        })
+        .collect()
+}
+
 /// A free localhost port.
 pub(crate) fn free_port() -> u16 {
     std::net::TcpListener::bind("127.0.0.1:0")
@@ -254,14 +271,7 @@ fn a_killed_node_is_noticed_and_a_restarted_one_rejoins() {
         "{lines:?}"
     );
     std::thread::sleep(Duration::from_millis(1500));
-    let policy: Vec<u32> = processes_mentioning(&format!(":{port}"))
-        .into_iter()
-        .filter(|pid| {
-            std::fs::read(format!("/proc/{pid}/cmdline"))
-                .map(|c| text(&c).contains("policy"))
-                .unwrap_or(false)
-        })
-        .collect();
+    let policy = node_processes(port, "policy");
     assert_eq!(policy.len(), 1, "one policy process: {policy:?}");
     // SAFETY: plain kill(2) on a child of our child.
     unsafe { libc::kill(policy[0] as i32, libc::SIGKILL) };

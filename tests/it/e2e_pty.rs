@@ -335,14 +335,7 @@ fn the_attached_lab_marks_a_killed_node_not_alive_and_sees_it_rejoin() {
     lab.wait_for("policy@policy", Duration::from_secs(60));
     lab.wait_for("Hz meas", Duration::from_secs(20));
     assert!(!lab.screen().contains("NOT ALIVE"), "{}", lab.screen());
-    let policy: Vec<u32> = crate::distributed::processes_mentioning(&format!(":{port}"))
-        .into_iter()
-        .filter(|pid| {
-            std::fs::read(format!("/proc/{pid}/cmdline"))
-                .map(|c| String::from_utf8_lossy(&c).contains("policy"))
-                .unwrap_or(false)
-        })
-        .collect();
+    let policy = crate::distributed::node_processes(port, "policy");
     assert_eq!(policy.len(), 1, "one policy process: {policy:?}");
     // SAFETY: plain kill(2) on a process this test's launcher started.
     unsafe { libc::kill(policy[0] as i32, libc::SIGKILL) };
