@@ -60,7 +60,7 @@ pub struct LaunchArgs {
     /// Without it the graph runs in this one process, as `ratelab run`.
     #[arg(long)]
     pub processes: bool,
-    /// The Zenoh endpoint to listen on (default tcp/127.0.0.1:7447, or a free port when that
+    /// The Zenoh endpoint to listen on (default tcp/127.0.0.1:7449, or a free port when that
     /// is taken).
     #[arg(long, value_name = "tcp/HOST:PORT")]
     pub listen: Option<String>,

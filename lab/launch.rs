@@ -144,14 +144,18 @@ fn launch_watched(
     recording: Option<&ratelab::recording::Recording>,
 ) -> anyhow::Result<LaunchReport> {
     let (line_tx, line_rx) = crossbeam_channel::unbounded::<String>();
+    // Set when the launcher returns (or the user stops it): the watcher stops waiting.
+    let launcher_done = StopFlag::new();
     let launcher = {
-        let (stop, cfg) = (stop.clone(), cfg.clone());
+        let (stop, cfg, done) = (stop.clone(), cfg.clone(), launcher_done.clone());
         std::thread::Builder::new()
             .name("launcher".into())
             .spawn(move || {
-                launch(&cfg, &opts, &stop, &|line| {
+                let r = launch(&cfg, &opts, &stop, &|line| {
                     let _ = line_tx.send(line.to_string());
-                })
+                });
+                done.stop();
+                r
             })?
     };
     let joined = |launcher: std::thread::JoinHandle<Result<LaunchReport, _>>| match launcher.join()
@@ -185,12 +189,13 @@ fn launch_watched(
         std::slice::from_ref(&endpoint),
         Some(&cfg.graph.name),
         ratelab::distributed::REPLY_TIMEOUT,
-        stop,
+        &launcher_done,
     ) {
         Ok(w) => w,
         Err(e) => {
+            // The launcher's own error, when it failed, says more than the watcher's.
             stop.stop();
-            let _ = joined(launcher);
+            joined(launcher)?;
             return Err(e.into());
         }
     };
@@ -332,14 +337,15 @@ pub fn run_top(a: &TopArgs, stop: StopFlag) -> anyhow::Result<()> {
         check_endpoint("--connect", ep, false)?;
     }
     let session = open_session(&["tcp/127.0.0.1:0".to_string()], &a.connect)?;
-    let (tx, rx) = crossbeam_channel::unbounded::<LiveStats>();
+    let (tx, rx) = crossbeam_channel::bounded::<LiveStats>(1024);
     let _sub = session
         .declare_subscriber("ratelab/*/@stats/*")
         .callback(move |s| {
-            if let Ok(m) =
-                ratelab::distributed::wire::decode_json::<LiveStats>(&s.payload().to_bytes())
-            {
-                let _ = tx.send(m);
+            if let Ok(mut m) = LiveStats::decode(&s.payload().to_bytes()) {
+                // `top` shows counters: the steps and ticks for the lab are not kept.
+                m.steps = Vec::new();
+                m.ticks = Vec::new();
+                let _ = tx.try_send(m);
             }
         })
         .wait()

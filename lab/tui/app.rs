@@ -256,10 +256,6 @@ impl App {
     }
 
     fn send(&mut self, c: Control) {
-        if self.attached.is_some() && !matches!(c, Control::Quit) {
-            self.say(READ_ONLY.to_string());
-            return;
-        }
         let _ = self.tx.send(c);
     }
 
@@ -408,6 +404,11 @@ impl App {
 
     /// Handle one key message.
     pub fn on_msg(&mut self, m: Msg) {
+        // Attached, a key that would change the graph changes nothing here either.
+        if self.attached.is_some() && !m.only_views() {
+            self.say(READ_ONLY.to_string());
+            return;
+        }
         match m {
             Msg::RateDown => {
                 let n = self.rate_target();
@@ -632,12 +633,17 @@ impl App {
     fn node_view(&self, id: NodeId, layer: usize) -> NodeView {
         let empty = VecDeque::new();
         let q = self.ticks.get(id.0).unwrap_or(&empty);
-        // No tick within the window (a node whose process died): it runs at 0 Hz now.
+        // No tick for a second or two periods (a node whose process died): 0 Hz now.
+        let quiet = Nanos::from_secs_f64(2.0 / self.rate_of(id).max(1e-3))
+            .unwrap_or(TICK_WINDOW)
+            .max(TICK_WINDOW);
         let silent = q
             .back()
-            .is_some_and(|(t, _)| self.now.saturating_sub(*t) > TICK_WINDOW);
+            .is_some_and(|(t, _)| self.now.saturating_sub(*t) > quiet);
         let (measured_hz, lateness_p99_us) = if self.clock == "real" && q.len() >= 2 {
-            let span = (q.back().expect("len ≥ 2").0 - q.front().expect("len ≥ 2").0).as_secs_f64();
+            let span = (q.back().expect("len ≥ 2").0)
+                .saturating_sub(q.front().expect("len ≥ 2").0)
+                .as_secs_f64();
             let mut late: Vec<u64> = q.iter().map(|(_, l)| l.0).collect();
             late.sort_unstable();
             let p99 = late[((late.len() as f64 * 0.99).ceil() as usize).clamp(1, late.len()) - 1];
@@ -727,7 +733,8 @@ impl App {
     pub fn view(&self) -> View {
         View {
             clock: self.clock.clone(),
-            speed: if self.clock == "virtual" {
+            // An attached lab's graph runs at the lockstep's pace, not the lab's.
+            speed: if self.clock == "virtual" && self.attached.is_none() {
                 self.speed.to_string()
             } else {
                 String::new()

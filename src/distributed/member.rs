@@ -113,6 +113,27 @@ pub const MAX_BATCH_STEPS: usize = 1000;
 /// The most node ticks one [`LiveStats`] carries.
 pub const MAX_BATCH_TICKS: usize = 20_000;
 
+impl LiveStats {
+    /// Decode figures from the network, refusing any over the bounds a process keeps
+    /// ([`MAX_BATCH_STEPS`], [`MAX_BATCH_TICKS`], a graph's most nodes and topics).
+    ///
+    /// # Errors
+    /// One line.
+    pub fn decode(bytes: &[u8]) -> Result<LiveStats, String> {
+        let m: LiveStats = wire::decode_json(bytes)?;
+        let bounded = m.steps.len() <= MAX_BATCH_STEPS
+            && m.ticks.len() <= MAX_BATCH_TICKS
+            && m.nodes.len() <= crate::graph::spec::MAX_NODES
+            && m.topics.len() <= crate::graph::spec::MAX_TOPICS
+            && m.wire.len() <= crate::graph::spec::MAX_TOPICS;
+        if bounded {
+            Ok(m)
+        } else {
+            Err("figures over a process's bounds".into())
+        }
+    }
+}
+
 /// What happened since the stats thread last published: steps and ticks, bounded.
 #[derive(Default)]
 struct Batch {
@@ -388,9 +409,10 @@ pub fn run_member(opts: &MemberOptions, stop: &StopFlag) -> Result<(), DistError
     let run_time = Arc::new(AtomicU64::new(0));
     // Live counters for `ratelab top` and `ratelab lab --attach`, every [`STATS_PERIOD`],
     // and once more after the run (its last steps).
+    // Dropped under congestion (Zenoh's default): a watcher that stalls must never hold up
+    // the run or its reports.
     let stats_pub = session
         .declare_publisher(keys.stats(&opts.process))
-        .congestion_control(block)
         .wait()?;
     let stats_done = StopFlag::new();
     let stats_thread = {
@@ -447,10 +469,11 @@ pub fn run_member(opts: &MemberOptions, stop: &StopFlag) -> Result<(), DistError
             &opts.process,
             &launcher_gone,
         ),
-        crate::ClockKind::Real => match recv(&ctl_rx, stop, &launcher_gone)? {
+        crate::ClockKind::Real => match recv(&ctl_rx, stop, &launcher_gone) {
+            Err(e) => Err(e),
             // Ended before it started: report the graph as built.
-            ToMember::Stop { .. } => Ok(GraphState::capture(&handles, Nanos::ZERO, &[], None)),
-            ToMember::Start { start_mono_ns } => real_clock(
+            Ok(ToMember::Stop { .. }) => Ok(GraphState::capture(&handles, Nanos::ZERO, &[], None)),
+            Ok(ToMember::Start { start_mono_ns }) => real_clock(
                 nodes,
                 &local,
                 &cfg,
@@ -466,7 +489,7 @@ pub fn run_member(opts: &MemberOptions, stop: &StopFlag) -> Result<(), DistError
                 &opts.process,
                 &batch,
             ),
-            other => Err(DistError::Peer(format!("expected a start, got {other:?}"))),
+            Ok(other) => Err(DistError::Peer(format!("expected a start, got {other:?}"))),
         },
     };
     stats_done.stop();

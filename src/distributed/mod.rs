@@ -36,9 +36,11 @@ use sha2::Digest;
 use zenoh::Wait;
 
 /// Where a launcher listens when not told (`--listen`), and where `ratelab lab --attach`
-/// looks when not told (`--connect`): Zenoh's usual port on loopback, as rmw_zenoh's router
-/// uses it. A launcher that finds it taken listens on a free port instead (and says which).
-pub const DEFAULT_ENDPOINT: &str = "tcp/127.0.0.1:7447";
+/// looks when not told (`--connect`): a port of ratelab's own on loopback, next to Zenoh's
+/// router port 7447 but not it (a ROS 2 node of rmw_zenoh connects to 7447 by default, and
+/// must not find ratelab's launcher there). A launcher that finds it taken listens on a
+/// free port instead (and says which).
+pub const DEFAULT_ENDPOINT: &str = "tcp/127.0.0.1:7449";
 
 /// How long a process waits for a peer's answer (a join, a ready, a granted tick).
 pub const REPLY_TIMEOUT: std::time::Duration = std::time::Duration::from_secs(20);

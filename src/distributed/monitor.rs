@@ -12,8 +12,9 @@
 //!   (real clock: measured rates and lateness) and the counters of the topics it holds;
 //! - a topic's counters live in its subscriber's process (its copy keeps the chapter's buffer
 //!   and QoS, `docs/distributed.md`), so each step's counters of a topic held elsewhere are
-//!   replaced by the holder's newest ([`Fold::merge_step`]); they lag by at most one
-//!   [`super::member::STATS_PERIOD`] plus the wire;
+//!   replaced by the holder's newest ([`Fold::merge_step`]); a step waits until every
+//!   holder has published figures of its run time or later ([`Fold::release`]), so they
+//!   are never older than the step;
 //! - a node is alive while its liveliness token is (`ratelab/<graph>/@node/<process>/<node>`),
 //!   as rmw_zenoh tracks its graph; the lab draws one whose token went as NOT ALIVE;
 //! - the launcher's progress lines (`@log`) become notices, and its merged summary
@@ -48,7 +49,7 @@ pub const STATUS_PERIOD: Duration = Duration::from_millis(250);
 pub const MAX_PENDING_STEPS: usize = 10_000;
 
 /// Events a watcher buffers between Zenoh's callbacks and its fold, at most.
-const EVENTS: usize = 4096;
+const EVENTS: usize = 64;
 
 /// Folds what a multi-process graph publishes into the lab's [`Telemetry`]: pure, so its
 /// rules are unit-tested without a network.
@@ -74,6 +75,8 @@ pub struct Fold {
     heard: bool,
     /// Newest run time seen.
     now: Nanos,
+    /// Each node's newest tick handed on, ns (older ones are dropped).
+    last_tick: Vec<Option<u64>>,
     /// The plant's steps not yet handed on: each waits until every other process holding a
     /// topic has published figures at least as new (or left, or died), so the counters it is
     /// shown with are not older than it (at most [`MAX_PENDING_STEPS`]).
@@ -106,6 +109,7 @@ impl Fold {
             left: BTreeSet::new(),
             heard: false,
             now: Nanos::ZERO,
+            last_tick: vec![None; cfg.graph.nodes.len()],
             pending: std::collections::VecDeque::new(),
             reported: std::collections::BTreeMap::new(),
             over: false,
@@ -179,8 +183,11 @@ impl Fold {
             }
         }
         for &(node, now, late) in &m.ticks {
-            // Only the process's own nodes.
-            if node < self.spec.nodes.len() && self.spec.process_of(NodeId(node)) == m.process {
+            // Only the process's own nodes, and only forward in time.
+            let own =
+                node < self.spec.nodes.len() && self.spec.process_of(NodeId(node)) == m.process;
+            if own && self.last_tick[node] < Some(now) {
+                self.last_tick[node] = Some(now);
                 out.push(Telemetry::NodeTick {
                     node,
                     now: Nanos(now),
@@ -233,6 +240,16 @@ impl Fold {
     /// A node's liveliness token appeared (`alive`) or was withdrawn. A process that said
     /// its part of the run is over keeps its nodes drawn alive as they leave.
     pub fn liveliness(&mut self, process: &str, node: &str, alive: bool) {
+        // Only the graph's own nodes, in their own processes.
+        let known = self
+            .spec
+            .nodes
+            .iter()
+            .enumerate()
+            .any(|(i, n)| n.name == node && self.spec.process_of(NodeId(i)) == process);
+        if !known {
+            return;
+        }
         self.heard = true;
         let key = (process.to_string(), node.to_string());
         if alive {
@@ -400,7 +417,7 @@ impl Watch {
             .session
             .declare_subscriber(keys.stats("*"))
             .callback(move |s| {
-                if let Ok(m) = wire::decode_json::<LiveStats>(&s.payload().to_bytes()) {
+                if let Ok(m) = LiveStats::decode(&s.payload().to_bytes()) {
                     send(&t, Event::Stats(Box::new(m)));
                 }
             })
@@ -416,7 +433,9 @@ impl Watch {
                 let alive = s.kind() == zenoh::sample::SampleKind::Put;
                 let rest = s.key_expr().as_str().strip_prefix(&prefix).unwrap_or("");
                 if let Some((p, n)) = rest.split_once('/') {
-                    send(&t, Event::Alive(p.to_string(), n.to_string(), alive));
+                    // Liveliness is news the fold must not miss: wait a little for room.
+                    let e = Event::Alive(p.to_string(), n.to_string(), alive);
+                    let _ = t.send_timeout(e, Duration::from_secs(1));
                 }
             })
             .wait()?;
@@ -455,7 +474,7 @@ impl Watch {
             .declare_subscriber(keys.ended())
             .callback(move |s| {
                 if let Ok(m) = wire::decode_json::<RunOver>(&s.payload().to_bytes()) {
-                    send(&t, Event::Over(Box::new(m)));
+                    let _ = t.send_timeout(Event::Over(Box::new(m)), Duration::from_secs(1));
                 }
             })
             .wait()?;
@@ -517,8 +536,8 @@ impl Watch {
 /// summary ([`Recording::finish`]).
 ///
 /// What differs from an in-process recording: a topic held by another process shows its
-/// counters as that process last published them (at most [`super::member::STATS_PERIOD`] behind); the
-/// published force is the newest per actuator step; leases are not recorded (liveliness is
+/// counters as that process published them at the step's run time or a little later
+/// (figures come every [`super::member::STATS_PERIOD`]); the published force is the newest per actuator step; leases are not recorded (liveliness is
 /// the tokens'). So it is not byte-identical to the in-process recording, even under the
 /// virtual clock (`metrics.json` is).
 ///
@@ -839,8 +858,12 @@ mod tests {
         let mut f = Fold::new(&cfg(), "scripted");
         let mut m = live("policy", vec![], vec![]);
         m.ticks = vec![(1, 20_000_000, 50_000), (0, 20_000_000, 1), (99, 0, 0)];
-        let out = f.stats(m);
+        let out = f.stats(m.clone());
         assert_eq!(out.len(), 1);
+        // A tick no newer than one handed on (a peer replaying, or out of order) is dropped:
+        // the lab's rates assume time goes forward.
+        m.ticks = vec![(1, 10_000_000, 0), (1, 20_000_000, 0)];
+        assert!(f.stats(m).is_empty());
         assert!(matches!(
             out[0],
             Telemetry::NodeTick {

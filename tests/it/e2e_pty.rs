@@ -334,6 +334,9 @@ fn the_attached_lab_marks_a_killed_node_not_alive_and_sees_it_rejoin() {
     let lab = Lab::start(&["lab", "--attach", "--connect", &ep]);
     lab.wait_for("policy@policy", Duration::from_secs(60));
     lab.wait_for("Hz meas", Duration::from_secs(20));
+    // Let the policy steady the pole first: the robot then holds its last force for a
+    // second or so without it (killed at the very start, the pole falls at once).
+    std::thread::sleep(Duration::from_secs(2));
     assert!(!lab.screen().contains("NOT ALIVE"), "{}", lab.screen());
     let policy = crate::distributed::node_processes(port, "policy");
     assert_eq!(policy.len(), 1, "one policy process: {policy:?}");
