@@ -314,8 +314,7 @@ fn the_attached_lab_marks_a_killed_node_not_alive_and_sees_it_rejoin() {
     let _machine = crate::machine::alone();
     let port = crate::distributed::free_port();
     let ep = format!("tcp/127.0.0.1:{port}");
-    let bin = env!("CARGO_BIN_EXE_ratelab");
-    let mut launcher = std::process::Command::new(bin)
+    let mut launcher = crate::distributed::bin()
         .args([
             "launch",
             "--processes",
@@ -326,7 +325,6 @@ fn the_attached_lab_marks_a_killed_node_not_alive_and_sees_it_rejoin() {
             "--listen",
             &ep,
         ])
-        .current_dir(crate::REPO)
         .stdout(std::process::Stdio::null())
         .stderr(std::process::Stdio::null())
         .spawn()
@@ -349,9 +347,8 @@ fn the_attached_lab_marks_a_killed_node_not_alive_and_sees_it_rejoin() {
     );
     // Its ticks stopped: its measured rate falls to 0 once a second has passed.
     lab.wait_for("0.0 Hz meas", Duration::from_secs(5));
-    let mut again = std::process::Command::new(bin)
+    let mut again = crate::distributed::bin()
         .args(["node", "--process", "policy", "--connect", &ep])
-        .current_dir(crate::REPO)
         .stdout(std::process::Stdio::null())
         .stderr(std::process::Stdio::null())
         .spawn()
