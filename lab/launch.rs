@@ -67,6 +67,8 @@ pub fn run_launch(a: &LaunchArgs, force_headless: bool, stop: StopFlag) -> anyho
         } else {
             Some(std::env::current_exe()?)
         },
+        child_stderr: None,
+        start_gate: None,
     };
     let placement: Vec<String> = cfg
         .graph
@@ -136,14 +138,23 @@ pub fn run_launch(a: &LaunchArgs, force_headless: bool, stop: StopFlag) -> anyho
 /// finished with the merged summary. The launcher's progress lines are printed as they come
 /// without the lab, and after the terminal is restored with it (the lab shows them
 /// meanwhile).
+///
+/// The run starts once the watcher has figures from every process (the launcher's start
+/// gate), so the lab and the recording miss none of it; with the lab, the processes' stderr
+/// comes as lines (in the lab's log, and printed after it) rather than over its screen.
 fn launch_watched(
     cfg: ratelab::RunConfig,
-    opts: LaunchOptions,
+    mut opts: LaunchOptions,
     stop: &StopFlag,
     lab: bool,
     recording: Option<&ratelab::recording::Recording>,
 ) -> anyhow::Result<LaunchReport> {
     let (line_tx, line_rx) = crossbeam_channel::unbounded::<String>();
+    let (gate_tx, gate_rx) = crossbeam_channel::bounded::<()>(1);
+    opts.start_gate = Some(gate_rx);
+    if lab {
+        opts.child_stderr = Some(line_tx.clone());
+    }
     // Set when the launcher returns (or the user stops it): the watcher stops waiting.
     let launcher_done = StopFlag::new();
     let launcher = {
@@ -221,7 +232,7 @@ fn launch_watched(
             None
         }
     };
-    let (watch_stop, watcher) = spawn_watch(watch, sinks)?;
+    let (watch_stop, watcher) = spawn_watch(watch, sinks, Some(gate_tx))?;
     let lab_result = if lab {
         let r = crate::tui::run_attached(policy, &cfg.graph, &lab_rx, stop);
         stop.stop(); // the user quit: end the launch, if it is still running
@@ -266,6 +277,7 @@ fn launch_watched(
 fn spawn_watch(
     watch: Watch,
     sinks: Vec<crossbeam_channel::Sender<Telemetry>>,
+    watching: Option<crossbeam_channel::Sender<()>>,
 ) -> anyhow::Result<(
     StopFlag,
     std::thread::JoinHandle<Result<(), ratelab::distributed::DistError>>,
@@ -283,7 +295,7 @@ fn spawn_watch(
                     }
                 }
             });
-            let r = watch.run(&tx, &watch_stop);
+            let r = watch.run(&tx, &watch_stop, watching);
             drop(tx);
             let _ = tee.join();
             r
@@ -305,7 +317,7 @@ pub fn run_attach(connect: &[String], stop: StopFlag) -> anyhow::Result<()> {
     let watch = Watch::connect(connect, None, Duration::from_secs(5), &stop)?;
     let (policy, spec) = (watch.setup.policy.clone(), watch.cfg.graph.clone());
     let (tx, rx) = crossbeam_channel::unbounded::<Telemetry>();
-    let (watch_stop, watcher) = spawn_watch(watch, vec![tx])?;
+    let (watch_stop, watcher) = spawn_watch(watch, vec![tx], None)?;
     let lab = crate::tui::run_attached(policy, &spec, &rx, &stop);
     watch_stop.stop();
     match watcher.join() {

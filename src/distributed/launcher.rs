@@ -37,6 +37,74 @@ pub struct LaunchOptions {
     /// The `ratelab` binary to start the placement groups with (`None`: start none, and
     /// wait for them to be started by hand with `ratelab node`).
     pub exe: Option<PathBuf>,
+    /// Where the started processes' stderr goes, a line at a time as `PROCESS: LINE` (each
+    /// line also published on the graph's log key, [`Keys::log`]); `None`: to the
+    /// launcher's own stderr. A lab on the terminal takes them, so that no child writes
+    /// over its screen. Lines are cut at [`MAX_STDERR_LINE`] bytes.
+    pub child_stderr: Option<crossbeam_channel::Sender<String>>,
+    /// The run starts only once this receives (or is told, within [`REPLY_TIMEOUT`]): a
+    /// watcher that must see the whole run (a recording, the lab) says here that it has
+    /// figures from every process ([`super::monitor::Watch::run`]). `None`: start when
+    /// every process is ready.
+    pub start_gate: Option<Receiver<()>>,
+}
+
+/// The longest line of a started process's stderr that [`LaunchOptions::child_stderr`]
+/// passes on, bytes (the rest of the line is dropped).
+pub const MAX_STDERR_LINE: usize = 4096;
+
+/// Pass `child`'s stderr on a line at a time, as `PROCESS: LINE`, to `to` and on the log
+/// key, until the child closes it (a thread that ends with the child).
+fn pass_stderr(
+    process: &str,
+    child: &mut Child,
+    to: crossbeam_channel::Sender<String>,
+    session: zenoh::Session,
+    log_key: String,
+) {
+    use std::io::{BufRead, Read};
+    let Some(err) = child.stderr.take() else {
+        return;
+    };
+    let process = process.to_string();
+    let _ = std::thread::Builder::new()
+        .name(format!("stderr {process}"))
+        .spawn(move || {
+            let mut r = std::io::BufReader::new(err);
+            let mut buf = Vec::new();
+            loop {
+                buf.clear();
+                // Bounded: a line longer than the limit is cut, its rest skipped.
+                match r
+                    .by_ref()
+                    .take(MAX_STDERR_LINE as u64)
+                    .read_until(b'\n', &mut buf)
+                {
+                    Ok(0) | Err(_) => return,
+                    Ok(_) => {}
+                }
+                let cut = buf.last() != Some(&b'\n');
+                if cut {
+                    let mut rest = Vec::new();
+                    loop {
+                        rest.clear();
+                        match r
+                            .by_ref()
+                            .take(MAX_STDERR_LINE as u64)
+                            .read_until(b'\n', &mut rest)
+                        {
+                            Ok(0) | Err(_) => break,
+                            Ok(_) if rest.last() == Some(&b'\n') => break,
+                            Ok(_) => {}
+                        }
+                    }
+                }
+                let text = String::from_utf8_lossy(&buf);
+                let line = format!("{process}: {}", text.trim_end());
+                let _ = session.put(log_key.as_str(), line.as_str()).wait();
+                let _ = to.send(line);
+            }
+        });
 }
 
 /// What a launched run produced.
@@ -202,6 +270,40 @@ impl Drop for Children {
         for (_, c) in &mut self.0 {
             let _ = c.kill();
             let _ = c.wait();
+        }
+    }
+}
+
+/// Wait for the start gate ([`LaunchOptions::start_gate`]), for up to [`REPLY_TIMEOUT`].
+fn wait_gate(
+    gate: &Receiver<()>,
+    stop: &StopFlag,
+    children: &mut Children,
+) -> Result<(), DistError> {
+    let deadline = Instant::now() + REPLY_TIMEOUT;
+    loop {
+        match gate.recv_timeout(Duration::from_millis(50)) {
+            Ok(()) => return Ok(()),
+            Err(crossbeam_channel::RecvTimeoutError::Disconnected) => {
+                return Err(DistError::Peer(
+                    "the run's watcher stopped before the run started".into(),
+                ))
+            }
+            Err(crossbeam_channel::RecvTimeoutError::Timeout) => {}
+        }
+        if stop.is_stopped() {
+            return Err(DistError::Peer("interrupted before the run started".into()));
+        }
+        if let Some((p, status)) = children.exited() {
+            return Err(DistError::Peer(format!(
+                "process '{p}' exited ({status}) before the run started"
+            )));
+        }
+        if Instant::now() >= deadline {
+            return Err(DistError::Peer(format!(
+                "the run's watcher did not hear from every process within {} s",
+                REPLY_TIMEOUT.as_secs()
+            )));
         }
     }
 }
@@ -375,7 +477,11 @@ pub fn launch(
                 .process_group(0)
                 .stdin(Stdio::null())
                 .stdout(Stdio::null())
-                .stderr(Stdio::inherit());
+                .stderr(if opts.child_stderr.is_some() {
+                    Stdio::piped()
+                } else {
+                    Stdio::inherit()
+                });
             // A node dies with the launcher, however the launcher ends.
             // SAFETY: prctl is async-signal-safe and touches only this (child) process.
             unsafe {
@@ -385,9 +491,12 @@ pub fn launch(
                     Ok(())
                 });
             }
-            let child = cmd
+            let mut child = cmd
                 .spawn()
                 .map_err(|e| DistError::Usage(format!("cannot start {}: {e}", exe.display())))?;
+            if let Some(to) = &opts.child_stderr {
+                pass_stderr(p, &mut child, to.clone(), session.clone(), keys.log());
+            }
             children.0.push((p.clone(), child));
         }
     } else {
@@ -546,6 +655,9 @@ pub fn launch(
             }
             _ => {}
         }
+    }
+    if let Some(gate) = &opts.start_gate {
+        wait_gate(gate, stop, &mut children)?;
     }
     let start = Instant::now();
     let mut reports: BTreeMap<String, GraphState> = BTreeMap::new();
@@ -792,5 +904,33 @@ fn collect_reports(
             wires.extend(wire);
             reports.insert(process, *state);
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_child_s_stderr_comes_as_bounded_lines_named_by_its_process() {
+        let mut child = Command::new("sh")
+            .args([
+                "-c",
+                "echo 'first line' >&2; head -c 10000 /dev/zero | tr '\\0' x >&2; echo >&2; printf 'last, no newline' >&2",
+            ])
+            .stdout(Stdio::null())
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("sh runs");
+        let session = open_session(&["tcp/127.0.0.1:0".to_string()], &[]).expect("a session");
+        let (tx, rx) = crossbeam_channel::unbounded();
+        pass_stderr("policy", &mut child, tx, session, Keys::new("g").log());
+        let _ = child.wait();
+        let lines: Vec<String> =
+            std::iter::from_fn(|| rx.recv_timeout(Duration::from_secs(5)).ok()).collect();
+        assert_eq!(lines.len(), 3, "{lines:?}");
+        assert_eq!(lines[0], "policy: first line");
+        assert_eq!(lines[1], format!("policy: {}", "x".repeat(MAX_STDERR_LINE)));
+        assert_eq!(lines[2], "policy: last, no newline");
     }
 }

@@ -401,11 +401,20 @@ impl Watch {
 
     /// Send the lab the run's telemetry until `stop` is set or the lab hangs up (its
     /// receiver is dropped): `Started` at once, then steps, ticks, notices and a status every
-    /// [`STATUS_PERIOD`], and `Ended` when the launcher says so.
+    /// [`STATUS_PERIOD`], and `Ended` when the launcher says so. `watching`, when given, is
+    /// told once figures have come from every process of the graph's placement: from then
+    /// on nothing any process publishes misses this watcher (Zenoh delivers in order), so a
+    /// launcher that waits for it before the run ([`super::launcher::LaunchOptions`]'s
+    /// `start_gate`) has the whole run watched.
     ///
     /// # Errors
     /// [`DistError::Zenoh`] when a subscription cannot be declared.
-    pub fn run(self, tx: &Sender<Telemetry>, stop: &StopFlag) -> Result<(), DistError> {
+    pub fn run(
+        self,
+        tx: &Sender<Telemetry>,
+        stop: &StopFlag,
+        watching: Option<Sender<()>>,
+    ) -> Result<(), DistError> {
         let (ev_tx, ev_rx) = crossbeam_channel::bounded::<Event>(EVENTS);
         let keys = &self.keys;
         // A full queue drops the event (the fold is behind; Zenoh's threads never wait).
@@ -490,10 +499,26 @@ impl Watch {
         }
         let mut last_status = Instant::now();
         let mut launcher_seen = false;
+        let mut watching = watching;
+        let mut unheard: Vec<String> = self
+            .cfg
+            .graph
+            .placement()
+            .into_iter()
+            .map(|(p, _)| p)
+            .collect();
         while !stop.is_stopped() {
             let mut out = Vec::new();
             match ev_rx.recv_timeout(STATUS_PERIOD / 2) {
-                Ok(Event::Stats(m)) => out = fold.stats(*m),
+                Ok(Event::Stats(m)) => {
+                    unheard.retain(|p| *p != m.process);
+                    if unheard.is_empty() {
+                        if let Some(w) = watching.take() {
+                            let _ = w.send(());
+                        }
+                    }
+                    out = fold.stats(*m);
+                }
                 Ok(Event::Alive(p, n, alive)) if !fold.is_over() => {
                     fold.liveliness(&p, &n, alive);
                     out = fold.release();
