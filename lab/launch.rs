@@ -110,9 +110,10 @@ pub fn run_launch(a: &LaunchArgs, force_headless: bool, stop: StopFlag) -> anyho
             w.topic, w.process, w.samples, w.p50_us, w.p99_us, w.max_us
         );
     }
-    if let Some((ticks, us)) = lockstep {
+    if let Some(l) = lockstep {
         println!(
-            "[ratelab] lockstep: {ticks} ticks granted, {us:.0} µs of wall time each (round trip + tick)"
+            "[ratelab] lockstep: {} ticks at {} instants, {:.0} µs of wall time per instant",
+            l.ticks, l.instants, l.us_per_instant
         );
     }
     if let Some(dir) = &run.out {

@@ -158,6 +158,21 @@ impl VirtualScheduler {
         Some((due, i, flow))
     }
 
+    /// Take the next tick off the schedule without running it (it runs in another process,
+    /// [`crate::distributed`]): sets [`VirtualScheduler::now`] to its time, schedules the
+    /// node's next tick one period on, and returns the tick's time and node index. Not
+    /// counted in [`VirtualScheduler::ticks`].
+    pub fn skip_next(&mut self, nodes: &[Box<dyn Node>]) -> Option<(Nanos, usize)> {
+        let Reverse((due, prio, i)) = self.heap.pop()?;
+        self.now = due;
+        self.heap.push(Reverse((
+            due.saturating_add(nodes[i].rate().period()),
+            prio,
+            i,
+        )));
+        Some((due, i))
+    }
+
     /// Run every tick due at the next instant, in tie-break order. A node that panics is
     /// caught, named, and ends the graph ([`InstantOutcome::Failed`]).
     pub fn run_instant(&mut self, nodes: &mut [Box<dyn Node>]) -> InstantOutcome {

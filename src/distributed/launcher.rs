@@ -3,7 +3,8 @@
 //! time authority under the virtual clock; the common start under the real one), stops
 //! every process it started, and merges their reports into one `metrics.json`.
 
-use super::wire::{self, Setup, ToLauncher, ToMember};
+use super::lockstep::{TickInbox, HORIZON_PERIODS, MAX_AHEAD};
+use super::wire::{self, Setup, Ticked, ToLauncher, ToMember};
 use super::{check_endpoint, check_keys, open_session, DistError, Keys, REPLY_TIMEOUT};
 use crate::config::{ClockKind, RunConfig};
 use crate::graph::spec::GraphSpec;
@@ -121,9 +122,8 @@ pub struct LaunchReport {
     pub wire: Vec<wire::WireLink>,
     /// Processes that did not report (gone, or failed): their figures are missing.
     pub missing: Vec<String>,
-    /// Virtual clock: ticks granted, and the wall time per granted tick, µs (the lockstep's
-    /// cost: a round trip to the node's process and its tick).
-    pub lockstep: Option<(u64, f64)>,
+    /// Virtual clock: the lockstep's cost.
+    pub lockstep: Option<LockstepCost>,
 }
 
 /// What the launcher made of a join.
@@ -159,27 +159,15 @@ impl Link {
     }
 }
 
-/// A remote node as the launcher's scheduler sees it: its tick is granted to its process.
-struct Proxy {
+/// A node as the launcher's scheduler sees it: its name, tie-break rank and rate (it ticks
+/// in its process; the launcher only follows the schedule, [`super::lockstep`]).
+struct Slot {
     name: String,
     id: NodeId,
     rate: Rate,
-    process: String,
-    /// The input topic's publisher is in another process: the tick waits for its message.
-    input: Option<usize>,
-    output: Option<usize>,
-    shared: Arc<Mutex<Shared>>,
-    /// Processes whose liveliness tokens were withdrawn.
-    gone: Arc<Mutex<Vec<String>>>,
 }
 
-struct Shared {
-    link: Link,
-    /// The newest seq published per topic, as the publishing process reported.
-    published: Vec<Option<u64>>,
-}
-
-impl Node for Proxy {
+impl Node for Slot {
     fn name(&self) -> &str {
         &self.name
     }
@@ -189,47 +177,20 @@ impl Node for Proxy {
     fn rate(&self) -> &Rate {
         &self.rate
     }
-    fn tick(&mut self, now: Nanos) -> Flow {
-        let mut sh = crate::graph::lock(&self.shared);
-        let need = self.input.and_then(|t| sh.published[t]);
-        let grant = ToMember::Grant {
-            t_ns: now.0,
-            node: self.id.0,
-            need,
-        };
-        if let Err(e) = sh.link.tell(&self.process, &grant) {
-            panic!("cannot reach process '{}': {e}", self.process);
-        }
-        let deadline = Instant::now() + REPLY_TIMEOUT;
-        loop {
-            if crate::graph::lock(&self.gone).contains(&self.process) {
-                panic!("process '{}' is gone", self.process);
-            }
-            match sh.link.recv(Duration::from_millis(50)) {
-                None if Instant::now() >= deadline => panic!(
-                    "process '{}' did not answer within {} s",
-                    self.process,
-                    REPLY_TIMEOUT.as_secs()
-                ),
-                None => {}
-                Some(ToLauncher::Done {
-                    process,
-                    stop,
-                    published,
-                    failed,
-                }) if process == self.process => {
-                    if let Some(msg) = failed {
-                        panic!("{msg}");
-                    }
-                    if let (Some(t), Some(seq)) = (self.output, published) {
-                        sh.published[t] = Some(seq);
-                    }
-                    return if stop { Flow::Stop } else { Flow::Continue };
-                }
-                Some(_) => {}
-            }
-        }
+    fn tick(&mut self, _now: Nanos) -> Flow {
+        Flow::Continue // never called: the launcher skips every tick
     }
+}
+
+/// The lockstep's cost, measured by the launcher (virtual clock).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LockstepCost {
+    /// Ticks run (in every process).
+    pub ticks: u64,
+    /// Distinct instants (run times) they ran at.
+    pub instants: u64,
+    /// Wall time of the run per instant, µs.
+    pub us_per_instant: f64,
 }
 
 /// The child processes; every one still running is killed when this is dropped.
@@ -457,6 +418,16 @@ pub fn launch(
             }
         })
         .wait()?;
+    // Virtual clock: every process's tick reports, to follow the run ([`super::lockstep`]).
+    let (ticked_tx, ticked_rx) = crossbeam_channel::bounded::<Ticked>(MAX_AHEAD);
+    let _ticked_sub = session
+        .declare_subscriber(keys.ticked("*"))
+        .callback(move |s| {
+            if let Ok(m) = wire::decode_json::<Ticked>(&s.payload().to_bytes()) {
+                let _ = ticked_tx.try_send(m);
+            }
+        })
+        .wait()?;
     let _launcher_token = session
         .liveliness()
         .declare_token(keys.launcher_token())
@@ -665,57 +636,160 @@ pub fn launch(
     let mut lockstep = None;
     let end = match cfg.clock {
         ClockKind::Virtual => {
-            let shared = Arc::new(Mutex::new(Shared {
-                link,
-                published: vec![None; spec.topics.len()],
-            }));
-            let rates = spec
-                .nodes
-                .iter()
-                .map(|n| Rate::new(n.rate_hz))
-                .collect::<Result<Vec<_>, _>>()
-                .map_err(|e| DistError::Usage(e.to_string()))?;
-            let mut proxies: Vec<Box<dyn Node>> = spec
+            let slots = spec
                 .nodes
                 .iter()
                 .enumerate()
                 .map(|(i, n)| {
-                    let id = NodeId(i);
-                    let remote_input = n.subscribes.filter(|t| {
-                        spec.process_of(spec.topic(*t).publisher) != spec.process_of(id)
-                    });
-                    Box::new(Proxy {
+                    Ok(Box::new(Slot {
                         name: n.name.clone(),
-                        id,
-                        rate: rates[i].clone(),
-                        process: spec.process_of(id),
-                        input: remote_input.map(|t| t.0),
-                        output: n.publishes.map(|t| t.0),
-                        shared: shared.clone(),
-                        gone: gone_now.clone(),
-                    }) as Box<dyn Node>
+                        id: NodeId(i),
+                        rate: Rate::new(n.rate_hz)?,
+                    }) as Box<dyn Node>)
                 })
-                .collect();
-            let mut sched = VirtualScheduler::with_offsets(&proxies, &cfg.phase_offsets);
-            let end = sched.run(&mut proxies, cfg.duration, stop, &mut |_| {});
-            let granted: u64 = sched.ticks().iter().sum();
-            lockstep = Some((
-                granted,
-                start.elapsed().as_secs_f64() * 1e6 / granted.max(1) as f64,
-            ));
-            drop(proxies);
-            let sh = Arc::try_unwrap(shared)
-                .map_err(|_| DistError::Peer("the scheduler kept its link".into()))?
-                .into_inner()
-                .unwrap_or_else(|e| e.into_inner());
+                .collect::<Result<Vec<_>, crate::rate::InvalidRate>>()
+                .map_err(|e| DistError::Usage(e.to_string()))?;
+            let mut sched = VirtualScheduler::with_offsets(&slots, &cfg.phase_offsets);
+            let lookahead = slots
+                .iter()
+                .map(|n| n.rate().period().0)
+                .min()
+                .unwrap_or(1)
+                .saturating_mul(HORIZON_PERIODS);
+            let mut inbox = TickInbox::new();
+            // No process ticks before the first horizon: anything already here is not a report.
+            while ticked_rx.try_recv().is_ok() {}
+            let mut published: Vec<Option<u64>> = vec![None; spec.topics.len()];
+            let mut horizon: Option<u64> = None;
+            let (mut index, mut instants) = (0u64, 0u64);
+            let mut last_t = None;
+            let failed = |i: usize, at: Nanos, message: String| RunEnd {
+                at,
+                reason: EndReason::NodeFailed {
+                    node: spec.nodes[i].name.clone(),
+                    message,
+                },
+            };
+            let end = loop {
+                let (Some(t), Some(i)) = (sched.next_due(), sched.next_node()) else {
+                    break RunEnd {
+                        at: cfg.duration,
+                        reason: EndReason::Duration,
+                    };
+                };
+                if t > cfg.duration {
+                    break RunEnd {
+                        at: cfg.duration,
+                        reason: EndReason::Duration,
+                    };
+                }
+                // Move the horizon on before the processes reach it; an interrupt stops it.
+                let want = t.0.saturating_add(lookahead).min(cfg.duration.0);
+                let low = horizon.is_none_or(|h| h < t.0.saturating_add(lookahead / 2));
+                if !stop.is_stopped() && low && horizon.is_none_or(|h| want > h) {
+                    for p in &names {
+                        link.tell(p, &ToMember::Horizon { until_ns: want })?;
+                    }
+                    horizon = Some(want);
+                }
+                if horizon.is_none_or(|h| t.0 > h) {
+                    // Only after an interrupt: every tick up to the horizon was seen.
+                    break RunEnd {
+                        at: sched.now(),
+                        reason: EndReason::Interrupted,
+                    };
+                }
+                // The tick's report, from its node's process.
+                let process = spec.process_of(NodeId(i));
+                let deadline = Instant::now() + REPLY_TIMEOUT;
+                let report = loop {
+                    if let Some(m) = inbox.take(index) {
+                        break Ok(m);
+                    }
+                    if crate::graph::lock(&gone_now).contains(&process) {
+                        break Err(format!("process '{process}' is gone"));
+                    }
+                    if Instant::now() >= deadline {
+                        break Err(format!(
+                            "process '{process}' did not answer within {} s",
+                            REPLY_TIMEOUT.as_secs()
+                        ));
+                    }
+                    crossbeam_channel::select! {
+                        recv(ticked_rx) -> m => if let Ok(m) = m {
+                            if let Err(e) = inbox.accept(m, spec) {
+                                break Err(e.to_string());
+                            }
+                        },
+                        recv(link.up) -> m => match m {
+                            // Nobody joins a run in lockstep: say so to whoever tries.
+                            Ok(m @ ToLauncher::Join { .. }) => match admit(&m, true, &[], &[]) {
+                                Admission::Refused(r) | Admission::OtherGraph(r) => {
+                                    say(&format!("refused a join: {r}"));
+                                }
+                                Admission::Welcomed | Admission::Ignored => {}
+                            },
+                            Ok(_) => {}
+                            Err(_) => break Err("the launcher's channel closed".into()),
+                        },
+                        default(Duration::from_millis(50)) => {}
+                    }
+                };
+                let m = match report {
+                    Ok(m) => m,
+                    Err(message) => break failed(i, t, message),
+                };
+                if m.node != i || m.t_ns != t.0 {
+                    break failed(
+                        i,
+                        t,
+                        format!(
+                            "process '{}' is out of step at tick {index} ({} at {} ns)",
+                            m.process,
+                            spec.nodes.get(m.node).map_or("?", |n| n.name.as_str()),
+                            m.t_ns
+                        ),
+                    );
+                }
+                sched.skip_next(&slots);
+                index += 1;
+                if last_t != Some(t) {
+                    instants += 1;
+                    last_t = Some(t);
+                }
+                if let (Some(topic), Some(seq)) = (spec.nodes[i].publishes, m.published) {
+                    published[topic.0] = Some(seq);
+                }
+                if let Some(message) = m.failed {
+                    break failed(i, t, message);
+                }
+                if m.stop {
+                    break RunEnd {
+                        at: t,
+                        reason: EndReason::NodeStopped,
+                    };
+                }
+            };
+            lockstep = Some(LockstepCost {
+                ticks: index,
+                instants,
+                us_per_instant: start.elapsed().as_secs_f64() * 1e6 / instants.max(1) as f64,
+            });
             // Every message sent is delivered before the reports: the last ones too.
-            let need: Vec<(usize, u64)> = sh
-                .published
+            let need: Vec<(usize, u64)> = published
                 .iter()
                 .enumerate()
                 .filter_map(|(t, s)| s.map(|s| (t, s)))
                 .collect();
-            collect_reports(&sh.link, &names, &end, need, &mut reports, &mut wires);
+            collect_reports(
+                &link,
+                &names,
+                &gone_now,
+                &end,
+                need,
+                &mut reports,
+                &mut wires,
+            );
             end
         }
         ClockKind::Real => {
@@ -879,6 +953,7 @@ pub fn launch(
 fn collect_reports(
     link: &Link,
     names: &[String],
+    gone: &Mutex<Vec<String>>,
     end: &RunEnd,
     need: Vec<(usize, u64)>,
     reports: &mut BTreeMap<String, GraphState>,
@@ -894,7 +969,14 @@ fn collect_reports(
         );
     }
     let deadline = Instant::now() + REPLY_TIMEOUT;
-    while Instant::now() < deadline && !names.iter().all(|p| reports.contains_key(p)) {
+    // A process that is gone (its tokens withdrawn) will not report: no wait for it.
+    let waiting = |reports: &BTreeMap<String, GraphState>| {
+        let gone = crate::graph::lock(gone);
+        names
+            .iter()
+            .any(|p| !reports.contains_key(p) && !gone.contains(p))
+    };
+    while Instant::now() < deadline && waiting(reports) {
         if let Some(ToLauncher::Report {
             process,
             state,

@@ -9,7 +9,8 @@
 //! each tick of the publishing node, its newest message is sent as a
 //! [`WireSample`](super::wire::WireSample).
 
-use super::wire::{self, ToLauncher, ToMember, WireSample};
+use super::lockstep;
+use super::wire::{self, Ticked, ToLauncher, ToMember, WireSample};
 use super::{check_endpoint, open_session, DistError, Keys, REPLY_TIMEOUT};
 use crate::config::RunConfig;
 use crate::graph::spec::GraphSpec;
@@ -20,7 +21,9 @@ use crate::node::{Flow, Node};
 use crate::policy::BrainSlot;
 use crate::qos::TopicQos;
 use crate::run::GraphState;
-use crate::scheduler::{catch_quietly, panic_message, run_real, RealOptions, StopFlag};
+use crate::scheduler::{
+    catch_quietly, panic_message, run_real, RealOptions, StopFlag, VirtualScheduler,
+};
 use crate::time::Nanos;
 use crossbeam_channel::{Receiver, RecvTimeoutError};
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -263,6 +266,31 @@ pub fn run_member(opts: &MemberOptions, stop: &StopFlag) -> Result<(), DistError
     };
     let cfg = setup.run_config()?;
     let spec = cfg.graph.clone();
+    // Virtual clock: the other processes' tick reports, then the `here` answer that tells
+    // them this subscription is in place (declared in that order, [`lockstep::meet_peers`]).
+    let virtual_clock = cfg.clock == crate::ClockKind::Virtual;
+    let (ticked_tx, ticked_rx) = crossbeam_channel::bounded::<Ticked>(lockstep::MAX_AHEAD);
+    let lockstep_keys = if virtual_clock {
+        let sub = session
+            .declare_subscriber(keys.ticked("*"))
+            .callback(move |s| {
+                if let Ok(m) = wire::decode_json::<Ticked>(&s.payload().to_bytes()) {
+                    let _ = ticked_tx.try_send(m);
+                }
+            })
+            .wait()?;
+        let here = keys.here(&opts.process);
+        let queryable = session
+            .declare_queryable(here.clone())
+            .callback(move |q| {
+                let _ = q.reply(here.as_str(), "").wait();
+            })
+            .wait()?;
+        Some((sub, queryable))
+    } else {
+        drop(ticked_tx);
+        None
+    };
     let mine: Vec<NodeId> = spec
         .placement()
         .into_iter()
@@ -373,6 +401,19 @@ pub fn run_member(opts: &MemberOptions, stop: &StopFlag) -> Result<(), DistError
     for (_, p) in &publishers {
         wait_matching(p, stop, Some(&launcher_gone), "the subscribing process")?;
     }
+    if virtual_clock {
+        let others: Vec<String> = spec
+            .placement()
+            .into_iter()
+            .map(|(p, _)| p)
+            .filter(|p| *p != opts.process)
+            .collect();
+        lockstep::meet_peers(&session, &keys, &others, stop, &launcher_gone)?;
+    }
+    let ticked_pub = session
+        .declare_publisher(keys.ticked(&opts.process))
+        .congestion_control(block)
+        .wait()?;
     send(&ToLauncher::Ready {
         process: opts.process.clone(),
     })?;
@@ -453,21 +494,20 @@ pub fn run_member(opts: &MemberOptions, stop: &StopFlag) -> Result<(), DistError
     };
     let local: Vec<usize> = mine.iter().map(|id| id.0).collect();
     let result = match cfg.clock {
-        crate::ClockKind::Virtual => lockstep(
+        crate::ClockKind::Virtual => run_lockstep(
             nodes,
             &local,
             &inbound,
-            &spec,
+            &cfg,
             &handles,
-            &ctl_rx,
+            &mut lockstep::Pace::new(&ctl_rx, &ticked_rx, &spec, stop, &launcher_gone),
             stop,
             &arrivals,
             &*forward_after,
             &ticks,
             &run_time,
-            &|m| send(m),
+            &|m| ticked_pub.put(wire::encode_json(m)).wait(),
             &opts.process,
-            &launcher_gone,
         ),
         crate::ClockKind::Real => match recv(&ctl_rx, stop, &launcher_gone) {
             Err(e) => Err(e),
@@ -505,6 +545,7 @@ pub fn run_member(opts: &MemberOptions, stop: &StopFlag) -> Result<(), DistError
     std::thread::sleep(Duration::from_millis(200));
     drop(tokens);
     drop(subscribers);
+    drop(lockstep_keys);
     let _ = session.close().wait();
     Ok(())
 }
@@ -632,94 +673,111 @@ fn real_clock(
     Ok(GraphState::capture(handles, at, &ticks_now, Some(timing)))
 }
 
-/// The virtual clock: tick what the launcher grants, in its order, until it stops the run.
+/// The virtual clock ([`lockstep`]): replay the run's one order of ticks; tick this
+/// process's nodes in their turn (each once the input message it must see has arrived) and
+/// report each tick to everyone; at another process's tick wait for its report. Then wait
+/// for the launcher's end and the last messages sent here.
 #[allow(clippy::too_many_arguments)]
-fn lockstep(
+fn run_lockstep(
     mut nodes: Vec<Box<dyn Node>>,
     local: &[usize],
     inbound: &[TopicId],
-    spec: &GraphSpec,
+    cfg: &RunConfig,
     handles: &crate::graph::GraphHandles,
-    ctl: &Receiver<ToMember>,
+    pace: &mut lockstep::Pace<'_>,
     stop: &StopFlag,
     arrivals: &Arrivals,
     forward_after: &dyn Fn(usize) -> Option<u64>,
     ticks: &[AtomicU64],
     run_time: &AtomicU64,
-    send: &dyn Fn(&ToLauncher) -> zenoh::Result<()>,
+    tell: &dyn Fn(&Ticked) -> zenoh::Result<()>,
     process: &str,
-    launcher_gone: &StopFlag,
 ) -> Result<GraphState, DistError> {
-    loop {
-        // Grants may be far apart (a slow node): wait for as long as the launcher lives.
-        let m = match ctl.recv_timeout(Duration::from_millis(100)) {
-            Ok(m) => m,
-            Err(RecvTimeoutError::Timeout) if launcher_gone.is_stopped() => {
-                return Err(DistError::Peer("the launcher went away".into()))
+    let spec = &cfg.graph;
+    let mut sched = VirtualScheduler::with_offsets(&nodes, &cfg.phase_offsets);
+    // The newest seq each topic's remote publisher sent, from its reports.
+    let mut sent: Vec<Option<u64>> = vec![None; spec.topics.len()];
+    let mut index = 0u64;
+    while let (Some(t), Some(i)) = (sched.next_due(), sched.next_node()) {
+        if t > cfg.duration || !pace.until(t.0)? {
+            break;
+        }
+        let over = if local.contains(&i) {
+            let mut failed = None;
+            let input = spec.nodes[i].subscribes.filter(|t| inbound.contains(t));
+            if let Some((input, seq)) = input.and_then(|t| Some((t, sent[t.0]?))) {
+                if !arrivals.wait_for(input, seq, stop) {
+                    failed = Some(format!(
+                        "message {seq} on {} did not arrive within {} s",
+                        spec.topic(input).name,
+                        REPLY_TIMEOUT.as_secs()
+                    ));
+                }
             }
-            Err(RecvTimeoutError::Timeout) if stop.is_stopped() => {
-                return Err(DistError::Peer("interrupted".into()))
+            let mut flow = Flow::Continue;
+            if failed.is_none() {
+                match catch_quietly(|| sched.tick_next(&mut nodes)) {
+                    Ok(r) => flow = r.map_or(Flow::Continue, |(_, _, f)| f),
+                    Err(p) => failed = Some(panic_message(&*p)),
+                }
+            } else {
+                sched.skip_next(&nodes);
             }
-            Err(RecvTimeoutError::Timeout) => continue,
-            Err(RecvTimeoutError::Disconnected) => {
-                return Err(DistError::Peer("the launcher's channel closed".into()))
+            ticks[i].fetch_add(1, Ordering::Relaxed);
+            run_time.fetch_max(t.0, Ordering::Relaxed);
+            let published = if failed.is_none() {
+                forward_after(i)
+            } else {
+                None
+            };
+            let over = flow == Flow::Stop || failed.is_some();
+            tell(&Ticked {
+                process: process.to_string(),
+                index,
+                node: i,
+                t_ns: t.0,
+                stop: flow == Flow::Stop,
+                published,
+                failed,
+            })?;
+            over
+        } else {
+            let Some(m) = pace.report(index)? else {
+                break; // the launcher ended the run (that process is gone)
+            };
+            if m.node != i || m.t_ns != t.0 {
+                return Err(DistError::Peer(format!(
+                    "out of step: tick {index} is {} at {} ns here, {} at {} ns in process '{}'",
+                    spec.nodes[i].name,
+                    t.0,
+                    spec.nodes.get(m.node).map_or("?", |n| n.name.as_str()),
+                    m.t_ns,
+                    m.process
+                )));
             }
+            if let (Some(topic), Some(seq)) = (spec.nodes[i].publishes, m.published) {
+                sent[topic.0] = Some(seq);
+            }
+            sched.skip_next(&nodes);
+            m.stop || m.failed.is_some()
         };
-        match m {
-            ToMember::Grant { t_ns, node, need } => {
-                let t = Nanos(t_ns);
-                let mut failed = None;
-                if let (Some(seq), Some(input)) =
-                    (need, spec.nodes.get(node).and_then(|n| n.subscribes))
-                {
-                    if !arrivals.wait_for(input, seq, stop) {
-                        failed = Some(format!(
-                            "message {seq} on {} did not arrive within {} s",
-                            spec.topic(input).name,
-                            REPLY_TIMEOUT.as_secs()
-                        ));
-                    }
-                }
-                let mut flow = Flow::Continue;
-                if failed.is_none() {
-                    match nodes.get_mut(node).filter(|_| local.contains(&node)) {
-                        None => failed = Some(format!("node {node} is not in process '{process}'")),
-                        Some(n) => match catch_quietly(|| n.tick(t)) {
-                            Ok(f) => flow = f,
-                            Err(p) => failed = Some(panic_message(&*p)),
-                        },
-                    }
-                }
-                ticks[node.min(ticks.len() - 1)].fetch_add(1, Ordering::Relaxed);
-                run_time.fetch_max(t_ns, Ordering::Relaxed);
-                let published = if failed.is_none() {
-                    forward_after(node)
-                } else {
-                    None
-                };
-                send(&ToLauncher::Done {
-                    process: process.to_string(),
-                    stop: flow == Flow::Stop,
-                    published,
-                    failed,
-                })?;
-            }
-            ToMember::Stop { at_ns, need } => {
-                // The last messages sent to us are delivered before the counters are read.
-                for (t, seq) in need {
-                    if inbound.contains(&TopicId(t)) && !arrivals.wait_for(TopicId(t), seq, stop) {
-                        return Err(DistError::Peer(format!(
-                            "message {seq} on {} did not arrive before the end",
-                            spec.topic(TopicId(t)).name
-                        )));
-                    }
-                }
-                let ticks: Vec<u64> = ticks.iter().map(|t| t.load(Ordering::Relaxed)).collect();
-                return Ok(GraphState::capture(handles, Nanos(at_ns), &ticks, None));
-            }
-            _ => {}
+        index += 1;
+        if over {
+            break;
         }
     }
+    let (at_ns, need) = pace.end()?;
+    // The last messages sent to us are delivered before the counters are read.
+    for (t, seq) in need {
+        if inbound.contains(&TopicId(t)) && !arrivals.wait_for(TopicId(t), seq, stop) {
+            return Err(DistError::Peer(format!(
+                "message {seq} on {} did not arrive before the end",
+                spec.topic(TopicId(t)).name
+            )));
+        }
+    }
+    let ticks: Vec<u64> = ticks.iter().map(|t| t.load(Ordering::Relaxed)).collect();
+    Ok(GraphState::capture(handles, Nanos(at_ns), &ticks, None))
 }
 
 /// The next control message: waits as long as the launcher lives (its liveliness token),

@@ -24,6 +24,7 @@
 //!   seed gives byte-identical metrics in one process and in several.
 
 pub mod launcher;
+pub mod lockstep;
 pub mod member;
 pub mod monitor;
 pub mod wire;
@@ -184,6 +185,18 @@ impl Keys {
     /// Where the launcher publishes its progress lines (a process joined, is gone, …).
     pub fn log(&self) -> String {
         format!("{}/@log", self.prefix)
+    }
+
+    /// Virtual clock: where process `p` says each tick of its nodes is done
+    /// ([`wire::Ticked`]), for every other process and the launcher.
+    pub fn ticked(&self, p: &str) -> String {
+        format!("{}/@ticked/{p}", self.prefix)
+    }
+
+    /// Virtual clock: process `p` answers here while it is up, so that the others know
+    /// they reach it directly before the run ([`lockstep`]).
+    pub fn here(&self, p: &str) -> String {
+        format!("{}/@here/{p}", self.prefix)
     }
 
     /// Where each process publishes its live counters for `ratelab top`.

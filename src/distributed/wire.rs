@@ -279,15 +279,12 @@ pub enum ToMember {
         /// Run time zero.
         start_mono_ns: u64,
     },
-    /// Virtual clock: tick `node` at run time `t_ns`, once the local copy of its input
-    /// topic has the message of seq `need` (published elsewhere).
-    Grant {
+    /// Virtual clock: run every tick due at or before run time `until_ns` (the lockstep's
+    /// horizon, [`super::lockstep`]). The launcher moves it on ahead of the ticks it has
+    /// seen done, and stops moving it to end the run early (an interrupt).
+    Horizon {
         /// Run time, ns.
-        t_ns: u64,
-        /// The node (index in the graph).
-        node: usize,
-        /// The input message the tick must see, if its publisher is remote.
-        need: Option<u64>,
+        until_ns: u64,
     },
     /// The run ended at run time `at_ns`: once the local copies of the input topics hold
     /// the messages `need` (topic index, seq: the last its publisher sent; virtual clock),
@@ -319,17 +316,6 @@ pub enum ToLauncher {
         /// Its process name.
         process: String,
     },
-    /// Virtual clock: the granted tick ran.
-    Done {
-        /// Its process name.
-        process: String,
-        /// The node stopped the graph (the fall).
-        stop: bool,
-        /// The seq the node published in the tick, if any.
-        published: Option<u64>,
-        /// The node panicked: its message.
-        failed: Option<String>,
-    },
     /// Real clock: its part of the graph ended on its own (a fall, a failed node, the
     /// duration).
     Ended {
@@ -355,11 +341,31 @@ impl ToLauncher {
         match self {
             ToLauncher::Join { process, .. }
             | ToLauncher::Ready { process }
-            | ToLauncher::Done { process, .. }
             | ToLauncher::Ended { process, .. }
             | ToLauncher::Report { process, .. } => process,
         }
     }
+}
+
+/// Virtual clock: one tick done, from its node's process to every other process and the
+/// launcher (key `ratelab/<graph>/@ticked/<process>`, [`super::lockstep`]).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Ticked {
+    /// The node's process.
+    pub process: String,
+    /// The tick's place in the run's one order of ticks (0, 1, …: the virtual scheduler's
+    /// order, by time then tie-break, which every process computes alike).
+    pub index: u64,
+    /// The node (index in the graph).
+    pub node: usize,
+    /// Run time of the tick, ns.
+    pub t_ns: u64,
+    /// The node stopped the graph (the fall).
+    pub stop: bool,
+    /// The seq the node published in the tick, if it sent one to another process.
+    pub published: Option<u64>,
+    /// The node panicked (or its input never came): the message.
+    pub failed: Option<String>,
 }
 
 /// Encode a control message (JSON).

@@ -212,6 +212,148 @@ fn three_processes_balance_under_the_real_clock_and_leave_nothing_behind() {
     );
 }
 
+/// The lines `child` prints on its (piped) stdout, as they come.
+fn stdout_lines(child: &mut Child) -> std::sync::mpsc::Receiver<String> {
+    let stdout = child.stdout.take().expect("stdout piped");
+    let (tx, rx) = std::sync::mpsc::channel::<String>();
+    std::thread::spawn(move || {
+        for line in BufReader::new(stdout).lines().map_while(Result::ok) {
+            let _ = tx.send(line);
+        }
+    });
+    rx
+}
+
+/// Wait up to `secs` for a line containing `needle`, keeping every line in `lines` (a line
+/// seen already counts).
+fn wait_line(
+    rx: &std::sync::mpsc::Receiver<String>,
+    lines: &mut Vec<String>,
+    needle: &str,
+    secs: u64,
+) -> bool {
+    if lines.iter().any(|l| l.contains(needle)) {
+        return true;
+    }
+    let until = Instant::now() + Duration::from_secs(secs);
+    while Instant::now() < until {
+        if let Ok(l) = rx.recv_timeout(Duration::from_millis(100)) {
+            let hit = l.contains(needle);
+            lines.push(l);
+            if hit {
+                return true;
+            }
+        }
+    }
+    false
+}
+
+/// A launch under the virtual clock on `port`, its lines, once both processes are ready.
+fn lockstep_launch(
+    port: u16,
+    out: &Path,
+) -> (Child, std::sync::mpsc::Receiver<String>, Vec<String>) {
+    let mut launcher = bin()
+        .args([
+            "launch",
+            "--processes",
+            "--clock",
+            "virtual",
+            "--duration",
+            "3600",
+        ])
+        .args(["--listen", &format!("tcp/127.0.0.1:{port}")])
+        .arg("--out")
+        .arg(out)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let rx = stdout_lines(&mut launcher);
+    let mut lines = Vec::new();
+    for p in ["policy", "robot"] {
+        let ready = format!("process '{p}' ready");
+        assert!(wait_line(&rx, &mut lines, &ready, 30), "{lines:?}");
+    }
+    std::thread::sleep(Duration::from_millis(1000));
+    (launcher, rx, lines)
+}
+
+/// Wait up to `secs` for `child` to exit.
+fn exit_within(child: &mut Child, secs: u64) -> std::process::ExitStatus {
+    let until = Instant::now() + Duration::from_secs(secs);
+    loop {
+        if let Some(s) = child.try_wait().unwrap() {
+            return s;
+        }
+        if Instant::now() >= until {
+            let _ = child.kill();
+            panic!("still running after {secs} s");
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    }
+}
+
+#[test]
+fn a_lockstep_refuses_a_join_stops_at_one_instant_on_ctrl_c_and_ends_when_a_process_dies() {
+    let _m = crate::machine::alone();
+    let dir = tempfile::tempdir().unwrap();
+    // A process that joins a run in lockstep is refused (one line, exit 2); Ctrl-C ends the
+    // run with every process at the same instant, and none left behind.
+    let port = free_port();
+    let (mut launcher, rx, mut lines) = lockstep_launch(port, dir.path());
+    let ep = format!("tcp/127.0.0.1:{port}");
+    let o = ratelab(&["node", "--process", "policy", "--connect", &ep]);
+    assert_one_line_exit_2(&o, "cannot rejoin: under the virtual clock");
+    // SAFETY: plain kill(2) on our child.
+    unsafe { libc::kill(launcher.id() as i32, libc::SIGINT) };
+    let status = exit_within(&mut launcher, 20);
+    lines.extend(rx.try_iter());
+    assert_eq!(status.code(), Some(130), "{lines:?}");
+    assert!(
+        lines.iter().any(|l| l.contains("interrupted at t=")),
+        "{lines:?}"
+    );
+    let m: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.path().join("metrics.json")).unwrap())
+            .unwrap();
+    let ticks: Vec<u64> = ["sensor", "policy", "actuator"]
+        .iter()
+        .map(|n| m["nodes"][n]["ticks"].as_u64().unwrap())
+        .collect();
+    assert!(ticks[0] > 10, "{ticks:?}");
+    assert!(
+        ticks.iter().all(|t| *t == ticks[0]),
+        "one instant for all: {ticks:?}"
+    );
+    assert_eq!(m["topics"]["/obs"]["published"].as_u64(), Some(ticks[0]));
+    std::thread::sleep(Duration::from_millis(500));
+    assert!(processes_mentioning(&format!(":{port}")).is_empty());
+
+    // The policy's process killed: the run ends at once, naming it (not after a timeout).
+    let port = free_port();
+    let (mut launcher, rx, mut lines) = lockstep_launch(port, &dir.path().join("kill"));
+    let policy = node_processes(port, "policy");
+    assert_eq!(policy.len(), 1, "one policy process: {policy:?}");
+    let killed = Instant::now();
+    // SAFETY: plain kill(2) on a child of our child.
+    unsafe { libc::kill(policy[0] as i32, libc::SIGKILL) };
+    let status = exit_within(&mut launcher, 30);
+    lines.extend(rx.try_iter());
+    assert!(
+        killed.elapsed() < Duration::from_secs(15),
+        "the end waited {:?}: {lines:?}",
+        killed.elapsed()
+    );
+    assert!(!status.success(), "{lines:?}");
+    assert!(
+        lines.iter().any(|l| l.contains("process 'policy' is gone")),
+        "{lines:?}"
+    );
+    std::thread::sleep(Duration::from_millis(500));
+    assert!(processes_mentioning(&format!(":{port}")).is_empty());
+}
+
 #[test]
 fn a_killed_node_is_noticed_and_a_restarted_one_rejoins() {
     let _m = crate::machine::alone();
@@ -238,31 +380,10 @@ fn a_killed_node_is_noticed_and_a_restarted_one_rejoins() {
         .stderr(Stdio::piped())
         .spawn()
         .unwrap();
-    let stdout = launcher.stdout.take().unwrap();
-    let (tx, rx) = std::sync::mpsc::channel::<String>();
-    std::thread::spawn(move || {
-        for line in BufReader::new(stdout).lines().map_while(Result::ok) {
-            let _ = tx.send(line);
-        }
-    });
+    let rx = stdout_lines(&mut launcher);
     let mut lines = Vec::new();
-    // A line seen already counts (the two processes become ready in either order).
-    let wait_for = |lines: &mut Vec<String>, needle: &str, secs: u64| {
-        if lines.iter().any(|l: &String| l.contains(needle)) {
-            return true;
-        }
-        let until = Instant::now() + Duration::from_secs(secs);
-        while Instant::now() < until {
-            if let Ok(l) = rx.recv_timeout(Duration::from_millis(100)) {
-                let hit = l.contains(needle);
-                lines.push(l);
-                if hit {
-                    return true;
-                }
-            }
-        }
-        false
-    };
+    let wait_for =
+        |lines: &mut Vec<String>, needle: &str, secs: u64| wait_line(&rx, lines, needle, secs);
     assert!(
         wait_for(&mut lines, "process 'policy' ready", 30),
         "{lines:?}"
@@ -513,11 +634,25 @@ fn hostile_bytes_on_the_control_keys_do_not_end_a_run() {
         br#"{"msg":"join","process":"robot","graph_sha256":"a\u00e9\u00e9\u00e9\u00e9\u00e9\u00e9\u00e9\u00e9","pid":1}"#.to_vec(),
         br#"{"msg":"join","process":"**","graph_sha256":"00","pid":1}"#.to_vec(),
         br#"{"msg":"join","process":"a#b","graph_sha256":"00","pid":1}"#.to_vec(),
-        br#"{"msg":"done","process":"robot","stop":true,"published":null,"failed":null}"#.to_vec(),
         vec![b'['; 100_000],
     ];
     for bytes in hostile {
         session.put(up, bytes).wait().unwrap();
+    }
+    // Tick reports nobody can have sent: bytes, a node of another process, no such node.
+    for (key, bytes) in [
+        ("ratelab/cartpole/@ticked/robot", vec![0xff; 64]),
+        (
+            "ratelab/cartpole/@ticked/robot",
+            br#"{"process":"robot","index":0,"node":1,"t_ns":0,"stop":true,"published":null,"failed":null}"#.to_vec(),
+        ),
+        (
+            "ratelab/cartpole/@ticked/policy",
+            br#"{"process":"policy","index":0,"node":99,"t_ns":0,"stop":true,"published":null,"failed":null}"#.to_vec(),
+        ),
+        ("ratelab/cartpole/@ticked/x", vec![b'{'; 100_000]),
+    ] {
+        session.put(key, bytes).wait().unwrap();
     }
     // A hostile sample on a topic key.
     session

@@ -1,0 +1,311 @@
+//! The virtual clock across processes: one order of ticks, replayed in every process.
+//!
+//! Every process (and the launcher) runs the same [`VirtualScheduler`] over the whole graph,
+//! so all of them know the run's one order of ticks (by time, then tie-break) and number
+//! its ticks 0, 1, …. A process runs a tick of its own node when its turn comes and says so
+//! to everyone ([`Ticked`], on `ratelab/<graph>/@ticked/<process>`, with the seq it sent and
+//! whether the node stopped the graph or failed); at a tick of another process's node it
+//! waits for that report. So ticks run one after another in the in-process order, a tick
+//! sees exactly the input messages it would see in one process (it waits for the seq the
+//! report names), and every process stops at the same tick: the same seed gives
+//! byte-identical metrics in one process and in several.
+//!
+//! Between two ticks of different processes there is one message (the report goes
+//! straight to the next process, peer to peer), none between ticks of one process. The
+//! launcher stays the time authority without being on that path: it lets the processes run
+//! up to a horizon ([`ToMember::Horizon`]), [`HORIZON_PERIODS`] periods of the fastest node
+//! ahead of the ticks it has seen reported, and ends the run early by not moving it on (a
+//! Ctrl-C). It also follows the reports, to know the end (a stop, a failure, a process
+//! gone) and the last seq of every topic before the processes report.
+//!
+//! This is conservative parallel discrete-event simulation in the sense of Chandy and
+//! Misra ("Distributed simulation: a case study in design and verification of distributed
+//! programs", IEEE TSE, 1979), with the whole schedule known to every process in advance
+//! (fixed rates), so no null messages are needed: the reports are the messages.
+
+use super::wire::{Ticked, ToMember};
+use super::{DistError, Keys};
+use crate::graph::spec::GraphSpec;
+use crate::graph::NodeId;
+use crate::scheduler::StopFlag;
+use crossbeam_channel::Receiver;
+use std::collections::{BTreeMap, BTreeSet};
+use std::time::Duration;
+use zenoh::Wait;
+
+/// How far ahead of the ticks it has seen reported the launcher lets the processes run, in
+/// periods of the graph's fastest node (the horizon is moved on when half of it is used).
+pub const HORIZON_PERIODS: u64 = 8;
+
+/// The most reports of other processes' ticks one process keeps ahead of their turn (a
+/// process runs at most to the horizon, so a well-behaved run holds a few).
+pub const MAX_AHEAD: usize = 65_536;
+
+/// The other processes' tick reports, handed out in the run's order.
+#[derive(Debug, Default)]
+pub struct TickInbox {
+    ahead: BTreeMap<u64, Ticked>,
+    /// Every index below this was taken or given up.
+    next: u64,
+}
+
+impl TickInbox {
+    /// An empty inbox, at tick 0.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Keep `m` until its turn. Ignored: a report for a tick already taken, a second report
+    /// for one tick, or one whose node is not in the graph or not in the process that sent
+    /// it (bytes from anyone on the keys must not change the run).
+    ///
+    /// # Errors
+    /// [`DistError::Peer`] when [`MAX_AHEAD`] reports are already waiting.
+    pub fn accept(&mut self, m: Ticked, spec: &GraphSpec) -> Result<(), DistError> {
+        let genuine = m.node < spec.nodes.len() && spec.process_of(NodeId(m.node)) == m.process;
+        if !genuine || m.index < self.next || self.ahead.contains_key(&m.index) {
+            return Ok(());
+        }
+        if self.ahead.len() >= MAX_AHEAD {
+            return Err(DistError::Peer(format!(
+                "more than {MAX_AHEAD} tick reports arrived ahead of their turn"
+            )));
+        }
+        self.ahead.insert(m.index, m);
+        Ok(())
+    }
+
+    /// The report of tick `index`, if it is in (the reports before it are then given up).
+    pub fn take(&mut self, index: u64) -> Option<Ticked> {
+        let m = self.ahead.remove(&index)?;
+        self.next = index + 1;
+        self.ahead = self.ahead.split_off(&self.next);
+        Some(m)
+    }
+}
+
+/// What one process waits on in the lockstep: the launcher's horizon and end, and the
+/// other processes' tick reports.
+pub struct Pace<'a> {
+    ctl: &'a Receiver<ToMember>,
+    ticked: &'a Receiver<Ticked>,
+    spec: &'a GraphSpec,
+    inbox: TickInbox,
+    horizon_ns: Option<u64>,
+    end: Option<(u64, Vec<(usize, u64)>)>,
+    stop: &'a StopFlag,
+    launcher_gone: &'a StopFlag,
+}
+
+impl<'a> Pace<'a> {
+    /// Wait on `ctl` (the launcher's messages to this process) and `ticked` (every
+    /// process's reports; this process's own are ignored, as reports for nodes it does not
+    /// hold are not its peers'), until `stop` or the launcher goes.
+    pub fn new(
+        ctl: &'a Receiver<ToMember>,
+        ticked: &'a Receiver<Ticked>,
+        spec: &'a GraphSpec,
+        stop: &'a StopFlag,
+        launcher_gone: &'a StopFlag,
+    ) -> Self {
+        Self {
+            ctl,
+            ticked,
+            spec,
+            inbox: TickInbox::new(),
+            horizon_ns: None,
+            end: None,
+            stop,
+            launcher_gone,
+        }
+    }
+
+    /// Wait up to 100 ms for one message and take it in.
+    fn pump(&mut self) -> Result<(), DistError> {
+        crossbeam_channel::select! {
+            recv(self.ctl) -> m => match m {
+                Ok(ToMember::Horizon { until_ns }) => {
+                    self.horizon_ns = Some(self.horizon_ns.unwrap_or(0).max(until_ns));
+                }
+                Ok(ToMember::Stop { at_ns, need }) => self.end = Some((at_ns, need)),
+                Ok(_) => {}
+                Err(_) => return Err(DistError::Peer("the launcher's channel closed".into())),
+            },
+            recv(self.ticked) -> m => match m {
+                Ok(m) => self.inbox.accept(m, self.spec)?,
+                Err(_) => return Err(DistError::Peer("the tick reports' channel closed".into())),
+            },
+            default(Duration::from_millis(100)) => {
+                // Ticks may be far apart (a slow node): wait for as long as the launcher lives.
+                if self.launcher_gone.is_stopped() {
+                    return Err(DistError::Peer("the launcher went away".into()));
+                }
+                if self.stop.is_stopped() {
+                    return Err(DistError::Peer("interrupted".into()));
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Wait until the horizon reaches run time `t_ns` (`true`), or the launcher ends the
+    /// run first (`false`).
+    ///
+    /// # Errors
+    /// [`DistError::Peer`] when the launcher goes, or on `stop`.
+    pub fn until(&mut self, t_ns: u64) -> Result<bool, DistError> {
+        loop {
+            if self.end.is_some() {
+                return Ok(false);
+            }
+            if self.horizon_ns.is_some_and(|h| h >= t_ns) {
+                return Ok(true);
+            }
+            self.pump()?;
+        }
+    }
+
+    /// Wait for the report of tick `index` (another process's), or `None` when the
+    /// launcher ends the run first (that process is gone, or failed).
+    ///
+    /// # Errors
+    /// As [`Pace::until`].
+    pub fn report(&mut self, index: u64) -> Result<Option<Ticked>, DistError> {
+        loop {
+            if let Some(m) = self.inbox.take(index) {
+                return Ok(Some(m));
+            }
+            if self.end.is_some() {
+                return Ok(None);
+            }
+            self.pump()?;
+        }
+    }
+
+    /// Wait for the launcher's end of the run: its run time, ns, and the messages still to
+    /// arrive here (topic index, seq) before this process reports.
+    ///
+    /// # Errors
+    /// As [`Pace::until`].
+    pub fn end(&mut self) -> Result<(u64, Vec<(usize, u64)>), DistError> {
+        loop {
+            if let Some(e) = self.end.take() {
+                return Ok(e);
+            }
+            self.pump()?;
+        }
+    }
+}
+
+/// Wait until every process in `others` answers on its [`Keys::here`] key, asking every
+/// 100 ms, for as long as the launcher lives. A peer's queryable answers only over a direct
+/// link (peers do not route for each other), and it is declared after the peer's
+/// subscription to the tick reports, which Zenoh declares first on the same link: once all
+/// answer, every report this process sends reaches every peer.
+///
+/// # Errors
+/// [`DistError::Peer`] on `stop` or when the launcher goes; [`DistError::Zenoh`] when the
+/// query cannot be sent.
+pub fn meet_peers(
+    session: &zenoh::Session,
+    keys: &Keys,
+    others: &[String],
+    stop: &StopFlag,
+    launcher_gone: &StopFlag,
+) -> Result<(), DistError> {
+    let prefix = keys.here("");
+    loop {
+        let replies = session
+            .get(keys.here("*"))
+            .timeout(Duration::from_millis(500))
+            .wait()?;
+        let mut met = BTreeSet::new();
+        while let Ok(r) = replies.recv() {
+            if let Ok(s) = r.result() {
+                if let Some(p) = s.key_expr().as_str().strip_prefix(&prefix) {
+                    met.insert(p.to_string());
+                }
+            }
+        }
+        if others.iter().all(|p| met.contains(p)) {
+            return Ok(());
+        }
+        if stop.is_stopped() {
+            return Err(DistError::Peer("interrupted".into()));
+        }
+        if launcher_gone.is_stopped() {
+            return Err(DistError::Peer("the launcher went away".into()));
+        }
+        std::thread::sleep(Duration::from_millis(100));
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::graph::spec::DEFAULT_GRAPH_TOML;
+
+    fn report(process: &str, index: u64, node: usize) -> Ticked {
+        Ticked {
+            process: process.into(),
+            index,
+            node,
+            t_ns: 0,
+            stop: false,
+            published: None,
+            failed: None,
+        }
+    }
+
+    #[test]
+    fn reports_are_handed_out_in_the_run_s_order_whatever_order_they_come_in() {
+        let spec = GraphSpec::parse(DEFAULT_GRAPH_TOML, "t").expect("the chapter's graph");
+        let policy = spec.chain.policy.0;
+        let sensor = spec.chain.sensor.0;
+        let mut inbox = TickInbox::new();
+        inbox.accept(report("policy", 4, policy), &spec).unwrap();
+        inbox.accept(report("robot", 1, sensor), &spec).unwrap();
+        assert_eq!(inbox.take(0), None, "tick 0 has not come");
+        assert_eq!(inbox.take(1).map(|m| m.index), Some(1));
+        assert_eq!(inbox.take(4).map(|m| m.index), Some(4));
+        // Late and repeated reports, and ones for ticks given up, are ignored.
+        inbox.accept(report("robot", 2, sensor), &spec).unwrap();
+        inbox.accept(report("robot", 4, sensor), &spec).unwrap();
+        assert_eq!(inbox.take(2), None);
+        assert!(inbox.ahead.is_empty());
+    }
+
+    #[test]
+    fn a_report_for_a_node_its_sender_does_not_hold_is_ignored() {
+        let spec = GraphSpec::parse(DEFAULT_GRAPH_TOML, "t").expect("the chapter's graph");
+        let mut inbox = TickInbox::new();
+        // The policy runs in 'policy', not in 'robot'; node 99 does not exist.
+        inbox
+            .accept(report("robot", 0, spec.chain.policy.0), &spec)
+            .unwrap();
+        inbox.accept(report("policy", 1, 99), &spec).unwrap();
+        assert_eq!(inbox.take(0), None);
+        assert_eq!(inbox.take(1), None);
+        // A second report for one tick does not replace the first.
+        let mut first = report("policy", 2, spec.chain.policy.0);
+        first.published = Some(7);
+        inbox.accept(first.clone(), &spec).unwrap();
+        inbox
+            .accept(report("policy", 2, spec.chain.policy.0), &spec)
+            .unwrap();
+        assert_eq!(inbox.take(2), Some(first));
+    }
+
+    #[test]
+    fn the_inbox_is_bounded() {
+        let spec = GraphSpec::parse(DEFAULT_GRAPH_TOML, "t").expect("the chapter's graph");
+        let mut inbox = TickInbox::new();
+        for i in 0..MAX_AHEAD as u64 {
+            inbox
+                .accept(report("policy", i + 1, spec.chain.policy.0), &spec)
+                .unwrap();
+        }
+        let over = inbox.accept(report("policy", u64::MAX, spec.chain.policy.0), &spec);
+        assert!(matches!(over, Err(DistError::Peer(_))), "{over:?}");
+    }
+}
