@@ -18,10 +18,10 @@
 //!   way, `docs/design.md`): `ratelab top` lists them, and the launcher sees a process go.
 //! - **Time.** Under the real clock the processes share the host's monotonic clock and one
 //!   run-time zero, so stamps and sense→act latency stay exact on one host. Under the
-//!   virtual clock the launcher is the time authority: it runs the one
-//!   [`crate::scheduler::VirtualScheduler`] over the whole graph and grants each tick to the
-//!   node's process, which first waits for the input message the tick must see; the same
-//!   seed gives byte-identical metrics in one process and in several.
+//!   virtual clock every process replays the one [`crate::scheduler::VirtualScheduler`]
+//!   order of ticks, ticks its own nodes in their turn and reports each tick to the others
+//!   ([`lockstep`]); the launcher is the time authority through the horizon it sets. The
+//!   same seed gives byte-identical metrics in one process and in several.
 
 pub mod launcher;
 pub mod lockstep;

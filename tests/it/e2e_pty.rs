@@ -340,11 +340,9 @@ fn the_attached_lab_marks_a_killed_node_not_alive_and_sees_it_rejoin() {
     assert_eq!(policy.len(), 1, "one policy process: {policy:?}");
     // SAFETY: plain kill(2) on a process this test's launcher started.
     unsafe { libc::kill(policy[0] as i32, libc::SIGKILL) };
-    let s = lab.wait_for("NOT ALIVE", Duration::from_secs(10));
-    assert!(
-        s.contains("is gone"),
-        "the launcher's line is shown too:\n{s}"
-    );
+    lab.wait_for("NOT ALIVE", Duration::from_secs(10));
+    // The launcher's line too (it comes on its own key: maybe a moment after the token).
+    lab.wait_for("is gone", Duration::from_secs(5));
     // Its ticks stopped: its measured rate falls to 0 once a second has passed.
     lab.wait_for("0.0 Hz meas", Duration::from_secs(5));
     let mut again = crate::distributed::bin()
