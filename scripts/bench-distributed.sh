@@ -21,7 +21,7 @@ for name, t in m["topics"].items():
     print(f"   {name}: published {t['published']}, lost {t.get('lost', 0)}, dropped {t['dropped']}")
 print(f"   sensor ticks {m['nodes']['sensor']['ticks']}, policy ticks {m['nodes']['policy']['ticks']}")
 PY
-echo "== virtual lockstep, 10 s at 50 Hz (501 instants)"
-"$bin" launch --processes --clock virtual --duration 10 --out "$out/v" | grep -E "lockstep|wall"
+echo "== virtual lockstep, 60 s at 50 Hz (3001 instants)"
+"$bin" launch --processes --clock virtual --duration 60 --out "$out/v" | grep -E "lockstep|wall"
 echo "== the same run in one process"
-"$bin" run --clock virtual --duration 10 | grep -E "wall"
+"$bin" run --clock virtual --duration 60 | grep -E "wall"
