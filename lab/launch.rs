@@ -5,7 +5,7 @@ use crate::cli::{LaunchArgs, NodeArgs, TopArgs};
 use crate::headless;
 use ratelab::distributed::launcher::{launch, LaunchOptions, LaunchReport};
 use ratelab::distributed::member::{run_member, LiveStats, MemberOptions};
-use ratelab::distributed::monitor::Watch;
+use ratelab::distributed::monitor::{Signals, Watch};
 use ratelab::distributed::zenoh::{self, Wait};
 use ratelab::distributed::{check_endpoint, open_session};
 use ratelab::graph::spec::{DEFAULT_GRAPH_TOML, MAX_FILE_BYTES};
@@ -233,7 +233,12 @@ fn launch_watched(
             None
         }
     };
-    let (watch_stop, watcher) = spawn_watch(watch, sinks, Some(gate_tx))?;
+    let (fin_tx, fin_rx) = crossbeam_channel::bounded::<()>(1);
+    let signals = Signals {
+        watching: Some(gate_tx),
+        finished: Some(fin_tx),
+    };
+    let (watch_stop, watcher) = spawn_watch(watch, sinks, signals)?;
     let lab_result = if lab {
         let r = crate::tui::run_attached(policy, &cfg.graph, &lab_rx, stop);
         stop.stop(); // the user quit: end the launch, if it is still running
@@ -250,8 +255,11 @@ fn launch_watched(
     for l in line_rx.try_iter() {
         line(l);
     }
-    // The processes' last figures left before their reports: they are in by now.
-    std::thread::sleep(Duration::from_millis(300));
+    // The processes' last figures (they leave before each process's report, but on
+    // another link): wait for them, a little (none come from a launch that failed early).
+    if report.is_ok() {
+        let _ = fin_rx.recv_timeout(Duration::from_secs(2));
+    }
     watch_stop.stop();
     let watched = watcher.join();
     if let Some(r) = recorder {
@@ -278,7 +286,7 @@ fn launch_watched(
 fn spawn_watch(
     watch: Watch,
     sinks: Vec<crossbeam_channel::Sender<Telemetry>>,
-    watching: Option<crossbeam_channel::Sender<()>>,
+    signals: Signals,
 ) -> anyhow::Result<(
     StopFlag,
     std::thread::JoinHandle<Result<(), ratelab::distributed::DistError>>,
@@ -296,7 +304,7 @@ fn spawn_watch(
                     }
                 }
             });
-            let r = watch.run(&tx, &watch_stop, watching);
+            let r = watch.run(&tx, &watch_stop, signals);
             drop(tx);
             let _ = tee.join();
             r
@@ -318,7 +326,7 @@ pub fn run_attach(connect: &[String], stop: StopFlag) -> anyhow::Result<()> {
     let watch = Watch::connect(connect, None, Duration::from_secs(5), &stop)?;
     let (policy, spec) = (watch.setup.policy.clone(), watch.cfg.graph.clone());
     let (tx, rx) = crossbeam_channel::unbounded::<Telemetry>();
-    let (watch_stop, watcher) = spawn_watch(watch, vec![tx], None)?;
+    let (watch_stop, watcher) = spawn_watch(watch, vec![tx], Signals::default())?;
     let lab = crate::tui::run_attached(policy, &spec, &rx, &stop);
     watch_stop.stop();
     match watcher.join() {

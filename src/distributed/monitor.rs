@@ -401,11 +401,8 @@ impl Watch {
 
     /// Send the lab the run's telemetry until `stop` is set or the lab hangs up (its
     /// receiver is dropped): `Started` at once, then steps, ticks, notices and a status every
-    /// [`STATUS_PERIOD`], and `Ended` when the launcher says so. `watching`, when given, is
-    /// told once figures have come from every process of the graph's placement: from then
-    /// on nothing any process publishes misses this watcher (Zenoh delivers in order), so a
-    /// launcher that waits for it before the run ([`super::launcher::LaunchOptions`]'s
-    /// `start_gate`) has the whole run watched.
+    /// [`STATUS_PERIOD`], and `Ended` when the launcher says so; `signals` are told when
+    /// the watch covers the run, and when it has had the processes' last figures.
     ///
     /// # Errors
     /// [`DistError::Zenoh`] when a subscription cannot be declared.
@@ -413,7 +410,7 @@ impl Watch {
         self,
         tx: &Sender<Telemetry>,
         stop: &StopFlag,
-        watching: Option<Sender<()>>,
+        signals: Signals,
     ) -> Result<(), DistError> {
         let (ev_tx, ev_rx) = crossbeam_channel::bounded::<Event>(EVENTS);
         let keys = &self.keys;
@@ -499,26 +496,26 @@ impl Watch {
         }
         let mut last_status = Instant::now();
         let mut launcher_seen = false;
-        let mut watching = watching;
-        let mut unheard: Vec<String> = self
+        let processes: Vec<String> = self
             .cfg
             .graph
             .placement()
             .into_iter()
             .map(|(p, _)| p)
             .collect();
+        let mut pending = Pending {
+            signals,
+            unheard: processes.clone(),
+            unfinished: processes,
+        };
         while !stop.is_stopped() {
             let mut out = Vec::new();
-            match ev_rx.recv_timeout(STATUS_PERIOD / 2) {
-                Ok(Event::Stats(m)) => {
-                    unheard.retain(|p| *p != m.process);
-                    if unheard.is_empty() {
-                        if let Some(w) = watching.take() {
-                            let _ = w.send(());
-                        }
-                    }
-                    out = fold.stats(*m);
-                }
+            let ev = ev_rx.recv_timeout(STATUS_PERIOD / 2);
+            if let Ok(e) = &ev {
+                pending.note(e);
+            }
+            match ev {
+                Ok(Event::Stats(m)) => out = fold.stats(*m),
                 Ok(Event::Alive(p, n, alive)) if !fold.is_over() => {
                     fold.liveliness(&p, &n, alive);
                     out = fold.release();
@@ -550,6 +547,51 @@ impl Watch {
             }
         }
         Ok(())
+    }
+}
+
+/// What a watcher tells the launch it runs in ([`Watch::run`]).
+#[derive(Debug, Default)]
+pub struct Signals {
+    /// Told once figures have come from every process of the graph's placement: from then
+    /// on nothing any process publishes misses this watcher (Zenoh delivers each peer's
+    /// samples in order), so a launcher that waits for it before the run
+    /// ([`super::launcher::LaunchOptions`]'s `start_gate`) has the whole run watched.
+    pub watching: Option<Sender<()>>,
+    /// Told once every process has published its last figures ([`LiveStats::done`]) or
+    /// withdrawn its nodes' tokens (it left or died): nothing more is coming.
+    pub finished: Option<Sender<()>>,
+}
+
+/// The processes a watcher's [`Signals`] still wait for.
+struct Pending {
+    signals: Signals,
+    unheard: Vec<String>,
+    unfinished: Vec<String>,
+}
+
+impl Pending {
+    fn note(&mut self, e: &Event) {
+        match e {
+            Event::Stats(m) => {
+                self.unheard.retain(|p| *p != m.process);
+                if m.done {
+                    self.unfinished.retain(|p| *p != m.process);
+                }
+            }
+            Event::Alive(p, _, false) => self.unfinished.retain(|q| q != p),
+            _ => {}
+        }
+        if self.unheard.is_empty() {
+            if let Some(w) = self.signals.watching.take() {
+                let _ = w.send(());
+            }
+        }
+        if self.unfinished.is_empty() {
+            if let Some(w) = self.signals.finished.take() {
+                let _ = w.send(());
+            }
+        }
     }
 }
 
@@ -897,5 +939,39 @@ mod tests {
                 ..
             }
         ));
+    }
+
+    #[test]
+    fn the_signals_wait_for_every_process_first_and_last() {
+        let (w_tx, w_rx) = crossbeam_channel::bounded(1);
+        let (f_tx, f_rx) = crossbeam_channel::bounded(1);
+        let mut p = Pending {
+            signals: Signals {
+                watching: Some(w_tx),
+                finished: Some(f_tx),
+            },
+            unheard: vec!["robot".into(), "policy".into()],
+            unfinished: vec!["robot".into(), "policy".into()],
+        };
+        p.note(&Event::Stats(Box::new(live("robot", vec![], vec![]))));
+        assert!(
+            w_rx.try_recv().is_err(),
+            "the policy's process is not heard yet"
+        );
+        p.note(&Event::Stats(Box::new(live("policy", vec![], vec![]))));
+        assert!(
+            w_rx.try_recv().is_ok(),
+            "every process heard: the run may start"
+        );
+        let mut last = live("robot", vec![], vec![]);
+        last.done = true;
+        p.note(&Event::Stats(Box::new(last)));
+        assert!(
+            f_rx.try_recv().is_err(),
+            "the policy's last figures are still to come"
+        );
+        // A process that died sends no last figures: its tokens going is its end.
+        p.note(&Event::Alive("policy".into(), "policy".into(), false));
+        assert!(f_rx.try_recv().is_ok());
     }
 }
