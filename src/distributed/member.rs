@@ -102,6 +102,13 @@ pub struct LiveStats {
     /// time ns, lateness ns), oldest first (at most [`MAX_BATCH_TICKS`]).
     #[serde(default)]
     pub ticks: Vec<(usize, u64, u64)>,
+    /// The counters of each topic it holds, after each tick of its nodes that changed them
+    /// since the previous figures: (run time ns, topic index, counters), oldest first (at
+    /// most [`MAX_BATCH_COUNTERS`]). A watcher shows each actuator step with the counters
+    /// its holder had at the step's run time, not at the figures' (under the virtual clock
+    /// 100 ms of wall time is many seconds of run time).
+    #[serde(default)]
+    pub counters: Vec<(u64, usize, crate::topic::TopicStats)>,
     /// The process's part of the run is over: these are its last figures, and its
     /// liveliness tokens going next is a process leaving, not dying.
     #[serde(default)]
@@ -115,6 +122,8 @@ pub const STATS_PERIOD: Duration = Duration::from_millis(100);
 pub const MAX_BATCH_STEPS: usize = 1000;
 /// The most node ticks one [`LiveStats`] carries.
 pub const MAX_BATCH_TICKS: usize = 20_000;
+/// The most counter samples one [`LiveStats`] carries.
+pub const MAX_BATCH_COUNTERS: usize = 20_000;
 
 impl LiveStats {
     /// Decode figures from the network, refusing any over the bounds a process keeps
@@ -126,6 +135,10 @@ impl LiveStats {
         let m: LiveStats = wire::decode_json(bytes)?;
         let bounded = m.steps.len() <= MAX_BATCH_STEPS
             && m.ticks.len() <= MAX_BATCH_TICKS
+            && m.counters.len() <= MAX_BATCH_COUNTERS
+            && m.counters
+                .iter()
+                .all(|c| c.1 < crate::graph::spec::MAX_TOPICS)
             && m.nodes.len() <= crate::graph::spec::MAX_NODES
             && m.topics.len() <= crate::graph::spec::MAX_TOPICS
             && m.wire.len() <= crate::graph::spec::MAX_TOPICS;
@@ -142,6 +155,9 @@ impl LiveStats {
 struct Batch {
     steps: std::collections::VecDeque<StepRecord>,
     ticks: std::collections::VecDeque<(usize, u64, u64)>,
+    counters: std::collections::VecDeque<(u64, usize, crate::topic::TopicStats)>,
+    /// Each topic's counters as last sampled (a sample is kept only when they changed).
+    last: Vec<Option<crate::topic::TopicStats>>,
 }
 
 impl Batch {
@@ -157,6 +173,37 @@ impl Batch {
         }
         self.ticks.push_back(t);
     }
+    /// Sample the counters of the topics this process holds at run time `t_ns` (after a
+    /// tick of one of its nodes).
+    fn sample(&mut self, t_ns: u64, held: &[TopicId], handles: &crate::graph::GraphHandles) {
+        for &t in held {
+            let st = handles.topic(t).stats();
+            if self.last.len() <= t.0 {
+                self.last.resize(t.0 + 1, None);
+            }
+            if self.last[t.0] == Some(st) {
+                continue;
+            }
+            self.last[t.0] = Some(st);
+            if self.counters.len() == MAX_BATCH_COUNTERS {
+                self.counters.pop_front();
+            }
+            self.counters.push_back((t_ns, t.0, st));
+        }
+    }
+}
+
+/// The topics whose counters process `mine` holds: those it subscribes to, and those it
+/// publishes that nobody subscribes to (as [`LiveStats::topics`]).
+fn held_topics(spec: &GraphSpec, mine: &[NodeId]) -> Vec<TopicId> {
+    let owns = |id: NodeId| mine.contains(&id);
+    (0..spec.topics.len())
+        .map(TopicId)
+        .filter(|&t| {
+            let ts = spec.topic(t);
+            ts.subscriber.map_or(owns(ts.publisher), owns)
+        })
+        .collect()
 }
 
 /// Hands every actuator step to the stats thread.
@@ -482,6 +529,7 @@ pub fn run_member(opts: &MemberOptions, stop: &StopFlag) -> Result<(), DistError
                     let mut b = crate::graph::lock(&batch);
                     msg.steps = b.steps.drain(..).collect();
                     msg.ticks = b.ticks.drain(..).collect();
+                    msg.counters = b.counters.drain(..).collect();
                 }
                 msg.done = last;
                 let _ = stats_pub.put(wire::encode_json(&msg)).wait();
@@ -508,6 +556,7 @@ pub fn run_member(opts: &MemberOptions, stop: &StopFlag) -> Result<(), DistError
             &run_time,
             &|m| ticked_pub.put(wire::encode_json(m)).wait(),
             &opts.process,
+            &batch,
         ),
         crate::ClockKind::Real => match recv(&ctl_rx, stop, &launcher_gone) {
             Err(e) => Err(e),
@@ -585,6 +634,9 @@ fn real_clock(
     let hook_time = run_time.clone();
     let hook_index = index.clone();
     let fwd = forward_after.clone();
+    let mine: Vec<NodeId> = local.iter().map(|&i| NodeId(i)).collect();
+    let hook_held = held_topics(spec, &mine);
+    let hook_handles = handles.clone();
     let real = RealOptions {
         spin_margin: cfg.spin_margin,
         phase_offsets: index
@@ -604,10 +656,12 @@ fn real_clock(
         on_tick: Some(Arc::new(
             move |k: usize, _: &str, now: Nanos, late: Nanos| {
                 let i = hook_index[k];
-                crate::graph::lock(&hook_batch).push_tick((i, now.0, late.0));
                 hook_ticks[i].fetch_add(1, Ordering::Relaxed);
                 hook_time.fetch_max(now.0, Ordering::Relaxed);
                 fwd(i);
+                let mut b = crate::graph::lock(&hook_batch);
+                b.push_tick((i, now.0, late.0));
+                b.sample(now.0, &hook_held, &hook_handles);
             },
         )),
         pause: None,
@@ -692,8 +746,11 @@ fn run_lockstep(
     run_time: &AtomicU64,
     tell: &dyn Fn(&Ticked) -> zenoh::Result<()>,
     process: &str,
+    batch: &Mutex<Batch>,
 ) -> Result<GraphState, DistError> {
     let spec = &cfg.graph;
+    let mine: Vec<NodeId> = local.iter().map(|&i| NodeId(i)).collect();
+    let held = held_topics(spec, &mine);
     let mut sched = VirtualScheduler::with_offsets(&nodes, &cfg.phase_offsets);
     // The newest seq each topic's remote publisher sent, from its reports.
     let mut sent: Vec<Option<u64>> = vec![None; spec.topics.len()];
@@ -730,6 +787,7 @@ fn run_lockstep(
             } else {
                 None
             };
+            crate::graph::lock(batch).sample(t.0, &held, handles);
             let over = flow == Flow::Stop || failed.is_some();
             tell(&Ticked {
                 process: process.to_string(),
@@ -872,6 +930,7 @@ fn live_stats(
         wire: wire_links(process, spec, inbound, lat),
         steps: Vec::new(),
         ticks: Vec::new(),
+        counters: Vec::new(),
         done: false,
     }
 }

@@ -12,9 +12,9 @@
 //!   (real clock: measured rates and lateness) and the counters of the topics it holds;
 //! - a topic's counters live in its subscriber's process (its copy keeps the chapter's buffer
 //!   and QoS, `docs/distributed.md`), so each step's counters of a topic held elsewhere are
-//!   replaced by the holder's newest ([`Fold::merge_step`]); a step waits until every
-//!   holder has published figures of its run time or later ([`Fold::release`]), so they
-//!   are never older than the step;
+//!   replaced by the ones the holder sampled after its newest tick no later than the step
+//!   ([`Fold::merge_step`]); a step waits until every holder has published figures of its
+//!   run time or later ([`Fold::release`]), so those samples are in;
 //! - a node is alive while its liveliness token is (`ratelab/<graph>/@node/<process>/<node>`),
 //!   as rmw_zenoh tracks its graph; the lab draws one whose token went as NOT ALIVE;
 //! - the launcher's progress lines (`@log`) become notices, and its merged summary
@@ -48,6 +48,9 @@ pub const STATUS_PERIOD: Duration = Duration::from_millis(250);
 /// (200 s at 50 Hz; about 1 KB each).
 pub const MAX_PENDING_STEPS: usize = 10_000;
 
+/// The most counter samples a watcher keeps per topic ahead of the steps it shows.
+pub const MAX_QUEUED_COUNTERS: usize = 100_000;
+
 /// Events a watcher buffers between Zenoh's callbacks and its fold, at most.
 const EVENTS: usize = 64;
 
@@ -60,6 +63,12 @@ pub struct Fold {
     /// Each topic's newest counters from its holder, when the holder is not the plant's
     /// (continued across the holder's restarts: see [`Fold::stats`]).
     held: Vec<Option<TopicStats>>,
+    /// Per topic held elsewhere, its holder's counters by run time, oldest first, not yet
+    /// shown (at most [`MAX_QUEUED_COUNTERS`] per topic; continued across restarts).
+    queued: Vec<std::collections::VecDeque<(Nanos, TopicStats)>>,
+    /// Per topic held elsewhere, the counters the steps are shown with now: the holder's
+    /// newest sample no later than the newest step shown.
+    shown: Vec<Option<TopicStats>>,
     /// Per topic, what earlier runs of its holder process counted before it was restarted.
     before: Vec<TopicStats>,
     /// Each process's OS process id as last heard: a new one is a restart.
@@ -100,6 +109,8 @@ impl Fold {
             .collect();
         Fold {
             held: vec![None; spec.topics.len()],
+            queued: vec![std::collections::VecDeque::new(); spec.topics.len()],
+            shown: vec![None; spec.topics.len()],
             before: vec![TopicStats::default(); spec.topics.len()],
             pids: std::collections::BTreeMap::new(),
             plant: spec.process_of(spec.chain.actuator),
@@ -118,15 +129,21 @@ impl Fold {
     }
 
     /// `step` (from the actuator's process) with the counters of every topic held by
-    /// another process replaced by that holder's newest: the actuator's process only
-    /// forwards those topics, so its own copies do not count what their subscribers do.
-    pub fn merge_step(&self, step: &StepRecord) -> StepRecord {
+    /// another process replaced by that holder's at the step's run time (its newest sample
+    /// no later than the step; its newest figures when it sent no samples): the actuator's
+    /// process only forwards those topics, so its own copies do not count what their
+    /// subscribers do. Steps are merged in run-time order.
+    pub fn merge_step(&mut self, step: &StepRecord) -> StepRecord {
         let mut out = *step;
         for (i, holder) in self.holders.iter().enumerate() {
-            if *holder != self.plant {
-                if let Some(s) = self.held[i] {
-                    out.topics.set(TopicId(i), s);
-                }
+            if *holder == self.plant {
+                continue;
+            }
+            while self.queued[i].front().is_some_and(|(t, _)| *t <= step.t) {
+                self.shown[i] = self.queued[i].pop_front().map(|(_, s)| s);
+            }
+            if let Some(s) = self.shown[i].or(self.held[i]) {
+                out.topics.set(TopicId(i), s);
             }
         }
         out
@@ -167,6 +184,20 @@ impl Fold {
                     self.held[i] = Some(continued(&self.before[i], st));
                 }
             }
+        }
+        for (t_ns, i, st) in &m.counters {
+            let ours = self.holders.get(*i).is_some_and(|h| *h == m.process);
+            if !ours || m.process == self.plant {
+                continue;
+            }
+            let q = &mut self.queued[*i];
+            if q.back().is_some_and(|(t, _)| t.0 > *t_ns) {
+                continue; // only forward in time
+            }
+            if q.len() == MAX_QUEUED_COUNTERS {
+                self.shown[*i] = q.pop_front().map(|(_, s)| s);
+            }
+            q.push_back((Nanos(*t_ns), continued(&self.before[*i], st)));
         }
         if !m.wire.is_empty() {
             let links: Vec<(usize, f64, f64)> = m
@@ -603,9 +634,9 @@ impl Pending {
 /// summary ([`Recording::finish`]).
 ///
 /// What differs from an in-process recording: a topic held by another process shows its
-/// counters as that process published them at the step's run time or a little later
-/// (figures come every [`super::member::STATS_PERIOD`]); the published force is the newest per actuator step; leases are not recorded (liveliness is
-/// the tokens'). So it is not byte-identical to the in-process recording, even under the
+/// counters as that process sampled them after its newest tick no later than the step (not
+/// at the step itself); the published force is the newest per actuator step; leases are
+/// not recorded (liveliness is the tokens'). So it is not byte-identical to the in-process recording, even under the
 /// virtual clock (`metrics.json` is).
 ///
 /// # Errors
@@ -723,6 +754,7 @@ mod tests {
             wire: Vec::new(),
             steps,
             ticks: Vec::new(),
+            counters: Vec::new(),
             done: false,
         }
     }
@@ -788,6 +820,43 @@ mod tests {
 
     fn step_at(t_ms: u64) -> StepRecord {
         step(t_ms, stats(0, 0), stats(0, 0))
+    }
+
+    #[test]
+    fn each_step_shows_the_counters_its_holder_had_at_the_step_s_run_time() {
+        // Under the virtual clock one batch of figures spans seconds of run time: the
+        // policy's copy of /obs was sampled after each of its ticks.
+        let mut f = Fold::new(&cfg(), "scripted");
+        let mut m = at(100, live("policy", vec![("/obs", stats(5, 0))], vec![]));
+        let ms = 1_000_000;
+        m.counters = vec![(10 * ms, 0, stats(1, 0)), (20 * ms, 0, stats(2, 0))];
+        m.counters.push((40 * ms, 0, stats(4, 1)));
+        m.counters.push((30 * ms, 0, stats(99, 9))); // back in time: ignored
+        f.stats(m);
+        let shown: Vec<TopicStats> = [5, 10, 15, 20, 35, 40, 60]
+            .iter()
+            .map(|t| f.merge_step(&step_at(*t)).topics.get(TopicId(0)))
+            .collect();
+        assert_eq!(
+            shown,
+            [
+                stats(5, 0), // before its first sample: its newest figures
+                stats(1, 0),
+                stats(1, 0),
+                stats(2, 0),
+                stats(2, 0),
+                stats(4, 1),
+                stats(4, 1),
+            ]
+        );
+        // Samples from a process that does not hold the topic are not its counters.
+        let mut robot = live("robot", vec![], vec![]);
+        robot.counters = vec![(70 * ms, 0, stats(50, 0)), (70 * ms, 99, stats(50, 0))];
+        f.stats(robot);
+        assert_eq!(
+            f.merge_step(&step_at(80)).topics.get(TopicId(0)),
+            stats(4, 1)
+        );
     }
 
     #[test]
