@@ -193,16 +193,18 @@ fn real_clock_balances_at_50_hz_for_3_s() {
 #[test]
 fn real_clock_falls_at_5_hz() {
     let _machine = crate::machine::alone();
+    // It falls within 2 s in almost every run (25 of 25 here, the latest at 1.84 s), but
+    // the real clock's phases vary: one run in a full suite stood 3 s. 10 s leaves room.
     let mut cfg = RunConfig {
-        duration: Nanos(3 * Nanos::SECOND.0),
+        duration: Nanos(10 * Nanos::SECOND.0),
         ..RunConfig::default()
     };
     cfg.set_control_hz(5.0).unwrap();
     let r = run(&cfg, Box::new(Scripted), RunOptions::new()).unwrap();
-    assert!(!r.metrics.balanced);
+    assert!(!r.metrics.balanced, "{:?}", r.metrics);
     assert!(r.metrics.obs_dropped > 0);
     assert!(
-        r.wall.as_secs_f64() < 2.9,
+        r.wall.as_secs_f64() < 9.9,
         "the fall stops the graph early: {:?}",
         r.wall
     );
