@@ -133,6 +133,9 @@ pub fn run_launch(a: &LaunchArgs, force_headless: bool, stop: StopFlag) -> anyho
     Ok(())
 }
 
+/// The most lines of the started processes' stderr kept while the lab is on the terminal.
+const MAX_HELD_STDERR_LINES: usize = 1000;
+
 /// Run the launch on a thread and watch it ([`Watch`]): with `lab`, the lab on the
 /// terminal (when the user quits, the launch is stopped: every process it started); with
 /// `recording`, every merged step into it ([`ratelab::distributed::monitor::record`]),
@@ -153,8 +156,13 @@ fn launch_watched(
     let (line_tx, line_rx) = crossbeam_channel::unbounded::<String>();
     let (gate_tx, gate_rx) = crossbeam_channel::bounded::<()>(1);
     opts.start_gate = Some(gate_rx);
+    // The processes' stderr while the lab is up: the first lines, printed after it (the
+    // lab shows every line meanwhile, from the log key).
+    let (err_tx, err_rx) = crossbeam_channel::bounded::<String>(MAX_HELD_STDERR_LINES);
     if lab {
-        opts.child_stderr = Some(line_tx.clone());
+        opts.child_stderr = Some(err_tx);
+    } else {
+        drop(err_tx);
     }
     // Set when the launcher returns (or the user stops it): the watcher stops waiting.
     let launcher_done = StopFlag::new();
@@ -268,6 +276,13 @@ fn launch_watched(
     }
     for l in held {
         println!("[ratelab] launch: {l}");
+    }
+    let cut = err_rx.is_full();
+    for l in err_rx.try_iter() {
+        eprintln!("[ratelab] {l}");
+    }
+    if cut {
+        eprintln!("[ratelab] (the processes' stderr lines after the first {MAX_HELD_STDERR_LINES} are not kept)");
     }
     lab_result?;
     let report = report?;

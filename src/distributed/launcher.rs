@@ -3,7 +3,7 @@
 //! time authority under the virtual clock; the common start under the real one), stops
 //! every process it started, and merges their reports into one `metrics.json`.
 
-use super::lockstep::{TickInbox, HORIZON_PERIODS, MAX_AHEAD};
+use super::lockstep::{decode_report, TickInbox, HORIZON_PERIODS, MAX_AHEAD};
 use super::wire::{self, Setup, Ticked, ToLauncher, ToMember};
 use super::{check_endpoint, check_keys, open_session, DistError, Keys, REPLY_TIMEOUT};
 use crate::config::{ClockKind, RunConfig};
@@ -41,7 +41,8 @@ pub struct LaunchOptions {
     /// Where the started processes' stderr goes, a line at a time as `PROCESS: LINE` (each
     /// line also published on the graph's log key, [`Keys::log`]); `None`: to the
     /// launcher's own stderr. A lab on the terminal takes them, so that no child writes
-    /// over its screen. Lines are cut at [`MAX_STDERR_LINE`] bytes.
+    /// over its screen. Lines are cut at [`MAX_STDERR_LINE`] bytes; a line that finds the
+    /// channel full is dropped here (give a bounded one: it is on the log key anyway).
     pub child_stderr: Option<crossbeam_channel::Sender<String>>,
     /// The run starts only once this receives (or is told, within [`REPLY_TIMEOUT`]): a
     /// watcher that must see the whole run (a recording, the lab) says here that it has
@@ -103,7 +104,7 @@ fn pass_stderr(
                 let text = String::from_utf8_lossy(&buf);
                 let line = format!("{process}: {}", text.trim_end());
                 let _ = session.put(log_key.as_str(), line.as_str()).wait();
-                let _ = to.send(line);
+                let _ = to.try_send(line);
             }
         });
 }
@@ -180,6 +181,16 @@ impl Node for Slot {
     fn tick(&mut self, _now: Nanos) -> Flow {
         Flow::Continue // never called: the launcher skips every tick
     }
+}
+
+/// What the launcher's wait for one tick's report came to (virtual clock).
+enum Awaited {
+    /// The report.
+    Report(Ticked),
+    /// The run cannot go on: why (the node's process is gone, silent, or out of step).
+    Failed(String),
+    /// Ctrl-C while the tick hung.
+    Interrupted,
 }
 
 /// The lockstep's cost, measured by the launcher (virtual clock).
@@ -423,7 +434,8 @@ pub fn launch(
     let _ticked_sub = session
         .declare_subscriber(keys.ticked("*"))
         .callback(move |s| {
-            if let Ok(m) = wire::decode_json::<Ticked>(&s.payload().to_bytes()) {
+            let bytes = s.payload().to_bytes();
+            if let Some(m) = decode_report(s.key_expr().as_str(), &bytes, None) {
                 let _ = ticked_tx.try_send(m);
             }
         })
@@ -701,24 +713,47 @@ pub fn launch(
                 }
                 // The tick's report, from its node's process.
                 let process = spec.process_of(NodeId(i));
-                let deadline = Instant::now() + REPLY_TIMEOUT;
+                // Longer than a process waits for an input message itself, so that its
+                // own, more precise error comes first.
+                let patience = 2 * REPLY_TIMEOUT;
+                let deadline = Instant::now() + patience;
+                let mut interrupted_at: Option<Instant> = None;
                 let report = loop {
+                    // Reports already here count before a process's going (it may have
+                    // reported, then died).
+                    let mut overflow = None;
+                    while let Ok(m) = ticked_rx.try_recv() {
+                        if let Err(e) = inbox.accept(m, spec) {
+                            overflow = Some(e.to_string());
+                            break;
+                        }
+                    }
+                    if let Some(e) = overflow {
+                        break Awaited::Failed(e);
+                    }
                     if let Some(m) = inbox.take(index) {
-                        break Ok(m);
+                        break Awaited::Report(m);
                     }
                     if crate::graph::lock(&gone_now).contains(&process) {
-                        break Err(format!("process '{process}' is gone"));
+                        break Awaited::Failed(format!("process '{process}' is gone"));
                     }
                     if Instant::now() >= deadline {
-                        break Err(format!(
+                        break Awaited::Failed(format!(
                             "process '{process}' did not answer within {} s",
-                            REPLY_TIMEOUT.as_secs()
+                            patience.as_secs()
                         ));
+                    }
+                    // Ctrl-C while a tick hangs: a second's grace, then the run ends here.
+                    if stop.is_stopped() {
+                        let since = *interrupted_at.get_or_insert_with(Instant::now);
+                        if since.elapsed() >= Duration::from_secs(1) {
+                            break Awaited::Interrupted;
+                        }
                     }
                     crossbeam_channel::select! {
                         recv(ticked_rx) -> m => if let Ok(m) = m {
                             if let Err(e) = inbox.accept(m, spec) {
-                                break Err(e.to_string());
+                                break Awaited::Failed(e.to_string());
                             }
                         },
                         recv(link.up) -> m => match m {
@@ -730,14 +765,20 @@ pub fn launch(
                                 Admission::Welcomed | Admission::Ignored => {}
                             },
                             Ok(_) => {}
-                            Err(_) => break Err("the launcher's channel closed".into()),
+                            Err(_) => break Awaited::Failed("the launcher's channel closed".into()),
                         },
                         default(Duration::from_millis(50)) => {}
                     }
                 };
                 let m = match report {
-                    Ok(m) => m,
-                    Err(message) => break failed(i, t, message),
+                    Awaited::Report(m) => m,
+                    Awaited::Interrupted => {
+                        break RunEnd {
+                            at: sched.now(),
+                            reason: EndReason::Interrupted,
+                        }
+                    }
+                    Awaited::Failed(message) => break failed(i, t, message),
                 };
                 if m.node != i || m.t_ns != t.0 {
                     break failed(

@@ -37,8 +37,9 @@ use zenoh::Wait;
 /// periods of the graph's fastest node (the horizon is moved on when half of it is used).
 pub const HORIZON_PERIODS: u64 = 8;
 
-/// The most reports of other processes' ticks one process keeps ahead of their turn (a
-/// process runs at most to the horizon, so a well-behaved run holds a few).
+/// The most reports of other processes' ticks one process keeps ahead of their turn (each
+/// process runs at most to the horizon, so a run holds at most the other processes' ticks
+/// of one horizon: [`HORIZON_PERIODS`] periods of the fastest node).
 pub const MAX_AHEAD: usize = 65_536;
 
 /// The other processes' tick reports, handed out in the run's order.
@@ -56,8 +57,9 @@ impl TickInbox {
     }
 
     /// Keep `m` until its turn. Ignored: a report for a tick already taken, a second report
-    /// for one tick, or one whose node is not in the graph or not in the process that sent
-    /// it (bytes from anyone on the keys must not change the run).
+    /// for one tick (the first stands), or one whose node is not in the graph or not in the
+    /// process the report names (malformed bytes on the keys must not end the run; a
+    /// well-formed forgery can still disturb it: the keys are not authenticated).
     ///
     /// # Errors
     /// [`DistError::Peer`] when [`MAX_AHEAD`] reports are already waiting.
@@ -98,9 +100,9 @@ pub struct Pace<'a> {
 }
 
 impl<'a> Pace<'a> {
-    /// Wait on `ctl` (the launcher's messages to this process) and `ticked` (every
-    /// process's reports; this process's own are ignored, as reports for nodes it does not
-    /// hold are not its peers'), until `stop` or the launcher goes.
+    /// Wait on `ctl` (the launcher's messages to this process) and `ticked` (the other
+    /// processes' reports, as [`decode_report`] lets them through), until `stop` or the
+    /// launcher goes.
     pub fn new(
         ctl: &'a Receiver<ToMember>,
         ticked: &'a Receiver<Ticked>,
@@ -122,6 +124,9 @@ impl<'a> Pace<'a> {
 
     /// Wait up to 100 ms for one message and take it in.
     fn pump(&mut self) -> Result<(), DistError> {
+        if self.stop.is_stopped() {
+            return Err(DistError::Peer("interrupted".into()));
+        }
         crossbeam_channel::select! {
             recv(self.ctl) -> m => match m {
                 Ok(ToMember::Horizon { until_ns }) => {
@@ -136,7 +141,8 @@ impl<'a> Pace<'a> {
                 Err(_) => return Err(DistError::Peer("the tick reports' channel closed".into())),
             },
             default(Duration::from_millis(100)) => {
-                // Ticks may be far apart (a slow node): wait for as long as the launcher lives.
+                // Ticks may be far apart (a slow node): wait for as long as the launcher
+                // lives (the launcher decides when a tick has taken too long).
                 if self.launcher_gone.is_stopped() {
                     return Err(DistError::Peer("the launcher went away".into()));
                 }
@@ -197,8 +203,21 @@ impl<'a> Pace<'a> {
     }
 }
 
+/// Decode a tick report that came on `key` (`ratelab/<graph>/@ticked/<process>`): `None`
+/// for bytes that are not one, for a report whose process is not the key's, and for this
+/// process's own (`own`: Zenoh hands a session its own puts too).
+pub fn decode_report(key: &str, bytes: &[u8], own: Option<&str>) -> Option<Ticked> {
+    let from = key.rsplit('/').next()?;
+    if own == Some(from) {
+        return None;
+    }
+    let m = super::wire::decode_json::<Ticked>(bytes).ok()?;
+    (m.process == from).then_some(m)
+}
+
 /// Wait until every process in `others` answers on its [`Keys::here`] key, asking every
-/// 100 ms, for as long as the launcher lives. A peer's queryable answers only over a direct
+/// 100 ms, for as long as the launcher lives (processes started by hand may come minutes
+/// apart); after [`super::REPLY_TIMEOUT`] it says once, on stderr, whom it waits for. A peer's queryable answers only over a direct
 /// link (peers do not route for each other), and it is declared after the peer's
 /// subscription to the tick reports, which Zenoh declares first on the same link: once all
 /// answer, every report this process sends reaches every peer.
@@ -214,6 +233,8 @@ pub fn meet_peers(
     launcher_gone: &StopFlag,
 ) -> Result<(), DistError> {
     let prefix = keys.here("");
+    let hint_at = std::time::Instant::now() + super::REPLY_TIMEOUT;
+    let mut hinted = false;
     loop {
         let replies = session
             .get(keys.here("*"))
@@ -229,6 +250,18 @@ pub fn meet_peers(
         }
         if others.iter().all(|p| met.contains(p)) {
             return Ok(());
+        }
+        if !hinted && std::time::Instant::now() >= hint_at {
+            hinted = true;
+            let missing: Vec<&str> = others
+                .iter()
+                .filter(|p| !met.contains(*p))
+                .map(String::as_str)
+                .collect();
+            eprintln!(
+                "ratelab: still waiting to reach process(es) {} directly (every process of a virtual-clock run links to every other; on other hosts give each `ratelab node` --listen tcp/<its address>:PORT)",
+                missing.join(", ")
+            );
         }
         if stop.is_stopped() {
             return Err(DistError::Peer("interrupted".into()));
@@ -294,6 +327,17 @@ mod tests {
             .accept(report("policy", 2, spec.chain.policy.0), &spec)
             .unwrap();
         assert_eq!(inbox.take(2), Some(first));
+    }
+
+    #[test]
+    fn a_report_counts_only_from_its_own_process_s_key_and_never_one_s_own() {
+        let bytes = crate::distributed::wire::encode_json(&report("policy", 3, 1));
+        let key = |p: &str| format!("ratelab/cartpole/@ticked/{p}");
+        assert!(decode_report(&key("policy"), &bytes, Some("robot")).is_some());
+        assert!(decode_report(&key("policy"), &bytes, None).is_some());
+        assert_eq!(decode_report(&key("policy"), &bytes, Some("policy")), None);
+        assert_eq!(decode_report(&key("robot"), &bytes, Some("x")), None);
+        assert_eq!(decode_report(&key("policy"), b"\xff{", None), None);
     }
 
     #[test]

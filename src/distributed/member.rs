@@ -318,10 +318,13 @@ pub fn run_member(opts: &MemberOptions, stop: &StopFlag) -> Result<(), DistError
     let virtual_clock = cfg.clock == crate::ClockKind::Virtual;
     let (ticked_tx, ticked_rx) = crossbeam_channel::bounded::<Ticked>(lockstep::MAX_AHEAD);
     let lockstep_keys = if virtual_clock {
+        let own = opts.process.clone();
         let sub = session
             .declare_subscriber(keys.ticked("*"))
             .callback(move |s| {
-                if let Ok(m) = wire::decode_json::<Ticked>(&s.payload().to_bytes()) {
+                let bytes = s.payload().to_bytes();
+                if let Some(m) = lockstep::decode_report(s.key_expr().as_str(), &bytes, Some(&own))
+                {
                     let _ = ticked_tx.try_send(m);
                 }
             })
@@ -756,6 +759,9 @@ fn run_lockstep(
     let mut sent: Vec<Option<u64>> = vec![None; spec.topics.len()];
     let mut index = 0u64;
     while let (Some(t), Some(i)) = (sched.next_due(), sched.next_node()) {
+        if stop.is_stopped() {
+            return Err(DistError::Peer("interrupted".into()));
+        }
         if t > cfg.duration || !pace.until(t.0)? {
             break;
         }
