@@ -307,6 +307,44 @@ fn launch_across_processes_opens_the_lab_and_quitting_leaves_nothing_behind() {
     );
 }
 
+/// Under the virtual clock a second of wall time is many seconds of run time: the arrows
+/// still read each topic's rate (the policy's copy of /obs sampled per tick, not per batch
+/// of figures), and the lockstep's processes stop with the lab.
+#[test]
+fn a_launch_in_lockstep_shows_every_topic_s_rate_in_the_lab() {
+    let _machine = crate::machine::alone();
+    let port = crate::distributed::free_port();
+    let ep = format!("tcp/127.0.0.1:{port}");
+    let mut lab = Lab::start(&[
+        "launch",
+        "--processes",
+        "--clock",
+        "virtual",
+        "--listen",
+        &ep,
+    ]);
+    lab.wait_for("virtual clock · 2 processes", Duration::from_secs(60));
+    // Both arrows at the chapter's 50 Hz (run time), once a 5 s window has passed.
+    let deadline = std::time::Instant::now() + Duration::from_secs(20);
+    loop {
+        let s = lab.screen();
+        if s.matches("50.0 msg/s").count() >= 2 {
+            break;
+        }
+        assert!(
+            std::time::Instant::now() < deadline,
+            "both arrows should read 50.0 msg/s:\n{s}"
+        );
+        std::thread::sleep(Duration::from_millis(200));
+    }
+    lab.quit();
+    std::thread::sleep(Duration::from_millis(500));
+    assert!(
+        crate::distributed::processes_mentioning(&format!(":{port}")).is_empty(),
+        "a node process outlived the launch"
+    );
+}
+
 /// `ratelab lab --attach` on a running launch: a node process killed with SIGKILL is drawn
 /// NOT ALIVE (its liveliness token went with it), and one started again is drawn alive.
 #[test]
