@@ -315,7 +315,7 @@ fn a_launch_in_lockstep_shows_every_topic_s_rate_in_the_lab() {
     let _machine = crate::machine::alone();
     let port = crate::distributed::free_port();
     let ep = format!("tcp/127.0.0.1:{port}");
-    let mut lab = Lab::start(&[
+    let lab = Lab::start(&[
         "launch",
         "--processes",
         "--clock",
