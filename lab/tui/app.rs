@@ -168,6 +168,12 @@ impl App {
         }
     }
 
+    /// Draw `spec` until the run's first telemetry says more (the lab knows its graph before
+    /// the run starts; without this the first frames show the chapter's).
+    pub fn show_graph(&mut self, spec: GraphSpec) {
+        self.graph = spec;
+    }
+
     /// Mark the lab as watching a graph across processes; `label` (`2 processes`) joins the
     /// header and each node box names its process.
     pub fn set_attached(&mut self, label: String) {

@@ -84,6 +84,7 @@ pub fn run_lab(settings: SessionSettings, stop: StopFlag) -> anyhow::Result<()> 
         settings.alt_policy.clone(),
         settings.speed,
     );
+    app.show_graph(settings.cfg.graph.clone());
     let session_file = settings.session_file.clone();
     let engine = Engine::new(settings, ctl_rx, tel_tx).spawn();
     let result = on_terminal(&mut app, &tel_rx, &stop);
@@ -119,6 +120,7 @@ pub fn run_attached(
     let (ctl_tx, _) = unbounded::<Control>();
     let mut app = App::new(ctl_tx, policy, None, ratelab::session::Speed::Times(1.0));
     app.set_attached(attached_label(spec));
+    app.show_graph(spec.clone());
     on_terminal(&mut app, telemetry, stop)
 }
 
@@ -193,6 +195,15 @@ mod tests {
         };
         cfg.set_control_hz(control_hz).unwrap();
         cfg
+    }
+
+    #[test]
+    fn the_lab_draws_its_own_graph_before_the_run_starts() {
+        let (tx, _rx) = crossbeam_channel::unbounded();
+        let mut app = App::new(tx, "scripted".into(), None, Speed::Times(1.0));
+        app.show_graph(graph_cfg("graphs/cartpole-estimator.toml", 1).graph);
+        let names: Vec<String> = app.view().nodes.iter().map(|n| n.name.clone()).collect();
+        assert!(names.contains(&"estimator".to_string()), "{names:?}");
     }
 
     fn graph_cfg(file: &str, secs: u64) -> RunConfig {
