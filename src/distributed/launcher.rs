@@ -1009,7 +1009,13 @@ fn collect_reports(
             },
         );
     }
-    let deadline = Instant::now() + REPLY_TIMEOUT;
+    // After Ctrl-C (maybe with a tick hung) the reports get a short while only.
+    let patience = if end.reason == EndReason::Interrupted {
+        Duration::from_secs(2)
+    } else {
+        REPLY_TIMEOUT
+    };
+    let deadline = Instant::now() + patience;
     // A process that is gone (its tokens withdrawn) will not report: no wait for it.
     let waiting = |reports: &BTreeMap<String, GraphState>| {
         let gone = crate::graph::lock(gone);

@@ -102,9 +102,10 @@ pub struct LiveStats {
     /// time ns, lateness ns), oldest first (at most [`MAX_BATCH_TICKS`]).
     #[serde(default)]
     pub ticks: Vec<(usize, u64, u64)>,
-    /// The counters of each topic it holds, after each tick of its nodes that changed them
-    /// since the previous figures: (run time ns, topic index, counters), oldest first (at
-    /// most [`MAX_BATCH_COUNTERS`]). A watcher shows each actuator step with the counters
+    /// The counters of each topic it holds, sampled after each tick of its nodes when they
+    /// differ from the previous sample: (run time ns, topic index, counters), oldest first,
+    /// run times never decreasing (at most [`MAX_BATCH_COUNTERS`], the oldest dropped
+    /// beyond). A watcher shows each actuator step with the counters
     /// its holder had at the step's run time, not at the figures' (under the virtual clock
     /// 100 ms of wall time is many seconds of run time).
     #[serde(default)]
@@ -122,8 +123,9 @@ pub const STATS_PERIOD: Duration = Duration::from_millis(100);
 pub const MAX_BATCH_STEPS: usize = 1000;
 /// The most node ticks one [`LiveStats`] carries.
 pub const MAX_BATCH_TICKS: usize = 20_000;
-/// The most counter samples one [`LiveStats`] carries.
-pub const MAX_BATCH_COUNTERS: usize = 20_000;
+/// The most counter samples one [`LiveStats`] carries (about 240 bytes each as JSON: a full
+/// batch, with full steps and ticks, stays well under [`wire::MAX_CONTROL_BYTES`]).
+pub const MAX_BATCH_COUNTERS: usize = 8_000;
 
 impl LiveStats {
     /// Decode figures from the network, refusing any over the bounds a process keeps
@@ -158,6 +160,8 @@ struct Batch {
     counters: std::collections::VecDeque<(u64, usize, crate::topic::TopicStats)>,
     /// Each topic's counters as last sampled (a sample is kept only when they changed).
     last: Vec<Option<crate::topic::TopicStats>>,
+    /// The run time of the newest sample, ns (samples never go back in time).
+    last_t: u64,
 }
 
 impl Batch {
@@ -173,11 +177,12 @@ impl Batch {
         }
         self.ticks.push_back(t);
     }
-    /// Sample the counters of the topics this process holds at run time `t_ns` (after a
-    /// tick of one of its nodes).
-    fn sample(&mut self, t_ns: u64, held: &[TopicId], handles: &crate::graph::GraphHandles) {
-        for &t in held {
-            let st = handles.topic(t).stats();
+    /// Keep the counters `read` of the topics this process holds at run time `t_ns` (after
+    /// a tick of one of its nodes), those that changed. Node threads may come out of order:
+    /// a sample is never older than the one before.
+    fn keep(&mut self, t_ns: u64, read: &[(TopicId, crate::topic::TopicStats)]) {
+        self.last_t = self.last_t.max(t_ns);
+        for &(t, st) in read {
             if self.last.len() <= t.0 {
                 self.last.resize(t.0 + 1, None);
             }
@@ -188,9 +193,19 @@ impl Batch {
             if self.counters.len() == MAX_BATCH_COUNTERS {
                 self.counters.pop_front();
             }
-            self.counters.push_back((t_ns, t.0, st));
+            self.counters.push_back((self.last_t, t.0, st));
         }
     }
+}
+
+/// Read the counters of `held` (before taking the batch's lock: each read locks its topic).
+fn read_counters(
+    held: &[TopicId],
+    handles: &crate::graph::GraphHandles,
+) -> Vec<(TopicId, crate::topic::TopicStats)> {
+    held.iter()
+        .map(|&t| (t, handles.topic(t).stats()))
+        .collect()
 }
 
 /// The topics whose counters process `mine` holds: those it subscribes to, and those it
@@ -530,9 +545,9 @@ pub fn run_member(opts: &MemberOptions, stop: &StopFlag) -> Result<(), DistError
                 );
                 {
                     let mut b = crate::graph::lock(&batch);
-                    msg.steps = b.steps.drain(..).collect();
-                    msg.ticks = b.ticks.drain(..).collect();
-                    msg.counters = b.counters.drain(..).collect();
+                    msg.steps = std::mem::take(&mut b.steps).into();
+                    msg.ticks = std::mem::take(&mut b.ticks).into();
+                    msg.counters = std::mem::take(&mut b.counters).into();
                 }
                 msg.done = last;
                 let _ = stats_pub.put(wire::encode_json(&msg)).wait();
@@ -660,11 +675,15 @@ fn real_clock(
             move |k: usize, _: &str, now: Nanos, late: Nanos| {
                 let i = hook_index[k];
                 hook_ticks[i].fetch_add(1, Ordering::Relaxed);
-                hook_time.fetch_max(now.0, Ordering::Relaxed);
                 fwd(i);
-                let mut b = crate::graph::lock(&hook_batch);
-                b.push_tick((i, now.0, late.0));
-                b.sample(now.0, &hook_held, &hook_handles);
+                // The sample is in the batch before the run time says this tick is done.
+                let read = read_counters(&hook_held, &hook_handles);
+                {
+                    let mut b = crate::graph::lock(&hook_batch);
+                    b.push_tick((i, now.0, late.0));
+                    b.keep(now.0, &read);
+                }
+                hook_time.fetch_max(now.0, Ordering::Relaxed);
             },
         )),
         pause: None,
@@ -793,7 +812,8 @@ fn run_lockstep(
             } else {
                 None
             };
-            crate::graph::lock(batch).sample(t.0, &held, handles);
+            let read = read_counters(&held, handles);
+            crate::graph::lock(batch).keep(t.0, &read);
             let over = flow == Flow::Stop || failed.is_some();
             tell(&Ticked {
                 process: process.to_string(),

@@ -48,6 +48,10 @@ pub const STATUS_PERIOD: Duration = Duration::from_millis(250);
 /// (200 s at 50 Hz; about 1 KB each).
 pub const MAX_PENDING_STEPS: usize = 10_000;
 
+/// How long after the run's end a watcher waits for holders' last figures before it hands
+/// on the steps still waiting as they are.
+pub const OVER_GRACE: Duration = Duration::from_secs(2);
+
 /// The most counter samples a watcher keeps per topic ahead of the steps it shows.
 pub const MAX_QUEUED_COUNTERS: usize = 100_000;
 
@@ -94,6 +98,8 @@ pub struct Fold {
     reported: std::collections::BTreeMap<String, Nanos>,
     /// The launcher said the run is over: the lab is frozen on it.
     over: bool,
+    /// The run's end, handed on once every step before it is ([`Fold::ended`]).
+    end: Option<Telemetry>,
     /// The brain's label.
     policy: String,
 }
@@ -124,6 +130,7 @@ impl Fold {
             pending: std::collections::VecDeque::new(),
             reported: std::collections::BTreeMap::new(),
             over: false,
+            end: None,
             policy: policy.to_string(),
         }
     }
@@ -187,7 +194,8 @@ impl Fold {
         }
         for (t_ns, i, st) in &m.counters {
             let ours = self.holders.get(*i).is_some_and(|h| *h == m.process);
-            if !ours || m.process == self.plant {
+            // A sample newer than the figures that carry it is not one.
+            if !ours || m.process == self.plant || *t_ns > m.t_ns {
                 continue;
             }
             let q = &mut self.queued[*i];
@@ -258,14 +266,37 @@ impl Fold {
         let mut out = Vec::new();
         while let Some(s) = self.pending.front() {
             // Once the run is over nothing more is waited for.
-            if !self.over && behind.is_some_and(|t| t < s.t) {
+            if behind.is_some_and(|t| t < s.t) {
                 break;
             }
             let s = self.pending.pop_front().expect("a front");
             self.now = self.now.max(s.t);
             out.push(Telemetry::Step(Box::new(self.merge_step(&s))));
         }
+        if self.pending.is_empty() {
+            out.extend(self.take_end());
+        }
         out
+    }
+
+    /// Every step still waiting, whatever the holders (they are late: the watch ends, or
+    /// the run ended a while ago), then the run's end if it came.
+    pub fn flush(&mut self) -> Vec<Telemetry> {
+        let mut out = Vec::new();
+        while let Some(s) = self.pending.pop_front() {
+            self.now = self.now.max(s.t);
+            out.push(Telemetry::Step(Box::new(self.merge_step(&s))));
+        }
+        out.extend(self.take_end());
+        out
+    }
+
+    /// The status and the run's end, once.
+    fn take_end(&mut self) -> Vec<Telemetry> {
+        match self.end.take() {
+            Some(end) => vec![self.status(), end],
+            None => Vec::new(),
+        }
     }
 
     /// A node's liveliness token appeared (`alive`) or was withdrawn. A process that said
@@ -299,14 +330,21 @@ impl Fold {
     }
 
     /// The run is over (the launcher's word): liveliness is no longer followed (the
-    /// processes leaving is not news), and the lab gets the merged summary.
-    pub fn ended(&mut self, over: RunOver) -> Telemetry {
+    /// processes leaving is not news). The steps still waiting are handed on as their
+    /// holders' last figures come (those may arrive after the launcher's word, on other
+    /// links), then the status and the merged summary (`Ended`); [`Fold::flush`] hands on
+    /// whatever still waits. Returns what can be handed on now.
+    pub fn ended(&mut self, over: RunOver) -> Vec<Telemetry> {
         self.over = true;
-        self.now = self.now.max(over.end.at);
-        Telemetry::Ended {
+        self.end = Some(Telemetry::Ended {
             metrics: Box::new(over.metrics),
             reason: over.end.reason,
-        }
+        });
+        // The steps still waiting go first (their holders' last figures may come after
+        // the launcher's word, on other links), then the end.
+        let out = self.release();
+        self.now = self.now.max(over.end.at);
+        out
     }
 
     /// Has the launcher said the run is over?
@@ -454,8 +492,11 @@ impl Watch {
             .session
             .declare_subscriber(keys.stats("*"))
             .callback(move |s| {
-                if let Ok(m) = LiveStats::decode(&s.payload().to_bytes()) {
-                    send(&t, Event::Stats(Box::new(m)));
+                let from = s.key_expr().as_str().rsplit('/').next().unwrap_or("");
+                match LiveStats::decode(&s.payload().to_bytes()) {
+                    // Only a process's own figures, on its own key.
+                    Ok(m) if m.process == from => send(&t, Event::Stats(Box::new(m))),
+                    _ => {}
                 }
             })
             .wait()?;
@@ -527,6 +568,7 @@ impl Watch {
         }
         let mut last_status = Instant::now();
         let mut launcher_seen = false;
+        let mut over_at: Option<Instant> = None;
         let processes: Vec<String> = self
             .cfg
             .graph
@@ -538,6 +580,7 @@ impl Watch {
             signals,
             unheard: processes.clone(),
             unfinished: processes,
+            done: BTreeSet::new(),
         };
         while !stop.is_stopped() {
             let mut out = Vec::new();
@@ -560,12 +603,15 @@ impl Watch {
                 }
                 Ok(Event::Log(line)) => out.push(Telemetry::Applied(format!("launch: {line}"))),
                 Ok(Event::Over(over)) if !fold.is_over() => {
-                    let end = fold.ended(*over);
-                    out = fold.release();
-                    out.push(fold.status());
-                    out.push(end);
+                    over_at = Some(Instant::now());
+                    out = fold.ended(*over);
                 }
                 Ok(_) | Err(_) => {}
+            }
+            // Holders late with their last figures (or dead at the end) are given a while.
+            if over_at.is_some_and(|t| t.elapsed() >= OVER_GRACE) {
+                over_at = None;
+                out.extend(fold.flush());
             }
             if last_status.elapsed() >= STATUS_PERIOD && !fold.is_over() {
                 last_status = Instant::now();
@@ -575,6 +621,12 @@ impl Watch {
                 if tx.send(t).is_err() {
                     return Ok(()); // the lab is gone
                 }
+            }
+        }
+        // Stopped: whatever still waits goes out as it is.
+        for t in fold.flush() {
+            if tx.send(t).is_err() {
+                break;
             }
         }
         Ok(())
@@ -599,6 +651,8 @@ struct Pending {
     signals: Signals,
     unheard: Vec<String>,
     unfinished: Vec<String>,
+    /// Processes that sent their last figures.
+    done: BTreeSet<String>,
 }
 
 impl Pending {
@@ -611,7 +665,18 @@ impl Pending {
                 }
             }
             Event::Alive(p, _, false) => self.unfinished.retain(|q| q != p),
+            // Started again (the real clock): its last figures are to come after all.
+            Event::Alive(p, _, true) if !self.done.contains(p) && !self.unfinished.contains(p) => {
+                if self.unheard.is_empty() && self.signals.finished.is_some() {
+                    self.unfinished.push(p.clone());
+                }
+            }
             _ => {}
+        }
+        if let Event::Stats(m) = e {
+            if m.done {
+                self.done.insert(m.process.clone());
+            }
         }
         if self.unheard.is_empty() {
             if let Some(w) = self.signals.watching.take() {
@@ -857,6 +922,14 @@ mod tests {
             f.merge_step(&step_at(80)).topics.get(TopicId(0)),
             stats(4, 1)
         );
+        // Nor is a sample from after the figures that carry it (it would freeze the rest).
+        let mut ahead = at(200, live("policy", vec![], vec![]));
+        ahead.counters = vec![(10_000 * ms, 0, stats(77, 0)), (150 * ms, 0, stats(6, 1))];
+        f.stats(ahead);
+        assert_eq!(
+            f.merge_step(&step_at(160)).topics.get(TopicId(0)),
+            stats(6, 1)
+        );
     }
 
     #[test]
@@ -964,8 +1037,22 @@ mod tests {
                 reason: crate::scheduler::EndReason::Duration,
             },
         };
-        f.ended(over);
-        assert_eq!(f.release().len(), 1);
+        // The run's end waits for the step's holder (its last figures may come after it);
+        // a flush hands on the step, the status and the end.
+        assert!(f.ended(over).is_empty());
+        let out = f.flush();
+        assert!(
+            matches!(
+                out.as_slice(),
+                [
+                    Telemetry::Step(_),
+                    Telemetry::Status { .. },
+                    Telemetry::Ended { .. }
+                ]
+            ),
+            "{out:?}"
+        );
+        assert!(f.flush().is_empty(), "the end goes out once");
     }
 
     #[test]
@@ -1021,6 +1108,7 @@ mod tests {
             },
             unheard: vec!["robot".into(), "policy".into()],
             unfinished: vec!["robot".into(), "policy".into()],
+            done: BTreeSet::new(),
         };
         p.note(&Event::Stats(Box::new(live("robot", vec![], vec![]))));
         assert!(
