@@ -666,10 +666,13 @@ impl Pending {
             }
             Event::Alive(p, _, false) => self.unfinished.retain(|q| q != p),
             // Started again (the real clock): its last figures are to come after all.
-            Event::Alive(p, _, true) if !self.done.contains(p) && !self.unfinished.contains(p) => {
-                if self.unheard.is_empty() && self.signals.finished.is_some() {
-                    self.unfinished.push(p.clone());
-                }
+            Event::Alive(p, _, true)
+                if !self.done.contains(p)
+                    && !self.unfinished.contains(p)
+                    && self.unheard.is_empty()
+                    && self.signals.finished.is_some() =>
+            {
+                self.unfinished.push(p.clone());
             }
             _ => {}
         }
