@@ -3,7 +3,7 @@
 //! time authority under the virtual clock; the common start under the real one), stops
 //! every process it started, and merges their reports into one `metrics.json`.
 
-use super::lockstep::{decode_report, TickInbox, HORIZON_PERIODS, MAX_AHEAD};
+use super::lockstep::{subscribe_reports, TickInbox, HORIZON_PERIODS};
 use super::wire::{self, Setup, Ticked, ToLauncher, ToMember};
 use super::{check_endpoint, check_keys, open_session, DistError, Keys, REPLY_TIMEOUT};
 use crate::config::{ClockKind, RunConfig};
@@ -263,14 +263,7 @@ fn wait_gate(
             }
             Err(crossbeam_channel::RecvTimeoutError::Timeout) => {}
         }
-        if stop.is_stopped() {
-            return Err(DistError::Peer("interrupted before the run started".into()));
-        }
-        if let Some((p, status)) = children.exited() {
-            return Err(DistError::Peer(format!(
-                "process '{p}' exited ({status}) before the run started"
-            )));
-        }
+        before_the_run(stop, children)?;
         if Instant::now() >= deadline {
             return Err(DistError::Peer(format!(
                 "the run's watcher did not hear from every process within {} s",
@@ -278,6 +271,20 @@ fn wait_gate(
             )));
         }
     }
+}
+
+/// Nothing has ended the launch before its run: not Ctrl-C, not a started process that
+/// exited.
+fn before_the_run(stop: &StopFlag, children: &mut Children) -> Result<(), DistError> {
+    if stop.is_stopped() {
+        return Err(DistError::Peer("interrupted before the run started".into()));
+    }
+    if let Some((p, status)) = children.exited() {
+        return Err(DistError::Peer(format!(
+            "process '{p}' exited ({status}) before the run started"
+        )));
+    }
+    Ok(())
 }
 
 /// A free TCP port on `host` (the OS picks it; it is free when this returns).
@@ -430,16 +437,7 @@ pub fn launch(
         })
         .wait()?;
     // Virtual clock: every process's tick reports, to follow the run ([`super::lockstep`]).
-    let (ticked_tx, ticked_rx) = crossbeam_channel::bounded::<Ticked>(MAX_AHEAD);
-    let _ticked_sub = session
-        .declare_subscriber(keys.ticked("*"))
-        .callback(move |s| {
-            let bytes = s.payload().to_bytes();
-            if let Some(m) = decode_report(s.key_expr().as_str(), &bytes, None) {
-                let _ = ticked_tx.try_send(m);
-            }
-        })
-        .wait()?;
+    let (_ticked_sub, ticked_rx) = subscribe_reports(&session, &keys, None)?;
     let _launcher_token = session
         .liveliness()
         .declare_token(keys.launcher_token())
@@ -599,9 +597,7 @@ pub fn launch(
             Duration::from_secs(3600)
         };
     while ready.len() < names.len() {
-        if stop.is_stopped() {
-            return Err(DistError::Peer("interrupted before the run started".into()));
-        }
+        before_the_run(stop, &mut children)?;
         if Instant::now() >= deadline {
             let missing: Vec<&str> = names
                 .iter()
@@ -612,11 +608,6 @@ pub fn launch(
                 "process(es) {} did not become ready within {} s",
                 missing.join(", "),
                 REPLY_TIMEOUT.as_secs()
-            )));
-        }
-        if let Some((p, status)) = children.exited() {
-            return Err(DistError::Peer(format!(
-                "process '{p}' exited ({status}) before the run started"
             )));
         }
         match link.recv(Duration::from_millis(50)) {

@@ -215,6 +215,32 @@ pub fn decode_report(key: &str, bytes: &[u8], own: Option<&str>) -> Option<Ticke
     (m.process == from).then_some(m)
 }
 
+/// Subscribe to every process's tick reports ([`Keys::ticked`]), as [`decode_report`] lets
+/// them through (`own`: this process, whose own reports are not its peers'); they come on
+/// the returned channel, at most [`MAX_AHEAD`] waiting (more are dropped: a run holds far
+/// fewer).
+///
+/// # Errors
+/// [`DistError::Zenoh`] when the subscriber cannot be declared.
+pub fn subscribe_reports(
+    session: &zenoh::Session,
+    keys: &Keys,
+    own: Option<&str>,
+) -> Result<(zenoh::pubsub::Subscriber<()>, Receiver<Ticked>), DistError> {
+    let (tx, rx) = crossbeam_channel::bounded::<Ticked>(MAX_AHEAD);
+    let own = own.map(str::to_string);
+    let sub = session
+        .declare_subscriber(keys.ticked("*"))
+        .callback(move |s| {
+            let bytes = s.payload().to_bytes();
+            if let Some(m) = decode_report(s.key_expr().as_str(), &bytes, own.as_deref()) {
+                let _ = tx.try_send(m);
+            }
+        })
+        .wait()?;
+    Ok((sub, rx))
+}
+
 /// Wait until every process in `others` answers on its [`Keys::here`] key, asking every
 /// 100 ms, for as long as the launcher lives (processes started by hand may come minutes
 /// apart); after [`super::REPLY_TIMEOUT`] it says once, on stderr, whom it waits for. A peer's queryable answers only over a direct

@@ -331,19 +331,8 @@ pub fn run_member(opts: &MemberOptions, stop: &StopFlag) -> Result<(), DistError
     // Virtual clock: the other processes' tick reports, then the `here` answer that tells
     // them this subscription is in place (declared in that order, [`lockstep::meet_peers`]).
     let virtual_clock = cfg.clock == crate::ClockKind::Virtual;
-    let (ticked_tx, ticked_rx) = crossbeam_channel::bounded::<Ticked>(lockstep::MAX_AHEAD);
-    let lockstep_keys = if virtual_clock {
-        let own = opts.process.clone();
-        let sub = session
-            .declare_subscriber(keys.ticked("*"))
-            .callback(move |s| {
-                let bytes = s.payload().to_bytes();
-                if let Some(m) = lockstep::decode_report(s.key_expr().as_str(), &bytes, Some(&own))
-                {
-                    let _ = ticked_tx.try_send(m);
-                }
-            })
-            .wait()?;
+    let (lockstep_keys, ticked_rx) = if virtual_clock {
+        let (sub, reports) = lockstep::subscribe_reports(&session, &keys, Some(&opts.process))?;
         let here = keys.here(&opts.process);
         let queryable = session
             .declare_queryable(here.clone())
@@ -351,10 +340,9 @@ pub fn run_member(opts: &MemberOptions, stop: &StopFlag) -> Result<(), DistError
                 let _ = q.reply(here.as_str(), "").wait();
             })
             .wait()?;
-        Some((sub, queryable))
+        (Some((sub, queryable)), reports)
     } else {
-        drop(ticked_tx);
-        None
+        (None, crossbeam_channel::never())
     };
     let mine: Vec<NodeId> = spec
         .placement()
@@ -927,7 +915,6 @@ fn live_stats(
     lat: &[Mutex<LatencyStats>],
     run_time: &AtomicU64,
 ) -> LiveStats {
-    let owns = |id: NodeId| mine.contains(&id);
     let rates = handles.rates_hz();
     LiveStats {
         graph: spec.name.clone(),
@@ -946,12 +933,9 @@ fn live_stats(
                 )
             })
             .collect(),
-        topics: spec
-            .topics
-            .iter()
-            .enumerate()
-            .filter(|(_, t)| t.subscriber.map_or(owns(t.publisher), owns))
-            .map(|(i, t)| (t.name.clone(), handles.topic(TopicId(i)).stats()))
+        topics: held_topics(spec, mine)
+            .into_iter()
+            .map(|t| (spec.topic(t).name.clone(), handles.topic(t).stats()))
             .collect(),
         wire: wire_links(process, spec, inbound, lat),
         steps: Vec::new(),

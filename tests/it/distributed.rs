@@ -60,6 +60,16 @@ pub(crate) fn node_processes(port: u16, process: &str) -> Vec<u32> {
         .collect()
 }
 
+/// After `after`, no `ratelab node` process connected to the launcher on `port` is left.
+pub(crate) fn assert_none_left(port: u16, after: Duration) {
+    std::thread::sleep(after);
+    let left = processes_mentioning(&format!(":{port}"));
+    assert!(
+        left.is_empty(),
+        "node process(es) {left:?} outlived the launch"
+    );
+}
+
 /// A free localhost port.
 pub(crate) fn free_port() -> u16 {
     std::net::TcpListener::bind("127.0.0.1:0")
@@ -206,10 +216,7 @@ fn three_processes_balance_under_the_real_clock_and_leave_nothing_behind() {
     for topic in ["/obs", "/action", "/cmd"] {
         assert!(out.contains(&format!("wire {topic} into")), "{out}");
     }
-    assert!(
-        processes_mentioning(&format!(":{port}")).is_empty(),
-        "node processes left running"
-    );
+    assert_none_left(port, Duration::ZERO);
 }
 
 /// The lines `child` prints on its (piped) stdout, as they come.
@@ -327,8 +334,7 @@ fn a_lockstep_refuses_a_join_stops_at_one_instant_on_ctrl_c_and_ends_when_a_proc
         "one instant for all: {ticks:?}"
     );
     assert_eq!(m["topics"]["/obs"]["published"].as_u64(), Some(ticks[0]));
-    std::thread::sleep(Duration::from_millis(500));
-    assert!(processes_mentioning(&format!(":{port}")).is_empty());
+    assert_none_left(port, Duration::from_millis(500));
 
     // The policy's process killed: the run ends at once, naming it (not after a timeout).
     let port = free_port();
@@ -350,8 +356,7 @@ fn a_lockstep_refuses_a_join_stops_at_one_instant_on_ctrl_c_and_ends_when_a_proc
         lines.iter().any(|l| l.contains("process 'policy' is gone")),
         "{lines:?}"
     );
-    std::thread::sleep(Duration::from_millis(500));
-    assert!(processes_mentioning(&format!(":{port}")).is_empty());
+    assert_none_left(port, Duration::from_millis(500));
 }
 
 #[test]
@@ -436,7 +441,7 @@ fn a_killed_node_is_noticed_and_a_restarted_one_rejoins() {
         "the restarted policy ticked {policy_ticks} times"
     );
     assert!(m["topics"]["/action"]["published"].as_u64().unwrap() >= policy_ticks);
-    assert!(processes_mentioning(&format!(":{port}")).is_empty());
+    assert_none_left(port, Duration::ZERO);
 }
 
 #[test]

@@ -58,15 +58,20 @@ impl Lab {
     }
 
     fn wait_for(&self, needle: &str, timeout: Duration) -> String {
+        self.wait_until(&format!("'{needle}'"), timeout, |s| s.contains(needle))
+    }
+
+    /// Wait until the screen satisfies `ok` (described as `what` when it does not in time).
+    fn wait_until(&self, what: &str, timeout: Duration, ok: impl Fn(&str) -> bool) -> String {
         let start = Instant::now();
         loop {
             let s = self.screen();
-            if s.contains(needle) {
+            if ok(&s) {
                 return s;
             }
             assert!(
                 start.elapsed() < timeout,
-                "'{needle}' not on screen after {timeout:?}:\n{s}"
+                "{what} not on screen after {timeout:?}:\n{s}"
             );
             std::thread::sleep(Duration::from_millis(50));
         }
@@ -302,11 +307,7 @@ fn launch_across_processes_opens_the_lab_and_quitting_leaves_nothing_behind() {
     lab.keys("+");
     lab.wait_for("read-only: live changes", Duration::from_secs(5));
     lab.quit();
-    std::thread::sleep(Duration::from_millis(500));
-    assert!(
-        crate::distributed::processes_mentioning(&format!(":{port}")).is_empty(),
-        "a node process outlived the launch"
-    );
+    crate::distributed::assert_none_left(port, Duration::from_millis(500));
 }
 
 /// Under the virtual clock a second of wall time is many seconds of run time: the arrows
@@ -327,24 +328,11 @@ fn a_launch_in_lockstep_shows_every_topic_s_rate_in_the_lab() {
     ]);
     lab.wait_for("virtual clock · 2 processes", Duration::from_secs(60));
     // Both arrows at the chapter's 50 Hz (run time), once a 5 s window has passed.
-    let deadline = std::time::Instant::now() + Duration::from_secs(20);
-    loop {
-        let s = lab.screen();
-        if s.matches("50.0 msg/s").count() >= 2 {
-            break;
-        }
-        assert!(
-            std::time::Instant::now() < deadline,
-            "both arrows should read 50.0 msg/s:\n{s}"
-        );
-        std::thread::sleep(Duration::from_millis(200));
-    }
+    lab.wait_until("both arrows at 50.0 msg/s", Duration::from_secs(20), |s| {
+        s.matches("50.0 msg/s").count() >= 2
+    });
     lab.quit();
-    std::thread::sleep(Duration::from_millis(500));
-    assert!(
-        crate::distributed::processes_mentioning(&format!(":{port}")).is_empty(),
-        "a node process outlived the launch"
-    );
+    crate::distributed::assert_none_left(port, Duration::from_millis(500));
 }
 
 /// `ratelab lab --attach` on a running launch: a node process killed with SIGKILL is drawn
@@ -411,7 +399,7 @@ fn the_attached_lab_marks_a_killed_node_not_alive_and_sees_it_rejoin() {
         "the launch ended with {status:?}"
     );
     let _ = again.wait();
-    assert!(crate::distributed::processes_mentioning(&format!(":{port}")).is_empty());
+    crate::distributed::assert_none_left(port, Duration::ZERO);
 }
 
 /// Nothing to attach to: one line, exit 2, the terminal restored.
