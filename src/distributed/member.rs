@@ -306,24 +306,25 @@ pub fn run_member(opts: &MemberOptions, stop: &StopFlag) -> Result<(), DistError
         graph_sha256: super::graph_hash(&opts.graph_bytes),
         pid: std::process::id(),
     })?;
-    let setup = match recv(&ctl_rx, stop, &launcher_gone)? {
-        ToMember::Welcome {
-            setup,
-            launcher_mono_ns,
-        } => {
-            let apart_s = wire::mono_now_ns().abs_diff(launcher_mono_ns) as f64 / 1e9;
-            if setup.clock == crate::ClockKind::Real && apart_s > 2.0 {
-                return Err(DistError::Usage(format!(
-                    "the real clock needs every process on the launcher's host (the monotonic clocks differ by {apart_s:.0} s); across hosts use --clock virtual"
-                )));
+    // The answer to the join. The control key is the process name's, so a process of that
+    // name already running (this one is a second copy, or rejoins too early) gets its run's
+    // messages there too: those are not for this one, which waits on.
+    let setup = loop {
+        match recv(&ctl_rx, stop, &launcher_gone)? {
+            ToMember::Welcome {
+                setup,
+                launcher_mono_ns,
+            } => {
+                let apart_s = wire::mono_now_ns().abs_diff(launcher_mono_ns) as f64 / 1e9;
+                if setup.clock == crate::ClockKind::Real && apart_s > 2.0 {
+                    return Err(DistError::Usage(format!(
+                        "the real clock needs every process on the launcher's host (the monotonic clocks differ by {apart_s:.0} s); across hosts use --clock virtual"
+                    )));
+                }
+                break setup;
             }
-            setup
-        }
-        ToMember::Reject { reason } => return Err(DistError::Usage(reason)),
-        other => {
-            return Err(DistError::Peer(format!(
-                "expected a welcome, got {other:?}"
-            )))
+            ToMember::Reject { reason } => return Err(DistError::Usage(reason)),
+            _ => {}
         }
     };
     let cfg = setup.run_config()?;
