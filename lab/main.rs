@@ -148,6 +148,8 @@ fn one_line(text: &str) -> String {
 }
 
 fn main() -> ExitCode {
+    // Before any thread starts (it sets an environment variable that Zenoh reads).
+    ratelab::distributed::set_zenoh_runtime();
     let cli = match Cli::try_parse() {
         Ok(cli) => cli,
         Err(e) => {

@@ -1,11 +1,18 @@
 #!/usr/bin/env bash
 # The process boundary's cost, measured side by side in one sitting (BENCHMARKS.md, issue 13):
 #   1. over-the-wire latency per message at 50 Hz and at 1 kHz (p50/p99/max), and losses;
-#   2. the virtual lockstep's cost per granted tick and per instant.
-# Usage: scripts/bench-distributed.sh [RATELAB_BINARY]   (default: cargo's release build)
+#   2. the virtual lockstep's cost per granted tick and per instant;
+#   3. the transport's floor in the same sitting: bare Zenoh (ratelab's session config) and a
+#      bare TCP socket, one way at 50 Hz and 1 kHz and round trips back to back
+#      (examples/zenoh_floor.rs);
+#   4. ratelab's Zenoh runtime threads (one worker, ratelab::distributed::ZENOH_RUNTIME)
+#      against Zenoh's default (six), alternated three times: 50 Hz wire p50 and lockstep.
+# Usage: scripts/bench-distributed.sh [RATELAB_BINARY [ZENOH_FLOOR_BINARY]]
+#        (default: cargo's release builds; `cargo build --release --all-targets` builds both)
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 bin="${1:-${CARGO_TARGET_DIR:-$root/target}/release/ratelab}"
+floor="${2:-${CARGO_TARGET_DIR:-$root/target}/release/examples/zenoh_floor}"
 out="$(mktemp -d)"
 trap 'rm -rf "$out"' EXIT
 cd "$root"
@@ -25,3 +32,16 @@ echo "== virtual lockstep, 60 s at 50 Hz (3001 instants)"
 "$bin" launch --processes --clock virtual --duration 60 --out "$out/v" | grep -E "lockstep|wall"
 echo "== the same run in one process"
 "$bin" run --clock virtual --duration 60 | grep -E "wall"
+echo "== the transport's floor: bare Zenoh and bare TCP, nothing of ratelab's on the path"
+"$floor"
+echo "== Zenoh's default runtime threads (A) against ratelab's one worker (B), alternated"
+zenoh_default="(app: (worker_threads: 1), acc: (worker_threads: 1), tx: (worker_threads: 1), rx: (worker_threads: 2), net: (worker_threads: 1))"
+for i in 1 2 3; do
+  for ab in A B; do
+    if [ "$ab" = A ]; then export ZENOH_RUNTIME="$zenoh_default"; else unset ZENOH_RUNTIME; fi
+    wire=$("$bin" launch --processes --clock real --duration 10 --out "$out/$ab$i" | grep -E "wire /obs" | grep -oE "p50 [0-9.]+ µs")
+    step=$("$bin" launch --processes --clock virtual --duration 60 --out "$out/v$ab$i" | grep -oE "[0-9]+ µs of wall time per instant")
+    echo "   $ab: wire /obs $wire; lockstep $step"
+  done
+done
+unset ZENOH_RUNTIME

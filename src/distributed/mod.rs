@@ -46,6 +46,27 @@ pub const DEFAULT_ENDPOINT: &str = "tcp/127.0.0.1:7449";
 /// How long a process waits for a peer's answer (a join, a ready, a granted tick).
 pub const REPLY_TIMEOUT: std::time::Duration = std::time::Duration::from_secs(20);
 
+/// Zenoh's runtime threads in a ratelab process, in the syntax of Zenoh's `ZENOH_RUNTIME`
+/// variable (RON): its receive, send, accept and network pools all handed over to one
+/// application worker thread, instead of Zenoh's default of six workers over five pools.
+/// On a machine with few cores, fewer threads to wake per message is faster: on this
+/// 2-core VM, 7 of 7 lockstep runs and 4 of 4 wire-latency figures measured faster with it
+/// (BENCHMARKS.md, issue 13; the pools are `zenoh_runtime::ZRuntime`).
+pub const ZENOH_RUNTIME: &str = "(rx: (handover: app), tx: (handover: app), \
+    acc: (handover: app), net: (handover: app), app: (worker_threads: 1))";
+
+/// Give this process, and every process it starts, [`ZENOH_RUNTIME`], unless the
+/// environment already sets a non-empty `ZENOH_RUNTIME` (a user's own setting wins; Zenoh
+/// reads it once, at its first use).
+///
+/// Call it first thing in `main`, before any thread starts: it changes the process's
+/// environment, which is not safe while another thread may read it.
+pub fn set_zenoh_runtime() {
+    if std::env::var_os("ZENOH_RUNTIME").is_none_or(|v| v.is_empty()) {
+        std::env::set_var("ZENOH_RUNTIME", ZENOH_RUNTIME);
+    }
+}
+
 /// Most placement groups one graph may have (each is an OS process).
 pub const MAX_PROCESSES: usize = 16;
 
