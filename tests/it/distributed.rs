@@ -720,3 +720,65 @@ fn a_sensor_away_from_the_plant_is_refused() {
     ]);
     assert_one_line_exit_2(&o, "must share one process");
 }
+
+/// The names of the threads of process `pid` (Linux: `/proc/PID/task/*/comm`).
+fn thread_names(pid: u32) -> Vec<String> {
+    let mut names: Vec<String> = std::fs::read_dir(format!("/proc/{pid}/task"))
+        .into_iter()
+        .flatten()
+        .flatten()
+        .filter_map(|t| std::fs::read_to_string(t.path().join("comm")).ok())
+        .map(|n| n.trim().to_string())
+        .collect();
+    names.sort();
+    names
+}
+
+#[test]
+fn every_process_runs_zenoh_on_one_worker_unless_zenoh_runtime_says_otherwise() {
+    // ratelab hands Zenoh's receive, send, accept and network pools to one application
+    // worker (`distributed::ZENOH_RUNTIME`): Zenoh names its workers `<pool>-<n>`, so the
+    // launcher and every process it starts have `app-` threads and no `rx-`, `tx-`, `acc-`
+    // or `net-` ones. A user's `ZENOH_RUNTIME` wins, for the children too.
+    let _m = crate::machine::shared();
+    for user in [None, Some("(rx: (worker_threads: 3))")] {
+        let dir = tempfile::tempdir().unwrap();
+        let port = free_port();
+        let mut launch = bin();
+        launch
+            .args(["launch", "--processes", "--clock", "real", "--duration", "3"])
+            .args(["--listen", &format!("tcp/127.0.0.1:{port}")])
+            .arg("--out")
+            .arg(dir.path())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::null());
+        match user {
+            Some(v) => launch.env("ZENOH_RUNTIME", v),
+            None => launch.env_remove("ZENOH_RUNTIME"),
+        };
+        let mut launcher = launch.spawn().unwrap();
+        let rx = stdout_lines(&mut launcher);
+        let mut lines = Vec::new();
+        for p in ["policy", "robot"] {
+            let ready = format!("process '{p}' ready");
+            assert!(wait_line(&rx, &mut lines, &ready, 30), "{lines:?}");
+        }
+        let mut pids = processes_mentioning(&format!(":{port}"));
+        assert_eq!(pids.len(), 2, "two node processes: {pids:?}");
+        pids.push(launcher.id());
+        for pid in pids {
+            let names = thread_names(pid);
+            let pool = |p: &str| names.iter().filter(|n| n.starts_with(p)).count();
+            assert!(pool("app-") >= 1, "{user:?}: pid {pid} threads {names:?}");
+            match user {
+                None => {
+                    let others = pool("rx-") + pool("tx-") + pool("acc-") + pool("net-");
+                    assert_eq!(others, 0, "one worker: pid {pid} threads {names:?}");
+                }
+                Some(_) => assert_eq!(pool("rx-"), 3, "the user's: pid {pid} {names:?}"),
+            }
+        }
+        assert!(exit_within(&mut launcher, 30).success(), "{lines:?}");
+        assert_none_left(port, Duration::ZERO);
+    }
+}
