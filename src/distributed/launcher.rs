@@ -297,8 +297,9 @@ fn free_port(host: &str) -> Result<u16, DistError> {
 }
 
 /// Merge the processes' views into the graph's: each node's figures from its own process,
-/// each topic's from its subscriber's process (whose copy saw every message that crossed),
-/// or its publisher's when nobody subscribes; the actuator's measurements from the
+/// each topic's from its [holder](crate::graph::spec::TopicSpec::holder)'s process (its
+/// subscriber's, whose copy saw every message that crossed, or its publisher's when nobody
+/// subscribes); the actuator's measurements from the
 /// actuator's process, the brain's label from the policy's. `None` without the actuator's
 /// process's report.
 pub fn merge_states(spec: &GraphSpec, states: &BTreeMap<String, GraphState>) -> Option<GraphState> {
@@ -317,8 +318,7 @@ pub fn merge_states(spec: &GraphSpec, states: &BTreeMap<String, GraphState>) -> 
         }
     }
     for (i, t) in spec.topics.iter().enumerate() {
-        let holder = t.subscriber.unwrap_or(t.publisher);
-        if let Some(st) = of(holder) {
+        if let Some(st) = of(t.holder()) {
             take(&mut merged.topics, &st.topics, i);
             take(&mut merged.topic_qos, &st.topic_qos, i);
         }

@@ -208,16 +208,15 @@ fn read_counters(
         .collect()
 }
 
-/// The topics whose counters process `mine` holds: those it subscribes to, and those it
-/// publishes that nobody subscribes to (as [`LiveStats::topics`]).
+/// The topics whose counters process `mine` holds (their [`TopicSpec::holder`] runs in
+/// it): those it subscribes to, and those it publishes that nobody subscribes to (as
+/// [`LiveStats::topics`]).
+///
+/// [`TopicSpec::holder`]: crate::graph::spec::TopicSpec::holder
 fn held_topics(spec: &GraphSpec, mine: &[NodeId]) -> Vec<TopicId> {
-    let owns = |id: NodeId| mine.contains(&id);
     (0..spec.topics.len())
         .map(TopicId)
-        .filter(|&t| {
-            let ts = spec.topic(t);
-            ts.subscriber.map_or(owns(ts.publisher), owns)
-        })
+        .filter(|&t| mine.contains(&spec.topic(t).holder()))
         .collect()
 }
 

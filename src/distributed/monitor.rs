@@ -111,7 +111,7 @@ impl Fold {
         let holders = spec
             .topics
             .iter()
-            .map(|t| spec.process_of(t.subscriber.unwrap_or(t.publisher)))
+            .map(|t| spec.process_of(t.holder()))
             .collect();
         Fold {
             held: vec![None; spec.topics.len()],

@@ -204,6 +204,17 @@ pub struct TopicSpec {
     pub subscriber: Option<NodeId>,
 }
 
+impl TopicSpec {
+    /// The node whose process keeps this topic's counters when the graph runs across
+    /// processes: its subscriber (whose copy of the topic sees every message that crossed,
+    /// and counts its drops, stale reads and losses), or its publisher when nobody
+    /// subscribes. The merged `metrics.json`, the watcher's steps and a process's samples
+    /// all take the topic from this node's process.
+    pub fn holder(&self) -> NodeId {
+        self.subscriber.unwrap_or(self.publisher)
+    }
+}
+
 /// The chapter's roles in any valid graph: the chain that ends at the actuator. The
 /// chapter's flags (`--sensor-hz`, `--control-hz`) and `metrics.json`'s flat keys
 /// (`obs_*`, `action_*`) speak of these.
@@ -1306,6 +1317,23 @@ depth = 1
             (50.0, 50.0, 50.0)
         );
         assert_eq!(g.queue_depth(), 1);
+    }
+
+    #[test]
+    fn a_topic_is_held_by_its_subscriber_else_by_its_publisher() {
+        let text = format!(
+            "{CHAIN}[[node]]\nname = \"cam\"\nkind = \"sensor\"\nrate_hz = 10\npublishes = \"/img\"\n\
+             [[topic]]\nname = \"/img\"\ntype = \"state\"\ndepth = 1\n"
+        );
+        let g = parse(&text).unwrap();
+        let holder = |t: &str| {
+            g.node(g.topic(g.topic_id(t).unwrap()).holder())
+                .name
+                .clone()
+        };
+        assert_eq!(holder("/obs"), "policy");
+        assert_eq!(holder("/action"), "actuator");
+        assert_eq!(holder("/img"), "cam", "nobody subscribes: its publisher");
     }
 
     #[test]

@@ -746,7 +746,14 @@ fn every_process_runs_zenoh_on_one_worker_unless_zenoh_runtime_says_otherwise() 
         let port = free_port();
         let mut launch = bin();
         launch
-            .args(["launch", "--processes", "--clock", "real", "--duration", "3"])
+            .args([
+                "launch",
+                "--processes",
+                "--clock",
+                "real",
+                "--duration",
+                "3",
+            ])
             .args(["--listen", &format!("tcp/127.0.0.1:{port}")])
             .arg("--out")
             .arg(dir.path())
