@@ -221,7 +221,7 @@ pub const HELP_NOTES: [(&str, &str); 4] = [
     ),
     (
         "wire p50/p99 µs",
-        "across processes: a topic's latency over the wire",
+        "across processes: latency over the wire (narrow: p50)",
     ),
 ];
 

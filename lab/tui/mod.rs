@@ -402,6 +402,47 @@ mod tests {
     }
 
     #[test]
+    fn at_80x24_an_arrow_with_stale_reads_still_shows_its_wire_line() {
+        // A 5 Hz sensor under a 50 Hz policy (stale reads on /obs), with wire figures as a
+        // launch across processes sends them: at 80×24 the arrow has five rows, so drops and
+        // stale reads share one and the wire line (p50 only: p50/p99 is wider than the
+        // arrow) keeps the fifth; at 120×40 each has its own line.
+        let mut cfg = virtual_cfg(50.0, 2);
+        cfg.set_sensor_hz(5.0).unwrap();
+        let (mut app, _rx) = app_after(cfg, false);
+        app.on_telemetry(Telemetry::Wire(vec![(0, 239.4, 1058.2), (1, 230.0, 400.0)]));
+        let stale = app.view().topics[0].stale_reads;
+        let small = render(&app, 80, 24);
+        assert!(small.contains(&format!("0 drop ✓ {stale}↺")), "{small}");
+        assert!(small.contains("wire 239 µs"), "{small}");
+        assert!(small.contains("wire 230 µs"), "{small}");
+        let big = render(&app, 120, 40);
+        assert!(big.contains(&format!("{stale} stale ↺")), "{big}");
+        assert!(big.contains("wire 239/1058 µs"), "{big}");
+    }
+
+    #[test]
+    fn a_node_box_too_narrow_for_late_shows_the_figure_alone() {
+        // A real-clock node whose tick lateness p99 passes 999 µs: at 80 columns its box is
+        // 14 wide inside, so "p99 1064 µs late" would be cut to "p99 1064 µs la".
+        let (app, _rx) = app_after(virtual_cfg(50.0, 1), false);
+        let mut view = app.view();
+        view.nodes[2].measured_hz = Some(50.0);
+        view.nodes[2].lateness_p99_us = Some(1064.0);
+        let text = |w, h| {
+            let mut t = Terminal::new(TestBackend::new(w, h)).unwrap();
+            t.draw(|f| f.render_widget(&view, f.area())).unwrap();
+            t.backend().to_string()
+        };
+        let small = text(80, 24);
+        assert!(
+            small.contains("p99 1064 µs") && !small.contains("µs la"),
+            "{small}"
+        );
+        assert!(text(120, 40).contains("p99 1064 µs late"));
+    }
+
+    #[test]
     fn after_50_5_50_hz_the_window_and_the_segment_see_only_the_matched_rates() {
         // The sequence: 50 Hz, a dip to 5 Hz (4.0 s to 4.6 s: /obs drops), back to
         // 50 Hz until 12 s. The run's totals mix the three settings; the window (last 5 s)
@@ -672,7 +713,13 @@ mod tests {
                 assert!(text.contains(needle), "{needle} at {w}x{h}:\n{text}");
             }
             assert_eq!(text.matches("NOT ALIVE").count(), 1, "{text}");
-            assert_eq!(text.matches("wire 214/403 µs").count(), 1, "{text}");
+            // At 80 columns an arrow is 14 wide: p50 only.
+            let wire = if w == 80 {
+                "wire 214 µs"
+            } else {
+                "wire 214/403 µs"
+            };
+            assert_eq!(text.matches(wire).count(), 1, "{text}");
             // The footer offers only the keys that act: no rate or depth keys.
             let footer = text.lines().last().unwrap_or_default();
             assert!(footer.contains("read-only"), "{footer}");

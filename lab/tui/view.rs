@@ -459,7 +459,14 @@ fn render_node(n: &NodeView, area: Rect, buf: &mut Buffer) {
             } else {
                 format!("{m:.1} meas")
             }));
-            lines.push(Line::from(format!("p99 {l:.0} µs late")).dim());
+            // "late" goes when the box is too narrow for it (at 80 columns, past 999 µs).
+            let late = format!("p99 {l:.0} µs late");
+            let late = if late.chars().count() <= usize::from(area.width.saturating_sub(2)) {
+                late
+            } else {
+                format!("p99 {l:.0} µs")
+            };
+            lines.push(Line::from(late).dim());
         }
         _ => lines.push(Line::from(if wide { "virtual time" } else { "virtual" }).dim()),
     }
@@ -499,10 +506,13 @@ fn pack(parts: impl IntoIterator<Item = String>, sep: &str, w: usize) -> Vec<Str
     packed
 }
 
-/// An arrow's lines at width `w`: name, shaft, msg/s, dropped (and stale reads). With QoS
-/// set: name, shaft, drops, the QoS counters, the QoS in short, msg/s, stale reads, packed
-/// to the width, most telling first (a short panel, at 80×24, cuts from the end).
-fn arrow_lines(t: &TopicView, w: usize) -> Vec<Line<'static>> {
+/// An arrow's lines at width `w`, for a panel `rows` high: name, shaft, msg/s, dropped (and
+/// stale reads, and the wire latency across processes). When those do not fit in `rows`
+/// (at 80×24), the drops and stale reads share a line (`3 drop ⚠ 126↺`) if it fits `w`, so
+/// the wire line still shows; a wire line wider than `w` shows its p50 only. With QoS set:
+/// name, shaft, drops, the QoS counters, the QoS in short, msg/s, stale reads, packed to the
+/// width, most telling first (a short panel cuts from the end).
+fn arrow_lines(t: &TopicView, w: usize, rows: usize) -> Vec<Line<'static>> {
     let (shaft, style, mark) = if t.dropping {
         (
             "═",
@@ -530,21 +540,52 @@ fn arrow_lines(t: &TopicView, w: usize) -> Vec<Line<'static>> {
     let rate = Line::from(format!("{:.1} msg/s", t.msg_per_s)).centered();
     let dropped =
         Line::from(Span::styled(format!("{} dropped {mark}", t.dropped), style)).centered();
+    // The mirror image of a drop, with a symbol of its own: old data read again.
+    let stale_style = if t.staling {
+        Style::new().fg(Color::Magenta).add_modifier(Modifier::BOLD)
+    } else {
+        Style::new().fg(Color::DarkGray)
+    };
     let stale = (t.segment_stale_reads > 0).then(|| {
-        // The mirror image of a drop, with a symbol of its own: old data read again.
-        let style = if t.staling {
-            Style::new().fg(Color::Magenta).add_modifier(Modifier::BOLD)
-        } else {
-            Style::new().fg(Color::DarkGray)
-        };
-        Line::from(Span::styled(format!("{} stale ↺", t.stale_reads), style)).centered()
+        Line::from(Span::styled(
+            format!("{} stale ↺", t.stale_reads),
+            stale_style,
+        ))
+        .centered()
     });
-    let wire = t
-        .wire_us
-        .map(|(p50, p99)| Line::from(format!("wire {p50:.0}/{p99:.0} µs").dim()).centered());
+    let wire = t.wire_us.map(|(p50, p99)| {
+        let full = format!("wire {p50:.0}/{p99:.0} µs");
+        let text = if full.chars().count() <= w {
+            full
+        } else {
+            format!("wire {p50:.0} µs")
+        };
+        Line::from(text.dim()).centered()
+    });
     let Some(parts) = &t.qos else {
-        let mut lines = vec![name, shaft, rate, dropped];
-        lines.extend(stale);
+        let mut lines = vec![name, shaft, rate];
+        let (drop_text, stale_text) = (
+            format!("{} drop {mark} ", t.dropped),
+            format!("{}↺", t.stale_reads),
+        );
+        let short =
+            lines.len() + 1 + usize::from(stale.is_some()) + usize::from(wire.is_some()) > rows;
+        if short
+            && stale.is_some()
+            && wire.is_some()
+            && (drop_text.chars().count() + stale_text.chars().count()) <= w
+        {
+            lines.push(
+                Line::from(vec![
+                    Span::styled(drop_text, style),
+                    Span::styled(stale_text, stale_style),
+                ])
+                .centered(),
+            );
+        } else {
+            lines.push(dropped);
+            lines.extend(stale);
+        }
         lines.extend(wire);
         return lines;
     };
@@ -578,7 +619,7 @@ fn arrow_lines(t: &TopicView, w: usize) -> Vec<Line<'static>> {
 
 fn render_arrow(t: &TopicView, area: Rect, buf: &mut Buffer) {
     let w = area.width.saturating_sub(1) as usize;
-    Paragraph::new(arrow_lines(t, w)).render(area, buf);
+    Paragraph::new(arrow_lines(t, w, usize::from(area.height))).render(area, buf);
 }
 
 /// The graph panel's height: 7 rows, more when an arrow's QoS lines need them and the
@@ -595,7 +636,7 @@ fn graph_height(v: &View, width: u16, height: u16, max: u16) -> u16 {
         .filter_map(|c| match c {
             Column::Topics(ts) => Some(
                 ts.iter()
-                    .map(|&i| arrow_lines(&v.topics[i], w).len())
+                    .map(|&i| arrow_lines(&v.topics[i], w, usize::MAX).len())
                     .sum::<usize>(),
             ),
             Column::Nodes(_) => None,
