@@ -69,6 +69,7 @@ pub fn run_launch(a: &LaunchArgs, force_headless: bool, stop: StopFlag) -> anyho
         },
         child_stderr: None,
         start_gate: None,
+        listening: None,
     };
     let placement: Vec<String> = cfg
         .graph
@@ -156,6 +157,8 @@ fn launch_watched(
     let (line_tx, line_rx) = crossbeam_channel::unbounded::<String>();
     let (gate_tx, gate_rx) = crossbeam_channel::bounded::<()>(1);
     opts.start_gate = Some(gate_rx);
+    let (listening_tx, listening_rx) = crossbeam_channel::bounded::<String>(1);
+    opts.listening = Some(listening_tx);
     // The processes' stderr while the lab is up: the first lines, printed after it (the
     // lab shows every line meanwhile, from the log key).
     let (err_tx, err_rx) = crossbeam_channel::bounded::<String>(MAX_HELD_STDERR_LINES);
@@ -191,18 +194,20 @@ fn launch_watched(
             println!("[ratelab] launch: {l}");
         }
     };
-    // The launcher says where it listens first; the watcher connects there.
+    // The launcher tells where it listens, before anything else; the watcher connects
+    // there. Its lines meanwhile (none yet, or the error that stopped it) pass on.
     let endpoint = loop {
-        match line_rx.recv_timeout(Duration::from_millis(100)) {
-            Ok(l) => {
-                let ep = l.strip_prefix("listening on ").map(str::to_string);
+        if let Ok(ep) = listening_rx.recv_timeout(Duration::from_millis(100)) {
+            break ep;
+        }
+        for l in line_rx.try_iter() {
+            line(l);
+        }
+        if launcher.is_finished() {
+            for l in line_rx.try_iter() {
                 line(l);
-                if let Some(ep) = ep {
-                    break ep;
-                }
             }
-            Err(_) if launcher.is_finished() => return joined(launcher),
-            Err(_) => {}
+            return joined(launcher);
         }
     };
     let watch = match Watch::connect(

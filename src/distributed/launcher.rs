@@ -49,6 +49,10 @@ pub struct LaunchOptions {
     /// figures from every process ([`super::monitor::Watch::run`]). `None`: start when
     /// every process is ready.
     pub start_gate: Option<Receiver<()>>,
+    /// Told the endpoint the launcher listens on (`tcp/HOST:PORT`), once it listens: a
+    /// watcher in the same program connects there. Its progress line `listening on …` says
+    /// the same to a person.
+    pub listening: Option<crossbeam_channel::Sender<String>>,
 }
 
 /// The longest line of a started process's stderr that [`LaunchOptions::child_stderr`]
@@ -406,6 +410,9 @@ pub fn launch(
         let _ = session.put(keys.log(), line).wait();
     };
     say(&format!("listening on {endpoint}"));
+    if let Some(tx) = &opts.listening {
+        let _ = tx.send(endpoint.clone());
+    }
     let (up_tx, up_rx) = crossbeam_channel::bounded::<ToLauncher>(65_536);
     let _up_sub = session
         .declare_subscriber(keys.up())
