@@ -84,7 +84,8 @@ pub struct LiveStats {
     pub process: String,
     /// Its OS process id.
     pub pid: u32,
-    /// Run time of these figures, ns.
+    /// Run time of these figures, ns: every counter sample up to it is in this message or
+    /// an earlier one (under the real clock, see `figures_time`).
     pub t_ns: u64,
     /// Its nodes: name, kind, rate Hz, ticks so far.
     pub nodes: Vec<(String, String, f64, u64)>,
@@ -643,21 +644,27 @@ fn real_clock(
     let mine: Vec<NodeId> = local.iter().map(|&i| NodeId(i)).collect();
     let hook_held = held_topics(spec, &mine);
     let hook_handles = handles.clone();
+    let phase_offsets: Vec<Nanos> = index
+        .iter()
+        .map(|&i| {
+            let first = cfg.phase_offsets.get(i).copied().unwrap_or(Nanos::ZERO);
+            let period = handles.rates[i].period();
+            if late <= first || period.0 == 0 {
+                first
+            } else {
+                let k = (late.0 - first.0).div_ceil(period.0);
+                Nanos(first.0.saturating_add(k.saturating_mul(period.0)))
+            }
+        })
+        .collect();
+    // Per local node, the deadline of its next tick, ns: no tick of it not yet sampled is
+    // earlier (see `figures_time`).
+    let next_due: Arc<Vec<AtomicU64>> =
+        Arc::new(phase_offsets.iter().map(|d| AtomicU64::new(d.0)).collect());
+    let (hook_due, end) = (next_due.clone(), cfg.duration.0);
     let real = RealOptions {
         spin_margin: cfg.spin_margin,
-        phase_offsets: index
-            .iter()
-            .map(|&i| {
-                let first = cfg.phase_offsets.get(i).copied().unwrap_or(Nanos::ZERO);
-                let period = handles.rates[i].period();
-                if late <= first || period.0 == 0 {
-                    first
-                } else {
-                    let k = (late.0 - first.0).div_ceil(period.0);
-                    Nanos(first.0.saturating_add(k.saturating_mul(period.0)))
-                }
-            })
-            .collect(),
+        phase_offsets,
         rt_priority: cfg.rt_priority,
         on_tick: Some(Arc::new(
             move |k: usize, _: &str, now: Nanos, late: Nanos| {
@@ -671,7 +678,15 @@ fn real_clock(
                     b.push_tick((i, now.0, late.0));
                     b.keep(now.0, &read);
                 }
-                hook_time.fetch_max(now.0, Ordering::Relaxed);
+                // Its next tick is due a period after this one's deadline, at the earliest.
+                let period = hook_handles.rates[i].period().0.max(1);
+                let deadline = now.0.saturating_sub(late.0);
+                hook_due[k].store(deadline.saturating_add(period), Ordering::SeqCst);
+                let wall = wire::mono_now_ns().saturating_sub(start);
+                hook_time.fetch_max(
+                    figures_time(wall, end, &due_now(&hook_due)),
+                    Ordering::SeqCst,
+                );
             },
         )),
         pause: None,
@@ -683,12 +698,14 @@ fn real_clock(
     let watcher = {
         let (rx, run_stop, outer) = (ctl_rx.clone(), run_stop.clone(), stop.clone());
         let (finished, gone) = (finished.clone(), launcher_gone.clone());
-        // The figures' run time is now, not the last tick (a slow node ticks seldom).
-        let (clock, end) = (run_time.clone(), cfg.duration.0);
+        // The figures' run time is now, not the last tick (a slow node ticks seldom), short
+        // of a tick that may be in progress.
+        let (clock, next_due) = (run_time.clone(), next_due.clone());
         std::thread::spawn(move || loop {
+            let wall = wire::mono_now_ns().saturating_sub(start);
             clock.fetch_max(
-                wire::mono_now_ns().saturating_sub(start).min(end),
-                Ordering::Relaxed,
+                figures_time(wall, end, &due_now(&next_due)),
+                Ordering::SeqCst,
             );
             match rx.recv_timeout(Duration::from_millis(50)) {
                 Ok(ToMember::Stop { at_ns, .. }) => {
@@ -733,8 +750,26 @@ fn real_clock(
         Some(at) if stopped_by_launcher => at,
         _ => r.end.at,
     };
+    // Every node thread has ended: the figures are final up to the run's end.
+    run_time.fetch_max(at.0, Ordering::SeqCst);
     let ticks_now: Vec<u64> = ticks.iter().map(|t| t.load(Ordering::Relaxed)).collect();
     Ok(GraphState::capture(handles, at, &ticks_now, Some(timing)))
+}
+
+/// The deadlines in `next_due`, ns, as they are now.
+fn due_now(next_due: &[AtomicU64]) -> Vec<u64> {
+    next_due.iter().map(|d| d.load(Ordering::SeqCst)).collect()
+}
+
+/// The run time up to which a real-clock process's figures are final, ns: now (`wall_ns`,
+/// at most the run's `end_ns`), but short of the earliest next deadline of its nodes
+/// (`next_due_ns`). A node's tick due by now may be in progress, its counters not yet
+/// sampled; its sample will carry its start time, which is at or after its deadline. So a
+/// watcher that releases a step of run time `t` once the figures cover `t` has every sample
+/// up to `t` ([`LiveStats::t_ns`]).
+fn figures_time(wall_ns: u64, end_ns: u64, next_due_ns: &[u64]) -> u64 {
+    let due = next_due_ns.iter().copied().min().unwrap_or(u64::MAX);
+    wall_ns.min(end_ns).min(due.saturating_sub(1))
 }
 
 /// The virtual clock ([`lockstep`]): replay the run's one order of ticks; tick this
@@ -969,4 +1004,30 @@ fn wire_links(
             }
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::figures_time;
+
+    #[test]
+    fn the_figures_time_stops_short_of_a_tick_that_may_be_in_progress() {
+        const MS: u64 = 1_000_000;
+        let end = 10_000 * MS;
+        // Both nodes' next ticks are due later than now: the figures are now's.
+        assert_eq!(figures_time(15 * MS, end, &[20 * MS, 40 * MS]), 15 * MS);
+        // The sensor's tick due at 20 ms may be running at 21 ms, its sample not yet kept:
+        // the figures stop just before it, whatever the other node.
+        assert_eq!(figures_time(21 * MS, end, &[20 * MS, 40 * MS]), 20 * MS - 1);
+        // A node late by seconds holds them back as long as its tick has not been sampled.
+        assert_eq!(
+            figures_time(3_000 * MS, end, &[20 * MS, 40 * MS]),
+            20 * MS - 1
+        );
+        // Never past the run's end; no local node: now.
+        assert_eq!(figures_time(12_000 * MS, end, &[u64::MAX]), end);
+        assert_eq!(figures_time(5 * MS, end, &[]), 5 * MS);
+        // A first tick due at 0 that has not happened: nothing is final yet.
+        assert_eq!(figures_time(1, end, &[0]), 0);
+    }
 }
