@@ -410,6 +410,15 @@ pub fn launch(
         let _ = session.put(keys.log(), line).wait();
     };
     say(&format!("listening on {endpoint}"));
+    // A process that asks again while refused as busy (`member::BUSY_RETRY`) is refused
+    // once in the log, not every 250 ms.
+    let last_refusal = std::cell::RefCell::new(String::new());
+    let say_refused = |r: &str| {
+        if *last_refusal.borrow() != r {
+            say(&format!("refused a join: {r}"));
+            r.clone_into(&mut last_refusal.borrow_mut());
+        }
+    };
     if let Some(tx) = &opts.listening {
         let _ = tx.send(endpoint.clone());
     }
@@ -541,15 +550,17 @@ pub fn launch(
         if !crate::graph::spec::valid_node_name(process) {
             return Admission::Ignored; // no key to answer on
         }
-        let refuse = |reason: String| {
+        let tell_refusal = |reason: String, busy: bool| {
             let _ = link.tell(
                 process,
                 &ToMember::Reject {
                     reason: reason.clone(),
+                    busy,
                 },
             );
             Admission::Refused(reason)
         };
+        let refuse = |reason: String| tell_refusal(reason, false);
         if !names.contains(process) {
             return refuse(format!(
                 "graph '{}' has no process '{process}' (its processes: {})",
@@ -579,9 +590,10 @@ pub fn launch(
                 return refuse(format!("process '{process}' cannot rejoin: it holds the plant, whose state died with it"));
             }
             if !gone.contains(process) {
-                return refuse(format!(
-                    "process '{process}' is already running in this graph"
-                ));
+                return tell_refusal(
+                    format!("process '{process}' is already running in this graph"),
+                    true,
+                );
             }
         } else if joined.contains(process) {
             return refuse(format!("process '{process}' has already joined this graph"));
@@ -625,7 +637,7 @@ pub fn launch(
                     std::thread::sleep(Duration::from_millis(300)); // let the refusal reach it
                     return Err(DistError::Usage(r));
                 }
-                Admission::Refused(r) => say(&format!("refused a join: {r}")),
+                Admission::Refused(r) => say_refused(&r),
                 Admission::Ignored => {}
             },
             Some(ToLauncher::Ready { process })
@@ -758,7 +770,7 @@ pub fn launch(
                             // Nobody joins a run in lockstep: say so to whoever tries.
                             Ok(m @ ToLauncher::Join { .. }) => match admit(&m, true, &[], &[]) {
                                 Admission::Refused(r) | Admission::OtherGraph(r) => {
-                                    say(&format!("refused a join: {r}"));
+                                    say_refused(&r);
                                 }
                                 Admission::Welcomed | Admission::Ignored => {}
                             },
@@ -865,8 +877,13 @@ pub fn launch(
                                 },
                             });
                         }
+                        let then = if p == robot {
+                            "the run ends with it (the plant's)"
+                        } else {
+                            "the others run on"
+                        };
                         say(&format!(
-                            "process '{p}' is gone at t={:.2}s (its liveliness token was withdrawn); the others run on",
+                            "process '{p}' is gone at t={:.2}s (its liveliness token was withdrawn); {then}",
                             run_time().as_secs_f64()
                         ));
                     }
@@ -898,9 +915,7 @@ pub fn launch(
                                 rejoining.push(m.process().to_string());
                                 say(&format!("process '{}' rejoined", m.process()));
                             }
-                            Admission::Refused(r) | Admission::OtherGraph(r) => {
-                                say(&format!("refused a join: {r}"))
-                            }
+                            Admission::Refused(r) | Admission::OtherGraph(r) => say_refused(&r),
                             Admission::Ignored => {}
                         }
                     }
@@ -960,10 +975,16 @@ pub fn launch(
         .cloned()
         .collect();
     let state = merge_states(spec, &reports).ok_or_else(|| {
-        DistError::Peer(format!(
-            "process '{}' (the actuator's) did not report",
-            spec.process_of(spec.chain.actuator)
-        ))
+        let plant = spec.process_of(spec.chain.actuator);
+        DistError::Peer(match &end.reason {
+            // The plant's process died: say so, not just that it did not report.
+            EndReason::NodeFailed { node, message } => format!(
+                "node '{node}' failed at t={:.2}s: {message}; no summary or metrics.json: \
+                 the plant's figures went with its process",
+                end.at.as_secs_f64()
+            ),
+            _ => format!("process '{plant}' (the actuator's) did not report"),
+        })
     })?;
     let metrics = summarize_state(cfg, &state, &end);
     let over = wire::RunOver {

@@ -230,6 +230,12 @@ impl crate::graph::StepObserver for StepTap {
     }
 }
 
+/// How long a process asks again to join while the launcher says a process of its name is
+/// still running (one killed a moment ago: its liveliness token is withdrawn when Zenoh
+/// sees its link close, on localhost within milliseconds). A second copy of a running
+/// process is refused after this.
+pub const BUSY_RETRY: Duration = Duration::from_secs(5);
+
 /// Run placement group `opts.process` until the launcher ends the run (or `stop`).
 ///
 /// # Errors
@@ -301,11 +307,13 @@ pub fn run_member(opts: &MemberOptions, stop: &StopFlag) -> Result<(), DistError
         .wait()?;
     wait_matching(&up, stop, None, "the launcher")?;
     let send = |m: &ToLauncher| up.put(wire::encode_json(m)).wait();
-    send(&ToLauncher::Join {
+    let join = ToLauncher::Join {
         process: opts.process.clone(),
         graph_sha256: super::graph_hash(&opts.graph_bytes),
         pid: std::process::id(),
-    })?;
+    };
+    send(&join)?;
+    let first_join = std::time::Instant::now();
     // The answer to the join. The control key is the process name's, so a process of that
     // name already running (this one is a second copy, or rejoins too early) gets its run's
     // messages there too: those are not for this one, which waits on.
@@ -323,7 +331,13 @@ pub fn run_member(opts: &MemberOptions, stop: &StopFlag) -> Result<(), DistError
                 }
                 break setup;
             }
-            ToMember::Reject { reason } => return Err(DistError::Usage(reason)),
+            // Started again the moment the one before was killed: the launcher has not
+            // yet seen its liveliness token go. Ask again, for a while.
+            ToMember::Reject { busy: true, .. } if first_join.elapsed() < BUSY_RETRY => {
+                std::thread::sleep(Duration::from_millis(250));
+                send(&join)?;
+            }
+            ToMember::Reject { reason, .. } => return Err(DistError::Usage(reason)),
             _ => {}
         }
     };

@@ -273,6 +273,12 @@ pub enum ToMember {
     Reject {
         /// Why.
         reason: String,
+        /// A process of that name is still running in the graph (as far as the launcher
+        /// knows: a process killed a moment ago until its liveliness token is withdrawn). A
+        /// process started again at once asks again for a while
+        /// ([`super::member::BUSY_RETRY`]).
+        #[serde(default)]
+        busy: bool,
     },
     /// Real clock: start; run time zero is at this `CLOCK_MONOTONIC` reading, ns.
     Start {

@@ -400,21 +400,31 @@ fn a_killed_node_is_noticed_and_a_restarted_one_rejoins() {
     std::thread::sleep(Duration::from_millis(1500));
     let policy = node_processes(port, "policy");
     assert_eq!(policy.len(), 1, "one policy process: {policy:?}");
-    // SAFETY: plain kill(2) on a child of our child.
-    unsafe { libc::kill(policy[0] as i32, libc::SIGKILL) };
-    assert!(
-        wait_for(&mut lines, "process 'policy' is gone", 10),
-        "{lines:?}"
-    );
+    // The new policy process starts before the old one is killed (as a restart "at once"
+    // may, before the launcher sees the old token go): refused as busy, it asks again.
     let mut again = bin()
         .args(["node", "--process", "policy", "--connect", &ep])
         .stdout(Stdio::null())
         .stderr(Stdio::null())
         .spawn()
         .unwrap();
+    let busy = "refused a join: process 'policy' is already running in this graph";
+    assert!(wait_for(&mut lines, busy, 10), "{lines:?}");
+    std::thread::sleep(Duration::from_millis(600));
+    // SAFETY: plain kill(2) on a child of our child.
+    unsafe { libc::kill(policy[0] as i32, libc::SIGKILL) };
+    assert!(
+        wait_for(&mut lines, "process 'policy' is gone", 10),
+        "{lines:?}"
+    );
     assert!(
         wait_for(&mut lines, "process 'policy' rejoined", 20),
         "{lines:?}"
+    );
+    assert_eq!(
+        lines.iter().filter(|l| l.contains(busy)).count(),
+        1,
+        "asked again every 250 ms, refused once in the log: {lines:?}"
     );
     let status = launcher.wait().unwrap();
     for l in rx.try_iter() {
@@ -441,6 +451,61 @@ fn a_killed_node_is_noticed_and_a_restarted_one_rejoins() {
         "the restarted policy ticked {policy_ticks} times"
     );
     assert!(m["topics"]["/action"]["published"].as_u64().unwrap() >= policy_ticks);
+    assert_none_left(port, Duration::ZERO);
+}
+
+#[test]
+fn the_plant_s_process_killed_ends_the_run_and_says_why() {
+    let _m = crate::machine::alone();
+    let dir = tempfile::tempdir().unwrap();
+    let port = free_port();
+    let mut launcher: Child = bin()
+        .args([
+            "launch",
+            "--processes",
+            "--clock",
+            "real",
+            "--duration",
+            "30",
+        ])
+        .args(["--listen", &format!("tcp/127.0.0.1:{port}")])
+        .arg("--out")
+        .arg(dir.path())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let rx = stdout_lines(&mut launcher);
+    let mut lines = Vec::new();
+    for p in ["policy", "robot"] {
+        let ready = format!("process '{p}' ready");
+        assert!(wait_line(&rx, &mut lines, &ready, 30), "{lines:?}");
+    }
+    std::thread::sleep(Duration::from_millis(1000));
+    let robot = node_processes(port, "robot");
+    assert_eq!(robot.len(), 1, "one robot process: {robot:?}");
+    // SAFETY: plain kill(2) on a child of our child.
+    unsafe { libc::kill(robot[0] as i32, libc::SIGKILL) };
+    let gone = "process 'robot' is gone";
+    assert!(wait_line(&rx, &mut lines, gone, 10), "{lines:?}");
+    let status = exit_within(&mut launcher, 30);
+    for l in rx.try_iter() {
+        lines.push(l);
+    }
+    let mut err = String::new();
+    std::io::Read::read_to_string(&mut launcher.stderr.take().unwrap(), &mut err).unwrap();
+    assert_eq!(status.code(), Some(2), "{lines:?} {err}");
+    let said = lines.iter().find(|l| l.contains(gone)).unwrap();
+    assert!(said.contains("the run ends with it"), "{said}");
+    assert!(!said.contains("the others run on"), "{said}");
+    let err_lines: Vec<&str> = err.lines().filter(|l| l.starts_with("error")).collect();
+    assert_eq!(err_lines.len(), 1, "one line: {err}");
+    assert!(
+        err_lines[0].contains("node 'actuator' failed at t=")
+            && err_lines[0].contains("process 'robot' (the plant's) is gone"),
+        "{err}"
+    );
+    assert!(!dir.path().join("metrics.json").exists());
     assert_none_left(port, Duration::ZERO);
 }
 
