@@ -4,6 +4,8 @@
 //! every process it started, and merges their reports into one `metrics.json`.
 
 use super::lockstep::{subscribe_reports, TickInbox, HORIZON_PERIODS};
+use super::member::LiveStats;
+use super::monitor::Carried;
 use super::wire::{self, Setup, Ticked, ToLauncher, ToMember};
 use super::{check_endpoint, check_keys, open_session, DistError, Keys, REPLY_TIMEOUT};
 use crate::config::{ClockKind, RunConfig};
@@ -305,8 +307,14 @@ fn free_port(host: &str) -> Result<u16, DistError> {
 /// subscriber's, whose copy saw every message that crossed, or its publisher's when nobody
 /// subscribes); the actuator's measurements from the
 /// actuator's process, the brain's label from the policy's. `None` without the actuator's
-/// process's report.
-pub fn merge_states(spec: &GraphSpec, states: &BTreeMap<String, GraphState>) -> Option<GraphState> {
+/// process's report. A topic whose holder was started again mid-run goes on from what the
+/// processes before it counted (`carried`: their last figures, up to 100 ms before they
+/// died, so what they received after those is counted as lost).
+pub fn merge_states(
+    spec: &GraphSpec,
+    states: &BTreeMap<String, GraphState>,
+    carried: &Carried,
+) -> Option<GraphState> {
     let of = |id: NodeId| states.get(&spec.process_of(id));
     let mut merged = of(spec.chain.actuator)?.clone();
     for i in 0..spec.nodes.len() {
@@ -325,6 +333,9 @@ pub fn merge_states(spec: &GraphSpec, states: &BTreeMap<String, GraphState>) -> 
         if let Some(st) = of(t.holder()) {
             take(&mut merged.topics, &st.topics, i);
             take(&mut merged.topic_qos, &st.topic_qos, i);
+            if let Some(m) = merged.topics.get_mut(i) {
+                *m = carried.continued(i, m);
+            }
         }
     }
     if let Some(st) = of(spec.chain.policy) {
@@ -655,6 +666,8 @@ pub fn launch(
     let start = Instant::now();
     let mut reports: BTreeMap<String, GraphState> = BTreeMap::new();
     let mut wires: Vec<wire::WireLink> = Vec::new();
+    // What a process started again mid-run counted before (real clock only).
+    let mut carried = Carried::new(Carried::holders_of(spec));
     let mut lockstep = None;
     let end = match cfg.clock {
         ClockKind::Virtual => {
@@ -844,6 +857,25 @@ pub fn launch(
             end
         }
         ClockKind::Real => {
+            // The figures of the processes that may be started again (all but the plant's):
+            // what one counted before it was killed is carried into the summary, as the
+            // lab carries it ([`Carried`]).
+            let (stats_tx, stats_rx) = crossbeam_channel::bounded::<LiveStats>(1024);
+            let mut _stats_subs = Vec::new();
+            for p in names.iter().filter(|p| **p != robot) {
+                let (tx, p) = (stats_tx.clone(), p.clone());
+                _stats_subs.push(
+                    session
+                        .declare_subscriber(keys.stats(&p))
+                        .callback(move |s| match LiveStats::decode(&s.payload().to_bytes()) {
+                            Ok(m) if m.process == p => {
+                                let _ = tx.try_send(m);
+                            }
+                            _ => {}
+                        })
+                        .wait()?,
+                );
+            }
             let start_mono = wire::mono_now_ns() + 300_000_000;
             for p in &names {
                 link.tell(
@@ -860,6 +892,9 @@ pub fn launch(
             let mut gone: Vec<String> = Vec::new();
             let mut rejoining: Vec<String> = Vec::new();
             loop {
+                for m in stats_rx.try_iter() {
+                    carried.see(spec, &m);
+                }
                 while let Ok(p) = gone_rx.try_recv() {
                     if end.is_none()
                         && names.contains(&p)
@@ -961,6 +996,9 @@ pub fn launch(
                     break;
                 }
             }
+            for m in stats_rx.try_iter() {
+                carried.see(spec, &m);
+            }
             end.unwrap_or(RunEnd {
                 at: cfg.duration,
                 reason: EndReason::Duration,
@@ -974,7 +1012,7 @@ pub fn launch(
         .filter(|p| !reports.contains_key(*p))
         .cloned()
         .collect();
-    let state = merge_states(spec, &reports).ok_or_else(|| {
+    let state = merge_states(spec, &reports, &carried).ok_or_else(|| {
         let plant = spec.process_of(spec.chain.actuator);
         DistError::Peer(match &end.reason {
             // The plant's process died: say so, not just that it did not report.

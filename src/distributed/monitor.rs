@@ -36,6 +36,7 @@ use crate::session::{Speed, Telemetry};
 use crate::time::Nanos;
 use crate::topic::{Topic, TopicStats};
 use crossbeam_channel::Sender;
+use std::collections::BTreeMap;
 use std::collections::BTreeSet;
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
@@ -64,19 +65,15 @@ pub struct Fold {
     spec: GraphSpec,
     /// The process holding each topic's counters (its subscriber's, else its publisher's).
     holders: Vec<String>,
-    /// Each topic's newest counters from its holder, when the holder is not the plant's
-    /// (continued across the holder's restarts: see [`Fold::stats`]).
-    held: Vec<Option<TopicStats>>,
+    /// Each topic's newest counters from its holder, when the holder is not the plant's,
+    /// continued across the holder's restarts.
+    carried: Carried,
     /// Per topic held elsewhere, its holder's counters by run time, oldest first, not yet
     /// shown (at most [`MAX_QUEUED_COUNTERS`] per topic; continued across restarts).
     queued: Vec<std::collections::VecDeque<(Nanos, TopicStats)>>,
     /// Per topic held elsewhere, the counters the steps are shown with now: the holder's
     /// newest sample no later than the newest step shown.
     shown: Vec<Option<TopicStats>>,
-    /// Per topic, what earlier runs of its holder process counted before it was restarted.
-    before: Vec<TopicStats>,
-    /// Each process's OS process id as last heard: a new one is a restart.
-    pids: std::collections::BTreeMap<String, u32>,
     /// The process of the actuator, whose steps the lab draws.
     plant: String,
     /// `(process, node)` whose liveliness tokens are alive.
@@ -108,17 +105,11 @@ impl Fold {
     /// A fold for the run `cfg` with the brain `policy` (its label in the lab).
     pub fn new(cfg: &RunConfig, policy: &str) -> Fold {
         let spec = cfg.graph.clone();
-        let holders = spec
-            .topics
-            .iter()
-            .map(|t| spec.process_of(t.holder()))
-            .collect();
+        let holders = Carried::holders_of(&spec);
         Fold {
-            held: vec![None; spec.topics.len()],
+            carried: Carried::new(holders.clone()),
             queued: vec![std::collections::VecDeque::new(); spec.topics.len()],
             shown: vec![None; spec.topics.len()],
-            before: vec![TopicStats::default(); spec.topics.len()],
-            pids: std::collections::BTreeMap::new(),
             plant: spec.process_of(spec.chain.actuator),
             holders,
             spec,
@@ -149,7 +140,7 @@ impl Fold {
             while self.queued[i].front().is_some_and(|(t, _)| *t <= step.t) {
                 self.shown[i] = self.queued[i].pop_front().map(|(_, s)| s);
             }
-            if let Some(s) = self.shown[i].or(self.held[i]) {
+            if let Some(s) = self.shown[i].or(self.carried.total(i)) {
                 out.topics.set(TopicId(i), s);
             }
         }
@@ -170,27 +161,8 @@ impl Fold {
         } else {
             self.left.remove(&m.process); // a process started again
         }
-        // A process started again (another pid) counts its topics from zero: what the one
-        // before counted is kept, so the run's totals go on from where they were.
-        let restarted = self
-            .pids
-            .insert(m.process.clone(), m.pid)
-            .is_some_and(|pid| pid != m.pid);
-        if restarted {
-            for i in 0..self.held.len() {
-                if self.holders[i] == m.process {
-                    if let Some(h) = self.held[i] {
-                        self.before[i] = h;
-                    }
-                }
-            }
-        }
-        for (name, st) in &m.topics {
-            if let Some(i) = self.spec.topics.iter().position(|t| t.name == *name) {
-                if self.holders[i] == m.process && m.process != self.plant {
-                    self.held[i] = Some(continued(&self.before[i], st));
-                }
-            }
+        if m.process != self.plant {
+            self.carried.see(&self.spec, &m);
         }
         for (t_ns, i, st) in &m.counters {
             let ours = self.holders.get(*i).is_some_and(|h| *h == m.process);
@@ -205,7 +177,7 @@ impl Fold {
             if q.len() == MAX_QUEUED_COUNTERS {
                 self.shown[*i] = q.pop_front().map(|(_, s)| s);
             }
-            q.push_back((Nanos(*t_ns), continued(&self.before[*i], st)));
+            q.push_back((Nanos(*t_ns), self.carried.continued(*i, st)));
         }
         if !m.wire.is_empty() {
             let links: Vec<(usize, f64, f64)> = m
@@ -367,6 +339,76 @@ impl Fold {
                 .collect(),
             policy: self.policy.clone(),
         }
+    }
+}
+
+/// The counters of the topics held by processes that may be started again mid-run (under
+/// the real clock): a process started again (another pid) counts its topics from zero, so
+/// what the ones before it counted, as their last figures said, is carried over and the
+/// run's totals go on. The watcher's lab and the launcher's summary both count this way.
+#[derive(Clone, Debug)]
+pub struct Carried {
+    /// The process holding each topic's counters ([`crate::graph::spec::TopicSpec::holder`]).
+    holders: Vec<String>,
+    /// Each process's OS process id as last heard: a new one is a restart.
+    pids: BTreeMap<String, u32>,
+    /// Each topic's counters in its holder's newest figures.
+    latest: Vec<Option<TopicStats>>,
+    /// Per topic, what earlier runs of its holder process counted before it was restarted.
+    before: Vec<TopicStats>,
+}
+
+impl Carried {
+    /// Nothing heard yet, for topics held by `holders` (one process name per topic).
+    pub fn new(holders: Vec<String>) -> Carried {
+        let n = holders.len();
+        Carried {
+            holders,
+            pids: BTreeMap::new(),
+            latest: vec![None; n],
+            before: vec![TopicStats::default(); n],
+        }
+    }
+
+    /// The holders of `spec`'s topics, for [`Carried::new`].
+    pub fn holders_of(spec: &GraphSpec) -> Vec<String> {
+        spec.topics
+            .iter()
+            .map(|t| spec.process_of(t.holder()))
+            .collect()
+    }
+
+    /// Take in figures `m` (of a process of `spec`'s graph): a new pid for its process
+    /// carries over what the one before counted; its topics' counters become the newest.
+    pub fn see(&mut self, spec: &GraphSpec, m: &LiveStats) {
+        let restarted = self
+            .pids
+            .insert(m.process.clone(), m.pid)
+            .is_some_and(|pid| pid != m.pid);
+        for i in 0..self.holders.len() {
+            if restarted && self.holders[i] == m.process {
+                if let Some(last) = self.latest[i].take() {
+                    self.before[i] = continued(&self.before[i], &last);
+                }
+            }
+        }
+        for (name, st) in &m.topics {
+            if let Some(i) = spec.topics.iter().position(|t| t.name == *name) {
+                if self.holders[i] == m.process {
+                    self.latest[i] = Some(*st);
+                }
+            }
+        }
+    }
+
+    /// Topic `i`'s counters now `now` (its holder's), continued from the processes before.
+    pub fn continued(&self, i: usize, now: &TopicStats) -> TopicStats {
+        self.before.get(i).map_or(*now, |b| continued(b, now))
+    }
+
+    /// Topic `i`'s newest counters, continued; `None` before its holder's first figures.
+    pub fn total(&self, i: usize) -> Option<TopicStats> {
+        self.latest.get(i)?.map(|l| self.continued(i, &l))
     }
 }
 
