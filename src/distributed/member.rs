@@ -305,6 +305,24 @@ pub fn run_member(opts: &MemberOptions, stop: &StopFlag) -> Result<(), DistError
         .declare_publisher(keys.up())
         .congestion_control(block)
         .wait()?;
+    // Not matched at once: a launcher of another graph at the endpoint means this process
+    // was given another graph file (the keys carry the graph's name, so the hash exchanged
+    // at join never comes): say so now rather than after the wait.
+    let soon = Instant::now() + Duration::from_secs(2);
+    while Instant::now() < soon && !up.matching_status().wait().is_ok_and(|m| m.matching()) {
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    if !up.matching_status().wait().is_ok_and(|m| m.matching()) {
+        let seen = launchers_seen(&session);
+        if !seen.is_empty() && !seen.iter().any(|g| g == keys.graph()) {
+            return Err(DistError::Usage(format!(
+                "the launcher at {} runs graph '{}', not '{}': was this process given another graph file?",
+                opts.connect.join(", "),
+                seen.join("', '"),
+                keys.graph()
+            )));
+        }
+    }
     wait_matching(&up, stop, None, "the launcher")?;
     let send = |m: &ToLauncher| up.put(wire::encode_json(m)).wait();
     let join = ToLauncher::Join {
@@ -950,6 +968,35 @@ fn wait_matching(
         }
         std::thread::sleep(Duration::from_millis(10));
     }
+}
+
+/// The graphs (their names as in their keys) whose launchers this session sees, by their
+/// liveliness tokens (at most 16; asked for up to 1 s).
+fn launchers_seen(session: &zenoh::Session) -> Vec<String> {
+    let Ok(replies) = session
+        .liveliness()
+        .get("ratelab/*/@launcher")
+        .timeout(Duration::from_secs(1))
+        .wait()
+    else {
+        return Vec::new();
+    };
+    let mut graphs = Vec::new();
+    while let Ok(reply) = replies.recv() {
+        if let Ok(sample) = reply.result() {
+            let key = sample.key_expr().as_str();
+            if let Some(g) = key
+                .strip_prefix("ratelab/")
+                .and_then(|k| k.strip_suffix("/@launcher"))
+            {
+                graphs.push(g.to_string());
+            }
+        }
+        if graphs.len() >= 16 {
+            break;
+        }
+    }
+    graphs
 }
 
 /// This process's [`LiveStats`] now.

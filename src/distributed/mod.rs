@@ -154,6 +154,11 @@ impl Keys {
         &self.prefix
     }
 
+    /// The graph's name as its keys spell it (`<graph>` in `ratelab/<graph>`).
+    pub fn graph(&self) -> &str {
+        self.prefix.strip_prefix("ratelab/").unwrap_or(&self.prefix)
+    }
+
     /// A topic's key: `ratelab/<graph>/obs` for `/obs`.
     pub fn topic(&self, name: &str) -> String {
         format!("{}/{}", self.prefix, name.trim_matches('/'))

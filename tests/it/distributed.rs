@@ -670,6 +670,23 @@ fn a_graph_file_that_differs_between_processes_is_refused_at_join() {
         .spawn()
         .unwrap();
     std::thread::sleep(Duration::from_millis(800));
+    // Another graph altogether (another name: other keys, so no join ever reaches this
+    // launcher): said within seconds, not after the 20 s wait for a launcher.
+    let t0 = Instant::now();
+    let node = ratelab(&[
+        "node",
+        "--graph",
+        "graphs/cartpole-safety.toml",
+        "--process",
+        "policy",
+        "--connect",
+        &ep,
+    ]);
+    assert_one_line_exit_2(
+        &node,
+        "runs graph 'cartpole', not 'cartpole-safety': was this process given another graph file?",
+    );
+    assert!(t0.elapsed() < Duration::from_secs(10), "{:?}", t0.elapsed());
     let node = ratelab(&[
         "node",
         "--graph",
