@@ -521,6 +521,11 @@ pub struct Metrics {
     /// Such a run is not `balanced`, and did not fall.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub stopped_by_watchdog: Option<String>,
+    /// `launch --processes` only: the processes that never reported (gone for good, not
+    /// started again). Their nodes' figures, and the counters of the topics they held, are
+    /// not measured: they read 0 here. Absent when every process reported.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub missing_processes: Vec<String>,
 }
 
 /// One node's figures in `metrics.json`.
@@ -751,8 +756,21 @@ impl Metrics {
                 self.nonfinite_actions
             ));
         }
+        if !self.missing_processes.is_empty() {
+            lines.push(format!(
+                "not measured: process(es) {} did not report; their nodes' figures and the topics they hold read 0",
+                self.missing_processes.join(", ")
+            ));
+        }
         if let Some(timing) = &self.node_timing {
             for t in timing {
+                if t.sched.is_empty() && t.ticks == 0 {
+                    lines.push(format!(
+                        "node {:<8} no figures (its process did not report)",
+                        t.node
+                    ));
+                    continue;
+                }
                 lines.push(format!(
                     "node {:<8} {:>7.2} Hz measured | lateness p50 {:.0} µs, p99 {:.0} µs, max {:.0} µs | cpu {:.0} ms | {}",
                     t.node, t.measured_hz, t.lateness_p50_us, t.lateness_p99_us, t.lateness_max_us, t.cpu_ms, t.sched

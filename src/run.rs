@@ -460,6 +460,7 @@ pub fn summarize_state(cfg: &RunConfig, st: &GraphState, end: &RunEnd) -> Metric
     Metrics {
         balanced: log.fell_at.is_none() && node_failed.is_none() && log.watchdog.is_none(),
         stopped_by_watchdog: log.watchdog.clone(),
+        missing_processes: Vec::new(),
         clock: cfg.clock.as_str().to_string(),
         control_hz: cfg.control_hz(),
         sensor_hz: cfg.sensor_hz(),

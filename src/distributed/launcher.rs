@@ -1024,7 +1024,8 @@ pub fn launch(
             _ => format!("process '{plant}' (the actuator's) did not report"),
         })
     })?;
-    let metrics = summarize_state(cfg, &state, &end);
+    let mut metrics = summarize_state(cfg, &state, &end);
+    metrics.missing_processes.clone_from(&missing);
     let over = wire::RunOver {
         metrics: metrics.clone(),
         end: end.clone(),

@@ -524,6 +524,56 @@ fn the_plant_s_process_killed_ends_the_run_and_says_why() {
 }
 
 #[test]
+fn a_process_gone_for_good_is_named_missing_not_counted_as_zeros() {
+    let _m = crate::machine::alone();
+    let dir = tempfile::tempdir().unwrap();
+    let port = free_port();
+    let mut launcher: Child = bin()
+        .args([
+            "launch",
+            "--processes",
+            "--clock",
+            "real",
+            "--duration",
+            "4",
+        ])
+        .args(["--listen", &format!("tcp/127.0.0.1:{port}")])
+        .arg("--out")
+        .arg(dir.path())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let rx = stdout_lines(&mut launcher);
+    let mut lines = Vec::new();
+    for p in ["policy", "robot"] {
+        let ready = format!("process '{p}' ready");
+        assert!(wait_line(&rx, &mut lines, &ready, 30), "{lines:?}");
+    }
+    std::thread::sleep(Duration::from_millis(1000));
+    let policy = node_processes(port, "policy");
+    assert_eq!(policy.len(), 1, "{policy:?}");
+    // SAFETY: plain kill(2) on a child of our child.
+    unsafe { libc::kill(policy[0] as i32, libc::SIGKILL) };
+    let status = exit_within(&mut launcher, 60);
+    for l in rx.try_iter() {
+        lines.push(l);
+    }
+    assert_eq!(status.code(), Some(2), "{lines:?}");
+    let said = |needle: &str| lines.iter().any(|l| l.contains(needle));
+    assert!(
+        said("not measured: process(es) policy did not report"),
+        "{lines:?}"
+    );
+    assert!(said("no figures (its process did not report)"), "{lines:?}");
+    let m: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.path().join("metrics.json")).unwrap())
+            .unwrap();
+    assert_eq!(m["missing_processes"], serde_json::json!(["policy"]), "{m}");
+    assert_none_left(port, Duration::ZERO);
+}
+
+#[test]
 fn top_lists_a_running_graph() {
     let _m = crate::machine::alone();
     let port = free_port();
