@@ -399,7 +399,7 @@ pub struct RunArgs {
     /// Quick deterministic check: virtual clock, 2 s.
     #[arg(long)]
     pub smoke: bool,
-    /// Write metrics.json (and trace.csv) into this folder.
+    /// Write metrics.json (and trace.csv, in one process) into this folder.
     #[arg(long, value_name = "DIR")]
     pub out: Option<PathBuf>,
     /// Record the run to a rerun .rrd (default: recordings/<clock>-control<hz>-q<depth>-seed<seed>.rrd).
