@@ -5,7 +5,7 @@ use crate::cli::{LaunchArgs, NodeArgs, TopArgs};
 use crate::headless;
 use ratelab::distributed::launcher::{launch, LaunchOptions, LaunchReport};
 use ratelab::distributed::member::{run_member, LiveStats, MemberOptions};
-use ratelab::distributed::monitor::{Signals, Watch};
+use ratelab::distributed::monitor::{ask_placement, PlacedProcess, Signals, Watch};
 use ratelab::distributed::zenoh::{self, Wait};
 use ratelab::distributed::{check_endpoint, open_session};
 use ratelab::graph::spec::{DEFAULT_GRAPH_TOML, MAX_FILE_BYTES};
@@ -391,12 +391,45 @@ pub fn run_top(a: &TopArgs, stop: StopFlag) -> anyhow::Result<()> {
         })
         .wait()
         .map_err(|e| anyhow::anyhow!("zenoh: {e}"))?;
+    // A launch's end (its summary on `@ended`): its graph leaves the table, and a refreshing
+    // `top` with nothing left to show ends too.
+    let (ended_tx, ended_rx) = crossbeam_channel::bounded::<String>(64);
+    let _ended_sub = session
+        .declare_subscriber("ratelab/*/@ended")
+        .callback(move |s| {
+            if let Some(g) = s.key_expr().as_str().split('/').nth(1) {
+                let _ = ended_tx.try_send(g.to_string());
+            }
+        })
+        .wait()
+        .map_err(|e| anyhow::anyhow!("zenoh: {e}"))?;
+    let mut ended: std::collections::BTreeSet<String> = std::collections::BTreeSet::new();
     // Per process: the newest figures and the ones before, for rates.
     let mut seen: BTreeMap<String, (LiveStats, Option<LiveStats>)> = BTreeMap::new();
+    // Per graph: its processes as placed (asked of its launcher once), so that a process
+    // gone before `top` heard from it is listed too.
+    let mut placements: BTreeMap<String, Vec<PlacedProcess>> = BTreeMap::new();
     let started = Instant::now();
     let mut last_print = Instant::now();
     loop {
+        for g in ended_rx.try_iter() {
+            if !a.once {
+                seen.retain(|_, (m, _)| ratelab::distributed::Keys::new(&m.graph).graph() != g);
+            }
+            ended.insert(g);
+        }
+        if !a.once && !ended.is_empty() && seen.is_empty() {
+            let graphs: Vec<&str> = ended.iter().map(String::as_str).collect();
+            println!(
+                "ratelab top: the launch of graph '{}' ended",
+                graphs.join("', '")
+            );
+            return Ok(());
+        }
         while let Ok(m) = rx.try_recv() {
+            if !a.once && ended.contains(ratelab::distributed::Keys::new(&m.graph).graph()) {
+                continue; // a last figure after its launch's end
+            }
             let key = format!("{}/{}", m.graph, m.process);
             // Rates over about a second: the figures before stay until the new ones are a
             // second newer (processes publish every 100 ms).
@@ -405,14 +438,19 @@ pub fn run_top(a: &TopArgs, stop: StopFlag) -> anyhow::Result<()> {
                 Some((cur, _)) => Some(cur),
                 None => None,
             };
+            if !placements.contains_key(&m.graph) {
+                let placed = ask_placement(&session, &m.graph).unwrap_or_default();
+                placements.insert(m.graph.clone(), placed);
+            }
             seen.insert(key, (m, prev));
         }
         let alive = alive_nodes(&session);
         if a.once {
-            // Rates over half a second at least.
+            // Rates over half a second at least (a process gone sends no more figures).
             let have_rates = seen.values().all(|(m, p)| {
-                p.as_ref()
-                    .is_some_and(|p| m.t_ns.saturating_sub(p.t_ns) >= 500_000_000)
+                !alive.iter().any(|(ap, _)| *ap == m.process)
+                    || p.as_ref()
+                        .is_some_and(|p| m.t_ns.saturating_sub(p.t_ns) >= 500_000_000)
             });
             if (!seen.is_empty() && have_rates) || started.elapsed() > Duration::from_secs(3) {
                 if seen.is_empty() {
@@ -421,7 +459,7 @@ pub fn run_top(a: &TopArgs, stop: StopFlag) -> anyhow::Result<()> {
                         a.connect.join(", ")
                     );
                 }
-                print!("{}", table(&seen, &alive));
+                print!("{}", table(&seen, &alive, &placements));
                 return Ok(());
             }
         } else if last_print.elapsed() >= Duration::from_secs(1) {
@@ -431,7 +469,7 @@ pub fn run_top(a: &TopArgs, stop: StopFlag) -> anyhow::Result<()> {
             if std::io::IsTerminal::is_terminal(&std::io::stdout()) {
                 print!("\x1b[2J\x1b[H");
             }
-            print!("{}", table(&seen, &alive));
+            print!("{}", table(&seen, &alive, &placements));
             if seen.is_empty() {
                 println!("(waiting for a graph at {})", a.connect.join(", "));
             }
@@ -469,14 +507,22 @@ fn alive_nodes(session: &zenoh::Session) -> Vec<(String, String)> {
 fn table(
     seen: &BTreeMap<String, (LiveStats, Option<LiveStats>)>,
     alive: &[(String, String)],
+    placements: &BTreeMap<String, Vec<PlacedProcess>>,
 ) -> String {
     use std::fmt::Write;
     let mut s = String::new();
     let t = seen.values().map(|(m, _)| m.t_ns).max().unwrap_or(0);
+    // The placed processes `top` has no figures from (gone before it heard them, or not
+    // yet started).
+    let unheard: Vec<(&String, &PlacedProcess)> = placements
+        .iter()
+        .flat_map(|(g, ps)| ps.iter().map(move |p| (g, p)))
+        .filter(|(g, (p, _))| !seen.contains_key(&format!("{g}/{p}")))
+        .collect();
     let _ = writeln!(
         s,
         "ratelab top: {} process(es), run time {:.2} s",
-        seen.len(),
+        seen.len() + unheard.len(),
         t as f64 / 1e9
     );
     let _ = writeln!(
@@ -484,6 +530,23 @@ fn table(
         "{:<10} {:>7} {:<10} {:<9} {:>8} {:>8} {:>10} {:<6}",
         "PROCESS", "PID", "NODE", "KIND", "RATE_HZ", "TICKS", "MEAS_HZ", "ALIVE"
     );
+    for (_, (p, nodes)) in &unheard {
+        for (name, kind, hz) in nodes {
+            let is_alive = alive.iter().any(|(ap, an)| ap == p && an == name);
+            let _ = writeln!(
+                s,
+                "{:<10} {:>7} {:<10} {:<9} {:>8.1} {:>8} {:>10} {:<6}",
+                p,
+                "-",
+                name,
+                kind,
+                hz,
+                "-",
+                "-",
+                if is_alive { "yes" } else { "GONE" }
+            );
+        }
+    }
     let mut wire: BTreeMap<String, (f64, f64)> = BTreeMap::new();
     let mut topics = Vec::new();
     for (m, prev) in seen.values() {
@@ -497,11 +560,14 @@ fn table(
                 .as_ref()
                 .and_then(|q| q.nodes.iter().find(|n| n.0 == *name))
                 .map(|n| n.3);
-            let meas = match (dt, before) {
-                (Some(dt), Some(b)) => format!("{:.1}", ticks.saturating_sub(b) as f64 / dt),
+            let is_alive = alive.iter().any(|(ap, an)| ap == p && an == name);
+            // A node gone has no rate now (its last figures would show its old one).
+            let meas = match (dt, before, is_alive) {
+                (Some(dt), Some(b), true) => {
+                    format!("{:.1}", ticks.saturating_sub(b) as f64 / dt)
+                }
                 _ => "-".into(),
             };
-            let is_alive = alive.iter().any(|(ap, an)| ap == p && an == name);
             let _ = writeln!(
                 s,
                 "{:<10} {:>7} {:<10} {:<9} {:>8.1} {:>8} {:>10} {:<6}",
@@ -515,11 +581,13 @@ fn table(
                 if is_alive { "yes" } else { "GONE" }
             );
         }
+        let process_alive = alive.iter().any(|(ap, _)| ap == p);
         for (name, st) in &m.topics {
             let before = prev
                 .as_ref()
                 .and_then(|q| q.topics.iter().find(|x| x.0 == *name))
-                .map(|x| x.1.published);
+                .map(|x| x.1.published)
+                .filter(|_| process_alive);
             let rate = match (dt, before) {
                 (Some(dt), Some(b)) => format!("{:.1}", st.published.saturating_sub(b) as f64 / dt),
                 _ => "-".into(),

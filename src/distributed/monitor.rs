@@ -812,6 +812,36 @@ pub fn record(
     Ok(())
 }
 
+/// A process of a running graph, as its launcher placed it: its name and its nodes' names,
+/// kinds and rates (Hz).
+pub type PlacedProcess = (String, Vec<(String, String, f64)>);
+
+/// Ask the launcher of graph `graph` (its name as its keys spell it) for the graph's
+/// placement, for up to a second: every process, with its nodes (`ratelab top` lists the
+/// processes it has no figures from, a process gone before it started, from this). `None`
+/// when no launcher answers with settings that decode.
+pub fn ask_placement(session: &zenoh::Session, graph: &str) -> Option<Vec<PlacedProcess>> {
+    let cfg = ask_setup(session, &Keys::new(graph).setup())?
+        .run_config()
+        .ok()?;
+    let spec = &cfg.graph;
+    Some(
+        spec.placement()
+            .into_iter()
+            .map(|(p, ids)| {
+                let nodes = ids
+                    .iter()
+                    .map(|&i| {
+                        let n = spec.node(i);
+                        (n.name.clone(), n.kind.as_str().to_string(), n.rate_hz)
+                    })
+                    .collect();
+                (p, nodes)
+            })
+            .collect(),
+    )
+}
+
 /// Ask once (for up to a second) for a graph's settings; the first answer that decodes.
 fn ask_setup(session: &zenoh::Session, selector: &str) -> Option<Setup> {
     let replies = session

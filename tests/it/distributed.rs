@@ -606,6 +606,13 @@ fn top_lists_a_running_graph() {
     // Keep draining the launcher's output so it never blocks on a full pipe.
     std::thread::spawn(move || reader.for_each(drop));
     std::thread::sleep(Duration::from_millis(1500)); // the run is going
+                                                     // A refreshing `top` alongside, to the launch's end.
+    let refreshing = bin()
+        .args(["top", "--connect", &ep])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
     let o = ratelab(&["top", "--connect", &ep, "--once"]);
     let out = text(&o.stdout);
     assert!(o.status.success(), "{out}{}", text(&o.stderr));
@@ -614,7 +621,34 @@ fn top_lists_a_running_graph() {
     ] {
         assert!(out.contains(needle), "{needle} missing in:\n{out}");
     }
-    assert!(launcher.wait().unwrap().success());
+    // The policy's process killed: its node is GONE, with no rate (not its last one).
+    let policy = node_processes(port, "policy");
+    assert_eq!(policy.len(), 1, "{policy:?}");
+    // SAFETY: plain kill(2) on a child of our child.
+    unsafe { libc::kill(policy[0] as i32, libc::SIGKILL) };
+    std::thread::sleep(Duration::from_millis(700));
+    let o = ratelab(&["top", "--connect", &ep, "--once"]);
+    let out = text(&o.stdout);
+    let row = out
+        .lines()
+        .find(|l| l.split_whitespace().nth(2) == Some("policy"))
+        .unwrap_or_else(|| panic!("no policy row in:\n{out}"));
+    let cols: Vec<&str> = row.split_whitespace().collect();
+    assert_eq!(cols.last(), Some(&"GONE"), "{out}");
+    assert_eq!(cols[cols.len() - 2], "-", "a gone node's rate: {out}");
+    launcher.wait().unwrap();
+    // The refreshing `top` ends with the launch, saying so.
+    let mut refreshing = refreshing;
+    let status = exit_within(&mut refreshing, 20);
+    let mut out = String::new();
+    std::io::Read::read_to_string(&mut refreshing.stdout.take().unwrap(), &mut out).unwrap();
+    assert!(status.success(), "{out}");
+    assert!(
+        out.trim_end()
+            .ends_with("ratelab top: the launch of graph 'cartpole' ended"),
+        "{out}"
+    );
+    assert_none_left(port, Duration::ZERO);
 }
 
 fn assert_one_line_exit_2(o: &Output, needle: &str) {
