@@ -70,6 +70,7 @@ pub fn run_launch(a: &LaunchArgs, force_headless: bool, stop: StopFlag) -> anyho
         child_stderr: None,
         start_gate: None,
         listening: None,
+        pace: None,
     };
     let placement: Vec<String> = cfg
         .graph
@@ -159,6 +160,10 @@ fn launch_watched(
     opts.start_gate = Some(gate_rx);
     let (listening_tx, listening_rx) = crossbeam_channel::bounded::<String>(1);
     opts.listening = Some(listening_tx);
+    // The lab follows a virtual-clock run at ×1, as it does in one process.
+    if lab {
+        opts.pace = Some(1.0);
+    }
     // The processes' stderr while the lab is up: the first lines, printed after it (the
     // lab shows every line meanwhile, from the log key).
     let (err_tx, err_rx) = crossbeam_channel::bounded::<String>(MAX_HELD_STDERR_LINES);

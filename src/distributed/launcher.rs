@@ -55,6 +55,10 @@ pub struct LaunchOptions {
     /// watcher in the same program connects there. Its progress line `listening on …` says
     /// the same to a person.
     pub listening: Option<crossbeam_channel::Sender<String>>,
+    /// Virtual clock: run at this many seconds of run time per second of wall time (the
+    /// lab's ×1, so that a person can follow it), the horizon let out no faster; `None`: as
+    /// fast as the processes go (headless, a recording, the benchmarks).
+    pub pace: Option<f64>,
 }
 
 /// The longest line of a started process's stderr that [`LaunchOptions::child_stderr`]
@@ -705,6 +709,7 @@ pub fn launch(
                     message,
                 },
             };
+            let paced_from = Instant::now();
             let end = loop {
                 let (Some(t), Some(i)) = (sched.next_due(), sched.next_node()) else {
                     break RunEnd {
@@ -717,6 +722,14 @@ pub fn launch(
                         at: cfg.duration,
                         reason: EndReason::Duration,
                     };
+                }
+                // Paced: no instant before its wall time (the horizon follows).
+                if let Some(speed) = opts.pace.filter(|s| *s > 0.0 && s.is_finite()) {
+                    let due = paced_from + Duration::from_secs_f64(t.as_secs_f64() / speed);
+                    while !stop.is_stopped() && Instant::now() < due {
+                        let left = due.saturating_duration_since(Instant::now());
+                        std::thread::sleep(left.min(Duration::from_millis(50)));
+                    }
                 }
                 // Move the horizon on before the processes reach it; an interrupt stops it.
                 let want = t.0.saturating_add(lookahead).min(cfg.duration.0);
@@ -834,7 +847,8 @@ pub fn launch(
                     };
                 }
             };
-            lockstep = Some(LockstepCost {
+            // Paced, the wall time is the pace's, not the lockstep's cost.
+            lockstep = opts.pace.is_none().then(|| LockstepCost {
                 ticks: index,
                 instants,
                 us_per_instant: start.elapsed().as_secs_f64() * 1e6 / instants.max(1) as f64,

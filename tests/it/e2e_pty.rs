@@ -310,9 +310,9 @@ fn launch_across_processes_opens_the_lab_and_quitting_leaves_nothing_behind() {
     crate::distributed::assert_none_left(port, Duration::from_millis(500));
 }
 
-/// Under the virtual clock a second of wall time is many seconds of run time: the arrows
-/// still read each topic's rate (the policy's copy of /obs sampled per tick, not per batch
-/// of figures), and the lockstep's processes stop with the lab.
+/// Under the virtual clock the lab paces the lockstep at ×1, as in one process; the arrows
+/// read each topic's rate (the policy's copy of /obs sampled per tick, not per batch of
+/// figures), and the lockstep's processes stop with the lab.
 #[test]
 fn a_launch_in_lockstep_shows_every_topic_s_rate_in_the_lab() {
     let _machine = crate::machine::alone();
@@ -327,10 +327,24 @@ fn a_launch_in_lockstep_shows_every_topic_s_rate_in_the_lab() {
         &ep,
     ]);
     lab.wait_for("virtual clock · 2 processes", Duration::from_secs(60));
+    let shown = Instant::now();
     // Both arrows at the chapter's 50 Hz (run time), once a 5 s window has passed.
-    lab.wait_until("both arrows at 50.0 msg/s", Duration::from_secs(20), |s| {
+    let screen = lab.wait_until("both arrows at 50.0 msg/s", Duration::from_secs(20), |s| {
         s.matches("50.0 msg/s").count() >= 2
     });
+    // Paced at ×1: the run time in the header is about the wall time since (as fast as
+    // it goes, it was hundreds of seconds by then).
+    let t_s: f64 = screen
+        .split("│ t ")
+        .nth(1)
+        .and_then(|r| r.split(" s").next())
+        .and_then(|t| t.trim().parse().ok())
+        .unwrap_or_else(|| panic!("no run time in the header:\n{screen}"));
+    let wall_s = shown.elapsed().as_secs_f64();
+    assert!(
+        t_s <= wall_s + 2.0,
+        "run time {t_s} s after {wall_s:.1} s of wall time:\n{screen}"
+    );
     lab.quit();
     crate::distributed::assert_none_left(port, Duration::from_millis(500));
 }
