@@ -229,6 +229,8 @@ fn launch_watched(
             return Err(e.into());
         }
     };
+    let mut watch = watch;
+    watch.recording = recording.map(|r| r.path().to_path_buf());
     let policy = watch.setup.policy.clone();
     let (lab_tx, lab_rx) = crossbeam_channel::unbounded::<Telemetry>();
     let (rec_tx, rec_rx) = crossbeam_channel::unbounded::<Telemetry>();

@@ -454,6 +454,8 @@ pub struct Watch {
     pub cfg: RunConfig,
     /// The endpoints it connected to.
     pub connect: Vec<String>,
+    /// Where this watch is recorded to, if it is (the lab's header shows it).
+    pub recording: Option<std::path::PathBuf>,
 }
 
 impl Watch {
@@ -493,6 +495,7 @@ impl Watch {
                     setup,
                     cfg,
                     connect: connect.to_vec(),
+                    recording: None,
                 });
             }
             if stop.is_stopped() {
@@ -603,7 +606,7 @@ impl Watch {
         let started = Telemetry::Started {
             cfg: self.cfg.clone(),
             policy: self.setup.policy.clone(),
-            recording: None,
+            recording: self.recording.clone(),
         };
         if tx.send(started).is_err() {
             return Ok(());

@@ -318,6 +318,8 @@ fn a_launch_in_lockstep_shows_every_topic_s_rate_in_the_lab() {
     let _machine = crate::machine::alone();
     let port = crate::distributed::free_port();
     let ep = format!("tcp/127.0.0.1:{port}");
+    let dir = tempfile::tempdir().unwrap();
+    let rrd = dir.path().join("run.rrd");
     let lab = Lab::start(&[
         "launch",
         "--processes",
@@ -325,9 +327,19 @@ fn a_launch_in_lockstep_shows_every_topic_s_rate_in_the_lab() {
         "virtual",
         "--listen",
         &ep,
+        "--record",
+        rrd.to_str().unwrap(),
     ]);
-    lab.wait_for("virtual clock · 2 processes", Duration::from_secs(60));
+    let screen = lab.wait_for("virtual clock · 2 processes", Duration::from_secs(60));
     let shown = Instant::now();
+    // The header says the launch is recorded, and where.
+    assert!(
+        screen
+            .lines()
+            .next()
+            .is_some_and(|h| h.contains("rec ●") && h.contains("run.rrd")),
+        "{screen}"
+    );
     // Both arrows at the chapter's 50 Hz (run time), once a 5 s window has passed.
     let screen = lab.wait_until("both arrows at 50.0 msg/s", Duration::from_secs(20), |s| {
         s.matches("50.0 msg/s").count() >= 2
@@ -346,6 +358,7 @@ fn a_launch_in_lockstep_shows_every_topic_s_rate_in_the_lab() {
         "run time {t_s} s after {wall_s:.1} s of wall time:\n{screen}"
     );
     lab.quit();
+    assert!(rrd.is_file(), "the recording was written");
     crate::distributed::assert_none_left(port, Duration::from_millis(500));
 }
 
