@@ -169,8 +169,16 @@ fn main() -> ExitCode {
         let interrupted = interrupted.clone();
         // Ctrl-C / SIGTERM: stop the graph cleanly (summaries and files still written);
         // a second one exits at once.
+        // A node process started by a launcher gets a second signal when the launcher
+        // exits (PR_SET_PDEATHSIG): it goes quietly.
+        let say = !matches!(cli.command, Some(Command::Node(_)));
         let _ = ctrlc::set_handler(move || {
             if interrupted.is_stopped() {
+                if say {
+                    eprintln!(
+                        "ratelab: interrupted again: exiting at once, without a summary or files"
+                    );
+                }
                 std::process::exit(i32::from(EXIT_INTERRUPTED));
             }
             interrupted.stop();

@@ -396,3 +396,42 @@ fn exercise_ex4_shows_the_stale_queue_and_reconciles() {
         "{out}"
     );
 }
+
+#[test]
+fn a_second_sigterm_exits_at_once_and_says_so() {
+    let _m = crate::machine::shared();
+    let dir = tempfile::tempdir().unwrap();
+    // A launch across processes: its clean stop (each process's report) takes long
+    // enough for the second signal to find it still stopping.
+    let port = crate::distributed::free_port();
+    let mut child = Command::new(env!("CARGO_BIN_EXE_ratelab"))
+        .args([
+            "launch",
+            "--processes",
+            "--clock",
+            "real",
+            "--duration",
+            "60",
+        ])
+        .args(["--listen", &format!("tcp/127.0.0.1:{port}"), "--out"])
+        .arg(dir.path())
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(std::time::Duration::from_millis(3000));
+    for _ in 0..2 {
+        // SAFETY: plain kill(2) on our child.
+        unsafe { libc::kill(child.id() as i32, libc::SIGTERM) };
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+    let o = child.wait_with_output().unwrap();
+    let err = stderr(&o);
+    assert_eq!(o.status.code(), Some(130), "{err}");
+    assert!(
+        err.contains("interrupted again: exiting at once, without a summary or files"),
+        "{err}"
+    );
+    assert!(!dir.path().join("metrics.json").exists());
+    crate::distributed::assert_none_left(port, std::time::Duration::from_millis(500));
+}
