@@ -245,18 +245,31 @@ pub struct GraphSpec {
     pub chain: Chain,
 }
 
-/// A graph file that cannot be used: one line `FILE:LINE:COL: reason`.
+/// A graph file that cannot be used: one line `FILE:LINE:COL: reason`, or `FILE: reason`
+/// for what concerns the whole file (it cannot be read, it is not UTF-8).
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
-#[error("{origin}:{line}:{col}: {reason}")]
 pub struct SpecError {
     /// The file (or what stands for it, e.g. a session log's run).
     pub origin: String,
-    /// 1-based line.
+    /// 1-based line; 0 for the whole file.
     pub line: usize,
-    /// 1-based column (characters).
+    /// 1-based column (characters); 0 for the whole file.
     pub col: usize,
     /// What is wrong.
     pub reason: String,
+}
+
+impl std::fmt::Display for SpecError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self.line {
+            0 => write!(f, "{}: {}", self.origin, self.reason),
+            _ => write!(
+                f,
+                "{}:{}:{}: {}",
+                self.origin, self.line, self.col, self.reason
+            ),
+        }
+    }
 }
 
 /// A change to a graph's settings that cannot be made (a `--rate`/`--depth` override, a
@@ -447,17 +460,18 @@ impl GraphSpec {
     /// [`MAX_FILE_BYTES`], then parsed as [`GraphSpec::parse`].
     ///
     /// # Errors
-    /// A [`SpecError`] (line 1, column 1 for file-level problems).
+    /// A [`SpecError`] (line 0, the whole file, for a file that cannot be read or is not
+    /// UTF-8).
     pub fn load(path: &Path) -> Result<GraphSpec, SpecError> {
         let origin = path.display().to_string();
         let at_start = |reason: String| SpecError {
             origin: origin.clone(),
-            line: 1,
-            col: 1,
+            line: 0,
+            col: 0,
             reason,
         };
         let bytes = crate::input::read_regular_file(path, MAX_FILE_BYTES).map_err(|e| {
-            // The error names the file first; the line's `FILE:1:1:` already does.
+            // The error names the file first; the line's `FILE:` already does.
             let text = e.to_string();
             let prefix = format!("{origin}: ");
             at_start(text.strip_prefix(&prefix).unwrap_or(&text).to_string())

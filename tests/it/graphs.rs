@@ -290,6 +290,16 @@ fn bad_graph_files_exit_2_with_file_line_col() {
         .unwrap();
     assert_eq!(o.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&o.stderr).contains("not a regular file"));
+    // A file that is not there: the file and why, no line or column (it has none).
+    let o = Command::new(env!("CARGO_BIN_EXE_ratelab"))
+        .args(["run", "--smoke", "--graph", "/nonexistent/g.toml"])
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(2));
+    assert_eq!(
+        String::from_utf8_lossy(&o.stderr).trim_end(),
+        "/nonexistent/g.toml: not found"
+    );
 }
 
 #[test]
