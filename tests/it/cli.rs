@@ -404,7 +404,7 @@ fn a_second_sigterm_exits_at_once_and_says_so() {
     // A launch across processes: its clean stop (each process's report) takes long
     // enough for the second signal to find it still stopping.
     let port = crate::distributed::free_port();
-    let mut child = Command::new(env!("CARGO_BIN_EXE_ratelab"))
+    let child = Command::new(env!("CARGO_BIN_EXE_ratelab"))
         .args([
             "launch",
             "--processes",
