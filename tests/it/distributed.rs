@@ -255,8 +255,12 @@ fn wait_line(
     false
 }
 
-/// A launch under the virtual clock on `port`, its lines, once both processes are ready.
-fn lockstep_launch(
+/// A launch of the chapter's graph across processes under `clock` for `secs` seconds on
+/// `port` (its files into `out`), with its lines, once both processes are ready and a
+/// second has run.
+fn ready_launch(
+    clock: &str,
+    secs: &str,
     port: u16,
     out: &Path,
 ) -> (Child, std::sync::mpsc::Receiver<String>, Vec<String>) {
@@ -265,9 +269,9 @@ fn lockstep_launch(
             "launch",
             "--processes",
             "--clock",
-            "virtual",
+            clock,
             "--duration",
-            "3600",
+            secs,
         ])
         .args(["--listen", &format!("tcp/127.0.0.1:{port}")])
         .arg("--out")
@@ -284,6 +288,23 @@ fn lockstep_launch(
     }
     std::thread::sleep(Duration::from_millis(1000));
     (launcher, rx, lines)
+}
+
+/// A launch under the virtual clock on `port`, its lines, once both processes are ready.
+fn lockstep_launch(
+    port: u16,
+    out: &Path,
+) -> (Child, std::sync::mpsc::Receiver<String>, Vec<String>) {
+    ready_launch("virtual", "3600", port, out)
+}
+
+/// SIGKILL the one node process of placement group `process` on the launcher at `port`.
+fn kill_node_process(port: u16, process: &str) -> u32 {
+    let pids = node_processes(port, process);
+    assert_eq!(pids.len(), 1, "one '{process}' process: {pids:?}");
+    // SAFETY: plain kill(2) on a child of our child.
+    unsafe { libc::kill(pids[0] as i32, libc::SIGKILL) };
+    pids[0]
 }
 
 /// Wait up to `secs` for `child` to exit.
@@ -339,11 +360,8 @@ fn a_lockstep_refuses_a_join_stops_at_one_instant_on_ctrl_c_and_ends_when_a_proc
     // The policy's process killed: the run ends at once, naming it (not after a timeout).
     let port = free_port();
     let (mut launcher, rx, mut lines) = lockstep_launch(port, &dir.path().join("kill"));
-    let policy = node_processes(port, "policy");
-    assert_eq!(policy.len(), 1, "one policy process: {policy:?}");
     let killed = Instant::now();
-    // SAFETY: plain kill(2) on a child of our child.
-    unsafe { libc::kill(policy[0] as i32, libc::SIGKILL) };
+    kill_node_process(port, "policy");
     let status = exit_within(&mut launcher, 30);
     lines.extend(rx.try_iter());
     assert!(
@@ -473,33 +491,8 @@ fn the_plant_s_process_killed_ends_the_run_and_says_why() {
     let _m = crate::machine::alone();
     let dir = tempfile::tempdir().unwrap();
     let port = free_port();
-    let mut launcher: Child = bin()
-        .args([
-            "launch",
-            "--processes",
-            "--clock",
-            "real",
-            "--duration",
-            "30",
-        ])
-        .args(["--listen", &format!("tcp/127.0.0.1:{port}")])
-        .arg("--out")
-        .arg(dir.path())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let rx = stdout_lines(&mut launcher);
-    let mut lines = Vec::new();
-    for p in ["policy", "robot"] {
-        let ready = format!("process '{p}' ready");
-        assert!(wait_line(&rx, &mut lines, &ready, 30), "{lines:?}");
-    }
-    std::thread::sleep(Duration::from_millis(1000));
-    let robot = node_processes(port, "robot");
-    assert_eq!(robot.len(), 1, "one robot process: {robot:?}");
-    // SAFETY: plain kill(2) on a child of our child.
-    unsafe { libc::kill(robot[0] as i32, libc::SIGKILL) };
+    let (mut launcher, rx, mut lines) = ready_launch("real", "30", port, dir.path());
+    kill_node_process(port, "robot");
     let gone = "process 'robot' is gone";
     assert!(wait_line(&rx, &mut lines, gone, 10), "{lines:?}");
     let status = exit_within(&mut launcher, 30);
@@ -528,33 +521,8 @@ fn a_process_gone_for_good_is_named_missing_not_counted_as_zeros() {
     let _m = crate::machine::alone();
     let dir = tempfile::tempdir().unwrap();
     let port = free_port();
-    let mut launcher: Child = bin()
-        .args([
-            "launch",
-            "--processes",
-            "--clock",
-            "real",
-            "--duration",
-            "4",
-        ])
-        .args(["--listen", &format!("tcp/127.0.0.1:{port}")])
-        .arg("--out")
-        .arg(dir.path())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let rx = stdout_lines(&mut launcher);
-    let mut lines = Vec::new();
-    for p in ["policy", "robot"] {
-        let ready = format!("process '{p}' ready");
-        assert!(wait_line(&rx, &mut lines, &ready, 30), "{lines:?}");
-    }
-    std::thread::sleep(Duration::from_millis(1000));
-    let policy = node_processes(port, "policy");
-    assert_eq!(policy.len(), 1, "{policy:?}");
-    // SAFETY: plain kill(2) on a child of our child.
-    unsafe { libc::kill(policy[0] as i32, libc::SIGKILL) };
+    let (mut launcher, rx, mut lines) = ready_launch("real", "4", port, dir.path());
+    kill_node_process(port, "policy");
     let status = exit_within(&mut launcher, 60);
     for l in rx.try_iter() {
         lines.push(l);
@@ -622,10 +590,7 @@ fn top_lists_a_running_graph() {
         assert!(out.contains(needle), "{needle} missing in:\n{out}");
     }
     // The policy's process killed: its node is GONE, with no rate (not its last one).
-    let policy = node_processes(port, "policy");
-    assert_eq!(policy.len(), 1, "{policy:?}");
-    // SAFETY: plain kill(2) on a child of our child.
-    unsafe { libc::kill(policy[0] as i32, libc::SIGKILL) };
+    kill_node_process(port, "policy");
     std::thread::sleep(Duration::from_millis(700));
     let o = ratelab(&["top", "--connect", &ep, "--once"]);
     let out = text(&o.stdout);
