@@ -728,6 +728,24 @@ mod tests {
                 "{footer}"
             );
         }
+        // Tab selects to look, and says the keys do nothing to it; the help lists only the
+        // keys that act here.
+        app.on_msg(Msg::SelectNext);
+        let text = render(&app, 120, 40);
+        assert!(text.contains("sensor selected (read-only)"), "{text}");
+        assert!(!text.contains("its rate"), "{text}");
+        app.on_msg(Msg::Back);
+        app.on_msg(Msg::ToggleHelp);
+        let text = render(&app, 120, 40);
+        assert!(text.contains("this lab only watches"), "{text}");
+        assert!(
+            text.contains("quit") && text.contains("wire p50/p99"),
+            "{text}"
+        );
+        for refused in ["pause", "rate ladder", "reset"] {
+            assert!(!text.contains(refused), "{refused} in:\n{text}");
+        }
+        app.on_msg(Msg::ToggleHelp);
         // A key that would change the graph is refused in words, and sends nothing.
         app.on_msg(Msg::RateUp);
         let msg = app.view().message.unwrap_or_default();

@@ -262,7 +262,7 @@ impl Widget for &View {
         render_latency(self, latency, buf);
         render_footer(self, footer, buf);
         if self.help {
-            render_help(area, buf);
+            render_help(area, buf, self.attached.is_some());
         }
     }
 }
@@ -339,8 +339,20 @@ fn depth_summary(topics: &[TopicView]) -> String {
     }
 }
 
-/// With a selection: what is selected and what the keys now do to it.
+/// With a selection: what is selected and what the keys now do to it (in an attached lab,
+/// which only watches, nothing: the selection only shows it).
 fn selection_title(v: &View) -> Option<String> {
+    if v.attached.is_some() {
+        let name = v
+            .nodes
+            .iter()
+            .find(|n| n.selected)
+            .map(|n| n.name.clone())
+            .or_else(|| v.topics.iter().find(|t| t.selected).map(|t| t.name.clone()))?;
+        return Some(format!(
+            " {name} selected (read-only) · Tab next · Esc clears "
+        ));
+    }
     if let Some(n) = v.nodes.iter().find(|n| n.selected) {
         return Some(format!(
             " {} selected: -/+ its rate · Tab next · Esc clears ",
@@ -972,15 +984,20 @@ fn render_footer(v: &View, area: Rect, buf: &mut Buffer) {
     Paragraph::new(line).render(area, buf);
 }
 
-fn render_help(area: Rect, buf: &mut Buffer) {
+/// The key help over the lab; `attached`: only the keys that act in a lab that watches a
+/// graph across processes (the others would be refused).
+fn render_help(area: Rect, buf: &mut Buffer, attached: bool) {
     let mut lines: Vec<Line> = BINDINGS
         .iter()
+        .filter(|b| !attached || b.only_views())
         .map(|b| Line::from(vec![format!("{:>16}  ", b.label).bold(), b.help.into()]))
         .collect();
     lines.push(Line::from(""));
     lines.extend(
         HELP_NOTES
             .iter()
+            // Attached, the ladders and the fall's keys do not apply; the wire's note does.
+            .filter(|(k, _)| !attached || k.starts_with("wire"))
             .map(|(k, d)| Line::from(vec![format!("{k:>16}  ").bold(), (*d).into()])),
     );
     let w = 90.min(area.width);
@@ -992,7 +1009,12 @@ fn render_help(area: Rect, buf: &mut Buffer) {
         height: h,
     };
     Clear.render(popup, buf);
+    let title = if attached {
+        " keys: this lab only watches (? or Esc to close) "
+    } else {
+        " keys (? or Esc to close) "
+    };
     Paragraph::new(lines)
-        .block(Block::bordered().title(" keys (? or Esc to close) "))
+        .block(Block::bordered().title(title))
         .render(popup, buf);
 }
