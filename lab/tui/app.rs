@@ -732,6 +732,11 @@ impl App {
                 .map(Nanos::as_secs_f64)
                 .filter(|&t| t > 0.0)
                 .collect(),
+            // The run's first segment, whose first step came over a second after its start.
+            joined_s: seg
+                .first_step
+                .filter(|t| seg.cause.is_none() && *t > seg.start + Nanos::SECOND)
+                .map(Nanos::as_secs_f64),
         }
     }
 

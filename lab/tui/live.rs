@@ -92,6 +92,8 @@ pub struct Segment {
     baseline: Option<StepRecord>,
     /// Sense→act latency of the steps since `start`.
     pub latency: ExactLatency,
+    /// Run time of the first step it holds (a lab attached mid-run sees none before).
+    pub first_step: Option<Nanos>,
 }
 
 /// The lab's window and segment, fed with every step record and every change.
@@ -129,8 +131,12 @@ impl Live {
             if self.segment.baseline.is_none_or(|b| b.t <= s.t) {
                 self.segment.baseline = Some(s);
             }
-        } else if let Some(l) = s.latency {
-            self.segment.latency.record(l);
+        } else {
+            let first = self.segment.first_step.get_or_insert(s.t);
+            *first = (*first).min(s.t);
+            if let Some(l) = s.latency {
+                self.segment.latency.record(l);
+            }
         }
         self.window.push_back(s);
         let now = self.last.map_or(s.t, |l| l.t.max(s.t));
@@ -171,12 +177,14 @@ impl Live {
             .filter(|r| r.t >= at)
             .filter_map(|r| r.latency)
             .collect();
+        let first_step = self.window.iter().filter(|r| r.t >= at).map(|r| r.t).min();
         self.segment = Segment {
             index: self.segment.index + 1,
             start: at,
             cause: Some(cause),
             baseline,
             latency,
+            first_step,
         };
         self.marks.push_back(at);
         while self.marks.len() > MAX_MARKS {

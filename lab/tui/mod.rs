@@ -422,6 +422,33 @@ mod tests {
     }
 
     #[test]
+    fn a_lab_attached_mid_run_says_its_latency_counts_from_when_it_joined() {
+        // The steps of a run from 6 s on, as a lab attached then sees them.
+        let cfg = virtual_cfg(50.0, 8);
+        let report = run(&cfg, Box::new(Scripted), RunOptions::new()).unwrap();
+        let (tx, _rx) = crossbeam_channel::unbounded();
+        let mut app = App::new(tx, "scripted".into(), None, Speed::Times(1.0));
+        app.set_attached(super::attached_label(&cfg.graph));
+        app.on_telemetry(Telemetry::Started {
+            cfg,
+            policy: "scripted".into(),
+            recording: None,
+        });
+        let late = report
+            .trace
+            .iter()
+            .filter(|s| s.t >= ratelab::Nanos(6_000_000_000));
+        for s in late {
+            app.on_telemetry(Telemetry::Step(Box::new(*s)));
+        }
+        let text = render(&app, 120, 40);
+        assert!(text.contains("latency since 6.00 s (joined): n="), "{text}");
+        // From the start, as in one process, it says so.
+        let (app, _rx) = app_after(virtual_cfg(50.0, 2), false);
+        assert!(render(&app, 120, 40).contains("latency since the start: n="));
+    }
+
+    #[test]
     fn a_node_box_too_narrow_for_late_shows_the_figure_alone() {
         // A real-clock node whose tick lateness p99 passes 999 µs: at 80 columns its box is
         // 14 wide inside, so "p99 1064 µs late" would be cut to "p99 1064 µs la".

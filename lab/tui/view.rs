@@ -103,6 +103,9 @@ pub struct SegmentView {
     pub window_full: bool,
     /// Run times of the changes over the last ~10 s, s (marks on the angle chart).
     pub marks_s: Vec<f64>,
+    /// When the lab saw its first step well after the run's start (attached mid-run), its
+    /// run time, s: the latency counts from there.
+    pub joined_s: Option<f64>,
 }
 
 impl SegmentView {
@@ -906,13 +909,13 @@ fn render_segment(v: &View, area: Rect, buf: &mut Buffer) {
 
 fn render_latency(v: &View, area: Rect, buf: &mut Buffer) {
     let l = &v.latency;
+    let since = match v.segment.joined_s {
+        Some(t) => format!("{t:.2} s (joined)"),
+        None => v.segment.since(),
+    };
     let figures = format!(
         "since {}: n={} │ p50 {:.1} │ p99 {:.1} │ max {:.1} ms ",
-        v.segment.since(),
-        l.count,
-        l.p50_ms,
-        l.p99_ms,
-        l.max_ms
+        since, l.count, l.p50_ms, l.p99_ms, l.max_ms
     );
     // "sense→act" when the width allows it.
     let title = [" sense→act latency ", " latency "]
