@@ -203,7 +203,7 @@ fn free_port() -> u16 {
 
 fn main() {
     // ratelab's runtime threads, as `ratelab` itself sets them.
-    ratelab::distributed::set_zenoh_runtime();
+    ratelab::distributed::set_zenoh_runtime().expect("a usable ZENOH_RUNTIME");
     let args: Vec<String> = std::env::args().collect();
     if let [_, flag, transport, endpoint] = args.as_slice() {
         if flag == "--far" {

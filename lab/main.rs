@@ -149,7 +149,10 @@ fn one_line(text: &str) -> String {
 
 fn main() -> ExitCode {
     // Before any thread starts (it sets an environment variable that Zenoh reads).
-    ratelab::distributed::set_zenoh_runtime();
+    if let Err(e) = ratelab::distributed::set_zenoh_runtime() {
+        eprintln!("error: {e}");
+        return ExitCode::from(EXIT_USAGE);
+    }
     let cli = match Cli::try_parse() {
         Ok(cli) => cli,
         Err(e) => {

@@ -60,10 +60,43 @@ pub const ZENOH_RUNTIME: &str = "(rx: (handover: app), tx: (handover: app), \
 /// reads it once, at its first use).
 ///
 /// Call it first thing in `main`, before any thread starts: it changes the process's
-/// environment, which is not safe while another thread may read it.
-pub fn set_zenoh_runtime() {
+/// environment, which is not safe while another thread may read it, and swaps the panic
+/// hook for a moment.
+///
+/// # Errors
+/// [`DistError::Usage`] when the user's `ZENOH_RUNTIME` is one Zenoh cannot use (not its
+/// RON syntax, an unknown pool or field, or no worker thread): Zenoh itself would panic on
+/// it at its first use.
+pub fn set_zenoh_runtime() -> Result<(), DistError> {
     if std::env::var_os("ZENOH_RUNTIME").is_none_or(|v| v.is_empty()) {
         std::env::set_var("ZENOH_RUNTIME", ZENOH_RUNTIME);
+        return Ok(());
+    }
+    use std::borrow::Borrow;
+    use zenoh_runtime::{RuntimeParam, ZRuntime};
+    // Zenoh parses the variable the first time a pool's settings are read, and panics on
+    // one it cannot parse: read them here, quietly, where a panic can be caught.
+    let hook = std::panic::take_hook();
+    std::panic::set_hook(Box::new(|_| {}));
+    let threads = std::panic::catch_unwind(|| {
+        ZRuntime::iter()
+            .map(|z| {
+                let p: &RuntimeParam = z.borrow();
+                p.worker_threads
+            })
+            .min()
+    });
+    std::panic::set_hook(hook);
+    match threads {
+        Ok(Some(n)) if n > 0 => Ok(()),
+        Ok(_) => Err(DistError::Usage(
+            "ZENOH_RUNTIME gives a Zenoh pool no worker thread (each needs at least one)".into(),
+        )),
+        Err(_) => Err(DistError::Usage(
+            "ZENOH_RUNTIME is not a runtime setting Zenoh can read (its RON syntax, e.g. \
+             '(rx: (worker_threads: 2))'; unset it for ratelab's own)"
+                .into(),
+        )),
     }
 }
 

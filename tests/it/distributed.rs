@@ -933,4 +933,23 @@ fn every_process_runs_zenoh_on_one_worker_unless_zenoh_runtime_says_otherwise() 
         assert!(exit_within(&mut launcher, 30).success(), "{lines:?}");
         assert_none_left(port, Duration::ZERO);
     }
+    // One Zenoh cannot use: one line and exit 2 before anything starts, not Zenoh's panic.
+    for (bad, why) in [
+        (
+            "(rx: (worker_threads: 2)",
+            "not a runtime setting Zenoh can read",
+        ),
+        (
+            "(bogus: (worker_threads: 1))",
+            "not a runtime setting Zenoh can read",
+        ),
+        ("(rx: (worker_threads: 0))", "no worker thread"),
+    ] {
+        let o = bin()
+            .args(["launch", "--processes", "--duration", "1"])
+            .env("ZENOH_RUNTIME", bad)
+            .output()
+            .unwrap();
+        assert_one_line_exit_2(&o, why);
+    }
 }
