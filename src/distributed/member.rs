@@ -623,6 +623,13 @@ pub fn run_member(opts: &MemberOptions, stop: &StopFlag) -> Result<(), DistError
     stats_done.stop();
     let _ = stats_thread.join();
     let state = result?;
+    // The launcher vanished mid-run (killed): nobody will take the report or print a
+    // summary; say so rather than end as if the run had completed.
+    if launcher_gone.is_stopped() && !stop.is_stopped() {
+        return Err(DistError::Peer(
+            "the launcher went away mid-run: this process stopped with it (no summary)".into(),
+        ));
+    }
     let wire = wire_links(&opts.process, &spec, &inbound, &wire_latency);
     send(&ToLauncher::Report {
         process: opts.process.clone(),

@@ -542,6 +542,52 @@ fn a_process_gone_for_good_is_named_missing_not_counted_as_zeros() {
 }
 
 #[test]
+fn hand_started_nodes_say_so_when_their_launcher_is_killed() {
+    let _m = crate::machine::alone();
+    let port = free_port();
+    let ep = format!("tcp/127.0.0.1:{port}");
+    let mut launcher = bin()
+        .args(["launch", "--processes", "--no-spawn", "--clock", "real"])
+        .args(["--duration", "60", "--listen", &ep])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let rx = stdout_lines(&mut launcher);
+    let mut lines = Vec::new();
+    assert!(wait_line(&rx, &mut lines, "listening on", 30), "{lines:?}");
+    let nodes: Vec<Child> = ["robot", "policy"]
+        .iter()
+        .map(|p| {
+            bin()
+                .args(["node", "--process", p, "--connect", &ep])
+                .stdout(Stdio::null())
+                .stderr(Stdio::piped())
+                .spawn()
+                .unwrap()
+        })
+        .collect();
+    for p in ["policy", "robot"] {
+        let ready = format!("process '{p}' ready");
+        assert!(wait_line(&rx, &mut lines, &ready, 30), "{lines:?}");
+    }
+    std::thread::sleep(Duration::from_millis(1500));
+    launcher.kill().unwrap(); // SIGKILL: no stop is sent
+    launcher.wait().unwrap();
+    for mut node in nodes {
+        let status = exit_within(&mut node, 30);
+        let mut err = String::new();
+        std::io::Read::read_to_string(&mut node.stderr.take().unwrap(), &mut err).unwrap();
+        assert_eq!(status.code(), Some(2), "{err}");
+        assert!(
+            err.contains("the launcher went away mid-run: this process stopped with it"),
+            "{err}"
+        );
+    }
+    assert_none_left(port, Duration::ZERO);
+}
+
+#[test]
 fn top_lists_a_running_graph() {
     let _m = crate::machine::alone();
     let port = free_port();
