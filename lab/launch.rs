@@ -7,7 +7,7 @@ use ratelab::distributed::launcher::{launch, LaunchOptions, LaunchReport};
 use ratelab::distributed::member::{run_member, LiveStats, MemberOptions};
 use ratelab::distributed::monitor::{ask_placement, PlacedProcess, Signals, Watch};
 use ratelab::distributed::zenoh::{self, Wait};
-use ratelab::distributed::{check_endpoint, open_session};
+use ratelab::distributed::{check_endpoint, live_tokens, open_session};
 use ratelab::graph::spec::{DEFAULT_GRAPH_TOML, MAX_FILE_BYTES};
 use ratelab::scheduler::StopFlag;
 use ratelab::session::Telemetry;
@@ -389,7 +389,7 @@ pub fn run_top(a: &TopArgs, stop: StopFlag) -> anyhow::Result<()> {
     let _sub = session
         .declare_subscriber("ratelab/*/@stats/*")
         .callback(move |s| {
-            if let Ok(mut m) = LiveStats::decode(&s.payload().to_bytes()) {
+            if let Some(mut m) = LiveStats::from_sample(&s) {
                 // `top` shows counters: the steps and ticks for the lab are not kept.
                 m.steps = Vec::new();
                 m.ticks = Vec::new();
@@ -490,24 +490,20 @@ pub fn run_top(a: &TopArgs, stop: StopFlag) -> anyhow::Result<()> {
 
 /// The nodes whose liveliness tokens are alive now: `(process, node)`.
 fn alive_nodes(session: &zenoh::Session) -> Vec<(String, String)> {
-    let Ok(replies) = session
-        .liveliness()
-        .get("ratelab/*/@node/*/*")
-        .timeout(Duration::from_millis(300))
-        .wait()
-    else {
-        return Vec::new();
-    };
-    let mut out = Vec::new();
-    while let Ok(r) = replies.recv() {
-        if let Ok(s) = r.result() {
-            let parts: Vec<&str> = s.key_expr().as_str().split('/').collect();
-            if let [_, _, _, p, n] = parts.as_slice() {
-                out.push(((*p).to_string(), (*n).to_string()));
-            }
-        }
-    }
-    out
+    // At most every node of 64 graphs of the largest size.
+    let max = 64 * ratelab::graph::spec::MAX_NODES;
+    live_tokens(
+        session,
+        "ratelab/*/@node/*/*",
+        Duration::from_millis(300),
+        max,
+    )
+    .iter()
+    .filter_map(|key| match key.split('/').collect::<Vec<_>>().as_slice() {
+        [_, _, _, p, n] => Some(((*p).to_string(), (*n).to_string())),
+        _ => None,
+    })
+    .collect()
 }
 
 /// The table `top` prints.

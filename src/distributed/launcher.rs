@@ -877,15 +877,14 @@ pub fn launch(
             let (stats_tx, stats_rx) = crossbeam_channel::bounded::<LiveStats>(1024);
             let mut _stats_subs = Vec::new();
             for p in names.iter().filter(|p| **p != robot) {
-                let (tx, p) = (stats_tx.clone(), p.clone());
+                let tx = stats_tx.clone();
                 _stats_subs.push(
                     session
-                        .declare_subscriber(keys.stats(&p))
-                        .callback(move |s| match LiveStats::decode(&s.payload().to_bytes()) {
-                            Ok(m) if m.process == p => {
+                        .declare_subscriber(keys.stats(p))
+                        .callback(move |s| {
+                            if let Some(m) = LiveStats::from_sample(&s) {
                                 let _ = tx.try_send(m);
                             }
-                            _ => {}
                         })
                         .wait()?,
                 );

@@ -151,6 +151,16 @@ impl LiveStats {
             Err("figures over a process's bounds".into())
         }
     }
+
+    /// A process's figures from a sample on its stats key ([`super::Keys::stats`]), as
+    /// [`LiveStats::decode`] takes them; `None` as well when they name another process than
+    /// the key's (a process's figures count only from its own key).
+    pub fn from_sample(sample: &zenoh::sample::Sample) -> Option<LiveStats> {
+        let from = sample.key_expr().as_str().rsplit('/').next().unwrap_or("");
+        LiveStats::decode(&sample.payload().to_bytes())
+            .ok()
+            .filter(|m| m.process == from)
+    }
 }
 
 /// What happened since the stats thread last published: steps and ticks, bounded.
@@ -980,30 +990,14 @@ fn wait_matching(
 /// The graphs (their names as in their keys) whose launchers this session sees, by their
 /// liveliness tokens (at most 16; asked for up to 1 s).
 fn launchers_seen(session: &zenoh::Session) -> Vec<String> {
-    let Ok(replies) = session
-        .liveliness()
-        .get("ratelab/*/@launcher")
-        .timeout(Duration::from_secs(1))
-        .wait()
-    else {
-        return Vec::new();
-    };
-    let mut graphs = Vec::new();
-    while let Ok(reply) = replies.recv() {
-        if let Ok(sample) = reply.result() {
-            let key = sample.key_expr().as_str();
-            if let Some(g) = key
-                .strip_prefix("ratelab/")
+    super::live_tokens(session, "ratelab/*/@launcher", Duration::from_secs(1), 16)
+        .iter()
+        .filter_map(|key| {
+            key.strip_prefix("ratelab/")
                 .and_then(|k| k.strip_suffix("/@launcher"))
-            {
-                graphs.push(g.to_string());
-            }
-        }
-        if graphs.len() >= 16 {
-            break;
-        }
-    }
-    graphs
+                .map(str::to_string)
+        })
+        .collect()
 }
 
 /// This process's [`LiveStats`] now.

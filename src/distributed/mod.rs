@@ -328,6 +328,27 @@ pub fn graph_hash(bytes: &[u8]) -> String {
         .collect()
 }
 
+/// The keys of the liveliness tokens alive now under `selector` (at most `max`; asked for
+/// up to `timeout`). Empty when the query cannot be made.
+pub fn live_tokens(
+    session: &zenoh::Session,
+    selector: &str,
+    timeout: std::time::Duration,
+    max: usize,
+) -> Vec<String> {
+    let Ok(replies) = session.liveliness().get(selector).timeout(timeout).wait() else {
+        return Vec::new();
+    };
+    let mut keys = Vec::new();
+    while keys.len() < max {
+        let Ok(reply) = replies.recv() else { break };
+        if let Ok(sample) = reply.result() {
+            keys.push(sample.key_expr().as_str().to_string());
+        }
+    }
+    keys
+}
+
 /// Open a Zenoh session in peer mode with multicast scouting off, listening on `listen` and
 /// connecting to `connect` (endpoints already checked).
 ///

@@ -537,11 +537,8 @@ impl Watch {
             .session
             .declare_subscriber(keys.stats("*"))
             .callback(move |s| {
-                let from = s.key_expr().as_str().rsplit('/').next().unwrap_or("");
-                match LiveStats::decode(&s.payload().to_bytes()) {
-                    // Only a process's own figures, on its own key.
-                    Ok(m) if m.process == from => send(&t, Event::Stats(Box::new(m))),
-                    _ => {}
+                if let Some(m) = LiveStats::from_sample(&s) {
+                    send(&t, Event::Stats(Box::new(m)));
                 }
             })
             .wait()?;
