@@ -307,6 +307,22 @@ fn kill_node_process(port: u16, process: &str) -> u32 {
     pids[0]
 }
 
+/// The chapter's two placement groups started by hand (`ratelab node`) against the
+/// launcher at `ep`, their stderr to `stderr()`.
+fn hand_started(ep: &str, stderr: fn() -> Stdio) -> Vec<Child> {
+    ["robot", "policy"]
+        .iter()
+        .map(|p| {
+            bin()
+                .args(["node", "--process", p, "--connect", ep])
+                .stdout(Stdio::null())
+                .stderr(stderr())
+                .spawn()
+                .unwrap()
+        })
+        .collect()
+}
+
 /// Wait up to `secs` for `child` to exit.
 fn exit_within(child: &mut Child, secs: u64) -> std::process::ExitStatus {
     let until = Instant::now() + Duration::from_secs(secs);
@@ -556,17 +572,7 @@ fn hand_started_nodes_say_so_when_their_launcher_is_killed() {
     let rx = stdout_lines(&mut launcher);
     let mut lines = Vec::new();
     assert!(wait_line(&rx, &mut lines, "listening on", 30), "{lines:?}");
-    let nodes: Vec<Child> = ["robot", "policy"]
-        .iter()
-        .map(|p| {
-            bin()
-                .args(["node", "--process", p, "--connect", &ep])
-                .stdout(Stdio::null())
-                .stderr(Stdio::piped())
-                .spawn()
-                .unwrap()
-        })
-        .collect();
+    let nodes = hand_started(&ep, Stdio::piped);
     for p in ["policy", "robot"] {
         let ready = format!("process '{p}' ready");
         assert!(wait_line(&rx, &mut lines, &ready, 30), "{lines:?}");
@@ -856,17 +862,7 @@ fn hostile_bytes_on_the_control_keys_do_not_end_a_run() {
         .wait()
         .unwrap();
     std::thread::sleep(Duration::from_millis(300));
-    let nodes: Vec<Child> = ["robot", "policy"]
-        .iter()
-        .map(|p| {
-            bin()
-                .args(["node", "--process", p, "--connect", &ep])
-                .stdout(Stdio::null())
-                .stderr(Stdio::null())
-                .spawn()
-                .unwrap()
-        })
-        .collect();
+    let nodes = hand_started(&ep, Stdio::null);
     let o = launcher.wait_with_output().unwrap();
     assert!(o.status.success(), "{}{}", text(&o.stdout), text(&o.stderr));
     for mut n in nodes {
