@@ -733,7 +733,7 @@ fn real_clock(
                 hook_due[k].store(deadline.saturating_add(period), Ordering::SeqCst);
                 let wall = wire::mono_now_ns().saturating_sub(start);
                 hook_time.fetch_max(
-                    figures_time(wall, end, &due_now(&hook_due)),
+                    figures_time(wall, end, due_now(&hook_due)),
                     Ordering::SeqCst,
                 );
             },
@@ -753,7 +753,7 @@ fn real_clock(
         std::thread::spawn(move || loop {
             let wall = wire::mono_now_ns().saturating_sub(start);
             clock.fetch_max(
-                figures_time(wall, end, &due_now(&next_due)),
+                figures_time(wall, end, due_now(&next_due)),
                 Ordering::SeqCst,
             );
             match rx.recv_timeout(Duration::from_millis(50)) {
@@ -805,9 +805,9 @@ fn real_clock(
     Ok(GraphState::capture(handles, at, &ticks_now, Some(timing)))
 }
 
-/// The deadlines in `next_due`, ns, as they are now.
-fn due_now(next_due: &[AtomicU64]) -> Vec<u64> {
-    next_due.iter().map(|d| d.load(Ordering::SeqCst)).collect()
+/// The deadlines in `next_due`, ns, as they are now (read on every tick: no allocation).
+fn due_now(next_due: &[AtomicU64]) -> impl Iterator<Item = u64> + '_ {
+    next_due.iter().map(|d| d.load(Ordering::SeqCst))
 }
 
 /// The run time up to which a real-clock process's figures are final, ns: now (`wall_ns`,
@@ -816,8 +816,8 @@ fn due_now(next_due: &[AtomicU64]) -> Vec<u64> {
 /// sampled; its sample will carry its start time, which is at or after its deadline. So a
 /// watcher that releases a step of run time `t` once the figures cover `t` has every sample
 /// up to `t` ([`LiveStats::t_ns`]).
-fn figures_time(wall_ns: u64, end_ns: u64, next_due_ns: &[u64]) -> u64 {
-    let due = next_due_ns.iter().copied().min().unwrap_or(u64::MAX);
+fn figures_time(wall_ns: u64, end_ns: u64, next_due_ns: impl IntoIterator<Item = u64>) -> u64 {
+    let due = next_due_ns.into_iter().min().unwrap_or(u64::MAX);
     wall_ns.min(end_ns).min(due.saturating_sub(1))
 }
 
@@ -1077,19 +1077,19 @@ mod tests {
         const MS: u64 = 1_000_000;
         let end = 10_000 * MS;
         // Both nodes' next ticks are due later than now: the figures are now's.
-        assert_eq!(figures_time(15 * MS, end, &[20 * MS, 40 * MS]), 15 * MS);
+        assert_eq!(figures_time(15 * MS, end, [20 * MS, 40 * MS]), 15 * MS);
         // The sensor's tick due at 20 ms may be running at 21 ms, its sample not yet kept:
         // the figures stop just before it, whatever the other node.
-        assert_eq!(figures_time(21 * MS, end, &[20 * MS, 40 * MS]), 20 * MS - 1);
+        assert_eq!(figures_time(21 * MS, end, [20 * MS, 40 * MS]), 20 * MS - 1);
         // A node late by seconds holds them back as long as its tick has not been sampled.
         assert_eq!(
-            figures_time(3_000 * MS, end, &[20 * MS, 40 * MS]),
+            figures_time(3_000 * MS, end, [20 * MS, 40 * MS]),
             20 * MS - 1
         );
         // Never past the run's end; no local node: now.
-        assert_eq!(figures_time(12_000 * MS, end, &[u64::MAX]), end);
-        assert_eq!(figures_time(5 * MS, end, &[]), 5 * MS);
+        assert_eq!(figures_time(12_000 * MS, end, [u64::MAX]), end);
+        assert_eq!(figures_time(5 * MS, end, []), 5 * MS);
         // A first tick due at 0 that has not happened: nothing is final yet.
-        assert_eq!(figures_time(1, end, &[0]), 0);
+        assert_eq!(figures_time(1, end, [0]), 0);
     }
 }
