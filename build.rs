@@ -1,5 +1,6 @@
 //! Build script:
-//! 1. embeds MuJoCo's library folder as an rpath, so binaries run without LD_LIBRARY_PATH;
+//! 1. embeds MuJoCo's and libpython's library folders as rpaths, so binaries run without
+//!    LD_LIBRARY_PATH (libpython: the one PyO3 links, of the `python3` found at build time);
 //! 2. tells the tests which exercise predictions are still empty, so each exercise's
 //!    prediction check is reported as *ignored* (not passed) until the learner writes one.
 
@@ -17,6 +18,7 @@ fn main() {
     if let Ok(dir) = std::env::var("MUJOCO_DYNAMIC_LINK_DIR") {
         println!("cargo:rustc-link-arg=-Wl,-rpath,{dir}");
     }
+    pyo3_build_config::add_libpython_rpath_link_args();
     for (ex, file, keys) in [
         ("ex1", "exercises/ex1_rate_cliff.toml", &["fails_at_hz"][..]),
         (

@@ -4,5 +4,9 @@
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 "$root/scripts/setup-mujoco.sh"
+# The tests run Python brains and nodes with the packages of .venv (NumPy): ratelab adds an
+# active virtual environment's packages at run time (the build does not depend on it).
+VIRTUAL_ENV="$("$root/scripts/setup-python.sh")"
+export VIRTUAL_ENV
 cd "$root"
 exec cargo test --release --locked "$@"
