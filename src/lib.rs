@@ -6,7 +6,7 @@
 //! This crate knows nothing of terminals: the lab (`lab/`) draws it.
 //!
 //! Layout, one module per idea: [`time`], [`clock`], [`topic`], [`rate`], [`node`],
-//! [`plant`], [`policy`], [`msg`], [`graph`] (+ its file format, [`graph::spec`]),
+//! [`plant`], [`policy`] (+ brains in [`python`]), [`msg`], [`graph`] (+ its file format, [`graph::spec`]),
 //! [`scheduler`] (+ [`realtime`]), [`metrics`], [`config`], [`run`], [`session`],
 //! [`distributed`] (the graph across processes, over Zenoh);
 //! files the user names are read through [`input`] and written through [`output`].
@@ -26,6 +26,7 @@ pub mod np_random;
 pub mod output;
 pub mod plant;
 pub mod policy;
+pub mod python;
 pub mod qos;
 pub mod rate;
 pub mod realtime;

@@ -1,0 +1,236 @@
+//! Python inside ratelab: the embedded interpreter (PyO3) that runs learners' code — a brain
+//! written as a Python function ([`brain`]), a node written like an rclpy node ([`node`]) —
+//! within the graph, under either clock.
+//!
+//! - **Which Python.** The `libpython` ratelab was built against (the `python3` on `PATH`
+//!   at build time; `.cargo/config.toml` pins `PYO3_PYTHON` so the build does not change
+//!   with the shell), found at run time through an rpath. An active virtual environment
+//!   (`VIRTUAL_ENV`) has its `site-packages` added, so `import numpy` or `import torch`
+//!   work as in that environment's `python`.
+//! - **One interpreter, one lock.** Python code of every node shares the interpreter and its
+//!   global interpreter lock (GIL): under the real clock two Python callbacks never run at
+//!   once, whatever threads their nodes have. Under the virtual clock nothing changes: ticks
+//!   run one at a time anyway.
+//! - **Errors are one line**, `FILE:LINE: ExceptionType: message`, at the innermost frame
+//!   in the learner's own folder (`support.py` formats them). A callback that raises
+//!   mid-run panics with that line; the scheduler catches it and the run ends as
+//!   "node 'X' failed" at that instant ([`crate::scheduler::EndReason::NodeFailed`]).
+//! - **Callbacks that never return.** Every call into learners' code is registered
+//!   ([`CallbackGuard`]); a watchdog thread warns once when one has run for
+//!   [`OVERRUN_WARNING`], and [`interrupt_callbacks`] (Ctrl-C) raises `KeyboardInterrupt`
+//!   inside the ones still running (`PyThreadState_SetAsyncExc`), so a `while True: pass`
+//!   cannot hang the run.
+
+pub mod brain;
+pub mod node;
+
+use pyo3::prelude::*;
+use pyo3::types::PyModule;
+use std::collections::HashMap;
+use std::sync::{Mutex, OnceLock};
+use std::time::{Duration, Instant};
+
+/// The largest Python script read, bytes (a learner's node is a few KiB).
+pub const MAX_SCRIPT_BYTES: u64 = 1 << 20;
+
+/// A callback running this long without returning is reported once on stderr: far beyond
+/// any period ratelab runs (10 ms at the slowest rate, 0.1 Hz, is 10 s; most are 20 ms).
+pub const OVERRUN_WARNING: Duration = Duration::from_secs(2);
+
+/// Why Python code could not be loaded. One line each, naming the file.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum PythonError {
+    /// The interpreter could not start or lacks a module ratelab needs (NumPy).
+    #[error("{0}")]
+    Interpreter(String),
+    /// The script could not be read (missing, not a file, too large, not UTF-8).
+    #[error("{0}")]
+    Input(String),
+    /// The script failed to load: a syntax error, an exception at import, a broken contract
+    /// (`FILE:LINE: ExceptionType: message`).
+    #[error("{0}")]
+    Script(String),
+}
+
+const SUPPORT_SOURCE: &std::ffi::CStr = {
+    const BYTES: &[u8] = concat!(include_str!("support.py"), "\0").as_bytes();
+    match std::ffi::CStr::from_bytes_with_nul(BYTES) {
+        Ok(s) => s,
+        Err(_) => panic!("support.py holds no NUL byte"),
+    }
+};
+
+/// The support module (`support.py`), once the interpreter is up.
+static SUPPORT: OnceLock<Result<Py<PyModule>, String>> = OnceLock::new();
+
+/// Start the interpreter (once per process) and return ratelab's support module.
+///
+/// # Errors
+/// [`PythonError::Interpreter`] when the support module cannot be set up.
+pub fn support(py: Python<'_>) -> Result<&Bound<'_, PyModule>, PythonError> {
+    match SUPPORT.get() {
+        Some(Ok(m)) => Ok(m.bind(py)),
+        Some(Err(e)) => Err(PythonError::Interpreter(e.clone())),
+        None => unreachable!("support() is called inside attach(), after start()"),
+    }
+}
+
+/// Start the embedded interpreter if it is not running, add the active virtual
+/// environment's packages, and load the support module. Cheap after the first call.
+///
+/// # Errors
+/// [`PythonError::Interpreter`] when the support module cannot be loaded.
+pub fn start() -> Result<(), PythonError> {
+    let result = SUPPORT.get_or_init(|| {
+        // Signal handling stays ratelab's (Ctrl-C is handled by the binary, not Python).
+        Python::initialize();
+        Python::attach(|py| {
+            add_virtual_env(py)?;
+            PyModule::from_code(py, SUPPORT_SOURCE, c"<ratelab>", c"_ratelab_support")
+                .map(Bound::unbind)
+                .map_err(|e| format!("ratelab's Python support failed to load: {e}"))
+        })
+    });
+    start_watchdog();
+    match result {
+        Ok(_) => Ok(()),
+        Err(e) => Err(PythonError::Interpreter(e.clone())),
+    }
+}
+
+/// `site.addsitedir` the `site-packages` of `$VIRTUAL_ENV`, as its `python` would see it.
+fn add_virtual_env(py: Python<'_>) -> Result<(), String> {
+    let Some(venv) = std::env::var_os("VIRTUAL_ENV").filter(|v| !v.is_empty()) else {
+        return Ok(());
+    };
+    let version = py.version_info();
+    let dir = std::path::Path::new(&venv).join(format!(
+        "lib/python{}.{}/site-packages",
+        version.major, version.minor
+    ));
+    if !dir.is_dir() {
+        // A virtual environment of another Python version: say so rather than guess.
+        eprintln!(
+            "[ratelab] warning: VIRTUAL_ENV={} has no {} (ratelab embeds Python {}.{}); its packages are not importable",
+            std::path::Path::new(&venv).display(),
+            dir.display(),
+            version.major,
+            version.minor
+        );
+        return Ok(());
+    }
+    py.import("site")
+        .and_then(|site| site.call_method1("addsitedir", (dir.to_string_lossy().as_ref(),)))
+        .map(drop)
+        .map_err(|e| format!("cannot add {} to Python's path: {e}", dir.display()))
+}
+
+/// One line for a Python exception raised by code of `script` (see the module docs).
+pub fn describe(py: Python<'_>, err: &PyErr, script: &str) -> String {
+    let described = support(py).ok().and_then(|m| {
+        m.call_method1("describe", (err.value(py), script))
+            .and_then(|s| s.extract::<String>())
+            .ok()
+    });
+    described.unwrap_or_else(|| format!("{script}: {err}"))
+}
+
+/// A call into learners' code in progress: what the watchdog knows of it.
+struct Running {
+    /// Who is called (`brain policy.py:act`), for the messages.
+    what: String,
+    /// When the call started.
+    since: Instant,
+    /// Already reported as overrunning.
+    warned: bool,
+}
+
+/// Calls in progress, by Python thread id.
+fn running() -> &'static Mutex<HashMap<u64, Running>> {
+    static RUNNING: OnceLock<Mutex<HashMap<u64, Running>>> = OnceLock::new();
+    RUNNING.get_or_init(Default::default)
+}
+
+fn lock_running() -> std::sync::MutexGuard<'static, HashMap<u64, Running>> {
+    running().lock().unwrap_or_else(|e| e.into_inner())
+}
+
+/// Registers a call into learners' code for the watchdog and for [`interrupt_callbacks`];
+/// unregisters it when dropped. Create it while attached to the interpreter.
+pub struct CallbackGuard {
+    thread: u64,
+}
+
+impl CallbackGuard {
+    /// Register the calling thread as running `what`.
+    pub fn enter(what: &str) -> CallbackGuard {
+        // SAFETY: PyThread_get_thread_ident only reads the calling thread's id.
+        let thread = unsafe { pyo3::ffi::PyThread_get_thread_ident() } as u64;
+        lock_running().insert(
+            thread,
+            Running {
+                what: what.to_string(),
+                since: Instant::now(),
+                warned: false,
+            },
+        );
+        CallbackGuard { thread }
+    }
+}
+
+impl Drop for CallbackGuard {
+    fn drop(&mut self) {
+        lock_running().remove(&self.thread);
+    }
+}
+
+/// Warns once (stderr) about each call into learners' code that has run for
+/// [`OVERRUN_WARNING`] without returning.
+fn start_watchdog() {
+    static STARTED: std::sync::Once = std::sync::Once::new();
+    STARTED.call_once(|| {
+        let _ = std::thread::Builder::new()
+            .name("python-watchdog".into())
+            .spawn(|| loop {
+                std::thread::sleep(Duration::from_millis(100));
+                for r in lock_running().values_mut() {
+                    let ran = r.since.elapsed();
+                    if ran >= OVERRUN_WARNING && !r.warned {
+                        r.warned = true;
+                        eprintln!(
+                            "[ratelab] warning: {} has not returned after {} s (Ctrl-C interrupts it)",
+                            r.what,
+                            OVERRUN_WARNING.as_secs()
+                        );
+                    }
+                }
+            });
+    });
+}
+
+/// Raise `KeyboardInterrupt` inside every call into learners' code that has been running
+/// for at least `grace`, so that a callback that never returns cannot hang a run that was
+/// asked to stop (Ctrl-C). The interrupted call fails the node as any exception does, its
+/// message naming where it was interrupted. Does nothing when no Python code runs.
+pub fn interrupt_callbacks(grace: Duration) {
+    if SUPPORT.get().is_none() {
+        return;
+    }
+    let threads: Vec<u64> = lock_running()
+        .iter()
+        .filter(|(_, r)| r.since.elapsed() >= grace)
+        .map(|(t, _)| *t)
+        .collect();
+    if threads.is_empty() {
+        return;
+    }
+    Python::attach(|py| {
+        let exc = py.get_type::<pyo3::exceptions::PyKeyboardInterrupt>();
+        for t in threads {
+            // SAFETY: attached to the interpreter; an id that no longer runs is ignored.
+            unsafe {
+                pyo3::ffi::PyThreadState_SetAsyncExc(t as _, exc.as_ptr());
+            }
+        }
+    });
+}

@@ -1,0 +1,238 @@
+//! A node written in Python, shaped like an rclpy node: a graph file's
+//! `kind = "python"`, `script = "nodes/NAME.py"`, optional `class` and `params`.
+//!
+//! The class's constructor gets a node handle and declares, as in rclpy,
+//! `create_subscription(MsgType, "/topic", callback, qos_depth)`,
+//! `create_publisher(MsgType, "/topic", qos_depth)` and `create_timer(period_s, callback)`;
+//! the handle also has `get_clock().now()` (the run's clock, virtual or real: `.nanoseconds`),
+//! `get_logger().info/warn/error`, `get_parameter(name).value` (the graph file's `params`),
+//! `get_name()`, `get_period()` (the node's tick, s: 1 / its `rate_hz` in this run) and `rng` (a NumPy `Generator` seeded from the run's seed and the node's
+//! name). Message classes, from `import ratelab` (fields are floats in SI units):
+//!
+//! | graph file type | class | fields |
+//! | --- | --- | --- |
+//! | `state` | `ratelab.State` | `cart_pos_m`, `cart_vel_m_s`, `cos_theta`, `sin_theta`, `pole_angvel_rad_s` (float32 on the topic) |
+//! | `position` | `ratelab.Position` | `cart_pos_m`, `pole_angle_rad` |
+//! | `force` | `ratelab.Force` | `newtons` |
+//!
+//! **The executor's order within a tick** (the node ticks at its `rate_hz`, like every
+//! node): first the subscription's callback, once, for what the topic's QoS delivers at
+//! that instant (latest: the newest unread message; FIFO: the oldest unread) — not called
+//! when nothing new arrived; then every timer due at the tick (a timer fires on the node's
+//! first tick and then every `period_s`, which must be a whole number of the node's
+//! periods). What the callbacks published goes out at the end of the tick, stamped with
+//! the tick's time.
+//!
+//! **Origin stamps** (sense→act latency): what a Python node publishes carries the origin
+//! of the newest message its subscription delivered (the reading it was derived from), or
+//! its own tick time when it subscribes to nothing. ratelab's nodes read at most one topic,
+//! so this is "the oldest origin among the messages it used".
+//!
+//! Errors at load are one line ([`PythonError`]): the script missing or unreadable, a
+//! syntax error, no such class, a topic or type the graph file does not give the node, a
+//! timer period that is not a whole number of ticks. During the run an exception, a
+//! publish of the wrong message type or a parameter that does not exist fails the node
+//! at that tick, naming `FILE:LINE` of the raising frame and the exception.
+
+use super::{describe, start, support, CallbackGuard, PythonError};
+use crate::graph::spec::{MsgType, PythonNodeSpec};
+use crate::msg::{AnyTopic, ForceMsg, PositionMsg};
+use crate::time::Nanos;
+use pyo3::prelude::*;
+use pyo3::types::{PyDict, PyList};
+
+/// A fields tuple of a message as it crosses into Python.
+type Fields = Vec<f64>;
+
+/// One Python node, ready to tick (see the module docs).
+pub struct PythonNode {
+    runtime: Py<PyAny>,
+    script: String,
+    what: String,
+    input: Option<AnyTopic>,
+    output: Option<AnyTopic>,
+    /// `seq` of the newest message delivered to the subscription callback.
+    last_seq: Option<u64>,
+    /// Origin stamp of the newest message delivered.
+    origin: Option<Nanos>,
+}
+
+/// Why a tick of a Python node failed: the one-line description the node fails with.
+#[derive(Debug)]
+pub struct TickError(pub String);
+
+impl PythonNode {
+    /// Load node `name` (ticking every `period`) from `spec`, wired to `input` and
+    /// `output` (the topics the graph file gives it); `seed` is the run's.
+    ///
+    /// # Errors
+    /// [`PythonError`]: see the module docs.
+    pub fn load(
+        name: &str,
+        spec: &PythonNodeSpec,
+        period: Nanos,
+        input: Option<AnyTopic>,
+        output: Option<AnyTopic>,
+        seed: u64,
+    ) -> Result<PythonNode, PythonError> {
+        let script = spec.script.as_str();
+        let source = super::brain::read_script(script)?;
+        start()?;
+        let module_name = format!("ratelab_node_{name}");
+        let declared = |t: &Option<AnyTopic>| {
+            t.as_ref()
+                .map(|t| (t.name().to_string(), msg_type(t).as_str()))
+        };
+        Python::attach(|py| {
+            let support = support(py)?;
+            let fail = |e: PyErr| PythonError::Script(describe(py, &e, script));
+            let _running = CallbackGuard::enter(&format!("node '{name}' ({script}) loading"));
+            support.call_method0("install_message_module").map_err(fail)?;
+            let module = support
+                .call_method1("load_module", (script, source, module_name))
+                .map_err(fail)?;
+            let params = PyDict::new(py);
+            for (k, v) in &spec.params {
+                params.set_item(k, to_python(py, v)).map_err(fail)?;
+            }
+            let runtime = support
+                .call_method1(
+                    "node_runtime",
+                    (
+                        module,
+                        script,
+                        spec.class.as_deref(),
+                        name,
+                        period.0,
+                        declared(&input),
+                        declared(&output),
+                        params,
+                        seed,
+                    ),
+                )
+                .map_err(fail)?;
+            Ok(PythonNode {
+                runtime: runtime.unbind(),
+                script: script.to_string(),
+                what: format!("node '{name}' ({script})"),
+                input,
+                output,
+                last_seq: None,
+                origin: None,
+            })
+        })
+    }
+
+    /// One tick at run time `now` (see the module docs for the order of callbacks).
+    ///
+    /// # Errors
+    /// [`TickError`] with the one-line description when a callback raised or published
+    /// something that is not a message of its topic's type.
+    pub fn tick(&mut self, now: Nanos) -> Result<(), TickError> {
+        let delivered = self.input.as_ref().and_then(|t| {
+            let (seq, origin, fields) = read(t, now)?;
+            (self.last_seq != Some(seq)).then(|| {
+                self.last_seq = Some(seq);
+                self.origin = Some(origin);
+                fields
+            })
+        });
+        let published: Vec<Fields> = Python::attach(|py| {
+            let _running = CallbackGuard::enter(&self.what);
+            self.runtime
+                .call_method1(py, "tick", (now.0, delivered))
+                .and_then(|out| {
+                    let out = out.bind(py).cast::<PyList>().map_err(PyErr::from)?;
+                    out.iter().map(|m| m.extract::<Fields>()).collect()
+                })
+                .map_err(|e| TickError(describe(py, &e, &self.script)))
+        })?;
+        if let Some(out) = &self.output {
+            let origin = if self.input.is_some() {
+                self.origin
+            } else {
+                Some(now)
+            };
+            for fields in published {
+                publish(out, &fields, now, origin);
+            }
+        }
+        Ok(())
+    }
+}
+
+fn msg_type(t: &AnyTopic) -> MsgType {
+    match t {
+        AnyTopic::State(_) => MsgType::State,
+        AnyTopic::Position(_) => MsgType::Position,
+        AnyTopic::Force(_) => MsgType::Force,
+    }
+}
+
+/// Read `t` at `now` by its QoS: the message's seq, origin (its own stamp when it has
+/// none) and fields.
+fn read(t: &AnyTopic, now: Nanos) -> Option<(u64, Nanos, Fields)> {
+    fn parts<T>(m: crate::topic::Message<T>, fields: Fields) -> (u64, Nanos, Fields) {
+        (m.seq, m.origin_stamp.unwrap_or(m.stamp), fields)
+    }
+    Some(match t {
+        AnyTopic::State(t) => {
+            let m = t.read(now)?;
+            let f = m.data.map(f64::from).to_vec();
+            parts(m, f)
+        }
+        AnyTopic::Position(t) => {
+            let m = t.read(now)?;
+            let f = vec![m.data.cart_pos_m, m.data.pole_angle_rad];
+            parts(m, f)
+        }
+        AnyTopic::Force(t) => {
+            let m = t.read(now)?;
+            let f = vec![m.data.newtons];
+            parts(m, f)
+        }
+    })
+}
+
+/// Publish a fields tuple (checked against the type by the Python side) on `t`.
+fn publish(t: &AnyTopic, f: &[f64], now: Nanos, origin: Option<Nanos>) {
+    let at = |i: usize| f.get(i).copied().unwrap_or(0.0);
+    match t {
+        AnyTopic::State(t) => {
+            t.publish(
+                [at(0), at(1), at(2), at(3), at(4)].map(|v| v as f32),
+                now,
+                origin,
+            );
+        }
+        AnyTopic::Position(t) => {
+            let m = PositionMsg {
+                cart_pos_m: at(0),
+                pole_angle_rad: at(1),
+            };
+            t.publish(m, now, origin);
+        }
+        AnyTopic::Force(t) => {
+            t.publish(ForceMsg { newtons: at(0) }, now, origin);
+        }
+    }
+}
+
+/// A graph file's parameter as a Python value.
+fn to_python<'py>(py: Python<'py>, v: &toml::Value) -> Bound<'py, PyAny> {
+    use pyo3::IntoPyObjectExt;
+    let any = match v {
+        toml::Value::Integer(i) => i.into_bound_py_any(py),
+        toml::Value::Float(f) => f.into_bound_py_any(py),
+        toml::Value::Boolean(b) => b.into_bound_py_any(py),
+        toml::Value::String(s) => s.into_bound_py_any(py),
+        toml::Value::Array(a) => a
+            .iter()
+            .map(|x| to_python(py, x))
+            .collect::<Vec<_>>()
+            .into_bound_py_any(py),
+        // Refused by the graph file's rules (src/graph/spec.rs).
+        other => other.to_string().into_bound_py_any(py),
+    };
+    any.unwrap_or_else(|_| py.None().into_bound(py))
+}

@@ -1,0 +1,367 @@
+"""ratelab's side of the embedded interpreter (src/python): loads a learner's script, calls
+its brain, and says in one line what went wrong. Internal to ratelab, not an API: learners
+write plain functions and classes and never import this module.
+
+Every error a learner can cause is reported as `FILE:LINE: ExceptionType: message`, the
+line being the innermost frame in the learner's own files (the folder of the script), so a
+NumPy internal never hides where the learner's code went wrong.
+"""
+
+import os
+import sys
+import traceback
+import types
+
+
+class ContractError(Exception):
+    """A script broke ratelab's contract (a missing function, a wrong return value)."""
+
+    def __init__(self, where, message):
+        super().__init__(message)
+        self.where = where
+
+
+def _one_line(text):
+    return " ".join(str(text).split())
+
+
+def describe(exc, script):
+    """One line for `exc` raised by code of `script` (its path as the user gave it)."""
+    if isinstance(exc, ContractError):
+        return f"{exc.where}: {_one_line(exc)}"
+    name = type(exc).__name__
+    if isinstance(exc, SyntaxError) and exc.filename == script:
+        return f"{script}:{exc.lineno}: {name}: {_one_line(exc.msg)}"
+    frames = traceback.extract_tb(exc.__traceback__)
+    folder = os.path.dirname(os.path.abspath(script))
+    mine = [f for f in frames if os.path.dirname(os.path.abspath(f.filename)) == folder]
+    frame = (mine or frames or [None])[-1]
+    where = f"{frame.filename}:{frame.lineno}" if frame is not None else script
+    message = _one_line(exc)
+    return f"{where}: {name}: {message}" if message else f"{where}: {name}"
+
+
+def load_module(script, source, module_name):
+    """Run `source` (the text of `script`) as a fresh module and return it. The script's
+    folder goes first on sys.path, as `python script.py` does, so it can import its
+    neighbours."""
+    code = compile(source, script, "exec", dont_inherit=True)
+    module = types.ModuleType(module_name)
+    module.__file__ = script
+    folder = os.path.dirname(os.path.abspath(script))
+    if folder not in sys.path:
+        sys.path.insert(0, folder)
+    sys.modules[module_name] = module
+    exec(code, module.__dict__)
+    return module
+
+
+def brain_caller(module, function, script):
+    """The chapter's `load_policy` contract for `FILE.py:FUNCTION`: `FUNCTION(obs)` with the
+    observation as a NumPy float32[5] array, returning a float or a one-element array-like,
+    converted to float32. Returns a callable from a 5-tuple of floats to a Python float
+    (ratelab clips it to [-1, 1])."""
+    fn = getattr(module, function, None)
+    if fn is None:
+        defined = sorted(
+            k for k, v in vars(module).items() if callable(v) and not k.startswith("_")
+        )
+        hint = f" (it defines {', '.join(defined)})" if defined else ""
+        raise ContractError(script, f"no function '{function}'{hint}; a brain is "
+                            f"`def {function}(obs): return action`")
+    if not callable(fn):
+        raise ContractError(script, f"'{function}' is a {type(fn).__name__}, not a function")
+    import numpy as np
+
+    array, asarray, f32 = np.array, np.asarray, np.float32
+    code = getattr(fn, "__code__", None)
+    where = f"{code.co_filename}:{code.co_firstlineno}" if code else script
+
+    def call(obs):
+        result = fn(array(obs, dtype=f32))
+        try:
+            a = asarray(result, dtype=f32)
+        except (TypeError, ValueError):
+            a = None
+        if a is None or a.size != 1:
+            shown = repr(result)
+            shown = shown if len(shown) <= 60 else shown[:57] + "..."
+            raise ContractError(where, f"{function}() returned {shown}; expected a float "
+                                "or a one-element array (the force command in [-1, 1])")
+        return float(a.reshape(-1)[0])
+
+    return call
+
+
+# ---- Python nodes (src/python/node.rs): an rclpy-shaped handle over one ratelab node -----
+
+class _Msg:
+    """A message with named fields in SI units; positional or keyword construction."""
+
+    __slots__ = ()
+    FIELDS = ()
+
+    def __init__(self, *args, **kwargs):
+        if len(args) > len(self.FIELDS):
+            raise TypeError(f"{type(self).__name__} has {len(self.FIELDS)} fields: "
+                            f"{', '.join(self.FIELDS)}")
+        values = dict(zip(self.FIELDS, args))
+        for k, v in kwargs.items():
+            if k not in self.FIELDS:
+                raise TypeError(f"{type(self).__name__} has no field '{k}' "
+                                f"(fields: {', '.join(self.FIELDS)})")
+            values[k] = v
+        for k in self.FIELDS:
+            object.__setattr__(self, k, float(values.get(k, 0.0)))
+
+    def __repr__(self):
+        inner = ", ".join(f"{k}={getattr(self, k)!r}" for k in self.FIELDS)
+        return f"{type(self).__name__}({inner})"
+
+    def _fields(self):
+        return tuple(float(getattr(self, k)) for k in self.FIELDS)
+
+
+class State(_Msg):
+    """The full state, the chapter's observation (float32 on the wire): cart position m,
+    cart velocity m/s, cos θ, sin θ, pole angular velocity rad/s."""
+
+    __slots__ = ("cart_pos_m", "cart_vel_m_s", "cos_theta", "sin_theta", "pole_angvel_rad_s")
+    FIELDS = __slots__
+
+
+class Position(_Msg):
+    """A position measurement: cart position m, pole angle from upright rad."""
+
+    __slots__ = ("cart_pos_m", "pole_angle_rad")
+    FIELDS = __slots__
+
+
+class Force(_Msg):
+    """A force on the cart, N (the motor's range is ±10 N; the plant clips beyond it)."""
+
+    __slots__ = ("newtons",)
+    FIELDS = __slots__
+
+
+MESSAGE_TYPES = {"state": State, "position": Position, "force": Force}
+
+
+class Time:
+    """A run time, as rclpy's `Time`: `.nanoseconds` (int) and `.seconds` (float)."""
+
+    __slots__ = ("nanoseconds",)
+
+    def __init__(self, nanoseconds):
+        self.nanoseconds = nanoseconds
+
+    @property
+    def seconds(self):
+        return self.nanoseconds / 1e9
+
+    def __repr__(self):
+        return f"Time(nanoseconds={self.nanoseconds})"
+
+
+class Clock:
+    """The run's clock (virtual or real): `now()` is the current tick's run time."""
+
+    def __init__(self, runtime):
+        self._runtime = runtime
+
+    def now(self):
+        return Time(self._runtime.now_ns)
+
+
+class Logger:
+    """`info`, `warn`/`warning`, `error`: one line on stderr, naming the node."""
+
+    def __init__(self, name):
+        self._name = name
+
+    def _say(self, level, text):
+        text = " ".join(str(text).split())
+        print(f"[{self._name}] {level}: {text}", file=sys.stderr, flush=True)
+
+    def info(self, text):
+        self._say("info", text)
+
+    def warn(self, text):
+        self._say("warning", text)
+
+    warning = warn
+
+    def error(self, text):
+        self._say("error", text)
+
+
+class Parameter:
+    """A parameter from the graph file's `params`, as rclpy's: `.name`, `.value`."""
+
+    __slots__ = ("name", "value")
+
+    def __init__(self, name, value):
+        self.name, self.value = name, value
+
+
+class Publisher:
+    """What `create_publisher` returns: `publish(msg)` sends `msg` on the node's topic at
+    the end of the callback that published it, stamped with the tick's time."""
+
+    def __init__(self, runtime, msg_type, topic):
+        self._runtime, self.msg_type, self.topic_name = runtime, msg_type, topic
+
+    def publish(self, msg):
+        if type(msg) is not self.msg_type:
+            raise TypeError(f"publish on '{self.topic_name}' takes a {self.msg_type.__name__}, "
+                            f"got {type(msg).__name__}")
+        self._runtime.outbox.append(msg._fields())
+
+
+def _qos_depth(qos):
+    return qos if isinstance(qos, int) else getattr(qos, "depth", qos)
+
+
+class NodeHandle:
+    """The handle a learner's class gets in its constructor, shaped like an rclpy Node:
+    create_subscription, create_publisher, create_timer, get_clock, get_logger,
+    get_parameter, get_name, and `rng` (a NumPy Generator seeded from the run's seed and
+    the node's name). Topics and types must be the ones the graph file gives the node."""
+
+    def __init__(self, runtime):
+        self._rt = runtime
+
+    def get_name(self):
+        return self._rt.name
+
+    def get_period(self):
+        """The node's period, s: 1 / its rate_hz as this run set it (flags, lab keys)."""
+        return self._rt.period_ns / 1e9
+
+    def _check(self, kind, msg_type, topic, declared):
+        if declared is None:
+            raise ContractError(self._rt.where(), f"node '{self._rt.name}' {kind} '{topic}', but "
+                                f"the graph file gives it no `{kind} = ...`")
+        name, type_name = declared
+        if topic != name:
+            raise ContractError(self._rt.where(), f"node '{self._rt.name}' {kind} '{topic}', but "
+                                f"the graph file gives it {kind} = \"{name}\"")
+        want = MESSAGE_TYPES[type_name]
+        if msg_type is not want:
+            got = getattr(msg_type, "__name__", repr(msg_type))
+            raise ContractError(self._rt.where(), f"'{topic}' carries {want.__name__} "
+                                f"(type = \"{type_name}\"), not {got}")
+
+    def create_subscription(self, msg_type, topic, callback, qos_profile=1, **_kw):
+        self._check("subscribes", msg_type, topic, self._rt.input)
+        if self._rt.subscription is not None:
+            raise ContractError(self._rt.where(), "one subscription per node (the graph file "
+                                "gives it one input topic)")
+        if not callable(callback):
+            raise ContractError(self._rt.where(), "create_subscription's callback is not callable")
+        self._rt.subscription = (msg_type, callback)
+        self._rt.qos_depths.append(_qos_depth(qos_profile))
+        return topic
+
+    def create_publisher(self, msg_type, topic, qos_profile=1, **_kw):
+        self._check("publishes", msg_type, topic, self._rt.output)
+        self._rt.qos_depths.append(_qos_depth(qos_profile))
+        return Publisher(self._rt, msg_type, topic)
+
+    def create_timer(self, timer_period_sec, callback, **_kw):
+        period_ns = self._rt.period_ns
+        ticks = float(timer_period_sec) * 1e9 / period_ns
+        every = round(ticks)
+        if every < 1 or abs(ticks - every) > 1e-6 * max(1.0, ticks):
+            raise ContractError(self._rt.where(), f"create_timer({timer_period_sec}): node "
+                                f"'{self._rt.name}' ticks every {period_ns / 1e6:g} ms (its "
+                                "rate_hz); a timer's period must be a whole number of ticks")
+        if not callable(callback):
+            raise ContractError(self._rt.where(), "create_timer's callback is not callable")
+        self._rt.timers.append((every, callback))
+
+    def get_clock(self):
+        return self._rt.clock
+
+    def get_logger(self):
+        return self._rt.logger
+
+    def get_parameter(self, name):
+        if name not in self._rt.params:
+            known = ", ".join(sorted(self._rt.params)) or "none"
+            raise ContractError(self._rt.where(), f"node '{self._rt.name}' has no parameter "
+                                f"'{name}' (the graph file's params: {known})")
+        return Parameter(name, self._rt.params[name])
+
+    @property
+    def rng(self):
+        if self._rt.rng is None:
+            import zlib
+
+            import numpy as np
+
+            self._rt.rng = np.random.default_rng([self._rt.seed, zlib.crc32(self._rt.name.encode())])
+        return self._rt.rng
+
+
+class NodeRuntime:
+    """One learner's node as ratelab drives it: `tick(now_ns, delivered)` runs the
+    subscription callback for a delivered message (a field tuple, or None), then the timers
+    due at this tick, and returns the field tuples published."""
+
+    def __init__(self, module, script, class_name, name, period_ns, input, output, params, seed):
+        self.script, self.name, self.period_ns = script, name, period_ns
+        self.input, self.output, self.params, self.seed = input, output, dict(params), seed
+        self.now_ns, self.ticks, self.outbox = 0, 0, []
+        self.subscription, self.timers, self.qos_depths, self.rng = None, [], [], None
+        self.clock, self.logger = Clock(self), Logger(name)
+        cls = self._find_class(module, class_name)
+        self.instance = cls(NodeHandle(self))
+
+    def where(self):
+        """`script:line` of the innermost frame in the learner's script (the call that
+        broke the contract), else the script."""
+        frame = sys._getframe(1)
+        while frame is not None:
+            if frame.f_code.co_filename == self.script:
+                return f"{self.script}:{frame.f_lineno}"
+            frame = frame.f_back
+        return self.script
+
+    def _find_class(self, module, class_name):
+        if class_name is not None:
+            cls = getattr(module, class_name, None)
+            if not isinstance(cls, type):
+                raise ContractError(self.script, f"no class '{class_name}'")
+            return cls
+        mine = [v for v in vars(module).values()
+                if isinstance(v, type) and v.__module__ == module.__name__]
+        if len(mine) != 1:
+            names = ", ".join(c.__name__ for c in mine) or "none"
+            raise ContractError(self.script, f"name the node's class with `class = \"...\"` "
+                                f"(the script defines {len(mine)} classes: {names})")
+        return mine[0]
+
+    def tick(self, now_ns, delivered):
+        self.now_ns, self.outbox = now_ns, []
+        if delivered is not None and self.subscription is not None:
+            msg_type, callback = self.subscription
+            callback(msg_type(*delivered))
+        for every, callback in self.timers:
+            if self.ticks % every == 0:
+                callback()
+        self.ticks += 1
+        return self.outbox
+
+
+def node_runtime(module, script, class_name, name, period_ns, input, output, params, seed):
+    return NodeRuntime(module, script, class_name, name, period_ns, input, output, params, seed)
+
+
+def install_message_module():
+    """`import ratelab` in a learner's script gives the message classes and Time."""
+    mod = types.ModuleType("ratelab")
+    mod.__doc__ = "ratelab's message types for Python nodes: State, Position, Force, Time."
+    for cls in (State, Position, Force, Time):
+        setattr(mod, cls.__name__, cls)
+    sys.modules["ratelab"] = mod
