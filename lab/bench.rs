@@ -1,5 +1,6 @@
 //! `ratelab bench`: the real clock's timing quality — per-node tick lateness (p50/p99/max)
-//! and CPU per node — with every node of the graph at one rate.
+//! and CPU per node — with every node of the graph at one rate; and what a call into
+//! Python costs per tick.
 
 use crate::cli::BenchArgs;
 use ratelab::config::duration_from_secs;
@@ -117,6 +118,15 @@ pub fn run_bench(a: &BenchArgs, stop: StopFlag) -> anyhow::Result<()> {
         "{:>8}  {:<10} {:>7} {:>9} {:>9} {:>9} {:>9} {:>8}  policy",
         "rate Hz", "node", "ticks", "p50 µs", "p99 µs", "max µs", "cpu %", "skipped"
     );
+    // What a Python brain or node adds to a tick (docs/python.md): its call, measured here.
+    match ratelab::python::brain::call_cost(20_000) {
+        Ok((p50, p99)) => println!(
+            "Python: an empty brain's call (obs to NumPy, act(obs), the float back) costs p50 {:.1} µs, p99 {:.1} µs over 20000 calls; Python nodes share one interpreter lock",
+            p50 as f64 / 1e3,
+            p99 as f64 / 1e3
+        ),
+        Err(e) => println!("Python: not measured ({e})"),
+    }
     for &hz in &a.hz {
         let rate = Rate::new(hz)?;
         let period = rate.period();

@@ -390,7 +390,8 @@ pub struct RunArgs {
     /// Executor: real (one thread per node) or virtual (deterministic).
     #[arg(long, default_value = "real", value_parser = parse_clock)]
     pub clock: ClockKind,
-    /// The brain: `scripted`, or a checkpoint (.pt/.pth, .safetensors, .onnx).
+    /// The brain: `scripted`, a Python function (`FILE.py[:FUNCTION]`, default `act`), or a
+    /// checkpoint (.pt/.pth, .safetensors, .onnx).
     #[arg(long, default_value = "scripted")]
     pub policy: String,
     /// Break the controller: control rate 5 Hz (the chapter's cliff demo).

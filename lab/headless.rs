@@ -77,6 +77,17 @@ pub fn config_from_args(a: &RunArgs) -> anyhow::Result<RunConfig> {
         faults: faults_from_args(&a.graph),
         ..RunConfig::default()
     };
+    let policy = cfg.graph.node(cfg.graph.chain.policy);
+    if let (Some(python), false) = (&policy.python, a.policy == "scripted") {
+        // A brain is what a built-in policy node runs; a Python node is its own brain.
+        anyhow::bail!(
+            "--policy {}: graph '{}' has a Python node as its policy ('{}', {}), which computes its own actions; --policy is for a graph whose policy is kind = \"policy\"",
+            a.policy,
+            cfg.graph.name,
+            policy.name,
+            python.script
+        );
+    }
     if let Some(hz) = a.sensor_hz {
         cfg.set_sensor_hz(hz)?;
     }

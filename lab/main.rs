@@ -147,6 +147,9 @@ fn one_line(text: &str) -> String {
     format!("{first} {}", listed.join(", "))
 }
 
+/// How long a Python callback may still run after Ctrl-C before it is interrupted.
+const PYTHON_GRACE: std::time::Duration = std::time::Duration::from_millis(300);
+
 fn main() -> ExitCode {
     // Before any thread starts (it sets an environment variable that Zenoh reads).
     if let Err(e) = ratelab::distributed::set_zenoh_runtime() {
@@ -186,6 +189,12 @@ fn main() -> ExitCode {
             }
             interrupted.stop();
             stop.stop();
+            // A Python callback that never returns would hold its node's tick forever:
+            // one still running after a short grace is interrupted (src/python).
+            std::thread::spawn(|| {
+                std::thread::sleep(PYTHON_GRACE);
+                ratelab::python::interrupt_callbacks(PYTHON_GRACE);
+            });
         });
     }
     let result = match &cli.command {

@@ -89,7 +89,7 @@ pub enum PolicyError {
     },
     /// An extension ratelab cannot read.
     #[error(
-        "{0}: unsupported policy file type (expected scripted, .pt, .pth, .safetensors or .onnx)"
+        "{0}: unsupported policy file type (expected scripted, .py[:FUNCTION], .pt, .pth, .safetensors or .onnx)"
     )]
     UnknownType(PathBuf),
     /// Actor tensors missing from the checkpoint.
@@ -160,6 +160,10 @@ pub enum PolicyError {
         /// Its shape.
         found: Vec<usize>,
     },
+    /// A Python brain (`FILE.py[:FUNCTION]`) that cannot be loaded: the one-line reason
+    /// ([`crate::python::PythonError`]).
+    #[error("{0}")]
+    Python(#[from] crate::python::PythonError),
     /// A tensor operation failed (should not happen after validation).
     #[error("{path}: {detail}")]
     Tensor {
@@ -170,8 +174,9 @@ pub enum PolicyError {
     },
 }
 
-/// Load the brain named by `spec`: `scripted`, or a checkpoint path (by extension:
-/// `.pt`/`.pth` PyTorch zip, `.safetensors`, `.onnx`).
+/// Load the brain named by `spec`: `scripted`, a Python function (`FILE.py[:FUNCTION]`,
+/// [`crate::python::brain`]), or a checkpoint path (by extension: `.pt`/`.pth` PyTorch zip,
+/// `.safetensors`, `.onnx`).
 ///
 /// # Errors
 /// [`PolicyError`]: the file is missing, unreadable, not a regular file, too large, of no
@@ -180,6 +185,11 @@ pub enum PolicyError {
 pub fn load_policy(spec: &str) -> Result<Box<dyn Policy>, PolicyError> {
     if spec == "scripted" {
         return Ok(Box::new(Scripted));
+    }
+    if let Some((script, function)) = crate::python::brain::parse_spec(spec) {
+        return Ok(Box::new(crate::python::brain::PythonBrain::load(
+            script, function,
+        )?));
     }
     let brain = load_checkpoint(spec)?;
     Ok(match caption(Path::new(spec)) {

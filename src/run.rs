@@ -356,7 +356,7 @@ impl GraphState {
             rates_hz: h.rates_hz(),
             ticks: ticks.to_vec(),
             timing,
-            brain: h.brain.label(),
+            brain: h.brain_label(),
             actuator: ActuatorSummary {
                 steps: log.steps,
                 fell_at: log.fell_at,

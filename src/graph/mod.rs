@@ -75,6 +75,21 @@ impl GraphHandles {
         self.rate(self.spec.chain.sensor)
     }
 
+    /// What drives the chain's policy, as metrics and summaries name it: the brain's label,
+    /// or, when the policy is a Python node, that node's script and class.
+    pub fn brain_label(&self) -> String {
+        let policy = self.spec.node(self.spec.chain.policy);
+        match &policy.python {
+            Some(p) => format!(
+                "Python node '{}' ({}{})",
+                policy.name,
+                p.script,
+                p.class.as_ref().map(|c| format!(":{c}")).unwrap_or_default()
+            ),
+            None => self.brain.label(),
+        }
+    }
+
     /// Topic `id`.
     pub fn topic(&self, id: TopicId) -> &AnyTopic {
         &self.topics[id.0]
@@ -143,6 +158,9 @@ pub enum GraphError {
     /// Queue depth 0.
     #[error(transparent)]
     Depth(#[from] ZeroDepth),
+    /// A Python node's script cannot be loaded (one line, naming the file).
+    #[error(transparent)]
+    Python(#[from] crate::python::PythonError),
 }
 
 impl Graph {
@@ -152,7 +170,8 @@ impl Graph {
     /// names are ignored here; [`crate::RunConfig::validate`] refuses them).
     ///
     /// # Errors
-    /// [`GraphError`] for a bad rate or a zero depth (a validated spec has neither).
+    /// [`GraphError`] for a bad rate or a zero depth (a validated spec has neither), or a
+    /// Python node whose script cannot be loaded.
     pub fn build(
         spec: &GraphSpec,
         plant: CartPole,
@@ -200,7 +219,7 @@ impl Graph {
             .nodes
             .iter()
             .enumerate()
-            .map(|(i, n)| {
+            .map(|(i, n)| -> Result<Box<dyn Node>, GraphError> {
                 let core = NodeCore {
                     name: n.name.clone(),
                     id: NodeId(i),
@@ -255,6 +274,17 @@ impl Graph {
                             max_force_n: n.params.max_force_n,
                         }
                     }
+                    (NodeKind::Python, (input, output)) => {
+                        let python = n.python.as_ref().expect("validated: a python node's script");
+                        Work::Python(Box::new(crate::python::node::PythonNode::load(
+                            &n.name,
+                            python,
+                            rates[i].period(),
+                            input.cloned(),
+                            output.cloned(),
+                            seed,
+                        )?))
+                    }
                     (NodeKind::Actuator, (Some(AnyTopic::Force(i)), None)) => {
                         Work::Actuator(Box::new(Actuator {
                             plant: plant.clone(),
@@ -275,9 +305,9 @@ impl Graph {
                         n.name
                     ),
                 };
-                Box::new(GraphNode::new(core, work)) as Box<dyn Node>
+                Ok(Box::new(GraphNode::new(core, work)) as Box<dyn Node>)
             })
-            .collect();
+            .collect::<Result<Vec<_>, _>>()?;
         Ok(Graph { nodes, handles })
     }
 }

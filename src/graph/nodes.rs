@@ -9,6 +9,8 @@
 //! - **policy**: runs the brain on the newest state (nothing before the first) and publishes
 //!   the force, `command × GEAR_N` newtons.
 //! - **safety**: clamps the newest force to ±`max_force_n` and republishes it.
+//! - **python**: the learner's node ([`crate::python::node`]): its subscription callback for
+//!   what arrived, then its timers; what they published goes out with the input's origin.
 //! - **actuator**: applies the newest force (zero before the first), steps the plant once and
 //!   records the step. Re-applying a stale force is the zero-order hold; a non-finite force
 //!   is refused and the last good one held. It alone steps the plant; a fall stops the graph.
@@ -88,6 +90,8 @@ pub enum Work {
     },
     /// See the module docs.
     Actuator(Box<Actuator>),
+    /// A learner's node in Python ([`crate::python::node`]).
+    Python(Box<crate::python::node::PythonNode>),
 }
 
 /// A sensor's state.
@@ -248,6 +252,11 @@ impl Node for GraphNode {
                 Flow::Continue
             }
             Work::Actuator(a) => a.tick(now),
+            Work::Python(p) => match p.tick(now) {
+                Ok(()) => Flow::Continue,
+                // The scheduler catches it and fails the node with this line.
+                Err(e) => panic!("{}", e.0),
+            },
         }
     }
 }

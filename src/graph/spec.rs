@@ -9,7 +9,7 @@
 //!
 //! [[node]]
 //! name = "sensor"
-//! kind = "sensor"          # sensor | estimator | policy | safety | actuator
+//! kind = "sensor"          # sensor | estimator | policy | safety | actuator | python
 //! rate_hz = 50
 //! publishes = "/obs"
 //!
@@ -27,7 +27,10 @@
 //!   and the zero-order hold);
 //! - each kind has a fixed shape: a sensor publishes `state` or `position`; an estimator
 //!   reads `position` and publishes `state`; a policy reads `state` and publishes `force`;
-//!   a safety node reads `force` and publishes `force`; the actuator reads `force`;
+//!   a safety node reads `force` and publishes `force`; the actuator reads `force`; a
+//!   `python` node (the learner's, [`crate::python::node`]) reads and publishes at most one
+//!   topic each, of any type, and names its `script` (relative to the graph file), its
+//!   optional `class` and `params` table;
 //! - every topic is declared once, has exactly one publisher and at most one subscriber
 //!   (the chapter's topic keeps one read mark; per-subscription queues come with QoS), and
 //!   its type matches both ends;
@@ -87,6 +90,10 @@ pub enum NodeKind {
     Safety,
     /// Applies the newest `force` (zero-order hold) and steps the plant; exactly one.
     Actuator,
+    /// A learner's node written in Python ([`crate::python::node`]): any one input and
+    /// output. In the chain's places it plays the policy (reads `state`, publishes `force`)
+    /// or a safety node (reads `force`, publishes `force`).
+    Python,
 }
 
 impl NodeKind {
@@ -98,18 +105,20 @@ impl NodeKind {
             NodeKind::Policy => "policy",
             NodeKind::Safety => "safety",
             NodeKind::Actuator => "actuator",
+            NodeKind::Python => "python",
         }
     }
     /// The message types this kind may read (none for a sensor) and publish (none for the
-    /// actuator).
-    fn shape(self) -> (Option<MsgType>, &'static [MsgType]) {
-        match self {
+    /// actuator); `None` for a Python node, which may read and publish any one topic.
+    fn shape(self) -> Option<(Option<MsgType>, &'static [MsgType])> {
+        Some(match self {
             NodeKind::Sensor => (None, &[MsgType::State, MsgType::Position]),
             NodeKind::Estimator => (Some(MsgType::Position), &[MsgType::State]),
             NodeKind::Policy => (Some(MsgType::State), &[MsgType::Force]),
             NodeKind::Safety => (Some(MsgType::Force), &[MsgType::Force]),
             NodeKind::Actuator => (Some(MsgType::Force), &[]),
-        }
+            NodeKind::Python => return None,
+        })
     }
 }
 
@@ -185,7 +194,26 @@ pub struct NodeSpec {
     /// the file gave it; `None` takes the default placement ([`GraphSpec::process_of`]).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub process: Option<String>,
+    /// A Python node's script, class and parameters; `None` for every other kind.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub python: Option<PythonNodeSpec>,
 }
+
+/// What a `kind = "python"` node runs ([`crate::python::node`]).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct PythonNodeSpec {
+    /// The script, as an absolute path (the file's `script` is relative to the graph
+    /// file's folder).
+    pub script: String,
+    /// The class to instantiate; `None`: the script's one class that takes a node handle.
+    pub class: Option<String>,
+    /// `params = { … }`: what the node's `get_parameter(name)` returns (numbers, strings,
+    /// booleans, or arrays of them).
+    pub params: toml::Table,
+}
+
+/// The most parameters a Python node may have.
+pub const MAX_PYTHON_PARAMS: usize = 64;
 
 /// One topic of a validated graph.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -314,6 +342,12 @@ struct RawNode {
     liveliness_lease_ms: Option<Spanned<f64>>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     process: Option<Spanned<String>>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    script: Option<Spanned<String>>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    class: Option<Spanned<String>>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    params: Option<Spanned<toml::Table>>,
 }
 
 #[derive(Deserialize, Serialize)]
@@ -525,6 +559,13 @@ impl GraphSpec {
                             max_force_n: (n.kind == NodeKind::Safety).then(|| f(p.max_force_n)),
                             liveliness_lease_ms: n.liveliness_lease.map(|l| f(nanos_ms(l))),
                             process: n.process.clone().map(s),
+                            script: n.python.as_ref().map(|p| s(p.script.clone())),
+                            class: n.python.as_ref().and_then(|p| p.class.clone()).map(s),
+                            params: n
+                                .python
+                                .as_ref()
+                                .filter(|p| !p.params.is_empty())
+                                .map(|p| Spanned::new(0..0, p.params.clone())),
                         },
                     )
                 })
@@ -888,7 +929,25 @@ fn build(cx: &Ctx<'_>, raw: RawGraph) -> Result<GraphSpec, SpecError> {
             actuators.push(r.name.span());
         }
         let id = NodeId(file_nodes.len());
-        let (reads, writes) = kind.shape();
+        let (reads, writes) = match kind.shape() {
+            Some(shape) => shape,
+            // A Python node: whatever its one input and output carry.
+            None => {
+                let carried = |t: &Option<Spanned<String>>| -> Result<Option<MsgType>, SpecError> {
+                    t.as_ref()
+                        .map(|t| find_topic(&topics, t).map(|i| topics[i].msg))
+                        .transpose()
+                };
+                let reads = carried(&r.subscribes)?;
+                let writes: &'static [MsgType] = match carried(&r.publishes)? {
+                    None => &[],
+                    Some(MsgType::State) => &[MsgType::State],
+                    Some(MsgType::Position) => &[MsgType::Position],
+                    Some(MsgType::Force) => &[MsgType::Force],
+                };
+                (reads, writes)
+            }
+        };
         let subscribes = match (&r.subscribes, reads) {
             (None, Some(want)) => {
                 return Err(cx.err(
@@ -979,6 +1038,7 @@ fn build(cx: &Ctx<'_>, raw: RawGraph) -> Result<GraphSpec, SpecError> {
             }
         };
         let params = node_params(cx, kind, r)?;
+        let python = python_node(cx, kind, r)?;
         let liveliness_lease = r
             .liveliness_lease_ms
             .as_ref()
@@ -1009,6 +1069,7 @@ fn build(cx: &Ctx<'_>, raw: RawGraph) -> Result<GraphSpec, SpecError> {
             params,
             liveliness_lease,
             process,
+            python,
         });
         node_spans.push(r.name.span());
     }
@@ -1123,9 +1184,15 @@ fn find_chain(spec: &GraphSpec) -> Result<Chain, String> {
                     .into(),
             );
         }
+        let reads = |m: MsgType| upstream(p).is_some_and(|(t, _)| spec.topics[t.0].msg == m);
         match spec.nodes[p.0].kind {
             NodeKind::Policy => break (p, action.unwrap_or(t)),
+            NodeKind::Python if reads(MsgType::State) => break (p, action.unwrap_or(t)),
             NodeKind::Safety => {
+                action = Some(t);
+                cur = p;
+            }
+            NodeKind::Python if reads(MsgType::Force) => {
                 action = Some(t);
                 cur = p;
             }
@@ -1135,8 +1202,20 @@ fn find_chain(spec: &GraphSpec) -> Result<Chain, String> {
     // `action` is the policy's output: the topic just downstream of it.
     let action = spec.nodes[policy.0].publishes.unwrap_or(action);
     let (obs, mut src) = upstream(policy).ok_or("the policy reads nothing")?;
-    if spec.nodes[src.0].kind == NodeKind::Estimator {
-        src = upstream(src).ok_or("the estimator reads nothing")?.1;
+    // Up through the estimators (built-in or Python) to the sensor.
+    for _ in 0..MAX_NODES {
+        match spec.nodes[src.0].kind {
+            NodeKind::Estimator | NodeKind::Python => {
+                let name = &spec.nodes[src.0].name;
+                src = upstream(src)
+                    .ok_or_else(|| format!("node '{name}' before the policy reads nothing"))?
+                    .1;
+            }
+            _ => break,
+        }
+    }
+    if spec.nodes[src.0].kind != NodeKind::Sensor {
+        return Err("the policy's input does not come from a sensor".into());
     }
     Ok(Chain {
         sensor: src,
@@ -1248,6 +1327,99 @@ fn node_params(cx: &Ctx<'_>, kind: NodeKind, r: &RawNode) -> Result<NodeParams, 
         cutoff_hz: value(&r.cutoff_hz, 10.0, 0.01..MAX_HZ, "cutoff_hz (Hz)")?,
         max_force_n: value(&r.max_force_n, GEAR_N, 0.0..GEAR_N, "max_force_n (N)")?,
     })
+}
+
+/// A Python node's script, class and parameters: required and allowed only on
+/// `kind = "python"`. The script is resolved against the graph file's folder.
+fn python_node(
+    cx: &Ctx<'_>,
+    kind: NodeKind,
+    r: &RawNode,
+) -> Result<Option<PythonNodeSpec>, SpecError> {
+    if kind != NodeKind::Python {
+        let stray = [
+            r.script.as_ref().map(|v| ("script", v.span())),
+            r.class.as_ref().map(|v| ("class", v.span())),
+            r.params.as_ref().map(|v| ("params", v.span())),
+        ];
+        if let Some((key, span)) = stray.into_iter().flatten().next() {
+            return Err(cx.err(
+                span,
+                format!(
+                    "'{key}' is for python nodes, not for a {} node",
+                    kind.as_str()
+                ),
+            ));
+        }
+        return Ok(None);
+    }
+    let script = r.script.as_ref().ok_or_else(|| {
+        cx.err(
+            r.name.span(),
+            "a python node needs `script = \"nodes/NAME.py\"` (relative to the graph file)",
+        )
+    })?;
+    let text = script.get_ref();
+    if !text.ends_with(".py") || text.len() > 4096 || text.contains('\0') {
+        return Err(cx.err(script.span(), "script must name a .py file"));
+    }
+    let folder = Path::new(cx.origin).parent().unwrap_or(Path::new(""));
+    let joined = folder.join(text);
+    let resolved = std::path::absolute(&joined).unwrap_or(joined);
+    let class = match &r.class {
+        Some(c) if !valid_python_name(c.get_ref()) => {
+            return Err(cx.err(
+                c.span(),
+                format!("class '{}' is not a Python class name", c.get_ref()),
+            ))
+        }
+        c => c.as_ref().map(|c| c.get_ref().clone()),
+    };
+    let params = match &r.params {
+        None => toml::Table::new(),
+        Some(p) => {
+            if p.get_ref().len() > MAX_PYTHON_PARAMS {
+                return Err(cx.err(
+                    p.span(),
+                    format!("a python node has at most {MAX_PYTHON_PARAMS} params"),
+                ));
+            }
+            for (k, v) in p.get_ref() {
+                let scalar = |v: &toml::Value| {
+                    matches!(
+                        v,
+                        toml::Value::Integer(_)
+                            | toml::Value::Float(_)
+                            | toml::Value::Boolean(_)
+                            | toml::Value::String(_)
+                    )
+                };
+                let ok = match v {
+                    toml::Value::Array(a) => a.len() <= 4096 && a.iter().all(scalar),
+                    v => scalar(v),
+                };
+                if !valid_python_name(k) || !ok {
+                    return Err(cx.err(
+                        p.span(),
+                        format!("params.{k}: a parameter is a number, a string, a boolean or an array of them, under a Python name"),
+                    ));
+                }
+            }
+            p.get_ref().clone()
+        }
+    };
+    Ok(Some(PythonNodeSpec {
+        script: resolved.to_string_lossy().into_owned(),
+        class,
+        params,
+    }))
+}
+
+/// A Python identifier (ASCII): a class or parameter name.
+fn valid_python_name(s: &str) -> bool {
+    (1..=64).contains(&s.len())
+        && !s.starts_with(|c: char| c.is_ascii_digit())
+        && s.chars().all(|c| c.is_ascii_alphanumeric() || c == '_')
 }
 
 /// A node or process name: 1 to 32 letters, digits, `_` or `-` (also a key-expression chunk).

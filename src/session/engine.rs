@@ -192,7 +192,7 @@ impl Engine {
         let graph = build_graph(cfg, slot, false, observers).map_err(|e| e.to_string())?;
         let _ = self.tx.send(Telemetry::Started {
             cfg: cfg.clone(),
-            policy: graph.handles.brain.label(),
+            policy: graph.handles.brain_label(),
             recording: recording.as_ref().map(|r| r.path().to_path_buf()),
         });
         self.log.runs.push(LoggedRun::starting(cfg, policy));
@@ -248,7 +248,7 @@ impl Engine {
                 .iter()
                 .map(|l| l.lease().map(|_| l.status_at(now).alive))
                 .collect(),
-            policy: h.brain.label(),
+            policy: h.brain_label(),
         });
     }
 
