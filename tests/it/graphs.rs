@@ -17,10 +17,13 @@ fn repo(file: &str) -> PathBuf {
     Path::new(crate::REPO).join(file)
 }
 
-const SHIPPED: [&str; 3] = [
+const SHIPPED: [&str; 6] = [
     "graphs/cartpole.toml",
     "graphs/cartpole-estimator.toml",
     "graphs/cartpole-safety.toml",
+    "graphs/cartpole-python.toml",
+    "graphs/cartpole-estimator-python.toml",
+    "graphs/cartpole-safety-python.toml",
 ];
 
 fn cfg(file: &str, clock: ClockKind, secs: u64) -> RunConfig {

@@ -17,6 +17,7 @@ mod e2e_pty;
 mod exercises;
 mod graphs;
 mod hostile;
+mod python;
 mod qos;
 mod realtime;
 mod recording;

@@ -1,0 +1,539 @@
+//! Brains written in Python (`--policy FILE.py[:FUNCTION]`, src/python): the chapter's
+//! arithmetic in Python equals the built-in scripted brain in every figure; every way a
+//! script can be wrong is one line and exit 2; a callback that never returns cannot hang a
+//! run. The tests need NumPy in the active virtual environment (scripts/test.sh makes it).
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output, Stdio};
+use std::time::{Duration, Instant};
+
+fn ratelab(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_ratelab"))
+        .args(args)
+        .output()
+        .expect("runs")
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+/// The shipped brain that does the chapter's arithmetic.
+fn shipped_brain() -> String {
+    Path::new(crate::REPO)
+        .join("graphs/brains/scripted.py")
+        .to_string_lossy()
+        .into_owned()
+}
+
+fn script(dir: &Path, name: &str, text: &str) -> PathBuf {
+    let p = dir.join(name);
+    std::fs::write(&p, text).unwrap();
+    p
+}
+
+/// metrics.json without the brain's label, and trace.csv, of one virtual run.
+fn virtual_run(dir: &Path, policy: &str, seed: &str, control_hz: &str) -> (String, Vec<u8>) {
+    let o = ratelab(&[
+        "run",
+        "--clock",
+        "virtual",
+        "--seed",
+        seed,
+        "--control-hz",
+        control_hz,
+        "--policy",
+        policy,
+        "--out",
+        dir.to_str().unwrap(),
+        "--force",
+    ]);
+    assert!(o.status.success(), "{policy}: {}", stderr(&o));
+    let mut m: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("metrics.json")).unwrap())
+            .unwrap();
+    let label = m
+        .as_object_mut()
+        .unwrap()
+        .remove("policy")
+        .expect("metrics.json names the brain");
+    assert!(
+        label.as_str().unwrap().contains(if policy == "scripted" {
+            "scripted balancer"
+        } else {
+            "Python brain"
+        }),
+        "{label}"
+    );
+    (
+        serde_json::to_string_pretty(&m).unwrap(),
+        std::fs::read(dir.join("trace.csv")).unwrap(),
+    )
+}
+
+#[test]
+fn a_python_brain_with_the_chapters_arithmetic_equals_the_builtin_one_in_every_figure() {
+    let _m = crate::machine::shared();
+    let (a, b) = (tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap());
+    let brain = shipped_brain();
+    for hz in ["50", "5"] {
+        for seed in ["0", "1", "2"] {
+            let builtin = virtual_run(a.path(), "scripted", seed, hz);
+            let python = virtual_run(b.path(), &brain, seed, hz);
+            assert!(
+                builtin.0 == python.0,
+                "seed {seed}, {hz} Hz: metrics differ\n{}\n{}",
+                builtin.0,
+                python.0
+            );
+            assert!(builtin.1 == python.1, "seed {seed}, {hz} Hz: trace differs");
+        }
+    }
+    // Two runs of the Python brain are byte-identical, label included.
+    let c = tempfile::tempdir().unwrap();
+    let first = virtual_run(b.path(), &brain, "1", "5");
+    let second = virtual_run(c.path(), &brain, "1", "5");
+    assert_eq!(first, second);
+}
+
+#[test]
+fn a_named_function_is_run_and_its_return_value_may_be_a_float_or_an_array() {
+    let dir = tempfile::tempdir().unwrap();
+    // Returns a plain float, unclipped: ratelab clips it to [-1, 1].
+    let p = script(
+        dir.path(),
+        "mine.py",
+        "import math\n\
+         def balance(obs):\n\
+         \x20   theta = math.atan2(float(obs[3]), float(obs[2]))\n\
+         \x20   return 10.0 * theta + 2.0 * float(obs[4]) + 0.4 * float(obs[0]) + 0.8 * float(obs[1])\n",
+    );
+    let spec = format!("{}:balance", p.display());
+    let (python, trace) = virtual_run(dir.path(), &spec, "0", "50");
+    let other = tempfile::tempdir().unwrap();
+    let (builtin, builtin_trace) = virtual_run(other.path(), "scripted", "0", "50");
+    assert_eq!(python, builtin);
+    assert_eq!(trace, builtin_trace);
+}
+
+fn assert_refused(policy: &str, needles: &[&str]) {
+    let o = ratelab(&["run", "--clock", "virtual", "--duration", "1", "--policy", policy]);
+    let err = stderr(&o);
+    assert_eq!(o.status.code(), Some(2), "{policy}: {err}");
+    assert_eq!(err.trim_end().lines().count(), 1, "{policy}: one line: {err:?}");
+    for n in needles {
+        assert!(err.contains(n), "{policy}: {err:?} lacks {n:?}");
+    }
+    assert!(!err.contains("panicked") && !err.contains("Traceback"), "{err}");
+}
+
+#[test]
+fn every_way_a_brain_script_is_wrong_is_one_line_and_exit_2() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let missing = d.join("nothing.py");
+    assert_refused(missing.to_str().unwrap(), &["nothing.py", "not found"]);
+    let syntax = script(d, "syntax.py", "def act(obs):\n    return (1.0\n\n");
+    assert_refused(
+        syntax.to_str().unwrap(),
+        &[&format!("{}:2: SyntaxError", syntax.display())],
+    );
+    let raises = script(d, "raises.py", "import math\nx = 1 / 0\ndef act(obs):\n    return 0.0\n");
+    assert_refused(
+        raises.to_str().unwrap(),
+        &[&format!("{}:2: ZeroDivisionError: division by zero", raises.display())],
+    );
+    let other = script(d, "other.py", "def policy(obs):\n    return 0.0\n");
+    assert_refused(
+        other.to_str().unwrap(),
+        &["other.py", "no function 'act'", "it defines policy"],
+    );
+    let not_fn = script(d, "notfn.py", "act = 3\n");
+    assert_refused(notfn_spec(&not_fn), &["'act' is a int, not a function"]);
+    let binary = script(d, "bin.py", "");
+    std::fs::write(&binary, b"x = 1\n\xff\xfe\n").unwrap();
+    assert_refused(binary.to_str().unwrap(), &["bin.py:2: not UTF-8"]);
+    let folder = d.join("folder.py");
+    std::fs::create_dir(&folder).unwrap();
+    assert_refused(folder.to_str().unwrap(), &["folder.py", "not a regular file"]);
+}
+
+fn notfn_spec(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+/// A run whose brain fails mid-run: the node fails at that tick, in one line naming the
+/// file and line of the raising frame and the exception; the summary is still printed.
+fn assert_fails_mid_run(body: &str, needles: &[&str]) {
+    let dir = tempfile::tempdir().unwrap();
+    let p = script(dir.path(), "brain.py", body);
+    let o = ratelab(&["run", "--clock", "virtual", "--policy", p.to_str().unwrap()]);
+    let err = stderr(&o);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    let last = err.trim_end().lines().last().unwrap_or("");
+    assert!(last.starts_with("error: node 'policy' failed at t="), "{err}");
+    for n in needles {
+        let n = n.replace("FILE", p.to_str().unwrap());
+        assert!(last.contains(&n), "{last:?} lacks {n:?}");
+    }
+    assert!(!err.contains("panicked") && !err.contains("Traceback"), "{err}");
+    assert!(
+        String::from_utf8_lossy(&o.stdout).contains("NODE FAILED"),
+        "the summary says so"
+    );
+}
+
+#[test]
+fn a_brain_that_raises_or_returns_nonsense_fails_the_policy_node_at_that_tick() {
+    assert_fails_mid_run(
+        "calls = 0\n\
+         def act(obs):\n\
+         \x20   global calls\n\
+         \x20   calls += 1\n\
+         \x20   if calls == 10:\n\
+         \x20       raise RuntimeError('gave up')\n\
+         \x20   return 0.0\n",
+        &["t=0.18s", "FILE:6: RuntimeError: gave up"],
+    );
+    // The raising frame in the learner's helper, not in NumPy.
+    assert_fails_mid_run(
+        "import numpy as np\n\
+         def helper(obs):\n\
+         \x20   return np.linalg.inv(np.zeros((2, 2)))\n\
+         def act(obs):\n\
+         \x20   return helper(obs)\n",
+        &["t=0.00s", "FILE:3: LinAlgError: Singular matrix"],
+    );
+    assert_fails_mid_run(
+        "def act(obs):\n    return 'left'\n",
+        &["FILE:1: act() returned 'left'; expected a float or a one-element array"],
+    );
+    assert_fails_mid_run(
+        "def act(obs):\n    return [0.1, 0.2]\n",
+        &["FILE:1: act() returned [0.1, 0.2]; expected a float"],
+    );
+}
+
+#[test]
+fn a_brain_that_never_returns_is_reported_and_ctrl_c_ends_the_run_within_a_second() {
+    let _m = crate::machine::alone();
+    let dir = tempfile::tempdir().unwrap();
+    let p = script(
+        dir.path(),
+        "hang.py",
+        "def act(obs):\n    while True:\n        pass\n",
+    );
+    let child = Command::new(env!("CARGO_BIN_EXE_ratelab"))
+        .args(["run", "--clock", "real", "--policy", p.to_str().unwrap()])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    // The watchdog reports the callback after 2 s; Ctrl-C at 3 s.
+    std::thread::sleep(Duration::from_millis(3000));
+    let sent = Instant::now();
+    // SAFETY: plain kill(2) on our child.
+    unsafe { libc::kill(child.id() as i32, libc::SIGINT) };
+    let o = child.wait_with_output().unwrap();
+    let took = sent.elapsed();
+    let err = stderr(&o);
+    assert!(took < Duration::from_secs(1), "took {took:?}: {err}");
+    assert!(
+        err.contains(&format!(
+            "the brain {}:act() has not returned after 2 s",
+            p.display()
+        )),
+        "{err}"
+    );
+    assert!(
+        err.contains(&format!("{}:2: KeyboardInterrupt", p.display())),
+        "{err}"
+    );
+    assert_eq!(o.status.code(), Some(130), "{err}");
+}
+
+// ---- Python nodes (kind = "python") ----------------------------------------------------
+
+fn repo(file: &str) -> String {
+    Path::new(crate::REPO)
+        .join(file)
+        .to_string_lossy()
+        .into_owned()
+}
+
+/// metrics.json of one virtual run of `graph` without what names the graph, the brain and
+/// the nodes' kinds, and trace.csv.
+fn graph_run(dir: &Path, graph: &str, seed: &str, extra: &[&str]) -> (String, Vec<u8>) {
+    let mut args = vec![
+        "run", "--clock", "virtual", "--seed", seed, "--graph", graph, "--out",
+    ];
+    let out = dir.to_str().unwrap();
+    args.push(out);
+    args.push("--force");
+    args.extend_from_slice(extra);
+    let o = ratelab(&args);
+    assert!(o.status.success(), "{graph}: {}", stderr(&o));
+    let mut m: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("metrics.json")).unwrap())
+            .unwrap();
+    let m_obj = m.as_object_mut().unwrap();
+    m_obj.remove("graph").expect("graph");
+    m_obj.remove("policy").expect("policy");
+    for n in m_obj["nodes"].as_object_mut().unwrap().values_mut() {
+        n.as_object_mut().unwrap().remove("kind").expect("kind");
+    }
+    (
+        serde_json::to_string_pretty(&m).unwrap(),
+        std::fs::read(dir.join("trace.csv")).unwrap(),
+    )
+}
+
+#[test]
+fn the_python_policy_node_graph_equals_the_builtin_graph_in_every_figure() {
+    let _m = crate::machine::shared();
+    let (a, b) = (tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap());
+    let python = repo("graphs/cartpole-python.toml");
+    let builtin = repo("graphs/cartpole.toml");
+    for hz in ["50", "5"] {
+        for seed in ["0", "1", "2"] {
+            let extra = ["--control-hz", hz];
+            let want = graph_run(a.path(), &builtin, seed, &extra);
+            let got = graph_run(b.path(), &python, seed, &extra);
+            assert!(
+                want.0 == got.0,
+                "seed {seed}, {hz} Hz: metrics differ\n{}\n{}",
+                want.0,
+                got.0
+            );
+            assert!(want.1 == got.1, "seed {seed}, {hz} Hz: trace differs");
+        }
+    }
+    // The label names the node's script and class; the node's kind is python.
+    let o = ratelab(&["run", "--clock", "virtual", "--graph", &python, "--duration", "1"]);
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        out.contains("policy=Python node 'policy' (")
+            && out.contains("scripted_balancer.py:ScriptedBalancer)"),
+        "{out}"
+    );
+}
+
+#[test]
+fn a_python_safety_node_equals_the_builtin_safety_node_at_its_rates() {
+    let _m = crate::machine::shared();
+    let (a, b) = (tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap());
+    for seed in ["0", "1"] {
+        let want = graph_run(a.path(), &repo("graphs/cartpole-safety.toml"), seed, &[]);
+        let got = graph_run(b.path(), &repo("graphs/cartpole-safety-python.toml"), seed, &[]);
+        assert!(want == got, "seed {seed}:\n{}\n{}", want.0, got.0);
+    }
+}
+
+#[test]
+fn a_python_node_balances_under_the_real_clock() {
+    let _m = crate::machine::alone();
+    let dir = tempfile::tempdir().unwrap();
+    let o = ratelab(&[
+        "run",
+        "--clock",
+        "real",
+        "--duration",
+        "3",
+        "--graph",
+        &repo("graphs/cartpole-python.toml"),
+        "--out",
+        dir.path().to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let m: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(dir.path().join("metrics.json")).unwrap(),
+    )
+    .unwrap();
+    assert_eq!(m["balanced"], true, "{m}");
+    let ticks = m["nodes"]["policy"]["ticks"].as_u64().unwrap();
+    assert!((140..=152).contains(&ticks), "policy ticks {ticks}");
+    assert_eq!(m["nodes"]["policy"]["kind"], "python");
+}
+
+/// A graph in `dir` whose policy is the Python node `body` (class `Mine`), with `node`
+/// lines added to its table.
+fn python_graph(dir: &Path, body: &str, node: &str) -> (PathBuf, PathBuf) {
+    let script = script(dir, "mine.py", body);
+    let graph = dir.join("g.toml");
+    std::fs::write(
+        &graph,
+        format!(
+            "name = \"g\"\n\
+             [[node]]\nname = \"sensor\"\nkind = \"sensor\"\nrate_hz = 50\npublishes = \"/obs\"\n\
+             [[node]]\nname = \"policy\"\nkind = \"python\"\nscript = \"mine.py\"\nrate_hz = 50\n\
+             subscribes = \"/obs\"\npublishes = \"/action\"\n{node}\n\
+             [[node]]\nname = \"actuator\"\nkind = \"actuator\"\nrate_hz = 50\nsubscribes = \"/action\"\n\
+             [[topic]]\nname = \"/obs\"\ntype = \"state\"\ndepth = 1\n\
+             [[topic]]\nname = \"/action\"\ntype = \"force\"\ndepth = 1\n"
+        ),
+    )
+    .unwrap();
+    (graph, script)
+}
+
+const HEAD: &str = "from ratelab import State, Force, Position\n";
+
+fn node_refused(body: &str, node: &str, needles: &[&str]) {
+    let dir = tempfile::tempdir().unwrap();
+    let (graph, script) = python_graph(dir.path(), &format!("{HEAD}{body}"), node);
+    let o = ratelab(&["run", "--clock", "virtual", "--duration", "1", "--graph"]
+        .iter()
+        .copied()
+        .chain([graph.to_str().unwrap()])
+        .collect::<Vec<_>>());
+    let err = stderr(&o);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert_eq!(err.trim_end().lines().count(), 1, "one line: {err:?}");
+    for n in needles {
+        let n = n.replace("FILE", script.to_str().unwrap());
+        assert!(err.contains(&n), "{err:?} lacks {n:?}");
+    }
+    assert!(!err.contains("panicked") && !err.contains("Traceback"), "{err}");
+}
+
+#[test]
+fn every_way_a_python_node_is_wrong_is_one_line_and_exit_2() {
+    const OK: &str = "class Mine:\n\
+        \x20   def __init__(self, node):\n\
+        \x20       self.pub = node.create_publisher(Force, '/action', 1)\n\
+        \x20       node.create_subscription(State, '/obs', self.on_obs, 1)\n\
+        \x20   def on_obs(self, msg):\n\
+        \x20       self.pub.publish(Force(newtons=0.0))\n";
+    // The script is fine: the run goes through (the pole falls, force 0).
+    let dir = tempfile::tempdir().unwrap();
+    let (graph, _) = python_graph(dir.path(), &format!("{HEAD}{OK}"), "");
+    let o = ratelab(&["run", "--clock", "virtual", "--graph", graph.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(String::from_utf8_lossy(&o.stdout).contains("FELL"));
+    // A missing class; two classes and none named.
+    node_refused(OK, "class = \"Other\"", &["FILE: no class 'Other'"]);
+    node_refused(
+        &format!("{OK}class Two:\n    pass\n"),
+        "",
+        &["FILE: name the node's class", "Mine, Two"],
+    );
+    // A topic or a type the graph file does not give the node.
+    node_refused(
+        &OK.replace("'/obs', self.on_obs", "'/state', self.on_obs"),
+        "",
+        &["FILE:5: node 'policy' subscribes '/state', but the graph file gives it subscribes = \"/obs\""],
+    );
+    node_refused(
+        &OK.replace("create_subscription(State", "create_subscription(Position"),
+        "",
+        &["FILE:5: '/obs' carries State (type = \"state\"), not Position"],
+    );
+    // A timer that is not a whole number of ticks; a parameter that does not exist.
+    node_refused(
+        &OK.replace("self.on_obs, 1)", "self.on_obs, 1)\n        node.create_timer(0.03, self.on_obs)"),
+        "",
+        &["FILE:6: create_timer(0.03): node 'policy' ticks every 20 ms"],
+    );
+    node_refused(
+        &OK.replace("self.on_obs, 1)", "self.on_obs, 1)\n        node.get_parameter('gain')"),
+        "params = { k = 1 }",
+        &["FILE:6: node 'policy' has no parameter 'gain' (the graph file's params: k)"],
+    );
+    // A missing script.
+    let dir = tempfile::tempdir().unwrap();
+    let (graph, script) = python_graph(dir.path(), OK, "");
+    std::fs::remove_file(&script).unwrap();
+    let o = ratelab(&["run", "--graph", graph.to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(stderr(&o).contains("mine.py: not found"), "{}", stderr(&o));
+}
+
+#[test]
+fn a_python_node_that_publishes_the_wrong_type_fails_at_that_tick() {
+    let dir = tempfile::tempdir().unwrap();
+    let body = "class Mine:\n\
+        \x20   def __init__(self, node):\n\
+        \x20       self.pub = node.create_publisher(Force, '/action', 1)\n\
+        \x20       node.create_subscription(State, '/obs', self.on_obs, 1)\n\
+        \x20       self.n = 0\n\
+        \x20   def on_obs(self, msg):\n\
+        \x20       self.n += 1\n\
+        \x20       self.pub.publish(Force(newtons=0.0) if self.n < 5 else msg)\n";
+    let (graph, script) = python_graph(dir.path(), &format!("{HEAD}{body}"), "");
+    let o = ratelab(&["run", "--clock", "virtual", "--graph", graph.to_str().unwrap()]);
+    let err = stderr(&o);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    let want = format!(
+        "node 'policy' failed at t=0.08s: {}:9: TypeError: publish on '/action' takes a Force, got State",
+        script.display()
+    );
+    assert!(err.contains(&want), "{err:?}");
+}
+
+#[test]
+fn the_graph_file_keeps_python_keys_for_python_nodes() {
+    let dir = tempfile::tempdir().unwrap();
+    let (graph, _) = python_graph(dir.path(), "", "");
+    let text = std::fs::read_to_string(&graph)
+        .unwrap()
+        .replace("name = \"sensor\"\n", "name = \"sensor\"\nscript = \"x.py\"\n");
+    std::fs::write(&graph, text).unwrap();
+    let o = ratelab(&["run", "--graph", graph.to_str().unwrap()]);
+    let err = stderr(&o);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(err.contains("'script' is for python nodes, not for a sensor node"), "{err}");
+    let text = std::fs::read_to_string(&graph)
+        .unwrap()
+        .replace("script = \"x.py\"\n", "")
+        .replace("script = \"mine.py\"\n", "");
+    std::fs::write(&graph, text).unwrap();
+    let o = ratelab(&["run", "--graph", graph.to_str().unwrap()]);
+    assert!(stderr(&o).contains("a python node needs `script"), "{}", stderr(&o));
+}
+
+#[test]
+fn a_python_node_in_its_own_process_gives_the_in_process_run_byte_for_byte() {
+    let _m = crate::machine::shared();
+    let dir = tempfile::tempdir().unwrap();
+    for hz in ["50", "5"] {
+        for seed in ["0", "1", "2"] {
+            let one = dir.path().join(format!("one-{hz}-{seed}"));
+            let many = dir.path().join(format!("many-{hz}-{seed}"));
+            let common = [
+                "--clock",
+                "virtual",
+                "--seed",
+                seed,
+                "--control-hz",
+                hz,
+                "--graph",
+                "graphs/cartpole-python.toml",
+            ];
+            let o = crate::distributed::bin()
+                .args([&["run"][..], &common, &["--out", one.to_str().unwrap()]].concat())
+                .output()
+                .unwrap();
+            assert!(o.status.success(), "{}", stderr(&o));
+            let o = crate::distributed::bin()
+                .args(
+                    [
+                        &["launch", "--processes"][..],
+                        &common,
+                        &["--out", many.to_str().unwrap()],
+                    ]
+                    .concat(),
+                )
+                .output()
+                .unwrap();
+            assert!(o.status.success(), "{}", stderr(&o));
+            let out = String::from_utf8_lossy(&o.stdout);
+            assert!(
+                out.contains("in 2 processes: robot [sensor, actuator], policy [policy]"),
+                "{out}"
+            );
+            let a = std::fs::read_to_string(one.join("metrics.json")).unwrap();
+            let b = std::fs::read_to_string(many.join("metrics.json")).unwrap();
+            assert_eq!(a, b, "control {hz} Hz, seed {seed}: metrics differ");
+        }
+    }
+}
