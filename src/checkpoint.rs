@@ -33,6 +33,7 @@ use std::ops::RangeInclusive;
 use std::path::{Path, PathBuf};
 use tract_onnx::prelude::*;
 
+pub mod export;
 pub mod torch;
 
 pub use torch::MAX_FILE_BYTES;
@@ -162,7 +163,7 @@ pub enum PolicyError {
     },
     /// A Python brain (`FILE.py[:FUNCTION]`) that cannot be loaded: the one-line reason
     /// ([`crate::python::PythonError`]).
-    #[error("{0}")]
+    #[error(transparent)]
     Python(#[from] crate::python::PythonError),
     /// A tensor operation failed (should not happen after validation).
     #[error("{path}: {detail}")]

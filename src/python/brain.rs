@@ -43,8 +43,7 @@ pub fn parse_spec(spec: &str) -> Option<(&str, &str)> {
 /// # Errors
 /// [`PythonError`] when the interpreter or NumPy is not available.
 pub fn call_cost(calls: usize) -> Result<(u64, u64), PythonError> {
-    let mut brain =
-        PythonBrain::from_source("<bench>", "def act(obs):\n    return 0.0\n", "act")?;
+    let mut brain = PythonBrain::from_source("<bench>", "def act(obs):\n    return 0.0\n", "act")?;
     let mut times = crate::metrics::LatencyStats::default();
     let obs = [0.0, 0.0, 1.0, 0.0, 0.0];
     for _ in 0..calls.max(1) {

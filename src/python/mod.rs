@@ -128,7 +128,9 @@ fn add_virtual_env(py: Python<'_>) -> Result<(), String> {
 /// One line for a Python exception raised by code of `script` (see the module docs).
 pub fn describe(py: Python<'_>, err: &PyErr, script: &str) -> String {
     let described = support(py).ok().and_then(|m| {
-        m.call_method1("describe", (err.value(py), script))
+        // The traceback goes separately: before Python 3.12 a fetched exception's
+        // `__traceback__` is not always set.
+        m.call_method1("describe", (err.value(py), script, err.traceback(py)))
             .and_then(|s| s.extract::<String>())
             .ok()
     });
@@ -205,6 +207,18 @@ fn start_watchdog() {
                     }
                 }
             });
+    });
+}
+
+/// [`interrupt_callbacks`]`(grace)` on a thread of its own, `grace` from now: for a stop
+/// (Ctrl-C, quitting the lab) that must not wait on a callback that never returns.
+pub fn interrupt_callbacks_after(grace: Duration) {
+    if SUPPORT.get().is_none() {
+        return;
+    }
+    std::thread::spawn(move || {
+        std::thread::sleep(grace);
+        interrupt_callbacks(grace);
     });
 }
 

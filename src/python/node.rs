@@ -87,7 +87,9 @@ impl PythonNode {
             let support = support(py)?;
             let fail = |e: PyErr| PythonError::Script(describe(py, &e, script));
             let _running = CallbackGuard::enter(&format!("node '{name}' ({script}) loading"));
-            support.call_method0("install_message_module").map_err(fail)?;
+            support
+                .call_method0("install_message_module")
+                .map_err(fail)?;
             let module = support
                 .call_method1("load_module", (script, source, module_name))
                 .map_err(fail)?;

@@ -25,16 +25,22 @@ def _one_line(text):
     return " ".join(str(text).split())
 
 
-def describe(exc, script):
-    """One line for `exc` raised by code of `script` (its path as the user gave it)."""
+def describe(exc, script, tb=None):
+    """One line for `exc` raised by code of `script` (its path as the user gave it), `tb`
+    its traceback (default: `exc.__traceback__`)."""
     if isinstance(exc, ContractError):
         return f"{exc.where}: {_one_line(exc)}"
     name = type(exc).__name__
     if isinstance(exc, SyntaxError) and exc.filename == script:
         return f"{script}:{exc.lineno}: {name}: {_one_line(exc.msg)}"
-    frames = traceback.extract_tb(exc.__traceback__)
+    frames = traceback.extract_tb(tb if tb is not None else exc.__traceback__)
     folder = os.path.dirname(os.path.abspath(script))
-    mine = [f for f in frames if os.path.dirname(os.path.abspath(f.filename)) == folder]
+    mine = [
+        f
+        for f in frames
+        if not f.filename.startswith("<")  # ratelab's own frames (this module)
+        and os.path.dirname(os.path.abspath(f.filename)) == folder
+    ]
     frame = (mine or frames or [None])[-1]
     where = f"{frame.filename}:{frame.lineno}" if frame is not None else script
     message = _one_line(exc)
