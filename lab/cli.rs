@@ -47,6 +47,23 @@ pub enum Command {
     Node(NodeArgs),
     /// A table of a running multi-process graph: nodes, rates, topics, wire latency.
     Top(TopArgs),
+    /// Write a checkpoint's tensors (.pt/.pth/.safetensors) as NumPy's .npz, for a Python
+    /// node to load with `np.load` (graphs/nodes/ppo_numpy.py).
+    Export(ExportArgs),
+}
+
+/// `ratelab export`.
+#[derive(Debug, Clone, Args)]
+pub struct ExportArgs {
+    /// The checkpoint: a PyTorch state_dict (.pt/.pth) or .safetensors.
+    #[arg(value_name = "CHECKPOINT")]
+    pub checkpoint: PathBuf,
+    /// The archive to write (.npz).
+    #[arg(long, value_name = "FILE.npz")]
+    pub out: PathBuf,
+    /// Overwrite an existing file.
+    #[arg(long)]
+    pub force: bool,
 }
 
 /// `ratelab launch`.

@@ -97,7 +97,8 @@ fn replay(args: &cli::ReplayArgs) -> anyhow::Result<()> {
         let metrics = replay_run(&log, i)?;
         let same = log.matches(i, &metrics);
         println!(
-            "[ratelab] run {n}: {} command(s) replayed",
+            "[ratelab] run {n}: seed {}, {} command(s) replayed",
+            metrics.seed,
             run.commands.len()
         );
         for line in metrics.summary_lines(None).iter().skip(1) {
@@ -127,6 +128,29 @@ fn replay(args: &cli::ReplayArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// `ratelab export`: a checkpoint's tensors as .npz ([`ratelab::checkpoint::export`]).
+fn export(args: &cli::ExportArgs) -> anyhow::Result<()> {
+    use ratelab::checkpoint::export::{checkpoint_tensors, to_npz};
+    anyhow::ensure!(
+        args.out.extension().is_some_and(|e| e == "npz"),
+        "--out {}: the archive's name must end in .npz (np.load tells the format by it)",
+        args.out.display()
+    );
+    ratelab::output::check_target(&args.out, args.force)?;
+    let tensors = checkpoint_tensors(&args.checkpoint)?;
+    let bytes = to_npz(&tensors).map_err(|e| anyhow::anyhow!("{}: {e}", args.out.display()))?;
+    ratelab::output::write_file(&args.out, args.force, &bytes)?;
+    for t in &tensors {
+        println!("{:<24} {:?}", t.name, t.shape);
+    }
+    println!(
+        "[ratelab] wrote {} ({} tensors, float32)",
+        args.out.display(),
+        tensors.len()
+    );
+    Ok(())
+}
+
 /// A clap error as one line that keeps its point: clap's first line names the flag, the
 /// value and the rule, except when it ends with a colon and lists its subject on the lines
 /// below (missing required arguments), which are then joined onto it.
@@ -147,8 +171,9 @@ fn one_line(text: &str) -> String {
     format!("{first} {}", listed.join(", "))
 }
 
-/// How long a Python callback may still run after Ctrl-C before it is interrupted.
-const PYTHON_GRACE: std::time::Duration = std::time::Duration::from_millis(300);
+/// How long a Python callback may still run after Ctrl-C (or `q` in the lab) before it is
+/// interrupted.
+pub const PYTHON_GRACE: std::time::Duration = std::time::Duration::from_millis(300);
 
 fn main() -> ExitCode {
     // Before any thread starts (it sets an environment variable that Zenoh reads).
@@ -191,10 +216,7 @@ fn main() -> ExitCode {
             stop.stop();
             // A Python callback that never returns would hold its node's tick forever:
             // one still running after a short grace is interrupted (src/python).
-            std::thread::spawn(|| {
-                std::thread::sleep(PYTHON_GRACE);
-                ratelab::python::interrupt_callbacks(PYTHON_GRACE);
-            });
+            ratelab::python::interrupt_callbacks_after(PYTHON_GRACE);
         });
     }
     let result = match &cli.command {
@@ -209,6 +231,7 @@ fn main() -> ExitCode {
         Some(Command::Launch(args)) => launch::run_launch(args, cli.headless, stop),
         Some(Command::Node(args)) => launch::run_node(args, stop),
         Some(Command::Top(args)) => launch::run_top(args, stop),
+        Some(Command::Export(args)) => export(args),
         None => {
             if !cli.headless && std::io::stdout().is_terminal() && std::io::stdin().is_terminal() {
                 lab(&cli.run, stop)
