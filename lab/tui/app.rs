@@ -370,7 +370,11 @@ impl App {
                     }
                     _ => match metrics.fell_at_s {
                         Some(t) => Verdict::Fell(t),
-                        None => Verdict::Done,
+                        None if metrics.headline() == ratelab::metrics::BALANCED_WHOLE_RUN => {
+                            Verdict::Done
+                        }
+                        // A watchdog stop, a plant that never stepped, an early stop.
+                        None => Verdict::Stopped(metrics.headline()),
                     },
                 };
                 self.say(match (metrics.sched_warning(), &self.attached) {
@@ -671,6 +675,7 @@ impl App {
             selected: self.selected == Some(Selected::Node(id)),
             alive: self.alive.get(id.0).copied().flatten(),
             process: self.attached.as_ref().map(|_| self.graph.process_of(id)),
+            python: self.graph.node(id).python.is_some(),
         }
     }
 

@@ -89,6 +89,8 @@ pub fn run_lab(settings: SessionSettings, stop: StopFlag) -> anyhow::Result<()> 
     let engine = Engine::new(settings, ctl_rx, tel_tx).spawn();
     let result = on_terminal(&mut app, &tel_rx, &stop);
     let _ = ctl_tx.send(Control::Quit);
+    // A Python callback that never returns would keep the engine from seeing the quit.
+    ratelab::python::interrupt_callbacks_after(crate::PYTHON_GRACE);
     if engine.join().is_err() {
         anyhow::bail!("the lab's engine stopped unexpectedly");
     }
@@ -223,6 +225,8 @@ mod tests {
         for (name, file) in [
             ("estimator", "graphs/cartpole-estimator.toml"),
             ("safety", "graphs/cartpole-safety.toml"),
+            // A learner's Python node says so in its box.
+            ("safety_python", "graphs/cartpole-safety-python.toml"),
         ] {
             let (app, _rx) = app_after(graph_cfg(file, 2), false);
             let text = render(&app, 80, 24);

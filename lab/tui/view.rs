@@ -48,6 +48,8 @@ pub struct NodeView {
     /// Attached to a graph across processes: the process it runs in (the box's title
     /// reads `policy@policy`).
     pub process: Option<String>,
+    /// A learner's node (`kind = "python"`): its box says `python` under its rate.
+    pub python: bool,
 }
 
 /// One topic arrow.
@@ -138,6 +140,9 @@ pub enum Verdict {
     Done,
     /// A node failed.
     Failed(String),
+    /// The run ended neither fallen nor balanced the whole run: the summary's headline
+    /// ([`ratelab::metrics::Metrics::headline`], e.g. `STOPPED BY WATCHDOG at t=2.04s (…)`).
+    Stopped(String),
 }
 
 /// Sense→act latency over the window, ms (exact order statistics).
@@ -485,13 +490,21 @@ fn render_node(n: &NodeView, area: Rect, buf: &mut Buffer) {
         }
         _ => lines.push(Line::from(if wide { "virtual time" } else { "virtual" }).dim()),
     }
+    // A Python node says so under its rate, or in its title when the box has no room left.
+    let python_in_title = n.python && lines.len() + 1 > usize::from(area.height.saturating_sub(2));
+    if n.python && !python_in_title {
+        lines.insert(1, Line::from("python").cyan());
+    }
     if n.alive == Some(false) {
         lines.insert(0, Line::from("✗ NOT ALIVE").white().on_red().bold());
     }
-    let name = match &n.process {
+    let mut name = match &n.process {
         Some(p) => format!("{}@{p}", n.name),
         None => n.name.clone(),
     };
+    if python_in_title {
+        name.push_str(" py");
+    }
     let (title, border) = if n.selected {
         (
             Line::from(name).black().on_yellow().bold().centered(),
@@ -670,6 +683,14 @@ fn badge(v: &View) -> Span<'static> {
             .on_red()
             .bold(),
         Verdict::Failed(_) => " NODE FAILED ✗ ".white().on_red().bold(),
+        // The headline up to its parenthesis: "STOPPED BY WATCHDOG at t=2.04s".
+        Verdict::Stopped(headline) => Span::from(format!(
+            " {} ",
+            headline.split(" (").next().unwrap_or(headline)
+        ))
+        .black()
+        .on_yellow()
+        .bold(),
     }
 }
 

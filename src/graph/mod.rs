@@ -84,7 +84,10 @@ impl GraphHandles {
                 "Python node '{}' ({}{})",
                 policy.name,
                 p.script,
-                p.class.as_ref().map(|c| format!(":{c}")).unwrap_or_default()
+                p.class
+                    .as_ref()
+                    .map(|c| format!(":{c}"))
+                    .unwrap_or_default()
             ),
             None => self.brain.label(),
         }
@@ -275,7 +278,10 @@ impl Graph {
                         }
                     }
                     (NodeKind::Python, (input, output)) => {
-                        let python = n.python.as_ref().expect("validated: a python node's script");
+                        let python = n
+                            .python
+                            .as_ref()
+                            .expect("validated: a python node's script");
                         Work::Python(Box::new(crate::python::node::PythonNode::load(
                             &n.name,
                             python,

@@ -443,3 +443,24 @@ fn attaching_where_no_graph_runs_says_so() {
         "{s}"
     );
 }
+
+/// `q` ends the lab even while a Python brain's call never returns: the call is interrupted
+/// after a short grace (src/python), and the terminal is restored.
+#[test]
+fn quitting_the_lab_interrupts_a_python_brain_that_never_returns() {
+    let _machine = crate::machine::alone();
+    let dir = tempfile::tempdir().unwrap();
+    let hang = dir.path().join("hang.py");
+    std::fs::write(&hang, "def act(obs):\n    while True:\n        pass\n").unwrap();
+    let mut lab = Lab::start(&["--clock", "virtual", "--policy", hang.to_str().unwrap()]);
+    lab.wait_for("virtual clock", Duration::from_secs(60));
+    std::thread::sleep(Duration::from_millis(500));
+    let sent = Instant::now();
+    lab.keys("q");
+    let status = lab.exit_status("q with a hung brain");
+    let took = sent.elapsed();
+    assert!(took < Duration::from_secs(3), "took {took:?}");
+    assert!(status.success(), "exit status {status:?}");
+    std::thread::sleep(Duration::from_millis(200));
+    assert!(!lab.parser.lock().unwrap().screen().alternate_screen());
+}

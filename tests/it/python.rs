@@ -50,8 +50,7 @@ fn virtual_run(dir: &Path, policy: &str, seed: &str, control_hz: &str) -> (Strin
     ]);
     assert!(o.status.success(), "{policy}: {}", stderr(&o));
     let mut m: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(dir.join("metrics.json")).unwrap())
-            .unwrap();
+        serde_json::from_str(&std::fs::read_to_string(dir.join("metrics.json")).unwrap()).unwrap();
     let label = m
         .as_object_mut()
         .unwrap()
@@ -117,14 +116,29 @@ fn a_named_function_is_run_and_its_return_value_may_be_a_float_or_an_array() {
 }
 
 fn assert_refused(policy: &str, needles: &[&str]) {
-    let o = ratelab(&["run", "--clock", "virtual", "--duration", "1", "--policy", policy]);
+    let o = ratelab(&[
+        "run",
+        "--clock",
+        "virtual",
+        "--duration",
+        "1",
+        "--policy",
+        policy,
+    ]);
     let err = stderr(&o);
     assert_eq!(o.status.code(), Some(2), "{policy}: {err}");
-    assert_eq!(err.trim_end().lines().count(), 1, "{policy}: one line: {err:?}");
+    assert_eq!(
+        err.trim_end().lines().count(),
+        1,
+        "{policy}: one line: {err:?}"
+    );
     for n in needles {
         assert!(err.contains(n), "{policy}: {err:?} lacks {n:?}");
     }
-    assert!(!err.contains("panicked") && !err.contains("Traceback"), "{err}");
+    assert!(
+        !err.contains("panicked") && !err.contains("Traceback"),
+        "{err}"
+    );
 }
 
 #[test]
@@ -138,10 +152,17 @@ fn every_way_a_brain_script_is_wrong_is_one_line_and_exit_2() {
         syntax.to_str().unwrap(),
         &[&format!("{}:2: SyntaxError", syntax.display())],
     );
-    let raises = script(d, "raises.py", "import math\nx = 1 / 0\ndef act(obs):\n    return 0.0\n");
+    let raises = script(
+        d,
+        "raises.py",
+        "import math\nx = 1 / 0\ndef act(obs):\n    return 0.0\n",
+    );
     assert_refused(
         raises.to_str().unwrap(),
-        &[&format!("{}:2: ZeroDivisionError: division by zero", raises.display())],
+        &[&format!(
+            "{}:2: ZeroDivisionError: division by zero",
+            raises.display()
+        )],
     );
     let other = script(d, "other.py", "def policy(obs):\n    return 0.0\n");
     assert_refused(
@@ -155,7 +176,10 @@ fn every_way_a_brain_script_is_wrong_is_one_line_and_exit_2() {
     assert_refused(binary.to_str().unwrap(), &["bin.py:2: not UTF-8"]);
     let folder = d.join("folder.py");
     std::fs::create_dir(&folder).unwrap();
-    assert_refused(folder.to_str().unwrap(), &["folder.py", "not a regular file"]);
+    assert_refused(
+        folder.to_str().unwrap(),
+        &["folder.py", "not a regular file"],
+    );
 }
 
 fn notfn_spec(p: &Path) -> &str {
@@ -171,12 +195,18 @@ fn assert_fails_mid_run(body: &str, needles: &[&str]) {
     let err = stderr(&o);
     assert_eq!(o.status.code(), Some(2), "{err}");
     let last = err.trim_end().lines().last().unwrap_or("");
-    assert!(last.starts_with("error: node 'policy' failed at t="), "{err}");
+    assert!(
+        last.starts_with("error: node 'policy' failed at t="),
+        "{err}"
+    );
     for n in needles {
         let n = n.replace("FILE", p.to_str().unwrap());
         assert!(last.contains(&n), "{last:?} lacks {n:?}");
     }
-    assert!(!err.contains("panicked") && !err.contains("Traceback"), "{err}");
+    assert!(
+        !err.contains("panicked") && !err.contains("Traceback"),
+        "{err}"
+    );
     assert!(
         String::from_utf8_lossy(&o.stdout).contains("NODE FAILED"),
         "the summary says so"
@@ -274,8 +304,7 @@ fn graph_run(dir: &Path, graph: &str, seed: &str, extra: &[&str]) -> (String, Ve
     let o = ratelab(&args);
     assert!(o.status.success(), "{graph}: {}", stderr(&o));
     let mut m: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(dir.join("metrics.json")).unwrap())
-            .unwrap();
+        serde_json::from_str(&std::fs::read_to_string(dir.join("metrics.json")).unwrap()).unwrap();
     let m_obj = m.as_object_mut().unwrap();
     m_obj.remove("graph").expect("graph");
     m_obj.remove("policy").expect("policy");
@@ -309,7 +338,15 @@ fn the_python_policy_node_graph_equals_the_builtin_graph_in_every_figure() {
         }
     }
     // The label names the node's script and class; the node's kind is python.
-    let o = ratelab(&["run", "--clock", "virtual", "--graph", &python, "--duration", "1"]);
+    let o = ratelab(&[
+        "run",
+        "--clock",
+        "virtual",
+        "--graph",
+        &python,
+        "--duration",
+        "1",
+    ]);
     let out = String::from_utf8_lossy(&o.stdout);
     assert!(
         out.contains("policy=Python node 'policy' (")
@@ -324,7 +361,12 @@ fn a_python_safety_node_equals_the_builtin_safety_node_at_its_rates() {
     let (a, b) = (tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap());
     for seed in ["0", "1"] {
         let want = graph_run(a.path(), &repo("graphs/cartpole-safety.toml"), seed, &[]);
-        let got = graph_run(b.path(), &repo("graphs/cartpole-safety-python.toml"), seed, &[]);
+        let got = graph_run(
+            b.path(),
+            &repo("graphs/cartpole-safety-python.toml"),
+            seed,
+            &[],
+        );
         assert!(want == got, "seed {seed}:\n{}\n{}", want.0, got.0);
     }
 }
@@ -345,10 +387,9 @@ fn a_python_node_balances_under_the_real_clock() {
         dir.path().to_str().unwrap(),
     ]);
     assert!(o.status.success(), "{}", stderr(&o));
-    let m: serde_json::Value = serde_json::from_str(
-        &std::fs::read_to_string(dir.path().join("metrics.json")).unwrap(),
-    )
-    .unwrap();
+    let m: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.path().join("metrics.json")).unwrap())
+            .unwrap();
     assert_eq!(m["balanced"], true, "{m}");
     let ticks = m["nodes"]["policy"]["ticks"].as_u64().unwrap();
     assert!((140..=152).contains(&ticks), "policy ticks {ticks}");
@@ -381,11 +422,13 @@ const HEAD: &str = "from ratelab import State, Force, Position\n";
 fn node_refused(body: &str, node: &str, needles: &[&str]) {
     let dir = tempfile::tempdir().unwrap();
     let (graph, script) = python_graph(dir.path(), &format!("{HEAD}{body}"), node);
-    let o = ratelab(&["run", "--clock", "virtual", "--duration", "1", "--graph"]
-        .iter()
-        .copied()
-        .chain([graph.to_str().unwrap()])
-        .collect::<Vec<_>>());
+    let o = ratelab(
+        &["run", "--clock", "virtual", "--duration", "1", "--graph"]
+            .iter()
+            .copied()
+            .chain([graph.to_str().unwrap()])
+            .collect::<Vec<_>>(),
+    );
     let err = stderr(&o);
     assert_eq!(o.status.code(), Some(2), "{err}");
     assert_eq!(err.trim_end().lines().count(), 1, "one line: {err:?}");
@@ -393,7 +436,10 @@ fn node_refused(body: &str, node: &str, needles: &[&str]) {
         let n = n.replace("FILE", script.to_str().unwrap());
         assert!(err.contains(&n), "{err:?} lacks {n:?}");
     }
-    assert!(!err.contains("panicked") && !err.contains("Traceback"), "{err}");
+    assert!(
+        !err.contains("panicked") && !err.contains("Traceback"),
+        "{err}"
+    );
 }
 
 #[test]
@@ -407,7 +453,13 @@ fn every_way_a_python_node_is_wrong_is_one_line_and_exit_2() {
     // The script is fine: the run goes through (the pole falls, force 0).
     let dir = tempfile::tempdir().unwrap();
     let (graph, _) = python_graph(dir.path(), &format!("{HEAD}{OK}"), "");
-    let o = ratelab(&["run", "--clock", "virtual", "--graph", graph.to_str().unwrap()]);
+    let o = ratelab(&[
+        "run",
+        "--clock",
+        "virtual",
+        "--graph",
+        graph.to_str().unwrap(),
+    ]);
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(String::from_utf8_lossy(&o.stdout).contains("FELL"));
     // A missing class; two classes and none named.
@@ -430,12 +482,18 @@ fn every_way_a_python_node_is_wrong_is_one_line_and_exit_2() {
     );
     // A timer that is not a whole number of ticks; a parameter that does not exist.
     node_refused(
-        &OK.replace("self.on_obs, 1)", "self.on_obs, 1)\n        node.create_timer(0.03, self.on_obs)"),
+        &OK.replace(
+            "self.on_obs, 1)",
+            "self.on_obs, 1)\n        node.create_timer(0.03, self.on_obs)",
+        ),
         "",
         &["FILE:6: create_timer(0.03): node 'policy' ticks every 20 ms"],
     );
     node_refused(
-        &OK.replace("self.on_obs, 1)", "self.on_obs, 1)\n        node.get_parameter('gain')"),
+        &OK.replace(
+            "self.on_obs, 1)",
+            "self.on_obs, 1)\n        node.get_parameter('gain')",
+        ),
         "params = { k = 1 }",
         &["FILE:6: node 'policy' has no parameter 'gain' (the graph file's params: k)"],
     );
@@ -460,7 +518,13 @@ fn a_python_node_that_publishes_the_wrong_type_fails_at_that_tick() {
         \x20       self.n += 1\n\
         \x20       self.pub.publish(Force(newtons=0.0) if self.n < 5 else msg)\n";
     let (graph, script) = python_graph(dir.path(), &format!("{HEAD}{body}"), "");
-    let o = ratelab(&["run", "--clock", "virtual", "--graph", graph.to_str().unwrap()]);
+    let o = ratelab(&[
+        "run",
+        "--clock",
+        "virtual",
+        "--graph",
+        graph.to_str().unwrap(),
+    ]);
     let err = stderr(&o);
     assert_eq!(o.status.code(), Some(2), "{err}");
     let want = format!(
@@ -474,21 +538,29 @@ fn a_python_node_that_publishes_the_wrong_type_fails_at_that_tick() {
 fn the_graph_file_keeps_python_keys_for_python_nodes() {
     let dir = tempfile::tempdir().unwrap();
     let (graph, _) = python_graph(dir.path(), "", "");
-    let text = std::fs::read_to_string(&graph)
-        .unwrap()
-        .replace("name = \"sensor\"\n", "name = \"sensor\"\nscript = \"x.py\"\n");
+    let text = std::fs::read_to_string(&graph).unwrap().replace(
+        "name = \"sensor\"\n",
+        "name = \"sensor\"\nscript = \"x.py\"\n",
+    );
     std::fs::write(&graph, text).unwrap();
     let o = ratelab(&["run", "--graph", graph.to_str().unwrap()]);
     let err = stderr(&o);
     assert_eq!(o.status.code(), Some(2), "{err}");
-    assert!(err.contains("'script' is for python nodes, not for a sensor node"), "{err}");
+    assert!(
+        err.contains("'script' is for python nodes, not for a sensor node"),
+        "{err}"
+    );
     let text = std::fs::read_to_string(&graph)
         .unwrap()
         .replace("script = \"x.py\"\n", "")
         .replace("script = \"mine.py\"\n", "");
     std::fs::write(&graph, text).unwrap();
     let o = ratelab(&["run", "--graph", graph.to_str().unwrap()]);
-    assert!(stderr(&o).contains("a python node needs `script"), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains("a python node needs `script"),
+        "{}",
+        stderr(&o)
+    );
 }
 
 #[test]
@@ -536,4 +608,164 @@ fn a_python_node_in_its_own_process_gives_the_in_process_run_byte_for_byte() {
             assert_eq!(a, b, "control {hz} Hz, seed {seed}: metrics differ");
         }
     }
+}
+
+// ---- The ch2.1 actor in NumPy (`ratelab export` + graphs/nodes/ppo_numpy.py) -----------
+
+fn fixture(name: &str) -> PathBuf {
+    let p = Path::new(crate::REPO).join("../shared/fixtures").join(name);
+    assert!(p.is_file(), "missing fixture {}", p.display());
+    p
+}
+
+/// `ratelab export` writes the checkpoint's tensors as .npz; `PpoActor` of the shipped node,
+/// run by the embedded interpreter on those weights, gives PyTorch's reference actions
+/// within 1e-5; the shipped graph runs with it. Bad exports are one line and exit 2.
+#[test]
+fn the_ppo_actor_in_numpy_matches_pytorch_from_exported_weights() {
+    let dir = tempfile::tempdir().unwrap();
+    let npz = dir.path().join("ppo.npz");
+    let pt = fixture("ppo_ch2.1_seed0.pt");
+    let o = ratelab(&[
+        "export",
+        pt.to_str().unwrap(),
+        "--out",
+        npz.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        out.lines()
+            .any(|l| l.starts_with("actor_mean.0.weight ") && l.ends_with(" [64, 5]")),
+        "{out}"
+    );
+    assert!(
+        out.contains("wrote") && out.contains("(13 tensors, float32)"),
+        "{out}"
+    );
+
+    // Nothing clobbered, and what cannot be exported says why.
+    for (args, needle) in [
+        (
+            vec![pt.to_str().unwrap(), "--out", npz.to_str().unwrap()],
+            "--force",
+        ),
+        (
+            vec![
+                fixture("ppo_ch2.1_seed0.onnx").to_str().unwrap(),
+                "--out",
+                dir.path().join("x.npz").to_str().unwrap(),
+            ],
+            "ppo_ch2.1_seed0.onnx",
+        ),
+        (
+            vec![
+                pt.to_str().unwrap(),
+                "--out",
+                dir.path().join("x.npy").to_str().unwrap(),
+            ],
+            "must end in .npz",
+        ),
+    ] {
+        let mut a = vec!["export"];
+        a.extend(args);
+        let o = ratelab(&a);
+        let err = stderr(&o);
+        assert_eq!(o.status.code(), Some(2), "{a:?}: {err}");
+        assert_eq!(err.trim_end().lines().count(), 1, "{err}");
+        assert!(err.contains(needle), "{err} lacks {needle}");
+    }
+
+    // The shipped node's network, on the reference observations.
+    let reference: serde_json::Value = serde_json::from_slice(
+        &std::fs::read(fixture("ppo_ch2.1_seed0.reference_actions.json")).unwrap(),
+    )
+    .unwrap();
+    let obs: Vec<Vec<f64>> = serde_json::from_value(reference["obs"].clone()).unwrap();
+    let want: Vec<Vec<f64>> = serde_json::from_value(reference["action"].clone()).unwrap();
+    assert_eq!((obs.len(), want.len()), (32, 32));
+    ratelab::python::start().unwrap();
+    let got: Vec<f64> = pyo3::Python::attach(|py| {
+        use pyo3::types::PyAnyMethods;
+        // As for a node: `from ratelab import Force, State` works.
+        ratelab::python::support(py)
+            .unwrap()
+            .call_method0("install_message_module")
+            .unwrap();
+        let sys = py.import("sys").unwrap();
+        sys.getattr("path")
+            .unwrap()
+            .call_method1("insert", (0, repo("graphs/nodes")))
+            .unwrap();
+        let actor = py
+            .import("ppo_numpy")
+            .unwrap()
+            .getattr("PpoActor")
+            .unwrap()
+            .call1((npz.to_str().unwrap(),))
+            .unwrap();
+        obs.iter()
+            .map(|o| actor.call1((o.clone(),)).unwrap().extract::<f64>().unwrap())
+            .collect()
+    });
+    for (i, (g, w)) in got.iter().zip(&want).enumerate() {
+        assert!(
+            (g - w[0]).abs() < 1e-5,
+            "obs {i}: numpy {g}, pytorch {}",
+            w[0]
+        );
+    }
+
+    // The shipped graph, its weights beside a copy of its script.
+    let graphs = dir.path().join("graphs");
+    std::fs::create_dir_all(graphs.join("nodes")).unwrap();
+    std::fs::copy(
+        repo("graphs/cartpole-ppo-numpy.toml"),
+        graphs.join("cartpole-ppo-numpy.toml"),
+    )
+    .unwrap();
+    std::fs::copy(
+        repo("graphs/nodes/ppo_numpy.py"),
+        graphs.join("nodes/ppo_numpy.py"),
+    )
+    .unwrap();
+    std::fs::copy(&npz, graphs.join("nodes/ppo_ch2.1_seed0.npz")).unwrap();
+    let run = |args: &[&str]| {
+        let mut a = vec!["run", "--clock", "virtual", "--duration", "10"];
+        a.extend_from_slice(args);
+        let o = ratelab(&a);
+        assert!(o.status.success(), "{a:?}: {}", stderr(&o));
+        String::from_utf8_lossy(&o.stdout).into_owned()
+    };
+    let numpy = run(&[
+        "--graph",
+        graphs.join("cartpole-ppo-numpy.toml").to_str().unwrap(),
+    ]);
+    let torch = run(&["--policy", pt.to_str().unwrap()]);
+    let headline = |s: &str| {
+        s.lines()
+            .find(|l| l.contains("actuator steps"))
+            // Without the wall time, which varies.
+            .and_then(|l| l.trim_start_matches("[ratelab] ").rsplit_once(" ("))
+            .map(|(head, _)| head.to_string())
+            .unwrap_or_default()
+    };
+    // The chapter's measured behaviour of this checkpoint at 50 Hz: it falls at 5.84 s.
+    assert!(headline(&torch).starts_with("FELL at t=5.84s"), "{torch}");
+    assert_eq!(headline(&numpy), headline(&torch), "{numpy}");
+
+    // Without its weights the node says how to make them.
+    std::fs::remove_file(graphs.join("nodes/ppo_ch2.1_seed0.npz")).unwrap();
+    let o = ratelab(&[
+        "run",
+        "--smoke",
+        "--graph",
+        graphs.join("cartpole-ppo-numpy.toml").to_str().unwrap(),
+    ]);
+    let err = stderr(&o);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains("FileNotFoundError: no weights at") && err.contains("ratelab export"),
+        "{err}"
+    );
 }
