@@ -88,6 +88,29 @@ pub fn config_from_args(a: &RunArgs) -> anyhow::Result<RunConfig> {
             python.script
         );
     }
+    // A chain shorthand and a `--rate` for the same node would leave one of them ignored.
+    let control_hz = if a.break_ {
+        Some(BREAK_CONTROL_HZ)
+    } else {
+        a.control_hz
+    };
+    for (flag, hz, node) in [
+        ("--sensor-hz", a.sensor_hz, cfg.graph.chain.sensor),
+        (
+            if a.break_ { "--break" } else { "--control-hz" },
+            control_hz,
+            cfg.graph.chain.policy,
+        ),
+    ] {
+        let name = &cfg.graph.node(node).name;
+        if let (Some(hz), Some((_, rate))) = (hz, a.graph.rates.iter().find(|(n, _)| n == name)) {
+            if hz != *rate {
+                anyhow::bail!(
+                    "--rate {name}={rate} and {flag} ({hz} Hz) both set node '{name}''s rate; give one"
+                );
+            }
+        }
+    }
     if let Some(hz) = a.sensor_hz {
         cfg.set_sensor_hz(hz)?;
     }
@@ -108,6 +131,15 @@ pub fn config_from_args(a: &RunArgs) -> anyhow::Result<RunConfig> {
         cfg.spin_margin = cfg.default_spin_margin();
     }
     cfg.validate()?;
+    for f in cfg.faults.iter().filter(|f| f.at >= cfg.duration) {
+        eprintln!(
+            "[ratelab] warning: the {} of '{}' at {} s starts after the run ends ({} s): it does nothing",
+            if f.duration.is_some() { "--stall" } else { "--kill" },
+            f.node,
+            f.at.as_secs_f64(),
+            cfg.duration.as_secs_f64()
+        );
+    }
     Ok(cfg)
 }
 

@@ -434,6 +434,9 @@ pub struct NodeTiming {
     pub sched_error: Option<String>,
 }
 
+/// [`Metrics::headline`] of a run whose plant stepped its whole duration with the pole up.
+pub const BALANCED_WHOLE_RUN: &str = "BALANCED (pole up the whole run)";
+
 /// A run's summary: the schema of `metrics.json`. Keys follow the chapter's report, then
 /// ratelab's additions. Under the virtual clock every field is a pure function of the
 /// settings (no wall-clock figure), so two runs serialize byte for byte the same.
@@ -462,8 +465,8 @@ pub struct Metrics {
     /// Actuator (plant) steps run: the same figure as `steps`, named for what it counts.
     #[serde(default)]
     pub actuator_steps: u64,
-    /// Ticks of the chain's policy node (the brain ran this often; at 5 Hz a tenth of the
-    /// actuator steps).
+    /// Ticks of the chain's policy node that ran its brain (at 5 Hz a tenth of the actuator
+    /// steps); ticks an injected fault (`--stall`, `--kill`) swallowed are not counted.
     #[serde(default)]
     pub policy_ticks: u64,
     /// The policy's rate in force when the run ended, Hz (`control_hz` is the rate it
@@ -627,8 +630,14 @@ impl Metrics {
             .collect();
         let topics = self.topics_by_publisher();
         let depth0 = topics.first().map_or(self.queue_depth, |(_, t)| t.depth);
-        if topics.iter().all(|(_, t)| t.depth == depth0) {
+        if topics.iter().all(|(_, t)| t.depth == depth0) && depth0 == self.queue_depth {
             parts.push(format!("queue_depth {depth0}"));
+        } else if topics.iter().all(|(_, t)| t.depth == depth0) {
+            // A live change moved it: the depth at the end, as the topics report it.
+            parts.push(format!(
+                "queue_depth {depth0} at the end, {} at the start",
+                self.queue_depth
+            ));
         } else {
             let depths: Vec<String> = topics
                 .iter()
@@ -663,9 +672,11 @@ impl Metrics {
                     .iter()
                     .map(|(k, v)| format!("{v} {}", k.replace('_', " ")))
                     .collect();
+                // The default QoS, named at the topic's depth (`KL1 latest`).
+                let default = crate::qos::TopicQos::default().short(t.depth);
                 format!(
                     "{name} {}{}{}",
-                    t.qos.as_deref().unwrap_or("KL latest"),
+                    t.qos.as_deref().unwrap_or(&default),
                     if counts.is_empty() { "" } else { ": " },
                     counts.join(", ")
                 )
@@ -702,6 +713,49 @@ impl Metrics {
         lines
     }
 
+    /// The summary's headline: how the run really ended, first match wins: `NODE FAILED`,
+    /// `FELL at t=…`, `STOPPED BY WATCHDOG at t=…` (QoS `on_deadline_missed=stop`), `PLANT
+    /// NEVER STEPPED` (the actuator ran no step), `STOPPED EARLY at t=… of …` (interrupted
+    /// before its duration), `BALANCED while the plant ran` (the actuator lost ticks to an
+    /// injected fault, the plant standing still meanwhile), else `BALANCED (pole up the
+    /// whole run)`. "The whole run" is said only when the plant stepped the whole run.
+    pub fn headline(&self) -> String {
+        let actuator_faults: u64 = self
+            .nodes
+            .values()
+            .filter(|n| n.kind == "actuator")
+            .filter_map(|n| n.faulted_ticks)
+            .sum();
+        if let Some(failed) = &self.node_failed {
+            format!("NODE FAILED ({failed})")
+        } else if let Some(t) = self.fell_at_s {
+            format!("FELL at t={t:.2}s")
+        } else if self.stopped_by_watchdog.is_some() {
+            format!(
+                "STOPPED BY WATCHDOG at t={:.2}s (pole up until then; not balanced)",
+                self.sim_time_s
+            )
+        } else if self.steps == 0 {
+            let why = if actuator_faults > 0 {
+                format!("the actuator lost all {actuator_faults} of its ticks to a fault")
+            } else {
+                "the actuator ran no step".to_string()
+            };
+            format!("PLANT NEVER STEPPED ({why}; nothing was balanced)")
+        } else if self.sim_time_s + 1e-9 < self.duration_s {
+            format!(
+                "STOPPED EARLY at t={:.2}s of {:.2}s (pole up until then)",
+                self.sim_time_s, self.duration_s
+            )
+        } else if actuator_faults > 0 {
+            format!(
+                "BALANCED while the plant ran (the actuator lost {actuator_faults} ticks to a fault; the plant stood still meanwhile)"
+            )
+        } else {
+            BALANCED_WHOLE_RUN.to_string()
+        }
+    }
+
     fn topics_by_publisher(&self) -> Vec<(&String, &TopicMetrics)> {
         let rank = |node: &str| self.nodes.get(node).map_or(usize::MAX, |n| n.rank);
         let mut topics: Vec<(&String, &TopicMetrics)> = self.topics.iter().collect();
@@ -720,11 +774,7 @@ impl Metrics {
             "{} actuator steps, {} policy ticks in {:.2}s sim{wall}",
             self.steps, self.policy_ticks, self.sim_time_s
         );
-        let verdict = match (&self.node_failed, self.fell_at_s) {
-            (Some(failed), _) => format!("NODE FAILED ({failed}) — {counted}"),
-            (None, None) => format!("BALANCED (pole up the whole run) — {counted}"),
-            (None, Some(t)) => format!("FELL at t={t:.2}s — {counted}"),
-        };
+        let verdict = format!("{} — {counted}", self.headline());
         let period =
             |hz: f64| crate::rate::period_for_hz(hz).map_or_else(|_| "?".into(), |p| p.to_string());
         let policy_period = if self.control_hz_end == self.control_hz {

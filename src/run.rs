@@ -458,7 +458,12 @@ pub fn summarize_state(cfg: &RunConfig, st: &GraphState, end: &RunEnd) -> Metric
         _ => None,
     };
     Metrics {
-        balanced: log.fell_at.is_none() && node_failed.is_none() && log.watchdog.is_none(),
+        // A plant that never stepped balanced nothing (an actuator stalled or killed from the
+        // start): not `balanced`.
+        balanced: log.fell_at.is_none()
+            && node_failed.is_none()
+            && log.watchdog.is_none()
+            && log.steps > 0,
         stopped_by_watchdog: log.watchdog.clone(),
         missing_processes: Vec::new(),
         clock: cfg.clock.as_str().to_string(),
@@ -470,7 +475,17 @@ pub fn summarize_state(cfg: &RunConfig, st: &GraphState, end: &RunEnd) -> Metric
         duration_s: cfg.duration.as_secs_f64(),
         steps: log.steps,
         actuator_steps: log.steps,
-        policy_ticks: st.ticks.get(spec.chain.policy.0).copied().unwrap_or(0),
+        // The brain's runs: the policy's ticks less those a fault (`--stall`) swallowed.
+        policy_ticks: st
+            .ticks
+            .get(spec.chain.policy.0)
+            .copied()
+            .unwrap_or(0)
+            .saturating_sub(
+                st.liveliness
+                    .get(spec.chain.policy.0)
+                    .map_or(0, |l| l.1.faulted_ticks),
+            ),
         control_hz_end: st
             .rates_hz
             .get(spec.chain.policy.0)

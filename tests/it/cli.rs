@@ -435,3 +435,46 @@ fn a_second_sigterm_exits_at_once_and_says_so() {
     assert!(!dir.path().join("metrics.json").exists());
     crate::distributed::assert_none_left(port, std::time::Duration::from_millis(500));
 }
+
+/// Two flags that set the same rate differently are refused, not silently resolved; a fault
+/// that starts after the run ends is warned about (#25).
+#[test]
+fn conflicting_rates_are_refused_and_a_fault_after_the_end_is_warned_about() {
+    assert_usage_error(
+        &["run", "--smoke", "--rate", "policy=5", "--control-hz", "10"],
+        "--rate policy=5 and --control-hz (10 Hz) both set node 'policy''s rate; give one",
+    );
+    assert_usage_error(
+        &["run", "--smoke", "--rate", "sensor=20", "--sensor-hz", "50"],
+        "both set node 'sensor''s rate",
+    );
+    assert_usage_error(
+        &["run", "--smoke", "--rate", "policy=50", "--break"],
+        "--rate policy=50 and --break (5 Hz) both set",
+    );
+    // The same value twice is no conflict.
+    let o = ratelab(&[
+        "run",
+        "--smoke",
+        "--rate",
+        "policy=10",
+        "--control-hz",
+        "10",
+    ]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let o = ratelab(&[
+        "run",
+        "--clock",
+        "virtual",
+        "--duration",
+        "2",
+        "--stall",
+        "policy@20+1",
+    ]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains("warning: the --stall of 'policy' at 20 s starts after the run ends (2 s): it does nothing"),
+        "{}",
+        stderr(&o)
+    );
+}

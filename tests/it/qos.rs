@@ -464,3 +464,62 @@ proptest! {
         prop_assert_eq!(once(), once());
     }
 }
+
+/// The summary's headline names the run's real end: a watchdog stop is not "the whole run",
+/// and a plant whose actuator was stalled or killed did not balance anything (#25).
+#[test]
+fn the_headline_names_how_the_run_really_ended() {
+    let headline = |extra: &[&str]| {
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().to_str().unwrap();
+        let mut args = vec!["run", "--clock", "virtual", "--duration", "3", "--out", out];
+        args.extend_from_slice(extra);
+        let (code, stdout, err) = ratelab(&args);
+        assert_eq!(code, 0, "{err}");
+        let m: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(dir.path().join("metrics.json")).unwrap())
+                .unwrap();
+        let line = stdout
+            .lines()
+            .find(|l| l.contains(" — ") && l.contains("actuator steps"))
+            .unwrap_or_else(|| panic!("no headline in {stdout}"))
+            .trim_start_matches("[ratelab] ")
+            .to_string();
+        (
+            line,
+            m["balanced"].as_bool().unwrap(),
+            m["policy_ticks"].as_u64().unwrap(),
+        )
+    };
+    let (line, balanced, policy_ticks) = headline(&[
+        "--qos",
+        "/action:deadline_ms=40,on_deadline_missed=stop",
+        "--stall",
+        "policy@2+0.5",
+    ]);
+    // The brain ran at t = 0, 0.02, …, 1.98 s; the stall swallowed the ticks from 2 s.
+    assert_eq!(policy_ticks, 100, "{line}");
+    assert!(
+        line.starts_with("STOPPED BY WATCHDOG at t=2.04s (pole up until then; not balanced)"),
+        "{line}"
+    );
+    assert!(!line.contains("whole run") && !balanced, "{line}");
+
+    let (line, balanced, _) = headline(&["--kill", "actuator@0"]);
+    assert!(line.starts_with("PLANT NEVER STEPPED"), "{line}");
+    assert!(line.contains("0 actuator steps") && !balanced, "{line}");
+
+    let (line, balanced, _) = headline(&["--stall", "actuator@1+0.5"]);
+    assert!(
+        line.starts_with("BALANCED while the plant ran (the actuator lost 25 ticks to a fault"),
+        "{line}"
+    );
+    assert!(balanced, "the pole did stay up whenever the plant stepped");
+
+    let (line, balanced, _) = headline(&[]);
+    assert!(
+        line.starts_with("BALANCED (pole up the whole run) — 151 actuator steps"),
+        "{line}"
+    );
+    assert!(balanced);
+}
