@@ -523,3 +523,45 @@ fn the_headline_names_how_the_run_really_ended() {
     );
     assert!(balanced);
 }
+
+/// The summary's rates line says when the depth at the end is not the one the run started
+/// with (a live change, as `replay` re-runs them), and a topic with the default QoS beside
+/// one with QoS set is named with its depth (#25).
+#[test]
+fn the_summary_names_depths_at_the_start_and_the_end_and_default_qos_with_its_depth() {
+    let mut cfg = RunConfig {
+        clock: ClockKind::Virtual,
+        duration: Nanos::from_millis(400),
+        ..RunConfig::default()
+    };
+    let (m, _, _) = run_json(&cfg);
+    assert!(
+        m.summary_lines(None)[1].ends_with("| queue_depth 1"),
+        "{:?}",
+        m.summary_lines(None)
+    );
+    // As a live change to depth 2 leaves it: the topics at 2, the run's setting 1.
+    let mut moved = m.clone();
+    for t in moved.topics.values_mut() {
+        t.depth = 2;
+    }
+    assert!(
+        moved.summary_lines(None)[1].ends_with("| queue_depth 2 at the end, 1 at the start"),
+        "{:?}",
+        moved.summary_lines(None)
+    );
+    cfg.graph.set_qos("/action", "deadline_ms=40").unwrap();
+    cfg.graph.set_depth("/obs", 3).unwrap();
+    let (mut m, _, _) = run_json(&cfg);
+    // As a launch across processes reports a default-QoS topic: counters, no QoS string.
+    let obs = m.topics.get_mut("/obs").unwrap();
+    assert_eq!(obs.qos, None);
+    obs.qos_counters.insert("lost".into(), 3);
+    let qos = m
+        .summary_lines(None)
+        .into_iter()
+        .find(|l| l.starts_with("qos: "))
+        .expect("a qos line");
+    assert!(qos.contains("/obs KL3 latest: 3 lost"), "{qos}");
+    assert!(qos.contains("/action KL1 latest dl 40 ms"), "{qos}");
+}
