@@ -758,7 +758,12 @@ impl App {
             paused: self.paused,
             sim_time_s: self.now.as_secs_f64(),
             seed: self.seed,
-            brain: short_brain(&self.policy_spec),
+            // A Python policy node is its own brain (`--policy` does not apply to it).
+            brain: if self.graph.node(self.graph.chain.policy).python.is_some() {
+                "py node".into()
+            } else {
+                short_brain(&self.policy_spec)
+            },
             brain_caption: self
                 .brain
                 .split_once(" — ")

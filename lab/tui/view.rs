@@ -502,7 +502,8 @@ fn render_node(n: &NodeView, area: Rect, buf: &mut Buffer) {
         Some(p) => format!("{}@{p}", n.name),
         None => n.name.clone(),
     };
-    if python_in_title {
+    // Only where the name still fits whole (a centred title too long loses both ends).
+    if python_in_title && name.chars().count() + 3 <= usize::from(area.width.saturating_sub(2)) {
         name.push_str(" py");
     }
     let (title, border) = if n.selected {
