@@ -290,6 +290,23 @@ impl ExactLatency {
             .map(Nanos)
     }
 
+    /// Samples strictly below `bound`: exact while every sample is kept, else the
+    /// histogram's count up to `bound` (3 significant digits). For a histogram's bars: the
+    /// bar `[a, b)` holds `count_below(b) − count_below(a)`.
+    pub fn count_below(&self, bound: Nanos) -> u64 {
+        if !self.is_exact() {
+            let h = self.stats.histogram();
+            return match bound.0.checked_sub(1) {
+                None => 0,
+                Some(top) => h.count_between(0, top),
+            };
+        }
+        self.blocks
+            .iter()
+            .map(|b| b.partition_point(|&x| x < bound.0) as u64)
+            .sum()
+    }
+
     /// The HDR histogram of every sample (3 significant digits), for drawing buckets.
     pub fn histogram(&self) -> &Histogram<u64> {
         self.stats.histogram()
@@ -903,6 +920,26 @@ mod tests {
         // The same ranking as the histogram's, to its precision.
         let h = s.histogram().value_at_quantile(0.5) as f64;
         assert!((h - s.quantile(0.5).unwrap().0 as f64).abs() <= h * 1e-3);
+    }
+
+    #[test]
+    fn count_below_is_exact_at_the_bounds() {
+        let s: ExactLatency = [0u64, 10_000_000, 19_990_000, 20_000_000, 200_000_000]
+            .map(Nanos)
+            .into_iter()
+            .collect();
+        assert_eq!(s.count_below(Nanos(0)), 0);
+        assert_eq!(
+            s.count_below(Nanos::from_millis(20)),
+            3,
+            "19.99 ms is below 20"
+        );
+        assert_eq!(
+            s.count_below(Nanos::from_millis(200)),
+            4,
+            "200 ms is not below 200"
+        );
+        assert_eq!(s.count_below(Nanos(u64::MAX)), 5);
     }
 
     #[test]

@@ -682,22 +682,29 @@ impl App {
     /// The latency panel: the segment's histogram and percentiles, and the window's.
     fn latency_view(&self) -> LatencyView {
         let latency = &self.live.segment().latency;
-        let h = latency.histogram();
         let mut buckets: Vec<(String, u64)> = (0..BUCKETS)
             .map(|i| {
+                // Each bar holds [i·20, (i+1)·20) ms, the last [200, ∞): labelled by the bound a
+                // sample is below ("<20": a fixed 10 ms, or 19.99 ms, is read right).
                 let label = if i + 1 == BUCKETS {
-                    format!(">{}", i as u64 * BUCKET.0 / 1_000_000)
+                    format!("≥{}", i as u64 * BUCKET.0 / 1_000_000)
                 } else {
-                    format!("{}", i as u64 * BUCKET.0 / 1_000_000)
+                    format!("<{}", (i as u64 + 1) * BUCKET.0 / 1_000_000)
                 };
                 (label, 0)
             })
             .collect();
-        if latency.count() > 0 {
-            for v in h.iter_recorded() {
-                let i = ((v.value_iterated_to() / BUCKET.0) as usize).min(BUCKETS - 1);
-                buckets[i].1 += v.count_at_value();
-            }
+        // Exact counts per bar (the samples themselves, not the histogram's rounding: a
+        // sample of exactly 200 ms is in the last bar, one of 19.99 ms in the first).
+        let mut below_prev = 0;
+        for (i, b) in buckets.iter_mut().enumerate() {
+            let below = if i + 1 == BUCKETS {
+                latency.count()
+            } else {
+                latency.count_below(Nanos((i as u64 + 1) * BUCKET.0))
+            };
+            b.1 = below.saturating_sub(below_prev);
+            below_prev = below;
         }
         let (p50_ms, p99_ms, max_ms) = latency.summary_ms();
         let (n, stats) = self.live.window_latency();

@@ -162,7 +162,7 @@ pub struct WindowLatency {
 /// statistics), and the window's percentiles.
 #[derive(Clone, Debug, PartialEq, Default)]
 pub struct LatencyView {
-    /// (label, count) per bucket, since the last change.
+    /// (label, count) per bucket, since the last change: `<20` for [0, 20) ms, …, `≥200`.
     pub buckets: Vec<(String, u64)>,
     /// Samples since the last change.
     pub count: u64,
