@@ -243,13 +243,26 @@ impl Policy for Captioned {
 }
 
 /// Load a checkpoint brain (no caption).
+/// A path's extension, lower-cased: how a checkpoint's format is told.
+fn extension(path: &Path) -> Option<String> {
+    path.extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase)
+}
+
+/// Why `path`, of no format the caller reads, is refused: missing, not a regular file, or
+/// of an unsupported type (a missing file is named as missing, whatever its extension).
+fn not_a_checkpoint(path: &Path) -> PolicyError {
+    match std::fs::metadata(path) {
+        Err(e) => input_err(path, crate::input::io_error(path, &e)),
+        Ok(m) if !m.is_file() => PolicyError::NotAFile(path.to_path_buf()),
+        Ok(_) => PolicyError::UnknownType(path.to_path_buf()),
+    }
+}
+
 fn load_checkpoint(spec: &str) -> Result<Box<dyn Policy>, PolicyError> {
     let path = Path::new(spec);
-    let ext = path
-        .extension()
-        .and_then(|e| e.to_str())
-        .map(str::to_ascii_lowercase);
-    match ext.as_deref() {
+    match extension(path).as_deref() {
         Some("pt" | "pth") => {
             let bytes = read_input(path, MAX_FILE_BYTES)?;
             let read = guarded(|| torch::read(&bytes, Some(&ACTOR_KEYS[..])))
@@ -277,14 +290,7 @@ fn load_checkpoint(spec: &str) -> Result<Box<dyn Policy>, PolicyError> {
             "ch2.1 PPO safetensors",
         )?)),
         Some("onnx") => Ok(Box::new(OnnxPolicy::load(path)?)),
-        _ => {
-            // A missing file is named as missing, whatever its extension.
-            match std::fs::metadata(path) {
-                Err(e) => Err(input_err(path, crate::input::io_error(path, &e))),
-                Ok(m) if !m.is_file() => Err(PolicyError::NotAFile(path.to_path_buf())),
-                Ok(_) => Err(PolicyError::UnknownType(path.to_path_buf())),
-            }
-        }
+        _ => Err(not_a_checkpoint(path)),
     }
 }
 

@@ -26,24 +26,15 @@ pub struct Exported {
 /// The tensors of the checkpoint at `path` (`.pt`/`.pth` or `.safetensors`), sorted by key.
 ///
 /// # Errors
-/// The checkpoint's load errors ([`PolicyError`]: missing, unreadable, hostile, not of one
-/// of these formats); [`PolicyError::UnknownType`] for an ONNX file or another extension (an
-/// ONNX graph has no `state_dict`); [`PolicyError::Tensor`] when a tensor cannot be read as
+/// The checkpoint's load errors ([`PolicyError`]: missing, not a regular file, unreadable,
+/// hostile, not of one of these formats); [`PolicyError::UnknownType`] for an ONNX file or
+/// another extension (an ONNX graph has no `state_dict`); [`PolicyError::Tensor`] when a tensor cannot be read as
 /// float32.
 pub fn checkpoint_tensors(path: &Path) -> Result<Vec<Exported>, PolicyError> {
-    let ext = path
-        .extension()
-        .and_then(|e| e.to_str())
-        .map(str::to_ascii_lowercase);
-    let tensors: HashMap<String, Tensor> = match ext.as_deref() {
+    let tensors: HashMap<String, Tensor> = match super::extension(path).as_deref() {
         Some("pt" | "pth") => read_torch(path)?,
         Some("safetensors") => read_safetensors(path)?,
-        _ => {
-            return match std::fs::metadata(path) {
-                Err(e) => Err(super::input_err(path, crate::input::io_error(path, &e))),
-                Ok(_) => Err(PolicyError::UnknownType(path.to_path_buf())),
-            }
-        }
+        _ => return Err(super::not_a_checkpoint(path)),
     };
     let tensor_err = |name: &str, e: candle_core::Error| PolicyError::Tensor {
         path: path.to_path_buf(),
