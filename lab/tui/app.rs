@@ -368,13 +368,11 @@ impl App {
                     EndReason::NodeFailed { node, message } => {
                         Verdict::Failed(format!("{node}: {message}"))
                     }
-                    _ => match metrics.fell_at_s {
-                        Some(t) => Verdict::Fell(t),
-                        None if metrics.headline() == ratelab::metrics::BALANCED_WHOLE_RUN => {
-                            Verdict::Done
-                        }
+                    _ => match (metrics.fell_at_s, metrics.headline()) {
+                        (Some(t), _) => Verdict::Fell(t),
+                        (None, h) if h == ratelab::metrics::BALANCED_WHOLE_RUN => Verdict::Done,
                         // A watchdog stop, a plant that never stepped, an early stop.
-                        None => Verdict::Stopped(metrics.headline()),
+                        (None, h) => Verdict::Stopped(h),
                     },
                 };
                 self.say(match (metrics.sched_warning(), &self.attached) {
