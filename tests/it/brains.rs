@@ -9,7 +9,7 @@ use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
 /// `../shared/fixtures`, beside the checkout. A missing fixture fails the test (never skips).
-fn fixture(name: &str) -> PathBuf {
+pub(crate) fn fixture(name: &str) -> PathBuf {
     let p = Path::new(crate::REPO).join("../shared/fixtures").join(name);
     assert!(
         p.is_file(),

@@ -81,6 +81,14 @@ pub(crate) fn free_port() -> u16 {
 
 #[test]
 fn virtual_lockstep_is_byte_identical_to_the_in_process_run() {
+    assert_lockstep_equals_in_process(&[], &["graphs/cartpole.toml"]);
+}
+
+/// For seeds 0–2 at control 50 and 5 Hz, virtual clock: `launch LAUNCH_GRAPH --processes`
+/// (the chapter's two placement groups, lockstep) writes byte for byte the metrics.json of
+/// `run RUN_GRAPH`. The graph arguments are a `--graph FILE` pair or a launch's positional
+/// file (none for `run`: the chapter's built-in graph).
+pub(crate) fn assert_lockstep_equals_in_process(run_graph: &[&str], launch_graph: &[&str]) {
     let _m = crate::machine::shared();
     let dir = tempfile::tempdir().unwrap();
     for hz in ["50", "5"] {
@@ -88,11 +96,21 @@ fn virtual_lockstep_is_byte_identical_to_the_in_process_run() {
             let one = dir.path().join(format!("one-{hz}-{seed}"));
             let many = dir.path().join(format!("many-{hz}-{seed}"));
             let common = ["--clock", "virtual", "--seed", seed, "--control-hz", hz];
-            let o = ratelab(&[&["run"][..], &common, &["--out", one.to_str().unwrap()]].concat());
+            let o = ratelab(
+                &[
+                    &["run"][..],
+                    run_graph,
+                    &common,
+                    &["--out", one.to_str().unwrap()],
+                ]
+                .concat(),
+            );
             assert!(o.status.success(), "{}", text(&o.stderr));
             let o = ratelab(
                 &[
-                    &["launch", "graphs/cartpole.toml", "--processes"][..],
+                    &["launch"][..],
+                    launch_graph,
+                    &["--processes"],
                     &common,
                     &["--out", many.to_str().unwrap()],
                 ]

@@ -10,12 +10,9 @@ use ratelab::policy::{BrainSlot, Scripted};
 use ratelab::run::build_graph;
 use ratelab::scheduler::{StopFlag, VirtualScheduler};
 use ratelab::{run, ClockKind, Nanos, RunConfig, RunOptions};
-use std::path::{Path, PathBuf};
 use std::process::Command;
 
-fn repo(file: &str) -> PathBuf {
-    Path::new(crate::REPO).join(file)
-}
+use crate::repo;
 
 const SHIPPED: [&str; 6] = [
     "graphs/cartpole.toml",

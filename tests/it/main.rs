@@ -9,6 +9,11 @@
 /// The repository's top folder (this suite belongs to the `lab/` package).
 pub const REPO: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/..");
 
+/// `file`, relative to the repository's top folder.
+pub fn repo(file: &str) -> std::path::PathBuf {
+    std::path::Path::new(REPO).join(file)
+}
+
 mod brains;
 mod chapter_bands;
 mod cli;

@@ -3,6 +3,7 @@
 //! script can be wrong is one line and exit 2; a callback that never returns cannot hang a
 //! run. The tests need NumPy in the active virtual environment (scripts/test.sh makes it).
 
+use crate::brains::fixture;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
 use std::time::{Duration, Instant};
@@ -32,25 +33,35 @@ fn script(dir: &Path, name: &str, text: &str) -> PathBuf {
     p
 }
 
+/// `ratelab run --clock virtual --out DIR --force ARGS`: its metrics.json and trace.csv.
+fn virtual_out(dir: &Path, args: &[&str]) -> (serde_json::Value, Vec<u8>) {
+    let out = dir.to_str().unwrap();
+    let o = ratelab(
+        &[
+            &["run", "--clock", "virtual", "--out", out, "--force"][..],
+            args,
+        ]
+        .concat(),
+    );
+    assert!(o.status.success(), "{args:?}: {}", stderr(&o));
+    let m =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("metrics.json")).unwrap()).unwrap();
+    (m, std::fs::read(dir.join("trace.csv")).unwrap())
+}
+
 /// metrics.json without the brain's label, and trace.csv, of one virtual run.
 fn virtual_run(dir: &Path, policy: &str, seed: &str, control_hz: &str) -> (String, Vec<u8>) {
-    let o = ratelab(&[
-        "run",
-        "--clock",
-        "virtual",
-        "--seed",
-        seed,
-        "--control-hz",
-        control_hz,
-        "--policy",
-        policy,
-        "--out",
-        dir.to_str().unwrap(),
-        "--force",
-    ]);
-    assert!(o.status.success(), "{policy}: {}", stderr(&o));
-    let mut m: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(dir.join("metrics.json")).unwrap()).unwrap();
+    let (mut m, trace) = virtual_out(
+        dir,
+        &[
+            "--seed",
+            seed,
+            "--control-hz",
+            control_hz,
+            "--policy",
+            policy,
+        ],
+    );
     let label = m
         .as_object_mut()
         .unwrap()
@@ -64,10 +75,7 @@ fn virtual_run(dir: &Path, policy: &str, seed: &str, control_hz: &str) -> (Strin
         }),
         "{label}"
     );
-    (
-        serde_json::to_string_pretty(&m).unwrap(),
-        std::fs::read(dir.join("trace.csv")).unwrap(),
-    )
+    (serde_json::to_string_pretty(&m).unwrap(), trace)
 }
 
 #[test]
@@ -284,37 +292,25 @@ fn a_brain_that_never_returns_is_reported_and_ctrl_c_ends_the_run_within_a_secon
 
 // ---- Python nodes (kind = "python") ----------------------------------------------------
 
+/// [`crate::repo`] as text, for command lines.
 fn repo(file: &str) -> String {
-    Path::new(crate::REPO)
-        .join(file)
-        .to_string_lossy()
-        .into_owned()
+    crate::repo(file).to_string_lossy().into_owned()
 }
 
 /// metrics.json of one virtual run of `graph` without what names the graph, the brain and
 /// the nodes' kinds, and trace.csv.
 fn graph_run(dir: &Path, graph: &str, seed: &str, extra: &[&str]) -> (String, Vec<u8>) {
-    let mut args = vec![
-        "run", "--clock", "virtual", "--seed", seed, "--graph", graph, "--out",
-    ];
-    let out = dir.to_str().unwrap();
-    args.push(out);
-    args.push("--force");
-    args.extend_from_slice(extra);
-    let o = ratelab(&args);
-    assert!(o.status.success(), "{graph}: {}", stderr(&o));
-    let mut m: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(dir.join("metrics.json")).unwrap()).unwrap();
+    let (mut m, trace) = virtual_out(
+        dir,
+        &[&["--seed", seed, "--graph", graph][..], extra].concat(),
+    );
     let m_obj = m.as_object_mut().unwrap();
     m_obj.remove("graph").expect("graph");
     m_obj.remove("policy").expect("policy");
     for n in m_obj["nodes"].as_object_mut().unwrap().values_mut() {
         n.as_object_mut().unwrap().remove("kind").expect("kind");
     }
-    (
-        serde_json::to_string_pretty(&m).unwrap(),
-        std::fs::read(dir.join("trace.csv")).unwrap(),
-    )
+    (serde_json::to_string_pretty(&m).unwrap(), trace)
 }
 
 #[test]
@@ -565,58 +561,11 @@ fn the_graph_file_keeps_python_keys_for_python_nodes() {
 
 #[test]
 fn a_python_node_in_its_own_process_gives_the_in_process_run_byte_for_byte() {
-    let _m = crate::machine::shared();
-    let dir = tempfile::tempdir().unwrap();
-    for hz in ["50", "5"] {
-        for seed in ["0", "1", "2"] {
-            let one = dir.path().join(format!("one-{hz}-{seed}"));
-            let many = dir.path().join(format!("many-{hz}-{seed}"));
-            let common = [
-                "--clock",
-                "virtual",
-                "--seed",
-                seed,
-                "--control-hz",
-                hz,
-                "--graph",
-                "graphs/cartpole-python.toml",
-            ];
-            let o = crate::distributed::bin()
-                .args([&["run"][..], &common, &["--out", one.to_str().unwrap()]].concat())
-                .output()
-                .unwrap();
-            assert!(o.status.success(), "{}", stderr(&o));
-            let o = crate::distributed::bin()
-                .args(
-                    [
-                        &["launch", "--processes"][..],
-                        &common,
-                        &["--out", many.to_str().unwrap()],
-                    ]
-                    .concat(),
-                )
-                .output()
-                .unwrap();
-            assert!(o.status.success(), "{}", stderr(&o));
-            let out = String::from_utf8_lossy(&o.stdout);
-            assert!(
-                out.contains("in 2 processes: robot [sensor, actuator], policy [policy]"),
-                "{out}"
-            );
-            let a = std::fs::read_to_string(one.join("metrics.json")).unwrap();
-            let b = std::fs::read_to_string(many.join("metrics.json")).unwrap();
-            assert_eq!(a, b, "control {hz} Hz, seed {seed}: metrics differ");
-        }
-    }
+    let graph = ["--graph", "graphs/cartpole-python.toml"];
+    crate::distributed::assert_lockstep_equals_in_process(&graph, &graph);
 }
 
 // ---- The ch2.1 actor in NumPy (`ratelab export` + graphs/nodes/ppo_numpy.py) -----------
-
-fn fixture(name: &str) -> PathBuf {
-    let p = Path::new(crate::REPO).join("../shared/fixtures").join(name);
-    assert!(p.is_file(), "missing fixture {}", p.display());
-    p
-}
 
 /// `ratelab export` writes the checkpoint's tensors as .npz; `PpoActor` of the shipped node,
 /// run by the embedded interpreter on those weights, gives PyTorch's reference actions

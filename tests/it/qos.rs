@@ -9,12 +9,9 @@ use ratelab::qos::Fault;
 use ratelab::run::build_graph;
 use ratelab::scheduler::{StopFlag, VirtualScheduler};
 use ratelab::{run, ClockKind, Nanos, RunConfig, RunOptions};
-use std::path::PathBuf;
 use std::process::Command;
 
-fn repo(file: &str) -> PathBuf {
-    PathBuf::from(crate::REPO).join(file)
-}
+use crate::repo;
 
 fn graph(file: &str) -> GraphSpec {
     GraphSpec::load(&repo(file)).unwrap()
