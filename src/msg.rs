@@ -76,6 +76,15 @@ impl AnyTopic {
         })
     }
 
+    /// The type of message it carries (the `msg` it was made with).
+    pub fn msg_type(&self) -> MsgType {
+        match self {
+            AnyTopic::State(_) => MsgType::State,
+            AnyTopic::Position(_) => MsgType::Position,
+            AnyTopic::Force(_) => MsgType::Force,
+        }
+    }
+
     /// Counters and depth as of the topic's latest operation.
     pub fn stats(&self) -> TopicStats {
         match self {

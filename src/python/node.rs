@@ -35,7 +35,7 @@
 //! at that tick, naming `FILE:LINE` of the raising frame and the exception.
 
 use super::{describe, start, support, CallbackGuard, PythonError};
-use crate::graph::spec::{MsgType, PythonNodeSpec};
+use crate::graph::spec::PythonNodeSpec;
 use crate::msg::{AnyTopic, ForceMsg, PositionMsg};
 use crate::time::Nanos;
 use pyo3::prelude::*;
@@ -81,7 +81,7 @@ impl PythonNode {
         let module_name = format!("ratelab_node_{name}");
         let declared = |t: &Option<AnyTopic>| {
             t.as_ref()
-                .map(|t| (t.name().to_string(), msg_type(t).as_str()))
+                .map(|t| (t.name().to_string(), t.msg_type().as_str()))
         };
         Python::attach(|py| {
             let support = support(py)?;
@@ -160,14 +160,6 @@ impl PythonNode {
             }
         }
         Ok(())
-    }
-}
-
-fn msg_type(t: &AnyTopic) -> MsgType {
-    match t {
-        AnyTopic::State(_) => MsgType::State,
-        AnyTopic::Position(_) => MsgType::Position,
-        AnyTopic::Force(_) => MsgType::Force,
     }
 }
 
