@@ -5,7 +5,7 @@ use anyhow::Context;
 use indicatif::{ProgressBar, ProgressStyle};
 use ratelab::config::{phase_offsets_from_ms, BREAK_CONTROL_HZ};
 use ratelab::graph::GraphSpec;
-use ratelab::metrics::StepRecord;
+use ratelab::runlog::StepRecord;
 use ratelab::recording::{check_output_path, default_path, RecordOptions, Recording};
 use ratelab::scheduler::{EndReason, StopFlag};
 use ratelab::{run, ClockKind, Nanos, RunConfig, RunOptions, RunReport};
@@ -346,9 +346,7 @@ fn write_trace(out: &mut dyn Write, trace: &[StepRecord], graph: &GraphSpec) -> 
         .topics
         .iter()
         .enumerate()
-        .map(|(i, t)| {
-            ratelab::qos::QosCounter::reported(&[t.qos], &last.get(ratelab::graph::TopicId(i)))
-        })
+        .map(|(i, t)| last.get(ratelab::graph::TopicId(i)).reported(&[t.qos]))
         .collect();
     let mut w = csv::Writer::from_writer(out);
     let mut header: Vec<String> = [
@@ -391,7 +389,7 @@ fn write_trace(out: &mut dyn Write, trace: &[StepRecord], graph: &GraphSpec) -> 
         }
         for (t, counters) in r.topics.as_slice().iter().zip(&qos_columns) {
             for c in counters {
-                row.push(c.value(t).to_string());
+                row.push(t.counter(*c).to_string());
             }
         }
         row.push(r.fell.to_string());

@@ -2,26 +2,15 @@
 
 use crate::graph::spec::{GraphSpec, OverrideError};
 use crate::rate::{period_for_hz, MAX_HZ};
-use crate::time::Nanos;
+use crate::time::{Nanos, MAX_DURATION_S};
 use std::fmt;
 use std::str::FromStr;
-
-/// The chapter's actuator rate: the plant's 50 Hz control step.
-pub const ACTUATOR_HZ: f64 = 50.0;
 
 /// `--break` sets the control rate to this (the chapter's demonstration of the cliff).
 pub const BREAK_CONTROL_HZ: f64 = 5.0;
 
-/// The longest run accepted, seconds (`--duration`, an exercise's bands, `bench`, a session
-/// log's run): one hour. A headless run keeps one trace record per actuator step (about
-/// 180 000 at 50 Hz for an hour, tens of MB), and a virtual hour at the highest rates takes
-/// minutes; a lab run ends there, so its log replays.
-pub const MAX_DURATION_S: f64 = 3600.0;
-
 /// The most faults one run may inject (`--stall`, `--kill`).
 pub const MAX_FAULTS: usize = 64;
-/// [`MAX_DURATION_S`] as run time.
-pub const MAX_DURATION: Nanos = Nanos(MAX_DURATION_S as u64 * Nanos::SECOND.0);
 
 /// Which executor runs the graph.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]

@@ -6,8 +6,8 @@
 //! This crate knows nothing of terminals: the lab (`lab/`) draws it.
 //!
 //! Layout, one module per idea: [`time`], [`clock`], [`topic`], [`rate`], [`node`],
-//! [`plant`], [`policy`] (+ brains in [`python`]), [`msg`], [`graph`] (+ its file format, [`graph::spec`]),
-//! [`scheduler`] (+ [`realtime`]), [`metrics`], [`config`], [`run`], [`session`],
+//! [`plant`], [`ids`], [`policy`] (+ brains in [`python`]), [`msg`], [`graph`] (+ its file format, [`graph::spec`]),
+//! [`scheduler`] (+ [`realtime`]), [`runlog`], [`metrics`], [`config`], [`run`], [`session`],
 //! [`distributed`] (the graph across processes, over Zenoh);
 //! files the user names are read through [`input`] and written through [`output`].
 #![warn(missing_docs)]
@@ -18,6 +18,7 @@ pub mod config;
 pub mod distributed;
 pub mod exercise;
 pub mod graph;
+pub mod ids;
 pub mod input;
 pub mod metrics;
 pub mod msg;
@@ -32,6 +33,7 @@ pub mod rate;
 pub mod realtime;
 pub mod recording;
 pub mod run;
+pub mod runlog;
 pub mod scheduler;
 pub mod session;
 pub mod sweep;

@@ -24,7 +24,7 @@ pub struct PositionMsg {
     pub pole_angle_rad: f64,
 }
 
-/// A force command on the cart, newtons. The motor's range is ±[`crate::graph::spec::GEAR_N`]
+/// A force command on the cart, newtons. The motor's range is ±[`crate::plant::GEAR_N`]
 /// (gear 10 on a control in [-1, 1]); the plant clips beyond it.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ForceMsg {

@@ -24,6 +24,11 @@ pub type Action = [f32; ACT_DIM];
 pub const FRAME_SKIP: usize = 2;
 /// The plant's step period (the actuator's period): 2 × 10 ms physics steps.
 pub const CONTROL_PERIOD: Nanos = Nanos(20_000_000);
+/// The actuator's rate, Hz: one plant step per tick, so it is fixed at 1 / [`CONTROL_PERIOD`]
+/// (the chapter's 50 Hz control step; a graph cannot change it).
+pub const ACTUATOR_HZ: f64 = 50.0;
+/// The motor's gear: a force command of 1 is this many newtons (`cartpole.xml`, gear 10).
+pub const GEAR_N: f64 = 10.0;
 /// Fall limit on |θ|, rad (≈ 12°).
 pub const THETA_LIMIT_RAD: f64 = 0.2095;
 /// Fall limit on |cart_pos|, m.

@@ -26,12 +26,15 @@
 //! The defaults are the chapter's topic exactly, so a graph that sets none of them runs
 //! byte-identically to one written before QoS existed.
 
-use crate::time::Nanos;
+use crate::time::{Nanos, MAX_DURATION_S};
 use serde::{Deserialize, Serialize};
 
 /// The longest deadline, lifespan, lease, link delay or jitter a graph may set, ms (an
 /// hour: the longest run).
 pub const MAX_QOS_MS: f64 = 3_600_000.0;
+
+/// The largest history depth a graph file or flag may set (a bound on memory per topic).
+pub const MAX_DEPTH: usize = 1_000_000;
 
 /// How many times a reliable link sends one message before it gives up and counts it
 /// lost (a bound on work per message; at 20% loss the chance of reaching it is 0.2¹⁶).
@@ -284,10 +287,10 @@ pub fn apply_key(
                 .trim()
                 .parse::<usize>()
                 .map_err(|_| format!("depth: not a whole number: '{value}'"))?;
-            if d == 0 || d > crate::graph::spec::MAX_DEPTH {
+            if d == 0 || d > MAX_DEPTH {
                 return Err(format!(
                     "depth must be in 1..={}, got {d}",
-                    crate::graph::spec::MAX_DEPTH
+                    MAX_DEPTH
                 ));
             }
             *depth = d;
@@ -367,7 +370,8 @@ pub fn split_pairs(list: &str) -> Result<Vec<(&str, &str)>, String> {
     Ok(pairs)
 }
 
-/// A QoS counter a topic reports (see [`crate::topic::TopicStats`] for each one's meaning).
+/// A QoS counter a topic reports (see `TopicStats` in [`crate::topic`] for each one's
+/// meaning; `TopicStats::counter` reads one, `TopicStats::reported` lists a topic's).
 /// Outputs (metrics.json, trace.csv, the lab, recordings) show a counter when the QoS that
 /// can make it count is on, or when it has counted (a live change may have turned it off
 /// since): a topic with the chapter's QoS adds nothing, so its outputs are unchanged.
@@ -410,18 +414,6 @@ impl QosCounter {
         }
     }
 
-    /// Its value in `s`.
-    pub fn value(self, s: &crate::topic::TopicStats) -> u64 {
-        match self {
-            QosCounter::Expired => s.expired,
-            QosCounter::Refused => s.refused,
-            QosCounter::Lost => s.lost,
-            QosCounter::Retransmitted => s.retransmitted,
-            QosCounter::OfferedDeadlineMissed => s.offered_deadline_missed,
-            QosCounter::RequestedDeadlineMissed => s.requested_deadline_missed,
-        }
-    }
-
     /// True when `q` can make it count.
     pub fn enabled_by(self, q: &TopicQos) -> bool {
         match self {
@@ -433,15 +425,6 @@ impl QosCounter {
                 q.deadline.is_some()
             }
         }
-    }
-
-    /// The counters a topic reports: enabled by any of `qos` (e.g. at the start and at the
-    /// end of a run), or nonzero in `last`.
-    pub fn reported(qos: &[TopicQos], last: &crate::topic::TopicStats) -> Vec<QosCounter> {
-        Self::ALL
-            .into_iter()
-            .filter(|c| qos.iter().any(|q| c.enabled_by(q)) || c.value(last) > 0)
-            .collect()
     }
 }
 
@@ -581,10 +564,10 @@ impl Fault {
                 .parse::<f64>()
                 .map_err(|_| format!("not a time: '{t}' (seconds, or with s/ms)"))?
                 * scale;
-            if !(secs.is_finite() && (0.0..=crate::config::MAX_DURATION_S).contains(&secs)) {
+            if !(secs.is_finite() && (0.0..=MAX_DURATION_S).contains(&secs)) {
                 return Err(format!(
                     "time '{t}' must be in [0, {}] s",
-                    crate::config::MAX_DURATION_S
+                    MAX_DURATION_S
                 ));
             }
             Nanos::from_secs_f64(secs).ok_or_else(|| format!("time '{t}' is out of range"))

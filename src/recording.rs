@@ -17,7 +17,7 @@
 //!   window), one colour per topic;
 //! - QoS ([`crate::qos`]): `bus/<topic>/<counter>` (`expired`, `refused`, `lost`,
 //!   `retransmitted`, `offered_deadline_missed`, `requested_deadline_missed`) for each counter
-//!   a topic reports ([`QosCounter::reported`]: its QoS can make it count, or it has
+//!   a topic reports ([`crate::topic::TopicStats::reported`]: its QoS can make it count, or it has
 //!   counted), from the first step it is reported to the end, read at each actuator step
 //!   (deadline periods missed up to that step count before the next message); and
 //!   `nodes/<name>/not_alive` (times the node lost its liveliness) for each node with a
@@ -69,7 +69,8 @@ pub use shape::{GraphShape, NodeShape, TopicShape};
 
 use crate::config::{ClockKind, RunConfig};
 use crate::graph::{GraphHandles, StepObserver};
-use crate::metrics::{Metrics, StepRecord};
+use crate::metrics::Metrics;
+use crate::runlog::StepRecord;
 use crate::plant::{CART_LIMIT_M, THETA_LIMIT_RAD};
 use crate::qos::QosCounter;
 use crate::scheduler::{EndReason, RunEnd};
@@ -317,8 +318,8 @@ impl Drop for Committer {
 }
 
 /// The force the motor applies per unit of control (the `gear` of `assets/cartpole.xml`), N:
-/// the graph's [`crate::graph::spec::GEAR_N`].
-pub const FORCE_PER_CONTROL_N: f64 = crate::graph::spec::GEAR_N;
+/// the graph's [`crate::plant::GEAR_N`].
+pub const FORCE_PER_CONTROL_N: f64 = crate::plant::GEAR_N;
 
 /// Half the rail's length (the slider's range in `assets/cartpole.xml`), m.
 pub const RAIL_HALF_LENGTH_M: f64 = 2.9;
@@ -1391,7 +1392,7 @@ impl RecordingObserver {
                 .copied()
                 .unwrap_or_else(|| (topic.stats)());
             let logged = &mut self.qos_logged[i];
-            for c in QosCounter::reported(&[topic.qos, (topic.live_qos)()], &st) {
+            for c in st.reported(&[topic.qos, (topic.live_qos)()]) {
                 if !logged.contains(&c) {
                     logged.push(c);
                     let color =
@@ -1406,7 +1407,7 @@ impl RecordingObserver {
             }
             logged.sort_by_key(|c| QosCounter::ALL.iter().position(|a| a == c));
             for c in logged.iter() {
-                buf.scalar(&qos_entity(topic, *c), s.t, s.step, c.value(&st) as f64);
+                buf.scalar(&qos_entity(topic, *c), s.t, s.step, st.counter(*c) as f64);
             }
             let (offered, requested) = (st.offered_deadline_missed, st.requested_deadline_missed);
             let (o0, r0) = self.deadline_seen[i];

@@ -2,11 +2,11 @@
 
 use crate::config::{ClockKind, RunConfig};
 use crate::graph::{lock, Graph, GraphHandles, StepObserver};
-use crate::metrics::{round_to, Metrics, NodeMetrics, NodeTiming, StepRecord, TopicMetrics};
+use crate::metrics::{round_to, Metrics, NodeMetrics, NodeTiming, TopicMetrics};
+use crate::runlog::StepRecord;
 use crate::msg::AnyTopic;
 use crate::plant::{CartPole, PlantError};
 use crate::policy::{BrainSlot, Policy};
-use crate::qos::QosCounter;
 use crate::scheduler::{run_real, RealOptions, RunEnd, StopFlag, VirtualScheduler};
 use crate::time::Nanos;
 use std::time::{Duration, Instant};
@@ -77,7 +77,7 @@ pub enum Command {
 impl Command {
     /// Apply to the settings a run starts with: `graph`'s rates and depths, the brain
     /// spec `policy`. The checks are the command line's: rates in (0, 10 000] Hz (the
-    /// actuator at 50), depths in 1..=[`crate::graph::spec::MAX_DEPTH`], names that exist.
+    /// actuator at 50), depths in 1..=[`crate::qos::MAX_DEPTH`], names that exist.
     /// A brain is not loaded here (see [`Command::validate`]).
     ///
     /// # Errors
@@ -388,7 +388,7 @@ pub fn summarize(
 pub fn summarize_state(cfg: &RunConfig, st: &GraphState, end: &RunEnd) -> Metrics {
     let spec = &cfg.graph;
     let log = &st.actuator;
-    let stats: crate::metrics::TopicCounters = st.topics.iter().copied().collect();
+    let stats: crate::runlog::TopicCounters = st.topics.iter().copied().collect();
     let obs = stats.get(spec.chain.obs);
     let action = stats.get(spec.chain.action);
     let sim_time = log.fell_at.unwrap_or(end.at);
@@ -443,9 +443,10 @@ pub fn summarize_state(cfg: &RunConfig, st: &GraphState, end: &RunEnd) -> Metric
                 msg_per_s: per_s(s.published),
                 qos: (!(t.qos.is_default() && now_qos.is_default()))
                     .then(|| now_qos.short(s.depth)),
-                qos_counters: QosCounter::reported(&[t.qos, now_qos], s)
+                qos_counters: s
+                    .reported(&[t.qos, now_qos])
                     .into_iter()
-                    .map(|c| (c.key().to_string(), c.value(s)))
+                    .map(|c| (c.key().to_string(), s.counter(c)))
                     .collect(),
             };
             (t.name.clone(), m)

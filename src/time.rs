@@ -10,6 +10,14 @@ use serde::{Deserialize, Serialize};
 use std::fmt;
 use std::ops::{Add, AddAssign, Sub};
 
+/// The longest run accepted, seconds (`--duration`, an exercise's bands, `bench`, a session
+/// log's run, a fault's time): one hour. A headless run keeps one trace record per actuator
+/// step (about 180 000 at 50 Hz for an hour, tens of MB), and a virtual hour at the highest
+/// rates takes minutes; a lab run ends there, so its log replays.
+pub const MAX_DURATION_S: f64 = 3600.0;
+/// [`MAX_DURATION_S`] as run time.
+pub const MAX_DURATION: Nanos = Nanos(MAX_DURATION_S as u64 * Nanos::SECOND.0);
+
 /// A point in run time or a span of time, in whole nanoseconds (`u64`: about 584 years).
 ///
 /// `Display` scales to the most readable unit: `850 ns`, `12.5 µs`, `20 ms`, `1.5 s`.

@@ -18,7 +18,7 @@
 //! virtual clock all of it is deterministic. Every message published is accounted for:
 //! `published = seen + dropped + expired + lost + refused + unseen buffered + in flight`.
 
-use crate::qos::{Delivery, History, Link, Reliability, TopicQos, MAX_ATTEMPTS};
+use crate::qos::{Delivery, History, Link, QosCounter, Reliability, TopicQos, MAX_ATTEMPTS};
 use crate::time::Nanos;
 use rand_distr::{Bernoulli, Distribution, Uniform};
 use std::collections::VecDeque;
@@ -74,6 +74,30 @@ pub struct TopicStats {
     /// Deadline periods that passed with no message arriving at the subscriber (ROS 2's
     /// *requested deadline missed*); beyond the offered ones, a link's losses and delays.
     pub requested_deadline_missed: u64,
+}
+
+impl TopicStats {
+    /// The value of QoS counter `c`.
+    pub fn counter(&self, c: QosCounter) -> u64 {
+        match c {
+            QosCounter::Expired => self.expired,
+            QosCounter::Refused => self.refused,
+            QosCounter::Lost => self.lost,
+            QosCounter::Retransmitted => self.retransmitted,
+            QosCounter::OfferedDeadlineMissed => self.offered_deadline_missed,
+            QosCounter::RequestedDeadlineMissed => self.requested_deadline_missed,
+        }
+    }
+
+    /// The QoS counters a topic whose latest stats these are reports, in output order:
+    /// those enabled by any of `qos` (e.g. its QoS at the start and at the end of a run),
+    /// or nonzero here.
+    pub fn reported(&self, qos: &[TopicQos]) -> Vec<QosCounter> {
+        QosCounter::ALL
+            .into_iter()
+            .filter(|&c| qos.iter().any(|q| c.enabled_by(q)) || self.counter(c) > 0)
+            .collect()
+    }
 }
 
 /// Why a depth cannot be set.

@@ -8,9 +8,9 @@ use super::view::{
 };
 use crossbeam_channel::Sender;
 use ratelab::config::{check_rate, BREAK_CONTROL_HZ};
-use ratelab::graph::spec::GEAR_N;
+use ratelab::plant::GEAR_N;
 use ratelab::graph::{GraphSpec, NodeId, TopicId};
-use ratelab::metrics::StepRecord;
+use ratelab::runlog::StepRecord;
 use ratelab::qos::{Delivery, QosCounter, TopicQos};
 use ratelab::run::Command;
 use ratelab::scheduler::EndReason;
@@ -627,10 +627,10 @@ impl App {
                 .then(|| qos.short_parts(self.depths.get(id.0).copied().unwrap_or(spec.depth))),
             qos_counts: self.last.map_or_else(Vec::new, |l| {
                 let s = l.topics.get(id);
-                QosCounter::reported(&[spec.qos, qos], &s)
+                s.reported(&[spec.qos, qos])
                     .into_iter()
                     .filter(|c| *c != QosCounter::OfferedDeadlineMissed)
-                    .map(|c| (short_counter(c), c.value(&s)))
+                    .map(|c| (short_counter(c), s.counter(c)))
                     .collect()
             }),
             selected: self.selected == Some(Selected::Topic(id)),

@@ -16,7 +16,8 @@
 //! most [`MAX_MARKS`] over the last [`MARK_HISTORY`].
 
 use ratelab::graph::TopicId;
-use ratelab::metrics::{ExactLatency, StepRecord};
+use ratelab::metrics::ExactLatency;
+use ratelab::runlog::StepRecord;
 use ratelab::topic::TopicStats;
 use ratelab::Nanos;
 use std::collections::VecDeque;
@@ -284,7 +285,7 @@ impl Live {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use ratelab::metrics::TopicCounters;
+    use ratelab::runlog::TopicCounters;
 
     const MS: u64 = 1_000_000;
 

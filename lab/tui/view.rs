@@ -817,7 +817,7 @@ fn time_axis(t0: f64, t1: f64, area: Rect) -> Axis<'static> {
 fn render_hold_chart(v: &View, area: Rect, buf: &mut Buffer) {
     let t1 = v.sim_time_s.max(10.0);
     let t0 = t1 - 10.0;
-    let limit = ratelab::graph::spec::GEAR_N;
+    let limit = ratelab::plant::GEAR_N;
     let clamp = |pts: &[(f64, f64)]| -> Vec<(f64, f64)> {
         pts.iter()
             .map(|&(t, f)| (t, f.clamp(-limit, limit)))

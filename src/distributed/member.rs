@@ -15,7 +15,8 @@ use super::{check_endpoint, open_session, DistError, Keys, REPLY_TIMEOUT};
 use crate::config::RunConfig;
 use crate::graph::spec::GraphSpec;
 use crate::graph::{Graph, NodeId, TopicId};
-use crate::metrics::{LatencyStats, NodeTiming, StepRecord};
+use crate::metrics::{LatencyStats, NodeTiming};
+use crate::runlog::StepRecord;
 use crate::msg::AnyTopic;
 use crate::node::{Flow, Node};
 use crate::policy::BrainSlot;
@@ -141,10 +142,10 @@ impl LiveStats {
             && m.counters.len() <= MAX_BATCH_COUNTERS
             && m.counters
                 .iter()
-                .all(|c| c.1 < crate::graph::spec::MAX_TOPICS)
-            && m.nodes.len() <= crate::graph::spec::MAX_NODES
-            && m.topics.len() <= crate::graph::spec::MAX_TOPICS
-            && m.wire.len() <= crate::graph::spec::MAX_TOPICS;
+                .all(|c| c.1 < crate::ids::MAX_TOPICS)
+            && m.nodes.len() <= crate::ids::MAX_NODES
+            && m.topics.len() <= crate::ids::MAX_TOPICS
+            && m.wire.len() <= crate::ids::MAX_TOPICS;
         if bounded {
             Ok(m)
         } else {

@@ -28,7 +28,7 @@ use super::{check_endpoint, open_session, DistError, Keys};
 use crate::config::RunConfig;
 use crate::graph::spec::GraphSpec;
 use crate::graph::{NodeId, TopicId};
-use crate::metrics::StepRecord;
+use crate::runlog::StepRecord;
 use crate::msg::ForceMsg;
 use crate::recording::{GraphShape, Recording};
 use crate::scheduler::StopFlag;
@@ -862,7 +862,7 @@ fn ask_setup(session: &zenoh::Session, selector: &str) -> Option<Setup> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::metrics::TopicCounters;
+    use crate::runlog::TopicCounters;
 
     fn cfg() -> RunConfig {
         RunConfig {

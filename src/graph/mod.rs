@@ -10,7 +10,7 @@ pub mod estimator;
 pub mod nodes;
 pub mod spec;
 
-use crate::metrics::{RunLog, StepRecord, TopicCounters};
+use crate::runlog::{RunLog, StepRecord, TopicCounters};
 use crate::msg::AnyTopic;
 use crate::node::Node;
 use crate::plant::CartPole;

@@ -20,9 +20,10 @@
 //! kind has one input; a kind that combined several would pass on the oldest origin.
 
 use super::estimator::VelocityFilter;
-use super::spec::{NodeId, GEAR_N};
+use super::spec::NodeId;
+use crate::plant::GEAR_N;
 use super::{lock, SharedPlant, StepObserver};
-use crate::metrics::{RunLog, StepRecord};
+use crate::runlog::{RunLog, StepRecord};
 use crate::msg::{AnyTopic, ForceMsg, PositionMsg, StateMsg};
 use crate::node::{Flow, Node};
 use crate::policy::BrainSlot;

@@ -50,8 +50,11 @@
 //! position; edges into a node with an explicit priority do not order it. A cycle among
 //! nodes without explicit priorities is an error.
 
-use crate::config::ACTUATOR_HZ;
-use crate::qos::{self, Delivery, History, Link, OnDeadlineMissed, Reliability, TopicQos};
+use crate::ids::{MAX_NODES, MAX_TOPICS};
+use crate::plant::{ACTUATOR_HZ, GEAR_N};
+use crate::qos::{
+    self, Delivery, History, Link, OnDeadlineMissed, Reliability, TopicQos, MAX_DEPTH,
+};
 use crate::rate::{period_for_hz, MAX_HZ};
 use crate::time::Nanos;
 use serde::{Deserialize, Serialize};
@@ -60,16 +63,8 @@ use std::ops::Range;
 use std::path::Path;
 use toml::Spanned;
 
-/// The most nodes a graph may have (the lab lays out up to this many).
-pub const MAX_NODES: usize = 8;
-/// The most topics a graph may have: every node but the actuator publishes at most one.
-pub const MAX_TOPICS: usize = MAX_NODES - 1;
 /// A graph file larger than this is refused before it is parsed, bytes.
 pub const MAX_FILE_BYTES: u64 = 64 * 1024;
-/// The largest history depth a graph file or flag may set (a bound on memory per topic).
-pub const MAX_DEPTH: usize = 1_000_000;
-/// The motor's gear: a force command of 1 is this many newtons (`cartpole.xml`, gear 10).
-pub const GEAR_N: f64 = 10.0;
 
 /// The chapter's graph, shipped as `graphs/cartpole.toml` and built in: the default.
 pub const DEFAULT_GRAPH_TOML: &str = include_str!("../../graphs/cartpole.toml");
@@ -149,13 +144,7 @@ impl MsgType {
 /// The process that holds the plant's nodes by default ([`GraphSpec::process_of`]).
 pub const DEFAULT_ROBOT_PROCESS: &str = "robot";
 
-/// Index of a node in [`GraphSpec::nodes`], which is the tie-break order.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
-pub struct NodeId(pub usize);
-
-/// Index of a topic in [`GraphSpec::topics`] (file order).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
-pub struct TopicId(pub usize);
+pub use crate::ids::{NodeId, TopicId};
 
 /// A node's kind-specific parameters (all optional in the file; defaults below).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize, Default)]

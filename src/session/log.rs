@@ -2,7 +2,9 @@
 //! virtual instants they took effect at, and its exact replay.
 
 use crate::checkpoint::load_policy;
-use crate::config::{ClockKind, RunConfig, ACTUATOR_HZ, MAX_DURATION};
+use crate::config::{ClockKind, RunConfig};
+use crate::plant::ACTUATOR_HZ;
+use crate::time::MAX_DURATION;
 use crate::graph::GraphSpec;
 use crate::metrics::Metrics;
 use crate::run::{RunOptions, TimedCommand};

@@ -2,15 +2,16 @@
 //! virtual clock's [`Speed`] ladder.
 
 use crate::config::RunConfig;
-use crate::metrics::{Metrics, StepRecord};
+use crate::metrics::Metrics;
+use crate::runlog::StepRecord;
 use crate::run::Command;
 use crate::scheduler::EndReason;
 use crate::time::Nanos;
 use std::path::PathBuf;
 
 /// "Run until stopped": the duration of an open-ended lab run, the longest any run may be
-/// ([`crate::config::MAX_DURATION`]), so that its session log replays.
-pub const UNBOUNDED: Nanos = crate::config::MAX_DURATION;
+/// ([`crate::time::MAX_DURATION`]), so that its session log replays.
+pub const UNBOUNDED: Nanos = crate::time::MAX_DURATION;
 
 /// Virtual-clock pacing: wall seconds per virtual second, or as fast as possible.
 #[derive(Clone, Copy, Debug, PartialEq)]

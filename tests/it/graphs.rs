@@ -5,7 +5,7 @@
 
 use proptest::prelude::*;
 use ratelab::graph::{GraphSpec, StepObserver};
-use ratelab::metrics::StepRecord;
+use ratelab::runlog::StepRecord;
 use ratelab::policy::{BrainSlot, Scripted};
 use ratelab::run::build_graph;
 use ratelab::scheduler::{StopFlag, VirtualScheduler};

@@ -14,6 +14,7 @@ pub fn repo(file: &str) -> std::path::PathBuf {
     std::path::Path::new(REPO).join(file)
 }
 
+mod architecture;
 mod brains;
 mod chapter_bands;
 mod cli;

@@ -180,7 +180,7 @@ fn reference_recording_is_what_the_code_produces() {
 fn a_run_cut_short_leaves_a_complete_file() {
     struct StopAfter(u64, StopFlag);
     impl ratelab::graph::StepObserver for StopAfter {
-        fn on_step(&mut self, r: &ratelab::metrics::StepRecord) {
+        fn on_step(&mut self, r: &ratelab::runlog::StepRecord) {
             if r.step >= self.0 {
                 self.1.stop();
             }
@@ -659,7 +659,7 @@ fn a_brain_swap_is_an_event_and_a_mark() {
     // `Recording::change`, at the instant it applied it.
     struct SwapAt(Recording, u64);
     impl ratelab::graph::StepObserver for SwapAt {
-        fn on_step(&mut self, r: &ratelab::metrics::StepRecord) {
+        fn on_step(&mut self, r: &ratelab::runlog::StepRecord) {
             if r.step == self.1 {
                 self.0.change(r.t, "brain → scripted");
             }

@@ -1,0 +1,348 @@
+//! The library's module graph has no cycle: no module imports one that imports it back,
+//! directly or through others (issue "Your own node": facts with no home made two import
+//! cycles; they now live in leaves — `plant`, `ids`, `time`, `qos`, `runlog`).
+//!
+//! Each `src/**/*.rs` is parsed with `syn`; a module depends on another when its code (not
+//! its doc comments, not its `#[cfg(test)]` items) names a path into it: `use crate::a::b`,
+//! `crate::a::f()`, `super::x`, also inside macro calls. A path names the deepest module it
+//! reaches (`crate::graph::spec::GraphSpec` → `graph::spec`); a module does not depend on
+//! its own submodules by declaring them.
+
+use proc_macro2::{TokenStream, TokenTree};
+use std::collections::{BTreeMap, BTreeSet};
+use std::path::Path;
+use syn::visit::Visit;
+
+/// Module path (`graph::spec`; the crate root is `crate`) → the modules it names.
+type Deps = BTreeMap<String, BTreeSet<String>>;
+
+/// Every module of `src` by its path, with its parsed file.
+fn modules(src: &Path) -> BTreeMap<String, syn::File> {
+    let mut out = BTreeMap::new();
+    let mut stack = vec![src.to_path_buf()];
+    while let Some(dir) = stack.pop() {
+        for entry in std::fs::read_dir(&dir).expect("read src") {
+            let path = entry.expect("dir entry").path();
+            if path.is_dir() {
+                stack.push(path);
+                continue;
+            }
+            if path.extension().is_none_or(|e| e != "rs") {
+                continue;
+            }
+            let rel = path.strip_prefix(src).unwrap().with_extension("");
+            let mut parts: Vec<String> = rel
+                .components()
+                .map(|c| c.as_os_str().to_string_lossy().into_owned())
+                .collect();
+            if parts.last().is_some_and(|p| p == "mod") {
+                parts.pop();
+            }
+            let name = if parts == ["lib"] {
+                "crate".to_string()
+            } else {
+                parts.join("::")
+            };
+            let text = std::fs::read_to_string(&path).expect("read module");
+            let file = syn::parse_file(&text)
+                .unwrap_or_else(|e| panic!("{} does not parse: {e}", path.display()));
+            out.insert(name, file);
+        }
+    }
+    out
+}
+
+fn is_cfg_test(attrs: &[syn::Attribute]) -> bool {
+    attrs.iter().any(|a| {
+        a.path().is_ident("cfg")
+            && a.parse_args::<syn::Meta>()
+                .is_ok_and(|m| m.path().is_ident("test"))
+    })
+}
+
+/// The paths one module's code names, each as segments from the crate root.
+struct Names {
+    /// Where the code being read is, as segments (empty for the crate root): the file's
+    /// module, then any inline `mod x { … }` it is inside.
+    module: Vec<String>,
+    found: Vec<Vec<String>>,
+}
+
+impl Names {
+    /// `segments` as written (`crate::…`, `super::…`, `self::…`), from the crate root;
+    /// `None` for a path into another crate or a local name.
+    fn absolute(&self, segments: &[String]) -> Option<Vec<String>> {
+        let (first, rest) = segments.split_first()?;
+        match first.as_str() {
+            "crate" => Some(rest.to_vec()),
+            "self" => Some([self.module.as_slice(), rest].concat()),
+            "super" => {
+                let mut base = self.module.to_vec();
+                base.pop()?;
+                let mut rest = rest;
+                while rest.first().is_some_and(|s| s == "super") {
+                    base.pop()?;
+                    rest = &rest[1..];
+                }
+                Some([base.as_slice(), rest].concat())
+            }
+            _ => None,
+        }
+    }
+
+    fn add(&mut self, segments: &[String]) {
+        if let Some(p) = self.absolute(segments) {
+            self.found.push(p);
+        }
+    }
+
+    /// `crate :: a :: b` (or `super`, `self`) sequences in a macro call's tokens.
+    fn scan_tokens(&mut self, tokens: TokenStream) {
+        let mut path: Vec<String> = Vec::new();
+        let mut colons = 0;
+        for tt in tokens {
+            match tt {
+                TokenTree::Group(g) => {
+                    self.flush(&mut path);
+                    self.scan_tokens(g.stream());
+                }
+                TokenTree::Ident(i) => {
+                    let s = i.to_string();
+                    if path.is_empty() || colons != 2 {
+                        self.flush(&mut path);
+                    }
+                    if path.is_empty() && !matches!(s.as_str(), "crate" | "super" | "self") {
+                        continue;
+                    }
+                    path.push(s);
+                    colons = 0;
+                }
+                TokenTree::Punct(p) if p.as_char() == ':' && !path.is_empty() => colons += 1,
+                TokenTree::Punct(_) | TokenTree::Literal(_) => self.flush(&mut path),
+            }
+        }
+        self.flush(&mut path);
+    }
+
+    fn flush(&mut self, path: &mut Vec<String>) {
+        if path.len() > 1 {
+            self.add(path);
+        }
+        path.clear();
+    }
+
+    fn use_tree(&mut self, prefix: &mut Vec<String>, tree: &syn::UseTree) {
+        match tree {
+            syn::UseTree::Path(p) => {
+                prefix.push(p.ident.to_string());
+                self.use_tree(prefix, &p.tree);
+                prefix.pop();
+            }
+            syn::UseTree::Name(n) => {
+                prefix.push(n.ident.to_string());
+                self.add(prefix);
+                prefix.pop();
+            }
+            syn::UseTree::Rename(r) => {
+                prefix.push(r.ident.to_string());
+                self.add(prefix);
+                prefix.pop();
+            }
+            syn::UseTree::Glob(_) => self.add(prefix),
+            syn::UseTree::Group(g) => {
+                for t in &g.items {
+                    self.use_tree(prefix, t);
+                }
+            }
+        }
+    }
+}
+
+/// An item's attributes (none for the kinds that cannot be `#[cfg(test)]` here).
+fn attrs(item: &syn::Item) -> &[syn::Attribute] {
+    use syn::Item::*;
+    match item {
+        Const(i) => &i.attrs,
+        Enum(i) => &i.attrs,
+        Fn(i) => &i.attrs,
+        Impl(i) => &i.attrs,
+        Macro(i) => &i.attrs,
+        Mod(i) => &i.attrs,
+        Static(i) => &i.attrs,
+        Struct(i) => &i.attrs,
+        Trait(i) => &i.attrs,
+        Type(i) => &i.attrs,
+        Union(i) => &i.attrs,
+        Use(i) => &i.attrs,
+        _ => &[],
+    }
+}
+
+impl<'ast> Visit<'ast> for Names {
+    fn visit_item(&mut self, item: &'ast syn::Item) {
+        if !is_cfg_test(attrs(item)) {
+            syn::visit::visit_item(self, item);
+        }
+    }
+
+    fn visit_item_mod(&mut self, m: &'ast syn::ItemMod) {
+        self.module.push(m.ident.to_string());
+        syn::visit::visit_item_mod(self, m);
+        self.module.pop();
+    }
+
+    fn visit_item_use(&mut self, u: &'ast syn::ItemUse) {
+        self.use_tree(&mut Vec::new(), &u.tree);
+    }
+
+    fn visit_path(&mut self, p: &'ast syn::Path) {
+        let segments: Vec<String> = p.segments.iter().map(|s| s.ident.to_string()).collect();
+        self.add(&segments);
+        syn::visit::visit_path(self, p);
+    }
+
+    fn visit_macro(&mut self, m: &'ast syn::Macro) {
+        self.scan_tokens(m.tokens.clone());
+        syn::visit::visit_macro(self, m);
+    }
+}
+
+/// Which module each module's code depends on (itself, its ancestors' declarations of it
+/// and its own submodules left out).
+fn dependencies(src: &Path) -> Deps {
+    let mods = modules(src);
+    let known: BTreeSet<String> = mods.keys().cloned().collect();
+    let mut deps = Deps::new();
+    for (name, file) in &mods {
+        let module: Vec<String> = if name == "crate" {
+            Vec::new()
+        } else {
+            name.split("::").map(str::to_string).collect()
+        };
+        let mut names = Names {
+            module,
+            found: Vec::new(),
+        };
+        names.visit_file(file);
+        let mut to = BTreeSet::new();
+        for path in names.found {
+            // The deepest module the path reaches.
+            let target = (1..=path.len())
+                .rev()
+                .map(|n| path[..n].join("::"))
+                .find(|m| known.contains(m));
+            if let Some(t) = target {
+                let own_child = t.starts_with(&format!("{name}::")) || name == "crate";
+                if &t != name && !own_child {
+                    to.insert(t);
+                }
+            }
+        }
+        deps.insert(name.clone(), to);
+    }
+    deps
+}
+
+/// A cycle of `deps` (its modules in order, the first repeated at the end), if any.
+fn find_cycle(deps: &Deps) -> Option<Vec<String>> {
+    #[derive(Clone, Copy, PartialEq)]
+    enum Mark {
+        Open,
+        Done,
+    }
+    fn walk(
+        m: &str,
+        deps: &Deps,
+        marks: &mut BTreeMap<String, Mark>,
+        path: &mut Vec<String>,
+    ) -> Option<Vec<String>> {
+        match marks.get(m) {
+            Some(Mark::Done) => return None,
+            Some(Mark::Open) => {
+                let at = path.iter().position(|p| p == m).unwrap();
+                let mut cycle = path[at..].to_vec();
+                cycle.push(m.to_string());
+                return Some(cycle);
+            }
+            None => {}
+        }
+        marks.insert(m.to_string(), Mark::Open);
+        path.push(m.to_string());
+        for d in deps.get(m).into_iter().flatten() {
+            if let Some(c) = walk(d, deps, marks, path) {
+                return Some(c);
+            }
+        }
+        path.pop();
+        marks.insert(m.to_string(), Mark::Done);
+        None
+    }
+    let mut marks = BTreeMap::new();
+    deps.keys()
+        .find_map(|m| walk(m, deps, &mut marks, &mut Vec::new()))
+}
+
+#[test]
+fn the_library_has_no_import_cycle() {
+    let deps = dependencies(&crate::repo("src"));
+    // The scan sees what it must: the graph file format imports the QoS and the plant's
+    // facts, the metrics do not import the graph.
+    assert!(deps["graph::spec"].contains("qos"), "{:?}", deps["graph::spec"]);
+    assert!(deps["graph::spec"].contains("plant"));
+    assert!(deps["runlog"].contains("ids"));
+    assert!(!deps["metrics"].contains("graph"), "{:?}", deps["metrics"]);
+    if let Some(cycle) = find_cycle(&deps) {
+        panic!("import cycle: {}", cycle.join(" → "));
+    }
+}
+
+#[test]
+fn a_cycle_is_found_and_named() {
+    let deps: Deps = [
+        ("config", &["graph::spec"][..]),
+        ("graph::spec", &["qos", "time"][..]),
+        ("qos", &["config", "time"][..]),
+        ("time", &[][..]),
+    ]
+    .into_iter()
+    .map(|(m, d)| (m.to_string(), d.iter().map(|s| s.to_string()).collect()))
+    .collect();
+    assert_eq!(
+        find_cycle(&deps).unwrap(),
+        ["config", "graph::spec", "qos", "config"]
+    );
+    let mut acyclic = deps.clone();
+    acyclic.get_mut("qos").unwrap().remove("config");
+    assert_eq!(find_cycle(&acyclic), None);
+}
+
+#[test]
+fn paths_in_code_and_macros_count_and_doc_comments_and_tests_do_not() {
+    let dir = tempfile::tempdir().unwrap();
+    let src = dir.path();
+    std::fs::create_dir(src.join("graph")).unwrap();
+    std::fs::write(src.join("lib.rs"), "pub mod graph; pub mod metrics; pub mod time;").unwrap();
+    std::fs::write(
+        src.join("graph/mod.rs"),
+        "pub mod spec;\n/// [`crate::metrics::M`]\npub fn f() { let _ = format!(\"{}\", crate::time::X); }\n\
+         mod inner { fn g() -> u8 { super::super::time::X } }",
+    )
+    .unwrap();
+    std::fs::write(
+        src.join("graph/spec.rs"),
+        "use super::super::time::X;\n#[cfg(test)]\nmod tests { use crate::metrics::M; }",
+    )
+    .unwrap();
+    std::fs::write(
+        src.join("metrics.rs"),
+        "use crate::graph::spec::{self, *};",
+    )
+    .unwrap();
+    std::fs::write(src.join("time.rs"), "pub const X: u8 = 0;").unwrap();
+    let deps = dependencies(src);
+    let set = |m: &str| deps[m].iter().cloned().collect::<Vec<_>>();
+    assert_eq!(set("graph"), ["time"]);
+    assert_eq!(set("graph::spec"), ["time"]);
+    assert_eq!(set("metrics"), ["graph::spec"]);
+    assert!(set("time").is_empty());
+}
