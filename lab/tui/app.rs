@@ -11,7 +11,7 @@ use ratelab::config::{check_rate, BREAK_CONTROL_HZ};
 use ratelab::plant::GEAR_N;
 use ratelab::graph::{GraphSpec, NodeId, TopicId};
 use ratelab::runlog::StepRecord;
-use ratelab::qos::{Delivery, QosCounter, TopicQos};
+use ratelab::qos::{Delivery, OnDeadlineMissed, QosCounter, Reliability, TopicQos};
 use ratelab::run::Command;
 use ratelab::scheduler::EndReason;
 use ratelab::session::{Control, Speed, Telemetry, SPEEDS};
@@ -52,8 +52,11 @@ pub const READ_ONLY: &str = "read-only: live changes do not cross processes yet"
 
 /// The deadlines `d` cycles through on the selected topic, ms (0: none).
 pub const DEADLINES_MS: [f64; 5] = [0.0, 25.0, 50.0, 100.0, 200.0];
-/// The link losses `L` cycles through on the selected topic (probabilities).
-pub const LOSSES: [f64; 4] = [0.0, 0.01, 0.05, 0.2];
+/// The link losses `L` cycles through on the selected topic (probabilities; 80 % is the
+/// loss at which exercise ex5 asks what a reliable link still delivers).
+pub const LOSSES: [f64; 6] = [0.0, 0.01, 0.05, 0.2, 0.5, 0.8];
+/// The lifespans `l` cycles through on the selected topic, ms (0: none).
+pub const LIFESPANS_MS: [f64; 5] = [0.0, 20.0, 50.0, 100.0, 200.0];
 
 /// The first value of the ascending `cycle` above `now`, or the first of all after the
 /// last (a value from a file or flag that is not in the cycle joins it where it fits).
@@ -437,7 +440,12 @@ impl App {
             }
             Msg::DepthDown => self.change_depth(depth_down),
             Msg::DepthUp => self.change_depth(depth_up),
-            Msg::ToggleDelivery | Msg::CycleDeadline | Msg::CycleLoss => self.change_qos(m),
+            Msg::ToggleDelivery
+            | Msg::CycleDeadline
+            | Msg::CycleLoss
+            | Msg::CycleLifespan
+            | Msg::ToggleReliability
+            | Msg::CycleOnDeadlineMissed => self.change_qos(m),
             Msg::SelectNext => self.selected = self.cycle(1),
             Msg::SelectPrev => self.selected = self.cycle(-1),
             Msg::TypeRate => self.typing = Some(String::new()),
@@ -548,12 +556,15 @@ impl App {
     }
 
     /// The selected topic's QoS, one key at a time: `f` latest ↔ fifo, `d` the next
-    /// deadline of [`DEADLINES_MS`], `L` the next link loss of [`LOSSES`]. Each change is a
-    /// logged command, so it replays.
+    /// deadline of [`DEADLINES_MS`], `L` the next link loss of [`LOSSES`], `l` the next
+    /// lifespan of [`LIFESPANS_MS`], `e` best effort ↔ reliable, `o` the actuator's
+    /// reaction to a missed deadline (hold → zero → stop). Each change is a logged command,
+    /// so it replays; one the graph refuses (e.g. `o` on a topic without a deadline) is
+    /// refused with the reason on the status line.
     fn change_qos(&mut self, m: Msg) {
         let Some(Selected::Topic(t)) = self.selected else {
             self.say(
-                "select a topic with Tab first: f, d and L change the selected topic's QoS".into(),
+                "select a topic with Tab first: f d L l e o change the selected topic's QoS".into(),
             );
             return;
         };
@@ -580,6 +591,27 @@ impl App {
             Msg::CycleLoss => {
                 let loss = q.link.map_or(0.0, |l| l.loss);
                 format!("loss={}", next_in_cycle(&LOSSES, loss))
+            }
+            Msg::CycleLifespan => {
+                let now_ms = q.lifespan.map_or(0.0, |d| d.as_millis_f64());
+                let next = next_in_cycle(&LIFESPANS_MS, now_ms);
+                if next == 0.0 {
+                    "lifespan_ms=none".to_string()
+                } else {
+                    format!("lifespan_ms={next}")
+                }
+            }
+            Msg::ToggleReliability => match q.reliability {
+                Reliability::BestEffort => "reliability=reliable".to_string(),
+                Reliability::Reliable => "reliability=best_effort".to_string(),
+            },
+            Msg::CycleOnDeadlineMissed => {
+                let next = match q.on_deadline_missed {
+                    OnDeadlineMissed::Hold => "zero",
+                    OnDeadlineMissed::Zero => "stop",
+                    OnDeadlineMissed::Stop => "hold",
+                };
+                format!("on_deadline_missed={next}")
             }
             _ => return,
         };

@@ -26,8 +26,15 @@ pub enum Msg {
     ToggleDelivery,
     /// The selected topic's deadline: the next of none, 25, 50, 100, 200 ms.
     CycleDeadline,
-    /// The selected topic's link loss: the next of 0, 1 %, 5 %, 20 %.
+    /// The selected topic's link loss: the next of 0, 1 %, 5 %, 20 %, 50 %, 80 %.
     CycleLoss,
+    /// The selected topic's lifespan: the next of none, 20, 50, 100, 200 ms.
+    CycleLifespan,
+    /// The selected topic's reliability: best effort ↔ reliable.
+    ToggleReliability,
+    /// The actuator's reaction to a missed deadline on the selected topic: hold → zero →
+    /// stop → hold.
+    CycleOnDeadlineMissed,
     /// Select the next node or topic (nothing → nodes → topics → nothing).
     SelectNext,
     /// Select the previous one.
@@ -141,6 +148,16 @@ pub const BINDINGS: &[Binding] = &[
         footer: None,
     },
     Binding {
+        keys: &[
+            (Char('l'), Msg::CycleLifespan),
+            (Char('e'), Msg::ToggleReliability),
+            (Char('o'), Msg::CycleOnDeadlineMissed),
+        ],
+        label: "l / e / o",
+        help: "… lifespan / reliability / on_deadline_missed",
+        footer: None,
+    },
+    Binding {
         keys: &[(Tab, Msg::SelectNext), (BackTab, Msg::SelectPrev)],
         label: "Tab / Shift-Tab",
         help: "select the next / previous node or topic",
@@ -212,7 +229,7 @@ pub const BINDINGS: &[Binding] = &[
 pub const HELP_NOTES: [(&str, &str); 4] = [
     (
         "rate ladder (Hz)",
-        "50 40 30 25 20 15 12 10 8 7 6 5 4 3 2 1",
+        "1000 500 200 100 60 50 40 30 25 20 15 12 10 8 7 6 5 4 3 2 1",
     ),
     ("depth ladder", "1 2 5 10 100"),
     (
@@ -265,9 +282,11 @@ pub fn readme_key_table() -> String {
     out
 }
 
-/// The control/sensor rate ladder, Hz, high to low.
-pub const RATE_LADDER: [f64; 16] = [
-    50.0, 40.0, 30.0, 25.0, 20.0, 15.0, 12.0, 10.0, 8.0, 7.0, 6.0, 5.0, 4.0, 3.0, 2.0, 1.0,
+/// The rate ladder, Hz, high to low: the chapter's control rates (50 … 1 Hz) and, above
+/// them, rungs back to a fast estimator's or sensor's rate (100, 200 Hz) once lowered.
+pub const RATE_LADDER: [f64; 21] = [
+    1000.0, 500.0, 200.0, 100.0, 60.0, 50.0, 40.0, 30.0, 25.0, 20.0, 15.0, 12.0, 10.0, 8.0, 7.0,
+    6.0, 5.0, 4.0, 3.0, 2.0, 1.0,
 ];
 /// The queue-depth ladder.
 pub const DEPTH_LADDER: [usize; 5] = [1, 2, 5, 10, 100];
@@ -281,14 +300,15 @@ pub fn rate_down(hz: f64) -> f64 {
         .unwrap_or(RATE_LADDER[RATE_LADDER.len() - 1])
 }
 
-/// The next rate up the ladder from `hz`.
+/// The next rate up the ladder from `hz` (a rate at or above the top rung stays: `+`
+/// never lowers a rate).
 pub fn rate_up(hz: f64) -> f64 {
     RATE_LADDER
         .iter()
         .rev()
         .copied()
         .find(|&r| r > hz)
-        .unwrap_or(RATE_LADDER[0])
+        .unwrap_or(hz)
 }
 
 /// The next depth down.
@@ -425,8 +445,13 @@ mod tests {
         assert_eq!(rate_down(1.0), 1.0);
         assert_eq!(rate_down(7.5), 7.0);
         assert_eq!(rate_up(7.5), 8.0);
-        assert_eq!(rate_up(50.0), 50.0);
-        assert_eq!(rate_up(100.0), 50.0);
+        assert_eq!(rate_up(50.0), 60.0);
+        // A 100 Hz estimator or a 200 Hz sensor lowered once comes back with `+`.
+        assert_eq!(rate_up(rate_down(100.0)), 100.0);
+        assert_eq!(rate_up(rate_down(200.0)), 200.0);
+        assert_eq!(rate_up(1000.0), 1000.0);
+        assert_eq!(rate_up(2000.0), 2000.0);
+        assert_eq!(rate_down(2000.0), 1000.0);
         assert_eq!(depth_up(1), 2);
         assert_eq!(depth_up(100), 100);
         assert_eq!(depth_down(10), 5);

@@ -297,7 +297,7 @@ mod tests {
             "{small}"
         );
         insta::assert_snapshot!("qos_80x24", small);
-        // f, d and L act on the selected topic only, as logged commands.
+        // f, d, L, l, e and o act on the selected topic only, as logged commands.
         app.on_msg(Msg::ToggleDelivery);
         assert!(
             rx.try_iter().next().is_none(),
@@ -309,6 +309,9 @@ mod tests {
         app.on_msg(Msg::ToggleDelivery);
         app.on_msg(Msg::CycleDeadline);
         app.on_msg(Msg::CycleLoss);
+        app.on_msg(Msg::CycleLifespan);
+        app.on_msg(Msg::ToggleReliability);
+        app.on_msg(Msg::CycleOnDeadlineMissed);
         use ratelab::run::Command::SetTopicQos;
         let sent: Vec<Control> = rx.try_iter().collect();
         let qos = |pairs: &str| {
@@ -322,7 +325,10 @@ mod tests {
             vec![
                 qos("delivery=fifo"),
                 qos("deadline_ms=50"), // 30 ms from the flags: the next one up
-                qos("loss=0"),         // 20 % is the last of the cycle
+                qos("loss=0.5"),       // 20 % from the flags: the next one up
+                qos("lifespan_ms=20"),
+                qos("reliability=reliable"),
+                qos("on_deadline_missed=stop"), // zero from the flags
             ]
         );
     }

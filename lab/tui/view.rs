@@ -1017,14 +1017,17 @@ fn render_help(area: Rect, buf: &mut Buffer, attached: bool) {
         .filter(|b| !attached || b.only_views())
         .map(|b| Line::from(vec![format!("{:>16}  ", b.label).bold(), b.help.into()]))
         .collect();
-    lines.push(Line::from(""));
-    lines.extend(
-        HELP_NOTES
-            .iter()
-            // Attached, the ladders and the fall's keys do not apply; the wire's note does.
-            .filter(|(k, _)| !attached || k.starts_with("wire"))
-            .map(|(k, d)| Line::from(vec![format!("{k:>16}  ").bold(), (*d).into()])),
-    );
+    let notes: Vec<Line> = HELP_NOTES
+        .iter()
+        // Attached, the ladders and the fall's keys do not apply; the wire's note does.
+        .filter(|(k, _)| !attached || k.starts_with("wire"))
+        .map(|(k, d)| Line::from(vec![format!("{k:>16}  ").bold(), (*d).into()]))
+        .collect();
+    // A blank line between keys and notes where it fits (at 80×24 every line is needed).
+    if lines.len() + notes.len() + 3 <= usize::from(area.height) {
+        lines.push(Line::from(""));
+    }
+    lines.extend(notes);
     let w = 90.min(area.width);
     let h = (lines.len() as u16 + 2).min(area.height);
     let popup = Rect {
