@@ -115,6 +115,8 @@ pub struct App {
     last: Option<StepRecord>,
     verdict: Verdict,
     help: bool,
+    /// Esc was pressed with nothing open to close: one more Esc quits (any other key stays).
+    confirm_quit: bool,
     typing: Option<String>,
     message: Option<String>,
     /// When the message was set (a fresh one leads the footer for [`FRESH`]).
@@ -165,6 +167,7 @@ impl App {
             typing: None,
             message: None,
             message_at: None,
+            confirm_quit: false,
             attached: None,
             wire: Vec::new(),
             quit: false,
@@ -306,6 +309,9 @@ impl App {
                 self.last = None;
                 self.verdict = Verdict::Balanced;
                 self.wire.clear();
+                // What was said belongs to the run before (e.g. "… (from the next run)").
+                self.message = None;
+                self.message_at = None;
             }
             Telemetry::Step(s) => {
                 let s = *s;
@@ -415,6 +421,7 @@ impl App {
 
     /// Handle one key message.
     pub fn on_msg(&mut self, m: Msg) {
+        let confirming = std::mem::take(&mut self.confirm_quit);
         // Attached, a key that would change the graph changes nothing here either.
         if self.attached.is_some() && !m.only_views() {
             self.say(READ_ONLY.to_string());
@@ -507,8 +514,11 @@ impl App {
                     self.help = false;
                 } else if self.selected.is_some() {
                     self.selected = None;
-                } else {
+                } else if confirming {
                     self.on_msg(Msg::Quit);
+                } else {
+                    self.confirm_quit = true;
+                    self.say("quit? Esc again or q quits; any other key stays".into());
                 }
             }
             Msg::Quit => {

@@ -59,7 +59,7 @@ pub enum Msg {
     SwapBrain,
     /// Show / hide the key help.
     ToggleHelp,
-    /// Close the help or the selection; quit when neither is open.
+    /// Close the help or the selection; when neither is open, ask, and quit on a second one.
     Back,
     /// Leave the lab.
     Quit,
@@ -214,7 +214,7 @@ pub const BINDINGS: &[Binding] = &[
     Binding {
         keys: &[(Esc, Msg::Back)],
         label: "Esc",
-        help: "close the help or the selection; else quit",
+        help: "close the help or the selection; else ask to quit",
         footer: None,
     },
     Binding {

@@ -355,12 +355,20 @@ mod tests {
             text.contains("/action selected: [/] its depth (5)"),
             "{text}"
         );
-        // Esc clears the selection, then closes help, and only then quits.
+        // Esc closes the help, then clears the selection, then asks, and only then quits;
+        // any other key in between cancels the question.
         app.on_msg(Msg::ToggleHelp);
         app.on_msg(Msg::Back);
         assert!(!app.view().help && !app.quit);
         app.on_msg(Msg::Back);
         assert!(app.view().topics.iter().all(|t| !t.selected) && !app.quit);
+        app.on_msg(Msg::Back);
+        assert!(!app.quit);
+        assert!(render(&app, 80, 24).contains("quit? Esc again or q quits"));
+        app.on_msg(Msg::ToggleHelp);
+        app.on_msg(Msg::ToggleHelp);
+        app.on_msg(Msg::Back);
+        assert!(!app.quit, "a key between two Esc cancels the question");
         app.on_msg(Msg::Back);
         assert!(app.quit);
         use ratelab::run::Command::*;

@@ -975,14 +975,15 @@ fn render_latency(v: &View, area: Rect, buf: &mut Buffer) {
 
 fn render_footer(v: &View, area: Rect, buf: &mut Buffer) {
     let ended = v.verdict != Verdict::Balanced;
-    let line = if let (true, Some(m)) = (ended, &v.message) {
-        Line::from(Span::from(format!(" {m}")).bold())
-    } else if let Some(t) = &v.typing {
+    // Typing a rate shows its prompt even after a fall, where the verdict leads otherwise.
+    let line = if let Some(t) = &v.typing {
         Line::from(vec![
             " rate (Hz): ".bold(),
             format!("{t}▏").into(),
             "  Enter apply · Esc cancel".dim(),
         ])
+    } else if let (true, Some(m)) = (ended, &v.message) {
+        Line::from(Span::from(format!(" {m}")).bold())
     } else if let (true, Some(m)) = (v.message_fresh, &v.message) {
         Line::from(vec![
             Span::from(format!(" ● {m}")).bold(),

@@ -163,11 +163,12 @@ impl Engine {
     ) -> Result<(Next, crate::graph::GraphSpec, String), String> {
         self.run_index += 1;
         let brain = load_policy(policy).map_err(|e| e.to_string())?;
+        let mut notice = None;
         let recording = match self.recording_path() {
             Some(path) => {
                 crate::recording::check_output_path(&path, self.settings.force)
                     .map_err(|e| e.to_string())?;
-                let (r, notice) = Recording::create_with(
+                let (r, n) = Recording::create_with(
                     &path,
                     cfg,
                     &brain.label(),
@@ -177,9 +178,7 @@ impl Engine {
                     self.settings.force,
                 )
                 .map_err(|e| e.to_string())?;
-                if let Some(n) = notice {
-                    let _ = self.tx.send(Telemetry::Error(n));
-                }
+                notice = n;
                 Some(r)
             }
             None => None,
@@ -196,6 +195,10 @@ impl Engine {
             policy: graph.handles.brain_label(),
             recording: recording.as_ref().map(|r| r.path().to_path_buf()),
         });
+        // Said after Started, which clears what the lab said about the run before.
+        if let Some(n) = notice {
+            let _ = self.tx.send(Telemetry::Error(n));
+        }
         self.log.runs.push(LoggedRun::starting(cfg, policy));
         self.save_log();
         let handles = graph.handles.clone();

@@ -136,7 +136,10 @@ impl Engine {
                 return (next, end, timing);
             }
             if last_status.elapsed() >= Duration::from_millis(33) {
-                self.status(now(), pause.load(Ordering::SeqCst), &handles);
+                // Once the run has ended (a fall, a watchdog, a failed node), its clock stops
+                // where it ended: the lab shows that instant, not wall time running on.
+                let shown = result.as_ref().map_or_else(now, |end| end.at);
+                self.status(shown, pause.load(Ordering::SeqCst), &handles);
                 last_status = Instant::now();
             }
         }

@@ -195,7 +195,7 @@ fn any_graph_in_the_lab_tab_selects_and_esc_backs_out() {
     lab.wait_for("estimator selected", Duration::from_secs(5));
     lab.keys("-");
     lab.wait_for("estimator rate → 5", Duration::from_secs(5));
-    // Esc closes the help, then the selection, and only then quits.
+    // Esc closes the help, then the selection, then asks, and only then quits.
     lab.keys("?");
     lab.wait_for("keys (? or Esc to close)", Duration::from_secs(5));
     lab.keys("\x1b");
@@ -212,6 +212,9 @@ fn any_graph_in_the_lab_tab_selects_and_esc_backs_out() {
         "Esc quit with a selection open"
     );
     assert!(!lab.screen().contains("estimator selected"));
+    lab.keys("\x1b");
+    lab.wait_for("quit? Esc again or q quits", Duration::from_secs(5));
+    assert!(lab.child.try_wait().unwrap().is_none(), "one bare Esc quit");
     lab.keys("\x1b");
     let status = lab.exit_status("Esc");
     assert!(status.success(), "{status:?}");
