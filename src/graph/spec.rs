@@ -460,7 +460,7 @@ fn check_actuator_rate(hz: f64) -> Result<(), String> {
         Ok(())
     } else {
         Err(format!(
-            "the actuator steps the plant 20 ms per tick, so its rate must be {ACTUATOR_HZ} Hz, got {hz}"
+"actuator rate {hz} Hz refused: it must be {ACTUATOR_HZ} Hz (one 20 ms plant step per tick)"
         ))
     }
 }

@@ -209,3 +209,55 @@ fn exercise_files_are_valid() {
         assert!(f.estimated_minutes > 0, "{file}");
     }
 }
+
+/// What a learner reads before predicting (the exercises' README and each exercise's
+/// objective and instructions, which `ratelab exercise` prints before it runs) gives no
+/// answer away: the chapter's own page reveals answers only after the prediction. Each
+/// phrase below once did; the reconcile `ratelab exercise` prints after the run says them.
+#[test]
+fn the_texts_read_before_predicting_give_no_answer_away() {
+    let spoilers = [
+        // ex1: where the cliff is, and the latency's shape.
+        ("7.5", "ex1's cliff"),
+        ("9,8.5,8", "ex1's cliff (a sweep around it)"),
+        ("not monotonic", "ex1's latency"),
+        // ex2: the deep queue's drops.
+        ("disappears from", "ex2's drops at depth 100"),
+        // ex3: drops and latency with and without offsets.
+        ("21.5 ms", "ex3's latency"),
+        ("about 20 ms", "ex3's latency"),
+        ("drops vanish", "ex3's or ex4's drops"),
+        ("10 ms every tick", "ex3's latency with offsets"),
+        // ex4: fifo falls with no drop; the lifespan's expiries.
+        ("stay at 0 while", "ex4's verdict"),
+        ("under another name", "ex4's expiries"),
+        // ex5: 20 % loss is ridden out.
+        ("rides out", "ex5's 20% loss"),
+        ("nothing falls", "ex5's 20% loss"),
+    ];
+    let mut texts = vec![(
+        "exercises/README.md".to_string(),
+        std::fs::read_to_string(path("README.md")).unwrap(),
+    )];
+    for ex in [
+        "ex1_rate_cliff.toml",
+        "ex2_queue_trap.toml",
+        "ex3_jitter_phase.toml",
+        "ex4_stale_queue.toml",
+        "ex5_watchdog.toml",
+    ] {
+        let f = ExerciseFile::load(&path(ex)).unwrap();
+        texts.push((ex.to_string(), format!("{}\n{}", f.objective, f.instructions)));
+    }
+    for (name, text) in &texts {
+        for (phrase, answer) in spoilers {
+            assert!(
+                !text.contains(phrase),
+                "{name} gives away {answer} before the prediction: '{phrase}'"
+            );
+        }
+    }
+    // The answers are still there, for after: bands.toml says it holds them.
+    let bands = std::fs::read_to_string(path("bands.toml")).unwrap();
+    assert!(bands.starts_with("# SPOILERS"), "bands.toml must warn first");
+}
