@@ -253,7 +253,7 @@ impl Node for GraphNode {
                 Flow::Continue
             }
             Work::Actuator(a) => a.tick(now),
-            Work::Python(p) => match p.tick(now) {
+            Work::Python(p) => match p.tick(now, self.core.rate.period()) {
                 Ok(()) => Flow::Continue,
                 // The scheduler catches it and fails the node with this line.
                 Err(e) => panic!("{}", e.0),

@@ -16,8 +16,9 @@
 //!   mid-run panics with that line; the scheduler catches it and the run ends as
 //!   "node 'X' failed" at that instant ([`crate::scheduler::EndReason::NodeFailed`]).
 //! - **Callbacks that never return.** Every call into learners' code is registered
-//!   ([`CallbackGuard`]); a watchdog thread warns once when one has run for
-//!   [`OVERRUN_WARNING`], and [`interrupt_callbacks`] (Ctrl-C) raises `KeyboardInterrupt`
+//!   ([`CallbackGuard`]); a watchdog thread warns once when one has overrun by far: a
+//!   node's callbacks after [`OVERRUN_PERIODS`] of its periods, a brain's (and any loading)
+//!   after [`OVERRUN_WARNING`]; and [`interrupt_callbacks`] (Ctrl-C) raises `KeyboardInterrupt`
 //!   inside the ones still running (`PyThreadState_SetAsyncExc`), so a `while True: pass`
 //!   cannot hang the run.
 
@@ -33,9 +34,17 @@ use std::time::{Duration, Instant};
 /// The largest Python script read, bytes (a learner's node is a few KiB).
 pub const MAX_SCRIPT_BYTES: u64 = 1 << 20;
 
-/// A callback running this long without returning is reported once on stderr: far beyond
-/// any period ratelab runs (10 ms at the slowest rate, 0.1 Hz, is 10 s; most are 20 ms).
+/// A Python node's tick that runs this many of the node's periods without returning is
+/// reported once on stderr (an overrun by far: 2 s at 50 Hz, 0.5 s at 200 Hz).
+pub const OVERRUN_PERIODS: u32 = 100;
+
+/// A brain's call (which does not know its node's rate) or a script's loading that runs
+/// this long without returning is reported once on stderr: [`OVERRUN_PERIODS`] at the
+/// chapter's 50 Hz.
 pub const OVERRUN_WARNING: Duration = Duration::from_secs(2);
+
+/// How often the watchdog looks, and so the shortest overrun it reports on time.
+const WATCHDOG_POLL: Duration = Duration::from_millis(50);
 
 /// Why Python code could not be loaded. One line each, naming the file.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -143,6 +152,10 @@ struct Running {
     what: String,
     /// When the call started.
     since: Instant,
+    /// How long it may run before it is reported, and how to say so (`2 s`, or `0.5 s,
+    /// 100 of its periods`).
+    overrun: Duration,
+    overrun_text: String,
     /// Already reported as overrunning.
     warned: bool,
 }
@@ -164,8 +177,27 @@ pub struct CallbackGuard {
 }
 
 impl CallbackGuard {
-    /// Register the calling thread as running `what`.
+    /// Register the calling thread as running `what`, reported if it runs
+    /// [`OVERRUN_WARNING`] without returning.
     pub fn enter(what: &str) -> CallbackGuard {
+        Self::enter_with(what, OVERRUN_WARNING, format!("{} s", OVERRUN_WARNING.as_secs_f64()))
+    }
+
+    /// Register the calling thread as running a tick of a node whose period is `period`:
+    /// reported after [`OVERRUN_PERIODS`] periods without returning.
+    pub fn enter_tick(what: &str, period: crate::time::Nanos) -> CallbackGuard {
+        let overrun = Duration::from_nanos(period.0.saturating_mul(u64::from(OVERRUN_PERIODS)));
+        Self::enter_with(
+            what,
+            overrun,
+            format!(
+                "{} s, {OVERRUN_PERIODS} of its {period} periods",
+                overrun.as_secs_f64()
+            ),
+        )
+    }
+
+    fn enter_with(what: &str, overrun: Duration, overrun_text: String) -> CallbackGuard {
         // SAFETY: PyThread_get_thread_ident only reads the calling thread's id.
         let thread = unsafe { pyo3::ffi::PyThread_get_thread_ident() } as u64;
         lock_running().insert(
@@ -173,6 +205,8 @@ impl CallbackGuard {
             Running {
                 what: what.to_string(),
                 since: Instant::now(),
+                overrun,
+                overrun_text,
                 warned: false,
             },
         );
@@ -186,23 +220,21 @@ impl Drop for CallbackGuard {
     }
 }
 
-/// Warns once (stderr) about each call into learners' code that has run for
-/// [`OVERRUN_WARNING`] without returning.
+/// Warns once (stderr) about each call into learners' code that has overrun by far
+/// without returning (see [`CallbackGuard`]).
 fn start_watchdog() {
     static STARTED: std::sync::Once = std::sync::Once::new();
     STARTED.call_once(|| {
         let _ = std::thread::Builder::new()
             .name("python-watchdog".into())
             .spawn(|| loop {
-                std::thread::sleep(Duration::from_millis(100));
+                std::thread::sleep(WATCHDOG_POLL);
                 for r in lock_running().values_mut() {
-                    let ran = r.since.elapsed();
-                    if ran >= OVERRUN_WARNING && !r.warned {
+                    if r.since.elapsed() >= r.overrun && !r.warned {
                         r.warned = true;
                         eprintln!(
-                            "[ratelab] warning: {} has not returned after {} s (Ctrl-C interrupts it)",
-                            r.what,
-                            OVERRUN_WARNING.as_secs()
+                            "[ratelab] warning: {} has not returned after {} (Ctrl-C interrupts it)",
+                            r.what, r.overrun_text
                         );
                     }
                 }

@@ -125,12 +125,14 @@ impl PythonNode {
         })
     }
 
-    /// One tick at run time `now` (see the module docs for the order of callbacks).
+    /// One tick at run time `now` of a node whose period is now `period` (see the module
+    /// docs for the order of callbacks; a tick running [`super::OVERRUN_PERIODS`] periods
+    /// is reported).
     ///
     /// # Errors
     /// [`TickError`] with the one-line description when a callback raised or published
     /// something that is not a message of its topic's type.
-    pub fn tick(&mut self, now: Nanos) -> Result<(), TickError> {
+    pub fn tick(&mut self, now: Nanos, period: Nanos) -> Result<(), TickError> {
         let delivered = self.input.as_ref().and_then(|t| {
             let (seq, origin, fields) = read(t, now)?;
             (self.last_seq != Some(seq)).then(|| {
@@ -140,7 +142,7 @@ impl PythonNode {
             })
         });
         let published: Vec<Fields> = Python::attach(|py| {
-            let _running = CallbackGuard::enter(&self.what);
+            let _running = CallbackGuard::enter_tick(&self.what, period);
             self.runtime
                 .call_method1(py, "tick", (now.0, delivered))
                 .and_then(|out| {

@@ -290,6 +290,54 @@ fn a_brain_that_never_returns_is_reported_and_ctrl_c_ends_the_run_within_a_secon
     assert_eq!(o.status.code(), Some(130), "{err}");
 }
 
+/// A Python node's tick that never returns is reported after 100 of the node's periods
+/// (0.5 s at 200 Hz, not the brain's fixed 2 s), and Ctrl-C still ends the run at once.
+#[test]
+fn a_python_node_that_never_returns_is_reported_after_100_periods_and_ctrl_c_ends_it() {
+    let _m = crate::machine::alone();
+    let dir = tempfile::tempdir().unwrap();
+    script(
+        dir.path(),
+        "hang.py",
+        "from ratelab import Force\n\
+         class Hang:\n\
+         \x20   def __init__(self, node):\n\
+         \x20       node.create_publisher(Force, '/action', 1)\n\
+         \x20       node.create_timer(node.get_period(), self.on_timer)\n\
+         \x20   def on_timer(self):\n\
+         \x20       while True:\n\
+         \x20           pass\n",
+    );
+    let graph = std::fs::read_to_string(crate::repo("graphs/cartpole-python.toml"))
+        .unwrap()
+        .replace("nodes/scripted_balancer.py", "hang.py")
+        .replace("ScriptedBalancer", "Hang");
+    let g = dir.path().join("graph.toml");
+    std::fs::write(&g, graph).unwrap();
+    let child = Command::new(env!("CARGO_BIN_EXE_ratelab"))
+        .args(["run", "--clock", "real", "--control-hz", "200", "--graph"])
+        .arg(&g)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(Duration::from_millis(2500));
+    let sent = Instant::now();
+    // SAFETY: plain kill(2) on our child.
+    unsafe { libc::kill(child.id() as i32, libc::SIGINT) };
+    let o = child.wait_with_output().unwrap();
+    let took = sent.elapsed();
+    let err = stderr(&o);
+    assert!(took < Duration::from_secs(1), "took {took:?}: {err}");
+    assert!(
+        err.contains("node 'policy'")
+            && err.contains("has not returned after 0.5 s, 100 of its 5 ms periods"),
+        "{err}"
+    );
+    assert!(err.contains("KeyboardInterrupt"), "{err}");
+    assert_eq!(o.status.code(), Some(130), "{err}");
+}
+
 // ---- Python nodes (kind = "python") ----------------------------------------------------
 
 /// [`crate::repo`] as text, for command lines.
