@@ -8,8 +8,8 @@
 //! plus percentiles, `fell_at_s`, `policy` and ratelab's extras).
 
 use crate::plant::ACTUATOR_HZ;
-use crate::time::MAX_DURATION_S;
 use crate::time::Nanos;
+use crate::time::MAX_DURATION_S;
 use hdrhistogram::Histogram;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;

@@ -288,10 +288,7 @@ pub fn apply_key(
                 .parse::<usize>()
                 .map_err(|_| format!("depth: not a whole number: '{value}'"))?;
             if d == 0 || d > MAX_DEPTH {
-                return Err(format!(
-                    "depth must be in 1..={}, got {d}",
-                    MAX_DEPTH
-                ));
+                return Err(format!("depth must be in 1..={}, got {d}", MAX_DEPTH));
             }
             *depth = d;
         }
@@ -565,10 +562,7 @@ impl Fault {
                 .map_err(|_| format!("not a time: '{t}' (seconds, or with s/ms)"))?
                 * scale;
             if !(secs.is_finite() && (0.0..=MAX_DURATION_S).contains(&secs)) {
-                return Err(format!(
-                    "time '{t}' must be in [0, {}] s",
-                    MAX_DURATION_S
-                ));
+                return Err(format!("time '{t}' must be in [0, {}] s", MAX_DURATION_S));
             }
             Nanos::from_secs_f64(secs).ok_or_else(|| format!("time '{t}' is out of range"))
         };

@@ -3,10 +3,10 @@
 use crate::config::{ClockKind, RunConfig};
 use crate::graph::{lock, Graph, GraphHandles, StepObserver};
 use crate::metrics::{round_to, Metrics, NodeMetrics, NodeTiming, TopicMetrics};
-use crate::runlog::StepRecord;
 use crate::msg::AnyTopic;
 use crate::plant::{CartPole, PlantError};
 use crate::policy::{BrainSlot, Policy};
+use crate::runlog::StepRecord;
 use crate::scheduler::{run_real, RealOptions, RunEnd, StopFlag, VirtualScheduler};
 use crate::time::Nanos;
 use std::time::{Duration, Instant};

@@ -8,11 +8,11 @@ use super::view::{
 };
 use crossbeam_channel::Sender;
 use ratelab::config::{check_rate, BREAK_CONTROL_HZ};
-use ratelab::plant::GEAR_N;
 use ratelab::graph::{GraphSpec, NodeId, TopicId};
-use ratelab::runlog::StepRecord;
+use ratelab::plant::GEAR_N;
 use ratelab::qos::{Delivery, OnDeadlineMissed, QosCounter, Reliability, TopicQos};
 use ratelab::run::Command;
+use ratelab::runlog::StepRecord;
 use ratelab::scheduler::EndReason;
 use ratelab::session::{Control, Speed, Telemetry, SPEEDS};
 use ratelab::Nanos;

@@ -16,12 +16,12 @@ use crate::config::RunConfig;
 use crate::graph::spec::GraphSpec;
 use crate::graph::{Graph, NodeId, TopicId};
 use crate::metrics::{LatencyStats, NodeTiming};
-use crate::runlog::StepRecord;
 use crate::msg::AnyTopic;
 use crate::node::{Flow, Node};
 use crate::policy::BrainSlot;
 use crate::qos::TopicQos;
 use crate::run::GraphState;
+use crate::runlog::StepRecord;
 use crate::scheduler::{
     catch_quietly, panic_message, run_real, RealOptions, StopFlag, VirtualScheduler,
 };
@@ -140,9 +140,7 @@ impl LiveStats {
         let bounded = m.steps.len() <= MAX_BATCH_STEPS
             && m.ticks.len() <= MAX_BATCH_TICKS
             && m.counters.len() <= MAX_BATCH_COUNTERS
-            && m.counters
-                .iter()
-                .all(|c| c.1 < crate::ids::MAX_TOPICS)
+            && m.counters.iter().all(|c| c.1 < crate::ids::MAX_TOPICS)
             && m.nodes.len() <= crate::ids::MAX_NODES
             && m.topics.len() <= crate::ids::MAX_TOPICS
             && m.wire.len() <= crate::ids::MAX_TOPICS;

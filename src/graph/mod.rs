@@ -10,13 +10,13 @@ pub mod estimator;
 pub mod nodes;
 pub mod spec;
 
-use crate::runlog::{RunLog, StepRecord, TopicCounters};
 use crate::msg::AnyTopic;
 use crate::node::Node;
 use crate::plant::CartPole;
 use crate::policy::BrainSlot;
 use crate::qos::{Fault, Liveliness};
 use crate::rate::{InvalidRate, Rate};
+use crate::runlog::{RunLog, StepRecord, TopicCounters};
 use crate::topic::ZeroDepth;
 use nodes::{Actuator, GraphNode, NodeCore, Sensor, SensorNoise, SensorOutput, Work};
 pub use spec::{Chain, GraphSpec, MsgType, NodeId, NodeKind, TopicId};

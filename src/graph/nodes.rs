@@ -21,14 +21,14 @@
 
 use super::estimator::VelocityFilter;
 use super::spec::NodeId;
-use crate::plant::GEAR_N;
 use super::{lock, SharedPlant, StepObserver};
-use crate::runlog::{RunLog, StepRecord};
 use crate::msg::{AnyTopic, ForceMsg, PositionMsg, StateMsg};
 use crate::node::{Flow, Node};
+use crate::plant::GEAR_N;
 use crate::policy::BrainSlot;
 use crate::qos::{Fault, Liveliness, OnDeadlineMissed};
 use crate::rate::Rate;
+use crate::runlog::{RunLog, StepRecord};
 use crate::time::Nanos;
 use crate::topic::Topic;
 use rand_distr::{Distribution, Normal};

@@ -180,7 +180,11 @@ impl CallbackGuard {
     /// Register the calling thread as running `what`, reported if it runs
     /// [`OVERRUN_WARNING`] without returning.
     pub fn enter(what: &str) -> CallbackGuard {
-        Self::enter_with(what, OVERRUN_WARNING, format!("{} s", OVERRUN_WARNING.as_secs_f64()))
+        Self::enter_with(
+            what,
+            OVERRUN_WARNING,
+            format!("{} s", OVERRUN_WARNING.as_secs_f64()),
+        )
     }
 
     /// Register the calling thread as running a tick of a node whose period is `period`:

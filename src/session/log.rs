@@ -3,12 +3,12 @@
 
 use crate::checkpoint::load_policy;
 use crate::config::{ClockKind, RunConfig};
-use crate::plant::ACTUATOR_HZ;
-use crate::time::MAX_DURATION;
 use crate::graph::GraphSpec;
 use crate::metrics::Metrics;
+use crate::plant::ACTUATOR_HZ;
 use crate::run::{RunOptions, TimedCommand};
 use crate::time::Nanos;
+use crate::time::MAX_DURATION;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 

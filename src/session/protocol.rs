@@ -3,8 +3,8 @@
 
 use crate::config::RunConfig;
 use crate::metrics::Metrics;
-use crate::runlog::StepRecord;
 use crate::run::Command;
+use crate::runlog::StepRecord;
 use crate::scheduler::EndReason;
 use crate::time::Nanos;
 use std::path::PathBuf;

@@ -287,7 +287,11 @@ fn the_library_has_no_import_cycle() {
     let deps = dependencies(&crate::repo("src"));
     // The scan sees what it must: the graph file format imports the QoS and the plant's
     // facts, the metrics do not import the graph.
-    assert!(deps["graph::spec"].contains("qos"), "{:?}", deps["graph::spec"]);
+    assert!(
+        deps["graph::spec"].contains("qos"),
+        "{:?}",
+        deps["graph::spec"]
+    );
     assert!(deps["graph::spec"].contains("plant"));
     assert!(deps["runlog"].contains("ids"));
     assert!(!deps["metrics"].contains("graph"), "{:?}", deps["metrics"]);
@@ -321,7 +325,11 @@ fn paths_in_code_and_macros_count_and_doc_comments_and_tests_do_not() {
     let dir = tempfile::tempdir().unwrap();
     let src = dir.path();
     std::fs::create_dir(src.join("graph")).unwrap();
-    std::fs::write(src.join("lib.rs"), "pub mod graph; pub mod metrics; pub mod time;").unwrap();
+    std::fs::write(
+        src.join("lib.rs"),
+        "pub mod graph; pub mod metrics; pub mod time;",
+    )
+    .unwrap();
     std::fs::write(
         src.join("graph/mod.rs"),
         "pub mod spec;\n/// [`crate::metrics::M`]\npub fn f() { let _ = format!(\"{}\", crate::time::X); }\n\
@@ -333,11 +341,7 @@ fn paths_in_code_and_macros_count_and_doc_comments_and_tests_do_not() {
         "use super::super::time::X;\n#[cfg(test)]\nmod tests { use crate::metrics::M; }",
     )
     .unwrap();
-    std::fs::write(
-        src.join("metrics.rs"),
-        "use crate::graph::spec::{self, *};",
-    )
-    .unwrap();
+    std::fs::write(src.join("metrics.rs"), "use crate::graph::spec::{self, *};").unwrap();
     std::fs::write(src.join("time.rs"), "pub const X: u8 = 0;").unwrap();
     let deps = dependencies(src);
     let set = |m: &str| deps[m].iter().cloned().collect::<Vec<_>>();

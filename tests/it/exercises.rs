@@ -247,7 +247,10 @@ fn the_texts_read_before_predicting_give_no_answer_away() {
         "ex5_watchdog.toml",
     ] {
         let f = ExerciseFile::load(&path(ex)).unwrap();
-        texts.push((ex.to_string(), format!("{}\n{}", f.objective, f.instructions)));
+        texts.push((
+            ex.to_string(),
+            format!("{}\n{}", f.objective, f.instructions),
+        ));
     }
     for (name, text) in &texts {
         for (phrase, answer) in spoilers {
@@ -259,5 +262,8 @@ fn the_texts_read_before_predicting_give_no_answer_away() {
     }
     // The answers are still there, for after: bands.toml says it holds them.
     let bands = std::fs::read_to_string(path("bands.toml")).unwrap();
-    assert!(bands.starts_with("# SPOILERS"), "bands.toml must warn first");
+    assert!(
+        bands.starts_with("# SPOILERS"),
+        "bands.toml must warn first"
+    );
 }

@@ -5,9 +5,9 @@
 
 use proptest::prelude::*;
 use ratelab::graph::{GraphSpec, StepObserver};
-use ratelab::runlog::StepRecord;
 use ratelab::policy::{BrainSlot, Scripted};
 use ratelab::run::build_graph;
+use ratelab::runlog::StepRecord;
 use ratelab::scheduler::{StopFlag, VirtualScheduler};
 use ratelab::{run, ClockKind, Nanos, RunConfig, RunOptions};
 use std::process::Command;
