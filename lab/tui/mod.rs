@@ -380,7 +380,7 @@ mod tests {
                 Control::Apply(SetQueueDepth { depth: 2 }),
                 Control::Apply(SetNodeHz {
                     node: "estimator".into(),
-                    hz: 50.0
+                    hz: 60.0
                 }),
                 Control::Apply(SetTopicDepth {
                     topic: "/action".into(),

@@ -1024,8 +1024,9 @@ fn render_help(area: Rect, buf: &mut Buffer, attached: bool) {
         .filter(|(k, _)| !attached || k.starts_with("wire"))
         .map(|(k, d)| Line::from(vec![format!("{k:>16}  ").bold(), (*d).into()]))
         .collect();
-    // A blank line between keys and notes where it fits (at 80×24 every line is needed).
-    if lines.len() + notes.len() + 3 <= usize::from(area.height) {
+    // A blank line between keys and notes where it fits with the footer's row left free
+    // (at 80×24 every line is needed).
+    if lines.len() + notes.len() + 4 <= usize::from(area.height) {
         lines.push(Line::from(""));
     }
     lines.extend(notes);

@@ -190,11 +190,11 @@ fn any_graph_in_the_lab_tab_selects_and_esc_backs_out() {
     ] {
         assert!(screen.contains(name), "{name} not drawn:\n{screen}");
     }
-    // Tab, Tab: the estimator; `-` steps its rate down the ladder (100 → 50 Hz).
+    // Tab, Tab: the estimator; `-` steps its rate down the ladder (100 → 60 Hz).
     lab.keys("\t\t");
     lab.wait_for("estimator selected", Duration::from_secs(5));
     lab.keys("-");
-    lab.wait_for("estimator rate → 5", Duration::from_secs(5));
+    lab.wait_for("estimator rate → 60", Duration::from_secs(5));
     // Esc closes the help, then the selection, then asks, and only then quits.
     lab.keys("?");
     lab.wait_for("keys (? or Esc to close)", Duration::from_secs(5));
