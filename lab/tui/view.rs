@@ -367,11 +367,17 @@ fn selection_title(v: &View) -> Option<String> {
             n.name
         ));
     }
-    v.topics.iter().find(|t| t.selected).map(|t| {
-        format!(
-            " {} selected: [/] its depth ({}) · f/d/L its QoS · Tab next · Esc clears ",
+    // With QoS set, the selection names it first: at 80×24 the arrow has no row left for it.
+    v.topics.iter().find(|t| t.selected).map(|t| match &t.qos {
+        Some(parts) => format!(
+            " {} selected: {} · [/] depth · f d L l e o QoS · Esc clears ",
+            t.name,
+            parts.join(" ")
+        ),
+        None => format!(
+            " {} selected: [/] its depth ({}) · f/d/L/l/e/o its QoS · Tab next · Esc clears ",
             t.name, t.depth
-        )
+        ),
     })
 }
 
@@ -539,7 +545,7 @@ fn pack(parts: impl IntoIterator<Item = String>, sep: &str, w: usize) -> Vec<Str
 /// stale reads, and the wire latency across processes). When those do not fit in `rows`
 /// (at 80×24), the drops and stale reads share a line (`3 drop ⚠ 126↺`) if it fits `w`, so
 /// the wire line still shows; a wire line wider than `w` shows its p50 only. With QoS set:
-/// name, shaft, drops, the QoS counters, the QoS in short, msg/s, stale reads, packed to the
+/// name, shaft, drops, msg/s, the QoS counters, the QoS in short, stale reads, packed to the
 /// width, most telling first (a short panel cuts from the end).
 fn arrow_lines(t: &TopicView, w: usize, rows: usize) -> Vec<Line<'static>> {
     let (shaft, style, mark) = if t.dropping {
@@ -618,7 +624,8 @@ fn arrow_lines(t: &TopicView, w: usize, rows: usize) -> Vec<Line<'static>> {
         lines.extend(wire);
         return lines;
     };
-    let mut lines = vec![name, shaft, dropped];
+    // msg/s right after the drops: at 80×24 a panel of five rows still shows it.
+    let mut lines = vec![name, shaft, dropped, rate];
     let counting = t.qos_counts.iter().any(|(_, n)| *n > 0);
     let counts = pack(
         t.qos_counts.iter().map(|(label, n)| format!("{n} {label}")),
@@ -640,7 +647,6 @@ fn arrow_lines(t: &TopicView, w: usize, rows: usize) -> Vec<Line<'static>> {
             .into_iter()
             .map(|l| Line::from(l).dim().centered()),
     );
-    lines.push(rate);
     lines.extend(stale);
     lines.extend(wire);
     lines
@@ -838,11 +844,14 @@ fn render_hold_chart(v: &View, area: Rect, buf: &mut Buffer) {
             .magenta()
             .data(&published),
     ];
-    // Three labels need three rows of plot; a short band gets the two ends.
+    // Three labels need three rows of plot. A band of two rows (80×24) cannot put a label
+    // on 0 N: the braille grid draws 0 N in the upper row (at its lowest dot), so its rows
+    // are labelled by what they hold, ≥ 0 above and < 0 below, not by ±10 at their ends,
+    // which read as if 0 N were 10 N.
     let labels: &[&str] = if area.height >= 5 {
         &["-10", "0", "10"]
     } else {
-        &["-10", "10"]
+        &["<0", "≥0"]
     };
     let title = Line::from(vec![
         " force (N): ".into(),
@@ -868,14 +877,16 @@ fn render_hold_chart(v: &View, area: Rect, buf: &mut Buffer) {
 /// width allows.
 fn render_segment(v: &View, area: Rect, buf: &mut Buffer) {
     let seg = &v.segment;
-    let topics = |short: bool| -> Vec<Span<'static>> {
+    // `short`: 0 says it in words, 1 shortens "dropped", 2 also writes stale reads as `N↺`
+    // (the arrows' symbol), so that no number is cut at 80 columns.
+    let topics = |short: u8| -> Vec<Span<'static>> {
         let mut spans: Vec<Span> = Vec::new();
         for (i, t) in v.topics.iter().enumerate() {
             if i > 0 {
                 spans.push(" · ".dim());
             }
             spans.push(format!("{} ", t.name).into());
-            let dropped = if short {
+            let dropped = if short > 0 {
                 format!("{} drop", t.segment_dropped)
             } else {
                 format!("{} dropped", t.segment_dropped)
@@ -886,7 +897,11 @@ fn render_segment(v: &View, area: Rect, buf: &mut Buffer) {
                 dropped.into()
             });
             if t.segment_stale_reads > 0 {
-                spans.push(format!(", {} stale", t.segment_stale_reads).magenta());
+                spans.push(if short > 1 {
+                    format!(" {}↺", t.segment_stale_reads).magenta()
+                } else {
+                    format!(", {} stale", t.segment_stale_reads).magenta()
+                });
             }
         }
         spans
@@ -907,10 +922,10 @@ fn render_segment(v: &View, area: Rect, buf: &mut Buffer) {
             " │".dim(),
             Span::from(head.clone()).dim(),
         ];
-        line.extend(topics(false));
+        line.extend(topics(0));
         candidates.push(line);
     }
-    for short in [false, true] {
+    for short in [0, 1, 2] {
         let mut line = vec![
             " ".into(),
             seg.window_label().bold(),
@@ -920,6 +935,10 @@ fn render_segment(v: &View, area: Rect, buf: &mut Buffer) {
         line.extend(topics(short));
         candidates.push(line);
     }
+    // The narrowest: the totals without their "since" (the latency panel's title says it).
+    let mut line = vec![" ".into(), seg.window_label().bold(), " │ ".dim()];
+    line.extend(topics(2));
+    candidates.push(line);
     let width = |l: &Vec<Span>| l.iter().map(|s| s.content.chars().count()).sum::<usize>();
     let last = candidates.len() - 1;
     let line = candidates
