@@ -616,6 +616,24 @@ impl App {
                 Reliability::Reliable => "reliability=best_effort".to_string(),
             },
             Msg::CycleOnDeadlineMissed => {
+                // Said here in a line that fits 80 columns (the graph would refuse it too).
+                let actuator = self.graph.chain.actuator;
+                if self.graph.topic(t).subscriber != Some(actuator) {
+                    let read = self
+                        .graph
+                        .topics
+                        .iter()
+                        .find(|x| x.subscriber == Some(actuator))
+                        .map_or_else(String::new, |x| format!(" ({})", x.name));
+                    self.say(format!(
+                        "o: the actuator's reaction: select the topic it reads{read}"
+                    ));
+                    return;
+                }
+                if q.deadline.is_none() && q.on_deadline_missed == OnDeadlineMissed::Hold {
+                    self.say("o: reacts to a missed deadline: set one first with d".into());
+                    return;
+                }
                 let next = match q.on_deadline_missed {
                     OnDeadlineMissed::Hold => "zero",
                     OnDeadlineMissed::Zero => "stop",

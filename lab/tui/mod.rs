@@ -312,6 +312,18 @@ mod tests {
         app.on_msg(Msg::CycleLifespan);
         app.on_msg(Msg::ToggleReliability);
         app.on_msg(Msg::CycleOnDeadlineMissed);
+        // On a topic the actuator does not read, `o` says which one it reads, sending nothing.
+        while !app
+            .view()
+            .topics
+            .iter()
+            .any(|t| t.selected && t.name != "/cmd")
+        {
+            app.on_msg(Msg::SelectNext);
+        }
+        app.on_msg(Msg::CycleOnDeadlineMissed);
+        let said = app.view().message.unwrap_or_default();
+        assert!(said.contains("select the topic it reads (/cmd)"), "{said}");
         use ratelab::run::Command::SetTopicQos;
         let sent: Vec<Control> = rx.try_iter().collect();
         let qos = |pairs: &str| {

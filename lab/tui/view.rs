@@ -768,7 +768,8 @@ fn render_angle_chart(v: &View, area: Rect, buf: &mut Buffer) {
         .marks_s
         .iter()
         .filter(|&&t| t >= t0 && t <= t1)
-        .map(|&t| [(t, -0.3), (t, 0.3)])
+        // A tick at the top edge, not a line across: a line read as a ±0.3 rad spike.
+        .map(|&t| [(t, 0.26), (t, 0.3)])
         .collect();
     let mut datasets = vec![
         Dataset::default()
