@@ -1,15 +1,48 @@
 //! Message types: what topics carry. Few, and named for what they carry (a graph file names
-//! them `state`, `position`, `force`; see [`crate::graph::spec::MsgType`]).
+//! them `state`, `position`, `force`; [`MsgType`]).
 //!
 //! [`AnyTopic`] is a topic of any of them, for the views that only count messages (metrics,
 //! the lab, recordings) and for changes that do not look inside (depth).
 
-use crate::graph::spec::MsgType;
 use crate::plant::Observation;
 use crate::qos::TopicQos;
 use crate::time::Nanos;
 use crate::topic::{Topic, TopicStats, ZeroDepth};
+use serde::{Deserialize, Serialize};
 use std::sync::Arc;
+
+/// What a topic carries.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum MsgType {
+    /// The full state as the chapter's observation: `float32[5]` = cart position m, cart
+    /// velocity m/s, cos θ, sin θ, pole angular velocity rad/s.
+    State,
+    /// A position measurement: cart position m and pole angle rad (no velocities).
+    Position,
+    /// A force command on the cart, newtons (the motor's range is ±[`crate::plant::GEAR_N`]).
+    Force,
+}
+
+impl MsgType {
+    /// The type's name as the file spells it.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            MsgType::State => "state",
+            MsgType::Position => "position",
+            MsgType::Force => "force",
+        }
+    }
+
+    /// It alone, as a list of the types a node may publish.
+    pub(crate) fn one(self) -> &'static [MsgType] {
+        match self {
+            MsgType::State => &[MsgType::State],
+            MsgType::Position => &[MsgType::Position],
+            MsgType::Force => &[MsgType::Force],
+        }
+    }
+}
 
 /// The full state, as the chapter's observation: `float32[5]` = cart position m, cart
 /// velocity m/s, cos θ, sin θ, pole angular velocity rad/s.

@@ -412,7 +412,7 @@ pub fn summarize_state(cfg: &RunConfig, st: &GraphState, end: &RunEnd) -> Metric
             let lease = n.liveliness_lease.or(live.and_then(|l| l.0));
             let faulted = cfg.faults.iter().any(|f| f.node == n.name);
             let m = NodeMetrics {
-                kind: n.kind.as_str().to_string(),
+                kind: n.kind_name().to_string(),
                 rank: i,
                 rate_hz: n.rate_hz,
                 ticks: st.ticks.get(i).copied().unwrap_or(0),

@@ -1023,7 +1023,7 @@ fn live_stats(
                 let n = spec.node(id);
                 (
                     n.name.clone(),
-                    n.kind.as_str().to_string(),
+                    n.kind_name().to_string(),
                     rates[id.0],
                     ticks[id.0].load(Ordering::Relaxed),
                 )

@@ -833,7 +833,7 @@ pub fn ask_placement(session: &zenoh::Session, graph: &str) -> Option<Vec<Placed
                     .iter()
                     .map(|&i| {
                         let n = spec.node(i);
-                        (n.name.clone(), n.kind.as_str().to_string(), n.rate_hz)
+                        (n.name.clone(), n.kind_name().to_string(), n.rate_hz)
                     })
                     .collect();
                 (p, nodes)

@@ -8,6 +8,7 @@
 
 pub mod estimator;
 pub mod nodes;
+pub mod registry;
 pub mod spec;
 
 use crate::msg::AnyTopic;
@@ -164,6 +165,10 @@ pub enum GraphError {
     /// A Python node's script cannot be loaded (one line, naming the file).
     #[error(transparent)]
     Python(#[from] crate::python::PythonError),
+    /// A node of a registered kind cannot be made: the kind is not registered in this
+    /// process, or its maker refused the node's parameters (one line, naming the node).
+    #[error("{0}")]
+    Registered(String),
 }
 
 impl Graph {
@@ -290,6 +295,22 @@ impl Graph {
                             output.cloned(),
                             seed,
                         )?))
+                    }
+                    (NodeKind::Registered, (Some(input), Some(output))) => {
+                        let r = n
+                            .registered
+                            .as_ref()
+                            .expect("validated: a registered node's kind");
+                        let cx = registry::NodeContext {
+                            name: &n.name,
+                            period: rates[i].period(),
+                            seed,
+                            params: &r.params,
+                        };
+                        Work::Registered(
+                            registry::make(&r.kind, &cx, input, output)
+                                .map_err(GraphError::Registered)?,
+                        )
                     }
                     (NodeKind::Actuator, (Some(AnyTopic::Force(i)), None)) => {
                         Work::Actuator(Box::new(Actuator {

@@ -11,6 +11,8 @@
 //! - **safety**: clamps the newest force to ±`max_force_n` and republishes it.
 //! - **python**: the learner's node ([`crate::python::node`]): its subscription callback for
 //!   what arrived, then its timers; what they published goes out with the input's origin.
+//! - a **registered** kind ([`super::registry`]): the node's `tick` for what arrived; what
+//!   it returned goes out with the input's origin.
 //! - **actuator**: applies the newest force (zero before the first), steps the plant once and
 //!   records the step. Re-applying a stale force is the zero-order hold; a non-finite force
 //!   is refused and the last good one held. It alone steps the plant; a fall stops the graph.
@@ -93,6 +95,8 @@ pub enum Work {
     Actuator(Box<Actuator>),
     /// A learner's node in Python ([`crate::python::node`]).
     Python(Box<crate::python::node::PythonNode>),
+    /// A node of a kind registered in Rust ([`super::registry`]), bound to its topics.
+    Registered(Box<dyn super::registry::Tick>),
 }
 
 /// A sensor's state.
@@ -253,6 +257,10 @@ impl Node for GraphNode {
                 Flow::Continue
             }
             Work::Actuator(a) => a.tick(now),
+            Work::Registered(r) => {
+                r.tick(now);
+                Flow::Continue
+            }
             Work::Python(p) => match p.tick(now, self.core.rate.period()) {
                 Ok(()) => Flow::Continue,
                 // The scheduler catches it and fails the node with this line.

@@ -10,6 +10,7 @@
 //! [[node]]
 //! name = "sensor"
 //! kind = "sensor"          # sensor | estimator | policy | safety | actuator | python
+//!                          # | a kind registered in Rust (crate::graph::registry)
 //! rate_hz = 50
 //! publishes = "/obs"
 //!
@@ -30,7 +31,9 @@
 //!   a safety node reads `force` and publishes `force`; the actuator reads `force`; a
 //!   `python` node (the learner's, [`crate::python::node`]) reads and publishes at most one
 //!   topic each, of any type, and names its `script` (relative to the graph file), its
-//!   optional `class` and `params` table;
+//!   optional `class` and `params` table; a node of a kind registered in Rust
+//!   ([`crate::graph::registry`]) reads and publishes the types it was registered with and
+//!   may have a `params` table;
 //! - every topic is declared once, has exactly one publisher and at most one subscriber
 //!   (the chapter's topic keeps one read mark; per-subscription queues come with QoS), and
 //!   its type matches both ends;
@@ -89,6 +92,10 @@ pub enum NodeKind {
     /// output. In the chain's places it plays the policy (reads `state`, publishes `force`)
     /// or a safety node (reads `force`, publishes `force`).
     Python,
+    /// A kind written in Rust and registered by the program that runs the graph
+    /// ([`crate::graph::registry`]; its name is in [`NodeSpec::registered`]). It takes the
+    /// chain's places as a Python node does.
+    Registered,
 }
 
 impl NodeKind {
@@ -101,10 +108,25 @@ impl NodeKind {
             NodeKind::Safety => "safety",
             NodeKind::Actuator => "actuator",
             NodeKind::Python => "python",
+            NodeKind::Registered => "registered",
         }
     }
+
+    /// The built-in kind a graph file's `kind` names (`None`: maybe a registered one).
+    fn built_in(name: &str) -> Option<NodeKind> {
+        Some(match name {
+            "sensor" => NodeKind::Sensor,
+            "estimator" => NodeKind::Estimator,
+            "policy" => NodeKind::Policy,
+            "safety" => NodeKind::Safety,
+            "actuator" => NodeKind::Actuator,
+            "python" => NodeKind::Python,
+            _ => return None,
+        })
+    }
     /// The message types this kind may read (none for a sensor) and publish (none for the
-    /// actuator); `None` for a Python node, which may read and publish any one topic.
+    /// actuator); `None` for a Python node, which may read and publish any one topic, and
+    /// for a registered kind, whose shape is the registry's.
     fn shape(self) -> Option<(Option<MsgType>, &'static [MsgType])> {
         Some(match self {
             NodeKind::Sensor => (None, &[MsgType::State, MsgType::Position]),
@@ -112,34 +134,12 @@ impl NodeKind {
             NodeKind::Policy => (Some(MsgType::State), &[MsgType::Force]),
             NodeKind::Safety => (Some(MsgType::Force), &[MsgType::Force]),
             NodeKind::Actuator => (Some(MsgType::Force), &[]),
-            NodeKind::Python => return None,
+            NodeKind::Python | NodeKind::Registered => return None,
         })
     }
 }
 
-/// What a topic carries.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum MsgType {
-    /// The full state as the chapter's observation: `float32[5]` = cart position m, cart
-    /// velocity m/s, cos θ, sin θ, pole angular velocity rad/s.
-    State,
-    /// A position measurement: cart position m and pole angle rad (no velocities).
-    Position,
-    /// A force command on the cart, newtons (the motor's range is ±[`GEAR_N`]).
-    Force,
-}
-
-impl MsgType {
-    /// The type's name as the file spells it.
-    pub fn as_str(self) -> &'static str {
-        match self {
-            MsgType::State => "state",
-            MsgType::Position => "position",
-            MsgType::Force => "force",
-        }
-    }
-}
+pub use crate::msg::MsgType;
 
 /// The process that holds the plant's nodes by default ([`GraphSpec::process_of`]).
 pub const DEFAULT_ROBOT_PROCESS: &str = "robot";
@@ -186,6 +186,29 @@ pub struct NodeSpec {
     /// A Python node's script, class and parameters; `None` for every other kind.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub python: Option<PythonNodeSpec>,
+    /// A registered kind's name and parameters; `None` for every other kind.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub registered: Option<RegisteredNodeSpec>,
+}
+
+impl NodeSpec {
+    /// Its kind as the graph file names it: the registered kind's own name for a
+    /// [`NodeKind::Registered`] node.
+    pub fn kind_name(&self) -> &str {
+        match &self.registered {
+            Some(r) => &r.kind,
+            None => self.kind.as_str(),
+        }
+    }
+}
+
+/// What a node of a registered kind is ([`crate::graph::registry`]).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct RegisteredNodeSpec {
+    /// The kind's registered name.
+    pub kind: String,
+    /// `params = { … }`: what the kind's maker reads ([`crate::graph::registry::NodeContext`]).
+    pub params: toml::Table,
 }
 
 /// What a `kind = "python"` node runs ([`crate::python::node`]).
@@ -311,7 +334,7 @@ struct RawGraph {
 #[serde(deny_unknown_fields)]
 struct RawNode {
     name: Spanned<String>,
-    kind: Spanned<NodeKind>,
+    kind: Spanned<String>,
     rate_hz: Spanned<f64>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     priority: Option<Spanned<i64>>,
@@ -536,7 +559,7 @@ impl GraphSpec {
                         0..0,
                         RawNode {
                             name: s(n.name.clone()),
-                            kind: Spanned::new(0..0, n.kind),
+                            kind: s(n.kind_name().to_string()),
                             rate_hz: f(n.rate_hz),
                             priority: n.priority.map(|p| Spanned::new(0..0, p)),
                             subscribes: topic_name(n.subscribes),
@@ -553,8 +576,10 @@ impl GraphSpec {
                             params: n
                                 .python
                                 .as_ref()
-                                .filter(|p| !p.params.is_empty())
-                                .map(|p| Spanned::new(0..0, p.params.clone())),
+                                .map(|p| &p.params)
+                                .or(n.registered.as_ref().map(|r| &r.params))
+                                .filter(|p| !p.is_empty())
+                                .map(|p| Spanned::new(0..0, p.clone())),
                         },
                     )
                 })
@@ -910,7 +935,33 @@ fn build(cx: &Ctx<'_>, raw: RawGraph) -> Result<GraphSpec, SpecError> {
         if file_nodes.iter().any(|x| x.name == *nname) {
             return Err(cx.err(r.name.span(), format!("duplicate node '{nname}'")));
         }
-        let kind = *r.kind.get_ref();
+        let kind_name = r.kind.get_ref().as_str();
+        let registered_shape = crate::graph::registry::shape(kind_name);
+        let kind = match (NodeKind::built_in(kind_name), registered_shape) {
+            (Some(k), _) => k,
+            (None, Some(_)) => NodeKind::Registered,
+            (None, None) => {
+                let mut known: Vec<String> = [
+                    "sensor",
+                    "estimator",
+                    "policy",
+                    "safety",
+                    "actuator",
+                    "python",
+                ]
+                .map(String::from)
+                .to_vec();
+                known.extend(crate::graph::registry::kinds());
+                return Err(cx.err(
+                    r.kind.span(),
+                    format!(
+                        "unknown kind `{kind_name}`: expected one of {} (or a kind a Rust \
+                         program registers: ratelab::graph::registry)",
+                        known.join(", ")
+                    ),
+                ));
+            }
+        };
         let hz = *r.rate_hz.get_ref();
         check_rate_hz(hz).map_err(|e| cx.err(r.rate_hz.span(), e))?;
         if kind == NodeKind::Actuator {
@@ -918,22 +969,20 @@ fn build(cx: &Ctx<'_>, raw: RawGraph) -> Result<GraphSpec, SpecError> {
             actuators.push(r.name.span());
         }
         let id = NodeId(file_nodes.len());
-        let (reads, writes) = match kind.shape() {
-            Some(shape) => shape,
+        let (reads, writes) = match (kind.shape(), registered_shape) {
+            (Some(shape), _) => shape,
+            (None, Some((reads, writes))) if kind == NodeKind::Registered => {
+                (Some(reads), writes.one())
+            }
             // A Python node: whatever its one input and output carry.
-            None => {
+            (None, _) => {
                 let carried = |t: &Option<Spanned<String>>| -> Result<Option<MsgType>, SpecError> {
                     t.as_ref()
                         .map(|t| find_topic(&topics, t).map(|i| topics[i].msg))
                         .transpose()
                 };
                 let reads = carried(&r.subscribes)?;
-                let writes: &'static [MsgType] = match carried(&r.publishes)? {
-                    None => &[],
-                    Some(MsgType::State) => &[MsgType::State],
-                    Some(MsgType::Position) => &[MsgType::Position],
-                    Some(MsgType::Force) => &[MsgType::Force],
-                };
+                let writes: &'static [MsgType] = carried(&r.publishes)?.map_or(&[], MsgType::one);
                 (reads, writes)
             }
         };
@@ -943,7 +992,7 @@ fn build(cx: &Ctx<'_>, raw: RawGraph) -> Result<GraphSpec, SpecError> {
                     r.name.span(),
                     format!(
                         "a {} node must subscribe to a {} topic",
-                        kind.as_str(),
+                        kind_name,
                         want.as_str()
                     ),
                 ))
@@ -951,7 +1000,7 @@ fn build(cx: &Ctx<'_>, raw: RawGraph) -> Result<GraphSpec, SpecError> {
             (Some(s), None) => {
                 return Err(cx.err(
                     s.span(),
-                    format!("a {} node subscribes to nothing", kind.as_str()),
+                    format!("a {} node subscribes to nothing", kind_name),
                 ))
             }
             (None, None) => None,
@@ -965,7 +1014,7 @@ fn build(cx: &Ctx<'_>, raw: RawGraph) -> Result<GraphSpec, SpecError> {
                             "type mismatch: '{}' carries {} but a {} node reads {}",
                             t.name,
                             t.msg.as_str(),
-                            kind.as_str(),
+                            kind_name,
                             want.as_str()
                         ),
                     ));
@@ -987,14 +1036,11 @@ fn build(cx: &Ctx<'_>, raw: RawGraph) -> Result<GraphSpec, SpecError> {
             (None, false) => {
                 return Err(cx.err(
                     r.name.span(),
-                    format!("a {} node must publish a topic", kind.as_str()),
+                    format!("a {} node must publish a topic", kind_name),
                 ))
             }
             (Some(p), true) => {
-                return Err(cx.err(
-                    p.span(),
-                    format!("a {} node publishes nothing", kind.as_str()),
-                ))
+                return Err(cx.err(p.span(), format!("a {} node publishes nothing", kind_name)))
             }
             (None, true) => None,
             (Some(p), false) => {
@@ -1008,7 +1054,7 @@ fn build(cx: &Ctx<'_>, raw: RawGraph) -> Result<GraphSpec, SpecError> {
                             "type mismatch: '{}' carries {} but a {} node publishes {}",
                             t.name,
                             t.msg.as_str(),
-                            kind.as_str(),
+                            kind_name,
                             names.join(" or ")
                         ),
                     ));
@@ -1028,6 +1074,7 @@ fn build(cx: &Ctx<'_>, raw: RawGraph) -> Result<GraphSpec, SpecError> {
         };
         let params = node_params(cx, kind, r)?;
         let python = python_node(cx, kind, r)?;
+        let registered = registered_node(cx, kind, kind_name, r)?;
         let liveliness_lease = r
             .liveliness_lease_ms
             .as_ref()
@@ -1059,6 +1106,7 @@ fn build(cx: &Ctx<'_>, raw: RawGraph) -> Result<GraphSpec, SpecError> {
             liveliness_lease,
             process,
             python,
+            registered,
         });
         node_spans.push(r.name.span());
     }
@@ -1176,12 +1224,14 @@ fn find_chain(spec: &GraphSpec) -> Result<Chain, String> {
         let reads = |m: MsgType| upstream(p).is_some_and(|(t, _)| spec.topics[t.0].msg == m);
         match spec.nodes[p.0].kind {
             NodeKind::Policy => break (p, action.unwrap_or(t)),
-            NodeKind::Python if reads(MsgType::State) => break (p, action.unwrap_or(t)),
+            NodeKind::Python | NodeKind::Registered if reads(MsgType::State) => {
+                break (p, action.unwrap_or(t))
+            }
             NodeKind::Safety => {
                 action = Some(t);
                 cur = p;
             }
-            NodeKind::Python if reads(MsgType::Force) => {
+            NodeKind::Python | NodeKind::Registered if reads(MsgType::Force) => {
                 action = Some(t);
                 cur = p;
             }
@@ -1194,7 +1244,7 @@ fn find_chain(spec: &GraphSpec) -> Result<Chain, String> {
     // Up through the estimators (built-in or Python) to the sensor.
     for _ in 0..MAX_NODES {
         match spec.nodes[src.0].kind {
-            NodeKind::Estimator | NodeKind::Python => {
+            NodeKind::Estimator | NodeKind::Python | NodeKind::Registered => {
                 let name = &spec.nodes[src.0].name;
                 src = upstream(src)
                     .ok_or_else(|| format!("node '{name}' before the policy reads nothing"))?
@@ -1326,10 +1376,14 @@ fn python_node(
     r: &RawNode,
 ) -> Result<Option<PythonNodeSpec>, SpecError> {
     if kind != NodeKind::Python {
+        // A registered kind takes `params` too (registered_node).
+        let params = (kind != NodeKind::Registered)
+            .then(|| r.params.as_ref().map(|v| ("params", v.span())))
+            .flatten();
         let stray = [
             r.script.as_ref().map(|v| ("script", v.span())),
             r.class.as_ref().map(|v| ("class", v.span())),
-            r.params.as_ref().map(|v| ("params", v.span())),
+            params,
         ];
         if let Some((key, span)) = stray.into_iter().flatten().next() {
             return Err(cx.err(
@@ -1364,13 +1418,40 @@ fn python_node(
         }
         c => c.as_ref().map(|c| c.get_ref().clone()),
     };
-    let params = match &r.params {
+    let params = node_table(cx, r)?;
+    Ok(Some(PythonNodeSpec {
+        script: resolved.to_string_lossy().into_owned(),
+        class,
+        params,
+    }))
+}
+
+/// A registered kind's name and parameters: `Some` on a [`NodeKind::Registered`] node.
+fn registered_node(
+    cx: &Ctx<'_>,
+    kind: NodeKind,
+    kind_name: &str,
+    r: &RawNode,
+) -> Result<Option<RegisteredNodeSpec>, SpecError> {
+    if kind != NodeKind::Registered {
+        return Ok(None);
+    }
+    Ok(Some(RegisteredNodeSpec {
+        kind: kind_name.to_string(),
+        params: node_table(cx, r)?,
+    }))
+}
+
+/// A node's `params = { … }` (empty when absent): at most [`MAX_PYTHON_PARAMS`] entries,
+/// each a number, a string, a boolean or an array of them, under a Python name.
+fn node_table(cx: &Ctx<'_>, r: &RawNode) -> Result<toml::Table, SpecError> {
+    Ok(match &r.params {
         None => toml::Table::new(),
         Some(p) => {
             if p.get_ref().len() > MAX_PYTHON_PARAMS {
                 return Err(cx.err(
                     p.span(),
-                    format!("a python node has at most {MAX_PYTHON_PARAMS} params"),
+                    format!("a node has at most {MAX_PYTHON_PARAMS} params"),
                 ));
             }
             for (k, v) in p.get_ref() {
@@ -1396,12 +1477,7 @@ fn python_node(
             }
             p.get_ref().clone()
         }
-    };
-    Ok(Some(PythonNodeSpec {
-        script: resolved.to_string_lossy().into_owned(),
-        class,
-        params,
-    }))
+    })
 }
 
 /// A Python identifier (ASCII): a class or parameter name.
@@ -1541,7 +1617,7 @@ depth = 1
     fn errors_point_at_the_culprit() {
         let e = parse(&CHAIN.replace("kind = \"policy\"", "kind = \"planner\"")).unwrap_err();
         assert_eq!((e.line, e.col), (10, 8), "{e}");
-        assert!(e.reason.contains("unknown variant"), "{e}");
+        assert!(e.reason.contains("unknown kind `planner`"), "{e}");
         let e = parse(&CHAIN.replace("depth = 1\n[[topic]]", "depth = 0\n[[topic]]")).unwrap_err();
         assert_eq!(e.line, 22, "{e}");
         assert!(

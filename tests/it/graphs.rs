@@ -211,7 +211,7 @@ fn line_of(text: &str, needle: &str) -> usize {
 fn bad_graph_files_exit_2_with_file_line_col() {
     // Unknown kind.
     let t = edit("kind = \"policy\"", "kind = \"planner\"");
-    assert_refused(&t, line_of(&t, "planner"), 8, "unknown variant `planner`");
+    assert_refused(&t, line_of(&t, "planner"), 8, "unknown kind `planner`");
     // Duplicate node.
     let t = edit("name = \"policy\"", "name = \"sensor\"");
     let second = t

@@ -18,6 +18,7 @@ mod architecture;
 mod brains;
 mod chapter_bands;
 mod cli;
+mod custom_node;
 mod distributed;
 mod e2e_pty;
 mod exercises;

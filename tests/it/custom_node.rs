@@ -1,0 +1,164 @@
+//! Node kinds written in Rust outside ratelab (`ratelab::graph::registry`): a kind
+//! registered once is usable from a graph file, runs in the graph like any node, and
+//! `examples/custom_node.rs` (a PD controller) runs the chapter's graph.
+
+use ratelab::graph::registry::{register, NodeContext, RustNode};
+use ratelab::graph::GraphSpec;
+use ratelab::msg::{ForceMsg, StateMsg};
+use ratelab::policy::Scripted;
+use ratelab::{run, ClockKind, Nanos, RunConfig, RunOptions};
+use std::path::PathBuf;
+use std::process::Command;
+
+/// Pushes the cart with a constant force, whatever it reads (it still needs one reading).
+struct Push {
+    newtons: f64,
+    sensed: bool,
+}
+
+impl RustNode for Push {
+    type Input = StateMsg;
+    type Output = ForceMsg;
+    fn tick(&mut self, _now: Nanos, input: Option<&StateMsg>) -> Option<ForceMsg> {
+        self.sensed |= input.is_some();
+        self.sensed.then_some(ForceMsg {
+            newtons: self.newtons,
+        })
+    }
+}
+
+/// The chapter's graph with its policy node of kind `kind` and `params`.
+fn graph_with(kind: &str, params: &str) -> String {
+    std::fs::read_to_string(crate::repo("graphs/cartpole.toml"))
+        .unwrap()
+        .replace(
+            "kind = \"policy\"",
+            &format!("kind = \"{kind}\"\nparams = {{ {params} }}"),
+        )
+}
+
+fn virtual_run(graph: GraphSpec) -> ratelab::metrics::Metrics {
+    let cfg = RunConfig {
+        clock: ClockKind::Virtual,
+        graph,
+        ..RunConfig::default()
+    };
+    run(&cfg, Box::new(Scripted), RunOptions::default())
+        .unwrap()
+        .metrics
+}
+
+#[test]
+fn a_registered_kind_is_usable_from_a_graph_file_and_runs_as_a_node() {
+    register("push_it", |cx: &NodeContext<'_>| {
+        Ok(Push {
+            newtons: cx.param_f64("newtons", 0.0)?,
+            sensed: false,
+        })
+    })
+    .unwrap();
+    let text = graph_with("push_it", "newtons = 10");
+    let spec = GraphSpec::parse(&text, "push.toml").unwrap();
+    assert_eq!(spec.node(spec.chain.policy).kind_name(), "push_it");
+    // The file the spec writes (session logs keep it) reads back to the same spec.
+    assert_eq!(
+        GraphSpec::parse(&spec.to_toml(), "again.toml").unwrap(),
+        spec
+    );
+    let m = virtual_run(spec);
+    // Pushed at full force the whole time, the pole falls, and fast; metrics name the kind.
+    let fell = m.fell_at_s.expect("a constant push topples the pole");
+    assert!(fell < 3.0, "fell at {fell}");
+    assert_eq!(m.nodes["policy"].kind, "push_it");
+    // Sense→act latency passes through it: the sensor's stamp reaches the actuator.
+    assert_eq!(m.mean_latency_ms, 0.0);
+    assert!(m.topics["/action"].published > 0);
+
+    // Its parameters are checked by its maker, in one line naming the node.
+    let bad = graph_with("push_it", "newtons = \"lots\"");
+    let cfg = RunConfig {
+        clock: ClockKind::Virtual,
+        graph: GraphSpec::parse(&bad, "bad.toml").unwrap(),
+        ..RunConfig::default()
+    };
+    let err = run(&cfg, Box::new(Scripted), RunOptions::default())
+        .err()
+        .expect("refused")
+        .to_string();
+    assert!(
+        err.contains("node 'policy': params.newtons must be a number"),
+        "{err}"
+    );
+    // Its registered types are checked against the file's topics.
+    let wrong =
+        graph_with("push_it", "newtons = 1").replacen("type = \"state\"", "type = \"position\"", 1);
+    let err = GraphSpec::parse(&wrong, "wrong.toml")
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("a push_it node reads state"), "{err}");
+}
+
+#[test]
+fn a_kind_nobody_registered_is_refused_by_the_file_and_the_binary() {
+    let text = graph_with("nobody_registered", "");
+    let err = GraphSpec::parse(&text, "g.toml").unwrap_err().to_string();
+    assert!(
+        err.contains("unknown kind `nobody_registered`: expected one of sensor"),
+        "{err}"
+    );
+    let dir = tempfile::tempdir().unwrap();
+    let g = dir.path().join("g.toml");
+    std::fs::write(&g, text).unwrap();
+    let o = Command::new(env!("CARGO_BIN_EXE_ratelab"))
+        .args(["run", "--clock", "virtual", "--graph"])
+        .arg(&g)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert_eq!(err.trim().lines().count(), 1, "{err}");
+    assert!(err.contains("unknown kind `nobody_registered`"), "{err}");
+}
+
+/// `target/<profile>/examples/custom_node`, built by `cargo test` beside this test binary
+/// (`target/<profile>/deps/it-…`).
+fn example_binary() -> PathBuf {
+    let exe = std::env::current_exe().unwrap();
+    let profile = exe.parent().and_then(|deps| deps.parent()).unwrap();
+    let p = profile.join("examples").join("custom_node");
+    assert!(
+        p.is_file(),
+        "{} is missing: `cargo test` builds the examples",
+        p.display()
+    );
+    p
+}
+
+#[test]
+fn the_custom_node_example_runs_the_chapters_graph_with_a_pd_node() {
+    let _m = crate::machine::shared();
+    for (hz, seed, verdict) in [("50", "0", "BALANCED"), ("5", "1", "FELL at t=")] {
+        let o = Command::new(example_binary())
+            .args([hz, seed])
+            .output()
+            .unwrap();
+        let out = String::from_utf8_lossy(&o.stdout);
+        assert!(
+            o.status.success(),
+            "{out}{}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+        assert!(
+            out.contains(&format!("pd node at {hz} Hz, seed {seed}: {verdict}")),
+            "{out}"
+        );
+        assert!(
+            out.contains(
+                "equal to the built-in policy node (scripted balancer) in every figure: yes"
+            ),
+            "{out}"
+        );
+    }
+    let o = Command::new(example_binary()).arg("fast").output().unwrap();
+    assert_eq!(o.status.code(), Some(2));
+}
