@@ -51,6 +51,11 @@ fn main() {
                 "reliable_latency_ms",
             ][..],
         ),
+        (
+            "ex6",
+            "exercises/ex6_own_node.toml",
+            &["smallest_clamp_n"][..],
+        ),
     ] {
         let file = root.join(file);
         println!("cargo:rerun-if-changed={}", file.display());

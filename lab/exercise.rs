@@ -1,21 +1,23 @@
-//! `ratelab exercise ex1|ex2|ex3|ex4|ex5`: predict, run, reconcile.
+//! `ratelab exercise ex1|ex2|ex3|ex4|ex5|ex6`: predict, run, reconcile.
 
 use anyhow::{bail, Context};
 use ratelab::exercise::{
-    check_ex1, check_ex2, check_ex3, check_ex4, check_ex5, load_bands, measure_ex1, measure_ex2,
-    measure_ex3, measure_ex4, measure_ex5, outcome_ex4, outcome_ex5, required_keys, Check,
-    Ex4Bands, Ex4Run, Ex5Bands, Ex5Case, Ex5Run, ExerciseFile, Outcome,
+    check_ex1, check_ex2, check_ex3, check_ex4, check_ex5, check_ex6, ex6_differences, load_bands,
+    measure_ex1, measure_ex2, measure_ex3, measure_ex4, measure_ex5, measure_ex6, outcome_ex4,
+    outcome_ex5, outcome_ex6, required_keys, Check, Ex4Bands, Ex4Run, Ex5Bands, Ex5Case, Ex5Run,
+    Ex6Bands, Ex6Run, ExerciseFile, Outcome,
 };
 use ratelab::metrics::Metrics;
 use std::path::Path;
 
 /// Every exercise and its file, in order.
-const FILES: [(&str, &str); 5] = [
+const FILES: [(&str, &str); 6] = [
     ("ex1", "ex1_rate_cliff.toml"),
     ("ex2", "ex2_queue_trap.toml"),
     ("ex3", "ex3_jitter_phase.toml"),
     ("ex4", "ex4_stale_queue.toml"),
     ("ex5", "ex5_watchdog.toml"),
+    ("ex6", "ex6_own_node.toml"),
 ];
 
 fn print_checks(checks: &[Check]) {
@@ -66,7 +68,7 @@ pub fn run_exercise(
     graph: &ratelab::graph::GraphSpec,
 ) -> anyhow::Result<()> {
     let Some((ex, file)) = FILES.iter().find(|(e, _)| *e == which) else {
-        bail!("unknown exercise '{which}' (expected ex1, ex2, ex3, ex4 or ex5)");
+        bail!("unknown exercise '{which}' (expected ex1, ex2, ex3, ex4, ex5 or ex6)");
     };
     let path = dir.join(file);
     let f = ExerciseFile::load(&path)?;
@@ -183,6 +185,12 @@ pub fn run_exercise(
             let b = &bands.ex5;
             let runs = with_spinner("measuring ex5", || measure_ex5(b, graph))?;
             print_ex5(b, &f, &runs);
+        }
+        "ex6" => {
+            let b = &bands.ex6;
+            let script = dir.join(&b.script);
+            let runs = with_spinner("measuring ex6", || measure_ex6(b, graph, &script))?;
+            print_ex6(b, &f, &runs);
         }
         _ => {
             let b = &bands.ex3;
@@ -499,6 +507,70 @@ fn print_ex5(b: &Ex5Bands, f: &ExerciseFile, runs: &[Ex5Run]) {
         b.topic, b.low_loss
     );
     println!("and the same with --qos {}:reliability=reliable.", b.topic);
+}
+
+/// ex6's table (per clamp: the built-in node's verdict per seed, then the learner's), the
+/// reconcile and the checks.
+fn print_ex6(b: &Ex6Bands, f: &ExerciseFile, runs: &[Ex6Run]) {
+    let cell = |r: Option<&Ex6Run>| match r {
+        Some(r) if r.metrics.balanced => "Y".to_string(),
+        Some(r) => r
+            .metrics
+            .fell_at_s
+            .map_or("n".into(), |t| format!("n@{t:.2}")),
+        None => "-".into(),
+    };
+    let row = |clamp: f64, python: bool| -> Vec<String> {
+        b.seeds
+            .iter()
+            .map(|&seed| {
+                cell(
+                    runs.iter()
+                        .find(|r| r.clamp_n == clamp && r.seed == seed && r.python == python),
+                )
+            })
+            .map(|c| format!("{c:<7}"))
+            .collect()
+    };
+    println!(
+        "{:>9} | built-in safety node: {} | your node ({}): {}",
+        "max force",
+        seeds_header(&b.seeds),
+        b.script,
+        seeds_header(&b.seeds)
+    );
+    let differ = ex6_differences(runs);
+    for &clamp in &b.clamps_n {
+        let mark = if differ.iter().any(|(c, _)| *c == clamp) {
+            "  <- differs"
+        } else {
+            ""
+        };
+        println!(
+            "{:>7} N | {:>21} {} | {:>w$} {}{mark}",
+            clamp,
+            "",
+            row(clamp, false).join(" "),
+            "",
+            row(clamp, true).join(" "),
+            w = 11 + b.script.len()
+        );
+    }
+    println!("(Y: balanced the whole run; n@T: fell at T s)");
+    say_reconcile(f, &outcome_ex6(runs));
+    print_checks(&check_ex6(b, runs));
+    println!();
+    paragraph(&format!(
+        "Reconcile: the balancer's commands are large only in the first second, while it \
+         catches the pole from the reset's tilt; once the pole is up, a few newtons' worth of \
+         command is plenty. Clamped at {} N the pole still comes up on every seed; below it, \
+         a seed whose first pushes need more falls in the first seconds. A limiter is a node \
+         like any other: here it ticks at the same instants as the policy, just after it, so \
+         it adds no sense->act latency. Try your node in the lab, and change its rate (Tab to \
+         select it, then - and +):",
+        b.smallest_balancing_clamp_n
+    ));
+    println!("  ./scripts/lab.sh --clock virtual --graph graphs/cartpole-safety-python.toml");
 }
 
 /// The learner's prediction against the outcome, in words.

@@ -361,9 +361,58 @@ fn exercise_ex5_runs_on_the_graph_its_bands_name_and_reconciles() {
         "{}",
         stderr(&o)
     );
-    let o = ratelab(&["exercise", "ex6", "--dir", d]);
+    let o = ratelab(&["exercise", "ex7", "--dir", d]);
     assert!(
-        stderr(&o).contains("expected ex1, ex2, ex3, ex4 or ex5"),
+        o.status.code() == Some(2)
+            && stderr(&o).contains("expected ex1, ex2, ex3, ex4, ex5 or ex6"),
+        "{}",
+        stderr(&o)
+    );
+}
+
+#[test]
+fn exercise_ex6_runs_the_learners_node_and_says_whether_it_limits() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = exercise_copy(tmp.path(), &["ex6_own_node.toml", "ex6_my_limiter.py"]);
+    let d = dir.to_str().unwrap();
+    let file = dir.join("ex6_own_node.toml");
+    let text = std::fs::read_to_string(&file)
+        .unwrap()
+        .replace("# smallest_clamp_n =\n", "smallest_clamp_n = 2\n")
+        .replace("why = \"\"", "why = \"catching the pole takes newtons\"");
+    std::fs::write(&file, text).unwrap();
+    // The shipped skeleton passes commands through: it is not the built-in limiter.
+    let o = ratelab(&["exercise", "ex6", "--dir", d]);
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(out.contains("your node (ex6_my_limiter.py)"), "{out}");
+    assert!(out.contains("<- differs"), "{out}");
+    assert!(
+        out.contains("Your node does not limit as the built-in safety node does"),
+        "{out}"
+    );
+    assert!(out.contains("[!!]"), "{out}");
+    // Written, it limits as the built-in node does, and the prediction is reconciled.
+    let script = dir.join("ex6_my_limiter.py");
+    let written = std::fs::read_to_string(&script).unwrap().replace(
+        "Force(newtons=msg.newtons)",
+        "Force(newtons=min(max(msg.newtons, -self.max_force_n), self.max_force_n))",
+    );
+    std::fs::write(&script, written).unwrap();
+    let o = ratelab(&["exercise", "ex6", "--dir", d]);
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(out.contains("[ok]") && !out.contains("[!!]"), "{out}");
+    assert!(
+        out.contains("You predicted the smallest clamp that keeps the pole up is 2 N; with your node it was 0.75 N."),
+        "{out}"
+    );
+    // A script that does not load: one line naming FILE:LINE, exit 2.
+    std::fs::write(&script, "x = (\n").unwrap();
+    let o = ratelab(&["exercise", "ex6", "--dir", d]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(
+        stderr(&o).contains("ex6_my_limiter.py:1: SyntaxError"),
         "{}",
         stderr(&o)
     );

@@ -4,9 +4,9 @@
 //! measured outcome.
 
 use ratelab::exercise::{
-    check_ex1, check_ex2, check_ex3, check_ex4, check_ex5, default_graph, load_bands, measure_ex1,
-    measure_ex2, measure_ex3, measure_ex4, measure_ex5, outcome_ex4, outcome_ex5, required_keys,
-    Bands, Ex5Case, ExerciseFile, Outcome,
+    check_ex1, check_ex2, check_ex3, check_ex4, check_ex5, check_ex6, default_graph, load_bands,
+    measure_ex1, measure_ex2, measure_ex3, measure_ex4, measure_ex5, measure_ex6, outcome_ex4,
+    outcome_ex5, outcome_ex6, required_keys, Bands, Ex5Case, ExerciseFile, Outcome,
 };
 use ratelab::graph::GraphSpec;
 use std::path::PathBuf;
@@ -137,6 +137,51 @@ fn ex5_measurement_watchdog() {
     assert!(measure_ex5(&b.ex5, &GraphSpec::chapter()).is_err());
 }
 
+#[test]
+fn ex6_measurement_your_own_node() {
+    let _machine = crate::machine::shared();
+    let b = bands();
+    let graph = default_graph("ex6", &path(""))
+        .unwrap()
+        .expect("ex6 names its graph");
+    let g = GraphSpec::load(&graph).unwrap();
+    assert_eq!(g.name, "cartpole-safety");
+    // The checks run the reference limiter in the learner's place: they test the runtime.
+    let reference = path(&b.ex6.reference_script);
+    let runs = measure_ex6(&b.ex6, &g, &reference).unwrap();
+    assert_eq!(runs.len(), 2 * b.ex6.clamps_n.len() * b.ex6.seeds.len());
+    assert_all(check_ex6(&b.ex6, &runs));
+    assert_eq!(
+        outcome_ex6(&runs),
+        Outcome::Ex6 {
+            smallest_clamp_n: Some(b.ex6.smallest_balancing_clamp_n),
+            matches_builtin: true
+        }
+    );
+    // The shipped skeleton passes commands through unclamped: it differs from the built-in
+    // node (which falls at the smallest clamps), and the check says so.
+    let skeleton = path(&b.ex6.script);
+    let runs = measure_ex6(&b.ex6, &g, &skeleton).unwrap();
+    let Outcome::Ex6 {
+        smallest_clamp_n,
+        matches_builtin,
+    } = outcome_ex6(&runs)
+    else {
+        unreachable!("ex6's outcome")
+    };
+    assert!(!matches_builtin);
+    assert_eq!(
+        smallest_clamp_n,
+        b.ex6.clamps_n.iter().copied().reduce(f64::min)
+    );
+    assert!(!check_ex6(&b.ex6, &runs)[1].passed);
+    // A graph without the node the bands name is refused by name.
+    let err = measure_ex6(&b.ex6, &GraphSpec::chapter(), &reference)
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("no node 'safety'"), "{err}");
+}
+
 fn prediction_recorded(ex: &str, file: &str) {
     let f = ExerciseFile::load(&path(file)).unwrap();
     assert!(
@@ -193,6 +238,15 @@ fn ex5_prediction_recorded() {
 }
 
 #[test]
+#[cfg_attr(
+    ex6_prediction_empty,
+    ignore = "ex6: write your prediction in exercises/ex6_own_node.toml"
+)]
+fn ex6_prediction_recorded() {
+    prediction_recorded("ex6", "ex6_own_node.toml");
+}
+
+#[test]
 fn exercise_files_are_valid() {
     for file in [
         "ex1_rate_cliff.toml",
@@ -200,6 +254,7 @@ fn exercise_files_are_valid() {
         "ex3_jitter_phase.toml",
         "ex4_stale_queue.toml",
         "ex5_watchdog.toml",
+        "ex6_own_node.toml",
     ] {
         let f = ExerciseFile::load(&path(file)).unwrap();
         assert!(
@@ -234,6 +289,9 @@ fn the_texts_read_before_predicting_give_no_answer_away() {
         // ex5: 20 % loss is ridden out.
         ("rides out", "ex5's 20% loss"),
         ("nothing falls", "ex5's 20% loss"),
+        // ex6: the smallest clamp that balances.
+        ("0.75 N", "ex6's smallest clamp"),
+        ("down to", "ex6's smallest clamp"),
     ];
     let mut texts = vec![(
         "exercises/README.md".to_string(),
@@ -245,6 +303,7 @@ fn the_texts_read_before_predicting_give_no_answer_away() {
         "ex3_jitter_phase.toml",
         "ex4_stale_queue.toml",
         "ex5_watchdog.toml",
+        "ex6_own_node.toml",
     ] {
         let f = ExerciseFile::load(&path(ex)).unwrap();
         texts.push((
