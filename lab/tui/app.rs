@@ -679,6 +679,8 @@ impl App {
             msg_per_s: window.msg_per_s,
             dropped: window.dropped,
             dropping: window.dropped > 0,
+            unhealthy: self.alive.get(spec.publisher.0).copied().flatten() == Some(false)
+                || self.last.is_some_and(|l| l.topics.get(id).lost > 0),
             stale_reads: window.stale_reads,
             staling: window.stale_reads > 0,
             segment_dropped: segment.dropped,

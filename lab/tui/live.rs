@@ -42,18 +42,26 @@ pub struct TopicCounts {
     /// Reads that found nothing new.
     pub stale_reads: u64,
     /// Messages per second: the messages published over the span of their publish stamps
-    /// (so a 5 Hz topic reads 5.0); 0 with fewer than two stamps to span.
+    /// (so a 5 Hz topic reads 5.0), the span reaching to now once the publisher has been
+    /// silent for more than twice its mean interval (a stalled or dead publisher's rate
+    /// falls to 0 instead of holding its last value); 0 with fewer than two stamps to span.
     pub msg_per_s: f64,
 }
 
 impl TopicCounts {
     /// The counts between two snapshots of one topic: `base` (zeros when `None`: the run's
-    /// start) and `last`. The messages published between them span exactly
-    /// `(base.last_stamp, last.last_stamp]`: msg/s is their count over that span.
-    pub fn between(base: Option<TopicStats>, last: TopicStats) -> Self {
+    /// start) and `last`, taken at run time `now`. The messages published between them span
+    /// exactly `(base.last_stamp, last.last_stamp]`: msg/s is their count over that span,
+    /// or over `(base.last_stamp, now]` when the publisher has been silent since for more
+    /// than twice their mean interval.
+    pub fn between(base: Option<TopicStats>, last: TopicStats, now: Nanos) -> Self {
         let base = base.unwrap_or_default();
         let published = last.published.saturating_sub(base.published);
-        let span = last.last_stamp.saturating_sub(base.last_stamp);
+        let mut span = last.last_stamp.saturating_sub(base.last_stamp);
+        let silence = now.saturating_sub(last.last_stamp);
+        if published > 0 && silence.0 > 2 * (span.0 / published) {
+            span = now.saturating_sub(base.last_stamp);
+        }
         Self {
             published,
             dropped: last.dropped.saturating_sub(base.dropped),
@@ -237,7 +245,8 @@ impl Live {
             return TopicCounts::default();
         };
         let base = self.window_base();
-        let counts = TopicCounts::between(base.map(|b| b.topics.get(id)), last.topics.get(id));
+        let counts =
+            TopicCounts::between(base.map(|b| b.topics.get(id)), last.topics.get(id), last.t);
         let before = base.map_or(0, |b| b.topics.get(id).published);
         let first = self
             .window
@@ -247,7 +256,7 @@ impl Live {
             .find(|s| s.published > before);
         TopicCounts {
             msg_per_s: first.map_or(0.0, |f| {
-                TopicCounts::between(Some(f), last.topics.get(id)).msg_per_s
+                TopicCounts::between(Some(f), last.topics.get(id), last.t).msg_per_s
             }),
             ..counts
         }
@@ -259,6 +268,7 @@ impl Live {
             Some(l) => TopicCounts::between(
                 self.segment.baseline.map(|b| b.topics.get(id)),
                 l.topics.get(id),
+                l.t,
             ),
             None => TopicCounts::default(),
         }
@@ -317,6 +327,28 @@ mod tests {
     }
 
     const T: TopicId = TopicId(0);
+
+    #[test]
+    fn a_publisher_that_stops_reads_less_and_then_0_msg_per_s() {
+        let mut live = Live::default();
+        // 50 Hz until 1 s, then silent (a stalled or killed publisher).
+        for t in (0..=8_000).step_by(20) {
+            let mut r = rec(t.min(1_000), 50, 0, 0, 0);
+            r.t = Nanos(t * MS);
+            r.step = t / 20 + 1;
+            live.push(r);
+            let hz = live.window_topic(T).msg_per_s;
+            match t {
+                // Publishing: exact, even between its stamps.
+                1_000 => assert_eq!(hz, 50.0),
+                // Silent for 1 s of a 2 s window: about half, never the old 50.
+                2_000 => assert!((20.0..30.0).contains(&hz), "{hz}"),
+                // The window no longer holds a message.
+                7_000.. => assert_eq!(hz, 0.0),
+                _ => {}
+            }
+        }
+    }
 
     #[test]
     fn a_5_hz_topic_reads_5_msg_per_s_over_the_window() {

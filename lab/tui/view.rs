@@ -72,6 +72,10 @@ pub struct TopicView {
     pub dropped: u64,
     /// Any dropped within the window (the arrow is "dropping").
     pub dropping: bool,
+    /// Not healthy though nothing was dropped: its publisher is not alive, or its link
+    /// lost messages. Its drop count gets no ✓ (a green tick never stands on a dead or
+    /// lossy topic).
+    pub unhealthy: bool,
     /// Reads within the window that found nothing new (the mirror of a drop).
     pub stale_reads: u64,
     /// Any stale reads within the window (the subscriber is re-reading old data).
@@ -554,6 +558,8 @@ fn arrow_lines(t: &TopicView, w: usize, rows: usize) -> Vec<Line<'static>> {
             Style::new().fg(Color::Yellow).add_modifier(Modifier::BOLD),
             "⚠",
         )
+    } else if t.unhealthy {
+        ("─", Style::new().fg(Color::Red), "✗")
     } else {
         ("─", Style::new().fg(Color::Green), "✓")
     };
