@@ -97,8 +97,9 @@ pub struct LabArgs {
     /// the run flags do not apply.
     #[arg(long)]
     pub attach: bool,
-    /// With --attach: the launcher's endpoint (repeatable).
-    #[arg(long, value_name = "tcp/HOST:PORT", requires = "attach", default_value = ratelab::distributed::DEFAULT_ENDPOINT)]
+    /// With --attach: the launcher's endpoint (repeatable; default: this user's running
+    /// launch, recorded when it started, else tcp/127.0.0.1:7449).
+    #[arg(long, value_name = "tcp/HOST:PORT", requires = "attach")]
     pub connect: Vec<String>,
     /// The run flags.
     #[command(flatten)]
@@ -125,8 +126,9 @@ pub struct NodeArgs {
 /// `ratelab top`.
 #[derive(Debug, Clone, Args)]
 pub struct TopArgs {
-    /// The endpoint of a running launcher or node (repeatable).
-    #[arg(long, value_name = "tcp/HOST:PORT", required = true)]
+    /// The endpoint of a running launcher or node (repeatable; default: this user's running
+    /// launch, recorded when it started, else tcp/127.0.0.1:7449).
+    #[arg(long, value_name = "tcp/HOST:PORT")]
     pub connect: Vec<String>,
     /// Print one table and exit (for scripts).
     #[arg(long)]

@@ -94,9 +94,20 @@ pub fn run_launch(a: &LaunchArgs, force_headless: bool, stop: StopFlag) -> anyho
     let report = if on_terminal || recording.is_some() {
         launch_watched(cfg, opts, &stop, on_terminal, recording.as_ref())?
     } else {
-        launch(&cfg, &opts, &stop, &|line| {
+        // Recorded for `lab --attach` and `top` once it listens, removed when it ends.
+        let (listening_tx, listening_rx) = crossbeam_channel::bounded::<String>(1);
+        let mut opts = opts;
+        opts.listening = Some(listening_tx);
+        let recorder = std::thread::spawn(move || {
+            let ep = listening_rx.recv().ok()?;
+            crate::rendezvous::record(&ep, &mut |w| eprintln!("[ratelab] launch: {w}"))
+        });
+        let report = launch(&cfg, &opts, &stop, &|line| {
             println!("[ratelab] launch: {line}")
-        })?
+        });
+        drop(opts);
+        let _recorded = recorder.join();
+        report?
     };
     let (wire, lockstep, missing) = (report.wire, report.lockstep, report.missing);
     let report = RunReport {
@@ -215,6 +226,12 @@ fn launch_watched(
             return joined(launcher);
         }
     };
+    // Recorded for `lab --attach` and `top` (removed when the launch ends), and said at once:
+    // a launch that got another port than 7449 is found all the same.
+    let _recorded = crate::rendezvous::record(&endpoint, &mut line);
+    if lab {
+        eprintln!("[ratelab] launch: listening on {endpoint}");
+    }
     let watch = match Watch::connect(
         std::slice::from_ref(&endpoint),
         Some(&cfg.graph.name),
@@ -260,7 +277,7 @@ fn launch_watched(
     };
     let (watch_stop, watcher) = spawn_watch(watch, sinks, signals)?;
     let lab_result = if lab {
-        let r = crate::tui::run_attached(policy, &cfg.graph, &lab_rx, stop);
+        let r = crate::tui::run_attached(policy, &cfg.graph, Some(&endpoint), &lab_rx, stop);
         stop.stop(); // the user quit: end the launch, if it is still running
         r
     } else {
@@ -339,22 +356,31 @@ fn spawn_watch(
     Ok((stop, handle))
 }
 
-/// `ratelab lab --attach [--connect EP]`: the lab on a graph running across processes.
+/// `ratelab lab --attach [--connect EP]`: the lab on a graph running across processes
+/// (without `--connect`: this user's recorded launch, [`crate::rendezvous`]).
 pub fn run_attach(connect: &[String], stop: StopFlag) -> anyhow::Result<()> {
     for ep in connect {
         check_endpoint("--connect", ep, false)?;
     }
+    let (connect, hint) = crate::rendezvous::endpoints(connect);
     if !(std::io::stdout().is_terminal() && std::io::stdin().is_terminal()) {
         anyhow::bail!(
             "--attach opens the lab on a terminal; without one, `ratelab top --connect {}` prints the same figures as text",
             connect.join(" --connect ")
         );
     }
-    let watch = Watch::connect(connect, None, Duration::from_secs(5), &stop)?;
+    let watch = Watch::connect(&connect, None, Duration::from_secs(5), &stop)
+        .map_err(|e| anyhow::anyhow!("{e}: {hint}"))?;
     let (policy, spec) = (watch.setup.policy.clone(), watch.cfg.graph.clone());
     let (tx, rx) = crossbeam_channel::unbounded::<Telemetry>();
     let (watch_stop, watcher) = spawn_watch(watch, vec![tx], Signals::default())?;
-    let lab = crate::tui::run_attached(policy, &spec, &rx, &stop);
+    let lab = crate::tui::run_attached(
+        policy,
+        &spec,
+        connect.first().map(String::as_str),
+        &rx,
+        &stop,
+    );
     watch_stop.stop();
     match watcher.join() {
         Ok(r) => r?,
@@ -384,7 +410,9 @@ pub fn run_top(a: &TopArgs, stop: StopFlag) -> anyhow::Result<()> {
     for ep in &a.connect {
         check_endpoint("--connect", ep, false)?;
     }
-    let session = open_session(&["tcp/127.0.0.1:0".to_string()], &a.connect)?;
+    let (connect, hint) = crate::rendezvous::endpoints(&a.connect);
+    let session = open_session(&["tcp/127.0.0.1:0".to_string()], &connect)
+        .map_err(|e| anyhow::anyhow!("cannot reach {}: {e}: {hint}", connect.join(", ")))?;
     let (tx, rx) = crossbeam_channel::bounded::<LiveStats>(1024);
     let _sub = session
         .declare_subscriber("ratelab/*/@stats/*")
@@ -462,8 +490,8 @@ pub fn run_top(a: &TopArgs, stop: StopFlag) -> anyhow::Result<()> {
             if (!seen.is_empty() && have_rates) || started.elapsed() > Duration::from_secs(3) {
                 if seen.is_empty() {
                     anyhow::bail!(
-                        "no running ratelab graph answered at {} within 3 s",
-                        a.connect.join(", ")
+                        "no running ratelab graph answered at {} within 3 s: {hint}",
+                        connect.join(", ")
                     );
                 }
                 print!("{}", table(&seen, &alive, &placements));

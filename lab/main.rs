@@ -5,6 +5,7 @@ mod cli;
 mod exercise;
 mod headless;
 mod launch;
+mod rendezvous;
 mod sweep;
 mod tui;
 

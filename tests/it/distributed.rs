@@ -686,6 +686,77 @@ fn top_lists_a_running_graph() {
     assert_none_left(port, Duration::ZERO);
 }
 
+/// `top` without `--connect` finds this user's launch, on whatever port it got, from the
+/// record the launch keeps while it runs (`$XDG_RUNTIME_DIR/ratelab/launch`), and says
+/// what to do when the recorded launch does not answer.
+#[test]
+fn top_finds_this_users_launch_without_connect() {
+    let _m = crate::machine::alone();
+    let runtime = tempfile::tempdir().unwrap();
+    let record = runtime.path().join("ratelab/launch");
+    let mut launcher = bin()
+        .env("XDG_RUNTIME_DIR", runtime.path())
+        .args([
+            "launch",
+            "--processes",
+            "--clock",
+            "real",
+            "--duration",
+            "5",
+        ])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let mut reader = BufReader::new(launcher.stdout.take().unwrap()).lines();
+    let (mut endpoint, mut ready) = (None, 0);
+    for line in reader.by_ref().map_while(Result::ok) {
+        if let Some(ep) = line.split("listening on ").nth(1) {
+            endpoint = Some(ep.trim().to_string());
+        }
+        ready += usize::from(line.contains("' ready"));
+        if ready == 2 {
+            break;
+        }
+    }
+    std::thread::spawn(move || reader.for_each(drop));
+    let endpoint = endpoint.expect("the launch says where it listens at once");
+    let recorded = std::fs::read_to_string(&record).unwrap();
+    assert_eq!(
+        recorded,
+        format!("{endpoint} {}\n", launcher.id()),
+        "the record names the endpoint and the launcher"
+    );
+    std::thread::sleep(Duration::from_millis(1000));
+    let o = bin()
+        .env("XDG_RUNTIME_DIR", runtime.path())
+        .args(["top", "--once"])
+        .output()
+        .unwrap();
+    let out = text(&o.stdout);
+    assert!(o.status.success(), "{out}{}", text(&o.stderr));
+    assert!(out.contains("policy") && out.contains("/obs"), "{out}");
+    launcher.wait().unwrap();
+    assert!(
+        !record.exists(),
+        "the launch removes its record when it ends"
+    );
+    // A record of a live process whose launch does not answer: a one-line hint.
+    let port = free_port();
+    std::fs::create_dir_all(record.parent().unwrap()).unwrap();
+    std::fs::write(
+        &record,
+        format!("tcp/127.0.0.1:{port} {}\n", std::process::id()),
+    )
+    .unwrap();
+    let o = bin()
+        .env("XDG_RUNTIME_DIR", runtime.path())
+        .args(["top", "--once"])
+        .output()
+        .unwrap();
+    assert_one_line_exit_2(&o, "this user's launch was recorded there");
+}
+
 fn assert_one_line_exit_2(o: &Output, needle: &str) {
     let err = text(&o.stderr);
     assert_eq!(o.status.code(), Some(2), "{err}");
