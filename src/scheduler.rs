@@ -133,6 +133,14 @@ impl VirtualScheduler {
         self.heap.peek().map(|Reverse((due, _, _))| *due)
     }
 
+    /// The due time of node `node`'s next tick (index in the graph), if it is scheduled.
+    pub fn next_due_of(&self, node: usize) -> Option<Nanos> {
+        self.heap
+            .iter()
+            .find(|Reverse((_, _, i))| *i == node)
+            .map(|Reverse((due, _, _))| *due)
+    }
+
     /// The virtual time of the latest tick.
     pub fn now(&self) -> Nanos {
         self.now

@@ -4,8 +4,9 @@
 use super::engine::{live_metrics, Engine, Next};
 use super::protocol::{Control, Speed, Telemetry};
 use crate::config::RunConfig;
-use crate::graph::Graph;
+use crate::graph::{Graph, GraphHandles};
 use crate::recording::Recording;
+use crate::run::Command;
 use crate::scheduler::{EndReason, InstantOutcome, RunEnd, VirtualScheduler};
 use crate::time::Nanos;
 use crossbeam_channel::RecvTimeoutError;
@@ -55,7 +56,14 @@ impl Engine {
                     Control::Apply(cmd) => {
                         if ended.is_none() {
                             let at = sched.next_due().unwrap_or(sched.now());
-                            self.apply(cmd, at, &handles, recording);
+                            let node = rate_target(&cmd, &handles);
+                            if self.apply(cmd, at, &handles, recording) {
+                                if let Some(note) =
+                                    node.and_then(|n| phase_note(&sched, &handles, n))
+                                {
+                                    let _ = self.tx.send(Telemetry::Applied(note));
+                                }
+                            }
                         } else {
                             self.defer(cmd, &handles);
                         }
@@ -186,4 +194,31 @@ impl Engine {
             reason: EndReason::Interrupted,
         })
     }
+}
+
+/// The node a rate command changes, if it is one.
+fn rate_target(cmd: &Command, h: &GraphHandles) -> Option<usize> {
+    match cmd {
+        Command::SetControlHz { .. } => Some(h.spec.chain.policy.0),
+        Command::SetSensorHz { .. } => Some(h.spec.chain.sensor.0),
+        Command::SetNodeHz { node, .. } => h.spec.nodes.iter().position(|n| &n.name == node),
+        _ => None,
+    }
+}
+
+/// After a live rate change: a node keeps the phase its old rate left it (its next tick is
+/// where the old period put it, then the new period on), so its ticks need not fall where a
+/// run started at the new rate puts them (multiples of the period from 0), and its latency
+/// can differ from `ratelab run`'s at that rate. Says so, with the offset, when it does.
+fn phase_note(sched: &VirtualScheduler, h: &GraphHandles, node: usize) -> Option<String> {
+    let period = h.rates.get(node)?.period();
+    let next = sched.next_due_of(node)?;
+    let off = Nanos(next.0 % period.0.max(1));
+    (off.0 != 0).then(|| {
+        format!(
+            "{}: ticks {off} off a fresh {} Hz run's phase (r restarts aligned)",
+            h.spec.nodes[node].name,
+            h.rates[node].hz()
+        )
+    })
 }

@@ -555,3 +555,65 @@ fn qos_changes_and_faults_are_logged_and_replay_byte_for_byte() {
         .unwrap_err();
     assert!(e.contains("loss must be a probability"), "{e}");
 }
+
+/// The `Applied` notes of a paused virtual session driven by `script`.
+fn notes(script: &[Control]) -> Vec<String> {
+    let dir = tempfile::tempdir().unwrap();
+    let (ctl_tx, ctl_rx) = unbounded();
+    let (tel_tx, tel_rx) = unbounded::<Telemetry>();
+    let settings = settings(
+        ClockKind::Virtual,
+        0,
+        true,
+        Speed::Max,
+        &dir.path().join("s.json"),
+    );
+    let engine = Engine::new(settings, ctl_rx, tel_tx).spawn();
+    for c in script {
+        ctl_tx.send(c.clone()).unwrap();
+    }
+    engine.join().unwrap();
+    tel_rx
+        .try_iter()
+        .filter_map(|t| match t {
+            Telemetry::Applied(text) => Some(text),
+            _ => None,
+        })
+        .collect()
+}
+
+/// A live rate change keeps the phase the old rate left: the lab says so, with the offset
+/// from where a run started at the new rate ticks (so `ratelab run` at that rate can differ),
+/// and says nothing when the phases agree.
+#[test]
+fn a_live_rate_change_says_when_it_keeps_an_old_phase() {
+    let hz = |hz: f64| Control::Apply(Command::SetControlHz { hz });
+    // 50 → 12 → 10 Hz, as `-` walks the ladder: the 10 Hz ticks are off a fresh run's.
+    let mut script = steps(5);
+    script.push(hz(12.0));
+    script.extend(steps(7));
+    script.push(hz(10.0));
+    script.push(Control::Quit);
+    let said = notes(&script);
+    assert!(
+        said.iter().any(|n| n.starts_with("policy: ticks ")
+            && n.contains("off a fresh 10 Hz run's phase (r restarts aligned)")),
+        "{said:?}"
+    );
+    // 50 → 25 Hz after the ticks at 0 and 20 ms: the next is at 40 ms, where a fresh 25 Hz
+    // run ticks too, so no note; one step earlier it is at 20 ms, 20 ms off.
+    let mut script = steps(1);
+    script.push(hz(25.0));
+    script.push(Control::Quit);
+    let said = notes(&script);
+    assert!(
+        said.iter()
+            .any(|n| n == "policy: ticks 20 ms off a fresh 25 Hz run's phase (r restarts aligned)"),
+        "{said:?}"
+    );
+    let mut script = steps(2);
+    script.push(hz(25.0));
+    script.push(Control::Quit);
+    let said = notes(&script);
+    assert!(said.iter().all(|n| !n.contains("fresh")), "{said:?}");
+}
