@@ -19,7 +19,10 @@ use crate::qos::{Fault, Liveliness};
 use crate::rate::{InvalidRate, Rate};
 use crate::runlog::{RunLog, StepRecord, TopicCounters};
 use crate::topic::ZeroDepth;
-use nodes::{Actuator, GraphNode, NodeCore, Sensor, SensorNoise, SensorOutput, Work};
+use nodes::{
+    Actuator, Estimator, GraphNode, NodeCore, PolicyNode, Safety, Sensor, SensorNoise,
+    SensorOutput, Work,
+};
 pub use spec::{Chain, GraphSpec, MsgType, NodeId, NodeKind, TopicId};
 use std::sync::{Arc, Mutex, MutexGuard};
 
@@ -261,26 +264,26 @@ impl Graph {
                     (
                         NodeKind::Estimator,
                         (Some(AnyTopic::Position(i)), Some(AnyTopic::State(o))),
-                    ) => Work::Estimator {
+                    ) => Work::Estimator(Estimator {
                         input: i.clone(),
                         output: o.clone(),
                         filter: estimator::VelocityFilter::new(n.params.cutoff_hz),
                         last_seq: None,
                         origin: None,
-                    },
+                    }),
                     (NodeKind::Policy, (Some(AnyTopic::State(i)), Some(AnyTopic::Force(o)))) => {
-                        Work::Policy {
+                        Work::Policy(PolicyNode {
                             brain: brain.clone(),
                             input: i.clone(),
                             output: o.clone(),
-                        }
+                        })
                     }
                     (NodeKind::Safety, (Some(AnyTopic::Force(i)), Some(AnyTopic::Force(o)))) => {
-                        Work::Safety {
+                        Work::Safety(Safety {
                             input: i.clone(),
                             output: o.clone(),
                             max_force_n: n.params.max_force_n,
-                        }
+                        })
                     }
                     (NodeKind::Python, (input, output)) => {
                         let python = n

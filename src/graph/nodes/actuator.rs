@@ -1,0 +1,98 @@
+//! The **actuator**: applies the newest force (zero before the first), steps the plant once
+//! and records the step. Re-applying a stale force is the zero-order hold; a non-finite
+//! force is refused and the last good one held; a missed deadline gets the input topic's
+//! reaction (hold, zero, stop). It alone steps the plant; a fall stops the graph.
+
+use crate::graph::{lock, SharedPlant, StepObserver};
+use crate::msg::{AnyTopic, ForceMsg};
+use crate::node::Flow;
+use crate::plant::GEAR_N;
+use crate::qos::OnDeadlineMissed;
+use crate::runlog::{RunLog, StepRecord};
+use crate::time::Nanos;
+use crate::topic::Topic;
+use std::sync::{Arc, Mutex};
+
+/// The actuator's state.
+pub struct Actuator {
+    /// The plant it steps.
+    pub plant: SharedPlant,
+    /// Its input.
+    pub input: Arc<Topic<ForceMsg>>,
+    /// Every topic of the graph, for the per-step counters.
+    pub topics: Vec<AnyTopic>,
+    /// Where steps are accounted.
+    pub log: Arc<Mutex<RunLog>>,
+    /// Told about every step.
+    pub observers: Vec<Box<dyn StepObserver>>,
+    /// The last finite command applied (in [-1, 1] units of the motor), with its origin.
+    pub held: Option<(f32, Option<Nanos>)>,
+    /// The policy's output topic, watched (never read) for what it published.
+    pub policy_output: Option<Arc<Topic<ForceMsg>>>,
+    /// `seq` of the newest policy message already reported.
+    pub reported: Option<u64>,
+}
+
+impl Actuator {
+    /// One tick at `now`: apply, step, record.
+    pub fn tick(&mut self, now: Nanos) -> Flow {
+        let mut nonfinite = false;
+        if let Some(msg) = self.input.read(now) {
+            if msg.data.newtons.is_finite() {
+                // Exact: a brain's f32 command × 10 is exact in f64, and so is ÷ 10.
+                let command = (msg.data.newtons / GEAR_N) as f32;
+                self.held = Some((command, msg.origin_stamp));
+            } else {
+                nonfinite = true; // hold the last good force instead
+            }
+        }
+        let (mut u, mut origin) = self.held.unwrap_or((0.0, None));
+        // The deadline reaction (QoS): no message within the deadline.
+        let qos = self.input.qos();
+        if let Some(deadline) = qos.deadline {
+            if now.saturating_sub(self.input.last_arrival()) > deadline {
+                match qos.on_deadline_missed {
+                    OnDeadlineMissed::Hold => {}
+                    OnDeadlineMissed::Zero => (u, origin) = (0.0, None),
+                    OnDeadlineMissed::Stop => {
+                        lock(&self.log).watchdog(now, self.input.name(), deadline);
+                        return Flow::Stop;
+                    }
+                }
+            }
+        }
+        let (outcome, step) = {
+            let mut plant = lock(&self.plant);
+            let outcome = plant.step(u);
+            (outcome, plant.steps())
+        };
+        let published = self.policy_output.as_ref().and_then(|t| {
+            let m = t.peek_newest()?;
+            (self.reported != Some(m.seq)).then(|| {
+                self.reported = Some(m.seq);
+                (m.stamp, m.data.newtons)
+            })
+        });
+        let rec = StepRecord {
+            published,
+            step,
+            t: now,
+            pole_angle: outcome.state.theta,
+            cart_pos: outcome.state.cart_pos,
+            action: outcome.applied,
+            latency: origin.map(|o| now.saturating_sub(o)),
+            nonfinite,
+            topics: self.topics.iter().map(|t| t.stats_at(now)).collect(),
+            fell: outcome.terminated,
+        };
+        lock(&self.log).push(rec);
+        for obs in &mut self.observers {
+            obs.on_step(&rec);
+        }
+        if outcome.terminated {
+            Flow::Stop
+        } else {
+            Flow::Continue
+        }
+    }
+}

@@ -1,0 +1,114 @@
+//! The node kinds at run time: what each does on a tick (ch2.8's node classes, generalized),
+//! one file each: [`sensor`], [`estimator`], [`policy`], [`safety`], [`actuator`]; a
+//! Python node is [`crate::python::node`], a registered one [`super::registry`].
+//!
+//! A **python** node runs its subscription callback for what arrived, then its timers; a
+//! **registered** kind its `tick` for what arrived; what either published goes out with the
+//! input's origin.
+//!
+//! Every node that publishes passes on the origin stamp of the message it derived its output
+//! from, so the actuator measures sense→act latency (`now − origin`) across any chain. Every
+//! kind has one input; a kind that combined several would pass on the oldest origin.
+//!
+//! Adding a built-in kind is a file here, its variant in [`Work`], its name in
+//! [`super::spec::NodeKind`] and its wiring in [`super::Graph::build`]; a kind written outside
+//! ratelab needs none of that ([`super::registry`]).
+
+pub mod actuator;
+pub mod estimator;
+pub mod policy;
+pub mod safety;
+pub mod sensor;
+
+pub use actuator::Actuator;
+pub use estimator::Estimator;
+pub use policy::PolicyNode;
+pub use safety::Safety;
+pub use sensor::{Sensor, SensorNoise, SensorOutput};
+
+use super::spec::NodeId;
+use crate::node::{Flow, Node};
+use crate::qos::{Fault, Liveliness};
+use crate::rate::Rate;
+use crate::time::Nanos;
+use std::sync::Arc;
+
+/// What every node carries: its identity, tie-break rank and rate.
+pub struct NodeCore {
+    /// Its name (from the graph file).
+    pub name: String,
+    /// Its index in the graph (the tie-break rank).
+    pub id: NodeId,
+    /// Its rate (shared with the graph's handles).
+    pub rate: Rate,
+    /// Its liveliness, asserted by every tick (shared with the graph's handles).
+    pub liveliness: Arc<Liveliness>,
+    /// Faults injected into it (`--stall`, `--kill`).
+    pub faults: Vec<Fault>,
+}
+
+/// A node of some kind around its [`NodeCore`].
+pub struct GraphNode {
+    core: NodeCore,
+    work: Work,
+}
+
+/// The kind-specific state: one variant per kind, each kind's tick in its own file.
+pub enum Work {
+    /// See [`sensor`].
+    Sensor(Sensor),
+    /// See [`estimator`].
+    Estimator(Estimator),
+    /// See [`policy`].
+    Policy(PolicyNode),
+    /// See [`safety`].
+    Safety(Safety),
+    /// See [`actuator`].
+    Actuator(Box<Actuator>),
+    /// A learner's node in Python ([`crate::python::node`]).
+    Python(Box<crate::python::node::PythonNode>),
+    /// A node of a kind registered in Rust ([`super::registry`]), bound to its topics.
+    Registered(Box<dyn super::registry::Tick>),
+}
+
+impl GraphNode {
+    /// A node of `work`'s kind.
+    pub fn new(core: NodeCore, work: Work) -> GraphNode {
+        GraphNode { core, work }
+    }
+}
+
+impl Node for GraphNode {
+    fn name(&self) -> &str {
+        &self.core.name
+    }
+    fn priority(&self) -> u32 {
+        self.core.id.0 as u32
+    }
+    fn rate(&self) -> &Rate {
+        &self.core.rate
+    }
+    fn tick(&mut self, now: Nanos) -> Flow {
+        if self.core.faults.iter().any(|f| f.covers(now)) {
+            self.core.liveliness.fault_tick();
+            return Flow::Continue; // stalled or killed: no work, no liveliness
+        }
+        self.core.liveliness.assert_at(now);
+        match &mut self.work {
+            Work::Sensor(s) => s.tick(now),
+            Work::Estimator(e) => e.tick(now),
+            Work::Policy(p) => p.tick(now),
+            Work::Safety(s) => s.tick(now),
+            Work::Actuator(a) => a.tick(now),
+            Work::Registered(r) => {
+                r.tick(now);
+                Flow::Continue
+            }
+            Work::Python(p) => match p.tick(now, self.core.rate.period()) {
+                Ok(()) => Flow::Continue,
+                // The scheduler catches it and fails the node with this line.
+                Err(e) => panic!("{}", e.0),
+            },
+        }
+    }
+}
