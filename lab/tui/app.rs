@@ -124,6 +124,8 @@ pub struct App {
     /// Watching a graph that runs across processes (`ratelab lab --attach`): the header's
     /// note (`2 processes`); keys that would change the graph are refused.
     attached: Option<String>,
+    /// Attached: the launch's endpoint.
+    endpoint: Option<String>,
     /// Attached: each topic's over-the-wire latency (p50, p99 µs) when it crosses processes.
     wire: Vec<Option<(f64, f64)>>,
     /// Set when the user asked to quit.
@@ -169,6 +171,7 @@ impl App {
             message_at: None,
             confirm_quit: false,
             attached: None,
+            endpoint: None,
             wire: Vec::new(),
             quit: false,
         }
@@ -184,6 +187,11 @@ impl App {
     /// header and each node box names its process.
     pub fn set_attached(&mut self, label: String) {
         self.attached = Some(label);
+    }
+
+    /// Attached: where the launch listens, for the footer.
+    pub fn set_endpoint(&mut self, endpoint: Option<String>) {
+        self.endpoint = endpoint;
     }
 
     /// A lab (scripted brain) fed with the telemetry of one deterministic virtual run with
@@ -865,6 +873,7 @@ impl App {
             message: self.message.clone(),
             message_fresh: self.message_at.is_some_and(|at| at.elapsed() < FRESH),
             attached: self.attached.clone(),
+            endpoint: self.endpoint.clone(),
         }
     }
 }

@@ -122,16 +122,9 @@ pub fn run_attached(
     // Nothing listens for controls: an attached lab refuses them itself.
     let (ctl_tx, _) = unbounded::<Control>();
     let mut app = App::new(ctl_tx, policy, None, ratelab::session::Speed::Times(1.0));
-    // The header names where the launch listens (another lab or `top` connects there).
-    let label = match endpoint {
-        Some(ep) => format!(
-            "{} · {}",
-            attached_label(spec),
-            ep.trim_start_matches("tcp/")
-        ),
-        None => attached_label(spec),
-    };
-    app.set_attached(label);
+    app.set_attached(attached_label(spec));
+    // The footer names where the launch listens (another lab or `top` connects there).
+    app.set_endpoint(endpoint.map(str::to_string));
     app.show_graph(spec.clone());
     on_terminal(&mut app, telemetry, stop)
 }

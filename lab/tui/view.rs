@@ -231,6 +231,8 @@ pub struct View {
     pub message_fresh: bool,
     /// Watching a graph across processes: the header's note (`2 processes`).
     pub attached: Option<String>,
+    /// Attached: where the launch listens (the footer's note).
+    pub endpoint: Option<String>,
 }
 
 fn hz(x: f64) -> String {
@@ -1018,7 +1020,10 @@ fn render_footer(v: &View, area: Rect, buf: &mut Buffer) {
     } else {
         // Attached to a graph across processes, only the keys that change the view act.
         let mut spans: Vec<Span> = match v.attached {
-            Some(_) => vec![" read-only │ ".dim()],
+            Some(_) => match &v.endpoint {
+                Some(ep) => vec![format!(" read-only · {ep} │ ").dim()],
+                None => vec![" read-only │ ".dim()],
+            },
             None => vec![" ".into()],
         };
         let shown = BINDINGS

@@ -57,11 +57,14 @@ impl Engine {
                         if ended.is_none() {
                             let at = sched.next_due().unwrap_or(sched.now());
                             let node = rate_target(&cmd, &handles);
+                            let text = super::protocol::describe(&cmd);
                             if self.apply(cmd, at, &handles, recording) {
                                 if let Some(note) =
                                     node.and_then(|n| phase_note(&sched, &handles, n))
                                 {
-                                    let _ = self.tx.send(Telemetry::Applied(note));
+                                    let _ = self
+                                        .tx
+                                        .send(Telemetry::Applied(format!("{text} · {note}")));
                                 }
                             }
                         } else {
@@ -209,16 +212,11 @@ fn rate_target(cmd: &Command, h: &GraphHandles) -> Option<usize> {
 /// After a live rate change: a node keeps the phase its old rate left it (its next tick is
 /// where the old period put it, then the new period on), so its ticks need not fall where a
 /// run started at the new rate puts them (multiples of the period from 0), and its latency
-/// can differ from `ratelab run`'s at that rate. Says so, with the offset, when it does.
+/// can differ from `ratelab run`'s at that rate. Says so, with the offset, when it does
+/// (`63.333 ms off a fresh run's phase (r realigns)`).
 fn phase_note(sched: &VirtualScheduler, h: &GraphHandles, node: usize) -> Option<String> {
     let period = h.rates.get(node)?.period();
     let next = sched.next_due_of(node)?;
     let off = Nanos(next.0 % period.0.max(1));
-    (off.0 != 0).then(|| {
-        format!(
-            "{}: ticks {off} off a fresh {} Hz run's phase (r restarts aligned)",
-            h.spec.nodes[node].name,
-            h.rates[node].hz()
-        )
-    })
+    (off.0 != 0).then(|| format!("{off} off a fresh run's phase (r realigns)"))
 }

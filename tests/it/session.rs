@@ -596,8 +596,8 @@ fn a_live_rate_change_says_when_it_keeps_an_old_phase() {
     script.push(Control::Quit);
     let said = notes(&script);
     assert!(
-        said.iter().any(|n| n.starts_with("policy: ticks ")
-            && n.contains("off a fresh 10 Hz run's phase (r restarts aligned)")),
+        said.iter().any(|n| n.starts_with("control rate → 10 Hz · ")
+            && n.ends_with(" off a fresh run's phase (r realigns)")),
         "{said:?}"
     );
     // 50 → 25 Hz after the ticks at 0 and 20 ms: the next is at 40 ms, where a fresh 25 Hz
@@ -608,7 +608,7 @@ fn a_live_rate_change_says_when_it_keeps_an_old_phase() {
     let said = notes(&script);
     assert!(
         said.iter()
-            .any(|n| n == "policy: ticks 20 ms off a fresh 25 Hz run's phase (r restarts aligned)"),
+            .any(|n| n == "control rate → 25 Hz · 20 ms off a fresh run's phase (r realigns)"),
         "{said:?}"
     );
     let mut script = steps(2);
