@@ -780,6 +780,7 @@ impl App {
         LatencyView {
             buckets,
             count: latency.count(),
+            no_command: self.live.segment().no_command,
             p50_ms,
             p99_ms,
             max_ms,

@@ -103,6 +103,9 @@ pub struct Segment {
     pub latency: ExactLatency,
     /// Run time of the first step it holds (a lab attached mid-run sees none before).
     pub first_step: Option<Nanos>,
+    /// Steps since `start` that applied no command after the run's first one (a deadline's
+    /// `zero` reaction): they have no sense→act latency, so the histogram does not hold them.
+    pub no_command: u64,
 }
 
 /// The lab's window and segment, fed with every step record and every change.
@@ -115,6 +118,8 @@ pub struct Live {
     /// Run times of the changes over the last [`MARK_HISTORY`].
     marks: VecDeque<Nanos>,
     last: Option<StepRecord>,
+    /// A step has applied a command (the steps before the first have no latency either).
+    commanded: bool,
 }
 
 impl Default for Live {
@@ -127,6 +132,7 @@ impl Default for Live {
             },
             marks: VecDeque::new(),
             last: None,
+            commanded: false,
         }
     }
 }
@@ -143,10 +149,13 @@ impl Live {
         } else {
             let first = self.segment.first_step.get_or_insert(s.t);
             *first = (*first).min(s.t);
-            if let Some(l) = s.latency {
-                self.segment.latency.record(l);
+            match s.latency {
+                Some(l) => self.segment.latency.record(l),
+                None if self.commanded => self.segment.no_command += 1,
+                None => {}
             }
         }
+        self.commanded |= s.latency.is_some();
         self.window.push_back(s);
         let now = self.last.map_or(s.t, |l| l.t.max(s.t));
         // Keep one record at or before now − WINDOW: the window's baseline.
@@ -187,6 +196,17 @@ impl Live {
             .filter_map(|r| r.latency)
             .collect();
         let first_step = self.window.iter().filter(|r| r.t >= at).map(|r| r.t).min();
+        let commanded_before = self.window.iter().any(|r| r.t < at && r.latency.is_some());
+        let mut seen = commanded_before;
+        let no_command = self
+            .window
+            .iter()
+            .filter(|r| r.t >= at)
+            .filter(|r| {
+                seen |= r.latency.is_some();
+                seen && r.latency.is_none()
+            })
+            .count() as u64;
         self.segment = Segment {
             index: self.segment.index + 1,
             start: at,
@@ -194,6 +214,7 @@ impl Live {
             baseline,
             latency,
             first_step,
+            no_command,
         };
         self.marks.push_back(at);
         while self.marks.len() > MAX_MARKS {
@@ -327,6 +348,29 @@ mod tests {
     }
 
     const T: TopicId = TopicId(0);
+
+    #[test]
+    fn steps_that_applied_no_command_are_counted_beside_the_latency() {
+        let mut live = Live::default();
+        let mut at = |live: &mut Live, t: u64, latency: Option<u64>| {
+            let mut r = rec(t, 50, 0, 0, 0);
+            r.latency = latency.map(|l| Nanos(l * MS));
+            live.push(r);
+        };
+        // Before the first command: no latency, and not "no command" either.
+        at(&mut live, 0, None);
+        at(&mut live, 20, Some(0));
+        // A deadline's zero reaction: two steps with no command.
+        at(&mut live, 40, None);
+        at(&mut live, 60, None);
+        at(&mut live, 80, Some(0));
+        assert_eq!(live.segment().latency.count(), 2);
+        assert_eq!(live.segment().no_command, 2);
+        // A change starts a segment: it counts its own (one, at 100 ms).
+        live.change(Nanos(90 * MS), "x".into());
+        at(&mut live, 100, None);
+        assert_eq!(live.segment().no_command, 1);
+    }
 
     #[test]
     fn a_publisher_that_stops_reads_less_and_then_0_msg_per_s() {

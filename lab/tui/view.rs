@@ -170,6 +170,8 @@ pub struct LatencyView {
     pub buckets: Vec<(String, u64)>,
     /// Samples since the last change.
     pub count: u64,
+    /// Steps since the last change that applied no command (no latency: not in the bars).
+    pub no_command: u64,
     /// p50, p99, max, ms.
     pub p50_ms: f64,
     /// p99, ms.
@@ -963,16 +965,25 @@ fn render_latency(v: &View, area: Rect, buf: &mut Buffer) {
         Some(t) => format!("{t:.2} s (joined)"),
         None => v.segment.since(),
     };
+    // Steps that applied no command have no latency: said beside n, not silently left out.
+    let no_cmd = if l.no_command > 0 {
+        format!(" (+{} no cmd)", l.no_command)
+    } else {
+        String::new()
+    };
     let figures = format!(
-        "since {}: n={} │ p50 {:.1} │ p99 {:.1} │ max {:.1} ms ",
-        since, l.count, l.p50_ms, l.p99_ms, l.max_ms
+        "n={}{no_cmd} │ p50 {:.1} │ p99 {:.1} │ max {:.1} ms ",
+        l.count, l.p50_ms, l.p99_ms, l.max_ms
     );
-    // "sense→act" when the width allows it.
-    let title = [" sense→act latency ", " latency "]
-        .iter()
-        .map(|head| format!("{head}{figures}"))
-        .find(|t| t.chars().count() + 2 <= area.width as usize)
-        .unwrap_or_else(|| format!(" latency {figures}"));
+    // "sense→act" and "since …" when the width allows them; the figures whole always.
+    let title = [
+        format!(" sense→act latency since {since}: {figures}"),
+        format!(" latency since {since}: {figures}"),
+        format!(" latency {figures}"),
+    ]
+    .into_iter()
+    .find(|t| t.chars().count() + 2 <= area.width as usize)
+    .unwrap_or_else(|| format!(" latency {figures}"));
     let w = &l.window;
     let window = Line::from(vec![
         " ".into(),
