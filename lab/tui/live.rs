@@ -352,7 +352,7 @@ mod tests {
     #[test]
     fn steps_that_applied_no_command_are_counted_beside_the_latency() {
         let mut live = Live::default();
-        let mut at = |live: &mut Live, t: u64, latency: Option<u64>| {
+        let at = |live: &mut Live, t: u64, latency: Option<u64>| {
             let mut r = rec(t, 50, 0, 0, 0);
             r.latency = latency.map(|l| Nanos(l * MS));
             live.push(r);
