@@ -165,8 +165,9 @@ fn registry() -> &'static RwLock<BTreeMap<String, Entry>> {
     &REGISTRY
 }
 
-/// The built-in kinds' names (a registered kind may not take one).
-const BUILT_IN: [&str; 6] = [
+/// The built-in kinds' names, as a graph file spells them (`NodeKind` in
+/// [`crate::graph::spec`]): a registered kind may not take one.
+pub const BUILT_IN_KINDS: [&str; 6] = [
     "sensor",
     "estimator",
     "policy",
@@ -195,7 +196,7 @@ where
         return Err(RegistryError::BadName(kind.to_string()));
     }
     let mut reg = registry().write().unwrap_or_else(|e| e.into_inner());
-    if BUILT_IN.contains(&kind) || reg.contains_key(kind) {
+    if BUILT_IN_KINDS.contains(&kind) || reg.contains_key(kind) {
         return Err(RegistryError::Taken(kind.to_string()));
     }
     if reg.len() >= MAX_KINDS {

@@ -941,16 +941,9 @@ fn build(cx: &Ctx<'_>, raw: RawGraph) -> Result<GraphSpec, SpecError> {
             (Some(k), _) => k,
             (None, Some(_)) => NodeKind::Registered,
             (None, None) => {
-                let mut known: Vec<String> = [
-                    "sensor",
-                    "estimator",
-                    "policy",
-                    "safety",
-                    "actuator",
-                    "python",
-                ]
-                .map(String::from)
-                .to_vec();
+                let mut known: Vec<String> = crate::graph::registry::BUILT_IN_KINDS
+                    .map(String::from)
+                    .to_vec();
                 known.extend(crate::graph::registry::kinds());
                 return Err(cx.err(
                     r.kind.span(),
@@ -1611,6 +1604,15 @@ depth = 1
             let back = GraphSpec::parse(&g.to_toml(), "again").unwrap();
             assert_eq!(g, back);
         }
+    }
+
+    #[test]
+    fn every_built_in_kind_name_is_a_node_kind_and_back() {
+        for name in crate::graph::registry::BUILT_IN_KINDS {
+            let kind = NodeKind::built_in(name).expect(name);
+            assert_eq!(kind.as_str(), name);
+        }
+        assert_eq!(NodeKind::built_in("registered"), None);
     }
 
     #[test]
