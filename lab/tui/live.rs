@@ -118,8 +118,9 @@ pub struct Live {
     /// Run times of the changes over the last [`MARK_HISTORY`].
     marks: VecDeque<Nanos>,
     last: Option<StepRecord>,
-    /// A step has applied a command (the steps before the first have no latency either).
-    commanded: bool,
+    /// Run time of the first step that applied a command (the steps before it have no
+    /// latency either, and are not "no command").
+    first_command: Option<Nanos>,
 }
 
 impl Default for Live {
@@ -132,7 +133,7 @@ impl Default for Live {
             },
             marks: VecDeque::new(),
             last: None,
-            commanded: false,
+            first_command: None,
         }
     }
 }
@@ -151,11 +152,15 @@ impl Live {
             *first = (*first).min(s.t);
             match s.latency {
                 Some(l) => self.segment.latency.record(l),
-                None if self.commanded => self.segment.no_command += 1,
+                None if self.first_command.is_some_and(|f| f < s.t) => {
+                    self.segment.no_command += 1;
+                }
                 None => {}
             }
         }
-        self.commanded |= s.latency.is_some();
+        if s.latency.is_some() {
+            self.first_command = Some(self.first_command.map_or(s.t, |f| f.min(s.t)));
+        }
         self.window.push_back(s);
         let now = self.last.map_or(s.t, |l| l.t.max(s.t));
         // Keep one record at or before now − WINDOW: the window's baseline.
@@ -196,16 +201,11 @@ impl Live {
             .filter_map(|r| r.latency)
             .collect();
         let first_step = self.window.iter().filter(|r| r.t >= at).map(|r| r.t).min();
-        let commanded_before = self.window.iter().any(|r| r.t < at && r.latency.is_some());
-        let mut seen = commanded_before;
         let no_command = self
             .window
             .iter()
-            .filter(|r| r.t >= at)
-            .filter(|r| {
-                seen |= r.latency.is_some();
-                seen && r.latency.is_none()
-            })
+            .filter(|r| r.t >= at && r.latency.is_none())
+            .filter(|r| self.first_command.is_some_and(|f| f < r.t))
             .count() as u64;
         self.segment = Segment {
             index: self.segment.index + 1,
