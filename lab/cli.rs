@@ -178,6 +178,20 @@ pub struct GraphArgs {
     /// Kill a node at run time T, seconds (repeatable): --kill policy@3.
     #[arg(long = "kill", value_name = "NODE@T", value_parser = parse_kill)]
     pub kills: Vec<Fault>,
+    /// Give a node's ticks a compute time, ms (repeatable): --compute policy=30, or
+    /// --compute policy=30±5 (uniform jitter, seeded). Its outputs go out that long after
+    /// its tick starts; its executor's thread is busy meanwhile.
+    #[arg(long = "compute", value_name = "NODE=MS", value_parser = parse_compute)]
+    pub computes: Vec<(String, ratelab::executor::ComputeTime)>,
+    /// Run every node on one executor: single_threaded, multi_threaded:N (N threads) or
+    /// per_node (a thread each, the default); replaces the graph file's [executors].
+    #[arg(long, value_name = "KIND", value_parser = ratelab::executor::ExecutorOverride::parse)]
+    pub executor: Option<ratelab::executor::ExecutorOverride>,
+}
+
+fn parse_compute(s: &str) -> Result<(String, ratelab::executor::ComputeTime), String> {
+    let (node, ms) = split_assignment(s, "NODE=MS")?;
+    Ok((node.to_string(), ratelab::executor::ComputeTime::parse(ms)?))
 }
 
 fn parse_topic_pairs(s: &str) -> Result<(String, String), String> {

@@ -54,6 +54,12 @@ pub fn graph_from_args(g: &GraphArgs) -> anyhow::Result<GraphSpec> {
         spec.set_lease(node, *ms)
             .map_err(|e| anyhow::anyhow!("--lease {node}={ms}: {e}"))?;
     }
+    if let Some(over) = g.executor {
+        spec.set_executor(over);
+    }
+    for (node, c) in &g.computes {
+        spec.set_compute(node, *c)?;
+    }
     for w in spec.qos_warnings() {
         eprintln!("[ratelab] {w}");
     }

@@ -47,6 +47,12 @@ pub fn run_launch(a: &LaunchArgs, force_headless: bool, stop: StopFlag) -> anyho
     let on_terminal =
         !force_headless && std::io::stdout().is_terminal() && std::io::stdin().is_terminal();
     let mut cfg = headless::config_from_args(&run)?;
+    if cfg.graph.has_executors_or_compute() {
+        anyhow::bail!(
+            "graph '{}' has executors or compute times (--executor, --compute, [executors], compute_ms): a launch across processes does not run them yet; run it in one process (without --processes)",
+            cfg.graph.name
+        );
+    }
     if on_terminal && run.duration.is_none() && !run.smoke {
         cfg.duration = ratelab::session::UNBOUNDED; // as the lab: until you quit
     }

@@ -359,6 +359,10 @@ pub struct Metrics {
     /// not measured: they read 0 here. Absent when every process reported.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub missing_processes: Vec<String>,
+    /// The executors that share threads (not `per_node`), with their utilization
+    /// ([`crate::executor`]). Absent when every node has a thread of its own.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub executors: Vec<crate::executor::ExecutorFigures>,
 }
 
 /// One node's figures in `metrics.json`.
@@ -387,6 +391,13 @@ pub struct NodeMetrics {
     /// Ticks a fault (`--stall`, `--kill`) swallowed, when one was injected.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub faulted_ticks: Option<u64>,
+    /// Its declared mean compute time, ms, when it has one ([`crate::executor`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub compute_ms: Option<f64>,
+    /// When the graph has executors or compute times: its response times
+    /// (`response_time_p50_ms`, `…_p99_ms`, `…_max_ms`), `skipped_ticks` and `busy_ms`.
+    #[serde(default, flatten, skip_serializing_if = "Option::is_none")]
+    pub exec: Option<crate::executor::NodeExecFigures>,
 }
 
 /// One topic's figures in `metrics.json`.
@@ -543,6 +554,43 @@ impl Metrics {
         lines
     }
 
+    /// When the graph has executors or compute times ([`crate::executor`]): one line per
+    /// executor that shares threads (`executor main: single_threaded, 1 thread, 87% busy`),
+    /// then per node `compute 30 ms | response p50 … p99 … max … ms | 12 skipped ticks`.
+    fn executor_lines(&self) -> Vec<String> {
+        let mut lines: Vec<String> = self
+            .executors
+            .iter()
+            .map(|e| {
+                format!(
+                    "executor {}: {}, {} thread{}, {:.0}% busy",
+                    e.name,
+                    e.kind.name(),
+                    e.threads,
+                    if e.threads == 1 { "" } else { "s" },
+                    e.utilization * 100.0
+                )
+            })
+            .collect();
+        let mut nodes: Vec<(&String, &NodeMetrics)> = self
+            .nodes
+            .iter()
+            .filter(|(_, n)| n.exec.is_some())
+            .collect();
+        nodes.sort_by_key(|(_, n)| n.rank);
+        for (name, n) in nodes {
+            let Some(x) = &n.exec else { continue };
+            let compute = n
+                .compute_ms
+                .map_or_else(|| "compute 0 ms".to_string(), |c| format!("compute {c} ms"));
+            lines.push(format!(
+                "node {name:<8} {compute} | response p50 {:.1} | p99 {:.1} | max {:.1} ms | {} skipped ticks",
+                x.response_time_p50_ms, x.response_time_p99_ms, x.response_time_max_ms, x.skipped_ticks
+            ));
+        }
+        lines
+    }
+
     /// The summary's headline: how the run really ended, first match wins: `NODE FAILED`,
     /// `FELL at t=…`, `STOPPED BY WATCHDOG at t=…` (QoS `on_deadline_missed=stop`), `PLANT
     /// NEVER STEPPED` (the actuator ran no step), `STOPPED EARLY at t=… of …` (interrupted
@@ -630,6 +678,7 @@ impl Metrics {
             ),
         ];
         lines.extend(self.qos_lines());
+        lines.extend(self.executor_lines());
         if self.nonfinite_actions > 0 {
             lines.push(format!(
                 "non-finite actions held over: {} (the actuator kept the last good action)",

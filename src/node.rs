@@ -29,4 +29,14 @@ pub trait Node: Send {
     fn rate(&self) -> &Rate;
     /// Do one tick's work at run time `now`.
     fn tick(&mut self, now: Nanos) -> Flow;
+    /// The compute time of the tick about to run, drawn per tick
+    /// ([`crate::executor::ComputeTime`]); zero (the default) publishes its outputs at once.
+    fn compute_time(&mut self) -> Nanos {
+        Nanos::ZERO
+    }
+    /// Hold what the next tick publishes until [`Node::publish_held`] (the executor calls it
+    /// before a tick with a compute time; see [`crate::publisher`]).
+    fn hold_outputs(&mut self) {}
+    /// Publish what the held tick published, stamped `at` (the tick's end).
+    fn publish_held(&mut self, _at: Nanos) {}
 }

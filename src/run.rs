@@ -241,6 +241,21 @@ pub fn build_graph(
     )?)
 }
 
+/// The virtual-clock executor for `cfg`'s graph: its phase offsets and execution plan
+/// (executors, callback groups); response times are measured when the graph has executors
+/// or compute times.
+pub fn virtual_scheduler(
+    cfg: &RunConfig,
+    nodes: &[Box<dyn crate::node::Node>],
+) -> VirtualScheduler {
+    VirtualScheduler::with_plan(
+        nodes,
+        &cfg.phase_offsets,
+        cfg.graph.execution_plan(),
+        cfg.graph.has_executors_or_compute(),
+    )
+}
+
 /// Run the graph once under `cfg.clock` and summarize it.
 ///
 /// # Errors
@@ -255,9 +270,9 @@ pub fn run(
     let brain = BrainSlot::new(brain);
     let Graph { mut nodes, handles } = build_graph(cfg, brain, opts.keep_trace, opts.observers)?;
     let start = Instant::now();
-    let (end, ticks, timing) = match cfg.clock {
+    let (end, ticks, timing, exec) = match cfg.clock {
         ClockKind::Virtual => {
-            let mut sched = VirtualScheduler::with_offsets(&nodes, &cfg.phase_offsets);
+            let mut sched = virtual_scheduler(cfg, &nodes);
             let mut pending = opts.commands.iter().peekable();
             let end = sched.run(&mut nodes, cfg.duration, &opts.stop, &mut |t| {
                 while let Some(c) = pending.next_if(|c| c.at_ns <= t.0) {
@@ -265,7 +280,8 @@ pub fn run(
                     let _ = c.command.apply(&handles);
                 }
             });
-            (end, sched.ticks().to_vec(), None)
+            let exec = sched.figures(end.at);
+            (end, sched.ticks().to_vec(), None, exec)
         }
         ClockKind::Real => {
             let real = RealOptions {
@@ -275,14 +291,16 @@ pub fn run(
                 on_tick: opts.on_node_tick.clone(),
                 pause: None,
                 start: None,
+                plan: Some(cfg.graph.execution_plan()),
+                track: cfg.graph.has_executors_or_compute(),
             };
             let r = run_real(nodes, cfg.duration, &opts.stop, &real);
             let ticks = r.timing.iter().map(|t| t.ticks).collect();
-            (r.end, ticks, Some(r.timing))
+            (r.end, ticks, Some(r.timing), r.exec)
         }
     };
     let wall = start.elapsed();
-    let metrics = summarize(cfg, &handles, &end, &ticks, timing);
+    let metrics = summarize(cfg, &handles, &end, &ticks, timing, exec);
     let trace = std::mem::take(&mut lock(&handles.log).trace);
     Ok(RunReport {
         metrics,
@@ -310,6 +328,10 @@ pub struct GraphState {
     pub ticks: Vec<u64>,
     /// Real clock: each node's tick timing.
     pub timing: Option<Vec<NodeTiming>>,
+    /// What the executors measured, when the graph has executors or compute times
+    /// ([`crate::executor`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub exec: Option<crate::executor::ExecFigures>,
     /// The brain's label.
     pub brain: String,
     /// What the actuator measured.
@@ -356,6 +378,7 @@ impl GraphState {
             rates_hz: h.rates_hz(),
             ticks: ticks.to_vec(),
             timing,
+            exec: None,
             brain: h.brain_label(),
             actuator: ActuatorSummary {
                 steps: log.steps,
@@ -380,8 +403,11 @@ pub fn summarize(
     end: &RunEnd,
     ticks: &[u64],
     timing: Option<Vec<NodeTiming>>,
+    exec: Option<crate::executor::ExecFigures>,
 ) -> Metrics {
-    summarize_state(cfg, &GraphState::capture(h, end.at, ticks, timing), end)
+    let mut st = GraphState::capture(h, end.at, ticks, timing);
+    st.exec = exec;
+    summarize_state(cfg, &st, end)
 }
 
 /// The summary (`metrics.json`) of a graph's [`GraphState`] at the end of a run.
@@ -411,7 +437,10 @@ pub fn summarize_state(cfg: &RunConfig, st: &GraphState, end: &RunEnd) -> Metric
             let status = live.map(|l| l.1);
             let lease = n.liveliness_lease.or(live.and_then(|l| l.0));
             let faulted = cfg.faults.iter().any(|f| f.node == n.name);
+            let x = st.exec.as_ref().and_then(|x| x.nodes.get(i));
             let m = NodeMetrics {
+                compute_ms: n.compute.map(|c| c.mean.as_millis_f64()),
+                exec: x.cloned(),
                 kind: n.kind_name().to_string(),
                 rank: i,
                 rate_hz: n.rate_hz,
@@ -467,6 +496,13 @@ pub fn summarize_state(cfg: &RunConfig, st: &GraphState, end: &RunEnd) -> Metric
             && log.steps > 0,
         stopped_by_watchdog: log.watchdog.clone(),
         missing_processes: Vec::new(),
+        executors: st
+            .exec
+            .iter()
+            .flat_map(|x| &x.executors)
+            .filter(|e| e.kind != crate::executor::ExecutorKind::PerNode)
+            .cloned()
+            .collect(),
         clock: cfg.clock.as_str().to_string(),
         control_hz: cfg.control_hz(),
         sensor_hz: cfg.sensor_hz(),

@@ -13,6 +13,12 @@
 //!   virtual clock to compare runs.
 
 use crate::clock::{Clock, MonotonicClock};
+mod shared;
+
+use crate::executor::{
+    timer_call, Dispatch, ExecFigures, ExecutionPlan, ExecutorFigures, ExecutorKind,
+    NodeExecFigures,
+};
 use crate::metrics::{LatencyStats, NodeTiming};
 use crate::node::{Flow, Node};
 use crate::rate::{next_deadline, DeadlineWaiter};
@@ -93,55 +99,168 @@ pub enum InstantOutcome {
     Failed(EndReason),
 }
 
+/// What an executor measures of one node while it runs.
+#[derive(Clone, Debug, Default)]
+pub struct NodeExecStats {
+    /// Skipped timer periods.
+    pub skipped_ticks: u64,
+    /// Response times (created at the first sample).
+    pub response: Option<LatencyStats>,
+    /// Compute time spent.
+    pub busy: Nanos,
+}
+
+impl NodeExecStats {
+    /// One tick released at `release` whose outputs went out at `done`, having computed for
+    /// `busy`.
+    pub fn record(&mut self, release: Nanos, done: Nanos, busy: Nanos) {
+        self.response
+            .get_or_insert_with(Default::default)
+            .record(done.saturating_sub(release));
+        self.busy = self.busy.saturating_add(busy);
+    }
+}
+
+/// The figures of `stats` (by node) under `plan` over a run of `elapsed`.
+pub fn figures(plan: &ExecutionPlan, stats: &[NodeExecStats], elapsed: Nanos) -> ExecFigures {
+    let ms = |q: Option<Nanos>| q.map_or(0.0, |n| (n.as_millis_f64() * 1e3).round() / 1e3);
+    let nodes = stats
+        .iter()
+        .map(|s| {
+            let r = s.response.as_ref();
+            NodeExecFigures {
+                response_time_p50_ms: ms(r.and_then(|r| r.quantile(0.5))),
+                response_time_p99_ms: ms(r.and_then(|r| r.quantile(0.99))),
+                response_time_max_ms: ms(r.and_then(|r| r.max())),
+                skipped_ticks: s.skipped_ticks,
+                busy_ms: ms(Some(s.busy)),
+            }
+        })
+        .collect();
+    let executors = plan
+        .executors
+        .iter()
+        .enumerate()
+        .map(|(e, x)| {
+            let busy: u64 = stats
+                .iter()
+                .enumerate()
+                .filter(|(n, _)| plan.node_executor.get(*n) == Some(&e))
+                .map(|(_, s)| s.busy.0)
+                .sum();
+            let available = elapsed.0 as f64 * x.threads as f64;
+            ExecutorFigures {
+                name: x.name.clone(),
+                kind: x.kind,
+                threads: x.threads,
+                utilization: if available > 0.0 {
+                    ((busy as f64 / available).min(1.0) * 1e4).round() / 1e4
+                } else {
+                    0.0
+                },
+            }
+        })
+        .collect();
+    ExecFigures { nodes, executors }
+}
+
 /// The virtual-clock executor, steppable one instant at a time (the lab paces it against
 /// the wall clock for display; pacing never changes the order of ticks). Every virtual run
 /// (headless, sweep, replay, exercises, the lab) goes through [`VirtualScheduler::run_instant`].
+///
+/// It applies the [`ExecutionPlan`]'s rules ([`crate::executor`]) at virtual instants: at
+/// each instant, first the ticks whose compute time ends then publish their outputs (in
+/// rank order), then the timers due then are released, then every tick that can start
+/// starts (in the executors' order; a tick with no compute time publishes at once, so a
+/// node downstream at the same instant sees it, as in the chapter). With the default plan
+/// (one thread per node, no compute time) this is exactly the chapter's `run_virtual`:
+/// every node due at an instant ticks in tie-break order.
 pub struct VirtualScheduler {
-    heap: BinaryHeap<Reverse<(Nanos, u32, usize)>>,
+    /// Armed timers: (next call, rank, node).
+    releases: BinaryHeap<Reverse<(Nanos, u32, usize)>>,
+    /// Ticks computing: (end, node).
+    completions: BinaryHeap<Reverse<(Nanos, usize)>>,
     now: Nanos,
     ticks: Vec<u64>,
+    ranks: Vec<u32>,
+    dispatch: Dispatch,
+    /// Each node's next call time (its timer's due time).
+    next_call: Vec<Nanos>,
+    /// The release (due time) of each node's running tick.
+    running_release: Vec<Nanos>,
+    /// The start of each node's running tick.
+    running_start: Vec<Nanos>,
+    /// Per node: what its executor measured (only when `track`).
+    stats: Vec<NodeExecStats>,
+    track: bool,
 }
 
 impl VirtualScheduler {
-    /// Every node due at `t = 0`.
+    /// Every node due at `t = 0`, on a thread of its own.
     pub fn new(nodes: &[Box<dyn Node>]) -> Self {
         Self::with_offsets(nodes, &[])
     }
 
-    /// Node `i` first due at `offsets[i]` (missing offsets are 0).
+    /// Node `i` first due at `offsets[i]` (missing offsets are 0), on a thread of its own.
     pub fn with_offsets(nodes: &[Box<dyn Node>], offsets: &[Nanos]) -> Self {
-        let heap = nodes
+        let names: Vec<&str> = nodes.iter().map(|n| n.name()).collect();
+        Self::with_plan(nodes, offsets, ExecutionPlan::per_node(&names), false)
+    }
+
+    /// Node `i` first due at `offsets[i]`, on the executors of `plan` (indexed like
+    /// `nodes`). `track`: measure response times, skipped ticks and busy time
+    /// ([`VirtualScheduler::figures`]); a run with the default plan and no compute time has
+    /// nothing to report and skips the bookkeeping.
+    pub fn with_plan(
+        nodes: &[Box<dyn Node>],
+        offsets: &[Nanos],
+        plan: ExecutionPlan,
+        track: bool,
+    ) -> Self {
+        let next_call: Vec<Nanos> = (0..nodes.len())
+            .map(|i| offsets.get(i).copied().unwrap_or(Nanos::ZERO))
+            .collect();
+        let ranks: Vec<u32> = nodes.iter().map(|n| n.priority()).collect();
+        let releases = nodes
             .iter()
             .enumerate()
-            .map(|(i, n)| {
-                Reverse((
-                    offsets.get(i).copied().unwrap_or(Nanos::ZERO),
-                    n.priority(),
-                    i,
-                ))
-            })
+            .map(|(i, n)| Reverse((next_call[i], n.priority(), i)))
             .collect();
         Self {
-            heap,
+            releases,
+            completions: BinaryHeap::new(),
             now: Nanos::ZERO,
             ticks: vec![0; nodes.len()],
+            dispatch: Dispatch::new(plan, &ranks),
+            ranks,
+            next_call,
+            running_release: vec![Nanos::ZERO; nodes.len()],
+            running_start: vec![Nanos::ZERO; nodes.len()],
+            stats: if track {
+                vec![NodeExecStats::default(); nodes.len()]
+            } else {
+                Vec::new()
+            },
+            track,
         }
     }
 
-    /// The due time of the next tick.
+    /// The time of the next event: a timer due or a tick's compute time ending.
     pub fn next_due(&self) -> Option<Nanos> {
-        self.heap.peek().map(|Reverse((due, _, _))| *due)
+        let release = self.releases.peek().map(|Reverse((due, _, _))| *due);
+        let end = self.completions.peek().map(|Reverse((at, _))| *at);
+        match (release, end) {
+            (Some(a), Some(b)) => Some(a.min(b)),
+            (a, b) => a.or(b),
+        }
     }
 
     /// The due time of node `node`'s next tick (index in the graph), if it is scheduled.
     pub fn next_due_of(&self, node: usize) -> Option<Nanos> {
-        self.heap
-            .iter()
-            .find(|Reverse((_, _, i))| *i == node)
-            .map(|Reverse((due, _, _))| *due)
+        self.next_call.get(node).copied()
     }
 
-    /// The virtual time of the latest tick.
+    /// The virtual time of the latest instant.
     pub fn now(&self) -> Nanos {
         self.now
     }
@@ -151,67 +270,135 @@ impl VirtualScheduler {
         &self.ticks
     }
 
+    /// What the executors measured, when tracking (else `None`): per node its response
+    /// times, skipped ticks and busy time, per executor its utilization over `elapsed`.
+    pub fn figures(&self, elapsed: Nanos) -> Option<ExecFigures> {
+        self.track.then(|| {
+            // Ticks still computing have held their thread since they started.
+            let mut stats = self.stats.clone();
+            for (i, s) in stats.iter_mut().enumerate() {
+                if self.dispatch.is_running(i) {
+                    let held = elapsed.saturating_sub(self.running_start[i]);
+                    s.busy = s.busy.saturating_add(held);
+                }
+            }
+            figures(self.dispatch.plan(), &stats, elapsed)
+        })
+    }
+
     /// Run the next tick. Returns its time, the node's index and the node's [`Flow`].
     /// A panic in the node propagates; [`VirtualScheduler::run_instant`] catches it.
+    /// For the default plan only (one thread per node, no compute time: what a graph across
+    /// processes runs, [`crate::distributed`]); [`VirtualScheduler::run_instant`] applies
+    /// any plan.
     pub fn tick_next(&mut self, nodes: &mut [Box<dyn Node>]) -> Option<(Nanos, usize, Flow)> {
-        let Reverse((due, prio, i)) = self.heap.pop()?;
+        let Reverse((due, prio, i)) = self.releases.pop()?;
         self.now = due;
         self.ticks[i] += 1;
         let flow = nodes[i].tick(due);
-        self.heap.push(Reverse((
-            due.saturating_add(nodes[i].rate().period()),
-            prio,
-            i,
-        )));
+        self.rearm(i, prio, due.saturating_add(nodes[i].rate().period()));
         Some((due, i, flow))
     }
 
     /// Take the next tick off the schedule without running it (it runs in another process,
     /// [`crate::distributed`]): sets [`VirtualScheduler::now`] to its time, schedules the
     /// node's next tick one period on, and returns the tick's time and node index. Not
-    /// counted in [`VirtualScheduler::ticks`].
+    /// counted in [`VirtualScheduler::ticks`]. For the default plan only, as
+    /// [`VirtualScheduler::tick_next`].
     pub fn skip_next(&mut self, nodes: &[Box<dyn Node>]) -> Option<(Nanos, usize)> {
-        let Reverse((due, prio, i)) = self.heap.pop()?;
+        let Reverse((due, prio, i)) = self.releases.pop()?;
         self.now = due;
-        self.heap.push(Reverse((
-            due.saturating_add(nodes[i].rate().period()),
-            prio,
-            i,
-        )));
+        self.rearm(i, prio, due.saturating_add(nodes[i].rate().period()));
         Some((due, i))
     }
 
-    /// Run every tick due at the next instant, in tie-break order. A node that panics is
-    /// caught, named, and ends the graph ([`InstantOutcome::Failed`]).
+    fn rearm(&mut self, node: usize, prio: u32, next: Nanos) {
+        self.next_call[node] = next;
+        self.releases.push(Reverse((next, prio, node)));
+    }
+
+    /// Run the next instant: the ends of ticks computing until then, the timers due then,
+    /// every tick that can start then (see the type's docs). A node that panics is caught,
+    /// named, and ends the graph ([`InstantOutcome::Failed`]).
     pub fn run_instant(&mut self, nodes: &mut [Box<dyn Node>]) -> InstantOutcome {
         let Some(t) = self.next_due() else {
             return InstantOutcome::Ran { ticked: 0 };
         };
+        self.now = t;
+        while let Some(&Reverse((at, i))) = self.completions.peek() {
+            if at != t {
+                break;
+            }
+            self.completions.pop();
+            nodes[i].publish_held(t);
+            self.dispatch.finish(i);
+            if self.track {
+                let busy = t.saturating_sub(self.running_start[i]);
+                self.stats[i].record(self.running_release[i], t, busy);
+            }
+        }
+        while let Some(&Reverse((at, _, i))) = self.releases.peek() {
+            if at > t {
+                break;
+            }
+            self.releases.pop();
+            self.dispatch.release(i);
+        }
         let mut ticked = 0u64;
-        while self.next_due() == Some(t) {
-            let next = self.next_node().unwrap_or(0);
-            match catch_quietly(|| self.tick_next(nodes)) {
+        while let Some(i) = self.dispatch.pick() {
+            self.dispatch.start(i);
+            let release = self.next_call[i];
+            let (next, skipped) = timer_call(release, t, nodes[i].rate().period());
+            self.ticks[i] += 1;
+            ticked |= 1 << (i % 64);
+            let node = &mut nodes[i];
+            let result = catch_quietly(|| {
+                let compute = node.compute_time();
+                if compute.0 > 0 {
+                    node.hold_outputs();
+                }
+                (compute, node.tick(t))
+            });
+            let (compute, flow) = match result {
+                Ok(r) => r,
                 Err(p) => {
                     return InstantOutcome::Failed(EndReason::NodeFailed {
-                        node: nodes[next].name().to_string(),
+                        node: nodes[i].name().to_string(),
                         message: panic_message(&*p),
                     })
                 }
-                Ok(None) => break,
-                Ok(Some((_, i, flow))) => {
-                    ticked |= 1 << (i % 64);
-                    if flow == Flow::Stop {
-                        return InstantOutcome::Stopped;
-                    }
+            };
+            if self.track {
+                self.stats[i].skipped_ticks += skipped;
+            }
+            if compute.0 == 0 {
+                self.dispatch.finish(i);
+                if self.track {
+                    self.stats[i].record(release, t, Nanos::ZERO);
                 }
+            } else {
+                self.running_release[i] = release;
+                self.running_start[i] = t;
+                self.completions
+                    .push(Reverse((t.saturating_add(compute), i)));
+            }
+            if next <= t {
+                // Due again at once (rcl: called exactly a period late).
+                self.next_call[i] = next;
+                self.dispatch.release(i);
+            } else {
+                self.rearm(i, self.ranks[i], next);
+            }
+            if flow == Flow::Stop {
+                return InstantOutcome::Stopped;
             }
         }
         InstantOutcome::Ran { ticked }
     }
 
-    /// The index of the node that ticks next.
+    /// The index of the node whose timer is due next.
     pub fn next_node(&self) -> Option<usize> {
-        self.heap.peek().map(|Reverse((_, _, i))| *i)
+        self.releases.peek().map(|Reverse((_, _, i))| *i)
     }
 
     /// Run instant by instant until `duration` (ticks due at exactly `duration` run), a
@@ -285,6 +472,10 @@ pub struct RealOptions {
     /// The instant the run's time is zero (`None`: when [`run_real`] starts). Processes of
     /// one graph share it, so their stamps share one clock ([`crate::distributed`]).
     pub start: Option<std::time::Instant>,
+    /// The executors ([`crate::executor`]); `None`: one thread per node.
+    pub plan: Option<ExecutionPlan>,
+    /// Measure response times, skipped ticks and busy time ([`RealRun::exec`]).
+    pub track: bool,
 }
 
 impl Default for RealOptions {
@@ -296,6 +487,8 @@ impl Default for RealOptions {
             pause: None,
             rt_priority: None,
             start: None,
+            plan: None,
+            track: false,
         }
     }
 }
@@ -308,6 +501,8 @@ pub struct RealRun {
     pub timing: Vec<NodeTiming>,
     /// The nodes, returned for reuse or inspection.
     pub nodes: Vec<Box<dyn Node>>,
+    /// What the executors measured, when [`RealOptions::track`] (and no node thread died).
+    pub exec: Option<ExecFigures>,
 }
 
 /// This thread's CPU time (Linux `CLOCK_THREAD_CPUTIME_ID`).
@@ -360,10 +555,56 @@ pub fn panic_message(p: &(dyn std::any::Any + Send)) -> String {
         .unwrap_or_else(|| "panic".to_string())
 }
 
-/// Run `nodes` on one OS thread each against a monotonic clock until `duration`, a node's
-/// [`Flow::Stop`] (which stops every thread), or `stop`. Each thread sleeps to absolute
-/// deadlines and records its lateness (actual − scheduled) for jitter statistics.
-/// A panicking node stops the graph and is reported in [`EndReason::NodeFailed`].
+/// Burn `cpu` of this thread's CPU time in a busy loop (`CLOCK_THREAD_CPUTIME_ID`): a tick's
+/// declared compute time under the real clock. On a loaded machine it takes longer than
+/// `cpu` of wall time, as real computation does. Stops early on `stop`.
+fn burn(cpu: Nanos, stop: &StopFlag) {
+    let wall = std::time::Instant::now();
+    let t0 = thread_cpu_time();
+    let mut x = 0u64;
+    loop {
+        for _ in 0..512 {
+            x = std::hint::black_box(x.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1));
+        }
+        // Without a thread CPU clock (it read 0), the wall clock measures.
+        let spent = if t0.0 == 0 {
+            Nanos(wall.elapsed().as_nanos() as u64)
+        } else {
+            thread_cpu_time().saturating_sub(t0)
+        };
+        if spent >= cpu || stop.is_stopped() {
+            return;
+        }
+    }
+}
+
+/// One tick of `node` at `now` under the real clock, with its compute time: its outputs are
+/// held while it burns that much CPU, then published at the clock's time. Returns the flow
+/// and the time its outputs went out.
+fn real_tick(
+    node: &mut dyn Node,
+    now: Nanos,
+    clock: &MonotonicClock,
+    stop: &StopFlag,
+) -> (Flow, Nanos) {
+    let compute = node.compute_time();
+    if compute.0 == 0 {
+        return (node.tick(now), clock.now());
+    }
+    node.hold_outputs();
+    let flow = node.tick(now);
+    burn(compute, stop);
+    let done = clock.now();
+    node.publish_held(done);
+    (flow, done)
+}
+
+/// Run `nodes` against a monotonic clock until `duration`, a node's [`Flow::Stop`] (which
+/// stops every thread), or `stop`, on the executors of [`RealOptions::plan`]: by default one
+/// OS thread per node, sleeping to absolute deadlines; a single- or multi-threaded executor's
+/// nodes share its threads by [`crate::executor`]'s rules. Each tick's lateness (actual −
+/// scheduled) is recorded for jitter statistics. A panicking node stops the graph and is
+/// reported in [`EndReason::NodeFailed`].
 pub fn run_real(
     nodes: Vec<Box<dyn Node>>,
     duration: Nanos,
@@ -375,115 +616,157 @@ pub fn run_real(
         .map_or_else(MonotonicClock::start, MonotonicClock::starting_at);
     let waiter = DeadlineWaiter::new(opts.spin_margin);
     let stop_at = Arc::new(AtomicU64::new(u64::MAX));
-    let handles: Vec<_> = nodes
-        .into_iter()
-        .enumerate()
-        .map(|(i, mut node)| {
-            let stop = stop.clone();
-            let stop_at = stop_at.clone();
-            let first = opts.phase_offsets.get(i).copied().unwrap_or(Nanos::ZERO);
-            let name = node.name().to_string();
-            let on_tick = opts.on_tick.clone();
-            let pause = opts.pause.clone();
-            let rt_priority = opts.rt_priority;
-            std::thread::Builder::new()
-                .name(name.clone())
-                .spawn(move || {
-                    let sched_error = rt_priority
-                        .and_then(|p| crate::realtime::set_current_thread_fifo(p).err())
-                        .map(|e| e.to_string());
-                    let sched = crate::realtime::current_thread_sched().to_string();
-                    let cpu0 = thread_cpu_time();
-                    let mut lateness = LatencyStats::default();
-                    let (mut ticks, mut skipped) = (0u64, 0u64);
-                    let mut deadline = first;
-                    let result = catch_quietly(|| loop {
-                        // Wake for the deadline, the run's end or a stop, whichever is
-                        // first: a slow node must not sleep past either.
-                        waiter.wait_until_or(clock.instant_at(deadline.min(duration)), &|| {
-                            stop.is_stopped()
-                        });
-                        let mut was_paused = false;
-                        while pause.as_ref().is_some_and(|p| p.load(Ordering::SeqCst))
-                            && !stop.is_stopped()
-                        {
-                            was_paused = true;
-                            std::thread::sleep(std::time::Duration::from_millis(5));
-                        }
-                        let now = clock.now();
-                        if now >= duration || stop.is_stopped() {
-                            break;
-                        }
-                        if was_paused {
-                            // Back on the grid after a pause: the ticks missed are not late ticks.
-                            let (next, _) = next_deadline(deadline, now, node.rate().period());
-                            deadline = next;
-                            continue;
-                        }
-                        let late = now.saturating_sub(deadline);
-                        lateness.record(late);
-                        ticks += 1;
-                        let flow = node.tick(now);
-                        if let Some(hook) = &on_tick {
-                            hook(i, &name, now, late);
-                        }
-                        if flow == Flow::Stop {
-                            stop_at.fetch_min(now.0, Ordering::SeqCst);
-                            stop.stop();
-                            break;
-                        }
-                        let (next, missed) =
-                            next_deadline(deadline, clock.now(), node.rate().period());
-                        deadline = next;
-                        skipped += missed;
-                    });
-                    if result.is_err() {
-                        stop.stop();
-                    }
-                    let elapsed = clock.now().min(duration).saturating_sub(first);
-                    let timing = NodeTiming {
-                        node: name,
-                        ticks,
-                        skipped,
-                        lateness_p50_us: lateness.quantile(0.5).map_or(0.0, |n| n.as_micros_f64()),
-                        lateness_p99_us: lateness.quantile(0.99).map_or(0.0, |n| n.as_micros_f64()),
-                        lateness_max_us: lateness.max().map_or(0.0, |n| n.as_micros_f64()),
-                        cpu_ms: (thread_cpu_time().saturating_sub(cpu0)).as_millis_f64(),
-                        measured_hz: if elapsed.0 > 0 {
-                            ticks as f64 / elapsed.as_secs_f64()
-                        } else {
-                            0.0
-                        },
-                        sched,
-                        sched_error,
-                    };
-                    (node, timing, result.err().map(|p| panic_message(&*p)))
-                })
-                .expect("spawning a node thread")
-        })
+    let names: Vec<String> = nodes.iter().map(|n| n.name().to_string()).collect();
+    let plan = opts.plan.clone().unwrap_or_else(|| {
+        ExecutionPlan::per_node(&names.iter().map(String::as_str).collect::<Vec<_>>())
+    });
+    let track = opts.track;
+    let own_thread: Vec<bool> = (0..nodes.len())
+        .map(|i| plan.executors[plan.node_executor[i]].kind == ExecutorKind::PerNode)
         .collect();
-    let mut nodes = Vec::new();
-    let mut timing = Vec::new();
+    let mut shared_nodes: Vec<Option<Box<dyn Node>>> = Vec::new();
+    let mut handles = Vec::new();
+    for (i, mut node) in nodes.into_iter().enumerate() {
+        if !own_thread[i] {
+            shared_nodes.push(Some(node));
+            continue;
+        }
+        shared_nodes.push(None);
+        let stop = stop.clone();
+        let stop_at = stop_at.clone();
+        let first = opts.phase_offsets.get(i).copied().unwrap_or(Nanos::ZERO);
+        let name = node.name().to_string();
+        let on_tick = opts.on_tick.clone();
+        let pause = opts.pause.clone();
+        let rt_priority = opts.rt_priority;
+        let handle = std::thread::Builder::new()
+            .name(name.clone())
+            .spawn(move || {
+                let sched_error = rt_priority
+                    .and_then(|p| crate::realtime::set_current_thread_fifo(p).err())
+                    .map(|e| e.to_string());
+                let sched = crate::realtime::current_thread_sched().to_string();
+                let cpu0 = thread_cpu_time();
+                let mut lateness = LatencyStats::default();
+                let mut exec = NodeExecStats::default();
+                let (mut ticks, mut skipped) = (0u64, 0u64);
+                let mut deadline = first;
+                let result = catch_quietly(|| loop {
+                    // Wake for the deadline, the run's end or a stop, whichever is
+                    // first: a slow node must not sleep past either.
+                    waiter.wait_until_or(clock.instant_at(deadline.min(duration)), &|| {
+                        stop.is_stopped()
+                    });
+                    let mut was_paused = false;
+                    while pause.as_ref().is_some_and(|p| p.load(Ordering::SeqCst))
+                        && !stop.is_stopped()
+                    {
+                        was_paused = true;
+                        std::thread::sleep(std::time::Duration::from_millis(5));
+                    }
+                    let now = clock.now();
+                    if now >= duration || stop.is_stopped() {
+                        break;
+                    }
+                    if was_paused {
+                        // Back on the grid after a pause: the ticks missed are not late ticks.
+                        let (next, _) = next_deadline(deadline, now, node.rate().period());
+                        deadline = next;
+                        continue;
+                    }
+                    let late = now.saturating_sub(deadline);
+                    lateness.record(late);
+                    ticks += 1;
+                    let (flow, done) = real_tick(&mut *node, now, &clock, &stop);
+                    if track {
+                        exec.record(deadline, done, done.saturating_sub(now));
+                    }
+                    if let Some(hook) = &on_tick {
+                        hook(i, &name, now, late);
+                    }
+                    if flow == Flow::Stop {
+                        stop_at.fetch_min(now.0, Ordering::SeqCst);
+                        stop.stop();
+                        break;
+                    }
+                    let (next, missed) = next_deadline(deadline, clock.now(), node.rate().period());
+                    deadline = next;
+                    skipped += missed;
+                });
+                if result.is_err() {
+                    stop.stop();
+                }
+                exec.skipped_ticks = skipped;
+                let elapsed = clock.now().min(duration).saturating_sub(first);
+                let timing = NodeTiming {
+                    node: name,
+                    ticks,
+                    skipped,
+                    lateness_p50_us: lateness.quantile(0.5).map_or(0.0, |n| n.as_micros_f64()),
+                    lateness_p99_us: lateness.quantile(0.99).map_or(0.0, |n| n.as_micros_f64()),
+                    lateness_max_us: lateness.max().map_or(0.0, |n| n.as_micros_f64()),
+                    cpu_ms: (thread_cpu_time().saturating_sub(cpu0)).as_millis_f64(),
+                    measured_hz: if elapsed.0 > 0 {
+                        ticks as f64 / elapsed.as_secs_f64()
+                    } else {
+                        0.0
+                    },
+                    sched,
+                    sched_error,
+                };
+                (node, timing, exec, result.err().map(|p| panic_message(&*p)))
+            })
+            .expect("spawning a node thread");
+        handles.push((i, handle));
+    }
+    let shared = shared::SharedExecutors::start(
+        shared_nodes,
+        &plan,
+        shared::Context {
+            clock,
+            duration,
+            stop: stop.clone(),
+            stop_at: stop_at.clone(),
+            opts: opts.clone(),
+        },
+    );
+    let mut slots: Vec<Option<shared::Finished>> = (0..names.len()).map(|_| None).collect();
     let mut failed = None;
-    for h in handles {
+    for (i, h) in handles {
         match h.join() {
-            Ok((node, t, panic)) => {
+            Ok((node, t, exec, panic)) => {
                 if let (Some(message), None) = (panic, &failed) {
                     failed = Some(EndReason::NodeFailed {
                         node: t.node.clone(),
                         message,
                     });
                 }
-                nodes.push(node);
-                timing.push(t);
+                slots[i] = Some((node, t, exec));
             }
             Err(p) => {
                 failed.get_or_insert(EndReason::NodeFailed {
-                    node: "?".into(),
+                    node: names[i].clone(),
                     message: panic_message(&*p),
                 });
             }
         }
+    }
+    let shared_end = shared.join();
+    if let (Some((node, message)), None) = (shared_end.failed, &failed) {
+        failed = Some(EndReason::NodeFailed { node, message });
+    }
+    for (i, s) in shared_end.nodes.into_iter().enumerate() {
+        if let Some(s) = s {
+            slots[i] = Some(s);
+        }
+    }
+    let mut nodes = Vec::new();
+    let mut timing = Vec::new();
+    let mut stats = Vec::new();
+    for (node, t, exec) in slots.into_iter().flatten() {
+        nodes.push(node);
+        timing.push(t);
+        stats.push(exec);
     }
     let stopped_at = stop_at.load(Ordering::SeqCst);
     let end = if let Some(reason) = failed {
@@ -507,7 +790,13 @@ pub fn run_real(
             reason: EndReason::Duration,
         }
     };
-    RealRun { end, timing, nodes }
+    let exec = (track && stats.len() == names.len()).then(|| figures(&plan, &stats, end.at));
+    RealRun {
+        end,
+        timing,
+        nodes,
+        exec,
+    }
 }
 
 #[cfg(test)]
@@ -676,6 +965,142 @@ mod tests {
             .filter(|(_, n)| *n == "policy")
             .count();
         assert_eq!(policy_ticks, 1, "ticks once at 0, next due never");
+    }
+
+    /// A node that logs its starts and the ends of its held ticks, with a compute time.
+    struct Worker {
+        name: &'static str,
+        rate: Rate,
+        compute: Nanos,
+        log: WorkLog,
+    }
+
+    impl Node for Worker {
+        fn name(&self) -> &str {
+            self.name
+        }
+        fn priority(&self) -> u32 {
+            0
+        }
+        fn rate(&self) -> &Rate {
+            &self.rate
+        }
+        fn tick(&mut self, now: Nanos) -> Flow {
+            self.log
+                .lock()
+                .unwrap()
+                .push((now.0 / 1_000_000, self.name, "start"));
+            Flow::Continue
+        }
+        fn compute_time(&mut self) -> Nanos {
+            self.compute
+        }
+        fn publish_held(&mut self, at: Nanos) {
+            self.log
+                .lock()
+                .unwrap()
+                .push((at.0 / 1_000_000, self.name, "end"));
+        }
+    }
+
+    type WorkLog = Arc<Mutex<Vec<(u64, &'static str, &'static str)>>>;
+
+    /// Sensor and policy at 50 Hz, the policy computing `policy_ms`, on `plan`, for 100 ms.
+    fn two_workers(plan: ExecutionPlan, policy_ms: u64) -> (WorkLog, VirtualScheduler, RunEnd) {
+        let log: WorkLog = Arc::new(Mutex::new(Vec::new()));
+        let mut nodes: Vec<Box<dyn Node>> = [("sensor", 0), ("policy", policy_ms)]
+            .into_iter()
+            .map(|(name, ms)| {
+                Box::new(Worker {
+                    name,
+                    rate: Rate::new(50.0).unwrap(),
+                    compute: Nanos::from_millis(ms),
+                    log: log.clone(),
+                }) as Box<dyn Node>
+            })
+            .collect();
+        let mut sched = VirtualScheduler::with_plan(&nodes, &[], plan, true);
+        let end = sched.run(
+            &mut nodes,
+            Nanos::from_millis(100),
+            &StopFlag::new(),
+            &mut |_| {},
+        );
+        (log, sched, end)
+    }
+
+    fn starts(log: &WorkLog, name: &str) -> Vec<u64> {
+        log.lock()
+            .unwrap()
+            .iter()
+            .filter(|(_, n, what)| *n == name && *what == "start")
+            .map(|(t, _, _)| *t)
+            .collect()
+    }
+
+    #[test]
+    fn a_compute_time_publishes_late_and_a_long_one_skips_periods_on_the_grid() {
+        let (log, sched, _) = two_workers(ExecutionPlan::per_node(&["sensor", "policy"]), 30);
+        // Own threads: the sensor is untouched; the policy (30 ms per 20 ms period) starts
+        // when its thread is free, on rcl's grid: 0, 30 (due 20), 60 (due 40, next due 60
+        // at once), 90 (due 60: 80 skipped).
+        assert_eq!(starts(&log, "sensor"), vec![0, 20, 40, 60, 80, 100]);
+        assert_eq!(starts(&log, "policy"), vec![0, 30, 60, 90]);
+        let ends: Vec<u64> = log
+            .lock()
+            .unwrap()
+            .iter()
+            .filter(|(_, n, w)| *n == "policy" && *w == "end")
+            .map(|(t, _, _)| *t)
+            .collect();
+        assert_eq!(ends, vec![30, 60, 90], "outputs 30 ms after each start");
+        let f = sched.figures(Nanos::from_millis(100)).unwrap();
+        assert_eq!(f.nodes[1].skipped_ticks, 1);
+        assert_eq!(f.nodes[0].skipped_ticks, 0);
+        assert_eq!(f.nodes[0].response_time_max_ms, 0.0);
+        // Releases 0, 20, 40 answered at 30, 60, 90: 30, 40, 50 ms.
+        assert!(
+            (f.nodes[1].response_time_max_ms - 50.0).abs() < 0.1,
+            "{f:?}"
+        );
+    }
+
+    #[test]
+    fn one_slow_callback_on_a_single_threaded_executor_starves_the_timer_beside_it() {
+        let plan = ExecutionPlan::one_executor(
+            &["sensor", "policy"],
+            crate::executor::ExecutorKind::SingleThreaded,
+            1,
+        );
+        let (log, sched, _) = two_workers(plan, 30);
+        // The sensor waits for the policy's 30 ms each time: 0, 30, 60, 90 (late ticks, one
+        // period skipped at 90), never its own 20 ms grid.
+        assert_eq!(starts(&log, "sensor"), vec![0, 30, 60, 90]);
+        assert_eq!(starts(&log, "policy"), vec![0, 30, 60, 90]);
+        let f = sched.figures(Nanos::from_millis(100)).unwrap();
+        assert_eq!(f.nodes[0].skipped_ticks, 1);
+        assert!(f.nodes[0].response_time_max_ms >= 30.0, "{f:?}");
+        assert!((f.executors[0].utilization - 1.0).abs() < 1e-9, "{f:?}");
+        // Twice the same: the virtual clock models the executor exactly.
+        let plan = ExecutionPlan::one_executor(
+            &["sensor", "policy"],
+            crate::executor::ExecutorKind::SingleThreaded,
+            1,
+        );
+        let (again, _, _) = two_workers(plan, 30);
+        assert_eq!(*log.lock().unwrap(), *again.lock().unwrap());
+    }
+
+    #[test]
+    fn two_threads_give_the_sensor_its_grid_back() {
+        let plan = ExecutionPlan::one_executor(
+            &["sensor", "policy"],
+            crate::executor::ExecutorKind::MultiThreaded,
+            2,
+        );
+        let (log, _, _) = two_workers(plan, 30);
+        assert_eq!(starts(&log, "sensor"), vec![0, 20, 40, 60, 80, 100]);
+        assert_eq!(starts(&log, "policy"), vec![0, 30, 60, 90]);
     }
 
     #[test]

@@ -739,6 +739,9 @@ fn real_clock(
         )),
         pause: None,
         start: Some(wire::instant_at_mono(start)),
+        // A launch across processes refuses executors and compute times (config).
+        plan: None,
+        track: false,
     };
     // The launcher's stop (another process ended the run, or Ctrl-C there).
     let run_stop = StopFlag::new();

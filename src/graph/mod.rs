@@ -11,10 +11,12 @@ pub mod nodes;
 pub mod registry;
 pub mod spec;
 
+use crate::executor::ComputeDraw;
 use crate::msg::AnyTopic;
 use crate::node::Node;
 use crate::plant::CartPole;
 use crate::policy::BrainSlot;
+use crate::publisher::{Outbox, Publisher};
 use crate::qos::{Fault, Liveliness};
 use crate::rate::{InvalidRate, Rate};
 use crate::runlog::{RunLog, StepRecord, TopicCounters};
@@ -231,6 +233,7 @@ impl Graph {
             .iter()
             .enumerate()
             .map(|(i, n)| -> Result<Box<dyn Node>, GraphError> {
+                let outbox = Outbox::new();
                 let core = NodeCore {
                     name: n.name.clone(),
                     id: NodeId(i),
@@ -241,6 +244,8 @@ impl Graph {
                         .filter(|f| f.node == n.name)
                         .cloned()
                         .collect(),
+                    outbox: outbox.clone(),
+                    compute: n.compute.map(|c| ComputeDraw::new(c, seed, i)),
                 };
                 let input = n.subscribes.map(|t| &topics[t.0]);
                 let output = n.publishes.map(|t| &topics[t.0]);
@@ -250,8 +255,13 @@ impl Graph {
                         Work::Sensor(Sensor {
                             plant: plant.clone(),
                             output: match out {
-                                AnyTopic::State(t) => SensorOutput::State(t.clone()),
-                                AnyTopic::Position(t) => SensorOutput::Position(t.clone()),
+                                AnyTopic::State(t) => {
+                                    SensorOutput::State(Publisher::new(t.clone(), outbox.clone()))
+                                }
+                                AnyTopic::Position(t) => SensorOutput::Position(Publisher::new(
+                                    t.clone(),
+                                    outbox.clone(),
+                                )),
                                 AnyTopic::Force(_) => {
                                     unreachable!("validated: a sensor publishes state or position")
                                 }
@@ -266,7 +276,7 @@ impl Graph {
                         (Some(AnyTopic::Position(i)), Some(AnyTopic::State(o))),
                     ) => Work::Estimator(Estimator {
                         input: i.clone(),
-                        output: o.clone(),
+                        output: Publisher::new(o.clone(), outbox.clone()),
                         filter: estimator::VelocityFilter::new(n.params.cutoff_hz),
                         last_seq: None,
                         origin: None,
@@ -275,13 +285,13 @@ impl Graph {
                         Work::Policy(PolicyNode {
                             brain: brain.clone(),
                             input: i.clone(),
-                            output: o.clone(),
+                            output: Publisher::new(o.clone(), outbox.clone()),
                         })
                     }
                     (NodeKind::Safety, (Some(AnyTopic::Force(i)), Some(AnyTopic::Force(o)))) => {
                         Work::Safety(Safety {
                             input: i.clone(),
-                            output: o.clone(),
+                            output: Publisher::new(o.clone(), outbox.clone()),
                             max_force_n: n.params.max_force_n,
                         })
                     }
@@ -296,6 +306,7 @@ impl Graph {
                             rates[i].period(),
                             input.cloned(),
                             output.cloned(),
+                            outbox.clone(),
                             seed,
                         )?))
                     }
@@ -311,7 +322,7 @@ impl Graph {
                             params: &r.params,
                         };
                         Work::Registered(
-                            registry::make(&r.kind, &cx, input, output)
+                            registry::make(&r.kind, &cx, input, output, &outbox)
                                 .map_err(GraphError::Registered)?,
                         )
                     }

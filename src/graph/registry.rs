@@ -38,6 +38,7 @@
 //! kinds, and refuses it by name).
 
 use crate::msg::{AnyTopic, ForceMsg, MsgType, PositionMsg, StateMsg};
+use crate::publisher::{Outbox, Publisher};
 use crate::time::Nanos;
 use crate::topic::Topic;
 use std::collections::BTreeMap;
@@ -151,8 +152,9 @@ pub trait Tick: Send {
     fn tick(&mut self, now: Nanos);
 }
 
-type Make =
-    dyn Fn(&NodeContext<'_>, &AnyTopic, &AnyTopic) -> Result<Box<dyn Tick>, String> + Send + Sync;
+type Make = dyn Fn(&NodeContext<'_>, &AnyTopic, &AnyTopic, &Outbox) -> Result<Box<dyn Tick>, String>
+    + Send
+    + Sync;
 
 struct Entry {
     input: MsgType,
@@ -202,7 +204,7 @@ where
     if reg.len() >= MAX_KINDS {
         return Err(RegistryError::Full);
     }
-    let make = move |cx: &NodeContext<'_>, input: &AnyTopic, output: &AnyTopic| {
+    let make = move |cx: &NodeContext<'_>, input: &AnyTopic, output: &AnyTopic, outbox: &Outbox| {
         let (Some(input), Some(output)) = (N::Input::topic(input), N::Output::topic(output)) else {
             // The graph file's types were checked against the kind's when it was read.
             return Err(format!("node '{}': its topics' types changed", cx.name));
@@ -211,7 +213,7 @@ where
         Ok(Box::new(Bound {
             node,
             input: input.clone(),
-            output: output.clone(),
+            output: Publisher::new(output.clone(), outbox.clone()),
             last_seq: None,
             origin: None,
         }) as Box<dyn Tick>)
@@ -239,7 +241,8 @@ pub fn kinds() -> Vec<String> {
     reg.keys().cloned().collect()
 }
 
-/// Make a node of registered kind `kind`, bound to `input` and `output`.
+/// Make a node of registered kind `kind`, bound to `input` and `output` (published through
+/// the node's `outbox`).
 ///
 /// # Errors
 /// A one-line reason: the kind is not registered in this process, or its maker refused
@@ -249,6 +252,7 @@ pub(crate) fn make(
     cx: &NodeContext<'_>,
     input: &AnyTopic,
     output: &AnyTopic,
+    outbox: &Outbox,
 ) -> Result<Box<dyn Tick>, String> {
     let reg = registry().read().unwrap_or_else(|e| e.into_inner());
     let entry = reg.get(kind).ok_or_else(|| {
@@ -258,14 +262,14 @@ pub(crate) fn make(
             cx.name
         )
     })?;
-    (entry.make)(cx, input, output)
+    (entry.make)(cx, input, output, outbox)
 }
 
 /// A node with its topics and what it has been given.
 struct Bound<N: RustNode> {
     node: N,
     input: Arc<Topic<N::Input>>,
-    output: Arc<Topic<N::Output>>,
+    output: Publisher<N::Output>,
     /// `seq` of the newest message given to the node.
     last_seq: Option<u64>,
     /// Origin stamp of the newest message given to the node.
@@ -333,7 +337,7 @@ mod tests {
             seed: 0,
             params: &params,
         };
-        let mut node = make("echo_bound", &cx, &input, &output).unwrap();
+        let mut node = make("echo_bound", &cx, &input, &output, &Outbox::new()).unwrap();
         let (AnyTopic::Force(i), AnyTopic::Force(o)) = (&input, &output) else {
             unreachable!()
         };
@@ -347,7 +351,7 @@ mod tests {
         // Nothing new: Echo publishes nothing.
         node.tick(Nanos(30));
         assert_eq!(o.stats().published, 1);
-        assert!(make("nobody", &cx, &input, &output)
+        assert!(make("nobody", &cx, &input, &output, &Outbox::new())
             .err()
             .unwrap()
             .contains("kind 'nobody' is not registered"));

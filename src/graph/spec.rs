@@ -53,6 +53,11 @@
 //! position; edges into a node with an explicit priority do not order it. A cycle among
 //! nodes without explicit priorities is an error.
 
+mod executors;
+
+pub use executors::ExecutorSpec;
+
+use crate::executor::ComputeTime;
 use crate::ids::{MAX_NODES, MAX_TOPICS};
 use crate::plant::{ACTUATOR_HZ, GEAR_N};
 use crate::qos::{
@@ -189,6 +194,14 @@ pub struct NodeSpec {
     /// A registered kind's name and parameters; `None` for every other kind.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub registered: Option<RegisteredNodeSpec>,
+    /// What a tick costs ([`crate::executor`]): its outputs are published that long after
+    /// it starts. `None`: nothing (outputs at once, as in the chapter).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub compute: Option<ComputeTime>,
+    /// Its callback group, a group of the executor holding it ([`ExecutorSpec`]); `None`:
+    /// a mutually exclusive group of its own.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub callback_group: Option<String>,
 }
 
 impl NodeSpec {
@@ -283,6 +296,8 @@ pub struct GraphSpec {
     pub topics: Vec<TopicSpec>,
     /// The chapter's roles.
     pub chain: Chain,
+    /// The `[executors]` tables ([`ExecutorSpec`]); empty: every node on a thread of its own.
+    pub executors: Vec<ExecutorSpec>,
 }
 
 /// A graph file that cannot be used: one line `FILE:LINE:COL: reason`, or `FILE: reason`
@@ -328,6 +343,8 @@ struct RawGraph {
     nodes: Vec<Spanned<RawNode>>,
     #[serde(default, rename = "topic")]
     topics: Vec<Spanned<RawTopic>>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    executors: Option<executors::RawExecutors>,
 }
 
 #[derive(Deserialize, Serialize)]
@@ -360,6 +377,10 @@ struct RawNode {
     class: Option<Spanned<String>>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     params: Option<Spanned<toml::Table>>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    compute_ms: Option<Spanned<toml::Value>>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    callback_group: Option<Spanned<String>>,
 }
 
 #[derive(Deserialize, Serialize)]
@@ -580,6 +601,10 @@ impl GraphSpec {
                                 .or(n.registered.as_ref().map(|r| &r.params))
                                 .filter(|p| !p.is_empty())
                                 .map(|p| Spanned::new(0..0, p.clone())),
+                            compute_ms: n
+                                .compute
+                                .map(|c| Spanned::new(0..0, executors::compute_value(&c))),
+                            callback_group: n.callback_group.clone().map(s),
                         },
                     )
                 })
@@ -622,6 +647,7 @@ impl GraphSpec {
                     )
                 })
                 .collect(),
+            executors: executors::to_raw(self),
         };
         toml::to_string(&raw).expect("a graph always serializes")
     }
@@ -1088,6 +1114,17 @@ fn build(cx: &Ctx<'_>, raw: RawGraph) -> Result<GraphSpec, SpecError> {
             }
             p => p.as_ref().map(|p| p.get_ref().clone()),
         };
+        let compute = r
+            .compute_ms
+            .as_ref()
+            .map(|c| executors::compute(cx, c))
+            .transpose()?
+            .filter(|c| !c.is_zero());
+        if let (Some(_), Some(c)) = (compute, &r.compute_ms) {
+            if kind == NodeKind::Actuator {
+                return Err(cx.err(c.span(), executors::ACTUATOR_NO_COMPUTE));
+            }
+        }
         file_nodes.push(NodeSpec {
             name: nname.clone(),
             kind,
@@ -1100,6 +1137,8 @@ fn build(cx: &Ctx<'_>, raw: RawGraph) -> Result<GraphSpec, SpecError> {
             process,
             python,
             registered,
+            compute,
+            callback_group: r.callback_group.as_ref().map(|g| g.get_ref().clone()),
         });
         node_spans.push(r.name.span());
     }
@@ -1178,7 +1217,15 @@ fn build(cx: &Ctx<'_>, raw: RawGraph) -> Result<GraphSpec, SpecError> {
             obs: TopicId(0),
             action: TopicId(0),
         },
+        executors: Vec::new(),
     };
+    let no_executors = executors::RawExecutors::new();
+    spec.executors = executors::executors(
+        cx,
+        raw.executors.as_ref().unwrap_or(&no_executors),
+        &spec,
+        |j| raw.nodes[order[j]].get_ref(),
+    )?;
     spec.chain = find_chain(&spec).map_err(|reason| {
         let at = node_spans[order[spec_actuator(&spec).0]].clone();
         cx.err(at, reason)

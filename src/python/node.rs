@@ -37,6 +37,7 @@
 use super::{describe, start, support, CallbackGuard, PythonError};
 use crate::graph::spec::PythonNodeSpec;
 use crate::msg::{AnyTopic, ForceMsg, PositionMsg};
+use crate::publisher::Outbox;
 use crate::time::Nanos;
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
@@ -51,6 +52,8 @@ pub struct PythonNode {
     what: String,
     input: Option<AnyTopic>,
     output: Option<AnyTopic>,
+    /// Where its publishes go (held during a tick with a compute time).
+    outbox: Outbox,
     /// `seq` of the newest message delivered to the subscription callback.
     last_seq: Option<u64>,
     /// Origin stamp of the newest message delivered.
@@ -63,7 +66,8 @@ pub struct TickError(pub String);
 
 impl PythonNode {
     /// Load node `name` (ticking every `period`) from `spec`, wired to `input` and
-    /// `output` (the topics the graph file gives it); `seed` is the run's.
+    /// `output` (the topics the graph file gives it, published through `outbox`); `seed` is
+    /// the run's.
     ///
     /// # Errors
     /// [`PythonError`]: see the module docs.
@@ -73,6 +77,7 @@ impl PythonNode {
         period: Nanos,
         input: Option<AnyTopic>,
         output: Option<AnyTopic>,
+        outbox: Outbox,
         seed: u64,
     ) -> Result<PythonNode, PythonError> {
         let script = spec.script.as_str();
@@ -119,6 +124,7 @@ impl PythonNode {
                 what: format!("node '{name}' ({script})"),
                 input,
                 output,
+                outbox,
                 last_seq: None,
                 origin: None,
             })
@@ -158,7 +164,7 @@ impl PythonNode {
                 Some(now)
             };
             for fields in published {
-                publish(out, &fields, now, origin);
+                publish(&self.outbox, out, &fields, now, origin);
             }
         }
         Ok(())
@@ -191,11 +197,12 @@ fn read(t: &AnyTopic, now: Nanos) -> Option<(u64, Nanos, Fields)> {
 }
 
 /// Publish a fields tuple (checked against the type by the Python side) on `t`.
-fn publish(t: &AnyTopic, f: &[f64], now: Nanos, origin: Option<Nanos>) {
+fn publish(outbox: &Outbox, t: &AnyTopic, f: &[f64], now: Nanos, origin: Option<Nanos>) {
     let at = |i: usize| f.get(i).copied().unwrap_or(0.0);
     match t {
         AnyTopic::State(t) => {
-            t.publish(
+            outbox.publish(
+                t,
                 [at(0), at(1), at(2), at(3), at(4)].map(|v| v as f32),
                 now,
                 origin,
@@ -206,10 +213,10 @@ fn publish(t: &AnyTopic, f: &[f64], now: Nanos, origin: Option<Nanos>) {
                 cart_pos_m: at(0),
                 pole_angle_rad: at(1),
             };
-            t.publish(m, now, origin);
+            outbox.publish(t, m, now, origin);
         }
         AnyTopic::Force(t) => {
-            t.publish(ForceMsg { newtons: at(0) }, now, origin);
+            outbox.publish(t, ForceMsg { newtons: at(0) }, now, origin);
         }
     }
 }

@@ -202,18 +202,18 @@ impl Engine {
         self.log.runs.push(LoggedRun::starting(cfg, policy));
         self.save_log();
         let handles = graph.handles.clone();
-        let (next, end, ticks, timing) = match cfg.clock {
+        let (next, end, ticks, timing, exec) = match cfg.clock {
             ClockKind::Virtual => {
-                let (next, end, ticks) = self.virtual_run(cfg, graph, &recording);
-                (next, end, ticks, None)
+                let (next, end, ticks, exec) = self.virtual_run(cfg, graph, &recording);
+                (next, end, ticks, None, exec)
             }
             ClockKind::Real => {
-                let (next, end, timing) = self.real_run(cfg, graph, &recording);
+                let (next, end, timing, exec) = self.real_run(cfg, graph, &recording);
                 let ticks = timing.iter().flatten().map(|t| t.ticks).collect();
-                (next, end, ticks, timing)
+                (next, end, ticks, timing, exec)
             }
         };
-        let metrics = live_metrics(cfg, &handles, &end, &ticks, timing);
+        let metrics = live_metrics(cfg, &handles, &end, &ticks, timing, exec);
         if let Some(r) = &recording {
             let _ = r.finish(&metrics, &end);
         }
@@ -328,6 +328,7 @@ pub(super) fn live_metrics(
     end: &RunEnd,
     ticks: &[u64],
     timing: Option<Vec<NodeTiming>>,
+    exec: Option<crate::executor::ExecFigures>,
 ) -> Metrics {
     summarize(
         &RunConfig {
@@ -338,5 +339,6 @@ pub(super) fn live_metrics(
         end,
         ticks,
         timing,
+        exec,
     )
 }

@@ -4,6 +4,7 @@
 use super::engine::{live_metrics, Engine, Next};
 use super::protocol::{Control, Telemetry};
 use crate::config::RunConfig;
+use crate::executor::ExecFigures;
 use crate::graph::Graph;
 use crate::metrics::NodeTiming;
 use crate::recording::Recording;
@@ -22,7 +23,7 @@ impl Engine {
         cfg: &RunConfig,
         graph: Graph,
         recording: &Option<Recording>,
-    ) -> (Next, RunEnd, Option<Vec<NodeTiming>>) {
+    ) -> (Next, RunEnd, Option<Vec<NodeTiming>>, Option<ExecFigures>) {
         let Graph { nodes, handles } = graph;
         if let Some(Err(e)) = cfg.rt_priority.map(crate::realtime::probe_fifo) {
             // Told now, not only when the run ends: node threads inherit this thread's
@@ -53,6 +54,8 @@ impl Engine {
             )),
             pause: Some(pause.clone()),
             start: None,
+            plan: Some(cfg.graph.execution_plan()),
+            track: cfg.graph.has_executors_or_compute(),
         };
         let start = Instant::now();
         let runner = {
@@ -67,6 +70,7 @@ impl Engine {
         let mut last_status = Instant::now();
         let mut result: Option<RunEnd> = None;
         let mut timing = None;
+        let mut exec = None;
         let mut runner = Some(runner);
         loop {
             if result.is_none() && runner.as_ref().is_some_and(|r| r.is_finished()) {
@@ -78,7 +82,9 @@ impl Engine {
                 let end = run.end.clone();
                 let ticks: Vec<u64> = run.timing.iter().map(|t| t.ticks).collect();
                 timing = Some(run.timing);
-                let metrics = live_metrics(cfg, &handles, &end, &ticks, timing.clone());
+                exec = run.exec;
+                let metrics =
+                    live_metrics(cfg, &handles, &end, &ticks, timing.clone(), exec.clone());
                 let _ = self.tx.send(Telemetry::Ended {
                     metrics: Box::new(metrics),
                     reason: end.reason.clone(),
@@ -121,6 +127,7 @@ impl Engine {
                     (None, Some(r)) => match r.join() {
                         Ok(run) => {
                             timing = Some(run.timing);
+                            exec = run.exec;
                             run.end
                         }
                         Err(_) => RunEnd {
@@ -133,7 +140,7 @@ impl Engine {
                         reason: EndReason::Interrupted,
                     },
                 };
-                return (next, end, timing);
+                return (next, end, timing, exec);
             }
             if last_status.elapsed() >= Duration::from_millis(33) {
                 // Once the run has ended (a fall, a watchdog, a failed node), its clock stops

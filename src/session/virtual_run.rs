@@ -4,6 +4,7 @@
 use super::engine::{live_metrics, Engine, Next};
 use super::protocol::{Control, Speed, Telemetry};
 use crate::config::RunConfig;
+use crate::executor::ExecFigures;
 use crate::graph::{Graph, GraphHandles};
 use crate::recording::Recording;
 use crate::run::Command;
@@ -20,10 +21,10 @@ impl Engine {
         cfg: &RunConfig,
         graph: Graph,
         recording: &Option<Recording>,
-    ) -> (Next, RunEnd, Vec<u64>) {
+    ) -> (Next, RunEnd, Vec<u64>, Option<ExecFigures>) {
         let Graph { mut nodes, handles } = graph;
         let actuator_bit = 1u64 << (cfg.graph.chain.actuator.0 % 64);
-        let mut sched = VirtualScheduler::with_offsets(&nodes, &cfg.phase_offsets);
+        let mut sched = crate::run::virtual_scheduler(cfg, &nodes);
         let mut paused = self.settings.start_paused;
         let mut step_pending = false;
         let mut ended: Option<RunEnd> = None;
@@ -43,6 +44,7 @@ impl Engine {
                                 Next::Quit,
                                 self.end_now(&sched, ended),
                                 sched.ticks().to_vec(),
+                                sched.figures(sched.now()),
                             )
                         }
                     }
@@ -91,6 +93,7 @@ impl Engine {
                             Next::Reset { next_seed },
                             self.end_now(&sched, ended),
                             sched.ticks().to_vec(),
+                            sched.figures(sched.now()),
                         )
                     }
                     Control::SwitchClock => {
@@ -98,6 +101,7 @@ impl Engine {
                             Next::SwitchClock,
                             self.end_now(&sched, ended),
                             sched.ticks().to_vec(),
+                            sched.figures(sched.now()),
                         )
                     }
                     Control::Quit => {
@@ -105,6 +109,7 @@ impl Engine {
                             Next::Quit,
                             self.end_now(&sched, ended),
                             sched.ticks().to_vec(),
+                            sched.figures(sched.now()),
                         )
                     }
                 }
@@ -169,7 +174,14 @@ impl Engine {
                 }
             }
             if let Some(end) = &ended {
-                let metrics = live_metrics(cfg, &handles, end, sched.ticks(), None);
+                let metrics = live_metrics(
+                    cfg,
+                    &handles,
+                    end,
+                    sched.ticks(),
+                    None,
+                    sched.figures(end.at),
+                );
                 self.status(sched.now(), paused, &handles);
                 let _ = self.tx.send(Telemetry::Ended {
                     metrics: Box::new(metrics),

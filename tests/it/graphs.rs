@@ -466,7 +466,7 @@ fn run_random(graph: &GraphSpec, seed: u64) -> RandomRun {
     let mut nodes = g.nodes;
     let mut sched = VirtualScheduler::new(&nodes);
     let end = sched.run(&mut nodes, cfg.duration, &StopFlag::new(), &mut |_| {});
-    let m = ratelab::run::summarize(&cfg, &g.handles, &end, sched.ticks(), None);
+    let m = ratelab::run::summarize(&cfg, &g.handles, &end, sched.ticks(), None, None);
     let counts = g
         .handles
         .topics

@@ -21,6 +21,7 @@ mod cli;
 mod custom_node;
 mod distributed;
 mod e2e_pty;
+mod executors;
 mod exercises;
 mod graphs;
 mod hostile;

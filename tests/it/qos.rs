@@ -455,7 +455,7 @@ proptest! {
                 let total = s.seen + s.dropped + s.expired + s.lost + s.refused + t.unseen_buffered() as u64 + s.in_flight;
                 assert_eq!(s.published, total, "{}: {s:?}", t.name());
             }
-            let m = ratelab::run::summarize(&cfg, &built.handles, &end, sched.ticks(), None);
+            let m = ratelab::run::summarize(&cfg, &built.handles, &end, sched.ticks(), None, None);
             serde_json::to_string(&m).unwrap()
         };
         prop_assert_eq!(once(), once());

@@ -6,6 +6,7 @@
 use crate::graph::estimator::VelocityFilter;
 use crate::msg::{PositionMsg, StateMsg};
 use crate::node::Flow;
+use crate::publisher::Publisher;
 use crate::time::Nanos;
 use crate::topic::Topic;
 use std::sync::Arc;
@@ -15,7 +16,7 @@ pub struct Estimator {
     /// Input.
     pub input: Arc<Topic<PositionMsg>>,
     /// Output.
-    pub output: Arc<Topic<StateMsg>>,
+    pub output: Publisher<StateMsg>,
     /// The filter.
     pub filter: VelocityFilter,
     /// `seq` of the last measurement fed to the filter.

@@ -27,7 +27,9 @@ pub use safety::Safety;
 pub use sensor::{Sensor, SensorNoise, SensorOutput};
 
 use super::spec::NodeId;
+use crate::executor::ComputeDraw;
 use crate::node::{Flow, Node};
+use crate::publisher::Outbox;
 use crate::qos::{Fault, Liveliness};
 use crate::rate::Rate;
 use crate::time::Nanos;
@@ -45,6 +47,10 @@ pub struct NodeCore {
     pub liveliness: Arc<Liveliness>,
     /// Faults injected into it (`--stall`, `--kill`).
     pub faults: Vec<Fault>,
+    /// Its publishers' outbox (held during a tick with a compute time).
+    pub outbox: Outbox,
+    /// Its compute time's draws; `None`: its ticks take no time.
+    pub compute: Option<ComputeDraw>,
 }
 
 /// A node of some kind around its [`NodeCore`].
@@ -110,5 +116,17 @@ impl Node for GraphNode {
                 Err(e) => panic!("{}", e.0),
             },
         }
+    }
+    fn compute_time(&mut self) -> Nanos {
+        self.core
+            .compute
+            .as_mut()
+            .map_or(Nanos::ZERO, ComputeDraw::draw)
+    }
+    fn hold_outputs(&mut self) {
+        self.core.outbox.hold();
+    }
+    fn publish_held(&mut self, at: Nanos) {
+        self.core.outbox.release(at);
     }
 }

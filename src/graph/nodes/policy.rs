@@ -5,6 +5,7 @@ use crate::msg::{ForceMsg, StateMsg};
 use crate::node::Flow;
 use crate::plant::GEAR_N;
 use crate::policy::BrainSlot;
+use crate::publisher::Publisher;
 use crate::time::Nanos;
 use crate::topic::Topic;
 use std::sync::Arc;
@@ -16,7 +17,7 @@ pub struct PolicyNode {
     /// Input.
     pub input: Arc<Topic<StateMsg>>,
     /// Output.
-    pub output: Arc<Topic<ForceMsg>>,
+    pub output: Publisher<ForceMsg>,
 }
 
 impl PolicyNode {

@@ -3,6 +3,7 @@
 
 use crate::msg::ForceMsg;
 use crate::node::Flow;
+use crate::publisher::Publisher;
 use crate::time::Nanos;
 use crate::topic::Topic;
 use std::sync::Arc;
@@ -12,7 +13,7 @@ pub struct Safety {
     /// Input.
     pub input: Arc<Topic<ForceMsg>>,
     /// Output.
-    pub output: Arc<Topic<ForceMsg>>,
+    pub output: Publisher<ForceMsg>,
     /// Largest magnitude passed on, N.
     pub max_force_n: f64,
 }

@@ -6,10 +6,9 @@ use crate::graph::spec::NodeId;
 use crate::graph::{lock, SharedPlant};
 use crate::msg::{PositionMsg, StateMsg};
 use crate::node::Flow;
+use crate::publisher::Publisher;
 use crate::time::Nanos;
-use crate::topic::Topic;
 use rand_distr::{Distribution, Normal};
-use std::sync::Arc;
 
 /// A sensor's state.
 pub struct Sensor {
@@ -24,9 +23,9 @@ pub struct Sensor {
 /// A sensor's topic: full state or positions.
 pub enum SensorOutput {
     /// Publishes the full state.
-    State(Arc<Topic<StateMsg>>),
+    State(Publisher<StateMsg>),
     /// Publishes positions.
-    Position(Arc<Topic<PositionMsg>>),
+    Position(Publisher<PositionMsg>),
 }
 
 /// Seeded Gaussian measurement noise.

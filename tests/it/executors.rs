@@ -1,0 +1,222 @@
+//! Executors and compute time, whole runs: a chain's latency is the sum of its compute times,
+//! one slow callback on a single-threaded executor starves the timer beside it (identically
+//! twice under the virtual clock, within bands under the real one), a second thread gives it
+//! back, the defaults change nothing, and bad executors are refused in one line.
+
+use ratelab::executor::{ComputeTime, ExecutorOverride};
+use ratelab::graph::GraphSpec;
+use ratelab::metrics::Metrics;
+use ratelab::policy::Scripted;
+use ratelab::{run, ClockKind, Nanos, RunConfig, RunOptions};
+use std::process::Command;
+
+use crate::repo;
+
+fn cfg(graph: GraphSpec, clock: ClockKind, secs: f64) -> RunConfig {
+    RunConfig {
+        clock,
+        duration: Nanos::from_secs_f64(secs).unwrap(),
+        graph,
+        ..RunConfig::default()
+    }
+}
+
+fn metrics(cfg: &RunConfig) -> (Metrics, String) {
+    let r = run(cfg, Box::new(Scripted), RunOptions::default()).unwrap();
+    let json = serde_json::to_string_pretty(&r.metrics).unwrap();
+    (r.metrics, json)
+}
+
+fn compute(spec: &mut GraphSpec, node: &str, ms: &str) {
+    spec.set_compute(node, ComputeTime::parse(ms).unwrap())
+        .unwrap();
+}
+
+/// `ratelab ARGS`: (exit code, stdout, stderr).
+fn ratelab(args: &[&str]) -> (i32, String, String) {
+    let o = Command::new(env!("CARGO_BIN_EXE_ratelab"))
+        .args(args)
+        .current_dir(crate::REPO)
+        .output()
+        .unwrap();
+    (
+        o.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&o.stdout).into_owned(),
+        String::from_utf8_lossy(&o.stderr).into_owned(),
+    )
+}
+
+#[test]
+fn every_stage_of_the_estimator_chain_adds_its_compute_time_to_the_latency() {
+    let mut g = GraphSpec::load(&repo("graphs/cartpole-estimator.toml")).unwrap();
+    assert_eq!(
+        g.node_names(),
+        vec!["sensor", "estimator", "policy", "actuator"]
+    );
+    compute(&mut g, "sensor", "1");
+    compute(&mut g, "estimator", "2");
+    compute(&mut g, "policy", "3");
+    let mut c = cfg(g, ClockKind::Virtual, 5.0);
+    // Each stage's tick starts as the stage before it publishes: nothing else waits.
+    c.phase_offsets = [0, 1, 3, 6].map(Nanos::from_millis).to_vec();
+    let (m, _) = metrics(&c);
+    assert!(m.balanced, "{}", m.headline());
+    for (what, v) in [
+        ("mean", m.mean_latency_ms),
+        ("p50", m.latency_p50_ms),
+        ("max", m.latency_max_ms),
+    ] {
+        assert!(
+            (v - 6.0).abs() < 1e-9,
+            "{what} latency {v} ms, not 1 + 2 + 3"
+        );
+    }
+    let policy = &m.nodes["policy"];
+    assert_eq!(policy.compute_ms, Some(3.0));
+    let x = policy.exec.as_ref().unwrap();
+    assert_eq!((x.response_time_max_ms, x.skipped_ticks), (3.0, 0));
+    // The same offsets without compute times: no latency at all (the chapter's instant).
+    let mut zero = c.clone();
+    for n in ["sensor", "estimator", "policy"] {
+        compute(&mut zero.graph, n, "0");
+    }
+    zero.phase_offsets = vec![Nanos::ZERO; 4];
+    let (m0, json0) = metrics(&zero);
+    assert_eq!(m0.latency_max_ms, 0.0);
+    assert!(!json0.contains("response_time"), "defaults add no key");
+}
+
+#[test]
+fn one_slow_callback_on_a_single_threaded_executor_starves_the_sensor_the_same_way_twice() {
+    let _machine = crate::machine::shared();
+    let mut g = GraphSpec::chapter();
+    compute(&mut g, "policy", "30");
+    g.set_executor(ExecutorOverride::parse("single_threaded").unwrap());
+    let c = cfg(g.clone(), ClockKind::Virtual, 10.0);
+    let (m, json) = metrics(&c);
+    let (_, again) = metrics(&c);
+    assert_eq!(json, again, "byte-identical");
+    let sensor = &m.nodes["sensor"];
+    let x = sensor.exec.as_ref().unwrap();
+    // The sensor runs only between the policy's 30 ms callbacks: about 1 / 30 ms, not 50 Hz.
+    let hz = sensor.ticks as f64 / m.sim_time_s;
+    assert!((30.0..=36.0).contains(&hz), "sensor at {hz} Hz");
+    assert!(x.skipped_ticks > 0, "{x:?}");
+    assert!(x.response_time_max_ms >= 30.0, "{x:?}");
+    assert_eq!(m.executors.len(), 1);
+    assert!(m.executors[0].utilization > 0.85, "{:?}", m.executors);
+    // A second thread: the sensor keeps its 50 Hz grid.
+    g.set_executor(ExecutorOverride::parse("multi_threaded:2").unwrap());
+    let (m2, _) = metrics(&cfg(g, ClockKind::Virtual, m.sim_time_s.max(1.0)));
+    let s2 = &m2.nodes["sensor"];
+    assert_eq!(s2.exec.as_ref().unwrap().skipped_ticks, 0);
+    let hz2 = s2.ticks as f64 / m2.sim_time_s;
+    assert!((49.0..=51.0).contains(&hz2), "sensor at {hz2} Hz");
+}
+
+#[test]
+fn the_defaults_said_out_loud_change_nothing() {
+    let base = cfg(GraphSpec::chapter(), ClockKind::Virtual, 5.0);
+    let (_, json) = metrics(&base);
+    let mut g = GraphSpec::chapter();
+    g.set_executor(ExecutorOverride::parse("per_node").unwrap());
+    compute(&mut g, "policy", "0");
+    let (_, same) = metrics(&cfg(g, ClockKind::Virtual, 5.0));
+    assert_eq!(json, same);
+}
+
+#[test]
+fn the_real_clock_shows_the_same_starvation_within_bands() {
+    let _machine = crate::machine::alone();
+    let mut g = GraphSpec::chapter();
+    compute(&mut g, "policy", "30");
+    g.set_executor(ExecutorOverride::parse("single_threaded").unwrap());
+    let (m, _) = metrics(&cfg(g.clone(), ClockKind::Real, 2.0));
+    let timing = m.node_timing.as_ref().unwrap();
+    let sensor = timing.iter().find(|t| t.node == "sensor").unwrap();
+    // A shared, noisy machine: the band is wide, the effect is not (50 Hz without it).
+    assert!(
+        (22.0..=40.0).contains(&sensor.measured_hz),
+        "sensor at {} Hz",
+        sensor.measured_hz
+    );
+    assert!(m.nodes["sensor"].exec.as_ref().unwrap().skipped_ticks > 0);
+    g.set_executor(ExecutorOverride::parse("multi_threaded:2").unwrap());
+    let (m2, _) = metrics(&cfg(g, ClockKind::Real, 2.0));
+    let sensor = m2
+        .node_timing
+        .as_ref()
+        .unwrap()
+        .iter()
+        .find(|t| t.node == "sensor")
+        .unwrap()
+        .clone();
+    assert!(
+        (44.0..=52.0).contains(&sensor.measured_hz),
+        "sensor at {} Hz with its own thread",
+        sensor.measured_hz
+    );
+}
+
+#[test]
+fn the_command_line_prints_the_executor_lines_and_refuses_bad_executors() {
+    let (code, out, err) = ratelab(&[
+        "run",
+        "--clock",
+        "virtual",
+        "--duration",
+        "2",
+        "--compute",
+        "policy=30",
+        "--executor",
+        "single_threaded",
+    ]);
+    assert_eq!(code, 0, "{err}");
+    assert!(
+        out.contains("executor main: single_threaded, 1 thread,"),
+        "{out}"
+    );
+    assert!(
+        out.contains("node policy   compute 30 ms | response p50"),
+        "{out}"
+    );
+    for (args, want) in [
+        (vec!["--executor", "fifo"], "unknown executor 'fifo'"),
+        (vec!["--compute", "policy=-1"], "compute time must be"),
+        (vec!["--compute", "nobody=3"], "unknown node 'nobody'"),
+    ] {
+        let mut all = vec!["run", "--clock", "virtual", "--duration", "1"];
+        all.extend(args);
+        let (code, _, err) = ratelab(&all);
+        assert_eq!(code, 2, "{all:?}: {err}");
+        assert!(err.contains(want), "{all:?}: {err}");
+        assert!(!err.contains("panicked"), "{err}");
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("two.toml");
+    let text = std::fs::read_to_string(repo("graphs/cartpole.toml")).unwrap()
+        + "\n[executors.a]\nkind = \"single_threaded\"\nnodes = [\"policy\"]\n\n[executors.b]\nkind = \"single_threaded\"\nnodes = [\"policy\"]\n";
+    std::fs::write(&file, text).unwrap();
+    let (code, _, err) = ratelab(&[
+        "run",
+        "--clock",
+        "virtual",
+        "--graph",
+        file.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 2, "{err}");
+    assert!(
+        err.contains("two.toml:") && err.contains("already in executor 'a'"),
+        "{err}"
+    );
+    assert_eq!(err.trim().lines().count(), 1, "{err}");
+    let (code, _, err) = ratelab(&[
+        "launch",
+        "--processes",
+        "--headless",
+        "--compute",
+        "policy=3",
+    ]);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("does not run them yet"), "{err}");
+}
