@@ -56,6 +56,17 @@ fn main() {
             "exercises/ex6_own_node.toml",
             &["smallest_clamp_n"][..],
         ),
+        (
+            "ex7",
+            "exercises/ex7_slow_callback.toml",
+            &[
+                "sensor_hz_single_threaded",
+                "skipped_ticks_single_threaded",
+                "balances_single_threaded",
+                "sensor_hz_shared_group",
+                "sensor_hz_own_group",
+            ][..],
+        ),
     ] {
         let file = root.join(file);
         println!("cargo:rerun-if-changed={}", file.display());

@@ -1,4 +1,4 @@
-//! `ratelab exercise ex1|ex2|ex3|ex4|ex5|ex6`: predict, run, reconcile.
+//! `ratelab exercise ex1|ex2|ex3|ex4|ex5|ex6|ex7`: predict, run, reconcile.
 
 use anyhow::{bail, Context};
 use ratelab::exercise::{
@@ -7,17 +7,19 @@ use ratelab::exercise::{
     outcome_ex5, outcome_ex6, required_keys, Check, Ex4Bands, Ex4Run, Ex5Bands, Ex5Case, Ex5Run,
     Ex6Bands, Ex6Run, ExerciseFile, Outcome,
 };
+use ratelab::exercise::{check_ex7, measure_ex7, outcome_ex7, Ex7Bands, Ex7Case, Ex7Run};
 use ratelab::metrics::Metrics;
 use std::path::Path;
 
 /// Every exercise and its file, in order.
-const FILES: [(&str, &str); 6] = [
+const FILES: [(&str, &str); 7] = [
     ("ex1", "ex1_rate_cliff.toml"),
     ("ex2", "ex2_queue_trap.toml"),
     ("ex3", "ex3_jitter_phase.toml"),
     ("ex4", "ex4_stale_queue.toml"),
     ("ex5", "ex5_watchdog.toml"),
     ("ex6", "ex6_own_node.toml"),
+    ("ex7", "ex7_slow_callback.toml"),
 ];
 
 fn print_checks(checks: &[Check]) {
@@ -68,7 +70,7 @@ pub fn run_exercise(
     graph: &ratelab::graph::GraphSpec,
 ) -> anyhow::Result<()> {
     let Some((ex, file)) = FILES.iter().find(|(e, _)| *e == which) else {
-        bail!("unknown exercise '{which}' (expected ex1, ex2, ex3, ex4, ex5 or ex6)");
+        bail!("unknown exercise '{which}' (expected ex1, ex2, ex3, ex4, ex5, ex6 or ex7)");
     };
     let path = dir.join(file);
     let f = ExerciseFile::load(&path)?;
@@ -191,6 +193,11 @@ pub fn run_exercise(
             let script = dir.join(&b.script);
             let runs = with_spinner("measuring ex6", || measure_ex6(b, graph, &script))?;
             print_ex6(b, &f, &runs);
+        }
+        "ex7" => {
+            let b = &bands.ex7;
+            let runs = with_spinner("measuring ex7", || measure_ex7(b, graph))?;
+            print_ex7(b, &f, &runs);
         }
         _ => {
             let b = &bands.ex3;
@@ -571,6 +578,49 @@ fn print_ex6(b: &Ex6Bands, f: &ExerciseFile, runs: &[Ex6Run]) {
         b.smallest_balancing_clamp_n
     ));
     println!("  ./scripts/lab.sh --clock virtual --graph graphs/cartpole-safety-python.toml");
+}
+
+/// ex7's table (per case and seed: the sensor's rate and skipped ticks, the policy's
+/// response time, the executor's utilization, the verdict), the reconcile and the checks.
+fn print_ex7(b: &Ex7Bands, f: &ExerciseFile, runs: &[Ex7Run]) {
+    println!(
+        "{:<21} | seed | sensor Hz | skipped | policy response p50/max | executor busy | balanced",
+        "executor"
+    );
+    for case in Ex7Case::ALL {
+        for r in runs.iter().filter(|r| r.case == case) {
+            let m = &r.metrics;
+            let policy = m
+                .nodes
+                .values()
+                .find(|n| n.kind == "policy")
+                .and_then(|n| n.exec.clone())
+                .unwrap_or_default();
+            let busy = m.executors.first().map_or(0.0, |e| e.utilization * 100.0);
+            println!(
+                "{:<21} | {:>4} | {:>9.1} | {:>7} | {:>10.1} / {:>5.1} ms | {:>12.0}% | {}",
+                case.label(),
+                r.seed,
+                r.sensor_hz(b),
+                r.sensor_skipped(b),
+                policy.response_time_p50_ms,
+                policy.response_time_max_ms,
+                busy,
+                if m.balanced {
+                    "Y".to_string()
+                } else {
+                    m.fell_at_s.map_or("n".into(), |t| format!("n@{t:.2}"))
+                }
+            );
+        }
+    }
+    say_reconcile(f, &outcome_ex7(b, runs));
+    print_checks(&check_ex7(b, runs));
+    println!();
+    paragraph(
+        "Reconcile: an executor runs one callback per thread at a time, and a callback is not          interrupted. Single-threaded, each 30 ms policy tick holds the only thread, so the          sensor's timer fires late, and the periods that pass meanwhile are skipped, not          made up (ROS 2's timers stay on their grid). A second thread does nothing while          both callbacks are in one mutually exclusive group: the group, not the thread count,          decides what may run together, and a node's callbacks share its default group. In a          group of its own the sensor gets the second thread and its rate back. The pole          hardly notices either way: the policy reads the newest reading when it starts, and          the action's age is the policy's own 30 ms plus the wait for the actuator's tick.          What the starved sensor costs is every other subscriber of /obs (a logger, an          estimator), which would see a third of its readings missing. Try it with the          policy's compute time changed:",
+    );
+    println!("  ./scripts/lab.sh run --clock virtual --graph graphs/cartpole-executors.toml --executor single_threaded --compute policy=60");
 }
 
 /// The learner's prediction against the outcome, in words.

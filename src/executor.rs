@@ -10,8 +10,8 @@
 //!
 //! - **Timers** follow rcl's `rcl_timer_call` (rcl/src/rcl/timer.c): a call moves the next
 //!   call time one period on from the previous *scheduled* time, and a timer that missed
-//!   whole periods skips them and stays phase-aligned ([`timer_call`]): no burst of catch-up
-//!   ticks. Those skipped periods are the node's `skipped_ticks`.
+//!   whole periods skips them and stays phase-aligned ([`crate::rate::next_deadline`]): no
+//!   burst of catch-up ticks. Those skipped periods are the node's `skipped_ticks`.
 //! - **Order**: an executor takes a snapshot of its ready callbacks when it has nothing left
 //!   to run (a *polling point*) and runs the snapshot in registration order (here the node
 //!   order of the graph file, its tie-break rank) before it looks again: round-robin over
@@ -25,27 +25,6 @@
 
 use crate::time::Nanos;
 use rand_distr::{Distribution, Uniform};
-
-/// rcl's timer call: the timer was due at `next_call` and is called at `now` (≥ `next_call`)
-/// with period `period`. Returns its new next call time and how many whole periods it
-/// skipped. As `rcl_timer_call`: `next = next_call + period`; when `next < now`, it moves on
-/// by as many periods as make it `≥ now` (so a timer called exactly one period late is due
-/// again at once, as in rcl). A zero period is always due (`now`).
-pub fn timer_call(next_call: Nanos, now: Nanos, period: Nanos) -> (Nanos, u64) {
-    let next = next_call.saturating_add(period);
-    if next >= now {
-        return (next, 0);
-    }
-    if period.0 == 0 {
-        return (now, 0);
-    }
-    let ahead = now.0 - next.0;
-    let periods = 1 + (ahead - 1) / period.0;
-    (
-        Nanos(next.0.saturating_add(periods.saturating_mul(period.0))),
-        periods,
-    )
-}
 
 /// What a node's tick costs: `mean ± jitter`, uniform, drawn per tick from a generator
 /// seeded by the run's seed and the node's rank (so virtual runs stay byte-identical).
@@ -469,7 +448,7 @@ pub struct NodeExecFigures {
     /// Largest, ms.
     pub response_time_max_ms: f64,
     /// Periods its timer skipped because the previous tick or another callback held the
-    /// thread ([`timer_call`]).
+    /// thread ([`crate::rate::next_deadline`]).
     pub skipped_ticks: u64,
     /// Time its ticks held a thread (the sum of their compute times), ms.
     pub busy_ms: f64,
@@ -500,24 +479,6 @@ pub struct ExecFigures {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn a_timer_on_time_moves_one_period() {
-        let p = Nanos(20);
-        assert_eq!(timer_call(Nanos(100), Nanos(100), p), (Nanos(120), 0));
-        assert_eq!(timer_call(Nanos(100), Nanos(119), p), (Nanos(120), 0));
-    }
-
-    #[test]
-    fn a_late_timer_skips_whole_periods_and_stays_on_its_grid() {
-        let p = Nanos(20);
-        // Exactly a period late: due again at once (rcl: `next < now` only then moves on).
-        assert_eq!(timer_call(Nanos(100), Nanos(120), p), (Nanos(120), 0));
-        assert_eq!(timer_call(Nanos(100), Nanos(121), p), (Nanos(140), 1));
-        assert_eq!(timer_call(Nanos(100), Nanos(175), p), (Nanos(180), 3));
-        assert_eq!(timer_call(Nanos(100), Nanos(180), p), (Nanos(180), 3));
-        assert_eq!(timer_call(Nanos(5), Nanos(9), Nanos(0)), (Nanos(9), 0));
-    }
 
     #[test]
     fn compute_times_parse_and_draw_within_their_spread() {

@@ -13,6 +13,12 @@
 //! - ex6, write your own node: the learner's Python safety limiter in the safety graph's
 //!   place, over a ladder of clamps, beside the built-in safety node: the smallest clamp
 //!   that still balances, and whether the learner's node limits as the built-in one does.
+//! - ex7, the slow callback ([`ex7`]): a 30 ms policy callback beside the sensor on one
+//!   executor, single-threaded, on two threads in one callback group, and in two groups.
+
+mod ex7;
+
+pub use ex7::{check_ex7, measure_ex7, outcome_ex7, Ex7Bands, Ex7Case, Ex7Run};
 
 use crate::config::{duration_from_secs, phase_offset_from_ms, ClockKind, RunConfig};
 use crate::graph::GraphSpec;
@@ -229,6 +235,8 @@ pub struct Bands {
     pub ex5: Ex5Bands,
     /// ex6.
     pub ex6: Ex6Bands,
+    /// ex7.
+    pub ex7: Ex7Bands,
 }
 
 /// The graph an exercise runs on when none is given: ex5's and ex6's (resolved against the
@@ -239,9 +247,10 @@ pub struct Bands {
 pub fn default_graph(exercise: &str, dir: &Path) -> Result<Option<PathBuf>, ExerciseError> {
     let graph = |b: Bands| match exercise {
         "ex5" => Some(b.ex5.graph),
+        "ex7" => Some(b.ex7.graph),
         _ => Some(b.ex6.graph),
     };
-    if !matches!(exercise, "ex5" | "ex6") {
+    if !matches!(exercise, "ex5" | "ex6" | "ex7") {
         return Ok(None);
     }
     Ok(graph(load_bands(&dir.join("bands.toml"))?).map(|g| dir.join(g)))
@@ -362,6 +371,20 @@ pub enum Outcome {
         /// Same balanced/fell, at the same step, as the built-in safety node, everywhere.
         matches_builtin: bool,
     },
+    /// ex7: the sensor's achieved rate in each case (the lowest over the seeds), its skipped
+    /// ticks single-threaded (the most over the seeds), and the single-threaded verdict.
+    Ex7 {
+        /// Single-threaded, Hz.
+        sensor_hz_single_threaded: f64,
+        /// Single-threaded.
+        skipped_ticks_single_threaded: u64,
+        /// Single-threaded, on every seed.
+        balances_single_threaded: bool,
+        /// Two threads, one mutually exclusive group, Hz.
+        sensor_hz_shared_group: f64,
+        /// Two threads, the sensor in its own group, Hz.
+        sensor_hz_own_group: f64,
+    },
 }
 
 /// The names a learner gives the reactions at the high loss (ex5's `keeps_it_up`), in
@@ -395,6 +418,7 @@ impl ExerciseFile {
             }
         };
         match *outcome {
+            Outcome::Ex7 { .. } => ex7::reconcile(&self.prediction, outcome),
             Outcome::Ex1 { fails_at_hz } => {
                 let measured = fails_at_hz.map_or("it never fell in the range".to_string(), |hz| {
                     format!("it first fell at {hz} Hz")
@@ -573,6 +597,13 @@ pub fn required_keys(exercise: &str) -> &'static [&'static str] {
             "reliable_latency_ms",
         ],
         "ex6" => &["smallest_clamp_n"],
+        "ex7" => &[
+            "sensor_hz_single_threaded",
+            "skipped_ticks_single_threaded",
+            "balances_single_threaded",
+            "sensor_hz_shared_group",
+            "sensor_hz_own_group",
+        ],
         _ => &[],
     }
 }

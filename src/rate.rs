@@ -149,8 +149,15 @@ impl Default for DeadlineWaiter {
 /// current time `now` and the period. On time, that is `scheduled + period`. When a tick
 /// ran so late that one or more whole deadlines have already passed, those ticks are
 /// skipped and the schedule stays on its grid (`scheduled + k·period`, the first one
-/// after `now`), as ROS timers do, rather than firing a burst to catch up.
-/// Returns the deadline and the number of ticks skipped.
+/// after `now`), as ROS timers do, rather than firing a burst to catch up (rcl's
+/// `rcl_timer_call`, rcl/src/rcl/timer.c). Returns the deadline and the number of ticks
+/// skipped.
+///
+/// One difference from rcl, on purpose: a tick late by *exactly* whole periods skips the
+/// deadline it lands on (rcl calls the timer again at once when `next == now`). Under a real
+/// clock the call always comes a little after, so rcl skips too; under the virtual clock
+/// exact instants are common (a 30 ms callback ends on a 20 ms grid every 60 ms), and
+/// skipping keeps the virtual model what the real clock does.
 pub fn next_deadline(scheduled: Nanos, now: Nanos, period: Nanos) -> (Nanos, u64) {
     let next = scheduled.saturating_add(period);
     if now < next || period.0 == 0 {

@@ -5,8 +5,8 @@
 //! outside it, and its end wakes the executors' waiting threads.
 
 use super::{
-    catch_quietly, next_deadline, panic_message, real_tick, thread_cpu_time, timer_call,
-    LatencyStats, NodeExecStats, RealOptions, StopFlag,
+    catch_quietly, next_deadline, panic_message, real_tick, thread_cpu_time, LatencyStats,
+    NodeExecStats, RealOptions, StopFlag,
 };
 use crate::clock::{Clock, MonotonicClock};
 use crate::executor::{Dispatch, ExecutionPlan, ExecutorKind};
@@ -266,7 +266,7 @@ fn worker(inner: &Inner, e: usize) {
             continue;
         };
         let release = st.next_call[i];
-        let (next, skipped) = timer_call(release, now, node.rate().period());
+        let (next, skipped) = next_deadline(release, now, node.rate().period());
         st.next_call[i] = next;
         st.ticks[i] += 1;
         st.stats[i].skipped_ticks += skipped;

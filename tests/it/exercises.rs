@@ -8,6 +8,7 @@ use ratelab::exercise::{
     measure_ex1, measure_ex2, measure_ex3, measure_ex4, measure_ex5, measure_ex6, outcome_ex4,
     outcome_ex5, outcome_ex6, required_keys, Bands, Ex5Case, ExerciseFile, Outcome,
 };
+use ratelab::exercise::{check_ex7, measure_ex7, outcome_ex7, Ex7Case, Ex7Run};
 use ratelab::graph::GraphSpec;
 use std::path::PathBuf;
 
@@ -182,6 +183,60 @@ fn ex6_measurement_your_own_node() {
     assert!(err.contains("no node 'safety'"), "{err}");
 }
 
+#[test]
+fn ex7_measurement_slow_callback() {
+    let _machine = crate::machine::shared();
+    let b = bands();
+    let graph = default_graph("ex7", &path(""))
+        .unwrap()
+        .expect("ex7 names its graph");
+    let g = GraphSpec::load(&graph).unwrap();
+    assert_eq!(g.name, "cartpole-executors");
+    let runs = measure_ex7(&b.ex7, &g).unwrap();
+    assert_eq!(runs.len(), Ex7Case::ALL.len() * b.ex7.seeds.len());
+    assert_all(check_ex7(&b.ex7, &runs));
+    let Outcome::Ex7 {
+        sensor_hz_single_threaded,
+        skipped_ticks_single_threaded,
+        balances_single_threaded,
+        sensor_hz_shared_group,
+        sensor_hz_own_group,
+    } = outcome_ex7(&b.ex7, &runs)
+    else {
+        unreachable!("ex7's outcome")
+    };
+    assert!(balances_single_threaded);
+    assert!(skipped_ticks_single_threaded > 0);
+    assert_eq!(sensor_hz_single_threaded, sensor_hz_shared_group);
+    assert!(sensor_hz_own_group > sensor_hz_single_threaded + 10.0);
+    // Virtual runs: the same thing twice.
+    let json = |rs: &[Ex7Run]| {
+        rs.iter()
+            .map(|r| serde_json::to_string(&r.metrics).unwrap())
+            .collect::<Vec<_>>()
+    };
+    assert_eq!(json(&runs), json(&measure_ex7(&b.ex7, &g).unwrap()));
+    // The checks fail off the measured shape: every node on a thread of its own.
+    let mut free = g.clone();
+    free.set_executor(ratelab::executor::ExecutorOverride::parse("per_node").unwrap());
+    let off = measure_ex7(&b.ex7, &free).unwrap();
+    assert!(!check_ex7(&b.ex7, &off)[1].passed || !check_ex7(&b.ex7, &off)[0].passed);
+    // The reconcile speaks to every key.
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("ex7.toml");
+    std::fs::write(
+        &file,
+        "title = \"t\"\nestimated_minutes = 1\nobjective = \"o\"\ninstructions = \"i\"\n[prediction]\nsensor_hz_single_threaded = 50\nskipped_ticks_single_threaded = 0\nbalances_single_threaded = false\nsensor_hz_shared_group = 50\nsensor_hz_own_group = 50\nwhy = \"w\"\n",
+    )
+    .unwrap();
+    let f = ExerciseFile::load(&file).unwrap();
+    let lines = f.reconcile(&outcome_ex7(&b.ex7, &runs));
+    assert_eq!(lines.len(), 5, "{lines:?}");
+    assert!(lines.iter().all(|l| !l.contains("missing")), "{lines:?}");
+    assert!(lines[0].contains("33.3 Hz"), "{lines:?}");
+    assert!(lines[4].contains("50.0 Hz"), "{lines:?}");
+}
+
 fn prediction_recorded(ex: &str, file: &str) {
     let f = ExerciseFile::load(&path(file)).unwrap();
     assert!(
@@ -247,6 +302,15 @@ fn ex6_prediction_recorded() {
 }
 
 #[test]
+#[cfg_attr(
+    ex7_prediction_empty,
+    ignore = "ex7: write your prediction in exercises/ex7_slow_callback.toml"
+)]
+fn ex7_prediction_recorded() {
+    prediction_recorded("ex7", "ex7_slow_callback.toml");
+}
+
+#[test]
 fn exercise_files_are_valid() {
     for file in [
         "ex1_rate_cliff.toml",
@@ -255,6 +319,7 @@ fn exercise_files_are_valid() {
         "ex4_stale_queue.toml",
         "ex5_watchdog.toml",
         "ex6_own_node.toml",
+        "ex7_slow_callback.toml",
     ] {
         let f = ExerciseFile::load(&path(file)).unwrap();
         assert!(
@@ -292,11 +357,21 @@ fn the_texts_read_before_predicting_give_no_answer_away() {
         // ex6: the smallest clamp that balances.
         ("0.75 N", "ex6's smallest clamp"),
         ("down to", "ex6's smallest clamp"),
+        // ex7: the starved sensor's rate, and what a second thread does.
+        ("33", "ex7's single-threaded sensor rate"),
+        ("does not help", "ex7's shared group"),
+        ("idles", "ex7's shared group"),
     ];
-    let mut texts = vec![(
-        "exercises/README.md".to_string(),
-        std::fs::read_to_string(path("README.md")).unwrap(),
-    )];
+    let mut texts = vec![
+        (
+            "exercises/README.md".to_string(),
+            std::fs::read_to_string(path("README.md")).unwrap(),
+        ),
+        (
+            "graphs/cartpole-executors.toml".to_string(),
+            std::fs::read_to_string(crate::repo("graphs/cartpole-executors.toml")).unwrap(),
+        ),
+    ];
     for ex in [
         "ex1_rate_cliff.toml",
         "ex2_queue_trap.toml",
@@ -304,6 +379,7 @@ fn the_texts_read_before_predicting_give_no_answer_away() {
         "ex4_stale_queue.toml",
         "ex5_watchdog.toml",
         "ex6_own_node.toml",
+        "ex7_slow_callback.toml",
     ] {
         let f = ExerciseFile::load(&path(ex)).unwrap();
         texts.push((
