@@ -437,24 +437,25 @@ pub fn run_member(opts: &MemberOptions, stop: &StopFlag) -> Result<(), DistError
             .collect(),
     );
     let mut subscribers = Vec::new();
+    let refusals = Arc::new(Refusals::default());
     for &t in &inbound {
         let topic = handles.topic(t).clone();
         let arrivals = arrivals.clone();
         let lat = wire_latency.clone();
         let offset = Mutex::new(None);
+        let refusals = refusals.clone();
+        let process = opts.process.clone();
         subscribers.push(
             session
                 .declare_subscriber(keys.topic(&spec.topic(t).name))
                 .callback(move |s| {
-                    let Ok(sample) = WireSample::decode(&s.payload().to_bytes()) else {
-                        return;
+                    let sample = match WireSample::decode(&s.payload().to_bytes()) {
+                        Ok(sample) => sample,
+                        Err(e) => return refusals.note(&process, topic.name(), &e),
                     };
                     let (seq, sent) = (sample.seq, sample.sent_mono_ns);
-                    if sample
-                        .deliver(&topic, &mut crate::graph::lock(&offset))
-                        .is_err()
-                    {
-                        return;
+                    if let Err(e) = sample.deliver(&topic, &mut crate::graph::lock(&offset)) {
+                        return refusals.note(&process, topic.name(), &e);
                     }
                     let took = wire::mono_now_ns().saturating_sub(sent);
                     crate::graph::lock(&lat[t.0]).record(Nanos(took));
@@ -1068,6 +1069,36 @@ fn wire_links(
             }
         })
         .collect()
+}
+
+/// Samples a process refused (malformed, of the wrong type, numbered out of bounds): counted,
+/// and said on stderr (which the launcher shows) at the first and then at most every 10 s,
+/// so a flood of bad samples cannot flood the terminal. The line holds only what this
+/// process wrote (the topic's name from its own graph, the reason), never the sample's text.
+#[derive(Default)]
+struct Refusals {
+    count: AtomicU64,
+    /// When the last line was printed, CLOCK_MONOTONIC ns (0: never).
+    said_at: AtomicU64,
+}
+
+impl Refusals {
+    /// Period between two lines, ns.
+    const EVERY_NS: u64 = 10_000_000_000;
+
+    fn note(&self, process: &str, topic: &str, reason: &str) {
+        let n = self.count.fetch_add(1, Ordering::SeqCst) + 1;
+        let now = wire::mono_now_ns().max(1);
+        let last = self.said_at.load(Ordering::SeqCst);
+        if (last == 0 || now.saturating_sub(last) >= Self::EVERY_NS)
+            && self
+                .said_at
+                .compare_exchange(last, now, Ordering::SeqCst, Ordering::SeqCst)
+                .is_ok()
+        {
+            eprintln!("[ratelab] {process}: {topic}: refused {reason} ({n} refused so far)");
+        }
+    }
 }
 
 #[cfg(test)]

@@ -26,6 +26,11 @@ pub const MAX_CONTROL_BYTES: usize = 4 << 20;
 /// leaves room and keeps every counter far from overflow.
 pub const MAX_SEQ: u64 = 1 << 40;
 
+/// The most a subscriber accepts a publisher's `seq` to move ahead of the last it received:
+/// a gap up to this is counted as lost on the wire, a larger one refused
+/// ([`WireSample::deliver`]). A 10 000 Hz publisher takes 100 s to publish this many.
+pub const MAX_SEQ_JUMP: u64 = 1_000_000;
+
 /// A message's payload on the wire, by message type.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub enum WireData {
@@ -91,10 +96,13 @@ impl WireSample {
     /// before the first sample) lets a subscriber join late: what was published before its
     /// first sample is not its loss. After that, a gap in `seq` is counted as lost on the wire
     /// ([`crate::topic::Topic::count_lost`]) before the sample is published. A publisher that
-    /// restarted (its `seq` went back) is taken as a new one.
+    /// restarted (its `seq` went back) is taken as a new one. A `seq` more than
+    /// [`MAX_SEQ_JUMP`] ahead of the last is refused, not counted as lost: no publisher gets
+    /// that far ahead of its subscriber in a run, and a forged number must not inflate `lost`.
     ///
     /// # Errors
-    /// The payload's type is not the topic's (a graph that differs between processes).
+    /// The payload's type is not the topic's (a graph that differs between processes), or its
+    /// `seq` jumps too far ahead (nothing is published or counted).
     pub fn deliver(self, topic: &AnyTopic, offset: &mut Option<i128>) -> Result<(), String> {
         let stamp = Nanos(self.stamp_ns);
         let origin = self.origin_ns.map(Nanos);
@@ -106,8 +114,13 @@ impl WireSample {
                     Some(off) if seq - off >= next - 1 => off,
                     _ => seq - next, // the first sample, or a restarted publisher
                 };
-                *offset = Some(off);
                 let gap = u64::try_from(seq - off - next).unwrap_or(0);
+                if gap > MAX_SEQ_JUMP {
+                    return Err(format!(
+                        "a sample numbered {gap} ahead of the last (at most {MAX_SEQ_JUMP})"
+                    ));
+                }
+                *offset = Some(off);
                 if gap > 0 {
                     $t.count_lost(gap);
                 }
@@ -134,8 +147,9 @@ impl WireSample {
         postcard::to_allocvec(self).unwrap_or_default()
     }
 
-    /// Decode, refusing anything over [`MAX_SAMPLE_BYTES`] or malformed (a `seq` beyond
-    /// [`MAX_SEQ`] too: no run publishes that many, and counters must not overflow).
+    /// Decode, refusing anything over [`MAX_SAMPLE_BYTES`] or malformed: it must decode
+    /// exactly (no byte after its end), and a `seq` beyond [`MAX_SEQ`] is refused too (no run
+    /// publishes that many, and counters must not overflow).
     ///
     /// # Errors
     /// One line.
@@ -146,8 +160,14 @@ impl WireSample {
                 bytes.len()
             ));
         }
-        let s: WireSample =
-            postcard::from_bytes(bytes).map_err(|e| format!("a malformed sample: {e}"))?;
+        let (s, rest): (WireSample, &[u8]) =
+            postcard::take_from_bytes(bytes).map_err(|e| format!("a malformed sample: {e}"))?;
+        if !rest.is_empty() {
+            return Err(format!(
+                "a malformed sample: {} bytes after its end",
+                rest.len()
+            ));
+        }
         if s.seq > MAX_SEQ {
             return Err(format!("a sample numbered {} (at most {MAX_SEQ})", s.seq));
         }
@@ -414,6 +434,13 @@ mod tests {
             ..s.clone()
         };
         assert!(WireSample::decode(&huge.encode()).is_err());
+        // Exactly: a valid sample with a byte after it, or a run of zeros (which starts like
+        // a sample numbered 0), is refused.
+        let mut longer = s.encode();
+        longer.push(0);
+        let e = WireSample::decode(&longer).unwrap_err();
+        assert!(e.contains("1 bytes after its end"), "{e}");
+        assert!(WireSample::decode(&[0u8; 1024]).is_err());
         assert!(decode_json::<ToMember>(b"{\"msg\":\"nope\"}").is_err());
     }
 
@@ -446,6 +473,17 @@ mod tests {
         sample(1).deliver(&t, &mut off).unwrap();
         assert_eq!(t.stats().lost, 2);
         assert_eq!(t.stats().published, 6);
+        // A number far ahead is refused: nothing published, nothing counted lost, and the
+        // numbering goes on from the last one accepted.
+        let e = sample(1 + MAX_SEQ_JUMP + 2)
+            .deliver(&t, &mut off)
+            .unwrap_err();
+        assert!(e.contains("ahead of the last"), "{e}");
+        assert_eq!((t.stats().lost, t.stats().published), (2, 6));
+        sample(1 + MAX_SEQ_JUMP + 1).deliver(&t, &mut off).unwrap();
+        assert_eq!(t.stats().lost, 2 + MAX_SEQ_JUMP);
+        sample(2 + MAX_SEQ_JUMP).deliver(&t, &mut off).unwrap();
+        assert_eq!(t.stats().lost, 2 + MAX_SEQ_JUMP);
     }
 
     #[test]

@@ -26,7 +26,8 @@
 //! (latest: the newest unread; fifo: the oldest unread) and passes it to
 //! [`RustNode::tick`] when it is new (`None` when nothing arrived since the last tick: a
 //! node that needs the last value keeps it, as the chapter's nodes do); what `tick` returns
-//! is published at the tick's time, carrying the origin stamp of the newest input the node
+//! is published at the tick's end (its time, plus its `compute_ms` if the graph file gives
+//! one: [`crate::executor`]), carrying the origin stamp of the newest input the node
 //! was given (its own tick time before the first), so the actuator measures sense→act
 //! latency across it as across any node. A registered kind takes the place of a policy
 //! (`state` in, `force` out), a safety node (`force` → `force`) or an estimator

@@ -905,7 +905,7 @@ fn build(cx: &Ctx<'_>, raw: RawGraph) -> Result<GraphSpec, SpecError> {
         if !valid_topic_name(tname) {
             return Err(cx.err(
                 t_ref.name.span(),
-                format!("topic name '{tname}' must start with '/' and use only letters, digits, '_' and '/' (at most 64 characters)"),
+                format!("topic name '{tname}' must be '/' then names of letters, digits and '_' separated by single '/', with no '/' at the end (at most 64 characters)"),
             ));
         }
         if topics.iter().any(|x| x.name == *tname) {
@@ -1534,11 +1534,15 @@ pub fn valid_node_name(s: &str) -> bool {
             .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-')
 }
 
+/// `/` then one or more names of letters, digits and `_`, separated by single `/`: as ROS 2
+/// names topics, and so that no two topics map to one Zenoh key (`/a` and `/a/`, `/a//b`).
 fn valid_topic_name(s: &str) -> bool {
     (2..=64).contains(&s.len())
-        && s.starts_with('/')
-        && s.chars()
-            .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '/')
+        && s.strip_prefix('/').is_some_and(|rest| {
+            rest.split('/').all(|part| {
+                !part.is_empty() && part.chars().all(|c| c.is_ascii_alphanumeric() || c == '_')
+            })
+        })
 }
 
 impl fmt::Display for GraphSpec {
@@ -1673,6 +1677,19 @@ depth = 1
             e.to_string().starts_with("g.toml:22:9: depth must be"),
             "{e}"
         );
+    }
+
+    #[test]
+    fn no_two_topic_names_map_to_one_key() {
+        for bad in ["/obs/", "//obs", "/a//b", "/", "/a b", "obs"] {
+            let text = CHAIN.replace("\"/obs\"", &format!("\"{bad}\""));
+            let e = parse(&text).unwrap_err();
+            assert!(e.reason.contains("topic name"), "{bad}: {e}");
+        }
+        for good in ["/obs", "/robot/obs", "/a_1/b2"] {
+            let text = CHAIN.replace("\"/obs\"", &format!("\"{good}\""));
+            assert!(parse(&text).is_ok(), "{good}");
+        }
     }
 
     #[test]
