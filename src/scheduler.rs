@@ -292,6 +292,18 @@ impl VirtualScheduler {
         })
     }
 
+    /// When measuring: each node's ticks and skipped ticks so far, by node index (cheap:
+    /// what the lab shows live).
+    pub fn skipped_ticks(&self) -> Option<Vec<(u64, u64)>> {
+        self.track.then(|| {
+            self.ticks
+                .iter()
+                .zip(&self.stats)
+                .map(|(&t, s)| (t, s.skipped_ticks))
+                .collect()
+        })
+    }
+
     /// Run the next tick. Returns its time, the node's index and the node's [`Flow`].
     /// A panic in the node propagates; [`VirtualScheduler::run_instant`] catches it.
     /// For the default plan only (one thread per node, no compute time: what a graph across

@@ -102,6 +102,9 @@ pub struct App {
     qos: Vec<TopicQos>,
     /// Each node's liveliness, by node index (`None`: no lease).
     alive: Vec<Option<bool>>,
+    /// Virtual clock with executors: each node's ticks and skipped ticks, as counted at the
+    /// run time they come with.
+    exec: Option<(Nanos, Vec<(u64, u64)>)>,
     /// What Tab selected.
     selected: Option<Selected>,
     /// The window (last 5 s) and the segment since the last change.
@@ -157,6 +160,7 @@ impl App {
             depths: Vec::new(),
             qos: Vec::new(),
             alive: Vec::new(),
+            exec: None,
             selected: None,
             live: Live::default(),
             history: VecDeque::new(),
@@ -251,6 +255,7 @@ impl App {
                     qos: graph.topics.iter().map(|t| t.qos).collect(),
                     alive: app.alive.clone(),
                     policy: app.brain.clone(),
+                    exec: None,
                 });
             }
             app.on_telemetry(Telemetry::Step(Box::new(*s)));
@@ -365,7 +370,10 @@ impl App {
                 qos,
                 alive,
                 policy,
+                exec,
             } => {
+                // Counted at `now`: rates from them are taken over that time.
+                self.exec = exec.map(|e| (now, e));
                 self.now = self.now.max(now);
                 self.paused = paused;
                 self.speed = speed;
@@ -734,12 +742,26 @@ impl App {
         } else {
             (None, None)
         };
+        // Virtual clock with executors: the rate the node achieved over the run (its tick
+        // intervals), and the periods its timer skipped waiting for a thread.
+        let ran = self.exec.as_ref().and_then(|(at, x)| {
+            let &(ticks, skipped) = x.get(id.0)?;
+            let secs = at.as_secs_f64();
+            let hz = if secs > 0.0 {
+                ticks.saturating_sub(1) as f64 / secs
+            } else {
+                0.0
+            };
+            Some((hz, skipped))
+        });
         NodeView {
             name: self.graph.node(id).name.clone(),
             layer,
             set_hz: self.rate_of(id),
             measured_hz,
             lateness_p99_us,
+            ran,
+            compute: self.graph.node(id).compute.map(|c| c.label()),
             selected: self.selected == Some(Selected::Node(id)),
             alive: self.alive.get(id.0).copied().flatten(),
             process: self.attached.as_ref().map(|_| self.graph.process_of(id)),

@@ -276,6 +276,7 @@ mod tests {
             qos,
             alive: vec![None, Some(false), None, None],
             policy: "scripted balancer".into(),
+            exec: None,
         });
         let text = render(&app, 120, 40);
         for want in [
@@ -608,6 +609,41 @@ mod tests {
     }
 
     #[test]
+    fn snapshot_a_starved_sensor_on_a_single_threaded_executor() {
+        // graphs/cartpole-executors.toml single-threaded, 3 s: the sensor and the policy tick
+        // once per 30 ms (100 ticks, 50 periods skipped), the actuator on its own thread.
+        let mut cfg = graph_cfg("graphs/cartpole-executors.toml", 3);
+        cfg.graph
+            .set_executor(ratelab::executor::ExecutorOverride::parse("single_threaded").unwrap());
+        let (mut app, _rx) = app_after(cfg, false);
+        app.on_telemetry(Telemetry::Status {
+            now: ratelab::Nanos(3_000_000_000),
+            paused: false,
+            speed: Speed::Times(1.0),
+            rates: vec![50.0; 3],
+            depths: vec![1; 2],
+            qos: vec![ratelab::qos::TopicQos::default(); 2],
+            alive: vec![None; 3],
+            policy: "scripted balancer".into(),
+            exec: Some(vec![(101, 50), (101, 50), (151, 0)]),
+        });
+        let v = app.view();
+        assert_eq!(v.nodes[0].ran, Some((100.0 / 3.0, 50)));
+        assert_eq!(v.nodes[1].compute.as_deref(), Some("30 ms"));
+        let wide = render(&app, 120, 40);
+        assert!(
+            wide.contains("33.3 Hz · 50 skip")
+                && wide.contains("30 ms compute")
+                && wide.contains("50.0 Hz ran"),
+            "{wide}"
+        );
+        let narrow = render(&app, 80, 24);
+        assert!(narrow.contains("33 Hz·50 skip"), "{narrow}");
+        insta::assert_snapshot!("executors_80x24", narrow);
+        insta::assert_snapshot!("executors_120x40", wide);
+    }
+
+    #[test]
     fn a_known_brain_shows_its_caption() {
         let (mut app, _rx) = app_after(virtual_cfg(50.0, 1), false);
         assert!(
@@ -623,6 +659,7 @@ mod tests {
             qos: vec![ratelab::qos::TopicQos::default(); 2],
             alive: vec![None; 3],
             policy: "ch2.1 PPO checkpoint (x.pt, hidden 64) — an imperfect learner".into(),
+            exec: None,
         });
         let text = render(&app, 120, 40);
         assert!(text.contains("brain: an imperfect learner"), "{text}");
@@ -759,6 +796,7 @@ mod tests {
             qos: vec![ratelab::qos::TopicQos::default(); 2],
             alive: vec![Some(true), Some(false), Some(true)],
             policy: "scripted".into(),
+            exec: None,
         });
         app.on_telemetry(Telemetry::Wire(vec![(0, 214.4, 402.7)]));
         for (w, h) in [(80, 24), (120, 40)] {

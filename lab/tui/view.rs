@@ -42,6 +42,11 @@ pub struct NodeView {
     pub measured_hz: Option<f64>,
     /// Real clock: p99 tick lateness over recent ticks, µs.
     pub lateness_p99_us: Option<f64>,
+    /// Virtual clock with executors ([`ratelab::executor`]): the rate it achieved over the
+    /// run, Hz, and the timer periods it skipped waiting for a thread.
+    pub ran: Option<(f64, u64)>,
+    /// Its compute time per tick (`30 ms`, `3±1 ms`), when it has one.
+    pub compute: Option<String>,
     /// Liveliness with a lease: `Some(false)` when not heard from within it; `None`
     /// without a lease. Attached to a graph across processes: its liveliness token.
     pub alive: Option<bool>,
@@ -502,7 +507,29 @@ fn render_node(n: &NodeView, area: Rect, buf: &mut Buffer) {
             };
             lines.push(Line::from(late).dim());
         }
-        _ => lines.push(Line::from(if wide { "virtual time" } else { "virtual" }).dim()),
+        _ => match n.ran {
+            // Executors under the virtual clock: what the timer achieved, and what it skipped.
+            Some((hz, skipped)) => {
+                let text = match (skipped > 0, wide && area.width >= 22) {
+                    (true, true) => format!("{hz:.1} Hz · {skipped} skip"),
+                    (true, false) => format!("{hz:.0} Hz·{skipped} skip"),
+                    (false, _) => format!("{hz:.1} Hz ran"),
+                };
+                let line = Line::from(text);
+                lines.push(if skipped > 0 { line.yellow() } else { line });
+            }
+            None => lines.push(Line::from(if wide { "virtual time" } else { "virtual" }).dim()),
+        },
+    }
+    if let Some(c) = &n.compute {
+        lines.push(
+            Line::from(if wide {
+                format!("{c} compute")
+            } else {
+                c.clone()
+            })
+            .dim(),
+        );
     }
     // A Python node says so under its rate, or in its title when the box has no room left.
     let python_in_title = n.python && lines.len() + 1 > usize::from(area.height.saturating_sub(2));

@@ -338,6 +338,7 @@ impl Fold {
                 .map(|i| self.is_alive(NodeId(i)))
                 .collect(),
             policy: self.policy.clone(),
+            exec: None,
         }
     }
 }

@@ -237,7 +237,15 @@ impl Engine {
             .unwrap_or_else(|| initial.to_string())
     }
 
-    pub(super) fn status(&self, now: Nanos, paused: bool, h: &GraphHandles) {
+    /// Send the lab the run's status at run time `now`; `exec`: each node's ticks and skipped
+    /// ticks, when the virtual clock's executors measure them.
+    pub(super) fn status(
+        &self,
+        now: Nanos,
+        paused: bool,
+        h: &GraphHandles,
+        exec: Option<Vec<(u64, u64)>>,
+    ) {
         let next = self.next_spec(h);
         let _ = self.tx.send(Telemetry::Status {
             now,
@@ -253,6 +261,7 @@ impl Engine {
                 .map(|l| l.lease().map(|_| l.status_at(now).alive))
                 .collect(),
             policy: h.brain_label(),
+            exec,
         });
     }
 

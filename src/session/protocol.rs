@@ -107,6 +107,9 @@ pub enum Telemetry {
         alive: Vec<Option<bool>>,
         /// The brain's label.
         policy: String,
+        /// Virtual clock, when the graph has executors or compute times
+        /// ([`crate::executor`]): each node's ticks and skipped ticks so far, by node index.
+        exec: Option<Vec<(u64, u64)>>,
     },
     /// A notice for the front end's log line (a change set for the next run, a refused
     /// real-time priority).

@@ -146,7 +146,7 @@ impl Engine {
                 // Once the run has ended (a fall, a watchdog, a failed node), its clock stops
                 // where it ended: the lab shows that instant, not wall time running on.
                 let shown = result.as_ref().map_or_else(now, |end| end.at);
-                self.status(shown, pause.load(Ordering::SeqCst), &handles);
+                self.status(shown, pause.load(Ordering::SeqCst), &handles, None);
                 last_status = Instant::now();
             }
         }

@@ -118,7 +118,7 @@ impl Engine {
                 }
             }
             if last_status.elapsed() >= Duration::from_millis(33) {
-                self.status(sched.now(), paused, &handles);
+                self.status(sched.now(), paused, &handles, sched.skipped_ticks());
                 last_status = Instant::now();
             }
             if ended.is_some() || (paused && !step_pending) {
@@ -182,7 +182,7 @@ impl Engine {
                     None,
                     sched.figures(end.at),
                 );
-                self.status(sched.now(), paused, &handles);
+                self.status(sched.now(), paused, &handles, sched.skipped_ticks());
                 let _ = self.tx.send(Telemetry::Ended {
                     metrics: Box::new(metrics),
                     reason: end.reason.clone(),
