@@ -112,7 +112,7 @@ fn pass_stderr(
                     }
                 }
                 let text = String::from_utf8_lossy(&buf);
-                let line = format!("{process}: {}", text.trim_end());
+                let line = format!("{process}: {}", wire::printable(text.trim_end()));
                 let _ = session.put(log_key.as_str(), line.as_str()).wait();
                 let _ = to.try_send(line);
             }

@@ -553,7 +553,9 @@ impl Watch {
             .callback(move |s| {
                 let alive = s.kind() == zenoh::sample::SampleKind::Put;
                 let rest = s.key_expr().as_str().strip_prefix(&prefix).unwrap_or("");
-                if let Some((p, n)) = rest.split_once('/') {
+                // Names that are not a graph file's (any text can be a Zenoh key) are not ours.
+                let named = |x: &str| crate::graph::spec::valid_node_name(x);
+                if let Some((p, n)) = rest.split_once('/').filter(|(p, n)| named(p) && named(n)) {
                     // Liveliness is news the fold must not miss: wait a little for room.
                     let e = Event::Alive(p.to_string(), n.to_string(), alive);
                     let _ = t.send_timeout(e, Duration::from_secs(1));
@@ -579,13 +581,11 @@ impl Watch {
             .declare_subscriber(keys.log())
             .callback(move |s| {
                 let bytes = s.payload().to_bytes();
-                // A progress line: short text, shown as it is.
+                // A progress line: short text, its control characters written out.
                 if bytes.len() <= 1024 {
                     let line = String::from_utf8_lossy(&bytes);
-                    send(
-                        &t,
-                        Event::Log(line.lines().next().unwrap_or("").to_string()),
-                    );
+                    let first = line.lines().next().unwrap_or("");
+                    send(&t, Event::Log(wire::printable(first)));
                 }
             })
             .wait()?;

@@ -400,6 +400,11 @@ pub fn encode_json<T: Serialize>(msg: &T) -> Vec<u8> {
 }
 
 /// Decode a control message, refusing anything over [`MAX_CONTROL_BYTES`] or malformed.
+/// Its text arrives printable: every control character in any string or map key (an escape
+/// sequence that would clear a terminal, a C1 control, DEL) is written out as `\u{1b}`
+/// ([`printable`]) before anything prints or records it. The one exception is a [`Setup`]'s
+/// `graph_toml`, a file's text with its newlines, which is parsed and validated
+/// ([`crate::graph::GraphSpec::parse`]), never printed.
 ///
 /// # Errors
 /// One line.
@@ -410,7 +415,56 @@ pub fn decode_json<T: for<'de> Deserialize<'de>>(bytes: &[u8]) -> Result<T, Stri
             bytes.len()
         ));
     }
-    serde_json::from_slice(bytes).map_err(|e| format!("a malformed control message: {e}"))
+    let malformed = |e: serde_json::Error| format!("a malformed control message: {e}");
+    if !may_hold_control(bytes) {
+        // JSON strings hold a control character only escaped (`\u001b`, `\n`) or, for DEL
+        // and the C1 controls, raw: with neither, decode as it is (the lockstep's path).
+        return serde_json::from_slice(bytes).map_err(malformed);
+    }
+    let mut value: serde_json::Value = serde_json::from_slice(bytes).map_err(malformed)?;
+    make_printable(&mut value);
+    serde_json::from_value(value).map_err(malformed)
+}
+
+/// Could `json` hold a control character in a string: a `\` escape, a raw DEL, or a raw C1
+/// control (UTF-8 `C2 80`–`C2 9F`)?
+fn may_hold_control(json: &[u8]) -> bool {
+    json.iter().any(|&b| b == b'\\' || b == 0x7f)
+        || json
+            .windows(2)
+            .any(|w| w[0] == 0xc2 && (0x80..=0x9f).contains(&w[1]))
+}
+
+fn make_printable(v: &mut serde_json::Value) {
+    use serde_json::Value;
+    match v {
+        Value::String(s) if s.chars().any(char::is_control) => *s = printable(s),
+        Value::Array(a) => a.iter_mut().for_each(make_printable),
+        Value::Object(o) => {
+            let entries = std::mem::take(o);
+            for (k, mut x) in entries {
+                if k != "graph_toml" {
+                    make_printable(&mut x);
+                }
+                o.insert(printable(&k), x);
+            }
+        }
+        _ => {}
+    }
+}
+
+/// `text` with every control character written out (`\u{1b}`, `\n`): what a terminal,
+/// `top` and a recording may show of text from the network.
+pub fn printable(text: &str) -> String {
+    text.chars()
+        .map(|c| {
+            if c.is_control() {
+                c.escape_default().to_string()
+            } else {
+                c.to_string()
+            }
+        })
+        .collect()
 }
 
 #[cfg(test)]
@@ -442,6 +496,41 @@ mod tests {
         assert!(e.contains("1 bytes after its end"), "{e}");
         assert!(WireSample::decode(&[0u8; 1024]).is_err());
         assert!(decode_json::<ToMember>(b"{\"msg\":\"nope\"}").is_err());
+    }
+
+    #[test]
+    fn text_from_the_network_arrives_printable() {
+        // An escape sequence that clears the screen, a newline, a raw C1 CSI and DEL.
+        let bytes = "{\"msg\":\"ready\",\"process\":\"a\\u001b[2J\\nb\u{9b}c\u{7f}\"}".as_bytes();
+        let m = decode_json::<ToLauncher>(bytes).unwrap();
+        assert_eq!(m.process(), "a\\u{1b}[2J\\nb\\u{9b}c\\u{7f}");
+        assert!(!m.process().chars().any(char::is_control));
+        // Map keys too (a report's per-node tables are keyed by name).
+        let mut v = serde_json::json!({"n\u{1b}": ["x\u{7}"]});
+        make_printable(&mut v);
+        assert_eq!(v, serde_json::json!({"n\\u{1b}": ["x\\u{7}"]}));
+        // Plain text and escapes that are not controls pass unchanged.
+        let plain =
+            decode_json::<ToLauncher>(r#"{"msg":"ready","process":"robot \"1\" é"}"#.as_bytes())
+                .unwrap();
+        assert_eq!(plain.process(), "robot \"1\" é");
+        assert_eq!(printable("50 Hz · ok"), "50 Hz · ok");
+        // A graph file's text keeps its lines (it is parsed, not printed).
+        let setup = Setup {
+            graph_toml: crate::graph::GraphSpec::chapter().to_toml(),
+            seed: 0,
+            duration_ns: 1,
+            clock: ClockKind::Virtual,
+            policy: "scripted\u{1b}".into(),
+            faults: Vec::new(),
+            phase_offsets_ns: Vec::new(),
+            rt_priority: None,
+            spin_margin_ns: 0,
+        };
+        let bytes = serde_json::to_vec(&setup).unwrap();
+        let back = decode_json::<Setup>(&bytes).unwrap();
+        assert_eq!(back.graph_toml, setup.graph_toml);
+        assert_eq!(back.policy, "scripted\\u{1b}");
     }
 
     #[test]
