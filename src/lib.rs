@@ -7,7 +7,8 @@
 //!
 //! Layout, one module per idea: [`time`], [`clock`], [`topic`], [`rate`], [`node`],
 //! [`plant`], [`ids`], [`policy`] (+ brains in [`python`]), [`msg`], [`graph`] (+ its file format, [`graph::spec`]),
-//! [`scheduler`] (+ [`realtime`]), [`runlog`], [`metrics`], [`config`], [`run`], [`session`],
+//! [`publisher`], [`executor`] (the rules), [`scheduler`] (the clocks that apply them, +
+//! [`realtime`]), [`runlog`], [`metrics`], [`config`], [`run`], [`session`],
 //! [`distributed`] (the graph across processes, over Zenoh);
 //! files the user names are read through [`input`] and written through [`output`].
 #![warn(missing_docs)]

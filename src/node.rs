@@ -1,7 +1,9 @@
 //! Nodes: a unit of work with a name, a rate, a tie-break priority and a `tick`.
 //!
-//! Nodes talk to each other only through topics they were handed. A scheduler (virtual
-//! or real, see [`crate::scheduler`]) calls [`Node::tick`] at the node's rate. The
+//! Nodes talk to each other only through topics they were handed (publishing through a
+//! [`crate::publisher::Publisher`]). A scheduler (virtual or real, see [`crate::scheduler`])
+//! calls [`Node::tick`] at the node's rate, on the thread its executor gives it
+//! ([`crate::executor`]); a tick with a compute time publishes at its end. The
 //! priority breaks ties between nodes due at the same instant: lower ticks first, so the
 //! chapter's order sensor (0) → policy (1) → actuator (2) samples, thinks, then acts.
 //! The node kinds of a graph are in [`crate::graph::nodes`].

@@ -1,16 +1,19 @@
-//! Executors: two ways to run one graph.
+//! The two clocks that run one graph, by the executors' rules ([`crate::executor`]).
 //!
-//! - [`VirtualScheduler`]: single-threaded discrete-event executor over a virtual clock
-//!   (ch2.8, `run_virtual`). A min-heap of `(due, priority, index)`: pop the earliest,
-//!   stop if it is due after the run's end, tick it, stop the world on [`Flow::Stop`],
-//!   push it back at `due + period` (the period read *now*, so a rate change takes effect
-//!   from the node's next tick). Time is integer nanoseconds, so ties are exact and broken
-//!   by priority then index: same settings → the same interleaving → byte-identical runs.
-//! - [`run_real`]: one OS thread per node, each ticking against a monotonic clock at
-//!   absolute deadlines (ch2.8, `run_real`). Message interleaving then depends on the OS
-//!   scheduler, so two runs with the same seed are **not** reproducible: drop counts and
-//!   latencies vary by a handful. That is the nature of concurrency, not a bug; use the
-//!   virtual clock to compare runs.
+//! - [`VirtualScheduler`]: a discrete-event model over a virtual clock (ch2.8,
+//!   `run_virtual`). A min-heap of `(due, priority, index)`: pop the earliest, stop if it is
+//!   due after the run's end, tick it, stop the world on [`Flow::Stop`], push it back at
+//!   `due + period` (the period read *now*, so a rate change takes effect from the node's
+//!   next tick). Time is integer nanoseconds, so ties are exact and broken by priority then
+//!   index: same settings → the same interleaving → byte-identical runs. With executors or
+//!   compute times the same instants also end ticks (their outputs go out) and hold ticks
+//!   that wait for a thread, exactly and deterministically.
+//! - [`run_real`]: by default one OS thread per node, each ticking against a monotonic
+//!   clock at absolute deadlines (ch2.8, `run_real`); a single- or multi-threaded
+//!   executor's nodes share its threads (`scheduler/shared.rs`). Message interleaving then
+//!   depends on the OS scheduler, so two runs with the same seed are **not** reproducible:
+//!   drop counts and latencies vary by a handful. That is the nature of concurrency, not a
+//!   bug; use the virtual clock to compare runs.
 
 use crate::clock::{Clock, MonotonicClock};
 mod shared;

@@ -23,6 +23,9 @@
 //! # link = { loss = 0.05, delay_ms = 10, jitter_ms = 3 }
 //! ```
 //!
+//! A node may also take a `compute_ms` and a `callback_group`, and the file
+//! `[executors.NAME]` tables: `src/graph/spec/executors.rs` has their format and rules.
+//!
 //! Rules (each broken rule is a [`SpecError`] with the line and column of the culprit):
 //! - at most [`MAX_NODES`] nodes, names unique; exactly one actuator (it owns the plant step
 //!   and the zero-order hold);
