@@ -197,8 +197,11 @@ impl Node for Slot {
 enum Awaited {
     /// The report.
     Report(Ticked),
-    /// The run cannot go on: why (the node's process is gone, silent, or out of step).
+    /// The run cannot go on: why (the node's process is silent, or out of step).
     Failed(String),
+    /// A process of the graph is gone (its liveliness token withdrawn): its ticks will not
+    /// come, and a tick awaited elsewhere may wait on its messages.
+    Gone(String),
     /// Ctrl-C while the tick hung.
     Interrupted,
 }
@@ -770,8 +773,15 @@ pub fn launch(
                     if let Some(m) = inbox.take(index) {
                         break Awaited::Report(m);
                     }
-                    if crate::graph::lock(&gone_now).contains(&process) {
-                        break Awaited::Failed(format!("process '{process}' is gone"));
+                    // Any of the graph's processes, not only this tick's: a tick of another
+                    // process may be waiting for the gone one's message, and would only
+                    // time out (REPLY_TIMEOUT) before saying so.
+                    let gone = crate::graph::lock(&gone_now)
+                        .iter()
+                        .find(|p| names.contains(p))
+                        .cloned();
+                    if let Some(p) = gone {
+                        break Awaited::Gone(p);
                     }
                     if Instant::now() >= deadline {
                         break Awaited::Failed(format!(
@@ -815,6 +825,16 @@ pub fn launch(
                         }
                     }
                     Awaited::Failed(message) => break failed(i, t, message),
+                    Awaited::Gone(p) => {
+                        // The failed node is the gone process's (its first), not the awaited one.
+                        let node = spec
+                            .placement()
+                            .into_iter()
+                            .find(|(name, _)| *name == p)
+                            .and_then(|(_, ids)| ids.first().map(|n| n.0))
+                            .unwrap_or(i);
+                        break failed(node, t, format!("process '{p}' is gone"));
+                    }
                 };
                 if m.node != i || m.t_ns != t.0 {
                     break failed(
