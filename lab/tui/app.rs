@@ -103,8 +103,9 @@ pub struct App {
     /// Each node's liveliness, by node index (`None`: no lease).
     alive: Vec<Option<bool>>,
     /// Virtual clock with executors: each node's ticks and skipped ticks, as counted at the
-    /// run time they come with.
-    exec: Option<(Nanos, Vec<(u64, u64)>)>,
+    /// run times they come with, over the arrows' window ([`super::live::WINDOW`]) and the
+    /// count just before it.
+    exec: VecDeque<(Nanos, Vec<(u64, u64)>)>,
     /// What Tab selected.
     selected: Option<Selected>,
     /// The window (last 5 s) and the segment since the last change.
@@ -160,7 +161,7 @@ impl App {
             depths: Vec::new(),
             qos: Vec::new(),
             alive: Vec::new(),
-            exec: None,
+            exec: VecDeque::new(),
             selected: None,
             live: Live::default(),
             history: VecDeque::new(),
@@ -308,6 +309,7 @@ impl App {
                     .map(|n| n.liveliness_lease.map(|_| true))
                     .collect();
                 self.ticks = vec![VecDeque::new(); cfg.graph.nodes.len()];
+                self.exec.clear();
                 if self.graph != cfg.graph {
                     self.selected = None;
                 }
@@ -372,8 +374,17 @@ impl App {
                 policy,
                 exec,
             } => {
-                // Counted at `now`: rates from them are taken over that time.
-                self.exec = exec.map(|e| (now, e));
+                // Counted at `now`: rates are taken between counts, over the window.
+                match exec {
+                    Some(e) => {
+                        self.exec.push_back((now, e));
+                        let from = now.saturating_sub(super::live::WINDOW);
+                        while self.exec.get(1).is_some_and(|(t, _)| *t <= from) {
+                            self.exec.pop_front();
+                        }
+                    }
+                    None => self.exec.clear(),
+                }
                 self.now = self.now.max(now);
                 self.paused = paused;
                 self.speed = speed;
@@ -742,17 +753,23 @@ impl App {
         } else {
             (None, None)
         };
-        // Virtual clock with executors: the rate the node achieved over the run (its tick
-        // intervals), and the periods its timer skipped waiting for a thread.
-        let ran = self.exec.as_ref().and_then(|(at, x)| {
+        // Virtual clock with executors: the rate the node achieved and the periods its timer
+        // skipped waiting for a thread, over the arrows' window (since the start until the
+        // run is that long: its tick intervals).
+        let ran = self.exec.back().and_then(|(at, x)| {
             let &(ticks, skipped) = x.get(id.0)?;
-            let secs = at.as_secs_f64();
+            let (t0, base) = match self.exec.front() {
+                Some((t0, b)) if t0 < at => (*t0, b.get(id.0).copied()),
+                _ => (Nanos::ZERO, None),
+            };
+            let (ticks0, skipped0) = base.unwrap_or((1, 0));
+            let secs = at.saturating_sub(t0).as_secs_f64();
             let hz = if secs > 0.0 {
-                ticks.saturating_sub(1) as f64 / secs
+                ticks.saturating_sub(ticks0) as f64 / secs
             } else {
                 0.0
             };
-            Some((hz, skipped))
+            Some((hz, skipped.saturating_sub(skipped0)))
         });
         NodeView {
             name: self.graph.node(id).name.clone(),

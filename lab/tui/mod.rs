@@ -641,6 +641,20 @@ mod tests {
         assert!(narrow.contains("33 Hz·50 skip"), "{narrow}");
         insta::assert_snapshot!("executors_80x24", narrow);
         insta::assert_snapshot!("executors_120x40", wide);
+        // Later, on threads of their own (as after a change): the box shows the window's
+        // rate and skips, not the run's.
+        app.on_telemetry(Telemetry::Status {
+            now: ratelab::Nanos(9_000_000_000),
+            paused: false,
+            speed: Speed::Times(1.0),
+            rates: vec![50.0; 3],
+            depths: vec![1; 2],
+            qos: vec![ratelab::qos::TopicQos::default(); 2],
+            alive: vec![None; 3],
+            policy: "scripted balancer".into(),
+            exec: Some(vec![(401, 50), (401, 50), (451, 0)]),
+        });
+        assert_eq!(app.view().nodes[0].ran, Some((50.0, 0)));
     }
 
     #[test]
