@@ -305,12 +305,70 @@ fn exercise_copy(root: &Path, files: &[&str]) -> std::path::PathBuf {
     for f in files.iter().chain(&["bands.toml"]) {
         std::fs::copy(repo.join("exercises").join(f), dir.join(f)).unwrap();
     }
-    std::fs::copy(
-        repo.join("graphs/cartpole-safety.toml"),
-        root.join("graphs/cartpole-safety.toml"),
-    )
-    .unwrap();
+    for g in [
+        "graphs/cartpole-safety.toml",
+        "graphs/cartpole-executors.toml",
+    ] {
+        std::fs::copy(repo.join(g), root.join(g)).unwrap();
+    }
     dir
+}
+
+#[test]
+fn exercise_ex7_runs_its_three_executors_and_reconciles() {
+    let _machine = crate::machine::shared();
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = exercise_copy(tmp.path(), &["ex7_slow_callback.toml"]);
+    let d = dir.to_str().unwrap();
+    let o = ratelab(&["exercise", "ex7", "--dir", d]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(
+        stderr(&o).contains("has no prediction yet"),
+        "{}",
+        stderr(&o)
+    );
+    let file = dir.join("ex7_slow_callback.toml");
+    let text = std::fs::read_to_string(&file)
+        .unwrap()
+        .replace(
+            "# sensor_hz_single_threaded =\n",
+            "sensor_hz_single_threaded = 25\n",
+        )
+        .replace(
+            "# skipped_ticks_single_threaded =\n",
+            "skipped_ticks_single_threaded = 250\n",
+        )
+        .replace(
+            "# balances_single_threaded =\n",
+            "balances_single_threaded = false\n",
+        )
+        .replace(
+            "# sensor_hz_shared_group =\n",
+            "sensor_hz_shared_group = 50\n",
+        )
+        .replace("# sensor_hz_own_group =\n", "sensor_hz_own_group = 50\n")
+        .replace("why = \"\"", "why = \"one thread, one callback at a time\"");
+    std::fs::write(&file, text).unwrap();
+    let o = ratelab(&["exercise", "ex7", "--dir", d]);
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success(), "{}", stderr(&o));
+    for row in [
+        "single_threaded       |    0 |      33.3 |     166 |",
+        "2 threads, one group  |    2 |      33.3 |     166 |",
+        "2 threads, own group  |    1 |      50.0 |       0 |",
+    ] {
+        assert!(out.contains(row), "{row}: {out}");
+    }
+    assert!(out.contains("[ok]") && !out.contains("[!!]"), "{out}");
+    assert!(
+        out.contains("You predicted the sensor achieves 50 Hz on two threads, in the policy's group; it achieved 33.3 Hz.")
+            && out.contains("You predicted the pole falls single-threaded; it stayed up on every seed."),
+        "{out}"
+    );
+    assert!(
+        out.contains("Reconcile: an executor runs one callback per thread"),
+        "{out}"
+    );
 }
 
 #[test]
