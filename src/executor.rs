@@ -262,7 +262,9 @@ impl ExecutionPlan {
     }
 
     /// Every node on one executor of `kind` with `threads`, each node its own mutually
-    /// exclusive group (`--executor`). `per_node` gives [`ExecutionPlan::per_node`].
+    /// exclusive group (a plan made by hand, as the tests do; `--executor` goes through
+    /// [`crate::graph::GraphSpec::set_executor`], which keeps the actuator on a thread of its
+    /// own). `per_node` gives [`ExecutionPlan::per_node`].
     pub fn one_executor(names: &[&str], kind: ExecutorKind, threads: usize) -> ExecutionPlan {
         if kind == ExecutorKind::PerNode {
             return Self::per_node(names);
@@ -365,15 +367,16 @@ impl Dispatch {
             && (self.busy_groups[g] == 0 || self.plan.groups[g] == GroupKind::Reentrant)
     }
 
-    /// Executor `e`'s next node to start now (a thread of `e` asks), polling `e` first when
-    /// nothing in its snapshot can start; `None` when every ready node of `e` waits.
-    pub fn pick_for(&mut self, e: usize) -> Option<usize> {
+    /// Executor `e`'s polling point: when it has a free thread and nothing in its snapshot can
+    /// start, its snapshot becomes every ready node of its own not running. Returns whether it
+    /// has a free thread (`false` too for an executor index out of range).
+    fn poll_if_idle(&mut self, e: usize) -> bool {
         if self
             .busy_threads
             .get(e)
             .is_none_or(|&b| b >= self.plan.executors[e].threads)
         {
-            return None;
+            return false;
         }
         let n = self.ready.len();
         let members = (0..n).filter(|&i| self.plan.node_executor[i] == e);
@@ -384,6 +387,15 @@ impl Dispatch {
             for i in members {
                 self.in_snapshot[i] = self.ready[i] && !self.running[i];
             }
+        }
+        true
+    }
+
+    /// Executor `e`'s next node to start now (a thread of `e` asks), polling `e` first when
+    /// nothing in its snapshot can start; `None` when every ready node of `e` waits.
+    pub fn pick_for(&mut self, e: usize) -> Option<usize> {
+        if !self.poll_if_idle(e) {
+            return None;
         }
         self.order
             .iter()
@@ -397,20 +409,8 @@ impl Dispatch {
     /// as its new snapshot); then the lowest-ranked startable node of any snapshot starts.
     /// Call [`Dispatch::start`] with it.
     pub fn pick(&mut self) -> Option<usize> {
-        let n = self.ready.len();
         for e in 0..self.plan.executors.len() {
-            if self.busy_threads[e] >= self.plan.executors[e].threads {
-                continue;
-            }
-            let members = (0..n).filter(|&i| self.plan.node_executor[i] == e);
-            let snapshot_has_work = members
-                .clone()
-                .any(|i| self.in_snapshot[i] && self.startable(i));
-            if !snapshot_has_work {
-                for i in members {
-                    self.in_snapshot[i] = self.ready[i] && !self.running[i];
-                }
-            }
+            self.poll_if_idle(e);
         }
         self.order
             .iter()

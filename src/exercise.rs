@@ -402,20 +402,8 @@ impl ExerciseFile {
     /// left out, or gave in another type, is said so.
     pub fn reconcile(&self, outcome: &Outcome) -> Vec<String> {
         let p = |k: &str| self.prediction.get(k);
-        let unreadable =
-            |k: &str| format!("Your prediction `{k}` is missing or not of the expected type.");
-        // ex4 and ex5: a predicted survival (`key`, true or false) beside the measured one.
         let survives = |key: &str, what: &str, measured: bool| {
-            let measured = if measured {
-                "it stayed up on every seed"
-            } else {
-                "it fell"
-            };
-            match p(key).and_then(toml::Value::as_bool) {
-                Some(true) => format!("You predicted the pole stays up {what}; {measured}."),
-                Some(false) => format!("You predicted the pole falls {what}; {measured}."),
-                None => unreadable(key),
-            }
+            predicted_survival(&self.prediction, key, what, measured)
         };
         match *outcome {
             Outcome::Ex7 { .. } => ex7::reconcile(&self.prediction, outcome),
@@ -575,6 +563,26 @@ impl ExerciseFile {
                 ]
             }
         }
+    }
+}
+
+/// The sentence for a prediction key that is missing or not of the expected type.
+fn unreadable(key: &str) -> String {
+    format!("Your prediction `{key}` is missing or not of the expected type.")
+}
+
+/// ex4, ex5 and ex7: the survival `prediction` gives under `key` (true or false) beside the
+/// `measured` one (on every seed), `what` naming the case.
+fn predicted_survival(prediction: &toml::Table, key: &str, what: &str, measured: bool) -> String {
+    let measured = if measured {
+        "it stayed up on every seed"
+    } else {
+        "it fell"
+    };
+    match prediction.get(key).and_then(toml::Value::as_bool) {
+        Some(true) => format!("You predicted the pole stays up {what}; {measured}."),
+        Some(false) => format!("You predicted the pole falls {what}; {measured}."),
+        None => unreadable(key),
     }
 }
 

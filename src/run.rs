@@ -256,6 +256,20 @@ pub fn virtual_scheduler(
     )
 }
 
+/// The real-clock executor's options for `cfg`: its spin margin, phase offsets, real-time
+/// priority and execution plan (measuring when the graph has executors or compute times);
+/// no tick hook, no pause, time zero when the run starts.
+pub fn real_options(cfg: &RunConfig) -> RealOptions {
+    RealOptions {
+        spin_margin: cfg.spin_margin,
+        phase_offsets: cfg.phase_offsets.to_vec(),
+        rt_priority: cfg.rt_priority,
+        plan: Some(cfg.graph.execution_plan()),
+        track: cfg.graph.has_executors_or_compute(),
+        ..RealOptions::default()
+    }
+}
+
 /// Run the graph once under `cfg.clock` and summarize it.
 ///
 /// # Errors
@@ -285,14 +299,8 @@ pub fn run(
         }
         ClockKind::Real => {
             let real = RealOptions {
-                spin_margin: cfg.spin_margin,
-                phase_offsets: cfg.phase_offsets.to_vec(),
-                rt_priority: cfg.rt_priority,
                 on_tick: opts.on_node_tick.clone(),
-                pause: None,
-                start: None,
-                plan: Some(cfg.graph.execution_plan()),
-                track: cfg.graph.has_executors_or_compute(),
+                ..real_options(cfg)
             };
             let r = run_real(nodes, cfg.duration, &opts.stop, &real);
             let ticks = r.timing.iter().map(|t| t.ticks).collect();

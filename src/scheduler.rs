@@ -602,6 +602,36 @@ pub fn panic_message(p: &(dyn std::any::Any + Send)) -> String {
         .unwrap_or_else(|| "panic".to_string())
 }
 
+/// A node's figures at the end of a real-clock run: `ticks` ticked and `skipped` deadlines
+/// skipped over `elapsed`, with their `lateness` and `cpu` of thread CPU time (the
+/// scheduling policy left for the caller to fill in).
+fn node_timing(
+    node: String,
+    ticks: u64,
+    skipped: u64,
+    lateness: &LatencyStats,
+    cpu: Nanos,
+    elapsed: Nanos,
+) -> NodeTiming {
+    let us = |n: Option<Nanos>| n.map_or(0.0, Nanos::as_micros_f64);
+    NodeTiming {
+        node,
+        ticks,
+        skipped,
+        lateness_p50_us: us(lateness.quantile(0.5)),
+        lateness_p99_us: us(lateness.quantile(0.99)),
+        lateness_max_us: us(lateness.max()),
+        cpu_ms: cpu.as_millis_f64(),
+        measured_hz: if elapsed.0 > 0 {
+            ticks as f64 / elapsed.as_secs_f64()
+        } else {
+            0.0
+        },
+        sched: String::new(),
+        sched_error: None,
+    }
+}
+
 /// Burn `cpu` of this thread's CPU time in a busy loop (`CLOCK_THREAD_CPUTIME_ID`): a tick's
 /// declared compute time under the real clock. On a loaded machine it takes longer than
 /// `cpu` of wall time, as real computation does. Stops early on `stop`.
@@ -745,38 +775,31 @@ pub fn run_real(
                 }
                 exec.skipped_ticks = skipped;
                 let elapsed = clock.now().min(duration).saturating_sub(first);
+                let cpu = thread_cpu_time().saturating_sub(cpu0);
                 let timing = NodeTiming {
-                    node: name,
-                    ticks,
-                    skipped,
-                    lateness_p50_us: lateness.quantile(0.5).map_or(0.0, |n| n.as_micros_f64()),
-                    lateness_p99_us: lateness.quantile(0.99).map_or(0.0, |n| n.as_micros_f64()),
-                    lateness_max_us: lateness.max().map_or(0.0, |n| n.as_micros_f64()),
-                    cpu_ms: (thread_cpu_time().saturating_sub(cpu0)).as_millis_f64(),
-                    measured_hz: if elapsed.0 > 0 {
-                        ticks as f64 / elapsed.as_secs_f64()
-                    } else {
-                        0.0
-                    },
                     sched,
                     sched_error,
+                    ..node_timing(name, ticks, skipped, &lateness, cpu, elapsed)
                 };
                 (node, timing, exec, result.err().map(|p| panic_message(&*p)))
             })
             .expect("spawning a node thread");
         handles.push((i, handle));
     }
-    let shared = shared::SharedExecutors::start(
-        shared_nodes,
-        &plan,
-        shared::Context {
-            clock,
-            duration,
-            stop: stop.clone(),
-            stop_at: stop_at.clone(),
-            opts: opts.clone(),
-        },
-    );
+    // Only when an executor shares threads (its bookkeeping holds a histogram per node).
+    let shared = own_thread.contains(&false).then(|| {
+        shared::SharedExecutors::start(
+            shared_nodes,
+            &plan,
+            shared::Context {
+                clock,
+                duration,
+                stop: stop.clone(),
+                stop_at: stop_at.clone(),
+                opts: opts.clone(),
+            },
+        )
+    });
     let mut slots: Vec<Option<shared::Finished>> = (0..names.len()).map(|_| None).collect();
     let mut failed = None;
     for (i, h) in handles {
@@ -798,13 +821,15 @@ pub fn run_real(
             }
         }
     }
-    let shared_end = shared.join();
-    if let (Some((node, message)), None) = (shared_end.failed, &failed) {
-        failed = Some(EndReason::NodeFailed { node, message });
-    }
-    for (i, s) in shared_end.nodes.into_iter().enumerate() {
-        if let Some(s) = s {
-            slots[i] = Some(s);
+    if let Some(shared) = shared {
+        let shared_end = shared.join();
+        if let (Some((node, message)), None) = (shared_end.failed, &failed) {
+            failed = Some(EndReason::NodeFailed { node, message });
+        }
+        for (i, s) in shared_end.nodes.into_iter().enumerate() {
+            if let Some(s) = s {
+                slots[i] = Some(s);
+            }
         }
     }
     let mut nodes = Vec::new();

@@ -616,8 +616,9 @@ mod tests {
         cfg.graph
             .set_executor(ratelab::executor::ExecutorOverride::parse("single_threaded").unwrap());
         let (mut app, _rx) = app_after(cfg, false);
-        app.on_telemetry(Telemetry::Status {
-            now: ratelab::Nanos(3_000_000_000),
+        // The engine's status at `s` seconds with each node's (ticks, skipped ticks).
+        let status = |s: u64, exec: Vec<(u64, u64)>| Telemetry::Status {
+            now: ratelab::Nanos(s * 1_000_000_000),
             paused: false,
             speed: Speed::Times(1.0),
             rates: vec![50.0; 3],
@@ -625,8 +626,9 @@ mod tests {
             qos: vec![ratelab::qos::TopicQos::default(); 2],
             alive: vec![None; 3],
             policy: "scripted balancer".into(),
-            exec: Some(vec![(101, 50), (101, 50), (151, 0)]),
-        });
+            exec: Some(exec),
+        };
+        app.on_telemetry(status(3, vec![(101, 50), (101, 50), (151, 0)]));
         let v = app.view();
         assert_eq!(v.nodes[0].ran, Some((100.0 / 3.0, 50)));
         assert_eq!(v.nodes[1].compute.as_deref(), Some("30 ms"));
@@ -643,17 +645,7 @@ mod tests {
         insta::assert_snapshot!("executors_120x40", wide);
         // Later, on threads of their own (as after a change): the box shows the window's
         // rate and skips, not the run's.
-        app.on_telemetry(Telemetry::Status {
-            now: ratelab::Nanos(9_000_000_000),
-            paused: false,
-            speed: Speed::Times(1.0),
-            rates: vec![50.0; 3],
-            depths: vec![1; 2],
-            qos: vec![ratelab::qos::TopicQos::default(); 2],
-            alive: vec![None; 3],
-            policy: "scripted balancer".into(),
-            exec: Some(vec![(401, 50), (401, 50), (451, 0)]),
-        });
+        app.on_telemetry(status(9, vec![(401, 50), (401, 50), (451, 0)]));
         assert_eq!(app.view().nodes[0].ran, Some((50.0, 0)));
     }
 

@@ -206,30 +206,24 @@ pub(super) fn reconcile(prediction: &toml::Table, outcome: &Outcome) -> Vec<Stri
     else {
         return Vec::new();
     };
-    let unreadable =
-        |k: &str| format!("Your prediction `{k}` is missing or not of the expected type.");
     let hz = |key: &str, what: &str, measured: f64| match p(key).and_then(super::number) {
         Some(n) => format!(
             "You predicted the sensor achieves {n} Hz {what}; it achieved {measured:.1} Hz."
         ),
-        None => unreadable(key),
+        None => super::unreadable(key),
     };
     let skipped = match p("skipped_ticks_single_threaded").and_then(super::number) {
         Some(n) => format!(
             "You predicted {n} skipped sensor ticks single-threaded; there were {skipped_ticks_single_threaded}."
         ),
-        None => unreadable("skipped_ticks_single_threaded"),
+        None => super::unreadable("skipped_ticks_single_threaded"),
     };
-    let measured = if balances_single_threaded {
-        "it stayed up on every seed"
-    } else {
-        "it fell"
-    };
-    let balances = match p("balances_single_threaded").and_then(toml::Value::as_bool) {
-        Some(true) => format!("You predicted the pole stays up single-threaded; {measured}."),
-        Some(false) => format!("You predicted the pole falls single-threaded; {measured}."),
-        None => unreadable("balances_single_threaded"),
-    };
+    let balances = super::predicted_survival(
+        prediction,
+        "balances_single_threaded",
+        "single-threaded",
+        balances_single_threaded,
+    );
     vec![
         hz(
             "sensor_hz_single_threaded",

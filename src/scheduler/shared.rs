@@ -5,8 +5,8 @@
 //! outside it, and its end wakes the executors' waiting threads.
 
 use super::{
-    catch_quietly, next_deadline, panic_message, real_tick, thread_cpu_time, LatencyStats,
-    NodeExecStats, RealOptions, StopFlag,
+    catch_quietly, next_deadline, node_timing, panic_message, real_tick, thread_cpu_time,
+    LatencyStats, NodeExecStats, RealOptions, StopFlag,
 };
 use crate::clock::{Clock, MonotonicClock};
 use crate::executor::{Dispatch, ExecutionPlan, ExecutorKind};
@@ -78,7 +78,7 @@ pub(super) struct SharedEnd {
 
 impl SharedExecutors {
     /// Start the threads of `plan`'s shared executors over `nodes` (by node index, `Some`
-    /// for the nodes they hold). No thread starts when every node has a thread of its own.
+    /// for the nodes they hold).
     pub(super) fn start(
         nodes: Vec<Option<Box<dyn Node>>>,
         plan: &ExecutionPlan,
@@ -159,20 +159,16 @@ impl SharedExecutors {
             let elapsed = end.saturating_sub(st.first[i]);
             let stats = std::mem::take(&mut st.stats[i]);
             let timing = NodeTiming {
-                node: self.names[i].clone(),
-                ticks,
-                skipped: stats.skipped_ticks,
-                lateness_p50_us: lateness.quantile(0.5).map_or(0.0, |n| n.as_micros_f64()),
-                lateness_p99_us: lateness.quantile(0.99).map_or(0.0, |n| n.as_micros_f64()),
-                lateness_max_us: lateness.max().map_or(0.0, |n| n.as_micros_f64()),
-                cpu_ms: st.cpu[i].as_millis_f64(),
-                measured_hz: if elapsed.0 > 0 {
-                    ticks as f64 / elapsed.as_secs_f64()
-                } else {
-                    0.0
-                },
                 sched: st.sched.clone(),
                 sched_error: st.sched_error.clone(),
+                ..node_timing(
+                    self.names[i].clone(),
+                    ticks,
+                    stats.skipped_ticks,
+                    lateness,
+                    st.cpu[i],
+                    elapsed,
+                )
             };
             nodes.push(Some((node, timing, stats)));
         }

@@ -37,9 +37,6 @@ impl Engine {
         let tx = self.tx.clone();
         let rec = recording.clone();
         let opts = RealOptions {
-            spin_margin: cfg.spin_margin,
-            phase_offsets: cfg.phase_offsets.to_vec(),
-            rt_priority: cfg.rt_priority,
             on_tick: Some(Arc::new(
                 move |node: usize, name: &str, now: Nanos, lateness: Nanos| {
                     let _ = tx.send(Telemetry::NodeTick {
@@ -53,9 +50,7 @@ impl Engine {
                 },
             )),
             pause: Some(pause.clone()),
-            start: None,
-            plan: Some(cfg.graph.execution_plan()),
-            track: cfg.graph.has_executors_or_compute(),
+            ..crate::run::real_options(cfg)
         };
         let start = Instant::now();
         let runner = {

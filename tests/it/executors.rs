@@ -8,9 +8,8 @@ use ratelab::graph::GraphSpec;
 use ratelab::metrics::Metrics;
 use ratelab::policy::Scripted;
 use ratelab::{run, ClockKind, Nanos, RunConfig, RunOptions};
-use std::process::Command;
 
-use crate::repo;
+use crate::{ratelab_in_repo as ratelab, repo};
 
 fn cfg(graph: GraphSpec, clock: ClockKind, secs: f64) -> RunConfig {
     RunConfig {
@@ -30,20 +29,6 @@ fn metrics(cfg: &RunConfig) -> (Metrics, String) {
 fn compute(spec: &mut GraphSpec, node: &str, ms: &str) {
     spec.set_compute(node, ComputeTime::parse(ms).unwrap())
         .unwrap();
-}
-
-/// `ratelab ARGS`: (exit code, stdout, stderr).
-fn ratelab(args: &[&str]) -> (i32, String, String) {
-    let o = Command::new(env!("CARGO_BIN_EXE_ratelab"))
-        .args(args)
-        .current_dir(crate::REPO)
-        .output()
-        .unwrap();
-    (
-        o.status.code().unwrap_or(-1),
-        String::from_utf8_lossy(&o.stdout).into_owned(),
-        String::from_utf8_lossy(&o.stderr).into_owned(),
-    )
 }
 
 #[test]

@@ -14,6 +14,20 @@ pub fn repo(file: &str) -> std::path::PathBuf {
     std::path::Path::new(REPO).join(file)
 }
 
+/// `ratelab ARGS` run in the repository's top folder: (exit code, stdout, stderr).
+pub fn ratelab_in_repo(args: &[&str]) -> (i32, String, String) {
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_ratelab"))
+        .args(args)
+        .current_dir(REPO)
+        .output()
+        .unwrap();
+    (
+        o.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&o.stdout).into_owned(),
+        String::from_utf8_lossy(&o.stderr).into_owned(),
+    )
+}
+
 mod architecture;
 mod brains;
 mod chapter_bands;

@@ -9,9 +9,8 @@ use ratelab::qos::Fault;
 use ratelab::run::build_graph;
 use ratelab::scheduler::{StopFlag, VirtualScheduler};
 use ratelab::{run, ClockKind, Nanos, RunConfig, RunOptions};
-use std::process::Command;
 
-use crate::repo;
+use crate::{ratelab_in_repo as ratelab, repo};
 
 fn graph(file: &str) -> GraphSpec {
     GraphSpec::load(&repo(file)).unwrap()
@@ -35,20 +34,6 @@ fn run_json(cfg: &RunConfig) -> (ratelab::metrics::Metrics, String, String) {
     let json = serde_json::to_string_pretty(&r.metrics).unwrap();
     let trace = format!("{:?}", r.trace);
     (r.metrics, json, trace)
-}
-
-/// `ratelab ARGS`: (exit code, stdout, stderr).
-fn ratelab(args: &[&str]) -> (i32, String, String) {
-    let o = Command::new(env!("CARGO_BIN_EXE_ratelab"))
-        .args(args)
-        .current_dir(crate::REPO)
-        .output()
-        .unwrap();
-    (
-        o.status.code().unwrap_or(-1),
-        String::from_utf8_lossy(&o.stdout).into_owned(),
-        String::from_utf8_lossy(&o.stderr).into_owned(),
-    )
 }
 
 #[test]

@@ -265,14 +265,17 @@ impl GraphSpec {
     /// Which executor and callback group each node runs in: the `[executors]` tables, every
     /// other node on a thread of its own in a group of its own.
     pub fn execution_plan(&self) -> ExecutionPlan {
-        let names: Vec<&str> = self.node_names();
-        let mut plan = ExecutionPlan::per_node(&names);
+        let n_nodes = self.nodes.len();
+        let mut plan = ExecutionPlan {
+            executors: Vec::new(),
+            groups: Vec::new(),
+            node_executor: vec![0; n_nodes],
+            node_group: vec![0; n_nodes],
+        };
         // Per-node executors first (one per node not held), then the declared ones.
-        let held: Vec<bool> = (0..self.nodes.len())
+        let held: Vec<bool> = (0..n_nodes)
             .map(|i| self.executors.iter().any(|e| e.nodes.contains(&NodeId(i))))
             .collect();
-        plan.executors.clear();
-        plan.groups.clear();
         for (i, n) in self.nodes.iter().enumerate() {
             if !held[i] {
                 plan.node_executor[i] = plan.executors.len();
