@@ -1,14 +1,17 @@
-//! The transport's floor on this host, for BENCHMARKS.md (issue 13): what one message costs
-//! through bare Zenoh, opened with ratelab's own session config and runtime threads
-//! ([`ratelab::distributed::ZENOH_RUNTIME`]), and through a bare TCP
-//! socket, with nothing of ratelab's on the path. `scripts/bench-distributed.sh` runs it in
+//! The transport's floor on this host, for BENCHMARKS.md (issues 13 and 27): what one message
+//! costs through bare Zenoh, opened with ratelab's own session config (mutual TLS and the
+//! graph's access control, [`ratelab::distributed::open_session`]) and runtime threads
+//! ([`ratelab::distributed::ZENOH_RUNTIME`]), through Zenoh on plain TCP without
+//! authentication (what ratelab used before issue 27), and through a bare TCP socket, with
+//! nothing of ratelab's on the path. `scripts/bench-distributed.sh` runs it in
 //! the same sitting as ratelab's own figures, so the two can be read as a ratio.
 //!
 //! ```sh
 //! target/release/examples/zenoh_floor            # every measure, about 30 s
 //! ```
 //!
-//! It starts one copy of itself as the far process (`--far zenoh|tcp ENDPOINT`) and measures,
+//! It starts one copy of itself as the far process (`--far TRANSPORT ENDPOINT CREDENTIALS`)
+//! and measures,
 //! per transport:
 //! - **one way at 50 Hz and at 1 kHz**: from the send to the far side's receive callback, on
 //!   the host's `CLOCK_MONOTONIC` (as ratelab's "wire" latency is measured), 500 and 5000
@@ -19,8 +22,9 @@
 //!   two such one-way hops, so the mean round trip is the floor of its wall time per instant.
 
 use hdrhistogram::Histogram;
+use ratelab::distributed::credentials::{Credentials, Role};
 use ratelab::distributed::wire::mono_now_ns;
-use ratelab::distributed::{open_session, zenoh::Wait};
+use ratelab::distributed::{open_session, zenoh, zenoh::Wait, Access};
 use std::io::{BufRead, BufReader, Read, Write};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
@@ -96,18 +100,50 @@ fn subscribe(
         .expect("a subscriber")
 }
 
+/// A Zenoh session for `transport`: `zenoh-tls` is ratelab's own (as process `who` of
+/// graph `floor`, with the credentials at `creds`), `zenoh-tcp` the same peer-mode settings
+/// on plain TCP with no authentication and no access control.
+fn session(
+    transport: &str,
+    listen: &[String],
+    connect: &[String],
+    creds: &str,
+    who: &str,
+) -> zenoh::Session {
+    if transport == "zenoh-tls" {
+        let credentials = Credentials::load(std::path::Path::new(creds)).expect("credentials");
+        let access = Access {
+            credentials: &credentials,
+            role: &Role::Process(who.into()),
+            spec: None,
+        };
+        return open_session(listen, connect, access).expect("a session");
+    }
+    let mut c = zenoh::Config::default();
+    let json = |v: &[String]| serde_json::to_string(v).expect("JSON");
+    for (k, v) in [
+        ("mode", "\"peer\"".to_string()),
+        ("scouting/multicast/enabled", "false".into()),
+        ("listen/endpoints", json(listen)),
+        ("connect/endpoints", json(connect)),
+    ] {
+        c.insert_json5(k, &v).expect("a config");
+    }
+    zenoh::open(c).wait().expect("a session")
+}
+
 /// The far process: stamp each message on arrival; send echoes back from a thread, and a
 /// one-way message's receive stamp back too (so the near side learns the one-way time).
-fn far(transport: &str, endpoint: &str) {
+fn far(transport: &str, endpoint: &str, creds: &str) {
     match transport {
-        "zenoh" => {
-            let session = open_session(&[endpoint.to_string()], &[]).expect("a session");
+        "zenoh-tls" | "zenoh-tcp" => {
+            let session = session(transport, &[endpoint.to_string()], &[], creds, "far");
             let publisher = session
-                .declare_publisher("floor/back")
+                .declare_publisher("ratelab/floor/back")
                 .wait()
                 .expect("a pub");
             let (tx, rx) = crossbeam_channel::bounded(1024);
-            let _sub = subscribe(&session, "floor/out", move |m| {
+            let _sub = subscribe(&session, "ratelab/floor/out", move |m| {
                 let received = mono_now_ns();
                 let _ = tx.try_send((m, received));
             });
@@ -205,23 +241,29 @@ fn main() {
     // ratelab's runtime threads, as `ratelab` itself sets them.
     ratelab::distributed::set_zenoh_runtime().expect("a usable ZENOH_RUNTIME");
     let args: Vec<String> = std::env::args().collect();
-    if let [_, flag, transport, endpoint] = args.as_slice() {
+    if let [_, flag, transport, endpoint, creds] = args.as_slice() {
         if flag == "--far" {
-            return far(transport, endpoint);
+            return far(transport, endpoint, creds);
         }
     }
     if args.len() != 1 {
         eprintln!("usage: zenoh_floor   (no arguments: it starts its far side itself)");
         std::process::exit(2);
     }
-    for transport in ["zenoh", "tcp"] {
+    let private = ratelab::distributed::credentials::PrivateDir::new().expect("a folder");
+    let creds =
+        Credentials::generate("floor", &["near".into(), "far".into()]).expect("credentials");
+    let creds = private.write("floor", &creds).expect("written");
+    let creds = creds.to_string_lossy().into_owned();
+    for transport in ["zenoh-tls", "zenoh-tcp", "tcp"] {
         let addr = format!("127.0.0.1:{}", free_port());
         let endpoint = match transport {
-            "zenoh" => format!("tcp/{addr}"),
+            "zenoh-tls" => format!("tls/{addr}"),
+            "zenoh-tcp" => format!("tcp/{addr}"),
             _ => addr.clone(),
         };
         let mut child = Command::new(&args[0])
-            .args(["--far", transport, &endpoint])
+            .args(["--far", transport, &endpoint, &creds])
             .stdout(Stdio::piped())
             .spawn()
             .expect("the far process starts");
@@ -229,15 +271,20 @@ fn main() {
         let stdout = child.stdout.take().expect("its stdout");
         BufReader::new(stdout).read_line(&mut ready).ok();
         let mut link: Box<dyn Link> = match transport {
-            "zenoh" => {
-                let session =
-                    open_session(&[], std::slice::from_ref(&endpoint)).expect("a session");
+            "zenoh-tls" | "zenoh-tcp" => {
+                let session = session(
+                    transport,
+                    &[],
+                    std::slice::from_ref(&endpoint),
+                    &creds,
+                    "near",
+                );
                 let publisher = session
-                    .declare_publisher("floor/out")
+                    .declare_publisher("ratelab/floor/out")
                     .wait()
                     .expect("a pub");
                 let (tx, back) = crossbeam_channel::bounded(1024);
-                let subscriber = subscribe(&session, "floor/back", move |m| {
+                let subscriber = subscribe(&session, "ratelab/floor/back", move |m| {
                     let _ = tx.try_send(m);
                 });
                 // Wait until the far side's subscriber is matched before the first put.
@@ -263,7 +310,8 @@ fn main() {
             }
         };
         let label = match transport {
-            "zenoh" => "bare Zenoh (ratelab's session config, TCP)",
+            "zenoh-tls" => "bare Zenoh (ratelab's session config: mutual TLS, access control)",
+            "zenoh-tcp" => "bare Zenoh (peer mode on plain TCP, no authentication)",
             _ => "bare TCP socket (nodelay, blocking)",
         };
         one_way(link.as_mut(), label, 50, 500);

@@ -77,13 +77,20 @@ pub struct LaunchArgs {
     /// Without it the graph runs in this one process, as `ratelab run`.
     #[arg(long)]
     pub processes: bool,
-    /// The Zenoh endpoint to listen on (default tcp/127.0.0.1:7449, or a free port when that
+    /// The Zenoh endpoint to listen on (default tls/127.0.0.1:7449, or a free port when that
     /// is taken).
-    #[arg(long, value_name = "tcp/HOST:PORT")]
+    #[arg(long, value_name = "tls/HOST:PORT")]
     pub listen: Option<String>,
-    /// Start no processes: wait for each group to join with `ratelab node … --connect`.
+    /// Start no processes: wait for each group to join with `ratelab node … --connect …
+    /// --credentials FILE` (needs --export-credentials).
     #[arg(long)]
     pub no_spawn: bool,
+    /// Write the launch's credentials (its CA's certificate and every process's identity;
+    /// a secret, mode 600) to FILE, for processes started by hand (`ratelab node
+    /// --credentials FILE`, also `top` and `lab --attach` on another host). An existing
+    /// FILE only with --force.
+    #[arg(long, value_name = "FILE")]
+    pub export_credentials: Option<PathBuf>,
     /// The run flags.
     #[command(flatten)]
     pub run: RunArgs,
@@ -98,9 +105,13 @@ pub struct LabArgs {
     #[arg(long)]
     pub attach: bool,
     /// With --attach: the launcher's endpoint (repeatable; default: this user's running
-    /// launch, recorded when it started, else tcp/127.0.0.1:7449).
-    #[arg(long, value_name = "tcp/HOST:PORT", requires = "attach")]
+    /// launch, recorded when it started, else tls/127.0.0.1:7449).
+    #[arg(long, value_name = "tls/HOST:PORT", requires = "attach")]
     pub connect: Vec<String>,
+    /// With --attach: the launch's credentials (`launch --export-credentials FILE`;
+    /// default: those this user's running launch keeps for its watchers).
+    #[arg(long, value_name = "FILE", requires = "attach")]
+    pub credentials: Option<PathBuf>,
     /// The run flags.
     #[command(flatten)]
     pub run: RunArgs,
@@ -116,23 +127,31 @@ pub struct NodeArgs {
     #[arg(long, value_name = "NAME")]
     pub process: String,
     /// The launcher's endpoint (repeatable).
-    #[arg(long, value_name = "tcp/HOST:PORT", required = true)]
+    #[arg(long, value_name = "tls/HOST:PORT", required = true)]
     pub connect: Vec<String>,
-    /// Endpoints to listen on for other processes (default tcp/127.0.0.1:<any port>).
-    #[arg(long, value_name = "tcp/HOST:PORT")]
+    /// Endpoints to listen on for other processes (default tls/127.0.0.1:<any port>).
+    #[arg(long, value_name = "tls/HOST:PORT")]
     pub listen: Vec<String>,
+    /// The launch's credentials, holding this process's identity (`launch
+    /// --export-credentials FILE`; the launcher gives the processes it starts their own).
+    #[arg(long, value_name = "FILE")]
+    pub credentials: Option<PathBuf>,
 }
 
 /// `ratelab top`.
 #[derive(Debug, Clone, Args)]
 pub struct TopArgs {
     /// The endpoint of a running launcher or node (repeatable; default: this user's running
-    /// launch, recorded when it started, else tcp/127.0.0.1:7449).
-    #[arg(long, value_name = "tcp/HOST:PORT")]
+    /// launch, recorded when it started, else tls/127.0.0.1:7449).
+    #[arg(long, value_name = "tls/HOST:PORT")]
     pub connect: Vec<String>,
     /// Print one table and exit (for scripts).
     #[arg(long)]
     pub once: bool,
+    /// The launch's credentials (`launch --export-credentials FILE`; default: those this
+    /// user's running launch keeps for its watchers).
+    #[arg(long, value_name = "FILE")]
+    pub credentials: Option<PathBuf>,
 }
 
 /// `ratelab replay`.

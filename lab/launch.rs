@@ -3,11 +3,12 @@
 
 use crate::cli::{LaunchArgs, NodeArgs, TopArgs};
 use crate::headless;
+use ratelab::distributed::credentials::{Credentials, Role};
 use ratelab::distributed::launcher::{launch, LaunchOptions, LaunchReport};
 use ratelab::distributed::member::{run_member, LiveStats, MemberOptions};
 use ratelab::distributed::monitor::{ask_placement, PlacedProcess, Signals, Watch};
 use ratelab::distributed::zenoh::{self, Wait};
-use ratelab::distributed::{check_endpoint, live_tokens, open_session};
+use ratelab::distributed::{check_endpoint, live_tokens, open_session, Access};
 use ratelab::graph::spec::{DEFAULT_GRAPH_TOML, MAX_FILE_BYTES};
 use ratelab::scheduler::StopFlag;
 use ratelab::session::Telemetry;
@@ -36,8 +37,8 @@ pub fn run_launch(a: &LaunchArgs, force_headless: bool, stop: StopFlag) -> anyho
         _ => {}
     }
     if !a.processes {
-        if a.listen.is_some() || a.no_spawn {
-            anyhow::bail!("--listen and --no-spawn need --processes");
+        if a.listen.is_some() || a.no_spawn || a.export_credentials.is_some() {
+            anyhow::bail!("--listen, --no-spawn and --export-credentials need --processes");
         }
         return headless::run_headless(&run, stop).map(|_| ());
     }
@@ -62,6 +63,19 @@ pub fn run_launch(a: &LaunchArgs, force_headless: bool, stop: StopFlag) -> anyho
             .map_err(|e| anyhow::anyhow!("cannot create --out folder {}: {e}", dir.display()))?;
         ratelab::output::check_target(&dir.join("metrics.json"), run.force)?;
     }
+    if a.no_spawn && a.export_credentials.is_none() {
+        anyhow::bail!("--no-spawn waits for processes started by hand, which need the launch's credentials: give --export-credentials FILE");
+    }
+    // This launch's CA and identities; exported for processes started by hand.
+    let names: Vec<String> = cfg.graph.placement().into_iter().map(|(p, _)| p).collect();
+    let credentials = Credentials::generate(&cfg.graph.name, &names)?;
+    if let Some(f) = &a.export_credentials {
+        credentials.write(f, run.force)?;
+        println!(
+            "[ratelab] launch: wrote the launch's credentials to {} (a secret: whoever holds it can join)",
+            f.display()
+        );
+    }
     let graph_path = run.graph.graph.clone();
     let opts = LaunchOptions {
         graph_bytes: graph_bytes(graph_path.as_deref())?,
@@ -77,6 +91,7 @@ pub fn run_launch(a: &LaunchArgs, force_headless: bool, stop: StopFlag) -> anyho
         start_gate: None,
         listening: None,
         pace: None,
+        credentials,
     };
     let placement: Vec<String> = cfg
         .graph
@@ -104,9 +119,10 @@ pub fn run_launch(a: &LaunchArgs, force_headless: bool, stop: StopFlag) -> anyho
         let (listening_tx, listening_rx) = crossbeam_channel::bounded::<String>(1);
         let mut opts = opts;
         opts.listening = Some(listening_tx);
+        let observer = opts.credentials.only(&Role::Observer)?;
         let recorder = std::thread::spawn(move || {
             let ep = listening_rx.recv().ok()?;
-            crate::rendezvous::record(&ep, &mut |w| eprintln!("[ratelab] launch: {w}"))
+            crate::rendezvous::record(&ep, &observer, &mut |w| eprintln!("[ratelab] launch: {w}"))
         });
         let report = launch(&cfg, &opts, &stop, &|line| {
             println!("[ratelab] launch: {line}")
@@ -189,6 +205,7 @@ fn launch_watched(
     } else {
         drop(err_tx);
     }
+    let observer = opts.credentials.only(&Role::Observer)?;
     // Set when the launcher returns (or the user stops it): the watcher stops waiting.
     let launcher_done = StopFlag::new();
     let launcher = {
@@ -234,13 +251,13 @@ fn launch_watched(
     };
     // Recorded for `lab --attach` and `top` (removed when the launch ends), and said at once:
     // a launch that got another port than 7449 is found all the same.
-    let _recorded = crate::rendezvous::record(&endpoint, &mut line);
+    let _recorded = crate::rendezvous::record(&endpoint, &observer, &mut line);
     if lab {
         eprintln!("[ratelab] launch: listening on {endpoint}");
     }
     let watch = match Watch::connect(
         std::slice::from_ref(&endpoint),
-        Some(&cfg.graph.name),
+        &observer,
         ratelab::distributed::REPLY_TIMEOUT,
         &launcher_done,
     ) {
@@ -364,7 +381,11 @@ fn spawn_watch(
 
 /// `ratelab lab --attach [--connect EP]`: the lab on a graph running across processes
 /// (without `--connect`: this user's recorded launch, [`crate::rendezvous`]).
-pub fn run_attach(connect: &[String], stop: StopFlag) -> anyhow::Result<()> {
+pub fn run_attach(
+    connect: &[String],
+    credentials: Option<&Path>,
+    stop: StopFlag,
+) -> anyhow::Result<()> {
     for ep in connect {
         check_endpoint("--connect", ep, false)?;
     }
@@ -375,7 +396,8 @@ pub fn run_attach(connect: &[String], stop: StopFlag) -> anyhow::Result<()> {
             connect.join(" --connect ")
         );
     }
-    let watch = Watch::connect(&connect, None, Duration::from_secs(5), &stop)
+    let credentials = crate::rendezvous::credentials(credentials)?;
+    let watch = Watch::connect(&connect, &credentials, Duration::from_secs(5), &stop)
         .map_err(|e| anyhow::anyhow!("{e}: {hint}"))?;
     let (policy, spec) = (watch.setup.policy.clone(), watch.cfg.graph.clone());
     let (tx, rx) = crossbeam_channel::unbounded::<Telemetry>();
@@ -397,6 +419,15 @@ pub fn run_attach(connect: &[String], stop: StopFlag) -> anyhow::Result<()> {
 
 /// `ratelab node --process NAME --connect EP`.
 pub fn run_node(a: &NodeArgs, stop: StopFlag) -> anyhow::Result<()> {
+    for ep in &a.connect {
+        check_endpoint("--connect", ep, false)?;
+    }
+    for ep in &a.listen {
+        check_endpoint("--listen", ep, true)?;
+    }
+    let credentials = a.credentials.as_deref().ok_or_else(|| {
+        anyhow::anyhow!("--credentials FILE is required: a graph admits only processes holding its launch's credentials (`ratelab launch --processes --export-credentials FILE` writes them)")
+    })?;
     let origin = a.graph.as_ref().map_or_else(
         || "graphs/cartpole.toml".to_string(),
         |p| p.display().to_string(),
@@ -407,6 +438,7 @@ pub fn run_node(a: &NodeArgs, stop: StopFlag) -> anyhow::Result<()> {
         process: a.process.clone(),
         connect: a.connect.clone(),
         listen: a.listen.clone(),
+        credentials: Credentials::load(credentials)?,
     };
     run_member(&opts, &stop).map_err(|e| anyhow::anyhow!("node '{}': {e}", a.process))
 }
@@ -416,9 +448,19 @@ pub fn run_top(a: &TopArgs, stop: StopFlag) -> anyhow::Result<()> {
     for ep in &a.connect {
         check_endpoint("--connect", ep, false)?;
     }
+    let credentials = crate::rendezvous::credentials(a.credentials.as_deref())?;
     let (connect, hint) = crate::rendezvous::endpoints(&a.connect);
-    let session = open_session(&["tcp/127.0.0.1:0".to_string()], &connect)
-        .map_err(|e| anyhow::anyhow!("cannot reach {}: {e}: {hint}", connect.join(", ")))?;
+    let access = Access {
+        credentials: &credentials,
+        role: &Role::Observer,
+        spec: None,
+    };
+    let session = open_session(
+        &[ratelab::distributed::LOOPBACK_ANY.to_string()],
+        &connect,
+        access,
+    )
+    .map_err(|e| anyhow::anyhow!("cannot reach {}: {e}: {hint}", connect.join(", ")))?;
     let (tx, rx) = crossbeam_channel::bounded::<LiveStats>(1024);
     let _sub = session
         .declare_subscriber("ratelab/*/@stats/*")

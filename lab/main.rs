@@ -222,7 +222,9 @@ fn main() -> ExitCode {
     }
     let result = match &cli.command {
         Some(Command::Run(args)) => headless(args, stop),
-        Some(Command::Lab(args)) if args.attach => launch::run_attach(&args.connect, stop),
+        Some(Command::Lab(args)) if args.attach => {
+            launch::run_attach(&args.connect, args.credentials.as_deref(), stop)
+        }
         Some(Command::Lab(args)) => lab(&args.run, stop),
         Some(Command::Replay(args)) => replay(args),
         Some(Command::Bench(args)) => bench::run_bench(args, stop),

@@ -7,9 +7,14 @@
 //! The file is one line, `ENDPOINT PID`. It is read as untrusted input: at most 256 bytes,
 //! the endpoint checked as `--connect` checks it, and a record whose process is gone (a
 //! launch killed before it could remove it) is ignored.
+//!
+//! Beside it, `launch-credentials.toml` (mode 600) holds the launch's observer identity
+//! ([`ratelab::distributed::credentials`]), so that this user's watchers join the launch's
+//! authenticated graph without `--credentials`; it goes with the record.
 
 use ratelab::distributed::check_endpoint;
-use std::path::PathBuf;
+use ratelab::distributed::credentials::Credentials;
+use std::path::{Path, PathBuf};
 
 /// The largest record read, bytes.
 const MAX_RECORD_BYTES: u64 = 256;
@@ -27,8 +32,13 @@ pub fn record_path() -> Option<PathBuf> {
     Some(dir.join("ratelab").join("launch"))
 }
 
-/// This process's launch, recorded while it lives: dropping it removes the record (unless
-/// a later launch has replaced it).
+/// The observer credentials' path beside `record`.
+fn credentials_path(record: &Path) -> PathBuf {
+    record.with_file_name("launch-credentials.toml")
+}
+
+/// This process's launch, recorded while it lives: dropping it removes the record and its
+/// credentials (unless a later launch has replaced them).
 pub struct Recorded {
     path: PathBuf,
     line: String,
@@ -38,18 +48,28 @@ impl Drop for Recorded {
     fn drop(&mut self) {
         if std::fs::read_to_string(&self.path).is_ok_and(|l| l == self.line) {
             let _ = std::fs::remove_file(&self.path);
+            let _ = std::fs::remove_file(credentials_path(&self.path));
         }
     }
 }
 
-/// Record that this process's launch listens on `endpoint`. Best effort: a launch runs
-/// without the record (say so in `warn`) when the folder cannot be written.
-pub fn record(endpoint: &str, warn: &mut dyn FnMut(String)) -> Option<Recorded> {
+/// Record that this process's launch listens on `endpoint`, with `observer` (the launch's
+/// credentials holding the observer's identity alone). Best effort: a launch runs without
+/// the record (say so in `warn`) when the folder cannot be written.
+pub fn record(
+    endpoint: &str,
+    observer: &Credentials,
+    warn: &mut dyn FnMut(String),
+) -> Option<Recorded> {
     let path = record_path()?;
     let line = format!("{endpoint} {}\n", std::process::id());
     let write = || -> std::io::Result<()> {
         let dir = path.parent().expect("a file in a folder");
         std::fs::create_dir_all(dir)?;
+        // The credentials first: a watcher that finds the record finds them too.
+        observer
+            .write(&credentials_path(&path), true)
+            .map_err(std::io::Error::other)?;
         // Written beside and moved into place: a reader never sees half a line.
         let tmp = dir.join(format!(".launch.{}", std::process::id()));
         std::fs::write(&tmp, &line)?;
@@ -86,6 +106,27 @@ fn parse(text: &str) -> Option<(String, u32)> {
     Some((ep.to_string(), pid))
 }
 
+/// The credentials `lab --attach` and `top` join with: `given` (`--credentials FILE`), else
+/// those of this user's recorded launch.
+///
+/// # Errors
+/// One line: the file is bad, or none is given and no launch of this user's is recorded.
+pub fn credentials(given: Option<&Path>) -> anyhow::Result<Credentials> {
+    if let Some(f) = given {
+        return Ok(Credentials::load(f)?);
+    }
+    let recorded = record_path()
+        .filter(|_| find().is_some())
+        .map(|p| credentials_path(&p))
+        .filter(|p| p.exists());
+    match recorded {
+        Some(p) => Ok(Credentials::load(&p)?),
+        None => anyhow::bail!(
+            "no launch of yours is running on this host to watch: give --credentials FILE (written by `ratelab launch --processes --export-credentials FILE`)"
+        ),
+    }
+}
+
 /// Where `lab --attach` and `top` connect: `connect` when given, else this user's recorded
 /// launch, else the default endpoint; with what to say when nothing answers there.
 pub fn endpoints(connect: &[String]) -> (Vec<String>, String) {
@@ -100,7 +141,7 @@ pub fn endpoints(connect: &[String]) -> (Vec<String>, String) {
         None => (
             vec![ratelab::distributed::DEFAULT_ENDPOINT.to_string()],
             "no launch of yours is recorded: start one with `ratelab launch --processes`, or \
-             give --connect tcp/HOST:PORT"
+             give --connect tls/HOST:PORT"
                 .to_string(),
         ),
     }
@@ -113,16 +154,17 @@ mod tests {
     #[test]
     fn records_are_one_checked_line() {
         assert_eq!(
-            parse("tcp/127.0.0.1:7449 42\n"),
-            Some(("tcp/127.0.0.1:7449".into(), 42))
+            parse("tls/127.0.0.1:7449 42\n"),
+            Some(("tls/127.0.0.1:7449".into(), 42))
         );
         for bad in [
             "",
-            "tcp/127.0.0.1:7449",
-            "tcp/127.0.0.1:7449 x",
-            "tcp/127.0.0.1:7449 42 43",
+            "tls/127.0.0.1:7449",
+            "tls/127.0.0.1:7449 x",
+            "tls/127.0.0.1:7449 42 43",
             "udp/127.0.0.1:7449 42",
-            "tcp/127.0.0.1:99999 42",
+            "tcp/127.0.0.1:7449 42",
+            "tls/127.0.0.1:99999 42",
         ] {
             assert_eq!(parse(bad), None, "{bad:?}");
         }

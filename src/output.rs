@@ -87,6 +87,21 @@ impl PendingFile {
     /// # Errors
     /// [`OutputError`] from the check or the creation.
     pub fn create(dest: &Path, force: bool) -> Result<(Self, std::fs::File), OutputError> {
+        Self::create_with_mode(dest, force, 0o666)
+    }
+
+    /// [`PendingFile::create`], the temporary file created with permission bits `mode`
+    /// (less the process's umask): `0o600` for a secret, which no other user may read at
+    /// any moment.
+    ///
+    /// # Errors
+    /// [`OutputError`] from the check or the creation.
+    pub fn create_with_mode(
+        dest: &Path,
+        force: bool,
+        mode: u32,
+    ) -> Result<(Self, std::fs::File), OutputError> {
+        use std::os::unix::fs::OpenOptionsExt as _;
         static COUNTER: AtomicU64 = AtomicU64::new(0);
         check_target(dest, force)?;
         let name = dest
@@ -110,6 +125,7 @@ impl PendingFile {
         let file = std::fs::OpenOptions::new()
             .write(true)
             .create_new(true)
+            .mode(mode)
             .open(&tmp)
             .map_err(|e| io_err(dest, &e))?;
         Ok((
@@ -186,7 +202,16 @@ pub fn write_with(
     force: bool,
     fill: impl FnOnce(&mut dyn Write) -> std::io::Result<()>,
 ) -> Result<(), OutputError> {
-    let (mut pending, file) = PendingFile::create(path, force)?;
+    write_with_mode(path, force, 0o666, fill)
+}
+
+fn write_with_mode(
+    path: &Path,
+    force: bool,
+    mode: u32,
+    fill: impl FnOnce(&mut dyn Write) -> std::io::Result<()>,
+) -> Result<(), OutputError> {
+    let (mut pending, file) = PendingFile::create_with_mode(path, force, mode)?;
     let mut w = std::io::BufWriter::new(file);
     fill(&mut w)
         .and_then(|()| w.flush())
@@ -203,6 +228,15 @@ pub fn write_with(
 /// As [`write_with`].
 pub fn write_file(path: &Path, force: bool, bytes: &[u8]) -> Result<(), OutputError> {
     write_with(path, force, |w| w.write_all(bytes))
+}
+
+/// Write a secret (a private key, credentials) to `path` by [`write_with`]'s rule, readable
+/// and writable by its owner alone (mode `0o600` from the moment it exists).
+///
+/// # Errors
+/// As [`write_with`].
+pub fn write_private(path: &Path, force: bool, bytes: &[u8]) -> Result<(), OutputError> {
+    write_with_mode(path, force, 0o600, |w| w.write_all(bytes))
 }
 
 #[cfg(test)]

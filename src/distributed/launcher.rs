@@ -3,11 +3,12 @@
 //! time authority under the virtual clock; the common start under the real one), stops
 //! every process it started, and merges their reports into one `metrics.json`.
 
+use super::credentials::{Credentials, PrivateDir, Role};
 use super::lockstep::{subscribe_reports, TickInbox, HORIZON_PERIODS};
 use super::member::LiveStats;
 use super::monitor::Carried;
 use super::wire::{self, Setup, Ticked, ToLauncher, ToMember};
-use super::{check_endpoint, check_keys, open_session, DistError, Keys, REPLY_TIMEOUT};
+use super::{check_endpoint, check_keys, Access, DistError, Keys, REPLY_TIMEOUT};
 use crate::config::{ClockKind, RunConfig};
 use crate::graph::spec::GraphSpec;
 use crate::graph::NodeId;
@@ -32,7 +33,7 @@ pub struct LaunchOptions {
     pub graph_path: Option<PathBuf>,
     /// The graph file's bytes.
     pub graph_bytes: Vec<u8>,
-    /// Where to listen (`tcp/HOST:PORT`; default [`super::DEFAULT_ENDPOINT`], or a free port
+    /// Where to listen (`tls/HOST:PORT`; default [`super::DEFAULT_ENDPOINT`], or a free port
     /// on 127.0.0.1 when that is taken).
     pub listen: Option<String>,
     /// The brain spec (`--policy`).
@@ -51,7 +52,7 @@ pub struct LaunchOptions {
     /// figures from every process ([`super::monitor::Watch::run`]). `None`: start when
     /// every process is ready.
     pub start_gate: Option<Receiver<()>>,
-    /// Told the endpoint the launcher listens on (`tcp/HOST:PORT`), once it listens: a
+    /// Told the endpoint the launcher listens on (`tls/HOST:PORT`), once it listens: a
     /// watcher in the same program connects there. Its progress line `listening on …` says
     /// the same to a person.
     pub listening: Option<crossbeam_channel::Sender<String>>,
@@ -59,6 +60,11 @@ pub struct LaunchOptions {
     /// lab's ×1, so that a person can follow it), the horizon let out no faster; `None`: as
     /// fast as the processes go (headless, a recording, the benchmarks).
     pub pace: Option<f64>,
+    /// The launch's credentials, every identity ([`Credentials::generate`] for this graph
+    /// and its placement): the launcher is authenticated with its own, and hands each
+    /// process it starts that process's alone (a file in a private folder, removed when
+    /// the launch ends).
+    pub credentials: Credentials,
 }
 
 /// The longest line of a started process's stderr that [`LaunchOptions::child_stderr`]
@@ -400,13 +406,31 @@ pub fn launch(
     cfg.validate().map_err(crate::run::RunError::from)?;
     let spec = &cfg.graph;
     check_keys(spec)?;
+    let placement = spec.placement();
+    let names: Vec<String> = placement.iter().map(|(p, _)| p.clone()).collect();
+    let creds = &opts.credentials;
+    if creds.graph != spec.name || creds.processes != names {
+        return Err(DistError::Usage(format!(
+            "the credentials are for graph '{}' with processes {:?}, not '{}' with {names:?}",
+            creds.graph, creds.processes, spec.name
+        )));
+    }
+    let access = Access {
+        credentials: creds,
+        role: &Role::Launcher,
+        spec: Some(spec),
+    };
+    let open_session =
+        |listen: &[String], connect: &[String]| super::open_session(listen, connect, access);
+    // Peers refused at the TLS handshake (no credentials of this launch), said in the log.
+    let mut refusals = super::refusals::Refusals::new();
     let (session, endpoint) = match &opts.listen {
         Some(ep) => {
             check_endpoint("--listen", ep, true)?;
             let ep = match ep.rsplit_once(':') {
                 Some((host, "0")) => {
-                    let h = host.trim_start_matches("tcp/");
-                    format!("tcp/{h}:{}", free_port(h)?)
+                    let h = host.trim_start_matches("tls/");
+                    format!("tls/{h}:{}", free_port(h)?)
                 }
                 _ => ep.clone(),
             };
@@ -416,7 +440,7 @@ pub fn launch(
         None => match open_session(&[super::DEFAULT_ENDPOINT.to_string()], &[]) {
             Ok(s) => (s, super::DEFAULT_ENDPOINT.to_string()),
             Err(_) => {
-                let ep = format!("tcp/127.0.0.1:{}", free_port("127.0.0.1")?);
+                let ep = format!("tls/127.0.0.1:{}", free_port("127.0.0.1")?);
                 (open_session(std::slice::from_ref(&ep), &[])?, ep)
             }
         },
@@ -441,11 +465,17 @@ pub fn launch(
         let _ = tx.send(endpoint.clone());
     }
     let (up_tx, up_rx) = crossbeam_channel::bounded::<ToLauncher>(65_536);
+    let up_prefix = format!("{}/@up/", keys.prefix());
     let _up_sub = session
         .declare_subscriber(keys.up())
         .callback(move |s| {
+            // A process speaks for itself only: the key it may publish on ([`super::access`])
+            // names it, and a message naming another process is dropped.
+            let from = s.key_expr().as_str().strip_prefix(up_prefix.as_str());
             if let Ok(m) = wire::decode_json::<ToLauncher>(&s.payload().to_bytes()) {
-                let _ = up_tx.try_send(m);
+                if from == Some(m.process()) {
+                    let _ = up_tx.try_send(m);
+                }
             }
         })
         .wait()?;
@@ -476,12 +506,15 @@ pub fn launch(
         .liveliness()
         .declare_token(keys.launcher_token())
         .wait()?;
-    let placement = spec.placement();
     let mut children = Children(Vec::new());
+    // Each started process's credentials, its identity alone, in a folder of this user's
+    // that goes with the launch.
+    let private = PrivateDir::new()?;
     if let Some(exe) = &opts.exe {
         for (p, _) in &placement {
+            let own = private.write(p, &creds.only(&Role::Process(p.clone()))?)?;
             let mut cmd = Command::new(exe);
-            cmd.arg("node");
+            cmd.arg("node").arg("--credentials").arg(&own);
             if let Some(g) = &opts.graph_path {
                 cmd.arg("--graph").arg(g);
             }
@@ -516,7 +549,7 @@ pub fn launch(
         }
     } else {
         say(&format!(
-            "waiting for {} to join: ratelab node{} --process NAME --connect {endpoint}",
+            "waiting for {} to join: ratelab node{} --process NAME --connect {endpoint} --credentials FILE (launch --export-credentials FILE)",
             placement
                 .iter()
                 .map(|(p, _)| p.as_str())
@@ -554,7 +587,6 @@ pub fn launch(
         .wait()?;
     // Admission: each process joins with the graph file's hash, then reports ready. Nothing
     // a joiner sends can end the run: a bad join is refused to that joiner alone.
-    let names: Vec<String> = placement.iter().map(|(p, _)| p.clone()).collect();
     let robot = spec.process_of(spec.chain.actuator);
     let admit = |m: &ToLauncher, running: bool, gone: &[String], joined: &[String]| -> Admission {
         let ToLauncher::Join {
@@ -647,6 +679,7 @@ pub fn launch(
                 REPLY_TIMEOUT.as_secs()
             )));
         }
+        refusals.say_due(&say);
         match link.recv(Duration::from_millis(50)) {
             Some(m @ ToLauncher::Join { .. }) => match admit(&m, false, &[], &joined) {
                 Admission::Welcomed => joined.push(m.process().to_string()),
@@ -734,6 +767,7 @@ pub fn launch(
                         std::thread::sleep(left.min(Duration::from_millis(50)));
                     }
                 }
+                refusals.say_due(&say);
                 // Move the horizon on before the processes reach it; an interrupt stops it.
                 let want = t.0.saturating_add(lookahead).min(cfg.duration.0);
                 let low = horizon.is_none_or(|h| h < t.0.saturating_add(lookahead / 2));
@@ -974,6 +1008,7 @@ pub fn launch(
                     }
                     stop_sent = true;
                 }
+                refusals.say_due(&say);
                 match link.recv(Duration::from_millis(50)) {
                     // A process restarted mid-run rejoins on the same clock.
                     Some(m @ ToLauncher::Join { .. }) if end.is_none() => {
@@ -1142,7 +1177,14 @@ mod tests {
             .stderr(Stdio::piped())
             .spawn()
             .expect("sh runs");
-        let session = open_session(&["tcp/127.0.0.1:0".to_string()], &[]).expect("a session");
+        let creds = Credentials::generate("g", &[]).expect("credentials");
+        let access = Access {
+            credentials: &creds,
+            role: &Role::Launcher,
+            spec: None,
+        };
+        let session = super::super::open_session(&[super::super::LOOPBACK_ANY.into()], &[], access)
+            .expect("a session");
         let (tx, rx) = crossbeam_channel::unbounded();
         pass_stderr("policy", &mut child, tx, session, Keys::new("g").log());
         let _ = child.wait();

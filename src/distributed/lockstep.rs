@@ -285,7 +285,7 @@ pub fn meet_peers(
                 .map(String::as_str)
                 .collect();
             eprintln!(
-                "ratelab: still waiting to reach process(es) {} directly (every process of a virtual-clock run links to every other; on other hosts give each `ratelab node` --listen tcp/<its address>:PORT)",
+                "ratelab: still waiting to reach process(es) {} directly (every process of a virtual-clock run links to every other; on other hosts give each `ratelab node` --listen tls/<its address>:PORT)",
                 missing.join(", ")
             );
         }

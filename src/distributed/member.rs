@@ -9,9 +9,10 @@
 //! each tick of the publishing node, its newest message is sent as a
 //! [`WireSample`](super::wire::WireSample).
 
+use super::credentials::{Credentials, Role};
 use super::lockstep;
 use super::wire::{self, Ticked, ToLauncher, ToMember, WireSample};
-use super::{check_endpoint, open_session, DistError, Keys, REPLY_TIMEOUT};
+use super::{check_endpoint, open_session, Access, DistError, Keys, REPLY_TIMEOUT};
 use crate::config::RunConfig;
 use crate::graph::spec::GraphSpec;
 use crate::graph::{Graph, NodeId, TopicId};
@@ -43,8 +44,10 @@ pub struct MemberOptions {
     pub process: String,
     /// Endpoints to connect to (the launcher's).
     pub connect: Vec<String>,
-    /// Endpoints to listen on (default `tcp/127.0.0.1:0`: peers find it by gossip).
+    /// Endpoints to listen on (default [`super::LOOPBACK_ANY`]: peers find it by gossip).
     pub listen: Vec<String>,
+    /// The launch's credentials, holding this process's identity (`--credentials FILE`).
+    pub credentials: Credentials,
 }
 
 /// The sequence numbers that have arrived per inbound topic, for the lockstep's waits.
@@ -267,9 +270,17 @@ pub fn run_member(opts: &MemberOptions, stop: &StopFlag) -> Result<(), DistError
     }
     if opts.connect.is_empty() {
         return Err(DistError::Usage(
-            "--connect tcp/HOST:PORT is required: the launcher's endpoint".into(),
+            "--connect tls/HOST:PORT is required: the launcher's endpoint".into(),
         ));
     }
+    let role = Role::Process(opts.process.clone());
+    if opts.credentials.graph != file_spec.name {
+        return Err(DistError::Usage(format!(
+            "--credentials are for graph '{}', not '{}': were they exported by another launch?",
+            opts.credentials.graph, file_spec.name
+        )));
+    }
+    opts.credentials.identity(&role)?;
     for ep in &opts.connect {
         check_endpoint("--connect", ep, false)?;
     }
@@ -277,11 +288,16 @@ pub fn run_member(opts: &MemberOptions, stop: &StopFlag) -> Result<(), DistError
         check_endpoint("--listen", ep, true)?;
     }
     let listen = if opts.listen.is_empty() {
-        vec!["tcp/127.0.0.1:0".to_string()]
+        vec![super::LOOPBACK_ANY.to_string()]
     } else {
         opts.listen.clone()
     };
-    let session = open_session(&listen, &opts.connect)?;
+    let access = Access {
+        credentials: &opts.credentials,
+        role: &role,
+        spec: Some(&file_spec),
+    };
+    let session = open_session(&listen, &opts.connect, access)?;
     let keys = Keys::new(&file_spec.name);
     let (ctl_tx, ctl_rx) = crossbeam_channel::bounded::<ToMember>(4096);
     let _ctl_sub = session
@@ -311,7 +327,7 @@ pub fn run_member(opts: &MemberOptions, stop: &StopFlag) -> Result<(), DistError
     // drops): a lost grant or report would stall the run.
     let block = zenoh::qos::CongestionControl::Block;
     let up = session
-        .declare_publisher(keys.up())
+        .declare_publisher(keys.up_from(&opts.process))
         .congestion_control(block)
         .wait()?;
     // Not matched at once: a launcher of another graph at the endpoint means this process

@@ -4,8 +4,14 @@
 //! nodes share `robot`, every other node runs alone: [`GraphSpec::process_of`]). Under
 //! `ratelab launch --processes` the launcher ([`launcher`]) starts one OS process per
 //! placement group (`ratelab node`, [`member`]) and they talk over Zenoh, peer to peer
-//! (multicast scouting off; the launcher listens on `tcp/127.0.0.1:PORT`, the others connect
+//! (multicast scouting off; the launcher listens on `tls/127.0.0.1:PORT`, the others connect
 //! to it and find each other by gossip, as rmw_zenoh's defaults do).
+//!
+//! - **Only the graph's own processes.** Every link is TLS 1.3 with mutual
+//!   authentication by a certificate authority made for one launch ([`credentials`]), and
+//!   every session drops what an identity may not say ([`access`]): a peer without the
+//!   launch's credentials cannot connect, and a process cannot publish another's topics,
+//!   reports or tokens, nor the launcher's control.
 //!
 //! - **Topics** are key expressions `ratelab/<graph>/<topic>` ([`Keys`]). Each process
 //!   builds the whole graph but ticks only its own nodes; a topic whose publisher and
@@ -23,10 +29,13 @@
 //!   ([`lockstep`]); the launcher is the time authority through the horizon it sets. The
 //!   same seed gives byte-identical metrics in one process and in several.
 
+pub mod access;
+pub mod credentials;
 pub mod launcher;
 pub mod lockstep;
 pub mod member;
 pub mod monitor;
+pub mod refusals;
 pub mod wire;
 
 /// The Zenoh crate ratelab is built with (for `ratelab top`'s session).
@@ -41,7 +50,11 @@ use zenoh::Wait;
 /// router port 7447 but not it (a ROS 2 node of rmw_zenoh connects to 7447 by default, and
 /// must not find ratelab's launcher there). A launcher that finds it taken listens on a
 /// free port instead (and says which).
-pub const DEFAULT_ENDPOINT: &str = "tcp/127.0.0.1:7449";
+pub const DEFAULT_ENDPOINT: &str = "tls/127.0.0.1:7449";
+
+/// Where a session that only connects listens: any free port on loopback (peers find it
+/// by gossip).
+pub const LOOPBACK_ANY: &str = "tls/127.0.0.1:0";
 
 /// How long a process waits for a peer's answer (a join, a ready, a granted tick).
 pub const REPLY_TIMEOUT: std::time::Duration = std::time::Duration::from_secs(20);
@@ -145,20 +158,26 @@ pub fn zenoh_message(msg: &str) -> String {
     line
 }
 
-/// Check a Zenoh endpoint as ratelab uses them: `tcp/HOST:PORT`, HOST a name or address
-/// that resolves, PORT in 0..=65535 (0 only for `--listen`: any free port).
+/// Check a Zenoh endpoint as ratelab uses them: `tls/HOST:PORT` (every link of a graph
+/// across processes is mutually authenticated TLS, [`credentials`]), HOST a name or
+/// address that resolves, PORT in 0..=65535 (0 only for `--listen`: any free port).
 ///
 /// # Errors
 /// [`DistError::Usage`] naming the flag.
 pub fn check_endpoint(flag: &str, ep: &str, listen: bool) -> Result<(), DistError> {
     use std::net::ToSocketAddrs;
     let bad = |why: &str| DistError::Usage(format!("{flag} {ep}: {why}"));
+    if ep.starts_with("tcp/") {
+        return Err(bad(
+            "a graph's links are mutually authenticated TLS: write tls/HOST:PORT",
+        ));
+    }
     let rest = ep
-        .strip_prefix("tcp/")
-        .ok_or_else(|| bad("expected tcp/HOST:PORT (only the TCP transport is built)"))?;
+        .strip_prefix("tls/")
+        .ok_or_else(|| bad("expected tls/HOST:PORT"))?;
     let (host, port) = rest
         .rsplit_once(':')
-        .ok_or_else(|| bad("expected tcp/HOST:PORT"))?;
+        .ok_or_else(|| bad("expected tls/HOST:PORT"))?;
     let port: u16 = port
         .parse()
         .map_err(|_| bad("the port must be a number in 0..=65535"))?;
@@ -226,9 +245,15 @@ impl Keys {
         format!("{}/@launcher", self.prefix)
     }
 
-    /// Where every process tells the launcher.
+    /// Where process `p` tells the launcher ([`wire::ToLauncher`]): its own key, which
+    /// only `p` may publish on ([`access`]).
+    pub fn up_from(&self, p: &str) -> String {
+        format!("{}/@up/{p}", self.prefix)
+    }
+
+    /// Every process's [`Keys::up_from`] (the launcher subscribes here).
     pub fn up(&self) -> String {
-        format!("{}/@up", self.prefix)
+        format!("{}/@up/*", self.prefix)
     }
 
     /// A node's liveliness token: `ratelab/<graph>/@node/<process>/<node>`.
@@ -349,13 +374,30 @@ pub fn live_tokens(
     keys
 }
 
+/// Who a session is and what it knows of the graph: what [`open_session`] needs to
+/// authenticate it and to check what it receives ([`access`]).
+#[derive(Clone, Copy, Debug)]
+pub struct Access<'a> {
+    /// The launch's credentials, holding this session's identity.
+    pub credentials: &'a credentials::Credentials,
+    /// This session's identity.
+    pub role: &'a credentials::Role,
+    /// The graph's shape, when the session knows it (a watcher does not yet).
+    pub spec: Option<&'a GraphSpec>,
+}
+
 /// Open a Zenoh session in peer mode with multicast scouting off, listening on `listen` and
-/// connecting to `connect` (endpoints already checked).
+/// connecting to `connect` (endpoints already checked), authenticated as `access.role` by
+/// mutual TLS and enforcing the graph's access control on what it receives.
 ///
 /// # Errors
-/// [`DistError::Usage`] when an endpoint cannot be used (a port in use), else
-/// [`DistError::Zenoh`].
-pub fn open_session(listen: &[String], connect: &[String]) -> Result<zenoh::Session, DistError> {
+/// [`DistError::Usage`] when an endpoint cannot be used (a port in use) or the credentials
+/// lack the role's identity, else [`DistError::Zenoh`].
+pub fn open_session(
+    listen: &[String],
+    connect: &[String],
+    access: Access<'_>,
+) -> Result<zenoh::Session, DistError> {
     let mut config = zenoh::Config::default();
     let json = |v: &[String]| serde_json::to_string(v).unwrap_or_else(|_| "[]".into());
     let set = |c: &mut zenoh::Config, k: &str, v: &str| {
@@ -371,6 +413,12 @@ pub fn open_session(listen: &[String], connect: &[String]) -> Result<zenoh::Sess
     set(&mut config, "listen/exit_on_failure", "true")?;
     set(&mut config, "connect/exit_on_failure", "true")?;
     set(&mut config, "connect/timeout_ms", "5000")?;
+    for (k, v) in access.credentials.zenoh_tls(access.role)? {
+        set(&mut config, k, &v)?;
+    }
+    let keys = Keys::new(&access.credentials.graph);
+    let acl = access::acl(&keys, &access.credentials.processes, access.spec);
+    set(&mut config, "access_control", &acl.to_string())?;
     zenoh::open(config).wait().map_err(|e| {
         let first = zenoh_message(&e.to_string());
         DistError::Usage(format!(

@@ -22,9 +22,10 @@
 //!
 //! [`record`] writes the same telemetry to a rerun recording (`launch --processes --record`).
 
+use super::credentials::{Credentials, Role};
 use super::member::LiveStats;
 use super::wire::{self, RunOver, Setup};
-use super::{check_endpoint, open_session, DistError, Keys};
+use super::{check_endpoint, open_session, Access, DistError, Keys};
 use crate::config::RunConfig;
 use crate::graph::spec::GraphSpec;
 use crate::graph::{NodeId, TopicId};
@@ -460,32 +461,35 @@ pub struct Watch {
 }
 
 impl Watch {
-    /// Connect to `connect` (a launcher's or a node's endpoint) and ask for the running
-    /// graph's settings, for up to `wait`: the first graph that answers (named `graph`, when
-    /// given).
+    /// Connect to `connect` (a launcher's or a node's endpoint) as an observer of the
+    /// launch whose `credentials` these are, and ask for its graph's settings, for up to
+    /// `wait`.
     ///
     /// # Errors
     /// [`DistError::Usage`] for a bad endpoint, or when no graph answers within `wait`
     /// (one line naming the endpoints); [`DistError::Peer`] when `stop` is set meanwhile.
     pub fn connect(
         connect: &[String],
-        graph: Option<&str>,
+        credentials: &Credentials,
         wait: Duration,
         stop: &StopFlag,
     ) -> Result<Watch, DistError> {
         if connect.is_empty() {
             return Err(DistError::Usage(
-                "--connect tcp/HOST:PORT is required: a running launcher's endpoint".into(),
+                "--connect tls/HOST:PORT is required: a running launcher's endpoint".into(),
             ));
         }
         for ep in connect {
             check_endpoint("--connect", ep, false)?;
         }
-        let session = open_session(&["tcp/127.0.0.1:0".to_string()], connect)?;
-        let selector = match graph {
-            Some(g) => Keys::new(g).setup(),
-            None => "ratelab/*/@setup".to_string(),
+        let access = Access {
+            credentials,
+            role: &Role::Observer,
+            spec: None,
         };
+        let session = open_session(&[super::LOOPBACK_ANY.to_string()], connect, access)?;
+        let graph = Some(credentials.graph.as_str());
+        let selector = Keys::new(&credentials.graph).setup();
         let deadline = Instant::now() + wait;
         loop {
             if let Some(setup) = ask_setup(&session, &selector) {

@@ -520,7 +520,7 @@ fn a_second_sigterm_exits_at_once_and_says_so() {
             "--duration",
             "60",
         ])
-        .args(["--listen", &format!("tcp/127.0.0.1:{port}"), "--out"])
+        .args(["--listen", &format!("tls/127.0.0.1:{port}"), "--out"])
         .arg(dir.path())
         .stdout(std::process::Stdio::null())
         .stderr(std::process::Stdio::piped())

@@ -70,6 +70,20 @@ pub(crate) fn assert_none_left(port: u16, after: Duration) {
     );
 }
 
+/// Credentials of a launch of the chapter's graph (its processes `robot` and `policy`),
+/// written to `dir/creds.toml` as `launch --export-credentials` writes them: enough for a
+/// hand-started node to get past its own checks (the launcher it meets has another CA).
+pub(crate) fn chapter_credentials(dir: &Path) -> std::path::PathBuf {
+    let c = ratelab::distributed::credentials::Credentials::generate(
+        "cartpole",
+        &["robot".into(), "policy".into()],
+    )
+    .unwrap();
+    let f = dir.join("creds.toml");
+    c.write(&f, true).unwrap();
+    f
+}
+
 /// A free localhost port.
 pub(crate) fn free_port() -> u16 {
     std::net::TcpListener::bind("127.0.0.1:0")
@@ -179,7 +193,7 @@ fn three_processes_balance_under_the_real_clock_and_leave_nothing_behind() {
     let _m = crate::machine::alone();
     let dir = tempfile::tempdir().unwrap();
     let port = free_port();
-    let ep = format!("tcp/127.0.0.1:{port}");
+    let ep = format!("tls/127.0.0.1:{port}");
     let o = ratelab(&[
         "launch",
         "graphs/cartpole-safety.toml",
@@ -238,7 +252,7 @@ fn three_processes_balance_under_the_real_clock_and_leave_nothing_behind() {
 }
 
 /// The lines `child` prints on its (piped) stdout, as they come.
-fn stdout_lines(child: &mut Child) -> std::sync::mpsc::Receiver<String> {
+pub(crate) fn stdout_lines(child: &mut Child) -> std::sync::mpsc::Receiver<String> {
     let stdout = child.stdout.take().expect("stdout piped");
     let (tx, rx) = std::sync::mpsc::channel::<String>();
     std::thread::spawn(move || {
@@ -251,7 +265,7 @@ fn stdout_lines(child: &mut Child) -> std::sync::mpsc::Receiver<String> {
 
 /// Wait up to `secs` for a line containing `needle`, keeping every line in `lines` (a line
 /// seen already counts).
-fn wait_line(
+pub(crate) fn wait_line(
     rx: &std::sync::mpsc::Receiver<String>,
     lines: &mut Vec<String>,
     needle: &str,
@@ -291,9 +305,11 @@ fn ready_launch(
             "--duration",
             secs,
         ])
-        .args(["--listen", &format!("tcp/127.0.0.1:{port}")])
+        .args(["--listen", &format!("tls/127.0.0.1:{port}")])
         .arg("--out")
         .arg(out)
+        .arg("--export-credentials")
+        .arg(out.join("creds.toml"))
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
         .spawn()
@@ -326,13 +342,15 @@ fn kill_node_process(port: u16, process: &str) -> u32 {
 }
 
 /// The chapter's two placement groups started by hand (`ratelab node`) against the
-/// launcher at `ep`, their stderr to `stderr()`.
-fn hand_started(ep: &str, stderr: fn() -> Stdio) -> Vec<Child> {
+/// launcher at `ep` with the launch's credentials `creds`, their stderr to `stderr()`.
+fn hand_started(ep: &str, creds: &Path, stderr: fn() -> Stdio) -> Vec<Child> {
     ["robot", "policy"]
         .iter()
         .map(|p| {
             bin()
                 .args(["node", "--process", p, "--connect", ep])
+                .arg("--credentials")
+                .arg(creds)
                 .stdout(Stdio::null())
                 .stderr(stderr())
                 .spawn()
@@ -364,8 +382,18 @@ fn a_lockstep_refuses_a_join_stops_at_one_instant_on_ctrl_c_and_ends_when_a_proc
     // run with every process at the same instant, and none left behind.
     let port = free_port();
     let (mut launcher, rx, mut lines) = lockstep_launch(port, dir.path());
-    let ep = format!("tcp/127.0.0.1:{port}");
-    let o = ratelab(&["node", "--process", "policy", "--connect", &ep]);
+    let ep = format!("tls/127.0.0.1:{port}");
+    let creds = dir.path().join("creds.toml");
+    let creds = creds.to_str().unwrap();
+    let o = ratelab(&[
+        "node",
+        "--process",
+        "policy",
+        "--connect",
+        &ep,
+        "--credentials",
+        creds,
+    ]);
     assert_one_line_exit_2(&o, "cannot rejoin: under the virtual clock");
     // SAFETY: plain kill(2) on our child.
     unsafe { libc::kill(launcher.id() as i32, libc::SIGINT) };
@@ -416,7 +444,7 @@ fn a_killed_node_is_noticed_and_a_restarted_one_rejoins() {
     let _m = crate::machine::alone();
     let dir = tempfile::tempdir().unwrap();
     let port = free_port();
-    let ep = format!("tcp/127.0.0.1:{port}");
+    let ep = format!("tls/127.0.0.1:{port}");
     let mut launcher: Child = bin()
         .args([
             "launch",
@@ -429,6 +457,8 @@ fn a_killed_node_is_noticed_and_a_restarted_one_rejoins() {
             &ep,
             "--out",
             dir.path().to_str().unwrap(),
+            "--export-credentials",
+            dir.path().join("creds.toml").to_str().unwrap(),
             // The recording follows the restart too (the restarted process counts anew).
             "--record",
             dir.path().join("run.rrd").to_str().unwrap(),
@@ -456,6 +486,8 @@ fn a_killed_node_is_noticed_and_a_restarted_one_rejoins() {
     // may, before the launcher sees the old token go): refused as busy, it asks again.
     let mut again = bin()
         .args(["node", "--process", "policy", "--connect", &ep])
+        .arg("--credentials")
+        .arg(dir.path().join("creds.toml"))
         .stdout(Stdio::null())
         .stderr(Stdio::null())
         .spawn()
@@ -579,10 +611,14 @@ fn a_process_gone_for_good_is_named_missing_not_counted_as_zeros() {
 fn hand_started_nodes_say_so_when_their_launcher_is_killed() {
     let _m = crate::machine::alone();
     let port = free_port();
-    let ep = format!("tcp/127.0.0.1:{port}");
+    let ep = format!("tls/127.0.0.1:{port}");
+    let dir = tempfile::tempdir().unwrap();
+    let creds = dir.path().join("creds.toml");
     let mut launcher = bin()
         .args(["launch", "--processes", "--no-spawn", "--clock", "real"])
         .args(["--duration", "60", "--listen", &ep])
+        .arg("--export-credentials")
+        .arg(&creds)
         .stdout(Stdio::piped())
         .stderr(Stdio::null())
         .spawn()
@@ -590,7 +626,7 @@ fn hand_started_nodes_say_so_when_their_launcher_is_killed() {
     let rx = stdout_lines(&mut launcher);
     let mut lines = Vec::new();
     assert!(wait_line(&rx, &mut lines, "listening on", 30), "{lines:?}");
-    let nodes = hand_started(&ep, Stdio::piped);
+    let nodes = hand_started(&ep, &creds, Stdio::piped);
     for p in ["policy", "robot"] {
         let ready = format!("process '{p}' ready");
         assert!(wait_line(&rx, &mut lines, &ready, 30), "{lines:?}");
@@ -615,7 +651,10 @@ fn hand_started_nodes_say_so_when_their_launcher_is_killed() {
 fn top_lists_a_running_graph() {
     let _m = crate::machine::alone();
     let port = free_port();
-    let ep = format!("tcp/127.0.0.1:{port}");
+    let ep = format!("tls/127.0.0.1:{port}");
+    let dir = tempfile::tempdir().unwrap();
+    let creds = dir.path().join("creds.toml");
+    let creds = creds.to_str().unwrap();
     let mut launcher = bin()
         .args([
             "launch",
@@ -626,6 +665,8 @@ fn top_lists_a_running_graph() {
             "6",
             "--listen",
             &ep,
+            "--export-credentials",
+            creds,
         ])
         .stdout(Stdio::piped())
         .stderr(Stdio::null())
@@ -646,12 +687,12 @@ fn top_lists_a_running_graph() {
     std::thread::sleep(Duration::from_millis(1500)); // the run is going
                                                      // A refreshing `top` alongside, to the launch's end.
     let refreshing = bin()
-        .args(["top", "--connect", &ep])
+        .args(["top", "--connect", &ep, "--credentials", creds])
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
         .spawn()
         .unwrap();
-    let o = ratelab(&["top", "--connect", &ep, "--once"]);
+    let o = ratelab(&["top", "--connect", &ep, "--once", "--credentials", creds]);
     let out = text(&o.stdout);
     assert!(o.status.success(), "{out}{}", text(&o.stderr));
     for needle in [
@@ -662,7 +703,7 @@ fn top_lists_a_running_graph() {
     // The policy's process killed: its node is GONE, with no rate (not its last one).
     kill_node_process(port, "policy");
     std::thread::sleep(Duration::from_millis(700));
-    let o = ratelab(&["top", "--connect", &ep, "--once"]);
+    let o = ratelab(&["top", "--connect", &ep, "--once", "--credentials", creds]);
     let out = text(&o.stdout);
     let row = out
         .lines()
@@ -746,7 +787,12 @@ fn top_finds_this_users_launch_without_connect() {
     std::fs::create_dir_all(record.parent().unwrap()).unwrap();
     std::fs::write(
         &record,
-        format!("tcp/127.0.0.1:{port} {}\n", std::process::id()),
+        format!("tls/127.0.0.1:{port} {}\n", std::process::id()),
+    )
+    .unwrap();
+    std::fs::rename(
+        chapter_credentials(runtime.path()),
+        record.with_file_name("launch-credentials.toml"),
     )
     .unwrap();
     let o = bin()
@@ -771,9 +817,11 @@ fn bad_endpoints_busy_ports_and_unknown_processes_exit_2() {
     for bad in [
         "nope",
         "udp/127.0.0.1:7447",
-        "tcp/127.0.0.1",
-        "tcp/127.0.0.1:99999",
-        "tcp/no.such.host.invalid:7447",
+        "tcp/127.0.0.1:7447",
+        "TLS/127.0.0.1",
+        "tls/127.0.0.1",
+        "tls/127.0.0.1:99999",
+        "tls/no.such.host.invalid:7447",
     ] {
         let o = ratelab(&["node", "--process", "policy", "--connect", bad]);
         assert_one_line_exit_2(&o, "--connect");
@@ -789,17 +837,31 @@ fn bad_endpoints_busy_ports_and_unknown_processes_exit_2() {
         ]);
         assert_one_line_exit_2(&o, "--listen");
     }
+    let dir = tempfile::tempdir().unwrap();
+    let creds = chapter_credentials(dir.path());
+    let creds = creds.to_str().unwrap();
+    // Without credentials, a node cannot join (before anything else is tried).
+    let o = ratelab(&[
+        "node",
+        "--process",
+        "policy",
+        "--connect",
+        "tls/127.0.0.1:9",
+    ]);
+    assert_one_line_exit_2(&o, "--credentials FILE is required");
     let o = ratelab(&[
         "node",
         "--process",
         "nobody",
         "--connect",
-        "tcp/127.0.0.1:9",
+        "tls/127.0.0.1:9",
+        "--credentials",
+        creds,
     ]);
     assert_one_line_exit_2(&o, "has no process 'nobody'");
     // A port in use.
     let busy = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
-    let ep = format!("tcp/127.0.0.1:{}", busy.local_addr().unwrap().port());
+    let ep = format!("tls/127.0.0.1:{}", busy.local_addr().unwrap().port());
     let o = ratelab(&[
         "launch",
         "--processes",
@@ -815,7 +877,9 @@ fn bad_endpoints_busy_ports_and_unknown_processes_exit_2() {
         "--process",
         "policy",
         "--connect",
-        &format!("tcp/127.0.0.1:{}", free_port()),
+        &format!("tls/127.0.0.1:{}", free_port()),
+        "--credentials",
+        creds,
     ]);
     assert_eq!(o.status.code(), Some(2), "{}", text(&o.stderr));
     assert!(!text(&o.stderr).contains("panicked"));
@@ -843,7 +907,8 @@ fn a_graph_file_that_differs_between_processes_is_refused_at_join() {
     .unwrap();
     assert_ne!(std::fs::read_to_string(&changed).unwrap(), original);
     let port = free_port();
-    let ep = format!("tcp/127.0.0.1:{port}");
+    let ep = format!("tls/127.0.0.1:{port}");
+    let creds = dir.path().join("creds.toml");
     let launcher = bin()
         .args([
             "launch",
@@ -854,14 +919,16 @@ fn a_graph_file_that_differs_between_processes_is_refused_at_join() {
             "virtual",
             "--listen",
             &ep,
+            "--export-credentials",
+            creds.to_str().unwrap(),
         ])
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
         .spawn()
         .unwrap();
     std::thread::sleep(Duration::from_millis(800));
-    // Another graph altogether (another name: other keys, so no join ever reaches this
-    // launcher): said within seconds, not after the 20 s wait for a launcher.
+    // Another graph altogether (another name: the launch's credentials are not for it):
+    // said at once, before connecting.
     let t0 = Instant::now();
     let node = ratelab(&[
         "node",
@@ -871,10 +938,12 @@ fn a_graph_file_that_differs_between_processes_is_refused_at_join() {
         "policy",
         "--connect",
         &ep,
+        "--credentials",
+        creds.to_str().unwrap(),
     ]);
     assert_one_line_exit_2(
         &node,
-        "runs graph 'cartpole', not 'cartpole-safety': was this process given another graph file?",
+        "--credentials are for graph 'cartpole', not 'cartpole-safety': were they exported by another launch?",
     );
     assert!(t0.elapsed() < Duration::from_secs(10), "{:?}", t0.elapsed());
     let node = ratelab(&[
@@ -885,6 +954,8 @@ fn a_graph_file_that_differs_between_processes_is_refused_at_join() {
         "policy",
         "--connect",
         &ep,
+        "--credentials",
+        creds.to_str().unwrap(),
     ]);
     assert_one_line_exit_2(&node, "different graph file");
     let o = launcher.wait_with_output().unwrap();
@@ -897,7 +968,7 @@ fn hostile_bytes_on_the_control_keys_do_not_end_a_run() {
     let _m = crate::machine::shared();
     let dir = tempfile::tempdir().unwrap();
     let port = free_port();
-    let ep = format!("tcp/127.0.0.1:{port}");
+    let ep = format!("tls/127.0.0.1:{port}");
     let launcher = bin()
         .args([
             "launch",
@@ -911,14 +982,27 @@ fn hostile_bytes_on_the_control_keys_do_not_end_a_run() {
             &ep,
             "--out",
             dir.path().to_str().unwrap(),
+            "--export-credentials",
+            dir.path().join("creds.toml").to_str().unwrap(),
         ])
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
         .spawn()
         .unwrap();
     std::thread::sleep(Duration::from_millis(800));
-    let session = ratelab::distributed::open_session(&[], std::slice::from_ref(&ep)).unwrap();
-    let up = "ratelab/cartpole/@up";
+    // A holder of the launch's credentials, as the robot's process, sending garbage where
+    // that identity may publish (and where it may not: dropped by the access control).
+    let creds = dir.path().join("creds.toml");
+    let creds = ratelab::distributed::credentials::Credentials::load(&creds).unwrap();
+    let role = ratelab::distributed::credentials::Role::Process("robot".into());
+    let access = ratelab::distributed::Access {
+        credentials: &creds,
+        role: &role,
+        spec: None,
+    };
+    let session =
+        ratelab::distributed::open_session(&[], std::slice::from_ref(&ep), access).unwrap();
+    let up = "ratelab/cartpole/@up/robot";
     let hostile: Vec<Vec<u8>> = vec![
         vec![0xff; 64],
         b"{\"msg\":\"join\"}".to_vec(),
@@ -951,7 +1035,7 @@ fn hostile_bytes_on_the_control_keys_do_not_end_a_run() {
         .wait()
         .unwrap();
     std::thread::sleep(Duration::from_millis(300));
-    let nodes = hand_started(&ep, Stdio::null);
+    let nodes = hand_started(&ep, &dir.path().join("creds.toml"), Stdio::null);
     let o = launcher.wait_with_output().unwrap();
     assert!(o.status.success(), "{}{}", text(&o.stdout), text(&o.stderr));
     for mut n in nodes {
@@ -1030,7 +1114,7 @@ fn every_process_runs_zenoh_on_one_worker_unless_zenoh_runtime_says_otherwise() 
                 "--duration",
                 "3",
             ])
-            .args(["--listen", &format!("tcp/127.0.0.1:{port}")])
+            .args(["--listen", &format!("tls/127.0.0.1:{port}")])
             .arg("--out")
             .arg(dir.path())
             .stdout(Stdio::piped())

@@ -290,7 +290,7 @@ fn pause_stops_virtual_time_and_is_refused_under_the_real_clock() {
 fn launch_across_processes_opens_the_lab_and_quitting_leaves_nothing_behind() {
     let _machine = crate::machine::alone();
     let port = crate::distributed::free_port();
-    let ep = format!("tcp/127.0.0.1:{port}");
+    let ep = format!("tls/127.0.0.1:{port}");
     let mut lab = Lab::start(&["launch", "--processes", "--clock", "real", "--listen", &ep]);
     lab.wait_for("2 processes", Duration::from_secs(60));
     for node in ["sensor@robot", "policy@policy", "actuator@robot"] {
@@ -320,7 +320,7 @@ fn launch_across_processes_opens_the_lab_and_quitting_leaves_nothing_behind() {
 fn a_launch_in_lockstep_shows_every_topic_s_rate_in_the_lab() {
     let _machine = crate::machine::alone();
     let port = crate::distributed::free_port();
-    let ep = format!("tcp/127.0.0.1:{port}");
+    let ep = format!("tls/127.0.0.1:{port}");
     let dir = tempfile::tempdir().unwrap();
     let rrd = dir.path().join("run.rrd");
     let lab = Lab::start(&[
@@ -371,7 +371,9 @@ fn a_launch_in_lockstep_shows_every_topic_s_rate_in_the_lab() {
 fn the_attached_lab_marks_a_killed_node_not_alive_and_sees_it_rejoin() {
     let _machine = crate::machine::alone();
     let port = crate::distributed::free_port();
-    let ep = format!("tcp/127.0.0.1:{port}");
+    let ep = format!("tls/127.0.0.1:{port}");
+    let dir = tempfile::tempdir().unwrap();
+    let creds = dir.path().join("creds.toml");
     let mut launcher = crate::distributed::bin()
         .args([
             "launch",
@@ -382,12 +384,22 @@ fn the_attached_lab_marks_a_killed_node_not_alive_and_sees_it_rejoin() {
             "40",
             "--listen",
             &ep,
+            "--export-credentials",
+            creds.to_str().unwrap(),
         ])
         .stdout(std::process::Stdio::null())
         .stderr(std::process::Stdio::null())
         .spawn()
         .unwrap();
-    let lab = Lab::start(&["lab", "--attach", "--connect", &ep]);
+    // Written before the launch listens: there once the lab can connect.
+    let lab = Lab::start(&[
+        "lab",
+        "--attach",
+        "--connect",
+        &ep,
+        "--credentials",
+        creds.to_str().unwrap(),
+    ]);
     lab.wait_for("policy@policy", Duration::from_secs(60));
     lab.wait_for("Hz meas", Duration::from_secs(20));
     // Let the policy steady the pole first: the robot then holds its last force for a
@@ -405,6 +417,8 @@ fn the_attached_lab_marks_a_killed_node_not_alive_and_sees_it_rejoin() {
     lab.wait_for("0.0 Hz meas", Duration::from_secs(5));
     let mut again = crate::distributed::bin()
         .args(["node", "--process", "policy", "--connect", &ep])
+        .arg("--credentials")
+        .arg(&creds)
         .stdout(std::process::Stdio::null())
         .stderr(std::process::Stdio::null())
         .spawn()
@@ -436,8 +450,17 @@ fn the_attached_lab_marks_a_killed_node_not_alive_and_sees_it_rejoin() {
 #[test]
 fn attaching_where_no_graph_runs_says_so() {
     let port = crate::distributed::free_port();
-    let ep = format!("tcp/127.0.0.1:{port}");
-    let mut lab = Lab::start(&["lab", "--attach", "--connect", &ep]);
+    let ep = format!("tls/127.0.0.1:{port}");
+    let dir = tempfile::tempdir().unwrap();
+    let creds = crate::distributed::chapter_credentials(dir.path());
+    let mut lab = Lab::start(&[
+        "lab",
+        "--attach",
+        "--connect",
+        &ep,
+        "--credentials",
+        creds.to_str().unwrap(),
+    ]);
     let status = lab.exit_status("no graph to attach to");
     assert_eq!(status.exit_code(), 2);
     let s = lab.screen();

@@ -1,0 +1,279 @@
+//! What each identity of a graph across processes may say: Zenoh's access control (ACL),
+//! built from the graph as data.
+//!
+//! Every session of the graph enforces it on what it receives (the ingress flow), by the
+//! authenticated identity of the link it came on (the TLS certificate's common name,
+//! [`super::credentials::Role::common_name`]); anything not allowed is dropped by Zenoh
+//! before it reaches ratelab, so a sample from the wrong identity never reaches a topic's
+//! buffer. The default is to deny:
+//!
+//! | who | may publish (`put`) | may declare |
+//! |---|---|---|
+//! | everyone | nothing | subscribers, queries, liveliness subscribers and queries on the graph's keys |
+//! | the launcher | control (`@ctl/*`), the end (`@ended`), progress lines (`@log`) | its token `@launcher`, the settings' queryable `@setup` (and its replies) |
+//! | process `P` | the topics its nodes publish, its reports `@up/P`, ticks `@ticked/P`, counters `@stats/P` | its nodes' tokens `@node/P/*`, their endpoints' `@pub`/`@sub` tokens, its queryable `@here/P` (and replies) |
+//! | an observer | nothing | nothing more |
+//!
+//! A session that does not know the graph's shape (a watcher, before it asks the settings)
+//! lets every process publish on any topic and declare any endpoint token: what it
+//! receives moves nothing. Zenoh's own ACL semantics: a rule's key expression must
+//! include the message's (`**` never matches a chunk starting with `@`, so each `@` key is
+//! named), a deny wins, and with a default of deny both flows are filtered (so every
+//! session may send anything on the graph's keys: the check is where it is received).
+
+use super::credentials::Role;
+use super::Keys;
+use crate::graph::spec::GraphSpec;
+use crate::graph::NodeId;
+use serde_json::{json, Value};
+
+/// The `@` keys of a graph (each must be named: `**` does not match them).
+const AT_KEYS: [&str; 12] = [
+    "@node/**",
+    "@pub/**",
+    "@sub/**",
+    "@ctl/**",
+    "@up/**",
+    "@ticked/**",
+    "@here/**",
+    "@stats/**",
+    "@setup",
+    "@ended",
+    "@log",
+    "@launcher",
+];
+
+/// Every message kind Zenoh's access control knows.
+const ALL_MESSAGES: [&str; 9] = [
+    "put",
+    "delete",
+    "declare_subscriber",
+    "query",
+    "declare_queryable",
+    "reply",
+    "liveliness_token",
+    "declare_liveliness_subscriber",
+    "liveliness_query",
+];
+
+/// Zenoh's `access_control` configuration (JSON) for a session of the graph whose keys are
+/// `keys`, placed in `processes`; `spec` gives which process publishes which topic and
+/// owns which node (`None`: a watcher that does not know yet, see the module's header).
+pub fn acl(keys: &Keys, processes: &[String], spec: Option<&GraphSpec>) -> Value {
+    let p = keys.prefix();
+    let at = |k: &str| format!("{p}/{k}");
+    let mut rules = Vec::new();
+    let mut policies = Vec::new();
+    let mut rule_on = |flow: &str, id: String, messages: &[&str], key_exprs: Vec<String>| {
+        rules.push(json!({
+            "id": id,
+            "messages": messages,
+            "flows": [flow],
+            "permission": "allow",
+            "key_exprs": key_exprs,
+        }));
+        id
+    };
+    let mut read_keys = vec![format!("{p}/**")];
+    read_keys.extend(AT_KEYS.iter().map(|k| at(k)));
+    // `ratelab top` and the members look for any graph's launcher, settings, figures,
+    // nodes and end (what they find is this launch's: no other peer can connect).
+    for k in ["@launcher", "@setup", "@stats/*", "@ended", "@node/*/*"] {
+        read_keys.push(format!("ratelab/*/{k}"));
+    }
+    // With a default of deny, Zenoh filters what a session sends too: it sends anything
+    // on the graph's keys (what it may send is bounded where it is received).
+    let send = rule_on("egress", "send".into(), &ALL_MESSAGES, read_keys.clone());
+    let mut rule = |id: String, messages: &[&str], key_exprs: Vec<String>| {
+        rule_on("ingress", id, messages, key_exprs)
+    };
+    let read = rule(
+        "read".into(),
+        &[
+            "declare_subscriber",
+            "query",
+            "declare_liveliness_subscriber",
+            "liveliness_query",
+        ],
+        read_keys,
+    );
+    let mut roles = vec![Role::Launcher, Role::Observer];
+    roles.extend(processes.iter().cloned().map(Role::Process));
+    let subjects: Vec<Value> = roles
+        .iter()
+        .map(|r| json!({ "id": subject_id(r), "cert_common_names": [r.common_name()] }))
+        .collect();
+    policies.push(json!({
+        "rules": [send, read],
+        "subjects": roles.iter().map(subject_id).collect::<Vec<_>>(),
+    }));
+    let mut own = |role: &Role, rules: Vec<String>| {
+        policies.push(json!({ "rules": rules, "subjects": [subject_id(role)] }));
+    };
+    let launcher = vec![
+        rule(
+            "launcher-put".into(),
+            &["put"],
+            vec![at("@ctl/**"), at("@ended"), at("@log")],
+        ),
+        rule(
+            "launcher-token".into(),
+            &["liveliness_token"],
+            vec![at("@launcher")],
+        ),
+        rule(
+            "launcher-setup".into(),
+            &["declare_queryable", "reply"],
+            vec![at("@setup")],
+        ),
+    ];
+    own(&Role::Launcher, launcher);
+    for proc_name in processes {
+        let mut puts = vec![
+            keys.up_from(proc_name),
+            keys.ticked(proc_name),
+            keys.stats(proc_name),
+        ];
+        let mut tokens = vec![format!("{p}/@node/{proc_name}/**")];
+        match spec {
+            Some(spec) => {
+                for t in &spec.topics {
+                    if spec.process_of(t.publisher) == *proc_name {
+                        puts.push(keys.topic(&t.name));
+                    }
+                }
+                for (i, n) in spec.nodes.iter().enumerate() {
+                    if spec.process_of(NodeId(i)) == *proc_name {
+                        tokens.push(format!("{p}/@pub/**/{}", n.name));
+                        tokens.push(format!("{p}/@sub/**/{}", n.name));
+                    }
+                }
+            }
+            None => {
+                puts.push(format!("{p}/**"));
+                tokens.push(at("@pub/**"));
+                tokens.push(at("@sub/**"));
+            }
+        }
+        let role = Role::Process(proc_name.clone());
+        let id = subject_id(&role);
+        let mine = vec![
+            rule(format!("{id}-put"), &["put"], puts),
+            rule(format!("{id}-token"), &["liveliness_token"], tokens),
+            rule(
+                format!("{id}-here"),
+                &["declare_queryable", "reply"],
+                vec![keys.here(proc_name)],
+            ),
+        ];
+        own(&role, mine);
+    }
+    json!({
+        "enabled": true,
+        "default_permission": "deny",
+        "rules": rules,
+        "subjects": subjects,
+        "policies": policies,
+    })
+}
+
+/// A role's subject id in the ACL: `launcher`, `observer`, `process-<NAME>`.
+fn subject_id(role: &Role) -> String {
+    match role {
+        Role::Launcher => "launcher".into(),
+        Role::Observer => "observer".into(),
+        Role::Process(p) => format!("process-{p}"),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn chapter() -> GraphSpec {
+        GraphSpec::parse(crate::graph::spec::DEFAULT_GRAPH_TOML, "chapter").unwrap()
+    }
+
+    /// The key expressions `role` may `message` on (what a session receives from it).
+    fn allowed(acl: &Value, role: &Role, message: &str) -> Vec<String> {
+        let sid = subject_id(role);
+        let rules: Vec<&str> = acl["policies"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .filter(|p| p["subjects"].as_array().unwrap().iter().any(|s| s == &sid))
+            .flat_map(|p| p["rules"].as_array().unwrap().iter())
+            .map(|r| r.as_str().unwrap())
+            .collect();
+        acl["rules"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .filter(|r| rules.contains(&r["id"].as_str().unwrap()))
+            .filter(|r| {
+                r["flows"]
+                    .as_array()
+                    .unwrap()
+                    .iter()
+                    .any(|f| f == "ingress")
+            })
+            .filter(|r| {
+                r["messages"]
+                    .as_array()
+                    .unwrap()
+                    .iter()
+                    .any(|m| m == message)
+            })
+            .flat_map(|r| r["key_exprs"].as_array().unwrap().iter())
+            .map(|k| k.as_str().unwrap().to_string())
+            .collect()
+    }
+
+    #[test]
+    fn each_process_publishes_only_its_own_topics_and_only_the_launcher_controls() {
+        let spec = chapter();
+        let keys = Keys::new(&spec.name);
+        let procs: Vec<String> = spec.placement().into_iter().map(|(p, _)| p).collect();
+        let acl = acl(&keys, &procs, Some(&spec));
+        let p = keys.prefix();
+        let robot = allowed(&acl, &Role::Process("robot".into()), "put");
+        assert!(robot.contains(&format!("{p}/obs")), "{robot:?}");
+        assert!(!robot.contains(&format!("{p}/action")), "{robot:?}");
+        let policy = allowed(&acl, &Role::Process("policy".into()), "put");
+        assert!(policy.contains(&format!("{p}/action")), "{policy:?}");
+        assert!(!policy.contains(&format!("{p}/obs")), "{policy:?}");
+        assert!(!policy.iter().any(|k| k.contains("@ctl")), "{policy:?}");
+        assert_eq!(
+            allowed(&acl, &Role::Launcher, "put"),
+            [
+                format!("{p}/@ctl/**"),
+                format!("{p}/@ended"),
+                format!("{p}/@log")
+            ]
+        );
+        assert!(allowed(&acl, &Role::Observer, "put").is_empty());
+        assert!(allowed(&acl, &Role::Observer, "liveliness_token").is_empty());
+        // A process's node tokens are under its own name only.
+        let tokens = allowed(&acl, &Role::Process("policy".into()), "liveliness_token");
+        assert!(
+            tokens.contains(&format!("{p}/@node/policy/**")),
+            "{tokens:?}"
+        );
+        assert!(
+            !tokens.iter().any(|k| k.contains("@node/robot")),
+            "{tokens:?}"
+        );
+    }
+
+    #[test]
+    fn zenoh_accepts_the_configuration_with_and_without_the_graphs_shape() {
+        let spec = chapter();
+        let keys = Keys::new(&spec.name);
+        let procs: Vec<String> = spec.placement().into_iter().map(|(p, _)| p).collect();
+        for shape in [Some(&spec), None] {
+            let mut c = zenoh::Config::default();
+            c.insert_json5("access_control", &acl(&keys, &procs, shape).to_string())
+                .unwrap();
+        }
+    }
+}

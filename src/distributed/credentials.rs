@@ -1,0 +1,458 @@
+//! Who may join a graph across processes: per-launch credentials for mutual TLS.
+//!
+//! Every session of a graph across processes (the launcher, each `ratelab node`, and the
+//! watchers `ratelab top` and `lab --attach`) speaks Zenoh over TLS 1.3 with mutual
+//! authentication: both ends of every link show a certificate signed by one certificate
+//! authority (CA) that exists for one launch only, so a peer without the launch's
+//! credentials cannot connect, read or write anything (ROS 2's own answer for rmw_zenoh is
+//! the same Zenoh mechanism, `zenoh_security_tools`). The certificate's common name is the
+//! peer's identity, which Zenoh's access control ([`super::access`]) checks on every
+//! message: [`Role::common_name`].
+//!
+//! [`Credentials::generate`] makes the CA and one certificate per identity (ECDSA P-256,
+//! by `rcgen`); the CA's private key is dropped at once, so nobody, not even the launcher,
+//! can issue another identity. The launcher hands each process it starts a file holding
+//! the CA's certificate and that process's identity alone, in a private folder (mode
+//! `0700`, files `0600`) removed when the launch ends; `launch --export-credentials FILE`
+//! writes every identity to a file for processes started by hand (`ratelab node
+//! --credentials FILE`). A later launch makes a new CA: old files admit to nothing.
+//!
+//! A credentials file is read as untrusted input: at most [`MAX_CREDENTIALS_BYTES`], TOML
+//! with known fields only, bounded counts and sizes, and refused when other users may read
+//! it (as `ssh` refuses a private key anyone can read).
+
+use super::{DistError, MAX_PROCESSES};
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+use std::path::Path;
+
+/// The largest credentials file read, bytes.
+pub const MAX_CREDENTIALS_BYTES: u64 = 256 * 1024;
+
+/// The largest certificate or private key in a credentials file, bytes of PEM.
+const MAX_PEM_BYTES: usize = 8 * 1024;
+
+/// The longest graph name or common name in a credentials file, bytes.
+const MAX_NAME_BYTES: usize = 128;
+
+/// Who a session is, as its certificate's common name says.
+#[derive(Clone, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum Role {
+    /// The launcher: the run's authority (the control keys, the run's settings, its end).
+    Launcher,
+    /// A placement group's process (`ratelab node --process NAME`): it publishes its own
+    /// nodes' topics, reports and tokens.
+    Process(String),
+    /// A watcher (`ratelab top`, `lab --attach`, the lab beside its launch): it reads, and
+    /// publishes nothing the graph acts on.
+    Observer,
+}
+
+impl Role {
+    /// The certificate's common name: `ratelab-launcher`, `ratelab-process-<NAME>`,
+    /// `ratelab-observer`.
+    pub fn common_name(&self) -> String {
+        match self {
+            Role::Launcher => "ratelab-launcher".into(),
+            Role::Process(p) => format!("ratelab-process-{p}"),
+            Role::Observer => "ratelab-observer".into(),
+        }
+    }
+
+    /// How a line names it: `the launcher`, `process 'robot'`, `an observer`.
+    pub fn describe(&self) -> String {
+        match self {
+            Role::Launcher => "the launcher".into(),
+            Role::Process(p) => format!("process '{p}'"),
+            Role::Observer => "an observer".into(),
+        }
+    }
+}
+
+/// One identity: its certificate (signed by the launch's CA) and private key, PEM.
+#[derive(Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Identity {
+    /// The certificate, PEM.
+    pub cert: String,
+    /// Its private key (PKCS#8), PEM.
+    pub key: String,
+}
+
+impl std::fmt::Debug for Identity {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("Identity { cert, key: *** }")
+    }
+}
+
+/// A launch's credentials: its CA's certificate and some of its identities.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Credentials {
+    /// The graph they admit to (its name).
+    pub graph: String,
+    /// The graph's processes (placement groups), in placement order.
+    pub processes: Vec<String>,
+    /// The launch's CA certificate, PEM: the only issuer a session trusts.
+    pub ca: String,
+    /// Identities by common name ([`Role::common_name`]).
+    pub identities: BTreeMap<String, Identity>,
+}
+
+fn tls_error(e: rcgen::Error) -> DistError {
+    DistError::Usage(format!("cannot make the launch's certificates: {e}"))
+}
+
+impl Credentials {
+    /// A new CA and an identity for the launcher, an observer and each of `processes`,
+    /// for graph `graph`. The CA's private key is not kept.
+    ///
+    /// # Errors
+    /// [`DistError::Usage`] when a key or certificate cannot be made (the system's
+    /// random source failed).
+    pub fn generate(graph: &str, processes: &[String]) -> Result<Credentials, DistError> {
+        use rcgen::{
+            BasicConstraints, CertificateParams, DnType, ExtendedKeyUsagePurpose, IsCa, Issuer,
+            KeyPair, KeyUsagePurpose,
+        };
+        let mut ca_params = CertificateParams::new(Vec::<String>::new()).map_err(tls_error)?;
+        ca_params
+            .distinguished_name
+            .push(DnType::CommonName, format!("ratelab launch CA ({graph})"));
+        ca_params.is_ca = IsCa::Ca(BasicConstraints::Constrained(0));
+        ca_params.key_usages = vec![
+            KeyUsagePurpose::KeyCertSign,
+            KeyUsagePurpose::CrlSign,
+            KeyUsagePurpose::DigitalSignature,
+        ];
+        let ca_key = KeyPair::generate().map_err(tls_error)?;
+        let ca_cert = ca_params.self_signed(&ca_key).map_err(tls_error)?;
+        let issuer = Issuer::new(ca_params, ca_key);
+        let mut roles = vec![Role::Launcher, Role::Observer];
+        roles.extend(processes.iter().cloned().map(Role::Process));
+        let mut identities = BTreeMap::new();
+        for role in roles {
+            let cn = role.common_name();
+            let mut params =
+                CertificateParams::new(vec!["localhost".to_string()]).map_err(tls_error)?;
+            params
+                .distinguished_name
+                .push(DnType::CommonName, cn.clone());
+            params.extended_key_usages = vec![
+                ExtendedKeyUsagePurpose::ServerAuth,
+                ExtendedKeyUsagePurpose::ClientAuth,
+            ];
+            params.key_usages = vec![KeyUsagePurpose::DigitalSignature];
+            let key = KeyPair::generate().map_err(tls_error)?;
+            let cert = params.signed_by(&key, &issuer).map_err(tls_error)?;
+            identities.insert(
+                cn,
+                Identity {
+                    cert: cert.pem(),
+                    key: key.serialize_pem(),
+                },
+            );
+        }
+        Ok(Credentials {
+            graph: graph.to_string(),
+            processes: processes.to_vec(),
+            ca: ca_cert.pem(),
+            identities,
+        })
+    }
+
+    /// The same credentials holding `role`'s identity alone (what a started process is
+    /// given).
+    ///
+    /// # Errors
+    /// [`DistError::Usage`] when they hold no identity for `role`.
+    pub fn only(&self, role: &Role) -> Result<Credentials, DistError> {
+        let id = self.identity(role)?.clone();
+        Ok(Credentials {
+            identities: BTreeMap::from([(role.common_name(), id)]),
+            ..self.clone()
+        })
+    }
+
+    /// `role`'s identity.
+    ///
+    /// # Errors
+    /// [`DistError::Usage`] naming the identities they hold.
+    pub fn identity(&self, role: &Role) -> Result<&Identity, DistError> {
+        self.identities.get(&role.common_name()).ok_or_else(|| {
+            DistError::Usage(format!(
+                "these credentials (graph '{}') hold no identity for {} (they hold: {})",
+                self.graph,
+                role.describe(),
+                self.identities
+                    .keys()
+                    .map(String::as_str)
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ))
+        })
+    }
+
+    /// The file's text (TOML, with a first line saying it is a secret).
+    pub fn to_toml(&self) -> String {
+        let body = toml::to_string(self).unwrap_or_default();
+        format!(
+            "# ratelab credentials for graph '{}': a secret. Whoever holds this file can join \
+             the graph's launch as the identities below.\n{body}",
+            self.graph
+        )
+    }
+
+    /// Parse a credentials file's text; `origin` names it in errors.
+    ///
+    /// # Errors
+    /// [`DistError::Usage`], one line: not TOML of this shape, or counts and sizes over
+    /// their bounds.
+    pub fn parse(text: &str, origin: &str) -> Result<Credentials, DistError> {
+        let bad = |why: String| DistError::Usage(format!("{origin}: {why}"));
+        let c: Credentials = toml::from_str(text).map_err(|e| {
+            bad(format!(
+                "not a ratelab credentials file ({})",
+                e.message().lines().next().unwrap_or("malformed")
+            ))
+        })?;
+        if c.graph.is_empty() || c.graph.len() > MAX_NAME_BYTES {
+            return Err(bad("the graph's name is empty or too long".into()));
+        }
+        if c.processes.len() > MAX_PROCESSES || c.identities.len() > MAX_PROCESSES + 2 {
+            return Err(bad(format!(
+                "more than {MAX_PROCESSES} processes or {} identities",
+                MAX_PROCESSES + 2
+            )));
+        }
+        if let Some(p) = c
+            .processes
+            .iter()
+            .find(|p| !crate::graph::spec::valid_node_name(p))
+        {
+            return Err(bad(format!(
+                "'{}' is not a process name",
+                super::wire::printable(p)
+            )));
+        }
+        let pem_ok = |s: &str| s.len() <= MAX_PEM_BYTES && s.starts_with("-----BEGIN ");
+        if !pem_ok(&c.ca) {
+            return Err(bad("the CA certificate is not a PEM certificate".into()));
+        }
+        for (cn, id) in &c.identities {
+            if cn.len() > MAX_NAME_BYTES || !pem_ok(&id.cert) || !pem_ok(&id.key) {
+                return Err(bad(format!(
+                    "identity '{}' is not a PEM certificate and key",
+                    super::wire::printable(cn)
+                )));
+            }
+        }
+        Ok(c)
+    }
+
+    /// Read a credentials file ([`Credentials::parse`]), refusing one that other users may
+    /// read or write.
+    ///
+    /// # Errors
+    /// [`DistError::Usage`], one line naming the file.
+    pub fn load(path: &Path) -> Result<Credentials, DistError> {
+        use std::os::unix::fs::PermissionsExt as _;
+        let shown = path.display();
+        let bytes = crate::input::read_regular_file(path, MAX_CREDENTIALS_BYTES)
+            .map_err(|e| DistError::Usage(format!("--credentials: {e}")))?;
+        if let Ok(m) = std::fs::metadata(path) {
+            if m.permissions().mode() & 0o077 != 0 {
+                return Err(DistError::Usage(format!(
+                    "--credentials {shown}: other users may read it (mode {:o}); it is a secret: chmod 600 {shown}",
+                    m.permissions().mode() & 0o777
+                )));
+            }
+        }
+        let text = String::from_utf8(bytes)
+            .map_err(|_| DistError::Usage(format!("--credentials {shown}: not UTF-8 text")))?;
+        Credentials::parse(&text, &format!("--credentials {shown}"))
+    }
+
+    /// Write them to `path`, readable by its owner alone; an existing file only with
+    /// `force` ([`crate::output`]'s rule).
+    ///
+    /// # Errors
+    /// [`DistError::Usage`], one line naming the file.
+    pub fn write(&self, path: &Path, force: bool) -> Result<(), DistError> {
+        crate::output::write_private(path, force, self.to_toml().as_bytes())
+            .map_err(|e| DistError::Usage(e.to_string()))
+    }
+
+    /// The Zenoh configuration a session of `role` needs, as `(key, JSON5 value)` pairs
+    /// for [`zenoh::Config::insert_json5`]: the CA as the only custom root, `role`'s
+    /// certificate and key on both listening and connecting links, mutual TLS. The peer's
+    /// host name is not checked against its certificate (a launch's CA issues nothing
+    /// else, and every peer is checked by its identity, [`super::access`]).
+    ///
+    /// # Errors
+    /// [`DistError::Usage`] when they hold no identity for `role`.
+    pub fn zenoh_tls(&self, role: &Role) -> Result<Vec<(&'static str, String)>, DistError> {
+        use base64::Engine as _;
+        let id = self.identity(role)?;
+        let b64 = |s: &str| {
+            serde_json::to_string(&base64::engine::general_purpose::STANDARD.encode(s))
+                .unwrap_or_default()
+        };
+        Ok(vec![
+            (
+                "transport/link/tls/root_ca_certificate_base64",
+                b64(&self.ca),
+            ),
+            (
+                "transport/link/tls/listen_certificate_base64",
+                b64(&id.cert),
+            ),
+            ("transport/link/tls/listen_private_key_base64", b64(&id.key)),
+            (
+                "transport/link/tls/connect_certificate_base64",
+                b64(&id.cert),
+            ),
+            (
+                "transport/link/tls/connect_private_key_base64",
+                b64(&id.key),
+            ),
+            ("transport/link/tls/enable_mtls", "true".into()),
+            ("transport/link/tls/verify_name_on_connect", "false".into()),
+        ])
+    }
+}
+
+/// A folder of this user's alone (mode `0700`) for a launch's credentials files, removed
+/// with everything in it when dropped.
+pub struct PrivateDir(tempfile::TempDir);
+
+impl PrivateDir {
+    /// A new one under the system's temporary folder (`ratelab-launch-XXXXXX`).
+    ///
+    /// # Errors
+    /// [`DistError::Usage`] when it cannot be made.
+    pub fn new() -> Result<PrivateDir, DistError> {
+        use std::os::unix::fs::PermissionsExt as _;
+        tempfile::Builder::new()
+            .prefix("ratelab-launch-")
+            .permissions(std::fs::Permissions::from_mode(0o700))
+            .tempdir()
+            .map(PrivateDir)
+            .map_err(|e| DistError::Usage(format!("cannot make a private folder: {e}")))
+    }
+
+    /// Its path.
+    pub fn path(&self) -> &Path {
+        self.0.path()
+    }
+
+    /// Write `creds` there as `NAME.toml` (mode `0600`) and return its path.
+    ///
+    /// # Errors
+    /// [`DistError::Usage`] when it cannot be written.
+    pub fn write(&self, name: &str, creds: &Credentials) -> Result<std::path::PathBuf, DistError> {
+        let path = self.0.path().join(format!("{name}.toml"));
+        creds.write(&path, false)?;
+        Ok(path)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn procs() -> Vec<String> {
+        vec!["robot".into(), "policy".into()]
+    }
+
+    #[test]
+    fn generated_credentials_round_trip_through_their_file_and_keep_one_identity_per_role() {
+        let c = Credentials::generate("cartpole", &procs()).unwrap();
+        assert_eq!(
+            c.identities.keys().cloned().collect::<Vec<_>>(),
+            [
+                "ratelab-launcher",
+                "ratelab-observer",
+                "ratelab-process-policy",
+                "ratelab-process-robot"
+            ]
+        );
+        let back = Credentials::parse(&c.to_toml(), "x").unwrap();
+        assert_eq!(back, c);
+        let one = c.only(&Role::Process("robot".into())).unwrap();
+        assert_eq!(one.identities.len(), 1);
+        assert!(one.identity(&Role::Launcher).is_err());
+        let err = c
+            .only(&Role::Process("camera".into()))
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("no identity for process 'camera'"), "{err}");
+        // The key never shows in a debug print.
+        assert!(!format!("{one:?}").contains("PRIVATE KEY"));
+    }
+
+    #[test]
+    fn two_launches_have_different_authorities() {
+        let a = Credentials::generate("g", &procs()).unwrap();
+        let b = Credentials::generate("g", &procs()).unwrap();
+        assert_ne!(a.ca, b.ca);
+    }
+
+    #[test]
+    fn hostile_files_are_refused_in_one_line() {
+        let c = Credentials::generate("g", &procs()).unwrap();
+        for (text, says) in [
+            ("", "not a ratelab credentials file"),
+            ("graph = 1", "not a ratelab credentials file"),
+            (
+                &c.to_toml()
+                    .replace("graph = \"g\"", "graph = \"g\"\nextra = 1"),
+                "not a ratelab credentials file",
+            ),
+            (
+                &c.to_toml().replace("-----BEGIN CERTIFICATE", "BEGIN"),
+                "not a PEM certificate",
+            ),
+        ] {
+            let e = Credentials::parse(text, "F").unwrap_err().to_string();
+            assert!(e.starts_with("F: ") && e.contains(says), "{e}");
+            assert!(!e.contains('\n'), "{e}");
+        }
+        let many = (0..40).map(|i| format!("p{i}")).collect::<Vec<_>>();
+        let mut big = c.clone();
+        big.processes = many;
+        let e = Credentials::parse(&big.to_toml(), "F")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("more than"), "{e}");
+    }
+
+    #[test]
+    fn files_are_private_never_overwritten_without_force_and_refused_when_others_can_read() {
+        use std::os::unix::fs::PermissionsExt as _;
+        let dir = PrivateDir::new().unwrap();
+        assert_eq!(
+            std::fs::metadata(dir.path()).unwrap().permissions().mode() & 0o777,
+            0o700
+        );
+        let c = Credentials::generate("g", &procs()).unwrap();
+        let f = dir.write("all", &c).unwrap();
+        assert_eq!(
+            std::fs::metadata(&f).unwrap().permissions().mode() & 0o777,
+            0o600
+        );
+        assert_eq!(Credentials::load(&f).unwrap(), c);
+        let e = c.write(&f, false).unwrap_err().to_string();
+        assert!(e.contains("--force"), "{e}");
+        c.write(&f, true).unwrap();
+        std::fs::set_permissions(&f, std::fs::Permissions::from_mode(0o644)).unwrap();
+        let e = Credentials::load(&f).unwrap_err().to_string();
+        assert!(e.contains("other users may read it"), "{e}");
+        let kept = dir.path().to_path_buf();
+        drop(dir);
+        assert!(
+            !kept.exists(),
+            "the private folder is removed with its files"
+        );
+    }
+}

@@ -1,0 +1,142 @@
+//! Connections a graph's session refused: a peer without the launch's credentials
+//! ([`super::credentials`]) fails the TLS handshake, which Zenoh reports only as a warning
+//! of its TLS link (`zenoh_link_tls`, through the `tracing` crate). [`watch`] installs a
+//! `tracing` subscriber that passes those warnings on, and nothing else (every other
+//! callsite is disabled once, at registration, so it costs nothing after); [`Refusals`]
+//! turns them into the launcher's progress lines, rate-limited.
+
+use crossbeam_channel::{Receiver, Sender};
+use std::sync::{Mutex, OnceLock};
+use std::time::{Duration, Instant};
+use tracing::subscriber::Interest;
+use tracing::{Event, Metadata, Subscriber};
+use tracing_subscriber::layer::{Context, Layer};
+use tracing_subscriber::prelude::*;
+
+/// The most refusals waiting to be said (more are counted, not kept).
+const MAX_WAITING: usize = 256;
+
+/// The longest refusal reason kept, bytes.
+const MAX_REASON_BYTES: usize = 200;
+
+/// Where refusals go: the receivers [`watch`] handed out.
+static SINKS: OnceLock<Mutex<Vec<Sender<String>>>> = OnceLock::new();
+
+/// Whether a callsite is one of Zenoh's TLS link warnings (and errors).
+fn is_refusal(meta: &Metadata<'_>) -> bool {
+    meta.target().starts_with("zenoh_link_tls") && *meta.level() <= tracing::Level::WARN
+}
+
+struct RefusalLayer;
+
+impl<S: Subscriber> Layer<S> for RefusalLayer {
+    fn register_callsite(&self, meta: &'static Metadata<'static>) -> Interest {
+        if is_refusal(meta) {
+            Interest::always()
+        } else {
+            Interest::never()
+        }
+    }
+
+    fn enabled(&self, meta: &Metadata<'_>, _: Context<'_, S>) -> bool {
+        is_refusal(meta)
+    }
+
+    fn on_event(&self, event: &Event<'_>, _: Context<'_, S>) {
+        struct Message(String);
+        impl tracing::field::Visit for Message {
+            fn record_debug(&mut self, field: &tracing::field::Field, v: &dyn std::fmt::Debug) {
+                if field.name() == "message" {
+                    self.0 = format!("{v:?}");
+                }
+            }
+        }
+        let mut m = Message(String::new());
+        event.record(&mut m);
+        // Zenoh's own hint after a failed accept is about file limits: not this case.
+        let reason = m.0.split(". Hint:").next().unwrap_or("").trim().to_string();
+        let mut reason = super::wire::printable(&reason);
+        if reason.len() > MAX_REASON_BYTES {
+            let mut cut = MAX_REASON_BYTES;
+            while !reason.is_char_boundary(cut) {
+                cut -= 1;
+            }
+            reason.truncate(cut);
+        }
+        if let Some(sinks) = SINKS.get() {
+            crate::graph::lock(sinks).retain(|s| match s.try_send(reason.clone()) {
+                Ok(()) | Err(crossbeam_channel::TrySendError::Full(_)) => true,
+                Err(crossbeam_channel::TrySendError::Disconnected(_)) => false,
+            });
+        }
+    }
+}
+
+/// Start passing on this process's refused connections, and return where they come (one
+/// reason per refused connection, printable, at most [`MAX_WAITING`] waiting). The first
+/// call installs the process's global `tracing` subscriber; when another is installed
+/// already, nothing comes (the run goes on).
+pub fn watch() -> Receiver<String> {
+    let (tx, rx) = crossbeam_channel::bounded(MAX_WAITING);
+    let mut installed = false;
+    let sinks = SINKS.get_or_init(|| {
+        installed = true;
+        Mutex::new(Vec::new())
+    });
+    crate::graph::lock(sinks).push(tx);
+    if installed {
+        let _ = tracing::subscriber::set_global_default(
+            tracing_subscriber::registry().with(RefusalLayer),
+        );
+    }
+    rx
+}
+
+/// The launcher's account of refused connections: the first said at once, then at most
+/// one line per [`Refusals::EVERY`], counting the rest.
+pub struct Refusals {
+    rx: Receiver<String>,
+    last_said: Option<Instant>,
+    unsaid: u64,
+    last_reason: String,
+}
+
+impl Refusals {
+    /// The least time between two lines.
+    pub const EVERY: Duration = Duration::from_secs(5);
+
+    /// Start watching ([`watch`]).
+    pub fn new() -> Refusals {
+        Refusals {
+            rx: watch(),
+            last_said: None,
+            unsaid: 0,
+            last_reason: String::new(),
+        }
+    }
+
+    /// Take what came, and say a line when one is due.
+    pub fn say_due(&mut self, say: &dyn Fn(&str)) {
+        for r in self.rx.try_iter() {
+            self.unsaid += 1;
+            self.last_reason = r;
+        }
+        if self.unsaid == 0 || self.last_said.is_some_and(|t| t.elapsed() < Self::EVERY) {
+            return;
+        }
+        let n = self.unsaid;
+        say(&format!(
+            "refused {n} connection{} without this launch's credentials ({})",
+            if n == 1 { "" } else { "s" },
+            self.last_reason
+        ));
+        self.unsaid = 0;
+        self.last_said = Some(Instant::now());
+    }
+}
+
+impl Default for Refusals {
+    fn default() -> Self {
+        Refusals::new()
+    }
+}

@@ -1,0 +1,324 @@
+//! Only the graph's own processes (issue 27): a peer without the launch's credentials
+//! cannot connect, and an authenticated process cannot say what its identity may not
+//! (Zenoh's mutual TLS and access control as `ratelab::distributed` configures them).
+
+use crate::distributed::{bin, free_port};
+use ratelab::distributed::credentials::{Credentials, Role};
+use ratelab::distributed::wire::{encode_json, ToMember, WireData, WireSample};
+use ratelab::distributed::zenoh::{self, Wait};
+use ratelab::distributed::{open_session, Access, Keys};
+use ratelab::graph::spec::{GraphSpec, DEFAULT_GRAPH_TOML};
+use std::process::Stdio;
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+fn chapter_processes() -> Vec<String> {
+    vec!["robot".into(), "policy".into()]
+}
+
+/// A session of `role` with `creds`, listening on `listen`, connecting to `connect`.
+fn session(
+    creds: &Credentials,
+    role: Role,
+    spec: Option<&GraphSpec>,
+    listen: &[String],
+    connect: &[String],
+) -> Result<zenoh::Session, String> {
+    let access = Access {
+        credentials: creds,
+        role: &role,
+        spec,
+    };
+    open_session(listen, connect, access).map_err(|e| e.to_string())
+}
+
+/// A plain Zenoh peer (no credentials) connecting to `connect`, with extra settings.
+fn plain_peer(connect: &str, extra: &[(&str, String)]) -> Result<zenoh::Session, String> {
+    let mut c = zenoh::Config::default();
+    for (k, v) in [
+        ("mode", "\"peer\"".to_string()),
+        ("scouting/multicast/enabled", "false".into()),
+        ("listen/endpoints", "[]".into()),
+        ("connect/endpoints", format!("[\"{connect}\"]")),
+        ("connect/exit_on_failure", "true".into()),
+        ("connect/timeout_ms", "3000".into()),
+    ]
+    .into_iter()
+    .chain(extra.iter().map(|(k, v)| (*k, v.clone())))
+    {
+        c.insert_json5(k, &v).unwrap();
+    }
+    zenoh::open(c).wait().map_err(|e| e.to_string())
+}
+
+#[test]
+fn a_peer_without_the_launch_s_credentials_cannot_connect() {
+    let _m = crate::machine::shared();
+    let creds = Credentials::generate("cartpole", &chapter_processes()).unwrap();
+    let port = free_port();
+    let ep = format!("tls/127.0.0.1:{port}");
+    let _launcher = session(&creds, Role::Launcher, None, std::slice::from_ref(&ep), &[]).unwrap();
+    // The launch's own process connects.
+    let ok = session(
+        &creds,
+        Role::Process("policy".into()),
+        None,
+        &[],
+        std::slice::from_ref(&ep),
+    );
+    assert!(ok.is_ok(), "{:?}", ok.err());
+    // Another launch's credentials (another CA): refused.
+    let other = Credentials::generate("cartpole", &chapter_processes()).unwrap();
+    let e = session(
+        &other,
+        Role::Process("policy".into()),
+        None,
+        &[],
+        std::slice::from_ref(&ep),
+    )
+    .expect_err("another launch's identity is refused");
+    assert!(e.contains("cannot open a Zenoh session"), "{e}");
+    // Plain Zenoh over TCP to the port: refused.
+    assert!(plain_peer(&format!("tcp/127.0.0.1:{port}"), &[]).is_err());
+    // TLS trusting the launch's CA but showing no certificate of its own: refused.
+    let dir = tempfile::tempdir().unwrap();
+    let ca = dir.path().join("ca.pem");
+    std::fs::write(&ca, &creds.ca).unwrap();
+    let e = plain_peer(
+        &ep,
+        &[
+            (
+                "transport/link/tls/root_ca_certificate",
+                serde_json::to_string(&ca).unwrap(),
+            ),
+            ("transport/link/tls/verify_name_on_connect", "false".into()),
+        ],
+    );
+    assert!(e.is_err(), "a TLS peer without a certificate connected");
+}
+
+/// Counts of what a subscriber received.
+fn counting(
+    session: &zenoh::Session,
+    key: &str,
+) -> (Arc<AtomicUsize>, zenoh::pubsub::Subscriber<()>) {
+    let n = Arc::new(AtomicUsize::new(0));
+    let c = n.clone();
+    let sub = session
+        .declare_subscriber(key.to_string())
+        .callback(move |_| {
+            c.fetch_add(1, Ordering::SeqCst);
+        })
+        .wait()
+        .unwrap();
+    (n, sub)
+}
+
+#[test]
+fn an_identity_publishes_only_what_the_graph_gives_it() {
+    let _m = crate::machine::shared();
+    let spec = GraphSpec::parse(DEFAULT_GRAPH_TOML, "chapter").unwrap();
+    let keys = Keys::new(&spec.name);
+    let creds = Credentials::generate(&spec.name, &chapter_processes()).unwrap();
+    let ep = format!("tls/127.0.0.1:{}", free_port());
+    // The robot's process: it subscribes to /action and to its control key.
+    let robot = session(
+        &creds,
+        Role::Process("robot".into()),
+        Some(&spec),
+        std::slice::from_ref(&ep),
+        &[],
+    )
+    .unwrap();
+    let (action, _a) = counting(&robot, &keys.topic("/action"));
+    let (control, _c) = counting(&robot, &keys.control("robot"));
+    let tokens = Arc::new(AtomicUsize::new(0));
+    let t = tokens.clone();
+    let _live = robot
+        .liveliness()
+        .declare_subscriber(format!("{}/@node/**", keys.prefix()))
+        .callback(move |_| {
+            t.fetch_add(1, Ordering::SeqCst);
+        })
+        .wait()
+        .unwrap();
+    let force = WireSample {
+        seq: 0,
+        stamp_ns: 0,
+        origin_ns: None,
+        sent_mono_ns: 0,
+        data: WireData::Force(10.0),
+    }
+    .encode();
+    let start = encode_json(&ToMember::Start { start_mono_ns: 0 });
+    // Publishes `n` forces on /action and `n` starts on robot's control key as `role`, and
+    // declares a token for the policy's node; returns how many of each arrived.
+    let attempt = |role: Role| -> (usize, usize, usize) {
+        let (a0, c0, t0) = (
+            action.load(Ordering::SeqCst),
+            control.load(Ordering::SeqCst),
+            tokens.load(Ordering::SeqCst),
+        );
+        let s = session(&creds, role, None, &[], std::slice::from_ref(&ep)).unwrap();
+        let token = s
+            .liveliness()
+            .declare_token(keys.node_token("policy", "policy"))
+            .wait()
+            .unwrap();
+        // Declarations travel first: wait until the robot's subscriptions reach this session.
+        let p = s.declare_publisher(keys.topic("/action")).wait().unwrap();
+        let until = Instant::now() + Duration::from_secs(5);
+        while !p.matching_status().wait().unwrap().matching() && Instant::now() < until {
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        for _ in 0..20 {
+            p.put(force.clone()).wait().unwrap();
+            s.put(keys.control("robot"), start.clone()).wait().unwrap();
+        }
+        std::thread::sleep(Duration::from_millis(600));
+        drop(token);
+        drop(s);
+        std::thread::sleep(Duration::from_millis(200));
+        (
+            action.load(Ordering::SeqCst) - a0,
+            control.load(Ordering::SeqCst) - c0,
+            tokens.load(Ordering::SeqCst) - t0,
+        )
+    };
+    // The robot's own identity (or an observer's) may not command the actuator, control a
+    // process nor declare another process's node: nothing reaches the robot's session.
+    assert_eq!(attempt(Role::Process("robot".into())), (0, 0, 0));
+    assert_eq!(attempt(Role::Observer), (0, 0, 0));
+    // The policy's identity may publish the force, not control; its own node's token
+    // (`@node/policy/policy`) arrives declared, then withdrawn.
+    assert_eq!(attempt(Role::Process("policy".into())), (20, 0, 2));
+    // The launcher may control.
+    assert_eq!(attempt(Role::Launcher), (0, 20, 0));
+}
+
+/// A launch under attack by a holder of the credentials who forges as the wrong identity,
+/// and by peers without them: the run is the undisturbed one, byte for byte, and the
+/// launcher says it refused connections.
+#[test]
+fn forgeries_change_nothing_in_a_launch_and_refused_peers_are_said() {
+    let _m = crate::machine::alone();
+    let dir = tempfile::tempdir().unwrap();
+    let creds_file = dir.path().join("creds.toml");
+    let port = free_port();
+    let ep = format!("tls/127.0.0.1:{port}");
+    let mut launcher = bin()
+        .args(["launch", "--processes", "--no-spawn", "--clock", "virtual"])
+        .args(["--duration", "10", "--listen", &ep, "--out"])
+        .arg(dir.path())
+        .arg("--export-credentials")
+        .arg(&creds_file)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let rx = crate::distributed::stdout_lines(&mut launcher);
+    let mut lines = Vec::new();
+    assert!(
+        crate::distributed::wait_line(&rx, &mut lines, "listening on", 30),
+        "{lines:?}"
+    );
+    // Peers without the launch's credentials.
+    assert!(plain_peer(&format!("tcp/127.0.0.1:{port}"), &[]).is_err());
+    let creds = Credentials::load(&creds_file).unwrap();
+    let spec = GraphSpec::parse(DEFAULT_GRAPH_TOML, "chapter").unwrap();
+    let keys = Keys::new(&spec.name);
+    // A holder of the file forging, as the robot's identity, what the policy and the
+    // launcher say, for the whole run.
+    let forger = session(
+        &creds,
+        Role::Process("robot".into()),
+        None,
+        &[],
+        std::slice::from_ref(&ep),
+    )
+    .unwrap();
+    let done = Arc::new(AtomicBool::new(false));
+    let forging = {
+        let (done, keys, forger) = (done.clone(), keys.clone(), forger.clone());
+        std::thread::spawn(move || {
+            let mut seq = 0;
+            while !done.load(Ordering::SeqCst) {
+                let force = WireSample {
+                    seq,
+                    stamp_ns: 0,
+                    origin_ns: None,
+                    sent_mono_ns: 0,
+                    data: WireData::Force(10.0),
+                };
+                let _ = forger.put(keys.topic("/action"), force.encode()).wait();
+                let stop = ToMember::Stop {
+                    at_ns: 0,
+                    need: Vec::new(),
+                };
+                let _ = forger
+                    .put(keys.control("policy"), encode_json(&stop))
+                    .wait();
+                let _ = forger.put(keys.ended(), b"{}".to_vec()).wait();
+                let _ = forger
+                    .put(keys.ticked("policy"), br#"{"process":"policy","index":0,"node":1,"t_ns":0,"stop":true,"published":null,"failed":null}"#.to_vec())
+                    .wait();
+                // A node token under the policy's name, declared and withdrawn.
+                if let Ok(t) = forger
+                    .liveliness()
+                    .declare_token(keys.node_token("policy", "policy"))
+                    .wait()
+                {
+                    std::thread::sleep(Duration::from_millis(5));
+                    drop(t);
+                }
+                seq += 1;
+                std::thread::sleep(Duration::from_millis(5));
+            }
+        })
+    };
+    std::thread::sleep(Duration::from_millis(300));
+    let nodes: Vec<_> = ["robot", "policy"]
+        .iter()
+        .map(|p| {
+            bin()
+                .args(["node", "--process", p, "--connect", &ep, "--credentials"])
+                .arg(&creds_file)
+                .stdout(Stdio::null())
+                .stderr(Stdio::null())
+                .spawn()
+                .unwrap()
+        })
+        .collect();
+    let status = launcher.wait().unwrap();
+    done.store(true, Ordering::SeqCst);
+    forging.join().unwrap();
+    lines.extend(rx.try_iter());
+    assert!(status.success(), "{lines:?}");
+    for mut n in nodes {
+        assert!(n.wait().unwrap().success());
+    }
+    assert!(
+        lines
+            .iter()
+            .any(|l| l.contains("without this launch's credentials")),
+        "the refused peer is said: {lines:?}"
+    );
+    let one = dir.path().join("one");
+    let (code, _, err) = crate::ratelab_in_repo(&[
+        "run",
+        "--clock",
+        "virtual",
+        "--duration",
+        "10",
+        "--out",
+        one.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    assert_eq!(
+        std::fs::read_to_string(one.join("metrics.json")).unwrap(),
+        std::fs::read_to_string(dir.path().join("metrics.json")).unwrap(),
+        "the forged run differs from the undisturbed one"
+    );
+    drop(forger);
+}
