@@ -35,6 +35,20 @@ const MAX_PEM_BYTES: usize = 8 * 1024;
 /// The longest graph name or common name in a credentials file, bytes.
 const MAX_NAME_BYTES: usize = 128;
 
+/// How long a launch's certificates are valid, from when they are made: a launch runs an
+/// hour at most, and processes started by hand may join a launch that waited for them.
+pub const VALIDITY: std::time::Duration = std::time::Duration::from_secs(7 * 24 * 3600);
+
+/// How far before it was made a certificate is valid already: hosts' clocks disagree.
+const CLOCK_SKEW: std::time::Duration = std::time::Duration::from_secs(3600);
+
+/// Now, seconds since the Unix epoch.
+fn unix_now_s() -> u64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_secs())
+}
+
 /// Who a session is, as its certificate's common name says.
 #[derive(Clone, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub enum Role {
@@ -93,6 +107,9 @@ pub struct Credentials {
     pub graph: String,
     /// The graph's processes (placement groups), in placement order.
     pub processes: Vec<String>,
+    /// When the certificates stop being valid, seconds since the Unix epoch ([`VALIDITY`]
+    /// after they were made; TLS refuses them after it, whatever the file says).
+    pub valid_until_unix_s: u64,
     /// The launch's CA certificate, PEM: the only issuer a session trusts.
     pub ca: String,
     /// Identities by common name ([`Role::common_name`]).
@@ -115,7 +132,19 @@ impl Credentials {
             BasicConstraints, CertificateParams, DnType, ExtendedKeyUsagePurpose, IsCa, Issuer,
             KeyPair, KeyUsagePurpose,
         };
+        let now = unix_now_s();
+        let valid_until_unix_s = now + VALIDITY.as_secs();
+        let at = |s: u64| {
+            time::OffsetDateTime::from_unix_timestamp(i64::try_from(s).unwrap_or(i64::MAX))
+                .map_err(|e| DistError::Usage(format!("cannot date the certificates: {e}")))
+        };
+        let (not_before, not_after) = (
+            at(now.saturating_sub(CLOCK_SKEW.as_secs()))?,
+            at(valid_until_unix_s)?,
+        );
         let mut ca_params = CertificateParams::new(Vec::<String>::new()).map_err(tls_error)?;
+        ca_params.not_before = not_before;
+        ca_params.not_after = not_after;
         ca_params
             .distinguished_name
             .push(DnType::CommonName, format!("ratelab launch CA ({graph})"));
@@ -138,6 +167,8 @@ impl Credentials {
             params
                 .distinguished_name
                 .push(DnType::CommonName, cn.clone());
+            params.not_before = not_before;
+            params.not_after = not_after;
             params.extended_key_usages = vec![
                 ExtendedKeyUsagePurpose::ServerAuth,
                 ExtendedKeyUsagePurpose::ClientAuth,
@@ -156,6 +187,7 @@ impl Credentials {
         Ok(Credentials {
             graph: graph.to_string(),
             processes: processes.to_vec(),
+            valid_until_unix_s,
             ca: ca_cert.pem(),
             identities,
         })
@@ -270,7 +302,16 @@ impl Credentials {
         }
         let text = String::from_utf8(bytes)
             .map_err(|_| DistError::Usage(format!("--credentials {shown}: not UTF-8 text")))?;
-        Credentials::parse(&text, &format!("--credentials {shown}"))
+        let c = Credentials::parse(&text, &format!("--credentials {shown}"))?;
+        let now = unix_now_s();
+        if now > c.valid_until_unix_s {
+            return Err(DistError::Usage(format!(
+                "--credentials {shown}: expired {} h ago (a launch's credentials are valid {} days): export this launch's with `launch --export-credentials FILE`",
+                (now - c.valid_until_unix_s) / 3600,
+                VALIDITY.as_secs() / 86_400
+            )));
+        }
+        Ok(c)
     }
 
     /// Write them to `path`, readable by its owner alone; an existing file only with
@@ -346,13 +387,14 @@ impl PrivateDir {
         self.0.path()
     }
 
-    /// Write `creds` there as `NAME.toml` (mode `0600`) and return its path.
+    /// Write `creds` there as `NAME.toml` (mode `0600`; anew, for a process started again)
+    /// and return its path.
     ///
     /// # Errors
     /// [`DistError::Usage`] when it cannot be written.
     pub fn write(&self, name: &str, creds: &Credentials) -> Result<std::path::PathBuf, DistError> {
         let path = self.0.path().join(format!("{name}.toml"));
-        creds.write(&path, false)?;
+        creds.write(&path, true)?;
         Ok(path)
     }
 }
@@ -444,6 +486,12 @@ mod tests {
         assert_eq!(Credentials::load(&f).unwrap(), c);
         let e = c.write(&f, false).unwrap_err().to_string();
         assert!(e.contains("--force"), "{e}");
+        c.write(&f, true).unwrap();
+        let mut old = c.clone();
+        old.valid_until_unix_s = unix_now_s() - 7200;
+        old.write(&f, true).unwrap();
+        let e = Credentials::load(&f).unwrap_err().to_string();
+        assert!(e.contains("expired 2 h ago"), "{e}");
         c.write(&f, true).unwrap();
         std::fs::set_permissions(&f, std::fs::Permissions::from_mode(0o644)).unwrap();
         let e = Credentials::load(&f).unwrap_err().to_string();

@@ -421,8 +421,18 @@ pub fn open_session(
     set(&mut config, "access_control", &acl.to_string())?;
     zenoh::open(config).wait().map_err(|e| {
         let first = zenoh_message(&e.to_string());
+        // Zenoh says only that it could not connect: nobody listens there, or the TLS
+        // handshake was refused (most often credentials of another launch).
+        let hint = if first.contains("Unable to connect")
+            || first.contains("certificate")
+            || first.contains("alert")
+        {
+            " (is the launch running there, and were these credentials made by it? each launch makes its own)"
+        } else {
+            ""
+        };
         DistError::Usage(format!(
-            "cannot open a Zenoh session (listen {listen:?}, connect {connect:?}): {first}"
+            "cannot open a Zenoh session (listen {listen:?}, connect {connect:?}): {first}{hint}"
         ))
     })
 }

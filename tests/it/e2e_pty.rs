@@ -391,7 +391,11 @@ fn the_attached_lab_marks_a_killed_node_not_alive_and_sees_it_rejoin() {
         .stderr(std::process::Stdio::null())
         .spawn()
         .unwrap();
-    // Written before the launch listens: there once the lab can connect.
+    // Written before the launch listens.
+    let until = Instant::now() + Duration::from_secs(30);
+    while !creds.exists() && Instant::now() < until {
+        std::thread::sleep(Duration::from_millis(50));
+    }
     let lab = Lab::start(&[
         "lab",
         "--attach",

@@ -322,3 +322,72 @@ fn forgeries_change_nothing_in_a_launch_and_refused_peers_are_said() {
     );
     drop(forger);
 }
+
+#[test]
+fn bad_credentials_files_exit_2_in_one_line() {
+    use std::os::unix::fs::PermissionsExt as _;
+    let _m = crate::machine::shared();
+    let dir = tempfile::tempdir().unwrap();
+    let node = |creds: &std::path::Path, ep: &str| {
+        bin()
+            .args([
+                "node",
+                "--process",
+                "policy",
+                "--connect",
+                ep,
+                "--credentials",
+            ])
+            .arg(creds)
+            .output()
+            .unwrap()
+    };
+    let one_line = |o: &std::process::Output, needle: &str| {
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{err}");
+        assert_eq!(err.trim_end().lines().count(), 1, "one line: {err}");
+        assert!(err.contains(needle), "{err} lacks {needle:?}");
+    };
+    let ep = format!("tls/127.0.0.1:{}", free_port());
+    one_line(&node(&dir.path().join("none.toml"), &ep), "--credentials");
+    // Readable by others.
+    let loose = crate::distributed::chapter_credentials(dir.path());
+    std::fs::set_permissions(&loose, std::fs::Permissions::from_mode(0o644)).unwrap();
+    one_line(&node(&loose, &ep), "other users may read it");
+    // Expired.
+    let mut c = Credentials::generate("cartpole", &chapter_processes()).unwrap();
+    c.valid_until_unix_s = 1;
+    let expired = dir.path().join("expired.toml");
+    c.write(&expired, false).unwrap();
+    one_line(&node(&expired, &ep), "expired");
+    // Not credentials at all.
+    let junk = dir.path().join("junk.toml");
+    std::fs::write(&junk, "graph = [").unwrap();
+    std::fs::set_permissions(&junk, std::fs::Permissions::from_mode(0o600)).unwrap();
+    one_line(&node(&junk, &ep), "not a ratelab credentials file");
+    // Another launch's, at a running launch: its TLS handshake is refused.
+    let port = free_port();
+    let ep = format!("tls/127.0.0.1:{port}");
+    let mut launcher = bin()
+        .args(["launch", "--processes", "--no-spawn", "--clock", "virtual"])
+        .args(["--listen", &ep, "--export-credentials"])
+        .arg(dir.path().join("this.toml"))
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let rx = crate::distributed::stdout_lines(&mut launcher);
+    let mut lines = Vec::new();
+    assert!(
+        crate::distributed::wait_line(&rx, &mut lines, "listening on", 30),
+        "{lines:?}"
+    );
+    let other = dir.path().join("other");
+    std::fs::create_dir_all(&other).unwrap();
+    one_line(
+        &node(&crate::distributed::chapter_credentials(&other), &ep),
+        "were these credentials made by it?",
+    );
+    let _ = launcher.kill();
+    let _ = launcher.wait();
+}
