@@ -10,7 +10,7 @@ use super::monitor::Carried;
 use super::wire::{self, Setup, Ticked, ToLauncher, ToMember};
 use super::{check_endpoint, check_keys, Access, DistError, Keys, REPLY_TIMEOUT};
 use crate::config::{ClockKind, RunConfig};
-use crate::graph::spec::GraphSpec;
+use crate::graph::spec::{GraphSpec, RestartPolicy, MAX_RESTARTS};
 use crate::graph::NodeId;
 use crate::metrics::Metrics;
 use crate::node::{Flow, Node};
@@ -452,6 +452,12 @@ pub fn launch(
         let _ = session.put(keys.log(), line).wait();
     };
     say(&format!("listening on {endpoint}"));
+    if cfg.clock == ClockKind::Virtual && !spec.restart.is_empty() {
+        say(&format!(
+            "restart = \"on-failure\" ({}) does not apply under the virtual clock: a lockstep cannot take a process back, so a process that fails ends the run",
+            spec.restart.keys().cloned().collect::<Vec<_>>().join(", ")
+        ));
+    }
     // A process that asks again while refused as busy (`member::BUSY_RETRY`) is refused
     // once in the log, not every 250 ms.
     let last_refusal = std::cell::RefCell::new(String::new());
@@ -510,42 +516,51 @@ pub fn launch(
     // Each started process's credentials, its identity alone, in a folder of this user's
     // that goes with the launch.
     let private = PrivateDir::new()?;
-    if let Some(exe) = &opts.exe {
+    // Start (or start again) process `p`, with its own credentials.
+    let start_process = |p: &str| -> Result<Option<Child>, DistError> {
+        let Some(exe) = &opts.exe else {
+            return Ok(None);
+        };
+        let own = private.write(p, &creds.only(&Role::Process(p.to_string()))?)?;
+        let mut cmd = Command::new(exe);
+        cmd.arg("node").arg("--credentials").arg(&own);
+        if let Some(g) = &opts.graph_path {
+            cmd.arg("--graph").arg(g);
+        }
+        // Its own process group: a Ctrl-C at the terminal reaches the launcher only,
+        // which then stops every process in order (their reports are merged).
+        use std::os::unix::process::CommandExt as _;
+        cmd.args(["--process", p, "--connect", &endpoint])
+            .process_group(0)
+            .stdin(Stdio::null())
+            .stdout(Stdio::null())
+            .stderr(if opts.child_stderr.is_some() {
+                Stdio::piped()
+            } else {
+                Stdio::inherit()
+            });
+        // A node dies with the launcher, however the launcher ends.
+        // SAFETY: prctl is async-signal-safe and touches only this (child) process.
+        unsafe {
+            cmd.pre_exec(|| {
+                libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGTERM);
+                Ok(())
+            });
+        }
+        let mut child = cmd
+            .spawn()
+            .map_err(|e| DistError::Usage(format!("cannot start {}: {e}", exe.display())))?;
+        if let Some(to) = &opts.child_stderr {
+            pass_stderr(p, &mut child, to.clone(), session.clone(), keys.log());
+        }
+        // The file is read at its start; a restart writes it anew.
+        Ok(Some(child))
+    };
+    if opts.exe.is_some() {
         for (p, _) in &placement {
-            let own = private.write(p, &creds.only(&Role::Process(p.clone()))?)?;
-            let mut cmd = Command::new(exe);
-            cmd.arg("node").arg("--credentials").arg(&own);
-            if let Some(g) = &opts.graph_path {
-                cmd.arg("--graph").arg(g);
+            if let Some(child) = start_process(p)? {
+                children.0.push((p.clone(), child));
             }
-            // Its own process group: a Ctrl-C at the terminal reaches the launcher only,
-            // which then stops every process in order (their reports are merged).
-            use std::os::unix::process::CommandExt as _;
-            cmd.args(["--process", p, "--connect", &endpoint])
-                .process_group(0)
-                .stdin(Stdio::null())
-                .stdout(Stdio::null())
-                .stderr(if opts.child_stderr.is_some() {
-                    Stdio::piped()
-                } else {
-                    Stdio::inherit()
-                });
-            // A node dies with the launcher, however the launcher ends.
-            // SAFETY: prctl is async-signal-safe and touches only this (child) process.
-            unsafe {
-                use std::os::unix::process::CommandExt;
-                cmd.pre_exec(|| {
-                    libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGTERM);
-                    Ok(())
-                });
-            }
-            let mut child = cmd
-                .spawn()
-                .map_err(|e| DistError::Usage(format!("cannot start {}: {e}", exe.display())))?;
-            if let Some(to) = &opts.child_stderr {
-                pass_stderr(p, &mut child, to.clone(), session.clone(), keys.log());
-            }
-            children.0.push((p.clone(), child));
         }
     } else {
         say(&format!(
@@ -958,9 +973,54 @@ pub fn launch(
             let mut stop_sent = false;
             let mut gone: Vec<String> = Vec::new();
             let mut rejoining: Vec<String> = Vec::new();
+            // Restarts per process ([`RestartPolicy::OnFailure`]), and those given up on.
+            let mut restarts: BTreeMap<String, u32> = BTreeMap::new();
+            let mut given_up: Vec<String> = Vec::new();
             loop {
                 for m in stats_rx.try_iter() {
                     carried.see(spec, &m);
+                }
+                // A started process that failed mid-run starts again where the graph says
+                // so (not the plant's: the plant went with it).
+                if end.is_none() && !stop.is_stopped() {
+                    for (p, child) in &mut children.0 {
+                        let Ok(Some(status)) = child.try_wait() else {
+                            continue;
+                        };
+                        if status.success()
+                            || *p == robot
+                            || spec.restart.get(p.as_str()) != Some(&RestartPolicy::OnFailure)
+                            || given_up.contains(p)
+                        {
+                            continue;
+                        }
+                        let n = restarts.entry(p.clone()).or_insert(0);
+                        if *n >= MAX_RESTARTS {
+                            say(&format!(
+                                "process '{p}' failed again ({status}): not started again (restarted {MAX_RESTARTS} times already)"
+                            ));
+                            given_up.push(p.clone());
+                            continue;
+                        }
+                        *n += 1;
+                        match start_process(p) {
+                            Ok(Some(c)) => {
+                                say(&format!(
+                                    "process '{p}' failed ({status}) at t={:.2}s: starting it again (restart = \"on-failure\", {} of {MAX_RESTARTS})",
+                                    run_time().as_secs_f64(),
+                                    *n
+                                ));
+                                *child = c;
+                            }
+                            Ok(None) => {}
+                            Err(e) => {
+                                say(&format!(
+                                    "process '{p}' failed ({status}); cannot start it again: {e}"
+                                ));
+                                given_up.push(p.clone());
+                            }
+                        }
+                    }
                 }
                 while let Ok(p) = gone_rx.try_recv() {
                     if end.is_none()

@@ -24,7 +24,9 @@
 //! ```
 //!
 //! A node may also take a `compute_ms` and a `callback_group`, and the file
-//! `[executors.NAME]` tables: `src/graph/spec/executors.rs` has their format and rules.
+//! `[executors.NAME]` tables: `src/graph/spec/executors.rs` has their format and rules;
+//! `[processes.NAME]` tables (restart a launch's process when it fails):
+//! `src/graph/spec/processes.rs`.
 //!
 //! Rules (each broken rule is a [`SpecError`] with the line and column of the culprit):
 //! - at most [`MAX_NODES`] nodes, names unique; exactly one actuator (it owns the plant step
@@ -57,8 +59,10 @@
 //! nodes without explicit priorities is an error.
 
 mod executors;
+mod processes;
 
 pub use executors::ExecutorSpec;
+pub use processes::{RestartPolicy, MAX_RESTARTS};
 
 use crate::executor::ComputeTime;
 use crate::ids::{MAX_NODES, MAX_TOPICS};
@@ -301,6 +305,9 @@ pub struct GraphSpec {
     pub chain: Chain,
     /// The `[executors]` tables ([`ExecutorSpec`]); empty: every node on a thread of its own.
     pub executors: Vec<ExecutorSpec>,
+    /// The `[processes]` tables' restart policies, by process, where not
+    /// [`RestartPolicy::Never`] (`src/graph/spec/processes.rs`).
+    pub restart: std::collections::BTreeMap<String, RestartPolicy>,
 }
 
 /// A graph file that cannot be used: one line `FILE:LINE:COL: reason`, or `FILE: reason`
@@ -348,6 +355,8 @@ struct RawGraph {
     topics: Vec<Spanned<RawTopic>>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     executors: Option<executors::RawExecutors>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    processes: Option<processes::RawProcesses>,
 }
 
 #[derive(Deserialize, Serialize)]
@@ -651,6 +660,7 @@ impl GraphSpec {
                 })
                 .collect(),
             executors: executors::to_raw(self),
+            processes: processes::to_raw(self),
         };
         toml::to_string(&raw).expect("a graph always serializes")
     }
@@ -1221,6 +1231,7 @@ fn build(cx: &Ctx<'_>, raw: RawGraph) -> Result<GraphSpec, SpecError> {
             action: TopicId(0),
         },
         executors: Vec::new(),
+        restart: std::collections::BTreeMap::new(),
     };
     let no_executors = executors::RawExecutors::new();
     spec.executors = executors::executors(
@@ -1229,6 +1240,9 @@ fn build(cx: &Ctx<'_>, raw: RawGraph) -> Result<GraphSpec, SpecError> {
         &spec,
         |j| raw.nodes[order[j]].get_ref(),
     )?;
+    if let Some(p) = &raw.processes {
+        spec.restart = processes::processes(cx, p, &spec)?;
+    }
     spec.chain = find_chain(&spec).map_err(|reason| {
         let at = node_spans[order[spec_actuator(&spec).0]].clone();
         cx.err(at, reason)

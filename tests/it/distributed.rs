@@ -1168,3 +1168,67 @@ fn every_process_runs_zenoh_on_one_worker_unless_zenoh_runtime_says_otherwise() 
         assert_one_line_exit_2(&o, why);
     }
 }
+
+#[test]
+fn a_process_that_fails_starts_again_when_its_graph_says_so() {
+    let _m = crate::machine::alone();
+    let dir = tempfile::tempdir().unwrap();
+    let graph = dir.path().join("restart.toml");
+    let original = std::fs::read_to_string(Path::new(REPO).join("graphs/cartpole.toml")).unwrap();
+    std::fs::write(
+        &graph,
+        format!("{original}\n[processes.policy]\nrestart = \"on-failure\"\n"),
+    )
+    .unwrap();
+    let port = free_port();
+    let mut launcher = bin()
+        .arg("launch")
+        .arg(&graph)
+        .args(["--processes", "--clock", "real", "--duration", "8"])
+        .args(["--listen", &format!("tls/127.0.0.1:{port}")])
+        .arg("--out")
+        .arg(dir.path())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let rx = stdout_lines(&mut launcher);
+    let mut lines = Vec::new();
+    for p in ["policy", "robot"] {
+        let ready = format!("process '{p}' ready");
+        assert!(wait_line(&rx, &mut lines, &ready, 30), "{lines:?}");
+    }
+    std::thread::sleep(Duration::from_millis(1500));
+    let killed = kill_node_process(port, "policy");
+    assert!(
+        wait_line(&rx, &mut lines, "process 'policy' failed (signal: 9", 10),
+        "{lines:?}"
+    );
+    assert!(
+        wait_line(&rx, &mut lines, "process 'policy' rejoined", 20),
+        "{lines:?}"
+    );
+    let again = node_processes(port, "policy");
+    assert_eq!(again.len(), 1, "one policy process again: {again:?}");
+    assert_ne!(again[0], killed);
+    let status = exit_within(&mut launcher, 30);
+    lines.extend(rx.try_iter());
+    assert!(status.success(), "{lines:?}");
+    let said = lines
+        .iter()
+        .find(|l| l.contains("starting it again"))
+        .unwrap();
+    assert!(said.contains("restart = \"on-failure\", 1 of 3"), "{said}");
+    // The restarted policy's process reported: its figures are in the summary.
+    let m: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.path().join("metrics.json")).unwrap())
+            .unwrap();
+    assert!(
+        m["missing_processes"]
+            .as_array()
+            .is_none_or(|a| a.is_empty()),
+        "{m}"
+    );
+    assert!(m["nodes"]["policy"]["ticks"].as_u64().unwrap() >= 50, "{m}");
+    assert_none_left(port, Duration::ZERO);
+}
