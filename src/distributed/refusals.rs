@@ -19,6 +19,10 @@ const MAX_WAITING: usize = 256;
 /// The longest refusal reason kept, bytes.
 const MAX_REASON_BYTES: usize = 200;
 
+/// How Zenoh's TLS listener ends its warning of a failed accept (zenoh-link-tls 1.10,
+/// `accept_task`): what follows is Zenoh's hint, what precedes it the reason.
+const ACCEPT_FAILED: &str = ". Hint: increase the system open file limit";
+
 /// Where refusals go: the receivers [`watch`] handed out.
 static SINKS: OnceLock<Mutex<Vec<Sender<String>>>> = OnceLock::new();
 
@@ -53,8 +57,14 @@ impl<S: Subscriber> Layer<S> for RefusalLayer {
         }
         let mut m = Message(String::new());
         event.record(&mut m);
-        // Zenoh's own hint after a failed accept is about file limits: not this case.
-        let reason = m.0.split(". Hint:").next().unwrap_or("").trim().to_string();
+        // Only a failed accept (a handshake refused, or one that timed out) is a refusal:
+        // Zenoh's TLS link warns of other things too (it skips checking a server's name on
+        // every link this session opens, as ratelab asks). Zenoh's own hint after a failed
+        // accept is about file limits: not this case.
+        let Some((reason, _)) = m.0.split_once(ACCEPT_FAILED) else {
+            return;
+        };
+        let reason = reason.trim().to_string();
         let mut reason = super::wire::printable(&reason);
         if reason.len() > MAX_REASON_BYTES {
             let mut cut = MAX_REASON_BYTES;

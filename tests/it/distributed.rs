@@ -136,6 +136,8 @@ pub(crate) fn assert_lockstep_equals_in_process(run_graph: &[&str], launch_graph
                 out.contains("in 2 processes: robot [sensor, actuator], policy [policy]"),
                 "{out}"
             );
+            // The launch's own processes are never counted as refused peers.
+            assert!(!out.contains("refused"), "{out}");
             let a = std::fs::read_to_string(one.join("metrics.json")).unwrap();
             let b = std::fs::read_to_string(many.join("metrics.json")).unwrap();
             assert_eq!(a, b, "control {hz} Hz, seed {seed}: metrics differ");

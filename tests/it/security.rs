@@ -298,12 +298,26 @@ fn forgeries_change_nothing_in_a_launch_and_refused_peers_are_said() {
     for mut n in nodes {
         assert!(n.wait().unwrap().success());
     }
-    assert!(
-        lines
-            .iter()
-            .any(|l| l.contains("without this launch's credentials")),
-        "the refused peer is said: {lines:?}"
-    );
+    // The refused peer is said (at once, then at most every 5 s, counted), with TLS's
+    // reason; the launch's own processes and the forger (who holds the credentials) are
+    // not refused: the peer's attempts (Zenoh retries for 3 s) are all there is.
+    let refused: Vec<&String> = lines
+        .iter()
+        .filter(|l| l.contains("without this launch's credentials"))
+        .collect();
+    assert!((1..=2).contains(&refused.len()), "{lines:?}");
+    let counted: u32 = refused
+        .iter()
+        .filter_map(|l| {
+            l.split("refused ")
+                .nth(1)?
+                .split(' ')
+                .next()?
+                .parse::<u32>()
+                .ok()
+        })
+        .sum();
+    assert!((1..=5).contains(&counted), "{lines:?}");
     let one = dir.path().join("one");
     let (code, _, err) = crate::ratelab_in_repo(&[
         "run",
