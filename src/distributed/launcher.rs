@@ -940,12 +940,13 @@ pub fn launch(
             end
         }
         ClockKind::Real => {
-            // The figures of the processes that may be started again (all but the plant's):
-            // what one counted before it was killed is carried into the summary, as the
-            // lab carries it ([`Carried`]).
+            // Every process's figures: when they stop, the process is silent; of the
+            // processes that may be started again (all but the plant's), what one counted
+            // before it was killed is carried into the summary, as the lab carries it
+            // ([`Carried`]).
             let (stats_tx, stats_rx) = crossbeam_channel::bounded::<LiveStats>(1024);
             let mut _stats_subs = Vec::new();
-            for p in names.iter().filter(|p| **p != robot) {
+            for p in &names {
                 let tx = stats_tx.clone();
                 _stats_subs.push(
                     session
@@ -976,9 +977,39 @@ pub fn launch(
             // Restarts per process ([`RestartPolicy::OnFailure`]), and those given up on.
             let mut restarts: BTreeMap<String, u32> = BTreeMap::new();
             let mut given_up: Vec<String> = Vec::new();
+            // When each process's figures last came, and those said to be silent.
+            let mut last_figures: BTreeMap<String, Instant> = BTreeMap::new();
+            let mut silent: Vec<String> = Vec::new();
             loop {
                 for m in stats_rx.try_iter() {
-                    carried.see(spec, &m);
+                    if m.done {
+                        last_figures.remove(&m.process);
+                    } else {
+                        last_figures.insert(m.process.clone(), Instant::now());
+                    }
+                    if let Some(i) = silent.iter().position(|p| *p == m.process) {
+                        silent.remove(i);
+                        say(&format!("process '{}' is heard again", m.process));
+                    }
+                    if m.process != robot {
+                        carried.see(spec, &m);
+                    }
+                }
+                // A process whose figures stopped while its tokens live: frozen (SIGSTOP),
+                // starved or cut off, said long before Zenoh's lease declares it gone.
+                for (p, at) in &last_figures {
+                    if end.is_none()
+                        && at.elapsed() >= super::monitor::SILENT_AFTER
+                        && !gone.contains(p)
+                        && !silent.contains(p)
+                    {
+                        silent.push(p.clone());
+                        say(&format!(
+                            "process '{p}' is silent at t={:.2}s: no figures for {:.1} s while its tokens live (stopped, starved or cut off?); it is gone if Zenoh's lease (10 s) runs out",
+                            run_time().as_secs_f64(),
+                            at.elapsed().as_secs_f64()
+                        ));
+                    }
                 }
                 // A started process that failed mid-run starts again where the graph says
                 // so (not the plant's: the plant went with it).
@@ -1124,7 +1155,7 @@ pub fn launch(
                     break;
                 }
             }
-            for m in stats_rx.try_iter() {
+            for m in stats_rx.try_iter().filter(|m| m.process != robot) {
                 carried.see(spec, &m);
             }
             end.unwrap_or(RunEnd {

@@ -46,6 +46,11 @@ use zenoh::Wait;
 /// How often a watcher sends the lab a status (liveliness, run time).
 pub const STATUS_PERIOD: Duration = Duration::from_millis(250);
 
+/// A process whose figures (published every 100 ms) stop for this long while its tokens
+/// live is silent: frozen (SIGSTOP), starved, or cut off before Zenoh's lease (10 s) says
+/// it is gone. Its nodes are drawn not alive meanwhile.
+pub const SILENT_AFTER: Duration = Duration::from_secs(1);
+
 /// The plant's steps a watcher holds back at most, waiting for other processes' figures
 /// (200 s at 50 Hz; about 1 KB each).
 pub const MAX_PENDING_STEPS: usize = 10_000;
@@ -82,6 +87,8 @@ pub struct Fold {
     /// Processes that said their part of the run is over ([`LiveStats::done`]): their tokens
     /// going is a process leaving, not dying.
     left: BTreeSet<String>,
+    /// Processes silent for [`SILENT_AFTER`] or more ([`Fold::set_silent`]).
+    silent: BTreeSet<String>,
     /// Liveliness has been heard at least once (before, every node is "unknown").
     heard: bool,
     /// Newest run time seen.
@@ -116,6 +123,7 @@ impl Fold {
             spec,
             alive: BTreeSet::new(),
             left: BTreeSet::new(),
+            silent: BTreeSet::new(),
             heard: false,
             now: Nanos::ZERO,
             last_tick: vec![None; cfg.graph.nodes.len()],
@@ -294,11 +302,22 @@ impl Fold {
         }
     }
 
-    /// Is node `id` alive (its token present)? `None` before any liveliness was heard.
+    /// The processes silent now (no figures for [`SILENT_AFTER`] while their tokens
+    /// live; the watcher keeps the time). A process that said its part is over is never
+    /// silent.
+    pub fn set_silent(&mut self, silent: BTreeSet<String>) {
+        self.silent = silent.difference(&self.left).cloned().collect();
+    }
+
+    /// Is node `id` alive (its token present, its process not silent)? `None` before any
+    /// liveliness was heard.
     pub fn is_alive(&self, id: NodeId) -> Option<bool> {
+        let process = self.spec.process_of(id);
         self.heard.then(|| {
-            self.alive
-                .contains(&(self.spec.process_of(id), self.spec.node(id).name.clone()))
+            !self.silent.contains(&process)
+                && self
+                    .alive
+                    .contains(&(process.clone(), self.spec.node(id).name.clone()))
         })
     }
 
@@ -614,6 +633,9 @@ impl Watch {
             return Ok(());
         }
         let mut last_status = Instant::now();
+        // When each process's figures last came (for [`SILENT_AFTER`]).
+        let mut last_figures: std::collections::BTreeMap<String, Instant> =
+            std::collections::BTreeMap::new();
         let mut launcher_seen = false;
         let mut over_at: Option<Instant> = None;
         let processes: Vec<String> = self
@@ -635,6 +657,15 @@ impl Watch {
             if let Ok(e) = &ev {
                 pending.note(e);
             }
+            if let Ok(Event::Stats(m)) = &ev {
+                last_figures.insert(m.process.clone(), Instant::now());
+            }
+            let silent: BTreeSet<String> = last_figures
+                .iter()
+                .filter(|(_, t)| t.elapsed() >= SILENT_AFTER)
+                .map(|(p, _)| p.clone())
+                .collect();
+            fold.set_silent(silent);
             match ev {
                 Ok(Event::Stats(m)) => out = fold.stats(*m),
                 Ok(Event::Alive(p, n, alive)) if !fold.is_over() => {
@@ -800,7 +831,7 @@ pub fn record(
                     match (*was, is) {
                         (Some(true), Some(false)) => rec.event(
                             now,
-                            &format!("node {name} not alive (its process's liveliness token was withdrawn)"),
+                            &format!("node {name} not alive (its process's liveliness token was withdrawn, or its process is silent)"),
                             "WARN",
                         ),
                         (Some(false), Some(true)) => {
@@ -1040,6 +1071,23 @@ mod tests {
                 vec![step(40, stats(1, 0), stats(0, 0))]
             ))
             .is_empty());
+    }
+
+    #[test]
+    fn a_silent_process_s_nodes_are_not_alive_until_its_figures_come_again() {
+        let mut f = Fold::new(&cfg(), "scripted");
+        let policy = NodeId(1);
+        f.liveliness("policy", "policy", true);
+        assert_eq!(f.is_alive(policy), Some(true));
+        f.set_silent(BTreeSet::from(["policy".to_string()]));
+        assert_eq!(f.is_alive(policy), Some(false));
+        assert_eq!(
+            f.is_alive(NodeId(0)),
+            Some(false),
+            "robot's token never came"
+        );
+        f.set_silent(BTreeSet::new());
+        assert_eq!(f.is_alive(policy), Some(true));
     }
 
     #[test]

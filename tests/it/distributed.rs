@@ -1120,7 +1120,8 @@ fn every_process_runs_zenoh_on_one_worker_unless_zenoh_runtime_says_otherwise() 
             .arg("--out")
             .arg(dir.path())
             .stdout(Stdio::piped())
-            .stderr(Stdio::null());
+            // Kept, to say why should the launch fail.
+            .stderr(std::fs::File::create(dir.path().join("stderr")).unwrap());
         match user {
             Some(v) => launch.env("ZENOH_RUNTIME", v),
             None => launch.env_remove("ZENOH_RUNTIME"),
@@ -1147,7 +1148,10 @@ fn every_process_runs_zenoh_on_one_worker_unless_zenoh_runtime_says_otherwise() 
                 Some(_) => assert_eq!(pool("rx-"), 3, "the user's: pid {pid} {names:?}"),
             }
         }
-        assert!(exit_within(&mut launcher, 30).success(), "{lines:?}");
+        let status = exit_within(&mut launcher, 30);
+        lines.extend(rx.try_iter());
+        let err = std::fs::read_to_string(dir.path().join("stderr")).unwrap_or_default();
+        assert!(status.success(), "{status:?} {lines:?} stderr: {err}");
         assert_none_left(port, Duration::ZERO);
     }
     // One Zenoh cannot use: one line and exit 2 before anything starts, not Zenoh's panic.
@@ -1232,5 +1236,36 @@ fn a_process_that_fails_starts_again_when_its_graph_says_so() {
         "{m}"
     );
     assert!(m["nodes"]["policy"]["ticks"].as_u64().unwrap() >= 50, "{m}");
+    assert_none_left(port, Duration::ZERO);
+}
+
+#[test]
+fn a_frozen_process_is_said_silent_within_seconds_and_heard_again_when_it_resumes() {
+    let _m = crate::machine::alone();
+    let dir = tempfile::tempdir().unwrap();
+    let port = free_port();
+    let (mut launcher, rx, mut lines) = ready_launch("real", "12", port, dir.path());
+    let robot = node_processes(port, "robot");
+    assert_eq!(robot.len(), 1, "{robot:?}");
+    // SAFETY: plain kill(2) on a child of our child.
+    unsafe { libc::kill(robot[0] as i32, libc::SIGSTOP) };
+    let stopped = Instant::now();
+    assert!(
+        wait_line(&rx, &mut lines, "process 'robot' is silent", 10),
+        "{lines:?}"
+    );
+    assert!(
+        stopped.elapsed() < Duration::from_secs(5),
+        "said after {:?}",
+        stopped.elapsed()
+    );
+    std::thread::sleep(Duration::from_millis(500));
+    // SAFETY: as above.
+    unsafe { libc::kill(robot[0] as i32, libc::SIGCONT) };
+    assert!(
+        wait_line(&rx, &mut lines, "process 'robot' is heard again", 10),
+        "{lines:?}"
+    );
+    let _ = exit_within(&mut launcher, 40);
     assert_none_left(port, Duration::ZERO);
 }
