@@ -405,3 +405,181 @@ fn bad_credentials_files_exit_2_in_one_line() {
     let _ = launcher.kill();
     let _ = launcher.wait();
 }
+
+/// Two network namespaces joined by a veth pair with `tc netem` delay on one end: two
+/// "hosts" on one machine (removed when dropped).
+struct TwoHosts {
+    a: String,
+    b: String,
+}
+
+impl TwoHosts {
+    /// Make them, with addresses 10.77.0.1 (`a`) and 10.77.0.2 (`b`) and `delay_ms` on
+    /// `b`'s end when the kernel has netem; `None` when this machine does not let the test
+    /// make them (not root, no `ip`, no network namespaces).
+    fn new(delay_ms: u32) -> Option<TwoHosts> {
+        let tag = std::process::id();
+        let hosts = TwoHosts {
+            a: format!("rla{tag}"),
+            b: format!("rlb{tag}"),
+        };
+        let ip = |args: &[&str]| {
+            std::process::Command::new("ip")
+                .args(args)
+                .stdout(Stdio::null())
+                .stderr(Stdio::null())
+                .status()
+                .is_ok_and(|s| s.success())
+        };
+        let (va, vb) = (format!("va{tag}"), format!("vb{tag}"));
+        let delay = format!("{delay_ms}ms");
+        let ok = ip(&["netns", "add", &hosts.a])
+            && ip(&["netns", "add", &hosts.b])
+            && ip(&["link", "add", &va, "type", "veth", "peer", "name", &vb])
+            && ip(&["link", "set", &va, "netns", &hosts.a])
+            && ip(&["link", "set", &vb, "netns", &hosts.b])
+            && ip(&["-n", &hosts.a, "addr", "add", "10.77.0.1/24", "dev", &va])
+            && ip(&["-n", &hosts.b, "addr", "add", "10.77.0.2/24", "dev", &vb])
+            && ip(&["-n", &hosts.a, "link", "set", &va, "up"])
+            && ip(&["-n", &hosts.b, "link", "set", &vb, "up"])
+            && ip(&["-n", &hosts.a, "link", "set", "lo", "up"])
+            && ip(&["-n", &hosts.b, "link", "set", "lo", "up"]);
+        if !ok {
+            return None;
+        }
+        // The delay when the kernel has netem (not every one does).
+        let delayed = std::process::Command::new("ip")
+            .args(["netns", "exec", &hosts.b, "tc", "qdisc", "add", "dev", &vb])
+            .args(["root", "netem", "delay", &delay])
+            .stderr(Stdio::null())
+            .status()
+            .is_ok_and(|s| s.success());
+        if !delayed {
+            eprintln!("note: no tc netem on this kernel: the two hosts are joined without delay");
+        }
+        Some(hosts)
+    }
+
+    /// `ratelab ARGS` on host `ns`.
+    fn ratelab(&self, ns: &str, args: &[&str]) -> std::process::Command {
+        let mut c = std::process::Command::new("ip");
+        c.args(["netns", "exec", ns, env!("CARGO_BIN_EXE_ratelab")])
+            .args(args)
+            .current_dir(crate::REPO);
+        c
+    }
+}
+
+impl Drop for TwoHosts {
+    fn drop(&mut self) {
+        for ns in [&self.a, &self.b] {
+            let _ = std::process::Command::new("ip")
+                .args(["netns", "del", ns])
+                .status();
+        }
+    }
+}
+
+/// Across two "hosts" (network namespaces; 5 ms on one end where the kernel has netem): a
+/// node on the other host joins with the launch's credentials and the lockstep run is the
+/// in-process run, byte for byte; with another launch's it is refused.
+#[test]
+fn a_node_on_another_host_joins_with_the_credentials_and_only_with_them() {
+    let _m = crate::machine::alone();
+    let Some(hosts) = TwoHosts::new(5) else {
+        eprintln!(
+            "note: two-host test skipped: this machine does not let it make network namespaces (needs root and iproute2)"
+        );
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let creds = dir.path().join("creds.toml");
+    let (creds_s, out_s) = (
+        creds.to_str().unwrap().to_string(),
+        dir.path().to_str().unwrap().to_string(),
+    );
+    let ep = "tls/10.77.0.1:7449";
+    let mut launcher = hosts
+        .ratelab(
+            &hosts.a,
+            &["launch", "--processes", "--no-spawn", "--clock", "virtual"],
+        )
+        .args(["--duration", "5", "--listen", ep, "--out", &out_s])
+        .args(["--export-credentials", &creds_s])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let rx = crate::distributed::stdout_lines(&mut launcher);
+    let mut lines = Vec::new();
+    assert!(
+        crate::distributed::wait_line(&rx, &mut lines, "listening on", 30),
+        "{lines:?}"
+    );
+    // Another launch's credentials, from the other host: refused.
+    let other = dir.path().join("other");
+    std::fs::create_dir_all(&other).unwrap();
+    let other = crate::distributed::chapter_credentials(&other);
+    let o = hosts
+        .ratelab(&hosts.b, &["node", "--process", "policy", "--connect", ep])
+        .args(["--listen", "tls/10.77.0.2:0", "--credentials"])
+        .arg(&other)
+        .output()
+        .unwrap();
+    assert_eq!(
+        o.status.code(),
+        Some(2),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    // The launch's own: the robot beside the launcher, the policy on the other host.
+    let robot = hosts
+        .ratelab(&hosts.a, &["node", "--process", "robot", "--connect", ep])
+        .args(["--listen", "tls/10.77.0.1:0", "--credentials", &creds_s])
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let policy = hosts
+        .ratelab(&hosts.b, &["node", "--process", "policy", "--connect", ep])
+        .args(["--listen", "tls/10.77.0.2:0", "--credentials", &creds_s])
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let until = Instant::now() + Duration::from_secs(120);
+    let status = loop {
+        if let Some(s) = launcher.try_wait().unwrap() {
+            break s;
+        }
+        assert!(Instant::now() < until, "the launch did not end: {lines:?}");
+        std::thread::sleep(Duration::from_millis(100));
+    };
+    lines.extend(rx.try_iter());
+    assert!(status.success(), "{lines:?}");
+    for mut n in [robot, policy] {
+        assert!(n.wait().unwrap().success());
+    }
+    assert!(
+        lines
+            .iter()
+            .any(|l| l.contains("refused 1 connection without this launch's credentials")),
+        "{lines:?}"
+    );
+    let one = dir.path().join("one");
+    let (code, _, err) = crate::ratelab_in_repo(&[
+        "run",
+        "--clock",
+        "virtual",
+        "--duration",
+        "5",
+        "--out",
+        one.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    assert_eq!(
+        std::fs::read_to_string(one.join("metrics.json")).unwrap(),
+        std::fs::read_to_string(dir.path().join("metrics.json")).unwrap()
+    );
+    drop(hosts);
+}
