@@ -698,6 +698,7 @@ impl App {
         let qos = self.qos.get(id.0).copied().unwrap_or(spec.qos);
         let window = self.live.window_topic(id);
         let segment = self.live.segment_topic(id);
+        let dead = |n: NodeId| self.alive.get(n.0).copied().flatten() == Some(false);
         TopicView {
             name: spec.name.clone(),
             publisher: spec.publisher.0,
@@ -706,8 +707,10 @@ impl App {
             msg_per_s: window.msg_per_s,
             dropped: window.dropped,
             dropping: window.dropped > 0,
-            unhealthy: self.alive.get(spec.publisher.0).copied().flatten() == Some(false)
+            unhealthy: dead(spec.publisher)
+                || spec.subscriber.is_some_and(dead)
                 || self.last.is_some_and(|l| l.topics.get(id).lost > 0),
+            uncounted: self.attached.is_some() && dead(spec.holder()),
             stale_reads: window.stale_reads,
             staling: window.stale_reads > 0,
             segment_dropped: segment.dropped,

@@ -817,6 +817,13 @@ mod tests {
                 assert!(text.contains(needle), "{needle} at {w}x{h}:\n{text}");
             }
             assert_eq!(text.matches("NOT ALIVE").count(), 1, "{text}");
+            // /obs is counted by the policy's process, gone: its rate is not known (not a
+            // 0.0 that says nothing was published), and no arrow has a green tick.
+            assert_eq!(text.matches("? msg/s").count(), 1, "{text}");
+            assert!(
+                !text.contains("dropped ✓") && !text.contains("drop ✓"),
+                "{text}"
+            );
             // At 80 columns an arrow is 14 wide: p50 only.
             let wire = if w == 80 {
                 "wire 214 µs"

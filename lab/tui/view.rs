@@ -77,10 +77,14 @@ pub struct TopicView {
     pub dropped: u64,
     /// Any dropped within the window (the arrow is "dropping").
     pub dropping: bool,
-    /// Not healthy though nothing was dropped: its publisher is not alive, or its link
-    /// lost messages. Its drop count gets no ✓ (a green tick never stands on a dead or
-    /// lossy topic).
+    /// Not healthy though nothing was dropped: its publisher or its subscriber is not
+    /// alive, or its link lost messages. Its drop count gets no ✓ (a green tick never
+    /// stands on a dead or lossy topic).
     pub unhealthy: bool,
+    /// Attached to a graph across processes, its counters come from a process that is not
+    /// alive (its subscriber's): they stopped with it, so its msg/s is not known (`? msg/s`,
+    /// not a 0.0 that says nothing was published).
+    pub uncounted: bool,
     /// Reads within the window that found nothing new (the mirror of a drop).
     pub stale_reads: u64,
     /// Any stale reads within the window (the subscriber is re-reading old data).
@@ -609,7 +613,11 @@ fn arrow_lines(t: &TopicView, w: usize, rows: usize) -> Vec<Line<'static>> {
         format!("{}▶", shaft.repeat(w.saturating_sub(1))),
         style,
     ));
-    let rate = Line::from(format!("{:.1} msg/s", t.msg_per_s)).centered();
+    let rate = if t.uncounted {
+        Line::from("? msg/s".red()).centered()
+    } else {
+        Line::from(format!("{:.1} msg/s", t.msg_per_s)).centered()
+    };
     let dropped =
         Line::from(Span::styled(format!("{} dropped {mark}", t.dropped), style)).centered();
     // The mirror image of a drop, with a symbol of its own: old data read again.
