@@ -687,7 +687,7 @@ impl Metrics {
         }
         if !self.missing_processes.is_empty() {
             lines.push(format!(
-                "not measured: process(es) {} did not report; their nodes' figures and the topics they hold read 0",
+                "not measured: process(es) {} did not report; their nodes' figures read 0, the topics they hold their last figures (what was sent after those counted lost)",
                 self.missing_processes.join(", ")
             ));
         }

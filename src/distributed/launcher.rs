@@ -322,7 +322,8 @@ fn free_port(host: &str) -> Result<u16, DistError> {
 /// actuator's process, the brain's label from the policy's. `None` without the actuator's
 /// process's report. A topic whose holder was started again mid-run goes on from what the
 /// processes before it counted (`carried`: their last figures, up to 100 ms before they
-/// died, so what they received after those is counted as lost).
+/// died, so what they received after those is counted as lost); a topic whose holder never
+/// reported (it died for good) reads its last figures, the rest of what was sent lost.
 pub fn merge_states(
     spec: &GraphSpec,
     states: &BTreeMap<String, GraphState>,
@@ -373,12 +374,19 @@ pub fn merge_states(
                 m.published = sent.published;
             }
         } else {
-            *m = crate::topic::TopicStats {
-                published: sent.published,
-                last_stamp: sent.last_stamp,
+            // The subscriber's process did not report (it died): what it counted until its
+            // last figures (at most 100 ms before it went), and what was sent after those
+            // counted as lost, never a clean 0 dropped.
+            let mut c = carried.total(i).unwrap_or(crate::topic::TopicStats {
                 depth: t.depth,
                 ..Default::default()
-            };
+            });
+            if sent.published > c.published {
+                c.lost += sent.published - c.published;
+                c.published = sent.published;
+            }
+            c.last_stamp = sent.last_stamp;
+            *m = c;
         }
     }
     Some(merged)

@@ -606,6 +606,14 @@ fn a_process_gone_for_good_is_named_missing_not_counted_as_zeros() {
         serde_json::from_str(&std::fs::read_to_string(dir.path().join("metrics.json")).unwrap())
             .unwrap();
     assert_eq!(m["missing_processes"], serde_json::json!(["policy"]), "{m}");
+    // /obs, which the dead policy's process held: what it counted until its last figures,
+    // and what the sensor sent after those lost (not a clean "0 dropped").
+    let obs = &m["topics"]["/obs"];
+    let (published, lost) = (
+        obs["published"].as_u64().unwrap(),
+        obs["lost"].as_u64().unwrap_or(0),
+    );
+    assert!(published > 50 && lost > 0 && lost < published, "{obs}");
     assert_none_left(port, Duration::ZERO);
 }
 
