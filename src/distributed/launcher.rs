@@ -392,6 +392,95 @@ pub fn merge_states(
     Some(merged)
 }
 
+/// Check that process `process`'s report could be true of a run that ended at `at`: its
+/// vectors have the graph's shape; its nodes ticked no more than their rates allow in that
+/// time (two more for phase and the tick at zero); the topics it holds received no more
+/// than their publishers could send, dropped no more than they received; and from the
+/// plant's process, steps as bounded, latencies finite within the run, a finite angle. A
+/// report can still be wrong within these bounds: it comes from the process's own identity
+/// ([`super::access`]), so only a process of the launch can send one.
+///
+/// # Errors
+/// What is out of bounds, one line.
+pub fn check_report(
+    spec: &GraphSpec,
+    process: &str,
+    st: &GraphState,
+    at: Nanos,
+) -> Result<(), String> {
+    let (n, t) = (spec.nodes.len(), spec.topics.len());
+    if st.topics.len() != t
+        || st.topic_qos.len() != t
+        || st.liveliness.len() != n
+        || st.rates_hz.len() != n
+        || !(st.ticks.is_empty() || st.ticks.len() == n)
+        || st.timing.as_ref().is_some_and(|v| v.len() != n)
+    {
+        return Err(format!(
+            "its figures are not shaped as graph '{}' ({n} nodes, {t} topics)",
+            spec.name
+        ));
+    }
+    let bound = |id: NodeId| -> u64 {
+        let hz = spec.node(id).rate_hz;
+        (at.as_secs_f64() * hz).ceil().min(u64::MAX as f64 / 2.0) as u64 + 2
+    };
+    for (i, node) in spec.nodes.iter().enumerate() {
+        if spec.process_of(NodeId(i)) != process {
+            continue;
+        }
+        if let Some(&ticks) = st.ticks.get(i) {
+            if ticks > bound(NodeId(i)) {
+                return Err(format!(
+                    "node '{}' ticked {ticks} times in {:.2} s at {} Hz (at most {})",
+                    node.name,
+                    at.as_secs_f64(),
+                    node.rate_hz,
+                    bound(NodeId(i))
+                ));
+            }
+        }
+    }
+    for (i, topic) in spec.topics.iter().enumerate() {
+        if spec.process_of(topic.holder()) != process {
+            continue;
+        }
+        let c = &st.topics[i];
+        let most = bound(topic.publisher);
+        if c.published > most || c.lost > most || c.dropped > c.published {
+            return Err(format!(
+                "topic '{}' counted {} published, {} dropped, {} lost in {:.2} s (its publisher sends at most {most})",
+                topic.name,
+                c.published,
+                c.dropped,
+                c.lost,
+                at.as_secs_f64()
+            ));
+        }
+    }
+    if spec.process_of(spec.chain.actuator) == process {
+        let a = &st.actuator;
+        let run_ms = at.as_secs_f64() * 1e3;
+        let ok_ms = |ms: f64| ms.is_finite() && (0.0..=run_ms + 1.0).contains(&ms);
+        let (p50, p99, max) = a.latency_ms;
+        if a.steps > bound(spec.chain.actuator)
+            || ![a.mean_latency_ms, p50, p99, max].into_iter().all(ok_ms)
+            || !a.final_pole_angle.is_finite()
+        {
+            return Err(format!(
+                "the plant's figures are impossible in {:.2} s ({} steps, latency {:.1}/{:.1}/{:.1} ms, angle {})",
+                at.as_secs_f64(),
+                a.steps,
+                p50,
+                p99,
+                max,
+                a.final_pole_angle
+            ));
+        }
+    }
+    Ok(())
+}
+
 /// `dst[i] = src[i]` where both exist.
 fn take<T: Clone>(dst: &mut [T], src: &[T], i: usize) {
     if let (Some(d), Some(s)) = (dst.get_mut(i), src.get(i)) {
@@ -1174,6 +1263,14 @@ pub fn launch(
     };
     let wall = start.elapsed();
     children.reap(Duration::from_secs(5));
+    // A report whose figures cannot be is not merged: its process counts as not reporting.
+    reports.retain(|p, st| match check_report(spec, p, st, end.at) {
+        Ok(()) => true,
+        Err(why) => {
+            say(&format!("refused process '{p}''s report: {why}"));
+            false
+        }
+    });
     let missing: Vec<String> = names
         .iter()
         .filter(|p| !reports.contains_key(*p))
@@ -1264,6 +1361,66 @@ fn collect_reports(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A 10 s run of the chapter's graph as process `robot` would report it.
+    fn robot_report() -> (GraphSpec, GraphState) {
+        let spec = GraphSpec::parse(crate::graph::spec::DEFAULT_GRAPH_TOML, "t").unwrap();
+        let obs = crate::topic::TopicStats {
+            published: 501,
+            dropped: 0,
+            ..Default::default()
+        };
+        let st = GraphState {
+            topics: vec![obs, obs],
+            topic_qos: vec![crate::qos::TopicQos::default(); 2],
+            liveliness: vec![(None, crate::qos::LivelinessStatus::default()); 3],
+            rates_hz: vec![50.0; 3],
+            ticks: vec![501, 0, 501],
+            timing: None,
+            exec: None,
+            brain: "scripted".into(),
+            actuator: crate::run::ActuatorSummary {
+                steps: 501,
+                fell_at: None,
+                watchdog: None,
+                mean_latency_ms: 20.0,
+                latency_ms: (20.0, 20.0, 40.0),
+                final_pole_angle: 0.01,
+                nonfinite_actions: 0,
+            },
+        };
+        (spec, st)
+    }
+
+    #[test]
+    fn a_report_is_merged_only_when_its_figures_could_be_true() {
+        let (spec, honest) = robot_report();
+        let ten_s = Nanos(10_000_000_000);
+        assert_eq!(check_report(&spec, "robot", &honest, ten_s), Ok(()));
+        let refused = |f: &dyn Fn(&mut GraphState)| {
+            let mut st = honest.clone();
+            f(&mut st);
+            check_report(&spec, "robot", &st, ten_s).unwrap_err()
+        };
+        assert!(refused(&|st| st.ticks[0] = 999_999).contains("node 'sensor' ticked 999999 times"));
+        assert!(refused(&|st| {
+            st.topics.pop();
+        })
+        .contains("not shaped"));
+        assert!(refused(&|st| st.actuator.latency_ms.2 = f64::NAN).contains("impossible"));
+        assert!(refused(&|st| st.actuator.steps = 424_242).contains("impossible"));
+        // /action is held by the robot (its subscriber): 5 published, 6 dropped cannot be.
+        assert!(refused(&|st| {
+            st.topics[1].published = 5;
+            st.topics[1].dropped = 6;
+        })
+        .contains("topic '/action'"));
+        // Figures of another process's nodes are not this report's to bound.
+        let mut st = honest.clone();
+        st.ticks[1] = 999_999;
+        assert_eq!(check_report(&spec, "robot", &st, ten_s), Ok(()));
+        assert!(check_report(&spec, "policy", &st, ten_s).is_err());
+    }
 
     #[test]
     fn a_child_s_stderr_comes_as_bounded_lines_named_by_its_process() {
