@@ -211,7 +211,7 @@ pub fn decode_report(key: &str, bytes: &[u8], own: Option<&str>) -> Option<Ticke
     if own == Some(from) {
         return None;
     }
-    let m = super::wire::decode_json::<Ticked>(bytes).ok()?;
+    let m = Ticked::decode(bytes).ok()?;
     (m.process == from).then_some(m)
 }
 
@@ -357,13 +357,24 @@ mod tests {
 
     #[test]
     fn a_report_counts_only_from_its_own_process_s_key_and_never_one_s_own() {
-        let bytes = crate::distributed::wire::encode_json(&report("policy", 3, 1));
+        let bytes = report("policy", 3, 1).encode();
         let key = |p: &str| format!("ratelab/cartpole/@ticked/{p}");
         assert!(decode_report(&key("policy"), &bytes, Some("robot")).is_some());
         assert!(decode_report(&key("policy"), &bytes, None).is_some());
         assert_eq!(decode_report(&key("policy"), &bytes, Some("policy")), None);
         assert_eq!(decode_report(&key("robot"), &bytes, Some("x")), None);
         assert_eq!(decode_report(&key("policy"), b"\xff{", None), None);
+        // Exactly: a byte after its end, or a report over the bound, is refused.
+        let mut longer = bytes.clone();
+        longer.push(0);
+        assert_eq!(decode_report(&key("policy"), &longer, None), None);
+        let mut failed = report("policy", 3, 1);
+        failed.failed = Some("x".repeat(crate::distributed::wire::MAX_TICK_BYTES));
+        assert_eq!(decode_report(&key("policy"), &failed.encode(), None), None);
+        // Its text arrives printable.
+        failed.failed = Some("boom \u{1b}[2J".into());
+        let got = decode_report(&key("policy"), &failed.encode(), None).unwrap();
+        assert_eq!(got.failed.as_deref(), Some("boom \\u{1b}[2J"));
     }
 
     #[test]

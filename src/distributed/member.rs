@@ -280,6 +280,13 @@ pub fn run_member(opts: &MemberOptions, stop: &StopFlag) -> Result<(), DistError
             opts.credentials.graph, file_spec.name
         )));
     }
+    let placed: Vec<String> = placement.iter().map(|(p, _)| p.clone()).collect();
+    if opts.credentials.processes != placed {
+        return Err(DistError::Usage(format!(
+            "--credentials are for processes {:?}, but the graph file places {placed:?}: were they exported by a launch of another version of it?",
+            opts.credentials.processes
+        )));
+    }
     opts.credentials.identity(&role)?;
     for ep in &opts.connect {
         check_endpoint("--connect", ep, false)?;
@@ -619,7 +626,7 @@ pub fn run_member(opts: &MemberOptions, stop: &StopFlag) -> Result<(), DistError
             &*forward_after,
             &ticks,
             &run_time,
-            &|m| ticked_pub.put(wire::encode_json(m)).wait(),
+            &|m| ticked_pub.put(m.encode()).wait(),
             &opts.process,
             &batch,
         ),

@@ -394,6 +394,42 @@ pub struct Ticked {
     pub failed: Option<String>,
 }
 
+/// The largest tick report read, bytes ([`Ticked::decode`]).
+pub const MAX_TICK_BYTES: usize = 8 * 1024;
+
+impl Ticked {
+    /// Encode (postcard: tick reports are the lockstep's traffic, one per tick, so they
+    /// take serde's compact binary form, as samples do, not JSON).
+    pub fn encode(&self) -> Vec<u8> {
+        postcard::to_allocvec(self).unwrap_or_default()
+    }
+
+    /// Decode, refusing anything over [`MAX_TICK_BYTES`] or malformed (it must decode
+    /// exactly, no byte after its end); its text arrives printable ([`printable`]).
+    ///
+    /// # Errors
+    /// One line.
+    pub fn decode(bytes: &[u8]) -> Result<Ticked, String> {
+        if bytes.len() > MAX_TICK_BYTES {
+            return Err(format!(
+                "a tick report of {} bytes (at most {MAX_TICK_BYTES})",
+                bytes.len()
+            ));
+        }
+        let (mut t, rest): (Ticked, &[u8]) = postcard::take_from_bytes(bytes)
+            .map_err(|e| format!("a malformed tick report: {e}"))?;
+        if !rest.is_empty() {
+            return Err(format!(
+                "a malformed tick report: {} bytes after its end",
+                rest.len()
+            ));
+        }
+        t.process = printable(&t.process);
+        t.failed = t.failed.as_deref().map(printable);
+        Ok(t)
+    }
+}
+
 /// Encode a control message (JSON).
 pub fn encode_json<T: Serialize>(msg: &T) -> Vec<u8> {
     serde_json::to_vec(msg).unwrap_or_default()
