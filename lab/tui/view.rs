@@ -475,7 +475,7 @@ fn render_graph(v: &View, area: Rect, buf: &mut Buffer) {
         match col {
             Column::Nodes(ns) => {
                 for (&i, cell) in ns.iter().zip(cells.iter()) {
-                    render_node(&v.nodes[i], *cell, buf);
+                    render_node(&v.nodes[i], *cell, buf, v.clock == "real");
                 }
             }
             Column::Topics(ts) => {
@@ -487,7 +487,9 @@ fn render_graph(v: &View, area: Rect, buf: &mut Buffer) {
     }
 }
 
-fn render_node(n: &NodeView, area: Rect, buf: &mut Buffer) {
+/// A node's box; `real`: under the real clock (a node with no measured rate yet, as one
+/// just started again, is being measured, not on virtual time).
+fn render_node(n: &NodeView, area: Rect, buf: &mut Buffer, real: bool) {
     let wide = area.width >= 14;
     let set = if wide {
         format!("{} Hz set", hz(n.set_hz))
@@ -522,6 +524,7 @@ fn render_node(n: &NodeView, area: Rect, buf: &mut Buffer) {
                 let line = Line::from(text);
                 lines.push(if skipped > 0 { line.yellow() } else { line });
             }
+            None if real => lines.push(Line::from("measuring").dim()),
             None => lines.push(Line::from(if wide { "virtual time" } else { "virtual" }).dim()),
         },
     }
