@@ -443,7 +443,11 @@ impl TwoHosts {
             && ip(&["-n", &hosts.a, "link", "set", &va, "up"])
             && ip(&["-n", &hosts.b, "link", "set", &vb, "up"])
             && ip(&["-n", &hosts.a, "link", "set", "lo", "up"])
-            && ip(&["-n", &hosts.b, "link", "set", "lo", "up"]);
+            && ip(&["-n", &hosts.b, "link", "set", "lo", "up"])
+            // A program runs inside each (some containers make the namespaces but cannot
+            // enter them).
+            && ip(&["netns", "exec", &hosts.a, env!("CARGO_BIN_EXE_ratelab"), "--version"])
+            && ip(&["netns", "exec", &hosts.b, env!("CARGO_BIN_EXE_ratelab"), "--version"]);
         if !ok {
             return None;
         }
