@@ -137,6 +137,16 @@ pub fn config_from_args(a: &RunArgs) -> anyhow::Result<RunConfig> {
         cfg.spin_margin = cfg.default_spin_margin();
     }
     cfg.validate()?;
+    Ok(cfg)
+}
+
+/// Warn on stderr of each injected fault (`--stall`, `--kill`) that starts after `cfg`'s
+/// run ends, so does nothing. Call it once the run's duration is final (the lab and a
+/// launch on a terminal run until quit, with no end to be after).
+pub fn warn_late_faults(cfg: &RunConfig) {
+    if cfg.duration == ratelab::session::UNBOUNDED {
+        return;
+    }
     for f in cfg.faults.iter().filter(|f| f.at >= cfg.duration) {
         eprintln!(
             "[ratelab] warning: the {} of '{}' at {} s starts after the run ends ({} s): it does nothing",
@@ -146,12 +156,12 @@ pub fn config_from_args(a: &RunArgs) -> anyhow::Result<RunConfig> {
             cfg.duration.as_secs_f64()
         );
     }
-    Ok(cfg)
 }
 
 /// Run headless and print the summary. Returns the report.
 pub fn run_headless(a: &RunArgs, stop: StopFlag) -> anyhow::Result<RunReport> {
     let cfg = config_from_args(a)?;
+    warn_late_faults(&cfg);
     let brain = ratelab::checkpoint::load_policy(&a.policy)?;
     if let Some(dir) = &a.out {
         std::fs::create_dir_all(dir)

@@ -57,6 +57,7 @@ pub fn run_launch(a: &LaunchArgs, force_headless: bool, stop: StopFlag) -> anyho
     if on_terminal && run.duration.is_none() && !run.smoke {
         cfg.duration = ratelab::session::UNBOUNDED; // as the lab: until you quit
     }
+    headless::warn_late_faults(&cfg);
     let brain = ratelab::checkpoint::load_policy(&run.policy)?; // a bad --policy fails before any process starts
     if let Some(dir) = &run.out {
         std::fs::create_dir_all(dir)

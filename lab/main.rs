@@ -33,6 +33,7 @@ fn lab(args: &cli::RunArgs, stop: StopFlag) -> anyhow::Result<()> {
     if args.duration.is_none() && !args.smoke {
         cfg.duration = UNBOUNDED;
     }
+    headless::warn_late_faults(&cfg);
     ratelab::checkpoint::load_policy(&args.policy)?; // a bad --policy fails before the screen opens
     let record = match &args.record {
         None if !args.spawn => None,

@@ -584,4 +584,24 @@ fn conflicting_rates_are_refused_and_a_fault_after_the_end_is_warned_about() {
         "{}",
         stderr(&o)
     );
+    // A launch says it too (one process, as `run`; the warning is given once the run's
+    // duration is final: the lab and a launch on a terminal run until quit, and give none).
+    let o = ratelab(&[
+        "launch",
+        "--clock",
+        "virtual",
+        "--duration",
+        "2",
+        "--kill",
+        "policy@5",
+    ]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    assert_eq!(
+        stderr(&o)
+            .matches("warning: the --kill of 'policy' at 5 s starts after the run ends (2 s)")
+            .count(),
+        1,
+        "{}",
+        stderr(&o)
+    );
 }
