@@ -6,7 +6,7 @@
 use super::credentials::{Credentials, PrivateDir, Role};
 use super::lockstep::{subscribe_reports, TickInbox, HORIZON_PERIODS};
 use super::member::LiveStats;
-use super::monitor::Carried;
+use super::monitor::{Carried, Silence};
 use super::wire::{self, Setup, Ticked, ToLauncher, ToMember};
 use super::{check_endpoint, check_keys, Access, DistError, Keys, REPLY_TIMEOUT};
 use crate::config::{ClockKind, RunConfig};
@@ -618,6 +618,7 @@ pub fn launch(
         let Some(exe) = &opts.exe else {
             return Ok(None);
         };
+        // Read by the process at its start; a restart writes it anew.
         let own = private.write(p, &creds.only(&Role::Process(p.to_string()))?)?;
         let mut cmd = Command::new(exe);
         cmd.arg("node").arg("--credentials").arg(&own);
@@ -650,7 +651,6 @@ pub fn launch(
         if let Some(to) = &opts.child_stderr {
             pass_stderr(p, &mut child, to.clone(), session.clone(), keys.log());
         }
-        // The file is read at its start; a restart writes it anew.
         Ok(Some(child))
     };
     if opts.exe.is_some() {
@@ -973,9 +973,8 @@ pub fn launch(
                     Awaited::Failed(message) => break failed(i, t, message),
                     Awaited::Gone(p) => {
                         // The failed node is the gone process's (its first), not the awaited one.
-                        let node = spec
-                            .placement()
-                            .into_iter()
+                        let node = placement
+                            .iter()
                             .find(|(name, _)| *name == p)
                             .and_then(|(_, ids)| ids.first().map(|n| n.0))
                             .unwrap_or(i);
@@ -1075,15 +1074,11 @@ pub fn launch(
             let mut restarts: BTreeMap<String, u32> = BTreeMap::new();
             let mut given_up: Vec<String> = Vec::new();
             // When each process's figures last came, and those said to be silent.
-            let mut last_figures: BTreeMap<String, Instant> = BTreeMap::new();
+            let mut silence = Silence::default();
             let mut silent: Vec<String> = Vec::new();
             loop {
                 for m in stats_rx.try_iter() {
-                    if m.done {
-                        last_figures.remove(&m.process);
-                    } else {
-                        last_figures.insert(m.process.clone(), Instant::now());
-                    }
+                    silence.heard(&m);
                     if let Some(i) = silent.iter().position(|p| *p == m.process) {
                         silent.remove(i);
                         say(&format!("process '{}' is heard again", m.process));
@@ -1094,18 +1089,14 @@ pub fn launch(
                 }
                 // A process whose figures stopped while its tokens live: frozen (SIGSTOP),
                 // starved or cut off, said long before Zenoh's lease declares it gone.
-                for (p, at) in &last_figures {
-                    if end.is_none()
-                        && at.elapsed() >= super::monitor::SILENT_AFTER
-                        && !gone.contains(p)
-                        && !silent.contains(p)
-                    {
-                        silent.push(p.clone());
+                for (p, quiet) in silence.silent() {
+                    if end.is_none() && !gone.contains(&p) && !silent.contains(&p) {
                         say(&format!(
                             "process '{p}' is silent at t={:.2}s: no figures for {:.1} s while its tokens live (stopped, starved or cut off?); it is gone if Zenoh's lease (10 s) runs out",
                             run_time().as_secs_f64(),
-                            at.elapsed().as_secs_f64()
+                            quiet.as_secs_f64()
                         ));
+                        silent.push(p);
                     }
                 }
                 // A started process that failed mid-run starts again where the graph says

@@ -51,6 +51,34 @@ pub const STATUS_PERIOD: Duration = Duration::from_millis(250);
 /// it is gone. Its nodes are drawn not alive meanwhile.
 pub const SILENT_AFTER: Duration = Duration::from_secs(1);
 
+/// When each process's figures last came, for [`SILENT_AFTER`]: the launcher says a silent
+/// process so, a watcher draws its nodes not alive ([`Fold::set_silent`]).
+#[derive(Debug, Default)]
+pub struct Silence {
+    last: BTreeMap<String, Instant>,
+}
+
+impl Silence {
+    /// Figures `m` came now. A process's last figures ([`LiveStats::done`]) end the watch
+    /// on it: it leaves, it is not silent.
+    pub fn heard(&mut self, m: &LiveStats) {
+        if m.done {
+            self.last.remove(&m.process);
+        } else {
+            self.last.insert(m.process.clone(), Instant::now());
+        }
+    }
+
+    /// The processes silent now, each with how long since its last figures.
+    pub fn silent(&self) -> BTreeMap<String, Duration> {
+        self.last
+            .iter()
+            .map(|(p, t)| (p.clone(), t.elapsed()))
+            .filter(|(_, quiet)| *quiet >= SILENT_AFTER)
+            .collect()
+    }
+}
+
 /// The plant's steps a watcher holds back at most, waiting for other processes' figures
 /// (200 s at 50 Hz; about 1 KB each).
 pub const MAX_PENDING_STEPS: usize = 10_000;
@@ -507,7 +535,6 @@ impl Watch {
             spec: None,
         };
         let session = open_session(&[super::LOOPBACK_ANY.to_string()], connect, access)?;
-        let graph = Some(credentials.graph.as_str());
         let selector = Keys::new(&credentials.graph).setup();
         let deadline = Instant::now() + wait;
         loop {
@@ -527,8 +554,8 @@ impl Watch {
             }
             if Instant::now() >= deadline {
                 return Err(DistError::Usage(format!(
-                    "no running ratelab graph{} answered at {} within {} s",
-                    graph.map_or(String::new(), |g| format!(" '{g}'")),
+                    "no running ratelab graph '{}' answered at {} within {} s",
+                    credentials.graph,
                     connect.join(", "),
                     wait.as_secs()
                 )));
@@ -633,9 +660,7 @@ impl Watch {
             return Ok(());
         }
         let mut last_status = Instant::now();
-        // When each process's figures last came (for [`SILENT_AFTER`]).
-        let mut last_figures: std::collections::BTreeMap<String, Instant> =
-            std::collections::BTreeMap::new();
+        let mut silence = Silence::default();
         let mut launcher_seen = false;
         let mut over_at: Option<Instant> = None;
         let processes: Vec<String> = self
@@ -658,14 +683,9 @@ impl Watch {
                 pending.note(e);
             }
             if let Ok(Event::Stats(m)) = &ev {
-                last_figures.insert(m.process.clone(), Instant::now());
+                silence.heard(m);
             }
-            let silent: BTreeSet<String> = last_figures
-                .iter()
-                .filter(|(_, t)| t.elapsed() >= SILENT_AFTER)
-                .map(|(p, _)| p.clone())
-                .collect();
-            fold.set_silent(silent);
+            fold.set_silent(silence.silent().into_keys().collect());
             match ev {
                 Ok(Event::Stats(m)) => out = fold.stats(*m),
                 Ok(Event::Alive(p, n, alive)) if !fold.is_over() => {

@@ -154,20 +154,7 @@ impl WireSample {
     /// # Errors
     /// One line.
     pub fn decode(bytes: &[u8]) -> Result<WireSample, String> {
-        if bytes.len() > MAX_SAMPLE_BYTES {
-            return Err(format!(
-                "a sample of {} bytes (at most {MAX_SAMPLE_BYTES})",
-                bytes.len()
-            ));
-        }
-        let (s, rest): (WireSample, &[u8]) =
-            postcard::take_from_bytes(bytes).map_err(|e| format!("a malformed sample: {e}"))?;
-        if !rest.is_empty() {
-            return Err(format!(
-                "a malformed sample: {} bytes after its end",
-                rest.len()
-            ));
-        }
+        let s: WireSample = decode_exact(bytes, MAX_SAMPLE_BYTES, "sample")?;
         if s.seq > MAX_SEQ {
             return Err(format!("a sample numbered {} (at most {MAX_SEQ})", s.seq));
         }
@@ -394,6 +381,27 @@ pub struct Ticked {
     pub failed: Option<String>,
 }
 
+/// Decode `bytes` (postcard) as a `T`, exactly: refused over `max` bytes, malformed, or
+/// with any byte after its end; `what` names it in the one-line error.
+fn decode_exact<T: for<'de> Deserialize<'de>>(
+    bytes: &[u8],
+    max: usize,
+    what: &str,
+) -> Result<T, String> {
+    if bytes.len() > max {
+        return Err(format!("a {what} of {} bytes (at most {max})", bytes.len()));
+    }
+    let (t, rest): (T, &[u8]) =
+        postcard::take_from_bytes(bytes).map_err(|e| format!("a malformed {what}: {e}"))?;
+    if !rest.is_empty() {
+        return Err(format!(
+            "a malformed {what}: {} bytes after its end",
+            rest.len()
+        ));
+    }
+    Ok(t)
+}
+
 /// The largest tick report read, bytes ([`Ticked::decode`]).
 pub const MAX_TICK_BYTES: usize = 8 * 1024;
 
@@ -410,20 +418,7 @@ impl Ticked {
     /// # Errors
     /// One line.
     pub fn decode(bytes: &[u8]) -> Result<Ticked, String> {
-        if bytes.len() > MAX_TICK_BYTES {
-            return Err(format!(
-                "a tick report of {} bytes (at most {MAX_TICK_BYTES})",
-                bytes.len()
-            ));
-        }
-        let (mut t, rest): (Ticked, &[u8]) = postcard::take_from_bytes(bytes)
-            .map_err(|e| format!("a malformed tick report: {e}"))?;
-        if !rest.is_empty() {
-            return Err(format!(
-                "a malformed tick report: {} bytes after its end",
-                rest.len()
-            ));
-        }
+        let mut t: Ticked = decode_exact(bytes, MAX_TICK_BYTES, "tick report")?;
         t.process = printable(&t.process);
         t.failed = t.failed.as_deref().map(printable);
         Ok(t)

@@ -84,6 +84,28 @@ pub(crate) fn chapter_credentials(dir: &Path) -> std::path::PathBuf {
     f
 }
 
+/// `ratelab run --clock virtual --duration SECS` (the chapter's graph in one process, seed
+/// 0) writes, byte for byte, the `metrics.json` a launch wrote into `launched`; `what` says
+/// what differs when it does not.
+pub(crate) fn assert_in_process_run_equals(secs: &str, launched: &Path, what: &str) {
+    let one = launched.join("one");
+    let o = ratelab(&[
+        "run",
+        "--clock",
+        "virtual",
+        "--duration",
+        secs,
+        "--out",
+        one.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    assert_eq!(
+        std::fs::read_to_string(one.join("metrics.json")).unwrap(),
+        std::fs::read_to_string(launched.join("metrics.json")).unwrap(),
+        "{what}"
+    );
+}
+
 /// A free localhost port.
 pub(crate) fn free_port() -> u16 {
     std::net::TcpListener::bind("127.0.0.1:0")
@@ -298,15 +320,24 @@ fn ready_launch(
     port: u16,
     out: &Path,
 ) -> (Child, std::sync::mpsc::Receiver<String>, Vec<String>) {
-    let mut launcher = bin()
-        .args([
-            "launch",
-            "--processes",
-            "--clock",
-            clock,
-            "--duration",
-            secs,
-        ])
+    ready_launch_of(None, clock, secs, port, out)
+}
+
+/// [`ready_launch`] of graph file `graph` (`None`: the chapter's).
+fn ready_launch_of(
+    graph: Option<&Path>,
+    clock: &str,
+    secs: &str,
+    port: u16,
+    out: &Path,
+) -> (Child, std::sync::mpsc::Receiver<String>, Vec<String>) {
+    let mut launch = bin();
+    launch.arg("launch");
+    if let Some(g) = graph {
+        launch.arg(g);
+    }
+    let mut launcher = launch
+        .args(["--processes", "--clock", clock, "--duration", secs])
         .args(["--listen", &format!("tls/127.0.0.1:{port}")])
         .arg("--out")
         .arg(out)
@@ -1051,21 +1082,7 @@ fn hostile_bytes_on_the_control_keys_do_not_end_a_run() {
     for mut n in nodes {
         assert!(n.wait().unwrap().success());
     }
-    let one = dir.path().join("one");
-    let r = ratelab(&[
-        "run",
-        "--clock",
-        "virtual",
-        "--duration",
-        "2",
-        "--out",
-        one.to_str().unwrap(),
-    ]);
-    assert!(r.status.success());
-    assert_eq!(
-        std::fs::read_to_string(one.join("metrics.json")).unwrap(),
-        std::fs::read_to_string(dir.path().join("metrics.json")).unwrap()
-    );
+    assert_in_process_run_equals("2", dir.path(), "hostile bytes changed the run");
     drop(session);
 }
 
@@ -1195,24 +1212,9 @@ fn a_process_that_fails_starts_again_when_its_graph_says_so() {
     )
     .unwrap();
     let port = free_port();
-    let mut launcher = bin()
-        .arg("launch")
-        .arg(&graph)
-        .args(["--processes", "--clock", "real", "--duration", "8"])
-        .args(["--listen", &format!("tls/127.0.0.1:{port}")])
-        .arg("--out")
-        .arg(dir.path())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::null())
-        .spawn()
-        .unwrap();
-    let rx = stdout_lines(&mut launcher);
-    let mut lines = Vec::new();
-    for p in ["policy", "robot"] {
-        let ready = format!("process '{p}' ready");
-        assert!(wait_line(&rx, &mut lines, &ready, 30), "{lines:?}");
-    }
-    std::thread::sleep(Duration::from_millis(1500));
+    let (mut launcher, rx, mut lines) =
+        ready_launch_of(Some(&graph), "real", "8", port, dir.path());
+    std::thread::sleep(Duration::from_millis(500));
     let killed = kill_node_process(port, "policy");
     assert!(
         wait_line(&rx, &mut lines, "process 'policy' failed (signal: 9", 10),
