@@ -480,6 +480,34 @@ pub struct RunArgs {
     /// CAP_SYS_NICE or `ulimit -r`; refused → a warning, default policy).
     #[arg(long, value_parser = parse_rt_priority, value_name = "PRIO", allow_negative_numbers = true)]
     pub rt_priority: Option<u8>,
+    /// Offer the graph to ROS 2 while it runs (rmw_zenoh's format: ros2 topic list/echo/hz
+    /// see it), on this domain, 0-232 (default: ROS_DOMAIN_ID, else 0), with the run time
+    /// on /clock; the virtual clock then keeps pace with the wall clock (docs/ros2.md).
+    #[arg(long, value_name = "DOMAIN", num_args = 0..=1, allow_negative_numbers = true, value_parser = parse_ros2_domain)]
+    pub ros2: Option<Option<u32>>,
+}
+
+fn parse_ros2_domain(s: &str) -> Result<u32, String> {
+    ratelab::ros2::names::parse_domain(s)
+}
+
+impl RunArgs {
+    /// The ROS 2 domain with `--ros2` (its value, else `ROS_DOMAIN_ID`, else 0).
+    ///
+    /// # Errors
+    /// `ROS_DOMAIN_ID` is set to something that is not a domain.
+    pub fn ros2_domain(&self) -> Result<Option<u32>, String> {
+        match self.ros2 {
+            None => Ok(None),
+            Some(Some(d)) => Ok(Some(d)),
+            Some(None) => match std::env::var("ROS_DOMAIN_ID") {
+                Ok(v) if !v.trim().is_empty() => ratelab::ros2::names::parse_domain(&v)
+                    .map(Some)
+                    .map_err(|e| format!("ROS_DOMAIN_ID: {e}")),
+                _ => Ok(Some(0)),
+            },
+        }
+    }
 }
 
 /// Settings of the real-clock timing benchmark.

@@ -194,6 +194,10 @@ pub fn run_headless(a: &RunArgs, stop: StopFlag) -> anyhow::Result<RunReport> {
     let recording = open_recording(a, &cfg, &brain.label())?;
     let mut opts = RunOptions {
         stop: stop.clone(),
+        ros2: a
+            .ros2_domain()
+            .map_err(anyhow::Error::msg)?
+            .map(|domain| ratelab::ros2::Ros2Options { domain }),
         ..RunOptions::new()
     };
     // A long virtual run (up to an hour of run time, seconds to minutes of wall time) shows
@@ -243,6 +247,20 @@ pub fn run_headless(a: &RunArgs, stop: StopFlag) -> anyhow::Result<RunReport> {
         let _ = t.join();
     }
     print_summary(&report);
+    if let Some(r) = &report.ros2 {
+        println!(
+            "[ratelab] ROS 2: {} messages offered{}",
+            r.offered,
+            if r.dropped > 0 {
+                format!(", {} not (the bridge fell behind)", r.dropped)
+            } else {
+                String::new()
+            }
+        );
+        if let Some(e) = &r.error {
+            eprintln!("[ratelab] warning: ROS 2: a put failed: {e}");
+        }
+    }
     if cfg.rt_priority.is_some() && cfg.clock == ClockKind::Virtual {
         eprintln!("[ratelab] note: --rt-priority applies to the real clock only; ignored");
     }

@@ -42,6 +42,11 @@ pub fn run_launch(a: &LaunchArgs, force_headless: bool, stop: StopFlag) -> anyho
         }
         return headless::run_headless(&run, stop).map(|_| ());
     }
+    if run.ros2.is_some() {
+        anyhow::bail!(
+            "--ros2 offers a graph run in one process (run, or launch without --processes); a launch across processes does not offer one yet (docs/ros2.md)"
+        );
+    }
     if run.session.is_some() {
         anyhow::bail!("--session is not available with --processes: a launch takes no live commands to log (its lab only watches)");
     }
@@ -138,6 +143,7 @@ pub fn run_launch(a: &LaunchArgs, force_headless: bool, stop: StopFlag) -> anyho
         trace: Vec::new(),
         end: report.end,
         wall: report.wall,
+        ros2: None,
     };
     headless::print_summary(&report);
     for w in &wire {

@@ -29,6 +29,11 @@ fn headless(args: &cli::RunArgs, stop: StopFlag) -> anyhow::Result<()> {
 /// Open the terminal lab with the run flags.
 fn lab(args: &cli::RunArgs, stop: StopFlag) -> anyhow::Result<()> {
     use ratelab::session::{SessionSettings, Speed, UNBOUNDED};
+    if args.ros2.is_some() {
+        anyhow::bail!(
+            "--ros2 offers a graph run headless (ratelab run --ros2); the lab does not offer its graph yet (docs/ros2.md)"
+        );
+    }
     let mut cfg = headless::config_from_args(args)?;
     if args.duration.is_none() && !args.smoke {
         cfg.duration = UNBOUNDED;

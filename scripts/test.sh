@@ -8,5 +8,8 @@ root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 # active virtual environment's packages at run time (the build does not depend on it).
 VIRTUAL_ENV="$("$root/scripts/setup-python.sh")"
 export VIRTUAL_ENV
+# The ROS 2 tests' independent oracles (eclipse-zenoh, rosbags), in their own environment.
+RATELAB_ORACLE_PYTHON="$("$root/scripts/setup-oracles.sh")"
+export RATELAB_ORACLE_PYTHON
 cd "$root"
 exec cargo test --release --locked "$@"

@@ -35,6 +35,7 @@ pub mod qos;
 pub mod rate;
 pub mod realtime;
 pub mod recording;
+pub mod ros2;
 pub mod run;
 pub mod runlog;
 pub mod scheduler;

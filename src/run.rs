@@ -23,6 +23,9 @@ pub enum RunError {
     /// The graph could not be built.
     #[error(transparent)]
     Graph(#[from] crate::graph::GraphError),
+    /// The graph could not be offered to ROS 2 (`--ros2`).
+    #[error(transparent)]
+    Ros2(#[from] crate::ros2::Ros2Error),
 }
 
 /// A change to a running graph. Under the virtual clock each is applied at a virtual
@@ -193,6 +196,10 @@ pub struct RunOptions {
     pub commands: Vec<TimedCommand>,
     /// Real clock: told about every node tick.
     pub on_node_tick: Option<crate::scheduler::TickHook>,
+    /// Offer the graph to ROS 2 while it runs ([`crate::ros2`]). Under the virtual clock the
+    /// run then keeps pace with the wall clock (one second of run time per second), so
+    /// that ROS 2's tools see the graph's rates; its results are unchanged.
+    pub ros2: Option<crate::ros2::Ros2Options>,
 }
 
 impl RunOptions {
@@ -215,6 +222,8 @@ pub struct RunReport {
     pub end: RunEnd,
     /// Wall time the run took.
     pub wall: Duration,
+    /// What was offered to ROS 2 (with [`RunOptions::ros2`]).
+    pub ros2: Option<crate::ros2::BridgeReport>,
 }
 
 /// Build the plant (reset to `cfg.seed`) and the graph for `cfg`.
@@ -283,12 +292,28 @@ pub fn run(
 ) -> Result<RunReport, RunError> {
     let brain = BrainSlot::new(brain);
     let Graph { mut nodes, handles } = build_graph(cfg, brain, opts.keep_trace, opts.observers)?;
+    let bridge = match &opts.ros2 {
+        Some(o) => {
+            let b = crate::ros2::Bridge::start(&handles.spec, &handles.topics, o, cfg.clock)?;
+            eprintln!("[ratelab] {}", b.describe());
+            Some(b)
+        }
+        None => None,
+    };
     let start = Instant::now();
     let (end, ticks, timing, exec) = match cfg.clock {
         ClockKind::Virtual => {
             let mut sched = virtual_scheduler(cfg, &nodes);
             let mut pending = opts.commands.iter().peekable();
             let end = sched.run(&mut nodes, cfg.duration, &opts.stop, &mut |t| {
+                if let Some(b) = &bridge {
+                    // Keep pace with the wall clock, then tell ROS 2 the time.
+                    let due = start + Duration::from_nanos(t.0);
+                    if let Some(wait) = due.checked_duration_since(Instant::now()) {
+                        std::thread::sleep(wait);
+                    }
+                    b.clock(t);
+                }
                 while let Some(c) = pending.next_if(|c| c.at_ns <= t.0) {
                     // Commands were validated when logged; a failure here changes nothing.
                     let _ = c.command.apply(&handles);
@@ -308,6 +333,7 @@ pub fn run(
         }
     };
     let wall = start.elapsed();
+    let ros2 = bridge.map(crate::ros2::Bridge::finish);
     let metrics = summarize(cfg, &handles, &end, &ticks, timing, exec);
     let trace = std::mem::take(&mut lock(&handles.log).trace);
     Ok(RunReport {
@@ -315,6 +341,7 @@ pub fn run(
         trace,
         end,
         wall,
+        ros2,
     })
 }
 

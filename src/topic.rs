@@ -17,12 +17,16 @@
 //! *retransmits* them). Time enters through the `now` every operation takes, so under the
 //! virtual clock all of it is deterministic. Every message published is accounted for:
 //! `published = seen + dropped + expired + lost + refused + unseen buffered + in flight`.
+//!
+//! A topic may carry one [`Tap`], told of every message as it is published (before the
+//! drop rule or a link decides its fate): how a run offers its topics outside without
+//! changing them ([`crate::ros2`]).
 
 use crate::qos::{Delivery, History, Link, QosCounter, Reliability, TopicQos, MAX_ATTEMPTS};
 use crate::time::Nanos;
 use rand_distr::{Bernoulli, Distribution, Uniform};
 use std::collections::VecDeque;
-use std::sync::{Mutex, MutexGuard};
+use std::sync::{Mutex, MutexGuard, OnceLock};
 
 /// One published value.
 #[derive(Clone, Debug, PartialEq)]
@@ -37,6 +41,11 @@ pub struct Message<T> {
     /// a downstream node measures sense→act latency as `now - origin_stamp`.
     pub origin_stamp: Option<Nanos>,
 }
+
+/// Told of every message published on a topic, as it is published, on the publisher's
+/// thread and under the topic's lock: it must be quick (a channel send) and must not touch
+/// the topic. Set once ([`Topic::set_tap`]).
+pub type Tap<T> = Box<dyn Fn(&Message<T>) + Send + Sync>;
 
 /// A topic's counters at one instant.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -356,6 +365,7 @@ impl<T> Inner<T> {
 pub struct Topic<T> {
     name: String,
     inner: Mutex<Inner<T>>,
+    tap: OnceLock<Tap<T>>,
 }
 
 impl<T: Clone> Topic<T> {
@@ -412,7 +422,16 @@ impl<T: Clone> Topic<T> {
                 last_arrival: Nanos::ZERO,
                 now: Nanos::ZERO,
             }),
+            tap: OnceLock::new(),
         })
+    }
+
+    /// Tell `tap` of every message published from now on.
+    ///
+    /// # Errors
+    /// The topic has a tap already: `tap` is given back.
+    pub fn set_tap(&self, tap: Tap<T>) -> Result<(), Tap<T>> {
+        self.tap.set(tap)
     }
 
     /// The topic's name.
@@ -442,12 +461,16 @@ impl<T: Clone> Topic<T> {
             inner.next_seq += 1;
             inner.published += 1;
             inner.last_stamp = stamp;
-            inner.buf.push_back(Message {
+            let msg = Message {
                 data,
                 stamp,
                 seq,
                 origin_stamp,
-            });
+            };
+            if let Some(tap) = self.tap.get() {
+                tap(&msg);
+            }
+            inner.buf.push_back(msg);
             return seq;
         }
         inner.settle(stamp);
@@ -459,22 +482,25 @@ impl<T: Clone> Topic<T> {
         inner.next_seq += 1;
         inner.published += 1;
         inner.last_stamp = stamp;
-        let msg = || Message {
+        let msg = Message {
             data,
             stamp,
             seq,
             origin_stamp,
         };
+        if let Some(tap) = self.tap.get() {
+            tap(&msg);
+        }
         match inner.qos.link {
             None => {
                 if inner.admit(stamp) {
-                    inner.buf.push_back(msg());
+                    inner.buf.push_back(msg);
                 }
             }
             Some(link) => match inner.send(link, stamp) {
                 None => {}
-                Some(at) if at <= stamp && inner.in_flight.is_empty() => inner.arrive(stamp, msg()),
-                Some(at) => inner.in_flight.push_back((at, msg())),
+                Some(at) if at <= stamp && inner.in_flight.is_empty() => inner.arrive(stamp, msg),
+                Some(at) => inner.in_flight.push_back((at, msg)),
             },
         }
         if inner.plain_qos {
@@ -671,6 +697,47 @@ impl<T> std::fmt::Debug for Topic<T> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_tap_is_told_of_every_message_published_even_those_later_dropped() {
+        let topic = t(1);
+        let seen = std::sync::Arc::new(Mutex::new(Vec::new()));
+        let s = seen.clone();
+        assert!(topic
+            .set_tap(Box::new(move |m: &Message<u32>| {
+                s.lock().unwrap().push((m.seq, m.data, m.stamp))
+            }))
+            .is_ok());
+        assert!(topic.set_tap(Box::new(|_| {})).is_err(), "one tap");
+        for i in 0..3 {
+            topic.publish(10 + i, Nanos(u64::from(i)), None);
+        }
+        assert_eq!(topic.stats().dropped, 2);
+        let lossy = Topic::with_qos(
+            "/l",
+            1,
+            TopicQos {
+                deadline: Some(Nanos(5)),
+                ..TopicQos::default()
+            },
+            0,
+        )
+        .unwrap();
+        let s = seen.clone();
+        let _ = lossy.set_tap(Box::new(move |m: &Message<u32>| {
+            s.lock().unwrap().push((m.seq, m.data, m.stamp))
+        }));
+        lossy.publish(7, Nanos(9), None);
+        assert_eq!(
+            *seen.lock().unwrap(),
+            [
+                (0, 10, Nanos(0)),
+                (1, 11, Nanos(1)),
+                (2, 12, Nanos(2)),
+                (0, 7, Nanos(9))
+            ]
+        );
+    }
 
     /// The tests of the chapter's rule read at any time: without lifespan or link, time
     /// does not matter.

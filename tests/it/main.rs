@@ -43,6 +43,7 @@ mod python;
 mod qos;
 mod realtime;
 mod recording;
+mod ros2;
 mod security;
 mod session;
 mod topic_stress;

@@ -1,0 +1,565 @@
+//! A running graph offered as a ROS 2 graph (rmw_zenoh's format, ros2/rmw_zenoh
+//! `docs/design.md`):
+//!
+//! - each ratelab node is a ROS 2 node in the root namespace: a liveliness token
+//!   `@ros2_lv/<domain>/<zid>/<nid>/<nid>/NN/%/%/<name>`; one more node, `ratelab`,
+//!   publishes `/clock`;
+//! - each topic's publisher and subscriber hold MP/MS tokens naming the topic, its type, its
+//!   RIHS01 hash and its QoS (history and depth, deadline, lifespan, reliability, the
+//!   publisher's liveliness lease) as ratelab runs it;
+//! - each message is put on `<domain>/<topic>/<dds type>/<RIHS01>` as CDR
+//!   ([`super::types`]) with rmw_zenoh's attachment: sequence number (ratelab's `seq` + 1,
+//!   so it starts at 1 and grows by 1), source timestamp (wall clock, ns since the Unix
+//!   epoch, as rmw_zenoh takes it) and the publisher's 16-byte GID;
+//! - `/clock` (`rosgraph_msgs/msg/Clock`, best effort, depth 1) carries the run time: before
+//!   each virtual instant under the virtual clock, and before any message stamped later than
+//!   the last clock under both clocks, so a message's header stamp is never ahead of
+//!   `/clock`.
+//!
+//! Messages leave through a [`crate::topic::Tap`] on each topic and a channel to one bridge
+//! thread: the graph's nodes never wait on Zenoh. Under the virtual clock the channel is
+//! waited on when full (the run stays byte-identical, only slower); under the real clock a
+//! full channel drops the ROS 2 copy and counts it ([`BridgeReport::dropped`]), so the
+//! nodes' timing is never the bridge's.
+
+use super::names::{check_node_name, check_topic_name};
+use super::session::{self, Ros2Session, Router, SessionEnv};
+use super::types::{clock_type, encode, encode_clock, ros_type_of, RosType};
+use super::{Ros2Error, Ros2Options};
+use crate::config::ClockKind;
+use crate::distributed::wire::WireData;
+use crate::graph::GraphSpec;
+use crate::msg::{AnyTopic, ForceMsg, PositionMsg, StateMsg};
+use crate::qos::{History, Reliability};
+use crate::time::Nanos;
+use crate::topic::Message;
+use crossbeam_channel::{Receiver, Sender, TrySendError};
+use hiroz_protocol::entity::{EndpointEntity, EndpointKind, NodeEntity, TypeHash, TypeInfo};
+use hiroz_protocol::qos::{QosDuration, QosHistory, QosProfile, QosReliability};
+use hiroz_protocol::KeyExprFormat;
+use sha2::Digest;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::Arc;
+use std::thread::JoinHandle;
+use zenoh::Wait;
+
+/// The ROS 2 node that publishes `/clock`.
+pub const CLOCK_NODE: &str = "ratelab";
+
+/// The topic ROS 2 nodes with `use_sim_time` read their time from.
+pub const CLOCK_TOPIC: &str = "/clock";
+
+/// Messages waiting for the bridge thread, at most.
+pub const CHANNEL_CAPACITY: usize = 4096;
+
+/// How long to ask the network for another `/clock` publisher before starting.
+const CLOCK_QUERY: std::time::Duration = std::time::Duration::from_millis(500);
+
+/// What the bridge thread is told.
+enum Out {
+    /// A message of topic `topic`, published at `stamp` with ratelab's `seq`.
+    Msg {
+        topic: usize,
+        seq: u64,
+        stamp: Nanos,
+        data: WireData,
+    },
+    /// The run's clock reached this time.
+    Clock(Nanos),
+    /// The run is over: put what came before, then stop.
+    End,
+}
+
+/// What the bridge did, when the run is over.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct BridgeReport {
+    /// Messages put on the ROS 2 keys (not counting `/clock`).
+    pub offered: u64,
+    /// ROS 2 copies dropped because the bridge fell behind (real clock only).
+    pub dropped: u64,
+    /// The first failed put, if any.
+    pub error: Option<String>,
+}
+
+/// The graph offered to ROS 2 while it runs ([`Bridge::start`] … [`Bridge::finish`]).
+pub struct Bridge {
+    tx: Option<Sender<Out>>,
+    thread: Option<JoinHandle<(u64, Option<String>)>>,
+    dropped: Arc<AtomicU64>,
+    /// The router the session uses.
+    pub router: Router,
+    /// The domain.
+    pub domain: u32,
+}
+
+/// Check that `spec` can be offered to ROS 2: valid ROS 2 names, no topic of its own on
+/// `/clock` (ratelab publishes the run's clock there: two `/clock` publishers would give
+/// ROS 2 nodes two times), no node named [`CLOCK_NODE`].
+///
+/// # Errors
+/// The first rule broken, in one line.
+pub fn check_graph(spec: &GraphSpec) -> Result<(), String> {
+    for n in &spec.nodes {
+        check_node_name(&n.name).map_err(|e| format!("--ros2: node {e}"))?;
+        if n.name == CLOCK_NODE {
+            return Err(format!(
+                "--ros2: a node named '{CLOCK_NODE}' would share its ROS 2 name with ratelab's /clock publisher; rename it"
+            ));
+        }
+    }
+    for t in &spec.topics {
+        check_topic_name(&t.name).map_err(|e| format!("--ros2: topic {e}"))?;
+        if t.name == CLOCK_TOPIC {
+            return Err(format!(
+                "--ros2: the graph's topic {CLOCK_TOPIC} would be a second /clock publisher (ratelab publishes the run's clock there); rename it"
+            ));
+        }
+    }
+    Ok(())
+}
+
+fn qos_of(spec: &GraphSpec, t: usize) -> QosProfile {
+    let topic = &spec.topics[t];
+    let q = &topic.qos;
+    let dur = |d: Option<Nanos>| {
+        d.map_or(QosDuration::INFINITE, |d| QosDuration {
+            sec: d.0 / 1_000_000_000,
+            nsec: d.0 % 1_000_000_000,
+        })
+    };
+    QosProfile {
+        reliability: match q.reliability {
+            Reliability::BestEffort => QosReliability::BestEffort,
+            Reliability::Reliable => QosReliability::Reliable,
+        },
+        history: match q.history {
+            History::KeepLast => QosHistory::KeepLast(topic.depth),
+            History::KeepAll => QosHistory::KeepAll,
+        },
+        deadline: dur(q.deadline),
+        lifespan: dur(q.lifespan),
+        liveliness_lease_duration: dur(spec.node(topic.publisher).liveliness_lease),
+        ..QosProfile::default()
+    }
+}
+
+fn clock_qos() -> QosProfile {
+    QosProfile {
+        reliability: QosReliability::BestEffort,
+        history: QosHistory::KeepLast(1),
+        ..QosProfile::default()
+    }
+}
+
+fn type_info(t: &RosType) -> TypeInfo {
+    TypeInfo::new(&t.dds_name(), TypeHash::new(1, t.hash.0))
+}
+
+/// The 16-byte GID of the endpoint whose token is `token`: the first half of its SHA-256
+/// (unique per session, node and endpoint, as the token is).
+fn gid(token: &str) -> [u8; 16] {
+    let h = sha2::Sha256::digest(token.as_bytes());
+    let mut g = [0u8; 16];
+    g.copy_from_slice(&h[..16]);
+    g
+}
+
+/// rmw_zenoh's attachment: `int64` sequence number, `int64` source timestamp (ns), the
+/// GID as a byte sequence (its length, 16, as one byte, then the 16 bytes): 33 bytes,
+/// little endian (rmw_zenoh `attachment_helpers.cpp`, Zenoh's serializer).
+pub fn attachment(seq: i64, source_ns: i64, gid: &[u8; 16]) -> [u8; 33] {
+    let mut a = [0u8; 33];
+    a[..8].copy_from_slice(&seq.to_le_bytes());
+    a[8..16].copy_from_slice(&source_ns.to_le_bytes());
+    a[16] = 16;
+    a[17..].copy_from_slice(gid);
+    a
+}
+
+fn wall_ns() -> i64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| i64::try_from(d.as_nanos()).unwrap_or(i64::MAX))
+}
+
+fn zerr(e: impl std::fmt::Display) -> Ros2Error {
+    Ros2Error::Zenoh(e.to_string().lines().next().unwrap_or_default().to_string())
+}
+
+/// The `/clock` publishers already on the network (their nodes' names), asked of the
+/// liveliness tokens for `CLOCK_QUERY`.
+fn clock_publishers(session: &zenoh::Session, domain: u32) -> Vec<String> {
+    let Ok(replies) = session
+        .liveliness()
+        .get(format!("@ros2_lv/{domain}/**"))
+        .timeout(CLOCK_QUERY)
+        .wait()
+    else {
+        return Vec::new();
+    };
+    let format = KeyExprFormat::default();
+    let mut found = Vec::new();
+    while let Ok(r) = replies.recv() {
+        let Ok(sample) = r.result() else { continue };
+        if let Ok(hiroz_protocol::entity::Entity::Endpoint(e)) =
+            format.parse_liveliness(sample.key_expr())
+        {
+            if e.kind == EndpointKind::Publisher && e.topic == CLOCK_TOPIC {
+                found.push(e.node.map_or_else(|| "?".to_string(), |n| n.name));
+            }
+        }
+    }
+    found
+}
+
+/// A publisher ready to put: its key, its GID.
+struct Outlet {
+    publisher: zenoh::pubsub::Publisher<'static>,
+    gid: [u8; 16],
+}
+
+impl Bridge {
+    /// Offer `spec`'s graph, whose topics are `topics` (by topic id), to ROS 2 on
+    /// `opts.domain`, with the process's `ZENOH_*` environment ([`session`]).
+    ///
+    /// # Errors
+    /// [`Ros2Error::Usage`]: a graph ROS 2 cannot name ([`check_graph`]), a bad `ZENOH_*`
+    /// variable, another `/clock` publisher on the domain, a router that cannot listen.
+    /// [`Ros2Error::Zenoh`]: a declaration failed.
+    pub fn start(
+        spec: &GraphSpec,
+        topics: &[AnyTopic],
+        opts: &Ros2Options,
+        clock: ClockKind,
+    ) -> Result<Bridge, Ros2Error> {
+        check_graph(spec).map_err(Ros2Error::Usage)?;
+        let domain = opts.domain;
+        let Ros2Session { session, router } = session::open(&SessionEnv::from_process())?;
+        let others = clock_publishers(&session, domain);
+        if let Some(other) = others.first() {
+            let _ = session.close().wait();
+            return Err(Ros2Error::Usage(format!(
+                "--ros2: node '{other}' already publishes /clock on domain {domain}; two /clock publishers would give ROS 2 nodes two times (stop it, or use another ROS_DOMAIN_ID)"
+            )));
+        }
+        let zid = session.zid();
+        let format = KeyExprFormat::default();
+        let dom = usize::try_from(domain).unwrap_or(0);
+        let node = |id: usize, name: &str| {
+            NodeEntity::new(dom, zid, id, name.to_string(), String::new(), String::new())
+        };
+        let mut tokens = Vec::new();
+        let mut declare = |ke: String| -> Result<(), Ros2Error> {
+            tokens.push(
+                session
+                    .liveliness()
+                    .declare_token(ke)
+                    .wait()
+                    .map_err(zerr)?,
+            );
+            Ok(())
+        };
+        let nodes: Vec<NodeEntity> = spec
+            .nodes
+            .iter()
+            .enumerate()
+            .map(|(i, n)| node(i, &n.name))
+            .collect();
+        let clock_node = node(nodes.len(), CLOCK_NODE);
+        for n in nodes.iter().chain(std::iter::once(&clock_node)) {
+            declare(
+                format
+                    .node_liveliness_key_expr(n)
+                    .map_err(zerr)?
+                    .to_string(),
+            )?;
+        }
+        let mut next_id = nodes.len() + 1;
+        let mut outlets = Vec::new();
+        let mut endpoint = |node: &NodeEntity,
+                            kind: EndpointKind,
+                            topic: &str,
+                            ty: &RosType,
+                            qos: QosProfile|
+         -> Result<EndpointEntity, Ros2Error> {
+            let e = EndpointEntity {
+                id: next_id,
+                node: Some(node.clone()),
+                kind,
+                topic: topic.to_string(),
+                type_info: Some(type_info(ty)),
+                qos,
+            };
+            next_id += 1;
+            Ok(e)
+        };
+        let publish = |e: &EndpointEntity| -> Result<Outlet, Ros2Error> {
+            let token = format
+                .liveliness_key_expr(e, &zid)
+                .map_err(zerr)?
+                .to_string();
+            let key = format.topic_key_expr(e).map_err(zerr)?.to_string();
+            let publisher = session.declare_publisher(key).wait().map_err(zerr)?;
+            Ok(Outlet {
+                publisher,
+                gid: gid(&token),
+            })
+        };
+        for (t, topic) in spec.topics.iter().enumerate() {
+            let ty = ros_type_of(topic.msg);
+            let qos = qos_of(spec, t);
+            let mp = endpoint(
+                &nodes[topic.publisher.0],
+                EndpointKind::Publisher,
+                &topic.name,
+                ty,
+                qos,
+            )?;
+            outlets.push(publish(&mp)?);
+            declare(
+                format
+                    .liveliness_key_expr(&mp, &zid)
+                    .map_err(zerr)?
+                    .to_string(),
+            )?;
+            if let Some(sub) = topic.subscriber {
+                let ms = endpoint(
+                    &nodes[sub.0],
+                    EndpointKind::Subscription,
+                    &topic.name,
+                    ty,
+                    qos,
+                )?;
+                declare(
+                    format
+                        .liveliness_key_expr(&ms, &zid)
+                        .map_err(zerr)?
+                        .to_string(),
+                )?;
+            }
+        }
+        let clock_ep = endpoint(
+            &clock_node,
+            EndpointKind::Publisher,
+            CLOCK_TOPIC,
+            clock_type(),
+            clock_qos(),
+        )?;
+        let clock_outlet = publish(&clock_ep)?;
+        declare(
+            format
+                .liveliness_key_expr(&clock_ep, &zid)
+                .map_err(zerr)?
+                .to_string(),
+        )?;
+
+        let (tx, rx) = crossbeam_channel::bounded(CHANNEL_CAPACITY);
+        let dropped = Arc::new(AtomicU64::new(0));
+        let waits = clock == ClockKind::Virtual;
+        for (i, topic) in topics.iter().enumerate() {
+            tap(topic, i, tx.clone(), waits, dropped.clone());
+        }
+        let thread = std::thread::Builder::new()
+            .name("ros2-bridge".into())
+            .spawn(move || {
+                let r = forward(&rx, &outlets, &clock_outlet);
+                drop(tokens);
+                drop(outlets);
+                let _ = session.close().wait();
+                r
+            })
+            .map_err(|e| Ros2Error::Zenoh(format!("cannot start the ROS 2 bridge: {e}")))?;
+        Ok(Bridge {
+            tx: Some(tx),
+            thread: Some(thread),
+            dropped,
+            router,
+            domain,
+        })
+    }
+
+    /// One line for the user: the domain, the router, what ROS 2's tools will see.
+    pub fn describe(&self) -> String {
+        let d = self.domain;
+        let via = match &self.router {
+            Router::Found(e) => format!("through the Zenoh router at {e}"),
+            Router::Embedded(e) => format!(
+                "no Zenoh router answered at {e}, so ratelab runs one there for this run (ROS 2 nodes connect to it as to rmw_zenohd)"
+            ),
+            Router::Unchecked => "without looking for a router (ZENOH_ROUTER_CHECK_ATTEMPTS < 0)".into(),
+        };
+        format!("offering the graph to ROS 2 on domain {d} with /clock, {via}")
+    }
+
+    /// The run's clock reached `t` (the virtual clock, before each instant).
+    pub fn clock(&self, t: Nanos) {
+        if let Some(tx) = &self.tx {
+            let _ = tx.send(Out::Clock(t));
+        }
+    }
+
+    /// Stop offering: every message already handed over is put first, then the tokens are
+    /// withdrawn and the session closed.
+    pub fn finish(mut self) -> BridgeReport {
+        // The taps hold senders too (they end with the graph's topics): the thread is told.
+        if let Some(tx) = self.tx.take() {
+            let _ = tx.send(Out::End);
+        }
+        let (offered, error) = self
+            .thread
+            .take()
+            .and_then(|t| t.join().ok())
+            .unwrap_or((0, Some("the ROS 2 bridge thread panicked".into())));
+        BridgeReport {
+            offered,
+            dropped: self.dropped.load(Ordering::Relaxed),
+            error,
+        }
+    }
+}
+
+/// Tap `topic` (number `i`) into the bridge's channel.
+fn tap(topic: &AnyTopic, i: usize, tx: Sender<Out>, waits: bool, dropped: Arc<AtomicU64>) {
+    let send = move |seq: u64, stamp: Nanos, data: WireData| {
+        let out = Out::Msg {
+            topic: i,
+            seq,
+            stamp,
+            data,
+        };
+        if waits {
+            let _ = tx.send(out);
+        } else if let Err(TrySendError::Full(_)) = tx.try_send(out) {
+            dropped.fetch_add(1, Ordering::Relaxed);
+        }
+    };
+    // A topic has one tap; a second bridge on the same topics is a caller's bug, and the
+    // first keeps them.
+    match topic {
+        AnyTopic::State(t) => {
+            let _ = t.set_tap(Box::new(move |m: &Message<StateMsg>| {
+                send(m.seq, m.stamp, WireData::State(m.data));
+            }));
+        }
+        AnyTopic::Position(t) => {
+            let _ = t.set_tap(Box::new(move |m: &Message<PositionMsg>| {
+                send(
+                    m.seq,
+                    m.stamp,
+                    WireData::Position(m.data.cart_pos_m, m.data.pole_angle_rad),
+                );
+            }));
+        }
+        AnyTopic::Force(t) => {
+            let _ = t.set_tap(Box::new(move |m: &Message<ForceMsg>| {
+                send(m.seq, m.stamp, WireData::Force(m.data.newtons));
+            }));
+        }
+    }
+}
+
+fn put(o: &Outlet, seq: i64, bytes: &[u8]) -> Result<(), String> {
+    o.publisher
+        .put(bytes.to_vec())
+        .attachment(attachment(seq, wall_ns(), &o.gid).to_vec())
+        .wait()
+        .map_err(|e| e.to_string())
+}
+
+/// The bridge thread: put each message, and `/clock` whenever the run's time moved on,
+/// until told the run ended. Returns the messages put and the first failed put.
+fn forward(rx: &Receiver<Out>, outlets: &[Outlet], clock: &Outlet) -> (u64, Option<String>) {
+    let mut buf = Vec::with_capacity(256);
+    let mut clock_seq: i64 = 0;
+    let mut last_clock: Option<Nanos> = None;
+    let mut offered = 0u64;
+    let mut error: Option<String> = None;
+    let mut note = |r: Result<(), String>| r.map_err(|e| error.get_or_insert(e).clone()).is_ok();
+    let mut tick =
+        |t: Nanos, buf: &mut Vec<u8>, note: &mut dyn FnMut(Result<(), String>) -> bool| {
+            if last_clock.is_none_or(|l| t > l) {
+                last_clock = Some(t);
+                clock_seq += 1;
+                encode_clock(t, buf);
+                note(put(clock, clock_seq, buf));
+            }
+        };
+    while let Ok(out) = rx.recv() {
+        match out {
+            Out::End => break,
+            Out::Clock(t) => tick(t, &mut buf, &mut note),
+            Out::Msg {
+                topic,
+                seq,
+                stamp,
+                data,
+            } => {
+                tick(stamp, &mut buf, &mut note);
+                encode(&data, stamp, &mut buf);
+                let seq = i64::try_from(seq).unwrap_or(i64::MAX - 1) + 1;
+                if note(put(&outlets[topic], seq, &buf)) {
+                    offered += 1;
+                }
+            }
+        }
+    }
+    (offered, error)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_attachment_is_33_bytes_as_rmw_zenoh_lays_it_out() {
+        let a = attachment(7, -2, &[9; 16]);
+        assert_eq!(a.len(), 33);
+        assert_eq!(a[..8], 7i64.to_le_bytes());
+        assert_eq!(a[8..16], (-2i64).to_le_bytes());
+        assert_eq!(a[16], 16);
+        assert_eq!(a[17..], [9; 16]);
+    }
+
+    #[test]
+    fn the_chapters_graph_can_be_offered_and_clock_is_refused() {
+        let spec = GraphSpec::chapter();
+        assert_eq!(check_graph(&spec), Ok(()));
+        let mut s = spec.clone();
+        s.topics[0].name = "/clock".into();
+        assert!(check_graph(&s)
+            .unwrap_err()
+            .contains("second /clock publisher"));
+        let mut s = spec.clone();
+        s.topics[0].name = "/2obs".into();
+        assert!(check_graph(&s)
+            .unwrap_err()
+            .contains("must not start with a digit"));
+        let mut s = spec;
+        s.nodes[0].name = "ratelab".into();
+        assert!(check_graph(&s)
+            .unwrap_err()
+            .contains("ratelab's /clock publisher"));
+    }
+
+    #[test]
+    fn the_qos_token_says_what_ratelab_runs() {
+        let mut spec = GraphSpec::chapter();
+        spec.set_qos("/action", "deadline_ms=40").unwrap();
+        let q = qos_of(&spec, spec.topic_id("/action").unwrap().0);
+        assert_eq!(q.history, QosHistory::KeepLast(spec.queue_depth()));
+        assert_eq!(
+            q.deadline,
+            QosDuration {
+                sec: 0,
+                nsec: 40_000_000
+            }
+        );
+        assert_eq!(q.lifespan, QosDuration::INFINITE);
+        assert_eq!(q.reliability, QosReliability::BestEffort);
+    }
+
+    #[test]
+    fn gids_differ_per_endpoint() {
+        assert_ne!(gid("@ros2_lv/0/a/1/2/MP"), gid("@ros2_lv/0/a/1/3/MP"));
+    }
+}

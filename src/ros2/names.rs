@@ -1,0 +1,141 @@
+//! ROS 2's rules for what a graph offers under its own names: the domain id, topic names
+//! and node names. Pure functions, so a graph is refused before any session opens.
+//!
+//! The rules are rmw's (`rmw/validate_full_topic_name.h`, `rmw/validate_node_name.h`,
+//! REP 144 "ROS Package Naming" for tokens) and ROS 2's domain range (`ROS_DOMAIN_ID`,
+//! 0–232 so that the DDS port formula stays below 65535; rmw_zenoh keeps the same range).
+
+/// The largest domain id ROS 2 accepts (`ROS_DOMAIN_ID`, "0–232" in ROS 2's docs).
+pub const MAX_DOMAIN_ID: u32 = 232;
+
+/// The longest fully qualified topic name, characters (`RMW_TOPIC_MAX_NAME_LENGTH`:
+/// 255 less the 8 a DDS prefix such as `rt/` may take).
+pub const MAX_TOPIC_NAME_LEN: usize = 247;
+
+/// The longest node name, characters (`RMW_NODE_NAME_MAX_NAME_LENGTH`).
+pub const MAX_NODE_NAME_LEN: usize = 255;
+
+/// A domain id from the command line or `ROS_DOMAIN_ID`.
+///
+/// # Errors
+/// Not an integer, or above [`MAX_DOMAIN_ID`]: the reason, in one line.
+pub fn parse_domain(s: &str) -> Result<u32, String> {
+    let t = s.trim();
+    let d: u32 = t
+        .parse()
+        .map_err(|_| format!("ROS 2 domain '{s}' is not a whole number in 0–{MAX_DOMAIN_ID}"))?;
+    if d > MAX_DOMAIN_ID {
+        return Err(format!(
+            "ROS 2 domain {d} is outside 0–{MAX_DOMAIN_ID} (ROS_DOMAIN_ID's range)"
+        ));
+    }
+    Ok(d)
+}
+
+/// Check a fully qualified topic name (`/cart/state`) by rmw's rules.
+///
+/// # Errors
+/// The rule it breaks, in words: empty, not absolute, ends with `/`, a character other than
+/// `A–Z a–z 0–9 _ /`, `//`, a token starting with a digit, or longer than
+/// [`MAX_TOPIC_NAME_LEN`].
+pub fn check_topic_name(name: &str) -> Result<(), String> {
+    let bad = |rule: &str| Err(format!("'{name}' is not a valid ROS 2 topic name: {rule}"));
+    if name.is_empty() {
+        return bad("it is empty");
+    }
+    if !name.starts_with('/') {
+        return bad("it must start with '/' (fully qualified)");
+    }
+    if name.len() > 1 && name.ends_with('/') {
+        return bad("it must not end with '/'");
+    }
+    if let Some(c) = name
+        .chars()
+        .find(|c| !(c.is_ascii_alphanumeric() || *c == '_' || *c == '/'))
+    {
+        return bad(&format!(
+            "'{}' is not allowed (only A-Z a-z 0-9 _ /)",
+            c.escape_default()
+        ));
+    }
+    if name.contains("//") {
+        return bad("it must not contain '//'");
+    }
+    if name
+        .split('/')
+        .any(|t| t.starts_with(|c: char| c.is_ascii_digit()))
+    {
+        return bad("a name token must not start with a digit");
+    }
+    if name.len() > MAX_TOPIC_NAME_LEN {
+        return bad(&format!(
+            "it is longer than {MAX_TOPIC_NAME_LEN} characters"
+        ));
+    }
+    Ok(())
+}
+
+/// Check a node name (`policy`, no namespace) by rmw's rules.
+///
+/// # Errors
+/// The rule it breaks: empty, a character other than `A–Z a–z 0–9 _`, starting with a
+/// digit, or longer than [`MAX_NODE_NAME_LEN`].
+pub fn check_node_name(name: &str) -> Result<(), String> {
+    let bad = |rule: &str| Err(format!("'{name}' is not a valid ROS 2 node name: {rule}"));
+    if name.is_empty() {
+        return bad("it is empty");
+    }
+    if let Some(c) = name
+        .chars()
+        .find(|c| !(c.is_ascii_alphanumeric() || *c == '_'))
+    {
+        return bad(&format!(
+            "'{}' is not allowed (only A-Z a-z 0-9 _)",
+            c.escape_default()
+        ));
+    }
+    if name.starts_with(|c: char| c.is_ascii_digit()) {
+        return bad("it must not start with a digit");
+    }
+    if name.len() > MAX_NODE_NAME_LEN {
+        return bad(&format!("it is longer than {MAX_NODE_NAME_LEN} characters"));
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn domains_are_0_to_232() {
+        assert_eq!(parse_domain("0"), Ok(0));
+        assert_eq!(parse_domain(" 232 "), Ok(232));
+        assert!(parse_domain("233").unwrap_err().contains("outside 0–232"));
+        assert!(parse_domain("-1").unwrap_err().contains("whole number"));
+        assert!(parse_domain("x").is_err());
+    }
+
+    #[test]
+    fn topic_names_follow_rmw() {
+        for ok in ["/obs", "/action", "/cart/state", "/a_1/b2", "/"] {
+            assert_eq!(check_topic_name(ok), Ok(()), "{ok}");
+        }
+        let why = |n: &str| check_topic_name(n).unwrap_err();
+        assert!(why("").contains("empty"));
+        assert!(why("obs").contains("start with '/'"));
+        assert!(why("/obs/").contains("end with '/'"));
+        assert!(why("/ob-s").contains("'-' is not allowed"));
+        assert!(why("/a//b").contains("'//'"));
+        assert!(why("/2d/pose").contains("digit"));
+        assert!(why(&format!("/{}", "a".repeat(300))).contains("longer than 247"));
+    }
+
+    #[test]
+    fn node_names_follow_rmw() {
+        assert_eq!(check_node_name("policy_2"), Ok(()));
+        assert!(check_node_name("2policy").unwrap_err().contains("digit"));
+        assert!(check_node_name("po-licy").unwrap_err().contains("'-'"));
+        assert!(check_node_name("").is_err());
+    }
+}

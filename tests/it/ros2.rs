@@ -1,0 +1,375 @@
+//! `--ros2`: the graph as ROS 2's tools see it, checked by a stand-in written with
+//! independent implementations only (`tests/ros2/standin.py`: PyPI `eclipse-zenoh` for the
+//! wire, `rosbags` for RIHS01 hashes and CDR), in the oracle environment `scripts/test.sh`
+//! makes (`RATELAB_ORACLE_PYTHON`).
+
+use crate::distributed::free_port;
+use crate::repo;
+use serde_json::Value;
+use std::io::{BufRead, BufReader, Read};
+use std::process::{Child, Command, Stdio};
+
+fn oracle_python() -> String {
+    std::env::var("RATELAB_ORACLE_PYTHON").expect(
+        "RATELAB_ORACLE_PYTHON is not set: run the tests with scripts/test.sh (it makes the oracle environment)",
+    )
+}
+
+/// The stand-in, ready (its subscriptions declared).
+struct StandIn {
+    child: Child,
+}
+
+impl StandIn {
+    fn start(mode: &str, endpoint: &str, domain: u32, extra: &[&str]) -> StandIn {
+        let mut child = Command::new(oracle_python())
+            .arg(repo("tests/ros2/standin.py"))
+            .args([mode, endpoint, &domain.to_string()])
+            .args(extra)
+            .stdin(Stdio::piped())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::inherit())
+            .spawn()
+            .unwrap();
+        let mut line = String::new();
+        BufReader::new(child.stdout.as_mut().unwrap())
+            .read_line(&mut line)
+            .unwrap();
+        assert_eq!(line.trim(), "ready", "the stand-in did not start");
+        StandIn { child }
+    }
+
+    /// Tell it ratelab is done; its report.
+    fn report(mut self) -> Value {
+        drop(self.child.stdin.take());
+        let mut out = String::new();
+        self.child
+            .stdout
+            .take()
+            .unwrap()
+            .read_to_string(&mut out)
+            .unwrap();
+        assert!(self.child.wait().unwrap().success(), "the stand-in failed");
+        serde_json::from_str(out.trim()).unwrap_or_else(|e| panic!("{e}: {out}"))
+    }
+}
+
+impl Drop for StandIn {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+fn ratelab(args: &[&str], env: &[(&str, String)]) -> (i32, String, String) {
+    let mut cmd = Command::new(env!("CARGO_BIN_EXE_ratelab"));
+    cmd.args(args).current_dir(crate::REPO);
+    cmd.env_remove("ROS_DOMAIN_ID")
+        .env_remove("ZENOH_ROUTER_CHECK_ATTEMPTS")
+        .env_remove("ZENOH_CONFIG_OVERRIDE");
+    for (k, v) in env {
+        cmd.env(k, v);
+    }
+    let o = cmd.output().unwrap();
+    (
+        o.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&o.stdout).into_owned(),
+        String::from_utf8_lossy(&o.stderr).into_owned(),
+    )
+}
+
+fn connect_to(endpoint: &str) -> (&'static str, String) {
+    (
+        "ZENOH_CONFIG_OVERRIDE",
+        format!("connect/endpoints=[\"{endpoint}\"]"),
+    )
+}
+
+fn strs(v: &Value) -> Vec<String> {
+    v.as_array()
+        .unwrap()
+        .iter()
+        .map(|s| s.as_str().unwrap().to_string())
+        .collect()
+}
+
+/// `(kind, node, topic, type)` of each endpoint token.
+fn endpoints(r: &Value) -> Vec<(String, String, String, String)> {
+    let mut e: Vec<_> = r["endpoints"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|e| {
+            let s = |k: &str| e[k].as_str().unwrap().to_string();
+            (s("kind"), s("node"), s("topic"), s("type"))
+        })
+        .collect();
+    e.sort();
+    e
+}
+
+fn trace(dir: &std::path::Path) -> Vec<std::collections::HashMap<String, String>> {
+    let text = std::fs::read_to_string(dir.join("trace.csv")).unwrap();
+    let mut lines = text.lines();
+    let head: Vec<&str> = lines.next().unwrap().split(',').collect();
+    lines
+        .map(|l| {
+            head.iter()
+                .zip(l.split(','))
+                .map(|(k, v)| (k.to_string(), v.to_string()))
+                .collect()
+        })
+        .collect()
+}
+
+fn f(v: &Value) -> f64 {
+    v.as_f64().unwrap()
+}
+
+#[test]
+fn ros_2s_tools_see_the_graph_its_types_messages_and_clock_and_the_results_do_not_change() {
+    let endpoint = format!("tcp/127.0.0.1:{}", free_port());
+    let standin = StandIn::start("router", &endpoint, 3, &[]);
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("ros2");
+    let (code, stdout, stderr) = ratelab(
+        &[
+            "run",
+            "--clock",
+            "virtual",
+            "--duration",
+            "1",
+            "--qos",
+            "/action:deadline_ms=40",
+            "--ros2",
+            "3",
+            "--out",
+            out.to_str().unwrap(),
+        ],
+        &[connect_to(&endpoint)],
+    );
+    let r = standin.report();
+    assert_eq!(code, 0, "{stdout}{stderr}");
+    assert!(
+        stderr.contains(&format!(
+            "offering the graph to ROS 2 on domain 3 with /clock, through the Zenoh router at {endpoint}"
+        )),
+        "{stderr}"
+    );
+    assert!(stdout.contains("ROS 2: 102 messages offered"), "{stdout}");
+    assert_eq!(r["errors"], Value::Array(vec![]), "{r}");
+
+    // ros2 node list / ros2 topic list -v: the nodes, who publishes and subscribes what.
+    assert_eq!(
+        strs(&r["nodes"]),
+        ["actuator", "policy", "ratelab", "sensor"]
+    );
+    let js = "sensor_msgs/msg/JointState";
+    let f64t = "std_msgs/msg/Float64";
+    let e = |k: &str, n: &str, t: &str, ty: &str| (k.into(), n.into(), t.into(), ty.into());
+    assert_eq!(
+        endpoints(&r),
+        vec![
+            e("MP", "policy", "/action", f64t),
+            e("MP", "ratelab", "/clock", "rosgraph_msgs/msg/Clock"),
+            e("MP", "sensor", "/obs", js),
+            e("MS", "actuator", "/action", f64t),
+            e("MS", "policy", "/obs", js),
+        ]
+    );
+    // Every type's hash is rosbags' hash_rihs01 of it.
+    for (ty, ok) in r["hash_ok"].as_object().unwrap() {
+        assert_eq!(ok, &Value::Bool(true), "{ty}");
+    }
+    // The QoS strings, read by rmw's enums: best effort (2), keep last 1; /action has its
+    // 40 ms deadline; /clock is best effort, depth 1.
+    for ep in r["endpoints"].as_array().unwrap() {
+        let qos: Vec<&str> = ep["qos"].as_str().unwrap().split(':').collect();
+        assert_eq!(qos[0], "2", "{ep}");
+        assert_eq!(qos[2], ",1", "{ep}");
+        let deadline = if ep["topic"] == "/action" {
+            "0,40000000"
+        } else {
+            ","
+        };
+        assert_eq!(qos[3], deadline, "{ep}");
+    }
+    // Withdrawn at the end.
+    assert_eq!(r["alive_at_end"], Value::Array(vec![]));
+
+    // ros2 topic echo: every message, in order, numbered 1, 2, … by one publisher, with the
+    // values ratelab ran with.
+    let rows = trace(&out);
+    let obs = r["topics"]["/obs"].as_array().unwrap();
+    let action = r["topics"]["/action"].as_array().unwrap();
+    assert_eq!((obs.len(), action.len()), (51, 51));
+    for msgs in [obs, action] {
+        for (i, m) in msgs.iter().enumerate() {
+            assert_eq!(m["seq"].as_i64(), Some(i as i64 + 1));
+            assert_eq!(m["gid"], msgs[0]["gid"]);
+        }
+    }
+    assert_ne!(obs[0]["gid"], action[0]["gid"]);
+    for (i, row) in rows.iter().enumerate() {
+        let stamp_ns = |m: &Value| m["stamp_ns"].as_u64().unwrap();
+        // The force the actuator applied at step i is /action's message i, in newtons.
+        let applied = row["action"].parse::<f64>().unwrap() * 10.0;
+        assert_eq!(f(&action[i]["data"]), applied, "step {i}");
+        // Step i's resulting state is the sensor's next reading (float32 in the
+        // observation; the angle is atan2 of its cos and sin).
+        if let Some(next) = obs.get(i + 1) {
+            let cart = row["cart_pos"].parse::<f64>().unwrap();
+            let angle = row["pole_angle"].parse::<f64>().unwrap();
+            assert!((f(&next["position"][0]) - cart).abs() < 1e-6, "step {i}");
+            assert!((f(&next["position"][1]) - angle).abs() < 1e-6, "step {i}");
+            assert_eq!(next["velocity"].as_array().unwrap().len(), 2);
+            assert_eq!(strs(&next["name"]), ["slider", "hinge"]);
+            assert_eq!(stamp_ns(next), (i as u64 + 1) * 20_000_000);
+        }
+    }
+
+    // /clock: the run's time, from 0 to the end, never behind a message's stamp.
+    let clock: Vec<u64> = r["clock_ns"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_u64().unwrap())
+        .collect();
+    assert_eq!(clock.first(), Some(&0));
+    assert_eq!(clock.last(), Some(&1_000_000_000));
+    assert!(clock.windows(2).all(|w| w[0] < w[1]), "{clock:?}");
+
+    // The same run without --ros2: the same metrics, byte for byte.
+    let plain = dir.path().join("plain");
+    let (code, ..) = ratelab(
+        &[
+            "run",
+            "--clock",
+            "virtual",
+            "--duration",
+            "1",
+            "--qos",
+            "/action:deadline_ms=40",
+            "--out",
+            plain.to_str().unwrap(),
+        ],
+        &[],
+    );
+    assert_eq!(code, 0);
+    for file in ["metrics.json", "trace.csv"] {
+        assert_eq!(
+            std::fs::read(out.join(file)).unwrap(),
+            std::fs::read(plain.join(file)).unwrap(),
+            "{file}"
+        );
+    }
+}
+
+#[test]
+fn with_no_router_ratelab_runs_one_and_ros_2_nodes_join_it_under_the_real_clock() {
+    let _alone = crate::machine::alone();
+    let endpoint = format!("tcp/127.0.0.1:{}", free_port());
+    let mut child = Command::new(env!("CARGO_BIN_EXE_ratelab"))
+        .args(["run", "--clock", "real", "--duration", "3", "--ros2"])
+        .current_dir(crate::REPO)
+        .env_remove("ROS_DOMAIN_ID")
+        .env_remove("ZENOH_ROUTER_CHECK_ATTEMPTS")
+        .env(connect_to(&endpoint).0, connect_to(&endpoint).1)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut err = BufReader::new(child.stderr.take().unwrap());
+    let mut line = String::new();
+    err.read_line(&mut line).unwrap();
+    assert!(
+        line.contains(&format!(
+            "no Zenoh router answered at {endpoint}, so ratelab runs one there for this run"
+        )),
+        "{line}"
+    );
+    // A ROS 2 node (domain 0: ROS_DOMAIN_ID unset) connects to it while the graph runs.
+    let standin = StandIn::start("client", &endpoint, 0, &[]);
+    let status = child.wait().unwrap();
+    let mut stdout = String::new();
+    child
+        .stdout
+        .take()
+        .unwrap()
+        .read_to_string(&mut stdout)
+        .unwrap();
+    assert!(status.success(), "{stdout}");
+    let r = standin.report();
+    assert_eq!(r["errors"], Value::Array(vec![]), "{r}");
+    assert_eq!(
+        strs(&r["nodes"]),
+        ["actuator", "policy", "ratelab", "sensor"]
+    );
+    // It joined late: from its first message on, it saw every one, in order, at about the
+    // sensor's 50 Hz (at least 2 s of the 3 s run).
+    let obs = r["topics"]["/obs"].as_array().unwrap();
+    assert!(obs.len() >= 80, "{} messages", obs.len());
+    let first = obs[0]["seq"].as_i64().unwrap();
+    for (i, m) in obs.iter().enumerate() {
+        assert_eq!(m["seq"].as_i64(), Some(first + i as i64));
+    }
+    let clock = r["clock_ns"].as_array().unwrap();
+    assert!(clock.len() >= 80, "{} clock messages", clock.len());
+}
+
+#[test]
+fn a_second_clock_a_bad_domain_and_names_ros_2_refuses_are_said_in_one_line() {
+    // Another /clock publisher on the domain (a simulator): refused before the run.
+    let endpoint = format!("tcp/127.0.0.1:{}", free_port());
+    let standin = StandIn::start("router", &endpoint, 0, &["clock"]);
+    let (code, _, stderr) = ratelab(
+        &["run", "--clock", "virtual", "--duration", "1", "--ros2"],
+        &[connect_to(&endpoint)],
+    );
+    drop(standin);
+    assert_eq!(code, 2, "{stderr}");
+    assert!(
+        stderr.contains("node 'gazebo' already publishes /clock on domain 0"),
+        "{stderr}"
+    );
+
+    let refused = |args: &[&str], env: &[(&str, String)], says: &str| {
+        let (code, _, stderr) = ratelab(args, env);
+        assert_eq!(code, 2, "{args:?}: {stderr}");
+        assert!(stderr.contains(says), "{args:?}: {stderr}");
+        assert_eq!(stderr.trim().lines().count(), 1, "{stderr}");
+    };
+    refused(&["run", "--ros2", "233"], &[], "outside 0–232");
+    refused(
+        &["run", "--ros2"],
+        &[("ROS_DOMAIN_ID", "abc".into())],
+        "ROS_DOMAIN_ID",
+    );
+    refused(
+        &["run", "--ros2"],
+        &[("ZENOH_ROUTER_CHECK_ATTEMPTS", "soon".into())],
+        "ZENOH_ROUTER_CHECK_ATTEMPTS='soon' is not an integer",
+    );
+    refused(
+        &["run", "--ros2"],
+        &[("ZENOH_CONFIG_OVERRIDE", "mode".into())],
+        "is not KEY=VALUE",
+    );
+    refused(
+        &["lab", "--ros2"],
+        &[],
+        "the lab does not offer its graph yet",
+    );
+    // A graph whose topic is /clock would be a second /clock publisher.
+    let dir = tempfile::tempdir().unwrap();
+    let graph = dir.path().join("clock.toml");
+    let text = std::fs::read_to_string(repo("graphs/cartpole.toml"))
+        .unwrap()
+        .replace("\"/obs\"", "\"/clock\"");
+    std::fs::write(&graph, text).unwrap();
+    refused(
+        &["run", "--graph", graph.to_str().unwrap(), "--ros2"],
+        &[],
+        "would be a second /clock publisher",
+    );
+}

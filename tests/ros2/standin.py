@@ -1,0 +1,165 @@
+"""A ROS 2 stand-in for the tests: what `ros2 topic list/echo`, `ros2 node list` and a
+rmw_zenohd router would see of a ratelab graph offered with `--ros2`, written with
+independent implementations only: Zenoh's official Python API (PyPI `eclipse-zenoh`) for
+the wire, `rosbags` for RIHS01 hashes and CDR. Nothing here comes from ratelab.
+
+Usage: standin.py MODE ENDPOINT DOMAIN [clock]
+  MODE router: be the Zenoh router, listening on ENDPOINT (plays rmw_zenohd);
+  MODE client: connect to a router at ENDPOINT (ratelab's embedded one).
+With `clock`, it also declares a node 'gazebo' publishing /clock (rmw_zenoh's NN and MP
+tokens), as a simulator with its own clock would. Prints "ready" once listening; when stdin closes (or after 120 s), waits a moment for the
+last samples and prints one JSON report on stdout:
+  nodes: [name], endpoints (every token ever declared), alive_at_end: [token], endpoints: [{kind, node, topic, type, hash, qos}],
+  hash_ok: {dds type: rosbags' hash == the hash in the keys},
+  topics: {topic: [{seq, source_ns, gid, value...}]}, clock_ns: [...], errors: [...]
+"""
+
+import json
+import struct
+import sys
+import threading
+import time
+
+import zenoh
+from rosbags.typesys import Stores, get_typestore
+
+mode, endpoint, domain = sys.argv[1], sys.argv[2], int(sys.argv[3])
+fake_clock = sys.argv[4:] == ["clock"]
+store = get_typestore(Stores.LATEST)
+lock = threading.Lock()
+tokens = set()  # alive now
+ever = set()  # ever declared
+samples = []  # (key, payload bytes, attachment bytes)
+
+
+def on_token(sample):
+    with lock:
+        key = str(sample.key_expr)
+        if sample.kind == zenoh.SampleKind.PUT:
+            tokens.add(key)
+            ever.add(key)
+        else:
+            tokens.discard(key)
+
+
+def on_data(sample):
+    att = sample.attachment
+    with lock:
+        samples.append(
+            (str(sample.key_expr), sample.payload.to_bytes(), att.to_bytes() if att else b"")
+        )
+
+
+conf = zenoh.Config()
+conf.insert_json5("mode", json.dumps(mode))
+conf.insert_json5("scouting/multicast/enabled", "false")
+if mode == "router":
+    conf.insert_json5("listen/endpoints", json.dumps([endpoint]))
+else:
+    conf.insert_json5("connect/endpoints", json.dumps([endpoint]))
+session = zenoh.open(conf)
+live = session.liveliness().declare_subscriber(f"@ros2_lv/{domain}/**", on_token, history=True)
+data = session.declare_subscriber(f"{domain}/**", on_data)
+fakes = []
+if fake_clock:
+    zid = str(session.info.zid())
+    clock_hash = store.hash_rihs01("rosgraph_msgs/msg/Clock")
+    for key in (
+        f"@ros2_lv/{domain}/{zid}/0/0/NN/%/%/gazebo",
+        f"@ros2_lv/{domain}/{zid}/0/1/MP/%/%/gazebo/%clock/rosgraph_msgs::msg::dds_::Clock_/{clock_hash}/2::,1:,:,:,,",
+    ):
+        fakes.append(session.liveliness().declare_token(key))
+print("ready", flush=True)
+
+# Until ratelab is done.
+done = threading.Event()
+threading.Thread(target=lambda: (sys.stdin.read(), done.set()), daemon=True).start()
+done.wait(120)
+time.sleep(0.5)
+
+errors = []
+nodes, endpoints = [], []
+with lock:
+    seen_tokens = sorted(ever)
+    alive_at_end = sorted(tokens)
+    got = list(samples)
+
+
+def demangle(s):
+    return s.replace("%", "/")
+
+
+def ros_name(dds):
+    # sensor_msgs::msg::dds_::JointState_ -> sensor_msgs/msg/JointState
+    pkg, kind, _, name = dds.split("::")
+    return f"{pkg}/{kind}/{name[:-1]}"
+
+
+for key in seen_tokens:
+    parts = key.split("/")
+    # @ros2_lv/<domain>/<zid>/<nid>/<eid>/<kind>/<enclave>/<ns>/<node>[/<topic>/<type>/<hash>/<qos>]
+    kind = parts[5]
+    if kind == "NN":
+        nodes.append(parts[8])
+    elif kind in ("MP", "MS"):
+        endpoints.append(
+            {
+                "kind": kind,
+                "node": parts[8],
+                "topic": demangle(parts[9]),
+                "type": ros_name(demangle(parts[10])),
+                "hash": parts[11],
+                "qos": parts[12],
+            }
+        )
+    else:
+        errors.append(f"unexpected token kind {kind}: {key}")
+
+hash_ok = {}
+for e in endpoints:
+    hash_ok[e["type"]] = store.hash_rihs01(e["type"]) == e["hash"]
+
+topics, clock_ns = {}, []
+for key, payload, att in got:
+    # <domain>/<topic...>/<dds type>/<hash>
+    parts = key.split("/")
+    topic = "/" + "/".join(parts[1:-2])
+    ros_type = ros_name(parts[-2])
+    if store.hash_rihs01(ros_type) != parts[-1]:
+        errors.append(f"{key}: hash is not rosbags' {store.hash_rihs01(ros_type)}")
+    if len(att) != 33 or att[16] != 16:
+        errors.append(f"{key}: attachment of {len(att)} bytes")
+        continue
+    seq, source_ns = struct.unpack_from("<qq", att, 0)
+    gid = att[17:].hex()
+    msg = store.deserialize_cdr(payload, ros_type)
+    if ros_type == "rosgraph_msgs/msg/Clock":
+        clock_ns.append(msg.clock.sec * 1_000_000_000 + msg.clock.nanosec)
+        continue
+    row = {"seq": seq, "source_ns": source_ns, "gid": gid, "type": ros_type}
+    if ros_type == "sensor_msgs/msg/JointState":
+        row["stamp_ns"] = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+        row["name"] = list(msg.name)
+        row["position"] = [float(v) for v in msg.position]
+        row["velocity"] = [float(v) for v in msg.velocity]
+    elif ros_type == "std_msgs/msg/Float64":
+        row["data"] = float(msg.data)
+    topics.setdefault(topic, []).append(row)
+
+print(
+    json.dumps(
+        {
+            "nodes": sorted(nodes),
+            "endpoints": endpoints,
+            "hash_ok": hash_ok,
+            "topics": topics,
+            "clock_ns": clock_ns,
+            "alive_at_end": alive_at_end,
+            "errors": errors,
+        }
+    ),
+    flush=True,
+)
+live.undeclare()
+data.undeclare()
+session.close()
