@@ -29,11 +29,6 @@ fn headless(args: &cli::RunArgs, stop: StopFlag) -> anyhow::Result<()> {
 /// Open the terminal lab with the run flags.
 fn lab(args: &cli::RunArgs, stop: StopFlag) -> anyhow::Result<()> {
     use ratelab::session::{SessionSettings, Speed, UNBOUNDED};
-    if args.ros2.is_some() {
-        anyhow::bail!(
-            "--ros2 offers a graph run headless (ratelab run --ros2); the lab does not offer its graph yet (docs/ros2.md)"
-        );
-    }
     let mut cfg = headless::config_from_args(args)?;
     if args.duration.is_none() && !args.smoke {
         cfg.duration = UNBOUNDED;
@@ -62,6 +57,16 @@ fn lab(args: &cli::RunArgs, stop: StopFlag) -> anyhow::Result<()> {
         ratelab::output::check_target(p, args.force)
             .map_err(|e| anyhow::anyhow!("--session {e}"))?;
     }
+    // Checked and opened before the screen opens: a bad name or setting is one line, exit 2.
+    let ros2 = match args.ros2_domain().map_err(anyhow::Error::msg)? {
+        Some(domain) => {
+            ratelab::ros2::bridge::check_graph(&cfg.graph).map_err(anyhow::Error::msg)?;
+            let link =
+                ratelab::ros2::session::open(&ratelab::ros2::session::SessionEnv::from_process())?;
+            Some((link, ratelab::ros2::Ros2Options { domain }))
+        }
+        None => None,
+    };
     let alt_policy = (args.policy != "scripted").then(|| args.policy.clone());
     let settings = SessionSettings {
         force: args.force,
@@ -73,6 +78,7 @@ fn lab(args: &cli::RunArgs, stop: StopFlag) -> anyhow::Result<()> {
         session_file,
         start_paused: false,
         speed: Speed::Times(1.0),
+        ros2,
     };
     tui::run_lab(settings, stop)
 }

@@ -292,13 +292,19 @@ pub fn run(
 ) -> Result<RunReport, RunError> {
     let brain = BrainSlot::new(brain);
     let Graph { mut nodes, handles } = build_graph(cfg, brain, opts.keep_trace, opts.observers)?;
-    let bridge = match &opts.ros2 {
-        Some(o) => {
-            let b = crate::ros2::Bridge::start(&handles.spec, &handles.topics, o, cfg.clock)?;
+    let link = match &opts.ros2 {
+        Some(_) => Some(crate::ros2::session::open(
+            &crate::ros2::session::SessionEnv::from_process(),
+        )?),
+        None => None,
+    };
+    let bridge = match (&opts.ros2, &link) {
+        (Some(o), Some(link)) => {
+            let b = crate::ros2::Bridge::start(link, &handles.spec, &handles.topics, o, cfg.clock)?;
             eprintln!("[ratelab] {}", b.describe());
             Some(b)
         }
-        None => None,
+        _ => None,
     };
     let start = Instant::now();
     let (end, ticks, timing, exec) = match cfg.clock {
@@ -334,6 +340,9 @@ pub fn run(
     };
     let wall = start.elapsed();
     let ros2 = bridge.map(crate::ros2::Bridge::finish);
+    if let Some(link) = link {
+        link.close();
+    }
     let metrics = summarize(cfg, &handles, &end, &ticks, timing, exec);
     let trace = std::mem::take(&mut lock(&handles.log).trace);
     Ok(RunReport {

@@ -23,7 +23,7 @@
 //! nodes' timing is never the bridge's.
 
 use super::names::{check_node_name, check_topic_name};
-use super::session::{self, Ros2Session, Router, SessionEnv};
+use super::session::{Ros2Session, Router};
 use super::types::{clock_type, encode, encode_clock, ros_type_of, RosType};
 use super::{Ros2Error, Ros2Options};
 use crate::config::ClockKind;
@@ -186,8 +186,8 @@ fn zerr(e: impl std::fmt::Display) -> Ros2Error {
     Ros2Error::Zenoh(e.to_string().lines().next().unwrap_or_default().to_string())
 }
 
-/// The `/clock` publishers already on the network (their nodes' names), asked of the
-/// liveliness tokens for `CLOCK_QUERY`.
+/// The `/clock` publishers already on the network but not of this session (their nodes'
+/// names), asked of the liveliness tokens for `CLOCK_QUERY`.
 fn clock_publishers(session: &zenoh::Session, domain: u32) -> Vec<String> {
     let Ok(replies) = session
         .liveliness()
@@ -204,7 +204,8 @@ fn clock_publishers(session: &zenoh::Session, domain: u32) -> Vec<String> {
         if let Ok(hiroz_protocol::entity::Entity::Endpoint(e)) =
             format.parse_liveliness(sample.key_expr())
         {
-            if e.kind == EndpointKind::Publisher && e.topic == CLOCK_TOPIC {
+            let ours = e.node.as_ref().is_some_and(|n| n.z_id == session.zid());
+            if e.kind == EndpointKind::Publisher && e.topic == CLOCK_TOPIC && !ours {
                 found.push(e.node.map_or_else(|| "?".to_string(), |n| n.name));
             }
         }
@@ -220,13 +221,15 @@ struct Outlet {
 
 impl Bridge {
     /// Offer `spec`'s graph, whose topics are `topics` (by topic id), to ROS 2 on
-    /// `opts.domain`, with the process's `ZENOH_*` environment ([`session`]).
+    /// `opts.domain`, through `link` ([`super::session::open`]; it outlives the bridge, so that a
+    /// lab's successive runs keep one session and one router).
     ///
     /// # Errors
     /// [`Ros2Error::Usage`]: a graph ROS 2 cannot name ([`check_graph`]), a bad `ZENOH_*`
     /// variable, another `/clock` publisher on the domain, a router that cannot listen.
     /// [`Ros2Error::Zenoh`]: a declaration failed.
     pub fn start(
+        link: &Ros2Session,
         spec: &GraphSpec,
         topics: &[AnyTopic],
         opts: &Ros2Options,
@@ -234,10 +237,10 @@ impl Bridge {
     ) -> Result<Bridge, Ros2Error> {
         check_graph(spec).map_err(Ros2Error::Usage)?;
         let domain = opts.domain;
-        let Ros2Session { session, router } = session::open(&SessionEnv::from_process())?;
+        let session = link.session.clone();
+        let router = link.router.clone();
         let others = clock_publishers(&session, domain);
         if let Some(other) = others.first() {
-            let _ = session.close().wait();
             return Err(Ros2Error::Usage(format!(
                 "--ros2: node '{other}' already publishes /clock on domain {domain}; two /clock publishers would give ROS 2 nodes two times (stop it, or use another ROS_DOMAIN_ID)"
             )));
@@ -363,9 +366,14 @@ impl Bridge {
             .name("ros2-bridge".into())
             .spawn(move || {
                 let r = forward(&rx, &outlets, &clock_outlet);
-                drop(tokens);
-                drop(outlets);
-                let _ = session.close().wait();
+                // Withdrawn: ROS 2's graph no longer shows the run's nodes.
+                for t in tokens {
+                    let _ = t.undeclare().wait();
+                }
+                for o in outlets {
+                    let _ = o.publisher.undeclare().wait();
+                }
+                let _ = clock_outlet.publisher.undeclare().wait();
                 r
             })
             .map_err(|e| Ros2Error::Zenoh(format!("cannot start the ROS 2 bridge: {e}")))?;

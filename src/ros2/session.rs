@@ -109,12 +109,29 @@ pub enum Router {
     Unchecked,
 }
 
-/// An open session and what it found.
+/// An open session and what it found. Cloning it gives another handle to the same session.
+#[derive(Clone)]
 pub struct Ros2Session {
     /// The session.
     pub session: zenoh::Session,
     /// The router it uses.
     pub router: Router,
+}
+
+impl std::fmt::Debug for Ros2Session {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Ros2Session")
+            .field("zid", &self.session.zid())
+            .field("router", &self.router)
+            .finish()
+    }
+}
+
+impl Ros2Session {
+    /// Close the session (and the embedded router, if it is one).
+    pub fn close(self) {
+        let _ = self.session.close().wait();
+    }
 }
 
 fn set(config: &mut zenoh::Config, key: &str, value: &str) -> Result<(), Ros2Error> {

@@ -39,6 +39,9 @@ pub struct SessionSettings {
     /// file exists is refused, never overwritten. The session log is checked once, by the
     /// caller, before the session starts, and then rewritten by the session as it goes.
     pub force: bool,
+    /// Offer each run's graph to ROS 2 through this session ([`crate::ros2`]), opened by the
+    /// caller before the session starts (one session, one router, for all runs).
+    pub ros2: Option<(crate::ros2::session::Ros2Session, crate::ros2::Ros2Options)>,
 }
 
 /// Streams step records to the front end.
@@ -199,12 +202,29 @@ impl Engine {
         if let Some(n) = notice {
             let _ = self.tx.send(Telemetry::Error(n));
         }
+        let bridge = match &self.settings.ros2 {
+            Some((link, opts)) => {
+                let h = &graph.handles;
+                match crate::ros2::Bridge::start(link, &h.spec, &h.topics, opts, cfg.clock) {
+                    Ok(b) => {
+                        let _ = self.tx.send(Telemetry::Applied(b.describe()));
+                        Some(b)
+                    }
+                    Err(e) => {
+                        let _ = self.tx.send(Telemetry::Error(format!("ROS 2: {e}")));
+                        None
+                    }
+                }
+            }
+            None => None,
+        };
         self.log.runs.push(LoggedRun::starting(cfg, policy));
         self.save_log();
         let handles = graph.handles.clone();
         let (next, end, ticks, timing, exec) = match cfg.clock {
             ClockKind::Virtual => {
-                let (next, end, ticks, exec) = self.virtual_run(cfg, graph, &recording);
+                let (next, end, ticks, exec) =
+                    self.virtual_run(cfg, graph, &recording, bridge.as_ref());
                 (next, end, ticks, None, exec)
             }
             ClockKind::Real => {
@@ -213,6 +233,13 @@ impl Engine {
                 (next, end, ticks, timing, exec)
             }
         };
+        if let Some(r) = bridge.map(crate::ros2::Bridge::finish) {
+            if let Some(e) = r.error {
+                let _ = self
+                    .tx
+                    .send(Telemetry::Error(format!("ROS 2: a put failed: {e}")));
+            }
+        }
         let metrics = live_metrics(cfg, &handles, &end, &ticks, timing, exec);
         if let Some(r) = &recording {
             let _ = r.finish(&metrics, &end);

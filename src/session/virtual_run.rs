@@ -21,6 +21,7 @@ impl Engine {
         cfg: &RunConfig,
         graph: Graph,
         recording: &Option<Recording>,
+        ros2: Option<&crate::ros2::Bridge>,
     ) -> (Next, RunEnd, Vec<u64>, Option<ExecFigures>) {
         let Graph { mut nodes, handles } = graph;
         let actuator_bit = 1u64 << (cfg.graph.chain.actuator.0 % 64);
@@ -146,6 +147,9 @@ impl Engine {
                 }
                 if target.is_some_and(|t| due > t) {
                     break;
+                }
+                if let Some(b) = ros2 {
+                    b.clock(due);
                 }
                 let actuator_ticked = match sched.run_instant(&mut nodes) {
                     InstantOutcome::Ran { ticked } => ticked & actuator_bit != 0,

@@ -13,6 +13,11 @@ struct Lab {
 
 impl Lab {
     fn start(args: &[&str]) -> Lab {
+        Lab::start_with(args, &[])
+    }
+
+    /// With these environment variables set as well.
+    fn start_with(args: &[&str], env: &[(&str, String)]) -> Lab {
         let pty = native_pty_system()
             .openpty(PtySize {
                 rows: 30,
@@ -24,6 +29,9 @@ impl Lab {
         let mut cmd = CommandBuilder::new(env!("CARGO_BIN_EXE_ratelab"));
         cmd.args(args);
         cmd.env("TERM", "xterm-256color");
+        for (k, v) in env {
+            cmd.env(k, v);
+        }
         cmd.cwd(std::env::temp_dir());
         let child = pty.slave.spawn_command(cmd).expect("spawn ratelab");
         drop(pty.slave);
@@ -126,6 +134,43 @@ fn virtual_lab_falls_off_the_rate_cliff_and_quits_cleanly() {
     let screen = lab.wait_for("FELL at t=", Duration::from_secs(60));
     assert!(screen.contains("dropped"), "{screen}");
     lab.quit();
+}
+
+#[test]
+fn the_lab_offers_its_graph_to_ros_2_with_the_virtual_clock_on_clock() {
+    use crate::ros2::{connect_to, strs, StandIn};
+    let _machine = crate::machine::alone();
+    let endpoint = format!("tcp/127.0.0.1:{}", crate::distributed::free_port());
+    let standin = StandIn::start("router", &endpoint, 0, &[]);
+    let lab = Lab::start_with(&["--clock", "virtual", "--ros2"], &[connect_to(&endpoint)]);
+    lab.wait_for(
+        "offering the graph to ROS 2 on domain 0",
+        Duration::from_secs(60),
+    );
+    lab.wait_for("BALANCED", Duration::from_secs(10));
+    std::thread::sleep(Duration::from_secs(2));
+    lab.quit();
+    let r = standin.report();
+    assert_eq!(r["errors"], serde_json::json!([]), "{r}");
+    assert_eq!(
+        strs(&r["nodes"]),
+        ["actuator", "policy", "ratelab", "sensor"]
+    );
+    // The lab paces virtual time at 1×: about 50 messages a second, every one, from the
+    // first; /clock follows the run's time.
+    let obs = r["topics"]["/obs"].as_array().unwrap();
+    assert!(obs.len() >= 80, "{} messages", obs.len());
+    for (i, m) in obs.iter().enumerate() {
+        assert_eq!(m["seq"].as_i64(), Some(i as i64 + 1));
+    }
+    let clock: Vec<u64> = r["clock_ns"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_u64().unwrap())
+        .collect();
+    assert!(clock.windows(2).all(|w| w[0] < w[1]));
+    assert!(*clock.last().unwrap() >= 1_500_000_000, "{clock:?}");
 }
 
 #[test]

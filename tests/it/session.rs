@@ -29,6 +29,7 @@ fn settings(
         spawn: false,
         session_file: Some(file.to_path_buf()),
         start_paused,
+        ros2: None,
         speed,
         force: false,
     }
