@@ -485,6 +485,10 @@ pub struct RunArgs {
     /// on /clock; the virtual clock then keeps pace with the wall clock (docs/ros2.md).
     #[arg(long, value_name = "DOMAIN", num_args = 0..=1, allow_negative_numbers = true, value_parser = parse_ros2_domain)]
     pub ros2: Option<Option<u32>>,
+    /// With --ros2 (`run`): also write what is offered as a rosbag2 bag (MCAP storage) in
+    /// this folder: every topic and /clock, stamped with run time (docs/ros2.md).
+    #[arg(long, value_name = "DIR", requires = "ros2")]
+    pub bag: Option<PathBuf>,
 }
 
 fn parse_ros2_domain(s: &str) -> Result<u32, String> {

@@ -194,10 +194,13 @@ pub fn run_headless(a: &RunArgs, stop: StopFlag) -> anyhow::Result<RunReport> {
     let recording = open_recording(a, &cfg, &brain.label())?;
     let mut opts = RunOptions {
         stop: stop.clone(),
-        ros2: a
-            .ros2_domain()
-            .map_err(anyhow::Error::msg)?
-            .map(|domain| ratelab::ros2::Ros2Options { domain }),
+        ros2: a.ros2_domain().map_err(anyhow::Error::msg)?.map(|domain| {
+            ratelab::ros2::Ros2Options {
+                domain,
+                bag: a.bag.clone(),
+                force: a.force,
+            }
+        }),
         ..RunOptions::new()
     };
     // A long virtual run (up to an hour of run time, seconds to minutes of wall time) shows
@@ -257,8 +260,14 @@ pub fn run_headless(a: &RunArgs, stop: StopFlag) -> anyhow::Result<RunReport> {
                 String::new()
             }
         );
+        if let (Some(n), Some(dir)) = (r.bagged, &a.bag) {
+            println!(
+                "[ratelab] bag: {} (rosbag2, MCAP): {n} messages with /clock",
+                dir.display()
+            );
+        }
         if let Some(e) = &r.error {
-            eprintln!("[ratelab] warning: ROS 2: a put failed: {e}");
+            eprintln!("[ratelab] warning: ROS 2: {e}");
         }
     }
     if cfg.rt_priority.is_some() && cfg.clock == ClockKind::Virtual {

@@ -58,12 +58,20 @@ fn lab(args: &cli::RunArgs, stop: StopFlag) -> anyhow::Result<()> {
             .map_err(|e| anyhow::anyhow!("--session {e}"))?;
     }
     // Checked and opened before the screen opens: a bad name or setting is one line, exit 2.
+    if args.bag.is_some() {
+        anyhow::bail!("--bag writes one run's bag: use it with `ratelab run --ros2`, not the lab");
+    }
     let ros2 = match args.ros2_domain().map_err(anyhow::Error::msg)? {
         Some(domain) => {
             ratelab::ros2::bridge::check_graph(&cfg.graph).map_err(anyhow::Error::msg)?;
             let link =
                 ratelab::ros2::session::open(&ratelab::ros2::session::SessionEnv::from_process())?;
-            Some((link, ratelab::ros2::Ros2Options { domain }))
+            let opts = ratelab::ros2::Ros2Options {
+                domain,
+                bag: None,
+                force: false,
+            };
+            Some((link, opts))
         }
         None => None,
     };

@@ -22,6 +22,7 @@
 //! full channel drops the ROS 2 copy and counts it ([`BridgeReport::dropped`]), so the
 //! nodes' timing is never the bridge's.
 
+use super::bag::{Bag, BagTopic};
 use super::names::{check_node_name, check_topic_name};
 use super::session::{Ros2Session, Router};
 use super::types::{clock_type, encode, encode_clock, ros_type_of, RosType};
@@ -77,14 +78,16 @@ pub struct BridgeReport {
     pub offered: u64,
     /// ROS 2 copies dropped because the bridge fell behind (real clock only).
     pub dropped: u64,
-    /// The first failed put, if any.
+    /// The first failed put or bag write, if any.
     pub error: Option<String>,
+    /// Messages written to the bag (with `/clock`), when there is one.
+    pub bagged: Option<u64>,
 }
 
 /// The graph offered to ROS 2 while it runs ([`Bridge::start`] … [`Bridge::finish`]).
 pub struct Bridge {
     tx: Option<Sender<Out>>,
-    thread: Option<JoinHandle<(u64, Option<String>)>>,
+    thread: Option<JoinHandle<Forwarded>>,
     dropped: Arc<AtomicU64>,
     /// The router the session uses.
     pub router: Router,
@@ -356,6 +359,24 @@ impl Bridge {
                 .to_string(),
         )?;
 
+        let bag = match &opts.bag {
+            Some(dir) => {
+                let mut topics: Vec<BagTopic<'_>> = spec
+                    .topics
+                    .iter()
+                    .map(|t| BagTopic {
+                        name: &t.name,
+                        ty: ros_type_of(t.msg),
+                    })
+                    .collect();
+                topics.push(BagTopic {
+                    name: CLOCK_TOPIC,
+                    ty: clock_type(),
+                });
+                Some(Bag::create(dir, opts.force, &topics)?)
+            }
+            None => None,
+        };
         let (tx, rx) = crossbeam_channel::bounded(CHANNEL_CAPACITY);
         let dropped = Arc::new(AtomicU64::new(0));
         let waits = clock == ClockKind::Virtual;
@@ -365,7 +386,7 @@ impl Bridge {
         let thread = std::thread::Builder::new()
             .name("ros2-bridge".into())
             .spawn(move || {
-                let r = forward(&rx, &outlets, &clock_outlet);
+                let r = forward(&rx, &outlets, &clock_outlet, bag);
                 // Withdrawn: ROS 2's graph no longer shows the run's nodes.
                 for t in tokens {
                     let _ = t.undeclare().wait();
@@ -413,15 +434,20 @@ impl Bridge {
         if let Some(tx) = self.tx.take() {
             let _ = tx.send(Out::End);
         }
-        let (offered, error) = self
+        let f = self
             .thread
             .take()
             .and_then(|t| t.join().ok())
-            .unwrap_or((0, Some("the ROS 2 bridge thread panicked".into())));
+            .unwrap_or(Forwarded {
+                offered: 0,
+                error: Some("the ROS 2 bridge thread panicked".into()),
+                bagged: None,
+            });
         BridgeReport {
-            offered,
+            offered: f.offered,
             dropped: self.dropped.load(Ordering::Relaxed),
-            error,
+            error: f.error,
+            bagged: f.bagged,
         }
     }
 }
@@ -474,44 +500,99 @@ fn put(o: &Outlet, seq: i64, bytes: &[u8]) -> Result<(), String> {
         .map_err(|e| e.to_string())
 }
 
-/// The bridge thread: put each message, and `/clock` whenever the run's time moved on,
-/// until told the run ended. Returns the messages put and the first failed put.
-fn forward(rx: &Receiver<Out>, outlets: &[Outlet], clock: &Outlet) -> (u64, Option<String>) {
-    let mut buf = Vec::with_capacity(256);
-    let mut clock_seq: i64 = 0;
-    let mut last_clock: Option<Nanos> = None;
-    let mut offered = 0u64;
-    let mut error: Option<String> = None;
-    let mut note = |r: Result<(), String>| r.map_err(|e| error.get_or_insert(e).clone()).is_ok();
-    let mut tick =
-        |t: Nanos, buf: &mut Vec<u8>, note: &mut dyn FnMut(Result<(), String>) -> bool| {
-            if last_clock.is_none_or(|l| t > l) {
-                last_clock = Some(t);
-                clock_seq += 1;
-                encode_clock(t, buf);
-                note(put(clock, clock_seq, buf));
+/// What the bridge thread did.
+struct Forwarded {
+    offered: u64,
+    error: Option<String>,
+    bagged: Option<u64>,
+}
+
+/// The bridge thread's state: where messages go and what happened.
+struct Forwarder<'a> {
+    outlets: &'a [Outlet],
+    clock: &'a Outlet,
+    bag: Option<Bag>,
+    buf: Vec<u8>,
+    clock_seq: i64,
+    last_clock: Option<Nanos>,
+    offered: u64,
+    error: Option<String>,
+}
+
+impl Forwarder<'_> {
+    /// `self.buf` out as message `seq` of outlet number `index` (the clock's: the number
+    /// after the topics'), at run time `t`: put on its key and written to the bag. False
+    /// when the put failed.
+    fn send(&mut self, index: usize, seq: i64, t: Nanos) -> bool {
+        if let Some(Err(e)) = self.bag.as_mut().map(|b| b.write(index, t.0, &self.buf)) {
+            self.error.get_or_insert(format!("the bag: {e}"));
+        }
+        let outlet = self.outlets.get(index).unwrap_or(self.clock);
+        match put(outlet, seq, &self.buf) {
+            Ok(()) => true,
+            Err(e) => {
+                self.error.get_or_insert(e);
+                false
             }
-        };
+        }
+    }
+
+    /// `/clock` at `t`, if the run's time moved on.
+    fn tick(&mut self, t: Nanos) {
+        if self.last_clock.is_none_or(|l| t > l) {
+            self.last_clock = Some(t);
+            self.clock_seq += 1;
+            encode_clock(t, &mut self.buf);
+            self.send(self.outlets.len(), self.clock_seq, t);
+        }
+    }
+}
+
+/// The bridge thread: put each message (and write it to the bag), and `/clock` whenever
+/// the run's time moved on, until told the run ended.
+fn forward(rx: &Receiver<Out>, outlets: &[Outlet], clock: &Outlet, bag: Option<Bag>) -> Forwarded {
+    let mut f = Forwarder {
+        outlets,
+        clock,
+        bag,
+        buf: Vec::with_capacity(256),
+        clock_seq: 0,
+        last_clock: None,
+        offered: 0,
+        error: None,
+    };
     while let Ok(out) = rx.recv() {
         match out {
             Out::End => break,
-            Out::Clock(t) => tick(t, &mut buf, &mut note),
+            Out::Clock(t) => f.tick(t),
             Out::Msg {
                 topic,
                 seq,
                 stamp,
                 data,
             } => {
-                tick(stamp, &mut buf, &mut note);
-                encode(&data, stamp, &mut buf);
+                f.tick(stamp);
+                encode(&data, stamp, &mut f.buf);
                 let seq = i64::try_from(seq).unwrap_or(i64::MAX - 1) + 1;
-                if note(put(&outlets[topic], seq, &buf)) {
-                    offered += 1;
+                if f.send(topic, seq, stamp) {
+                    f.offered += 1;
                 }
             }
         }
     }
-    (offered, error)
+    let mut error = f.error;
+    let bagged = f.bag.map(|b| match b.finish() {
+        Ok(n) => n,
+        Err(e) => {
+            error.get_or_insert(format!("the bag: {e}"));
+            0
+        }
+    });
+    Forwarded {
+        offered: f.offered,
+        error,
+        bagged,
+    }
 }
 
 #[cfg(test)]

@@ -9,6 +9,7 @@
 //! - [`session`]: the Zenoh session rmw_zenoh's nodes open by default (peer, a router at
 //!   `tcp/localhost:7447`, `ZENOH_ROUTER_CHECK_ATTEMPTS`, `ZENOH_CONFIG_OVERRIDE`), or an
 //!   embedded router when none answers;
+//! - [`bag`]: `--bag DIR`, what is offered as a rosbag2 bag (MCAP storage);
 //! - [`bridge`]: the liveliness tokens (NN per node, MP/MS per publisher and subscription,
 //!   with the QoS), a publisher per topic on `<domain>/<topic>/<dds type>/<RIHS01>` with
 //!   rmw_zenoh's 33-byte attachment, and `/clock`.
@@ -21,6 +22,7 @@
 //! What is offered is a view: ratelab's own topics, clocks and drop rules are unchanged,
 //! and a run with `--ros2` gives the same results as one without.
 
+pub mod bag;
 pub mod bridge;
 pub mod names;
 pub mod session;
@@ -34,6 +36,10 @@ pub struct Ros2Options {
     /// The ROS 2 domain, 0–[`names::MAX_DOMAIN_ID`] (`ROS_DOMAIN_ID`): the first part of
     /// every key and token.
     pub domain: u32,
+    /// Also write what is offered as a rosbag2 bag (MCAP) in this folder ([`bag`]).
+    pub bag: Option<std::path::PathBuf>,
+    /// Replace a bag already in that folder.
+    pub force: bool,
 }
 
 /// Why a graph cannot be offered to ROS 2.

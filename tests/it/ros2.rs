@@ -362,6 +362,12 @@ fn a_second_clock_a_bad_domain_and_names_ros_2_refuses_are_said_in_one_line() {
         .unwrap()
         .replace("\"/obs\"", "\"/clock\"");
     std::fs::write(&graph, text).unwrap();
+    refused(
+        &["lab", "--ros2", "--bag", "b"],
+        &[],
+        "--bag writes one run's bag",
+    );
+    refused(&["run", "--bag", "b"], &[], "--ros2");
     for cmd in ["run", "lab"] {
         refused(
             &[cmd, "--graph", graph.to_str().unwrap(), "--ros2"],
@@ -369,4 +375,96 @@ fn a_second_clock_a_bad_domain_and_names_ros_2_refuses_are_said_in_one_line() {
             "would be a second /clock publisher",
         );
     }
+}
+
+/// Read a bag with rosbags: each topic's type and messages (`/action`'s data, `/obs`'s
+/// positions, `/clock`'s times in ns), and each message's log time.
+fn read_bag(dir: &std::path::Path) -> Value {
+    let script = r#"
+import json, sys
+from rosbags.rosbag2 import Reader
+from rosbags.typesys import Stores, get_typestore
+ts = get_typestore(Stores.LATEST)
+out = {"count": 0, "topics": {}}
+with Reader(sys.argv[1]) as r:
+    out["count"] = r.message_count
+    for c, t, raw in r.messages():
+        m = ts.deserialize_cdr(raw, c.msgtype)
+        rows = out["topics"].setdefault(c.topic, {"type": c.msgtype, "t": [], "v": []})
+        rows["t"].append(t)
+        if c.msgtype == "std_msgs/msg/Float64":
+            rows["v"].append(float(m.data))
+        elif c.msgtype == "rosgraph_msgs/msg/Clock":
+            rows["v"].append(m.clock.sec * 10**9 + m.clock.nanosec)
+        else:
+            rows["v"].append([float(x) for x in m.position])
+print(json.dumps(out))
+"#;
+    let o = Command::new(oracle_python())
+        .args(["-c", script, dir.to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    serde_json::from_slice(&o.stdout).unwrap()
+}
+
+#[test]
+fn a_bag_of_the_run_reads_back_with_rosbags_every_message_the_same_on_every_run() {
+    // No router needed to write a bag: the session is not checked for one.
+    let env = [
+        ("ZENOH_ROUTER_CHECK_ATTEMPTS", "-1".to_string()),
+        connect_to(&format!("tcp/127.0.0.1:{}", free_port())),
+    ];
+    let dir = tempfile::tempdir().unwrap();
+    let bag = |name: &str, extra: &[&str]| {
+        let path = dir.path().join(name);
+        let mut args = vec!["run", "--clock", "virtual", "--duration", "1", "--ros2"];
+        args.extend_from_slice(&["--bag", path.to_str().unwrap()]);
+        args.extend_from_slice(extra);
+        (ratelab(&args, &env), path)
+    };
+    let out = dir.path().join("out");
+    let ((code, stdout, stderr), first) = bag("first", &["--out", out.to_str().unwrap()]);
+    assert_eq!(code, 0, "{stdout}{stderr}");
+    assert!(
+        stdout.contains("(rosbag2, MCAP): 153 messages with /clock"),
+        "{stdout}"
+    );
+    let r = read_bag(&first);
+    assert_eq!(r["count"], 153);
+    let topic = |t: &str| &r["topics"][t];
+    assert_eq!(topic("/obs")["type"], "sensor_msgs/msg/JointState");
+    assert_eq!(topic("/action")["type"], "std_msgs/msg/Float64");
+    assert_eq!(topic("/clock")["type"], "rosgraph_msgs/msg/Clock");
+    // The forces applied, in newtons, step by step; log times are run times.
+    let rows = trace(&out);
+    let forces = topic("/action")["v"].as_array().unwrap();
+    assert_eq!(forces.len(), rows.len());
+    for (i, (v, row)) in forces.iter().zip(&rows).enumerate() {
+        assert_eq!(
+            f(v),
+            row["action"].parse::<f64>().unwrap() * 10.0,
+            "step {i}"
+        );
+        assert_eq!(
+            topic("/action")["t"][i].as_u64(),
+            Some(i as u64 * 20_000_000)
+        );
+    }
+    let clock = topic("/clock")["v"].as_array().unwrap();
+    assert_eq!(clock.len(), 51);
+    assert_eq!(clock.last().unwrap().as_u64(), Some(1_000_000_000));
+
+    // The same run again: the same messages at the same times (the MCAP summary's record
+    // order is the `mcap` crate's and varies between processes).
+    let ((code, ..), second) = bag("second", &[]);
+    assert_eq!(code, 0);
+    assert_eq!(read_bag(&second), r);
+    // Never over a bag without --force; with it, replaced.
+    let ((code, _, stderr), _) = bag("first", &[]);
+    assert_eq!(code, 2, "{stderr}");
+    assert!(stderr.contains("--force"), "{stderr}");
+    let ((code, _, stderr), _) = bag("first", &["--force"]);
+    assert_eq!(code, 0, "{stderr}");
+    assert_eq!(read_bag(&first)["count"], 153);
 }

@@ -1,0 +1,286 @@
+//! `--bag DIR`: what a run offered to ROS 2, written as a rosbag2 bag with MCAP storage
+//! (the format `ros2 bag record` writes since Iron, and `ros2 bag play` reads): a folder
+//! with `metadata.yaml` and one `<folder name>_0.mcap`.
+//!
+//! The MCAP file has the `ros2` profile; one schema per type (encoding `ros2msg`: the `.msg`
+//! text with its dependencies after rosbag2's `====…` / `MSG: pkg/Type` separators), one
+//! channel per topic (CDR) and `/clock`; each message's log and publish times are its run
+//! time, ns, so a bag of a virtual run holds the same messages at the same times on every
+//! run of it (the MCAP summary's record order is the `mcap` crate's and varies), and its
+//! starting time reads 1970-01-01 (run time starts at 0). `metadata.yaml` is rosbag2's version 9 with
+//! each topic's type, RIHS01 hash and message count. MCAP is written by the `mcap` crate,
+//! the YAML by `serde_yaml`; a bag cut short (killed run) has its MCAP data but no
+//! `metadata.yaml`, which `ros2 bag reindex` rebuilds.
+
+use super::types::RosType;
+use super::Ros2Error;
+use serde::Serialize;
+use std::collections::BTreeMap;
+use std::io::BufWriter;
+use std::path::{Path, PathBuf};
+
+/// The `.msg` text of each type the bags carry, as ROS 2 Jazzy ships it (comments dropped).
+fn msg_text(name: &str) -> &'static str {
+    match name {
+        "builtin_interfaces/msg/Time" => "int32 sec\nuint32 nanosec\n",
+        "std_msgs/msg/Header" => "builtin_interfaces/Time stamp\nstring frame_id\n",
+        "sensor_msgs/msg/JointState" => {
+            "std_msgs/Header header\nstring[] name\nfloat64[] position\nfloat64[] velocity\nfloat64[] effort\n"
+        }
+        "std_msgs/msg/Float64" => "float64 data\n",
+        "rosgraph_msgs/msg/Clock" => "builtin_interfaces/Time clock\n",
+        _ => "",
+    }
+}
+
+/// rosbag2's `ros2msg` schema: the type's text, then each type it refers to.
+fn schema(ty: &RosType) -> String {
+    let mut s = msg_text(ty.name).to_string();
+    for r in &ty.description.referenced_type_descriptions {
+        let short = r.type_name.replacen("/msg/", "/", 1);
+        s.push_str(&format!("{}\nMSG: {short}\n", "=".repeat(80)));
+        s.push_str(msg_text(&r.type_name));
+    }
+    s
+}
+
+/// One topic of the bag.
+pub struct BagTopic<'a> {
+    /// Its name (`/obs`).
+    pub name: &'a str,
+    /// Its ROS 2 type.
+    pub ty: &'static RosType,
+}
+
+struct Counted {
+    name: String,
+    ty: &'static RosType,
+    channel: u16,
+    count: u64,
+}
+
+/// A bag being written.
+pub struct Bag {
+    writer: mcap::Writer<BufWriter<std::fs::File>>,
+    dir: PathBuf,
+    mcap_path: PathBuf,
+    topics: Vec<Counted>,
+    first_ns: Option<u64>,
+    last_ns: u64,
+}
+
+fn io(what: &Path, e: impl std::fmt::Display) -> Ros2Error {
+    Ros2Error::Usage(format!("--bag {}: {e}", what.display()))
+}
+
+impl Bag {
+    /// Start a bag in folder `dir` (made if missing) with these topics, in order.
+    ///
+    /// # Errors
+    /// [`Ros2Error::Usage`]: `dir` is not a folder, or holds a bag already (its
+    /// `metadata.yaml` or MCAP file) and `force` is false, or cannot be written.
+    pub fn create(dir: &Path, force: bool, topics: &[BagTopic<'_>]) -> Result<Bag, Ros2Error> {
+        if dir.exists() && !dir.is_dir() {
+            return Err(io(dir, "exists and is not a folder"));
+        }
+        std::fs::create_dir_all(dir).map_err(|e| io(dir, e))?;
+        let stem = dir
+            .canonicalize()
+            .ok()
+            .and_then(|d| d.file_name().map(|n| n.to_string_lossy().into_owned()))
+            .unwrap_or_else(|| "bag".into());
+        let mcap_path = dir.join(format!("{stem}_0.mcap"));
+        for p in [&mcap_path, &dir.join("metadata.yaml")] {
+            crate::output::check_target(p, force).map_err(|e| io(p, e))?;
+        }
+        let file = std::fs::File::create(&mcap_path).map_err(|e| io(&mcap_path, e))?;
+        let mut writer = mcap::WriteOptions::new()
+            .profile("ros2")
+            .library("ratelab")
+            .create(BufWriter::new(file))
+            .map_err(|e| io(&mcap_path, e))?;
+        let mut counted = Vec::new();
+        let mut schemas: BTreeMap<&str, u16> = BTreeMap::new();
+        for t in topics {
+            let schema_id = match schemas.get(t.ty.name) {
+                Some(id) => *id,
+                None => {
+                    let id = writer
+                        .add_schema(t.ty.name, "ros2msg", schema(t.ty).as_bytes())
+                        .map_err(|e| io(&mcap_path, e))?;
+                    schemas.insert(t.ty.name, id);
+                    id
+                }
+            };
+            let channel = writer
+                .add_channel(schema_id, t.name, "cdr", &BTreeMap::new())
+                .map_err(|e| io(&mcap_path, e))?;
+            counted.push(Counted {
+                name: t.name.to_string(),
+                ty: t.ty,
+                channel,
+                count: 0,
+            });
+        }
+        Ok(Bag {
+            writer,
+            dir: dir.to_path_buf(),
+            mcap_path,
+            topics: counted,
+            first_ns: None,
+            last_ns: 0,
+        })
+    }
+
+    /// Write message `data` (CDR with its header) of topic number `topic` at run time
+    /// `t_ns`.
+    ///
+    /// # Errors
+    /// The write failed (a full disk): the reason.
+    pub fn write(&mut self, topic: usize, t_ns: u64, data: &[u8]) -> Result<(), String> {
+        let t = &mut self.topics[topic];
+        let header = mcap::records::MessageHeader {
+            channel_id: t.channel,
+            sequence: u32::try_from(t.count).unwrap_or(u32::MAX),
+            log_time: t_ns,
+            publish_time: t_ns,
+        };
+        self.writer
+            .write_to_known_channel(&header, data)
+            .map_err(|e| e.to_string())?;
+        t.count += 1;
+        self.first_ns.get_or_insert(t_ns);
+        self.last_ns = self.last_ns.max(t_ns);
+        Ok(())
+    }
+
+    /// Finish the MCAP file and write `metadata.yaml`. Returns the messages written.
+    ///
+    /// # Errors
+    /// A write failed: the reason.
+    pub fn finish(mut self) -> Result<u64, String> {
+        self.writer.finish().map_err(|e| e.to_string())?;
+        let start = self.first_ns.unwrap_or(0);
+        let duration = self.last_ns.saturating_sub(start);
+        let total: u64 = self.topics.iter().map(|t| t.count).sum();
+        let file = self
+            .mcap_path
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        let meta = MetadataFile {
+            rosbag2_bagfile_information: Info {
+                version: 9,
+                storage_identifier: "mcap",
+                duration: Duration {
+                    nanoseconds: duration,
+                },
+                starting_time: Starting {
+                    nanoseconds_since_epoch: start,
+                },
+                message_count: total,
+                topics_with_message_count: self
+                    .topics
+                    .iter()
+                    .map(|t| TopicCount {
+                        topic_metadata: TopicMeta {
+                            name: t.name.clone(),
+                            r#type: t.ty.name,
+                            serialization_format: "cdr",
+                            offered_qos_profiles: Vec::new(),
+                            type_description_hash: t.ty.hash.to_rihs_string(),
+                        },
+                        message_count: t.count,
+                    })
+                    .collect(),
+                compression_format: "",
+                compression_mode: "",
+                relative_file_paths: vec![file.clone()],
+                files: vec![FileInfo {
+                    path: file,
+                    starting_time: Starting {
+                        nanoseconds_since_epoch: start,
+                    },
+                    duration: Duration {
+                        nanoseconds: duration,
+                    },
+                    message_count: total,
+                }],
+                custom_data: BTreeMap::new(),
+                ros_distro: "",
+            },
+        };
+        let yaml = serde_yaml::to_string(&meta).map_err(|e| e.to_string())?;
+        crate::output::write_file(&self.dir.join("metadata.yaml"), true, yaml.as_bytes())
+            .map_err(|e| e.to_string())?;
+        Ok(total)
+    }
+}
+
+#[derive(Serialize)]
+struct MetadataFile {
+    rosbag2_bagfile_information: Info,
+}
+
+#[derive(Serialize)]
+struct Info {
+    version: u32,
+    storage_identifier: &'static str,
+    duration: Duration,
+    starting_time: Starting,
+    message_count: u64,
+    topics_with_message_count: Vec<TopicCount>,
+    compression_format: &'static str,
+    compression_mode: &'static str,
+    relative_file_paths: Vec<String>,
+    files: Vec<FileInfo>,
+    custom_data: BTreeMap<String, String>,
+    ros_distro: &'static str,
+}
+
+#[derive(Serialize)]
+struct Duration {
+    nanoseconds: u64,
+}
+
+#[derive(Serialize)]
+struct Starting {
+    nanoseconds_since_epoch: u64,
+}
+
+#[derive(Serialize)]
+struct TopicCount {
+    topic_metadata: TopicMeta,
+    message_count: u64,
+}
+
+#[derive(Serialize)]
+struct TopicMeta {
+    name: String,
+    r#type: &'static str,
+    serialization_format: &'static str,
+    offered_qos_profiles: Vec<String>,
+    type_description_hash: String,
+}
+
+#[derive(Serialize)]
+struct FileInfo {
+    path: String,
+    starting_time: Starting,
+    duration: Duration,
+    message_count: u64,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::msg::MsgType;
+
+    #[test]
+    fn a_schema_carries_the_types_it_refers_to() {
+        let s = schema(super::super::types::ros_type_of(MsgType::State));
+        assert!(s.starts_with("std_msgs/Header header\n"), "{s}");
+        assert!(s.contains("\nMSG: std_msgs/Header\nbuiltin_interfaces/Time stamp\n"));
+        assert!(s.contains("\nMSG: builtin_interfaces/Time\nint32 sec\n"));
+    }
+}
