@@ -191,16 +191,22 @@ pub fn run_headless(a: &RunArgs, stop: StopFlag) -> anyhow::Result<RunReport> {
             }
         })
     });
-    let recording = open_recording(a, &cfg, &brain.label())?;
-    let mut opts = RunOptions {
-        stop: stop.clone(),
-        ros2: a.ros2_domain().map_err(anyhow::Error::msg)?.map(|domain| {
-            ratelab::ros2::Ros2Options {
+    // Refused before anything is written or opened.
+    let ros2 =
+        a.ros2_domain()
+            .map_err(anyhow::Error::msg)?
+            .map(|domain| ratelab::ros2::Ros2Options {
                 domain,
                 bag: a.bag.clone(),
                 force: a.force,
-            }
-        }),
+            });
+    if let Some(o) = &ros2 {
+        ratelab::ros2::bridge::check(&cfg.graph, o).map_err(anyhow::Error::msg)?;
+    }
+    let recording = open_recording(a, &cfg, &brain.label())?;
+    let mut opts = RunOptions {
+        stop: stop.clone(),
+        ros2,
         ..RunOptions::new()
     };
     // A long virtual run (up to an hour of run time, seconds to minutes of wall time) shows

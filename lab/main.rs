@@ -63,14 +63,14 @@ fn lab(args: &cli::RunArgs, stop: StopFlag) -> anyhow::Result<()> {
     }
     let ros2 = match args.ros2_domain().map_err(anyhow::Error::msg)? {
         Some(domain) => {
-            ratelab::ros2::bridge::check_graph(&cfg.graph).map_err(anyhow::Error::msg)?;
-            let link =
-                ratelab::ros2::session::open(&ratelab::ros2::session::SessionEnv::from_process())?;
             let opts = ratelab::ros2::Ros2Options {
                 domain,
                 bag: None,
                 force: false,
             };
+            ratelab::ros2::bridge::check(&cfg.graph, &opts).map_err(anyhow::Error::msg)?;
+            let env = ratelab::ros2::session::SessionEnv::from_process();
+            let link = ratelab::ros2::session::open(&env, &stop)?;
             Some((link, opts))
         }
         None => None,

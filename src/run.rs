@@ -293,9 +293,13 @@ pub fn run(
     let brain = BrainSlot::new(brain);
     let Graph { mut nodes, handles } = build_graph(cfg, brain, opts.keep_trace, opts.observers)?;
     let link = match &opts.ros2 {
-        Some(_) => Some(crate::ros2::session::open(
-            &crate::ros2::session::SessionEnv::from_process(),
-        )?),
+        Some(o) => {
+            // What needs no network is refused before a session (or a router) opens.
+            crate::ros2::bridge::check(&cfg.graph, o)
+                .map_err(|e| crate::ros2::Ros2Error::Usage(e))?;
+            let env = crate::ros2::session::SessionEnv::from_process();
+            Some(crate::ros2::session::open(&env, &opts.stop)?)
+        }
         None => None,
     };
     let bridge = match (&opts.ros2, &link) {

@@ -74,26 +74,57 @@ fn io(what: &Path, e: impl std::fmt::Display) -> Ros2Error {
 }
 
 impl Bag {
-    /// Start a bag in folder `dir` (made if missing) with these topics, in order.
-    ///
-    /// # Errors
-    /// [`Ros2Error::Usage`]: `dir` is not a folder, or holds a bag already (its
-    /// `metadata.yaml` or MCAP file) and `force` is false, or cannot be written.
-    pub fn create(dir: &Path, force: bool, topics: &[BagTopic<'_>]) -> Result<Bag, Ros2Error> {
-        if dir.exists() && !dir.is_dir() {
-            return Err(io(dir, "exists and is not a folder"));
-        }
-        std::fs::create_dir_all(dir).map_err(|e| io(dir, e))?;
-        let stem = dir
-            .canonicalize()
+    /// The bag's two files in `dir`: the MCAP file (named for the folder, as rosbag2
+    /// names it) and `metadata.yaml`.
+    fn files(dir: &Path) -> (PathBuf, PathBuf) {
+        let stem = std::path::absolute(dir)
             .ok()
             .and_then(|d| d.file_name().map(|n| n.to_string_lossy().into_owned()))
             .unwrap_or_else(|| "bag".into());
-        let mcap_path = dir.join(format!("{stem}_0.mcap"));
-        for p in [&mcap_path, &dir.join("metadata.yaml")] {
+        (
+            dir.join(format!("{stem}_0.mcap")),
+            dir.join("metadata.yaml"),
+        )
+    }
+
+    /// Check that a bag may be written in `dir` (before a run starts).
+    ///
+    /// # Errors
+    /// [`Ros2Error::Usage`]: `dir` exists and is not a folder, or holds a bag (either file)
+    /// and `force` is false, or one of them is a link or not a regular file.
+    pub fn check(dir: &Path, force: bool) -> Result<(), Ros2Error> {
+        if dir.exists() && !dir.is_dir() {
+            return Err(io(dir, "exists and is not a folder"));
+        }
+        let (mcap, meta) = Bag::files(dir);
+        for p in [&mcap, &meta] {
             crate::output::check_target(p, force).map_err(|e| io(p, e))?;
         }
-        let file = std::fs::File::create(&mcap_path).map_err(|e| io(&mcap_path, e))?;
+        Ok(())
+    }
+
+    /// Start a bag in folder `dir` (made if missing) with these topics, in order. With
+    /// `force`, a bag there is removed first (both files: a run cut short then leaves no
+    /// `metadata.yaml` of the old bag beside the new data).
+    ///
+    /// # Errors
+    /// What [`Bag::check`] refuses, or the folder or file cannot be made.
+    pub fn create(dir: &Path, force: bool, topics: &[BagTopic<'_>]) -> Result<Bag, Ros2Error> {
+        Bag::check(dir, force)?;
+        std::fs::create_dir_all(dir).map_err(|e| io(dir, e))?;
+        let (mcap_path, meta) = Bag::files(dir);
+        for p in [&mcap_path, &meta] {
+            match std::fs::remove_file(p) {
+                Err(e) if e.kind() != std::io::ErrorKind::NotFound => return Err(io(p, e)),
+                _ => {}
+            }
+        }
+        // create_new: never through a link made since the check.
+        let file = std::fs::OpenOptions::new()
+            .write(true)
+            .create_new(true)
+            .open(&mcap_path)
+            .map_err(|e| io(&mcap_path, e))?;
         let mut writer = mcap::WriteOptions::new()
             .profile("ros2")
             .library("ratelab")

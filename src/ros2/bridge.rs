@@ -17,10 +17,10 @@
 //!   `/clock`.
 //!
 //! Messages leave through a [`crate::topic::Tap`] on each topic and a channel to one bridge
-//! thread: the graph's nodes never wait on Zenoh. Under the virtual clock the channel is
-//! waited on when full (the run stays byte-identical, only slower); under the real clock a
-//! full channel drops the ROS 2 copy and counts it ([`BridgeReport::dropped`]), so the
-//! nodes' timing is never the bridge's.
+//! thread: no node puts on Zenoh itself. Under the virtual clock a publisher waits when the
+//! channel is full (the run stays byte-identical, only slower: it keeps pace with the wall
+//! clock anyway); under the real clock a full channel drops the ROS 2 copy and counts it
+//! ([`BridgeReport::dropped`]), so the nodes' timing is never the bridge's.
 
 use super::bag::{Bag, BagTopic};
 use super::names::{check_node_name, check_topic_name};
@@ -93,6 +93,19 @@ pub struct Bridge {
     pub router: Router,
     /// The domain.
     pub domain: u32,
+}
+
+/// Check, before any session opens, everything [`Bridge::start`] would refuse that does
+/// not need the network: the graph ([`check_graph`]) and the bag's folder.
+///
+/// # Errors
+/// The first problem, in one line.
+pub fn check(spec: &GraphSpec, opts: &Ros2Options) -> Result<(), String> {
+    check_graph(spec)?;
+    if let Some(dir) = &opts.bag {
+        Bag::check(dir, opts.force).map_err(|e| e.to_string())?;
+    }
+    Ok(())
 }
 
 /// Check that `spec` can be offered to ROS 2: valid ROS 2 names, no topic of its own on
@@ -228,9 +241,8 @@ impl Bridge {
     /// lab's successive runs keep one session and one router).
     ///
     /// # Errors
-    /// [`Ros2Error::Usage`]: a graph ROS 2 cannot name ([`check_graph`]), a bad `ZENOH_*`
-    /// variable, another `/clock` publisher on the domain, a router that cannot listen.
-    /// [`Ros2Error::Zenoh`]: a declaration failed.
+    /// [`Ros2Error::Usage`]: what [`check`] refuses, or another `/clock` publisher on the
+    /// domain. [`Ros2Error::Zenoh`]: a declaration failed.
     pub fn start(
         link: &Ros2Session,
         spec: &GraphSpec,
@@ -238,7 +250,7 @@ impl Bridge {
         opts: &Ros2Options,
         clock: ClockKind,
     ) -> Result<Bridge, Ros2Error> {
-        check_graph(spec).map_err(Ros2Error::Usage)?;
+        check(spec, opts).map_err(Ros2Error::Usage)?;
         let domain = opts.domain;
         let session = link.session.clone();
         let router = link.router.clone();
@@ -269,9 +281,9 @@ impl Bridge {
             .nodes
             .iter()
             .enumerate()
-            .map(|(i, n)| node(i, &n.name))
+            .map(|(_, n)| node(link.take_id(), &n.name))
             .collect();
-        let clock_node = node(nodes.len(), CLOCK_NODE);
+        let clock_node = node(link.take_id(), CLOCK_NODE);
         for n in nodes.iter().chain(std::iter::once(&clock_node)) {
             declare(
                 format
@@ -280,23 +292,21 @@ impl Bridge {
                     .to_string(),
             )?;
         }
-        let mut next_id = nodes.len() + 1;
         let mut outlets = Vec::new();
-        let mut endpoint = |node: &NodeEntity,
-                            kind: EndpointKind,
-                            topic: &str,
-                            ty: &RosType,
-                            qos: QosProfile|
+        let endpoint = |node: &NodeEntity,
+                        kind: EndpointKind,
+                        topic: &str,
+                        ty: &RosType,
+                        qos: QosProfile|
          -> Result<EndpointEntity, Ros2Error> {
             let e = EndpointEntity {
-                id: next_id,
+                id: link.take_id(),
                 node: Some(node.clone()),
                 kind,
                 topic: topic.to_string(),
                 type_info: Some(type_info(ty)),
                 qos,
             };
-            next_id += 1;
             Ok(e)
         };
         let publish = |e: &EndpointEntity| -> Result<Outlet, Ros2Error> {
@@ -427,8 +437,8 @@ impl Bridge {
         }
     }
 
-    /// Stop offering: every message already handed over is put first, then the tokens are
-    /// withdrawn and the session closed.
+    /// Stop offering: every message already handed over is put first (and the bag
+    /// finished), then the tokens and publishers are withdrawn; the session stays open.
     pub fn finish(mut self) -> BridgeReport {
         // The taps hold senders too (they end with the graph's topics): the thread is told.
         if let Some(tx) = self.tx.take() {

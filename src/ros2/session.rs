@@ -15,6 +15,7 @@
 //! use this session: it carries the ROS 2 view only (docs/ros2.md).
 
 use super::Ros2Error;
+use crate::scheduler::StopFlag;
 use std::time::{Duration, Instant};
 use zenoh::Wait;
 
@@ -60,7 +61,8 @@ pub enum RouterCheck {
 /// # Errors
 /// Not an integer: the reason, in one line.
 pub fn router_check(value: Option<&str>) -> Result<RouterCheck, String> {
-    let Some(v) = value else {
+    // Set but empty reads as unset, as rmw_zenoh reads it.
+    let Some(v) = value.filter(|v| !v.trim().is_empty()) else {
         return Ok(RouterCheck::Attempts(1));
     };
     let n: i64 = v.trim().parse().map_err(|_| {
@@ -116,6 +118,10 @@ pub struct Ros2Session {
     pub session: zenoh::Session,
     /// The router it uses.
     pub router: Router,
+    /// The next node or endpoint id (rmw_zenoh numbers them per context): every bridge on
+    /// this session takes fresh ones, so successive runs of a lab never share a token, a
+    /// GID or a sequence.
+    next_id: std::sync::Arc<std::sync::atomic::AtomicUsize>,
 }
 
 impl std::fmt::Debug for Ros2Session {
@@ -128,6 +134,20 @@ impl std::fmt::Debug for Ros2Session {
 }
 
 impl Ros2Session {
+    fn new(session: zenoh::Session, router: Router) -> Ros2Session {
+        Ros2Session {
+            session,
+            router,
+            next_id: std::sync::Arc::default(),
+        }
+    }
+
+    /// A fresh node or endpoint id.
+    pub fn take_id(&self) -> usize {
+        self.next_id
+            .fetch_add(1, std::sync::atomic::Ordering::Relaxed)
+    }
+
     /// Close the session (and the embedded router, if it is one).
     pub fn close(self) {
         let _ = self.session.close().wait();
@@ -151,12 +171,13 @@ fn has_router(session: &zenoh::Session) -> bool {
     session.info().routers_zid().wait().next().is_some()
 }
 
-/// Open the session (see the module's header).
+/// Open the session (see the module's header). `stop` (Ctrl-C) ends a wait for a router.
 ///
 /// # Errors
-/// [`Ros2Error::Usage`] for a bad `ZENOH_*` variable or config value, or a router that
-/// cannot listen (its port taken by something that is not a Zenoh router).
-pub fn open(env: &SessionEnv) -> Result<Ros2Session, Ros2Error> {
+/// [`Ros2Error::Usage`] for a bad `ZENOH_*` variable or config value, a router that
+/// cannot listen (its port taken by something that is not a Zenoh router), or a wait for a
+/// router stopped.
+pub fn open(env: &SessionEnv, stop: &StopFlag) -> Result<Ros2Session, Ros2Error> {
     let check = router_check(env.router_check_attempts.as_deref()).map_err(Ros2Error::Usage)?;
     let overrides = match env.config_override.as_deref() {
         Some(s) => parse_override(s).map_err(Ros2Error::Usage)?,
@@ -185,12 +206,7 @@ pub fn open(env: &SessionEnv) -> Result<Ros2Session, Ros2Error> {
         .unwrap_or_else(|| DEFAULT_ROUTER.to_string());
     let session = open_with(config, "peer")?;
     let attempts = match check {
-        RouterCheck::Skip => {
-            return Ok(Ros2Session {
-                session,
-                router: Router::Unchecked,
-            })
-        }
+        RouterCheck::Skip => return Ok(Ros2Session::new(session, Router::Unchecked)),
         RouterCheck::Forever => u32::MAX,
         RouterCheck::Attempts(n) => n,
     };
@@ -200,11 +216,13 @@ pub fn open(env: &SessionEnv) -> Result<Ros2Session, Ros2Error> {
         }
         let until = Instant::now() + Duration::from_secs(1);
         while Instant::now() < until {
+            if stop.is_stopped() {
+                return Err(Ros2Error::Usage(format!(
+                    "stopped while waiting for a Zenoh router at {endpoint}"
+                )));
+            }
             if has_router(&session) {
-                return Ok(Ros2Session {
-                    session,
-                    router: Router::Found(endpoint),
-                });
+                return Ok(Ros2Session::new(session, Router::Found(endpoint)));
             }
             std::thread::sleep(Duration::from_millis(20));
         }
@@ -222,10 +240,7 @@ pub fn open(env: &SessionEnv) -> Result<Ros2Session, Ros2Error> {
     set(&mut config, "listen/exit_on_failure", "true")?;
     set(&mut config, "connect/endpoints", "[]")?;
     let session = open_with(config, &format!("a Zenoh router on {endpoint}"))?;
-    Ok(Ros2Session {
-        session,
-        router: Router::Embedded(endpoint),
-    })
+    Ok(Ros2Session::new(session, Router::Embedded(endpoint)))
 }
 
 #[cfg(test)]
@@ -235,6 +250,7 @@ mod tests {
     #[test]
     fn router_check_attempts_read_as_rmw_zenoh_reads_them() {
         assert_eq!(router_check(None), Ok(RouterCheck::Attempts(1)));
+        assert_eq!(router_check(Some(" ")), Ok(RouterCheck::Attempts(1)));
         assert_eq!(router_check(Some("3")), Ok(RouterCheck::Attempts(3)));
         assert_eq!(router_check(Some("0")), Ok(RouterCheck::Forever));
         assert_eq!(router_check(Some("-1")), Ok(RouterCheck::Skip));

@@ -194,7 +194,8 @@ fn ros_2s_tools_see_the_graph_its_types_messages_and_clock_and_the_results_do_no
         };
         assert_eq!(qos[3], deadline, "{ep}");
     }
-    // Withdrawn at the end.
+    // Withdrawn at the end (here with the session; a bridge's own withdrawal, its session
+    // staying open as in the lab: `a_finished_bridge_withdraws_its_tokens_…`).
     assert_eq!(r["alive_at_end"], Value::Array(vec![]));
 
     // ros2 topic echo: every message, in order, numbered 1, 2, … by one publisher, with the
@@ -270,7 +271,7 @@ fn with_no_router_ratelab_runs_one_and_ros_2_nodes_join_it_under_the_real_clock(
     let _alone = crate::machine::alone();
     let endpoint = format!("tcp/127.0.0.1:{}", free_port());
     let mut child = Command::new(env!("CARGO_BIN_EXE_ratelab"))
-        .args(["run", "--clock", "real", "--duration", "3", "--ros2"])
+        .args(["run", "--clock", "real", "--duration", "5", "--ros2"])
         .current_dir(crate::REPO)
         .env_remove("ROS_DOMAIN_ID")
         .env_remove("ZENOH_ROUTER_CHECK_ATTEMPTS")
@@ -306,7 +307,7 @@ fn with_no_router_ratelab_runs_one_and_ros_2_nodes_join_it_under_the_real_clock(
         ["actuator", "policy", "ratelab", "sensor"]
     );
     // It joined late: from its first message on, it saw every one, in order, at about the
-    // sensor's 50 Hz (at least 2 s of the 3 s run).
+    // sensor's 50 Hz (at least 1.6 s of the 5 s run, however slowly Python starts).
     let obs = r["topics"]["/obs"].as_array().unwrap();
     assert!(obs.len() >= 80, "{} messages", obs.len());
     let first = obs[0]["seq"].as_i64().unwrap();
@@ -467,4 +468,64 @@ fn a_bag_of_the_run_reads_back_with_rosbags_every_message_the_same_on_every_run(
     let ((code, _, stderr), _) = bag("first", &["--force"]);
     assert_eq!(code, 0, "{stderr}");
     assert_eq!(read_bag(&first)["count"], 153);
+}
+
+#[test]
+fn a_finished_bridge_withdraws_its_tokens_and_the_next_takes_fresh_ids_on_the_same_session() {
+    use ratelab::ros2::session::{open, SessionEnv};
+    use ratelab::ros2::{Bridge, Ros2Options};
+    use zenoh::Wait;
+    let env = SessionEnv {
+        router_check_attempts: Some("-1".into()),
+        config_override: Some(connect_to(&format!("tcp/127.0.0.1:{}", free_port())).1),
+    };
+    let link = open(&env, &ratelab::scheduler::StopFlag::new()).unwrap();
+    let tokens = || -> Vec<String> {
+        let replies = link
+            .session
+            .liveliness()
+            .get("@ros2_lv/9/**")
+            .timeout(std::time::Duration::from_millis(300))
+            .wait()
+            .unwrap();
+        let mut keys = Vec::new();
+        while let Ok(r) = replies.recv() {
+            if let Ok(s) = r.result() {
+                keys.push(s.key_expr().to_string());
+            }
+        }
+        keys.sort();
+        keys
+    };
+    let opts = Ros2Options {
+        domain: 9,
+        bag: None,
+        force: false,
+    };
+    let cfg = ratelab::RunConfig::default();
+    let bridge = || {
+        let brain = ratelab::checkpoint::load_policy("scripted").unwrap();
+        let slot = ratelab::policy::BrainSlot::new(brain);
+        let graph = ratelab::run::build_graph(&cfg, slot, false, Vec::new()).unwrap();
+        let h = &graph.handles;
+        Bridge::start(&link, &h.spec, &h.topics, &opts, cfg.clock).unwrap()
+    };
+    let first = bridge();
+    let during = tokens();
+    // 4 nodes (the graph's 3 and /clock's), 5 endpoints.
+    assert_eq!(during.len(), 9, "{during:?}");
+    first.finish();
+    assert_eq!(
+        tokens(),
+        Vec::<String>::new(),
+        "withdrawn, the session still open"
+    );
+    // The lab's next run: the same graph on the same session, fresh ids, so none of the
+    // first run's tokens (nor its GIDs) comes back.
+    let second = bridge();
+    let again = tokens();
+    assert_eq!(again.len(), 9);
+    assert!(again.iter().all(|k| !during.contains(k)), "{again:?}");
+    second.finish();
+    link.close();
 }
