@@ -295,8 +295,7 @@ pub fn run(
     let link = match &opts.ros2 {
         Some(o) => {
             // What needs no network is refused before a session (or a router) opens.
-            crate::ros2::bridge::check(&cfg.graph, o)
-                .map_err(|e| crate::ros2::Ros2Error::Usage(e))?;
+            crate::ros2::bridge::check(&cfg.graph, o).map_err(crate::ros2::Ros2Error::Usage)?;
             let env = crate::ros2::session::SessionEnv::from_process();
             Some(crate::ros2::session::open(&env, &opts.stop)?)
         }

@@ -280,8 +280,7 @@ impl Bridge {
         let nodes: Vec<NodeEntity> = spec
             .nodes
             .iter()
-            .enumerate()
-            .map(|(_, n)| node(link.take_id(), &n.name))
+            .map(|n| node(link.take_id(), &n.name))
             .collect();
         let clock_node = node(link.take_id(), CLOCK_NODE);
         for n in nodes.iter().chain(std::iter::once(&clock_node)) {
