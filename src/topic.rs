@@ -461,16 +461,17 @@ impl<T: Clone> Topic<T> {
             inner.next_seq += 1;
             inner.published += 1;
             inner.last_stamp = stamp;
-            let msg = Message {
+            inner.buf.push_back(Message {
                 data,
                 stamp,
                 seq,
                 origin_stamp,
-            };
+            });
             if let Some(tap) = self.tap.get() {
-                tap(&msg);
+                if let Some(msg) = inner.buf.back() {
+                    tap(msg);
+                }
             }
-            inner.buf.push_back(msg);
             return seq;
         }
         inner.settle(stamp);
