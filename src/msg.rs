@@ -65,6 +65,18 @@ pub struct ForceMsg {
     pub newtons: f64,
 }
 
+/// A message's payload, by message type: what crosses a process boundary
+/// ([`crate::distributed::wire`], postcard) and what is offered to ROS 2 ([`crate::ros2`]).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub enum MsgData {
+    /// [`StateMsg`].
+    State([f32; crate::plant::OBS_DIM]),
+    /// [`PositionMsg`]: cart position m, pole angle rad.
+    Position(f64, f64),
+    /// [`ForceMsg`]: newtons.
+    Force(f64),
+}
+
 /// A topic of any message type.
 #[derive(Clone, Debug)]
 pub enum AnyTopic {

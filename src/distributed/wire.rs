@@ -31,16 +31,8 @@ pub const MAX_SEQ: u64 = 1 << 40;
 /// ([`WireSample::deliver`]). A 10 000 Hz publisher takes 100 s to publish this many.
 pub const MAX_SEQ_JUMP: u64 = 1_000_000;
 
-/// A message's payload on the wire, by message type.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub enum WireData {
-    /// [`crate::msg::StateMsg`].
-    State([f32; crate::plant::OBS_DIM]),
-    /// [`PositionMsg`]: cart position m, pole angle rad.
-    Position(f64, f64),
-    /// [`ForceMsg`]: newtons.
-    Force(f64),
-}
+/// A message's payload on the wire, by message type: [`crate::msg::MsgData`].
+pub use crate::msg::MsgData as WireData;
 
 /// One topic sample on the wire.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]

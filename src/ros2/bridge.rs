@@ -28,8 +28,8 @@ use super::session::{Ros2Session, Router};
 use super::types::{clock_type, encode, encode_clock, ros_type_of, RosType};
 use super::{Ros2Error, Ros2Options};
 use crate::config::ClockKind;
-use crate::distributed::wire::WireData;
 use crate::graph::GraphSpec;
+use crate::msg::MsgData;
 use crate::msg::{AnyTopic, ForceMsg, PositionMsg, StateMsg};
 use crate::qos::{History, Reliability};
 use crate::time::Nanos;
@@ -63,7 +63,7 @@ enum Out {
         topic: usize,
         seq: u64,
         stamp: Nanos,
-        data: WireData,
+        data: MsgData,
     },
     /// The run's clock reached this time.
     Clock(Nanos),
@@ -463,7 +463,7 @@ impl Bridge {
 
 /// Tap `topic` (number `i`) into the bridge's channel.
 fn tap(topic: &AnyTopic, i: usize, tx: Sender<Out>, waits: bool, dropped: Arc<AtomicU64>) {
-    let send = move |seq: u64, stamp: Nanos, data: WireData| {
+    let send = move |seq: u64, stamp: Nanos, data: MsgData| {
         let out = Out::Msg {
             topic: i,
             seq,
@@ -481,7 +481,7 @@ fn tap(topic: &AnyTopic, i: usize, tx: Sender<Out>, waits: bool, dropped: Arc<At
     match topic {
         AnyTopic::State(t) => {
             let _ = t.set_tap(Box::new(move |m: &Message<StateMsg>| {
-                send(m.seq, m.stamp, WireData::State(m.data));
+                send(m.seq, m.stamp, MsgData::State(m.data));
             }));
         }
         AnyTopic::Position(t) => {
@@ -489,13 +489,13 @@ fn tap(topic: &AnyTopic, i: usize, tx: Sender<Out>, waits: bool, dropped: Arc<At
                 send(
                     m.seq,
                     m.stamp,
-                    WireData::Position(m.data.cart_pos_m, m.data.pole_angle_rad),
+                    MsgData::Position(m.data.cart_pos_m, m.data.pole_angle_rad),
                 );
             }));
         }
         AnyTopic::Force(t) => {
             let _ = t.set_tap(Box::new(move |m: &Message<ForceMsg>| {
-                send(m.seq, m.stamp, WireData::Force(m.data.newtons));
+                send(m.seq, m.stamp, MsgData::Force(m.data.newtons));
             }));
         }
     }

@@ -19,7 +19,7 @@
 //! (`CDR_LE`), as rmw_zenoh sends, by `hiroz-cdr`. The type hashes come from
 //! `hiroz-schema`'s RIHS01 (the tests check them against `rosbags`' `hash_rihs01`).
 
-use crate::distributed::wire::WireData;
+use crate::msg::MsgData;
 use crate::msg::MsgType;
 use crate::time::Nanos;
 use hiroz_schema::{
@@ -235,14 +235,14 @@ fn cdr<T: Serialize>(value: &T, out: &mut Vec<u8>) {
 
 /// The ROS 2 message for a payload published at run time `stamp`, as CDR with its
 /// encapsulation header, into `out` (cleared first).
-pub fn encode(data: &WireData, stamp: Nanos, out: &mut Vec<u8>) {
+pub fn encode(data: &MsgData, stamp: Nanos, out: &mut Vec<u8>) {
     let header = || Header {
         stamp: Time::of(stamp),
         frame_id: String::new(),
     };
     let names = || JOINT_NAMES.iter().map(|s| s.to_string()).collect();
     match *data {
-        WireData::State(o) => {
+        MsgData::State(o) => {
             let angle = f64::from(o[3]).atan2(f64::from(o[2]));
             cdr(
                 &JointState {
@@ -255,7 +255,7 @@ pub fn encode(data: &WireData, stamp: Nanos, out: &mut Vec<u8>) {
                 out,
             );
         }
-        WireData::Position(x, th) => cdr(
+        MsgData::Position(x, th) => cdr(
             &JointState {
                 header: header(),
                 name: names(),
@@ -265,7 +265,7 @@ pub fn encode(data: &WireData, stamp: Nanos, out: &mut Vec<u8>) {
             },
             out,
         ),
-        WireData::Force(n) => cdr(&Float64 { data: n }, out),
+        MsgData::Force(n) => cdr(&Float64 { data: n }, out),
     }
 }
 
@@ -310,7 +310,7 @@ mod tests {
     #[test]
     fn a_force_is_a_float64() {
         let mut out = Vec::new();
-        encode(&WireData::Force(-3.5), Nanos(1), &mut out);
+        encode(&MsgData::Force(-3.5), Nanos(1), &mut out);
         assert_eq!(out.len(), 12);
         assert_eq!(out[4..], (-3.5f64).to_le_bytes());
         assert_eq!(decode::<Float64>(&out).data, -3.5);
@@ -321,7 +321,7 @@ mod tests {
         let th = 0.1f32;
         let mut out = Vec::new();
         encode(
-            &WireData::State([0.5, -0.25, th.cos(), th.sin(), 2.0]),
+            &MsgData::State([0.5, -0.25, th.cos(), th.sin(), 2.0]),
             Nanos(2_500_000_000),
             &mut out,
         );
@@ -338,7 +338,7 @@ mod tests {
         assert!((js.position[1] - 0.1).abs() < 1e-6);
         assert_eq!(js.velocity, [-0.25, 2.0]);
         assert!(js.effort.is_empty());
-        encode(&WireData::Position(1.0, -0.2), Nanos(0), &mut out);
+        encode(&MsgData::Position(1.0, -0.2), Nanos(0), &mut out);
         let js: JointState = decode(&out);
         assert_eq!(
             (js.position.as_slice(), js.velocity.len()),
