@@ -77,6 +77,24 @@ pub enum MsgData {
     Force(f64),
 }
 
+impl From<StateMsg> for MsgData {
+    fn from(m: StateMsg) -> MsgData {
+        MsgData::State(m)
+    }
+}
+
+impl From<PositionMsg> for MsgData {
+    fn from(m: PositionMsg) -> MsgData {
+        MsgData::Position(m.cart_pos_m, m.pole_angle_rad)
+    }
+}
+
+impl From<ForceMsg> for MsgData {
+    fn from(m: ForceMsg) -> MsgData {
+        MsgData::Force(m.newtons)
+    }
+}
+
 /// A topic of any message type.
 #[derive(Clone, Debug)]
 pub enum AnyTopic {

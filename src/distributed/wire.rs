@@ -54,25 +54,17 @@ impl WireSample {
     /// The newest message of `topic` with `seq > after` (none: nothing new), as a sample.
     pub fn newest_of(topic: &AnyTopic, after: Option<u64>) -> Option<WireSample> {
         let fresh = |seq: u64| after.is_none_or(|a| seq > a);
+        fn newest<T: Clone + Into<WireData>>(
+            t: &crate::topic::Topic<T>,
+            fresh: impl Fn(u64) -> bool,
+        ) -> Option<(u64, Nanos, Option<Nanos>, WireData)> {
+            let m = t.peek_newest().filter(|m| fresh(m.seq))?;
+            Some((m.seq, m.stamp, m.origin_stamp, m.data.into()))
+        }
         let (seq, stamp, origin, data) = match topic {
-            AnyTopic::State(t) => {
-                let m = t.peek_newest().filter(|m| fresh(m.seq))?;
-                (m.seq, m.stamp, m.origin_stamp, WireData::State(m.data))
-            }
-            AnyTopic::Position(t) => {
-                let m = t.peek_newest().filter(|m| fresh(m.seq))?;
-                let d = WireData::Position(m.data.cart_pos_m, m.data.pole_angle_rad);
-                (m.seq, m.stamp, m.origin_stamp, d)
-            }
-            AnyTopic::Force(t) => {
-                let m = t.peek_newest().filter(|m| fresh(m.seq))?;
-                (
-                    m.seq,
-                    m.stamp,
-                    m.origin_stamp,
-                    WireData::Force(m.data.newtons),
-                )
-            }
+            AnyTopic::State(t) => newest(t, fresh)?,
+            AnyTopic::Position(t) => newest(t, fresh)?,
+            AnyTopic::Force(t) => newest(t, fresh)?,
         };
         Some(WireSample {
             seq,

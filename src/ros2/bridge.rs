@@ -29,8 +29,8 @@ use super::types::{clock_type, encode, encode_clock, ros_type_of, RosType};
 use super::{Ros2Error, Ros2Options};
 use crate::config::ClockKind;
 use crate::graph::GraphSpec;
+use crate::msg::AnyTopic;
 use crate::msg::MsgData;
-use crate::msg::{AnyTopic, ForceMsg, PositionMsg, StateMsg};
 use crate::qos::{History, Reliability};
 use crate::time::Nanos;
 use crate::topic::Message;
@@ -291,66 +291,40 @@ impl Bridge {
                     .to_string(),
             )?;
         }
-        let mut outlets = Vec::new();
-        let endpoint = |node: &NodeEntity,
-                        kind: EndpointKind,
-                        topic: &str,
-                        ty: &RosType,
-                        qos: QosProfile|
-         -> Result<EndpointEntity, Ros2Error> {
-            let e = EndpointEntity {
-                id: link.take_id(),
-                node: Some(node.clone()),
-                kind,
-                topic: topic.to_string(),
-                type_info: Some(type_info(ty)),
-                qos,
+        let endpoint =
+            |node: &NodeEntity, kind: EndpointKind, topic: &str, ty: &RosType, qos: QosProfile| {
+                EndpointEntity {
+                    id: link.take_id(),
+                    node: Some(node.clone()),
+                    kind,
+                    topic: topic.to_string(),
+                    type_info: Some(type_info(ty)),
+                    qos,
+                }
             };
-            Ok(e)
-        };
-        let publish = |e: &EndpointEntity| -> Result<Outlet, Ros2Error> {
+        // A publisher: its key declared, its MP token declared, its GID from that token.
+        let mut publish = |e: &EndpointEntity| -> Result<Outlet, Ros2Error> {
             let token = format
                 .liveliness_key_expr(e, &zid)
                 .map_err(zerr)?
                 .to_string();
             let key = format.topic_key_expr(e).map_err(zerr)?.to_string();
             let publisher = session.declare_publisher(key).wait().map_err(zerr)?;
-            Ok(Outlet {
-                publisher,
-                gid: gid(&token),
-            })
+            let gid = gid(&token);
+            declare(token)?;
+            Ok(Outlet { publisher, gid })
         };
+        let mut outlets = Vec::new();
+        let mut subscriptions = Vec::new();
         for (t, topic) in spec.topics.iter().enumerate() {
             let ty = ros_type_of(topic.msg);
             let qos = qos_of(spec, t);
-            let mp = endpoint(
-                &nodes[topic.publisher.0],
-                EndpointKind::Publisher,
-                &topic.name,
-                ty,
-                qos,
-            )?;
+            let publisher = &nodes[topic.publisher.0];
+            let mp = endpoint(publisher, EndpointKind::Publisher, &topic.name, ty, qos);
             outlets.push(publish(&mp)?);
-            declare(
-                format
-                    .liveliness_key_expr(&mp, &zid)
-                    .map_err(zerr)?
-                    .to_string(),
-            )?;
             if let Some(sub) = topic.subscriber {
-                let ms = endpoint(
-                    &nodes[sub.0],
-                    EndpointKind::Subscription,
-                    &topic.name,
-                    ty,
-                    qos,
-                )?;
-                declare(
-                    format
-                        .liveliness_key_expr(&ms, &zid)
-                        .map_err(zerr)?
-                        .to_string(),
-                )?;
+                let kind = EndpointKind::Subscription;
+                subscriptions.push(endpoint(&nodes[sub.0], kind, &topic.name, ty, qos));
             }
         }
         let clock_ep = endpoint(
@@ -359,14 +333,16 @@ impl Bridge {
             CLOCK_TOPIC,
             clock_type(),
             clock_qos(),
-        )?;
+        );
         let clock_outlet = publish(&clock_ep)?;
-        declare(
-            format
-                .liveliness_key_expr(&clock_ep, &zid)
-                .map_err(zerr)?
-                .to_string(),
-        )?;
+        for ms in &subscriptions {
+            declare(
+                format
+                    .liveliness_key_expr(ms, &zid)
+                    .map_err(zerr)?
+                    .to_string(),
+            )?;
+        }
 
         let bag = match &opts.bag {
             Some(dir) => {
@@ -429,6 +405,17 @@ impl Bridge {
         format!("offering the graph to ROS 2 on domain {d} with /clock, {via}")
     }
 
+    /// The same in a few words, for the lab's status line (fits 80 columns with a
+    /// `tcp/localhost:7447` endpoint): `ROS 2 domain 0 + /clock: ratelab's router on …`.
+    pub fn status(&self) -> String {
+        let via = match &self.router {
+            Router::Found(e) => format!("via the router at {e}"),
+            Router::Embedded(e) => format!("ratelab's own router on {e}"),
+            Router::Unchecked => "router not checked".into(),
+        };
+        format!("ROS 2 domain {} + /clock: {via}", self.domain)
+    }
+
     /// The run's clock reached `t` (the virtual clock, before each instant).
     pub fn clock(&self, t: Nanos) {
         if let Some(tx) = &self.tx {
@@ -478,26 +465,18 @@ fn tap(topic: &AnyTopic, i: usize, tx: Sender<Out>, waits: bool, dropped: Arc<At
     };
     // A topic has one tap; a second bridge on the same topics is a caller's bug, and the
     // first keeps them.
+    fn tap_topic<T: Clone + Into<MsgData> + 'static>(
+        t: &crate::topic::Topic<T>,
+        send: impl Fn(u64, Nanos, MsgData) + Send + Sync + 'static,
+    ) {
+        let _ = t.set_tap(Box::new(move |m: &Message<T>| {
+            send(m.seq, m.stamp, m.data.clone().into())
+        }));
+    }
     match topic {
-        AnyTopic::State(t) => {
-            let _ = t.set_tap(Box::new(move |m: &Message<StateMsg>| {
-                send(m.seq, m.stamp, MsgData::State(m.data));
-            }));
-        }
-        AnyTopic::Position(t) => {
-            let _ = t.set_tap(Box::new(move |m: &Message<PositionMsg>| {
-                send(
-                    m.seq,
-                    m.stamp,
-                    MsgData::Position(m.data.cart_pos_m, m.data.pole_angle_rad),
-                );
-            }));
-        }
-        AnyTopic::Force(t) => {
-            let _ = t.set_tap(Box::new(move |m: &Message<ForceMsg>| {
-                send(m.seq, m.stamp, MsgData::Force(m.data.newtons));
-            }));
-        }
+        AnyTopic::State(t) => tap_topic(t, send),
+        AnyTopic::Position(t) => tap_topic(t, send),
+        AnyTopic::Force(t) => tap_topic(t, send),
     }
 }
 

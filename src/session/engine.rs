@@ -207,7 +207,7 @@ impl Engine {
                 let h = &graph.handles;
                 match crate::ros2::Bridge::start(link, &h.spec, &h.topics, opts, cfg.clock) {
                     Ok(b) => {
-                        let _ = self.tx.send(Telemetry::Applied(b.describe()));
+                        let _ = self.tx.send(Telemetry::Applied(b.status()));
                         Some(b)
                     }
                     Err(e) => {
