@@ -311,6 +311,14 @@ pub(crate) fn wait_line(
     false
 }
 
+/// The lines of `launcher` (started with its stdout piped), once it says where it listens.
+pub(crate) fn listening(launcher: &mut Child) -> (std::sync::mpsc::Receiver<String>, Vec<String>) {
+    let rx = stdout_lines(launcher);
+    let mut lines = Vec::new();
+    assert!(wait_line(&rx, &mut lines, "listening on", 30), "{lines:?}");
+    (rx, lines)
+}
+
 /// A launch of the chapter's graph across processes under `clock` for `secs` seconds on
 /// `port` (its files into `out`), with its lines, once both processes are ready and a
 /// second has run.
@@ -664,9 +672,7 @@ fn hand_started_nodes_say_so_when_their_launcher_is_killed() {
         .stderr(Stdio::null())
         .spawn()
         .unwrap();
-    let rx = stdout_lines(&mut launcher);
-    let mut lines = Vec::new();
-    assert!(wait_line(&rx, &mut lines, "listening on", 30), "{lines:?}");
+    let (rx, mut lines) = listening(&mut launcher);
     let nodes = hand_started(&ep, &creds, Stdio::piped);
     for p in ["policy", "robot"] {
         let ready = format!("process '{p}' ready");

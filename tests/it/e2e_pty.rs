@@ -138,13 +138,13 @@ fn virtual_lab_falls_off_the_rate_cliff_and_quits_cleanly() {
 
 #[test]
 fn the_lab_offers_its_graph_to_ros_2_with_the_virtual_clock_on_clock() {
-    use crate::ros2::{connect_to, strs, StandIn};
+    use crate::ros2::{assert_every_one_from, clock_ns, connect_to, strs, StandIn};
     let _machine = crate::machine::alone();
     let endpoint = format!("tcp/127.0.0.1:{}", crate::distributed::free_port());
     let standin = StandIn::start("router", &endpoint, 0, &[]);
     let lab = Lab::start_with(&["--clock", "virtual", "--ros2"], &[connect_to(&endpoint)]);
     lab.wait_for(
-        "offering the graph to ROS 2 on domain 0",
+        &format!("ROS 2 domain 0 + /clock: via the router at {endpoint}"),
         Duration::from_secs(60),
     );
     lab.wait_for("BALANCED", Duration::from_secs(10));
@@ -160,15 +160,8 @@ fn the_lab_offers_its_graph_to_ros_2_with_the_virtual_clock_on_clock() {
     // first; /clock follows the run's time.
     let obs = r["topics"]["/obs"].as_array().unwrap();
     assert!(obs.len() >= 80, "{} messages", obs.len());
-    for (i, m) in obs.iter().enumerate() {
-        assert_eq!(m["seq"].as_i64(), Some(i as i64 + 1));
-    }
-    let clock: Vec<u64> = r["clock_ns"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|v| v.as_u64().unwrap())
-        .collect();
+    assert_every_one_from(obs, 1);
+    let clock = clock_ns(&r);
     assert!(clock.windows(2).all(|w| w[0] < w[1]));
     assert!(*clock.last().unwrap() >= 1_500_000_000, "{clock:?}");
 }

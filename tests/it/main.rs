@@ -16,11 +16,18 @@ pub fn repo(file: &str) -> std::path::PathBuf {
 
 /// `ratelab ARGS` run in the repository's top folder: (exit code, stdout, stderr).
 pub fn ratelab_in_repo(args: &[&str]) -> (i32, String, String) {
-    let o = std::process::Command::new(env!("CARGO_BIN_EXE_ratelab"))
-        .args(args)
-        .current_dir(REPO)
-        .output()
-        .unwrap();
+    ratelab_in_repo_with(
+        args,
+        &mut std::process::Command::new(env!("CARGO_BIN_EXE_ratelab")),
+    )
+}
+
+/// [`ratelab_in_repo`] with `cmd` (the binary, its environment set by the caller).
+pub fn ratelab_in_repo_with(
+    args: &[&str],
+    cmd: &mut std::process::Command,
+) -> (i32, String, String) {
+    let o = cmd.args(args).current_dir(REPO).output().unwrap();
     (
         o.status.code().unwrap_or(-1),
         String::from_utf8_lossy(&o.stdout).into_owned(),

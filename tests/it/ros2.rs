@@ -63,19 +63,13 @@ impl Drop for StandIn {
 
 fn ratelab(args: &[&str], env: &[(&str, String)]) -> (i32, String, String) {
     let mut cmd = Command::new(env!("CARGO_BIN_EXE_ratelab"));
-    cmd.args(args).current_dir(crate::REPO);
     cmd.env_remove("ROS_DOMAIN_ID")
         .env_remove("ZENOH_ROUTER_CHECK_ATTEMPTS")
         .env_remove("ZENOH_CONFIG_OVERRIDE");
     for (k, v) in env {
         cmd.env(k, v);
     }
-    let o = cmd.output().unwrap();
-    (
-        o.status.code().unwrap_or(-1),
-        String::from_utf8_lossy(&o.stdout).into_owned(),
-        String::from_utf8_lossy(&o.stderr).into_owned(),
-    )
+    crate::ratelab_in_repo_with(args, &mut cmd)
 }
 
 pub(crate) fn connect_to(endpoint: &str) -> (&'static str, String) {
@@ -83,6 +77,23 @@ pub(crate) fn connect_to(endpoint: &str) -> (&'static str, String) {
         "ZENOH_CONFIG_OVERRIDE",
         format!("connect/endpoints=[\"{endpoint}\"]"),
     )
+}
+
+/// The stand-in's `/clock` samples, ns.
+pub(crate) fn clock_ns(r: &Value) -> Vec<u64> {
+    r["clock_ns"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_u64().unwrap())
+        .collect()
+}
+
+/// Assert `msgs` are numbered `first`, `first` + 1, … with none missing.
+pub(crate) fn assert_every_one_from(msgs: &[Value], first: i64) {
+    for (i, m) in msgs.iter().enumerate() {
+        assert_eq!(m["seq"].as_i64(), Some(first + i as i64), "message {i}");
+    }
 }
 
 pub(crate) fn strs(v: &Value) -> Vec<String> {
@@ -132,22 +143,14 @@ fn ros_2s_tools_see_the_graph_its_types_messages_and_clock_and_the_results_do_no
     let standin = StandIn::start("router", &endpoint, 3, &[]);
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("ros2");
-    let (code, stdout, stderr) = ratelab(
-        &[
-            "run",
-            "--clock",
-            "virtual",
-            "--duration",
-            "1",
-            "--qos",
-            "/action:deadline_ms=40",
-            "--ros2",
-            "3",
-            "--out",
-            out.to_str().unwrap(),
-        ],
-        &[connect_to(&endpoint)],
-    );
+    // The run, with --ros2 and (at the end) without.
+    let run = |extra: &[&str]| {
+        let mut args = vec!["run", "--clock", "virtual", "--duration", "1"];
+        args.extend_from_slice(&["--qos", "/action:deadline_ms=40"]);
+        args.extend_from_slice(extra);
+        ratelab(&args, &[connect_to(&endpoint)])
+    };
+    let (code, stdout, stderr) = run(&["--ros2", "3", "--out", out.to_str().unwrap()]);
     let r = standin.report();
     assert_eq!(code, 0, "{stdout}{stderr}");
     assert!(
@@ -205,10 +208,8 @@ fn ros_2s_tools_see_the_graph_its_types_messages_and_clock_and_the_results_do_no
     let action = r["topics"]["/action"].as_array().unwrap();
     assert_eq!((obs.len(), action.len()), (51, 51));
     for msgs in [obs, action] {
-        for (i, m) in msgs.iter().enumerate() {
-            assert_eq!(m["seq"].as_i64(), Some(i as i64 + 1));
-            assert_eq!(m["gid"], msgs[0]["gid"]);
-        }
+        assert_every_one_from(msgs, 1);
+        assert!(msgs.iter().all(|m| m["gid"] == msgs[0]["gid"]));
     }
     assert_ne!(obs[0]["gid"], action[0]["gid"]);
     for (i, row) in rows.iter().enumerate() {
@@ -230,32 +231,14 @@ fn ros_2s_tools_see_the_graph_its_types_messages_and_clock_and_the_results_do_no
     }
 
     // /clock: the run's time, from 0 to the end, never behind a message's stamp.
-    let clock: Vec<u64> = r["clock_ns"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|v| v.as_u64().unwrap())
-        .collect();
+    let clock = clock_ns(&r);
     assert_eq!(clock.first(), Some(&0));
     assert_eq!(clock.last(), Some(&1_000_000_000));
     assert!(clock.windows(2).all(|w| w[0] < w[1]), "{clock:?}");
 
     // The same run without --ros2: the same metrics, byte for byte.
     let plain = dir.path().join("plain");
-    let (code, ..) = ratelab(
-        &[
-            "run",
-            "--clock",
-            "virtual",
-            "--duration",
-            "1",
-            "--qos",
-            "/action:deadline_ms=40",
-            "--out",
-            plain.to_str().unwrap(),
-        ],
-        &[],
-    );
+    let (code, ..) = run(&["--out", plain.to_str().unwrap()]);
     assert_eq!(code, 0);
     for file in ["metrics.json", "trace.csv"] {
         assert_eq!(
@@ -310,10 +293,7 @@ fn with_no_router_ratelab_runs_one_and_ros_2_nodes_join_it_under_the_real_clock(
     // sensor's 50 Hz (at least 1.6 s of the 5 s run, however slowly Python starts).
     let obs = r["topics"]["/obs"].as_array().unwrap();
     assert!(obs.len() >= 80, "{} messages", obs.len());
-    let first = obs[0]["seq"].as_i64().unwrap();
-    for (i, m) in obs.iter().enumerate() {
-        assert_eq!(m["seq"].as_i64(), Some(first + i as i64));
-    }
+    assert_every_one_from(obs, obs[0]["seq"].as_i64().unwrap());
     let clock = r["clock_ns"].as_array().unwrap();
     assert!(clock.len() >= 80, "{} clock messages", clock.len());
 }

@@ -217,12 +217,7 @@ fn forgeries_change_nothing_in_a_launch_and_refused_peers_are_said() {
         .stderr(Stdio::piped())
         .spawn()
         .unwrap();
-    let rx = crate::distributed::stdout_lines(&mut launcher);
-    let mut lines = Vec::new();
-    assert!(
-        crate::distributed::wait_line(&rx, &mut lines, "listening on", 30),
-        "{lines:?}"
-    );
+    let (rx, mut lines) = crate::distributed::listening(&mut launcher);
     // Peers without the launch's credentials.
     assert!(plain_peer(&format!("tcp/127.0.0.1:{port}"), &[]).is_err());
     let creds = Credentials::load(&creds_file).unwrap();
@@ -379,12 +374,7 @@ fn bad_credentials_files_exit_2_in_one_line() {
         .stderr(Stdio::null())
         .spawn()
         .unwrap();
-    let rx = crate::distributed::stdout_lines(&mut launcher);
-    let mut lines = Vec::new();
-    assert!(
-        crate::distributed::wait_line(&rx, &mut lines, "listening on", 30),
-        "{lines:?}"
-    );
+    let (_rx, _lines) = crate::distributed::listening(&mut launcher);
     let other = dir.path().join("other");
     std::fs::create_dir_all(&other).unwrap();
     one_line(
@@ -503,12 +493,7 @@ fn a_node_on_another_host_joins_with_the_credentials_and_only_with_them() {
         .stderr(Stdio::null())
         .spawn()
         .unwrap();
-    let rx = crate::distributed::stdout_lines(&mut launcher);
-    let mut lines = Vec::new();
-    assert!(
-        crate::distributed::wait_line(&rx, &mut lines, "listening on", 30),
-        "{lines:?}"
-    );
+    let (rx, mut lines) = crate::distributed::listening(&mut launcher);
     // Another launch's credentials, from the other host: refused.
     let other = dir.path().join("other");
     std::fs::create_dir_all(&other).unwrap();
