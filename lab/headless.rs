@@ -200,9 +200,11 @@ pub fn run_headless(a: &RunArgs, stop: StopFlag) -> anyhow::Result<RunReport> {
                 bag: a.bag.clone(),
                 force: a.force,
             });
-    if let Some(o) = &ros2 {
-        ratelab::ros2::bridge::check(&cfg.graph, o).map_err(anyhow::Error::msg)?;
+    match &ros2 {
+        Some(o) => ratelab::ros2::bridge::check(&cfg.graph, o),
+        None => ratelab::ros2::external::check_offered(&cfg.graph),
     }
+    .map_err(anyhow::Error::msg)?;
     let recording = open_recording(a, &cfg, &brain.label())?;
     let mut opts = RunOptions {
         stop: stop.clone(),
@@ -274,6 +276,9 @@ pub fn run_headless(a: &RunArgs, stop: StopFlag) -> anyhow::Result<RunReport> {
         }
         if let Some(e) = &r.error {
             eprintln!("[ratelab] warning: ROS 2: {e}");
+        }
+        for w in r.external_warnings() {
+            eprintln!("[ratelab] warning: {w}");
         }
     }
     if cfg.rt_priority.is_some() && cfg.clock == ClockKind::Virtual {

@@ -53,6 +53,12 @@ pub fn run_launch(a: &LaunchArgs, force_headless: bool, stop: StopFlag) -> anyho
     let on_terminal =
         !force_headless && std::io::stdout().is_terminal() && std::io::stdin().is_terminal();
     let mut cfg = headless::config_from_args(&run)?;
+    if let Some(n) = cfg.graph.first_external() {
+        anyhow::bail!(
+            "node '{}' is external (kind = \"external\"): a ROS 2 node fills it over --ros2, which a launch across processes does not offer yet; run the graph in one process (without --processes)",
+            n.name
+        );
+    }
     if cfg.graph.has_executors_or_compute() {
         anyhow::bail!(
             "graph '{}' has executors or compute times (--executor, --compute, [executors], compute_ms): a launch across processes does not run them yet; run it in one process (without --processes)",

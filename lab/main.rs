@@ -73,7 +73,10 @@ fn lab(args: &cli::RunArgs, stop: StopFlag) -> anyhow::Result<()> {
             let link = ratelab::ros2::session::open(&env, &stop)?;
             Some((link, opts))
         }
-        None => None,
+        None => {
+            ratelab::ros2::external::check_offered(&cfg.graph).map_err(anyhow::Error::msg)?;
+            None
+        }
     };
     let alt_policy = (args.policy != "scripted").then(|| args.policy.clone());
     let settings = SessionSettings {

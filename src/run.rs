@@ -291,6 +291,9 @@ pub fn run(
     opts: RunOptions,
 ) -> Result<RunReport, RunError> {
     let brain = BrainSlot::new(brain);
+    if opts.ros2.is_none() {
+        crate::ros2::external::check_offered(&cfg.graph).map_err(crate::ros2::Ros2Error::Usage)?;
+    }
     let Graph { mut nodes, handles } = build_graph(cfg, brain, opts.keep_trace, opts.observers)?;
     let link = match &opts.ros2 {
         Some(o) => {
@@ -303,7 +306,8 @@ pub fn run(
     };
     let bridge = match (&opts.ros2, &link) {
         (Some(o), Some(link)) => {
-            let b = crate::ros2::Bridge::start(link, &handles.spec, &handles.topics, o, cfg.clock)?;
+            let graph = (&*handles.spec, &handles.topics[..], &handles.external[..]);
+            let b = crate::ros2::Bridge::start(link, graph, o, cfg.clock, &opts.stop)?;
             eprintln!("[ratelab] {}", b.describe());
             Some(b)
         }

@@ -22,8 +22,8 @@ use crate::rate::{InvalidRate, Rate};
 use crate::runlog::{RunLog, StepRecord, TopicCounters};
 use crate::topic::ZeroDepth;
 use nodes::{
-    Actuator, Estimator, GraphNode, NodeCore, PolicyNode, Safety, Sensor, SensorNoise,
-    SensorOutput, Work,
+    Actuator, Estimator, External, ExternalPort, GraphNode, NodeCore, PolicyNode, Safety, Sensor,
+    SensorNoise, SensorOutput, Work,
 };
 pub use spec::{Chain, GraphSpec, MsgType, NodeId, NodeKind, TopicId};
 use std::sync::{Arc, Mutex, MutexGuard};
@@ -63,6 +63,9 @@ pub struct GraphHandles {
     pub log: Arc<Mutex<RunLog>>,
     /// Each node's liveliness, by [`NodeId`].
     pub liveliness: Vec<Arc<Liveliness>>,
+    /// The ports of the graph's external nodes ([`nodes::external`]), in node order: the
+    /// ROS 2 side ([`crate::ros2::external`]) connects them.
+    pub external: Vec<Arc<ExternalPort>>,
 }
 
 impl GraphHandles {
@@ -82,9 +85,13 @@ impl GraphHandles {
     }
 
     /// What drives the chain's policy, as metrics and summaries name it: the brain's label,
-    /// or, when the policy is a Python node, that node's script and class.
+    /// or, when the policy is a Python node, that node's script and class; an external
+    /// node says so.
     pub fn brain_label(&self) -> String {
         let policy = self.spec.node(self.spec.chain.policy);
+        if policy.kind == NodeKind::External {
+            return format!("external ROS 2 node '{}'", policy.name);
+        }
         match &policy.python {
             Some(p) => format!(
                 "Python node '{}' ({}{})",
@@ -215,6 +222,22 @@ impl Graph {
             .map(|n| Rate::new(n.rate_hz))
             .collect::<Result<Vec<_>, _>>()?;
         let log = Arc::new(Mutex::new(RunLog::new(keep_trace)));
+        let external: Vec<Arc<ExternalPort>> = spec
+            .nodes
+            .iter()
+            .enumerate()
+            .filter_map(|(i, n)| {
+                let settings = n.external?;
+                let output = n.publishes?;
+                Some(Arc::new(ExternalPort::new(
+                    NodeId(i),
+                    &n.name,
+                    n.subscribes,
+                    output,
+                    settings,
+                )))
+            })
+            .collect();
         let handles = GraphHandles {
             spec: Arc::new(spec.clone()),
             rates: rates.clone(),
@@ -223,6 +246,7 @@ impl Graph {
             plant: plant.clone(),
             log: log.clone(),
             liveliness: liveliness.clone(),
+            external: external.clone(),
         };
         for o in &mut observers {
             o.attach(&handles);
@@ -325,6 +349,21 @@ impl Graph {
                             registry::make(&r.kind, &cx, input, output, &outbox)
                                 .map_err(GraphError::Registered)?,
                         )
+                    }
+                    (NodeKind::External, (input, Some(output))) => {
+                        let port = external
+                            .iter()
+                            .find(|p| p.node.0 == i)
+                            .expect("made above for every external node")
+                            .clone();
+                        Work::External(Box::new(External {
+                            port,
+                            input: input.cloned(),
+                            output: output.clone(),
+                            outbox: outbox.clone(),
+                            liveliness: liveliness[i].clone(),
+                            origin: None,
+                        }))
                     }
                     (NodeKind::Actuator, (Some(AnyTopic::Force(i)), None)) => {
                         Work::Actuator(Box::new(Actuator {

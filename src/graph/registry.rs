@@ -170,13 +170,14 @@ fn registry() -> &'static RwLock<BTreeMap<String, Entry>> {
 
 /// The built-in kinds' names, as a graph file spells them (`NodeKind` in
 /// [`crate::graph::spec`]): a registered kind may not take one.
-pub const BUILT_IN_KINDS: [&str; 6] = [
+pub const BUILT_IN_KINDS: [&str; 7] = [
     "sensor",
     "estimator",
     "policy",
     "safety",
     "actuator",
     "python",
+    "external",
 ];
 
 /// Register node kind `kind`: a graph file's `kind = "<kind>"` then makes a node with

@@ -108,6 +108,10 @@ pub enum NodeKind {
     /// ([`crate::graph::registry`]; its name is in [`NodeSpec::registered`]). It takes the
     /// chain's places as a Python node does.
     Registered,
+    /// A node ratelab does not run: a ROS 2 node (rclpy, rclcpp, or any program speaking
+    /// rmw_zenoh) fills it over `--ros2` ([`crate::ros2::external`]); its settings are in
+    /// [`NodeSpec::external`]. It takes the chain's places as a Python node does.
+    External,
 }
 
 impl NodeKind {
@@ -121,6 +125,7 @@ impl NodeKind {
             NodeKind::Actuator => "actuator",
             NodeKind::Python => "python",
             NodeKind::Registered => "registered",
+            NodeKind::External => "external",
         }
     }
 
@@ -133,12 +138,13 @@ impl NodeKind {
             "safety" => NodeKind::Safety,
             "actuator" => NodeKind::Actuator,
             "python" => NodeKind::Python,
+            "external" => NodeKind::External,
             _ => return None,
         })
     }
     /// The message types this kind may read (none for a sensor) and publish (none for the
-    /// actuator); `None` for a Python node, which may read and publish any one topic, and
-    /// for a registered kind, whose shape is the registry's.
+    /// actuator); `None` for a Python or external node, which may read and publish any one
+    /// topic, and for a registered kind, whose shape is the registry's.
     fn shape(self) -> Option<(Option<MsgType>, &'static [MsgType])> {
         Some(match self {
             NodeKind::Sensor => (None, &[MsgType::State, MsgType::Position]),
@@ -146,7 +152,7 @@ impl NodeKind {
             NodeKind::Policy => (Some(MsgType::State), &[MsgType::Force]),
             NodeKind::Safety => (Some(MsgType::Force), &[MsgType::Force]),
             NodeKind::Actuator => (Some(MsgType::Force), &[]),
-            NodeKind::Python | NodeKind::Registered => return None,
+            NodeKind::Python | NodeKind::Registered | NodeKind::External => return None,
         })
     }
 }
@@ -201,6 +207,9 @@ pub struct NodeSpec {
     /// A registered kind's name and parameters; `None` for every other kind.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub registered: Option<RegisteredNodeSpec>,
+    /// An external node's waits; `None` for every other kind.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub external: Option<ExternalNodeSpec>,
     /// What a tick costs ([`crate::executor`]): its outputs are published that long after
     /// it starts. `None`: nothing (outputs at once, as in the chapter).
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -229,6 +238,28 @@ pub struct RegisteredNodeSpec {
     pub kind: String,
     /// `params = { … }`: what the kind's maker reads ([`crate::graph::registry::NodeContext`]).
     pub params: toml::Table,
+}
+
+/// How long ratelab waits for a `kind = "external"` node ([`crate::ros2::external`]), from
+/// the graph file's `params = { appear_timeout_s = …, tick_timeout_ms = … }`.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ExternalNodeSpec {
+    /// How long to wait, before the run starts, for the node's liveliness tokens (its node
+    /// and each declared endpoint) on the ROS 2 domain; default 10 s, at most 600 s.
+    pub appear_timeout: Nanos,
+    /// Under the virtual clock, how long (wall time) one tick waits for the node's message
+    /// on each of its outputs before the tick is counted as missed; default 2 s, 1 ms to
+    /// 60 s.
+    pub tick_timeout: Nanos,
+}
+
+impl Default for ExternalNodeSpec {
+    fn default() -> Self {
+        ExternalNodeSpec {
+            appear_timeout: Nanos(10_000_000_000),
+            tick_timeout: Nanos(2_000_000_000),
+        }
+    }
 }
 
 /// What a `kind = "python"` node runs ([`crate::python::node`]).
@@ -697,6 +728,12 @@ impl GraphSpec {
         self.nodes.iter().position(|n| n.name == name).map(NodeId)
     }
 
+    /// The first node of `kind = "external"`, if any: such a graph runs only with `--ros2`,
+    /// in one process ([`crate::ros2::external`]).
+    pub fn first_external(&self) -> Option<&NodeSpec> {
+        self.nodes.iter().find(|n| n.kind == NodeKind::External)
+    }
+
     /// The topic named `name`.
     pub fn topic_id(&self, name: &str) -> Option<TopicId> {
         self.topics.iter().position(|t| t.name == name).map(TopicId)
@@ -1104,9 +1141,16 @@ fn build(cx: &Ctx<'_>, raw: RawGraph) -> Result<GraphSpec, SpecError> {
                 Some(TopicId(ti))
             }
         };
+        if kind == NodeKind::External && publishes.is_none() {
+            return Err(cx.err(
+                r.name.span(),
+                "an external node must publish a topic: what it publishes is how ratelab hears it",
+            ));
+        }
         let params = node_params(cx, kind, r)?;
         let python = python_node(cx, kind, r)?;
         let registered = registered_node(cx, kind, kind_name, r)?;
+        let external = external_node(cx, kind, r)?;
         let liveliness_lease = r
             .liveliness_lease_ms
             .as_ref()
@@ -1150,6 +1194,7 @@ fn build(cx: &Ctx<'_>, raw: RawGraph) -> Result<GraphSpec, SpecError> {
             process,
             python,
             registered,
+            external,
             compute,
             callback_group: r.callback_group.as_ref().map(|g| g.get_ref().clone()),
         });
@@ -1281,14 +1326,18 @@ fn find_chain(spec: &GraphSpec) -> Result<Chain, String> {
         let reads = |m: MsgType| upstream(p).is_some_and(|(t, _)| spec.topics[t.0].msg == m);
         match spec.nodes[p.0].kind {
             NodeKind::Policy => break (p, action.unwrap_or(t)),
-            NodeKind::Python | NodeKind::Registered if reads(MsgType::State) => {
+            NodeKind::Python | NodeKind::Registered | NodeKind::External
+                if reads(MsgType::State) =>
+            {
                 break (p, action.unwrap_or(t))
             }
             NodeKind::Safety => {
                 action = Some(t);
                 cur = p;
             }
-            NodeKind::Python | NodeKind::Registered if reads(MsgType::Force) => {
+            NodeKind::Python | NodeKind::Registered | NodeKind::External
+                if reads(MsgType::Force) =>
+            {
                 action = Some(t);
                 cur = p;
             }
@@ -1301,7 +1350,7 @@ fn find_chain(spec: &GraphSpec) -> Result<Chain, String> {
     // Up through the estimators (built-in or Python) to the sensor.
     for _ in 0..MAX_NODES {
         match spec.nodes[src.0].kind {
-            NodeKind::Estimator | NodeKind::Python | NodeKind::Registered => {
+            NodeKind::Estimator | NodeKind::Python | NodeKind::Registered | NodeKind::External => {
                 let name = &spec.nodes[src.0].name;
                 src = upstream(src)
                     .ok_or_else(|| format!("node '{name}' before the policy reads nothing"))?
@@ -1433,8 +1482,9 @@ fn python_node(
     r: &RawNode,
 ) -> Result<Option<PythonNodeSpec>, SpecError> {
     if kind != NodeKind::Python {
-        // A registered kind takes `params` too (registered_node).
-        let params = (kind != NodeKind::Registered)
+        // A registered kind takes `params` too (registered_node), and so does an external
+        // node (external_node).
+        let params = (kind != NodeKind::Registered && kind != NodeKind::External)
             .then(|| r.params.as_ref().map(|v| ("params", v.span())))
             .flatten();
         let stray = [
@@ -1497,6 +1547,51 @@ fn registered_node(
         kind: kind_name.to_string(),
         params: node_table(cx, r)?,
     }))
+}
+
+/// An external node's waits from its `params = { … }`: `Some` on a [`NodeKind::External`]
+/// node, whose params may name only `appear_timeout_s` and `tick_timeout_ms`.
+fn external_node(
+    cx: &Ctx<'_>,
+    kind: NodeKind,
+    r: &RawNode,
+) -> Result<Option<ExternalNodeSpec>, SpecError> {
+    if kind != NodeKind::External {
+        return Ok(None);
+    }
+    let mut spec = ExternalNodeSpec::default();
+    let Some(p) = &r.params else {
+        return Ok(Some(spec));
+    };
+    for (k, v) in p.get_ref() {
+        let (scale, range, slot) = match k.as_str() {
+            "appear_timeout_s" => (1e9, 0.0..=600.0, &mut spec.appear_timeout),
+            "tick_timeout_ms" => (1e6, 1.0..=60_000.0, &mut spec.tick_timeout),
+            _ => return Err(cx.err(
+                p.span(),
+                format!(
+                    "an external node's params are appear_timeout_s and tick_timeout_ms, not '{k}'"
+                ),
+            )),
+        };
+        let x = match v {
+            toml::Value::Float(x) => *x,
+            toml::Value::Integer(i) => *i as f64,
+            _ => f64::NAN,
+        };
+        if !range.contains(&x) {
+            return Err(cx.err(
+                p.span(),
+                format!(
+                    "params.{k} must be a number in {}..={}, got {v}",
+                    range.start(),
+                    range.end()
+                ),
+            ));
+        }
+        *slot = Nanos((x * scale).round() as u64);
+    }
+    Ok(Some(spec))
 }
 
 /// A node's `params = { … }` (empty when absent): at most [`MAX_PYTHON_PARAMS`] entries,

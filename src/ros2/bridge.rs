@@ -14,7 +14,12 @@
 //! - `/clock` (`rosgraph_msgs/msg/Clock`, best effort, depth 1) carries the run time: before
 //!   each virtual instant under the virtual clock, and before any message stamped later than
 //!   the last clock under both clocks, so a message's header stamp is never ahead of
-//!   `/clock`.
+//!   `/clock`. With an external node under the virtual clock (the lockstep,
+//!   [`super::external`]) `/clock = t` follows instead the messages published at `t` by the
+//!   nodes ranked before the external node ticking at `t` (or all of instant `t`'s when none
+//!   ticks then): a message is then ahead of `/clock` until the clock reaches its instant;
+//! - an external node's own tokens and publishers are its program's: ratelab declares none
+//!   for it, and what it publishes is not put again (only written to the bag).
 //!
 //! Messages leave through a [`crate::topic::Tap`] on each topic and a channel to one bridge
 //! thread: no node puts on Zenoh itself. Under the virtual clock a publisher waits when the
@@ -25,17 +30,20 @@
 use super::bag::{Bag, BagTopic};
 use super::names::{check_node_name, check_topic_name};
 use super::session::{Ros2Session, Router};
-use super::types::{clock_type, encode, encode_clock, ros_type_of, RosType};
-use super::{Ros2Error, Ros2Options};
+use super::types::{clock_type, encode, encode_clock, ros_type_of, type_info, RosType};
+use super::{zerr, Ros2Error, Ros2Options};
 use crate::config::ClockKind;
+use crate::graph::nodes::external::{ExternalLink, ExternalStats};
+use crate::graph::nodes::ExternalPort;
 use crate::graph::GraphSpec;
 use crate::msg::AnyTopic;
 use crate::msg::MsgData;
 use crate::qos::{History, Reliability};
+use crate::scheduler::StopFlag;
 use crate::time::Nanos;
 use crate::topic::Message;
 use crossbeam_channel::{Receiver, Sender, TrySendError};
-use hiroz_protocol::entity::{EndpointEntity, EndpointKind, NodeEntity, TypeHash, TypeInfo};
+use hiroz_protocol::entity::{EndpointEntity, EndpointKind, NodeEntity};
 use hiroz_protocol::qos::{QosDuration, QosHistory, QosProfile, QosReliability};
 use hiroz_protocol::KeyExprFormat;
 use sha2::Digest;
@@ -65,8 +73,10 @@ enum Out {
         stamp: Nanos,
         data: MsgData,
     },
-    /// The run's clock reached this time.
+    /// The run's clock reached this time (before an instant).
     Clock(Nanos),
+    /// An external node ticks at this time: `/clock` must say it now.
+    Announce(Nanos),
     /// The run is over: put what came before, then stop.
     End,
 }
@@ -82,6 +92,38 @@ pub struct BridgeReport {
     pub error: Option<String>,
     /// Messages written to the bag (with `/clock`), when there is one.
     pub bagged: Option<u64>,
+    /// What each external node did, by name, in node order.
+    pub external: Vec<(String, ExternalStats)>,
+}
+
+impl BridgeReport {
+    /// One line per external node that missed ticks or sent what could not be used (none
+    /// when all went well).
+    pub fn external_warnings(&self) -> Vec<String> {
+        let mut lines = Vec::new();
+        for (name, s) in &self.external {
+            if s.missed > 0 {
+                lines.push(format!(
+                    "external node '{name}' missed {} tick(s): nothing on its output within its tick_timeout (it publishes one message per output per tick under the virtual clock; docs/ros2.md)",
+                    s.missed
+                ));
+            }
+            if s.overflow > 0 {
+                lines.push(format!(
+                    "external node '{name}': {} message(s) dropped (more than {} waiting)",
+                    s.overflow,
+                    crate::graph::nodes::external::INBOX_CAPACITY
+                ));
+            }
+            if let Some(e) = &s.first_error {
+                lines.push(format!(
+                    "external node '{name}': {} message(s) refused, the first: {e}",
+                    s.undecodable
+                ));
+            }
+        }
+        lines
+    }
 }
 
 /// The graph offered to ROS 2 while it runs ([`Bridge::start`] … [`Bridge::finish`]).
@@ -89,6 +131,7 @@ pub struct Bridge {
     tx: Option<Sender<Out>>,
     thread: Option<JoinHandle<Forwarded>>,
     dropped: Arc<AtomicU64>,
+    ports: Vec<Arc<ExternalPort>>,
     /// The router the session uses.
     pub router: Router,
     /// The domain.
@@ -167,10 +210,6 @@ fn clock_qos() -> QosProfile {
     }
 }
 
-fn type_info(t: &RosType) -> TypeInfo {
-    TypeInfo::new(&t.dds_name(), TypeHash::new(1, t.hash.0))
-}
-
 /// The 16-byte GID of the endpoint whose token is `token`: the first half of its SHA-256
 /// (unique per session, node and endpoint, as the token is).
 fn gid(token: &str) -> [u8; 16] {
@@ -196,10 +235,6 @@ fn wall_ns() -> i64 {
     std::time::SystemTime::now()
         .duration_since(std::time::UNIX_EPOCH)
         .map_or(0, |d| i64::try_from(d.as_nanos()).unwrap_or(i64::MAX))
-}
-
-fn zerr(e: impl std::fmt::Display) -> Ros2Error {
-    Ros2Error::Zenoh(e.to_string().lines().next().unwrap_or_default().to_string())
 }
 
 /// The `/clock` publishers already on the network but not of this session (their nodes'
@@ -229,6 +264,24 @@ fn clock_publishers(session: &zenoh::Session, domain: u32) -> Vec<String> {
     found
 }
 
+/// Wait until `o` has a matching subscriber, for at most `within` (or until `stop`).
+fn wait_matched(o: &Outlet, within: std::time::Duration, stop: &StopFlag) -> Result<(), ()> {
+    let start = std::time::Instant::now();
+    loop {
+        if o.publisher
+            .matching_status()
+            .wait()
+            .is_ok_and(|m| m.matching())
+        {
+            return Ok(());
+        }
+        if start.elapsed() >= within || stop.is_stopped() {
+            return Err(());
+        }
+        std::thread::sleep(std::time::Duration::from_millis(10));
+    }
+}
+
 /// A publisher ready to put: its key, its GID.
 struct Outlet {
     publisher: zenoh::pubsub::Publisher<'static>,
@@ -238,18 +291,22 @@ struct Outlet {
 impl Bridge {
     /// Offer `spec`'s graph, whose topics are `topics` (by topic id), to ROS 2 on
     /// `opts.domain`, through `link` ([`super::session::open`]; it outlives the bridge, so that a
-    /// lab's successive runs keep one session and one router).
+    /// lab's successive runs keep one session and one router). The graph's external nodes
+    /// (their `ports`) are waited for first ([`super::external::wait_for`], `stop` ends the
+    /// wait), then connected.
     ///
     /// # Errors
-    /// [`Ros2Error::Usage`]: what [`check`] refuses, or another `/clock` publisher on the
-    /// domain. [`Ros2Error::Zenoh`]: a declaration failed.
+    /// [`Ros2Error::Usage`]: what [`check`] refuses, another `/clock` publisher on the
+    /// domain, an external node that did not appear or has another type. [`Ros2Error::Zenoh`]:
+    /// a declaration failed.
     pub fn start(
         link: &Ros2Session,
-        spec: &GraphSpec,
-        topics: &[AnyTopic],
+        graph: (&GraphSpec, &[AnyTopic], &[Arc<ExternalPort>]),
         opts: &Ros2Options,
         clock: ClockKind,
+        stop: &StopFlag,
     ) -> Result<Bridge, Ros2Error> {
+        let (spec, topics, ports) = graph;
         check(spec, opts).map_err(Ros2Error::Usage)?;
         let domain = opts.domain;
         let session = link.session.clone();
@@ -260,6 +317,8 @@ impl Bridge {
                 "--ros2: node '{other}' already publishes /clock on domain {domain}; two /clock publishers would give ROS 2 nodes two times (stop it, or use another ROS_DOMAIN_ID)"
             )));
         }
+        super::external::wait_for(&session, domain, spec, ports, stop)?;
+        let external = |n: crate::graph::NodeId| ports.iter().any(|p| p.node == n);
         let zid = session.zid();
         let format = KeyExprFormat::default();
         let dom = usize::try_from(domain).unwrap_or(0);
@@ -283,7 +342,12 @@ impl Bridge {
             .map(|n| node(link.take_id(), &n.name))
             .collect();
         let clock_node = node(link.take_id(), CLOCK_NODE);
-        for n in nodes.iter().chain(std::iter::once(&clock_node)) {
+        let own = nodes
+            .iter()
+            .enumerate()
+            .filter(|(i, _)| !external(crate::graph::NodeId(*i)))
+            .map(|(_, n)| n);
+        for n in own.chain(std::iter::once(&clock_node)) {
             declare(
                 format
                     .node_liveliness_key_expr(n)
@@ -320,9 +384,13 @@ impl Bridge {
             let ty = ros_type_of(topic.msg);
             let qos = qos_of(spec, t);
             let publisher = &nodes[topic.publisher.0];
-            let mp = endpoint(publisher, EndpointKind::Publisher, &topic.name, ty, qos);
-            outlets.push(publish(&mp)?);
-            if let Some(sub) = topic.subscriber {
+            if external(topic.publisher) {
+                outlets.push(None); // the external node's program publishes it
+            } else {
+                let mp = endpoint(publisher, EndpointKind::Publisher, &topic.name, ty, qos);
+                outlets.push(Some(publish(&mp)?));
+            }
+            if let Some(sub) = topic.subscriber.filter(|s| !external(*s)) {
                 let kind = EndpointKind::Subscription;
                 subscriptions.push(endpoint(&nodes[sub.0], kind, &topic.name, ty, qos));
             }
@@ -362,21 +430,54 @@ impl Bridge {
             }
             None => None,
         };
+        let inbound = super::external::listen(&session, domain, spec, ports)?;
+        // What an external node reads must reach it from the first message: wait until
+        // Zenoh has matched its subscriptions to the publishers (the tokens came first).
+        for p in ports {
+            let mut feeds = vec![(CLOCK_TOPIC, &clock_outlet)];
+            if let Some(t) = p.input {
+                if let Some(o) = &outlets[t.0] {
+                    feeds.push((spec.topics[t.0].name.as_str(), o));
+                }
+            }
+            for (topic, o) in feeds {
+                wait_matched(o, p.settings.appear_timeout.to_duration(), stop).map_err(|()| {
+                    Ros2Error::Usage(format!(
+                        "external node '{}' declared its subscription to {topic}, but no subscriber of its matched ratelab's publisher within {:.1} s",
+                        p.name,
+                        p.settings.appear_timeout.as_secs_f64()
+                    ))
+                })?;
+            }
+        }
         let (tx, rx) = crossbeam_channel::bounded(CHANNEL_CAPACITY);
         let dropped = Arc::new(AtomicU64::new(0));
         let waits = clock == ClockKind::Virtual;
         for (i, topic) in topics.iter().enumerate() {
             tap(topic, i, tx.clone(), waits, dropped.clone());
         }
+        let lockstep = waits && !ports.is_empty();
+        for p in ports {
+            let tx = tx.clone();
+            p.connect(ExternalLink {
+                lockstep,
+                announce: Box::new(move |t| {
+                    let _ = tx.send(Out::Announce(t));
+                }),
+            });
+        }
         let thread = std::thread::Builder::new()
             .name("ros2-bridge".into())
             .spawn(move || {
-                let r = forward(&rx, &outlets, &clock_outlet, bag);
+                let r = forward(&rx, &outlets, &clock_outlet, bag, lockstep);
                 // Withdrawn: ROS 2's graph no longer shows the run's nodes.
+                for s in inbound {
+                    let _ = s.undeclare().wait();
+                }
                 for t in tokens {
                     let _ = t.undeclare().wait();
                 }
-                for o in outlets {
+                for o in outlets.into_iter().flatten() {
                     let _ = o.publisher.undeclare().wait();
                 }
                 let _ = clock_outlet.publisher.undeclare().wait();
@@ -387,6 +488,7 @@ impl Bridge {
             tx: Some(tx),
             thread: Some(thread),
             dropped,
+            ports: ports.to_vec(),
             router,
             domain,
         })
@@ -444,6 +546,11 @@ impl Bridge {
             dropped: self.dropped.load(Ordering::Relaxed),
             error: f.error,
             bagged: f.bagged,
+            external: self
+                .ports
+                .iter()
+                .map(|p| (p.name.clone(), p.stats()))
+                .collect(),
         }
     }
 }
@@ -497,8 +604,14 @@ struct Forwarded {
 
 /// The bridge thread's state: where messages go and what happened.
 struct Forwarder<'a> {
-    outlets: &'a [Outlet],
+    /// By topic: `None` for an external node's topic (bag only).
+    outlets: &'a [Option<Outlet>],
     clock: &'a Outlet,
+    /// The lockstep's `/clock` (module header): an instant's time waits for an external
+    /// node's tick or the next instant.
+    deferred: bool,
+    /// The instant whose `/clock` waits, in that mode.
+    pending: Option<Nanos>,
     bag: Option<Bag>,
     buf: Vec<u8>,
     clock_seq: i64,
@@ -515,7 +628,11 @@ impl Forwarder<'_> {
         if let Some(Err(e)) = self.bag.as_mut().map(|b| b.write(index, t.0, &self.buf)) {
             self.error.get_or_insert(format!("the bag: {e}"));
         }
-        let outlet = self.outlets.get(index).unwrap_or(self.clock);
+        let outlet = match self.outlets.get(index) {
+            Some(Some(o)) => o,
+            Some(None) => return false, // an external node's: its program put it
+            None => self.clock,
+        };
         match put(outlet, seq, &self.buf) {
             Ok(()) => true,
             Err(e) => {
@@ -537,11 +654,19 @@ impl Forwarder<'_> {
 }
 
 /// The bridge thread: put each message (and write it to the bag), and `/clock` whenever
-/// the run's time moved on, until told the run ended.
-fn forward(rx: &Receiver<Out>, outlets: &[Outlet], clock: &Outlet, bag: Option<Bag>) -> Forwarded {
+/// the run's time moved on (`deferred`: as the lockstep wants it), until told the run ended.
+fn forward(
+    rx: &Receiver<Out>,
+    outlets: &[Option<Outlet>],
+    clock: &Outlet,
+    bag: Option<Bag>,
+    deferred: bool,
+) -> Forwarded {
     let mut f = Forwarder {
         outlets,
         clock,
+        deferred,
+        pending: None,
         bag,
         buf: Vec::with_capacity(256),
         clock_seq: 0,
@@ -552,14 +677,25 @@ fn forward(rx: &Receiver<Out>, outlets: &[Outlet], clock: &Outlet, bag: Option<B
     while let Ok(out) = rx.recv() {
         match out {
             Out::End => break,
-            Out::Clock(t) => f.tick(t),
+            Out::Clock(t) if f.deferred => {
+                // The instant before is over: its time goes out now, this one's waits.
+                if let Some(p) = f.pending.replace(t) {
+                    f.tick(p);
+                }
+            }
+            Out::Clock(t) | Out::Announce(t) => {
+                f.pending = f.pending.filter(|p| *p > t);
+                f.tick(t);
+            }
             Out::Msg {
                 topic,
                 seq,
                 stamp,
                 data,
             } => {
-                f.tick(stamp);
+                if !f.deferred {
+                    f.tick(stamp);
+                }
                 encode(&data, stamp, &mut f.buf);
                 let seq = i64::try_from(seq).unwrap_or(i64::MAX - 1) + 1;
                 if f.send(topic, seq, stamp) {
@@ -567,6 +703,9 @@ fn forward(rx: &Receiver<Out>, outlets: &[Outlet], clock: &Outlet, bag: Option<B
                 }
             }
         }
+    }
+    if let Some(p) = f.pending.take() {
+        f.tick(p);
     }
     let mut error = f.error;
     let bagged = f.bag.map(|b| match b.finish() {

@@ -12,7 +12,10 @@
 //! - [`bag`]: `--bag DIR`, what is offered as a rosbag2 bag (MCAP storage);
 //! - [`bridge`]: the liveliness tokens (NN per node, MP/MS per publisher and subscription,
 //!   with the QoS), a publisher per topic on `<domain>/<topic>/<dds type>/<RIHS01>` with
-//!   rmw_zenoh's 33-byte attachment, and `/clock`.
+//!   rmw_zenoh's 33-byte attachment, and `/clock`;
+//! - [`external`]: nodes of `kind = "external"`, which a ROS 2 node fills: waiting for
+//!   their tokens, checking their types, hearing what they publish, and the lockstep's
+//!   time contract under the virtual clock.
 //!
 //! The format is rmw_zenoh's `docs/design.md`; its keys, tokens and QoS strings come from
 //! ZettaScale's `hiroz-protocol`, its hashes from `hiroz-schema`, its CDR from `hiroz-cdr`.
@@ -24,6 +27,7 @@
 
 pub mod bag;
 pub mod bridge;
+pub mod external;
 pub mod names;
 pub mod session;
 pub mod types;
@@ -51,4 +55,9 @@ pub enum Ros2Error {
     /// Zenoh failed.
     #[error("Zenoh: {0}")]
     Zenoh(String),
+}
+
+/// A Zenoh error as [`Ros2Error::Zenoh`], in one line.
+pub(crate) fn zerr(e: impl std::fmt::Display) -> Ros2Error {
+    Ros2Error::Zenoh(e.to_string().lines().next().unwrap_or_default().to_string())
 }

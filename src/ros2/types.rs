@@ -72,6 +72,12 @@ impl RosType {
     }
 }
 
+/// `t` as hiroz-protocol's tokens and keys name it: its DDS name and RIHS01 hash.
+pub fn type_info(t: &RosType) -> hiroz_protocol::entity::TypeInfo {
+    use hiroz_protocol::entity::{TypeHash as Hash, TypeInfo};
+    TypeInfo::new(&t.dds_name(), Hash::new(1, t.hash.0))
+}
+
 const JOINT_STATE: &str = "sensor_msgs/msg/JointState";
 const FLOAT64: &str = "std_msgs/msg/Float64";
 const CLOCK: &str = "rosgraph_msgs/msg/Clock";
@@ -269,6 +275,81 @@ pub fn encode(data: &MsgData, stamp: Nanos, out: &mut Vec<u8>) {
     }
 }
 
+/// The most bytes a message from ROS 2 may have: a cartpole message is under 200.
+pub const MAX_INBOUND_BYTES: usize = 4096;
+
+fn from_cdr<'de, T: Deserialize<'de>>(bytes: &'de [u8]) -> Result<T, String> {
+    if bytes.len() > MAX_INBOUND_BYTES {
+        return Err(format!(
+            "{} bytes (at most {MAX_INBOUND_BYTES})",
+            bytes.len()
+        ));
+    }
+    let body = match bytes {
+        [0, 1, _, _, body @ ..] => body,
+        [a, b, ..] => return Err(format!("encapsulation {a:02x} {b:02x}, not CDR_LE (00 01)")),
+        _ => return Err("shorter than the encapsulation header".into()),
+    };
+    let (v, used) = hiroz_cdr::from_bytes::<T, hiroz_cdr::LittleEndian>(body)
+        .map_err(|e| format!("not valid CDR: {e}"))?;
+    // CDR pads to 4; anything more after the value is not this type.
+    if body.len() - used > 3 {
+        return Err(format!("{} bytes after the message", body.len() - used));
+    }
+    Ok(v)
+}
+
+/// A payload of ratelab type `msg` from the ROS 2 message in `bytes` (CDR with its
+/// encapsulation header, as rmw_zenoh sends it): the inverse of [`encode`]. A state's
+/// `JointState` needs both joints' positions and velocities (named [`JOINT_NAMES`] in that
+/// order, or unnamed); the observation is `[x, ẋ, cos θ, sin θ, θ̇]` as float32. A position
+/// needs both positions. The header is not read: the proxy stamps what it delivers.
+///
+/// # Errors
+/// One line: too long, not CDR_LE, not the type, or the joints missing or non-finite.
+pub fn decode(msg: MsgType, bytes: &[u8]) -> Result<MsgData, String> {
+    let joints = |js: &JointState, velocities: bool| -> Result<([f64; 2], [f64; 2]), String> {
+        let named = js.name.is_empty() || js.name.iter().map(String::as_str).eq(JOINT_NAMES);
+        if !named {
+            return Err(format!(
+                "JointState names {:?}, not {JOINT_NAMES:?}",
+                js.name
+            ));
+        }
+        let two = |v: &[f64], what: &str| -> Result<[f64; 2], String> {
+            match v {
+                [a, b] if a.is_finite() && b.is_finite() => Ok([*a, *b]),
+                [_, _] => Err(format!("a non-finite {what}")),
+                _ => Err(format!("{} {what} values, not 2", v.len())),
+            }
+        };
+        let p = two(&js.position, "position")?;
+        let v = if velocities {
+            two(&js.velocity, "velocity")?
+        } else {
+            [0.0; 2]
+        };
+        Ok((p, v))
+    };
+    Ok(match msg {
+        MsgType::State => {
+            let ([x, th], [xd, thd]) = joints(&from_cdr(bytes)?, true)?;
+            MsgData::State([
+                x as f32,
+                xd as f32,
+                th.cos() as f32,
+                th.sin() as f32,
+                thd as f32,
+            ])
+        }
+        MsgType::Position => {
+            let ([x, th], _) = joints(&from_cdr(bytes)?, false)?;
+            MsgData::Position(x, th)
+        }
+        MsgType::Force => MsgData::Force(from_cdr::<Float64>(bytes)?.data),
+    })
+}
+
 /// `/clock` at run time `t`, as CDR with its encapsulation header, into `out`.
 pub fn encode_clock(t: Nanos, out: &mut Vec<u8>) {
     cdr(&Clock { clock: Time::of(t) }, out);
@@ -283,6 +364,70 @@ mod tests {
         let (v, used) = hiroz_cdr::from_bytes::<T, hiroz_cdr::LittleEndian>(&bytes[4..]).unwrap();
         assert_eq!(used, bytes.len() - 4, "no trailing bytes");
         v
+    }
+
+    #[test]
+    fn what_is_encoded_decodes_back() {
+        let mut out = Vec::new();
+        encode(&MsgData::Force(-3.5), Nanos(1), &mut out);
+        assert_eq!(
+            super::decode(MsgType::Force, &out),
+            Ok(MsgData::Force(-3.5))
+        );
+        encode(&MsgData::Position(0.25, -0.5), Nanos(1), &mut out);
+        assert_eq!(
+            super::decode(MsgType::Position, &out),
+            Ok(MsgData::Position(0.25, -0.5))
+        );
+        let th = 0.125f64;
+        let obs = [0.5, -1.0, th.cos() as f32, th.sin() as f32, 2.0];
+        encode(&MsgData::State(obs), Nanos(1), &mut out);
+        assert_eq!(super::decode(MsgType::State, &out), Ok(MsgData::State(obs)));
+    }
+
+    #[test]
+    fn hostile_messages_are_refused_in_one_line() {
+        let mut out = Vec::new();
+        encode(&MsgData::Position(0.25, -0.5), Nanos(1), &mut out);
+        // A position has no velocities: not a state.
+        assert!(super::decode(MsgType::State, &out)
+            .unwrap_err()
+            .contains("0 velocity values"));
+        encode(&MsgData::Force(1.0), Nanos(1), &mut out);
+        assert!(super::decode(MsgType::State, &out).is_err());
+        assert!(super::decode(MsgType::Force, &out[..6]).is_err());
+        assert!(
+            super::decode(MsgType::Force, &[1, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0])
+                .unwrap_err()
+                .contains("not CDR_LE")
+        );
+        assert!(super::decode(MsgType::Force, &[0, 1]).is_err());
+        let big = vec![0u8; MAX_INBOUND_BYTES + 1];
+        assert!(super::decode(MsgType::Force, &big)
+            .unwrap_err()
+            .contains("at most"));
+        // A sequence claiming 2^32-1 names in a few bytes: refused, not allocated.
+        let mut js = vec![0, 1, 0, 0];
+        js.extend_from_slice(&[0; 8]); // stamp
+        js.extend_from_slice(&1u32.to_le_bytes()); // frame_id: ""
+        js.push(0);
+        js.extend_from_slice(&[0; 3]);
+        js.extend_from_slice(&u32::MAX.to_le_bytes());
+        assert!(super::decode(MsgType::State, &js).is_err());
+        let wrong = JointState {
+            header: Header {
+                stamp: Time::of(Nanos(0)),
+                frame_id: String::new(),
+            },
+            name: vec!["a".into(), "b".into()],
+            position: vec![0.0, 0.0],
+            velocity: vec![0.0, 0.0],
+            effort: vec![],
+        };
+        cdr(&wrong, &mut out);
+        assert!(super::decode(MsgType::State, &out)
+            .unwrap_err()
+            .contains("names"));
     }
 
     #[test]

@@ -205,11 +205,21 @@ impl Engine {
         let bridge = match &self.settings.ros2 {
             Some((link, opts)) => {
                 let h = &graph.handles;
-                match crate::ros2::Bridge::start(link, &h.spec, &h.topics, opts, cfg.clock) {
+                if let Some(x) = h.external.first() {
+                    let _ = self.tx.send(Telemetry::Applied(format!(
+                        "waiting for external node '{}' on ROS 2 domain {}…",
+                        x.name, opts.domain
+                    )));
+                }
+                let g = (&*h.spec, &h.topics[..], &h.external[..]);
+                let stop = crate::scheduler::StopFlag::new();
+                match crate::ros2::Bridge::start(link, g, opts, cfg.clock, &stop) {
                     Ok(b) => {
                         let _ = self.tx.send(Telemetry::Applied(b.status()));
                         Some(b)
                     }
+                    // Without its external nodes the graph cannot run.
+                    Err(e) if !h.external.is_empty() => return Err(format!("ROS 2: {e}")),
                     Err(e) => {
                         let _ = self.tx.send(Telemetry::Error(format!("ROS 2: {e}")));
                         None
@@ -234,10 +244,13 @@ impl Engine {
             }
         };
         if let Some(r) = bridge.map(crate::ros2::Bridge::finish) {
-            if let Some(e) = r.error {
+            if let Some(e) = &r.error {
                 let _ = self
                     .tx
                     .send(Telemetry::Error(format!("ROS 2: a put failed: {e}")));
+            }
+            if let Some(w) = r.external_warnings().into_iter().next() {
+                let _ = self.tx.send(Telemetry::Error(w));
             }
         }
         let metrics = live_metrics(cfg, &handles, &end, &ticks, timing, exec);

@@ -51,6 +51,7 @@ mod qos;
 mod realtime;
 mod recording;
 mod ros2;
+mod ros2_external;
 mod security;
 mod session;
 mod topic_stress;

@@ -9,7 +9,7 @@ use serde_json::Value;
 use std::io::{BufRead, BufReader, Read};
 use std::process::{Child, Command, Stdio};
 
-fn oracle_python() -> String {
+pub(crate) fn oracle_python() -> String {
     std::env::var("RATELAB_ORACLE_PYTHON").expect(
         "RATELAB_ORACLE_PYTHON is not set: run the tests with scripts/test.sh (it makes the oracle environment)",
     )
@@ -61,7 +61,7 @@ impl Drop for StandIn {
     }
 }
 
-fn ratelab(args: &[&str], env: &[(&str, String)]) -> (i32, String, String) {
+pub(crate) fn ratelab(args: &[&str], env: &[(&str, String)]) -> (i32, String, String) {
     let mut cmd = Command::new(env!("CARGO_BIN_EXE_ratelab"));
     cmd.env_remove("ROS_DOMAIN_ID")
         .env_remove("ZENOH_ROUTER_CHECK_ATTEMPTS")
@@ -105,7 +105,7 @@ pub(crate) fn strs(v: &Value) -> Vec<String> {
 }
 
 /// `(kind, node, topic, type)` of each endpoint token.
-fn endpoints(r: &Value) -> Vec<(String, String, String, String)> {
+pub(crate) fn endpoints(r: &Value) -> Vec<(String, String, String, String)> {
     let mut e: Vec<_> = r["endpoints"]
         .as_array()
         .unwrap()
@@ -488,7 +488,15 @@ fn a_finished_bridge_withdraws_its_tokens_and_the_next_takes_fresh_ids_on_the_sa
         let slot = ratelab::policy::BrainSlot::new(brain);
         let graph = ratelab::run::build_graph(&cfg, slot, false, Vec::new()).unwrap();
         let h = &graph.handles;
-        Bridge::start(&link, &h.spec, &h.topics, &opts, cfg.clock).unwrap()
+        let g = (&*h.spec, &h.topics[..], &h.external[..]);
+        Bridge::start(
+            &link,
+            g,
+            &opts,
+            cfg.clock,
+            &ratelab::scheduler::StopFlag::new(),
+        )
+        .unwrap()
     };
     let first = bridge();
     let during = tokens();

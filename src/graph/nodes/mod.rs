@@ -1,6 +1,7 @@
 //! The node kinds at run time: what each does on a tick (ch2.8's node classes, generalized),
 //! one file each: [`sensor`], [`estimator`], [`policy`], [`safety`], [`actuator`]; a
-//! Python node is [`crate::python::node`], a registered one [`super::registry`].
+//! Python node is [`crate::python::node`], a registered one [`super::registry`]; an
+//! external node, run by another program over ROS 2, enters through [`external`].
 //!
 //! A **python** node runs its subscription callback for what arrived, then its timers; a
 //! **registered** kind its `tick` for what arrived; what either published goes out with the
@@ -16,12 +17,14 @@
 
 pub mod actuator;
 pub mod estimator;
+pub mod external;
 pub mod policy;
 pub mod safety;
 pub mod sensor;
 
 pub use actuator::Actuator;
 pub use estimator::Estimator;
+pub use external::{External, ExternalPort};
 pub use policy::PolicyNode;
 pub use safety::Safety;
 pub use sensor::{Sensor, SensorNoise, SensorOutput};
@@ -75,6 +78,8 @@ pub enum Work {
     Python(Box<crate::python::node::PythonNode>),
     /// A node of a kind registered in Rust ([`super::registry`]), bound to its topics.
     Registered(Box<dyn super::registry::Tick>),
+    /// A node another program runs over ROS 2 ([`external`]): its proxy.
+    External(Box<External>),
 }
 
 impl GraphNode {
@@ -99,13 +104,17 @@ impl Node for GraphNode {
             self.core.liveliness.fault_tick();
             return Flow::Continue; // stalled or killed: no work, no liveliness
         }
-        self.core.liveliness.assert_at(now);
+        if !matches!(self.work, Work::External(_)) {
+            // An external node is alive when it delivers, not when its proxy ticks.
+            self.core.liveliness.assert_at(now);
+        }
         match &mut self.work {
             Work::Sensor(s) => s.tick(now),
             Work::Estimator(e) => e.tick(now),
             Work::Policy(p) => p.tick(now),
             Work::Safety(s) => s.tick(now),
             Work::Actuator(a) => a.tick(now),
+            Work::External(x) => x.tick(now),
             Work::Registered(r) => {
                 r.tick(now);
                 Flow::Continue

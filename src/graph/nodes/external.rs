@@ -1,0 +1,222 @@
+//! The **external** node's stand-in inside the graph: a node of `kind = "external"` is run by
+//! another program over ROS 2 ([`crate::ros2::external`] connects it), and this proxy is
+//! where its messages enter ratelab's topics.
+//!
+//! On each tick at run time `t` the proxy reads its input topic as a built-in node of its
+//! place would (so the topic's counters and drop rule are the same), then:
+//! - **virtual clock (lockstep)**: it tells ROS 2 the time is `t` (`/clock`, after every
+//!   message the nodes ranked before it published at `t`) and waits, up to the node's
+//!   `tick_timeout`, for the external node's one message on its output; that message is
+//!   published at `t`. Nothing in time: the tick is counted as missed and publishes nothing.
+//!   The contract: **one message per output per tick**, computed from what the node had
+//!   received when `/clock` reached `t`.
+//! - **real clock**: it publishes, stamped `t`, every message that arrived since its last
+//!   tick (so a message enters the graph at most one proxy period after it arrived: give the
+//!   node a `rate_hz` at least its own).
+//!
+//! A published message carries the origin stamp of the newest input the proxy read (its
+//! tick time before the first), so the actuator measures sense→act latency across the
+//! external node as across any node. The node counts as alive (its liveliness asserted)
+//! when it delivers.
+
+use crate::graph::spec::{ExternalNodeSpec, NodeId, TopicId};
+use crate::msg::{AnyTopic, ForceMsg, MsgData, PositionMsg};
+use crate::node::Flow;
+use crate::publisher::Outbox;
+use crate::qos::Liveliness;
+use crate::time::Nanos;
+use crossbeam_channel::{Receiver, RecvTimeoutError, Sender, TrySendError};
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, OnceLock};
+
+/// Messages from the external node waiting for the proxy, at most; more are dropped and
+/// counted ([`ExternalStats::overflow`]).
+pub const INBOX_CAPACITY: usize = 1024;
+
+/// How the proxy reaches the ROS 2 side, set once it is connected.
+pub struct ExternalLink {
+    /// Lockstep (virtual clock): wait for one message per tick.
+    pub lockstep: bool,
+    /// Tell ROS 2 the run's time reached this (`/clock`), in order after what the graph
+    /// published before.
+    pub announce: Box<dyn Fn(Nanos) + Send + Sync>,
+}
+
+/// What an external node did in a run.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct ExternalStats {
+    /// Messages it delivered into the graph.
+    pub delivered: u64,
+    /// Lockstep ticks that waited `tick_timeout` in vain.
+    pub missed: u64,
+    /// Messages dropped because the proxy's inbox was full.
+    pub overflow: u64,
+    /// Messages that did not decode as the output's type (the first reason is kept).
+    pub undecodable: u64,
+    /// Why the first undecodable message did not decode.
+    pub first_error: Option<String>,
+}
+
+/// Where an external node's messages come in: filled by the ROS 2 side, drained by the
+/// proxy. One per external node, shared ([`crate::graph::GraphHandles::external`]).
+pub struct ExternalPort {
+    /// The node.
+    pub node: NodeId,
+    /// Its name.
+    pub name: String,
+    /// The topic it reads, if any.
+    pub input: Option<TopicId>,
+    /// The topic it publishes.
+    pub output: TopicId,
+    /// Its waits.
+    pub settings: ExternalNodeSpec,
+    tx: Sender<MsgData>,
+    rx: Receiver<MsgData>,
+    link: OnceLock<ExternalLink>,
+    delivered: AtomicU64,
+    missed: AtomicU64,
+    overflow: AtomicU64,
+    undecodable: AtomicU64,
+    first_error: OnceLock<String>,
+}
+
+impl ExternalPort {
+    /// A port for node `node` (`name`), reading `input`, publishing `output`.
+    pub fn new(
+        node: NodeId,
+        name: &str,
+        input: Option<TopicId>,
+        output: TopicId,
+        settings: ExternalNodeSpec,
+    ) -> ExternalPort {
+        let (tx, rx) = crossbeam_channel::bounded(INBOX_CAPACITY);
+        ExternalPort {
+            node,
+            name: name.to_string(),
+            input,
+            output,
+            settings,
+            tx,
+            rx,
+            link: OnceLock::new(),
+            delivered: AtomicU64::new(0),
+            missed: AtomicU64::new(0),
+            overflow: AtomicU64::new(0),
+            undecodable: AtomicU64::new(0),
+            first_error: OnceLock::new(),
+        }
+    }
+
+    /// Connect the port (once; a second link is ignored and `false` returned).
+    pub fn connect(&self, link: ExternalLink) -> bool {
+        self.link.set(link).is_ok()
+    }
+
+    /// A message from the external node: queued for the proxy's next tick, or counted when
+    /// the inbox is full.
+    pub fn push(&self, data: MsgData) {
+        if let Err(TrySendError::Full(_)) = self.tx.try_send(data) {
+            self.overflow.fetch_add(1, Ordering::Relaxed);
+        }
+    }
+
+    /// A message from the external node that did not decode: counted, the first reason kept.
+    pub fn refuse(&self, reason: String) {
+        self.undecodable.fetch_add(1, Ordering::Relaxed);
+        let _ = self.first_error.set(reason);
+    }
+
+    /// What it did so far.
+    pub fn stats(&self) -> ExternalStats {
+        ExternalStats {
+            delivered: self.delivered.load(Ordering::Relaxed),
+            missed: self.missed.load(Ordering::Relaxed),
+            overflow: self.overflow.load(Ordering::Relaxed),
+            undecodable: self.undecodable.load(Ordering::Relaxed),
+            first_error: self.first_error.get().cloned(),
+        }
+    }
+}
+
+/// The proxy node's state.
+pub struct External {
+    /// Its port.
+    pub port: Arc<ExternalPort>,
+    /// What it reads (for the counters and the origin stamp).
+    pub input: Option<AnyTopic>,
+    /// Where the external node's messages go.
+    pub output: AnyTopic,
+    /// Its publishers' outbox.
+    pub outbox: Outbox,
+    /// Its liveliness: asserted when it delivers.
+    pub liveliness: Arc<Liveliness>,
+    /// Origin stamp of the newest input read.
+    pub origin: Option<Nanos>,
+}
+
+impl External {
+    /// Read the input topic (the newest message's origin is kept).
+    fn read_input(&mut self, now: Nanos) {
+        let origin = match &self.input {
+            None => return,
+            Some(AnyTopic::State(t)) => t.read(now).map(|m| m.origin_stamp.unwrap_or(m.stamp)),
+            Some(AnyTopic::Position(t)) => t.read(now).map(|m| m.origin_stamp.unwrap_or(m.stamp)),
+            Some(AnyTopic::Force(t)) => t.read(now).map(|m| m.origin_stamp.unwrap_or(m.stamp)),
+        };
+        if origin.is_some() {
+            self.origin = origin;
+        }
+    }
+
+    /// Publish `data` at `now` on the output, if it is of the output's type.
+    fn deliver(&mut self, data: MsgData, now: Nanos) {
+        let origin = self.origin.or(Some(now));
+        let ob = &self.outbox;
+        match (&self.output, data) {
+            (AnyTopic::State(t), MsgData::State(v)) => ob.publish(t, v, now, origin),
+            (AnyTopic::Position(t), MsgData::Position(cart_pos_m, pole_angle_rad)) => {
+                let m = PositionMsg {
+                    cart_pos_m,
+                    pole_angle_rad,
+                };
+                ob.publish(t, m, now, origin)
+            }
+            (AnyTopic::Force(t), MsgData::Force(newtons)) => {
+                ob.publish(t, ForceMsg { newtons }, now, origin)
+            }
+            _ => {
+                let why = format!("a message of the wrong type for {}", self.output.name());
+                self.port.refuse(why);
+                return;
+            }
+        }
+        self.port.delivered.fetch_add(1, Ordering::Relaxed);
+        self.liveliness.assert_at(now);
+    }
+
+    /// One tick at `now` (see the module's header).
+    pub fn tick(&mut self, now: Nanos) -> Flow {
+        self.read_input(now);
+        let Some(link) = self.port.link.get() else {
+            return Flow::Continue; // not connected: nothing can come
+        };
+        if link.lockstep {
+            (link.announce)(now);
+            match self
+                .port
+                .rx
+                .recv_timeout(self.port.settings.tick_timeout.to_duration())
+            {
+                Ok(data) => self.deliver(data, now),
+                Err(RecvTimeoutError::Timeout | RecvTimeoutError::Disconnected) => {
+                    self.port.missed.fetch_add(1, Ordering::Relaxed);
+                }
+            }
+        } else {
+            while let Ok(data) = self.port.rx.try_recv() {
+                self.deliver(data, now);
+            }
+        }
+        Flow::Continue
+    }
+}

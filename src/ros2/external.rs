@@ -1,0 +1,308 @@
+//! External nodes: a graph node of `kind = "external"` that ratelab does not run. Any
+//! process speaking rmw_zenoh fills it (an rclpy or rclcpp node on a ROS 2 machine, or a
+//! plain Zenoh program): it subscribes to the node's input and publishes its output as
+//! ROS 2 topics, and ratelab's proxy ([`crate::graph::nodes::external`]) delivers what it
+//! publishes into the graph.
+//!
+//! Before the run starts, ratelab waits (up to the node's `appear_timeout_s`) for the node's
+//! liveliness tokens on the domain: its node (NN, by name, any namespace), a publisher (MP)
+//! on each output and a subscription (MS) on each input. A token for one of those topics
+//! with another type (name or RIHS01 hash) is refused at once, in one line naming both:
+//! the silent failure ROS 2 users otherwise meet (a subscriber that hears nothing). Then
+//! ratelab subscribes to the output's data key and decodes each message ([`super::types::decode`]).
+//!
+//! The time contract under the virtual clock (the lockstep): `/clock` reaches `t` at the
+//! external node's tick at `t`, after every message the nodes ranked before it published at
+//! `t` (the bridge holds `/clock = t` back until then, or until the next instant when no
+//! external node ticks at `t`); the node then publishes **one message per output per
+//! tick**, from the newest inputs it has. A node that ticks on `/clock` (a timer with
+//! `use_sim_time`, or a `/clock` subscription) and publishes from the newest input
+//! therefore computes on what ratelab's own node of its rank would read, and a
+//! deterministic node gives byte-identical runs. Zenoh delivers one session's samples to a
+//! subscriber in order; an rclpy executor may still run a timer before a subscription
+//! callback that arrived first (docs/ros2.md).
+
+use super::types::{decode, ros_type_of, type_info, RosType};
+use super::{zerr, Ros2Error};
+use crate::graph::nodes::ExternalPort;
+use crate::graph::GraphSpec;
+use crate::scheduler::StopFlag;
+use hiroz_protocol::entity::{EndpointEntity, EndpointKind, Entity, NodeEntity, TypeHash};
+use hiroz_protocol::qos::QosProfile;
+use hiroz_protocol::KeyExprFormat;
+use std::collections::BTreeSet;
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+use zenoh::Wait;
+
+/// A node's token, in [`Seen`]'s first place (an endpoint's is [`kind_key`]'s number).
+const NODE: u8 = u8::MAX;
+
+fn kind_key(k: EndpointKind) -> u8 {
+    match k {
+        EndpointKind::Publisher => 0,
+        EndpointKind::Subscription => 1,
+        _ => 2,
+    }
+}
+
+/// One token seen on the domain: (what it is, its node's name, its topic, its type's DDS
+/// name and hash).
+type Seen = (u8, String, String, Option<(String, [u8; 32])>);
+
+/// What one external node must have declared: its name, and per topic the endpoint kind
+/// with the type ratelab expects.
+struct Wanted<'a> {
+    port: &'a ExternalPort,
+    endpoints: Vec<(EndpointKind, &'a str, &'static super::types::RosType)>,
+}
+
+fn short_hash(h: &[u8; 32]) -> String {
+    TypeHash::new(1, *h).to_rihs_string()
+}
+
+/// The tokens of domain `domain` seen so far, kept by a liveliness subscriber (with the
+/// tokens already declared).
+struct Tokens {
+    seen: Arc<Mutex<BTreeSet<Seen>>>,
+    _sub: zenoh::pubsub::Subscriber<()>,
+}
+
+/// Check that `spec` may run without `--ros2`: it has no external node (only ROS 2 can fill
+/// one).
+///
+/// # Errors
+/// One line naming the first external node.
+pub fn check_offered(spec: &GraphSpec) -> Result<(), String> {
+    match spec.first_external() {
+        Some(n) => Err(format!(
+            "node '{}' is external (kind = \"external\"): a ROS 2 node fills it, so the graph runs with --ros2 (docs/ros2.md)",
+            n.name
+        )),
+        None => Ok(()),
+    }
+}
+
+/// Wait until every external node of `spec` (their `ports`) has declared its tokens on
+/// `domain`, each within its own `appear_timeout` from now.
+///
+/// # Errors
+/// [`Ros2Error::Usage`], one line: a node that did not appear in time (what is missing), a
+/// node whose endpoint has another type, or Ctrl-C while waiting. [`Ros2Error::Zenoh`]: the
+/// liveliness subscriber could not be declared.
+pub fn wait_for(
+    session: &zenoh::Session,
+    domain: u32,
+    spec: &GraphSpec,
+    ports: &[Arc<ExternalPort>],
+    stop: &StopFlag,
+) -> Result<(), Ros2Error> {
+    if ports.is_empty() {
+        return Ok(());
+    }
+    let tokens = watch(session, domain)?;
+    let wanted: Vec<Wanted<'_>> = ports
+        .iter()
+        .map(|p| {
+            let mut endpoints = Vec::new();
+            let topic = |t: crate::graph::TopicId| &spec.topics[t.0];
+            let out = topic(p.output);
+            endpoints.push((
+                EndpointKind::Publisher,
+                out.name.as_str(),
+                ros_type_of(out.msg),
+            ));
+            if let Some(i) = p.input {
+                let t = topic(i);
+                endpoints.push((
+                    EndpointKind::Subscription,
+                    t.name.as_str(),
+                    ros_type_of(t.msg),
+                ));
+            }
+            Wanted { port: p, endpoints }
+        })
+        .collect();
+    let start = Instant::now();
+    loop {
+        let seen = tokens
+            .seen
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .clone();
+        let mut all = true;
+        for w in &wanted {
+            let name = &w.port.name;
+            let mut missing = Vec::new();
+            if !seen.iter().any(|(k, n, _, _)| *k == NODE && n == name) {
+                missing.push(format!("its node (an NN token named '{name}')"));
+            }
+            for (kind, topic, ty) in &w.endpoints {
+                let want = (ty.dds_name(), ty.hash.0);
+                let mine = seen
+                    .iter()
+                    .filter(|(k, n, t, _)| *k == kind_key(*kind) && n == name && t == topic);
+                let mut found = false;
+                for (_, _, _, got) in mine {
+                    match got {
+                        Some(got) if *got == want => found = true,
+                        Some((gname, ghash)) => {
+                            let what = endpoint_word(*kind);
+                            let theirs = hiroz_schema::ros_from_dds_strict(gname);
+                            let differs = if *gname == want.0 {
+                                format!(
+                                    "{theirs} with type hash {}, ratelab's is {} (another ROS 2 distribution's definition?)",
+                                    short_hash(ghash),
+                                    short_hash(&want.1)
+                                )
+                            } else {
+                                format!("{theirs}, but the graph's {topic} is {}", ty.name)
+                            };
+                            return Err(Ros2Error::Usage(format!(
+                                "external node '{name}' {what} {topic} as {differs}: a ROS 2 endpoint of another type hears nothing (fix its type or the graph's)"
+                            )));
+                        }
+                        None => {}
+                    }
+                }
+                if !found {
+                    missing.push(format!("{} {topic} ({})", endpoint_word(*kind), ty.name));
+                }
+            }
+            if !missing.is_empty() {
+                all = false;
+                if start.elapsed() >= w.port.settings.appear_timeout.to_duration() {
+                    return Err(Ros2Error::Usage(format!(
+                        "external node '{name}' did not appear on ROS 2 domain {domain} within {:.1} s: no liveliness token for {} (start it, with RMW_IMPLEMENTATION=rmw_zenoh_cpp and the same ROS_DOMAIN_ID and router; or raise params.appear_timeout_s)",
+                        w.port.settings.appear_timeout.as_secs_f64(),
+                        missing.join(", ")
+                    )));
+                }
+            }
+        }
+        if all {
+            return Ok(());
+        }
+        if stop.is_stopped() {
+            return Err(Ros2Error::Usage(
+                "stopped while waiting for the graph's external nodes".into(),
+            ));
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+fn endpoint_word(k: EndpointKind) -> &'static str {
+    match k {
+        EndpointKind::Publisher => "publishes",
+        _ => "subscribes to",
+    }
+}
+
+/// A liveliness subscriber on `@ros2_lv/<domain>/**` (with the tokens already there)
+/// keeping what each token says.
+fn watch(session: &zenoh::Session, domain: u32) -> Result<Tokens, Ros2Error> {
+    let seen = Arc::new(Mutex::new(BTreeSet::new()));
+    let kept = seen.clone();
+    let format = KeyExprFormat::default();
+    let sub = session
+        .liveliness()
+        .declare_subscriber(format!("@ros2_lv/{domain}/**"))
+        .history(true)
+        .callback(move |sample| {
+            let Ok(entity) = format.parse_liveliness(sample.key_expr()) else {
+                return; // not a ROS 2 token: ignored
+            };
+            let entry = match entity {
+                Entity::Node(n) => (NODE, n.name, String::new(), None),
+                Entity::Endpoint(e) => (
+                    kind_key(e.kind),
+                    e.node.map(|n| n.name).unwrap_or_default(),
+                    e.topic,
+                    e.type_info.map(|t| (t.name, t.hash.value)),
+                ),
+            };
+            let mut s = kept.lock().unwrap_or_else(|e| e.into_inner());
+            match sample.kind() {
+                zenoh::sample::SampleKind::Put => {
+                    // Bounded: a domain with more than this many tokens is not waited on
+                    // token by token (the first ones are kept).
+                    if s.len() < 65_536 {
+                        s.insert(entry);
+                    }
+                }
+                zenoh::sample::SampleKind::Delete => {
+                    s.remove(&entry);
+                }
+            }
+        })
+        .wait()
+        .map_err(zerr)?;
+    Ok(Tokens { seen, _sub: sub })
+}
+
+/// The data key of `topic` of type `ty` on `domain` (`<domain>/<topic>/<dds type>/<hash>`).
+///
+/// # Errors
+/// [`Ros2Error::Zenoh`] when the format refuses it (a validated name never is).
+fn data_key(
+    format: &KeyExprFormat,
+    zid: zenoh::session::ZenohId,
+    domain: u32,
+    topic: &str,
+    ty: &RosType,
+) -> Result<String, Ros2Error> {
+    let dom = usize::try_from(domain).unwrap_or(0);
+    // Any node gives the same key: it names the domain, topic and type alone.
+    let node = NodeEntity::new(dom, zid, 0, "key".into(), String::new(), String::new());
+    let e = EndpointEntity {
+        id: 0,
+        node: Some(node),
+        kind: EndpointKind::Subscription,
+        topic: topic.to_string(),
+        type_info: Some(type_info(ty)),
+        qos: QosProfile::default(),
+    };
+    Ok(format.topic_key_expr(&e).map_err(zerr)?.to_string())
+}
+
+/// Subscribe to what each external node publishes, on its output's data key, delivering
+/// each decoded message to its port (undecodable ones are counted there). The subscribers
+/// live as long as the returned handles.
+///
+/// # Errors
+/// [`Ros2Error::Zenoh`]: a declaration failed.
+pub fn listen(
+    session: &zenoh::Session,
+    domain: u32,
+    spec: &GraphSpec,
+    ports: &[Arc<ExternalPort>],
+) -> Result<Vec<zenoh::pubsub::Subscriber<()>>, Ros2Error> {
+    let format = KeyExprFormat::default();
+    ports
+        .iter()
+        .map(|p| {
+            let topic = &spec.topics[p.output.0];
+            let key = data_key(
+                &format,
+                session.zid(),
+                domain,
+                &topic.name,
+                ros_type_of(topic.msg),
+            )?;
+            let port = p.clone();
+            let msg = topic.msg;
+            session
+                .declare_subscriber(key)
+                .callback(move |sample| {
+                    let bytes = sample.payload().to_bytes();
+                    match decode(msg, &bytes) {
+                        Ok(data) => port.push(data),
+                        Err(e) => port.refuse(e),
+                    }
+                })
+                .wait()
+                .map_err(zerr)
+        })
+        .collect()
+}

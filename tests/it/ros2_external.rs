@@ -1,0 +1,277 @@
+//! External nodes (`kind = "external"`): a ROS 2 node fills a graph node. The node here is
+//! `tests/ros2/external_policy.py`, the chapter's scripted balancer written as a ROS 2 node
+//! would be with independent implementations only (PyPI `eclipse-zenoh`, `rosbags`); the
+//! stand-in (`tests/ros2/standin.py`) plays the Zenoh router and lists what ROS 2 sees.
+
+use super::ros2::{connect_to, endpoints, oracle_python, ratelab, StandIn};
+use crate::distributed::free_port;
+use crate::repo;
+use serde_json::Value;
+use std::io::{BufRead, BufReader, Read};
+use std::path::Path;
+use std::process::{Child, Command, Stdio};
+
+/// The external policy, ready (its tokens declared).
+struct External {
+    child: Child,
+}
+
+impl External {
+    fn start(endpoint: &str, domain: u32, rate_hz: &str, extra: &[&str]) -> External {
+        let mut child = Command::new(oracle_python())
+            .arg(repo("tests/ros2/external_policy.py"))
+            .args([endpoint, &domain.to_string(), rate_hz])
+            .args(extra)
+            .stdin(Stdio::piped())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::inherit())
+            .spawn()
+            .unwrap();
+        let mut line = String::new();
+        BufReader::new(child.stdout.as_mut().unwrap())
+            .read_line(&mut line)
+            .unwrap();
+        assert_eq!(line.trim(), "ready", "the external policy did not start");
+        External { child }
+    }
+
+    /// Tell it the run is over; what it did.
+    fn report(mut self) -> Value {
+        drop(self.child.stdin.take());
+        let mut out = String::new();
+        self.child
+            .stdout
+            .take()
+            .unwrap()
+            .read_to_string(&mut out)
+            .unwrap();
+        assert!(
+            self.child.wait().unwrap().success(),
+            "the external policy failed"
+        );
+        serde_json::from_str(out.trim()).unwrap_or_else(|e| panic!("{e}: {out}"))
+    }
+}
+
+impl Drop for External {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// metrics.json without what names the graph, the brain and the nodes' kinds, and
+/// trace.csv, of the run written to `dir`.
+fn figures(dir: &Path) -> (String, Vec<u8>) {
+    let text = std::fs::read_to_string(dir.join("metrics.json")).unwrap();
+    let mut m: Value = serde_json::from_str(&text).unwrap();
+    let o = m.as_object_mut().unwrap();
+    o.remove("graph").expect("graph");
+    o.remove("policy").expect("policy");
+    for n in o["nodes"].as_object_mut().unwrap().values_mut() {
+        n.as_object_mut().unwrap().remove("kind").expect("kind");
+    }
+    let trace = std::fs::read(dir.join("trace.csv")).unwrap();
+    (serde_json::to_string_pretty(&m).unwrap(), trace)
+}
+
+const GRAPH: &str = "graphs/cartpole-external.toml";
+
+#[test]
+fn an_external_ros_2_policy_in_lockstep_gives_the_builtin_policys_figures_byte_for_byte() {
+    let _m = crate::machine::shared();
+    let endpoint = format!("tcp/127.0.0.1:{}", free_port());
+    let standin = StandIn::start("router", &endpoint, 4, &[]);
+    let (a, b) = (tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap());
+    let cases = [("0", "50"), ("1", "50"), ("2", "50"), ("0", "5")];
+    for (seed, hz) in cases {
+        let common = ["--clock", "virtual", "--duration", "2", "--force"];
+        let args = |dir: &Path| -> Vec<String> {
+            let mut v: Vec<String> = ["run", "--seed", seed, "--control-hz", hz, "--out"]
+                .map(String::from)
+                .to_vec();
+            v.push(dir.to_string_lossy().into_owned());
+            v.extend(common.map(String::from));
+            v
+        };
+        let builtin = args(a.path());
+        let builtin: Vec<&str> = builtin.iter().map(String::as_str).collect();
+        let (code, _, err) = ratelab(&builtin, &[]);
+        assert_eq!(code, 0, "{err}");
+
+        let policy = External::start(&endpoint, 4, hz, &[]);
+        let mut ext = args(b.path());
+        ext.extend(["--graph", GRAPH, "--ros2", "4"].map(String::from));
+        let ext: Vec<&str> = ext.iter().map(String::as_str).collect();
+        let (code, out, err) = ratelab(&ext, &[connect_to(&endpoint)]);
+        let did = policy.report();
+        assert_eq!(code, 0, "{out}{err}");
+        assert!(!err.contains("missed"), "seed {seed}, {hz} Hz: {err}");
+        assert!(out.contains("policy=external ROS 2 node 'policy'"), "{out}");
+        let (want, got) = (figures(a.path()), figures(b.path()));
+        assert!(
+            want.0 == got.0,
+            "seed {seed}, {hz} Hz: metrics differ\n{}\n{}",
+            want.0,
+            got.0
+        );
+        assert!(want.1 == got.1, "seed {seed}, {hz} Hz: trace differs");
+        // One message per tick, each one delivered: the policy's ticks.
+        let m: Value =
+            serde_json::from_str(&std::fs::read_to_string(b.path().join("metrics.json")).unwrap())
+                .unwrap();
+        assert_eq!(did["published"], m["policy_ticks"], "{did} {m}");
+    }
+    // ROS 2 saw the external node's own endpoints alone for 'policy' (one MP and one MS
+    // per run, with the QoS it declared): ratelab declared none for it.
+    let r = standin.report();
+    let e = endpoints(&r);
+    let of_policy: Vec<_> = e.iter().filter(|x| x.1 == "policy").collect();
+    assert_eq!(of_policy.len(), 2 * cases.len(), "{of_policy:?}");
+    for qos in r["endpoints"].as_array().unwrap() {
+        if qos["node"] == "policy" {
+            assert_eq!(qos["qos"], "1::,1:,:,:,,", "{qos}");
+        }
+    }
+}
+
+#[test]
+fn an_external_ros_2_policy_keeps_the_pole_up_under_the_real_clock() {
+    let _m = crate::machine::alone();
+    let endpoint = format!("tcp/127.0.0.1:{}", free_port());
+    let _standin = StandIn::start("router", &endpoint, 5, &[]);
+    let policy = External::start(&endpoint, 5, "50", &[]);
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path().to_str().unwrap();
+    let args = [
+        "run",
+        "--clock",
+        "real",
+        "--duration",
+        "3",
+        "--graph",
+        GRAPH,
+        "--ros2",
+        "5",
+        "--out",
+        d,
+    ];
+    let (code, out, err) = ratelab(&args, &[connect_to(&endpoint)]);
+    let did = policy.report();
+    assert_eq!(code, 0, "{out}{err}");
+    let m: Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.path().join("metrics.json")).unwrap())
+            .unwrap();
+    assert_eq!(m["balanced"], true, "{out}{err}");
+    // It published about 50 a second, and what it published drove the actuator.
+    let sent = did["published"].as_u64().unwrap();
+    assert!((100..=200).contains(&sent), "{did}");
+    let action = m["action_published"].as_u64().unwrap();
+    assert!(action >= sent - 5 && action <= sent, "{action} of {sent}");
+}
+
+#[test]
+fn an_external_node_missing_of_another_type_or_silent_is_said_in_one_line() {
+    let _m = crate::machine::shared();
+    let dir = tempfile::tempdir().unwrap();
+    let text = std::fs::read_to_string(repo(GRAPH)).unwrap();
+    let graph = |from: &str, to: &str| {
+        let p = dir.path().join(format!("g{}.toml", to.len()));
+        std::fs::write(&p, text.replace(from, to)).unwrap();
+        p.to_string_lossy().into_owned()
+    };
+    let quick = graph(
+        "appear_timeout_s = 10, tick_timeout_ms = 2000",
+        "appear_timeout_s = 1, tick_timeout_ms = 50",
+    );
+    let one_line = |err: &str| {
+        assert_eq!(err.trim_end().lines().count(), 1, "{err}");
+    };
+
+    // Without --ros2 nothing can fill it.
+    let (code, _, err) = ratelab(&["run", "--graph", GRAPH], &[]);
+    assert_eq!(code, 2, "{err}");
+    assert!(
+        err.contains("node 'policy' is external") && err.contains("--ros2"),
+        "{err}"
+    );
+    one_line(&err);
+    // Graph files: an external node must publish, and takes only its two params.
+    let (code, _, err) = ratelab(
+        &[
+            "run",
+            "--graph",
+            &graph("publishes = \"/action\"\nparams", "params"),
+        ],
+        &[],
+    );
+    assert_eq!(code, 2, "{err}");
+    assert!(
+        err.contains("an external node must publish a topic"),
+        "{err}"
+    );
+    let (code, _, err) = ratelab(
+        &[
+            "run",
+            "--graph",
+            &graph("tick_timeout_ms = 2000", "tick_timeout_ms = 0"),
+        ],
+        &[],
+    );
+    assert_eq!(code, 2, "{err}");
+    assert!(
+        err.contains("params.tick_timeout_ms must be a number in 1..=60000"),
+        "{err}"
+    );
+    let (code, _, err) = ratelab(
+        &[
+            "run",
+            "--graph",
+            &graph("tick_timeout_ms = 2000", "script = 2"),
+        ],
+        &[],
+    );
+    assert_eq!(code, 2, "{err}");
+    assert!(
+        err.contains("appear_timeout_s and tick_timeout_ms, not 'script'"),
+        "{err}"
+    );
+
+    let endpoint = format!("tcp/127.0.0.1:{}", free_port());
+    let _standin = StandIn::start("router", &endpoint, 6, &[]);
+    let env = [connect_to(&endpoint)];
+    let run = |extra: &[&str]| {
+        let mut args = vec!["run", "--graph", &quick, "--ros2", "6", "--duration", "1"];
+        args.extend_from_slice(extra);
+        ratelab(&args, &env)
+    };
+    // Never appears: named, with what is missing, after its bounded wait.
+    let (code, _, err) = run(&[]);
+    assert_eq!(code, 2, "{err}");
+    assert!(
+        err.contains("external node 'policy' did not appear on ROS 2 domain 6 within 1.0 s")
+            && err.contains("an NN token named 'policy'")
+            && err.contains("publishes /action (std_msgs/msg/Float64)"),
+        "{err}"
+    );
+    one_line(&err);
+    // The wrong type: said from its token, before the run.
+    let wrong = External::start(&endpoint, 6, "50", &["--type", "float32"]);
+    let (code, _, err) = run(&[]);
+    drop(wrong);
+    assert_eq!(code, 2, "{err}");
+    assert!(
+        err.contains("external node 'policy' publishes /action as std_msgs/msg/Float32, but the graph's /action is std_msgs/msg/Float64"),
+        "{err}"
+    );
+    one_line(&err);
+    // There but silent: each tick waits its timeout, and the misses are reported.
+    let mute = External::start(&endpoint, 6, "50", &["--mute"]);
+    let (code, out, err) = run(&["--clock", "virtual"]);
+    drop(mute);
+    assert_eq!(code, 0, "{out}{err}");
+    assert!(
+        err.contains("external node 'policy' missed") && err.contains("tick(s)"),
+        "{err}"
+    );
+}
