@@ -4,11 +4,11 @@
 use super::keymap::{depth_down, depth_up, rate_down, rate_up, Msg};
 use super::live::{Live, WINDOW};
 use super::view::{
-    LatencyView, NodeView, SegmentView, Selected, TopicView, Verdict, View, WindowLatency,
+    Badge, LatencyView, NodeView, SegmentView, Selected, TopicView, Verdict, View, WindowLatency,
 };
 use crossbeam_channel::Sender;
 use ratelab::config::{check_rate, BREAK_CONTROL_HZ};
-use ratelab::graph::{GraphSpec, NodeId, TopicId};
+use ratelab::graph::{GraphSpec, NodeId, NodeKind, TopicId};
 use ratelab::plant::GEAR_N;
 use ratelab::qos::{Delivery, OnDeadlineMissed, QosCounter, Reliability, TopicQos};
 use ratelab::run::Command;
@@ -785,7 +785,11 @@ impl App {
             selected: self.selected == Some(Selected::Node(id)),
             alive: self.alive.get(id.0).copied().flatten(),
             process: self.attached.as_ref().map(|_| self.graph.process_of(id)),
-            python: self.graph.node(id).python.is_some(),
+            badge: match self.graph.node(id).kind {
+                NodeKind::Python => Some(Badge::Python),
+                NodeKind::External => Some(Badge::Ros2),
+                _ => None,
+            },
         }
     }
 
@@ -876,11 +880,11 @@ impl App {
             paused: self.paused,
             sim_time_s: self.now.as_secs_f64(),
             seed: self.seed,
-            // A Python policy node is its own brain (`--policy` does not apply to it).
-            brain: if self.graph.node(self.graph.chain.policy).python.is_some() {
-                "py node".into()
-            } else {
-                short_brain(&self.policy_spec)
+            // A Python or external policy node is its own brain (`--policy` does not apply).
+            brain: match self.graph.node(self.graph.chain.policy).kind {
+                NodeKind::Python => "py node".into(),
+                NodeKind::External => "ROS 2 node".into(),
+                _ => short_brain(&self.policy_spec),
             },
             brain_caption: self
                 .brain

@@ -53,8 +53,29 @@ pub struct NodeView {
     /// Attached to a graph across processes: the process it runs in (the box's title
     /// reads `policy@policy`).
     pub process: Option<String>,
-    /// A learner's node (`kind = "python"`): its box says `python` under its rate.
-    pub python: bool,
+    /// What its box says under its rate about who runs it: `python` for a learner's node
+    /// (`kind = "python"`), `ROS 2` for an external node (`kind = "external"`, run by a ROS 2
+    /// program); `None` for the built-in kinds.
+    pub badge: Option<Badge>,
+}
+
+/// Who runs a node that ratelab's built-in kinds do not: [`NodeView::badge`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Badge {
+    /// A Python node.
+    Python,
+    /// An external node, filled by a ROS 2 program.
+    Ros2,
+}
+
+impl Badge {
+    /// Under the rate, and (when the box has no room below) after the name in its title.
+    fn words(self) -> (&'static str, &'static str) {
+        match self {
+            Badge::Python => ("python", "py"),
+            Badge::Ros2 => ("ROS 2 node", "ros"),
+        }
+    }
 }
 
 /// One topic arrow.
@@ -538,10 +559,12 @@ fn render_node(n: &NodeView, area: Rect, buf: &mut Buffer, real: bool) {
             .dim(),
         );
     }
-    // A Python node says so under its rate, or in its title when the box has no room left.
-    let python_in_title = n.python && lines.len() + 1 > usize::from(area.height.saturating_sub(2));
-    if n.python && !python_in_title {
-        lines.insert(1, Line::from("python").cyan());
+    // A Python or ROS 2 node says so under its rate, or in its title when the box has no
+    // room left.
+    let badge_in_title =
+        n.badge.is_some() && lines.len() + 1 > usize::from(area.height.saturating_sub(2));
+    if let (Some(b), false) = (n.badge, badge_in_title) {
+        lines.insert(1, Line::from(b.words().0).cyan());
     }
     if n.alive == Some(false) {
         lines.insert(0, Line::from("✗ NOT ALIVE").white().on_red().bold());
@@ -551,8 +574,12 @@ fn render_node(n: &NodeView, area: Rect, buf: &mut Buffer, real: bool) {
         None => n.name.clone(),
     };
     // Only where the name still fits whole (a centred title too long loses both ends).
-    if python_in_title && name.chars().count() + 3 <= usize::from(area.width.saturating_sub(2)) {
-        name.push_str(" py");
+    if let (Some(b), true) = (n.badge, badge_in_title) {
+        let short = b.words().1;
+        if name.chars().count() + short.len() < usize::from(area.width.saturating_sub(2)) {
+            name.push(' ');
+            name.push_str(short);
+        }
     }
     let (title, border) = if n.selected {
         (

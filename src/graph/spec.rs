@@ -1567,12 +1567,14 @@ fn external_node(
         let (scale, range, slot) = match k.as_str() {
             "appear_timeout_s" => (1e9, 0.0..=600.0, &mut spec.appear_timeout),
             "tick_timeout_ms" => (1e6, 1.0..=60_000.0, &mut spec.tick_timeout),
-            _ => return Err(cx.err(
-                p.span(),
-                format!(
+            _ => {
+                return Err(cx.err(
+                    p.span(),
+                    format!(
                     "an external node's params are appear_timeout_s and tick_timeout_ms, not '{k}'"
                 ),
-            )),
+                ))
+            }
         };
         let x = match v {
             toml::Value::Float(x) => *x,

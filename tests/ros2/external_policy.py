@@ -56,7 +56,7 @@ session = zenoh.open(conf)
 zid = str(session.info.zid())
 
 lock = threading.Lock()
-state = {"obs": None, "next_ns": 0, "published": 0, "clock_msgs": 0, "obs_msgs": 0, "seq": 0}
+state = {"obs": None, "next_ns": 0, "last_ns": 0, "published": 0, "clock_msgs": 0, "obs_msgs": 0, "seq": 0}
 gid = bytes(range(16))
 pub = session.declare_publisher(data_key("action", out_type))
 
@@ -84,6 +84,11 @@ def on_clock(sample):
     t = c.clock.sec * 1_000_000_000 + c.clock.nanosec
     with lock:
         state["clock_msgs"] += 1
+        if t < state["last_ns"]:
+            # Time jumped back (a new run, or the lab's reset, starts at 0): as ROS 2 resets
+            # its timers on a backward jump, the next tick is due at once.
+            state["next_ns"] = t
+        state["last_ns"] = t
         if t < state["next_ns"]:
             return
         while state["next_ns"] <= t:  # a ROS 2 timer: the next call after now

@@ -1,0 +1,68 @@
+"""The chapter's scripted balancer as an rclpy node: the external `policy` of
+graphs/cartpole-external.toml.
+
+On a ROS 2 machine (Jazzy or later) with rmw_zenoh:
+
+    export RMW_IMPLEMENTATION=rmw_zenoh_cpp
+    ros2 run rmw_zenoh_cpp rmw_zenohd &            # or let ratelab run its own router
+    python3 examples/ros2/balancer_node.py &
+    ratelab run --graph graphs/cartpole-external.toml --ros2 --clock virtual
+
+It follows ratelab's /clock (use_sim_time), keeps the newest /obs, and at each tick of its
+timer publishes one /action: the contract of an external node under the virtual clock (one
+message per output per tick; docs/ros2.md). Its rate must be the graph node's rate_hz.
+Its force is not rounded through float32 as the built-in brain's action is, so its figures
+are close to the built-in policy's, not equal (the test's node rounds, and is equal).
+
+Untested here: the machines that build ratelab have no ROS 2. The same node written with
+Zenoh's Python API and rosbags (tests/ros2/external_policy.py) is what the tests run.
+"""
+
+
+import rclpy
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64
+
+RATE_HZ = 50.0  # the graph file's rate_hz for `policy`
+GEAR_N = 10.0  # the cartpole's motor: newtons per unit of action
+
+
+class Balancer(Node):
+    def __init__(self):
+        super().__init__(
+            "policy", parameter_overrides=[Parameter("use_sim_time", value=True)]
+        )
+        self.obs = None
+        self.create_subscription(JointState, "/obs", self.on_obs, 1)
+        self.pub = self.create_publisher(Float64, "/action", 1)
+        self.create_timer(1.0 / RATE_HZ, self.on_tick)
+
+    def on_obs(self, msg):
+        self.obs = msg
+
+    def on_tick(self):
+        if self.obs is None:
+            return
+        x, theta = self.obs.position
+        x_dot, theta_dot = self.obs.velocity
+        u = 10.0 * theta + 2.0 * theta_dot + 0.4 * x + 0.8 * x_dot
+        u = max(-1.0, min(1.0, u))
+        self.pub.publish(Float64(data=u * GEAR_N))
+
+
+def main():
+    rclpy.init()
+    node = Balancer()
+    try:
+        rclpy.spin(node)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown()
+
+
+if __name__ == "__main__":
+    main()
