@@ -7,6 +7,7 @@ line being the innermost frame in the learner's own files (the folder of the scr
 NumPy internal never hides where the learner's code went wrong.
 """
 
+import math
 import os
 import sys
 import traceback
@@ -128,26 +129,82 @@ class _Msg:
         return tuple(float(getattr(self, k)) for k in self.FIELDS)
 
 
+# The ROS 2 types each class is offered as (`--ros2`, src/ros2/types.rs; docs/ros2.md):
+# `to_ros()` gives the ROS 2 message's fields as a dict (`JointState(**s.to_ros())` in
+# rclpy; the header is left to the publisher), `from_ros(msg)` reads a ROS 2 message (an
+# rclpy or rosbags object, or a dict) with the same conversion ratelab's bridge uses.
+JOINT_NAMES = ("slider", "hinge")
+
+
+def _ros_field(msg, name):
+    return msg[name] if isinstance(msg, dict) else getattr(msg, name)
+
+
+def _joints(msg, velocities):
+    names = list(_ros_field(msg, "name"))
+    if names and tuple(names) != JOINT_NAMES:
+        raise ValueError(f"JointState names {names}, not {list(JOINT_NAMES)}")
+    pos = [float(v) for v in _ros_field(msg, "position")]
+    vel = [float(v) for v in _ros_field(msg, "velocity")] if velocities else [0.0, 0.0]
+    if len(pos) != 2 or len(vel) != 2:
+        raise ValueError("a JointState needs both joints' positions"
+                         + (" and velocities" if velocities else ""))
+    return pos, vel
+
+
 class State(_Msg):
     """The full state, the chapter's observation (float32 on the wire): cart position m,
-    cart velocity m/s, cos θ, sin θ, pole angular velocity rad/s."""
+    cart velocity m/s, cos θ, sin θ, pole angular velocity rad/s. ROS 2:
+    `sensor_msgs/msg/JointState` (joints slider, hinge; the pole's position is
+    atan2(sin θ, cos θ))."""
 
     __slots__ = ("cart_pos_m", "cart_vel_m_s", "cos_theta", "sin_theta", "pole_angvel_rad_s")
     FIELDS = __slots__
+    ROS_TYPE = "sensor_msgs/msg/JointState"
+
+    def to_ros(self):
+        theta = math.atan2(self.sin_theta, self.cos_theta)
+        return {"name": list(JOINT_NAMES), "position": [self.cart_pos_m, theta],
+                "velocity": [self.cart_vel_m_s, self.pole_angvel_rad_s], "effort": []}
+
+    @classmethod
+    def from_ros(cls, msg):
+        (x, theta), (x_dot, theta_dot) = _joints(msg, True)
+        return cls(x, x_dot, math.cos(theta), math.sin(theta), theta_dot)
 
 
 class Position(_Msg):
-    """A position measurement: cart position m, pole angle from upright rad."""
+    """A position measurement: cart position m, pole angle from upright rad. ROS 2:
+    `sensor_msgs/msg/JointState` without velocities."""
 
     __slots__ = ("cart_pos_m", "pole_angle_rad")
     FIELDS = __slots__
+    ROS_TYPE = "sensor_msgs/msg/JointState"
+
+    def to_ros(self):
+        return {"name": list(JOINT_NAMES), "position": [self.cart_pos_m, self.pole_angle_rad],
+                "velocity": [], "effort": []}
+
+    @classmethod
+    def from_ros(cls, msg):
+        (x, theta), _ = _joints(msg, False)
+        return cls(x, theta)
 
 
 class Force(_Msg):
-    """A force on the cart, N (the motor's range is ±10 N; the plant clips beyond it)."""
+    """A force on the cart, N (the motor's range is ±10 N; the plant clips beyond it).
+    ROS 2: `std_msgs/msg/Float64`."""
 
     __slots__ = ("newtons",)
     FIELDS = __slots__
+    ROS_TYPE = "std_msgs/msg/Float64"
+
+    def to_ros(self):
+        return {"data": self.newtons}
+
+    @classmethod
+    def from_ros(cls, msg):
+        return cls(float(_ros_field(msg, "data")))
 
 
 MESSAGE_TYPES = {"state": State, "position": Position, "force": Force}

@@ -1,0 +1,51 @@
+"""Checks ratelab's Python message classes (src/python/support.py: State, Position, Force)
+against ROS 2's types as `rosbags` (an independent implementation) serializes them.
+
+Reads one JSON object on stdin: {"state": HEX, "position": HEX, "force": HEX}, CDR that
+ratelab's Rust bridge encoded (src/ros2/types.rs). Prints one JSON object:
+  from_ros: each decoded with rosbags and read with CLASS.from_ros (fields as floats);
+  to_ros: HEX of CDR that rosbags serializes from CLASS(...).to_ros() for the values given
+          in the input's "values" (state: 5 floats, position: 2, force: 1);
+  ros_type: each class's ROS_TYPE.
+"""
+
+import json
+import os
+import sys
+
+from rosbags.typesys import Stores, get_typestore
+
+sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "..", "src", "python"))
+import support  # noqa: E402  (ratelab's own module, under test)
+
+store = get_typestore(Stores.LATEST)
+given = json.load(sys.stdin)
+classes = {"state": support.State, "position": support.Position, "force": support.Force}
+out = {"from_ros": {}, "to_ros": {}, "ros_type": {}}
+for name, cls in classes.items():
+    msg = store.deserialize_cdr(bytes.fromhex(given[name]), cls.ROS_TYPE)
+    out["from_ros"][name] = list(cls.from_ros(msg)._fields())
+    out["ros_type"][name] = cls.ROS_TYPE
+    fields = cls(*given["values"][name]).to_ros()
+    Msg = store.types[cls.ROS_TYPE]
+    if cls.ROS_TYPE == "sensor_msgs/msg/JointState":
+        import numpy as np
+
+        Header = store.types["std_msgs/msg/Header"]
+        Time = store.types["builtin_interfaces/msg/Time"]
+        fields = {
+            "header": Header(stamp=Time(sec=0, nanosec=0), frame_id=""),
+            "name": fields["name"],
+            "position": np.array(fields["position"], dtype=np.float64),
+            "velocity": np.array(fields["velocity"], dtype=np.float64),
+            "effort": np.array(fields["effort"], dtype=np.float64),
+        }
+    out["to_ros"][name] = bytes(store.serialize_cdr(Msg(**fields), cls.ROS_TYPE)).hex()
+# A dict works as a message too, and a JointState with other joints is refused.
+assert support.Force.from_ros({"data": 2.5}).newtons == 2.5
+try:
+    support.Position.from_ros({"name": ["a", "b"], "position": [0, 0], "velocity": []})
+    raise SystemExit("other joints were accepted")
+except ValueError as e:
+    assert "not ['slider', 'hinge']" in str(e), e
+print(json.dumps(out))
