@@ -8,12 +8,15 @@
 //! time, ns, so a bag of a virtual run holds the same messages at the same times on every
 //! run of it (the MCAP summary's record order is the `mcap` crate's and varies), and its
 //! starting time reads 1970-01-01 (run time starts at 0). `metadata.yaml` is rosbag2's version 9 with
-//! each topic's type, RIHS01 hash and message count. MCAP is written by the `mcap` crate,
+//! each topic's type, RIHS01 hash, message count and offered QoS profile (the QoS ratelab
+//! ran it with, as its publisher's token says; also in each MCAP channel's metadata, where
+//! `ros2 bag play` reads it). MCAP is written by the `mcap` crate,
 //! the YAML by `serde_yaml`; a bag cut short (killed run) has its MCAP data but no
 //! `metadata.yaml`, which `ros2 bag reindex` rebuilds.
 
 use super::types::RosType;
 use super::Ros2Error;
+use hiroz_protocol::qos::{QosDuration, QosHistory, QosProfile, QosReliability};
 use serde::Serialize;
 use std::collections::BTreeMap;
 use std::io::BufWriter;
@@ -50,11 +53,62 @@ pub struct BagTopic<'a> {
     pub name: &'a str,
     /// Its ROS 2 type.
     pub ty: &'static RosType,
+    /// The QoS its publisher offered.
+    pub qos: QosProfile,
+}
+
+/// A QoS profile as rosbag2's metadata (version 9) writes it.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+struct QosYaml {
+    history: &'static str,
+    depth: usize,
+    reliability: &'static str,
+    durability: &'static str,
+    deadline: SecNsec,
+    lifespan: SecNsec,
+    liveliness: &'static str,
+    liveliness_lease_duration: SecNsec,
+    avoid_ros_namespace_conventions: bool,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+struct SecNsec {
+    sec: u64,
+    nsec: u64,
+}
+
+impl QosYaml {
+    fn of(q: &QosProfile) -> QosYaml {
+        let d = |d: QosDuration| SecNsec {
+            sec: d.sec,
+            nsec: d.nsec,
+        };
+        let (history, depth) = match q.history {
+            QosHistory::KeepLast(n) => ("keep_last", n),
+            QosHistory::KeepAll => ("keep_all", 0),
+        };
+        QosYaml {
+            history,
+            depth,
+            reliability: match q.reliability {
+                QosReliability::Reliable => "reliable",
+                QosReliability::BestEffort => "best_effort",
+            },
+            // ratelab keeps nothing for late joiners.
+            durability: "volatile",
+            deadline: d(q.deadline),
+            lifespan: d(q.lifespan),
+            liveliness: "automatic",
+            liveliness_lease_duration: d(q.liveliness_lease_duration),
+            avoid_ros_namespace_conventions: false,
+        }
+    }
 }
 
 struct Counted {
     name: String,
     ty: &'static RosType,
+    qos: QosYaml,
     channel: u16,
     count: u64,
 }
@@ -143,12 +197,16 @@ impl Bag {
                     id
                 }
             };
+            let qos = QosYaml::of(&t.qos);
+            let offered = serde_yaml::to_string(&[&qos]).unwrap_or_default();
+            let meta = BTreeMap::from([("offered_qos_profiles".to_string(), offered)]);
             let channel = writer
-                .add_channel(schema_id, t.name, "cdr", &BTreeMap::new())
+                .add_channel(schema_id, t.name, "cdr", &meta)
                 .map_err(|e| io(&mcap_path, e))?;
             counted.push(Counted {
                 name: t.name.to_string(),
                 ty: t.ty,
+                qos,
                 channel,
                 count: 0,
             });
@@ -218,7 +276,7 @@ impl Bag {
                             name: t.name.clone(),
                             r#type: t.ty.name,
                             serialization_format: "cdr",
-                            offered_qos_profiles: Vec::new(),
+                            offered_qos_profiles: vec![t.qos.clone()],
                             type_description_hash: t.ty.hash.to_rihs_string(),
                         },
                         message_count: t.count,
@@ -290,7 +348,7 @@ struct TopicMeta {
     name: String,
     r#type: &'static str,
     serialization_format: &'static str,
-    offered_qos_profiles: Vec<String>,
+    offered_qos_profiles: Vec<QosYaml>,
     type_description_hash: String,
 }
 

@@ -417,14 +417,17 @@ impl Bridge {
                 let mut topics: Vec<BagTopic<'_>> = spec
                     .topics
                     .iter()
-                    .map(|t| BagTopic {
+                    .enumerate()
+                    .map(|(i, t)| BagTopic {
                         name: &t.name,
                         ty: ros_type_of(t.msg),
+                        qos: qos_of(spec, i),
                     })
                     .collect();
                 topics.push(BagTopic {
                     name: CLOCK_TOPIC,
                     ty: clock_type(),
+                    qos: clock_qos(),
                 });
                 Some(Bag::create(dir, opts.force, &topics)?)
             }

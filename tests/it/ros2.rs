@@ -366,9 +366,15 @@ import json, sys
 from rosbags.rosbag2 import Reader
 from rosbags.typesys import Stores, get_typestore
 ts = get_typestore(Stores.LATEST)
-out = {"count": 0, "topics": {}}
+out = {"count": 0, "topics": {}, "qos": {}}
 with Reader(sys.argv[1]) as r:
     out["count"] = r.message_count
+    for c in r.connections:
+        out["qos"][c.topic] = [
+            [q.history.name, q.depth, q.reliability.name, q.durability.name,
+             q.deadline.sec, q.deadline.nsec]
+            for q in c.ext.offered_qos_profiles
+        ]
     for c, t, raw in r.messages():
         m = ts.deserialize_cdr(raw, c.msgtype)
         rows = out["topics"].setdefault(c.topic, {"type": c.msgtype, "t": [], "v": []})
@@ -405,7 +411,11 @@ fn a_bag_of_the_run_reads_back_with_rosbags_every_message_the_same_on_every_run(
         (ratelab(&args, &env), path)
     };
     let out = dir.path().join("out");
-    let ((code, stdout, stderr), first) = bag("first", &["--out", out.to_str().unwrap()]);
+    let deadline = ["--qos", "/action:deadline_ms=40"];
+    let ((code, stdout, stderr), first) = bag(
+        "first",
+        &[&["--out", out.to_str().unwrap()][..], &deadline].concat(),
+    );
     assert_eq!(code, 0, "{stdout}{stderr}");
     assert!(
         stdout.contains("(rosbag2, MCAP): 153 messages with /clock"),
@@ -417,6 +427,21 @@ fn a_bag_of_the_run_reads_back_with_rosbags_every_message_the_same_on_every_run(
     assert_eq!(topic("/obs")["type"], "sensor_msgs/msg/JointState");
     assert_eq!(topic("/action")["type"], "std_msgs/msg/Float64");
     assert_eq!(topic("/clock")["type"], "rosgraph_msgs/msg/Clock");
+    // Each topic's offered QoS is the one ratelab ran it with (`ros2 bag play` offers it).
+    let qos = |t: &str| r["qos"][t].to_string();
+    let inf = "9223372036,854775807";
+    assert_eq!(
+        qos("/obs"),
+        format!("[[\"KEEP_LAST\",1,\"BEST_EFFORT\",\"VOLATILE\",{inf}]]")
+    );
+    assert_eq!(
+        qos("/action"),
+        "[[\"KEEP_LAST\",1,\"BEST_EFFORT\",\"VOLATILE\",0,40000000]]"
+    );
+    assert_eq!(
+        qos("/clock"),
+        format!("[[\"KEEP_LAST\",1,\"BEST_EFFORT\",\"VOLATILE\",{inf}]]")
+    );
     // The forces applied, in newtons, step by step; log times are run times.
     let rows = trace(&out);
     let forces = topic("/action")["v"].as_array().unwrap();
@@ -438,7 +463,7 @@ fn a_bag_of_the_run_reads_back_with_rosbags_every_message_the_same_on_every_run(
 
     // The same run again: the same messages at the same times (the MCAP summary's record
     // order is the `mcap` crate's and varies between processes).
-    let ((code, ..), second) = bag("second", &[]);
+    let ((code, ..), second) = bag("second", &deadline);
     assert_eq!(code, 0);
     assert_eq!(read_bag(&second), r);
     // Never over a bag without --force; with it, replaced.
