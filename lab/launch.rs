@@ -42,10 +42,8 @@ pub fn run_launch(a: &LaunchArgs, force_headless: bool, stop: StopFlag) -> anyho
         }
         return headless::run_headless(&run, stop).map(|_| ());
     }
-    if run.ros2.is_some() {
-        anyhow::bail!(
-            "--ros2 offers a graph run in one process (run, or launch without --processes); a launch across processes does not offer one yet (docs/ros2.md)"
-        );
+    if run.bag.is_some() {
+        anyhow::bail!("--bag writes a bag of a run in one process (run --ros2): a launch across processes does not write one yet");
     }
     if run.session.is_some() {
         anyhow::bail!("--session is not available with --processes: a launch takes no live commands to log (its lab only watches)");
@@ -55,7 +53,7 @@ pub fn run_launch(a: &LaunchArgs, force_headless: bool, stop: StopFlag) -> anyho
     let mut cfg = headless::config_from_args(&run)?;
     if let Some(n) = cfg.graph.first_external() {
         anyhow::bail!(
-            "node '{}' is external (kind = \"external\"): a ROS 2 node fills it over --ros2, which a launch across processes does not offer yet; run the graph in one process (without --processes)",
+            "node '{}' is external (kind = \"external\"): a launch across processes does not wait for external nodes yet; run the graph in one process (launch without --processes, or run)",
             n.name
         );
     }
@@ -88,6 +86,27 @@ pub fn run_launch(a: &LaunchArgs, force_headless: bool, stop: StopFlag) -> anyho
             f.display()
         );
     }
+    // --ros2: checked, and the session (with the embedded router when none answers) opened
+    // before any process starts, so that each finds the router and offers its own nodes.
+    let ros2_domain = run.ros2_domain().map_err(anyhow::Error::msg)?;
+    let _ros2 = match ros2_domain {
+        Some(domain) => {
+            let opts = ratelab::ros2::Ros2Options {
+                domain,
+                bag: None,
+                force: false,
+            };
+            ratelab::ros2::bridge::check(&cfg.graph, &opts).map_err(anyhow::Error::msg)?;
+            let env = ratelab::ros2::session::SessionEnv::from_process();
+            let link = ratelab::ros2::session::open(&env, &stop)?;
+            println!(
+                "[ratelab] launch: offering the graph to ROS 2 on domain {domain}: each process its own nodes, the plant's process /clock, {}",
+                link.router.via()
+            );
+            Some(link)
+        }
+        None => None,
+    };
     let graph_path = run.graph.graph.clone();
     let opts = LaunchOptions {
         graph_bytes: graph_bytes(graph_path.as_deref())?,
@@ -104,6 +123,7 @@ pub fn run_launch(a: &LaunchArgs, force_headless: bool, stop: StopFlag) -> anyho
         listening: None,
         pace: None,
         credentials,
+        ros2_domain,
     };
     let placement: Vec<String> = cfg
         .graph

@@ -306,8 +306,8 @@ pub fn run(
     };
     let bridge = match (&opts.ros2, &link) {
         (Some(o), Some(link)) => {
-            let graph = (&*handles.spec, &handles.topics[..], &handles.external[..]);
-            let b = crate::ros2::Bridge::start(link, graph, o, cfg.clock, &opts.stop)?;
+            let offer = crate::ros2::bridge::Offer::whole(&handles);
+            let b = crate::ros2::Bridge::start(link, &offer, o, cfg.clock, &opts.stop)?;
             eprintln!("[ratelab] {}", b.describe());
             Some(b)
         }

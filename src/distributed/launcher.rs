@@ -65,6 +65,10 @@ pub struct LaunchOptions {
     /// process it starts that process's alone (a file in a private folder, removed when
     /// the launch ends).
     pub credentials: Credentials,
+    /// `--ros2`: each process offers its own nodes to ROS 2 on this domain, the plant's
+    /// process `/clock` too (the launcher's program holds the ROS 2 session, and so the
+    /// embedded router when none answered, for the launch's length).
+    pub ros2_domain: Option<u32>,
 }
 
 /// The longest line of a started process's stderr that [`LaunchOptions::child_stderr`]
@@ -688,6 +692,7 @@ pub fn launch(
         phase_offsets_ns: cfg.phase_offsets.iter().map(|n| n.0).collect(),
         spin_margin_ns: cfg.spin_margin.0,
         rt_priority: cfg.rt_priority,
+        ros2_domain: opts.ros2_domain,
     };
     // Watchers ask for the run's settings here (`ratelab lab --attach`).
     let setup_json = wire::encode_json(&setup);

@@ -612,6 +612,11 @@ pub fn run_member(opts: &MemberOptions, stop: &StopFlag) -> Result<(), DistError
             })
             .map_err(|e| DistError::Peer(format!("cannot start a thread: {e}")))?
     };
+    // --ros2: this process offers its own nodes; the plant's process `/clock` too.
+    let ros2 = match setup.ros2_domain {
+        Some(domain) => Some(offer_to_ros2(domain, &cfg, &handles, &mine, stop)?),
+        None => None,
+    };
     let local: Vec<usize> = mine.iter().map(|id| id.0).collect();
     let result = match cfg.clock {
         crate::ClockKind::Virtual => run_lockstep(
@@ -655,6 +660,13 @@ pub fn run_member(opts: &MemberOptions, stop: &StopFlag) -> Result<(), DistError
     };
     stats_done.stop();
     let _ = stats_thread.join();
+    if let Some((bridge, link)) = ros2 {
+        let r = bridge.finish();
+        if let Some(e) = r.error {
+            eprintln!("[ratelab] warning: ROS 2: {e}");
+        }
+        link.close();
+    }
     let state = result?;
     // The launcher vanished mid-run (killed): nobody will take the report or print a
     // summary; say so rather than end as if the run had completed.
@@ -676,6 +688,40 @@ pub fn run_member(opts: &MemberOptions, stop: &StopFlag) -> Result<(), DistError
     drop(lockstep_keys);
     let _ = session.close().wait();
     Ok(())
+}
+
+/// Offer this process's nodes (`mine`) to ROS 2 on `domain`, `/clock` too when it runs the
+/// plant's actuator, through a session opened as rmw_zenoh's nodes open theirs (the
+/// launcher's program opened one first, so a router answers).
+///
+/// # Errors
+/// [`DistError::Usage`]: what the bridge refuses; [`DistError::Zenoh`]: the session.
+fn offer_to_ros2(
+    domain: u32,
+    cfg: &RunConfig,
+    handles: &crate::graph::GraphHandles,
+    mine: &[NodeId],
+    stop: &StopFlag,
+) -> Result<(crate::ros2::Bridge, crate::ros2::session::Ros2Session), DistError> {
+    use crate::ros2::Ros2Error;
+    let err = |e: Ros2Error| match e {
+        Ros2Error::Usage(m) => DistError::Usage(format!("--ros2: {m}")),
+        Ros2Error::Zenoh(m) => DistError::Zenoh(m),
+    };
+    let env = crate::ros2::session::SessionEnv::from_process();
+    let link = crate::ros2::session::open(&env, stop).map_err(err)?;
+    let offer = crate::ros2::bridge::Offer {
+        local: Some(mine),
+        clock: mine.contains(&cfg.graph.chain.actuator),
+        ..crate::ros2::bridge::Offer::whole(handles)
+    };
+    let opts = crate::ros2::Ros2Options {
+        domain,
+        bag: None,
+        force: false,
+    };
+    let bridge = crate::ros2::Bridge::start(&link, &offer, &opts, cfg.clock, stop).map_err(err)?;
+    Ok((bridge, link))
 }
 
 /// The real clock: run the local nodes on their own threads from the shared start instant

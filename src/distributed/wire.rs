@@ -193,6 +193,10 @@ pub struct Setup {
     pub spin_margin_ns: u64,
     /// Real clock: `SCHED_FIFO` priority.
     pub rt_priority: Option<u8>,
+    /// `--ros2`: the ROS 2 domain each process offers its own nodes on
+    /// ([`crate::ros2::bridge::Offer::local`]); `None`: not offered.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ros2_domain: Option<u32>,
 }
 
 impl Setup {
@@ -541,6 +545,7 @@ mod tests {
             phase_offsets_ns: Vec::new(),
             rt_priority: None,
             spin_margin_ns: 0,
+            ros2_domain: None,
         };
         let bytes = serde_json::to_vec(&setup).unwrap();
         let back = decode_json::<Setup>(&bytes).unwrap();

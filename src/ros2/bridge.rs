@@ -35,7 +35,7 @@ use super::{zerr, Ros2Error, Ros2Options};
 use crate::config::ClockKind;
 use crate::graph::nodes::external::{ExternalLink, ExternalStats};
 use crate::graph::nodes::ExternalPort;
-use crate::graph::GraphSpec;
+use crate::graph::{GraphSpec, NodeId};
 use crate::msg::AnyTopic;
 use crate::msg::MsgData;
 use crate::qos::{History, Reliability};
@@ -136,6 +136,41 @@ pub struct Bridge {
     pub router: Router,
     /// The domain.
     pub domain: u32,
+}
+
+/// What a bridge offers: a graph's topics, the external nodes it waits for, and (in a launch
+/// across processes) which nodes run here.
+pub struct Offer<'a> {
+    /// The graph's shape.
+    pub spec: &'a GraphSpec,
+    /// Its topics, by topic id.
+    pub topics: &'a [AnyTopic],
+    /// Its external nodes' ports ([`super::external`]).
+    pub external: &'a [Arc<ExternalPort>],
+    /// The nodes this process runs; `None`: all (one process). A node run by another
+    /// process is offered by that process's bridge: this one declares nothing for it and
+    /// puts nothing of it (a topic it publishes arrives here as a copy).
+    pub local: Option<&'a [NodeId]>,
+    /// Publish `/clock` (one bridge of a graph does: in a launch, the plant's process).
+    pub clock: bool,
+}
+
+impl<'a> Offer<'a> {
+    /// The whole graph behind `h`, in one process, with `/clock`.
+    pub fn whole(h: &'a crate::graph::GraphHandles) -> Offer<'a> {
+        Offer {
+            spec: &h.spec,
+            topics: &h.topics,
+            external: &h.external,
+            local: None,
+            clock: true,
+        }
+    }
+
+    /// Node `n` is run by another program (an external node, or another process).
+    fn elsewhere(&self, n: NodeId) -> bool {
+        self.external.iter().any(|p| p.node == n) || self.local.is_some_and(|l| !l.contains(&n))
+    }
 }
 
 /// Check, before any session opens, everything [`Bridge::start`] would refuse that does
@@ -292,8 +327,8 @@ impl Bridge {
     /// Offer `spec`'s graph, whose topics are `topics` (by topic id), to ROS 2 on
     /// `opts.domain`, through `link` ([`super::session::open`]; it outlives the bridge, so that a
     /// lab's successive runs keep one session and one router). The graph's external nodes
-    /// (their `ports`) are waited for first ([`super::external::wait_for`], `stop` ends the
-    /// wait), then connected.
+    /// are waited for first ([`super::external::wait_for`], `stop` ends the wait), then
+    /// connected.
     ///
     /// # Errors
     /// [`Ros2Error::Usage`]: what [`check`] refuses, another `/clock` publisher on the
@@ -301,24 +336,28 @@ impl Bridge {
     /// a declaration failed.
     pub fn start(
         link: &Ros2Session,
-        graph: (&GraphSpec, &[AnyTopic], &[Arc<ExternalPort>]),
+        offer: &Offer<'_>,
         opts: &Ros2Options,
         clock: ClockKind,
         stop: &StopFlag,
     ) -> Result<Bridge, Ros2Error> {
-        let (spec, topics, ports) = graph;
+        let (spec, topics, ports) = (offer.spec, offer.topics, offer.external);
         check(spec, opts).map_err(Ros2Error::Usage)?;
         let domain = opts.domain;
         let session = link.session.clone();
         let router = link.router.clone();
-        let others = clock_publishers(&session, domain);
+        let others = if offer.clock {
+            clock_publishers(&session, domain)
+        } else {
+            Vec::new()
+        };
         if let Some(other) = others.first() {
             return Err(Ros2Error::Usage(format!(
                 "--ros2: node '{other}' already publishes /clock on domain {domain}; two /clock publishers would give ROS 2 nodes two times (stop it, or use another ROS_DOMAIN_ID)"
             )));
         }
         super::external::wait_for(&session, domain, spec, ports, stop)?;
-        let external = |n: crate::graph::NodeId| ports.iter().any(|p| p.node == n);
+        let elsewhere = |n: NodeId| offer.elsewhere(n);
         let zid = session.zid();
         let format = KeyExprFormat::default();
         let dom = usize::try_from(domain).unwrap_or(0);
@@ -345,9 +384,9 @@ impl Bridge {
         let own = nodes
             .iter()
             .enumerate()
-            .filter(|(i, _)| !external(crate::graph::NodeId(*i)))
+            .filter(|(i, _)| !elsewhere(NodeId(*i)))
             .map(|(_, n)| n);
-        for n in own.chain(std::iter::once(&clock_node)) {
+        for n in own.chain(offer.clock.then_some(&clock_node)) {
             declare(
                 format
                     .node_liveliness_key_expr(n)
@@ -384,13 +423,13 @@ impl Bridge {
             let ty = ros_type_of(topic.msg);
             let qos = qos_of(spec, t);
             let publisher = &nodes[topic.publisher.0];
-            if external(topic.publisher) {
-                outlets.push(None); // the external node's program publishes it
+            if elsewhere(topic.publisher) {
+                outlets.push(None); // its own program or process publishes it
             } else {
                 let mp = endpoint(publisher, EndpointKind::Publisher, &topic.name, ty, qos);
                 outlets.push(Some(publish(&mp)?));
             }
-            if let Some(sub) = topic.subscriber.filter(|s| !external(*s)) {
+            if let Some(sub) = topic.subscriber.filter(|s| !elsewhere(*s)) {
                 let kind = EndpointKind::Subscription;
                 subscriptions.push(endpoint(&nodes[sub.0], kind, &topic.name, ty, qos));
             }
@@ -402,7 +441,11 @@ impl Bridge {
             clock_type(),
             clock_qos(),
         );
-        let clock_outlet = publish(&clock_ep)?;
+        let clock_outlet = if offer.clock {
+            Some(publish(&clock_ep)?)
+        } else {
+            None
+        };
         for ms in &subscriptions {
             declare(
                 format
@@ -437,7 +480,11 @@ impl Bridge {
         // What an external node reads must reach it from the first message: wait until
         // Zenoh has matched its subscriptions to the publishers (the tokens came first).
         for p in ports {
-            let mut feeds = vec![(CLOCK_TOPIC, &clock_outlet)];
+            let mut feeds: Vec<(&str, &Outlet)> = clock_outlet
+                .as_ref()
+                .map(|o| (CLOCK_TOPIC, o))
+                .into_iter()
+                .collect();
             if let Some(t) = p.input {
                 if let Some(o) = &outlets[t.0] {
                     feeds.push((spec.topics[t.0].name.as_str(), o));
@@ -457,7 +504,13 @@ impl Bridge {
         let dropped = Arc::new(AtomicU64::new(0));
         let waits = clock == ClockKind::Virtual;
         for (i, topic) in topics.iter().enumerate() {
-            tap(topic, i, tx.clone(), waits, dropped.clone());
+            // What another process publishes arrives here as a copy: its own bridge offers it.
+            if offer
+                .local
+                .is_none_or(|l| l.contains(&spec.topics[i].publisher))
+            {
+                tap(topic, i, tx.clone(), waits, dropped.clone());
+            }
         }
         let lockstep = waits && !ports.is_empty();
         for p in ports {
@@ -472,7 +525,7 @@ impl Bridge {
         let thread = std::thread::Builder::new()
             .name("ros2-bridge".into())
             .spawn(move || {
-                let r = forward(&rx, &outlets, &clock_outlet, bag, lockstep);
+                let r = forward(&rx, &outlets, clock_outlet.as_ref(), bag, lockstep);
                 // Withdrawn: ROS 2's graph no longer shows the run's nodes.
                 for s in inbound {
                     let _ = s.undeclare().wait();
@@ -483,7 +536,9 @@ impl Bridge {
                 for o in outlets.into_iter().flatten() {
                     let _ = o.publisher.undeclare().wait();
                 }
-                let _ = clock_outlet.publisher.undeclare().wait();
+                if let Some(o) = clock_outlet {
+                    let _ = o.publisher.undeclare().wait();
+                }
                 r
             })
             .map_err(|e| Ros2Error::Zenoh(format!("cannot start the ROS 2 bridge: {e}")))?;
@@ -499,14 +554,7 @@ impl Bridge {
 
     /// One line for the user: the domain, the router, what ROS 2's tools will see.
     pub fn describe(&self) -> String {
-        let d = self.domain;
-        let via = match &self.router {
-            Router::Found(e) => format!("through the Zenoh router at {e}"),
-            Router::Embedded(e) => format!(
-                "no Zenoh router answered at {e}, so ratelab runs one there for this run (ROS 2 nodes connect to it as to rmw_zenohd)"
-            ),
-            Router::Unchecked => "without looking for a router (ZENOH_ROUTER_CHECK_ATTEMPTS < 0)".into(),
-        };
+        let (d, via) = (self.domain, self.router.via());
         format!("offering the graph to ROS 2 on domain {d} with /clock, {via}")
     }
 
@@ -609,7 +657,8 @@ struct Forwarded {
 struct Forwarder<'a> {
     /// By topic: `None` for an external node's topic (bag only).
     outlets: &'a [Option<Outlet>],
-    clock: &'a Outlet,
+    /// `None`: another process's bridge publishes `/clock`.
+    clock: Option<&'a Outlet>,
     /// The lockstep's `/clock` (module header): an instant's time waits for an external
     /// node's tick or the next instant.
     deferred: bool,
@@ -631,10 +680,10 @@ impl Forwarder<'_> {
         if let Some(Err(e)) = self.bag.as_mut().map(|b| b.write(index, t.0, &self.buf)) {
             self.error.get_or_insert(format!("the bag: {e}"));
         }
-        let outlet = match self.outlets.get(index) {
-            Some(Some(o)) => o,
-            Some(None) => return false, // an external node's: its program put it
-            None => self.clock,
+        let outlet = match (self.outlets.get(index), self.clock) {
+            (Some(Some(o)), _) | (None, Some(o)) => o,
+            // An external node's (its program put it), or /clock of another process.
+            _ => return false,
         };
         match put(outlet, seq, &self.buf) {
             Ok(()) => true,
@@ -645,9 +694,9 @@ impl Forwarder<'_> {
         }
     }
 
-    /// `/clock` at `t`, if the run's time moved on.
+    /// `/clock` at `t`, if the run's time moved on (and this bridge publishes it).
     fn tick(&mut self, t: Nanos) {
-        if self.last_clock.is_none_or(|l| t > l) {
+        if self.clock.is_some() && self.last_clock.is_none_or(|l| t > l) {
             self.last_clock = Some(t);
             self.clock_seq += 1;
             encode_clock(t, &mut self.buf);
@@ -661,7 +710,7 @@ impl Forwarder<'_> {
 fn forward(
     rx: &Receiver<Out>,
     outlets: &[Option<Outlet>],
-    clock: &Outlet,
+    clock: Option<&Outlet>,
     bag: Option<Bag>,
     deferred: bool,
 ) -> Forwarded {

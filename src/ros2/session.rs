@@ -111,6 +111,21 @@ pub enum Router {
     Unchecked,
 }
 
+impl Router {
+    /// Where the session's messages go, for a person: `through the Zenoh router at …`.
+    pub fn via(&self) -> String {
+        match self {
+            Router::Found(e) => format!("through the Zenoh router at {e}"),
+            Router::Embedded(e) => format!(
+                "no Zenoh router answered at {e}, so ratelab runs one there for this run (ROS 2 nodes connect to it as to rmw_zenohd)"
+            ),
+            Router::Unchecked => {
+                "without looking for a router (ZENOH_ROUTER_CHECK_ATTEMPTS < 0)".into()
+            }
+        }
+    }
+}
+
 /// An open session and what it found. Cloning it gives another handle to the same session.
 #[derive(Clone)]
 pub struct Ros2Session {

@@ -211,9 +211,9 @@ impl Engine {
                         x.name, opts.domain
                     )));
                 }
-                let g = (&*h.spec, &h.topics[..], &h.external[..]);
+                let offer = crate::ros2::bridge::Offer::whole(h);
                 let stop = crate::scheduler::StopFlag::new();
-                match crate::ros2::Bridge::start(link, g, opts, cfg.clock, &stop) {
+                match crate::ros2::Bridge::start(link, &offer, opts, cfg.clock, &stop) {
                     Ok(b) => {
                         let _ = self.tx.send(Telemetry::Applied(b.status()));
                         Some(b)

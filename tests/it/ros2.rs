@@ -513,10 +513,10 @@ fn a_finished_bridge_withdraws_its_tokens_and_the_next_takes_fresh_ids_on_the_sa
         let slot = ratelab::policy::BrainSlot::new(brain);
         let graph = ratelab::run::build_graph(&cfg, slot, false, Vec::new()).unwrap();
         let h = &graph.handles;
-        let g = (&*h.spec, &h.topics[..], &h.external[..]);
+        let g = ratelab::ros2::bridge::Offer::whole(h);
         Bridge::start(
             &link,
-            g,
+            &g,
             &opts,
             cfg.clock,
             &ratelab::scheduler::StopFlag::new(),
@@ -541,4 +541,71 @@ fn a_finished_bridge_withdraws_its_tokens_and_the_next_takes_fresh_ids_on_the_sa
     assert!(again.iter().all(|k| !during.contains(k)), "{again:?}");
     second.finish();
     link.close();
+}
+
+#[test]
+fn a_launch_across_processes_offers_each_processs_own_nodes_and_the_plants_clock() {
+    let _m = crate::machine::shared();
+    let endpoint = format!("tcp/127.0.0.1:{}", free_port());
+    let standin = StandIn::start("router", &endpoint, 7, &[]);
+    let dir = tempfile::tempdir().unwrap();
+    let plain = dir.path().join("plain");
+    let launched = dir.path().join("launched");
+    let args = ["--clock", "virtual", "--duration", "1", "--force"];
+    let (code, out, err) = ratelab(
+        &[
+            &["launch", "--processes", "--ros2", "7", "--out"][..],
+            &[launched.to_str().unwrap()],
+            &args,
+        ]
+        .concat(),
+        &[connect_to(&endpoint)],
+    );
+    let r = standin.report();
+    assert_eq!(code, 0, "{out}{err}");
+    assert!(
+        out.contains("offering the graph to ROS 2 on domain 7: each process its own nodes, the plant's process /clock"),
+        "{out}"
+    );
+    assert_eq!(r["errors"], Value::Array(vec![]), "{r}");
+    // One NN per node and one MP/MS per endpoint, whichever process declared it (each
+    // process offers its own nodes; a copy of another's topic is not offered again).
+    assert_eq!(
+        strs(&r["nodes"]),
+        ["actuator", "policy", "ratelab", "sensor"]
+    );
+    let e = |k: &str, n: &str, t: &str, ty: &str| (k.into(), n.into(), t.into(), ty.into());
+    let (js, f64t) = ("sensor_msgs/msg/JointState", "std_msgs/msg/Float64");
+    assert_eq!(
+        endpoints(&r),
+        vec![
+            e("MP", "policy", "/action", f64t),
+            e("MP", "ratelab", "/clock", "rosgraph_msgs/msg/Clock"),
+            e("MP", "sensor", "/obs", js),
+            e("MS", "actuator", "/action", f64t),
+            e("MS", "policy", "/obs", js),
+        ]
+    );
+    // Every message once, numbered from 1, with the in-process run's values (the lockstep
+    // is byte-identical to it).
+    let (code, ..) = ratelab(
+        &[&["run", "--out", plain.to_str().unwrap()][..], &args].concat(),
+        &[],
+    );
+    assert_eq!(code, 0);
+    let rows = trace(&plain);
+    let action = r["topics"]["/action"].as_array().unwrap();
+    let obs = r["topics"]["/obs"].as_array().unwrap();
+    assert_eq!((obs.len(), action.len()), (51, 51));
+    assert_every_one_from(obs, 1);
+    assert_every_one_from(action, 1);
+    for (i, row) in rows.iter().enumerate() {
+        let applied = row["action"].parse::<f64>().unwrap() * 10.0;
+        assert_eq!(f(&action[i]["data"]), applied, "step {i}");
+    }
+    // /clock from the plant's process alone: the run's time, 0 to the end.
+    let clock = clock_ns(&r);
+    assert_eq!(clock.first(), Some(&0));
+    assert_eq!(clock.last(), Some(&1_000_000_000));
+    assert!(clock.windows(2).all(|w| w[0] < w[1]), "{clock:?}");
 }
