@@ -1,19 +1,22 @@
 #!/usr/bin/env bash
 # Independent implementations the tests check ratelab against, never used by ratelab itself:
 # Zenoh's official Python API (PyPI eclipse-zenoh) and rosbags (CDR, RIHS01 type hashes,
-# rosbag2), for the ROS 2 tests (tests/ros2/standin.py). Makes .venv-oracles/ (git-ignored)
+# rosbag2), for the ROS 2 tests (tests/ros2/standin.py); ros2-pyterfaces (its pure-Python
+# core: a second RIHS01 oracle). Makes .venv-oracles/ (git-ignored)
 # once, pinned; idempotent, offline once done. Prints its python on stdout.
 set -euo pipefail
 ZENOH_VERSION=1.10.2
 ROSBAGS_VERSION=0.11.9
+PYTERFACES_VERSION=0.3.0
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 venv="$root/.venv-oracles"
-stamp="$venv/.ratelab-zenoh-$ZENOH_VERSION-rosbags-$ROSBAGS_VERSION"
+stamp="$venv/.ratelab-zenoh-$ZENOH_VERSION-rosbags-$ROSBAGS_VERSION-pyterfaces-$PYTERFACES_VERSION"
 if [ ! -f "$stamp" ]; then
-  echo "ratelab: making $venv with eclipse-zenoh $ZENOH_VERSION and rosbags $ROSBAGS_VERSION (test oracles) ..." >&2
+  echo "ratelab: making $venv with eclipse-zenoh $ZENOH_VERSION, rosbags $ROSBAGS_VERSION and ros2-pyterfaces $PYTERFACES_VERSION (test oracles) ..." >&2
   python3 -m venv "$venv" >&2
   "$venv/bin/python" -m pip install --quiet --disable-pip-version-check \
-    "eclipse-zenoh==$ZENOH_VERSION" "rosbags==$ROSBAGS_VERSION" >&2
+    "eclipse-zenoh==$ZENOH_VERSION" "rosbags==$ROSBAGS_VERSION" \
+    "ros2-pyterfaces==$PYTERFACES_VERSION" >&2
   touch "$stamp"
 fi
 echo "$venv/bin/python"

@@ -779,6 +779,10 @@ impl App {
             layer,
             set_hz: self.rate_of(id),
             measured_hz,
+            published_hz: match (self.graph.node(id).kind, self.graph.node(id).publishes) {
+                (NodeKind::External, Some(t)) => Some(self.live.window_topic(t).msg_per_s),
+                _ => None,
+            },
             lateness_p99_us,
             ran,
             compute: self.graph.node(id).compute.map(|c| c.label()),

@@ -40,6 +40,9 @@ pub struct NodeView {
     pub set_hz: f64,
     /// Real clock: measured rate over the last second, Hz.
     pub measured_hz: Option<f64>,
+    /// An external node (run by a ROS 2 program): the rate of what it publishes, msg/s
+    /// over the arrows' window, shown instead of its proxy's ticks (`50.0 Hz sent`).
+    pub published_hz: Option<f64>,
     /// Real clock: p99 tick lateness over recent ticks, µs.
     pub lateness_p99_us: Option<f64>,
     /// Virtual clock with executors ([`ratelab::executor`]): the rate it achieved over the
@@ -518,8 +521,9 @@ fn render_node(n: &NodeView, area: Rect, buf: &mut Buffer, real: bool) {
         format!("{} Hz", hz(n.set_hz))
     };
     let mut lines = vec![Line::from(set)];
-    match (n.measured_hz, n.lateness_p99_us) {
-        (Some(m), Some(l)) => {
+    match (n.published_hz, n.measured_hz, n.lateness_p99_us) {
+        (Some(p), ..) => lines.push(Line::from(format!("{p:.1} Hz sent"))),
+        (None, Some(m), Some(l)) => {
             lines.push(Line::from(if wide {
                 format!("{m:.1} Hz meas")
             } else {

@@ -609,3 +609,38 @@ fn a_launch_across_processes_offers_each_processs_own_nodes_and_the_plants_clock
     assert_eq!(clock.last(), Some(&1_000_000_000));
     assert!(clock.windows(2).all(|w| w[0] < w[1]), "{clock:?}");
 }
+
+#[test]
+fn every_type_hash_is_the_one_a_second_independent_implementation_computes() {
+    use ratelab::msg::MsgType;
+    use ratelab::ros2::types::{clock_type, ros_type_of};
+    // ros2-pyterfaces (pure-Python core, its schemas rewritten from ROS 2's interfaces),
+    // beside rosbags which the other tests use.
+    let script = r#"
+import json
+from ros2_pyterfaces import core
+from ros2_pyterfaces.core.sensor_msgs.msg import JointState
+from ros2_pyterfaces.core.std_msgs.msg import Float64
+from ros2_pyterfaces.core.rosgraph_msgs.msg import Clock
+print(json.dumps({t["__typename"]: core.hash_rihs01(t) for t in (JointState, Float64, Clock)}))
+"#;
+    let o = Command::new(oracle_python())
+        .args(["-c", script])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let theirs: Value = serde_json::from_slice(&o.stdout).unwrap();
+    for ty in [
+        ros_type_of(MsgType::State),
+        ros_type_of(MsgType::Position),
+        ros_type_of(MsgType::Force),
+        clock_type(),
+    ] {
+        assert_eq!(
+            theirs[ty.name].as_str(),
+            Some(ty.hash.to_rihs_string().as_str()),
+            "{}",
+            ty.name
+        );
+    }
+}
