@@ -51,12 +51,10 @@ pub fn run_launch(a: &LaunchArgs, force_headless: bool, stop: StopFlag) -> anyho
     let on_terminal =
         !force_headless && std::io::stdout().is_terminal() && std::io::stdin().is_terminal();
     let mut cfg = headless::config_from_args(&run)?;
-    if let Some(n) = cfg.graph.first_external() {
-        anyhow::bail!(
-            "node '{}' is external (kind = \"external\"): a launch across processes does not wait for external nodes yet; run the graph in one process (launch without --processes, or run)",
-            n.name
-        );
+    if run.ros2.is_none() {
+        ratelab::ros2::external::check_offered(&cfg.graph).map_err(anyhow::Error::msg)?;
     }
+    ratelab::ros2::external::check_placement(&cfg.graph).map_err(anyhow::Error::msg)?;
     if cfg.graph.has_executors_or_compute() {
         anyhow::bail!(
             "graph '{}' has executors or compute times (--executor, --compute, [executors], compute_ms): a launch across processes does not run them yet; run it in one process (without --processes)",

@@ -710,9 +710,24 @@ fn offer_to_ros2(
     };
     let env = crate::ros2::session::SessionEnv::from_process();
     let link = crate::ros2::session::open(&env, stop).map_err(err)?;
+    // The external nodes' proxies run here or elsewhere, all in one process
+    // (`external::check_placement`), which then publishes /clock at their ticks; without
+    // any, the plant's process does.
+    let external: Vec<_> = handles
+        .external
+        .iter()
+        .filter(|p| mine.contains(&p.node))
+        .cloned()
+        .collect();
+    let clock = if handles.external.is_empty() {
+        mine.contains(&cfg.graph.chain.actuator)
+    } else {
+        !external.is_empty()
+    };
     let offer = crate::ros2::bridge::Offer {
         local: Some(mine),
-        clock: mine.contains(&cfg.graph.chain.actuator),
+        external: &external,
+        clock,
         ..crate::ros2::bridge::Offer::whole(handles)
     };
     let opts = crate::ros2::Ros2Options {

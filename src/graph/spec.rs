@@ -698,15 +698,28 @@ impl GraphSpec {
 
     /// The placement group (OS process) node `id` runs in under `ratelab launch
     /// --processes`: the file's `process = "…"`, or by default `robot` for the nodes that
-    /// touch the simulator (sensors and the actuator, as drivers touch hardware) and the
-    /// node's own name for every other node.
+    /// touch the simulator (sensors and the actuator, as drivers touch hardware), for an
+    /// external node (its proxy) its input's publisher's process, and the node's own name
+    /// for every other node.
     pub fn process_of(&self, id: NodeId) -> String {
-        let n = self.node(id);
-        match (&n.process, n.kind) {
-            (Some(p), _) => p.clone(),
-            (None, NodeKind::Sensor | NodeKind::Actuator) => DEFAULT_ROBOT_PROCESS.to_string(),
-            (None, _) => n.name.clone(),
+        let mut at = id;
+        // An external node's proxy goes with its input's publisher (through other external
+        // nodes, at most once round the graph): that process offers the input to ROS 2
+        // and `/clock` after it, in order ([`crate::ros2::external`]).
+        for _ in 0..=self.nodes.len() {
+            let n = self.node(at);
+            match (&n.process, n.kind, n.subscribes) {
+                (Some(p), ..) => return p.clone(),
+                (None, NodeKind::External, Some(t)) if self.topic(t).publisher != id => {
+                    at = self.topic(t).publisher;
+                }
+                (None, NodeKind::Sensor | NodeKind::Actuator, _) => {
+                    return DEFAULT_ROBOT_PROCESS.to_string()
+                }
+                (None, ..) => return n.name.clone(),
+            }
         }
+        self.node(id).name.clone()
     }
 
     /// The placement: each process with its nodes (in tie-break order), processes in the

@@ -83,6 +83,44 @@ pub fn check_offered(spec: &GraphSpec) -> Result<(), String> {
     }
 }
 
+/// Check that a launch across processes can run `spec`'s external nodes: all of their
+/// proxies in one process (it publishes `/clock` at their ticks), each beside its input's
+/// publisher (so that process offers the input to ROS 2 before `/clock` reaches the tick,
+/// in one ordered stream).
+///
+/// # Errors
+/// One line naming the node and where it would have to run.
+pub fn check_placement(spec: &GraphSpec) -> Result<(), String> {
+    let mut host: Option<(String, &str)> = None;
+    for (i, n) in spec.nodes.iter().enumerate() {
+        if n.kind != crate::graph::NodeKind::External {
+            continue;
+        }
+        let p = spec.process_of(crate::graph::NodeId(i));
+        if let Some(t) = n.subscribes {
+            let feeder = spec.process_of(spec.topic(t).publisher);
+            if feeder != p {
+                return Err(format!(
+                    "external node '{}' is placed in process '{p}', but its input {} comes from process '{feeder}': place it there (or leave out its `process`), so that /clock follows its input in one stream",
+                    n.name,
+                    spec.topic(t).name
+                ));
+            }
+        }
+        match &host {
+            Some((h, other)) if *h != p => {
+                return Err(format!(
+                    "external nodes '{other}' and '{}' run in processes '{h}' and '{p}': a launch across processes takes its external nodes in one process (which publishes /clock)",
+                    n.name
+                ))
+            }
+            Some(_) => {}
+            None => host = Some((p, &n.name)),
+        }
+    }
+    Ok(())
+}
+
 /// Wait until every external node of `spec` (their `ports`) has declared its tokens on
 /// `domain`, each within its own `appear_timeout` from now.
 ///

@@ -354,3 +354,73 @@ fn python_message_classes_convert_to_and_from_ros_2_as_the_bridge_does() {
     assert_eq!(r["ros_type"]["state"], "sensor_msgs/msg/JointState");
     assert_eq!(r["ros_type"]["force"], "std_msgs/msg/Float64");
 }
+
+#[test]
+fn an_external_policy_in_a_launch_across_processes_runs_beside_its_input_and_equals_the_builtin() {
+    let _m = crate::machine::shared();
+    let endpoint = format!("tcp/127.0.0.1:{}", free_port());
+    let _standin = StandIn::start("router", &endpoint, 8, &[]);
+    let (a, b) = (tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap());
+    let common = ["--clock", "virtual", "--duration", "2", "--force", "--out"];
+    let (code, _, err) = ratelab(
+        &[&["run"][..], &common, &[a.path().to_str().unwrap()]].concat(),
+        &[],
+    );
+    assert_eq!(code, 0, "{err}");
+    let policy = External::start(&endpoint, 8, "50", &[]);
+    let (code, out, err) = ratelab(
+        &[
+            &["launch", "--processes", "--graph", GRAPH, "--ros2", "8"][..],
+            &common,
+            &[b.path().to_str().unwrap()],
+        ]
+        .concat(),
+        &[connect_to(&endpoint)],
+    );
+    let did = policy.report();
+    assert_eq!(code, 0, "{out}{err}");
+    // Its proxy runs beside its input's publisher, the plant's process.
+    assert!(out.contains("robot [sensor, policy, actuator]"), "{out}");
+    let strip = |dir: &Path| {
+        let text = std::fs::read_to_string(dir.join("metrics.json")).unwrap();
+        let mut m: Value = serde_json::from_str(&text).unwrap();
+        let o = m.as_object_mut().unwrap();
+        o.remove("graph");
+        o.remove("policy");
+        for n in o["nodes"].as_object_mut().unwrap().values_mut() {
+            n.as_object_mut().unwrap().remove("kind");
+        }
+        serde_json::to_string_pretty(&m).unwrap()
+    };
+    assert_eq!(strip(a.path()), strip(b.path()));
+    assert_eq!(did["published"], 101, "{did}");
+
+    // Placed away from its input, it is refused in one line.
+    let dir = tempfile::tempdir().unwrap();
+    let g = dir.path().join("g.toml");
+    let text = std::fs::read_to_string(repo(GRAPH)).unwrap();
+    std::fs::write(
+        &g,
+        text.replace(
+            "kind = \"external\"",
+            "kind = \"external\"\nprocess = \"brain\"",
+        ),
+    )
+    .unwrap();
+    let (code, _, err) = ratelab(
+        &[
+            "launch",
+            "--processes",
+            "--ros2",
+            "8",
+            "--graph",
+            g.to_str().unwrap(),
+        ],
+        &[connect_to(&endpoint)],
+    );
+    assert_eq!(code, 2, "{err}");
+    assert!(
+        err.contains("external node 'policy' is placed in process 'brain', but its input /obs comes from process 'robot'"),
+        "{err}"
+    );
+}
