@@ -108,6 +108,12 @@ impl BridgeReport {
                     s.missed
                 ));
             }
+            if s.stray > 0 {
+                lines.push(format!(
+                    "external node '{name}': {} message(s) came outside their tick (late after a miss, or more than one per tick) and were dropped",
+                    s.stray
+                ));
+            }
             if s.overflow > 0 {
                 lines.push(format!(
                     "external node '{name}': {} message(s) dropped (more than {} waiting)",

@@ -274,6 +274,32 @@ fn an_external_node_missing_of_another_type_or_silent_is_said_in_one_line() {
         err.contains("external node 'policy' missed") && err.contains("tick(s)"),
         "{err}"
     );
+    // Two messages a tick: the second is dropped and counted, and every tick still takes
+    // its own (the pole stays up, no tick missed).
+    // (The shipped graph's 2 s tick timeout: a first tick may take longer than 50 ms while
+    // the node's Python warms up, and would be missed.)
+    let double = External::start(&endpoint, 6, "50", &["--double"]);
+    let (code, out, err) = ratelab(
+        &[
+            "run",
+            "--graph",
+            GRAPH,
+            "--ros2",
+            "6",
+            "--duration",
+            "1",
+            "--clock",
+            "virtual",
+        ],
+        &env,
+    );
+    drop(double);
+    assert_eq!(code, 0, "{out}{err}");
+    assert!(
+        err.contains("came outside their tick") && !err.contains("missed"),
+        "{err}"
+    );
+    assert!(out.contains("BALANCED"), "{out}");
 }
 
 #[test]

@@ -8,7 +8,8 @@ Usage: external_policy.py ENDPOINT DOMAIN RATE_HZ [--name N] [--type float32] [-
   /action (std_msgs/msg/Float64; with --type float32, std_msgs/msg/Float32: the wrong type),
   and follows /clock as a node with use_sim_time and a timer of 1/RATE_HZ would: when the
   clock reaches its next tick, it publishes the balancer's force from the newest /obs.
-  --mute: declares everything, publishes nothing.
+  --mute: declares everything, publishes nothing. --double: publishes each tick's message
+  twice (breaks the one-message-per-tick contract).
 Prints "ready" once declared; runs until stdin closes (or 120 s), then prints one JSON
 line: {"published": n, "clock_msgs": n, "obs_msgs": n}.
 """
@@ -26,6 +27,7 @@ args = sys.argv[4:]
 name = args[args.index("--name") + 1] if "--name" in args else "policy"
 wrong = "--type" in args and args[args.index("--type") + 1] == "float32"
 mute = "--mute" in args
+double = "--double" in args
 store = get_typestore(Stores.LATEST)
 GEAR_N = 10.0  # the cartpole's motor: newtons per unit of action
 period_ns = round(1e9 / rate_hz)
@@ -98,10 +100,11 @@ def on_clock(sample):
         force = balance(state["obs"])
         msg_cls = store.types[out_type]
         payload = store.serialize_cdr(msg_cls(data=force), out_type)
-        state["seq"] += 1
-        att = struct.pack("<qqB", state["seq"], 0, 16) + gid
-        pub.put(bytes(payload), attachment=att)
-        state["published"] += 1
+        for _ in range(2 if double else 1):
+            state["seq"] += 1
+            att = struct.pack("<qqB", state["seq"], 0, 16) + gid
+            pub.put(bytes(payload), attachment=att)
+            state["published"] += 1
 
 
 OBS_KEY, CLOCK_KEY = data_key("obs", JS), data_key("clock", CLOCK)

@@ -9,7 +9,10 @@
 //!   `tick_timeout`, for the external node's one message on its output; that message is
 //!   published at `t`. Nothing in time: the tick is counted as missed and publishes nothing.
 //!   The contract: **one message per output per tick**, computed from what the node had
-//!   received when `/clock` reached `t`.
+//!   received when `/clock` reached `t`. A message already waiting when a tick begins (late
+//!   after a miss, or a second one for a tick) is dropped and counted, so it cannot shift
+//!   the ticks after it (a second message arriving after the next tick began is taken as
+//!   that tick's: nothing can tell them apart).
 //! - **real clock**: it publishes, stamped `t`, every message that arrived since its last
 //!   tick (so a message enters the graph at most one proxy period after it arrived: give the
 //!   node a `rate_hz` at least its own).
@@ -49,6 +52,10 @@ pub struct ExternalStats {
     pub delivered: u64,
     /// Lockstep ticks that waited `tick_timeout` in vain.
     pub missed: u64,
+    /// Lockstep: messages found waiting when a tick began, so not answers to it (late after
+    /// a miss, or a second message for a tick): dropped, so that a late or extra message
+    /// cannot shift every tick after it.
+    pub stray: u64,
     /// Messages dropped because the proxy's inbox was full.
     pub overflow: u64,
     /// Messages that did not decode as the output's type (the first reason is kept).
@@ -75,6 +82,7 @@ pub struct ExternalPort {
     link: OnceLock<ExternalLink>,
     delivered: AtomicU64,
     missed: AtomicU64,
+    stray: AtomicU64,
     overflow: AtomicU64,
     undecodable: AtomicU64,
     first_error: OnceLock<String>,
@@ -101,6 +109,7 @@ impl ExternalPort {
             link: OnceLock::new(),
             delivered: AtomicU64::new(0),
             missed: AtomicU64::new(0),
+            stray: AtomicU64::new(0),
             overflow: AtomicU64::new(0),
             undecodable: AtomicU64::new(0),
             first_error: OnceLock::new(),
@@ -131,6 +140,7 @@ impl ExternalPort {
         ExternalStats {
             delivered: self.delivered.load(Ordering::Relaxed),
             missed: self.missed.load(Ordering::Relaxed),
+            stray: self.stray.load(Ordering::Relaxed),
             overflow: self.overflow.load(Ordering::Relaxed),
             undecodable: self.undecodable.load(Ordering::Relaxed),
             first_error: self.first_error.get().cloned(),
@@ -201,6 +211,9 @@ impl External {
             return Flow::Continue; // not connected: nothing can come
         };
         if link.lockstep {
+            // Anything here before this tick's /clock answers an earlier one.
+            let stray = self.port.rx.try_iter().count() as u64;
+            self.port.stray.fetch_add(stray, Ordering::Relaxed);
             (link.announce)(now);
             match self
                 .port
