@@ -180,9 +180,10 @@ fn an_external_node_missing_of_another_type_or_silent_is_said_in_one_line() {
         std::fs::write(&p, text.replace(from, to)).unwrap();
         p.to_string_lossy().into_owned()
     };
+    // Short waits, and a liveliness lease: a node that stops delivering is not alive.
     let quick = graph(
-        "appear_timeout_s = 10, tick_timeout_ms = 2000",
-        "appear_timeout_s = 1, tick_timeout_ms = 50",
+        "appear_timeout_s = 10, tick_timeout_ms = 2000 }",
+        "appear_timeout_s = 1, tick_timeout_ms = 50 }\nliveliness_lease_ms = 100",
     );
     let one_line = |err: &str| {
         assert_eq!(err.trim_end().lines().count(), 1, "{err}");
@@ -273,6 +274,10 @@ fn an_external_node_missing_of_another_type_or_silent_is_said_in_one_line() {
     assert!(
         err.contains("external node 'policy' missed") && err.contains("tick(s)"),
         "{err}"
+    );
+    assert!(
+        format!("{out}{err}").contains("policy not alive 1× (lease 100 ms)"),
+        "{out}{err}"
     );
     // Two messages a tick: the second is dropped and counted, and every tick still takes
     // its own (the pole stays up, no tick missed).
