@@ -98,7 +98,12 @@ pub fn run_launch(a: &LaunchArgs, force_headless: bool, stop: StopFlag) -> anyho
             let env = ratelab::ros2::session::SessionEnv::from_process();
             let link = ratelab::ros2::session::open(&env, &stop)?;
             println!(
-                "[ratelab] launch: offering the graph to ROS 2 on domain {domain}: each process its own nodes, the plant's process /clock, {}",
+                "[ratelab] launch: offering the graph to ROS 2 on domain {domain}: each process its own nodes, {} /clock, {}",
+                if cfg.graph.first_external().is_some() {
+                    "the external nodes' process"
+                } else {
+                    "the plant's process"
+                },
                 link.router.via()
             );
             Some(link)

@@ -8,9 +8,13 @@ On a ROS 2 machine (Jazzy or later) with rmw_zenoh:
     python3 examples/ros2/balancer_node.py &
     ratelab run --graph graphs/cartpole-external.toml --ros2 --clock virtual
 
-It follows ratelab's /clock (use_sim_time), keeps the newest /obs, and at each tick of its
-timer publishes one /action: the contract of an external node under the virtual clock (one
-message per output per tick; docs/ros2.md). Its rate must be the graph node's rate_hz.
+It keeps the newest /obs and follows ratelab's /clock: at each /clock that reaches its next
+tick (every 1/RATE_HZ from 0) it publishes one /action, the contract of an external node under
+the virtual clock (one message per output per tick; docs/ros2.md). Its rate must be the graph
+node's rate_hz. It ticks from a /clock subscription rather than create_timer: a timer made
+under sim time is first due one period after its creation, so it would skip the tick at 0
+(which ratelab would wait for and count as missed), and it may run before an /obs callback
+that arrived first. It starts again from 0 when /clock jumps back (each run starts at 0).
 Its force is not rounded through float32 as the built-in brain's action is, so its figures
 are close to the built-in policy's, not equal (the test's node rounds, and is equal).
 
@@ -22,6 +26,7 @@ Zenoh's Python API and rosbags (tests/ros2/external_policy.py) is what the tests
 import rclpy
 from rclpy.node import Node
 from rclpy.parameter import Parameter
+from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64
 
@@ -35,14 +40,25 @@ class Balancer(Node):
             "policy", parameter_overrides=[Parameter("use_sim_time", value=True)]
         )
         self.obs = None
+        self.period_ns = round(1e9 / RATE_HZ)
+        self.next_ns = 0
+        self.last_ns = 0
         self.create_subscription(JointState, "/obs", self.on_obs, 1)
+        self.create_subscription(Clock, "/clock", self.on_clock, 10)
         self.pub = self.create_publisher(Float64, "/action", 1)
-        self.create_timer(1.0 / RATE_HZ, self.on_tick)
 
     def on_obs(self, msg):
         self.obs = msg
 
-    def on_tick(self):
+    def on_clock(self, msg):
+        t = msg.clock.sec * 1_000_000_000 + msg.clock.nanosec
+        if t < self.last_ns:
+            self.next_ns = t  # a new run: time jumped back
+        self.last_ns = t
+        if t < self.next_ns:
+            return
+        while self.next_ns <= t:
+            self.next_ns += self.period_ns
         if self.obs is None:
             return
         x, theta = self.obs.position

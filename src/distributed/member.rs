@@ -533,6 +533,12 @@ pub fn run_member(opts: &MemberOptions, stop: &StopFlag) -> Result<(), DistError
         .declare_publisher(keys.ticked(&opts.process))
         .congestion_control(block)
         .wait()?;
+    // --ros2: this process offers its own nodes; the plant's process `/clock` too. Before
+    // saying ready: the wait for external nodes must not eat into the run.
+    let ros2 = match setup.ros2_domain {
+        Some(domain) => Some(offer_to_ros2(domain, &cfg, &handles, &mine, stop)?),
+        None => None,
+    };
     send(&ToLauncher::Ready {
         process: opts.process.clone(),
     })?;
@@ -612,11 +618,6 @@ pub fn run_member(opts: &MemberOptions, stop: &StopFlag) -> Result<(), DistError
             })
             .map_err(|e| DistError::Peer(format!("cannot start a thread: {e}")))?
     };
-    // --ros2: this process offers its own nodes; the plant's process `/clock` too.
-    let ros2 = match setup.ros2_domain {
-        Some(domain) => Some(offer_to_ros2(domain, &cfg, &handles, &mine, stop)?),
-        None => None,
-    };
     let local: Vec<usize> = mine.iter().map(|id| id.0).collect();
     let result = match cfg.clock {
         crate::ClockKind::Virtual => run_lockstep(
@@ -662,8 +663,11 @@ pub fn run_member(opts: &MemberOptions, stop: &StopFlag) -> Result<(), DistError
     let _ = stats_thread.join();
     if let Some((bridge, link)) = ros2 {
         let r = bridge.finish();
-        if let Some(e) = r.error {
+        if let Some(e) = &r.error {
             eprintln!("[ratelab] warning: ROS 2: {e}");
+        }
+        for w in r.external_warnings() {
+            eprintln!("[ratelab] warning: {w}");
         }
         link.close();
     }

@@ -741,8 +741,9 @@ impl GraphSpec {
         self.nodes.iter().position(|n| n.name == name).map(NodeId)
     }
 
-    /// The first node of `kind = "external"`, if any: such a graph runs only with `--ros2`,
-    /// in one process ([`crate::ros2::external`]).
+    /// The first node of `kind = "external"`, if any: such a graph runs only with `--ros2`
+    /// ([`crate::ros2::external`]; across processes, its proxy beside its input's
+    /// publisher).
     pub fn first_external(&self) -> Option<&NodeSpec> {
         self.nodes.iter().find(|n| n.kind == NodeKind::External)
     }

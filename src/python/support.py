@@ -149,6 +149,8 @@ def _joints(msg, velocities):
     if len(pos) != 2 or len(vel) != 2:
         raise ValueError("a JointState needs both joints' positions"
                          + (" and velocities" if velocities else ""))
+    if not all(math.isfinite(v) for v in pos + vel):
+        raise ValueError("a JointState with a non-finite position or velocity")
     return pos, vel
 
 

@@ -362,6 +362,15 @@ impl Bridge {
                 "--ros2: node '{other}' already publishes /clock on domain {domain}; two /clock publishers would give ROS 2 nodes two times (stop it, or use another ROS_DOMAIN_ID)"
             )));
         }
+        let waits = clock == ClockKind::Virtual;
+        if waits && ports.len() > 1 {
+            // They would share each /clock tick: the second would answer at the first's.
+            return Err(Ros2Error::Usage(format!(
+                "graph '{}' has {} external nodes: under the virtual clock the lockstep takes one (they would share each /clock tick); use the real clock, or make one of them a ratelab node",
+                spec.name,
+                ports.len()
+            )));
+        }
         super::external::wait_for(&session, domain, spec, ports, stop)?;
         let elsewhere = |n: NodeId| offer.elsewhere(n);
         let zid = session.zid();
@@ -484,10 +493,12 @@ impl Bridge {
         };
         let inbound = super::external::listen(&session, domain, spec, ports)?;
         // What an external node reads must reach it from the first message: wait until
-        // Zenoh has matched its subscriptions to the publishers (the tokens came first).
+        // Zenoh has matched its subscriptions to the publishers (the tokens came first);
+        // under the virtual clock, /clock too (the lockstep runs on it).
         for p in ports {
             let mut feeds: Vec<(&str, &Outlet)> = clock_outlet
                 .as_ref()
+                .filter(|_| waits)
                 .map(|o| (CLOCK_TOPIC, o))
                 .into_iter()
                 .collect();
@@ -499,7 +510,7 @@ impl Bridge {
             for (topic, o) in feeds {
                 wait_matched(o, p.settings.appear_timeout.to_duration(), stop).map_err(|()| {
                     Ros2Error::Usage(format!(
-                        "external node '{}' declared its subscription to {topic}, but no subscriber of its matched ratelab's publisher within {:.1} s",
+                        "external node '{}': no subscriber of {topic} matched ratelab's publisher within {:.1} s (under the virtual clock it must subscribe to its input and to /clock)",
                         p.name,
                         p.settings.appear_timeout.as_secs_f64()
                     ))
@@ -508,7 +519,6 @@ impl Bridge {
         }
         let (tx, rx) = crossbeam_channel::bounded(CHANNEL_CAPACITY);
         let dropped = Arc::new(AtomicU64::new(0));
-        let waits = clock == ClockKind::Virtual;
         for (i, topic) in topics.iter().enumerate() {
             // What another process publishes arrives here as a copy: its own bridge offers it.
             if offer

@@ -287,8 +287,10 @@ fn from_cdr<'de, T: Deserialize<'de>>(bytes: &'de [u8]) -> Result<T, String> {
     }
     let body = match bytes {
         [0, 1, _, _, body @ ..] => body,
-        [a, b, ..] => return Err(format!("encapsulation {a:02x} {b:02x}, not CDR_LE (00 01)")),
-        _ => return Err("shorter than the encapsulation header".into()),
+        [a, b, _, _, ..] => {
+            return Err(format!("encapsulation {a:02x} {b:02x}, not CDR_LE (00 01)"))
+        }
+        _ => return Err("shorter than the 4-byte encapsulation header".into()),
     };
     let (v, used) = hiroz_cdr::from_bytes::<T, hiroz_cdr::LittleEndian>(body)
         .map_err(|e| format!("not valid CDR: {e}"))?;
@@ -401,7 +403,9 @@ mod tests {
                 .unwrap_err()
                 .contains("not CDR_LE")
         );
-        assert!(super::decode(MsgType::Force, &[0, 1]).is_err());
+        assert!(super::decode(MsgType::Force, &[0, 1])
+            .unwrap_err()
+            .contains("shorter than the 4-byte encapsulation header"));
         let big = vec![0u8; MAX_INBOUND_BYTES + 1];
         assert!(super::decode(MsgType::Force, &big)
             .unwrap_err()

@@ -279,6 +279,32 @@ fn an_external_node_missing_of_another_type_or_silent_is_said_in_one_line() {
         format!("{out}{err}").contains("policy not alive 1× (lease 100 ms)"),
         "{out}{err}"
     );
+    // Two external nodes under the virtual clock would share each /clock tick: refused.
+    let two = dir.path().join("two.toml");
+    std::fs::write(
+        &two,
+        text.replace("publishes = \"/action\"\nparams", "publishes = \"/mid\"\nparams")
+            + "\n[[node]]\nname = \"limiter\"\nkind = \"external\"\nrate_hz = 50\nsubscribes = \"/mid\"\npublishes = \"/action\"\n\n[[topic]]\nname = \"/mid\"\ntype = \"force\"\ndepth = 1\n",
+    )
+    .unwrap();
+    let (code, _, err) = ratelab(
+        &[
+            "run",
+            "--graph",
+            two.to_str().unwrap(),
+            "--ros2",
+            "6",
+            "--clock",
+            "virtual",
+        ],
+        &env,
+    );
+    assert_eq!(code, 2, "{err}");
+    assert!(
+        err.contains("has 2 external nodes: under the virtual clock the lockstep takes one"),
+        "{err}"
+    );
+    one_line(&err);
     // Two messages a tick: the second is dropped and counted, and every tick still takes
     // its own (the pole stays up, no tick missed).
     // (The shipped graph's 2 s tick timeout: a first tick may take longer than 50 ms while

@@ -6,8 +6,10 @@ Usage: external_policy.py ENDPOINT DOMAIN RATE_HZ [--name N] [--type float32] [-
   connects as a Zenoh client to the router at ENDPOINT, declares rmw_zenoh's tokens for a
   node N (default `policy`) subscribing to /obs (sensor_msgs/msg/JointState) and publishing
   /action (std_msgs/msg/Float64; with --type float32, std_msgs/msg/Float32: the wrong type),
-  and follows /clock as a node with use_sim_time and a timer of 1/RATE_HZ would: when the
-  clock reaches its next tick, it publishes the balancer's force from the newest /obs.
+  and follows /clock as examples/ros2/balancer_node.py does (a /clock subscription, not an
+  rclpy timer, which under sim time would first fire one period after 0): when the clock
+  reaches its next tick (every 1/RATE_HZ from 0), it publishes the balancer's force from
+  the newest /obs.
   --mute: declares everything, publishes nothing. --double: publishes each tick's message
   twice (breaks the one-message-per-tick contract).
 Prints "ready" once declared; runs until stdin closes (or 120 s), then prints one JSON
