@@ -159,6 +159,43 @@ pub fn warn_late_faults(cfg: &RunConfig) {
 }
 
 /// Run headless and print the summary. Returns the report.
+/// `--ros2` as `a` gives it (the domain from the flag or `ROS_DOMAIN_ID`, the bag), checked
+/// against `graph` before anything opens: ROS 2's names, `/clock`, the bag's folder. Without
+/// `--ros2` the graph must have no external node (nothing else could fill it). Used by
+/// `run`, the lab and a launch.
+///
+/// # Errors
+/// The first problem, in one line (exit 2).
+pub fn ros2_options(
+    a: &RunArgs,
+    graph: &GraphSpec,
+) -> anyhow::Result<Option<ratelab::ros2::Ros2Options>> {
+    let opts =
+        a.ros2_domain()
+            .map_err(anyhow::Error::msg)?
+            .map(|domain| ratelab::ros2::Ros2Options {
+                domain,
+                bag: a.bag.clone(),
+                force: a.force,
+            });
+    match &opts {
+        Some(o) => ratelab::ros2::bridge::check(graph, o),
+        None => ratelab::ros2::external::check_offered(graph),
+    }
+    .map_err(anyhow::Error::msg)?;
+    Ok(opts)
+}
+
+/// The ROS 2 session, opened as rmw_zenoh's nodes open theirs (with an embedded router when
+/// none answers), from the process's `ZENOH_*` variables; `stop` ends a wait for a router.
+///
+/// # Errors
+/// A bad variable or a failed session, in one line.
+pub fn open_ros2(stop: &StopFlag) -> anyhow::Result<ratelab::ros2::session::Ros2Session> {
+    let env = ratelab::ros2::session::SessionEnv::from_process();
+    Ok(ratelab::ros2::session::open(&env, stop)?)
+}
+
 pub fn run_headless(a: &RunArgs, stop: StopFlag) -> anyhow::Result<RunReport> {
     let cfg = config_from_args(a)?;
     warn_late_faults(&cfg);
@@ -192,19 +229,7 @@ pub fn run_headless(a: &RunArgs, stop: StopFlag) -> anyhow::Result<RunReport> {
         })
     });
     // Refused before anything is written or opened.
-    let ros2 =
-        a.ros2_domain()
-            .map_err(anyhow::Error::msg)?
-            .map(|domain| ratelab::ros2::Ros2Options {
-                domain,
-                bag: a.bag.clone(),
-                force: a.force,
-            });
-    match &ros2 {
-        Some(o) => ratelab::ros2::bridge::check(&cfg.graph, o),
-        None => ratelab::ros2::external::check_offered(&cfg.graph),
-    }
-    .map_err(anyhow::Error::msg)?;
+    let ros2 = ros2_options(a, &cfg.graph)?;
     let recording = open_recording(a, &cfg, &brain.label())?;
     let mut opts = RunOptions {
         stop: stop.clone(),

@@ -51,9 +51,7 @@ pub fn run_launch(a: &LaunchArgs, force_headless: bool, stop: StopFlag) -> anyho
     let on_terminal =
         !force_headless && std::io::stdout().is_terminal() && std::io::stdin().is_terminal();
     let mut cfg = headless::config_from_args(&run)?;
-    if run.ros2.is_none() {
-        ratelab::ros2::external::check_offered(&cfg.graph).map_err(anyhow::Error::msg)?;
-    }
+    let ros2 = headless::ros2_options(&run, &cfg.graph)?;
     ratelab::ros2::external::check_placement(&cfg.graph).map_err(anyhow::Error::msg)?;
     if cfg.graph.has_executors_or_compute() {
         anyhow::bail!(
@@ -86,17 +84,10 @@ pub fn run_launch(a: &LaunchArgs, force_headless: bool, stop: StopFlag) -> anyho
     }
     // --ros2: checked, and the session (with the embedded router when none answers) opened
     // before any process starts, so that each finds the router and offers its own nodes.
-    let ros2_domain = run.ros2_domain().map_err(anyhow::Error::msg)?;
+    let ros2_domain = ros2.as_ref().map(|o| o.domain);
     let _ros2 = match ros2_domain {
         Some(domain) => {
-            let opts = ratelab::ros2::Ros2Options {
-                domain,
-                bag: None,
-                force: false,
-            };
-            ratelab::ros2::bridge::check(&cfg.graph, &opts).map_err(anyhow::Error::msg)?;
-            let env = ratelab::ros2::session::SessionEnv::from_process();
-            let link = ratelab::ros2::session::open(&env, &stop)?;
+            let link = headless::open_ros2(&stop)?;
             println!(
                 "[ratelab] launch: offering the graph to ROS 2 on domain {domain}: each process its own nodes, {} /clock, {}",
                 if cfg.graph.first_external().is_some() {

@@ -61,22 +61,9 @@ fn lab(args: &cli::RunArgs, stop: StopFlag) -> anyhow::Result<()> {
     if args.bag.is_some() {
         anyhow::bail!("--bag writes one run's bag: use it with `ratelab run --ros2`, not the lab");
     }
-    let ros2 = match args.ros2_domain().map_err(anyhow::Error::msg)? {
-        Some(domain) => {
-            let opts = ratelab::ros2::Ros2Options {
-                domain,
-                bag: None,
-                force: false,
-            };
-            ratelab::ros2::bridge::check(&cfg.graph, &opts).map_err(anyhow::Error::msg)?;
-            let env = ratelab::ros2::session::SessionEnv::from_process();
-            let link = ratelab::ros2::session::open(&env, &stop)?;
-            Some((link, opts))
-        }
-        None => {
-            ratelab::ros2::external::check_offered(&cfg.graph).map_err(anyhow::Error::msg)?;
-            None
-        }
+    let ros2 = match headless::ros2_options(args, &cfg.graph)? {
+        Some(opts) => Some((headless::open_ros2(&stop)?, opts)),
+        None => None,
     };
     let alt_policy = (args.policy != "scripted").then(|| args.policy.clone());
     let settings = SessionSettings {

@@ -15,6 +15,19 @@ pub fn repo(file: &str) -> std::path::PathBuf {
 }
 
 /// `ratelab ARGS` run in the repository's top folder: (exit code, stdout, stderr).
+/// metrics.json `m` as pretty text without what names the graph, the brain and the nodes'
+/// kinds (each must be there): what two graphs of the same shape, one with a Python or an
+/// external node in the built-in node's place, must then have equal.
+pub fn metrics_without_names(mut m: serde_json::Value) -> String {
+    let o = m.as_object_mut().unwrap();
+    o.remove("graph").expect("graph");
+    o.remove("policy").expect("policy");
+    for n in o["nodes"].as_object_mut().unwrap().values_mut() {
+        n.as_object_mut().unwrap().remove("kind").expect("kind");
+    }
+    serde_json::to_string_pretty(&m).unwrap()
+}
+
 pub fn ratelab_in_repo(args: &[&str]) -> (i32, String, String) {
     ratelab_in_repo_with(
         args,

@@ -348,17 +348,11 @@ fn repo(file: &str) -> String {
 /// metrics.json of one virtual run of `graph` without what names the graph, the brain and
 /// the nodes' kinds, and trace.csv.
 fn graph_run(dir: &Path, graph: &str, seed: &str, extra: &[&str]) -> (String, Vec<u8>) {
-    let (mut m, trace) = virtual_out(
+    let (m, trace) = virtual_out(
         dir,
         &[&["--seed", seed, "--graph", graph][..], extra].concat(),
     );
-    let m_obj = m.as_object_mut().unwrap();
-    m_obj.remove("graph").expect("graph");
-    m_obj.remove("policy").expect("policy");
-    for n in m_obj["nodes"].as_object_mut().unwrap().values_mut() {
-        n.as_object_mut().unwrap().remove("kind").expect("kind");
-    }
-    (serde_json::to_string_pretty(&m).unwrap(), trace)
+    (crate::metrics_without_names(m), trace)
 }
 
 #[test]

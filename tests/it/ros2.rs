@@ -15,17 +15,19 @@ pub(crate) fn oracle_python() -> String {
     )
 }
 
-/// The stand-in, ready (its subscriptions declared).
-pub(crate) struct StandIn {
+/// A test oracle's Python script (`tests/ros2/*.py`), running and ready: it printed
+/// `ready` on stdout; closing its stdin tells it to finish and print one JSON report.
+pub(crate) struct Oracle {
     child: Child,
+    what: &'static str,
 }
 
-impl StandIn {
-    pub(crate) fn start(mode: &str, endpoint: &str, domain: u32, extra: &[&str]) -> StandIn {
+impl Oracle {
+    /// Start `script` with `args` and wait for its `ready` (`what` names it in failures).
+    pub(crate) fn start(script: &str, args: &[&str], what: &'static str) -> Oracle {
         let mut child = Command::new(oracle_python())
-            .arg(repo("tests/ros2/standin.py"))
-            .args([mode, endpoint, &domain.to_string()])
-            .args(extra)
+            .arg(repo(script))
+            .args(args)
             .stdin(Stdio::piped())
             .stdout(Stdio::piped())
             .stderr(Stdio::inherit())
@@ -35,8 +37,8 @@ impl StandIn {
         BufReader::new(child.stdout.as_mut().unwrap())
             .read_line(&mut line)
             .unwrap();
-        assert_eq!(line.trim(), "ready", "the stand-in did not start");
-        StandIn { child }
+        assert_eq!(line.trim(), "ready", "{what} did not start");
+        Oracle { child, what }
     }
 
     /// Tell it ratelab is done; its report.
@@ -49,15 +51,26 @@ impl StandIn {
             .unwrap()
             .read_to_string(&mut out)
             .unwrap();
-        assert!(self.child.wait().unwrap().success(), "the stand-in failed");
+        assert!(self.child.wait().unwrap().success(), "{} failed", self.what);
         serde_json::from_str(out.trim()).unwrap_or_else(|e| panic!("{e}: {out}"))
     }
 }
 
-impl Drop for StandIn {
+impl Drop for Oracle {
     fn drop(&mut self) {
         let _ = self.child.kill();
         let _ = self.child.wait();
+    }
+}
+
+/// The stand-in (`tests/ros2/standin.py`), ready: its subscriptions declared.
+pub(crate) struct StandIn;
+
+impl StandIn {
+    pub(crate) fn start(mode: &str, endpoint: &str, domain: u32, extra: &[&str]) -> Oracle {
+        let domain = domain.to_string();
+        let args = [&[mode, endpoint, &domain][..], extra].concat();
+        Oracle::start("tests/ros2/standin.py", &args, "the stand-in")
     }
 }
 
@@ -102,6 +115,28 @@ pub(crate) fn strs(v: &Value) -> Vec<String> {
         .iter()
         .map(|s| s.as_str().unwrap().to_string())
         .collect()
+}
+
+/// What `ros2 node list` and `ros2 topic list -v` show of the chapter's graph, as the
+/// stand-in `r` saw it: its three nodes and `ratelab` (the `/clock` publisher), and who
+/// publishes and subscribes what, with which type.
+fn assert_the_chapters_graph(r: &Value) {
+    assert_eq!(
+        strs(&r["nodes"]),
+        ["actuator", "policy", "ratelab", "sensor"]
+    );
+    let e = |k: &str, n: &str, t: &str, ty: &str| (k.into(), n.into(), t.into(), ty.into());
+    let (js, f64t) = ("sensor_msgs/msg/JointState", "std_msgs/msg/Float64");
+    assert_eq!(
+        endpoints(r),
+        vec![
+            e("MP", "policy", "/action", f64t),
+            e("MP", "ratelab", "/clock", "rosgraph_msgs/msg/Clock"),
+            e("MP", "sensor", "/obs", js),
+            e("MS", "actuator", "/action", f64t),
+            e("MS", "policy", "/obs", js),
+        ]
+    );
 }
 
 /// `(kind, node, topic, type)` of each endpoint token.
@@ -163,23 +198,7 @@ fn ros_2s_tools_see_the_graph_its_types_messages_and_clock_and_the_results_do_no
     assert_eq!(r["errors"], Value::Array(vec![]), "{r}");
 
     // ros2 node list / ros2 topic list -v: the nodes, who publishes and subscribes what.
-    assert_eq!(
-        strs(&r["nodes"]),
-        ["actuator", "policy", "ratelab", "sensor"]
-    );
-    let js = "sensor_msgs/msg/JointState";
-    let f64t = "std_msgs/msg/Float64";
-    let e = |k: &str, n: &str, t: &str, ty: &str| (k.into(), n.into(), t.into(), ty.into());
-    assert_eq!(
-        endpoints(&r),
-        vec![
-            e("MP", "policy", "/action", f64t),
-            e("MP", "ratelab", "/clock", "rosgraph_msgs/msg/Clock"),
-            e("MP", "sensor", "/obs", js),
-            e("MS", "actuator", "/action", f64t),
-            e("MS", "policy", "/obs", js),
-        ]
-    );
+    assert_the_chapters_graph(&r);
     // Every type's hash is rosbags' hash_rihs01 of it.
     for (ty, ok) in r["hash_ok"].as_object().unwrap() {
         assert_eq!(ok, &Value::Bool(true), "{ty}");
@@ -570,22 +589,7 @@ fn a_launch_across_processes_offers_each_processs_own_nodes_and_the_plants_clock
     assert_eq!(r["errors"], Value::Array(vec![]), "{r}");
     // One NN per node and one MP/MS per endpoint, whichever process declared it (each
     // process offers its own nodes; a copy of another's topic is not offered again).
-    assert_eq!(
-        strs(&r["nodes"]),
-        ["actuator", "policy", "ratelab", "sensor"]
-    );
-    let e = |k: &str, n: &str, t: &str, ty: &str| (k.into(), n.into(), t.into(), ty.into());
-    let (js, f64t) = ("sensor_msgs/msg/JointState", "std_msgs/msg/Float64");
-    assert_eq!(
-        endpoints(&r),
-        vec![
-            e("MP", "policy", "/action", f64t),
-            e("MP", "ratelab", "/clock", "rosgraph_msgs/msg/Clock"),
-            e("MP", "sensor", "/obs", js),
-            e("MS", "actuator", "/action", f64t),
-            e("MS", "policy", "/obs", js),
-        ]
-    );
+    assert_the_chapters_graph(&r);
     // Every message once, numbered from 1, with the in-process run's values (the lockstep
     // is byte-identical to it).
     let (code, ..) = ratelab(

@@ -3,76 +3,40 @@
 //! would be with independent implementations only (PyPI `eclipse-zenoh`, `rosbags`); the
 //! stand-in (`tests/ros2/standin.py`) plays the Zenoh router and lists what ROS 2 sees.
 
-use super::ros2::{connect_to, endpoints, oracle_python, ratelab, StandIn};
+use super::ros2::{connect_to, endpoints, oracle_python, ratelab, Oracle, StandIn};
 use crate::distributed::free_port;
 use crate::repo;
 use serde_json::Value;
-use std::io::{BufRead, BufReader, Read};
 use std::path::Path;
-use std::process::{Child, Command, Stdio};
+use std::process::{Command, Stdio};
 
-/// The external policy, ready (its tokens declared).
-struct External {
-    child: Child,
-}
+/// The external policy (`tests/ros2/external_policy.py`), ready: its tokens declared.
+struct External;
 
 impl External {
-    fn start(endpoint: &str, domain: u32, rate_hz: &str, extra: &[&str]) -> External {
-        let mut child = Command::new(oracle_python())
-            .arg(repo("tests/ros2/external_policy.py"))
-            .args([endpoint, &domain.to_string(), rate_hz])
-            .args(extra)
-            .stdin(Stdio::piped())
-            .stdout(Stdio::piped())
-            .stderr(Stdio::inherit())
-            .spawn()
-            .unwrap();
-        let mut line = String::new();
-        BufReader::new(child.stdout.as_mut().unwrap())
-            .read_line(&mut line)
-            .unwrap();
-        assert_eq!(line.trim(), "ready", "the external policy did not start");
-        External { child }
-    }
-
-    /// Tell it the run is over; what it did.
-    fn report(mut self) -> Value {
-        drop(self.child.stdin.take());
-        let mut out = String::new();
-        self.child
-            .stdout
-            .take()
-            .unwrap()
-            .read_to_string(&mut out)
-            .unwrap();
-        assert!(
-            self.child.wait().unwrap().success(),
-            "the external policy failed"
-        );
-        serde_json::from_str(out.trim()).unwrap_or_else(|e| panic!("{e}: {out}"))
-    }
-}
-
-impl Drop for External {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
+    fn start(endpoint: &str, domain: u32, rate_hz: &str, extra: &[&str]) -> Oracle {
+        let domain = domain.to_string();
+        let args = [&[endpoint, &domain, rate_hz][..], extra].concat();
+        Oracle::start(
+            "tests/ros2/external_policy.py",
+            &args,
+            "the external policy",
+        )
     }
 }
 
 /// metrics.json without what names the graph, the brain and the nodes' kinds, and
 /// trace.csv, of the run written to `dir`.
 fn figures(dir: &Path) -> (String, Vec<u8>) {
-    let text = std::fs::read_to_string(dir.join("metrics.json")).unwrap();
-    let mut m: Value = serde_json::from_str(&text).unwrap();
-    let o = m.as_object_mut().unwrap();
-    o.remove("graph").expect("graph");
-    o.remove("policy").expect("policy");
-    for n in o["nodes"].as_object_mut().unwrap().values_mut() {
-        n.as_object_mut().unwrap().remove("kind").expect("kind");
-    }
     let trace = std::fs::read(dir.join("trace.csv")).unwrap();
-    (serde_json::to_string_pretty(&m).unwrap(), trace)
+    (metrics(dir), trace)
+}
+
+/// metrics.json of the run written to `dir`, without what names the graph, the brain and
+/// the nodes' kinds.
+fn metrics(dir: &Path) -> String {
+    let text = std::fs::read_to_string(dir.join("metrics.json")).unwrap();
+    crate::metrics_without_names(serde_json::from_str(&text).unwrap())
 }
 
 const GRAPH: &str = "graphs/cartpole-external.toml";
@@ -188,83 +152,68 @@ fn an_external_node_missing_of_another_type_or_silent_is_said_in_one_line() {
     let one_line = |err: &str| {
         assert_eq!(err.trim_end().lines().count(), 1, "{err}");
     };
+    // A refusal: exit 2, saying each of `wants`; its stderr.
+    let refused = |args: &[&str], env: &[(&str, String)], wants: &[&str]| -> String {
+        let (code, _, err) = ratelab(args, env);
+        assert_eq!(code, 2, "{err}");
+        for want in wants {
+            assert!(err.contains(want), "{want}: {err}");
+        }
+        err
+    };
 
     // Without --ros2 nothing can fill it.
-    let (code, _, err) = ratelab(&["run", "--graph", GRAPH], &[]);
-    assert_eq!(code, 2, "{err}");
-    assert!(
-        err.contains("node 'policy' is external") && err.contains("--ros2"),
-        "{err}"
+    let err = refused(
+        &["run", "--graph", GRAPH],
+        &[],
+        &["node 'policy' is external", "--ros2"],
     );
     one_line(&err);
     // Graph files: an external node must publish, and takes only its two params.
-    let (code, _, err) = ratelab(
-        &[
-            "run",
-            "--graph",
-            &graph("publishes = \"/action\"\nparams", "params"),
-        ],
-        &[],
-    );
-    assert_eq!(code, 2, "{err}");
-    assert!(
-        err.contains("an external node must publish a topic"),
-        "{err}"
-    );
-    let (code, _, err) = ratelab(
-        &[
-            "run",
-            "--graph",
-            &graph("tick_timeout_ms = 2000", "tick_timeout_ms = 0"),
-        ],
-        &[],
-    );
-    assert_eq!(code, 2, "{err}");
-    assert!(
-        err.contains("params.tick_timeout_ms must be a number in 1..=60000"),
-        "{err}"
-    );
-    let (code, _, err) = ratelab(
-        &[
-            "run",
-            "--graph",
-            &graph("tick_timeout_ms = 2000", "script = 2"),
-        ],
-        &[],
-    );
-    assert_eq!(code, 2, "{err}");
-    assert!(
-        err.contains("appear_timeout_s and tick_timeout_ms, not 'script'"),
-        "{err}"
-    );
+    for (from, to, want) in [
+        (
+            "publishes = \"/action\"\nparams",
+            "params",
+            "an external node must publish a topic",
+        ),
+        (
+            "tick_timeout_ms = 2000",
+            "tick_timeout_ms = 0",
+            "params.tick_timeout_ms must be a number in 1..=60000",
+        ),
+        (
+            "tick_timeout_ms = 2000",
+            "script = 2",
+            "appear_timeout_s and tick_timeout_ms, not 'script'",
+        ),
+    ] {
+        refused(&["run", "--graph", &graph(from, to)], &[], &[want]);
+    }
 
     let endpoint = format!("tcp/127.0.0.1:{}", free_port());
     let _standin = StandIn::start("router", &endpoint, 6, &[]);
     let env = [connect_to(&endpoint)];
-    let run = |extra: &[&str]| {
-        let mut args = vec!["run", "--graph", &quick, "--ros2", "6", "--duration", "1"];
-        args.extend_from_slice(extra);
-        ratelab(&args, &env)
-    };
+    let quick_run = ["run", "--graph", &quick, "--ros2", "6", "--duration", "1"];
+    let run = |extra: &[&str]| ratelab(&[&quick_run[..], extra].concat(), &env);
     // Never appears: named, with what is missing, after its bounded wait.
-    let (code, _, err) = run(&[]);
-    assert_eq!(code, 2, "{err}");
-    assert!(
-        err.contains("external node 'policy' did not appear on ROS 2 domain 6 within 1.0 s")
-            && err.contains("an NN token named 'policy'")
-            && err.contains("publishes /action (std_msgs/msg/Float64)"),
-        "{err}"
+    let err = refused(
+        &quick_run,
+        &env,
+        &[
+            "external node 'policy' did not appear on ROS 2 domain 6 within 1.0 s",
+            "an NN token named 'policy'",
+            "publishes /action (std_msgs/msg/Float64)",
+        ],
     );
     one_line(&err);
     // The wrong type: said from its token, before the run.
     let wrong = External::start(&endpoint, 6, "50", &["--type", "float32"]);
-    let (code, _, err) = run(&[]);
-    drop(wrong);
-    assert_eq!(code, 2, "{err}");
-    assert!(
-        err.contains("external node 'policy' publishes /action as std_msgs/msg/Float32, but the graph's /action is std_msgs/msg/Float64"),
-        "{err}"
+    let err = refused(
+        &quick_run,
+        &env,
+        &["external node 'policy' publishes /action as std_msgs/msg/Float32, but the graph's /action is std_msgs/msg/Float64"],
     );
+    drop(wrong);
     one_line(&err);
     // There but silent: each tick waits its timeout, and the misses are reported.
     let mute = External::start(&endpoint, 6, "50", &["--mute"]);
@@ -287,7 +236,7 @@ fn an_external_node_missing_of_another_type_or_silent_is_said_in_one_line() {
             + "\n[[node]]\nname = \"limiter\"\nkind = \"external\"\nrate_hz = 50\nsubscribes = \"/mid\"\npublishes = \"/action\"\n\n[[topic]]\nname = \"/mid\"\ntype = \"force\"\ndepth = 1\n",
     )
     .unwrap();
-    let (code, _, err) = ratelab(
+    let err = refused(
         &[
             "run",
             "--graph",
@@ -298,11 +247,7 @@ fn an_external_node_missing_of_another_type_or_silent_is_said_in_one_line() {
             "virtual",
         ],
         &env,
-    );
-    assert_eq!(code, 2, "{err}");
-    assert!(
-        err.contains("has 2 external nodes: under the virtual clock the lockstep takes one"),
-        "{err}"
+        &["has 2 external nodes: under the virtual clock the lockstep takes one"],
     );
     one_line(&err);
     // Two messages a tick: the second is dropped and counted, and every tick still takes
@@ -438,18 +383,7 @@ fn an_external_policy_in_a_launch_across_processes_runs_beside_its_input_and_equ
     assert_eq!(code, 0, "{out}{err}");
     // Its proxy runs beside its input's publisher, the plant's process.
     assert!(out.contains("robot [sensor, policy, actuator]"), "{out}");
-    let strip = |dir: &Path| {
-        let text = std::fs::read_to_string(dir.join("metrics.json")).unwrap();
-        let mut m: Value = serde_json::from_str(&text).unwrap();
-        let o = m.as_object_mut().unwrap();
-        o.remove("graph");
-        o.remove("policy");
-        for n in o["nodes"].as_object_mut().unwrap().values_mut() {
-            n.as_object_mut().unwrap().remove("kind");
-        }
-        serde_json::to_string_pretty(&m).unwrap()
-    };
-    assert_eq!(strip(a.path()), strip(b.path()));
+    assert_eq!(metrics(a.path()), metrics(b.path()));
     assert_eq!(did["published"], 101, "{did}");
 
     // Placed away from its input, it is refused in one line.
