@@ -489,11 +489,16 @@ impl Metrics {
         parts.join(" | ")
     }
 
-    /// `/obs 50.0 msg/s (0 dropped) | /action …`, topics in their publishers' rank order.
+    /// `/obs 50.0 msg/s (0 dropped) | /action …`, topics in their publishers' rank order; a
+    /// topic nobody subscribes to says so instead of its drops (every message it evicts
+    /// counts as dropped, read by no one).
     fn topics_line(&self) -> String {
         self.topics_by_publisher()
             .iter()
-            .map(|(name, t)| format!("{name} {:.1} msg/s ({} dropped)", t.msg_per_s, t.dropped))
+            .map(|(name, t)| match t.subscriber {
+                Some(_) => format!("{name} {:.1} msg/s ({} dropped)", t.msg_per_s, t.dropped),
+                None => format!("{name} {:.1} msg/s (no subscriber)", t.msg_per_s),
+            })
             .collect::<Vec<_>>()
             .join(" | ")
     }

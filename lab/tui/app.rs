@@ -706,7 +706,8 @@ impl App {
             depth: self.depths.get(id.0).copied().unwrap_or(spec.depth),
             msg_per_s: window.msg_per_s,
             dropped: window.dropped,
-            dropping: window.dropped > 0,
+            // A topic nobody reads evicts every message unread: not a drop anyone suffers.
+            dropping: spec.subscriber.is_some() && window.dropped > 0,
             unhealthy: dead(spec.publisher)
                 || spec.subscriber.is_some_and(dead)
                 || self.last.is_some_and(|l| l.topics.get(id).lost > 0),
@@ -779,8 +780,11 @@ impl App {
             layer,
             set_hz: self.rate_of(id),
             measured_hz,
-            published_hz: match (self.graph.node(id).kind, self.graph.node(id).publishes) {
-                (NodeKind::External, Some(t)) => Some(self.live.window_topic(t).msg_per_s),
+            published_hz: match (
+                self.graph.node(id).kind,
+                self.graph.node(id).publishes.first(),
+            ) {
+                (NodeKind::External, Some(&t)) => Some(self.live.window_topic(t).msg_per_s),
                 _ => None,
             },
             lateness_p99_us,

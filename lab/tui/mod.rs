@@ -230,6 +230,8 @@ mod tests {
             ("safety", "graphs/cartpole-safety.toml"),
             // A learner's Python node says so in its box.
             ("safety_python", "graphs/cartpole-safety-python.toml"),
+            // Two inputs and two outputs; /error has no subscriber (a dashed arrow).
+            ("setpoint", "graphs/cartpole-setpoint.toml"),
         ] {
             let (app, _rx) = app_after(graph_cfg(file, 2), false);
             let text = render(&app, 80, 24);

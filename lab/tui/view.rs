@@ -436,14 +436,20 @@ pub fn shorten_left(s: &str, max: usize) -> String {
 
 /// The graph panel's title: the nodes and topics in layout order.
 fn graph_title(v: &View) -> String {
-    let names: Vec<&str> = layout_columns(v)
+    // Columns joined by arrows; what shares a column, by commas.
+    let names: Vec<String> = layout_columns(v)
         .iter()
-        .flat_map(|c| match c {
+        .map(|c| match c {
             Column::Nodes(ns) => ns
                 .iter()
                 .map(|&i| v.nodes[i].name.as_str())
-                .collect::<Vec<_>>(),
-            Column::Topics(ts) => ts.iter().map(|&i| v.topics[i].name.as_str()).collect(),
+                .collect::<Vec<_>>()
+                .join(", "),
+            Column::Topics(ts) => ts
+                .iter()
+                .map(|&i| v.topics[i].name.as_str())
+                .collect::<Vec<_>>()
+                .join(", "),
         })
         .collect();
     format!(" graph: {} ", names.join(" → "))
@@ -621,6 +627,20 @@ fn pack(parts: impl IntoIterator<Item = String>, sep: &str, w: usize) -> Vec<Str
 /// name, shaft, drops, msg/s, the QoS counters, the QoS in short, stale reads, packed to the
 /// width, most telling first (a short panel cuts from the end).
 fn arrow_lines(t: &TopicView, w: usize, rows: usize) -> Vec<Line<'static>> {
+    if t.subscriber.is_none() {
+        // Published, read by no node (a diagnostic output): a dashed arrow to nobody, and
+        // no drop count (every message it evicts is unread, and no one misses it).
+        let grey = Style::new().fg(Color::DarkGray);
+        return vec![
+            Line::from(t.name.clone().bold()).centered(),
+            Line::from(Span::styled(
+                format!("{}▷", "╌".repeat(w.saturating_sub(1))),
+                grey,
+            )),
+            Line::from(format!("{:.1} msg/s", t.msg_per_s)).centered(),
+            Line::from(Span::styled("no subscriber", grey)).centered(),
+        ];
+    }
     let (shaft, style, mark) = if t.dropping {
         (
             "═",
@@ -961,7 +981,13 @@ fn render_segment(v: &View, area: Rect, buf: &mut Buffer) {
     // (the arrows' symbol), so that no number is cut at 80 columns.
     let topics = |short: u8| -> Vec<Span<'static>> {
         let mut spans: Vec<Span> = Vec::new();
-        for (i, t) in v.topics.iter().enumerate() {
+        // A topic nobody reads has no drops to total (the arrow says "no subscriber").
+        for (i, t) in v
+            .topics
+            .iter()
+            .filter(|t| t.subscriber.is_some())
+            .enumerate()
+        {
             if i > 0 {
                 spans.push(" · ".dim());
             }

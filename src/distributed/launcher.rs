@@ -11,7 +11,7 @@ use super::wire::{self, Setup, Ticked, ToLauncher, ToMember};
 use super::{check_endpoint, check_keys, Access, DistError, Keys, REPLY_TIMEOUT};
 use crate::config::{ClockKind, RunConfig};
 use crate::graph::spec::{GraphSpec, RestartPolicy, MAX_RESTARTS};
-use crate::graph::NodeId;
+use crate::graph::{NodeId, TopicId};
 use crate::metrics::Metrics;
 use crate::node::{Flow, Node};
 use crate::rate::Rate;
@@ -1004,8 +1004,11 @@ pub fn launch(
                     instants += 1;
                     last_t = Some(t);
                 }
-                if let (Some(topic), Some(seq)) = (spec.nodes[i].publishes, m.published) {
-                    published[topic.0] = Some(seq);
+                for &(topic, seq) in &m.published {
+                    // Only a topic the node publishes (a report is untrusted input).
+                    if spec.nodes[i].publishes.contains(&TopicId(topic)) {
+                        published[topic] = Some(seq);
+                    }
                 }
                 if let Some(message) = m.failed {
                     break failed(i, t, message);

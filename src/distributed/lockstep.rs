@@ -311,7 +311,7 @@ mod tests {
             node,
             t_ns: 0,
             stop: false,
-            published: None,
+            published: Vec::new(),
             failed: None,
         }
     }
@@ -347,7 +347,7 @@ mod tests {
         assert_eq!(inbox.take(1), None);
         // A second report for one tick does not replace the first.
         let mut first = report("policy", 2, spec.chain.policy.0);
-        first.published = Some(7);
+        first.published = vec![(1, 7)];
         inbox.accept(first.clone(), &spec).unwrap();
         inbox
             .accept(report("policy", 2, spec.chain.policy.0), &spec)

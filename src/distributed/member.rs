@@ -50,6 +50,10 @@ pub struct MemberOptions {
     pub credentials: Credentials,
 }
 
+/// After node `i`'s tick, send what it published for other processes: the (topic index,
+/// seq) of each message sent.
+type Forward = dyn Fn(usize) -> Vec<(usize, u64)> + Send + Sync;
+
 /// The sequence numbers that have arrived per inbound topic, for the lockstep's waits.
 struct Arrivals {
     seqs: Mutex<Vec<Option<u64>>>,
@@ -509,12 +513,12 @@ pub fn run_member(opts: &MemberOptions, stop: &StopFlag) -> Result<(), DistError
                 .declare_token(keys.node_token(&opts.process, &n.name))
                 .wait()?,
         );
-        for (role, t) in [("pub", n.publishes), ("sub", n.subscribes)] {
-            if let Some(t) = t {
-                let ts = spec.topic(t);
-                let key = keys.endpoint_token(role, &ts.name, &ts.qos.short(ts.depth), &n.name);
-                tokens.push(session.liveliness().declare_token(key).wait()?);
-            }
+        let ends = (n.publishes.iter().map(|&t| ("pub", t)))
+            .chain(n.subscribes.iter().map(|&t| ("sub", t)));
+        for (role, t) in ends {
+            let ts = spec.topic(t);
+            let key = keys.endpoint_token(role, &ts.name, &ts.qos.short(ts.depth), &n.name);
+            tokens.push(session.liveliness().declare_token(key).wait()?);
         }
     }
     for (_, p) in &publishers {
@@ -548,26 +552,37 @@ pub fn run_member(opts: &MemberOptions, stop: &StopFlag) -> Result<(), DistError
     for (t, p) in publishers {
         by_topic[t.0] = Some(p);
     }
-    let forward: Arc<Vec<Option<(AnyTopic, zenoh::pubsub::Publisher<'static>)>>> = Arc::new(
+    // Per node, each topic it publishes for another process.
+    type Outlet = (TopicId, AnyTopic, zenoh::pubsub::Publisher<'static>);
+    let forward: Arc<Vec<Vec<Outlet>>> = Arc::new(
         (0..spec.nodes.len())
             .map(|i| {
-                let t = spec.node(NodeId(i)).publishes?;
-                let p = by_topic[t.0].take()?;
-                Some((handles.topic(t).clone(), p))
+                spec.node(NodeId(i))
+                    .publishes
+                    .iter()
+                    .filter_map(|&t| Some((t, handles.topic(t).clone(), by_topic[t.0].take()?)))
+                    .collect()
             })
             .collect(),
     );
     let sent: Arc<Vec<Mutex<Option<u64>>>> =
-        Arc::new((0..spec.nodes.len()).map(|_| Mutex::new(None)).collect());
-    let forward_after: Arc<dyn Fn(usize) -> Option<u64> + Send + Sync> = Arc::new({
+        Arc::new((0..spec.topics.len()).map(|_| Mutex::new(None)).collect());
+    let forward_after: Arc<Forward> = Arc::new({
         let (forward, sent) = (forward.clone(), sent.clone());
-        move |node: usize| -> Option<u64> {
-            let (topic, publisher) = forward.get(node)?.as_ref()?;
-            let mut last = crate::graph::lock(&sent[node]);
-            let sample = WireSample::newest_of(topic, *last)?;
-            *last = Some(sample.seq);
-            let _ = publisher.put(sample.encode()).wait();
-            Some(sample.seq)
+        move |node: usize| -> Vec<(usize, u64)> {
+            let Some(outlets) = forward.get(node) else {
+                return Vec::new();
+            };
+            outlets
+                .iter()
+                .filter_map(|(t, topic, publisher)| {
+                    let mut last = crate::graph::lock(&sent[t.0]);
+                    let sample = WireSample::newest_of(topic, *last)?;
+                    *last = Some(sample.seq);
+                    let _ = publisher.put(sample.encode()).wait();
+                    Some((t.0, sample.seq))
+                })
+                .collect()
         }
     });
     let ticks: Arc<Vec<AtomicU64>> =
@@ -756,7 +771,7 @@ fn real_clock(
     ctl_rx: &Receiver<ToMember>,
     stop: &StopFlag,
     launcher_gone: &StopFlag,
-    forward_after: &Arc<dyn Fn(usize) -> Option<u64> + Send + Sync>,
+    forward_after: &Arc<Forward>,
     ticks: &Arc<Vec<AtomicU64>>,
     run_time: &Arc<AtomicU64>,
     send: &dyn Fn(&ToLauncher) -> zenoh::Result<()>,
@@ -926,7 +941,7 @@ fn run_lockstep(
     pace: &mut lockstep::Pace<'_>,
     stop: &StopFlag,
     arrivals: &Arrivals,
-    forward_after: &dyn Fn(usize) -> Option<u64>,
+    forward_after: &Forward,
     ticks: &[AtomicU64],
     run_time: &AtomicU64,
     tell: &dyn Fn(&Ticked) -> zenoh::Result<()>,
@@ -949,14 +964,20 @@ fn run_lockstep(
         }
         let over = if local.contains(&i) {
             let mut failed = None;
-            let input = spec.nodes[i].subscribes.filter(|t| inbound.contains(t));
-            if let Some((input, seq)) = input.and_then(|t| Some((t, sent[t.0]?))) {
+            // Each input from another process: what its publisher sent so far has arrived.
+            for &input in spec.nodes[i]
+                .subscribes
+                .iter()
+                .filter(|t| inbound.contains(t))
+            {
+                let Some(seq) = sent[input.0] else { continue };
                 if !arrivals.wait_for(input, seq, stop) {
                     failed = Some(format!(
                         "message {seq} on {} did not arrive within {} s",
                         spec.topic(input).name,
                         REPLY_TIMEOUT.as_secs()
                     ));
+                    break;
                 }
             }
             let mut flow = Flow::Continue;
@@ -973,7 +994,7 @@ fn run_lockstep(
             let published = if failed.is_none() {
                 forward_after(i)
             } else {
-                None
+                Vec::new()
             };
             let read = read_counters(&held, handles);
             crate::graph::lock(batch).keep(t.0, &read);
@@ -1002,8 +1023,11 @@ fn run_lockstep(
                     m.process
                 )));
             }
-            if let (Some(topic), Some(seq)) = (spec.nodes[i].publishes, m.published) {
-                sent[topic.0] = Some(seq);
+            for &(topic, seq) in &m.published {
+                // Only a topic the node publishes (a report is untrusted input).
+                if spec.nodes[i].publishes.contains(&TopicId(topic)) {
+                    sent[topic] = Some(seq);
+                }
             }
             sched.skip_next(&nodes);
             m.stop || m.failed.is_some()

@@ -363,8 +363,9 @@ pub struct Ticked {
     pub t_ns: u64,
     /// The node stopped the graph (the fall).
     pub stop: bool,
-    /// The seq the node published in the tick, if it sent one to another process.
-    pub published: Option<u64>,
+    /// What the node sent to other processes in the tick: (topic index, seq) per topic it
+    /// sent a message on, in the node's `publishes` order.
+    pub published: Vec<(usize, u64)>,
     /// The node panicked (or its input never came): the message.
     pub failed: Option<String>,
 }

@@ -228,11 +228,11 @@ impl Graph {
             .enumerate()
             .filter_map(|(i, n)| {
                 let settings = n.external?;
-                let output = n.publishes?;
+                let output = *n.publishes.first()?;
                 Some(Arc::new(ExternalPort::new(
                     NodeId(i),
                     &n.name,
-                    n.subscribes,
+                    n.subscribes.first().copied(),
                     output,
                     settings,
                 )))
@@ -271,8 +271,9 @@ impl Graph {
                     outbox: outbox.clone(),
                     compute: n.compute.map(|c| ComputeDraw::new(c, seed, i)),
                 };
-                let input = n.subscribes.map(|t| &topics[t.0]);
-                let output = n.publishes.map(|t| &topics[t.0]);
+                // Every kind but a python node reads and publishes at most one topic each.
+                let input = n.subscribes.first().map(|t| &topics[t.0]);
+                let output = n.publishes.first().map(|t| &topics[t.0]);
                 let work = match (n.kind, (input, output)) {
                     (NodeKind::Sensor, (_, Some(out))) => {
                         let p = &n.params;
@@ -319,17 +320,18 @@ impl Graph {
                             max_force_n: n.params.max_force_n,
                         })
                     }
-                    (NodeKind::Python, (input, output)) => {
+                    (NodeKind::Python, _) => {
                         let python = n
                             .python
                             .as_ref()
                             .expect("validated: a python node's script");
+                        let of = |ts: &[TopicId]| ts.iter().map(|t| topics[t.0].clone()).collect();
                         Work::Python(Box::new(crate::python::node::PythonNode::load(
                             &n.name,
                             python,
                             rates[i].period(),
-                            input.cloned(),
-                            output.cloned(),
+                            of(&n.subscribes),
+                            of(&n.publishes),
                             outbox.clone(),
                             seed,
                         )?))

@@ -188,10 +188,12 @@ pub struct NodeSpec {
     pub rate_hz: f64,
     /// The explicit tie-break priority, if the file gave one.
     pub priority: Option<i64>,
-    /// The topic it reads, if any.
-    pub subscribes: Option<TopicId>,
-    /// The topic it publishes, if any.
-    pub publishes: Option<TopicId>,
+    /// The topics it reads, in the file's order: one for a built-in kind that reads (none
+    /// for a sensor), any number for a python node ([`crate::python::node`]).
+    pub subscribes: Vec<TopicId>,
+    /// The topics it publishes, in the file's order: one for a built-in kind that publishes
+    /// (none for the actuator), any number for a python node.
+    pub publishes: Vec<TopicId>,
     /// Kind parameters.
     pub params: NodeParams,
     /// Its liveliness lease: not heard from (not ticked) for longer than this, it is
@@ -398,10 +400,12 @@ struct RawNode {
     rate_hz: Spanned<f64>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     priority: Option<Spanned<i64>>,
+    /// A topic name, or a list of them (a python node may have several).
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    subscribes: Option<Spanned<String>>,
+    subscribes: Option<Spanned<toml::Value>>,
+    /// As `subscribes`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    publishes: Option<Spanned<String>>,
+    publishes: Option<Spanned<toml::Value>>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     noise_pos_m: Option<Spanned<f64>>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -536,6 +540,47 @@ impl Ctx<'_> {
     }
 }
 
+/// "a sensor", "an actuator": the kind with its article, for messages.
+fn a_kind(kind_name: &str) -> String {
+    let an = kind_name.starts_with(['a', 'e', 'i', 'o', 'u']);
+    format!("{} {kind_name}", if an { "an" } else { "a" })
+}
+
+/// A node's `subscribes` or `publishes`: one topic name, or a list of them (at most
+/// [`MAX_TOPICS`], each once), each spanned at the value.
+fn topic_list(
+    cx: &Ctx<'_>,
+    key: &str,
+    v: &Option<Spanned<toml::Value>>,
+) -> Result<Vec<Spanned<String>>, SpecError> {
+    let Some(v) = v else {
+        return Ok(Vec::new());
+    };
+    let bad = || {
+        cx.err(
+            v.span(),
+            format!("{key} must be a topic name or a list of topic names"),
+        )
+    };
+    let names: Vec<String> = match v.get_ref() {
+        toml::Value::String(name) => vec![name.clone()],
+        toml::Value::Array(items) if !items.is_empty() && items.len() <= MAX_TOPICS => items
+            .iter()
+            .map(|i| i.as_str().map(String::from).ok_or_else(bad))
+            .collect::<Result<_, _>>()?,
+        _ => return Err(bad()),
+    };
+    for (i, n) in names.iter().enumerate() {
+        if names[..i].contains(n) {
+            return Err(cx.err(v.span(), format!("{key} names '{n}' twice")));
+        }
+    }
+    Ok(names
+        .into_iter()
+        .map(|n| Spanned::new(v.span(), n))
+        .collect())
+}
+
 fn check_rate_hz(hz: f64) -> Result<(), String> {
     period_for_hz(hz)
         .map(|_| ())
@@ -610,7 +655,19 @@ impl GraphSpec {
     pub fn to_toml(&self) -> String {
         let s = |v: String| Spanned::new(0..0, v);
         let f = |v: f64| Spanned::new(0..0, v);
-        let topic_name = |t: Option<TopicId>| t.map(|t| s(self.topics[t.0].name.clone()));
+        // One topic as a string (as the chapter's files write it), several as a list.
+        let topic_names = |ts: &[TopicId]| -> Option<Spanned<toml::Value>> {
+            let names: Vec<toml::Value> = ts
+                .iter()
+                .map(|t| toml::Value::String(self.topics[t.0].name.clone()))
+                .collect();
+            match names.len() {
+                0 => None,
+                1 => names.into_iter().next(),
+                _ => Some(toml::Value::Array(names)),
+            }
+            .map(|v| Spanned::new(0..0, v))
+        };
         let raw = RawGraph {
             name: Some(s(self.name.clone())),
             nodes: self
@@ -626,8 +683,8 @@ impl GraphSpec {
                             kind: s(n.kind_name().to_string()),
                             rate_hz: f(n.rate_hz),
                             priority: n.priority.map(|p| Spanned::new(0..0, p)),
-                            subscribes: topic_name(n.subscribes),
-                            publishes: topic_name(n.publishes),
+                            subscribes: topic_names(&n.subscribes),
+                            publishes: topic_names(&n.publishes),
                             noise_pos_m: (sensor && p.noise_pos_m != 0.0).then(|| f(p.noise_pos_m)),
                             noise_angle_rad: (sensor && p.noise_angle_rad != 0.0)
                                 .then(|| f(p.noise_angle_rad)),
@@ -708,7 +765,7 @@ impl GraphSpec {
         // and `/clock` after it, in order ([`crate::ros2::external`]).
         for _ in 0..=self.nodes.len() {
             let n = self.node(at);
-            match (&n.process, n.kind, n.subscribes) {
+            match (&n.process, n.kind, n.subscribes.first().copied()) {
                 (Some(p), ..) => return p.clone(),
                 (None, NodeKind::External, Some(t)) if self.topic(t).publisher != id => {
                     at = self.topic(t).publisher;
@@ -923,7 +980,7 @@ impl GraphSpec {
         // Longest path over at most MAX_NODES relaxations; a cycle stops growing at the bound.
         for _ in 0..self.nodes.len() {
             for (i, n) in self.nodes.iter().enumerate() {
-                if let Some(t) = n.subscribes {
+                for t in &n.subscribes {
                     let p = self.topics[t.0].publisher.0;
                     if p != i {
                         layer[i] = layer[i].max((layer[p] + 1).min(self.nodes.len() - 1));
@@ -1052,110 +1109,134 @@ fn build(cx: &Ctx<'_>, raw: RawGraph) -> Result<GraphSpec, SpecError> {
             actuators.push(r.name.span());
         }
         let id = NodeId(file_nodes.len());
-        let (reads, writes) = match (kind.shape(), registered_shape) {
-            (Some(shape), _) => shape,
-            (None, Some((reads, writes))) if kind == NodeKind::Registered => {
-                (Some(reads), writes.one())
+        // The types a kind reads and publishes: fixed for a built-in kind and a registered
+        // one (the registry's), any for a python or external node.
+        let fixed: Option<(Option<MsgType>, &'static [MsgType])> =
+            match (kind.shape(), registered_shape) {
+                (Some(shape), _) => Some(shape),
+                (None, Some((reads, writes))) if kind == NodeKind::Registered => {
+                    Some((Some(reads), writes.one()))
+                }
+                _ => None,
+            };
+        let sub_names = topic_list(cx, "subscribes", &r.subscribes)?;
+        let pub_names = topic_list(cx, "publishes", &r.publishes)?;
+        // A python node may read and publish several topics; every other kind one each.
+        if kind != NodeKind::Python {
+            for (key, names) in [("subscribes", &sub_names), ("publishes", &pub_names)] {
+                if let Some(second) = names.get(1) {
+                    return Err(cx.err(
+                        second.span(),
+                        format!(
+                            "{} node {key} one topic (only a python node may have several)",
+                            a_kind(kind_name)
+                        ),
+                    ));
+                }
             }
-            // A Python node: whatever its one input and output carry.
-            (None, _) => {
-                let carried = |t: &Option<Spanned<String>>| -> Result<Option<MsgType>, SpecError> {
-                    t.as_ref()
-                        .map(|t| find_topic(&topics, t).map(|i| topics[i].msg))
-                        .transpose()
-                };
-                let reads = carried(&r.subscribes)?;
-                let writes: &'static [MsgType] = carried(&r.publishes)?.map_or(&[], MsgType::one);
-                (reads, writes)
+        }
+        if let Some((reads, writes)) = fixed {
+            match (sub_names.first(), reads) {
+                (None, Some(want)) => {
+                    return Err(cx.err(
+                        r.name.span(),
+                        format!(
+                            "{} node must subscribe to a {} topic",
+                            a_kind(kind_name),
+                            want.as_str()
+                        ),
+                    ))
+                }
+                (Some(s), None) => {
+                    return Err(cx.err(
+                        s.span(),
+                        format!("{} node subscribes to nothing", a_kind(kind_name)),
+                    ))
+                }
+                _ => {}
             }
-        };
-        let subscribes = match (&r.subscribes, reads) {
-            (None, Some(want)) => {
-                return Err(cx.err(
-                    r.name.span(),
-                    format!(
-                        "a {} node must subscribe to a {} topic",
-                        kind_name,
-                        want.as_str()
-                    ),
-                ))
+            match (pub_names.first(), writes.is_empty()) {
+                (None, false) => {
+                    return Err(cx.err(
+                        r.name.span(),
+                        format!("{} node must publish a topic", a_kind(kind_name)),
+                    ))
+                }
+                (Some(p), true) => {
+                    return Err(cx.err(
+                        p.span(),
+                        format!("{} node publishes nothing", a_kind(kind_name)),
+                    ))
+                }
+                _ => {}
             }
-            (Some(s), None) => {
-                return Err(cx.err(
-                    s.span(),
-                    format!("a {} node subscribes to nothing", kind_name),
-                ))
-            }
-            (None, None) => None,
-            (Some(s), Some(want)) => {
-                let ti = find_topic(&topics, s)?;
-                let t = &mut topics[ti];
+        }
+        let mut subscribes = Vec::with_capacity(sub_names.len());
+        for s in &sub_names {
+            let ti = find_topic(&topics, s)?;
+            let t = &mut topics[ti];
+            if let Some((Some(want), _)) = fixed {
                 if t.msg != want {
                     return Err(cx.err(
                         s.span(),
                         format!(
-                            "type mismatch: '{}' carries {} but a {} node reads {}",
+                            "type mismatch: '{}' carries {} but {} node reads {}",
                             t.name,
                             t.msg.as_str(),
-                            kind_name,
+                            a_kind(kind_name),
                             want.as_str()
                         ),
                     ));
                 }
-                if let Some(other) = t.subscriber {
-                    return Err(cx.err(
-                        s.span(),
-                        format!(
-                            "topic '{}' already has a subscriber ('{}'): one subscriber per topic",
-                            t.name, file_nodes[other.0].name
-                        ),
-                    ));
-                }
-                t.subscriber = Some(id);
-                Some(TopicId(ti))
             }
-        };
-        let publishes = match (&r.publishes, writes.is_empty()) {
-            (None, false) => {
+            if let Some(other) = t.subscriber {
+                let who = file_nodes.get(other.0).map_or(nname.as_str(), |n| &n.name);
                 return Err(cx.err(
-                    r.name.span(),
-                    format!("a {} node must publish a topic", kind_name),
-                ))
+                    s.span(),
+                    format!(
+                        "topic '{}' already has a subscriber ('{who}'): one subscriber per topic",
+                        t.name
+                    ),
+                ));
             }
-            (Some(p), true) => {
-                return Err(cx.err(p.span(), format!("a {} node publishes nothing", kind_name)))
-            }
-            (None, true) => None,
-            (Some(p), false) => {
-                let ti = find_topic(&topics, p)?;
-                let t = &mut topics[ti];
+            t.subscriber = Some(id);
+            subscribes.push(TopicId(ti));
+        }
+        let mut publishes = Vec::with_capacity(pub_names.len());
+        for p in &pub_names {
+            let ti = find_topic(&topics, p)?;
+            let t = &mut topics[ti];
+            if let Some((_, writes)) = fixed {
                 if !writes.contains(&t.msg) {
                     let names: Vec<&str> = writes.iter().map(|m| m.as_str()).collect();
                     return Err(cx.err(
                         p.span(),
                         format!(
-                            "type mismatch: '{}' carries {} but a {} node publishes {}",
+                            "type mismatch: '{}' carries {} but {} node publishes {}",
                             t.name,
                             t.msg.as_str(),
-                            kind_name,
+                            a_kind(kind_name),
                             names.join(" or ")
                         ),
                     ));
                 }
-                if t.publisher.0 != usize::MAX {
-                    return Err(cx.err(
-                        p.span(),
-                        format!(
-                            "topic '{}' already has a publisher ('{}'): one publisher per topic",
-                            t.name, file_nodes[t.publisher.0].name
-                        ),
-                    ));
-                }
-                t.publisher = id;
-                Some(TopicId(ti))
             }
-        };
-        if kind == NodeKind::External && publishes.is_none() {
+            if t.publisher.0 != usize::MAX {
+                let who = file_nodes
+                    .get(t.publisher.0)
+                    .map_or(nname.as_str(), |n| &n.name);
+                return Err(cx.err(
+                    p.span(),
+                    format!(
+                        "topic '{}' already has a publisher ('{who}'): one publisher per topic",
+                        t.name
+                    ),
+                ));
+            }
+            t.publisher = id;
+            publishes.push(TopicId(ti));
+        }
+        if kind == NodeKind::External && publishes.is_empty() {
             return Err(cx.err(
                 r.name.span(),
                 "an external node must publish a topic: what it publishes is how ratelab hears it",
@@ -1319,17 +1400,31 @@ fn spec_actuator(spec: &GraphSpec) -> NodeId {
 }
 
 /// Walk upstream from the actuator: safety nodes, the policy, an estimator, the sensor.
+///
+/// A node of an open kind (python, registered, external) is the policy when it reads a
+/// `state` topic (its first), and a safety node when it reads a `force` topic (its first),
+/// which the walk follows; up from the policy, the walk follows each node's first input.
 fn find_chain(spec: &GraphSpec) -> Result<Chain, String> {
     let actuator = spec_actuator(spec);
-    let upstream = |n: NodeId| -> Option<(TopicId, NodeId)> {
-        let t = spec.nodes[n.0].subscribes?;
+    let open = |n: NodeId| {
+        matches!(
+            spec.nodes[n.0].kind,
+            NodeKind::Python | NodeKind::Registered | NodeKind::External
+        )
+    };
+    // Node `n`'s first input of type `m` (any type: `None`), with its publisher.
+    let input = |n: NodeId, m: Option<MsgType>| -> Option<(TopicId, NodeId)> {
+        let t = *spec.nodes[n.0]
+            .subscribes
+            .iter()
+            .find(|t| m.is_none_or(|m| spec.topics[t.0].msg == m))?;
         Some((t, spec.topics[t.0].publisher))
     };
     let mut cur = actuator;
-    let mut action = None;
     let mut seen = 0;
     let (policy, action) = loop {
-        let (t, p) = upstream(cur).ok_or("the actuator is not driven by a policy")?;
+        let (t, p) =
+            input(cur, Some(MsgType::Force)).ok_or("the actuator is not driven by a policy")?;
         seen += 1;
         if seen > MAX_NODES {
             return Err(
@@ -1337,40 +1432,25 @@ fn find_chain(spec: &GraphSpec) -> Result<Chain, String> {
                     .into(),
             );
         }
-        let reads = |m: MsgType| upstream(p).is_some_and(|(t, _)| spec.topics[t.0].msg == m);
+        let reads = |m: MsgType| input(p, Some(m)).is_some();
         match spec.nodes[p.0].kind {
-            NodeKind::Policy => break (p, action.unwrap_or(t)),
-            NodeKind::Python | NodeKind::Registered | NodeKind::External
-                if reads(MsgType::State) =>
-            {
-                break (p, action.unwrap_or(t))
-            }
-            NodeKind::Safety => {
-                action = Some(t);
-                cur = p;
-            }
-            NodeKind::Python | NodeKind::Registered | NodeKind::External
-                if reads(MsgType::Force) =>
-            {
-                action = Some(t);
-                cur = p;
-            }
+            NodeKind::Policy => break (p, t),
+            _ if open(p) && reads(MsgType::State) => break (p, t),
+            NodeKind::Safety => cur = p,
+            _ if open(p) && reads(MsgType::Force) => cur = p,
             _ => return Err("the actuator is not driven by a policy".into()),
         }
     };
-    // `action` is the policy's output: the topic just downstream of it.
-    let action = spec.nodes[policy.0].publishes.unwrap_or(action);
-    let (obs, mut src) = upstream(policy).ok_or("the policy reads nothing")?;
-    // Up through the estimators (built-in or Python) to the sensor.
+    let (obs, mut src) = input(policy, Some(MsgType::State)).ok_or("the policy reads nothing")?;
+    // Up through the estimators (built-in or of an open kind) to the sensor.
     for _ in 0..MAX_NODES {
-        match spec.nodes[src.0].kind {
-            NodeKind::Estimator | NodeKind::Python | NodeKind::Registered | NodeKind::External => {
-                let name = &spec.nodes[src.0].name;
-                src = upstream(src)
-                    .ok_or_else(|| format!("node '{name}' before the policy reads nothing"))?
-                    .1;
-            }
-            _ => break,
+        if spec.nodes[src.0].kind == NodeKind::Estimator || open(src) {
+            let name = &spec.nodes[src.0].name;
+            src = input(src, None)
+                .ok_or_else(|| format!("node '{name}' before the policy reads nothing"))?
+                .1;
+        } else {
+            break;
         }
     }
     if spec.nodes[src.0].kind != NodeKind::Sensor {
@@ -1685,8 +1765,9 @@ impl fmt::Display for GraphSpec {
                 n.name,
                 n.rate_hz
             )?;
-            if let Some(t) = n.publishes {
-                write!(f, " → {}", self.topics[t.0].name)?;
+            for (k, t) in n.publishes.iter().enumerate() {
+                let sep = if k == 0 { " →" } else { "," };
+                write!(f, "{sep} {}", self.topics[t.0].name)?;
             }
         }
         Ok(())
@@ -1783,6 +1864,87 @@ depth = 1
             let back = GraphSpec::parse(&g.to_toml(), "again").unwrap();
             assert_eq!(g, back);
         }
+    }
+
+    const SETPOINT: &str = include_str!("../../graphs/cartpole-setpoint.toml");
+
+    #[test]
+    fn a_python_node_may_read_and_publish_several_topics_and_plays_the_policy() {
+        let g = parse(SETPOINT).unwrap();
+        let tracker = g.node_id("tracker").unwrap();
+        let names = |ts: &[TopicId]| -> Vec<String> {
+            ts.iter().map(|t| g.topic(*t).name.clone()).collect()
+        };
+        assert_eq!(names(&g.node(tracker).subscribes), ["/obs", "/reference"]);
+        assert_eq!(names(&g.node(tracker).publishes), ["/action", "/error"]);
+        // The chain: the state input makes it the policy; its output toward the actuator
+        // is the action; /reference's publisher ranks before it (topological order).
+        assert_eq!(g.chain.policy, tracker);
+        assert_eq!(g.topic(g.chain.obs).name, "/obs");
+        assert_eq!(g.topic(g.chain.action).name, "/action");
+        assert_eq!(
+            g.node_names(),
+            ["sensor", "reference", "tracker", "actuator"]
+        );
+        assert_eq!(g.layers(), vec![0, 0, 1, 2]);
+        assert!(
+            g.to_string().contains("tracker 50 Hz → /action, /error"),
+            "{g}"
+        );
+        // Several topics are written as a list, one as a string, and read back equal.
+        let text = g.to_toml();
+        assert!(
+            text.contains(r#"subscribes = ["/obs", "/reference"]"#),
+            "{text}"
+        );
+        assert!(text.contains(r#"subscribes = "/action""#), "{text}");
+        assert_eq!(GraphSpec::parse(&text, "again").unwrap(), g);
+    }
+
+    #[test]
+    fn lists_of_topics_are_checked() {
+        let reason = |from: &str, to: &str| {
+            assert!(SETPOINT.contains(from), "{from}");
+            parse(&SETPOINT.replace(from, to)).unwrap_err().reason
+        };
+        // Only a python node takes several.
+        let e = reason(
+            "subscribes = \"/action\"",
+            "subscribes = [\"/action\", \"/error\"]",
+        );
+        assert_eq!(
+            e,
+            "an actuator node subscribes one topic (only a python node may have several)"
+        );
+        for bad in ["3", "[]", "[\"/obs\", 3]", "{ a = 1 }"] {
+            let e = reason(
+                "subscribes = [\"/obs\", \"/reference\"]",
+                &format!("subscribes = {bad}"),
+            );
+            assert_eq!(
+                e, "subscribes must be a topic name or a list of topic names",
+                "{bad}"
+            );
+        }
+        let e = reason(
+            "publishes = [\"/action\", \"/error\"]",
+            "publishes = [\"/action\", \"/action\"]",
+        );
+        assert_eq!(e, "publishes names '/action' twice");
+        let e = reason(
+            "publishes = [\"/action\", \"/error\"]",
+            "publishes = [\"/action\", \"/nope\"]",
+        );
+        assert!(e.starts_with("unknown topic '/nope'"), "{e}");
+        // Each topic keeps one publisher and one subscriber.
+        let e = reason(
+            "publishes = [\"/action\", \"/error\"]",
+            "publishes = [\"/action\", \"/reference\"]",
+        );
+        assert!(
+            e.contains("topic '/reference' already has a publisher ('reference')"),
+            "{e}"
+        );
     }
 
     #[test]

@@ -15,18 +15,26 @@
 //! | `position` | `ratelab.Position` | `cart_pos_m`, `pole_angle_rad` |
 //! | `force` | `ratelab.Force` | `newtons` |
 //!
-//! **The executor's order within a tick** (the node ticks at its `rate_hz`, like every
-//! node): first the subscription's callback, once, for what the topic's QoS delivers at
-//! that instant (latest: the newest unread message; FIFO: the oldest unread) — not called
-//! when nothing new arrived; then every timer due at the tick (a timer fires on the node's
-//! first tick and then every `period_s`, which must be a whole number of the node's
-//! periods). What the callbacks published goes out at the end of the tick, stamped with
-//! the tick's time.
+//! A node may subscribe to several topics and publish several (`subscribes = ["/obs",
+//! "/reference"]` in the graph file): one `create_subscription` per input and one
+//! `create_publisher` per output, each naming a topic the graph file gives it.
 //!
-//! **Origin stamps** (sense→act latency): what a Python node publishes carries the origin
-//! of the newest message its subscription delivered (the reading it was derived from), or
-//! its own tick time when it subscribes to nothing. ratelab's nodes read at most one topic,
-//! so this is "the oldest origin among the messages it used".
+//! **The executor's order within a tick** (the node ticks at its `rate_hz`, like every
+//! node): first the subscriptions' callbacks, in the order the node created them, each
+//! once for what its topic's QoS delivers at that instant (latest: the newest unread
+//! message; FIFO: the oldest unread) — not called when nothing new arrived on it; then
+//! every timer due at the tick, in the order created (a timer fires on the node's first
+//! tick and then every `period_s`, which must be a whole number of the node's periods).
+//! What the callbacks published goes out at the end of the tick, stamped with the tick's
+//! time, in the order published.
+//!
+//! **Origin stamps** (sense→act latency): what a Python node publishes carries the
+//! **oldest** origin among the newest messages its subscriptions delivered — the oldest
+//! reading the output may depend on, since a node keeps its inputs' last values (a zero-order
+//! hold) — or its own tick time when it subscribes to nothing (it is a source). With one
+//! input that is the origin of the reading it was derived from. So an input that is slow or
+//! stale (a setpoint published once a second) stretches the sense→act latency the actuator
+//! measures: the command really does rest on data that old.
 //!
 //! Errors at load are one line ([`PythonError`]): the script missing or unreadable, a
 //! syntax error, no such class, a topic or type the graph file does not give the node, a
@@ -50,10 +58,15 @@ pub struct PythonNode {
     runtime: Py<PyAny>,
     script: String,
     what: String,
-    input: Option<AnyTopic>,
-    output: Option<AnyTopic>,
+    inputs: Vec<Input>,
+    outputs: Vec<AnyTopic>,
     /// Where its publishes go (held during a tick with a compute time).
     outbox: Outbox,
+}
+
+/// One subscription: its topic and what it delivered last.
+struct Input {
+    topic: AnyTopic,
     /// `seq` of the newest message delivered to the subscription callback.
     last_seq: Option<u64>,
     /// Origin stamp of the newest message delivered.
@@ -65,9 +78,9 @@ pub struct PythonNode {
 pub struct TickError(pub String);
 
 impl PythonNode {
-    /// Load node `name` (ticking every `period`) from `spec`, wired to `input` and
-    /// `output` (the topics the graph file gives it, published through `outbox`); `seed` is
-    /// the run's.
+    /// Load node `name` (ticking every `period`) from `spec`, wired to `inputs` and
+    /// `outputs` (the topics the graph file gives it, in its order, published through
+    /// `outbox`); `seed` is the run's.
     ///
     /// # Errors
     /// [`PythonError`]: see the module docs.
@@ -75,8 +88,8 @@ impl PythonNode {
         name: &str,
         spec: &PythonNodeSpec,
         period: Nanos,
-        input: Option<AnyTopic>,
-        output: Option<AnyTopic>,
+        inputs: Vec<AnyTopic>,
+        outputs: Vec<AnyTopic>,
         outbox: Outbox,
         seed: u64,
     ) -> Result<PythonNode, PythonError> {
@@ -84,9 +97,10 @@ impl PythonNode {
         let source = super::brain::read_script(script)?;
         start()?;
         let module_name = format!("ratelab_node_{name}");
-        let declared = |t: &Option<AnyTopic>| {
-            t.as_ref()
+        let declared = |ts: &[AnyTopic]| -> Vec<(String, &'static str)> {
+            ts.iter()
                 .map(|t| (t.name().to_string(), t.msg_type().as_str()))
+                .collect()
         };
         Python::attach(|py| {
             let support = support(py)?;
@@ -111,8 +125,8 @@ impl PythonNode {
                         spec.class.as_deref(),
                         name,
                         period.0,
-                        declared(&input),
-                        declared(&output),
+                        declared(&inputs),
+                        declared(&outputs),
                         params,
                         seed,
                     ),
@@ -122,11 +136,16 @@ impl PythonNode {
                 runtime: runtime.unbind(),
                 script: script.to_string(),
                 what: format!("node '{name}' ({script})"),
-                input,
-                output,
+                inputs: inputs
+                    .into_iter()
+                    .map(|topic| Input {
+                        topic,
+                        last_seq: None,
+                        origin: None,
+                    })
+                    .collect(),
+                outputs,
                 outbox,
-                last_seq: None,
-                origin: None,
             })
         })
     }
@@ -139,35 +158,49 @@ impl PythonNode {
     /// [`TickError`] with the one-line description when a callback raised or published
     /// something that is not a message of its topic's type.
     pub fn tick(&mut self, now: Nanos, period: Nanos) -> Result<(), TickError> {
-        let delivered = self.input.as_ref().and_then(|t| {
-            let (seq, origin, fields) = read(t, now)?;
-            (self.last_seq != Some(seq)).then(|| {
-                self.last_seq = Some(seq);
-                self.origin = Some(origin);
-                fields
+        // What each input delivers now (by its QoS), if new: (input index, fields).
+        let delivered: Vec<(usize, Fields)> = self
+            .inputs
+            .iter_mut()
+            .enumerate()
+            .filter_map(|(i, input)| {
+                let (seq, origin, fields) = read(&input.topic, now)?;
+                (input.last_seq != Some(seq)).then(|| {
+                    input.last_seq = Some(seq);
+                    input.origin = Some(origin);
+                    (i, fields)
+                })
             })
-        });
-        let published: Vec<Fields> = Python::attach(|py| {
+            .collect();
+        let published: Vec<(usize, Fields)> = Python::attach(|py| {
             let _running = CallbackGuard::enter_tick(&self.what, period);
             self.runtime
                 .call_method1(py, "tick", (now.0, delivered))
                 .and_then(|out| {
                     let out = out.bind(py).cast::<PyList>().map_err(PyErr::from)?;
-                    out.iter().map(|m| m.extract::<Fields>()).collect()
+                    out.iter().map(|m| m.extract::<(usize, Fields)>()).collect()
                 })
                 .map_err(|e| TickError(describe(py, &e, &self.script)))
         })?;
-        if let Some(out) = &self.output {
-            let origin = if self.input.is_some() {
-                self.origin
-            } else {
-                Some(now)
-            };
-            for fields in published {
+        let origin = self.origin(now);
+        for (output, fields) in published {
+            // The Python side checked the index against the graph file's outputs.
+            if let Some(out) = self.outputs.get(output) {
                 publish(&self.outbox, out, &fields, now, origin);
             }
         }
         Ok(())
+    }
+
+    /// The origin stamp what it publishes at `now` carries: the oldest origin among the
+    /// newest messages its subscriptions delivered (its inputs' last values, which its
+    /// callbacks used), or `now` when it subscribes to nothing (it is a source). `None`
+    /// before any subscription delivered.
+    fn origin(&self, now: Nanos) -> Option<Nanos> {
+        if self.inputs.is_empty() {
+            return Some(now);
+        }
+        self.inputs.iter().filter_map(|i| i.origin).min()
     }
 }
 

@@ -270,17 +270,18 @@ class Parameter:
 
 
 class Publisher:
-    """What `create_publisher` returns: `publish(msg)` sends `msg` on the node's topic at
-    the end of the callback that published it, stamped with the tick's time."""
+    """What `create_publisher` returns: `publish(msg)` sends `msg` on its topic at the end
+    of the tick that published it, stamped with the tick's time."""
 
-    def __init__(self, runtime, msg_type, topic):
+    def __init__(self, runtime, msg_type, topic, index):
         self._runtime, self.msg_type, self.topic_name = runtime, msg_type, topic
+        self._index = index
 
     def publish(self, msg):
         if type(msg) is not self.msg_type:
             raise TypeError(f"publish on '{self.topic_name}' takes a {self.msg_type.__name__}, "
                             f"got {type(msg).__name__}")
-        self._runtime.outbox.append(msg._fields())
+        self._runtime.outbox.append((self._index, msg._fields()))
 
 
 def _qos_depth(qos):
@@ -304,34 +305,39 @@ class NodeHandle:
         return self._rt.period_ns / 1e9
 
     def _check(self, kind, msg_type, topic, declared):
-        if declared is None:
+        """The index of `topic` among the graph file's `kind` topics for this node, after
+        checking that it is one of them and carries `msg_type`."""
+        names = [name for name, _ in declared]
+        if topic not in names:
+            given = (f"{kind} = " + (f"\"{names[0]}\"" if len(names) == 1 else
+                                      "[" + ", ".join(f"\"{n}\"" for n in names) + "]")
+                     if names else f"no `{kind} = ...`")
             raise ContractError(self._rt.where(), f"node '{self._rt.name}' {kind} '{topic}', but "
-                                f"the graph file gives it no `{kind} = ...`")
-        name, type_name = declared
-        if topic != name:
-            raise ContractError(self._rt.where(), f"node '{self._rt.name}' {kind} '{topic}', but "
-                                f"the graph file gives it {kind} = \"{name}\"")
+                                f"the graph file gives it {given}")
+        index = names.index(topic)
+        type_name = declared[index][1]
         want = MESSAGE_TYPES[type_name]
         if msg_type is not want:
             got = getattr(msg_type, "__name__", repr(msg_type))
             raise ContractError(self._rt.where(), f"'{topic}' carries {want.__name__} "
                                 f"(type = \"{type_name}\"), not {got}")
+        return index
 
     def create_subscription(self, msg_type, topic, callback, qos_profile=1, **_kw):
-        self._check("subscribes", msg_type, topic, self._rt.input)
-        if self._rt.subscription is not None:
-            raise ContractError(self._rt.where(), "one subscription per node (the graph file "
-                                "gives it one input topic)")
+        index = self._check("subscribes", msg_type, topic, self._rt.inputs)
+        if any(i == index for i, _, _ in self._rt.subscriptions):
+            raise ContractError(self._rt.where(), f"a second subscription to '{topic}' (one "
+                                "per topic)")
         if not callable(callback):
             raise ContractError(self._rt.where(), "create_subscription's callback is not callable")
-        self._rt.subscription = (msg_type, callback)
+        self._rt.subscriptions.append((index, msg_type, callback))
         self._rt.qos_depths.append(_qos_depth(qos_profile))
         return topic
 
     def create_publisher(self, msg_type, topic, qos_profile=1, **_kw):
-        self._check("publishes", msg_type, topic, self._rt.output)
+        index = self._check("publishes", msg_type, topic, self._rt.outputs)
         self._rt.qos_depths.append(_qos_depth(qos_profile))
-        return Publisher(self._rt, msg_type, topic)
+        return Publisher(self._rt, msg_type, topic, index)
 
     def create_timer(self, timer_period_sec, callback, **_kw):
         period_ns = self._rt.period_ns
@@ -371,14 +377,16 @@ class NodeHandle:
 
 class NodeRuntime:
     """One learner's node as ratelab drives it: `tick(now_ns, delivered)` runs the
-    subscription callback for a delivered message (a field tuple, or None), then the timers
-    due at this tick, and returns the field tuples published."""
+    subscriptions' callbacks, in the order created, for what their inputs delivered
+    (`delivered`: (input index, field tuple) pairs), then the timers due at this tick, and
+    returns what was published: (output index, field tuple) pairs, in order."""
 
-    def __init__(self, module, script, class_name, name, period_ns, input, output, params, seed):
+    def __init__(self, module, script, class_name, name, period_ns, inputs, outputs, params,
+                 seed):
         self.script, self.name, self.period_ns = script, name, period_ns
-        self.input, self.output, self.params, self.seed = input, output, dict(params), seed
+        self.inputs, self.outputs, self.params, self.seed = inputs, outputs, dict(params), seed
         self.now_ns, self.ticks, self.outbox = 0, 0, []
-        self.subscription, self.timers, self.qos_depths, self.rng = None, [], [], None
+        self.subscriptions, self.timers, self.qos_depths, self.rng = [], [], [], None
         self.clock, self.logger = Clock(self), Logger(name)
         cls = self._find_class(module, class_name)
         self.instance = cls(NodeHandle(self))
@@ -409,9 +417,11 @@ class NodeRuntime:
 
     def tick(self, now_ns, delivered):
         self.now_ns, self.outbox = now_ns, []
-        if delivered is not None and self.subscription is not None:
-            msg_type, callback = self.subscription
-            callback(msg_type(*delivered))
+        if delivered:
+            fields = dict(delivered)
+            for index, msg_type, callback in self.subscriptions:
+                if index in fields:
+                    callback(msg_type(*fields[index]))
         for every, callback in self.timers:
             if self.ticks % every == 0:
                 callback()
@@ -419,8 +429,9 @@ class NodeRuntime:
         return self.outbox
 
 
-def node_runtime(module, script, class_name, name, period_ns, input, output, params, seed):
-    return NodeRuntime(module, script, class_name, name, period_ns, input, output, params, seed)
+def node_runtime(module, script, class_name, name, period_ns, inputs, outputs, params, seed):
+    return NodeRuntime(module, script, class_name, name, period_ns, inputs, outputs, params,
+                       seed)
 
 
 def install_message_module():

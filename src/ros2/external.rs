@@ -97,7 +97,7 @@ pub fn check_placement(spec: &GraphSpec) -> Result<(), String> {
             continue;
         }
         let p = spec.process_of(crate::graph::NodeId(i));
-        if let Some(t) = n.subscribes {
+        if let Some(&t) = n.subscribes.first() {
             let feeder = spec.process_of(spec.topic(t).publisher);
             if feeder != p {
                 return Err(format!(

@@ -607,6 +607,179 @@ fn a_python_node_in_its_own_process_gives_the_in_process_run_byte_for_byte() {
     crate::distributed::assert_lockstep_equals_in_process(&graph, &graph);
 }
 
+// ---- Several inputs and outputs (graphs/cartpole-setpoint.toml) ------------------------
+
+/// The mean cart position, m, over trace rows with `from_s <= t < to_s`.
+fn mean_cart_pos(trace: &[u8], from_s: f64, to_s: f64) -> f64 {
+    let text = String::from_utf8_lossy(trace);
+    let mut rows = text.lines();
+    let head: Vec<&str> = rows.next().unwrap().split(',').collect();
+    let col = |name: &str| head.iter().position(|h| *h == name).unwrap();
+    let (t, x) = (col("t_ns"), col("cart_pos"));
+    let xs: Vec<f64> = rows
+        .map(|r| r.split(',').collect::<Vec<_>>())
+        .filter(|r| (from_s..to_s).contains(&(r[t].parse::<f64>().unwrap() / 1e9)))
+        .map(|r| r[x].parse().unwrap())
+        .collect();
+    xs.iter().sum::<f64>() / xs.len() as f64
+}
+
+/// A node with two subscriptions and two publishers: the tracker holds the cart at the
+/// reference node's setpoint (+0.3 m, then −0.3 m after 4 s) while balancing, publishes
+/// its error on a topic nobody reads (the summary says so), and the run is byte-identical
+/// run to run.
+#[test]
+fn a_python_node_with_two_inputs_and_two_outputs_tracks_a_setpoint_and_balances() {
+    let _m = crate::machine::shared();
+    let (a, b) = (tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap());
+    let graph = repo("graphs/cartpole-setpoint.toml");
+    let args = ["--graph", graph.as_str(), "--duration", "12"];
+    let (m, trace) = virtual_out(a.path(), &args);
+    assert_eq!(m["balanced"], true, "{m}");
+    let label = format!(
+        "Python node 'tracker' ({})",
+        repo("graphs/nodes/setpoint_tracker.py")
+    );
+    assert_eq!(m["policy"], label.as_str());
+    let before = mean_cart_pos(&trace, 3.5, 4.0);
+    let after = mean_cart_pos(&trace, 7.5, 8.0);
+    assert!(
+        before > 0.2 && after < -0.2,
+        "cart at {before} m, then {after} m"
+    );
+    // Each output got one message per tick (the timer publishes both).
+    let ticks = m["nodes"]["tracker"]["ticks"].as_u64().unwrap();
+    assert_eq!(m["topics"]["/action"]["published"], ticks);
+    assert_eq!(m["topics"]["/error"]["published"], ticks);
+    assert_eq!(m["topics"]["/error"].get("subscriber"), None);
+    let (m2, trace2) = virtual_out(b.path(), &args);
+    assert!(m == m2 && trace == trace2, "two runs differ");
+    let o = ratelab(&[&["run", "--clock", "virtual"][..], &args].concat());
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(out.contains("/error 50.1 msg/s (no subscriber)"), "{out}");
+}
+
+/// What a node with several inputs publishes carries the oldest origin among its inputs'
+/// newest messages: with the setpoint published at 5 Hz (at 0, 200, … ms) and the sensor at
+/// 50 Hz, the tracker's command at `t` rests on the setpoint of the last multiple of 200 ms,
+/// so the actuator measures `t mod 200 ms`: 0, 20, …, 180 ms, mean 90. At 50 Hz both
+/// inputs are of the same instant: 0 under the virtual clock.
+#[test]
+fn a_node_with_several_inputs_passes_on_the_oldest_origin() {
+    let dir = tempfile::tempdir().unwrap();
+    let graph = repo("graphs/cartpole-setpoint.toml");
+    let latency = |rate: &str| {
+        let (m, _) = virtual_out(
+            dir.path(),
+            &["--graph", &graph, "--duration", "4", "--rate", rate],
+        );
+        assert_eq!(m["balanced"], true, "{rate}: {m}");
+        (
+            m["mean_latency_ms"].as_f64().unwrap(),
+            m["latency_max_ms"].as_f64().unwrap(),
+        )
+    };
+    assert_eq!(latency("reference=50"), (0.0, 0.0));
+    let (mean, max) = latency("reference=5");
+    assert_eq!(max, 180.0);
+    assert!((mean - 90.0).abs() < 1.0, "mean {mean} ms");
+}
+
+#[test]
+fn a_node_with_several_inputs_in_its_own_process_gives_the_in_process_run() {
+    let _m = crate::machine::shared();
+    let dir = tempfile::tempdir().unwrap();
+    let graph = repo("graphs/cartpole-setpoint.toml");
+    for seed in ["0", "1"] {
+        let (one, many) = (dir.path().join("one"), dir.path().join("many"));
+        let common = [
+            "--clock",
+            "virtual",
+            "--seed",
+            seed,
+            "--duration",
+            "6",
+            "--graph",
+            &graph,
+        ];
+        let o = ratelab(
+            &[
+                &["run"][..],
+                &common,
+                &["--out", one.to_str().unwrap(), "--force"],
+            ]
+            .concat(),
+        );
+        assert!(o.status.success(), "{}", stderr(&o));
+        let o = ratelab(
+            &[
+                &["launch", "--processes"][..],
+                &common,
+                &["--out", many.to_str().unwrap(), "--force"],
+            ]
+            .concat(),
+        );
+        let out = String::from_utf8_lossy(&o.stdout);
+        assert!(o.status.success(), "{out}{}", stderr(&o));
+        assert!(
+            out.contains("in 3 processes: robot [sensor, actuator], reference [reference], tracker [tracker]"),
+            "{out}"
+        );
+        let a = std::fs::read_to_string(one.join("metrics.json")).unwrap();
+        let b = std::fs::read_to_string(many.join("metrics.json")).unwrap();
+        assert_eq!(a, b, "seed {seed}: metrics differ");
+    }
+}
+
+#[test]
+fn a_python_node_subscribes_and_publishes_only_what_its_list_gives_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let refused = |node: &str, needle: &str| {
+        let graph = dir.path().join("g.toml");
+        let text = std::fs::read_to_string(repo("graphs/cartpole-setpoint.toml"))
+            .unwrap()
+            .replace(
+                "script = \"nodes/setpoint_tracker.py\"",
+                "script = \"tracker.py\"",
+            )
+            .replace(
+                "nodes/square_reference.py",
+                &repo("graphs/nodes/square_reference.py"),
+            );
+        std::fs::write(&graph, text).unwrap();
+        let tracker = std::fs::read_to_string(repo("graphs/nodes/setpoint_tracker.py")).unwrap();
+        let changed = tracker.replace(
+            "        node.create_timer(node.get_period(), self.on_timer)",
+            &format!("        node.create_timer(node.get_period(), self.on_timer)\n{node}"),
+        );
+        assert_ne!(changed, tracker);
+        std::fs::write(dir.path().join("tracker.py"), changed).unwrap();
+        let o = ratelab(&[
+            "run",
+            "--clock",
+            "virtual",
+            "--graph",
+            graph.to_str().unwrap(),
+        ]);
+        let err = stderr(&o);
+        assert_eq!(o.status.code(), Some(2), "{err}");
+        assert_eq!(err.trim_end().lines().count(), 1, "{err:?}");
+        assert!(err.contains(needle), "{err:?} lacks {needle:?}");
+    };
+    refused(
+        "        node.create_subscription(State, '/state', self.on_obs, 1)",
+        "node 'tracker' subscribes '/state', but the graph file gives it subscribes = [\"/obs\", \"/reference\"]",
+    );
+    refused(
+        "        node.create_subscription(State, '/obs', self.on_obs, 1)",
+        "a second subscription to '/obs' (one per topic)",
+    );
+    refused(
+        "        node.create_publisher(State, '/error', 1)",
+        "'/error' carries Position (type = \"position\"), not State",
+    );
+}
+
 // ---- The ch2.1 actor in NumPy (`ratelab export` + graphs/nodes/ppo_numpy.py) -----------
 
 /// `ratelab export` writes the checkpoint's tensors as .npz; `PpoActor` of the shipped node,
