@@ -271,9 +271,13 @@ impl Graph {
                     outbox: outbox.clone(),
                     compute: n.compute.map(|c| ComputeDraw::new(c, seed, i)),
                 };
-                // Every kind but a python node reads and publishes at most one topic each.
+                // Every other kind reads and publishes at most one topic each.
                 let input = n.subscribes.first().map(|t| &topics[t.0]);
                 let output = n.publishes.first().map(|t| &topics[t.0]);
+                // A python or registered node's topics, in the graph file's order.
+                let of = |ts: &[TopicId]| -> Vec<AnyTopic> {
+                    ts.iter().map(|t| topics[t.0].clone()).collect()
+                };
                 let work = match (n.kind, (input, output)) {
                     (NodeKind::Sensor, (_, Some(out))) => {
                         let p = &n.params;
@@ -325,7 +329,6 @@ impl Graph {
                             .python
                             .as_ref()
                             .expect("validated: a python node's script");
-                        let of = |ts: &[TopicId]| ts.iter().map(|t| topics[t.0].clone()).collect();
                         Work::Python(Box::new(crate::python::node::PythonNode::load(
                             &n.name,
                             python,
@@ -336,7 +339,7 @@ impl Graph {
                             seed,
                         )?))
                     }
-                    (NodeKind::Registered, (Some(input), Some(output))) => {
+                    (NodeKind::Registered, _) => {
                         let r = n
                             .registered
                             .as_ref()
@@ -348,8 +351,14 @@ impl Graph {
                             params: &r.params,
                         };
                         Work::Registered(
-                            registry::make(&r.kind, &cx, input, output, &outbox)
-                                .map_err(GraphError::Registered)?,
+                            registry::make(
+                                &r.kind,
+                                &cx,
+                                &of(&n.subscribes),
+                                &of(&n.publishes),
+                                &outbox,
+                            )
+                            .map_err(GraphError::Registered)?,
                         )
                     }
                     (NodeKind::External, (input, Some(output))) => {

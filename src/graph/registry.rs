@@ -1,9 +1,10 @@
 //! Node kinds written in Rust outside ratelab: a registry from the name a graph file gives
 //! as `kind` to the code that makes such a node.
 //!
-//! A kind is a type implementing [`RustNode`] with a typed input and output (copper-rs's
-//! `CuTask` is the model): any [`Message`] — [`StateMsg`], [`PositionMsg`] or [`ForceMsg`]
-//! today. [`register`] it once, before the graph file is read; from then on
+//! A kind is a type implementing [`RustNode`] with typed inputs and outputs (copper-rs's
+//! `CuTask` is the model): each a [`Message`] — [`StateMsg`], [`PositionMsg`] or
+//! [`ForceMsg`] today — or a tuple of two to four of them, or `()` for none ([`Inputs`],
+//! [`Outputs`]). [`register`] it once, before the graph file is read; from then on
 //! `kind = "NAME"` in a graph file makes one, with the file's `params = { … }`:
 //!
 //! ```no_run
@@ -22,21 +23,47 @@
 //! register("hold", |cx: &NodeContext| Ok(Hold(cx.param_f64("newtons", 0.0)?))).unwrap();
 //! ```
 //!
-//! **At run time**, a tick of a registered node reads its input topic by the topic's QoS
-//! (latest: the newest unread; fifo: the oldest unread) and passes it to
-//! [`RustNode::tick`] when it is new (`None` when nothing arrived since the last tick: a
-//! node that needs the last value keeps it, as the chapter's nodes do); what `tick` returns
-//! is published at the tick's end (its time, plus its `compute_ms` if the graph file gives
-//! one: [`crate::executor`]), carrying the origin stamp of the newest input the node
-//! was given (its own tick time before the first), so the actuator measures sense→act
-//! latency across it as across any node. A registered kind takes the place of a policy
-//! (`state` in, `force` out), a safety node (`force` → `force`) or an estimator
-//! (`position` → `state`) in the chapter's chain, like a Python node.
+//! A node of several inputs or outputs names a tuple, and the graph file lists its topics
+//! in that order (`subscribes = ["/obs", "/reference"]`):
 //!
-//! **Limits.** One input and one output per node (as every kind has today); the registry
-//! is per process, so a graph with a registered kind runs in the process that registered
-//! it (`ratelab launch --processes` starts `ratelab` binaries, which know only the built-in
-//! kinds, and refuses it by name).
+//! ```no_run
+//! # use ratelab::graph::registry::RustNode;
+//! # use ratelab::msg::{ForceMsg, PositionMsg, StateMsg};
+//! # use ratelab::Nanos;
+//! struct Track { setpoint_m: f64 }
+//! impl RustNode for Track {
+//!     type Input = (StateMsg, PositionMsg);
+//!     type Output = ForceMsg;
+//!     fn tick(
+//!         &mut self,
+//!         _now: Nanos,
+//!         (state, reference): (Option<&StateMsg>, Option<&PositionMsg>),
+//!     ) -> Option<ForceMsg> {
+//!         if let Some(r) = reference {
+//!             self.setpoint_m = r.cart_pos_m;
+//!         }
+//!         let s = state?;
+//!         Some(ForceMsg { newtons: -(f64::from(s[0]) - self.setpoint_m) })
+//!     }
+//! }
+//! ```
+//!
+//! **At run time**, a tick of a registered node reads each input topic by the topic's QoS
+//! (latest: the newest unread; fifo: the oldest unread) and passes each to
+//! [`RustNode::tick`] when it is new (`None` when nothing arrived on it since the last tick:
+//! a node that needs the last value keeps it, as the chapter's nodes do); what `tick`
+//! returns is published at the tick's end (its time, plus its `compute_ms` if the graph
+//! file gives one: [`crate::executor`]), carrying the **oldest** origin stamp among the
+//! newest messages its inputs delivered (its own tick time before the first, and always for
+//! a node with no inputs), so the actuator measures sense→act latency across it as across
+//! any node — and a slow input (a setpoint published rarely) stretches it, since the output
+//! may rest on a value that old. A registered kind takes the place of a policy (a `state`
+//! input, a `force` output toward the actuator), a safety node (`force` → `force`) or an
+//! estimator in the chapter's chain, like a Python node.
+//!
+//! **Limits.** The registry is per process, so a graph with a registered kind runs in the
+//! process that registered it (`ratelab launch --processes` starts `ratelab` binaries,
+//! which know only the built-in kinds, and refuses it by name).
 
 use crate::msg::{AnyTopic, ForceMsg, MsgType, PositionMsg, StateMsg};
 use crate::publisher::{Outbox, Publisher};
@@ -86,15 +113,205 @@ impl Message for ForceMsg {
     }
 }
 
-/// A node of a registered kind: one typed input, one typed output.
+/// What a registered node reads: one [`Message`] type, a tuple of two to four (one topic
+/// each, in the graph file's `subscribes` order), or `()` for none (a source).
+///
+/// A tick is given [`Inputs::Delivered`]: per input, the message its topic delivered since
+/// the last tick (`None`: nothing new) — `Option<&M>` for one input, a tuple of them for
+/// several, `()` for none.
+pub trait Inputs: 'static {
+    /// The message types, in order.
+    const TYPES: &'static [MsgType];
+    /// What a tick is given.
+    type Delivered<'a>;
+    /// The inputs bound to their topics (ratelab's side: write an `Inputs` type, not this).
+    #[doc(hidden)]
+    type Ports: Send;
+    /// Bind to `topics` (the graph file's, types checked when it was read).
+    #[doc(hidden)]
+    fn bind(topics: &[AnyTopic]) -> Option<Self::Ports>;
+    /// Read every input at `now` by its topic's QoS.
+    #[doc(hidden)]
+    fn read(ports: &mut Self::Ports, now: Nanos) -> Self::Delivered<'_>;
+    /// The oldest origin among the newest messages delivered on each input; `None` before
+    /// any, and for no inputs.
+    #[doc(hidden)]
+    fn oldest_origin(ports: &Self::Ports) -> Option<Nanos>;
+}
+
+/// What a registered node publishes: one [`Message`] type, a tuple of two to four (one
+/// topic each, in the graph file's `publishes` order), or `()` for none.
+///
+/// A tick returns [`Outputs::Published`]: per output, the message to publish now, if any —
+/// `Option<M>` for one output, a tuple of them for several, `()` for none.
+pub trait Outputs: 'static {
+    /// The message types, in order.
+    const TYPES: &'static [MsgType];
+    /// What a tick returns.
+    type Published;
+    /// The outputs bound to their topics (ratelab's side).
+    #[doc(hidden)]
+    type Ports: Send;
+    /// Bind to `topics`, publishing through `outbox`.
+    #[doc(hidden)]
+    fn bind(topics: &[AnyTopic], outbox: &Outbox) -> Option<Self::Ports>;
+    /// Publish what a tick returned, stamped `now`, carrying `origin`.
+    #[doc(hidden)]
+    fn publish(ports: &Self::Ports, out: Self::Published, now: Nanos, origin: Option<Nanos>);
+}
+
+/// One input bound to its topic, with what it delivered last.
+#[doc(hidden)]
+pub struct InPort<M: Message> {
+    topic: Arc<Topic<M>>,
+    /// `seq` of the newest message delivered.
+    last_seq: Option<u64>,
+    /// Origin stamp of the newest message delivered (its own stamp when it has none).
+    origin: Option<Nanos>,
+    /// The message delivered at this tick, if new.
+    fresh: Option<M>,
+}
+
+impl<M: Message> InPort<M> {
+    fn new(t: &AnyTopic) -> Option<InPort<M>> {
+        Some(InPort {
+            topic: M::topic(t)?.clone(),
+            last_seq: None,
+            origin: None,
+            fresh: None,
+        })
+    }
+
+    /// Read at `now`: the message, if new since the last read that delivered one.
+    fn read(&mut self, now: Nanos) -> Option<&M> {
+        self.fresh = self.topic.read(now).and_then(|m| {
+            (self.last_seq != Some(m.seq)).then(|| {
+                self.last_seq = Some(m.seq);
+                self.origin = Some(m.origin_stamp.unwrap_or(m.stamp));
+                m.data
+            })
+        });
+        self.fresh.as_ref()
+    }
+}
+
+impl Inputs for () {
+    const TYPES: &'static [MsgType] = &[];
+    type Delivered<'a> = ();
+    type Ports = ();
+    fn bind(topics: &[AnyTopic]) -> Option<()> {
+        topics.is_empty().then_some(())
+    }
+    fn read(_: &mut (), _: Nanos) {}
+    fn oldest_origin(_: &()) -> Option<Nanos> {
+        None
+    }
+}
+
+impl<M: Message> Inputs for M {
+    const TYPES: &'static [MsgType] = &[M::TYPE];
+    type Delivered<'a> = Option<&'a M>;
+    type Ports = InPort<M>;
+    fn bind(topics: &[AnyTopic]) -> Option<InPort<M>> {
+        match topics {
+            [t] => InPort::new(t),
+            _ => None,
+        }
+    }
+    fn read(ports: &mut InPort<M>, now: Nanos) -> Option<&M> {
+        ports.read(now)
+    }
+    fn oldest_origin(ports: &InPort<M>) -> Option<Nanos> {
+        ports.origin
+    }
+}
+
+impl Outputs for () {
+    const TYPES: &'static [MsgType] = &[];
+    type Published = ();
+    type Ports = ();
+    fn bind(topics: &[AnyTopic], _: &Outbox) -> Option<()> {
+        topics.is_empty().then_some(())
+    }
+    fn publish(_: &(), _: (), _: Nanos, _: Option<Nanos>) {}
+}
+
+impl<M: Message> Outputs for M {
+    const TYPES: &'static [MsgType] = &[M::TYPE];
+    type Published = Option<M>;
+    type Ports = Publisher<M>;
+    fn bind(topics: &[AnyTopic], outbox: &Outbox) -> Option<Publisher<M>> {
+        match topics {
+            [t] => Some(Publisher::new(M::topic(t)?.clone(), outbox.clone())),
+            _ => None,
+        }
+    }
+    fn publish(ports: &Publisher<M>, out: Option<M>, now: Nanos, origin: Option<Nanos>) {
+        if let Some(m) = out {
+            ports.publish(m, now, origin);
+        }
+    }
+}
+
+/// `Inputs` and `Outputs` for a tuple of messages, one topic each.
+macro_rules! tuple_ports {
+    ($($m:ident $i:tt),+) => {
+        impl<$($m: Message),+> Inputs for ($($m,)+) {
+            const TYPES: &'static [MsgType] = &[$($m::TYPE),+];
+            type Delivered<'a> = ($(Option<&'a $m>,)+);
+            type Ports = ($(InPort<$m>,)+);
+            fn bind(topics: &[AnyTopic]) -> Option<Self::Ports> {
+                if topics.len() != <Self as Inputs>::TYPES.len() {
+                    return None;
+                }
+                Some(($(InPort::new(&topics[$i])?,)+))
+            }
+            fn read(ports: &mut Self::Ports, now: Nanos) -> Self::Delivered<'_> {
+                ($(ports.$i.read(now),)+)
+            }
+            fn oldest_origin(ports: &Self::Ports) -> Option<Nanos> {
+                [$(ports.$i.origin),+].into_iter().flatten().min()
+            }
+        }
+
+        impl<$($m: Message),+> Outputs for ($($m,)+) {
+            const TYPES: &'static [MsgType] = &[$($m::TYPE),+];
+            type Published = ($(Option<$m>,)+);
+            type Ports = ($(Publisher<$m>,)+);
+            fn bind(topics: &[AnyTopic], outbox: &Outbox) -> Option<Self::Ports> {
+                if topics.len() != <Self as Outputs>::TYPES.len() {
+                    return None;
+                }
+                Some(($(Publisher::new($m::topic(&topics[$i])?.clone(), outbox.clone()),)+))
+            }
+            fn publish(ports: &Self::Ports, out: Self::Published, now: Nanos, origin: Option<Nanos>) {
+                $(if let Some(m) = out.$i {
+                    ports.$i.publish(m, now, origin);
+                })+
+            }
+        }
+    };
+}
+
+tuple_ports!(A 0, B 1);
+tuple_ports!(A 0, B 1, C 2);
+tuple_ports!(A 0, B 1, C 2, D 3);
+
+/// A node of a registered kind: typed inputs and outputs (one message type, a tuple of
+/// them, or `()`), as copper-rs's `CuTask`.
 pub trait RustNode: Send + 'static {
-    /// What it reads.
-    type Input: Message;
-    /// What it publishes.
-    type Output: Message;
-    /// One tick at run time `now`. `input` is the message the topic delivered since the
-    /// last tick (`None`: nothing new). The message returned, if any, is published now.
-    fn tick(&mut self, now: Nanos, input: Option<&Self::Input>) -> Option<Self::Output>;
+    /// What it reads: a [`Message`] type, a tuple of two to four, or `()`.
+    type Input: Inputs;
+    /// What it publishes: a [`Message`] type, a tuple of two to four, or `()`.
+    type Output: Outputs;
+    /// One tick at run time `now`. `input` is, per input, the message its topic delivered
+    /// since the last tick (`None`: nothing new): `Option<&M>` for one input. What it
+    /// returns (per output, `Option<M>` for one) is published now.
+    fn tick(
+        &mut self,
+        now: Nanos,
+        input: <Self::Input as Inputs>::Delivered<'_>,
+    ) -> <Self::Output as Outputs>::Published;
 }
 
 /// What making a node is given: its name and settings from the graph file and the run.
@@ -153,13 +370,13 @@ pub trait Tick: Send {
     fn tick(&mut self, now: Nanos);
 }
 
-type Make = dyn Fn(&NodeContext<'_>, &AnyTopic, &AnyTopic, &Outbox) -> Result<Box<dyn Tick>, String>
+type Make = dyn Fn(&NodeContext<'_>, &[AnyTopic], &[AnyTopic], &Outbox) -> Result<Box<dyn Tick>, String>
     + Send
     + Sync;
 
 struct Entry {
-    input: MsgType,
-    output: MsgType,
+    inputs: &'static [MsgType],
+    outputs: &'static [MsgType],
     make: Box<Make>,
 }
 
@@ -206,35 +423,38 @@ where
     if reg.len() >= MAX_KINDS {
         return Err(RegistryError::Full);
     }
-    let make = move |cx: &NodeContext<'_>, input: &AnyTopic, output: &AnyTopic, outbox: &Outbox| {
-        let (Some(input), Some(output)) = (N::Input::topic(input), N::Output::topic(output)) else {
-            // The graph file's types were checked against the kind's when it was read.
-            return Err(format!("node '{}': its topics' types changed", cx.name));
+    let make =
+        move |cx: &NodeContext<'_>, inputs: &[AnyTopic], outputs: &[AnyTopic], outbox: &Outbox| {
+            let (Some(inputs), Some(outputs)) = (
+                <N::Input as Inputs>::bind(inputs),
+                <N::Output as Outputs>::bind(outputs, outbox),
+            ) else {
+                // The graph file's types were checked against the kind's when it was read.
+                return Err(format!("node '{}': its topics' types changed", cx.name));
+            };
+            let node = make(cx)?;
+            Ok(Box::new(Bound::<N> {
+                node,
+                inputs,
+                outputs,
+            }) as Box<dyn Tick>)
         };
-        let node = make(cx)?;
-        Ok(Box::new(Bound {
-            node,
-            input: input.clone(),
-            output: Publisher::new(output.clone(), outbox.clone()),
-            last_seq: None,
-            origin: None,
-        }) as Box<dyn Tick>)
-    };
     reg.insert(
         kind.to_string(),
         Entry {
-            input: N::Input::TYPE,
-            output: N::Output::TYPE,
+            inputs: <N::Input as Inputs>::TYPES,
+            outputs: <N::Output as Outputs>::TYPES,
             make: Box::new(make),
         },
     );
     Ok(())
 }
 
-/// What registered kind `kind` reads and publishes, if it is registered.
-pub fn shape(kind: &str) -> Option<(MsgType, MsgType)> {
+/// The message types registered kind `kind` reads and publishes, in order (one topic
+/// each), if it is registered.
+pub fn shape(kind: &str) -> Option<(&'static [MsgType], &'static [MsgType])> {
     let reg = registry().read().unwrap_or_else(|e| e.into_inner());
-    reg.get(kind).map(|e| (e.input, e.output))
+    reg.get(kind).map(|e| (e.inputs, e.outputs))
 }
 
 /// Every registered kind's name, sorted.
@@ -243,8 +463,8 @@ pub fn kinds() -> Vec<String> {
     reg.keys().cloned().collect()
 }
 
-/// Make a node of registered kind `kind`, bound to `input` and `output` (published through
-/// the node's `outbox`).
+/// Make a node of registered kind `kind`, bound to `inputs` and `outputs` (the graph
+/// file's, in order; published through the node's `outbox`).
 ///
 /// # Errors
 /// A one-line reason: the kind is not registered in this process, or its maker refused
@@ -252,8 +472,8 @@ pub fn kinds() -> Vec<String> {
 pub(crate) fn make(
     kind: &str,
     cx: &NodeContext<'_>,
-    input: &AnyTopic,
-    output: &AnyTopic,
+    inputs: &[AnyTopic],
+    outputs: &[AnyTopic],
     outbox: &Outbox,
 ) -> Result<Box<dyn Tick>, String> {
     let reg = registry().read().unwrap_or_else(|e| e.into_inner());
@@ -264,32 +484,27 @@ pub(crate) fn make(
             cx.name
         )
     })?;
-    (entry.make)(cx, input, output, outbox)
+    (entry.make)(cx, inputs, outputs, outbox)
 }
 
 /// A node with its topics and what it has been given.
 struct Bound<N: RustNode> {
     node: N,
-    input: Arc<Topic<N::Input>>,
-    output: Publisher<N::Output>,
-    /// `seq` of the newest message given to the node.
-    last_seq: Option<u64>,
-    /// Origin stamp of the newest message given to the node.
-    origin: Option<Nanos>,
+    inputs: <N::Input as Inputs>::Ports,
+    outputs: <N::Output as Outputs>::Ports,
 }
 
 impl<N: RustNode> Tick for Bound<N> {
     fn tick(&mut self, now: Nanos) {
-        let input = self.input.read(now).and_then(|m| {
-            (self.last_seq != Some(m.seq)).then(|| {
-                self.last_seq = Some(m.seq);
-                self.origin = Some(m.origin_stamp.unwrap_or(m.stamp));
-                m.data
-            })
-        });
-        if let Some(out) = self.node.tick(now, input.as_ref()) {
-            self.output.publish(out, now, self.origin.or(Some(now)));
-        }
+        let delivered = <N::Input as Inputs>::read(&mut self.inputs, now);
+        let out = self.node.tick(now, delivered);
+        // The oldest origin its inputs delivered; a source's data begins at its tick.
+        let origin = if <N::Input as Inputs>::TYPES.is_empty() {
+            Some(now)
+        } else {
+            <N::Input as Inputs>::oldest_origin(&self.inputs).or(Some(now))
+        };
+        <N::Output as Outputs>::publish(&self.outputs, out, now, origin);
     }
 }
 
@@ -322,9 +537,82 @@ mod tests {
             register("echo_unit", ok),
             Err(RegistryError::Taken("echo_unit".into()))
         );
-        assert_eq!(shape("echo_unit"), Some((MsgType::Force, MsgType::Force)));
+        assert_eq!(
+            shape("echo_unit"),
+            Some((&[MsgType::Force][..], &[MsgType::Force][..]))
+        );
         assert!(kinds().contains(&"echo_unit".to_string()));
         assert_eq!(shape("nobody"), None);
+    }
+
+    /// Two inputs, two outputs: a force passed on, and the position it was given echoed.
+    struct Mix;
+    impl RustNode for Mix {
+        type Input = (ForceMsg, PositionMsg);
+        type Output = (ForceMsg, PositionMsg);
+        fn tick(
+            &mut self,
+            _now: Nanos,
+            (force, position): (Option<&ForceMsg>, Option<&PositionMsg>),
+        ) -> (Option<ForceMsg>, Option<PositionMsg>) {
+            (force.copied(), position.copied())
+        }
+    }
+
+    #[test]
+    fn a_node_of_several_inputs_and_outputs_passes_on_the_oldest_origin() {
+        register("mix_bound", |_: &NodeContext<'_>| Ok(Mix)).unwrap();
+        assert_eq!(
+            shape("mix_bound"),
+            Some((
+                &[MsgType::Force, MsgType::Position][..],
+                &[MsgType::Force, MsgType::Position][..]
+            ))
+        );
+        let topic = |name: &str, m: MsgType| AnyTopic::new(name, m, 1).unwrap();
+        let inputs = [topic("/f", MsgType::Force), topic("/p", MsgType::Position)];
+        let outputs = [
+            topic("/f2", MsgType::Force),
+            topic("/p2", MsgType::Position),
+        ];
+        let params = toml::Table::new();
+        let cx = NodeContext {
+            name: "m",
+            period: Nanos(20),
+            seed: 0,
+            params: &params,
+        };
+        // The wrong number of topics is refused (the graph file is checked before).
+        assert!(make("mix_bound", &cx, &inputs[..1], &outputs, &Outbox::new()).is_err());
+        let mut node = make("mix_bound", &cx, &inputs, &outputs, &Outbox::new()).unwrap();
+        let (AnyTopic::Force(f), AnyTopic::Position(p)) = (&inputs[0], &inputs[1]) else {
+            unreachable!()
+        };
+        let (AnyTopic::Force(f2), AnyTopic::Position(p2)) = (&outputs[0], &outputs[1]) else {
+            unreachable!()
+        };
+        let at = |x| PositionMsg {
+            cart_pos_m: x,
+            pole_angle_rad: 0.0,
+        };
+        f.publish(ForceMsg { newtons: 1.0 }, Nanos(8), Some(Nanos(7)));
+        p.publish(at(0.5), Nanos(3), None); // its own stamp is its origin
+        node.tick(Nanos(10));
+        let (mf, mp) = (f2.read(Nanos(10)).unwrap(), p2.read(Nanos(10)).unwrap());
+        assert_eq!((mf.data.newtons, mp.data.cart_pos_m), (1.0, 0.5));
+        assert_eq!(
+            (mf.origin_stamp, mp.origin_stamp),
+            (Some(Nanos(3)), Some(Nanos(3)))
+        );
+        // Only the force is new: only it is published, still with the older origin.
+        f.publish(ForceMsg { newtons: 2.0 }, Nanos(28), Some(Nanos(27)));
+        node.tick(Nanos(30));
+        assert_eq!(f2.read(Nanos(30)).unwrap().origin_stamp, Some(Nanos(3)));
+        assert_eq!(p2.stats().published, 1);
+        // A newer position: now the force's origin (27) is the oldest.
+        p.publish(at(0.7), Nanos(45), None);
+        node.tick(Nanos(50));
+        assert_eq!(p2.read(Nanos(50)).unwrap().origin_stamp, Some(Nanos(27)));
     }
 
     #[test]
@@ -339,7 +627,8 @@ mod tests {
             seed: 0,
             params: &params,
         };
-        let mut node = make("echo_bound", &cx, &input, &output, &Outbox::new()).unwrap();
+        let (inputs, outputs) = ([input.clone()], [output.clone()]);
+        let mut node = make("echo_bound", &cx, &inputs, &outputs, &Outbox::new()).unwrap();
         let (AnyTopic::Force(i), AnyTopic::Force(o)) = (&input, &output) else {
             unreachable!()
         };
@@ -353,7 +642,7 @@ mod tests {
         // Nothing new: Echo publishes nothing.
         node.tick(Nanos(30));
         assert_eq!(o.stats().published, 1);
-        assert!(make("nobody", &cx, &input, &output, &Outbox::new())
+        assert!(make("nobody", &cx, &inputs, &outputs, &Outbox::new())
             .err()
             .unwrap()
             .contains("kind 'nobody' is not registered"));

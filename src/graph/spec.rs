@@ -34,11 +34,12 @@
 //! - each kind has a fixed shape: a sensor publishes `state` or `position`; an estimator
 //!   reads `position` and publishes `state`; a policy reads `state` and publishes `force`;
 //!   a safety node reads `force` and publishes `force`; the actuator reads `force`; a
-//!   `python` node (the learner's, [`crate::python::node`]) reads and publishes at most one
-//!   topic each, of any type, and names its `script` (relative to the graph file), its
-//!   optional `class` and `params` table; a node of a kind registered in Rust
-//!   ([`crate::graph::registry`]) reads and publishes the types it was registered with and
-//!   may have a `params` table;
+//!   `python` node (the learner's, [`crate::python::node`]) reads and publishes any number
+//!   of topics, of any type (`subscribes = ["/obs", "/reference"]`: a topic or a list), and
+//!   names its `script` (relative to the graph file), its optional `class` and `params`
+//!   table; a node of a kind registered in Rust ([`crate::graph::registry`]) reads and
+//!   publishes the types it was registered with, one topic each in that order, and may have
+//!   a `params` table; an external node reads at most one topic and publishes one;
 //! - every topic is declared once, has exactly one publisher and at most one subscriber
 //!   (the chapter's topic keeps one read mark; per-subscription queues come with QoS), and
 //!   its type matches both ends;
@@ -100,9 +101,9 @@ pub enum NodeKind {
     Safety,
     /// Applies the newest `force` (zero-order hold) and steps the plant; exactly one.
     Actuator,
-    /// A learner's node written in Python ([`crate::python::node`]): any one input and
-    /// output. In the chain's places it plays the policy (reads `state`, publishes `force`)
-    /// or a safety node (reads `force`, publishes `force`).
+    /// A learner's node written in Python ([`crate::python::node`]): any inputs and
+    /// outputs. In the chain's places it plays the policy (reads a `state` topic, publishes
+    /// the `force` toward the actuator) or a safety node (reads `force`, publishes `force`).
     Python,
     /// A kind written in Rust and registered by the program that runs the graph
     /// ([`crate::graph::registry`]; its name is in [`NodeSpec::registered`]). It takes the
@@ -1111,18 +1112,36 @@ fn build(cx: &Ctx<'_>, raw: RawGraph) -> Result<GraphSpec, SpecError> {
         let id = NodeId(file_nodes.len());
         // The types a kind reads and publishes: fixed for a built-in kind and a registered
         // one (the registry's), any for a python or external node.
-        let fixed: Option<(Option<MsgType>, &'static [MsgType])> =
-            match (kind.shape(), registered_shape) {
-                (Some(shape), _) => Some(shape),
-                (None, Some((reads, writes))) if kind == NodeKind::Registered => {
-                    Some((Some(reads), writes.one()))
-                }
-                _ => None,
-            };
+        let fixed: Option<(Option<MsgType>, &'static [MsgType])> = kind.shape();
+        // A registered kind: its types in order, one topic each.
+        let registered_ports = registered_shape.filter(|_| kind == NodeKind::Registered);
         let sub_names = topic_list(cx, "subscribes", &r.subscribes)?;
         let pub_names = topic_list(cx, "publishes", &r.publishes)?;
-        // A python node may read and publish several topics; every other kind one each.
-        if kind != NodeKind::Python {
+        // A python node may read and publish several topics, a registered kind as many as
+        // it was registered with; every other kind one each.
+        if let Some((reads, writes)) = registered_ports {
+            for (key, names, types) in [
+                ("subscribes", &sub_names, reads),
+                ("publishes", &pub_names, writes),
+            ] {
+                if names.len() != types.len() {
+                    let list: Vec<&str> = types.iter().map(|m| m.as_str()).collect();
+                    let want = match list.len() {
+                        0 => "no topic".to_string(),
+                        1 => format!("one {} topic", list[0]),
+                        n => format!("{n} topics: {}", list.join(", ")),
+                    };
+                    let at = names.first().map_or_else(|| r.name.span(), |n| n.span());
+                    return Err(cx.err(
+                        at,
+                        format!(
+                            "a node of kind '{kind_name}' {key} {want}, in that order (as registered), not {}",
+                            names.len()
+                        ),
+                    ));
+                }
+            }
+        } else if kind != NodeKind::Python {
             for (key, names) in [("subscribes", &sub_names), ("publishes", &pub_names)] {
                 if let Some(second) = names.get(1) {
                     return Err(cx.err(
@@ -1172,10 +1191,15 @@ fn build(cx: &Ctx<'_>, raw: RawGraph) -> Result<GraphSpec, SpecError> {
             }
         }
         let mut subscribes = Vec::with_capacity(sub_names.len());
-        for s in &sub_names {
+        for (k, s) in sub_names.iter().enumerate() {
             let ti = find_topic(&topics, s)?;
             let t = &mut topics[ti];
-            if let Some((Some(want), _)) = fixed {
+            let want = match (fixed, registered_ports) {
+                (Some((reads, _)), _) => reads,
+                (None, Some((reads, _))) => reads.get(k).copied(),
+                (None, None) => None,
+            };
+            if let Some(want) = want {
                 if t.msg != want {
                     return Err(cx.err(
                         s.span(),
@@ -1203,10 +1227,15 @@ fn build(cx: &Ctx<'_>, raw: RawGraph) -> Result<GraphSpec, SpecError> {
             subscribes.push(TopicId(ti));
         }
         let mut publishes = Vec::with_capacity(pub_names.len());
-        for p in &pub_names {
+        for (k, p) in pub_names.iter().enumerate() {
             let ti = find_topic(&topics, p)?;
             let t = &mut topics[ti];
-            if let Some((_, writes)) = fixed {
+            let writes = match (fixed, registered_ports) {
+                (Some((_, writes)), _) => Some(writes),
+                (None, Some((_, writes))) => writes.get(k).map(|m| m.one()),
+                (None, None) => None,
+            };
+            if let Some(writes) = writes {
                 if !writes.contains(&t.msg) {
                     let names: Vec<&str> = writes.iter().map(|m| m.as_str()).collect();
                     return Err(cx.err(

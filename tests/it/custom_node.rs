@@ -4,7 +4,7 @@
 
 use ratelab::graph::registry::{register, NodeContext, RustNode};
 use ratelab::graph::GraphSpec;
-use ratelab::msg::{ForceMsg, StateMsg};
+use ratelab::msg::{ForceMsg, PositionMsg, StateMsg};
 use ratelab::policy::Scripted;
 use ratelab::{run, ClockKind, Nanos, RunConfig, RunOptions};
 use std::path::PathBuf;
@@ -96,6 +96,121 @@ fn a_registered_kind_is_usable_from_a_graph_file_and_runs_as_a_node() {
         .unwrap_err()
         .to_string();
     assert!(err.contains("a push_it node reads state"), "{err}");
+}
+
+/// graphs/nodes/setpoint_tracker.py in Rust: two inputs (the state, the setpoint), two
+/// outputs (the force, the tracking error), the same arithmetic.
+struct Tracker {
+    state: Option<StateMsg>,
+    setpoint_m: f64,
+}
+
+impl RustNode for Tracker {
+    type Input = (StateMsg, PositionMsg);
+    type Output = (ForceMsg, PositionMsg);
+    fn tick(
+        &mut self,
+        _now: Nanos,
+        (state, reference): (Option<&StateMsg>, Option<&PositionMsg>),
+    ) -> (Option<ForceMsg>, Option<PositionMsg>) {
+        if let Some(s) = state {
+            self.state = Some(*s);
+        }
+        if let Some(r) = reference {
+            self.setpoint_m = r.cart_pos_m;
+        }
+        let Some([x, x_dot, cos_t, sin_t, theta_dot]) = self.state.map(|s| s.map(f64::from)) else {
+            return (None, None);
+        };
+        let theta = sin_t.atan2(cos_t);
+        let error_m = x - self.setpoint_m;
+        let u = 10.0 * theta + 2.0 * theta_dot + 0.4 * error_m + 0.8 * x_dot;
+        let command = u.clamp(-1.0, 1.0) as f32;
+        (
+            Some(ForceMsg {
+                newtons: f64::from(command) * 10.0,
+            }),
+            Some(PositionMsg {
+                cart_pos_m: error_m,
+                pole_angle_rad: theta,
+            }),
+        )
+    }
+}
+
+/// graphs/cartpole-setpoint.toml, its tracker of kind `tracker` (`None`: the Python one),
+/// as a spec read from a file in `dir`.
+fn setpoint_graph(dir: &std::path::Path, tracker: Option<&str>) -> GraphSpec {
+    let nodes = crate::repo("graphs/nodes");
+    let mut text = std::fs::read_to_string(crate::repo("graphs/cartpole-setpoint.toml"))
+        .unwrap()
+        .replace("\"nodes/", &format!("\"{}/", nodes.display()));
+    if let Some(kind) = tracker {
+        let python = format!(
+            "kind = \"python\"\nscript = \"{}/setpoint_tracker.py\"",
+            nodes.display()
+        );
+        assert!(text.contains(&python));
+        text = text.replace(&python, &format!("kind = \"{kind}\""));
+    }
+    let path = dir.join("g.toml");
+    std::fs::write(&path, text).unwrap();
+    GraphSpec::load(&path).unwrap()
+}
+
+#[test]
+fn a_registered_kind_of_two_inputs_and_two_outputs_equals_the_python_one() {
+    register("track_rs", |_: &NodeContext<'_>| {
+        Ok(Tracker {
+            state: None,
+            setpoint_m: 0.0,
+        })
+    })
+    .unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let rust = setpoint_graph(dir.path(), Some("track_rs"));
+    let tracker = rust.node_id("tracker").unwrap();
+    assert_eq!(rust.node(tracker).subscribes.len(), 2);
+    assert_eq!(rust.chain.policy, tracker);
+    let python = setpoint_graph(dir.path(), None);
+    for seed in [0, 1] {
+        let metrics = |graph: &GraphSpec| {
+            let cfg = RunConfig {
+                clock: ClockKind::Virtual,
+                duration: Nanos(8_000_000_000),
+                seed,
+                graph: graph.clone(),
+                ..RunConfig::default()
+            };
+            let m = run(&cfg, Box::new(Scripted), RunOptions::default())
+                .unwrap()
+                .metrics;
+            crate::metrics_without_names(serde_json::to_value(&m).unwrap())
+        };
+        let (r, p) = (metrics(&rust), metrics(&python));
+        assert!(r == p, "seed {seed}:\n{r}\n{p}");
+        assert!(r.contains("\"balanced\": true"), "{r}");
+    }
+    // The file's topics must be the registered ones, in number and in order.
+    let text = rust.to_toml();
+    for (from, to, want) in [
+        (
+            r#"subscribes = ["/obs", "/reference"]"#,
+            r#"subscribes = "/obs""#,
+            "a node of kind 'track_rs' subscribes 2 topics: state, position, in that order (as registered), not 1",
+        ),
+        (
+            r#"subscribes = ["/obs", "/reference"]"#,
+            r#"subscribes = ["/reference", "/obs"]"#,
+            "type mismatch: '/reference' carries position but a track_rs node reads state",
+        ),
+    ] {
+        assert!(text.contains(from), "{text}");
+        let err = GraphSpec::parse(&text.replace(from, to), "g.toml")
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains(want), "{err}");
+    }
 }
 
 #[test]

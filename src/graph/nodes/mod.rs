@@ -3,13 +3,14 @@
 //! Python node is [`crate::python::node`], a registered one [`super::registry`]; an
 //! external node, run by another program over ROS 2, enters through [`external`].
 //!
-//! A **python** node runs its subscription callback for what arrived, then its timers; a
+//! A **python** node runs its subscription callbacks for what arrived, then its timers; a
 //! **registered** kind its `tick` for what arrived; what either published goes out with the
-//! input's origin.
+//! oldest origin among its inputs' newest messages (either may have several inputs and
+//! outputs; every other kind has at most one of each).
 //!
 //! Every node that publishes passes on the origin stamp of the message it derived its output
-//! from, so the actuator measures sense→act latency (`now − origin`) across any chain. Every
-//! kind has one input; a kind that combined several would pass on the oldest origin.
+//! from (of several inputs, the oldest), so the actuator measures sense→act latency
+//! (`now − origin`) across any chain.
 //!
 //! Adding a built-in kind is a file here, its variant in [`Work`], its name in
 //! [`super::spec::NodeKind`] and its wiring in [`super::Graph::build`]; a kind written outside
