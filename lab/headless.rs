@@ -258,8 +258,8 @@ pub fn run_headless(a: &RunArgs, stop: StopFlag) -> anyhow::Result<RunReport> {
     if let Some(r) = &recording {
         opts.observers.push(r.observer());
         let r = r.clone();
-        opts.on_node_tick = Some(Arc::new(move |_, node, now, late| {
-            r.node_tick(node, now, late)
+        opts.on_node_tick = Some(Arc::new(move |t: &ratelab::scheduler::TickReport<'_>| {
+            r.node_tick(t.name, t.now, t.lateness)
         }));
     }
     let report = run(&cfg, brain, opts)?;

@@ -493,9 +493,24 @@ impl VirtualScheduler {
     }
 }
 
-/// Called on a node's own thread after each tick under the real clock, with the node's
-/// index and name, the tick's run time and its lateness (actual − scheduled).
-pub type TickHook = Arc<dyn Fn(usize, &str, Nanos, Nanos) + Send + Sync>;
+/// One tick under the real clock, as a [`TickHook`] is told of it.
+#[derive(Clone, Copy, Debug)]
+pub struct TickReport<'a> {
+    /// The node's index (its tie-break rank).
+    pub node: usize,
+    /// The node's name.
+    pub name: &'a str,
+    /// Run time the tick started.
+    pub now: Nanos,
+    /// Its lateness: actual start − scheduled.
+    pub lateness: Nanos,
+    /// Wall time the tick took, start to end (its compute time burned included; zero for
+    /// a tick that panicked).
+    pub took: Nanos,
+}
+
+/// Called on the node's thread after each tick under the real clock ([`TickReport`]).
+pub type TickHook = Arc<dyn Fn(&TickReport<'_>) + Send + Sync>;
 
 /// Options of the real-clock executor.
 #[derive(Clone)]
@@ -759,7 +774,13 @@ pub fn run_real(
                         exec.record(deadline, done, done.saturating_sub(now));
                     }
                     if let Some(hook) = &on_tick {
-                        hook(i, &name, now, late);
+                        hook(&TickReport {
+                            node: i,
+                            name: &name,
+                            now,
+                            lateness: late,
+                            took: done.saturating_sub(now),
+                        });
                     }
                     if flow == Flow::Stop {
                         stop_at.fetch_min(now.0, Ordering::SeqCst);

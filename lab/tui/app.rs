@@ -115,7 +115,7 @@ pub struct App {
     applied: VecDeque<(f64, f64)>,
     /// (t s, published force N) per policy publication seen over the last [`HISTORY_S`].
     published: VecDeque<(f64, f64)>,
-    ticks: Vec<VecDeque<(Nanos, Nanos)>>,
+    ticks: Vec<VecDeque<(Nanos, Nanos, Nanos)>>,
     last: Option<StepRecord>,
     verdict: Verdict,
     help: bool,
@@ -352,12 +352,13 @@ impl App {
                 node,
                 now,
                 lateness,
+                took,
             } => {
                 if let Some(q) = self.ticks.get_mut(node) {
-                    q.push_back((now, lateness));
+                    q.push_back((now, lateness, took));
                     while q
                         .front()
-                        .is_some_and(|(t, _)| now.saturating_sub(*t) > TICK_WINDOW)
+                        .is_some_and(|(t, ..)| now.saturating_sub(*t) > TICK_WINDOW)
                     {
                         q.pop_front();
                     }
@@ -740,22 +741,25 @@ impl App {
             .max(TICK_WINDOW);
         let silent = q
             .back()
-            .is_some_and(|(t, _)| self.now.saturating_sub(*t) > quiet);
-        let (measured_hz, lateness_p99_us) = if self.clock == "real" && q.len() >= 2 {
+            .is_some_and(|(t, ..)| self.now.saturating_sub(*t) > quiet);
+        let (measured_hz, lateness_p99_us, tick_p50_us) = if self.clock == "real" && q.len() >= 2 {
             let span = (q.back().expect("len ≥ 2").0)
                 .saturating_sub(q.front().expect("len ≥ 2").0)
                 .as_secs_f64();
-            let mut late: Vec<u64> = q.iter().map(|(_, l)| l.0).collect();
+            let mut late: Vec<u64> = q.iter().map(|(_, l, _)| l.0).collect();
             late.sort_unstable();
             let p99 = late[((late.len() as f64 * 0.99).ceil() as usize).clamp(1, late.len()) - 1];
+            let mut took: Vec<u64> = q.iter().map(|(.., d)| d.0).collect();
+            took.sort_unstable();
+            let p50 = took[(took.len() - 1) / 2];
             let hz = if silent {
                 0.0
             } else {
                 (q.len() - 1) as f64 / span.max(1e-9)
             };
-            (Some(hz), Some(p99 as f64 / 1e3))
+            (Some(hz), Some(p99 as f64 / 1e3), Some(p50 as f64 / 1e3))
         } else {
-            (None, None)
+            (None, None, None)
         };
         // Virtual clock with executors: the rate the node achieved and the periods its timer
         // skipped waiting for a thread, over the arrows' window (since the start until the
@@ -788,6 +792,7 @@ impl App {
                 _ => None,
             },
             lateness_p99_us,
+            tick_p50_us,
             ran,
             compute: self.graph.node(id).compute.map(|c| c.label()),
             selected: self.selected == Some(Selected::Node(id)),

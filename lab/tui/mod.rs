@@ -506,6 +506,49 @@ mod tests {
     }
 
     #[test]
+    fn a_real_clock_node_box_shows_the_median_time_of_its_ticks() {
+        let (tx, _rx) = crossbeam_channel::unbounded();
+        let mut app = App::new(tx, "scripted".into(), None, Speed::Times(1.0));
+        app.on_telemetry(Telemetry::Started {
+            cfg: RunConfig {
+                clock: ClockKind::Real,
+                ..virtual_cfg(50.0, 1)
+            },
+            policy: "scripted".into(),
+            recording: None,
+        });
+        // Ticks of the policy (node 1) every 20 ms taking 30, 40 … 130 µs: the median of the
+        // last second's is 80 µs.
+        for k in 0..11u64 {
+            app.on_telemetry(Telemetry::NodeTick {
+                node: 1,
+                now: ratelab::Nanos(k * 20_000_000),
+                lateness: ratelab::Nanos(5_000),
+                took: ratelab::Nanos(30_000 + k * 10_000),
+            });
+        }
+        let view = app.view();
+        assert_eq!(view.nodes[1].tick_p50_us, Some(80.0));
+        assert_eq!(view.nodes[0].tick_p50_us, None, "no ticks heard of");
+        let text = |w, h| {
+            let mut t = Terminal::new(TestBackend::new(w, h)).unwrap();
+            t.draw(|f| f.render_widget(&view, f.area())).unwrap();
+            t.backend().to_string()
+        };
+        assert!(
+            text(120, 40).contains("tick p50 80 µs"),
+            "{}",
+            text(120, 40)
+        );
+        // At 80×24 the box has no row left for it: the rate and lateness stay whole.
+        let small = text(80, 24);
+        assert!(
+            small.contains("p99 5 µs late") && !small.contains("tick"),
+            "{small}"
+        );
+    }
+
+    #[test]
     fn after_50_5_50_hz_the_window_and_the_segment_see_only_the_matched_rates() {
         // The sequence: 50 Hz, a dip to 5 Hz (4.0 s to 4.6 s: /obs drops), back to
         // 50 Hz until 12 s. The run's totals mix the three settings; the window (last 5 s)

@@ -45,6 +45,9 @@ pub struct NodeView {
     pub published_hz: Option<f64>,
     /// Real clock: p99 tick lateness over recent ticks, µs.
     pub lateness_p99_us: Option<f64>,
+    /// Real clock: the median wall time of its recent ticks, start to end, µs (what a
+    /// Python callback, a brain or a compute time costs each tick).
+    pub tick_p50_us: Option<f64>,
     /// Virtual clock with executors ([`ratelab::executor`]): the rate it achieved over the
     /// run, Hz, and the timer periods it skipped waiting for a thread.
     pub ran: Option<(f64, u64)>,
@@ -501,7 +504,28 @@ fn render_graph(v: &View, area: Rect, buf: &mut Buffer) {
         let count = match col {
             Column::Nodes(x) | Column::Topics(x) => x.len().max(1) as u32,
         };
-        let cells = Layout::vertical((0..count).map(|_| Constraint::Ratio(1, count))).split(*rect);
+        // Node boxes each as tall as they need when the column has room for all of them
+        // (the last takes the rest); else, and for arrows, evenly.
+        let needs: Vec<u16> = match col {
+            Column::Nodes(ns) => ns
+                .iter()
+                .map(|&i| node_rows(&v.nodes[i]) as u16 + 2)
+                .collect(),
+            Column::Topics(_) => Vec::new(),
+        };
+        let cells = if !needs.is_empty() && needs.iter().sum::<u16>() <= rect.height {
+            let last = needs.len() - 1;
+            Layout::vertical(needs.iter().enumerate().map(|(k, &h)| {
+                if k == last {
+                    Constraint::Fill(1)
+                } else {
+                    Constraint::Length(h)
+                }
+            }))
+            .split(*rect)
+        } else {
+            Layout::vertical((0..count).map(|_| Constraint::Ratio(1, count))).split(*rect)
+        };
         match col {
             Column::Nodes(ns) => {
                 for (&i, cell) in ns.iter().zip(cells.iter()) {
@@ -575,6 +599,17 @@ fn render_node(n: &NodeView, area: Rect, buf: &mut Buffer, real: bool) {
         n.badge.is_some() && lines.len() + 1 > usize::from(area.height.saturating_sub(2));
     if let (Some(b), false) = (n.badge, badge_in_title) {
         lines.insert(1, Line::from(b.words().0).cyan());
+    }
+    // What a tick costs, last: only where the box has a row left for it.
+    if let Some(t) = n.tick_p50_us {
+        if lines.len() < usize::from(area.height.saturating_sub(2)) {
+            let text = if wide {
+                format!("tick p50 {t:.0} µs")
+            } else {
+                format!("tick {t:.0} µs")
+            };
+            lines.push(Line::from(text).dim());
+        }
     }
     if n.alive == Some(false) {
         lines.insert(0, Line::from("✗ NOT ALIVE").white().on_red().bold());
@@ -756,8 +791,22 @@ fn render_arrow(t: &TopicView, area: Rect, buf: &mut Buffer) {
     Paragraph::new(arrow_lines(t, w, usize::from(area.height))).render(area, buf);
 }
 
-/// The graph panel's height: 7 rows, more when an arrow's QoS lines need them and the
-/// terminal is tall enough (30 rows) to spare them, within `max`.
+/// The rows a node's box would fill inside its border: its rate, what it measured (or ran,
+/// or sent), its compute time, badge, tick time and liveliness.
+fn node_rows(n: &NodeView) -> usize {
+    let status = match (n.published_hz, n.measured_hz, n.lateness_p99_us) {
+        (None, Some(_), Some(_)) => 2,
+        _ => 1,
+    };
+    1 + status
+        + usize::from(n.compute.is_some())
+        + usize::from(n.badge.is_some())
+        + usize::from(n.tick_p50_us.is_some())
+        + usize::from(n.alive == Some(false))
+}
+
+/// The graph panel's height: 7 rows, more when an arrow's QoS lines or a column of node
+/// boxes need them and the terminal is tall enough (30 rows) to spare them, within `max`.
 fn graph_height(v: &View, width: u16, height: u16, max: u16) -> u16 {
     if height < 30 {
         return 7;
@@ -767,13 +816,12 @@ fn graph_height(v: &View, width: u16, height: u16, max: u16) -> u16 {
     let w = (width.saturating_sub(2) / n).saturating_sub(1) as usize;
     let tallest = cols
         .iter()
-        .filter_map(|c| match c {
-            Column::Topics(ts) => Some(
-                ts.iter()
-                    .map(|&i| arrow_lines(&v.topics[i], w, usize::MAX).len())
-                    .sum::<usize>(),
-            ),
-            Column::Nodes(_) => None,
+        .map(|c| match c {
+            Column::Topics(ts) => ts
+                .iter()
+                .map(|&i| arrow_lines(&v.topics[i], w, usize::MAX).len())
+                .sum::<usize>(),
+            Column::Nodes(ns) => ns.iter().map(|&i| node_rows(&v.nodes[i]) + 2).sum(),
         })
         .max()
         .unwrap_or(0) as u16;

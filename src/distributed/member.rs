@@ -108,9 +108,10 @@ pub struct LiveStats {
     #[serde(default)]
     pub steps: Vec<StepRecord>,
     /// Real clock: each tick of its nodes since the previous figures, as (node index, run
-    /// time ns, lateness ns), oldest first (at most [`MAX_BATCH_TICKS`]).
+    /// time ns, lateness ns, wall time the tick took ns), oldest first (at most
+    /// [`MAX_BATCH_TICKS`]).
     #[serde(default)]
-    pub ticks: Vec<(usize, u64, u64)>,
+    pub ticks: Vec<(usize, u64, u64, u64)>,
     /// The counters of each topic it holds, sampled after each tick of its nodes when they
     /// differ from the previous sample: (run time ns, topic index, counters), oldest first,
     /// run times never decreasing (at most [`MAX_BATCH_COUNTERS`], the oldest dropped
@@ -173,7 +174,7 @@ impl LiveStats {
 #[derive(Default)]
 struct Batch {
     steps: std::collections::VecDeque<StepRecord>,
-    ticks: std::collections::VecDeque<(usize, u64, u64)>,
+    ticks: std::collections::VecDeque<(usize, u64, u64, u64)>,
     counters: std::collections::VecDeque<(u64, usize, crate::topic::TopicStats)>,
     /// Each topic's counters as last sampled (a sample is kept only when they changed).
     last: Vec<Option<crate::topic::TopicStats>>,
@@ -188,7 +189,7 @@ impl Batch {
         }
         self.steps.push_back(s);
     }
-    fn push_tick(&mut self, t: (usize, u64, u64)) {
+    fn push_tick(&mut self, t: (usize, u64, u64, u64)) {
         if self.ticks.len() == MAX_BATCH_TICKS {
             self.ticks.pop_front();
         }
@@ -818,29 +819,28 @@ fn real_clock(
         spin_margin: cfg.spin_margin,
         phase_offsets,
         rt_priority: cfg.rt_priority,
-        on_tick: Some(Arc::new(
-            move |k: usize, _: &str, now: Nanos, late: Nanos| {
-                let i = hook_index[k];
-                hook_ticks[i].fetch_add(1, Ordering::Relaxed);
-                fwd(i);
-                // The sample is in the batch before the run time says this tick is done.
-                let read = read_counters(&hook_held, &hook_handles);
-                {
-                    let mut b = crate::graph::lock(&hook_batch);
-                    b.push_tick((i, now.0, late.0));
-                    b.keep(now.0, &read);
-                }
-                // Its next tick is due a period after this one's deadline, at the earliest.
-                let period = hook_handles.rates[i].period().0.max(1);
-                let deadline = now.0.saturating_sub(late.0);
-                hook_due[k].store(deadline.saturating_add(period), Ordering::SeqCst);
-                let wall = wire::mono_now_ns().saturating_sub(start);
-                hook_time.fetch_max(
-                    figures_time(wall, end, due_now(&hook_due)),
-                    Ordering::SeqCst,
-                );
-            },
-        )),
+        on_tick: Some(Arc::new(move |t: &crate::scheduler::TickReport<'_>| {
+            let (k, now, late) = (t.node, t.now, t.lateness);
+            let i = hook_index[k];
+            hook_ticks[i].fetch_add(1, Ordering::Relaxed);
+            fwd(i);
+            // The sample is in the batch before the run time says this tick is done.
+            let read = read_counters(&hook_held, &hook_handles);
+            {
+                let mut b = crate::graph::lock(&hook_batch);
+                b.push_tick((i, now.0, late.0, t.took.0));
+                b.keep(now.0, &read);
+            }
+            // Its next tick is due a period after this one's deadline, at the earliest.
+            let period = hook_handles.rates[i].period().0.max(1);
+            let deadline = now.0.saturating_sub(late.0);
+            hook_due[k].store(deadline.saturating_add(period), Ordering::SeqCst);
+            let wall = wire::mono_now_ns().saturating_sub(start);
+            hook_time.fetch_max(
+                figures_time(wall, end, due_now(&hook_due)),
+                Ordering::SeqCst,
+            );
+        })),
         pause: None,
         start: Some(wire::instant_at_mono(start)),
         // A launch across processes refuses executors and compute times (config).

@@ -230,7 +230,7 @@ impl Fold {
                 out.push(Telemetry::Wire(links));
             }
         }
-        for &(node, now, late) in &m.ticks {
+        for &(node, now, late, took) in &m.ticks {
             // Only the process's own nodes, and only forward in time.
             let own =
                 node < self.spec.nodes.len() && self.spec.process_of(NodeId(node)) == m.process;
@@ -240,6 +240,7 @@ impl Fold {
                     node,
                     now: Nanos(now),
                     lateness: Nanos(late),
+                    took: Nanos(took),
                 });
             }
         }
@@ -838,6 +839,7 @@ pub fn record(
                 node,
                 now: at,
                 lateness,
+                ..
             } => {
                 if let Some(n) = spec.nodes.get(node) {
                     rec.node_tick(&n.name, at, lateness);
@@ -1228,18 +1230,23 @@ mod tests {
     fn ticks_are_taken_only_for_the_senders_own_nodes() {
         let mut f = Fold::new(&cfg(), "scripted");
         let mut m = live("policy", vec![], vec![]);
-        m.ticks = vec![(1, 20_000_000, 50_000), (0, 20_000_000, 1), (99, 0, 0)];
+        m.ticks = vec![
+            (1, 20_000_000, 50_000, 7_000),
+            (0, 20_000_000, 1, 1),
+            (99, 0, 0, 0),
+        ];
         let out = f.stats(m.clone());
         assert_eq!(out.len(), 1);
         // A tick no newer than one handed on (a peer replaying, or out of order) is dropped:
         // the lab's rates assume time goes forward.
-        m.ticks = vec![(1, 10_000_000, 0), (1, 20_000_000, 0)];
+        m.ticks = vec![(1, 10_000_000, 0, 0), (1, 20_000_000, 0, 0)];
         assert!(f.stats(m).is_empty());
         assert!(matches!(
             out[0],
             Telemetry::NodeTick {
                 node: 1,
                 lateness: Nanos(50_000),
+                took: Nanos(7_000),
                 ..
             }
         ));

@@ -273,7 +273,15 @@ fn worker(inner: &Inner, e: usize) {
         let result = catch_quietly(|| real_tick(&mut *node, now, &cx.clock, &cx.stop));
         let cpu = thread_cpu_time().saturating_sub(cpu0);
         if let Some(hook) = &cx.opts.on_tick {
-            hook(i, node.name(), now, late);
+            hook(&super::TickReport {
+                node: i,
+                name: node.name(),
+                now,
+                lateness: late,
+                took: result
+                    .as_ref()
+                    .map_or(Nanos::ZERO, |(_, done)| done.saturating_sub(now)),
+            });
         }
         st = inner.lock();
         let name = node.name().to_string();

@@ -78,8 +78,8 @@ pub enum Telemetry {
     },
     /// One actuator tick.
     Step(Box<StepRecord>),
-    /// One node tick under the real clock: node index (tie-break rank), run time and
-    /// lateness.
+    /// One node tick under the real clock: node index (tie-break rank), run time,
+    /// lateness and how long it took.
     NodeTick {
         /// Node index ([`crate::graph::NodeId`]).
         node: usize,
@@ -87,6 +87,8 @@ pub enum Telemetry {
         now: Nanos,
         /// Actual − scheduled.
         lateness: Nanos,
+        /// Wall time from its start to its end ([`crate::scheduler::TickReport::took`]).
+        took: Nanos,
     },
     /// Periodic status.
     Status {

@@ -37,18 +37,17 @@ impl Engine {
         let tx = self.tx.clone();
         let rec = recording.clone();
         let opts = RealOptions {
-            on_tick: Some(Arc::new(
-                move |node: usize, name: &str, now: Nanos, lateness: Nanos| {
-                    let _ = tx.send(Telemetry::NodeTick {
-                        node,
-                        now,
-                        lateness,
-                    });
-                    if let Some(r) = &rec {
-                        r.node_tick(name, now, lateness);
-                    }
-                },
-            )),
+            on_tick: Some(Arc::new(move |t: &crate::scheduler::TickReport<'_>| {
+                let _ = tx.send(Telemetry::NodeTick {
+                    node: t.node,
+                    now: t.now,
+                    lateness: t.lateness,
+                    took: t.took,
+                });
+                if let Some(r) = &rec {
+                    r.node_tick(t.name, t.now, t.lateness);
+                }
+            })),
             pause: Some(pause.clone()),
             ..crate::run::real_options(cfg)
         };

@@ -182,6 +182,10 @@ fn real_clock_lab_keeps_the_pole_up_for_3_s() {
         screen.contains("µs late"),
         "the real clock shows tick lateness:\n{screen}"
     );
+    assert!(
+        screen.contains("tick p50 "),
+        "the real clock shows what a tick takes:\n{screen}"
+    );
     lab.quit();
 }
 

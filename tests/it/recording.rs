@@ -36,9 +36,11 @@ fn record_with(
     let mut opts = RunOptions {
         observers: vec![rec.observer()],
         // As `ratelab run` does: per-node lateness (logged by the real clock only).
-        on_node_tick: Some(std::sync::Arc::new(move |_, node: &str, now, late| {
-            ticks.node_tick(node, now, late)
-        })),
+        on_node_tick: Some(std::sync::Arc::new(
+            move |t: &ratelab::scheduler::TickReport<'_>| {
+                ticks.node_tick(t.name, t.now, t.lateness)
+            },
+        )),
         commands,
         ..RunOptions::new()
     };
