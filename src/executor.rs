@@ -218,6 +218,22 @@ impl ExecutorOverride {
     }
 }
 
+/// One tick as an executor ran it: for the lab's executor timeline.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct CallbackSpan {
+    /// The node (index in the graph).
+    pub node: usize,
+    /// When its timer was due (the tick's release).
+    pub release: Nanos,
+    /// When the tick started on a thread.
+    pub start: Nanos,
+    /// When it ended (its outputs published).
+    pub end: Nanos,
+}
+
+/// The most [`CallbackSpan`]s a virtual scheduler keeps between two reads (the oldest go).
+pub const MAX_SPANS: usize = 4096;
+
 /// One executor of a plan.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct PlanExecutor {

@@ -19,7 +19,8 @@ use crate::clock::{Clock, MonotonicClock};
 mod shared;
 
 use crate::executor::{
-    Dispatch, ExecFigures, ExecutionPlan, ExecutorFigures, ExecutorKind, NodeExecFigures,
+    CallbackSpan, Dispatch, ExecFigures, ExecutionPlan, ExecutorFigures, ExecutorKind,
+    NodeExecFigures,
 };
 use crate::metrics::{LatencyStats, NodeTiming};
 use crate::node::{Flow, Node};
@@ -194,6 +195,9 @@ pub struct VirtualScheduler {
     running_start: Vec<Nanos>,
     /// Per node: what its executor measured (only when `track`).
     stats: Vec<NodeExecStats>,
+    /// The ticks that ended since [`VirtualScheduler::take_spans`] last took them (only when
+    /// `track`; at most [`crate::executor::MAX_SPANS`], the oldest dropped).
+    spans: std::collections::VecDeque<CallbackSpan>,
     track: bool,
     /// Any executor shares threads, or ticks take time: the executors' rules apply. Else
     /// (the default) an instant is the chapter's loop, which they reduce to.
@@ -249,6 +253,7 @@ impl VirtualScheduler {
             } else {
                 Vec::new()
             },
+            spans: std::collections::VecDeque::new(),
             general: track || !plan_per_node,
             track,
         }
@@ -293,6 +298,19 @@ impl VirtualScheduler {
             }
             figures(self.dispatch.plan(), &stats, elapsed)
         })
+    }
+
+    /// When measuring: the ticks that ended since the last call, oldest first (the lab's
+    /// executor timeline); empty otherwise.
+    pub fn take_spans(&mut self) -> Vec<CallbackSpan> {
+        self.spans.drain(..).collect()
+    }
+
+    fn keep_span(&mut self, span: CallbackSpan) {
+        if self.spans.len() == crate::executor::MAX_SPANS {
+            self.spans.pop_front();
+        }
+        self.spans.push_back(span);
     }
 
     /// When measuring: each node's ticks and skipped ticks so far, by node index (cheap:
@@ -359,6 +377,12 @@ impl VirtualScheduler {
             if self.track {
                 let busy = t.saturating_sub(self.running_start[i]);
                 self.stats[i].record(self.running_release[i], t, busy);
+                self.keep_span(CallbackSpan {
+                    node: i,
+                    release: self.running_release[i],
+                    start: self.running_start[i],
+                    end: t,
+                });
             }
         }
         while let Some(&Reverse((at, _, i))) = self.releases.peek() {
@@ -399,6 +423,12 @@ impl VirtualScheduler {
                 self.dispatch.finish(i);
                 if self.track {
                     self.stats[i].record(release, t, Nanos::ZERO);
+                    self.keep_span(CallbackSpan {
+                        node: i,
+                        release,
+                        start: t,
+                        end: t,
+                    });
                 }
             } else {
                 self.running_release[i] = release;

@@ -116,6 +116,10 @@ pub struct App {
     /// (t s, published force N) per policy publication seen over the last [`HISTORY_S`].
     published: VecDeque<(f64, f64)>,
     ticks: Vec<VecDeque<(Nanos, Nanos, Nanos)>>,
+    /// The ticks of the last second, for the executor timeline ([`super::timeline`]).
+    timeline: super::timeline::Timeline,
+    /// The timeline shown in place of the latency histogram (key `t`).
+    show_timeline: bool,
     last: Option<StepRecord>,
     verdict: Verdict,
     help: bool,
@@ -168,6 +172,8 @@ impl App {
             applied: VecDeque::new(),
             published: VecDeque::new(),
             ticks: Vec::new(),
+            timeline: Default::default(),
+            show_timeline: false,
             last: None,
             verdict: Verdict::Balanced,
             help: false,
@@ -309,6 +315,7 @@ impl App {
                     .map(|n| n.liveliness_lease.map(|_| true))
                     .collect();
                 self.ticks = vec![VecDeque::new(); cfg.graph.nodes.len()];
+                self.timeline.clear();
                 self.exec.clear();
                 if self.graph != cfg.graph {
                     self.selected = None;
@@ -354,6 +361,15 @@ impl App {
                 lateness,
                 took,
             } => {
+                self.timeline.push(
+                    ratelab::executor::CallbackSpan {
+                        node,
+                        release: now.saturating_sub(lateness),
+                        start: now,
+                        end: now.saturating_add(took),
+                    },
+                    now,
+                );
                 if let Some(q) = self.ticks.get_mut(node) {
                     q.push_back((now, lateness, took));
                     while q
@@ -396,6 +412,11 @@ impl App {
                 self.brain = policy;
             }
             Telemetry::Applied(text) => self.say(text),
+            Telemetry::Callbacks(spans) => {
+                for s in spans {
+                    self.timeline.push(s, s.end.max(self.now));
+                }
+            }
             Telemetry::Changed { at, text } => {
                 self.live.change(at, text.clone());
                 self.say(text);
@@ -537,6 +558,7 @@ impl App {
                     .say("no --policy file given: nothing to swap the scripted brain with".into()),
             },
             Msg::ToggleHelp => self.help = !self.help,
+            Msg::ToggleTimeline => self.show_timeline = !self.show_timeline,
             Msg::Back => {
                 if self.help {
                     self.help = false;
@@ -927,6 +949,16 @@ impl App {
                 .collect(),
             published_force: self.published.iter().copied().collect(),
             latency: self.latency_view(),
+            timeline: self.show_timeline.then(|| {
+                self.timeline.view(
+                    &self.graph,
+                    &self.graph.execution_plan(),
+                    &(0..self.graph.nodes.len())
+                        .map(|i| self.rate_of(NodeId(i)))
+                        .collect::<Vec<_>>(),
+                    self.now,
+                )
+            }),
             segment: self.segment_view(),
             help: self.help,
             typing: self.typing.clone(),

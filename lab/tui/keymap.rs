@@ -57,6 +57,8 @@ pub enum Msg {
     Faster,
     /// Swap the brain (scripted ↔ the --policy file).
     SwapBrain,
+    /// Show the executor timeline instead of the latency histogram, or back.
+    ToggleTimeline,
     /// Show / hide the key help.
     ToggleHelp,
     /// Close the help or the selection; when neither is open, ask, and quit on a second one.
@@ -79,7 +81,12 @@ impl Msg {
     pub fn only_views(self) -> bool {
         matches!(
             self,
-            Msg::SelectNext | Msg::SelectPrev | Msg::ToggleHelp | Msg::Back | Msg::Quit
+            Msg::SelectNext
+                | Msg::SelectPrev
+                | Msg::ToggleHelp
+                | Msg::ToggleTimeline
+                | Msg::Back
+                | Msg::Quit
         )
     }
 }
@@ -162,6 +169,12 @@ pub const BINDINGS: &[Binding] = &[
         label: "Tab / Shift-Tab",
         help: "select the next / previous node or topic",
         footer: Some(("Tab", "select")),
+    },
+    Binding {
+        keys: &[(Char('t'), Msg::ToggleTimeline)],
+        label: "t",
+        help: "executor timeline (which tick ran on which thread) ↔ latency",
+        footer: None,
     },
     Binding {
         keys: &[(Char('b'), Msg::Break)],

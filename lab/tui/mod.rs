@@ -5,6 +5,7 @@
 pub mod app;
 pub mod keymap;
 pub mod live;
+pub mod timeline;
 pub mod view;
 
 use anyhow::Context;

@@ -257,6 +257,8 @@ pub struct View {
     pub published_force: Vec<(f64, f64)>,
     /// Latency since the last change, and over the window.
     pub latency: LatencyView,
+    /// The executor timeline, shown in place of the latency histogram (key `t`).
+    pub timeline: Option<super::timeline::TimelineView>,
     /// The window and the segment the numbers count over.
     pub segment: SegmentView,
     /// Help overlay shown?
@@ -311,7 +313,10 @@ impl Widget for &View {
             Layout::vertical([Constraint::Percentage(56), Constraint::Percentage(44)]).areas(chart);
         render_angle_chart(self, angle, buf);
         render_hold_chart(self, hold, buf);
-        render_latency(self, latency, buf);
+        match &self.timeline {
+            Some(t) => super::timeline::render(t, self.clock == "virtual", latency, buf),
+            None => render_latency(self, latency, buf),
+        }
         render_footer(self, footer, buf);
         if self.help {
             render_help(area, buf, self.attached.is_some());

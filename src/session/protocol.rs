@@ -113,6 +113,10 @@ pub enum Telemetry {
         /// ([`crate::executor`]): each node's ticks and skipped ticks so far, by node index.
         exec: Option<Vec<(u64, u64)>>,
     },
+    /// Virtual clock with executors or compute times: the ticks that ended since the last
+    /// such message, oldest first ([`crate::executor::CallbackSpan`]; the lab's executor
+    /// timeline). Under the real clock [`Telemetry::NodeTick`] gives the same.
+    Callbacks(Vec<crate::executor::CallbackSpan>),
     /// A notice for the front end's log line (a change set for the next run, a refused
     /// real-time priority).
     Applied(String),

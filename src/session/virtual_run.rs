@@ -119,6 +119,10 @@ impl Engine {
                 }
             }
             if last_status.elapsed() >= Duration::from_millis(33) {
+                let spans = sched.take_spans();
+                if !spans.is_empty() {
+                    let _ = self.tx.send(Telemetry::Callbacks(spans));
+                }
                 self.status(sched.now(), paused, &handles, sched.skipped_ticks());
                 last_status = Instant::now();
             }
@@ -186,6 +190,10 @@ impl Engine {
                     None,
                     sched.figures(end.at),
                 );
+                let spans = sched.take_spans();
+                if !spans.is_empty() {
+                    let _ = self.tx.send(Telemetry::Callbacks(spans));
+                }
                 self.status(sched.now(), paused, &handles, sched.skipped_ticks());
                 let _ = self.tx.send(Telemetry::Ended {
                     metrics: Box::new(metrics),

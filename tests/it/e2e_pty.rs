@@ -296,6 +296,37 @@ fn the_queue_trap_recipe_works_at_human_speed() {
     lab.quit();
 }
 
+/// `t` shows the executor timeline: on the executors graph (sensor and a 30 ms policy in
+/// one exclusive group of a two-thread executor) every tick of both is on the executor's
+/// first thread, the sensor's (S) each followed by the policy computing (Ppp); `t` again
+/// gives the latency histogram back.
+#[test]
+fn the_executor_timeline_shows_which_tick_ran_on_which_thread() {
+    let _machine = crate::machine::alone();
+    let graph = crate::repo("graphs/cartpole-executors.toml");
+    let mut lab = Lab::start(&["--clock", "virtual", "--graph", graph.to_str().unwrap()]);
+    lab.wait_for("BALANCED", Duration::from_secs(60));
+    type_slowly(&mut lab, "t");
+    let screen = lab.wait_until("the timeline", Duration::from_secs(10), |s| {
+        s.contains("executor timeline") && s.contains("main#1") && s.contains("Spp")
+    });
+    let lane = |name: &str| {
+        screen
+            .lines()
+            .find(|l| l.trim_start_matches('│').starts_with(name))
+            .map(str::to_string)
+            .unwrap_or_default()
+    };
+    assert!(
+        !lane("main#2").contains('S') && !lane("main#2").contains('P'),
+        "one exclusive group: nothing on the second thread\n{screen}"
+    );
+    assert!(lane("actuator").contains('A'), "{screen}");
+    type_slowly(&mut lab, "t");
+    lab.wait_for("sense→act latency", Duration::from_secs(5));
+    lab.quit();
+}
+
 #[test]
 fn pause_stops_virtual_time_and_is_refused_under_the_real_clock() {
     let _machine = crate::machine::alone();
