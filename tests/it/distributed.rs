@@ -1134,7 +1134,13 @@ fn every_process_runs_zenoh_on_one_worker_unless_zenoh_runtime_says_otherwise() 
     // launcher and every process it starts have `app-` threads and no `rx-`, `tx-`, `acc-`
     // or `net-` ones. A user's `ZENOH_RUNTIME` wins, for the children too.
     let _m = crate::machine::shared();
-    for user in [None, Some("(rx: (worker_threads: 3))")] {
+    // The user's setting keeps receive and send on one thread, as ratelab's does:
+    // zenoh-link-tls reads and writes a TLS stream from two tasks without a lock
+    // (eclipse-zenoh/zenoh#2557), and with them on threads of their own a process crashed
+    // here once (rustls, "memory allocation of 140385569500528 bytes failed").
+    let user_runtime = "(rx: (handover: app), tx: (handover: app), net: (handover: app), \
+        app: (worker_threads: 1), acc: (worker_threads: 2))";
+    for user in [None, Some(user_runtime)] {
         let dir = tempfile::tempdir().unwrap();
         let port = free_port();
         let mut launch = bin();
@@ -1176,7 +1182,7 @@ fn every_process_runs_zenoh_on_one_worker_unless_zenoh_runtime_says_otherwise() 
                     let others = pool("rx-") + pool("tx-") + pool("acc-") + pool("net-");
                     assert_eq!(others, 0, "one worker: pid {pid} threads {names:?}");
                 }
-                Some(_) => assert_eq!(pool("rx-"), 3, "the user's: pid {pid} {names:?}"),
+                Some(_) => assert!(pool("acc-") >= 2, "the user's: pid {pid} {names:?}"),
             }
         }
         let status = exit_within(&mut launcher, 30);
