@@ -103,7 +103,8 @@ pub enum NodeKind {
     Actuator,
     /// A learner's node written in Python ([`crate::python::node`]): any inputs and
     /// outputs. In the chain's places it plays the policy (reads a `state` topic, publishes
-    /// the `force` toward the actuator) or a safety node (reads `force`, publishes `force`).
+    /// the `force` toward the actuator) or a safety node (reads `force`, publishes `force`);
+    /// driving the actuator and reading neither, it is the policy.
     Python,
     /// A kind written in Rust and registered by the program that runs the graph
     /// ([`crate::graph::registry`]; its name is in [`NodeSpec::registered`]). It takes the
@@ -1431,8 +1432,10 @@ fn spec_actuator(spec: &GraphSpec) -> NodeId {
 /// Walk upstream from the actuator: safety nodes, the policy, an estimator, the sensor.
 ///
 /// A node of an open kind (python, registered, external) is the policy when it reads a
-/// `state` topic (its first), and a safety node when it reads a `force` topic (its first),
-/// which the walk follows; up from the policy, the walk follows each node's first input.
+/// `state` topic (its first); else a safety node when it reads a `force` topic (its first),
+/// which the walk follows; else, reading anything, the policy too (a controller with its
+/// own estimator may read `position` alone), its first input its observation. Up from the
+/// policy, the walk follows each node's first input.
 fn find_chain(spec: &GraphSpec) -> Result<Chain, String> {
     let actuator = spec_actuator(spec);
     let open = |n: NodeId| {
@@ -1467,10 +1470,19 @@ fn find_chain(spec: &GraphSpec) -> Result<Chain, String> {
             _ if open(p) && reads(MsgType::State) => break (p, t),
             NodeKind::Safety => cur = p,
             _ if open(p) && reads(MsgType::Force) => cur = p,
+            _ if open(p) => break (p, t),
             _ => return Err("the actuator is not driven by a policy".into()),
         }
     };
-    let (obs, mut src) = input(policy, Some(MsgType::State)).ok_or("the policy reads nothing")?;
+    // Its `state` input, else (an open kind reading no state) its first.
+    let (obs, mut src) = input(policy, Some(MsgType::State))
+        .or_else(|| input(policy, None))
+        .ok_or_else(|| {
+            format!(
+                "node '{}', which drives the actuator, reads nothing: a graph's policy reads what a sensor measures",
+                spec.nodes[policy.0].name
+            )
+        })?;
     // Up through the estimators (built-in or of an open kind) to the sensor.
     for _ in 0..MAX_NODES {
         if spec.nodes[src.0].kind == NodeKind::Estimator || open(src) {
@@ -1928,6 +1940,29 @@ depth = 1
         );
         assert!(text.contains(r#"subscribes = "/action""#), "{text}");
         assert_eq!(GraphSpec::parse(&text, "again").unwrap(), g);
+    }
+
+    #[test]
+    fn an_open_node_driving_the_actuator_is_the_policy_whatever_it_reads() {
+        let g = parse(include_str!("../../graphs/cartpole-position-python.toml")).unwrap();
+        assert_eq!(g.node(g.chain.policy).name, "controller");
+        assert_eq!(g.topic(g.chain.obs).name, "/meas");
+        assert_eq!(g.node(g.chain.sensor).name, "sensor");
+        // One that reads nothing is refused, by name.
+        let text = include_str!("../../graphs/cartpole-position-python.toml")
+            .replace("subscribes = \"/meas\"\n", "");
+        let text = text.replace(
+            "publishes = \"/meas\"",
+            "publishes = \"/meas\"\n[[node]]\nname = \"log\"\nkind = \"python\"\nscript = \"l.py\"\nrate_hz = 1\nsubscribes = \"/meas\"",
+        );
+        let e = parse(&text).unwrap_err().reason;
+        assert!(
+            e.starts_with("node 'controller', which drives the actuator, reads nothing"),
+            "{e}"
+        );
+        // A built-in policy still must read state.
+        let e = parse(&CHAIN.replace("type = \"state\"", "type = \"position\"")).unwrap_err();
+        assert!(e.reason.contains("type mismatch"), "{e}");
     }
 
     #[test]

@@ -14,13 +14,15 @@ use std::process::Command;
 
 use crate::repo;
 
-const SHIPPED: [&str; 6] = [
+const SHIPPED: [&str; 8] = [
     "graphs/cartpole.toml",
     "graphs/cartpole-estimator.toml",
     "graphs/cartpole-safety.toml",
     "graphs/cartpole-python.toml",
     "graphs/cartpole-estimator-python.toml",
     "graphs/cartpole-safety-python.toml",
+    "graphs/cartpole-setpoint.toml",
+    "graphs/cartpole-position-python.toml",
 ];
 
 fn cfg(file: &str, clock: ClockKind, secs: u64) -> RunConfig {
