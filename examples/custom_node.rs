@@ -54,39 +54,7 @@ impl RustNode for Pd {
 }
 
 /// The chapter's graph with the policy node replaced by a `pd` node.
-const GRAPH: &str = r#"
-name = "cartpole-pd"
-
-[[node]]
-name = "sensor"
-kind = "sensor"
-rate_hz = 50
-publishes = "/obs"
-
-[[node]]
-name = "policy"
-kind = "pd"
-rate_hz = 50
-subscribes = "/obs"
-publishes = "/action"
-params = { kp_angle = 10.0, kd_angle = 2.0, kp_pos = 0.4, kd_pos = 0.8 }
-
-[[node]]
-name = "actuator"
-kind = "actuator"
-rate_hz = 50
-subscribes = "/action"
-
-[[topic]]
-name = "/obs"
-type = "state"
-depth = 1
-
-[[topic]]
-name = "/action"
-type = "force"
-depth = 1
-"#;
+const GRAPH: &str = include_str!("cartpole-pd.toml");
 
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();

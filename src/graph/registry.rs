@@ -61,9 +61,13 @@
 //! input, a `force` output toward the actuator), a safety node (`force` → `force`) or an
 //! estimator in the chapter's chain, like a Python node.
 //!
-//! **Limits.** The registry is per process, so a graph with a registered kind runs in the
-//! process that registered it (`ratelab launch --processes` starts `ratelab` binaries,
-//! which know only the built-in kinds, and refuses it by name).
+//! **Across processes.** The registry is per process: a graph with a registered kind runs
+//! in programs that register it. `ratelab launch --processes` starts `ratelab` binaries,
+//! which know only the built-in kinds, and refuses such a graph by its kind's name; a
+//! program of your own launches it, starting itself as each process
+//! ([`crate::distributed::launcher::launch`] with `exe` its own path, and
+//! [`crate::distributed::member::run_member`] for the `node` command the launcher starts it
+//! with): `examples/custom_node_processes.rs` is one.
 
 use crate::msg::{AnyTopic, ForceMsg, MsgType, PositionMsg, StateMsg};
 use crate::publisher::{Outbox, Publisher};

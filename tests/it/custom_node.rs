@@ -238,9 +238,14 @@ fn a_kind_nobody_registered_is_refused_by_the_file_and_the_binary() {
 /// `target/<profile>/examples/custom_node`, built by `cargo test` beside this test binary
 /// (`target/<profile>/deps/it-…`).
 fn example_binary() -> PathBuf {
+    example("custom_node")
+}
+
+/// `target/<profile>/examples/NAME`.
+fn example(name: &str) -> PathBuf {
     let exe = std::env::current_exe().unwrap();
     let profile = exe.parent().and_then(|deps| deps.parent()).unwrap();
-    let p = profile.join("examples").join("custom_node");
+    let p = profile.join("examples").join(name);
     assert!(
         p.is_file(),
         "{} is missing: `cargo test` builds the examples",
@@ -276,4 +281,43 @@ fn the_custom_node_example_runs_the_chapters_graph_with_a_pd_node() {
     }
     let o = Command::new(example_binary()).arg("fast").output().unwrap();
     assert_eq!(o.status.code(), Some(2));
+}
+
+/// A program that registers a kind runs it across processes: it launches itself as each
+/// process (a `ratelab` binary would not know the kind), and the lockstep's metrics equal
+/// the one-process run's.
+#[test]
+fn a_registered_kind_runs_across_processes_in_the_program_that_registers_it() {
+    let _m = crate::machine::shared();
+    for seed in ["0", "2"] {
+        let o = Command::new(example("custom_node_processes"))
+            .args(["--seed", seed])
+            .output()
+            .unwrap();
+        let out = String::from_utf8_lossy(&o.stdout);
+        assert!(
+            o.status.success(),
+            "{out}{}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+        assert!(
+            out.contains(
+                "graph 'cartpole-pd' in 2 processes: robot [sensor, actuator], policy [policy]"
+            ),
+            "{out}"
+        );
+        assert!(
+            out.contains("equal to the same graph in one process in every figure: yes"),
+            "{out}"
+        );
+    }
+    // The ratelab binary, which does not know the kind, refuses the graph in one line.
+    let o = Command::new(env!("CARGO_BIN_EXE_ratelab"))
+        .args(["launch", "--processes", "--graph"])
+        .arg(crate::repo("examples/cartpole-pd.toml"))
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(err.contains("unknown kind `pd`"), "{err}");
 }
