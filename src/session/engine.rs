@@ -44,6 +44,10 @@ pub struct SessionSettings {
     pub ros2: Option<(crate::ros2::session::Ros2Session, crate::ros2::Ros2Options)>,
 }
 
+/// How long a fresh run that judges a live rate change runs at most
+/// ([`Engine::judge_fresh_run`]): 30 s of run time (about 60 ms of CPU).
+pub const JUDGE_FOR: Nanos = Nanos(30 * Nanos::SECOND.0);
+
 /// Streams step records to the front end.
 struct TelemetryObserver(Sender<Telemetry>);
 
@@ -63,6 +67,8 @@ pub struct Engine {
     run_index: usize,
     /// Changes made while a run was frozen (after a fall or its end): they set the next run.
     next_run: Vec<Command>,
+    /// The brain spec the current run started with (for [`Engine::judge_fresh_run`]).
+    run_policy: String,
 }
 
 /// What ended a run from the engine's side.
@@ -84,6 +90,7 @@ impl Engine {
             speed,
             run_index: 0,
             next_run: Vec::new(),
+            run_policy: String::new(),
         }
     }
 
@@ -165,6 +172,7 @@ impl Engine {
         policy: &str,
     ) -> Result<(Next, crate::graph::GraphSpec, String), String> {
         self.run_index += 1;
+        self.run_policy = policy.to_string();
         let brain = load_policy(policy).map_err(|e| e.to_string())?;
         let mut notice = None;
         let recording = match self.recording_path() {
@@ -275,6 +283,50 @@ impl Engine {
                 _ => None,
             })
             .unwrap_or_else(|| initial.to_string())
+    }
+
+    /// After a live rate change (`text` says which, `note` the phase it left): how a run
+    /// started at the settings now goes — the headless result, which `r` gives — sent as a
+    /// notice when it is known, so that a learner knows how long to wait before judging a
+    /// rate (a live run carries its old phase and state, and a rate that fails may take
+    /// seconds to show it). Computed on a thread of its own, under the virtual clock, for at
+    /// most [`JUDGE_FOR`] (or the run's duration), with the brain in use (a Python brain,
+    /// or a graph with Python, registered or external nodes, whose code would run a second
+    /// time beside the live one, is not judged).
+    pub(super) fn judge_fresh_run(&self, cfg: &RunConfig, h: &GraphHandles, text: String) {
+        let spec = h.current_spec();
+        let open = spec.nodes.iter().any(|n| {
+            matches!(
+                n.kind,
+                crate::graph::NodeKind::Python
+                    | crate::graph::NodeKind::Registered
+                    | crate::graph::NodeKind::External
+            )
+        });
+        let policy = self.current_policy_spec(&self.run_policy);
+        if open || policy.contains(".py") {
+            return;
+        }
+        let mut fresh = cfg.clone();
+        fresh.graph = spec;
+        fresh.clock = ClockKind::Virtual;
+        fresh.duration = cfg.duration.min(JUDGE_FOR);
+        let tx = self.tx.clone();
+        let _ = std::thread::Builder::new()
+            .name("judge".into())
+            .spawn(move || {
+                let Ok(brain) = load_policy(&policy) else {
+                    return;
+                };
+                let Ok(r) = crate::run::run(&fresh, brain, crate::run::RunOptions::new()) else {
+                    return;
+                };
+                let verdict = match r.metrics.fell_at_s {
+                    Some(t) => format!("a fresh run falls at {t:.2} s: judge no sooner"),
+                    None => format!("a fresh run balances {:.0} s", fresh.duration.as_secs_f64()),
+                };
+                let _ = tx.send(Telemetry::Applied(format!("{text} · {verdict}")));
+            });
     }
 
     /// Send the lab the run's status at run time `now`; `exec`: each node's ticks and skipped

@@ -8,6 +8,7 @@ use crate::executor::ExecFigures;
 use crate::graph::Graph;
 use crate::metrics::NodeTiming;
 use crate::recording::Recording;
+use crate::run::Command;
 use crate::scheduler::{run_real, EndReason, RealOptions, RunEnd, StopFlag};
 use crate::time::Nanos;
 use crossbeam_channel::RecvTimeoutError;
@@ -88,7 +89,16 @@ impl Engine {
             let next = match self.rx.recv_timeout(Duration::from_millis(30)) {
                 Ok(Control::Apply(cmd)) => {
                     if result.is_none() {
-                        self.apply(cmd, now(), &handles, recording);
+                        let rate = matches!(
+                            cmd,
+                            Command::SetControlHz { .. }
+                                | Command::SetSensorHz { .. }
+                                | Command::SetNodeHz { .. }
+                        );
+                        let text = super::protocol::describe(&cmd);
+                        if self.apply(cmd, now(), &handles, recording) && rate {
+                            self.judge_fresh_run(cfg, &handles, text);
+                        }
                     } else {
                         self.defer(cmd, &handles);
                     }

@@ -62,12 +62,17 @@ impl Engine {
                             let node = rate_target(&cmd, &handles);
                             let text = super::protocol::describe(&cmd);
                             if self.apply(cmd, at, &handles, recording) {
-                                if let Some(note) =
-                                    node.and_then(|n| phase_note(&sched, &handles, n))
+                                let said = match node.and_then(|n| phase_note(&sched, &handles, n))
                                 {
-                                    let _ = self
-                                        .tx
-                                        .send(Telemetry::Applied(format!("{text} · {note}")));
+                                    Some(note) => {
+                                        let said = format!("{text} · {note}");
+                                        let _ = self.tx.send(Telemetry::Applied(said.clone()));
+                                        said
+                                    }
+                                    None => text,
+                                };
+                                if node.is_some() {
+                                    self.judge_fresh_run(cfg, &handles, said);
                                 }
                             }
                         } else {

@@ -618,3 +618,42 @@ fn a_live_rate_change_says_when_it_keeps_an_old_phase() {
     let said = notes(&script);
     assert!(said.iter().all(|n| !n.contains("fresh")), "{said:?}");
 }
+
+/// A live rate change is judged by a fresh run at the new settings (the headless result `r`
+/// gives), said as a notice: at 7 Hz the chapter's graph falls at 4.06 s from a fresh start
+/// (seed 0), at 25 Hz it balances, so a learner knows how long to wait before judging.
+#[test]
+fn a_live_rate_change_says_how_a_fresh_run_at_that_rate_goes() {
+    let dir = tempfile::tempdir().unwrap();
+    let (ctl_tx, ctl_rx) = unbounded();
+    let (tel_tx, tel_rx) = unbounded::<Telemetry>();
+    let file = dir.path().join("session.json");
+    let settings = settings(ClockKind::Virtual, 0, true, Speed::Max, &file);
+    let engine = Engine::new(settings, ctl_rx, tel_tx).spawn();
+    let notice = |want: &str| {
+        let deadline = std::time::Instant::now() + std::time::Duration::from_secs(20);
+        loop {
+            let left = deadline.saturating_duration_since(std::time::Instant::now());
+            match tel_rx.recv_timeout(left) {
+                Ok(Telemetry::Applied(t)) if t.contains("a fresh run") => return t,
+                Ok(_) => {}
+                Err(_) => panic!("no notice of a fresh run for {want}"),
+            }
+        }
+    };
+    ctl_tx
+        .send(Control::Apply(Command::SetControlHz { hz: 7.0 }))
+        .unwrap();
+    let t = notice("7 Hz");
+    assert!(
+        t.contains("control rate → 7 Hz") && t.contains("a fresh run falls at 4.06 s"),
+        "{t}"
+    );
+    ctl_tx
+        .send(Control::Apply(Command::SetControlHz { hz: 25.0 }))
+        .unwrap();
+    let t = notice("25 Hz");
+    assert!(t.contains("a fresh run balances 30 s"), "{t}");
+    ctl_tx.send(Control::Quit).unwrap();
+    engine.join().unwrap();
+}
