@@ -15,42 +15,18 @@
 //! clap, as the `ratelab` binary does). Exit status 0 when the two runs are equal, 1 when
 //! not, 2 for bad arguments or a failed launch.
 
+#[path = "common/pd.rs"]
+mod pd;
+
 use clap::{Parser, Subcommand};
 use ratelab::distributed::credentials::Credentials;
 use ratelab::distributed::launcher::{launch, LaunchOptions};
 use ratelab::distributed::member::{run_member, MemberOptions};
-use ratelab::graph::registry::{register, NodeContext, RustNode};
 use ratelab::graph::GraphSpec;
-use ratelab::msg::{ForceMsg, StateMsg};
-use ratelab::plant::GEAR_N;
 use ratelab::policy::Scripted;
 use ratelab::scheduler::StopFlag;
 use ratelab::{run, ClockKind, Nanos, RunConfig, RunOptions};
 use std::path::PathBuf;
-
-/// The PD controller of `examples/custom_node.rs`.
-struct Pd {
-    gains: [f64; 4],
-    state: Option<StateMsg>,
-}
-
-impl RustNode for Pd {
-    type Input = StateMsg;
-    type Output = ForceMsg;
-
-    fn tick(&mut self, _now: Nanos, input: Option<&StateMsg>) -> Option<ForceMsg> {
-        if let Some(s) = input {
-            self.state = Some(*s);
-        }
-        let [x, x_dot, cos_t, sin_t, theta_dot] = self.state?.map(f64::from);
-        let [kp_angle, kd_angle, kp_pos, kd_pos] = self.gains;
-        let u = kp_angle * sin_t.atan2(cos_t) + kd_angle * theta_dot + kp_pos * x + kd_pos * x_dot;
-        let command = u.clamp(-1.0, 1.0) as f32;
-        Some(ForceMsg {
-            newtons: f64::from(command) * GEAR_N,
-        })
-    }
-}
 
 /// The graph, as a file: the launcher hands its path to every process it starts.
 fn graph_path() -> PathBuf {
@@ -90,18 +66,7 @@ fn main() {
         eprintln!("custom_node_processes: {e}");
         std::process::exit(2);
     }
-    register("pd", |cx: &NodeContext<'_>| {
-        Ok(Pd {
-            gains: [
-                cx.param_f64("kp_angle", 10.0)?,
-                cx.param_f64("kd_angle", 2.0)?,
-                cx.param_f64("kp_pos", 0.4)?,
-                cx.param_f64("kd_pos", 0.8)?,
-            ],
-            state: None,
-        })
-    })
-    .expect("'pd' is free");
+    pd::register_pd();
     let cli = Cli::parse();
     let fail = |e: &dyn std::fmt::Display| -> ! {
         eprintln!("custom_node_processes: {e}");
