@@ -153,8 +153,8 @@ pub fn run_exercise(
                         "{:>13} | {:>4} | {:>5} | {:>12} | {:>8} | {:>12} | {:>7.1} ms",
                         "",
                         seed,
-                        m.queue_depth,
-                        m.obs_dropped,
+                        dash(m.queue_depth),
+                        dash(m.obs_dropped),
                         if m.balanced { "Y" } else { "n" },
                         m.steps,
                         m.mean_latency_ms
@@ -166,7 +166,7 @@ pub fn run_exercise(
                 &Outcome::Ex2 {
                     deep_queue_obs_drops: pairs
                         .iter()
-                        .map(|(_, d)| d.obs_dropped)
+                        .filter_map(|(_, d)| d.obs_dropped)
                         .max()
                         .unwrap_or(0),
                     deep_queue_balances: pairs.iter().all(|(_, d)| d.balanced),
@@ -214,8 +214,8 @@ pub fn run_exercise(
                 println!(
                     "{:<16} | {:>12} | {:>15} | {:>8} | {:>9.1} ms | {:>6.1} | {:>6.1}",
                     label,
-                    m.obs_dropped,
-                    m.action_dropped,
+                    dash(m.obs_dropped),
+                    dash(m.action_dropped),
                     if m.balanced { "Y" } else { "n" },
                     m.mean_latency_ms,
                     m.latency_p50_ms,
@@ -226,7 +226,7 @@ pub fn run_exercise(
             say_reconcile(
                 &f,
                 &Outcome::Ex3 {
-                    matched_obs_drops: matched.obs_dropped,
+                    matched_obs_drops: matched.obs_dropped.unwrap_or(0),
                 },
             );
             print_checks(&check_ex3(b, &matched, &offset));
@@ -243,8 +243,8 @@ pub fn run_exercise(
                 "sense, then {} ms later think, then {} ms later act. They remove the drops ({} -> {}) and fix",
                 b.phase_offset_ms[1] - b.phase_offset_ms[0],
                 b.phase_offset_ms[2] - b.phase_offset_ms[1],
-                matched.obs_dropped,
-                offset.obs_dropped
+                dash(matched.obs_dropped),
+                dash(offset.obs_dropped)
             );
             println!(
                 "the latency at the sensor-to-actuator offset: {:.1} ms on average, {:.1} ms at the median,",
@@ -652,4 +652,10 @@ fn join(seeds: &[u64]) -> String {
         .map(u64::to_string)
         .collect::<Vec<_>>()
         .join(",")
+}
+
+/// A figure of the chapter's chain, or `-` for a graph without it (the exercises' graphs
+/// all have it).
+fn dash<T: std::fmt::Display>(x: Option<T>) -> String {
+    x.map_or_else(|| "-".to_string(), |v| v.to_string())
 }

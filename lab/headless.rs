@@ -83,8 +83,12 @@ pub fn config_from_args(a: &RunArgs) -> anyhow::Result<RunConfig> {
         faults: faults_from_args(&a.graph),
         ..RunConfig::default()
     };
-    let policy = cfg.graph.node(cfg.graph.chain.policy);
-    if let (Some(python), false) = (&policy.python, a.policy == "scripted") {
+    let policy = cfg.graph.chain.map(|c| cfg.graph.node(c.policy));
+    if let (Some(python), false) = (
+        policy.and_then(|p| p.python.as_ref()),
+        a.policy == "scripted",
+    ) {
+        let policy = policy.expect("a Python policy node");
         // A brain is what a built-in policy node runs; a Python node is its own brain.
         anyhow::bail!(
             "--policy {}: graph '{}' has a Python node as its policy ('{}', {}), which computes its own actions; --policy is for a graph whose policy is kind = \"policy\"",
@@ -94,20 +98,29 @@ pub fn config_from_args(a: &RunArgs) -> anyhow::Result<RunConfig> {
             python.script
         );
     }
+    if a.policy != "scripted" && !cfg.graph.nodes.iter().any(|n| n.kind.def().uses_brain) {
+        anyhow::bail!(
+            "--policy {}: graph '{}' has no node that runs a brain (kind = \"policy\"); its nodes compute their own actions",
+            a.policy,
+            cfg.graph.name
+        );
+    }
     // A chain shorthand and a `--rate` for the same node would leave one of them ignored.
     let control_hz = if a.break_ {
         Some(BREAK_CONTROL_HZ)
     } else {
         a.control_hz
     };
+    let chain = cfg.graph.chain;
     for (flag, hz, node) in [
-        ("--sensor-hz", a.sensor_hz, cfg.graph.chain.sensor),
+        ("--sensor-hz", a.sensor_hz, chain.map(|c| c.sensor)),
         (
             if a.break_ { "--break" } else { "--control-hz" },
             control_hz,
-            cfg.graph.chain.policy,
+            chain.map(|c| c.policy),
         ),
     ] {
+        let Some(node) = node else { continue }; // refused below, naming the flag
         let name = &cfg.graph.node(node).name;
         if let (Some(hz), Some((_, rate))) = (hz, a.graph.rates.iter().find(|(n, _)| n == name)) {
             if hz != *rate {

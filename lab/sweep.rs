@@ -127,7 +127,7 @@ fn print_table(rows: &[(Point, Metrics)]) {
             if m.balanced { "Y" } else { "n" },
             m.steps,
             m.fell_at_s.map_or("-".into(), |t| format!("{t:.2}")),
-            m.obs_dropped,
+            m.obs_dropped.map_or("-".into(), |d| d.to_string()),
             m.mean_latency_ms
         );
         if let Some(failed) = &m.node_failed {
@@ -278,10 +278,10 @@ fn write_csv(out: &mut dyn std::io::Write, rows: &[(Point, Metrics)]) -> anyhow:
             m.balanced.to_string(),
             m.steps.to_string(),
             m.fell_at_s.map_or(String::new(), |t| t.to_string()),
-            m.obs_published.to_string(),
-            m.obs_dropped.to_string(),
-            m.action_published.to_string(),
-            m.action_dropped.to_string(),
+            m.obs_published.map_or(String::new(), |x| x.to_string()),
+            m.obs_dropped.map_or(String::new(), |x| x.to_string()),
+            m.action_published.map_or(String::new(), |x| x.to_string()),
+            m.action_dropped.map_or(String::new(), |x| x.to_string()),
             m.mean_latency_ms.to_string(),
             m.latency_p99_ms.to_string(),
             m.policy.clone(),
@@ -333,7 +333,11 @@ pub fn run_cliff(a: &CliffArgs, stop: &StopFlag) -> anyhow::Result<()> {
             faults: faults.clone(),
             ..RunConfig::default()
         }
-        .with_chapter(a.sensor_hz, graph.control_hz(), a.queue_depth);
+        .with_chapter(
+            a.sensor_hz,
+            graph.control_hz().unwrap_or(a.max_hz),
+            a.queue_depth,
+        );
         let r = base
             .map_err(ratelab::sweep::SweepError::from)
             .and_then(|base| find_cliff(&base, &brain, a.min_hz, a.max_hz, a.step));

@@ -201,13 +201,15 @@ pub fn phase_offset_from_ms(ms: f64) -> Result<Nanos, ConfigError> {
 }
 
 impl RunConfig {
-    /// The chain sensor's rate at the start, Hz (the chapter's `sensor_hz`).
-    pub fn sensor_hz(&self) -> f64 {
+    /// The chain sensor's rate at the start, Hz (the chapter's `sensor_hz`); `None` for a
+    /// graph without the chapter's chain.
+    pub fn sensor_hz(&self) -> Option<f64> {
         self.graph.sensor_hz()
     }
 
-    /// The chain policy's rate at the start, Hz (the chapter's control rate).
-    pub fn control_hz(&self) -> f64 {
+    /// The chain policy's rate at the start, Hz (the chapter's control rate); `None` for a
+    /// graph without the chapter's chain.
+    pub fn control_hz(&self) -> Option<f64> {
         self.graph.control_hz()
     }
 
@@ -216,8 +218,9 @@ impl RunConfig {
         self.graph.actuator_hz()
     }
 
-    /// The policy input's depth at the start (the chapter's one queue depth).
-    pub fn queue_depth(&self) -> usize {
+    /// The policy input's depth at the start (the chapter's one queue depth); `None` for a
+    /// graph without the chapter's chain.
+    pub fn queue_depth(&self) -> Option<usize> {
         self.graph.queue_depth()
     }
 
@@ -227,7 +230,7 @@ impl RunConfig {
     /// [`ConfigError::Rate`] naming the flag.
     pub fn set_sensor_hz(&mut self, hz: f64) -> Result<(), ConfigError> {
         check_rate("sensor-hz", hz)?;
-        let id = self.graph.chain.sensor;
+        let id = self.graph.chain_for("--sensor-hz")?.sensor;
         Ok(self.graph.set_rate_of(id, hz)?)
     }
 
@@ -237,7 +240,7 @@ impl RunConfig {
     /// [`ConfigError::Rate`] naming the flag.
     pub fn set_control_hz(&mut self, hz: f64) -> Result<(), ConfigError> {
         check_rate("control-hz", hz)?;
-        let id = self.graph.chain.policy;
+        let id = self.graph.chain_for("--control-hz")?.policy;
         Ok(self.graph.set_rate_of(id, hz)?)
     }
 
@@ -360,7 +363,7 @@ mod tests {
             .to_string()
             .contains("--queue-depth"));
         cfg.set_control_hz(5.0).unwrap();
-        assert_eq!(cfg.control_hz(), 5.0);
+        assert_eq!(cfg.control_hz(), Some(5.0));
         assert!(RunConfig::default().validate().is_ok());
         assert!(duration_from_secs(-1.0).is_err());
         assert!(duration_from_secs(f64::NAN).is_err());

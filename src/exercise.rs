@@ -665,7 +665,7 @@ pub fn measure_ex1(b: &Ex1Bands, graph: &GraphSpec) -> Result<Vec<Metrics>, Exer
 
 /// ex1's checks on its measurements.
 pub fn check_ex1(b: &Ex1Bands, runs: &[Metrics]) -> Vec<Check> {
-    let at = |hz: f64| runs.iter().filter(move |m| m.control_hz == hz);
+    let at = |hz: f64| runs.iter().filter(move |m| m.control_hz == Some(hz));
     let mut checks = Vec::new();
     for &hz in b
         .control_hz
@@ -734,11 +734,11 @@ pub fn check_ex2(b: &Ex2Bands, pairs: &[(Metrics, Metrics)]) -> Vec<Check> {
     vec![
         check(
             format!("depth {} drops 0 /obs on every seed", b.deep_depth),
-            pairs.iter().all(|(_, d)| d.obs_dropped == 0),
+            pairs.iter().all(|(_, d)| d.obs_dropped == Some(0)),
         ),
         check(
             format!("depth {} drops > 0 /obs on every seed", b.shallow_depth),
-            pairs.iter().all(|(s, _)| s.obs_dropped > 0),
+            pairs.iter().all(|(s, _)| s.obs_dropped > Some(0)),
         ),
         check(
             "neither depth balances",
@@ -801,8 +801,8 @@ pub fn check_ex3(b: &Ex3Bands, matched: &Metrics, offset: &Metrics) -> Vec<Check
                 "with offsets, /obs drops <= {:.0}% of published",
                 b.max_obs_drop_fraction_with_offsets * 100.0
             ),
-            offset.obs_dropped as f64
-                <= b.max_obs_drop_fraction_with_offsets * offset.obs_published as f64,
+            offset.obs_dropped.unwrap_or(0) as f64
+                <= b.max_obs_drop_fraction_with_offsets * offset.obs_published.unwrap_or(0) as f64,
         ),
         check(
             format!(
@@ -1308,16 +1308,14 @@ fn ex6_graph(
         .iter_mut()
         .find(|n| n.name == b.node)
         .ok_or_else(|| ExerciseError::NoNode(b.node.clone()))?;
-    node.params.max_force_n = clamp_n;
+    node.params
+        .insert("max_force_n".into(), toml::Value::Float(clamp_n));
     if let Some(script) = script {
         let absolute = std::path::absolute(script).unwrap_or_else(|_| script.to_path_buf());
-        let mut params = toml::Table::new();
-        params.insert("max_force_n".into(), toml::Value::Float(clamp_n));
-        node.kind = crate::graph::NodeKind::Python;
-        node.python = Some(crate::graph::spec::PythonNodeSpec {
+        node.kind = crate::graph::registry::kind("python").expect("a built-in kind");
+        node.python = Some(crate::graph::kind::PythonCode {
             script: absolute.to_string_lossy().into_owned(),
             class: None,
-            params,
         });
     }
     Ok(g)
@@ -1463,14 +1461,14 @@ mod tests {
             .unwrap()
             .metrics;
         let matched = Metrics {
-            obs_published: 250,
-            obs_dropped: 40,
+            obs_published: Some(250),
+            obs_dropped: Some(40),
             mean_latency_ms: 21.5,
             ..base.clone()
         };
         let offset = Metrics {
-            obs_published: 250,
-            obs_dropped: 0,
+            obs_published: Some(250),
+            obs_dropped: Some(0),
             mean_latency_ms: 9.9,
             latency_p50_ms: 10.0,
             ..base
@@ -1486,7 +1484,7 @@ mod tests {
         // A latency that is not the offsets' 10 ms, drops that stay, a matched run at 0 ms.
         let off = Metrics {
             latency_p50_ms: 12.0,
-            obs_dropped: 40,
+            obs_dropped: Some(40),
             ..offset.clone()
         };
         assert_eq!(

@@ -276,14 +276,19 @@ pub struct Metrics {
     pub balanced: bool,
     /// `virtual` or `real`.
     pub clock: String,
-    /// Policy rate at the start of the run, Hz.
-    pub control_hz: f64,
+    /// Policy rate at the start of the run, Hz (this and every key of the chapter's chain
+    /// below — `sensor_hz`, `queue_depth`, `policy_ticks`, `control_hz_end`, `obs_*`,
+    /// `action_*` — only for a graph with the chain: [`Metrics::without_chain`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub control_hz: Option<f64>,
     /// Sensor rate at the start of the run, Hz.
-    pub sensor_hz: f64,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sensor_hz: Option<f64>,
     /// Actuator (plant) rate, Hz.
     pub actuator_hz: f64,
-    /// History depth of both topics at the start of the run.
-    pub queue_depth: usize,
+    /// History depth of the policy's input topic at the start of the run.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub queue_depth: Option<usize>,
     /// Reset seed.
     pub seed: u64,
     /// Requested duration, s.
@@ -297,12 +302,12 @@ pub struct Metrics {
     pub actuator_steps: u64,
     /// Ticks of the chain's policy node that ran its brain (at 5 Hz a tenth of the actuator
     /// steps); ticks an injected fault (`--stall`, `--kill`) swallowed are not counted.
-    #[serde(default)]
-    pub policy_ticks: u64,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub policy_ticks: Option<u64>,
     /// The policy's rate in force when the run ended, Hz (`control_hz` is the rate it
     /// started with; live changes in the lab and replayed sessions move it).
-    #[serde(default)]
-    pub control_hz_end: f64,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub control_hz_end: Option<f64>,
     /// Run time when the graph stopped (the fall, or the duration), s.
     pub sim_time_s: f64,
     /// Pole angle after the last step, rad.
@@ -315,18 +320,24 @@ pub struct Metrics {
     pub latency_p99_ms: f64,
     /// Largest sense→act latency, ms.
     pub latency_max_ms: f64,
-    /// Messages published on `/obs`.
-    pub obs_published: u64,
+    /// Messages published on `/obs` (the policy's input topic).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub obs_published: Option<u64>,
     /// `/obs` messages evicted unread.
-    pub obs_dropped: u64,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub obs_dropped: Option<u64>,
     /// `/obs` messages per second of run time.
-    pub obs_msg_per_s: f64,
-    /// Messages published on `/action`.
-    pub action_published: u64,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub obs_msg_per_s: Option<f64>,
+    /// Messages published on `/action` (the policy's output topic).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub action_published: Option<u64>,
     /// `/action` messages evicted unread.
-    pub action_dropped: u64,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub action_dropped: Option<u64>,
     /// `/action` messages per second of run time.
-    pub action_msg_per_s: f64,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub action_msg_per_s: Option<f64>,
     /// Run time of the fall, s, or `null` when balanced.
     pub fell_at_s: Option<f64>,
     /// Brain label.
@@ -363,6 +374,10 @@ pub struct Metrics {
     /// ([`crate::executor`]). Absent when every node has a thread of its own.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub executors: Vec<crate::executor::ExecutorFigures>,
+    /// For a graph without the chapter's chain (sensor → policy → actuator), why the
+    /// chain's keys are left out; absent for a graph with it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub without_chain: Option<String>,
 }
 
 /// One node's figures in `metrics.json`.
@@ -470,21 +485,25 @@ impl Metrics {
             })
             .collect();
         let topics = self.topics_by_publisher();
-        let depth0 = topics.first().map_or(self.queue_depth, |(_, t)| t.depth);
-        if topics.iter().all(|(_, t)| t.depth == depth0) && depth0 == self.queue_depth {
-            parts.push(format!("queue_depth {depth0}"));
-        } else if topics.iter().all(|(_, t)| t.depth == depth0) {
-            // A live change moved it: the depth at the end, as the topics report it.
-            parts.push(format!(
-                "queue_depth {depth0} at the end, {} at the start",
-                self.queue_depth
-            ));
-        } else {
-            let depths: Vec<String> = topics
-                .iter()
-                .map(|(name, t)| format!("{name} {}", t.depth))
-                .collect();
-            parts.push(format!("depths {}", depths.join(", ")));
+        let depth0 = topics
+            .first()
+            .map_or(self.queue_depth.unwrap_or(0), |(_, t)| t.depth);
+        let shared = topics.iter().all(|(_, t)| t.depth == depth0);
+        match self.queue_depth {
+            Some(start) if shared && start != depth0 => {
+                // A live change moved it: the depth at the end, as the topics report it.
+                parts.push(format!(
+                    "queue_depth {depth0} at the end, {start} at the start"
+                ));
+            }
+            _ if shared => parts.push(format!("queue_depth {depth0}")),
+            _ => {
+                let depths: Vec<String> = topics
+                    .iter()
+                    .map(|(name, t)| format!("{name} {}", t.depth))
+                    .collect();
+                parts.push(format!("depths {}", depths.join(", ")));
+            }
         }
         parts.join(" | ")
     }
@@ -653,21 +672,24 @@ impl Metrics {
     /// force at the end (with the starting one when a live change moved it).
     pub fn summary_lines(&self, wall_s: Option<f64>) -> Vec<String> {
         let wall = wall_s.map_or_else(String::new, |w| format!(" ({w:.2}s wall)"));
+        let ticks = self
+            .policy_ticks
+            .map_or_else(String::new, |t| format!(", {t} policy ticks"));
         let counted = format!(
-            "{} actuator steps, {} policy ticks in {:.2}s sim{wall}",
-            self.steps, self.policy_ticks, self.sim_time_s
+            "{} actuator steps{ticks} in {:.2}s sim{wall}",
+            self.steps, self.sim_time_s
         );
         let verdict = format!("{} — {counted}", self.headline());
         let period =
             |hz: f64| crate::rate::period_for_hz(hz).map_or_else(|_| "?".into(), |p| p.to_string());
-        let policy_period = if self.control_hz_end == self.control_hz {
-            format!("policy period {}", period(self.control_hz_end))
-        } else {
-            format!(
-                "policy period {} at the end, {} at the start",
-                period(self.control_hz_end),
-                period(self.control_hz)
-            )
+        let policy_period = match (self.control_hz, self.control_hz_end) {
+            (Some(start), Some(end)) if start == end => format!("; policy period {}", period(end)),
+            (Some(start), Some(end)) => format!(
+                "; policy period {} at the end, {} at the start",
+                period(end),
+                period(start)
+            ),
+            _ => String::new(),
         };
         let mut lines = vec![
             format!("clock={}  policy={}", self.clock, self.policy),
@@ -675,7 +697,7 @@ impl Metrics {
             verdict,
             format!("topics: {}", self.topics_line()),
             format!(
-                "mean sense->act latency: {:.1} ms  (p50 {:.1} | p99 {:.1} | max {:.1} ms; {policy_period})",
+                "mean sense->act latency: {:.1} ms  (p50 {:.1} | p99 {:.1} | max {:.1} ms{policy_period})",
                 self.mean_latency_ms,
                 self.latency_p50_ms,
                 self.latency_p99_ms,
@@ -683,6 +705,9 @@ impl Metrics {
             ),
         ];
         lines.extend(self.qos_lines());
+        if let Some(why) = &self.without_chain {
+            lines.push(why.clone());
+        }
         lines.extend(self.executor_lines());
         if self.nonfinite_actions > 0 {
             lines.push(format!(

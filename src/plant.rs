@@ -9,7 +9,7 @@
 use crate::np_random::NumpyGenerator;
 use crate::time::Nanos;
 use mujoco_rs::prelude::*;
-use std::sync::Mutex;
+use std::sync::{Arc, Mutex, MutexGuard};
 
 /// Observation width: `[cart_pos, cart_vel, cos θ, sin θ, pole_angvel]`.
 pub const OBS_DIM: usize = 5;
@@ -92,6 +92,14 @@ pub struct StepOutcome {
 pub fn wrap_angle(theta: f64) -> f64 {
     use std::f64::consts::PI;
     (theta + PI).rem_euclid(2.0 * PI) - PI
+}
+
+/// The plant shared by the sensors (read) and the actuator (steps it).
+pub type SharedPlant = Arc<Mutex<CartPole>>;
+
+/// Lock the shared plant, tolerating poison (each holder leaves it consistent).
+pub fn lock(p: &SharedPlant) -> MutexGuard<'_, CartPole> {
+    p.lock().unwrap_or_else(|e| e.into_inner())
 }
 
 /// The MuJoCo cartpole. `Send`, so the real clock can share it behind a lock.

@@ -267,14 +267,11 @@ fn graph_prefix(cfg: &RunConfig) -> String {
 /// `recordings/[<graph>-]<clock>-control<hz>-q<depth>-seed<seed>[-<n>].rrd` under `dir`: the
 /// first name not already taken (`-2`, `-3`, … are appended), so nothing is overwritten.
 pub fn default_path(dir: &Path, cfg: &RunConfig) -> PathBuf {
-    let stem = format!(
-        "{}{}-control{}-q{}-seed{}",
-        graph_prefix(cfg),
-        cfg.clock,
-        hz_label(cfg.control_hz()),
-        cfg.queue_depth(),
-        cfg.seed
-    );
+    let chain = match (cfg.control_hz(), cfg.queue_depth()) {
+        (Some(hz), Some(depth)) => format!("-control{}-q{depth}", hz_label(hz)),
+        _ => String::new(),
+    };
+    let stem = format!("{}{}{chain}-seed{}", graph_prefix(cfg), cfg.clock, cfg.seed);
     let first = dir.join(format!("{stem}.rrd"));
     if !first.exists() {
         return first;
@@ -695,14 +692,23 @@ pub fn viewer_on_path() -> bool {
         .unwrap_or(false)
 }
 
+/// The chapter's settings of a run (`control 50 Hz, sensor 50 Hz, depth 1`), when its
+/// graph has the chapter's chain; `None` for another shape.
+fn chapter_settings(cfg: &RunConfig) -> Option<String> {
+    Some(format!(
+        "control {} Hz, sensor {} Hz, depth {}",
+        hz_label(cfg.control_hz()?),
+        hz_label(cfg.sensor_hz()?),
+        cfg.queue_depth()?
+    ))
+}
+
 /// One-line settings of a run, for the start event and the summary.
 fn settings_line(cfg: &RunConfig) -> String {
     format!(
-        "{}control {} Hz, sensor {} Hz, depth {}, seed {}, {} clock",
+        "{}{}seed {}, {} clock",
         graph_prefix(cfg).replace('-', ": "),
-        hz_label(cfg.control_hz()),
-        hz_label(cfg.sensor_hz()),
-        cfg.queue_depth(),
+        chapter_settings(cfg).map(|c| c + ", ").unwrap_or_default(),
         cfg.seed,
         cfg.clock
     )
@@ -849,15 +855,19 @@ impl Recording {
     }
 
     fn log_settings(&self, cfg: &RunConfig, policy: &str) {
+        let text = |x: Option<String>| x.unwrap_or_else(|| "none (no chapter chain)".into());
         let settings = [
             ("clock", cfg.clock.to_string()),
             ("policy", policy.to_string()),
             ("seed", cfg.seed.to_string()),
             ("duration_s", cfg.duration.as_secs_f64().to_string()),
-            ("sensor_hz", cfg.sensor_hz().to_string()),
-            ("control_hz", cfg.control_hz().to_string()),
+            ("sensor_hz", text(cfg.sensor_hz().map(|x| x.to_string()))),
+            ("control_hz", text(cfg.control_hz().map(|x| x.to_string()))),
             ("actuator_hz", cfg.actuator_hz().to_string()),
-            ("queue_depth", cfg.queue_depth().to_string()),
+            (
+                "queue_depth",
+                text(cfg.queue_depth().map(|x| x.to_string())),
+            ),
         ];
         // The chapter's graph keeps the settings it had; any other names itself.
         let graph = (cfg.graph.name != "cartpole").then(|| ("graph", cfg.graph.to_string()));
@@ -865,12 +875,14 @@ impl Recording {
         for (k, v) in settings.iter().chain(graph.iter()) {
             values = values.with_component::<rerun::components::Text>(*k, [v.as_str()]);
         }
+        let chain = match (cfg.control_hz(), cfg.queue_depth()) {
+            (Some(hz), Some(depth)) => format!(", control {} Hz, depth {depth}", hz_label(hz)),
+            _ => String::new(),
+        };
         let name = format!(
-            "{}{} clock, control {} Hz, depth {}, seed {}",
+            "{}{} clock{chain}, seed {}",
             graph_prefix(cfg),
             cfg.clock,
-            hz_label(cfg.control_hz()),
-            cfg.queue_depth(),
             cfg.seed
         );
         let properties = rerun::EntityPath::properties();
@@ -902,10 +914,8 @@ impl Recording {
             "events",
             &start,
             &rerun::TextLog::new(format!(
-                "start: control {} Hz, sensor {} Hz, depth {}",
-                hz_label(cfg.control_hz()),
-                hz_label(cfg.sensor_hz()),
-                cfg.queue_depth()
+                "start: {}",
+                chapter_settings(cfg).unwrap_or_else(|| cfg.graph.to_string())
             ))
             .with_level(rerun::components::TextLogLevel::INFO),
         );
@@ -1217,12 +1227,15 @@ impl Recording {
 /// settings write the same recording. `None` under the real clock (a random id).
 fn deterministic_id(cfg: &RunConfig) -> Option<String> {
     (cfg.clock == ClockKind::Virtual).then(|| {
+        let chain = match (cfg.sensor_hz(), cfg.control_hz(), cfg.queue_depth()) {
+            (Some(s), Some(c), Some(q)) => {
+                format!("-sensor{}-control{}-q{q}", hz_label(s), hz_label(c))
+            }
+            _ => String::new(),
+        };
         format!(
-            "ratelab-{}virtual-sensor{}-control{}-q{}-seed{}-d{}",
+            "ratelab-{}virtual{chain}-seed{}-d{}",
             graph_prefix(cfg),
-            hz_label(cfg.sensor_hz()),
-            hz_label(cfg.control_hz()),
-            cfg.queue_depth(),
             cfg.seed,
             cfg.duration.0
         )

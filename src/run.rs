@@ -90,13 +90,18 @@ impl Command {
         graph: &mut crate::graph::GraphSpec,
         policy: &mut String,
     ) -> Result<(), String> {
-        let (sensor, controller) = (graph.chain.sensor, graph.chain.policy);
         match self {
             Command::SetControlHz { hz } => crate::config::check_rate("control-hz", *hz)
-                .and_then(|_| Ok(graph.set_rate_of(controller, *hz)?))
+                .and_then(|_| {
+                    let id = graph.chain_for("the control rate")?.policy;
+                    Ok(graph.set_rate_of(id, *hz)?)
+                })
                 .map_err(|e| e.to_string()),
             Command::SetSensorHz { hz } => crate::config::check_rate("sensor-hz", *hz)
-                .and_then(|_| Ok(graph.set_rate_of(sensor, *hz)?))
+                .and_then(|_| {
+                    let id = graph.chain_for("the sensor rate")?.sensor;
+                    Ok(graph.set_rate_of(id, *hz)?)
+                })
                 .map_err(|e| e.to_string()),
             Command::SetQueueDepth { depth } => {
                 graph.set_all_depths(*depth).map_err(|e| e.to_string())
@@ -135,8 +140,16 @@ impl Command {
     /// (the graph is unchanged).
     pub fn apply(&self, h: &GraphHandles) -> Result<(), String> {
         match self {
-            Command::SetControlHz { hz } => h.control_rate().set_hz(*hz).map_err(|e| e.to_string()),
-            Command::SetSensorHz { hz } => h.sensor_rate().set_hz(*hz).map_err(|e| e.to_string()),
+            Command::SetControlHz { hz } => h
+                .control_rate()
+                .ok_or("the graph has no chapter chain: no control rate")?
+                .set_hz(*hz)
+                .map_err(|e| e.to_string()),
+            Command::SetSensorHz { hz } => h
+                .sensor_rate()
+                .ok_or("the graph has no chapter chain: no sensor rate")?
+                .set_hz(*hz)
+                .map_err(|e| e.to_string()),
             Command::SetQueueDepth { depth } => {
                 h.set_queue_depth(*depth).map_err(|e| e.to_string())
             }
@@ -466,8 +479,9 @@ pub fn summarize_state(cfg: &RunConfig, st: &GraphState, end: &RunEnd) -> Metric
     let spec = &cfg.graph;
     let log = &st.actuator;
     let stats: crate::runlog::TopicCounters = st.topics.iter().copied().collect();
-    let obs = stats.get(spec.chain.obs);
-    let action = stats.get(spec.chain.action);
+    let chain = spec.chain;
+    let obs = chain.map(|c| stats.get(c.obs));
+    let action = chain.map(|c| stats.get(c.action));
     let sim_time = log.fell_at.unwrap_or(end.at);
     let per_s = |n: u64| {
         if sim_time.0 == 0 {
@@ -546,6 +560,12 @@ pub fn summarize_state(cfg: &RunConfig, st: &GraphState, end: &RunEnd) -> Metric
             && log.watchdog.is_none()
             && log.steps > 0,
         stopped_by_watchdog: log.watchdog.clone(),
+        without_chain: chain.is_none().then(|| {
+            format!(
+                "graph '{}' has no sensor → policy → actuator chain: the chapter's figures (control_hz, sensor_hz, queue_depth, policy_ticks, obs_*, action_*) are left out; its nodes and topics have their own",
+                spec.name
+            )
+        }),
         missing_processes: Vec::new(),
         executors: st
             .exec
@@ -564,33 +584,31 @@ pub fn summarize_state(cfg: &RunConfig, st: &GraphState, end: &RunEnd) -> Metric
         steps: log.steps,
         actuator_steps: log.steps,
         // The brain's runs: the policy's ticks less those a fault (`--stall`) swallowed.
-        policy_ticks: st
-            .ticks
-            .get(spec.chain.policy.0)
-            .copied()
-            .unwrap_or(0)
-            .saturating_sub(
-                st.liveliness
-                    .get(spec.chain.policy.0)
-                    .map_or(0, |l| l.1.faulted_ticks),
-            ),
-        control_hz_end: st
-            .rates_hz
-            .get(spec.chain.policy.0)
-            .copied()
-            .unwrap_or(cfg.control_hz()),
+        policy_ticks: chain.map(|c| {
+            st.ticks
+                .get(c.policy.0)
+                .copied()
+                .unwrap_or(0)
+                .saturating_sub(st.liveliness.get(c.policy.0).map_or(0, |l| l.1.faulted_ticks))
+        }),
+        control_hz_end: chain.and_then(|c| {
+            st.rates_hz
+                .get(c.policy.0)
+                .copied()
+                .or(cfg.control_hz())
+        }),
         sim_time_s: sim_time.as_secs_f64(),
         final_pole_angle: log.final_pole_angle,
         mean_latency_ms: log.mean_latency_ms,
         latency_p50_ms: p50,
         latency_p99_ms: p99,
         latency_max_ms: max,
-        obs_published: obs.published,
-        obs_dropped: obs.dropped,
-        obs_msg_per_s: per_s(obs.published),
-        action_published: action.published,
-        action_dropped: action.dropped,
-        action_msg_per_s: per_s(action.published),
+        obs_published: obs.map(|o| o.published),
+        obs_dropped: obs.map(|o| o.dropped),
+        obs_msg_per_s: obs.map(|o| per_s(o.published)),
+        action_published: action.map(|a| a.published),
+        action_dropped: action.map(|a| a.dropped),
+        action_msg_per_s: action.map(|a| per_s(a.published)),
         fell_at_s: log.fell_at.map(Nanos::as_secs_f64),
         policy: st.brain.clone(),
         nonfinite_actions: log.nonfinite_actions,

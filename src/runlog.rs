@@ -12,6 +12,13 @@ use crate::time::Nanos;
 use crate::topic::TopicStats;
 use serde::{Deserialize, Serialize};
 
+/// Told of every actuator step, on the actuator's thread (a recorder, the lab's telemetry):
+/// it must not block. [`crate::graph::StepObserver`] is one that also sees the graph built.
+pub trait StepSink: Send {
+    /// One actuator tick happened.
+    fn on_step(&mut self, rec: &StepRecord);
+}
+
 /// Every topic's counters at one instant, by [`TopicId`]: a fixed-size copy (no allocation
 /// per actuator step), at most [`MAX_TOPICS`] entries.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]

@@ -8,7 +8,8 @@ use super::view::{
 };
 use crossbeam_channel::Sender;
 use ratelab::config::{check_rate, BREAK_CONTROL_HZ};
-use ratelab::graph::{GraphSpec, NodeId, NodeKind, TopicId};
+use ratelab::graph::kind::Code;
+use ratelab::graph::{GraphSpec, NodeId, TopicId};
 use ratelab::plant::GEAR_N;
 use ratelab::qos::{Delivery, OnDeadlineMissed, QosCounter, Reliability, TopicQos};
 use ratelab::run::Command;
@@ -49,6 +50,9 @@ fn short_brain(spec: &str) -> String {
 /// What a key that would change the graph says in an attached lab (a graph across
 /// processes, which takes no live changes yet).
 pub const READ_ONLY: &str = "read-only: live changes do not cross processes yet";
+/// What `b`, `[` and `]` say on a graph without the chapter's chain.
+pub const NO_CHAIN: &str =
+    "no sensor → policy → actuator chain here: select a node (Tab), then -/+";
 
 /// The deadlines `d` cycles through on the selected topic, ms (0: none).
 pub const DEADLINES_MS: [f64; 5] = [0.0, 25.0, 50.0, 100.0, 200.0];
@@ -453,12 +457,23 @@ impl App {
         }
     }
 
-    /// The node `-`/`+`/`=` act on: the selected node, else the chain's policy.
+    /// The node `-`/`+`/`=` act on: the selected node, else the chain's policy, else (a
+    /// graph without the chapter's chain) the first node that is not the actuator.
     fn rate_target(&self) -> NodeId {
-        match self.selected {
-            Some(Selected::Node(n)) => n,
-            _ => self.graph.chain.policy,
+        match (self.selected, self.graph.chain) {
+            (Some(Selected::Node(n)), _) => n,
+            (_, Some(c)) => c.policy,
+            (_, None) => NodeId(
+                (0..self.graph.nodes.len())
+                    .find(|&i| NodeId(i) != self.graph.actuator)
+                    .unwrap_or(0),
+            ),
         }
+    }
+
+    /// The chain's node `pick` names (callers checked the graph has the chain).
+    fn rate_target_of_chain(&self, pick: impl Fn(ratelab::graph::Chain) -> NodeId) -> NodeId {
+        self.graph.chain.map_or(self.rate_target(), pick)
     }
 
     fn rate_of(&self, n: NodeId) -> f64 {
@@ -485,13 +500,19 @@ impl App {
                 let n = self.rate_target();
                 self.set_rate(n, rate_up(self.rate_of(n)));
             }
-            Msg::Break => self.set_rate(self.graph.chain.policy, BREAK_CONTROL_HZ),
+            Msg::Break | Msg::SensorDown | Msg::SensorUp if self.graph.chain.is_none() => {
+                self.say(NO_CHAIN.to_string());
+            }
+            Msg::Break => {
+                let n = self.rate_target_of_chain(|c| c.policy);
+                self.set_rate(n, BREAK_CONTROL_HZ);
+            }
             Msg::SensorDown => {
-                let n = self.graph.chain.sensor;
+                let n = self.rate_target_of_chain(|c| c.sensor);
                 self.set_rate(n, rate_down(self.rate_of(n)));
             }
             Msg::SensorUp => {
-                let n = self.graph.chain.sensor;
+                let n = self.rate_target_of_chain(|c| c.sensor);
                 self.set_rate(n, rate_up(self.rate_of(n)));
             }
             Msg::DepthDown => self.change_depth(depth_down),
@@ -602,9 +623,10 @@ impl App {
         if let Some(r) = self.rates.get_mut(n.0) {
             *r = hz;
         }
-        let cmd = if n == self.graph.chain.policy {
+        let chain = self.graph.chain;
+        let cmd = if chain.is_some_and(|c| n == c.policy) {
             Command::SetControlHz { hz }
-        } else if n == self.graph.chain.sensor {
+        } else if chain.is_some_and(|c| n == c.sensor) {
             Command::SetSensorHz { hz }
         } else {
             Command::SetNodeHz {
@@ -667,7 +689,7 @@ impl App {
             },
             Msg::CycleOnDeadlineMissed => {
                 // Said here in a line that fits 80 columns (the graph would refuse it too).
-                let actuator = self.graph.chain.actuator;
+                let actuator = self.graph.actuator;
                 if self.graph.topic(t).subscriber != Some(actuator) {
                     let read = self
                         .graph
@@ -807,10 +829,10 @@ impl App {
             set_hz: self.rate_of(id),
             measured_hz,
             published_hz: match (
-                self.graph.node(id).kind,
+                self.graph.node(id).kind.code(),
                 self.graph.node(id).publishes.first(),
             ) {
-                (NodeKind::External, Some(&t)) => Some(self.live.window_topic(t).msg_per_s),
+                (Code::Ros2, Some(&t)) => Some(self.live.window_topic(t).msg_per_s),
                 _ => None,
             },
             lateness_p99_us,
@@ -820,10 +842,10 @@ impl App {
             selected: self.selected == Some(Selected::Node(id)),
             alive: self.alive.get(id.0).copied().flatten(),
             process: self.attached.as_ref().map(|_| self.graph.process_of(id)),
-            badge: match self.graph.node(id).kind {
-                NodeKind::Python => Some(Badge::Python),
-                NodeKind::External => Some(Badge::Ros2),
-                _ => None,
+            badge: match self.graph.node(id).kind.code() {
+                Code::Python => Some(Badge::Python),
+                Code::Ros2 => Some(Badge::Ros2),
+                Code::BuiltIn | Code::Rust => None,
             },
         }
     }
@@ -916,10 +938,15 @@ impl App {
             sim_time_s: self.now.as_secs_f64(),
             seed: self.seed,
             // A Python or external policy node is its own brain (`--policy` does not apply).
-            brain: match self.graph.node(self.graph.chain.policy).kind {
-                NodeKind::Python => "py node".into(),
-                NodeKind::External => "ROS 2 node".into(),
-                _ => short_brain(&self.policy_spec),
+            brain: match self.graph.chain.map(|c| self.graph.node(c.policy).kind) {
+                None => "no policy".into(),
+                Some(k) => match k.code() {
+                    Code::Python => "py node".into(),
+                    Code::Ros2 => "ROS 2 node".into(),
+                    Code::Rust => format!("{k} node"),
+                    Code::BuiltIn if k.def().uses_brain => short_brain(&self.policy_spec),
+                    Code::BuiltIn => format!("{k} node"),
+                },
             },
             brain_caption: self
                 .brain

@@ -334,7 +334,7 @@ pub fn merge_states(
     carried: &Carried,
 ) -> Option<GraphState> {
     let of = |id: NodeId| states.get(&spec.process_of(id));
-    let mut merged = of(spec.chain.actuator)?.clone();
+    let mut merged = of(spec.actuator)?.clone();
     for i in 0..spec.nodes.len() {
         let Some(st) = of(NodeId(i)) else { continue };
         take(&mut merged.rates_hz, &st.rates_hz, i);
@@ -356,7 +356,7 @@ pub fn merge_states(
             }
         }
     }
-    if let Some(st) = of(spec.chain.policy) {
+    if let Some(st) = spec.chain.and_then(|c| of(c.policy)) {
         merged.brain.clone_from(&st.brain);
     }
     // A topic that crossed processes: what its publisher sent is published; what the
@@ -462,12 +462,12 @@ pub fn check_report(
             ));
         }
     }
-    if spec.process_of(spec.chain.actuator) == process {
+    if spec.process_of(spec.actuator) == process {
         let a = &st.actuator;
         let run_ms = at.as_secs_f64() * 1e3;
         let ok_ms = |ms: f64| ms.is_finite() && (0.0..=run_ms + 1.0).contains(&ms);
         let (p50, p99, max) = a.latency_ms;
-        if a.steps > bound(spec.chain.actuator)
+        if a.steps > bound(spec.actuator)
             || ![a.mean_latency_ms, p50, p99, max].into_iter().all(ok_ms)
             || !a.final_pole_angle.is_finite()
         {
@@ -704,7 +704,7 @@ pub fn launch(
         .wait()?;
     // Admission: each process joins with the graph file's hash, then reports ready. Nothing
     // a joiner sends can end the run: a bad join is refused to that joiner alone.
-    let robot = spec.process_of(spec.chain.actuator);
+    let robot = spec.process_of(spec.actuator);
     let admit = |m: &ToLauncher, running: bool, gone: &[String], joined: &[String]| -> Admission {
         let ToLauncher::Join {
             process,
@@ -1161,7 +1161,7 @@ pub fn launch(
                             end = Some(RunEnd {
                                 at: run_time().min(cfg.duration),
                                 reason: EndReason::NodeFailed {
-                                    node: spec.node(spec.chain.actuator).name.clone(),
+                                    node: spec.node(spec.actuator).name.clone(),
                                     message: format!("process '{p}' (the plant's) is gone"),
                                 },
                             });
@@ -1276,7 +1276,7 @@ pub fn launch(
         .cloned()
         .collect();
     let state = merge_states(spec, &reports, &carried).ok_or_else(|| {
-        let plant = spec.process_of(spec.chain.actuator);
+        let plant = spec.process_of(spec.actuator);
         DistError::Peer(match &end.reason {
             // The plant's process died: say so, not just that it did not report.
             EndReason::NodeFailed { node, message } => format!(

@@ -319,8 +319,8 @@ mod tests {
     #[test]
     fn reports_are_handed_out_in_the_run_s_order_whatever_order_they_come_in() {
         let spec = GraphSpec::parse(DEFAULT_GRAPH_TOML, "t").expect("the chapter's graph");
-        let policy = spec.chain.policy.0;
-        let sensor = spec.chain.sensor.0;
+        let policy = spec.chain.unwrap().policy.0;
+        let sensor = spec.chain.unwrap().sensor.0;
         let mut inbox = TickInbox::new();
         inbox.accept(report("policy", 4, policy), &spec).unwrap();
         inbox.accept(report("robot", 1, sensor), &spec).unwrap();
@@ -340,17 +340,17 @@ mod tests {
         let mut inbox = TickInbox::new();
         // The policy runs in 'policy', not in 'robot'; node 99 does not exist.
         inbox
-            .accept(report("robot", 0, spec.chain.policy.0), &spec)
+            .accept(report("robot", 0, spec.chain.unwrap().policy.0), &spec)
             .unwrap();
         inbox.accept(report("policy", 1, 99), &spec).unwrap();
         assert_eq!(inbox.take(0), None);
         assert_eq!(inbox.take(1), None);
         // A second report for one tick does not replace the first.
-        let mut first = report("policy", 2, spec.chain.policy.0);
+        let mut first = report("policy", 2, spec.chain.unwrap().policy.0);
         first.published = vec![(1, 7)];
         inbox.accept(first.clone(), &spec).unwrap();
         inbox
-            .accept(report("policy", 2, spec.chain.policy.0), &spec)
+            .accept(report("policy", 2, spec.chain.unwrap().policy.0), &spec)
             .unwrap();
         assert_eq!(inbox.take(2), Some(first));
     }
@@ -383,10 +383,13 @@ mod tests {
         let mut inbox = TickInbox::new();
         for i in 0..MAX_AHEAD as u64 {
             inbox
-                .accept(report("policy", i + 1, spec.chain.policy.0), &spec)
+                .accept(report("policy", i + 1, spec.chain.unwrap().policy.0), &spec)
                 .unwrap();
         }
-        let over = inbox.accept(report("policy", u64::MAX, spec.chain.policy.0), &spec);
+        let over = inbox.accept(
+            report("policy", u64::MAX, spec.chain.unwrap().policy.0),
+            &spec,
+        );
         assert!(matches!(over, Err(DistError::Peer(_))), "{over:?}");
     }
 }

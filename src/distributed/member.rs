@@ -421,7 +421,8 @@ pub fn run_member(opts: &MemberOptions, stop: &StopFlag) -> Result<(), DistError
         .map(|(_, ids)| ids)
         .unwrap_or_default();
     let owns = |id: NodeId| mine.contains(&id);
-    let brain_spec = if mine.contains(&spec.chain.policy) {
+    // The brain, where one of this process's nodes runs it (a `policy` node).
+    let brain_spec = if mine.iter().any(|&id| spec.node(id).kind.def().uses_brain) {
         setup.policy.as_str()
     } else {
         "scripted"
@@ -740,7 +741,7 @@ fn offer_to_ros2(
         .cloned()
         .collect();
     let clock = if handles.external.is_empty() {
-        mine.contains(&cfg.graph.chain.actuator)
+        mine.contains(&cfg.graph.actuator)
     } else {
         !external.is_empty()
     };

@@ -324,10 +324,10 @@ pub fn check_keys(spec: &GraphSpec) -> Result<(), DistError> {
         }
     }
     // Every process builds its own plant; only the one the actuator steps moves.
-    let plant = spec.process_of(spec.chain.actuator);
+    let plant = spec.process_of(spec.actuator);
     for (i, n) in spec.nodes.iter().enumerate() {
         let p = spec.process_of(crate::graph::NodeId(i));
-        if n.kind == crate::graph::NodeKind::Sensor && p != plant {
+        if n.kind.plant() == crate::graph::kind::Plant::Reads && p != plant {
             return Err(DistError::Usage(format!(
                 "sensor '{}' is placed in process '{p}' but the actuator in '{plant}': the nodes that touch the plant must share one process",
                 n.name

@@ -146,7 +146,7 @@ impl Fold {
             carried: Carried::new(holders.clone()),
             queued: vec![std::collections::VecDeque::new(); spec.topics.len()],
             shown: vec![None; spec.topics.len()],
-            plant: spec.process_of(spec.chain.actuator),
+            plant: spec.process_of(spec.actuator),
             holders,
             spec,
             alive: BTreeSet::new(),
@@ -816,11 +816,13 @@ pub fn record(
     let spec = &cfg.graph;
     let counters: Arc<Mutex<Vec<TopicStats>>> =
         Arc::new(Mutex::new(vec![TopicStats::default(); spec.topics.len()]));
-    let commands = Arc::new(
-        Topic::new(spec.topic(spec.chain.action).name.clone(), 1)
-            .map_err(|e| DistError::Usage(e.to_string()))?,
-    );
-    let shape = GraphShape::from_spec(spec, counters.clone(), Some(commands.clone()))
+    // The policy's published forces, when the graph has the chapter's chain.
+    let commands = spec
+        .chain
+        .map(|c| Topic::new(spec.topic(c.action).name.clone(), 1).map(Arc::new))
+        .transpose()
+        .map_err(|e| DistError::Usage(e.to_string()))?;
+    let shape = GraphShape::from_spec(spec, counters.clone(), commands.clone())
         .map_err(|e| DistError::Usage(e.to_string()))?;
     let mut observer = rec.observer_for(shape);
     let mut alive: Vec<Option<bool>> = vec![None; spec.nodes.len()];
@@ -830,8 +832,8 @@ pub fn record(
             Telemetry::Step(s) => {
                 now = now.max(s.t);
                 *crate::graph::lock(&counters) = s.topics.as_slice().to_vec();
-                if let Some((at, newtons)) = s.published {
-                    commands.publish(ForceMsg { newtons }, at, None);
+                if let (Some((at, newtons)), Some(c)) = (s.published, &commands) {
+                    c.publish(ForceMsg { newtons }, at, None);
                 }
                 observer.on_step(&s);
             }

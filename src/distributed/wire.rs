@@ -9,7 +9,7 @@
 //! bytes come from the network.
 
 use crate::config::ClockKind;
-use crate::msg::{AnyTopic, ForceMsg, PositionMsg};
+use crate::msg::AnyTopic;
 use crate::qos::Fault;
 use crate::run::GraphState;
 use crate::scheduler::RunEnd;
@@ -31,9 +31,6 @@ pub const MAX_SEQ: u64 = 1 << 40;
 /// ([`WireSample::deliver`]). A 10 000 Hz publisher takes 100 s to publish this many.
 pub const MAX_SEQ_JUMP: u64 = 1_000_000;
 
-/// A message's payload on the wire, by message type: [`crate::msg::MsgData`].
-pub use crate::msg::MsgData as WireData;
-
 /// One topic sample on the wire.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct WireSample {
@@ -46,32 +43,21 @@ pub struct WireSample {
     /// When it was sent, on the host's `CLOCK_MONOTONIC`, ns: receive time minus this is
     /// the over-the-wire latency (exact on one host; across hosts, see docs/distributed.md).
     pub sent_mono_ns: u64,
-    /// The payload.
-    pub data: WireData,
+    /// The payload: the message in its type's wire encoding ([`crate::msg::MsgData::to_bytes`]),
+    /// decoded by the receiving topic's type ([`crate::msg::MsgType::decode`]), exactly.
+    pub data: Vec<u8>,
 }
 
 impl WireSample {
     /// The newest message of `topic` with `seq > after` (none: nothing new), as a sample.
     pub fn newest_of(topic: &AnyTopic, after: Option<u64>) -> Option<WireSample> {
-        let fresh = |seq: u64| after.is_none_or(|a| seq > a);
-        fn newest<T: Clone + Into<WireData>>(
-            t: &crate::topic::Topic<T>,
-            fresh: impl Fn(u64) -> bool,
-        ) -> Option<(u64, Nanos, Option<Nanos>, WireData)> {
-            let m = t.peek_newest().filter(|m| fresh(m.seq))?;
-            Some((m.seq, m.stamp, m.origin_stamp, m.data.into()))
-        }
-        let (seq, stamp, origin, data) = match topic {
-            AnyTopic::State(t) => newest(t, fresh)?,
-            AnyTopic::Position(t) => newest(t, fresh)?,
-            AnyTopic::Force(t) => newest(t, fresh)?,
-        };
+        let (seq, stamp, origin, data) = topic.newest_after(after)?;
         Some(WireSample {
             seq,
             stamp_ns: stamp.0,
             origin_ns: origin.map(|o| o.0),
             sent_mono_ns: mono_now_ns(),
-            data,
+            data: data.to_bytes(),
         })
     }
 
@@ -91,39 +77,26 @@ impl WireSample {
         let stamp = Nanos(self.stamp_ns);
         let origin = self.origin_ns.map(Nanos);
         let seq = i128::from(self.seq);
-        macro_rules! put {
-            ($t:expr, $v:expr) => {{
-                let next = i128::from($t.next_seq());
-                let off = match *offset {
-                    Some(off) if seq - off >= next - 1 => off,
-                    _ => seq - next, // the first sample, or a restarted publisher
-                };
-                let gap = u64::try_from(seq - off - next).unwrap_or(0);
-                if gap > MAX_SEQ_JUMP {
-                    return Err(format!(
-                        "a sample numbered {gap} ahead of the last (at most {MAX_SEQ_JUMP})"
-                    ));
-                }
-                *offset = Some(off);
-                if gap > 0 {
-                    $t.count_lost(gap);
-                }
-                $t.publish($v, stamp, origin);
-            }};
+        let data = topic
+            .msg_type()
+            .decode(&self.data)
+            .map_err(|e| format!("a sample on {}: {e}", topic.name()))?;
+        let next = i128::from(topic.next_seq());
+        let off = match *offset {
+            Some(off) if seq - off >= next - 1 => off,
+            _ => seq - next, // the first sample, or a restarted publisher
+        };
+        let gap = u64::try_from(seq - off - next).unwrap_or(0);
+        if gap > MAX_SEQ_JUMP {
+            return Err(format!(
+                "a sample numbered {gap} ahead of the last (at most {MAX_SEQ_JUMP})"
+            ));
         }
-        match (topic, self.data) {
-            (AnyTopic::State(t), WireData::State(v)) => put!(t, v),
-            (AnyTopic::Position(t), WireData::Position(x, th)) => put!(
-                t,
-                PositionMsg {
-                    cart_pos_m: x,
-                    pole_angle_rad: th,
-                }
-            ),
-            (AnyTopic::Force(t), WireData::Force(n)) => put!(t, ForceMsg { newtons: n }),
-            _ => return Err(format!("a sample of the wrong type on {}", topic.name())),
+        *offset = Some(off);
+        if gap > 0 {
+            topic.count_lost(gap);
         }
-        Ok(())
+        topic.publish(None, &data, stamp, origin)
     }
 
     /// Encode (postcard).
@@ -490,6 +463,7 @@ pub fn printable(text: &str) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::msg::{ForceMsg, Message, MsgData, PositionMsg};
 
     #[test]
     fn a_sample_round_trips_and_hostile_bytes_are_refused() {
@@ -498,7 +472,7 @@ mod tests {
             stamp_ns: 20_000_000,
             origin_ns: Some(0),
             sent_mono_ns: 5,
-            data: WireData::State([0.1, -0.2, 1.0, 0.0, 3.5]),
+            data: MsgData::new([0.1f32, -0.2, 1.0, 0.0, 3.5]).to_bytes(),
         };
         assert_eq!(WireSample::decode(&s.encode()).unwrap(), s);
         assert!(WireSample::decode(&[0xff; 3]).is_err());
@@ -556,25 +530,27 @@ mod tests {
 
     #[test]
     fn delivery_keeps_the_publishers_numbering_and_counts_gaps_as_lost() {
-        let t = AnyTopic::new("/action", crate::graph::MsgType::Force, 1).unwrap();
+        let t = AnyTopic::new("/action", ForceMsg::TYPE, 1).unwrap();
         let sample = |seq| WireSample {
             seq,
             stamp_ns: seq * 20_000_000,
             origin_ns: None,
             sent_mono_ns: 0,
-            data: WireData::Force(1.0),
+            data: MsgData::new(ForceMsg { newtons: 1.0 }).to_bytes(),
         };
         let mut off = None;
         sample(0).deliver(&t, &mut off).unwrap();
         sample(3).deliver(&t, &mut off).unwrap(); // 1 and 2 never arrived
         let st = t.stats();
         assert_eq!((st.published, st.lost, st.dropped), (4, 2, 1));
-        let AnyTopic::Force(f) = &t else {
-            unreachable!()
-        };
+        let f = t.typed::<ForceMsg>().unwrap();
         assert_eq!(f.peek_newest().unwrap().seq, 3);
         let wrong = WireSample {
-            data: WireData::Position(0.0, 0.0),
+            data: MsgData::new(PositionMsg {
+                cart_pos_m: 0.0,
+                pole_angle_rad: 0.0,
+            })
+            .to_bytes(),
             ..sample(4)
         };
         assert!(wrong.deliver(&t, &mut off).is_err());
@@ -598,7 +574,7 @@ mod tests {
 
     #[test]
     fn a_late_subscriber_does_not_count_what_came_before_it_as_lost() {
-        let t = AnyTopic::new("/obs", crate::graph::MsgType::Force, 1).unwrap();
+        let t = AnyTopic::new("/obs", ForceMsg::TYPE, 1).unwrap();
         let mut off = None;
         for seq in [100, 101, 103] {
             WireSample {
@@ -606,7 +582,7 @@ mod tests {
                 stamp_ns: seq,
                 origin_ns: None,
                 sent_mono_ns: 0,
-                data: WireData::Force(0.0),
+                data: MsgData::new(ForceMsg { newtons: 0.0 }).to_bytes(),
             }
             .deliver(&t, &mut off)
             .unwrap();

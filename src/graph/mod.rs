@@ -7,6 +7,7 @@
 //! [`NodeId`]/[`TopicId`].
 
 pub mod estimator;
+pub mod kind;
 pub mod nodes;
 pub mod registry;
 pub mod spec;
@@ -15,21 +16,18 @@ use crate::executor::ComputeDraw;
 use crate::msg::AnyTopic;
 use crate::node::Node;
 use crate::plant::CartPole;
+pub use crate::plant::SharedPlant;
 use crate::policy::BrainSlot;
-use crate::publisher::{Outbox, Publisher};
+use crate::publisher::Outbox;
 use crate::qos::{Fault, Liveliness};
 use crate::rate::{InvalidRate, Rate};
-use crate::runlog::{RunLog, StepRecord, TopicCounters};
+use crate::runlog::{RunLog, StepRecord, StepSink, TopicCounters};
 use crate::topic::ZeroDepth;
-use nodes::{
-    Actuator, Estimator, External, ExternalPort, GraphNode, NodeCore, PolicyNode, Safety, Sensor,
-    SensorNoise, SensorOutput, Work,
-};
-pub use spec::{Chain, GraphSpec, MsgType, NodeId, NodeKind, TopicId};
+use kind::{BuildContext, Code};
+pub use kind::{Kind, KindDef};
+use nodes::{ExternalPort, GraphNode, NodeCore};
+pub use spec::{Chain, GraphSpec, MsgType, NodeId, TopicId};
 use std::sync::{Arc, Mutex, MutexGuard};
-
-/// The plant shared by the sensors (read) and the actuator (steps).
-pub type SharedPlant = Arc<Mutex<CartPole>>;
 
 /// Lock a shared value, tolerating poison (each holder leaves it consistent).
 pub fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
@@ -43,6 +41,15 @@ pub trait StepObserver: Send {
     fn attach(&mut self, _handles: &GraphHandles) {}
     /// One actuator tick happened.
     fn on_step(&mut self, rec: &StepRecord);
+}
+
+/// A [`StepObserver`] as the actuator sees it.
+struct Observer(Box<dyn StepObserver>);
+
+impl StepSink for Observer {
+    fn on_step(&mut self, rec: &StepRecord) {
+        self.0.on_step(rec);
+    }
 }
 
 /// Handles to change and read a running graph: rates, depths, the brain. Cheap to clone
@@ -74,35 +81,43 @@ impl GraphHandles {
         &self.rates[id.0]
     }
 
-    /// The chain policy's rate (the chapter's control rate).
-    pub fn control_rate(&self) -> &Rate {
-        self.rate(self.spec.chain.policy)
+    /// The chain policy's rate (the chapter's control rate); `None` when the graph has no
+    /// chapter chain ([`Chain`]).
+    pub fn control_rate(&self) -> Option<&Rate> {
+        self.spec.chain.map(|c| self.rate(c.policy))
     }
 
-    /// The chain sensor's rate.
-    pub fn sensor_rate(&self) -> &Rate {
-        self.rate(self.spec.chain.sensor)
+    /// The chain sensor's rate; `None` when the graph has no chapter chain.
+    pub fn sensor_rate(&self) -> Option<&Rate> {
+        self.spec.chain.map(|c| self.rate(c.sensor))
     }
 
-    /// What drives the chain's policy, as metrics and summaries name it: the brain's label,
-    /// or, when the policy is a Python node, that node's script and class; an external
-    /// node says so.
+    /// What drives the actuator, as metrics and summaries name it: the brain's label when
+    /// the chain's policy is a `policy` node, else the node's own code (a Python node's
+    /// script and class, a Rust kind, a ROS 2 node); a graph without the chapter's chain
+    /// says so.
     pub fn brain_label(&self) -> String {
-        let policy = self.spec.node(self.spec.chain.policy);
-        if policy.kind == NodeKind::External {
-            return format!("external ROS 2 node '{}'", policy.name);
-        }
-        match &policy.python {
-            Some(p) => format!(
-                "Python node '{}' ({}{})",
-                policy.name,
-                p.script,
-                p.class
-                    .as_ref()
-                    .map(|c| format!(":{c}"))
-                    .unwrap_or_default()
-            ),
-            None => self.brain.label(),
+        let Some(chain) = self.spec.chain else {
+            return "none (the graph has no policy driving the actuator)".into();
+        };
+        let policy = self.spec.node(chain.policy);
+        match policy.kind.code() {
+            Code::Ros2 => format!("external ROS 2 node '{}'", policy.name),
+            Code::Rust => format!("Rust node '{}' (kind {})", policy.name, policy.kind),
+            Code::Python => match &policy.python {
+                Some(p) => format!(
+                    "Python node '{}' ({}{})",
+                    policy.name,
+                    p.script,
+                    p.class
+                        .as_ref()
+                        .map(|c| format!(":{c}"))
+                        .unwrap_or_default()
+                ),
+                None => format!("Python node '{}'", policy.name),
+            },
+            Code::BuiltIn if policy.kind.def().uses_brain => self.brain.label(),
+            Code::BuiltIn => format!("node '{}' (kind {})", policy.name, policy.kind),
         }
     }
 
@@ -174,13 +189,10 @@ pub enum GraphError {
     /// Queue depth 0.
     #[error(transparent)]
     Depth(#[from] ZeroDepth),
-    /// A Python node's script cannot be loaded (one line, naming the file).
-    #[error(transparent)]
-    Python(#[from] crate::python::PythonError),
-    /// A node of a registered kind cannot be made: the kind is not registered in this
-    /// process, or its maker refused the node's parameters (one line, naming the node).
+    /// A node cannot be made: a Python node's script cannot be loaded (naming the file), a
+    /// registered kind's maker refused the node's parameters (naming the node). One line.
     #[error("{0}")]
-    Registered(String),
+    Node(String),
 }
 
 impl Graph {
@@ -227,7 +239,7 @@ impl Graph {
             .iter()
             .enumerate()
             .filter_map(|(i, n)| {
-                let settings = n.external?;
+                let settings = n.external()?;
                 let output = *n.publishes.first()?;
                 Some(Arc::new(ExternalPort::new(
                     NodeId(i),
@@ -251,7 +263,13 @@ impl Graph {
         for o in &mut observers {
             o.attach(&handles);
         }
-        let mut observers = Some(observers);
+        let mut observers: Option<Vec<Box<dyn StepSink>>> = Some(
+            observers
+                .into_iter()
+                .map(|o| Box::new(Observer(o)) as Box<dyn StepSink>)
+                .collect(),
+        );
+        let action = spec.chain.map(|c| &topics[c.action.0]);
         let nodes = spec
             .nodes
             .iter()
@@ -271,131 +289,35 @@ impl Graph {
                     outbox: outbox.clone(),
                     compute: n.compute.map(|c| ComputeDraw::new(c, seed, i)),
                 };
-                // Every other kind reads and publishes at most one topic each.
-                let input = n.subscribes.first().map(|t| &topics[t.0]);
-                let output = n.publishes.first().map(|t| &topics[t.0]);
-                // A python or registered node's topics, in the graph file's order.
+                // Its topics, in the graph file's order.
                 let of = |ts: &[TopicId]| -> Vec<AnyTopic> {
                     ts.iter().map(|t| topics[t.0].clone()).collect()
                 };
-                let work = match (n.kind, (input, output)) {
-                    (NodeKind::Sensor, (_, Some(out))) => {
-                        let p = &n.params;
-                        Work::Sensor(Sensor {
-                            plant: plant.clone(),
-                            output: match out {
-                                AnyTopic::State(t) => {
-                                    SensorOutput::State(Publisher::new(t.clone(), outbox.clone()))
-                                }
-                                AnyTopic::Position(t) => SensorOutput::Position(Publisher::new(
-                                    t.clone(),
-                                    outbox.clone(),
-                                )),
-                                AnyTopic::Force(_) => {
-                                    unreachable!("validated: a sensor publishes state or position")
-                                }
-                            },
-                            noise: (p.noise_pos_m > 0.0 || p.noise_angle_rad > 0.0).then(|| {
-                                SensorNoise::new(seed, NodeId(i), p.noise_pos_m, p.noise_angle_rad)
-                            }),
-                        })
-                    }
-                    (
-                        NodeKind::Estimator,
-                        (Some(AnyTopic::Position(i)), Some(AnyTopic::State(o))),
-                    ) => Work::Estimator(Estimator {
-                        input: i.clone(),
-                        output: Publisher::new(o.clone(), outbox.clone()),
-                        filter: estimator::VelocityFilter::new(n.params.cutoff_hz),
-                        last_seq: None,
-                        origin: None,
-                    }),
-                    (NodeKind::Policy, (Some(AnyTopic::State(i)), Some(AnyTopic::Force(o)))) => {
-                        Work::Policy(PolicyNode {
-                            brain: brain.clone(),
-                            input: i.clone(),
-                            output: Publisher::new(o.clone(), outbox.clone()),
-                        })
-                    }
-                    (NodeKind::Safety, (Some(AnyTopic::Force(i)), Some(AnyTopic::Force(o)))) => {
-                        Work::Safety(Safety {
-                            input: i.clone(),
-                            output: Publisher::new(o.clone(), outbox.clone()),
-                            max_force_n: n.params.max_force_n,
-                        })
-                    }
-                    (NodeKind::Python, _) => {
-                        let python = n
-                            .python
-                            .as_ref()
-                            .expect("validated: a python node's script");
-                        Work::Python(Box::new(crate::python::node::PythonNode::load(
-                            &n.name,
-                            python,
-                            rates[i].period(),
-                            of(&n.subscribes),
-                            of(&n.publishes),
-                            outbox.clone(),
-                            seed,
-                        )?))
-                    }
-                    (NodeKind::Registered, _) => {
-                        let r = n
-                            .registered
-                            .as_ref()
-                            .expect("validated: a registered node's kind");
-                        let cx = registry::NodeContext {
-                            name: &n.name,
-                            period: rates[i].period(),
-                            seed,
-                            params: &r.params,
-                        };
-                        Work::Registered(
-                            registry::make(
-                                &r.kind,
-                                &cx,
-                                &of(&n.subscribes),
-                                &of(&n.publishes),
-                                &outbox,
-                            )
-                            .map_err(GraphError::Registered)?,
-                        )
-                    }
-                    (NodeKind::External, (input, Some(output))) => {
-                        let port = external
-                            .iter()
-                            .find(|p| p.node.0 == i)
-                            .expect("made above for every external node")
-                            .clone();
-                        Work::External(Box::new(External {
-                            port,
-                            input: input.cloned(),
-                            output: output.clone(),
-                            outbox: outbox.clone(),
-                            liveliness: liveliness[i].clone(),
-                            origin: None,
-                        }))
-                    }
-                    (NodeKind::Actuator, (Some(AnyTopic::Force(i)), None)) => {
-                        Work::Actuator(Box::new(Actuator {
-                            plant: plant.clone(),
-                            input: i.clone(),
-                            topics: topics.clone(),
-                            log: log.clone(),
-                            observers: observers.take().unwrap_or_default(),
-                            held: None,
-                            policy_output: match &topics[spec.chain.action.0] {
-                                AnyTopic::Force(t) => Some(t.clone()),
-                                _ => None,
-                            },
-                            reported: None,
-                        }))
-                    }
-                    _ => unreachable!(
-                        "validated spec: node '{}' is wired as its kind requires",
-                        n.name
-                    ),
+                let (inputs, outputs) = (of(&n.subscribes), of(&n.publishes));
+                let attachment = external
+                    .iter()
+                    .find(|p| p.node.0 == i)
+                    .map(|p| p.clone() as Arc<dyn std::any::Any + Send + Sync>);
+                let mut cx = BuildContext {
+                    name: &n.name,
+                    id: NodeId(i),
+                    rate: &rates[i],
+                    seed,
+                    params: &n.params,
+                    python: n.python.as_ref(),
+                    inputs: &inputs,
+                    outputs: &outputs,
+                    outbox: &outbox,
+                    plant: &plant,
+                    brain: &brain,
+                    log: &log,
+                    topics: &topics,
+                    action,
+                    liveliness: &liveliness[i],
+                    observers: &mut observers,
+                    attachment,
                 };
+                let work = (n.kind.def().make)(&mut cx).map_err(GraphError::Node)?;
                 Ok(Box::new(GraphNode::new(core, work)) as Box<dyn Node>)
             })
             .collect::<Result<Vec<_>, _>>()?;

@@ -1,10 +1,14 @@
-//! Node kinds written in Rust outside ratelab: a registry from the name a graph file gives
-//! as `kind` to the code that makes such a node.
+//! The registry of node kinds: from the name a graph file gives as `kind` to the kind's one
+//! definition ([`super::kind::KindDef`]). The built-in kinds (`sensor`, `estimator`,
+//! `policy`, `safety`, `actuator`, `python`, `external`; one file each in
+//! [`super::nodes`]) are registered here, one line each; a Rust program adds its own with
+//! [`register`].
 //!
-//! A kind is a type implementing [`RustNode`] with typed inputs and outputs (copper-rs's
-//! `CuTask` is the model): each a [`Message`] — [`StateMsg`], [`PositionMsg`] or
-//! [`ForceMsg`] today — or a tuple of two to four of them, or `()` for none ([`Inputs`],
-//! [`Outputs`]). [`register`] it once, before the graph file is read; from then on
+//! A kind written in Rust outside ratelab is a type implementing [`RustNode`] with typed inputs and outputs (copper-rs's
+//! `CuTask` is the model): each a [`Message`] — any registered message type
+//! ([`crate::msg`]: the built-in `StateMsg`, `PositionMsg`, `ForceMsg`, or one of your own,
+//! which registering the kind registers too) — or a tuple of two to four of them, or `()`
+//! for none ([`Inputs`], [`Outputs`]). [`register`] it once, before the graph file is read; from then on
 //! `kind = "NAME"` in a graph file makes one, with the file's `params = { … }`:
 //!
 //! ```no_run
@@ -69,53 +73,17 @@
 //! [`crate::distributed::member::run_member`] for the `node` command the launcher starts it
 //! with): `examples/custom_node_processes.rs` is one.
 
-use crate::msg::{AnyTopic, ForceMsg, MsgType, PositionMsg, StateMsg};
+use super::kind::{BuildContext, Code, Kind, KindDef, Params, Plant, Ports, Work};
+use super::nodes;
+use crate::msg::{AnyTopic, Message, MsgType};
+use crate::node::Flow;
 use crate::publisher::{Outbox, Publisher};
 use crate::time::Nanos;
 use crate::topic::Topic;
-use std::collections::BTreeMap;
-use std::sync::{Arc, RwLock};
+use std::sync::{Arc, LazyLock, RwLock};
 
-/// The most kinds one process may register.
+/// The most node kinds one process may have, the seven built-in ones included.
 pub const MAX_KINDS: usize = 64;
-
-/// A message a registered node may read or publish: one of the graph's message types.
-pub trait Message: Clone + Send + Sync + 'static {
-    /// The type a graph file names (`state`, `position`, `force`).
-    const TYPE: MsgType;
-    /// `t` as a topic of this type, if it is one.
-    fn topic(t: &AnyTopic) -> Option<&Arc<Topic<Self>>>;
-}
-
-impl Message for StateMsg {
-    const TYPE: MsgType = MsgType::State;
-    fn topic(t: &AnyTopic) -> Option<&Arc<Topic<Self>>> {
-        match t {
-            AnyTopic::State(t) => Some(t),
-            _ => None,
-        }
-    }
-}
-
-impl Message for PositionMsg {
-    const TYPE: MsgType = MsgType::Position;
-    fn topic(t: &AnyTopic) -> Option<&Arc<Topic<Self>>> {
-        match t {
-            AnyTopic::Position(t) => Some(t),
-            _ => None,
-        }
-    }
-}
-
-impl Message for ForceMsg {
-    const TYPE: MsgType = MsgType::Force;
-    fn topic(t: &AnyTopic) -> Option<&Arc<Topic<Self>>> {
-        match t {
-            AnyTopic::Force(t) => Some(t),
-            _ => None,
-        }
-    }
-}
 
 /// What a registered node reads: one [`Message`] type, a tuple of two to four (one topic
 /// each, in the graph file's `subscribes` order), or `()` for none (a source).
@@ -179,7 +147,7 @@ pub struct InPort<M: Message> {
 impl<M: Message> InPort<M> {
     fn new(t: &AnyTopic) -> Option<InPort<M>> {
         Some(InPort {
-            topic: M::topic(t)?.clone(),
+            topic: t.typed::<M>()?.clone(),
             last_seq: None,
             origin: None,
             fresh: None,
@@ -246,7 +214,7 @@ impl<M: Message> Outputs for M {
     type Ports = Publisher<M>;
     fn bind(topics: &[AnyTopic], outbox: &Outbox) -> Option<Publisher<M>> {
         match topics {
-            [t] => Some(Publisher::new(M::topic(t)?.clone(), outbox.clone())),
+            [t] => Some(Publisher::new(t.typed::<M>()?.clone(), outbox.clone())),
             _ => None,
         }
     }
@@ -286,7 +254,7 @@ macro_rules! tuple_ports {
                 if topics.len() != <Self as Outputs>::TYPES.len() {
                     return None;
                 }
-                Some(($(Publisher::new($m::topic(&topics[$i])?.clone(), outbox.clone()),)+))
+                Some(($(Publisher::new(topics[$i].typed::<$m>()?.clone(), outbox.clone()),)+))
             }
             fn publish(ports: &Self::Ports, out: Self::Published, now: Nanos, origin: Option<Nanos>) {
                 $(if let Some(m) = out.$i {
@@ -339,15 +307,7 @@ impl NodeContext<'_> {
     /// # Errors
     /// A one-line reason naming the node and the key when it is not a finite number.
     pub fn param_f64(&self, key: &str, default: f64) -> Result<f64, String> {
-        match self.params.get(key) {
-            None => Ok(default),
-            Some(toml::Value::Float(x)) if x.is_finite() => Ok(*x),
-            Some(toml::Value::Integer(i)) => Ok(*i as f64),
-            Some(v) => Err(format!(
-                "node '{}': params.{key} must be a number, got {v}",
-                self.name
-            )),
-        }
+        crate::graph::kind::param_f64(self.name, self.params, key, default)
     }
 }
 
@@ -365,47 +325,57 @@ pub enum RegistryError {
     /// [`MAX_KINDS`] kinds are registered already.
     #[error("at most {MAX_KINDS} node kinds can be registered")]
     Full,
+    /// One of its message types cannot be registered ([`crate::msg::register`]).
+    #[error(transparent)]
+    Message(#[from] crate::msg::MsgRegistryError),
 }
 
-/// A registered node bound to its topics, ready to tick: what the registry makes of a
-/// [`RustNode`] (write a `RustNode`, not this).
-pub trait Tick: Send {
-    /// One tick at run time `now`: read, [`RustNode::tick`], publish.
-    fn tick(&mut self, now: Nanos);
-}
-
-type Make = dyn Fn(&NodeContext<'_>, &[AnyTopic], &[AnyTopic], &Outbox) -> Result<Box<dyn Tick>, String>
-    + Send
-    + Sync;
-
-struct Entry {
-    inputs: &'static [MsgType],
-    outputs: &'static [MsgType],
-    make: Box<Make>,
-}
-
-fn registry() -> &'static RwLock<BTreeMap<String, Entry>> {
-    static REGISTRY: RwLock<BTreeMap<String, Entry>> = RwLock::new(BTreeMap::new());
+/// Every kind: the built-in ones in the chapter's order, then those registered, in the
+/// order they were (at most [`MAX_KINDS`] of them: a list is quick enough).
+fn registry() -> &'static RwLock<Vec<Kind>> {
+    static REGISTRY: LazyLock<RwLock<Vec<Kind>>> = LazyLock::new(|| {
+        let built_in = [
+            nodes::sensor::def(),
+            nodes::estimator::def(),
+            nodes::policy::def(),
+            nodes::safety::def(),
+            nodes::actuator::def(),
+            nodes::python::def(),
+            nodes::external::def(),
+        ];
+        RwLock::new(
+            built_in
+                .into_iter()
+                .map(|d| Kind(Box::leak(Box::new(d))))
+                .collect(),
+        )
+    });
     &REGISTRY
 }
 
-/// The built-in kinds' names, as a graph file spells them (`NodeKind` in
-/// [`crate::graph::spec`]): a registered kind may not take one.
-pub const BUILT_IN_KINDS: [&str; 7] = [
-    "sensor",
-    "estimator",
-    "policy",
-    "safety",
-    "actuator",
-    "python",
-    "external",
-];
+/// The kind a graph file's `kind = "<name>"` names, built in or registered.
+pub fn kind(name: &str) -> Option<Kind> {
+    registry()
+        .read()
+        .unwrap_or_else(|e| e.into_inner())
+        .iter()
+        .copied()
+        .find(|k| k.as_str() == name)
+}
+
+/// Every kind: the built-in ones in the chapter's order, then those registered, in the
+/// order they were.
+pub fn kinds() -> Vec<Kind> {
+    registry().read().unwrap_or_else(|e| e.into_inner()).clone()
+}
 
 /// Register node kind `kind`: a graph file's `kind = "<kind>"` then makes a node with
-/// `make`, given the node's [`NodeContext`].
+/// `make`, given the node's [`NodeContext`]. Its message types are registered with it
+/// ([`crate::msg::register`]).
 ///
 /// # Errors
-/// [`RegistryError`]: a bad or taken name, or too many kinds.
+/// [`RegistryError`]: a bad or taken name, too many kinds, or a message type that cannot
+/// be registered.
 pub fn register<N, F>(kind: &str, make: F) -> Result<(), RegistryError>
 where
     N: RustNode,
@@ -421,74 +391,57 @@ where
         return Err(RegistryError::BadName(kind.to_string()));
     }
     let mut reg = registry().write().unwrap_or_else(|e| e.into_inner());
-    if BUILT_IN_KINDS.contains(&kind) || reg.contains_key(kind) {
+    if reg.iter().any(|k| k.as_str() == kind) {
         return Err(RegistryError::Taken(kind.to_string()));
     }
     if reg.len() >= MAX_KINDS {
         return Err(RegistryError::Full);
     }
-    let make =
-        move |cx: &NodeContext<'_>, inputs: &[AnyTopic], outputs: &[AnyTopic], outbox: &Outbox| {
-            let (Some(inputs), Some(outputs)) = (
-                <N::Input as Inputs>::bind(inputs),
-                <N::Output as Outputs>::bind(outputs, outbox),
-            ) else {
-                // The graph file's types were checked against the kind's when it was read.
-                return Err(format!("node '{}': its topics' types changed", cx.name));
-            };
-            let node = make(cx)?;
-            Ok(Box::new(Bound::<N> {
-                node,
-                inputs,
-                outputs,
-            }) as Box<dyn Tick>)
+    // Its message types become usable in graph files with it.
+    for t in <N::Input as Inputs>::TYPES
+        .iter()
+        .chain(<N::Output as Outputs>::TYPES)
+    {
+        crate::msg::register_type(*t)?;
+    }
+    let make = move |cx: &mut BuildContext<'_>| {
+        let (Some(inputs), Some(outputs)) = (
+            <N::Input as Inputs>::bind(cx.inputs),
+            <N::Output as Outputs>::bind(cx.outputs, cx.outbox),
+        ) else {
+            // The graph file's types were checked against the kind's when it was read.
+            return Err(format!("node '{}': its topics' types changed", cx.name));
         };
-    reg.insert(
-        kind.to_string(),
-        Entry {
-            inputs: <N::Input as Inputs>::TYPES,
-            outputs: <N::Output as Outputs>::TYPES,
-            make: Box::new(make),
+        let node = make(&NodeContext {
+            name: cx.name,
+            period: cx.period(),
+            seed: cx.seed,
+            params: cx.params,
+        })?;
+        Ok(Box::new(Bound::<N> {
+            node,
+            inputs,
+            outputs,
+        }) as Box<dyn Work>)
+    };
+    let one = |types: &'static [MsgType]| -> Vec<&'static [MsgType]> {
+        types.iter().map(std::slice::from_ref).collect()
+    };
+    let def = KindDef {
+        name: Box::leak(kind.to_string().into_boxed_str()),
+        doc: "a node kind the program registered in Rust",
+        ports: Ports::Fixed {
+            inputs: one(<N::Input as Inputs>::TYPES),
+            outputs: one(<N::Output as Outputs>::TYPES),
         },
-    );
+        plant: Plant::None,
+        code: Code::Rust,
+        params: Params::Free,
+        uses_brain: false,
+        make: Box::new(make),
+    };
+    reg.push(Kind(Box::leak(Box::new(def))));
     Ok(())
-}
-
-/// The message types registered kind `kind` reads and publishes, in order (one topic
-/// each), if it is registered.
-pub fn shape(kind: &str) -> Option<(&'static [MsgType], &'static [MsgType])> {
-    let reg = registry().read().unwrap_or_else(|e| e.into_inner());
-    reg.get(kind).map(|e| (e.inputs, e.outputs))
-}
-
-/// Every registered kind's name, sorted.
-pub fn kinds() -> Vec<String> {
-    let reg = registry().read().unwrap_or_else(|e| e.into_inner());
-    reg.keys().cloned().collect()
-}
-
-/// Make a node of registered kind `kind`, bound to `inputs` and `outputs` (the graph
-/// file's, in order; published through the node's `outbox`).
-///
-/// # Errors
-/// A one-line reason: the kind is not registered in this process, or its maker refused
-/// the node's parameters.
-pub(crate) fn make(
-    kind: &str,
-    cx: &NodeContext<'_>,
-    inputs: &[AnyTopic],
-    outputs: &[AnyTopic],
-    outbox: &Outbox,
-) -> Result<Box<dyn Tick>, String> {
-    let reg = registry().read().unwrap_or_else(|e| e.into_inner());
-    let entry = reg.get(kind).ok_or_else(|| {
-        format!(
-            "node '{}': kind '{kind}' is not registered in this process (a Rust node kind \
-             runs in the program that registers it)",
-            cx.name
-        )
-    })?;
-    (entry.make)(cx, inputs, outputs, outbox)
 }
 
 /// A node with its topics and what it has been given.
@@ -498,8 +451,8 @@ struct Bound<N: RustNode> {
     outputs: <N::Output as Outputs>::Ports,
 }
 
-impl<N: RustNode> Tick for Bound<N> {
-    fn tick(&mut self, now: Nanos) {
+impl<N: RustNode> Work for Bound<N> {
+    fn tick(&mut self, now: Nanos) -> Flow {
         let delivered = <N::Input as Inputs>::read(&mut self.inputs, now);
         let out = self.node.tick(now, delivered);
         // The oldest origin its inputs delivered; a source's data begins at its tick.
@@ -509,12 +462,61 @@ impl<N: RustNode> Tick for Bound<N> {
             <N::Input as Inputs>::oldest_origin(&self.inputs).or(Some(now))
         };
         <N::Output as Outputs>::publish(&self.outputs, out, now, origin);
+        Flow::Continue
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::msg::{ForceMsg, PositionMsg};
+
+    /// Make a node of kind `kind` as the graph's builder would, around a fresh plant.
+    fn make(
+        kind: &str,
+        cx: &NodeContext<'_>,
+        inputs: &[AnyTopic],
+        outputs: &[AnyTopic],
+        outbox: &Outbox,
+    ) -> Result<Box<dyn Work>, String> {
+        let k = super::kind(kind).ok_or_else(|| format!("kind '{kind}' is not registered"))?;
+        let plant = std::sync::Arc::new(std::sync::Mutex::new(
+            crate::plant::CartPole::new().unwrap(),
+        ));
+        let brain = crate::policy::BrainSlot::new(Box::new(crate::policy::Scripted));
+        let log = Arc::new(std::sync::Mutex::new(crate::runlog::RunLog::new(false)));
+        let liveliness = Arc::new(crate::qos::Liveliness::new(None));
+        let rate = crate::rate::Rate::new(1e9 / cx.period.0 as f64).unwrap();
+        let mut observers = None;
+        (k.def().make)(&mut BuildContext {
+            name: cx.name,
+            id: crate::ids::NodeId(0),
+            rate: &rate,
+            seed: cx.seed,
+            params: cx.params,
+            python: None,
+            inputs,
+            outputs,
+            outbox,
+            plant: &plant,
+            brain: &brain,
+            log: &log,
+            topics: inputs,
+            action: None,
+            liveliness: &liveliness,
+            observers: &mut observers,
+            attachment: None,
+        })
+    }
+
+    type Slots = Vec<&'static [MsgType]>;
+
+    fn shape(kind: &str) -> Option<(Slots, Slots)> {
+        match &super::kind(kind)?.def().ports {
+            Ports::Fixed { inputs, outputs } => Some((inputs.clone(), outputs.clone())),
+            Ports::Open { .. } => None,
+        }
+    }
 
     struct Echo;
     impl RustNode for Echo {
@@ -541,11 +543,10 @@ mod tests {
             register("echo_unit", ok),
             Err(RegistryError::Taken("echo_unit".into()))
         );
-        assert_eq!(
-            shape("echo_unit"),
-            Some((&[MsgType::Force][..], &[MsgType::Force][..]))
-        );
-        assert!(kinds().contains(&"echo_unit".to_string()));
+        let force: &'static [MsgType] = &[ForceMsg::TYPE];
+        assert_eq!(shape("echo_unit"), Some((vec![force], vec![force])));
+        assert!(kinds().iter().any(|k| k.as_str() == "echo_unit"));
+        assert_eq!(kind("echo_unit").unwrap().code(), Code::Rust);
         assert_eq!(shape("nobody"), None);
     }
 
@@ -566,35 +567,33 @@ mod tests {
     #[test]
     fn a_node_of_several_inputs_and_outputs_passes_on_the_oldest_origin() {
         register("mix_bound", |_: &NodeContext<'_>| Ok(Mix)).unwrap();
-        assert_eq!(
-            shape("mix_bound"),
-            Some((
-                &[MsgType::Force, MsgType::Position][..],
-                &[MsgType::Force, MsgType::Position][..]
-            ))
-        );
+        let (f, p): (&'static [MsgType], &'static [MsgType]) =
+            (&[ForceMsg::TYPE], &[PositionMsg::TYPE]);
+        assert_eq!(shape("mix_bound"), Some((vec![f, p], vec![f, p])));
         let topic = |name: &str, m: MsgType| AnyTopic::new(name, m, 1).unwrap();
-        let inputs = [topic("/f", MsgType::Force), topic("/p", MsgType::Position)];
+        let inputs = [topic("/f", ForceMsg::TYPE), topic("/p", PositionMsg::TYPE)];
         let outputs = [
-            topic("/f2", MsgType::Force),
-            topic("/p2", MsgType::Position),
+            topic("/f2", ForceMsg::TYPE),
+            topic("/p2", PositionMsg::TYPE),
         ];
         let params = toml::Table::new();
         let cx = NodeContext {
             name: "m",
-            period: Nanos(20),
+            period: Nanos(20_000_000),
             seed: 0,
             params: &params,
         };
         // The wrong number of topics is refused (the graph file is checked before).
         assert!(make("mix_bound", &cx, &inputs[..1], &outputs, &Outbox::new()).is_err());
         let mut node = make("mix_bound", &cx, &inputs, &outputs, &Outbox::new()).unwrap();
-        let (AnyTopic::Force(f), AnyTopic::Position(p)) = (&inputs[0], &inputs[1]) else {
-            unreachable!()
-        };
-        let (AnyTopic::Force(f2), AnyTopic::Position(p2)) = (&outputs[0], &outputs[1]) else {
-            unreachable!()
-        };
+        let (f, p) = (
+            inputs[0].typed::<ForceMsg>().unwrap(),
+            inputs[1].typed::<PositionMsg>().unwrap(),
+        );
+        let (f2, p2) = (
+            outputs[0].typed::<ForceMsg>().unwrap(),
+            outputs[1].typed::<PositionMsg>().unwrap(),
+        );
         let at = |x| PositionMsg {
             cart_pos_m: x,
             pole_angle_rad: 0.0,
@@ -622,20 +621,21 @@ mod tests {
     #[test]
     fn a_bound_node_gets_each_message_once_and_passes_its_origin_on() {
         register("echo_bound", |_: &NodeContext<'_>| Ok(Echo)).unwrap();
-        let input = AnyTopic::new("/in", MsgType::Force, 1).unwrap();
-        let output = AnyTopic::new("/out", MsgType::Force, 1).unwrap();
+        let input = AnyTopic::new("/in", ForceMsg::TYPE, 1).unwrap();
+        let output = AnyTopic::new("/out", ForceMsg::TYPE, 1).unwrap();
         let params = toml::Table::new();
         let cx = NodeContext {
             name: "e",
-            period: Nanos(20),
+            period: Nanos(20_000_000),
             seed: 0,
             params: &params,
         };
         let (inputs, outputs) = ([input.clone()], [output.clone()]);
         let mut node = make("echo_bound", &cx, &inputs, &outputs, &Outbox::new()).unwrap();
-        let (AnyTopic::Force(i), AnyTopic::Force(o)) = (&input, &output) else {
-            unreachable!()
-        };
+        let (i, o) = (
+            input.typed::<ForceMsg>().unwrap(),
+            output.typed::<ForceMsg>().unwrap(),
+        );
         i.publish(ForceMsg { newtons: 3.0 }, Nanos(5), Some(Nanos(1)));
         node.tick(Nanos(10));
         let m = o.read(Nanos(10)).unwrap();

@@ -10,13 +10,13 @@
 //! [[node]]
 //! name = "sensor"
 //! kind = "sensor"          # sensor | estimator | policy | safety | actuator | python
-//!                          # | a kind registered in Rust (crate::graph::registry)
+//!                          # | external | a kind registered in Rust (crate::graph::registry)
 //! rate_hz = 50
 //! publishes = "/obs"
 //!
 //! [[topic]]
 //! name = "/obs"
-//! type = "state"           # state | position | force
+//! type = "state"           # state | position | force | a type registered (crate::msg)
 //! depth = 1                # history depth (keep-last), ≥ 1
 //! # QoS, all optional (crate::qos; ROS 2's names): history = "keep_all", delivery = "fifo",
 //! # deadline_ms = 40, lifespan_ms = 60, reliability = "reliable", on_deadline_missed = "zero",
@@ -29,17 +29,23 @@
 //! `src/graph/spec/processes.rs`.
 //!
 //! Rules (each broken rule is a [`SpecError`] with the line and column of the culprit):
-//! - at most [`MAX_NODES`] nodes, names unique; exactly one actuator (it owns the plant step
-//!   and the zero-order hold);
-//! - each kind has a fixed shape: a sensor publishes `state` or `position`; an estimator
-//!   reads `position` and publishes `state`; a policy reads `state` and publishes `force`;
-//!   a safety node reads `force` and publishes `force`; the actuator reads `force`; a
-//!   `python` node (the learner's, [`crate::python::node`]) reads and publishes any number
-//!   of topics, of any type (`subscribes = ["/obs", "/reference"]`: a topic or a list), and
-//!   names its `script` (relative to the graph file), its optional `class` and `params`
-//!   table; a node of a kind registered in Rust ([`crate::graph::registry`]) reads and
-//!   publishes the types it was registered with, one topic each in that order, and may have
-//!   a `params` table; an external node reads at most one topic and publishes one;
+//! - at most [`MAX_NODES`] nodes, names unique; exactly one actuator (the kind that steps
+//!   the plant: it owns the plant step and the zero-order hold);
+//! - each node's `kind` is one the registry knows ([`crate::graph::registry`]: the
+//!   built-in `sensor`, `estimator`, `policy`, `safety`, `actuator`, `python`, `external`,
+//!   and any a Rust program registered), and its topics fit the kind's ports
+//!   ([`crate::graph::kind::Ports`]): a sensor publishes `state` or `position`; an
+//!   estimator reads `position` and publishes `state`; a policy reads `state` and publishes
+//!   `force`; a safety node reads `force` and publishes `force`; the actuator reads `force`;
+//!   a `python` node (the learner's, [`crate::python::node`]) reads and publishes any
+//!   number of topics, of any type (`subscribes = ["/obs", "/reference"]`: a topic or a
+//!   list), and names its `script` (relative to the graph file) and optional `class`; a
+//!   registered kind reads and publishes the types it was registered with, one topic each
+//!   in that order; an external node reads at most one topic and publishes one;
+//! - a node's parameters (`params = { … }`; the built-in kinds' also as keys of the node's
+//!   table, as the chapter's files write `max_force_n = 8`) are the kind's
+//!   ([`crate::graph::kind::Params`]): checked numbers with defaults, or a free table for
+//!   Python and Rust kinds;
 //! - every topic is declared once, has exactly one publisher and at most one subscriber
 //!   (the chapter's topic keeps one read mark; per-subscription queues come with QoS), and
 //!   its type matches both ends;
@@ -58,6 +64,12 @@
 //! overrides: nodes tick in ascending priority, a node without one taking its topological
 //! position; edges into a node with an explicit priority do not order it. A cycle among
 //! nodes without explicit priorities is an error.
+//!
+//! No shape is required beyond one actuator: the chapter's chain (sensor → policy →
+//! actuator, through any estimators and pass-through nodes) is found when the graph has it
+//! ([`GraphSpec::chain`]), and the chapter's shorthands apply to it; a graph without it (an
+//! open-loop source driving the actuator) runs all the same and says so where a shorthand
+//! is used ([`GraphSpec::chain_for`]).
 
 mod executors;
 mod processes;
@@ -67,7 +79,7 @@ pub use processes::{RestartPolicy, MAX_RESTARTS};
 
 use crate::executor::ComputeTime;
 use crate::ids::{MAX_NODES, MAX_TOPICS};
-use crate::plant::{ACTUATOR_HZ, GEAR_N};
+use crate::plant::ACTUATOR_HZ;
 use crate::qos::{
     self, Delivery, History, Link, OnDeadlineMissed, Reliability, TopicQos, MAX_DEPTH,
 };
@@ -87,203 +99,80 @@ pub const DEFAULT_GRAPH_TOML: &str = include_str!("../../graphs/cartpole.toml");
 /// The name the built-in default graph is reported under.
 pub const DEFAULT_GRAPH_ORIGIN: &str = "graphs/cartpole.toml";
 
-/// What a node does.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum NodeKind {
-    /// Reads the plant and publishes a measurement (`state` or `position`).
-    Sensor,
-    /// Turns `position` measurements into a `state` estimate ([`crate::graph::estimator`]).
-    Estimator,
-    /// Runs a brain on `state` and publishes a `force` command.
-    Policy,
-    /// Clamps a `force` command to `max_force_n` and republishes it.
-    Safety,
-    /// Applies the newest `force` (zero-order hold) and steps the plant; exactly one.
-    Actuator,
-    /// A learner's node written in Python ([`crate::python::node`]): any inputs and
-    /// outputs. In the chain's places it plays the policy (reads a `state` topic, publishes
-    /// the `force` toward the actuator) or a safety node (reads `force`, publishes `force`);
-    /// driving the actuator and reading neither, it is the policy.
-    Python,
-    /// A kind written in Rust and registered by the program that runs the graph
-    /// ([`crate::graph::registry`]; its name is in [`NodeSpec::registered`]). It takes the
-    /// chain's places as a Python node does.
-    Registered,
-    /// A node ratelab does not run: a ROS 2 node (rclpy, rclcpp, or any program speaking
-    /// rmw_zenoh) fills it over `--ros2` ([`crate::ros2::external`]); its settings are in
-    /// [`NodeSpec::external`]. It takes the chain's places as a Python node does.
-    External,
-}
-
-impl NodeKind {
-    /// The kind's name as the file spells it.
-    pub fn as_str(self) -> &'static str {
-        match self {
-            NodeKind::Sensor => "sensor",
-            NodeKind::Estimator => "estimator",
-            NodeKind::Policy => "policy",
-            NodeKind::Safety => "safety",
-            NodeKind::Actuator => "actuator",
-            NodeKind::Python => "python",
-            NodeKind::Registered => "registered",
-            NodeKind::External => "external",
-        }
-    }
-
-    /// The built-in kind a graph file's `kind` names (`None`: maybe a registered one).
-    fn built_in(name: &str) -> Option<NodeKind> {
-        Some(match name {
-            "sensor" => NodeKind::Sensor,
-            "estimator" => NodeKind::Estimator,
-            "policy" => NodeKind::Policy,
-            "safety" => NodeKind::Safety,
-            "actuator" => NodeKind::Actuator,
-            "python" => NodeKind::Python,
-            "external" => NodeKind::External,
-            _ => return None,
-        })
-    }
-    /// The message types this kind may read (none for a sensor) and publish (none for the
-    /// actuator); `None` for a Python or external node, which may read and publish any one
-    /// topic, and for a registered kind, whose shape is the registry's.
-    fn shape(self) -> Option<(Option<MsgType>, &'static [MsgType])> {
-        Some(match self {
-            NodeKind::Sensor => (None, &[MsgType::State, MsgType::Position]),
-            NodeKind::Estimator => (Some(MsgType::Position), &[MsgType::State]),
-            NodeKind::Policy => (Some(MsgType::State), &[MsgType::Force]),
-            NodeKind::Safety => (Some(MsgType::Force), &[MsgType::Force]),
-            NodeKind::Actuator => (Some(MsgType::Force), &[]),
-            NodeKind::Python | NodeKind::Registered | NodeKind::External => return None,
-        })
-    }
-}
+pub use crate::graph::kind::{Code, Kind, Plant, PythonCode};
+use crate::graph::kind::{Params, Ports};
 
 pub use crate::msg::MsgType;
+use crate::msg::{ForceMsg, Message, StateMsg};
 
 /// The process that holds the plant's nodes by default ([`GraphSpec::process_of`]).
 pub const DEFAULT_ROBOT_PROCESS: &str = "robot";
 
 pub use crate::ids::{NodeId, TopicId};
 
-/// A node's kind-specific parameters (all optional in the file; defaults below).
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize, Default)]
-pub struct NodeParams {
-    /// Sensor: standard deviation of Gaussian noise on the cart position, m (default 0).
-    pub noise_pos_m: f64,
-    /// Sensor: standard deviation of Gaussian noise on the pole angle, rad (default 0).
-    pub noise_angle_rad: f64,
-    /// Estimator: cut-off of the first-order low-pass on the velocities, Hz (default 10).
-    pub cutoff_hz: f64,
-    /// Safety: the largest force magnitude passed on, N (default the motor's 10 N).
-    pub max_force_n: f64,
-}
-
 /// One node of a validated graph.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct NodeSpec {
     /// Unique name.
     pub name: String,
-    /// What it does.
-    pub kind: NodeKind,
+    /// What it is: its kind's one definition ([`crate::graph::kind::KindDef`]).
+    pub kind: Kind,
     /// Rate at the start of a run, Hz, in (0, 10 000].
     pub rate_hz: f64,
     /// The explicit tie-break priority, if the file gave one.
     pub priority: Option<i64>,
-    /// The topics it reads, in the file's order: one for a built-in kind that reads (none
-    /// for a sensor), any number for a python node ([`crate::python::node`]).
+    /// The topics it reads, in the file's order (as many as its kind's ports take).
     pub subscribes: Vec<TopicId>,
-    /// The topics it publishes, in the file's order: one for a built-in kind that publishes
-    /// (none for the actuator), any number for a python node.
+    /// The topics it publishes, in the file's order.
     pub publishes: Vec<TopicId>,
-    /// Kind parameters.
-    pub params: NodeParams,
+    /// Its parameters (`params = { … }`): for a kind of numeric parameters, every one it
+    /// declares, checked, defaults filled in (as floats); for a Python or Rust kind, the
+    /// file's table as given.
+    pub params: toml::Table,
     /// Its liveliness lease: not heard from (not ticked) for longer than this, it is
     /// reported *not alive* (ROS 2's liveliness lease duration). `None`: not monitored.
     pub liveliness_lease: Option<Nanos>,
     /// The placement group (OS process) it runs in under `ratelab launch --processes`, as
     /// the file gave it; `None` takes the default placement ([`GraphSpec::process_of`]).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub process: Option<String>,
-    /// A Python node's script, class and parameters; `None` for every other kind.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub python: Option<PythonNodeSpec>,
-    /// A registered kind's name and parameters; `None` for every other kind.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub registered: Option<RegisteredNodeSpec>,
-    /// An external node's waits; `None` for every other kind.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub external: Option<ExternalNodeSpec>,
+    /// A Python node's script and class; `None` for every other kind.
+    pub python: Option<PythonCode>,
     /// What a tick costs ([`crate::executor`]): its outputs are published that long after
     /// it starts. `None`: nothing (outputs at once, as in the chapter).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub compute: Option<ComputeTime>,
     /// Its callback group, a group of the executor holding it ([`ExecutorSpec`]); `None`:
     /// a mutually exclusive group of its own.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub callback_group: Option<String>,
 }
 
 impl NodeSpec {
-    /// Its kind as the graph file names it: the registered kind's own name for a
-    /// [`NodeKind::Registered`] node.
+    /// Its kind's name, as the graph file spells it.
     pub fn kind_name(&self) -> &str {
-        match &self.registered {
-            Some(r) => &r.kind,
-            None => self.kind.as_str(),
+        self.kind.as_str()
+    }
+
+    /// An external node's waits (from its parameters); `None` for every other kind.
+    pub fn external(&self) -> Option<ExternalNodeSpec> {
+        (self.kind.code() == Code::Ros2).then(|| ExternalNodeSpec::from_params(&self.params))
+    }
+
+    /// Numeric parameter `key` (its checked value, or the kind's default).
+    pub fn param(&self, key: &str) -> Option<f64> {
+        match self.params.get(key)? {
+            toml::Value::Float(x) => Some(*x),
+            toml::Value::Integer(i) => Some(*i as f64),
+            _ => None,
         }
     }
 }
 
-/// What a node of a registered kind is ([`crate::graph::registry`]).
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct RegisteredNodeSpec {
-    /// The kind's registered name.
-    pub kind: String,
-    /// `params = { … }`: what the kind's maker reads ([`crate::graph::registry::NodeContext`]).
-    pub params: toml::Table,
-}
-
-/// How long ratelab waits for a `kind = "external"` node ([`crate::ros2::external`]), from
-/// the graph file's `params = { appear_timeout_s = …, tick_timeout_ms = … }`.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-pub struct ExternalNodeSpec {
-    /// How long to wait, before the run starts, for the node's liveliness tokens (its node
-    /// and each declared endpoint) on the ROS 2 domain; default 10 s, at most 600 s.
-    pub appear_timeout: Nanos,
-    /// Under the virtual clock, how long (wall time) one tick waits for the node's message
-    /// on each of its outputs before the tick is counted as missed; default 2 s, 1 ms to
-    /// 60 s.
-    pub tick_timeout: Nanos,
-}
-
-impl Default for ExternalNodeSpec {
-    fn default() -> Self {
-        ExternalNodeSpec {
-            appear_timeout: Nanos(10_000_000_000),
-            tick_timeout: Nanos(2_000_000_000),
-        }
-    }
-}
-
-/// What a `kind = "python"` node runs ([`crate::python::node`]).
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct PythonNodeSpec {
-    /// The script, as an absolute path (the file's `script` is relative to the graph
-    /// file's folder).
-    pub script: String,
-    /// The class to instantiate; `None`: the script's one class that takes a node handle.
-    pub class: Option<String>,
-    /// `params = { … }`: what the node's `get_parameter(name)` returns (numbers, strings,
-    /// booleans, or arrays of them).
-    pub params: toml::Table,
-}
+pub use crate::graph::nodes::ExternalNodeSpec;
 
 /// The most parameters a Python node may have.
 pub const MAX_PYTHON_PARAMS: usize = 64;
 
 /// One topic of a validated graph.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct TopicSpec {
     /// Name, by convention starting with `/`.
     pub name: String,
@@ -310,17 +199,16 @@ impl TopicSpec {
     }
 }
 
-/// The chapter's roles in any valid graph: the chain that ends at the actuator. The
-/// chapter's flags (`--sensor-hz`, `--control-hz`) and `metrics.json`'s flat keys
-/// (`obs_*`, `action_*`) speak of these.
+/// The chapter's roles, when a graph has them: the chain sensor → … → policy → … →
+/// actuator ([`GraphSpec::chain`]). The chapter's flags (`--sensor-hz`, `--control-hz`,
+/// `--queue-depth`), `metrics.json`'s flat keys (`obs_*`, `action_*`) and the lab's
+/// rate keys speak of these; a graph without the chain has none of them.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub struct Chain {
     /// The sensor at the head of the actuator's chain.
     pub sensor: NodeId,
     /// The policy that drives the actuator (through any safety nodes).
     pub policy: NodeId,
-    /// The actuator.
-    pub actuator: NodeId,
     /// The topic the policy reads (`/obs` in the chapter).
     pub obs: TopicId,
     /// The topic the policy publishes (`/action` in the chapter).
@@ -336,8 +224,13 @@ pub struct GraphSpec {
     pub nodes: Vec<NodeSpec>,
     /// Topics, in file order ([`TopicId`] indexes this).
     pub topics: Vec<TopicSpec>,
-    /// The chapter's roles.
-    pub chain: Chain,
+    /// The actuator: the one node that steps the plant.
+    pub actuator: NodeId,
+    /// The chapter's roles, when the graph has its chain: the actuator driven (through
+    /// any pass-through nodes) by a policy whose input comes (through any estimators) from
+    /// a sensor. `None`: some other shape (an open-loop source driving the actuator, a
+    /// policy fed by no sensor); it runs all the same, without the chapter's shorthands.
+    pub chain: Option<Chain>,
     /// The `[executors]` tables ([`ExecutorSpec`]); empty: every node on a thread of its own.
     pub executors: Vec<ExecutorSpec>,
     /// The `[processes]` tables' restart policies, by process, where not
@@ -425,7 +318,7 @@ struct RawNode {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     class: Option<Spanned<String>>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    params: Option<Spanned<toml::Table>>,
+    params: Option<Spanned<std::collections::BTreeMap<String, Spanned<toml::Value>>>>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     compute_ms: Option<Spanned<toml::Value>>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -676,8 +569,21 @@ impl GraphSpec {
                 .nodes
                 .iter()
                 .map(|n| {
-                    let p = &n.params;
-                    let sensor = n.kind == NodeKind::Sensor;
+                    // A kind's numeric parameters at their defaults are left out.
+                    let defaults = match n.kind.def().params {
+                        Params::Numbers(defs) => defs,
+                        Params::Free => &[],
+                    };
+                    let params: std::collections::BTreeMap<String, Spanned<toml::Value>> = n
+                        .params
+                        .iter()
+                        .filter(|(k, v)| {
+                            !defaults
+                                .iter()
+                                .any(|d| d.name == k.as_str() && v.as_float() == Some(d.default))
+                        })
+                        .map(|(k, v)| (k.clone(), Spanned::new(0..0, v.clone())))
+                        .collect();
                     Spanned::new(
                         0..0,
                         RawNode {
@@ -687,22 +593,15 @@ impl GraphSpec {
                             priority: n.priority.map(|p| Spanned::new(0..0, p)),
                             subscribes: topic_names(&n.subscribes),
                             publishes: topic_names(&n.publishes),
-                            noise_pos_m: (sensor && p.noise_pos_m != 0.0).then(|| f(p.noise_pos_m)),
-                            noise_angle_rad: (sensor && p.noise_angle_rad != 0.0)
-                                .then(|| f(p.noise_angle_rad)),
-                            cutoff_hz: (n.kind == NodeKind::Estimator).then(|| f(p.cutoff_hz)),
-                            max_force_n: (n.kind == NodeKind::Safety).then(|| f(p.max_force_n)),
+                            noise_pos_m: None,
+                            noise_angle_rad: None,
+                            cutoff_hz: None,
+                            max_force_n: None,
                             liveliness_lease_ms: n.liveliness_lease.map(|l| f(nanos_ms(l))),
                             process: n.process.clone().map(s),
                             script: n.python.as_ref().map(|p| s(p.script.clone())),
                             class: n.python.as_ref().and_then(|p| p.class.clone()).map(s),
-                            params: n
-                                .python
-                                .as_ref()
-                                .map(|p| &p.params)
-                                .or(n.registered.as_ref().map(|r| &r.params))
-                                .filter(|p| !p.is_empty())
-                                .map(|p| Spanned::new(0..0, p.clone())),
+                            params: (!params.is_empty()).then(|| Spanned::new(0..0, params)),
                             compute_ms: n
                                 .compute
                                 .map(|c| Spanned::new(0..0, executors::compute_value(&c))),
@@ -767,15 +666,15 @@ impl GraphSpec {
         // and `/clock` after it, in order ([`crate::ros2::external`]).
         for _ in 0..=self.nodes.len() {
             let n = self.node(at);
-            match (&n.process, n.kind, n.subscribes.first().copied()) {
-                (Some(p), ..) => return p.clone(),
-                (None, NodeKind::External, Some(t)) if self.topic(t).publisher != id => {
+            match (&n.process, n.subscribes.first().copied()) {
+                (Some(p), _) => return p.clone(),
+                (None, Some(t)) if n.kind.code() == Code::Ros2 && self.topic(t).publisher != id => {
                     at = self.topic(t).publisher;
                 }
-                (None, NodeKind::Sensor | NodeKind::Actuator, _) => {
+                (None, _) if n.kind.plant() != Plant::None => {
                     return DEFAULT_ROBOT_PROCESS.to_string()
                 }
-                (None, ..) => return n.name.clone(),
+                (None, _) => return n.name.clone(),
             }
         }
         self.node(id).name.clone()
@@ -804,7 +703,7 @@ impl GraphSpec {
     /// ([`crate::ros2::external`]; across processes, its proxy beside its input's
     /// publisher).
     pub fn first_external(&self) -> Option<&NodeSpec> {
-        self.nodes.iter().find(|n| n.kind == NodeKind::External)
+        self.nodes.iter().find(|n| n.kind.code() == Code::Ros2)
     }
 
     /// The topic named `name`.
@@ -864,7 +763,7 @@ impl GraphSpec {
     pub fn set_rate_of(&mut self, id: NodeId, hz: f64) -> Result<(), OverrideError> {
         let node = &mut self.nodes[id.0];
         check_rate_hz(hz).map_err(|e| OverrideError(format!("node '{}': {e}", node.name)))?;
-        if node.kind == NodeKind::Actuator {
+        if node.kind.is_actuator() {
             check_actuator_rate(hz).map_err(OverrideError)?;
         }
         node.rate_hz = hz;
@@ -912,7 +811,7 @@ impl GraphSpec {
         }
         let to_actuator = t
             .subscriber
-            .is_some_and(|n| self.nodes[n.0].kind == NodeKind::Actuator);
+            .is_some_and(|n| self.nodes[n.0].kind.is_actuator());
         qos::check_combination(&q, to_actuator).map_err(err)?;
         let t = &mut self.topics[id.0];
         (t.qos, t.depth) = (q, depth);
@@ -955,24 +854,39 @@ impl GraphSpec {
         self.nodes.iter().map(|n| n.name.as_str()).collect()
     }
 
-    /// The chain's policy rate (the chapter's control rate), Hz.
-    pub fn control_hz(&self) -> f64 {
-        self.node(self.chain.policy).rate_hz
+    /// The chain's policy rate (the chapter's control rate), Hz; `None` without the chain.
+    pub fn control_hz(&self) -> Option<f64> {
+        self.chain.map(|c| self.node(c.policy).rate_hz)
     }
 
-    /// The chain's sensor rate, Hz.
-    pub fn sensor_hz(&self) -> f64 {
-        self.node(self.chain.sensor).rate_hz
+    /// The chain's sensor rate, Hz; `None` without the chain.
+    pub fn sensor_hz(&self) -> Option<f64> {
+        self.chain.map(|c| self.node(c.sensor).rate_hz)
     }
 
     /// The actuator's rate, Hz.
     pub fn actuator_hz(&self) -> f64 {
-        self.node(self.chain.actuator).rate_hz
+        self.node(self.actuator).rate_hz
     }
 
-    /// The depth of the policy's input topic (the chapter's one queue depth), at the start.
-    pub fn queue_depth(&self) -> usize {
-        self.topic(self.chain.obs).depth
+    /// The depth of the policy's input topic (the chapter's one queue depth), at the start;
+    /// `None` without the chain.
+    pub fn queue_depth(&self) -> Option<usize> {
+        self.chain.map(|c| self.topic(c.obs).depth)
+    }
+
+    /// The chain, or a one-line reason naming what uses it (`--control-hz`, a lab key)
+    /// when the graph has none.
+    ///
+    /// # Errors
+    /// [`OverrideError`]: the graph has no chapter chain.
+    pub fn chain_for(&self, what: &str) -> Result<Chain, OverrideError> {
+        self.chain.ok_or_else(|| {
+            OverrideError(format!(
+                "{what} speaks of the chapter's chain (sensor → policy → actuator), which graph '{}' does not have: name a node or topic instead (--rate NODE=HZ, --depth TOPIC=N)",
+                self.name
+            ))
+        })
     }
 
     /// Layers for drawing left to right: a node's layer is one more than its publisher's
@@ -1015,7 +929,7 @@ fn build(cx: &Ctx<'_>, raw: RawGraph) -> Result<GraphSpec, SpecError> {
     if raw.nodes.is_empty() {
         return Err(cx.err(
             whole,
-            "no [[node]]: a graph needs at least a sensor, a policy and an actuator",
+            "no [[node]]: a graph needs at least an actuator (it steps the plant), and nodes that drive it",
         ));
     }
 
@@ -1085,123 +999,37 @@ fn build(cx: &Ctx<'_>, raw: RawGraph) -> Result<GraphSpec, SpecError> {
             return Err(cx.err(r.name.span(), format!("duplicate node '{nname}'")));
         }
         let kind_name = r.kind.get_ref().as_str();
-        let registered_shape = crate::graph::registry::shape(kind_name);
-        let kind = match (NodeKind::built_in(kind_name), registered_shape) {
-            (Some(k), _) => k,
-            (None, Some(_)) => NodeKind::Registered,
-            (None, None) => {
-                let mut known: Vec<String> = crate::graph::registry::BUILT_IN_KINDS
-                    .map(String::from)
-                    .to_vec();
-                known.extend(crate::graph::registry::kinds());
-                return Err(cx.err(
-                    r.kind.span(),
-                    format!(
-                        "unknown kind `{kind_name}`: expected one of {} (or a kind a Rust \
-                         program registers: ratelab::graph::registry)",
-                        known.join(", ")
-                    ),
-                ));
-            }
-        };
+        let kind = crate::graph::registry::kind(kind_name).ok_or_else(|| {
+            let known: Vec<&str> = crate::graph::registry::kinds()
+                .iter()
+                .map(|k| k.as_str())
+                .collect();
+            cx.err(
+                r.kind.span(),
+                format!(
+                    "unknown kind `{kind_name}`: expected one of {} (or a kind a Rust \
+                     program registers: ratelab::graph::registry)",
+                    known.join(", ")
+                ),
+            )
+        })?;
         let hz = *r.rate_hz.get_ref();
         check_rate_hz(hz).map_err(|e| cx.err(r.rate_hz.span(), e))?;
-        if kind == NodeKind::Actuator {
+        if kind.is_actuator() {
             check_actuator_rate(hz).map_err(|e| cx.err(r.rate_hz.span(), e))?;
             actuators.push(r.name.span());
         }
         let id = NodeId(file_nodes.len());
-        // The types a kind reads and publishes: fixed for a built-in kind and a registered
-        // one (the registry's), any for a python or external node.
-        let fixed: Option<(Option<MsgType>, &'static [MsgType])> = kind.shape();
-        // A registered kind: its types in order, one topic each.
-        let registered_ports = registered_shape.filter(|_| kind == NodeKind::Registered);
         let sub_names = topic_list(cx, "subscribes", &r.subscribes)?;
         let pub_names = topic_list(cx, "publishes", &r.publishes)?;
-        // A python node may read and publish several topics, a registered kind as many as
-        // it was registered with; every other kind one each.
-        if let Some((reads, writes)) = registered_ports {
-            for (key, names, types) in [
-                ("subscribes", &sub_names, reads),
-                ("publishes", &pub_names, writes),
-            ] {
-                if names.len() != types.len() {
-                    let list: Vec<&str> = types.iter().map(|m| m.as_str()).collect();
-                    let want = match list.len() {
-                        0 => "no topic".to_string(),
-                        1 => format!("one {} topic", list[0]),
-                        n => format!("{n} topics: {}", list.join(", ")),
-                    };
-                    let at = names.first().map_or_else(|| r.name.span(), |n| n.span());
-                    return Err(cx.err(
-                        at,
-                        format!(
-                            "a node of kind '{kind_name}' {key} {want}, in that order (as registered), not {}",
-                            names.len()
-                        ),
-                    ));
-                }
-            }
-        } else if kind != NodeKind::Python {
-            for (key, names) in [("subscribes", &sub_names), ("publishes", &pub_names)] {
-                if let Some(second) = names.get(1) {
-                    return Err(cx.err(
-                        second.span(),
-                        format!(
-                            "{} node {key} one topic (only a python node may have several)",
-                            a_kind(kind_name)
-                        ),
-                    ));
-                }
-            }
-        }
-        if let Some((reads, writes)) = fixed {
-            match (sub_names.first(), reads) {
-                (None, Some(want)) => {
-                    return Err(cx.err(
-                        r.name.span(),
-                        format!(
-                            "{} node must subscribe to a {} topic",
-                            a_kind(kind_name),
-                            want.as_str()
-                        ),
-                    ))
-                }
-                (Some(s), None) => {
-                    return Err(cx.err(
-                        s.span(),
-                        format!("{} node subscribes to nothing", a_kind(kind_name)),
-                    ))
-                }
-                _ => {}
-            }
-            match (pub_names.first(), writes.is_empty()) {
-                (None, false) => {
-                    return Err(cx.err(
-                        r.name.span(),
-                        format!("{} node must publish a topic", a_kind(kind_name)),
-                    ))
-                }
-                (Some(p), true) => {
-                    return Err(cx.err(
-                        p.span(),
-                        format!("{} node publishes nothing", a_kind(kind_name)),
-                    ))
-                }
-                _ => {}
-            }
-        }
+        // What the kind reads and publishes: per topic, the types it takes (`None`: any).
+        let (reads, writes) = check_ports(cx, kind, r, &sub_names, &pub_names)?;
         let mut subscribes = Vec::with_capacity(sub_names.len());
         for (k, s) in sub_names.iter().enumerate() {
             let ti = find_topic(&topics, s)?;
             let t = &mut topics[ti];
-            let want = match (fixed, registered_ports) {
-                (Some((reads, _)), _) => reads,
-                (None, Some((reads, _))) => reads.get(k).copied(),
-                (None, None) => None,
-            };
-            if let Some(want) = want {
-                if t.msg != want {
+            if let Some(want) = reads.get(k).copied().flatten() {
+                if !want.contains(&t.msg) {
                     return Err(cx.err(
                         s.span(),
                         format!(
@@ -1209,7 +1037,7 @@ fn build(cx: &Ctx<'_>, raw: RawGraph) -> Result<GraphSpec, SpecError> {
                             t.name,
                             t.msg.as_str(),
                             a_kind(kind_name),
-                            want.as_str()
+                            type_names(want)
                         ),
                     ));
                 }
@@ -1231,14 +1059,8 @@ fn build(cx: &Ctx<'_>, raw: RawGraph) -> Result<GraphSpec, SpecError> {
         for (k, p) in pub_names.iter().enumerate() {
             let ti = find_topic(&topics, p)?;
             let t = &mut topics[ti];
-            let writes = match (fixed, registered_ports) {
-                (Some((_, writes)), _) => Some(writes),
-                (None, Some((_, writes))) => writes.get(k).map(|m| m.one()),
-                (None, None) => None,
-            };
-            if let Some(writes) = writes {
-                if !writes.contains(&t.msg) {
-                    let names: Vec<&str> = writes.iter().map(|m| m.as_str()).collect();
+            if let Some(want) = writes.get(k).copied().flatten() {
+                if !want.contains(&t.msg) {
                     return Err(cx.err(
                         p.span(),
                         format!(
@@ -1246,7 +1068,7 @@ fn build(cx: &Ctx<'_>, raw: RawGraph) -> Result<GraphSpec, SpecError> {
                             t.name,
                             t.msg.as_str(),
                             a_kind(kind_name),
-                            names.join(" or ")
+                            type_names(want)
                         ),
                     ));
                 }
@@ -1266,16 +1088,8 @@ fn build(cx: &Ctx<'_>, raw: RawGraph) -> Result<GraphSpec, SpecError> {
             t.publisher = id;
             publishes.push(TopicId(ti));
         }
-        if kind == NodeKind::External && publishes.is_empty() {
-            return Err(cx.err(
-                r.name.span(),
-                "an external node must publish a topic: what it publishes is how ratelab hears it",
-            ));
-        }
         let params = node_params(cx, kind, r)?;
-        let python = python_node(cx, kind, r)?;
-        let registered = registered_node(cx, kind, kind_name, r)?;
-        let external = external_node(cx, kind, r)?;
+        let python = python_code(cx, kind, r)?;
         let liveliness_lease = r
             .liveliness_lease_ms
             .as_ref()
@@ -1303,7 +1117,7 @@ fn build(cx: &Ctx<'_>, raw: RawGraph) -> Result<GraphSpec, SpecError> {
             .transpose()?
             .filter(|c| !c.is_zero());
         if let (Some(_), Some(c)) = (compute, &r.compute_ms) {
-            if kind == NodeKind::Actuator {
+            if kind.is_actuator() {
                 return Err(cx.err(c.span(), executors::ACTUATOR_NO_COMPUTE));
             }
         }
@@ -1318,8 +1132,6 @@ fn build(cx: &Ctx<'_>, raw: RawGraph) -> Result<GraphSpec, SpecError> {
             liveliness_lease,
             process,
             python,
-            registered,
-            external,
             compute,
             callback_group: r.callback_group.as_ref().map(|g| g.get_ref().clone()),
         });
@@ -1351,7 +1163,7 @@ fn build(cx: &Ctx<'_>, raw: RawGraph) -> Result<GraphSpec, SpecError> {
         }
         let to_actuator = t
             .subscriber
-            .is_some_and(|n| file_nodes[n.0].kind == NodeKind::Actuator);
+            .is_some_and(|n| file_nodes[n.0].kind.is_actuator());
         qos::check_combination(&t.qos, to_actuator).map_err(|e| {
             let raw = raw.topics[i].get_ref();
             let at = raw
@@ -1389,17 +1201,13 @@ fn build(cx: &Ctx<'_>, raw: RawGraph) -> Result<GraphSpec, SpecError> {
         t.publisher = NodeId(new_index[t.publisher.0]);
         t.subscriber = t.subscriber.map(|s| NodeId(new_index[s.0]));
     }
+    let actuator = NodeId(nodes.iter().position(|n| n.kind.is_actuator()).unwrap_or(0));
     let mut spec = GraphSpec {
         name,
         nodes,
         topics,
-        chain: Chain {
-            sensor: NodeId(0),
-            policy: NodeId(0),
-            actuator: NodeId(0),
-            obs: TopicId(0),
-            action: TopicId(0),
-        },
+        actuator,
+        chain: None,
         executors: Vec::new(),
         restart: std::collections::BTreeMap::new(),
     };
@@ -1413,37 +1221,20 @@ fn build(cx: &Ctx<'_>, raw: RawGraph) -> Result<GraphSpec, SpecError> {
     if let Some(p) = &raw.processes {
         spec.restart = processes::processes(cx, p, &spec)?;
     }
-    spec.chain = find_chain(&spec).map_err(|reason| {
-        let at = node_spans[order[spec_actuator(&spec).0]].clone();
-        cx.err(at, reason)
-    })?;
+    spec.chain = find_chain(&spec);
     Ok(spec)
 }
 
-fn spec_actuator(spec: &GraphSpec) -> NodeId {
-    NodeId(
-        spec.nodes
-            .iter()
-            .position(|n| n.kind == NodeKind::Actuator)
-            .unwrap_or(0),
-    )
-}
-
-/// Walk upstream from the actuator: safety nodes, the policy, an estimator, the sensor.
-///
-/// A node of an open kind (python, registered, external) is the policy when it reads a
-/// `state` topic (its first); else a safety node when it reads a `force` topic (its first),
-/// which the walk follows; else, reading anything, the policy too (a controller with its
-/// own estimator may read `position` alone), its first input its observation. Up from the
-/// policy, the walk follows each node's first input.
-fn find_chain(spec: &GraphSpec) -> Result<Chain, String> {
-    let actuator = spec_actuator(spec);
-    let open = |n: NodeId| {
-        matches!(
-            spec.nodes[n.0].kind,
-            NodeKind::Python | NodeKind::Registered | NodeKind::External
-        )
-    };
+/// The chapter's chain, if the graph has it: walk upstream from the actuator's `force`
+/// input. A node that reads `state` (its first such input) is the policy; else one that
+/// reads `force` passes it on (a safety limiter), and the walk goes on up it; else the
+/// node drives the actuator from what it reads (a controller with its own estimator may
+/// read `position` alone) and is the policy, its first input its observation. Up from the
+/// policy, the walk follows first inputs (through estimators) to a node that reads the
+/// plant (a sensor). Any other shape — the actuator fed by a node that reads nothing (an
+/// open-loop source), a policy fed by no sensor — has no chain.
+fn find_chain(spec: &GraphSpec) -> Option<Chain> {
+    let actuator = spec.actuator;
     // Node `n`'s first input of type `m` (any type: `None`), with its publisher.
     let input = |n: NodeId, m: Option<MsgType>| -> Option<(TopicId, NodeId)> {
         let t = *spec.nodes[n.0]
@@ -1455,55 +1246,40 @@ fn find_chain(spec: &GraphSpec) -> Result<Chain, String> {
     let mut cur = actuator;
     let mut seen = 0;
     let (policy, action) = loop {
-        let (t, p) =
-            input(cur, Some(MsgType::Force)).ok_or("the actuator is not driven by a policy")?;
+        let Some((t, p)) = input(cur, Some(ForceMsg::TYPE)) else {
+            return None; // the actuator reads nothing
+        };
         seen += 1;
         if seen > MAX_NODES {
-            return Err(
-                "the actuator's input chain loops through safety nodes and never reaches a policy"
-                    .into(),
-            );
+            return None; // pass-through nodes in a loop
         }
         let reads = |m: MsgType| input(p, Some(m)).is_some();
-        match spec.nodes[p.0].kind {
-            NodeKind::Policy => break (p, t),
-            _ if open(p) && reads(MsgType::State) => break (p, t),
-            NodeKind::Safety => cur = p,
-            _ if open(p) && reads(MsgType::Force) => cur = p,
-            _ if open(p) => break (p, t),
-            _ => return Err("the actuator is not driven by a policy".into()),
+        if reads(StateMsg::TYPE) || !reads(ForceMsg::TYPE) {
+            break (p, t);
         }
+        cur = p;
     };
-    // Its `state` input, else (an open kind reading no state) its first.
-    let (obs, mut src) = input(policy, Some(MsgType::State))
-        .or_else(|| input(policy, None))
-        .ok_or_else(|| {
-            format!(
-                "node '{}', which drives the actuator, reads nothing: a graph's policy reads what a sensor measures",
-                spec.nodes[policy.0].name
-            )
-        })?;
-    // Up through the estimators (built-in or of an open kind) to the sensor.
+    // Its `state` input, else its first.
+    let Some((obs, mut src)) = input(policy, Some(StateMsg::TYPE)).or_else(|| input(policy, None))
+    else {
+        return None; // an open-loop source drives the actuator
+    };
+    // Up through the nodes before it to the plant's sensor.
     for _ in 0..MAX_NODES {
-        if spec.nodes[src.0].kind == NodeKind::Estimator || open(src) {
-            let name = &spec.nodes[src.0].name;
-            src = input(src, None)
-                .ok_or_else(|| format!("node '{name}' before the policy reads nothing"))?
-                .1;
-        } else {
-            break;
+        if spec.nodes[src.0].kind.plant() == Plant::Reads {
+            return Some(Chain {
+                sensor: src,
+                policy,
+                obs,
+                action,
+            });
+        }
+        match input(src, None) {
+            Some((_, up)) => src = up,
+            None => return None, // fed by a source that is not a sensor
         }
     }
-    if spec.nodes[src.0].kind != NodeKind::Sensor {
-        return Err("the policy's input does not come from a sensor".into());
-    }
-    Ok(Chain {
-        sensor: src,
-        policy,
-        actuator,
-        obs,
-        action,
-    })
+    None
 }
 
 /// A topological order (Kahn; ready nodes in file order), with explicit priorities
@@ -1564,75 +1340,255 @@ fn tie_break_order(nodes: &[NodeSpec], topics: &[TopicSpec]) -> Result<Vec<usize
     Ok(order)
 }
 
-fn node_params(cx: &Ctx<'_>, kind: NodeKind, r: &RawNode) -> Result<NodeParams, SpecError> {
-    let only =
-        |field: &Option<Spanned<f64>>, name: &str, owner: NodeKind| -> Result<(), SpecError> {
-            match field {
-                Some(v) if kind != owner => Err(cx.err(
-                    v.span(),
-                    format!(
-                        "'{name}' is a parameter of {} nodes, not of a {} node",
-                        owner.as_str(),
-                        kind.as_str()
+/// Check a node's topics against its kind's ports: how many it reads and publishes. Per
+/// topic, the types it takes (`None`: any).
+#[allow(clippy::type_complexity)]
+fn check_ports(
+    cx: &Ctx<'_>,
+    kind: Kind,
+    r: &RawNode,
+    sub_names: &[Spanned<String>],
+    pub_names: &[Spanned<String>],
+) -> Result<
+    (
+        Vec<Option<&'static [MsgType]>>,
+        Vec<Option<&'static [MsgType]>>,
+    ),
+    SpecError,
+> {
+    let kind_name = kind.as_str();
+    match &kind.def().ports {
+        Ports::Fixed { inputs, outputs } => {
+            for (key, names, want) in [
+                ("subscribes", sub_names, inputs),
+                ("publishes", pub_names, outputs),
+            ] {
+                if names.len() == want.len() {
+                    continue;
+                }
+                let a = a_kind(kind_name);
+                let (at, reason) = match (names.len(), want.as_slice()) {
+                    // The chapter's kinds read and publish one topic or none.
+                    (0, [t]) if kind.code() == Code::BuiltIn && key == "subscribes" => (
+                        r.name.span(),
+                        format!("{a} node must subscribe to a {} topic", type_names(t)),
                     ),
-                )),
-                _ => Ok(()),
+                    (0, [_]) if kind.code() == Code::BuiltIn => {
+                        (r.name.span(), format!("{a} node must publish a topic"))
+                    }
+                    (_, []) if kind.code() == Code::BuiltIn => {
+                        let what = if key == "subscribes" {
+                            "subscribes to"
+                        } else {
+                            "publishes"
+                        };
+                        (names[0].span(), format!("{a} node {what} nothing"))
+                    }
+                    (_, [_]) if kind.code() == Code::BuiltIn => (
+                        names[1].span(),
+                        format!("{a} node {key} one topic (only a python node may have several)"),
+                    ),
+                    _ => {
+                        let list: Vec<String> = want.iter().map(|t| type_names(t)).collect();
+                        let wanted = match list.len() {
+                            0 => "no topic".to_string(),
+                            1 => format!("one {} topic", list[0]),
+                            n => format!("{n} topics: {}", list.join(", ")),
+                        };
+                        (
+                            names.first().map_or_else(|| r.name.span(), |n| n.span()),
+                            format!(
+                                "a node of kind '{kind_name}' {key} {wanted}, in that order (as registered), not {}",
+                                names.len()
+                            ),
+                        )
+                    }
+                };
+                return Err(cx.err(at, reason));
             }
-        };
-    only(&r.noise_pos_m, "noise_pos_m", NodeKind::Sensor)?;
-    only(&r.noise_angle_rad, "noise_angle_rad", NodeKind::Sensor)?;
-    only(&r.cutoff_hz, "cutoff_hz", NodeKind::Estimator)?;
-    only(&r.max_force_n, "max_force_n", NodeKind::Safety)?;
-    let value =
-        |field: &Option<Spanned<f64>>, default: f64, range: Range<f64>, what: &str| match field {
-            None => Ok(default),
-            Some(v) => {
-                let x = *v.get_ref();
-                if x.is_finite() && x >= range.start && x <= range.end {
-                    Ok(x)
-                } else {
-                    Err(cx.err(
-                        v.span(),
-                        format!(
-                            "{what} must be in [{}, {}], got {x}",
-                            range.start, range.end
-                        ),
-                    ))
+            Ok((
+                inputs.iter().map(|t| Some(*t)).collect(),
+                outputs.iter().map(|t| Some(*t)).collect(),
+            ))
+        }
+        &Ports::Open {
+            max_inputs,
+            min_outputs,
+            max_outputs,
+        } => {
+            for (key, names, max) in [
+                ("subscribes", sub_names, max_inputs),
+                ("publishes", pub_names, max_outputs),
+            ] {
+                if let Some(extra) = names.get(max) {
+                    let most = match max {
+                        0 => "nothing".to_string(),
+                        1 => "one topic".to_string(),
+                        n => format!("at most {n} topics"),
+                    };
+                    return Err(cx.err(
+                        extra.span(),
+                        format!("{} node {key} {most}", a_kind(kind_name)),
+                    ));
                 }
             }
-        };
-    Ok(NodeParams {
-        noise_pos_m: value(&r.noise_pos_m, 0.0, 0.0..1.0, "noise_pos_m (m)")?,
-        noise_angle_rad: value(&r.noise_angle_rad, 0.0, 0.0..0.5, "noise_angle_rad (rad)")?,
-        cutoff_hz: value(&r.cutoff_hz, 10.0, 0.01..MAX_HZ, "cutoff_hz (Hz)")?,
-        max_force_n: value(&r.max_force_n, GEAR_N, 0.0..GEAR_N, "max_force_n (N)")?,
-    })
+            if pub_names.len() < min_outputs {
+                let why = if kind.code() == Code::Ros2 {
+                    ": what it publishes is how ratelab hears it"
+                } else {
+                    ""
+                };
+                return Err(cx.err(
+                    r.name.span(),
+                    format!("{} node must publish a topic{why}", a_kind(kind_name)),
+                ));
+            }
+            Ok((vec![None; sub_names.len()], vec![None; pub_names.len()]))
+        }
+    }
 }
 
-/// A Python node's script, class and parameters: required and allowed only on
-/// `kind = "python"`. The script is resolved against the graph file's folder.
-fn python_node(
-    cx: &Ctx<'_>,
-    kind: NodeKind,
-    r: &RawNode,
-) -> Result<Option<PythonNodeSpec>, SpecError> {
-    if kind != NodeKind::Python {
-        // A registered kind takes `params` too (registered_node), and so does an external
-        // node (external_node).
-        let params = (kind != NodeKind::Registered && kind != NodeKind::External)
-            .then(|| r.params.as_ref().map(|v| ("params", v.span())))
-            .flatten();
+/// Message types as a file names them: `state`, or `state or position`.
+fn type_names(types: &[MsgType]) -> String {
+    types
+        .iter()
+        .map(|t| t.as_str())
+        .collect::<Vec<_>>()
+        .join(" or ")
+}
+
+/// The built-in kinds' parameters the file may also give as keys of the node's table, as
+/// the chapter's graphs do (`max_force_n = 8`), not only in `params = { … }`.
+const PARAM_KEYS: [&str; 4] = ["noise_pos_m", "noise_angle_rad", "cutoff_hz", "max_force_n"];
+
+/// A node's parameters, checked against its kind's ([`Params`]): `params = { … }` and the
+/// keys of [`PARAM_KEYS`]. A kind of numeric parameters gets every one it declares (the
+/// file's value, else its default) as a float; a Python or Rust kind its table as given
+/// (numbers, strings, booleans and arrays of them, under Python names).
+fn node_params(cx: &Ctx<'_>, kind: Kind, r: &RawNode) -> Result<toml::Table, SpecError> {
+    let a = a_kind(kind.as_str());
+    // (name, value, where, given as a key of the node's table)
+    let mut given: Vec<(String, toml::Value, Range<usize>, bool)> = Vec::new();
+    if let Some(p) = &r.params {
+        if p.get_ref().len() > MAX_PYTHON_PARAMS {
+            return Err(cx.err(
+                p.span(),
+                format!("a node has at most {MAX_PYTHON_PARAMS} params"),
+            ));
+        }
+        for (k, v) in p.get_ref() {
+            given.push((k.clone(), v.get_ref().clone(), v.span(), false));
+        }
+    }
+    let keys = [
+        &r.noise_pos_m,
+        &r.noise_angle_rad,
+        &r.cutoff_hz,
+        &r.max_force_n,
+    ];
+    for (key, field) in PARAM_KEYS.iter().zip(keys) {
+        if let Some(v) = field {
+            if given.iter().any(|g| g.0 == *key) {
+                return Err(cx.err(
+                    v.span(),
+                    format!("'{key}' is given twice: as a key and in params"),
+                ));
+            }
+            given.push((
+                key.to_string(),
+                toml::Value::Float(*v.get_ref()),
+                v.span(),
+                true,
+            ));
+        }
+    }
+    match kind.def().params {
+        Params::Numbers(defs) => {
+            let mut out = toml::Table::new();
+            for (k, v, span, as_key) in given {
+                let Some(d) = defs.iter().find(|d| d.name == k) else {
+                    let names: Vec<&str> = defs.iter().map(|d| d.name).collect();
+                    let takes = match names.as_slice() {
+                        [] => "takes no parameters".to_string(),
+                        [one] => format!("'s parameter is {one}"),
+                        [init @ .., last] => {
+                            format!("'s parameters are {} and {last}", init.join(", "))
+                        }
+                    };
+                    let sep = if takes.starts_with('\'') { "" } else { " " };
+                    return Err(cx.err(span, format!("{a} node{sep}{takes}, not '{k}'")));
+                };
+                let x = match v {
+                    toml::Value::Float(x) => x,
+                    toml::Value::Integer(i) => i as f64,
+                    _ => f64::NAN,
+                };
+                if !(x.is_finite() && x >= d.min && x <= d.max) {
+                    let name = if as_key { k } else { format!("params.{k}") };
+                    return Err(cx.err(
+                        span,
+                        format!(
+                            "{name} must be a number in {}..={} ({}), got {v}",
+                            d.min, d.max, d.unit
+                        ),
+                    ));
+                }
+                out.insert(d.name.to_string(), toml::Value::Float(x));
+            }
+            for d in defs {
+                out.entry(d.name).or_insert(toml::Value::Float(d.default));
+            }
+            Ok(out)
+        }
+        Params::Free => {
+            let mut out = toml::Table::new();
+            for (k, v, span, as_key) in given {
+                if as_key {
+                    return Err(cx.err(
+                        span,
+                        format!("'{k}' is a built-in kind's parameter, not one of {a} node (give a node's own in params = {{ … }})"),
+                    ));
+                }
+                let scalar = |v: &toml::Value| {
+                    matches!(
+                        v,
+                        toml::Value::Integer(_)
+                            | toml::Value::Float(_)
+                            | toml::Value::Boolean(_)
+                            | toml::Value::String(_)
+                    )
+                };
+                let ok = match &v {
+                    toml::Value::Array(a) => a.len() <= 4096 && a.iter().all(scalar),
+                    v => scalar(v),
+                };
+                if !valid_python_name(&k) || !ok {
+                    return Err(cx.err(
+                        span,
+                        format!("params.{k}: a parameter is a number, a string, a boolean or an array of them, under a Python name"),
+                    ));
+                }
+                out.insert(k, v);
+            }
+            Ok(out)
+        }
+    }
+}
+
+/// A Python node's script and class: required and allowed only on a kind whose code is
+/// Python. The script is resolved against the graph file's folder.
+fn python_code(cx: &Ctx<'_>, kind: Kind, r: &RawNode) -> Result<Option<PythonCode>, SpecError> {
+    if kind.code() != Code::Python {
         let stray = [
             r.script.as_ref().map(|v| ("script", v.span())),
             r.class.as_ref().map(|v| ("class", v.span())),
-            params,
         ];
         if let Some((key, span)) = stray.into_iter().flatten().next() {
             return Err(cx.err(
                 span,
                 format!(
-                    "'{key}' is for python nodes, not for a {} node",
-                    kind.as_str()
+                    "'{key}' is for python nodes, not for {} node",
+                    a_kind(kind.as_str())
                 ),
             ));
         }
@@ -1660,113 +1616,10 @@ fn python_node(
         }
         c => c.as_ref().map(|c| c.get_ref().clone()),
     };
-    let params = node_table(cx, r)?;
-    Ok(Some(PythonNodeSpec {
+    Ok(Some(PythonCode {
         script: resolved.to_string_lossy().into_owned(),
         class,
-        params,
     }))
-}
-
-/// A registered kind's name and parameters: `Some` on a [`NodeKind::Registered`] node.
-fn registered_node(
-    cx: &Ctx<'_>,
-    kind: NodeKind,
-    kind_name: &str,
-    r: &RawNode,
-) -> Result<Option<RegisteredNodeSpec>, SpecError> {
-    if kind != NodeKind::Registered {
-        return Ok(None);
-    }
-    Ok(Some(RegisteredNodeSpec {
-        kind: kind_name.to_string(),
-        params: node_table(cx, r)?,
-    }))
-}
-
-/// An external node's waits from its `params = { … }`: `Some` on a [`NodeKind::External`]
-/// node, whose params may name only `appear_timeout_s` and `tick_timeout_ms`.
-fn external_node(
-    cx: &Ctx<'_>,
-    kind: NodeKind,
-    r: &RawNode,
-) -> Result<Option<ExternalNodeSpec>, SpecError> {
-    if kind != NodeKind::External {
-        return Ok(None);
-    }
-    let mut spec = ExternalNodeSpec::default();
-    let Some(p) = &r.params else {
-        return Ok(Some(spec));
-    };
-    for (k, v) in p.get_ref() {
-        let (scale, range, slot) = match k.as_str() {
-            "appear_timeout_s" => (1e9, 0.0..=600.0, &mut spec.appear_timeout),
-            "tick_timeout_ms" => (1e6, 1.0..=60_000.0, &mut spec.tick_timeout),
-            _ => {
-                return Err(cx.err(
-                    p.span(),
-                    format!(
-                    "an external node's params are appear_timeout_s and tick_timeout_ms, not '{k}'"
-                ),
-                ))
-            }
-        };
-        let x = match v {
-            toml::Value::Float(x) => *x,
-            toml::Value::Integer(i) => *i as f64,
-            _ => f64::NAN,
-        };
-        if !range.contains(&x) {
-            return Err(cx.err(
-                p.span(),
-                format!(
-                    "params.{k} must be a number in {}..={}, got {v}",
-                    range.start(),
-                    range.end()
-                ),
-            ));
-        }
-        *slot = Nanos((x * scale).round() as u64);
-    }
-    Ok(Some(spec))
-}
-
-/// A node's `params = { … }` (empty when absent): at most [`MAX_PYTHON_PARAMS`] entries,
-/// each a number, a string, a boolean or an array of them, under a Python name.
-fn node_table(cx: &Ctx<'_>, r: &RawNode) -> Result<toml::Table, SpecError> {
-    Ok(match &r.params {
-        None => toml::Table::new(),
-        Some(p) => {
-            if p.get_ref().len() > MAX_PYTHON_PARAMS {
-                return Err(cx.err(
-                    p.span(),
-                    format!("a node has at most {MAX_PYTHON_PARAMS} params"),
-                ));
-            }
-            for (k, v) in p.get_ref() {
-                let scalar = |v: &toml::Value| {
-                    matches!(
-                        v,
-                        toml::Value::Integer(_)
-                            | toml::Value::Float(_)
-                            | toml::Value::Boolean(_)
-                            | toml::Value::String(_)
-                    )
-                };
-                let ok = match v {
-                    toml::Value::Array(a) => a.len() <= 4096 && a.iter().all(scalar),
-                    v => scalar(v),
-                };
-                if !valid_python_name(k) || !ok {
-                    return Err(cx.err(
-                        p.span(),
-                        format!("params.{k}: a parameter is a number, a string, a boolean or an array of them, under a Python name"),
-                    ));
-                }
-            }
-            p.get_ref().clone()
-        }
-    })
 }
 
 /// A Python identifier (ASCII): a class or parameter name.
@@ -1855,13 +1708,15 @@ depth = 1
     fn the_default_graph_orders_sensor_policy_actuator() {
         let g = GraphSpec::chapter();
         assert_eq!(g.node_names(), ["sensor", "policy", "actuator"]);
-        assert_eq!(g.chain.obs, g.topic_id("/obs").unwrap());
-        assert_eq!(g.chain.action, g.topic_id("/action").unwrap());
+        let chain = g.chain.unwrap();
+        assert_eq!(chain.obs, g.topic_id("/obs").unwrap());
+        assert_eq!(chain.action, g.topic_id("/action").unwrap());
+        assert_eq!(g.node(g.actuator).name, "actuator");
         assert_eq!(
             (g.sensor_hz(), g.control_hz(), g.actuator_hz()),
-            (50.0, 50.0, 50.0)
+            (Some(50.0), Some(50.0), 50.0)
         );
-        assert_eq!(g.queue_depth(), 1);
+        assert_eq!(g.queue_depth(), Some(1));
     }
 
     #[test]
@@ -1920,9 +1775,10 @@ depth = 1
         assert_eq!(names(&g.node(tracker).publishes), ["/action", "/error"]);
         // The chain: the state input makes it the policy; its output toward the actuator
         // is the action; /reference's publisher ranks before it (topological order).
-        assert_eq!(g.chain.policy, tracker);
-        assert_eq!(g.topic(g.chain.obs).name, "/obs");
-        assert_eq!(g.topic(g.chain.action).name, "/action");
+        let chain = g.chain.unwrap();
+        assert_eq!(chain.policy, tracker);
+        assert_eq!(g.topic(chain.obs).name, "/obs");
+        assert_eq!(g.topic(chain.action).name, "/action");
         assert_eq!(
             g.node_names(),
             ["sensor", "reference", "tracker", "actuator"]
@@ -1945,21 +1801,26 @@ depth = 1
     #[test]
     fn an_open_node_driving_the_actuator_is_the_policy_whatever_it_reads() {
         let g = parse(include_str!("../../graphs/cartpole-position-python.toml")).unwrap();
-        assert_eq!(g.node(g.chain.policy).name, "controller");
-        assert_eq!(g.topic(g.chain.obs).name, "/meas");
-        assert_eq!(g.node(g.chain.sensor).name, "sensor");
-        // One that reads nothing is refused, by name.
+        let chain = g.chain.unwrap();
+        assert_eq!(g.node(chain.policy).name, "controller");
+        assert_eq!(g.topic(chain.obs).name, "/meas");
+        assert_eq!(g.node(chain.sensor).name, "sensor");
+        // One that reads nothing drives the actuator open loop: a valid graph, without
+        // the chapter's chain.
         let text = include_str!("../../graphs/cartpole-position-python.toml")
             .replace("subscribes = \"/meas\"\n", "");
         let text = text.replace(
             "publishes = \"/meas\"",
             "publishes = \"/meas\"\n[[node]]\nname = \"log\"\nkind = \"python\"\nscript = \"l.py\"\nrate_hz = 1\nsubscribes = \"/meas\"",
         );
-        let e = parse(&text).unwrap_err().reason;
-        assert!(
-            e.starts_with("node 'controller', which drives the actuator, reads nothing"),
-            "{e}"
-        );
+        let g = parse(&text).unwrap();
+        assert_eq!(g.chain, None);
+        assert_eq!((g.control_hz(), g.queue_depth()), (None, None));
+        assert!(g
+            .chain_for("--control-hz")
+            .unwrap_err()
+            .0
+            .starts_with("--control-hz speaks of the chapter's chain"));
         // A built-in policy still must read state.
         let e = parse(&CHAIN.replace("type = \"state\"", "type = \"position\"")).unwrap_err();
         assert!(e.reason.contains("type mismatch"), "{e}");
@@ -2012,12 +1873,56 @@ depth = 1
     }
 
     #[test]
-    fn every_built_in_kind_name_is_a_node_kind_and_back() {
-        for name in crate::graph::registry::BUILT_IN_KINDS {
-            let kind = NodeKind::built_in(name).expect(name);
+    fn every_built_in_kind_is_registered_under_its_name() {
+        for name in [
+            "sensor",
+            "estimator",
+            "policy",
+            "safety",
+            "actuator",
+            "python",
+            "external",
+        ] {
+            let kind = crate::graph::registry::kind(name).expect(name);
             assert_eq!(kind.as_str(), name);
         }
-        assert_eq!(NodeKind::built_in("registered"), None);
+        assert_eq!(crate::graph::registry::kind("registered"), None);
+    }
+
+    #[test]
+    fn a_kinds_parameters_are_checked_and_defaulted() {
+        let safety = include_str!("../../graphs/cartpole-safety.toml");
+        let g = parse(safety).unwrap();
+        let limit = g.node(g.node_id("safety").unwrap());
+        assert_eq!(limit.param("max_force_n"), Some(8.0));
+        // In params = { … } too, and a default where the file gives none.
+        let g = parse(&safety.replace("max_force_n = 8 ", "params = { max_force_n = 3 }")).unwrap();
+        assert_eq!(
+            g.node(g.node_id("safety").unwrap()).param("max_force_n"),
+            Some(3.0)
+        );
+        let g = parse(&safety.replace("max_force_n = 8 ", "")).unwrap();
+        assert_eq!(
+            g.node(g.node_id("safety").unwrap()).param("max_force_n"),
+            Some(10.0)
+        );
+        let e = parse(&safety.replace("max_force_n = 8 ", "max_force_n = 11 ")).unwrap_err();
+        assert!(
+            e.reason
+                .starts_with("max_force_n must be a number in 0..=10 (N), got 11"),
+            "{e}"
+        );
+        let e =
+            parse(&safety.replace("max_force_n = 8 ", "params = { max_force = 3 }")).unwrap_err();
+        assert_eq!(
+            e.reason,
+            "a safety node's parameter is max_force_n, not 'max_force'"
+        );
+        let e = parse(&safety.replace("max_force_n = 8 ", "cutoff_hz = 3 ")).unwrap_err();
+        assert_eq!(
+            e.reason,
+            "a safety node's parameter is max_force_n, not 'cutoff_hz'"
+        );
     }
 
     #[test]
@@ -2050,7 +1955,7 @@ depth = 1
     fn overrides_follow_the_file_rules() {
         let mut g = GraphSpec::chapter();
         g.set_rate("policy", 5.0).unwrap();
-        assert_eq!(g.control_hz(), 5.0);
+        assert_eq!(g.control_hz(), Some(5.0));
         assert!(g.set_rate("policy", 0.0).is_err());
         assert!(g
             .set_rate("actuator", 40.0)
@@ -2063,7 +1968,7 @@ depth = 1
             .0
             .contains("no node 'planner'"));
         g.set_depth("/obs", 100).unwrap();
-        assert_eq!(g.queue_depth(), 100);
+        assert_eq!(g.queue_depth(), Some(100));
         assert!(g.set_depth("/obs", 0).is_err());
         assert!(g.set_depth("/nope", 1).is_err());
     }

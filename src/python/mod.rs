@@ -284,3 +284,40 @@ pub fn interrupt_callbacks(grace: Duration) {
         }
     });
 }
+
+/// The message registry as Python's `install_message_module` takes it: per type its name,
+/// class, doc, fields `(name, unit, doc)` and ROS 2 type.
+type RegistryRow = (
+    &'static str,
+    &'static str,
+    &'static str,
+    Vec<(&'static str, &'static str, &'static str)>,
+    Option<&'static str>,
+);
+
+fn message_registry() -> Vec<RegistryRow> {
+    crate::msg::registered()
+        .into_iter()
+        .map(|t| {
+            (
+                t.as_str(),
+                t.class(),
+                t.doc(),
+                t.fields().iter().map(|f| (f.name, f.unit, f.doc)).collect(),
+                t.ros2().map(|c| (c.ros_type)().name),
+            )
+        })
+        .collect()
+}
+
+/// Make `import ratelab` give every registered message type's class (and `Time`), as a
+/// Python node sees them ([`crate::msg`]: the one definition of each type).
+///
+/// # Errors
+/// The support module's error: a built-in class that does not match the registry.
+pub fn install_messages(py: Python<'_>) -> PyResult<()> {
+    let support =
+        support(py).map_err(|e| pyo3::exceptions::PyRuntimeError::new_err(e.to_string()))?;
+    support.call_method1("install_message_module", (message_registry(),))?;
+    Ok(())
+}

@@ -43,8 +43,8 @@
 //! at that tick, naming `FILE:LINE` of the raising frame and the exception.
 
 use super::{describe, start, support, CallbackGuard, PythonError};
-use crate::graph::spec::PythonNodeSpec;
-use crate::msg::{AnyTopic, ForceMsg, PositionMsg};
+use crate::graph::kind::{BuildContext, PythonCode};
+use crate::msg::AnyTopic;
 use crate::publisher::Outbox;
 use crate::time::Nanos;
 use pyo3::prelude::*;
@@ -78,22 +78,16 @@ struct Input {
 pub struct TickError(pub String);
 
 impl PythonNode {
-    /// Load node `name` (ticking every `period`) from `spec`, wired to `inputs` and
-    /// `outputs` (the topics the graph file gives it, in its order, published through
-    /// `outbox`); `seed` is the run's.
+    /// Load the node `cx` makes (its name, period, seed, parameters, topics in the graph
+    /// file's order, outbox) from `code`.
     ///
     /// # Errors
     /// [`PythonError`]: see the module docs.
-    pub fn load(
-        name: &str,
-        spec: &PythonNodeSpec,
-        period: Nanos,
-        inputs: Vec<AnyTopic>,
-        outputs: Vec<AnyTopic>,
-        outbox: Outbox,
-        seed: u64,
-    ) -> Result<PythonNode, PythonError> {
-        let script = spec.script.as_str();
+    pub fn load(cx: &BuildContext<'_>, code: &PythonCode) -> Result<PythonNode, PythonError> {
+        let (name, params, period, seed) = (cx.name, cx.params, cx.period(), cx.seed);
+        let (inputs, outputs, outbox) =
+            (cx.inputs.to_vec(), cx.outputs.to_vec(), cx.outbox.clone());
+        let script = code.script.as_str();
         let source = super::brain::read_script(script)?;
         start()?;
         let module_name = format!("ratelab_node_{name}");
@@ -106,15 +100,13 @@ impl PythonNode {
             let support = support(py)?;
             let fail = |e: PyErr| PythonError::Script(describe(py, &e, script));
             let _running = CallbackGuard::enter(&format!("node '{name}' ({script}) loading"));
-            support
-                .call_method0("install_message_module")
-                .map_err(fail)?;
+            super::install_messages(py).map_err(fail)?;
             let module = support
                 .call_method1("load_module", (script, source, module_name))
                 .map_err(fail)?;
-            let params = PyDict::new(py);
-            for (k, v) in &spec.params {
-                params.set_item(k, to_python(py, v)).map_err(fail)?;
+            let py_params = PyDict::new(py);
+            for (k, v) in params {
+                py_params.set_item(k, to_python(py, v)).map_err(fail)?;
             }
             let runtime = support
                 .call_method1(
@@ -122,12 +114,12 @@ impl PythonNode {
                     (
                         module,
                         script,
-                        spec.class.as_deref(),
+                        code.class.as_deref(),
                         name,
                         period.0,
                         declared(&inputs),
                         declared(&outputs),
-                        params,
+                        py_params,
                         seed,
                     ),
                 )
@@ -207,51 +199,14 @@ impl PythonNode {
 /// Read `t` at `now` by its QoS: the message's seq, origin (its own stamp when it has
 /// none) and fields.
 fn read(t: &AnyTopic, now: Nanos) -> Option<(u64, Nanos, Fields)> {
-    fn parts<T>(m: crate::topic::Message<T>, fields: Fields) -> (u64, Nanos, Fields) {
-        (m.seq, m.origin_stamp.unwrap_or(m.stamp), fields)
-    }
-    Some(match t {
-        AnyTopic::State(t) => {
-            let m = t.read(now)?;
-            let f = m.data.map(f64::from).to_vec();
-            parts(m, f)
-        }
-        AnyTopic::Position(t) => {
-            let m = t.read(now)?;
-            let f = vec![m.data.cart_pos_m, m.data.pole_angle_rad];
-            parts(m, f)
-        }
-        AnyTopic::Force(t) => {
-            let m = t.read(now)?;
-            let f = vec![m.data.newtons];
-            parts(m, f)
-        }
-    })
+    let m = t.read(now)?;
+    Some((m.seq, m.origin, m.data.fields()))
 }
 
 /// Publish a fields tuple (checked against the type by the Python side) on `t`.
 fn publish(outbox: &Outbox, t: &AnyTopic, f: &[f64], now: Nanos, origin: Option<Nanos>) {
-    let at = |i: usize| f.get(i).copied().unwrap_or(0.0);
-    match t {
-        AnyTopic::State(t) => {
-            outbox.publish(
-                t,
-                [at(0), at(1), at(2), at(3), at(4)].map(|v| v as f32),
-                now,
-                origin,
-            );
-        }
-        AnyTopic::Position(t) => {
-            let m = PositionMsg {
-                cart_pos_m: at(0),
-                pole_angle_rad: at(1),
-            };
-            outbox.publish(t, m, now, origin);
-        }
-        AnyTopic::Force(t) => {
-            outbox.publish(t, ForceMsg { newtons: at(0) }, now, origin);
-        }
-    }
+    // Of the topic's own type: it cannot be refused.
+    let _ = t.publish(Some(outbox), &t.msg_type().from_fields(f), now, origin);
 }
 
 /// A graph file's parameter as a Python value.

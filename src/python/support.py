@@ -434,10 +434,29 @@ def node_runtime(module, script, class_name, name, period_ns, inputs, outputs, p
                        seed)
 
 
-def install_message_module():
-    """`import ratelab` in a learner's script gives the message classes and Time."""
+def install_message_module(registry):
+    """`import ratelab` in a learner's script gives the message classes and Time.
+
+    `registry` is ratelab's message registry (src/msg/mod.rs), the one definition of every
+    message type: [(name, class, doc, [(field, unit, doc), ...], ros_type or None), ...].
+    The built-in types' classes are written above (with their ROS 2 conversions) and must
+    match it; a type a Rust program registered gets a class made from its fields."""
+    for name, class_name, doc, fields, ros_type in registry:
+        names = tuple(f for f, _, _ in fields)
+        cls = MESSAGE_TYPES.get(name)
+        if cls is None:
+            described = "; ".join(f"{f} ({u}): {d}" for f, u, d in fields)
+            cls = type(class_name, (_Msg,), {
+                "__slots__": names, "FIELDS": names, "ROS_TYPE": ros_type,
+                "__doc__": f"{doc} Fields: {described}.", "__module__": "ratelab"})
+            MESSAGE_TYPES[name] = cls
+        elif (cls.__name__, cls.FIELDS, cls.ROS_TYPE) != (class_name, names, ros_type):
+            raise RuntimeError(f"ratelab's Python class {cls.__name__} does not match message "
+                               f"type '{name}' as Rust defines it ({class_name}: "
+                               f"{', '.join(names)}; ROS 2 {ros_type})")
     mod = types.ModuleType("ratelab")
-    mod.__doc__ = "ratelab's message types for Python nodes: State, Position, Force, Time."
-    for cls in (State, Position, Force, Time):
+    mod.__doc__ = ("ratelab's message types for Python nodes ("
+                   + ", ".join(c.__name__ for c in MESSAGE_TYPES.values()) + ") and Time.")
+    for cls in list(MESSAGE_TYPES.values()) + [Time]:
         setattr(mod, cls.__name__, cls)
     sys.modules["ratelab"] = mod

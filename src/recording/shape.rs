@@ -5,7 +5,7 @@
 //! which is built in one place, [`GraphShape::from_handles`].
 
 use crate::graph::GraphHandles;
-use crate::msg::{AnyTopic, ForceMsg};
+use crate::msg::ForceMsg;
 use crate::qos::{Liveliness, TopicQos};
 use crate::rate::Rate;
 use crate::topic::{Topic, TopicStats};
@@ -84,10 +84,10 @@ impl GraphShape {
     /// rate, every topic with its publisher, subscriber and live counters; the chain's
     /// policy sets the control period, and its output topic is the published force.
     pub fn from_handles(h: &GraphHandles) -> Self {
-        let commands = match h.topic(h.spec.chain.action) {
-            AnyTopic::Force(t) => Some(t.clone()),
-            _ => None,
-        };
+        let commands = h
+            .spec
+            .chain
+            .and_then(|c| h.topic(c.action).typed::<ForceMsg>().cloned());
         Self::build(
             &h.spec,
             &h.rates,
@@ -178,7 +178,7 @@ impl GraphShape {
                     live_qos: live_qos(i),
                 })
                 .collect(),
-            controller: Some(spec.node(spec.chain.policy).name.clone()),
+            controller: spec.chain.map(|c| spec.node(c.policy).name.clone()),
             commands,
         }
     }

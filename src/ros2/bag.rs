@@ -363,11 +363,10 @@ struct FileInfo {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::msg::MsgType;
 
     #[test]
     fn a_schema_carries_the_types_it_refers_to() {
-        let s = schema(super::super::types::ros_type_of(MsgType::State));
+        let s = schema(super::super::types::joint_state_type());
         assert!(s.starts_with("std_msgs/Header header\n"), "{s}");
         assert!(s.contains("\nMSG: std_msgs/Header\nbuiltin_interfaces/Time stamp\n"));
         assert!(s.contains("\nMSG: builtin_interfaces/Time\nint32 sec\n"));

@@ -29,8 +29,9 @@
 
 use super::bag::{Bag, BagTopic};
 use super::names::{check_node_name, check_topic_name};
+use super::ros_type_of;
 use super::session::{Ros2Session, Router};
-use super::types::{clock_type, encode, encode_clock, ros_type_of, type_info, RosType};
+use super::types::{clock_type, encode_clock, type_info, RosType};
 use super::{zerr, Ros2Error, Ros2Options};
 use crate::config::ClockKind;
 use crate::graph::nodes::external::{ExternalLink, ExternalStats};
@@ -41,7 +42,6 @@ use crate::msg::MsgData;
 use crate::qos::{History, Reliability};
 use crate::scheduler::StopFlag;
 use crate::time::Nanos;
-use crate::topic::Message;
 use crossbeam_channel::{Receiver, Sender, TrySendError};
 use hiroz_protocol::entity::{EndpointEntity, EndpointKind, NodeEntity};
 use hiroz_protocol::qos::{QosDuration, QosHistory, QosProfile, QosReliability};
@@ -209,6 +209,12 @@ pub fn check_graph(spec: &GraphSpec) -> Result<(), String> {
     }
     for t in &spec.topics {
         check_topic_name(&t.name).map_err(|e| format!("--ros2: topic {e}"))?;
+        if t.msg.ros2().is_none() {
+            return Err(format!(
+                "--ros2: topic '{}' carries '{}', a message type with no ROS 2 type (give it one: ratelab::msg::RosMapped)",
+                t.name, t.msg
+            ));
+        }
         if t.name == CLOCK_TOPIC {
             return Err(format!(
                 "--ros2: the graph's topic {CLOCK_TOPIC} would be a second /clock publisher (ratelab publishes the run's clock there); rename it"
@@ -624,7 +630,9 @@ impl Bridge {
 
 /// Tap `topic` (number `i`) into the bridge's channel.
 fn tap(topic: &AnyTopic, i: usize, tx: Sender<Out>, waits: bool, dropped: Arc<AtomicU64>) {
-    let send = move |seq: u64, stamp: Nanos, data: MsgData| {
+    // A topic has one tap; a second bridge on the same topics is a caller's bug, and the
+    // first keeps them.
+    topic.set_data_tap(Box::new(move |seq: u64, stamp: Nanos, data: MsgData| {
         let out = Out::Msg {
             topic: i,
             seq,
@@ -636,22 +644,7 @@ fn tap(topic: &AnyTopic, i: usize, tx: Sender<Out>, waits: bool, dropped: Arc<At
         } else if let Err(TrySendError::Full(_)) = tx.try_send(out) {
             dropped.fetch_add(1, Ordering::Relaxed);
         }
-    };
-    // A topic has one tap; a second bridge on the same topics is a caller's bug, and the
-    // first keeps them.
-    fn tap_topic<T: Clone + Into<MsgData> + 'static>(
-        t: &crate::topic::Topic<T>,
-        send: impl Fn(u64, Nanos, MsgData) + Send + Sync + 'static,
-    ) {
-        let _ = t.set_tap(Box::new(move |m: &Message<T>| {
-            send(m.seq, m.stamp, m.data.clone().into())
-        }));
-    }
-    match topic {
-        AnyTopic::State(t) => tap_topic(t, send),
-        AnyTopic::Position(t) => tap_topic(t, send),
-        AnyTopic::Force(t) => tap_topic(t, send),
-    }
+    }));
 }
 
 fn put(o: &Outlet, seq: i64, bytes: &[u8]) -> Result<(), String> {
@@ -764,7 +757,9 @@ fn forward(
                 if !f.deferred {
                     f.tick(stamp);
                 }
-                encode(&data, stamp, &mut f.buf);
+                if let Some(codec) = data.msg_type().ros2() {
+                    (codec.encode)(&data, stamp, &mut f.buf);
+                }
                 let seq = i64::try_from(seq).unwrap_or(i64::MAX - 1) + 1;
                 if f.send(topic, seq, stamp) {
                     f.offered += 1;
@@ -830,7 +825,7 @@ mod tests {
         let mut spec = GraphSpec::chapter();
         spec.set_qos("/action", "deadline_ms=40").unwrap();
         let q = qos_of(&spec, spec.topic_id("/action").unwrap().0);
-        assert_eq!(q.history, QosHistory::KeepLast(spec.queue_depth()));
+        assert_eq!(q.history, QosHistory::KeepLast(spec.queue_depth().unwrap()));
         assert_eq!(
             q.deadline,
             QosDuration {

@@ -22,7 +22,8 @@
 //! subscriber in order; an rclpy executor may still run a timer before a subscription
 //! callback that arrived first (docs/ros2.md).
 
-use super::types::{decode, ros_type_of, type_info, RosType};
+use super::ros_type_of;
+use super::types::{type_info, RosType};
 use super::{zerr, Ros2Error};
 use crate::graph::nodes::ExternalPort;
 use crate::graph::GraphSpec;
@@ -93,7 +94,7 @@ pub fn check_offered(spec: &GraphSpec) -> Result<(), String> {
 pub fn check_placement(spec: &GraphSpec) -> Result<(), String> {
     let mut host: Option<(String, &str)> = None;
     for (i, n) in spec.nodes.iter().enumerate() {
-        if n.kind != crate::graph::NodeKind::External {
+        if n.kind.code() != crate::graph::kind::Code::Ros2 {
             continue;
         }
         let p = spec.process_of(crate::graph::NodeId(i));
@@ -329,12 +330,16 @@ pub fn listen(
                 ros_type_of(topic.msg),
             )?;
             let port = p.clone();
-            let msg = topic.msg;
+            let decode = topic
+                .msg
+                .ros2()
+                .expect("a graph offered to ROS 2 has only mapped types")
+                .decode;
             session
                 .declare_subscriber(key)
                 .callback(move |sample| {
                     let bytes = sample.payload().to_bytes();
-                    match decode(msg, &bytes) {
+                    match decode(&bytes) {
                         Ok(data) => port.push(data),
                         Err(e) => port.refuse(e),
                     }

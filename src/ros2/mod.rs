@@ -5,7 +5,8 @@
 //!
 //! The parts, one idea each:
 //! - [`names`]: ROS 2's rules for domains, topic and node names (pure, checked first);
-//! - [`types`]: which ROS 2 type each message type is offered as, its RIHS01 hash and CDR;
+//! - [`types`]: the ROS 2 types ratelab's message types are offered as (each type's own
+//!   definition names its mapping, [`crate::msg::RosMapped`]), their RIHS01 hashes and CDR;
 //! - [`session`]: the Zenoh session rmw_zenoh's nodes open by default (peer, a router at
 //!   `tcp/localhost:7447`, `ZENOH_ROUTER_CHECK_ATTEMPTS`, `ZENOH_CONFIG_OVERRIDE`), or an
 //!   embedded router when none answers;
@@ -60,4 +61,14 @@ pub enum Ros2Error {
 /// A Zenoh error as [`Ros2Error::Zenoh`], in one line.
 pub(crate) fn zerr(e: impl std::fmt::Display) -> Ros2Error {
     Ros2Error::Zenoh(e.to_string().lines().next().unwrap_or_default().to_string())
+}
+
+/// The ROS 2 type message type `msg` is offered as.
+///
+/// # Panics
+/// When `msg` has none: [`crate::ros2::bridge::check_graph`] refuses such a graph first.
+pub fn ros_type_of(msg: crate::msg::MsgType) -> &'static types::RosType {
+    (msg.ros2()
+        .expect("a graph offered to ROS 2 has only mapped types")
+        .ros_type)()
 }

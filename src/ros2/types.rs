@@ -1,5 +1,8 @@
-//! The ROS 2 message type each ratelab message type is offered as, with its type
-//! description (for the RIHS01 hash in every key and token) and its CDR encoding.
+//! The ROS 2 message types ratelab's messages are offered as — their descriptions (for the
+//! RIHS01 hash in every key and token), their serde layouts (CDR) — and `/clock`. Which
+//! ratelab type maps to which, and how, is part of each message type's one definition
+//! ([`crate::msg::RosMapped`], in `src/msg/<type>.rs`); this module holds only ROS 2's side.
+//! The built-in types map so:
 //!
 //! | ratelab  | ROS 2 type                   | fields (units)                                              |
 //! |----------|------------------------------|-------------------------------------------------------------|
@@ -19,8 +22,6 @@
 //! (`CDR_LE`), as rmw_zenoh sends, by `hiroz-cdr`. The type hashes come from
 //! `hiroz-schema`'s RIHS01 (the tests check them against `rosbags`' `hash_rihs01`).
 
-use crate::msg::MsgData;
-use crate::msg::MsgType;
 use crate::time::Nanos;
 use hiroz_schema::{
     FieldDescription, FieldTypeDescription, TypeDescription, TypeDescriptionMsg, TypeHash, TypeId,
@@ -122,40 +123,41 @@ fn header() -> TypeDescription {
     )
 }
 
-/// The ROS 2 type a ratelab message type is offered as (the module's table).
-pub fn ros_type_of(msg: MsgType) -> &'static RosType {
+/// `sensor_msgs/msg/JointState`: the type the state and position messages are offered as.
+pub fn joint_state_type() -> &'static RosType {
     static JOINT: OnceLock<RosType> = OnceLock::new();
+    JOINT.get_or_init(|| {
+        let seq = |t: u8| FieldTypeDescription::primitive(t + TypeId::UNBOUNDED_SEQUENCE_OFFSET);
+        RosType::new(
+            JOINT_STATE,
+            vec![
+                field(
+                    "header",
+                    FieldTypeDescription::nested(TypeId::NESTED_TYPE, HEADER),
+                ),
+                field("name", seq(TypeId::STRING)),
+                field("position", seq(TypeId::FLOAT64)),
+                field("velocity", seq(TypeId::FLOAT64)),
+                field("effort", seq(TypeId::FLOAT64)),
+            ],
+            vec![header(), time()],
+        )
+    })
+}
+
+/// `std_msgs/msg/Float64`: the type the force message is offered as.
+pub fn float64_type() -> &'static RosType {
     static F64: OnceLock<RosType> = OnceLock::new();
-    match msg {
-        MsgType::State | MsgType::Position => JOINT.get_or_init(|| {
-            let seq =
-                |t: u8| FieldTypeDescription::primitive(t + TypeId::UNBOUNDED_SEQUENCE_OFFSET);
-            RosType::new(
-                JOINT_STATE,
-                vec![
-                    field(
-                        "header",
-                        FieldTypeDescription::nested(TypeId::NESTED_TYPE, HEADER),
-                    ),
-                    field("name", seq(TypeId::STRING)),
-                    field("position", seq(TypeId::FLOAT64)),
-                    field("velocity", seq(TypeId::FLOAT64)),
-                    field("effort", seq(TypeId::FLOAT64)),
-                ],
-                vec![header(), time()],
-            )
-        }),
-        MsgType::Force => F64.get_or_init(|| {
-            RosType::new(
-                FLOAT64,
-                vec![field(
-                    "data",
-                    FieldTypeDescription::primitive(TypeId::FLOAT64),
-                )],
-                vec![],
-            )
-        }),
-    }
+    F64.get_or_init(|| {
+        RosType::new(
+            FLOAT64,
+            vec![field(
+                "data",
+                FieldTypeDescription::primitive(TypeId::FLOAT64),
+            )],
+            vec![],
+        )
+    })
 }
 
 /// `rosgraph_msgs/msg/Clock`, the type of `/clock`.
@@ -174,7 +176,7 @@ pub fn clock_type() -> &'static RosType {
 }
 
 /// `builtin_interfaces/msg/Time`: whole seconds and nanoseconds.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 pub struct Time {
     /// Seconds (run time: from 0 at the run's start).
     pub sec: i32,
@@ -193,7 +195,7 @@ impl Time {
 }
 
 /// `std_msgs/msg/Header`.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct Header {
     /// The publish stamp, run time.
     pub stamp: Time,
@@ -201,8 +203,10 @@ pub struct Header {
     pub frame_id: String,
 }
 
-/// `sensor_msgs/msg/JointState`.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+/// `sensor_msgs/msg/JointState`. A field missing from a dict (Python's `from_ros`) reads
+/// as empty.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
 pub struct JointState {
     /// The stamp.
     pub header: Header,
@@ -214,6 +218,52 @@ pub struct JointState {
     pub velocity: Vec<f64>,
     /// Empty.
     pub effort: Vec<f64>,
+}
+
+impl JointState {
+    /// The cartpole's joints ([`JOINT_NAMES`]) at run time `stamp`: positions (cart m, pole
+    /// rad) and velocities (cart m/s, pole rad/s; empty for none).
+    pub fn of(stamp: Nanos, position: Vec<f64>, velocity: Vec<f64>) -> JointState {
+        JointState {
+            header: Header {
+                stamp: Time::of(stamp),
+                frame_id: String::new(),
+            },
+            name: JOINT_NAMES.iter().map(|s| s.to_string()).collect(),
+            position,
+            velocity,
+            effort: vec![],
+        }
+    }
+
+    /// Both joints' positions and, with `velocities`, velocities (`[0, 0]` without), as a
+    /// ROS 2 node sent them: named [`JOINT_NAMES`] in that order, or unnamed, and finite.
+    ///
+    /// # Errors
+    /// One line: other joint names, a joint missing, or a non-finite value.
+    pub fn joints(&self, velocities: bool) -> Result<([f64; 2], [f64; 2]), String> {
+        let named = self.name.is_empty() || self.name.iter().map(String::as_str).eq(JOINT_NAMES);
+        if !named {
+            return Err(format!(
+                "JointState names {:?}, not {JOINT_NAMES:?}",
+                self.name
+            ));
+        }
+        let two = |v: &[f64], what: &str| -> Result<[f64; 2], String> {
+            match v {
+                [a, b] if a.is_finite() && b.is_finite() => Ok([*a, *b]),
+                [_, _] => Err(format!("a non-finite {what}")),
+                _ => Err(format!("{} {what} values, not 2", v.len())),
+            }
+        };
+        let p = two(&self.position, "position")?;
+        let v = if velocities {
+            two(&self.velocity, "velocity")?
+        } else {
+            [0.0; 2]
+        };
+        Ok((p, v))
+    }
 }
 
 /// `std_msgs/msg/Float64`.
@@ -230,7 +280,8 @@ pub struct Clock {
     pub clock: Time,
 }
 
-fn cdr<T: Serialize>(value: &T, out: &mut Vec<u8>) {
+/// `value` as CDR little endian after the encapsulation header, into `out` (cleared first).
+pub fn cdr<T: Serialize>(value: &T, out: &mut Vec<u8>) {
     out.clear();
     out.extend_from_slice(&CDR_LE_HEADER);
     // Alignment counts from after the encapsulation header (the serializer starts there).
@@ -239,46 +290,15 @@ fn cdr<T: Serialize>(value: &T, out: &mut Vec<u8>) {
     let _ = value.serialize(&mut ser);
 }
 
-/// The ROS 2 message for a payload published at run time `stamp`, as CDR with its
-/// encapsulation header, into `out` (cleared first).
-pub fn encode(data: &MsgData, stamp: Nanos, out: &mut Vec<u8>) {
-    let header = || Header {
-        stamp: Time::of(stamp),
-        frame_id: String::new(),
-    };
-    let names = || JOINT_NAMES.iter().map(|s| s.to_string()).collect();
-    match *data {
-        MsgData::State(o) => {
-            let angle = f64::from(o[3]).atan2(f64::from(o[2]));
-            cdr(
-                &JointState {
-                    header: header(),
-                    name: names(),
-                    position: vec![f64::from(o[0]), angle],
-                    velocity: vec![f64::from(o[1]), f64::from(o[4])],
-                    effort: vec![],
-                },
-                out,
-            );
-        }
-        MsgData::Position(x, th) => cdr(
-            &JointState {
-                header: header(),
-                name: names(),
-                position: vec![x, th],
-                velocity: vec![],
-                effort: vec![],
-            },
-            out,
-        ),
-        MsgData::Force(n) => cdr(&Float64 { data: n }, out),
-    }
-}
-
 /// The most bytes a message from ROS 2 may have: a cartpole message is under 200.
 pub const MAX_INBOUND_BYTES: usize = 4096;
 
-fn from_cdr<'de, T: Deserialize<'de>>(bytes: &'de [u8]) -> Result<T, String> {
+/// A `T` from CDR with its encapsulation header (`CDR_LE` only), within
+/// [`MAX_INBOUND_BYTES`], with nothing after it but CDR's padding.
+///
+/// # Errors
+/// One line: too long, not CDR_LE, not valid CDR of `T`, or bytes after it.
+pub fn from_cdr<'de, T: Deserialize<'de>>(bytes: &'de [u8]) -> Result<T, String> {
     if bytes.len() > MAX_INBOUND_BYTES {
         return Err(format!(
             "{} bytes (at most {MAX_INBOUND_BYTES})",
@@ -301,57 +321,6 @@ fn from_cdr<'de, T: Deserialize<'de>>(bytes: &'de [u8]) -> Result<T, String> {
     Ok(v)
 }
 
-/// A payload of ratelab type `msg` from the ROS 2 message in `bytes` (CDR with its
-/// encapsulation header, as rmw_zenoh sends it): the inverse of [`encode`]. A state's
-/// `JointState` needs both joints' positions and velocities (named [`JOINT_NAMES`] in that
-/// order, or unnamed); the observation is `[x, ẋ, cos θ, sin θ, θ̇]` as float32. A position
-/// needs both positions. The header is not read: the proxy stamps what it delivers.
-///
-/// # Errors
-/// One line: too long, not CDR_LE, not the type, or the joints missing or non-finite.
-pub fn decode(msg: MsgType, bytes: &[u8]) -> Result<MsgData, String> {
-    let joints = |js: &JointState, velocities: bool| -> Result<([f64; 2], [f64; 2]), String> {
-        let named = js.name.is_empty() || js.name.iter().map(String::as_str).eq(JOINT_NAMES);
-        if !named {
-            return Err(format!(
-                "JointState names {:?}, not {JOINT_NAMES:?}",
-                js.name
-            ));
-        }
-        let two = |v: &[f64], what: &str| -> Result<[f64; 2], String> {
-            match v {
-                [a, b] if a.is_finite() && b.is_finite() => Ok([*a, *b]),
-                [_, _] => Err(format!("a non-finite {what}")),
-                _ => Err(format!("{} {what} values, not 2", v.len())),
-            }
-        };
-        let p = two(&js.position, "position")?;
-        let v = if velocities {
-            two(&js.velocity, "velocity")?
-        } else {
-            [0.0; 2]
-        };
-        Ok((p, v))
-    };
-    Ok(match msg {
-        MsgType::State => {
-            let ([x, th], [xd, thd]) = joints(&from_cdr(bytes)?, true)?;
-            MsgData::State([
-                x as f32,
-                xd as f32,
-                th.cos() as f32,
-                th.sin() as f32,
-                thd as f32,
-            ])
-        }
-        MsgType::Position => {
-            let ([x, th], _) = joints(&from_cdr(bytes)?, false)?;
-            MsgData::Position(x, th)
-        }
-        MsgType::Force => MsgData::Force(from_cdr::<Float64>(bytes)?.data),
-    })
-}
-
 /// `/clock` at run time `t`, as CDR with its encapsulation header, into `out`.
 pub fn encode_clock(t: Nanos, out: &mut Vec<u8>) {
     cdr(&Clock { clock: Time::of(t) }, out);
@@ -360,6 +329,26 @@ pub fn encode_clock(t: Nanos, out: &mut Vec<u8>) {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::msg::{ForceMsg, Message, MsgData, MsgType, PositionMsg, StateMsg};
+
+    fn encode(d: &MsgData, stamp: Nanos, out: &mut Vec<u8>) {
+        assert!((d.msg_type().ros2().unwrap().encode)(d, stamp, out));
+    }
+    fn dec(t: MsgType, bytes: &[u8]) -> Result<MsgData, String> {
+        (t.ros2().unwrap().decode)(bytes)
+    }
+    fn force(newtons: f64) -> MsgData {
+        MsgData::new(ForceMsg { newtons })
+    }
+    fn position(cart_pos_m: f64, pole_angle_rad: f64) -> MsgData {
+        MsgData::new(PositionMsg {
+            cart_pos_m,
+            pole_angle_rad,
+        })
+    }
+    fn state(o: StateMsg) -> MsgData {
+        MsgData::new(o)
+    }
 
     fn decode<'de, T: Deserialize<'de>>(bytes: &'de [u8]) -> T {
         assert_eq!(bytes[..4], CDR_LE_HEADER);
@@ -371,45 +360,35 @@ mod tests {
     #[test]
     fn what_is_encoded_decodes_back() {
         let mut out = Vec::new();
-        encode(&MsgData::Force(-3.5), Nanos(1), &mut out);
-        assert_eq!(
-            super::decode(MsgType::Force, &out),
-            Ok(MsgData::Force(-3.5))
-        );
-        encode(&MsgData::Position(0.25, -0.5), Nanos(1), &mut out);
-        assert_eq!(
-            super::decode(MsgType::Position, &out),
-            Ok(MsgData::Position(0.25, -0.5))
-        );
+        encode(&force(-3.5), Nanos(1), &mut out);
+        assert_eq!(dec(ForceMsg::TYPE, &out), Ok(force(-3.5)));
+        encode(&position(0.25, -0.5), Nanos(1), &mut out);
+        assert_eq!(dec(PositionMsg::TYPE, &out), Ok(position(0.25, -0.5)));
         let th = 0.125f64;
         let obs = [0.5, -1.0, th.cos() as f32, th.sin() as f32, 2.0];
-        encode(&MsgData::State(obs), Nanos(1), &mut out);
-        assert_eq!(super::decode(MsgType::State, &out), Ok(MsgData::State(obs)));
+        encode(&state(obs), Nanos(1), &mut out);
+        assert_eq!(dec(StateMsg::TYPE, &out), Ok(state(obs)));
     }
 
     #[test]
     fn hostile_messages_are_refused_in_one_line() {
         let mut out = Vec::new();
-        encode(&MsgData::Position(0.25, -0.5), Nanos(1), &mut out);
+        encode(&position(0.25, -0.5), Nanos(1), &mut out);
         // A position has no velocities: not a state.
-        assert!(super::decode(MsgType::State, &out)
+        assert!(dec(StateMsg::TYPE, &out)
             .unwrap_err()
             .contains("0 velocity values"));
-        encode(&MsgData::Force(1.0), Nanos(1), &mut out);
-        assert!(super::decode(MsgType::State, &out).is_err());
-        assert!(super::decode(MsgType::Force, &out[..6]).is_err());
-        assert!(
-            super::decode(MsgType::Force, &[1, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0])
-                .unwrap_err()
-                .contains("not CDR_LE")
-        );
-        assert!(super::decode(MsgType::Force, &[0, 1])
+        encode(&force(1.0), Nanos(1), &mut out);
+        assert!(dec(StateMsg::TYPE, &out).is_err());
+        assert!(dec(ForceMsg::TYPE, &out[..6]).is_err());
+        assert!(dec(ForceMsg::TYPE, &[1, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0])
+            .unwrap_err()
+            .contains("not CDR_LE"));
+        assert!(dec(ForceMsg::TYPE, &[0, 1])
             .unwrap_err()
             .contains("shorter than the 4-byte encapsulation header"));
         let big = vec![0u8; MAX_INBOUND_BYTES + 1];
-        assert!(super::decode(MsgType::Force, &big)
-            .unwrap_err()
-            .contains("at most"));
+        assert!(dec(ForceMsg::TYPE, &big).unwrap_err().contains("at most"));
         // A sequence claiming 2^32-1 names in a few bytes: refused, not allocated.
         let mut js = vec![0, 1, 0, 0];
         js.extend_from_slice(&[0; 8]); // stamp
@@ -417,7 +396,7 @@ mod tests {
         js.push(0);
         js.extend_from_slice(&[0; 3]);
         js.extend_from_slice(&u32::MAX.to_le_bytes());
-        assert!(super::decode(MsgType::State, &js).is_err());
+        assert!(dec(StateMsg::TYPE, &js).is_err());
         let wrong = JointState {
             header: Header {
                 stamp: Time::of(Nanos(0)),
@@ -429,9 +408,7 @@ mod tests {
             effort: vec![],
         };
         cdr(&wrong, &mut out);
-        assert!(super::decode(MsgType::State, &out)
-            .unwrap_err()
-            .contains("names"));
+        assert!(dec(StateMsg::TYPE, &out).unwrap_err().contains("names"));
     }
 
     #[test]
@@ -443,15 +420,15 @@ mod tests {
             "RIHS01_692f7a66e93a3c83e71765d033b60349ba68023a8c689a79e48078bcb5c58564"
         );
         assert_eq!(
-            ros_type_of(MsgType::State).hash.to_rihs_string(),
+            joint_state_type().hash.to_rihs_string(),
             "RIHS01_a13ee3a330e346c9d87b5aa18d24e11690752bd33a0350f11c5882bc9179260e"
         );
         assert_eq!(
-            ros_type_of(MsgType::Force).hash.to_rihs_string(),
+            float64_type().hash.to_rihs_string(),
             "RIHS01_705ba9c3d1a09df43737eb67095534de36fd426c0587779bda2bc51fe790182a"
         );
         assert_eq!(
-            ros_type_of(MsgType::Position).dds_name(),
+            joint_state_type().dds_name(),
             "sensor_msgs::msg::dds_::JointState_"
         );
     }
@@ -459,7 +436,7 @@ mod tests {
     #[test]
     fn a_force_is_a_float64() {
         let mut out = Vec::new();
-        encode(&MsgData::Force(-3.5), Nanos(1), &mut out);
+        encode(&force(-3.5), Nanos(1), &mut out);
         assert_eq!(out.len(), 12);
         assert_eq!(out[4..], (-3.5f64).to_le_bytes());
         assert_eq!(decode::<Float64>(&out).data, -3.5);
@@ -470,7 +447,7 @@ mod tests {
         let th = 0.1f32;
         let mut out = Vec::new();
         encode(
-            &MsgData::State([0.5, -0.25, th.cos(), th.sin(), 2.0]),
+            &state([0.5, -0.25, th.cos(), th.sin(), 2.0]),
             Nanos(2_500_000_000),
             &mut out,
         );
@@ -487,7 +464,7 @@ mod tests {
         assert!((js.position[1] - 0.1).abs() < 1e-6);
         assert_eq!(js.velocity, [-0.25, 2.0]);
         assert!(js.effort.is_empty());
-        encode(&MsgData::Position(1.0, -0.2), Nanos(0), &mut out);
+        encode(&position(1.0, -0.2), Nanos(0), &mut out);
         let js: JointState = decode(&out);
         assert_eq!(
             (js.position.as_slice(), js.velocity.len()),

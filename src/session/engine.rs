@@ -295,14 +295,10 @@ impl Engine {
     /// time beside the live one, is not judged).
     pub(super) fn judge_fresh_run(&self, cfg: &RunConfig, h: &GraphHandles, text: String) {
         let spec = h.current_spec();
-        let open = spec.nodes.iter().any(|n| {
-            matches!(
-                n.kind,
-                crate::graph::NodeKind::Python
-                    | crate::graph::NodeKind::Registered
-                    | crate::graph::NodeKind::External
-            )
-        });
+        let open = spec
+            .nodes
+            .iter()
+            .any(|n| n.kind.code() != crate::graph::kind::Code::BuiltIn);
         let policy = self.current_policy_spec(&self.run_policy);
         if open || policy.contains(".py") {
             return;

@@ -24,7 +24,7 @@ impl Engine {
         ros2: Option<&crate::ros2::Bridge>,
     ) -> (Next, RunEnd, Vec<u64>, Option<ExecFigures>) {
         let Graph { mut nodes, handles } = graph;
-        let actuator_bit = 1u64 << (cfg.graph.chain.actuator.0 % 64);
+        let actuator_bit = 1u64 << (cfg.graph.actuator.0 % 64);
         let mut sched = crate::run::virtual_scheduler(cfg, &nodes);
         let mut paused = self.settings.start_paused;
         let mut step_pending = false;
@@ -231,8 +231,8 @@ impl Engine {
 /// The node a rate command changes, if it is one.
 fn rate_target(cmd: &Command, h: &GraphHandles) -> Option<usize> {
     match cmd {
-        Command::SetControlHz { .. } => Some(h.spec.chain.policy.0),
-        Command::SetSensorHz { .. } => Some(h.spec.chain.sensor.0),
+        Command::SetControlHz { .. } => h.spec.chain.map(|c| c.policy.0),
+        Command::SetSensorHz { .. } => h.spec.chain.map(|c| c.sensor.0),
         Command::SetNodeHz { node, .. } => h.spec.nodes.iter().position(|n| &n.name == node),
         _ => None,
     }

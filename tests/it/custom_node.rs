@@ -59,7 +59,7 @@ fn a_registered_kind_is_usable_from_a_graph_file_and_runs_as_a_node() {
     .unwrap();
     let text = graph_with("push_it", "newtons = 10");
     let spec = GraphSpec::parse(&text, "push.toml").unwrap();
-    assert_eq!(spec.node(spec.chain.policy).kind_name(), "push_it");
+    assert_eq!(spec.node(spec.chain.unwrap().policy).kind_name(), "push_it");
     // The file the spec writes (session logs keep it) reads back to the same spec.
     assert_eq!(
         GraphSpec::parse(&spec.to_toml(), "again.toml").unwrap(),
@@ -171,7 +171,7 @@ fn a_registered_kind_of_two_inputs_and_two_outputs_equals_the_python_one() {
     let rust = setpoint_graph(dir.path(), Some("track_rs"));
     let tracker = rust.node_id("tracker").unwrap();
     assert_eq!(rust.node(tracker).subscribes.len(), 2);
-    assert_eq!(rust.chain.policy, tracker);
+    assert_eq!(rust.chain.unwrap().policy, tracker);
     let python = setpoint_graph(dir.path(), None);
     for seed in [0, 1] {
         let metrics = |graph: &GraphSpec| {
@@ -320,4 +320,219 @@ fn a_registered_kind_runs_across_processes_in_the_program_that_registers_it() {
     let err = String::from_utf8_lossy(&o.stderr);
     assert_eq!(o.status.code(), Some(2), "{err}");
     assert!(err.contains("unknown kind `pd`"), "{err}");
+}
+
+/// A message type of the program's own (`examples/common/setpoint.rs`): registered once,
+/// a graph file's topic carries it, a Rust kind publishes it typed, a Python node reads it
+/// as a class made from its fields, and the run equals the same graph with the setpoint as
+/// a built-in `position` message in every figure. The `ratelab` binary, which does not know
+/// the type, refuses the graph in one line naming it.
+#[test]
+fn a_message_type_of_the_programs_own_is_one_definition_and_one_line() {
+    let _m = crate::machine::shared();
+    for seed in ["0", "1"] {
+        let o = Command::new(example("custom_message"))
+            .arg(seed)
+            .output()
+            .unwrap();
+        let out = String::from_utf8_lossy(&o.stdout);
+        assert!(
+            o.status.success(),
+            "{out}{}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+        assert!(
+            out.contains(&format!("setpoint message, seed {seed}: BALANCED")),
+            "{out}"
+        );
+        assert!(
+            out.contains("/reference carries setpoint (501 published)"),
+            "{out}"
+        );
+        assert!(
+            out.contains(
+                "equal to graphs/cartpole-setpoint.toml (a position message) in every figure: yes"
+            ),
+            "{out}"
+        );
+    }
+    let o = Command::new(env!("CARGO_BIN_EXE_ratelab"))
+        .args(["run", "--clock", "virtual", "--graph"])
+        .arg(crate::repo("examples/cartpole-setpoint-msg.toml"))
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert_eq!(err.trim().lines().count(), 1, "{err}");
+    assert!(err.contains("unknown message type `setpoint`"), "{err}");
+}
+
+/// The one definition of a message type drives what a Python node sees: a type registered
+/// in Rust becomes a `ratelab` class with its fields, and a Python node publishes it typed
+/// onto a topic a Rust node reads.
+#[test]
+fn a_registered_message_type_crosses_between_rust_and_python_nodes() {
+    #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+    struct Gain {
+        scale: f64,
+    }
+    impl ratelab::msg::Message for Gain {
+        const NAME: &'static str = "gain_it";
+        const CLASS: &'static str = "GainIt";
+        const DOC: &'static str = "A scale for the force.";
+        const FIELDS: &'static [ratelab::msg::Field] =
+            &[ratelab::msg::Field::new("scale", "1", "force multiplier")];
+        fn to_fields(&self) -> Vec<f64> {
+            vec![self.scale]
+        }
+        fn from_fields(f: &[f64]) -> Self {
+            Gain { scale: f[0] }
+        }
+    }
+    /// The chapter's balancer, its force scaled by the newest gain (1 before the first).
+    struct Scaled {
+        gain: f64,
+        state: Option<StateMsg>,
+    }
+    impl RustNode for Scaled {
+        type Input = (StateMsg, Gain);
+        type Output = ForceMsg;
+        fn tick(
+            &mut self,
+            _now: Nanos,
+            (state, gain): (Option<&StateMsg>, Option<&Gain>),
+        ) -> Option<ForceMsg> {
+            if let Some(g) = gain {
+                self.gain = g.scale;
+            }
+            if let Some(s) = state {
+                self.state = Some(*s);
+            }
+            use ratelab::policy::Policy;
+            let u = Scripted.act(self.state.as_ref()?)[0];
+            Some(ForceMsg {
+                newtons: f64::from(u) * 10.0 * self.gain,
+            })
+        }
+    }
+    register("scaled_it", |_: &NodeContext<'_>| {
+        Ok(Scaled {
+            gain: 1.0,
+            state: None,
+        })
+    })
+    .unwrap();
+    assert!(
+        ratelab::msg::MsgType::named("gain_it").is_some(),
+        "registered with its kind"
+    );
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(
+        dir.path().join("gain.py"),
+        "from ratelab import GainIt\n\n\
+         class Gain:\n    \
+             def __init__(self, node):\n        \
+                 assert GainIt.FIELDS == ('scale',), GainIt.FIELDS\n        \
+                 self.pub = node.create_publisher(GainIt, '/gain', 1)\n        \
+                 node.create_timer(node.get_period(), self.tick)\n\n    \
+             def tick(self):\n        \
+                 self.pub.publish(GainIt(scale=0.0))\n",
+    )
+    .unwrap();
+    let text = "name = \"gain\"\n\
+         [[node]]\nname = \"sensor\"\nkind = \"sensor\"\nrate_hz = 50\npublishes = \"/obs\"\n\
+         [[node]]\nname = \"gain\"\nkind = \"python\"\nscript = \"gain.py\"\nrate_hz = 50\npublishes = \"/gain\"\n\
+         [[node]]\nname = \"policy\"\nkind = \"scaled_it\"\nrate_hz = 50\nsubscribes = [\"/obs\", \"/gain\"]\npublishes = \"/action\"\n\
+         [[node]]\nname = \"actuator\"\nkind = \"actuator\"\nrate_hz = 50\nsubscribes = \"/action\"\n\
+         [[topic]]\nname = \"/obs\"\ntype = \"state\"\ndepth = 1\n\
+         [[topic]]\nname = \"/gain\"\ntype = \"gain_it\"\ndepth = 1\n\
+         [[topic]]\nname = \"/action\"\ntype = \"force\"\ndepth = 1\n";
+    let path = dir.path().join("g.toml");
+    std::fs::write(&path, text).unwrap();
+    let spec = GraphSpec::load(&path).unwrap();
+    // A gain of 0 from the first tick: the motor never pushes, and the pole falls.
+    let m = virtual_run(spec);
+    assert!(!m.balanced, "{m:?}");
+    assert_eq!(m.topics["/gain"].msg, "gain_it");
+    assert!(m.topics["/gain"].published > 0);
+}
+
+/// No shape is privileged: an open-loop driver with no chain runs, its metrics say why the
+/// chapter's keys are missing, and the chapter's shorthands refuse in one line.
+#[test]
+fn a_graph_without_the_chapters_chain_runs_and_says_so() {
+    let _m = crate::machine::shared();
+    let dir = tempfile::tempdir().unwrap();
+    let graph = crate::repo("graphs/cartpole-open-loop.toml");
+    let o = Command::new(env!("CARGO_BIN_EXE_ratelab"))
+        .args(["run", "--clock", "virtual", "--out"])
+        .arg(dir.path())
+        .arg("--graph")
+        .arg(&graph)
+        .output()
+        .unwrap();
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        o.status.success(),
+        "{out}{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    assert!(out.contains("FELL at t="), "{out}");
+    assert!(
+        out.contains("has no sensor → policy → actuator chain"),
+        "{out}"
+    );
+    let m: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.path().join("metrics.json")).unwrap())
+            .unwrap();
+    for key in [
+        "control_hz",
+        "sensor_hz",
+        "queue_depth",
+        "policy_ticks",
+        "obs_published",
+        "action_dropped",
+    ] {
+        assert!(m.get(key).is_none(), "{key}: {m}");
+    }
+    assert!(m["without_chain"]
+        .as_str()
+        .unwrap()
+        .contains("cartpole-open-loop"));
+    assert_eq!(
+        m["policy"],
+        "none (the graph has no policy driving the actuator)"
+    );
+    assert!(m["topics"]["/force"]["published"].as_u64().unwrap() > 0);
+    // Twice the same: deterministic like any graph.
+    let again = tempfile::tempdir().unwrap();
+    let o2 = Command::new(env!("CARGO_BIN_EXE_ratelab"))
+        .args(["run", "--clock", "virtual", "--out"])
+        .arg(again.path())
+        .arg("--graph")
+        .arg(&graph)
+        .output()
+        .unwrap();
+    assert!(o2.status.success());
+    for f in ["metrics.json", "trace.csv"] {
+        assert_eq!(
+            std::fs::read(dir.path().join(f)).unwrap(),
+            std::fs::read(again.path().join(f)).unwrap(),
+            "{f}"
+        );
+    }
+    for flag in ["--control-hz", "--sensor-hz"] {
+        let o = Command::new(env!("CARGO_BIN_EXE_ratelab"))
+            .args(["run", "--clock", "virtual", flag, "5", "--graph"])
+            .arg(&graph)
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{flag}: {err}");
+        assert_eq!(err.trim().lines().count(), 1, "{err}");
+        assert!(
+            err.contains(&format!("{flag} speaks of the chapter's chain")),
+            "{err}"
+        );
+    }
 }

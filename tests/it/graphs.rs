@@ -93,8 +93,8 @@ fn a_slow_estimator_adds_its_period_to_the_latency_as_computed_by_hand() {
     c.graph.set_rate("sensor", 100.0).unwrap();
     c.graph.set_rate("estimator", 5.0).unwrap();
     for n in &mut c.graph.nodes {
-        n.params.noise_pos_m = 0.0;
-        n.params.noise_angle_rad = 0.0;
+        n.params.insert("noise_pos_m".into(), 0.0.into());
+        n.params.insert("noise_angle_rad".into(), 0.0.into());
     }
     let kept = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
     let opts = RunOptions {

@@ -852,10 +852,7 @@ fn the_ppo_actor_in_numpy_matches_pytorch_from_exported_weights() {
     let got: Vec<f64> = pyo3::Python::attach(|py| {
         use pyo3::types::PyAnyMethods;
         // As for a node: `from ratelab import Force, State` works.
-        ratelab::python::support(py)
-            .unwrap()
-            .call_method0("install_message_module")
-            .unwrap();
+        ratelab::python::install_messages(py).unwrap();
         let sys = py.import("sys").unwrap();
         sys.getattr("path")
             .unwrap()

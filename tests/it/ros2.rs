@@ -616,8 +616,9 @@ fn a_launch_across_processes_offers_each_processs_own_nodes_and_the_plants_clock
 
 #[test]
 fn every_type_hash_is_the_one_a_second_independent_implementation_computes() {
-    use ratelab::msg::MsgType;
-    use ratelab::ros2::types::{clock_type, ros_type_of};
+    use ratelab::msg::{ForceMsg, Message, MsgType, PositionMsg, StateMsg};
+    use ratelab::ros2::types::clock_type;
+    let ros_type_of = |t: MsgType| (t.ros2().expect("a ROS 2 mapping").ros_type)();
     // ros2-pyterfaces (pure-Python core, its schemas rewritten from ROS 2's interfaces),
     // beside rosbags which the other tests use.
     let script = r#"
@@ -635,9 +636,9 @@ print(json.dumps({t["__typename"]: core.hash_rihs01(t) for t in (JointState, Flo
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let theirs: Value = serde_json::from_slice(&o.stdout).unwrap();
     for ty in [
-        ros_type_of(MsgType::State),
-        ros_type_of(MsgType::Position),
-        ros_type_of(MsgType::Force),
+        ros_type_of(StateMsg::TYPE),
+        ros_type_of(PositionMsg::TYPE),
+        ros_type_of(ForceMsg::TYPE),
         clock_type(),
     ] {
         assert_eq!(

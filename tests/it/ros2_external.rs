@@ -280,8 +280,17 @@ fn an_external_node_missing_of_another_type_or_silent_is_said_in_one_line() {
 
 #[test]
 fn python_message_classes_convert_to_and_from_ros_2_as_the_bridge_does() {
-    use ratelab::msg::{MsgData, MsgType};
-    use ratelab::ros2::types::{decode, encode};
+    use ratelab::msg::{ForceMsg, Message, MsgData, MsgType, PositionMsg, StateMsg};
+    let encode = |d: &MsgData, stamp, out: &mut Vec<u8>| {
+        assert!((d.msg_type().ros2().unwrap().encode)(d, stamp, out))
+    };
+    let decode = |t: MsgType, bytes: &[u8]| (t.ros2().unwrap().decode)(bytes);
+    let position = |cart_pos_m, pole_angle_rad| {
+        MsgData::new(PositionMsg {
+            cart_pos_m,
+            pole_angle_rad,
+        })
+    };
     use std::io::Write;
     let th = 0.125f64;
     let obs = [0.5f32, -1.0, th.cos() as f32, th.sin() as f32, 2.0];
@@ -291,9 +300,9 @@ fn python_message_classes_convert_to_and_from_ros_2_as_the_bridge_does() {
         b.iter().map(|x| format!("{x:02x}")).collect::<String>()
     };
     let input = serde_json::json!({
-        "state": hex(MsgData::State(obs)),
-        "position": hex(MsgData::Position(0.25, -0.5)),
-        "force": hex(MsgData::Force(-3.5)),
+        "state": hex(MsgData::new(obs)),
+        "position": hex(position(0.25, -0.5)),
+        "force": hex(MsgData::new(ForceMsg { newtons: -3.5 })),
         "values": {
             "state": obs.map(f64::from),
             "position": [0.25, -0.5],
@@ -342,16 +351,16 @@ fn python_message_classes_convert_to_and_from_ros_2_as_the_bridge_does() {
             .collect()
     };
     assert_eq!(
-        decode(MsgType::State, &bytes("state")),
-        Ok(MsgData::State(obs))
+        decode(StateMsg::TYPE, &bytes("state")),
+        Ok(MsgData::new(obs))
     );
     assert_eq!(
-        decode(MsgType::Position, &bytes("position")),
-        Ok(MsgData::Position(0.25, -0.5))
+        decode(PositionMsg::TYPE, &bytes("position")),
+        Ok(position(0.25, -0.5))
     );
     assert_eq!(
-        decode(MsgType::Force, &bytes("force")),
-        Ok(MsgData::Force(-3.5))
+        decode(ForceMsg::TYPE, &bytes("force")),
+        Ok(MsgData::new(ForceMsg { newtons: -3.5 }))
     );
     assert_eq!(r["ros_type"]["state"], "sensor_msgs/msg/JointState");
     assert_eq!(r["ros_type"]["force"], "std_msgs/msg/Float64");

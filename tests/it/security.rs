@@ -4,10 +4,11 @@
 
 use crate::distributed::{bin, free_port};
 use ratelab::distributed::credentials::{Credentials, Role};
-use ratelab::distributed::wire::{encode_json, ToMember, WireData, WireSample};
+use ratelab::distributed::wire::{encode_json, ToMember, WireSample};
 use ratelab::distributed::zenoh::{self, Wait};
 use ratelab::distributed::{open_session, Access, Keys};
 use ratelab::graph::spec::{GraphSpec, DEFAULT_GRAPH_TOML};
+use ratelab::msg::{ForceMsg, MsgData};
 use std::process::Stdio;
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::sync::Arc;
@@ -148,7 +149,7 @@ fn an_identity_publishes_only_what_the_graph_gives_it() {
         stamp_ns: 0,
         origin_ns: None,
         sent_mono_ns: 0,
-        data: WireData::Force(10.0),
+        data: MsgData::new(ForceMsg { newtons: 10.0 }).to_bytes(),
     }
     .encode();
     let start = encode_json(&ToMember::Start { start_mono_ns: 0 });
@@ -244,7 +245,7 @@ fn forgeries_change_nothing_in_a_launch_and_refused_peers_are_said() {
                     stamp_ns: 0,
                     origin_ns: None,
                     sent_mono_ns: 0,
-                    data: WireData::Force(10.0),
+                    data: MsgData::new(ForceMsg { newtons: 10.0 }).to_bytes(),
                 };
                 let _ = forger.put(keys.topic("/action"), force.encode()).wait();
                 let stop = ToMember::Stop {

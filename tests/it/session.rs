@@ -82,7 +82,7 @@ fn scripted_session_replays_byte_for_byte() {
     let second = log.runs[1].config("run 2").unwrap();
     assert_eq!(
         (second.seed, second.control_hz(), second.queue_depth()),
-        (2, 7.0, 1)
+        (2, Some(7.0), Some(1))
     );
     assert!(
         !log.runs[1].metrics.as_ref().unwrap().balanced,
@@ -462,7 +462,10 @@ fn keys_pressed_after_a_fall_set_the_next_run() {
     assert_eq!(log.runs.len(), 2);
     assert!(!log.runs[0].metrics.as_ref().unwrap().balanced);
     let second = log.runs[1].config("run 2").unwrap();
-    assert_eq!((second.control_hz(), second.queue_depth()), (5.0, 100));
+    assert_eq!(
+        (second.control_hz(), second.queue_depth()),
+        (Some(5.0), Some(100))
+    );
     // The deferred change is part of the second run's starting graph, not a logged
     // command of the first (which replays as it ran).
     assert_eq!(log.runs[0].commands.len(), 1);

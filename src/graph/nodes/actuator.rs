@@ -3,15 +3,48 @@
 //! force is refused and the last good one held; a missed deadline gets the input topic's
 //! reaction (hold, zero, stop). It alone steps the plant; a fall stops the graph.
 
-use crate::graph::{lock, SharedPlant, StepObserver};
-use crate::msg::{AnyTopic, ForceMsg};
+use crate::graph::kind::{typed, BuildContext, Code, KindDef, Params, Plant, Ports, Work};
+use crate::msg::{AnyTopic, ForceMsg, Message};
 use crate::node::Flow;
-use crate::plant::GEAR_N;
+use crate::plant::{lock, SharedPlant, GEAR_N};
 use crate::qos::OnDeadlineMissed;
-use crate::runlog::{RunLog, StepRecord};
+use crate::runlog::{RunLog, StepRecord, StepSink};
 use crate::time::Nanos;
 use crate::topic::Topic;
 use std::sync::{Arc, Mutex};
+
+/// The kind: `force` in, nothing out; steps the plant (exactly one per graph).
+pub fn def() -> KindDef {
+    KindDef {
+        name: "actuator",
+        doc: "applies the newest force (zero-order hold) and steps the plant",
+        ports: Ports::Fixed {
+            inputs: vec![&[ForceMsg::TYPE]],
+            outputs: vec![],
+        },
+        plant: Plant::Steps,
+        code: Code::BuiltIn,
+        params: Params::Numbers(&[]),
+        uses_brain: false,
+        make: Box::new(|cx: &mut BuildContext<'_>| {
+            Ok(Box::new(Actuator {
+                plant: cx.plant.clone(),
+                input: typed(cx.inputs.first())?,
+                topics: cx.topics.to_vec(),
+                log: cx.log.clone(),
+                observers: cx.observers.take().unwrap_or_default(),
+                held: None,
+                policy_output: cx.action.and_then(|t| t.typed::<ForceMsg>()).cloned(),
+                reported: None,
+            }) as Box<dyn Work>)
+        }),
+    }
+}
+
+/// The run's log, locked (tolerating poison: each holder leaves it consistent).
+fn log(l: &Mutex<RunLog>) -> std::sync::MutexGuard<'_, RunLog> {
+    l.lock().unwrap_or_else(|e| e.into_inner())
+}
 
 /// The actuator's state.
 pub struct Actuator {
@@ -24,7 +57,7 @@ pub struct Actuator {
     /// Where steps are accounted.
     pub log: Arc<Mutex<RunLog>>,
     /// Told about every step.
-    pub observers: Vec<Box<dyn StepObserver>>,
+    pub observers: Vec<Box<dyn StepSink>>,
     /// The last finite command applied (in [-1, 1] units of the motor), with its origin.
     pub held: Option<(f32, Option<Nanos>)>,
     /// The policy's output topic, watched (never read) for what it published.
@@ -33,9 +66,9 @@ pub struct Actuator {
     pub reported: Option<u64>,
 }
 
-impl Actuator {
+impl Work for Actuator {
     /// One tick at `now`: apply, step, record.
-    pub fn tick(&mut self, now: Nanos) -> Flow {
+    fn tick(&mut self, now: Nanos) -> Flow {
         let mut nonfinite = false;
         if let Some(msg) = self.input.read(now) {
             if msg.data.newtons.is_finite() {
@@ -55,7 +88,7 @@ impl Actuator {
                     OnDeadlineMissed::Hold => {}
                     OnDeadlineMissed::Zero => (u, origin) = (0.0, None),
                     OnDeadlineMissed::Stop => {
-                        lock(&self.log).watchdog(now, self.input.name(), deadline);
+                        log(&self.log).watchdog(now, self.input.name(), deadline);
                         return Flow::Stop;
                     }
                 }
@@ -85,7 +118,7 @@ impl Actuator {
             topics: self.topics.iter().map(|t| t.stats_at(now)).collect(),
             fell: outcome.terminated,
         };
-        lock(&self.log).push(rec);
+        log(&self.log).push(rec);
         for obs in &mut self.observers {
             obs.on_step(&rec);
         }

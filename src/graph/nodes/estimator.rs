@@ -1,15 +1,54 @@
-//! The **estimator**: reads the newest position measurement, updates the
+//! The **estimator** kind: reads the newest position measurement, updates the
 //! [`VelocityFilter`], publishes the state estimate every tick. Before its first
 //! measurement it publishes nothing; its estimate carries the origin of the newest
 //! measurement it used.
 
 use crate::graph::estimator::VelocityFilter;
-use crate::msg::{PositionMsg, StateMsg};
+use crate::graph::kind::{
+    typed, BuildContext, Code, KindDef, ParamDef, Params, Plant, Ports, Work,
+};
+use crate::msg::{Message, PositionMsg, StateMsg};
 use crate::node::Flow;
 use crate::publisher::Publisher;
+use crate::rate::MAX_HZ;
 use crate::time::Nanos;
 use crate::topic::Topic;
 use std::sync::Arc;
+
+/// Its parameter: the low-pass cut-off.
+pub const PARAMS: &[ParamDef] = &[ParamDef {
+    name: "cutoff_hz",
+    unit: "Hz",
+    doc: "cut-off of the first-order low-pass on the differentiated velocities",
+    default: 10.0,
+    min: 0.01,
+    max: MAX_HZ,
+}];
+
+/// The kind: `position` in, `state` out.
+pub fn def() -> KindDef {
+    KindDef {
+        name: "estimator",
+        doc: "turns position measurements into a state estimate (differences, low-pass)",
+        ports: Ports::Fixed {
+            inputs: vec![&[PositionMsg::TYPE]],
+            outputs: vec![&[StateMsg::TYPE]],
+        },
+        plant: Plant::None,
+        code: Code::BuiltIn,
+        params: Params::Numbers(PARAMS),
+        uses_brain: false,
+        make: Box::new(|cx: &mut BuildContext<'_>| {
+            Ok(Box::new(Estimator {
+                input: typed(cx.inputs.first())?,
+                output: Publisher::new(typed(cx.outputs.first())?, cx.outbox.clone()),
+                filter: VelocityFilter::new(cx.param_f64("cutoff_hz", 10.0)?),
+                last_seq: None,
+                origin: None,
+            }) as Box<dyn Work>)
+        }),
+    }
+}
 
 /// An estimator's state.
 pub struct Estimator {
@@ -25,9 +64,8 @@ pub struct Estimator {
     pub origin: Option<Nanos>,
 }
 
-impl Estimator {
-    /// One tick at `now`.
-    pub fn tick(&mut self, now: Nanos) -> Flow {
+impl Work for Estimator {
+    fn tick(&mut self, now: Nanos) -> Flow {
         if let Some(msg) = self.input.read(now) {
             if self.last_seq != Some(msg.seq) {
                 self.last_seq = Some(msg.seq);

@@ -22,8 +22,9 @@
 //! external node as across any node. The node counts as alive (its liveliness asserted)
 //! when it delivers.
 
-use crate::graph::spec::{ExternalNodeSpec, NodeId, TopicId};
-use crate::msg::{AnyTopic, ForceMsg, MsgData, PositionMsg};
+use crate::graph::kind::{BuildContext, Code, KindDef, ParamDef, Params, Plant, Ports, Work};
+use crate::ids::{NodeId, TopicId};
+use crate::msg::{AnyTopic, MsgData};
 use crate::node::Flow;
 use crate::publisher::Outbox;
 use crate::qos::Liveliness;
@@ -31,6 +32,98 @@ use crate::time::Nanos;
 use crossbeam_channel::{Receiver, RecvTimeoutError, Sender, TrySendError};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, OnceLock};
+
+/// Its parameters: how long ratelab waits for the ROS 2 node.
+pub const PARAMS: &[ParamDef] = &[
+    ParamDef {
+        name: "appear_timeout_s",
+        unit: "s",
+        doc: "how long to wait, before the run, for the node's liveliness tokens",
+        default: 10.0,
+        min: 0.0,
+        max: 600.0,
+    },
+    ParamDef {
+        name: "tick_timeout_ms",
+        unit: "ms",
+        doc: "virtual clock: how long (wall time) a tick waits for the node's message",
+        default: 2000.0,
+        min: 1.0,
+        max: 60_000.0,
+    },
+];
+
+/// The kind: at most one input, exactly one output, any types (each with a ROS 2 type);
+/// a ROS 2 node's code.
+pub fn def() -> KindDef {
+    KindDef {
+        name: "external",
+        doc: "a ROS 2 node fills it over --ros2; ratelab runs its proxy",
+        ports: Ports::Open {
+            max_inputs: 1,
+            min_outputs: 1,
+            max_outputs: 1,
+        },
+        plant: Plant::None,
+        code: Code::Ros2,
+        params: Params::Numbers(PARAMS),
+        uses_brain: false,
+        make: Box::new(|cx: &mut BuildContext<'_>| {
+            let port = cx
+                .attachment
+                .take()
+                .and_then(|a| a.downcast::<ExternalPort>().ok())
+                .ok_or_else(|| format!("external node '{}' has no port", cx.name))?;
+            Ok(Box::new(External {
+                port,
+                input: cx.inputs.first().cloned(),
+                output: cx
+                    .outputs
+                    .first()
+                    .cloned()
+                    .ok_or("an external node publishes one topic")?,
+                outbox: cx.outbox.clone(),
+                liveliness: cx.liveliness.clone(),
+                origin: None,
+            }) as Box<dyn Work>)
+        }),
+    }
+}
+
+/// How long ratelab waits for a `kind = "external"` node ([`crate::ros2::external`]), from
+/// the graph file's `params = { appear_timeout_s = …, tick_timeout_ms = … }` ([`PARAMS`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ExternalNodeSpec {
+    /// How long to wait, before the run starts, for the node's liveliness tokens (its node
+    /// and each declared endpoint) on the ROS 2 domain; default 10 s, at most 600 s.
+    pub appear_timeout: Nanos,
+    /// Under the virtual clock, how long (wall time) one tick waits for the node's message
+    /// on each of its outputs before the tick is counted as missed; default 2 s, 1 ms to
+    /// 60 s.
+    pub tick_timeout: Nanos,
+}
+
+impl Default for ExternalNodeSpec {
+    fn default() -> Self {
+        ExternalNodeSpec::from_params(&toml::Table::new())
+    }
+}
+
+impl ExternalNodeSpec {
+    /// The waits a node's checked parameters give (defaults where absent).
+    pub fn from_params(params: &toml::Table) -> ExternalNodeSpec {
+        let get = |i: usize, scale: f64| {
+            let d = &PARAMS[i];
+            let x =
+                crate::graph::kind::param_f64("", params, d.name, d.default).unwrap_or(d.default);
+            Nanos((x.clamp(d.min, d.max) * scale).round() as u64)
+        };
+        ExternalNodeSpec {
+            appear_timeout: get(0, 1e9),
+            tick_timeout: get(1, 1e6),
+        }
+    }
+}
 
 /// Messages from the external node waiting for the proxy, at most; more are dropped and
 /// counted ([`ExternalStats::overflow`]).
@@ -167,45 +260,35 @@ pub struct External {
 impl External {
     /// Read the input topic (the newest message's origin is kept).
     fn read_input(&mut self, now: Nanos) {
-        let origin = match &self.input {
-            None => return,
-            Some(AnyTopic::State(t)) => t.read(now).map(|m| m.origin_stamp.unwrap_or(m.stamp)),
-            Some(AnyTopic::Position(t)) => t.read(now).map(|m| m.origin_stamp.unwrap_or(m.stamp)),
-            Some(AnyTopic::Force(t)) => t.read(now).map(|m| m.origin_stamp.unwrap_or(m.stamp)),
-        };
-        if origin.is_some() {
-            self.origin = origin;
+        if let Some(m) = self.input.as_ref().and_then(|t| t.read(now)) {
+            self.origin = Some(m.origin);
         }
     }
 
     /// Publish `data` at `now` on the output, if it is of the output's type.
     fn deliver(&mut self, data: MsgData, now: Nanos) {
         let origin = self.origin.or(Some(now));
-        let ob = &self.outbox;
-        match (&self.output, data) {
-            (AnyTopic::State(t), MsgData::State(v)) => ob.publish(t, v, now, origin),
-            (AnyTopic::Position(t), MsgData::Position(cart_pos_m, pole_angle_rad)) => {
-                let m = PositionMsg {
-                    cart_pos_m,
-                    pole_angle_rad,
-                };
-                ob.publish(t, m, now, origin)
-            }
-            (AnyTopic::Force(t), MsgData::Force(newtons)) => {
-                ob.publish(t, ForceMsg { newtons }, now, origin)
-            }
-            _ => {
-                let why = format!("a message of the wrong type for {}", self.output.name());
-                self.port.refuse(why);
-                return;
-            }
+        if self
+            .output
+            .publish(Some(&self.outbox), &data, now, origin)
+            .is_err()
+        {
+            let why = format!("a message of the wrong type for {}", self.output.name());
+            self.port.refuse(why);
+            return;
         }
         self.port.delivered.fetch_add(1, Ordering::Relaxed);
         self.liveliness.assert_at(now);
     }
+}
+
+impl Work for External {
+    fn alive_by_ticking(&self) -> bool {
+        false
+    }
 
     /// One tick at `now` (see the module's header).
-    pub fn tick(&mut self, now: Nanos) -> Flow {
+    fn tick(&mut self, now: Nanos) -> Flow {
         self.read_input(now);
         let Some(link) = self.port.link.get() else {
             return Flow::Continue; // not connected: nothing can come

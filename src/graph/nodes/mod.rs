@@ -1,7 +1,9 @@
-//! The node kinds at run time: what each does on a tick (ch2.8's node classes, generalized),
-//! one file each: [`sensor`], [`estimator`], [`policy`], [`safety`], [`actuator`]; a
-//! Python node is [`crate::python::node`], a registered one [`super::registry`]; an
-//! external node, run by another program over ROS 2, enters through [`external`].
+//! The node kinds ratelab has built in, one file each — [`sensor`], [`estimator`],
+//! [`policy`], [`safety`], [`actuator`], [`python`] (a learner's script, run by
+//! [`crate::python::node`]) and [`external`] (a ROS 2 node's proxy) — each its one
+//! definition ([`crate::graph::kind::KindDef`]: ports, plant, parameters, `make`) and its
+//! tick ([`crate::graph::kind::Work`]). [`super::registry`] registers them; a kind written
+//! outside ratelab is registered the same way ([`super::registry::register`]).
 //!
 //! A **python** node runs its subscription callbacks for what arrived, then its timers; a
 //! **registered** kind its `tick` for what arrived; what either published goes out with the
@@ -12,26 +14,22 @@
 //! from (of several inputs, the oldest), so the actuator measures sense→act latency
 //! (`now − origin`) across any chain.
 //!
-//! Adding a built-in kind is a file here, its variant in [`Work`], its name in
-//! [`super::spec::NodeKind`] and its wiring in [`super::Graph::build`]; a kind written outside
-//! ratelab needs none of that ([`super::registry`]).
+//! **Adding a built-in kind** is a file here (its `def()` and its [`Work`]) and its line in
+//! [`super::registry`]'s list; nothing else names a kind.
 
 pub mod actuator;
 pub mod estimator;
 pub mod external;
 pub mod policy;
+pub mod python;
 pub mod safety;
 pub mod sensor;
 
-pub use actuator::Actuator;
-pub use estimator::Estimator;
-pub use external::{External, ExternalPort};
-pub use policy::PolicyNode;
-pub use safety::Safety;
-pub use sensor::{Sensor, SensorNoise, SensorOutput};
+pub use external::{ExternalNodeSpec, ExternalPort};
 
-use super::spec::NodeId;
 use crate::executor::ComputeDraw;
+use crate::graph::kind::Work;
+use crate::ids::NodeId;
 use crate::node::{Flow, Node};
 use crate::publisher::Outbox;
 use crate::qos::{Fault, Liveliness};
@@ -57,35 +55,15 @@ pub struct NodeCore {
     pub compute: Option<ComputeDraw>,
 }
 
-/// A node of some kind around its [`NodeCore`].
+/// A node of some kind around its [`NodeCore`]: what the scheduler runs.
 pub struct GraphNode {
     core: NodeCore,
-    work: Work,
-}
-
-/// The kind-specific state: one variant per kind, each kind's tick in its own file.
-pub enum Work {
-    /// See [`sensor`].
-    Sensor(Sensor),
-    /// See [`estimator`].
-    Estimator(Estimator),
-    /// See [`policy`].
-    Policy(PolicyNode),
-    /// See [`safety`].
-    Safety(Safety),
-    /// See [`actuator`].
-    Actuator(Box<Actuator>),
-    /// A learner's node in Python ([`crate::python::node`]).
-    Python(Box<crate::python::node::PythonNode>),
-    /// A node of a kind registered in Rust ([`super::registry`]), bound to its topics.
-    Registered(Box<dyn super::registry::Tick>),
-    /// A node another program runs over ROS 2 ([`external`]): its proxy.
-    External(Box<External>),
+    work: Box<dyn Work>,
 }
 
 impl GraphNode {
-    /// A node of `work`'s kind.
-    pub fn new(core: NodeCore, work: Work) -> GraphNode {
+    /// A node doing `work`.
+    pub fn new(core: NodeCore, work: Box<dyn Work>) -> GraphNode {
         GraphNode { core, work }
     }
 }
@@ -105,27 +83,11 @@ impl Node for GraphNode {
             self.core.liveliness.fault_tick();
             return Flow::Continue; // stalled or killed: no work, no liveliness
         }
-        if !matches!(self.work, Work::External(_)) {
+        if self.work.alive_by_ticking() {
             // An external node is alive when it delivers, not when its proxy ticks.
             self.core.liveliness.assert_at(now);
         }
-        match &mut self.work {
-            Work::Sensor(s) => s.tick(now),
-            Work::Estimator(e) => e.tick(now),
-            Work::Policy(p) => p.tick(now),
-            Work::Safety(s) => s.tick(now),
-            Work::Actuator(a) => a.tick(now),
-            Work::External(x) => x.tick(now),
-            Work::Registered(r) => {
-                r.tick(now);
-                Flow::Continue
-            }
-            Work::Python(p) => match p.tick(now, self.core.rate.period()) {
-                Ok(()) => Flow::Continue,
-                // The scheduler catches it and fails the node with this line.
-                Err(e) => panic!("{}", e.0),
-            },
-        }
+        self.work.tick(now)
     }
     fn compute_time(&mut self) -> Nanos {
         self.core

@@ -1,7 +1,9 @@
-//! The **policy**: runs the brain on the newest state (nothing before the first) and
-//! publishes the force, `command × GEAR_N` newtons, with the state's origin.
+//! The **policy** kind: runs the run's brain (`--policy`) on the newest state (nothing
+//! before the first) and publishes the force, `command × GEAR_N` newtons, with the state's
+//! origin.
 
-use crate::msg::{ForceMsg, StateMsg};
+use crate::graph::kind::{typed, BuildContext, Code, KindDef, Params, Plant, Ports, Work};
+use crate::msg::{ForceMsg, Message, StateMsg};
 use crate::node::Flow;
 use crate::plant::GEAR_N;
 use crate::policy::BrainSlot;
@@ -9,6 +11,29 @@ use crate::publisher::Publisher;
 use crate::time::Nanos;
 use crate::topic::Topic;
 use std::sync::Arc;
+
+/// The kind: `state` in, `force` out, the brain between.
+pub fn def() -> KindDef {
+    KindDef {
+        name: "policy",
+        doc: "runs the --policy brain on the newest state and publishes a force",
+        ports: Ports::Fixed {
+            inputs: vec![&[StateMsg::TYPE]],
+            outputs: vec![&[ForceMsg::TYPE]],
+        },
+        plant: Plant::None,
+        code: Code::BuiltIn,
+        params: Params::Numbers(&[]),
+        uses_brain: true,
+        make: Box::new(|cx: &mut BuildContext<'_>| {
+            Ok(Box::new(PolicyNode {
+                brain: cx.brain.clone(),
+                input: typed(cx.inputs.first())?,
+                output: Publisher::new(typed(cx.outputs.first())?, cx.outbox.clone()),
+            }) as Box<dyn Work>)
+        }),
+    }
+}
 
 /// A policy node's state.
 pub struct PolicyNode {
@@ -20,9 +45,8 @@ pub struct PolicyNode {
     pub output: Publisher<ForceMsg>,
 }
 
-impl PolicyNode {
-    /// One tick at `now`.
-    pub fn tick(&mut self, now: Nanos) -> Flow {
+impl Work for PolicyNode {
+    fn tick(&mut self, now: Nanos) -> Flow {
         let Some(msg) = self.input.read(now) else {
             return Flow::Continue; // nothing sensed yet
         };

@@ -1,12 +1,49 @@
-//! The **safety** node: clamps the newest force to ±`max_force_n` and republishes it, with
+//! The **safety** kind: clamps the newest force to ±`max_force_n` and republishes it, with
 //! its origin.
 
-use crate::msg::ForceMsg;
+use crate::graph::kind::{
+    typed, BuildContext, Code, KindDef, ParamDef, Params, Plant, Ports, Work,
+};
+use crate::msg::{ForceMsg, Message};
 use crate::node::Flow;
+use crate::plant::GEAR_N;
 use crate::publisher::Publisher;
 use crate::time::Nanos;
 use crate::topic::Topic;
 use std::sync::Arc;
+
+/// Its parameter: the clamp.
+pub const PARAMS: &[ParamDef] = &[ParamDef {
+    name: "max_force_n",
+    unit: "N",
+    doc: "the largest force magnitude passed on",
+    default: GEAR_N,
+    min: 0.0,
+    max: GEAR_N,
+}];
+
+/// The kind: `force` in, `force` out.
+pub fn def() -> KindDef {
+    KindDef {
+        name: "safety",
+        doc: "clamps the newest force to ±max_force_n and passes it on",
+        ports: Ports::Fixed {
+            inputs: vec![&[ForceMsg::TYPE]],
+            outputs: vec![&[ForceMsg::TYPE]],
+        },
+        plant: Plant::None,
+        code: Code::BuiltIn,
+        params: Params::Numbers(PARAMS),
+        uses_brain: false,
+        make: Box::new(|cx: &mut BuildContext<'_>| {
+            Ok(Box::new(Safety {
+                input: typed(cx.inputs.first())?,
+                output: Publisher::new(typed(cx.outputs.first())?, cx.outbox.clone()),
+                max_force_n: cx.param_f64("max_force_n", GEAR_N)?,
+            }) as Box<dyn Work>)
+        }),
+    }
+}
 
 /// A safety node's state.
 pub struct Safety {
@@ -18,9 +55,8 @@ pub struct Safety {
     pub max_force_n: f64,
 }
 
-impl Safety {
-    /// One tick at `now`.
-    pub fn tick(&mut self, now: Nanos) -> Flow {
+impl Work for Safety {
+    fn tick(&mut self, now: Nanos) -> Flow {
         if let Some(msg) = self.input.read(now) {
             let newtons = msg.data.newtons.clamp(-self.max_force_n, self.max_force_n);
             self.output

@@ -1,14 +1,73 @@
-//! The **sensor**: reads the plant under its lock and publishes the full state (the
+//! The **sensor** kind: reads the plant under its lock and publishes the full state (the
 //! chapter's observation) or a position measurement, with optional seeded Gaussian noise on
 //! the positions. Its message's origin stamp is its own stamp: the reading.
 
-use crate::graph::spec::NodeId;
-use crate::graph::{lock, SharedPlant};
-use crate::msg::{PositionMsg, StateMsg};
+use crate::graph::kind::{BuildContext, Code, KindDef, ParamDef, Params, Plant, Ports, Work};
+use crate::ids::NodeId;
+use crate::msg::{Message, PositionMsg, StateMsg};
 use crate::node::Flow;
+use crate::plant::{lock, SharedPlant};
 use crate::publisher::Publisher;
 use crate::time::Nanos;
 use rand_distr::{Distribution, Normal};
+
+/// Its parameters: noise on each measured position.
+pub const PARAMS: &[ParamDef] = &[
+    ParamDef {
+        name: "noise_pos_m",
+        unit: "m",
+        doc: "standard deviation of Gaussian noise on the cart position",
+        default: 0.0,
+        min: 0.0,
+        max: 1.0,
+    },
+    ParamDef {
+        name: "noise_angle_rad",
+        unit: "rad",
+        doc: "standard deviation of Gaussian noise on the pole angle",
+        default: 0.0,
+        min: 0.0,
+        max: 0.5,
+    },
+];
+
+/// The kind: no input; one output of `state` or `position`; reads the plant.
+pub fn def() -> KindDef {
+    KindDef {
+        name: "sensor",
+        doc: "reads the plant and publishes the state or a position measurement",
+        ports: Ports::Fixed {
+            inputs: vec![],
+            outputs: vec![&[StateMsg::TYPE, PositionMsg::TYPE]],
+        },
+        plant: Plant::Reads,
+        code: Code::BuiltIn,
+        params: Params::Numbers(PARAMS),
+        uses_brain: false,
+        make: Box::new(|cx: &mut BuildContext<'_>| {
+            let out = cx.outputs.first().ok_or("a sensor publishes one topic")?;
+            let output = match (out.typed::<StateMsg>(), out.typed::<PositionMsg>()) {
+                (Some(t), _) => SensorOutput::State(Publisher::new(t.clone(), cx.outbox.clone())),
+                (None, Some(t)) => {
+                    SensorOutput::Position(Publisher::new(t.clone(), cx.outbox.clone()))
+                }
+                (None, None) => {
+                    return Err(format!("sensor '{}' publishes state or position", cx.name))
+                }
+            };
+            let (pos, angle) = (
+                cx.param_f64("noise_pos_m", 0.0)?,
+                cx.param_f64("noise_angle_rad", 0.0)?,
+            );
+            Ok(Box::new(Sensor {
+                plant: cx.plant.clone(),
+                output,
+                noise: (pos > 0.0 || angle > 0.0)
+                    .then(|| SensorNoise::new(cx.seed, cx.id, pos, angle)),
+            }) as Box<dyn Work>)
+        }),
+    }
+}
 
 /// A sensor's state.
 pub struct Sensor {
@@ -52,9 +111,9 @@ impl SensorNoise {
     }
 }
 
-impl Sensor {
+impl Work for Sensor {
     /// One tick at `now`: read the plant, publish.
-    pub fn tick(&mut self, now: Nanos) -> Flow {
+    fn tick(&mut self, now: Nanos) -> Flow {
         let state = lock(&self.plant).state();
         match &self.output {
             SensorOutput::State(t) => {

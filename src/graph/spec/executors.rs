@@ -21,7 +21,7 @@
 //! executor holding it. A node in no
 //! `[executors]` table runs on a thread of its own (`per_node`), in a group of its own.
 
-use super::{Ctx, GraphSpec, NodeId, NodeKind, OverrideError, RawNode, SpecError};
+use super::{Ctx, GraphSpec, NodeId, OverrideError, RawNode, SpecError};
 use crate::executor::{
     ComputeTime, ExecutionPlan, ExecutorKind, ExecutorOverride, GroupKind, PlanExecutor,
     MAX_THREADS,
@@ -163,7 +163,7 @@ pub(super) fn executors<'r>(
                     format!("executor '{name}': unknown node '{}'", n.get_ref()),
                 )
             })?;
-            if spec.node(id).kind == NodeKind::Actuator {
+            if spec.node(id).kind.is_actuator() {
                 return Err(cx.err(
                     n.span(),
                     format!(
@@ -341,7 +341,7 @@ impl GraphSpec {
                 threads: over.threads,
                 nodes: (0..self.nodes.len())
                     .map(NodeId)
-                    .filter(|&n| self.node(n).kind != NodeKind::Actuator)
+                    .filter(|&n| !self.node(n).kind.is_actuator())
                     .collect(),
                 callback_groups: BTreeMap::new(),
             }],
@@ -360,7 +360,7 @@ impl GraphSpec {
                 self.node_names().join(", ")
             ))
         })?;
-        if self.nodes[id.0].kind == NodeKind::Actuator && !c.is_zero() {
+        if self.nodes[id.0].kind.is_actuator() && !c.is_zero() {
             return Err(OverrideError(format!("--compute: {ACTUATOR_NO_COMPUTE}")));
         }
         self.nodes[id.0].compute = (!c.is_zero()).then_some(c);
