@@ -423,9 +423,14 @@ pub struct TopicMetrics {
     pub msg: String,
     /// The publishing node.
     pub publisher: String,
-    /// The subscribing node, if any.
+    /// The subscribing node, if any (the first, in tie-break order, of several).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub subscriber: Option<String>,
+    /// With several subscribers, each one's own queue's figures, by node (the topic's
+    /// `dropped`, `stale_reads` and reader-side counters are their sums; each subscription
+    /// has a queue of its own, as in ROS 2). Absent for at most one subscriber.
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub subscriptions: BTreeMap<String, SubscriptionMetrics>,
     /// History depth at the end of the run.
     pub depth: usize,
     /// Messages published.
@@ -444,6 +449,17 @@ pub struct TopicMetrics {
     /// `requested_deadline_missed`.
     #[serde(flatten)]
     pub qos_counters: BTreeMap<String, u64>,
+}
+
+/// One subscription's figures on a topic of several subscribers ([`TopicMetrics::subscriptions`]).
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub struct SubscriptionMetrics {
+    /// Messages evicted from its queue before it read them (the chapter's drop rule).
+    pub dropped: u64,
+    /// Its reads that found nothing new.
+    pub stale_reads: u64,
+    /// Messages its queue never got (a lossy link, or the wire).
+    pub lost: u64,
 }
 
 impl Metrics {
@@ -515,6 +531,15 @@ impl Metrics {
         self.topics_by_publisher()
             .iter()
             .map(|(name, t)| match t.subscriber {
+                // Several subscribers: each one's drops (a queue each).
+                Some(_) if !t.subscriptions.is_empty() => {
+                    let each: Vec<String> = t
+                        .subscriptions
+                        .iter()
+                        .map(|(node, s)| format!("{node} {} dropped", s.dropped))
+                        .collect();
+                    format!("{name} {:.1} msg/s ({})", t.msg_per_s, each.join(", "))
+                }
                 Some(_) => format!("{name} {:.1} msg/s ({} dropped)", t.msg_per_s, t.dropped),
                 None => format!("{name} {:.1} msg/s (no subscriber)", t.msg_per_s),
             })

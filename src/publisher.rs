@@ -81,29 +81,66 @@ impl Outbox {
     }
 }
 
-/// A node's publisher on one topic of `T` messages.
+/// A node's publisher on one topic of `T` messages: it publishes into the queue of every
+/// subscription (one queue for a topic with at most one subscriber).
 #[derive(Clone)]
 pub struct Publisher<T> {
-    topic: Arc<Topic<T>>,
+    queues: Queues<T>,
     outbox: Outbox,
+}
+
+/// The queues a publish goes into.
+#[derive(Clone)]
+enum Queues<T> {
+    One(Arc<Topic<T>>),
+    Many(Arc<[Arc<Topic<T>>]>),
 }
 
 impl<T: Clone + Send + Sync + 'static> Publisher<T> {
     /// A publisher on `topic` through the node's `outbox`.
     pub fn new(topic: Arc<Topic<T>>, outbox: Outbox) -> Publisher<T> {
-        Publisher { topic, outbox }
+        Publisher {
+            queues: Queues::One(topic),
+            outbox,
+        }
+    }
+
+    /// A publisher on a topic of several subscriptions, one queue each (at least one).
+    ///
+    /// # Panics
+    /// For no queue.
+    pub fn fan_out(queues: Vec<Arc<Topic<T>>>, outbox: Outbox) -> Publisher<T> {
+        assert!(!queues.is_empty(), "a topic has at least one queue");
+        Publisher {
+            queues: if queues.len() == 1 {
+                Queues::One(queues[0].clone())
+            } else {
+                Queues::Many(queues.into())
+            },
+            outbox,
+        }
     }
 
     /// Publish `data` at run time `now` with the origin stamp of what it was derived from
-    /// (sense→act latency is measured from it). Held until the tick's end when the tick has
-    /// a compute time.
+    /// (sense→act latency is measured from it), into every subscription's queue. Held
+    /// until the tick's end when the tick has a compute time.
     pub fn publish(&self, data: T, now: Nanos, origin_stamp: Option<Nanos>) {
-        self.outbox.publish(&self.topic, data, now, origin_stamp);
+        match &self.queues {
+            Queues::One(t) => self.outbox.publish(t, data, now, origin_stamp),
+            Queues::Many(ts) => {
+                for t in ts.iter() {
+                    self.outbox.publish(t, data.clone(), now, origin_stamp);
+                }
+            }
+        }
     }
 
-    /// The topic.
+    /// The (first subscription's) queue.
     pub fn topic(&self) -> &Arc<Topic<T>> {
-        &self.topic
+        match &self.queues {
+            Queues::One(t) => t,
+            Queues::Many(ts) => &ts[0],
+        }
     }
 }
 

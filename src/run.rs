@@ -1,7 +1,7 @@
 //! One run, end to end: settings + brain → plant, graph, executor → [`RunReport`].
 
 use crate::config::{ClockKind, RunConfig};
-use crate::graph::{lock, Graph, GraphHandles, StepObserver};
+use crate::graph::{lock, Graph, GraphHandles, NodeId, StepObserver, TopicId};
 use crate::metrics::{round_to, Metrics, NodeMetrics, NodeTiming, TopicMetrics};
 use crate::msg::AnyTopic;
 use crate::plant::{CartPole, PlantError};
@@ -384,6 +384,10 @@ pub struct GraphState {
     pub topics: Vec<crate::topic::TopicStats>,
     /// Each topic's QoS in force at the end.
     pub topic_qos: Vec<crate::qos::TopicQos>,
+    /// Each topic's subscriptions' counters at the end, when some topic has several
+    /// subscribers (empty when none has).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub subscriptions: Vec<Vec<crate::topic::TopicStats>>,
     /// Each node's liveliness lease and status at the end.
     pub liveliness: Vec<(Option<Nanos>, crate::qos::LivelinessStatus)>,
     /// Each node's rate at the end, Hz.
@@ -434,6 +438,14 @@ impl GraphState {
         GraphState {
             topics: h.topic_stats_at(at).as_slice().to_vec(),
             topic_qos: h.topics.iter().map(AnyTopic::qos).collect(),
+            subscriptions: if h.spec.topics.iter().any(|t| t.subscribers.len() > 1) {
+                h.topics
+                    .iter()
+                    .map(|t| t.subscription_stats(Some(at)))
+                    .collect()
+            } else {
+                Vec::new()
+            },
             liveliness: h
                 .liveliness
                 .iter()
@@ -480,8 +492,24 @@ pub fn summarize_state(cfg: &RunConfig, st: &GraphState, end: &RunEnd) -> Metric
     let log = &st.actuator;
     let stats: crate::runlog::TopicCounters = st.topics.iter().copied().collect();
     let chain = spec.chain;
-    let obs = chain.map(|c| stats.get(c.obs));
-    let action = chain.map(|c| stats.get(c.action));
+    // The chain's topics as its reader sees them: with several subscribers, the queue of the
+    // policy (for /obs) and of the node it drives (for /action).
+    let as_read_by = |t: TopicId, reader: NodeId| -> crate::topic::TopicStats {
+        let k = spec.topic(t).subscribers.iter().position(|&s| s == reader);
+        k.and_then(|k| st.subscriptions.get(t.0)?.get(k).copied())
+            .filter(|_| spec.topic(t).subscribers.len() > 1)
+            .unwrap_or_else(|| stats.get(t))
+    };
+    let obs = chain.map(|c| as_read_by(c.obs, c.policy));
+    let action = chain.map(|c| {
+        let subs = &spec.topic(c.action).subscribers;
+        let reader = if subs.contains(&spec.actuator) {
+            spec.actuator
+        } else {
+            subs.first().copied().unwrap_or(spec.actuator)
+        };
+        as_read_by(c.action, reader)
+    });
     let sim_time = log.fell_at.unwrap_or(end.at);
     let per_s = |n: u64| {
         if sim_time.0 == 0 {
@@ -529,7 +557,26 @@ pub fn summarize_state(cfg: &RunConfig, st: &GraphState, end: &RunEnd) -> Metric
             let m = TopicMetrics {
                 msg: t.msg.as_str().to_string(),
                 publisher: spec.node(t.publisher).name.clone(),
-                subscriber: t.subscriber.map(|n| spec.node(n).name.clone()),
+                subscriber: t.subscriber().map(|n| spec.node(n).name.clone()),
+                subscriptions: st
+                    .subscriptions
+                    .get(i)
+                    .filter(|subs| subs.len() > 1)
+                    .map(|subs| {
+                        t.subscribers
+                            .iter()
+                            .zip(subs)
+                            .map(|(n, s)| {
+                                let m = crate::metrics::SubscriptionMetrics {
+                                    dropped: s.dropped,
+                                    stale_reads: s.stale_reads,
+                                    lost: s.lost,
+                                };
+                                (spec.node(*n).name.clone(), m)
+                            })
+                            .collect()
+                    })
+                    .unwrap_or_default(),
                 depth: s.depth,
                 published: s.published,
                 dropped: s.dropped,

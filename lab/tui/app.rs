@@ -690,12 +690,12 @@ impl App {
             Msg::CycleOnDeadlineMissed => {
                 // Said here in a line that fits 80 columns (the graph would refuse it too).
                 let actuator = self.graph.actuator;
-                if self.graph.topic(t).subscriber != Some(actuator) {
+                if !self.graph.topic(t).subscribers.contains(&actuator) {
                     let read = self
                         .graph
                         .topics
                         .iter()
-                        .find(|x| x.subscriber == Some(actuator))
+                        .find(|x| x.subscribers.contains(&actuator))
                         .map_or_else(String::new, |x| format!(" ({})", x.name));
                     self.say(format!(
                         "o: the actuator's reaction: select the topic it reads{read}"
@@ -747,14 +747,21 @@ impl App {
         TopicView {
             name: spec.name.clone(),
             publisher: spec.publisher.0,
-            subscriber: spec.subscriber.map(|n| n.0),
+            subscriber: spec.subscriber().map(|n| n.0),
+            fan_out: (spec.subscribers.len() > 1).then(|| {
+                spec.subscribers
+                    .iter()
+                    .map(|n| self.graph.node(*n).name.as_str())
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            }),
             depth: self.depths.get(id.0).copied().unwrap_or(spec.depth),
             msg_per_s: window.msg_per_s,
             dropped: window.dropped,
             // A topic nobody reads evicts every message unread: not a drop anyone suffers.
-            dropping: spec.subscriber.is_some() && window.dropped > 0,
+            dropping: spec.subscriber().is_some() && window.dropped > 0,
             unhealthy: dead(spec.publisher)
-                || spec.subscriber.is_some_and(dead)
+                || spec.subscribers.iter().any(|&n| dead(n))
                 || self.last.is_some_and(|l| l.topics.get(id).lost > 0),
             uncounted: self.attached.is_some() && dead(spec.holder()),
             stale_reads: window.stale_reads,

@@ -91,8 +91,11 @@ pub struct TopicView {
     pub name: String,
     /// The publishing node's index.
     pub publisher: usize,
-    /// The subscribing node's index, if any.
+    /// The subscribing node's index, if any (the first of several).
     pub subscriber: Option<usize>,
+    /// With several subscribers, their names (each has a queue of its own; the arrow's
+    /// drops and stale reads are their sums).
+    pub fan_out: Option<String>,
     /// History depth now.
     pub depth: usize,
     /// Selected with Tab?
@@ -711,6 +714,14 @@ fn arrow_lines(t: &TopicView, w: usize, rows: usize) -> Vec<Line<'static>> {
         Line::from("? msg/s".red()).centered()
     } else {
         Line::from(format!("{:.1} msg/s", t.msg_per_s)).centered()
+    };
+    // Several subscribers: who reads it, under its name.
+    let name = match &t.fan_out {
+        Some(to) => {
+            let to: String = format!("→ {to}").chars().take(w).collect();
+            Line::from(vec![name.spans[0].clone(), Span::raw(" "), to.dim()]).centered()
+        }
+        None => name,
     };
     let dropped =
         Line::from(Span::styled(format!("{} dropped {mark}", t.dropped), style)).centered();

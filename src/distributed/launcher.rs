@@ -363,7 +363,7 @@ pub fn merge_states(
     // subscriber's copy never received (in flight at the end, or sent while it was down)
     // was lost on the wire. Without the subscriber's report only the sending side is known.
     for (i, t) in spec.topics.iter().enumerate() {
-        let Some(sub) = t.subscriber else { continue };
+        let Some(sub) = t.subscriber() else { continue };
         let (from, to) = (spec.process_of(t.publisher), spec.process_of(sub));
         if from == to {
             continue;
@@ -1372,6 +1372,7 @@ mod tests {
         let st = GraphState {
             topics: vec![obs, obs],
             topic_qos: vec![crate::qos::TopicQos::default(); 2],
+            subscriptions: Vec::new(),
             liveliness: vec![(None, crate::qos::LivelinessStatus::default()); 3],
             rates_hz: vec![50.0; 3],
             ticks: vec![501, 0, 501],

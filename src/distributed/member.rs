@@ -441,14 +441,14 @@ pub fn run_member(opts: &MemberOptions, stop: &StopFlag) -> Result<(), DistError
         .map(TopicId)
         .filter(|&t| {
             let ts = spec.topic(t);
-            ts.subscriber.is_some_and(owns) && !owns(ts.publisher)
+            ts.subscriber().is_some_and(owns) && !owns(ts.publisher)
         })
         .collect();
     let outbound: Vec<TopicId> = (0..spec.topics.len())
         .map(TopicId)
         .filter(|&t| {
             let ts = spec.topic(t);
-            owns(ts.publisher) && ts.subscriber.is_some_and(|s| !owns(s))
+            owns(ts.publisher) && ts.subscriber().is_some_and(|s| !owns(s))
         })
         .collect();
     for &t in &outbound {

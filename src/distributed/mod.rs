@@ -334,6 +334,21 @@ pub fn check_keys(spec: &GraphSpec) -> Result<(), DistError> {
             )));
         }
     }
+    // A topic's subscribers share a process: it holds the topic's counters, and one copy of
+    // the topic there feeds every subscription.
+    for t in &spec.topics {
+        let mut at = t.subscribers.iter().map(|&s| (s, spec.process_of(s)));
+        if let Some((first, p)) = at.next() {
+            if let Some((other, q)) = at.find(|(_, q)| *q != p) {
+                return Err(DistError::Usage(format!(
+                    "topic '{}' has subscribers in two processes ('{}' in '{p}', '{}' in '{q}'): a topic's subscribers share a process across processes (place them together, or give each its own topic)",
+                    t.name,
+                    spec.node(first).name,
+                    spec.node(other).name
+                )));
+            }
+        }
+    }
     if spec.placement().len() > MAX_PROCESSES {
         return Err(DistError::Usage(format!(
             "graph '{}' places its nodes in {} processes (at most {MAX_PROCESSES})",

@@ -300,3 +300,21 @@ pub fn typed<M: crate::msg::Message>(
         None => Err(format!("no topic of {}", M::NAME)),
     }
 }
+
+/// A publisher of `M` on topic `t` through `outbox` (into every subscription's queue), for
+/// a kind whose ports fix its type.
+///
+/// # Errors
+/// One line naming the topic, when it carries another type (the graph file's rules make
+/// that impossible for a validated graph).
+pub fn publisher<M: crate::msg::Message>(
+    t: Option<&AnyTopic>,
+    outbox: &Outbox,
+) -> Result<crate::publisher::Publisher<M>, String> {
+    match t {
+        Some(t) => t
+            .publisher::<M>(outbox)
+            .ok_or_else(|| format!("topic {} does not carry {}", t.name(), M::NAME)),
+        None => Err(format!("no topic of {}", M::NAME)),
+    }
+}

@@ -220,7 +220,14 @@ impl Graph {
             .enumerate()
             .map(|(i, t)| {
                 let link_seed = seed.rotate_left(16) ^ (i as u64 + 1);
-                AnyTopic::with_qos(&t.name, t.msg, t.depth, t.qos, link_seed)
+                AnyTopic::with_subscriptions(
+                    &t.name,
+                    t.msg,
+                    t.depth,
+                    t.qos,
+                    link_seed,
+                    t.subscribers.len(),
+                )
             })
             .collect::<Result<Vec<_>, _>>()?;
         let liveliness: Vec<Arc<Liveliness>> = spec
@@ -289,11 +296,21 @@ impl Graph {
                     outbox: outbox.clone(),
                     compute: n.compute.map(|c| ComputeDraw::new(c, seed, i)),
                 };
-                // Its topics, in the graph file's order.
-                let of = |ts: &[TopicId]| -> Vec<AnyTopic> {
-                    ts.iter().map(|t| topics[t.0].clone()).collect()
-                };
-                let (inputs, outputs) = (of(&n.subscribes), of(&n.publishes));
+                // Its topics, in the graph file's order: what it reads, its own subscription's
+                // queue (a topic of several subscribers has one per subscriber).
+                let inputs: Vec<AnyTopic> = n
+                    .subscribes
+                    .iter()
+                    .map(|t| {
+                        let subs = &spec.topic(*t).subscribers;
+                        match subs.iter().position(|s| s.0 == i) {
+                            Some(k) if subs.len() > 1 => topics[t.0].subscription(k),
+                            _ => topics[t.0].clone(),
+                        }
+                    })
+                    .collect();
+                let outputs: Vec<AnyTopic> =
+                    n.publishes.iter().map(|t| topics[t.0].clone()).collect();
                 let attachment = external
                     .iter()
                     .find(|p| p.node.0 == i)

@@ -214,7 +214,7 @@ impl<M: Message> Outputs for M {
     type Ports = Publisher<M>;
     fn bind(topics: &[AnyTopic], outbox: &Outbox) -> Option<Publisher<M>> {
         match topics {
-            [t] => Some(Publisher::new(t.typed::<M>()?.clone(), outbox.clone())),
+            [t] => t.publisher::<M>(outbox),
             _ => None,
         }
     }
@@ -254,7 +254,7 @@ macro_rules! tuple_ports {
                 if topics.len() != <Self as Outputs>::TYPES.len() {
                     return None;
                 }
-                Some(($(Publisher::new(topics[$i].typed::<$m>()?.clone(), outbox.clone()),)+))
+                Some(($(topics[$i].publisher::<$m>(outbox)?,)+))
             }
             fn publish(ports: &Self::Ports, out: Self::Published, now: Nanos, origin: Option<Nanos>) {
                 $(if let Some(m) = out.$i {

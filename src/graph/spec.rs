@@ -46,9 +46,10 @@
 //!   table, as the chapter's files write `max_force_n = 8`) are the kind's
 //!   ([`crate::graph::kind::Params`]): checked numbers with defaults, or a free table for
 //!   Python and Rust kinds;
-//! - every topic is declared once, has exactly one publisher and at most one subscriber
-//!   (the chapter's topic keeps one read mark; per-subscription queues come with QoS), and
-//!   its type matches both ends;
+//! - every topic is declared once, has exactly one publisher and any number of subscribers
+//!   (each subscription has a queue of its own, as in ROS 2: the topic's depth, drop rule,
+//!   link and counters per subscriber; the chapter's topics have one), and its type matches
+//!   every end;
 //! - rates in (0, 10 000] Hz; the actuator at the plant's 50 Hz (each tick steps 20 ms of
 //!   physics); depths ≥ 1; no field the format does not know;
 //! - QoS values in range (deadline and lifespan > 0, loss in [0, 1], …) and combined
@@ -90,6 +91,9 @@ use std::fmt;
 use std::ops::Range;
 use std::path::Path;
 use toml::Spanned;
+
+/// The most subscribers a topic may have.
+pub const MAX_SUBSCRIBERS: usize = MAX_NODES - 1;
 
 /// A graph file larger than this is refused before it is parsed, bytes.
 pub const MAX_FILE_BYTES: u64 = 64 * 1024;
@@ -184,18 +188,25 @@ pub struct TopicSpec {
     pub qos: TopicQos,
     /// The one publisher.
     pub publisher: NodeId,
-    /// The subscriber, if any.
-    pub subscriber: Option<NodeId>,
+    /// The subscribers, in tie-break order (none: nobody reads it). Each has a queue of its
+    /// own ([`crate::msg::AnyTopic::subscription`]).
+    pub subscribers: Vec<NodeId>,
 }
 
 impl TopicSpec {
+    /// The first subscriber (in tie-break order), if any: the chapter's topics have one.
+    pub fn subscriber(&self) -> Option<NodeId> {
+        self.subscribers.first().copied()
+    }
+
     /// The node whose process keeps this topic's counters when the graph runs across
     /// processes: its subscriber (whose copy of the topic sees every message that crossed,
-    /// and counts its drops, stale reads and losses), or its publisher when nobody
-    /// subscribes. The merged `metrics.json`, the watcher's steps and a process's samples
-    /// all take the topic from this node's process.
+    /// and counts its drops, stale reads and losses; a launch keeps all of a topic's
+    /// subscribers in one process), or its publisher when nobody subscribes. The merged
+    /// `metrics.json`, the watcher's steps and a process's samples all take the topic from
+    /// this node's process.
     pub fn holder(&self) -> NodeId {
-        self.subscriber.unwrap_or(self.publisher)
+        self.subscriber().unwrap_or(self.publisher)
     }
 }
 
@@ -810,8 +821,9 @@ impl GraphSpec {
             qos::apply_key(&mut q, &mut depth, k, v).map_err(err)?;
         }
         let to_actuator = t
-            .subscriber
-            .is_some_and(|n| self.nodes[n.0].kind.is_actuator());
+            .subscribers
+            .iter()
+            .any(|n| self.nodes[n.0].kind.is_actuator());
         qos::check_combination(&q, to_actuator).map_err(err)?;
         let t = &mut self.topics[id.0];
         (t.qos, t.depth) = (q, depth);
@@ -957,7 +969,7 @@ fn build(cx: &Ctx<'_>, raw: RawGraph) -> Result<GraphSpec, SpecError> {
             depth,
             qos,
             publisher: NodeId(usize::MAX),
-            subscriber: None,
+            subscribers: Vec::new(),
         });
         topic_spans.push(t_ref.name.span());
     }
@@ -1042,17 +1054,16 @@ fn build(cx: &Ctx<'_>, raw: RawGraph) -> Result<GraphSpec, SpecError> {
                     ));
                 }
             }
-            if let Some(other) = t.subscriber {
-                let who = file_nodes.get(other.0).map_or(nname.as_str(), |n| &n.name);
+            if t.subscribers.len() >= MAX_SUBSCRIBERS {
                 return Err(cx.err(
                     s.span(),
                     format!(
-                        "topic '{}' already has a subscriber ('{who}'): one subscriber per topic",
+                        "topic '{}' has {MAX_SUBSCRIBERS} subscribers already (at most {MAX_SUBSCRIBERS})",
                         t.name
                     ),
                 ));
             }
-            t.subscriber = Some(id);
+            t.subscribers.push(id);
             subscribes.push(TopicId(ti));
         }
         let mut publishes = Vec::with_capacity(pub_names.len());
@@ -1154,7 +1165,7 @@ fn build(cx: &Ctx<'_>, raw: RawGraph) -> Result<GraphSpec, SpecError> {
     }
     for (i, t) in topics.iter().enumerate() {
         if t.publisher.0 == usize::MAX {
-            let why = if t.subscriber.is_some() {
+            let why = if !t.subscribers.is_empty() {
                 "has a subscriber but no publisher"
             } else {
                 "is declared but no node publishes it"
@@ -1162,8 +1173,9 @@ fn build(cx: &Ctx<'_>, raw: RawGraph) -> Result<GraphSpec, SpecError> {
             return Err(cx.err(topic_spans[i].clone(), format!("topic '{}' {why}", t.name)));
         }
         let to_actuator = t
-            .subscriber
-            .is_some_and(|n| file_nodes[n.0].kind.is_actuator());
+            .subscribers
+            .iter()
+            .any(|n| file_nodes[n.0].kind.is_actuator());
         qos::check_combination(&t.qos, to_actuator).map_err(|e| {
             let raw = raw.topics[i].get_ref();
             let at = raw
@@ -1199,7 +1211,10 @@ fn build(cx: &Ctx<'_>, raw: RawGraph) -> Result<GraphSpec, SpecError> {
     let nodes: Vec<NodeSpec> = order.iter().map(|&i| file_nodes[i].clone()).collect();
     for t in &mut topics {
         t.publisher = NodeId(new_index[t.publisher.0]);
-        t.subscriber = t.subscriber.map(|s| NodeId(new_index[s.0]));
+        for s in &mut t.subscribers {
+            *s = NodeId(new_index[s.0]);
+        }
+        t.subscribers.sort();
     }
     let actuator = NodeId(nodes.iter().position(|n| n.kind.is_actuator()).unwrap_or(0));
     let mut spec = GraphSpec {
@@ -1289,7 +1304,7 @@ fn tie_break_order(nodes: &[NodeSpec], topics: &[TopicSpec]) -> Result<Vec<usize
     let mut indegree = vec![0usize; n];
     let mut edges: Vec<(usize, usize)> = Vec::new();
     for t in topics {
-        if let Some(s) = t.subscriber {
+        for &s in &t.subscribers {
             if nodes[s.0].priority.is_none() {
                 edges.push((t.publisher.0, s.0));
                 indegree[s.0] += 1;
@@ -1861,7 +1876,7 @@ depth = 1
             "publishes = [\"/action\", \"/nope\"]",
         );
         assert!(e.starts_with("unknown topic '/nope'"), "{e}");
-        // Each topic keeps one publisher and one subscriber.
+        // Each topic keeps one publisher.
         let e = reason(
             "publishes = [\"/action\", \"/error\"]",
             "publishes = [\"/action\", \"/reference\"]",

@@ -126,7 +126,7 @@ pub struct MsgTypeInfo {
     doc: &'static str,
     fields: &'static [Field],
     type_id: fn() -> TypeId,
-    new_topic: fn(&str, usize, TopicQos, u64) -> Result<AnyTopic, ZeroDepth>,
+    new_topic: fn(&str, usize, TopicQos, u64, usize) -> Result<AnyTopic, ZeroDepth>,
     from_bytes: fn(&[u8]) -> Result<MsgData, String>,
     from_fields: fn(&[f64]) -> MsgData,
     ros2: fn() -> Option<RosCodec>,
@@ -153,10 +153,21 @@ fn new_topic<M: Message>(
     depth: usize,
     qos: TopicQos,
     link_seed: u64,
+    subscriptions: usize,
 ) -> Result<AnyTopic, ZeroDepth> {
-    Ok(AnyTopic(Arc::new(Arc::new(Topic::<M>::with_qos(
-        name, depth, qos, link_seed,
-    )?))))
+    let queue = |k: usize| -> Result<Arc<Topic<M>>, ZeroDepth> {
+        // Each subscription's link draws its own fates; the first draws the topic's.
+        let seed = link_seed ^ ((k as u64) << 48);
+        Ok(Arc::new(Topic::<M>::with_qos(name, depth, qos, seed)?))
+    };
+    Ok(if subscriptions <= 1 {
+        AnyTopic(Arc::new(queue(0)?))
+    } else {
+        let queues = (0..subscriptions)
+            .map(queue)
+            .collect::<Result<Vec<_>, _>>()?;
+        AnyTopic(Arc::new(FanOut { queues }))
+    })
 }
 
 fn from_fields<M: Message>(f: &[f64]) -> MsgData {
@@ -490,6 +501,8 @@ trait ErasedTopic: Send + Sync + fmt::Debug {
         origin: Option<Nanos>,
     ) -> bool;
     fn set_data_tap(&self, tap: DataTap) -> bool;
+    fn subscriptions(&self) -> Vec<AnyTopic>;
+    fn subscription_stats(&self, now: Option<Nanos>) -> Vec<TopicStats>;
 }
 
 /// A message read from a topic of any type ([`AnyTopic::read`]).
@@ -578,6 +591,123 @@ impl<M: Message> ErasedTopic for Arc<Topic<M>> {
         }))
         .is_ok()
     }
+    fn subscriptions(&self) -> Vec<AnyTopic> {
+        vec![AnyTopic(Arc::new(self.clone()))]
+    }
+    fn subscription_stats(&self, now: Option<Nanos>) -> Vec<TopicStats> {
+        vec![now.map_or_else(|| Topic::stats(self), |n| Topic::stats_at(self, n))]
+    }
+}
+
+/// A topic of several subscribers: a queue per subscription, as ROS 2 gives each
+/// subscription its own history. A publish goes into every queue; each subscriber reads its
+/// own, with its own drop rule, link fates and counters. Its counters as one
+/// ([`AnyTopic::stats`]) are the first queue's for what the publisher did (`published`,
+/// `last_stamp`, `depth`, `offered_deadline_missed`) and the sum over the subscriptions for
+/// what each reader met (`dropped`, `seen`, `stale_reads`, `expired`, `refused`, `lost`,
+/// `retransmitted`, `in_flight`, `requested_deadline_missed`).
+#[derive(Debug)]
+struct FanOut<M> {
+    queues: Vec<Arc<Topic<M>>>,
+}
+
+/// Several subscriptions' counters as one (see [`FanOut`]).
+fn combined(all: Vec<TopicStats>) -> TopicStats {
+    let mut it = all.into_iter();
+    let mut out = it.next().unwrap_or_default();
+    for s in it {
+        out.dropped += s.dropped;
+        out.seen += s.seen;
+        out.stale_reads += s.stale_reads;
+        out.expired += s.expired;
+        out.refused += s.refused;
+        out.lost += s.lost;
+        out.retransmitted += s.retransmitted;
+        out.in_flight += s.in_flight;
+        out.requested_deadline_missed += s.requested_deadline_missed;
+    }
+    out
+}
+
+impl<M: Message> ErasedTopic for FanOut<M> {
+    fn msg_type(&self) -> MsgType {
+        M::TYPE
+    }
+    fn any(&self) -> &dyn Any {
+        self
+    }
+    fn name(&self) -> &str {
+        self.queues[0].name()
+    }
+    fn stats(&self) -> TopicStats {
+        combined(self.queues.iter().map(|q| q.stats()).collect())
+    }
+    fn stats_at(&self, now: Nanos) -> TopicStats {
+        combined(self.queues.iter().map(|q| q.stats_at(now)).collect())
+    }
+    fn qos(&self) -> TopicQos {
+        self.queues[0].qos()
+    }
+    fn set_qos(&self, qos: TopicQos) {
+        for q in &self.queues {
+            q.set_qos(qos);
+        }
+    }
+    fn set_depth(&self, depth: usize) -> Result<(), ZeroDepth> {
+        self.queues.iter().try_for_each(|q| q.set_depth(depth))
+    }
+    fn buffered(&self) -> usize {
+        self.queues.iter().map(|q| q.buffered()).max().unwrap_or(0)
+    }
+    fn unseen_buffered(&self) -> usize {
+        self.queues
+            .iter()
+            .map(|q| q.unseen_buffered())
+            .max()
+            .unwrap_or(0)
+    }
+    fn next_seq(&self) -> u64 {
+        self.queues[0].next_seq()
+    }
+    fn count_lost(&self, n: u64) {
+        for q in &self.queues {
+            q.count_lost(n);
+        }
+    }
+    fn read(&self, now: Nanos) -> Option<Received> {
+        // Each subscriber reads its own queue ([`AnyTopic::subscription`]).
+        ErasedTopic::read(&self.queues[0], now)
+    }
+    fn newest_after(&self, after: Option<u64>) -> Option<(u64, Nanos, Option<Nanos>, MsgData)> {
+        self.queues[0].newest_after(after)
+    }
+    fn publish(
+        &self,
+        outbox: Option<&Outbox>,
+        data: &MsgData,
+        stamp: Nanos,
+        origin: Option<Nanos>,
+    ) -> bool {
+        self.queues
+            .iter()
+            .all(|q| ErasedTopic::publish(q, outbox, data, stamp, origin))
+    }
+    fn set_data_tap(&self, tap: DataTap) -> bool {
+        // Every publish reaches every queue: the first sees each message once.
+        self.queues[0].set_data_tap(tap)
+    }
+    fn subscriptions(&self) -> Vec<AnyTopic> {
+        self.queues
+            .iter()
+            .map(|q| AnyTopic(Arc::new(q.clone())))
+            .collect()
+    }
+    fn subscription_stats(&self, now: Option<Nanos>) -> Vec<TopicStats> {
+        self.queues
+            .iter()
+            .map(|q| now.map_or_else(|| q.stats(), |n| q.stats_at(n)))
+            .collect()
+    }
 }
 
 /// A topic of any registered message type (module docs). Cheap to clone: the clones are
@@ -605,12 +735,62 @@ impl AnyTopic {
         qos: TopicQos,
         link_seed: u64,
     ) -> Result<AnyTopic, ZeroDepth> {
-        (msg.0.new_topic)(name, depth, qos, link_seed)
+        (msg.0.new_topic)(name, depth, qos, link_seed, 1)
     }
 
-    /// The typed topic, if it carries `M`.
+    /// A new topic of type `msg` with `qos` read by `subscriptions` subscribers, each with
+    /// a queue of its own (its depth, drop rule, link fates — seeded from `link_seed` and
+    /// its index — and counters); at most one subscriber gives the one queue
+    /// [`AnyTopic::with_qos`] makes.
+    ///
+    /// # Errors
+    /// [`ZeroDepth`] for depth 0.
+    pub fn with_subscriptions(
+        name: &str,
+        msg: MsgType,
+        depth: usize,
+        qos: TopicQos,
+        link_seed: u64,
+        subscriptions: usize,
+    ) -> Result<AnyTopic, ZeroDepth> {
+        (msg.0.new_topic)(name, depth, qos, link_seed, subscriptions)
+    }
+
+    /// The typed queue, if it carries `M` and has one queue (for several subscribers: a
+    /// subscriber's own, [`AnyTopic::subscription`]).
     pub fn typed<M: Message>(&self) -> Option<&Arc<Topic<M>>> {
         self.0.any().downcast_ref::<Arc<Topic<M>>>()
+    }
+
+    /// A publisher of `M` on it, into every subscription's queue, through `outbox`; `None`
+    /// when it carries another type.
+    pub fn publisher<M: Message>(&self, outbox: &Outbox) -> Option<crate::publisher::Publisher<M>> {
+        let any = self.0.any();
+        if let Some(t) = any.downcast_ref::<Arc<Topic<M>>>() {
+            return Some(crate::publisher::Publisher::new(t.clone(), outbox.clone()));
+        }
+        let fan = any.downcast_ref::<FanOut<M>>()?;
+        Some(crate::publisher::Publisher::fan_out(
+            fan.queues.clone(),
+            outbox.clone(),
+        ))
+    }
+
+    /// Subscription `k`'s queue, as a topic of its own (what subscriber number `k`, in
+    /// tie-break order, reads); the topic itself when it has one queue.
+    pub fn subscription(&self, k: usize) -> AnyTopic {
+        let mut all = self.0.subscriptions();
+        if k < all.len() {
+            all.swap_remove(k)
+        } else {
+            self.clone()
+        }
+    }
+
+    /// Every subscription's counters, in subscriber order (one entry for a topic of one
+    /// queue), as of their latest operations or at run time `now`.
+    pub fn subscription_stats(&self, now: Option<Nanos>) -> Vec<TopicStats> {
+        self.0.subscription_stats(now)
     }
 
     /// The type of message it carries (the `msg` it was made with).

@@ -84,10 +84,12 @@ impl GraphShape {
     /// rate, every topic with its publisher, subscriber and live counters; the chain's
     /// policy sets the control period, and its output topic is the published force.
     pub fn from_handles(h: &GraphHandles) -> Self {
-        let commands = h
-            .spec
-            .chain
-            .and_then(|c| h.topic(c.action).typed::<ForceMsg>().cloned());
+        let commands = h.spec.chain.and_then(|c| {
+            h.topic(c.action)
+                .subscription(0)
+                .typed::<ForceMsg>()
+                .cloned()
+        });
         Self::build(
             &h.spec,
             &h.rates,
@@ -169,9 +171,9 @@ impl GraphShape {
                     name: t.name.clone(),
                     publisher: spec.node(t.publisher).name.clone(),
                     subscribers: t
-                        .subscriber
-                        .map(|s| spec.node(s).name.clone())
-                        .into_iter()
+                        .subscribers
+                        .iter()
+                        .map(|s| spec.node(*s).name.clone())
                         .collect(),
                     stats: stats(i),
                     qos: t.qos,

@@ -450,7 +450,7 @@ impl Bridge {
                 let mp = endpoint(publisher, EndpointKind::Publisher, &topic.name, ty, qos);
                 outlets.push(Some(publish(&mp)?));
             }
-            if let Some(sub) = topic.subscriber.filter(|s| !elsewhere(*s)) {
+            for &sub in topic.subscribers.iter().filter(|s| !elsewhere(**s)) {
                 let kind = EndpointKind::Subscription;
                 subscriptions.push(endpoint(&nodes[sub.0], kind, &topic.name, ty, qos));
             }

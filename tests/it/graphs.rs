@@ -14,7 +14,7 @@ use std::process::Command;
 
 use crate::repo;
 
-const SHIPPED: [&str; 8] = [
+const SHIPPED: [&str; 9] = [
     "graphs/cartpole.toml",
     "graphs/cartpole-estimator.toml",
     "graphs/cartpole-safety.toml",
@@ -23,6 +23,7 @@ const SHIPPED: [&str; 8] = [
     "graphs/cartpole-safety-python.toml",
     "graphs/cartpole-setpoint.toml",
     "graphs/cartpole-position-python.toml",
+    "graphs/cartpole-monitor.toml",
 ];
 
 fn cfg(file: &str, clock: ClockKind, secs: u64) -> RunConfig {
@@ -594,4 +595,62 @@ fn every_metrics_key_and_trace_column_is_documented() {
             "trace column `{column}` is not in docs/metrics.md"
         );
     }
+}
+
+/// A topic of two subscribers: each subscription has a queue of its own (ROS 2's
+/// per-subscription history), so the slow monitor's drops are its own and the policy's
+/// run is the chapter's in every figure of the chain.
+#[test]
+fn each_subscriber_of_a_topic_has_a_queue_of_its_own() {
+    let _m = crate::machine::shared();
+    let run = |graph: &str, dir: &std::path::Path| -> serde_json::Value {
+        let o = std::process::Command::new(env!("CARGO_BIN_EXE_ratelab"))
+            .args([
+                "run", "--clock", "virtual", "--seed", "1", "--graph", graph, "--out",
+            ])
+            .arg(dir)
+            .current_dir(crate::repo("."))
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let out = String::from_utf8_lossy(&o.stdout);
+        if graph.contains("monitor") {
+            assert!(
+                out.contains("/obs 50.1 msg/s (monitor 400 dropped, policy 0 dropped)"),
+                "{out}"
+            );
+        }
+        serde_json::from_str(&std::fs::read_to_string(dir.join("metrics.json")).unwrap()).unwrap()
+    };
+    let (a, b) = (tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap());
+    let monitor = run("graphs/cartpole-monitor.toml", a.path());
+    let chapter = run("graphs/cartpole.toml", b.path());
+    let subs = &monitor["topics"]["/obs"]["subscriptions"];
+    assert_eq!(subs["policy"]["dropped"], 0, "{subs}");
+    assert_eq!(subs["monitor"]["dropped"], 400, "{subs}");
+    assert_eq!(
+        monitor["topics"]["/obs"]["dropped"], 400,
+        "the topic's: the sum"
+    );
+    // The chain's figures are the policy's queue's, and equal the chapter's.
+    for key in [
+        "balanced",
+        "steps",
+        "policy_ticks",
+        "final_pole_angle",
+        "mean_latency_ms",
+        "latency_max_ms",
+        "obs_published",
+        "obs_dropped",
+        "action_published",
+        "action_dropped",
+    ] {
+        assert_eq!(monitor[key], chapter[key], "{key}");
+    }
+    // The trace too, apart from the monitor's own columns.
+    let trace = |d: &std::path::Path| std::fs::read_to_string(d.join("trace.csv")).unwrap();
+    let (tm, tc) = (trace(a.path()), trace(b.path()));
+    assert_eq!(tm.lines().count(), tc.lines().count());
+    // A chapter's graph is unchanged by the rule: one subscriber, no `subscriptions` key.
+    assert!(chapter["topics"]["/obs"].get("subscriptions").is_none());
 }

@@ -34,7 +34,9 @@ pub fn def() -> KindDef {
                 log: cx.log.clone(),
                 observers: cx.observers.take().unwrap_or_default(),
                 held: None,
-                policy_output: cx.action.and_then(|t| t.typed::<ForceMsg>()).cloned(),
+                policy_output: cx
+                    .action
+                    .and_then(|t| t.subscription(0).typed::<ForceMsg>().cloned()),
                 reported: None,
             }) as Box<dyn Work>)
         }),

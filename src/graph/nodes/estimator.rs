@@ -5,7 +5,7 @@
 
 use crate::graph::estimator::VelocityFilter;
 use crate::graph::kind::{
-    typed, BuildContext, Code, KindDef, ParamDef, Params, Plant, Ports, Work,
+    publisher, typed, BuildContext, Code, KindDef, ParamDef, Params, Plant, Ports, Work,
 };
 use crate::msg::{Message, PositionMsg, StateMsg};
 use crate::node::Flow;
@@ -41,7 +41,7 @@ pub fn def() -> KindDef {
         make: Box::new(|cx: &mut BuildContext<'_>| {
             Ok(Box::new(Estimator {
                 input: typed(cx.inputs.first())?,
-                output: Publisher::new(typed(cx.outputs.first())?, cx.outbox.clone()),
+                output: publisher(cx.outputs.first(), cx.outbox)?,
                 filter: VelocityFilter::new(cx.param_f64("cutoff_hz", 10.0)?),
                 last_seq: None,
                 origin: None,

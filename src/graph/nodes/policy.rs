@@ -2,7 +2,9 @@
 //! before the first) and publishes the force, `command × GEAR_N` newtons, with the state's
 //! origin.
 
-use crate::graph::kind::{typed, BuildContext, Code, KindDef, Params, Plant, Ports, Work};
+use crate::graph::kind::{
+    publisher, typed, BuildContext, Code, KindDef, Params, Plant, Ports, Work,
+};
 use crate::msg::{ForceMsg, Message, StateMsg};
 use crate::node::Flow;
 use crate::plant::GEAR_N;
@@ -29,7 +31,7 @@ pub fn def() -> KindDef {
             Ok(Box::new(PolicyNode {
                 brain: cx.brain.clone(),
                 input: typed(cx.inputs.first())?,
-                output: Publisher::new(typed(cx.outputs.first())?, cx.outbox.clone()),
+                output: publisher(cx.outputs.first(), cx.outbox)?,
             }) as Box<dyn Work>)
         }),
     }

@@ -2,7 +2,7 @@
 //! its origin.
 
 use crate::graph::kind::{
-    typed, BuildContext, Code, KindDef, ParamDef, Params, Plant, Ports, Work,
+    publisher, typed, BuildContext, Code, KindDef, ParamDef, Params, Plant, Ports, Work,
 };
 use crate::msg::{ForceMsg, Message};
 use crate::node::Flow;
@@ -38,7 +38,7 @@ pub fn def() -> KindDef {
         make: Box::new(|cx: &mut BuildContext<'_>| {
             Ok(Box::new(Safety {
                 input: typed(cx.inputs.first())?,
-                output: Publisher::new(typed(cx.outputs.first())?, cx.outbox.clone()),
+                output: publisher(cx.outputs.first(), cx.outbox)?,
                 max_force_n: cx.param_f64("max_force_n", GEAR_N)?,
             }) as Box<dyn Work>)
         }),

@@ -46,11 +46,12 @@ pub fn def() -> KindDef {
         uses_brain: false,
         make: Box::new(|cx: &mut BuildContext<'_>| {
             let out = cx.outputs.first().ok_or("a sensor publishes one topic")?;
-            let output = match (out.typed::<StateMsg>(), out.typed::<PositionMsg>()) {
-                (Some(t), _) => SensorOutput::State(Publisher::new(t.clone(), cx.outbox.clone())),
-                (None, Some(t)) => {
-                    SensorOutput::Position(Publisher::new(t.clone(), cx.outbox.clone()))
-                }
+            let output = match (
+                out.publisher::<StateMsg>(cx.outbox),
+                out.publisher::<PositionMsg>(cx.outbox),
+            ) {
+                (Some(p), _) => SensorOutput::State(p),
+                (None, Some(p)) => SensorOutput::Position(p),
                 (None, None) => {
                     return Err(format!("sensor '{}' publishes state or position", cx.name))
                 }
