@@ -130,6 +130,16 @@ pub fn config_from_args(a: &RunArgs) -> anyhow::Result<RunConfig> {
             }
         }
     }
+    // Each shorthand of the chain refuses a graph without it, by its own name.
+    for (flag, given) in [
+        ("--sensor-hz", a.sensor_hz.is_some()),
+        ("--break", a.break_),
+        ("--control-hz", a.control_hz.is_some()),
+    ] {
+        if given {
+            cfg.graph.chain_for(flag)?;
+        }
+    }
     if let Some(hz) = a.sensor_hz {
         cfg.set_sensor_hz(hz)?;
     }

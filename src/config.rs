@@ -266,6 +266,10 @@ impl RunConfig {
         control_hz: f64,
         queue_depth: usize,
     ) -> Result<Self, ConfigError> {
+        // A sweep or a cliff search varies the chain's rates: say so by name.
+        self.graph.chain_for(
+            "a sweep or cliff search (it varies the chain's sensor and control rates)",
+        )?;
         self.set_sensor_hz(sensor_hz)?;
         self.set_control_hz(control_hz)?;
         self.set_queue_depth(queue_depth)?;

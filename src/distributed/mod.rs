@@ -467,4 +467,18 @@ mod tests {
         );
         assert_eq!(super::zenoh_message("look at me"), "look at me");
     }
+
+    #[test]
+    fn a_topics_subscribers_share_a_process() {
+        let monitor = include_str!("../../graphs/cartpole-monitor.toml");
+        let spec = crate::graph::GraphSpec::parse(monitor, "m.toml").unwrap();
+        super::check_keys(&spec).unwrap();
+        let apart = monitor.replace("process = \"policy\"", "process = \"watch\"");
+        let spec = crate::graph::GraphSpec::parse(&apart, "m.toml").unwrap();
+        let e = super::check_keys(&spec).unwrap_err().to_string();
+        assert!(
+            e.contains("topic '/obs' has subscribers in two processes ('policy' in 'policy', 'monitor' in 'watch')"),
+            "{e}"
+        );
+    }
 }

@@ -7,7 +7,9 @@
 //! in one registry ([`super::registry::kind`]). The graph file's rules ([`super::spec`])
 //! read only the definition: what the kind reads and publishes ([`Ports`]), how it touches
 //! the plant ([`Plant`]), whose code it runs ([`Code`]) and which parameters it takes
-//! ([`Params`]); [`super::Graph::build`] calls its `make`. Nothing else names a kind.
+//! ([`Params`]); [`super::Graph::build`] calls its `make`. Nothing else matches on a
+//! kind (the graph file's shorthand for the built-in kinds' parameters, `max_force_n = 8` as
+//! a key of the node's table, lists their names).
 //!
 //! A leaf of the graph module: it knows message types, topics and the plant, not the graph
 //! file or the graph built from it.

@@ -323,7 +323,7 @@ pub enum RegistryError {
     #[error("node kind '{0}' is already taken")]
     Taken(String),
     /// [`MAX_KINDS`] kinds are registered already.
-    #[error("at most {MAX_KINDS} node kinds can be registered")]
+    #[error("a process has at most {MAX_KINDS} node kinds, the seven built-in ones included")]
     Full,
     /// One of its message types cannot be registered ([`crate::msg::register`]).
     #[error(transparent)]
@@ -397,11 +397,17 @@ where
     if reg.len() >= MAX_KINDS {
         return Err(RegistryError::Full);
     }
-    // Its message types become usable in graph files with it.
-    for t in <N::Input as Inputs>::TYPES
-        .iter()
-        .chain(<N::Output as Outputs>::TYPES)
-    {
+    // Its message types become usable in graph files with it: all checked first, so that a
+    // refusal registers none of them.
+    let types = || {
+        <N::Input as Inputs>::TYPES
+            .iter()
+            .chain(<N::Output as Outputs>::TYPES)
+    };
+    for t in types() {
+        crate::msg::check_type(*t)?;
+    }
+    for t in types() {
         crate::msg::register_type(*t)?;
     }
     let make = move |cx: &mut BuildContext<'_>| {

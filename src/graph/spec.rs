@@ -212,8 +212,9 @@ impl TopicSpec {
 
 /// The chapter's roles, when a graph has them: the chain sensor → … → policy → … →
 /// actuator ([`GraphSpec::chain`]). The chapter's flags (`--sensor-hz`, `--control-hz`,
-/// `--queue-depth`), `metrics.json`'s flat keys (`obs_*`, `action_*`) and the lab's
-/// rate keys speak of these; a graph without the chain has none of them.
+/// `--break`), `metrics.json`'s flat keys (`obs_*`, `action_*`) and the lab's rate keys
+/// speak of these; a graph without the chain has none of them (`--queue-depth`, every
+/// topic's depth, applies to any graph).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub struct Chain {
     /// The sensor at the head of the actuator's chain.
@@ -843,11 +844,22 @@ impl GraphSpec {
     }
 
     /// Settings that are allowed but probably not meant: a deadline shorter than its
-    /// publisher's period misses every period. One line each, naming the topic.
+    /// publisher's period misses every period; a node that runs the brain in a graph with no
+    /// sensor → policy → actuator chain (it drives nothing the chapter would call control).
+    /// One line each, naming the topic or node.
     pub fn qos_warnings(&self) -> Vec<String> {
-        self.topics
+        let shape = self
+            .nodes
             .iter()
-            .filter_map(|t| {
+            .filter(|n| self.chain.is_none() && n.kind.def().uses_brain)
+            .map(|n| {
+                format!(
+                    "warning: node '{}' runs the brain, but graph '{}' has no sensor → policy → actuator chain through it: the chapter's figures and shorthands do not apply",
+                    n.name, self.name
+                )
+            });
+        shape
+            .chain(self.topics.iter().filter_map(|t| {
                 let d = t.qos.deadline?;
                 let p = self.nodes[t.publisher.0].rate_hz;
                 let period = period_for_hz(p).ok()?;
@@ -857,7 +869,7 @@ impl GraphSpec {
                         t.name, self.nodes[t.publisher.0].name
                     )
                 })
-            })
+            }))
             .collect()
     }
 
@@ -1401,7 +1413,7 @@ fn check_ports(
                     }
                     (_, [_]) if kind.code() == Code::BuiltIn => (
                         names[1].span(),
-                        format!("{a} node {key} one topic (only a python node may have several)"),
+                        format!("{a} node {key} one topic (a python node, or a kind registered with several, may have more)"),
                     ),
                     _ => {
                         let list: Vec<String> = want.iter().map(|t| type_names(t)).collect();
@@ -1854,7 +1866,7 @@ depth = 1
         );
         assert_eq!(
             e,
-            "an actuator node subscribes one topic (only a python node may have several)"
+            "an actuator node subscribes one topic (a python node, or a kind registered with several, may have more)"
         );
         for bad in ["3", "[]", "[\"/obs\", 3]", "{ a = 1 }"] {
             let e = reason(

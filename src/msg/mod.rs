@@ -311,12 +311,27 @@ fn registry() -> &'static RwLock<Vec<MsgType>> {
     &REGISTRY
 }
 
+/// Python's keywords: a field or type name must not be one (`msg.from` does not parse).
+const PYTHON_KEYWORDS: [&str; 35] = [
+    "False", "None", "True", "and", "as", "assert", "async", "await", "break", "class", "continue",
+    "def", "del", "elif", "else", "except", "finally", "for", "from", "global", "if", "import",
+    "in", "is", "lambda", "nonlocal", "not", "or", "pass", "raise", "return", "try", "while",
+    "with", "yield",
+];
+
+/// What `import ratelab` gives besides the message classes (`src/python/support.py`): a
+/// type's class must not take one of these names.
+const PYTHON_TAKEN: [&str; 1] = ["Time"];
+
+/// A field (or type) name: lowercase letters, digits and `_`, starting with a letter (a
+/// leading `_` would hide the class's own methods), not a Python keyword.
 fn valid_field(s: &str) -> bool {
     !s.is_empty()
         && s.len() <= 32
-        && s.starts_with(|c: char| c.is_ascii_lowercase() || c == '_')
+        && s.starts_with(|c: char| c.is_ascii_lowercase())
         && s.chars()
             .all(|c| c.is_ascii_lowercase() || c.is_ascii_digit() || c == '_')
+        && !PYTHON_KEYWORDS.contains(&s)
 }
 
 /// Register message type `M`, so that graph files may name it (`type = "<M::NAME>"`).
@@ -334,6 +349,25 @@ pub fn register<M: Message>() -> Result<(), MsgRegistryError> {
 /// # Errors
 /// As [`register`].
 pub(crate) fn register_type(t: MsgType) -> Result<(), MsgRegistryError> {
+    if check_type(t)? {
+        return Ok(()); // registered already
+    }
+    let mut reg = registry().write().unwrap_or_else(|e| e.into_inner());
+    if reg.iter().any(|o| (o.0.type_id)() == (t.0.type_id)()) {
+        return Ok(());
+    }
+    if reg.len() >= MAX_MSG_TYPES {
+        return Err(MsgRegistryError::Full);
+    }
+    reg.push(t);
+    Ok(())
+}
+
+/// Could [`register_type`] take `t`? `Ok(true)`: it is registered already.
+///
+/// # Errors
+/// As [`register`].
+pub(crate) fn check_type(t: MsgType) -> Result<bool, MsgRegistryError> {
     let (name, class, fields) = (t.as_str(), t.class(), t.fields());
     let bad = |why: &str| Err(MsgRegistryError::Bad(name.to_string(), why.to_string()));
     let name_ok = name.starts_with(|c: char| c.is_ascii_lowercase()) && valid_field(name);
@@ -344,9 +378,11 @@ pub(crate) fn register_type(t: MsgType) -> Result<(), MsgRegistryError> {
     }
     let class_ok = class.len() <= 32
         && class.starts_with(|c: char| c.is_ascii_uppercase())
-        && class.chars().all(|c| c.is_ascii_alphanumeric() || c == '_');
+        && class.chars().all(|c| c.is_ascii_alphanumeric() || c == '_')
+        && !PYTHON_KEYWORDS.contains(&class)
+        && !PYTHON_TAKEN.contains(&class);
     if !class_ok {
-        return bad("its class must be 1 to 32 letters, digits or '_', starting with a capital");
+        return bad("its class must be 1 to 32 letters, digits or '_', starting with a capital, and not a name `import ratelab` gives already (Time)");
     }
     if fields.is_empty() || fields.len() > MAX_FIELDS {
         return bad(&format!("it must have 1 to {MAX_FIELDS} fields"));
@@ -354,15 +390,15 @@ pub(crate) fn register_type(t: MsgType) -> Result<(), MsgRegistryError> {
     for (i, f) in fields.iter().enumerate() {
         if !valid_field(f.name) || fields[..i].iter().any(|g| g.name == f.name) {
             return bad(&format!(
-                "field '{}' must be a unique name of 1 to 32 lowercase letters, digits or '_'",
+                "field '{}' must be a unique name of 1 to 32 lowercase letters, digits or '_', starting with a letter, and not a Python keyword",
                 f.name
             ));
         }
     }
-    let mut reg = registry().write().unwrap_or_else(|e| e.into_inner());
+    let reg = registry().read().unwrap_or_else(|e| e.into_inner());
     for other in reg.iter() {
         if (other.0.type_id)() == (t.0.type_id)() {
-            return Ok(());
+            return Ok(true);
         }
         if other.as_str() == name || other.class() == class {
             let clash = if other.as_str() == name { name } else { class };
@@ -372,8 +408,7 @@ pub(crate) fn register_type(t: MsgType) -> Result<(), MsgRegistryError> {
     if reg.len() >= MAX_MSG_TYPES {
         return Err(MsgRegistryError::Full);
     }
-    reg.push(t);
-    Ok(())
+    Ok(false)
 }
 
 /// Every registered message type, the built-in ones first, then in registration order.
@@ -967,6 +1002,33 @@ mod tests {
             (0, Nanos(5), vec![0.25])
         );
         assert_eq!(got.data.describe(), "setpoint_unit: cart_pos_m=0.25 m");
+    }
+
+    #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+    struct Keyword(f64);
+
+    impl Message for Keyword {
+        const NAME: &'static str = "keyword_unit";
+        const CLASS: &'static str = "KeywordUnit";
+        const DOC: &'static str = "A field Python cannot name.";
+        const FIELDS: &'static [Field] = &[Field::new("from", "1", "a keyword")];
+        fn to_fields(&self) -> Vec<f64> {
+            vec![self.0]
+        }
+        fn from_fields(f: &[f64]) -> Self {
+            Keyword(f[0])
+        }
+    }
+
+    #[test]
+    fn names_python_cannot_use_are_refused() {
+        let e = register::<Keyword>().unwrap_err().to_string();
+        assert!(
+            e.contains("field 'from'") && e.contains("Python keyword"),
+            "{e}"
+        );
+        assert!(!valid_field("_fields") && !valid_field("lambda") && valid_field("cart_pos_m"));
+        assert_eq!(MsgType::named("keyword_unit"), None);
     }
 
     #[test]

@@ -42,11 +42,6 @@ pub struct RosCodec {
     /// A payload from CDR with its encapsulation header, exactly, within
     /// [`crate::ros2::types::MAX_INBOUND_BYTES`].
     pub decode: fn(&[u8]) -> Result<MsgData, String>,
-    /// The ROS 2 message (as JSON, stamp 0) of the fields of a message of this type (what
-    /// Python's `to_ros()` gives).
-    pub to_json: fn(&[f64]) -> serde_json::Value,
-    /// The fields of the message a ROS 2 message (as JSON) makes (Python's `from_ros`).
-    pub from_json: fn(serde_json::Value) -> Result<Vec<f64>, String>,
 }
 
 impl RosCodec {
@@ -56,8 +51,6 @@ impl RosCodec {
             ros_type: M::ros_type,
             encode: encode::<M>,
             decode: decode::<M>,
-            to_json: to_json::<M>,
-            from_json: from_json::<M>,
         }
     }
 }
@@ -75,16 +68,4 @@ fn encode<M: RosMapped>(data: &MsgData, stamp: Nanos, out: &mut Vec<u8>) -> bool
 
 fn decode<M: RosMapped>(bytes: &[u8]) -> Result<MsgData, String> {
     Ok(MsgData::new(M::from_ros(from_cdr::<M::Ros>(bytes)?)?))
-}
-
-fn to_json<M: RosMapped>(fields: &[f64]) -> serde_json::Value {
-    let mut f = fields.to_vec();
-    f.resize(M::FIELDS.len(), 0.0);
-    serde_json::to_value(M::from_fields(&f).to_ros(Nanos::ZERO)).unwrap_or_default()
-}
-
-fn from_json<M: RosMapped>(v: serde_json::Value) -> Result<Vec<f64>, String> {
-    let ros: M::Ros =
-        serde_json::from_value(v).map_err(|e| format!("not a {}: {e}", M::ros_type().name))?;
-    Ok(M::from_ros(ros)?.to_fields())
 }

@@ -757,8 +757,12 @@ fn forward(
                 if !f.deferred {
                     f.tick(stamp);
                 }
-                if let Some(codec) = data.msg_type().ros2() {
-                    (codec.encode)(&data, stamp, &mut f.buf);
+                // check_graph refused a type without a ROS 2 mapping; nothing to send else.
+                let Some(codec) = data.msg_type().ros2() else {
+                    continue;
+                };
+                if !(codec.encode)(&data, stamp, &mut f.buf) {
+                    continue;
                 }
                 let seq = i64::try_from(seq).unwrap_or(i64::MAX - 1) + 1;
                 if f.send(topic, seq, stamp) {
