@@ -205,3 +205,36 @@ fn the_command_line_prints_the_executor_lines_and_refuses_bad_executors() {
     assert_eq!(code, 2, "{err}");
     assert!(err.contains("does not run them yet"), "{err}");
 }
+
+/// The estimator graph teaches what its comment says: with its compute times (the estimate
+/// 1 ms, the brain 2 ms) each stage's output waits for the next stage's tick, 10 + 20 = 30 ms
+/// of sense→act latency every step; 13 ms with the actuator just after the policy; none
+/// with the compute times at 0 (the chapter's instant).
+#[test]
+fn the_estimator_graph_adds_each_stages_delay_as_its_comment_says() {
+    for file in [
+        "graphs/cartpole-estimator.toml",
+        "graphs/cartpole-estimator-python.toml",
+    ] {
+        let g = GraphSpec::load(&repo(file)).unwrap();
+        let node = |n: &str| g.node(g.node_id(n).unwrap()).compute.map(|c| c.mean);
+        assert_eq!(
+            (node("estimator"), node("policy")),
+            (Some(Nanos::from_millis(1)), Some(Nanos::from_millis(2))),
+            "{file}"
+        );
+        let c = cfg(g.clone(), ClockKind::Virtual, 10.0);
+        let (m, _) = metrics(&c);
+        assert!(m.balanced, "{file}: {}", m.headline());
+        assert_eq!((m.latency_p50_ms, m.latency_max_ms), (30.0, 30.0), "{file}");
+        let mut shifted = c.clone();
+        shifted.phase_offsets = [0, 0, 0, 3].map(Nanos::from_millis).to_vec();
+        let (m, _) = metrics(&shifted);
+        assert_eq!((m.latency_p50_ms, m.latency_max_ms), (13.0, 13.0), "{file}");
+        let mut instant = c;
+        for n in ["estimator", "policy"] {
+            compute(&mut instant.graph, n, "0");
+        }
+        assert_eq!(metrics(&instant).0.latency_max_ms, 0.0, "{file}");
+    }
+}
