@@ -281,8 +281,9 @@ pub fn run_headless(a: &RunArgs, stop: StopFlag) -> anyhow::Result<RunReport> {
     if let Some(r) = &recording {
         opts.observers.push(r.observer());
         let r = r.clone();
+        opts.on_span = r.span_hook();
         opts.on_node_tick = Some(Arc::new(move |t: &ratelab::scheduler::TickReport<'_>| {
-            r.node_tick(t.name, t.now, t.lateness)
+            r.real_tick(t)
         }));
     }
     let report = run(&cfg, brain, opts)?;

@@ -231,6 +231,9 @@ pub struct CallbackSpan {
     pub end: Nanos,
 }
 
+/// Told of every tick as an executor ran it ([`CallbackSpan`]; a recording's timeline).
+pub type SpanHook = std::sync::Arc<dyn Fn(&CallbackSpan) + Send + Sync>;
+
 /// The most [`CallbackSpan`]s a virtual scheduler keeps between two reads (the oldest go).
 pub const MAX_SPANS: usize = 4096;
 

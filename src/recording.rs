@@ -28,6 +28,9 @@
 //!   (a topic with QoS beyond the depth shows it in short on a second line, `KL1 latest dl 30 ms link
 //!   20%`) and are re-logged when they change;
 //! - `nodes/<name>/lateness_us`: per-tick lateness of each node (real clock only);
+//! - with executors or compute times: `nodes/<name>/executor_lane` (the executor timeline:
+//!   the node's rank, raised by 0.8 while its tick holds a thread), `nodes/<name>/response_ms`
+//!   (release → outputs published, per tick) and `nodes/<name>/skipped_ticks` (so far);
 //! - `events`: text logs for the start, rate, depth and QoS changes, brain swaps, the fall and
 //!   the end; and the QoS events: `deadline missed on /cmd: requested +1 (3 in all)` (WARN)
 //!   when a topic's offered or requested deadline counter rises, stamped at the actuator
@@ -427,7 +430,25 @@ pub struct Recording {
     shape: Arc<Mutex<Option<GraphShape>>>,
     /// The temporary file rerun writes, moved to `path` by [`Recording::finish`].
     file: Arc<Committer>,
+    /// Per node (by index): the release of its last tick logged and the periods its timer
+    /// skipped so far ([`Recording::node_span`]).
+    lanes: Arc<Mutex<Vec<Lane>>>,
 }
+
+/// A node's lane in the executor timeline: the release of its last tick logged, and the
+/// periods its timer skipped so far.
+type Lane = (Option<Nanos>, u64);
+
+/// Does a run of `cfg` measure its executors (compute times, or executors that share
+/// threads)? Its recording then has the executor timeline, response times and skipped
+/// ticks.
+fn measures_executors(cfg: &RunConfig) -> bool {
+    cfg.graph.nodes.iter().any(|n| n.compute.is_some()) || !cfg.graph.execution_plan().is_per_node()
+}
+
+/// How high a node's lane sits in the executor timeline: its tie-break rank, the lane at
+/// `rank` while idle and `rank + LANE_BUSY` while its tick holds a thread.
+const LANE_BUSY: f64 = 0.8;
 
 /// A y range with a margin around `[lo, hi]`, so no line sits on the plot's edge.
 fn axis(lo: f64, hi: f64) -> bp::ScalarAxis {
@@ -521,6 +542,40 @@ fn layout_for(shape: &GraphShape, cfg: &RunConfig, extents: Option<&Extents>) ->
         .into_iter()
         .map(|v| (1.0, Item::View(v)))
         .collect();
+    if measures_executors(cfg) {
+        let lanes = shape.nodes.len().max(1) as f64;
+        let each = |series: &str| -> Vec<String> {
+            shape
+                .nodes
+                .iter()
+                .map(|n| format!("/nodes/{}/{series}", n.name))
+                .collect()
+        };
+        let timeline = plot(
+            "executor-timeline",
+            "executor timeline: a lane per node (by rank), raised while its tick holds a thread",
+            each("executor_lane"),
+            Some((0.0, lanes - 1.0 + LANE_BUSY)),
+            extents,
+        );
+        let response = plot(
+            "response",
+            "response time (ms): a tick's release → its outputs published",
+            each("response_ms"),
+            extents.map(|_| (0.0, 0.0)),
+            extents,
+        );
+        let skipped = plot(
+            "skipped",
+            "skipped ticks (total): periods a node's timer let pass, its thread held",
+            each("skipped_ticks"),
+            extents.map(|_| (0.0, 1.0)),
+            extents,
+        );
+        for v in [timeline, response, skipped] {
+            signals.push((1.0, Item::View(v)));
+        }
+    }
     if cfg.clock == ClockKind::Real {
         let lateness = plot(
             "lateness",
@@ -805,6 +860,7 @@ impl Recording {
             file: Arc::new(Committer(Mutex::new(Some(pending)))),
             last_step: Arc::default(),
             shape: Arc::default(),
+            lanes: Arc::default(),
         };
         recording.log_settings(cfg, policy);
         Ok((recording, notice))
@@ -1142,6 +1198,29 @@ impl Recording {
         }
     }
 
+    /// Log a real-clock tick: its lateness ([`Recording::node_tick`]) and, when the run
+    /// measures its executors, its span for the executor timeline ([`Recording::node_span`]:
+    /// released at its deadline, started `lateness` after it, ended when it had taken `took`).
+    pub fn real_tick(&self, t: &crate::scheduler::TickReport<'_>) {
+        self.node_tick(t.name, t.now, t.lateness);
+        if measures_executors(&self.cfg) {
+            self.node_span(&crate::executor::CallbackSpan {
+                node: t.node,
+                release: t.now.saturating_sub(t.lateness),
+                start: t.now,
+                end: t.now.saturating_add(t.took),
+            });
+        }
+    }
+
+    /// A hook that logs every span of a virtual run ([`Recording::node_span`]), when the
+    /// run measures its executors (`None` else: nothing to draw).
+    pub fn span_hook(&self) -> Option<crate::executor::SpanHook> {
+        let me = self.clone();
+        measures_executors(&self.cfg)
+            .then(|| Arc::new(move |s: &crate::executor::CallbackSpan| me.node_span(s)) as _)
+    }
+
     /// Log one node tick's lateness (real clock), on the node's own thread.
     pub fn node_tick(&self, node: &str, now: Nanos, lateness: Nanos) {
         let entity = format!("nodes/{node}/lateness_us");
@@ -1150,6 +1229,52 @@ impl Recording {
         self.rec
             .set_time("sim_time", std::time::Duration::from_nanos(now.0));
         let _ = self.rec.log(entity, &rerun::Scalars::single(us));
+    }
+
+    /// Log one tick as its executor ran it (virtual clock: the scheduler's span; real clock:
+    /// the tick's start, lateness and time taken) for the executor timeline: node `node`'s
+    /// lane (`nodes/<name>/executor_lane`, its rank, `LANE_BUSY` higher from the tick's start
+    /// to its end), its response time (`nodes/<name>/response_ms`: release → outputs
+    /// published, at the end) and the periods its timer skipped so far
+    /// (`nodes/<name>/skipped_ticks`: a release more than a period after the last, at the
+    /// node's starting rate). Only for runs that measure executors.
+    pub fn node_span(&self, span: &crate::executor::CallbackSpan) {
+        let Some(n) = self.cfg.graph.nodes.get(span.node) else {
+            return;
+        };
+        let base = span.node as f64;
+        let lane = format!("nodes/{}/executor_lane", n.name);
+        let period = crate::rate::period_for_hz(n.rate_hz).map_or(0, |p| p.0.max(1));
+        let skipped = {
+            let mut lanes = self.lanes.lock().unwrap_or_else(|e| e.into_inner());
+            if lanes.len() <= span.node {
+                lanes.resize(span.node + 1, (None, 0));
+            }
+            let (last, total) = &mut lanes[span.node];
+            if let (Some(l), true) = (*last, period > 0) {
+                let gap = span.release.saturating_sub(l).0;
+                *total += (gap / period).saturating_sub(1);
+            }
+            *last = Some(span.release);
+            *total
+        };
+        let step = self.last_step.load(std::sync::atomic::Ordering::Relaxed);
+        let mut buf = self.lock();
+        let (start, end) = (span.start, span.end.max(span.start));
+        buf.scalar(&lane, start, step, base + LANE_BUSY);
+        buf.scalar(&lane, end, step, base);
+        buf.scalar(
+            &format!("nodes/{}/response_ms", n.name),
+            end,
+            step,
+            end.saturating_sub(span.release).as_millis_f64(),
+        );
+        buf.scalar(
+            &format!("nodes/{}/skipped_ticks", n.name),
+            end,
+            step,
+            skipped as f64,
+        );
     }
 
     /// Log the end of the run (an event and the summary document) at its end time, flush
@@ -1187,6 +1312,16 @@ impl Recording {
         }
         {
             let mut buf = self.lock();
+            // The skipped ticks end where metrics.json ends them (a tick still computing
+            // at the end counted its skipped periods when it started, and no span ended).
+            let logged = self.lanes.lock().unwrap_or_else(|e| e.into_inner()).clone();
+            for (name, n) in &metrics.nodes {
+                let spans = logged.get(n.rank).is_some_and(|(last, _)| last.is_some());
+                if let (Some(x), true) = (&n.exec, spans) {
+                    let entity = format!("nodes/{name}/skipped_ticks");
+                    buf.scalar(&entity, end.at, metrics.steps, x.skipped_ticks as f64);
+                }
+            }
             buf.add(
                 "summary",
                 &TimePoint::default(),

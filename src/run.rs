@@ -209,6 +209,9 @@ pub struct RunOptions {
     pub commands: Vec<TimedCommand>,
     /// Real clock: told about every node tick.
     pub on_node_tick: Option<crate::scheduler::TickHook>,
+    /// Virtual clock, when executors or compute times apply: told about every tick as its
+    /// executor ran it (release, start, end).
+    pub on_span: Option<crate::executor::SpanHook>,
     /// Offer the graph to ROS 2 while it runs ([`crate::ros2`]). Under the virtual clock the
     /// run then keeps pace with the wall clock (one second of run time per second), so
     /// that ROS 2's tools see the graph's rates; its results are unchanged.
@@ -330,6 +333,9 @@ pub fn run(
     let (end, ticks, timing, exec) = match cfg.clock {
         ClockKind::Virtual => {
             let mut sched = virtual_scheduler(cfg, &nodes);
+            if let Some(h) = &opts.on_span {
+                sched.set_span_hook(h.clone());
+            }
             let mut pending = opts.commands.iter().peekable();
             let end = sched.run(&mut nodes, cfg.duration, &opts.stop, &mut |t| {
                 if let Some(b) = &bridge {

@@ -198,6 +198,8 @@ pub struct VirtualScheduler {
     /// The ticks that ended since [`VirtualScheduler::take_spans`] last took them (only when
     /// `track`; at most [`crate::executor::MAX_SPANS`], the oldest dropped).
     spans: std::collections::VecDeque<CallbackSpan>,
+    /// Told of every span as it ends (only when `track`).
+    span_hook: Option<crate::executor::SpanHook>,
     track: bool,
     /// Any executor shares threads, or ticks take time: the executors' rules apply. Else
     /// (the default) an instant is the chapter's loop, which they reduce to.
@@ -254,6 +256,7 @@ impl VirtualScheduler {
                 Vec::new()
             },
             spans: std::collections::VecDeque::new(),
+            span_hook: None,
             general: track || !plan_per_node,
             track,
         }
@@ -306,7 +309,15 @@ impl VirtualScheduler {
         self.spans.drain(..).collect()
     }
 
+    /// Tell `hook` of every tick as it ends (when measuring: executors or compute times).
+    pub fn set_span_hook(&mut self, hook: crate::executor::SpanHook) {
+        self.span_hook = Some(hook);
+    }
+
     fn keep_span(&mut self, span: CallbackSpan) {
+        if let Some(h) = &self.span_hook {
+            h(&span);
+        }
         if self.spans.len() == crate::executor::MAX_SPANS {
             self.spans.pop_front();
         }

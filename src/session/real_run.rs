@@ -46,7 +46,7 @@ impl Engine {
                     took: t.took,
                 });
                 if let Some(r) = &rec {
-                    r.node_tick(t.name, t.now, t.lateness);
+                    r.real_tick(t);
                 }
             })),
             pause: Some(pause.clone()),

@@ -26,6 +26,9 @@ impl Engine {
         let Graph { mut nodes, handles } = graph;
         let actuator_bit = 1u64 << (cfg.graph.actuator.0 % 64);
         let mut sched = crate::run::virtual_scheduler(cfg, &nodes);
+        if let Some(h) = recording.as_ref().and_then(Recording::span_hook) {
+            sched.set_span_hook(h);
+        }
         let mut paused = self.settings.start_paused;
         let mut step_pending = false;
         let mut ended: Option<RunEnd> = None;

@@ -35,12 +35,12 @@ fn record_with(
     let ticks = rec.clone();
     let mut opts = RunOptions {
         observers: vec![rec.observer()],
-        // As `ratelab run` does: per-node lateness (logged by the real clock only).
+        // As `ratelab run` does: per-node lateness (logged by the real clock only) and,
+        // with executors or compute times, every tick's span for the executor timeline.
         on_node_tick: Some(std::sync::Arc::new(
-            move |t: &ratelab::scheduler::TickReport<'_>| {
-                ticks.node_tick(t.name, t.now, t.lateness)
-            },
+            move |t: &ratelab::scheduler::TickReport<'_>| ticks.real_tick(t),
         )),
+        on_span: rec.span_hook(),
         commands,
         ..RunOptions::new()
     };
@@ -499,6 +499,62 @@ fn every_view_matches_data_in_a_virtual_run_and_a_fall() {
     let m = record(&fall, &five, None);
     assert!(m.fell_at_s.is_some(), "5 Hz falls");
     check_views(&fall);
+}
+
+/// A run with executors and compute times records the executor timeline (a lane per node,
+/// raised while its tick holds a thread), each tick's response time and the skipped ticks,
+/// each a view of the stock viewer; the chapter's run has none of them.
+#[test]
+fn an_executors_run_records_its_timeline_response_times_and_skipped_ticks() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("exec.rrd");
+    let mut g =
+        ratelab::graph::GraphSpec::load(&crate::repo("graphs/cartpole-executors.toml")).unwrap();
+    g.set_executor(ratelab::executor::ExecutorOverride::parse("single_threaded").unwrap());
+    let cfg = RunConfig {
+        graph: g,
+        ..virtual_cfg().with_duration_ms(3000)
+    };
+    let m = record(&path, &cfg, None);
+    let views = check_views(&path);
+    assert_eq!(views.len(), 14, "the chapter's 11 and three: {views:#?}");
+    for (title, series) in [
+        ("executor timeline", "executor_lane"),
+        ("response time", "response_ms"),
+        ("skipped ticks", "skipped_ticks"),
+    ] {
+        let v = views
+            .iter()
+            .find(|v| v.name.starts_with(title))
+            .unwrap_or_else(|| panic!("no {title} view: {views:#?}"));
+        let want: Vec<String> = ["sensor", "policy", "actuator"]
+            .iter()
+            .map(|n| format!("/nodes/{n}/{series}"))
+            .collect();
+        assert_eq!(v.queries, want, "{title}");
+    }
+    // The policy's lane: raised 30 ms each tick (its compute time), at rank 1.
+    let all = chunks(&path);
+    let lane: Vec<f64> = all
+        .iter()
+        .filter(|c| c.entity_path().to_string() == "/nodes/policy/executor_lane")
+        .flat_map(|c| c.iter_slices::<f64>(rerun::Scalars::descriptor_scalars().component))
+        .flat_map(|b| b.to_vec())
+        .collect();
+    assert!(lane.contains(&1.0) && lane.contains(&1.8), "{lane:?}");
+    // The skipped ticks end where metrics.json ends them.
+    let skipped: Vec<f64> = all
+        .iter()
+        .filter(|c| c.entity_path().to_string() == "/nodes/sensor/skipped_ticks")
+        .flat_map(|c| c.iter_slices::<f64>(rerun::Scalars::descriptor_scalars().component))
+        .flat_map(|b| b.to_vec())
+        .collect();
+    let x = m.nodes["sensor"].exec.as_ref().unwrap();
+    assert!(x.skipped_ticks > 0);
+    assert_eq!(
+        skipped.iter().copied().fold(0.0, f64::max),
+        x.skipped_ticks as f64
+    );
 }
 
 #[test]
