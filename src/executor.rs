@@ -367,6 +367,31 @@ impl Dispatch {
         &self.plan
     }
 
+    /// Run on `plan` from now on (the lab's executor key, at an instant of the virtual
+    /// clock): what is ready stays ready, what runs keeps its thread — a thread of its
+    /// executor under the new plan, even past that executor's threads (nothing new starts
+    /// there until enough have finished) — and every executor polls afresh.
+    ///
+    /// # Panics
+    /// When `plan` is for another number of nodes.
+    pub fn replan(&mut self, plan: ExecutionPlan) {
+        assert_eq!(
+            plan.node_executor.len(),
+            self.ready.len(),
+            "a plan for these nodes"
+        );
+        self.busy_threads = vec![0; plan.executors.len()];
+        self.busy_groups = vec![0; plan.groups.len()];
+        for (i, &running) in self.running.iter().enumerate() {
+            if running {
+                self.busy_threads[plan.node_executor[i]] += 1;
+                self.busy_groups[plan.node_group[i]] += 1;
+            }
+        }
+        self.in_snapshot.iter_mut().for_each(|s| *s = false);
+        self.plan = plan;
+    }
+
     /// Node `node`'s timer is due: it waits for a thread (and for its executor's next poll).
     pub fn release(&mut self, node: usize) {
         self.ready[node] = true;
@@ -498,6 +523,26 @@ pub struct ExecFigures {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_new_plan_keeps_what_runs_on_its_thread_and_what_is_ready() {
+        // Two nodes on threads of their own; node 0 runs, node 1 is ready.
+        let mut d = Dispatch::new(ExecutionPlan::per_node(&["a", "b"]), &[0, 1]);
+        d.release(0);
+        assert_eq!(d.pick(), Some(0));
+        d.start(0);
+        d.release(1);
+        // One thread for both: node 0 keeps it, node 1 waits for it.
+        d.replan(ExecutionPlan::one_executor(
+            &["a", "b"],
+            ExecutorKind::SingleThreaded,
+            1,
+        ));
+        assert!(d.is_running(0));
+        assert_eq!(d.pick(), None, "the one thread is held");
+        d.finish(0);
+        assert_eq!(d.pick(), Some(1));
+    }
 
     #[test]
     fn compute_times_parse_and_draw_within_their_spread() {

@@ -75,6 +75,14 @@ pub enum Command {
         /// The brain spec, as `--policy` takes it.
         spec: String,
     },
+    /// Run the graph on other executors, as `--executor` takes them (`per_node`,
+    /// `single_threaded`, `multi_threaded:N`): the lab's `x`. Under the virtual clock it
+    /// takes effect at the instant it is applied (ticks running keep their threads); under
+    /// the real clock, whose threads are made when a run starts, from the next run.
+    SetExecutor {
+        /// The executors, as `--executor` takes them.
+        executor: String,
+    },
 }
 
 impl Command {
@@ -115,6 +123,10 @@ impl Command {
             }
             Command::SetPolicy { spec } => {
                 policy.clone_from(spec);
+                Ok(())
+            }
+            Command::SetExecutor { executor } => {
+                graph.set_executor(crate::executor::ExecutorOverride::parse(executor)?);
                 Ok(())
             }
         }
@@ -180,6 +192,14 @@ impl Command {
             Command::SetPolicy { spec } => {
                 let brain = crate::checkpoint::load_policy(spec).map_err(|e| e.to_string())?;
                 h.brain.swap(brain);
+                Ok(())
+            }
+            Command::SetExecutor { executor } => {
+                let over = crate::executor::ExecutorOverride::parse(executor)?;
+                let mut spec = h.current_spec();
+                spec.set_executor(over);
+                *crate::graph::lock(&h.executor) = Some(over);
+                *crate::graph::lock(&h.plan_request) = Some(spec.execution_plan());
                 Ok(())
             }
         }
@@ -336,6 +356,7 @@ pub fn run(
             if let Some(h) = &opts.on_span {
                 sched.set_span_hook(h.clone());
             }
+            sched.take_plans_from(handles.plan_request.clone());
             let mut pending = opts.commands.iter().peekable();
             let end = sched.run(&mut nodes, cfg.duration, &opts.stop, &mut |t| {
                 if let Some(b) = &bridge {

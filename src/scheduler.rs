@@ -200,6 +200,8 @@ pub struct VirtualScheduler {
     spans: std::collections::VecDeque<CallbackSpan>,
     /// Told of every span as it ends (only when `track`).
     span_hook: Option<crate::executor::SpanHook>,
+    /// A plan asked for while running (the lab's executor key), taken before each instant.
+    plan_request: Option<PlanRequest>,
     track: bool,
     /// Any executor shares threads, or ticks take time: the executors' rules apply. Else
     /// (the default) an instant is the chapter's loop, which they reduce to.
@@ -257,6 +259,7 @@ impl VirtualScheduler {
             },
             spans: std::collections::VecDeque::new(),
             span_hook: None,
+            plan_request: None,
             general: track || !plan_per_node,
             track,
         }
@@ -307,6 +310,24 @@ impl VirtualScheduler {
     /// executor timeline); empty otherwise.
     pub fn take_spans(&mut self) -> Vec<CallbackSpan> {
         self.spans.drain(..).collect()
+    }
+
+    /// Run on `plan` from the next instant: the executors' rules apply from then on, and
+    /// their figures are measured from then on when they were not before (see
+    /// [`crate::executor::Dispatch::replan`]).
+    pub fn set_plan(&mut self, plan: ExecutionPlan) {
+        self.dispatch.replan(plan);
+        self.general = true;
+        if !self.track {
+            self.track = true;
+            self.stats = vec![NodeExecStats::default(); self.ticks.len()];
+        }
+    }
+
+    /// Take a plan from `request` before each instant ([`VirtualScheduler::set_plan`]): how
+    /// a command applied at an instant (the lab, a replay) changes the executors.
+    pub fn take_plans_from(&mut self, request: PlanRequest) {
+        self.plan_request = Some(request);
     }
 
     /// Tell `hook` of every tick as it ends (when measuring: executors or compute times).
@@ -507,7 +528,16 @@ impl VirtualScheduler {
                 };
             }
             match self.next_due() {
-                Some(due) if due <= duration => before_instant(due),
+                Some(due) if due <= duration => {
+                    before_instant(due);
+                    let asked = self
+                        .plan_request
+                        .as_ref()
+                        .and_then(|r| r.lock().unwrap_or_else(|e| e.into_inner()).take());
+                    if let Some(plan) = asked {
+                        self.set_plan(plan);
+                    }
+                }
                 _ => {
                     return RunEnd {
                         at: duration,
@@ -549,6 +579,10 @@ pub struct TickReport<'a> {
     /// a tick that panicked).
     pub took: Nanos,
 }
+
+/// Where a command leaves a plan for the virtual scheduler to take at its next instant
+/// ([`VirtualScheduler::take_plans_from`]).
+pub type PlanRequest = Arc<std::sync::Mutex<Option<ExecutionPlan>>>;
 
 /// Called on the node's thread after each tick under the real clock ([`TickReport`]).
 pub type TickHook = Arc<dyn Fn(&TickReport<'_>) + Send + Sync>;

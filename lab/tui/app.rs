@@ -8,6 +8,7 @@ use super::view::{
 };
 use crossbeam_channel::Sender;
 use ratelab::config::{check_rate, BREAK_CONTROL_HZ};
+use ratelab::executor::{ExecutorKind, ExecutorOverride};
 use ratelab::graph::kind::Code;
 use ratelab::graph::{GraphSpec, NodeId, TopicId};
 use ratelab::plant::GEAR_N;
@@ -580,6 +581,22 @@ impl App {
             },
             Msg::ToggleHelp => self.help = !self.help,
             Msg::ToggleTimeline => self.show_timeline = !self.show_timeline,
+            Msg::CycleExecutor => {
+                // One per node → one thread for all → two threads → one per node.
+                let next = match self.graph.executors.first().map(|e| (e.kind, e.threads)) {
+                    None => "single_threaded",
+                    Some((ExecutorKind::SingleThreaded, _)) => "multi_threaded:2",
+                    Some(_) => "per_node",
+                };
+                if let Ok(over) = ExecutorOverride::parse(next) {
+                    self.graph.set_executor(over);
+                }
+                // The timeline shows what the executors do.
+                self.show_timeline = true;
+                self.apply(Command::SetExecutor {
+                    executor: next.to_string(),
+                });
+            }
             Msg::Back => {
                 if self.help {
                     self.help = false;

@@ -57,6 +57,9 @@ pub enum Msg {
     Faster,
     /// Swap the brain (scripted ↔ the --policy file).
     SwapBrain,
+    /// Run the graph on the next executors: one thread per node → one thread for all →
+    /// two threads → one per node (virtual clock: at once; real clock: the next run).
+    CycleExecutor,
     /// Show the executor timeline instead of the latency histogram, or back.
     ToggleTimeline,
     /// Show / hide the key help.
@@ -171,9 +174,12 @@ pub const BINDINGS: &[Binding] = &[
         footer: Some(("Tab", "select")),
     },
     Binding {
-        keys: &[(Char('t'), Msg::ToggleTimeline)],
-        label: "t",
-        help: "executor timeline (which tick ran on which thread) ↔ latency",
+        keys: &[
+            (Char('t'), Msg::ToggleTimeline),
+            (Char('x'), Msg::CycleExecutor),
+        ],
+        label: "t / x",
+        help: "timeline ↔ latency / executors per node → single → multi:2",
         footer: None,
     },
     Binding {
@@ -417,7 +423,11 @@ mod tests {
             ),
             Some(Msg::Quit)
         );
-        assert_eq!(map_key(key(KeyCode::Char('x')), false), None);
+        assert_eq!(
+            map_key(key(KeyCode::Char('x')), false),
+            Some(Msg::CycleExecutor)
+        );
+        assert_eq!(map_key(key(KeyCode::Char('z')), false), None);
     }
 
     #[test]

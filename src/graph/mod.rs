@@ -70,6 +70,11 @@ pub struct GraphHandles {
     pub log: Arc<Mutex<RunLog>>,
     /// Each node's liveliness, by [`NodeId`].
     pub liveliness: Vec<Arc<Liveliness>>,
+    /// The executors asked for while running (`Command::SetExecutor`): the override, for
+    /// [`GraphHandles::current_spec`]…
+    pub executor: Arc<Mutex<Option<crate::executor::ExecutorOverride>>>,
+    /// …and the plan the virtual scheduler takes at its next instant.
+    pub plan_request: crate::scheduler::PlanRequest,
     /// The ports of the graph's external nodes ([`nodes::external`]), in node order: the
     /// ROS 2 side ([`crate::ros2::external`]) connects them.
     pub external: Vec<Arc<ExternalPort>>,
@@ -167,6 +172,9 @@ impl GraphHandles {
         }
         for (n, l) in spec.nodes.iter_mut().zip(&self.liveliness) {
             n.liveliness_lease = l.lease();
+        }
+        if let Some(over) = *lock(&self.executor) {
+            spec.set_executor(over);
         }
         spec
     }
@@ -266,6 +274,8 @@ impl Graph {
             log: log.clone(),
             liveliness: liveliness.clone(),
             external: external.clone(),
+            executor: Arc::default(),
+            plan_request: Arc::default(),
         };
         for o in &mut observers {
             o.attach(&handles);

@@ -155,5 +155,6 @@ pub fn describe(cmd: &Command) -> String {
         Command::SetTopicDepth { topic, depth } => format!("{topic} depth → {depth}"),
         Command::SetTopicQos { topic, pairs } => format!("{topic} QoS → {pairs}"),
         Command::SetPolicy { spec } => format!("brain → {spec}"),
+        Command::SetExecutor { executor } => format!("executor → {executor}"),
     }
 }

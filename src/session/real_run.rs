@@ -96,8 +96,16 @@ impl Engine {
                                 | Command::SetNodeHz { .. }
                         );
                         let text = super::protocol::describe(&cmd);
-                        if self.apply(cmd, now(), &handles, recording) && rate {
-                            self.judge_fresh_run(cfg, &handles, text);
+                        let executor = matches!(cmd, Command::SetExecutor { .. });
+                        if self.apply(cmd, now(), &handles, recording) {
+                            if rate {
+                                self.judge_fresh_run(cfg, &handles, text);
+                            } else if executor {
+                                // The real clock's threads are made when a run starts.
+                                let _ = self.tx.send(Telemetry::Applied(format!(
+                                    "{text} (from the next run: r; the real clock's threads are made at the start)"
+                                )));
+                            }
                         }
                     } else {
                         self.defer(cmd, &handles);

@@ -65,6 +65,12 @@ impl Engine {
                             let node = rate_target(&cmd, &handles);
                             let text = super::protocol::describe(&cmd);
                             if self.apply(cmd, at, &handles, recording) {
+                                // A new plan (the executor key) runs from this instant on,
+                                // as a replay applies it.
+                                let asked = crate::graph::lock(&handles.plan_request).take();
+                                if let Some(plan) = asked {
+                                    sched.set_plan(plan);
+                                }
                                 let said = match node.and_then(|n| phase_note(&sched, &handles, n))
                                 {
                                     Some(note) => {

@@ -238,3 +238,64 @@ fn the_estimator_graph_adds_each_stages_delay_as_its_comment_says() {
         assert_eq!(metrics(&instant).0.latency_max_ms, 0.0, "{file}");
     }
 }
+
+/// The lab's executor key as a command: at 2 s the chapter's graph (its policy computing
+/// 30 ms) moves to one thread for all; from that instant the sensor waits for the policy's
+/// callbacks (skipped ticks), before it none. Applied at an instant, it replays the same.
+#[test]
+fn an_executor_switched_live_applies_from_its_instant_and_replays_the_same() {
+    use ratelab::run::{Command, TimedCommand};
+    let mut g = GraphSpec::chapter();
+    compute(&mut g, "policy", "30");
+    let c = cfg(g, ClockKind::Virtual, 4.0);
+    let switched = || {
+        let opts = RunOptions {
+            commands: vec![TimedCommand {
+                at_ns: 2_000_000_000,
+                command: Command::SetExecutor {
+                    executor: "single_threaded".into(),
+                },
+            }],
+            ..RunOptions::new()
+        };
+        let r = run(&c, Box::new(Scripted), opts).unwrap();
+        (
+            r.metrics.clone(),
+            serde_json::to_string_pretty(&r.metrics).unwrap(),
+            r.trace,
+        )
+    };
+    let (m, json, trace) = switched();
+    let (_, again, _) = switched();
+    assert_eq!(json, again, "byte-identical");
+    // Before the switch the sensor ticked at 50 Hz: 100 ticks in the first 2 s, one per
+    // 20 ms; after it, about one per 30 ms.
+    let sensor = &m.nodes["sensor"];
+    let x = sensor.exec.as_ref().unwrap();
+    assert!(x.skipped_ticks > 20, "{x:?}");
+    let hz = sensor.ticks as f64 / m.sim_time_s;
+    assert!((40.0..48.0).contains(&hz), "sensor at {hz} Hz over the run");
+    assert_eq!(m.executors.len(), 1, "{:?}", m.executors);
+    // The obs rate the actuator saw before the switch is the chapter's 50 per second.
+    let published_at = |t_ns: u64| {
+        trace
+            .iter()
+            .find(|s| s.t.0 >= t_ns)
+            .map(|s| s.topics.as_slice()[0].published)
+            .unwrap()
+    };
+    assert_eq!(published_at(1_000_000_000), 51, "50 Hz before the switch");
+    let after = published_at(3_980_000_000) - published_at(2_000_000_000);
+    assert!(
+        (60..=70).contains(&after),
+        "{after} in the 2 s after the switch"
+    );
+    // A bad executor is refused in one line, as --executor refuses it.
+    let bad = Command::SetExecutor {
+        executor: "two_threads".into(),
+    };
+    assert!(bad
+        .validate(&GraphSpec::chapter())
+        .unwrap_err()
+        .contains("unknown executor 'two_threads'"));
+}
