@@ -391,17 +391,24 @@ fn qos_series(shape: &GraphShape, extents: Option<&Extents>) -> Vec<String> {
             }
         }
     }
-    for n in &shape.nodes {
-        let e = not_alive_entity(&n.name);
-        let shown = match extents {
-            Some(ext) => ext.contains_key(&e),
-            None => n.lease().is_some(),
-        };
-        if shown {
-            out.push(format!("/{e}"));
-        }
-    }
     out
+}
+
+/// The liveliness series a layout shows (`nodes/<name>/not_alive`, `/`-rooted): when the
+/// run is over, every one that was logged; at the start, every node with a lease. A plot of
+/// their own, so that a count of 1 is not a flat line under counters of hundreds.
+fn liveliness_series(shape: &GraphShape, extents: Option<&Extents>) -> Vec<String> {
+    shape
+        .nodes
+        .iter()
+        .map(|n| not_alive_entity(&n.name))
+        .zip(&shape.nodes)
+        .filter(|(e, n)| match extents {
+            Some(ext) => ext.contains_key(e),
+            None => n.lease().is_some(),
+        })
+        .map(|(e, _)| format!("/{e}"))
+        .collect()
 }
 
 fn rgb((r, g, b): (u8, u8, u8)) -> Color {
@@ -479,11 +486,17 @@ fn plot(
         (Some(r), None) | (None, Some(r)) => Some(r),
         (None, None) => None,
     };
+    // Every plot's time axis moves with the others (one moment is one x everywhere), and
+    // its legend sits top right: the start and change markers are on the left.
     let view = ViewSpec::new(key, "TimeSeries", name)
         .contents(entities)
         .property(
             "PlotLegend",
-            &bp::PlotLegend::new().with_corner(bpc::Corner2D::LeftTop),
+            &bp::PlotLegend::new().with_corner(bpc::Corner2D::RightTop),
+        )
+        .property(
+            "TimeAxis",
+            &bp::TimeAxis::new().with_link(bpc::LinkAxis::LinkToGlobal),
         );
     match range {
         Some((lo, hi)) => view.property("ScalarAxis", &axis(lo, hi)),
@@ -499,12 +512,19 @@ fn layout_for(shape: &GraphShape, cfg: &RunConfig, extents: Option<&Extents>) ->
     let angle = plot(
         "angle",
         &format!("pole angle θ (rad), fall limits ±{deg:.0}°"),
-        paths(&[
-            "/plant/pole_angle_rad",
-            "/plant/fall_limit/upper",
-            "/plant/fall_limit/lower",
-            "/plant/changes",
-        ]),
+        {
+            let mut p = paths(&[
+                "/plant/pole_angle_rad",
+                "/plant/fall_limit/upper",
+                "/plant/fall_limit/lower",
+                "/plant/changes",
+            ]);
+            // The fall's marker, in the final layout of a run that fell.
+            if extents.is_some_and(|e| e.contains_key("plant/fall")) {
+                p.push("/plant/fall".to_string());
+            }
+            p
+        },
         Some((-CHANGE_MARK_RAD, CHANGE_MARK_RAD)),
         extents,
     );
@@ -619,6 +639,16 @@ fn layout_for(shape: &GraphShape, cfg: &RunConfig, extents: Option<&Extents>) ->
             extents,
         )
     });
+    let alive = liveliness_series(shape, extents);
+    let alive = (!alive.is_empty()).then(|| {
+        plot(
+            "liveliness",
+            "liveliness: times a node went not alive (total)",
+            alive,
+            extents.map(|_| (0.0, 1.0)),
+            extents,
+        )
+    });
     let events = ViewSpec::new("events", "TextLog", "events")
         .contents(["/events"])
         .property(
@@ -634,7 +664,7 @@ fn layout_for(shape: &GraphShape, cfg: &RunConfig, extents: Option<&Extents>) ->
                         kind: bpd::TextLogColumnKind::EntityPath,
                     },
                     bpd::TextLogColumn {
-                        visible: false.into(),
+                        visible: true.into(),
                         kind: bpd::TextLogColumnKind::LogLevel,
                     },
                     bpd::TextLogColumn {
@@ -700,6 +730,7 @@ fn layout_for(shape: &GraphShape, cfg: &RunConfig, extents: Option<&Extents>) ->
                     Some(published),
                     Some(dropped),
                     qos,
+                    alive,
                     Some(msg_per_s),
                     Some(events),
                 ]
@@ -975,6 +1006,39 @@ impl Recording {
             ))
             .with_level(rerun::components::TextLogLevel::INFO),
         );
+        // The faults the run injects (`--stall`, `--kill`), where they happen: a stalled
+        // node's silence is otherwise recorded nowhere but in its not-alive count.
+        for f in &cfg.faults {
+            let warn = rerun::components::TextLogLevel::WARN;
+            let (text, end) = match f.duration {
+                Some(d) => (
+                    format!(
+                        "injected stall: node {} does no work and asserts no liveliness for {:.2} s (until {:.2} s)",
+                        f.node,
+                        d.as_secs_f64(),
+                        f.at.saturating_add(d).as_secs_f64()
+                    ),
+                    Some(f.at.saturating_add(d)),
+                ),
+                None => (
+                    format!("injected kill: node {} stops for good", f.node),
+                    None,
+                ),
+            };
+            buf.add(
+                "events",
+                &time_point(f.at, 0),
+                &rerun::TextLog::new(text).with_level(warn),
+            );
+            if let Some(end) = end {
+                buf.add(
+                    "events",
+                    &time_point(end, 0),
+                    &rerun::TextLog::new(format!("node {} resumes after its stall", f.node))
+                        .with_level(rerun::components::TextLogLevel::INFO),
+                );
+            }
+        }
         buf.send(&self.rec);
     }
 
@@ -1768,6 +1832,17 @@ impl StepObserver for RecordingObserver {
         }
         self.qos_rows(&mut buf, s);
         if s.fell {
+            // A marker on the angle plot where the pole went past its limit.
+            buf.add(
+                "plant/fall",
+                &TimePoint::default(),
+                &rerun::SeriesPoints::new()
+                    .with_names(["the fall"])
+                    .with_colors([rgb(LIMIT_COLOR)])
+                    .with_marker_sizes([8.0])
+                    .with_markers([rerun::components::MarkerShape::Cross]),
+            );
+            buf.scalar("plant/fall", s.t, s.step, theta);
             let text = format!("FELL at t={:.2}s, θ = {:.3} rad", s.t.as_secs_f64(), theta);
             buf.add(
                 "events",

@@ -498,7 +498,21 @@ fn every_view_matches_data_in_a_virtual_run_and_a_fall() {
     five.set_control_hz(5.0).unwrap();
     let m = record(&fall, &five, None);
     assert!(m.fell_at_s.is_some(), "5 Hz falls");
-    check_views(&fall);
+    let views = check_views(&fall);
+    // The fall is marked on the pole-angle plot (a balanced run has no such series).
+    let angle = views
+        .iter()
+        .find(|v| v.name.starts_with("pole angle"))
+        .expect("an angle view");
+    assert!(
+        angle.queries.contains(&"/plant/fall".to_string()),
+        "{angle:?}"
+    );
+    let balanced_angle = blueprint_views(&balanced)
+        .into_iter()
+        .find(|v| v.name.starts_with("pole angle"))
+        .unwrap();
+    assert!(!balanced_angle.queries.contains(&"/plant/fall".to_string()));
 }
 
 /// A run with executors and compute times records the executor timeline (a lane per node,
@@ -928,8 +942,8 @@ fn every_view_matches_data_in_a_qos_run_and_the_counters_have_a_view() {
     let views = check_views(&path);
     assert_eq!(
         views.len(),
-        12,
-        "the chapter's 11 and the QoS counters: {views:#?}"
+        13,
+        "the chapter's 11, the QoS counters and liveliness: {views:#?}"
     );
     let qos = views
         .iter()
@@ -941,9 +955,31 @@ fn every_view_matches_data_in_a_qos_run_and_the_counters_have_a_view() {
             "/bus/cmd/lost",
             "/bus/cmd/offered_deadline_missed",
             "/bus/cmd/requested_deadline_missed",
-            "/nodes/policy/not_alive"
         ]
     );
+    // The not-alive count has a plot (and a scale) of its own.
+    let alive = views
+        .iter()
+        .find(|v| v.name.starts_with("liveliness"))
+        .expect("a liveliness view");
+    assert_eq!(alive.queries, ["/nodes/policy/not_alive"]);
+    // The injected stall is an event, a warning, at its start, and its end one too.
+    let events: Vec<String> = chunks(&path)
+        .iter()
+        .filter(|c| c.entity_path().to_string() == "/events")
+        .flat_map(|c| c.iter_slices::<String>(rerun::TextLog::descriptor_text().component))
+        .flatten()
+        .map(|s| s.as_str().to_string())
+        .collect();
+    assert!(
+        events
+            .iter()
+            .any(|e| e.starts_with("injected stall: node policy does no work")),
+        "{events:?}"
+    );
+    assert!(events
+        .iter()
+        .any(|e| e == "node policy resumes after its stall"));
     // The watchdog: a stalled safety node starves /cmd past its deadline; the recording
     // says so and does not call it a fall.
     let stop = dir.path().join("stop.rrd");
