@@ -486,8 +486,8 @@ fn plot(
         (Some(r), None) | (None, Some(r)) => Some(r),
         (None, None) => None,
     };
-    // Every plot's time axis moves with the others (one moment is one x everywhere), and
-    // its legend sits top right: the start and change markers are on the left.
+    // The legend sits top right (the start and change markers are on the left); the time
+    // axes are linked: zoom or pan one plot and every plot follows.
     let view = ViewSpec::new(key, "TimeSeries", name)
         .contents(entities)
         .property(
