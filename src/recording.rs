@@ -368,6 +368,23 @@ fn qos_entity(topic: &TopicShape, c: QosCounter) -> String {
     format!("bus/{}/{}", topic.entity(), c.key())
 }
 
+/// `deadline missed on /cmd: requested +3 (84 in all)`: the misses since `before`,
+/// (offered, requested), to `now`, and `tail` after the counts.
+fn deadline_line(topic: &str, before: (u64, u64), now: (u64, u64), tail: &str) -> String {
+    let mut sides = Vec::new();
+    if now.0 > before.0 {
+        sides.push(format!("offered +{} ({} in all)", now.0 - before.0, now.0));
+    }
+    if now.1 > before.1 {
+        sides.push(format!(
+            "requested +{} ({} in all)",
+            now.1 - before.1,
+            now.1
+        ));
+    }
+    format!("deadline missed on {topic}: {}{tail}", sides.join(", "))
+}
+
 /// The entity of a node's not-alive count: `nodes/<name>/not_alive`.
 fn not_alive_entity(node: &str) -> String {
     format!("nodes/{node}/not_alive")
@@ -440,7 +457,20 @@ pub struct Recording {
     /// Per node (by index): the release of its last tick logged and the periods its timer
     /// skipped so far ([`Recording::node_span`]).
     lanes: Arc<Mutex<Vec<Lane>>>,
+    /// Per topic (by name): the deadline misses the events have told so far (offered,
+    /// requested) and when the last such event was ([`DEADLINE_EVENT_GAP`]).
+    deadline_said: Arc<Mutex<BTreeMap<String, DeadlineSaid>>>,
 }
+
+/// A topic's deadline misses as the events told them: (offered, requested) and the time
+/// of the last event.
+type DeadlineSaid = (u64, u64, Nanos);
+
+/// Deadline misses closer than this to the last event about them are counted, not listed:
+/// a lossy link misses a deadline every few steps, and a line for each buried everything
+/// else in the event list. A burst's first miss gets a line; the end of the run says how
+/// many there were in all.
+const DEADLINE_EVENT_GAP: Nanos = Nanos(1_000_000_000);
 
 /// A node's lane in the executor timeline: the release of its last tick logged, and the
 /// periods its timer skipped so far.
@@ -892,6 +922,7 @@ impl Recording {
             last_step: Arc::default(),
             shape: Arc::default(),
             lanes: Arc::default(),
+            deadline_said: Arc::default(),
         };
         recording.log_settings(cfg, policy);
         Ok((recording, notice))
@@ -1341,6 +1372,30 @@ impl Recording {
         );
     }
 
+    /// At the end: for each topic whose deadline misses grew since its last event, one line
+    /// with how many more and how many in all.
+    fn deadline_totals(&self, buf: &mut ChunkBuffer, metrics: &Metrics, end: Nanos) {
+        let said = self.deadline_said.lock().unwrap_or_else(|e| e.into_inner());
+        for (name, t) in &metrics.topics {
+            let total = |k: &str| t.qos_counters.get(k).copied().unwrap_or(0);
+            let now = (
+                total("offered_deadline_missed"),
+                total("requested_deadline_missed"),
+            );
+            let Some(&(so, sr, _)) = said.get(name) else {
+                continue;
+            };
+            if now.0 > so || now.1 > sr {
+                buf.add(
+                    "events",
+                    &time_point(end, metrics.steps),
+                    &rerun::TextLog::new(deadline_line(name, (so, sr), now, ""))
+                        .with_level(rerun::components::TextLogLevel::WARN),
+                );
+            }
+        }
+    }
+
     /// Log the end of the run (an event and the summary document) at its end time, flush
     /// the file and move it into place, so the recording is complete whichever way the run
     /// ended.
@@ -1376,6 +1431,7 @@ impl Recording {
         }
         {
             let mut buf = self.lock();
+            self.deadline_totals(&mut buf, metrics, end.at);
             // The skipped ticks end where metrics.json ends them (a tick still computing
             // at the end counted its skipped periods when it started, and no span ended).
             let logged = self.lanes.lock().unwrap_or_else(|e| e.into_inner()).clone();
@@ -1624,26 +1680,32 @@ impl RecordingObserver {
             let (offered, requested) = (st.offered_deadline_missed, st.requested_deadline_missed);
             let (o0, r0) = self.deadline_seen[i];
             if offered > o0 || requested > r0 {
-                let mut sides = Vec::new();
-                if offered > o0 {
-                    sides.push(format!("offered +{} ({offered} in all)", offered - o0));
+                // A burst's first miss is said; misses within DEADLINE_EVENT_GAP of the last
+                // line are counted, and said with the next line or at the end.
+                let mut said = self
+                    .rec
+                    .deadline_said
+                    .lock()
+                    .unwrap_or_else(|e| e.into_inner());
+                let (so, sr, last) = match said.get(&topic.name) {
+                    Some(&(o, r, at)) => (o, r, Some(at)),
+                    None => (0, 0, None),
+                };
+                let quiet = last.is_none_or(|at| s.t.saturating_sub(at) > DEADLINE_EVENT_GAP);
+                if quiet {
+                    buf.add(
+                        "events",
+                        &time,
+                        &rerun::TextLog::new(deadline_line(
+                            &topic.name,
+                            (so, sr),
+                            (offered, requested),
+                            "",
+                        ))
+                        .with_level(rerun::components::TextLogLevel::WARN),
+                    );
+                    said.insert(topic.name.clone(), (offered, requested, s.t));
                 }
-                if requested > r0 {
-                    sides.push(format!(
-                        "requested +{} ({requested} in all)",
-                        requested - r0
-                    ));
-                }
-                buf.add(
-                    "events",
-                    &time,
-                    &rerun::TextLog::new(format!(
-                        "deadline missed on {}: {}",
-                        topic.name,
-                        sides.join(", ")
-                    ))
-                    .with_level(rerun::components::TextLogLevel::WARN),
-                );
             }
             self.deadline_seen[i] = (offered.max(o0), requested.max(r0));
         }
@@ -1943,9 +2005,16 @@ mod tests {
                 "/bus/action/refused",
                 "/bus/action/offered_deadline_missed",
                 "/bus/action/requested_deadline_missed",
-                "/nodes/policy/not_alive"
             ]
         );
+        // A leased node's not-alive count: a view (and a scale) of its own.
+        let alive = layout_for(&s, &cfg, None)
+            .views()
+            .iter()
+            .map(|v| v.title_and_queries())
+            .find(|(t, _)| t.starts_with("liveliness"))
+            .map(|(_, q)| q.to_vec());
+        assert_eq!(alive.unwrap(), ["/nodes/policy/not_alive"]);
         // At the end: what was logged, whatever the QoS says now.
         let mut ext = Extents::new();
         widen(&mut ext, "bus/obs/lost", 3.0);
