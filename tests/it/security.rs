@@ -552,3 +552,79 @@ fn a_node_on_another_host_joins_with_the_credentials_and_only_with_them() {
     );
     drop(hosts);
 }
+
+/// The real clock across two "hosts" (network namespaces on one machine: one
+/// `CLOCK_MONOTONIC`, so the launcher's start instant and every stamp are shared, as
+/// docs/distributed.md says they must be): the policy on the other host, 5 ms away where
+/// the kernel has netem (on what that host sends: the force back). The run balances, and
+/// every command crosses the link twice (the reading out, the force back), so the mean
+/// sense→act latency is at least the delay.
+#[test]
+fn the_real_clock_across_two_hosts_balances_and_its_latency_carries_the_link() {
+    let _m = crate::machine::alone();
+    let Some(hosts) = TwoHosts::new(5) else {
+        eprintln!(
+            "note: two-host test skipped: this machine does not let it make network namespaces (needs root and iproute2)"
+        );
+        return;
+    };
+    let netem = std::process::Command::new("ip")
+        .args(["netns", "exec", &hosts.b, "tc", "qdisc", "show"])
+        .output()
+        .is_ok_and(|o| String::from_utf8_lossy(&o.stdout).contains("netem"));
+    let dir = tempfile::tempdir().unwrap();
+    let creds = dir.path().join("creds.toml");
+    let (creds_s, out_s) = (
+        creds.to_str().unwrap().to_string(),
+        dir.path().to_str().unwrap().to_string(),
+    );
+    let ep = "tls/10.77.0.1:7449";
+    let mut launcher = hosts
+        .ratelab(
+            &hosts.a,
+            &["launch", "--processes", "--no-spawn", "--clock", "real"],
+        )
+        .args(["--duration", "3", "--listen", ep, "--out", &out_s])
+        .args(["--export-credentials", &creds_s])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let (rx, mut lines) = crate::distributed::listening(&mut launcher);
+    let node = |ns: &str, process: &str, listen: &str| {
+        hosts
+            .ratelab(ns, &["node", "--process", process, "--connect", ep])
+            .args(["--listen", listen, "--credentials", &creds_s])
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap()
+    };
+    let robot = node(&hosts.a, "robot", "tls/10.77.0.1:0");
+    let policy = node(&hosts.b, "policy", "tls/10.77.0.2:0");
+    let until = Instant::now() + Duration::from_secs(120);
+    let status = loop {
+        if let Some(s) = launcher.try_wait().unwrap() {
+            break s;
+        }
+        assert!(Instant::now() < until, "the launch did not end: {lines:?}");
+        std::thread::sleep(Duration::from_millis(100));
+    };
+    lines.extend(rx.try_iter());
+    assert!(status.success(), "{lines:?}");
+    for mut n in [robot, policy] {
+        assert!(n.wait().unwrap().success());
+    }
+    let m: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.path().join("metrics.json")).unwrap())
+            .unwrap();
+    assert_eq!(m["balanced"], true, "{m}");
+    assert_eq!(m["clock"], "real");
+    let mean = m["mean_latency_ms"].as_f64().unwrap();
+    if netem {
+        // The force comes back 5 ms late at least, on top of the sampling.
+        assert!(mean >= 5.0, "mean sense→act {mean} ms across a 5 ms link");
+    }
+    assert!(mean > 0.0, "{m}");
+    drop(hosts);
+}
