@@ -38,7 +38,7 @@ fn lab(args: &cli::RunArgs, stop: StopFlag) -> anyhow::Result<()> {
     let record = match &args.record {
         None if !args.spawn => None,
         Some(Some(p)) => Some(p.clone()),
-        _ => Some(ratelab::recording::default_path(
+        _ => Some(ratelab::recording::default_lab_path(
             std::path::Path::new("recordings"),
             &cfg,
         )),

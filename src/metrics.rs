@@ -389,6 +389,10 @@ pub struct NodeMetrics {
     pub rank: usize,
     /// Rate at the start of the run, Hz.
     pub rate_hz: f64,
+    /// Rate at the end of the run, Hz, when a live change (the lab's keys, a replayed
+    /// command) moved it; absent when it ran at `rate_hz` to the end.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rate_hz_end: Option<f64>,
     /// Ticks run.
     pub ticks: u64,
     /// Real clock only: lateness p99, µs.
@@ -497,7 +501,10 @@ impl Metrics {
                 } else {
                     name.as_str()
                 };
-                format!("{label} {} Hz", n.rate_hz)
+                match n.rate_hz_end {
+                    Some(end) => format!("{label} {end} Hz ({} Hz at the start)", n.rate_hz),
+                    None => format!("{label} {} Hz", n.rate_hz),
+                }
             })
             .collect();
         let topics = self.topics_by_publisher();

@@ -1,12 +1,15 @@
 //! Recordings: a run written to a rerun `.rrd` for offline review (rerun 0.36.3).
 //!
-//! Timelines: `sim_time` (a duration on the runtime clock, virtual or real) and
+//! Timelines: the runtime clock's time as a duration, named for the clock — `sim_time` under
+//! the virtual clock, `wall_time` (since the run's start) under the real one — and
 //! `control_step` (a sequence). Entities, for a graph described by a [`GraphShape`] (lists of
 //! nodes and topics, so nothing below names a node or a topic):
 //! - `world` (z up): `world/rail` (the cart rests on it), `world/cart` (translated by the cart
 //!   position) with `world/cart/body` (box 0.2 × 0.1 × 0.1 m), `world/cart/fall_limits`
 //!   (two lines at ±12°, labelled by `…/labels`), `world/cart/force` (the applied force as an arrow, 0.04 m per N)
-//!   and `world/cart/pole` (rotated θ about +y) with `world/cart/pole/body` (capsule 1.0 m);
+//!   and `world/cart/pole` (rotated θ about +y) with `world/cart/pole/body` (capsule 1.0 m)
+//!   and, from a fall on, `world/cart/pole/fallen` (the pole drawn red, `…/label` along it, clear of the limits' labels:
+//!   `FELL at 0.84 s`);
 //! - `plant/pole_angle_rad`, `plant/fall_limit/{upper,lower}`, `plant/changes` (a mark at the
 //!   start and at every mid-run change), `plant/cart_pos_m`, `plant/rail_end/{right,left}`,
 //!   `plant/cart_limit/{right,left}`;
@@ -14,7 +17,8 @@
 //!   `action/applied_N` (the force the actuator applied at each step: the zero-order hold);
 //! - `latency/sense_to_act_ms`, `latency/control_period_ms` (the controller's period);
 //! - `bus/<topic>/{published,dropped,msg_per_s}` for every topic (msg/s over a 1 s sliding
-//!   window), one colour per topic;
+//!   window), one colour per topic, the same in every graph, each topic's line narrower than
+//!   the one drawn before it so that equal lines show both colours;
 //! - QoS ([`crate::qos`]): `bus/<topic>/<counter>` (`expired`, `refused`, `lost`,
 //!   `retransmitted`, `offered_deadline_missed`, `requested_deadline_missed`) for each counter
 //!   a topic reports ([`crate::topic::TopicStats::reported`]: its QoS can make it count, or it has
@@ -107,8 +111,9 @@ struct ScalarColumn {
 
 /// Rows gathered per entity, sent as chunks in a fixed order. Scalars are kept as plain
 /// columns and serialized once per flush (one arrow array per series, not one per row).
-#[derive(Default)]
 struct ChunkBuffer {
+    /// The time timeline's name ([`timeline_name`]).
+    timeline: &'static str,
     rows: BTreeMap<String, ChunkBuilder>,
     scalars: BTreeMap<String, ScalarColumn>,
     /// The smallest and largest value of every scalar series so far (kept across sends):
@@ -134,7 +139,31 @@ fn widen(extents: &mut Extents, entity: &str, value: f64) {
     }
 }
 
+/// The name of the timeline that carries the runtime clock's time: `sim_time` for the
+/// virtual clock (simulated time, as ROS 2 calls time from `/clock`), `wall_time` for the
+/// real clock (time since the run's start on the machine's monotonic clock).
+pub fn timeline_name(clock: ClockKind) -> &'static str {
+    match clock {
+        ClockKind::Virtual => "sim_time",
+        ClockKind::Real => "wall_time",
+    }
+}
+
 impl ChunkBuffer {
+    fn new(timeline: &'static str) -> Self {
+        Self {
+            timeline,
+            rows: BTreeMap::new(),
+            scalars: BTreeMap::new(),
+            extents: Extents::new(),
+        }
+    }
+
+    /// The time point of control step `step` at run time `t`.
+    fn at(&self, t: Nanos, step: u64) -> TimePoint {
+        time_point(self.timeline, t, step)
+    }
+
     fn add(&mut self, entity: &str, time: &TimePoint, row: &dyn rerun::AsComponents) {
         let builder = self
             .rows
@@ -166,7 +195,7 @@ impl ChunkBuffer {
         }
         for (entity, col) in std::mem::take(&mut self.scalars) {
             let index = [
-                TimeColumn::new_duration_nanos("sim_time", col.t_ns),
+                TimeColumn::new_duration_nanos(self.timeline, col.t_ns),
                 TimeColumn::new_sequence("control_step", col.step),
             ];
             if let Ok(columns) = rerun::Scalars::new(col.value).columns_of_unit_batches() {
@@ -189,11 +218,20 @@ fn series_style(buf: &mut ChunkBuffer, entity: &str, name: &str, color: (u8, u8,
     );
 }
 
-/// The runtime-clock time point of control step `step` at run time `t`.
-fn time_point(t: Nanos, step: u64) -> TimePoint {
+/// The range the plots' linked time axes show for a run that ended at `end` (ns): the run
+/// with 5 % of it (at least 100 ms) of room each side, so the labels at its ends show
+/// whole.
+fn time_axis_ns(end: Nanos) -> (i64, i64) {
+    let end = i64::try_from(end.0).unwrap_or(i64::MAX);
+    let pad = (end / 20).max(100_000_000);
+    (-pad, end.saturating_add(pad))
+}
+
+/// The runtime-clock time point of control step `step` at run time `t`, on `timeline`.
+fn time_point(timeline: &'static str, t: Nanos, step: u64) -> TimePoint {
     TimePoint::default()
         .with(
-            Timeline::new_duration("sim_time"),
+            Timeline::new_duration(timeline),
             i64::try_from(t.0).unwrap_or(i64::MAX),
         )
         .with(
@@ -274,7 +312,24 @@ pub fn default_path(dir: &Path, cfg: &RunConfig) -> PathBuf {
         (Some(hz), Some(depth)) => format!("-control{}-q{depth}", hz_label(hz)),
         _ => String::new(),
     };
-    let stem = format!("{}{}{chain}-seed{}", graph_prefix(cfg), cfg.clock, cfg.seed);
+    first_free(
+        dir,
+        &format!("{}{}{chain}-seed{}", graph_prefix(cfg), cfg.clock, cfg.seed),
+    )
+}
+
+/// A lab session's recording: `lab-[<graph>-]<clock>-seed<seed>[-<n>].rrd` under `dir`, the
+/// first name not taken. No rate or depth in the name: the learner changes them during the
+/// session (the recording's summary gives them at the start and at the end, its events each
+/// change).
+pub fn default_lab_path(dir: &Path, cfg: &RunConfig) -> PathBuf {
+    first_free(
+        dir,
+        &format!("lab-{}{}-seed{}", graph_prefix(cfg), cfg.clock, cfg.seed),
+    )
+}
+
+fn first_free(dir: &Path, stem: &str) -> PathBuf {
     let first = dir.join(format!("{stem}.rrd"));
     if !first.exists() {
         return first;
@@ -337,6 +392,38 @@ const PALETTE: [(u8, u8, u8); 6] = [
 fn palette(i: usize) -> Color {
     let (r, g, b) = PALETTE[i % PALETTE.len()];
     Color::from_rgb(r, g, b)
+}
+
+/// A topic's colour, the same in every graph: the shipped graphs' topics have one each
+/// (`/obs` cyan, `/action` orange, …), any other topic a palette entry chosen by its name
+/// (FNV-1a), so a topic keeps its colour when the graph around it changes.
+fn topic_color(name: &str) -> Color {
+    const FIXED: [&str; 6] = ["/obs", "/action", "/meas", "/state", "/cmd", "/force"];
+    let i = FIXED.iter().position(|t| *t == name).unwrap_or_else(|| {
+        let hash = name.bytes().fold(0xcbf2_9ce4_8422_2325_u64, |h, b| {
+            (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3)
+        });
+        (hash % PALETTE.len() as u64) as usize
+    });
+    palette(i)
+}
+
+/// Line widths (px) for series that can coincide (every topic's published count, two
+/// topics at one rate): the viewer draws a plot's series in entity-path order, each over
+/// the last, so the first drawn is the widest and every later one narrower; two equal
+/// lines then show as one inside the other, both colours visible. Returns one width per
+/// name, in the order given.
+fn layered_widths(entities: &[String]) -> Vec<f32> {
+    let mut sorted = entities.to_vec();
+    sorted.sort_unstable();
+    let n = sorted.len();
+    entities
+        .iter()
+        .map(|e| {
+            let rank = sorted.iter().position(|s| s == e).unwrap_or(0);
+            2.0 + 3.0 * (n - 1 - rank) as f32
+        })
+        .collect()
 }
 
 const ANGLE_COLOR: (u8, u8, u8) = (90, 160, 255);
@@ -686,7 +773,7 @@ fn layout_for(shape: &GraphShape, cfg: &RunConfig, extents: Option<&Extents>) ->
             &bp::TextLogColumns::new()
                 .with_timeline_columns([bpd::TimelineColumn {
                     visible: true.into(),
-                    timeline: "sim_time".into(),
+                    timeline: timeline_name(cfg.clock).into(),
                 }])
                 .with_text_log_columns([
                     bpd::TextLogColumn {
@@ -917,7 +1004,7 @@ impl Recording {
             path: path.to_path_buf(),
             clock: cfg.clock,
             cfg: cfg.clone(),
-            buffer: Arc::default(),
+            buffer: Arc::new(Mutex::new(ChunkBuffer::new(timeline_name(cfg.clock)))),
             file: Arc::new(Committer(Mutex::new(Some(pending)))),
             last_step: Arc::default(),
             shape: Arc::default(),
@@ -947,17 +1034,18 @@ impl Recording {
         &self,
         shape: &GraphShape,
         extents: Option<&Extents>,
+        end: Option<Nanos>,
     ) -> Result<(), RecordingError> {
         let root = layout_for(shape, &self.cfg, extents);
         let stage = if extents.is_some() { "final" } else { "start" };
         let id = deterministic_id(&self.cfg).map(|id| format!("{id}-blueprint-{stage}"));
+        let timeline = timeline_name(self.cfg.clock);
         let (msgs, activate) =
-            layout::blueprint_messages(APP_ID, id, &root, "sim_time").map_err(|detail| {
-                RecordingError::Rerun {
+            layout::blueprint_messages(APP_ID, id, &root, timeline, end.map(time_axis_ns))
+                .map_err(|detail| RecordingError::Rerun {
                     path: self.path.clone(),
                     detail,
-                }
-            })?;
+                })?;
         self.rec.send_blueprint(msgs, activate);
         Ok(())
     }
@@ -966,7 +1054,7 @@ impl Recording {
     fn attach(&self, shape: &GraphShape) {
         *self.shape.lock().unwrap_or_else(|e| e.into_inner()) = Some(shape.clone());
         self.log_styles(shape);
-        if let Err(e) = self.send_layout(shape, None) {
+        if let Err(e) = self.send_layout(shape, None, None) {
             // The data is still recorded; the viewer falls back to its own layout.
             self.event(Nanos::ZERO, &format!("no viewer layout: {e}"), "WARN");
         }
@@ -1027,7 +1115,7 @@ impl Recording {
                 settings_line(cfg)
             )),
         );
-        let start = time_point(Nanos::ZERO, 0);
+        let start = buf.at(Nanos::ZERO, 0);
         buf.add(
             "events",
             &start,
@@ -1056,15 +1144,13 @@ impl Recording {
                     None,
                 ),
             };
-            buf.add(
-                "events",
-                &time_point(f.at, 0),
-                &rerun::TextLog::new(text).with_level(warn),
-            );
+            let at = buf.at(f.at, 0);
+            buf.add("events", &at, &rerun::TextLog::new(text).with_level(warn));
             if let Some(end) = end {
+                let at = buf.at(end, 0);
                 buf.add(
                     "events",
-                    &time_point(end, 0),
+                    &at,
                     &rerun::TextLog::new(format!("node {} resumes after its stall", f.node))
                         .with_level(rerun::components::TextLogLevel::INFO),
                 );
@@ -1190,12 +1276,14 @@ impl Recording {
                 .with_names(["published (policy)"])
                 .with_colors([rgb(ANGLE_COLOR)])
                 .with_markers([rerun::components::MarkerShape::Circle])
-                .with_marker_sizes([3.0]),
+                .with_marker_sizes([2.5]),
         );
+        // Wider than the published points drawn over it (where the actuator applies what
+        // was just published, both show).
         buf.add(
             "action/applied_N",
             &fixed,
-            &lines("applied (actuator, held)", FORCE_COLOR, 1.5)
+            &lines("applied (actuator, held)", FORCE_COLOR, 5.0)
                 .with_interpolation_mode(rerun::components::InterpolationMode::StepAfter),
         );
         buf.add(
@@ -1210,27 +1298,35 @@ impl Recording {
             &lines(&format!("{controller} period"), NEUTRAL_COLOR, 1.5)
                 .with_interpolation_mode(rerun::components::InterpolationMode::StepAfter),
         );
-        for (i, topic) in shape.topics.iter().enumerate() {
+        let widths = layered_widths(&shape.topics.iter().map(|t| t.entity()).collect::<Vec<_>>());
+        for (topic, width) in shape.topics.iter().zip(widths) {
             for measure in ["published", "dropped", "msg_per_s"] {
                 buf.add(
                     &format!("bus/{}/{measure}", topic.entity()),
                     &fixed,
                     &rerun::SeriesLines::new()
                         .with_names([topic.name.as_str()])
-                        .with_colors([palette(i)])
-                        .with_widths([2.0]),
+                        .with_colors([topic_color(&topic.name)])
+                        .with_widths([width]),
                 );
             }
         }
         if self.clock == ClockKind::Real {
-            for (i, node) in shape.nodes.iter().enumerate() {
+            let widths = layered_widths(
+                &shape
+                    .nodes
+                    .iter()
+                    .map(|n| n.name.clone())
+                    .collect::<Vec<_>>(),
+            );
+            for ((i, node), width) in shape.nodes.iter().enumerate().zip(widths) {
                 buf.add(
                     &format!("nodes/{}/lateness_us", node.name),
                     &fixed,
                     &rerun::SeriesLines::new()
                         .with_names([node.name.as_str()])
                         .with_colors([palette(i)])
-                        .with_widths([1.5]),
+                        .with_widths([width]),
                 );
             }
         }
@@ -1245,9 +1341,11 @@ impl Recording {
     /// Log an event line at run time `t` (and the latest control step).
     pub fn event(&self, t: Nanos, text: &str, level: &str) {
         let step = self.last_step.load(std::sync::atomic::Ordering::Relaxed);
-        self.lock().add(
+        let mut buf = self.lock();
+        let time = buf.at(t, step);
+        buf.add(
             "events",
-            &time_point(t, step),
+            &time,
             &rerun::TextLog::new(text).with_level(level),
         );
     }
@@ -1257,9 +1355,10 @@ impl Recording {
     pub fn change(&self, t: Nanos, text: &str) {
         let step = self.last_step.load(std::sync::atomic::Ordering::Relaxed);
         let mut buf = self.lock();
+        let time = buf.at(t, step);
         buf.add(
             "events",
-            &time_point(t, step),
+            &time,
             &rerun::TextLog::new(text).with_level(rerun::components::TextLogLevel::INFO),
         );
         buf.scalar("plant/changes", t, step, CHANGE_MARK_RAD);
@@ -1321,8 +1420,10 @@ impl Recording {
         let entity = format!("nodes/{node}/lateness_us");
         let us = lateness.as_micros_f64();
         widen(&mut self.lock().extents, &entity, us);
-        self.rec
-            .set_time("sim_time", std::time::Duration::from_nanos(now.0));
+        self.rec.set_time(
+            timeline_name(self.clock),
+            std::time::Duration::from_nanos(now.0),
+        );
         let _ = self.rec.log(entity, &rerun::Scalars::single(us));
     }
 
@@ -1386,9 +1487,10 @@ impl Recording {
                 continue;
             };
             if now.0 > so || now.1 > sr {
+                let at = buf.at(end, metrics.steps);
                 buf.add(
                     "events",
-                    &time_point(end, metrics.steps),
+                    &at,
                     &rerun::TextLog::new(deadline_line(name, (so, sr), now, ""))
                         .with_level(rerun::components::TextLogLevel::WARN),
                 );
@@ -1452,7 +1554,7 @@ impl Recording {
         let shape = self.shape.lock().unwrap_or_else(|e| e.into_inner()).clone();
         if let Some(shape) = shape {
             let extents = self.lock().extents.clone();
-            self.send_layout(&shape, Some(&extents))?;
+            self.send_layout(&shape, Some(&extents), Some(end.at))?;
         }
         self.flush()?;
         Ok(self.file.commit()?)
@@ -1646,7 +1748,7 @@ impl RecordingObserver {
     /// counter rose, each leased node's not-alive count, and an event when a node's
     /// liveliness changed.
     fn qos_rows(&mut self, buf: &mut ChunkBuffer, s: &StepRecord) {
-        let time = time_point(s.t, s.step);
+        let time = buf.at(s.t, s.step);
         let n = self.shape.topics.len();
         self.qos_logged.resize(n, Vec::new());
         self.deadline_seen.resize(n, (0, 0));
@@ -1753,18 +1855,20 @@ impl RecordingObserver {
                 };
                 let lapsed_at = before.saturating_add(lease.unwrap_or(Nanos::ZERO)).min(s.t);
                 let lease_text = lease.map_or(String::new(), |l| format!(" (lease {l})"));
+                let at = buf.at(lapsed_at, s.step);
                 buf.add(
                     "events",
-                    &time_point(lapsed_at, s.step),
+                    &at,
                     &rerun::TextLog::new(format!("node {} not alive{lease_text}", node.name))
                         .with_level(rerun::components::TextLogLevel::WARN),
                 );
             }
             let came_back = status.alive && (!seen.alive || status.not_alive > seen.not_alive);
             if came_back {
+                let at = buf.at(status.last_asserted, s.step);
                 buf.add(
                     "events",
-                    &time_point(status.last_asserted, s.step),
+                    &at,
                     &rerun::TextLog::new(format!("node {} alive again", node.name))
                         .with_level(rerun::components::TextLogLevel::INFO),
                 );
@@ -1788,9 +1892,9 @@ impl StepObserver for RecordingObserver {
         self.rec
             .last_step
             .store(s.step, std::sync::atomic::Ordering::Relaxed);
-        let time = time_point(s.t, s.step);
         let rec = self.rec.clone();
         let mut buf = rec.lock();
+        let time = buf.at(s.t, s.step);
         let state = self.shape.state();
         if self.last_state.as_ref() != Some(&state) {
             match &self.last_state {
@@ -1905,6 +2009,21 @@ impl StepObserver for RecordingObserver {
                     .with_markers([rerun::components::MarkerShape::Cross]),
             );
             buf.scalar("plant/fall", s.t, s.step, theta);
+            // …and in 3D: from the fall on, the pole is drawn red and labelled.
+            buf.add(
+                "world/cart/pole/fallen",
+                &time,
+                &rerun::Capsules3D::from_lengths_and_radii([1.0], [0.032])
+                    .with_colors([rgb(LIMIT_COLOR)]),
+            );
+            buf.add(
+                "world/cart/pole/fallen/label",
+                &time,
+                &rerun::Points3D::new([[0.0, 0.0, 0.6]])
+                    .with_colors([rgb(LIMIT_COLOR)])
+                    .with_radii([0.02])
+                    .with_labels([format!("FELL at {:.2} s", s.t.as_secs_f64())]),
+            );
             let text = format!("FELL at t={:.2}s, θ = {:.3} rad", s.t.as_secs_f64(), theta);
             buf.add(
                 "events",
@@ -1923,6 +2042,24 @@ impl StepObserver for RecordingObserver {
 mod tests {
     use super::shape::tests::shape;
     use super::*;
+
+    #[test]
+    fn a_topic_keeps_its_colour_in_every_graph_and_equal_lines_stay_visible() {
+        // The shipped graphs' topics have a colour each, whatever graph they are in.
+        let shipped = ["/obs", "/action", "/meas", "/state", "/cmd", "/force"];
+        let colours: std::collections::BTreeSet<[u8; 4]> =
+            shipped.iter().map(|t| topic_color(t).to_array()).collect();
+        assert_eq!(colours.len(), shipped.len());
+        assert_eq!(topic_color("/reference"), topic_color("/reference"));
+        assert!(PALETTE.contains(&{
+            let [r, g, b, _] = topic_color("/reference").to_array();
+            (r, g, b)
+        }));
+        // Drawn in entity-path order, each over the last: the first drawn is the widest.
+        let w = layered_widths(&["obs".to_string(), "action".to_string(), "cmd".to_string()]);
+        assert!(w[1] > w[2] && w[2] > w[0], "{w:?}");
+        assert_eq!(layered_widths(&["obs".to_string()]), [2.0]);
+    }
 
     #[test]
     fn views_list_every_topic_and_use_only_trailing_subtree_queries() {
@@ -2051,6 +2188,12 @@ mod tests {
             second.file_name().unwrap(),
             "virtual-control7.5-q1-seed0-2.rrd"
         );
+        // A lab session's name claims no rate: the learner changes them as it runs.
+        let lab = default_lab_path(dir.path(), &cfg);
+        assert_eq!(lab.file_name().unwrap(), "lab-virtual-seed0.rrd");
+        std::fs::write(&lab, b"").unwrap();
+        let lab2 = default_lab_path(dir.path(), &cfg);
+        assert_eq!(lab2.file_name().unwrap(), "lab-virtual-seed0-2.rrd");
     }
 
     #[test]

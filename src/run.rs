@@ -564,6 +564,7 @@ pub fn summarize_state(cfg: &RunConfig, st: &GraphState, end: &RunEnd) -> Metric
                 kind: n.kind_name().to_string(),
                 rank: i,
                 rate_hz: n.rate_hz,
+                rate_hz_end: st.rates_hz.get(i).copied().filter(|end| *end != n.rate_hz),
                 ticks: st.ticks.get(i).copied().unwrap_or(0),
                 lateness_p99_us: t.map(|t| t.lateness_p99_us),
                 lateness_max_us: t.map(|t| t.lateness_max_us),

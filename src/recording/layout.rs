@@ -187,17 +187,28 @@ fn log_item(stream: &rerun::RecordingStream, item: &Item) -> Result<(), Recordin
     }
 }
 
+/// The viewer's id for the hidden view whose time axis every plot linked with
+/// `LinkAxis::LinkToGlobal` reads (`re_viewer_context::GLOBAL_VIEW_ID` in rerun 0.36, not
+/// exposed by the SDK: `re_view_time_series`'s `view_class.rs` reads that view's `TimeAxis`
+/// for a linked plot, ignoring the plot's own range). Pinned with rerun itself.
+const GLOBAL_VIEW_UUID: &str = "5c0dca6a-e63f-9cf7-f657-2602590474cc";
+
 /// The blueprint messages for `root` (a container) and the command that activates them.
 /// `blueprint_id`, when given, makes the blueprint store's id deterministic. The panels
 /// around the views are folded away (blueprint and selection hidden, time panel collapsed on
-/// `timeline`, following the newest data), so the views get the window.
+/// `timeline`, following the newest data), so the views get the window. `time_axis_ns`, when
+/// given, is the range `[start, end]` (ns on `timeline`) the linked time axes show: the
+/// viewer centres each tick's label on its tick, so a range ending at the run's last instant
+/// cuts the last label in half ("+1" for "+10s"); a little room each side shows it whole.
 pub(crate) fn blueprint_messages(
     app_id: &'static str,
     blueprint_id: Option<String>,
     root: &Item,
     timeline: &str,
+    time_axis_ns: Option<(i64, i64)>,
 ) -> Result<(Vec<LogMsg>, BlueprintActivationCommand), String> {
-    let msgs = blueprint_stream(app_id, blueprint_id, root, timeline).map_err(|e| e.to_string())?;
+    let msgs = blueprint_stream(app_id, blueprint_id, root, timeline, time_axis_ns)
+        .map_err(|e| e.to_string())?;
     let blueprint_id = msgs
         .iter()
         .find_map(|m| match m {
@@ -218,6 +229,7 @@ fn blueprint_stream(
     blueprint_id: Option<String>,
     root: &Item,
     timeline: &str,
+    time_axis_ns: Option<(i64, i64)>,
 ) -> Result<Vec<LogMsg>, RecordingStreamError> {
     let mut builder = RecordingStreamBuilder::new(app_id).blueprint();
     if let Some(id) = blueprint_id {
@@ -227,6 +239,15 @@ fn blueprint_stream(
     // The viewer identifies blueprint data by this timeline.
     stream.set_time_sequence("blueprint", 0);
     log_item(&stream, root)?;
+    if let Some((start, end)) = time_axis_ns {
+        stream.log(
+            format!("view/{GLOBAL_VIEW_UUID}/TimeAxis"),
+            &bp::TimeAxis::new().with_view_range(bpc::TimeRange(datatypes::TimeRange {
+                start: datatypes::TimeRangeBoundary::Absolute(datatypes::TimeInt(start)),
+                end: datatypes::TimeRangeBoundary::Absolute(datatypes::TimeInt(end)),
+            })),
+        )?;
+    }
     stream.log(
         "viewport",
         &bp::ViewportBlueprint::new()

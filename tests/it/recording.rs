@@ -513,6 +513,38 @@ fn every_view_matches_data_in_a_virtual_run_and_a_fall() {
         .find(|v| v.name.starts_with("pole angle"))
         .unwrap();
     assert!(!balanced_angle.queries.contains(&"/plant/fall".to_string()));
+    // …and in 3D, from the fall on: the pole drawn red over the orange one, labelled.
+    let fallen: Vec<Chunk> = chunks(&fall)
+        .into_iter()
+        .filter(|c| {
+            c.entity_path()
+                .to_string()
+                .starts_with("/world/cart/pole/fallen")
+        })
+        .collect();
+    assert_eq!(
+        fallen.iter().map(|c| c.num_rows()).sum::<usize>(),
+        2,
+        "the red pole and its label"
+    );
+    let at_ns = fallen[0]
+        .timelines()
+        .iter()
+        .find(|(n, _)| n.as_str() == "sim_time")
+        .map(|(_, col)| col.times_raw()[0])
+        .expect("the fall's time");
+    let fell_at_s = m.fell_at_s.unwrap();
+    assert!(
+        (at_ns as f64 / 1e9 - fell_at_s).abs() < 1e-9,
+        "{at_ns} ns vs {fell_at_s} s"
+    );
+    assert!(
+        !chunks(&balanced).iter().any(|c| c
+            .entity_path()
+            .to_string()
+            .starts_with("/world/cart/pole/fallen")),
+        "a balanced run has no fallen pole"
+    );
 }
 
 /// A run with executors and compute times records the executor timeline (a lane per node,
@@ -595,6 +627,20 @@ fn every_view_matches_data_in_a_real_clock_run() {
         .find(|v| v.name.contains("lateness"))
         .expect("a lateness view under the real clock");
     assert_eq!(lateness.queries.len(), 3, "{lateness:?}");
+    // The real clock's time is wall time since the start, and the timeline says so.
+    let timelines: BTreeSet<String> = chunks(&path)
+        .iter()
+        .flat_map(|c| {
+            c.timelines()
+                .keys()
+                .map(|t| t.to_string())
+                .collect::<Vec<_>>()
+        })
+        .collect();
+    assert!(
+        timelines.contains("wall_time") && !timelines.contains("sim_time"),
+        "{timelines:?}"
+    );
 }
 
 #[test]

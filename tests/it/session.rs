@@ -145,6 +145,14 @@ fn replay_cli_reproduces_and_refuses_garbage() {
         (Some(50.0), Some(10.0))
     );
     assert_eq!(m["actuator_steps"], m["steps"]);
+    // Each node's rate says where it ended when a change moved it, and only then.
+    assert_eq!(m["nodes"]["policy"]["rate_hz"], 50.0);
+    assert_eq!(m["nodes"]["policy"]["rate_hz_end"], 10.0);
+    assert!(m["nodes"]["sensor"].get("rate_hz_end").is_none(), "{m}");
+    assert!(
+        stdout.contains("control 10 Hz (50 Hz at the start)") && stdout.contains("sensor 50 Hz |"),
+        "{stdout}"
+    );
 
     let junk = dir.path().join("junk.json");
     std::fs::write(&junk, "{not json").unwrap();
