@@ -67,6 +67,11 @@ fn main() {
                 "sensor_hz_own_group",
             ][..],
         ),
+        (
+            "ex8",
+            "exercises/ex8_noisy_sensor.toml",
+            &["fails_at_noise_rad", "lower_cutoff_tolerates_more"][..],
+        ),
     ] {
         let file = root.join(file);
         println!("cargo:rerun-if-changed={}", file.display());

@@ -15,10 +15,14 @@
 //!   that still balances, and whether the learner's node limits as the built-in one does.
 //! - ex7, the slow callback ([`ex7`]): a 30 ms policy callback beside the sensor on one
 //!   executor, single-threaded, on two threads in one callback group, and in two groups.
+//! - ex8, the noisy sensor ([`ex8`]): the estimator graph with its sensor's angle noise
+//!   raised, at the estimator's cut-off and a lower one: where the pole first falls.
 
 mod ex7;
+mod ex8;
 
 pub use ex7::{check_ex7, measure_ex7, outcome_ex7, Ex7Bands, Ex7Case, Ex7Run};
+pub use ex8::{check_ex8, first_fall_rad, measure_ex8, outcome_ex8, Ex8Bands, Ex8Run};
 
 use crate::config::{duration_from_secs, phase_offset_from_ms, ClockKind, RunConfig};
 use crate::graph::GraphSpec;
@@ -237,6 +241,8 @@ pub struct Bands {
     pub ex6: Ex6Bands,
     /// ex7.
     pub ex7: Ex7Bands,
+    /// ex8.
+    pub ex8: Ex8Bands,
 }
 
 /// The graph an exercise runs on when none is given: ex5's and ex6's (resolved against the
@@ -248,9 +254,10 @@ pub fn default_graph(exercise: &str, dir: &Path) -> Result<Option<PathBuf>, Exer
     let graph = |b: Bands| match exercise {
         "ex5" => Some(b.ex5.graph),
         "ex7" => Some(b.ex7.graph),
+        "ex8" => Some(b.ex8.graph),
         _ => Some(b.ex6.graph),
     };
-    if !matches!(exercise, "ex5" | "ex6" | "ex7") {
+    if !matches!(exercise, "ex5" | "ex6" | "ex7" | "ex8") {
         return Ok(None);
     }
     Ok(graph(load_bands(&dir.join("bands.toml"))?).map(|g| dir.join(g)))
@@ -385,6 +392,15 @@ pub enum Outcome {
         /// Two threads, the sensor in its own group, Hz.
         sensor_hz_own_group: f64,
     },
+    /// ex8: the lowest noise at which a seed fell at the estimator's shipped cut-off
+    /// (`None`: none on the grid), and whether the lower cut-off's first fall came at a
+    /// higher noise.
+    Ex8 {
+        /// rad.
+        fails_at_noise_rad: Option<f64>,
+        /// The smoother estimate tolerated more noise.
+        lower_cutoff_tolerates_more: bool,
+    },
 }
 
 /// The names a learner gives the reactions at the high loss (ex5's `keeps_it_up`), in
@@ -407,6 +423,7 @@ impl ExerciseFile {
         };
         match *outcome {
             Outcome::Ex7 { .. } => ex7::reconcile(&self.prediction, outcome),
+            Outcome::Ex8 { .. } => ex8::reconcile(&self.prediction, outcome),
             Outcome::Ex1 { fails_at_hz } => {
                 let measured = fails_at_hz.map_or("it never fell in the range".to_string(), |hz| {
                     format!("it first fell at {hz} Hz")
@@ -612,6 +629,7 @@ pub fn required_keys(exercise: &str) -> &'static [&'static str] {
             "sensor_hz_shared_group",
             "sensor_hz_own_group",
         ],
+        "ex8" => &["fails_at_noise_rad", "lower_cutoff_tolerates_more"],
         _ => &[],
     }
 }

@@ -9,6 +9,7 @@ use ratelab::exercise::{
     outcome_ex5, outcome_ex6, required_keys, Bands, Ex5Case, ExerciseFile, Outcome,
 };
 use ratelab::exercise::{check_ex7, measure_ex7, outcome_ex7, Ex7Case, Ex7Run};
+use ratelab::exercise::{check_ex8, first_fall_rad, measure_ex8, outcome_ex8, Ex8Run};
 use ratelab::graph::GraphSpec;
 use std::path::PathBuf;
 
@@ -237,6 +238,69 @@ fn ex7_measurement_slow_callback() {
     assert!(lines[4].contains("50.0 Hz"), "{lines:?}");
 }
 
+#[test]
+fn ex8_measurement_noisy_sensor() {
+    let _machine = crate::machine::shared();
+    let b = bands();
+    let graph = default_graph("ex8", &path(""))
+        .unwrap()
+        .expect("ex8 names its graph");
+    let g = GraphSpec::load(&graph).unwrap();
+    assert_eq!(g.name, "cartpole-estimator");
+    let runs = measure_ex8(&b.ex8, &g).unwrap();
+    assert_eq!(
+        runs.len(),
+        b.ex8.cutoffs_hz.len() * b.ex8.noise_grid_rad.len() * b.ex8.seeds.len()
+    );
+    assert_all(check_ex8(&b.ex8, &runs));
+    let Outcome::Ex8 {
+        fails_at_noise_rad,
+        lower_cutoff_tolerates_more,
+    } = outcome_ex8(&b.ex8, &runs)
+    else {
+        unreachable!("ex8's outcome")
+    };
+    assert_eq!(
+        fails_at_noise_rad,
+        Some(0.014),
+        "as bands.toml's provenance"
+    );
+    assert_eq!(first_fall_rad(&runs, 10.0), Some(0.018));
+    assert!(lower_cutoff_tolerates_more);
+    // The noise is what moves: the lowest noise of the grid balances on every seed, and
+    // the sense→act latency is the compute times' 30 ms in every run, fallen or not.
+    assert!(runs
+        .iter()
+        .filter(|r| r.noise_rad == b.ex8.noise_grid_rad[0])
+        .all(|r| r.metrics.balanced));
+    assert!(runs.iter().all(|r| r.metrics.mean_latency_ms == 30.0));
+    // Virtual runs: the same thing twice.
+    let json = |rs: &[Ex8Run]| {
+        rs.iter()
+            .map(|r| serde_json::to_string(&r.metrics).unwrap())
+            .collect::<Vec<_>>()
+    };
+    assert_eq!(json(&runs), json(&measure_ex8(&b.ex8, &g).unwrap()));
+    // The checks fail off the measured shape: a noiseless sensor never falls.
+    let mut quiet = b.ex8.clone();
+    quiet.noise_grid_rad = vec![0.0, 0.001];
+    let off = measure_ex8(&quiet, &g).unwrap();
+    assert!(check_ex8(&quiet, &off).iter().all(|c| !c.passed));
+    // The reconcile speaks to every key.
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("ex8.toml");
+    std::fs::write(
+        &file,
+        "title = \"t\"\nestimated_minutes = 1\nobjective = \"o\"\ninstructions = \"i\"\n[prediction]\nfails_at_noise_rad = 0.03\nlower_cutoff_tolerates_more = false\nwhy = \"w\"\n",
+    )
+    .unwrap();
+    let f = ExerciseFile::load(&file).unwrap();
+    let lines = f.reconcile(&outcome_ex8(&b.ex8, &runs));
+    assert_eq!(lines.len(), 2, "{lines:?}");
+    assert!(lines[0].contains("first fell at 0.014 rad"), "{lines:?}");
+    assert!(lines[1].contains("it does."), "{lines:?}");
+}
+
 fn prediction_recorded(ex: &str, file: &str) {
     let f = ExerciseFile::load(&path(file)).unwrap();
     assert!(
@@ -311,6 +375,15 @@ fn ex7_prediction_recorded() {
 }
 
 #[test]
+#[cfg_attr(
+    ex8_prediction_empty,
+    ignore = "ex8: write your prediction in exercises/ex8_noisy_sensor.toml"
+)]
+fn ex8_prediction_recorded() {
+    prediction_recorded("ex8", "ex8_noisy_sensor.toml");
+}
+
+#[test]
 fn exercise_files_are_valid() {
     for file in [
         "ex1_rate_cliff.toml",
@@ -320,6 +393,7 @@ fn exercise_files_are_valid() {
         "ex5_watchdog.toml",
         "ex6_own_node.toml",
         "ex7_slow_callback.toml",
+        "ex8_noisy_sensor.toml",
     ] {
         let f = ExerciseFile::load(&path(file)).unwrap();
         assert!(
@@ -361,6 +435,10 @@ fn the_texts_read_before_predicting_give_no_answer_away() {
         ("33", "ex7's single-threaded sensor rate"),
         ("does not help", "ex7's shared group"),
         ("idles", "ex7's shared group"),
+        // ex8: where the pole falls, and what the filter does.
+        ("at 0.014", "ex8's first fall"),
+        ("holds on", "ex8's lower cut-off"),
+        ("larger harm", "ex8's noise against lag"),
     ];
     let mut texts = vec![
         (
@@ -371,6 +449,10 @@ fn the_texts_read_before_predicting_give_no_answer_away() {
             "graphs/cartpole-executors.toml".to_string(),
             std::fs::read_to_string(crate::repo("graphs/cartpole-executors.toml")).unwrap(),
         ),
+        (
+            "graphs/cartpole-estimator.toml".to_string(),
+            std::fs::read_to_string(crate::repo("graphs/cartpole-estimator.toml")).unwrap(),
+        ),
     ];
     for ex in [
         "ex1_rate_cliff.toml",
@@ -380,6 +462,7 @@ fn the_texts_read_before_predicting_give_no_answer_away() {
         "ex5_watchdog.toml",
         "ex6_own_node.toml",
         "ex7_slow_callback.toml",
+        "ex8_noisy_sensor.toml",
     ] {
         let f = ExerciseFile::load(&path(ex)).unwrap();
         texts.push((

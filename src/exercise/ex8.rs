@@ -1,0 +1,206 @@
+//! ex8, the noisy sensor: the estimator graph (`graphs/cartpole-estimator.toml`: a 200 Hz
+//! sensor measuring positions only, an estimator differencing them into velocities through
+//! a first-order low-pass filter, the policy on its estimate) with the sensor's pole-angle
+//! noise raised step by step, at the estimator's shipped cut-off and at a lower one. Where
+//! does the pole first fall, and does a smoother estimate (more lag, less noise) move that
+//! point? Virtual clock: every run is exact, the noise seeded.
+
+use super::{check, run_virtual, Check, ExerciseError, Outcome};
+use crate::graph::GraphSpec;
+use crate::metrics::Metrics;
+use serde::Deserialize;
+
+/// ex8's settings and the bands its checks assert.
+#[derive(Clone, Debug, Deserialize)]
+pub struct Ex8Bands {
+    /// The graph, relative to the bands file's folder.
+    pub graph: String,
+    /// The node whose measurement noise is raised.
+    pub sensor: String,
+    /// Its noise parameter (a standard deviation, rad).
+    pub noise_param: String,
+    /// The estimator node.
+    pub estimator: String,
+    /// Its low-pass cut-off parameter (Hz).
+    pub cutoff_param: String,
+    /// The noise levels, rad, in increasing order.
+    pub noise_grid_rad: Vec<f64>,
+    /// The cut-offs, Hz: the graph's own first, then the lower (smoother) one.
+    pub cutoffs_hz: [f64; 2],
+    /// Seeds.
+    pub seeds: Vec<u64>,
+    /// Run length, s.
+    pub duration_s: f64,
+    /// At the first cut-off, the lowest noise at which a seed falls lies in this
+    /// `[low, high]`, rad.
+    pub first_fall_rad: [f64; 2],
+}
+
+/// One ex8 run.
+#[derive(Clone, Debug)]
+pub struct Ex8Run {
+    /// The estimator's cut-off, Hz.
+    pub cutoff_hz: f64,
+    /// The sensor's pole-angle noise (standard deviation), rad.
+    pub noise_rad: f64,
+    /// The seed.
+    pub seed: u64,
+    /// What it measured.
+    pub metrics: Metrics,
+}
+
+/// `graph` with the sensor's noise at `noise_rad` and the estimator's cut-off at `cutoff_hz`.
+fn case_graph(
+    b: &Ex8Bands,
+    graph: &GraphSpec,
+    noise_rad: f64,
+    cutoff_hz: f64,
+) -> Result<GraphSpec, ExerciseError> {
+    let mut g = graph.clone();
+    for (node, key, value) in [
+        (&b.sensor, &b.noise_param, noise_rad),
+        (&b.estimator, &b.cutoff_param, cutoff_hz),
+    ] {
+        let id = g
+            .node_id(node)
+            .ok_or_else(|| ExerciseError::NoNode(node.clone()))?;
+        g.nodes[id.0]
+            .params
+            .insert(key.clone(), toml::Value::Float(value));
+    }
+    Ok(g)
+}
+
+/// ex8's measurements: every cut-off, noise level and seed (in that order, seed fastest).
+///
+/// # Errors
+/// [`ExerciseError`] when the graph has no such sensor or estimator, or a run cannot start.
+pub fn measure_ex8(b: &Ex8Bands, graph: &GraphSpec) -> Result<Vec<Ex8Run>, ExerciseError> {
+    let mut runs = Vec::new();
+    for cutoff_hz in b.cutoffs_hz {
+        for &noise_rad in &b.noise_grid_rad {
+            let g = case_graph(b, graph, noise_rad, cutoff_hz)?;
+            for &seed in &b.seeds {
+                runs.push(Ex8Run {
+                    cutoff_hz,
+                    noise_rad,
+                    seed,
+                    metrics: run_virtual(g.clone(), seed, b.duration_s)?.metrics,
+                });
+            }
+        }
+    }
+    Ok(runs)
+}
+
+/// The lowest noise at which a seed fell with the cut-off `cutoff_hz` (`None`: none fell).
+pub fn first_fall_rad(runs: &[Ex8Run], cutoff_hz: f64) -> Option<f64> {
+    runs.iter()
+        .filter(|r| r.cutoff_hz == cutoff_hz && !r.metrics.balanced)
+        .map(|r| r.noise_rad)
+        .fold(None, |lo: Option<f64>, n| {
+            Some(lo.map_or(n, |lo| lo.min(n)))
+        })
+}
+
+/// ex8's outcome in the terms of its prediction.
+pub fn outcome_ex8(b: &Ex8Bands, runs: &[Ex8Run]) -> Outcome {
+    let [shipped, lower] = b.cutoffs_hz;
+    let (at_shipped, at_lower) = (first_fall_rad(runs, shipped), first_fall_rad(runs, lower));
+    Outcome::Ex8 {
+        fails_at_noise_rad: at_shipped,
+        lower_cutoff_tolerates_more: tolerates_more(at_lower, at_shipped),
+    }
+}
+
+/// Does a first fall at `a` (`None`: none on the grid) come at a higher noise than one at `b`?
+fn tolerates_more(a: Option<f64>, b: Option<f64>) -> bool {
+    match (a, b) {
+        (None, Some(_)) => true,
+        (Some(a), Some(b)) => a > b,
+        _ => false,
+    }
+}
+
+/// ex8's checks: at the shipped cut-off every seed balances below the band and one falls
+/// within it; every seed falls at the grid's top (the noise does decide); the lower
+/// cut-off's first fall is at a higher noise.
+pub fn check_ex8(b: &Ex8Bands, runs: &[Ex8Run]) -> Vec<Check> {
+    let [lo, hi] = b.first_fall_rad;
+    let [shipped, lower] = b.cutoffs_hz;
+    let top = b.noise_grid_rad.last().copied().unwrap_or(0.0);
+    let at_shipped = first_fall_rad(runs, shipped);
+    let at_lower = first_fall_rad(runs, lower);
+    vec![
+        check(
+            format!(
+                "with the {shipped} Hz cut-off the pole first falls at a noise of {lo}-{hi} rad, and no seed falls below it"
+            ),
+            at_shipped.is_some_and(|n| (lo..=hi).contains(&n)),
+        ),
+        check(
+            format!("at {top} rad every seed falls, whatever the cut-off"),
+            runs.iter().any(|r| r.noise_rad == top)
+                && runs
+                    .iter()
+                    .filter(|r| r.noise_rad == top)
+                    .all(|r| !r.metrics.balanced),
+        ),
+        check(
+            format!(
+                "a {lower} Hz cut-off (smoother, later) first falls at a higher noise than {shipped} Hz"
+            ),
+            tolerates_more(at_lower, at_shipped),
+        ),
+    ]
+}
+
+/// The learner's ex8 `prediction` beside the outcome, one sentence per key.
+pub(super) fn reconcile(prediction: &toml::Table, outcome: &Outcome) -> Vec<String> {
+    let Outcome::Ex8 {
+        fails_at_noise_rad,
+        lower_cutoff_tolerates_more,
+    } = *outcome
+    else {
+        return Vec::new();
+    };
+    let measured = fails_at_noise_rad
+        .map_or("no noise on the grid made it fall".to_string(), |n| {
+            format!("it first fell at {n} rad")
+        });
+    let first = match prediction.get("fails_at_noise_rad").and_then(super::number) {
+        Some(n) => format!("You predicted the pole first falls at a noise of {n} rad; {measured}."),
+        None => super::unreadable("fails_at_noise_rad"),
+    };
+    let lower = match prediction
+        .get("lower_cutoff_tolerates_more")
+        .and_then(toml::Value::as_bool)
+    {
+        Some(p) => format!(
+            "You predicted the lower cut-off {} more noise; it {}.",
+            if p { "tolerates" } else { "does not tolerate" },
+            if lower_cutoff_tolerates_more {
+                "does"
+            } else {
+                "does not"
+            }
+        ),
+        None => super::unreadable("lower_cutoff_tolerates_more"),
+    };
+    vec![first, lower]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_first_fall_higher_or_none_tolerates_more() {
+        assert!(tolerates_more(Some(0.018), Some(0.014)));
+        assert!(!tolerates_more(Some(0.014), Some(0.014)));
+        assert!(!tolerates_more(Some(0.012), Some(0.014)));
+        assert!(tolerates_more(None, Some(0.014)));
+        assert!(!tolerates_more(Some(0.02), None));
+        assert!(!tolerates_more(None, None));
+    }
+}
