@@ -72,6 +72,11 @@ fn main() {
             "exercises/ex8_noisy_sensor.toml",
             &["fails_at_noise_rad", "lower_cutoff_tolerates_more"][..],
         ),
+        (
+            "ex9",
+            "exercises/ex9_crossing.toml",
+            &["p50_latency_across_ms", "p50_latency_across_offsets_ms"][..],
+        ),
     ] {
         let file = root.join(file);
         println!("cargo:rerun-if-changed={}", file.display());

@@ -35,7 +35,7 @@ pub enum Command {
     Replay(ReplayArgs),
     /// Real-clock timing benchmark: per-node tick lateness and CPU at given rates.
     Bench(BenchArgs),
-    /// Run an exercise (ex1 to ex8): prediction first, then the measurement.
+    /// Run an exercise (ex1 to ex9): prediction first, then the measurement.
     Exercise(ExerciseArgs),
     /// Run a grid of settings; print a table and a plot, write CSV/JSON.
     Sweep(SweepArgs),
@@ -267,13 +267,13 @@ fn parse_topic_depth(s: &str) -> Result<(String, usize), String> {
 pub struct ExerciseArgs {
     /// ex1 (rate cliff), ex2 (queue-depth trap), ex3 (jitter and phase offsets), ex4 (the
     /// stale queue), ex5 (the watchdog), ex6 (write your own node), ex7 (the slow callback)
-    /// or ex8 (the noisy sensor).
+    /// ex8 (the noisy sensor) or ex9 (the crossing: real processes).
     pub which: String,
     /// The folder holding the exercise files and bands.toml.
     #[arg(long, default_value = "exercises")]
     pub dir: PathBuf,
     /// The graph the exercise runs on (its bands were measured on the default: the chapter's,
-    /// or for ex5 to ex8 the one their bands name).
+    /// or for ex5 to ex8 the one their bands name; ex9's processes load it too).
     #[command(flatten)]
     pub graph: GraphArgs,
 }

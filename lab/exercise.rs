@@ -9,11 +9,12 @@ use ratelab::exercise::{
 };
 use ratelab::exercise::{check_ex7, measure_ex7, outcome_ex7, Ex7Bands, Ex7Case, Ex7Run};
 use ratelab::exercise::{check_ex8, measure_ex8, outcome_ex8, Ex8Bands, Ex8Run};
+use ratelab::exercise::{check_ex9, measure_ex9, outcome_ex9, Ex9Bands, Ex9Case, Ex9Run};
 use ratelab::metrics::Metrics;
 use std::path::Path;
 
 /// Every exercise and its file, in order.
-const FILES: [(&str, &str); 8] = [
+const FILES: [(&str, &str); 9] = [
     ("ex1", "ex1_rate_cliff.toml"),
     ("ex2", "ex2_queue_trap.toml"),
     ("ex3", "ex3_jitter_phase.toml"),
@@ -22,6 +23,7 @@ const FILES: [(&str, &str); 8] = [
     ("ex6", "ex6_own_node.toml"),
     ("ex7", "ex7_slow_callback.toml"),
     ("ex8", "ex8_noisy_sensor.toml"),
+    ("ex9", "ex9_crossing.toml"),
 ];
 
 fn print_checks(checks: &[Check]) {
@@ -62,17 +64,21 @@ pub fn run_from_args(args: &crate::cli::ExerciseArgs) -> anyhow::Result<()> {
     if !crate::headless::faults_from_args(&graph).is_empty() {
         bail!("--stall/--kill: the exercises inject no faults; use `ratelab run` or `ratelab lab` with them");
     }
-    run_exercise(&args.which, &args.dir, &g)
+    run_exercise(&args.which, &args.dir, &g, graph.graph.as_deref())
 }
 
-/// Run exercise `which` from the exercise folder `dir`.
+/// Run exercise `which` from the exercise folder `dir` on `graph` (read from `graph_path`,
+/// `None` for the chapter's: ex9's processes load it too).
 pub fn run_exercise(
     which: &str,
     dir: &Path,
     graph: &ratelab::graph::GraphSpec,
+    graph_path: Option<&Path>,
 ) -> anyhow::Result<()> {
     let Some((ex, file)) = FILES.iter().find(|(e, _)| *e == which) else {
-        bail!("unknown exercise '{which}' (expected ex1, ex2, ex3, ex4, ex5, ex6, ex7 or ex8)");
+        bail!(
+            "unknown exercise '{which}' (expected ex1, ex2, ex3, ex4, ex5, ex6, ex7, ex8 or ex9)"
+        );
     };
     let path = dir.join(file);
     let f = ExerciseFile::load(&path)?;
@@ -205,6 +211,16 @@ pub fn run_exercise(
             let b = &bands.ex8;
             let runs = with_spinner("measuring ex8", || measure_ex8(b, graph))?;
             print_ex8(b, &f, &runs);
+        }
+        "ex9" => {
+            let b = &bands.ex9;
+            println!(
+                "Running {} s on the real clock three times, twice across two processes (this takes real time)...",
+                b.duration_s
+            );
+            let exe = std::env::current_exe()?;
+            let runs = with_spinner("measuring ex9", || measure_ex9(b, graph, graph_path, &exe))?;
+            print_ex9(b, &f, &runs);
         }
         _ => {
             let b = &bands.ex3;
@@ -715,4 +731,52 @@ fn print_ex8(b: &Ex8Bands, f: &ExerciseFile, runs: &[Ex8Run]) {
          plus the waits for the next tick: noise does not delay messages, it corrupts them.",
     );
     println!("  ./scripts/lab.sh run --clock virtual --graph graphs/cartpole-estimator.toml");
+}
+
+/// ex9's table (per case: the latency's mean, median and 99th percentile, the drops, the
+/// wire's median per crossing topic), the reconcile and the checks.
+fn print_ex9(b: &Ex9Bands, f: &ExerciseFile, runs: &[Ex9Run]) {
+    println!("case                   | latency mean |    p50 |    p99 | /obs dropped | /action dropped | wire p50");
+    for case in Ex9Case::ALL {
+        for r in runs.iter().filter(|r| r.case == case) {
+            let m = &r.metrics;
+            let wire: Vec<String> = r
+                .wire_p50_us
+                .iter()
+                .map(|(t, us)| format!("{t} {us:.0} µs"))
+                .collect();
+            println!(
+                "{:<22} | {:>9.1} ms | {:>6.1} | {:>6.1} | {:>12} | {:>15} | {}",
+                case.label(),
+                m.mean_latency_ms,
+                m.latency_p50_ms,
+                m.latency_p99_ms,
+                m.obs_dropped.unwrap_or(0),
+                m.action_dropped.unwrap_or(0),
+                if wire.is_empty() {
+                    "-".to_string()
+                } else {
+                    wire.join(", ")
+                }
+            );
+        }
+    }
+    say_reconcile(f, &outcome_ex9(runs));
+    print_checks(&check_ex9(b, runs));
+    println!();
+    paragraph(
+        "Reconcile: in one process, the policy waking at the sensor's instant races the \
+         sensor's thread for the fresh reading, and wins it sometimes (ex3). Across \
+         processes it never does: the reading is still on the wire (a fraction of a \
+         millisecond), so the policy acts on the one before, a period older (+20 ms); the \
+         force crosses back the same way and the actuator, waking at the policy's instant, \
+         applies the force before (+20 ms). Each crossing hop at a shared instant costs a \
+         full period. Offsets give each hop time to arrive: the sensor at 0, the policy 5 ms \
+         later, the actuator 5 ms after that, and the latency is the 10 ms between sensor and \
+         actuator. An offset of 1 ms is longer than the wire but not than every stall of a \
+         busy machine: then misses come back, some of the time.",
+    );
+    println!(
+        "  ./scripts/lab.sh launch --processes --clock real --duration 5 --phase-offset-ms 0,1,2"
+    );
 }

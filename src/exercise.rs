@@ -17,12 +17,16 @@
 //!   executor, single-threaded, on two threads in one callback group, and in two groups.
 //! - ex8, the noisy sensor ([`ex8`]): the estimator graph with its sensor's angle noise
 //!   raised, at the estimator's cut-off and a lower one: where the pole first falls.
+//! - ex9, the crossing ([`ex9`], real clock, real processes): the chapter's graph split
+//!   across two processes, without and with phase offsets: what a crossing hop costs.
 
 mod ex7;
 mod ex8;
+mod ex9;
 
 pub use ex7::{check_ex7, measure_ex7, outcome_ex7, Ex7Bands, Ex7Case, Ex7Run};
 pub use ex8::{check_ex8, first_fall_rad, measure_ex8, outcome_ex8, Ex8Bands, Ex8Run};
+pub use ex9::{check_ex9, measure_ex9, outcome_ex9, Ex9Bands, Ex9Case, Ex9Run};
 
 use crate::config::{duration_from_secs, phase_offset_from_ms, ClockKind, RunConfig};
 use crate::graph::GraphSpec;
@@ -64,6 +68,9 @@ pub enum ExerciseError {
     /// The graph lacks a node the bands name.
     #[error("bands: the graph has no node '{0}'")]
     NoNode(String),
+    /// A launch across processes failed.
+    #[error("launch: {0}")]
+    Launch(String),
 }
 
 fn read_toml<T: for<'de> Deserialize<'de>>(path: &Path) -> Result<T, ExerciseError> {
@@ -243,6 +250,8 @@ pub struct Bands {
     pub ex7: Ex7Bands,
     /// ex8.
     pub ex8: Ex8Bands,
+    /// ex9.
+    pub ex9: Ex9Bands,
 }
 
 /// The graph an exercise runs on when none is given: ex5's and ex6's (resolved against the
@@ -401,6 +410,13 @@ pub enum Outcome {
         /// The smoother estimate tolerated more noise.
         lower_cutoff_tolerates_more: bool,
     },
+    /// ex9: the median sense→act latency across processes, without and with the offsets.
+    Ex9 {
+        /// ms.
+        p50_latency_across_ms: f64,
+        /// ms.
+        p50_latency_across_offsets_ms: f64,
+    },
 }
 
 /// The names a learner gives the reactions at the high loss (ex5's `keeps_it_up`), in
@@ -424,6 +440,7 @@ impl ExerciseFile {
         match *outcome {
             Outcome::Ex7 { .. } => ex7::reconcile(&self.prediction, outcome),
             Outcome::Ex8 { .. } => ex8::reconcile(&self.prediction, outcome),
+            Outcome::Ex9 { .. } => ex9::reconcile(&self.prediction, outcome),
             Outcome::Ex1 { fails_at_hz } => {
                 let measured = fails_at_hz.map_or("it never fell in the range".to_string(), |hz| {
                     format!("it first fell at {hz} Hz")
@@ -630,6 +647,7 @@ pub fn required_keys(exercise: &str) -> &'static [&'static str] {
             "sensor_hz_own_group",
         ],
         "ex8" => &["fails_at_noise_rad", "lower_cutoff_tolerates_more"],
+        "ex9" => &["p50_latency_across_ms", "p50_latency_across_offsets_ms"],
         _ => &[],
     }
 }

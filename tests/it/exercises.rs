@@ -10,6 +10,7 @@ use ratelab::exercise::{
 };
 use ratelab::exercise::{check_ex7, measure_ex7, outcome_ex7, Ex7Case, Ex7Run};
 use ratelab::exercise::{check_ex8, first_fall_rad, measure_ex8, outcome_ex8, Ex8Run};
+use ratelab::exercise::{check_ex9, measure_ex9, outcome_ex9, Ex9Case};
 use ratelab::graph::GraphSpec;
 use std::path::PathBuf;
 
@@ -301,6 +302,57 @@ fn ex8_measurement_noisy_sensor() {
     assert!(lines[1].contains("it does."), "{lines:?}");
 }
 
+/// ex9 starts real processes on the real clock: alone on the machine, its checks on medians.
+#[test]
+fn ex9_measurement_crossing() {
+    let _machine = crate::machine::alone();
+    let b = bands();
+    assert_eq!(
+        default_graph("ex9", &path("")).unwrap(),
+        None,
+        "the chapter's graph"
+    );
+    let g = GraphSpec::chapter();
+    let exe = std::path::Path::new(env!("CARGO_BIN_EXE_ratelab"));
+    let runs = measure_ex9(&b.ex9, &g, None, exe).unwrap();
+    assert_eq!(
+        runs.iter().map(|r| r.case).collect::<Vec<_>>(),
+        Ex9Case::ALL
+    );
+    assert_all(check_ex9(&b.ex9, &runs));
+    // Across processes each crossing topic was timed on the wire; in one process none.
+    for r in &runs {
+        let topics: Vec<&str> = r.wire_p50_us.iter().map(|(t, _)| t.as_str()).collect();
+        match r.case {
+            Ex9Case::OneProcess => assert!(topics.is_empty(), "{topics:?}"),
+            _ => assert_eq!(topics, ["/obs", "/action"], "{:?}", r.case),
+        }
+    }
+    // The checks fail off the measured shape: offsets that leave every hop at one instant.
+    let mut same = b.ex9.clone();
+    same.phase_offset_ms = [0.0, 0.0, 0.0];
+    assert!(
+        !check_ex9(&same, &runs)[2].passed,
+        "0 ms is not the measured 10 ms"
+    );
+    // The reconcile speaks to every key.
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("ex9.toml");
+    std::fs::write(
+        &file,
+        "title = \"t\"\nestimated_minutes = 1\nobjective = \"o\"\ninstructions = \"i\"\n[prediction]\np50_latency_across_ms = 20\np50_latency_across_offsets_ms = 10\nwhy = \"w\"\n",
+    )
+    .unwrap();
+    let f = ExerciseFile::load(&file).unwrap();
+    let lines = f.reconcile(&outcome_ex9(&runs));
+    assert_eq!(lines.len(), 2, "{lines:?}");
+    assert!(
+        lines[0].contains("20 ms across processes; it was 4"),
+        "{lines:?}"
+    );
+    assert!(lines[1].contains("it was 10."), "{lines:?}");
+}
+
 fn prediction_recorded(ex: &str, file: &str) {
     let f = ExerciseFile::load(&path(file)).unwrap();
     assert!(
@@ -384,6 +436,15 @@ fn ex8_prediction_recorded() {
 }
 
 #[test]
+#[cfg_attr(
+    ex9_prediction_empty,
+    ignore = "ex9: write your prediction in exercises/ex9_crossing.toml"
+)]
+fn ex9_prediction_recorded() {
+    prediction_recorded("ex9", "ex9_crossing.toml");
+}
+
+#[test]
 fn exercise_files_are_valid() {
     for file in [
         "ex1_rate_cliff.toml",
@@ -394,6 +455,7 @@ fn exercise_files_are_valid() {
         "ex6_own_node.toml",
         "ex7_slow_callback.toml",
         "ex8_noisy_sensor.toml",
+        "ex9_crossing.toml",
     ] {
         let f = ExerciseFile::load(&path(file)).unwrap();
         assert!(
@@ -439,6 +501,9 @@ fn the_texts_read_before_predicting_give_no_answer_away() {
         ("at 0.014", "ex8's first fall"),
         ("holds on", "ex8's lower cut-off"),
         ("larger harm", "ex8's noise against lag"),
+        // ex9: a crossing hop costs a period.
+        ("40 ms", "ex9's latency across processes"),
+        ("costs a", "ex9's crossing hop"),
     ];
     let mut texts = vec![
         (
@@ -463,6 +528,7 @@ fn the_texts_read_before_predicting_give_no_answer_away() {
         "ex6_own_node.toml",
         "ex7_slow_callback.toml",
         "ex8_noisy_sensor.toml",
+        "ex9_crossing.toml",
     ] {
         let f = ExerciseFile::load(&path(ex)).unwrap();
         texts.push((

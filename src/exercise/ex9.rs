@@ -1,0 +1,241 @@
+//! ex9, the crossing: the chapter's graph under the real clock, in one process and split
+//! across two (the plant's `robot` process holding sensor and actuator, the policy alone),
+//! first with every node waking at the same instant, then with phase offsets. A message
+//! that crosses processes takes a fraction of a millisecond on the wire, so the node that
+//! ticks at the instant it was published never has it: each crossing hop costs a period.
+//! Real clock, real processes over Zenoh ([`crate::distributed`]): the checks assert only
+//! what holds on a noisy machine (medians).
+
+use super::{check, Check, ExerciseError, Outcome};
+use crate::config::{duration_from_secs, phase_offset_from_ms, ClockKind, RunConfig};
+use crate::distributed::credentials::Credentials;
+use crate::distributed::launcher::{launch, LaunchOptions};
+use crate::graph::GraphSpec;
+use crate::metrics::Metrics;
+use crate::policy::Scripted;
+use crate::scheduler::StopFlag;
+use crate::sweep::SweepError;
+use serde::Deserialize;
+use std::path::{Path, PathBuf};
+
+/// ex9's settings and the bands its checks assert.
+#[derive(Clone, Debug, Deserialize)]
+pub struct Ex9Bands {
+    /// Run length of each run, s.
+    pub duration_s: f64,
+    /// Offsets for sensor, policy, actuator (tie-break order), ms.
+    pub phase_offset_ms: [f64; 3],
+    /// Across processes without offsets, the median sense→act latency is two policy
+    /// periods: within this `[low, high]`, ms.
+    pub across_p50_ms: [f64; 2],
+    /// Across processes with the offsets, the median is the sensor-to-actuator offset (the
+    /// last minus the first) within this, ms.
+    pub offsets_p50_tolerance_ms: f64,
+}
+
+impl Ex9Bands {
+    /// The latency the offsets fix, ms: from the sensor's tick to the actuator's.
+    pub fn fixed_latency_ms(&self) -> f64 {
+        self.phase_offset_ms[2] - self.phase_offset_ms[0]
+    }
+}
+
+/// The three ways ex9 runs the graph.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Ex9Case {
+    /// One process (`ratelab run --clock real`).
+    OneProcess,
+    /// Two processes (`ratelab launch --processes --clock real`).
+    Across,
+    /// Two processes with the phase offsets.
+    AcrossWithOffsets,
+}
+
+impl Ex9Case {
+    /// Every case, in the order the exercise runs and shows them.
+    pub const ALL: [Ex9Case; 3] = [
+        Ex9Case::OneProcess,
+        Ex9Case::Across,
+        Ex9Case::AcrossWithOffsets,
+    ];
+
+    /// The case as the table names it.
+    pub fn label(self) -> &'static str {
+        match self {
+            Ex9Case::OneProcess => "one process",
+            Ex9Case::Across => "two processes",
+            Ex9Case::AcrossWithOffsets => "two processes, offsets",
+        }
+    }
+}
+
+/// One ex9 run.
+#[derive(Clone, Debug)]
+pub struct Ex9Run {
+    /// Which case.
+    pub case: Ex9Case,
+    /// What it measured (merged from the processes across processes).
+    pub metrics: Metrics,
+    /// Across processes: the median wire latency of each crossing topic, µs.
+    pub wire_p50_us: Vec<(String, f64)>,
+}
+
+/// ex9's measurements: the three cases, each once, on `graph` (the file at `graph_path`,
+/// `None` for the chapter's compiled-in graph, which the started processes load too),
+/// starting the processes with the `ratelab` binary `exe`.
+///
+/// # Errors
+/// [`ExerciseError`] when a run cannot start, or a launch fails (a process that cannot be
+/// started, a port that cannot be listened on).
+pub fn measure_ex9(
+    b: &Ex9Bands,
+    graph: &GraphSpec,
+    graph_path: Option<&Path>,
+    exe: &Path,
+) -> Result<Vec<Ex9Run>, ExerciseError> {
+    let base = RunConfig {
+        clock: ClockKind::Real,
+        duration: duration_from_secs(b.duration_s)?,
+        graph: graph.clone(),
+        ..RunConfig::default()
+    };
+    let offsets = b
+        .phase_offset_ms
+        .iter()
+        .map(|&ms| phase_offset_from_ms(ms))
+        .collect::<Result<Vec<_>, _>>()?;
+    let graph_bytes =
+        match graph_path {
+            None => crate::graph::spec::DEFAULT_GRAPH_TOML.as_bytes().to_vec(),
+            Some(p) => crate::input::read_regular_file(p, crate::graph::spec::MAX_FILE_BYTES)
+                .map_err(|e| ExerciseError::Read {
+                    path: p.display().to_string(),
+                    detail: e.to_string(),
+                })?,
+        };
+    let across = |cfg: &RunConfig| -> Result<(Metrics, Vec<(String, f64)>), ExerciseError> {
+        let names: Vec<String> = cfg.graph.placement().into_iter().map(|(p, _)| p).collect();
+        let launch_error = |e: crate::distributed::DistError| ExerciseError::Launch(e.to_string());
+        let opts = LaunchOptions {
+            graph_path: graph_path.map(Path::to_path_buf),
+            graph_bytes: graph_bytes.clone(),
+            listen: None,
+            policy: "scripted".into(),
+            exe: Some(PathBuf::from(exe)),
+            child_stderr: None,
+            start_gate: None,
+            listening: None,
+            pace: None,
+            credentials: Credentials::generate(&cfg.graph.name, &names).map_err(launch_error)?,
+            ros2_domain: None,
+        };
+        let report = launch(cfg, &opts, &StopFlag::new(), &|_| {}).map_err(launch_error)?;
+        if !report.missing.is_empty() {
+            return Err(ExerciseError::Launch(format!(
+                "process(es) {} did not report",
+                report.missing.join(", ")
+            )));
+        }
+        let wire = report
+            .wire
+            .iter()
+            .map(|w| (w.topic.clone(), w.p50_us))
+            .collect();
+        Ok((report.metrics, wire))
+    };
+    let mut runs = Vec::new();
+    for case in Ex9Case::ALL {
+        let (metrics, wire_p50_us) = match case {
+            Ex9Case::OneProcess => {
+                let opts = crate::run::RunOptions {
+                    keep_trace: false,
+                    ..Default::default()
+                };
+                let r =
+                    crate::run::run(&base, Box::new(Scripted), opts).map_err(SweepError::from)?;
+                (r.metrics, Vec::new())
+            }
+            Ex9Case::Across => across(&base)?,
+            Ex9Case::AcrossWithOffsets => across(&RunConfig {
+                phase_offsets: offsets.clone(),
+                ..base.clone()
+            })?,
+        };
+        runs.push(Ex9Run {
+            case,
+            metrics,
+            wire_p50_us,
+        });
+    }
+    Ok(runs)
+}
+
+fn of(runs: &[Ex9Run], case: Ex9Case) -> Option<&Ex9Run> {
+    runs.iter().find(|r| r.case == case)
+}
+
+/// ex9's outcome in the terms of its prediction.
+pub fn outcome_ex9(runs: &[Ex9Run]) -> Outcome {
+    let p50 = |case| of(runs, case).map_or(f64::NAN, |r| r.metrics.latency_p50_ms);
+    Outcome::Ex9 {
+        p50_latency_across_ms: p50(Ex9Case::Across),
+        p50_latency_across_offsets_ms: p50(Ex9Case::AcrossWithOffsets),
+    }
+}
+
+/// ex9's checks: the pole stays up in every case; across processes the median latency is
+/// two periods (each crossing hop misses the tick at its instant); the offsets bring it to
+/// the sensor-to-actuator offset.
+pub fn check_ex9(b: &Ex9Bands, runs: &[Ex9Run]) -> Vec<Check> {
+    let [lo, hi] = b.across_p50_ms;
+    let fixed = b.fixed_latency_ms();
+    let tol = b.offsets_p50_tolerance_ms;
+    let p50 = |case| of(runs, case).map(|r| r.metrics.latency_p50_ms);
+    vec![
+        check(
+            "the pole stays up in every case",
+            runs.len() == Ex9Case::ALL.len() && runs.iter().all(|r| r.metrics.balanced),
+        ),
+        check(
+            format!("across processes, all nodes waking together: median sense→act {lo}-{hi} ms"),
+            p50(Ex9Case::Across).is_some_and(|m| (lo..=hi).contains(&m)),
+        ),
+        check(
+            format!(
+                "across processes with offsets {:?} ms: median sense→act {fixed} ms (within {tol} ms)",
+                b.phase_offset_ms
+            ),
+            p50(Ex9Case::AcrossWithOffsets).is_some_and(|m| (m - fixed).abs() <= tol),
+        ),
+    ]
+}
+
+/// The learner's ex9 `prediction` beside the outcome, one sentence per key.
+pub(super) fn reconcile(prediction: &toml::Table, outcome: &Outcome) -> Vec<String> {
+    let Outcome::Ex9 {
+        p50_latency_across_ms,
+        p50_latency_across_offsets_ms,
+    } = *outcome
+    else {
+        return Vec::new();
+    };
+    let say =
+        |key: &str, what: &str, measured: f64| match prediction.get(key).and_then(super::number) {
+            Some(n) => format!(
+            "You predicted a median sense→act latency of {n} ms {what}; it was {measured:.1} ms."
+        ),
+            None => super::unreadable(key),
+        };
+    vec![
+        say(
+            "p50_latency_across_ms",
+            "across processes",
+            p50_latency_across_ms,
+        ),
+        say(
+            "p50_latency_across_offsets_ms",
+            "across processes with the offsets",
+            p50_latency_across_offsets_ms,
+        ),
+    ]
+}
