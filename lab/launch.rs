@@ -119,23 +119,11 @@ pub fn run_launch(a: &LaunchArgs, force_headless: bool, stop: StopFlag) -> anyho
         credentials,
         ros2_domain,
     };
-    let placement: Vec<String> = cfg
-        .graph
-        .placement()
-        .iter()
-        .map(|(p, ids)| {
-            let names: Vec<&str> = ids
-                .iter()
-                .map(|i| cfg.graph.node(*i).name.as_str())
-                .collect();
-            format!("{p} [{}]", names.join(", "))
-        })
-        .collect();
     println!(
         "[ratelab] launch: graph '{}' in {} processes: {}",
         cfg.graph.name,
-        placement.len(),
-        placement.join(", ")
+        cfg.graph.placement().len(),
+        placement_line(&cfg.graph)
     );
     let recording = headless::open_recording(&run, &cfg, &brain.label())?;
     let report = if on_terminal || recording.is_some() {
@@ -167,10 +155,7 @@ pub fn run_launch(a: &LaunchArgs, force_headless: bool, stop: StopFlag) -> anyho
     };
     headless::print_summary(&report);
     for w in &wire {
-        println!(
-            "[ratelab] wire {} into '{}': {} samples, p50 {} µs | p99 {} µs | max {} µs",
-            w.topic, w.process, w.samples, w.p50_us, w.p99_us, w.max_us
-        );
+        println!("[ratelab] {}", wire_line(w));
     }
     if let Some(l) = lockstep {
         println!(
@@ -193,6 +178,26 @@ pub fn run_launch(a: &LaunchArgs, force_headless: bool, stop: StopFlag) -> anyho
         missing.join(", ")
     );
     Ok(())
+}
+
+/// The placement as one line: `robot [sensor, actuator], policy [policy]`.
+fn placement_line(spec: &ratelab::graph::GraphSpec) -> String {
+    spec.placement()
+        .iter()
+        .map(|(p, ids)| {
+            let names: Vec<&str> = ids.iter().map(|i| spec.node(*i).name.as_str()).collect();
+            format!("{p} [{}]", names.join(", "))
+        })
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+/// A crossing topic's time on the wire, as the summary says it.
+fn wire_line(w: &ratelab::distributed::wire::WireLink) -> String {
+    format!(
+        "wire {} into '{}': {} samples, p50 {} µs | p99 {} µs | max {} µs",
+        w.topic, w.process, w.samples, w.p50_us, w.p99_us, w.max_us
+    )
 }
 
 /// The most lines of the started processes' stderr kept while the lab is on the terminal.
@@ -366,6 +371,10 @@ fn launch_watched(
     lab_result?;
     let report = report?;
     if let Some(rec) = recording {
+        rec.summary_line(format!("processes: {}", placement_line(&cfg.graph)));
+        for w in &report.wire {
+            rec.summary_line(wire_line(w));
+        }
         rec.finish(&report.metrics, &report.end)?;
     }
     match watched {

@@ -32,6 +32,9 @@
 //!   (a topic with QoS beyond the depth shows it in short on a second line, `KL1 latest dl 30 ms link
 //!   20%`) and are re-logged when they change;
 //! - `nodes/<name>/lateness_us`: per-tick lateness of each node (real clock only);
+//! - across processes (a launch's recording): `bus/<topic>/wire_{p50,p99}_us` for each topic
+//!   that crosses processes (its samples' time on the wire so far, as the subscriber's
+//!   process measured it), and each node's process on its node-graph label;
 //! - with executors or compute times: `nodes/<name>/executor_lane` (the executor timeline:
 //!   the node's rank, raised by 0.8 while its tick holds a thread), `nodes/<name>/response_ms`
 //!   (release → outputs published, per tick) and `nodes/<name>/skipped_ticks` (so far);
@@ -296,6 +299,22 @@ pub fn bus_name(topic: &str) -> String {
     topic.trim_start_matches('/').replace('/', "_")
 }
 
+/// The topics of `shape` that cross processes: a subscriber in another process than the
+/// publisher's (none in one process).
+fn crossing_topics(shape: &GraphShape) -> impl Iterator<Item = &TopicShape> {
+    let process = |name: &str| {
+        shape
+            .nodes
+            .iter()
+            .find(|n| n.name == name)
+            .and_then(|n| n.process.as_deref())
+    };
+    shape.topics.iter().filter(move |t| {
+        let from = process(&t.publisher);
+        from.is_some() && t.subscribers.iter().any(|s| process(s) != from)
+    })
+}
+
 /// `<graph>-` for any graph but the chapter's (`cartpole`), which keeps the names it had.
 fn graph_prefix(cfg: &RunConfig) -> String {
     if cfg.graph.name == "cartpole" {
@@ -547,6 +566,8 @@ pub struct Recording {
     /// Per topic (by name): the deadline misses the events have told so far (offered,
     /// requested) and when the last such event was ([`DEADLINE_EVENT_GAP`]).
     deadline_said: Arc<Mutex<BTreeMap<String, DeadlineSaid>>>,
+    /// Lines the summary gains beyond the metrics' ([`Recording::summary_line`]).
+    extra_summary: Arc<Mutex<Vec<String>>>,
 }
 
 /// A topic's deadline misses as the events told them: (offered, requested) and the time
@@ -726,6 +747,22 @@ fn layout_for(shape: &GraphShape, cfg: &RunConfig, extents: Option<&Extents>) ->
             extents,
         );
         signals.push((1.0, Item::View(lateness)));
+    }
+    // Across processes: each crossing topic's time on the wire (what its subscriber's process
+    // measured), where there is any.
+    let wire: Vec<String> = crossing_topics(shape)
+        .flat_map(|t| ["p50", "p99"].map(|stat| format!("/bus/{}/wire_{stat}_us", t.entity())))
+        .filter(|q| extents.is_none_or(|e| e.contains_key(&q[1..])))
+        .collect();
+    if !wire.is_empty() {
+        let view = plot(
+            "wire",
+            "over the wire (µs): p50 and p99 of each crossing topic's samples so far",
+            wire,
+            extents.map(|_| (0.0, 0.0)),
+            extents,
+        );
+        signals.push((1.0, Item::View(view)));
     }
 
     let bus = |measure: &str, title: &str| {
@@ -1010,6 +1047,7 @@ impl Recording {
             shape: Arc::default(),
             lanes: Arc::default(),
             deadline_said: Arc::default(),
+            extra_summary: Arc::default(),
         };
         recording.log_settings(cfg, policy);
         Ok((recording, notice))
@@ -1312,21 +1350,15 @@ impl Recording {
             }
         }
         if self.clock == ClockKind::Real {
-            let widths = layered_widths(
-                &shape
-                    .nodes
-                    .iter()
-                    .map(|n| n.name.clone())
-                    .collect::<Vec<_>>(),
-            );
-            for ((i, node), width) in shape.nodes.iter().enumerate().zip(widths) {
+            // Noisy series that seldom coincide: one width (layered, the spikes hid all).
+            for (i, node) in shape.nodes.iter().enumerate() {
                 buf.add(
                     &format!("nodes/{}/lateness_us", node.name),
                     &fixed,
                     &rerun::SeriesLines::new()
                         .with_names([node.name.as_str()])
                         .with_colors([palette(i)])
-                        .with_widths([width]),
+                        .with_widths([1.5]),
                 );
             }
         }
@@ -1413,6 +1445,39 @@ impl Recording {
         let me = self.clone();
         measures_executors(&self.cfg)
             .then(|| Arc::new(move |s: &crate::executor::CallbackSpan| me.node_span(s)) as _)
+    }
+
+    /// Add `line` to the summary written at [`Recording::finish`], after the metrics' lines
+    /// (a launch's processes and wire latencies).
+    pub fn summary_line(&self, line: impl Into<String>) {
+        self.extra_summary
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .push(line.into());
+    }
+
+    /// Log the over-the-wire latency of topic `topic` (a graph across processes) at run time
+    /// `t`: the median and the 99th percentile, µs, of the samples its subscriber's process
+    /// received so far, as `bus/<topic>/wire_p50_us` and `bus/<topic>/wire_p99_us` (named
+    /// and coloured as the topic at their first value).
+    pub fn wire(&self, t: Nanos, topic: &str, p50_us: f64, p99_us: f64) {
+        let step = self.last_step.load(std::sync::atomic::Ordering::Relaxed);
+        let entity = bus_name(topic);
+        let mut buf = self.lock();
+        for (stat, value, width) in [("p50", p50_us, 2.5), ("p99", p99_us, 1.0)] {
+            let path = format!("bus/{entity}/wire_{stat}_us");
+            if !buf.extents.contains_key(&path) {
+                buf.add(
+                    &path,
+                    &TimePoint::default(),
+                    &rerun::SeriesLines::new()
+                        .with_names([format!("{topic} {stat}")])
+                        .with_colors([topic_color(topic)])
+                        .with_widths([width]),
+                );
+            }
+            buf.scalar(&path, t, step, value);
+        }
     }
 
     /// Log one node tick's lateness (real clock), on the node's own thread.
@@ -1530,6 +1595,14 @@ impl Recording {
             if i != 2 {
                 doc.push_str(&format!("- {line}\n"));
             }
+        }
+        for line in self
+            .extra_summary
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .iter()
+        {
+            doc.push_str(&format!("- {line}\n"));
         }
         {
             let mut buf = self.lock();
@@ -1664,7 +1737,12 @@ impl RecordingObserver {
         let (positions, _) = graph_positions(shape);
         let label = |id: &str| {
             if let Some(n) = shape.nodes.iter().find(|n| n.name == id) {
-                (format!("{id} · {} Hz", hz_label(n.rate.hz())), NODE_COLOR)
+                let rate = format!("{id} · {} Hz", hz_label(n.rate.hz()));
+                // Across processes, the node's process on a second line.
+                match &n.process {
+                    Some(p) => (format!("{rate}\nprocess {p}"), NODE_COLOR),
+                    None => (rate, NODE_COLOR),
+                }
             } else {
                 let topic = shape.topics.iter().find(|t| t.name == id);
                 let depth = topic.map_or(0, |t| (t.stats)().depth);

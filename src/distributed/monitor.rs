@@ -847,6 +847,13 @@ pub fn record(
                     rec.node_tick(&n.name, at, lateness);
                 }
             }
+            Telemetry::Wire(links) => {
+                for (i, p50_us, p99_us) in links {
+                    if let Some(t) = spec.topics.get(i) {
+                        rec.wire(now, &t.name, p50_us, p99_us);
+                    }
+                }
+            }
             Telemetry::Applied(line) => rec.event(now, &line, "INFO"),
             Telemetry::Error(line) => rec.event(now, &line, "WARN"),
             Telemetry::Status { alive: next, .. } => {

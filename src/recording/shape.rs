@@ -21,6 +21,8 @@ pub struct NodeShape {
     pub rate: Rate,
     /// Its liveliness, read live (`None` when not known: nothing about it is recorded).
     pub liveliness: Option<Arc<Liveliness>>,
+    /// The OS process it runs in, for a graph across processes (`None` in one process).
+    pub process: Option<String>,
 }
 
 impl NodeShape {
@@ -107,7 +109,7 @@ impl GraphShape {
     }
 
     /// The shape of a graph that runs elsewhere (in other processes), as data: each node at
-    /// its rate in `spec` (no liveliness), each topic's counters read from `stats` (by
+    /// its rate in `spec` (no liveliness) in its process (`spec`'s placement), each topic's counters read from `stats` (by
     /// [`crate::graph::TopicId`]; zeros for a topic it lacks), its QoS as `spec` has it, and
     /// the published force read from `commands`.
     pub fn from_spec(
@@ -120,7 +122,7 @@ impl GraphShape {
             .iter()
             .map(|n| Rate::new(n.rate_hz))
             .collect::<Result<Vec<_>, _>>()?;
-        Ok(Self::build(
+        let mut shape = Self::build(
             spec,
             &rates,
             &[],
@@ -138,7 +140,11 @@ impl GraphShape {
                 Arc::new(move || qos)
             },
             commands,
-        ))
+        );
+        for (i, n) in shape.nodes.iter_mut().enumerate() {
+            n.process = Some(spec.process_of(crate::graph::NodeId(i)));
+        }
+        Ok(shape)
     }
 
     /// The one place the shape is put together: nodes with `rates` (and `liveliness`,
@@ -161,6 +167,7 @@ impl GraphShape {
                     name: n.name.clone(),
                     rate: rate.clone(),
                     liveliness: liveliness.get(i).cloned(),
+                    process: None,
                 })
                 .collect(),
             topics: spec
@@ -259,6 +266,7 @@ pub(crate) mod tests {
                     name: n.to_string(),
                     rate: Rate::new(50.0).unwrap(),
                     liveliness: None,
+                    process: None,
                 })
                 .collect(),
             topics: topics

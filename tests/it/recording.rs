@@ -1101,7 +1101,47 @@ fn a_launch_across_processes_records_every_step() {
         published > 0.0 && published <= total,
         "{published} of {total}"
     );
-    check_views(&path);
+    let views = check_views(&path);
+    // What makes it a launch: each node's process in the node graph, each crossing topic's
+    // time on the wire (a view of its own), the placement and the wire in the summary.
+    let wire = views
+        .iter()
+        .find(|v| v.name.starts_with("over the wire"))
+        .expect("a wire view");
+    for q in [
+        "/bus/obs/wire_p50_us",
+        "/bus/obs/wire_p99_us",
+        "/bus/action/wire_p50_us",
+        "/bus/action/wire_p99_us",
+    ] {
+        assert!(wire.queries.contains(&q.to_string()), "{wire:?}");
+    }
+    let (p50, n) = last_scalar(&all, "/bus/obs/wire_p50_us").unwrap();
+    assert!(p50 > 0.0 && n > 0, "{p50} µs, {n} values");
+    let texts = |entity: &str, component| -> Vec<String> {
+        all.iter()
+            .filter(|c| c.entity_path().to_string() == entity)
+            .flat_map(|c| c.iter_slices::<String>(component).collect::<Vec<_>>())
+            .flat_map(|s| s.iter().map(|x| x.as_str().to_string()).collect::<Vec<_>>())
+            .collect()
+    };
+    let labels = texts("/graph", rerun::GraphNodes::descriptor_labels().component);
+    for l in [
+        "sensor · 50 Hz\nprocess robot",
+        "policy · 50 Hz\nprocess policy",
+        "actuator · 50 Hz\nprocess robot",
+    ] {
+        assert!(labels.iter().any(|x| x == l), "{l:?} in {labels:?}");
+    }
+    let summary = texts("/summary", rerun::TextDocument::descriptor_text().component)
+        .pop()
+        .unwrap();
+    assert!(
+        summary.contains("processes: robot [sensor, actuator], policy [policy]")
+            && summary.contains("wire /obs into 'policy': ")
+            && summary.contains("wire /action into 'robot': "),
+        "{summary}"
+    );
     let events = events_with_times(&path);
     assert!(
         events.iter().any(|(_, _, e)| e.starts_with("end: ")),
