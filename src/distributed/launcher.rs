@@ -139,7 +139,7 @@ pub struct LaunchReport {
     pub wall: Duration,
     /// The endpoint the launcher listened on.
     pub endpoint: String,
-    /// Over-the-wire latency per topic that crossed processes.
+    /// Over-the-wire latency per topic that crossed processes, in the graph's topic order.
     pub wire: Vec<wire::WireLink>,
     /// Processes that did not report (gone, or failed): their figures are missing.
     pub missing: Vec<String>,
@@ -1300,6 +1300,8 @@ pub fn launch(
     // Let it leave before the session closes (and the launcher's token with it: a watcher
     // takes a token gone without this word for a launcher that died).
     std::thread::sleep(Duration::from_millis(200));
+    // In the graph's topic order, whichever process reported first.
+    wires.sort_by_key(|w| spec.topics.iter().position(|t| t.name == w.topic));
     Ok(LaunchReport {
         metrics,
         end,

@@ -76,7 +76,8 @@ pub struct Ex9Run {
     pub case: Ex9Case,
     /// What it measured (merged from the processes across processes).
     pub metrics: Metrics,
-    /// Across processes: the median wire latency of each crossing topic, µs.
+    /// Across processes: the median wire latency of each crossing topic, µs, in the graph's
+    /// topic order.
     pub wire_p50_us: Vec<(String, f64)>,
 }
 
@@ -136,11 +137,13 @@ pub fn measure_ex9(
                 report.missing.join(", ")
             )));
         }
-        let wire = report
+        // In the graph's topic order (the reports arrive in any order).
+        let mut wire: Vec<(String, f64)> = report
             .wire
             .iter()
             .map(|w| (w.topic.clone(), w.p50_us))
             .collect();
+        wire.sort_by_key(|(t, _)| cfg.graph.topics.iter().position(|x| &x.name == t));
         Ok((report.metrics, wire))
     };
     let mut runs = Vec::new();
