@@ -105,6 +105,12 @@ pub fn config_from_args(a: &RunArgs) -> anyhow::Result<RunConfig> {
             cfg.graph.name
         );
     }
+    // Two shorthands for the policy's rate would leave one of them ignored.
+    if let (true, Some(hz)) = (a.break_, a.control_hz.filter(|hz| *hz != BREAK_CONTROL_HZ)) {
+        anyhow::bail!(
+            "--break sets the policy to {BREAK_CONTROL_HZ} Hz and --control-hz to {hz} Hz; give one"
+        );
+    }
     // A chain shorthand and a `--rate` for the same node would leave one of them ignored.
     let control_hz = if a.break_ {
         Some(BREAK_CONTROL_HZ)

@@ -425,13 +425,17 @@ pub fn run_attach(
     for ep in connect {
         check_endpoint("--connect", ep, false)?;
     }
-    let (connect, hint) = crate::rendezvous::endpoints(connect);
     if !(std::io::stdout().is_terminal() && std::io::stdin().is_terminal()) {
+        // `top` finds this user's launch as the lab does: name an endpoint only if given.
+        let top = std::iter::once("ratelab top".to_string())
+            .chain(connect.iter().map(|ep| format!("--connect {ep}")))
+            .collect::<Vec<_>>()
+            .join(" ");
         anyhow::bail!(
-            "--attach opens the lab on a terminal; without one, `ratelab top --connect {}` prints the same figures as text",
-            connect.join(" --connect ")
+            "--attach opens the lab on a terminal; without one, `{top}` prints the same figures as text"
         );
     }
+    let (connect, hint) = crate::rendezvous::endpoints(connect);
     let credentials = crate::rendezvous::credentials(credentials)?;
     let watch = Watch::connect(&connect, &credentials, Duration::from_secs(5), &stop)
         .map_err(|e| anyhow::anyhow!("{e}: {hint}"))?;

@@ -779,7 +779,10 @@ impl App {
             dropping: spec.subscriber().is_some() && window.dropped > 0,
             unhealthy: dead(spec.publisher)
                 || spec.subscribers.iter().any(|&n| dead(n))
-                || self.last.is_some_and(|l| l.topics.get(id).lost > 0),
+                || self.last.is_some_and(|l| {
+                    let s = l.topics.get(id);
+                    s.lost > 0 || s.counter(QosCounter::RequestedDeadlineMissed) > 0
+                }),
             uncounted: self.attached.is_some() && dead(spec.holder()),
             stale_reads: window.stale_reads,
             staling: window.stale_reads > 0,

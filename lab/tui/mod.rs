@@ -254,6 +254,31 @@ mod tests {
         }
     }
 
+    /// A topic whose subscriber missed its deadline gets no green tick, though nothing was
+    /// dropped (the policy stalled: no force for half a second).
+    #[test]
+    fn a_missed_deadline_takes_the_green_tick_off_its_topic() {
+        let mut cfg = virtual_cfg(50.0, 2);
+        cfg.graph.set_qos("/action", "deadline_ms=30").unwrap();
+        cfg.faults = vec![ratelab::qos::Fault::parse("policy@1+0.5", false).unwrap()];
+        let (app, _rx) = app_after(cfg, false);
+        let view = app.view();
+        let action = view.topics.iter().find(|t| t.name == "/action").unwrap();
+        let obs = view.topics.iter().find(|t| t.name == "/obs").unwrap();
+        assert!(
+            action.unhealthy && !action.dropping,
+            "{:?}",
+            action.qos_counts
+        );
+        assert!(!obs.unhealthy, "/obs has no deadline, its nodes are alive");
+        let text = render(&app, 120, 40);
+        assert!(text.contains("dl miss"), "{text}");
+        assert!(
+            text.contains("0 dropped ✗") && !text.contains("dropped ✓"),
+            "{text}"
+        );
+    }
+
     #[test]
     fn qos_shows_on_the_edges_and_a_dead_node_is_drawn_so() {
         let mut cfg = graph_cfg("graphs/cartpole-safety.toml", 2);

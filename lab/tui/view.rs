@@ -108,8 +108,8 @@ pub struct TopicView {
     /// Any dropped within the window (the arrow is "dropping").
     pub dropping: bool,
     /// Not healthy though nothing was dropped: its publisher or its subscriber is not
-    /// alive, or its link lost messages. Its drop count gets no ✓ (a green tick never
-    /// stands on a dead or lossy topic).
+    /// alive, its link lost messages, or its subscriber missed a deadline on it. Its drop
+    /// count gets no ✓ (a green tick never stands on a dead, lossy or late topic).
     pub unhealthy: bool,
     /// Attached to a graph across processes, its counters come from a process that is not
     /// alive (its subscriber's): they stopped with it, so its msg/s is not known (`? msg/s`,
@@ -1171,6 +1171,25 @@ fn render_latency(v: &View, area: Rect, buf: &mut Buffer) {
         .render(area, buf);
 }
 
+/// A status message made to fit `width` columns: whole when it fits; else its parts
+/// (separated by ` · `) from the middle out, keeping the first (what changed) and the last
+/// (the verdict: `a fresh run falls at 4.06 s: judge no sooner`); else cut with `…`.
+fn fit_message(m: &str, width: usize) -> String {
+    let len = |s: &str| s.chars().count();
+    if len(m) <= width {
+        return m.to_string();
+    }
+    let parts: Vec<&str> = m.split(" · ").collect();
+    if parts.len() >= 3 {
+        let short = format!("{} · {}", parts[0], parts[parts.len() - 1]);
+        if len(&short) <= width {
+            return short;
+        }
+    }
+    let cut: String = m.chars().take(width.saturating_sub(1)).collect();
+    format!("{cut}…")
+}
+
 fn render_footer(v: &View, area: Rect, buf: &mut Buffer) {
     let ended = v.verdict != Verdict::Balanced;
     // Typing a rate shows its prompt even after a fall, where the verdict leads otherwise.
@@ -1181,12 +1200,17 @@ fn render_footer(v: &View, area: Rect, buf: &mut Buffer) {
             "  Enter apply · Esc cancel".dim(),
         ])
     } else if let (true, Some(m)) = (ended, &v.message) {
+        let m = fit_message(m, usize::from(area.width).saturating_sub(1));
         Line::from(Span::from(format!(" {m}")).bold())
     } else if let (true, Some(m)) = (v.message_fresh, &v.message) {
-        Line::from(vec![
-            Span::from(format!(" ● {m}")).bold(),
-            "  (? keys)".dim(),
-        ])
+        let width = usize::from(area.width);
+        let m = fit_message(m, width.saturating_sub(3));
+        let keys = (m.chars().count() + 3 + 10 <= width).then(|| "  (? keys)".dim());
+        Line::from(
+            std::iter::once(Span::from(format!(" ● {m}")).bold())
+                .chain(keys)
+                .collect::<Vec<_>>(),
+        )
     } else {
         // Attached to a graph across processes, only the keys that change the view act.
         let mut spans: Vec<Span> = match v.attached {
@@ -1248,4 +1272,23 @@ fn render_help(area: Rect, buf: &mut Buffer, attached: bool) {
     Paragraph::new(lines)
         .block(Block::bordered().title(title))
         .render(popup, buf);
+}
+
+#[cfg(test)]
+mod tests {
+    use super::fit_message;
+
+    #[test]
+    fn a_long_status_keeps_what_changed_and_the_verdict() {
+        let m = "control rate → 7 Hz · 142.857 ms off a fresh run's phase (r realigns) · a fresh run falls at 4.06 s: judge no sooner";
+        assert_eq!(fit_message(m, 200), m);
+        assert_eq!(
+            fit_message(m, 77),
+            "control rate → 7 Hz · a fresh run falls at 4.06 s: judge no sooner"
+        );
+        let cut = fit_message(m, 30);
+        assert_eq!(cut.chars().count(), 30);
+        assert!(cut.ends_with('…') && cut.starts_with("control rate → 7 Hz"));
+        assert_eq!(fit_message("short", 3), "sh…");
+    }
 }

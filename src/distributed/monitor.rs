@@ -793,6 +793,24 @@ impl Pending {
     }
 }
 
+/// The level a launcher's line is recorded at: a warning for what went wrong (a process
+/// gone, failed, silent; a join or a report refused), information for the rest (listening,
+/// ready, rejoined, heard again).
+fn launcher_line_level(line: &str) -> &'static str {
+    const TROUBLE: [&str; 5] = [
+        " is gone",
+        " failed",
+        " is silent",
+        "refused ",
+        "does not apply",
+    ];
+    if TROUBLE.iter().any(|t| line.contains(t)) {
+        "WARN"
+    } else {
+        "INFO"
+    }
+}
+
 /// Record what a watcher sees of a run across processes into `rec`, until `telemetry` is
 /// closed: each merged step (the plant, the latency, every topic's counters as its holder
 /// reported them; the force the policy published, from the step), each node tick's
@@ -854,7 +872,7 @@ pub fn record(
                     }
                 }
             }
-            Telemetry::Applied(line) => rec.event(now, &line, "INFO"),
+            Telemetry::Applied(line) => rec.event(now, &line, launcher_line_level(&line)),
             Telemetry::Error(line) => rec.event(now, &line, "WARN"),
             Telemetry::Status { alive: next, .. } => {
                 for (i, (was, is)) in alive.iter_mut().zip(next).enumerate() {
@@ -1212,6 +1230,21 @@ mod tests {
             "{out:?}"
         );
         assert!(f.flush().is_empty(), "the end goes out once");
+    }
+
+    #[test]
+    fn a_launchers_trouble_is_recorded_as_a_warning() {
+        for (line, level) in [
+            ("launch: process 'policy' is gone at t=3.21s (its liveliness token was withdrawn); the others run on", "WARN"),
+            ("launch: process 'policy' failed (signal: 9) at t=2.31s: starting it again", "WARN"),
+            ("launch: process 'robot' is silent at t=4.00s: no figures for 1.0 s", "WARN"),
+            ("launch: refused a join: process 'policy' is already running", "WARN"),
+            ("launch: process 'policy' rejoined", "INFO"),
+            ("launch: process 'robot' is heard again", "INFO"),
+            ("launch: listening on tls/127.0.0.1:7449", "INFO"),
+        ] {
+            assert_eq!(launcher_line_level(line), level, "{line}");
+        }
     }
 
     #[test]

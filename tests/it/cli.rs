@@ -543,6 +543,20 @@ fn a_second_sigterm_exits_at_once_and_says_so() {
     crate::distributed::assert_none_left(port, std::time::Duration::from_millis(500));
 }
 
+/// `lab --attach` without a terminal points to `top`, which finds the launch the same way:
+/// no made-up endpoint (it once named 7449 whatever port the launch had).
+#[test]
+fn attach_without_a_terminal_points_to_top() {
+    assert_usage_error(
+        &["lab", "--attach"],
+        "without one, `ratelab top` prints the same figures as text",
+    );
+    assert_usage_error(
+        &["lab", "--attach", "--connect", "tls/127.0.0.1:7500"],
+        "`ratelab top --connect tls/127.0.0.1:7500` prints",
+    );
+}
+
 /// Two flags that set the same rate differently are refused, not silently resolved; a fault
 /// that starts after the run ends is warned about (#25).
 #[test]
@@ -558,6 +572,10 @@ fn conflicting_rates_are_refused_and_a_fault_after_the_end_is_warned_about() {
     assert_usage_error(
         &["run", "--smoke", "--rate", "policy=50", "--break"],
         "--rate policy=50 and --break (5 Hz) both set",
+    );
+    assert_usage_error(
+        &["run", "--smoke", "--control-hz", "10", "--break"],
+        "--break sets the policy to 5 Hz and --control-hz to 10 Hz; give one",
     );
     // The same value twice is no conflict.
     let o = ratelab(&[

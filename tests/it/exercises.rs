@@ -487,6 +487,8 @@ fn the_texts_read_before_predicting_give_no_answer_away() {
         // ex4: fifo falls with no drop; the lifespan's expiries.
         ("stay at 0 while", "ex4's verdict"),
         ("under another name", "ex4's expiries"),
+        ("when nothing is dropped", "ex4's fifo verdict"),
+        ("about a hundred", "ex3's drops (the chapter's count)"),
         // ex5: 20 % loss is ridden out.
         ("rides out", "ex5's 20% loss"),
         ("nothing falls", "ex5's 20% loss"),
