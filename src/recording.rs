@@ -754,16 +754,17 @@ fn layout_for(shape: &GraphShape, cfg: &RunConfig, extents: Option<&Extents>) ->
         .flat_map(|t| ["p50", "p99"].map(|stat| format!("/bus/{}/wire_{stat}_us", t.entity())))
         .filter(|q| extents.is_none_or(|e| e.contains_key(&q[1..])))
         .collect();
-    if !wire.is_empty() {
-        let view = plot(
+    // With the bus's views (the right column), so that neither column gets too many plots
+    // to label their axes.
+    let wire = (!wire.is_empty()).then(|| {
+        plot(
             "wire",
             "over the wire (µs): p50 and p99 of each crossing topic's samples so far",
             wire,
             extents.map(|_| (0.0, 0.0)),
             extents,
-        );
-        signals.push((1.0, Item::View(view)));
-    }
+        )
+    });
 
     let bus = |measure: &str, title: &str| {
         plot(
@@ -803,6 +804,10 @@ fn layout_for(shape: &GraphShape, cfg: &RunConfig, extents: Option<&Extents>) ->
             extents,
         )
     });
+    // A node's liveliness sits with the node's other plots (the middle column).
+    if let Some(v) = alive {
+        signals.push((1.0, Item::View(v)));
+    }
     let events = ViewSpec::new("events", "TextLog", "events")
         .contents(["/events"])
         .property(
@@ -884,8 +889,8 @@ fn layout_for(shape: &GraphShape, cfg: &RunConfig, extents: Option<&Extents>) ->
                     Some(published),
                     Some(dropped),
                     qos,
-                    alive,
                     Some(msg_per_s),
+                    wire,
                     Some(events),
                 ]
                 .into_iter()
