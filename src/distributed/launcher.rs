@@ -1289,6 +1289,13 @@ pub fn launch(
     })?;
     let mut metrics = summarize_state(cfg, &state, &end);
     metrics.missing_processes.clone_from(&missing);
+    // The policy's ticks went with its process: not measured, not 0 (the headline would
+    // say "0 policy ticks" of a policy that ran for seconds).
+    if let Some(c) = spec.chain {
+        if missing.contains(&spec.process_of(c.policy)) {
+            metrics.policy_ticks = None;
+        }
+    }
     let over = wire::RunOver {
         metrics: metrics.clone(),
         end: end.clone(),

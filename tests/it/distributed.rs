@@ -645,6 +645,9 @@ fn a_process_gone_for_good_is_named_missing_not_counted_as_zeros() {
         serde_json::from_str(&std::fs::read_to_string(dir.path().join("metrics.json")).unwrap())
             .unwrap();
     assert_eq!(m["missing_processes"], serde_json::json!(["policy"]), "{m}");
+    // The policy's ticks went with its process: not measured, never "0 policy ticks".
+    assert!(m.get("policy_ticks").is_none(), "{m}");
+    assert!(!said(" 0 policy ticks"), "{lines:?}");
     // /obs, which the dead policy's process held: what it counted until its last figures,
     // and what the sensor sent after those lost (not a clean "0 dropped").
     let obs = &m["topics"]["/obs"];
