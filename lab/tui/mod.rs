@@ -279,6 +279,23 @@ mod tests {
         );
     }
 
+    /// At 80×24 an arrow keeps room for few QoS counters: the ones that counted come first
+    /// (a lossy /cmd with a lifespan showed "0 expired" and hid its losses behind its ✗).
+    #[test]
+    fn at_80x24_the_counters_that_counted_come_first() {
+        let mut cfg = graph_cfg("graphs/cartpole-safety.toml", 6);
+        cfg.graph
+            .set_qos("/cmd", "deadline_ms=40,lifespan_ms=60,loss=0.2")
+            .unwrap();
+        let (app, _rx) = app_after(cfg, false);
+        let small = render(&app, 80, 24);
+        assert!(
+            small.contains(" lost") && small.contains("0 dropped ✗"),
+            "{small}"
+        );
+        assert!(!small.contains("0 expired"), "{small}");
+    }
+
     #[test]
     fn qos_shows_on_the_edges_and_a_dead_node_is_drawn_so() {
         let mut cfg = graph_cfg("graphs/cartpole-safety.toml", 2);

@@ -777,8 +777,12 @@ fn arrow_lines(t: &TopicView, w: usize, rows: usize) -> Vec<Line<'static>> {
     // msg/s right after the drops: at 80×24 a panel of five rows still shows it.
     let mut lines = vec![name, shaft, dropped, rate];
     let counting = t.qos_counts.iter().any(|(_, n)| *n > 0);
+    // The counters that counted first (a short panel cuts from the end: at 80×24 "41 lost"
+    // must not give way to "0 expired").
+    let mut counted: Vec<&(&'static str, u64)> = t.qos_counts.iter().collect();
+    counted.sort_by_key(|(_, n)| *n == 0);
     let counts = pack(
-        t.qos_counts.iter().map(|(label, n)| format!("{n} {label}")),
+        counted.iter().map(|(label, n)| format!("{n} {label}")),
         " · ",
         w,
     );
