@@ -101,6 +101,12 @@ pub struct App {
     graph: GraphSpec,
     /// Each node's set rate, by node index.
     rates: Vec<f64>,
+    /// Rates asked for and not yet seen in a status, by node index: the rate and the run
+    /// time when asked. A status the engine sent before it took the command still carries
+    /// the old rate; taking it would make the next key step from the old rate (a burst of
+    /// `-` lost a step under load). Kept until a status shows the rate, or for
+    /// [`PENDING_RATE`] of run time (a refused rate then gives way to the engine's).
+    pending_rates: Vec<Option<(f64, ratelab::Nanos)>>,
     /// Each topic's depth, by topic index.
     depths: Vec<usize>,
     /// Each topic's QoS, by topic index.
@@ -167,6 +173,7 @@ impl App {
             recording: None,
             graph: GraphSpec::chapter(),
             rates: Vec::new(),
+            pending_rates: Vec::new(),
             depths: Vec::new(),
             qos: Vec::new(),
             alive: Vec::new(),
@@ -311,6 +318,7 @@ impl App {
                 self.clock = cfg.clock.to_string();
                 self.seed = cfg.seed;
                 self.rates = cfg.graph.nodes.iter().map(|n| n.rate_hz).collect();
+                self.pending_rates.clear();
                 self.depths = cfg.graph.topics.iter().map(|t| t.depth).collect();
                 self.qos = cfg.graph.topics.iter().map(|t| t.qos).collect();
                 self.alive = cfg
@@ -410,7 +418,7 @@ impl App {
                 self.now = self.now.max(now);
                 self.paused = paused;
                 self.speed = speed;
-                self.rates = rates;
+                self.rates = merge_pending(&mut self.pending_rates, rates, now);
                 self.depths = depths;
                 self.qos = qos;
                 self.alive = alive;
@@ -640,6 +648,10 @@ impl App {
         if let Some(r) = self.rates.get_mut(n.0) {
             *r = hz;
         }
+        if self.pending_rates.len() <= n.0 {
+            self.pending_rates.resize(n.0 + 1, None);
+        }
+        self.pending_rates[n.0] = Some((hz, self.now));
         let chain = self.graph.chain;
         let cmd = if chain.is_some_and(|c| n == c.policy) {
             Command::SetControlHz { hz }
@@ -1021,5 +1033,62 @@ impl App {
             attached: self.attached.clone(),
             endpoint: self.endpoint.clone(),
         }
+    }
+}
+
+/// How long (run time) a rate asked for outranks the engine's status: its command is taken
+/// at the next instant, so a status without it after this long means it was refused.
+const PENDING_RATE: ratelab::Nanos = ratelab::Nanos(1_000_000_000);
+
+/// The rates to show, from a status's `rates` at run time `now`: a rate still `pending`
+/// (asked for, not yet in a status, asked less than [`PENDING_RATE`] ago) stands over the
+/// status's; one the status shows, or too old, is no longer pending.
+fn merge_pending(
+    pending: &mut [Option<(f64, ratelab::Nanos)>],
+    mut rates: Vec<f64>,
+    now: ratelab::Nanos,
+) -> Vec<f64> {
+    for (i, p) in pending.iter_mut().enumerate() {
+        let Some((hz, asked)) = *p else { continue };
+        let seen = rates.get(i) == Some(&hz);
+        if seen || now.saturating_sub(asked) > PENDING_RATE {
+            *p = None;
+        } else if let Some(r) = rates.get_mut(i) {
+            *r = hz;
+        }
+    }
+    rates
+}
+
+#[cfg(test)]
+mod pending_tests {
+    use super::merge_pending;
+    use ratelab::Nanos;
+
+    #[test]
+    fn a_rate_asked_for_outranks_a_status_sent_before_it_was_taken() {
+        let ms = |n: u64| Nanos(n * 1_000_000);
+        let mut pending = vec![None, Some((40.0, ms(100)))];
+        // A status from before the command: the asked rate stands.
+        assert_eq!(
+            merge_pending(&mut pending, vec![50.0, 50.0], ms(110)),
+            [50.0, 40.0]
+        );
+        assert!(pending[1].is_some());
+        // The status that shows it: no longer pending, the status stands from then on.
+        assert_eq!(
+            merge_pending(&mut pending, vec![50.0, 40.0], ms(120)),
+            [50.0, 40.0]
+        );
+        assert!(pending[1].is_none());
+        assert_eq!(
+            merge_pending(&mut pending, vec![50.0, 30.0], ms(130)),
+            [50.0, 30.0]
+        );
+        // Refused (never shown): after a second of run time the engine's rate stands.
+        let mut pending = vec![Some((40.0, ms(0)))];
+        assert_eq!(merge_pending(&mut pending, vec![50.0], ms(500)), [40.0]);
+        assert_eq!(merge_pending(&mut pending, vec![50.0], ms(1_200)), [50.0]);
+        assert!(pending[0].is_none());
     }
 }
