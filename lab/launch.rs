@@ -9,7 +9,7 @@ use ratelab::distributed::member::{run_member, LiveStats, MemberOptions};
 use ratelab::distributed::monitor::{ask_placement, PlacedProcess, Signals, Watch};
 use ratelab::distributed::zenoh::{self, Wait};
 use ratelab::distributed::{check_endpoint, live_tokens, open_session, Access};
-use ratelab::graph::spec::{DEFAULT_GRAPH_TOML, MAX_FILE_BYTES};
+use ratelab::graph::spec::graph_file_bytes;
 use ratelab::scheduler::StopFlag;
 use ratelab::session::Telemetry;
 use ratelab::RunReport;
@@ -17,14 +17,6 @@ use std::collections::BTreeMap;
 use std::io::IsTerminal;
 use std::path::Path;
 use std::time::{Duration, Instant};
-
-/// The graph file's bytes (the chapter's when `path` is `None`), bounded as `--graph` reads it.
-fn graph_bytes(path: Option<&Path>) -> anyhow::Result<Vec<u8>> {
-    match path {
-        None => Ok(DEFAULT_GRAPH_TOML.as_bytes().to_vec()),
-        Some(p) => Ok(ratelab::input::read_regular_file(p, MAX_FILE_BYTES)?),
-    }
-}
 
 /// `ratelab launch [GRAPH] [--processes]`. On a terminal (and without `--headless`) a launch
 /// across processes opens the lab on it (as `ratelab lab --attach` would); otherwise it
@@ -103,7 +95,7 @@ pub fn run_launch(a: &LaunchArgs, force_headless: bool, stop: StopFlag) -> anyho
     };
     let graph_path = run.graph.graph.clone();
     let opts = LaunchOptions {
-        graph_bytes: graph_bytes(graph_path.as_deref())?,
+        graph_bytes: graph_file_bytes(graph_path.as_deref())?,
         graph_path,
         listen: a.listen.clone(),
         policy: run.policy.clone(),
@@ -473,7 +465,7 @@ pub fn run_node(a: &NodeArgs, stop: StopFlag) -> anyhow::Result<()> {
         |p| p.display().to_string(),
     );
     let opts = MemberOptions {
-        graph_bytes: graph_bytes(a.graph.as_deref())?,
+        graph_bytes: graph_file_bytes(a.graph.as_deref())?,
         graph_origin: origin,
         process: a.process.clone(),
         connect: a.connect.clone(),

@@ -805,21 +805,24 @@ pub fn measure_ex3(b: &Ex3Bands, graph: &GraphSpec) -> Result<(Metrics, Metrics)
         .iter()
         .map(|&ms| phase_offset_from_ms(ms))
         .collect::<Result<Vec<_>, _>>()?;
-    let run = |cfg: &RunConfig| -> Result<Metrics, ExerciseError> {
-        let opts = crate::run::RunOptions {
-            keep_trace: false,
-            ..Default::default()
-        };
-        Ok(crate::run::run(cfg, Box::new(Scripted), opts)
-            .map_err(SweepError::from)?
-            .metrics)
-    };
-    let matched = run(&base)?;
-    let offset = run(&RunConfig {
+    let matched = run_scripted(&base)?;
+    let offset = run_scripted(&RunConfig {
         phase_offsets: offsets,
         ..base
     })?;
     Ok((matched, offset))
+}
+
+/// One run of `cfg` with the scripted balancer, no trace kept (the real-clock exercises:
+/// ex3, ex9): its metrics.
+fn run_scripted(cfg: &RunConfig) -> Result<Metrics, ExerciseError> {
+    let opts = crate::run::RunOptions {
+        keep_trace: false,
+        ..Default::default()
+    };
+    Ok(crate::run::run(cfg, Box::new(Scripted), opts)
+        .map_err(SweepError::from)?
+        .metrics)
 }
 
 /// ex3's checks: only what is robust on a noisy machine (see the bands' provenance).

@@ -12,9 +12,7 @@ use crate::distributed::credentials::Credentials;
 use crate::distributed::launcher::{launch, LaunchOptions};
 use crate::graph::GraphSpec;
 use crate::metrics::Metrics;
-use crate::policy::Scripted;
 use crate::scheduler::StopFlag;
-use crate::sweep::SweepError;
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
 
@@ -106,14 +104,10 @@ pub fn measure_ex9(
         .map(|&ms| phase_offset_from_ms(ms))
         .collect::<Result<Vec<_>, _>>()?;
     let graph_bytes =
-        match graph_path {
-            None => crate::graph::spec::DEFAULT_GRAPH_TOML.as_bytes().to_vec(),
-            Some(p) => crate::input::read_regular_file(p, crate::graph::spec::MAX_FILE_BYTES)
-                .map_err(|e| ExerciseError::Read {
-                    path: p.display().to_string(),
-                    detail: e.to_string(),
-                })?,
-        };
+        crate::graph::spec::graph_file_bytes(graph_path).map_err(|e| ExerciseError::Read {
+            path: graph_path.map_or_else(String::new, |p| p.display().to_string()),
+            detail: e.to_string(),
+        })?;
     let across = |cfg: &RunConfig| -> Result<(Metrics, Vec<(String, f64)>), ExerciseError> {
         let names: Vec<String> = cfg.graph.placement().into_iter().map(|(p, _)| p).collect();
         let launch_error = |e: crate::distributed::DistError| ExerciseError::Launch(e.to_string());
@@ -149,15 +143,7 @@ pub fn measure_ex9(
     let mut runs = Vec::new();
     for case in Ex9Case::ALL {
         let (metrics, wire_p50_us) = match case {
-            Ex9Case::OneProcess => {
-                let opts = crate::run::RunOptions {
-                    keep_trace: false,
-                    ..Default::default()
-                };
-                let r =
-                    crate::run::run(&base, Box::new(Scripted), opts).map_err(SweepError::from)?;
-                (r.metrics, Vec::new())
-            }
+            Ex9Case::OneProcess => (super::run_scripted(&base)?, Vec::new()),
             Ex9Case::Across => across(&base)?,
             Ex9Case::AcrossWithOffsets => across(&RunConfig {
                 phase_offsets: offsets.clone(),

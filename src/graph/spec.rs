@@ -100,6 +100,19 @@ pub const MAX_FILE_BYTES: u64 = 64 * 1024;
 
 /// The chapter's graph, shipped as `graphs/cartpole.toml` and built in: the default.
 pub const DEFAULT_GRAPH_TOML: &str = include_str!("../../graphs/cartpole.toml");
+
+/// A graph file's bytes as a launch hashes and hands them to its processes: the chapter's
+/// ([`DEFAULT_GRAPH_TOML`]) when `path` is `None`, else the file, read as `--graph` reads
+/// it (a regular file of at most [`MAX_FILE_BYTES`]).
+///
+/// # Errors
+/// [`crate::input::InputError`] when the file cannot be read or is too big.
+pub fn graph_file_bytes(path: Option<&Path>) -> Result<Vec<u8>, crate::input::InputError> {
+    match path {
+        None => Ok(DEFAULT_GRAPH_TOML.as_bytes().to_vec()),
+        Some(p) => crate::input::read_regular_file(p, MAX_FILE_BYTES),
+    }
+}
 /// The name the built-in default graph is reported under.
 pub const DEFAULT_GRAPH_ORIGIN: &str = "graphs/cartpole.toml";
 
