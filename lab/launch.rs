@@ -45,12 +45,14 @@ pub fn run_launch(a: &LaunchArgs, force_headless: bool, stop: StopFlag) -> anyho
     let mut cfg = headless::config_from_args(&run)?;
     let ros2 = headless::ros2_options(&run, &cfg.graph)?;
     ratelab::ros2::external::check_placement(&cfg.graph).map_err(anyhow::Error::msg)?;
-    if cfg.graph.has_executors_or_compute() {
-        anyhow::bail!(
-            "graph '{}' has executors or compute times (--executor, --compute, [executors], compute_ms): a launch across processes does not run them yet; run it in one process (without --processes)",
-            cfg.graph.name
-        );
+    // Across processes each process spins its own executors: `--executor` makes one per
+    // process; an [executors] table must hold one process's nodes.
+    if let Some(over) = run.graph.executor {
+        cfg.graph.set_executor_per_process(over);
     }
+    cfg.graph
+        .check_executors_per_process()
+        .map_err(anyhow::Error::msg)?;
     if on_terminal && run.duration.is_none() && !run.smoke {
         cfg.duration = ratelab::session::UNBOUNDED; // as the lab: until you quit
     }

@@ -304,6 +304,35 @@ impl ExecutionPlan {
         }
     }
 
+    /// The plan of the nodes `keep` (indices into this plan's nodes, in the order the new
+    /// plan indexes them): the executors and callback groups that hold any of them, in this
+    /// plan's order. What one process of a launch runs ([`crate::distributed`]: its nodes
+    /// only; an executor never spans processes).
+    pub fn restricted(&self, keep: &[usize]) -> ExecutionPlan {
+        let mut executors: Vec<usize> = keep.iter().map(|&n| self.node_executor[n]).collect();
+        let mut groups: Vec<usize> = keep.iter().map(|&n| self.node_group[n]).collect();
+        executors.sort_unstable();
+        executors.dedup();
+        groups.sort_unstable();
+        groups.dedup();
+        let at = |v: &[usize], x: usize| v.iter().position(|&y| y == x).unwrap_or(0);
+        ExecutionPlan {
+            executors: executors
+                .iter()
+                .map(|&e| self.executors[e].clone())
+                .collect(),
+            groups: groups.iter().map(|&g| self.groups[g]).collect(),
+            node_executor: keep
+                .iter()
+                .map(|&n| at(&executors, self.node_executor[n]))
+                .collect(),
+            node_group: keep
+                .iter()
+                .map(|&n| at(&groups, self.node_group[n]))
+                .collect(),
+        }
+    }
+
     /// Is every node on a thread of its own (nothing shared, nothing to wait for)?
     pub fn is_per_node(&self) -> bool {
         self.executors
@@ -523,6 +552,45 @@ pub struct ExecFigures {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_restricted_plan_keeps_the_executors_and_groups_of_its_nodes_renumbered() {
+        // a, b, c on one multi-threaded executor with a shared reentrant group for b and c;
+        // d on a thread of its own.
+        let plan = ExecutionPlan {
+            executors: vec![
+                PlanExecutor {
+                    name: "d".into(),
+                    kind: ExecutorKind::PerNode,
+                    threads: 1,
+                },
+                PlanExecutor {
+                    name: "main".into(),
+                    kind: ExecutorKind::MultiThreaded,
+                    threads: 2,
+                },
+            ],
+            groups: vec![
+                GroupKind::MutuallyExclusive,
+                GroupKind::Reentrant,
+                GroupKind::MutuallyExclusive,
+            ],
+            node_executor: vec![1, 1, 1, 0],
+            node_group: vec![2, 1, 1, 0],
+        };
+        let bc = plan.restricted(&[1, 2]);
+        assert_eq!(bc.executors, vec![plan.executors[1].clone()]);
+        assert_eq!(bc.groups, vec![GroupKind::Reentrant]);
+        assert_eq!((bc.node_executor, bc.node_group), (vec![0, 0], vec![0, 0]));
+        let da = plan.restricted(&[3, 0]);
+        assert_eq!(da.executors, plan.executors);
+        assert_eq!(
+            da.groups,
+            vec![GroupKind::MutuallyExclusive, GroupKind::MutuallyExclusive]
+        );
+        assert_eq!((da.node_executor, da.node_group), (vec![0, 1], vec![0, 1]));
+        assert_eq!(plan.restricted(&[0, 1, 2, 3]), plan);
+    }
 
     #[test]
     fn a_new_plan_keeps_what_runs_on_its_thread_and_what_is_ready() {

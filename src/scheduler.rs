@@ -102,6 +102,35 @@ pub enum InstantOutcome {
     Failed(EndReason),
 }
 
+/// One event of the virtual clock under the executors' rules
+/// ([`VirtualScheduler::next_event`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Event {
+    /// Node `node`'s tick has computed until `at`: its held outputs go out now.
+    Publish {
+        /// The node's index.
+        node: usize,
+        /// The run time, ns.
+        at: Nanos,
+    },
+    /// Node `node` got a thread at `at`: its tick starts.
+    Start {
+        /// The node's index.
+        node: usize,
+        /// The run time, ns.
+        at: Nanos,
+    },
+}
+
+impl Event {
+    /// The event's node and run time.
+    pub fn node_at(&self) -> (usize, Nanos) {
+        match *self {
+            Event::Publish { node, at } | Event::Start { node, at } => (node, at),
+        }
+    }
+}
+
 /// What an executor measures of one node while it runs.
 #[derive(Clone, Debug, Default)]
 pub struct NodeExecStats {
@@ -359,9 +388,8 @@ impl VirtualScheduler {
 
     /// Run the next tick. Returns its time, the node's index and the node's [`Flow`].
     /// A panic in the node propagates; [`VirtualScheduler::run_instant`] catches it.
-    /// For the default plan only (one thread per node, no compute time: what a graph across
-    /// processes runs, [`crate::distributed`]); [`VirtualScheduler::run_instant`] applies
-    /// any plan.
+    /// For the default plan only (one thread per node, no compute time);
+    /// [`VirtualScheduler::run_instant`] applies any plan.
     pub fn tick_next(&mut self, nodes: &mut [Box<dyn Node>]) -> Option<(Nanos, usize, Flow)> {
         let Reverse((due, prio, i)) = self.releases.pop()?;
         self.now = due;
@@ -369,18 +397,6 @@ impl VirtualScheduler {
         let flow = nodes[i].tick(due);
         self.rearm(i, prio, due.saturating_add(nodes[i].rate().period()));
         Some((due, i, flow))
-    }
-
-    /// Take the next tick off the schedule without running it (it runs in another process,
-    /// [`crate::distributed`]): sets [`VirtualScheduler::now`] to its time, schedules the
-    /// node's next tick one period on, and returns the tick's time and node index. Not
-    /// counted in [`VirtualScheduler::ticks`]. For the default plan only, as
-    /// [`VirtualScheduler::tick_next`].
-    pub fn skip_next(&mut self, nodes: &[Box<dyn Node>]) -> Option<(Nanos, usize)> {
-        let Reverse((due, prio, i)) = self.releases.pop()?;
-        self.now = due;
-        self.rearm(i, prio, due.saturating_add(nodes[i].rate().period()));
-        Some((due, i))
     }
 
     fn rearm(&mut self, node: usize, prio: u32, next: Nanos) {
@@ -399,22 +415,75 @@ impl VirtualScheduler {
             return InstantOutcome::Ran { ticked: 0 };
         };
         self.now = t;
-        while let Some(&Reverse((at, i))) = self.completions.peek() {
-            if at != t {
-                break;
+        let mut ticked = 0u64;
+        while let Some(event) = self.event_now() {
+            match event {
+                Event::Publish { node, at } => nodes[node].publish_held(at),
+                Event::Start { node, .. } => {
+                    ticked |= 1 << (node % 64);
+                    match self.start_here(nodes, node) {
+                        Err(reason) => return InstantOutcome::Failed(reason),
+                        Ok((Flow::Stop, _)) => return InstantOutcome::Stopped,
+                        Ok((Flow::Continue, _)) => {}
+                    }
+                }
             }
-            self.completions.pop();
-            nodes[i].publish_held(t);
-            self.dispatch.finish(i);
-            if self.track {
-                let busy = t.saturating_sub(self.running_start[i]);
-                self.stats[i].record(self.running_release[i], t, busy);
-                self.keep_span(CallbackSpan {
-                    node: i,
-                    release: self.running_release[i],
-                    start: self.running_start[i],
-                    end: t,
-                });
+        }
+        InstantOutcome::Ran { ticked }
+    }
+
+    /// The next event under the executors' rules, the clock moved on to it: at each instant
+    /// first the ticks whose compute time ends then ([`Event::Publish`], in rank order),
+    /// then every tick that can start ([`Event::Start`], in the executors' order), once the
+    /// timers due then are released. `None` when nothing is scheduled.
+    ///
+    /// The scheduler's side of the event is done when this returns (a thread freed, a
+    /// thread taken); the node's side is the caller's: [`Node::publish_held`] for a publish
+    /// where the node runs, and for a start exactly one of [`VirtualScheduler::start_here`]
+    /// (the node ticks here) or [`VirtualScheduler::start_elsewhere`] (it ticks in another
+    /// process, [`crate::distributed::lockstep`]), before the next call. One instant of
+    /// [`VirtualScheduler::run_instant`] is this, event by event.
+    pub fn next_event(&mut self) -> Option<Event> {
+        self.next_event_until(Nanos(u64::MAX))
+    }
+
+    /// [`VirtualScheduler::next_event`], but `None` (and nothing taken) when the next event
+    /// is after `limit`: a run of duration `limit` ends there, its later events untouched,
+    /// as [`VirtualScheduler::run`] leaves them.
+    pub fn next_event_until(&mut self, limit: Nanos) -> Option<Event> {
+        loop {
+            if let Some(e) = self.event_now() {
+                return Some(e);
+            }
+            // Nothing more at this instant: everything left is later (a compute time ends
+            // after its start; a timer is rearmed after its tick).
+            let t = self.next_due()?;
+            if t > limit {
+                return None;
+            }
+            self.now = t;
+        }
+    }
+
+    /// The next event at [`VirtualScheduler::now`], if any (see
+    /// [`VirtualScheduler::next_event`]).
+    fn event_now(&mut self) -> Option<Event> {
+        let t = self.now;
+        if let Some(&Reverse((at, i))) = self.completions.peek() {
+            if at <= t {
+                self.completions.pop();
+                self.dispatch.finish(i);
+                if self.track {
+                    let busy = at.saturating_sub(self.running_start[i]);
+                    self.stats[i].record(self.running_release[i], at, busy);
+                    self.keep_span(CallbackSpan {
+                        node: i,
+                        release: self.running_release[i],
+                        start: self.running_start[i],
+                        end: at,
+                    });
+                }
+                return Some(Event::Publish { node: i, at });
             }
         }
         while let Some(&Reverse((at, _, i))) = self.releases.peek() {
@@ -424,57 +493,93 @@ impl VirtualScheduler {
             self.releases.pop();
             self.dispatch.release(i);
         }
-        let mut ticked = 0u64;
-        while let Some(i) = self.dispatch.pick() {
-            self.dispatch.start(i);
-            let release = self.next_call[i];
-            let (next, skipped) = next_deadline(release, t, nodes[i].rate().period());
-            self.ticks[i] += 1;
-            ticked |= 1 << (i % 64);
-            let node = &mut nodes[i];
-            let result = catch_quietly(|| {
-                let compute = node.compute_time();
-                if compute.0 > 0 {
-                    node.hold_outputs();
-                }
-                (compute, node.tick(t))
-            });
-            let (compute, flow) = match result {
-                Ok(r) => r,
-                Err(p) => {
-                    return InstantOutcome::Failed(EndReason::NodeFailed {
-                        node: nodes[i].name().to_string(),
-                        message: panic_message(&*p),
-                    })
-                }
-            };
-            if self.track {
-                self.stats[i].skipped_ticks += skipped;
+        let i = self.dispatch.pick()?;
+        self.dispatch.start(i);
+        // Held from now: a tick taken but never run (the run ended first) holds its thread
+        // for no time before `t` ([`VirtualScheduler::figures`]).
+        self.running_release[i] = self.next_call[i];
+        self.running_start[i] = t;
+        Some(Event::Start { node: i, at: t })
+    }
+
+    /// Node `node`'s tick of the [`Event::Start`] just taken runs here: its compute time is
+    /// drawn (its outputs held when it is not zero), it ticks, and its outputs go out now
+    /// or when its compute time has elapsed. Returns the node's [`Flow`] and the compute
+    /// time drawn.
+    ///
+    /// # Errors
+    /// The node panicked: [`EndReason::NodeFailed`] naming it (the graph must stop).
+    pub fn start_here(
+        &mut self,
+        nodes: &mut [Box<dyn Node>],
+        node: usize,
+    ) -> Result<(Flow, Nanos), EndReason> {
+        let t = self.now;
+        let n = &mut nodes[node];
+        // The period as the tick starts (a rate change takes effect from the next tick).
+        let period = n.rate().period();
+        let result = catch_quietly(|| {
+            let compute = n.compute_time();
+            if compute.0 > 0 {
+                n.hold_outputs();
             }
-            if compute.0 == 0 {
-                self.dispatch.finish(i);
-                if self.track {
-                    self.stats[i].record(release, t, Nanos::ZERO);
-                    self.keep_span(CallbackSpan {
-                        node: i,
-                        release,
-                        start: t,
-                        end: t,
-                    });
-                }
-            } else {
-                self.running_release[i] = release;
-                self.running_start[i] = t;
-                self.completions
-                    .push(Reverse((t.saturating_add(compute), i)));
+            (compute, n.tick(t))
+        });
+        match result {
+            Ok((compute, flow)) => {
+                self.started(node, period, compute);
+                Ok((flow, compute))
             }
-            // Always after `t` (a zero period is refused by `Rate`).
-            self.rearm(i, self.ranks[i], next);
-            if flow == Flow::Stop {
-                return InstantOutcome::Stopped;
+            Err(p) => {
+                self.ticks[node] += 1; // it did start
+                Err(EndReason::NodeFailed {
+                    node: nodes[node].name().to_string(),
+                    message: panic_message(&*p),
+                })
             }
         }
-        InstantOutcome::Ran { ticked }
+    }
+
+    /// Node `node`'s tick of the [`Event::Start`] just taken runs in another process and
+    /// computes for `compute` (as that process reports it); `nodes[node]` gives its period
+    /// only.
+    pub fn start_elsewhere(&mut self, nodes: &[Box<dyn Node>], node: usize, compute: Nanos) {
+        self.started(node, nodes[node].rate().period(), compute);
+    }
+
+    /// The bookkeeping of a tick started now: its count, its skipped periods, its end (now
+    /// when it takes no time), its timer rearmed.
+    fn started(&mut self, i: usize, period: Nanos, compute: Nanos) {
+        let t = self.now;
+        let release = self.next_call[i];
+        let (next, skipped) = next_deadline(release, t, period);
+        self.ticks[i] += 1;
+        if self.track {
+            self.stats[i].skipped_ticks += skipped;
+        }
+        if compute.0 == 0 {
+            self.dispatch.finish(i);
+            if self.track {
+                self.stats[i].record(release, t, Nanos::ZERO);
+                self.keep_span(CallbackSpan {
+                    node: i,
+                    release,
+                    start: t,
+                    end: t,
+                });
+            }
+        } else {
+            self.completions
+                .push(Reverse((t.saturating_add(compute), i)));
+        }
+        // Always after `t` (a zero period is refused by `Rate`).
+        self.rearm(i, self.ranks[i], next);
+    }
+
+    /// Do the executors' rules apply (executors that share threads, or compute times)? Else
+    /// every instant is the chapter's loop ([`VirtualScheduler::tick_next`]).
+    pub fn is_general(&self) -> bool {
+        self.general
     }
 
     /// An instant of the default plan: every node due ticks, in tie-break order (the

@@ -4,7 +4,7 @@
 //! every process it started, and merges their reports into one `metrics.json`.
 
 use super::credentials::{Credentials, PrivateDir, Role};
-use super::lockstep::{subscribe_reports, TickInbox, HORIZON_PERIODS};
+use super::lockstep::{check_tick_report, subscribe_reports, TickInbox, HORIZON_PERIODS};
 use super::member::LiveStats;
 use super::monitor::{Carried, Silence};
 use super::wire::{self, Setup, Ticked, ToLauncher, ToMember};
@@ -16,7 +16,7 @@ use crate::metrics::Metrics;
 use crate::node::{Flow, Node};
 use crate::rate::Rate;
 use crate::run::{summarize_state, GraphState};
-use crate::scheduler::{EndReason, RunEnd, StopFlag, VirtualScheduler};
+use crate::scheduler::{EndReason, Event, RunEnd, StopFlag, VirtualScheduler};
 use crate::time::Nanos;
 use crossbeam_channel::Receiver;
 use std::collections::BTreeMap;
@@ -359,6 +359,7 @@ pub fn merge_states(
     if let Some(st) = spec.chain.and_then(|c| of(c.policy)) {
         merged.brain.clone_from(&st.brain);
     }
+    merged.exec = merge_exec(spec, states);
     // A topic that crossed processes: what its publisher sent is published; what the
     // subscriber's copy never received (in flight at the end, or sent while it was down)
     // was lost on the wire. Without the subscriber's report only the sending side is known.
@@ -396,6 +397,46 @@ pub fn merge_states(
     Some(merged)
 }
 
+/// The executors' figures of a launch: each node's from its own process, each executor's
+/// from the process that ran it (an executor never spans processes), in the graph's plan
+/// order. `None` when no process measured any (no executors, no compute times). Under the
+/// virtual clock every process replays every executor, so any process's figures are the
+/// graph's; under the real clock each measured its own.
+fn merge_exec(
+    spec: &GraphSpec,
+    states: &BTreeMap<String, GraphState>,
+) -> Option<crate::executor::ExecFigures> {
+    let exec_of = |id: NodeId| {
+        states
+            .get(&spec.process_of(id))
+            .and_then(|s| s.exec.as_ref())
+    };
+    if states.values().all(|s| s.exec.is_none()) {
+        return None;
+    }
+    let nodes = (0..spec.nodes.len())
+        .map(|i| {
+            exec_of(NodeId(i))
+                .and_then(|x| x.nodes.get(i).cloned())
+                .unwrap_or_default()
+        })
+        .collect();
+    let executors = spec
+        .execution_plan()
+        .executors
+        .iter()
+        .filter_map(|e| {
+            states
+                .values()
+                .filter_map(|s| s.exec.as_ref())
+                .flat_map(|x| &x.executors)
+                .find(|f| f.name == e.name && f.kind == e.kind)
+                .cloned()
+        })
+        .collect();
+    Some(crate::executor::ExecFigures { nodes, executors })
+}
+
 /// Check that process `process`'s report could be true of a run that ended at `at`: its
 /// vectors have the graph's shape; its nodes ticked no more than their rates allow in that
 /// time (two more for phase and the tick at zero); the topics it holds received no more
@@ -419,6 +460,9 @@ pub fn check_report(
         || st.rates_hz.len() != n
         || !(st.ticks.is_empty() || st.ticks.len() == n)
         || st.timing.as_ref().is_some_and(|v| v.len() != n)
+        || st.exec.as_ref().is_some_and(|x| {
+            x.nodes.len() != n || x.executors.len() > spec.execution_plan().executors.len()
+        })
     {
         return Err(format!(
             "its figures are not shaped as graph '{}' ({n} nodes, {t} topics)",
@@ -462,10 +506,42 @@ pub fn check_report(
             ));
         }
     }
+    let run_ms = at.as_secs_f64() * 1e3;
+    let ok_ms = |ms: f64| ms.is_finite() && (0.0..=run_ms + 1.0).contains(&ms);
+    if let Some(x) = &st.exec {
+        // A response may end after the run (a tick computing at the end): up to the longest
+        // compute time past it.
+        let late_ms = run_ms + crate::executor::MAX_COMPUTE.as_millis_f64();
+        let ok_response = |ms: f64| ms.is_finite() && (0.0..=late_ms).contains(&ms);
+        for (i, f) in x.nodes.iter().enumerate() {
+            if spec.process_of(NodeId(i)) != process {
+                continue;
+            }
+            let r = [
+                f.response_time_p50_ms,
+                f.response_time_p99_ms,
+                f.response_time_max_ms,
+            ];
+            if !r.into_iter().all(ok_response)
+                || !ok_ms(f.busy_ms)
+                || f.skipped_ticks > bound(NodeId(i))
+            {
+                return Err(format!(
+                    "node '{}': its executor's figures are impossible in {:.2} s",
+                    spec.nodes[i].name,
+                    at.as_secs_f64()
+                ));
+            }
+        }
+        if x.executors
+            .iter()
+            .any(|e| !(e.utilization.is_finite() && (0.0..=1.0).contains(&e.utilization)))
+        {
+            return Err("an executor's utilization is outside [0, 1]".into());
+        }
+    }
     if spec.process_of(spec.actuator) == process {
         let a = &st.actuator;
-        let run_ms = at.as_secs_f64() * 1e3;
-        let ok_ms = |ms: f64| ms.is_finite() && (0.0..=run_ms + 1.0).contains(&ms);
         let (p50, p99, max) = a.latency_ms;
         if a.steps > bound(spec.actuator)
             || ![a.mean_latency_ms, p50, p99, max].into_iter().all(ok_ms)
@@ -841,7 +917,13 @@ pub fn launch(
                 })
                 .collect::<Result<Vec<_>, crate::rate::InvalidRate>>()
                 .map_err(|e| DistError::Usage(e.to_string()))?;
-            let mut sched = VirtualScheduler::with_offsets(&slots, &cfg.phase_offsets);
+            // The whole graph's plan: its events are the processes' reports, in order.
+            let mut sched = VirtualScheduler::with_plan(
+                &slots,
+                &cfg.phase_offsets,
+                spec.execution_plan(),
+                false,
+            );
             let lookahead = slots
                 .iter()
                 .map(|n| n.rate().period().0)
@@ -853,7 +935,9 @@ pub fn launch(
             while ticked_rx.try_recv().is_ok() {}
             let mut published: Vec<Option<u64>> = vec![None; spec.topics.len()];
             let mut horizon: Option<u64> = None;
-            let (mut index, mut instants) = (0u64, 0u64);
+            // Events (ticks' starts, and their outputs going out after a compute time), the
+            // ticks among them, and the instants they fell on.
+            let (mut index, mut started, mut instants) = (0u64, 0u64, 0u64);
             let mut last_t = None;
             let failed = |i: usize, at: Nanos, message: String| RunEnd {
                 at,
@@ -864,18 +948,13 @@ pub fn launch(
             };
             let paced_from = Instant::now();
             let end = loop {
-                let (Some(t), Some(i)) = (sched.next_due(), sched.next_node()) else {
+                let Some(event) = sched.next_event_until(cfg.duration) else {
                     break RunEnd {
                         at: cfg.duration,
                         reason: EndReason::Duration,
                     };
                 };
-                if t > cfg.duration {
-                    break RunEnd {
-                        at: cfg.duration,
-                        reason: EndReason::Duration,
-                    };
-                }
+                let (i, t) = event.node_at();
                 // Paced: no instant before its wall time (the horizon follows).
                 if let Some(speed) = opts.pace.filter(|s| *s > 0.0 && s.is_finite()) {
                     let due = paced_from + Duration::from_secs_f64(t.as_secs_f64() / speed);
@@ -986,19 +1065,14 @@ pub fn launch(
                         break failed(node, t, format!("process '{p}' is gone"));
                     }
                 };
-                if m.node != i || m.t_ns != t.0 {
-                    break failed(
-                        i,
-                        t,
-                        format!(
-                            "process '{}' is out of step at tick {index} ({} at {} ns)",
-                            m.process,
-                            spec.nodes.get(m.node).map_or("?", |n| n.name.as_str()),
-                            m.t_ns
-                        ),
-                    );
+                let compute = match check_tick_report(&m, index, event, spec) {
+                    Ok(c) => c,
+                    Err(message) => break failed(i, t, message),
+                };
+                if let Event::Start { .. } = event {
+                    sched.start_elsewhere(&slots, i, compute);
+                    started += 1;
                 }
-                sched.skip_next(&slots);
                 index += 1;
                 if last_t != Some(t) {
                     instants += 1;
@@ -1022,7 +1096,7 @@ pub fn launch(
             };
             // Paced, the wall time is the pace's, not the lockstep's cost.
             lockstep = opts.pace.is_none().then(|| LockstepCost {
-                ticks: index,
+                ticks: started,
                 instants,
                 us_per_instant: start.elapsed().as_secs_f64() * 1e6 / instants.max(1) as f64,
             });

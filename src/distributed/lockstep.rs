@@ -1,33 +1,38 @@
-//! The virtual clock across processes: one order of ticks, replayed in every process.
+//! The virtual clock across processes: one order of events, replayed in every process.
 //!
 //! Every process (and the launcher) runs the same [`VirtualScheduler`] over the whole graph,
-//! so all of them know the run's one order of ticks (by time, then tie-break) and number
-//! its ticks 0, 1, …. A process runs a tick of its own node when its turn comes and says so
-//! to everyone ([`Ticked`], on `ratelab/<graph>/@ticked/<process>`, with the seq it sent and
-//! whether the node stopped the graph or failed); at a tick of another process's node it
-//! waits for that report. So ticks run one after another in the in-process order, a tick
-//! sees exactly the input messages it would see in one process (it waits for the seq the
-//! report names), and every process stops at the same tick: the same seed gives
-//! byte-identical metrics in one process and in several.
+//! with the whole graph's executors, so all of them know the run's one order of events (a
+//! tick's start, and when the tick computes, the instant its held outputs go out:
+//! [`Event`]; by time, then the executors' order) and number them 0, 1, …. A process runs
+//! an event of its own node when its turn comes and says so to everyone ([`Ticked`], on
+//! `ratelab/<graph>/@ticked/<process>`, with the seq it sent, the compute time its node
+//! drew at a start, and whether the node stopped the graph or failed); at another process's
+//! event it waits for that report ([`check_tick_report`]) and schedules the tick's end by
+//! the compute time reported. So events run one after another in the in-process order, a
+//! tick sees exactly the input messages it would see in one process (it waits for the seq
+//! the report names), and every process stops at the same event: the same seed gives
+//! byte-identical metrics in one process and in several, executors' figures included.
 //!
-//! Between two ticks of different processes there is one message (the report goes
-//! straight to the next process, peer to peer), none between ticks of one process. The
+//! Between two events of different processes there is one message (the report goes
+//! straight to the next process, peer to peer), none between events of one process. The
 //! launcher stays the time authority without being on that path: it lets the processes run
 //! up to a horizon ([`ToMember::Horizon`]), [`HORIZON_PERIODS`] periods of the fastest node
-//! ahead of the ticks it has seen reported, and ends the run early by not moving it on (a
+//! ahead of the events it has seen reported, and ends the run early by not moving it on (a
 //! Ctrl-C). It also follows the reports, to know the end (a stop, a failure, a process
 //! gone) and the last seq of every topic before the processes report.
 //!
 //! This is conservative parallel discrete-event simulation in the sense of Chandy and
 //! Misra ("Distributed simulation: a case study in design and verification of distributed
 //! programs", IEEE TSE, 1979), with the whole schedule known to every process in advance
-//! (fixed rates), so no null messages are needed: the reports are the messages.
+//! (fixed rates; a compute time is known once its tick has started, before its end), so no
+//! null messages are needed: the reports are the messages.
 
 use super::wire::{Ticked, ToMember};
 use super::{DistError, Keys};
 use crate::graph::spec::GraphSpec;
 use crate::graph::NodeId;
-use crate::scheduler::StopFlag;
+use crate::scheduler::{Event, StopFlag};
+use crate::time::Nanos;
 use crossbeam_channel::Receiver;
 use std::collections::{BTreeMap, BTreeSet};
 use std::time::Duration;
@@ -203,6 +208,49 @@ impl<'a> Pace<'a> {
     }
 }
 
+/// Check another process's report `m` of event `index` against the event this process
+/// expects there (`event`: every process replays the same order), and return the compute
+/// time it reports for a start.
+///
+/// # Errors
+/// One line when the report is for another node, another run time, the other kind of
+/// event, or claims a compute time over [`crate::executor::MAX_COMPUTE`] (or any at the
+/// end of a compute time): the processes are out of step, and the run cannot go on.
+pub fn check_tick_report(
+    m: &Ticked,
+    index: u64,
+    event: Event,
+    spec: &GraphSpec,
+) -> Result<Nanos, String> {
+    let (node, at) = event.node_at();
+    let publish = matches!(event, Event::Publish { .. });
+    let name = |i: usize| spec.nodes.get(i).map_or("?", |n| n.name.as_str());
+    let what = |p: bool| if p { "the outputs" } else { "the tick" };
+    if m.node != node || m.t_ns != at.0 || m.publish != publish {
+        return Err(format!(
+            "process '{}' is out of step at event {index}: it reported {} of {} at {} ns, where this run has {} of {} at {} ns",
+            m.process,
+            what(m.publish),
+            name(m.node),
+            m.t_ns,
+            what(publish),
+            name(node),
+            at.0
+        ));
+    }
+    let compute = Nanos(m.compute_ns);
+    if compute > crate::executor::MAX_COMPUTE || (publish && compute.0 > 0) {
+        return Err(format!(
+            "process '{}' reported a compute time of {} ns for {} at event {index} (at most {} ns at a start, none when outputs go out)",
+            m.process,
+            m.compute_ns,
+            name(node),
+            crate::executor::MAX_COMPUTE.0
+        ));
+    }
+    Ok(compute)
+}
+
 /// Decode a tick report that came on `key` (`ratelab/<graph>/@ticked/<process>`): `None`
 /// for bytes that are not one, for a report whose process is not the key's, and for this
 /// process's own (`own`: Zenoh hands a session its own puts too).
@@ -313,7 +361,57 @@ mod tests {
             stop: false,
             published: Vec::new(),
             failed: None,
+            publish: false,
+            compute_ns: 0,
         }
+    }
+
+    #[test]
+    fn a_report_of_another_event_or_an_impossible_compute_time_is_out_of_step() {
+        let spec = GraphSpec::parse(DEFAULT_GRAPH_TOML, "t").expect("the chapter's graph");
+        let policy = spec.chain.unwrap().policy.0;
+        let start = Event::Start {
+            node: policy,
+            at: Nanos(20_000_000),
+        };
+        let mut m = report("policy", 5, policy);
+        m.t_ns = 20_000_000;
+        m.compute_ns = 30_000_000;
+        assert_eq!(
+            check_tick_report(&m, 5, start, &spec),
+            Ok(Nanos(30_000_000))
+        );
+        // Another node, another time, the other kind of event.
+        let mut other = m.clone();
+        other.node = spec.chain.unwrap().sensor.0;
+        let e = check_tick_report(&other, 5, start, &spec).unwrap_err();
+        assert!(
+            e.contains("out of step at event 5") && e.contains("the tick of sensor"),
+            "{e}"
+        );
+        other = m.clone();
+        other.t_ns += 1;
+        assert!(check_tick_report(&other, 5, start, &spec).is_err());
+        other = m.clone();
+        other.publish = true;
+        let e = check_tick_report(&other, 5, start, &spec).unwrap_err();
+        assert!(e.contains("the outputs of policy"), "{e}");
+        // A compute time no node may declare, or one claimed when outputs go out.
+        other = m.clone();
+        other.compute_ns = crate::executor::MAX_COMPUTE.0 + 1;
+        assert!(check_tick_report(&other, 5, start, &spec).is_err());
+        let publish = Event::Publish {
+            node: policy,
+            at: Nanos(20_000_000),
+        };
+        other = m.clone();
+        other.publish = true;
+        assert!(check_tick_report(&other, 5, publish, &spec).is_err());
+        other.compute_ns = 0;
+        assert_eq!(
+            check_tick_report(&other, 5, publish, &spec),
+            Ok(Nanos::ZERO)
+        );
     }
 
     #[test]

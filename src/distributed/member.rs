@@ -23,9 +23,7 @@ use crate::policy::BrainSlot;
 use crate::qos::TopicQos;
 use crate::run::GraphState;
 use crate::runlog::StepRecord;
-use crate::scheduler::{
-    catch_quietly, panic_message, run_real, RealOptions, StopFlag, VirtualScheduler,
-};
+use crate::scheduler::{run_real, EndReason, Event, RealOptions, StopFlag};
 use crate::time::Nanos;
 use crossbeam_channel::{Receiver, RecvTimeoutError};
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -844,9 +842,9 @@ fn real_clock(
         })),
         pause: None,
         start: Some(wire::instant_at_mono(start)),
-        // A launch across processes refuses executors and compute times (config).
-        plan: None,
-        track: false,
+        // This process's executors (an executor never spans processes: `launch` checks).
+        plan: Some(spec.execution_plan().restricted(&index)),
+        track: spec.has_executors_or_compute(),
     };
     // The launcher's stop (another process ended the run, or Ctrl-C there).
     let run_stop = StopFlag::new();
@@ -909,7 +907,20 @@ fn real_clock(
     // Every node thread has ended: the figures are final up to the run's end.
     run_time.fetch_max(at.0, Ordering::SeqCst);
     let ticks_now: Vec<u64> = ticks.iter().map(|t| t.load(Ordering::Relaxed)).collect();
-    Ok(GraphState::capture(handles, at, &ticks_now, Some(timing)))
+    let mut state = GraphState::capture(handles, at, &ticks_now, Some(timing));
+    // Its nodes' figures by graph index (the others' are their processes' to report), and
+    // its executors'.
+    state.exec = r.exec.map(|x| {
+        let mut nodes = vec![crate::executor::NodeExecFigures::default(); spec.nodes.len()];
+        for (k, f) in x.nodes.into_iter().enumerate() {
+            nodes[index[k]] = f;
+        }
+        crate::executor::ExecFigures {
+            nodes,
+            executors: x.executors,
+        }
+    });
+    Ok(state)
 }
 
 /// The deadlines in `next_due`, ns, as they are now (read on every tick: no allocation).
@@ -928,10 +939,11 @@ fn figures_time(wall_ns: u64, end_ns: u64, next_due_ns: impl IntoIterator<Item =
     wall_ns.min(end_ns).min(due.saturating_sub(1))
 }
 
-/// The virtual clock ([`lockstep`]): replay the run's one order of ticks; tick this
-/// process's nodes in their turn (each once the input message it must see has arrived) and
-/// report each tick to everyone; at another process's tick wait for its report. Then wait
-/// for the launcher's end and the last messages sent here.
+/// The virtual clock ([`lockstep`]): replay the run's one order of events (ticks' starts,
+/// and under executors or compute times their outputs going out, [`Event`]); run this
+/// process's in their turn (a start once the input messages it must see have arrived) and
+/// report each to everyone; at another process's event wait for its report. Then wait for
+/// the launcher's end and the last messages sent here.
 #[allow(clippy::too_many_arguments)]
 fn run_lockstep(
     mut nodes: Vec<Box<dyn Node>>,
@@ -952,45 +964,55 @@ fn run_lockstep(
     let spec = &cfg.graph;
     let mine: Vec<NodeId> = local.iter().map(|&i| NodeId(i)).collect();
     let held = held_topics(spec, &mine);
-    let mut sched = VirtualScheduler::with_offsets(&nodes, &cfg.phase_offsets);
+    // The whole graph's plan, as in one process: every process replays every executor.
+    let mut sched = crate::run::virtual_scheduler(cfg, &nodes);
     // The newest seq each topic's remote publisher sent, from its reports.
     let mut sent: Vec<Option<u64>> = vec![None; spec.topics.len()];
     let mut index = 0u64;
-    while let (Some(t), Some(i)) = (sched.next_due(), sched.next_node()) {
+    while let Some(event) = sched.next_event_until(cfg.duration) {
         if stop.is_stopped() {
             return Err(DistError::Peer("interrupted".into()));
         }
-        if t > cfg.duration || !pace.until(t.0)? {
+        let (i, t) = event.node_at();
+        if !pace.until(t.0)? {
             break;
         }
         let over = if local.contains(&i) {
             let mut failed = None;
-            // Each input from another process: what its publisher sent so far has arrived.
-            for &input in spec.nodes[i]
-                .subscribes
-                .iter()
-                .filter(|t| inbound.contains(t))
-            {
-                let Some(seq) = sent[input.0] else { continue };
-                if !arrivals.wait_for(input, seq, stop) {
-                    failed = Some(format!(
-                        "message {seq} on {} did not arrive within {} s",
-                        spec.topic(input).name,
-                        REPLY_TIMEOUT.as_secs()
-                    ));
-                    break;
-                }
-            }
             let mut flow = Flow::Continue;
-            if failed.is_none() {
-                match catch_quietly(|| sched.tick_next(&mut nodes)) {
-                    Ok(r) => flow = r.map_or(Flow::Continue, |(_, _, f)| f),
-                    Err(p) => failed = Some(panic_message(&*p)),
+            let mut compute = Nanos::ZERO;
+            match event {
+                Event::Publish { .. } => nodes[i].publish_held(t),
+                Event::Start { .. } => {
+                    // Each input from another process: what its publisher sent so far has
+                    // arrived.
+                    for &input in spec.nodes[i]
+                        .subscribes
+                        .iter()
+                        .filter(|t| inbound.contains(t))
+                    {
+                        let Some(seq) = sent[input.0] else { continue };
+                        if !arrivals.wait_for(input, seq, stop) {
+                            failed = Some(format!(
+                                "message {seq} on {} did not arrive within {} s",
+                                spec.topic(input).name,
+                                REPLY_TIMEOUT.as_secs()
+                            ));
+                            break;
+                        }
+                    }
+                    if failed.is_none() {
+                        match sched.start_here(&mut nodes, i) {
+                            Ok((f, c)) => (flow, compute) = (f, c),
+                            Err(EndReason::NodeFailed { message, .. }) => failed = Some(message),
+                            Err(other) => failed = Some(other.to_string()),
+                        }
+                    } else {
+                        sched.start_elsewhere(&nodes, i, Nanos::ZERO);
+                    }
+                    ticks[i].fetch_add(1, Ordering::Relaxed);
                 }
-            } else {
-                sched.skip_next(&nodes);
             }
-            ticks[i].fetch_add(1, Ordering::Relaxed);
             run_time.fetch_max(t.0, Ordering::Relaxed);
             let published = if failed.is_none() {
                 forward_after(i)
@@ -1008,29 +1030,25 @@ fn run_lockstep(
                 stop: flow == Flow::Stop,
                 published,
                 failed,
+                publish: matches!(event, Event::Publish { .. }),
+                compute_ns: compute.0,
             })?;
             over
         } else {
             let Some(m) = pace.report(index)? else {
                 break; // the launcher ended the run (that process is gone)
             };
-            if m.node != i || m.t_ns != t.0 {
-                return Err(DistError::Peer(format!(
-                    "out of step: tick {index} is {} at {} ns here, {} at {} ns in process '{}'",
-                    spec.nodes[i].name,
-                    t.0,
-                    spec.nodes.get(m.node).map_or("?", |n| n.name.as_str()),
-                    m.t_ns,
-                    m.process
-                )));
-            }
+            let compute =
+                lockstep::check_tick_report(&m, index, event, spec).map_err(DistError::Peer)?;
             for &(topic, seq) in &m.published {
                 // Only a topic the node publishes (a report is untrusted input).
                 if spec.nodes[i].publishes.contains(&TopicId(topic)) {
                     sent[topic] = Some(seq);
                 }
             }
-            sched.skip_next(&nodes);
+            if let Event::Start { .. } = event {
+                sched.start_elsewhere(&nodes, i, compute);
+            }
             m.stop || m.failed.is_some()
         };
         index += 1;
@@ -1049,7 +1067,10 @@ fn run_lockstep(
         }
     }
     let ticks: Vec<u64> = ticks.iter().map(|t| t.load(Ordering::Relaxed)).collect();
-    Ok(GraphState::capture(handles, Nanos(at_ns), &ticks, None))
+    let mut state = GraphState::capture(handles, Nanos(at_ns), &ticks, None);
+    // Every process replayed every executor: these are the graph's figures, as in one.
+    state.exec = sched.figures(Nanos(at_ns));
+    Ok(state)
 }
 
 /// The next control message: waits as long as the launcher lives (its liveliness token),

@@ -321,14 +321,15 @@ impl ToLauncher {
     }
 }
 
-/// Virtual clock: one tick done, from its node's process to every other process and the
+/// Virtual clock: one event done (a tick started, or its outputs gone out), from its node's process to every other process and the
 /// launcher (key `ratelab/<graph>/@ticked/<process>`, [`super::lockstep`]).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Ticked {
     /// The node's process.
     pub process: String,
-    /// The tick's place in the run's one order of ticks (0, 1, …: the virtual scheduler's
-    /// order, by time then tie-break, which every process computes alike).
+    /// The event's place in the run's one order of events (0, 1, …: the virtual
+    /// scheduler's order, [`crate::scheduler::VirtualScheduler::next_event`], which every
+    /// process computes alike).
     pub index: u64,
     /// The node (index in the graph).
     pub node: usize,
@@ -341,6 +342,15 @@ pub struct Ticked {
     pub published: Vec<(usize, u64)>,
     /// The node panicked (or its input never came): the message.
     pub failed: Option<String>,
+    /// The event is the end of the tick's compute time (its held outputs went out then,
+    /// [`crate::scheduler::Event::Publish`]), not its start. Only under executors or compute
+    /// times ([`crate::executor`]).
+    pub publish: bool,
+    /// At a start: the tick's compute time as the node drew it, ns (0: its outputs went out
+    /// at once). Every other process schedules the tick's end by it
+    /// ([`crate::scheduler::VirtualScheduler::start_elsewhere`]); at most
+    /// [`crate::executor::MAX_COMPUTE`].
+    pub compute_ns: u64,
 }
 
 /// Decode `bytes` (postcard) as a `T`, exactly: refused over `max` bytes, malformed, or

@@ -195,15 +195,6 @@ fn the_command_line_prints_the_executor_lines_and_refuses_bad_executors() {
         "{err}"
     );
     assert_eq!(err.trim().lines().count(), 1, "{err}");
-    let (code, _, err) = ratelab(&[
-        "launch",
-        "--processes",
-        "--headless",
-        "--compute",
-        "policy=3",
-    ]);
-    assert_eq!(code, 2, "{err}");
-    assert!(err.contains("does not run them yet"), "{err}");
 }
 
 /// The estimator graph teaches what its comment says: with its compute times (the estimate
@@ -298,4 +289,183 @@ fn an_executor_switched_live_applies_from_its_instant_and_replays_the_same() {
         .validate(&GraphSpec::chapter())
         .unwrap_err()
         .contains("unknown executor 'two_threads'"));
+}
+
+/// The estimator graph with its estimator (1 ms) and its policy (12 ± 4 ms) in one process,
+/// 'brain', on one single-threaded executor, the sensor and the actuator in 'robot': written
+/// to `dir/brain.toml`.
+fn brain_graph(dir: &std::path::Path) -> std::path::PathBuf {
+    let mut g = GraphSpec::load(&repo("graphs/cartpole-estimator.toml")).unwrap();
+    g.name = "estimator-brain".into();
+    compute(&mut g, "policy", "12±4");
+    for n in ["estimator", "policy"] {
+        let id = g.node_id(n).unwrap();
+        g.nodes[id.0].process = Some("brain".into());
+    }
+    g.executors = vec![ratelab::graph::spec::ExecutorSpec {
+        name: "brain".into(),
+        kind: ratelab::executor::ExecutorKind::SingleThreaded,
+        threads: 1,
+        nodes: ["estimator", "policy"]
+            .iter()
+            .map(|n| g.node_id(n).unwrap())
+            .collect(),
+        callback_groups: Default::default(),
+    }];
+    let f = dir.join("brain.toml");
+    std::fs::write(&f, g.to_toml()).unwrap();
+    f
+}
+
+fn json(path: &std::path::Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
+}
+
+#[test]
+fn across_processes_each_process_runs_its_executors_byte_for_byte_under_the_virtual_clock() {
+    let _m = crate::machine::shared();
+    let dir = tempfile::tempdir().unwrap();
+    let brain = brain_graph(dir.path());
+    let brain = brain.to_str().unwrap();
+    // An executor shared by two nodes of one process, with jittered compute times; and the
+    // shipped estimator graph, whose compute times cross three processes.
+    for (graph, seed) in [
+        (brain, "0"),
+        (brain, "1"),
+        ("graphs/cartpole-estimator.toml", "0"),
+    ] {
+        let one = dir.path().join(format!("one-{seed}"));
+        let many = dir.path().join(format!("many-{seed}"));
+        let _ = std::fs::remove_dir_all(&one);
+        let _ = std::fs::remove_dir_all(&many);
+        let common = ["--clock", "virtual", "--duration", "5", "--seed", seed];
+        let (code, _, err) = ratelab(
+            &[
+                &["run", "--graph", graph][..],
+                &common,
+                &["--out", one.to_str().unwrap()],
+            ]
+            .concat(),
+        );
+        assert_eq!(code, 0, "{err}");
+        let (code, out, err) = ratelab(
+            &[
+                &["launch", graph, "--processes"][..],
+                &common,
+                &["--out", many.to_str().unwrap()],
+            ]
+            .concat(),
+        );
+        assert_eq!(code, 0, "{out}{err}");
+        if graph == brain {
+            assert!(
+                out.contains("robot [sensor, actuator], brain [estimator, policy]"),
+                "{out}"
+            );
+            assert!(
+                out.contains("executor brain: single_threaded, 1 thread"),
+                "{out}"
+            );
+        }
+        let a = std::fs::read_to_string(one.join("metrics.json")).unwrap();
+        let b = std::fs::read_to_string(many.join("metrics.json")).unwrap();
+        assert_eq!(a, b, "{graph}, seed {seed}: metrics differ");
+        let m = json(&many.join("metrics.json"));
+        assert!(
+            m["nodes"]["policy"]["response_time_p50_ms"]
+                .as_f64()
+                .unwrap()
+                > 0.0,
+            "{graph}: compute times ran"
+        );
+    }
+}
+
+#[test]
+fn an_executor_across_processes_is_refused_and_executor_makes_one_per_process() {
+    let _m = crate::machine::shared();
+    // The file's executor holds the sensor ('robot') and the policy ('policy').
+    let (code, out, err) = ratelab(&[
+        "launch",
+        "graphs/cartpole-executors.toml",
+        "--processes",
+        "--clock",
+        "virtual",
+    ]);
+    assert_eq!(code, 2, "{out}{err}");
+    assert_eq!(err.trim().lines().count(), 1, "{err}");
+    assert!(
+        err.contains(
+            "executor 'main' holds 'sensor' (process 'robot') and 'policy' (process 'policy')"
+        ),
+        "{err}"
+    );
+    assert!(
+        !out.contains("launch:"),
+        "refused before any process starts: {out}"
+    );
+    // --executor on a launch: one executor per process.
+    let dir = tempfile::tempdir().unwrap();
+    let (code, out, err) = ratelab(&[
+        "launch",
+        "graphs/cartpole-executors.toml",
+        "--processes",
+        "--clock",
+        "virtual",
+        "--duration",
+        "3",
+        "--executor",
+        "single_threaded",
+        "--out",
+        dir.path().to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{out}{err}");
+    for line in [
+        "executor robot: single_threaded, 1 thread",
+        "executor policy: single_threaded, 1 thread",
+    ] {
+        assert!(out.contains(line), "{line}: {out}");
+    }
+    let m = json(&dir.path().join("metrics.json"));
+    // The policy's 30 ms tick on its process's one thread skips every other 20 ms period.
+    let policy = &m["nodes"]["policy"];
+    let p50 = policy["response_time_p50_ms"].as_f64().unwrap();
+    assert!((p50 - 40.0).abs() < 0.1, "{policy}"); // a histogram's bucket of 40 ms
+    assert!(policy["skipped_ticks"].as_u64().unwrap() > 0, "{policy}");
+    assert_eq!(m["nodes"]["sensor"]["skipped_ticks"].as_u64(), Some(0));
+}
+
+#[test]
+fn across_processes_the_real_clock_runs_each_process_s_executor() {
+    let _m = crate::machine::alone();
+    let dir = tempfile::tempdir().unwrap();
+    let brain = brain_graph(dir.path());
+    let out_dir = dir.path().join("real");
+    let (code, out, err) = ratelab(&[
+        "launch",
+        brain.to_str().unwrap(),
+        "--processes",
+        "--clock",
+        "real",
+        "--duration",
+        "3",
+        "--out",
+        out_dir.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{out}{err}");
+    let m = json(&out_dir.join("metrics.json"));
+    let e = &m["executors"][0];
+    assert_eq!(e["name"], "brain", "{m}");
+    assert_eq!(e["kind"], "single_threaded");
+    // Busy 1 ms per 10 ms and 12 ms per 20 ms: 70 % of one thread (the virtual clock's
+    // figure); a shared machine adds or loses a little.
+    let u = e["utilization"].as_f64().unwrap();
+    assert!((0.55..=0.9).contains(&u), "utilization {u}");
+    let node = |n: &str, k: &str| m["nodes"][n][k].as_f64().unwrap();
+    let p50 = node("policy", "response_time_p50_ms");
+    assert!((12.0..=20.0).contains(&p50), "policy response p50 {p50} ms");
+    // The estimator's 1 ms update waits behind the policy's tick on the one thread: its
+    // worst response is several ms (about 1 ms on a thread of its own).
+    let p99 = node("estimator", "response_time_p99_ms");
+    assert!(p99 >= 4.0, "estimator response p99 {p99} ms");
 }

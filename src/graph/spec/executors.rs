@@ -348,6 +348,59 @@ impl GraphSpec {
         };
     }
 
+    /// `--executor` on a launch across processes ([`crate::distributed`]): one executor of
+    /// that kind per process, named after it, holding its nodes but the actuator (per_node:
+    /// none), replacing the file's `[executors]` and every node's `callback_group`. Across
+    /// processes each process has its own executors, as each ROS 2 process spins its own.
+    pub fn set_executor_per_process(&mut self, over: ExecutorOverride) {
+        self.set_executor(over);
+        if over.kind == ExecutorKind::PerNode {
+            return;
+        }
+        self.executors = self
+            .placement()
+            .into_iter()
+            .filter_map(|(process, ids)| {
+                let nodes: Vec<NodeId> = ids
+                    .into_iter()
+                    .filter(|&n| !self.node(n).kind.is_actuator())
+                    .collect();
+                (!nodes.is_empty()).then(|| ExecutorSpec {
+                    name: process,
+                    kind: over.kind,
+                    threads: over.threads,
+                    nodes,
+                    callback_groups: BTreeMap::new(),
+                })
+            })
+            .collect();
+    }
+
+    /// A launch across processes ([`crate::distributed`]) runs each process's executors in
+    /// that process: no executor may hold nodes of two processes.
+    ///
+    /// # Errors
+    /// One line naming the executor, two of its nodes and their processes.
+    pub fn check_executors_per_process(&self) -> Result<(), String> {
+        for e in &self.executors {
+            let Some(&first) = e.nodes.first() else {
+                continue;
+            };
+            let home = self.process_of(first);
+            if let Some(&other) = e.nodes.iter().find(|&&n| self.process_of(n) != home) {
+                return Err(format!(
+                    "graph '{}': executor '{}' holds '{}' (process '{home}') and '{}' (process '{}'): across processes each process has its own executors, as each ROS 2 process spins its own; give each process its own [executors] table (or use --executor, which makes one per process), or run in one process (without --processes)",
+                    self.name,
+                    e.name,
+                    self.node(first).name,
+                    self.node(other).name,
+                    self.process_of(other)
+                ));
+            }
+        }
+        Ok(())
+    }
+
     /// `--compute NODE=MS`: node `name`'s compute time.
     ///
     /// # Errors
@@ -437,6 +490,35 @@ callback_groups = { control = "mutually_exclusive" }
         assert!(spec.has_executors_or_compute());
         let back = GraphSpec::parse(&spec.to_toml(), "log").unwrap();
         assert_eq!(back, spec);
+    }
+
+    #[test]
+    fn across_processes_an_executor_stays_in_its_process() {
+        // The chapter's graph: sensor and actuator in 'robot', the policy in 'policy'.
+        let mut spec = GraphSpec::chapter();
+        spec.set_executor(ExecutorOverride::parse("single_threaded").unwrap());
+        let e = spec.check_executors_per_process().unwrap_err();
+        assert!(
+            e.contains(
+                "executor 'main' holds 'sensor' (process 'robot') and 'policy' (process 'policy')"
+            ),
+            "{e}"
+        );
+        spec.set_executor_per_process(ExecutorOverride::parse("multi_threaded:2").unwrap());
+        spec.check_executors_per_process().unwrap();
+        let names: Vec<(&str, usize)> = spec
+            .executors
+            .iter()
+            .map(|e| (e.name.as_str(), e.nodes.len()))
+            .collect();
+        assert_eq!(
+            names,
+            vec![("robot", 1), ("policy", 1)],
+            "the actuator keeps its thread"
+        );
+        assert!(spec.executors.iter().all(|e| e.threads == 2));
+        spec.set_executor_per_process(ExecutorOverride::parse("per_node").unwrap());
+        assert!(spec.executors.is_empty());
     }
 
     #[test]
