@@ -440,7 +440,8 @@ pub struct RunArgs {
     /// History depth of every topic, ≥ 1 (default: the graph's).
     #[arg(long, allow_negative_numbers = true, value_parser = parse_depth)]
     pub queue_depth: Option<usize>,
-    /// Executor: real (one thread per node) or virtual (deterministic).
+    /// Clock: real (node threads against the monotonic clock, by the executors' rules) or
+    /// virtual (deterministic).
     #[arg(long, default_value = "real", value_parser = parse_clock)]
     pub clock: ClockKind,
     /// The brain: `scripted`, a Python function (`FILE.py[:FUNCTION]`, default `act`), or a

@@ -113,10 +113,11 @@ pub fn run_launch(a: &LaunchArgs, force_headless: bool, stop: StopFlag) -> anyho
         credentials,
         ros2_domain,
     };
+    let placed = cfg.graph.placement().len();
     println!(
-        "[ratelab] launch: graph '{}' in {} processes: {}",
+        "[ratelab] launch: graph '{}' in {placed} process{}: {}",
         cfg.graph.name,
-        cfg.graph.placement().len(),
+        if placed == 1 { "" } else { "es" },
         placement_line(&cfg.graph)
     );
     let recording = headless::open_recording(&run, &cfg, &brain.label())?;
@@ -630,7 +631,7 @@ fn table(
     let unheard: Vec<(&String, &PlacedProcess)> = placements
         .iter()
         .flat_map(|(g, ps)| ps.iter().map(move |p| (g, p)))
-        .filter(|(g, (p, _))| !seen.contains_key(&format!("{g}/{p}")))
+        .filter(|(g, p)| !seen.contains_key(&format!("{g}/{}", p.name)))
         .collect();
     let _ = writeln!(
         s,
@@ -643,8 +644,9 @@ fn table(
         "{:<10} {:>7} {:<10} {:<9} {:>8} {:>8} {:>10} {:<6}",
         "PROCESS", "PID", "NODE", "KIND", "RATE_HZ", "TICKS", "MEAS_HZ", "ALIVE"
     );
-    for (_, (p, nodes)) in &unheard {
-        for (name, kind, hz) in nodes {
+    for (_, placed) in &unheard {
+        let p = &placed.name;
+        for (name, kind, hz) in &placed.nodes {
             let is_alive = alive.iter().any(|(ap, an)| ap == p && an == name);
             let _ = writeln!(
                 s,
@@ -705,7 +707,12 @@ fn table(
                 (Some(dt), Some(b)) => format!("{:.1}", st.published.saturating_sub(b) as f64 / dt),
                 _ => "-".into(),
             };
-            topics.push((name.clone(), rate, *st));
+            topics.push((
+                name.clone(),
+                rate,
+                [st.published, st.dropped, st.lost].map(|n| n.to_string()),
+                String::new(),
+            ));
         }
         for w in &m.wire {
             wire.insert(w.topic.clone(), (w.p50_us, w.p99_us));
@@ -716,18 +723,112 @@ fn table(
         "\n{:<10} {:>8} {:>10} {:>8} {:>6} {:>9} {:>9}",
         "TOPIC", "MSG/S", "PUBLISHED", "DROPPED", "LOST", "WIRE_P50", "WIRE_P99"
     );
+    // A topic held by a process with no figures here still has its row: its counters live
+    // there, so none can be shown, and the row says why.
+    for (_, placed) in &unheard {
+        let gone = !alive.iter().any(|(ap, _)| *ap == placed.name);
+        for name in &placed.holds {
+            if topics.iter().any(|t| t.0 == *name) {
+                continue;
+            }
+            let why = if gone {
+                format!("counted by '{}', which is gone", placed.name)
+            } else {
+                format!("counted by '{}': no figures yet", placed.name)
+            };
+            topics.push((
+                name.clone(),
+                "-".into(),
+                ["-", "-", "-"].map(String::from),
+                why,
+            ));
+        }
+    }
     topics.sort_by(|a, b| a.0.cmp(&b.0));
-    for (name, rate, st) in topics {
+    for (name, rate, [published, dropped, lost], why) in topics {
         let (p50, p99) = wire
             .get(&name)
             .map_or(("in-proc".to_string(), "-".to_string()), |(a, b)| {
                 (format!("{a:.0} µs"), format!("{b:.0} µs"))
             });
-        let _ = writeln!(
-            s,
-            "{:<10} {:>8} {:>10} {:>8} {:>6} {:>9} {:>9}",
-            name, rate, st.published, st.dropped, st.lost, p50, p99
+        let (p50, p99) = if why.is_empty() {
+            (p50, p99)
+        } else {
+            ("-".to_string(), "-".to_string())
+        };
+        let line = format!(
+            "{name:<10} {rate:>8} {published:>10} {dropped:>8} {lost:>6} {p50:>9} {p99:>9}  {why}"
         );
+        let _ = writeln!(s, "{}", line.trim_end());
     }
     s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use ratelab::distributed::monitor::placed_processes;
+
+    fn stats(process: &str, t_ns: u64, sensor_ticks: u64) -> LiveStats {
+        LiveStats {
+            graph: "cartpole".into(),
+            process: process.into(),
+            pid: 42,
+            t_ns,
+            nodes: vec![("sensor".into(), "sensor".into(), 50.0, sensor_ticks)],
+            topics: vec![(
+                "/action".into(),
+                ratelab::topic::TopicStats {
+                    published: 40,
+                    ..Default::default()
+                },
+            )],
+            wire: Vec::new(),
+            steps: Vec::new(),
+            ticks: Vec::new(),
+            counters: Vec::new(),
+            done: false,
+        }
+    }
+
+    #[test]
+    fn a_topic_counted_by_a_process_gone_keeps_its_row_and_says_why() {
+        let spec = ratelab::graph::GraphSpec::chapter();
+        let placed = placed_processes(&spec);
+        assert_eq!(placed[0].name, "robot");
+        assert_eq!(placed[0].holds, vec!["/action"]);
+        assert_eq!(
+            placed[1].holds,
+            vec!["/obs"],
+            "the policy subscribes to /obs"
+        );
+        let mut seen = BTreeMap::new();
+        seen.insert(
+            "cartpole/robot".to_string(),
+            (
+                stats("robot", 2_000_000_000, 100),
+                Some(stats("robot", 1_000_000_000, 50)),
+            ),
+        );
+        let placements = BTreeMap::from([("cartpole".to_string(), placed)]);
+        let alive = vec![("robot".to_string(), "sensor".to_string())];
+        let t = table(&seen, &alive, &placements);
+        let obs = t
+            .lines()
+            .find(|l| l.starts_with("/obs"))
+            .unwrap_or_else(|| panic!("{t}"));
+        assert!(obs.contains("counted by 'policy', which is gone"), "{t}");
+        assert!(!obs.contains(" 0 "), "no counts made up: {t}");
+        let policy = t.lines().find(|l| l.contains(" policy ")).unwrap();
+        assert!(policy.trim_end().ends_with("GONE"), "{t}");
+        let sensor = t.lines().find(|l| l.contains(" sensor ")).unwrap();
+        assert!(sensor.contains("50.0") && sensor.contains("yes"), "{t}");
+        // Still starting: no figures yet, not gone.
+        let alive = vec![
+            ("robot".to_string(), "sensor".to_string()),
+            ("policy".to_string(), "policy".to_string()),
+        ];
+        let t = table(&seen, &alive, &placements);
+        assert!(t.contains("counted by 'policy': no figures yet"), "{t}");
+    }
 }

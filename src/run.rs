@@ -560,6 +560,10 @@ pub fn summarize_state(cfg: &RunConfig, st: &GraphState, end: &RunEnd) -> Metric
             let x = st.exec.as_ref().and_then(|x| x.nodes.get(i));
             let m = NodeMetrics {
                 compute_ms: n.compute.map(|c| c.mean.as_millis_f64()),
+                compute_jitter_ms: n
+                    .compute
+                    .filter(|c| c.jitter.0 > 0)
+                    .map(|c| c.jitter.as_millis_f64()),
                 exec: x.cloned(),
                 kind: n.kind_name().to_string(),
                 rank: i,

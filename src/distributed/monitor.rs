@@ -897,34 +897,51 @@ pub fn record(
     Ok(())
 }
 
-/// A process of a running graph, as its launcher placed it: its name and its nodes' names,
-/// kinds and rates (Hz).
-pub type PlacedProcess = (String, Vec<(String, String, f64)>);
+/// A process of a running graph, as its launcher placed it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PlacedProcess {
+    /// Its name.
+    pub name: String,
+    /// Its nodes: name, kind, rate (Hz).
+    pub nodes: Vec<(String, String, f64)>,
+    /// The topics whose counters it holds (their subscriber's process, or the publisher's
+    /// when nobody subscribes: [`crate::graph::spec::TopicSpec::holder`]), by name.
+    pub holds: Vec<String>,
+}
 
 /// Ask the launcher of graph `graph` (its name as its keys spell it) for the graph's
-/// placement, for up to a second: every process, with its nodes (`ratelab top` lists the
-/// processes it has no figures from, a process gone before it started, from this). `None`
-/// when no launcher answers with settings that decode.
+/// placement, for up to a second: every process, with its nodes and the topics it holds
+/// (`ratelab top` lists the processes it has no figures from, a process gone before it
+/// started, and their topics, from this). `None` when no launcher answers with settings
+/// that decode.
 pub fn ask_placement(session: &zenoh::Session, graph: &str) -> Option<Vec<PlacedProcess>> {
     let cfg = ask_setup(session, &Keys::new(graph).setup())?
         .run_config()
         .ok()?;
-    let spec = &cfg.graph;
-    Some(
-        spec.placement()
-            .into_iter()
-            .map(|(p, ids)| {
-                let nodes = ids
-                    .iter()
-                    .map(|&i| {
-                        let n = spec.node(i);
-                        (n.name.clone(), n.kind_name().to_string(), n.rate_hz)
-                    })
-                    .collect();
-                (p, nodes)
-            })
-            .collect(),
-    )
+    Some(placed_processes(&cfg.graph))
+}
+
+/// `spec`'s processes as [`ask_placement`] gives them.
+pub fn placed_processes(spec: &GraphSpec) -> Vec<PlacedProcess> {
+    spec.placement()
+        .into_iter()
+        .map(|(name, ids)| PlacedProcess {
+            nodes: ids
+                .iter()
+                .map(|&i| {
+                    let n = spec.node(i);
+                    (n.name.clone(), n.kind_name().to_string(), n.rate_hz)
+                })
+                .collect(),
+            holds: spec
+                .topics
+                .iter()
+                .filter(|t| ids.contains(&t.holder()))
+                .map(|t| t.name.clone())
+                .collect(),
+            name,
+        })
+        .collect()
 }
 
 /// Ask once (for up to a second) for a graph's settings; the first answer that decodes.

@@ -762,6 +762,12 @@ fn top_lists_a_running_graph() {
     let cols: Vec<&str> = row.split_whitespace().collect();
     assert_eq!(cols.last(), Some(&"GONE"), "{out}");
     assert_eq!(cols[cols.len() - 2], "-", "a gone node's rate: {out}");
+    // /obs is counted by its subscriber, the policy: its row stays and says why it is empty.
+    let obs = out
+        .lines()
+        .find(|l| l.starts_with("/obs"))
+        .unwrap_or_else(|| panic!("no /obs row in:\n{out}"));
+    assert!(obs.contains("counted by 'policy', which is gone"), "{out}");
     launcher.wait().unwrap();
     // The refreshing `top` ends with the launch, saying so.
     let mut refreshing = refreshing;

@@ -426,6 +426,29 @@ fn an_executor_across_processes_is_refused_and_executor_makes_one_per_process() 
     ] {
         assert!(out.contains(line), "{line}: {out}");
     }
+    // The same executors written in a file give the same bytes in one process.
+    let mut g = GraphSpec::load(&repo("graphs/cartpole-executors.toml")).unwrap();
+    g.set_executor_per_process(ExecutorOverride::parse("single_threaded").unwrap());
+    let file = dir.path().join("per-process.toml");
+    std::fs::write(&file, g.to_toml()).unwrap();
+    let one = dir.path().join("one");
+    let (code, _, err) = ratelab(&[
+        "run",
+        "--graph",
+        file.to_str().unwrap(),
+        "--clock",
+        "virtual",
+        "--duration",
+        "3",
+        "--out",
+        one.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    assert_eq!(
+        std::fs::read_to_string(one.join("metrics.json")).unwrap(),
+        std::fs::read_to_string(dir.path().join("metrics.json")).unwrap(),
+        "launch --executor = its executors written in a file, run in one process"
+    );
     let m = json(&dir.path().join("metrics.json"));
     // The policy's 30 ms tick on its process's one thread skips every other 20 ms period.
     let policy = &m["nodes"]["policy"];
@@ -468,4 +491,37 @@ fn across_processes_the_real_clock_runs_each_process_s_executor() {
     // worst response is several ms (about 1 ms on a thread of its own).
     let p99 = node("estimator", "response_time_p99_ms");
     assert!(p99 >= 4.0, "estimator response p99 {p99} ms");
+}
+
+#[test]
+fn a_tick_that_never_finishes_is_said_so_not_shown_as_zero() {
+    // The policy's first tick computes for 10 s: nothing reaches the actuator in 2 s.
+    let dir = tempfile::tempdir().unwrap();
+    let (code, out, err) = ratelab(&[
+        "run",
+        "--clock",
+        "virtual",
+        "--duration",
+        "2",
+        "--compute",
+        "policy=9999±1",
+        "--out",
+        dir.path().to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    assert!(
+        out.contains("sense->act latency: none (no command was published to the actuator)"),
+        "{out}"
+    );
+    assert!(
+        out.contains("node policy   compute 9999±1 ms | no tick finished its compute time |"),
+        "{out}"
+    );
+    assert!(!out.contains("latency: 0.0 ms"), "{out}");
+    let m = json(&dir.path().join("metrics.json"));
+    assert_eq!(
+        m["nodes"]["policy"]["compute_jitter_ms"].as_f64(),
+        Some(1.0)
+    );
+    assert_eq!(m["action_published"].as_u64(), Some(0));
 }

@@ -374,6 +374,9 @@ impl GraphSpec {
                 })
             })
             .collect();
+        // By name, as a graph file's tables are: the same executors written in a file give
+        // the same plan.
+        self.executors.sort_by(|a, b| a.name.cmp(&b.name));
     }
 
     /// A launch across processes ([`crate::distributed`]) runs each process's executors in
@@ -513,8 +516,8 @@ callback_groups = { control = "mutually_exclusive" }
             .collect();
         assert_eq!(
             names,
-            vec![("robot", 1), ("policy", 1)],
-            "the actuator keeps its thread"
+            vec![("policy", 1), ("robot", 1)],
+            "by name, as a file's tables; the actuator keeps its thread"
         );
         assert!(spec.executors.iter().all(|e| e.threads == 2));
         spec.set_executor_per_process(ExecutorOverride::parse("per_node").unwrap());
