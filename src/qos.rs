@@ -149,7 +149,8 @@ impl TopicQos {
     }
 
     /// The QoS in a few characters, for the lab's edges: `KL1 latest`, `KA100 fifo`, then
-    /// `dl 40ms`, `ls 60ms`, `link 5%`, `rel` when set.
+    /// `dl 40 ms` (`dl 40 ms stop`, `… zero`: what a missed deadline does when not the
+    /// hold), `ls 60 ms`, `link 5%`, `rel` when set.
     pub fn short(&self, depth: usize) -> String {
         self.short_parts(depth).join(" ")
     }
@@ -169,18 +170,26 @@ impl TopicQos {
             }
         )];
         if let Some(d) = self.deadline {
-            parts.push(format!("dl {d}"));
+            // What a missed deadline does, when not the hold.
+            parts.push(match self.on_deadline_missed {
+                OnDeadlineMissed::Hold => format!("dl {d}"),
+                OnDeadlineMissed::Zero => format!("dl {d} zero"),
+                OnDeadlineMissed::Stop => format!("dl {d} stop"),
+            });
         }
         if let Some(l) = self.lifespan {
             parts.push(format!("ls {l}"));
         }
-        if let Some(l) = &self.link {
-            let rel = if self.reliability == Reliability::Reliable {
-                " rel"
-            } else {
-                ""
-            };
-            parts.push(format!("link {}%{rel}", fmt_percent(l.loss)));
+        let rel = self.reliability == Reliability::Reliable;
+        match &self.link {
+            Some(l) => parts.push(format!(
+                "link {}%{}",
+                fmt_percent(l.loss),
+                if rel { " rel" } else { "" }
+            )),
+            // Reliable without a link: nothing is lost to resend, but what was set shows.
+            None if rel => parts.push("rel".into()),
+            None => {}
         }
         parts
     }
@@ -687,6 +696,11 @@ mod tests {
         assert_eq!(TopicQos::default().short(1), "KL1 latest");
         let (q, d) = set("history=keep_all,depth=100,delivery=fifo,deadline_ms=40,loss=0.05,reliability=reliable").unwrap();
         assert_eq!(q.short(d), "KA100 fifo dl 40 ms link 5% rel");
+        // Nothing set is hidden: what a missed deadline does, reliability without a link.
+        let (q, d) = set("deadline_ms=40,on_deadline_missed=stop,reliability=reliable").unwrap();
+        assert_eq!(q.short(d), "KL1 latest dl 40 ms stop rel");
+        let (q, d) = set("deadline_ms=40,on_deadline_missed=zero,lifespan_ms=60").unwrap();
+        assert_eq!(q.short(d), "KL1 latest dl 40 ms zero ls 60 ms");
     }
 
     #[test]

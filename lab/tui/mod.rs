@@ -297,6 +297,42 @@ mod tests {
     }
 
     #[test]
+    fn at_80x24_an_arrow_s_qos_rides_on_its_shaft() {
+        let mut cfg = graph_cfg("graphs/cartpole.toml", 2);
+        cfg.graph
+            .set_qos(
+                "/action",
+                "deadline_ms=40,on_deadline_missed=stop,reliability=reliable",
+            )
+            .unwrap();
+        let (app, _rx) = app_after(cfg, false);
+        let text = render(&app, 80, 24);
+        // The deadline and its reaction on the shaft, in short; the counters still below.
+        let shaft = text
+            .lines()
+            .find(|l| l.contains("▶") && l.contains("dl 40"))
+            .unwrap_or_else(|| panic!("no QoS on a shaft:\n{text}"));
+        assert!(shaft.contains("dl 40 stop"), "{shaft}");
+        assert!(text.contains("dl miss"), "{text}");
+        // At 120×40 it is whole.
+        let (app, _rx) = app_after(
+            {
+                let mut c = graph_cfg("graphs/cartpole.toml", 2);
+                c.graph
+                    .set_qos(
+                        "/action",
+                        "deadline_ms=40,on_deadline_missed=stop,reliability=reliable",
+                    )
+                    .unwrap();
+                c
+            },
+            false,
+        );
+        let text = render(&app, 120, 40);
+        assert!(text.contains("dl 40 ms stop rel"), "{text}");
+    }
+
+    #[test]
     fn qos_shows_on_the_edges_and_a_dead_node_is_drawn_so() {
         let mut cfg = graph_cfg("graphs/cartpole-safety.toml", 2);
         cfg.graph

@@ -774,6 +774,50 @@ fn arrow_lines(t: &TopicView, w: usize, rows: usize) -> Vec<Line<'static>> {
         lines.extend(wire);
         return lines;
     };
+    // The QoS on the shaft itself (`── dl 40 ms stop ──▶`), as many parts as fit, most
+    // telling first: at 80×24 the panel's rows are the drops', the rate's and the counters'.
+    // On a shaft too short for all, the chapter's keep-last/latest rule gives way first
+    // (the depth shows in the header and on the selected arrow); the parts left go below.
+    let room = w.saturating_sub(3); // the head and a space either side
+    let all = parts.join(" ");
+    let (on_shaft, below): (Vec<String>, Vec<String>) = if all.chars().count() <= room {
+        (parts.clone(), Vec::new())
+    } else {
+        let mut fit: Vec<String> = Vec::new();
+        let mut rest: Vec<String> = Vec::new();
+        let latest_rule = |p: &str| p.starts_with("KL") && p.ends_with(" latest");
+        for p in parts.iter().filter(|p| !latest_rule(p)) {
+            let used = fit.iter().map(|f| f.chars().count() + 1).sum::<usize>();
+            // Its compact form when it is too long (`dl 40 stop`: milliseconds, as every
+            // QoS time is).
+            let compact = p.replace(" ms", "");
+            match [p.clone(), compact]
+                .into_iter()
+                .find(|c| rest.is_empty() && used + c.chars().count() <= room)
+            {
+                Some(c) => fit.push(c),
+                None => rest.push(p.clone()),
+            }
+        }
+        rest.extend(parts.iter().filter(|p| latest_rule(p)).cloned());
+        (fit, rest)
+    };
+    let shaft = if on_shaft.is_empty() {
+        shaft
+    } else {
+        let label = on_shaft.join(" ");
+        let run = w
+            .saturating_sub(1)
+            .saturating_sub(label.chars().count() + 2);
+        let (left, right) = (run / 2, run - run / 2);
+        let shaft_style = shaft.spans.first().map_or(Style::new(), |s| s.style);
+        let bar = if t.dropping { "═" } else { "─" };
+        Line::from(vec![
+            Span::styled(format!("{} ", bar.repeat(left)), shaft_style),
+            Span::raw(label).dim(),
+            Span::styled(format!(" {}▶", bar.repeat(right)), shaft_style),
+        ])
+    };
     // msg/s right after the drops: at 80×24 a panel of five rows still shows it.
     let mut lines = vec![name, shaft, dropped, rate];
     let counting = t.qos_counts.iter().any(|(_, n)| *n > 0);
@@ -797,7 +841,7 @@ fn arrow_lines(t: &TopicView, w: usize, rows: usize) -> Vec<Line<'static>> {
             .map(|l| Line::from(Span::styled(l, style)).centered()),
     );
     lines.extend(
-        pack(parts.iter().cloned(), " ", w)
+        pack(below.into_iter(), " ", w)
             .into_iter()
             .map(|l| Line::from(l).dim().centered()),
     );
@@ -965,8 +1009,14 @@ fn render_angle_chart(v: &View, area: Rect, buf: &mut Buffer) {
             .data(m);
         datasets.push(if i == 0 { d.name("change") } else { d });
     }
+    // The marks' key in the title: the chart's own legend hides when the chart is small.
+    let mut title = vec![Span::raw(" pole angle (rad), last 10 s ")];
+    if !marks.is_empty() {
+        title.push(Span::raw("· "));
+        title.push(Span::styled("⡇ change ", Style::new().fg(Color::Cyan)));
+    }
     Chart::new(datasets)
-        .block(Block::bordered().title(" pole angle (rad), last 10 s "))
+        .block(Block::bordered().title(Line::from(title)))
         .x_axis(time_axis(t0, t1, area))
         .y_axis(
             Axis::default()

@@ -974,7 +974,7 @@ fn a_qos_run_plots_its_counters_and_logs_its_events() {
     assert!(
         labels
             .iter()
-            .any(|l| l == "/cmd · depth 1\nKL1 latest dl 30 ms link 20%"),
+            .any(|l| l == "/cmd · depth 1\nKL1 latest dl 30 ms zero link 20%"),
         "{labels:?}"
     );
     assert!(labels.iter().any(|l| l == "/obs · depth 1"), "{labels:?}");
