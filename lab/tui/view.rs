@@ -841,7 +841,7 @@ fn arrow_lines(t: &TopicView, w: usize, rows: usize) -> Vec<Line<'static>> {
             .map(|l| Line::from(Span::styled(l, style)).centered()),
     );
     lines.extend(
-        pack(below.into_iter(), " ", w)
+        pack(below, " ", w)
             .into_iter()
             .map(|l| Line::from(l).dim().centered()),
     );
