@@ -339,6 +339,10 @@ pub fn merge_states(
         let Some(st) = of(NodeId(i)) else { continue };
         take(&mut merged.rates_hz, &st.rates_hz, i);
         take(&mut merged.ticks, &st.ticks, i);
+        // A process started again mid-run counts its nodes' ticks anew.
+        if let Some(t) = merged.ticks.get_mut(i) {
+            *t = carried.node_ticks(i, *t);
+        }
         take(&mut merged.liveliness, &st.liveliness, i);
         if let (Some(d), Some(s)) = (
             merged.timing.as_mut().and_then(|t| t.get_mut(i)),
@@ -900,7 +904,7 @@ pub fn launch(
     let mut reports: BTreeMap<String, GraphState> = BTreeMap::new();
     let mut wires: Vec<wire::WireLink> = Vec::new();
     // What a process started again mid-run counted before (real clock only).
-    let mut carried = Carried::new(Carried::holders_of(spec));
+    let mut carried = Carried::for_graph(spec);
     let mut lockstep = None;
     let end = match cfg.clock {
         ClockKind::Virtual => {

@@ -406,6 +406,12 @@ pub struct Carried {
     latest: Vec<Option<TopicStats>>,
     /// Per topic, what earlier runs of its holder process counted before it was restarted.
     before: Vec<TopicStats>,
+    /// The process running each node (empty: node ticks are not carried).
+    node_processes: Vec<String>,
+    /// Each node's ticks in its process's newest figures.
+    latest_ticks: Vec<Option<u64>>,
+    /// Per node, the ticks earlier runs of its process counted before it was restarted.
+    before_ticks: Vec<u64>,
 }
 
 impl Carried {
@@ -417,6 +423,21 @@ impl Carried {
             pids: BTreeMap::new(),
             latest: vec![None; n],
             before: vec![TopicStats::default(); n],
+            node_processes: Vec::new(),
+            latest_ticks: Vec::new(),
+            before_ticks: Vec::new(),
+        }
+    }
+
+    /// [`Carried::new`] for `spec`'s topics, carrying its nodes' ticks too: a node whose
+    /// process is started again mid-run goes on counting from the ticks it ran before.
+    pub fn for_graph(spec: &GraphSpec) -> Carried {
+        let n = spec.nodes.len();
+        Carried {
+            node_processes: (0..n).map(|i| spec.process_of(NodeId(i))).collect(),
+            latest_ticks: vec![None; n],
+            before_ticks: vec![0; n],
+            ..Carried::new(Carried::holders_of(spec))
         }
     }
 
@@ -449,6 +470,24 @@ impl Carried {
                 }
             }
         }
+        for i in 0..self.node_processes.len() {
+            if self.node_processes[i] != m.process {
+                continue;
+            }
+            if restarted {
+                self.before_ticks[i] += self.latest_ticks[i].take().unwrap_or(0);
+            }
+            let name = &spec.nodes[i].name;
+            if let Some((_, _, _, ticks)) = m.nodes.iter().find(|n| n.0 == *name) {
+                self.latest_ticks[i] = Some(*ticks);
+            }
+        }
+    }
+
+    /// Node `i`'s ticks, `now` its process's count, continued from the processes before
+    /// ([`Carried::for_graph`]; `now` as is otherwise).
+    pub fn node_ticks(&self, i: usize, now: u64) -> u64 {
+        now.saturating_add(self.before_ticks.get(i).copied().unwrap_or(0))
     }
 
     /// Topic `i`'s counters now `now` (its holder's), continued from the processes before.
@@ -1014,6 +1053,30 @@ mod tests {
             published: None,
             fell: false,
         }
+    }
+
+    #[test]
+    fn a_node_whose_process_is_started_again_goes_on_counting_its_ticks() {
+        let spec = cfg().graph;
+        let policy = spec.node_id("policy").unwrap().0;
+        let sensor = spec.node_id("sensor").unwrap().0;
+        let mut carried = Carried::for_graph(&spec);
+        let ticking = |pid: u32, process: &str, node: &str, ticks: u64| {
+            let mut m = live(process, Vec::new(), Vec::new());
+            m.pid = pid;
+            m.nodes = vec![(node.into(), node.into(), 50.0, ticks)];
+            m
+        };
+        carried.see(&spec, &ticking(7, "policy", "policy", 100));
+        carried.see(&spec, &ticking(7, "policy", "policy", 148));
+        carried.see(&spec, &ticking(3, "robot", "sensor", 150));
+        // Killed after 148 ticks; started again (another pid), it counts from 0.
+        carried.see(&spec, &ticking(9, "policy", "policy", 2));
+        assert_eq!(carried.node_ticks(policy, 250), 398);
+        // Another process's nodes are untouched.
+        assert_eq!(carried.node_ticks(sensor, 400), 400);
+        // Without for_graph, ticks are as reported.
+        assert_eq!(Carried::new(Carried::holders_of(&spec)).node_ticks(policy, 250), 250);
     }
 
     /// `m` with figures of run time `t_ms`.
