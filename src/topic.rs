@@ -18,9 +18,10 @@
 //! virtual clock all of it is deterministic. Every message published is accounted for:
 //! `published = seen + dropped + expired + lost + refused + unseen buffered + in flight`.
 //!
-//! A topic may carry one [`Tap`], told of every message as it is published (before the
+//! A topic may carry [`Tap`]s, each told of every message as it is published (before the
 //! drop rule or a link decides its fate): how a run offers its topics outside without
-//! changing them ([`crate::ros2`]).
+//! changing them ([`crate::ros2`]), and how a graph across processes forwards each message
+//! to the process that subscribes ([`crate::distributed`]).
 
 use crate::qos::{Delivery, History, Link, QosCounter, Reliability, TopicQos, MAX_ATTEMPTS};
 use crate::time::Nanos;
@@ -44,7 +45,7 @@ pub struct Message<T> {
 
 /// Told of every message published on a topic, as it is published, on the publisher's
 /// thread and under the topic's lock: it must be quick (a channel send) and must not touch
-/// the topic. Set once ([`Topic::set_tap`]).
+/// the topic. Added with [`Topic::add_tap`].
 pub type Tap<T> = Box<dyn Fn(&Message<T>) + Send + Sync>;
 
 /// A topic's counters at one instant.
@@ -365,7 +366,8 @@ impl<T> Inner<T> {
 pub struct Topic<T> {
     name: String,
     inner: Mutex<Inner<T>>,
-    tap: OnceLock<Tap<T>>,
+    /// The taps, in the order they were added (none: the lock is never made).
+    taps: OnceLock<Mutex<Vec<Tap<T>>>>,
 }
 
 impl<T: Clone> Topic<T> {
@@ -422,16 +424,26 @@ impl<T: Clone> Topic<T> {
                 last_arrival: Nanos::ZERO,
                 now: Nanos::ZERO,
             }),
-            tap: OnceLock::new(),
+            taps: OnceLock::new(),
         })
     }
 
-    /// Tell `tap` of every message published from now on.
-    ///
-    /// # Errors
-    /// The topic has a tap already: `tap` is given back.
-    pub fn set_tap(&self, tap: Tap<T>) -> Result<(), Tap<T>> {
-        self.tap.set(tap)
+    /// Tell `tap` of every message published from now on, after the taps added before it.
+    pub fn add_tap(&self, tap: Tap<T>) {
+        self.taps
+            .get_or_init(|| Mutex::new(Vec::new()))
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .push(tap);
+    }
+
+    /// Tell every tap of `msg` (nothing to do, and no lock taken, without one).
+    fn tell_taps(&self, msg: &Message<T>) {
+        if let Some(taps) = self.taps.get() {
+            for tap in taps.lock().unwrap_or_else(|e| e.into_inner()).iter() {
+                tap(msg);
+            }
+        }
     }
 
     /// The topic's name.
@@ -467,10 +479,8 @@ impl<T: Clone> Topic<T> {
                 seq,
                 origin_stamp,
             });
-            if let Some(tap) = self.tap.get() {
-                if let Some(msg) = inner.buf.back() {
-                    tap(msg);
-                }
+            if let Some(msg) = inner.buf.back() {
+                self.tell_taps(msg);
             }
             return seq;
         }
@@ -489,9 +499,7 @@ impl<T: Clone> Topic<T> {
             seq,
             origin_stamp,
         };
-        if let Some(tap) = self.tap.get() {
-            tap(&msg);
-        }
+        self.tell_taps(&msg);
         match inner.qos.link {
             None => {
                 if inner.admit(stamp) {
@@ -704,16 +712,18 @@ mod tests {
         let topic = t(1);
         let seen = std::sync::Arc::new(Mutex::new(Vec::new()));
         let s = seen.clone();
-        assert!(topic
-            .set_tap(Box::new(move |m: &Message<u32>| {
-                s.lock().unwrap().push((m.seq, m.data, m.stamp))
-            }))
-            .is_ok());
-        assert!(topic.set_tap(Box::new(|_| {})).is_err(), "one tap");
+        topic.add_tap(Box::new(move |m: &Message<u32>| {
+            s.lock().unwrap().push((m.seq, m.data, m.stamp))
+        }));
+        // A second tap is told too, after the first.
+        let second = std::sync::Arc::new(Mutex::new(0u32));
+        let n = second.clone();
+        topic.add_tap(Box::new(move |_| *n.lock().unwrap() += 1));
         for i in 0..3 {
             topic.publish(10 + i, Nanos(u64::from(i)), None);
         }
         assert_eq!(topic.stats().dropped, 2);
+        assert_eq!(*second.lock().unwrap(), 3, "every tap sees every message");
         let lossy = Topic::with_qos(
             "/l",
             1,
@@ -725,7 +735,7 @@ mod tests {
         )
         .unwrap();
         let s = seen.clone();
-        let _ = lossy.set_tap(Box::new(move |m: &Message<u32>| {
+        lossy.add_tap(Box::new(move |m: &Message<u32>| {
             s.lock().unwrap().push((m.seq, m.data, m.stamp))
         }));
         lossy.publish(7, Nanos(9), None);

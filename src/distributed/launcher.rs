@@ -498,7 +498,8 @@ pub fn check_report(
             continue;
         }
         let c = &st.topics[i];
-        let most = bound(topic.publisher);
+        // A node may publish several times a tick; a process sends at most so many of them.
+        let most = bound(topic.publisher).saturating_mul(wire::MAX_SENT_PER_TICK as u64);
         if c.published > most || c.lost > most || c.dropped > c.published {
             return Err(format!(
                 "topic '{}' counted {} published, {} dropped, {} lost in {:.2} s (its publisher sends at most {most})",
@@ -1502,6 +1503,15 @@ mod tests {
             st.topics[1].dropped = 6;
         })
         .contains("topic '/action'"));
+        // A policy that publishes twice a tick: 1002 in 10 s at 50 Hz can be true; more than
+        // a process sends in the run's ticks cannot.
+        let mut st = honest.clone();
+        st.topics[1].published = 1002;
+        assert_eq!(check_report(&spec, "robot", &st, ten_s), Ok(()));
+        assert!(
+            refused(&|st| st.topics[1].published = 600 * wire::MAX_SENT_PER_TICK as u64)
+                .contains("sends at most")
+        );
         // Figures of another process's nodes are not this report's to bound.
         let mut st = honest.clone();
         st.ticks[1] = 999_999;

@@ -17,7 +17,6 @@ use crate::config::RunConfig;
 use crate::graph::spec::GraphSpec;
 use crate::graph::{Graph, NodeId, TopicId};
 use crate::metrics::{LatencyStats, NodeTiming};
-use crate::msg::AnyTopic;
 use crate::node::{Flow, Node};
 use crate::policy::BrainSlot;
 use crate::qos::TopicQos;
@@ -553,34 +552,62 @@ pub fn run_member(opts: &MemberOptions, stop: &StopFlag) -> Result<(), DistError
         by_topic[t.0] = Some(p);
     }
     // Per node, each topic it publishes for another process.
-    type Outlet = (TopicId, AnyTopic, zenoh::pubsub::Publisher<'static>);
+    type Outlet = (TopicId, zenoh::pubsub::Publisher<'static>);
     let forward: Arc<Vec<Vec<Outlet>>> = Arc::new(
         (0..spec.nodes.len())
             .map(|i| {
                 spec.node(NodeId(i))
                     .publishes
                     .iter()
-                    .filter_map(|&t| Some((t, handles.topic(t).clone(), by_topic[t.0].take()?)))
+                    .filter_map(|&t| Some((t, by_topic[t.0].take()?)))
                     .collect()
             })
             .collect(),
     );
-    let sent: Arc<Vec<Mutex<Option<u64>>>> =
-        Arc::new((0..spec.topics.len()).map(|_| Mutex::new(None)).collect());
+    // Every message published on a crossing topic, from its tap (as it is published, held
+    // outputs when they go out), until the tick that published it ends: then each one goes,
+    // in order, so a node that publishes twice in a tick sends both, as in one process.
+    let pending: Arc<Vec<Mutex<std::collections::VecDeque<WireSample>>>> = Arc::new(
+        (0..spec.topics.len())
+            .map(|_| Mutex::new(std::collections::VecDeque::new()))
+            .collect(),
+    );
+    for &(t, _) in forward.iter().flatten() {
+        let pending = pending.clone();
+        handles
+            .topic(t)
+            .add_data_tap(Box::new(move |seq, stamp, origin, data| {
+                let mut q = crate::graph::lock(&pending[t.0]);
+                // Bounded: past it the oldest go (the subscriber counts them lost on the wire).
+                if q.len() >= wire::MAX_SENT_PER_TICK {
+                    q.pop_front();
+                }
+                q.push_back(WireSample {
+                    seq,
+                    stamp_ns: stamp.0,
+                    origin_ns: origin.map(|o| o.0),
+                    sent_mono_ns: 0,
+                    data: data.to_bytes(),
+                });
+            }));
+    }
     let forward_after: Arc<Forward> = Arc::new({
-        let (forward, sent) = (forward.clone(), sent.clone());
+        let (forward, pending) = (forward.clone(), pending.clone());
         move |node: usize| -> Vec<(usize, u64)> {
             let Some(outlets) = forward.get(node) else {
                 return Vec::new();
             };
             outlets
                 .iter()
-                .filter_map(|(t, topic, publisher)| {
-                    let mut last = crate::graph::lock(&sent[t.0]);
-                    let sample = WireSample::newest_of(topic, *last)?;
-                    *last = Some(sample.seq);
-                    let _ = publisher.put(sample.encode()).wait();
-                    Some((t.0, sample.seq))
+                .filter_map(|(t, publisher)| {
+                    let samples = std::mem::take(&mut *crate::graph::lock(&pending[t.0]));
+                    let mut last = None;
+                    for mut sample in samples {
+                        sample.sent_mono_ns = wire::mono_now_ns();
+                        last = Some(sample.seq);
+                        let _ = publisher.put(sample.encode()).wait();
+                    }
+                    Some((t.0, last?))
                 })
                 .collect()
         }

@@ -1076,7 +1076,10 @@ mod tests {
         // Another process's nodes are untouched.
         assert_eq!(carried.node_ticks(sensor, 400), 400);
         // Without for_graph, ticks are as reported.
-        assert_eq!(Carried::new(Carried::holders_of(&spec)).node_ticks(policy, 250), 250);
+        assert_eq!(
+            Carried::new(Carried::holders_of(&spec)).node_ticks(policy, 250),
+            250
+        );
     }
 
     /// `m` with figures of run time `t_ms`.

@@ -49,18 +49,6 @@ pub struct WireSample {
 }
 
 impl WireSample {
-    /// The newest message of `topic` with `seq > after` (none: nothing new), as a sample.
-    pub fn newest_of(topic: &AnyTopic, after: Option<u64>) -> Option<WireSample> {
-        let (seq, stamp, origin, data) = topic.newest_after(after)?;
-        Some(WireSample {
-            seq,
-            stamp_ns: stamp.0,
-            origin_ns: origin.map(|o| o.0),
-            sent_mono_ns: mono_now_ns(),
-            data: data.to_bytes(),
-        })
-    }
-
     /// Publish this sample into the local copy `topic` of its topic, as its publisher did.
     /// `offset` (the publisher's `seq` minus the copy's, kept by the caller per topic, `None`
     /// before the first sample) lets a subscriber join late: what was published before its
@@ -373,6 +361,12 @@ fn decode_exact<T: for<'de> Deserialize<'de>>(
     }
     Ok(t)
 }
+
+/// The most messages a process sends on one crossing topic for one tick of its publisher
+/// (a node may publish several times in a tick); past it the oldest are not sent, and the
+/// subscriber counts them lost on the wire. Reports are checked against it
+/// ([`super::launcher::check_report`]).
+pub const MAX_SENT_PER_TICK: usize = 256;
 
 /// The largest tick report read, bytes ([`Ticked::decode`]).
 pub const MAX_TICK_BYTES: usize = 8 * 1024;

@@ -508,9 +508,10 @@ impl<M: Message> From<M> for MsgData {
     }
 }
 
-/// Told of every message published on a topic as a payload ([`AnyTopic::set_data_tap`]):
-/// its `seq`, stamp and value. On the publisher's thread, under the topic's lock: be quick.
-pub type DataTap = Box<dyn Fn(u64, Nanos, MsgData) + Send + Sync>;
+/// Told of every message published on a topic as a payload ([`AnyTopic::add_data_tap`]):
+/// its `seq`, stamp, origin stamp (what it was derived from, for sense→act latency) and
+/// value. On the publisher's thread, under the topic's lock: be quick.
+pub type DataTap = Box<dyn Fn(u64, Nanos, Option<Nanos>, MsgData) + Send + Sync>;
 
 /// What [`AnyTopic`] needs of a typed topic.
 trait ErasedTopic: Send + Sync + fmt::Debug {
@@ -527,7 +528,6 @@ trait ErasedTopic: Send + Sync + fmt::Debug {
     fn next_seq(&self) -> u64;
     fn count_lost(&self, n: u64);
     fn read(&self, now: Nanos) -> Option<Received>;
-    fn newest_after(&self, after: Option<u64>) -> Option<(u64, Nanos, Option<Nanos>, MsgData)>;
     fn publish(
         &self,
         outbox: Option<&Outbox>,
@@ -535,7 +535,7 @@ trait ErasedTopic: Send + Sync + fmt::Debug {
         stamp: Nanos,
         origin: Option<Nanos>,
     ) -> bool;
-    fn set_data_tap(&self, tap: DataTap) -> bool;
+    fn add_data_tap(&self, tap: DataTap);
     fn subscriptions(&self) -> Vec<AnyTopic>;
     fn subscription_stats(&self, now: Option<Nanos>) -> Vec<TopicStats>;
 }
@@ -596,12 +596,6 @@ impl<M: Message> ErasedTopic for Arc<Topic<M>> {
             data: MsgData::new(m.data),
         })
     }
-    fn newest_after(&self, after: Option<u64>) -> Option<(u64, Nanos, Option<Nanos>, MsgData)> {
-        let m = self
-            .peek_newest()
-            .filter(|m| after.is_none_or(|a| m.seq > a))?;
-        Some((m.seq, m.stamp, m.origin_stamp, MsgData::new(m.data)))
-    }
     fn publish(
         &self,
         outbox: Option<&Outbox>,
@@ -620,11 +614,10 @@ impl<M: Message> ErasedTopic for Arc<Topic<M>> {
         }
         true
     }
-    fn set_data_tap(&self, tap: DataTap) -> bool {
-        self.set_tap(Box::new(move |m: &crate::topic::Message<M>| {
-            tap(m.seq, m.stamp, MsgData::new(m.data.clone()))
-        }))
-        .is_ok()
+    fn add_data_tap(&self, tap: DataTap) {
+        self.add_tap(Box::new(move |m: &crate::topic::Message<M>| {
+            tap(m.seq, m.stamp, m.origin_stamp, MsgData::new(m.data.clone()))
+        }));
     }
     fn subscriptions(&self) -> Vec<AnyTopic> {
         vec![AnyTopic(Arc::new(self.clone()))]
@@ -713,9 +706,6 @@ impl<M: Message> ErasedTopic for FanOut<M> {
         // Each subscriber reads its own queue ([`AnyTopic::subscription`]).
         ErasedTopic::read(&self.queues[0], now)
     }
-    fn newest_after(&self, after: Option<u64>) -> Option<(u64, Nanos, Option<Nanos>, MsgData)> {
-        self.queues[0].newest_after(after)
-    }
     fn publish(
         &self,
         outbox: Option<&Outbox>,
@@ -727,9 +717,9 @@ impl<M: Message> ErasedTopic for FanOut<M> {
             .iter()
             .all(|q| ErasedTopic::publish(q, outbox, data, stamp, origin))
     }
-    fn set_data_tap(&self, tap: DataTap) -> bool {
+    fn add_data_tap(&self, tap: DataTap) {
         // Every publish reaches every queue: the first sees each message once.
-        self.queues[0].set_data_tap(tap)
+        self.queues[0].add_data_tap(tap);
     }
     fn subscriptions(&self) -> Vec<AnyTopic> {
         self.queues
@@ -891,12 +881,6 @@ impl AnyTopic {
         self.0.read(now)
     }
 
-    /// The newest buffered message with `seq > after` (any, for `None`), without reading
-    /// it: `(seq, stamp, origin, value)`.
-    pub fn newest_after(&self, after: Option<u64>) -> Option<(u64, Nanos, Option<Nanos>, MsgData)> {
-        self.0.newest_after(after)
-    }
-
     /// Publish `data` stamped `stamp`, through `outbox` (held during a tick with a compute
     /// time) or straight onto the topic (`None`).
     ///
@@ -921,10 +905,10 @@ impl AnyTopic {
         }
     }
 
-    /// Tell `tap` of every message published from now on (see [`Topic::set_tap`]); false
-    /// when the topic has a tap already (the first keeps it).
-    pub fn set_data_tap(&self, tap: DataTap) -> bool {
-        self.0.set_data_tap(tap)
+    /// Tell `tap` of every message published from now on, after the taps added before it
+    /// (see [`Topic::add_tap`]).
+    pub fn add_data_tap(&self, tap: DataTap) {
+        self.0.add_data_tap(tap);
     }
 }
 

@@ -630,21 +630,21 @@ impl Bridge {
 
 /// Tap `topic` (number `i`) into the bridge's channel.
 fn tap(topic: &AnyTopic, i: usize, tx: Sender<Out>, waits: bool, dropped: Arc<AtomicU64>) {
-    // A topic has one tap; a second bridge on the same topics is a caller's bug, and the
-    // first keeps them.
-    topic.set_data_tap(Box::new(move |seq: u64, stamp: Nanos, data: MsgData| {
-        let out = Out::Msg {
-            topic: i,
-            seq,
-            stamp,
-            data,
-        };
-        if waits {
-            let _ = tx.send(out);
-        } else if let Err(TrySendError::Full(_)) = tx.try_send(out) {
-            dropped.fetch_add(1, Ordering::Relaxed);
-        }
-    }));
+    topic.add_data_tap(Box::new(
+        move |seq: u64, stamp: Nanos, _origin, data: MsgData| {
+            let out = Out::Msg {
+                topic: i,
+                seq,
+                stamp,
+                data,
+            };
+            if waits {
+                let _ = tx.send(out);
+            } else if let Err(TrySendError::Full(_)) = tx.try_send(out) {
+                dropped.fetch_add(1, Ordering::Relaxed);
+            }
+        },
+    ));
 }
 
 fn put(o: &Outlet, seq: i64, bytes: &[u8]) -> Result<(), String> {

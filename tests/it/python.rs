@@ -607,6 +607,68 @@ fn a_python_node_in_its_own_process_gives_the_in_process_run_byte_for_byte() {
     crate::distributed::assert_lockstep_equals_in_process(&graph, &graph);
 }
 
+/// A node that publishes twice in a tick sends both messages to the process that
+/// subscribes, as one process delivers both (only the newest crossed, and the rest were
+/// counted lost on the wire, until the report was refused as impossible).
+#[test]
+fn a_node_that_publishes_twice_a_tick_sends_both_across_processes() {
+    let _m = crate::machine::shared();
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::create_dir(dir.path().join("nodes")).unwrap();
+    let script = std::fs::read_to_string(repo("graphs/nodes/scripted_balancer.py")).unwrap();
+    let last = "        self.pub.publish(Force(newtons=float(command) * MOTOR_N))";
+    assert!(script.contains(last));
+    let twice = script.replace(
+        last,
+        &format!("        self.pub.publish(Force(newtons=0.0))\n{last}"),
+    );
+    std::fs::write(dir.path().join("nodes/twice.py"), twice).unwrap();
+    let graph = std::fs::read_to_string(repo("graphs/cartpole-python.toml"))
+        .unwrap()
+        .replace("nodes/scripted_balancer.py", "nodes/twice.py");
+    // The actuator's queue keeps both: depth 4 on /action.
+    let at = graph.rfind("depth = 1").unwrap();
+    let graph = format!("{}depth = 4{}", &graph[..at], &graph[at + 9..]);
+    let file = dir.path().join("twice.toml");
+    std::fs::write(&file, graph).unwrap();
+    let file = file.to_str().unwrap();
+    let (one, many) = (dir.path().join("one"), dir.path().join("many"));
+    let common = ["--clock", "virtual", "--duration", "3"];
+    let o = ratelab(
+        &[
+            &["run", "--graph", file][..],
+            &common,
+            &["--out", one.to_str().unwrap()],
+        ]
+        .concat(),
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let o = ratelab(
+        &[
+            &["launch", file, "--processes"][..],
+            &common,
+            &["--out", many.to_str().unwrap()],
+        ]
+        .concat(),
+    );
+    assert!(
+        o.status.success(),
+        "{}{}",
+        String::from_utf8_lossy(&o.stdout),
+        stderr(&o)
+    );
+    let a = std::fs::read_to_string(one.join("metrics.json")).unwrap();
+    let b = std::fs::read_to_string(many.join("metrics.json")).unwrap();
+    assert_eq!(a, b, "one process and two differ");
+    let m: serde_json::Value = serde_json::from_str(&b).unwrap();
+    let ticks = m["nodes"]["policy"]["ticks"].as_u64().unwrap();
+    assert_eq!(
+        m["topics"]["/action"]["published"].as_u64(),
+        Some(2 * ticks)
+    );
+    assert_eq!(m["topics"]["/action"].get("lost"), None, "{m}");
+}
+
 // ---- Several inputs and outputs (graphs/cartpole-setpoint.toml) ------------------------
 
 /// The mean cart position, m, over trace rows with `from_s <= t < to_s`.
