@@ -746,15 +746,11 @@ fn table(
     }
     topics.sort_by(|a, b| a.0.cmp(&b.0));
     for (name, rate, [published, dropped, lost], why) in topics {
-        let (p50, p99) = wire
-            .get(&name)
-            .map_or(("in-proc".to_string(), "-".to_string()), |(a, b)| {
-                (format!("{a:.0} µs"), format!("{b:.0} µs"))
-            });
-        let (p50, p99) = if why.is_empty() {
-            (p50, p99)
-        } else {
-            ("-".to_string(), "-".to_string())
+        let (p50, p99) = match wire.get(&name) {
+            // No figures from its counting process: nothing to show of its wire either.
+            _ if !why.is_empty() => ("-".to_string(), "-".to_string()),
+            Some((a, b)) => (format!("{a:.0} µs"), format!("{b:.0} µs")),
+            None => ("in-proc".to_string(), "-".to_string()),
         };
         let line = format!(
             "{name:<10} {rate:>8} {published:>10} {dropped:>8} {lost:>6} {p50:>9} {p99:>9}  {why}"

@@ -103,7 +103,7 @@ pub enum InstantOutcome {
 }
 
 /// One event of the virtual clock under the executors' rules
-/// ([`VirtualScheduler::next_event`]).
+/// ([`VirtualScheduler::next_event_until`]).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Event {
     /// Node `node`'s tick has computed until `at`: its held outputs go out now.
@@ -435,7 +435,9 @@ impl VirtualScheduler {
     /// The next event under the executors' rules, the clock moved on to it: at each instant
     /// first the ticks whose compute time ends then ([`Event::Publish`], in rank order),
     /// then every tick that can start ([`Event::Start`], in the executors' order), once the
-    /// timers due then are released. `None` when nothing is scheduled.
+    /// timers due then are released. `None` (and nothing taken) when nothing is scheduled
+    /// up to `limit`: a run of duration `limit` ends there, its later events untouched, as
+    /// [`VirtualScheduler::run`] leaves them.
     ///
     /// The scheduler's side of the event is done when this returns (a thread freed, a
     /// thread taken); the node's side is the caller's: [`Node::publish_held`] for a publish
@@ -443,13 +445,6 @@ impl VirtualScheduler {
     /// (the node ticks here) or [`VirtualScheduler::start_elsewhere`] (it ticks in another
     /// process, [`crate::distributed::lockstep`]), before the next call. One instant of
     /// [`VirtualScheduler::run_instant`] is this, event by event.
-    pub fn next_event(&mut self) -> Option<Event> {
-        self.next_event_until(Nanos(u64::MAX))
-    }
-
-    /// [`VirtualScheduler::next_event`], but `None` (and nothing taken) when the next event
-    /// is after `limit`: a run of duration `limit` ends there, its later events untouched,
-    /// as [`VirtualScheduler::run`] leaves them.
     pub fn next_event_until(&mut self, limit: Nanos) -> Option<Event> {
         loop {
             if let Some(e) = self.event_now() {
@@ -466,23 +461,13 @@ impl VirtualScheduler {
     }
 
     /// The next event at [`VirtualScheduler::now`], if any (see
-    /// [`VirtualScheduler::next_event`]).
+    /// [`VirtualScheduler::next_event_until`]).
     fn event_now(&mut self) -> Option<Event> {
         let t = self.now;
         if let Some(&Reverse((at, i))) = self.completions.peek() {
             if at <= t {
                 self.completions.pop();
-                self.dispatch.finish(i);
-                if self.track {
-                    let busy = at.saturating_sub(self.running_start[i]);
-                    self.stats[i].record(self.running_release[i], at, busy);
-                    self.keep_span(CallbackSpan {
-                        node: i,
-                        release: self.running_release[i],
-                        start: self.running_start[i],
-                        end: at,
-                    });
-                }
+                self.ended(i, self.running_release[i], self.running_start[i], at);
                 return Some(Event::Publish { node: i, at });
             }
         }
@@ -547,6 +532,22 @@ impl VirtualScheduler {
         self.started(node, nodes[node].rate().period(), compute);
     }
 
+    /// Node `i`'s tick, released at `release` and started at `start`, has published its
+    /// outputs at `end`: its thread and group are free, and when measuring, its response
+    /// time, busy time and span are kept.
+    fn ended(&mut self, i: usize, release: Nanos, start: Nanos, end: Nanos) {
+        self.dispatch.finish(i);
+        if self.track {
+            self.stats[i].record(release, end, end.saturating_sub(start));
+            self.keep_span(CallbackSpan {
+                node: i,
+                release,
+                start,
+                end,
+            });
+        }
+    }
+
     /// The bookkeeping of a tick started now: its count, its skipped periods, its end (now
     /// when it takes no time), its timer rearmed.
     fn started(&mut self, i: usize, period: Nanos, compute: Nanos) {
@@ -558,28 +559,13 @@ impl VirtualScheduler {
             self.stats[i].skipped_ticks += skipped;
         }
         if compute.0 == 0 {
-            self.dispatch.finish(i);
-            if self.track {
-                self.stats[i].record(release, t, Nanos::ZERO);
-                self.keep_span(CallbackSpan {
-                    node: i,
-                    release,
-                    start: t,
-                    end: t,
-                });
-            }
+            self.ended(i, release, t, t);
         } else {
             self.completions
                 .push(Reverse((t.saturating_add(compute), i)));
         }
         // Always after `t` (a zero period is refused by `Rate`).
         self.rearm(i, self.ranks[i], next);
-    }
-
-    /// Do the executors' rules apply (executors that share threads, or compute times)? Else
-    /// every instant is the chapter's loop ([`VirtualScheduler::tick_next`]).
-    pub fn is_general(&self) -> bool {
-        self.general
     }
 
     /// An instant of the default plan: every node due ticks, in tie-break order (the

@@ -905,7 +905,7 @@ pub fn launch(
     let mut reports: BTreeMap<String, GraphState> = BTreeMap::new();
     let mut wires: Vec<wire::WireLink> = Vec::new();
     // What a process started again mid-run counted before (real clock only).
-    let mut carried = Carried::for_graph(spec);
+    let mut carried = Carried::new(spec);
     let mut lockstep = None;
     let end = match cfg.clock {
         ClockKind::Virtual => {

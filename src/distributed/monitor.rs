@@ -143,7 +143,7 @@ impl Fold {
         let spec = cfg.graph.clone();
         let holders = Carried::holders_of(&spec);
         Fold {
-            carried: Carried::new(holders.clone()),
+            carried: Carried::new(&spec),
             queued: vec![std::collections::VecDeque::new(); spec.topics.len()],
             shown: vec![None; spec.topics.len()],
             plant: spec.process_of(spec.actuator),
@@ -393,9 +393,10 @@ impl Fold {
 }
 
 /// The counters of the topics held by processes that may be started again mid-run (under
-/// the real clock): a process started again (another pid) counts its topics from zero, so
-/// what the ones before it counted, as their last figures said, is carried over and the
-/// run's totals go on. The watcher's lab and the launcher's summary both count this way.
+/// the real clock), and their nodes' ticks: a process started again (another pid) counts its
+/// topics and ticks from zero, so what the ones before it counted, as their last figures
+/// said, is carried over and the run's totals go on. The watcher's lab and the launcher's
+/// summary both count this way.
 #[derive(Clone, Debug)]
 pub struct Carried {
     /// The process holding each topic's counters ([`crate::graph::spec::TopicSpec::holder`]).
@@ -406,7 +407,7 @@ pub struct Carried {
     latest: Vec<Option<TopicStats>>,
     /// Per topic, what earlier runs of its holder process counted before it was restarted.
     before: Vec<TopicStats>,
-    /// The process running each node (empty: node ticks are not carried).
+    /// The process running each node.
     node_processes: Vec<String>,
     /// Each node's ticks in its process's newest figures.
     latest_ticks: Vec<Option<u64>>,
@@ -415,33 +416,21 @@ pub struct Carried {
 }
 
 impl Carried {
-    /// Nothing heard yet, for topics held by `holders` (one process name per topic).
-    pub fn new(holders: Vec<String>) -> Carried {
-        let n = holders.len();
+    /// Nothing heard yet, for `spec`'s topics and nodes.
+    pub fn new(spec: &GraphSpec) -> Carried {
+        let (topics, nodes) = (spec.topics.len(), spec.nodes.len());
         Carried {
-            holders,
+            holders: Carried::holders_of(spec),
             pids: BTreeMap::new(),
-            latest: vec![None; n],
-            before: vec![TopicStats::default(); n],
-            node_processes: Vec::new(),
-            latest_ticks: Vec::new(),
-            before_ticks: Vec::new(),
+            latest: vec![None; topics],
+            before: vec![TopicStats::default(); topics],
+            node_processes: (0..nodes).map(|i| spec.process_of(NodeId(i))).collect(),
+            latest_ticks: vec![None; nodes],
+            before_ticks: vec![0; nodes],
         }
     }
 
-    /// [`Carried::new`] for `spec`'s topics, carrying its nodes' ticks too: a node whose
-    /// process is started again mid-run goes on counting from the ticks it ran before.
-    pub fn for_graph(spec: &GraphSpec) -> Carried {
-        let n = spec.nodes.len();
-        Carried {
-            node_processes: (0..n).map(|i| spec.process_of(NodeId(i))).collect(),
-            latest_ticks: vec![None; n],
-            before_ticks: vec![0; n],
-            ..Carried::new(Carried::holders_of(spec))
-        }
-    }
-
-    /// The holders of `spec`'s topics, for [`Carried::new`].
+    /// The holders of `spec`'s topics (one process name per topic).
     pub fn holders_of(spec: &GraphSpec) -> Vec<String> {
         spec.topics
             .iter()
@@ -484,8 +473,7 @@ impl Carried {
         }
     }
 
-    /// Node `i`'s ticks, `now` its process's count, continued from the processes before
-    /// ([`Carried::for_graph`]; `now` as is otherwise).
+    /// Node `i`'s ticks, `now` its process's count, continued from the processes before.
     pub fn node_ticks(&self, i: usize, now: u64) -> u64 {
         now.saturating_add(self.before_ticks.get(i).copied().unwrap_or(0))
     }
@@ -1060,7 +1048,7 @@ mod tests {
         let spec = cfg().graph;
         let policy = spec.node_id("policy").unwrap().0;
         let sensor = spec.node_id("sensor").unwrap().0;
-        let mut carried = Carried::for_graph(&spec);
+        let mut carried = Carried::new(&spec);
         let ticking = |pid: u32, process: &str, node: &str, ticks: u64| {
             let mut m = live(process, Vec::new(), Vec::new());
             m.pid = pid;
@@ -1073,13 +1061,9 @@ mod tests {
         // Killed after 148 ticks; started again (another pid), it counts from 0.
         carried.see(&spec, &ticking(9, "policy", "policy", 2));
         assert_eq!(carried.node_ticks(policy, 250), 398);
-        // Another process's nodes are untouched.
+        // Another process's nodes are untouched; nothing restarted, ticks are as reported.
         assert_eq!(carried.node_ticks(sensor, 400), 400);
-        // Without for_graph, ticks are as reported.
-        assert_eq!(
-            Carried::new(Carried::holders_of(&spec)).node_ticks(policy, 250),
-            250
-        );
+        assert_eq!(Carried::new(&spec).node_ticks(policy, 250), 250);
     }
 
     /// `m` with figures of run time `t_ms`.

@@ -354,23 +354,24 @@ impl GraphSpec {
     /// processes each process has its own executors, as each ROS 2 process spins its own.
     pub fn set_executor_per_process(&mut self, over: ExecutorOverride) {
         self.set_executor(over);
-        if over.kind == ExecutorKind::PerNode {
+        // `--executor`'s one executor (none for per_node), split by process.
+        let Some(all) = self.executors.pop() else {
             return;
-        }
+        };
         self.executors = self
             .placement()
             .into_iter()
             .filter_map(|(process, ids)| {
-                let nodes: Vec<NodeId> = ids
-                    .into_iter()
-                    .filter(|&n| !self.node(n).kind.is_actuator())
+                let nodes: Vec<NodeId> = all
+                    .nodes
+                    .iter()
+                    .copied()
+                    .filter(|n| ids.contains(n))
                     .collect();
                 (!nodes.is_empty()).then(|| ExecutorSpec {
                     name: process,
-                    kind: over.kind,
-                    threads: over.threads,
                     nodes,
-                    callback_groups: BTreeMap::new(),
+                    ..all.clone()
                 })
             })
             .collect();
