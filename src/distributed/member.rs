@@ -47,9 +47,58 @@ pub struct MemberOptions {
     pub credentials: Credentials,
 }
 
-/// After node `i`'s tick, send what it published for other processes: the (topic index,
-/// seq) of each message sent.
+/// After node `i`'s tick (its messages for other processes already sent, as published):
+/// the (topic index, newest seq sent) of each crossing topic it sent on, for its report.
 type Forward = dyn Fn(usize) -> Vec<(usize, u64)> + Send + Sync;
+
+/// One crossing topic's sending end in its publisher's process: the bridge element that
+/// puts each message on the wire as it is published.
+struct Outlet {
+    publisher: zenoh::pubsub::Publisher<'static>,
+    /// The newest seq sent since the publishing tick ended last ([`NOT_SENT`]: none).
+    newest: AtomicU64,
+    /// Messages offered since the publishing tick ended last.
+    this_tick: AtomicU64,
+}
+
+/// [`Outlet::newest`] when nothing was sent.
+const NOT_SENT: u64 = u64::MAX;
+
+impl Outlet {
+    fn new(publisher: zenoh::pubsub::Publisher<'static>) -> Self {
+        Outlet {
+            publisher,
+            newest: AtomicU64::new(NOT_SENT),
+            this_tick: AtomicU64::new(0),
+        }
+    }
+
+    /// Send one message (called from the topic's tap, as it is published). Past
+    /// [`wire::MAX_SENT_PER_TICK`] in one tick the rest of that tick's are not sent, and
+    /// the subscriber counts them lost on the wire.
+    fn send(&self, seq: u64, stamp: Nanos, origin: Option<Nanos>, data: &crate::msg::MsgData) {
+        if self.this_tick.fetch_add(1, Ordering::Relaxed) >= wire::MAX_SENT_PER_TICK as u64 {
+            return;
+        }
+        let sample = WireSample {
+            seq,
+            stamp_ns: stamp.0,
+            origin_ns: origin.map(|o| o.0),
+            sent_mono_ns: wire::mono_now_ns(),
+            data: data.to_bytes(),
+        };
+        // Under congestion control `Block` a put fails only when the session is closed,
+        // which the run notices on its own.
+        let _ = self.publisher.put(sample.encode()).wait();
+        self.newest.store(seq, Ordering::Relaxed);
+    }
+
+    /// The publishing tick ended: the newest seq it sent, if any (for its report).
+    fn tick_ended(&self) -> Option<u64> {
+        self.this_tick.store(0, Ordering::Relaxed);
+        Some(self.newest.swap(NOT_SENT, Ordering::Relaxed)).filter(|&s| s != NOT_SENT)
+    }
+}
 
 /// The sequence numbers that have arrived per inbound topic, for the lockstep's waits.
 struct Arrivals {
@@ -551,64 +600,43 @@ pub fn run_member(opts: &MemberOptions, stop: &StopFlag) -> Result<(), DistError
     for (t, p) in publishers {
         by_topic[t.0] = Some(p);
     }
-    // Per node, each topic it publishes for another process.
-    type Outlet = (TopicId, zenoh::pubsub::Publisher<'static>);
-    let forward: Arc<Vec<Vec<Outlet>>> = Arc::new(
-        (0..spec.nodes.len())
-            .map(|i| {
-                spec.node(NodeId(i))
-                    .publishes
-                    .iter()
-                    .filter_map(|&t| Some((t, by_topic[t.0].take()?)))
-                    .collect()
-            })
-            .collect(),
-    );
-    // Every message published on a crossing topic, from its tap (as it is published, held
-    // outputs when they go out), until the tick that published it ends: then each one goes,
-    // in order, so a node that publishes twice in a tick sends both, as in one process.
-    let pending: Arc<Vec<Mutex<std::collections::VecDeque<WireSample>>>> = Arc::new(
-        (0..spec.topics.len())
-            .map(|_| Mutex::new(std::collections::VecDeque::new()))
-            .collect(),
-    );
-    for &(t, _) in forward.iter().flatten() {
-        let pending = pending.clone();
+    // A crossing topic is a bridge element of the graph: its tap sends each message as it
+    // is published (held outputs when they go out), in order, so a node that publishes
+    // twice in a tick sends both, as in one process. The publishing tick's report then
+    // names the newest seq sent, which a process reading the topic under the virtual clock
+    // waits for.
+    let outlets: Arc<Vec<Option<Outlet>>> =
+        Arc::new(by_topic.into_iter().map(|p| p.map(Outlet::new)).collect());
+    for t in (0..outlets.len()).filter(|&t| outlets[t].is_some()) {
+        let outlets = outlets.clone();
         handles
-            .topic(t)
+            .topic(TopicId(t))
             .add_data_tap(Box::new(move |seq, stamp, origin, data| {
-                let mut q = crate::graph::lock(&pending[t.0]);
-                // Bounded: past it the oldest go (the subscriber counts them lost on the wire).
-                if q.len() >= wire::MAX_SENT_PER_TICK {
-                    q.pop_front();
+                if let Some(o) = &outlets[t] {
+                    o.send(seq, stamp, origin, &data);
                 }
-                q.push_back(WireSample {
-                    seq,
-                    stamp_ns: stamp.0,
-                    origin_ns: origin.map(|o| o.0),
-                    sent_mono_ns: 0,
-                    data: data.to_bytes(),
-                });
             }));
     }
+    // Per node, the crossing topics it publishes.
+    let forward: Vec<Vec<TopicId>> = (0..spec.nodes.len())
+        .map(|i| {
+            let publishes = &spec.node(NodeId(i)).publishes;
+            publishes
+                .iter()
+                .copied()
+                .filter(|t| outlets[t.0].is_some())
+                .collect()
+        })
+        .collect();
     let forward_after: Arc<Forward> = Arc::new({
-        let (forward, pending) = (forward.clone(), pending.clone());
+        let outlets = outlets.clone();
         move |node: usize| -> Vec<(usize, u64)> {
-            let Some(outlets) = forward.get(node) else {
+            let Some(topics) = forward.get(node) else {
                 return Vec::new();
             };
-            outlets
+            topics
                 .iter()
-                .filter_map(|(t, publisher)| {
-                    let samples = std::mem::take(&mut *crate::graph::lock(&pending[t.0]));
-                    let mut last = None;
-                    for mut sample in samples {
-                        sample.sent_mono_ns = wire::mono_now_ns();
-                        last = Some(sample.seq);
-                        let _ = publisher.put(sample.encode()).wait();
-                    }
-                    Some((t.0, last?))
-                })
+                .filter_map(|t| Some((t.0, outlets[t.0].as_ref()?.tick_ended()?)))
                 .collect()
         }
     });
@@ -1264,7 +1292,72 @@ impl Refusals {
 
 #[cfg(test)]
 mod tests {
-    use super::figures_time;
+    use super::{figures_time, Outlet};
+    use crate::distributed::wire::{WireSample, MAX_SENT_PER_TICK};
+    use crate::msg::{force::ForceMsg, MsgData};
+    use crate::time::Nanos;
+    use zenoh::Wait;
+
+    #[test]
+    fn a_crossing_topic_sends_each_message_as_it_is_published_and_names_the_newest() {
+        // A session of its own, on no network: Zenoh hands a session's puts to its own
+        // subscribers.
+        let mut config = zenoh::Config::default();
+        for (key, value) in [
+            ("listen/endpoints", "[]"),
+            ("connect/endpoints", "[]"),
+            ("scouting/multicast/enabled", "false"),
+        ] {
+            config.insert_json5(key, value).expect("a Zenoh setting");
+        }
+        let session = zenoh::open(config).wait().expect("a local session");
+        let (tx, rx) = crossbeam_channel::unbounded();
+        let _sub = session
+            .declare_subscriber("t/action")
+            .callback(move |s| {
+                let _ = tx.send(WireSample::decode(&s.payload().to_bytes()));
+            })
+            .wait()
+            .expect("a subscriber");
+        let outlet = Outlet::new(session.declare_publisher("t/action").wait().unwrap());
+        let force = |n: f64| MsgData::new(ForceMsg { newtons: n });
+        let got = |seq: u64| {
+            let s = rx
+                .recv_timeout(std::time::Duration::from_secs(10))
+                .expect("the sample, before its tick ends")
+                .expect("a sample that decodes");
+            assert_eq!(s.seq, seq);
+            s
+        };
+        // Nothing published in a tick: nothing to name.
+        assert_eq!(outlet.tick_ended(), None);
+        // Two in one tick: each is on the wire as it is published, before the tick ends.
+        outlet.send(0, Nanos(20), Some(Nanos(10)), &force(1.5));
+        let first = got(0);
+        assert_eq!((first.stamp_ns, first.origin_ns), (20, Some(10)));
+        assert_eq!(
+            first.data,
+            force(1.5).to_bytes(),
+            "the payload, as published"
+        );
+        outlet.send(1, Nanos(20), None, &force(-2.0));
+        got(1);
+        assert_eq!(outlet.tick_ended(), Some(1), "the newest sent");
+        assert_eq!(outlet.tick_ended(), None, "a tick that sent nothing");
+        // Past the bound in one tick, the rest of that tick's stay home; the next tick
+        // sends again.
+        for seq in 2..2 + MAX_SENT_PER_TICK as u64 + 10 {
+            outlet.send(seq, Nanos(40), None, &force(0.0));
+        }
+        for seq in 2..2 + MAX_SENT_PER_TICK as u64 {
+            got(seq);
+        }
+        assert_eq!(outlet.tick_ended(), Some(1 + MAX_SENT_PER_TICK as u64));
+        outlet.send(500, Nanos(60), None, &force(0.0));
+        got(500);
+        assert!(rx.try_recv().is_err(), "nothing more was sent");
+        assert_eq!(outlet.tick_ended(), Some(500));
+    }
 
     #[test]
     fn the_figures_time_stops_short_of_a_tick_that_may_be_in_progress() {
