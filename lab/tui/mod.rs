@@ -377,10 +377,13 @@ mod tests {
         );
         insta::assert_snapshot!("qos_120x40", text);
         let small = render(&app, 80, 24);
+        // At 80×24 the dead node's words read whole, and /cmd's shaft carries its deadline
+        // (without what a miss does: the shaft is too short for it).
         assert!(
-            small.contains("20 lost") && small.contains("NOT AL"),
+            small.contains("20 lost") && small.contains("NOT ALIVE"),
             "{small}"
         );
+        assert!(small.contains("─ dl 30 ─▶"), "{small}");
         insta::assert_snapshot!("qos_80x24", small);
         // f, d, L, l, e and o act on the selected topic only, as logged commands.
         app.on_msg(Msg::ToggleDelivery);

@@ -370,14 +370,25 @@ fn render_status(v: &View, area: Rect, buf: &mut Buffer) {
         .into(),
     );
     let used: usize = spans.iter().map(|s| s.content.chars().count()).sum();
-    spans.push(match &v.recording {
-        Some(p) => Span::from(format!(
-            "rec ● {}",
-            shorten_left(p, (area.width as usize).saturating_sub(used + 6))
-        ))
-        .red(),
-        None => Span::from("rec off").dim(),
-    });
+    match &v.recording {
+        Some(p) => spans.push(
+            Span::from(format!(
+                "rec ● {}",
+                shorten_left(p, (area.width as usize).saturating_sub(used + 6))
+            ))
+            .red(),
+        ),
+        // Whole or not at all (at 80 columns "rec " alone read as a cut word).
+        None if used + "rec off".len() <= area.width as usize => {
+            spans.push(Span::from("rec off").dim());
+        }
+        None => {
+            if let Some(last) = spans.pop() {
+                let kept = last.content.trim_end_matches(" │ ").to_string();
+                spans.push(Span::styled(kept, last.style));
+            }
+        }
+    }
     Paragraph::new(Line::from(spans)).render(area, buf);
 }
 
@@ -620,7 +631,14 @@ fn render_node(n: &NodeView, area: Rect, buf: &mut Buffer, real: bool) {
         }
     }
     if n.alive == Some(false) {
-        lines.insert(0, Line::from("✗ NOT ALIVE").white().on_red().bold());
+        // The mark gives way in a narrow box (80 columns): the words must read whole.
+        let full = "✗ NOT ALIVE";
+        let text = if full.chars().count() <= usize::from(area.width.saturating_sub(2)) {
+            full
+        } else {
+            "NOT ALIVE"
+        };
+        lines.insert(0, Line::from(text).white().on_red().bold());
     }
     let mut name = match &n.process {
         Some(p) => format!("{}@{p}", n.name),
@@ -789,14 +807,21 @@ fn arrow_lines(t: &TopicView, w: usize, rows: usize) -> Vec<Line<'static>> {
         for p in parts.iter().filter(|p| !latest_rule(p)) {
             let used = fit.iter().map(|f| f.chars().count() + 1).sum::<usize>();
             // Its compact form when it is too long (`dl 40 stop`: milliseconds, as every
-            // QoS time is).
+            // QoS time is), then its first two words (`dl 30`: the deadline without what a
+            // miss does, which goes below with the whole part).
             let compact = p.replace(" ms", "");
-            match [p.clone(), compact]
+            let words: Vec<&str> = compact.split(' ').collect();
+            let head = (words.len() > 2).then(|| words[..2].join(" "));
+            let whole = [p.clone(), compact.clone()]
                 .into_iter()
-                .find(|c| rest.is_empty() && used + c.chars().count() <= room)
-            {
-                Some(c) => fit.push(c),
-                None => rest.push(p.clone()),
+                .find(|c| rest.is_empty() && used + c.chars().count() <= room);
+            match (whole, head) {
+                (Some(c), _) => fit.push(c),
+                (None, Some(h)) if rest.is_empty() && used + h.chars().count() <= room => {
+                    fit.push(h);
+                    rest.push(p.clone());
+                }
+                _ => rest.push(p.clone()),
             }
         }
         rest.extend(parts.iter().filter(|p| latest_rule(p)).cloned());
