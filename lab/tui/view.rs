@@ -741,8 +741,16 @@ fn arrow_lines(t: &TopicView, w: usize, rows: usize) -> Vec<Line<'static>> {
         }
         None => name,
     };
-    let dropped =
-        Line::from(Span::styled(format!("{} dropped {mark}", t.dropped), style)).centered();
+    // The mark stays when the words do not fit (`25 drop ⚠` at 80 columns; the line may
+    // take the column before the next box too).
+    let dropped = [
+        format!("{} dropped {mark}", t.dropped),
+        format!("{} drop {mark}", t.dropped),
+    ]
+    .into_iter()
+    .find(|d| d.chars().count() <= w + 1)
+    .unwrap_or_else(|| format!("{} {mark}", t.dropped));
+    let dropped = Line::from(Span::styled(dropped, style)).centered();
     // The mirror image of a drop, with a symbol of its own: old data read again.
     let stale_style = if t.staling {
         Style::new().fg(Color::Magenta).add_modifier(Modifier::BOLD)
