@@ -3,14 +3,25 @@
 #
 #   scripts/viewer-shot.sh FILE.rrd OUT.png [WIDTHxHEIGHT]     (default 1920x1080)
 #
-# Installs what it needs on first use: Xvfb, Mesa's Vulkan driver (lavapipe) and ImageMagick
-# with apt-get, `rerun-sdk==0.36.3` with pip into a virtualenv kept under
-# ${RATELAB_VIEWER_VENV:-~/.cache/ratelab/viewer-venv}. The viewer runs on a private Xvfb
-# display with the Composite extension off (with it on, rerun's window is all black under
-# Xvfb) and the Vulkan backend (the GL one cannot draw to R32Float). rerun saves the picture,
-# then may exit non-zero ("Failed to take store hub"), so the script judges by the picture.
-# The viewer's start-up notifications (a Docker notice, a Wgpu validation message) sometimes
-# cover the top-right corner when the picture is taken: take it again if one hides something.
+# Installs what it needs on first use: Mesa's Vulkan driver (lavapipe) and ImageMagick with
+# apt-get, `rerun-sdk==0.36.3` with pip into a virtualenv kept under
+# ${RATELAB_VIEWER_VENV:-~/.cache/ratelab/viewer-venv}. The viewer runs headless (`--headless`:
+# the same viewer, drawn offscreen, no X display) on the Vulkan backend (the GL one cannot
+# draw to R32Float), as a new viewer (`--new`: else, with a viewer already listening on port
+# 9876, rerun hands the file to that one and takes no picture), and saves the picture itself
+# (`--screenshot-to`, in its screenshot style, at twice WIDTHxHEIGHT as on a high-dpi screen).
+#
+# No notifications in the picture, by construction:
+# - `--screenshot-to` resizes the window for its 2x picture at start-up, before the first
+#   frame, from egui's placeholder screen of 10000x10000 points: 20000 points at 2 px each, a
+#   40000x40000 surface, beyond any GPU's limit (lavapipe's is 16384), whatever the window or
+#   screen size: the viewer's red "Wgpu validation error … Requested was (40000, 40000)".
+#   Headless there is no window: the offscreen renderer ignores the resize, no error.
+# - The viewer shows its own info and warning log lines (software rasterizer, "Listening for
+#   gRPC connections", "Loading …") as notifications for 4 s, and `--screenshot-to` takes the
+#   picture 10 frames after start, when they may still show. RUST_LOG=error keeps the viewer
+#   from logging them. Errors still log, and would show: if the viewer logs one, the script
+#   prints it and exits 1 (the picture is kept, to look at).
 set -euo pipefail
 
 if [ $# -lt 2 ] || [ $# -gt 3 ]; then
@@ -28,7 +39,6 @@ fi
 
 # System packages (Debian/Ubuntu), only when missing.
 need=()
-command -v Xvfb > /dev/null || need+=(xvfb)
 command -v identify > /dev/null || need+=(imagemagick)
 ls /usr/share/vulkan/icd.d/lvp_icd*.json > /dev/null 2>&1 || need+=(mesa-vulkan-drivers)
 if [ ${#need[@]} -gt 0 ]; then
@@ -45,41 +55,30 @@ if ! "$venv/bin/rerun" --version 2> /dev/null | grep -q "0\.36\.3"; then
   "$venv/bin/python" -m pip install --quiet --disable-pip-version-check rerun-sdk==0.36.3
   "$venv/bin/rerun" analytics disable > /dev/null 2>&1 || true
 fi
+# The viewer's own binary, not the `rerun` Python shim that runs it as a child (a timeout
+# would stop the shim and leave the viewer running).
+viewer="$("$venv/bin/python" -c 'import os, rerun_cli; print(os.path.join(os.path.dirname(rerun_cli.__file__), "rerun"))')"
+[ -x "$viewer" ] || { echo "no rerun viewer binary at $viewer" >&2; exit 1; }
 
-# A private X display; Xvfb picks a free number and writes it to fd 3.
 work="$(mktemp -d)"
-xvfb_pid=""
-cleanup() {
-  [ -n "$xvfb_pid" ] && kill "$xvfb_pid" 2> /dev/null || true
-  rm -rf "$work"
-}
-trap cleanup EXIT
-Xvfb -displayfd 3 -screen 0 "${size}x24" -extension Composite -nolisten tcp \
-  3> "$work/display" 2> "$work/xvfb.log" &
-xvfb_pid=$!
-for _ in $(seq 1 100); do
-  [ -s "$work/display" ] && break
-  sleep 0.1
-done
-if ! [ -s "$work/display" ]; then
-  echo "Xvfb did not start:" >&2
-  cat "$work/xvfb.log" >&2
-  exit 1
-fi
-display=":$(head -n1 "$work/display")"
+trap 'rm -rf "$work"' EXIT
 
 rm -f "$out"
 mkdir -p "$(dirname "$out")"
 set +e
-DISPLAY="$display" WGPU_BACKEND=vulkan RERUN_ANALYTICS=0 \
-  timeout 300 "$venv/bin/rerun" --window-size "$size" --screenshot-to "$out" "$file" \
-  > "$work/rerun.log" 2>&1
+env -u DISPLAY -u WAYLAND_DISPLAY WGPU_BACKEND=vulkan RERUN_ANALYTICS=0 RUST_LOG=error \
+  timeout --kill-after=10 300 "$viewer" --headless --new --window-size "$size" \
+  --screenshot-to "$out" "$file" > "$work/rerun.log" 2>&1
 status=$?
 set -e
-if [ -s "$out" ] && identify "$out" > /dev/null 2>&1; then
-  echo "$out ($(identify -format '%wx%h' "$out"); rerun exited $status)"
-else
+if ! [ -s "$out" ] || ! identify "$out" > /dev/null 2>&1; then
   echo "no screenshot (rerun exited $status):" >&2
   tail -n 20 "$work/rerun.log" >&2
   exit 1
 fi
+if grep -aq "ERROR" "$work/rerun.log"; then
+  echo "$out: the viewer logged errors, which the picture may show as notifications:" >&2
+  grep -a -A4 "ERROR" "$work/rerun.log" | head -n 40 >&2
+  exit 1
+fi
+echo "$out ($(identify -format '%wx%h' "$out"); rerun exited $status)"
