@@ -29,8 +29,8 @@
 //! - `graph`: the node graph as rerun `GraphNodes`/`GraphEdges`. Rerun's edges carry no
 //!   labels, so topics are drawn as nodes of their own, as ROS's rqt_graph does, in another
 //!   colour; positions run left to right from the sources; labels show the rates and depths
-//!   (a topic with QoS beyond the depth shows it in short on a second line, `KL1 latest dl 30 ms link
-//!   20%`) and are re-logged when they change;
+//!   (a topic with QoS beyond the depth shows it in short, a part a line under its name:
+//!   `dl 30 ms zero`, `link 20%`) and are re-logged when they change;
 //! - `nodes/<name>/lateness_us`: per-tick lateness of each node (real clock only);
 //! - across processes (a launch's recording): `bus/<topic>/wire_{p50,p99}_us` for each topic
 //!   that crosses processes (its samples' time on the wire so far, as the subscriber's
@@ -611,6 +611,30 @@ fn plot(
     base: Option<(f64, f64)>,
     extents: Option<&Extents>,
 ) -> ViewSpec {
+    plot_with_legend(key, name, entities, base, extents, bpc::Corner2D::RightTop)
+}
+
+/// [`plot`] of totals (counters that only grow, from 0 at the start): their lines rise from
+/// bottom left to top right, so the legend sits top left, where they never are.
+fn totals_plot(
+    key: &str,
+    name: &str,
+    entities: Vec<String>,
+    base: Option<(f64, f64)>,
+    extents: Option<&Extents>,
+) -> ViewSpec {
+    plot_with_legend(key, name, entities, base, extents, bpc::Corner2D::LeftTop)
+}
+
+/// [`plot`] with its legend in `corner`.
+fn plot_with_legend(
+    key: &str,
+    name: &str,
+    entities: Vec<String>,
+    base: Option<(f64, f64)>,
+    extents: Option<&Extents>,
+    corner: bpc::Corner2D,
+) -> ViewSpec {
     let seen = extents.map(|ext| {
         entities
             .iter()
@@ -624,14 +648,11 @@ fn plot(
         (Some(r), None) | (None, Some(r)) => Some(r),
         (None, None) => None,
     };
-    // The legend sits top right (the start and change markers are on the left); the time
-    // axes are linked: zoom or pan one plot and every plot follows.
+    // The legend sits top right unless said (the start and change markers are on the
+    // left); the time axes are linked: zoom or pan one plot and every plot follows.
     let view = ViewSpec::new(key, "TimeSeries", name)
         .contents(entities)
-        .property(
-            "PlotLegend",
-            &bp::PlotLegend::new().with_corner(bpc::Corner2D::RightTop),
-        )
+        .property("PlotLegend", &bp::PlotLegend::new().with_corner(corner))
         .property(
             "TimeAxis",
             &bp::TimeAxis::new().with_link(bpc::LinkAxis::LinkToGlobal),
@@ -723,7 +744,7 @@ fn layout_for(shape: &GraphShape, cfg: &RunConfig, extents: Option<&Extents>) ->
             extents.map(|_| (0.0, 0.0)),
             extents,
         );
-        let skipped = plot(
+        let skipped = totals_plot(
             "skipped",
             "skipped ticks (total): periods a node's timer let pass, its thread held",
             each("skipped_ticks"),
@@ -766,8 +787,8 @@ fn layout_for(shape: &GraphShape, cfg: &RunConfig, extents: Option<&Extents>) ->
         )
     });
 
-    let bus = |measure: &str, title: &str| {
-        plot(
+    let bus = |measure: &str, title: &str, corner: bpc::Corner2D| {
+        plot_with_legend(
             &format!("bus-{measure}"),
             title,
             shape
@@ -777,16 +798,27 @@ fn layout_for(shape: &GraphShape, cfg: &RunConfig, extents: Option<&Extents>) ->
                 .collect(),
             extents.map(|_| (0.0, 0.0)),
             extents,
+            corner,
         )
     };
-    let published = bus("published", "bus: published (total)");
-    let msg_per_s = bus("msg_per_s", "bus: msg/s (1 s window)");
-    let dropped = bus("dropped", "bus: dropped (total)");
+    // Totals rise from bottom left: their legends top left. Rates run along the top once
+    // they settle: bottom right.
+    let published = bus(
+        "published",
+        "bus: published (total)",
+        bpc::Corner2D::LeftTop,
+    );
+    let msg_per_s = bus(
+        "msg_per_s",
+        "bus: msg/s (1 s window)",
+        bpc::Corner2D::RightBottom,
+    );
+    let dropped = bus("dropped", "bus: dropped (total)", bpc::Corner2D::LeftTop);
     // QoS counters only where a topic's QoS can make them count (or they did): the
     // chapter's graph has no such view.
     let qos = qos_series(shape, extents);
     let qos = (!qos.is_empty()).then(|| {
-        plot(
+        totals_plot(
             "bus-qos",
             "QoS: counters (total)",
             qos,
@@ -796,7 +828,7 @@ fn layout_for(shape: &GraphShape, cfg: &RunConfig, extents: Option<&Extents>) ->
     });
     let alive = liveliness_series(shape, extents);
     let alive = (!alive.is_empty()).then(|| {
-        plot(
+        totals_plot(
             "liveliness",
             "liveliness: times a node went not alive (total)",
             alive,
@@ -1751,13 +1783,21 @@ impl RecordingObserver {
             } else {
                 let topic = shape.topics.iter().find(|t| t.name == id);
                 let depth = topic.map_or(0, |t| (t.stats)().depth);
-                // A topic with QoS beyond the depth shows it in short (`KL1 latest dl 30 ms`)
-                // on a second line, so the label stays about as wide as its neighbours.
+                // A topic with QoS beyond the depth shows it in short, a part a line under
+                // its name (`dl 30 ms zero`, `link 20%`), so the label stays about as wide
+                // as its neighbours (one line of every part made the graph's text tiny and
+                // the label covered its arrows); the chapter's keep-last/latest rule goes
+                // without saying (the depth is on the first line).
                 match topic.map(|t| (t.live_qos)()).filter(|q| !q.is_default()) {
-                    Some(q) => (
-                        format!("{id} · depth {depth}\n{}", q.short(depth)),
-                        TOPIC_COLOR,
-                    ),
+                    Some(q) => {
+                        let mut lines = vec![format!("{id} · depth {depth}")];
+                        lines.extend(
+                            q.short_parts(depth)
+                                .into_iter()
+                                .filter(|p| !(p.starts_with("KL") && p.ends_with(" latest"))),
+                        );
+                        (lines.join("\n"), TOPIC_COLOR)
+                    }
                     None => (format!("{id} · depth {depth}"), TOPIC_COLOR),
                 }
             }

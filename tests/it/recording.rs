@@ -963,7 +963,8 @@ fn a_qos_run_plots_its_counters_and_logs_its_events() {
         "seen at or after the instant: {lost_step}"
     );
     assert_eq!(at("node policy alive again").0, 2_300_000_000);
-    // The graph labels the topic with its QoS in short.
+    // The graph labels the topic with its QoS in short, a part a line (the chapter's
+    // keep-last/latest goes without saying).
     let labels: Vec<String> = all
         .iter()
         .filter(|c| c.entity_path().to_string() == "/graph")
@@ -974,7 +975,7 @@ fn a_qos_run_plots_its_counters_and_logs_its_events() {
     assert!(
         labels
             .iter()
-            .any(|l| l == "/cmd · depth 1\nKL1 latest dl 30 ms zero link 20%"),
+            .any(|l| l == "/cmd · depth 1\ndl 30 ms zero\nlink 20%"),
         "{labels:?}"
     );
     assert!(labels.iter().any(|l| l == "/obs · depth 1"), "{labels:?}");
