@@ -303,6 +303,9 @@ impl Engine {
         if open || policy.contains(".py") {
             return;
         }
+        // Under the real clock the judge is still a virtual-clock run: said so (a real-clock
+        // run's jitter moves its fall, or keeps it up).
+        let real = cfg.clock == ClockKind::Real;
         let mut fresh = cfg.clone();
         fresh.graph = spec;
         fresh.clock = ClockKind::Virtual;
@@ -317,9 +320,16 @@ impl Engine {
                 let Ok(r) = crate::run::run(&fresh, brain, crate::run::RunOptions::new()) else {
                     return;
                 };
-                let verdict = match r.metrics.fell_at_s {
-                    Some(t) => format!("a fresh run falls at {t:.2} s: judge no sooner"),
-                    None => format!("a fresh run balances {:.0} s", fresh.duration.as_secs_f64()),
+                let secs = fresh.duration.as_secs_f64();
+                let verdict = match (r.metrics.fell_at_s, real) {
+                    (Some(t), false) => format!("a fresh run falls at {t:.2} s: judge no sooner"),
+                    (None, false) => format!("a fresh run balances {secs:.0} s"),
+                    (Some(t), true) => {
+                        format!("a fresh virtual-clock run falls at {t:.2} s (real runs vary)")
+                    }
+                    (None, true) => {
+                        format!("a fresh virtual-clock run balances {secs:.0} s (real runs vary)")
+                    }
                 };
                 let _ = tx.send(Telemetry::Applied(format!("{text} · {verdict}")));
             });

@@ -672,3 +672,34 @@ fn a_live_rate_change_says_how_a_fresh_run_at_that_rate_goes() {
     ctl_tx.send(Control::Quit).unwrap();
     engine.join().unwrap();
 }
+
+/// Under the real clock the fresh run that judges a rate is still a virtual-clock run, and
+/// the notice says so (a real run at 8 Hz fell at 7.56 s once and balanced once, where the
+/// virtual clock's falls at 22.50 s).
+#[test]
+fn under_the_real_clock_the_fresh_run_says_it_is_the_virtual_clocks() {
+    let dir = tempfile::tempdir().unwrap();
+    let (ctl_tx, ctl_rx) = unbounded();
+    let (tel_tx, tel_rx) = unbounded::<Telemetry>();
+    let file = dir.path().join("session.json");
+    let settings = settings(ClockKind::Real, 0, true, Speed::Times(1.0), &file);
+    let engine = Engine::new(settings, ctl_rx, tel_tx).spawn();
+    ctl_tx
+        .send(Control::Apply(Command::SetControlHz { hz: 7.0 }))
+        .unwrap();
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(20);
+    let t = loop {
+        let left = deadline.saturating_duration_since(std::time::Instant::now());
+        match tel_rx.recv_timeout(left) {
+            Ok(Telemetry::Applied(t)) if t.contains("fresh") => break t,
+            Ok(_) => {}
+            Err(_) => panic!("no notice of a fresh run"),
+        }
+    };
+    assert!(
+        t.contains("a fresh virtual-clock run falls at 4.06 s (real runs vary)"),
+        "{t}"
+    );
+    ctl_tx.send(Control::Quit).unwrap();
+    engine.join().unwrap();
+}
