@@ -283,6 +283,16 @@ impl Live {
         }
     }
 
+    /// Topic `id`'s QoS counter `c` over the window (what it counted since the window's
+    /// baseline), as its drops and stale reads are.
+    pub fn window_counter(&self, id: TopicId, c: ratelab::qos::QosCounter) -> u64 {
+        let Some(last) = self.last() else { return 0 };
+        let base = self
+            .window_base()
+            .map_or(0, |b| b.topics.get(id).counter(c));
+        last.topics.get(id).counter(c).saturating_sub(base)
+    }
+
     /// Topic `id` since the segment started.
     pub fn segment_topic(&self, id: TopicId) -> TopicCounts {
         match self.last() {

@@ -121,8 +121,8 @@ pub struct TopicView {
     pub staling: bool,
     /// Its QoS in short, in parts (`KA100 fifo`, `dl 40 ms`), when not the chapter's.
     pub qos: Option<Vec<String>>,
-    /// The QoS counters it reports since the run started, labelled for the edge (`lost`,
-    /// `dl miss`, …).
+    /// The QoS counters it reports, over the window (as `dropped`), labelled for the edge
+    /// (`lost`, `dl miss`, …).
     pub qos_counts: Vec<(&'static str, u64)>,
     /// Dropped since the last change of settings (or the run's start).
     pub segment_dropped: u64,
@@ -570,30 +570,56 @@ fn render_node(n: &NodeView, area: Rect, buf: &mut Buffer, real: bool) {
         format!("{} Hz", hz(n.set_hz))
     };
     let mut lines = vec![Line::from(set)];
+    // Each figure in the first of its forms that fits the box whole (at 80 columns a box is
+    // 9 wide: `200 meas`, `p99 3.5ms`, never `200.0 mea` or `p99 3506 `).
+    let room = usize::from(area.width.saturating_sub(2));
+    let fit = |forms: Vec<String>| -> String {
+        let last = forms.last().cloned().unwrap_or_default();
+        forms
+            .into_iter()
+            .find(|f| f.chars().count() <= room)
+            .unwrap_or(last)
+    };
     match (n.published_hz, n.measured_hz, n.lateness_p99_us) {
-        (Some(p), ..) => lines.push(Line::from(format!("{p:.1} Hz sent"))),
+        (Some(p), ..) => lines.push(Line::from(fit(vec![
+            format!("{p:.1} Hz sent"),
+            format!("{p:.0} Hz sent"),
+            format!("{p:.0} sent"),
+        ]))),
         (None, Some(m), Some(l)) => {
-            lines.push(Line::from(if wide {
-                format!("{m:.1} Hz meas")
-            } else {
-                format!("{m:.1} meas")
-            }));
-            // "late" goes when the box is too narrow for it (at 80 columns, past 999 µs).
-            let late = format!("p99 {l:.0} µs late");
-            let late = if late.chars().count() <= usize::from(area.width.saturating_sub(2)) {
-                late
-            } else {
-                format!("p99 {l:.0} µs")
-            };
-            lines.push(Line::from(late).dim());
+            let mut meas = vec![format!("{m:.1} meas"), format!("{m:.0} meas")];
+            if wide {
+                meas.insert(0, format!("{m:.1} Hz meas"));
+            }
+            lines.push(Line::from(fit(meas)));
+            // "late" goes before the figure is cut; past 999 µs in milliseconds.
+            let ms = l / 1000.0;
+            lines.push(
+                Line::from(fit(vec![
+                    format!("p99 {l:.0} µs late"),
+                    format!("p99 {ms:.1} ms late"),
+                    format!("p99 {l:.0} µs"),
+                    format!("p99 {l:.0}µs"),
+                    format!("p99 {ms:.1}ms"),
+                ]))
+                .dim(),
+            );
         }
         _ => match n.ran {
             // Executors under the virtual clock: what the timer achieved, and what it skipped.
             Some((hz, skipped)) => {
                 let text = match (skipped > 0, wide && area.width >= 22) {
                     (true, true) => format!("{hz:.1} Hz · {skipped} skip"),
-                    (true, false) => format!("{hz:.0} Hz·{skipped} skip"),
-                    (false, _) => format!("{hz:.1} Hz ran"),
+                    (true, false) => fit(vec![
+                        format!("{hz:.0} Hz·{skipped} skip"),
+                        format!("{hz:.0}Hz {skipped}skip"),
+                        format!("{skipped} skip"),
+                    ]),
+                    (false, _) => fit(vec![
+                        format!("{hz:.1} Hz ran"),
+                        format!("{hz:.0} Hz ran"),
+                        format!("{hz:.1} ran"),
+                    ]),
                 };
                 let line = Line::from(text);
                 lines.push(if skipped > 0 { line.yellow() } else { line });
@@ -728,8 +754,18 @@ fn arrow_lines(t: &TopicView, w: usize, rows: usize) -> Vec<Line<'static>> {
         format!("{}▶", shaft.repeat(w.saturating_sub(1))),
         style,
     ));
+    // The ✗ of an unhealthy topic stands by what went wrong, never by a count of 0 drops:
+    // by the QoS counter that counted (`53 lost ✗`), else by the rate a dead node starves.
+    let counted_first = t.qos_counts.iter().any(|(_, n)| *n > 0);
+    let fault_on_rate = t.unhealthy && !t.dropping && !counted_first;
     let rate = if t.uncounted {
         Line::from("? msg/s".red()).centered()
+    } else if fault_on_rate {
+        Line::from(vec![
+            Span::raw(format!("{:.1} msg/s ", t.msg_per_s)),
+            Span::styled("✗", style),
+        ])
+        .centered()
     } else {
         Line::from(format!("{:.1} msg/s", t.msg_per_s)).centered()
     };
@@ -743,13 +779,18 @@ fn arrow_lines(t: &TopicView, w: usize, rows: usize) -> Vec<Line<'static>> {
     };
     // The mark stays when the words do not fit (`25 drop ⚠` at 80 columns; the line may
     // take the column before the next box too).
+    let drop_mark = if t.unhealthy && !t.dropping {
+        String::new()
+    } else {
+        format!(" {mark}")
+    };
     let dropped = [
-        format!("{} dropped {mark}", t.dropped),
-        format!("{} drop {mark}", t.dropped),
+        format!("{} dropped{drop_mark}", t.dropped),
+        format!("{} drop{drop_mark}", t.dropped),
     ]
     .into_iter()
     .find(|d| d.chars().count() <= w + 1)
-    .unwrap_or_else(|| format!("{} {mark}", t.dropped));
+    .unwrap_or_else(|| format!("{}{drop_mark}", t.dropped));
     let dropped = Line::from(Span::styled(dropped, style)).centered();
     // The mirror image of a drop, with a symbol of its own: old data read again.
     let stale_style = if t.staling {
@@ -776,7 +817,7 @@ fn arrow_lines(t: &TopicView, w: usize, rows: usize) -> Vec<Line<'static>> {
     let Some(parts) = &t.qos else {
         let mut lines = vec![name, shaft, rate];
         let (drop_text, stale_text) = (
-            format!("{} drop {mark} ", t.dropped),
+            format!("{} drop{drop_mark} ", t.dropped),
             format!("{}↺", t.stale_reads),
         );
         let short =
@@ -859,7 +900,11 @@ fn arrow_lines(t: &TopicView, w: usize, rows: usize) -> Vec<Line<'static>> {
     let mut counted: Vec<&(&'static str, u64)> = t.qos_counts.iter().collect();
     counted.sort_by_key(|(_, n)| *n == 0);
     let counts = pack(
-        counted.iter().map(|(label, n)| format!("{n} {label}")),
+        counted.iter().enumerate().map(|(i, (label, n))| {
+            // The unhealthy topic's ✗ by the first counter that counted.
+            let fault = i == 0 && *n > 0 && t.unhealthy && !t.dropping;
+            format!("{n} {label}{}", if fault { " ✗" } else { "" })
+        }),
         " · ",
         w,
     );
@@ -1192,8 +1237,18 @@ fn render_segment(v: &View, area: Rect, buf: &mut Buffer) {
         line.extend(topics(short));
         candidates.push(line);
     }
-    // The narrowest: the totals without their "since" (the latency panel's title says it).
-    let mut line = vec![" ".into(), seg.window_label().bold(), " │ ".dim()];
+    // Narrower: the totals without their "since" (the latency panel's title says it), but
+    // still called totals (after "last 5 s" alone they read as the window's).
+    let mut line = vec![
+        " ".into(),
+        seg.window_label().bold(),
+        " │".dim(),
+        " totals: ".dim(),
+    ];
+    line.extend(topics(2));
+    candidates.push(line);
+    // The narrowest: the totals alone (the arrows' window is in the latency panel's foot).
+    let mut line = vec![" totals: ".dim()];
     line.extend(topics(2));
     candidates.push(line);
     let width = |l: &Vec<Span>| l.iter().map(|s| s.content.chars().count()).sum::<usize>();
@@ -1203,6 +1258,12 @@ fn render_segment(v: &View, area: Rect, buf: &mut Buffer) {
         .position(|l| width(l) <= area.width as usize)
         .map_or_else(|| candidates[last].clone(), |i| candidates[i].clone());
     Paragraph::new(Line::from(line)).render(area, buf);
+}
+
+/// `ms` to a tenth, rounded down (within float noise): a latency of 199.96 ms reads
+/// `199.9`, as the bar it is counted in (`<200`) says, not `200.0`.
+fn tenth_down(ms: f64) -> f64 {
+    ((ms * 10.0) + 1e-6).floor() / 10.0
 }
 
 fn render_latency(v: &View, area: Rect, buf: &mut Buffer) {
@@ -1219,7 +1280,10 @@ fn render_latency(v: &View, area: Rect, buf: &mut Buffer) {
     };
     let figures = format!(
         "n={}{no_cmd} │ p50 {:.1} │ p99 {:.1} │ max {:.1} ms ",
-        l.count, l.p50_ms, l.p99_ms, l.max_ms
+        l.count,
+        tenth_down(l.p50_ms),
+        tenth_down(l.p99_ms),
+        tenth_down(l.max_ms)
     );
     // "sense→act" and "since …" when the width allows them; the figures whole always.
     let title = [
@@ -1236,7 +1300,10 @@ fn render_latency(v: &View, area: Rect, buf: &mut Buffer) {
         v.segment.window_label().bold(),
         format!(
             ": n={} │ p50 {:.1} │ p99 {:.1} │ max {:.1} ms ",
-            w.count, w.p50_ms, w.p99_ms, w.max_ms
+            w.count,
+            tenth_down(w.p50_ms),
+            tenth_down(w.p99_ms),
+            tenth_down(w.max_ms)
         )
         .into(),
     ]);
@@ -1363,7 +1430,18 @@ fn render_help(area: Rect, buf: &mut Buffer, attached: bool) {
 
 #[cfg(test)]
 mod tests {
-    use super::fit_message;
+    use super::{fit_message, tenth_down};
+
+    #[test]
+    fn a_latency_reads_down_to_its_tenth_as_its_bar_counts_it() {
+        // In the `<200` bar, so not `200.0`.
+        assert_eq!(format!("{:.1}", tenth_down(199.96)), "199.9");
+        // Exact figures stay themselves, float noise or not.
+        for (ms, text) in [(200.0, "200.0"), (0.3, "0.3"), (40.2, "40.2"), (0.0, "0.0")] {
+            assert_eq!(format!("{:.1}", tenth_down(ms)), text);
+        }
+        assert_eq!(format!("{:.1}", tenth_down(300_000.0 / 1e6)), "0.3");
+    }
 
     #[test]
     fn a_long_status_keeps_what_changed_and_the_verdict() {
