@@ -183,11 +183,24 @@ pub fn render(v: &TimelineView, virtual_clock: bool, area: Rect, buf: &mut Buffe
         .zip(&v.letters)
         .map(|(n, c)| format!("{c} {n}"))
         .collect();
-    let title = format!(
-        " executor timeline, last {:.0} s (t: latency) │ {} │ red: a period late or over ",
-        WINDOW.as_secs_f64(),
-        legend.join(" · ")
-    );
+    // The first title that fits whole, the letters' legend kept the longest.
+    let secs = WINDOW.as_secs_f64();
+    let legend = legend.join(" · ");
+    let titles = [
+        format!(
+            " executor timeline, last {secs:.0} s (t: latency) │ {legend} │ red: a period late or over "
+        ),
+        format!(" executor timeline, last {secs:.0} s │ {legend} │ red: late "),
+        format!(" timeline │ {legend} │ red: late "),
+        format!(" {legend} │ red: late "),
+        format!(" {legend} "),
+    ];
+    let room = usize::from(area.width.saturating_sub(2));
+    let title = titles
+        .iter()
+        .find(|t| t.chars().count() <= room)
+        .unwrap_or(&titles[titles.len() - 1])
+        .clone();
     let block = Block::bordered().title(title);
     let inner = block.inner(area);
     block.render(area, buf);
@@ -254,7 +267,8 @@ pub fn render(v: &TimelineView, virtual_clock: bool, area: Rect, buf: &mut Buffe
         }
     }
     if v.lanes.len() > usize::from(rows) {
-        let more = format!(" +{} ", v.lanes.len() - usize::from(rows));
+        let hidden = v.lanes.len() - usize::from(rows);
+        let more = format!(" +{hidden} lane{} ", if hidden == 1 { "" } else { "s" });
         let x = inner.right().saturating_sub(more.len() as u16);
         buf.set_string(x, inner.y, more, Style::new().reversed());
     }
@@ -378,7 +392,11 @@ mod tests {
                     + "\n"
             })
             .collect();
-        assert!(text.contains("executor timeline"), "{text}");
+        // At 60 columns the title is the short one, whole: every node's letter and "red".
+        assert!(
+            text.contains("┌ timeline │ s sensor · p policy · a actuator │ red: late ─┐"),
+            "{text}"
+        );
         assert!(text.contains("main#1"), "{text}");
         assert!(text.contains("Ppppp"), "{text}");
         assert!(text.contains("0.00 s") && text.contains("1.00 s"), "{text}");

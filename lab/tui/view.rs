@@ -1381,8 +1381,12 @@ fn render_footer(v: &View, area: Rect, buf: &mut Buffer) {
             spans.push(format!("{keys} ").bold());
             spans.push(format!("{word} ").into());
         }
-        if let Some(m) = &v.message {
-            spans.push(Span::from(format!("  │ {m}")).italic());
+        // The last message after the keys, made to fit what is left (its verdict kept),
+        // or left out where too little is (never a cut word or a bare `│`).
+        let used: usize = spans.iter().map(|s| s.content.chars().count()).sum();
+        let left = usize::from(area.width).saturating_sub(used + 4);
+        if let (Some(m), true) = (&v.message, left >= 12) {
+            spans.push(Span::from(format!("  │ {}", fit_message(m, left))).italic());
         }
         Line::from(spans)
     };
