@@ -131,6 +131,12 @@ pub struct App {
     timeline: super::timeline::Timeline,
     /// The timeline shown in place of the latency histogram (key `t`).
     show_timeline: bool,
+    /// Under the real clock, the executors `x` asked for, for the next run (its threads are
+    /// made when a run starts): the timeline keeps drawing the ones that run.
+    pending_executor: Option<&'static str>,
+    /// The run time of the last change of settings, from which the executors' counts are
+    /// taken (a node's rate and skipped ticks never average over two settings).
+    exec_from: Option<Nanos>,
     last: Option<StepRecord>,
     verdict: Verdict,
     help: bool,
@@ -186,6 +192,8 @@ impl App {
             ticks: Vec::new(),
             timeline: Default::default(),
             show_timeline: false,
+            pending_executor: None,
+            exec_from: None,
             last: None,
             verdict: Verdict::Balanced,
             help: false,
@@ -330,6 +338,8 @@ impl App {
                 self.ticks = vec![VecDeque::new(); cfg.graph.nodes.len()];
                 self.timeline.clear();
                 self.exec.clear();
+                self.pending_executor = None;
+                self.exec_from = None;
                 if self.graph != cfg.graph {
                     self.selected = None;
                 }
@@ -432,6 +442,9 @@ impl App {
             }
             Telemetry::Changed { at, text } => {
                 self.live.change(at, text.clone());
+                // The executors' counts start again from the change (as the arrows do).
+                self.exec.retain(|(t, _)| *t >= at);
+                self.exec_from = Some(at);
                 self.say(text);
             }
             Telemetry::Ended { metrics, reason } => {
@@ -591,12 +604,22 @@ impl App {
             Msg::ToggleTimeline => self.show_timeline = !self.show_timeline,
             Msg::CycleExecutor => {
                 // One per node → one thread for all → two threads → one per node.
-                let next = match self.graph.executors.first().map(|e| (e.kind, e.threads)) {
-                    None => "single_threaded",
-                    Some((ExecutorKind::SingleThreaded, _)) => "multi_threaded:2",
-                    Some(_) => "per_node",
+                let current = self.pending_executor.unwrap_or_else(|| {
+                    match self.graph.executors.first().map(|e| e.kind) {
+                        None => "per_node",
+                        Some(ExecutorKind::SingleThreaded) => "single_threaded",
+                        Some(_) => "multi_threaded:2",
+                    }
+                });
+                let next = match current {
+                    "per_node" => "single_threaded",
+                    "single_threaded" => "multi_threaded:2",
+                    _ => "per_node",
                 };
-                if let Ok(over) = ExecutorOverride::parse(next) {
+                if self.clock == "real" {
+                    // From the next run: this run's threads stay, and so does its timeline.
+                    self.pending_executor = Some(next);
+                } else if let Ok(over) = ExecutorOverride::parse(next) {
                     self.graph.set_executor(over);
                 }
                 // The timeline shows what the executors do.
@@ -855,6 +878,8 @@ impl App {
             let &(ticks, skipped) = x.get(id.0)?;
             let (t0, base) = match self.exec.front() {
                 Some((t0, b)) if t0 < at => (*t0, b.get(id.0).copied()),
+                // One count since a change: nothing to rate yet.
+                _ if self.exec_from.is_some() => return None,
                 _ => (Nanos::ZERO, None),
             };
             let (ticks0, skipped0) = base.unwrap_or((1, 0));

@@ -785,6 +785,17 @@ mod tests {
         // rate and skips, not the run's.
         app.on_telemetry(status(9, vec![(401, 50), (401, 50), (451, 0)]));
         assert_eq!(app.view().nodes[0].ran, Some((50.0, 0)));
+        // A change of executors: the counts start again from it, never averaging the two
+        // (one count is nothing to rate yet).
+        app.on_telemetry(Telemetry::Changed {
+            at: ratelab::Nanos(9_500_000_000),
+            text: "executor → single_threaded".into(),
+        });
+        assert_eq!(app.view().nodes[0].ran, None);
+        app.on_telemetry(status(10, vec![(416, 65), (416, 65), (476, 0)]));
+        assert_eq!(app.view().nodes[0].ran, None);
+        app.on_telemetry(status(11, vec![(449, 82), (449, 82), (526, 0)]));
+        assert_eq!(app.view().nodes[0].ran, Some((33.0, 17)));
     }
 
     #[test]

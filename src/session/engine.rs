@@ -399,6 +399,29 @@ impl Engine {
         h: &GraphHandles,
         recording: &Option<Recording>,
     ) -> bool {
+        self.apply_from(cmd, at, h, recording, true)
+    }
+
+    /// [`Engine::apply`] of a command that takes effect from the next run (an executor under
+    /// the real clock): logged, but no change of this run's (no new segment, no mark).
+    pub(super) fn apply_for_next_run(
+        &mut self,
+        cmd: Command,
+        at: Nanos,
+        h: &GraphHandles,
+        recording: &Option<Recording>,
+    ) -> bool {
+        self.apply_from(cmd, at, h, recording, false)
+    }
+
+    fn apply_from(
+        &mut self,
+        cmd: Command,
+        at: Nanos,
+        h: &GraphHandles,
+        recording: &Option<Recording>,
+        now: bool,
+    ) -> bool {
         match cmd.apply(h) {
             Ok(()) => {
                 let text = describe(&cmd);
@@ -417,7 +440,9 @@ impl Engine {
                         command: cmd,
                     });
                 self.save_log();
-                let _ = self.tx.send(Telemetry::Changed { at, text });
+                if now {
+                    let _ = self.tx.send(Telemetry::Changed { at, text });
+                }
                 true
             }
             Err(e) => {

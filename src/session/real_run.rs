@@ -97,7 +97,12 @@ impl Engine {
                         );
                         let text = super::protocol::describe(&cmd);
                         let executor = matches!(cmd, Command::SetExecutor { .. });
-                        if self.apply(cmd, now(), &handles, recording) {
+                        let applied = if executor {
+                            self.apply_for_next_run(cmd, now(), &handles, recording)
+                        } else {
+                            self.apply(cmd, now(), &handles, recording)
+                        };
+                        if applied {
                             if rate {
                                 self.judge_fresh_run(cfg, &handles, text);
                             } else if executor {

@@ -703,3 +703,38 @@ fn under_the_real_clock_the_fresh_run_says_it_is_the_virtual_clocks() {
     ctl_tx.send(Control::Quit).unwrap();
     engine.join().unwrap();
 }
+
+/// Under the real clock a change of executors takes effect from the next run (its threads
+/// are made at the start): said so, and not announced as a change of this run (no new
+/// segment, no mark on the pole-angle chart, the timeline keeps the threads that run).
+#[test]
+fn under_the_real_clock_an_executor_change_waits_for_the_next_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let (ctl_tx, ctl_rx) = unbounded();
+    let (tel_tx, tel_rx) = unbounded::<Telemetry>();
+    let file = dir.path().join("session.json");
+    let settings = settings(ClockKind::Real, 0, true, Speed::Times(1.0), &file);
+    let engine = Engine::new(settings, ctl_rx, tel_tx).spawn();
+    ctl_tx
+        .send(Control::Apply(Command::SetExecutor {
+            executor: "single_threaded".into(),
+        }))
+        .unwrap();
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(20);
+    loop {
+        let left = deadline.saturating_duration_since(std::time::Instant::now());
+        match tel_rx.recv_timeout(left) {
+            Ok(Telemetry::Applied(t)) if t.contains("executor") => {
+                assert!(t.contains("from the next run"), "{t}");
+                break;
+            }
+            Ok(Telemetry::Changed { text, .. }) => {
+                panic!("announced as a change of this run: {text}")
+            }
+            Ok(_) => {}
+            Err(_) => panic!("no notice of the executor change"),
+        }
+    }
+    ctl_tx.send(Control::Quit).unwrap();
+    engine.join().unwrap();
+}
