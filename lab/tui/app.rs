@@ -137,6 +137,9 @@ pub struct App {
     /// The run time of the last change of settings, from which the executors' counts are
     /// taken (a node's rate and skipped ticks never average over two settings).
     exec_from: Option<Nanos>,
+    /// The rates and depths the run ended with (after a fall the keys set the next run's,
+    /// and the frozen figures stay beside the settings they were measured under).
+    ended_with: Option<(Vec<f64>, Vec<usize>)>,
     last: Option<StepRecord>,
     verdict: Verdict,
     help: bool,
@@ -194,6 +197,7 @@ impl App {
             show_timeline: false,
             pending_executor: None,
             exec_from: None,
+            ended_with: None,
             last: None,
             verdict: Verdict::Balanced,
             help: false,
@@ -340,6 +344,7 @@ impl App {
                 self.exec.clear();
                 self.pending_executor = None;
                 self.exec_from = None;
+                self.ended_with = None;
                 if self.graph != cfg.graph {
                     self.selected = None;
                 }
@@ -448,6 +453,20 @@ impl App {
                 self.say(text);
             }
             Telemetry::Ended { metrics, reason } => {
+                if self.ended_with.is_none() {
+                    let rates = (0..self.graph.nodes.len())
+                        .map(|i| self.rate_of(NodeId(i)))
+                        .collect();
+                    let depths = (0..self.graph.topics.len())
+                        .map(|i| {
+                            self.depths
+                                .get(i)
+                                .copied()
+                                .unwrap_or(self.graph.topics[i].depth)
+                        })
+                        .collect();
+                    self.ended_with = Some((rates, depths));
+                }
                 self.verdict = match &reason {
                     EndReason::NodeFailed { node, message } => {
                         Verdict::Failed(format!("{node}: {message}"))
@@ -807,7 +826,15 @@ impl App {
                     .collect::<Vec<_>>()
                     .join(", ")
             }),
-            depth: self.depths.get(id.0).copied().unwrap_or(spec.depth),
+            depth: self
+                .ended_with
+                .as_ref()
+                .and_then(|(_, d)| d.get(id.0).copied())
+                .unwrap_or_else(|| self.depths.get(id.0).copied().unwrap_or(spec.depth)),
+            next_depth: self.ended_with.as_ref().and_then(|(_, d)| {
+                let next = self.depths.get(id.0).copied().unwrap_or(spec.depth);
+                (d.get(id.0) != Some(&next)).then_some(next)
+            }),
             msg_per_s: window.msg_per_s,
             dropped: window.dropped,
             // A topic nobody reads evicts every message unread: not a drop anyone suffers.
@@ -891,10 +918,18 @@ impl App {
             };
             Some((hz, skipped.saturating_sub(skipped0)))
         });
+        // After the run ended: the rate it ran at, and the next run's when a key changed it.
+        let ran_hz = self
+            .ended_with
+            .as_ref()
+            .and_then(|(r, _)| r.get(id.0).copied());
         NodeView {
             name: self.graph.node(id).name.clone(),
             layer,
-            set_hz: self.rate_of(id),
+            set_hz: ran_hz.unwrap_or_else(|| self.rate_of(id)),
+            next_hz: ran_hz
+                .map(|_| self.rate_of(id))
+                .filter(|&next| Some(next) != ran_hz),
             measured_hz,
             published_hz: match (
                 self.graph.node(id).kind.code(),

@@ -937,6 +937,38 @@ mod tests {
         assert!(text.contains("node 'policy' failed: boom"), "{text}");
     }
 
+    /// After a fall the keys set the next run: the frozen figures stay beside the rate and
+    /// depth they were measured under, and the next run's show as next.
+    #[test]
+    fn after_a_fall_the_next_runs_settings_show_as_next() {
+        let (mut app, _rx) = app_after(virtual_cfg(5.0, 10), true);
+        assert!(matches!(app.view().verdict, super::view::Verdict::Fell(_)));
+        // The engine's status after `+` on the policy and `]`: the next run's settings.
+        app.on_telemetry(Telemetry::Status {
+            now: ratelab::Nanos(840_000_000),
+            paused: false,
+            speed: Speed::Times(1.0),
+            rates: vec![50.0, 6.0, 50.0],
+            depths: vec![2, 2],
+            qos: vec![ratelab::qos::TopicQos::default(); 2],
+            alive: vec![None; 3],
+            policy: "scripted balancer".into(),
+            exec: None,
+        });
+        let v = app.view();
+        let policy = v.nodes.iter().find(|n| n.name == "policy").unwrap();
+        assert_eq!((policy.set_hz, policy.next_hz), (5.0, Some(6.0)));
+        assert!(v
+            .topics
+            .iter()
+            .all(|t| t.depth == 1 && t.next_depth == Some(2)));
+        let wide = render(&app, 120, 40);
+        assert!(wide.contains("5→6 Hz next"), "{wide}");
+        assert!(wide.contains("depth 1 (next run 2)"), "{wide}");
+        let small = render(&app, 80, 24);
+        assert!(small.contains("5→6 Hz"), "{small}");
+    }
+
     #[test]
     fn an_attached_lab_names_each_nodes_process_and_draws_a_gone_one() {
         let (mut app, rx) = app_after(virtual_cfg(50.0, 2), false);

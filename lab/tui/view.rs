@@ -36,8 +36,10 @@ pub struct NodeView {
     pub layer: usize,
     /// Selected with Tab?
     pub selected: bool,
-    /// Rate as set, Hz.
+    /// Rate as set, Hz (after the run ended: the rate it ran at).
     pub set_hz: f64,
+    /// After the run ended: the next run's rate, Hz, when a key changed it.
+    pub next_hz: Option<f64>,
     /// Real clock: measured rate over the last second, Hz.
     pub measured_hz: Option<f64>,
     /// An external node (run by a ROS 2 program): the rate of what it publishes, msg/s
@@ -96,8 +98,10 @@ pub struct TopicView {
     /// With several subscribers, their names (each has a queue of its own; the arrow's
     /// drops and stale reads are their sums).
     pub fan_out: Option<String>,
-    /// History depth now.
+    /// History depth now (after the run ended: the depth it ran with).
     pub depth: usize,
+    /// After the run ended: the next run's depth, when a key changed it.
+    pub next_depth: Option<usize>,
     /// Selected with Tab?
     pub selected: bool,
     /// Messages per second over the window (the last 5 s, never across a change): the
@@ -392,17 +396,29 @@ fn render_status(v: &View, area: Rect, buf: &mut Buffer) {
     Paragraph::new(Line::from(spans)).render(area, buf);
 }
 
-/// `depth 1` when every topic has one depth, else each: `depths 1/5/1`.
+/// `depth 1` when every topic has one depth, else each: `depths 1/5/1`; after the run
+/// ended with a key changing one, the next run's too: `depth 1 (next run 2)`.
 fn depth_summary(topics: &[TopicView]) -> String {
-    match topics.first() {
-        Some(first) if topics.iter().all(|t| t.depth == first.depth) => {
-            format!("depth {}", first.depth)
-        }
+    let ran = depths_of(topics.iter().map(|t| t.depth));
+    if topics.iter().all(|t| t.next_depth.is_none()) {
+        return ran;
+    }
+    let next = depths_of(topics.iter().map(|t| t.next_depth.unwrap_or(t.depth)));
+    let next = next
+        .trim_start_matches("depths ")
+        .trim_start_matches("depth ");
+    format!("{ran} (next run {next})")
+}
+
+fn depths_of(depths: impl Iterator<Item = usize>) -> String {
+    let depths: Vec<usize> = depths.collect();
+    match depths.first() {
+        Some(first) if depths.iter().all(|d| d == first) => format!("depth {first}"),
         Some(_) => format!(
             "depths {}",
-            topics
+            depths
                 .iter()
-                .map(|t| t.depth.to_string())
+                .map(|d| d.to_string())
                 .collect::<Vec<_>>()
                 .join("/")
         ),
@@ -564,10 +580,12 @@ fn render_graph(v: &View, area: Rect, buf: &mut Buffer) {
 /// just started again, is being measured, not on virtual time).
 fn render_node(n: &NodeView, area: Rect, buf: &mut Buffer, real: bool) {
     let wide = area.width >= 14;
-    let set = if wide {
-        format!("{} Hz set", hz(n.set_hz))
-    } else {
-        format!("{} Hz", hz(n.set_hz))
+    let set = match (n.next_hz, wide) {
+        // After the run ended, the rate it ran at beside the next run's.
+        (Some(next), true) => format!("{}→{} Hz next", hz(n.set_hz), hz(next)),
+        (Some(next), false) => format!("{}→{} Hz", hz(n.set_hz), hz(next)),
+        (None, true) => format!("{} Hz set", hz(n.set_hz)),
+        (None, false) => format!("{} Hz", hz(n.set_hz)),
     };
     let mut lines = vec![Line::from(set)];
     // Each figure in the first of its forms that fits the box whole (at 80 columns a box is
