@@ -832,7 +832,8 @@ fn layout_for(shape: &GraphShape, cfg: &RunConfig, extents: Option<&Extents>) ->
             "liveliness",
             "liveliness: times a node went not alive (total)",
             alive,
-            extents.map(|_| (0.0, 1.0)),
+            // Room above a single loss, under the legend top left.
+            extents.map(|_| (0.0, 2.0)),
             extents,
         )
     });

@@ -177,7 +177,17 @@ impl Fold {
             while self.queued[i].front().is_some_and(|(t, _)| *t <= step.t) {
                 self.shown[i] = self.queued[i].pop_front().map(|(_, s)| s);
             }
-            if let Some(s) = self.shown[i].or(self.carried.total(i)) {
+            let before_first = self.queued[i].front().map(|(_, first)| {
+                // Every sample is later than the step: nothing counted yet by this holder
+                // (what the processes before it counted, if any), never its newer counts,
+                // which made a total run backwards and a rate read low.
+                let none = TopicStats {
+                    depth: first.depth,
+                    ..TopicStats::default()
+                };
+                self.carried.continued(i, &none)
+            });
+            if let Some(s) = self.shown[i].or(before_first).or(self.carried.total(i)) {
                 out.topics.set(TopicId(i), s);
             }
         }
@@ -1132,7 +1142,9 @@ mod tests {
         assert_eq!(
             shown,
             [
-                stats(5, 0), // before its first sample: its newest figures
+                // Before its first sample: nothing counted yet (its newest figures, 5,
+                // then 1 at 10 ms, ran the total backwards).
+                stats(0, 0),
                 stats(1, 0),
                 stats(1, 0),
                 stats(2, 0),
