@@ -852,7 +852,8 @@ fn launcher_line_level(line: &str) -> &'static str {
 /// closed: each merged step (the plant, the latency, every topic's counters as its holder
 /// reported them; the force the policy published, from the step), each node tick's
 /// lateness (real clock), the launcher's lines as events, and each node's liveliness token
-/// going and coming back as events. The caller finishes the recording with the merged
+/// going and coming back as events (stamped with the newest run time any process reported,
+/// [`Telemetry::Status`]'s `now`). The caller finishes the recording with the merged
 /// summary ([`Recording::finish`]).
 ///
 /// What differs from an in-process recording: a topic held by another process shows its
@@ -911,7 +912,15 @@ pub fn record(
             }
             Telemetry::Applied(line) => rec.event(now, &line, launcher_line_level(&line)),
             Telemetry::Error(line) => rec.event(now, &line, "WARN"),
-            Telemetry::Status { alive: next, .. } => {
+            Telemetry::Status {
+                now: seen,
+                alive: next,
+                ..
+            } => {
+                // The newest run time any process reported: events are stamped by it, not
+                // by the newest step shown, which waits for every holder's figures (a
+                // process gone and its rejoin were both stamped at the step before).
+                now = now.max(seen);
                 for (i, (was, is)) in alive.iter_mut().zip(next).enumerate() {
                     let name = &spec.nodes[i].name;
                     match (*was, is) {
