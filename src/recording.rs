@@ -780,7 +780,7 @@ fn layout_for(shape: &GraphShape, cfg: &RunConfig, extents: Option<&Extents>) ->
     let wire = (!wire.is_empty()).then(|| {
         plot(
             "wire",
-            "over the wire (µs): p50 and p99 of each crossing topic's samples so far",
+            "over the wire (µs): each crossing topic's p50, p99 so far",
             wire,
             extents.map(|_| (0.0, 0.0)),
             extents,
