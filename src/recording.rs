@@ -595,6 +595,25 @@ fn measures_executors(cfg: &RunConfig) -> bool {
 /// `rank` while idle and `rank + LANE_BUSY` while its tick holds a thread.
 const LANE_BUSY: f64 = 0.8;
 
+/// The top of a y range from 0 that gets a label above 0 in the stock viewer: its grid
+/// labels steps of a power of ten at least about 16 px apart, which a plot of the 1600×900
+/// layout (about 110 px, the range padded by a tenth either side) gives up to about 5.5 of,
+/// so a top over 5.5 × 10^k (a latency of 80 ms: eight steps of 10, too dense, and no step
+/// of 100 under it) shows "0" alone. Such a top is raised to 10^(k+1) (100: "0" and "100");
+/// a lower one stays (msg/s at 52: "0" to "50"; 300: "0" to "300"). Measured in the
+/// viewer's pictures: 5.2 steps labelled, 6.96 steps of a symmetric range not.
+fn label_top(hi: f64) -> f64 {
+    if !(hi.is_finite() && hi > 0.0) {
+        return hi;
+    }
+    let step = 10f64.powf(hi.log10().floor());
+    if hi / step > 5.5 {
+        step * 10.0
+    } else {
+        hi
+    }
+}
+
 /// A y range with a margin around `[lo, hi]`, so no line sits on the plot's edge.
 fn axis(lo: f64, hi: f64) -> bp::ScalarAxis {
     let pad = if hi > lo { (hi - lo) * 0.1 } else { 1.0 };
@@ -647,7 +666,14 @@ fn plot_with_legend(
         (Some((a, b)), Some((lo, hi))) => Some((a.min(lo), b.max(hi))),
         (Some(r), None) | (None, Some(r)) => Some(r),
         (None, None) => None,
-    };
+    }
+    .map(|(lo, hi)| {
+        if lo >= 0.0 {
+            (lo, label_top(hi))
+        } else {
+            (lo, hi)
+        }
+    });
     // The legend sits top right unless said (the start and change markers are on the
     // left); the time axes are linked: zoom or pan one plot and every plot follows.
     let view = ViewSpec::new(key, "TimeSeries", name)
@@ -2166,6 +2192,22 @@ impl StepObserver for RecordingObserver {
 mod tests {
     use super::shape::tests::shape;
     use super::*;
+
+    #[test]
+    fn a_plot_from_zero_reaches_a_labelled_step() {
+        // A real-clock latency of 80 ms: 0–100, so "100" is labelled, not "0" alone.
+        assert_eq!(label_top(80.0), 100.0);
+        assert_eq!(label_top(0.8), 1.0);
+        assert_eq!(label_top(2400.0), 2400.0);
+        // Steps of the power of ten already label it: kept.
+        assert_eq!(label_top(60.0), 100.0);
+        for hi in [300.0, 50.0, 52.0, 500.0, 1.0, 100.0, 5.0] {
+            assert_eq!(label_top(hi), hi);
+        }
+        // Nothing to label: as is.
+        assert_eq!(label_top(0.0), 0.0);
+        assert!(label_top(f64::NAN).is_nan());
+    }
 
     #[test]
     fn a_topic_keeps_its_colour_in_every_graph_and_equal_lines_stay_visible() {
