@@ -667,8 +667,10 @@ fn plot_with_legend(
         (Some(r), None) | (None, Some(r)) => Some(r),
         (None, None) => None,
     }
+    // Only a range fitted to the data from 0 (a latency, a count): a scale chosen up front
+    // (an executor's lanes, a liveliness count) stays as chosen.
     .map(|(lo, hi)| {
-        if lo >= 0.0 {
+        if base == Some((0.0, 0.0)) && lo >= 0.0 {
             (lo, label_top(hi))
         } else {
             (lo, hi)
@@ -2199,8 +2201,8 @@ mod tests {
         assert_eq!(label_top(80.0), 100.0);
         assert_eq!(label_top(0.8), 1.0);
         assert_eq!(label_top(2400.0), 2400.0);
-        // Steps of the power of ten already label it: kept.
         assert_eq!(label_top(60.0), 100.0);
+        // Steps of the power of ten already label it: kept.
         for hi in [300.0, 50.0, 52.0, 500.0, 1.0, 100.0, 5.0] {
             assert_eq!(label_top(hi), hi);
         }

@@ -134,8 +134,8 @@ pub struct App {
     /// Under the real clock, the executors `x` asked for, for the next run (its threads are
     /// made when a run starts): the timeline keeps drawing the ones that run.
     pending_executor: Option<&'static str>,
-    /// The run time of the last change of settings, from which the executors' counts are
-    /// taken (a node's rate and skipped ticks never average over two settings).
+    /// The run time of the last change of settings (the executors' counts before it are
+    /// dropped, so a node's rate and skipped ticks never average over two settings).
     exec_from: Option<Nanos>,
     /// The rates and depths the run ended with (after a fall the keys set the next run's,
     /// and the frozen figures stay beside the settings they were measured under).
@@ -635,8 +635,9 @@ impl App {
                     "single_threaded" => "multi_threaded:2",
                     _ => "per_node",
                 };
-                if self.clock == "real" {
-                    // From the next run: this run's threads stay, and so does its timeline.
+                if self.clock == "real" || self.ended_with.is_some() {
+                    // From the next run (the real clock's threads are made at its start; a
+                    // run that ended keeps its frozen timeline).
                     self.pending_executor = Some(next);
                 } else if let Ok(over) = ExecutorOverride::parse(next) {
                     self.graph.set_executor(over);

@@ -964,7 +964,7 @@ mod tests {
             .all(|t| t.depth == 1 && t.next_depth == Some(2)));
         let wide = render(&app, 120, 40);
         assert!(wide.contains("5→6 Hz next"), "{wide}");
-        assert!(wide.contains("depth 1 (next run 2)"), "{wide}");
+        assert!(wide.contains("depth 1→2 next"), "{wide}");
         let small = render(&app, 80, 24);
         assert!(small.contains("5→6 Hz"), "{small}");
     }

@@ -397,7 +397,7 @@ fn render_status(v: &View, area: Rect, buf: &mut Buffer) {
 }
 
 /// `depth 1` when every topic has one depth, else each: `depths 1/5/1`; after the run
-/// ended with a key changing one, the next run's too: `depth 1 (next run 2)`.
+/// ended with a key changing one, the next run's too: `depth 1→2 next`.
 fn depth_summary(topics: &[TopicView]) -> String {
     let ran = depths_of(topics.iter().map(|t| t.depth));
     if topics.iter().all(|t| t.next_depth.is_none()) {
@@ -407,7 +407,7 @@ fn depth_summary(topics: &[TopicView]) -> String {
     let next = next
         .trim_start_matches("depths ")
         .trim_start_matches("depth ");
-    format!("{ran} (next run {next})")
+    format!("{ran}→{next} next")
 }
 
 fn depths_of(depths: impl Iterator<Item = usize>) -> String {
@@ -580,14 +580,6 @@ fn render_graph(v: &View, area: Rect, buf: &mut Buffer) {
 /// just started again, is being measured, not on virtual time).
 fn render_node(n: &NodeView, area: Rect, buf: &mut Buffer, real: bool) {
     let wide = area.width >= 14;
-    let set = match (n.next_hz, wide) {
-        // After the run ended, the rate it ran at beside the next run's.
-        (Some(next), true) => format!("{}→{} Hz next", hz(n.set_hz), hz(next)),
-        (Some(next), false) => format!("{}→{} Hz", hz(n.set_hz), hz(next)),
-        (None, true) => format!("{} Hz set", hz(n.set_hz)),
-        (None, false) => format!("{} Hz", hz(n.set_hz)),
-    };
-    let mut lines = vec![Line::from(set)];
     // Each figure in the first of its forms that fits the box whole (at 80 columns a box is
     // 9 wide: `200 meas`, `p99 3.5ms`, never `200.0 mea` or `p99 3506 `).
     let room = usize::from(area.width.saturating_sub(2));
@@ -598,6 +590,21 @@ fn render_node(n: &NodeView, area: Rect, buf: &mut Buffer, real: bool) {
             .find(|f| f.chars().count() <= room)
             .unwrap_or(last)
     };
+    let set = match (n.next_hz, wide) {
+        // After the run ended, the rate it ran at beside the next run's.
+        (Some(next), _) => {
+            let (ran, next) = (hz(n.set_hz), hz(next));
+            fit(vec![
+                format!("{ran}→{next} Hz next"),
+                format!("{ran}→{next} Hz"),
+                format!("{ran}→{next}"),
+                format!("→{next} Hz"),
+            ])
+        }
+        (None, true) => format!("{} Hz set", hz(n.set_hz)),
+        (None, false) => format!("{} Hz", hz(n.set_hz)),
+    };
+    let mut lines = vec![Line::from(set)];
     match (n.published_hz, n.measured_hz, n.lateness_p99_us) {
         (Some(p), ..) => lines.push(Line::from(fit(vec![
             format!("{p:.1} Hz sent"),
@@ -773,14 +780,27 @@ fn arrow_lines(t: &TopicView, w: usize, rows: usize) -> Vec<Line<'static>> {
         style,
     ));
     // The ✗ of an unhealthy topic stands by what went wrong, never by a count of 0 drops:
-    // by the QoS counter that counted (`53 lost ✗`), else by the rate a dead node starves.
-    let counted_first = t.qos_counts.iter().any(|(_, n)| *n > 0);
-    let fault_on_rate = t.unhealthy && !t.dropping && !counted_first;
+    // by its losses or missed deadlines where its QoS counters show (`53 lost ✗`), else by
+    // its rate (a dead node starves it; a default-QoS topic's losses on the wire).
+    let faulty = |label: &str| label == "lost" || label == "dl miss";
+    let fault_counted = t.qos.is_some()
+        && t.qos_counts
+            .iter()
+            .any(|(label, n)| *n > 0 && faulty(label));
+    let fault_on_rate = t.unhealthy && !t.dropping && !fault_counted;
     let rate = if t.uncounted {
         Line::from("? msg/s".red()).centered()
     } else if fault_on_rate {
+        let text = [
+            format!("{:.1} msg/s", t.msg_per_s),
+            format!("{:.0} msg/s", t.msg_per_s),
+            format!("{:.0}/s", t.msg_per_s),
+        ]
+        .into_iter()
+        .find(|r| r.chars().count() + 2 <= w + 1)
+        .unwrap_or_else(|| format!("{:.0}", t.msg_per_s));
         Line::from(vec![
-            Span::raw(format!("{:.1} msg/s ", t.msg_per_s)),
+            Span::raw(format!("{text} ")),
             Span::styled("✗", style),
         ])
         .centered()
@@ -917,11 +937,14 @@ fn arrow_lines(t: &TopicView, w: usize, rows: usize) -> Vec<Line<'static>> {
     // must not give way to "0 expired").
     let mut counted: Vec<&(&'static str, u64)> = t.qos_counts.iter().collect();
     counted.sort_by_key(|(_, n)| *n == 0);
+    // The unhealthy topic's ✗ by the first of its losses or missed deadlines that counted.
+    let marked = counted
+        .iter()
+        .position(|(label, n)| *n > 0 && faulty(label))
+        .filter(|_| t.unhealthy && !t.dropping);
     let counts = pack(
         counted.iter().enumerate().map(|(i, (label, n))| {
-            // The unhealthy topic's ✗ by the first counter that counted.
-            let fault = i == 0 && *n > 0 && t.unhealthy && !t.dropping;
-            format!("{n} {label}{}", if fault { " ✗" } else { "" })
+            format!("{n} {label}{}", if Some(i) == marked { " ✗" } else { "" })
         }),
         " · ",
         w,

@@ -52,7 +52,9 @@ pub struct MemberOptions {
 type Forward = dyn Fn(usize) -> Vec<(usize, u64)> + Send + Sync;
 
 /// One crossing topic's sending end in its publisher's process: the bridge element that
-/// puts each message on the wire as it is published.
+/// puts each message on the wire as it is published, from the topic's tap, under the topic's
+/// lock and within the publishing tick (as ROS 2's `publish()` hands a message to its
+/// middleware before it returns): a tick's measured time includes its sends.
 struct Outlet {
     publisher: zenoh::pubsub::Publisher<'static>,
     /// The newest seq sent since the publishing tick ended last ([`NOT_SENT`]: none).
@@ -74,8 +76,8 @@ impl Outlet {
     }
 
     /// Send one message (called from the topic's tap, as it is published). Past
-    /// [`wire::MAX_SENT_PER_TICK`] in one tick the rest of that tick's are not sent, and
-    /// the subscriber counts them lost on the wire.
+    /// [`wire::MAX_SENT_PER_TICK`] in one tick the rest of that tick's are not sent (the
+    /// subscriber counts them lost on the wire when a later one arrives).
     fn send(&self, seq: u64, stamp: Nanos, origin: Option<Nanos>, data: &crate::msg::MsgData) {
         if self.this_tick.fetch_add(1, Ordering::Relaxed) >= wire::MAX_SENT_PER_TICK as u64 {
             return;

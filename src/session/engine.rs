@@ -325,10 +325,10 @@ impl Engine {
                     (Some(t), false) => format!("a fresh run falls at {t:.2} s: judge no sooner"),
                     (None, false) => format!("a fresh run balances {secs:.0} s"),
                     (Some(t), true) => {
-                        format!("a fresh virtual-clock run falls at {t:.2} s (real runs vary)")
+                        format!("a virtual-clock run falls at {t:.2} s (real runs vary)")
                     }
                     (None, true) => {
-                        format!("a fresh virtual-clock run balances {secs:.0} s (real runs vary)")
+                        format!("a virtual-clock run balances {secs:.0} s (real runs vary)")
                     }
                 };
                 let _ = tx.send(Telemetry::Applied(format!("{text} · {verdict}")));

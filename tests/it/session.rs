@@ -691,13 +691,13 @@ fn under_the_real_clock_the_fresh_run_says_it_is_the_virtual_clocks() {
     let t = loop {
         let left = deadline.saturating_duration_since(std::time::Instant::now());
         match tel_rx.recv_timeout(left) {
-            Ok(Telemetry::Applied(t)) if t.contains("fresh") => break t,
+            Ok(Telemetry::Applied(t)) if t.contains("virtual-clock run") => break t,
             Ok(_) => {}
             Err(_) => panic!("no notice of a fresh run"),
         }
     };
     assert!(
-        t.contains("a fresh virtual-clock run falls at 4.06 s (real runs vary)"),
+        t.contains("a virtual-clock run falls at 4.06 s (real runs vary)"),
         "{t}"
     );
     ctl_tx.send(Control::Quit).unwrap();
@@ -725,7 +725,7 @@ fn under_the_real_clock_an_executor_change_waits_for_the_next_run() {
         let left = deadline.saturating_duration_since(std::time::Instant::now());
         match tel_rx.recv_timeout(left) {
             Ok(Telemetry::Applied(t)) if t.contains("executor") => {
-                assert!(t.contains("from the next run"), "{t}");
+                assert!(t.contains("(from the next run: r;"), "{t}");
                 break;
             }
             Ok(Telemetry::Changed { text, .. }) => {
