@@ -139,7 +139,7 @@ pub struct App {
     exec_from: Option<Nanos>,
     /// The rates and depths the run ended with (after a fall the keys set the next run's,
     /// and the frozen figures stay beside the settings they were measured under).
-    ended_with: Option<(Vec<f64>, Vec<usize>)>,
+    ended_with: Option<(Vec<f64>, Vec<usize>, Vec<TopicQos>)>,
     last: Option<StepRecord>,
     verdict: Verdict,
     help: bool,
@@ -465,7 +465,10 @@ impl App {
                                 .unwrap_or(self.graph.topics[i].depth)
                         })
                         .collect();
-                    self.ended_with = Some((rates, depths));
+                    let qos = (0..self.graph.topics.len())
+                        .map(|i| self.qos.get(i).copied().unwrap_or(self.graph.topics[i].qos))
+                        .collect();
+                    self.ended_with = Some((rates, depths, qos));
                 }
                 self.verdict = match &reason {
                     EndReason::NodeFailed { node, message } => {
@@ -812,7 +815,12 @@ impl App {
 
     fn topic_view(&self, id: TopicId) -> TopicView {
         let spec = self.graph.topic(id);
-        let qos = self.qos.get(id.0).copied().unwrap_or(spec.qos);
+        // After the run ended: the QoS it ran with (keys set the next run's).
+        let qos = self
+            .ended_with
+            .as_ref()
+            .and_then(|(_, _, q)| q.get(id.0).copied())
+            .unwrap_or_else(|| self.qos.get(id.0).copied().unwrap_or(spec.qos));
         let window = self.live.window_topic(id);
         let segment = self.live.segment_topic(id);
         let dead = |n: NodeId| self.alive.get(n.0).copied().flatten() == Some(false);
@@ -830,9 +838,9 @@ impl App {
             depth: self
                 .ended_with
                 .as_ref()
-                .and_then(|(_, d)| d.get(id.0).copied())
+                .and_then(|(_, d, _)| d.get(id.0).copied())
                 .unwrap_or_else(|| self.depths.get(id.0).copied().unwrap_or(spec.depth)),
-            next_depth: self.ended_with.as_ref().and_then(|(_, d)| {
+            next_depth: self.ended_with.as_ref().and_then(|(_, d, _)| {
                 let next = self.depths.get(id.0).copied().unwrap_or(spec.depth);
                 (d.get(id.0) != Some(&next)).then_some(next)
             }),
@@ -852,8 +860,14 @@ impl App {
             staling: window.stale_reads > 0,
             segment_dropped: segment.dropped,
             segment_stale_reads: segment.stale_reads,
-            qos: (!(qos.is_default() && spec.qos.is_default()))
-                .then(|| qos.short_parts(self.depths.get(id.0).copied().unwrap_or(spec.depth))),
+            qos: (!(qos.is_default() && spec.qos.is_default())).then(|| {
+                let depth = self
+                    .ended_with
+                    .as_ref()
+                    .and_then(|(_, d, _)| d.get(id.0).copied())
+                    .unwrap_or_else(|| self.depths.get(id.0).copied().unwrap_or(spec.depth));
+                qos.short_parts(depth)
+            }),
             // Over the window, as its drops and stale reads (totals counted from the start
             // read as 40 % loss on a 20 % link under an arrow saying "last 5 s").
             qos_counts: self.last.map_or_else(Vec::new, |l| {
@@ -923,7 +937,7 @@ impl App {
         let ran_hz = self
             .ended_with
             .as_ref()
-            .and_then(|(r, _)| r.get(id.0).copied());
+            .and_then(|(r, _, _)| r.get(id.0).copied());
         NodeView {
             name: self.graph.node(id).name.clone(),
             layer,
@@ -1084,9 +1098,13 @@ impl App {
                 self.timeline.view(
                     &self.graph,
                     &self.graph.execution_plan(),
-                    &(0..self.graph.nodes.len())
-                        .map(|i| self.rate_of(NodeId(i)))
-                        .collect::<Vec<_>>(),
+                    // The rates the ticks ran at (after a fall, not the next run's).
+                    &match &self.ended_with {
+                        Some((r, ..)) => r.clone(),
+                        None => (0..self.graph.nodes.len())
+                            .map(|i| self.rate_of(NodeId(i)))
+                            .collect::<Vec<_>>(),
+                    },
                     self.now,
                 )
             }),

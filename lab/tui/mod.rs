@@ -967,6 +967,13 @@ mod tests {
         assert!(wide.contains("depth 1→2 next"), "{wide}");
         let small = render(&app, 80, 24);
         assert!(small.contains("5→6 Hz"), "{small}");
+        // The header keeps the brain's label whole, cut at a word's end or left out.
+        let header = small.lines().next().unwrap();
+        assert!(header.contains("depth 1→2 next"), "{header}");
+        assert!(
+            !header.contains("balanc") || header.contains("balancer"),
+            "{header}"
+        );
     }
 
     #[test]

@@ -363,16 +363,28 @@ fn render_status(v: &View, area: Rect, buf: &mut Buffer) {
     if v.paused {
         spans.push(" PAUSED".yellow().bold());
     }
-    spans.push(
-        format!(
-            " │ t {:.2} s │ seed {} │ {} │ {} │ ",
-            v.sim_time_s,
-            v.seed,
-            depth_summary(&v.topics),
-            v.brain
-        )
-        .into(),
+    let fixed = format!(
+        " │ t {:.2} s │ seed {} │ {} │ ",
+        v.sim_time_s,
+        v.seed,
+        depth_summary(&v.topics)
     );
+    // The brain's label in what is left (cut at a word's end, or left out), so the line
+    // never runs off the screen mid-word.
+    let head: usize = spans.iter().map(|s| s.content.chars().count()).sum();
+    let room = usize::from(area.width).saturating_sub(head + fixed.chars().count() + 3);
+    let brain = if v.brain.chars().count() <= room {
+        v.brain.clone()
+    } else if room >= 8 {
+        fit_message(&v.brain, room)
+    } else {
+        String::new()
+    };
+    spans.push(if brain.is_empty() {
+        fixed.into()
+    } else {
+        format!("{fixed}{brain} │ ").into()
+    });
     let used: usize = spans.iter().map(|s| s.content.chars().count()).sum();
     match &v.recording {
         Some(p) => spans.push(
@@ -1368,7 +1380,8 @@ fn render_latency(v: &View, area: Rect, buf: &mut Buffer) {
 
 /// A status message made to fit `width` columns: whole when it fits; else its parts
 /// (separated by ` · `) from the middle out, keeping the first (what changed) and the last
-/// (the verdict: `a fresh run falls at 4.06 s: judge no sooner`); else cut with `…`.
+/// (the verdict: `a fresh run falls at 4.06 s: judge no sooner`); else cut with `…`, at a
+/// word's end where one is near.
 fn fit_message(m: &str, width: usize) -> String {
     let len = |s: &str| s.chars().count();
     if len(m) <= width {
@@ -1381,7 +1394,14 @@ fn fit_message(m: &str, width: usize) -> String {
             return short;
         }
     }
+    // Cut at a word's end where one is near, so no word is left half.
     let cut: String = m.chars().take(width.saturating_sub(1)).collect();
+    let cut = match cut.rfind(' ') {
+        Some(i) if cut[i..].chars().count() <= 16 && i > 0 => {
+            cut[..i].trim_end_matches([' ', '·']).to_string()
+        }
+        _ => cut,
+    };
     format!("{cut}…")
 }
 
@@ -1496,9 +1516,8 @@ mod tests {
             fit_message(m, 77),
             "control rate → 7 Hz · a fresh run falls at 4.06 s: judge no sooner"
         );
-        let cut = fit_message(m, 30);
-        assert_eq!(cut.chars().count(), 30);
-        assert!(cut.ends_with('…') && cut.starts_with("control rate → 7 Hz"));
+        // Cut at a word's end, never mid-word ("142.857" would have been "142.85").
+        assert_eq!(fit_message(m, 30), "control rate → 7 Hz…");
         assert_eq!(fit_message("short", 3), "sh…");
     }
 }
