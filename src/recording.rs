@@ -620,7 +620,18 @@ fn axis(lo: f64, hi: f64) -> bp::ScalarAxis {
     bp::ScalarAxis::new().with_range(rerun::components::Range1D::new(lo - pad, hi + pad))
 }
 
-/// A time series view of the series `entities` (exact paths), its legend top left. Its y
+/// A legend in `corner` (in place of [`plot`]'s top right).
+fn legend_at(view: ViewSpec, corner: bpc::Corner2D) -> ViewSpec {
+    view.property("PlotLegend", &bp::PlotLegend::new().with_corner(corner))
+}
+
+/// Totals (counters that only grow, from 0 at the start) rise from bottom left to top
+/// right: their legend sits top left, where they never are.
+fn totals(view: ViewSpec) -> ViewSpec {
+    legend_at(view, bpc::Corner2D::LeftTop)
+}
+
+/// A time series view of the series `entities` (exact paths), its legend top right. Its y
 /// range spans `base` (a scale chosen up front) and, when the run is over, every value the
 /// series took (`extents`); with neither, rerun fits the data itself.
 fn plot(
@@ -629,30 +640,6 @@ fn plot(
     entities: Vec<String>,
     base: Option<(f64, f64)>,
     extents: Option<&Extents>,
-) -> ViewSpec {
-    plot_with_legend(key, name, entities, base, extents, bpc::Corner2D::RightTop)
-}
-
-/// [`plot`] of totals (counters that only grow, from 0 at the start): their lines rise from
-/// bottom left to top right, so the legend sits top left, where they never are.
-fn totals_plot(
-    key: &str,
-    name: &str,
-    entities: Vec<String>,
-    base: Option<(f64, f64)>,
-    extents: Option<&Extents>,
-) -> ViewSpec {
-    plot_with_legend(key, name, entities, base, extents, bpc::Corner2D::LeftTop)
-}
-
-/// [`plot`] with its legend in `corner`.
-fn plot_with_legend(
-    key: &str,
-    name: &str,
-    entities: Vec<String>,
-    base: Option<(f64, f64)>,
-    extents: Option<&Extents>,
-    corner: bpc::Corner2D,
 ) -> ViewSpec {
     let seen = extents.map(|ext| {
         entities
@@ -676,11 +663,15 @@ fn plot_with_legend(
             (lo, hi)
         }
     });
-    // The legend sits top right unless said (the start and change markers are on the
-    // left); the time axes are linked: zoom or pan one plot and every plot follows.
+    // The legend sits top right (the start and change markers are on the left; other
+    // corners: `legend_at`); the time axes are linked: zoom or pan one plot and every plot
+    // follows.
     let view = ViewSpec::new(key, "TimeSeries", name)
         .contents(entities)
-        .property("PlotLegend", &bp::PlotLegend::new().with_corner(corner))
+        .property(
+            "PlotLegend",
+            &bp::PlotLegend::new().with_corner(bpc::Corner2D::RightTop),
+        )
         .property(
             "TimeAxis",
             &bp::TimeAxis::new().with_link(bpc::LinkAxis::LinkToGlobal),
@@ -772,13 +763,13 @@ fn layout_for(shape: &GraphShape, cfg: &RunConfig, extents: Option<&Extents>) ->
             extents.map(|_| (0.0, 0.0)),
             extents,
         );
-        let skipped = totals_plot(
+        let skipped = totals(plot(
             "skipped",
             "skipped ticks (total): periods a node's timer let pass, its thread held",
             each("skipped_ticks"),
             extents.map(|_| (0.0, 1.0)),
             extents,
-        );
+        ));
         for v in [timeline, response, skipped] {
             signals.push((1.0, Item::View(v)));
         }
@@ -815,8 +806,8 @@ fn layout_for(shape: &GraphShape, cfg: &RunConfig, extents: Option<&Extents>) ->
         )
     });
 
-    let bus = |measure: &str, title: &str, corner: bpc::Corner2D| {
-        plot_with_legend(
+    let bus = |measure: &str, title: &str| {
+        plot(
             &format!("bus-{measure}"),
             title,
             shape
@@ -826,44 +817,37 @@ fn layout_for(shape: &GraphShape, cfg: &RunConfig, extents: Option<&Extents>) ->
                 .collect(),
             extents.map(|_| (0.0, 0.0)),
             extents,
-            corner,
         )
     };
-    // Totals rise from bottom left: their legends top left. Rates run along the top once
-    // they settle: bottom right.
-    let published = bus(
-        "published",
-        "bus: published (total)",
-        bpc::Corner2D::LeftTop,
-    );
-    let msg_per_s = bus(
-        "msg_per_s",
-        "bus: msg/s (1 s window)",
+    let published = totals(bus("published", "bus: published (total)"));
+    // Rates run along the top once they settle: their legend bottom right.
+    let msg_per_s = legend_at(
+        bus("msg_per_s", "bus: msg/s (1 s window)"),
         bpc::Corner2D::RightBottom,
     );
-    let dropped = bus("dropped", "bus: dropped (total)", bpc::Corner2D::LeftTop);
+    let dropped = totals(bus("dropped", "bus: dropped (total)"));
     // QoS counters only where a topic's QoS can make them count (or they did): the
     // chapter's graph has no such view.
     let qos = qos_series(shape, extents);
     let qos = (!qos.is_empty()).then(|| {
-        totals_plot(
+        totals(plot(
             "bus-qos",
             "QoS: counters (total)",
             qos,
             extents.map(|_| (0.0, 0.0)),
             extents,
-        )
+        ))
     });
     let alive = liveliness_series(shape, extents);
     let alive = (!alive.is_empty()).then(|| {
-        totals_plot(
+        totals(plot(
             "liveliness",
             "liveliness: times a node went not alive (total)",
             alive,
             // Room above a single loss, under the legend top left.
             extents.map(|_| (0.0, 2.0)),
             extents,
-        )
+        ))
     });
     // A node's liveliness sits with the node's other plots (the middle column).
     if let Some(v) = alive {

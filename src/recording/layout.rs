@@ -59,8 +59,10 @@ impl ViewSpec {
         (&self.name, &self.contents)
     }
 
-    /// A view property, e.g. `("ScalarAxis", &ScalarAxis::new()…)`.
+    /// A view property, e.g. `("ScalarAxis", &ScalarAxis::new()…)`; one set before under
+    /// the same name is replaced (a view has one of each).
     pub(crate) fn property(mut self, name: &'static str, archetype: &dyn AsComponents) -> Self {
+        self.properties.retain(|(n, _)| *n != name);
         self.properties
             .push((name, archetype.as_serialized_batches()));
         self
@@ -289,5 +291,35 @@ mod tests {
         assert_ne!(a, uuid_string("view:latency"));
         assert_eq!(a.len(), 36);
         assert_eq!(&a[14..15], "4", "{a}");
+    }
+
+    #[test]
+    fn a_property_set_again_replaces_the_first() {
+        use rerun::external::re_sdk_types::blueprint::{
+            archetypes::PlotLegend, components::Corner2D,
+        };
+        let v = ViewSpec::new("k", "TimeSeries", "plot")
+            .property(
+                "PlotLegend",
+                &PlotLegend::new().with_corner(Corner2D::RightTop),
+            )
+            .property(
+                "PlotLegend",
+                &PlotLegend::new().with_corner(Corner2D::LeftTop),
+            );
+        let legends: Vec<_> = v
+            .properties
+            .iter()
+            .filter(|(n, _)| *n == "PlotLegend")
+            .collect();
+        assert_eq!(legends.len(), 1, "one legend per view");
+        let left = PlotLegend::new()
+            .with_corner(Corner2D::LeftTop)
+            .as_serialized_batches();
+        assert_eq!(
+            format!("{:?}", legends[0].1),
+            format!("{left:?}"),
+            "the later one"
+        );
     }
 }
