@@ -634,43 +634,66 @@ fn a_live_rate_change_says_when_it_keeps_an_old_phase() {
     );
 }
 
+/// A live engine for a test of its notices (held: its session file's directory).
+struct LiveEngine {
+    ctl: crossbeam_channel::Sender<Control>,
+    tel: crossbeam_channel::Receiver<Telemetry>,
+    engine: std::thread::JoinHandle<SessionLog>,
+    _dir: tempfile::TempDir,
+}
+
+impl LiveEngine {
+    /// An engine on the chapter's graph, started paused, under `clock`.
+    fn start(clock: ClockKind, speed: Speed) -> LiveEngine {
+        let dir = tempfile::tempdir().unwrap();
+        let (ctl, ctl_rx) = unbounded();
+        let (tel_tx, tel) = unbounded::<Telemetry>();
+        let settings = settings(clock, 0, true, speed, &dir.path().join("session.json"));
+        let engine = Engine::new(settings, ctl_rx, tel_tx).spawn();
+        LiveEngine {
+            ctl,
+            tel,
+            engine,
+            _dir: dir,
+        }
+    }
+
+    /// Apply `cmd`, then wait (at most 20 s) for the notice that contains `wanted`: the
+    /// notice, and every message the engine sent before it.
+    fn notice_after(&self, cmd: Command, wanted: &str) -> (String, Vec<Telemetry>) {
+        self.ctl.send(Control::Apply(cmd)).unwrap();
+        let deadline = std::time::Instant::now() + std::time::Duration::from_secs(20);
+        let mut before = Vec::new();
+        loop {
+            let left = deadline.saturating_duration_since(std::time::Instant::now());
+            match self.tel.recv_timeout(left) {
+                Ok(Telemetry::Applied(t)) if t.contains(wanted) => return (t, before),
+                Ok(other) => before.push(other),
+                Err(_) => panic!("no notice with '{wanted}'"),
+            }
+        }
+    }
+
+    fn quit(self) {
+        self.ctl.send(Control::Quit).unwrap();
+        self.engine.join().unwrap();
+    }
+}
+
 /// A live rate change is judged by a fresh run at the new settings (the headless result `r`
 /// gives), said as a notice: at 7 Hz the chapter's graph falls at 4.06 s from a fresh start
 /// (seed 0), at 25 Hz it balances, so a learner knows how long to wait before judging.
 #[test]
 fn a_live_rate_change_says_how_a_fresh_run_at_that_rate_goes() {
-    let dir = tempfile::tempdir().unwrap();
-    let (ctl_tx, ctl_rx) = unbounded();
-    let (tel_tx, tel_rx) = unbounded::<Telemetry>();
-    let file = dir.path().join("session.json");
-    let settings = settings(ClockKind::Virtual, 0, true, Speed::Max, &file);
-    let engine = Engine::new(settings, ctl_rx, tel_tx).spawn();
-    let notice = |want: &str| {
-        let deadline = std::time::Instant::now() + std::time::Duration::from_secs(20);
-        loop {
-            let left = deadline.saturating_duration_since(std::time::Instant::now());
-            match tel_rx.recv_timeout(left) {
-                Ok(Telemetry::Applied(t)) if t.contains("a fresh run") => return t,
-                Ok(_) => {}
-                Err(_) => panic!("no notice of a fresh run for {want}"),
-            }
-        }
-    };
-    ctl_tx
-        .send(Control::Apply(Command::SetControlHz { hz: 7.0 }))
-        .unwrap();
-    let t = notice("7 Hz");
+    let live = LiveEngine::start(ClockKind::Virtual, Speed::Max);
+    let (t, _) = live.notice_after(Command::SetControlHz { hz: 7.0 }, "a fresh run");
     assert!(
         t.contains("control rate → 7 Hz") && t.contains("a fresh run falls at 4.06 s"),
         "{t}"
     );
-    ctl_tx
-        .send(Control::Apply(Command::SetControlHz { hz: 25.0 }))
-        .unwrap();
-    let t = notice("25 Hz");
+    let (t, _) = live.notice_after(Command::SetControlHz { hz: 25.0 }, "a fresh run");
     assert!(t.contains("a fresh run balances 30 s"), "{t}");
-    ctl_tx.send(Control::Quit).unwrap();
-    engine.join().unwrap();
+    live.quit();
 }
 
 /// Under the real clock the fresh run that judges a rate is still a virtual-clock run, and
@@ -678,30 +701,13 @@ fn a_live_rate_change_says_how_a_fresh_run_at_that_rate_goes() {
 /// virtual clock's falls at 22.50 s).
 #[test]
 fn under_the_real_clock_the_fresh_run_says_it_is_the_virtual_clocks() {
-    let dir = tempfile::tempdir().unwrap();
-    let (ctl_tx, ctl_rx) = unbounded();
-    let (tel_tx, tel_rx) = unbounded::<Telemetry>();
-    let file = dir.path().join("session.json");
-    let settings = settings(ClockKind::Real, 0, true, Speed::Times(1.0), &file);
-    let engine = Engine::new(settings, ctl_rx, tel_tx).spawn();
-    ctl_tx
-        .send(Control::Apply(Command::SetControlHz { hz: 7.0 }))
-        .unwrap();
-    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(20);
-    let t = loop {
-        let left = deadline.saturating_duration_since(std::time::Instant::now());
-        match tel_rx.recv_timeout(left) {
-            Ok(Telemetry::Applied(t)) if t.contains("virtual-clock run") => break t,
-            Ok(_) => {}
-            Err(_) => panic!("no notice of a fresh run"),
-        }
-    };
+    let live = LiveEngine::start(ClockKind::Real, Speed::Times(1.0));
+    let (t, _) = live.notice_after(Command::SetControlHz { hz: 7.0 }, "virtual-clock run");
     assert!(
         t.contains("a virtual-clock run falls at 4.06 s (real runs vary)"),
         "{t}"
     );
-    ctl_tx.send(Control::Quit).unwrap();
-    engine.join().unwrap();
+    live.quit();
 }
 
 /// Under the real clock a change of executors takes effect from the next run (its threads
@@ -709,32 +715,16 @@ fn under_the_real_clock_the_fresh_run_says_it_is_the_virtual_clocks() {
 /// segment, no mark on the pole-angle chart, the timeline keeps the threads that run).
 #[test]
 fn under_the_real_clock_an_executor_change_waits_for_the_next_run() {
-    let dir = tempfile::tempdir().unwrap();
-    let (ctl_tx, ctl_rx) = unbounded();
-    let (tel_tx, tel_rx) = unbounded::<Telemetry>();
-    let file = dir.path().join("session.json");
-    let settings = settings(ClockKind::Real, 0, true, Speed::Times(1.0), &file);
-    let engine = Engine::new(settings, ctl_rx, tel_tx).spawn();
-    ctl_tx
-        .send(Control::Apply(Command::SetExecutor {
-            executor: "single_threaded".into(),
-        }))
-        .unwrap();
-    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(20);
-    loop {
-        let left = deadline.saturating_duration_since(std::time::Instant::now());
-        match tel_rx.recv_timeout(left) {
-            Ok(Telemetry::Applied(t)) if t.contains("executor") => {
-                assert!(t.contains("(from the next run: r;"), "{t}");
-                break;
-            }
-            Ok(Telemetry::Changed { text, .. }) => {
-                panic!("announced as a change of this run: {text}")
-            }
-            Ok(_) => {}
-            Err(_) => panic!("no notice of the executor change"),
+    let live = LiveEngine::start(ClockKind::Real, Speed::Times(1.0));
+    let cmd = Command::SetExecutor {
+        executor: "single_threaded".into(),
+    };
+    let (t, before) = live.notice_after(cmd, "executor");
+    assert!(t.contains("(from the next run: r;"), "{t}");
+    for m in before {
+        if let Telemetry::Changed { text, .. } = m {
+            panic!("announced as a change of this run: {text}");
         }
     }
-    ctl_tx.send(Control::Quit).unwrap();
-    engine.join().unwrap();
+    live.quit();
 }
