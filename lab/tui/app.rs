@@ -73,6 +73,13 @@ fn next_in_cycle(cycle: &[f64], now: f64) -> f64 {
         .unwrap_or(cycle[0])
 }
 
+/// A latency in ms to its tenth, rounded down from the exact sample: 199.9996 ms reads
+/// `199.9`, as the bar it is counted in (`<200`) says, never `200.0`; 200 ms exactly reads
+/// `200.0`.
+fn tenth_ms_down(n: Nanos) -> f64 {
+    (n.0 / 100_000) as f64 / 10.0
+}
+
 /// A QoS counter as the lab's edges label it.
 fn short_counter(c: QosCounter) -> &'static str {
     match c {
@@ -995,21 +1002,20 @@ impl App {
             b.1 = below.saturating_sub(below_prev);
             below_prev = below;
         }
-        let (p50_ms, p99_ms, max_ms) = latency.summary_ms();
         let (n, stats) = self.live.window_latency();
-        let ms = |n: Nanos| ratelab::metrics::round_to(n.as_millis_f64(), 3);
+        let down = |n: Option<Nanos>| n.map_or(0.0, tenth_ms_down);
         LatencyView {
             buckets,
             count: latency.count(),
             no_command: self.live.segment().no_command,
-            p50_ms,
-            p99_ms,
-            max_ms,
+            p50_ms: down(latency.quantile(0.5)),
+            p99_ms: down(latency.quantile(0.99)),
+            max_ms: down(latency.max()),
             window: WindowLatency {
                 count: n as u64,
-                p50_ms: stats.map_or(0.0, |s| ms(s.0)),
-                p99_ms: stats.map_or(0.0, |s| ms(s.1)),
-                max_ms: stats.map_or(0.0, |s| ms(s.2)),
+                p50_ms: down(stats.map(|s| s.0)),
+                p99_ms: down(stats.map(|s| s.1)),
+                max_ms: down(stats.map(|s| s.2)),
             },
         }
     }
@@ -1173,5 +1179,23 @@ mod pending_tests {
         assert_eq!(merge_pending(&mut pending, vec![50.0], ms(500)), [40.0]);
         assert_eq!(merge_pending(&mut pending, vec![50.0], ms(1_200)), [50.0]);
         assert!(pending[0].is_none());
+    }
+
+    #[test]
+    fn a_latency_reads_down_to_its_tenth_as_its_bar_counts_it() {
+        use super::tenth_ms_down;
+        // In the `<200` bar, so not `200.0`, however close (to the nanosecond).
+        for ns in [199_960_000, 199_999_600, 199_999_999] {
+            assert_eq!(format!("{:.1}", tenth_ms_down(Nanos(ns))), "199.9");
+        }
+        for (ns, text) in [
+            (200_000_000, "200.0"),
+            (300_000, "0.3"),
+            (40_200_000, "40.2"),
+            (0, "0.0"),
+            (19_990_000, "19.9"),
+        ] {
+            assert_eq!(format!("{:.1}", tenth_ms_down(Nanos(ns))), text);
+        }
     }
 }

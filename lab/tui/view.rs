@@ -192,7 +192,7 @@ pub enum Verdict {
     Stopped(String),
 }
 
-/// Sense→act latency over the window, ms (exact order statistics).
+/// Sense→act latency over the window, ms to the tenth rounded down (exact order statistics).
 #[derive(Clone, Debug, PartialEq, Default)]
 pub struct WindowLatency {
     /// Samples.
@@ -215,11 +215,11 @@ pub struct LatencyView {
     pub count: u64,
     /// Steps since the last change that applied no command (no latency: not in the bars).
     pub no_command: u64,
-    /// p50, p99, max, ms.
+    /// p50, ms, to the tenth rounded down (as the bar it is counted in says).
     pub p50_ms: f64,
-    /// p99, ms.
+    /// p99, ms, to the tenth rounded down.
     pub p99_ms: f64,
-    /// max, ms.
+    /// max, ms, to the tenth rounded down.
     pub max_ms: f64,
     /// The same over the window.
     pub window: WindowLatency,
@@ -1313,12 +1313,6 @@ fn render_segment(v: &View, area: Rect, buf: &mut Buffer) {
     Paragraph::new(Line::from(line)).render(area, buf);
 }
 
-/// `ms` to a tenth, rounded down (within float noise): a latency of 199.96 ms reads
-/// `199.9`, as the bar it is counted in (`<200`) says, not `200.0`.
-fn tenth_down(ms: f64) -> f64 {
-    ((ms * 10.0) + 1e-6).floor() / 10.0
-}
-
 fn render_latency(v: &View, area: Rect, buf: &mut Buffer) {
     let l = &v.latency;
     let since = match v.segment.joined_s {
@@ -1333,10 +1327,7 @@ fn render_latency(v: &View, area: Rect, buf: &mut Buffer) {
     };
     let figures = format!(
         "n={}{no_cmd} │ p50 {:.1} │ p99 {:.1} │ max {:.1} ms ",
-        l.count,
-        tenth_down(l.p50_ms),
-        tenth_down(l.p99_ms),
-        tenth_down(l.max_ms)
+        l.count, l.p50_ms, l.p99_ms, l.max_ms
     );
     // "sense→act" and "since …" when the width allows them; the figures whole always.
     let title = [
@@ -1353,10 +1344,7 @@ fn render_latency(v: &View, area: Rect, buf: &mut Buffer) {
         v.segment.window_label().bold(),
         format!(
             ": n={} │ p50 {:.1} │ p99 {:.1} │ max {:.1} ms ",
-            w.count,
-            tenth_down(w.p50_ms),
-            tenth_down(w.p99_ms),
-            tenth_down(w.max_ms)
+            w.count, w.p50_ms, w.p99_ms, w.max_ms
         )
         .into(),
     ]);
@@ -1495,18 +1483,7 @@ fn render_help(area: Rect, buf: &mut Buffer, attached: bool) {
 
 #[cfg(test)]
 mod tests {
-    use super::{fit_message, tenth_down};
-
-    #[test]
-    fn a_latency_reads_down_to_its_tenth_as_its_bar_counts_it() {
-        // In the `<200` bar, so not `200.0`.
-        assert_eq!(format!("{:.1}", tenth_down(199.96)), "199.9");
-        // Exact figures stay themselves, float noise or not.
-        for (ms, text) in [(200.0, "200.0"), (0.3, "0.3"), (40.2, "40.2"), (0.0, "0.0")] {
-            assert_eq!(format!("{:.1}", tenth_down(ms)), text);
-        }
-        assert_eq!(format!("{:.1}", tenth_down(300_000.0 / 1e6)), "0.3");
-    }
+    use super::fit_message;
 
     #[test]
     fn a_long_status_keeps_what_changed_and_the_verdict() {
