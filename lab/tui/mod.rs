@@ -571,24 +571,33 @@ mod tests {
     }
 
     #[test]
-    fn a_node_box_too_narrow_for_late_shows_the_figure_alone() {
-        // A real-clock node whose tick lateness p99 passes 999 µs: at 80 columns its box is
-        // 14 wide inside, so "p99 1064 µs late" would be cut to "p99 1064 µs la".
+    fn a_narrow_node_box_keeps_late_by_dropping_spaces_and_digits_first() {
+        // Real-clock nodes whose tick lateness p99 is 5, 124 and 1064 µs: at 80 columns a
+        // box is 14 wide inside, where "p99 124 µs late" and "p99 1064 µs late" do not fit.
+        // Each keeps what the figure is, never cut mid-word, so the three read alike.
         let (app, _rx) = app_after(virtual_cfg(50.0, 1), false);
         let mut view = app.view();
-        view.nodes[2].measured_hz = Some(50.0);
-        view.nodes[2].lateness_p99_us = Some(1064.0);
+        for (n, late_us) in [(0, 5.0), (1, 124.0), (2, 1064.0)] {
+            view.nodes[n].measured_hz = Some(50.0);
+            view.nodes[n].lateness_p99_us = Some(late_us);
+        }
         let text = |w, h| {
             let mut t = Terminal::new(TestBackend::new(w, h)).unwrap();
             t.draw(|f| f.render_widget(&view, f.area())).unwrap();
             t.backend().to_string()
         };
         let small = text(80, 24);
+        for form in ["p99 5 µs late", "p99 124µs late", "p99 1.1ms late"] {
+            assert!(small.contains(form), "{form}:\n{small}");
+        }
         assert!(
-            small.contains("p99 1064 µs") && !small.contains("µs la"),
-            "{small}"
+            !small.contains("la\u{2502}"),
+            "a word cut at the box's edge:\n{small}"
         );
-        assert!(text(120, 40).contains("p99 1064 µs late"));
+        let large = text(120, 40);
+        for form in ["p99 5 µs late", "p99 124 µs late", "p99 1064 µs late"] {
+            assert!(large.contains(form), "{form}:\n{large}");
+        }
     }
 
     #[test]

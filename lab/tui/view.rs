@@ -629,15 +629,20 @@ fn render_node(n: &NodeView, area: Rect, buf: &mut Buffer, real: bool) {
                 meas.insert(0, format!("{m:.1} Hz meas"));
             }
             lines.push(Line::from(fit(meas)));
-            // "late" goes before the figure is cut; past 999 µs in milliseconds.
+            // What the figure is ("late") goes only after the spaces and digits that can
+            // go (past 999 µs in milliseconds), so that boxes of one width read alike:
+            // a 14-wide box keeps "late" up to 999 ms.
             let ms = l / 1000.0;
             lines.push(
                 Line::from(fit(vec![
                     format!("p99 {l:.0} µs late"),
+                    format!("p99 {l:.0}µs late"),
                     format!("p99 {ms:.1} ms late"),
-                    format!("p99 {l:.0} µs"),
+                    format!("p99 {ms:.1}ms late"),
+                    format!("p99 {ms:.0}ms late"),
                     format!("p99 {l:.0}µs"),
                     format!("p99 {ms:.1}ms"),
+                    format!("p99 {ms:.0}ms"),
                 ]))
                 .dim(),
             );
