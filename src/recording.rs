@@ -714,19 +714,51 @@ fn layout_for(shape: &GraphShape, cfg: &RunConfig, extents: Option<&Extents>) ->
         Some((-force, force)),
         extents,
     );
-    let cart = plot(
-        "cart",
-        "cart position (m)",
-        paths(&[
-            "/plant/cart_pos_m",
-            "/plant/rail_end/right",
-            "/plant/rail_end/left",
-            "/plant/cart_limit/right",
-            "/plant/cart_limit/left",
-        ]),
-        Some((-RAIL_HALF_LENGTH_M, RAIL_HALF_LENGTH_M)),
-        extents,
-    );
+    // The middle column's plots: these four, the executors' three, the real clock's
+    // lateness, the liveliness totals.
+    let alive = liveliness_series(shape, extents);
+    let column = 4
+        + if measures_executors(cfg) { 3 } else { 0 }
+        + usize::from(cfg.clock == ClockKind::Real)
+        + usize::from(!alive.is_empty());
+    let cart = if column <= 4 {
+        plot(
+            "cart",
+            "cart position (m)",
+            paths(&[
+                "/plant/cart_pos_m",
+                "/plant/rail_end/right",
+                "/plant/rail_end/left",
+                "/plant/cart_limit/right",
+                "/plant/cart_limit/left",
+            ]),
+            Some((-RAIL_HALF_LENGTH_M, RAIL_HALF_LENGTH_M)),
+            extents,
+        )
+    } else {
+        // A shorter plot: the rails' ends padded (6.96 m) are too many metres for the
+        // viewer to label one (it showed "0" alone); the run's ends alone, within ±2.5 m,
+        // get "-2" to "2". A cart past them (the run's end) widens the range.
+        let reach = extents
+            .and_then(|e| e.get("plant/cart_pos_m"))
+            .map_or(0.0, |&(lo, hi)| lo.abs().max(hi.abs()));
+        let half = (CART_LIMIT_M + 0.1).max(reach * 1.05);
+        plot(
+            "cart",
+            "cart position (m)",
+            paths(&[
+                "/plant/cart_pos_m",
+                "/plant/cart_limit/right",
+                "/plant/cart_limit/left",
+            ]),
+            None,
+            None,
+        )
+        .property(
+            "ScalarAxis",
+            &bp::ScalarAxis::new().with_range(rerun::components::Range1D::new(-half, half)),
+        )
+    };
     // Latency, lateness and the bus series have no scale known up front (a lab session may
     // change rates mid-run): rerun fits them while the run goes, the final layout pads them.
     let latency = plot(
@@ -838,7 +870,6 @@ fn layout_for(shape: &GraphShape, cfg: &RunConfig, extents: Option<&Extents>) ->
             extents,
         ))
     });
-    let alive = liveliness_series(shape, extents);
     let alive = (!alive.is_empty()).then(|| {
         totals(plot(
             "liveliness",
@@ -2256,6 +2287,17 @@ mod tests {
                 .map(|v| v.title_and_queries())
                 .find(|(t, _)| t.contains("lateness"));
             assert_eq!(lateness.is_some(), clock == ClockKind::Real);
+            // Four plots in the middle column leave the cart's room for the rails' ends;
+            // a fifth (the real clock's lateness) leaves it the run's ends alone, a range
+            // the viewer can label.
+            let cart = views
+                .iter()
+                .map(|v| v.title_and_queries())
+                .find(|(t, _)| t.starts_with("cart position"))
+                .unwrap();
+            let rails = cart.1.iter().any(|q| q.contains("rail_end"));
+            assert_eq!(rails, clock == ClockKind::Virtual, "{:?}", cart.1);
+            assert!(cart.1.iter().any(|q| q == "/plant/cart_limit/right"));
         }
     }
 
