@@ -172,7 +172,7 @@ pub fn run_launch(a: &LaunchArgs, force_headless: bool, stop: StopFlag) -> anyho
         "process(es) {} did not report: their nodes' figures are missing from the summary",
         missing.join(", ")
     );
-    Ok(())
+    headless::watchdog_is_no_success(&report.metrics)
 }
 
 /// The placement as one line: `robot [sensor, actuator], policy [policy]`.

@@ -457,7 +457,6 @@ fn the_headline_names_how_the_run_really_ended() {
         let mut args = vec!["run", "--clock", "virtual", "--duration", "3", "--out", out];
         args.extend_from_slice(extra);
         let (code, stdout, err) = ratelab(&args);
-        assert_eq!(code, 0, "{err}");
         let m: serde_json::Value =
             serde_json::from_slice(&std::fs::read(dir.path().join("metrics.json")).unwrap())
                 .unwrap();
@@ -467,6 +466,16 @@ fn the_headline_names_how_the_run_really_ended() {
             .unwrap_or_else(|| panic!("no headline in {stdout}"))
             .trim_start_matches("[ratelab] ")
             .to_string();
+        // A watchdog's stop is an early end: after the summary and files, exit 2 and one
+        // line; every other end here is a success.
+        match m.get("stopped_by_watchdog").and_then(|w| w.as_str()) {
+            Some(w) => {
+                assert_eq!(code, 2, "{err}");
+                let lines: Vec<&str> = err.lines().collect();
+                assert_eq!(lines, [format!("error: the run ended early: {w}")], "{err}");
+            }
+            None => assert_eq!(code, 0, "{err}"),
+        }
         (
             line,
             m["balanced"].as_bool().unwrap(),
