@@ -155,6 +155,10 @@ enum Admission {
     Refused(String),
     /// Refused: a process of this graph with another graph file (told why).
     OtherGraph(String),
+    /// Not yet: a process of that name still runs (its liveliness token has not gone), so
+    /// the joining one, started again at once after the last was killed, asks again for a
+    /// while (told why; a second copy gives up).
+    Busy(String),
     /// Not a join, or from a name no key can answer.
     Ignored,
 }
@@ -642,13 +646,15 @@ pub fn launch(
     }
     // A process that asks again while refused as busy (`member::BUSY_RETRY`) is refused
     // once in the log, not every 250 ms.
-    let last_refusal = std::cell::RefCell::new(String::new());
-    let say_refused = |r: &str| {
-        if *last_refusal.borrow() != r {
-            say(&format!("refused a join: {r}"));
-            r.clone_into(&mut last_refusal.borrow_mut());
+    let last_join_line = std::cell::RefCell::new(String::new());
+    // A line about joins, not said twice in a row (a process asks again and again).
+    let say_once = |line: String| {
+        if *last_join_line.borrow() != line {
+            say(&line);
+            *last_join_line.borrow_mut() = line;
         }
     };
+    let say_refused = |r: &str| say_once(format!("refused a join: {r}"));
     if let Some(tx) = &opts.listening {
         let _ = tx.send(endpoint.clone());
     }
@@ -838,10 +844,9 @@ pub fn launch(
                 return refuse(format!("process '{process}' cannot rejoin: it holds the plant, whose state died with it"));
             }
             if !gone.contains(process) {
-                return tell_refusal(
-                    format!("process '{process}' is already running in this graph"),
-                    true,
-                );
+                let reason = format!("process '{process}' is already running in this graph");
+                let _ = tell_refusal(reason.clone(), true);
+                return Admission::Busy(reason);
             }
         } else if joined.contains(process) {
             return refuse(format!("process '{process}' has already joined this graph"));
@@ -886,7 +891,7 @@ pub fn launch(
                     std::thread::sleep(Duration::from_millis(300)); // let the refusal reach it
                     return Err(DistError::Usage(r));
                 }
-                Admission::Refused(r) => say_refused(&r),
+                Admission::Refused(r) | Admission::Busy(r) => say_refused(&r),
                 Admission::Ignored => {}
             },
             Some(ToLauncher::Ready { process })
@@ -1040,9 +1045,9 @@ pub fn launch(
                         recv(link.up) -> m => match m {
                             // Nobody joins a run in lockstep: say so to whoever tries.
                             Ok(m @ ToLauncher::Join { .. }) => match admit(&m, true, &[], &[]) {
-                                Admission::Refused(r) | Admission::OtherGraph(r) => {
-                                    say_refused(&r);
-                                }
+                                Admission::Refused(r)
+                                | Admission::OtherGraph(r)
+                                | Admission::Busy(r) => say_refused(&r),
                                 Admission::Welcomed | Admission::Ignored => {}
                             },
                             Ok(_) => {}
@@ -1285,6 +1290,11 @@ pub fn launch(
                                 say(&format!("process '{}' rejoined", m.process()));
                             }
                             Admission::Refused(r) | Admission::OtherGraph(r) => say_refused(&r),
+                            // Started again before its last run's token went: it asks again.
+                            Admission::Busy(_) => say_once(format!(
+                                "process '{}' asks to rejoin before its last run's liveliness token went: it is let in once that goes (a second copy gives up)",
+                                m.process()
+                            )),
                             Admission::Ignored => {}
                         }
                     }
