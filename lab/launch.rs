@@ -188,9 +188,13 @@ fn placement_line(spec: &ratelab::graph::GraphSpec) -> String {
 }
 
 /// A crossing topic's time on the wire, as the summary says it.
+/// A process that rejoined counts from its rejoin: the line says so.
 fn wire_line(w: &ratelab::distributed::wire::WireLink) -> String {
+    let since = w.since_ns.map_or(String::new(), |t| {
+        format!(" since its rejoin at {:.2} s", t as f64 / 1e9)
+    });
     format!(
-        "wire {} into '{}': {} samples, p50 {} µs | p99 {} µs | max {} µs",
+        "wire {} into '{}': {} samples{since}, p50 {} µs | p99 {} µs | max {} µs",
         w.topic, w.process, w.samples, w.p50_us, w.p99_us, w.max_us
     )
 }

@@ -29,6 +29,7 @@ pub mod np_random;
 pub mod output;
 pub mod plant;
 pub mod policy;
+pub mod procs;
 pub mod publisher;
 pub mod python;
 pub mod qos;

@@ -644,10 +644,9 @@ pub fn launch(
             spec.restart.keys().cloned().collect::<Vec<_>>().join(", ")
         ));
     }
-    // A process that asks again while refused as busy (`member::BUSY_RETRY`) is refused
-    // once in the log, not every 250 ms.
+    // A process told to wait asks again every 100 ms (`member::BUSY_RETRY`): a line about
+    // joins is not said twice in a row.
     let last_join_line = std::cell::RefCell::new(String::new());
-    // A line about joins, not said twice in a row (a process asks again and again).
     let say_once = |line: String| {
         if *last_join_line.borrow() != line {
             say(&line);
@@ -1162,6 +1161,14 @@ pub fn launch(
             let mut stop_sent = false;
             let mut gone: Vec<String> = Vec::new();
             let mut rejoining: Vec<String> = Vec::new();
+            // When each process that rejoined did (its last time): its wire figures count
+            // from then.
+            let mut rejoined_at: BTreeMap<String, Nanos> = BTreeMap::new();
+            // Joins told to wait (their process's last run still had its token), taken
+            // again the moment that run is seen gone rather than at the joiner's next ask
+            // (100 ms later), when the joiner still asks: it asked within the last 300 ms
+            // and its process still runs (a rejoin under the real clock is on this host).
+            let mut waiting_join: BTreeMap<String, (Instant, ToLauncher)> = BTreeMap::new();
             // Restarts per process ([`RestartPolicy::OnFailure`]), and those given up on.
             let mut restarts: BTreeMap<String, u32> = BTreeMap::new();
             let mut given_up: Vec<String> = Vec::new();
@@ -1280,21 +1287,37 @@ pub fn launch(
                     stop_sent = true;
                 }
                 refusals.say_due(&say);
-                match link.recv(Duration::from_millis(50)) {
+                waiting_join.retain(|_, (asked, m)| {
+                    let pid = match m {
+                        ToLauncher::Join { pid, .. } => *pid,
+                        _ => 0,
+                    };
+                    asked.elapsed() < Duration::from_millis(300) && crate::procs::process_alive(pid)
+                });
+                let last_run_gone = waiting_join.keys().find(|p| gone.contains(*p)).cloned();
+                let next = match last_run_gone.and_then(|p| waiting_join.remove(&p)) {
+                    Some((_, join)) => Some(join),
+                    None => link.recv(Duration::from_millis(50)),
+                };
+                match next {
                     // A process restarted mid-run rejoins on the same clock.
                     Some(m @ ToLauncher::Join { .. }) if end.is_none() => {
                         match admit(&m, true, &gone, &[]) {
                             Admission::Welcomed => {
                                 gone.retain(|g| g != m.process());
+                                rejoined_at.insert(m.process().to_string(), run_time());
                                 rejoining.push(m.process().to_string());
                                 say(&format!("process '{}' rejoined", m.process()));
                             }
                             Admission::Refused(r) | Admission::OtherGraph(r) => say_refused(&r),
                             // Started again before its last run's token went: it asks again.
-                            Admission::Busy(_) => say_once(format!(
-                                "process '{}' asks to rejoin before its last run's liveliness token went: it is let in once that goes (a second copy gives up)",
-                                m.process()
-                            )),
+                            Admission::Busy(_) => {
+                                say_once(format!(
+                                    "process '{}' asks to rejoin before its last run's liveliness token went: it is let in once that goes (a second copy gives up)",
+                                    m.process()
+                                ));
+                                waiting_join.insert(m.process().to_string(), (Instant::now(), m));
+                            }
                             Admission::Ignored => {}
                         }
                     }
@@ -1321,7 +1344,11 @@ pub fn launch(
                         wire,
                     }) => {
                         wires.retain(|w| w.process != process);
-                        wires.extend(wire);
+                        let since = rejoined_at.get(&process).map(|t| t.0);
+                        wires.extend(wire.into_iter().map(|w| wire::WireLink {
+                            since_ns: since,
+                            ..w
+                        }));
                         reports.insert(process, *state);
                     }
                     _ => {}

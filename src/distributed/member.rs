@@ -437,7 +437,8 @@ pub fn run_member(opts: &MemberOptions, stop: &StopFlag) -> Result<(), DistError
             // Started again the moment the one before was killed: the launcher has not
             // yet seen its liveliness token go. Ask again, for a while.
             ToMember::Reject { busy: true, .. } if first_join.elapsed() < BUSY_RETRY => {
-                std::thread::sleep(Duration::from_millis(250));
+                // Soon: every message of the gap is a reading lost to the policy.
+                std::thread::sleep(Duration::from_millis(100));
                 send(&join)?;
             }
             ToMember::Reject { reason, .. } => return Err(DistError::Usage(reason)),
@@ -708,7 +709,7 @@ pub fn run_member(opts: &MemberOptions, stop: &StopFlag) -> Result<(), DistError
             &opts.process,
             &batch,
         ),
-        crate::ClockKind::Real => match recv(&ctl_rx, stop, &launcher_gone) {
+        crate::ClockKind::Real => match recv_own(&ctl_rx, stop, &launcher_gone) {
             Err(e) => Err(e),
             // Ended before it started: report the graph as built.
             Ok(ToMember::Stop { .. }) => Ok(GraphState::capture(&handles, Nanos::ZERO, &[], None)),
@@ -1151,6 +1152,22 @@ fn recv(rx: &Receiver<ToMember>, stop: &StopFlag, gone: &StopFlag) -> Result<ToM
     }
 }
 
+/// The next control message for this process once welcomed: a busy refusal is for another
+/// process of its name asking to join (the control key is the name's: a second copy, or this
+/// one's own join that crossed its welcome), never for this one.
+fn recv_own(
+    rx: &Receiver<ToMember>,
+    stop: &StopFlag,
+    gone: &StopFlag,
+) -> Result<ToMember, DistError> {
+    loop {
+        match recv(rx, stop, gone)? {
+            ToMember::Reject { busy: true, .. } => {}
+            m => return Ok(m),
+        }
+    }
+}
+
 /// Wait until `p` has a matching subscriber (`who`, for the error): while the launcher
 /// lives when `gone` watches it, else for [`REPLY_TIMEOUT`].
 fn wait_matching(
@@ -1257,6 +1274,7 @@ fn wire_links(
                 p50_us: us(l.quantile(0.5)),
                 p99_us: us(l.quantile(0.99)),
                 max_us: us(l.max()),
+                since_ns: None,
             }
         })
         .collect()

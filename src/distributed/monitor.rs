@@ -1346,6 +1346,7 @@ mod tests {
             p50_us: 120.0,
             p99_us: 300.0,
             max_us: 400.0,
+            since_ns: None,
         };
         let mut m = live("policy", vec![], vec![]);
         // /obs arrives in `policy`; a claim about /action from `policy` is not its to make.

@@ -211,6 +211,10 @@ pub struct WireLink {
     pub p99_us: f64,
     /// Latency max, µs.
     pub max_us: f64,
+    /// Set by the launcher when the receiving process rejoined mid-run: the run time of its
+    /// rejoin, ns. Its figures count from then (the process before it took its own with it).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub since_ns: Option<u64>,
 }
 
 /// Launcher → one placement group (key `ratelab/<graph>/@ctl/<process>`).

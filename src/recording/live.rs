@@ -38,7 +38,9 @@ impl Shared {
         }
         let hopeless = match self.grpc.status() {
             GrpcSinkConnectionState::Connected => false,
-            GrpcSinkConnectionState::Connecting { .. } => !self.viewer.is_none_or(process_alive),
+            GrpcSinkConnectionState::Connecting { .. } => {
+                !self.viewer.is_none_or(crate::procs::process_alive)
+            }
             GrpcSinkConnectionState::Disconnected(_) => true,
         };
         if hopeless {
@@ -46,16 +48,6 @@ impl Shared {
         }
         !hopeless
     }
-}
-
-/// Whether process `pid` is running (a zombie is not), from `/proc`.
-fn process_alive(pid: u32) -> bool {
-    std::fs::read_to_string(format!("/proc/{pid}/stat")).is_ok_and(|stat| {
-        // The state follows the parenthesised command name, which may contain spaces.
-        stat.rsplit_once(')')
-            .and_then(|(_, rest)| rest.split_whitespace().next())
-            .is_some_and(|state| state != "Z" && state != "X")
-    })
 }
 
 /// A [`LogSink`] to a live viewer that never blocks its caller.
@@ -126,22 +118,5 @@ impl LogSink for LiveSink {
 
     fn default_batcher_config(&self) -> ChunkBatcherConfig {
         self.shared.grpc.default_batcher_config()
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn zombies_and_missing_processes_are_not_alive() {
-        assert!(process_alive(std::process::id()));
-        let mut child = std::process::Command::new("true").spawn().unwrap();
-        let pid = child.id();
-        // Exited but not yet reaped: a zombie.
-        std::thread::sleep(Duration::from_millis(200));
-        assert!(!process_alive(pid));
-        child.wait().unwrap();
-        assert!(!process_alive(pid));
     }
 }
