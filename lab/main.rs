@@ -13,7 +13,7 @@ use clap::error::ErrorKind;
 use clap::Parser;
 use cli::{Cli, Command};
 use ratelab::scheduler::StopFlag;
-use std::io::IsTerminal;
+use std::io::{IsTerminal, Write};
 use std::process::ExitCode;
 
 /// Exit code for bad input (as clap uses for usage errors).
@@ -258,10 +258,12 @@ fn main() -> ExitCode {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             // A graph file's error is `FILE:LINE:COL: reason`, as compilers print them.
-            match e.downcast_ref::<ratelab::graph::spec::SpecError>() {
-                Some(spec) => eprintln!("{spec}"),
-                None => eprintln!("error: {e:#}"),
-            }
+            // Not `eprintln!`: stderr may be a terminal that hung up (SIGHUP).
+            let mut err = std::io::stderr();
+            let _ = match e.downcast_ref::<ratelab::graph::spec::SpecError>() {
+                Some(spec) => writeln!(err, "{spec}"),
+                None => writeln!(err, "error: {e:#}"),
+            };
             // Whatever failed after a Ctrl-C failed because of it.
             ExitCode::from(if interrupted.is_stopped() {
                 EXIT_INTERRUPTED

@@ -16,6 +16,7 @@ use ratatui::backend::Backend;
 use ratatui::Terminal;
 use ratelab::scheduler::StopFlag;
 use ratelab::session::{Control, Engine, SessionSettings, Telemetry};
+use std::io::Write;
 use std::time::Duration;
 
 /// Frames per second of the display.
@@ -96,7 +97,9 @@ pub fn run_lab(settings: SessionSettings, stop: StopFlag) -> anyhow::Result<()> 
         anyhow::bail!("the lab's engine stopped unexpectedly");
     }
     if let Some(p) = session_file {
-        println!(
+        // Not `println!`: after a hang-up (SIGHUP) stdout is gone, and the log is saved.
+        let _ = writeln!(
+            std::io::stdout(),
             "[ratelab] session log: {} (replay: ratelab replay {})",
             p.display(),
             p.display()
@@ -166,8 +169,34 @@ fn on_terminal(
         }
     }));
     let result = run_loop(&mut terminal, app, &in_rx, telemetry, stop);
-    ratatui::restore();
-    result
+    let gone = result.as_ref().err().is_some_and(hung_up) || terminal.show_cursor().is_err();
+    if !gone {
+        let _ = ratatui::try_restore();
+        return result;
+    }
+    // The terminal hung up (its window closed: SIGHUP, or a draw failed on it first).
+    // There is nothing to restore, and a print to a hung-up terminal panics: leave it
+    // without ratatui's restore and drop, which print. The engine still ends the run, so
+    // the recording and the session log are complete.
+    std::mem::forget(terminal);
+    stop.stop();
+    Err(anyhow::anyhow!(
+        "the terminal hung up (its window closed): the lab ended there"
+    ))
+}
+
+/// Linux's `EIO` and `ENXIO` (asm-generic/errno-base.h).
+const EIO: i32 = 5;
+const ENXIO: i32 = 6;
+
+/// Whether `e` is a terminal that hung up: a write to it failed with `EIO` or `ENXIO` (its
+/// pseudo-terminal's other side closed).
+fn hung_up(e: &anyhow::Error) -> bool {
+    e.chain().any(|c| {
+        c.downcast_ref::<std::io::Error>()
+            .and_then(std::io::Error::raw_os_error)
+            .is_some_and(|n| n == EIO || n == ENXIO)
+    })
 }
 
 #[cfg(test)]

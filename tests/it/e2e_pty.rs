@@ -213,6 +213,74 @@ fn sigterm_restores_the_terminal() {
     lab.keys(""); // the pty is still writable: nothing hangs
 }
 
+/// The lab's window closed under it (the pseudo-terminal's master side gone: SIGHUP, and
+/// every write to the terminal fails): it ends without a panic or a backtrace, not as a
+/// success, and its recording and session log are whole.
+#[test]
+fn a_lab_whose_terminal_hangs_up_ends_quietly_with_its_recording_whole() {
+    let _machine = crate::machine::alone();
+    let dir = tempfile::tempdir().unwrap();
+    let rrd = dir.path().join("hup.rrd");
+    let pty = native_pty_system()
+        .openpty(PtySize {
+            rows: 30,
+            cols: 100,
+            pixel_width: 0,
+            pixel_height: 0,
+        })
+        .expect("a pseudo-terminal");
+    let mut cmd = CommandBuilder::new(env!("CARGO_BIN_EXE_ratelab"));
+    cmd.args(["--clock", "virtual", "--record"]);
+    cmd.arg(&rrd);
+    cmd.env("TERM", "xterm-256color");
+    cmd.cwd(dir.path());
+    let mut child = pty.slave.spawn_command(cmd).expect("spawn ratelab");
+    drop(pty.slave);
+    let mut reader = pty.master.try_clone_reader().unwrap();
+    let (tx, rx) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        let mut parser = vt100::Parser::new(
+            std::num::NonZeroU16::new(30).unwrap(),
+            std::num::NonZeroU16::new(100).unwrap(),
+            0,
+        );
+        let mut buf = [0u8; 8192];
+        while let Ok(n) = reader.read(&mut buf) {
+            if n == 0 {
+                break;
+            }
+            parser.process(&buf[..n]);
+            if parser.screen().contents().contains("BALANCED") {
+                // Its copy of the master side goes with it: the window can then close.
+                let _ = tx.send(());
+                break;
+            }
+        }
+    });
+    rx.recv_timeout(Duration::from_secs(60))
+        .expect("the lab runs");
+    std::thread::sleep(Duration::from_secs(1)); // a second of the run, unread
+    drop(pty.master); // the window closes
+    let start = Instant::now();
+    let status = loop {
+        if let Some(s) = child.try_wait().unwrap() {
+            break s;
+        }
+        assert!(start.elapsed() < Duration::from_secs(15), "still running");
+        std::thread::sleep(Duration::from_millis(50));
+    };
+    // 2 (a write failed first) or 130 (the signal came first); a panic is 101.
+    assert!([2, 130].contains(&status.exit_code()), "{status:?}");
+    let events = crate::recording::events_with_times(&rrd);
+    for kind in ["start:", "end:"] {
+        assert!(
+            events.iter().any(|(_, _, e)| e.starts_with(kind)),
+            "{kind} {events:?}"
+        );
+    }
+    assert!(dir.path().join("hup.session.json").is_file());
+}
+
 #[test]
 fn any_graph_in_the_lab_tab_selects_and_esc_backs_out() {
     let _machine = crate::machine::alone();

@@ -53,7 +53,7 @@ fn record_with(
 }
 
 /// The recording store's chunks, in file order.
-fn chunks(path: &Path) -> Vec<Chunk> {
+pub(crate) fn chunks(path: &Path) -> Vec<Chunk> {
     let file = std::io::BufReader::new(std::fs::File::open(path).unwrap());
     let mut out = Vec::new();
     for msg in re_log_encoding::DecoderApp::decode_lazy(file) {
@@ -841,7 +841,7 @@ fn qos_cfg() -> RunConfig {
 }
 
 /// The event lines of a recording with their `sim_time` (ns) and `control_step`.
-fn events_with_times(path: &Path) -> Vec<(i64, i64, String)> {
+pub(crate) fn events_with_times(path: &Path) -> Vec<(i64, i64, String)> {
     let mut out = Vec::new();
     for c in chunks(path)
         .into_iter()
