@@ -5,6 +5,18 @@ use std::io::{Read, Write};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
+/// A pseudo-terminal of 30 rows and 100 columns, as the tests' screens are.
+fn pty() -> portable_pty::PtyPair {
+    native_pty_system()
+        .openpty(PtySize {
+            rows: 30,
+            cols: 100,
+            pixel_width: 0,
+            pixel_height: 0,
+        })
+        .expect("a pseudo-terminal")
+}
+
 struct Lab {
     parser: Arc<Mutex<vt100::Parser>>,
     writer: Box<dyn Write + Send>,
@@ -18,14 +30,7 @@ impl Lab {
 
     /// With these environment variables set as well.
     fn start_with(args: &[&str], env: &[(&str, String)]) -> Lab {
-        let pty = native_pty_system()
-            .openpty(PtySize {
-                rows: 30,
-                cols: 100,
-                pixel_width: 0,
-                pixel_height: 0,
-            })
-            .expect("a pseudo-terminal");
+        let pty = pty();
         let mut cmd = CommandBuilder::new(env!("CARGO_BIN_EXE_ratelab"));
         cmd.args(args);
         cmd.env("TERM", "xterm-256color");
@@ -221,14 +226,7 @@ fn a_lab_whose_terminal_hangs_up_ends_quietly_with_its_recording_whole() {
     let _machine = crate::machine::alone();
     let dir = tempfile::tempdir().unwrap();
     let rrd = dir.path().join("hup.rrd");
-    let pty = native_pty_system()
-        .openpty(PtySize {
-            rows: 30,
-            cols: 100,
-            pixel_width: 0,
-            pixel_height: 0,
-        })
-        .expect("a pseudo-terminal");
+    let pty = pty();
     let mut cmd = CommandBuilder::new(env!("CARGO_BIN_EXE_ratelab"));
     cmd.args(["--clock", "virtual", "--record"]);
     cmd.arg(&rrd);
