@@ -9,7 +9,8 @@ use ratelab::distributed::zenoh::{self, Wait};
 use ratelab::distributed::{open_session, Access, Keys};
 use ratelab::graph::spec::{GraphSpec, DEFAULT_GRAPH_TOML};
 use ratelab::msg::{ForceMsg, MsgData};
-use std::process::Stdio;
+use std::path::Path;
+use std::process::{Child, Stdio};
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -452,6 +453,73 @@ impl TwoHosts {
             .current_dir(crate::REPO);
         c
     }
+
+    /// A launch on host `a` under `clock` for `secs`, listening on [`TWO_HOSTS_EP`], its
+    /// processes started by hand, its credentials and metrics in `out`; its lines once it
+    /// listens.
+    fn launch(
+        &self,
+        clock: &str,
+        secs: &str,
+        out: &Path,
+    ) -> (Child, std::sync::mpsc::Receiver<String>, Vec<String>) {
+        let mut launcher = self
+            .ratelab(
+                &self.a,
+                &["launch", "--processes", "--no-spawn", "--clock", clock],
+            )
+            .args(["--duration", secs, "--listen", TWO_HOSTS_EP, "--out"])
+            .arg(out)
+            .arg("--export-credentials")
+            .arg(out.join("creds.toml"))
+            .stdout(Stdio::piped())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap();
+        let (rx, lines) = crate::distributed::listening(&mut launcher);
+        (launcher, rx, lines)
+    }
+
+    /// `ratelab node --process PROCESS` on host `ns`, listening on `listen`, joining the
+    /// launch with `creds`.
+    fn node(&self, ns: &str, process: &str, listen: &str, creds: &Path) -> Child {
+        self.ratelab(
+            ns,
+            &["node", "--process", process, "--connect", TWO_HOSTS_EP],
+        )
+        .args(["--listen", listen, "--credentials"])
+        .arg(creds)
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap()
+    }
+}
+
+/// Where [`TwoHosts::launch`] listens (host `a`).
+const TWO_HOSTS_EP: &str = "tls/10.77.0.1:7449";
+
+/// Wait (at most 120 s) for `launcher` and then for its `nodes`, which must succeed; its
+/// status, `lines` with every line it printed.
+fn launch_ends(
+    launcher: &mut Child,
+    nodes: Vec<Child>,
+    rx: &std::sync::mpsc::Receiver<String>,
+    lines: &mut Vec<String>,
+) -> std::process::ExitStatus {
+    let until = Instant::now() + Duration::from_secs(120);
+    let status = loop {
+        if let Some(s) = launcher.try_wait().unwrap() {
+            break s;
+        }
+        assert!(Instant::now() < until, "the launch did not end: {lines:?}");
+        std::thread::sleep(Duration::from_millis(100));
+    };
+    lines.extend(rx.try_iter());
+    for mut n in nodes {
+        assert!(n.wait().unwrap().success());
+    }
+    status
 }
 
 impl Drop for TwoHosts {
@@ -478,29 +546,16 @@ fn a_node_on_another_host_joins_with_the_credentials_and_only_with_them() {
     };
     let dir = tempfile::tempdir().unwrap();
     let creds = dir.path().join("creds.toml");
-    let (creds_s, out_s) = (
-        creds.to_str().unwrap().to_string(),
-        dir.path().to_str().unwrap().to_string(),
-    );
-    let ep = "tls/10.77.0.1:7449";
-    let mut launcher = hosts
-        .ratelab(
-            &hosts.a,
-            &["launch", "--processes", "--no-spawn", "--clock", "virtual"],
-        )
-        .args(["--duration", "5", "--listen", ep, "--out", &out_s])
-        .args(["--export-credentials", &creds_s])
-        .stdout(Stdio::piped())
-        .stderr(Stdio::null())
-        .spawn()
-        .unwrap();
-    let (rx, mut lines) = crate::distributed::listening(&mut launcher);
+    let (mut launcher, rx, mut lines) = hosts.launch("virtual", "5", dir.path());
     // Another launch's credentials, from the other host: refused.
     let other = dir.path().join("other");
     std::fs::create_dir_all(&other).unwrap();
     let other = crate::distributed::chapter_credentials(&other);
     let o = hosts
-        .ratelab(&hosts.b, &["node", "--process", "policy", "--connect", ep])
+        .ratelab(
+            &hosts.b,
+            &["node", "--process", "policy", "--connect", TWO_HOSTS_EP],
+        )
         .args(["--listen", "tls/10.77.0.2:0", "--credentials"])
         .arg(&other)
         .output()
@@ -512,33 +567,12 @@ fn a_node_on_another_host_joins_with_the_credentials_and_only_with_them() {
         String::from_utf8_lossy(&o.stderr)
     );
     // The launch's own: the robot beside the launcher, the policy on the other host.
-    let robot = hosts
-        .ratelab(&hosts.a, &["node", "--process", "robot", "--connect", ep])
-        .args(["--listen", "tls/10.77.0.1:0", "--credentials", &creds_s])
-        .stdout(Stdio::null())
-        .stderr(Stdio::null())
-        .spawn()
-        .unwrap();
-    let policy = hosts
-        .ratelab(&hosts.b, &["node", "--process", "policy", "--connect", ep])
-        .args(["--listen", "tls/10.77.0.2:0", "--credentials", &creds_s])
-        .stdout(Stdio::null())
-        .stderr(Stdio::null())
-        .spawn()
-        .unwrap();
-    let until = Instant::now() + Duration::from_secs(120);
-    let status = loop {
-        if let Some(s) = launcher.try_wait().unwrap() {
-            break s;
-        }
-        assert!(Instant::now() < until, "the launch did not end: {lines:?}");
-        std::thread::sleep(Duration::from_millis(100));
-    };
-    lines.extend(rx.try_iter());
+    let nodes = vec![
+        hosts.node(&hosts.a, "robot", "tls/10.77.0.1:0", &creds),
+        hosts.node(&hosts.b, "policy", "tls/10.77.0.2:0", &creds),
+    ];
+    let status = launch_ends(&mut launcher, nodes, &rx, &mut lines);
     assert!(status.success(), "{lines:?}");
-    for mut n in [robot, policy] {
-        assert!(n.wait().unwrap().success());
-    }
     assert!(
         lines
             .iter()
@@ -574,47 +608,13 @@ fn the_real_clock_across_two_hosts_balances_and_its_latency_carries_the_link() {
         .is_ok_and(|o| String::from_utf8_lossy(&o.stdout).contains("netem"));
     let dir = tempfile::tempdir().unwrap();
     let creds = dir.path().join("creds.toml");
-    let (creds_s, out_s) = (
-        creds.to_str().unwrap().to_string(),
-        dir.path().to_str().unwrap().to_string(),
-    );
-    let ep = "tls/10.77.0.1:7449";
-    let mut launcher = hosts
-        .ratelab(
-            &hosts.a,
-            &["launch", "--processes", "--no-spawn", "--clock", "real"],
-        )
-        .args(["--duration", "3", "--listen", ep, "--out", &out_s])
-        .args(["--export-credentials", &creds_s])
-        .stdout(Stdio::piped())
-        .stderr(Stdio::null())
-        .spawn()
-        .unwrap();
-    let (rx, mut lines) = crate::distributed::listening(&mut launcher);
-    let node = |ns: &str, process: &str, listen: &str| {
-        hosts
-            .ratelab(ns, &["node", "--process", process, "--connect", ep])
-            .args(["--listen", listen, "--credentials", &creds_s])
-            .stdout(Stdio::null())
-            .stderr(Stdio::null())
-            .spawn()
-            .unwrap()
-    };
-    let robot = node(&hosts.a, "robot", "tls/10.77.0.1:0");
-    let policy = node(&hosts.b, "policy", "tls/10.77.0.2:0");
-    let until = Instant::now() + Duration::from_secs(120);
-    let status = loop {
-        if let Some(s) = launcher.try_wait().unwrap() {
-            break s;
-        }
-        assert!(Instant::now() < until, "the launch did not end: {lines:?}");
-        std::thread::sleep(Duration::from_millis(100));
-    };
-    lines.extend(rx.try_iter());
+    let (mut launcher, rx, mut lines) = hosts.launch("real", "3", dir.path());
+    let nodes = vec![
+        hosts.node(&hosts.a, "robot", "tls/10.77.0.1:0", &creds),
+        hosts.node(&hosts.b, "policy", "tls/10.77.0.2:0", &creds),
+    ];
+    let status = launch_ends(&mut launcher, nodes, &rx, &mut lines);
     assert!(status.success(), "{lines:?}");
-    for mut n in [robot, policy] {
-        assert!(n.wait().unwrap().success());
-    }
     let m: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(dir.path().join("metrics.json")).unwrap())
             .unwrap();
