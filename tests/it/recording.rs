@@ -66,6 +66,28 @@ pub(crate) fn chunks(path: &Path) -> Vec<Chunk> {
     out
 }
 
+/// The names of every timeline the chunks are on.
+fn timeline_names(chunks: &[Chunk]) -> BTreeSet<String> {
+    chunks
+        .iter()
+        .flat_map(|c| {
+            c.timelines()
+                .keys()
+                .map(|t| t.to_string())
+                .collect::<Vec<_>>()
+        })
+        .collect()
+}
+
+/// A chunk's rows' times on `timeline` (none when it is not on it).
+fn times_on(c: &Chunk, timeline: &str) -> Vec<i64> {
+    c.timelines()
+        .iter()
+        .find(|(n, _)| n.as_str() == timeline)
+        .map(|(_, col)| col.times_raw().to_vec())
+        .unwrap_or_default()
+}
+
 /// Pole-angle rows on the timelines (the static row naming the series is not a sample).
 fn angle_rows(chunks: &[Chunk]) -> u64 {
     chunks
@@ -123,15 +145,7 @@ fn fresh_recording_has_the_entities_timelines_and_one_angle_row_per_step() {
     ] {
         assert!(entities.contains(e), "missing {e} in {entities:?}");
     }
-    let timelines: BTreeSet<String> = chunks
-        .iter()
-        .flat_map(|c| {
-            c.timelines()
-                .keys()
-                .map(|t| t.to_string())
-                .collect::<Vec<_>>()
-        })
-        .collect();
+    let timelines = timeline_names(&chunks);
     assert!(
         timelines.contains("sim_time") && timelines.contains("control_step"),
         "{timelines:?}"
@@ -527,11 +541,8 @@ fn every_view_matches_data_in_a_virtual_run_and_a_fall() {
         2,
         "the red pole and its label"
     );
-    let at_ns = fallen[0]
-        .timelines()
-        .iter()
-        .find(|(n, _)| n.as_str() == "sim_time")
-        .map(|(_, col)| col.times_raw()[0])
+    let at_ns = *times_on(&fallen[0], "sim_time")
+        .first()
         .expect("the fall's time");
     let fell_at_s = m.fell_at_s.unwrap();
     assert!(
@@ -628,15 +639,7 @@ fn every_view_matches_data_in_a_real_clock_run() {
         .expect("a lateness view under the real clock");
     assert_eq!(lateness.queries.len(), 3, "{lateness:?}");
     // The real clock's time is wall time since the start, and the timeline says so.
-    let timelines: BTreeSet<String> = chunks(&path)
-        .iter()
-        .flat_map(|c| {
-            c.timelines()
-                .keys()
-                .map(|t| t.to_string())
-                .collect::<Vec<_>>()
-        })
-        .collect();
+    let timelines = timeline_names(&chunks(&path));
     assert!(
         timelines.contains("wall_time") && !timelines.contains("sim_time"),
         "{timelines:?}"
@@ -809,13 +812,7 @@ fn a_brain_swap_is_an_event_and_a_mark() {
     let marks: Vec<i64> = all
         .iter()
         .filter(|c| !c.is_static() && c.entity_path().to_string() == "/plant/changes")
-        .flat_map(|c| {
-            c.timelines()
-                .iter()
-                .find(|(name, _)| name.as_str() == "control_step")
-                .map(|(_, col)| col.times_raw().to_vec())
-                .unwrap_or_default()
-        })
+        .flat_map(|c| times_on(c, "control_step"))
         .collect();
     assert_eq!(marks, [0, 40], "the start and the swap");
     check_views(&path);
@@ -847,12 +844,14 @@ pub(crate) fn events_with_times(path: &Path) -> Vec<(i64, i64, String)> {
         .into_iter()
         .filter(|c| c.entity_path().to_string() == "/events")
     {
+        // A chunk not on a timeline (static) reads 0 there.
         let col = |name: &str| -> Vec<i64> {
-            c.timelines()
-                .iter()
-                .find(|(n, _)| n.as_str() == name)
-                .map(|(_, col)| col.times_raw().to_vec())
-                .unwrap_or_else(|| vec![0; c.num_rows()])
+            let times = times_on(&c, name);
+            if times.is_empty() {
+                vec![0; c.num_rows()]
+            } else {
+                times
+            }
         };
         let (t, step) = (col("sim_time"), col("control_step"));
         let texts: Vec<String> = c
@@ -878,12 +877,7 @@ fn last_scalar(all: &[Chunk], entity: &str) -> Option<(f64, usize)> {
         .iter()
         .filter(|c| !c.is_static() && c.entity_path().to_string() == entity)
     {
-        let steps: Vec<i64> = c
-            .timelines()
-            .iter()
-            .find(|(n, _)| n.as_str() == "control_step")
-            .map(|(_, col)| col.times_raw().to_vec())
-            .unwrap_or_default();
+        let steps = times_on(c, "control_step");
         let values: Vec<f64> = c
             .iter_slices::<f64>(rerun::Scalars::descriptor_scalars().component)
             .flat_map(|b| b.to_vec())
