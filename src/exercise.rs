@@ -159,11 +159,16 @@ pub struct Ex3Bands {
 }
 
 impl Ex3Bands {
-    /// The latency the offsets fix, ms: from the sensor's tick to the actuator's (the last
-    /// offset minus the first).
+    /// The latency the offsets fix, ms ([`fixed_latency_ms`]).
     pub fn fixed_latency_ms(&self) -> f64 {
-        self.phase_offset_ms[2] - self.phase_offset_ms[0]
+        fixed_latency_ms(&self.phase_offset_ms)
     }
+}
+
+/// The sense→act latency phase offsets of the chapter's chain (sensor, policy, actuator,
+/// ms) fix: from the sensor's tick to the actuator's, the last offset minus the first.
+pub fn fixed_latency_ms(phase_offset_ms: &[f64; 3]) -> f64 {
+    phase_offset_ms[2] - phase_offset_ms[0]
 }
 
 /// ex4's settings: the stale queue.

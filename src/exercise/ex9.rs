@@ -32,9 +32,9 @@ pub struct Ex9Bands {
 }
 
 impl Ex9Bands {
-    /// The latency the offsets fix, ms: from the sensor's tick to the actuator's.
+    /// The latency the offsets fix, ms ([`super::fixed_latency_ms`]).
     pub fn fixed_latency_ms(&self) -> f64 {
-        self.phase_offset_ms[2] - self.phase_offset_ms[0]
+        super::fixed_latency_ms(&self.phase_offset_ms)
     }
 }
 
