@@ -1169,6 +1169,9 @@ pub fn launch(
             // (100 ms later), when the joiner still asks: it asked within the last 300 ms
             // and its process still runs (a rejoin under the real clock is on this host).
             let mut waiting_join: BTreeMap<String, (Instant, ToLauncher)> = BTreeMap::new();
+            // The OS process each rejoining process was let in as: its ask that crossed the
+            // welcome is not another copy's.
+            let mut welcomed_pid: BTreeMap<String, u32> = BTreeMap::new();
             // Restarts per process ([`RestartPolicy::OnFailure`]), and those given up on.
             let mut restarts: BTreeMap<String, u32> = BTreeMap::new();
             let mut given_up: Vec<String> = Vec::new();
@@ -1300,10 +1303,17 @@ pub fn launch(
                     None => link.recv(Duration::from_millis(50)),
                 };
                 match next {
+                    // The ask of one just let in that crossed its welcome: already answered.
+                    Some(ToLauncher::Join { process, pid, .. })
+                        if rejoining.contains(&process)
+                            && welcomed_pid.get(&process) == Some(&pid) => {}
                     // A process restarted mid-run rejoins on the same clock.
                     Some(m @ ToLauncher::Join { .. }) if end.is_none() => {
                         match admit(&m, true, &gone, &[]) {
                             Admission::Welcomed => {
+                                if let ToLauncher::Join { pid, .. } = &m {
+                                    welcomed_pid.insert(m.process().to_string(), *pid);
+                                }
                                 gone.retain(|g| g != m.process());
                                 rejoined_at.insert(m.process().to_string(), run_time());
                                 rejoining.push(m.process().to_string());
