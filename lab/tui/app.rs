@@ -464,17 +464,9 @@ impl App {
                     let rates = (0..self.graph.nodes.len())
                         .map(|i| self.rate_of(NodeId(i)))
                         .collect();
-                    let depths = (0..self.graph.topics.len())
-                        .map(|i| {
-                            self.depths
-                                .get(i)
-                                .copied()
-                                .unwrap_or(self.graph.topics[i].depth)
-                        })
-                        .collect();
-                    let qos = (0..self.graph.topics.len())
-                        .map(|i| self.qos.get(i).copied().unwrap_or(self.graph.topics[i].qos))
-                        .collect();
+                    let topics = 0..self.graph.topics.len();
+                    let depths = topics.clone().map(|i| self.depth_of(TopicId(i))).collect();
+                    let qos = topics.map(|i| self.qos_of(TopicId(i))).collect();
                     self.ended_with = Some((rates, depths, qos));
                 }
                 self.verdict = match &reason {
@@ -532,6 +524,22 @@ impl App {
             .get(n.0)
             .copied()
             .unwrap_or(self.graph.node(n).rate_hz)
+    }
+
+    /// Topic `t`'s history depth as set (after a fall, the next run's).
+    fn depth_of(&self, t: TopicId) -> usize {
+        self.depths
+            .get(t.0)
+            .copied()
+            .unwrap_or(self.graph.topic(t).depth)
+    }
+
+    /// Topic `t`'s QoS as set (after a fall, the next run's).
+    fn qos_of(&self, t: TopicId) -> TopicQos {
+        self.qos
+            .get(t.0)
+            .copied()
+            .unwrap_or(self.graph.topic(t).qos)
     }
 
     /// Handle one key message.
@@ -827,7 +835,18 @@ impl App {
             .ended_with
             .as_ref()
             .and_then(|(_, _, q)| q.get(id.0).copied())
-            .unwrap_or_else(|| self.qos.get(id.0).copied().unwrap_or(spec.qos));
+            .unwrap_or_else(|| self.qos_of(id));
+        // The depth it ran with, and as set for the next run.
+        let (ran_depth, next_depth) = match &self.ended_with {
+            Some((_, d, _)) => {
+                let next = self.depth_of(id);
+                (
+                    d.get(id.0).copied().unwrap_or(next),
+                    (d.get(id.0) != Some(&next)).then_some(next),
+                )
+            }
+            None => (self.depth_of(id), None),
+        };
         let window = self.live.window_topic(id);
         let segment = self.live.segment_topic(id);
         let dead = |n: NodeId| self.alive.get(n.0).copied().flatten() == Some(false);
@@ -842,15 +861,8 @@ impl App {
                     .collect::<Vec<_>>()
                     .join(", ")
             }),
-            depth: self
-                .ended_with
-                .as_ref()
-                .and_then(|(_, d, _)| d.get(id.0).copied())
-                .unwrap_or_else(|| self.depths.get(id.0).copied().unwrap_or(spec.depth)),
-            next_depth: self.ended_with.as_ref().and_then(|(_, d, _)| {
-                let next = self.depths.get(id.0).copied().unwrap_or(spec.depth);
-                (d.get(id.0) != Some(&next)).then_some(next)
-            }),
+            depth: ran_depth,
+            next_depth,
             msg_per_s: window.msg_per_s,
             dropped: window.dropped,
             // A topic nobody reads evicts every message unread: not a drop anyone suffers.
@@ -867,14 +879,7 @@ impl App {
             staling: window.stale_reads > 0,
             segment_dropped: segment.dropped,
             segment_stale_reads: segment.stale_reads,
-            qos: (!(qos.is_default() && spec.qos.is_default())).then(|| {
-                let depth = self
-                    .ended_with
-                    .as_ref()
-                    .and_then(|(_, d, _)| d.get(id.0).copied())
-                    .unwrap_or_else(|| self.depths.get(id.0).copied().unwrap_or(spec.depth));
-                qos.short_parts(depth)
-            }),
+            qos: (!(qos.is_default() && spec.qos.is_default())).then(|| qos.short_parts(ran_depth)),
             // Over the window, as its drops and stale reads (totals counted from the start
             // read as 40 % loss on a 20 % link under an arrow saying "last 5 s").
             qos_counts: self.last.map_or_else(Vec::new, |l| {
