@@ -595,13 +595,7 @@ fn render_node(n: &NodeView, area: Rect, buf: &mut Buffer, real: bool) {
     // Each figure in the first of its forms that fits the box whole (at 80 columns a box is
     // 9 wide: `200 meas`, `p99 3.5ms`, never `200.0 mea` or `p99 3506 `).
     let room = usize::from(area.width.saturating_sub(2));
-    let fit = |forms: Vec<String>| -> String {
-        let last = forms.last().cloned().unwrap_or_default();
-        forms
-            .into_iter()
-            .find(|f| f.chars().count() <= room)
-            .unwrap_or(last)
-    };
+    let fit = |forms: Vec<String>| first_that_fits(forms, room);
     let set = match (n.next_hz, wide) {
         // After the run ended, the rate it ran at beside the next run's.
         (Some(next), _) => {
@@ -808,14 +802,16 @@ fn arrow_lines(t: &TopicView, w: usize, rows: usize) -> Vec<Line<'static>> {
     let rate = if t.uncounted {
         Line::from("? msg/s".red()).centered()
     } else if fault_on_rate {
-        let text = [
-            format!("{:.1} msg/s", t.msg_per_s),
-            format!("{:.0} msg/s", t.msg_per_s),
-            format!("{:.0}/s", t.msg_per_s),
-        ]
-        .into_iter()
-        .find(|r| r.chars().count() + 2 <= w + 1)
-        .unwrap_or_else(|| format!("{:.0}", t.msg_per_s));
+        // Room for the rate and " ✗".
+        let text = first_that_fits(
+            [
+                format!("{:.1} msg/s", t.msg_per_s),
+                format!("{:.0} msg/s", t.msg_per_s),
+                format!("{:.0}/s", t.msg_per_s),
+                format!("{:.0}", t.msg_per_s),
+            ],
+            (w + 1).saturating_sub(2),
+        );
         Line::from(vec![
             Span::raw(format!("{text} ")),
             Span::styled("✗", style),
@@ -839,13 +835,14 @@ fn arrow_lines(t: &TopicView, w: usize, rows: usize) -> Vec<Line<'static>> {
     } else {
         format!(" {mark}")
     };
-    let dropped = [
-        format!("{} dropped{drop_mark}", t.dropped),
-        format!("{} drop{drop_mark}", t.dropped),
-    ]
-    .into_iter()
-    .find(|d| d.chars().count() <= w + 1)
-    .unwrap_or_else(|| format!("{}{drop_mark}", t.dropped));
+    let dropped = first_that_fits(
+        [
+            format!("{} dropped{drop_mark}", t.dropped),
+            format!("{} drop{drop_mark}", t.dropped),
+            format!("{}{drop_mark}", t.dropped),
+        ],
+        w + 1,
+    );
     let dropped = Line::from(Span::styled(dropped, style)).centered();
     // The mirror image of a drop, with a symbol of its own: old data read again.
     let stale_style = if t.staling {
@@ -1335,14 +1332,14 @@ fn render_latency(v: &View, area: Rect, buf: &mut Buffer) {
         l.count, l.p50_ms, l.p99_ms, l.max_ms
     );
     // "sense→act" and "since …" when the width allows them; the figures whole always.
-    let title = [
-        format!(" sense→act latency since {since}: {figures}"),
-        format!(" latency since {since}: {figures}"),
-        format!(" latency {figures}"),
-    ]
-    .into_iter()
-    .find(|t| t.chars().count() + 2 <= area.width as usize)
-    .unwrap_or_else(|| format!(" latency {figures}"));
+    let title = first_that_fits(
+        [
+            format!(" sense→act latency since {since}: {figures}"),
+            format!(" latency since {since}: {figures}"),
+            format!(" latency {figures}"),
+        ],
+        usize::from(area.width).saturating_sub(2),
+    );
     let w = &l.window;
     let window = Line::from(vec![
         " ".into(),
@@ -1369,6 +1366,19 @@ fn render_latency(v: &View, area: Rect, buf: &mut Buffer) {
         .bar_style(Style::new().fg(Color::Cyan))
         .value_style(Style::new().fg(Color::Black).bg(Color::Cyan))
         .render(area, buf);
+}
+
+/// The first of `forms` (longest first) that fits `room` columns whole, else the last: a
+/// figure or title never cut mid-word.
+pub(super) fn first_that_fits(forms: impl IntoIterator<Item = String>, room: usize) -> String {
+    let mut last = String::new();
+    for f in forms {
+        if f.chars().count() <= room {
+            return f;
+        }
+        last = f;
+    }
+    last
 }
 
 /// A status message made to fit `width` columns: whole when it fits; else its parts
