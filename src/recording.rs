@@ -721,40 +721,31 @@ fn layout_for(shape: &GraphShape, cfg: &RunConfig, extents: Option<&Extents>) ->
         + if measures_executors(cfg) { 3 } else { 0 }
         + usize::from(cfg.clock == ClockKind::Real)
         + usize::from(!alive.is_empty());
-    let cart = if column <= 4 {
-        plot(
-            "cart",
-            "cart position (m)",
-            paths(&[
-                "/plant/cart_pos_m",
-                "/plant/rail_end/right",
-                "/plant/rail_end/left",
-                "/plant/cart_limit/right",
-                "/plant/cart_limit/left",
-            ]),
-            Some((-RAIL_HALF_LENGTH_M, RAIL_HALF_LENGTH_M)),
-            extents,
-        )
+    // With four, the rails' ends and the run's; in a shorter plot the rails' ends padded
+    // (6.96 m) are too many metres for the viewer to label one (it showed "0" alone): the
+    // run's ends alone, within ±2.5 m, get "-2" to "2" (a cart past them, at the run's end,
+    // widens the range).
+    let tall = column <= 4;
+    let mut cart_paths = vec!["/plant/cart_pos_m"];
+    if tall {
+        cart_paths.extend(["/plant/rail_end/right", "/plant/rail_end/left"]);
+    }
+    cart_paths.extend(["/plant/cart_limit/right", "/plant/cart_limit/left"]);
+    let cart = plot(
+        "cart",
+        "cart position (m)",
+        paths(&cart_paths),
+        Some((-RAIL_HALF_LENGTH_M, RAIL_HALF_LENGTH_M)),
+        extents,
+    );
+    let cart = if tall {
+        cart
     } else {
-        // A shorter plot: the rails' ends padded (6.96 m) are too many metres for the
-        // viewer to label one (it showed "0" alone); the run's ends alone, within ±2.5 m,
-        // get "-2" to "2". A cart past them (the run's end) widens the range.
         let reach = extents
             .and_then(|e| e.get("plant/cart_pos_m"))
             .map_or(0.0, |&(lo, hi)| lo.abs().max(hi.abs()));
         let half = (CART_LIMIT_M + 0.1).max(reach * 1.05);
-        plot(
-            "cart",
-            "cart position (m)",
-            paths(&[
-                "/plant/cart_pos_m",
-                "/plant/cart_limit/right",
-                "/plant/cart_limit/left",
-            ]),
-            None,
-            None,
-        )
-        .property(
+        cart.property(
             "ScalarAxis",
             &bp::ScalarAxis::new().with_range(rerun::components::Range1D::new(-half, half)),
         )
