@@ -187,8 +187,8 @@ fn placement_line(spec: &ratelab::graph::GraphSpec) -> String {
         .join(", ")
 }
 
-/// A crossing topic's time on the wire, as the summary says it.
-/// A process that rejoined counts from its rejoin: the line says so.
+/// A crossing topic's time on the wire, as the summary says it (a process that rejoined
+/// counts from its rejoin, and the line says so).
 fn wire_line(w: &ratelab::distributed::wire::WireLink) -> String {
     let since = w.since_ns.map_or(String::new(), |t| {
         format!(" since its rejoin at {:.2} s", t as f64 / 1e9)

@@ -166,9 +166,9 @@ impl Fold {
     /// `step` (from the actuator's process) with the counters of every topic held by
     /// another process replaced by that holder's at the step's run time (its newest sample
     /// no later than the step; nothing counted yet, or what the processes before it
-    /// counted, when all its samples are later; its newest figures when it sent none): the actuator's
-    /// process only forwards those topics, so its own copies do not count what their
-    /// subscribers do. Steps are merged in run-time order.
+    /// counted, when all its samples are later; its newest figures when it sent none): the
+    /// actuator's process only forwards those topics, so its own copies do not count what
+    /// their subscribers do. Steps are merged in run-time order.
     pub fn merge_step(&mut self, step: &StepRecord) -> StepRecord {
         let mut out = *step;
         for (i, holder) in self.holders.iter().enumerate() {

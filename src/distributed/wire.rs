@@ -368,8 +368,8 @@ fn decode_exact<T: for<'de> Deserialize<'de>>(
 
 /// The most messages a process sends on one crossing topic for one tick of its publisher
 /// (a node may publish several times in a tick); past it the rest of that tick's are not
-/// sent, and the subscriber counts them lost on the wire when a later one arrives. Reports are checked against it
-/// ([`super::launcher::check_report`]).
+/// sent, and the subscriber counts them lost on the wire when a later one arrives. Reports
+/// are checked against it ([`super::launcher::check_report`]).
 pub const MAX_SENT_PER_TICK: usize = 256;
 
 /// The largest tick report read, bytes ([`Ticked::decode`]).
