@@ -17,6 +17,25 @@ fn pty() -> portable_pty::PtyPair {
         .expect("a pseudo-terminal")
 }
 
+/// Wait (at most 15 s) for `child` to exit (`after`: what should have made it, for the
+/// failure).
+fn exit_status(
+    child: &mut (dyn portable_pty::Child + Send + Sync),
+    after: &str,
+) -> portable_pty::ExitStatus {
+    let start = Instant::now();
+    loop {
+        if let Some(s) = child.try_wait().unwrap() {
+            return s;
+        }
+        assert!(
+            start.elapsed() < Duration::from_secs(15),
+            "ratelab did not exit after {after}"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+}
+
 struct Lab {
     parser: Arc<Mutex<vt100::Parser>>,
     writer: Box<dyn Write + Send>,
@@ -100,17 +119,7 @@ impl Lab {
 
     /// Wait (at most 15 s) for the process to exit.
     fn exit_status(&mut self, after: &str) -> portable_pty::ExitStatus {
-        let start = Instant::now();
-        loop {
-            if let Some(s) = self.child.try_wait().unwrap() {
-                return s;
-            }
-            assert!(
-                start.elapsed() < Duration::from_secs(15),
-                "ratelab did not exit after {after}"
-            );
-            std::thread::sleep(Duration::from_millis(50));
-        }
+        exit_status(&mut *self.child, after)
     }
 
     fn quit(mut self) {
@@ -259,14 +268,7 @@ fn a_lab_whose_terminal_hangs_up_ends_quietly_with_its_recording_whole() {
         .expect("the lab runs");
     std::thread::sleep(Duration::from_secs(1)); // a second of the run, unread
     drop(pty.master); // the window closes
-    let start = Instant::now();
-    let status = loop {
-        if let Some(s) = child.try_wait().unwrap() {
-            break s;
-        }
-        assert!(start.elapsed() < Duration::from_secs(15), "still running");
-        std::thread::sleep(Duration::from_millis(50));
-    };
+    let status = exit_status(&mut *child, "its terminal hung up");
     // 2 (a write failed first) or 130 (the signal came first); a panic is 101.
     assert!([2, 130].contains(&status.exit_code()), "{status:?}");
     let events = crate::recording::events_with_times(&rrd);
