@@ -8,6 +8,7 @@
 //!
 //! ```sh
 //! target/release/examples/zenoh_floor            # every measure, about 30 s
+//! target/release/examples/zenoh_floor --transport zenoh-tls --round-trips 30000 --work-us 50
 //! ```
 //!
 //! It starts one copy of itself as the far process (`--far TRANSPORT ENDPOINT CREDENTIALS`)
@@ -20,6 +21,14 @@
 //!   callback to a thread that sends it back, as a lockstep process hands a tick report to
 //!   the node thread that then ticks and reports. A lockstep instant of the chapter's graph is
 //!   two such one-way hops, so the mean round trip is the floor of its wall time per instant.
+//!   It also gives the CPU time both processes spent per round trip (from `/proc`, Linux).
+//!
+//! Options shape the round trips like a lockstep's, to see what each part of an instant
+//! costs: `--work-us N` (each side busy for N µs before it answers, as a process ticks its
+//! node between two hops), `--extra-puts N` (each side puts N more messages before its
+//! answer, as a hop carries a sample and its tick's report) and `--reply-in-callback` (the
+//! far side answers inside Zenoh's receive callback, with no hand-off to a thread).
+//! `--transport` and `--round-trips N` narrow a sitting to one transport's round trips.
 
 use hdrhistogram::Histogram;
 use ratelab::distributed::credentials::{Credentials, Role};
@@ -29,8 +38,71 @@ use std::io::{BufRead, BufReader, Read, Write};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-/// One message: [kind (0 = one way, 1 = echo, 2 = end), pad, send stamp ns, receive stamp ns].
+/// One message: [kind (0 = one way, 1 = echo, 2 = end, 3 = filler), pad, send stamp ns,
+/// receive stamp ns].
 const MSG_BYTES: usize = 24;
+
+/// A filler message (`--extra-puts`): carried, then ignored.
+const FILLER: u8 = 3;
+
+/// How the round trips are shaped (see the module's header); the far side gets the same.
+#[derive(clap::Parser, Clone, Debug)]
+#[command(about = "The transport's floor on this host (BENCHMARKS.md)")]
+struct Opts {
+    /// Only this transport: zenoh-tls, zenoh-tcp or tcp.
+    #[arg(long, value_parser = ["zenoh-tls", "zenoh-tcp", "tcp"])]
+    transport: Option<String>,
+    /// Round trips per transport; the one-way measures run only with the default.
+    #[arg(long, default_value_t = 5000, value_parser = clap::value_parser!(u64).range(1..=10_000_000))]
+    round_trips: u64,
+    /// Each side is busy this long before it answers, µs (a busy wait).
+    #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u64).range(0..=1_000_000))]
+    work_us: u64,
+    /// Each side puts this many filler messages before its answer (Zenoh transports).
+    #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u32).range(0..=100))]
+    extra_puts: u32,
+    /// The far side answers inside Zenoh's receive callback, not from a thread.
+    #[arg(long)]
+    reply_in_callback: bool,
+    /// Run as the far side: TRANSPORT ENDPOINT CREDENTIALS (the near side starts it).
+    #[arg(long, num_args = 3, hide = true)]
+    far: Option<Vec<String>>,
+}
+
+impl Opts {
+    /// The options the far side is started with.
+    fn for_far(&self) -> Vec<String> {
+        let mut v = vec![
+            "--work-us".to_string(),
+            self.work_us.to_string(),
+            "--extra-puts".into(),
+            self.extra_puts.to_string(),
+        ];
+        if self.reply_in_callback {
+            v.push("--reply-in-callback".into());
+        }
+        v
+    }
+
+    /// Busy for `--work-us`.
+    fn work(&self) {
+        let t = Instant::now();
+        while t.elapsed() < Duration::from_micros(self.work_us) {
+            std::hint::spin_loop();
+        }
+    }
+}
+
+/// CPU time (user and system) process `pid` has used so far, ns; `None` off Linux.
+fn cpu_ns(pid: u32) -> Option<u64> {
+    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).ok()?;
+    // The fields after the command's closing parenthesis; utime and stime are 14 and 15.
+    let rest = stat.rsplit_once(')')?.1;
+    let f: Vec<&str> = rest.split_whitespace().collect();
+    let ticks = f.get(11)?.parse::<u64>().ok()? + f.get(12)?.parse::<u64>().ok()?;
+    // The kernel's USER_HZ is 100 on every Linux this runs on.
+    Some(ticks * 10_000_000)
+}
 
 fn encode(kind: u8, sent_ns: u64, received_ns: u64) -> [u8; MSG_BYTES] {
     let mut b = [0u8; MSG_BYTES];
@@ -53,6 +125,7 @@ trait Link {
 }
 
 struct ZenohLink {
+    extra_puts: u32,
     _session: ratelab::distributed::zenoh::Session,
     publisher: ratelab::distributed::zenoh::pubsub::Publisher<'static>,
     _subscriber: ratelab::distributed::zenoh::pubsub::Subscriber<()>,
@@ -61,12 +134,22 @@ struct ZenohLink {
 
 impl Link for ZenohLink {
     fn send(&mut self, msg: [u8; MSG_BYTES]) {
+        for _ in 0..self.extra_puts {
+            let filler = encode(FILLER, 0, 0).to_vec();
+            self.publisher.put(filler).wait().expect("a put");
+        }
         self.publisher.put(msg.to_vec()).wait().expect("a put");
     }
     fn recv(&mut self) -> [u8; MSG_BYTES] {
-        self.back
-            .recv_timeout(Duration::from_secs(10))
-            .expect("the far side answers within 10 s")
+        loop {
+            let m = self
+                .back
+                .recv_timeout(Duration::from_secs(10))
+                .expect("the far side answers within 10 s");
+            if m[0] != FILLER {
+                return m;
+            }
+        }
     }
 }
 
@@ -132,9 +215,32 @@ fn session(
     zenoh::open(c).wait().expect("a session")
 }
 
-/// The far process: stamp each message on arrival; send echoes back from a thread, and a
-/// one-way message's receive stamp back too (so the near side learns the one-way time).
-fn far(transport: &str, endpoint: &str, creds: &str) {
+/// The far side's answer to message `m` received at `received` (ns): `None` for a filler;
+/// else after `--work-us`, `--extra-puts` fillers and then the answer (the message's kind,
+/// its send stamp and `received`). `true` at the end.
+fn answer(
+    opts: &Opts,
+    publisher: &zenoh::pubsub::Publisher<'static>,
+    m: &[u8; MSG_BYTES],
+    received: u64,
+) -> Option<bool> {
+    let (kind, sent, _) = decode(m).unwrap_or((2, 0, 0));
+    if kind == FILLER {
+        return None;
+    }
+    opts.work();
+    for _ in 0..opts.extra_puts {
+        publisher.put(encode(FILLER, 0, 0).to_vec()).wait().ok();
+    }
+    let answer = encode(kind, sent, received).to_vec();
+    publisher.put(answer).wait().ok();
+    Some(kind == 2)
+}
+
+/// The far process: stamp each message on arrival; send echoes back from a thread (or, with
+/// `--reply-in-callback`, from Zenoh's receive callback), and a one-way message's receive
+/// stamp back too (so the near side learns the one-way time).
+fn far(opts: &Opts, transport: &str, endpoint: &str, creds: &str) {
     match transport {
         "zenoh-tls" | "zenoh-tcp" => {
             let session = session(transport, &[endpoint.to_string()], &[], creds, "far");
@@ -142,19 +248,20 @@ fn far(transport: &str, endpoint: &str, creds: &str) {
                 .declare_publisher("ratelab/floor/back")
                 .wait()
                 .expect("a pub");
+            let publisher = std::sync::Arc::new(publisher);
             let (tx, rx) = crossbeam_channel::bounded(1024);
+            let (in_callback, o, p) = (opts.reply_in_callback, opts.clone(), publisher.clone());
             let _sub = subscribe(&session, "ratelab/floor/out", move |m| {
                 let received = mono_now_ns();
-                let _ = tx.try_send((m, received));
+                if !in_callback {
+                    let _ = tx.try_send((m, received));
+                } else if answer(&o, &p, &m, received) == Some(true) {
+                    let _ = tx.try_send((encode(2, 0, 0), received));
+                }
             });
             println!("ready");
             while let Ok((m, received)) = rx.recv() {
-                let (kind, sent, _) = decode(&m).unwrap_or((2, 0, 0));
-                publisher
-                    .put(encode(kind, sent, received).to_vec())
-                    .wait()
-                    .ok();
-                if kind == 2 {
+                if in_callback || answer(opts, &publisher, &m, received) == Some(true) {
                     break;
                 }
             }
@@ -168,6 +275,7 @@ fn far(transport: &str, endpoint: &str, creds: &str) {
             while s.read_exact(&mut b).is_ok() {
                 let received = mono_now_ns();
                 let (kind, sent, _) = decode(&b).unwrap_or((2, 0, 0));
+                opts.work();
                 s.write_all(&encode(kind, sent, received)).ok();
                 if kind == 2 {
                     break;
@@ -207,22 +315,30 @@ fn one_way(link: &mut dyn Link, label: &str, rate_hz: u64, n: u64) {
     );
 }
 
-/// Round trips back to back: `n` of them.
-fn round_trips(link: &mut dyn Link, label: &str, n: u64) {
+/// Round trips back to back: `n` of them, with `--work-us` before each send (the far side
+/// works as long before it answers); the CPU time of this process and the far one (`far`).
+fn round_trips(link: &mut dyn Link, label: &str, n: u64, opts: &Opts, far: u32) {
     let mut h = hist();
     for _ in 0..20 {
         link.send(encode(1, mono_now_ns(), 0));
         link.recv();
     }
     let start = Instant::now();
+    let cpu = || Some(cpu_ns(std::process::id())? + cpu_ns(far)?);
+    let cpu_before = cpu();
     for _ in 0..n {
         let t = mono_now_ns();
+        opts.work();
         link.send(encode(1, t, 0));
         link.recv();
         h.saturating_record(mono_now_ns().saturating_sub(t).max(1));
     }
+    let cpu = match (cpu_before, cpu()) {
+        (Some(a), Some(b)) => format!(" | CPU {:.1} µs each", us(b.saturating_sub(a) / n)),
+        _ => String::new(),
+    };
     println!(
-        "{label}: {n} round trips back to back: mean {:.1} µs (wall {:.1} µs each) | p50 {:.1} µs | p99 {:.1} µs",
+        "{label}: {n} round trips back to back: mean {:.1} µs (wall {:.1} µs each) | p50 {:.1} µs | p99 {:.1} µs{cpu}",
         h.mean() / 1e3,
         start.elapsed().as_secs_f64() * 1e6 / n as f64,
         us(h.value_at_quantile(0.5)),
@@ -240,29 +356,28 @@ fn free_port() -> u16 {
 fn main() {
     // ratelab's runtime threads, as `ratelab` itself sets them.
     ratelab::distributed::set_zenoh_runtime().expect("a usable ZENOH_RUNTIME");
-    let args: Vec<String> = std::env::args().collect();
-    if let [_, flag, transport, endpoint, creds] = args.as_slice() {
-        if flag == "--far" {
-            return far(transport, endpoint, creds);
-        }
+    let opts = <Opts as clap::Parser>::parse();
+    if let Some([transport, endpoint, creds]) = opts.far.as_deref() {
+        return far(&opts, transport, endpoint, creds);
     }
-    if args.len() != 1 {
-        eprintln!("usage: zenoh_floor   (no arguments: it starts its far side itself)");
-        std::process::exit(2);
-    }
+    let me = std::env::current_exe().expect("this program's path");
     let private = ratelab::distributed::credentials::PrivateDir::new().expect("a folder");
     let creds =
         Credentials::generate("floor", &["near".into(), "far".into()]).expect("credentials");
     let creds = private.write("floor", &creds).expect("written");
     let creds = creds.to_string_lossy().into_owned();
     for transport in ["zenoh-tls", "zenoh-tcp", "tcp"] {
+        if opts.transport.as_ref().is_some_and(|t| t != transport) {
+            continue;
+        }
         let addr = format!("127.0.0.1:{}", free_port());
         let endpoint = match transport {
             "zenoh-tls" => format!("tls/{addr}"),
             "zenoh-tcp" => format!("tcp/{addr}"),
             _ => addr.clone(),
         };
-        let mut child = Command::new(&args[0])
+        let mut child = Command::new(&me)
+            .args(opts.for_far())
             .args(["--far", transport, &endpoint, &creds])
             .stdout(Stdio::piped())
             .spawn()
@@ -297,6 +412,7 @@ fn main() {
                     std::thread::sleep(Duration::from_millis(10));
                 }
                 Box::new(ZenohLink {
+                    extra_puts: opts.extra_puts,
                     _session: session,
                     publisher,
                     _subscriber: subscriber,
@@ -314,9 +430,11 @@ fn main() {
             "zenoh-tcp" => "bare Zenoh (peer mode on plain TCP, no authentication)",
             _ => "bare TCP socket (nodelay, blocking)",
         };
-        one_way(link.as_mut(), label, 50, 500);
-        one_way(link.as_mut(), label, 1000, 5000);
-        round_trips(link.as_mut(), label, 5000);
+        if opts.round_trips == 5000 {
+            one_way(link.as_mut(), label, 50, 500);
+            one_way(link.as_mut(), label, 1000, 5000);
+        }
+        round_trips(link.as_mut(), label, opts.round_trips, &opts, child.id());
         link.send(encode(2, 0, 0));
         let _ = child.wait();
     }
