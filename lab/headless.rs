@@ -131,7 +131,7 @@ pub fn config_from_args(a: &RunArgs) -> anyhow::Result<RunConfig> {
         if let (Some(hz), Some((_, rate))) = (hz, a.graph.rates.iter().find(|(n, _)| n == name)) {
             if hz != *rate {
                 anyhow::bail!(
-                    "--rate {name}={rate} and {flag} ({hz} Hz) both set node '{name}''s rate; give one"
+                    "--rate {name}={rate} and {flag} ({hz} Hz) both set the rate of node '{name}'; give one"
                 );
             }
         }

@@ -232,6 +232,9 @@ fn main() -> ExitCode {
     }
     let result = match &cli.command {
         Some(Command::Run(args)) => headless(args, stop),
+        Some(Command::Lab(_)) if cli.headless => Err(anyhow::anyhow!(
+            "`lab` is the terminal lab and cannot run --headless: `ratelab run` runs the graph headless"
+        )),
         Some(Command::Lab(args)) if args.attach => {
             launch::run_attach(&args.connect, args.credentials.as_deref(), stop)
         }

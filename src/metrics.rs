@@ -231,6 +231,16 @@ impl FromIterator<Nanos> for ExactLatency {
     }
 }
 
+/// `n` and its noun, singular for one: `counted(1, "actuator step")` is "1 actuator step",
+/// `counted(2, "actuator step")` "2 actuator steps".
+pub fn counted(n: u64, noun: &str) -> String {
+    if n == 1 {
+        format!("1 {noun}")
+    } else {
+        format!("{n} {noun}s")
+    }
+}
+
 /// Round `x` to `digits` decimals (report figures only).
 pub fn round_to(x: f64, digits: i32) -> f64 {
     let p = 10f64.powi(digits);
@@ -727,6 +737,16 @@ impl Metrics {
         }
     }
 
+    /// How the run ended, in words: `reason`'s ("the pole fell", "duration reached", …),
+    /// except that the actuator's watchdog, which ends the run as a node's stop (as a fall
+    /// does), says "stopped by watchdog".
+    pub fn end_words(&self, reason: &crate::scheduler::EndReason) -> String {
+        match &self.stopped_by_watchdog {
+            Some(_) => "stopped by watchdog".to_string(),
+            None => reason.to_string(),
+        }
+    }
+
     fn topics_by_publisher(&self) -> Vec<(&String, &TopicMetrics)> {
         let rank = |node: &str| self.nodes.get(node).map_or(usize::MAX, |n| n.rank);
         let mut topics: Vec<(&String, &TopicMetrics)> = self.topics.iter().collect();
@@ -743,10 +763,11 @@ impl Metrics {
         let wall = wall_s.map_or_else(String::new, |w| format!(" ({w:.2}s wall)"));
         let ticks = self
             .policy_ticks
-            .map_or_else(String::new, |t| format!(", {t} policy ticks"));
+            .map_or_else(String::new, |t| format!(", {}", counted(t, "policy tick")));
         let counted = format!(
-            "{} actuator steps{ticks} in {:.2}s sim{wall}",
-            self.steps, self.sim_time_s
+            "{}{ticks} in {:.2}s sim{wall}",
+            counted(self.steps, "actuator step"),
+            self.sim_time_s
         );
         let verdict = format!("{} — {counted}", self.headline());
         let period =
@@ -768,6 +789,9 @@ impl Metrics {
             if self.action_published == Some(0) {
                 // Nothing reached the actuator: there is no latency to give, not one of 0 ms.
                 "sense->act latency: none (no command was published to the actuator)".to_string()
+            } else if self.steps == 0 {
+                // Nothing was applied: the same, from the other end of the chain.
+                "sense->act latency: none (the actuator applied no command)".to_string()
             } else {
                 format!(
                     "mean sense->act latency: {:.1} ms  (p50 {:.1} | p99 {:.1} | max {:.1} ms{policy_period})",

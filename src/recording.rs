@@ -1649,17 +1649,16 @@ impl Recording {
             _ => rerun::components::TextLogLevel::INFO,
         };
         let verdict = summary.get(2).cloned().unwrap_or_default();
-        // The actuator's watchdog ends the run as a node stop, as a fall does: say which.
-        let reason = match &metrics.stopped_by_watchdog {
-            Some(_) => "stopped by watchdog".to_string(),
-            None => end.reason.to_string(),
-        };
+        let reason = metrics.end_words(&end.reason);
         if let Some(watchdog) = &metrics.stopped_by_watchdog {
             self.event(end.at, watchdog, rerun::components::TextLogLevel::WARN);
         }
         self.event(
             end.at,
-            &format!("end: {reason}, {} actuator steps", metrics.steps),
+            &format!(
+                "end: {reason}, {}",
+                crate::metrics::counted(metrics.steps, "actuator step")
+            ),
             level,
         );
         let mut doc = format!("**{verdict}** ({reason}).\n\n");

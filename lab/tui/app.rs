@@ -120,6 +120,8 @@ pub struct App {
     qos: Vec<TopicQos>,
     /// Each node's liveliness, by node index (`None`: no lease).
     alive: Vec<Option<bool>>,
+    /// The run's injected faults (`--stall`, `--kill`).
+    faults: Vec<ratelab::qos::Fault>,
     /// Virtual clock with executors: each node's ticks and skipped ticks, as counted at the
     /// run times they come with, over the arrows' window ([`super::live::WINDOW`]) and the
     /// count just before it.
@@ -193,6 +195,7 @@ impl App {
             depths: Vec::new(),
             qos: Vec::new(),
             alive: Vec::new(),
+            faults: Vec::new(),
             exec: VecDeque::new(),
             selected: None,
             live: Live::default(),
@@ -294,6 +297,7 @@ impl App {
                     alive: app.alive.clone(),
                     policy: app.brain.clone(),
                     exec: None,
+                    topics: None,
                 });
             }
             app.on_telemetry(Telemetry::Step(Box::new(*s)));
@@ -340,6 +344,7 @@ impl App {
                 self.pending_rates.clear();
                 self.depths = cfg.graph.topics.iter().map(|t| t.depth).collect();
                 self.qos = cfg.graph.topics.iter().map(|t| t.qos).collect();
+                self.faults = cfg.faults.clone();
                 self.alive = cfg
                     .graph
                     .nodes
@@ -425,7 +430,11 @@ impl App {
                 alive,
                 policy,
                 exec,
+                topics,
             } => {
+                if let Some(topics) = topics {
+                    self.live.counters(super::live::Counts { t: now, topics });
+                }
                 // Counted at `now`: rates are taken between counts, over the window.
                 match exec {
                     Some(e) => {
@@ -480,6 +489,7 @@ impl App {
                         (None, h) => Verdict::Stopped(h),
                     },
                 };
+                let reason = metrics.end_words(&reason);
                 self.say(match (metrics.sched_warning(), &self.attached) {
                     (Some(w), _) => format!("{reason} — {w}"),
                     (None, Some(_)) => format!("{reason} — the launch is over · q quit"),
@@ -849,7 +859,9 @@ impl App {
         };
         let window = self.live.window_topic(id);
         let segment = self.live.segment_topic(id);
-        let dead = |n: NodeId| self.alive.get(n.0).copied().flatten() == Some(false);
+        let dead = |n: NodeId| {
+            self.alive.get(n.0).copied().flatten() == Some(false) || self.fault_of(n).is_some()
+        };
         TopicView {
             name: spec.name.clone(),
             publisher: spec.publisher.0,
@@ -894,6 +906,15 @@ impl App {
             selected: self.selected == Some(Selected::Topic(id)),
             wire_us: self.wire.get(id.0).copied().flatten(),
         }
+    }
+
+    /// The injected fault node `id` is under now: `STALLED` or `KILLED`.
+    fn fault_of(&self, id: NodeId) -> Option<&'static str> {
+        let name = &self.graph.node(id).name;
+        self.faults
+            .iter()
+            .find(|f| &f.node == name && f.covers(self.now))
+            .map(|f| if f.duration.is_some() { "STALLED" } else { "KILLED" })
     }
 
     fn node_view(&self, id: NodeId, layer: usize) -> NodeView {
@@ -971,6 +992,7 @@ impl App {
             compute: self.graph.node(id).compute.map(|c| c.label()),
             selected: self.selected == Some(Selected::Node(id)),
             alive: self.alive.get(id.0).copied().flatten(),
+            fault: self.fault_of(id),
             process: self.attached.as_ref().map(|_| self.graph.process_of(id)),
             badge: match self.graph.node(id).kind.code() {
                 Code::Python => Some(Badge::Python),
@@ -1039,6 +1061,14 @@ impl App {
                 span.as_secs_f64()
             },
             window_full: full,
+            latency_window_s: {
+                let (span, full) = self.live.latency_span();
+                if full {
+                    WINDOW.as_secs_f64()
+                } else {
+                    span.as_secs_f64()
+                }
+            },
             marks_s: self
                 .live
                 .marks()

@@ -8,24 +8,27 @@
 //!   run started) — per-topic totals and the latency histogram. Each change starts a new
 //!   segment and leaves a mark for the angle chart.
 //!
-//! Both are computed from the actuator's [`StepRecord`]s, which carry every topic's
-//! cumulative counters: a window or a segment is the difference between two records. Memory
-//! is bounded: the window keeps at most one record per actuator tick over [`WINDOW`] (the
-//! actuator runs at 50 Hz: 251 records; never more than [`MAX_WINDOW_RECORDS`]), the
-//! segment's latency at most [`ratelab::metrics::MAX_EXACT_SAMPLES`] samples, the marks at
-//! most [`MAX_MARKS`] over the last [`MARK_HISTORY`].
+//! Both are computed from every topic's cumulative counters ([`Counts`]), which come with
+//! each of the actuator's [`StepRecord`]s and with each of the engine's status messages (so
+//! they stay current while the actuator is stalled or dead): a window or a segment is the
+//! difference between two of them. Latency comes from the step records alone. Memory is
+//! bounded: the window keeps at most one record per actuator tick and one count per status
+//! over [`WINDOW`] (a 50 Hz actuator and a status every 33 ms: about 400; never more than
+//! [`MAX_WINDOW_RECORDS`] of either), the segment's latency at most
+//! [`ratelab::metrics::MAX_EXACT_SAMPLES`] samples, the marks at most [`MAX_MARKS`] over the
+//! last [`MARK_HISTORY`].
 
 use ratelab::graph::TopicId;
 use ratelab::metrics::ExactLatency;
-use ratelab::runlog::StepRecord;
+use ratelab::runlog::{StepRecord, TopicCounters};
 use ratelab::topic::TopicStats;
 use ratelab::Nanos;
 use std::collections::VecDeque;
 
 /// The window: the last 5 s of run time.
 pub const WINDOW: Nanos = Nanos(5 * Nanos::SECOND.0);
-/// Records the window keeps at most, whatever arrives (the 50 Hz actuator sends 251 in
-/// [`WINDOW`]).
+/// Records (and counts) the window keeps at most, whatever arrives (the 50 Hz actuator
+/// sends 251 in [`WINDOW`], the engine's status about 150).
 pub const MAX_WINDOW_RECORDS: usize = 1024;
 /// How far back segment marks are kept (the charts show the last 10 s).
 pub const MARK_HISTORY: Nanos = Nanos(10 * Nanos::SECOND.0);
@@ -88,6 +91,16 @@ pub fn order_stats(samples: &mut [u64]) -> Option<(Nanos, Nanos, Nanos)> {
     Some((at(0.5), at(0.99), Nanos(samples[n - 1])))
 }
 
+/// Every topic's cumulative counters at one run time: from an actuator's [`StepRecord`], or
+/// from the engine's status (which comes while the actuator is stalled or dead too).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Counts {
+    /// Run time they were read.
+    pub t: Nanos,
+    /// Each topic's counters, by [`TopicId`].
+    pub topics: TopicCounters,
+}
+
 /// The segment since the last change of settings.
 #[derive(Clone, Debug, Default)]
 pub struct Segment {
@@ -97,8 +110,8 @@ pub struct Segment {
     pub start: Nanos,
     /// What started it (`None`: the run's start).
     pub cause: Option<String>,
-    /// The newest record from before `start` (`None`: the segment starts with the run).
-    baseline: Option<StepRecord>,
+    /// The newest counters from before `start` (`None`: the segment starts with the run).
+    baseline: Option<Counts>,
     /// Sense→act latency of the steps since `start`.
     pub latency: ExactLatency,
     /// Run time of the first step it holds (a lab attached mid-run sees none before).
@@ -108,16 +121,20 @@ pub struct Segment {
     pub no_command: u64,
 }
 
-/// The lab's window and segment, fed with every step record and every change.
+/// The lab's window and segment, fed with every step record, every status's counters and
+/// every change.
 #[derive(Clone, Debug)]
 pub struct Live {
-    /// Records over the window, oldest first; the oldest may be the one just before the
-    /// window (the window's baseline).
+    /// Step records over the window, oldest first (their latencies).
     window: VecDeque<StepRecord>,
+    /// Counters over the window, oldest first; the oldest may be from just before the
+    /// window (the window's baseline).
+    counts: VecDeque<Counts>,
     segment: Segment,
     /// Run times of the changes over the last [`MARK_HISTORY`].
     marks: VecDeque<Nanos>,
-    last: Option<StepRecord>,
+    /// The newest counters, from a step or a status.
+    newest: Option<Counts>,
     /// Run time of the first step that applied a command (the steps before it have no
     /// latency either, and are not "no command").
     first_command: Option<Nanos>,
@@ -127,27 +144,35 @@ impl Default for Live {
     fn default() -> Self {
         Self {
             window: VecDeque::new(),
+            counts: VecDeque::new(),
             segment: Segment {
                 index: 1,
                 ..Segment::default()
             },
             marks: VecDeque::new(),
-            last: None,
+            newest: None,
             first_command: None,
         }
+    }
+}
+
+/// Drop the front of `q` while its second entry is at or before `now − WINDOW` (so one
+/// entry at or before the window's start stays: its baseline) or `q` holds more than
+/// [`MAX_WINDOW_RECORDS`].
+fn trim<T>(q: &mut VecDeque<T>, at: impl Fn(&T) -> Nanos, now: Nanos) {
+    while q.len() > MAX_WINDOW_RECORDS
+        || q
+            .get(1)
+            .is_some_and(|r| at(r) <= now.saturating_sub(WINDOW) && now >= WINDOW)
+    {
+        q.pop_front();
     }
 }
 
 impl Live {
     /// Account one actuator step.
     pub fn push(&mut self, s: StepRecord) {
-        if s.t < self.segment.start {
-            // Taken before the change but received after it (the real clock's threads):
-            // the baseline, not the segment.
-            if self.segment.baseline.is_none_or(|b| b.t <= s.t) {
-                self.segment.baseline = Some(s);
-            }
-        } else {
+        if s.t >= self.segment.start {
             let first = self.segment.first_step.get_or_insert(s.t);
             *first = (*first).min(s.t);
             match s.latency {
@@ -162,16 +187,34 @@ impl Live {
             self.first_command = Some(self.first_command.map_or(s.t, |f| f.min(s.t)));
         }
         self.window.push_back(s);
-        let now = self.last.map_or(s.t, |l| l.t.max(s.t));
-        // Keep one record at or before now − WINDOW: the window's baseline.
-        while self.window.len() > MAX_WINDOW_RECORDS
-            || self
-                .window
-                .get(1)
-                .is_some_and(|r| r.t <= now.saturating_sub(WINDOW) && now >= WINDOW)
-        {
-            self.window.pop_front();
+        self.counters(Counts {
+            t: s.t,
+            topics: s.topics,
+        });
+    }
+
+    /// Account every topic's counters at a run time: a step's, or the engine's status's
+    /// (which keeps the counts current while the actuator sends no step).
+    pub fn counters(&mut self, c: Counts) {
+        if c.t < self.segment.start {
+            // Taken before the change but received after it (the real clock's threads):
+            // the baseline, not the segment.
+            if self.segment.baseline.is_none_or(|b| b.t <= c.t) {
+                self.segment.baseline = Some(c);
+            }
         }
+        // A status repeats its instant while paused or frozen: the newest counters of an
+        // instant stand for it.
+        match self.counts.back_mut() {
+            Some(back) if back.t == c.t => *back = c,
+            _ => self.counts.push_back(c),
+        }
+        if self.newest.is_none_or(|n| n.t <= c.t) {
+            self.newest = Some(c);
+        }
+        let now = self.now();
+        trim(&mut self.counts, |c| c.t, now);
+        trim(&mut self.window, |r| r.t, now);
         while self
             .marks
             .front()
@@ -179,18 +222,20 @@ impl Live {
         {
             self.marks.pop_front();
         }
-        if self.last.is_none_or(|l| l.t <= s.t) {
-            self.last = Some(s);
-        }
+    }
+
+    /// The newest run time accounted.
+    fn now(&self) -> Nanos {
+        self.newest.map_or(Nanos::ZERO, |n| n.t)
     }
 
     /// A change of settings took effect at run time `at`: a new segment starts there.
     pub fn change(&mut self, at: Nanos, cause: String) {
         let baseline = self
-            .window
+            .counts
             .iter()
-            .filter(|r| r.t < at)
-            .max_by_key(|r| r.t)
+            .filter(|c| c.t < at)
+            .max_by_key(|c| c.t)
             .copied()
             .or(self.segment.baseline.filter(|b| b.t < at));
         // Steps from at or after the change that arrived before it (real clock) belong here.
@@ -227,21 +272,15 @@ impl Live {
         &self.segment
     }
 
-    /// The newest record.
-    pub fn last(&self) -> Option<&StepRecord> {
-        self.last.as_ref()
-    }
-
-    /// The window's baseline, the record whose counters the window counts from (its events
-    /// are after it): the segment's baseline when the last change is within the window (so
-    /// the window never mixes two settings), else the record just before the window; `None`
-    /// when the window reaches back to the run's start (it counts from zero).
-    fn window_base(&self) -> Option<&StepRecord> {
-        let front = self.window.front()?;
-        let now = self.last.map_or(front.t, |l| l.t);
+    /// The window's baseline, the counters the window counts from (its events are after
+    /// them): the segment's baseline when the last change is within the window (so the
+    /// window never mixes two settings), else the counters from just before the window;
+    /// `None` when the window reaches back to the run's start (it counts from zero).
+    fn window_base(&self) -> Option<&Counts> {
+        let front = self.counts.front()?;
         match &self.segment.baseline {
             Some(b) if b.t >= front.t => Some(b),
-            None if now < WINDOW => None,
+            None if self.now() < WINDOW => None,
             _ => Some(front),
         }
     }
@@ -249,35 +288,53 @@ impl Live {
     /// The window's span, and whether it is the whole [`WINDOW`] (false right after the
     /// run's start or a change: the window is shorter then).
     pub fn window_span(&self) -> (Nanos, bool) {
-        let Some(last) = self.last() else {
+        if self.newest.is_none() {
             return (Nanos::ZERO, false);
-        };
+        }
         let from = self.window_base().map_or(self.segment.start, |b| b.t);
-        let span = last.t.saturating_sub(from);
+        let span = self.now().saturating_sub(from);
         (span.min(WINDOW), span >= WINDOW)
     }
 
+    /// The latency window's span: as [`Live::window_span`], but from the first step a lab
+    /// saw when it joined a run well after its start (attached mid-run: it holds no step
+    /// from before; the counters it holds count from the run's start).
+    pub fn latency_span(&self) -> (Nanos, bool) {
+        let (span, full) = self.window_span();
+        let joined = self
+            .segment
+            .first_step
+            .filter(|t| self.segment.cause.is_none() && *t > self.segment.start + Nanos::SECOND);
+        match joined {
+            Some(j) if !full => {
+                let from = self.window_base().map_or(self.segment.start, |b| b.t);
+                (self.now().saturating_sub(from.max(j)), false)
+            }
+            _ => (span, full),
+        }
+    }
+
     /// Topic `id` over the window. msg/s is the count over the span between the first and
-    /// the last publish stamp in the window: from the first record that holds a message
+    /// the last publish stamp in the window: from the first counters that hold a message
     /// published in the window (its newest stamp), so a gap before the window (a change from
     /// a slower rate) does not dilute it.
     pub fn window_topic(&self, id: TopicId) -> TopicCounts {
-        let Some(last) = self.last() else {
+        let Some(newest) = self.newest else {
             return TopicCounts::default();
         };
+        let last = newest.topics.get(id);
         let base = self.window_base();
-        let counts =
-            TopicCounts::between(base.map(|b| b.topics.get(id)), last.topics.get(id), last.t);
+        let counts = TopicCounts::between(base.map(|b| b.topics.get(id)), last, newest.t);
         let before = base.map_or(0, |b| b.topics.get(id).published);
         let first = self
-            .window
+            .counts
             .iter()
-            .filter(|r| base.is_none_or(|b| r.t > b.t))
-            .map(|r| r.topics.get(id))
+            .filter(|c| base.is_none_or(|b| c.t > b.t))
+            .map(|c| c.topics.get(id))
             .find(|s| s.published > before);
         TopicCounts {
             msg_per_s: first.map_or(0.0, |f| {
-                TopicCounts::between(Some(f), last.topics.get(id), last.t).msg_per_s
+                TopicCounts::between(Some(f), last, newest.t).msg_per_s
             }),
             ..counts
         }
@@ -286,20 +343,20 @@ impl Live {
     /// Topic `id`'s QoS counter `c` over the window (what it counted since the window's
     /// baseline), as its drops and stale reads are.
     pub fn window_counter(&self, id: TopicId, c: ratelab::qos::QosCounter) -> u64 {
-        let Some(last) = self.last() else { return 0 };
+        let Some(newest) = self.newest else { return 0 };
         let base = self
             .window_base()
             .map_or(0, |b| b.topics.get(id).counter(c));
-        last.topics.get(id).counter(c).saturating_sub(base)
+        newest.topics.get(id).counter(c).saturating_sub(base)
     }
 
     /// Topic `id` since the segment started.
     pub fn segment_topic(&self, id: TopicId) -> TopicCounts {
-        match self.last() {
-            Some(l) => TopicCounts::between(
+        match self.newest {
+            Some(n) => TopicCounts::between(
                 self.segment.baseline.map(|b| b.topics.get(id)),
-                l.topics.get(id),
-                l.t,
+                n.topics.get(id),
+                n.t,
             ),
             None => TopicCounts::default(),
         }
@@ -422,6 +479,59 @@ mod tests {
         assert_eq!(live.window.len(), 251);
         // The segment (no change yet) is the whole run: 61 messages at t = 0, 0.2, …, 12 s.
         assert_eq!(live.segment_topic(T).published, 61);
+    }
+
+    #[test]
+    fn counts_stay_current_while_the_actuator_sends_no_step() {
+        let mut live = Live::default();
+        // The actuator steps until 1 s, then stalls; the engine's status keeps counting:
+        // the topic published on at 50 Hz, and every message from 1 s on was dropped.
+        for t in (0..=1_000).step_by(20) {
+            live.push(rec(t, 50, 0, 0, 0));
+        }
+        for t in (1_020..=3_000).step_by(33) {
+            let r = rec(t, 50, (t - 1_000) / 20, 0, 0);
+            live.counters(Counts {
+                t: r.t,
+                topics: r.topics,
+            });
+        }
+        let w = live.window_topic(T);
+        assert_eq!((w.dropped, w.published), (100, 151), "{w:?}");
+        assert_eq!(w.msg_per_s, 50.0);
+        assert_eq!(live.window_span(), (Nanos(3_000 * MS), false));
+        // The latency window holds the steps only: 51 of them.
+        assert_eq!(live.window_latency().0, 51);
+        // A frozen run repeats its last status: the window stays as it was.
+        let (t, topics) = (Nanos(3_000 * MS), live.newest.unwrap().topics);
+        for _ in 0..5_000 {
+            live.counters(Counts { t, topics });
+        }
+        assert_eq!(live.window_topic(T), w);
+        assert!(live.counts.len() < 200, "{}", live.counts.len());
+    }
+
+    #[test]
+    fn a_lab_that_joined_mid_run_spans_its_latency_from_its_first_step() {
+        // Attached at 1.6 s: the counters count from the run's start, the latency from 1.6 s.
+        let mut live = Live::default();
+        for t in (1_600..=3_600).step_by(20) {
+            live.push(rec(t, 50, 0, 0, 0));
+        }
+        assert_eq!(live.window_span(), (Nanos(3_600 * MS), false));
+        assert_eq!(live.latency_span(), (Nanos(2_000 * MS), false));
+        assert_eq!(live.window_latency().0, 101);
+        // Once the window is whole, both are its 5 s.
+        for t in (3_620..=9_000).step_by(20) {
+            live.push(rec(t, 50, 0, 0, 0));
+        }
+        assert_eq!(live.latency_span(), (WINDOW, true));
+        // A run the lab saw from its start: the same span for both.
+        let mut live = Live::default();
+        for t in (0..=2_000).step_by(20) {
+            live.push(rec(t, 50, 0, 0, 0));
+        }
+        assert_eq!(live.latency_span(), live.window_span());
     }
 
     #[test]

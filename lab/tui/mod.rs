@@ -253,6 +253,75 @@ mod tests {
         }
     }
 
+    /// A node under an injected fault says so in its box (a lease, when it has one, then
+    /// says NOT ALIVE), and no arrow it publishes or reads carries a green tick (#25).
+    #[test]
+    fn an_injected_stall_or_kill_shows_on_its_node_and_takes_the_tick_off_its_topics() {
+        // The policy stalled from 1 s: the pole falls at 2.42 s, the policy still stalled.
+        let mut cfg = virtual_cfg(50.0, 5);
+        cfg.faults = vec![ratelab::qos::Fault::parse("policy@1+3", false).unwrap()];
+        let (app, _rx) = app_after(cfg, true);
+        for (w, h) in [(80, 24), (120, 40)] {
+            let text = render(&app, w, h);
+            assert_eq!(text.matches("✗ STALLED").count(), 1, "{w}x{h}:\n{text}");
+            assert!(!text.contains("dropped ✓"), "{w}x{h}:\n{text}");
+        }
+        // The actuator killed at 1 s of 3: the engine's last status is at 3 s.
+        let mut cfg = virtual_cfg(50.0, 3);
+        cfg.faults = vec![ratelab::qos::Fault::parse("actuator@1", true).unwrap()];
+        let depths: Vec<usize> = cfg.graph.topics.iter().map(|t| t.depth).collect();
+        let qos = cfg.graph.topics.iter().map(|t| t.qos).collect();
+        let (mut app, _rx) = app_after(cfg, false);
+        app.on_telemetry(Telemetry::Status {
+            now: ratelab::Nanos(3_000_000_000),
+            paused: false,
+            speed: Speed::Times(1.0),
+            rates: vec![50.0; 3],
+            depths,
+            qos,
+            alive: vec![None; 3],
+            policy: "scripted balancer".into(),
+            exec: None,
+            topics: None,
+        });
+        let text = render(&app, 80, 24);
+        assert_eq!(text.matches("✗ KILLED").count(), 1, "{text}");
+        // /obs still flows (sensor to policy); /action's reader is dead.
+        assert_eq!(text.matches("dropped ✓").count(), 1, "{text}");
+    }
+
+    /// The verdict reads whole in the narrow cartpole panel (80 columns): the panel's name
+    /// gives way first (#25).
+    #[test]
+    fn the_verdict_reads_whole_at_80_columns() {
+        let mut cfg = virtual_cfg(50.0, 3);
+        cfg.faults = vec![ratelab::qos::Fault::parse("actuator@1", true).unwrap()];
+        let (app, _rx) = app_after(cfg, true);
+        let text = render(&app, 80, 24);
+        assert!(text.contains("┌ BALANCED while the plant ran ┐"), "{text}");
+        let (app, _rx) = app_after(virtual_cfg(50.0, 2), true);
+        let text = render(&app, 80, 24);
+        assert!(text.contains("┌ BALANCED ✓ (run complete) ─"), "{text}");
+        let text = render(&app, 120, 40);
+        assert!(text.contains("┌ cartpole  BALANCED ✓ (run complete) ─"), "{text}");
+    }
+
+    /// A watchdog's stop is not a fall: the footer says which ended the run (#25).
+    #[test]
+    fn a_watchdog_stop_is_not_called_a_fall() {
+        let mut cfg = virtual_cfg(50.0, 5);
+        cfg.graph
+            .set_qos("/action", "deadline_ms=40,on_deadline_missed=stop")
+            .unwrap();
+        cfg.faults = vec![ratelab::qos::Fault::parse("policy@2+0.5", false).unwrap()];
+        let (app, _rx) = app_after(cfg, true);
+        let text = render(&app, 80, 24);
+        let footer = text.lines().last().unwrap_or_default();
+        assert!(footer.contains("stopped by watchdog — keys set"), "{footer}");
+        assert!(!text.contains("the pole fell"), "{text}");
+        assert!(text.contains("STOPPED BY WATCHDOG at t=2.04s"), "{text}");
+    }
+
     #[test]
     fn snapshot_shipped_graphs_at_80x24() {
         for (name, file) in [
@@ -391,6 +460,7 @@ mod tests {
             alive: vec![None, Some(false), None, None],
             policy: "scripted balancer".into(),
             exec: None,
+            topics: None,
         });
         let text = render(&app, 120, 40);
         for want in [
@@ -803,6 +873,7 @@ mod tests {
             alive: vec![None; 3],
             policy: "scripted balancer".into(),
             exec: Some(exec),
+            topics: None,
         };
         app.on_telemetry(status(3, vec![(101, 50), (101, 50), (151, 0)]));
         let v = app.view();
@@ -853,6 +924,7 @@ mod tests {
             alive: vec![None; 3],
             policy: "ch2.1 PPO checkpoint (x.pt, hidden 64) — an imperfect learner".into(),
             exec: None,
+            topics: None,
         });
         let text = render(&app, 120, 40);
         assert!(text.contains("brain: an imperfect learner"), "{text}");
@@ -992,6 +1064,7 @@ mod tests {
             alive: vec![None; 3],
             policy: "scripted balancer".into(),
             exec: None,
+            topics: None,
         });
         let v = app.view();
         let policy = v.nodes.iter().find(|n| n.name == "policy").unwrap();
@@ -1029,6 +1102,7 @@ mod tests {
             alive: vec![Some(true), Some(false), Some(true)],
             policy: "scripted".into(),
             exec: None,
+            topics: None,
         });
         app.on_telemetry(Telemetry::Wire(vec![(0, 214.4, 402.7)]));
         for (w, h) in [(80, 24), (120, 40)] {

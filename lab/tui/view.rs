@@ -58,6 +58,9 @@ pub struct NodeView {
     /// Liveliness with a lease: `Some(false)` when not heard from within it; `None`
     /// without a lease. Attached to a graph across processes: its liveliness token.
     pub alive: Option<bool>,
+    /// An injected fault in force now (`--stall`, `--kill`): `STALLED` or `KILLED`. Its box
+    /// says so until its lease (if it has one) says `NOT ALIVE`.
+    pub fault: Option<&'static str>,
     /// Attached to a graph across processes: the process it runs in (the box's title
     /// reads `policy@policy`).
     pub process: Option<String>,
@@ -150,6 +153,9 @@ pub struct SegmentView {
     pub window_s: f64,
     /// The window spans its whole 5 s.
     pub window_full: bool,
+    /// The latency window's span, s: as `window_s`, but from the first step a lab attached
+    /// mid-run saw.
+    pub latency_window_s: f64,
     /// Run times of the changes over the last ~10 s, s (marks on the angle chart).
     pub marks_s: Vec<f64>,
     /// When the lab saw its first step well after the run's start (attached mid-run), its
@@ -157,14 +163,25 @@ pub struct SegmentView {
     pub joined_s: Option<f64>,
 }
 
+/// `last 5 s` for a whole window of `span_s`, else `last 2.3 s`.
+fn last(span_s: f64, full: bool) -> String {
+    if full {
+        format!("last {} s", hz(span_s))
+    } else {
+        format!("last {span_s:.1} s")
+    }
+}
+
 impl SegmentView {
     /// `last 5 s` or, while the window is shorter, `last 2.3 s`.
     pub fn window_label(&self) -> String {
-        if self.window_full {
-            format!("last {} s", hz(self.window_s))
-        } else {
-            format!("last {:.1} s", self.window_s)
-        }
+        last(self.window_s, self.window_full)
+    }
+
+    /// The latency window's label: as [`SegmentView::window_label`], over
+    /// [`SegmentView::latency_window_s`] (shorter only while the window is).
+    pub fn latency_window_label(&self) -> String {
+        last(self.latency_window_s, self.window_full)
     }
 
     /// `the start` or `12.30 s`.
@@ -692,13 +709,13 @@ fn render_node(n: &NodeView, area: Rect, buf: &mut Buffer, real: bool) {
             lines.push(Line::from(text).dim());
         }
     }
-    if n.alive == Some(false) {
+    if let Some(words) = alarm(n) {
         // The mark gives way in a narrow box (80 columns): the words must read whole.
-        let full = "✗ NOT ALIVE";
+        let full = format!("✗ {words}");
         let text = if full.chars().count() <= usize::from(area.width.saturating_sub(2)) {
             full
         } else {
-            "NOT ALIVE"
+            words.to_string()
         };
         lines.insert(0, Line::from(text).white().on_red().bold());
     }
@@ -988,6 +1005,16 @@ fn render_arrow(t: &TopicView, area: Rect, buf: &mut Buffer) {
     Paragraph::new(arrow_lines(t, w, usize::from(area.height))).render(area, buf);
 }
 
+/// What a node's box raises in red: its lease ran out (`NOT ALIVE`), or, until then, the
+/// fault injected into it (`STALLED`, `KILLED`).
+fn alarm(n: &NodeView) -> Option<&'static str> {
+    if n.alive == Some(false) {
+        Some("NOT ALIVE")
+    } else {
+        n.fault
+    }
+}
+
 /// The rows a node's box would fill inside its border: its rate, what it measured (or ran,
 /// or sent), its compute time, badge, tick time and liveliness.
 fn node_rows(n: &NodeView) -> usize {
@@ -999,7 +1026,7 @@ fn node_rows(n: &NodeView) -> usize {
         + usize::from(n.compute.is_some())
         + usize::from(n.badge.is_some())
         + usize::from(n.tick_p50_us.is_some())
-        + usize::from(n.alive == Some(false))
+        + usize::from(alarm(n).is_some())
 }
 
 /// The graph panel's height: 7 rows, more when an arrow's QoS lines or a column of node
@@ -1048,7 +1075,24 @@ fn badge(v: &View) -> Span<'static> {
 fn render_cartpole(v: &View, area: Rect, buf: &mut Buffer) {
     let x = v.cart_pos;
     let theta = v.pole_angle;
-    let title = Line::from(vec![" cartpole ".into(), badge(v)]);
+    // The verdict reads whole: in a narrow panel (80 columns) the panel's name gives way,
+    // then the badge's padding ("BALANCED while the plant ran" is no plain BALANCED).
+    let verdict = badge(v);
+    let (room, words) = (
+        usize::from(area.width.saturating_sub(2)),
+        verdict.content.chars().count(),
+    );
+    let name = " cartpole ";
+    let title = if name.len() + words <= room {
+        Line::from(vec![name.into(), verdict])
+    } else if words <= room {
+        Line::from(verdict)
+    } else {
+        Line::from(Span::styled(
+            verdict.content.trim().to_string(),
+            verdict.style,
+        ))
+    };
     Canvas::default()
         .block(Block::bordered().title(title))
         .marker(Marker::Braille)
@@ -1343,7 +1387,7 @@ fn render_latency(v: &View, area: Rect, buf: &mut Buffer) {
     let w = &l.window;
     let window = Line::from(vec![
         " ".into(),
-        v.segment.window_label().bold(),
+        v.segment.latency_window_label().bold(),
         format!(
             ": n={} │ p50 {:.1} │ p99 {:.1} │ max {:.1} ms ",
             w.count, w.p50_ms, w.p99_ms, w.max_ms

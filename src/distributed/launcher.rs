@@ -1392,7 +1392,7 @@ pub fn launch(
     reports.retain(|p, st| match check_report(spec, p, st, end.at) {
         Ok(()) => true,
         Err(why) => {
-            say(&format!("refused process '{p}''s report: {why}"));
+            say(&format!("refused the report of process '{p}': {why}"));
             false
         }
     });

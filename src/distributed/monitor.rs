@@ -399,6 +399,8 @@ impl Fold {
                 .collect(),
             policy: self.policy.clone(),
             exec: None,
+            // The steps carry the holders' counters, merged (the figures come in batches).
+            topics: None,
         }
     }
 }

@@ -360,6 +360,7 @@ impl Engine {
                 .collect(),
             policy: h.brain_label(),
             exec,
+            topics: Some(h.topic_stats_at(now)),
         });
     }
 

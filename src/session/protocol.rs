@@ -112,6 +112,10 @@ pub enum Telemetry {
         /// Virtual clock, when the graph has executors or compute times
         /// ([`crate::executor`]): each node's ticks and skipped ticks so far, by node index.
         exec: Option<Vec<(u64, u64)>>,
+        /// Every topic's counters at `now`, as a step record carries them: they keep the
+        /// lab's counts current while the actuator sends no step (stalled, killed).
+        /// `None` where the sender has none (a lab attached to a launch).
+        topics: Option<crate::runlog::TopicCounters>,
     },
     /// Virtual clock with executors or compute times: the ticks that ended since the last
     /// such message, oldest first ([`crate::executor::CallbackSpan`]; the lab's executor

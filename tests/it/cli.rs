@@ -28,6 +28,15 @@ fn assert_usage_error(args: &[&str], needle: &str) {
 }
 
 #[test]
+fn the_lab_refuses_headless_with_a_pointer_to_run() {
+    // `--headless` is a global flag, so `lab --help` lists it; it cannot mean the lab.
+    assert_usage_error(
+        &["lab", "--headless", "--clock", "virtual"],
+        "`lab` is the terminal lab and cannot run --headless: `ratelab run` runs the graph headless",
+    );
+}
+
+#[test]
 fn bad_rates_are_refused() {
     for bad in ["0", "-5", "nan", "inf", "10001", "fast"] {
         assert_usage_error(&["run", "--control-hz", bad], "--control-hz");
@@ -572,11 +581,11 @@ fn attach_without_a_terminal_points_to_top() {
 fn conflicting_rates_are_refused_and_a_fault_after_the_end_is_warned_about() {
     assert_usage_error(
         &["run", "--smoke", "--rate", "policy=5", "--control-hz", "10"],
-        "--rate policy=5 and --control-hz (10 Hz) both set node 'policy''s rate; give one",
+        "--rate policy=5 and --control-hz (10 Hz) both set the rate of node 'policy'; give one",
     );
     assert_usage_error(
         &["run", "--smoke", "--rate", "sensor=20", "--sensor-hz", "50"],
-        "both set node 'sensor''s rate",
+        "both set the rate of node 'sensor'",
     );
     assert_usage_error(
         &["run", "--smoke", "--rate", "policy=50", "--break"],

@@ -480,9 +480,10 @@ fn the_headline_names_how_the_run_really_ended() {
             line,
             m["balanced"].as_bool().unwrap(),
             m["policy_ticks"].as_u64().unwrap(),
+            stdout,
         )
     };
-    let (line, balanced, policy_ticks) = headline(&[
+    let (line, balanced, policy_ticks, _) = headline(&[
         "--qos",
         "/action:deadline_ms=40,on_deadline_missed=stop",
         "--stall",
@@ -496,18 +497,24 @@ fn the_headline_names_how_the_run_really_ended() {
     );
     assert!(!line.contains("whole run") && !balanced, "{line}");
 
-    let (line, balanced, _) = headline(&["--kill", "actuator@0"]);
+    let (line, balanced, _, out) = headline(&["--kill", "actuator@0"]);
     assert!(line.starts_with("PLANT NEVER STEPPED"), "{line}");
     assert!(line.contains("0 actuator steps") && !balanced, "{line}");
+    // Commands were published, none applied: no latency to give, not one of 0.0 ms.
+    assert!(
+        out.contains("sense->act latency: none (the actuator applied no command)"),
+        "{out}"
+    );
+    assert!(!out.contains("latency: 0.0 ms"), "{out}");
 
-    let (line, balanced, _) = headline(&["--stall", "actuator@1+0.5"]);
+    let (line, balanced, _, _) = headline(&["--stall", "actuator@1+0.5"]);
     assert!(
         line.starts_with("BALANCED while the plant ran (the actuator lost 25 ticks to a fault"),
         "{line}"
     );
     assert!(balanced, "the pole did stay up whenever the plant stepped");
 
-    let (line, balanced, _) = headline(&[]);
+    let (line, balanced, _, _) = headline(&[]);
     assert!(
         line.starts_with("BALANCED (pole up the whole run) — 151 actuator steps"),
         "{line}"

@@ -728,3 +728,47 @@ fn under_the_real_clock_an_executor_change_waits_for_the_next_run() {
     }
     live.quit();
 }
+
+/// The engine's status carries every topic's counters, so the lab's counts stay current
+/// while the actuator (whose steps carry them too) is stalled or dead: with the actuator
+/// killed at 1 s of a 3 s run, no step comes after 1 s, yet the last status before the end
+/// counts the 100 messages on /action nobody read, as the headless summary does (#25).
+#[test]
+fn the_status_keeps_counting_while_the_actuator_is_dead() {
+    let dir = tempfile::tempdir().unwrap();
+    let (ctl, ctl_rx) = unbounded();
+    let (tel_tx, tel) = unbounded::<Telemetry>();
+    let mut s = settings(
+        ClockKind::Virtual,
+        0,
+        false,
+        Speed::Max,
+        &dir.path().join("session.json"),
+    );
+    s.cfg.duration = ratelab::Nanos(3_000_000_000);
+    s.cfg.faults = vec![ratelab::qos::Fault::parse("actuator@1", true).unwrap()];
+    let engine = Engine::new(s, ctl_rx, tel_tx).spawn();
+    let action = ratelab::graph::TopicId(1);
+    let (mut last_step, mut last_counts) = (None, None);
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(20);
+    let metrics = loop {
+        let left = deadline.saturating_duration_since(std::time::Instant::now());
+        match tel.recv_timeout(left).expect("the run ends within 20 s") {
+            Telemetry::Step(r) => last_step = Some(r.t),
+            Telemetry::Status {
+                now,
+                topics: Some(t),
+                ..
+            } => last_counts = Some((now, t.get(action))),
+            Telemetry::Ended { metrics, .. } => break metrics,
+            _ => {}
+        }
+    };
+    ctl.send(Control::Quit).unwrap();
+    engine.join().unwrap();
+    assert_eq!(last_step, Some(ratelab::Nanos(980_000_000)));
+    let (now, a) = last_counts.expect("a status with counters");
+    assert_eq!(now, ratelab::Nanos(3_000_000_000));
+    assert_eq!(a.dropped, metrics.topics["/action"].dropped);
+    assert_eq!(a.dropped, 100);
+}
