@@ -390,6 +390,36 @@ pub struct Metrics {
     pub without_chain: Option<String>,
 }
 
+/// A fault injected into a node (`--stall NODE@T+D`, `--kill NODE@T`), in `metrics.json`.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub struct FaultMetrics {
+    /// When it started, s of run time.
+    pub at_s: f64,
+    /// How long it lasted, s; `None` for a kill (to the end of the run).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub duration_s: Option<f64>,
+}
+
+impl FaultMetrics {
+    /// The fault in words, as the summary says it: `stalled at 2.00 s for 0.50 s`,
+    /// `killed at 3.00 s`.
+    pub fn describe(&self) -> String {
+        match self.duration_s {
+            Some(d) => format!("stalled at {:.2} s for {d:.2} s", self.at_s),
+            None => format!("killed at {:.2} s", self.at_s),
+        }
+    }
+}
+
+impl From<&crate::qos::Fault> for FaultMetrics {
+    fn from(f: &crate::qos::Fault) -> Self {
+        Self {
+            at_s: f.at.as_secs_f64(),
+            duration_s: f.duration.map(Nanos::as_secs_f64),
+        }
+    }
+}
+
 /// One node's figures in `metrics.json`.
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
 pub struct NodeMetrics {
@@ -420,6 +450,10 @@ pub struct NodeMetrics {
     /// Ticks a fault (`--stall`, `--kill`) swallowed, when one was injected.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub faulted_ticks: Option<u64>,
+    /// The faults injected into it (`--stall`, `--kill`); empty (and left out of
+    /// `metrics.json`) without one.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub faults: Vec<FaultMetrics>,
     /// Its declared mean compute time, ms, when it has one ([`crate::executor`]).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub compute_ms: Option<f64>,
@@ -630,8 +664,15 @@ impl Metrics {
                     if let (Some(lease), Some(k)) = (n.liveliness_lease_ms, n.not_alive) {
                         p.push_str(&format!(" not alive {k}× (lease {lease} ms)"));
                     }
-                    if let Some(f) = n.faulted_ticks {
-                        p.push_str(&format!(" {f} ticks lost to faults"));
+                    if !n.faults.is_empty() {
+                        let sep = if n.not_alive.is_some() { ", " } else { " " };
+                        let said: Vec<String> = n.faults.iter().map(FaultMetrics::describe).collect();
+                        p.push_str(&format!("{sep}{}", said.join(", ")));
+                    }
+                    match (n.faulted_ticks, n.faults.is_empty()) {
+                        (Some(f), true) => p.push_str(&format!(" {f} ticks lost to faults")),
+                        (Some(f), false) => p.push_str(&format!(": {f} ticks lost")),
+                        (None, _) => {}
                     }
                     p
                 })
@@ -727,6 +768,18 @@ impl Metrics {
             format!(
                 "STOPPED EARLY at t={:.2}s of {:.2}s (pole up until then)",
                 self.sim_time_s, self.duration_s
+            )
+        } else if let Some(kill) = self
+            .nodes
+            .values()
+            .filter(|n| n.kind == "actuator")
+            .flat_map(|n| &n.faults)
+            .find(|f| f.duration_s.is_none())
+        {
+            // The plant stood still from the kill to the end: it balanced nothing after.
+            format!(
+                "ACTUATOR KILLED at t={:.2}s (pole up until then; the plant stood still after)",
+                kill.at_s
             )
         } else if actuator_faults > 0 {
             format!(

@@ -575,6 +575,12 @@ pub fn summarize_state(cfg: &RunConfig, st: &GraphState, end: &RunEnd) -> Metric
                 liveliness_lease_ms: lease.map(Nanos::as_millis_f64),
                 not_alive: status.and_then(|s| lease.map(|_| s.not_alive)),
                 faulted_ticks: status.and_then(|s| faulted.then_some(s.faulted_ticks)),
+                faults: cfg
+                    .faults
+                    .iter()
+                    .filter(|f| f.node == n.name)
+                    .map(crate::metrics::FaultMetrics::from)
+                    .collect(),
             };
             (n.name.clone(), m)
         })
@@ -631,13 +637,18 @@ pub fn summarize_state(cfg: &RunConfig, st: &GraphState, end: &RunEnd) -> Metric
         }
         _ => None,
     };
+    // An actuator killed during the run stood the plant still from then to the end.
+    let actuator_killed = cfg.faults.iter().any(|f| {
+        f.duration.is_none() && f.node == spec.node(spec.actuator).name && f.at <= end.at
+    });
     Metrics {
         // A plant that never stepped balanced nothing (an actuator stalled or killed from the
-        // start): not `balanced`.
+        // start), nor one whose actuator was killed: not `balanced`.
         balanced: log.fell_at.is_none()
             && node_failed.is_none()
             && log.watchdog.is_none()
-            && log.steps > 0,
+            && log.steps > 0
+            && !actuator_killed,
         stopped_by_watchdog: log.watchdog.clone(),
         without_chain: chain.is_none().then(|| {
             format!(

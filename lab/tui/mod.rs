@@ -295,10 +295,15 @@ mod tests {
     #[test]
     fn the_verdict_reads_whole_at_80_columns() {
         let mut cfg = virtual_cfg(50.0, 3);
-        cfg.faults = vec![ratelab::qos::Fault::parse("actuator@1", true).unwrap()];
+        cfg.faults = vec![ratelab::qos::Fault::parse("actuator@1+0.5", false).unwrap()];
         let (app, _rx) = app_after(cfg, true);
         let text = render(&app, 80, 24);
         assert!(text.contains("┌ BALANCED while the plant ran ┐"), "{text}");
+        let mut cfg = virtual_cfg(50.0, 3);
+        cfg.faults = vec![ratelab::qos::Fault::parse("actuator@1", true).unwrap()];
+        let (app, _rx) = app_after(cfg, true);
+        let text = render(&app, 80, 24);
+        assert!(text.contains("┌ ACTUATOR KILLED at t=1.00s ─"), "{text}");
         let (app, _rx) = app_after(virtual_cfg(50.0, 2), true);
         let text = render(&app, 80, 24);
         assert!(text.contains("┌ BALANCED ✓ (run complete) ─"), "{text}");

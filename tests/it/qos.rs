@@ -358,7 +358,9 @@ fn qos_counters_reach_metrics_json_and_trace_csv() {
     assert_eq!(code, 0, "{err}");
     assert!(stdout.contains("qos: /obs KA4 latest ls 30 ms"), "{stdout}");
     assert!(
-        stdout.contains("liveliness: policy not alive 1× (lease 50 ms) 10 ticks lost to faults"),
+        stdout.contains(
+            "liveliness: policy not alive 1× (lease 50 ms), stalled at 1.00 s for 0.20 s: 10 ticks lost"
+        ),
         "{stdout}"
     );
     let m: serde_json::Value =
@@ -507,7 +509,25 @@ fn the_headline_names_how_the_run_really_ended() {
     );
     assert!(!out.contains("latency: 0.0 ms"), "{out}");
 
-    let (line, balanced, _, _) = headline(&["--stall", "actuator@1+0.5"]);
+    // Killed mid-run: the plant stood still from then, and the summary says what was done.
+    let (line, balanced, _, out) = headline(&["--kill", "actuator@1"]);
+    assert!(
+        line.starts_with(
+            "ACTUATOR KILLED at t=1.00s (pole up until then; the plant stood still after) — 50 actuator steps"
+        ),
+        "{line}"
+    );
+    assert!(!balanced, "{line}");
+    assert!(
+        out.contains("liveliness: actuator killed at 1.00 s: 101 ticks lost"),
+        "{out}"
+    );
+
+    let (line, balanced, _, out) = headline(&["--stall", "actuator@1+0.5"]);
+    assert!(
+        out.contains("liveliness: actuator stalled at 1.00 s for 0.50 s: 25 ticks lost"),
+        "{out}"
+    );
     assert!(
         line.starts_with("BALANCED while the plant ran (the actuator lost 25 ticks to a fault"),
         "{line}"
