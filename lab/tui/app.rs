@@ -1040,6 +1040,7 @@ impl App {
             max_ms: down(latency.max()),
             window: WindowLatency {
                 count: n as u64,
+                no_command: self.live.window_no_command(),
                 p50_ms: down(stats.map(|s| s.0)),
                 p99_ms: down(stats.map(|s| s.1)),
                 max_ms: down(stats.map(|s| s.2)),

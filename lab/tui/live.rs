@@ -362,6 +362,17 @@ impl Live {
         }
     }
 
+    /// Steps over the window that applied no command after the run's first one (as
+    /// [`Segment::no_command`] counts them): beside the window's latency samples.
+    pub fn window_no_command(&self) -> u64 {
+        let after = self.window_base().map(|b| b.t);
+        self.window
+            .iter()
+            .filter(|r| after.is_none_or(|a| r.t > a) && r.t >= self.segment.start)
+            .filter(|r| r.latency.is_none() && self.first_command.is_some_and(|f| f < r.t))
+            .count() as u64
+    }
+
     /// Sense→act latency over the window: (samples, p50/p99/max).
     pub fn window_latency(&self) -> (usize, Option<(Nanos, Nanos, Nanos)>) {
         let after = self.window_base().map(|b| b.t);
@@ -433,6 +444,7 @@ mod tests {
         at(&mut live, 80, Some(0));
         assert_eq!(live.segment().latency.count(), 2);
         assert_eq!(live.segment().no_command, 2);
+        assert_eq!((live.window_latency().0, live.window_no_command()), (2, 2));
         // A change starts a segment: it counts its own (one, at 100 ms).
         live.change(Nanos(90 * MS), "x".into());
         at(&mut live, 100, None);

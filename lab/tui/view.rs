@@ -214,6 +214,8 @@ pub enum Verdict {
 pub struct WindowLatency {
     /// Samples.
     pub count: u64,
+    /// Steps that applied no command (a deadline's `zero`): no latency, said beside `count`.
+    pub no_command: u64,
     /// p50, ms.
     pub p50_ms: f64,
     /// p99, ms.
@@ -1389,8 +1391,16 @@ fn render_latency(v: &View, area: Rect, buf: &mut Buffer) {
         " ".into(),
         v.segment.latency_window_label().bold(),
         format!(
-            ": n={} │ p50 {:.1} │ p99 {:.1} │ max {:.1} ms ",
-            w.count, w.p50_ms, w.p99_ms, w.max_ms
+            ": n={}{} │ p50 {:.1} │ p99 {:.1} │ max {:.1} ms ",
+            w.count,
+            if w.no_command > 0 {
+                format!(" (+{} no cmd)", w.no_command)
+            } else {
+                String::new()
+            },
+            w.p50_ms,
+            w.p99_ms,
+            w.max_ms
         )
         .into(),
     ]);

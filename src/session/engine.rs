@@ -323,12 +323,12 @@ impl Engine {
                 let secs = fresh.duration.as_secs_f64();
                 let verdict = match (r.metrics.fell_at_s, real) {
                     (Some(t), false) => format!("a fresh run falls at {t:.2} s: judge no sooner"),
-                    (None, false) => format!("a fresh run balances {secs:.0} s"),
+                    (None, false) => format!("a fresh run stays up all of its {secs:.0} s"),
                     (Some(t), true) => {
                         format!("a virtual-clock run falls at {t:.2} s (real runs vary)")
                     }
                     (None, true) => {
-                        format!("a virtual-clock run balances {secs:.0} s (real runs vary)")
+                        format!("a virtual-clock run stays up all of its {secs:.0} s (real runs vary)")
                     }
                 };
                 let _ = tx.send(Telemetry::Applied(format!("{text} · {verdict}")));

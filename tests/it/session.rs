@@ -692,7 +692,7 @@ fn a_live_rate_change_says_how_a_fresh_run_at_that_rate_goes() {
         "{t}"
     );
     let (t, _) = live.notice_after(Command::SetControlHz { hz: 25.0 }, "a fresh run");
-    assert!(t.contains("a fresh run balances 30 s"), "{t}");
+    assert!(t.contains("a fresh run stays up all of its 30 s"), "{t}");
     live.quit();
 }
 
