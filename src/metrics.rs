@@ -666,7 +666,8 @@ impl Metrics {
                     }
                     if !n.faults.is_empty() {
                         let sep = if n.not_alive.is_some() { ", " } else { " " };
-                        let said: Vec<String> = n.faults.iter().map(FaultMetrics::describe).collect();
+                        let said: Vec<String> =
+                            n.faults.iter().map(FaultMetrics::describe).collect();
                         p.push_str(&format!("{sep}{}", said.join(", ")));
                     }
                     match (n.faulted_ticks, n.faults.is_empty()) {
@@ -787,16 +788,6 @@ impl Metrics {
             )
         } else {
             BALANCED_WHOLE_RUN.to_string()
-        }
-    }
-
-    /// How the run ended, in words: `reason`'s ("the pole fell", "duration reached", …),
-    /// except that the actuator's watchdog, which ends the run as a node's stop (as a fall
-    /// does), says "stopped by watchdog".
-    pub fn end_words(&self, reason: &crate::scheduler::EndReason) -> String {
-        match &self.stopped_by_watchdog {
-            Some(_) => "stopped by watchdog".to_string(),
-            None => reason.to_string(),
         }
     }
 

@@ -1649,7 +1649,7 @@ impl Recording {
             _ => rerun::components::TextLogLevel::INFO,
         };
         let verdict = summary.get(2).cloned().unwrap_or_default();
-        let reason = metrics.end_words(&end.reason);
+        let reason = end.reason.words(metrics.stopped_by_watchdog.is_some());
         if let Some(watchdog) = &metrics.stopped_by_watchdog {
             self.event(end.at, watchdog, rerun::components::TextLogLevel::WARN);
         }

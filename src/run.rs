@@ -638,9 +638,10 @@ pub fn summarize_state(cfg: &RunConfig, st: &GraphState, end: &RunEnd) -> Metric
         _ => None,
     };
     // An actuator killed during the run stood the plant still from then to the end.
-    let actuator_killed = cfg.faults.iter().any(|f| {
-        f.duration.is_none() && f.node == spec.node(spec.actuator).name && f.at <= end.at
-    });
+    let actuator_killed = cfg
+        .faults
+        .iter()
+        .any(|f| f.duration.is_none() && f.node == spec.node(spec.actuator).name && f.at <= end.at);
     Metrics {
         // A plant that never stepped balanced nothing (an actuator stalled or killed from the
         // start), nor one whose actuator was killed: not `balanced`.

@@ -68,6 +68,20 @@ pub enum EndReason {
     },
 }
 
+impl EndReason {
+    /// How the run ended, in words: as it displays ("the pole fell", "duration reached", …),
+    /// except that a stop by the actuator's deadline watchdog (`watchdog`: the run's
+    /// [`crate::metrics::Metrics::stopped_by_watchdog`] is set), which ends the run as a node's
+    /// stop as a fall does, says "stopped by watchdog".
+    pub fn words(&self, watchdog: bool) -> String {
+        if watchdog {
+            "stopped by watchdog".to_string()
+        } else {
+            self.to_string()
+        }
+    }
+}
+
 impl std::fmt::Display for EndReason {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {

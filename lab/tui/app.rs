@@ -433,7 +433,10 @@ impl App {
                 topics,
             } => {
                 if let Some(topics) = topics {
-                    self.live.counters(super::live::Counts { t: now, topics });
+                    self.live.counters(super::live::Counts {
+                        t: now,
+                        topics: *topics,
+                    });
                 }
                 // Counted at `now`: rates are taken between counts, over the window.
                 match exec {
@@ -489,7 +492,7 @@ impl App {
                         (None, h) => Verdict::Stopped(h),
                     },
                 };
-                let reason = metrics.end_words(&reason);
+                let reason = reason.words(metrics.stopped_by_watchdog.is_some());
                 self.say(match (metrics.sched_warning(), &self.attached) {
                     (Some(w), _) => format!("{reason} — {w}"),
                     (None, Some(_)) => format!("{reason} — the launch is over · q quit"),
@@ -914,7 +917,13 @@ impl App {
         self.faults
             .iter()
             .find(|f| &f.node == name && f.covers(self.now))
-            .map(|f| if f.duration.is_some() { "STALLED" } else { "KILLED" })
+            .map(|f| {
+                if f.duration.is_some() {
+                    "STALLED"
+                } else {
+                    "KILLED"
+                }
+            })
     }
 
     fn node_view(&self, id: NodeId, layer: usize) -> NodeView {

@@ -161,8 +161,7 @@ impl Default for Live {
 /// [`MAX_WINDOW_RECORDS`].
 fn trim<T>(q: &mut VecDeque<T>, at: impl Fn(&T) -> Nanos, now: Nanos) {
     while q.len() > MAX_WINDOW_RECORDS
-        || q
-            .get(1)
+        || q.get(1)
             .is_some_and(|r| at(r) <= now.saturating_sub(WINDOW) && now >= WINDOW)
     {
         q.pop_front();

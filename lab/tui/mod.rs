@@ -308,7 +308,10 @@ mod tests {
         let text = render(&app, 80, 24);
         assert!(text.contains("┌ BALANCED ✓ (run complete) ─"), "{text}");
         let text = render(&app, 120, 40);
-        assert!(text.contains("┌ cartpole  BALANCED ✓ (run complete) ─"), "{text}");
+        assert!(
+            text.contains("┌ cartpole  BALANCED ✓ (run complete) ─"),
+            "{text}"
+        );
     }
 
     /// A watchdog's stop is not a fall: the footer says which ended the run (#25).
@@ -322,7 +325,10 @@ mod tests {
         let (app, _rx) = app_after(cfg, true);
         let text = render(&app, 80, 24);
         let footer = text.lines().last().unwrap_or_default();
-        assert!(footer.contains("stopped by watchdog — keys set"), "{footer}");
+        assert!(
+            footer.contains("stopped by watchdog — keys set"),
+            "{footer}"
+        );
         assert!(!text.contains("the pole fell"), "{text}");
         assert!(text.contains("STOPPED BY WATCHDOG at t=2.04s"), "{text}");
     }

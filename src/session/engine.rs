@@ -328,7 +328,9 @@ impl Engine {
                         format!("a virtual-clock run falls at {t:.2} s (real runs vary)")
                     }
                     (None, true) => {
-                        format!("a virtual-clock run stays up all of its {secs:.0} s (real runs vary)")
+                        format!(
+                            "a virtual-clock run stays up all of its {secs:.0} s (real runs vary)"
+                        )
                     }
                 };
                 let _ = tx.send(Telemetry::Applied(format!("{text} · {verdict}")));
@@ -360,7 +362,7 @@ impl Engine {
                 .collect(),
             policy: h.brain_label(),
             exec,
-            topics: Some(h.topic_stats_at(now)),
+            topics: Some(Box::new(h.topic_stats_at(now))),
         });
     }
 

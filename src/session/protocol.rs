@@ -115,7 +115,7 @@ pub enum Telemetry {
         /// Every topic's counters at `now`, as a step record carries them: they keep the
         /// lab's counts current while the actuator sends no step (stalled, killed).
         /// `None` where the sender has none (a lab attached to a launch).
-        topics: Option<crate::runlog::TopicCounters>,
+        topics: Option<Box<crate::runlog::TopicCounters>>,
     },
     /// Virtual clock with executors or compute times: the ticks that ended since the last
     /// such message, oldest first ([`crate::executor::CallbackSpan`]; the lab's executor
