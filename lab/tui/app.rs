@@ -955,31 +955,39 @@ impl App {
         } else {
             (None, None, None)
         };
-        // Virtual clock with executors: the rate the node achieved and the periods its timer
-        // skipped waiting for a thread, over the arrows' window (since the start until the
-        // run is that long: its tick intervals).
-        let ran = self.exec.back().and_then(|(at, x)| {
-            let &(ticks, skipped) = x.get(id.0)?;
-            let (t0, base) = match self.exec.front() {
-                Some((t0, b)) if t0 < at => (*t0, b.get(id.0).copied()),
-                // One count since a change: nothing to rate yet.
-                _ if self.exec_from.is_some() => return None,
-                _ => (Nanos::ZERO, None),
-            };
-            let (ticks0, skipped0) = base.unwrap_or((1, 0));
-            let secs = at.saturating_sub(t0).as_secs_f64();
-            let hz = if secs > 0.0 {
-                ticks.saturating_sub(ticks0) as f64 / secs
-            } else {
-                0.0
-            };
-            Some((hz, skipped.saturating_sub(skipped0)))
-        });
         // After the run ended: the rate it ran at, and the next run's when a key changed it.
         let ran_hz = self
             .ended_with
             .as_ref()
             .and_then(|(r, _, _)| r.get(id.0).copied());
+        // Virtual clock with executors: the rate the node achieved and the periods its timer
+        // skipped waiting for a thread, over the arrows' window (since the start until the
+        // run is that long: its tick intervals). Each period of a timer either ticks or is
+        // skipped (rcl's timers, `ratelab::rate::next_deadline`), so the rate achieved is the
+        // set rate times the share of periods that ticked: exactly the set rate for a node
+        // that skipped none, where ticks over the span between two status messages (which
+        // fall between ticks) read a tick off (200.3 Hz for 200).
+        let ran = self.exec.back().and_then(|(at, x)| {
+            let &(ticks, skipped) = x.get(id.0)?;
+            let base = match self.exec.front() {
+                Some((t0, b)) if t0 < at => b.get(id.0).copied(),
+                // One count since a change: nothing to rate yet.
+                _ if self.exec_from.is_some() => return None,
+                _ => None,
+            };
+            let (ticks0, skipped0) = base.unwrap_or((1, 0));
+            let (ticked, missed) = (
+                ticks.saturating_sub(ticks0),
+                skipped.saturating_sub(skipped0),
+            );
+            let hz = if ticked + missed > 0 {
+                ran_hz.unwrap_or_else(|| self.rate_of(id)) * ticked as f64
+                    / (ticked + missed) as f64
+            } else {
+                0.0
+            };
+            Some((hz, missed))
+        });
         NodeView {
             name: self.graph.node(id).name.clone(),
             layer,

@@ -905,6 +905,25 @@ mod tests {
         // rate and skips, not the run's.
         app.on_telemetry(status(9, vec![(401, 50), (401, 50), (451, 0)]));
         assert_eq!(app.view().nodes[0].ran, Some((50.0, 0)));
+        // A node that skipped no period ran at its rate, wherever between its ticks the
+        // status falls: the actuator's 99 ticks from 1.001 s to 2.999 s are 49.5 over that
+        // span, and every one of its periods.
+        let (mut other, _rx) = app_after(graph_cfg("graphs/cartpole-executors.toml", 3), false);
+        for (ns, ticks) in [(1_001_000_000, 51), (2_999_000_000, 150)] {
+            other.on_telemetry(Telemetry::Status {
+                now: ratelab::Nanos(ns),
+                paused: false,
+                speed: Speed::Times(1.0),
+                rates: vec![50.0; 3],
+                depths: vec![1; 2],
+                qos: vec![ratelab::qos::TopicQos::default(); 2],
+                alive: vec![None; 3],
+                policy: "scripted balancer".into(),
+                exec: Some(vec![(ticks, 0); 3]),
+                topics: None,
+            });
+        }
+        assert_eq!(other.view().nodes[2].ran, Some((50.0, 0)));
         // A change of executors: the counts start again from it, never averaging the two
         // (one count is nothing to rate yet).
         app.on_telemetry(Telemetry::Changed {
