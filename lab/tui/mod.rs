@@ -753,6 +753,33 @@ mod tests {
         );
     }
 
+    /// A tick time past 999 µs reads whole in a narrow box: in ms where µs would not fit.
+    #[test]
+    fn a_long_tick_time_reads_whole_in_a_narrow_box() {
+        let (tx, _rx) = crossbeam_channel::unbounded();
+        let mut app = App::new(tx, "scripted".into(), None, Speed::Times(1.0));
+        app.on_telemetry(Telemetry::Started {
+            cfg: RunConfig {
+                clock: ClockKind::Real,
+                ..graph_cfg("graphs/cartpole-estimator.toml", 1)
+            },
+            policy: "scripted".into(),
+            recording: None,
+        });
+        // The policy (node 2) computes 2 ms a tick.
+        for k in 0..11u64 {
+            app.on_telemetry(Telemetry::NodeTick {
+                node: 2,
+                now: ratelab::Nanos(k * 20_000_000),
+                lateness: ratelab::Nanos(5_000),
+                took: ratelab::Nanos(2_024_000),
+            });
+        }
+        let text = render(&app, 120, 40);
+        assert!(text.contains("tick p50 2.0 ms"), "{text}");
+        assert!(!text.contains("2024 µ"), "{text}");
+    }
+
     #[test]
     fn after_50_5_50_hz_the_window_and_the_segment_see_only_the_matched_rates() {
         // The sequence: 50 Hz, a dip to 5 Hz (4.0 s to 4.6 s: /obs drops), back to

@@ -703,11 +703,15 @@ fn render_node(n: &NodeView, area: Rect, buf: &mut Buffer, real: bool) {
     // What a tick costs, last: only where the box has a row left for it.
     if let Some(t) = n.tick_p50_us {
         if lines.len() < usize::from(area.height.saturating_sub(2)) {
-            let text = if wide {
-                format!("tick p50 {t:.0} µs")
-            } else {
-                format!("tick {t:.0} µs")
-            };
+            // Whole, in ms past 999 µs where µs would not fit (a 2 ms compute time).
+            let ms = t / 1000.0;
+            let text = fit(vec![
+                format!("tick p50 {t:.0} µs"),
+                format!("tick p50 {ms:.1} ms"),
+                format!("tick {t:.0} µs"),
+                format!("tick {ms:.1} ms"),
+                format!("tick {ms:.0}ms"),
+            ]);
             lines.push(Line::from(text).dim());
         }
     }
