@@ -82,6 +82,9 @@ fn lab(args: &cli::RunArgs, stop: StopFlag) -> anyhow::Result<()> {
 }
 
 /// Re-run a session's virtual runs and compare with what the live runs measured.
+/// The most commands `replay` lists per run (a session may hold thousands).
+const REPLAY_SHOWN: usize = 20;
+
 fn replay(args: &cli::ReplayArgs) -> anyhow::Result<()> {
     use ratelab::session::{replay_run, SessionLog};
     let log = SessionLog::load(&args.file)?;
@@ -112,6 +115,22 @@ fn replay(args: &cli::ReplayArgs) -> anyhow::Result<()> {
             metrics.seed,
             run.commands.len()
         );
+        // Each change at its run time (the summary gives only the start and the end: a depth
+        // set to 2 and back to 1 reads as 1): the first REPLAY_SHOWN of them.
+        for c in run.commands.iter().take(REPLAY_SHOWN) {
+            println!(
+                "[ratelab]   at {:.2} s: {}",
+                ratelab::Nanos(c.at_ns).as_secs_f64(),
+                // A log is a file from anywhere: its text reaches the terminal escaped.
+                ratelab::distributed::wire::printable(&ratelab::session::describe(&c.command))
+            );
+        }
+        if run.commands.len() > REPLAY_SHOWN {
+            println!(
+                "[ratelab]   … and {} more",
+                run.commands.len() - REPLAY_SHOWN
+            );
+        }
         for line in metrics.summary_lines(None).iter().skip(1) {
             println!("[ratelab]   {line}");
         }

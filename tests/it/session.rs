@@ -127,6 +127,16 @@ fn replay_cli_reproduces_and_refuses_garbage() {
         String::from_utf8_lossy(&o.stderr)
     );
     assert!(stdout.contains("identical to the live run"), "{stdout}");
+    // Each change is listed at its run time (the summary gives only the start and the end).
+    assert!(stdout.contains("seed 1, 1 command(s) replayed"), "{stdout}");
+    assert_eq!(
+        stdout
+            .lines()
+            .filter(|l| l.contains("s: control rate → 10 Hz"))
+            .count(),
+        1,
+        "{stdout}"
+    );
     // The period reported is the one in force when the run ended (10 Hz), beside the one
     // it started with; the steps are named for what they are.
     assert!(
