@@ -149,6 +149,9 @@ pub struct App {
     /// The rates and depths the run ended with (after a fall the keys set the next run's,
     /// and the frozen figures stay beside the settings they were measured under).
     ended_with: Option<(Vec<f64>, Vec<usize>, Vec<TopicQos>)>,
+    /// Attached to a launch, once it ended: each topic's totals as its summary gives them
+    /// (the launcher's accounting, which counts what a gone process's copy no longer can).
+    final_topics: Option<std::collections::BTreeMap<String, ratelab::metrics::TopicMetrics>>,
     last: Option<StepRecord>,
     verdict: Verdict,
     help: bool,
@@ -208,6 +211,7 @@ impl App {
             pending_executor: None,
             exec_from: None,
             ended_with: None,
+            final_topics: None,
             last: None,
             verdict: Verdict::Balanced,
             help: false,
@@ -357,6 +361,7 @@ impl App {
                 self.pending_executor = None;
                 self.exec_from = None;
                 self.ended_with = None;
+                self.final_topics = None;
                 if self.graph != cfg.graph {
                     self.selected = None;
                 }
@@ -480,6 +485,9 @@ impl App {
                     let depths = topics.clone().map(|i| self.depth_of(TopicId(i))).collect();
                     let qos = topics.map(|i| self.qos_of(TopicId(i))).collect();
                     self.ended_with = Some((rates, depths, qos));
+                }
+                if self.attached.is_some() {
+                    self.final_topics = Some(metrics.topics.clone());
                 }
                 self.verdict = match &reason {
                     EndReason::NodeFailed { node, message } => {
@@ -862,6 +870,8 @@ impl App {
         };
         let window = self.live.window_topic(id);
         let segment = self.live.segment_topic(id);
+        // An attached lab's totals, once the launch ended: its summary's.
+        let ended = self.final_topics.as_ref().and_then(|m| m.get(&spec.name));
         let dead = |n: NodeId| {
             self.alive.get(n.0).copied().flatten() == Some(false) || self.fault_of(n).is_some()
         };
@@ -892,8 +902,8 @@ impl App {
             uncounted: self.attached.is_some() && dead(spec.holder()),
             stale_reads: window.stale_reads,
             staling: window.stale_reads > 0,
-            segment_dropped: segment.dropped,
-            segment_stale_reads: segment.stale_reads,
+            segment_dropped: ended.map_or(segment.dropped, |t| t.dropped),
+            segment_stale_reads: ended.map_or(segment.stale_reads, |t| t.stale_reads),
             qos: (!(qos.is_default() && spec.qos.is_default())).then(|| qos.short_parts(ran_depth)),
             // Over the window, as its drops and stale reads (totals counted from the start
             // read as 40 % loss on a 20 % link under an arrow saying "last 5 s").

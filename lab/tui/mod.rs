@@ -1220,7 +1220,12 @@ mod tests {
         assert!(msg.contains("read-only"), "{msg}");
         assert!(rx.try_recv().is_err(), "an attached lab sent a control");
         // The run's end in an attached lab offers no next run.
-        let report = run(&virtual_cfg(50.0, 1), Box::new(Scripted), RunOptions::new()).unwrap();
+        let mut report = run(&virtual_cfg(50.0, 1), Box::new(Scripted), RunOptions::new()).unwrap();
+        // Its totals are the summary's, where the launcher counted what the gone policy's
+        // copy of /obs no longer could.
+        if let Some(obs) = report.metrics.topics.get_mut("/obs") {
+            (obs.dropped, obs.stale_reads) = (93, 4);
+        }
         app.on_telemetry(Telemetry::Ended {
             metrics: Box::new(report.metrics),
             reason: EndReason::Duration,
@@ -1228,5 +1233,9 @@ mod tests {
         let msg = app.view().message.unwrap_or_default();
         assert!(msg.contains("the launch is over"), "{msg}");
         assert!(!msg.contains("r/R reset"), "{msg}");
+        let obs = &app.view().topics[0];
+        assert_eq!((obs.segment_dropped, obs.segment_stale_reads), (93, 4));
+        let text = render(&app, 120, 40);
+        assert!(text.contains("/obs 93 dropped"), "{text}");
     }
 }
