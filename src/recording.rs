@@ -556,6 +556,8 @@ pub struct Recording {
     buffer: Arc<Mutex<ChunkBuffer>>,
     /// The latest actuator step logged (stamps events that arrive between steps).
     last_step: Arc<std::sync::atomic::AtomicU64>,
+    /// Its run time, ns (the bus counters come with the steps: see [`Recording::finish`]).
+    last_step_ns: Arc<std::sync::atomic::AtomicU64>,
     /// The graph, once the observer is attached (for the final layout).
     shape: Arc<Mutex<Option<GraphShape>>>,
     /// The temporary file rerun writes, moved to `path` by [`Recording::finish`].
@@ -1116,6 +1118,7 @@ impl Recording {
             buffer: Arc::new(Mutex::new(ChunkBuffer::new(timeline_name(cfg.clock)))),
             file: Arc::new(Committer(Mutex::new(Some(pending)))),
             last_step: Arc::default(),
+            last_step_ns: Arc::default(),
             shape: Arc::default(),
             lanes: Arc::default(),
             deadline_said: Arc::default(),
@@ -1678,6 +1681,18 @@ impl Recording {
         {
             let mut buf = self.lock();
             self.deadline_totals(&mut buf, metrics, end.at);
+            // The bus counters come with the actuator's steps: an actuator killed (or stalled
+            // past the end) left them short of the run's end, where the summary counts on.
+            // Its totals at the end, so that the bus plots reach them.
+            let last_ns = self.last_step_ns.load(std::sync::atomic::Ordering::Relaxed);
+            if metrics.steps > 0 && last_ns < end.at.0 {
+                for (name, t) in &metrics.topics {
+                    let entity = bus_name(name);
+                    let at = |m: &str| format!("bus/{entity}/{m}");
+                    buf.scalar(&at("published"), end.at, metrics.steps, t.published as f64);
+                    buf.scalar(&at("dropped"), end.at, metrics.steps, t.dropped as f64);
+                }
+            }
             // The skipped ticks end where metrics.json ends them (a tick still computing
             // at the end counted its skipped periods when it started, and no span ended).
             let logged = self.lanes.lock().unwrap_or_else(|e| e.into_inner()).clone();
@@ -2049,6 +2064,9 @@ impl StepObserver for RecordingObserver {
         self.rec
             .last_step
             .store(s.step, std::sync::atomic::Ordering::Relaxed);
+        self.rec
+            .last_step_ns
+            .store(s.t.0, std::sync::atomic::Ordering::Relaxed);
         let rec = self.rec.clone();
         let mut buf = rec.lock();
         let time = buf.at(s.t, s.step);

@@ -1150,3 +1150,46 @@ fn a_launch_across_processes_records_every_step() {
         "{events:?}"
     );
 }
+
+/// The bus plots come with the actuator's steps; with the actuator killed at 1 s of a 3 s
+/// run they still reach the run's end, at the totals the summary gives (#25).
+#[test]
+fn the_bus_plots_reach_the_end_when_the_actuator_was_killed() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("kill.rrd");
+    let mut cfg = virtual_cfg();
+    cfg.duration = ratelab::Nanos(3_000_000_000);
+    cfg.faults = vec![ratelab::qos::Fault::parse("actuator@1", true).unwrap()];
+    let m = record(&path, &cfg, None);
+    assert_eq!(m.topics["/action"].dropped, 100, "{:?}", m.topics);
+    let all = chunks(&path);
+    // The newest sample of a series by run time: (ns, value).
+    let newest = |entity: &str| {
+        all.iter()
+            .filter(|c| !c.is_static() && c.entity_path().to_string() == entity)
+            .flat_map(|c| {
+                let values: Vec<f64> = c
+                    .iter_slices::<f64>(rerun::Scalars::descriptor_scalars().component)
+                    .flat_map(|b| b.to_vec())
+                    .collect();
+                times_on(c, "sim_time").into_iter().zip(values)
+            })
+            .max_by_key(|(t, _)| *t)
+    };
+    for (entity, topic, dropped) in [
+        ("/bus/action", "/action", true),
+        ("/bus/obs", "/obs", false),
+    ] {
+        let t = &m.topics[topic];
+        assert_eq!(
+            newest(&format!("{entity}/published")),
+            Some((3_000_000_000, t.published as f64))
+        );
+        if dropped {
+            assert_eq!(
+                newest(&format!("{entity}/dropped")),
+                Some((3_000_000_000, t.dropped as f64))
+            );
+        }
+    }
+}
