@@ -2,7 +2,7 @@
 //! each frame. Keys become engine [`Control`]s; nothing here blocks the graph.
 
 use super::keymap::{depth_down, depth_up, rate_down, rate_up, Msg};
-use super::live::{Live, WINDOW};
+use super::live::Live;
 use super::view::{
     Badge, LatencyView, NodeView, SegmentView, Selected, TopicView, Verdict, View, WindowLatency,
 };
@@ -1083,31 +1083,17 @@ impl App {
             index: seg.index,
             start_s: seg.start.as_secs_f64(),
             cause: seg.cause.clone(),
-            window_s: if full {
-                WINDOW.as_secs_f64()
-            } else {
-                span.as_secs_f64()
-            },
+            // Both spans are at most the window's.
+            window_s: span.as_secs_f64(),
             window_full: full,
-            latency_window_s: {
-                let (span, full) = self.live.latency_span();
-                if full {
-                    WINDOW.as_secs_f64()
-                } else {
-                    span.as_secs_f64()
-                }
-            },
+            latency_window_s: self.live.latency_span().0.as_secs_f64(),
             marks_s: self
                 .live
                 .marks()
                 .map(Nanos::as_secs_f64)
                 .filter(|&t| t > 0.0)
                 .collect(),
-            // The run's first segment, whose first step came over a second after its start.
-            joined_s: seg
-                .first_step
-                .filter(|t| seg.cause.is_none() && *t > seg.start + Nanos::SECOND)
-                .map(Nanos::as_secs_f64),
+            joined_s: seg.joined().map(Nanos::as_secs_f64),
         }
     }
 

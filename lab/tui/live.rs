@@ -121,6 +121,15 @@ pub struct Segment {
     pub no_command: u64,
 }
 
+impl Segment {
+    /// When the lab saw the run's first segment's first step over a second after its start
+    /// (attached mid-run), that step's run time: the latency counts from there.
+    pub fn joined(&self) -> Option<Nanos> {
+        self.first_step
+            .filter(|t| self.cause.is_none() && *t > self.start + Nanos::SECOND)
+    }
+}
+
 /// The lab's window and segment, fed with every step record, every status's counters and
 /// every change.
 #[derive(Clone, Debug)]
@@ -176,9 +185,7 @@ impl Live {
             *first = (*first).min(s.t);
             match s.latency {
                 Some(l) => self.segment.latency.record(l),
-                None if self.first_command.is_some_and(|f| f < s.t) => {
-                    self.segment.no_command += 1;
-                }
+                None if self.applied_no_command(&s) => self.segment.no_command += 1,
                 None => {}
             }
         }
@@ -248,8 +255,7 @@ impl Live {
         let no_command = self
             .window
             .iter()
-            .filter(|r| r.t >= at && r.latency.is_none())
-            .filter(|r| self.first_command.is_some_and(|f| f < r.t))
+            .filter(|r| r.t >= at && self.applied_no_command(r))
             .count() as u64;
         self.segment = Segment {
             index: self.segment.index + 1,
@@ -300,11 +306,7 @@ impl Live {
     /// from before; the counters it holds count from the run's start).
     pub fn latency_span(&self) -> (Nanos, bool) {
         let (span, full) = self.window_span();
-        let joined = self
-            .segment
-            .first_step
-            .filter(|t| self.segment.cause.is_none() && *t > self.segment.start + Nanos::SECOND);
-        match joined {
+        match self.segment.joined() {
             Some(j) if !full => {
                 let from = self.window_base().map_or(self.segment.start, |b| b.t);
                 (self.now().saturating_sub(from.max(j)), false)
@@ -368,8 +370,15 @@ impl Live {
         self.window
             .iter()
             .filter(|r| after.is_none_or(|a| r.t > a) && r.t >= self.segment.start)
-            .filter(|r| r.latency.is_none() && self.first_command.is_some_and(|f| f < r.t))
+            .filter(|r| self.applied_no_command(r))
             .count() as u64
+    }
+
+    /// Step `r` applied no command after the run's first one (a deadline's `zero`
+    /// reaction): it has no sense→act latency (the steps before the first command have none
+    /// either, and are not counted).
+    fn applied_no_command(&self, r: &StepRecord) -> bool {
+        r.latency.is_none() && self.first_command.is_some_and(|f| f < r.t)
     }
 
     /// Sense→act latency over the window: (samples, p50/p99/max).

@@ -1365,22 +1365,24 @@ fn render_segment(v: &View, area: Rect, buf: &mut Buffer) {
     Paragraph::new(Line::from(line)).render(area, buf);
 }
 
+/// `n=81 (+19 no cmd) │ p50 20.0 │ p99 220.0 │ max 220.0 ms `: a latency panel's figures.
+/// Steps that applied no command have no latency: said beside n, not silently left out.
+fn latency_figures(count: u64, no_command: u64, p50_ms: f64, p99_ms: f64, max_ms: f64) -> String {
+    let no_cmd = if no_command > 0 {
+        format!(" (+{no_command} no cmd)")
+    } else {
+        String::new()
+    };
+    format!("n={count}{no_cmd} │ p50 {p50_ms:.1} │ p99 {p99_ms:.1} │ max {max_ms:.1} ms ")
+}
+
 fn render_latency(v: &View, area: Rect, buf: &mut Buffer) {
     let l = &v.latency;
     let since = match v.segment.joined_s {
         Some(t) => format!("{t:.2} s (joined)"),
         None => v.segment.since(),
     };
-    // Steps that applied no command have no latency: said beside n, not silently left out.
-    let no_cmd = if l.no_command > 0 {
-        format!(" (+{} no cmd)", l.no_command)
-    } else {
-        String::new()
-    };
-    let figures = format!(
-        "n={}{no_cmd} │ p50 {:.1} │ p99 {:.1} │ max {:.1} ms ",
-        l.count, l.p50_ms, l.p99_ms, l.max_ms
-    );
+    let figures = latency_figures(l.count, l.no_command, l.p50_ms, l.p99_ms, l.max_ms);
     // "sense→act" and "since …" when the width allows them; the figures whole always.
     let title = first_that_fits(
         [
@@ -1395,16 +1397,8 @@ fn render_latency(v: &View, area: Rect, buf: &mut Buffer) {
         " ".into(),
         v.segment.latency_window_label().bold(),
         format!(
-            ": n={}{} │ p50 {:.1} │ p99 {:.1} │ max {:.1} ms ",
-            w.count,
-            if w.no_command > 0 {
-                format!(" (+{} no cmd)", w.no_command)
-            } else {
-                String::new()
-            },
-            w.p50_ms,
-            w.p99_ms,
-            w.max_ms
+            ": {}",
+            latency_figures(w.count, w.no_command, w.p50_ms, w.p99_ms, w.max_ms)
         )
         .into(),
     ]);
