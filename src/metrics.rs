@@ -401,6 +401,11 @@ pub struct FaultMetrics {
 }
 
 impl FaultMetrics {
+    /// A kill that took effect by run time `t_s` (a kill set after a run's end does nothing).
+    pub fn kills_by(&self, t_s: f64) -> bool {
+        self.duration_s.is_none() && self.at_s <= t_s
+    }
+
     /// The fault in words, as the summary says it: `stalled at 2.00 s for 0.50 s`,
     /// `killed at 3.00 s`.
     pub fn describe(&self) -> String {
@@ -775,7 +780,7 @@ impl Metrics {
             .values()
             .filter(|n| n.kind == "actuator")
             .flat_map(|n| &n.faults)
-            .find(|f| f.duration_s.is_none())
+            .find(|f| f.kills_by(self.sim_time_s))
         {
             // The plant stood still from the kill to the end: it balanced nothing after.
             format!(

@@ -546,7 +546,7 @@ pub fn summarize_state(cfg: &RunConfig, st: &GraphState, end: &RunEnd) -> Metric
         }
     };
     let (p50, p99, max) = log.latency_ms;
-    let nodes = spec
+    let nodes: std::collections::BTreeMap<String, NodeMetrics> = spec
         .nodes
         .iter()
         .enumerate()
@@ -637,11 +637,11 @@ pub fn summarize_state(cfg: &RunConfig, st: &GraphState, end: &RunEnd) -> Metric
         }
         _ => None,
     };
-    // An actuator killed during the run stood the plant still from then to the end.
-    let actuator_killed = cfg
-        .faults
-        .iter()
-        .any(|f| f.duration.is_none() && f.node == spec.node(spec.actuator).name && f.at <= end.at);
+    // An actuator killed during the run stood the plant still from then to the end (the
+    // headline says so by the same rule, `FaultMetrics::kills_by`).
+    let actuator_killed = nodes
+        .get(&spec.node(spec.actuator).name)
+        .is_some_and(|a| a.faults.iter().any(|f| f.kills_by(sim_time.as_secs_f64())));
     Metrics {
         // A plant that never stepped balanced nothing (an actuator stalled or killed from the
         // start), nor one whose actuator was killed: not `balanced`.

@@ -523,6 +523,15 @@ fn the_headline_names_how_the_run_really_ended() {
         "{out}"
     );
 
+    // A kill set after the end does nothing (it is warned about): the headline agrees with
+    // `balanced`.
+    let (line, balanced, _, _) = headline(&["--kill", "actuator@12"]);
+    assert!(
+        line.starts_with("BALANCED (pole up the whole run) — 151 actuator steps"),
+        "{line}"
+    );
+    assert!(balanced, "{line}");
+
     let (line, balanced, _, out) = headline(&["--stall", "actuator@1+0.5"]);
     assert!(
         out.contains("liveliness: actuator stalled at 1.00 s for 0.50 s: 25 ticks lost"),
