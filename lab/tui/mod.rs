@@ -900,9 +900,9 @@ mod tests {
         cfg.graph
             .set_executor(ratelab::executor::ExecutorOverride::parse("single_threaded").unwrap());
         let (mut app, _rx) = app_after(cfg, false);
-        // The engine's status at `s` seconds with each node's (ticks, skipped ticks).
-        let status = |s: u64, exec: Vec<(u64, u64)>| Telemetry::Status {
-            now: ratelab::Nanos(s * 1_000_000_000),
+        // The engine's status at `ms` of run time with each node's (ticks, skipped ticks).
+        let status = |ms: u64, exec: Vec<(u64, u64)>| Telemetry::Status {
+            now: ratelab::Nanos(ms * 1_000_000),
             paused: false,
             speed: Speed::Times(1.0),
             rates: vec![50.0; 3],
@@ -913,7 +913,7 @@ mod tests {
             exec: Some(exec),
             topics: None,
         };
-        app.on_telemetry(status(3, vec![(101, 50), (101, 50), (151, 0)]));
+        app.on_telemetry(status(3_000, vec![(101, 50), (101, 50), (151, 0)]));
         let v = app.view();
         assert_eq!(v.nodes[0].ran, Some((100.0 / 3.0, 50)));
         assert_eq!(v.nodes[1].compute.as_deref(), Some("30 ms"));
@@ -930,25 +930,14 @@ mod tests {
         insta::assert_snapshot!("executors_120x40", wide);
         // Later, on threads of their own (as after a change): the box shows the window's
         // rate and skips, not the run's.
-        app.on_telemetry(status(9, vec![(401, 50), (401, 50), (451, 0)]));
+        app.on_telemetry(status(9_000, vec![(401, 50), (401, 50), (451, 0)]));
         assert_eq!(app.view().nodes[0].ran, Some((50.0, 0)));
         // A node that skipped no period ran at its rate, wherever between its ticks the
         // status falls: the actuator's 99 ticks from 1.001 s to 2.999 s are 49.5 over that
         // span, and every one of its periods.
         let (mut other, _rx) = app_after(graph_cfg("graphs/cartpole-executors.toml", 3), false);
-        for (ns, ticks) in [(1_001_000_000, 51), (2_999_000_000, 150)] {
-            other.on_telemetry(Telemetry::Status {
-                now: ratelab::Nanos(ns),
-                paused: false,
-                speed: Speed::Times(1.0),
-                rates: vec![50.0; 3],
-                depths: vec![1; 2],
-                qos: vec![ratelab::qos::TopicQos::default(); 2],
-                alive: vec![None; 3],
-                policy: "scripted balancer".into(),
-                exec: Some(vec![(ticks, 0); 3]),
-                topics: None,
-            });
+        for (ms, ticks) in [(1_001, 51), (2_999, 150)] {
+            other.on_telemetry(status(ms, vec![(ticks, 0); 3]));
         }
         assert_eq!(other.view().nodes[2].ran, Some((50.0, 0)));
         // A change of executors: the counts start again from it, never averaging the two
@@ -958,9 +947,9 @@ mod tests {
             text: "executor → single_threaded".into(),
         });
         assert_eq!(app.view().nodes[0].ran, None);
-        app.on_telemetry(status(10, vec![(416, 65), (416, 65), (476, 0)]));
+        app.on_telemetry(status(10_000, vec![(416, 65), (416, 65), (476, 0)]));
         assert_eq!(app.view().nodes[0].ran, None);
-        app.on_telemetry(status(11, vec![(449, 82), (449, 82), (526, 0)]));
+        app.on_telemetry(status(11_000, vec![(449, 82), (449, 82), (526, 0)]));
         assert_eq!(app.view().nodes[0].ran, Some((33.0, 17)));
     }
 
