@@ -42,6 +42,10 @@ use std::time::{Duration, Instant};
 /// receive stamp ns].
 const MSG_BYTES: usize = 24;
 
+/// Round trips per transport unless `--round-trips` says otherwise; with this number the
+/// one-way measures run too (a sitting narrowed to round trips gives another).
+const DEFAULT_ROUND_TRIPS: u64 = 5000;
+
 /// A filler message (`--extra-puts`): carried, then ignored.
 const FILLER: u8 = 3;
 
@@ -53,7 +57,7 @@ struct Opts {
     #[arg(long, value_parser = ["zenoh-tls", "zenoh-tcp", "tcp"])]
     transport: Option<String>,
     /// Round trips per transport; the one-way measures run only with the default.
-    #[arg(long, default_value_t = 5000, value_parser = clap::value_parser!(u64).range(1..=10_000_000))]
+    #[arg(long, default_value_t = DEFAULT_ROUND_TRIPS, value_parser = clap::value_parser!(u64).range(1..=10_000_000))]
     round_trips: u64,
     /// Each side is busy this long before it answers, µs (a busy wait).
     #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u64).range(0..=1_000_000))]
@@ -430,7 +434,7 @@ fn main() {
             "zenoh-tcp" => "bare Zenoh (peer mode on plain TCP, no authentication)",
             _ => "bare TCP socket (nodelay, blocking)",
         };
-        if opts.round_trips == 5000 {
+        if opts.round_trips == DEFAULT_ROUND_TRIPS {
             one_way(link.as_mut(), label, 50, 500);
             one_way(link.as_mut(), label, 1000, 5000);
         }
