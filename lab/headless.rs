@@ -362,20 +362,20 @@ pub fn run_headless(a: &RunArgs, stop: StopFlag) -> anyhow::Result<RunReport> {
             message.lines().next().unwrap_or("panic")
         );
     }
-    watchdog_is_no_success(&report.metrics)?;
+    no_success_is_an_error(&report.metrics)?;
     Ok(report)
 }
 
-/// A run its deadline watchdog ended (QoS `on_deadline_missed = "stop"`, as a ROS 2 node's
-/// deadline-missed handler may stop the system) ended early for a reason other than its
-/// duration or a fall: after its summary and files, it is an error (exit 2), never a
-/// success that a script could take for a balanced run.
+/// A run that reached its summary but is no success (`Metrics::no_success`: a deadline
+/// watchdog's stop, as a ROS 2 node's deadline-missed handler may stop the system, or an
+/// actuator killed within the run) is, after its summary and files, an error (exit 2),
+/// never a success that a script could take for a balanced run.
 ///
 /// # Errors
-/// One line, the watchdog's own.
-pub fn watchdog_is_no_success(metrics: &ratelab::metrics::Metrics) -> anyhow::Result<()> {
-    match &metrics.stopped_by_watchdog {
-        Some(w) => anyhow::bail!("the run ended early: {w}"),
+/// One line, `Metrics::no_success`'s.
+pub fn no_success_is_an_error(metrics: &ratelab::metrics::Metrics) -> anyhow::Result<()> {
+    match metrics.no_success() {
+        Some(why) => anyhow::bail!("{why}"),
         None => Ok(()),
     }
 }

@@ -172,7 +172,7 @@ pub fn run_launch(a: &LaunchArgs, force_headless: bool, stop: StopFlag) -> anyho
         "process(es) {} did not report: their nodes' figures are missing from the summary",
         missing.join(", ")
     );
-    headless::watchdog_is_no_success(&report.metrics)
+    headless::no_success_is_an_error(&report.metrics)
 }
 
 /// The placement as one line: `robot [sensor, actuator], policy [policy]`.

@@ -741,6 +741,34 @@ impl Metrics {
         lines
     }
 
+    /// When an injected `--kill` of the actuator took effect, s of run time; `None` when no
+    /// actuator was killed within the run (a kill set after its end does nothing).
+    pub fn actuator_killed_at_s(&self) -> Option<f64> {
+        self.nodes
+            .values()
+            .filter(|n| n.kind == "actuator")
+            .flat_map(|n| &n.faults)
+            .find(|f| f.kills_by(self.sim_time_s))
+            .map(|f| f.at_s)
+    }
+
+    /// Why a run that reached its summary is still no success, in one line, or `None` for a
+    /// run that ran its duration or fell (issue 27: "a lying report can never read as
+    /// success"). A deadline watchdog's stop (`the run ended early: …`) and an actuator
+    /// killed within the run (the plant stood still from then) are no success; the binary
+    /// prints this line after the summary and files and exits 2.
+    pub fn no_success(&self) -> Option<String> {
+        if let Some(w) = &self.stopped_by_watchdog {
+            Some(format!("the run ended early: {w}"))
+        } else {
+            self.actuator_killed_at_s().map(|t| {
+                format!(
+                    "the actuator was killed at t={t:.2}s (--kill): the plant stood still from then, so the run balanced nothing after"
+                )
+            })
+        }
+    }
+
     /// The summary's headline: how the run really ended, first match wins: `NODE FAILED`,
     /// `FELL at t=…`, `STOPPED BY WATCHDOG at t=…` (QoS `on_deadline_missed=stop`), `PLANT
     /// NEVER STEPPED` (the actuator ran no step), `STOPPED EARLY at t=… of …` (interrupted
@@ -775,17 +803,10 @@ impl Metrics {
                 "STOPPED EARLY at t={:.2}s of {:.2}s (pole up until then)",
                 self.sim_time_s, self.duration_s
             )
-        } else if let Some(kill) = self
-            .nodes
-            .values()
-            .filter(|n| n.kind == "actuator")
-            .flat_map(|n| &n.faults)
-            .find(|f| f.kills_by(self.sim_time_s))
-        {
+        } else if let Some(at_s) = self.actuator_killed_at_s() {
             // The plant stood still from the kill to the end: it balanced nothing after.
             format!(
-                "ACTUATOR KILLED at t={:.2}s (pole up until then; the plant stood still after)",
-                kill.at_s
+                "ACTUATOR KILLED at t={at_s:.2}s (pole up until then; the plant stood still after)"
             )
         } else if actuator_faults > 0 {
             format!(

@@ -468,15 +468,35 @@ fn the_headline_names_how_the_run_really_ended() {
             .unwrap_or_else(|| panic!("no headline in {stdout}"))
             .trim_start_matches("[ratelab] ")
             .to_string();
-        // A watchdog's stop is an early end: after the summary and files, exit 2 and one
-        // line; every other end here is a success.
-        match m.get("stopped_by_watchdog").and_then(|w| w.as_str()) {
-            Some(w) => {
+        // A watchdog's stop is an early end, and an actuator killed within the run left the
+        // plant standing still: after the summary and files, exit 2 and one line (#27: a
+        // lying report never reads as success); every other end here is a success.
+        let killed = extra
+            .windows(2)
+            .find(|w| w[0] == "--kill" && w[1].starts_with("actuator@"))
+            .map(|w| w[1].trim_start_matches("actuator@").parse::<f64>().unwrap())
+            .filter(|&t| t <= 3.0);
+        match (
+            m.get("stopped_by_watchdog").and_then(|w| w.as_str()),
+            killed,
+        ) {
+            (Some(w), _) => {
                 assert_eq!(code, 2, "{err}");
                 let lines: Vec<&str> = err.lines().collect();
                 assert_eq!(lines, [format!("error: the run ended early: {w}")], "{err}");
             }
-            None => assert_eq!(code, 0, "{err}"),
+            (None, Some(t)) => {
+                assert_eq!(code, 2, "{err}");
+                let lines: Vec<&str> = err.lines().collect();
+                assert_eq!(
+                    lines,
+                    [format!(
+                        "error: the actuator was killed at t={t:.2}s (--kill): the plant stood still from then, so the run balanced nothing after"
+                    )],
+                    "{err}"
+                );
+            }
+            (None, None) => assert_eq!(code, 0, "{err}"),
         }
         (
             line,
