@@ -17,7 +17,8 @@
 //!   `action/applied_N` (the force the actuator applied at each step: the zero-order hold);
 //! - `latency/sense_to_act_ms`, `latency/control_period_ms` (the controller's period);
 //! - `bus/<topic>/{published,dropped,msg_per_s}` for every topic (msg/s over a 1 s sliding
-//!   window), one colour per topic, the same in every graph, each topic's line narrower than
+//!   window; read at each actuator step, and at the run's end when the actuator stopped
+//!   stepping before it, msg/s there over the time since its last step), one colour per topic, the same in every graph, each topic's line narrower than
 //!   the one drawn before it so that equal lines show both colours;
 //! - QoS ([`crate::qos`]): `bus/<topic>/<counter>` (`expired`, `refused`, `lost`,
 //!   `retransmitted`, `offered_deadline_missed`, `requested_deadline_missed`) for each counter
@@ -558,6 +559,9 @@ pub struct Recording {
     last_step: Arc<std::sync::atomic::AtomicU64>,
     /// Its run time, ns (the bus counters come with the steps: see [`Recording::finish`]).
     last_step_ns: Arc<std::sync::atomic::AtomicU64>,
+    /// Each topic's messages published by then, by topic name (for the msg/s from the last
+    /// step to the run's end: see [`Recording::finish`]).
+    last_step_published: Arc<Mutex<BTreeMap<String, u64>>>,
     /// The graph, once the observer is attached (for the final layout).
     shape: Arc<Mutex<Option<GraphShape>>>,
     /// The temporary file rerun writes, moved to `path` by [`Recording::finish`].
@@ -1119,6 +1123,7 @@ impl Recording {
             file: Arc::new(Committer(Mutex::new(Some(pending)))),
             last_step: Arc::default(),
             last_step_ns: Arc::default(),
+            last_step_published: Arc::default(),
             shape: Arc::default(),
             lanes: Arc::default(),
             deadline_said: Arc::default(),
@@ -1683,14 +1688,26 @@ impl Recording {
             self.deadline_totals(&mut buf, metrics, end.at);
             // The bus counters come with the actuator's steps: an actuator killed (or stalled
             // past the end) left them short of the run's end, where the summary counts on.
-            // Its totals at the end, so that the bus plots reach them.
+            // Its totals at the end, so that the bus plots reach them, and its msg/s there:
+            // the messages published from the last step to the end over that time (a
+            // publisher that kept its rate keeps its line level).
             let last_ns = self.last_step_ns.load(std::sync::atomic::Ordering::Relaxed);
             if metrics.steps > 0 && last_ns < end.at.0 {
+                let since_s = end.at.saturating_sub(Nanos(last_ns)).as_secs_f64();
+                let then = self
+                    .last_step_published
+                    .lock()
+                    .unwrap_or_else(|e| e.into_inner())
+                    .clone();
                 for (name, t) in &metrics.topics {
                     let entity = bus_name(name);
                     let at = |m: &str| format!("bus/{entity}/{m}");
                     buf.scalar(&at("published"), end.at, metrics.steps, t.published as f64);
                     buf.scalar(&at("dropped"), end.at, metrics.steps, t.dropped as f64);
+                    if let Some(&before) = then.get(name) {
+                        let rate = t.published.saturating_sub(before) as f64 / since_s;
+                        buf.scalar(&at("msg_per_s"), end.at, metrics.steps, rate);
+                    }
                 }
             }
             // The skipped ticks end where metrics.json ends them (a tick still computing
@@ -2170,6 +2187,21 @@ impl StepObserver for RecordingObserver {
                 st.dropped as f64,
             );
             buf.scalar(&format!("bus/{entity}/msg_per_s"), s.t, s.step, rate);
+        }
+        {
+            let mut last = self
+                .rec
+                .last_step_published
+                .lock()
+                .unwrap_or_else(|e| e.into_inner());
+            for (topic, st) in self.shape.topics.iter().zip(&stats) {
+                match last.get_mut(&topic.name) {
+                    Some(n) => *n = st.published,
+                    None => {
+                        last.insert(topic.name.clone(), st.published);
+                    }
+                }
+            }
         }
         self.qos_rows(&mut buf, s);
         if s.fell {

@@ -1152,7 +1152,8 @@ fn a_launch_across_processes_records_every_step() {
 }
 
 /// The bus plots come with the actuator's steps; with the actuator killed at 1 s of a 3 s
-/// run they still reach the run's end, at the totals the summary gives (#25).
+/// run they still reach the run's end, at the totals the summary gives and the rate the
+/// publishers kept (#25).
 #[test]
 fn the_bus_plots_reach_the_end_when_the_actuator_was_killed() {
     let dir = tempfile::tempdir().unwrap();
@@ -1191,5 +1192,13 @@ fn the_bus_plots_reach_the_end_when_the_actuator_was_killed() {
                 Some((3_000_000_000, t.dropped as f64))
             );
         }
+        // Both topics' publishers kept their 50 Hz after the kill: the msg/s plot reaches
+        // the end at that rate, not at the kill.
+        let (at, rate) = newest(&format!("{entity}/msg_per_s")).unwrap();
+        assert_eq!(at, 3_000_000_000, "{entity}");
+        assert!(
+            (49.0..=51.0).contains(&rate),
+            "{entity}: {rate} msg/s at the end"
+        );
     }
 }
