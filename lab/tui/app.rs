@@ -904,6 +904,12 @@ impl App {
             staling: window.stale_reads > 0,
             segment_dropped: ended.map_or(segment.dropped, |t| t.dropped),
             segment_stale_reads: ended.map_or(segment.stale_reads, |t| t.stale_reads),
+            segment_lost: ended.map_or(segment.lost, |t| {
+                t.qos_counters
+                    .get(QosCounter::Lost.key())
+                    .copied()
+                    .unwrap_or(0)
+            }),
             qos: (!(qos.is_default() && spec.qos.is_default())).then(|| qos.short_parts(ran_depth)),
             // Over the window, as its drops and stale reads (totals counted from the start
             // read as 40 % loss on a 20 % link under an arrow saying "last 5 s").

@@ -44,6 +44,9 @@ pub struct TopicCounts {
     pub dropped: u64,
     /// Reads that found nothing new.
     pub stale_reads: u64,
+    /// Messages its link lost (a lossy best-effort link, or a crossing topic's sequence
+    /// gaps: QoS counter `lost`).
+    pub lost: u64,
     /// Messages per second: the messages published over the span of their publish stamps
     /// (so a 5 Hz topic reads 5.0), the span reaching to now once the publisher has been
     /// silent for more than twice its mean interval (a stalled or dead publisher's rate
@@ -69,6 +72,7 @@ impl TopicCounts {
             published,
             dropped: last.dropped.saturating_sub(base.dropped),
             stale_reads: last.stale_reads.saturating_sub(base.stale_reads),
+            lost: last.lost.saturating_sub(base.lost),
             msg_per_s: if span.0 > 0 && base.published > 0 {
                 // Both integers, so an exact rate divides exactly (249 in 4.98 s is 50.0).
                 published as f64 * Nanos::SECOND.0 as f64 / span.0 as f64
@@ -577,6 +581,25 @@ mod tests {
             "nothing dropped in the last 5 s"
         );
         assert_eq!(live.segment_topic(T).dropped, 10, "the totals keep them");
+    }
+
+    #[test]
+    fn a_links_losses_total_over_the_segment() {
+        let mut live = Live::default();
+        let mut lost = 0;
+        for t in (0..=8_000).step_by(20) {
+            if t % 1_000 == 0 && t > 0 {
+                lost += 1; // one lost a second
+            }
+            let mut r = rec(t, 50, 0, 0, 0);
+            r.topics = TopicCounters::from_iter([TopicStats {
+                lost,
+                ..r.topics.get(T)
+            }]);
+            live.push(r);
+        }
+        assert_eq!(live.segment_topic(T).lost, 8);
+        assert_eq!(live.window_counter(T, ratelab::qos::QosCounter::Lost), 5);
     }
 
     #[test]

@@ -1214,6 +1214,7 @@ mod tests {
         // copy of /obs no longer could.
         if let Some(obs) = report.metrics.topics.get_mut("/obs") {
             (obs.dropped, obs.stale_reads) = (93, 4);
+            obs.qos_counters.insert("lost".into(), 7);
         }
         app.on_telemetry(Telemetry::Ended {
             metrics: Box::new(report.metrics),
@@ -1223,8 +1224,18 @@ mod tests {
         assert!(msg.contains("the launch is over"), "{msg}");
         assert!(!msg.contains("r/R reset"), "{msg}");
         let obs = &app.view().topics[0];
-        assert_eq!((obs.segment_dropped, obs.segment_stale_reads), (93, 4));
+        assert_eq!(
+            (
+                obs.segment_dropped,
+                obs.segment_stale_reads,
+                obs.segment_lost
+            ),
+            (93, 4, 7)
+        );
         let text = render(&app, 120, 40);
-        assert!(text.contains("/obs 93 dropped"), "{text}");
+        assert!(text.contains("/obs 93 dropped, 4 stale, 7 lost"), "{text}");
+        // At 80 columns the totals shorten, and still say the loss.
+        let text = render(&app, 80, 24);
+        assert!(text.contains("/obs 93 drop, 4 stale, 7 lost"), "{text}");
     }
 }

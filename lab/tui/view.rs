@@ -135,6 +135,8 @@ pub struct TopicView {
     pub segment_dropped: u64,
     /// Stale reads since the last change of settings (or the run's start).
     pub segment_stale_reads: u64,
+    /// Messages its link lost since then (QoS counter `lost`), in the segment line when any.
+    pub segment_lost: u64,
     /// Attached to a graph across processes, a topic that crosses them: its over-the-wire
     /// latency so far, (p50, p99) µs.
     pub wire_us: Option<(f64, f64)>,
@@ -1308,6 +1310,13 @@ fn render_segment(v: &View, area: Rect, buf: &mut Buffer) {
                     format!(" {}↺", t.segment_stale_reads).magenta()
                 } else {
                     format!(", {} stale", t.segment_stale_reads).magenta()
+                });
+            }
+            if t.segment_lost > 0 {
+                spans.push(if short > 1 {
+                    format!(" {} lost", t.segment_lost).red()
+                } else {
+                    format!(", {} lost", t.segment_lost).red()
                 });
             }
         }
