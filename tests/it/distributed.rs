@@ -595,7 +595,15 @@ fn a_killed_node_is_noticed_and_a_restarted_one_rejoins() {
         "the policy ticked {policy_ticks} times in its two processes"
     );
     assert_eq!(m["policy_ticks"].as_u64(), Some(policy_ticks), "{m}");
-    assert!(m["topics"]["/action"]["published"].as_u64().unwrap() >= policy_ticks);
+    // Every tick publishes on /action, and the robot counts what arrived: the killed
+    // process's ticks are not counted twice. A few of its messages may have been in
+    // flight at the kill, and the last tick's at the end; the killed process's ticks of
+    // its last 100 ms are not carried. Seen from 1 below the ticks counted to 3 above.
+    let action_published = m["topics"]["/action"]["published"].as_u64().unwrap();
+    assert!(
+        action_published + 5 >= policy_ticks,
+        "/action published {action_published}, far short of {policy_ticks} policy ticks: {m}"
+    );
     // /obs's counters go on from what the killed policy process received (about 120
     // readings, its figures up to 100 ms before it died): only what was sent while no
     // policy process ran (well under a second here: 50 a second) is lost. Counting from

@@ -1,0 +1,809 @@
+//! The launcher (`ratelab launch --processes`): starts one `ratelab node` process per
+//! placement group, admits them (the graph file's hash must match), runs the graph (the
+//! time authority under the virtual clock; the common start under the real one), stops
+//! every process it started, and merges their reports into one `metrics.json`.
+//!
+//! [`launch`] goes through the phases in order, one module each: the processes it starts
+//! (`processes`), who joins (`admission`), the run under the virtual clock
+//! (`virtual_run`) or the real one (`real_run`); the session, the summary and the
+//! merge of the processes' figures are here.
+
+mod admission;
+mod processes;
+mod real_run;
+mod virtual_run;
+
+use super::credentials::{Credentials, PrivateDir, Role};
+use super::lockstep::subscribe_reports;
+use super::monitor::Carried;
+use super::wire::{self, Setup, ToLauncher, ToMember};
+use super::{check_endpoint, check_keys, Access, DistError, Keys};
+use crate::config::{ClockKind, RunConfig};
+use crate::graph::spec::GraphSpec;
+use crate::graph::NodeId;
+use crate::metrics::Metrics;
+use crate::run::{summarize_state, GraphState};
+use crate::scheduler::{EndReason, RunEnd, StopFlag};
+use crate::time::Nanos;
+use crossbeam_channel::Receiver;
+use processes::{wait_gate, Children};
+use std::cell::RefCell;
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+use zenoh::Wait;
+
+/// How to launch.
+#[derive(Clone, Debug)]
+pub struct LaunchOptions {
+    /// The graph file (`None`: the chapter's, compiled in) and its bytes (hashed at join).
+    pub graph_path: Option<PathBuf>,
+    /// The graph file's bytes.
+    pub graph_bytes: Vec<u8>,
+    /// Where to listen (`tls/HOST:PORT`; default [`super::DEFAULT_ENDPOINT`], or a free port
+    /// on 127.0.0.1 when that is taken).
+    pub listen: Option<String>,
+    /// The brain spec (`--policy`).
+    pub policy: String,
+    /// The `ratelab` binary to start the placement groups with (`None`: start none, and
+    /// wait for them to be started by hand with `ratelab node`).
+    pub exe: Option<PathBuf>,
+    /// Where the started processes' stderr goes, a line at a time as `PROCESS: LINE` (each
+    /// line also published on the graph's log key, [`Keys::log`]); `None`: to the
+    /// launcher's own stderr. A lab on the terminal takes them, so that no child writes
+    /// over its screen. Lines are cut at [`MAX_STDERR_LINE`] bytes; a line that finds the
+    /// channel full is dropped here (give a bounded one: it is on the log key anyway).
+    pub child_stderr: Option<crossbeam_channel::Sender<String>>,
+    /// The run starts only once this receives (or is told, within [`REPLY_TIMEOUT`]): a
+    /// watcher that must see the whole run (a recording, the lab) says here that it has
+    /// figures from every process ([`super::monitor::Watch::run`]). `None`: start when
+    /// every process is ready.
+    pub start_gate: Option<Receiver<()>>,
+    /// Told the endpoint the launcher listens on (`tls/HOST:PORT`), once it listens: a
+    /// watcher in the same program connects there. Its progress line `listening on …` says
+    /// the same to a person.
+    pub listening: Option<crossbeam_channel::Sender<String>>,
+    /// Virtual clock: run at this many seconds of run time per second of wall time (the
+    /// lab's ×1, so that a person can follow it), the horizon let out no faster; `None`: as
+    /// fast as the processes go (headless, a recording, the benchmarks).
+    pub pace: Option<f64>,
+    /// The launch's credentials, every identity ([`Credentials::generate`] for this graph
+    /// and its placement): the launcher is authenticated with its own, and hands each
+    /// process it starts that process's alone (a file in a private folder, removed when
+    /// the launch ends).
+    pub credentials: Credentials,
+    /// `--ros2`: each process offers its own nodes to ROS 2 on this domain, the plant's
+    /// process `/clock` too (the launcher's program holds the ROS 2 session, and so the
+    /// embedded router when none answered, for the launch's length).
+    pub ros2_domain: Option<u32>,
+}
+
+/// The longest line of a started process's stderr that [`LaunchOptions::child_stderr`]
+/// passes on, bytes (the rest of the line is dropped).
+pub const MAX_STDERR_LINE: usize = 4096;
+
+/// What a launched run produced.
+pub struct LaunchReport {
+    /// The merged summary.
+    pub metrics: Metrics,
+    /// How it ended.
+    pub end: RunEnd,
+    /// Wall time of the run (after every process was ready).
+    pub wall: Duration,
+    /// The endpoint the launcher listened on.
+    pub endpoint: String,
+    /// Over-the-wire latency per topic that crossed processes, in the graph's topic order.
+    pub wire: Vec<wire::WireLink>,
+    /// Processes that did not report (gone, or failed): their figures are missing.
+    pub missing: Vec<String>,
+    /// Virtual clock: the lockstep's cost.
+    pub lockstep: Option<LockstepCost>,
+}
+
+/// The launcher's link to its processes: publishers per process and the reply channel.
+struct Link {
+    keys: Keys,
+    session: zenoh::Session,
+    up: Receiver<ToLauncher>,
+}
+
+impl Link {
+    fn tell(&self, process: &str, m: &ToMember) -> Result<(), DistError> {
+        self.session
+            .put(self.keys.control(process), wire::encode_json(m))
+            .congestion_control(zenoh::qos::CongestionControl::Block)
+            .wait()?;
+        Ok(())
+    }
+
+    fn recv(&self, timeout: Duration) -> Option<ToLauncher> {
+        self.up.recv_timeout(timeout).ok()
+    }
+}
+
+/// The lockstep's cost, measured by the launcher (virtual clock).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LockstepCost {
+    /// Ticks run (in every process).
+    pub ticks: u64,
+    /// Distinct instants (run times) they ran at.
+    pub instants: u64,
+    /// Wall time of the run per instant, µs.
+    pub us_per_instant: f64,
+}
+
+/// A free TCP port on `host` (the OS picks it; it is free when this returns).
+fn free_port(host: &str) -> Result<u16, DistError> {
+    let host = host.trim_start_matches('[').trim_end_matches(']');
+    std::net::TcpListener::bind((host, 0))
+        .and_then(|l| l.local_addr())
+        .map(|a| a.port())
+        .map_err(|e| DistError::Usage(format!("no free port on {host}: {e}")))
+}
+
+/// Merge the processes' views into the graph's: each node's figures from its own process,
+/// each topic's from its [holder](crate::graph::spec::TopicSpec::holder)'s process (its
+/// subscriber's, whose copy saw every message that crossed, or its publisher's when nobody
+/// subscribes); the actuator's measurements from the
+/// actuator's process, the brain's label from the policy's. `None` without the actuator's
+/// process's report. A topic whose holder was started again mid-run goes on from what the
+/// processes before it counted (`carried`: their last figures, up to 100 ms before they
+/// died, so what they received after those is counted as lost); a topic whose holder never
+/// reported (it died for good) reads its last figures, the rest of what was sent lost.
+pub fn merge_states(
+    spec: &GraphSpec,
+    states: &BTreeMap<String, GraphState>,
+    carried: &Carried,
+) -> Option<GraphState> {
+    let of = |id: NodeId| states.get(&spec.process_of(id));
+    let mut merged = of(spec.actuator)?.clone();
+    for i in 0..spec.nodes.len() {
+        let Some(st) = of(NodeId(i)) else { continue };
+        take(&mut merged.rates_hz, &st.rates_hz, i);
+        take(&mut merged.ticks, &st.ticks, i);
+        // A process started again mid-run counts its nodes' ticks anew.
+        if let Some(t) = merged.ticks.get_mut(i) {
+            *t = carried.node_ticks(i, *t);
+        }
+        take(&mut merged.liveliness, &st.liveliness, i);
+        if let (Some(d), Some(s)) = (
+            merged.timing.as_mut().and_then(|t| t.get_mut(i)),
+            st.timing.as_ref().and_then(|t| t.get(i)),
+        ) {
+            *d = s.clone();
+        }
+    }
+    for (i, t) in spec.topics.iter().enumerate() {
+        if let Some(st) = of(t.holder()) {
+            take(&mut merged.topics, &st.topics, i);
+            take(&mut merged.topic_qos, &st.topic_qos, i);
+            if let Some(m) = merged.topics.get_mut(i) {
+                *m = carried.continued(i, m);
+            }
+        }
+    }
+    if let Some(st) = spec.chain.and_then(|c| of(c.policy)) {
+        merged.brain.clone_from(&st.brain);
+    }
+    merged.exec = merge_exec(spec, states);
+    // A topic that crossed processes: what its publisher sent is published; what the
+    // subscriber's copy never received (in flight at the end, or sent while it was down)
+    // was lost on the wire. Without the subscriber's report only the sending side is known.
+    for (i, t) in spec.topics.iter().enumerate() {
+        let Some(sub) = t.subscriber() else { continue };
+        let (from, to) = (spec.process_of(t.publisher), spec.process_of(sub));
+        if from == to {
+            continue;
+        }
+        let sent = states.get(&from).and_then(|s| s.topics.get(i)).copied();
+        let (Some(sent), Some(m)) = (sent, merged.topics.get_mut(i)) else {
+            continue;
+        };
+        if states.contains_key(&to) {
+            if sent.published > m.published {
+                m.lost += sent.published - m.published;
+                m.published = sent.published;
+            }
+        } else {
+            // The subscriber's process did not report (it died): what it counted until its
+            // last figures (at most 100 ms before it went), and what was sent after those
+            // counted as lost, never a clean 0 dropped.
+            let mut c = carried.total(i).unwrap_or(crate::topic::TopicStats {
+                depth: t.depth,
+                ..Default::default()
+            });
+            if sent.published > c.published {
+                c.lost += sent.published - c.published;
+                c.published = sent.published;
+            }
+            c.last_stamp = sent.last_stamp;
+            *m = c;
+        }
+    }
+    Some(merged)
+}
+
+/// The executors' figures of a launch: each node's from its own process, each executor's
+/// from the process that ran it (an executor never spans processes), in the graph's plan
+/// order. `None` when no process measured any (no executors, no compute times). Under the
+/// virtual clock every process replays every executor, so any process's figures are the
+/// graph's; under the real clock each measured its own.
+fn merge_exec(
+    spec: &GraphSpec,
+    states: &BTreeMap<String, GraphState>,
+) -> Option<crate::executor::ExecFigures> {
+    let exec_of = |id: NodeId| {
+        states
+            .get(&spec.process_of(id))
+            .and_then(|s| s.exec.as_ref())
+    };
+    if states.values().all(|s| s.exec.is_none()) {
+        return None;
+    }
+    let nodes = (0..spec.nodes.len())
+        .map(|i| {
+            exec_of(NodeId(i))
+                .and_then(|x| x.nodes.get(i).cloned())
+                .unwrap_or_default()
+        })
+        .collect();
+    let executors = spec
+        .execution_plan()
+        .executors
+        .iter()
+        .filter_map(|e| {
+            states
+                .values()
+                .filter_map(|s| s.exec.as_ref())
+                .flat_map(|x| &x.executors)
+                .find(|f| f.name == e.name && f.kind == e.kind)
+                .cloned()
+        })
+        .collect();
+    Some(crate::executor::ExecFigures { nodes, executors })
+}
+
+/// Check that process `process`'s report could be true of a run that ended at `at`: its
+/// vectors have the graph's shape; its nodes ticked no more than their rates allow in that
+/// time (two more for phase and the tick at zero); the topics it holds received no more
+/// than their publishers could send, dropped no more than they received; and from the
+/// plant's process, steps as bounded, latencies finite within the run, a finite angle. A
+/// report can still be wrong within these bounds: it comes from the process's own identity
+/// ([`super::access`]), so only a process of the launch can send one.
+///
+/// # Errors
+/// What is out of bounds, one line.
+pub fn check_report(
+    spec: &GraphSpec,
+    process: &str,
+    st: &GraphState,
+    at: Nanos,
+) -> Result<(), String> {
+    let (n, t) = (spec.nodes.len(), spec.topics.len());
+    if st.topics.len() != t
+        || st.topic_qos.len() != t
+        || st.liveliness.len() != n
+        || st.rates_hz.len() != n
+        || !(st.ticks.is_empty() || st.ticks.len() == n)
+        || st.timing.as_ref().is_some_and(|v| v.len() != n)
+        || st.exec.as_ref().is_some_and(|x| {
+            x.nodes.len() != n || x.executors.len() > spec.execution_plan().executors.len()
+        })
+    {
+        return Err(format!(
+            "its figures are not shaped as graph '{}' ({n} nodes, {t} topics)",
+            spec.name
+        ));
+    }
+    let bound = |id: NodeId| -> u64 {
+        let hz = spec.node(id).rate_hz;
+        (at.as_secs_f64() * hz).ceil().min(u64::MAX as f64 / 2.0) as u64 + 2
+    };
+    for (i, node) in spec.nodes.iter().enumerate() {
+        if spec.process_of(NodeId(i)) != process {
+            continue;
+        }
+        if let Some(&ticks) = st.ticks.get(i) {
+            if ticks > bound(NodeId(i)) {
+                return Err(format!(
+                    "node '{}' ticked {ticks} times in {:.2} s at {} Hz (at most {})",
+                    node.name,
+                    at.as_secs_f64(),
+                    node.rate_hz,
+                    bound(NodeId(i))
+                ));
+            }
+        }
+    }
+    for (i, topic) in spec.topics.iter().enumerate() {
+        if spec.process_of(topic.holder()) != process {
+            continue;
+        }
+        let c = &st.topics[i];
+        // A node may publish several times a tick; a process sends at most so many of them.
+        let most = bound(topic.publisher).saturating_mul(wire::MAX_SENT_PER_TICK as u64);
+        if c.published > most || c.lost > most || c.dropped > c.published {
+            return Err(format!(
+                "topic '{}' counted {} published, {} dropped, {} lost in {:.2} s (its publisher sends at most {most})",
+                topic.name,
+                c.published,
+                c.dropped,
+                c.lost,
+                at.as_secs_f64()
+            ));
+        }
+    }
+    let run_ms = at.as_secs_f64() * 1e3;
+    let ok_ms = |ms: f64| ms.is_finite() && (0.0..=run_ms + 1.0).contains(&ms);
+    if let Some(x) = &st.exec {
+        // A response may end after the run (a tick computing at the end): up to the longest
+        // compute time past it.
+        let late_ms = run_ms + crate::executor::MAX_COMPUTE.as_millis_f64();
+        let ok_response = |ms: f64| ms.is_finite() && (0.0..=late_ms).contains(&ms);
+        for (i, f) in x.nodes.iter().enumerate() {
+            if spec.process_of(NodeId(i)) != process {
+                continue;
+            }
+            let r = [
+                f.response_time_p50_ms,
+                f.response_time_p99_ms,
+                f.response_time_max_ms,
+            ];
+            if !r.into_iter().all(ok_response)
+                || !ok_ms(f.busy_ms)
+                || f.skipped_ticks > bound(NodeId(i))
+            {
+                return Err(format!(
+                    "node '{}': its executor's figures are impossible in {:.2} s",
+                    spec.nodes[i].name,
+                    at.as_secs_f64()
+                ));
+            }
+        }
+        if x.executors
+            .iter()
+            .any(|e| !(e.utilization.is_finite() && (0.0..=1.0).contains(&e.utilization)))
+        {
+            return Err("an executor's utilization is outside [0, 1]".into());
+        }
+    }
+    if spec.process_of(spec.actuator) == process {
+        let a = &st.actuator;
+        let (p50, p99, max) = a.latency_ms;
+        if a.steps > bound(spec.actuator)
+            || ![a.mean_latency_ms, p50, p99, max].into_iter().all(ok_ms)
+            || !a.final_pole_angle.is_finite()
+        {
+            return Err(format!(
+                "the plant's figures are impossible in {:.2} s ({} steps, latency {:.1}/{:.1}/{:.1} ms, angle {})",
+                at.as_secs_f64(),
+                a.steps,
+                p50,
+                p99,
+                max,
+                a.final_pole_angle
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// `dst[i] = src[i]` where both exist.
+fn take<T: Clone>(dst: &mut [T], src: &[T], i: usize) {
+    if let (Some(d), Some(s)) = (dst.get_mut(i), src.get(i)) {
+        d.clone_from(s);
+    }
+}
+
+/// Launch `cfg`'s graph over its placement, one process per group, and run it once.
+/// `say` is told progress lines (the endpoint, processes joining or gone).
+///
+/// The phases, each in its own module: open the session and follow the graph's keys
+/// (here), start the processes (`processes`), admit them until all are ready
+/// (`admission`), run (under the virtual clock `virtual_run`, the real one `real_run`),
+/// then merge the reports into one summary (here).
+///
+/// # Errors
+/// [`DistError`]: a bad or busy endpoint, a process that does not join (or joins with
+/// another graph file), a process that fails before the run.
+pub fn launch(
+    cfg: &RunConfig,
+    opts: &LaunchOptions,
+    stop: &StopFlag,
+    say: &dyn Fn(&str),
+) -> Result<LaunchReport, DistError> {
+    cfg.validate().map_err(crate::run::RunError::from)?;
+    let spec = &cfg.graph;
+    check_keys(spec)?;
+    let placement = spec.placement();
+    let names: Vec<String> = placement.iter().map(|(p, _)| p.clone()).collect();
+    let creds = &opts.credentials;
+    if creds.graph != spec.name || creds.processes != names {
+        return Err(DistError::Usage(format!(
+            "the credentials are for graph '{}' with processes {:?}, not '{}' with {names:?}",
+            creds.graph, creds.processes, spec.name
+        )));
+    }
+    // Peers refused at the TLS handshake (no credentials of this launch), said in the log.
+    let refusals = super::refusals::Refusals::new();
+    let (session, endpoint) = listen(spec, opts)?;
+    let keys = Keys::new(&spec.name);
+    let (up_tx, up_rx) = crossbeam_channel::bounded::<ToLauncher>(65_536);
+    let up_prefix = format!("{}/@up/", keys.prefix());
+    let _up_sub = session
+        .declare_subscriber(keys.up())
+        .callback(move |s| {
+            // A process speaks for itself only: the key it may publish on ([`super::access`])
+            // names it, and a message naming another process is dropped.
+            let from = s.key_expr().as_str().strip_prefix(up_prefix.as_str());
+            if let Ok(m) = wire::decode_json::<ToLauncher>(&s.payload().to_bytes()) {
+                if from == Some(m.process()) {
+                    let _ = up_tx.try_send(m);
+                }
+            }
+        })
+        .wait()?;
+    let me = Launch {
+        cfg,
+        opts,
+        spec,
+        stop,
+        robot: spec.process_of(spec.actuator),
+        placement,
+        names,
+        endpoint,
+        setup: Setup {
+            graph_toml: spec.to_toml(),
+            seed: cfg.seed,
+            duration_ns: cfg.duration.0,
+            clock: cfg.clock,
+            policy: opts.policy.clone(),
+            faults: cfg.faults.clone(),
+            phase_offsets_ns: cfg.phase_offsets.iter().map(|n| n.0).collect(),
+            spin_margin_ns: cfg.spin_margin.0,
+            rt_priority: cfg.rt_priority,
+            ros2_domain: opts.ros2_domain,
+        },
+        hash: super::graph_hash(&opts.graph_bytes),
+        private: PrivateDir::new()?,
+        link: Link {
+            keys: keys.clone(),
+            session: session.clone(),
+            up: up_rx,
+        },
+        say_to: say,
+        last_join_line: RefCell::new(String::new()),
+        refusals: RefCell::new(refusals),
+    };
+    let endpoint = me.endpoint.clone();
+    me.say(&format!("listening on {endpoint}"));
+    if cfg.clock == ClockKind::Virtual && !spec.restart.is_empty() {
+        me.say(&format!(
+            "restart = \"on-failure\" ({}) does not apply under the virtual clock: a lockstep cannot take a process back, so a process that fails ends the run",
+            spec.restart.keys().cloned().collect::<Vec<_>>().join(", ")
+        ));
+    }
+    if let Some(tx) = &opts.listening {
+        let _ = tx.send(endpoint.clone());
+    }
+    // Processes going away: their node tokens are withdrawn.
+    let (gone_tx, gone_rx) = crossbeam_channel::unbounded::<String>();
+    let gone_now: Arc<Mutex<Vec<String>>> = Arc::default();
+    let gone_cb = gone_now.clone();
+    let token_prefix = format!("{}/@node/", keys.prefix());
+    let _live_sub = session
+        .liveliness()
+        .declare_subscriber(format!("{}/@node/**", keys.prefix()))
+        .callback(move |s| {
+            if s.kind() == zenoh::sample::SampleKind::Delete {
+                let k = s.key_expr().as_str();
+                if let Some(p) = k
+                    .strip_prefix(&token_prefix)
+                    .and_then(|r| r.split('/').next())
+                {
+                    crate::graph::lock(&gone_cb).push(p.to_string());
+                    let _ = gone_tx.send(p.to_string());
+                }
+            }
+        })
+        .wait()?;
+    // Virtual clock: every process's tick reports, to follow the run ([`super::lockstep`]).
+    let (_ticked_sub, ticked_rx) = subscribe_reports(&session, &keys, None)?;
+    let _launcher_token = session
+        .liveliness()
+        .declare_token(keys.launcher_token())
+        .wait()?;
+    let mut children = Children(Vec::new());
+    if opts.exe.is_some() {
+        for (p, _) in &me.placement {
+            if let Some(child) = me.start_process(p)? {
+                children.0.push((p.clone(), child));
+            }
+        }
+    } else {
+        me.say(&format!(
+            "waiting for {} to join: ratelab node{} --process NAME --connect {endpoint} --credentials FILE (launch --export-credentials FILE)",
+            me.names.join(", "),
+            opts.graph_path
+                .as_ref()
+                .map_or(String::new(), |g| format!(" --graph {}", g.display()))
+        ));
+    }
+    // Watchers ask for the run's settings here (`ratelab lab --attach`).
+    let setup_json = wire::encode_json(&me.setup);
+    let _setup_queryable = session
+        .declare_queryable(keys.setup())
+        .callback(move |q| {
+            let _ = q.reply(q.key_expr().clone(), setup_json.clone()).wait();
+        })
+        .wait()?;
+    me.admit_until_ready(&mut children)?;
+    if let Some(gate) = &opts.start_gate {
+        wait_gate(gate, stop, &mut children)?;
+    }
+    let start = Instant::now();
+    let mut reports: BTreeMap<String, GraphState> = BTreeMap::new();
+    let mut wires: Vec<wire::WireLink> = Vec::new();
+    // What a process started again mid-run counted before (real clock only).
+    let mut carried = Carried::new(spec);
+    let (end, lockstep) = match cfg.clock {
+        ClockKind::Virtual => {
+            me.run_lockstep(&ticked_rx, &gone_now, start, &mut reports, &mut wires)?
+        }
+        ClockKind::Real => (
+            me.supervise(
+                &gone_rx,
+                &mut children,
+                &mut carried,
+                &mut reports,
+                &mut wires,
+            )?,
+            None,
+        ),
+    };
+    let wall = start.elapsed();
+    children.reap(Duration::from_secs(5));
+    let (metrics, missing) = me.conclude(&end, &mut reports, &carried)?;
+    // In the graph's topic order, whichever process reported first.
+    wires.sort_by_key(|w| spec.topics.iter().position(|t| t.name == w.topic));
+    Ok(LaunchReport {
+        metrics,
+        end,
+        wall,
+        endpoint,
+        wire: wires,
+        missing,
+        lockstep,
+    })
+}
+
+/// Open the launcher's session: on `--listen` (port 0: a free one), else on Zenoh's usual
+/// port when it is free (watchers look there), else on any free one. Returns the session and
+/// the endpoint it listens on.
+fn listen(spec: &GraphSpec, opts: &LaunchOptions) -> Result<(zenoh::Session, String), DistError> {
+    let access = Access {
+        credentials: &opts.credentials,
+        role: &Role::Launcher,
+        spec: Some(spec),
+    };
+    let open_session =
+        |listen: &[String], connect: &[String]| super::open_session(listen, connect, access);
+    Ok(match &opts.listen {
+        Some(ep) => {
+            check_endpoint("--listen", ep, true)?;
+            let ep = match ep.rsplit_once(':') {
+                Some((host, "0")) => {
+                    let h = host.trim_start_matches("tls/");
+                    format!("tls/{h}:{}", free_port(h)?)
+                }
+                _ => ep.clone(),
+            };
+            (open_session(std::slice::from_ref(&ep), &[])?, ep)
+        }
+        None => match open_session(&[super::DEFAULT_ENDPOINT.to_string()], &[]) {
+            Ok(s) => (s, super::DEFAULT_ENDPOINT.to_string()),
+            Err(_) => {
+                let ep = format!("tls/127.0.0.1:{}", free_port("127.0.0.1")?);
+                (open_session(std::slice::from_ref(&ep), &[])?, ep)
+            }
+        },
+    })
+}
+
+/// One launch while it runs: its settings, its processes' names, its link to them and its
+/// progress lines. Each phase of [`launch`] is a method of it, in its own module.
+struct Launch<'a> {
+    cfg: &'a RunConfig,
+    opts: &'a LaunchOptions,
+    spec: &'a GraphSpec,
+    stop: &'a StopFlag,
+    /// Each process and its nodes ([`GraphSpec::placement`]).
+    placement: Vec<(String, Vec<NodeId>)>,
+    /// The processes' names, in placement order.
+    names: Vec<String>,
+    /// The plant's process (the actuator's): it cannot rejoin, and its going ends the run.
+    robot: String,
+    /// The endpoint the launcher listens on.
+    endpoint: String,
+    /// The run's settings, sent in every welcome.
+    setup: Setup,
+    /// The graph file's SHA-256, which every join must match.
+    hash: String,
+    /// Where each started process's credentials are written, removed with the launch.
+    private: PrivateDir,
+    link: Link,
+    /// Where progress lines go (each also on the graph's log key).
+    say_to: &'a dyn Fn(&str),
+    /// The last line about a join (not said twice in a row).
+    last_join_line: RefCell<String>,
+    refusals: RefCell<super::refusals::Refusals>,
+}
+
+impl Launch<'_> {
+    /// A progress line, to `say` and whoever watches (`ratelab lab --attach`).
+    fn say(&self, line: &str) {
+        (self.say_to)(line);
+        let _ = self.link.session.put(self.link.keys.log(), line).wait();
+    }
+
+    /// A line about joins, unless it was the last one said: a process told to wait asks
+    /// again every 100 ms (`member::BUSY_RETRY`).
+    fn say_once(&self, line: String) {
+        if *self.last_join_line.borrow() != line {
+            self.say(&line);
+            *self.last_join_line.borrow_mut() = line;
+        }
+    }
+
+    /// A refused join, said once.
+    fn say_refused(&self, reason: &str) {
+        self.say_once(format!("refused a join: {reason}"));
+    }
+
+    /// The refused connections since the last line, when a line is due
+    /// ([`super::refusals::Refusals::say_due`]).
+    fn say_refusals_due(&self) {
+        self.refusals.borrow_mut().say_due(&|l| self.say(l));
+    }
+
+    /// The run's summary from the processes' `reports` (those whose figures cannot be
+    /// true of a run that ended at `end` are refused and said), `carried` on from
+    /// processes started again; published on the graph's ended key for watchers. Returns
+    /// it and the processes that did not report.
+    ///
+    /// # Errors
+    /// [`DistError::Peer`] without the plant's process's report.
+    fn conclude(
+        &self,
+        end: &RunEnd,
+        reports: &mut BTreeMap<String, GraphState>,
+        carried: &Carried,
+    ) -> Result<(Metrics, Vec<String>), DistError> {
+        let spec = self.spec;
+        // A report whose figures cannot be is not merged: its process counts as not reporting.
+        reports.retain(|p, st| match check_report(spec, p, st, end.at) {
+            Ok(()) => true,
+            Err(why) => {
+                self.say(&format!("refused the report of process '{p}': {why}"));
+                false
+            }
+        });
+        let missing: Vec<String> = self
+            .names
+            .iter()
+            .filter(|p| !reports.contains_key(*p))
+            .cloned()
+            .collect();
+        let state = merge_states(spec, reports, carried).ok_or_else(|| {
+            let plant = spec.process_of(spec.actuator);
+            DistError::Peer(match &end.reason {
+                // The plant's process died: say so, not just that it did not report.
+                EndReason::NodeFailed { node, message } => format!(
+                    "node '{node}' failed at t={:.2}s: {message}; no summary or metrics.json: \
+                     the plant's figures went with its process",
+                    end.at.as_secs_f64()
+                ),
+                _ => format!("process '{plant}' (the actuator's) did not report"),
+            })
+        })?;
+        let mut metrics = summarize_state(self.cfg, &state, end);
+        metrics.missing_processes.clone_from(&missing);
+        // The policy's ticks went with its process: not measured, not 0 (the headline would
+        // say "0 policy ticks" of a policy that ran for seconds).
+        if let Some(c) = spec.chain {
+            if missing.contains(&spec.process_of(c.policy)) {
+                metrics.policy_ticks = None;
+            }
+        }
+        let over = wire::RunOver {
+            metrics: metrics.clone(),
+            end: end.clone(),
+        };
+        let _ = self
+            .link
+            .session
+            .put(self.link.keys.ended(), wire::encode_json(&over))
+            .congestion_control(zenoh::qos::CongestionControl::Block)
+            .wait();
+        // Let it leave before the session closes (and the launcher's token with it: a watcher
+        // takes a token gone without this word for a launcher that died).
+        std::thread::sleep(Duration::from_millis(200));
+        Ok((metrics, missing))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A 10 s run of the chapter's graph as process `robot` would report it.
+    fn robot_report() -> (GraphSpec, GraphState) {
+        let spec = GraphSpec::parse(crate::graph::spec::DEFAULT_GRAPH_TOML, "t").unwrap();
+        let obs = crate::topic::TopicStats {
+            published: 501,
+            dropped: 0,
+            ..Default::default()
+        };
+        let st = GraphState {
+            topics: vec![obs, obs],
+            topic_qos: vec![crate::qos::TopicQos::default(); 2],
+            subscriptions: Vec::new(),
+            liveliness: vec![(None, crate::qos::LivelinessStatus::default()); 3],
+            rates_hz: vec![50.0; 3],
+            ticks: vec![501, 0, 501],
+            timing: None,
+            exec: None,
+            brain: "scripted".into(),
+            actuator: crate::run::ActuatorSummary {
+                steps: 501,
+                fell_at: None,
+                watchdog: None,
+                mean_latency_ms: 20.0,
+                latency_ms: (20.0, 20.0, 40.0),
+                final_pole_angle: 0.01,
+                nonfinite_actions: 0,
+            },
+        };
+        (spec, st)
+    }
+
+    #[test]
+    fn a_report_is_merged_only_when_its_figures_could_be_true() {
+        let (spec, honest) = robot_report();
+        let ten_s = Nanos(10_000_000_000);
+        assert_eq!(check_report(&spec, "robot", &honest, ten_s), Ok(()));
+        let refused = |f: &dyn Fn(&mut GraphState)| {
+            let mut st = honest.clone();
+            f(&mut st);
+            check_report(&spec, "robot", &st, ten_s).unwrap_err()
+        };
+        assert!(refused(&|st| st.ticks[0] = 999_999).contains("node 'sensor' ticked 999999 times"));
+        assert!(refused(&|st| {
+            st.topics.pop();
+        })
+        .contains("not shaped"));
+        assert!(refused(&|st| st.actuator.latency_ms.2 = f64::NAN).contains("impossible"));
+        assert!(refused(&|st| st.actuator.steps = 424_242).contains("impossible"));
+        // /action is held by the robot (its subscriber): 5 published, 6 dropped cannot be.
+        assert!(refused(&|st| {
+            st.topics[1].published = 5;
+            st.topics[1].dropped = 6;
+        })
+        .contains("topic '/action'"));
+        // A policy that publishes twice a tick: 1002 in 10 s at 50 Hz can be true; more than
+        // a process sends in the run's ticks cannot.
+        let mut st = honest.clone();
+        st.topics[1].published = 1002;
+        assert_eq!(check_report(&spec, "robot", &st, ten_s), Ok(()));
+        assert!(
+            refused(&|st| st.topics[1].published = 600 * wire::MAX_SENT_PER_TICK as u64)
+                .contains("sends at most")
+        );
+        // Figures of another process's nodes are not this report's to bound.
+        let mut st = honest.clone();
+        st.ticks[1] = 999_999;
+        assert_eq!(check_report(&spec, "robot", &st, ten_s), Ok(()));
+        assert!(check_report(&spec, "policy", &st, ten_s).is_err());
+    }
+}

@@ -1,0 +1,251 @@
+//! The processes a launch starts: each `ratelab node` with its own credentials, its stderr
+//! passed on a line at a time, killed with the launch however it ends, and watched until
+//! the run starts.
+
+use super::{Launch, MAX_STDERR_LINE};
+use crate::distributed::{wire, DistError, REPLY_TIMEOUT};
+use crate::scheduler::StopFlag;
+use crossbeam_channel::Receiver;
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+use zenoh::Wait;
+
+impl Launch<'_> {
+    /// Start (or start again) process `p` with its own credentials: `None` when the launch
+    /// starts no process (they are started by hand, [`super::LaunchOptions::exe`]).
+    ///
+    /// # Errors
+    /// [`DistError::Usage`] when its credentials cannot be written or the binary cannot
+    /// start.
+    pub(super) fn start_process(&self, p: &str) -> Result<Option<Child>, DistError> {
+        let Some(exe) = &self.opts.exe else {
+            return Ok(None);
+        };
+        // Read by the process at its start; a restart writes it anew.
+        let own = self.private.write(
+            p,
+            &self
+                .opts
+                .credentials
+                .only(&crate::distributed::credentials::Role::Process(
+                    p.to_string(),
+                ))?,
+        )?;
+        let mut cmd = Command::new(exe);
+        cmd.arg("node").arg("--credentials").arg(&own);
+        if let Some(g) = &self.opts.graph_path {
+            cmd.arg("--graph").arg(g);
+        }
+        // Its own process group: a Ctrl-C at the terminal reaches the launcher only,
+        // which then stops every process in order (their reports are merged).
+        use std::os::unix::process::CommandExt as _;
+        cmd.args(["--process", p, "--connect", &self.endpoint])
+            .process_group(0)
+            .stdin(Stdio::null())
+            .stdout(Stdio::null())
+            .stderr(if self.opts.child_stderr.is_some() {
+                Stdio::piped()
+            } else {
+                Stdio::inherit()
+            });
+        // A node dies with the launcher, however the launcher ends.
+        // SAFETY: prctl is async-signal-safe and touches only this (child) process.
+        unsafe {
+            cmd.pre_exec(|| {
+                libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGTERM);
+                Ok(())
+            });
+        }
+        let mut child = cmd
+            .spawn()
+            .map_err(|e| DistError::Usage(format!("cannot start {}: {e}", exe.display())))?;
+        if let Some(to) = &self.opts.child_stderr {
+            pass_stderr(
+                p,
+                &mut child,
+                to.clone(),
+                self.link.session.clone(),
+                self.link.keys.log(),
+            );
+        }
+        Ok(Some(child))
+    }
+}
+
+/// Pass `child`'s stderr on a line at a time, as `PROCESS: LINE`, to `to` and on the log
+/// key, until the child closes it (a thread that ends with the child).
+fn pass_stderr(
+    process: &str,
+    child: &mut Child,
+    to: crossbeam_channel::Sender<String>,
+    session: zenoh::Session,
+    log_key: String,
+) {
+    use std::io::{BufRead, Read};
+    let Some(err) = child.stderr.take() else {
+        return;
+    };
+    let process = process.to_string();
+    let _ = std::thread::Builder::new()
+        .name(format!("stderr {process}"))
+        .spawn(move || {
+            let mut r = std::io::BufReader::new(err);
+            let mut buf = Vec::new();
+            loop {
+                buf.clear();
+                // Bounded: a line longer than the limit is cut, its rest skipped.
+                match r
+                    .by_ref()
+                    .take(MAX_STDERR_LINE as u64)
+                    .read_until(b'\n', &mut buf)
+                {
+                    Ok(0) | Err(_) => return,
+                    Ok(_) => {}
+                }
+                let cut = buf.last() != Some(&b'\n');
+                if cut {
+                    let mut rest = Vec::new();
+                    loop {
+                        rest.clear();
+                        match r
+                            .by_ref()
+                            .take(MAX_STDERR_LINE as u64)
+                            .read_until(b'\n', &mut rest)
+                        {
+                            Ok(0) | Err(_) => break,
+                            Ok(_) if rest.last() == Some(&b'\n') => break,
+                            Ok(_) => {}
+                        }
+                    }
+                }
+                let text = String::from_utf8_lossy(&buf);
+                let line = format!("{process}: {}", wire::printable(text.trim_end()));
+                let _ = session.put(log_key.as_str(), line.as_str()).wait();
+                let _ = to.try_send(line);
+            }
+        });
+}
+
+/// The child processes; every one still running is killed when this is dropped.
+pub(super) struct Children(pub(super) Vec<(String, Child)>);
+
+impl Children {
+    /// Wait up to `grace` for each to exit, then kill the rest.
+    pub(super) fn reap(&mut self, grace: Duration) {
+        let deadline = Instant::now() + grace;
+        for (_, c) in &mut self.0 {
+            while Instant::now() < deadline {
+                if let Ok(Some(_)) = c.try_wait() {
+                    break;
+                }
+                std::thread::sleep(Duration::from_millis(20));
+            }
+            if let Ok(None) = c.try_wait() {
+                let _ = c.kill();
+            }
+            let _ = c.wait();
+        }
+        self.0.clear();
+    }
+
+    /// A child that exited: its process name and status.
+    fn exited(&mut self) -> Option<(String, String)> {
+        for (p, c) in &mut self.0 {
+            if let Ok(Some(status)) = c.try_wait() {
+                return Some((p.clone(), status.to_string()));
+            }
+        }
+        None
+    }
+}
+
+impl Drop for Children {
+    fn drop(&mut self) {
+        for (_, c) in &mut self.0 {
+            let _ = c.kill();
+            let _ = c.wait();
+        }
+    }
+}
+
+/// Wait for the start gate ([`LaunchOptions::start_gate`]), for up to [`REPLY_TIMEOUT`].
+pub(super) fn wait_gate(
+    gate: &Receiver<()>,
+    stop: &StopFlag,
+    children: &mut Children,
+) -> Result<(), DistError> {
+    let deadline = Instant::now() + REPLY_TIMEOUT;
+    loop {
+        match gate.recv_timeout(Duration::from_millis(50)) {
+            Ok(()) => return Ok(()),
+            Err(crossbeam_channel::RecvTimeoutError::Disconnected) => {
+                return Err(DistError::Peer(
+                    "the run's watcher stopped before the run started".into(),
+                ))
+            }
+            Err(crossbeam_channel::RecvTimeoutError::Timeout) => {}
+        }
+        before_the_run(stop, children)?;
+        if Instant::now() >= deadline {
+            return Err(DistError::Peer(format!(
+                "the run's watcher did not hear from every process within {} s",
+                REPLY_TIMEOUT.as_secs()
+            )));
+        }
+    }
+}
+
+/// Nothing has ended the launch before its run: not Ctrl-C, not a started process that
+/// exited.
+pub(super) fn before_the_run(stop: &StopFlag, children: &mut Children) -> Result<(), DistError> {
+    if stop.is_stopped() {
+        return Err(DistError::Peer("interrupted before the run started".into()));
+    }
+    if let Some((p, status)) = children.exited() {
+        return Err(DistError::Peer(format!(
+            "process '{p}' exited ({status}) before the run started"
+        )));
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::distributed::credentials::{Credentials, Role};
+    use crate::distributed::{Access, Keys};
+
+    #[test]
+    fn a_child_s_stderr_comes_as_bounded_lines_named_by_its_process() {
+        let mut child = Command::new("sh")
+            .args([
+                "-c",
+                "echo 'first line' >&2; head -c 10000 /dev/zero | tr '\\0' x >&2; echo >&2; printf 'last, no newline' >&2",
+            ])
+            .stdout(Stdio::null())
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("sh runs");
+        let creds = Credentials::generate("g", &[]).expect("credentials");
+        let access = Access {
+            credentials: &creds,
+            role: &Role::Launcher,
+            spec: None,
+        };
+        let session = crate::distributed::open_session(
+            &[crate::distributed::LOOPBACK_ANY.into()],
+            &[],
+            access,
+        )
+        .expect("a session");
+        let (tx, rx) = crossbeam_channel::unbounded();
+        pass_stderr("policy", &mut child, tx, session, Keys::new("g").log());
+        let _ = child.wait();
+        let lines: Vec<String> =
+            std::iter::from_fn(|| rx.recv_timeout(Duration::from_secs(5)).ok()).collect();
+        assert_eq!(lines.len(), 3, "{lines:?}");
+        assert_eq!(lines[0], "policy: first line");
+        assert_eq!(lines[1], format!("policy: {}", "x".repeat(MAX_STDERR_LINE)));
+        assert_eq!(lines[2], "policy: last, no newline");
+    }
+}

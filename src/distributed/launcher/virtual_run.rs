@@ -1,0 +1,339 @@
+//! The run under the virtual clock, as the launcher sees it: it follows the whole graph's
+//! order of events, moves the horizon on ahead of them, takes each event's report from its
+//! node's process ([`crate::distributed::lockstep`]), ends the run where a report says so,
+//! and gathers the processes' reports at the end.
+
+use super::admission::Admission;
+use super::{Launch, Link, LockstepCost};
+use crate::distributed::lockstep::{check_tick_report, TickInbox, HORIZON_PERIODS};
+use crate::distributed::wire::{self, Ticked, ToLauncher, ToMember};
+use crate::distributed::{DistError, REPLY_TIMEOUT};
+use crate::graph::{NodeId, TopicId};
+use crate::node::{Flow, Node};
+use crate::rate::Rate;
+use crate::run::GraphState;
+use crate::scheduler::{EndReason, Event, RunEnd, VirtualScheduler};
+use crate::time::Nanos;
+use crossbeam_channel::Receiver;
+use std::collections::BTreeMap;
+use std::sync::Mutex;
+use std::time::{Duration, Instant};
+
+/// A node as the launcher's scheduler sees it: its name, tie-break rank and rate (it ticks
+/// in its process; the launcher only follows the schedule, [`super::lockstep`]).
+struct Slot {
+    name: String,
+    id: NodeId,
+    rate: Rate,
+}
+
+impl Node for Slot {
+    fn name(&self) -> &str {
+        &self.name
+    }
+    fn priority(&self) -> u32 {
+        self.id.0 as u32
+    }
+    fn rate(&self) -> &Rate {
+        &self.rate
+    }
+    fn tick(&mut self, _now: Nanos) -> Flow {
+        Flow::Continue // never called: the launcher skips every tick
+    }
+}
+
+/// What the launcher's wait for one tick's report came to (virtual clock).
+enum Awaited {
+    /// The report.
+    Report(Ticked),
+    /// The run cannot go on: why (the node's process is silent, or out of step).
+    Failed(String),
+    /// A process of the graph is gone (its liveliness token withdrawn): its ticks will not
+    /// come, and a tick awaited elsewhere may wait on its messages.
+    Gone(String),
+    /// Ctrl-C while the tick hung.
+    Interrupted,
+}
+
+impl Launch<'_> {
+    /// Follow the run in lockstep from `start` (every process ready) to its end: each
+    /// event's report from `ticked` (every process's tick reports), a process of the graph
+    /// going (`gone_now`) ending it. Then stop every process and gather its report
+    /// (`reports`, `wires`). Returns how the run ended and, unpaced, its cost.
+    ///
+    /// # Errors
+    /// [`DistError`] when a horizon cannot be sent.
+    pub(super) fn run_lockstep(
+        &self,
+        ticked_rx: &Receiver<Ticked>,
+        gone_now: &Mutex<Vec<String>>,
+        start: Instant,
+        reports: &mut BTreeMap<String, GraphState>,
+        wires: &mut Vec<wire::WireLink>,
+    ) -> Result<(RunEnd, Option<LockstepCost>), DistError> {
+        let (spec, cfg, opts, stop) = (self.spec, self.cfg, self.opts, self.stop);
+        let (names, placement, link) = (&self.names, &self.placement, &self.link);
+        let slots = spec
+            .nodes
+            .iter()
+            .enumerate()
+            .map(|(i, n)| {
+                Ok(Box::new(Slot {
+                    name: n.name.clone(),
+                    id: NodeId(i),
+                    rate: Rate::new(n.rate_hz)?,
+                }) as Box<dyn Node>)
+            })
+            .collect::<Result<Vec<_>, crate::rate::InvalidRate>>()
+            .map_err(|e| DistError::Usage(e.to_string()))?;
+        // The whole graph's plan: its events are the processes' reports, in order.
+        let mut sched =
+            VirtualScheduler::with_plan(&slots, &cfg.phase_offsets, spec.execution_plan(), false);
+        let lookahead = slots
+            .iter()
+            .map(|n| n.rate().period().0)
+            .min()
+            .unwrap_or(1)
+            .saturating_mul(HORIZON_PERIODS);
+        let mut inbox = TickInbox::new();
+        // No process ticks before the first horizon: anything already here is not a report.
+        while ticked_rx.try_recv().is_ok() {}
+        let mut published: Vec<Option<u64>> = vec![None; spec.topics.len()];
+        let mut horizon: Option<u64> = None;
+        // Events (ticks' starts, and their outputs going out after a compute time), the
+        // ticks among them, and the instants they fell on.
+        let (mut index, mut started, mut instants) = (0u64, 0u64, 0u64);
+        let mut last_t = None;
+        let failed = |i: usize, at: Nanos, message: String| RunEnd {
+            at,
+            reason: EndReason::NodeFailed {
+                node: spec.nodes[i].name.clone(),
+                message,
+            },
+        };
+        let paced_from = Instant::now();
+        let end = loop {
+            let Some(event) = sched.next_event_until(cfg.duration) else {
+                break RunEnd {
+                    at: cfg.duration,
+                    reason: EndReason::Duration,
+                };
+            };
+            let (i, t) = event.node_at();
+            // Paced: no instant before its wall time (the horizon follows).
+            if let Some(speed) = opts.pace.filter(|s| *s > 0.0 && s.is_finite()) {
+                let due = paced_from + Duration::from_secs_f64(t.as_secs_f64() / speed);
+                while !stop.is_stopped() && Instant::now() < due {
+                    let left = due.saturating_duration_since(Instant::now());
+                    std::thread::sleep(left.min(Duration::from_millis(50)));
+                }
+            }
+            self.say_refusals_due();
+            // Move the horizon on before the processes reach it; an interrupt stops it.
+            let want = t.0.saturating_add(lookahead).min(cfg.duration.0);
+            let low = horizon.is_none_or(|h| h < t.0.saturating_add(lookahead / 2));
+            if !stop.is_stopped() && low && horizon.is_none_or(|h| want > h) {
+                for p in names {
+                    link.tell(p, &ToMember::Horizon { until_ns: want })?;
+                }
+                horizon = Some(want);
+            }
+            if horizon.is_none_or(|h| t.0 > h) {
+                // Only after an interrupt: every tick up to the horizon was seen.
+                break RunEnd {
+                    at: sched.now(),
+                    reason: EndReason::Interrupted,
+                };
+            }
+            // The tick's report, from its node's process.
+            let report = self.await_report(ticked_rx, gone_now, &mut inbox, index, i);
+            let m = match report {
+                Awaited::Report(m) => m,
+                Awaited::Interrupted => {
+                    break RunEnd {
+                        at: sched.now(),
+                        reason: EndReason::Interrupted,
+                    }
+                }
+                Awaited::Failed(message) => break failed(i, t, message),
+                Awaited::Gone(p) => {
+                    // The failed node is the gone process's (its first), not the awaited one.
+                    let node = placement
+                        .iter()
+                        .find(|(name, _)| *name == p)
+                        .and_then(|(_, ids)| ids.first().map(|n| n.0))
+                        .unwrap_or(i);
+                    break failed(node, t, format!("process '{p}' is gone"));
+                }
+            };
+            let compute = match check_tick_report(&m, index, event, spec) {
+                Ok(c) => c,
+                Err(message) => break failed(i, t, message),
+            };
+            if let Event::Start { .. } = event {
+                sched.start_elsewhere(&slots, i, compute);
+                started += 1;
+            }
+            index += 1;
+            if last_t != Some(t) {
+                instants += 1;
+                last_t = Some(t);
+            }
+            for &(topic, seq) in &m.published {
+                // Only a topic the node publishes (a report is untrusted input).
+                if spec.nodes[i].publishes.contains(&TopicId(topic)) {
+                    published[topic] = Some(seq);
+                }
+            }
+            if let Some(message) = m.failed {
+                break failed(i, t, message);
+            }
+            if m.stop {
+                break RunEnd {
+                    at: t,
+                    reason: EndReason::NodeStopped,
+                };
+            }
+        };
+        // Paced, the wall time is the pace's, not the lockstep's cost.
+        let lockstep = opts.pace.is_none().then(|| LockstepCost {
+            ticks: started,
+            instants,
+            us_per_instant: start.elapsed().as_secs_f64() * 1e6 / instants.max(1) as f64,
+        });
+        // Every message sent is delivered before the reports: the last ones too.
+        let need: Vec<(usize, u64)> = published
+            .iter()
+            .enumerate()
+            .filter_map(|(t, s)| s.map(|s| (t, s)))
+            .collect();
+        collect_reports(link, names, gone_now, &end, need, reports, wires);
+        Ok((end, lockstep))
+    }
+
+    /// Wait for the report of event `index`, a tick of node `i` (from `ticked_rx` through
+    /// `inbox`, which keeps reports that came early): it, a process of the graph gone
+    /// (`gone_now`), no answer within twice [`REPLY_TIMEOUT`], or Ctrl-C with the tick still
+    /// hung after a second's grace. A join meanwhile is refused (nobody joins a lockstep).
+    fn await_report(
+        &self,
+        ticked_rx: &Receiver<Ticked>,
+        gone_now: &Mutex<Vec<String>>,
+        inbox: &mut TickInbox,
+        index: u64,
+        i: usize,
+    ) -> Awaited {
+        let (spec, names, stop, link) = (self.spec, &self.names, self.stop, &self.link);
+        let process = spec.process_of(NodeId(i));
+        // Longer than a process waits for an input message itself, so that its
+        // own, more precise error comes first.
+        let patience = 2 * REPLY_TIMEOUT;
+        let deadline = Instant::now() + patience;
+        let mut interrupted_at: Option<Instant> = None;
+        loop {
+            // Reports already here count before a process's going (it may have
+            // reported, then died).
+            let mut overflow = None;
+            while let Ok(m) = ticked_rx.try_recv() {
+                if let Err(e) = inbox.accept(m, spec) {
+                    overflow = Some(e.to_string());
+                    break;
+                }
+            }
+            if let Some(e) = overflow {
+                return Awaited::Failed(e);
+            }
+            if let Some(m) = inbox.take(index) {
+                return Awaited::Report(m);
+            }
+            // Any of the graph's processes, not only this tick's: a tick of another
+            // process may be waiting for the gone one's message, and would only
+            // time out (REPLY_TIMEOUT) before saying so.
+            let gone = crate::graph::lock(gone_now)
+                .iter()
+                .find(|p| names.contains(p))
+                .cloned();
+            if let Some(p) = gone {
+                return Awaited::Gone(p);
+            }
+            if Instant::now() >= deadline {
+                return Awaited::Failed(format!(
+                    "process '{process}' did not answer within {} s",
+                    patience.as_secs()
+                ));
+            }
+            // Ctrl-C while a tick hangs: a second's grace, then the run ends here.
+            if stop.is_stopped() {
+                let since = *interrupted_at.get_or_insert_with(Instant::now);
+                if since.elapsed() >= Duration::from_secs(1) {
+                    return Awaited::Interrupted;
+                }
+            }
+            crossbeam_channel::select! {
+                recv(ticked_rx) -> m => if let Ok(m) = m {
+                    if let Err(e) = inbox.accept(m, spec) {
+                        return Awaited::Failed(e.to_string());
+                    }
+                },
+                recv(link.up) -> m => match m {
+                    // Nobody joins a run in lockstep: say so to whoever tries.
+                    Ok(m @ ToLauncher::Join { .. }) => match self.admit(&m, true, &[], &[]) {
+                        Admission::Refused(r)
+                        | Admission::OtherGraph(r)
+                        | Admission::Busy(r) => self.say_refused(&r),
+                        Admission::Welcomed | Admission::Ignored => {}
+                    },
+                    Ok(_) => {}
+                    Err(_) => return Awaited::Failed("the launcher's channel closed".into()),
+                },
+                default(Duration::from_millis(50)) => {}
+            }
+        }
+    }
+}
+
+/// Stop every process at `end` and gather its report.
+fn collect_reports(
+    link: &Link,
+    names: &[String],
+    gone: &Mutex<Vec<String>>,
+    end: &RunEnd,
+    need: Vec<(usize, u64)>,
+    reports: &mut BTreeMap<String, GraphState>,
+    wires: &mut Vec<wire::WireLink>,
+) {
+    for p in names {
+        let _ = link.tell(
+            p,
+            &ToMember::Stop {
+                at_ns: end.at.0,
+                need: need.clone(),
+            },
+        );
+    }
+    // After Ctrl-C (maybe with a tick hung) the reports get a short while only.
+    let patience = if end.reason == EndReason::Interrupted {
+        Duration::from_secs(2)
+    } else {
+        REPLY_TIMEOUT
+    };
+    let deadline = Instant::now() + patience;
+    // A process that is gone (its tokens withdrawn) will not report: no wait for it.
+    let waiting = |reports: &BTreeMap<String, GraphState>| {
+        let gone = crate::graph::lock(gone);
+        names
+            .iter()
+            .any(|p| !reports.contains_key(p) && !gone.contains(p))
+    };
+    while Instant::now() < deadline && waiting(reports) {
+        if let Some(ToLauncher::Report {
+            process,
+            state,
+            wire,
+        }) = link.recv(Duration::from_millis(50))
+        {
+            wires.extend(wire);
+            reports.insert(process, *state);
+        }
+    }
+}
