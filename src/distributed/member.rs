@@ -307,144 +307,21 @@ pub const BUSY_RETRY: Duration = Duration::from_secs(5);
 /// [`DistError`]: bad endpoints, no launcher, a rejected join (another graph file), a run
 /// that cannot be built.
 pub fn run_member(opts: &MemberOptions, stop: &StopFlag) -> Result<(), DistError> {
-    let text = std::str::from_utf8(&opts.graph_bytes)
-        .map_err(|_| DistError::Usage(format!("{}: not UTF-8 text", opts.graph_origin)))?;
-    let file_spec =
-        GraphSpec::parse(text, &opts.graph_origin).map_err(|e| DistError::Usage(e.to_string()))?;
-    let placement = file_spec.placement();
-    if !placement.iter().any(|(p, _)| *p == opts.process) {
-        let names: Vec<&str> = placement.iter().map(|(p, _)| p.as_str()).collect();
-        return Err(DistError::Usage(format!(
-            "graph '{}' has no process '{}' (its processes: {})",
-            file_spec.name,
-            opts.process,
-            names.join(", ")
-        )));
-    }
-    if opts.connect.is_empty() {
-        return Err(DistError::Usage(
-            "--connect tls/HOST:PORT is required: the launcher's endpoint".into(),
-        ));
-    }
-    let role = Role::Process(opts.process.clone());
-    if opts.credentials.graph != file_spec.name {
-        return Err(DistError::Usage(format!(
-            "--credentials are for graph '{}', not '{}': were they exported by another launch?",
-            opts.credentials.graph, file_spec.name
-        )));
-    }
-    let placed: Vec<String> = placement.iter().map(|(p, _)| p.clone()).collect();
-    if opts.credentials.processes != placed {
-        return Err(DistError::Usage(format!(
-            "--credentials are for processes {:?}, but the graph file places {placed:?}: were they exported by a launch of another version of it?",
-            opts.credentials.processes
-        )));
-    }
-    opts.credentials.identity(&role)?;
-    for ep in &opts.connect {
-        check_endpoint("--connect", ep, false)?;
-    }
-    for ep in &opts.listen {
-        check_endpoint("--listen", ep, true)?;
-    }
-    let listen = if opts.listen.is_empty() {
-        vec![super::LOOPBACK_ANY.to_string()]
-    } else {
-        opts.listen.clone()
-    };
-    let access = Access {
-        credentials: &opts.credentials,
-        role: &role,
-        spec: Some(&file_spec),
-    };
-    let session = open_session(&listen, &opts.connect, access)?;
-    let keys = Keys::new(&file_spec.name);
-    let (ctl_tx, ctl_rx) = crossbeam_channel::bounded::<ToMember>(4096);
-    let _ctl_sub = session
-        .declare_subscriber(keys.control(&opts.process))
-        .callback(move |s| {
-            if let Ok(m) = wire::decode_json::<ToMember>(&s.payload().to_bytes()) {
-                let _ = ctl_tx.try_send(m);
-            }
-        })
-        .wait()?;
-    // The launcher's token: withdrawn, the run is over for us too.
-    let launcher_gone = StopFlag::new();
-    let _launcher_watch = {
-        let gone = launcher_gone.clone();
-        session
-            .liveliness()
-            .declare_subscriber(keys.launcher_token())
-            .history(true)
-            .callback(move |s| {
-                if s.kind() == zenoh::sample::SampleKind::Delete {
-                    gone.stop();
-                }
-            })
-            .wait()?
-    };
-    // Control messages and samples are never dropped under congestion (Zenoh's default
-    // drops): a lost grant or report would stall the run.
-    let block = zenoh::qos::CongestionControl::Block;
-    let up = session
-        .declare_publisher(keys.up_from(&opts.process))
-        .congestion_control(block)
-        .wait()?;
-    // Not matched at once: a launcher of another graph at the endpoint means this process
-    // was given another graph file (the keys carry the graph's name, so the hash exchanged
-    // at join never comes): say so now rather than after the wait.
-    let soon = Instant::now() + Duration::from_secs(2);
-    while Instant::now() < soon && !up.matching_status().wait().is_ok_and(|m| m.matching()) {
-        std::thread::sleep(Duration::from_millis(20));
-    }
-    if !up.matching_status().wait().is_ok_and(|m| m.matching()) {
-        let seen = launchers_seen(&session);
-        if !seen.is_empty() && !seen.iter().any(|g| g == keys.graph()) {
-            return Err(DistError::Usage(format!(
-                "the launcher at {} runs graph '{}', not '{}': was this process given another graph file?",
-                opts.connect.join(", "),
-                seen.join("', '"),
-                keys.graph()
-            )));
-        }
-    }
-    wait_matching(&up, stop, None, "the launcher")?;
+    let file_spec = check_options(opts)?;
+    let Joined {
+        session,
+        keys,
+        ctl_rx,
+        launcher_gone,
+        up,
+        setup,
+        _ctl_sub,
+        _launcher_watch,
+    } = Joined::join(opts, &file_spec, stop)?;
     let send = |m: &ToLauncher| up.put(wire::encode_json(m)).wait();
-    let join = ToLauncher::Join {
-        process: opts.process.clone(),
-        graph_sha256: super::graph_hash(&opts.graph_bytes),
-        pid: std::process::id(),
-    };
-    send(&join)?;
-    let first_join = std::time::Instant::now();
-    // The answer to the join. The control key is the process name's, so a process of that
-    // name already running (this one is a second copy, or rejoins too early) gets its run's
-    // messages there too: those are not for this one, which waits on.
-    let setup = loop {
-        match recv(&ctl_rx, stop, &launcher_gone)? {
-            ToMember::Welcome {
-                setup,
-                launcher_mono_ns,
-            } => {
-                let apart_s = wire::mono_now_ns().abs_diff(launcher_mono_ns) as f64 / 1e9;
-                if setup.clock == crate::ClockKind::Real && apart_s > 2.0 {
-                    return Err(DistError::Usage(format!(
-                        "the real clock needs every process on the launcher's host (the monotonic clocks differ by {apart_s:.0} s); across hosts use --clock virtual"
-                    )));
-                }
-                break setup;
-            }
-            // Started again the moment the one before was killed: the launcher has not
-            // yet seen its liveliness token go. Ask again, for a while.
-            ToMember::Reject { busy: true, .. } if first_join.elapsed() < BUSY_RETRY => {
-                // Soon: every message of the gap is a reading lost to the policy.
-                std::thread::sleep(Duration::from_millis(100));
-                send(&join)?;
-            }
-            ToMember::Reject { reason, .. } => return Err(DistError::Usage(reason)),
-            _ => {}
-        }
-    };
+    // Samples and reports are never dropped under congestion (Zenoh's default drops): a
+    // lost one would stall the run.
+    let block = zenoh::qos::CongestionControl::Block;
     let cfg = setup.run_config()?;
     let spec = cfg.graph.clone();
     // Virtual clock: the other processes' tick reports, then the `here` answer that tells
@@ -469,7 +346,6 @@ pub fn run_member(opts: &MemberOptions, stop: &StopFlag) -> Result<(), DistError
         .find(|(p, _)| *p == opts.process)
         .map(|(_, ids)| ids)
         .unwrap_or_default();
-    let owns = |id: NodeId| mine.contains(&id);
     // The brain, where one of this process's nodes runs it (a `policy` node).
     let brain_spec = if mine.iter().any(|&id| spec.node(id).kind.def().uses_brain) {
         setup.policy.as_str()
@@ -486,64 +362,17 @@ pub fn run_member(opts: &MemberOptions, stop: &StopFlag) -> Result<(), DistError
         vec![Box::new(StepTap(batch.clone()))],
     )?;
     // Topics crossing the boundary.
-    let inbound: Vec<TopicId> = (0..spec.topics.len())
-        .map(TopicId)
-        .filter(|&t| {
-            let ts = spec.topic(t);
-            ts.subscriber().is_some_and(owns) && !owns(ts.publisher)
-        })
-        .collect();
-    let outbound: Vec<TopicId> = (0..spec.topics.len())
-        .map(TopicId)
-        .filter(|&t| {
-            let ts = spec.topic(t);
-            owns(ts.publisher) && ts.subscriber().is_some_and(|s| !owns(s))
-        })
-        .collect();
+    let (inbound, outbound) = crossings(&spec, &mine);
     for &t in &outbound {
         // The publisher's side is a plain buffer; the subscriber's copy keeps the QoS.
         let _ = handles.topic(t).set_depth(1);
         handles.topic(t).set_qos(TopicQos::default());
     }
-    let arrivals = Arc::new(Arrivals {
-        seqs: Mutex::new(vec![None; spec.topics.len()]),
-        cv: Condvar::new(),
-    });
-    let wire_latency: Arc<Vec<Mutex<LatencyStats>>> = Arc::new(
-        (0..spec.topics.len())
-            .map(|_| Mutex::new(LatencyStats::default()))
-            .collect(),
-    );
-    let mut subscribers = Vec::new();
-    let refusals = Arc::new(Refusals::default());
-    for &t in &inbound {
-        let topic = handles.topic(t).clone();
-        let arrivals = arrivals.clone();
-        let lat = wire_latency.clone();
-        let offset = Mutex::new(None);
-        let refusals = refusals.clone();
-        let process = opts.process.clone();
-        subscribers.push(
-            session
-                .declare_subscriber(keys.topic(&spec.topic(t).name))
-                .callback(move |s| {
-                    let sample = match WireSample::decode(&s.payload().to_bytes()) {
-                        Ok(sample) => sample,
-                        Err(e) => return refusals.note(&process, topic.name(), &e),
-                    };
-                    let (seq, sent) = (sample.seq, sample.sent_mono_ns);
-                    if let Err(e) = sample.deliver(&topic, &mut crate::graph::lock(&offset)) {
-                        return refusals.note(&process, topic.name(), &e);
-                    }
-                    let took = wire::mono_now_ns().saturating_sub(sent);
-                    crate::graph::lock(&lat[t.0]).record(Nanos(took));
-                    let mut seqs = crate::graph::lock(&arrivals.seqs);
-                    seqs[t.0] = Some(seq);
-                    arrivals.cv.notify_all();
-                })
-                .wait()?,
-        );
-    }
+    let Inbound {
+        subscribers,
+        arrivals,
+        wire_latency,
+    } = subscribe_inbound(&session, &keys, &spec, &handles, &inbound, &opts.process)?;
     let mut publishers = Vec::new();
     for &t in &outbound {
         publishers.push((
@@ -597,6 +426,387 @@ pub fn run_member(opts: &MemberOptions, stop: &StopFlag) -> Result<(), DistError
     send(&ToLauncher::Ready {
         process: opts.process.clone(),
     })?;
+    let forward_after = bridge_outbound(&spec, &handles, publishers);
+    let ticks: Arc<Vec<AtomicU64>> =
+        Arc::new((0..spec.nodes.len()).map(|_| AtomicU64::new(0)).collect());
+    let run_time = Arc::new(AtomicU64::new(0));
+    // Live counters for `ratelab top` and `ratelab lab --attach`, every [`STATS_PERIOD`],
+    // and once more after the run (its last steps).
+    // Dropped under congestion (Zenoh's default): a watcher that stalls must never hold up
+    // the run or its reports.
+    let stats_pub = session
+        .declare_publisher(keys.stats(&opts.process))
+        .wait()?;
+    let share = Arc::new(Share {
+        process: opts.process.clone(),
+        cfg,
+        handles,
+        mine,
+        inbound,
+        arrivals,
+        wire_latency,
+        forward_after,
+        ticks,
+        run_time,
+        batch,
+    });
+    let stats_done = StopFlag::new();
+    let stats_thread = spawn_figures(share.clone(), stats_pub, stats_done.clone())?;
+    let result = match share.cfg.clock {
+        crate::ClockKind::Virtual => run_lockstep(
+            nodes,
+            &share,
+            &mut lockstep::Pace::new(&ctl_rx, &ticked_rx, &spec, stop, &launcher_gone),
+            stop,
+            &|m| ticked_pub.put(m.encode()).wait(),
+        ),
+        crate::ClockKind::Real => match recv_own(&ctl_rx, stop, &launcher_gone) {
+            Err(e) => Err(e),
+            // Ended before it started: report the graph as built.
+            Ok(ToMember::Stop { .. }) => {
+                Ok(GraphState::capture(&share.handles, Nanos::ZERO, &[], None))
+            }
+            Ok(ToMember::Start { start_mono_ns }) => real_clock(
+                nodes,
+                &share,
+                start_mono_ns,
+                &ctl_rx,
+                stop,
+                &launcher_gone,
+                &|m| send(m),
+            ),
+            Ok(other) => Err(DistError::Peer(format!("expected a start, got {other:?}"))),
+        },
+    };
+    stats_done.stop();
+    let _ = stats_thread.join();
+    if let Some((bridge, link)) = ros2 {
+        let r = bridge.finish();
+        if let Some(e) = &r.error {
+            eprintln!("[ratelab] warning: ROS 2: {e}");
+        }
+        for w in r.external_warnings() {
+            eprintln!("[ratelab] warning: {w}");
+        }
+        link.close();
+    }
+    let state = result?;
+    // The launcher vanished mid-run (killed): nobody will take the report or print a
+    // summary; say so rather than end as if the run had completed.
+    if launcher_gone.is_stopped() && !stop.is_stopped() {
+        return Err(DistError::Peer(
+            "the launcher went away mid-run: this process stopped with it (no summary)".into(),
+        ));
+    }
+    let wire = share.wire_links();
+    send(&ToLauncher::Report {
+        process: opts.process.clone(),
+        state: Box::new(state),
+        wire,
+    })?;
+    // Let the report leave before the session closes.
+    std::thread::sleep(Duration::from_millis(200));
+    drop(tokens);
+    drop(subscribers);
+    drop(lockstep_keys);
+    let _ = session.close().wait();
+    Ok(())
+}
+
+/// Check `opts` before anything connects: its graph file parses and places
+/// `opts.process`, the credentials are this graph's and this placement's and hold the
+/// process's identity, the endpoints are well formed. Returns the graph file's graph.
+///
+/// # Errors
+/// [`DistError::Usage`], one line naming what is wrong.
+fn check_options(opts: &MemberOptions) -> Result<GraphSpec, DistError> {
+    let text = std::str::from_utf8(&opts.graph_bytes)
+        .map_err(|_| DistError::Usage(format!("{}: not UTF-8 text", opts.graph_origin)))?;
+    let file_spec =
+        GraphSpec::parse(text, &opts.graph_origin).map_err(|e| DistError::Usage(e.to_string()))?;
+    let placement = file_spec.placement();
+    if !placement.iter().any(|(p, _)| *p == opts.process) {
+        let names: Vec<&str> = placement.iter().map(|(p, _)| p.as_str()).collect();
+        return Err(DistError::Usage(format!(
+            "graph '{}' has no process '{}' (its processes: {})",
+            file_spec.name,
+            opts.process,
+            names.join(", ")
+        )));
+    }
+    if opts.connect.is_empty() {
+        return Err(DistError::Usage(
+            "--connect tls/HOST:PORT is required: the launcher's endpoint".into(),
+        ));
+    }
+    let role = Role::Process(opts.process.clone());
+    if opts.credentials.graph != file_spec.name {
+        return Err(DistError::Usage(format!(
+            "--credentials are for graph '{}', not '{}': were they exported by another launch?",
+            opts.credentials.graph, file_spec.name
+        )));
+    }
+    let placed: Vec<String> = placement.iter().map(|(p, _)| p.clone()).collect();
+    if opts.credentials.processes != placed {
+        return Err(DistError::Usage(format!(
+            "--credentials are for processes {:?}, but the graph file places {placed:?}: were they exported by a launch of another version of it?",
+            opts.credentials.processes
+        )));
+    }
+    opts.credentials.identity(&role)?;
+    for ep in &opts.connect {
+        check_endpoint("--connect", ep, false)?;
+    }
+    for ep in &opts.listen {
+        check_endpoint("--listen", ep, true)?;
+    }
+    Ok(file_spec)
+}
+
+/// A process joined to its launcher: its session, the launcher's control messages and the
+/// run's settings from the welcome.
+struct Joined {
+    session: zenoh::Session,
+    keys: Keys,
+    /// The launcher's control messages to this process.
+    ctl_rx: Receiver<ToMember>,
+    /// Set once the launcher's liveliness token is withdrawn.
+    launcher_gone: StopFlag,
+    /// Where this process speaks to the launcher (its own key).
+    up: zenoh::pubsub::Publisher<'static>,
+    /// The run's settings.
+    setup: Box<wire::Setup>,
+    _ctl_sub: zenoh::pubsub::Subscriber<()>,
+    _launcher_watch: zenoh::pubsub::Subscriber<()>,
+}
+
+impl Joined {
+    /// Open the session to `opts.connect`, wait for the launcher, join with the graph
+    /// file's hash and wait for the welcome (asking again for [`BUSY_RETRY`] while a
+    /// process of this name still runs).
+    ///
+    /// # Errors
+    /// [`DistError`]: the session cannot open, the launcher runs another graph, the join
+    /// is refused, the real clock's processes are on hosts whose clocks differ, `stop`.
+    fn join(
+        opts: &MemberOptions,
+        file_spec: &GraphSpec,
+        stop: &StopFlag,
+    ) -> Result<Joined, DistError> {
+        let role = Role::Process(opts.process.clone());
+        let listen = if opts.listen.is_empty() {
+            vec![super::LOOPBACK_ANY.to_string()]
+        } else {
+            opts.listen.clone()
+        };
+        let access = Access {
+            credentials: &opts.credentials,
+            role: &role,
+            spec: Some(file_spec),
+        };
+        let session = open_session(&listen, &opts.connect, access)?;
+        let keys = Keys::new(&file_spec.name);
+        let (ctl_tx, ctl_rx) = crossbeam_channel::bounded::<ToMember>(4096);
+        let _ctl_sub = session
+            .declare_subscriber(keys.control(&opts.process))
+            .callback(move |s| {
+                if let Ok(m) = wire::decode_json::<ToMember>(&s.payload().to_bytes()) {
+                    let _ = ctl_tx.try_send(m);
+                }
+            })
+            .wait()?;
+        // The launcher's token: withdrawn, the run is over for us too.
+        let launcher_gone = StopFlag::new();
+        let _launcher_watch = {
+            let gone = launcher_gone.clone();
+            session
+                .liveliness()
+                .declare_subscriber(keys.launcher_token())
+                .history(true)
+                .callback(move |s| {
+                    if s.kind() == zenoh::sample::SampleKind::Delete {
+                        gone.stop();
+                    }
+                })
+                .wait()?
+        };
+        // Control messages and samples are never dropped under congestion (Zenoh's default
+        // drops): a lost grant or report would stall the run.
+        let block = zenoh::qos::CongestionControl::Block;
+        let up = session
+            .declare_publisher(keys.up_from(&opts.process))
+            .congestion_control(block)
+            .wait()?;
+        // Not matched at once: a launcher of another graph at the endpoint means this process
+        // was given another graph file (the keys carry the graph's name, so the hash exchanged
+        // at join never comes): say so now rather than after the wait.
+        let soon = Instant::now() + Duration::from_secs(2);
+        while Instant::now() < soon && !up.matching_status().wait().is_ok_and(|m| m.matching()) {
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        if !up.matching_status().wait().is_ok_and(|m| m.matching()) {
+            let seen = launchers_seen(&session);
+            if !seen.is_empty() && !seen.iter().any(|g| g == keys.graph()) {
+                return Err(DistError::Usage(format!(
+                    "the launcher at {} runs graph '{}', not '{}': was this process given another graph file?",
+                    opts.connect.join(", "),
+                    seen.join("', '"),
+                    keys.graph()
+                )));
+            }
+        }
+        wait_matching(&up, stop, None, "the launcher")?;
+        let send = |m: &ToLauncher| up.put(wire::encode_json(m)).wait();
+        let join = ToLauncher::Join {
+            process: opts.process.clone(),
+            graph_sha256: super::graph_hash(&opts.graph_bytes),
+            pid: std::process::id(),
+        };
+        send(&join)?;
+        let first_join = std::time::Instant::now();
+        // The answer to the join. The control key is the process name's, so a process of that
+        // name already running (this one is a second copy, or rejoins too early) gets its run's
+        // messages there too: those are not for this one, which waits on.
+        let setup = loop {
+            match recv(&ctl_rx, stop, &launcher_gone)? {
+                ToMember::Welcome {
+                    setup,
+                    launcher_mono_ns,
+                } => {
+                    let apart_s = wire::mono_now_ns().abs_diff(launcher_mono_ns) as f64 / 1e9;
+                    if setup.clock == crate::ClockKind::Real && apart_s > 2.0 {
+                        return Err(DistError::Usage(format!(
+                            "the real clock needs every process on the launcher's host (the monotonic clocks differ by {apart_s:.0} s); across hosts use --clock virtual"
+                        )));
+                    }
+                    break setup;
+                }
+                // Started again the moment the one before was killed: the launcher has not
+                // yet seen its liveliness token go. Ask again, for a while.
+                ToMember::Reject { busy: true, .. } if first_join.elapsed() < BUSY_RETRY => {
+                    // Soon: every message of the gap is a reading lost to the policy.
+                    std::thread::sleep(Duration::from_millis(100));
+                    send(&join)?;
+                }
+                ToMember::Reject { reason, .. } => return Err(DistError::Usage(reason)),
+                _ => {}
+            }
+        };
+        Ok(Joined {
+            session,
+            keys,
+            ctl_rx,
+            launcher_gone,
+            up,
+            setup,
+            _ctl_sub,
+            _launcher_watch,
+        })
+    }
+}
+
+/// Which of `spec`'s topics cross this process's boundary, for the process running nodes
+/// `mine`: (inbound: another process publishes, one of `mine` reads; outbound: one of
+/// `mine` publishes, another process reads), each in the graph's topic order. The one
+/// place this is decided: the subscriptions, the bridges, the waits and the wire figures
+/// all follow it.
+fn crossings(spec: &GraphSpec, mine: &[NodeId]) -> (Vec<TopicId>, Vec<TopicId>) {
+    let owns = |id: NodeId| mine.contains(&id);
+    let topics = || (0..spec.topics.len()).map(TopicId);
+    let inbound = topics()
+        .filter(|&t| {
+            let ts = spec.topic(t);
+            ts.subscriber().is_some_and(owns) && !owns(ts.publisher)
+        })
+        .collect();
+    let outbound = topics()
+        .filter(|&t| {
+            let ts = spec.topic(t);
+            owns(ts.publisher) && ts.subscriber().is_some_and(|s| !owns(s))
+        })
+        .collect();
+    (inbound, outbound)
+}
+
+/// Subscribe to each `inbound` topic's key: each sample is decoded exactly and delivered
+/// into the topic's copy here (or refused and counted, [`Refusals`]), its seq noted in the
+/// returned [`Arrivals`] and its time on the wire in the returned per-topic latencies.
+///
+/// # Errors
+/// [`DistError::Zenoh`] when a subscriber cannot be declared.
+fn subscribe_inbound(
+    session: &zenoh::Session,
+    keys: &Keys,
+    spec: &GraphSpec,
+    handles: &crate::graph::GraphHandles,
+    inbound: &[TopicId],
+    process: &str,
+) -> Result<Inbound, DistError> {
+    let arrivals = Arc::new(Arrivals {
+        seqs: Mutex::new(vec![None; spec.topics.len()]),
+        cv: Condvar::new(),
+    });
+    let wire_latency: Arc<Vec<Mutex<LatencyStats>>> = Arc::new(
+        (0..spec.topics.len())
+            .map(|_| Mutex::new(LatencyStats::default()))
+            .collect(),
+    );
+    let mut subscribers = Vec::new();
+    let refusals = Arc::new(Refusals::default());
+    for &t in inbound {
+        let topic = handles.topic(t).clone();
+        let arrivals = arrivals.clone();
+        let lat = wire_latency.clone();
+        let offset = Mutex::new(None);
+        let refusals = refusals.clone();
+        let process = process.to_string();
+        subscribers.push(
+            session
+                .declare_subscriber(keys.topic(&spec.topic(t).name))
+                .callback(move |s| {
+                    let sample = match WireSample::decode(&s.payload().to_bytes()) {
+                        Ok(sample) => sample,
+                        Err(e) => return refusals.note(&process, topic.name(), &e),
+                    };
+                    let (seq, sent) = (sample.seq, sample.sent_mono_ns);
+                    if let Err(e) = sample.deliver(&topic, &mut crate::graph::lock(&offset)) {
+                        return refusals.note(&process, topic.name(), &e);
+                    }
+                    let took = wire::mono_now_ns().saturating_sub(sent);
+                    crate::graph::lock(&lat[t.0]).record(Nanos(took));
+                    let mut seqs = crate::graph::lock(&arrivals.seqs);
+                    seqs[t.0] = Some(seq);
+                    arrivals.cv.notify_all();
+                })
+                .wait()?,
+        );
+    }
+    Ok(Inbound {
+        subscribers,
+        arrivals,
+        wire_latency,
+    })
+}
+
+/// This process's inbound topics as [`subscribe_inbound`] set them up.
+struct Inbound {
+    /// One per inbound topic, kept for the run.
+    subscribers: Vec<zenoh::pubsub::Subscriber<()>>,
+    /// The newest seq received on each topic.
+    arrivals: Arc<Arrivals>,
+    /// Per topic, the over-the-wire latency of what arrived.
+    wire_latency: Arc<Vec<Mutex<LatencyStats>>>,
+}
+
+/// Make each crossing topic whose publisher runs here a bridge element (`publishers`: the
+/// topic and its key's publisher): its tap sends each message as it is published. Returns
+/// what, after a local node's event, it published across the boundary and the newest seq
+/// sent on each.
+fn bridge_outbound(
+    spec: &GraphSpec,
+    handles: &crate::graph::GraphHandles,
+    publishers: Vec<(TopicId, zenoh::pubsub::Publisher<'static>)>,
+) -> Arc<Forward> {
     // What each local node publishes across the boundary, and the last seq sent.
     let mut by_topic: Vec<Option<zenoh::pubsub::Publisher<'static>>> =
         (0..spec.topics.len()).map(|_| None).collect();
@@ -631,7 +841,7 @@ pub fn run_member(opts: &MemberOptions, stop: &StopFlag) -> Result<(), DistError
                 .collect()
         })
         .collect();
-    let forward_after: Arc<Forward> = Arc::new({
+    Arc::new({
         let outlets = outlets.clone();
         move |node: usize| -> Vec<(usize, u64)> {
             let Some(topics) = forward.get(node) else {
@@ -642,129 +852,39 @@ pub fn run_member(opts: &MemberOptions, stop: &StopFlag) -> Result<(), DistError
                 .filter_map(|t| Some((t.0, outlets[t.0].as_ref()?.tick_ended()?)))
                 .collect()
         }
-    });
-    let ticks: Arc<Vec<AtomicU64>> =
-        Arc::new((0..spec.nodes.len()).map(|_| AtomicU64::new(0)).collect());
-    let run_time = Arc::new(AtomicU64::new(0));
-    // Live counters for `ratelab top` and `ratelab lab --attach`, every [`STATS_PERIOD`],
-    // and once more after the run (its last steps).
-    // Dropped under congestion (Zenoh's default): a watcher that stalls must never hold up
-    // the run or its reports.
-    let stats_pub = session
-        .declare_publisher(keys.stats(&opts.process))
-        .wait()?;
-    let stats_done = StopFlag::new();
-    let stats_thread = {
-        let (handles, ticks, run_time, lat, batch) = (
-            handles.clone(),
-            ticks.clone(),
-            run_time.clone(),
-            wire_latency.clone(),
-            batch.clone(),
-        );
-        let (spec, mine, inbound, done, process) = (
-            spec.clone(),
-            mine.clone(),
-            inbound.clone(),
-            stats_done.clone(),
-            opts.process.clone(),
-        );
-        std::thread::Builder::new()
-            .name("stats".into())
-            .spawn(move || loop {
-                let last = done.is_stopped();
-                let mut msg = live_stats(
-                    &process, &spec, &mine, &inbound, &handles, &ticks, &lat, &run_time,
-                );
-                {
-                    let mut b = crate::graph::lock(&batch);
-                    msg.steps = std::mem::take(&mut b.steps).into();
-                    msg.ticks = std::mem::take(&mut b.ticks).into();
-                    msg.counters = std::mem::take(&mut b.counters).into();
-                }
-                msg.done = last;
-                let _ = stats_pub.put(wire::encode_json(&msg)).wait();
-                if last {
-                    break;
-                }
-                std::thread::sleep(STATS_PERIOD);
-            })
-            .map_err(|e| DistError::Peer(format!("cannot start a thread: {e}")))?
-    };
-    let local: Vec<usize> = mine.iter().map(|id| id.0).collect();
-    let result = match cfg.clock {
-        crate::ClockKind::Virtual => run_lockstep(
-            nodes,
-            &local,
-            &inbound,
-            &cfg,
-            &handles,
-            &mut lockstep::Pace::new(&ctl_rx, &ticked_rx, &spec, stop, &launcher_gone),
-            stop,
-            &arrivals,
-            &*forward_after,
-            &ticks,
-            &run_time,
-            &|m| ticked_pub.put(m.encode()).wait(),
-            &opts.process,
-            &batch,
-        ),
-        crate::ClockKind::Real => match recv_own(&ctl_rx, stop, &launcher_gone) {
-            Err(e) => Err(e),
-            // Ended before it started: report the graph as built.
-            Ok(ToMember::Stop { .. }) => Ok(GraphState::capture(&handles, Nanos::ZERO, &[], None)),
-            Ok(ToMember::Start { start_mono_ns }) => real_clock(
-                nodes,
-                &local,
-                &cfg,
-                &handles,
-                start_mono_ns,
-                &ctl_rx,
-                stop,
-                &launcher_gone,
-                &forward_after,
-                &ticks,
-                &run_time,
-                &|m| send(m),
-                &opts.process,
-                &batch,
-            ),
-            Ok(other) => Err(DistError::Peer(format!("expected a start, got {other:?}"))),
-        },
-    };
-    stats_done.stop();
-    let _ = stats_thread.join();
-    if let Some((bridge, link)) = ros2 {
-        let r = bridge.finish();
-        if let Some(e) = &r.error {
-            eprintln!("[ratelab] warning: ROS 2: {e}");
-        }
-        for w in r.external_warnings() {
-            eprintln!("[ratelab] warning: {w}");
-        }
-        link.close();
-    }
-    let state = result?;
-    // The launcher vanished mid-run (killed): nobody will take the report or print a
-    // summary; say so rather than end as if the run had completed.
-    if launcher_gone.is_stopped() && !stop.is_stopped() {
-        return Err(DistError::Peer(
-            "the launcher went away mid-run: this process stopped with it (no summary)".into(),
-        ));
-    }
-    let wire = wire_links(&opts.process, &spec, &inbound, &wire_latency);
-    send(&ToLauncher::Report {
-        process: opts.process.clone(),
-        state: Box::new(state),
-        wire,
-    })?;
-    // Let the report leave before the session closes.
-    std::thread::sleep(Duration::from_millis(200));
-    drop(tokens);
-    drop(subscribers);
-    drop(lockstep_keys);
-    let _ = session.close().wait();
-    Ok(())
+    })
+}
+
+/// Start the thread that puts this process's figures ([`LiveStats`]) on `stats_pub` every
+/// [`STATS_PERIOD`] for `ratelab top` and `ratelab lab --attach`, and once more after
+/// `done` (the run's last steps).
+///
+/// # Errors
+/// [`DistError::Peer`] when the thread cannot start.
+fn spawn_figures(
+    share: Arc<Share>,
+    stats_pub: zenoh::pubsub::Publisher<'static>,
+    done: StopFlag,
+) -> Result<std::thread::JoinHandle<()>, DistError> {
+    std::thread::Builder::new()
+        .name("stats".into())
+        .spawn(move || loop {
+            let last = done.is_stopped();
+            let mut msg = share.live_stats();
+            {
+                let mut b = crate::graph::lock(&share.batch);
+                msg.steps = std::mem::take(&mut b.steps).into();
+                msg.ticks = std::mem::take(&mut b.ticks).into();
+                msg.counters = std::mem::take(&mut b.counters).into();
+            }
+            msg.done = last;
+            let _ = stats_pub.put(wire::encode_json(&msg)).wait();
+            if last {
+                break;
+            }
+            std::thread::sleep(STATS_PERIOD);
+        })
+        .map_err(|e| DistError::Peer(format!("cannot start a thread: {e}")))
 }
 
 /// Offer this process's nodes (`mine`) to ROS 2 on `domain`, `/clock` too when it runs the
@@ -819,23 +939,23 @@ fn offer_to_ros2(
 /// The real clock: run the local nodes on their own threads from the shared start instant
 /// (a process that joined late starts each node at its next tick on the run's grid), until
 /// the duration, a local stop (the fall) or the launcher's stop.
-#[allow(clippy::too_many_arguments)]
 fn real_clock(
     nodes: Vec<Box<dyn Node>>,
-    local: &[usize],
-    cfg: &RunConfig,
-    handles: &crate::graph::GraphHandles,
+    share: &Share,
     start: u64,
     ctl_rx: &Receiver<ToMember>,
     stop: &StopFlag,
     launcher_gone: &StopFlag,
-    forward_after: &Arc<Forward>,
-    ticks: &Arc<Vec<AtomicU64>>,
-    run_time: &Arc<AtomicU64>,
     send: &dyn Fn(&ToLauncher) -> zenoh::Result<()>,
-    process: &str,
-    batch: &Arc<Mutex<Batch>>,
 ) -> Result<GraphState, DistError> {
+    let (cfg, handles, process) = (&share.cfg, &share.handles, share.process.as_str());
+    let (forward_after, ticks, run_time, batch) = (
+        &share.forward_after,
+        &share.ticks,
+        &share.run_time,
+        &share.batch,
+    );
+    let local = share.local();
     let spec = &cfg.graph;
     let hook_batch = batch.clone();
     // Joined late (a restart): the first tick of each node is its next one on the grid.
@@ -1002,23 +1122,21 @@ fn figures_time(wall_ns: u64, end_ns: u64, next_due_ns: impl IntoIterator<Item =
 /// process's in their turn (a start once the input messages it must see have arrived) and
 /// report each to everyone; at another process's event wait for its report. Then wait for
 /// the launcher's end and the last messages sent here.
-#[allow(clippy::too_many_arguments)]
 fn run_lockstep(
     mut nodes: Vec<Box<dyn Node>>,
-    local: &[usize],
-    inbound: &[TopicId],
-    cfg: &RunConfig,
-    handles: &crate::graph::GraphHandles,
+    share: &Share,
     pace: &mut lockstep::Pace<'_>,
     stop: &StopFlag,
-    arrivals: &Arrivals,
-    forward_after: &Forward,
-    ticks: &[AtomicU64],
-    run_time: &AtomicU64,
     tell: &dyn Fn(&Ticked) -> zenoh::Result<()>,
-    process: &str,
-    batch: &Mutex<Batch>,
 ) -> Result<GraphState, DistError> {
+    let (cfg, handles, process) = (&share.cfg, &share.handles, share.process.as_str());
+    let (inbound, arrivals, forward_after) = (
+        share.inbound.as_slice(),
+        &*share.arrivals,
+        &*share.forward_after,
+    );
+    let (ticks, run_time, batch) = (share.ticks.as_slice(), &*share.run_time, &*share.batch);
+    let local = share.local();
     let spec = &cfg.graph;
     let mine: Vec<NodeId> = local.iter().map(|&i| NodeId(i)).collect();
     let held = held_topics(spec, &mine);
@@ -1211,45 +1329,80 @@ fn launchers_seen(session: &zenoh::Session) -> Vec<String> {
         .collect()
 }
 
-/// This process's [`LiveStats`] now.
-#[allow(clippy::too_many_arguments)]
-fn live_stats(
-    process: &str,
-    spec: &GraphSpec,
-    mine: &[NodeId],
-    inbound: &[TopicId],
-    handles: &crate::graph::GraphHandles,
-    ticks: &[AtomicU64],
-    lat: &[Mutex<LatencyStats>],
-    run_time: &AtomicU64,
-) -> LiveStats {
-    let rates = handles.rates_hz();
-    LiveStats {
-        graph: spec.name.clone(),
-        process: process.to_string(),
-        pid: std::process::id(),
-        t_ns: run_time.load(Ordering::Relaxed),
-        nodes: mine
-            .iter()
-            .map(|&id| {
-                let n = spec.node(id);
-                (
-                    n.name.clone(),
-                    n.kind_name().to_string(),
-                    rates[id.0],
-                    ticks[id.0].load(Ordering::Relaxed),
-                )
-            })
-            .collect(),
-        topics: held_topics(spec, mine)
-            .into_iter()
-            .map(|t| (spec.topic(t).name.clone(), handles.topic(t).stats()))
-            .collect(),
-        wire: wire_links(process, spec, inbound, lat),
-        steps: Vec::new(),
-        ticks: Vec::new(),
-        counters: Vec::new(),
-        done: false,
+/// This process's share of the graph while it runs: what both clocks, the figures thread
+/// and the final report read.
+struct Share {
+    /// Its placement group's name.
+    process: String,
+    /// The run's settings (its graph is `cfg.graph`).
+    cfg: RunConfig,
+    handles: crate::graph::GraphHandles,
+    /// Its nodes, in graph order.
+    mine: Vec<NodeId>,
+    /// The topics another process publishes and one of its nodes reads.
+    inbound: Vec<TopicId>,
+    /// The newest seq received on each inbound topic.
+    arrivals: Arc<Arrivals>,
+    /// Per topic, the over-the-wire latency of what arrived.
+    wire_latency: Arc<Vec<Mutex<LatencyStats>>>,
+    /// After a local node's event: the crossing topics it published, with the newest seq
+    /// sent on each.
+    forward_after: Arc<Forward>,
+    /// Ticks per node of the graph (its own nodes' counted here).
+    ticks: Arc<Vec<AtomicU64>>,
+    /// The run time up to which its figures are final, ns.
+    run_time: Arc<AtomicU64>,
+    /// The steps, ticks and counters since the last figures sent.
+    batch: Arc<Mutex<Batch>>,
+}
+
+impl Share {
+    /// Its nodes' indices in the graph.
+    fn local(&self) -> Vec<usize> {
+        self.mine.iter().map(|id| id.0).collect()
+    }
+
+    /// Its [`LiveStats`] now.
+    fn live_stats(&self) -> LiveStats {
+        let (spec, handles, mine) = (&self.cfg.graph, &self.handles, &self.mine);
+        let rates = handles.rates_hz();
+        LiveStats {
+            graph: spec.name.clone(),
+            process: self.process.clone(),
+            pid: std::process::id(),
+            t_ns: self.run_time.load(Ordering::Relaxed),
+            nodes: mine
+                .iter()
+                .map(|&id| {
+                    let n = spec.node(id);
+                    (
+                        n.name.clone(),
+                        n.kind_name().to_string(),
+                        rates[id.0],
+                        self.ticks[id.0].load(Ordering::Relaxed),
+                    )
+                })
+                .collect(),
+            topics: held_topics(spec, mine)
+                .into_iter()
+                .map(|t| (spec.topic(t).name.clone(), handles.topic(t).stats()))
+                .collect(),
+            wire: self.wire_links(),
+            steps: Vec::new(),
+            ticks: Vec::new(),
+            counters: Vec::new(),
+            done: false,
+        }
+    }
+
+    /// The over-the-wire latency of each inbound topic so far.
+    fn wire_links(&self) -> Vec<wire::WireLink> {
+        wire_links(
+            &self.process,
+            &self.cfg.graph,
+            &self.inbound,
+            &self.wire_latency,
+        )
     }
 }
 
@@ -1312,11 +1465,52 @@ impl Refusals {
 
 #[cfg(test)]
 mod tests {
-    use super::{figures_time, Outlet};
+    use super::{crossings, figures_time, Outlet};
     use crate::distributed::wire::{WireSample, MAX_SENT_PER_TICK};
+    use crate::graph::spec::GraphSpec;
+    use crate::graph::NodeId;
     use crate::msg::{force::ForceMsg, MsgData};
     use crate::time::Nanos;
     use zenoh::Wait;
+
+    /// Which topics cross a process's boundary, decided in one place, as a table: the
+    /// chapter's graph as `launch --processes` places it, and the whole graph in one.
+    #[test]
+    fn crossings_follow_the_placement() {
+        let spec = GraphSpec::chapter();
+        let names = |ids: Vec<crate::graph::TopicId>| -> Vec<String> {
+            ids.into_iter()
+                .map(|t| spec.topic(t).name.clone())
+                .collect()
+        };
+        let placement = spec.placement();
+        let group = |p: &str| -> Vec<NodeId> {
+            placement
+                .iter()
+                .find(|(name, _)| name == p)
+                .map(|(_, ids)| ids.clone())
+                .unwrap_or_else(|| panic!("no process {p} in {placement:?}"))
+        };
+        let all: Vec<NodeId> = (0..spec.nodes.len()).map(NodeId).collect();
+        // (who, its nodes, inbound, outbound)
+        let table = [
+            ("robot", group("robot"), vec!["/action"], vec!["/obs"]),
+            ("policy", group("policy"), vec!["/obs"], vec!["/action"]),
+            ("one process", all, vec![], vec![]),
+            ("no node", Vec::new(), vec![], vec![]),
+        ];
+        for (who, mine, inbound, outbound) in table {
+            let (i, o) = crossings(&spec, &mine);
+            assert_eq!(
+                (names(i), names(o)),
+                (
+                    inbound.iter().map(|s| s.to_string()).collect::<Vec<_>>(),
+                    outbound.iter().map(|s| s.to_string()).collect::<Vec<_>>()
+                ),
+                "{who}"
+            );
+        }
+    }
 
     #[test]
     fn a_crossing_topic_sends_each_message_as_it_is_published_and_names_the_newest() {
