@@ -1,0 +1,107 @@
+//! Launcher to member, on the member's control key: the welcome with the run's settings
+//! ([`Setup`]), a refusal, the start, the horizon and the stop ([`ToMember`]). JSON.
+
+use crate::config::ClockKind;
+use crate::qos::Fault;
+use crate::time::Nanos;
+use serde::{Deserialize, Serialize};
+
+/// What a placement group needs to run its part of the graph: the launcher's settings.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Setup {
+    /// The resolved graph (every override applied), as a graph file.
+    pub graph_toml: String,
+    /// Reset seed.
+    pub seed: u64,
+    /// Run length, ns.
+    pub duration_ns: u64,
+    /// Which clock.
+    pub clock: ClockKind,
+    /// The brain spec (`--policy`).
+    pub policy: String,
+    /// Faults to inject.
+    pub faults: Vec<Fault>,
+    /// Each node's first deadline, ns.
+    pub phase_offsets_ns: Vec<u64>,
+    /// Real clock: the spin margin, ns.
+    pub spin_margin_ns: u64,
+    /// Real clock: `SCHED_FIFO` priority.
+    pub rt_priority: Option<u8>,
+    /// `--ros2`: the ROS 2 domain each process offers its own nodes on
+    /// ([`crate::ros2::bridge::Offer::local`]); `None`: not offered.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ros2_domain: Option<u32>,
+}
+
+impl Setup {
+    /// The run these settings describe: the graph parsed from [`Setup::graph_toml`], with
+    /// every other setting, validated.
+    ///
+    /// # Errors
+    /// [`crate::distributed::DistError::Usage`] naming what is wrong (the bytes came from the network).
+    pub fn run_config(&self) -> Result<crate::config::RunConfig, crate::distributed::DistError> {
+        let spec = crate::graph::spec::GraphSpec::parse(&self.graph_toml, "the launcher's graph")
+            .map_err(|e| crate::distributed::DistError::Usage(e.to_string()))?;
+        let cfg = crate::config::RunConfig {
+            seed: self.seed,
+            duration: Nanos(self.duration_ns),
+            graph: spec,
+            clock: self.clock,
+            spin_margin: Nanos(self.spin_margin_ns),
+            phase_offsets: self.phase_offsets_ns.iter().copied().map(Nanos).collect(),
+            rt_priority: self.rt_priority,
+            faults: self.faults.clone(),
+        };
+        cfg.validate().map_err(|e| {
+            crate::distributed::DistError::Usage(format!("the launcher's settings: {e}"))
+        })?;
+        Ok(cfg)
+    }
+}
+
+/// Launcher → one placement group (key `ratelab/<graph>/@ctl/<process>`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "msg", rename_all = "snake_case")]
+pub enum ToMember {
+    /// Joined: here are the settings.
+    Welcome {
+        /// The settings.
+        setup: Box<Setup>,
+        /// The launcher's `CLOCK_MONOTONIC` when it sent this, ns: a real-clock run needs
+        /// one host's clock (a member compares it with its own).
+        launcher_mono_ns: u64,
+    },
+    /// Not joined, and why (one line).
+    Reject {
+        /// Why.
+        reason: String,
+        /// A process of that name is still running in the graph (as far as the launcher
+        /// knows: a process killed a moment ago until its liveliness token is withdrawn). A
+        /// process started again at once asks again for a while
+        /// ([`crate::distributed::member::BUSY_RETRY`]).
+        #[serde(default)]
+        busy: bool,
+    },
+    /// Real clock: start; run time zero is at this `CLOCK_MONOTONIC` reading, ns.
+    Start {
+        /// Run time zero.
+        start_mono_ns: u64,
+    },
+    /// Virtual clock: run every tick due at or before run time `until_ns` (the lockstep's
+    /// horizon, [`crate::distributed::lockstep`]). The launcher moves it on ahead of the ticks it has
+    /// seen done, and stops moving it to end the run early (an interrupt).
+    Horizon {
+        /// Run time, ns.
+        until_ns: u64,
+    },
+    /// The run ended at run time `at_ns`: once the local copies of the input topics hold
+    /// the messages `need` (topic index, seq: the last its publisher sent; virtual clock),
+    /// report and leave.
+    Stop {
+        /// Run time of the end, ns.
+        at_ns: u64,
+        /// Messages still to arrive before the report.
+        #[serde(default)]
+        need: Vec<(usize, u64)>,
+    },
+}

@@ -1,0 +1,158 @@
+//! Member to member, peer to peer: a crossing topic's samples ([`WireSample`], on the
+//! topic's key, from its publisher's process to its subscriber's) and, under the virtual
+//! clock, each event's tick report ([`Ticked`], to every process and the launcher). Both
+//! postcard, both bounded and decoded exactly.
+
+use super::{decode_exact, printable};
+use crate::msg::AnyTopic;
+use crate::time::Nanos;
+use serde::{Deserialize, Serialize};
+
+/// The largest topic sample accepted, bytes (a state sample is about 40).
+pub const MAX_SAMPLE_BYTES: usize = 1024;
+
+/// The largest sequence number accepted: an hour at 10 kHz is 3.6 × 10⁷ messages; this
+/// leaves room and keeps every counter far from overflow.
+pub const MAX_SEQ: u64 = 1 << 40;
+
+/// The most a subscriber accepts a publisher's `seq` to move ahead of the last it received:
+/// a gap up to this is counted as lost on the wire, a larger one refused
+/// ([`WireSample::deliver`]). A 10 000 Hz publisher takes 100 s to publish this many.
+pub const MAX_SEQ_JUMP: u64 = 1_000_000;
+
+/// One topic sample on the wire.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct WireSample {
+    /// The publisher's sequence number for the topic (from 0).
+    pub seq: u64,
+    /// Run time of the publish, ns (the graph's processes share the run's clock).
+    pub stamp_ns: u64,
+    /// The origin stamp (the sensor reading it derives from), ns.
+    pub origin_ns: Option<u64>,
+    /// When it was sent, on the host's `CLOCK_MONOTONIC`, ns: receive time minus this is
+    /// the over-the-wire latency (exact on one host; across hosts, see docs/distributed.md).
+    pub sent_mono_ns: u64,
+    /// The payload: the message in its type's wire encoding ([`crate::msg::MsgData::to_bytes`]),
+    /// decoded by the receiving topic's type ([`crate::msg::MsgType::decode`]), exactly.
+    pub data: Vec<u8>,
+}
+
+impl WireSample {
+    /// Publish this sample into the local copy `topic` of its topic, as its publisher did.
+    /// `offset` (the publisher's `seq` minus the copy's, kept by the caller per topic, `None`
+    /// before the first sample) lets a subscriber join late: what was published before its
+    /// first sample is not its loss. After that, a gap in `seq` is counted as lost on the wire
+    /// ([`crate::topic::Topic::count_lost`]) before the sample is published. A publisher that
+    /// restarted (its `seq` went back) is taken as a new one. A `seq` more than
+    /// [`MAX_SEQ_JUMP`] ahead of the last is refused, not counted as lost: no publisher gets
+    /// that far ahead of its subscriber in a run, and a forged number must not inflate `lost`.
+    ///
+    /// # Errors
+    /// The payload's type is not the topic's (a graph that differs between processes), or its
+    /// `seq` jumps too far ahead (nothing is published or counted).
+    pub fn deliver(self, topic: &AnyTopic, offset: &mut Option<i128>) -> Result<(), String> {
+        let stamp = Nanos(self.stamp_ns);
+        let origin = self.origin_ns.map(Nanos);
+        let seq = i128::from(self.seq);
+        let data = topic
+            .msg_type()
+            .decode(&self.data)
+            .map_err(|e| format!("a sample on {}: {e}", topic.name()))?;
+        let next = i128::from(topic.next_seq());
+        let off = match *offset {
+            Some(off) if seq - off >= next - 1 => off,
+            _ => seq - next, // the first sample, or a restarted publisher
+        };
+        let gap = u64::try_from(seq - off - next).unwrap_or(0);
+        if gap > MAX_SEQ_JUMP {
+            return Err(format!(
+                "a sample numbered {gap} ahead of the last (at most {MAX_SEQ_JUMP})"
+            ));
+        }
+        *offset = Some(off);
+        if gap > 0 {
+            topic.count_lost(gap);
+        }
+        topic.publish(None, &data, stamp, origin)
+    }
+
+    /// Encode (postcard).
+    pub fn encode(&self) -> Vec<u8> {
+        postcard::to_allocvec(self).unwrap_or_default()
+    }
+
+    /// Decode, refusing anything over [`MAX_SAMPLE_BYTES`] or malformed: it must decode
+    /// exactly (no byte after its end), and a `seq` beyond [`MAX_SEQ`] is refused too (no run
+    /// publishes that many, and counters must not overflow).
+    ///
+    /// # Errors
+    /// One line.
+    pub fn decode(bytes: &[u8]) -> Result<WireSample, String> {
+        let s: WireSample = decode_exact(bytes, MAX_SAMPLE_BYTES, "sample")?;
+        if s.seq > MAX_SEQ {
+            return Err(format!("a sample numbered {} (at most {MAX_SEQ})", s.seq));
+        }
+        Ok(s)
+    }
+}
+
+/// Virtual clock: one event done (a tick started, or its outputs gone out), from its node's process to every other process and the
+/// launcher (key `ratelab/<graph>/@ticked/<process>`, [`crate::distributed::lockstep`]).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Ticked {
+    /// The node's process.
+    pub process: String,
+    /// The event's place in the run's one order of events (0, 1, …: the virtual
+    /// scheduler's order, [`crate::scheduler::VirtualScheduler::next_event_until`], which every
+    /// process computes alike).
+    pub index: u64,
+    /// The node (index in the graph).
+    pub node: usize,
+    /// Run time of the tick, ns.
+    pub t_ns: u64,
+    /// The node stopped the graph (the fall).
+    pub stop: bool,
+    /// What the node sent to other processes in the tick: (topic index, seq) per topic it
+    /// sent a message on, in the node's `publishes` order.
+    pub published: Vec<(usize, u64)>,
+    /// The node panicked (or its input never came): the message.
+    pub failed: Option<String>,
+    /// The event is the end of the tick's compute time (its held outputs went out then,
+    /// [`crate::scheduler::Event::Publish`]), not its start. Only under executors or compute
+    /// times ([`crate::executor`]).
+    pub publish: bool,
+    /// At a start: the tick's compute time as the node drew it, ns (0: its outputs went out
+    /// at once). Every other process schedules the tick's end by it
+    /// ([`crate::scheduler::VirtualScheduler::start_elsewhere`]); at most
+    /// [`crate::executor::MAX_COMPUTE`].
+    pub compute_ns: u64,
+}
+
+/// The most messages a process sends on one crossing topic for one tick of its publisher
+/// (a node may publish several times in a tick); past it the rest of that tick's are not
+/// sent, and the subscriber counts them lost on the wire when a later one arrives. Reports
+/// are checked against it ([`crate::distributed::launcher::check_report`]).
+pub const MAX_SENT_PER_TICK: usize = 256;
+
+/// The largest tick report read, bytes ([`Ticked::decode`]).
+pub const MAX_TICK_BYTES: usize = 8 * 1024;
+
+impl Ticked {
+    /// Encode (postcard: tick reports are the lockstep's traffic, one per tick, so they
+    /// take serde's compact binary form, as samples do, not JSON).
+    pub fn encode(&self) -> Vec<u8> {
+        postcard::to_allocvec(self).unwrap_or_default()
+    }
+
+    /// Decode, refusing anything over [`MAX_TICK_BYTES`] or malformed (it must decode
+    /// exactly, no byte after its end); its text arrives printable ([`printable`]).
+    ///
+    /// # Errors
+    /// One line.
+    pub fn decode(bytes: &[u8]) -> Result<Ticked, String> {
+        let mut t: Ticked = decode_exact(bytes, MAX_TICK_BYTES, "tick report")?;
+        t.process = printable(&t.process);
+        t.failed = t.failed.as_deref().map(printable);
+        Ok(t)
+    }
+}

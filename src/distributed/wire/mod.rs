@@ -1,0 +1,287 @@
+//! What crosses a process boundary: topic samples and the launcher's control messages.
+//!
+//! A topic sample is [`WireSample`]: the publisher's `seq`, publish stamp and origin stamp
+//! (the same three numbers an in-process [`crate::topic::Message`] carries), the send time
+//! on the host's monotonic clock (for the over-the-wire latency) and the payload, encoded
+//! with `postcard` (serde's compact binary format). Control messages ([`ToMember`],
+//! [`ToLauncher`]) are JSON (`serde_json`): few, and readable when debugging with
+//! `z_sub`. Every decode is bounded ([`MAX_SAMPLE_BYTES`], [`MAX_CONTROL_BYTES`]): the
+//! bytes come from the network.
+
+//!
+//! One module per direction of travel, as dora-rs splits its messages:
+//! `member_to_member` (samples and tick reports), `launcher_to_member`,
+//! `member_to_launcher` and `launcher_to_watcher`; the codec, its bounds and the
+//! printable text they share are here.
+
+mod launcher_to_member;
+mod launcher_to_watcher;
+mod member_to_launcher;
+mod member_to_member;
+
+pub use launcher_to_member::{Setup, ToMember};
+pub use launcher_to_watcher::RunOver;
+pub use member_to_launcher::{ToLauncher, WireLink};
+pub use member_to_member::{
+    Ticked, WireSample, MAX_SAMPLE_BYTES, MAX_SENT_PER_TICK, MAX_SEQ, MAX_SEQ_JUMP, MAX_TICK_BYTES,
+};
+
+use serde::{Deserialize, Serialize};
+
+/// The largest control message accepted, bytes (a report with its counters is a few KB; a
+/// graph file is at most [`crate::input`]'s bound).
+pub const MAX_CONTROL_BYTES: usize = 4 << 20;
+
+/// The host's `CLOCK_MONOTONIC`, ns: the clock every process on one host shares (Rust's
+/// `Instant` reads the same clock on Linux).
+pub fn mono_now_ns() -> u64 {
+    let mut ts = libc::timespec {
+        tv_sec: 0,
+        tv_nsec: 0,
+    };
+    // SAFETY: `ts` is a valid, writable timespec; the clock id is a constant.
+    let rc = unsafe { libc::clock_gettime(libc::CLOCK_MONOTONIC, &mut ts) };
+    if rc != 0 {
+        return 0;
+    }
+    (ts.tv_sec as u64).saturating_mul(1_000_000_000) + ts.tv_nsec as u64
+}
+
+/// The `Instant` at `CLOCK_MONOTONIC` reading `mono_ns` (past or future).
+pub fn instant_at_mono(mono_ns: u64) -> std::time::Instant {
+    let (now_mono, now) = (mono_now_ns(), std::time::Instant::now());
+    if mono_ns >= now_mono {
+        now + std::time::Duration::from_nanos(mono_ns - now_mono)
+    } else {
+        now.checked_sub(std::time::Duration::from_nanos(now_mono - mono_ns))
+            .unwrap_or(now)
+    }
+}
+
+/// Decode `bytes` (postcard) as a `T`, exactly: refused over `max` bytes, malformed, or
+/// with any byte after its end; `what` names it in the one-line error.
+fn decode_exact<T: for<'de> Deserialize<'de>>(
+    bytes: &[u8],
+    max: usize,
+    what: &str,
+) -> Result<T, String> {
+    if bytes.len() > max {
+        return Err(format!("a {what} of {} bytes (at most {max})", bytes.len()));
+    }
+    let (t, rest): (T, &[u8]) =
+        postcard::take_from_bytes(bytes).map_err(|e| format!("a malformed {what}: {e}"))?;
+    if !rest.is_empty() {
+        return Err(format!(
+            "a malformed {what}: {} bytes after its end",
+            rest.len()
+        ));
+    }
+    Ok(t)
+}
+
+/// Encode a control message (JSON).
+pub fn encode_json<T: Serialize>(msg: &T) -> Vec<u8> {
+    serde_json::to_vec(msg).unwrap_or_default()
+}
+
+/// Decode a control message, refusing anything over [`MAX_CONTROL_BYTES`] or malformed.
+/// Its text arrives printable: every control character in any string or map key (an escape
+/// sequence that would clear a terminal, a C1 control, DEL) is written out as `\u{1b}`
+/// ([`printable`]) before anything prints or records it. The one exception is a [`Setup`]'s
+/// `graph_toml`, a file's text with its newlines, which is parsed and validated
+/// ([`crate::graph::GraphSpec::parse`]), never printed.
+///
+/// # Errors
+/// One line.
+pub fn decode_json<T: for<'de> Deserialize<'de>>(bytes: &[u8]) -> Result<T, String> {
+    if bytes.len() > MAX_CONTROL_BYTES {
+        return Err(format!(
+            "a control message of {} bytes (at most {MAX_CONTROL_BYTES})",
+            bytes.len()
+        ));
+    }
+    let malformed = |e: serde_json::Error| format!("a malformed control message: {e}");
+    if !may_hold_control(bytes) {
+        // JSON strings hold a control character only escaped (`\u001b`, `\n`) or, for DEL
+        // and the C1 controls, raw: with neither, decode as it is (the lockstep's path).
+        return serde_json::from_slice(bytes).map_err(malformed);
+    }
+    let mut value: serde_json::Value = serde_json::from_slice(bytes).map_err(malformed)?;
+    make_printable(&mut value);
+    serde_json::from_value(value).map_err(malformed)
+}
+
+/// Could `json` hold a control character in a string: a `\` escape, a raw DEL, or a raw C1
+/// control (UTF-8 `C2 80`–`C2 9F`)?
+fn may_hold_control(json: &[u8]) -> bool {
+    json.iter().any(|&b| b == b'\\' || b == 0x7f)
+        || json
+            .windows(2)
+            .any(|w| w[0] == 0xc2 && (0x80..=0x9f).contains(&w[1]))
+}
+
+fn make_printable(v: &mut serde_json::Value) {
+    use serde_json::Value;
+    match v {
+        Value::String(s) if s.chars().any(char::is_control) => *s = printable(s),
+        Value::Array(a) => a.iter_mut().for_each(make_printable),
+        Value::Object(o) => {
+            let entries = std::mem::take(o);
+            for (k, mut x) in entries {
+                if k != "graph_toml" {
+                    make_printable(&mut x);
+                }
+                o.insert(printable(&k), x);
+            }
+        }
+        _ => {}
+    }
+}
+
+/// `text` with every control character written out (`\u{1b}`, `\n`): what a terminal,
+/// `top` and a recording may show of text from the network.
+pub fn printable(text: &str) -> String {
+    text.chars()
+        .map(|c| {
+            if c.is_control() {
+                c.escape_default().to_string()
+            } else {
+                c.to_string()
+            }
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::config::ClockKind;
+    use crate::msg::AnyTopic;
+    use crate::msg::{ForceMsg, Message, MsgData, PositionMsg};
+
+    #[test]
+    fn a_sample_round_trips_and_hostile_bytes_are_refused() {
+        let s = WireSample {
+            seq: 7,
+            stamp_ns: 20_000_000,
+            origin_ns: Some(0),
+            sent_mono_ns: 5,
+            data: MsgData::new([0.1f32, -0.2, 1.0, 0.0, 3.5]).to_bytes(),
+        };
+        assert_eq!(WireSample::decode(&s.encode()).unwrap(), s);
+        assert!(WireSample::decode(&[0xff; 3]).is_err());
+        assert!(WireSample::decode(&vec![0; MAX_SAMPLE_BYTES + 1]).is_err());
+        let huge = WireSample {
+            seq: u64::MAX,
+            ..s.clone()
+        };
+        assert!(WireSample::decode(&huge.encode()).is_err());
+        // Exactly: a valid sample with a byte after it, or a run of zeros (which starts like
+        // a sample numbered 0), is refused.
+        let mut longer = s.encode();
+        longer.push(0);
+        let e = WireSample::decode(&longer).unwrap_err();
+        assert!(e.contains("1 bytes after its end"), "{e}");
+        assert!(WireSample::decode(&[0u8; 1024]).is_err());
+        assert!(decode_json::<ToMember>(b"{\"msg\":\"nope\"}").is_err());
+    }
+
+    #[test]
+    fn text_from_the_network_arrives_printable() {
+        // An escape sequence that clears the screen, a newline, a raw C1 CSI and DEL.
+        let bytes = "{\"msg\":\"ready\",\"process\":\"a\\u001b[2J\\nb\u{9b}c\u{7f}\"}".as_bytes();
+        let m = decode_json::<ToLauncher>(bytes).unwrap();
+        assert_eq!(m.process(), "a\\u{1b}[2J\\nb\\u{9b}c\\u{7f}");
+        assert!(!m.process().chars().any(char::is_control));
+        // Map keys too (a report's per-node tables are keyed by name).
+        let mut v = serde_json::json!({"n\u{1b}": ["x\u{7}"]});
+        make_printable(&mut v);
+        assert_eq!(v, serde_json::json!({"n\\u{1b}": ["x\\u{7}"]}));
+        // Plain text and escapes that are not controls pass unchanged.
+        let plain =
+            decode_json::<ToLauncher>(r#"{"msg":"ready","process":"robot \"1\" é"}"#.as_bytes())
+                .unwrap();
+        assert_eq!(plain.process(), "robot \"1\" é");
+        assert_eq!(printable("50 Hz · ok"), "50 Hz · ok");
+        // A graph file's text keeps its lines (it is parsed, not printed).
+        let setup = Setup {
+            graph_toml: crate::graph::GraphSpec::chapter().to_toml(),
+            seed: 0,
+            duration_ns: 1,
+            clock: ClockKind::Virtual,
+            policy: "scripted\u{1b}".into(),
+            faults: Vec::new(),
+            phase_offsets_ns: Vec::new(),
+            rt_priority: None,
+            spin_margin_ns: 0,
+            ros2_domain: None,
+        };
+        let bytes = serde_json::to_vec(&setup).unwrap();
+        let back = decode_json::<Setup>(&bytes).unwrap();
+        assert_eq!(back.graph_toml, setup.graph_toml);
+        assert_eq!(back.policy, "scripted\\u{1b}");
+    }
+
+    #[test]
+    fn delivery_keeps_the_publishers_numbering_and_counts_gaps_as_lost() {
+        let t = AnyTopic::new("/action", ForceMsg::TYPE, 1).unwrap();
+        let sample = |seq| WireSample {
+            seq,
+            stamp_ns: seq * 20_000_000,
+            origin_ns: None,
+            sent_mono_ns: 0,
+            data: MsgData::new(ForceMsg { newtons: 1.0 }).to_bytes(),
+        };
+        let mut off = None;
+        sample(0).deliver(&t, &mut off).unwrap();
+        sample(3).deliver(&t, &mut off).unwrap(); // 1 and 2 never arrived
+        let st = t.stats();
+        assert_eq!((st.published, st.lost, st.dropped), (4, 2, 1));
+        let f = t.typed::<ForceMsg>().unwrap();
+        assert_eq!(f.peek_newest().unwrap().seq, 3);
+        let wrong = WireSample {
+            data: MsgData::new(PositionMsg {
+                cart_pos_m: 0.0,
+                pole_angle_rad: 0.0,
+            })
+            .to_bytes(),
+            ..sample(4)
+        };
+        assert!(wrong.deliver(&t, &mut off).is_err());
+        // A publisher that restarted counts from 0 again: a new numbering, nothing lost.
+        sample(0).deliver(&t, &mut off).unwrap();
+        sample(1).deliver(&t, &mut off).unwrap();
+        assert_eq!(t.stats().lost, 2);
+        assert_eq!(t.stats().published, 6);
+        // A number far ahead is refused: nothing published, nothing counted lost, and the
+        // numbering goes on from the last one accepted.
+        let e = sample(1 + MAX_SEQ_JUMP + 2)
+            .deliver(&t, &mut off)
+            .unwrap_err();
+        assert!(e.contains("ahead of the last"), "{e}");
+        assert_eq!((t.stats().lost, t.stats().published), (2, 6));
+        sample(1 + MAX_SEQ_JUMP + 1).deliver(&t, &mut off).unwrap();
+        assert_eq!(t.stats().lost, 2 + MAX_SEQ_JUMP);
+        sample(2 + MAX_SEQ_JUMP).deliver(&t, &mut off).unwrap();
+        assert_eq!(t.stats().lost, 2 + MAX_SEQ_JUMP);
+    }
+
+    #[test]
+    fn a_late_subscriber_does_not_count_what_came_before_it_as_lost() {
+        let t = AnyTopic::new("/obs", ForceMsg::TYPE, 1).unwrap();
+        let mut off = None;
+        for seq in [100, 101, 103] {
+            WireSample {
+                seq,
+                stamp_ns: seq,
+                origin_ns: None,
+                sent_mono_ns: 0,
+                data: MsgData::new(ForceMsg { newtons: 0.0 }).to_bytes(),
+            }
+            .deliver(&t, &mut off)
+            .unwrap();
+        }
+        let st = t.stats();
+        assert_eq!((st.published, st.lost), (4, 1));
+    }
+}
