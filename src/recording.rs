@@ -17,9 +17,10 @@
 //!   `action/applied_N` (the force the actuator applied at each step: the zero-order hold);
 //! - `latency/sense_to_act_ms`, `latency/control_period_ms` (the controller's period);
 //! - `bus/<topic>/{published,dropped,msg_per_s}` for every topic (msg/s over a 1 s sliding
-//!   window; read at each actuator step, and at the run's end when the actuator stopped
-//!   stepping before it, msg/s there over the time since its last step), one colour per topic, the same in every graph, each topic's line narrower than
-//!   the one drawn before it so that equal lines show both colours;
+//!   window, from the second actuator step: the first spans no time; and at the run's end
+//!   when the actuator stopped stepping before it, over the time since its last step), one
+//!   colour per topic, the same in every graph, each topic's line narrower than the one
+//!   drawn before it so that equal lines show both colours;
 //! - QoS ([`crate::qos`]): `bus/<topic>/<counter>` (`expired`, `refused`, `lost`,
 //!   `retransmitted`, `offered_deadline_missed`, `requested_deadline_missed`) for each counter
 //!   a topic reports ([`crate::topic::TopicStats::reported`]: its QoS can make it count, or it has
@@ -2165,15 +2166,7 @@ impl StepObserver for RecordingObserver {
         let span = s.t.saturating_sub(t0).as_secs_f64();
         for (i, (topic, st)) in self.shape.topics.iter().zip(&stats).enumerate() {
             let entity = topic.entity();
-            let rate = if span > 0.0 {
-                // Saturating: a topic's counters from another process may start over (it
-                // was restarted) or arrive from a peer that misbehaves.
-                st.published
-                    .saturating_sub(then.get(i).copied().unwrap_or(0)) as f64
-                    / span
-            } else {
-                0.0
-            };
+
             buf.scalar(
                 &format!("bus/{entity}/published"),
                 s.t,
@@ -2186,7 +2179,14 @@ impl StepObserver for RecordingObserver {
                 s.step,
                 st.dropped as f64,
             );
-            buf.scalar(&format!("bus/{entity}/msg_per_s"), s.t, s.step, rate);
+            // The first step spans no time: no rate to give yet (not 0 msg/s). Saturating: a
+            // topic's counters from another process may start over (it was restarted) or
+            // arrive from a peer that misbehaves.
+            if span > 0.0 {
+                let before = then.get(i).copied().unwrap_or(0);
+                let rate = st.published.saturating_sub(before) as f64 / span;
+                buf.scalar(&format!("bus/{entity}/msg_per_s"), s.t, s.step, rate);
+            }
         }
         {
             let mut last = self

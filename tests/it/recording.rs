@@ -159,6 +159,32 @@ fn fresh_recording_has_the_entities_timelines_and_one_angle_row_per_step() {
     assert!(size < 2 * 1024 * 1024, "a 10 s recording is {size} bytes");
 }
 
+/// The bus's msg/s starts at the second step, at the sensor's rate: the first step spans no
+/// time, and logging 0 there drew a 50 Hz topic rising from 0 msg/s at the run's start (#25).
+#[test]
+fn the_msg_per_s_plot_starts_at_the_rate_not_at_zero() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("r.rrd");
+    let mut cfg = virtual_cfg();
+    cfg.duration = ratelab::Nanos(1_000_000_000);
+    record(&path, &cfg, None);
+    let all = chunks(&path);
+    let mut samples: Vec<(i64, f64)> = all
+        .iter()
+        .filter(|c| !c.is_static() && c.entity_path().to_string() == "/bus/obs/msg_per_s")
+        .flat_map(|c| {
+            let values: Vec<f64> = c
+                .iter_slices::<f64>(rerun::Scalars::descriptor_scalars().component)
+                .flat_map(|b| b.to_vec())
+                .collect();
+            times_on(c, "sim_time").into_iter().zip(values)
+        })
+        .collect();
+    samples.sort_by_key(|(t, _)| *t);
+    assert_eq!(samples.first(), Some(&(20_000_000, 50.0)), "{samples:?}");
+    assert!(samples.iter().all(|(_, r)| *r > 0.0), "{samples:?}");
+}
+
 #[test]
 fn two_virtual_recordings_are_identical() {
     let dir = tempfile::tempdir().unwrap();
