@@ -5,9 +5,14 @@
 //! Every process builds the whole graph (so topic and node indices agree everywhere) but
 //! ticks only its nodes. A topic it publishes for another process is kept as the chapter's
 //! plain latest-wins buffer here (its QoS lives with the subscriber's copy, which sees every
-//! message in publish order and so counts exactly what the in-process topic would); after
-//! each tick of the publishing node, its newest message is sent as a
-//! [`WireSample`](super::wire::WireSample).
+//! message in publish order and so counts exactly what the in-process topic would); it is a
+//! bridge element of the graph: each message goes out as a
+//! [`WireSample`](super::wire::WireSample) as it is published.
+//!
+//! [`run_member`] goes through its phases in order: check its options against the graph
+//! file, join the launcher (`Joined`), build the graph, wire the topics that cross its
+//! boundary (`crossings` decides which), say ready, then run its share of the graph
+//! (`Share`) under the virtual clock (in lockstep) or the real one, and report.
 
 use super::credentials::{Credentials, Role};
 use super::lockstep;
