@@ -18,9 +18,9 @@
 //! - `latency/sense_to_act_ms`, `latency/control_period_ms` (the controller's period);
 //! - `bus/<topic>/{published,dropped,msg_per_s}` for every topic (msg/s over a 1 s sliding
 //!   window, from the second actuator step: the first spans no time; and at the run's end
-//!   when the actuator stopped stepping before it, over the time since its last step), one
-//!   colour per topic, the same in every graph, each topic's line narrower than the one
-//!   drawn before it so that equal lines show both colours;
+//!   when the actuator stopped stepping 1 s or more before it, over the time since its last
+//!   step), one colour per topic, the same in every graph, each topic's line narrower than
+//!   the one drawn before it so that equal lines show both colours;
 //! - QoS ([`crate::qos`]): `bus/<topic>/<counter>` (`expired`, `refused`, `lost`,
 //!   `retransmitted`, `offered_deadline_missed`, `requested_deadline_missed`) for each counter
 //!   a topic reports ([`crate::topic::TopicStats::reported`]: its QoS can make it count, or it has
@@ -1689,9 +1689,12 @@ impl Recording {
             self.deadline_totals(&mut buf, metrics, end.at);
             // The bus counters come with the actuator's steps: an actuator killed (or stalled
             // past the end) left them short of the run's end, where the summary counts on.
-            // Its totals at the end, so that the bus plots reach them, and its msg/s there:
-            // the messages published from the last step to the end over that time (a
-            // publisher that kept its rate keeps its line level).
+            // Its totals at the end, so that the bus plots reach them, and, when the steps
+            // stopped a whole window (1 s) or more before the end, its msg/s there: the
+            // messages published from the last step to the end over that time (a publisher
+            // that kept its rate keeps its line level). Over a shorter gap (a real-clock
+            // run's last step a few ms before its end) that quotient is noise: a launch's
+            // merged totals against its last step's counters read as a 500 msg/s spike.
             let last_ns = self.last_step_ns.load(std::sync::atomic::Ordering::Relaxed);
             if metrics.steps > 0 && last_ns < end.at.0 {
                 let since_s = end.at.saturating_sub(Nanos(last_ns)).as_secs_f64();
@@ -1705,7 +1708,7 @@ impl Recording {
                     let at = |m: &str| format!("bus/{entity}/{m}");
                     buf.scalar(&at("published"), end.at, metrics.steps, t.published as f64);
                     buf.scalar(&at("dropped"), end.at, metrics.steps, t.dropped as f64);
-                    if let Some(&before) = then.get(name) {
+                    if let (Some(&before), true) = (then.get(name), since_s >= 1.0) {
                         let rate = t.published.saturating_sub(before) as f64 / since_s;
                         buf.scalar(&at("msg_per_s"), end.at, metrics.steps, rate);
                     }

@@ -1227,4 +1227,15 @@ fn the_bus_plots_reach_the_end_when_the_actuator_was_killed() {
             "{entity}: {rate} msg/s at the end"
         );
     }
+    // Killed less than a window (1 s) before the end: no end point, whose quotient over a
+    // short gap is noise; the plot ends at the last step (2.48 s).
+    let path = dir.path().join("late-kill.rrd");
+    cfg.faults = vec![ratelab::qos::Fault::parse("actuator@2.5", true).unwrap()];
+    record(&path, &cfg, None);
+    let newest_at = chunks(&path)
+        .iter()
+        .filter(|c| !c.is_static() && c.entity_path().to_string() == "/bus/obs/msg_per_s")
+        .flat_map(|c| times_on(c, "sim_time"))
+        .max();
+    assert_eq!(newest_at, Some(2_480_000_000));
 }
