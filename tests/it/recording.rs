@@ -89,6 +89,23 @@ fn times_on(c: &Chunk, timeline: &str) -> Vec<i64> {
 }
 
 /// Pole-angle rows on the timelines (the static row naming the series is not a sample).
+/// Every sample of scalar series `entity` on the `sim_time` timeline, by run time: (ns, value).
+fn sim_series(chunks: &[Chunk], entity: &str) -> Vec<(i64, f64)> {
+    let mut samples: Vec<(i64, f64)> = chunks
+        .iter()
+        .filter(|c| !c.is_static() && c.entity_path().to_string() == entity)
+        .flat_map(|c| {
+            let values: Vec<f64> = c
+                .iter_slices::<f64>(rerun::Scalars::descriptor_scalars().component)
+                .flat_map(|b| b.to_vec())
+                .collect();
+            times_on(c, "sim_time").into_iter().zip(values)
+        })
+        .collect();
+    samples.sort_by_key(|(t, _)| *t);
+    samples
+}
+
 fn angle_rows(chunks: &[Chunk]) -> u64 {
     chunks
         .iter()
@@ -168,19 +185,7 @@ fn the_msg_per_s_plot_starts_at_the_rate_not_at_zero() {
     let mut cfg = virtual_cfg();
     cfg.duration = ratelab::Nanos(1_000_000_000);
     record(&path, &cfg, None);
-    let all = chunks(&path);
-    let mut samples: Vec<(i64, f64)> = all
-        .iter()
-        .filter(|c| !c.is_static() && c.entity_path().to_string() == "/bus/obs/msg_per_s")
-        .flat_map(|c| {
-            let values: Vec<f64> = c
-                .iter_slices::<f64>(rerun::Scalars::descriptor_scalars().component)
-                .flat_map(|b| b.to_vec())
-                .collect();
-            times_on(c, "sim_time").into_iter().zip(values)
-        })
-        .collect();
-    samples.sort_by_key(|(t, _)| *t);
+    let samples = sim_series(&chunks(&path), "/bus/obs/msg_per_s");
     assert_eq!(samples.first(), Some(&(20_000_000, 50.0)), "{samples:?}");
     assert!(samples.iter().all(|(_, r)| *r > 0.0), "{samples:?}");
 }
@@ -1191,18 +1196,7 @@ fn the_bus_plots_reach_the_end_when_the_actuator_was_killed() {
     assert_eq!(m.topics["/action"].dropped, 100, "{:?}", m.topics);
     let all = chunks(&path);
     // The newest sample of a series by run time: (ns, value).
-    let newest = |entity: &str| {
-        all.iter()
-            .filter(|c| !c.is_static() && c.entity_path().to_string() == entity)
-            .flat_map(|c| {
-                let values: Vec<f64> = c
-                    .iter_slices::<f64>(rerun::Scalars::descriptor_scalars().component)
-                    .flat_map(|b| b.to_vec())
-                    .collect();
-                times_on(c, "sim_time").into_iter().zip(values)
-            })
-            .max_by_key(|(t, _)| *t)
-    };
+    let newest = |entity: &str| sim_series(&all, entity).last().copied();
     for (entity, topic, dropped) in [
         ("/bus/action", "/action", true),
         ("/bus/obs", "/obs", false),
@@ -1232,10 +1226,8 @@ fn the_bus_plots_reach_the_end_when_the_actuator_was_killed() {
     let path = dir.path().join("late-kill.rrd");
     cfg.faults = vec![ratelab::qos::Fault::parse("actuator@2.5", true).unwrap()];
     record(&path, &cfg, None);
-    let newest_at = chunks(&path)
-        .iter()
-        .filter(|c| !c.is_static() && c.entity_path().to_string() == "/bus/obs/msg_per_s")
-        .flat_map(|c| times_on(c, "sim_time"))
-        .max();
+    let newest_at = sim_series(&chunks(&path), "/bus/obs/msg_per_s")
+        .last()
+        .map(|(t, _)| *t);
     assert_eq!(newest_at, Some(2_480_000_000));
 }
