@@ -6,7 +6,9 @@ use crate::headless;
 use ratelab::distributed::credentials::{Credentials, Role};
 use ratelab::distributed::launcher::{launch, LaunchOptions, LaunchReport};
 use ratelab::distributed::member::{run_member, LiveStats, MemberOptions};
-use ratelab::distributed::monitor::{ask_placement, PlacedProcess, Signals, Watch};
+use ratelab::distributed::monitor::{
+    ask_graph, placed_processes, Carried, PlacedProcess, Signals, Watch,
+};
 use ratelab::distributed::zenoh::{self, Wait};
 use ratelab::distributed::{check_endpoint, live_tokens, open_session, Access};
 use ratelab::graph::spec::graph_file_bytes;
@@ -528,9 +530,9 @@ pub fn run_top(a: &TopArgs, stop: StopFlag) -> anyhow::Result<()> {
     let mut ended: std::collections::BTreeSet<String> = std::collections::BTreeSet::new();
     // Per process: the newest figures and the ones before, for rates.
     let mut seen: BTreeMap<String, (LiveStats, Option<LiveStats>)> = BTreeMap::new();
-    // Per graph: its processes as placed (asked of its launcher once), so that a process
-    // gone before `top` heard from it is listed too.
-    let mut placements: BTreeMap<String, Vec<PlacedProcess>> = BTreeMap::new();
+    // Per graph: its shape (asked of its launcher once), so that a process gone before
+    // `top` heard from it is listed too and a restarted one's counts go on.
+    let mut graphs: BTreeMap<String, Known> = BTreeMap::new();
     let started = Instant::now();
     let mut last_print = Instant::now();
     loop {
@@ -554,16 +556,17 @@ pub fn run_top(a: &TopArgs, stop: StopFlag) -> anyhow::Result<()> {
             }
             let key = format!("{}/{}", m.graph, m.process);
             // Rates over about a second: the figures before stay until the new ones are a
-            // second newer (processes publish every 100 ms).
+            // second newer (processes publish every 100 ms); none across a restart.
             let prev = match seen.remove(&key) {
                 Some((_, Some(p))) if m.t_ns.saturating_sub(p.t_ns) < 1_000_000_000 => Some(p),
                 Some((cur, _)) => Some(cur),
                 None => None,
-            };
-            if !placements.contains_key(&m.graph) {
-                let placed = ask_placement(&session, &m.graph).unwrap_or_default();
-                placements.insert(m.graph.clone(), placed);
             }
+            .filter(|p| p.pid == m.pid);
+            graphs
+                .entry(m.graph.clone())
+                .or_insert_with(|| Known::new(ask_graph(&session, &m.graph)))
+                .see(&m);
             seen.insert(key, (m, prev));
         }
         let alive = alive_nodes(&session);
@@ -581,7 +584,7 @@ pub fn run_top(a: &TopArgs, stop: StopFlag) -> anyhow::Result<()> {
                         connect.join(", ")
                     );
                 }
-                print!("{}", table(&seen, &alive, &placements));
+                print!("{}", table(&seen, &alive, &graphs));
                 return Ok(());
             }
         } else if last_print.elapsed() >= Duration::from_secs(1) {
@@ -591,7 +594,7 @@ pub fn run_top(a: &TopArgs, stop: StopFlag) -> anyhow::Result<()> {
             if std::io::IsTerminal::is_terminal(&std::io::stdout()) {
                 print!("\x1b[2J\x1b[H");
             }
-            print!("{}", table(&seen, &alive, &placements));
+            print!("{}", table(&seen, &alive, &graphs));
             if seen.is_empty() {
                 println!("(waiting for a graph at {})", a.connect.join(", "));
             }
@@ -621,22 +624,91 @@ fn alive_nodes(session: &zenoh::Session) -> Vec<(String, String)> {
     .collect()
 }
 
-/// The table `top` prints.
+/// What `top` knows of a running graph beyond its processes' figures: its shape, as its
+/// launcher answered (none when it did not), and the counts of its restarted processes.
+struct Known {
+    /// Its processes as placed.
+    placed: Vec<PlacedProcess>,
+    /// The graph, with the counts its restarted processes carry over.
+    carried: Option<(ratelab::graph::spec::GraphSpec, Carried)>,
+}
+
+impl Known {
+    fn new(spec: Option<ratelab::graph::spec::GraphSpec>) -> Known {
+        match spec {
+            Some(spec) => Known {
+                placed: placed_processes(&spec),
+                carried: Some((spec.clone(), Carried::new(&spec))),
+            },
+            None => Known {
+                placed: Vec::new(),
+                carried: None,
+            },
+        }
+    }
+
+    /// Take in a process's figures.
+    fn see(&mut self, m: &LiveStats) {
+        if let Some((spec, carried)) = &mut self.carried {
+            carried.see(spec, m);
+        }
+    }
+
+    /// Node `name`'s ticks `now` (its process's count), continued from the processes
+    /// before it that `top` heard.
+    fn ticks(&self, name: &str, now: u64) -> u64 {
+        self.carried
+            .as_ref()
+            .and_then(|(spec, c)| {
+                let i = spec.nodes.iter().position(|n| n.name == name)?;
+                Some(c.node_ticks(i, now))
+            })
+            .unwrap_or(now)
+    }
+
+    /// Topic `name`'s counters `now` (its holder's), continued likewise.
+    fn counters(&self, name: &str, now: &ratelab::topic::TopicStats) -> ratelab::topic::TopicStats {
+        self.carried
+            .as_ref()
+            .and_then(|(spec, c)| {
+                let i = spec.topics.iter().position(|t| t.name == name)?;
+                Some(c.continued(i, now))
+            })
+            .unwrap_or(*now)
+    }
+
+    /// What the counts of process `m.process` leave out, said after them: its runs before
+    /// a rejoin that `top` did not hear (empty when they cover the whole run).
+    fn since(&self, m: &LiveStats) -> String {
+        let carried = self
+            .carried
+            .as_ref()
+            .is_some_and(|(_, c)| c.saw_restart(&m.process));
+        match m.since_ns {
+            Some(t) if !carried => format!("since it rejoined at {:.2} s", t as f64 / 1e9),
+            _ => String::new(),
+        }
+    }
+}
+
+/// The table `top` prints: every process's nodes, then every topic with its counters
+/// (continued across a restart `top` heard; a note where they leave something out).
 fn table(
     seen: &BTreeMap<String, (LiveStats, Option<LiveStats>)>,
     alive: &[(String, String)],
-    placements: &BTreeMap<String, Vec<PlacedProcess>>,
+    graphs: &BTreeMap<String, Known>,
 ) -> String {
     use std::fmt::Write;
     let mut s = String::new();
     let t = seen.values().map(|(m, _)| m.t_ns).max().unwrap_or(0);
     // The placed processes `top` has no figures from (gone before it heard them, or not
     // yet started).
-    let unheard: Vec<(&String, &PlacedProcess)> = placements
+    let unheard: Vec<(&String, &PlacedProcess)> = graphs
         .iter()
-        .flat_map(|(g, ps)| ps.iter().map(move |p| (g, p)))
+        .flat_map(|(g, k)| k.placed.iter().map(move |p| (g, p)))
         .filter(|(g, p)| !seen.contains_key(&format!("{g}/{}", p.name)))
         .collect();
+    let unknown = Known::new(None);
     let _ = writeln!(
         s,
         "ratelab top: {} process(es), run time {:.2} s",
@@ -670,6 +742,8 @@ fn table(
     let mut topics = Vec::new();
     for (m, prev) in seen.values() {
         let p = &m.process;
+        let known = graphs.get(&m.graph).unwrap_or(&unknown);
+        let since = known.since(m);
         let dt = prev
             .as_ref()
             .map(|q| m.t_ns.saturating_sub(q.t_ns) as f64 / 1e9)
@@ -687,20 +761,28 @@ fn table(
                 }
                 _ => "-".into(),
             };
-            let _ = writeln!(
-                s,
-                "{:<10} {:>7} {:<10} {:<9} {:>8.1} {:>8} {:>10} {:<6}",
+            let line = format!(
+                "{:<10} {:>7} {:<10} {:<9} {:>8.1} {:>8} {:>10} {:<6} {since}",
                 p,
                 m.pid,
                 name,
                 kind,
                 hz,
-                ticks,
+                known.ticks(name, *ticks),
                 meas,
                 if is_alive { "yes" } else { "GONE" }
             );
+            let _ = writeln!(s, "{}", line.trim_end());
         }
         let process_alive = alive.iter().any(|(ap, _)| ap == p);
+        // A holder gone took its counting with it: its last counts stand, and say so.
+        let why = if !process_alive && !m.done {
+            format!("counted by '{p}' until it went")
+        } else if since.is_empty() {
+            String::new()
+        } else {
+            format!("counted by '{p}' {since}")
+        };
         for (name, st) in &m.topics {
             let before = prev
                 .as_ref()
@@ -711,11 +793,12 @@ fn table(
                 (Some(dt), Some(b)) => format!("{:.1}", st.published.saturating_sub(b) as f64 / dt),
                 _ => "-".into(),
             };
+            let st = known.counters(name, st);
             topics.push((
                 name.clone(),
                 rate,
                 [st.published, st.dropped, st.lost].map(|n| n.to_string()),
-                String::new(),
+                why.clone(),
             ));
         }
         for w in &m.wire {
@@ -752,7 +835,7 @@ fn table(
     for (name, rate, [published, dropped, lost], why) in topics {
         let (p50, p99) = match wire.get(&name) {
             // No figures from its counting process: nothing to show of its wire either.
-            _ if !why.is_empty() => ("-".to_string(), "-".to_string()),
+            _ if published == "-" => ("-".to_string(), "-".to_string()),
             Some((a, b)) => (format!("{a:.0} µs"), format!("{b:.0} µs")),
             None => ("in-proc".to_string(), "-".to_string()),
         };
@@ -767,7 +850,6 @@ fn table(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use ratelab::distributed::monitor::placed_processes;
 
     fn stats(process: &str, t_ns: u64, sensor_ticks: u64) -> LiveStats {
         LiveStats {
@@ -788,7 +870,74 @@ mod tests {
             ticks: Vec::new(),
             counters: Vec::new(),
             done: false,
+            since_ns: None,
         }
+    }
+
+    /// The policy's process's figures: its pid, the counts of `/obs` (which it holds) and
+    /// of its node's ticks, and the run time it joined at when it rejoined.
+    fn policy_stats(pid: u32, counted: u64, since_ns: Option<u64>) -> LiveStats {
+        LiveStats {
+            process: "policy".into(),
+            pid,
+            t_ns: 3_000_000_000,
+            nodes: vec![("policy".into(), "policy".into(), 50.0, counted)],
+            topics: vec![(
+                "/obs".into(),
+                ratelab::topic::TopicStats {
+                    published: counted,
+                    dropped: 2,
+                    ..Default::default()
+                },
+            )],
+            since_ns,
+            ..stats("policy", 0, 0)
+        }
+    }
+
+    fn row<'a>(t: &'a str, starts: &str) -> &'a str {
+        t.lines()
+            .find(|l| l.starts_with(starts))
+            .unwrap_or_else(|| panic!("no row {starts}: {t}"))
+    }
+
+    #[test]
+    fn a_restarted_process_counts_on_or_says_what_its_counts_leave_out() {
+        let spec = ratelab::graph::GraphSpec::chapter();
+        let alive = vec![
+            ("robot".to_string(), "sensor".to_string()),
+            ("policy".to_string(), "policy".to_string()),
+        ];
+        let (first, again) = (policy_stats(7, 100, None), policy_stats(8, 30, Some(2_000_000_000)));
+        let seen = BTreeMap::from([("cartpole/policy".to_string(), (again.clone(), None))]);
+        // Heard before and after its restart: the counts go on.
+        let mut known = Known::new(Some(spec.clone()));
+        known.see(&first);
+        known.see(&again);
+        let graphs = BTreeMap::from([("cartpole".to_string(), known)]);
+        let t = table(&seen, &alive, &graphs);
+        let obs = row(&t, "/obs");
+        let cols: Vec<&str> = obs.split_whitespace().collect();
+        assert_eq!(cols[2..4], ["130", "4"], "published and dropped carried over: {t}");
+        assert!(!obs.contains("since") && !obs.contains("counted by"), "{t}");
+        let node = row(&t, "policy ");
+        assert!(node.contains(" 130 ") && node.ends_with("yes"), "{t}");
+        // Heard only after it: its own counts, and what they leave out.
+        let mut known = Known::new(Some(spec.clone()));
+        known.see(&again);
+        let graphs = BTreeMap::from([("cartpole".to_string(), known)]);
+        let t = table(&seen, &alive, &graphs);
+        let obs = row(&t, "/obs");
+        assert!(obs.contains(" 30 "), "{t}");
+        assert!(obs.ends_with("counted by 'policy' since it rejoined at 2.00 s"), "{t}");
+        assert!(row(&t, "policy ").ends_with("yes    since it rejoined at 2.00 s"), "{t}");
+        // Gone: its last counts stand, and say so.
+        let robot_only = vec![("robot".to_string(), "sensor".to_string())];
+        let t = table(&seen, &robot_only, &graphs);
+        let obs = row(&t, "/obs");
+        assert!(obs.contains(" 30 ") && obs.contains(" - "), "no rate for a gone holder: {t}");
+        assert!(obs.ends_with("counted by 'policy' until it went"), "{t}");
+        assert!(row(&t, "policy ").contains("GONE"), "{t}");
     }
 
     #[test]
@@ -810,9 +959,9 @@ mod tests {
                 Some(stats("robot", 1_000_000_000, 50)),
             ),
         );
-        let placements = BTreeMap::from([("cartpole".to_string(), placed)]);
+        let graphs = BTreeMap::from([("cartpole".to_string(), Known::new(Some(spec.clone())))]);
         let alive = vec![("robot".to_string(), "sensor".to_string())];
-        let t = table(&seen, &alive, &placements);
+        let t = table(&seen, &alive, &graphs);
         let obs = t
             .lines()
             .find(|l| l.starts_with("/obs"))
@@ -828,7 +977,7 @@ mod tests {
             ("robot".to_string(), "sensor".to_string()),
             ("policy".to_string(), "policy".to_string()),
         ];
-        let t = table(&seen, &alive, &placements);
+        let t = table(&seen, &alive, &graphs);
         assert!(t.contains("counted by 'policy': no figures yet"), "{t}");
     }
 }

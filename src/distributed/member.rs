@@ -177,6 +177,12 @@ pub struct LiveStats {
     /// liveliness tokens going next is a process leaving, not dying.
     #[serde(default)]
     pub done: bool,
+    /// Set when this process joined a run already under way (started again mid-run, real
+    /// clock): the run time its counts start from, ns. Its counters and ticks count from
+    /// then; a watcher that heard the process before it carries that one's counts over
+    /// ([`crate::distributed::monitor::Carried`]), one that did not says so.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub since_ns: Option<u64>,
 }
 
 /// How often each process publishes its [`LiveStats`].
@@ -454,6 +460,7 @@ pub fn run_member(opts: &MemberOptions, stop: &StopFlag) -> Result<(), DistError
         ticks,
         run_time,
         batch,
+        joined_at: AtomicU64::new(0),
     });
     let stats_done = StopFlag::new();
     let stats_thread = spawn_figures(share.clone(), stats_pub, stats_done.clone())?;
@@ -965,6 +972,7 @@ fn real_clock(
     let hook_batch = batch.clone();
     // Joined late (a restart): the first tick of each node is its next one on the grid.
     let late = Nanos(wire::mono_now_ns().saturating_sub(start));
+    share.joined_at.store(late.0, Ordering::Relaxed);
     let mut picked: Vec<(usize, Box<dyn Node>)> = nodes
         .into_iter()
         .enumerate()
@@ -1359,6 +1367,9 @@ struct Share {
     run_time: Arc<AtomicU64>,
     /// The steps, ticks and counters since the last figures sent.
     batch: Arc<Mutex<Batch>>,
+    /// The run time this process joined at, ns, when it joined a run under way (0: from
+    /// the start).
+    joined_at: AtomicU64,
 }
 
 impl Share {
@@ -1397,6 +1408,7 @@ impl Share {
             ticks: Vec::new(),
             counters: Vec::new(),
             done: false,
+            since_ns: Some(self.joined_at.load(Ordering::Relaxed)).filter(|t| *t > 0),
         }
     }
 

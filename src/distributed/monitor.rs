@@ -426,6 +426,8 @@ pub struct Carried {
     latest_ticks: Vec<Option<u64>>,
     /// Per node, the ticks earlier runs of its process counted before it was restarted.
     before_ticks: Vec<u64>,
+    /// The processes heard under two pids or more: their counts are carried over.
+    restarted: BTreeSet<String>,
 }
 
 impl Carried {
@@ -440,6 +442,7 @@ impl Carried {
             node_processes: (0..nodes).map(|i| spec.process_of(NodeId(i))).collect(),
             latest_ticks: vec![None; nodes],
             before_ticks: vec![0; nodes],
+            restarted: BTreeSet::new(),
         }
     }
 
@@ -458,6 +461,9 @@ impl Carried {
             .pids
             .insert(m.process.clone(), m.pid)
             .is_some_and(|pid| pid != m.pid);
+        if restarted {
+            self.restarted.insert(m.process.clone());
+        }
         for i in 0..self.holders.len() {
             if restarted && self.holders[i] == m.process {
                 if let Some(last) = self.latest[i].take() {
@@ -484,6 +490,13 @@ impl Carried {
                 self.latest_ticks[i] = Some(*ticks);
             }
         }
+    }
+
+    /// Whether `process` was heard restarted (under a second pid): its counts are carried
+    /// over from the run before. A process that joined mid-run ([`LiveStats::since_ns`])
+    /// and was not heard restarted counts only from its join.
+    pub fn saw_restart(&self, process: &str) -> bool {
+        self.restarted.contains(process)
     }
 
     /// Node `i`'s ticks, `now` its process's count, continued from the processes before.
@@ -958,19 +971,19 @@ pub struct PlacedProcess {
     pub holds: Vec<String>,
 }
 
-/// Ask the launcher of graph `graph` (its name as its keys spell it) for the graph's
-/// placement, for up to a second: every process, with its nodes and the topics it holds
-/// (`ratelab top` lists the processes it has no figures from, a process gone before it
-/// started, and their topics, from this). `None` when no launcher answers with settings
-/// that decode.
-pub fn ask_placement(session: &zenoh::Session, graph: &str) -> Option<Vec<PlacedProcess>> {
+/// Ask the launcher of graph `graph` (its name as its keys spell it) for the graph, for up
+/// to a second: `ratelab top` lists the processes it has no figures from (a process gone
+/// before it started) and their topics from its placement ([`placed_processes`]), and
+/// carries a restarted process's counts over ([`Carried`]). `None` when no launcher
+/// answers with settings that decode.
+pub fn ask_graph(session: &zenoh::Session, graph: &str) -> Option<GraphSpec> {
     let cfg = ask_setup(session, &Keys::new(graph).setup())?
         .run_config()
         .ok()?;
-    Some(placed_processes(&cfg.graph))
+    Some(cfg.graph)
 }
 
-/// `spec`'s processes as [`ask_placement`] gives them.
+/// `spec`'s processes: every process, with its nodes and the topics it holds.
 pub fn placed_processes(spec: &GraphSpec) -> Vec<PlacedProcess> {
     spec.placement()
         .into_iter()
@@ -1047,6 +1060,7 @@ mod tests {
             ticks: Vec::new(),
             counters: Vec::new(),
             done: false,
+            since_ns: None,
         }
     }
 
