@@ -575,7 +575,14 @@ pub struct Recording {
     deadline_said: Arc<Mutex<BTreeMap<String, DeadlineSaid>>>,
     /// Lines the summary gains beyond the metrics' ([`Recording::summary_line`]).
     extra_summary: Arc<Mutex<Vec<String>>>,
+    /// Events known before they happen (an injected fault's start and end), oldest first:
+    /// each is logged once the run reaches its time, so a run that ended first (a fall, a
+    /// watchdog) records none after its end.
+    due_events: Arc<Mutex<VecDeque<DueEvent>>>,
 }
+
+/// An event known in advance: its run time, text and level.
+type DueEvent = (Nanos, String, &'static str);
 
 /// A topic's deadline misses as the events told them: (offered, requested) and the time
 /// of the last event.
@@ -1129,6 +1136,7 @@ impl Recording {
             lanes: Arc::default(),
             deadline_said: Arc::default(),
             extra_summary: Arc::default(),
+            due_events: Arc::default(),
         };
         recording.log_settings(cfg, policy);
         Ok((recording, notice))
@@ -1245,7 +1253,9 @@ impl Recording {
             .with_level(rerun::components::TextLogLevel::INFO),
         );
         // The faults the run injects (`--stall`, `--kill`), where they happen: a stalled
-        // node's silence is otherwise recorded nowhere but in its not-alive count.
+        // node's silence is otherwise recorded nowhere but in its not-alive count. Logged
+        // when the run reaches them ([`Recording::log_due_events`]).
+        let mut due = Vec::new();
         for f in &cfg.faults {
             let warn = rerun::components::TextLogLevel::WARN;
             let (text, end) = match f.duration {
@@ -1263,19 +1273,30 @@ impl Recording {
                     None,
                 ),
             };
-            let at = buf.at(f.at, 0);
-            buf.add("events", &at, &rerun::TextLog::new(text).with_level(warn));
+            due.push((f.at, text, warn));
             if let Some(end) = end {
-                let at = buf.at(end, 0);
-                buf.add(
-                    "events",
-                    &at,
-                    &rerun::TextLog::new(format!("node {} resumes after its stall", f.node))
-                        .with_level(rerun::components::TextLogLevel::INFO),
-                );
+                due.push((
+                    end,
+                    format!("node {} resumes after its stall", f.node),
+                    rerun::components::TextLogLevel::INFO,
+                ));
             }
         }
+        due.sort_by_key(|(t, _, _)| *t);
+        *self.due_events.lock().unwrap_or_else(|e| e.into_inner()) = due.into();
         buf.send(&self.rec);
+    }
+
+    /// Log the events known in advance that are due by run time `now` (at their own times,
+    /// on control step `step`, the step that reached them).
+    fn log_due_events(&self, buf: &mut ChunkBuffer, now: Nanos, step: u64) {
+        let mut due = self.due_events.lock().unwrap_or_else(|e| e.into_inner());
+        while due.front().is_some_and(|(t, _, _)| *t <= now) {
+            if let Some((t, text, level)) = due.pop_front() {
+                let at = buf.at(t, step);
+                buf.add("events", &at, &rerun::TextLog::new(text).with_level(level));
+            }
+        }
     }
 
     /// The static 3D scene: z up, the rail under the cart, the cart, the pole and the ±12°
@@ -1659,6 +1680,13 @@ impl Recording {
         };
         let verdict = summary.get(2).cloned().unwrap_or_default();
         let reason = end.reason.words(metrics.stopped_by_watchdog.is_some());
+        // The known events the run reached after its last step (an actuator killed or
+        // stalled takes no step at them); none past the end.
+        {
+            let mut buf = self.lock();
+            let step = self.last_step.load(std::sync::atomic::Ordering::Relaxed);
+            self.log_due_events(&mut buf, end.at, step);
+        }
         if let Some(watchdog) = &metrics.stopped_by_watchdog {
             self.event(end.at, watchdog, rerun::components::TextLogLevel::WARN);
         }
@@ -2090,6 +2118,7 @@ impl StepObserver for RecordingObserver {
             .store(s.t.0, std::sync::atomic::Ordering::Relaxed);
         let rec = self.rec.clone();
         let mut buf = rec.lock();
+        rec.log_due_events(&mut buf, s.t, s.step);
         let time = buf.at(s.t, s.step);
         let state = self.shape.state();
         if self.last_state.as_ref() != Some(&state) {

@@ -565,6 +565,22 @@ fn a_killed_node_is_noticed_and_a_restarted_one_rejoins() {
         "{lines:?}"
     );
     assert!(dir.path().join("run.rrd").is_file(), "{lines:?}");
+    // The recording tells the kill and the rejoin, the trouble as warnings (issue 25: a
+    // launch records the launcher's and liveliness events), and its plots get labels.
+    let rrd = dir.path().join("run.rrd");
+    let events = crate::recording::events_with_levels(&rrd);
+    // (A restart this quick may leave no status in which the node was not alive: its
+    // liveliness events are not asked for.)
+    for (level, said) in [
+        ("WARN", "process 'policy' is gone at t="),
+        ("INFO", "process 'policy' rejoined"),
+    ] {
+        assert!(
+            events.iter().any(|(l, e)| l == level && e.contains(said)),
+            "{level} {said:?} in {events:#?}"
+        );
+    }
+    crate::recording::check_views(&rrd);
     // The restarted process measured the wire from its rejoin on: the line says so (the
     // robot's own, /action, counts the whole run).
     let obs_wire = lines

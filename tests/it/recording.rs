@@ -339,6 +339,13 @@ fn ctrl_c_during_a_recorded_real_run_leaves_a_complete_file() {
     let stdout = String::from_utf8_lossy(&out.stdout);
     assert_eq!(out.status.code(), Some(130), "{stdout}");
     assert!(stdout.contains("interrupted at t="), "{stdout}");
+    // The headline names the run's end, never "the whole run" (issue 25).
+    assert!(stdout.contains("STOPPED EARLY at t="), "{stdout}");
+    assert!(
+        stdout.contains("s of 20.00s (pole up until then)"),
+        "{stdout}"
+    );
+    assert!(!stdout.contains("whole run"), "{stdout}");
     let rows = angle_rows(&chunks(&path));
     assert!(rows > 50, "about 2.5 s of 50 Hz steps recorded, got {rows}");
     let events: Vec<Chunk> = chunks(&path)
@@ -350,21 +357,21 @@ fn ctrl_c_during_a_recorded_real_run_leaves_a_complete_file() {
 
 /// One view of a recording's blueprint, as decoded from the file.
 #[derive(Debug, Default)]
-struct BlueprintView {
+pub(crate) struct BlueprintView {
     class: String,
     name: String,
     origin: String,
     queries: Vec<String>,
     /// The y range (`ScalarAxis`) of a time series view, when it has one.
     y_range: Option<[f64; 2]>,
+    /// How its time axis is linked (`TimeAxis`'s link), when set.
+    time_link: Option<String>,
+    /// The corner of its legend (`PlotLegend`), when set.
+    legend: Option<String>,
 }
 
-/// The views of the blueprint the `.rrd` at `path` activates last (`view/<id>` and
-/// `view/<id>/ViewContents` of that blueprint store).
-fn blueprint_views(path: &Path) -> Vec<BlueprintView> {
-    use rerun::external::re_sdk_types::blueprint::archetypes::{
-        ScalarAxis, ViewBlueprint, ViewContents,
-    };
+/// The chunks of the blueprint the `.rrd` at `path` activates last.
+fn active_blueprint(path: &Path) -> Vec<Chunk> {
     let file = std::io::BufReader::new(std::fs::File::open(path).unwrap());
     let mut stores: BTreeMap<String, Vec<Chunk>> = BTreeMap::new();
     let mut active = None;
@@ -383,6 +390,37 @@ fn blueprint_views(path: &Path) -> Vec<BlueprintView> {
         }
     }
     let active = active.expect("the file activates a blueprint");
+    stores
+        .remove(&active)
+        .expect("the active blueprint is in the file")
+}
+
+/// The time range every linked time axis shows (the `TimeAxis` view range that no view of
+/// its own carries: the viewer's global one), ns: `(start, end)`.
+fn linked_time_range(path: &Path) -> Option<(i64, i64)> {
+    use rerun::external::re_sdk_types::blueprint::archetypes::TimeAxis;
+    use rerun::external::re_sdk_types::blueprint::components::TimeRange;
+    use rerun::external::re_sdk_types::datatypes::TimeRangeBoundary;
+    let at = |b: &TimeRangeBoundary| match b {
+        TimeRangeBoundary::Absolute(t) => Some(t.0),
+        _ => None,
+    };
+    active_blueprint(path)
+        .iter()
+        .filter(|c| c.entity_path().to_string().ends_with("/TimeAxis"))
+        .flat_map(|c| c.iter_component::<TimeRange>(TimeAxis::descriptor_view_range().component))
+        .flat_map(|batch| batch.to_vec())
+        .filter_map(|r| Some((at(&r.0.start)?, at(&r.0.end)?)))
+        .last()
+}
+
+/// The views of the blueprint the `.rrd` at `path` activates last (`view/<id>` and
+/// `view/<id>/ViewContents` of that blueprint store).
+fn blueprint_views(path: &Path) -> Vec<BlueprintView> {
+    use rerun::external::re_sdk_types::blueprint::archetypes::{
+        PlotLegend, ScalarAxis, TimeAxis, ViewBlueprint, ViewContents,
+    };
+    use rerun::external::re_sdk_types::blueprint::components::{Corner2D, LinkAxis};
     let text = |chunk: &Chunk, component| -> Vec<String> {
         chunk
             .iter_slices::<String>(component)
@@ -391,10 +429,7 @@ fn blueprint_views(path: &Path) -> Vec<BlueprintView> {
             .collect()
     };
     let mut views: BTreeMap<String, BlueprintView> = BTreeMap::new();
-    for chunk in stores
-        .remove(&active)
-        .expect("the active blueprint is in the file")
-    {
+    for chunk in active_blueprint(path) {
         let path = chunk.entity_path().to_string();
         let parts: Vec<&str> = path.trim_start_matches('/').split('/').collect();
         match parts.as_slice() {
@@ -425,6 +460,27 @@ fn blueprint_views(path: &Path) -> Vec<BlueprintView> {
                     .last()
                 {
                     views.entry(id.to_string()).or_default().y_range = Some(r.0 .0);
+                }
+            }
+            ["view", id, "TimeAxis"] => {
+                // The global range's own entity carries no link: no view is made for it.
+                let link = TimeAxis::descriptor_link().component;
+                if let Some(l) = chunk
+                    .iter_component::<LinkAxis>(link)
+                    .flat_map(|batch| batch.to_vec())
+                    .last()
+                {
+                    views.entry(id.to_string()).or_default().time_link = Some(format!("{l:?}"));
+                }
+            }
+            ["view", id, "PlotLegend"] => {
+                let corner = PlotLegend::descriptor_corner().component;
+                if let Some(c) = chunk
+                    .iter_component::<Corner2D>(corner)
+                    .flat_map(|batch| batch.to_vec())
+                    .last()
+                {
+                    views.entry(id.to_string()).or_default().legend = Some(format!("{c:?}"));
                 }
             }
             _ => {}
@@ -487,15 +543,48 @@ fn unmatched(
     problems
 }
 
-fn check_views(path: &Path) -> Vec<BlueprintView> {
+pub(crate) fn check_views(path: &Path) -> Vec<BlueprintView> {
     let views = blueprint_views(path);
     let problems = unmatched(&views, &entity_components(path));
     assert!(problems.is_empty(), "{problems:#?}");
     let all = chunks(path);
+    // Every plot's time axis is linked to the one range, which shows the whole run with room
+    // at both ends, so the last label reads whole ("+10s", not "+1").
+    let (start, end) = linked_time_range(path).expect("a range for the linked time axes");
+    let ends = all
+        .iter()
+        .flat_map(|c| {
+            c.timelines()
+                .iter()
+                .filter(|(name, _)| ["sim_time", "wall_time"].contains(&name.as_str()))
+                .flat_map(|(_, t)| t.times_raw().to_vec())
+                .collect::<Vec<_>>()
+        })
+        .fold((i64::MAX, i64::MIN), |(a, b), t| (a.min(t), b.max(t)));
+    assert!(
+        start < ends.0.min(0) && end > ends.1,
+        "the linked range {start}..{end} leaves no room around the run's {ends:?}"
+    );
     for v in views.iter().filter(|v| v.class == "TimeSeries") {
+        assert_eq!(v.time_link.as_deref(), Some("LinkToGlobal"), "{v:?}");
+        assert!(
+            v.legend.is_some(),
+            "{:?}: its legend's corner is chosen",
+            v.name
+        );
         let [lo, hi] = v
             .y_range
             .unwrap_or_else(|| panic!("{:?} has no y range in the final layout", v.name));
+        // A range the stock viewer labels above "0" alone: a step of a power of ten that
+        // fits in it, at most 7 of them across. In the pictures (1600x900) a plot of the
+        // four-plot column labels the cart's 6.96 steps (±3.48 m), one of the five-plot
+        // column 5.2 but not 6.96 (`recording::label_top` keeps those at 5.5 and under); a
+        // latency fitted to 0–80 ms (9.65 steps of 10) showed "0" alone.
+        let labelled = (-12..=12).any(|k| {
+            let step = 10f64.powi(k);
+            step <= hi.max(-lo) && (hi - lo) / step <= 7.0
+        });
+        assert!(labelled, "{:?}: no labelled step in {lo}..{hi}", v.name);
         let values: Vec<f64> = all
             .iter()
             .filter(|c| v.queries.contains(&c.entity_path().to_string()))
@@ -868,6 +957,31 @@ fn qos_cfg() -> RunConfig {
     }
 }
 
+/// The event lines of a recording, each with its level (`INFO`, `WARN`, …), in the order
+/// they were logged.
+pub(crate) fn events_with_levels(path: &Path) -> Vec<(String, String)> {
+    let mut out = Vec::new();
+    for c in chunks(path)
+        .into_iter()
+        .filter(|c| c.entity_path().to_string() == "/events")
+    {
+        let column = |component| -> Vec<String> {
+            c.iter_slices::<String>(component)
+                .map(|s| {
+                    s.first()
+                        .map(|x| x.as_str().to_string())
+                        .unwrap_or_default()
+                })
+                .collect()
+        };
+        let texts = column(rerun::TextLog::descriptor_text().component);
+        let levels = column(rerun::TextLog::descriptor_level().component);
+        assert_eq!(texts.len(), levels.len(), "every event has its level");
+        out.extend(levels.into_iter().zip(texts));
+    }
+    out
+}
+
 /// The event lines of a recording with their `sim_time` (ns) and `control_step`.
 pub(crate) fn events_with_times(path: &Path) -> Vec<(i64, i64, String)> {
     let mut out = Vec::new();
@@ -974,6 +1088,37 @@ fn a_qos_run_plots_its_counters_and_logs_its_events() {
     );
     let total = format!("({} in all)", cmd.qos_counters["requested_deadline_missed"]);
     assert!(missed.last().unwrap().2.ends_with(&total), "{missed:?}");
+    // A burst of misses is one line: a miss less than a second after the last line waits
+    // for the next one, so the two lease events are not buried (issue 25: 84 lines).
+    for pair in missed.windows(2).take(missed.len().saturating_sub(2)) {
+        assert!(
+            pair[1].0 - pair[0].0 >= 1_000_000_000,
+            "lines under a second apart: {missed:#?}"
+        );
+    }
+    assert!(missed.len() <= 11, "at most a line a second: {missed:#?}");
+    // Trouble reads as trouble: the misses, the stall and the lost liveliness are warnings.
+    let levels = events_with_levels(&path);
+    let level_of = |starts: &str| -> Vec<&str> {
+        levels
+            .iter()
+            .filter(|(_, e)| e.starts_with(starts))
+            .map(|(l, _)| l.as_str())
+            .collect()
+    };
+    for (starts, level) in [
+        ("deadline missed on /cmd", "WARN"),
+        ("injected stall: node policy", "WARN"),
+        ("node policy not alive", "WARN"),
+        ("node policy alive again", "INFO"),
+        ("start: ", "INFO"),
+    ] {
+        let found = level_of(starts);
+        assert!(
+            !found.is_empty() && found.iter().all(|l| *l == level),
+            "{starts:?} should be {level}: {levels:#?}"
+        );
+    }
     let at = |text: &str| -> (i64, i64) {
         let (t, s, _) = events
             .iter()
@@ -1180,6 +1325,57 @@ fn a_launch_across_processes_records_every_step() {
             .any(|(_, _, e)| e.contains("launcher is gone")),
         "{events:?}"
     );
+}
+
+/// The colour and width a series line is drawn with (`SeriesLines`), as logged for
+/// `entity`: `(rgba, width px)`.
+fn series_style(all: &[Chunk], entity: &str) -> Option<(u32, f32)> {
+    let of = |c: &Chunk, component| -> Option<u32> {
+        c.iter_slices::<u32>(component)
+            .flat_map(|s| s.to_vec())
+            .last()
+    };
+    let c = all.iter().find(|c| {
+        c.entity_path().to_string() == entity && c.num_rows() > 0 && {
+            of(c, rerun::SeriesLines::descriptor_colors().component).is_some()
+        }
+    })?;
+    let color = of(c, rerun::SeriesLines::descriptor_colors().component)?;
+    let width = c
+        .iter_slices::<f32>(rerun::SeriesLines::descriptor_widths().component)
+        .flat_map(|s| s.to_vec())
+        .last()?;
+    Some((color, width))
+}
+
+/// A topic has one colour in every plot, and where two topics' lines coincide (the
+/// chapter's: both at 50 Hz, none dropped) the first drawn is wider, so both show (#25:
+/// `/action` hid under `/obs`, and colours changed between graphs). Read from the reference
+/// recording, which the code reproduces.
+#[test]
+fn a_topic_keeps_its_colour_in_every_plot_and_coinciding_lines_both_show() {
+    let all = chunks(&reference());
+    let mut colors = BTreeMap::new();
+    for topic in ["obs", "action"] {
+        let styles: Vec<(u32, f32)> = ["published", "dropped", "msg_per_s"]
+            .iter()
+            .map(|m| {
+                let e = format!("/bus/{topic}/{m}");
+                series_style(&all, &e).unwrap_or_else(|| panic!("no line style for {e}"))
+            })
+            .collect();
+        assert!(
+            styles.iter().all(|s| s.0 == styles[0].0),
+            "/{topic}: one colour in every plot: {styles:?}"
+        );
+        colors.insert(topic, styles);
+    }
+    let (action, obs) = (&colors["action"], &colors["obs"]);
+    assert_ne!(action[0].0, obs[0].0, "two topics, two colours");
+    // Drawn in entity-path order, /action first: it is the wider in each plot.
+    for (a, o) in action.iter().zip(obs) {
+        assert!(a.1 > o.1, "/action {a:?} under /obs {o:?} would hide");
+    }
 }
 
 /// The bus plots come with the actuator's steps; with the actuator killed at 1 s of a 3 s
