@@ -1093,6 +1093,60 @@ mod tests {
         assert!(text.contains("node 'policy' failed: boom"), "{text}");
     }
 
+    /// A refused rate reads whole enough to act on at both sizes: the value tried and the
+    /// rule (#25: at 80×24 "must be 50 Hz, got 4" when 40 was tried).
+    #[test]
+    fn a_refused_actuator_rate_names_the_rate_tried_at_both_sizes() {
+        // The engine's words: its command goes through the graph's own check.
+        let refused = ratelab::graph::GraphSpec::chapter()
+            .set_rate("actuator", 40.0)
+            .unwrap_err()
+            .to_string();
+        for (w, h) in [(80, 24), (120, 40)] {
+            let (mut app, _rx) = app_after(virtual_cfg(50.0, 1), false);
+            app.on_telemetry(Telemetry::Error(refused.clone()));
+            let text = render(&app, w, h);
+            assert!(
+                text.contains("actuator rate 40 Hz refused"),
+                "{w}x{h}: {text}"
+            );
+            if w >= 120 {
+                assert!(text.contains("it must be 50 Hz"), "{w}x{h}: {text}");
+            }
+        }
+    }
+
+    /// After a fall `=` still shows what it takes (#25: it took input with no prompt), and
+    /// what was said of the next run goes when that run starts (#25: "… (from the next
+    /// run)" stayed on it). At both sizes.
+    #[test]
+    fn after_a_fall_typing_a_rate_has_its_prompt_and_a_new_run_clears_the_last_word() {
+        for (w, h) in [(80, 24), (120, 40)] {
+            let (mut app, _rx) = app_after(virtual_cfg(5.0, 10), true);
+            assert!(matches!(app.view().verdict, super::view::Verdict::Fell(_)));
+            app.on_msg(Msg::TypeRate);
+            app.on_msg(Msg::Input('8'));
+            let typing = render(&app, w, h);
+            // The footer: the screen's last line.
+            let footer = typing.lines().last().unwrap_or_default();
+            assert!(footer.contains("rate (Hz): 8"), "{w}x{h}: {typing}");
+            assert!(footer.contains("Enter apply"), "{w}x{h}: {typing}");
+            app.on_msg(Msg::Submit);
+            let said = app.view().message.expect("the change is said");
+            assert!(said.contains("next run"), "{said}");
+            assert!(render(&app, w, h).contains("next run"), "{w}x{h}");
+            // The next run starts: what was said of it belongs to the run before.
+            app.on_telemetry(Telemetry::Started {
+                cfg: virtual_cfg(8.0, 10),
+                policy: "scripted balancer".into(),
+                recording: None,
+            });
+            let fresh = render(&app, w, h);
+            assert!(app.view().message.is_none(), "{w}x{h}: {fresh}");
+            assert!(!fresh.contains("next run"), "{w}x{h}: {fresh}");
+        }
+    }
+
     /// After a fall the keys set the next run: the frozen figures stay beside the rate and
     /// depth they were measured under, and the next run's show as next.
     #[test]
@@ -1151,8 +1205,21 @@ mod tests {
             topics: None,
         });
         app.on_telemetry(Telemetry::Wire(vec![(0, 214.4, 402.7)]));
+        app.set_endpoint(Some("tls/127.0.0.1:7451".into()));
         for (w, h) in [(80, 24), (120, 40)] {
             let text = render(&app, w, h);
+            // Where the launch listens shows at once (it may not be 7449): in the header
+            // where it fits, and in the footer.
+            let header = text.lines().next().unwrap_or_default();
+            if w >= 120 {
+                assert!(
+                    header.contains("2 processes at tls/127.0.0.1:7451"),
+                    "{header}"
+                );
+            }
+            assert!(header.contains("t 2.00 s"), "{w}x{h}: {header}");
+            let footer = text.lines().last().unwrap_or_default();
+            assert!(footer.contains("tls/127.0.0.1:7451"), "{w}x{h}: {footer}");
             for needle in [
                 "2 processes",
                 "sensor@robot",

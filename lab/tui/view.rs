@@ -299,7 +299,8 @@ pub struct View {
     pub message_fresh: bool,
     /// Watching a graph across processes: the header's note (`2 processes`).
     pub attached: Option<String>,
-    /// Attached: where the launch listens (the footer's note).
+    /// Attached: where the launch listens (the header's note where it fits, and the
+    /// footer's).
     pub endpoint: Option<String>,
 }
 
@@ -375,8 +376,26 @@ fn render_status(v: &View, area: Rect, buf: &mut Buffer) {
         " ratelab ".black().on_cyan().bold(),
         format!(" {} clock", v.clock).into(),
     ];
+    let fixed = format!(
+        " │ t {:.2} s │ seed {} │ {} │ ",
+        v.sim_time_s,
+        v.seed,
+        depth_summary(&v.topics)
+    );
     if let Some(a) = &v.attached {
-        spans.push(format!(" · {a}").bold());
+        // Where the launch listens, when the line has room for it beside the run's figures
+        // (at 80 columns the footer says it).
+        let head: usize = spans.iter().map(|s| s.content.chars().count()).sum();
+        let note = format!(" · {a}");
+        let at = v
+            .endpoint
+            .as_ref()
+            .map(|ep| format!(" at {ep}"))
+            .filter(|at| {
+                head + note.chars().count() + at.chars().count() + fixed.chars().count() + 7
+                    <= usize::from(area.width)
+            });
+        spans.push(format!("{note}{}", at.unwrap_or_default()).bold());
     }
     if !v.speed.is_empty() {
         spans.push(format!(" {}", v.speed).into());
@@ -384,12 +403,6 @@ fn render_status(v: &View, area: Rect, buf: &mut Buffer) {
     if v.paused {
         spans.push(" PAUSED".yellow().bold());
     }
-    let fixed = format!(
-        " │ t {:.2} s │ seed {} │ {} │ ",
-        v.sim_time_s,
-        v.seed,
-        depth_summary(&v.topics)
-    );
     // The brain's label in what is left (cut at a word's end, or left out), so the line
     // never runs off the screen mid-word.
     let head: usize = spans.iter().map(|s| s.content.chars().count()).sum();

@@ -5,12 +5,13 @@ use std::io::{Read, Write};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
-/// A pseudo-terminal of 30 rows and 100 columns, as the tests' screens are.
-fn pty() -> portable_pty::PtyPair {
+/// A pseudo-terminal of `cols` × `rows` (the tests' screens are 100×30 unless they test
+/// the two sizes the lab is made for, 80×24 and 120×40).
+fn pty(cols: u16, rows: u16) -> portable_pty::PtyPair {
     native_pty_system()
         .openpty(PtySize {
-            rows: 30,
-            cols: 100,
+            rows,
+            cols,
             pixel_width: 0,
             pixel_height: 0,
         })
@@ -49,7 +50,12 @@ impl Lab {
 
     /// With these environment variables set as well.
     fn start_with(args: &[&str], env: &[(&str, String)]) -> Lab {
-        let pty = pty();
+        Lab::start_sized(args, env, 100, 30)
+    }
+
+    /// In a terminal of `cols` × `rows`.
+    fn start_sized(args: &[&str], env: &[(&str, String)], cols: u16, rows: u16) -> Lab {
+        let pty = pty(cols, rows);
         let mut cmd = CommandBuilder::new(env!("CARGO_BIN_EXE_ratelab"));
         cmd.args(args);
         cmd.env("TERM", "xterm-256color");
@@ -60,8 +66,8 @@ impl Lab {
         let child = pty.slave.spawn_command(cmd).expect("spawn ratelab");
         drop(pty.slave);
         let parser = Arc::new(Mutex::new(vt100::Parser::new(
-            std::num::NonZeroU16::new(30).unwrap(),
-            std::num::NonZeroU16::new(100).unwrap(),
+            std::num::NonZeroU16::new(rows).unwrap(),
+            std::num::NonZeroU16::new(cols).unwrap(),
             0,
         )));
         let mut reader = pty.master.try_clone_reader().unwrap();
@@ -235,7 +241,7 @@ fn a_lab_whose_terminal_hangs_up_ends_quietly_with_its_recording_whole() {
     let _machine = crate::machine::alone();
     let dir = tempfile::tempdir().unwrap();
     let rrd = dir.path().join("hup.rrd");
-    let pty = pty();
+    let pty = pty(100, 30);
     let mut cmd = CommandBuilder::new(env!("CARGO_BIN_EXE_ratelab"));
     cmd.args(["--clock", "virtual", "--record"]);
     cmd.arg(&rrd);
@@ -331,6 +337,30 @@ fn any_graph_in_the_lab_tab_selects_and_esc_backs_out() {
 }
 
 /// Keys typed as a person types them: one every 0.4 s.
+/// At the two sizes the lab is made for, the real binary: a break (`b`, 5 Hz) falls, the
+/// verdict and the drops read whole, `=` after the fall shows its prompt and Esc cancels it,
+/// and `q` restores the terminal (#25's screen items at 80×24 and 120×40).
+#[test]
+fn at_80x24_and_120x40_a_fall_reads_whole_and_typing_a_rate_has_its_prompt() {
+    let _machine = crate::machine::alone();
+    for (cols, rows) in [(80, 24), (120, 40)] {
+        let mut lab = Lab::start_sized(&["--clock", "virtual"], &[], cols, rows);
+        lab.wait_for("BALANCED", Duration::from_secs(60));
+        type_slowly(&mut lab, "b");
+        let fell = lab.wait_for("FELL at t=", Duration::from_secs(30));
+        assert!(fell.contains("5 Hz"), "{cols}x{rows}:\n{fell}");
+        assert!(fell.contains("drop"), "{cols}x{rows}:\n{fell}");
+        type_slowly(&mut lab, "=8");
+        let typing = lab.wait_for("rate (Hz): 8", Duration::from_secs(5));
+        assert!(typing.contains("Enter apply"), "{cols}x{rows}:\n{typing}");
+        lab.keys("\x1b");
+        lab.wait_until("the prompt gone", Duration::from_secs(5), |s| {
+            !s.contains("rate (Hz):")
+        });
+        lab.quit();
+    }
+}
+
 fn type_slowly(lab: &mut Lab, keys: &str) {
     for k in keys.chars() {
         lab.keys(&k.to_string());
