@@ -908,7 +908,10 @@ mod tests {
             ("robot".to_string(), "sensor".to_string()),
             ("policy".to_string(), "policy".to_string()),
         ];
-        let (first, again) = (policy_stats(7, 100, None), policy_stats(8, 30, Some(2_000_000_000)));
+        let (first, again) = (
+            policy_stats(7, 100, None),
+            policy_stats(8, 30, Some(2_000_000_000)),
+        );
         let seen = BTreeMap::from([("cartpole/policy".to_string(), (again.clone(), None))]);
         // Heard before and after its restart: the counts go on.
         let mut known = Known::new(Some(spec.clone()));
@@ -918,7 +921,11 @@ mod tests {
         let t = table(&seen, &alive, &graphs);
         let obs = row(&t, "/obs");
         let cols: Vec<&str> = obs.split_whitespace().collect();
-        assert_eq!(cols[2..4], ["130", "4"], "published and dropped carried over: {t}");
+        assert_eq!(
+            cols[2..4],
+            ["130", "4"],
+            "published and dropped carried over: {t}"
+        );
         assert!(!obs.contains("since") && !obs.contains("counted by"), "{t}");
         let node = row(&t, "policy ");
         assert!(node.contains(" 130 ") && node.ends_with("yes"), "{t}");
@@ -929,13 +936,22 @@ mod tests {
         let t = table(&seen, &alive, &graphs);
         let obs = row(&t, "/obs");
         assert!(obs.contains(" 30 "), "{t}");
-        assert!(obs.ends_with("counted by 'policy' since it rejoined at 2.00 s"), "{t}");
-        assert!(row(&t, "policy ").ends_with("yes    since it rejoined at 2.00 s"), "{t}");
+        assert!(
+            obs.ends_with("counted by 'policy' since it rejoined at 2.00 s"),
+            "{t}"
+        );
+        assert!(
+            row(&t, "policy ").ends_with("yes    since it rejoined at 2.00 s"),
+            "{t}"
+        );
         // Gone: its last counts stand, and say so.
         let robot_only = vec![("robot".to_string(), "sensor".to_string())];
         let t = table(&seen, &robot_only, &graphs);
         let obs = row(&t, "/obs");
-        assert!(obs.contains(" 30 ") && obs.contains(" - "), "no rate for a gone holder: {t}");
+        assert!(
+            obs.contains(" 30 ") && obs.contains(" - "),
+            "no rate for a gone holder: {t}"
+        );
         assert!(obs.ends_with("counted by 'policy' until it went"), "{t}");
         assert!(row(&t, "policy ").contains("GONE"), "{t}");
     }

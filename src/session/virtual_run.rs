@@ -250,11 +250,41 @@ fn rate_target(cmd: &Command, h: &GraphHandles) -> Option<usize> {
 /// After a live rate change: a node keeps the phase its old rate left it (its next tick is
 /// where the old period put it, then the new period on), so its ticks need not fall where a
 /// run started at the new rate puts them (multiples of the period from 0), and its latency
-/// can differ from `ratelab run`'s at that rate. Says so, with the offset, when it does
-/// (`63.333 ms off a fresh run's phase (r realigns)`).
+/// can differ from `ratelab run`'s at that rate. Says so, with the offset and where its ticks
+/// now fall against the sensor's (what its latency depends on), when it does (`63.333 ms off
+/// a fresh run's phase, 3.333 ms after the sensor's ticks (r realigns)`).
 fn phase_note(sched: &VirtualScheduler, h: &GraphHandles, node: usize) -> Option<String> {
     let period = h.rates.get(node)?.period();
     let next = sched.next_due_of(node)?;
     let off = Nanos(next.0 % period.0.max(1));
-    (off.0 != 0).then(|| format!("{off} off a fresh run's phase (r realigns)"))
+    (off.0 != 0).then(|| {
+        let sensor = after_sensor(sched, h, node, next).unwrap_or_default();
+        format!("{off} off a fresh run's phase{sensor} (r realigns)")
+    })
+}
+
+/// Where node `node`'s next tick (at `next`) falls against the chain's sensor's ticks:
+/// `, on the sensor's ticks` (at the same instants, after the sensor by the tie-break order,
+/// so it reads a fresh state) or `, 3.333 ms after the sensor's ticks`. `None` for the sensor
+/// itself or a graph without the chapter's chain.
+fn after_sensor(
+    sched: &VirtualScheduler,
+    h: &GraphHandles,
+    node: usize,
+    next: Nanos,
+) -> Option<String> {
+    let sensor = h.spec.chain?.sensor.0;
+    if sensor == node {
+        return None;
+    }
+    let period = h.rates.get(sensor)?.period().0.max(1);
+    let sensor_next = sched.next_due_of(sensor)?;
+    let after = Nanos(
+        (i128::from(next.0) - i128::from(sensor_next.0)).rem_euclid(i128::from(period)) as u64,
+    );
+    Some(if after.0 == 0 {
+        ", on the sensor's ticks".to_string()
+    } else {
+        format!(", {after} after the sensor's ticks")
+    })
 }

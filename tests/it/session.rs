@@ -605,8 +605,8 @@ fn notes(script: &[Control]) -> Vec<String> {
 }
 
 /// A live rate change keeps the phase the old rate left: the lab says so, with the offset
-/// from where a run started at the new rate ticks (so `ratelab run` at that rate can differ),
-/// and says nothing when the phases agree.
+/// from where a run started at the new rate ticks (so `ratelab run` at that rate can differ)
+/// and where its ticks fall against the sensor's, and says nothing when the phases agree.
 #[test]
 fn a_live_rate_change_says_when_it_keeps_an_old_phase() {
     let hz = |hz: f64| Control::Apply(Command::SetControlHz { hz });
@@ -619,7 +619,8 @@ fn a_live_rate_change_says_when_it_keeps_an_old_phase() {
     let said = notes(&script);
     assert!(
         said.iter().any(|n| n.starts_with("control rate → 10 Hz · ")
-            && n.ends_with(" off a fresh run's phase (r realigns)")),
+            && n.contains(" off a fresh run's phase, ")
+            && n.ends_with(" ms after the sensor's ticks (r realigns)")),
         "{said:?}"
     );
     // 50 → 25 Hz after the ticks at 0 and 20 ms: the next is at 40 ms, where a fresh 25 Hz
@@ -630,7 +631,7 @@ fn a_live_rate_change_says_when_it_keeps_an_old_phase() {
     let said = notes(&script);
     assert!(
         said.iter()
-            .any(|n| n == "control rate → 25 Hz · 20 ms off a fresh run's phase (r realigns)"),
+            .any(|n| n == "control rate → 25 Hz · 20 ms off a fresh run's phase, on the sensor's ticks (r realigns)"),
         "{said:?}"
     );
     let mut script = steps(2);
@@ -781,4 +782,112 @@ fn the_status_keeps_counting_while_the_actuator_is_dead() {
     assert_eq!(now, ratelab::Nanos(3_000_000_000));
     assert_eq!(a.dropped, metrics.topics["/action"].dropped);
     assert_eq!(a.dropped, 100);
+}
+
+/// Under the real clock a run that fell stops its clock where it fell: the engine's status
+/// after the fall shows that instant, not wall time running on (#25: the lab's charts
+/// scrolled the fall away within 10 s).
+#[test]
+fn under_the_real_clock_the_clock_stops_at_the_fall() {
+    let _m = crate::machine::shared();
+    let dir = tempfile::tempdir().unwrap();
+    let (ctl, ctl_rx) = unbounded();
+    let (tel_tx, tel) = unbounded::<Telemetry>();
+    let mut s = settings(
+        ClockKind::Real,
+        0,
+        false,
+        Speed::Times(1.0),
+        &dir.path().join("session.json"),
+    );
+    // 5 Hz falls within about a second (0.84 s under the virtual clock).
+    s.cfg.set_control_hz(5.0).unwrap();
+    let engine = Engine::new(s, ctl_rx, tel_tx).spawn();
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(20);
+    let metrics = loop {
+        let left = deadline.saturating_duration_since(std::time::Instant::now());
+        if let Telemetry::Ended { metrics, .. } =
+            tel.recv_timeout(left).expect("the run falls within 20 s")
+        {
+            break metrics;
+        }
+    };
+    let fell_s = metrics.fell_at_s.expect("a 5 Hz policy falls");
+    // A second of statuses after the fall (one every 33 ms): every one at the run's end.
+    let until = std::time::Instant::now() + std::time::Duration::from_secs(1);
+    let mut shown = Vec::new();
+    while let Ok(m) = tel.recv_timeout(until.saturating_duration_since(std::time::Instant::now())) {
+        if let Telemetry::Status { now, .. } = m {
+            shown.push(now.as_secs_f64());
+        }
+    }
+    ctl.send(Control::Quit).unwrap();
+    engine.join().unwrap();
+    assert!(
+        shown.len() >= 10,
+        "statuses go on after the fall: {shown:?}"
+    );
+    assert!(
+        shown.iter().all(|t| (t - metrics.sim_time_s).abs() < 0.03),
+        "fell at {fell_s} s (run time {} s), yet the clock showed {shown:?}",
+        metrics.sim_time_s
+    );
+}
+
+/// Restarting (`r`) after reaching a rate through another gives what that rate gives from a
+/// fresh start, as headless: 10 Hz reached through 12 Hz kept 12 Hz's phase in the live run
+/// (latency p50 60 / max 100 ms, #25), a fresh 10 Hz run has 40 / 80.
+#[test]
+fn restarting_at_a_rate_reached_through_another_gives_the_headless_result() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("session.json");
+    let mut script = vec![Control::Apply(Command::SetControlHz { hz: 12.0 })];
+    script.extend(steps(13));
+    script.push(Control::Apply(Command::SetControlHz { hz: 10.0 }));
+    script.extend(steps(100));
+    script.push(Control::Reset { next_seed: false });
+    script.extend(steps(100));
+    script.push(Control::Quit);
+    let log = drive(&script, &file);
+    assert_eq!(log.runs.len(), 2);
+    let live = log.runs[1]
+        .metrics
+        .clone()
+        .expect("the second run's metrics");
+    let mut cfg = log.runs[1].config("run 2").unwrap();
+    assert_eq!(cfg.control_hz(), Some(10.0));
+    // The same run, headless, for as long as the live one ran.
+    cfg.duration = ratelab::Nanos((live.sim_time_s * 1e9).round() as u64);
+    let mut fresh = RunConfig {
+        clock: ClockKind::Virtual,
+        seed: cfg.seed,
+        duration: cfg.duration,
+        ..RunConfig::default()
+    };
+    fresh.set_control_hz(10.0).unwrap();
+    assert_eq!(
+        cfg.graph, fresh.graph,
+        "the restart starts the graph afresh"
+    );
+    assert_eq!(
+        cfg.phase_offsets, fresh.phase_offsets,
+        "no phase carried over"
+    );
+    let headless = ratelab::run(
+        &fresh,
+        Box::new(ratelab::policy::Scripted),
+        ratelab::RunOptions::new(),
+    )
+    .unwrap()
+    .metrics;
+    assert_eq!(
+        (live.latency_p50_ms, live.latency_max_ms, live.steps),
+        (
+            headless.latency_p50_ms,
+            headless.latency_max_ms,
+            headless.steps
+        ),
+        "live {live:?}\nheadless {headless:?}"
+    );
+    assert_eq!((live.latency_p50_ms, live.latency_max_ms), (40.0, 80.0));
 }
