@@ -1187,6 +1187,39 @@ mod tests {
         );
     }
 
+    /// The cartpole panel of a rendered screen: the rail is its lowest drawing (the cart
+    /// on it, never under it: #25 saw an attached lab's cart hang under the rail), the
+    /// cart and pole above or on the rail's row.
+    fn cart_sits_on_the_rail(text: &str, w: u16, h: u16) {
+        let braille = |c: char| ('\u{2801}'..='\u{28ff}').contains(&c);
+        // (The test backend quotes each line.)
+        let lines: Vec<&str> = text.lines().map(|l| l.trim_matches('"')).collect();
+        let top = lines
+            .iter()
+            .position(|l| l.contains("┌ cartpole"))
+            .unwrap_or_else(|| panic!("{w}x{h}: no cartpole panel:\n{text}"));
+        // The panel's inside: from its title to its bottom border, up to its right border.
+        let inside: Vec<String> = lines[top + 1..]
+            .iter()
+            .take_while(|l| !l.starts_with('└'))
+            .map(|l| l.chars().skip(1).take_while(|c| *c != '│').collect())
+            .collect();
+        let rail = inside
+            .iter()
+            .rposition(|l| l.chars().filter(|c| braille(*c)).count() >= l.chars().count() / 2)
+            .unwrap_or_else(|| panic!("{w}x{h}: no rail in\n{}", inside.join("\n")));
+        assert!(
+            inside[rail + 1..].iter().all(|l| !l.chars().any(braille)),
+            "{w}x{h}: something drawn under the rail:\n{}",
+            inside.join("\n")
+        );
+        assert!(
+            inside[..rail].iter().any(|l| l.chars().any(braille)),
+            "{w}x{h}: the cart and pole are above the rail:\n{}",
+            inside.join("\n")
+        );
+    }
+
     #[test]
     fn an_attached_lab_names_each_nodes_process_and_draws_a_gone_one() {
         let (mut app, rx) = app_after(virtual_cfg(50.0, 2), false);
@@ -1251,6 +1284,7 @@ mod tests {
                 !footer.contains("rate") && !footer.contains("depth"),
                 "{footer}"
             );
+            cart_sits_on_the_rail(&text, w, h);
         }
         // Tab selects to look, and says the keys do nothing to it; the help lists only the
         // keys that act here.
