@@ -2190,12 +2190,6 @@ impl StepObserver for RecordingObserver {
         {
             self.window.pop_front();
         }
-        let (t0, then) = self
-            .window
-            .front()
-            .cloned()
-            .unwrap_or_else(|| (s.t, vec![0; stats.len()]));
-        let span = s.t.saturating_sub(t0).as_secs_f64();
         for (i, (topic, st)) in self.shape.topics.iter().zip(&stats).enumerate() {
             let entity = topic.entity();
 
@@ -2211,13 +2205,21 @@ impl StepObserver for RecordingObserver {
                 s.step,
                 st.dropped as f64,
             );
-            // The first step spans no time: no rate to give yet (not 0 msg/s). Saturating: a
-            // topic's counters from another process may start over (it was restarted) or
-            // arrive from a peer that misbehaves.
-            if span > 0.0 {
-                let before = then.get(i).copied().unwrap_or(0);
-                let rate = st.published.saturating_sub(before) as f64 / span;
-                buf.scalar(&format!("bus/{entity}/msg_per_s"), s.t, s.step, rate);
+            // The window from the topic's first counted message: the first step spans no
+            // time, and a topic counted by another process has no count before that
+            // process's first figures; either way no rate yet (not 0 msg/s, then a jump).
+            // Saturating: a topic's counters from another process may start over (it was
+            // restarted) or arrive from a peer that misbehaves.
+            let from = self
+                .window
+                .iter()
+                .find(|(_, counts)| counts.get(i).is_some_and(|n| *n > 0));
+            if let Some((t0, counts)) = from {
+                let span = s.t.saturating_sub(*t0).as_secs_f64();
+                if span > 0.0 {
+                    let rate = st.published.saturating_sub(counts[i]) as f64 / span;
+                    buf.scalar(&format!("bus/{entity}/msg_per_s"), s.t, s.step, rate);
+                }
             }
         }
         {

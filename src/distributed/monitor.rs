@@ -233,8 +233,11 @@ impl Fold {
                 .iter()
                 .filter_map(|w| {
                     let i = self.spec.topics.iter().position(|t| t.name == w.topic)?;
-                    // Only the holder (the subscriber's process) measures its arrivals.
-                    (self.holders[i] == m.process).then_some((i, w.p50_us, w.p99_us))
+                    // Only the holder (the subscriber's process) measures its arrivals, and
+                    // a link with no sample yet (a process just started again) has no
+                    // latency to give (not 0 µs).
+                    (self.holders[i] == m.process && w.samples > 0)
+                        .then_some((i, w.p50_us, w.p99_us))
                 })
                 .collect();
             if !links.is_empty() {
@@ -1372,6 +1375,15 @@ mod tests {
             panic!("one wire report expected")
         };
         assert_eq!(links, &vec![(0, 120.0, 300.0)]);
+        // Started again, the policy's process has no sample yet: no latency, not 0 µs.
+        let mut m = live("policy", vec![], vec![]);
+        m.wire = vec![wire::WireLink {
+            samples: 0,
+            p50_us: 0.0,
+            p99_us: 0.0,
+            ..link("/obs", "policy")
+        }];
+        assert!(f.stats(m).iter().all(|t| !matches!(t, Telemetry::Wire(_))));
     }
 
     #[test]

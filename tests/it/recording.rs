@@ -1273,6 +1273,17 @@ fn a_launch_across_processes_records_every_step() {
         "{published} of {total}"
     );
     let views = check_views(&path);
+    // Each topic's msg/s starts at its rate: a topic counted by another process has no
+    // count before that process's first figures, which read as 0 msg/s and then a jump.
+    for topic in ["obs", "action"] {
+        let rates = sim_series(&all, &format!("/bus/{topic}/msg_per_s"));
+        let (t, first) = rates[0];
+        assert!(
+            (45.0..=55.0).contains(&first),
+            "/{topic} starts at {first} msg/s at {t} ns: {:?}",
+            &rates[..rates.len().min(5)]
+        );
+    }
     // What makes it a launch: each node's process in the node graph, each crossing topic's
     // time on the wire (a view of its own), the placement and the wire in the summary.
     let wire = views
