@@ -392,6 +392,92 @@ mod tests {
             "{text}"
         );
         assert!(!text.contains("dropped ✗"), "{text}");
+        // At 80 columns too: the ✗ stays, no green tick on the topic.
+        let small = render(&app, 80, 24);
+        assert!(small.contains('✗'), "{small}");
+        assert!(
+            !small.contains("drop ✓") && !small.contains("dropped ✓"),
+            "{small}"
+        );
+    }
+
+    /// #25's case: a leased policy stalled at 1 s falls at 2.42 s. At the fall the lab must
+    /// not show `/action` at 50 msg/s (its publisher has sent nothing for 1.42 s: 20.2 over
+    /// the run's 2.4 s, with a ✗), and it shows the policy stalled, at both sizes.
+    #[test]
+    fn a_stalled_publisher_s_topic_reads_its_silence_at_the_fall() {
+        let mut cfg = virtual_cfg(50.0, 10);
+        cfg.graph.set_lease("policy", 60.0).unwrap();
+        cfg.faults = vec![ratelab::qos::Fault::parse("policy@1+3", false).unwrap()];
+        let (app, _rx) = app_after(cfg, true);
+        assert!(matches!(app.view().verdict, super::view::Verdict::Fell(_)));
+        let action = app
+            .view()
+            .topics
+            .iter()
+            .find(|t| t.name == "/action")
+            .cloned()
+            .unwrap();
+        assert!(action.msg_per_s < 40.0, "{:?}", action.msg_per_s);
+        for (w, h) in [(80, 24), (120, 40)] {
+            let text = render(&app, w, h);
+            // The node names its state: the injected stall (it is also not alive).
+            assert!(text.contains("✗ STALLED"), "{w}x{h}: {text}");
+            assert!(!text.contains("50.0 msg/s ✓"), "{w}x{h}: {text}");
+            assert!(text.contains("20.2 msg/s ✗"), "{w}x{h}: {text}");
+            let rates: Vec<&str> = text.matches("50.0 msg/s").collect();
+            assert!(
+                rates.len() <= 1,
+                "only /obs keeps its rate: {w}x{h}: {text}"
+            );
+        }
+    }
+
+    /// `L` on a selected topic walks the link-loss ladder all the way to 80 % (exercise 5
+    /// needs it; it stopped at 20 %), then back to none.
+    #[test]
+    fn the_loss_ladder_reaches_80_percent_and_wraps() {
+        let (mut app, rx) = app_after(virtual_cfg(50.0, 1), false);
+        // Tab past the three nodes to /obs.
+        for _ in 0..4 {
+            app.on_msg(Msg::SelectNext);
+        }
+        assert!(app.view().topics[0].selected);
+        // The engine's side: each command applied to the graph, its QoS in the next status.
+        let mut graph = ratelab::graph::GraphSpec::chapter();
+        let mut sent = Vec::new();
+        for _ in 0..6 {
+            app.on_msg(Msg::CycleLoss);
+            for c in rx.try_iter() {
+                if let Control::Apply(ratelab::run::Command::SetTopicQos { topic, pairs }) = c {
+                    graph.set_qos(&topic, &pairs).unwrap();
+                    sent.push(format!("{topic}:{pairs}"));
+                }
+            }
+            app.on_telemetry(Telemetry::Status {
+                now: ratelab::Nanos::SECOND,
+                paused: false,
+                speed: Speed::Times(1.0),
+                rates: vec![50.0; 3],
+                depths: vec![1, 1],
+                qos: graph.topics.iter().map(|t| t.qos).collect(),
+                alive: vec![None; 3],
+                policy: "scripted".into(),
+                exec: None,
+                topics: None,
+            });
+        }
+        assert_eq!(
+            sent,
+            [
+                "/obs:loss=0.01",
+                "/obs:loss=0.05",
+                "/obs:loss=0.2",
+                "/obs:loss=0.5",
+                "/obs:loss=0.8",
+                "/obs:loss=0",
+            ]
+        );
     }
 
     /// At 80×24 an arrow keeps room for few QoS counters: the ones that counted come first

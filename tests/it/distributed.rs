@@ -871,10 +871,13 @@ fn top_lists_a_running_graph() {
 
 /// `top` without `--connect` finds this user's launch, on whatever port it got, from the
 /// record the launch keeps while it runs (`$XDG_RUNTIME_DIR/ratelab/launch`), and says
-/// what to do when the recorded launch does not answer.
+/// what to do when the recorded launch does not answer. With 7449 taken (held here, as
+/// another user's launch would hold it), the launch says at once where it listens instead.
 #[test]
 fn top_finds_this_users_launch_without_connect() {
     let _m = crate::machine::alone();
+    // (When this fails, something else holds 7449 already: taken either way.)
+    let _taken = std::net::TcpListener::bind("127.0.0.1:7449");
     let runtime = tempfile::tempdir().unwrap();
     let record = runtime.path().join("ratelab/launch");
     let mut launcher = bin()
@@ -904,6 +907,10 @@ fn top_finds_this_users_launch_without_connect() {
     }
     std::thread::spawn(move || reader.for_each(drop));
     let endpoint = endpoint.expect("the launch says where it listens at once");
+    assert!(
+        endpoint.starts_with("tls/127.0.0.1:") && !endpoint.ends_with(":7449"),
+        "7449 is taken: {endpoint}"
+    );
     let recorded = std::fs::read_to_string(&record).unwrap();
     assert_eq!(
         recorded,
