@@ -222,6 +222,23 @@ mod tests {
         t.backend().to_string()
     }
 
+    /// The engine's status for the chapter's graph at 1 s: every node at 50 Hz, every topic
+    /// at depth 1 with `qos`, each node's liveliness `alive`.
+    fn chapter_status(qos: Vec<ratelab::qos::TopicQos>, alive: Vec<Option<bool>>) -> Telemetry {
+        Telemetry::Status {
+            now: ratelab::Nanos::SECOND,
+            paused: false,
+            speed: Speed::Times(1.0),
+            rates: vec![50.0; 3],
+            depths: vec![1, 1],
+            qos,
+            alive,
+            policy: "scripted".into(),
+            exec: None,
+            topics: None,
+        }
+    }
+
     fn virtual_cfg(control_hz: f64, secs: u64) -> RunConfig {
         let mut cfg = RunConfig {
             clock: ClockKind::Virtual,
@@ -454,18 +471,8 @@ mod tests {
                     sent.push(format!("{topic}:{pairs}"));
                 }
             }
-            app.on_telemetry(Telemetry::Status {
-                now: ratelab::Nanos::SECOND,
-                paused: false,
-                speed: Speed::Times(1.0),
-                rates: vec![50.0; 3],
-                depths: vec![1, 1],
-                qos: graph.topics.iter().map(|t| t.qos).collect(),
-                alive: vec![None; 3],
-                policy: "scripted".into(),
-                exec: None,
-                topics: None,
-            });
+            let qos = graph.topics.iter().map(|t| t.qos).collect();
+            app.on_telemetry(chapter_status(qos, vec![None; 3]));
         }
         assert_eq!(
             sent,
@@ -1311,18 +1318,10 @@ mod tests {
         let (mut app, rx) = app_after(virtual_cfg(50.0, 2), false);
         let spec = ratelab::graph::GraphSpec::chapter();
         app.set_attached(super::attached_label(&spec));
-        app.on_telemetry(Telemetry::Status {
-            now: ratelab::Nanos::SECOND,
-            paused: false,
-            speed: Speed::Times(1.0),
-            rates: vec![50.0; 3],
-            depths: vec![1, 1],
-            qos: vec![ratelab::qos::TopicQos::default(); 2],
-            alive: vec![Some(true), Some(false), Some(true)],
-            policy: "scripted".into(),
-            exec: None,
-            topics: None,
-        });
+        app.on_telemetry(chapter_status(
+            vec![ratelab::qos::TopicQos::default(); 2],
+            vec![Some(true), Some(false), Some(true)],
+        ));
         app.on_telemetry(Telemetry::Wire(vec![(0, 214.4, 402.7)]));
         app.set_endpoint(Some("tls/127.0.0.1:7451".into()));
         for (w, h) in [(80, 24), (120, 40)] {

@@ -370,6 +370,17 @@ pub(crate) struct BlueprintView {
     legend: Option<String>,
 }
 
+/// The last value of `component` (of type `C`) in `chunk`, if any.
+fn last<C: rerun::Component + Clone>(
+    chunk: &Chunk,
+    component: re_chunk::ComponentIdentifier,
+) -> Option<C> {
+    chunk
+        .iter_component::<C>(component)
+        .flat_map(|batch| batch.to_vec())
+        .last()
+}
+
 /// The chunks of the blueprint the `.rrd` at `path` activates last.
 fn active_blueprint(path: &Path) -> Vec<Chunk> {
     let file = std::io::BufReader::new(std::fs::File::open(path).unwrap());
@@ -454,32 +465,20 @@ fn blueprint_views(path: &Path) -> Vec<BlueprintView> {
             }
             ["view", id, "ScalarAxis"] => {
                 let range = ScalarAxis::descriptor_range().component;
-                if let Some(r) = chunk
-                    .iter_component::<rerun::components::Range1D>(range)
-                    .flat_map(|batch| batch.to_vec())
-                    .last()
-                {
+                if let Some(r) = last::<rerun::components::Range1D>(&chunk, range) {
                     views.entry(id.to_string()).or_default().y_range = Some(r.0 .0);
                 }
             }
             ["view", id, "TimeAxis"] => {
                 // The global range's own entity carries no link: no view is made for it.
                 let link = TimeAxis::descriptor_link().component;
-                if let Some(l) = chunk
-                    .iter_component::<LinkAxis>(link)
-                    .flat_map(|batch| batch.to_vec())
-                    .last()
-                {
+                if let Some(l) = last::<LinkAxis>(&chunk, link) {
                     views.entry(id.to_string()).or_default().time_link = Some(format!("{l:?}"));
                 }
             }
             ["view", id, "PlotLegend"] => {
                 let corner = PlotLegend::descriptor_corner().component;
-                if let Some(c) = chunk
-                    .iter_component::<Corner2D>(corner)
-                    .flat_map(|batch| batch.to_vec())
-                    .last()
-                {
+                if let Some(c) = last::<Corner2D>(&chunk, corner) {
                     views.entry(id.to_string()).or_default().legend = Some(format!("{c:?}"));
                 }
             }
