@@ -1186,6 +1186,31 @@ mod tests {
         assert!(text.contains("node 'policy' failed: boom"), "{text}");
     }
 
+    /// A live rate change's notice, as the engine says it: at 120 columns where the policy's
+    /// ticks now fall against the sensor's stays beside the fresh run's verdict; at 80 the
+    /// verdict stays (#25: the phase relative to the sensor).
+    #[test]
+    fn a_rate_changes_notice_keeps_the_phase_against_the_sensor_where_it_fits() {
+        let notice = "control rate → 7 Hz · 142.857 ms off a fresh run's phase · ticks 2.857 ms after the sensor's (r realigns) · a fresh run falls at 4.06 s: judge no sooner";
+        for (w, h) in [(80, 24), (120, 40)] {
+            let (mut app, _rx) = app_after(virtual_cfg(50.0, 1), false);
+            app.on_telemetry(Telemetry::Applied(notice.into()));
+            let text = render(&app, w, h);
+            let footer = text.lines().last().unwrap_or_default();
+            assert!(footer.contains("control rate → 7 Hz"), "{w}x{h}: {footer}");
+            assert!(
+                footer.contains("a fresh run falls at 4.06 s: judge no sooner"),
+                "{w}x{h}: {footer}"
+            );
+            if w >= 120 {
+                assert!(
+                    footer.contains("ticks 2.857 ms after the sensor's (r realigns)"),
+                    "{footer}"
+                );
+            }
+        }
+    }
+
     /// A refused rate reads whole enough to act on at both sizes: the value tried and the
     /// rule (#25: at 80×24 "must be 50 Hz, got 4" when 40 was tried).
     #[test]

@@ -1464,11 +1464,21 @@ fn fit_message(m: &str, width: usize) -> String {
     if len(m) <= width {
         return m.to_string();
     }
+    // Too long: what changed and the verdict (the first and last parts) stay, and the
+    // middle parts go from the first (a phase note's offset from a fresh run before where
+    // its ticks fall against the sensor's).
     let parts: Vec<&str> = m.split(" · ").collect();
     if parts.len() >= 3 {
-        let short = format!("{} · {}", parts[0], parts[parts.len() - 1]);
-        if len(&short) <= width {
-            return short;
+        let (first, last) = (parts[0], parts[parts.len() - 1]);
+        for drop in 1..parts.len() - 1 {
+            let kept: Vec<&str> = std::iter::once(first)
+                .chain(parts[1 + drop..parts.len() - 1].iter().copied())
+                .chain(std::iter::once(last))
+                .collect();
+            let short = kept.join(" · ");
+            if len(&short) <= width {
+                return short;
+            }
         }
     }
     // Cut at a word's end where one is near, so no word is left half.
@@ -1576,8 +1586,13 @@ mod tests {
 
     #[test]
     fn a_long_status_keeps_what_changed_and_the_verdict() {
-        let m = "control rate → 7 Hz · 142.857 ms off a fresh run's phase (r realigns) · a fresh run falls at 4.06 s: judge no sooner";
+        let m = "control rate → 7 Hz · 142.857 ms off a fresh run's phase · ticks 2.857 ms after the sensor's (r realigns) · a fresh run falls at 4.06 s: judge no sooner";
         assert_eq!(fit_message(m, 200), m);
+        // 120 columns: where the ticks fall against the sensor's stays.
+        assert_eq!(
+            fit_message(m, 117),
+            "control rate → 7 Hz · ticks 2.857 ms after the sensor's (r realigns) · a fresh run falls at 4.06 s: judge no sooner"
+        );
         assert_eq!(
             fit_message(m, 77),
             "control rate → 7 Hz · a fresh run falls at 4.06 s: judge no sooner"

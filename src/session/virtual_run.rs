@@ -252,20 +252,21 @@ fn rate_target(cmd: &Command, h: &GraphHandles) -> Option<usize> {
 /// run started at the new rate puts them (multiples of the period from 0), and its latency
 /// can differ from `ratelab run`'s at that rate. Says so, with the offset and where its ticks
 /// now fall against the sensor's (what its latency depends on), when it does (`63.333 ms off
-/// a fresh run's phase, 3.333 ms after the sensor's ticks (r realigns)`).
+/// a fresh run's phase · ticks 3.333 ms after the sensor's (r realigns)`: two parts of
+/// the notice, so a narrow footer keeps the second).
 fn phase_note(sched: &VirtualScheduler, h: &GraphHandles, node: usize) -> Option<String> {
     let period = h.rates.get(node)?.period();
     let next = sched.next_due_of(node)?;
     let off = Nanos(next.0 % period.0.max(1));
-    (off.0 != 0).then(|| {
-        let sensor = after_sensor(sched, h, node, next).unwrap_or_default();
-        format!("{off} off a fresh run's phase{sensor} (r realigns)")
+    (off.0 != 0).then(|| match after_sensor(sched, h, node, next) {
+        Some(sensor) => format!("{off} off a fresh run's phase · {sensor} (r realigns)"),
+        None => format!("{off} off a fresh run's phase (r realigns)"),
     })
 }
 
 /// Where node `node`'s next tick (at `next`) falls against the chain's sensor's ticks:
-/// `, on the sensor's ticks` (at the same instants, after the sensor by the tie-break order,
-/// so it reads a fresh state) or `, 3.333 ms after the sensor's ticks`. `None` for the sensor
+/// `ticks on the sensor's` (at the same instants, after the sensor by the tie-break order, so
+/// it reads a fresh state) or `ticks 3.333 ms after the sensor's`. `None` for the sensor
 /// itself or a graph without the chapter's chain.
 fn after_sensor(
     sched: &VirtualScheduler,
@@ -283,8 +284,8 @@ fn after_sensor(
         (i128::from(next.0) - i128::from(sensor_next.0)).rem_euclid(i128::from(period)) as u64,
     );
     Some(if after.0 == 0 {
-        ", on the sensor's ticks".to_string()
+        "ticks on the sensor's".to_string()
     } else {
-        format!(", {after} after the sensor's ticks")
+        format!("ticks {after} after the sensor's")
     })
 }

@@ -546,7 +546,10 @@ fn the_texts_read_before_predicting_give_no_answer_away() {
             .find(section)
             .unwrap_or_else(|| panic!("README.md has no {section}"));
         let rest = &readme[start + section.len()..];
-        let end = rest.find("\n## ").or_else(|| rest.find("\n### ")).unwrap_or(rest.len());
+        let end = rest
+            .find("\n## ")
+            .or_else(|| rest.find("\n### "))
+            .unwrap_or(rest.len());
         texts.push((format!("README.md {section}"), rest[..end].to_string()));
     }
     for (name, text) in &texts {

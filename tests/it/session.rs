@@ -619,8 +619,8 @@ fn a_live_rate_change_says_when_it_keeps_an_old_phase() {
     let said = notes(&script);
     assert!(
         said.iter().any(|n| n.starts_with("control rate → 10 Hz · ")
-            && n.contains(" off a fresh run's phase, ")
-            && n.ends_with(" ms after the sensor's ticks (r realigns)")),
+            && n.contains(" off a fresh run's phase · ticks ")
+            && n.ends_with(" ms after the sensor's (r realigns)")),
         "{said:?}"
     );
     // 50 → 25 Hz after the ticks at 0 and 20 ms: the next is at 40 ms, where a fresh 25 Hz
@@ -631,7 +631,7 @@ fn a_live_rate_change_says_when_it_keeps_an_old_phase() {
     let said = notes(&script);
     assert!(
         said.iter()
-            .any(|n| n == "control rate → 25 Hz · 20 ms off a fresh run's phase, on the sensor's ticks (r realigns)"),
+            .any(|n| n == "control rate → 25 Hz · 20 ms off a fresh run's phase · ticks on the sensor's (r realigns)"),
         "{said:?}"
     );
     let mut script = steps(2);
