@@ -748,6 +748,11 @@ impl Watch {
                 Ok(Event::Alive(p, n, alive)) if !fold.is_over() => {
                     fold.liveliness(&p, &n, alive);
                     out = fold.release();
+                    // A status at once: a process started again within a status period
+                    // would otherwise leave none in which its nodes were not alive, and
+                    // the lab and the recording would not see it go.
+                    out.push(fold.status());
+                    last_status = Instant::now();
                 }
                 Ok(Event::Launcher(true)) => launcher_seen = true,
                 Ok(Event::Launcher(false)) if !fold.is_over() && launcher_seen => {
@@ -901,6 +906,9 @@ pub fn record(
         .map_err(|e| DistError::Usage(e.to_string()))?;
     let mut observer = rec.observer_for(shape);
     let mut alive: Vec<Option<bool>> = vec![None; spec.nodes.len()];
+    // Per node: said not alive, and not yet alive again (a node whose token has not come
+    // yet at the start is not alive to the watcher, but its coming is no return).
+    let mut said_gone = vec![false; spec.nodes.len()];
     let mut now = Nanos::ZERO;
     for t in telemetry {
         match t {
@@ -943,13 +951,17 @@ pub fn record(
                 for (i, (was, is)) in alive.iter_mut().zip(next).enumerate() {
                     let name = &spec.nodes[i].name;
                     match (*was, is) {
-                        (Some(true), Some(false)) => rec.event(
-                            now,
-                            &format!("node {name} not alive (its process's liveliness token was withdrawn, or its process is silent)"),
-                            "WARN",
-                        ),
-                        (Some(false), Some(true)) => {
-                            rec.event(now, &format!("node {name} alive again"), "INFO")
+                        (Some(true), Some(false)) => {
+                            said_gone[i] = true;
+                            rec.event(
+                                now,
+                                &format!("node {name} not alive (its process's liveliness token was withdrawn, or its process is silent)"),
+                                "WARN",
+                            );
+                        }
+                        (Some(false), Some(true)) if said_gone[i] => {
+                            said_gone[i] = false;
+                            rec.event(now, &format!("node {name} alive again"), "INFO");
                         }
                         _ => {}
                     }

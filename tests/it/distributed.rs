@@ -339,12 +339,25 @@ fn ready_launch_of(
     port: u16,
     out: &Path,
 ) -> (Child, std::sync::mpsc::Receiver<String>, Vec<String>) {
+    ready_launch_with(graph, clock, secs, port, out, &[])
+}
+
+/// [`ready_launch_of`] with `extra` arguments to `launch` (e.g. `--record FILE`).
+fn ready_launch_with(
+    graph: Option<&Path>,
+    clock: &str,
+    secs: &str,
+    port: u16,
+    out: &Path,
+    extra: &[&std::ffi::OsStr],
+) -> (Child, std::sync::mpsc::Receiver<String>, Vec<String>) {
     let mut launch = bin();
     launch.arg("launch");
     if let Some(g) = graph {
         launch.arg(g);
     }
     let mut launcher = launch
+        .args(extra)
         .args(["--processes", "--clock", clock, "--duration", secs])
         .args(["--listen", &format!("tls/127.0.0.1:{port}")])
         .arg("--out")
@@ -1326,8 +1339,15 @@ fn a_process_that_fails_starts_again_when_its_graph_says_so() {
     )
     .unwrap();
     let port = free_port();
-    let (mut launcher, rx, mut lines) =
-        ready_launch_of(Some(&graph), "real", "8", port, dir.path());
+    let rrd = dir.path().join("restart.rrd");
+    let (mut launcher, rx, mut lines) = ready_launch_with(
+        Some(&graph),
+        "real",
+        "8",
+        port,
+        dir.path(),
+        &["--record".as_ref(), rrd.as_os_str()],
+    );
     std::thread::sleep(Duration::from_millis(500));
     let killed = kill_node_process(port, "policy");
     assert!(
@@ -1360,6 +1380,21 @@ fn a_process_that_fails_starts_again_when_its_graph_says_so() {
         "{m}"
     );
     assert!(m["nodes"]["policy"]["ticks"].as_u64().unwrap() >= 50, "{m}");
+    // The recording tells it as it went (issue 25: a launch records the launcher's and
+    // the liveliness events): the failure and the node not alive as warnings, the restart,
+    // the rejoin and the node alive again as information, in that order.
+    let events = crate::recording::events_with_levels(&rrd);
+    let at = |level: &str, said: &str| {
+        events
+            .iter()
+            .position(|(l, e)| l == level && e.contains(said))
+            .unwrap_or_else(|| panic!("no {level} {said:?} in {events:#?}"))
+    };
+    let failed = at("WARN", "process 'policy' failed (signal: 9");
+    let not_alive = at("WARN", "node policy not alive");
+    let rejoined = at("INFO", "process 'policy' rejoined");
+    let alive = at("INFO", "node policy alive again");
+    assert!(failed < rejoined && not_alive < alive, "{events:#?}");
     assert_none_left(port, Duration::ZERO);
 }
 
