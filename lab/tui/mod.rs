@@ -1354,12 +1354,12 @@ mod tests {
             // Where the launch listens shows at once (it may not be 7449): in the header
             // where it fits, and in the footer.
             let header = text.lines().next().unwrap_or_default();
-            if w >= 120 {
-                assert!(
-                    header.contains("2 processes at tls/127.0.0.1:7451"),
-                    "{header}"
-                );
-            }
+            let at = if w >= 120 {
+                "2 processes at tls/127.0.0.1:7451"
+            } else {
+                "2 processes at :7451"
+            };
+            assert!(header.contains(at), "{w}x{h}: {header}");
             assert!(header.contains("t 2.00 s"), "{w}x{h}: {header}");
             let footer = text.lines().last().unwrap_or_default();
             assert!(footer.contains("tls/127.0.0.1:7451"), "{w}x{h}: {footer}");

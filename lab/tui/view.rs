@@ -383,18 +383,19 @@ fn render_status(v: &View, area: Rect, buf: &mut Buffer) {
         depth_summary(&v.topics)
     );
     if let Some(a) = &v.attached {
-        // Where the launch listens, when the line has room for it beside the run's figures
-        // (at 80 columns the footer says it).
+        // Where the launch listens, at once (it may not be 7449): whole where the line has
+        // room beside the run's figures, else its port (at 80 columns; the brain's label
+        // and "rec off" give way first, and the footer says it whole when no news is).
         let head: usize = spans.iter().map(|s| s.content.chars().count()).sum();
         let note = format!(" · {a}");
-        let at = v
-            .endpoint
-            .as_ref()
-            .map(|ep| format!(" at {ep}"))
-            .filter(|at| {
-                head + note.chars().count() + at.chars().count() + fixed.chars().count() + 7
-                    <= usize::from(area.width)
-            });
+        let room = usize::from(area.width)
+            .saturating_sub(head + note.chars().count() + fixed.chars().count());
+        let at = v.endpoint.as_ref().and_then(|ep| {
+            let port = ep.rsplit_once(':').map(|(_, p)| format!(" at :{p}"));
+            std::iter::once(format!(" at {ep}"))
+                .chain(port)
+                .find(|at| at.chars().count() <= room)
+        });
         spans.push(format!("{note}{}", at.unwrap_or_default()).bold());
     }
     if !v.speed.is_empty() {

@@ -460,28 +460,41 @@ fn pause_stops_virtual_time_and_is_refused_under_the_real_clock() {
 #[test]
 fn launch_across_processes_opens_the_lab_and_quitting_leaves_nothing_behind() {
     let _machine = crate::machine::alone();
-    let port = crate::distributed::free_port();
-    let ep = format!("tls/127.0.0.1:{port}");
-    let mut lab = Lab::start(&["launch", "--processes", "--clock", "real", "--listen", &ep]);
-    lab.wait_for("2 processes", Duration::from_secs(60));
-    for node in ["sensor@robot", "policy@policy", "actuator@robot"] {
-        lab.wait_for(node, Duration::from_secs(10));
+    // At the two sizes the lab is made for (#25): the header says where the launch listens
+    // where it fits (120 columns), the footer at 80.
+    for (cols, rows) in [(80, 24), (120, 40)] {
+        let port = crate::distributed::free_port();
+        let ep = format!("tls/127.0.0.1:{port}");
+        let args = ["launch", "--processes", "--clock", "real", "--listen", &ep];
+        let mut lab = Lab::start_sized(&args, &[], cols, rows);
+        lab.wait_for("2 processes", Duration::from_secs(60));
+        for node in ["sensor@robot", "policy@policy", "actuator@robot"] {
+            lab.wait_for(node, Duration::from_secs(10));
+        }
+        // Ticks of the policy's process (its measured rate) and the robot's steps arrive.
+        lab.wait_for("Hz meas", Duration::from_secs(20));
+        let s = lab.wait_for("BALANCED", Duration::from_secs(10));
+        assert!(s.contains("real clock"), "{s}");
+        // Where it listens, at once: whole at 120 columns, its port at 80.
+        let header = s.lines().next().unwrap_or_default();
+        let at = if cols >= 120 {
+            format!("2 processes at {ep}")
+        } else {
+            format!("2 processes at :{port}")
+        };
+        assert!(header.contains(&at), "{cols}x{rows}:\n{s}");
+        // The /obs counters are the policy process's copy: 50 Hz published, none dropped.
+        lab.wait_for("msg/s", Duration::from_secs(10));
+        assert_eq!(
+            crate::distributed::processes_mentioning(&format!(":{port}")).len(),
+            2,
+            "two node processes while the lab runs"
+        );
+        lab.keys("+");
+        lab.wait_for("read-only: live changes", Duration::from_secs(5));
+        lab.quit();
+        crate::distributed::assert_none_left(port, Duration::from_millis(500));
     }
-    // Ticks of the policy's process (its measured rate) and the robot's steps arrive.
-    lab.wait_for("Hz meas", Duration::from_secs(20));
-    let s = lab.wait_for("BALANCED", Duration::from_secs(10));
-    assert!(s.contains("real clock"), "{s}");
-    // The /obs counters are the policy process's copy: 50 Hz published, none dropped at 50 Hz.
-    lab.wait_for("msg/s", Duration::from_secs(10));
-    assert_eq!(
-        crate::distributed::processes_mentioning(&format!(":{port}")).len(),
-        2,
-        "two node processes while the lab runs"
-    );
-    lab.keys("+");
-    lab.wait_for("read-only: live changes", Duration::from_secs(5));
-    lab.quit();
-    crate::distributed::assert_none_left(port, Duration::from_millis(500));
 }
 
 /// Under the virtual clock the lab paces the lockstep at ×1, as in one process; the arrows
