@@ -566,6 +566,25 @@ fn a_killed_node_is_noticed_and_a_restarted_one_rejoins() {
         "asked again every 100 ms, said once in the log: {lines:?}"
     );
     assert!(!lines.iter().any(|l| l.contains("refused")), "{lines:?}");
+    // `top` started after the restart never heard the process before it: the counts it
+    // shows of /obs (held by the policy's process) say what they leave out (#25: it showed
+    // the new process's count as the topic's).
+    std::thread::sleep(Duration::from_millis(500));
+    let top = bin()
+        .args(["top", "--once", "--connect", &ep, "--credentials"])
+        .arg(dir.path().join("creds.toml"))
+        .output()
+        .unwrap();
+    let table = text(&top.stdout);
+    assert!(top.status.success(), "{table}{}", text(&top.stderr));
+    let obs = table
+        .lines()
+        .find(|l| l.starts_with("/obs"))
+        .unwrap_or_else(|| panic!("{table}"));
+    assert!(
+        obs.contains("counted by 'policy' since it rejoined at "),
+        "{table}"
+    );
     let status = launcher.wait().unwrap();
     for l in rx.try_iter() {
         lines.push(l);
