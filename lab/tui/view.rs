@@ -388,8 +388,9 @@ fn render_status(v: &View, area: Rect, buf: &mut Buffer) {
         // and "rec off" give way first, and the footer says it whole when no news is).
         let head: usize = spans.iter().map(|s| s.content.chars().count()).sum();
         let note = format!(" · {a}");
+        let recording = recording_room(v);
         let room = usize::from(area.width)
-            .saturating_sub(head + note.chars().count() + fixed.chars().count());
+            .saturating_sub(head + note.chars().count() + fixed.chars().count() + recording);
         let at = v.endpoint.as_ref().and_then(|ep| {
             let port = ep.rsplit_once(':').map(|(_, p)| format!(" at :{p}"));
             std::iter::once(format!(" at {ep}"))
@@ -407,7 +408,8 @@ fn render_status(v: &View, area: Rect, buf: &mut Buffer) {
     // The brain's label in what is left (cut at a word's end, or left out), so the line
     // never runs off the screen mid-word.
     let head: usize = spans.iter().map(|s| s.content.chars().count()).sum();
-    let room = usize::from(area.width).saturating_sub(head + fixed.chars().count() + 3);
+    let room = usize::from(area.width)
+        .saturating_sub(head + fixed.chars().count() + 3 + recording_room(v));
     let brain = if v.brain.chars().count() <= room {
         v.brain.clone()
     } else if room >= 8 {
@@ -441,6 +443,17 @@ fn render_status(v: &View, area: Rect, buf: &mut Buffer) {
         }
     }
     Paragraph::new(Line::from(spans)).render(area, buf);
+}
+
+/// The header's room a recording keeps for its file's name (`rec ● …/run.rrd`): what the
+/// brain's label and an attached lab's endpoint give way to. 0 without a recording.
+fn recording_room(v: &View) -> usize {
+    v.recording.as_deref().map_or(0, |p| {
+        let name = std::path::Path::new(p)
+            .file_name()
+            .map_or(p.chars().count(), |n| n.to_string_lossy().chars().count());
+        "rec ● …/".chars().count() + name
+    })
 }
 
 /// `depth 1` when every topic has one depth, else each: `depths 1/5/1`; after the run
