@@ -2192,7 +2192,6 @@ impl StepObserver for RecordingObserver {
         }
         for (i, (topic, st)) in self.shape.topics.iter().zip(&stats).enumerate() {
             let entity = topic.entity();
-
             buf.scalar(
                 &format!("bus/{entity}/published"),
                 s.t,

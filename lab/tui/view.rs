@@ -382,13 +382,13 @@ fn render_status(v: &View, area: Rect, buf: &mut Buffer) {
         v.seed,
         depth_summary(&v.topics)
     );
+    let recording = recording_room(v);
     if let Some(a) = &v.attached {
         // Where the launch listens, at once (it may not be 7449): whole where the line has
         // room beside the run's figures, else its port (at 80 columns; the brain's label
         // and "rec off" give way first, and the footer says it whole when no news is).
         let head: usize = spans.iter().map(|s| s.content.chars().count()).sum();
         let note = format!(" · {a}");
-        let recording = recording_room(v);
         let room = usize::from(area.width)
             .saturating_sub(head + note.chars().count() + fixed.chars().count() + recording);
         let at = v.endpoint.as_ref().and_then(|ep| {
@@ -408,8 +408,7 @@ fn render_status(v: &View, area: Rect, buf: &mut Buffer) {
     // The brain's label in what is left (cut at a word's end, or left out), so the line
     // never runs off the screen mid-word.
     let head: usize = spans.iter().map(|s| s.content.chars().count()).sum();
-    let room = usize::from(area.width)
-        .saturating_sub(head + fixed.chars().count() + 3 + recording_room(v));
+    let room = usize::from(area.width).saturating_sub(head + fixed.chars().count() + 3 + recording);
     let brain = if v.brain.chars().count() <= room {
         v.brain.clone()
     } else if room >= 8 {

@@ -656,10 +656,26 @@ struct LiveEngine {
 impl LiveEngine {
     /// An engine on the chapter's graph, started paused, under `clock`.
     fn start(clock: ClockKind, speed: Speed) -> LiveEngine {
+        LiveEngine::spawn(clock, true, speed, |_| {})
+    }
+
+    /// An engine running from the start under `clock`, its run's settings changed by `edit`
+    /// (the chapter's graph, run open-ended, unless `edit` says otherwise).
+    fn running(clock: ClockKind, speed: Speed, edit: impl FnOnce(&mut RunConfig)) -> LiveEngine {
+        LiveEngine::spawn(clock, false, speed, edit)
+    }
+
+    fn spawn(
+        clock: ClockKind,
+        paused: bool,
+        speed: Speed,
+        edit: impl FnOnce(&mut RunConfig),
+    ) -> LiveEngine {
         let dir = tempfile::tempdir().unwrap();
         let (ctl, ctl_rx) = unbounded();
         let (tel_tx, tel) = unbounded::<Telemetry>();
-        let settings = settings(clock, 0, true, speed, &dir.path().join("session.json"));
+        let mut settings = settings(clock, 0, paused, speed, &dir.path().join("session.json"));
+        edit(&mut settings.cfg);
         let engine = Engine::new(settings, ctl_rx, tel_tx).spawn();
         LiveEngine {
             ctl,
@@ -746,25 +762,20 @@ fn under_the_real_clock_an_executor_change_waits_for_the_next_run() {
 /// counts the 100 messages on /action nobody read, as the headless summary does (#25).
 #[test]
 fn the_status_keeps_counting_while_the_actuator_is_dead() {
-    let dir = tempfile::tempdir().unwrap();
-    let (ctl, ctl_rx) = unbounded();
-    let (tel_tx, tel) = unbounded::<Telemetry>();
-    let mut s = settings(
-        ClockKind::Virtual,
-        0,
-        false,
-        Speed::Max,
-        &dir.path().join("session.json"),
-    );
-    s.cfg.duration = ratelab::Nanos(3_000_000_000);
-    s.cfg.faults = vec![ratelab::qos::Fault::parse("actuator@1", true).unwrap()];
-    let engine = Engine::new(s, ctl_rx, tel_tx).spawn();
+    let live = LiveEngine::running(ClockKind::Virtual, Speed::Max, |cfg| {
+        cfg.duration = ratelab::Nanos(3_000_000_000);
+        cfg.faults = vec![ratelab::qos::Fault::parse("actuator@1", true).unwrap()];
+    });
     let action = ratelab::graph::TopicId(1);
     let (mut last_step, mut last_counts) = (None, None);
     let deadline = std::time::Instant::now() + std::time::Duration::from_secs(20);
     let metrics = loop {
         let left = deadline.saturating_duration_since(std::time::Instant::now());
-        match tel.recv_timeout(left).expect("the run ends within 20 s") {
+        match live
+            .tel
+            .recv_timeout(left)
+            .expect("the run ends within 20 s")
+        {
             Telemetry::Step(r) => last_step = Some(r.t),
             Telemetry::Status {
                 now,
@@ -775,8 +786,7 @@ fn the_status_keeps_counting_while_the_actuator_is_dead() {
             _ => {}
         }
     };
-    ctl.send(Control::Quit).unwrap();
-    engine.join().unwrap();
+    live.quit();
     assert_eq!(last_step, Some(ratelab::Nanos(980_000_000)));
     let (now, a) = last_counts.expect("a status with counters");
     assert_eq!(now, ratelab::Nanos(3_000_000_000));
@@ -790,19 +800,11 @@ fn the_status_keeps_counting_while_the_actuator_is_dead() {
 #[test]
 fn under_the_real_clock_the_clock_stops_at_the_fall() {
     let _m = crate::machine::shared();
-    let dir = tempfile::tempdir().unwrap();
-    let (ctl, ctl_rx) = unbounded();
-    let (tel_tx, tel) = unbounded::<Telemetry>();
-    let mut s = settings(
-        ClockKind::Real,
-        0,
-        false,
-        Speed::Times(1.0),
-        &dir.path().join("session.json"),
-    );
     // 5 Hz falls within about a second (0.84 s under the virtual clock).
-    s.cfg.set_control_hz(5.0).unwrap();
-    let engine = Engine::new(s, ctl_rx, tel_tx).spawn();
+    let live = LiveEngine::running(ClockKind::Real, Speed::Times(1.0), |cfg| {
+        cfg.set_control_hz(5.0).unwrap()
+    });
+    let tel = &live.tel;
     let deadline = std::time::Instant::now() + std::time::Duration::from_secs(20);
     let metrics = loop {
         let left = deadline.saturating_duration_since(std::time::Instant::now());
@@ -821,8 +823,7 @@ fn under_the_real_clock_the_clock_stops_at_the_fall() {
             shown.push(now.as_secs_f64());
         }
     }
-    ctl.send(Control::Quit).unwrap();
-    engine.join().unwrap();
+    live.quit();
     assert!(
         shown.len() >= 10,
         "statuses go on after the fall: {shown:?}"
