@@ -27,7 +27,7 @@
 //! (fixed rates; a compute time is known once its tick has started, before its end), so no
 //! null messages are needed: the reports are the messages.
 
-use super::wire::{Ticked, ToMember};
+use super::wire::{self, Ticked};
 use super::{DistError, Keys};
 use crate::graph::spec::GraphSpec;
 use crate::graph::NodeId;
@@ -91,123 +91,6 @@ impl TickInbox {
     }
 }
 
-/// What one process waits on in the lockstep: the launcher's horizon and end, and the
-/// other processes' tick reports.
-pub struct Pace<'a> {
-    ctl: &'a Receiver<ToMember>,
-    ticked: &'a Receiver<Ticked>,
-    spec: &'a GraphSpec,
-    inbox: TickInbox,
-    horizon_ns: Option<u64>,
-    end: Option<(u64, Vec<(usize, u64)>)>,
-    stop: &'a StopFlag,
-    launcher_gone: &'a StopFlag,
-}
-
-impl<'a> Pace<'a> {
-    /// Wait on `ctl` (the launcher's messages to this process) and `ticked` (the other
-    /// processes' reports, as [`decode_report`] lets them through), until `stop` or the
-    /// launcher goes.
-    pub fn new(
-        ctl: &'a Receiver<ToMember>,
-        ticked: &'a Receiver<Ticked>,
-        spec: &'a GraphSpec,
-        stop: &'a StopFlag,
-        launcher_gone: &'a StopFlag,
-    ) -> Self {
-        Self {
-            ctl,
-            ticked,
-            spec,
-            inbox: TickInbox::new(),
-            horizon_ns: None,
-            end: None,
-            stop,
-            launcher_gone,
-        }
-    }
-
-    /// Wait up to 100 ms for one message and take it in.
-    fn pump(&mut self) -> Result<(), DistError> {
-        if self.stop.is_stopped() {
-            return Err(DistError::Peer("interrupted".into()));
-        }
-        crossbeam_channel::select! {
-            recv(self.ctl) -> m => match m {
-                Ok(ToMember::Horizon { until_ns }) => {
-                    self.horizon_ns = Some(self.horizon_ns.unwrap_or(0).max(until_ns));
-                }
-                Ok(ToMember::Stop { at_ns, need }) => self.end = Some((at_ns, need)),
-                Ok(_) => {}
-                Err(_) => return Err(DistError::Peer("the launcher's channel closed".into())),
-            },
-            recv(self.ticked) -> m => match m {
-                Ok(m) => self.inbox.accept(m, self.spec)?,
-                Err(_) => return Err(DistError::Peer("the tick reports' channel closed".into())),
-            },
-            default(Duration::from_millis(100)) => {
-                // Ticks may be far apart (a slow node): wait for as long as the launcher
-                // lives (the launcher decides when a tick has taken too long).
-                if self.launcher_gone.is_stopped() {
-                    return Err(DistError::Peer("the launcher went away".into()));
-                }
-                if self.stop.is_stopped() {
-                    return Err(DistError::Peer("interrupted".into()));
-                }
-            }
-        }
-        Ok(())
-    }
-
-    /// Wait until the horizon reaches run time `t_ns` (`true`), or the launcher ends the
-    /// run first (`false`).
-    ///
-    /// # Errors
-    /// [`DistError::Peer`] when the launcher goes, or on `stop`.
-    pub fn until(&mut self, t_ns: u64) -> Result<bool, DistError> {
-        loop {
-            if self.end.is_some() {
-                return Ok(false);
-            }
-            if self.horizon_ns.is_some_and(|h| h >= t_ns) {
-                return Ok(true);
-            }
-            self.pump()?;
-        }
-    }
-
-    /// Wait for the report of tick `index` (another process's), or `None` when the
-    /// launcher ends the run first (that process is gone, or failed).
-    ///
-    /// # Errors
-    /// As [`Pace::until`].
-    pub fn report(&mut self, index: u64) -> Result<Option<Ticked>, DistError> {
-        loop {
-            if let Some(m) = self.inbox.take(index) {
-                return Ok(Some(m));
-            }
-            if self.end.is_some() {
-                return Ok(None);
-            }
-            self.pump()?;
-        }
-    }
-
-    /// Wait for the launcher's end of the run: its run time, ns, and the messages still to
-    /// arrive here (topic index, seq) before this process reports.
-    ///
-    /// # Errors
-    /// As [`Pace::until`].
-    pub fn end(&mut self) -> Result<(u64, Vec<(usize, u64)>), DistError> {
-        loop {
-            if let Some(e) = self.end.take() {
-                return Ok(e);
-            }
-            self.pump()?;
-        }
-    }
-}
-
 /// Check another process's report `m` of event `index` against the event this process
 /// expects there (`event`: every process replays the same order), and return the compute
 /// time it reports for a start.
@@ -251,22 +134,23 @@ pub fn check_tick_report(
     Ok(compute)
 }
 
-/// Decode a tick report that came on `key` (`ratelab/<graph>/@ticked/<process>`): `None`
-/// for bytes that are not one, for a report whose process is not the key's, and for this
-/// process's own (`own`: Zenoh hands a session its own puts too).
-pub fn decode_report(key: &str, bytes: &[u8], own: Option<&str>) -> Option<Ticked> {
+/// Decode a message of tick reports that came on `key` (`ratelab/<graph>/@ticked/<process>`,
+/// [`wire::decode_reports`]): `None` for bytes that are not one, for a message with a report
+/// whose process is not the key's, and for this process's own (`own`: Zenoh hands a session
+/// its own puts too).
+pub fn decode_report(key: &str, bytes: &[u8], own: Option<&str>) -> Option<Vec<Ticked>> {
     let from = key.rsplit('/').next()?;
     if own == Some(from) {
         return None;
     }
-    let m = Ticked::decode(bytes).ok()?;
-    (m.process == from).then_some(m)
+    let ms = wire::decode_reports(bytes).ok()?;
+    ms.iter().all(|m| m.process == from).then_some(ms)
 }
 
 /// Subscribe to every process's tick reports ([`Keys::ticked`]), as [`decode_report`] lets
 /// them through (`own`: this process, whose own reports are not its peers'); they come on
-/// the returned channel, at most [`MAX_AHEAD`] waiting (more are dropped: a run holds far
-/// fewer).
+/// the returned channel one by one, at most [`MAX_AHEAD`] waiting (more are dropped: a run
+/// holds far fewer).
 ///
 /// # Errors
 /// [`DistError::Zenoh`] when the subscriber cannot be declared.
@@ -281,7 +165,9 @@ pub fn subscribe_reports(
         .declare_subscriber(keys.ticked("*"))
         .callback(move |s| {
             let bytes = s.payload().to_bytes();
-            if let Some(m) = decode_report(s.key_expr().as_str(), &bytes, own.as_deref()) {
+            for m in
+                decode_report(s.key_expr().as_str(), &bytes, own.as_deref()).unwrap_or_default()
+            {
                 let _ = tx.try_send(m);
             }
         })
@@ -455,24 +341,39 @@ mod tests {
 
     #[test]
     fn a_report_counts_only_from_its_own_process_s_key_and_never_one_s_own() {
-        let bytes = report("policy", 3, 1).encode();
+        let bytes = wire::encode_reports(&[report("policy", 3, 1), report("policy", 4, 1)]);
         let key = |p: &str| format!("ratelab/cartpole/@ticked/{p}");
-        assert!(decode_report(&key("policy"), &bytes, Some("robot")).is_some());
+        let got = decode_report(&key("policy"), &bytes, Some("robot")).unwrap();
+        assert_eq!(got, vec![report("policy", 3, 1), report("policy", 4, 1)]);
         assert!(decode_report(&key("policy"), &bytes, None).is_some());
         assert_eq!(decode_report(&key("policy"), &bytes, Some("policy")), None);
         assert_eq!(decode_report(&key("robot"), &bytes, Some("x")), None);
         assert_eq!(decode_report(&key("policy"), b"\xff{", None), None);
-        // Exactly: a byte after its end, or a report over the bound, is refused.
+        // One report of another process refuses the whole message.
+        let mixed = wire::encode_reports(&[report("policy", 3, 1), report("robot", 4, 0)]);
+        assert_eq!(decode_report(&key("policy"), &mixed, None), None);
+        // Exactly: a byte after its end, a message over the bound, none or too many
+        // reports are refused.
         let mut longer = bytes.clone();
         longer.push(0);
         assert_eq!(decode_report(&key("policy"), &longer, None), None);
         let mut failed = report("policy", 3, 1);
-        failed.failed = Some("x".repeat(crate::distributed::wire::MAX_TICK_BYTES));
-        assert_eq!(decode_report(&key("policy"), &failed.encode(), None), None);
+        failed.failed = Some("x".repeat(wire::MAX_TICKS_PER_MESSAGE * wire::MAX_TICK_BYTES));
+        let over = wire::encode_reports(std::slice::from_ref(&failed));
+        assert_eq!(decode_report(&key("policy"), &over, None), None);
+        assert_eq!(
+            decode_report(&key("policy"), &wire::encode_reports(&[]), None),
+            None
+        );
+        let many = vec![report("policy", 3, 1); wire::MAX_TICKS_PER_MESSAGE + 1];
+        assert_eq!(
+            decode_report(&key("policy"), &wire::encode_reports(&many), None),
+            None
+        );
         // Its text arrives printable.
         failed.failed = Some("boom \u{1b}[2J".into());
-        let got = decode_report(&key("policy"), &failed.encode(), None).unwrap();
-        assert_eq!(got.failed.as_deref(), Some("boom \\u{1b}[2J"));
+        let got = decode_report(&key("policy"), &wire::encode_reports(&[failed]), None).unwrap();
+        assert_eq!(got[0].failed.as_deref(), Some("boom \\u{1b}[2J"));
     }
 
     #[test]

@@ -16,18 +16,18 @@
 
 use super::credentials::{Credentials, Role};
 use super::lockstep;
-use super::wire::{self, Ticked, ToLauncher, ToMember, WireSample};
+use super::wire::{self, ToLauncher, ToMember, WireSample};
 use super::{check_endpoint, open_session, Access, DistError, Keys, REPLY_TIMEOUT};
 use crate::config::RunConfig;
 use crate::graph::spec::GraphSpec;
 use crate::graph::{Graph, NodeId, TopicId};
 use crate::metrics::{LatencyStats, NodeTiming};
-use crate::node::{Flow, Node};
+use crate::node::Node;
 use crate::policy::BrainSlot;
 use crate::qos::TopicQos;
 use crate::run::GraphState;
 use crate::runlog::StepRecord;
-use crate::scheduler::{run_real, EndReason, Event, RealOptions, StopFlag};
+use crate::scheduler::{run_real, RealOptions, StopFlag};
 use crate::time::Nanos;
 use crossbeam_channel::{Receiver, RecvTimeoutError};
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -114,6 +114,12 @@ struct Arrivals {
 }
 
 impl Arrivals {
+    /// Topic `t` has received `seq` (or anything after it).
+    fn has(&self, t: TopicId, seq: u64) -> bool {
+        let seqs = crate::graph::lock(&self.seqs);
+        seqs.get(t.0).copied().flatten().is_some_and(|s| s >= seq)
+    }
+
     /// Wait until topic `t` has received `seq` (or anything after it).
     fn wait_for(&self, t: TopicId, seq: u64, stop: &StopFlag) -> bool {
         let deadline = Instant::now() + REPLY_TIMEOUT;
@@ -338,8 +344,19 @@ pub fn run_member(opts: &MemberOptions, stop: &StopFlag) -> Result<(), DistError
     // Virtual clock: the other processes' tick reports, then the `here` answer that tells
     // them this subscription is in place (declared in that order, [`lockstep::meet_peers`]).
     let virtual_clock = cfg.clock == crate::ClockKind::Virtual;
-    let (lockstep_keys, ticked_rx) = if virtual_clock {
-        let (sub, reports) = lockstep::subscribe_reports(&session, &keys, Some(&opts.process))?;
+    let slot = virtual_clock.then(|| stepper::Slot::shared(spec.clone()));
+    let lockstep_keys = if let Some(slot) = &slot {
+        let (slot, own) = (slot.clone(), opts.process.clone());
+        let sub = session
+            .declare_subscriber(keys.ticked("*"))
+            .callback(move |s| {
+                let bytes = s.payload().to_bytes();
+                let key = s.key_expr().as_str();
+                if let Some(ms) = lockstep::decode_report(key, &bytes, Some(&own)) {
+                    crate::graph::lock(&slot).reports(ms);
+                }
+            })
+            .wait()?;
         let here = keys.here(&opts.process);
         let queryable = session
             .declare_queryable(here.clone())
@@ -347,9 +364,9 @@ pub fn run_member(opts: &MemberOptions, stop: &StopFlag) -> Result<(), DistError
                 let _ = q.reply(here.as_str(), "").wait();
             })
             .wait()?;
-        (Some((sub, queryable)), reports)
+        Some((sub, queryable))
     } else {
-        (None, crossbeam_channel::never())
+        None
     };
     let mine: Vec<NodeId> = spec
         .placement()
@@ -383,7 +400,14 @@ pub fn run_member(opts: &MemberOptions, stop: &StopFlag) -> Result<(), DistError
         subscribers,
         arrivals,
         wire_latency,
-    } = subscribe_inbound(&session, &keys, &spec, &handles, &inbound, &opts.process)?;
+    } = subscribe_inbound(
+        &session,
+        &keys,
+        &spec,
+        &handles,
+        (&inbound, slot.clone()),
+        &opts.process,
+    )?;
     let mut publishers = Vec::new();
     for &t in &outbound {
         publishers.push((
@@ -465,12 +489,14 @@ pub fn run_member(opts: &MemberOptions, stop: &StopFlag) -> Result<(), DistError
     let stats_done = StopFlag::new();
     let stats_thread = spawn_figures(share.clone(), stats_pub, stats_done.clone())?;
     let result = match share.cfg.clock {
-        crate::ClockKind::Virtual => run_lockstep(
+        crate::ClockKind::Virtual => stepper::run_lockstep(
             nodes,
             &share,
-            &mut lockstep::Pace::new(&ctl_rx, &ticked_rx, &spec, stop, &launcher_gone),
+            slot.as_ref().expect("set up under the virtual clock"),
+            &ctl_rx,
+            ticked_pub,
             stop,
-            &|m| ticked_pub.put(m.encode()).wait(),
+            &launcher_gone,
         ),
         crate::ClockKind::Real => match recv_own(&ctl_rx, stop, &launcher_gone) {
             Err(e) => Err(e),
@@ -743,6 +769,8 @@ fn crossings(spec: &GraphSpec, mine: &[NodeId]) -> (Vec<TopicId>, Vec<TopicId>) 
 /// Subscribe to each `inbound` topic's key: each sample is decoded exactly and delivered
 /// into the topic's copy here (or refused and counted, [`Refusals`]), its seq noted in the
 /// returned [`Arrivals`] and its time on the wire in the returned per-topic latencies.
+/// Under the virtual clock each arrival then advances the lockstep in `slot`, on Zenoh's
+/// receive thread ([`stepper`]).
 ///
 /// # Errors
 /// [`DistError::Zenoh`] when a subscriber cannot be declared.
@@ -751,7 +779,7 @@ fn subscribe_inbound(
     keys: &Keys,
     spec: &GraphSpec,
     handles: &crate::graph::GraphHandles,
-    inbound: &[TopicId],
+    (inbound, slot): (&[TopicId], Option<stepper::SharedSlot>),
     process: &str,
 ) -> Result<Inbound, DistError> {
     let arrivals = Arc::new(Arrivals {
@@ -772,6 +800,7 @@ fn subscribe_inbound(
         let offset = Mutex::new(None);
         let refusals = refusals.clone();
         let process = process.to_string();
+        let slot = slot.clone();
         subscribers.push(
             session
                 .declare_subscriber(keys.topic(&spec.topic(t).name))
@@ -786,9 +815,14 @@ fn subscribe_inbound(
                     }
                     let took = wire::mono_now_ns().saturating_sub(sent);
                     crate::graph::lock(&lat[t.0]).record(Nanos(took));
-                    let mut seqs = crate::graph::lock(&arrivals.seqs);
-                    seqs[t.0] = Some(seq);
-                    arrivals.cv.notify_all();
+                    {
+                        let mut seqs = crate::graph::lock(&arrivals.seqs);
+                        seqs[t.0] = Some(seq);
+                        arrivals.cv.notify_all();
+                    }
+                    if let Some(slot) = &slot {
+                        crate::graph::lock(slot).wake();
+                    }
                 })
                 .wait()?,
         );
@@ -1130,138 +1164,6 @@ fn figures_time(wall_ns: u64, end_ns: u64, next_due_ns: impl IntoIterator<Item =
     wall_ns.min(end_ns).min(due.saturating_sub(1))
 }
 
-/// The virtual clock ([`lockstep`]): replay the run's one order of events (ticks' starts,
-/// and under executors or compute times their outputs going out, [`Event`]); run this
-/// process's in their turn (a start once the input messages it must see have arrived) and
-/// report each to everyone; at another process's event wait for its report. Then wait for
-/// the launcher's end and the last messages sent here.
-fn run_lockstep(
-    mut nodes: Vec<Box<dyn Node>>,
-    share: &Share,
-    pace: &mut lockstep::Pace<'_>,
-    stop: &StopFlag,
-    tell: &dyn Fn(&Ticked) -> zenoh::Result<()>,
-) -> Result<GraphState, DistError> {
-    let (cfg, handles, process) = (&share.cfg, &share.handles, share.process.as_str());
-    let (inbound, arrivals, forward_after) = (
-        share.inbound.as_slice(),
-        &*share.arrivals,
-        &*share.forward_after,
-    );
-    let (ticks, run_time, batch) = (share.ticks.as_slice(), &*share.run_time, &*share.batch);
-    let local = share.local();
-    let spec = &cfg.graph;
-    let mine: Vec<NodeId> = local.iter().map(|&i| NodeId(i)).collect();
-    let held = held_topics(spec, &mine);
-    // The whole graph's plan, as in one process: every process replays every executor.
-    let mut sched = crate::run::virtual_scheduler(cfg, &nodes);
-    // The newest seq each topic's remote publisher sent, from its reports.
-    let mut sent: Vec<Option<u64>> = vec![None; spec.topics.len()];
-    let mut index = 0u64;
-    while let Some(event) = sched.next_event_until(cfg.duration) {
-        if stop.is_stopped() {
-            return Err(DistError::Peer("interrupted".into()));
-        }
-        let (i, t) = event.node_at();
-        if !pace.until(t.0)? {
-            break;
-        }
-        let over = if local.contains(&i) {
-            let mut failed = None;
-            let mut flow = Flow::Continue;
-            let mut compute = Nanos::ZERO;
-            match event {
-                Event::Publish { .. } => nodes[i].publish_held(t),
-                Event::Start { .. } => {
-                    // Each input from another process: what its publisher sent so far has
-                    // arrived.
-                    for &input in spec.nodes[i]
-                        .subscribes
-                        .iter()
-                        .filter(|t| inbound.contains(t))
-                    {
-                        let Some(seq) = sent[input.0] else { continue };
-                        if !arrivals.wait_for(input, seq, stop) {
-                            failed = Some(format!(
-                                "message {seq} on {} did not arrive within {} s",
-                                spec.topic(input).name,
-                                REPLY_TIMEOUT.as_secs()
-                            ));
-                            break;
-                        }
-                    }
-                    if failed.is_none() {
-                        match sched.start_here(&mut nodes, i) {
-                            Ok((f, c)) => (flow, compute) = (f, c),
-                            Err(EndReason::NodeFailed { message, .. }) => failed = Some(message),
-                            Err(other) => failed = Some(other.to_string()),
-                        }
-                    } else {
-                        sched.start_elsewhere(&nodes, i, Nanos::ZERO);
-                    }
-                    ticks[i].fetch_add(1, Ordering::Relaxed);
-                }
-            }
-            run_time.fetch_max(t.0, Ordering::Relaxed);
-            let published = if failed.is_none() {
-                forward_after(i)
-            } else {
-                Vec::new()
-            };
-            let read = read_counters(&held, handles);
-            crate::graph::lock(batch).keep(t.0, &read);
-            let over = flow == Flow::Stop || failed.is_some();
-            tell(&Ticked {
-                process: process.to_string(),
-                index,
-                node: i,
-                t_ns: t.0,
-                stop: flow == Flow::Stop,
-                published,
-                failed,
-                publish: matches!(event, Event::Publish { .. }),
-                compute_ns: compute.0,
-            })?;
-            over
-        } else {
-            let Some(m) = pace.report(index)? else {
-                break; // the launcher ended the run (that process is gone)
-            };
-            let compute =
-                lockstep::check_tick_report(&m, index, event, spec).map_err(DistError::Peer)?;
-            for &(topic, seq) in &m.published {
-                // Only a topic the node publishes (a report is untrusted input).
-                if spec.nodes[i].publishes.contains(&TopicId(topic)) {
-                    sent[topic] = Some(seq);
-                }
-            }
-            if let Event::Start { .. } = event {
-                sched.start_elsewhere(&nodes, i, compute);
-            }
-            m.stop || m.failed.is_some()
-        };
-        index += 1;
-        if over {
-            break;
-        }
-    }
-    let (at_ns, need) = pace.end()?;
-    // The last messages sent to us are delivered before the counters are read.
-    for (t, seq) in need {
-        if inbound.contains(&TopicId(t)) && !arrivals.wait_for(TopicId(t), seq, stop) {
-            return Err(DistError::Peer(format!(
-                "message {seq} on {} did not arrive before the end",
-                spec.topic(TopicId(t)).name
-            )));
-        }
-    }
-    let ticks: Vec<u64> = ticks.iter().map(|t| t.load(Ordering::Relaxed)).collect();
-    let mut state = GraphState::capture(handles, Nanos(at_ns), &ticks, None);
-    // Every process replayed every executor: these are the graph's figures, as in one.
-    state.exec = sched.figures(Nanos(at_ns));
-    Ok(state)
-}
-
 /// The next control message: waits as long as the launcher lives (its liveliness token),
 /// so processes started by hand may join minutes apart; an error on a stop or when the
 /// launcher is gone.
@@ -1479,6 +1381,8 @@ impl Refusals {
         }
     }
 }
+
+mod stepper;
 
 #[cfg(test)]
 mod tests {

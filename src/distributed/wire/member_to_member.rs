@@ -1,6 +1,7 @@
 //! Member to member, peer to peer: a crossing topic's samples ([`WireSample`], on the
 //! topic's key, from its publisher's process to its subscriber's) and, under the virtual
-//! clock, each event's tick report ([`Ticked`], to every process and the launcher). Both
+//! clock, the tick reports of each process's events ([`Ticked`], several to a message, to every
+//! process and the launcher). Both
 //! postcard, both bounded and decoded exactly.
 
 use super::{decode_exact, printable};
@@ -134,25 +135,42 @@ pub struct Ticked {
 /// are checked against it ([`crate::distributed::launcher::check_report`]).
 pub const MAX_SENT_PER_TICK: usize = 256;
 
-/// The largest tick report read, bytes ([`Ticked::decode`]).
+/// The largest tick report read, bytes (within [`decode_reports`]).
 pub const MAX_TICK_BYTES: usize = 8 * 1024;
 
-impl Ticked {
-    /// Encode (postcard: tick reports are the lockstep's traffic, one per tick, so they
-    /// take serde's compact binary form, as samples do, not JSON).
-    pub fn encode(&self) -> Vec<u8> {
-        postcard::to_allocvec(self).unwrap_or_default()
-    }
+/// The most tick reports one message carries: a process sends the reports of its
+/// consecutive events together when it must next wait, or once this many are waiting
+/// ([`encode_reports`]).
+pub const MAX_TICKS_PER_MESSAGE: usize = 64;
 
-    /// Decode, refusing anything over [`MAX_TICK_BYTES`] or malformed (it must decode
-    /// exactly, no byte after its end); its text arrives printable ([`printable`]).
-    ///
-    /// # Errors
-    /// One line.
-    pub fn decode(bytes: &[u8]) -> Result<Ticked, String> {
-        let mut t: Ticked = decode_exact(bytes, MAX_TICK_BYTES, "tick report")?;
+/// Encode a process's reports of consecutive events, oldest first, as one message
+/// (postcard: the lockstep's traffic takes serde's compact binary form, as samples do, not
+/// JSON). One message a hop, not one an event: an instant of the chapter's graph costs the
+/// robot's process one report message (its actuator's and sensor's events) and the
+/// policy's one, beside the two samples.
+pub fn encode_reports(reports: &[Ticked]) -> Vec<u8> {
+    postcard::to_allocvec(reports).unwrap_or_default()
+}
+
+/// Decode a message of tick reports, refusing it whole when it is over
+/// [`MAX_TICKS_PER_MESSAGE`] × [`MAX_TICK_BYTES`] bytes, holds more than
+/// [`MAX_TICKS_PER_MESSAGE`] reports or none, or is malformed (it must decode exactly, no
+/// byte after its end); its text arrives printable ([`printable`]).
+///
+/// # Errors
+/// One line.
+pub fn decode_reports(bytes: &[u8]) -> Result<Vec<Ticked>, String> {
+    let max = MAX_TICKS_PER_MESSAGE * MAX_TICK_BYTES;
+    let mut ts: Vec<Ticked> = decode_exact(bytes, max, "message of tick reports")?;
+    if ts.is_empty() || ts.len() > MAX_TICKS_PER_MESSAGE {
+        return Err(format!(
+            "a message of {} tick reports (1 to {MAX_TICKS_PER_MESSAGE})",
+            ts.len()
+        ));
+    }
+    for t in &mut ts {
         t.process = printable(&t.process);
         t.failed = t.failed.as_deref().map(printable);
-        Ok(t)
     }
+    Ok(ts)
 }

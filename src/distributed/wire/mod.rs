@@ -23,7 +23,8 @@ pub use launcher_to_member::{Setup, ToMember};
 pub use launcher_to_watcher::RunOver;
 pub use member_to_launcher::{ToLauncher, WireLink};
 pub use member_to_member::{
-    Ticked, WireSample, MAX_SAMPLE_BYTES, MAX_SENT_PER_TICK, MAX_SEQ, MAX_SEQ_JUMP, MAX_TICK_BYTES,
+    decode_reports, encode_reports, Ticked, WireSample, MAX_SAMPLE_BYTES, MAX_SENT_PER_TICK,
+    MAX_SEQ, MAX_SEQ_JUMP, MAX_TICKS_PER_MESSAGE, MAX_TICK_BYTES,
 };
 
 use serde::{Deserialize, Serialize};
