@@ -52,16 +52,16 @@ pub struct MemberOptions {
     pub credentials: Credentials,
 }
 
-/// After node `i`'s tick (its messages for other processes already sent, as published):
-/// the (topic index, newest seq sent) of each crossing topic it sent on, for its report.
-type Forward = dyn Fn(usize) -> Vec<(usize, u64)> + Send + Sync;
-
 /// One crossing topic's sending end in its publisher's process: the bridge element that
 /// puts each message on the wire as it is published, from the topic's tap, under the topic's
 /// lock and within the publishing tick (as ROS 2's `publish()` hands a message to its
 /// middleware before it returns): a tick's measured time includes its sends.
 struct Outlet {
     publisher: zenoh::pubsub::Publisher<'static>,
+    /// The topic's index in the graph.
+    topic: usize,
+    /// Where a sample goes when the tick runs on Zenoh's receive thread past its budget.
+    spill: Arc<Spill>,
     /// The newest seq sent since the publishing tick ended last ([`NOT_SENT`]: none).
     newest: AtomicU64,
     /// Messages offered since the publishing tick ended last.
@@ -72,9 +72,11 @@ struct Outlet {
 const NOT_SENT: u64 = u64::MAX;
 
 impl Outlet {
-    fn new(publisher: zenoh::pubsub::Publisher<'static>) -> Self {
+    fn new(publisher: zenoh::pubsub::Publisher<'static>, topic: usize, spill: Arc<Spill>) -> Self {
         Outlet {
             publisher,
+            topic,
+            spill,
             newest: AtomicU64::new(NOT_SENT),
             this_tick: AtomicU64::new(0),
         }
@@ -94,9 +96,14 @@ impl Outlet {
             sent_mono_ns: wire::mono_now_ns(),
             data: data.to_bytes(),
         };
-        // Under congestion control `Block` a put fails only when the session is closed,
-        // which the run notices on its own.
-        let _ = self.publisher.put(sample.encode()).wait();
+        let bytes = sample.encode();
+        if self.spill.admit(bytes.len()) {
+            // Under congestion control `Block` a put fails only when the session is closed,
+            // which the run notices on its own.
+            let _ = self.publisher.put(bytes).wait();
+        } else {
+            self.spill.hold(self.topic, bytes);
+        }
         self.newest.store(seq, Ordering::Relaxed);
     }
 
@@ -104,6 +111,93 @@ impl Outlet {
     fn tick_ended(&self) -> Option<u64> {
         self.this_tick.store(0, Ordering::Relaxed);
         Some(self.newest.swap(NOT_SENT, Ordering::Relaxed)).filter(|&s| s != NOT_SENT)
+    }
+}
+
+/// The bytes of samples a lockstep event run on Zenoh's receive thread may put on the wire
+/// itself ([`stepper`]). Zenoh's runtime is that one thread here ([`super::ZENOH_RUNTIME`]),
+/// so its sending task cannot drain the send queue (two batches of 64 KiB a priority) while
+/// a callback puts: past this, a tick's samples are held back and the main thread puts
+/// them (and the reports after them), where a full queue only waits. An instant of the
+/// chapter's graph puts about 50 bytes of samples a hop; a node that publishes 200
+/// messages a tick across processes goes past it.
+pub(super) const CALLBACK_SEND_BUDGET: i64 = 4 * 1024;
+
+/// The samples held back from the wire by the current lockstep advance, and its budget.
+pub(super) struct Spill {
+    /// Bytes the current advance may still put itself (`i64::MAX`: no bound).
+    left: std::sync::atomic::AtomicI64,
+    /// Samples held back, in publish order: (topic index, encoded sample).
+    held: Mutex<std::collections::VecDeque<(usize, Vec<u8>)>>,
+}
+
+impl Spill {
+    /// No bound: every sample is put as it is published (the real clock; the main thread).
+    fn unbounded() -> Arc<Spill> {
+        Arc::new(Spill {
+            left: std::sync::atomic::AtomicI64::new(i64::MAX),
+            held: Mutex::default(),
+        })
+    }
+
+    /// From now on, the samples may put `budget` bytes themselves (`None`: no bound).
+    pub(super) fn set_budget(&self, budget: Option<i64>) {
+        self.left
+            .store(budget.unwrap_or(i64::MAX), Ordering::SeqCst);
+    }
+
+    /// A sample of `len` bytes may go on the wire now: within the budget, and nothing held
+    /// back before it (order is kept).
+    fn admit(&self, len: usize) -> bool {
+        let len = i64::try_from(len).unwrap_or(i64::MAX);
+        self.is_empty() && self.left.fetch_sub(len, Ordering::SeqCst) >= len
+    }
+
+    fn hold(&self, topic: usize, bytes: Vec<u8>) {
+        crate::graph::lock(&self.held).push_back((topic, bytes));
+    }
+
+    /// No sample is held back.
+    pub(super) fn is_empty(&self) -> bool {
+        crate::graph::lock(&self.held).is_empty()
+    }
+}
+
+/// The crossing topics whose publisher runs here: each one's [`Outlet`], and the samples
+/// held back from Zenoh's receive thread.
+pub(super) struct Bridge {
+    outlets: Vec<Option<Outlet>>,
+    /// Per node, the crossing topics it publishes.
+    by_node: Vec<Vec<TopicId>>,
+    pub(super) spill: Arc<Spill>,
+}
+
+impl Bridge {
+    /// After node `node`'s event: the (topic index, newest seq sent) of each crossing topic
+    /// it sent on, for its report.
+    pub(super) fn forward_after(&self, node: usize) -> Vec<(usize, u64)> {
+        let Some(topics) = self.by_node.get(node) else {
+            return Vec::new();
+        };
+        topics
+            .iter()
+            .filter_map(|t| Some((t.0, self.outlets[t.0].as_ref()?.tick_ended()?)))
+            .collect()
+    }
+
+    /// Put the samples held back on the wire, oldest first (from the main thread).
+    ///
+    /// # Errors
+    /// When the session is closed.
+    pub(super) fn put_held(&self) -> zenoh::Result<()> {
+        loop {
+            let Some((t, bytes)) = crate::graph::lock(&self.spill.held).pop_front() else {
+                return Ok(());
+            };
+            if let Some(o) = self.outlets.get(t).and_then(Option::as_ref) {
+                o.publisher.put(bytes).wait()?;
+            }
+        }
     }
 }
 
@@ -344,7 +438,13 @@ pub fn run_member(opts: &MemberOptions, stop: &StopFlag) -> Result<(), DistError
     // Virtual clock: the other processes' tick reports, then the `here` answer that tells
     // them this subscription is in place (declared in that order, [`lockstep::meet_peers`]).
     let virtual_clock = cfg.clock == crate::ClockKind::Virtual;
-    let slot = virtual_clock.then(|| stepper::Slot::shared(spec.clone()));
+    let (slot, nudged) = match virtual_clock {
+        true => {
+            let (slot, nudged) = stepper::Slot::shared(spec.clone());
+            (Some(slot), nudged)
+        }
+        false => (None, crossbeam_channel::never()),
+    };
     let lockstep_keys = if let Some(slot) = &slot {
         let (slot, own) = (slot.clone(), opts.process.clone());
         let sub = session
@@ -353,7 +453,7 @@ pub fn run_member(opts: &MemberOptions, stop: &StopFlag) -> Result<(), DistError
                 let bytes = s.payload().to_bytes();
                 let key = s.key_expr().as_str();
                 if let Some(ms) = lockstep::decode_report(key, &bytes, Some(&own)) {
-                    crate::graph::lock(&slot).reports(ms);
+                    slot.reports(ms);
                 }
             })
             .wait()?;
@@ -461,7 +561,7 @@ pub fn run_member(opts: &MemberOptions, stop: &StopFlag) -> Result<(), DistError
     send(&ToLauncher::Ready {
         process: opts.process.clone(),
     })?;
-    let forward_after = bridge_outbound(&spec, &handles, publishers);
+    let bridge = bridge_outbound(&spec, &handles, publishers);
     let ticks: Arc<Vec<AtomicU64>> =
         Arc::new((0..spec.nodes.len()).map(|_| AtomicU64::new(0)).collect());
     let run_time = Arc::new(AtomicU64::new(0));
@@ -480,7 +580,7 @@ pub fn run_member(opts: &MemberOptions, stop: &StopFlag) -> Result<(), DistError
         inbound,
         arrivals,
         wire_latency,
-        forward_after,
+        bridge,
         ticks,
         run_time,
         batch,
@@ -492,7 +592,10 @@ pub fn run_member(opts: &MemberOptions, stop: &StopFlag) -> Result<(), DistError
         crate::ClockKind::Virtual => stepper::run_lockstep(
             nodes,
             &share,
-            slot.as_ref().expect("set up under the virtual clock"),
+            (
+                slot.as_ref().expect("set up under the virtual clock"),
+                &nudged,
+            ),
             &ctl_rx,
             ticked_pub,
             stop,
@@ -821,7 +924,7 @@ fn subscribe_inbound(
                         arrivals.cv.notify_all();
                     }
                     if let Some(slot) = &slot {
-                        crate::graph::lock(slot).wake();
+                        slot.wake(false);
                     }
                 })
                 .wait()?,
@@ -846,38 +949,20 @@ struct Inbound {
 
 /// Make each crossing topic whose publisher runs here a bridge element (`publishers`: the
 /// topic and its key's publisher): its tap sends each message as it is published. Returns
-/// what, after a local node's event, it published across the boundary and the newest seq
-/// sent on each.
+/// the bridge, which says after a local node's event what it published across the
+/// boundary and the newest seq sent on each.
 fn bridge_outbound(
     spec: &GraphSpec,
     handles: &crate::graph::GraphHandles,
     publishers: Vec<(TopicId, zenoh::pubsub::Publisher<'static>)>,
-) -> Arc<Forward> {
-    // What each local node publishes across the boundary, and the last seq sent.
-    let mut by_topic: Vec<Option<zenoh::pubsub::Publisher<'static>>> =
-        (0..spec.topics.len()).map(|_| None).collect();
+) -> Arc<Bridge> {
+    let spill = Spill::unbounded();
+    let mut outlets: Vec<Option<Outlet>> = (0..spec.topics.len()).map(|_| None).collect();
     for (t, p) in publishers {
-        by_topic[t.0] = Some(p);
-    }
-    // A crossing topic is a bridge element of the graph: its tap sends each message as it
-    // is published (held outputs when they go out), in order, so a node that publishes
-    // twice in a tick sends both, as in one process. The publishing tick's report then
-    // names the newest seq sent, which a process reading the topic under the virtual clock
-    // waits for.
-    let outlets: Arc<Vec<Option<Outlet>>> =
-        Arc::new(by_topic.into_iter().map(|p| p.map(Outlet::new)).collect());
-    for t in (0..outlets.len()).filter(|&t| outlets[t].is_some()) {
-        let outlets = outlets.clone();
-        handles
-            .topic(TopicId(t))
-            .add_data_tap(Box::new(move |seq, stamp, origin, data| {
-                if let Some(o) = &outlets[t] {
-                    o.send(seq, stamp, origin, &data);
-                }
-            }));
+        outlets[t.0] = Some(Outlet::new(p, t.0, spill.clone()));
     }
     // Per node, the crossing topics it publishes.
-    let forward: Vec<Vec<TopicId>> = (0..spec.nodes.len())
+    let by_node: Vec<Vec<TopicId>> = (0..spec.nodes.len())
         .map(|i| {
             let publishes = &spec.node(NodeId(i)).publishes;
             publishes
@@ -887,18 +972,27 @@ fn bridge_outbound(
                 .collect()
         })
         .collect();
-    Arc::new({
-        let outlets = outlets.clone();
-        move |node: usize| -> Vec<(usize, u64)> {
-            let Some(topics) = forward.get(node) else {
-                return Vec::new();
-            };
-            topics
-                .iter()
-                .filter_map(|t| Some((t.0, outlets[t.0].as_ref()?.tick_ended()?)))
-                .collect()
-        }
-    })
+    let bridge = Arc::new(Bridge {
+        outlets,
+        by_node,
+        spill,
+    });
+    // A crossing topic is a bridge element of the graph: its tap sends each message as it
+    // is published (held outputs when they go out), in order, so a node that publishes
+    // twice in a tick sends both, as in one process. The publishing tick's report then
+    // names the newest seq sent, which a process reading the topic under the virtual clock
+    // waits for.
+    for t in (0..bridge.outlets.len()).filter(|&t| bridge.outlets[t].is_some()) {
+        let bridge = bridge.clone();
+        handles
+            .topic(TopicId(t))
+            .add_data_tap(Box::new(move |seq, stamp, origin, data| {
+                if let Some(o) = &bridge.outlets[t] {
+                    o.send(seq, stamp, origin, &data);
+                }
+            }));
+    }
+    bridge
 }
 
 /// Start the thread that puts this process's figures ([`LiveStats`]) on `stats_pub` every
@@ -995,12 +1089,8 @@ fn real_clock(
     send: &dyn Fn(&ToLauncher) -> zenoh::Result<()>,
 ) -> Result<GraphState, DistError> {
     let (cfg, handles, process) = (&share.cfg, &share.handles, share.process.as_str());
-    let (forward_after, ticks, run_time, batch) = (
-        &share.forward_after,
-        &share.ticks,
-        &share.run_time,
-        &share.batch,
-    );
+    let (bridge, ticks, run_time, batch) =
+        (&share.bridge, &share.ticks, &share.run_time, &share.batch);
     let local = share.local();
     let spec = &cfg.graph;
     let hook_batch = batch.clone();
@@ -1017,7 +1107,7 @@ fn real_clock(
     let hook_ticks = ticks.clone();
     let hook_time = run_time.clone();
     let hook_index = index.clone();
-    let fwd = forward_after.clone();
+    let fwd = bridge.clone();
     let mine: Vec<NodeId> = local.iter().map(|&i| NodeId(i)).collect();
     let hook_held = held_topics(spec, &mine);
     let hook_handles = handles.clone();
@@ -1047,7 +1137,7 @@ fn real_clock(
             let (k, now, late) = (t.node, t.now, t.lateness);
             let i = hook_index[k];
             hook_ticks[i].fetch_add(1, Ordering::Relaxed);
-            fwd(i);
+            fwd.forward_after(i);
             // The sample is in the batch before the run time says this tick is done.
             let read = read_counters(&hook_held, &hook_handles);
             {
@@ -1260,9 +1350,9 @@ struct Share {
     arrivals: Arc<Arrivals>,
     /// Per topic, the over-the-wire latency of what arrived.
     wire_latency: Arc<Vec<Mutex<LatencyStats>>>,
-    /// After a local node's event: the crossing topics it published, with the newest seq
-    /// sent on each.
-    forward_after: Arc<Forward>,
+    /// The crossing topics it publishes: what a local node's event sent across the
+    /// boundary, and the samples held back from Zenoh's receive thread.
+    bridge: Arc<Bridge>,
     /// Ticks per node of the graph (its own nodes' counted here).
     ticks: Arc<Vec<AtomicU64>>,
     /// The run time up to which its figures are final, ns.
@@ -1454,7 +1544,14 @@ mod tests {
             })
             .wait()
             .expect("a subscriber");
-        let outlet = Outlet::new(session.declare_publisher("t/action").wait().unwrap());
+        let publisher = session.declare_publisher("t/action").wait().unwrap();
+        let spill = super::Spill::unbounded();
+        let bridge = super::Bridge {
+            outlets: vec![Some(Outlet::new(publisher, 0, spill.clone()))],
+            by_node: vec![vec![crate::graph::TopicId(0)], vec![]],
+            spill: spill.clone(),
+        };
+        let outlet = bridge.outlets[0].as_ref().unwrap();
         let force = |n: f64| MsgData::new(ForceMsg { newtons: n });
         let got = |seq: u64| {
             let s = rx
@@ -1491,7 +1588,48 @@ mod tests {
         outlet.send(500, Nanos(60), None, &force(0.0));
         got(500);
         assert!(rx.try_recv().is_err(), "nothing more was sent");
-        assert_eq!(outlet.tick_ended(), Some(500));
+        assert_eq!(bridge.forward_after(0), vec![(0, 500)], "the node's report");
+        assert_eq!(
+            bridge.forward_after(1),
+            vec![],
+            "a node that publishes nothing across"
+        );
+        // On Zenoh's receive thread, past its budget: the rest are held back, in order,
+        // even one that would fit, and the report names them as sent; the main thread puts
+        // them.
+        let len = WireSample {
+            seq: 501,
+            stamp_ns: 80,
+            origin_ns: None,
+            sent_mono_ns: crate::distributed::wire::mono_now_ns(),
+            data: force(0.0).to_bytes(),
+        }
+        .encode()
+        .len() as i64;
+        spill.set_budget(Some(2 * len + len / 2));
+        for seq in 501..506 {
+            outlet.send(seq, Nanos(80), None, &force(0.0));
+        }
+        got(501);
+        got(502);
+        assert!(!spill.is_empty(), "three held back");
+        spill.set_budget(Some(i64::MAX));
+        outlet.send(506, Nanos(80), None, &force(0.0));
+        assert!(
+            rx.try_recv().is_err(),
+            "nothing jumps the samples held back"
+        );
+        assert_eq!(bridge.forward_after(0), vec![(0, 506)]);
+        bridge.put_held().unwrap();
+        assert!(spill.is_empty());
+        for seq in 503..507 {
+            got(seq);
+        }
+        // No bound again: each goes as it is published.
+        spill.set_budget(None);
+        outlet.send(507, Nanos(100), None, &force(0.0));
+        got(507);
+        assert!(spill.is_empty());
     }
 
     #[test]

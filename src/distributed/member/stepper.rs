@@ -12,6 +12,7 @@
 
 use super::{held_topics, read_counters, Share};
 use crate::distributed::lockstep::{check_tick_report, TickInbox};
+use crate::distributed::wire::ToMember;
 use crate::distributed::wire::{self, Ticked};
 use crate::distributed::{DistError, REPLY_TIMEOUT};
 use crate::graph::spec::GraphSpec;
@@ -20,62 +21,113 @@ use crate::node::{Flow, Node};
 use crate::run::GraphState;
 use crate::scheduler::{EndReason, Event, StopFlag, VirtualScheduler};
 use crate::time::Nanos;
-use std::sync::atomic::Ordering;
-use std::sync::{Arc, Mutex};
-use std::time::Instant;
+use crossbeam_channel::{Receiver, Sender};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex, TryLockError};
+use std::time::{Duration, Instant};
 use zenoh::Wait;
 
 /// The longest failure message a report carries, chars (a node's panic text may be long;
 /// a message of reports is bounded, [`wire::decode_reports`]).
 const MAX_FAILED_CHARS: usize = 2_000;
 
-/// What one process's lockstep shares between Zenoh's callbacks and its main thread,
-/// behind one lock: the other processes' reports (they may come before the run is set up
-/// here) and the run, once set up.
+/// What one process's lockstep shares between Zenoh's callbacks and its main thread: the
+/// other processes' reports (they may come before the run is set up here) and the run, once
+/// set up.
+///
+/// One thread advances the run at a time. A callback that finds it taken leaves its news
+/// (a report in the inbox, an arrival, `dirty`) to the thread advancing, which looks again
+/// before it lets go: a callback never waits for the main thread, which may be waiting for
+/// Zenoh's one thread to send (its held-back samples, [`super::Spill`]).
 pub(super) struct Slot {
     spec: GraphSpec,
-    inbox: TickInbox,
-    run: Option<Stepper>,
+    inbox: Mutex<TickInbox>,
+    run: Mutex<Option<Stepper>>,
+    /// News came while another thread advanced the run.
+    dirty: AtomicBool,
     /// Why the run cannot go on here (taken by the main thread).
-    error: Option<DistError>,
+    error: Mutex<Option<DistError>>,
+    /// Tells the main thread to go on where a callback stopped (samples held back).
+    nudge: Sender<()>,
 }
 
 /// A [`Slot`] as the callbacks and the main thread hold it.
-pub(super) type SharedSlot = Arc<Mutex<Slot>>;
+pub(super) type SharedSlot = Arc<Slot>;
 
 impl Slot {
-    /// An empty slot for a run of `spec`: reports are kept until the run is set up.
-    pub(super) fn shared(spec: GraphSpec) -> SharedSlot {
-        Arc::new(Mutex::new(Slot {
+    /// An empty slot for a run of `spec`: reports are kept until the run is set up. The
+    /// receiver hears when the main thread must go on ([`run_lockstep`]).
+    pub(super) fn shared(spec: GraphSpec) -> (SharedSlot, Receiver<()>) {
+        let (nudge, nudged) = crossbeam_channel::bounded(1);
+        let slot = Arc::new(Slot {
             spec,
-            inbox: TickInbox::new(),
-            run: None,
-            error: None,
-        }))
+            inbox: Mutex::new(TickInbox::new()),
+            run: Mutex::new(None),
+            dirty: AtomicBool::new(false),
+            error: Mutex::new(None),
+            nudge,
+        });
+        (slot, nudged)
     }
 
-    /// Take in other processes' reports (decoded, from their keys), then advance.
-    pub(super) fn reports(&mut self, ms: Vec<Ticked>) {
-        for m in ms {
-            if let Err(e) = self.inbox.accept(m, &self.spec) {
-                self.error.get_or_insert(e);
+    /// Take in other processes' reports (decoded, from their keys), then advance (on
+    /// Zenoh's receive thread).
+    pub(super) fn reports(&self, ms: Vec<Ticked>) {
+        {
+            let mut inbox = crate::graph::lock(&self.inbox);
+            for m in ms {
+                if let Err(e) = inbox.accept(m, &self.spec) {
+                    crate::graph::lock(&self.error).get_or_insert(e);
+                    return;
+                }
+            }
+        }
+        self.wake(false);
+    }
+
+    /// Advance the run as far as what has come in lets it (nothing before it is set up, or
+    /// after it failed): `on_main`, from the process's main thread (it waits its turn and
+    /// puts any samples held back), else from a Zenoh callback (it leaves the run to the
+    /// thread advancing it, and puts at most [`super::CALLBACK_SEND_BUDGET`] bytes itself).
+    pub(super) fn wake(&self, on_main: bool) {
+        self.dirty.store(true, Ordering::SeqCst);
+        loop {
+            let mut run = if on_main {
+                crate::graph::lock(&self.run)
+            } else {
+                match self.run.try_lock() {
+                    Ok(g) => g,
+                    Err(TryLockError::Poisoned(p)) => p.into_inner(),
+                    Err(TryLockError::WouldBlock) => return, // its holder sees `dirty`
+                }
+            };
+            self.dirty.store(false, Ordering::SeqCst);
+            if let Some(r) = run.as_mut() {
+                if crate::graph::lock(&self.error).is_none() {
+                    match r.advance(&self.inbox, on_main) {
+                        Ok(false) => {}
+                        Ok(true) => {
+                            let _ = self.nudge.try_send(());
+                        }
+                        Err(e) => *crate::graph::lock(&self.error) = Some(e),
+                    }
+                }
+            }
+            drop(run);
+            if !self.dirty.load(Ordering::SeqCst) {
                 return;
             }
         }
-        self.wake();
     }
 
-    /// Advance the run as far as what has come in lets it (nothing before it is set up,
-    /// or after it failed).
-    pub(super) fn wake(&mut self) {
-        if self.error.is_some() {
-            return;
-        }
-        if let Some(run) = &mut self.run {
-            if let Err(e) = run.advance(&mut self.inbox) {
-                self.error = Some(e);
-            }
-        }
+    /// Why the run cannot go on, if it cannot.
+    fn take_error(&self) -> Option<DistError> {
+        crate::graph::lock(&self.error).take()
+    }
+
+    /// Take the run out: the callbacks leave it alone from now on.
+    fn take_run(&self) -> Option<Stepper> {
+        crate::graph::lock(&self.run).take()
     }
 }
 
@@ -161,14 +213,31 @@ impl Stepper {
     }
 
     /// Run every event whose turn has come and whose inputs are here, then send the
-    /// reports of this process's events among them.
-    fn advance(&mut self, inbox: &mut TickInbox) -> Result<(), DistError> {
+    /// reports of this process's events among them. `on_main`: first put the samples held
+    /// back, and put every sample as it is published; else (on Zenoh's receive thread) stop
+    /// after an event whose samples went past [`super::CALLBACK_SEND_BUDGET`] and return
+    /// `true`: the main thread must go on, putting the held-back samples and then the
+    /// reports.
+    fn advance(&mut self, inbox: &Mutex<TickInbox>, on_main: bool) -> Result<bool, DistError> {
+        let spill = self.share.bridge.spill.clone();
+        if on_main {
+            spill.set_budget(None);
+            self.share.bridge.put_held()?;
+        } else if !spill.is_empty() {
+            return Ok(true);
+        } else {
+            spill.set_budget(Some(super::CALLBACK_SEND_BUDGET));
+        }
         let ran = self.run_events(inbox);
+        if !spill.is_empty() {
+            // The reports follow their samples: both from the main thread.
+            return ran.map(|()| true);
+        }
         self.flush()?;
-        ran
+        ran.map(|()| false)
     }
 
-    fn run_events(&mut self, inbox: &mut TickInbox) -> Result<(), DistError> {
+    fn run_events(&mut self, inbox: &Mutex<TickInbox>) -> Result<(), DistError> {
         let share = self.share.clone();
         let spec = &share.cfg.graph;
         while !self.done {
@@ -195,7 +264,7 @@ impl Stepper {
                     None => break, // an input message is still on its way
                 }
             } else {
-                let Some(m) = inbox.take(self.index) else {
+                let Some(m) = crate::graph::lock(inbox).take(self.index) else {
                     break;
                 };
                 let compute =
@@ -214,6 +283,9 @@ impl Stepper {
             self.next = None;
             self.index += 1;
             self.done = over;
+            if !share.bridge.spill.is_empty() {
+                break; // samples held back: the main thread goes on
+            }
             if self.outbox.len() >= wire::MAX_TICKS_PER_MESSAGE {
                 self.flush()?;
             }
@@ -272,7 +344,7 @@ impl Stepper {
         }
         share.run_time.fetch_max(t.0, Ordering::Relaxed);
         let published = if failed.is_none() {
-            (share.forward_after)(i)
+            share.bridge.forward_after(i)
         } else {
             Vec::new()
         };
@@ -306,9 +378,9 @@ impl Stepper {
 }
 
 /// Run this process's part of the virtual clock's run: set up `nodes` in `slot` (whose
-/// callbacks advance it as reports and samples arrive), move the horizon on as the
-/// launcher's messages on `ctl` say, and at its stop wait for the last messages sent here
-/// and return the figures.
+/// callbacks advance it as reports and samples arrive), go on where a callback stopped
+/// (`nudged`), move the horizon on as the launcher's messages on `ctl` say, and at its stop
+/// wait for the last messages sent here and return the figures.
 ///
 /// # Errors
 /// [`DistError::Peer`] when the run cannot go on here (another process out of step, an
@@ -317,53 +389,49 @@ impl Stepper {
 pub(super) fn run_lockstep(
     nodes: Vec<Box<dyn Node>>,
     share: &Arc<Share>,
-    slot: &SharedSlot,
-    ctl: &crossbeam_channel::Receiver<crate::distributed::wire::ToMember>,
+    (slot, nudged): (&SharedSlot, &Receiver<()>),
+    ctl: &Receiver<ToMember>,
     publisher: zenoh::pubsub::Publisher<'static>,
     stop: &StopFlag,
     launcher_gone: &StopFlag,
 ) -> Result<GraphState, DistError> {
-    use crate::distributed::wire::ToMember;
-    use crossbeam_channel::RecvTimeoutError;
-    {
-        let mut s = crate::graph::lock(slot);
-        s.run = Some(Stepper::new(nodes, share.clone(), publisher, stop.clone()));
-        s.wake();
-    }
-    // Out of the slot, the callbacks leave the run alone.
-    let take = || crate::graph::lock(slot).run.take();
+    *crate::graph::lock(&slot.run) =
+        Some(Stepper::new(nodes, share.clone(), publisher, stop.clone()));
+    slot.wake(true);
+    let failed = |e: DistError| {
+        slot.take_run();
+        Err(e)
+    };
     let (at_ns, need) = loop {
-        if let Some(e) = crate::graph::lock(slot).error.take() {
-            take();
-            return Err(e);
+        if let Some(e) = slot.take_error() {
+            return failed(e);
         }
         if stop.is_stopped() {
-            take();
-            return Err(DistError::Peer("interrupted".into()));
+            return failed(DistError::Peer("interrupted".into()));
         }
-        match ctl.recv_timeout(std::time::Duration::from_millis(100)) {
-            Ok(ToMember::Horizon { until_ns }) => {
-                let mut s = crate::graph::lock(slot);
-                if let Some(run) = &mut s.run {
-                    run.horizon(until_ns);
+        crossbeam_channel::select! {
+            recv(ctl) -> m => match m {
+                Ok(ToMember::Horizon { until_ns }) => {
+                    if let Some(r) = crate::graph::lock(&slot.run).as_mut() {
+                        r.horizon(until_ns);
+                    }
+                    slot.wake(true);
                 }
-                s.wake();
-            }
-            Ok(ToMember::Stop { at_ns, need }) => break (at_ns, need),
-            Ok(_) => {}
-            Err(RecvTimeoutError::Timeout) if launcher_gone.is_stopped() => {
-                take();
-                return Err(DistError::Peer("the launcher went away".into()));
-            }
-            // An input that never came fails its tick after a while: look again.
-            Err(RecvTimeoutError::Timeout) => crate::graph::lock(slot).wake(),
-            Err(RecvTimeoutError::Disconnected) => {
-                take();
-                return Err(DistError::Peer("the launcher's channel closed".into()));
+                Ok(ToMember::Stop { at_ns, need }) => break (at_ns, need),
+                Ok(_) => {}
+                Err(_) => return failed(DistError::Peer("the launcher's channel closed".into())),
+            },
+            recv(nudged) -> _ => slot.wake(true),
+            default(Duration::from_millis(100)) => {
+                if launcher_gone.is_stopped() {
+                    return failed(DistError::Peer("the launcher went away".into()));
+                }
+                // An input that never came fails its tick after a while: look again.
+                slot.wake(true);
             }
         }
     };
-    let Some(mut run) = take() else {
+    let Some(mut run) = slot.take_run() else {
         return Err(DistError::Peer("the run was not set up".into()));
     };
     run.end();
