@@ -27,6 +27,12 @@ use std::sync::{Arc, Mutex, TryLockError};
 use std::time::{Duration, Instant};
 use zenoh::Wait;
 
+/// The longest tick a Zenoh callback runs itself, ns: a node whose last tick here took
+/// longer (or that has not ticked here yet) ticks on the main thread. A tick on Zenoh's one
+/// thread holds up everything Zenoh does for the process (its keep-alives too: a tick of
+/// Zenoh's lease, 10 s, would end the link), so only ticks known to be short run there.
+const CALLBACK_TICK_NS: u64 = 2_000_000;
+
 /// The longest failure message a report carries, chars (a node's panic text may be long;
 /// a message of reports is bounded, [`wire::decode_reports`]).
 const MAX_FAILED_CHARS: usize = 2_000;
@@ -156,6 +162,12 @@ pub(super) struct Stepper {
     awaiting: Option<(TopicId, u64, Instant)>,
     /// Reports of this process's events not yet sent.
     outbox: Vec<Ticked>,
+    /// Per node, how long its last tick here took, ns (`None`: it has not ticked here).
+    tick_ns: Vec<Option<u64>>,
+    /// This advance runs on the main thread, not in a Zenoh callback.
+    on_main: bool,
+    /// A callback stopped before a tick that is the main thread's to run.
+    hand_off: bool,
     /// Where its reports go ([`crate::distributed::Keys::ticked`]).
     publisher: zenoh::pubsub::Publisher<'static>,
     stop: StopFlag,
@@ -185,6 +197,9 @@ impl Stepper {
             done: false,
             awaiting: None,
             outbox: Vec::new(),
+            tick_ns: vec![None; share.cfg.graph.nodes.len()],
+            on_main: true,
+            hand_off: false,
             publisher,
             stop,
             share,
@@ -215,9 +230,9 @@ impl Stepper {
     /// Run every event whose turn has come and whose inputs are here, then send the
     /// reports of this process's events among them. `on_main`: first put the samples held
     /// back, and put every sample as it is published; else (on Zenoh's receive thread) stop
-    /// after an event whose samples went past [`super::CALLBACK_SEND_BUDGET`] and return
-    /// `true`: the main thread must go on, putting the held-back samples and then the
-    /// reports.
+    /// after an event whose samples went past [`super::CALLBACK_SEND_BUDGET`], or before a
+    /// tick not known to be short ([`CALLBACK_TICK_NS`]), and return `true`: the main
+    /// thread must go on (putting the held-back samples and then the reports).
     fn advance(&mut self, inbox: &Mutex<TickInbox>, on_main: bool) -> Result<bool, DistError> {
         let spill = self.share.bridge.spill.clone();
         if on_main {
@@ -228,13 +243,14 @@ impl Stepper {
         } else {
             spill.set_budget(Some(super::CALLBACK_SEND_BUDGET));
         }
+        (self.on_main, self.hand_off) = (on_main, false);
         let ran = self.run_events(inbox);
         if !spill.is_empty() {
             // The reports follow their samples: both from the main thread.
             return ran.map(|()| true);
         }
         self.flush()?;
-        ran.map(|()| false)
+        ran.map(|()| self.hand_off)
     }
 
     fn run_events(&mut self, inbox: &Mutex<TickInbox>) -> Result<(), DistError> {
@@ -259,6 +275,11 @@ impl Stepper {
                 break;
             }
             let over = if self.local.contains(&i) {
+                let long = self.tick_ns[i].is_none_or(|ns| ns > CALLBACK_TICK_NS);
+                if !self.on_main && matches!(event, Event::Start { .. }) && long {
+                    self.hand_off = true;
+                    break;
+                }
                 match self.run_here(event)? {
                     Some(over) => over,
                     None => break, // an input message is still on its way
@@ -331,7 +352,11 @@ impl Stepper {
                 }
                 self.awaiting = None;
                 if failed.is_none() {
-                    match self.sched.start_here(&mut self.nodes, i) {
+                    let began = Instant::now();
+                    let ticked = self.sched.start_here(&mut self.nodes, i);
+                    let took = u64::try_from(began.elapsed().as_nanos()).unwrap_or(u64::MAX);
+                    self.tick_ns[i] = Some(took);
+                    match ticked {
                         Ok((f, c)) => (flow, compute) = (f, c),
                         Err(EndReason::NodeFailed { message, .. }) => failed = Some(message),
                         Err(other) => failed = Some(other.to_string()),
