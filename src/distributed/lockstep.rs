@@ -13,13 +13,16 @@
 //! the report names), and every process stops at the same event: the same seed gives
 //! byte-identical metrics in one process and in several, executors' figures included.
 //!
-//! Between two events of different processes there is one message (the report goes
-//! straight to the next process, peer to peer), none between events of one process. The
-//! launcher stays the time authority without being on that path: it lets the processes run
-//! up to a horizon ([`ToMember::Horizon`]), [`HORIZON_PERIODS`] periods of the fastest node
-//! ahead of the events it has seen reported, and ends the run early by not moving it on (a
-//! Ctrl-C). It also follows the reports, to know the end (a stop, a failure, a process
-//! gone) and the last seq of every topic before the processes report.
+//! A process sends the reports of its consecutive events together, in one message, when it
+//! must next wait ([`wire::encode_reports`]), straight to the other processes (peer to
+//! peer), and runs its events on the thread that receives what they wait for (Zenoh's
+//! receive callback; the member's `stepper`): between two events of different processes
+//! there is one report message and no hand-off between threads. The launcher stays the
+//! time authority without being on that path: it lets the processes run up to a horizon
+//! ([`ToMember::Horizon`]), [`HORIZON_PERIODS`] periods of the fastest node ahead of the
+//! events it has seen reported, and ends the run early by not moving it on (a Ctrl-C). It
+//! also follows the reports, to know the end (a stop, a failure, a process gone) and the
+//! last seq of every topic before the processes report.
 //!
 //! This is conservative parallel discrete-event simulation in the sense of Chandy and
 //! Misra ("Distributed simulation: a case study in design and verification of distributed
@@ -28,6 +31,8 @@
 //! null messages are needed: the reports are the messages.
 
 use super::wire::{self, Ticked};
+#[cfg(doc)]
+use super::wire::ToMember;
 use super::{DistError, Keys};
 use crate::graph::spec::GraphSpec;
 use crate::graph::NodeId;
@@ -63,8 +68,9 @@ impl TickInbox {
 
     /// Keep `m` until its turn. Ignored: a report for a tick already taken, a second report
     /// for one tick (the first stands), or one whose node is not in the graph or not in the
-    /// process the report names (malformed bytes on the keys must not end the run; a
-    /// well-formed forgery can still disturb it: the keys are not authenticated).
+    /// process the report names (the access control lets only that process's identity put
+    /// on its key, [`crate::distributed::access`]; a holder of its credentials could still
+    /// send a well-formed report that disturbs the run).
     ///
     /// # Errors
     /// [`DistError::Peer`] when [`MAX_AHEAD`] reports are already waiting.
