@@ -19,7 +19,7 @@
 //! receive callback; the member's `stepper`): between two events of different processes
 //! there is one report message and no hand-off between threads. The launcher stays the
 //! time authority without being on that path: it lets the processes run up to a horizon
-//! ([`ToMember::Horizon`]), [`HORIZON_PERIODS`] periods of the fastest node ahead of the
+//! ([`wire::ToMember::Horizon`]), [`HORIZON_PERIODS`] periods of the fastest node ahead of the
 //! events it has seen reported, and ends the run early by not moving it on (a Ctrl-C). It
 //! also follows the reports, to know the end (a stop, a failure, a process gone) and the
 //! last seq of every topic before the processes report.
@@ -31,8 +31,6 @@
 //! null messages are needed: the reports are the messages.
 
 use super::wire::{self, Ticked};
-#[cfg(doc)]
-use super::wire::ToMember;
 use super::{DistError, Keys};
 use crate::graph::spec::GraphSpec;
 use crate::graph::NodeId;

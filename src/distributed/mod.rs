@@ -290,8 +290,8 @@ impl Keys {
         format!("{}/@log", self.prefix)
     }
 
-    /// Virtual clock: where process `p` says each tick of its nodes is done
-    /// ([`wire::Ticked`]), for every other process and the launcher.
+    /// Virtual clock: where process `p` says each event of its nodes is done
+    /// ([`wire::Ticked`], several to a message), for every other process and the launcher.
     pub fn ticked(&self, p: &str) -> String {
         format!("{}/@ticked/{p}", self.prefix)
     }

@@ -97,8 +97,10 @@ impl WireSample {
     }
 }
 
-/// Virtual clock: one event done (a tick started, or its outputs gone out), from its node's process to every other process and the
-/// launcher (key `ratelab/<graph>/@ticked/<process>`, [`crate::distributed::lockstep`]).
+/// Virtual clock: one event done (a tick started, or its outputs gone out), from its node's
+/// process to every other process and the launcher (key `ratelab/<graph>/@ticked/<process>`,
+/// in a message with the reports of the process's events just before it, [`encode_reports`];
+/// [`crate::distributed::lockstep`]).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Ticked {
     /// The node's process.
@@ -135,7 +137,9 @@ pub struct Ticked {
 /// are checked against it ([`crate::distributed::launcher::check_report`]).
 pub const MAX_SENT_PER_TICK: usize = 256;
 
-/// The largest tick report read, bytes (within [`decode_reports`]).
+/// The room for one tick report in a message of them, bytes: a message is read up to
+/// [`MAX_TICKS_PER_MESSAGE`] times this ([`decode_reports`]; a report is about 30 bytes, and
+/// its sender cuts a failure's text to 2 000 characters).
 pub const MAX_TICK_BYTES: usize = 8 * 1024;
 
 /// The most tick reports one message carries: a process sends the reports of its
