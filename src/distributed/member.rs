@@ -597,7 +597,8 @@ pub fn run_member(opts: &MemberOptions, stop: &StopFlag) -> Result<(), DistError
                 &nudged,
             ),
             &ctl_rx,
-            ticked_pub,
+            // Under --ros2 a tick may wait on Zenoh: never on Zenoh's own thread.
+            (ticked_pub, ros2.is_none()),
             stop,
             &launcher_gone,
         ),

@@ -688,6 +688,93 @@ fn publishes_across_processes(n: usize) {
     assert_eq!(m["topics"]["/action"].get("lost"), None, "{m}");
 }
 
+/// A process that runs many events before it next waits sends their reports in messages
+/// of at most 64 (a message of more is refused whole): the robot's process holds the whole
+/// chain and four monitors at 50 Hz that compute for 1 ms (a tick is then two events, its
+/// start and its end), so before the first horizon it runs 8 instants of 11 events, while a
+/// reference at 1 Hz in a process of its own waits on them. The run is the one process's
+/// byte for byte.
+#[test]
+fn a_process_with_many_events_between_its_waits_reports_them_all() {
+    let _m = crate::machine::shared();
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::create_dir(dir.path().join("nodes")).unwrap();
+    for script in [
+        "obs_monitor.py",
+        "square_reference.py",
+        "scripted_balancer.py",
+    ] {
+        std::fs::copy(
+            repo(&format!("graphs/nodes/{script}")),
+            dir.path().join("nodes").join(script),
+        )
+        .unwrap();
+    }
+    let node = |name: &str, kind: &str, extra: &str| {
+        format!("[[node]]\nname = \"{name}\"\nkind = \"{kind}\"\n{extra}\n")
+    };
+    let mut graph = String::from("name = \"many-events\"\n\n");
+    graph += &node("sensor", "sensor", "rate_hz = 50\npublishes = \"/obs\"");
+    graph += &node(
+        "policy",
+        "python",
+        "script = \"nodes/scripted_balancer.py\"\nrate_hz = 50\nsubscribes = \"/obs\"\npublishes = \"/action\"\nprocess = \"robot\"",
+    );
+    graph += &node(
+        "actuator",
+        "actuator",
+        "rate_hz = 50\nsubscribes = \"/action\"",
+    );
+    for k in 1..=4 {
+        graph += &node(
+            &format!("monitor{k}"),
+            "python",
+            "script = \"nodes/obs_monitor.py\"\nrate_hz = 50\ncompute_ms = 1\nsubscribes = \"/obs\"\nprocess = \"robot\"",
+        );
+    }
+    graph += &node(
+        "reference",
+        "python",
+        "script = \"nodes/square_reference.py\"\nrate_hz = 1\npublishes = \"/reference\"\nprocess = \"watch\"\nparams = { amplitude_m = 0.3, period_s = 8.0 }",
+    );
+    graph += "[[topic]]\nname = \"/obs\"\ntype = \"state\"\ndepth = 1\n\n";
+    graph += "[[topic]]\nname = \"/action\"\ntype = \"force\"\ndepth = 1\n\n";
+    graph += "[[topic]]\nname = \"/reference\"\ntype = \"position\"\ndepth = 1\n";
+    let file = dir.path().join("many.toml");
+    std::fs::write(&file, graph).unwrap();
+    let file = file.to_str().unwrap();
+    let (one, many) = (dir.path().join("one"), dir.path().join("many"));
+    let common = ["--clock", "virtual", "--duration", "3"];
+    let o = ratelab(
+        &[
+            &["run", "--graph", file][..],
+            &common,
+            &["--out", one.to_str().unwrap()],
+        ]
+        .concat(),
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let o = ratelab(
+        &[
+            &["launch", file, "--processes"][..],
+            &common,
+            &["--out", many.to_str().unwrap()],
+        ]
+        .concat(),
+    );
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success(), "{out}{}", stderr(&o));
+    assert!(
+        out.contains("in 2 processes: robot [sensor, policy, actuator, monitor1, monitor2, monitor3, monitor4], watch [reference]"),
+        "{out}"
+    );
+    let a = std::fs::read_to_string(one.join("metrics.json")).unwrap();
+    let b = std::fs::read_to_string(many.join("metrics.json")).unwrap();
+    assert_eq!(a, b, "one process and two differ");
+    let m: serde_json::Value = serde_json::from_str(&b).unwrap();
+    assert_eq!(m["nodes"]["monitor4"]["ticks"].as_u64(), Some(151), "{m}");
+}
+
 // ---- Several inputs and outputs (graphs/cartpole-setpoint.toml) ------------------------
 
 /// The mean cart position, m, over trace rows with `from_s <= t < to_s`.

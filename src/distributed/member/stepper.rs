@@ -33,9 +33,14 @@ use zenoh::Wait;
 /// Zenoh's lease, 10 s, would end the link), so only ticks known to be short run there.
 const CALLBACK_TICK_NS: u64 = 2_000_000;
 
-/// The longest failure message a report carries, chars (a node's panic text may be long;
-/// a message of reports is bounded, [`wire::decode_reports`]).
-const MAX_FAILED_CHARS: usize = 2_000;
+/// The longest failure message a report carries, bytes (a node's panic text may be long;
+/// a message of reports is bounded, [`wire::decode_reports`]): within the room of one
+/// report, as a report with a longer one could not be read before.
+const MAX_FAILED_BYTES: usize = wire::MAX_TICK_BYTES - 512;
+
+/// The longest a report waits for the next one to go with it: past this it goes alone, so
+/// slow ticks in a row report as they end, as the launcher's patience counts per report.
+const MAX_REPORT_WAIT: Duration = Duration::from_millis(10);
 
 /// What one process's lockstep shares between Zenoh's callbacks and its main thread: the
 /// other processes' reports (they may come before the run is set up here) and the run, once
@@ -168,6 +173,11 @@ pub(super) struct Stepper {
     on_main: bool,
     /// A callback stopped before a tick that is the main thread's to run.
     hand_off: bool,
+    /// Ticks may run in a Zenoh callback at all (not under `--ros2`: a ROS 2 node's tick
+    /// waits on Zenoh, and the ROS 2 bridge's tap on its thread).
+    callback_ticks: bool,
+    /// When the oldest report in `outbox` was kept.
+    kept_at: Option<Instant>,
     /// Where its reports go ([`crate::distributed::Keys::ticked`]).
     publisher: zenoh::pubsub::Publisher<'static>,
     stop: StopFlag,
@@ -175,12 +185,14 @@ pub(super) struct Stepper {
 
 impl Stepper {
     /// The run of `nodes` (the whole graph's, this process's built) as `share` sets it up,
-    /// its reports sent on `publisher`; it runs nothing before the first horizon.
+    /// its reports sent on `publisher`; it runs nothing before the first horizon. With
+    /// `callback_ticks` false every event of this process runs on its main thread.
     pub(super) fn new(
         nodes: Vec<Box<dyn Node>>,
         share: Arc<Share>,
         publisher: zenoh::pubsub::Publisher<'static>,
         stop: StopFlag,
+        callback_ticks: bool,
     ) -> Self {
         // The whole graph's plan, as in one process: every process replays every executor.
         let sched = crate::run::virtual_scheduler(&share.cfg, &nodes);
@@ -200,6 +212,8 @@ impl Stepper {
             tick_ns: vec![None; share.cfg.graph.nodes.len()],
             on_main: true,
             hand_off: false,
+            callback_ticks,
+            kept_at: None,
             publisher,
             stop,
             share,
@@ -274,9 +288,13 @@ impl Stepper {
             if self.horizon_ns.is_none_or(|h| h < t.0) {
                 break;
             }
+            if self.outbox.len() >= wire::MAX_TICKS_PER_MESSAGE {
+                self.flush()?;
+            }
             let over = if self.local.contains(&i) {
+                let start = matches!(event, Event::Start { .. });
                 let long = self.tick_ns[i].is_none_or(|ns| ns > CALLBACK_TICK_NS);
-                if !self.on_main && matches!(event, Event::Start { .. }) && long {
+                if !self.on_main && (!self.callback_ticks || (start && long)) {
                     self.hand_off = true;
                     break;
                 }
@@ -307,7 +325,10 @@ impl Stepper {
             if !share.bridge.spill.is_empty() {
                 break; // samples held back: the main thread goes on
             }
-            if self.outbox.len() >= wire::MAX_TICKS_PER_MESSAGE {
+            if self
+                .kept_at
+                .is_some_and(|at| at.elapsed() >= MAX_REPORT_WAIT)
+            {
                 self.flush()?;
             }
         }
@@ -376,6 +397,7 @@ impl Stepper {
         let read = read_counters(&self.held, &share.handles);
         crate::graph::lock(&share.batch).keep(t.0, &read);
         let over = flow == Flow::Stop || failed.is_some();
+        self.kept_at.get_or_insert_with(Instant::now);
         self.outbox.push(Ticked {
             process: share.process.clone(),
             index: self.index,
@@ -383,7 +405,7 @@ impl Stepper {
             t_ns: t.0,
             stop: flow == Flow::Stop,
             published,
-            failed: failed.map(|m| m.chars().take(MAX_FAILED_CHARS).collect()),
+            failed: failed.map(|m| cut(m, MAX_FAILED_BYTES)),
             publish: matches!(event, Event::Publish { .. }),
             compute_ns: compute.0,
         });
@@ -397,15 +419,29 @@ impl Stepper {
         }
         let bytes = wire::encode_reports(&self.outbox);
         self.outbox.clear();
+        self.kept_at = None;
         self.publisher.put(bytes).wait()?;
         Ok(())
     }
 }
 
+/// `text` cut to at most `max` bytes, on a character's boundary.
+fn cut(mut text: String, max: usize) -> String {
+    if text.len() > max {
+        let end = (0..=max)
+            .rev()
+            .find(|&k| text.is_char_boundary(k))
+            .unwrap_or(0);
+        text.truncate(end);
+    }
+    text
+}
+
 /// Run this process's part of the virtual clock's run: set up `nodes` in `slot` (whose
 /// callbacks advance it as reports and samples arrive), go on where a callback stopped
 /// (`nudged`), move the horizon on as the launcher's messages on `ctl` say, and at its stop
-/// wait for the last messages sent here and return the figures.
+/// wait for the last messages sent here and return the figures. `callback_ticks`: its
+/// ticks may run in Zenoh's callbacks ([`Stepper::new`]).
 ///
 /// # Errors
 /// [`DistError::Peer`] when the run cannot go on here (another process out of step, an
@@ -416,12 +452,18 @@ pub(super) fn run_lockstep(
     share: &Arc<Share>,
     (slot, nudged): (&SharedSlot, &Receiver<()>),
     ctl: &Receiver<ToMember>,
-    publisher: zenoh::pubsub::Publisher<'static>,
+    (publisher, callback_ticks): (zenoh::pubsub::Publisher<'static>, bool),
     stop: &StopFlag,
     launcher_gone: &StopFlag,
 ) -> Result<GraphState, DistError> {
-    *crate::graph::lock(&slot.run) =
-        Some(Stepper::new(nodes, share.clone(), publisher, stop.clone()));
+    let run = Stepper::new(
+        nodes,
+        share.clone(),
+        publisher,
+        stop.clone(),
+        callback_ticks,
+    );
+    *crate::graph::lock(&slot.run) = Some(run);
     slot.wake(true);
     let failed = |e: DistError| {
         slot.take_run();
@@ -460,6 +502,10 @@ pub(super) fn run_lockstep(
         return Err(DistError::Peer("the run was not set up".into()));
     };
     run.end();
+    // What went wrong here before the stop still ends this process's part in an error.
+    if let Some(e) = slot.take_error() {
+        return Err(e);
+    }
     // The last messages sent to us are delivered before the counters are read.
     let spec = &share.cfg.graph;
     for (t, seq) in need {
@@ -472,4 +518,20 @@ pub(super) fn run_lockstep(
         }
     }
     Ok(run.capture(Nanos(at_ns)))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::cut;
+
+    #[test]
+    fn a_failure_s_text_is_cut_on_a_character_s_boundary() {
+        assert_eq!(cut("boom".into(), 10), "boom");
+        assert_eq!(cut("boom".into(), 4), "boom");
+        assert_eq!(cut("boom".into(), 2), "bo");
+        // 'é' is two bytes: a cut inside it keeps the character before.
+        assert_eq!(cut("aé".into(), 2), "a");
+        assert_eq!(cut("aé".into(), 3), "aé");
+        assert_eq!(cut("é".into(), 0), "");
+    }
 }
