@@ -650,36 +650,7 @@ fn publishes_across_processes(n: usize) {
     let graph = format!("{}depth = 4{}", &graph[..at], &graph[at + 9..]);
     let file = dir.path().join("burst.toml");
     std::fs::write(&file, graph).unwrap();
-    let file = file.to_str().unwrap();
-    let (one, many) = (dir.path().join("one"), dir.path().join("many"));
-    let common = ["--clock", "virtual", "--duration", "3"];
-    let o = ratelab(
-        &[
-            &["run", "--graph", file][..],
-            &common,
-            &["--out", one.to_str().unwrap()],
-        ]
-        .concat(),
-    );
-    assert!(o.status.success(), "{}", stderr(&o));
-    let o = ratelab(
-        &[
-            &["launch", file, "--processes"][..],
-            &common,
-            &["--out", many.to_str().unwrap()],
-        ]
-        .concat(),
-    );
-    assert!(
-        o.status.success(),
-        "{}{}",
-        String::from_utf8_lossy(&o.stdout),
-        stderr(&o)
-    );
-    let a = std::fs::read_to_string(one.join("metrics.json")).unwrap();
-    let b = std::fs::read_to_string(many.join("metrics.json")).unwrap();
-    assert_eq!(a, b, "one process and two differ");
-    let m: serde_json::Value = serde_json::from_str(&b).unwrap();
+    let (_, m) = one_and_many(dir.path(), &file);
     let ticks = m["nodes"]["policy"]["ticks"].as_u64().unwrap();
     assert_eq!(
         m["topics"]["/action"]["published"].as_u64(),
@@ -742,8 +713,20 @@ fn a_process_with_many_events_between_its_waits_reports_them_all() {
     graph += "[[topic]]\nname = \"/reference\"\ntype = \"position\"\ndepth = 1\n";
     let file = dir.path().join("many.toml");
     std::fs::write(&file, graph).unwrap();
+    let (out, m) = one_and_many(dir.path(), &file);
+    assert!(
+        out.contains("in 2 processes: robot [sensor, policy, actuator, monitor1, monitor2, monitor3, monitor4], watch [reference]"),
+        "{out}"
+    );
+    assert_eq!(m["nodes"]["monitor4"]["ticks"].as_u64(), Some(151), "{m}");
+}
+
+/// Run graph `file` for 3 s under the virtual clock in one process and launched across
+/// processes (outputs under `dir`), assert the two metrics.json byte-identical and return
+/// the launch's stdout and the metrics.
+fn one_and_many(dir: &Path, file: &Path) -> (String, serde_json::Value) {
     let file = file.to_str().unwrap();
-    let (one, many) = (dir.path().join("one"), dir.path().join("many"));
+    let (one, many) = (dir.join("one"), dir.join("many"));
     let common = ["--clock", "virtual", "--duration", "3"];
     let o = ratelab(
         &[
@@ -762,17 +745,12 @@ fn a_process_with_many_events_between_its_waits_reports_them_all() {
         ]
         .concat(),
     );
-    let out = String::from_utf8_lossy(&o.stdout);
+    let out = String::from_utf8_lossy(&o.stdout).into_owned();
     assert!(o.status.success(), "{out}{}", stderr(&o));
-    assert!(
-        out.contains("in 2 processes: robot [sensor, policy, actuator, monitor1, monitor2, monitor3, monitor4], watch [reference]"),
-        "{out}"
-    );
     let a = std::fs::read_to_string(one.join("metrics.json")).unwrap();
     let b = std::fs::read_to_string(many.join("metrics.json")).unwrap();
     assert_eq!(a, b, "one process and two differ");
-    let m: serde_json::Value = serde_json::from_str(&b).unwrap();
-    assert_eq!(m["nodes"]["monitor4"]["ticks"].as_u64(), Some(151), "{m}");
+    (out, serde_json::from_str(&b).unwrap())
 }
 
 // ---- Several inputs and outputs (graphs/cartpole-setpoint.toml) ------------------------
