@@ -201,11 +201,15 @@ impl Launch<'_> {
             instants,
             us_per_instant: start.elapsed().as_secs_f64() * 1e6 / instants.max(1) as f64,
         });
-        // Every message sent is delivered before the reports: the last ones too.
+        // Every message sent is delivered before the reports: the last ones too, but those
+        // of a process that is gone, which may have died with them still to send (its
+        // report reached us, its sample not the subscriber).
+        let gone = crate::graph::lock(gone_now).clone();
         let need: Vec<(usize, u64)> = published
             .iter()
             .enumerate()
             .filter_map(|(t, s)| s.map(|s| (t, s)))
+            .filter(|&(t, _)| !gone.contains(&spec.process_of(spec.topics[t].publisher)))
             .collect();
         collect_reports(link, names, gone_now, &end, need, reports, wires);
         Ok((end, lockstep))
