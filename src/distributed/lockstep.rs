@@ -36,7 +36,6 @@ use crate::graph::spec::GraphSpec;
 use crate::graph::NodeId;
 use crate::scheduler::{Event, StopFlag};
 use crate::time::Nanos;
-use crossbeam_channel::Receiver;
 use std::collections::{BTreeMap, BTreeSet};
 use std::time::Duration;
 use zenoh::Wait;
@@ -152,9 +151,8 @@ pub fn decode_report(key: &str, bytes: &[u8], own: Option<&str>) -> Option<Vec<T
 }
 
 /// Subscribe to every process's tick reports ([`Keys::ticked`]), as [`decode_report`] lets
-/// them through (`own`: this process, whose own reports are not its peers'); they come on
-/// the returned channel one by one, at most [`MAX_AHEAD`] waiting (more are dropped: a run
-/// holds far fewer).
+/// them through (`own`: this process, whose own reports are not its peers'): each message's
+/// reports go to `take`, on Zenoh's receive thread.
 ///
 /// # Errors
 /// [`DistError::Zenoh`] when the subscriber cannot be declared.
@@ -162,21 +160,19 @@ pub fn subscribe_reports(
     session: &zenoh::Session,
     keys: &Keys,
     own: Option<&str>,
-) -> Result<(zenoh::pubsub::Subscriber<()>, Receiver<Ticked>), DistError> {
-    let (tx, rx) = crossbeam_channel::bounded::<Ticked>(MAX_AHEAD);
+    take: impl Fn(Vec<Ticked>) + Send + Sync + 'static,
+) -> Result<zenoh::pubsub::Subscriber<()>, DistError> {
     let own = own.map(str::to_string);
     let sub = session
         .declare_subscriber(keys.ticked("*"))
         .callback(move |s| {
             let bytes = s.payload().to_bytes();
-            for m in
-                decode_report(s.key_expr().as_str(), &bytes, own.as_deref()).unwrap_or_default()
-            {
-                let _ = tx.try_send(m);
+            if let Some(ms) = decode_report(s.key_expr().as_str(), &bytes, own.as_deref()) {
+                take(ms);
             }
         })
         .wait()?;
-    Ok((sub, rx))
+    Ok(sub)
 }
 
 /// Wait until every process in `others` answers on its [`Keys::here`] key, asking every

@@ -35,6 +35,8 @@ use std::sync::{Arc, Condvar, Mutex};
 use std::time::{Duration, Instant};
 use zenoh::Wait;
 
+mod stepper;
+
 /// How a placement group is started.
 #[derive(Clone, Debug)]
 pub struct MemberOptions {
@@ -201,6 +203,12 @@ impl Bridge {
     }
 }
 
+/// In `seqs` (the newest seq received per topic), topic `t` has received `seq` or anything
+/// after it.
+fn arrived(seqs: &[Option<u64>], t: TopicId, seq: u64) -> bool {
+    seqs.get(t.0).copied().flatten().is_some_and(|s| s >= seq)
+}
+
 /// The sequence numbers that have arrived per inbound topic, for the lockstep's waits.
 struct Arrivals {
     seqs: Mutex<Vec<Option<u64>>>,
@@ -210,8 +218,7 @@ struct Arrivals {
 impl Arrivals {
     /// Topic `t` has received `seq` (or anything after it).
     fn has(&self, t: TopicId, seq: u64) -> bool {
-        let seqs = crate::graph::lock(&self.seqs);
-        seqs.get(t.0).copied().flatten().is_some_and(|s| s >= seq)
+        arrived(&crate::graph::lock(&self.seqs), t, seq)
     }
 
     /// Wait until topic `t` has received `seq` (or anything after it).
@@ -219,7 +226,7 @@ impl Arrivals {
         let deadline = Instant::now() + REPLY_TIMEOUT;
         let mut seqs = crate::graph::lock(&self.seqs);
         loop {
-            if seqs.get(t.0).copied().flatten().is_some_and(|s| s >= seq) {
+            if arrived(&seqs, t, seq) {
                 return true;
             }
             let now = Instant::now();
@@ -446,17 +453,10 @@ pub fn run_member(opts: &MemberOptions, stop: &StopFlag) -> Result<(), DistError
         false => (None, crossbeam_channel::never()),
     };
     let lockstep_keys = if let Some(slot) = &slot {
-        let (slot, own) = (slot.clone(), opts.process.clone());
-        let sub = session
-            .declare_subscriber(keys.ticked("*"))
-            .callback(move |s| {
-                let bytes = s.payload().to_bytes();
-                let key = s.key_expr().as_str();
-                if let Some(ms) = lockstep::decode_report(key, &bytes, Some(&own)) {
-                    slot.reports(ms);
-                }
-            })
-            .wait()?;
+        let slot = slot.clone();
+        let sub = lockstep::subscribe_reports(&session, &keys, Some(&opts.process), move |ms| {
+            slot.reports(ms)
+        })?;
         let here = keys.here(&opts.process);
         let queryable = session
             .declare_queryable(here.clone())
@@ -1472,8 +1472,6 @@ impl Refusals {
         }
     }
 }
-
-mod stepper;
 
 #[cfg(test)]
 mod tests {

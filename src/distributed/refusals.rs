@@ -65,14 +65,7 @@ impl<S: Subscriber> Layer<S> for RefusalLayer {
             return;
         };
         let reason = reason.trim().to_string();
-        let mut reason = super::wire::printable(&reason);
-        if reason.len() > MAX_REASON_BYTES {
-            let mut cut = MAX_REASON_BYTES;
-            while !reason.is_char_boundary(cut) {
-                cut -= 1;
-            }
-            reason.truncate(cut);
-        }
+        let reason = super::wire::cut_to_bytes(super::wire::printable(&reason), MAX_REASON_BYTES);
         if let Some(sinks) = SINKS.get() {
             crate::graph::lock(sinks).retain(|s| match s.try_send(reason.clone()) {
                 Ok(()) | Err(crossbeam_channel::TrySendError::Full(_)) => true,

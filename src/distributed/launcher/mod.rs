@@ -14,7 +14,7 @@ mod real_run;
 mod virtual_run;
 
 use super::credentials::{Credentials, PrivateDir, Role};
-use super::lockstep::subscribe_reports;
+use super::lockstep::{subscribe_reports, MAX_AHEAD};
 use super::monitor::Carried;
 use super::wire::{self, Setup, ToLauncher, ToMember};
 use super::{check_endpoint, check_keys, Access, DistError, Keys};
@@ -509,7 +509,13 @@ pub fn launch(
         })
         .wait()?;
     // Virtual clock: every process's tick reports, to follow the run ([`super::lockstep`]).
-    let (_ticked_sub, ticked_rx) = subscribe_reports(&session, &keys, None)?;
+    // One by one, at most MAX_AHEAD waiting (more are dropped: a run holds far fewer).
+    let (ticked_tx, ticked_rx) = crossbeam_channel::bounded(MAX_AHEAD);
+    let _ticked_sub = subscribe_reports(&session, &keys, None, move |ms| {
+        for m in ms {
+            let _ = ticked_tx.try_send(m);
+        }
+    })?;
     let _launcher_token = session
         .liveliness()
         .declare_token(keys.launcher_token())

@@ -169,10 +169,6 @@ pub(super) struct Stepper {
     outbox: Vec<Ticked>,
     /// Per node, how long its last tick here took, ns (`None`: it has not ticked here).
     tick_ns: Vec<Option<u64>>,
-    /// This advance runs on the main thread, not in a Zenoh callback.
-    on_main: bool,
-    /// A callback stopped before a tick that is the main thread's to run.
-    hand_off: bool,
     /// Ticks may run in a Zenoh callback at all (not under `--ros2`: a ROS 2 node's tick
     /// waits on Zenoh, and the ROS 2 bridge's tap on its thread).
     callback_ticks: bool,
@@ -210,8 +206,6 @@ impl Stepper {
             awaiting: None,
             outbox: Vec::new(),
             tick_ns: vec![None; share.cfg.graph.nodes.len()],
-            on_main: true,
-            hand_off: false,
             callback_ticks,
             kept_at: None,
             publisher,
@@ -257,17 +251,18 @@ impl Stepper {
         } else {
             spill.set_budget(Some(super::CALLBACK_SEND_BUDGET));
         }
-        (self.on_main, self.hand_off) = (on_main, false);
-        let ran = self.run_events(inbox);
+        let ran = self.run_events(inbox, on_main);
         if !spill.is_empty() {
             // The reports follow their samples: both from the main thread.
-            return ran.map(|()| true);
+            return ran.map(|_| true);
         }
         self.flush()?;
-        ran.map(|()| self.hand_off)
+        ran
     }
 
-    fn run_events(&mut self, inbox: &Mutex<TickInbox>) -> Result<(), DistError> {
+    /// Run events as [`Stepper::advance`] says; `true` when a callback (`on_main` false)
+    /// stopped before an event that is the main thread's to run.
+    fn run_events(&mut self, inbox: &Mutex<TickInbox>, on_main: bool) -> Result<bool, DistError> {
         let share = self.share.clone();
         let spec = &share.cfg.graph;
         while !self.done {
@@ -294,9 +289,8 @@ impl Stepper {
             let over = if self.local.contains(&i) {
                 let start = matches!(event, Event::Start { .. });
                 let long = self.tick_ns[i].is_none_or(|ns| ns > CALLBACK_TICK_NS);
-                if !self.on_main && (!self.callback_ticks || (start && long)) {
-                    self.hand_off = true;
-                    break;
+                if !on_main && (!self.callback_ticks || (start && long)) {
+                    return Ok(true);
                 }
                 match self.run_here(event)? {
                     Some(over) => over,
@@ -332,7 +326,7 @@ impl Stepper {
                 self.flush()?;
             }
         }
-        Ok(())
+        Ok(false)
     }
 
     /// Run `event`, this process's, and keep its report: `Some(over)` (the node stopped the
@@ -405,7 +399,7 @@ impl Stepper {
             t_ns: t.0,
             stop: flow == Flow::Stop,
             published,
-            failed: failed.map(|m| cut(m, MAX_FAILED_BYTES)),
+            failed: failed.map(|m| wire::cut_to_bytes(m, MAX_FAILED_BYTES)),
             publish: matches!(event, Event::Publish { .. }),
             compute_ns: compute.0,
         });
@@ -423,18 +417,6 @@ impl Stepper {
         self.publisher.put(bytes).wait()?;
         Ok(())
     }
-}
-
-/// `text` cut to at most `max` bytes, on a character's boundary.
-fn cut(mut text: String, max: usize) -> String {
-    if text.len() > max {
-        let end = (0..=max)
-            .rev()
-            .find(|&k| text.is_char_boundary(k))
-            .unwrap_or(0);
-        text.truncate(end);
-    }
-    text
 }
 
 /// Run this process's part of the virtual clock's run: set up `nodes` in `slot` (whose
@@ -518,20 +500,4 @@ pub(super) fn run_lockstep(
         }
     }
     Ok(run.capture(Nanos(at_ns)))
-}
-
-#[cfg(test)]
-mod tests {
-    use super::cut;
-
-    #[test]
-    fn a_failure_s_text_is_cut_on_a_character_s_boundary() {
-        assert_eq!(cut("boom".into(), 10), "boom");
-        assert_eq!(cut("boom".into(), 4), "boom");
-        assert_eq!(cut("boom".into(), 2), "bo");
-        // 'é' is two bytes: a cut inside it keeps the character before.
-        assert_eq!(cut("aé".into(), 2), "a");
-        assert_eq!(cut("aé".into(), 3), "aé");
-        assert_eq!(cut("é".into(), 0), "");
-    }
 }

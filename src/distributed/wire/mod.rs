@@ -139,6 +139,19 @@ fn make_printable(v: &mut serde_json::Value) {
     }
 }
 
+/// `text` cut to at most `max` bytes, on a character's boundary (text from or for the
+/// network, kept within a bound).
+pub fn cut_to_bytes(mut text: String, max: usize) -> String {
+    if text.len() > max {
+        let end = (0..=max)
+            .rev()
+            .find(|&k| text.is_char_boundary(k))
+            .unwrap_or(0);
+        text.truncate(end);
+    }
+    text
+}
+
 /// `text` with every control character written out (`\u{1b}`, `\n`): what a terminal,
 /// `top` and a recording may show of text from the network.
 pub fn printable(text: &str) -> String {
@@ -185,6 +198,17 @@ mod tests {
         assert!(e.contains("1 bytes after its end"), "{e}");
         assert!(WireSample::decode(&[0u8; 1024]).is_err());
         assert!(decode_json::<ToMember>(b"{\"msg\":\"nope\"}").is_err());
+    }
+
+    #[test]
+    fn text_is_cut_on_a_character_s_boundary() {
+        assert_eq!(cut_to_bytes("boom".into(), 10), "boom");
+        assert_eq!(cut_to_bytes("boom".into(), 4), "boom");
+        assert_eq!(cut_to_bytes("boom".into(), 2), "bo");
+        // 'é' is two bytes: a cut inside it keeps the character before.
+        assert_eq!(cut_to_bytes("aé".into(), 2), "a");
+        assert_eq!(cut_to_bytes("aé".into(), 3), "aé");
+        assert_eq!(cut_to_bytes("é".into(), 0), "");
     }
 
     #[test]
