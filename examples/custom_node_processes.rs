@@ -87,6 +87,7 @@ fn main() {
             connect,
             listen,
             credentials: Credentials::load(&credentials).unwrap_or_else(|e| fail(&e)),
+            say: None,
         };
         if let Err(e) = run_member(&opts, &StopFlag::new()) {
             fail(&format!("node '{process}': {e}"));

@@ -323,7 +323,7 @@ pub fn run_headless(a: &RunArgs, stop: StopFlag) -> anyhow::Result<RunReport> {
                 String::new()
             }
         );
-        if let (Some(n), Some(dir)) = (r.bagged, &a.bag) {
+        if let (Some(Ok(n)), Some(dir)) = (&r.bagged, &a.bag) {
             println!(
                 "[ratelab] bag: {} (rosbag2, MCAP): {n} messages with /clock",
                 dir.display()
@@ -353,17 +353,31 @@ pub fn run_headless(a: &RunArgs, stop: StopFlag) -> anyhow::Result<RunReport> {
         println!("[ratelab] recording: {}", r.path().display());
         println!("[ratelab] open it with: rerun {}", r.path().display());
     }
+    if let Some(Err(e)) = report.ros2.as_ref().and_then(|r| r.bagged.as_ref()) {
+        // After the summary and the other outputs: a bag that is not whole is an error.
+        anyhow::bail!("--bag {e}");
+    }
+    end_is_an_error(&report)?;
+    Ok(report)
+}
+
+/// A run that reached its summary and files but did not succeed is, after them, an error
+/// (exit 2, one line), in every command and process layout (`run`, `launch` in one process
+/// or across processes, under either clock): a node that failed (a panic, a Python
+/// exception, `sys.exit`), whatever the pole did meanwhile, or [`no_success_is_an_error`]'s
+/// cases.
+///
+/// # Errors
+/// One line naming the failed node and its error's first line, or `no_success`'s.
+pub fn end_is_an_error(report: &RunReport) -> anyhow::Result<()> {
     if let EndReason::NodeFailed { node, message } = &report.end.reason {
-        // The summary and files above are kept for diagnosis, but a run whose node died
-        // did not succeed, whatever the pole did meanwhile.
         anyhow::bail!(
             "node '{node}' failed at t={:.2}s: {}",
             report.end.at.as_secs_f64(),
             message.lines().next().unwrap_or("panic")
         );
     }
-    no_success_is_an_error(&report.metrics)?;
-    Ok(report)
+    no_success_is_an_error(&report.metrics)
 }
 
 /// A run that reached its summary but is no success (`Metrics::no_success`: a deadline

@@ -174,7 +174,7 @@ pub fn run_launch(a: &LaunchArgs, force_headless: bool, stop: StopFlag) -> anyho
         "process(es) {} did not report: their nodes' figures are missing from the summary",
         missing.join(", ")
     );
-    headless::no_success_is_an_error(&report.metrics)
+    headless::end_is_an_error(&report)
 }
 
 /// The placement as one line: `robot [sensor, actuator], policy [policy]`.
@@ -436,8 +436,11 @@ pub fn run_attach(
             "--attach opens the lab on a terminal; without one, `{top}` prints the same figures as text"
         );
     }
-    let (connect, hint) = crate::rendezvous::endpoints(connect);
-    let credentials = crate::rendezvous::credentials(credentials)?;
+    let crate::rendezvous::Target {
+        connect,
+        hint,
+        credentials,
+    } = crate::rendezvous::target(connect, credentials, &crate::rendezvous::launches())?;
     let watch = Watch::connect(&connect, &credentials, Duration::from_secs(5), &stop)
         .map_err(|e| anyhow::anyhow!("{e}: {hint}"))?;
     let (policy, spec) = (watch.setup.policy.clone(), watch.cfg.graph.clone());
@@ -480,6 +483,9 @@ pub fn run_node(a: &NodeArgs, stop: StopFlag) -> anyhow::Result<()> {
         connect: a.connect.clone(),
         listen: a.listen.clone(),
         credentials: Credentials::load(credentials)?,
+        // On stdout: a process started by hand says what happens to it; a launcher's own
+        // children have no stdout (their launcher says it).
+        say: Some(|line| println!("[ratelab] node: {line}")),
     };
     run_member(&opts, &stop).map_err(|e| anyhow::anyhow!("node '{}': {e}", a.process))
 }
@@ -489,8 +495,15 @@ pub fn run_top(a: &TopArgs, stop: StopFlag) -> anyhow::Result<()> {
     for ep in &a.connect {
         check_endpoint("--connect", ep, false)?;
     }
-    let credentials = crate::rendezvous::credentials(a.credentials.as_deref())?;
-    let (connect, hint) = crate::rendezvous::endpoints(&a.connect);
+    let crate::rendezvous::Target {
+        connect,
+        hint,
+        credentials,
+    } = crate::rendezvous::target(
+        &a.connect,
+        a.credentials.as_deref(),
+        &crate::rendezvous::launches(),
+    )?;
     let access = Access {
         credentials: &credentials,
         role: &Role::Observer,

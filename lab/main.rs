@@ -13,6 +13,7 @@ use clap::error::ErrorKind;
 use clap::Parser;
 use cli::{Cli, Command};
 use ratelab::scheduler::StopFlag;
+use ratelab::text::printable;
 use std::io::{IsTerminal, Write};
 use std::process::ExitCode;
 
@@ -201,6 +202,25 @@ fn one_line(text: &str) -> String {
     format!("{first} {}", listed.join(", "))
 }
 
+/// Exit code when the reader of stdout went away (`ratelab cliff | head -1`): 128 + SIGPIPE,
+/// what a shell reports for a program the closed pipe ended.
+const EXIT_CLOSED_PIPE: i32 = 141;
+
+/// A closed stdout ends the process quietly, whatever subcommand was printing: Rust ignores
+/// SIGPIPE (sockets and child pipes must not kill a launcher), so `println!` to a pipe whose
+/// reader has gone panics; this hook turns exactly that panic into a silent exit 141, as a
+/// shell tool killed by SIGPIPE ends. Any other panic goes on to the hook before it.
+fn quiet_on_a_closed_stdout() {
+    let before = std::panic::take_hook();
+    std::panic::set_hook(Box::new(move |info| {
+        let message = ratelab::scheduler::panic_message(info.payload());
+        if message.starts_with("failed printing to stdout") && message.contains("Broken pipe") {
+            std::process::exit(EXIT_CLOSED_PIPE);
+        }
+        before(info)
+    }));
+}
+
 /// How long a Python callback may still run after Ctrl-C (or `q` in the lab) before it is
 /// interrupted.
 pub const PYTHON_GRACE: std::time::Duration = std::time::Duration::from_millis(300);
@@ -209,6 +229,20 @@ fn main() -> ExitCode {
     // Before any thread starts (it sets an environment variable that Zenoh reads).
     if let Err(e) = ratelab::distributed::set_zenoh_runtime() {
         eprintln!("error: {e}");
+        return ExitCode::from(EXIT_USAGE);
+    }
+    quiet_on_a_closed_stdout();
+    // No flag, name or path of ratelab holds a control character: one in a value (a
+    // newline pasted into `--listen`) is refused here, in one line that shows it.
+    if let Some(arg) = std::env::args_os()
+        .skip(1)
+        .map(|a| a.to_string_lossy().into_owned())
+        .find(|a| ratelab::text::has_control(a))
+    {
+        eprintln!(
+            "error: the argument '{}' holds a control character; no flag, name or path of ratelab takes one",
+            printable(&arg)
+        );
         return ExitCode::from(EXIT_USAGE);
     }
     let cli = match Cli::try_parse() {
@@ -282,9 +316,11 @@ fn main() -> ExitCode {
             // A graph file's error is `FILE:LINE:COL: reason`, as compilers print them.
             // Not `eprintln!`: stderr may be a terminal that hung up (SIGHUP).
             let mut err = std::io::stderr();
+            // One line whatever the error quotes (a flag's value, a file's text, a peer's
+            // name, a learner's exception): its control characters are written out.
             let _ = match e.downcast_ref::<ratelab::graph::spec::SpecError>() {
                 Some(spec) => writeln!(err, "{spec}"),
-                None => writeln!(err, "error: {e:#}"),
+                None => writeln!(err, "error: {}", printable(&format!("{e:#}"))),
             };
             // Whatever failed after a Ctrl-C failed because of it.
             ExitCode::from(if interrupted.is_stopped() {

@@ -1,26 +1,33 @@
-//! Where this user's launch listens: `ratelab launch --processes` records its endpoint in a
-//! file of the user's own (`$XDG_RUNTIME_DIR/ratelab/launch`, else
-//! `~/.cache/ratelab/launch`), and `ratelab lab --attach` and `ratelab top` look there when
-//! no `--connect` is given, so they find this user's launch on whatever port it got (7449
-//! when free, another when not), and not another user's on 7449.
+//! Where this user's launches listen: `ratelab launch --processes` records its endpoint in a
+//! file of the user's own (`$XDG_RUNTIME_DIR/ratelab/launch.<pid>`, else
+//! `~/.cache/ratelab/launch.<pid>`), and `ratelab lab --attach` and `ratelab top` look there
+//! when no `--connect` is given, so they find this user's launch on whatever port it got
+//! (7449 when free, another when not), and not another user's on 7449. With two launches of
+//! the user running, neither is guessed: both are listed, and `--connect` chooses.
 //!
-//! The file is one line, `ENDPOINT PID`. It is read as untrusted input: at most 256 bytes,
-//! the endpoint checked as `--connect` checks it, and a record whose process is gone (a
-//! launch killed before it could remove it) is ignored.
+//! Each record is one line, `ENDPOINT PID`. It is read as untrusted input: at most 256 bytes,
+//! the endpoint checked as `--connect` checks it, at most [`MAX_RECORDS`] records looked at,
+//! and a record whose process is gone (a launch killed before it could remove it) is
+//! ignored.
 //!
-//! Beside it, `launch-credentials.toml` (mode 600) holds the launch's observer identity
-//! ([`ratelab::distributed::credentials`]), so that this user's watchers join the launch's
-//! authenticated graph without `--credentials`; it goes with the record.
+//! Beside each, `launch-credentials.<pid>.toml` (mode 600) holds that launch's observer
+//! identity ([`ratelab::distributed::credentials`]), so that this user's watchers join the
+//! launch's authenticated graph without `--credentials`; it goes with the record. The
+//! credentials a watcher uses are always those of the launch it connects to.
 
 use ratelab::distributed::check_endpoint;
 use ratelab::distributed::credentials::Credentials;
+use ratelab::text::printable;
 use std::path::{Path, PathBuf};
 
 /// The largest record read, bytes.
 const MAX_RECORD_BYTES: u64 = 256;
 
-/// The record's path, if the user has a runtime or home folder.
-pub fn record_path() -> Option<PathBuf> {
+/// The most entries of the records' folder looked at (a user runs a few launches at once).
+pub const MAX_RECORDS: usize = 256;
+
+/// The folder of this user's records, if the user has a runtime or home folder.
+pub fn records_dir() -> Option<PathBuf> {
     let dir = std::env::var_os("XDG_RUNTIME_DIR")
         .filter(|d| !d.is_empty())
         .map(PathBuf::from)
@@ -29,27 +36,30 @@ pub fn record_path() -> Option<PathBuf> {
                 .filter(|d| !d.is_empty())
                 .map(|h| PathBuf::from(h).join(".cache"))
         })?;
-    Some(dir.join("ratelab").join("launch"))
+    Some(dir.join("ratelab"))
 }
 
-/// The observer credentials' path beside `record`.
-fn credentials_path(record: &Path) -> PathBuf {
-    record.with_file_name("launch-credentials.toml")
+/// The record of the launch of process `pid` in `dir`.
+fn record_path(dir: &Path, pid: u32) -> PathBuf {
+    dir.join(format!("launch.{pid}"))
+}
+
+/// The observer credentials' path of the launch of process `pid` in `dir`.
+fn credentials_path(dir: &Path, pid: u32) -> PathBuf {
+    dir.join(format!("launch-credentials.{pid}.toml"))
 }
 
 /// This process's launch, recorded while it lives: dropping it removes the record and its
-/// credentials (unless a later launch has replaced them).
+/// credentials.
 pub struct Recorded {
-    path: PathBuf,
-    line: String,
+    dir: PathBuf,
+    pid: u32,
 }
 
 impl Drop for Recorded {
     fn drop(&mut self) {
-        if std::fs::read_to_string(&self.path).is_ok_and(|l| l == self.line) {
-            let _ = std::fs::remove_file(&self.path);
-            let _ = std::fs::remove_file(credentials_path(&self.path));
-        }
+        let _ = std::fs::remove_file(record_path(&self.dir, self.pid));
+        let _ = std::fs::remove_file(credentials_path(&self.dir, self.pid));
     }
 }
 
@@ -61,22 +71,22 @@ pub fn record(
     observer: &Credentials,
     warn: &mut dyn FnMut(String),
 ) -> Option<Recorded> {
-    let path = record_path()?;
-    let line = format!("{endpoint} {}\n", std::process::id());
+    let dir = records_dir()?;
+    let pid = std::process::id();
+    let path = record_path(&dir, pid);
     let write = || -> std::io::Result<()> {
-        let dir = path.parent().expect("a file in a folder");
-        std::fs::create_dir_all(dir)?;
+        std::fs::create_dir_all(&dir)?;
         // The credentials first: a watcher that finds the record finds them too.
         observer
-            .write(&credentials_path(&path), true)
+            .write(&credentials_path(&dir, pid), true)
             .map_err(std::io::Error::other)?;
         // Written beside and moved into place: a reader never sees half a line.
-        let tmp = dir.join(format!(".launch.{}", std::process::id()));
-        std::fs::write(&tmp, &line)?;
+        let tmp = dir.join(format!(".launch.{pid}"));
+        std::fs::write(&tmp, format!("{endpoint} {pid}\n"))?;
         std::fs::rename(&tmp, &path)
     };
     match write() {
-        Ok(()) => Some(Recorded { path, line }),
+        Ok(()) => Some(Recorded { dir, pid }),
         Err(e) => {
             warn(format!(
                 "cannot record this launch in {} ({e}): `lab --attach` and `top` need --connect {endpoint}",
@@ -87,13 +97,52 @@ pub fn record(
     }
 }
 
-/// The endpoint of this user's running launch, if one is recorded and its process lives.
-pub fn find() -> Option<String> {
-    let path = record_path()?;
-    let bytes = ratelab::input::read_regular_file(&path, MAX_RECORD_BYTES).ok()?;
-    parse(&String::from_utf8(bytes).ok()?)
-        .filter(|(_, pid)| std::path::Path::new(&format!("/proc/{pid}")).exists())
-        .map(|(ep, _)| ep)
+/// A running launch of this user's, as its record gives it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Launch {
+    /// Where it listens.
+    pub endpoint: String,
+    /// Its launcher's process id.
+    pub pid: u32,
+    /// Its observer credentials' file.
+    pub credentials: PathBuf,
+}
+
+impl Launch {
+    /// `tls/127.0.0.1:7449 (graph 'cartpole', pid 123)`, for a list of launches.
+    fn describe(&self) -> String {
+        let graph = Credentials::load(&self.credentials)
+            .map(|c| format!("graph '{}', ", printable(&c.graph)))
+            .unwrap_or_default();
+        format!("{} ({graph}pid {})", self.endpoint, self.pid)
+    }
+}
+
+/// This user's running launches (their records whose process lives), by process id.
+pub fn launches() -> Vec<Launch> {
+    let Some(dir) = records_dir() else {
+        return Vec::new();
+    };
+    let Ok(entries) = std::fs::read_dir(&dir) else {
+        return Vec::new();
+    };
+    let mut found: Vec<Launch> = entries
+        .take(MAX_RECORDS)
+        .filter_map(Result::ok)
+        .filter_map(|e| {
+            let name = e.file_name();
+            let pid: u32 = name.to_str()?.strip_prefix("launch.")?.parse().ok()?;
+            let bytes = ratelab::input::read_regular_file(&e.path(), MAX_RECORD_BYTES).ok()?;
+            let (endpoint, said) = parse(&String::from_utf8(bytes).ok()?)?;
+            (said == pid && Path::new(&format!("/proc/{pid}")).exists()).then(|| Launch {
+                endpoint,
+                pid,
+                credentials: credentials_path(&dir, pid),
+            })
+        })
+        .collect();
+    found.sort_by_key(|l| l.pid);
+    found
 }
 
 /// A record's endpoint and process id, if it is one well-formed line.
@@ -106,45 +155,94 @@ fn parse(text: &str) -> Option<(String, u32)> {
     Some((ep.to_string(), pid))
 }
 
-/// The credentials `lab --attach` and `top` join with: `given` (`--credentials FILE`), else
-/// those of this user's recorded launch.
-///
-/// # Errors
-/// One line: the file is bad, or none is given and no launch of this user's is recorded.
-pub fn credentials(given: Option<&Path>) -> anyhow::Result<Credentials> {
-    if let Some(f) = given {
-        return Ok(Credentials::load(f)?);
-    }
-    let recorded = record_path()
-        .filter(|_| find().is_some())
-        .map(|p| credentials_path(&p))
-        .filter(|p| p.exists());
-    match recorded {
-        Some(p) => Ok(Credentials::load(&p)?),
-        None => anyhow::bail!(
-            "no launch of yours is running on this host to watch: give --credentials FILE (written by `ratelab launch --processes --export-credentials FILE`)"
-        ),
-    }
+/// What `lab --attach` and `top` watch: where they connect, what to say when nothing answers
+/// there, and the credentials they join with.
+pub struct Target {
+    /// The endpoints to connect to.
+    pub connect: Vec<String>,
+    /// The hint for when nothing answers.
+    pub hint: String,
+    /// The credentials to join with.
+    pub credentials: Credentials,
 }
 
-/// Where `lab --attach` and `top` connect: `connect` when given, else this user's recorded
-/// launch, else the default endpoint; with what to say when nothing answers there.
-pub fn endpoints(connect: &[String]) -> (Vec<String>, String) {
-    if !connect.is_empty() {
-        return (connect.to_vec(), "check the endpoint".to_string());
-    }
-    match find() {
-        Some(ep) => (
-            vec![ep],
+/// Choose what `lab --attach` and `top` watch, from `--connect` (`connect`),
+/// `--credentials` (`given`) and `launches` (this user's running launches):
+///
+/// - endpoints: `connect` when given, else the one running launch's, else the default;
+/// - credentials: `given`, else those of the launch connected to (the one whose endpoint
+///   `connect` names, or the one running).
+///
+/// # Errors
+/// One line: several launches running and nothing to choose one by (they are listed);
+/// no credentials to be had; a credentials file that is bad.
+pub fn target(
+    connect: &[String],
+    given: Option<&Path>,
+    launches: &[Launch],
+) -> anyhow::Result<Target> {
+    let chosen: Option<&Launch> = if connect.is_empty() {
+        match launches {
+            [] => None,
+            [one] => Some(one),
+            several => anyhow::bail!(
+                "{} launches of yours are running: {}; choose one with --connect",
+                several.len(),
+                several
+                    .iter()
+                    .map(Launch::describe)
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ),
+        }
+    } else {
+        match launches
+            .iter()
+            .find(|l| connect.contains(&l.endpoint))
+            .or(match launches {
+                // Named otherwise (localhost for 127.0.0.1): the one running is the one.
+                [one] => Some(one),
+                _ => None,
+            }) {
+            Some(l) => Some(l),
+            None if given.is_some() || launches.is_empty() => None,
+            None => anyhow::bail!(
+                "none of the {} launches of yours listens on {}: {}; give its --connect, or --credentials FILE",
+                launches.len(),
+                connect.join(", "),
+                launches
+                    .iter()
+                    .map(Launch::describe)
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ),
+        }
+    };
+    let credentials = match (given, chosen) {
+        (Some(f), _) => Credentials::load(f)?,
+        (None, Some(l)) => Credentials::load(&l.credentials)?,
+        (None, None) => anyhow::bail!(
+            "no launch of yours is running on this host to watch: give --credentials FILE (written by `ratelab launch --processes --export-credentials FILE`)"
+        ),
+    };
+    let (connect, hint) = match (connect.is_empty(), chosen) {
+        (false, _) => (connect.to_vec(), "check the endpoint".to_string()),
+        (true, Some(l)) => (
+            vec![l.endpoint.clone()],
             "this user's launch was recorded there; is it still starting?".to_string(),
         ),
-        None => (
+        (true, None) => (
             vec![ratelab::distributed::DEFAULT_ENDPOINT.to_string()],
             "no launch of yours is recorded: start one with `ratelab launch --processes`, or \
              give --connect tls/HOST:PORT"
                 .to_string(),
         ),
-    }
+    };
+    Ok(Target {
+        connect,
+        hint,
+        credentials,
+    })
 }
 
 #[cfg(test)]
@@ -168,5 +266,40 @@ mod tests {
         ] {
             assert_eq!(parse(bad), None, "{bad:?}");
         }
+    }
+
+    #[test]
+    fn two_running_launches_are_listed_never_guessed() {
+        let l = |port: u16, pid: u32| Launch {
+            endpoint: format!("tls/127.0.0.1:{port}"),
+            pid,
+            credentials: PathBuf::from(format!("/nonexistent/launch-credentials.{pid}.toml")),
+        };
+        let two = [l(7449, 10), l(7450, 11)];
+        let e = target(&[], None, &two).err().unwrap().to_string();
+        assert!(
+            e.starts_with("2 launches of yours are running: tls/127.0.0.1:7449 (pid 10), tls/127.0.0.1:7450 (pid 11)")
+                && e.ends_with("choose one with --connect"),
+            "{e}"
+        );
+        assert_eq!(e.lines().count(), 1);
+        // --connect chooses, and the credentials looked for are that launch's.
+        let e = target(&["tls/127.0.0.1:7450".into()], None, &two)
+            .err()
+            .unwrap()
+            .to_string();
+        assert!(e.contains("launch-credentials.11.toml"), "{e}");
+        // An endpoint neither listens on: listed, with what to do.
+        let e = target(&["tls/127.0.0.1:9".into()], None, &two)
+            .err()
+            .unwrap()
+            .to_string();
+        assert!(
+            e.starts_with("none of the 2 launches of yours listens on tls/127.0.0.1:9"),
+            "{e}"
+        );
+        // None running and no credentials: one line saying what to give.
+        let e = target(&[], None, &[]).err().unwrap().to_string();
+        assert!(e.contains("give --credentials FILE"), "{e}");
     }
 }

@@ -333,19 +333,27 @@ pub fn guarded<T>(f: impl FnOnce() -> T) -> Result<T, String> {
     })
 }
 
-/// Every tensor of a PyTorch `state_dict` saved with `torch.save` (zip format) whose
-/// storage type ratelab represents (others, e.g. `BoolStorage`, are left out), read as
-/// untrusted input (see [`torch`]).
+/// Every tensor of a PyTorch `state_dict` saved with `torch.save` (zip format), read as
+/// untrusted input (see [`torch`]). All or nothing: a tensor whose storage type ratelab
+/// cannot represent (e.g. `BoolStorage`) is refused, never left out without a word.
 ///
 /// # Errors
 /// [`PolicyError::Format`] when the file is not such an archive or is refused by the
-/// checks; the input errors of [`load_policy`].
+/// checks; [`PolicyError::Storage`] naming the first such tensor (by key); the input errors
+/// of [`load_policy`].
 pub fn read_torch(path: &Path) -> Result<HashMap<String, Tensor>, PolicyError> {
     let bytes = read_input(path, MAX_FILE_BYTES)?;
-    guarded(|| torch::read(&bytes, None))
+    let read = guarded(|| torch::read(&bytes, None))
         .and_then(|r| r)
-        .map(|t| t.tensors)
-        .map_err(|e| format_err(path, "PyTorch", e))
+        .map_err(|e| format_err(path, "PyTorch", e))?;
+    if let Some((tensor, storage)) = read.unsupported.iter().min_by_key(|(k, _)| k.as_str()) {
+        return Err(PolicyError::Storage {
+            path: path.to_path_buf(),
+            tensor: tensor.clone(),
+            storage: storage.clone(),
+        });
+    }
+    Ok(read.tensors)
 }
 
 /// Every tensor of a `.safetensors` file (at most [`MAX_FILE_BYTES`]).

@@ -10,7 +10,8 @@
 //! [`publisher`], [`executor`] (the rules), [`scheduler`] (the clocks that apply them, +
 //! [`realtime`]), [`runlog`], [`metrics`], [`config`], [`run`], [`session`],
 //! [`distributed`] (the graph across processes, over Zenoh);
-//! files the user names are read through [`input`] and written through [`output`].
+//! files the user names are read through [`input`] and written through [`output`]; text from
+//! outside is shown through [`text`].
 #![warn(missing_docs)]
 
 pub mod checkpoint;
@@ -42,6 +43,7 @@ pub mod runlog;
 pub mod scheduler;
 pub mod session;
 pub mod sweep;
+pub mod text;
 pub mod time;
 pub mod topic;
 

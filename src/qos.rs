@@ -205,7 +205,10 @@ fn fmt_percent(p: f64) -> String {
 }
 
 /// Milliseconds from a file or flag as [`Nanos`]: finite, `> 0` (or `≥ 0` when
-/// `zero_ok`), at most [`MAX_QOS_MS`].
+/// `zero_ok`), at most [`MAX_QOS_MS`]. Time is whole nanoseconds, so a duration where 0
+/// has no meaning (a deadline, a lifespan, a lease, a retransmission) must also be at
+/// least 1 ns once rounded: `deadline_ms = 1e-300` would otherwise be a deadline of 0,
+/// which no period can miss.
 ///
 /// # Errors
 /// A one-line reason naming `key`.
@@ -217,7 +220,14 @@ pub fn ms_to_nanos(key: &str, ms: f64, zero_ok: bool) -> Result<Nanos, String> {
             "{key} must be {lo} and at most {MAX_QOS_MS} ms, got {ms}"
         ));
     }
-    Nanos::from_secs_f64(ms / 1e3).ok_or_else(|| format!("{key}: {ms} ms is out of range"))
+    let n =
+        Nanos::from_secs_f64(ms / 1e3).ok_or_else(|| format!("{key}: {ms} ms is out of range"))?;
+    if !zero_ok && n == Nanos::ZERO {
+        return Err(format!(
+            "{key} = {ms:e} ms rounds to 0 ns (time is whole nanoseconds): give at least 0.000001 ms"
+        ));
+    }
+    Ok(n)
 }
 
 /// A link's loss probability: in [0, 1].

@@ -1774,18 +1774,50 @@ impl Recording {
     /// [`RecordingError::Rerun`] when the sink fails.
     pub fn flush(&self) -> Result<(), RecordingError> {
         self.lock().send(&self.rec);
-        self.rec
-            .flush_blocking()
-            .map_err(|e| RecordingError::Rerun {
+        self.rec.flush_blocking().map_err(|e| {
+            // rerun's file writer says only that it stopped: the OS's reason is found by
+            // writing beside the file (a full disk refuses that too).
+            let why = self
+                .path
+                .parent()
+                .and_then(writing_beside_fails)
+                .map_or_else(String::new, |e| format!(" ({e})"));
+            RecordingError::Rerun {
                 path: self.path.clone(),
-                detail: e.to_string(),
-            })
+                detail: format!(
+                    "{e}{why}: cut short, what was written is kept and opens as a recording cut short"
+                ),
+            }
+        })
     }
 
     /// The clock this recording was stamped with.
     pub fn clock(&self) -> ClockKind {
         self.clock
     }
+}
+
+/// Why a write in folder `dir` fails now, if it does: a page written to a temporary file
+/// there and synced (removed after). The reason behind a file writer that stopped.
+fn writing_beside_fails(dir: &Path) -> Option<String> {
+    let dir = if dir.as_os_str().is_empty() {
+        Path::new(".")
+    } else {
+        dir
+    };
+    let path = dir.join(format!(".ratelab-probe.{}", std::process::id()));
+    let probe = || -> std::io::Result<()> {
+        // create_new: never through anything already at that name.
+        let mut f = std::fs::OpenOptions::new()
+            .write(true)
+            .create_new(true)
+            .open(&path)?;
+        std::io::Write::write_all(&mut f, &[0; 4096])?;
+        f.sync_all()
+    };
+    let failed = probe().err().map(|e| e.to_string());
+    let _ = std::fs::remove_file(&path);
+    failed
 }
 
 /// The recording id of a virtual run: derived from its settings, so two runs with the same

@@ -2,8 +2,9 @@
 //! node can run the same network with NumPy alone (`graphs/nodes/ppo_numpy.py`), no PyTorch.
 //!
 //! The checkpoint is read exactly as a brain is (untrusted input, the same bounds: see
-//! [`super`]); every tensor whose storage ratelab represents is written as float32 under its
-//! `state_dict` key (`np.load(FILE)["actor_mean.0.weight"]` has PyTorch's shape, `[out, in]`).
+//! [`super`]); every tensor is written as float32 under its `state_dict` key (a tensor whose
+//! storage ratelab cannot represent, such as `BoolStorage`, refuses the export: nothing is
+//! left out without a word) (`np.load(FILE)["actor_mean.0.weight"]` has PyTorch's shape, `[out, in]`).
 //! The archive is NumPy's own format, written by the `ndarray-npy` crate (uncompressed, as
 //! `numpy.savez`).
 

@@ -120,6 +120,30 @@ fn tls_error(e: rcgen::Error) -> DistError {
     DistError::Usage(format!("cannot make the launch's certificates: {e}"))
 }
 
+/// Is `pem` exactly one X.509 certificate, in PEM whose DER parses? (Checked when a file
+/// is read, so a bad one is named there; Zenoh's TLS would say it at the handshake, in
+/// rustls' terms.)
+///
+/// # Errors
+/// What is wrong, to follow "its certificate …".
+fn check_certificate(pem: &str) -> Result<(), String> {
+    use rustls_pki_types::{pem::PemObject, CertificateDer};
+    let certs = CertificateDer::pem_slice_iter(pem.as_bytes())
+        .collect::<Result<Vec<_>, _>>()
+        .map_err(|e| {
+            format!(
+                "is not valid PEM ({})",
+                super::wire::printable(&e.to_string())
+            )
+        })?;
+    let [cert] = certs.as_slice() else {
+        return Err(format!("holds {} certificates, not one", certs.len()));
+    };
+    webpki::EndEntityCert::try_from(cert)
+        .map(drop)
+        .map_err(|e| format!("is not an X.509 certificate ({e:?})"))
+}
+
 impl Credentials {
     /// A new CA and an identity for the launcher, an observer and each of `processes`,
     /// for graph `graph`. The CA's private key is not kept.
@@ -231,7 +255,8 @@ impl Credentials {
         format!(
             "# ratelab credentials for graph '{}': a secret. Whoever holds this file can join \
              the graph's launch as the identities below.\n{body}",
-            self.graph
+            // A comment holds no control character (TOML), whatever the graph is called.
+            crate::text::printable(&self.graph)
         )
     }
 
@@ -271,13 +296,22 @@ impl Credentials {
         if !pem_ok(&c.ca) {
             return Err(bad("the CA certificate is not a PEM certificate".into()));
         }
+        check_certificate(&c.ca).map_err(|why| bad(format!("the CA certificate {why}")))?;
         for (cn, id) in &c.identities {
+            let who = super::wire::printable(cn);
             if cn.len() > MAX_NAME_BYTES || !pem_ok(&id.cert) || !pem_ok(&id.key) {
                 return Err(bad(format!(
-                    "identity '{}' is not a PEM certificate and key",
-                    super::wire::printable(cn)
+                    "identity '{who}' is not a PEM certificate and key"
                 )));
             }
+            check_certificate(&id.cert)
+                .map_err(|why| bad(format!("identity '{who}': its certificate {why}")))?;
+            rcgen::KeyPair::from_pem(&id.key).map_err(|e| {
+                bad(format!(
+                    "identity '{who}': its key is not a valid PEM private key ({})",
+                    super::wire::printable(&e.to_string())
+                ))
+            })?;
         }
         Ok(c)
     }
@@ -460,6 +494,43 @@ mod tests {
             assert!(e.starts_with("F: ") && e.contains(says), "{e}");
             assert!(!e.contains('\n'), "{e}");
         }
+        // Certificates and keys whose PEM, DER or count is wrong: each named in one line.
+        let cert = |f: &dyn Fn(&mut Identity)| {
+            let mut bad = c.clone();
+            f(bad.identities.values_mut().next().unwrap());
+            Credentials::parse(&bad.to_toml(), "F")
+                .unwrap_err()
+                .to_string()
+        };
+        let e = cert(&|id| id.cert = id.cert.replacen("-----\nM", "-----\n!", 1));
+        assert!(e.contains("its certificate is not valid PEM"), "{e}");
+        let e = cert(&|id| {
+            id.cert = "-----BEGIN CERTIFICATE-----\nAAAA\n-----END CERTIFICATE-----\n".into()
+        });
+        assert!(
+            e.contains("its certificate is not an X.509 certificate"),
+            "{e}"
+        );
+        let e = cert(&|id| id.cert = format!("{}{}", id.cert, id.cert));
+        assert!(e.contains("holds 2 certificates, not one"), "{e}");
+        let e = cert(&|id| id.key = id.key.replacen("-----\nM", "-----\n!", 1));
+        assert!(e.contains("its key is not a valid PEM private key"), "{e}");
+        let mut bad = c.clone();
+        bad.ca = bad.ca.replacen("-----\nM", "-----\n!", 1);
+        let e = Credentials::parse(&bad.to_toml(), "F")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.starts_with("F: the CA certificate is not valid PEM"),
+            "{e}"
+        );
+        // A graph name with control characters still makes a file that reads back.
+        let mut odd = c.clone();
+        odd.graph = "g\n\u{1b}[2J".into();
+        assert_eq!(
+            Credentials::parse(&odd.to_toml(), "F").unwrap().graph,
+            odd.graph
+        );
         let many = (0..40).map(|i| format!("p{i}")).collect::<Vec<_>>();
         let mut big = c.clone();
         big.processes = many;

@@ -37,6 +37,10 @@ use zenoh::Wait;
 
 mod stepper;
 
+/// A process that starts its part of a real-clock run this long after the run's start
+/// rejoined it (a process restarted mid-run), rather than starting with it, seconds.
+const REJOIN_AFTER_S: f64 = 0.5;
+
 /// How a placement group is started.
 #[derive(Clone, Debug)]
 pub struct MemberOptions {
@@ -52,6 +56,11 @@ pub struct MemberOptions {
     pub listen: Vec<String>,
     /// The launch's credentials, holding this process's identity (`--credentials FILE`).
     pub credentials: Credentials,
+    /// Where the process says what happens to it, one line each: joined, ready, started or
+    /// rejoined (with the run time), ended. `None`: nothing said. `ratelab node` says them on
+    /// its stdout, which a launcher's own children have closed (`/dev/null`), so only a
+    /// process started by hand is heard.
+    pub say: Option<fn(&str)>,
 }
 
 /// One crossing topic's sending end in its publisher's process: the bridge element that
@@ -436,6 +445,17 @@ pub fn run_member(opts: &MemberOptions, stop: &StopFlag) -> Result<(), DistError
         _ctl_sub,
         _launcher_watch,
     } = Joined::join(opts, &file_spec, stop)?;
+    let say = |line: String| {
+        if let Some(say) = opts.say {
+            say(&line);
+        }
+    };
+    let me = &opts.process;
+    say(format!(
+        "process '{me}' joined graph '{}' at {}",
+        file_spec.name,
+        opts.connect.join(", ")
+    ));
     let send = |m: &ToLauncher| up.put(wire::encode_json(m)).wait();
     // Samples and reports are never dropped under congestion (Zenoh's default drops): a
     // lost one would stall the run.
@@ -561,6 +581,10 @@ pub fn run_member(opts: &MemberOptions, stop: &StopFlag) -> Result<(), DistError
     send(&ToLauncher::Ready {
         process: opts.process.clone(),
     })?;
+    say(format!(
+        "process '{me}' ready ({} clock): its run starts with the launcher's",
+        cfg.clock.as_str()
+    ));
     let bridge = bridge_outbound(&spec, &handles, publishers);
     let ticks: Arc<Vec<AtomicU64>> =
         Arc::new((0..spec.nodes.len()).map(|_| AtomicU64::new(0)).collect());
@@ -608,15 +632,24 @@ pub fn run_member(opts: &MemberOptions, stop: &StopFlag) -> Result<(), DistError
             Ok(ToMember::Stop { .. }) => {
                 Ok(GraphState::capture(&share.handles, Nanos::ZERO, &[], None))
             }
-            Ok(ToMember::Start { start_mono_ns }) => real_clock(
-                nodes,
-                &share,
-                start_mono_ns,
-                &ctl_rx,
-                stop,
-                &launcher_gone,
-                &|m| send(m),
-            ),
+            Ok(ToMember::Start { start_mono_ns }) => {
+                // Started with the run, or restarted into it (a rejoin): say which.
+                let at_s = wire::mono_now_ns().saturating_sub(start_mono_ns) as f64 / 1e9;
+                say(if at_s > REJOIN_AFTER_S {
+                    format!("process '{me}' rejoined the run at t={at_s:.2}s")
+                } else {
+                    format!("process '{me}' started with the run")
+                });
+                real_clock(
+                    nodes,
+                    &share,
+                    start_mono_ns,
+                    &ctl_rx,
+                    stop,
+                    &launcher_gone,
+                    &|m| send(m),
+                )
+            }
             Ok(other) => Err(DistError::Peer(format!("expected a start, got {other:?}"))),
         },
     };
@@ -646,6 +679,9 @@ pub fn run_member(opts: &MemberOptions, stop: &StopFlag) -> Result<(), DistError
         state: Box::new(state),
         wire,
     })?;
+    say(format!(
+        "process '{me}' ended: its report went to the launcher, which prints the run's summary"
+    ));
     // Let the report leave before the session closes.
     std::thread::sleep(Duration::from_millis(200));
     drop(tokens);

@@ -69,6 +69,12 @@ impl Silence {
         }
     }
 
+    /// Stop watching `process` (gone, or rejoined as a new process whose figures are yet
+    /// to come: its predecessor's silence is not its own).
+    pub fn forget(&mut self, process: &str) {
+        self.last.remove(process);
+    }
+
     /// The processes silent now, each with how long since its last figures.
     pub fn silent(&self) -> BTreeMap<String, Duration> {
         self.last

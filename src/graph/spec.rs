@@ -278,14 +278,14 @@ pub struct SpecError {
 }
 
 impl std::fmt::Display for SpecError {
+    /// One line: the file's name and the reason may quote the file (a `class`, a `kind`, a
+    /// key), so their control characters are written out ([`crate::text::printable`]).
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let origin = crate::text::printable(&self.origin);
+        let reason = crate::text::printable(&self.reason);
         match self.line {
-            0 => write!(f, "{}: {}", self.origin, self.reason),
-            _ => write!(
-                f,
-                "{}:{}:{}: {}",
-                self.origin, self.line, self.col, self.reason
-            ),
+            0 => write!(f, "{origin}: {reason}"),
+            _ => write!(f, "{origin}:{}:{}: {reason}", self.line, self.col),
         }
     }
 }
@@ -955,6 +955,17 @@ fn build(cx: &Ctx<'_>, raw: RawGraph) -> Result<GraphSpec, SpecError> {
     if let Some(n) = &raw.name {
         if n.get_ref().trim().is_empty() || n.get_ref().len() > 64 {
             return Err(cx.err(n.span(), "name must be 1 to 64 characters"));
+        }
+        // The name titles the lab, names recordings and heads a launch's credentials file:
+        // a control character would repaint a terminal or break that file.
+        if crate::text::has_control(n.get_ref()) {
+            return Err(cx.err(
+                n.span(),
+                format!(
+                    "name '{}' holds a control character",
+                    crate::text::printable(n.get_ref())
+                ),
+            ));
         }
     }
     if raw.nodes.len() > MAX_NODES {

@@ -6,8 +6,9 @@
 //!   cart velocity m/s, cos θ, sin θ, pole angular velocity rad/s.
 //! - The return value is a float or a one-element array-like (a NumPy array, a list, a
 //!   NumPy scalar): the force command in motor units, converted to float32 and clipped to
-//!   [−1, 1] as the chapter's environment does (×10 N on the cart). A NaN passes through
-//!   unclipped and the actuator refuses it, holding its last good force.
+//!   [−1, 1] as the chapter's environment does (×10 N on the cart). A NaN or ±inf passes
+//!   through unclipped and the actuator refuses it, holding its last good force; `None` (or
+//!   anything else that is not one number) fails the node.
 //! - Under the virtual clock a brain that does the chapter's arithmetic gives exactly the
 //!   chapter's run: Python floats are IEEE doubles and `math` calls the same C library.
 //!
@@ -136,8 +137,13 @@ impl Policy for PythonBrain {
                 .map_err(|e| describe(py, &e, &self.script))
         });
         match result {
-            // f64 of a float32 is exact, and so is the way back.
-            Ok(u) => [(u as f32).clamp(-1.0, 1.0)],
+            // f64 of a float32 is exact, and so is the way back. A non-finite command
+            // (NaN, ±inf) is not clipped: the actuator refuses it and holds its last good
+            // force, and the run counts and says it (inf is no full push).
+            Ok(u) => {
+                let u = u as f32;
+                [if u.is_finite() { u.clamp(-1.0, 1.0) } else { u }]
+            }
             Err(message) => panic!("{message}"),
         }
     }

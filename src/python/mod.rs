@@ -143,7 +143,9 @@ pub fn describe(py: Python<'_>, err: &PyErr, script: &str) -> String {
             .and_then(|s| s.extract::<String>())
             .ok()
     });
-    described.unwrap_or_else(|| format!("{script}: {err}"))
+    // The file names in it come from a graph file or a flag: nothing reaches a terminal raw.
+    let line = described.unwrap_or_else(|| format!("{script}: {err}"));
+    crate::text::printable(&line).into_owned()
 }
 
 /// A call into learners' code in progress: what the watchdog knows of it.
@@ -238,7 +240,8 @@ fn start_watchdog() {
                         r.warned = true;
                         eprintln!(
                             "[ratelab] warning: {} has not returned after {} (Ctrl-C interrupts it)",
-                            r.what, r.overrun_text
+                            crate::text::printable(&r.what),
+                            r.overrun_text
                         );
                     }
                 }

@@ -10,8 +10,51 @@ NumPy internal never hides where the learner's code went wrong.
 import math
 import os
 import sys
+import threading
+import time
 import traceback
 import types
+import unicodedata
+
+
+# ---- blocking calls a stop can interrupt ------------------------------------------------
+# A stop (Ctrl-C, SIGTERM, quitting the lab) raises KeyboardInterrupt inside a learner's
+# callback that is still running (PyThreadState_SetAsyncExc, src/python/mod.rs), but Python
+# delivers it only between bytecodes: a callback blocked in one long C call (`time.sleep(60)`,
+# `threading.Event().wait()`) would not see it until the call returned. These two, the usual
+# ways a learner waits, are made of slices of at most _SLICE_S seconds, so the stop lands
+# within a slice; what they do and return is unchanged. Other blocking C calls (a socket,
+# a lock's acquire) still block until they return.
+_SLICE_S = 0.05
+_real_sleep = time.sleep
+_real_event_wait = threading.Event.wait
+
+
+def _sleep(seconds):
+    if not isinstance(seconds, (int, float)) or seconds != seconds or seconds <= 0:
+        return _real_sleep(seconds)  # its own errors (a type, a negative value) and zero
+    end = time.monotonic() + seconds
+    while True:
+        left = end - time.monotonic()
+        if left <= 0:
+            return None
+        _real_sleep(min(left, _SLICE_S))
+
+
+def _event_wait(self, timeout=None):
+    end = None if timeout is None else time.monotonic() + max(0.0, timeout)
+    while True:
+        left = _SLICE_S if end is None else min(_SLICE_S, end - time.monotonic())
+        if left <= 0:
+            return self.is_set()
+        if _real_event_wait(self, left):
+            return True
+
+
+_sleep.__doc__ = _real_sleep.__doc__
+_event_wait.__doc__ = _real_event_wait.__doc__
+time.sleep = _sleep
+threading.Event.wait = _event_wait
 
 
 class ContractError(Exception):
@@ -23,7 +66,13 @@ class ContractError(Exception):
 
 
 def _one_line(text):
-    return " ".join(str(text).split())
+    """`text` as one line a terminal shows as it is: whitespace runs (newlines too) become
+    one space, and any other control character (ESC, DEL, C1) is written out as Rust's
+    `char::escape_default` writes it (`\\u{1b}`), as ratelab's `text::printable` does."""
+    folded = " ".join(str(text).split())
+    return "".join(
+        f"\\u{{{ord(c):x}}}" if unicodedata.category(c) == "Cc" else c for c in folded
+    )
 
 
 def describe(exc, script, tb=None):
@@ -86,10 +135,12 @@ def brain_caller(module, function, script):
 
     def call(obs):
         result = fn(array(obs, dtype=f32))
-        try:
-            a = asarray(result, dtype=f32)
-        except (TypeError, ValueError):
-            a = None
+        a = None
+        if result is not None:  # NumPy would take None for NaN: a brain that forgot to return
+            try:
+                a = asarray(result, dtype=f32)
+            except (TypeError, ValueError):
+                pass
         if a is None or a.size != 1:
             shown = repr(result)
             shown = shown if len(shown) <= 60 else shown[:57] + "..."
@@ -245,8 +296,7 @@ class Logger:
         self._name = name
 
     def _say(self, level, text):
-        text = " ".join(str(text).split())
-        print(f"[{self._name}] {level}: {text}", file=sys.stderr, flush=True)
+        print(f"[{self._name}] {level}: {_one_line(text)}", file=sys.stderr, flush=True)
 
     def info(self, text):
         self._say("info", text)

@@ -12,7 +12,9 @@
 //! ran it with, as its publisher's token says; also in each MCAP channel's metadata, where
 //! `ros2 bag play` reads it). MCAP is written by the `mcap` crate,
 //! the YAML by `serde_yaml`; a bag cut short (killed run) has its MCAP data but no
-//! `metadata.yaml`, which `ros2 bag reindex` rebuilds.
+//! `metadata.yaml`, which `ros2 bag reindex` rebuilds. A bag that could not be written
+//! whole (a full disk) is not left under its name: its MCAP file is removed, and the run
+//! says so and fails ([`Bag::finish`]), as `--out` and `--record` do.
 
 use super::types::RosType;
 use super::Ros2Error;
@@ -121,6 +123,9 @@ pub struct Bag {
     topics: Vec<Counted>,
     first_ns: Option<u64>,
     last_ns: u64,
+    /// The first write that failed (a full disk): later messages are not written, and
+    /// [`Bag::finish`] removes the file.
+    failed: Option<String>,
 }
 
 fn io(what: &Path, e: impl std::fmt::Display) -> Ros2Error {
@@ -218,15 +223,25 @@ impl Bag {
             topics: counted,
             first_ns: None,
             last_ns: 0,
+            failed: None,
         })
     }
 
     /// Write message `data` (CDR with its header) of topic number `topic` at run time
     /// `t_ns`.
     ///
-    /// # Errors
-    /// The write failed (a full disk): the reason.
-    pub fn write(&mut self, topic: usize, t_ns: u64, data: &[u8]) -> Result<(), String> {
+    /// A write that fails (a full disk) is kept for [`Bag::finish`], which fails with it;
+    /// nothing is written after it.
+    pub fn write(&mut self, topic: usize, t_ns: u64, data: &[u8]) {
+        if self.failed.is_some() {
+            return;
+        }
+        if let Err(e) = self.write_one(topic, t_ns, data) {
+            self.failed = Some(e);
+        }
+    }
+
+    fn write_one(&mut self, topic: usize, t_ns: u64, data: &[u8]) -> Result<(), String> {
         let t = &mut self.topics[topic];
         let header = mcap::records::MessageHeader {
             channel_id: t.channel,
@@ -246,9 +261,26 @@ impl Bag {
     /// Finish the MCAP file and write `metadata.yaml`. Returns the messages written.
     ///
     /// # Errors
-    /// A write failed: the reason.
+    /// A write failed (here or in [`Bag::write`]): the reason, and the bag is not left under
+    /// its name (its MCAP file is removed, no `metadata.yaml` is written): a bag is whole or
+    /// not there.
     pub fn finish(mut self) -> Result<u64, String> {
-        self.writer.finish().map_err(|e| e.to_string())?;
+        let finished = match self.failed.take() {
+            Some(e) => Err(e),
+            None => self.writer.finish().map(drop).map_err(|e| e.to_string()),
+        };
+        if let Err(e) = finished.and_then(|()| self.write_metadata()) {
+            let _ = std::fs::remove_file(&self.mcap_path);
+            return Err(format!(
+                "{}: cut short ({e}); the bag was removed",
+                self.dir.display()
+            ));
+        }
+        Ok(self.topics.iter().map(|t| t.count).sum())
+    }
+
+    /// `metadata.yaml`, rosbag2's description of the bag, once the MCAP file is whole.
+    fn write_metadata(&self) -> Result<(), String> {
         let start = self.first_ns.unwrap_or(0);
         let duration = self.last_ns.saturating_sub(start);
         let total: u64 = self.topics.iter().map(|t| t.count).sum();
@@ -301,8 +333,7 @@ impl Bag {
         };
         let yaml = serde_yaml::to_string(&meta).map_err(|e| e.to_string())?;
         crate::output::write_file(&self.dir.join("metadata.yaml"), true, yaml.as_bytes())
-            .map_err(|e| e.to_string())?;
-        Ok(total)
+            .map_err(|e| e.to_string())
     }
 }
 

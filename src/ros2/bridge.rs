@@ -88,19 +88,22 @@ pub struct BridgeReport {
     pub offered: u64,
     /// ROS 2 copies dropped because the bridge fell behind (real clock only).
     pub dropped: u64,
-    /// The first failed put or bag write, if any.
+    /// The first failed put, if any.
     pub error: Option<String>,
-    /// Messages written to the bag (with `/clock`), when there is one.
-    pub bagged: Option<u64>,
+    /// The bag, when there is one: the messages written to it (with `/clock`), or why it
+    /// could not be written whole (it was then removed: [`super::bag::Bag::finish`]).
+    pub bagged: Option<Result<u64, String>>,
     /// What each external node did, by name, in node order.
     pub external: Vec<(String, ExternalStats)>,
+    /// Notes from waiting for the external nodes (malformed tokens ignored), one line each.
+    pub notes: Vec<String>,
 }
 
 impl BridgeReport {
     /// One line per external node that missed ticks or sent what could not be used (none
     /// when all went well).
     pub fn external_warnings(&self) -> Vec<String> {
-        let mut lines = Vec::new();
+        let mut lines = self.notes.clone();
         for (name, s) in &self.external {
             if s.missed > 0 {
                 lines.push(format!(
@@ -138,6 +141,7 @@ pub struct Bridge {
     thread: Option<JoinHandle<Forwarded>>,
     dropped: Arc<AtomicU64>,
     ports: Vec<Arc<ExternalPort>>,
+    notes: Vec<String>,
     /// The router the session uses.
     pub router: Router,
     /// The domain.
@@ -365,7 +369,8 @@ impl Bridge {
         };
         if let Some(other) = others.first() {
             return Err(Ros2Error::Usage(format!(
-                "--ros2: node '{other}' already publishes /clock on domain {domain}; two /clock publishers would give ROS 2 nodes two times (stop it, or use another ROS_DOMAIN_ID)"
+                "--ros2: node '{}' already publishes /clock on domain {domain}; two /clock publishers would give ROS 2 nodes two times (stop it, or use another ROS_DOMAIN_ID)",
+                crate::text::printable(other)
             )));
         }
         let waits = clock == ClockKind::Virtual;
@@ -377,7 +382,7 @@ impl Bridge {
                 ports.len()
             )));
         }
-        super::external::wait_for(&session, domain, spec, ports, stop)?;
+        let notes = super::external::wait_for(&session, domain, spec, ports, stop)?;
         let elsewhere = |n: NodeId| offer.elsewhere(n);
         let zid = session.zid();
         let format = KeyExprFormat::default();
@@ -569,6 +574,7 @@ impl Bridge {
             thread: Some(thread),
             dropped,
             ports: ports.to_vec(),
+            notes,
             router,
             domain,
         })
@@ -624,6 +630,7 @@ impl Bridge {
                 .iter()
                 .map(|p| (p.name.clone(), p.stats()))
                 .collect(),
+            notes: std::mem::take(&mut self.notes),
         }
     }
 }
@@ -659,7 +666,7 @@ fn put(o: &Outlet, seq: i64, bytes: &[u8]) -> Result<(), String> {
 struct Forwarded {
     offered: u64,
     error: Option<String>,
-    bagged: Option<u64>,
+    bagged: Option<Result<u64, String>>,
 }
 
 /// The bridge thread's state: where messages go and what happened.
@@ -686,8 +693,8 @@ impl Forwarder<'_> {
     /// after the topics'), at run time `t`: put on its key and written to the bag. False
     /// when the put failed.
     fn send(&mut self, index: usize, seq: i64, t: Nanos) -> bool {
-        if let Some(Err(e)) = self.bag.as_mut().map(|b| b.write(index, t.0, &self.buf)) {
-            self.error.get_or_insert(format!("the bag: {e}"));
+        if let Some(b) = self.bag.as_mut() {
+            b.write(index, t.0, &self.buf);
         }
         let outlet = match (self.outlets.get(index), self.clock) {
             (Some(Some(o)), _) | (None, Some(o)) => o,
@@ -774,18 +781,10 @@ fn forward(
     if let Some(p) = f.pending.take() {
         f.tick(p);
     }
-    let mut error = f.error;
-    let bagged = f.bag.map(|b| match b.finish() {
-        Ok(n) => n,
-        Err(e) => {
-            error.get_or_insert(format!("the bag: {e}"));
-            0
-        }
-    });
     Forwarded {
         offered: f.offered,
-        error,
-        bagged,
+        error: f.error,
+        bagged: f.bag.map(Bag::finish),
     }
 }
 

@@ -66,7 +66,23 @@ fn short_hash(h: &[u8; 32]) -> String {
 /// tokens already declared).
 struct Tokens {
     seen: Arc<Mutex<BTreeSet<Seen>>>,
+    /// Tokens ignored because a name in them holds a control character: how many, and the
+    /// first's key, written out ([`crate::text::printable`]).
+    ignored: Arc<Mutex<(u64, Option<String>)>>,
     _sub: zenoh::pubsub::Subscriber<()>,
+}
+
+impl Tokens {
+    /// The note for the tokens ignored so far, if any (one line).
+    fn note(&self, domain: u32) -> Option<String> {
+        let (n, first) = &*self.ignored.lock().unwrap_or_else(|e| e.into_inner());
+        (*n > 0).then(|| {
+            format!(
+                "ignored {n} malformed ROS 2 liveliness token(s) on domain {domain} (a name holding control characters), the first: {}",
+                first.as_deref().unwrap_or("?")
+            )
+        })
+    }
 }
 
 /// Check that `spec` may run without `--ros2`: it has no external node (only ROS 2 can fill
@@ -135,9 +151,9 @@ pub fn wait_for(
     spec: &GraphSpec,
     ports: &[Arc<ExternalPort>],
     stop: &StopFlag,
-) -> Result<(), Ros2Error> {
+) -> Result<Vec<String>, Ros2Error> {
     if ports.is_empty() {
-        return Ok(());
+        return Ok(Vec::new());
     }
     let tokens = watch(session, domain)?;
     let wanted: Vec<Wanted<'_>> = ports
@@ -181,27 +197,29 @@ pub fn wait_for(
                 let mine = seen
                     .iter()
                     .filter(|(k, n, t, _)| *k == kind_key(*kind) && n == name && t == topic);
-                let mut found = false;
-                for (_, _, _, got) in mine {
-                    match got {
-                        Some(got) if *got == want => found = true,
-                        Some((gname, ghash)) => {
-                            let what = endpoint_word(*kind);
-                            let theirs = hiroz_schema::ros_from_dds_strict(gname);
-                            let differs = if *gname == want.0 {
-                                format!(
-                                    "{theirs} with type hash {}, ratelab's is {} (another ROS 2 distribution's definition?)",
-                                    short_hash(ghash),
-                                    short_hash(&want.1)
-                                )
-                            } else {
-                                format!("{theirs}, but the graph's {topic} is {}", ty.name)
-                            };
-                            return Err(Ros2Error::Usage(format!(
-                                "external node '{name}' {what} {topic} as {differs}: a ROS 2 endpoint of another type hears nothing (fix its type or the graph's)"
-                            )));
-                        }
-                        None => {}
+                // Any peer on the domain may declare a token under this node's name: one of
+                // another type is an error only when none of the right type is there.
+                let found = mine
+                    .clone()
+                    .any(|(_, _, _, got)| *got == Some(want.clone()));
+                for (_, _, _, got) in mine.filter(|_| !found) {
+                    if let Some((gname, ghash)) = got {
+                        let what = endpoint_word(*kind);
+                        let theirs =
+                            crate::text::printable(&hiroz_schema::ros_from_dds_strict(gname))
+                                .into_owned();
+                        let differs = if *gname == want.0 {
+                            format!(
+                                "{theirs} with type hash {}, ratelab's is {} (another ROS 2 distribution's definition?)",
+                                short_hash(ghash),
+                                short_hash(&want.1)
+                            )
+                        } else {
+                            format!("{theirs}, but the graph's {topic} is {}", ty.name)
+                        };
+                        return Err(Ros2Error::Usage(format!(
+                            "external node '{name}' {what} {topic} as {differs}: a ROS 2 endpoint of another type hears nothing (fix its type or the graph's)"
+                        )));
                     }
                 }
                 if !found {
@@ -220,7 +238,7 @@ pub fn wait_for(
             }
         }
         if all {
-            return Ok(());
+            return Ok(tokens.note(domain).into_iter().collect());
         }
         if stop.is_stopped() {
             return Err(Ros2Error::Usage(
@@ -243,6 +261,8 @@ fn endpoint_word(k: EndpointKind) -> &'static str {
 fn watch(session: &zenoh::Session, domain: u32) -> Result<Tokens, Ros2Error> {
     let seen = Arc::new(Mutex::new(BTreeSet::new()));
     let kept = seen.clone();
+    let ignored = Arc::new(Mutex::new((0u64, None)));
+    let noted = ignored.clone();
     let format = KeyExprFormat::default();
     let sub = session
         .liveliness()
@@ -261,6 +281,24 @@ fn watch(session: &zenoh::Session, domain: u32) -> Result<Tokens, Ros2Error> {
                     e.type_info.map(|t| (t.name, t.hash.value)),
                 ),
             };
+            // A peer's names reach the user's terminal in errors: a token whose names hold
+            // control characters is not one ROS 2 makes (its names are checked), so it is
+            // ignored, with a note, never fatal.
+            if [&entry.1, &entry.2]
+                .iter()
+                .any(|t| crate::text::has_control(t))
+                || entry
+                    .3
+                    .as_ref()
+                    .is_some_and(|t| crate::text::has_control(&t.0))
+            {
+                let mut n = noted.lock().unwrap_or_else(|e| e.into_inner());
+                n.0 += 1;
+                n.1.get_or_insert_with(|| {
+                    crate::text::printable(sample.key_expr().as_ref()).into_owned()
+                });
+                return;
+            }
             let mut s = kept.lock().unwrap_or_else(|e| e.into_inner());
             match sample.kind() {
                 zenoh::sample::SampleKind::Put => {
@@ -277,7 +315,11 @@ fn watch(session: &zenoh::Session, domain: u32) -> Result<Tokens, Ros2Error> {
         })
         .wait()
         .map_err(zerr)?;
-    Ok(Tokens { seen, _sub: sub })
+    Ok(Tokens {
+        seen,
+        ignored,
+        _sub: sub,
+    })
 }
 
 /// The data key of `topic` of type `ty` on `domain` (`<domain>/<topic>/<dds type>/<hash>`).

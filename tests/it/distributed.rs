@@ -543,10 +543,19 @@ fn a_killed_node_is_noticed_and_a_restarted_one_rejoins() {
         .args(["node", "--process", "policy", "--connect", &ep])
         .arg("--credentials")
         .arg(dir.path().join("creds.toml"))
-        .stdout(Stdio::null())
+        .stdout(Stdio::piped())
         .stderr(Stdio::null())
         .spawn()
         .unwrap();
+    // Started by hand, it says what happens to it on its stdout (drained meanwhile).
+    let said = {
+        let out = again.stdout.take().unwrap();
+        std::thread::spawn(move || {
+            let mut s = String::new();
+            let _ = std::io::Read::read_to_string(&mut BufReader::new(out), &mut s);
+            s
+        })
+    };
     let busy = "process 'policy' asks to rejoin before its last run's liveliness token went";
     assert!(wait_for(&mut lines, busy, 10), "{lines:?}");
     std::thread::sleep(Duration::from_millis(600));
@@ -630,6 +639,31 @@ fn a_killed_node_is_noticed_and_a_restarted_one_rejoins() {
     assert!(!action_wire.contains("rejoin"), "{action_wire}");
     let restarted = again.wait().unwrap();
     assert!(restarted.success(), "the restarted node ends with the run");
+    let said = said.join().unwrap();
+    let said: Vec<&str> = said.lines().collect();
+    assert!(
+        said.len() == 4
+            && said[0].starts_with(
+                "[ratelab] node: process 'policy' joined graph 'cartpole' at tls/127.0.0.1:"
+            )
+            && said[1].starts_with("[ratelab] node: process 'policy' ready (real clock)")
+            && said[2].starts_with("[ratelab] node: process 'policy' rejoined the run at t=")
+            && said[3].starts_with("[ratelab] node: process 'policy' ended: its report went"),
+        "{said:?}"
+    );
+    // The launcher's log reads in order: a rejoined process is not then said to be silent
+    // (its predecessor's silence is not its own), nor heard again.
+    let rejoined = lines
+        .iter()
+        .position(|l| l.contains("process 'policy' rejoined"))
+        .unwrap();
+    assert!(
+        !lines[rejoined..]
+            .iter()
+            .any(|l| l.contains("process 'policy' is silent")
+                || l.contains("process 'policy' is heard again")),
+        "{lines:?}"
+    );
     // The policy ticked before it was killed and after its restart: its ticks go on from
     // what the killed process counted (its figures up to 100 ms before it died), so only
     // the gap (well under a second) is missing from 6 s at 50 Hz; counting from the restart
@@ -911,7 +945,7 @@ fn top_finds_this_users_launch_without_connect() {
     // (When this fails, something else holds 7449 already: taken either way.)
     let _taken = std::net::TcpListener::bind("127.0.0.1:7449");
     let runtime = tempfile::tempdir().unwrap();
-    let record = runtime.path().join("ratelab/launch");
+    let records = runtime.path().join("ratelab");
     let mut launcher = bin()
         .env("XDG_RUNTIME_DIR", runtime.path())
         .args([
@@ -943,6 +977,7 @@ fn top_finds_this_users_launch_without_connect() {
         endpoint.starts_with("tls/127.0.0.1:") && !endpoint.ends_with(":7449"),
         "7449 is taken: {endpoint}"
     );
+    let record = records.join(format!("launch.{}", launcher.id()));
     let recorded = std::fs::read_to_string(&record).unwrap();
     assert_eq!(
         recorded,
@@ -963,25 +998,67 @@ fn top_finds_this_users_launch_without_connect() {
         !record.exists(),
         "the launch removes its record when it ends"
     );
+    assert!(
+        !records
+            .join(format!("launch-credentials.{}.toml", launcher.id()))
+            .exists(),
+        "and its credentials"
+    );
     // A record of a live process whose launch does not answer: a one-line hint.
     let port = free_port();
-    std::fs::create_dir_all(record.parent().unwrap()).unwrap();
+    let me = std::process::id();
+    std::fs::create_dir_all(&records).unwrap();
     std::fs::write(
-        &record,
-        format!("tls/127.0.0.1:{port} {}\n", std::process::id()),
+        records.join(format!("launch.{me}")),
+        format!("tls/127.0.0.1:{port} {me}\n"),
     )
     .unwrap();
-    std::fs::rename(
-        chapter_credentials(runtime.path()),
-        record.with_file_name("launch-credentials.toml"),
+    let credentials = chapter_credentials(runtime.path());
+    std::fs::copy(
+        &credentials,
+        records.join(format!("launch-credentials.{me}.toml")),
     )
     .unwrap();
+    let top = || {
+        bin()
+            .env("XDG_RUNTIME_DIR", runtime.path())
+            .args(["top", "--once"])
+            .output()
+            .unwrap()
+    };
+    assert_one_line_exit_2(&top(), "this user's launch was recorded there");
+    // Two launches of this user's running: neither is guessed, both are listed (a record
+    // names a live process: this test's and the init process, pid 1).
+    let other = free_port();
+    std::fs::write(
+        records.join("launch.1"),
+        format!("tls/127.0.0.1:{other} 1\n"),
+    )
+    .unwrap();
+    std::fs::copy(&credentials, records.join("launch-credentials.1.toml")).unwrap();
+    let o = top();
+    assert_one_line_exit_2(&o, "2 launches of yours are running: ");
+    let err = text(&o.stderr);
+    assert!(
+        err.contains(&format!("tls/127.0.0.1:{other} (graph 'cartpole', pid 1)"))
+            && err.contains(&format!(
+                "tls/127.0.0.1:{port} (graph 'cartpole', pid {me})"
+            ))
+            && err.contains("choose one with --connect"),
+        "{err}"
+    );
+    // --connect chooses one, with that launch's credentials: the hint is the endpoint's.
     let o = bin()
         .env("XDG_RUNTIME_DIR", runtime.path())
-        .args(["top", "--once"])
+        .args([
+            "top",
+            "--once",
+            "--connect",
+            &format!("tls/127.0.0.1:{port}"),
+        ])
         .output()
         .unwrap();
-    assert_one_line_exit_2(&o, "this user's launch was recorded there");
+    assert_one_line_exit_2(&o, "check the endpoint");
 }
 
 fn assert_one_line_exit_2(o: &Output, needle: &str) {

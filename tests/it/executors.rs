@@ -110,36 +110,49 @@ fn the_defaults_said_out_loud_change_nothing() {
     assert_eq!(json, same);
 }
 
+/// The measured rate of `node` in a real-clock run's metrics, Hz.
+fn measured_hz(m: &Metrics, node: &str) -> f64 {
+    m.node_timing
+        .as_ref()
+        .unwrap()
+        .iter()
+        .find(|t| t.node == node)
+        .unwrap()
+        .measured_hz
+}
+
 #[test]
 fn the_real_clock_shows_the_same_starvation_within_bands() {
+    // Judged against this machine as it is now (a learner's busy laptop, CI's shared
+    // cores): the sensor's rate with a thread of its own and no compute time, measured in
+    // the same test, is the floor; the claims are relative to it.
     let _machine = crate::machine::alone();
+    let floor_hz = measured_hz(
+        &metrics(&cfg(GraphSpec::chapter(), ClockKind::Real, 2.0)).0,
+        "sensor",
+    );
+    assert!(
+        floor_hz > 25.0,
+        "the machine cannot hold even 50 Hz: {floor_hz} Hz"
+    );
     let mut g = GraphSpec::chapter();
     compute(&mut g, "policy", "30");
     g.set_executor(ExecutorOverride::parse("single_threaded").unwrap());
     let (m, _) = metrics(&cfg(g.clone(), ClockKind::Real, 2.0));
-    let timing = m.node_timing.as_ref().unwrap();
-    let sensor = timing.iter().find(|t| t.node == "sensor").unwrap();
-    // A shared, noisy machine: the band is wide, the effect is not (50 Hz without it).
+    let starved_hz = measured_hz(&m, "sensor");
+    // One thread: the policy's 30 ms holds the sensor's timer past its 20 ms period (about
+    // 33 Hz on an idle machine, less on a loaded one), and periods are skipped.
     assert!(
-        (22.0..=40.0).contains(&sensor.measured_hz),
-        "sensor at {} Hz",
-        sensor.measured_hz
+        starved_hz <= 0.8 * floor_hz,
+        "sensor at {starved_hz} Hz on one thread beside a 30 ms policy, {floor_hz} Hz alone"
     );
     assert!(m.nodes["sensor"].exec.as_ref().unwrap().skipped_ticks > 0);
+    // A second thread gives the sensor its grid back: the floor's rate, within a few ticks.
     g.set_executor(ExecutorOverride::parse("multi_threaded:2").unwrap());
-    let (m2, _) = metrics(&cfg(g, ClockKind::Real, 2.0));
-    let sensor = m2
-        .node_timing
-        .as_ref()
-        .unwrap()
-        .iter()
-        .find(|t| t.node == "sensor")
-        .unwrap()
-        .clone();
+    let freed_hz = measured_hz(&metrics(&cfg(g, ClockKind::Real, 2.0)).0, "sensor");
     assert!(
-        (44.0..=52.0).contains(&sensor.measured_hz),
-        "sensor at {} Hz with its own thread",
-        sensor.measured_hz
+        freed_hz >= 0.9 * floor_hz && freed_hz > starved_hz,
+        "sensor at {freed_hz} Hz with its own thread, {floor_hz} Hz alone, {starved_hz} Hz starved"
     );
 }
 
@@ -481,12 +494,21 @@ fn across_processes_the_real_clock_runs_each_process_s_executor() {
     assert_eq!(e["name"], "brain", "{m}");
     assert_eq!(e["kind"], "single_threaded");
     // Busy 1 ms per 10 ms and 12 ms per 20 ms: 70 % of one thread (the virtual clock's
-    // figure); a shared machine adds or loses a little.
-    let u = e["utilization"].as_f64().unwrap();
-    assert!((0.55..=0.9).contains(&u), "utilization {u}");
+    // figure). A compute time is CPU burnt: on a loaded machine it takes longer in wall
+    // time, by the stretch measured here (the policy's wall time per tick over its 12 ms of
+    // CPU), and the upper bounds stretch with it; load never lowers these figures.
     let node = |n: &str, k: &str| m["nodes"][n][k].as_f64().unwrap();
+    let stretch = (node("policy", "busy_ms") / (12.0 * node("policy", "ticks"))).max(1.0);
+    let u = e["utilization"].as_f64().unwrap();
+    assert!(
+        u >= 0.55 && u <= (0.9 * stretch).min(1.0),
+        "utilization {u} (stretch {stretch})"
+    );
     let p50 = node("policy", "response_time_p50_ms");
-    assert!((12.0..=20.0).contains(&p50), "policy response p50 {p50} ms");
+    assert!(
+        (12.0..=20.0 * stretch).contains(&p50),
+        "policy response p50 {p50} ms (stretch {stretch})"
+    );
     // The estimator's 1 ms update waits behind the policy's tick on the one thread: its
     // worst response is several ms (about 1 ms on a thread of its own).
     let p99 = node("estimator", "response_time_p99_ms");

@@ -472,7 +472,13 @@ fn malformed_rebuild_calls_and_storages_are_refused_in_one_line() {
     // An actor tensor in a storage type that cannot become float32.
     let mut t = actor(4);
     t[0].storage = "FancyStorage".into();
-    assert_policy_refused(&write_pt(d, "fancy.pt", &t, 6), "torch.FancyStorage");
+    let fancy = write_pt(d, "fancy.pt", &t, 6);
+    assert_policy_refused(&fancy, "torch.FancyStorage");
+    // `export` refuses it as `run --policy` does: no tensor is left out without a word.
+    let npz = d.join("fancy.npz");
+    let (fancy, npz) = (fancy.to_str().unwrap(), npz.to_str().unwrap());
+    assert_refused(&["export", fancy, "--out", npz], d, "torch.FancyStorage");
+    assert!(!d.join("fancy.npz").exists());
     let mut t = actor(4);
     t[1].storage = "BoolStorage".into();
     t[1].data = vec![1; 4];

@@ -58,6 +58,7 @@ mod e2e_pty;
 mod executors;
 mod exercises;
 mod graphs;
+mod hardening;
 mod hostile;
 mod python;
 mod qos;

@@ -250,6 +250,172 @@ fn a_brain_that_raises_or_returns_nonsense_fails_the_policy_node_at_that_tick() 
         "def act(obs):\n    return [0.1, 0.2]\n",
         &["FILE:1: act() returned [0.1, 0.2]; expected a float"],
     );
+    // A brain that forgot to return: None is not a number (NumPy would read it as NaN).
+    assert_fails_mid_run(
+        "def act(obs):\n    obs * 2\n",
+        &["t=0.00s", "FILE:1: act() returned None; expected a float"],
+    );
+    // An exception's message reaches the terminal with its control characters written out.
+    assert_fails_mid_run(
+        "def act(obs):\n    raise RuntimeError('\\x1b[2J\\x1b]0;pwned\\x07 gone')\n",
+        &["FILE:2: RuntimeError: \\u{1b}[2J\\u{1b}]0;pwned\\u{7} gone"],
+    );
+}
+
+/// ±inf from a brain is refused as NaN is: counted, said, and never applied (the actuator
+/// holds its last good force), not clipped to a full push.
+#[test]
+fn an_infinite_action_is_refused_and_counted_as_nan_is() {
+    let dir = tempfile::tempdir().unwrap();
+    for (name, bad) in [
+        ("inf", "float('inf')"),
+        ("ninf", "-float('inf')"),
+        ("nan", "float('nan')"),
+    ] {
+        // The shipped scripted brain, but every third action non-finite (holding the one
+        // before still balances at 50 Hz).
+        let p = script(
+            dir.path(),
+            &format!("{name}.py"),
+            &format!(
+                "import importlib.util\n\
+                 spec = importlib.util.spec_from_file_location('scripted', {:?})\n\
+                 scripted = importlib.util.module_from_spec(spec)\n\
+                 spec.loader.exec_module(scripted)\n\
+                 calls = 0\n\
+                 def act(obs):\n\
+                 \x20   global calls\n\
+                 \x20   calls += 1\n\
+                 \x20   return {bad} if calls % 3 == 0 else scripted.act(obs)\n",
+                shipped_brain()
+            ),
+        );
+        let out = dir.path().join(name);
+        let (m, trace) = virtual_out(&out, &["--policy", p.to_str().unwrap(), "--duration", "2"]);
+        assert_eq!(
+            m["nonfinite_actions"].as_u64(),
+            Some(33),
+            "{name}: one in three of 101 ticks"
+        );
+        // No applied force is a full push that the brain did not ask for: every force in the
+        // trace is finite, and the first refused tick re-applies the force before it.
+        let text = String::from_utf8_lossy(&trace);
+        let header: Vec<&str> = text.lines().next().unwrap().split(',').collect();
+        let col = header
+            .iter()
+            .position(|c| *c == "action")
+            .expect("an action column");
+        let actions: Vec<f64> = text
+            .lines()
+            .skip(1)
+            .map(|l| l.split(',').nth(col).unwrap().parse().unwrap())
+            .collect();
+        assert!(actions.iter().all(|a| a.is_finite()), "{name}");
+        assert_eq!(
+            actions[2], actions[1],
+            "{name}: the third tick holds the second's force"
+        );
+    }
+}
+
+/// A callback asleep in `time.sleep` or `threading.Event.wait` (one C call) is interrupted
+/// by the first Ctrl-C too: the run ends within a second, with its summary.
+#[test]
+fn a_brain_asleep_in_a_c_call_is_interrupted_by_the_first_ctrl_c() {
+    let _m = crate::machine::alone();
+    let dir = tempfile::tempdir().unwrap();
+    for (name, body) in [
+        (
+            "sleep",
+            "import time\ndef act(obs):\n    time.sleep(60)\n    return 0.0\n",
+        ),
+        (
+            "wait",
+            "import threading\ndef act(obs):\n    threading.Event().wait()\n    return 0.0\n",
+        ),
+    ] {
+        let p = script(dir.path(), &format!("{name}.py"), body);
+        let child = Command::new(env!("CARGO_BIN_EXE_ratelab"))
+            .args(["run", "--clock", "real", "--policy", p.to_str().unwrap()])
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap();
+        std::thread::sleep(Duration::from_millis(1500));
+        let sent = Instant::now();
+        // SAFETY: plain kill(2) on our child.
+        unsafe { libc::kill(child.id() as i32, libc::SIGINT) };
+        let o = child.wait_with_output().unwrap();
+        let took = sent.elapsed();
+        let err = stderr(&o);
+        assert!(
+            took < Duration::from_secs(1),
+            "{name}: took {took:?}: {err}"
+        );
+        assert!(
+            err.contains(&format!("{}:3: KeyboardInterrupt", p.display())),
+            "{name}: {err}"
+        );
+        assert!(
+            String::from_utf8_lossy(&o.stdout).contains("NODE FAILED"),
+            "{name}: the summary is printed"
+        );
+        assert_eq!(o.status.code(), Some(130), "{name}: {err}");
+    }
+}
+
+/// A node that fails (an exception, `sys.exit`) fails the run in every layout: `run`, a
+/// launch in one process and a launch across processes, under either clock, exit 2 with
+/// one line naming the node, after the summary.
+#[test]
+fn a_failed_node_exits_2_in_every_layout() {
+    let _m = crate::machine::shared();
+    let dir = tempfile::tempdir().unwrap();
+    for (body, needle) in [
+        ("raise RuntimeError('gave up')", "RuntimeError: gave up"),
+        ("import sys; sys.exit(3)", "SystemExit: 3"),
+    ] {
+        let (graph, _) = python_graph(
+            dir.path(),
+            &format!(
+                "{HEAD}\
+                 class Mine:\n\
+                 \x20   def __init__(self, node):\n\
+                 \x20       self.n = 0\n\
+                 \x20       self.pub = node.create_publisher(Force, '/action', 1)\n\
+                 \x20       node.create_subscription(State, '/obs', lambda m: None, 1)\n\
+                 \x20       node.create_timer(node.get_period(), self.tick)\n\
+                 \x20   def tick(self):\n\
+                 \x20       self.n += 1\n\
+                 \x20       if self.n == 5:\n\
+                 \x20           {body}\n\
+                 \x20       self.pub.publish(Force(newtons=0.0))\n"
+            ),
+            "class = \"Mine\"\nprocess = \"policy\"",
+        );
+        let g = graph.to_str().unwrap();
+        for clock in ["virtual", "real"] {
+            for args in [
+                vec!["run", "--graph", g],
+                vec!["launch", g],
+                vec!["launch", g, "--processes"],
+            ] {
+                let o = ratelab(&[&args[..], &["--clock", clock, "--duration", "1"]].concat());
+                let err = stderr(&o);
+                let what = format!("{args:?} under the {clock} clock");
+                assert_eq!(o.status.code(), Some(2), "{what}: {err}");
+                let last = err.trim_end().lines().last().unwrap_or("");
+                assert!(
+                    last.starts_with("error: node 'policy' failed at t=") && last.contains(needle),
+                    "{what}: {err}"
+                );
+                assert!(
+                    String::from_utf8_lossy(&o.stdout).contains("NODE FAILED"),
+                    "{what}: the summary says so"
+                );
+            }
+        }
+    }
 }
 
 #[test]

@@ -276,6 +276,37 @@ fn an_external_node_missing_of_another_type_or_silent_is_said_in_one_line() {
         "{err}"
     );
     assert!(out.contains("BALANCED"), "{out}");
+    // A hostile peer beside the node: a token whose type name holds an escape sequence,
+    // and one of another type for the same node and topic. Neither stops the run: the
+    // first is ignored with a note (written out, never raw), the second does not matter
+    // while a token of the right type is there.
+    let forged = External::start(&endpoint, 6, "50", &["--forge"]);
+    let (code, out, err) = ratelab(
+        &[
+            "run",
+            "--graph",
+            GRAPH,
+            "--ros2",
+            "6",
+            "--duration",
+            "1",
+            "--clock",
+            "virtual",
+        ],
+        &env,
+    );
+    drop(forged);
+    assert_eq!(code, 0, "{out}{err}");
+    assert!(out.contains("BALANCED"), "{out}");
+    assert!(
+        err.contains("ignored 1 malformed ROS 2 liveliness token(s) on domain 6")
+            && err.contains("Float64\\u{1b}[2J\\u{1b}]0;pwned\\u{7}_"),
+        "{err}"
+    );
+    assert!(
+        !format!("{out}{err}").contains('\u{1b}'),
+        "raw ESC: {err:?}"
+    );
 }
 
 #[test]

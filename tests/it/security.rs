@@ -365,6 +365,15 @@ fn bad_credentials_files_exit_2_in_one_line() {
     std::fs::write(&junk, "graph = [").unwrap();
     std::fs::set_permissions(&junk, std::fs::Permissions::from_mode(0o600)).unwrap();
     one_line(&node(&junk, &ep), "not a ratelab credentials file");
+    // A malformed certificate: the file and the identity named, not rustls' internals.
+    let mut c = Credentials::generate("cartpole", &chapter_processes()).unwrap();
+    let id = c.identities.values_mut().next().unwrap();
+    id.cert = id.cert.replacen("-----\nM", "-----\n!", 1);
+    let bad_pem = dir.path().join("bad-pem.toml");
+    c.write(&bad_pem, false).unwrap();
+    let o = node(&bad_pem, &ep);
+    one_line(&o, "bad-pem.toml");
+    one_line(&o, "its certificate is not valid PEM");
     // Another launch's, at a running launch: its TLS handshake is refused.
     let port = free_port();
     let ep = format!("tls/127.0.0.1:{port}");

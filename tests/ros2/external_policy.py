@@ -11,7 +11,9 @@ Usage: external_policy.py ENDPOINT DOMAIN RATE_HZ [--name N] [--type float32] [-
   reaches its next tick (every 1/RATE_HZ from 0), it publishes the balancer's force from
   the newest /obs.
   --mute: declares everything, publishes nothing. --double: publishes each tick's message
-  twice (breaks the one-message-per-tick contract).
+  twice (breaks the one-message-per-tick contract). --forge: also declares what a hostile
+  peer on the domain could: a publisher token of the same node and topic whose type name
+  holds an escape sequence, and one of another type (Float32).
 Prints "ready" once declared; runs until stdin closes (or 120 s), then prints one JSON
 line: {"published": n, "clock_msgs": n, "obs_msgs": n}.
 """
@@ -129,6 +131,12 @@ tokens = [
     f"@ros2_lv/{domain}/{zid}/0/1/MS/%/%/{name}/%obs/{dds(JS)}/{store.hash_rihs01(JS)}/{qos}",
     f"@ros2_lv/{domain}/{zid}/0/2/MP/%/%/{name}/%action/{dds(out_type)}/{store.hash_rihs01(out_type)}/{qos}",
 ]
+if "--forge" in args:
+    evil = "std_msgs::msg::dds_::Float64\x1b[2J\x1b]0;pwned\x07_"
+    tokens += [
+        f"@ros2_lv/{domain}/{zid}/0/3/MP/%/%/{name}/%action/{evil}/{store.hash_rihs01(F64)}/{qos}",
+        f"@ros2_lv/{domain}/{zid}/0/4/MP/%/%/{name}/%action/{dds(F32)}/{store.hash_rihs01(F32)}/{qos}",
+    ]
 held = [session.liveliness().declare_token(k) for k in tokens]
 print("ready", flush=True)
 

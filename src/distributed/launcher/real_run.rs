@@ -232,6 +232,8 @@ impl Supervision {
             {
                 continue;
             }
+            self.silence.forget(&p);
+            self.silent.retain(|s| *s != p);
             self.gone.push(p.clone());
             let plant = p == l.robot;
             if plant {
@@ -326,6 +328,10 @@ impl Supervision {
                             self.welcomed_pid.insert(process.clone(), *pid);
                         }
                         self.gone.retain(|g| *g != process);
+                        // The process before it fell silent, not this one: no "silent" (then
+                        // "heard again") about a process that has just rejoined.
+                        self.silence.forget(&process);
+                        self.silent.retain(|p| *p != process);
                         self.rejoined_at.insert(process.clone(), self.run_time());
                         l.say(&format!("process '{process}' rejoined"));
                         self.rejoining.push(process);

@@ -153,17 +153,9 @@ pub fn cut_to_bytes(mut text: String, max: usize) -> String {
 }
 
 /// `text` with every control character written out (`\u{1b}`, `\n`): what a terminal,
-/// `top` and a recording may show of text from the network.
+/// `top` and a recording may show of text from the network ([`crate::text::printable`]).
 pub fn printable(text: &str) -> String {
-    text.chars()
-        .map(|c| {
-            if c.is_control() {
-                c.escape_default().to_string()
-            } else {
-                c.to_string()
-            }
-        })
-        .collect()
+    crate::text::printable(text).into_owned()
 }
 
 #[cfg(test)]

@@ -1,0 +1,55 @@
+//! Text from outside made safe to show: the one rule every terminal line, log line and
+//! recording event follows for strings that came from a file, a flag, a peer or a learner's
+//! code.
+//!
+//! A control character (ESC, carriage return, newline, DEL, the C1 controls) never reaches
+//! a terminal raw: an escape sequence would repaint the screen, a carriage return would
+//! overwrite the line, a newline would split a one-line error in two. Each is written out
+//! as Rust writes it (`\u{1b}`, `\r`, `\n`), so what the user sees names the byte that was
+//! there.
+
+use std::borrow::Cow;
+
+/// `text` with every control character written out (`\u{1b}`, `\r`, `\n`, `\t`,
+/// `\u{7f}`), everything else (any printable Unicode) as it is. Borrowed when there is
+/// nothing to escape (the common case costs no allocation).
+pub fn printable(text: &str) -> Cow<'_, str> {
+    if !text.chars().any(char::is_control) {
+        return Cow::Borrowed(text);
+    }
+    Cow::Owned(
+        text.chars()
+            .map(|c| {
+                if c.is_control() {
+                    c.escape_default().to_string()
+                } else {
+                    c.to_string()
+                }
+            })
+            .collect(),
+    )
+}
+
+/// Does `text` hold a control character (what [`printable`] would write out)?
+pub fn has_control(text: &str) -> bool {
+    text.chars().any(char::is_control)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn control_characters_are_written_out_and_the_rest_kept() {
+        assert_eq!(printable("plain · ✓ é"), "plain · ✓ é");
+        assert!(matches!(printable("plain"), Cow::Borrowed(_)));
+        assert_eq!(printable("\u{1b}[2Jx"), "\\u{1b}[2Jx");
+        assert_eq!(printable("a\nb\rc\td"), "a\\nb\\rc\\td");
+        assert_eq!(printable("\u{7f}\u{85}\u{9b}"), "\\u{7f}\\u{85}\\u{9b}");
+        assert!(!printable("\u{1b}\u{9b}\n\r\u{7f}")
+            .chars()
+            .any(char::is_control));
+        assert!(has_control("x\u{1b}"));
+        assert!(!has_control("x y"));
+    }
+}
