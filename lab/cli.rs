@@ -50,6 +50,13 @@ pub enum Command {
     /// Write a checkpoint's tensors (.pt/.pth/.safetensors) as NumPy's .npz, for a Python
     /// node to load with `np.load` (graphs/nodes/ppo_numpy.py).
     Export(ExportArgs),
+    /// Print the node kinds this program knows, built in and registered: what each reads
+    /// and publishes, how it touches the plant, whose code it runs, its parameters (unit,
+    /// default, range), as a Markdown table.
+    Kinds,
+    /// Print the message types this program knows, built in and registered: the Python
+    /// class, the fields with their units, the ROS 2 type, as a Markdown table.
+    Msgs,
 }
 
 /// `ratelab export`.

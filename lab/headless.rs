@@ -296,6 +296,9 @@ pub fn run_headless(a: &RunArgs, stop: StopFlag) -> anyhow::Result<RunReport> {
     if let Some(bar) = virtual_bar {
         bar.finish_and_clear();
     }
+    // A recording that could not be finished (a full disk) fails the run after its summary
+    // and the other files: it costs the file, not the run's result.
+    let mut unrecorded = None;
     if let Some(r) = &recording {
         match r.finish(&report.metrics, &report.end) {
             // With --spawn the flush also waits for the live viewer; one that could not start
@@ -303,7 +306,8 @@ pub fn run_headless(a: &RunArgs, stop: StopFlag) -> anyhow::Result<RunReport> {
             Err(e) if a.spawn => {
                 eprintln!("[ratelab] warning: live viewer: {e} (the file is written)")
             }
-            other => other?,
+            Err(e) => unrecorded = Some(e),
+            Ok(()) => {}
         }
     }
     if let Some(bar) = bar {
@@ -348,6 +352,9 @@ pub fn run_headless(a: &RunArgs, stop: StopFlag) -> anyhow::Result<RunReport> {
             "[ratelab] wrote {}/metrics.json and trace.csv (what each key and column means: docs/metrics.md)",
             dir.display()
         );
+    }
+    if let Some(e) = unrecorded {
+        return Err(e.into());
     }
     if let Some(r) = &recording {
         println!("[ratelab] recording: {}", r.path().display());

@@ -16,7 +16,7 @@ use ratelab::scheduler::StopFlag;
 use ratelab::session::Telemetry;
 use ratelab::RunReport;
 use std::collections::BTreeMap;
-use std::io::IsTerminal;
+use std::io::{IsTerminal, Write};
 use std::path::Path;
 use std::time::{Duration, Instant};
 
@@ -485,7 +485,10 @@ pub fn run_node(a: &NodeArgs, stop: StopFlag) -> anyhow::Result<()> {
         credentials: Credentials::load(credentials)?,
         // On stdout: a process started by hand says what happens to it; a launcher's own
         // children have no stdout (their launcher says it).
-        say: Some(|line| println!("[ratelab] node: {line}")),
+        say: Some(|line| {
+            // Never fatal: a node whose stdout was closed runs on, unheard.
+            let _ = writeln!(std::io::stdout(), "[ratelab] node: {line}");
+        }),
     };
     run_member(&opts, &stop).map_err(|e| anyhow::anyhow!("node '{}': {e}", a.process))
 }

@@ -172,7 +172,8 @@ fn export(args: &cli::ExportArgs) -> anyhow::Result<()> {
     let bytes = to_npz(&tensors).map_err(|e| anyhow::anyhow!("{}: {e}", args.out.display()))?;
     ratelab::output::write_file(&args.out, args.force, &bytes)?;
     for t in &tensors {
-        println!("{:<24} {:?}", t.name, t.shape);
+        // A state_dict's keys are the checkpoint's: written out.
+        println!("{:<24} {:?}", printable(&t.name), t.shape);
     }
     println!(
         "[ratelab] wrote {} ({} tensors, float32)",
@@ -206,15 +207,18 @@ fn one_line(text: &str) -> String {
 /// what a shell reports for a program the closed pipe ended.
 const EXIT_CLOSED_PIPE: i32 = 141;
 
-/// A closed stdout ends the process quietly, whatever subcommand was printing: Rust ignores
-/// SIGPIPE (sockets and child pipes must not kill a launcher), so `println!` to a pipe whose
-/// reader has gone panics; this hook turns exactly that panic into a silent exit 141, as a
-/// shell tool killed by SIGPIPE ends. Any other panic goes on to the hook before it.
+/// A closed stdout (or stderr) ends the process quietly, whatever subcommand was printing:
+/// Rust ignores SIGPIPE (sockets and child pipes must not kill a launcher), so `println!` to
+/// a pipe whose reader has gone panics; this hook turns exactly that panic into a silent
+/// exit 141, as a shell tool killed by SIGPIPE ends (never 0: what was to be said was not).
+/// Any other panic goes on to the hook before it.
 fn quiet_on_a_closed_stdout() {
     let before = std::panic::take_hook();
     std::panic::set_hook(Box::new(move |info| {
         let message = ratelab::scheduler::panic_message(info.payload());
-        if message.starts_with("failed printing to stdout") && message.contains("Broken pipe") {
+        let printing = message.starts_with("failed printing to stdout")
+            || message.starts_with("failed printing to stderr");
+        if printing && message.contains("Broken pipe") {
             std::process::exit(EXIT_CLOSED_PIPE);
         }
         before(info)
@@ -301,6 +305,14 @@ fn main() -> ExitCode {
         Some(Command::Node(args)) => launch::run_node(args, stop),
         Some(Command::Top(args)) => launch::run_top(args, stop),
         Some(Command::Export(args)) => export(args),
+        Some(Command::Kinds) => {
+            print!("{}", ratelab::graph::registry::kinds_table());
+            Ok(())
+        }
+        Some(Command::Msgs) => {
+            print!("{}", ratelab::msg::types_table());
+            Ok(())
+        }
         None => {
             if !cli.headless && std::io::stdout().is_terminal() && std::io::stdin().is_terminal() {
                 lab(&cli.run, stop)

@@ -74,6 +74,7 @@ pub fn record(
     let dir = records_dir()?;
     let pid = std::process::id();
     let path = record_path(&dir, pid);
+    prune(&dir);
     let write = || -> std::io::Result<()> {
         std::fs::create_dir_all(&dir)?;
         // The credentials first: a watcher that finds the record finds them too.
@@ -95,6 +96,35 @@ pub fn record(
             None
         }
     }
+}
+
+/// Remove the records (and credentials) in `dir` of launches that are gone: a launch killed
+/// before it could remove its own (SIGKILL, a second Ctrl-C) leaves them.
+fn prune(dir: &Path) {
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return;
+    };
+    for e in entries.filter_map(Result::ok).take(MAX_RECORDS) {
+        let name = e.file_name();
+        let Some(pid) = name
+            .to_str()
+            .and_then(|n| n.strip_prefix("launch."))
+            .and_then(|p| p.parse::<u32>().ok())
+        else {
+            continue;
+        };
+        if !is_launch(pid) {
+            let _ = std::fs::remove_file(record_path(dir, pid));
+            let _ = std::fs::remove_file(credentials_path(dir, pid));
+        }
+    }
+}
+
+/// Is process `pid` a ratelab launch? It lives and its command line says `launch` (a pid
+/// reused by another program since the record was written is no launch).
+fn is_launch(pid: u32) -> bool {
+    std::fs::read(format!("/proc/{pid}/cmdline"))
+        .is_ok_and(|c| c.split(|&b| b == 0).any(|arg| arg == b"launch"))
 }
 
 /// A running launch of this user's, as its record gives it.
@@ -127,14 +157,19 @@ pub fn launches() -> Vec<Launch> {
         return Vec::new();
     };
     let mut found: Vec<Launch> = entries
-        .take(MAX_RECORDS)
         .filter_map(Result::ok)
+        .filter(|e| {
+            e.file_name()
+                .to_str()
+                .is_some_and(|n| n.starts_with("launch."))
+        })
+        .take(MAX_RECORDS)
         .filter_map(|e| {
             let name = e.file_name();
             let pid: u32 = name.to_str()?.strip_prefix("launch.")?.parse().ok()?;
             let bytes = ratelab::input::read_regular_file(&e.path(), MAX_RECORD_BYTES).ok()?;
             let (endpoint, said) = parse(&String::from_utf8(bytes).ok()?)?;
-            (said == pid && Path::new(&format!("/proc/{pid}")).exists()).then(|| Launch {
+            (said == pid && is_launch(pid)).then(|| Launch {
                 endpoint,
                 pid,
                 credentials: credentials_path(&dir, pid),
@@ -196,13 +231,22 @@ pub fn target(
             ),
         }
     } else {
+        let port = |ep: &str| ep.rsplit_once(':').map(|(_, p)| p.to_string());
+        let local = |ep: &str| {
+            ["127.0.0.1", "localhost", "[::1]"]
+                .iter()
+                .any(|h| ep.contains(h))
+        };
         match launches
             .iter()
             .find(|l| connect.contains(&l.endpoint))
-            .or(match launches {
-                // Named otherwise (localhost for 127.0.0.1): the one running is the one.
-                [one] => Some(one),
-                _ => None,
+            // Named otherwise (localhost for 127.0.0.1): a launch of this host on that port.
+            .or_else(|| {
+                launches.iter().find(|l| {
+                    connect
+                        .iter()
+                        .any(|c| local(c) && port(c).is_some() && port(c) == port(&l.endpoint))
+                })
             }) {
             Some(l) => Some(l),
             None if given.is_some() || launches.is_empty() => None,

@@ -99,6 +99,22 @@ pub fn run_sweep(a: &SweepArgs, stop: &StopFlag) -> anyhow::Result<()> {
         ratelab::output::write_file(p, a.force, json.as_bytes())?;
         println!("wrote {}", p.display());
     }
+    // After the table and the files, which keep them: a sweep whose runs failed a node is
+    // no success.
+    let failed: Vec<&(Point, Metrics)> = rows
+        .iter()
+        .filter(|(_, m)| m.node_failed.is_some())
+        .collect();
+    if let Some((p, m)) = failed.first() {
+        anyhow::bail!(
+            "{} of {} runs failed a node (the first, control {} Hz seed {}: {})",
+            failed.len(),
+            rows.len(),
+            p.control_hz,
+            p.seed,
+            m.node_failed.as_deref().unwrap_or("?")
+        );
+    }
     Ok(())
 }
 

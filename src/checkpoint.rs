@@ -216,7 +216,8 @@ pub fn caption(path: &Path) -> Option<String> {
         let text = String::from_utf8_lossy(&bytes);
         let line = text.lines().next().unwrap_or("").trim();
         if !line.is_empty() {
-            return Some(line.chars().take(200).collect());
+            // The label of the brain in the summary, the lab and a recording.
+            return Some(crate::text::printable(line).chars().take(200).collect());
         }
     }
     use sha2::Digest;

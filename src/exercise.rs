@@ -327,7 +327,7 @@ impl ExerciseFile {
     pub fn prediction_text(&self) -> String {
         self.prediction
             .iter()
-            .map(|(k, v)| format!("{k} = {v}"))
+            .map(|(k, v)| format!("{} = {v}", crate::text::printable(k)))
             .collect::<Vec<_>>()
             .join("\n")
     }

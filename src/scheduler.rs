@@ -789,12 +789,16 @@ pub fn catch_quietly<T>(f: impl FnOnce() -> T) -> std::thread::Result<T> {
     result
 }
 
-/// The message of a caught panic.
+/// The message of a caught panic, its control characters written out
+/// ([`crate::text::printable`]): a node's code (a registered kind's, a learner's) says what
+/// it likes, and the message reaches the summary, `metrics.json`, the lab and a recording.
 pub fn panic_message(p: &(dyn std::any::Any + Send)) -> String {
-    p.downcast_ref::<&str>()
+    let message = p
+        .downcast_ref::<&str>()
         .map(|s| s.to_string())
         .or_else(|| p.downcast_ref::<String>().cloned())
-        .unwrap_or_else(|| "panic".to_string())
+        .unwrap_or_else(|| "panic".to_string());
+    crate::text::printable(&message).into_owned()
 }
 
 /// A node's figures at the end of a real-clock run: `ticks` ticked and `skipped` deadlines

@@ -105,6 +105,17 @@ pub enum SweepError {
     /// A worker thread failed outside any run (a bug): its panic message.
     #[error("sweep worker failed: {0}")]
     Worker(String),
+    /// A node failed in a run of the cliff's search: that run neither balanced nor fell,
+    /// so no rate can be called the cliff.
+    #[error("seed {seed} at control {hz} Hz: node {failed}: the cliff cannot be found past a failed node")]
+    NodeFailed {
+        /// The run's seed.
+        seed: u64,
+        /// Its control rate, Hz.
+        hz: f64,
+        /// The failed node and its error (`policy: …`).
+        failed: String,
+    },
 }
 
 /// Run every point of `grid`, `threads` at a time (real-clock points run one at a time so
@@ -257,7 +268,8 @@ pub struct Cliff {
 /// multiples of the step (no float accumulation).
 ///
 /// # Errors
-/// [`SweepError`] when a run cannot start.
+/// [`SweepError`] when a run cannot start, or [`SweepError::NodeFailed`] when a node of a
+/// run failed (a run that did not balance because its brain raised is no fall).
 pub fn find_cliff(
     base: &RunConfig,
     brain: BrainFactory<'_>,
@@ -278,6 +290,13 @@ pub fn find_cliff(
         };
         let m = run(&cfg, brain().map_err(SweepError::Brain)?, opts)?.metrics;
         runs += 1;
+        if let Some(failed) = m.node_failed {
+            return Err(SweepError::NodeFailed {
+                seed: base.seed,
+                hz,
+                failed,
+            });
+        }
         if !m.balanced {
             let above = (k < top).then(|| ((k + 1) as f64 * step_hz * 1e6).round() / 1e6);
             return Ok(Cliff {

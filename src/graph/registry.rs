@@ -369,6 +369,90 @@ pub fn kinds() -> Vec<Kind> {
     registry().read().unwrap_or_else(|e| e.into_inner()).clone()
 }
 
+/// The registry as a Markdown table, one row per kind in [`kinds`]'s order: its name, what
+/// it reads and publishes (message types; `a|b`: either), how it touches the plant, whose
+/// code it runs, its parameters (unit, default, range) and its one line of docs. What
+/// `ratelab kinds` prints and the README's table of kinds is (a test keeps the two equal).
+pub fn kinds_table() -> String {
+    let types = |alts: &[crate::msg::MsgType]| {
+        alts.iter()
+            .map(|t| format!("`{}`", t.as_str()))
+            .collect::<Vec<_>>()
+            .join("\\|")
+    };
+    let ports = |p: &Ports| match p {
+        Ports::Fixed { inputs, outputs } => {
+            let side = |v: &[&'static [crate::msg::MsgType]]| match v {
+                [] => "—".to_string(),
+                v => v
+                    .iter()
+                    .map(|alts| types(alts))
+                    .collect::<Vec<_>>()
+                    .join(", "),
+            };
+            format!("{} → {}", side(inputs), side(outputs))
+        }
+        Ports::Open {
+            max_inputs,
+            min_outputs,
+            max_outputs,
+        } => format!("any: 0–{max_inputs} in → {min_outputs}–{max_outputs} out"),
+    };
+    let plant = |p: Plant| match p {
+        Plant::None => "—",
+        Plant::Reads => "reads",
+        Plant::Steps => "steps",
+    };
+    let code = |c: Code| match c {
+        Code::BuiltIn => "built in",
+        Code::Python => "Python",
+        Code::Rust => "Rust (registered)",
+        Code::Ros2 => "ROS 2",
+    };
+    let number = |x: f64| {
+        if x.is_infinite() {
+            if x > 0.0 { "∞" } else { "−∞" }.to_string()
+        } else {
+            format!("{x}")
+        }
+    };
+    let params = |p: &Params| match p {
+        Params::Free => "any table (the node's code reads it)".to_string(),
+        Params::Numbers([]) => "—".to_string(),
+        Params::Numbers(defs) => defs
+            .iter()
+            .map(|d| {
+                format!(
+                    "`{}` {} (default {}, {}…{})",
+                    d.name,
+                    d.unit,
+                    number(d.default),
+                    number(d.min),
+                    number(d.max)
+                )
+            })
+            .collect::<Vec<_>>()
+            .join("; "),
+    };
+    let mut out = String::from(
+        "| kind | reads → publishes | plant | code | parameters | what it does |\n\
+         | --- | --- | --- | --- | --- | --- |\n",
+    );
+    for k in kinds() {
+        let d = k.def();
+        out += &format!(
+            "| `{}` | {} | {} | {} | {} | {} |\n",
+            d.name,
+            ports(&d.ports),
+            plant(d.plant),
+            code(d.code),
+            params(&d.params),
+            d.doc.replace('|', "\\|")
+        );
+    }
+    out
+}
+
 /// Register node kind `kind`: a graph file's `kind = "<kind>"` then makes a node with
 /// `make`, given the node's [`NodeContext`]. Its message types are registered with it
 /// ([`crate::msg::register`]).

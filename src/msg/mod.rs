@@ -416,6 +416,36 @@ pub fn registered() -> Vec<MsgType> {
     registry().read().unwrap_or_else(|e| e.into_inner()).clone()
 }
 
+/// The registered message types as a Markdown table, in [`registered`]'s order: the name a
+/// graph file gives as a topic's `type`, the Python class, the fields with their units,
+/// the ROS 2 type it is offered as (`—`: not offered) and its one line of docs. What
+/// `ratelab msgs` prints and the README's table of message types is (a test keeps the two
+/// equal).
+pub fn types_table() -> String {
+    let mut out = String::from(
+        "| type | Python class | fields (unit) | ROS 2 type | what it is |\n\
+         | --- | --- | --- | --- | --- |\n",
+    );
+    for t in registered() {
+        let fields = t
+            .fields()
+            .iter()
+            .map(|f| format!("`{}` ({})", f.name, f.unit))
+            .collect::<Vec<_>>()
+            .join(", ");
+        let ros = t
+            .ros2()
+            .map_or_else(|| "—".to_string(), |c| format!("`{}`", (c.ros_type)().name));
+        out += &format!(
+            "| `{}` | `{}` | {fields} | {ros} | {} |\n",
+            t.as_str(),
+            t.class(),
+            t.doc().replace('|', "\\|")
+        );
+    }
+    out
+}
+
 /// A message value of some registered type: what crosses a process boundary
 /// ([`crate::distributed::wire`], as [`MsgData::to_bytes`]), what is offered to ROS 2
 /// ([`crate::ros2`]) and what a ROS 2 node delivers.

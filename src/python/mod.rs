@@ -121,8 +121,8 @@ fn add_virtual_env(py: Python<'_>) -> Result<(), String> {
         // A virtual environment of another Python version: say so rather than guess.
         eprintln!(
             "[ratelab] warning: VIRTUAL_ENV={} has no {} (ratelab embeds Python {}.{}); its packages are not importable",
-            std::path::Path::new(&venv).display(),
-            dir.display(),
+            crate::text::printable(&venv.to_string_lossy()),
+            crate::text::printable(&dir.to_string_lossy()),
             version.major,
             version.minor
         );

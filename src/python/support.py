@@ -31,8 +31,8 @@ _real_event_wait = threading.Event.wait
 
 
 def _sleep(seconds):
-    if not isinstance(seconds, (int, float)) or seconds != seconds or seconds <= 0:
-        return _real_sleep(seconds)  # its own errors (a type, a negative value) and zero
+    if not isinstance(seconds, (int, float)) or not math.isfinite(seconds) or seconds <= 0:
+        return _real_sleep(seconds)  # its own errors (a type, NaN, inf, a negative value), 0
     end = time.monotonic() + seconds
     while True:
         left = end - time.monotonic()

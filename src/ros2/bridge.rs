@@ -103,7 +103,7 @@ impl BridgeReport {
     /// One line per external node that missed ticks or sent what could not be used (none
     /// when all went well).
     pub fn external_warnings(&self) -> Vec<String> {
-        let mut lines = self.notes.clone();
+        let mut lines = Vec::new();
         for (name, s) in &self.external {
             if s.missed > 0 {
                 lines.push(format!(
@@ -131,6 +131,8 @@ impl BridgeReport {
                 ));
             }
         }
+        // Notes last: the lab shows the first line, and a node's misses matter more.
+        lines.extend(self.notes.iter().cloned());
         lines
     }
 }

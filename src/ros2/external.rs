@@ -189,6 +189,9 @@ pub fn wait_for(
         for w in &wanted {
             let name = &w.port.name;
             let mut missing = Vec::new();
+            // Of another type: said only if the right one never comes (any peer on the domain
+            // may declare a token under this node's name, before or beside the node's own).
+            let mut other_type = None;
             if !seen.iter().any(|(k, n, _, _)| *k == NODE && n == name) {
                 missing.push(format!("its node (an NN token named '{name}')"));
             }
@@ -197,43 +200,40 @@ pub fn wait_for(
                 let mine = seen
                     .iter()
                     .filter(|(k, n, t, _)| *k == kind_key(*kind) && n == name && t == topic);
-                // Any peer on the domain may declare a token under this node's name: one of
-                // another type is an error only when none of the right type is there.
-                let found = mine
+                if mine
                     .clone()
-                    .any(|(_, _, _, got)| *got == Some(want.clone()));
-                for (_, _, _, got) in mine.filter(|_| !found) {
-                    if let Some((gname, ghash)) = got {
-                        let what = endpoint_word(*kind);
-                        let theirs =
-                            crate::text::printable(&hiroz_schema::ros_from_dds_strict(gname))
-                                .into_owned();
-                        let differs = if *gname == want.0 {
-                            format!(
-                                "{theirs} with type hash {}, ratelab's is {} (another ROS 2 distribution's definition?)",
-                                short_hash(ghash),
-                                short_hash(&want.1)
-                            )
-                        } else {
-                            format!("{theirs}, but the graph's {topic} is {}", ty.name)
-                        };
-                        return Err(Ros2Error::Usage(format!(
-                            "external node '{name}' {what} {topic} as {differs}: a ROS 2 endpoint of another type hears nothing (fix its type or the graph's)"
-                        )));
-                    }
+                    .any(|(_, _, _, got)| *got == Some(want.clone()))
+                {
+                    continue;
                 }
-                if !found {
-                    missing.push(format!("{} {topic} ({})", endpoint_word(*kind), ty.name));
+                missing.push(format!("{} {topic} ({})", endpoint_word(*kind), ty.name));
+                let theirs = mine.filter_map(|(_, _, _, got)| got.as_ref()).next();
+                if let (Some((gname, ghash)), None) = (theirs, &other_type) {
+                    let what = endpoint_word(*kind);
+                    let shown = crate::text::printable(&hiroz_schema::ros_from_dds_strict(gname))
+                        .into_owned();
+                    let differs = if *gname == want.0 {
+                        format!(
+                            "{shown} with type hash {}, ratelab's is {} (another ROS 2 distribution's definition?)",
+                            short_hash(ghash),
+                            short_hash(&want.1)
+                        )
+                    } else {
+                        format!("{shown}, but the graph's {topic} is {}", ty.name)
+                    };
+                    other_type = Some(format!(
+                        "external node '{name}' {what} {topic} as {differs}: a ROS 2 endpoint of another type hears nothing (fix its type or the graph's)"
+                    ));
                 }
             }
             if !missing.is_empty() {
                 all = false;
                 if start.elapsed() >= w.port.settings.appear_timeout.to_duration() {
-                    return Err(Ros2Error::Usage(format!(
+                    return Err(Ros2Error::Usage(other_type.unwrap_or_else(|| format!(
                         "external node '{name}' did not appear on ROS 2 domain {domain} within {:.1} s: no liveliness token for {} (start it, with RMW_IMPLEMENTATION=rmw_zenoh_cpp and the same ROS_DOMAIN_ID and router; or raise params.appear_timeout_s)",
                         w.port.settings.appear_timeout.as_secs_f64(),
                         missing.join(", ")
-                    )));
+                    ))));
                 }
             }
         }

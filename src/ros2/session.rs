@@ -227,7 +227,10 @@ pub fn open(env: &SessionEnv, stop: &StopFlag) -> Result<Ros2Session, Ros2Error>
     };
     for attempt in 0..attempts {
         if attempt == 1 && check == RouterCheck::Forever {
-            eprintln!("[ratelab] waiting for a Zenoh router at {endpoint} (ZENOH_ROUTER_CHECK_ATTEMPTS=0) ...");
+            eprintln!(
+                "[ratelab] waiting for a Zenoh router at {} (ZENOH_ROUTER_CHECK_ATTEMPTS=0) ...",
+                crate::text::printable(&endpoint.to_string())
+            );
         }
         let until = Instant::now() + Duration::from_secs(1);
         while Instant::now() < until {

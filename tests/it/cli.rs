@@ -641,3 +641,58 @@ fn conflicting_rates_are_refused_and_a_fault_after_the_end_is_warned_about() {
         stderr(&o)
     );
 }
+
+/// The README's section between `<!-- generated: ratelab WHAT -->` and
+/// `<!-- end: ratelab WHAT -->`, without the markers' lines.
+fn readme_section(what: &str) -> String {
+    let readme = std::fs::read_to_string(crate::repo("README.md")).unwrap();
+    let start = format!("<!-- generated: ratelab {what} -->\n");
+    let end = format!("<!-- end: ratelab {what} -->");
+    let from = readme
+        .find(&start)
+        .unwrap_or_else(|| panic!("README has no {start:?}"))
+        + start.len();
+    let to = from + readme[from..].find(&end).expect("the section's end");
+    readme[from..to].to_string()
+}
+
+/// The README's tables of node kinds and message types are the registry's, as `ratelab
+/// kinds` and `ratelab msgs` print them: a kind or a type added, or a parameter's range
+/// changed, without the README following fails here (paste the command's output there).
+#[test]
+fn the_readme_tables_of_kinds_and_messages_are_the_registrys() {
+    for what in ["kinds", "msgs"] {
+        let o = ratelab(&[what]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        let printed = String::from_utf8(o.stdout).unwrap();
+        assert_eq!(
+            readme_section(what),
+            printed,
+            "README.md's table differs from `ratelab {what}`: paste its output between the markers"
+        );
+    }
+    // What the tables must show: every built-in kind and type, parameters with units and
+    // ranges, ROS 2 types.
+    let kinds = readme_section("kinds");
+    for needle in [
+        "| `sensor` |",
+        "| `estimator` |",
+        "| `policy` |",
+        "| `safety` |",
+        "| `actuator` |",
+        "| `python` |",
+        "| `external` |",
+        "`max_force_n` N (default",
+        "`cutoff_hz` Hz",
+    ] {
+        assert!(kinds.contains(needle), "{needle} missing:\n{kinds}");
+    }
+    let msgs = readme_section("msgs");
+    for needle in [
+        "| `state` | `State` |",
+        "| `force` | `Force` | `newtons` (N) | `std_msgs/msg/Float64` |",
+        "`sensor_msgs/msg/JointState`",
+    ] {
+        assert!(msgs.contains(needle), "{needle} missing:\n{msgs}");
+    }
+}

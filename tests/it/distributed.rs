@@ -1004,9 +1004,17 @@ fn top_finds_this_users_launch_without_connect() {
             .exists(),
         "and its credentials"
     );
-    // A record of a live process whose launch does not answer: a one-line hint.
+    // A record of a live launch that does not answer: a one-line hint. (A record counts
+    // while its process lives and its command line says `launch`: a stand-in process.)
     let port = free_port();
-    let me = std::process::id();
+    let stand_in = || {
+        Command::new("sh")
+            .args(["-c", "sleep 60; exit 0", "launch"])
+            .spawn()
+            .unwrap()
+    };
+    let mut first = stand_in();
+    let me = first.id();
     std::fs::create_dir_all(&records).unwrap();
     std::fs::write(
         records.join(format!("launch.{me}")),
@@ -1027,24 +1035,29 @@ fn top_finds_this_users_launch_without_connect() {
             .unwrap()
     };
     assert_one_line_exit_2(&top(), "this user's launch was recorded there");
-    // Two launches of this user's running: neither is guessed, both are listed (a record
-    // names a live process: this test's and the init process, pid 1).
+    // Two launches of this user's running: neither is guessed, both are listed.
     let other = free_port();
+    let mut second = stand_in();
+    let pid2 = second.id();
     std::fs::write(
-        records.join("launch.1"),
-        format!("tls/127.0.0.1:{other} 1\n"),
+        records.join(format!("launch.{pid2}")),
+        format!("tls/127.0.0.1:{other} {pid2}\n"),
     )
     .unwrap();
-    std::fs::copy(&credentials, records.join("launch-credentials.1.toml")).unwrap();
+    std::fs::copy(
+        &credentials,
+        records.join(format!("launch-credentials.{pid2}.toml")),
+    )
+    .unwrap();
     let o = top();
     assert_one_line_exit_2(&o, "2 launches of yours are running: ");
     let err = text(&o.stderr);
     assert!(
-        err.contains(&format!("tls/127.0.0.1:{other} (graph 'cartpole', pid 1)"))
-            && err.contains(&format!(
-                "tls/127.0.0.1:{port} (graph 'cartpole', pid {me})"
-            ))
-            && err.contains("choose one with --connect"),
+        err.contains(&format!(
+            "tls/127.0.0.1:{other} (graph 'cartpole', pid {pid2})"
+        )) && err.contains(&format!(
+            "tls/127.0.0.1:{port} (graph 'cartpole', pid {me})"
+        )) && err.contains("choose one with --connect"),
         "{err}"
     );
     // --connect chooses one, with that launch's credentials: the hint is the endpoint's.
@@ -1059,6 +1072,13 @@ fn top_finds_this_users_launch_without_connect() {
         .output()
         .unwrap();
     assert_one_line_exit_2(&o, "check the endpoint");
+    // A launch gone (killed before it could remove its record): its record no longer
+    // counts.
+    second.kill().unwrap();
+    second.wait().unwrap();
+    assert_one_line_exit_2(&top(), "this user's launch was recorded there");
+    first.kill().unwrap();
+    first.wait().unwrap();
 }
 
 fn assert_one_line_exit_2(o: &Output, needle: &str) {

@@ -267,18 +267,28 @@ fn a_closed_stdout_ends_every_subcommand_quietly() {
 /// disk); returns its output, whose last line of stderr lists what was left in `full`
 /// (`LEFT: …`). `None` where the machine allows no such namespace (not root).
 fn on_a_full_disk(full: &Path, args: &[&str]) -> Option<Output> {
-    let probe = Command::new("unshare")
-        .args(["-m", "--propagation", "private", "true"])
-        .output();
-    if !probe.is_ok_and(|o| o.status.success()) {
+    // As root a mount namespace; otherwise one inside a user namespace, where allowed.
+    let works = |flags: &[&str]| {
+        Command::new("unshare")
+            .args(flags)
+            .args(["--propagation", "private", "true"])
+            .output()
+            .is_ok_and(|o| o.status.success())
+    };
+    let flags: &[&str] = if works(&["-m"]) {
+        &["-m"]
+    } else if works(&["-r", "-m"]) {
+        &["-r", "-m"]
+    } else {
         return None;
-    }
+    };
     std::fs::create_dir_all(full).unwrap();
     let script = "mount -t tmpfs -o size=16k tmpfs \"$0\" || exit 97; \"$@\"; code=$?; \
                   echo \"LEFT: $(cd \"$0\" && find . -mindepth 1 | sort | tr '\\n' ' ')\" >&2; \
                   exit $code";
     let o = Command::new("unshare")
-        .args(["-m", "--propagation", "private", "sh", "-c", script])
+        .args(flags)
+        .args(["--propagation", "private", "sh", "-c", script])
         .arg(full)
         .arg(env!("CARGO_BIN_EXE_ratelab"))
         .args(args)
@@ -393,5 +403,53 @@ fn a_node_publishing_ten_thousand_messages_a_tick_runs_across_processes() {
         m["topics"]["/action"]["published"].as_u64(),
         Some(10_000 * ticks),
         "{m}"
+    );
+}
+
+/// A sweep whose runs fail a node exits 2 after its table, and a cliff search that meets a
+/// failed node says so and exits 2: a run that did not balance because its brain raised is
+/// no fall (it was counted as the cliff).
+#[test]
+fn a_sweep_or_a_cliff_whose_runs_fail_a_node_exits_2() {
+    let dir = tempfile::tempdir().unwrap();
+    let brain = dir.path().join("raises.py");
+    std::fs::write(&brain, "def act(obs):\n    raise RuntimeError('gave up')\n").unwrap();
+    let b = brain.to_str().unwrap();
+    let o = bin()
+        .args([
+            "sweep",
+            "--control-hz",
+            "50,25",
+            "--seeds",
+            "0",
+            "--duration",
+            "1",
+        ])
+        .args(["--policy", b])
+        .output()
+        .unwrap();
+    let err = text(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(
+        err.trim_end().lines().last().is_some_and(|l| l
+            .starts_with("error: 2 of 2 runs failed a node (the first, control ")
+            && l.contains("RuntimeError: gave up")),
+        "{err}"
+    );
+    assert!(text(&o.stdout).contains("node failed"), "the table first");
+    let o = bin()
+        .args(["cliff", "--seeds", "0", "--duration", "1", "--policy", b])
+        .output()
+        .unwrap();
+    let err = text(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains("error: seed 0 at control ")
+            && err.contains("the cliff cannot be found past a failed node"),
+        "{err}"
+    );
+    assert!(
+        !text(&o.stdout).contains("Hz (falls there"),
+        "no cliff claimed"
     );
 }
