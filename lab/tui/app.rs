@@ -226,6 +226,15 @@ impl App {
         }
     }
 
+    /// The failed node's line (`policy: FILE:LINE: …`) when the run on screen ended with a
+    /// node that failed: the lab then exits 2 saying so, after restoring the terminal.
+    pub fn failed_node(&self) -> Option<&str> {
+        match &self.verdict {
+            Verdict::Failed(line) => Some(line),
+            _ => None,
+        }
+    }
+
     /// Draw `spec` until the run's first telemetry says more (the lab knows its graph before
     /// the run starts; without this the first frames show the chapter's).
     pub fn show_graph(&mut self, spec: GraphSpec) {

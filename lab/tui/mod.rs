@@ -105,7 +105,13 @@ pub fn run_lab(settings: SessionSettings, stop: StopFlag) -> anyhow::Result<()> 
             p.display()
         );
     }
-    result
+    result?;
+    // Quitting the lab after a run whose node failed is no success (a script that ran it
+    // learns so): the terminal is restored, the session log saved, then one line.
+    if let Some(line) = app.failed_node() {
+        anyhow::bail!("the lab's last run failed: node {line}");
+    }
+    Ok(())
 }
 
 /// Open the lab on a graph running across processes (`ratelab lab --attach`, or the lab of
@@ -1184,6 +1190,10 @@ mod tests {
         let text = render(&app, 80, 24);
         assert!(text.contains("NODE FAILED"), "{text}");
         assert!(text.contains("node 'policy' failed: boom"), "{text}");
+        // Quitting now exits 2 with this line (run_lab); a fall alone would not.
+        assert_eq!(app.failed_node(), Some("policy: boom"));
+        let (fell, _rx) = app_after(virtual_cfg(5.0, 10), true);
+        assert_eq!(fell.failed_node(), None);
     }
 
     /// A live rate change's notice, as the engine says it: at 120 columns where the policy's

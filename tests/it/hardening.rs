@@ -223,6 +223,12 @@ fn a_closed_stdout_ends_every_subcommand_quietly() {
         npz.to_str().unwrap(),
         pt.to_str().unwrap(),
     );
+    // A lab session's log, for `replay`.
+    let session = d.join("s.json");
+    let mut script = crate::session::steps(30);
+    script.push(ratelab::session::Control::Quit);
+    crate::session::drive(&script, &session);
+    let session = session.to_str().unwrap();
     for args in [
         vec!["run", "--smoke"],
         vec!["run", "--duration", "1", "--out", &format!("{ds}/out")],
@@ -240,6 +246,7 @@ fn a_closed_stdout_ends_every_subcommand_quietly() {
         vec!["launch", "--duration", "1"],
         vec!["bench", "--hz", "200", "--duration", "0.2"],
         vec!["export", pt, "--out", npz],
+        vec!["replay", session],
         vec!["--help"],
     ] {
         let o: Output = bin()

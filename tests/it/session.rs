@@ -35,7 +35,7 @@ fn settings(
     }
 }
 
-fn drive(script: &[Control], file: &std::path::Path) -> SessionLog {
+pub(crate) fn drive(script: &[Control], file: &std::path::Path) -> SessionLog {
     let (ctl_tx, ctl_rx) = unbounded();
     let (tel_tx, tel_rx) = unbounded::<Telemetry>();
     let settings = settings(ClockKind::Virtual, 1, true, Speed::Max, file);
@@ -48,7 +48,7 @@ fn drive(script: &[Control], file: &std::path::Path) -> SessionLog {
     log
 }
 
-fn steps(n: usize) -> Vec<Control> {
+pub(crate) fn steps(n: usize) -> Vec<Control> {
     vec![Control::Step; n]
 }
 
