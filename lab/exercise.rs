@@ -12,6 +12,7 @@ use ratelab::exercise::{check_ex8, measure_ex8, outcome_ex8, Ex8Bands, Ex8Run};
 use ratelab::exercise::{check_ex9, measure_ex9, outcome_ex9, Ex9Bands, Ex9Case, Ex9Run};
 use ratelab::metrics::Metrics;
 use std::path::Path;
+use std::sync::atomic::{AtomicUsize, Ordering};
 
 /// Every exercise and its file, in order.
 const FILES: [(&str, &str); 9] = [
@@ -26,9 +27,33 @@ const FILES: [(&str, &str); 9] = [
     ("ex9", "ex9_crossing.toml"),
 ];
 
+/// What did not pass in this process's exercise: checks marked `[!!]` and predictions
+/// that could not be read. One exercise runs per process.
+static NOT_PASSED: AtomicUsize = AtomicUsize::new(0);
+
+/// An exercise that ran to its end but did not pass: a check failed or a prediction could
+/// not be read. `ratelab exercise` then exits 1 (2 is for what kept it from running).
+#[derive(Debug)]
+pub struct NotPassed(pub usize);
+
+impl std::fmt::Display for NotPassed {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "{} check(s) or prediction(s) did not pass (marked above): the exercise is not passed",
+            self.0
+        )
+    }
+}
+
+impl std::error::Error for NotPassed {}
+
 fn print_checks(checks: &[Check]) {
     for c in checks {
         println!("  [{}] {}", if c.passed { "ok" } else { "!!" }, c.name);
+        if !c.passed {
+            NOT_PASSED.fetch_add(1, Ordering::Relaxed);
+        }
     }
 }
 
@@ -69,7 +94,25 @@ pub fn run_from_args(args: &crate::cli::ExerciseArgs) -> anyhow::Result<()> {
 
 /// Run exercise `which` from the exercise folder `dir` on `graph` (read from `graph_path`,
 /// `None` for the chapter's: ex9's processes load it too).
+///
+/// # Errors
+/// What kept it from running (exit 2), or [`NotPassed`] after it ran when a check failed or
+/// a prediction could not be read (exit 1).
 pub fn run_exercise(
+    which: &str,
+    dir: &Path,
+    graph: &ratelab::graph::GraphSpec,
+    graph_path: Option<&Path>,
+) -> anyhow::Result<()> {
+    NOT_PASSED.store(0, Ordering::Relaxed);
+    run_one(which, dir, graph, graph_path)?;
+    match NOT_PASSED.load(Ordering::Relaxed) {
+        0 => Ok(()),
+        n => Err(NotPassed(n).into()),
+    }
+}
+
+fn run_one(
     which: &str,
     dir: &Path,
     graph: &ratelab::graph::GraphSpec,
@@ -126,7 +169,10 @@ pub fn run_exercise(
                     .iter()
                     .any(|m| !m.balanced)
             });
-            println!("(Y: balanced the whole run; n@T: fell at run time T s; one cell per seed, as in the header.)");
+            println!(
+                "(Y: balanced the whole {} s run, which a longer run may not; n@T: fell at run time T s; one cell per seed, as in the header.)",
+                b.duration_s
+            );
             println!(
                 "\nOutcome: the pole first fails at {} Hz.",
                 first_fall.map_or("no rate".into(), |(_, hz)| hz.to_string())
@@ -199,8 +245,9 @@ pub fn run_exercise(
         "ex6" => {
             let b = &bands.ex6;
             let script = dir.join(&b.script);
+            refuse_the_template(&script)?;
             let runs = with_spinner("measuring ex6", || measure_ex6(b, graph, &script))?;
-            print_ex6(b, &f, &runs);
+            print_ex6(b, &f, &runs, dir);
         }
         "ex7" => {
             let b = &bands.ex7;
@@ -541,7 +588,7 @@ fn print_ex5(b: &Ex5Bands, f: &ExerciseFile, runs: &[Ex5Run]) {
 
 /// ex6's table (per clamp: the built-in node's verdict per seed, then the learner's), the
 /// reconcile and the checks.
-fn print_ex6(b: &Ex6Bands, f: &ExerciseFile, runs: &[Ex6Run]) {
+fn print_ex6(b: &Ex6Bands, f: &ExerciseFile, runs: &[Ex6Run], dir: &Path) {
     let cell = |r: Option<&Ex6Run>| match r {
         Some(r) if r.metrics.balanced => "Y".to_string(),
         Some(r) => r
@@ -600,7 +647,32 @@ fn print_ex6(b: &Ex6Bands, f: &ExerciseFile, runs: &[Ex6Run]) {
          select it, then - and +):",
         b.smallest_balancing_clamp_n
     ));
-    println!("  ./scripts/lab.sh --clock virtual --graph graphs/cartpole-safety-python.toml");
+    // The learner's node, not the shipped solution: the graph beside the exercise's files.
+    println!(
+        "  ./scripts/lab.sh --clock virtual --graph {}",
+        dir.join("ex6_my_limiter.toml").display()
+    );
+}
+
+/// ex6's node as shipped, to tell the learner's from it: running the untouched template
+/// would measure ratelab's pass-through, not the learner's node.
+const EX6_TEMPLATE: &str = include_str!("../exercises/ex6_my_limiter.py");
+
+/// Refuse ex6's node file when it is still the template as shipped (line endings and
+/// trailing blanks aside).
+///
+/// # Errors
+/// One line: the file is the untouched template.
+fn refuse_the_template(script: &Path) -> anyhow::Result<()> {
+    let normal = |t: &str| t.lines().map(str::trim_end).collect::<Vec<_>>().join("\n");
+    let mine = std::fs::read(script).unwrap_or_default();
+    if normal(&String::from_utf8_lossy(&mine)) == normal(EX6_TEMPLATE).as_str() {
+        bail!(
+            "{} is the template as shipped: make on_action clamp msg.newtons to ±max_force_n (its TODO) first; writing the node is the exercise",
+            script.display()
+        );
+    }
+    Ok(())
 }
 
 /// ex7's table (per case and seed: the sensor's rate and skipped ticks, the policy's
@@ -651,6 +723,9 @@ fn say_reconcile(f: &ExerciseFile, outcome: &Outcome) {
     println!();
     for line in f.reconcile(outcome) {
         println!("{line}");
+        if ratelab::exercise::says_unreadable(&line) {
+            NOT_PASSED.fetch_add(1, Ordering::Relaxed);
+        }
     }
 }
 
@@ -720,10 +795,11 @@ fn print_ex8(b: &Ex8Bands, f: &ExerciseFile, runs: &[Ex8Run]) {
     print_checks(&check_ex8(b, runs));
     println!();
     paragraph(
-        "Reconcile: the estimator's velocity is the difference of two noisy angles 5 ms apart, \
-         so its noise is about 280 times the angle's (sqrt(2) / 0.005 s) before the filter: a \
-         pole-angle noise of a hundredth of a radian, half a degree, is a velocity noise of \
-         about 3 rad/s, and the policy pushes on it. The low-pass filter trades that noise for \
+        "Reconcile: the estimator ticks at 100 Hz and reads the newest of the two measurements \
+         the 200 Hz sensor published since its last tick, so its velocity is the difference of \
+         two noisy angles 10 ms apart: its noise is about 141 times the angle's \
+         (sqrt(2) / 0.010 s) before the filter. A pole-angle noise of a hundredth of a radian, \
+         half a degree, is a velocity noise of about 1.4 rad/s, and the policy pushes on it. The low-pass filter trades that noise for \
          lag (about 1 / (2 pi cut-off): 8 ms at 20 Hz, 16 ms at 10 Hz); here the noise is the \
          larger harm, so the smoother estimate holds on to a higher noise. How far does the \
          trade go? Copy the graph, lower cutoff_hz to 5 and 2 Hz, raise noise_angle_rad, and \

@@ -610,6 +610,13 @@ fn unreadable(key: &str) -> String {
     format!("Your prediction `{key}` is missing or not of the expected type.")
 }
 
+/// Does a reconcile line say a prediction could not be read (missing, or not of its type)?
+/// Such an exercise is not passed (`ratelab exercise` exits 1).
+pub fn says_unreadable(line: &str) -> bool {
+    line.starts_with("Your prediction `")
+        && line.ends_with("is missing or not of the expected type.")
+}
+
 /// ex4, ex5 and ex7: the survival `prediction` gives under `key` (true or false) beside the
 /// `measured` one (on every seed), `what` naming the case.
 fn predicted_survival(prediction: &toml::Table, key: &str, what: &str, measured: bool) -> String {

@@ -265,6 +265,11 @@ fn cliff_prints_one_rate_per_seed_with_one_decimal() {
     let out = String::from_utf8_lossy(&o.stdout);
     let lines: Vec<&str> = out.lines().filter(|l| l.starts_with("seed ")).collect();
     assert_eq!(lines.len(), 2, "{out}");
+    // The run's length it judged by: balanced means up that long.
+    assert!(
+        out.contains("highest control rate at which the pole falls within a 10 s run (virtual clock, 7–9 Hz by 0.1 Hz):"),
+        "{out}"
+    );
     // Then the ragged edge: every rate around the cliff, the fraction of seeds that balanced.
     assert!(out.contains("The edge is ragged"), "{out}");
     let plot: Vec<&str> = out.lines().filter(|l| l.contains(" Hz |")).collect();
@@ -457,10 +462,30 @@ fn exercise_ex6_runs_the_learners_node_and_says_whether_it_limits() {
         .replace("# smallest_clamp_n =\n", "smallest_clamp_n = 2\n")
         .replace("why = \"\"", "why = \"catching the pole takes newtons\"");
     std::fs::write(&file, text).unwrap();
-    // The shipped skeleton passes commands through: it is not the built-in limiter.
+    // The template as shipped is refused: measuring it would say nothing of the learner's.
+    let o = ratelab(&["exercise", "ex6", "--dir", d]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert_eq!(stderr(&o).trim_end().lines().count(), 1, "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains("ex6_my_limiter.py is the template as shipped"),
+        "{}",
+        stderr(&o)
+    );
+    // Touched but still passing commands through: not the built-in limiter, a check fails,
+    // and the exercise exits 1 (not passed; 2 is for what kept it from running).
+    let script = dir.join("ex6_my_limiter.py");
+    let touched = std::fs::read_to_string(&script)
+        .unwrap()
+        .replace("# TODO: clamp", "# not yet: clamp");
+    std::fs::write(&script, touched).unwrap();
     let o = ratelab(&["exercise", "ex6", "--dir", d]);
     let out = String::from_utf8_lossy(&o.stdout);
-    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains("did not pass (marked above): the exercise is not passed"),
+        "{}",
+        stderr(&o)
+    );
     assert!(out.contains("your node (ex6_my_limiter.py)"), "{out}");
     assert!(out.contains("<- differs"), "{out}");
     assert!(
@@ -468,8 +493,15 @@ fn exercise_ex6_runs_the_learners_node_and_says_whether_it_limits() {
         "{out}"
     );
     assert!(out.contains("[!!]"), "{out}");
+    // Try it in the lab: the learner's node, beside the exercise's files.
+    assert!(
+        out.contains(&format!(
+            "./scripts/lab.sh --clock virtual --graph {}",
+            dir.join("ex6_my_limiter.toml").display()
+        )),
+        "{out}"
+    );
     // Written, it limits as the built-in node does, and the prediction is reconciled.
-    let script = dir.join("ex6_my_limiter.py");
     let written = std::fs::read_to_string(&script).unwrap().replace(
         "Force(newtons=msg.newtons)",
         "Force(newtons=min(max(msg.newtons, -self.max_force_n), self.max_force_n))",
@@ -695,4 +727,37 @@ fn the_readme_tables_of_kinds_and_messages_are_the_registrys() {
     ] {
         assert!(msgs.contains(needle), "{needle} missing:\n{msgs}");
     }
+}
+
+/// A prediction that cannot be read (of another type than its key asks) is said in the
+/// reconcile, and the exercise exits 1: it ran, but is not passed.
+#[test]
+fn an_exercise_whose_prediction_cannot_be_read_exits_1() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = exercise_copy(tmp.path(), &["ex2_queue_trap.toml"]);
+    let file = dir.join("ex2_queue_trap.toml");
+    let text = std::fs::read_to_string(&file)
+        .unwrap()
+        .replace(
+            "# deep_queue_obs_drops =\n",
+            "deep_queue_obs_drops = \"none\"\n",
+        )
+        .replace("# deep_queue_balances =\n", "deep_queue_balances = false\n")
+        .replace("why = \"\"", "why = \"the newest only\"");
+    std::fs::write(&file, text).unwrap();
+    let o = ratelab(&["exercise", "ex2", "--dir", dir.to_str().unwrap()]);
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert_eq!(o.status.code(), Some(1), "{out}{}", stderr(&o));
+    assert!(
+        out.contains(
+            "Your prediction `deep_queue_obs_drops` is missing or not of the expected type."
+        ),
+        "{out}"
+    );
+    assert!(!out.contains("[!!]"), "the checks pass: {out}");
+    assert!(
+        stderr(&o).starts_with("error: 1 check(s) or prediction(s) did not pass"),
+        "{}",
+        stderr(&o)
+    );
 }
