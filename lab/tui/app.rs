@@ -1041,7 +1041,32 @@ impl App {
                 Code::Ros2 => Some(Badge::Ros2),
                 Code::BuiltIn | Code::Rust => None,
             },
+            in_callback_s: self
+                .hung_callback()
+                .filter(|(node, _)| *node == self.graph.node(id).name)
+                .map(|(_, s)| s),
         }
+    }
+
+    /// A learner's callback in this process (a Python node's tick, the brain's call) that
+    /// has not returned for [`HUNG_AFTER`] or longer: its node and how long, s. `None` in
+    /// an attached lab (the graph's code runs in other processes).
+    fn hung_callback(&self) -> Option<(String, f64)> {
+        if self.attached.is_some() {
+            return None;
+        }
+        let call = ratelab::python::running_callbacks(HUNG_AFTER)
+            .into_iter()
+            .next()?;
+        // A brain's call is its node's: the one whose kind runs the brain.
+        let node = call.node.or_else(|| {
+            self.graph
+                .nodes
+                .iter()
+                .find(|n| n.kind.def().uses_brain)
+                .map(|n| n.name.clone())
+        })?;
+        Some((node, call.running_for.as_secs_f64()))
     }
 
     /// The latency panel: the segment's histogram and percentiles, and the window's.
@@ -1153,7 +1178,20 @@ impl App {
                 .collect(),
             pole_angle: self.last.map_or(0.0, |s| s.pole_angle),
             cart_pos: self.last.map_or(0.0, |s| s.cart_pos),
-            verdict: self.verdict.clone(),
+            // While a callback holds the run, the run is not "balanced": it is hung, since the
+            // run time it holds (the virtual clock stands there; under the real clock, from
+            // when it started).
+            verdict: match (&self.verdict, self.hung_callback()) {
+                (Verdict::Balanced, Some((node, s))) => Verdict::Hung {
+                    node,
+                    since_s: if self.clock == "real" {
+                        (self.now.as_secs_f64() - s).max(0.0)
+                    } else {
+                        self.now.as_secs_f64()
+                    },
+                },
+                (v, _) => v.clone(),
+            },
             angle_history: self.history.iter().copied().collect(),
             // Each applied force holds until the next step: a staircase.
             applied_force: self
@@ -1188,6 +1226,11 @@ impl App {
         }
     }
 }
+
+/// How long a learner's callback runs without returning (wall time) before the lab shows it
+/// hung: far past any tick a balancing graph can afford (its period is 20 ms), and soon
+/// enough that a learner sees it at once.
+pub const HUNG_AFTER: std::time::Duration = std::time::Duration::from_secs(1);
 
 /// How long (run time) a rate asked for outranks the engine's status: its command is taken
 /// at the next instant, so a status without it after this long means it was refused.

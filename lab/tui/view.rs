@@ -68,6 +68,9 @@ pub struct NodeView {
     /// (`kind = "python"`), `ROS 2` for an external node (`kind = "external"`, run by a ROS 2
     /// program); `None` for the built-in kinds.
     pub badge: Option<Badge>,
+    /// A callback of the node (a Python tick, the brain's call) that has not returned for
+    /// this long, s: its box says `in callback 3.2 s` instead of its timing.
+    pub in_callback_s: Option<f64>,
 }
 
 /// Who runs a node that ratelab's built-in kinds do not: [`NodeView::badge`].
@@ -206,6 +209,14 @@ pub enum Verdict {
     Done,
     /// A node failed.
     Failed(String),
+    /// A node's callback (a Python tick or brain call) has not returned for a while: under
+    /// the virtual clock it holds the run's clock, so the pole is not "balanced" meanwhile.
+    Hung {
+        /// The node whose callback it is.
+        node: String,
+        /// The run time it has held since, s.
+        since_s: f64,
+    },
     /// The run ended neither fallen nor balanced the whole run: the summary's headline
     /// ([`ratelab::metrics::Metrics::headline`], e.g. `STOPPED BY WATCHDOG at t=2.04s (…)`).
     Stopped(String),
@@ -658,7 +669,20 @@ fn render_node(n: &NodeView, area: Rect, buf: &mut Buffer, real: bool) {
         (None, false) => format!("{} Hz", hz(n.set_hz)),
     };
     let mut lines = vec![Line::from(set)];
+    if let Some(s) = n.in_callback_s {
+        lines.push(
+            Line::from(fit(vec![
+                format!("in callback {s:.1} s"),
+                format!("in callback {s:.0}s"),
+                format!("in cb {s:.1}s"),
+                format!("cb {s:.0}s"),
+            ]))
+            .red()
+            .bold(),
+        );
+    }
     match (n.published_hz, n.measured_hz, n.lateness_p99_us) {
+        _ if n.in_callback_s.is_some() => {}
         (Some(p), ..) => lines.push(Line::from(fit(vec![
             format!("{p:.1} Hz sent"),
             format!("{p:.0} Hz sent"),
@@ -1095,6 +1119,12 @@ fn badge(v: &View) -> Span<'static> {
             .on_red()
             .bold(),
         Verdict::Failed(_) => " NODE FAILED ✗ ".white().on_red().bold(),
+        Verdict::Hung { node, since_s } => Span::from(format!(
+            " HUNG in {node}'s callback since t={since_s:.2}s ✗ "
+        ))
+        .white()
+        .on_red()
+        .bold(),
         // The headline up to its parenthesis: "STOPPED BY WATCHDOG at t=2.04s".
         Verdict::Stopped(headline) => Span::from(format!(
             " {} ",
@@ -1111,11 +1141,24 @@ fn render_cartpole(v: &View, area: Rect, buf: &mut Buffer) {
     let theta = v.pole_angle;
     // The verdict reads whole: in a narrow panel (80 columns) the panel's name gives way,
     // then the badge's padding ("BALANCED while the plant ran" is no plain BALANCED).
-    let verdict = badge(v);
-    let (room, words) = (
-        usize::from(area.width.saturating_sub(2)),
-        verdict.content.chars().count(),
-    );
+    let room = usize::from(area.width.saturating_sub(2));
+    let verdict = match &v.verdict {
+        // The hang's verdict in the first of its forms that fits the panel whole.
+        Verdict::Hung { node, since_s } => {
+            let forms = vec![
+                format!(" HUNG in {node}'s callback since t={since_s:.2}s ✗ "),
+                format!(" HUNG in {node}'s callback t={since_s:.2}s "),
+                format!(" HUNG: {node} since t={since_s:.2}s "),
+                format!(" HUNG: {node} t={since_s:.2}s "),
+            ];
+            Span::from(first_that_fits(forms, room))
+                .white()
+                .on_red()
+                .bold()
+        }
+        _ => badge(v),
+    };
+    let words = verdict.content.chars().count();
     let name = " cartpole ";
     let title = if name.len() + words <= room {
         Line::from(vec![name.into(), verdict])
@@ -1506,7 +1549,8 @@ fn fit_message(m: &str, width: usize) -> String {
 }
 
 fn render_footer(v: &View, area: Rect, buf: &mut Buffer) {
-    let ended = v.verdict != Verdict::Balanced;
+    // A hung callback is no end: the run goes on once it returns.
+    let ended = !matches!(v.verdict, Verdict::Balanced | Verdict::Hung { .. });
     // Typing a rate shows its prompt even after a fall, where the verdict leads otherwise.
     let line = if let Some(t) = &v.typing {
         Line::from(vec![

@@ -152,6 +152,8 @@ pub fn describe(py: Python<'_>, err: &PyErr, script: &str) -> String {
 struct Running {
     /// Who is called (`brain policy.py:act`), for the messages.
     what: String,
+    /// The node whose tick it is (`None`: a brain's call or a script's loading).
+    node: Option<String>,
     /// When the call started.
     since: Instant,
     /// How long it may run before it is reported, and how to say so (`2 s`, or `0.5 s,
@@ -184,6 +186,7 @@ impl CallbackGuard {
     pub fn enter(what: &str) -> CallbackGuard {
         Self::enter_with(
             what,
+            None,
             OVERRUN_WARNING,
             format!("{} s", OVERRUN_WARNING.as_secs_f64()),
         )
@@ -191,10 +194,11 @@ impl CallbackGuard {
 
     /// Register the calling thread as running a tick of a node whose period is `period`:
     /// reported after [`OVERRUN_PERIODS`] periods without returning.
-    pub fn enter_tick(what: &str, period: crate::time::Nanos) -> CallbackGuard {
+    pub fn enter_tick(what: &str, node: &str, period: crate::time::Nanos) -> CallbackGuard {
         let overrun = Duration::from_nanos(period.0.saturating_mul(u64::from(OVERRUN_PERIODS)));
         Self::enter_with(
             what,
+            Some(node),
             overrun,
             format!(
                 "{} s, {OVERRUN_PERIODS} of its {period} periods",
@@ -203,13 +207,19 @@ impl CallbackGuard {
         )
     }
 
-    fn enter_with(what: &str, overrun: Duration, overrun_text: String) -> CallbackGuard {
+    fn enter_with(
+        what: &str,
+        node: Option<&str>,
+        overrun: Duration,
+        overrun_text: String,
+    ) -> CallbackGuard {
         // SAFETY: PyThread_get_thread_ident only reads the calling thread's id.
         let thread = unsafe { pyo3::ffi::PyThread_get_thread_ident() } as u64;
         lock_running().insert(
             thread,
             Running {
                 what: what.to_string(),
+                node: node.map(str::to_string),
                 since: Instant::now(),
                 overrun,
                 overrun_text,
@@ -224,6 +234,36 @@ impl Drop for CallbackGuard {
     fn drop(&mut self) {
         lock_running().remove(&self.thread);
     }
+}
+
+/// A call into a learner's code that has not returned yet ([`running_callbacks`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Callback {
+    /// Who is called, as the warnings say it (`node 'policy' (mine.py)`, `the brain
+    /// b.py:act()`).
+    pub what: String,
+    /// The node whose tick it is; `None` for a brain's call (the node that runs the run's
+    /// brain: [`crate::graph::kind::KindDef::uses_brain`]) or a script's loading.
+    pub node: Option<String>,
+    /// How long it has run so far (wall time).
+    pub running_for: Duration,
+}
+
+/// The calls into learners' code that have run `at_least` (wall time) without returning,
+/// the longest first: what the lab shows as a hung callback (`in callback 3.2 s`, `HUNG`),
+/// since under the virtual clock such a call holds the run's clock.
+pub fn running_callbacks(at_least: Duration) -> Vec<Callback> {
+    let mut calls: Vec<Callback> = lock_running()
+        .values()
+        .map(|r| Callback {
+            what: r.what.clone(),
+            node: r.node.clone(),
+            running_for: r.since.elapsed(),
+        })
+        .filter(|c| c.running_for >= at_least)
+        .collect();
+    calls.sort_by(|a, b| b.running_for.cmp(&a.running_for));
+    calls
 }
 
 /// Warns once (stderr) about each call into learners' code that has overrun by far

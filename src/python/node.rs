@@ -57,6 +57,8 @@ type Fields = Vec<f64>;
 pub struct PythonNode {
     runtime: Py<PyAny>,
     script: String,
+    /// The node's name (the lab shows a tick that does not return on its box).
+    name: String,
     what: String,
     inputs: Vec<Input>,
     outputs: Vec<AnyTopic>,
@@ -127,6 +129,7 @@ impl PythonNode {
             Ok(PythonNode {
                 runtime: runtime.unbind(),
                 script: script.to_string(),
+                name: name.to_string(),
                 what: format!("node '{name}' ({script})"),
                 inputs: inputs
                     .into_iter()
@@ -165,7 +168,7 @@ impl PythonNode {
             })
             .collect();
         let published: Vec<(usize, Fields)> = Python::attach(|py| {
-            let _running = CallbackGuard::enter_tick(&self.what, period);
+            let _running = CallbackGuard::enter_tick(&self.what, &self.name, period);
             self.runtime
                 .call_method1(py, "tick", (now.0, delivered))
                 .and_then(|out| {

@@ -678,3 +678,57 @@ fn quitting_the_lab_interrupts_a_python_brain_that_never_returns() {
     std::thread::sleep(Duration::from_millis(200));
     assert!(!lab.parser.lock().unwrap().screen().alternate_screen());
 }
+
+/// A brain that never returns holds the virtual clock: within 3 s the lab says so, at both
+/// sizes it is made for: the verdict reads `HUNG in policy's callback since t=…` (never
+/// BALANCED while the clock is held) and the policy's box how long it has been in its
+/// callback. Quitting still ends it at once.
+#[test]
+fn a_brain_that_never_returns_shows_hung_not_balanced() {
+    let _machine = crate::machine::alone();
+    let dir = tempfile::tempdir().unwrap();
+    let hang = dir.path().join("hang.py");
+    std::fs::write(
+        &hang,
+        "calls = 0\ndef act(obs):\n    global calls\n    calls += 1\n    while calls > 25:\n        pass\n    return 0.0\n",
+    )
+    .unwrap();
+    for (cols, rows, verdict, in_box) in [
+        (80, 24, "HUNG: policy since t=0.48s", "in callback "),
+        (
+            120,
+            40,
+            "HUNG in policy's callback since t=0.48s",
+            "in callback ",
+        ),
+    ] {
+        let mut lab = Lab::start_sized(
+            &["--clock", "virtual", "--policy", hang.to_str().unwrap()],
+            &[],
+            cols,
+            rows,
+        );
+        lab.wait_for("virtual clock", Duration::from_secs(60));
+        let shown = Instant::now();
+        let screen = lab.wait_for(verdict, Duration::from_secs(5));
+        assert!(
+            shown.elapsed() < Duration::from_secs(3),
+            "{:?} at {cols}x{rows}:\n{screen}",
+            shown.elapsed()
+        );
+        assert!(!screen.contains("BALANCED"), "{screen}");
+        assert!(
+            screen.contains(in_box),
+            "the policy's box at {cols}x{rows}:\n{screen}"
+        );
+        let sent = Instant::now();
+        lab.keys("q");
+        let status = lab.exit_status("q with a hung brain");
+        assert!(
+            sent.elapsed() < Duration::from_secs(3),
+            "{:?}",
+            sent.elapsed()
+        );
+        assert!(status.success(), "{status:?}");
+    }
+}
