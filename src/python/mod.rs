@@ -262,7 +262,7 @@ pub fn running_callbacks(at_least: Duration) -> Vec<Callback> {
         })
         .filter(|c| c.running_for >= at_least)
         .collect();
-    calls.sort_by(|a, b| b.running_for.cmp(&a.running_for));
+    calls.sort_by_key(|c| std::cmp::Reverse(c.running_for));
     calls
 }
 
