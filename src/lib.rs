@@ -5,13 +5,24 @@
 //! course chapter 2.8 ("Concepts of ROS, without ROS"); time is integer nanoseconds.
 //! This crate knows nothing of terminals: the lab (`lab/`) draws it.
 //!
-//! Layout, one module per idea: [`time`], [`clock`], [`topic`], [`rate`], [`node`],
-//! [`plant`], [`ids`], [`policy`] (+ brains in [`python`]), [`msg`], [`graph`] (+ its file format, [`graph::spec`]),
-//! [`publisher`], [`executor`] (the rules), [`scheduler`] (the clocks that apply them, +
-//! [`realtime`]), [`runlog`], [`metrics`], [`config`], [`run`], [`session`],
-//! [`distributed`] (the graph across processes, over Zenoh);
-//! files the user names are read through [`input`] and written through [`output`]; text from
-//! outside is shown through [`text`].
+//! Layout, one module per idea (every module of the crate, by layer):
+//!
+//! - **leaves** that many modules share: [`time`] (the `Nanos` newtype), [`ids`] (node and
+//!   topic ids and their bounds), [`text`] (text from outside, made safe to show), [`procs`]
+//!   (what `/proc` says of a process), [`np_random`] (NumPy-exact seeding), [`input`] and
+//!   [`output`] (the rules for files the user names);
+//! - **the runtime's parts**: [`clock`], [`rate`], [`qos`] (ROS 2's QoS), [`topic`] (a
+//!   subscription's queue and its drop rule), [`msg`] (message types and their registry),
+//!   [`publisher`], [`node`], [`plant`] (the MuJoCo cartpole), [`policy`] (brains; +
+//!   [`checkpoint`] for trained ones, [`python`] for a learner's code), [`graph`] (the graph
+//!   file, [`graph::spec`]; node kinds and their registry), [`executor`] (ROS 2's executors
+//!   as rules), [`scheduler`] (the virtual and real clocks that apply them, + [`realtime`]),
+//!   [`runlog`], [`metrics`], [`config`];
+//! - **runs and their drivers**: [`run`] (one run), [`session`] (the lab's live runs, their
+//!   log and replay), [`sweep`] (grids and the rate cliff), [`exercise`] (the exercises'
+//!   bands and checks);
+//! - **the world outside**: [`recording`] (rerun `.rrd`), [`ros2`] (ROS 2 on the wire, over
+//!   rmw_zenoh's format), [`distributed`] (the graph across processes, over Zenoh).
 #![warn(missing_docs)]
 
 pub mod checkpoint;

@@ -834,8 +834,14 @@ impl Metrics {
         let ticks = self
             .policy_ticks
             .map_or_else(String::new, |t| format!(", {}", counted(t, "policy tick")));
+        // Under the real clock run time is wall time from the start: not simulated time.
+        let time = if self.clock == crate::ClockKind::Real.as_str() {
+            "run time"
+        } else {
+            "sim"
+        };
         let counted = format!(
-            "{}{ticks} in {:.2}s sim{wall}",
+            "{}{ticks} in {:.2}s {time}{wall}",
             counted(self.steps, "actuator step"),
             self.sim_time_s
         );

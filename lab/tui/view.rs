@@ -1263,12 +1263,26 @@ fn render_angle_chart(v: &View, area: Rect, buf: &mut Buffer) {
             .data(m);
         datasets.push(if i == 0 { d.name("change") } else { d });
     }
-    // The marks' key in the title: the chart's own legend hides when the chart is small.
-    let mut title = vec![Span::raw(" pole angle (rad), last 10 s ")];
+    // The lines' key in the title (the chart's own legend hides when the chart is small):
+    // the fall limits (±0.2095 rad, drawn between the axis's ±0.3 labels), the changes'
+    // marks, then the window, each as long as the title has room.
+    let room = usize::from(area.width.saturating_sub(2));
+    let mut title = vec![Span::raw(" pole angle (rad) ")];
+    let mut used = 18;
+    let limits = format!("── ±{LIMIT_RAD:.2} fall ");
+    let mut add = |title: &mut Vec<Span<'static>>, text: String, style: Style| {
+        let n = text.chars().count() + 2;
+        if used + n <= room {
+            used += n;
+            title.push(Span::raw("· "));
+            title.push(Span::styled(text, style));
+        }
+    };
+    add(&mut title, limits, Style::new().fg(Color::Red));
     if !marks.is_empty() {
-        title.push(Span::raw("· "));
-        title.push(Span::styled("⡇ change ", Style::new().fg(Color::Cyan)));
+        add(&mut title, "⡇ change ".into(), Style::new().fg(Color::Cyan));
     }
+    add(&mut title, "last 10 s ".into(), Style::new());
     Chart::new(datasets)
         .block(Block::bordered().title(Line::from(title)))
         .x_axis(time_axis(t0, t1, area))

@@ -761,3 +761,34 @@ fn an_exercise_whose_prediction_cannot_be_read_exits_1() {
         stderr(&o)
     );
 }
+
+/// The README's 80×24 screen is the lab's snapshot test's (`dropping_80x24`), line for line
+/// (trailing blanks aside): a change to the lab that moves it fails here, not silently.
+#[test]
+fn the_readme_s_lab_screen_is_the_snapshot_s() {
+    let snap = std::fs::read_to_string(crate::repo(
+        "lab/tui/snapshots/ratelab__tui__tests__dropping_80x24.snap",
+    ))
+    .unwrap();
+    let screen: Vec<String> = snap
+        .lines()
+        .filter_map(|l| l.strip_prefix('"').and_then(|l| l.strip_suffix('"')))
+        .map(|l| {
+            l.replace("\\\"", "\"")
+                .replace("\\\\", "\\")
+                .trim_end()
+                .to_string()
+        })
+        .collect();
+    assert_eq!(screen.len(), 24, "{snap}");
+    let readme = std::fs::read_to_string(crate::repo("README.md")).unwrap();
+    let start = readme
+        .find("```text\n ratelab  virtual clock")
+        .expect("the screen")
+        + 8;
+    let shown: Vec<&str> = readme[start..].lines().take(24).collect();
+    assert_eq!(
+        shown, screen,
+        "README.md's 80x24 screen differs from the snapshot"
+    );
+}
