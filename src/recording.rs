@@ -1608,19 +1608,32 @@ impl Recording {
         let base = span.node as f64;
         let lane = format!("nodes/{}/executor_lane", n.name);
         let period = crate::rate::period_for_hz(n.rate_hz).map_or(0, |p| p.0.max(1));
-        let skipped = {
+        let (skipped, first_skip) = {
             let mut lanes = self.lanes.lock().unwrap_or_else(|e| e.into_inner());
             if lanes.len() <= span.node {
                 lanes.resize(span.node + 1, (None, 0));
             }
             let (last, total) = &mut lanes[span.node];
+            let before = *total;
             if let (Some(l), true) = (*last, period > 0) {
                 let gap = span.release.saturating_sub(l).0;
                 *total += (gap / period).saturating_sub(1);
             }
             *last = Some(span.release);
-            *total
+            (*total, before == 0 && *total > 0)
         };
+        if first_skip {
+            // The moment a timer first lost periods to a busy thread is trouble to find in
+            // time: a warning, at the release that came late (the total is at the end).
+            self.event(
+                span.release,
+                &format!(
+                    "node {} skipped {} tick(s): its timer's periods passed while its executor's thread was busy",
+                    n.name, skipped
+                ),
+                rerun::components::TextLogLevel::WARN,
+            );
+        }
         let step = self.last_step.load(std::sync::atomic::Ordering::Relaxed);
         let mut buf = self.lock();
         let (start, end) = (span.start, span.end.max(span.start));
@@ -1689,6 +1702,19 @@ impl Recording {
         }
         if let Some(watchdog) = &metrics.stopped_by_watchdog {
             self.event(end.at, watchdog, rerun::components::TextLogLevel::WARN);
+        }
+        // Each node whose timer skipped periods, in all: the rate it achieved of its own.
+        for (name, n) in &metrics.nodes {
+            if let Some(x) = n.exec.as_ref().filter(|x| x.skipped_ticks > 0) {
+                self.event(
+                    end.at,
+                    &format!(
+                        "node {name} skipped {} tick(s) in all (ticked {} times at {} Hz set): its executor's thread was busy",
+                        x.skipped_ticks, n.ticks, n.rate_hz
+                    ),
+                    rerun::components::TextLogLevel::WARN,
+                );
+            }
         }
         self.event(
             end.at,

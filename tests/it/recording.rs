@@ -731,6 +731,25 @@ fn an_executors_run_records_its_timeline_response_times_and_skipped_ticks() {
         skipped.iter().copied().fold(0.0, f64::max),
         x.skipped_ticks as f64
     );
+    // Trouble placed in time: the first skipped tick is a warning at the release that came
+    // late, and the total a warning at the end (#54: such a run recorded none).
+    let events = events_with_levels(&path);
+    let warned = |needle: &str| {
+        events
+            .iter()
+            .any(|(level, text)| text.contains(needle) && level == "WARN")
+    };
+    assert!(
+        warned("tick(s): its timer's periods passed while its executor's thread was busy"),
+        "{events:?}"
+    );
+    assert!(
+        warned(&format!(
+            "node sensor skipped {} tick(s) in all (ticked {} times at 50 Hz set)",
+            x.skipped_ticks, m.nodes["sensor"].ticks
+        )),
+        "{events:?}"
+    );
 }
 
 #[test]
