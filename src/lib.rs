@@ -18,7 +18,8 @@
 //!   file, [`graph::spec`]; node kinds and their registry), [`executor`] (ROS 2's executors
 //!   as rules), [`scheduler`] (the virtual and real clocks that apply them, + [`realtime`]),
 //!   [`runlog`], [`metrics`], [`config`];
-//! - **runs and their drivers**: [`run`] (one run), [`session`] (the lab's live runs, their
+//! - **runs and their drivers**: [`run`] (one run), [`textlog`] (what nodes' code and
+//!   ratelab's warnings write, stamped with run time and node), [`session`] (the lab's live runs, their
 //!   log and replay), [`sweep`] (grids and the rate cliff), [`exercise`] (the exercises'
 //!   bands and checks);
 //! - **the world outside**: [`recording`] (rerun `.rrd`), [`ros2`] (ROS 2 on the wire, over
@@ -55,6 +56,7 @@ pub mod scheduler;
 pub mod session;
 pub mod sweep;
 pub mod text;
+pub mod textlog;
 pub mod time;
 pub mod topic;
 

@@ -4,7 +4,8 @@
 use super::keymap::{depth_down, depth_up, rate_down, rate_up, Msg};
 use super::live::Live;
 use super::view::{
-    Badge, LatencyView, NodeView, SegmentView, Selected, TopicView, Verdict, View, WindowLatency,
+    Badge, LatencyView, LogView, NodeView, SegmentView, Selected, TopicView, Verdict, View,
+    WindowLatency,
 };
 use crossbeam_channel::Sender;
 use ratelab::config::{check_rate, BREAK_CONTROL_HZ};
@@ -140,6 +141,14 @@ pub struct App {
     timeline: super::timeline::Timeline,
     /// The timeline shown in place of the latency histogram (key `t`).
     show_timeline: bool,
+    /// What nodes' code and ratelab's warnings wrote ([`ratelab::textlog`]), the newest
+    /// [`LOG_LINES`], and where they come from while the lab runs.
+    log: VecDeque<ratelab::textlog::LogLine>,
+    log_rx: Option<crossbeam_channel::Receiver<ratelab::textlog::LogLine>>,
+    /// Lines received in all (the pane says how many it holds of them).
+    log_total: usize,
+    /// The log pane shown in place of the latency histogram (key `v`).
+    show_log: bool,
     /// Under the real clock, the executors `x` asked for, for the next run (its threads are
     /// made when a run starts): the timeline keeps drawing the ones that run.
     pending_executor: Option<&'static str>,
@@ -208,6 +217,10 @@ impl App {
             ticks: Vec::new(),
             timeline: Default::default(),
             show_timeline: false,
+            log: VecDeque::new(),
+            log_rx: None,
+            log_total: 0,
+            show_log: false,
             pending_executor: None,
             exec_from: None,
             ended_with: None,
@@ -223,6 +236,60 @@ impl App {
             endpoint: None,
             wire: Vec::new(),
             quit: false,
+        }
+    }
+
+    /// Take the run's text log from `rx` ([`ratelab::textlog`]): the pane (key `v`) shows it.
+    pub fn take_log(&mut self, rx: crossbeam_channel::Receiver<ratelab::textlog::LogLine>) {
+        self.log_rx = Some(rx);
+    }
+
+    /// Move the lines that came into the log (the newest [`LOG_LINES`] are kept).
+    pub fn drain_log(&mut self) {
+        let Some(rx) = &self.log_rx else {
+            return;
+        };
+        for line in rx.try_iter() {
+            self.log_total += 1;
+            if self.log.len() == LOG_LINES {
+                self.log.pop_front();
+            }
+            self.log.push_back(line);
+        }
+    }
+
+    /// The log pane's view: the selected node's lines (all nodes' when none is selected).
+    fn log_view(&self) -> LogView {
+        let node = match self.selected {
+            Some(Selected::Node(id)) => Some(self.graph.node(id).name.clone()),
+            _ => None,
+        };
+        let mine =
+            |l: &&ratelab::textlog::LogLine| node.is_none() || l.node.as_deref() == node.as_deref();
+        let lines: Vec<(bool, String)> = self
+            .log
+            .iter()
+            .filter(mine)
+            .map(|l| {
+                let t = l.t.map_or_else(
+                    || "      ".to_string(),
+                    |t| format!("t={:<5.2}", t.as_secs_f64()),
+                );
+                let who = l.node.as_deref().unwrap_or("ratelab");
+                (
+                    l.level != ratelab::textlog::Level::Info,
+                    format!("{t} {who:<9} {}", l.text),
+                )
+            })
+            .collect();
+        LogView {
+            whose: node.unwrap_or_else(|| "all nodes".to_string()),
+            total: if self.selected.is_some() {
+                lines.len()
+            } else {
+                self.log_total
+            },
+            lines,
         }
     }
 
@@ -668,7 +735,11 @@ impl App {
                     .say("no --policy file given: nothing to swap the scripted brain with".into()),
             },
             Msg::ToggleHelp => self.help = !self.help,
-            Msg::ToggleTimeline => self.show_timeline = !self.show_timeline,
+            Msg::ToggleTimeline => {
+                self.show_timeline = !self.show_timeline;
+                self.show_log = false;
+            }
+            Msg::ToggleLog => self.show_log = !self.show_log,
             Msg::CycleExecutor => {
                 // One per node → one thread for all → two threads → one per node.
                 let current = self.pending_executor.unwrap_or_else(|| {
@@ -1202,6 +1273,7 @@ impl App {
                 .collect(),
             published_force: self.published.iter().copied().collect(),
             latency: self.latency_view(),
+            log: self.show_log.then(|| self.log_view()),
             timeline: self.show_timeline.then(|| {
                 self.timeline.view(
                     &self.graph,
@@ -1226,6 +1298,9 @@ impl App {
         }
     }
 }
+
+/// The most lines of the run's text log the lab keeps (the pane shows the newest).
+pub const LOG_LINES: usize = 2000;
 
 /// How long a learner's callback runs without returning (wall time) before the lab shows it
 /// hung: far past any tick a balancing graph can afford (its period is 20 ms), and soon

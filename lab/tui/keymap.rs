@@ -62,6 +62,9 @@ pub enum Msg {
     CycleExecutor,
     /// Show the executor timeline instead of the latency histogram, or back.
     ToggleTimeline,
+    /// Show the log pane (what nodes' code and ratelab's warnings wrote) instead of the
+    /// latency histogram, or back.
+    ToggleLog,
     /// Show / hide the key help.
     ToggleHelp,
     /// Close the help or the selection; when neither is open, ask, and quit on a second one.
@@ -88,6 +91,7 @@ impl Msg {
                 | Msg::SelectPrev
                 | Msg::ToggleHelp
                 | Msg::ToggleTimeline
+                | Msg::ToggleLog
                 | Msg::Back
                 | Msg::Quit
         )
@@ -180,6 +184,13 @@ pub const BINDINGS: &[Binding] = &[
         ],
         label: "t / x",
         help: "timeline ↔ latency / executors per node → single → multi:2",
+        footer: None,
+    },
+    Binding {
+        keys: &[(Char('v'), Msg::ToggleLog)],
+        label: "v",
+        help:
+            "log pane ↔ latency: what nodes printed and logged, and warnings (the selected node's)",
         footer: None,
     },
     Binding {

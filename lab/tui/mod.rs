@@ -25,6 +25,9 @@ pub const FPS: u64 = 30;
 /// so seconds of stale input never queue up.
 pub const INPUT_QUEUE: usize = 16;
 
+/// The most log lines waiting between two frames of the lab (more are dropped).
+const LOG_QUEUE: usize = 4096;
+
 /// Run the event loop until the user quits or `stop` is set: input, telemetry and a
 /// ~30 fps tick, one `select!`. Draws on every tick and after every key.
 ///
@@ -69,7 +72,10 @@ where
                     app.on_telemetry(t);
                 }
             }
-            recv(ticker) -> _ => draw(terminal, app)?,
+            recv(ticker) -> _ => {
+                app.drain_log();
+                draw(terminal, app)?
+            }
         }
     }
     Ok(())
@@ -87,13 +93,22 @@ pub fn run_lab(settings: SessionSettings, stop: StopFlag) -> anyhow::Result<()> 
         settings.speed,
     );
     app.show_graph(settings.cfg.graph.clone());
+    // What nodes' code and ratelab's warnings write goes to the log pane while the screen
+    // is up, never over it (bounded: a node printing without end drops lines, not memory).
+    let (log_tx, log_rx) = crossbeam_channel::bounded::<ratelab::textlog::LogLine>(LOG_QUEUE);
+    app.take_log(log_rx);
+    ratelab::textlog::set_sink(Some(Box::new(move |line| {
+        let _ = log_tx.try_send(line);
+    })));
     let session_file = settings.session_file.clone();
     let engine = Engine::new(settings, ctl_rx, tel_tx).spawn();
     let result = on_terminal(&mut app, &tel_rx, &stop);
     let _ = ctl_tx.send(Control::Quit);
     // A Python callback that never returns would keep the engine from seeing the quit.
     ratelab::python::interrupt_callbacks_after(crate::PYTHON_GRACE);
-    if engine.join().is_err() {
+    let joined = engine.join();
+    ratelab::textlog::set_sink(None);
+    if joined.is_err() {
         anyhow::bail!("the lab's engine stopped unexpectedly");
     }
     if let Some(p) = session_file {

@@ -298,6 +298,8 @@ pub struct View {
     pub latency: LatencyView,
     /// The executor timeline, shown in place of the latency histogram (key `t`).
     pub timeline: Option<super::timeline::TimelineView>,
+    /// The log pane, shown in place of the latency histogram (key `v`).
+    pub log: Option<LogView>,
     /// The window and the segment the numbers count over.
     pub segment: SegmentView,
     /// Help overlay shown?
@@ -313,6 +315,42 @@ pub struct View {
     /// Attached: where the launch listens (the header's note where it fits, and the
     /// footer's).
     pub endpoint: Option<String>,
+}
+
+/// The log pane: what nodes' code wrote and ratelab's warnings, newest last.
+#[derive(Clone, Debug, PartialEq, Default)]
+pub struct LogView {
+    /// Whose lines: `all nodes`, or the selected node's name.
+    pub whose: String,
+    /// How many lines the lab holds of it in all.
+    pub total: usize,
+    /// The newest lines: (is it a warning or an error, `t=1.23 policy  text`).
+    pub lines: Vec<(bool, String)>,
+}
+
+fn render_log(l: &LogView, area: Rect, buf: &mut Buffer) {
+    let title = format!(" log: {} ({} lines) · v hides ", l.whose, l.total);
+    let block = Block::bordered().title(title);
+    let inner = block.inner(area);
+    block.render(area, buf);
+    let rows = usize::from(inner.height);
+    let width = usize::from(inner.width);
+    let shown: Vec<Line> = if l.lines.is_empty() {
+        vec![Line::from("nothing written yet (print, get_logger, warnings)").dim()]
+    } else {
+        l.lines[l.lines.len().saturating_sub(rows)..]
+            .iter()
+            .map(|(warn, text)| {
+                let cut: String = text.chars().take(width).collect();
+                if *warn {
+                    Line::from(cut).yellow()
+                } else {
+                    Line::from(cut)
+                }
+            })
+            .collect()
+    };
+    ratatui::widgets::Paragraph::new(shown).render(inner, buf);
 }
 
 fn hz(x: f64) -> String {
@@ -353,9 +391,10 @@ impl Widget for &View {
             Layout::vertical([Constraint::Percentage(56), Constraint::Percentage(44)]).areas(chart);
         render_angle_chart(self, angle, buf);
         render_hold_chart(self, hold, buf);
-        match &self.timeline {
-            Some(t) => super::timeline::render(t, self.clock == "virtual", latency, buf),
-            None => render_latency(self, latency, buf),
+        match (&self.log, &self.timeline) {
+            (Some(l), _) => render_log(l, latency, buf),
+            (None, Some(t)) => super::timeline::render(t, self.clock == "virtual", latency, buf),
+            (None, None) => render_latency(self, latency, buf),
         }
         render_footer(self, footer, buf);
         if self.help {

@@ -96,6 +96,12 @@ pub fn start() -> Result<(), PythonError> {
         Python::attach(|py| {
             add_virtual_env(py)?;
             PyModule::from_code(py, SUPPORT_SOURCE, c"<ratelab>", c"_ratelab_support")
+                .and_then(|m| {
+                    // What learners' code writes goes to the run's text log.
+                    m.add_function(wrap_pyfunction!(log_line, &m)?)?;
+                    m.call_method0("_capture_output")?;
+                    Ok(m)
+                })
                 .map(Bound::unbind)
                 .map_err(|e| format!("ratelab's Python support failed to load: {e}"))
         })
@@ -132,6 +138,25 @@ fn add_virtual_env(py: Python<'_>) -> Result<(), String> {
         .and_then(|site| site.call_method1("addsitedir", (dir.to_string_lossy().as_ref(),)))
         .map(drop)
         .map_err(|e| format!("cannot add {} to Python's path: {e}", dir.display()))
+}
+
+/// `_ratelab_support._log(level, text, node=None)`: a line (or lines) a learner's code wrote
+/// (`print`, `sys.stderr`, a warning, `get_logger()`), to the run's text log
+/// ([`crate::textlog`]), stamped with the calling thread's tick, or with `node` (a logger's
+/// own) when given.
+#[pyfunction]
+#[pyo3(name = "_log", signature = (level, text, node=None))]
+fn log_line(level: &str, text: &str, node: Option<&str>) {
+    use crate::textlog::{emit, emit_for, Level};
+    let level = match level {
+        "info" => Level::Info,
+        "error" => Level::Error,
+        _ => Level::Warn,
+    };
+    match node {
+        Some(n) => emit_for(Some(n), crate::textlog::now(), level, text),
+        None => emit(level, text),
+    }
 }
 
 /// One line for a Python exception raised by code of `script` (see the module docs).
@@ -278,10 +303,15 @@ fn start_watchdog() {
                 for r in lock_running().values_mut() {
                     if r.since.elapsed() >= r.overrun && !r.warned {
                         r.warned = true;
-                        eprintln!(
-                            "[ratelab] warning: {} has not returned after {} (Ctrl-C interrupts it)",
-                            crate::text::printable(&r.what),
-                            r.overrun_text
+                        // To the run's text log: the lab's pane, not over its screen.
+                        crate::textlog::emit_for(
+                            r.node.as_deref(),
+                            None,
+                            crate::textlog::Level::Warn,
+                            &format!(
+                                "[ratelab] warning: {} has not returned after {} (Ctrl-C interrupts it)",
+                                r.what, r.overrun_text
+                            ),
                         );
                     }
                 }

@@ -153,6 +153,8 @@ impl PythonNode {
     /// [`TickError`] with the one-line description when a callback raised or published
     /// something that is not a message of its topic's type.
     pub fn tick(&mut self, now: Nanos, period: Nanos) -> Result<(), TickError> {
+        // What the node's code writes meanwhile is stamped with this tick.
+        let _stamp = crate::textlog::enter(&self.name, now);
         // What each input delivers now (by its QoS), if new: (input index, fields).
         let delivered: Vec<(usize, Fields)> = self
             .inputs

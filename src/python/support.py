@@ -57,6 +57,51 @@ time.sleep = _sleep
 threading.Event.wait = _event_wait
 
 
+# ---- what learners' code writes -----------------------------------------------------------
+# `print`, `sys.stderr`, Python's warnings (NumPy's RuntimeWarning): each line goes to the
+# run's text log (`_log`, src/textlog.rs), stamped with the tick it was written in, never
+# straight onto a terminal where the lab draws.
+
+
+class _Lines:
+    """A text stream whose lines go to the run's text log at one level."""
+
+    encoding = "utf-8"
+    errors = "replace"
+    _MAX = 4096  # a line longer than this is cut into pieces of this size
+
+    def __init__(self, level):
+        self._level = level
+        self._buf = ""
+
+    def write(self, s):
+        s = str(s)
+        self._buf += s
+        while "\n" in self._buf:
+            line, self._buf = self._buf.split("\n", 1)
+            _log(self._level, line)
+        while len(self._buf) > self._MAX:
+            _log(self._level, self._buf[: self._MAX])
+            self._buf = self._buf[self._MAX :]
+        return len(s)
+
+    def flush(self):
+        if self._buf:
+            _log(self._level, self._buf)
+            self._buf = ""
+
+    def writable(self):
+        return True
+
+    def isatty(self):
+        return False
+
+
+def _capture_output():
+    sys.stdout = _Lines("info")
+    sys.stderr = _Lines("warn")
+
+
 class ContractError(Exception):
     """A script broke ratelab's contract (a missing function, a wrong return value)."""
 
@@ -296,7 +341,8 @@ class Logger:
         self._name = name
 
     def _say(self, level, text):
-        print(f"[{self._name}] {level}: {_one_line(text)}", file=sys.stderr, flush=True)
+        # To the run's text log (src/textlog.rs), stamped with this node and the run time.
+        _log("warn" if level == "warning" else level, f"{level}: {_one_line(text)}", self._name)
 
     def info(self, text):
         self._say("info", text)

@@ -732,3 +732,58 @@ fn a_brain_that_never_returns_shows_hung_not_balanced() {
         assert!(status.success(), "{status:?}");
     }
 }
+
+/// A Python node that prints every tick and logs: nothing it writes lands on the lab's
+/// screen (no row shows its text) until the log pane (`v`) is opened, where its lines are,
+/// stamped with run time and node; at both sizes the lab is made for.
+#[test]
+fn what_a_python_node_prints_goes_to_the_log_pane_never_over_the_screen() {
+    let _machine = crate::machine::alone();
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::create_dir(dir.path().join("nodes")).unwrap();
+    let repo = std::path::Path::new(crate::REPO);
+    let balancer = std::fs::read_to_string(repo.join("graphs/nodes/scripted_balancer.py")).unwrap();
+    let timer = "    def on_timer(self):\n";
+    assert!(balancer.contains(timer));
+    let loud = balancer.replace(
+        timer,
+        &format!(
+            "{timer}        print('printed-by-policy', 42)\n        import sys; print('on-stderr', file=sys.stderr)\n"
+        ),
+    );
+    std::fs::write(dir.path().join("nodes/loud.py"), loud).unwrap();
+    let graph = std::fs::read_to_string(repo.join("graphs/cartpole-python.toml"))
+        .unwrap()
+        .replace("nodes/scripted_balancer.py", "nodes/loud.py");
+    let g = dir.path().join("loud.toml");
+    std::fs::write(&g, graph).unwrap();
+    for (cols, rows) in [(80, 24), (120, 40)] {
+        let mut lab = Lab::start_sized(
+            &["--clock", "virtual", "--graph", g.to_str().unwrap()],
+            &[],
+            cols,
+            rows,
+        );
+        lab.wait_for("t 2.", Duration::from_secs(60));
+        let screen = lab.screen();
+        assert!(
+            !screen.contains("printed-by") && !screen.contains("on-stderr"),
+            "written over the screen at {cols}x{rows}:\n{screen}"
+        );
+        lab.keys("v");
+        let screen = lab.wait_for("log: all nodes", Duration::from_secs(5));
+        assert!(
+            screen.contains("policy    printed-by-policy 42")
+                || screen.contains("policy    on-stderr"),
+            "{cols}x{rows}:\n{screen}"
+        );
+        assert!(
+            !screen
+                .lines()
+                .any(|l| l.starts_with("printed-by") || l.starts_with("on-stderr")),
+            "{screen}"
+        );
+        lab.keys("v");
+        lab.quit();
+    }
+}

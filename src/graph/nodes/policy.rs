@@ -29,6 +29,7 @@ pub fn def() -> KindDef {
         uses_brain: true,
         make: Box::new(|cx: &mut BuildContext<'_>| {
             Ok(Box::new(PolicyNode {
+                name: cx.name.to_string(),
                 brain: cx.brain.clone(),
                 input: typed(cx.inputs.first())?,
                 output: publisher(cx.outputs.first(), cx.outbox)?,
@@ -39,6 +40,8 @@ pub fn def() -> KindDef {
 
 /// A policy node's state.
 pub struct PolicyNode {
+    /// The node's name: what its brain writes is stamped with it ([`crate::textlog`]).
+    pub name: String,
     /// The brain.
     pub brain: BrainSlot,
     /// Input.
@@ -52,7 +55,10 @@ impl Work for PolicyNode {
         let Some(msg) = self.input.read(now) else {
             return Flow::Continue; // nothing sensed yet
         };
-        let action = self.brain.lock().act(&msg.data);
+        let action = {
+            let _stamp = crate::textlog::enter(&self.name, now);
+            self.brain.lock().act(&msg.data)
+        };
         let force = ForceMsg {
             newtons: f64::from(action[0]) * GEAR_N,
         };

@@ -1,0 +1,166 @@
+//! The run's text log: every line a node's code writes (a Python node's or brain's `print`,
+//! `get_logger()`, a Python warning) and ratelab's own warnings about them (a callback that
+//! has not returned), each stamped with the run time and the node it came from.
+//!
+//! Where a line goes is the program's choice, made once ([`set_sink`]): the terminal lab
+//! takes them into its log pane (nothing is ever written over its screen); without a sink
+//! (a headless run) each goes to stderr as one line, `[t=1.234 s policy] text`.
+//!
+//! The run time and node of a line are those of the tick the calling thread is in
+//! ([`enter`], set by the node around its tick): a line written outside any tick (a script's
+//! loading) has neither. Text is made safe to show ([`crate::text::printable`]).
+
+use crate::time::Nanos;
+use std::cell::RefCell;
+use std::sync::Mutex;
+
+/// How much a line matters.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Level {
+    /// What a node's code printed on stdout, or logged as info.
+    Info,
+    /// A warning: what the code wrote on stderr or logged as one, ratelab's own.
+    Warn,
+    /// An error the code logged.
+    Error,
+}
+
+/// One line of the log.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LogLine {
+    /// The run time of the tick it was written in; `None` outside any tick.
+    pub t: Option<Nanos>,
+    /// The node whose code wrote it (or whom ratelab's warning is about).
+    pub node: Option<String>,
+    /// How much it matters.
+    pub level: Level,
+    /// The text, one line, control characters written out.
+    pub text: String,
+}
+
+impl LogLine {
+    /// `[t=1.234 s policy] text`: the line as headless runs print it (the stamp's parts
+    /// that are known).
+    pub fn prefixed(&self) -> String {
+        let stamp = match (self.t, &self.node) {
+            (Some(t), Some(n)) => format!("[t={:.3} s {n}] ", t.as_secs_f64()),
+            (Some(t), None) => format!("[t={:.3} s] ", t.as_secs_f64()),
+            (None, Some(n)) => format!("[{n}] "),
+            (None, None) => String::new(),
+        };
+        format!("{stamp}{}", self.text)
+    }
+}
+
+/// Where lines go, when a program took them.
+type Sink = Box<dyn Fn(LogLine) + Send + Sync>;
+
+fn sink() -> &'static Mutex<Option<Sink>> {
+    static SINK: Mutex<Option<Sink>> = Mutex::new(None);
+    &SINK
+}
+
+/// Send every line to `to` from now on (`None`: back to stderr). The terminal lab takes
+/// them while its screen is up, and gives them back when it closes.
+pub fn set_sink(to: Option<Sink>) {
+    *sink().lock().unwrap_or_else(|e| e.into_inner()) = to;
+}
+
+thread_local! {
+    /// The tick the calling thread is in: its run time and node.
+    static TICK: RefCell<Option<(Nanos, String)>> = const { RefCell::new(None) };
+}
+
+/// The calling thread is in node `node`'s tick at run time `now` until the returned scope
+/// is dropped: lines it writes meanwhile carry both.
+pub fn enter(node: &str, now: Nanos) -> Scope {
+    let before = TICK.with(|t| t.replace(Some((now, node.to_string()))));
+    Scope { before }
+}
+
+/// A tick's stamp on the calling thread, restored to what it was when dropped.
+pub struct Scope {
+    before: Option<(Nanos, String)>,
+}
+
+impl Drop for Scope {
+    fn drop(&mut self) {
+        let before = self.before.take();
+        TICK.with(|t| *t.borrow_mut() = before);
+    }
+}
+
+/// The run time of the tick the calling thread is in, if any.
+pub fn now() -> Option<Nanos> {
+    TICK.with(|t| t.borrow().as_ref().map(|(now, _)| *now))
+}
+
+/// Write `text` (one line or several: each its own line) at `level`, stamped with the
+/// calling thread's tick ([`enter`]).
+pub fn emit(level: Level, text: &str) {
+    let (t, node) = TICK.with(|t| t.borrow().clone()).unzip();
+    emit_for(node.as_deref(), t, level, text);
+}
+
+/// Write `text` about node `node` at run time `t` (either unknown: `None`).
+pub fn emit_for(node: Option<&str>, t: Option<Nanos>, level: Level, text: &str) {
+    let guard = sink().lock().unwrap_or_else(|e| e.into_inner());
+    for line in text.lines().filter(|l| !l.trim().is_empty()) {
+        let line = LogLine {
+            t,
+            node: node.map(str::to_string),
+            level,
+            text: crate::text::printable(line.trim_end()).into_owned(),
+        };
+        match guard.as_ref() {
+            Some(to) => to(line),
+            // Not `eprintln!`: a closed stderr must not end the run from a node's print.
+            None => {
+                use std::io::Write as _;
+                let _ = writeln!(std::io::stderr(), "{}", line.prefixed());
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::sync::{Arc, Mutex};
+
+    #[test]
+    fn lines_carry_their_tick_and_go_where_the_program_says() {
+        let got = Arc::new(Mutex::new(Vec::new()));
+        let keep = got.clone();
+        set_sink(Some(Box::new(move |l| keep.lock().unwrap().push(l))));
+        emit(Level::Info, "zqx before any tick");
+        {
+            let _tick = enter("policy", Nanos(1_234_000_000));
+            emit(Level::Warn, "zqx two\nzqx lines \u{1b}[2J");
+        }
+        emit(Level::Info, "zqx after");
+        set_sink(None);
+        // Only this test's lines (others may write meanwhile).
+        let got: Vec<LogLine> = got
+            .lock()
+            .unwrap()
+            .iter()
+            .filter(|l| l.text.starts_with("zqx "))
+            .cloned()
+            .collect();
+        let shown: Vec<String> = got
+            .iter()
+            .map(|l| l.prefixed().replace("zqx ", ""))
+            .collect();
+        assert_eq!(
+            shown,
+            [
+                "before any tick",
+                "[t=1.234 s policy] two",
+                "[t=1.234 s policy] lines \\u{1b}[2J",
+                "after"
+            ]
+        );
+        assert_eq!(got[1].level, Level::Warn);
+    }
+}
