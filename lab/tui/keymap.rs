@@ -187,13 +187,6 @@ pub const BINDINGS: &[Binding] = &[
         footer: None,
     },
     Binding {
-        keys: &[(Char('v'), Msg::ToggleLog)],
-        label: "v",
-        help:
-            "log pane ↔ latency: what nodes printed and logged, and warnings (the selected node's)",
-        footer: None,
-    },
-    Binding {
         keys: &[(Char('b'), Msg::Break)],
         label: "b",
         help: "break: control rate to 5 Hz",
@@ -236,9 +229,9 @@ pub const BINDINGS: &[Binding] = &[
         footer: None,
     },
     Binding {
-        keys: &[(Char('?'), Msg::ToggleHelp)],
-        label: "?",
-        help: "this help",
+        keys: &[(Char('?'), Msg::ToggleHelp), (Char('v'), Msg::ToggleLog)],
+        label: "? / v",
+        help: "this help / log pane: prints, logs, warnings",
         footer: Some(("?", "help")),
     },
     Binding {
