@@ -11,7 +11,7 @@ use ratelab::scheduler::{EndReason, StopFlag};
 use ratelab::{run, ClockKind, Nanos, RunConfig, RunOptions, RunReport};
 use std::io::{IsTerminal, Write};
 use std::path::{Path, PathBuf};
-use std::sync::Arc;
+use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
 /// Headless runs last this long unless `--duration` says otherwise, s.
@@ -292,7 +292,25 @@ pub fn run_headless(a: &RunArgs, stop: StopFlag) -> anyhow::Result<RunReport> {
             r.real_tick(t)
         }));
     }
-    let report = run(&cfg, brain, opts)?;
+    // What nodes' code writes (ratelab::textlog): each line on stderr, stamped, as it comes;
+    // with --out also kept for log.txt (the first MAX_LOG_LINES).
+    let kept = Arc::new(Mutex::new(Vec::<String>::new()));
+    {
+        let keep = a.out.is_some().then(|| kept.clone());
+        ratelab::textlog::set_sink(Some(Box::new(move |line| {
+            let text = line.prefixed();
+            let _ = writeln!(std::io::stderr(), "{text}");
+            if let Some(k) = &keep {
+                let mut k = k.lock().unwrap_or_else(|e| e.into_inner());
+                if k.len() < MAX_LOG_LINES {
+                    k.push(text);
+                }
+            }
+        })));
+    }
+    let report = run(&cfg, brain, opts);
+    ratelab::textlog::set_sink(None);
+    let report = report?;
     if let Some(bar) = virtual_bar {
         bar.finish_and_clear();
     }
@@ -348,8 +366,11 @@ pub fn run_headless(a: &RunArgs, stop: StopFlag) -> anyhow::Result<RunReport> {
     }
     if let Some(dir) = &a.out {
         write_outputs(dir, &report, &cfg.graph, a.force)?;
+        let log = kept.lock().unwrap_or_else(|e| e.into_inner()).join("\n");
+        let log = if log.is_empty() { log } else { log + "\n" };
+        ratelab::output::write_file(&dir.join("log.txt"), a.force, log.as_bytes())?;
         println!(
-            "[ratelab] wrote {}/metrics.json and trace.csv (what each key and column means: docs/metrics.md)",
+            "[ratelab] wrote {}/metrics.json, trace.csv and log.txt (what each key and column means: docs/metrics.md)",
             dir.display()
         );
     }
@@ -386,6 +407,10 @@ pub fn end_is_an_error(report: &RunReport) -> anyhow::Result<()> {
     }
     no_success_is_an_error(&report.metrics)
 }
+
+/// The most lines of the run's text log `--out` keeps in `log.txt` (each is on stderr as
+/// well).
+pub const MAX_LOG_LINES: usize = 100_000;
 
 /// A run that reached its summary but is no success (`Metrics::no_success`: a deadline
 /// watchdog's stop, as a ROS 2 node's deadline-missed handler may stop the system, or an
@@ -469,10 +494,11 @@ pub fn write_outputs(
     graph: &GraphSpec,
     force: bool,
 ) -> anyhow::Result<()> {
-    // Both names are checked before either is written, so a refusal writes nothing.
+    // Every name is checked before any is written, so a refusal writes nothing.
     let (metrics, trace) = (dir.join("metrics.json"), dir.join("trace.csv"));
     ratelab::output::check_target(&metrics, force)?;
     ratelab::output::check_target(&trace, force)?;
+    ratelab::output::check_target(&dir.join("log.txt"), force)?;
     let json = serde_json::to_string_pretty(&report.metrics)? + "\n";
     ratelab::output::write_file(&metrics, force, json.as_bytes())?;
     ratelab::output::write_with(&trace, force, |w| {

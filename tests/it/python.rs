@@ -1242,3 +1242,62 @@ fn the_ppo_actor_in_numpy_matches_pytorch_from_exported_weights() {
         "{err}"
     );
 }
+
+/// Headless, what a Python node writes (print, stderr, a warning, its logger) goes to
+/// stderr one line each, stamped `[t=… s NODE]`, and with `--out` to `log.txt` as well.
+#[test]
+fn what_a_python_node_writes_is_stamped_on_stderr_and_kept_in_log_txt() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::create_dir(dir.path().join("nodes")).unwrap();
+    let balancer = std::fs::read_to_string(repo("graphs/nodes/scripted_balancer.py")).unwrap();
+    let timer = "    def on_timer(self):\n";
+    assert!(balancer.contains(timer));
+    let loud = balancer.replace(
+        timer,
+        &format!(
+            "{timer}        import sys, warnings\n        print('tick', 7)\n        print('to stderr', file=sys.stderr)\n        warnings.warn('careful')\n"
+        ),
+    );
+    std::fs::write(dir.path().join("nodes/loud.py"), loud).unwrap();
+    let graph = std::fs::read_to_string(repo("graphs/cartpole-python.toml"))
+        .unwrap()
+        .replace("nodes/scripted_balancer.py", "nodes/loud.py");
+    let g = dir.path().join("loud.toml");
+    std::fs::write(&g, graph).unwrap();
+    let out = dir.path().join("out");
+    let o = ratelab(&[
+        "run",
+        "--clock",
+        "virtual",
+        "--duration",
+        "0.1",
+        "--graph",
+        g.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    let err = stderr(&o);
+    assert!(o.status.success(), "{err}");
+    for needle in [
+        "[t=0.000 s policy] tick 7",
+        "[t=0.020 s policy] to stderr",
+        "[t=0.000 s policy] ",
+        "UserWarning: careful",
+    ] {
+        assert!(err.contains(needle), "{needle}: {err}");
+    }
+    let log = std::fs::read_to_string(out.join("log.txt")).unwrap();
+    let on_stderr: Vec<&str> = err.lines().filter(|l| l.starts_with("[t=")).collect();
+    let in_log: Vec<&str> = log.lines().collect();
+    assert_eq!(
+        in_log, on_stderr,
+        "log.txt holds what stderr showed of the nodes"
+    );
+    assert_eq!(
+        in_log.iter().filter(|l| l.ends_with("] tick 7")).count(),
+        6,
+        "one a tick at 50 Hz over 0.1 s: {log}"
+    );
+    // Nothing is printed raw on stdout: the summary is all there is.
+    assert!(!String::from_utf8_lossy(&o.stdout).contains("tick 7"));
+}
