@@ -12,7 +12,7 @@
 
 use crate::time::Nanos;
 use std::cell::RefCell;
-use std::sync::Mutex;
+use std::sync::{Arc, Mutex};
 
 /// How much a line matters.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -68,19 +68,20 @@ pub fn set_sink(to: Option<Sink>) {
 
 thread_local! {
     /// The tick the calling thread is in: its run time and node.
-    static TICK: RefCell<Option<(Nanos, String)>> = const { RefCell::new(None) };
+    static TICK: RefCell<Option<(Nanos, Arc<str>)>> = const { RefCell::new(None) };
 }
 
 /// The calling thread is in node `node`'s tick at run time `now` until the returned scope
-/// is dropped: lines it writes meanwhile carry both.
-pub fn enter(node: &str, now: Nanos) -> Scope {
-    let before = TICK.with(|t| t.replace(Some((now, node.to_string()))));
+/// is dropped: lines it writes meanwhile carry both. Cheap (no allocation): a node's ticks
+/// call it each time.
+pub fn enter(node: &Arc<str>, now: Nanos) -> Scope {
+    let before = TICK.with(|t| t.replace(Some((now, node.clone()))));
     Scope { before }
 }
 
 /// A tick's stamp on the calling thread, restored to what it was when dropped.
 pub struct Scope {
-    before: Option<(Nanos, String)>,
+    before: Option<(Nanos, Arc<str>)>,
 }
 
 impl Drop for Scope {
@@ -126,7 +127,6 @@ pub fn emit_for(node: Option<&str>, t: Option<Nanos>, level: Level, text: &str) 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use std::sync::{Arc, Mutex};
 
     #[test]
     fn lines_carry_their_tick_and_go_where_the_program_says() {
@@ -135,7 +135,7 @@ mod tests {
         set_sink(Some(Box::new(move |l| keep.lock().unwrap().push(l))));
         emit(Level::Info, "zqx before any tick");
         {
-            let _tick = enter("policy", Nanos(1_234_000_000));
+            let _tick = enter(&Arc::from("policy"), Nanos(1_234_000_000));
             emit(Level::Warn, "zqx two\nzqx lines \u{1b}[2J");
         }
         emit(Level::Info, "zqx after");

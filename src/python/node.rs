@@ -57,8 +57,9 @@ type Fields = Vec<f64>;
 pub struct PythonNode {
     runtime: Py<PyAny>,
     script: String,
-    /// The node's name (the lab shows a tick that does not return on its box).
-    name: String,
+    /// The node's name (the lab shows a tick that does not return on its box; what its code
+    /// writes is stamped with it).
+    name: std::sync::Arc<str>,
     what: String,
     inputs: Vec<Input>,
     outputs: Vec<AnyTopic>,
@@ -129,7 +130,7 @@ impl PythonNode {
             Ok(PythonNode {
                 runtime: runtime.unbind(),
                 script: script.to_string(),
-                name: name.to_string(),
+                name: name.into(),
                 what: format!("node '{name}' ({script})"),
                 inputs: inputs
                     .into_iter()

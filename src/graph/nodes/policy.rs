@@ -29,7 +29,7 @@ pub fn def() -> KindDef {
         uses_brain: true,
         make: Box::new(|cx: &mut BuildContext<'_>| {
             Ok(Box::new(PolicyNode {
-                name: cx.name.to_string(),
+                name: cx.name.into(),
                 brain: cx.brain.clone(),
                 input: typed(cx.inputs.first())?,
                 output: publisher(cx.outputs.first(), cx.outbox)?,
@@ -41,7 +41,7 @@ pub fn def() -> KindDef {
 /// A policy node's state.
 pub struct PolicyNode {
     /// The node's name: what its brain writes is stamped with it ([`crate::textlog`]).
-    pub name: String,
+    pub name: std::sync::Arc<str>,
     /// The brain.
     pub brain: BrainSlot,
     /// Input.
