@@ -149,6 +149,8 @@ pub struct App {
     log_total: usize,
     /// The log pane shown in place of the latency histogram (key `v`).
     show_log: bool,
+    /// How far the pane is scrolled back from the newest line, lines (PgUp / PgDn).
+    log_back: usize,
     /// Under the real clock, the executors `x` asked for, for the next run (its threads are
     /// made when a run starts): the timeline keeps drawing the ones that run.
     pending_executor: Option<&'static str>,
@@ -221,6 +223,7 @@ impl App {
             log_rx: None,
             log_total: 0,
             show_log: false,
+            log_back: 0,
             pending_executor: None,
             exec_from: None,
             ended_with: None,
@@ -283,6 +286,7 @@ impl App {
             })
             .collect();
         LogView {
+            back: self.log_back.min(lines.len().saturating_sub(1)),
             whose: node.unwrap_or_else(|| "all nodes".to_string()),
             total: if self.selected.is_some() {
                 lines.len()
@@ -739,7 +743,17 @@ impl App {
                 self.show_timeline = !self.show_timeline;
                 self.show_log = false;
             }
-            Msg::ToggleLog => self.show_log = !self.show_log,
+            Msg::ToggleLog => {
+                self.show_log = !self.show_log;
+                self.log_back = 0;
+            }
+            Msg::LogOlder if self.show_log => {
+                self.log_back = (self.log_back + LOG_PAGE).min(self.log.len().saturating_sub(1));
+            }
+            Msg::LogNewer if self.show_log => {
+                self.log_back = self.log_back.saturating_sub(LOG_PAGE)
+            }
+            Msg::LogOlder | Msg::LogNewer => {}
             Msg::CycleExecutor => {
                 // One per node → one thread for all → two threads → one per node.
                 let current = self.pending_executor.unwrap_or_else(|| {
@@ -1301,6 +1315,9 @@ impl App {
 
 /// The most lines of the run's text log the lab keeps (the pane shows the newest).
 pub const LOG_LINES: usize = 2000;
+
+/// How many lines PgUp / PgDn scroll the log pane.
+pub const LOG_PAGE: usize = 3;
 
 /// How long a learner's callback runs without returning (wall time) before the lab shows it
 /// hung: far past any tick a balancing graph can afford (its period is 20 ms), and soon

@@ -65,6 +65,10 @@ pub enum Msg {
     /// Show the log pane (what nodes' code and ratelab's warnings wrote) instead of the
     /// latency histogram, or back.
     ToggleLog,
+    /// Scroll the log pane back (older lines).
+    LogOlder,
+    /// Scroll the log pane forward (newer lines).
+    LogNewer,
     /// Show / hide the key help.
     ToggleHelp,
     /// Close the help or the selection; when neither is open, ask, and quit on a second one.
@@ -92,6 +96,8 @@ impl Msg {
                 | Msg::ToggleHelp
                 | Msg::ToggleTimeline
                 | Msg::ToggleLog
+                | Msg::LogOlder
+                | Msg::LogNewer
                 | Msg::Back
                 | Msg::Quit
         )
@@ -229,9 +235,14 @@ pub const BINDINGS: &[Binding] = &[
         footer: None,
     },
     Binding {
-        keys: &[(Char('?'), Msg::ToggleHelp), (Char('v'), Msg::ToggleLog)],
-        label: "? / v",
-        help: "this help / log pane: prints, logs, warnings",
+        keys: &[
+            (Char('?'), Msg::ToggleHelp),
+            (Char('v'), Msg::ToggleLog),
+            (KeyCode::PageUp, Msg::LogOlder),
+            (KeyCode::PageDown, Msg::LogNewer),
+        ],
+        label: "? / v, PgUp PgDn",
+        help: "this help / log pane: prints, logs, warnings; scroll it",
         footer: Some(("?", "help")),
     },
     Binding {

@@ -1188,6 +1188,56 @@ mod tests {
         assert!(app.quit);
     }
 
+    /// The log pane: the newest lines that fit, the selected node's only, PgUp back to older
+    /// ones and PgDn forward; `v` again gives the latency panel back.
+    #[test]
+    fn the_log_pane_shows_the_newest_lines_filters_by_node_and_scrolls() {
+        use ratelab::textlog::{Level, LogLine};
+        let (mut app, _rx) = app_after(virtual_cfg(50.0, 1), false);
+        let (tx, rx) = crossbeam_channel::unbounded();
+        app.take_log(rx);
+        for i in 0..40u64 {
+            tx.send(LogLine {
+                t: Some(ratelab::Nanos(i * 20_000_000)),
+                node: Some(if i % 2 == 0 { "policy" } else { "sensor" }.into()),
+                level: if i == 39 { Level::Warn } else { Level::Info },
+                text: format!("line {i}"),
+            })
+            .unwrap();
+        }
+        app.drain_log();
+        app.on_msg(Msg::ToggleLog);
+        let text = render(&app, 80, 24);
+        assert!(
+            text.contains("log: all nodes (40 lines) · v hides"),
+            "{text}"
+        );
+        assert!(text.contains("t=0.78  sensor    line 39"), "{text}");
+        assert!(
+            text.contains("line 37") && !text.contains("line 36 "),
+            "{text}"
+        );
+        app.on_msg(Msg::LogOlder);
+        let text = render(&app, 80, 24);
+        assert!(text.contains("40 lines, 3 back) · PgDn newer"), "{text}");
+        assert!(
+            text.contains("line 36") && !text.contains("line 39"),
+            "{text}"
+        );
+        app.on_msg(Msg::LogNewer);
+        assert!(render(&app, 80, 24).contains("line 39"));
+        // Tab selects the first node: its lines only.
+        app.on_msg(Msg::SelectNext);
+        let text = render(&app, 120, 40);
+        assert!(text.contains("log: sensor (20 lines)"), "{text}");
+        assert!(!text.contains("policy    line"), "{text}");
+        app.on_msg(Msg::ToggleLog);
+        assert!(
+            render(&app, 80, 24).contains("latency"),
+            "the latency panel is back"
+        );
+    }
+
     #[test]
     fn frozen_after_a_fall_and_node_failures_are_named() {
         let (mut app, _rx) = app_after(virtual_cfg(5.0, 10), true);

@@ -326,10 +326,19 @@ pub struct LogView {
     pub total: usize,
     /// The newest lines: (is it a warning or an error, `t=1.23 policy  text`).
     pub lines: Vec<(bool, String)>,
+    /// Scrolled back this many lines from the newest (PgUp / PgDn).
+    pub back: usize,
 }
 
 fn render_log(l: &LogView, area: Rect, buf: &mut Buffer) {
-    let title = format!(" log: {} ({} lines) · v hides ", l.whose, l.total);
+    let title = if l.back > 0 {
+        format!(
+            " log: {} ({} lines, {} back) · PgDn newer · v hides ",
+            l.whose, l.total, l.back
+        )
+    } else {
+        format!(" log: {} ({} lines) · v hides ", l.whose, l.total)
+    };
     let block = Block::bordered().title(title);
     let inner = block.inner(area);
     block.render(area, buf);
@@ -338,7 +347,8 @@ fn render_log(l: &LogView, area: Rect, buf: &mut Buffer) {
     let shown: Vec<Line> = if l.lines.is_empty() {
         vec![Line::from("nothing written yet (print, get_logger, warnings)").dim()]
     } else {
-        l.lines[l.lines.len().saturating_sub(rows)..]
+        let end = l.lines.len().saturating_sub(l.back);
+        l.lines[end.saturating_sub(rows)..end]
             .iter()
             .map(|(warn, text)| {
                 let cut: String = text.chars().take(width).collect();
