@@ -432,6 +432,7 @@ class NodeHandle:
 
     def create_publisher(self, msg_type, topic, qos_profile=1, **_kw):
         index = self._check("publishes", msg_type, topic, self._rt.outputs)
+        self._rt.declared_outputs.add(index)
         self._rt.qos_depths.append(_qos_depth(qos_profile))
         return Publisher(self._rt, msg_type, topic, index)
 
@@ -484,8 +485,22 @@ class NodeRuntime:
         self.now_ns, self.ticks, self.outbox = 0, 0, []
         self.subscriptions, self.timers, self.qos_depths, self.rng = [], [], [], None
         self.clock, self.logger = Clock(self), Logger(name)
+        self.declared_outputs = set()
         cls = self._find_class(module, class_name)
         self.instance = cls(NodeHandle(self))
+        # A topic the graph file gives the node that its constructor never declared: nothing
+        # will come of it, which is easy to miss (a typo'd method, a forgotten line).
+        for index, (topic, _) in enumerate(self.outputs):
+            if index not in self.declared_outputs:
+                _log("warn", f"[ratelab] warning: node '{name}' declares no publisher for "
+                     f"'{topic}', which its graph file gives it: nothing is published there",
+                     name)
+        subscribed = {i for i, _, _ in self.subscriptions}
+        for index, (topic, _) in enumerate(self.inputs):
+            if index not in subscribed:
+                _log("warn", f"[ratelab] warning: node '{name}' declares no subscription to "
+                     f"'{topic}', which its graph file gives it: what arrives there is unread",
+                     name)
 
     def where(self):
         """`script:line` of the innermost frame in the learner's script (the call that

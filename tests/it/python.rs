@@ -1301,3 +1301,61 @@ fn what_a_python_node_writes_is_stamped_on_stderr_and_kept_in_log_txt() {
     // Nothing is printed raw on stdout: the summary is all there is.
     assert!(!String::from_utf8_lossy(&o.stdout).contains("tick 7"));
 }
+
+/// A Python node whose constructor never declares a publisher (or subscription) for a topic
+/// its graph file gives it is warned about, once, before the run (nothing would come of
+/// the topic); the shipped graphs' nodes declare all of theirs.
+#[test]
+fn a_python_node_that_never_declares_a_topic_its_file_gives_it_is_warned_about() {
+    let dir = tempfile::tempdir().unwrap();
+    let (graph, _) = python_graph(
+        dir.path(),
+        &format!(
+            "{HEAD}\
+             class Mine:\n\
+             \x20   def __init__(self, node):\n\
+             \x20       pass\n"
+        ),
+        "",
+    );
+    let o = ratelab(&[
+        "run",
+        "--clock",
+        "virtual",
+        "--duration",
+        "0.2",
+        "--graph",
+        graph.to_str().unwrap(),
+    ]);
+    let err = stderr(&o);
+    assert!(
+        err.contains("[policy] [ratelab] warning: node 'policy' declares no publisher for '/action', which its graph file gives it: nothing is published there"),
+        "{err}"
+    );
+    assert!(
+        err.contains("node 'policy' declares no subscription to '/obs'"),
+        "{err}"
+    );
+    for shipped in std::fs::read_dir(repo("graphs")).unwrap() {
+        let path = shipped.unwrap().path();
+        let text = std::fs::read_to_string(&path).unwrap_or_default();
+        if path.extension().is_none_or(|e| e != "toml") || !text.contains("kind = \"python\"") {
+            continue;
+        }
+        let o = ratelab(&[
+            "run",
+            "--clock",
+            "virtual",
+            "--duration",
+            "0.1",
+            "--graph",
+            path.to_str().unwrap(),
+        ]);
+        assert!(
+            !stderr(&o).contains("declares no"),
+            "{}: {}",
+            path.display(),
+            stderr(&o)
+        );
+    }
+}
