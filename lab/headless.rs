@@ -293,11 +293,16 @@ pub fn run_headless(a: &RunArgs, stop: StopFlag) -> anyhow::Result<RunReport> {
         }));
     }
     // What nodes' code writes (ratelab::textlog): each line on stderr, stamped, as it comes;
-    // with --out also kept for log.txt (the first MAX_LOG_LINES).
+    // with --out also kept for log.txt (the first MAX_LOG_LINES); with --record, in the
+    // recording (`log/<node>`).
     let kept = Arc::new(Mutex::new(Vec::<String>::new()));
     {
         let keep = a.out.is_some().then(|| kept.clone());
+        let recorded = recording.clone();
         ratelab::textlog::set_sink(Some(Box::new(move |line| {
+            if let Some(r) = &recorded {
+                r.log_line(&line);
+            }
             let text = line.prefixed();
             let _ = writeln!(std::io::stderr(), "{text}");
             if let Some(k) = &keep {

@@ -129,6 +129,10 @@ struct ChunkBuffer {
 /// (min, max) per scalar entity path.
 type Extents = BTreeMap<String, (f64, f64)>;
 
+/// The key of [`Extents`] that says the run's text log wrote lines (`log/<node>`): the final
+/// layout then has a view of them.
+const LOG_MARK: &str = "log";
+
 fn widen(extents: &mut Extents, entity: &str, value: f64) {
     if !value.is_finite() {
         return;
@@ -914,6 +918,34 @@ fn layout_for(shape: &GraphShape, cfg: &RunConfig, extents: Option<&Extents>) ->
                 ]),
         );
 
+    // What the nodes' code wrote (`log/<node>`), when it wrote anything: the final layout
+    // knows (a run whose nodes wrote nothing, as the chapter's, has no such view).
+    let log = extents.filter(|e| e.contains_key(LOG_MARK)).map(|_| {
+        ViewSpec::new("log", "TextLog", "log: what the nodes' code wrote")
+            .contents(["/log/**"])
+            .property(
+                "TextLogColumns",
+                &bp::TextLogColumns::new()
+                    .with_timeline_columns([bpd::TimelineColumn {
+                        visible: true.into(),
+                        timeline: timeline_name(cfg.clock).into(),
+                    }])
+                    .with_text_log_columns([
+                        bpd::TextLogColumn {
+                            visible: true.into(),
+                            kind: bpd::TextLogColumnKind::EntityPath,
+                        },
+                        bpd::TextLogColumn {
+                            visible: true.into(),
+                            kind: bpd::TextLogColumnKind::LogLevel,
+                        },
+                        bpd::TextLogColumn {
+                            visible: true.into(),
+                            kind: bpd::TextLogColumnKind::Body,
+                        },
+                    ]),
+            )
+    });
     let world = ViewSpec::new("cartpole", "3D", "cartpole")
         .origin("/world")
         .property(
@@ -973,6 +1005,7 @@ fn layout_for(shape: &GraphShape, cfg: &RunConfig, extents: Option<&Extents>) ->
                     Some(msg_per_s),
                     wire,
                     Some(events),
+                    log,
                 ]
                 .into_iter()
                 .flatten()
@@ -1470,6 +1503,31 @@ impl Recording {
 
     fn lock(&self) -> std::sync::MutexGuard<'_, ChunkBuffer> {
         self.buffer.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    /// Log a line of the run's text log ([`crate::textlog`]) under `log/<node>` (`log/ratelab`
+    /// for ratelab's own), at its run time (the latest step's when it has none), with its
+    /// level: the final layout shows them in a view of their own.
+    pub fn log_line(&self, line: &crate::textlog::LogLine) {
+        let step = self.last_step.load(std::sync::atomic::Ordering::Relaxed);
+        let mut buf = self.lock();
+        // Outside any tick (a script's loading): at the latest actuator step's time.
+        let t = line.t.unwrap_or_else(|| {
+            Nanos((step as f64 * 1e9 / crate::plant::ACTUATOR_HZ).round() as u64)
+        });
+        let time = buf.at(t, step);
+        let level = match line.level {
+            crate::textlog::Level::Info => rerun::components::TextLogLevel::INFO,
+            crate::textlog::Level::Warn => rerun::components::TextLogLevel::WARN,
+            crate::textlog::Level::Error => rerun::components::TextLogLevel::ERROR,
+        };
+        let who = line.node.as_deref().unwrap_or("ratelab");
+        buf.add(
+            &format!("log/{who}"),
+            &time,
+            &rerun::TextLog::new(line.text.as_str()).with_level(level),
+        );
+        buf.extents.insert(LOG_MARK.to_string(), (0.0, 0.0));
     }
 
     /// Log an event line at run time `t` (and the latest control step).

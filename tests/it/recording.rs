@@ -1456,3 +1456,53 @@ fn the_bus_plots_reach_the_end_when_the_actuator_was_killed() {
         .map(|(t, _)| *t);
     assert_eq!(newest_at, Some(2_480_000_000));
 }
+
+/// What a Python node prints goes into a recording too: one text log per node
+/// (`log/<node>`), at the run time of the tick that wrote it, in a view of its own that the
+/// final layout has only when something was written (the chapter's recording has none).
+#[test]
+fn what_a_python_node_writes_is_in_the_recording_per_node() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::create_dir(dir.path().join("nodes")).unwrap();
+    let balancer =
+        std::fs::read_to_string(crate::repo("graphs/nodes/scripted_balancer.py")).unwrap();
+    let timer = "    def on_timer(self):\n";
+    assert!(balancer.contains(timer));
+    std::fs::write(
+        dir.path().join("nodes/loud.py"),
+        balancer.replace(timer, &format!("{timer}        print('tick here')\n")),
+    )
+    .unwrap();
+    let graph = std::fs::read_to_string(crate::repo("graphs/cartpole-python.toml"))
+        .unwrap()
+        .replace("nodes/scripted_balancer.py", "nodes/loud.py");
+    let g = dir.path().join("loud.toml");
+    std::fs::write(&g, graph).unwrap();
+    let rrd = dir.path().join("loud.rrd");
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_ratelab"))
+        .args(["run", "--clock", "virtual", "--duration", "0.5", "--graph"])
+        .arg(&g)
+        .arg("--record")
+        .arg(&rrd)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let views = check_views(&rrd);
+    let log = views
+        .iter()
+        .find(|v| v.name.starts_with("log"))
+        .unwrap_or_else(|| panic!("no log view: {views:#?}"));
+    assert_eq!(log.queries, ["/log/**"], "{log:?}");
+    let lines: Vec<String> = chunks(&rrd)
+        .iter()
+        .filter(|c| c.entity_path().to_string() == "/log/policy")
+        .flat_map(|c| c.iter_slices::<String>(rerun::TextLog::descriptor_text().component))
+        .flat_map(|s| s.into_iter().map(|x| x.to_string()).collect::<Vec<_>>())
+        .collect();
+    assert_eq!(
+        lines.len(),
+        26,
+        "a line a tick at 50 Hz over 0.5 s: {lines:?}"
+    );
+    assert!(lines.iter().all(|l| l == "tick here"), "{lines:?}");
+}
