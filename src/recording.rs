@@ -895,56 +895,14 @@ fn layout_for(shape: &GraphShape, cfg: &RunConfig, extents: Option<&Extents>) ->
     }
     let events = ViewSpec::new("events", "TextLog", "events")
         .contents(["/events"])
-        .property(
-            "TextLogColumns",
-            &bp::TextLogColumns::new()
-                .with_timeline_columns([bpd::TimelineColumn {
-                    visible: true.into(),
-                    timeline: timeline_name(cfg.clock).into(),
-                }])
-                .with_text_log_columns([
-                    bpd::TextLogColumn {
-                        visible: false.into(),
-                        kind: bpd::TextLogColumnKind::EntityPath,
-                    },
-                    bpd::TextLogColumn {
-                        visible: true.into(),
-                        kind: bpd::TextLogColumnKind::LogLevel,
-                    },
-                    bpd::TextLogColumn {
-                        visible: true.into(),
-                        kind: bpd::TextLogColumnKind::Body,
-                    },
-                ]),
-        );
-
+        .property("TextLogColumns", &text_log_columns(cfg.clock, false));
     // What the nodes' code wrote (`log/<node>`), when it wrote anything: the final layout
-    // knows (a run whose nodes wrote nothing, as the chapter's, has no such view).
+    // knows (a run whose nodes wrote nothing, as the chapter's, has no such view). The
+    // entity column names the node.
     let log = extents.filter(|e| e.contains_key(LOG_MARK)).map(|_| {
         ViewSpec::new("log", "TextLog", "log: what the nodes' code wrote")
             .contents(["/log/**"])
-            .property(
-                "TextLogColumns",
-                &bp::TextLogColumns::new()
-                    .with_timeline_columns([bpd::TimelineColumn {
-                        visible: true.into(),
-                        timeline: timeline_name(cfg.clock).into(),
-                    }])
-                    .with_text_log_columns([
-                        bpd::TextLogColumn {
-                            visible: true.into(),
-                            kind: bpd::TextLogColumnKind::EntityPath,
-                        },
-                        bpd::TextLogColumn {
-                            visible: true.into(),
-                            kind: bpd::TextLogColumnKind::LogLevel,
-                        },
-                        bpd::TextLogColumn {
-                            visible: true.into(),
-                            kind: bpd::TextLogColumnKind::Body,
-                        },
-                    ]),
-            )
+            .property("TextLogColumns", &text_log_columns(cfg.clock, true))
     });
     let world = ViewSpec::new("cartpole", "3D", "cartpole")
         .origin("/world")
@@ -1014,6 +972,25 @@ fn layout_for(shape: &GraphShape, cfg: &RunConfig, extents: Option<&Extents>) ->
             ),
         ),
     ])
+}
+
+/// A text log view's columns: the run's timeline, then (when `entity` is shown) the entity,
+/// the level and the text.
+fn text_log_columns(clock: ClockKind, entity: bool) -> bp::TextLogColumns {
+    let column = |visible: bool, kind| bpd::TextLogColumn {
+        visible: visible.into(),
+        kind,
+    };
+    bp::TextLogColumns::new()
+        .with_timeline_columns([bpd::TimelineColumn {
+            visible: true.into(),
+            timeline: timeline_name(clock).into(),
+        }])
+        .with_text_log_columns([
+            column(entity, bpd::TextLogColumnKind::EntityPath),
+            column(true, bpd::TextLogColumnKind::LogLevel),
+            column(true, bpd::TextLogColumnKind::Body),
+        ])
 }
 
 /// Where the ground grid lies: just under the rail (the rail's top is the cart's bottom).
