@@ -64,6 +64,7 @@ mod python;
 mod qos;
 mod realtime;
 mod recording;
+mod reference_runs;
 mod ros2;
 mod ros2_external;
 mod security;
