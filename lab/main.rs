@@ -126,7 +126,7 @@ fn replay(args: &cli::ReplayArgs) -> anyhow::Result<()> {
                 "[ratelab]   at {:.2} s: {}",
                 ratelab::Nanos(c.at_ns).as_secs_f64(),
                 // A log is a file from anywhere: its text reaches the terminal escaped.
-                ratelab::distributed::wire::printable(&ratelab::session::describe(&c.command))
+                printable(&ratelab::session::describe(&c.command))
             );
         }
         if run.commands.len() > REPLAY_SHOWN {

@@ -101,23 +101,30 @@ pub fn record(
 /// Remove the records (and credentials) in `dir` of launches that are gone: a launch killed
 /// before it could remove its own (SIGKILL, a second Ctrl-C) leaves them.
 fn prune(dir: &Path) {
-    let Ok(entries) = std::fs::read_dir(dir) else {
-        return;
-    };
-    for e in entries.filter_map(Result::ok).take(MAX_RECORDS) {
-        let name = e.file_name();
-        let Some(pid) = name
-            .to_str()
-            .and_then(|n| n.strip_prefix("launch."))
-            .and_then(|p| p.parse::<u32>().ok())
-        else {
-            continue;
-        };
+    for pid in recorded_pids(dir) {
         if !is_launch(pid) {
             let _ = std::fs::remove_file(record_path(dir, pid));
             let _ = std::fs::remove_file(credentials_path(dir, pid));
         }
     }
+}
+
+/// The process ids of the records (`launch.<pid>`) in `dir`, at most [`MAX_RECORDS`].
+fn recorded_pids(dir: &Path) -> Vec<u32> {
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return Vec::new();
+    };
+    entries
+        .filter_map(Result::ok)
+        .filter_map(|e| {
+            e.file_name()
+                .to_str()?
+                .strip_prefix("launch.")?
+                .parse()
+                .ok()
+        })
+        .take(MAX_RECORDS)
+        .collect()
 }
 
 /// Is process `pid` a ratelab launch? It lives and its command line says `launch` (a pid
@@ -153,21 +160,12 @@ pub fn launches() -> Vec<Launch> {
     let Some(dir) = records_dir() else {
         return Vec::new();
     };
-    let Ok(entries) = std::fs::read_dir(&dir) else {
-        return Vec::new();
-    };
-    let mut found: Vec<Launch> = entries
-        .filter_map(Result::ok)
-        .filter(|e| {
-            e.file_name()
-                .to_str()
-                .is_some_and(|n| n.starts_with("launch."))
-        })
-        .take(MAX_RECORDS)
-        .filter_map(|e| {
-            let name = e.file_name();
-            let pid: u32 = name.to_str()?.strip_prefix("launch.")?.parse().ok()?;
-            let bytes = ratelab::input::read_regular_file(&e.path(), MAX_RECORD_BYTES).ok()?;
+    let mut found: Vec<Launch> = recorded_pids(&dir)
+        .into_iter()
+        .filter_map(|pid| {
+            let bytes =
+                ratelab::input::read_regular_file(&record_path(&dir, pid), MAX_RECORD_BYTES)
+                    .ok()?;
             let (endpoint, said) = parse(&String::from_utf8(bytes).ok()?)?;
             (said == pid && is_launch(pid)).then(|| Launch {
                 endpoint,

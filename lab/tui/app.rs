@@ -1036,7 +1036,8 @@ impl App {
             })
     }
 
-    fn node_view(&self, id: NodeId, layer: usize) -> NodeView {
+    /// `hung`: the callback held now, if any ([`App::hung_callback`], asked once a frame).
+    fn node_view(&self, id: NodeId, layer: usize, hung: Option<&(String, f64)>) -> NodeView {
         let empty = VecDeque::new();
         let q = self.ticks.get(id.0).unwrap_or(&empty);
         // No tick for a second or two periods (a node whose process died): 0 Hz now.
@@ -1126,10 +1127,9 @@ impl App {
                 Code::Ros2 => Some(Badge::Ros2),
                 Code::BuiltIn | Code::Rust => None,
             },
-            in_callback_s: self
-                .hung_callback()
+            in_callback_s: hung
                 .filter(|(node, _)| *node == self.graph.node(id).name)
-                .map(|(_, s)| s),
+                .map(|(_, s)| *s),
         }
     }
 
@@ -1224,6 +1224,8 @@ impl App {
 
     /// The frame's view model.
     pub fn view(&self) -> View {
+        // Asked once a frame: the verdict and the nodes' boxes read the same answer.
+        let hung = self.hung_callback();
         View {
             clock: self.clock.clone(),
             // An attached lab's graph runs at the lockstep's pace, not the lab's.
@@ -1256,7 +1258,7 @@ impl App {
                 .layers()
                 .into_iter()
                 .enumerate()
-                .map(|(i, layer)| self.node_view(NodeId(i), layer))
+                .map(|(i, layer)| self.node_view(NodeId(i), layer, hung.as_ref()))
                 .collect(),
             topics: (0..self.graph.topics.len())
                 .map(|i| self.topic_view(TopicId(i)))
@@ -1266,7 +1268,7 @@ impl App {
             // While a callback holds the run, the run is not "balanced": it is hung, since the
             // run time it holds (the virtual clock stands there; under the real clock, from
             // when it started).
-            verdict: match (&self.verdict, self.hung_callback()) {
+            verdict: match (&self.verdict, hung) {
                 (Verdict::Balanced, Some((node, s))) => Verdict::Hung {
                     node,
                     since_s: if self.clock == "real" {

@@ -133,7 +133,7 @@ fn check_certificate(pem: &str) -> Result<(), String> {
         .map_err(|e| {
             format!(
                 "is not valid PEM ({})",
-                super::wire::printable(&e.to_string())
+                crate::text::printable(&e.to_string())
             )
         })?;
     let [cert] = certs.as_slice() else {
@@ -289,7 +289,7 @@ impl Credentials {
         {
             return Err(bad(format!(
                 "'{}' is not a process name",
-                super::wire::printable(p)
+                crate::text::printable(p)
             )));
         }
         let pem_ok = |s: &str| s.len() <= MAX_PEM_BYTES && s.starts_with("-----BEGIN ");
@@ -298,7 +298,7 @@ impl Credentials {
         }
         check_certificate(&c.ca).map_err(|why| bad(format!("the CA certificate {why}")))?;
         for (cn, id) in &c.identities {
-            let who = super::wire::printable(cn);
+            let who = crate::text::printable(cn);
             if cn.len() > MAX_NAME_BYTES || !pem_ok(&id.cert) || !pem_ok(&id.key) {
                 return Err(bad(format!(
                     "identity '{who}' is not a PEM certificate and key"
@@ -309,7 +309,7 @@ impl Credentials {
             rcgen::KeyPair::from_pem(&id.key).map_err(|e| {
                 bad(format!(
                     "identity '{who}': its key is not a valid PEM private key ({})",
-                    super::wire::printable(&e.to_string())
+                    crate::text::printable(&e.to_string())
                 ))
             })?;
         }

@@ -698,7 +698,7 @@ impl Watch {
                 if bytes.len() <= 1024 {
                     let line = String::from_utf8_lossy(&bytes);
                     let first = line.lines().next().unwrap_or("");
-                    send(&t, Event::Log(wire::printable(first)));
+                    send(&t, Event::Log(crate::text::printable(first).into_owned()));
                 }
             })
             .wait()?;

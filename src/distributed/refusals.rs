@@ -65,7 +65,10 @@ impl<S: Subscriber> Layer<S> for RefusalLayer {
             return;
         };
         let reason = reason.trim().to_string();
-        let reason = super::wire::cut_to_bytes(super::wire::printable(&reason), MAX_REASON_BYTES);
+        let reason = super::wire::cut_to_bytes(
+            crate::text::printable(&reason).into_owned(),
+            MAX_REASON_BYTES,
+        );
         if let Some(sinks) = SINKS.get() {
             crate::graph::lock(sinks).retain(|s| match s.try_send(reason.clone()) {
                 Ok(()) | Err(crossbeam_channel::TrySendError::Full(_)) => true,

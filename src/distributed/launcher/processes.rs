@@ -3,7 +3,7 @@
 //! the run starts.
 
 use super::{Launch, MAX_STDERR_LINE};
-use crate::distributed::{wire, DistError, REPLY_TIMEOUT};
+use crate::distributed::{DistError, REPLY_TIMEOUT};
 use crate::scheduler::StopFlag;
 use crossbeam_channel::Receiver;
 use std::process::{Child, Command, Stdio};
@@ -119,7 +119,7 @@ fn pass_stderr(
                     }
                 }
                 let text = String::from_utf8_lossy(&buf);
-                let line = format!("{process}: {}", wire::printable(text.trim_end()));
+                let line = format!("{process}: {}", crate::text::printable(text.trim_end()));
                 let _ = session.put(log_key.as_str(), line.as_str()).wait();
                 let _ = to.try_send(line);
             }

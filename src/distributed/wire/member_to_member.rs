@@ -4,7 +4,7 @@
 //! process and the launcher). Both
 //! postcard, both bounded and decoded exactly.
 
-use super::{decode_exact, printable};
+use super::decode_exact;
 use crate::msg::AnyTopic;
 use crate::time::Nanos;
 use serde::{Deserialize, Serialize};
@@ -173,8 +173,11 @@ pub fn decode_reports(bytes: &[u8]) -> Result<Vec<Ticked>, String> {
         ));
     }
     for t in &mut ts {
-        t.process = printable(&t.process);
-        t.failed = t.failed.as_deref().map(printable);
+        t.process = crate::text::printable(&t.process).into_owned();
+        t.failed = t
+            .failed
+            .as_deref()
+            .map(|f| crate::text::printable(f).into_owned());
     }
     Ok(ts)
 }

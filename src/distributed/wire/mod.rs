@@ -12,7 +12,7 @@
 //! One module per direction of travel, as dora-rs splits its messages:
 //! `member_to_member` (samples and tick reports), `launcher_to_member`,
 //! `member_to_launcher` and `launcher_to_watcher`; the codec, its bounds and the
-//! printable text they share are here.
+//! printable text they share ([`crate::text::printable`]) are here.
 
 mod launcher_to_member;
 mod launcher_to_watcher;
@@ -88,7 +88,7 @@ pub fn encode_json<T: Serialize>(msg: &T) -> Vec<u8> {
 /// Decode a control message, refusing anything over [`MAX_CONTROL_BYTES`] or malformed.
 /// Its text arrives printable: every control character in any string or map key (an escape
 /// sequence that would clear a terminal, a C1 control, DEL) is written out as `\u{1b}`
-/// ([`printable`]) before anything prints or records it. The one exception is a [`Setup`]'s
+/// ([`crate::text::printable`]) before anything prints or records it. The one exception is a [`Setup`]'s
 /// `graph_toml`, a file's text with its newlines, which is parsed and validated
 /// ([`crate::graph::GraphSpec::parse`]), never printed.
 ///
@@ -124,7 +124,9 @@ fn may_hold_control(json: &[u8]) -> bool {
 fn make_printable(v: &mut serde_json::Value) {
     use serde_json::Value;
     match v {
-        Value::String(s) if s.chars().any(char::is_control) => *s = printable(s),
+        Value::String(s) if s.chars().any(char::is_control) => {
+            *s = crate::text::printable(s).into_owned()
+        }
         Value::Array(a) => a.iter_mut().for_each(make_printable),
         Value::Object(o) => {
             let entries = std::mem::take(o);
@@ -132,7 +134,7 @@ fn make_printable(v: &mut serde_json::Value) {
                 if k != "graph_toml" {
                     make_printable(&mut x);
                 }
-                o.insert(printable(&k), x);
+                o.insert(crate::text::printable(&k).into_owned(), x);
             }
         }
         _ => {}
@@ -150,12 +152,6 @@ pub fn cut_to_bytes(mut text: String, max: usize) -> String {
         text.truncate(end);
     }
     text
-}
-
-/// `text` with every control character written out (`\u{1b}`, `\n`): what a terminal,
-/// `top` and a recording may show of text from the network ([`crate::text::printable`]).
-pub fn printable(text: &str) -> String {
-    crate::text::printable(text).into_owned()
 }
 
 #[cfg(test)]
@@ -219,7 +215,7 @@ mod tests {
             decode_json::<ToLauncher>(r#"{"msg":"ready","process":"robot \"1\" é"}"#.as_bytes())
                 .unwrap();
         assert_eq!(plain.process(), "robot \"1\" é");
-        assert_eq!(printable("50 Hz · ok"), "50 Hz · ok");
+        assert_eq!(crate::text::printable("50 Hz · ok"), "50 Hz · ok");
         // A graph file's text keeps its lines (it is parsed, not printed).
         let setup = Setup {
             graph_toml: crate::graph::GraphSpec::chapter().to_toml(),
