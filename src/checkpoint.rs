@@ -241,6 +241,12 @@ impl Policy for Captioned {
     fn label(&self) -> String {
         self.label.clone()
     }
+    fn duplicate(&self) -> Option<Box<dyn Policy>> {
+        Some(Box::new(Captioned {
+            inner: self.inner.duplicate()?,
+            label: self.label.clone(),
+        }))
+    }
 }
 
 /// Load a checkpoint brain (no caption).
@@ -370,6 +376,7 @@ pub fn read_safetensors(path: &Path) -> Result<HashMap<String, Tensor>, PolicyEr
 }
 
 /// One dense layer, `y = W x + b`, float32, `W` row-major `[out][in]`.
+#[derive(Clone)]
 struct Dense {
     w: Vec<f32>,
     b: Vec<f32>,
@@ -393,6 +400,7 @@ impl Dense {
 /// The forward pass runs directly on the loaded weights rather than as candle ops: at
 /// this size candle's per-op dispatch dominates (measured 128 µs per call for the 64-wide
 /// net, against a budget of 20 µs for a 1 kHz policy; see BENCHMARKS.md).
+#[derive(Clone)]
 pub struct MlpPolicy {
     layers: Vec<Dense>,
     hidden: usize,
@@ -537,9 +545,15 @@ impl Policy for MlpPolicy {
     fn label(&self) -> String {
         self.label.clone()
     }
+
+    /// The network keeps nothing between calls (any scratch is overwritten by each).
+    fn duplicate(&self) -> Option<Box<dyn Policy>> {
+        Some(Box::new(self.clone()))
+    }
 }
 
 /// An ONNX actor (contract v1), run by tract.
+#[derive(Clone)]
 pub struct OnnxPolicy {
     plan: Arc<TypedSimplePlan>,
     label: String,
@@ -798,5 +812,10 @@ impl Policy for OnnxPolicy {
 
     fn label(&self) -> String {
         self.label.clone()
+    }
+
+    /// The network keeps nothing between calls (any scratch is overwritten by each).
+    fn duplicate(&self) -> Option<Box<dyn Policy>> {
+        Some(Box::new(self.clone()))
     }
 }

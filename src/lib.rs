@@ -18,7 +18,8 @@
 //!   file, [`graph::spec`]; node kinds and their registry), [`executor`] (ROS 2's executors
 //!   as rules), [`scheduler`] (the virtual and real clocks that apply them, + [`realtime`]),
 //!   [`runlog`], [`metrics`], [`config`];
-//! - **runs and their drivers**: [`run`] (one run), [`textlog`] (what nodes' code and
+//! - **runs and their drivers**: [`runcore`] (one graph under the virtual clock, stepped,
+//!   commanded, captured and restored), [`run`] (one run), [`textlog`] (what nodes' code and
 //!   ratelab's warnings write, stamped with run time and node), [`session`] (the lab's live runs, their
 //!   log and replay), [`sweep`] (grids and the rate cliff), [`exercise`] (the exercises'
 //!   bands and checks);
@@ -51,6 +52,7 @@ pub mod realtime;
 pub mod recording;
 pub mod ros2;
 pub mod run;
+pub mod runcore;
 pub mod runlog;
 pub mod scheduler;
 pub mod session;

@@ -7,9 +7,20 @@
 //! priority breaks ties between nodes due at the same instant: lower ticks first, so the
 //! chapter's order sensor (0) → policy (1) → actuator (2) samples, thinks, then acts.
 //! The node kinds of a graph are in [`crate::graph::nodes`].
+//!
+//! A node may also give its state at an instant ([`Node::save`]) and take it back
+//! ([`Node::load`]): what the run core's capture and restore are made of
+//! ([`crate::runcore`]). A node that cannot (the default: a Python node's objects, a ROS 2
+//! node's proxy, a program's own kind that does not say how) makes a capture a replay.
 
 use crate::rate::Rate;
 use crate::time::Nanos;
+use std::any::Any;
+
+/// A node's state at an instant, as [`Node::save`] gives it: whatever the node needs to go
+/// on from there as if it had never stopped (counters, held values, generators). Only the
+/// node that saved it reads it back ([`Node::load`]).
+pub type NodeState = Box<dyn Any + Send + Sync>;
 
 /// What the scheduler should do after a tick.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -41,4 +52,14 @@ pub trait Node: Send {
     fn hold_outputs(&mut self) {}
     /// Publish what the held tick published, stamped `at` (the tick's end).
     fn publish_held(&mut self, _at: Nanos) {}
+    /// The node's state now, between two instants, or `None` when it cannot be captured
+    /// (the default). Topics, rates and liveliness are the graph's, captured apart.
+    fn save(&self) -> Option<NodeState> {
+        None
+    }
+    /// Take back a state [`Node::save`] gave. Returns false (and changes nothing) when
+    /// `state` is not one of this node's.
+    fn load(&mut self, _state: &NodeState) -> bool {
+        false
+    }
 }

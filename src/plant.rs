@@ -44,7 +44,20 @@ pub enum PlantError {
     /// MuJoCo rejected the model (a bug in the shipped MJCF).
     #[error("MuJoCo could not load the cartpole model: {0}")]
     Model(String),
+    /// A state given to [`CartPole::load`] is not this model's (its length, in numbers).
+    #[error("a plant state of {0} numbers is not the cartpole's")]
+    State(usize),
 }
+
+/// What [`CartPole::save`] captures: MuJoCo's integration state and the step count.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PlantState {
+    mj: Vec<f64>,
+    steps: u64,
+}
+
+/// The parts of MuJoCo's state a capture takes: everything `mj_step` integrates from.
+const INTEGRATION: u32 = MjtState::mjSTATE_INTEGRATION as u32;
 
 /// The cartpole's full state, in SI units (θ wrapped to [-π, π)).
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
@@ -180,6 +193,32 @@ impl CartPole {
             applied,
             terminated: state.terminated(),
         }
+    }
+
+    /// MuJoCo's whole integration state (`mj_getState` with `mjSTATE_INTEGRATION`: time,
+    /// positions, velocities, actuator activations, warm start, controls, …) and the step
+    /// count, for a capture of the run ([`crate::runcore`]): [`CartPole::load`] of it and
+    /// stepping on gives, bit for bit, what stepping on from here gives.
+    pub fn save(&self) -> PlantState {
+        PlantState {
+            mj: self.data.state(INTEGRATION).into_vec(),
+            steps: self.steps,
+        }
+    }
+
+    /// Put back what [`CartPole::save`] gave (`mj_setState`).
+    ///
+    /// # Errors
+    /// [`PlantError::State`] when `state` is not this model's (its length differs).
+    pub fn load(&mut self, state: &PlantState) -> Result<(), PlantError> {
+        if state.mj.len() != self.data.model().state_size(INTEGRATION) {
+            return Err(PlantError::State(state.mj.len()));
+        }
+        self.data
+            .set_state(&state.mj, INTEGRATION)
+            .map_err(|_| PlantError::State(state.mj.len()))?;
+        self.steps = state.steps;
+        Ok(())
     }
 
     /// Plant steps taken since the last reset.

@@ -18,6 +18,13 @@ pub trait Policy: Send {
     fn act(&mut self, obs: &Observation) -> Action;
     /// A human-readable label naming the brain (and its file, if any).
     fn label(&self) -> String;
+    /// A brain in the same state as this one, for a capture of the run
+    /// ([`crate::runcore`]); `None` (the default) when it cannot be copied (a Python
+    /// brain's objects), which makes a capture a replay. A brain whose action depends on
+    /// the observation alone (the scripted balancer, a checkpoint's network) copies itself.
+    fn duplicate(&self) -> Option<Box<dyn Policy>> {
+        None
+    }
 }
 
 /// The chapter's scripted balancer (the course's `balance_action` gains), computed from the
@@ -36,6 +43,10 @@ impl Policy for Scripted {
 
     fn label(&self) -> String {
         "scripted balancer (built-in, checkpoint-free)".to_string()
+    }
+
+    fn duplicate(&self) -> Option<Box<dyn Policy>> {
+        Some(Box::new(Scripted))
     }
 }
 
@@ -62,6 +73,24 @@ impl BrainSlot {
     /// The current brain's label.
     pub fn label(&self) -> String {
         self.lock().label()
+    }
+
+    /// A copy of the brain in the slot now ([`Policy::duplicate`]); `None` when it cannot
+    /// be copied.
+    pub fn save(&self) -> Option<Box<dyn Policy>> {
+        self.lock().duplicate()
+    }
+
+    /// Put a copy of `saved` (what [`BrainSlot::save`] gave) in the slot. Returns false
+    /// (the slot unchanged) when it cannot be copied again.
+    pub fn load(&self, saved: &dyn Policy) -> bool {
+        match saved.duplicate() {
+            Some(brain) => {
+                *self.lock() = brain;
+                true
+            }
+            None => false,
+        }
     }
 }
 

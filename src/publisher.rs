@@ -13,7 +13,9 @@ use crate::topic::Topic;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 
-type Held = Box<dyn FnOnce(Nanos) + Send>;
+/// One publish a held tick made, to go out at the tick's end. `Fn` (each call publishes a
+/// copy of the value), so a capture can keep what is held ([`Outbox::save`]).
+type Held = Arc<dyn Fn(Nanos) + Send + Sync>;
 
 #[derive(Default)]
 struct Inner {
@@ -24,6 +26,13 @@ struct Inner {
 /// One node's outbox, shared by its publishers. Cheap to clone.
 #[derive(Clone, Default)]
 pub struct Outbox(Arc<Inner>);
+
+/// What an [`Outbox`] holds at an instant ([`Outbox::save`]).
+#[derive(Clone)]
+pub struct OutboxState {
+    holding: bool,
+    held: Vec<Held>,
+}
 
 impl Outbox {
     /// An outbox that holds nothing.
@@ -53,6 +62,26 @@ impl Outbox {
         n
     }
 
+    /// What the outbox holds now (whether it is holding, and the publishes held), for a
+    /// capture of the run ([`crate::runcore`]).
+    pub fn save(&self) -> OutboxState {
+        OutboxState {
+            holding: self.is_holding(),
+            held: self
+                .0
+                .held
+                .lock()
+                .unwrap_or_else(|e| e.into_inner())
+                .clone(),
+        }
+    }
+
+    /// Hold again what [`Outbox::save`] gave.
+    pub fn load(&self, state: &OutboxState) {
+        self.0.holding.store(state.holding, Ordering::Release);
+        *self.0.held.lock().unwrap_or_else(|e| e.into_inner()) = state.held.clone();
+    }
+
     fn keep(&self, publish: Held) {
         self.0
             .held
@@ -72,8 +101,8 @@ impl Outbox {
     ) {
         if self.is_holding() {
             let topic = topic.clone();
-            self.keep(Box::new(move |at| {
-                topic.publish(data, at, origin_stamp);
+            self.keep(Arc::new(move |at| {
+                topic.publish(data.clone(), at, origin_stamp);
             }));
         } else {
             topic.publish(data, now, origin_stamp);

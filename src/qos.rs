@@ -462,6 +462,10 @@ struct LiveInner {
     faulted_ticks: u64,
 }
 
+/// A [`Liveliness`]'s state at an instant ([`Liveliness::save`]).
+#[derive(Clone, Copy, Debug)]
+pub struct LivelinessState(LiveInner);
+
 /// A node's liveliness at one instant.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 pub struct LivelinessStatus {
@@ -486,6 +490,17 @@ impl Liveliness {
                 faulted_ticks: 0,
             }),
         }
+    }
+
+    /// Its lease, last assertion and counters now, for a capture of the run
+    /// ([`crate::runcore`]).
+    pub fn save(&self) -> LivelinessState {
+        LivelinessState(*self.lock())
+    }
+
+    /// Put back what [`Liveliness::save`] gave.
+    pub fn load(&self, state: LivelinessState) {
+        *self.lock() = state.0;
     }
 
     fn lock(&self) -> std::sync::MutexGuard<'_, LiveInner> {

@@ -326,11 +326,32 @@ pub fn run(
     brain: Box<dyn Policy>,
     opts: RunOptions,
 ) -> Result<RunReport, RunError> {
-    let brain = BrainSlot::new(brain);
     if opts.ros2.is_none() {
         crate::ros2::external::check_offered(&cfg.graph).map_err(crate::ros2::Ros2Error::Usage)?;
     }
-    let Graph { mut nodes, handles } = build_graph(cfg, brain, opts.keep_trace, opts.observers)?;
+    // Under the virtual clock the run core steps the graph; under the real clock, one
+    // thread per node.
+    let driver = match cfg.clock {
+        ClockKind::Virtual => Driver::Virtual(Box::new(crate::runcore::RunCore::new(
+            cfg,
+            brain,
+            crate::runcore::CoreOptions {
+                keep_trace: opts.keep_trace,
+                observers: opts.observers,
+                commands: opts.commands.clone(),
+                on_span: opts.on_span.clone(),
+                remake_brain: None,
+            },
+        )?)),
+        ClockKind::Real => {
+            let brain = BrainSlot::new(brain);
+            Driver::Real(build_graph(cfg, brain, opts.keep_trace, opts.observers)?)
+        }
+    };
+    let handles = match &driver {
+        Driver::Virtual(core) => core.handles().clone(),
+        Driver::Real(g) => g.handles.clone(),
+    };
     let link = match &opts.ros2 {
         Some(o) => {
             // What needs no network is refused before a session (or a router) opens.
@@ -350,16 +371,13 @@ pub fn run(
         _ => None,
     };
     let start = Instant::now();
-    let (end, ticks, timing, exec) = match cfg.clock {
-        ClockKind::Virtual => {
-            let mut sched = virtual_scheduler(cfg, &nodes);
-            if let Some(h) = &opts.on_span {
-                sched.set_span_hook(h.clone());
-            }
-            sched.take_plans_from(handles.plan_request.clone());
-            let mut pending = opts.commands.iter().peekable();
-            let end = sched.run(&mut nodes, cfg.duration, &opts.stop, &mut |t| {
-                if let Some(b) = &bridge {
+    let (end, ticks, timing, exec) = match driver {
+        Driver::Virtual(mut core) => {
+            let end = loop {
+                if opts.stop.is_stopped() {
+                    break core.interrupt();
+                }
+                if let (Some(b), Some(t)) = (&bridge, core.next_instant()) {
                     // Keep pace with the wall clock, then tell ROS 2 the time.
                     let due = start + Duration::from_nanos(t.0);
                     if let Some(wait) = due.checked_duration_since(Instant::now()) {
@@ -367,15 +385,14 @@ pub fn run(
                     }
                     b.clock(t);
                 }
-                while let Some(c) = pending.next_if(|c| c.at_ns <= t.0) {
-                    // Commands were validated when logged; a failure here changes nothing.
-                    let _ = c.command.apply(&handles);
+                if let crate::runcore::Step::Ended(end) = core.step() {
+                    break end;
                 }
-            });
-            let exec = sched.figures(end.at);
-            (end, sched.ticks().to_vec(), None, exec)
+            };
+            let exec = core.scheduler().figures(end.at);
+            (end, core.scheduler().ticks().to_vec(), None, exec)
         }
-        ClockKind::Real => {
+        Driver::Real(Graph { nodes, .. }) => {
             let real = RealOptions {
                 on_tick: opts.on_node_tick.clone(),
                 ..real_options(cfg)
@@ -399,6 +416,13 @@ pub fn run(
         wall,
         ros2,
     })
+}
+
+/// What steps a run's graph: the run core under the virtual clock, one thread per node
+/// under the real clock.
+enum Driver {
+    Virtual(Box<crate::runcore::RunCore>),
+    Real(Graph),
 }
 
 /// What [`summarize`] reads of a graph, as data: the whole graph's state when it ran in one

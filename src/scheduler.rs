@@ -221,6 +221,7 @@ pub fn figures(plan: &ExecutionPlan, stats: &[NodeExecStats], elapsed: Nanos) ->
 /// node downstream at the same instant sees it, as in the chapter). With the default plan
 /// (one thread per node, no compute time) this is exactly the chapter's `run_virtual`:
 /// every node due at an instant ticks in tie-break order.
+#[derive(Clone)]
 pub struct VirtualScheduler {
     /// Armed timers: (next call, rank, node).
     releases: BinaryHeap<Reverse<(Nanos, u32, usize)>>,
@@ -306,6 +307,17 @@ impl VirtualScheduler {
             general: track || !plan_per_node,
             track,
         }
+    }
+
+    /// Take back the timers, running ticks, counters and plan of `saved` (a clone of this
+    /// scheduler taken earlier, [`crate::runcore`]), keeping this one's span hook and plan
+    /// request (wiring, not state).
+    pub fn load(&mut self, saved: &VirtualScheduler) {
+        let hook = self.span_hook.take();
+        let request = self.plan_request.take();
+        self.clone_from(saved);
+        self.span_hook = hook;
+        self.plan_request = request;
     }
 
     /// The time of the next event: a timer due or a tick's compute time ending.

@@ -126,12 +126,14 @@ pub fn deadline_misses(gap: Nanos, deadline: Nanos) -> u64 {
     }
 }
 
+#[derive(Clone)]
 struct LinkState {
     rng: rand_pcg::Pcg64,
     /// The newest arrival time scheduled: a message never overtakes an earlier one.
     last_arrival: Nanos,
 }
 
+#[derive(Clone)]
 struct Inner<T> {
     buf: VecDeque<Message<T>>,
     /// Messages on the link with their arrival times (non-decreasing).
@@ -361,6 +363,10 @@ impl<T> Inner<T> {
     }
 }
 
+/// A [`Topic`]'s state at an instant ([`Topic::save`]).
+#[derive(Clone)]
+pub struct TopicState<T>(Inner<T>);
+
 /// A named bus of `T` messages bounded to `depth` buffered messages. Publishers and
 /// subscribers may live on different threads; every operation takes one short lock.
 pub struct Topic<T> {
@@ -426,6 +432,18 @@ impl<T: Clone> Topic<T> {
             }),
             taps: OnceLock::new(),
         })
+    }
+
+    /// The queue's whole state now (messages buffered and on the link, depth, QoS, link
+    /// generator, counters and timers), for a capture of the run ([`crate::runcore`]). Its
+    /// name and taps are not state: they stay as they are.
+    pub fn save(&self) -> TopicState<T> {
+        TopicState(self.lock().clone())
+    }
+
+    /// Put back what [`Topic::save`] gave: the queue is as it was then.
+    pub fn load(&self, state: &TopicState<T>) {
+        self.lock().clone_from(&state.0);
     }
 
     /// Tell `tap` of every message published from now on, after the taps added before it.

@@ -127,6 +127,18 @@ pub trait Work: Send {
     fn alive_by_ticking(&self) -> bool {
         true
     }
+    /// The node's own state now ([`crate::node::Node::save`]): `None` (the default) when it
+    /// cannot be captured, which makes a capture of its graph a replay
+    /// ([`crate::runcore`]). A kind whose `tick` keeps nothing between ticks returns
+    /// `Some(Box::new(()))`.
+    fn save(&self) -> Option<crate::node::NodeState> {
+        None
+    }
+    /// Take back what [`Work::save`] gave; false (nothing changed) when it is not this
+    /// kind's.
+    fn load(&mut self, _state: &crate::node::NodeState) -> bool {
+        false
+    }
 }
 
 /// Everything making one node is given: the node's settings from the graph file, its

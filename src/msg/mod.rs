@@ -568,7 +568,12 @@ trait ErasedTopic: Send + Sync + fmt::Debug {
     fn add_data_tap(&self, tap: DataTap);
     fn subscriptions(&self) -> Vec<AnyTopic>;
     fn subscription_stats(&self, now: Option<Nanos>) -> Vec<TopicStats>;
+    fn save(&self) -> TopicSnapshot;
+    fn load(&self, state: &TopicSnapshot) -> bool;
 }
+
+/// A topic's state at an instant, every subscription's queue ([`AnyTopic::save`]).
+pub struct TopicSnapshot(Box<dyn Any + Send + Sync>);
 
 /// A message read from a topic of any type ([`AnyTopic::read`]).
 #[derive(Clone, Debug, PartialEq)]
@@ -654,6 +659,18 @@ impl<M: Message> ErasedTopic for Arc<Topic<M>> {
     }
     fn subscription_stats(&self, now: Option<Nanos>) -> Vec<TopicStats> {
         vec![now.map_or_else(|| Topic::stats(self), |n| Topic::stats_at(self, n))]
+    }
+    fn save(&self) -> TopicSnapshot {
+        TopicSnapshot(Box::new(Topic::save(self)))
+    }
+    fn load(&self, state: &TopicSnapshot) -> bool {
+        match state.0.downcast_ref::<crate::topic::TopicState<M>>() {
+            Some(s) => {
+                Topic::load(self, s);
+                true
+            }
+            None => false,
+        }
     }
 }
 
@@ -763,6 +780,22 @@ impl<M: Message> ErasedTopic for FanOut<M> {
             .map(|q| now.map_or_else(|| q.stats(), |n| q.stats_at(n)))
             .collect()
     }
+    fn save(&self) -> TopicSnapshot {
+        let queues: Vec<crate::topic::TopicState<M>> =
+            self.queues.iter().map(|q| Topic::save(q)).collect();
+        TopicSnapshot(Box::new(queues))
+    }
+    fn load(&self, state: &TopicSnapshot) -> bool {
+        match state.0.downcast_ref::<Vec<crate::topic::TopicState<M>>>() {
+            Some(s) if s.len() == self.queues.len() => {
+                for (q, s) in self.queues.iter().zip(s) {
+                    Topic::load(q, s);
+                }
+                true
+            }
+            _ => false,
+        }
+    }
 }
 
 /// A topic of any registered message type (module docs). Cheap to clone: the clones are
@@ -771,6 +804,18 @@ impl<M: Message> ErasedTopic for FanOut<M> {
 pub struct AnyTopic(Arc<dyn ErasedTopic>);
 
 impl AnyTopic {
+    /// Every subscription's queue as it is now (its messages, QoS, link generator,
+    /// counters): for a capture of the run ([`crate::runcore`]).
+    pub fn save(&self) -> TopicSnapshot {
+        self.0.save()
+    }
+
+    /// Put back what [`AnyTopic::save`] gave this topic. False (nothing changed) when
+    /// `state` is another topic's type or shape.
+    pub fn load(&self, state: &TopicSnapshot) -> bool {
+        self.0.load(state)
+    }
+
     /// A new topic of type `msg` with the chapter's QoS.
     ///
     /// # Errors

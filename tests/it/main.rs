@@ -67,6 +67,7 @@ mod recording;
 mod reference_runs;
 mod ros2;
 mod ros2_external;
+mod runcore;
 mod security;
 mod session;
 mod topic_stress;

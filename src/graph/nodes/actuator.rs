@@ -69,6 +69,18 @@ pub struct Actuator {
 }
 
 impl Work for Actuator {
+    fn save(&self) -> Option<crate::node::NodeState> {
+        // The force it holds (zero-order hold) and the newest policy message it reported.
+        Some(Box::new((self.held, self.reported)))
+    }
+    fn load(&mut self, state: &crate::node::NodeState) -> bool {
+        type Kept = (Option<(f32, Option<Nanos>)>, Option<u64>);
+        let Some(&(held, reported)) = state.downcast_ref::<Kept>() else {
+            return false;
+        };
+        (self.held, self.reported) = (held, reported);
+        true
+    }
     /// One tick at `now`: apply, step, record.
     fn tick(&mut self, now: Nanos) -> Flow {
         let mut nonfinite = false;

@@ -65,6 +65,18 @@ pub struct Estimator {
 }
 
 impl Work for Estimator {
+    fn save(&self) -> Option<crate::node::NodeState> {
+        Some(Box::new((self.filter.clone(), self.last_seq, self.origin)))
+    }
+    fn load(&mut self, state: &crate::node::NodeState) -> bool {
+        type Kept = (VelocityFilter, Option<u64>, Option<Nanos>);
+        let Some((filter, last_seq, origin)) = state.downcast_ref::<Kept>() else {
+            return false;
+        };
+        self.filter.clone_from(filter);
+        (self.last_seq, self.origin) = (*last_seq, *origin);
+        true
+    }
     fn tick(&mut self, now: Nanos) -> Flow {
         if let Some(msg) = self.input.read(now) {
             if self.last_seq != Some(msg.seq) {

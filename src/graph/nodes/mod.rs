@@ -30,7 +30,7 @@ pub use external::{ExternalNodeSpec, ExternalPort};
 use crate::executor::ComputeDraw;
 use crate::graph::kind::Work;
 use crate::ids::NodeId;
-use crate::node::{Flow, Node};
+use crate::node::{Flow, Node, NodeState};
 use crate::publisher::Outbox;
 use crate::qos::{Fault, Liveliness};
 use crate::rate::Rate;
@@ -101,4 +101,31 @@ impl Node for GraphNode {
     fn publish_held(&mut self, at: Nanos) {
         self.core.outbox.release(at);
     }
+    fn save(&self) -> Option<NodeState> {
+        Some(Box::new(Saved {
+            work: self.work.save()?,
+            outbox: self.core.outbox.save(),
+            compute: self.core.compute.clone(),
+        }))
+    }
+    fn load(&mut self, state: &NodeState) -> bool {
+        let Some(s) = state.downcast_ref::<Saved>() else {
+            return false;
+        };
+        if !self.work.load(&s.work) {
+            return false;
+        }
+        self.core.outbox.load(&s.outbox);
+        self.core.compute.clone_from(&s.compute);
+        true
+    }
+}
+
+/// A [`GraphNode`]'s state ([`Node::save`]): its kind's, what its outbox holds, and its
+/// compute-time generator. Its name, rank, faults and handles never change; its rate and
+/// liveliness are the graph's ([`crate::runcore`] captures them).
+struct Saved {
+    work: NodeState,
+    outbox: crate::publisher::OutboxState,
+    compute: Option<ComputeDraw>,
 }

@@ -51,6 +51,13 @@ pub struct PolicyNode {
 }
 
 impl Work for PolicyNode {
+    // Nothing kept between ticks (the brain is the graph's, captured apart).
+    fn save(&self) -> Option<crate::node::NodeState> {
+        Some(Box::new(()))
+    }
+    fn load(&mut self, state: &crate::node::NodeState) -> bool {
+        state.is::<()>()
+    }
     fn tick(&mut self, now: Nanos) -> Flow {
         let Some(msg) = self.input.read(now) else {
             return Flow::Continue; // nothing sensed yet

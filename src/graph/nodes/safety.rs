@@ -56,6 +56,13 @@ pub struct Safety {
 }
 
 impl Work for Safety {
+    // Nothing kept between ticks (the brain is the graph's, captured apart).
+    fn save(&self) -> Option<crate::node::NodeState> {
+        Some(Box::new(()))
+    }
+    fn load(&mut self, state: &crate::node::NodeState) -> bool {
+        state.is::<()>()
+    }
     fn tick(&mut self, now: Nanos) -> Flow {
         if let Some(msg) = self.input.read(now) {
             let newtons = msg.data.newtons.clamp(-self.max_force_n, self.max_force_n);

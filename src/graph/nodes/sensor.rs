@@ -113,6 +113,19 @@ impl SensorNoise {
 }
 
 impl Work for Sensor {
+    fn save(&self) -> Option<crate::node::NodeState> {
+        // The noise's generator is all a sensor keeps between ticks.
+        Some(Box::new(self.noise.as_ref().map(|n| n.rng.clone())))
+    }
+    fn load(&mut self, state: &crate::node::NodeState) -> bool {
+        let Some(rng) = state.downcast_ref::<Option<rand_pcg::Pcg64>>() else {
+            return false;
+        };
+        if let (Some(n), Some(rng)) = (&mut self.noise, rng) {
+            n.rng = rng.clone();
+        }
+        true
+    }
     /// One tick at `now`: read the plant, publish.
     fn tick(&mut self, now: Nanos) -> Flow {
         let state = lock(&self.plant).state();

@@ -1,0 +1,224 @@
+//! The run core's capture and restore, whole runs: restoring what was captured at t and
+//! running on gives the uninterrupted run byte for byte (`metrics.json` and every step
+//! record), whatever ran or was changed in between; capturing changes nothing; a branch at
+//! the capture equals `replay` of the same command; a graph with a Python node restores by
+//! replaying.
+
+use proptest::prelude::*;
+use ratelab::graph::GraphSpec;
+use ratelab::policy::Scripted;
+use ratelab::qos::Fault;
+use ratelab::run::{Command, TimedCommand};
+use ratelab::runcore::{CoreOptions, RunCore};
+use ratelab::scheduler::StopFlag;
+use ratelab::{ClockKind, Nanos, RunConfig};
+
+use crate::repo;
+
+/// The configurations the byte-identity checks use, each `(label, settings)`.
+fn configurations() -> Vec<(&'static str, RunConfig)> {
+    let cfg = |graph: GraphSpec, seed: u64| RunConfig {
+        clock: ClockKind::Virtual,
+        duration: Nanos(6 * Nanos::SECOND.0),
+        graph,
+        seed,
+        ..RunConfig::default()
+    };
+    let file = |f: &str| GraphSpec::load(&repo(f)).unwrap();
+    let mut slow = GraphSpec::chapter();
+    slow.set_rate("policy", 5.0).unwrap();
+    let mut deep = GraphSpec::chapter();
+    deep.set_rate("policy", 10.0).unwrap();
+    deep.set_qos("/obs", "depth=100").unwrap();
+    let mut lossy = GraphSpec::chapter();
+    lossy
+        .set_qos(
+            "/action",
+            "loss=0.2,delay_ms=5,deadline_ms=30,on_deadline_missed=zero",
+        )
+        .unwrap();
+    let mut faulted = cfg(GraphSpec::chapter(), 1);
+    faulted.graph.set_lease("policy", 100.0).unwrap();
+    faulted.faults = vec![
+        Fault::parse("policy@2+0.5", false).unwrap(),
+        Fault::parse("sensor@5", true).unwrap(),
+    ];
+    vec![
+        ("chapter", cfg(GraphSpec::chapter(), 0)),
+        ("5 Hz", cfg(slow, 0)),
+        ("10 Hz depth 100 seed 2", cfg(deep, 2)),
+        ("lossy link", cfg(lossy, 3)),
+        ("faults", faulted),
+        ("estimator", cfg(file("graphs/cartpole-estimator.toml"), 0)),
+        ("safety", cfg(file("graphs/cartpole-safety.toml"), 0)),
+        ("executors", cfg(file("graphs/cartpole-executors.toml"), 0)),
+    ]
+}
+
+fn core(cfg: &RunConfig, commands: Vec<TimedCommand>) -> RunCore {
+    RunCore::new(
+        cfg,
+        Box::new(Scripted),
+        CoreOptions {
+            keep_trace: true,
+            commands,
+            remake_brain: Some(Box::new(|| Ok(Box::new(Scripted)))),
+            ..CoreOptions::default()
+        },
+    )
+    .unwrap()
+}
+
+/// `metrics.json` and the trace of the rest of `core`'s run.
+fn finish(mut core: RunCore) -> (String, String) {
+    core.run_to_end(&StopFlag::new());
+    let metrics = serde_json::to_string_pretty(&core.metrics()).unwrap();
+    (metrics, format!("{:?}", core.take_trace()))
+}
+
+/// Something that changes the run: a rate, a depth, a QoS.
+fn divergence(cfg: &RunConfig, k: usize) -> Command {
+    let topic = cfg.graph.topics[0].name.clone();
+    match k % 3 {
+        0 => Command::SetNodeHz {
+            node: cfg.graph.nodes[cfg.graph.nodes.len() / 2].name.clone(),
+            hz: 7.0,
+        },
+        1 => Command::SetTopicDepth { topic, depth: 3 },
+        _ => Command::SetTopicQos {
+            topic,
+            pairs: "loss=0.5".into(),
+        },
+    }
+}
+
+/// Capture at `t_ms`, change the run and run it on, restore, finish: the uninterrupted
+/// run. And a capture that is never restored changes nothing.
+fn check_restore(label: &str, cfg: &RunConfig, t_ms: u64, k: usize) {
+    let whole = finish(core(cfg, Vec::new()));
+    let t = Nanos(t_ms * Nanos::MILLISECOND.0);
+
+    let mut c = core(cfg, Vec::new());
+    c.run_until(t);
+    let cap = c.capture();
+    let python = cfg.graph.nodes.iter().any(|n| n.python.is_some());
+    assert_eq!(
+        cap.is_replay(),
+        python,
+        "{label}: only Python nodes make a replay"
+    );
+    assert_eq!(
+        finish(c),
+        whole,
+        "{label}: a capture at {t} changed the run"
+    );
+
+    let mut c = core(cfg, Vec::new());
+    c.run_until(t);
+    let cap = c.capture();
+    // The command may be refused (a rule of the graph): the run goes on regardless.
+    let _ = c.apply(divergence(cfg, k));
+    c.run_until(t.saturating_add(Nanos(1_500 * Nanos::MILLISECOND.0)));
+    c.restore(&cap).unwrap();
+    assert_eq!(c.now(), cap.at());
+    assert_eq!(finish(c), whole, "{label}: restored at {t}, continued");
+}
+
+#[test]
+fn a_restored_run_continues_as_the_uninterrupted_run_in_every_configuration() {
+    let _machine = crate::machine::shared();
+    for (i, (label, cfg)) in configurations().iter().enumerate() {
+        check_restore(label, cfg, 1_000 + 450 * i as u64, i);
+    }
+    // Python nodes (two, with parameters): a replay, to the same continuation.
+    let mut setpoint = configurations()[0].1.clone();
+    setpoint.graph = GraphSpec::load(&repo("graphs/cartpole-setpoint.toml")).unwrap();
+    check_restore("setpoint", &setpoint, 2_345, 1);
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 24, ..ProptestConfig::default() })]
+
+    /// Over random instants, configurations and changes in between.
+    #[test]
+    fn capture_restore_continue_is_the_uninterrupted_run(
+        which in 0usize..8,
+        t_ms in 0u64..6_000,
+        k in 0usize..3,
+    ) {
+        let _machine = crate::machine::shared();
+        let all = configurations();
+        let (label, cfg) = &all[which % all.len()];
+        check_restore(label, cfg, t_ms, k);
+    }
+}
+
+#[test]
+fn a_branch_at_the_capture_equals_replay_of_the_same_command() {
+    let _machine = crate::machine::shared();
+    let cfg = &configurations()[0].1;
+    let t = Nanos(2_010 * Nanos::MILLISECOND.0);
+    let change = Command::SetControlHz { hz: 6.0 };
+    let mut c = core(cfg, Vec::new());
+    c.run_until(t);
+    let cap = c.capture();
+    c.run_until(Nanos(4 * Nanos::SECOND.0));
+    c.restore(&cap).unwrap();
+    c.apply(change.clone()).unwrap();
+    let logged = c.applied().to_vec();
+    assert_eq!(logged.len(), 1);
+    assert!(logged[0].at_ns > t.0, "taking effect at the next instant");
+    let branched = finish(c);
+    let replayed = finish(core(cfg, logged));
+    assert_eq!(branched, replayed);
+    assert_ne!(
+        branched,
+        finish(core(cfg, Vec::new())),
+        "6 Hz changes the run"
+    );
+}
+
+#[test]
+fn a_capture_restores_only_into_the_graph_it_was_taken_of() {
+    let cfg = &configurations()[0].1;
+    let mut a = core(cfg, Vec::new());
+    a.run_until(Nanos::SECOND);
+    let mut b = core(cfg, Vec::new());
+    let e = b.restore(&a.capture()).unwrap_err();
+    assert_eq!(e.to_string(), "this capture is of another graph");
+    assert_eq!(b.now(), Nanos::ZERO, "unchanged");
+}
+
+#[test]
+fn a_python_node_makes_the_capture_a_replay_that_gives_the_same_continuation() {
+    let _machine = crate::machine::shared();
+    let cfg = RunConfig {
+        clock: ClockKind::Virtual,
+        duration: Nanos(4 * Nanos::SECOND.0),
+        graph: GraphSpec::load(&repo("graphs/cartpole-python.toml")).unwrap(),
+        ..RunConfig::default()
+    };
+    let whole = finish(core(&cfg, Vec::new()));
+    let mut c = core(&cfg, Vec::new());
+    c.run_until(Nanos(1_500 * Nanos::MILLISECOND.0));
+    c.apply(Command::SetQueueDepth { depth: 2 }).unwrap();
+    let cap = c.capture();
+    assert!(cap.is_replay(), "a Python node's objects cannot be copied");
+    c.run_until(Nanos(3 * Nanos::SECOND.0));
+    c.restore(&cap).unwrap();
+    assert_eq!(c.now(), cap.at());
+    let restored = finish(c);
+    let mut straight = core(&cfg, Vec::new());
+    straight.run_until(Nanos(1_500 * Nanos::MILLISECOND.0));
+    straight.apply(Command::SetQueueDepth { depth: 2 }).unwrap();
+    assert_eq!(restored, finish(straight));
+    assert_ne!(restored, whole, "depth 2 from 1.5 s is another run");
+
+    // Without a way to make the brain again, a replay is refused and nothing changes.
+    let mut c = RunCore::new(&cfg, Box::new(Scripted), CoreOptions::default()).unwrap();
+    c.run_until(Nanos::SECOND);
+    let cap = c.capture();
+    c.run_until(Nanos(2 * Nanos::SECOND.0));
+    assert!(c.restore(&cap).is_err());
+    assert_eq!(c.now(), Nanos(2 * Nanos::SECOND.0));
+}
