@@ -1,5 +1,5 @@
 //! Criterion benchmarks: the bus, a whole virtual episode against bare physics, recording
-//! cost, and brain inference. Results and the commands live in BENCHMARKS.md.
+//! cost, brain inference, and the run core's capture and restore. Results and the commands live in BENCHMARKS.md.
 
 use criterion::{criterion_group, criterion_main, BatchSize, Criterion};
 use ratelab::checkpoint::load_policy;
@@ -323,5 +323,52 @@ fn exercises(c: &mut Criterion) {
     g.finish();
 }
 
-criterion_group!(benches, topic, episode, graph_size, brains, exercises);
+/// The run core ([`ratelab::runcore`]): a capture and a restore of the chapter's graph at
+/// 5 s of a 10 s run (no trace kept, as the lab keeps none), and reaching an instant of a
+/// 10-minute run by restoring the nearest of captures taken every 10 s and running on.
+fn run_core(c: &mut Criterion) {
+    use ratelab::runcore::{CoreOptions, RunCore};
+    let cfg = RunConfig {
+        clock: ClockKind::Virtual,
+        ..RunConfig::default()
+    };
+    let core = |cfg: &RunConfig| {
+        RunCore::new(cfg, Box::new(Scripted), CoreOptions::default()).unwrap()
+    };
+    let mut g = c.benchmark_group("run core (chapter graph)");
+    let mut at5 = core(&cfg);
+    at5.run_until(Nanos(5 * Nanos::SECOND.0));
+    g.bench_function("capture at 5 s", |b| b.iter(|| black_box(at5.capture())));
+    let cap = at5.capture();
+    at5.run_until(Nanos(6 * Nanos::SECOND.0));
+    g.bench_function("restore to 5 s", |b| {
+        b.iter(|| at5.restore(black_box(&cap)).unwrap())
+    });
+    let long = RunConfig {
+        duration: Nanos(600 * Nanos::SECOND.0),
+        ..cfg.clone()
+    };
+    let mut ten_min = core(&long);
+    let mut every_10_s = Vec::new();
+    for s in (0..600).step_by(10) {
+        ten_min.run_until(Nanos(s * Nanos::SECOND.0));
+        every_10_s.push(ten_min.capture());
+    }
+    ten_min.run_until(long.duration);
+    let mut k = 0u64;
+    g.bench_function("reach an instant of a 10-minute run (captures every 10 s)", |b| {
+        b.iter(|| {
+            // Instants spread over the run, none on a capture.
+            k = (k + 7_919) % 599_000;
+            let t = Nanos((k + 500) * Nanos::MILLISECOND.0);
+            let nearest = &every_10_s[(t.0 / (10 * Nanos::SECOND.0)) as usize];
+            ten_min.restore(nearest).unwrap();
+            ten_min.run_until(t);
+            black_box(ten_min.now())
+        })
+    });
+    g.finish();
+}
+
+criterion_group!(benches, topic, episode, graph_size, brains, exercises, run_core);
 criterion_main!(benches);
