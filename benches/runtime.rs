@@ -332,9 +332,8 @@ fn run_core(c: &mut Criterion) {
         clock: ClockKind::Virtual,
         ..RunConfig::default()
     };
-    let core = |cfg: &RunConfig| {
-        RunCore::new(cfg, Box::new(Scripted), CoreOptions::default()).unwrap()
-    };
+    let core =
+        |cfg: &RunConfig| RunCore::new(cfg, Box::new(Scripted), CoreOptions::default()).unwrap();
     let mut g = c.benchmark_group("run core (chapter graph)");
     let mut at5 = core(&cfg);
     at5.run_until(Nanos(5 * Nanos::SECOND.0));
@@ -356,17 +355,20 @@ fn run_core(c: &mut Criterion) {
     }
     ten_min.run_until(long.duration);
     let mut k = 0u64;
-    g.bench_function("reach an instant of a 10-minute run (captures every 10 s)", |b| {
-        b.iter(|| {
-            // Instants spread over the run, none on a capture.
-            k = (k + 7_919) % 599_000;
-            let t = Nanos((k + 500) * Nanos::MILLISECOND.0);
-            let nearest = &every_10_s[(t.0 / (10 * Nanos::SECOND.0)) as usize];
-            ten_min.restore(nearest).unwrap();
-            ten_min.run_until(t);
-            black_box(ten_min.now())
-        })
-    });
+    g.bench_function(
+        "reach an instant of a 10-minute run (captures every 10 s)",
+        |b| {
+            b.iter(|| {
+                // Instants spread over the run, none on a capture.
+                k = (k + 7_919) % 599_000;
+                let t = Nanos((k + 500) * Nanos::MILLISECOND.0);
+                let nearest = &every_10_s[(t.0 / (10 * Nanos::SECOND.0)) as usize];
+                ten_min.restore(nearest).unwrap();
+                ten_min.run_until(t);
+                black_box(ten_min.now())
+            })
+        },
+    );
     g.finish();
 }
 

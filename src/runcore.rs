@@ -3,10 +3,12 @@
 //! **captured** and **restored** whole, so that restoring what was captured at t and running
 //! on gives, byte for byte, the run's own continuation.
 //!
-//! [`crate::run::run`] (and so the headless run, `sweep`, `cliff`, the exercises and
-//! `replay`) drives a virtual run through it. The lab's engine, the launcher's lockstep and
-//! a launch's processes still step their graphs with the scheduler directly (the lab's
-//! scrubbing and reload will be built on this type).
+//! Its drivers: [`crate::run::run`] under the virtual clock (and so the headless run,
+//! `sweep`, `cliff`, the exercises, `bench` and `replay`) and the lab's engine under the
+//! virtual clock ([`crate::session`]), which paces it against the wall clock. Still outside
+//! it: the real clock's threads ([`crate::scheduler::run_real`]), and the graph across
+//! processes (the launcher's lockstep and each process's stepper, [`crate::distributed`]),
+//! which step their graphs with the scheduler's events directly.
 //!
 //! # What an instant is
 //! [`RunCore::step`] runs the next instant of the scheduler ([`VirtualScheduler::run_instant`]:
@@ -186,8 +188,18 @@ impl RunCore {
         brain: Box<dyn Policy>,
         opts: CoreOptions,
     ) -> Result<Self, RunError> {
-        let Graph { nodes, handles } =
-            build_graph(cfg, BrainSlot::new(brain), opts.keep_trace, opts.observers)?;
+        let mut opts = opts;
+        let observers = std::mem::take(&mut opts.observers);
+        let graph = build_graph(cfg, BrainSlot::new(brain), opts.keep_trace, observers)?;
+        Ok(Self::with_graph(cfg, graph, opts))
+    }
+
+    /// A run core for `graph`, built for `cfg` by [`build_graph`] (with its observers, and
+    /// keeping the trace or not as it was built: `opts.observers` and `opts.keep_trace` are
+    /// not read), at t = 0 with nothing run.
+    pub fn with_graph(cfg: &RunConfig, graph: Graph, opts: CoreOptions) -> Self {
+        let Graph { nodes, handles } = graph;
+        let keep_trace = lock(&handles.log).keep_trace;
         let mut sched = virtual_scheduler(cfg, &nodes);
         if let Some(h) = &opts.on_span {
             sched.set_span_hook(h.clone());
@@ -195,7 +207,7 @@ impl RunCore {
         sched.take_plans_from(handles.plan_request.clone());
         let mut scheduled = opts.commands;
         scheduled.sort_by_key(|c| c.at_ns);
-        Ok(RunCore {
+        RunCore {
             graph_id: next_graph_id(),
             cfg: cfg.clone(),
             nodes,
@@ -205,10 +217,10 @@ impl RunCore {
             next_scheduled: 0,
             applied: Vec::new(),
             end: None,
-            keep_trace: opts.keep_trace,
+            keep_trace,
             on_span: opts.on_span,
             remake_brain: opts.remake_brain,
-        })
+        }
     }
 
     /// The run's settings.
@@ -325,13 +337,12 @@ impl RunCore {
     /// logged at it ([`RunCore::applied`]); a new executor plan runs from that instant.
     ///
     /// # Errors
-    /// A one-line description when the run has ended, or the value is invalid or a brain
-    /// cannot be loaded (the run is unchanged).
+    /// A one-line description when the run has ended, or the value breaks the graph's rules
+    /// or a brain cannot be loaded ([`Command::apply`]; the run is unchanged).
     pub fn apply(&mut self, command: Command) -> Result<(), String> {
         if self.end.is_some() {
             return Err("the run has ended".into());
         }
-        command.validate(&self.handles.current_spec())?;
         command.apply(&self.handles)?;
         let at = self.sched.next_due().unwrap_or(self.sched.now());
         self.applied.push(TimedCommand {

@@ -425,7 +425,21 @@ impl Engine {
         recording: &Option<Recording>,
         now: bool,
     ) -> bool {
-        match cmd.apply(h) {
+        self.apply_with(cmd, at, recording, now, |c| c.apply(h))
+    }
+
+    /// Apply `cmd` with `apply` (to the graph's handles, or through the run core), then log
+    /// it at `at`, mark it in the recording and tell the front end (`now`: it changes this
+    /// run). Returns false when it was refused (the front end is told why).
+    pub(super) fn apply_with(
+        &mut self,
+        cmd: Command,
+        at: Nanos,
+        recording: &Option<Recording>,
+        now: bool,
+        apply: impl FnOnce(&Command) -> Result<(), String>,
+    ) -> bool {
+        match apply(&cmd) {
             Ok(()) => {
                 let text = describe(&cmd);
                 if let Some(r) = recording {

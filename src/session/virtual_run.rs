@@ -1,5 +1,6 @@
-//! A virtual-clock run in the lab: one instant at a time, paced against the wall clock at
-//! the chosen speed. Pacing decides only *when* an instant runs, never its order.
+//! A virtual-clock run in the lab: the run core ([`crate::runcore`]) stepped one instant at
+//! a time, paced against the wall clock at the chosen speed. Pacing decides only *when* an
+//! instant runs, never its order.
 
 use super::engine::{live_metrics, Engine, Next};
 use super::protocol::{Control, Speed, Telemetry};
@@ -8,7 +9,8 @@ use crate::executor::ExecFigures;
 use crate::graph::{Graph, GraphHandles};
 use crate::recording::Recording;
 use crate::run::Command;
-use crate::scheduler::{EndReason, InstantOutcome, RunEnd, VirtualScheduler};
+use crate::runcore::{CoreOptions, RunCore, Step};
+use crate::scheduler::{EndReason, RunEnd, VirtualScheduler};
 use crate::time::Nanos;
 use crossbeam_channel::RecvTimeoutError;
 use std::time::{Duration, Instant};
@@ -23,12 +25,17 @@ impl Engine {
         recording: &Option<Recording>,
         ros2: Option<&crate::ros2::Bridge>,
     ) -> (Next, RunEnd, Vec<u64>, Option<ExecFigures>) {
-        let Graph { mut nodes, handles } = graph;
         let actuator_bit = 1u64 << (cfg.graph.actuator.0 % 64);
-        let mut sched = crate::run::virtual_scheduler(cfg, &nodes);
-        if let Some(h) = recording.as_ref().and_then(Recording::span_hook) {
-            sched.set_span_hook(h);
-        }
+        let mut core = RunCore::with_graph(
+            cfg,
+            graph,
+            CoreOptions {
+                on_span: recording.as_ref().and_then(Recording::span_hook),
+                ..CoreOptions::default()
+            },
+        );
+        // The lab never restores a capture that replays: these stay the graph's.
+        let handles = core.handles().clone();
         let mut paused = self.settings.start_paused;
         let mut step_pending = false;
         let mut ended: Option<RunEnd> = None;
@@ -44,12 +51,7 @@ impl Engine {
                         Ok(m) => m,
                         Err(RecvTimeoutError::Timeout) => break,
                         Err(RecvTimeoutError::Disconnected) => {
-                            return (
-                                Next::Quit,
-                                self.end_now(&sched, ended),
-                                sched.ticks().to_vec(),
-                                sched.figures(sched.now()),
-                            )
+                            return self.leave(Next::Quit, core.scheduler(), ended)
                         }
                     }
                 } else {
@@ -61,18 +63,16 @@ impl Engine {
                 match msg {
                     Control::Apply(cmd) => {
                         if ended.is_none() {
-                            let at = sched.next_due().unwrap_or(sched.now());
+                            let at = core.scheduler().next_due().unwrap_or(core.now());
                             let node = rate_target(&cmd, &handles);
                             let text = super::protocol::describe(&cmd);
-                            if self.apply(cmd, at, &handles, recording) {
-                                // A new plan (the executor key) runs from this instant on,
-                                // as a replay applies it.
-                                let asked = crate::graph::lock(&handles.plan_request).take();
-                                if let Some(plan) = asked {
-                                    sched.set_plan(plan);
-                                }
-                                let said = match node.and_then(|n| phase_note(&sched, &handles, n))
-                                {
+                            // A new plan (the executor key) runs from the next instant on,
+                            // as a replay applies it.
+                            let applied = self
+                                .apply_with(cmd, at, recording, true, |c| core.apply(c.clone()));
+                            if applied {
+                                let sched = core.scheduler();
+                                let said = match node.and_then(|n| phase_note(sched, &handles, n)) {
                                     Some(note) => {
                                         let said = format!("{text} · {note}");
                                         let _ = self.tx.send(Telemetry::Applied(said.clone()));
@@ -90,7 +90,7 @@ impl Engine {
                     }
                     Control::TogglePause => {
                         paused = !paused;
-                        anchor_v = sched.now();
+                        anchor_v = core.now();
                         anchor_w = Instant::now();
                     }
                     Control::Step => {
@@ -100,43 +100,27 @@ impl Engine {
                     }
                     Control::SetSpeed(s) => {
                         self.speed = s;
-                        anchor_v = sched.now();
+                        anchor_v = core.now();
                         anchor_w = Instant::now();
                     }
                     Control::Reset { next_seed } => {
-                        return (
-                            Next::Reset { next_seed },
-                            self.end_now(&sched, ended),
-                            sched.ticks().to_vec(),
-                            sched.figures(sched.now()),
-                        )
+                        return self.leave(Next::Reset { next_seed }, core.scheduler(), ended)
                     }
                     Control::SwitchClock => {
-                        return (
-                            Next::SwitchClock,
-                            self.end_now(&sched, ended),
-                            sched.ticks().to_vec(),
-                            sched.figures(sched.now()),
-                        )
+                        return self.leave(Next::SwitchClock, core.scheduler(), ended)
                     }
-                    Control::Quit => {
-                        return (
-                            Next::Quit,
-                            self.end_now(&sched, ended),
-                            sched.ticks().to_vec(),
-                            sched.figures(sched.now()),
-                        )
-                    }
+                    Control::Quit => return self.leave(Next::Quit, core.scheduler(), ended),
                 }
                 if step_pending {
                     break;
                 }
             }
             if last_status.elapsed() >= Duration::from_millis(33) {
-                let spans = sched.take_spans();
+                let spans = core.scheduler_mut().take_spans();
                 if !spans.is_empty() {
                     let _ = self.tx.send(Telemetry::Callbacks(spans));
                 }
+                let sched = core.scheduler();
                 self.status(sched.now(), paused, &handles, sched.skipped_ticks());
                 last_status = Instant::now();
             }
@@ -155,34 +139,23 @@ impl Engine {
                 }
             };
             let budget = Instant::now();
-            while let Some(due) = sched.next_due() {
-                if due > cfg.duration {
-                    ended = Some(RunEnd {
-                        at: cfg.duration.min(sched.now()),
-                        reason: EndReason::Duration,
-                    });
-                    break;
-                }
-                if target.is_some_and(|t| due > t) {
-                    break;
-                }
-                if let Some(b) = ros2 {
-                    b.clock(due);
-                }
-                let actuator_ticked = match sched.run_instant(&mut nodes) {
-                    InstantOutcome::Ran { ticked } => ticked & actuator_bit != 0,
-                    InstantOutcome::Stopped => {
-                        ended = Some(RunEnd {
-                            at: sched.now(),
-                            reason: EndReason::NodeStopped,
-                        });
+            loop {
+                if let Some(due) = core.next_instant() {
+                    if target.is_some_and(|t| due > t) {
                         break;
                     }
-                    InstantOutcome::Failed(reason) => {
-                        ended = Some(RunEnd {
-                            at: sched.now(),
-                            reason,
-                        });
+                    if let Some(b) = ros2 {
+                        b.clock(due);
+                    }
+                }
+                let actuator_ticked = match core.step() {
+                    Step::Ran { ticked, .. } => ticked & actuator_bit != 0,
+                    Step::Ended(mut end) => {
+                        if end.reason == EndReason::Duration {
+                            // The lab's run ends at its last instant.
+                            end.at = cfg.duration.min(core.now());
+                        }
+                        ended = Some(end);
                         break;
                     }
                 };
@@ -196,6 +169,7 @@ impl Engine {
                 }
             }
             if let Some(end) = &ended {
+                let sched = core.scheduler();
                 let metrics = live_metrics(
                     cfg,
                     &handles,
@@ -204,10 +178,11 @@ impl Engine {
                     None,
                     sched.figures(end.at),
                 );
-                let spans = sched.take_spans();
+                let spans = core.scheduler_mut().take_spans();
                 if !spans.is_empty() {
                     let _ = self.tx.send(Telemetry::Callbacks(spans));
                 }
+                let sched = core.scheduler();
                 self.status(sched.now(), paused, &handles, sched.skipped_ticks());
                 let _ = self.tx.send(Telemetry::Ended {
                     metrics: Box::new(metrics),
@@ -216,7 +191,7 @@ impl Engine {
                 continue;
             }
             // Sleep until the next instant is due on the wall (or a few ms at most).
-            if let (Some(due), Speed::Times(x)) = (sched.next_due(), self.speed) {
+            if let (Some(due), Speed::Times(x)) = (core.next_instant(), self.speed) {
                 if !step_pending {
                     let wait_v = due.saturating_sub(anchor_v).0 as f64 / x;
                     let wake = anchor_w + Duration::from_nanos(wait_v as u64);
@@ -229,11 +204,24 @@ impl Engine {
         }
     }
 
-    fn end_now(&self, sched: &VirtualScheduler, ended: Option<RunEnd>) -> RunEnd {
-        ended.unwrap_or(RunEnd {
+    /// Leave the run for `next`: how it ended (interrupted now, unless it had ended), each
+    /// node's tick count and the executors' figures.
+    fn leave(
+        &self,
+        next: Next,
+        sched: &VirtualScheduler,
+        ended: Option<RunEnd>,
+    ) -> (Next, RunEnd, Vec<u64>, Option<ExecFigures>) {
+        let end = ended.unwrap_or(RunEnd {
             at: sched.now(),
             reason: EndReason::Interrupted,
-        })
+        });
+        (
+            next,
+            end,
+            sched.ticks().to_vec(),
+            sched.figures(sched.now()),
+        )
     }
 }
 
