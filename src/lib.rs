@@ -18,8 +18,9 @@
 //!   file, [`graph::spec`]; node kinds and their registry), [`executor`] (ROS 2's executors
 //!   as rules), [`scheduler`] (the virtual and real clocks that apply them, + [`realtime`]),
 //!   [`runlog`], [`metrics`], [`config`];
-//! - **runs and their drivers**: [`runcore`] (one graph under the virtual clock, stepped,
-//!   commanded, captured and restored), [`run`] (one run), [`textlog`] (what nodes' code and
+//! - **runs and their drivers**: [`command`] (changes to a running graph), [`runcore`] (one
+//!   graph under the virtual clock, stepped, commanded, captured and restored), [`summary`]
+//!   (a run's figures from its graph's state), [`run`] (one run), [`textlog`] (what nodes' code and
 //!   ratelab's warnings write, stamped with run time and node), [`session`] (the lab's live runs, their
 //!   log and replay), [`sweep`] (grids and the rate cliff), [`exercise`] (the exercises'
 //!   bands and checks);
@@ -29,6 +30,7 @@
 
 pub mod checkpoint;
 pub mod clock;
+pub mod command;
 pub mod config;
 pub mod distributed;
 pub mod executor;
@@ -56,6 +58,7 @@ pub mod runcore;
 pub mod runlog;
 pub mod scheduler;
 pub mod session;
+pub mod summary;
 pub mod sweep;
 pub mod text;
 pub mod textlog;

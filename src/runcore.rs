@@ -42,18 +42,75 @@
 //! the run; BENCHMARKS.md gives the chapter's graph's figures), or, for a replay, the run up
 //! to the instant.
 
+use crate::command::{Command, TimedCommand};
 use crate::config::RunConfig;
 use crate::executor::{ExecutionPlan, ExecutorOverride};
 use crate::graph::{lock, Graph, GraphHandles, StepObserver};
 use crate::msg::TopicSnapshot;
 use crate::node::{Node, NodeState};
 use crate::plant::PlantState;
+use crate::plant::{CartPole, PlantError};
 use crate::policy::{BrainSlot, Policy};
 use crate::qos::LivelinessState;
-use crate::run::{build_graph, virtual_scheduler, Command, RunError, TimedCommand};
 use crate::runlog::RunLog;
 use crate::scheduler::{EndReason, InstantOutcome, RunEnd, StopFlag, VirtualScheduler};
 use crate::time::Nanos;
+
+/// A run that could not start.
+#[derive(Debug, thiserror::Error)]
+pub enum RunError {
+    /// Bad settings.
+    #[error(transparent)]
+    Config(#[from] crate::config::ConfigError),
+    /// The plant could not be built.
+    #[error(transparent)]
+    Plant(#[from] PlantError),
+    /// The graph could not be built.
+    #[error(transparent)]
+    Graph(#[from] crate::graph::GraphError),
+    /// The graph could not be offered to ROS 2 (`--ros2`).
+    #[error(transparent)]
+    Ros2(#[from] crate::ros2::Ros2Error),
+}
+
+/// Build the plant (reset to `cfg.seed`) and the graph for `cfg`.
+///
+/// # Errors
+/// [`RunError`] for bad settings or a plant that will not load.
+pub fn build_graph(
+    cfg: &RunConfig,
+    brain: BrainSlot,
+    keep_trace: bool,
+    observers: Vec<Box<dyn StepObserver>>,
+) -> Result<Graph, RunError> {
+    cfg.validate()?;
+    let mut plant = CartPole::new()?;
+    plant.reset(cfg.seed);
+    Ok(Graph::build(
+        &cfg.graph,
+        plant,
+        brain,
+        cfg.seed,
+        keep_trace,
+        observers,
+        &cfg.faults,
+    )?)
+}
+
+/// The virtual-clock executor for `cfg`'s graph: its phase offsets and execution plan
+/// (executors, callback groups); response times are measured when the graph has executors
+/// or compute times.
+pub fn virtual_scheduler(
+    cfg: &RunConfig,
+    nodes: &[Box<dyn crate::node::Node>],
+) -> VirtualScheduler {
+    VirtualScheduler::with_plan(
+        nodes,
+        &cfg.phase_offsets,
+        cfg.graph.execution_plan(),
+        cfg.graph.has_executors_or_compute(),
+    )
+}
 
 /// A number for each graph a run core builds in this process.
 fn next_graph_id() -> u64 {
@@ -507,7 +564,7 @@ impl RunCore {
             reason: EndReason::Interrupted,
         });
         let exec = self.sched.figures(end.at);
-        crate::run::summarize(
+        crate::summary::summarize(
             &self.cfg,
             &self.handles,
             &end,

@@ -1,0 +1,193 @@
+//! Commands to a running graph — a rate, a depth, a QoS, a brain, the executors — as the
+//! lab's keys, a session log and `replay` give them ([`Command`]), and stamped with the run
+//! time they take effect at ([`TimedCommand`]).
+
+use crate::graph::GraphHandles;
+
+/// A change to a running graph. Under the virtual clock each is applied at a virtual
+/// instant, so a logged session replays exactly.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(tag = "cmd", rename_all = "snake_case")]
+pub enum Command {
+    /// Set the policy rate, Hz.
+    SetControlHz {
+        /// New rate.
+        hz: f64,
+    },
+    /// Set the sensor rate, Hz.
+    SetSensorHz {
+        /// New rate.
+        hz: f64,
+    },
+    /// Set every topic's history depth.
+    SetQueueDepth {
+        /// New depth (≥ 1).
+        depth: usize,
+    },
+    /// Set one node's rate, Hz.
+    SetNodeHz {
+        /// The node's name.
+        node: String,
+        /// New rate.
+        hz: f64,
+    },
+    /// Set one topic's history depth.
+    SetTopicDepth {
+        /// The topic's name.
+        topic: String,
+        /// New depth (≥ 1).
+        depth: usize,
+    },
+    /// Set one topic's QoS keys (`KEY=VALUE[,KEY=VALUE…]`, the graph file's keys; see
+    /// [`crate::qos`]): the lab's `f` (delivery), `d` (deadline) and `L` (link loss).
+    SetTopicQos {
+        /// The topic's name.
+        topic: String,
+        /// The keys and values.
+        pairs: String,
+    },
+    /// Swap the policy node's brain (`scripted` or a checkpoint path).
+    SetPolicy {
+        /// The brain spec, as `--policy` takes it.
+        spec: String,
+    },
+    /// Run the graph on other executors, as `--executor` takes them (`per_node`,
+    /// `single_threaded`, `multi_threaded:N`): the lab's `x`. Under the virtual clock it
+    /// takes effect at the instant it is applied (ticks running keep their threads); under
+    /// the real clock, whose threads are made when a run starts, from the next run.
+    SetExecutor {
+        /// The executors, as `--executor` takes them.
+        executor: String,
+    },
+}
+
+impl Command {
+    /// Apply to the settings a run starts with: `graph`'s rates and depths, the brain
+    /// spec `policy`. The checks are the command line's: rates in (0, 10 000] Hz (the
+    /// actuator at 50), depths in 1..=[`crate::qos::MAX_DEPTH`], names that exist.
+    /// A brain is not loaded here (see [`Command::validate`]).
+    ///
+    /// # Errors
+    /// One line saying what is wrong; nothing changes.
+    pub fn apply_to_settings(
+        &self,
+        graph: &mut crate::graph::GraphSpec,
+        policy: &mut String,
+    ) -> Result<(), String> {
+        match self {
+            Command::SetControlHz { hz } => crate::config::check_rate("control-hz", *hz)
+                .and_then(|_| {
+                    let id = graph.chain_for("the control rate")?.policy;
+                    Ok(graph.set_rate_of(id, *hz)?)
+                })
+                .map_err(|e| e.to_string()),
+            Command::SetSensorHz { hz } => crate::config::check_rate("sensor-hz", *hz)
+                .and_then(|_| {
+                    let id = graph.chain_for("the sensor rate")?.sensor;
+                    Ok(graph.set_rate_of(id, *hz)?)
+                })
+                .map_err(|e| e.to_string()),
+            Command::SetQueueDepth { depth } => {
+                graph.set_all_depths(*depth).map_err(|e| e.to_string())
+            }
+            Command::SetNodeHz { node, hz } => graph.set_rate(node, *hz).map_err(|e| e.to_string()),
+            Command::SetTopicDepth { topic, depth } => {
+                graph.set_depth(topic, *depth).map_err(|e| e.to_string())
+            }
+            Command::SetTopicQos { topic, pairs } => {
+                graph.set_qos(topic, pairs).map_err(|e| e.to_string())
+            }
+            Command::SetPolicy { spec } => {
+                policy.clone_from(spec);
+                Ok(())
+            }
+            Command::SetExecutor { executor } => {
+                graph.set_executor(crate::executor::ExecutorOverride::parse(executor)?);
+                Ok(())
+            }
+        }
+    }
+
+    /// Check the command against `graph` as the command line checks the same values
+    /// ([`Command::apply_to_settings`] on a copy), and that a brain it names loads.
+    ///
+    /// # Errors
+    /// One line saying what is wrong.
+    pub fn validate(&self, graph: &crate::graph::GraphSpec) -> Result<(), String> {
+        self.apply_to_settings(&mut graph.clone(), &mut String::new())?;
+        if let Command::SetPolicy { spec } = self {
+            crate::checkpoint::load_policy(spec).map_err(|e| e.to_string())?;
+        }
+        Ok(())
+    }
+
+    /// Apply to a running graph.
+    ///
+    /// # Errors
+    /// A one-line description when the value is invalid or the brain cannot be loaded
+    /// (the graph is unchanged).
+    pub fn apply(&self, h: &GraphHandles) -> Result<(), String> {
+        match self {
+            Command::SetControlHz { hz } => h
+                .control_rate()
+                .ok_or("the graph has no chapter chain: no control rate")?
+                .set_hz(*hz)
+                .map_err(|e| e.to_string()),
+            Command::SetSensorHz { hz } => h
+                .sensor_rate()
+                .ok_or("the graph has no chapter chain: no sensor rate")?
+                .set_hz(*hz)
+                .map_err(|e| e.to_string()),
+            Command::SetQueueDepth { depth } => {
+                h.set_queue_depth(*depth).map_err(|e| e.to_string())
+            }
+            Command::SetNodeHz { node, hz } => {
+                // The file's rules (the actuator's fixed rate) hold for live changes too.
+                let mut spec = h.spec.as_ref().clone();
+                spec.set_rate(node, *hz).map_err(|e| e.to_string())?;
+                let id = spec.node_id(node).expect("set_rate found it");
+                h.rate(id).set_hz(*hz).map_err(|e| e.to_string())
+            }
+            Command::SetTopicDepth { topic, depth } => {
+                let id = h
+                    .spec
+                    .topic_id(topic)
+                    .ok_or_else(|| format!("no topic '{topic}' in graph '{}'", h.spec.name))?;
+                h.topic(id).set_depth(*depth).map_err(|e| e.to_string())
+            }
+            Command::SetTopicQos { topic, pairs } => {
+                // The file's rules hold for live changes: check on the graph as it is now.
+                let mut spec = h.current_spec();
+                spec.set_qos(topic, pairs).map_err(|e| e.to_string())?;
+                let id = spec.topic_id(topic).expect("set_qos found it");
+                let t = spec.topic(id);
+                h.topic(id).set_depth(t.depth).map_err(|e| e.to_string())?;
+                h.topic(id).set_qos(t.qos);
+                Ok(())
+            }
+            Command::SetPolicy { spec } => {
+                let brain = crate::checkpoint::load_policy(spec).map_err(|e| e.to_string())?;
+                h.brain.swap(brain);
+                Ok(())
+            }
+            Command::SetExecutor { executor } => {
+                let over = crate::executor::ExecutorOverride::parse(executor)?;
+                let mut spec = h.current_spec();
+                spec.set_executor(over);
+                *crate::graph::lock(&h.executor) = Some(over);
+                *crate::graph::lock(&h.plan_request) = Some(spec.execution_plan());
+                Ok(())
+            }
+        }
+    }
+}
+
+/// A command stamped with the run time at which it takes effect.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct TimedCommand {
+    /// Run time, ns: applied just before the first tick due at or after it.
+    pub at_ns: u64,
+    /// The change.
+    #[serde(flatten)]
+    pub command: Command,
+}
