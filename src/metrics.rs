@@ -14,11 +14,17 @@ use hdrhistogram::Histogram;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 
+/// How a node's failure begins when its callback hung (ran on without returning until
+/// Ctrl-C interrupted it, [`crate::python`]): the headline then says `HUNG`, not `NODE
+/// FAILED`.
+pub const HUNG: &str = "hung: ";
+
 /// Latency (or lateness) statistics over a run: an HDR histogram in nanoseconds (3
 /// significant digits: percentiles are within 0.1% of the sample, rounded up) with an exact
 /// integer sum for the mean. Constant memory, for counts without a bound (node lateness
 /// under the real clock); sense→act latency uses [`ExactLatency`].
 #[derive(Clone, Debug)]
+
 pub struct LatencyStats {
     hist: Histogram<u64>,
     sum_ns: u128,
@@ -769,7 +775,9 @@ impl Metrics {
         }
     }
 
-    /// The summary's headline: how the run really ended, first match wins: `NODE FAILED`,
+    /// The summary's headline: how the run really ended, first match wins: `HUNG in
+    /// policy's callback (…)` (a call into a learner's code that never returned, stopped by
+    /// Ctrl-C: its failure starts with [`HUNG`]), `NODE FAILED`,
     /// `FELL at t=…`, `STOPPED BY WATCHDOG at t=…` (QoS `on_deadline_missed=stop`), `PLANT
     /// NEVER STEPPED` (the actuator ran no step), `STOPPED EARLY at t=… of …` (interrupted
     /// before its duration), `BALANCED while the plant ran` (the actuator lost ticks to an
@@ -783,7 +791,16 @@ impl Metrics {
             .filter_map(|n| n.faulted_ticks)
             .sum();
         if let Some(failed) = &self.node_failed {
-            format!("NODE FAILED ({failed})")
+            match failed.split_once(": ") {
+                Some((node, why)) if why.starts_with(HUNG) => {
+                    let why = &why[HUNG.len()..];
+                    format!(
+                        "HUNG in {node}'s callback at t={:.2}s ({why})",
+                        self.sim_time_s
+                    )
+                }
+                _ => format!("NODE FAILED ({failed})"),
+            }
         } else if let Some(t) = self.fell_at_s {
             format!("FELL at t={t:.2}s")
         } else if self.stopped_by_watchdog.is_some() {

@@ -1321,10 +1321,8 @@ pub const LOG_LINES: usize = 2000;
 /// How many lines PgUp / PgDn scroll the log pane.
 pub const LOG_PAGE: usize = 3;
 
-/// How long a learner's callback runs without returning (wall time) before the lab shows it
-/// hung: far past any tick a balancing graph can afford (its period is 20 ms), and soon
-/// enough that a learner sees it at once.
-pub const HUNG_AFTER: std::time::Duration = std::time::Duration::from_secs(1);
+/// How long a learner's callback runs without returning before the lab shows it hung.
+pub use ratelab::python::HUNG_AFTER;
 
 /// How long (run time) a rate asked for outranks the engine's status: its command is taken
 /// at the next instant, so a status without it after this long means it was refused.

@@ -170,8 +170,38 @@ pub fn describe(py: Python<'_>, err: &PyErr, script: &str) -> String {
     });
     // The file names in it come from a graph file or a flag: nothing reaches a terminal raw.
     let line = described.unwrap_or_else(|| format!("{script}: {err}"));
+    let line = match hung_for(py, err) {
+        // A callback that never returned, stopped by Ctrl-C: say it hung, and where it was.
+        Some(ran) => format!(
+            "{}ran {:.1} s without returning; Ctrl-C interrupted it at {}",
+            crate::metrics::HUNG,
+            ran.as_secs_f64(),
+            line.strip_suffix(": KeyboardInterrupt").unwrap_or(&line)
+        ),
+        None => line,
+    };
     crate::text::printable(&line).into_owned()
 }
+
+/// How long this thread's call into learners' code had run when [`interrupt_callbacks`]
+/// interrupted it, if `err` is that interruption and the call had run [`HUNG_AFTER`] or
+/// longer: a hung callback, not a slow one.
+fn hung_for(py: Python<'_>, err: &PyErr) -> Option<Duration> {
+    if !err.is_instance_of::<pyo3::exceptions::PyKeyboardInterrupt>(py) {
+        return None;
+    }
+    // SAFETY: PyThread_get_thread_ident only reads the calling thread's id.
+    let thread = unsafe { pyo3::ffi::PyThread_get_thread_ident() } as u64;
+    let running = lock_running();
+    let call = running.get(&thread).filter(|r| r.interrupted)?;
+    Some(call.since.elapsed()).filter(|d| *d >= HUNG_AFTER)
+}
+
+/// How long a call into learners' code runs without returning (wall time) before it is
+/// called hung: the lab's `HUNG` verdict, and what a Ctrl-C that interrupts it says. Far past
+/// any tick a balancing graph can afford (its period is 20 ms), and soon enough that a
+/// learner sees it at once.
+pub const HUNG_AFTER: Duration = Duration::from_secs(1);
 
 /// A call into learners' code in progress: what the watchdog knows of it.
 struct Running {
@@ -187,6 +217,8 @@ struct Running {
     overrun_text: String,
     /// Already reported as overrunning.
     warned: bool,
+    /// Interrupted by [`interrupt_callbacks`] (Ctrl-C).
+    interrupted: bool,
 }
 
 /// Calls in progress, by Python thread id.
@@ -249,6 +281,7 @@ impl CallbackGuard {
                 overrun,
                 overrun_text,
                 warned: false,
+                interrupted: false,
             },
         );
         CallbackGuard { thread }
@@ -340,9 +373,12 @@ pub fn interrupt_callbacks(grace: Duration) {
         return;
     }
     let threads: Vec<u64> = lock_running()
-        .iter()
+        .iter_mut()
         .filter(|(_, r)| r.since.elapsed() >= grace)
-        .map(|(t, _)| *t)
+        .map(|(t, r)| {
+            r.interrupted = true;
+            *t
+        })
         .collect();
     if threads.is_empty() {
         return;

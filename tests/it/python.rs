@@ -319,7 +319,8 @@ fn an_infinite_action_is_refused_and_counted_as_nan_is() {
 }
 
 /// A callback asleep in `time.sleep` or `threading.Event.wait` (one C call) is interrupted
-/// by the first Ctrl-C too: the run ends within a second, with its summary.
+/// by the first Ctrl-C too: the run ends within a second, with its summary, whose headline
+/// names the hang and where the callback was.
 #[test]
 fn a_brain_asleep_in_a_c_call_is_interrupted_by_the_first_ctrl_c() {
     let _m = crate::machine::alone();
@@ -353,15 +354,62 @@ fn a_brain_asleep_in_a_c_call_is_interrupted_by_the_first_ctrl_c() {
             "{name}: took {took:?}: {err}"
         );
         assert!(
-            err.contains(&format!("{}:3: KeyboardInterrupt", p.display())),
+            err.contains(&format!("Ctrl-C interrupted it at {}:3", p.display())),
             "{name}: {err}"
         );
         assert!(
-            String::from_utf8_lossy(&o.stdout).contains("NODE FAILED"),
-            "{name}: the summary is printed"
+            String::from_utf8_lossy(&o.stdout).contains("HUNG in policy's callback at t="),
+            "{name}: the summary is printed, naming the hang"
         );
         assert_eq!(o.status.code(), Some(130), "{name}: {err}");
     }
+}
+
+/// A brain that loops forever holds the virtual clock: Ctrl-C stops it, and the headline
+/// says it hung (not that the node failed), when, for how long, and where; so does
+/// `metrics.json`'s `node_failed`.
+#[test]
+fn a_brain_looping_forever_is_named_hung_when_ctrl_c_stops_it() {
+    let _m = crate::machine::alone();
+    let dir = tempfile::tempdir().unwrap();
+    let p = script(
+        dir.path(),
+        "spin.py",
+        "def act(obs):\n    while True:\n        pass\n",
+    );
+    let out = dir.path().join("out");
+    let child = Command::new(env!("CARGO_BIN_EXE_ratelab"))
+        .args(["run", "--clock", "virtual", "--policy", p.to_str().unwrap()])
+        .arg("--out")
+        .arg(&out)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(Duration::from_millis(2000));
+    // SAFETY: plain kill(2) on our child.
+    unsafe { libc::kill(child.id() as i32, libc::SIGINT) };
+    let o = child.wait_with_output().unwrap();
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    let headline = stdout
+        .lines()
+        .find(|l| l.contains("HUNG"))
+        .unwrap_or_else(|| panic!("no HUNG headline: {stdout}"));
+    assert!(
+        headline.contains("HUNG in policy's callback at t=0.00s (ran ")
+            && headline.contains(&format!(
+                "s without returning; Ctrl-C interrupted it at {}:",
+                p.display()
+            )),
+        "{headline}"
+    );
+    assert!(!stdout.contains("NODE FAILED"), "{stdout}");
+    let metrics = std::fs::read_to_string(out.join("metrics.json")).unwrap();
+    assert!(
+        metrics.contains("\"node_failed\": \"policy: hung: ran "),
+        "{metrics}"
+    );
+    assert_eq!(o.status.code(), Some(130), "{}", stderr(&o));
 }
 
 /// A node that fails (an exception, `sys.exit`) fails the run in every layout: `run`, a
@@ -450,7 +498,7 @@ fn a_brain_that_never_returns_is_reported_and_ctrl_c_ends_the_run_within_a_secon
         "{err}"
     );
     assert!(
-        err.contains(&format!("{}:2: KeyboardInterrupt", p.display())),
+        err.contains(&format!("Ctrl-C interrupted it at {}:", p.display())),
         "{err}"
     );
     assert_eq!(o.status.code(), Some(130), "{err}");
@@ -500,7 +548,14 @@ fn a_python_node_that_never_returns_is_reported_after_100_periods_and_ctrl_c_end
             && err.contains("has not returned after 0.5 s, 100 of its 5 ms periods"),
         "{err}"
     );
-    assert!(err.contains("KeyboardInterrupt"), "{err}");
+    assert!(
+        err.contains("node 'policy' failed at t=") && err.contains(": hung: ran "),
+        "{err}"
+    );
+    assert!(
+        String::from_utf8_lossy(&o.stdout).contains("HUNG in policy's callback at t="),
+        "the headline names the hang"
+    );
     assert_eq!(o.status.code(), Some(130), "{err}");
 }
 
