@@ -68,10 +68,10 @@
 //! **Across processes.** The registry is per process: a graph with a registered kind runs
 //! in programs that register it. `ratelab launch --processes` starts `ratelab` binaries,
 //! which know only the built-in kinds, and refuses such a graph by its kind's name; a
-//! program of your own launches it, starting itself as each process
-//! ([`crate::distributed::launcher::launch`] with `exe` its own path, and
-//! [`crate::distributed::member::run_member`] for the `node` command the launcher starts it
-//! with): `examples/custom_node_processes.rs` is one.
+//! program of your own launches it, starting itself as each process: registering its kinds
+//! and handing over to the command line as a library (`ratelab_lab::main_with`, in the
+//! `lab/` crate) gives it `launch` and every other front end, and
+//! `examples/custom_node_processes.rs` is one.
 
 use super::kind::{BuildContext, Code, Kind, KindDef, Params, Plant, Ports, Work};
 use super::nodes;

@@ -283,38 +283,73 @@ fn the_custom_node_example_runs_the_chapters_graph_with_a_pd_node() {
     assert_eq!(o.status.code(), Some(2));
 }
 
-/// A program that registers a kind runs it across processes: it launches itself as each
-/// process (a `ratelab` binary would not know the kind), and the lockstep's metrics equal
-/// the one-process run's.
+/// A program that registers a kind gets ratelab's whole command line with it
+/// (`ratelab_lab::main_with`, `examples/custom_node_processes.rs`): `kinds` lists it, a sweep
+/// runs it, and a launch across processes — each process the program started again — gives
+/// the one-process run byte for byte under the virtual clock. The `ratelab` binary, which
+/// does not know the kind, refuses the graph in one line.
 #[test]
-fn a_registered_kind_runs_across_processes_in_the_program_that_registers_it() {
+fn a_program_s_own_kind_is_in_every_front_end_of_its_command_line() {
     let _m = crate::machine::shared();
+    let program = example("custom_node_processes");
+    let graph = crate::repo("examples/cartpole-pd.toml");
+    let graph = graph.to_str().unwrap();
+    let run = |args: &[&str]| {
+        let o = Command::new(&program).args(args).output().unwrap();
+        let out = String::from_utf8_lossy(&o.stdout).into_owned();
+        let err = String::from_utf8_lossy(&o.stderr).into_owned();
+        assert!(o.status.success(), "{args:?}: {out}{err}");
+        out
+    };
+    let kinds = run(&["kinds"]);
+    assert!(
+        kinds.contains("| `pd` | `state` → `force` |") && kinds.contains("| `sensor` |"),
+        "{kinds}"
+    );
+    let dir = tempfile::tempdir().unwrap();
     for seed in ["0", "2"] {
-        let o = Command::new(example("custom_node_processes"))
-            .args(["--seed", seed])
-            .output()
-            .unwrap();
-        let out = String::from_utf8_lossy(&o.stdout);
+        let one = dir.path().join(format!("one-{seed}"));
+        let many = dir.path().join(format!("many-{seed}"));
+        let common = ["--clock", "virtual", "--seed", seed, "--graph", graph];
+        run(&[&["run"], &common[..], &["--out", one.to_str().unwrap()]].concat());
+        let launched = run(&[
+            &["launch", "--processes", "--headless"],
+            &common[..],
+            &["--out", many.to_str().unwrap()],
+        ]
+        .concat());
         assert!(
-            o.status.success(),
-            "{out}{}",
-            String::from_utf8_lossy(&o.stderr)
-        );
-        assert!(
-            out.contains(
+            launched.contains(
                 "graph 'cartpole-pd' in 2 processes: robot [sensor, actuator], policy [policy]"
             ),
-            "{out}"
+            "{launched}"
         );
+        let a = std::fs::read(one.join("metrics.json")).unwrap();
+        let b = std::fs::read(many.join("metrics.json")).unwrap();
         assert!(
-            out.contains("equal to the same graph in one process in every figure: yes"),
-            "{out}"
+            a == b,
+            "seed {seed}: the launch differs from the one-process run"
         );
     }
+    let json = dir.path().join("sweep.json");
+    run(&[
+        "sweep",
+        "--graph",
+        graph,
+        "--control-hz",
+        "50,5",
+        "--seeds",
+        "1",
+        "--json",
+        json.to_str().unwrap(),
+    ]);
+    let rows: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let rows = rows.as_array().expect("a table of runs");
+    assert_eq!(rows.len(), 2, "{rows:?}");
     // The ratelab binary, which does not know the kind, refuses the graph in one line.
     let o = Command::new(env!("CARGO_BIN_EXE_ratelab"))
-        .args(["launch", "--processes", "--graph"])
-        .arg(crate::repo("examples/cartpole-pd.toml"))
+        .args(["launch", "--processes", "--graph", graph])
         .output()
         .unwrap();
     let err = String::from_utf8_lossy(&o.stderr);

@@ -55,8 +55,26 @@ impl Lab {
 
     /// In a terminal of `cols` × `rows`.
     fn start_sized(args: &[&str], env: &[(&str, String)], cols: u16, rows: u16) -> Lab {
+        Lab::start_program(
+            env!("CARGO_BIN_EXE_ratelab").as_ref(),
+            args,
+            env,
+            cols,
+            rows,
+        )
+    }
+
+    /// `program` (a `ratelab` binary, or a program on `ratelab_lab::main_with`) in a
+    /// terminal of `cols` × `rows`.
+    fn start_program(
+        program: &std::path::Path,
+        args: &[&str],
+        env: &[(&str, String)],
+        cols: u16,
+        rows: u16,
+    ) -> Lab {
         let pty = pty(cols, rows);
-        let mut cmd = CommandBuilder::new(env!("CARGO_BIN_EXE_ratelab"));
+        let mut cmd = CommandBuilder::new(program);
         cmd.args(args);
         cmd.env("TERM", "xterm-256color");
         for (k, v) in env {
@@ -786,4 +804,44 @@ fn what_a_python_node_prints_goes_to_the_log_pane_never_over_the_screen() {
         lab.keys("v");
         lab.quit();
     }
+}
+
+/// A program with a node kind of its own (`examples/custom_node_processes.rs`, on
+/// `ratelab_lab::main_with`) opens the lab on a graph that uses it, which the `ratelab`
+/// binary refuses: the pd node is drawn, the pole balances, `q` restores the terminal.
+#[test]
+fn a_program_s_own_kind_runs_in_its_lab() {
+    let _machine = crate::machine::alone();
+    let exe = std::env::current_exe().unwrap();
+    let program = exe
+        .parent()
+        .and_then(|deps| deps.parent())
+        .unwrap()
+        .join("examples/custom_node_processes");
+    let graph = std::path::Path::new(crate::REPO).join("examples/cartpole-pd.toml");
+    let lab = Lab::start_program(
+        &program,
+        &[
+            "lab",
+            "--clock",
+            "virtual",
+            "--graph",
+            graph.to_str().unwrap(),
+        ],
+        &[],
+        100,
+        30,
+    );
+    let screen = lab.wait_for("BALANCED", Duration::from_secs(60));
+    for name in [
+        "sensor",
+        "/obs",
+        "policy",
+        "/action",
+        "actuator",
+        "pd node",
+    ] {
+        assert!(screen.contains(name), "{name} not drawn:\n{screen}");
+    }
+    lab.quit();
 }

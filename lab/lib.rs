@@ -1,0 +1,370 @@
+//! The ratelab command line — the terminal lab, the headless run, and the tools around them
+//! (`run`, `lab`, `launch`, `node`, `sweep`, `cliff`, `exercise`, `bench`, `replay`, `top`,
+//! `export`, `kinds`, `msgs`) — as a library, so that a program with node kinds and message
+//! types of its own gets all of it with them: [`main_with`]. The `ratelab` binary is
+//! `main_with(|| {})`.
+
+mod bench;
+mod cli;
+mod exercise;
+mod headless;
+mod launch;
+mod rendezvous;
+mod sweep;
+mod tui;
+
+use clap::error::ErrorKind;
+use clap::Parser;
+use cli::{Cli, Command};
+use ratelab::scheduler::StopFlag;
+use ratelab::text::printable;
+use std::io::{IsTerminal, Write};
+use std::process::ExitCode;
+
+/// Exit code for bad input (as clap uses for usage errors).
+const EXIT_USAGE: u8 = 2;
+/// Exit code of an exercise that ran but did not pass (a check failed, a prediction could not
+/// be read), for scripts: 0 passed, 1 not passed, 2 could not run.
+const EXIT_NOT_PASSED: u8 = 1;
+/// Exit code of a run stopped by Ctrl-C or SIGTERM (after writing its outputs).
+const EXIT_INTERRUPTED: u8 = 130;
+
+/// A headless run; its summary, outputs and recording are complete even when interrupted.
+fn headless(args: &cli::RunArgs, stop: StopFlag) -> anyhow::Result<()> {
+    headless::run_headless(args, stop).map(|_| ())
+}
+
+/// Open the terminal lab with the run flags.
+fn lab(args: &cli::RunArgs, stop: StopFlag) -> anyhow::Result<()> {
+    use ratelab::session::{SessionSettings, Speed, UNBOUNDED};
+    let mut cfg = headless::config_from_args(args)?;
+    if args.duration.is_none() && !args.smoke {
+        cfg.duration = UNBOUNDED;
+    }
+    headless::warn_late_faults(&cfg);
+    ratelab::checkpoint::load_policy(&args.policy)?; // a bad --policy fails before the screen opens
+    let record = match &args.record {
+        None if !args.spawn => None,
+        Some(Some(p)) => Some(p.clone()),
+        _ => Some(ratelab::recording::default_lab_path(
+            std::path::Path::new("recordings"),
+            &cfg,
+        )),
+    };
+    if let Some(p) = &record {
+        // Checked before the screen opens; the session then replaces it only with --force.
+        ratelab::recording::check_output_path(p, args.force)?;
+    }
+    let session_file = args
+        .session
+        .clone()
+        .or_else(|| record.as_ref().map(|p| p.with_extension("session.json")));
+    if let Some(p) = &session_file {
+        // The session log is saved over and over during the session: an existing file
+        // is only replaced with --force (and never through a link or into a non-file).
+        ratelab::output::check_target(p, args.force)
+            .map_err(|e| anyhow::anyhow!("--session {e}"))?;
+    }
+    // Checked and opened before the screen opens: a bad name or setting is one line, exit 2.
+    if args.bag.is_some() {
+        anyhow::bail!("--bag writes one run's bag: use it with `ratelab run --ros2`, not the lab");
+    }
+    let ros2 = match headless::ros2_options(args, &cfg.graph)? {
+        Some(opts) => Some((headless::open_ros2(&stop)?, opts)),
+        None => None,
+    };
+    let alt_policy = (args.policy != "scripted").then(|| args.policy.clone());
+    let settings = SessionSettings {
+        force: args.force,
+        cfg,
+        policy: args.policy.clone(),
+        alt_policy,
+        record,
+        spawn: args.spawn,
+        session_file,
+        start_paused: false,
+        speed: Speed::Times(1.0),
+        ros2,
+    };
+    tui::run_lab(settings, stop)
+}
+
+/// Re-run a session's virtual runs and compare with what the live runs measured.
+/// The most commands `replay` lists per run (a session may hold thousands).
+const REPLAY_SHOWN: usize = 20;
+
+fn replay(args: &cli::ReplayArgs) -> anyhow::Result<()> {
+    use ratelab::session::{replay_run, SessionLog};
+    let log = SessionLog::load(&args.file)?;
+    if let Some(dir) = &args.out {
+        std::fs::create_dir_all(dir)
+            .map_err(|e| anyhow::anyhow!("cannot create --out folder {}: {e}", dir.display()))?;
+        for n in 1..=log.runs.len() {
+            ratelab::output::check_target(&dir.join(format!("metrics-{n}.json")), args.force)?;
+        }
+    }
+    let mut mismatches = 0;
+    for (i, run) in log.runs.iter().enumerate() {
+        let n = i + 1;
+        if run.clock != ratelab::ClockKind::Virtual {
+            println!(
+                "[ratelab] run {n}: real clock — not replayable exactly (concurrency), skipped"
+            );
+            continue;
+        }
+        if run.end_ns == 0 {
+            println!("[ratelab] run {n}: ended before its first tick, nothing to replay");
+            continue;
+        }
+        let metrics = replay_run(&log, i)?;
+        let same = log.matches(i, &metrics);
+        println!(
+            "[ratelab] run {n}: seed {}, {} command(s) replayed",
+            metrics.seed,
+            run.commands.len()
+        );
+        // Each change at its run time (the summary gives only the start and the end: a depth
+        // set to 2 and back to 1 reads as 1): the first REPLAY_SHOWN of them.
+        for c in run.commands.iter().take(REPLAY_SHOWN) {
+            println!(
+                "[ratelab]   at {:.2} s: {}",
+                ratelab::Nanos(c.at_ns).as_secs_f64(),
+                // A log is a file from anywhere: its text reaches the terminal escaped.
+                printable(&ratelab::session::describe(&c.command))
+            );
+        }
+        if run.commands.len() > REPLAY_SHOWN {
+            println!(
+                "[ratelab]   … and {} more",
+                run.commands.len() - REPLAY_SHOWN
+            );
+        }
+        for line in metrics.summary_lines(None).iter().skip(1) {
+            println!("[ratelab]   {line}");
+        }
+        let json = serde_json::to_string_pretty(&metrics)? + "\n";
+        match same {
+            Some(true) => println!("[ratelab]   identical to the live run's metrics ✓"),
+            Some(false) => {
+                mismatches += 1;
+                println!("[ratelab]   DIFFERS from the live run's metrics ✗")
+            }
+            None => println!("[ratelab]   (the live run recorded no metrics)"),
+        }
+        if let Some(dir) = &args.out {
+            ratelab::output::write_file(
+                &dir.join(format!("metrics-{n}.json")),
+                args.force,
+                json.as_bytes(),
+            )?;
+        }
+    }
+    anyhow::ensure!(
+        mismatches == 0,
+        "{mismatches} replayed run(s) differ from the live session"
+    );
+    Ok(())
+}
+
+/// `ratelab export`: a checkpoint's tensors as .npz ([`ratelab::checkpoint::export`]).
+fn export(args: &cli::ExportArgs) -> anyhow::Result<()> {
+    use ratelab::checkpoint::export::{checkpoint_tensors, to_npz};
+    anyhow::ensure!(
+        args.out.extension().is_some_and(|e| e == "npz"),
+        "--out {}: the archive's name must end in .npz (np.load tells the format by it)",
+        args.out.display()
+    );
+    ratelab::output::check_target(&args.out, args.force)?;
+    let tensors = checkpoint_tensors(&args.checkpoint)?;
+    let bytes = to_npz(&tensors).map_err(|e| anyhow::anyhow!("{}: {e}", args.out.display()))?;
+    ratelab::output::write_file(&args.out, args.force, &bytes)?;
+    for t in &tensors {
+        // A state_dict's keys are the checkpoint's: written out.
+        println!("{:<24} {:?}", printable(&t.name), t.shape);
+    }
+    println!(
+        "[ratelab] wrote {} ({} tensors, float32)",
+        args.out.display(),
+        tensors.len()
+    );
+    Ok(())
+}
+
+/// A clap error as one line that keeps its point: clap's first line names the flag, the
+/// value and the rule, except when it ends with a colon and lists its subject on the lines
+/// below (missing required arguments), which are then joined onto it.
+fn one_line(text: &str) -> String {
+    let mut lines = text.lines().map(str::trim).filter(|l| !l.is_empty());
+    let first = lines
+        .next()
+        .unwrap_or("error: invalid arguments")
+        .to_string();
+    if !first.ends_with(':') {
+        return first;
+    }
+    let listed: Vec<&str> = lines
+        .take_while(|l| {
+            !l.starts_with("Usage:") && !l.starts_with("For more") && !l.starts_with("tip:")
+        })
+        .collect();
+    format!("{first} {}", listed.join(", "))
+}
+
+/// Exit code when the reader of stdout went away (`ratelab cliff | head -1`): 128 + SIGPIPE,
+/// what a shell reports for a program the closed pipe ended.
+const EXIT_CLOSED_PIPE: i32 = 141;
+
+/// A closed stdout (or stderr) ends the process quietly, whatever subcommand was printing:
+/// Rust ignores SIGPIPE (sockets and child pipes must not kill a launcher), so `println!` to
+/// a pipe whose reader has gone panics; this hook turns exactly that panic into a silent
+/// exit 141, as a shell tool killed by SIGPIPE ends (never 0: what was to be said was not).
+/// Any other panic goes on to the hook before it.
+fn quiet_on_a_closed_stdout() {
+    let before = std::panic::take_hook();
+    std::panic::set_hook(Box::new(move |info| {
+        let message = ratelab::scheduler::panic_message(info.payload());
+        let printing = message.starts_with("failed printing to stdout")
+            || message.starts_with("failed printing to stderr");
+        if printing && message.contains("Broken pipe") {
+            std::process::exit(EXIT_CLOSED_PIPE);
+        }
+        before(info)
+    }));
+}
+
+/// How long a Python callback may still run after Ctrl-C (or `q` in the lab) before it is
+/// interrupted.
+pub const PYTHON_GRACE: std::time::Duration = std::time::Duration::from_millis(300);
+
+/// Run ratelab's whole command line (the process's arguments) in a program that first
+/// registers its own node kinds and message types in `register`
+/// ([`ratelab::graph::registry::register`], [`ratelab::msg::register`]): every front end —
+/// the lab, `run`, `launch` (whose processes are this program started again, so each
+/// registers them too), `sweep`, `cliff`, `exercise`, `bench`, `replay`, `kinds`, `msgs` —
+/// then knows them. Returns the exit code: 0 done, 1 an exercise not passed, 2 bad input or
+/// a failed run, 130 interrupted (Ctrl-C, SIGTERM), 141 a closed stdout.
+///
+/// ```no_run
+/// fn main() -> std::process::ExitCode {
+///     ratelab_lab::main_with(|| {
+///         // ratelab::graph::registry::register("pd", …);
+///     })
+/// }
+/// ```
+pub fn main_with(register: impl FnOnce()) -> ExitCode {
+    // Before any thread starts (it sets an environment variable that Zenoh reads).
+    if let Err(e) = ratelab::distributed::set_zenoh_runtime() {
+        eprintln!("error: {e}");
+        return ExitCode::from(EXIT_USAGE);
+    }
+    register();
+    quiet_on_a_closed_stdout();
+    // No flag, name or path of ratelab holds a control character: one in a value (a
+    // newline pasted into `--listen`) is refused here, in one line that shows it.
+    if let Some(arg) = std::env::args_os()
+        .skip(1)
+        .map(|a| a.to_string_lossy().into_owned())
+        .find(|a| ratelab::text::has_control(a))
+    {
+        eprintln!(
+            "error: the argument '{}' holds a control character; no flag, name or path of ratelab takes one",
+            printable(&arg)
+        );
+        return ExitCode::from(EXIT_USAGE);
+    }
+    let cli = match Cli::try_parse() {
+        Ok(cli) => cli,
+        Err(e) => {
+            if matches!(e.kind(), ErrorKind::DisplayHelp | ErrorKind::DisplayVersion) {
+                let _ = e.print();
+                return ExitCode::SUCCESS;
+            }
+            eprintln!("{}", one_line(&e.render().to_string()));
+            return ExitCode::from(EXIT_USAGE);
+        }
+    };
+    let stop = StopFlag::new();
+    // Set only by a signal (a fall also sets `stop`, under the real clock).
+    let interrupted = StopFlag::new();
+    {
+        let stop = stop.clone();
+        let interrupted = interrupted.clone();
+        // Ctrl-C / SIGTERM: stop the graph cleanly (summaries and files still written);
+        // a second one exits at once.
+        // A node process started by a launcher gets a second signal when the launcher
+        // exits (PR_SET_PDEATHSIG): it goes quietly.
+        let say = !matches!(cli.command, Some(Command::Node(_)));
+        let _ = ctrlc::set_handler(move || {
+            if interrupted.is_stopped() {
+                if say {
+                    eprintln!(
+                        "ratelab: interrupted again: exiting at once, without a summary or files"
+                    );
+                }
+                std::process::exit(i32::from(EXIT_INTERRUPTED));
+            }
+            interrupted.stop();
+            stop.stop();
+            // A Python callback that never returns would hold its node's tick forever:
+            // one still running after a short grace is interrupted (src/python).
+            ratelab::python::interrupt_callbacks_after(PYTHON_GRACE);
+        });
+    }
+    let result = match &cli.command {
+        Some(Command::Run(args)) => headless(args, stop),
+        Some(Command::Lab(_)) if cli.headless => Err(anyhow::anyhow!(
+            "`lab` is the terminal lab and cannot run --headless: `ratelab run` runs the graph headless"
+        )),
+        Some(Command::Lab(args)) if args.attach => {
+            launch::run_attach(&args.connect, args.credentials.as_deref(), stop)
+        }
+        Some(Command::Lab(args)) => lab(&args.run, stop),
+        Some(Command::Replay(args)) => replay(args),
+        Some(Command::Bench(args)) => bench::run_bench(args, stop),
+        Some(Command::Exercise(args)) => exercise::run_from_args(args),
+        Some(Command::Sweep(args)) => sweep::run_sweep(args, &stop),
+        Some(Command::Cliff(args)) => sweep::run_cliff(args, &stop),
+        Some(Command::Launch(args)) => launch::run_launch(args, cli.headless, stop),
+        Some(Command::Node(args)) => launch::run_node(args, stop),
+        Some(Command::Top(args)) => launch::run_top(args, stop),
+        Some(Command::Export(args)) => export(args),
+        Some(Command::Kinds) => {
+            print!("{}", ratelab::graph::registry::kinds_table());
+            Ok(())
+        }
+        Some(Command::Msgs) => {
+            print!("{}", ratelab::msg::types_table());
+            Ok(())
+        }
+        None => {
+            if !cli.headless && std::io::stdout().is_terminal() && std::io::stdin().is_terminal() {
+                lab(&cli.run, stop)
+            } else {
+                headless(&cli.run, stop)
+            }
+        }
+    };
+    match result {
+        Ok(()) if interrupted.is_stopped() => ExitCode::from(EXIT_INTERRUPTED),
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            // A graph file's error is `FILE:LINE:COL: reason`, as compilers print them.
+            // Not `eprintln!`: stderr may be a terminal that hung up (SIGHUP).
+            let mut err = std::io::stderr();
+            // One line whatever the error quotes (a flag's value, a file's text, a peer's
+            // name, a learner's exception): its control characters are written out.
+            let _ = match e.downcast_ref::<ratelab::graph::spec::SpecError>() {
+                Some(spec) => writeln!(err, "{spec}"),
+                None => writeln!(err, "error: {}", printable(&format!("{e:#}"))),
+            };
+            // Whatever failed after a Ctrl-C failed because of it.
+            ExitCode::from(if interrupted.is_stopped() {
+                EXIT_INTERRUPTED
+            } else if e.downcast_ref::<exercise::NotPassed>().is_some() {
+                EXIT_NOT_PASSED
+            } else {
+                EXIT_USAGE
+            })
+        }
+    }
+}
