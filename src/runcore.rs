@@ -135,7 +135,18 @@ pub struct CoreOptions {
     /// Makes the brain again for a restore that replays; without it such a restore fails
     /// with [`RestoreError::CannotReplay`].
     pub remake_brain: Option<BrainFactory>,
+    /// Keep a capture this often (run time) for [`RunCore::seek`] (the lab's time travel;
+    /// [`HISTORY_EVERY`]); `None`: keep none, and seeking back fails.
+    pub history_every: Option<Nanos>,
 }
+
+/// How often (run time) the lab keeps a capture to seek back to.
+pub const HISTORY_EVERY: Nanos = Nanos(Nanos::SECOND.0);
+
+/// The most captures a run core keeps for seeking. Past it every other one goes and the
+/// spacing doubles, so a long run's history costs bounded memory, and reaching any instant
+/// costs at most one spacing of run time after the restore.
+pub const MAX_HISTORY: usize = 128;
 
 /// What [`RunCore::step`] did.
 #[derive(Clone, Debug, PartialEq)]
@@ -164,6 +175,10 @@ pub enum RestoreError {
         "this capture must be replayed from t = 0, and the run core cannot make its brain again"
     )]
     CannotReplay,
+    /// Seeking back with no capture kept at or before the instant
+    /// ([`CoreOptions::history_every`]).
+    #[error("no capture kept to seek back to {0}")]
+    NoHistory(Nanos),
     /// Replaying the run to the captured instant failed.
     #[error("replaying the run to {at}: {reason}")]
     Replay {
@@ -182,6 +197,8 @@ pub struct Capture {
     /// The commands applied up to the capture, each at the instant before which it took
     /// effect.
     applied: Vec<TimedCommand>,
+    /// Those of them applied by hand ([`RunCore::apply`]).
+    by_hand: Vec<TimedCommand>,
     next_scheduled: usize,
     end: Option<RunEnd>,
     state: Option<Box<Saved>>,
@@ -227,6 +244,13 @@ pub struct RunCore {
     next_scheduled: usize,
     /// Every command applied, scheduled or not, at the instant before which it took effect.
     applied: Vec<TimedCommand>,
+    /// The commands applied by hand ([`RunCore::apply`]), which a seek back applies again.
+    by_hand: Vec<TimedCommand>,
+    /// Captures kept to seek back to, oldest first ([`RunCore::seek`]).
+    history: Vec<Capture>,
+    /// Their spacing (`None`: none kept), and when the next is due.
+    history_every: Option<Nanos>,
+    next_history: Nanos,
     end: Option<RunEnd>,
     keep_trace: bool,
     on_span: Option<crate::executor::SpanHook>,
@@ -264,7 +288,7 @@ impl RunCore {
         sched.take_plans_from(handles.plan_request.clone());
         let mut scheduled = opts.commands;
         scheduled.sort_by_key(|c| c.at_ns);
-        RunCore {
+        let mut core = RunCore {
             graph_id: next_graph_id(),
             cfg: cfg.clone(),
             nodes,
@@ -273,11 +297,17 @@ impl RunCore {
             scheduled,
             next_scheduled: 0,
             applied: Vec::new(),
+            by_hand: Vec::new(),
+            history: Vec::new(),
+            history_every: opts.history_every.filter(|e| e.0 > 0),
+            next_history: Nanos::ZERO,
             end: None,
             keep_trace,
             on_span: opts.on_span,
             remake_brain: opts.remake_brain,
-        }
+        };
+        core.keep_history();
+        core
     }
 
     /// The run's settings.
@@ -345,7 +375,10 @@ impl RunCore {
         }
         self.take_plan();
         let ended = match self.sched.run_instant(&mut self.nodes) {
-            InstantOutcome::Ran { ticked } => return Step::Ran { at: due, ticked },
+            InstantOutcome::Ran { ticked } => {
+                self.keep_history();
+                return Step::Ran { at: due, ticked };
+            }
             InstantOutcome::Stopped => RunEnd {
                 at: self.sched.now(),
                 reason: EndReason::NodeStopped,
@@ -402,11 +435,93 @@ impl RunCore {
         }
         command.apply(&self.handles)?;
         let at = self.sched.next_due().unwrap_or(self.sched.now());
-        self.applied.push(TimedCommand {
+        let c = TimedCommand {
             at_ns: at.0,
             command,
-        });
+        };
+        self.applied.push(c.clone());
+        self.by_hand.push(c);
         self.take_plan();
+        Ok(())
+    }
+
+    /// Keep a capture for seeking when one is due (module docs: [`CoreOptions::history_every`],
+    /// [`MAX_HISTORY`]).
+    fn keep_history(&mut self) {
+        let Some(every) = self.history_every else {
+            return;
+        };
+        let now = self.sched.now();
+        if now < self.next_history && !self.history.is_empty() {
+            return;
+        }
+        self.history.push(self.capture());
+        if self.history.len() > MAX_HISTORY {
+            // Keep the first (t = 0) and every other one after it.
+            let mut k = 0;
+            self.history.retain(|_| {
+                k += 1;
+                k % 2 == 1
+            });
+            self.history_every = Some(Nanos(every.0.saturating_mul(2)));
+        }
+        let every = self.history_every.unwrap_or(every);
+        self.next_history = now.saturating_add(every);
+    }
+
+    /// The run times of the captures kept for seeking, oldest first.
+    pub fn history(&self) -> impl Iterator<Item = Nanos> + '_ {
+        self.history.iter().map(Capture::at)
+    }
+
+    /// Put the run at run time `t`: as it was right after its last instant at or before
+    /// `t`. Forward it runs on. Back it restores the newest capture kept at or before `t`
+    /// and runs on from there to `t`, applying again, at the instants they took effect, the
+    /// commands applied by hand in between ([`RunCore::apply`]; scheduled ones come again
+    /// from their schedule), and forgets what came after `t`: the run branches there, and
+    /// what is applied next is a new future (what `replay` of [`RunCore::applied`] then
+    /// gives). Step observers see the instants run again.
+    ///
+    /// # Errors
+    /// [`RestoreError::NoHistory`] when no capture is kept at or before `t`, or what the
+    /// restore met; the run is then unchanged.
+    pub fn seek(&mut self, t: Nanos) -> Result<(), RestoreError> {
+        if t >= self.sched.now() {
+            self.run_until(t);
+            return Ok(());
+        }
+        let k = self
+            .history
+            .iter()
+            .rposition(|c| c.at <= t)
+            .ok_or(RestoreError::NoHistory(t))?;
+        let by_hand = self.by_hand.clone();
+        let mut kept = self.history.split_off(k);
+        let from = kept.swap_remove(0);
+        if let Err(e) = self.restore_keeping_history(&from) {
+            self.history.push(from);
+            self.history.append(&mut kept);
+            return Err(e);
+        }
+        let mut again = by_hand
+            .into_iter()
+            .skip(from.by_hand.len())
+            .filter(|c| c.at_ns <= t.0)
+            .peekable();
+        self.next_history = from
+            .at
+            .saturating_add(self.history_every.unwrap_or_default());
+        self.history.push(from);
+        while let Some(due) = self.next_instant().filter(|&due| due <= t) {
+            while let Some(c) = again.next_if(|c| c.at_ns <= due.0) {
+                // It was applied once; the graph is as it was then.
+                let _ = c.command.apply(&self.handles);
+                self.applied.push(c.clone());
+                self.by_hand.push(c);
+            }
+            self.take_plan();
+            self.step();
+        }
         Ok(())
     }
 
@@ -433,6 +548,7 @@ impl RunCore {
             graph_id: self.graph_id,
             at: self.sched.now(),
             applied: self.applied.clone(),
+            by_hand: self.by_hand.clone(),
             next_scheduled: self.next_scheduled,
             end: self.end.clone(),
             state: self.save().map(Box::new),
@@ -462,16 +578,27 @@ impl RunCore {
 
     /// Put the run back as `capture` found it (module docs), whatever ran or was applied
     /// since: in place, or by replaying the run from t = 0 when the capture is a replay.
+    /// The captures kept for seeking are forgotten (they may be of another branch of the
+    /// run); new ones are kept from here.
     ///
     /// # Errors
     /// [`RestoreError`]; the run is then unchanged.
     pub fn restore(&mut self, capture: &Capture) -> Result<(), RestoreError> {
+        self.restore_keeping_history(capture)?;
+        self.history.clear();
+        self.next_history = capture.at;
+        self.keep_history();
+        Ok(())
+    }
+
+    fn restore_keeping_history(&mut self, capture: &Capture) -> Result<(), RestoreError> {
         match &capture.state {
             Some(_) if capture.graph_id != self.graph_id => return Err(RestoreError::OtherGraph),
             Some(saved) => self.load(saved)?,
             None => self.replay(capture)?,
         }
         self.applied.clone_from(&capture.applied);
+        self.by_hand.clone_from(&capture.by_hand);
         self.next_scheduled = capture.next_scheduled;
         self.end.clone_from(&capture.end);
         Ok(())
@@ -534,6 +661,7 @@ impl RunCore {
                 commands: capture.applied.clone(),
                 on_span: self.on_span.clone(),
                 remake_brain: None,
+                history_every: None,
             },
         )
         .map_err(|e| failed(e.to_string()))?;

@@ -833,14 +833,7 @@ fn a_program_s_own_kind_runs_in_its_lab() {
         30,
     );
     let screen = lab.wait_for("BALANCED", Duration::from_secs(60));
-    for name in [
-        "sensor",
-        "/obs",
-        "policy",
-        "/action",
-        "actuator",
-        "pd node",
-    ] {
+    for name in ["sensor", "/obs", "policy", "/action", "actuator", "pd node"] {
         assert!(screen.contains(name), "{name} not drawn:\n{screen}");
     }
     lab.quit();

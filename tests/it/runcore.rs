@@ -222,3 +222,87 @@ fn a_python_node_makes_the_capture_a_replay_that_gives_the_same_continuation() {
     assert!(c.restore(&cap).is_err());
     assert_eq!(c.now(), Nanos(2 * Nanos::SECOND.0));
 }
+
+/// A core keeping captures every `every` for seeking.
+fn seeking(cfg: &RunConfig, every: Nanos) -> RunCore {
+    RunCore::new(
+        cfg,
+        Box::new(Scripted),
+        CoreOptions {
+            keep_trace: true,
+            history_every: Some(every),
+            ..CoreOptions::default()
+        },
+    )
+    .unwrap()
+}
+
+/// `metrics.json` (as of now) and the trace so far.
+fn so_far(core: &mut RunCore) -> (String, String) {
+    let metrics = serde_json::to_string_pretty(&core.metrics()).unwrap();
+    (metrics, format!("{:?}", core.take_trace()))
+}
+
+#[test]
+fn seeking_back_shows_the_run_as_it_was_and_a_branch_there_equals_replay() {
+    let _machine = crate::machine::shared();
+    for (label, cfg) in configurations() {
+        let ms = |v: u64| Nanos(v * Nanos::MILLISECOND.0);
+        // The run to 8 s with commands by hand at 3 s and 7 s, then back to 5.5 s …
+        let mut c = seeking(&cfg, Nanos::SECOND);
+        c.run_until(ms(3_000));
+        let early = divergence(&cfg, 1);
+        let early_ok = c.apply(early.clone()).is_ok();
+        c.run_until(ms(7_000));
+        let _ = c.apply(divergence(&cfg, 0));
+        c.run_until(ms(8_000));
+        c.seek(ms(5_500)).unwrap();
+        // … is the run to 5.5 s with the 3 s command only (its counters, every record).
+        let mut fresh = seeking(&cfg, Nanos::SECOND);
+        fresh.run_until(ms(3_000));
+        if early_ok {
+            fresh.apply(early).unwrap();
+        }
+        fresh.run_until(ms(5_500));
+        assert_eq!(c.now(), fresh.now(), "{label}");
+        assert_eq!(c.applied(), fresh.applied(), "{label}");
+        let (trace_at, trace_fresh) = (so_far(&mut c), so_far(&mut fresh));
+        assert_eq!(trace_at, trace_fresh, "{label}: seeking back to 5.5 s");
+        // A branch there: a change, then on to the end, is what replay of the log gives.
+        let _ = c.apply(Command::SetQueueDepth { depth: 4 });
+        let logged = c.applied().to_vec();
+        let branched = finish(c);
+        assert_eq!(branched.0, finish(core(&cfg, logged)).0, "{label}: branch");
+    }
+}
+
+#[test]
+fn a_long_run_keeps_a_bounded_history_and_still_seeks_exactly() {
+    let _machine = crate::machine::shared();
+    let cfg = RunConfig {
+        duration: Nanos(120 * Nanos::SECOND.0),
+        ..configurations()[0].1.clone()
+    };
+    let mut c = seeking(&cfg, Nanos(100 * Nanos::MILLISECOND.0));
+    c.run_until(cfg.duration);
+    let kept: Vec<Nanos> = c.history().collect();
+    assert!(
+        kept.len() <= ratelab::runcore::MAX_HISTORY,
+        "{}",
+        kept.len()
+    );
+    assert!(kept.len() > 32, "{}", kept.len());
+    assert_eq!(kept[0], Nanos::ZERO);
+    let t = Nanos(77_777 * Nanos::MILLISECOND.0);
+    c.seek(t).unwrap();
+    let mut fresh = core(&cfg, Vec::new());
+    fresh.run_until(t);
+    assert_eq!(
+        serde_json::to_string(&c.metrics()).unwrap(),
+        serde_json::to_string(&fresh.metrics()).unwrap()
+    );
+    // Without a history, seeking back is refused and nothing changes.
+    let e = fresh.seek(Nanos::SECOND).unwrap_err();
+    assert_eq!(e.to_string(), "no capture kept to seek back to 1 s");
+    assert_eq!(fresh.now(), Nanos(77_760 * Nanos::MILLISECOND.0));
+}
