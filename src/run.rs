@@ -100,6 +100,7 @@ pub fn run(
                 commands: opts.commands.clone(),
                 on_span: opts.on_span.clone(),
                 remake_brain: None,
+                remake_observers: None,
                 history_every: None,
             },
         )?)),

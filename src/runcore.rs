@@ -35,8 +35,9 @@
 //! the capture is a *replay*: the commands applied up to then. Restoring it builds the graph
 //! again from its settings (with the brain [`CoreOptions::remake_brain`] makes) and runs it
 //! from 0 to the captured instant under the virtual clock, which is deterministic: the same
-//! state, reached the long way. Such a restore gives a new graph: what was attached to the
-//! old one (step observers, topic taps, a ROS 2 offer) is not carried over.
+//! state, reached the long way. Such a restore gives a new graph: its step observers are made
+//! again ([`CoreOptions::remake_observers`]); what else was attached to the old one (topic
+//! taps, a ROS 2 offer) is not carried over.
 //!
 //! A restore's cost: copies of the parts above (the trace and the latency samples grow with
 //! the run; BENCHMARKS.md gives the chapter's graph's figures), or, for a replay, the run up
@@ -121,6 +122,9 @@ fn next_graph_id() -> u64 {
 /// Makes the run's brain afresh, for a restore that replays ([`RunCore::restore`]).
 pub type BrainFactory = Box<dyn Fn() -> Result<Box<dyn Policy>, String> + Send>;
 
+/// Makes the step observers afresh for the graph a restore that replays builds.
+pub type ObserverFactory = Box<dyn Fn() -> Vec<Box<dyn StepObserver>> + Send>;
+
 /// How a [`RunCore`] is built.
 #[derive(Default)]
 pub struct CoreOptions {
@@ -135,6 +139,9 @@ pub struct CoreOptions {
     /// Makes the brain again for a restore that replays; without it such a restore fails
     /// with [`RestoreError::CannotReplay`].
     pub remake_brain: Option<BrainFactory>,
+    /// Makes the step observers again for the graph a restore that replays builds (without
+    /// it that graph has none).
+    pub remake_observers: Option<ObserverFactory>,
     /// Keep a capture this often (run time) for [`RunCore::seek`] (the lab's time travel;
     /// [`HISTORY_EVERY`]); `None`: keep none, and seeking back fails.
     pub history_every: Option<Nanos>,
@@ -255,6 +262,7 @@ pub struct RunCore {
     keep_trace: bool,
     on_span: Option<crate::executor::SpanHook>,
     remake_brain: Option<BrainFactory>,
+    remake_observers: Option<ObserverFactory>,
 }
 
 impl RunCore {
@@ -305,6 +313,7 @@ impl RunCore {
             keep_trace,
             on_span: opts.on_span,
             remake_brain: opts.remake_brain,
+            remake_observers: opts.remake_observers,
         };
         core.keep_history();
         core
@@ -657,10 +666,15 @@ impl RunCore {
             brain,
             CoreOptions {
                 keep_trace: self.keep_trace,
-                observers: Vec::new(),
+                observers: self
+                    .remake_observers
+                    .as_ref()
+                    .map(|f| f())
+                    .unwrap_or_default(),
                 commands: capture.applied.clone(),
                 on_span: self.on_span.clone(),
                 remake_brain: None,
+                remake_observers: None,
                 history_every: None,
             },
         )

@@ -175,6 +175,11 @@ pub struct App {
     /// Watching a graph that runs across processes (`ratelab lab --attach`): the header's
     /// note (`2 processes`); keys that would change the graph are refused.
     attached: Option<String>,
+    /// What the run told since it started, each with the run time the lab was at after it:
+    /// folded again up to a seek's instant to show the run as it was then.
+    journal: Vec<(Nanos, Telemetry)>,
+    /// The journal reached [`MAX_JOURNAL`] and stopped.
+    journal_full: bool,
     /// Attached: the launch's endpoint.
     endpoint: Option<String>,
     /// Attached: each topic's over-the-wire latency (p50, p99 µs) when it crosses processes.
@@ -236,6 +241,8 @@ impl App {
             message_at: None,
             confirm_quit: false,
             attached: None,
+            journal: Vec::new(),
+            journal_full: false,
             endpoint: None,
             wire: Vec::new(),
             quit: false,
@@ -406,6 +413,12 @@ impl App {
         self.typing.is_some()
     }
 
+    /// Do ← and → move through the run (paused under the virtual clock, in the lab's own
+    /// session)?
+    pub fn scrubbing(&self) -> bool {
+        self.paused && self.clock == "virtual" && self.attached.is_none() && self.typing.is_none()
+    }
+
     fn send(&mut self, c: Control) {
         let _ = self.tx.send(c);
     }
@@ -414,9 +427,65 @@ impl App {
         self.send(Control::Apply(cmd));
     }
 
-    /// Fold one telemetry message.
+    /// Fold one telemetry message, and keep it in the run's journal (a seek back shows the
+    /// run as it was by folding the journal again up to then).
     pub fn on_telemetry(&mut self, t: Telemetry) {
         match t {
+            Telemetry::Rewound { at } => self.rewind(at),
+            Telemetry::Started { .. } => {
+                self.journal.clear();
+                self.journal_full = false;
+                self.fold(t.clone());
+                self.journal.push((self.now, t));
+            }
+            // A status while paused repeats its instant: the newest of an instant stands.
+            Telemetry::Status { now, .. }
+                if self.journal.last().is_some_and(|(at, last)| {
+                    *at == now && matches!(last, Telemetry::Status { .. })
+                }) =>
+            {
+                self.fold(t.clone());
+                if let Some(last) = self.journal.last_mut() {
+                    *last = (self.now, t);
+                }
+            }
+            t => {
+                self.fold(t.clone());
+                if self.journal.len() < MAX_JOURNAL {
+                    self.journal.push((self.now, t));
+                } else {
+                    self.journal_full = true;
+                }
+            }
+        }
+    }
+
+    /// The run was put back at `at` ([`Telemetry::Rewound`]): show it as it was then, by
+    /// folding again what the run told up to then (what the screen showed at that run time).
+    fn rewind(&mut self, at: Nanos) {
+        if self.journal_full {
+            self.say(format!(
+                "back at t={:.2} s: the run is too long to show as it was ({MAX_JOURNAL} messages); the figures go on from here",
+                at.as_secs_f64()
+            ));
+            return;
+        }
+        let journal = std::mem::take(&mut self.journal);
+        let upto = journal.partition_point(|(t, _)| *t <= at);
+        for (_, t) in journal.into_iter().take(upto) {
+            self.on_telemetry(t);
+        }
+        self.now = at;
+        self.say(format!(
+            "back at t={:.3} s: a change or space branches the run here",
+            at.as_secs_f64()
+        ));
+    }
+
+    /// Fold one telemetry message into what the lab shows.
+    fn fold(&mut self, t: Telemetry) {
+        match t {
+            Telemetry::Rewound { .. } => {}
             Telemetry::Started {
                 cfg,
                 policy,
@@ -712,6 +781,23 @@ impl App {
             }
             Msg::TogglePause => self.send(Control::TogglePause),
             Msg::Step => self.send(Control::Step),
+            Msg::SeekBack { second } | Msg::SeekForward { second } => {
+                let by = if second {
+                    Nanos::SECOND
+                } else {
+                    let node = match self.selected {
+                        Some(Selected::Node(n)) => n,
+                        _ => self.graph.actuator,
+                    };
+                    ratelab::rate::period_for_hz(self.rate_of(node)).unwrap_or(Nanos::SECOND)
+                };
+                let to = if matches!(m, Msg::SeekBack { .. }) {
+                    self.now.saturating_sub(by)
+                } else {
+                    self.now.saturating_add(by)
+                };
+                self.send(Control::Seek(to));
+            }
             Msg::Reset => self.send(Control::Reset { next_seed: false }),
             Msg::NextSeed => self.send(Control::Reset { next_seed: true }),
             Msg::SwitchClock => self.send(Control::SwitchClock),
@@ -1317,6 +1403,11 @@ impl App {
 
 /// The most lines of the run's text log the lab keeps (the pane shows the newest).
 pub const LOG_LINES: usize = 2000;
+
+/// The most telemetry messages a run's journal keeps for seeking back (about an hour of a
+/// run at ×1): past it, seeking back still puts the run there, but the lab's figures go on
+/// from there instead of showing the run as it was.
+pub const MAX_JOURNAL: usize = 400_000;
 
 /// How many lines PgUp / PgDn scroll the log pane.
 pub const LOG_PAGE: usize = 3;

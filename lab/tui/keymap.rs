@@ -45,6 +45,17 @@ pub enum Msg {
     TogglePause,
     /// One actuator step while paused (virtual clock).
     Step,
+    /// While paused (virtual clock): back one tick of the selected node (else the
+    /// actuator's); `second`: one second.
+    SeekBack {
+        /// One second rather than one tick.
+        second: bool,
+    },
+    /// … forward.
+    SeekForward {
+        /// One second rather than one tick.
+        second: bool,
+    },
     /// New run, same seed.
     Reset,
     /// New run, next seed.
@@ -86,6 +97,11 @@ pub enum Msg {
 }
 
 impl Msg {
+    /// Does it move through the run ([`Msg::SeekBack`], [`Msg::SeekForward`])?
+    pub fn is_seek(self) -> bool {
+        matches!(self, Msg::SeekBack { .. } | Msg::SeekForward { .. })
+    }
+
     /// Does it only change what the lab shows (a selection, the help, leaving)? Those are the
     /// keys an attached lab, which watches a graph across processes, acts on.
     pub fn only_views(self) -> bool {
@@ -205,9 +221,13 @@ pub const BINDINGS: &[Binding] = &[
         footer: Some(("␣", "pause")),
     },
     Binding {
-        keys: &[(Char('.'), Msg::Step)],
-        label: ".",
-        help: "one actuator step (20 ms) while paused (virtual clock)",
+        keys: &[
+            (Char('.'), Msg::Step),
+            (Left, Msg::SeekBack { second: false }),
+            (Right, Msg::SeekForward { second: false }),
+        ],
+        label: ". / ← →",
+        help: "paused: one step / ← → a tick back · forward (Shift: 1 s)",
         footer: None,
     },
     Binding {
@@ -276,8 +296,10 @@ pub const HELP_NOTES: [(&str, &str); 4] = [
     ),
 ];
 
-/// Map a key event. `typing` is true while an exact rate is being typed.
-pub fn map_key(key: KeyEvent, typing: bool) -> Option<Msg> {
+/// Map a key event. `typing` is true while an exact rate is being typed; `scrubbing` while
+/// the run is paused under the virtual clock, when ← and → move through the run (Shift:
+/// by a second) instead of changing a rate.
+pub fn map_key(key: KeyEvent, typing: bool, scrubbing: bool) -> Option<Msg> {
     if key.kind == KeyEventKind::Release {
         return None;
     }
@@ -293,11 +315,25 @@ pub fn map_key(key: KeyEvent, typing: bool) -> Option<Msg> {
             _ => None,
         };
     }
+    let second = key.modifiers.contains(KeyModifiers::SHIFT);
     BINDINGS
         .iter()
         .flat_map(|b| b.keys.iter())
+        .filter(|(_, msg)| msg.is_seek() == scrubbing || !key_seeks(key.code))
         .find(|(code, _)| *code == key.code)
-        .map(|(_, msg)| *msg)
+        .map(|(_, msg)| match *msg {
+            Msg::SeekBack { .. } => Msg::SeekBack { second },
+            Msg::SeekForward { .. } => Msg::SeekForward { second },
+            m => m,
+        })
+}
+
+/// Is `code` one of the keys that move through the run while paused?
+fn key_seeks(code: KeyCode) -> bool {
+    BINDINGS
+        .iter()
+        .flat_map(|b| b.keys.iter())
+        .any(|(c, m)| *c == code && m.is_seek())
 }
 
 #[cfg(test)]
@@ -370,10 +406,19 @@ mod tests {
 
     #[test]
     fn no_key_is_bound_twice() {
-        let mut seen = Vec::new();
-        for (code, _) in BINDINGS.iter().flat_map(|b| b.keys.iter()) {
-            assert!(!seen.contains(code), "{code:?} bound twice");
-            seen.push(*code);
+        // Once while running and once while scrubbing (paused, virtual clock) at most.
+        for scrubbing in [false, true] {
+            let mut seen = Vec::new();
+            for (code, msg) in BINDINGS.iter().flat_map(|b| b.keys.iter()) {
+                if msg.is_seek() != scrubbing && (scrubbing && key_seeks(*code)) {
+                    continue; // the running binding, shadowed while scrubbing
+                }
+                if msg.is_seek() && !scrubbing {
+                    continue;
+                }
+                assert!(!seen.contains(code), "{code:?} bound twice");
+                seen.push(*code);
+            }
         }
     }
 
@@ -390,82 +435,169 @@ mod tests {
 
     #[test]
     fn default_bindings() {
-        assert_eq!(map_key(key(KeyCode::Char('-')), false), Some(Msg::RateDown));
-        assert_eq!(map_key(key(KeyCode::Left), false), Some(Msg::RateDown));
-        assert_eq!(map_key(key(KeyCode::Char('+')), false), Some(Msg::RateUp));
-        assert_eq!(map_key(key(KeyCode::Right), false), Some(Msg::RateUp));
-        assert_eq!(map_key(key(KeyCode::Tab), false), Some(Msg::SelectNext));
-        assert_eq!(map_key(key(KeyCode::BackTab), false), Some(Msg::SelectPrev));
-        assert_eq!(map_key(key(KeyCode::Char('=')), false), Some(Msg::TypeRate));
         assert_eq!(
-            map_key(key(KeyCode::Char('s')), false),
+            map_key(key(KeyCode::Char('-')), false, false),
+            Some(Msg::RateDown)
+        );
+        assert_eq!(
+            map_key(key(KeyCode::Left), false, false),
+            Some(Msg::RateDown)
+        );
+        assert_eq!(
+            map_key(key(KeyCode::Char('+')), false, false),
+            Some(Msg::RateUp)
+        );
+        assert_eq!(
+            map_key(key(KeyCode::Right), false, false),
+            Some(Msg::RateUp)
+        );
+        assert_eq!(
+            map_key(key(KeyCode::Tab), false, false),
+            Some(Msg::SelectNext)
+        );
+        assert_eq!(
+            map_key(key(KeyCode::BackTab), false, false),
+            Some(Msg::SelectPrev)
+        );
+        assert_eq!(
+            map_key(key(KeyCode::Char('=')), false, false),
+            Some(Msg::TypeRate)
+        );
+        assert_eq!(
+            map_key(key(KeyCode::Char('s')), false, false),
             Some(Msg::SensorDown)
         );
-        assert_eq!(map_key(key(KeyCode::Char('S')), false), Some(Msg::SensorUp));
         assert_eq!(
-            map_key(key(KeyCode::Char('[')), false),
+            map_key(key(KeyCode::Char('S')), false, false),
+            Some(Msg::SensorUp)
+        );
+        assert_eq!(
+            map_key(key(KeyCode::Char('[')), false, false),
             Some(Msg::DepthDown)
         );
-        assert_eq!(map_key(key(KeyCode::Char(']')), false), Some(Msg::DepthUp));
-        assert_eq!(map_key(key(KeyCode::Char('b')), false), Some(Msg::Break));
         assert_eq!(
-            map_key(key(KeyCode::Char(' ')), false),
+            map_key(key(KeyCode::Char(']')), false, false),
+            Some(Msg::DepthUp)
+        );
+        assert_eq!(
+            map_key(key(KeyCode::Char('b')), false, false),
+            Some(Msg::Break)
+        );
+        assert_eq!(
+            map_key(key(KeyCode::Char(' ')), false, false),
             Some(Msg::TogglePause)
         );
-        assert_eq!(map_key(key(KeyCode::Char('.')), false), Some(Msg::Step));
-        assert_eq!(map_key(key(KeyCode::Char('r')), false), Some(Msg::Reset));
-        assert_eq!(map_key(key(KeyCode::Char('R')), false), Some(Msg::NextSeed));
         assert_eq!(
-            map_key(key(KeyCode::Char('c')), false),
+            map_key(key(KeyCode::Char('.')), false, false),
+            Some(Msg::Step)
+        );
+        assert_eq!(
+            map_key(key(KeyCode::Char('r')), false, false),
+            Some(Msg::Reset)
+        );
+        assert_eq!(
+            map_key(key(KeyCode::Char('R')), false, false),
+            Some(Msg::NextSeed)
+        );
+        assert_eq!(
+            map_key(key(KeyCode::Char('c')), false, false),
             Some(Msg::SwitchClock)
         );
-        assert_eq!(map_key(key(KeyCode::Char('<')), false), Some(Msg::Slower));
-        assert_eq!(map_key(key(KeyCode::Char('>')), false), Some(Msg::Faster));
         assert_eq!(
-            map_key(key(KeyCode::Char('p')), false),
+            map_key(key(KeyCode::Char('<')), false, false),
+            Some(Msg::Slower)
+        );
+        assert_eq!(
+            map_key(key(KeyCode::Char('>')), false, false),
+            Some(Msg::Faster)
+        );
+        assert_eq!(
+            map_key(key(KeyCode::Char('p')), false, false),
             Some(Msg::SwapBrain)
         );
         assert_eq!(
-            map_key(key(KeyCode::Char('?')), false),
+            map_key(key(KeyCode::Char('?')), false, false),
             Some(Msg::ToggleHelp)
         );
-        assert_eq!(map_key(key(KeyCode::Char('q')), false), Some(Msg::Quit));
-        assert_eq!(map_key(key(KeyCode::Esc), false), Some(Msg::Back));
+        assert_eq!(
+            map_key(key(KeyCode::Char('q')), false, false),
+            Some(Msg::Quit)
+        );
+        assert_eq!(map_key(key(KeyCode::Esc), false, false), Some(Msg::Back));
         assert_eq!(
             map_key(
                 KeyEvent::new(KeyCode::Char('c'), KeyModifiers::CONTROL),
+                false,
                 false
             ),
             Some(Msg::Quit)
         );
         assert_eq!(
-            map_key(key(KeyCode::Char('x')), false),
+            map_key(key(KeyCode::Char('x')), false, false),
             Some(Msg::CycleExecutor)
         );
-        assert_eq!(map_key(key(KeyCode::Char('z')), false), None);
+        assert_eq!(map_key(key(KeyCode::Char('z')), false, false), None);
     }
 
     #[test]
     fn typing_mode_takes_digits_only() {
         assert_eq!(
-            map_key(key(KeyCode::Char('7')), true),
+            map_key(key(KeyCode::Char('7')), true, false),
             Some(Msg::Input('7'))
         );
         assert_eq!(
-            map_key(key(KeyCode::Char('.')), true),
+            map_key(key(KeyCode::Char('.')), true, false),
             Some(Msg::Input('.'))
         );
-        assert_eq!(map_key(key(KeyCode::Char('q')), true), None);
-        assert_eq!(map_key(key(KeyCode::Enter), true), Some(Msg::Submit));
-        assert_eq!(map_key(key(KeyCode::Esc), true), Some(Msg::Cancel));
-        assert_eq!(map_key(key(KeyCode::Backspace), true), Some(Msg::Backspace));
+        assert_eq!(map_key(key(KeyCode::Char('q')), true, false), None);
+        assert_eq!(map_key(key(KeyCode::Enter), true, false), Some(Msg::Submit));
+        assert_eq!(map_key(key(KeyCode::Esc), true, false), Some(Msg::Cancel));
+        assert_eq!(
+            map_key(key(KeyCode::Backspace), true, false),
+            Some(Msg::Backspace)
+        );
         // Ctrl-C always quits.
         assert_eq!(
             map_key(
                 KeyEvent::new(KeyCode::Char('c'), KeyModifiers::CONTROL),
-                true
+                true,
+                false
             ),
             Some(Msg::Quit)
+        );
+    }
+
+    #[test]
+    fn paused_the_arrows_move_through_the_run_and_shift_by_a_second() {
+        let shifted = |c| KeyEvent::new(c, KeyModifiers::SHIFT);
+        assert_eq!(
+            map_key(key(KeyCode::Left), false, true),
+            Some(Msg::SeekBack { second: false })
+        );
+        assert_eq!(
+            map_key(key(KeyCode::Right), false, true),
+            Some(Msg::SeekForward { second: false })
+        );
+        assert_eq!(
+            map_key(shifted(KeyCode::Left), false, true),
+            Some(Msg::SeekBack { second: true })
+        );
+        assert_eq!(
+            map_key(shifted(KeyCode::Right), false, true),
+            Some(Msg::SeekForward { second: true })
+        );
+        // The rate keys stay rate keys; running, the arrows are rates again.
+        assert_eq!(
+            map_key(key(KeyCode::Char('-')), false, true),
+            Some(Msg::RateDown)
+        );
+        assert_eq!(
+            map_key(key(KeyCode::Char('.')), false, true),
+            Some(Msg::Step)
+        );
+        assert_eq!(
+            map_key(shifted(KeyCode::Left), false, false),
+            Some(Msg::RateDown)
         );
     }
 
@@ -473,7 +605,7 @@ mod tests {
     fn key_releases_are_ignored() {
         let mut k = key(KeyCode::Char('-'));
         k.kind = KeyEventKind::Release;
-        assert_eq!(map_key(k, false), None);
+        assert_eq!(map_key(k, false, false), None);
     }
 
     #[test]

@@ -58,7 +58,7 @@ where
                 let Ok(ev) = ev else { break };
                 for ev in std::iter::once(ev).chain(input.try_iter()) {
                     if let TermEvent::Key(k) = ev {
-                        if let Some(m) = keymap::map_key(k, app.typing()) {
+                        if let Some(m) = keymap::map_key(k, app.typing(), app.scrubbing()) {
                             app.on_msg(m);
                         }
                     }
@@ -765,6 +765,36 @@ mod tests {
         let big = render(&app, 120, 40);
         assert!(big.contains(&format!("{stale} stale ↺")), "{big}");
         assert!(big.contains("wire 239/1058 µs"), "{big}");
+    }
+
+    /// A seek back (Rewound) shows the run as it was then: the screen of a lab told the run
+    /// up to 5 s, every row but the footer's message.
+    #[test]
+    fn rewound_the_lab_shows_the_run_as_it_was_then() {
+        let cfg = virtual_cfg(8.0, 8);
+        let report = run(&cfg, Box::new(Scripted), RunOptions::new()).unwrap();
+        let at = ratelab::Nanos(5_000_000_000);
+        let told = |upto: ratelab::Nanos| {
+            let (tx, _rx) = crossbeam_channel::unbounded();
+            let mut app = App::new(tx, "scripted".into(), None, Speed::Times(1.0));
+            app.on_telemetry(Telemetry::Started {
+                cfg: cfg.clone(),
+                policy: "scripted".into(),
+                recording: None,
+            });
+            for s in report.trace.iter().filter(|s| s.t <= upto) {
+                app.on_telemetry(Telemetry::Step(Box::new(*s)));
+            }
+            app
+        };
+        let mut back = told(ratelab::Nanos(8_000_000_000));
+        let before = render(&back, 120, 40);
+        back.on_telemetry(Telemetry::Rewound { at });
+        let (a, b) = (render(&back, 120, 40), render(&told(at), 120, 40));
+        let rows = |s: &str| s.lines().take(39).map(str::to_string).collect::<Vec<_>>();
+        assert_eq!(rows(&a), rows(&b));
+        assert_ne!(rows(&a), rows(&before), "8 Hz falls between 5 and 8 s");
+        assert!(a.contains("back at t=5.000 s"), "{a}");
     }
 
     #[test]

@@ -15,6 +15,8 @@ use crate::scheduler::RunEnd;
 use crate::time::Nanos;
 use crossbeam_channel::{Receiver, Sender};
 use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
 
 /// How the lab's engine starts.
 #[derive(Clone, Debug)]
@@ -49,11 +51,15 @@ pub struct SessionSettings {
 pub const JUDGE_FOR: Nanos = Nanos(30 * Nanos::SECOND.0);
 
 /// Streams step records to the front end.
-struct TelemetryObserver(Sender<Telemetry>);
+/// Streams step records to the front end, unless muted (while a seek back runs the run again
+/// to the instant asked for: the front end has those steps already).
+pub(super) struct TelemetryObserver(pub(super) Sender<Telemetry>, pub(super) Arc<AtomicBool>);
 
 impl StepObserver for TelemetryObserver {
     fn on_step(&mut self, rec: &StepRecord) {
-        let _ = self.0.send(Telemetry::Step(Box::new(*rec)));
+        if !self.1.load(Ordering::Relaxed) {
+            let _ = self.0.send(Telemetry::Step(Box::new(*rec)));
+        }
     }
 }
 
@@ -68,7 +74,9 @@ pub struct Engine {
     /// Changes made while a run was frozen (after a fall or its end): they set the next run.
     next_run: Vec<Command>,
     /// The brain spec the current run started with (for [`Engine::judge_fresh_run`]).
-    run_policy: String,
+    pub(super) run_policy: String,
+    /// Mutes the step telemetry while a seek back runs the run again.
+    pub(super) muted: Arc<AtomicBool>,
 }
 
 /// What ended a run from the engine's side.
@@ -91,6 +99,7 @@ impl Engine {
             run_index: 0,
             next_run: Vec::new(),
             run_policy: String::new(),
+            muted: Arc::new(AtomicBool::new(false)),
         }
     }
 
@@ -194,8 +203,10 @@ impl Engine {
             }
             None => None,
         };
-        let mut observers: Vec<Box<dyn StepObserver>> =
-            vec![Box::new(TelemetryObserver(self.tx.clone()))];
+        let mut observers: Vec<Box<dyn StepObserver>> = vec![Box::new(TelemetryObserver(
+            self.tx.clone(),
+            self.muted.clone(),
+        ))];
         if let Some(r) = &recording {
             observers.push(r.observer());
         }
@@ -392,6 +403,15 @@ impl Engine {
                 let _ = self.tx.send(Telemetry::Error(e));
             }
         }
+    }
+
+    /// The run went back and branched ([`Control::Seek`]): its log holds the commands of the
+    /// branch, `applied` (what `replay` then gives).
+    pub(super) fn branch_log(&mut self, applied: &[TimedCommand]) {
+        if let Some(run) = self.log.runs.last_mut() {
+            run.commands = applied.to_vec();
+        }
+        self.save_log();
     }
 
     /// Apply a graph command, logging it at `at`. Returns false when it was refused.

@@ -51,6 +51,10 @@ pub enum Control {
     TogglePause,
     /// While paused (virtual clock): run until the next actuator tick.
     Step,
+    /// While paused (virtual clock): put the run at this run time ([`crate::runcore::RunCore::seek`]):
+    /// forward it runs there; back it is as it was then, and what runs from there is a new
+    /// branch of the run.
+    Seek(Nanos),
     /// Start a new run with the current settings: same seed, or the next one.
     Reset {
         /// Use `seed + 1`.
@@ -78,6 +82,12 @@ pub enum Telemetry {
     },
     /// One actuator tick.
     Step(Box<StepRecord>),
+    /// The run was put back at this run time ([`Control::Seek`]): the front end shows it as it
+    /// was then (what it was told up to then), and what comes next is a new branch.
+    Rewound {
+        /// The run time it is at.
+        at: Nanos,
+    },
     /// One node tick under the real clock: node index (tie-break rank), run time,
     /// lateness and how long it took.
     NodeTick {

@@ -126,9 +126,9 @@ impl Engine {
                     ));
                     None
                 }
-                Ok(Control::Step | Control::SetSpeed(_)) => {
+                Ok(Control::Step | Control::Seek(_) | Control::SetSpeed(_)) => {
                     let _ = self.tx.send(Telemetry::Error(
-                        "single-step and speed apply to the virtual clock only".into(),
+                        "single-step, scrubbing and speed apply to the virtual clock only".into(),
                     ));
                     None
                 }

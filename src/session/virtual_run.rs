@@ -2,6 +2,7 @@
 //! a time, paced against the wall clock at the chosen speed. Pacing decides only *when* an
 //! instant runs, never its order.
 
+use super::engine::TelemetryObserver;
 use super::engine::{live_metrics, Engine, Next};
 use super::protocol::{Control, Speed, Telemetry};
 use crate::config::RunConfig;
@@ -9,10 +10,11 @@ use crate::executor::ExecFigures;
 use crate::graph::{Graph, GraphHandles};
 use crate::recording::Recording;
 use crate::run::Command;
-use crate::runcore::{CoreOptions, RunCore, Step};
+use crate::runcore::{CoreOptions, RunCore, Step, HISTORY_EVERY};
 use crate::scheduler::{EndReason, RunEnd, VirtualScheduler};
 use crate::time::Nanos;
 use crossbeam_channel::RecvTimeoutError;
+use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
 impl Engine {
@@ -26,16 +28,28 @@ impl Engine {
         ros2: Option<&crate::ros2::Bridge>,
     ) -> (Next, RunEnd, Vec<u64>, Option<ExecFigures>) {
         let actuator_bit = 1u64 << (cfg.graph.actuator.0 % 64);
+        let policy = self.run_policy.clone();
+        let (tx, muted) = (self.tx.clone(), self.muted.clone());
         let mut core = RunCore::with_graph(
             cfg,
             graph,
             CoreOptions {
                 on_span: recording.as_ref().and_then(Recording::span_hook),
+                // Time travel (Control::Seek): a capture every second of run time; a graph
+                // whose captures replay makes its brain and telemetry again.
+                history_every: Some(HISTORY_EVERY),
+                remake_brain: Some(Box::new(move || {
+                    crate::checkpoint::load_policy(&policy).map_err(|e| e.to_string())
+                })),
+                remake_observers: Some(Box::new(move || {
+                    vec![Box::new(TelemetryObserver(tx.clone(), muted.clone()))
+                        as Box<dyn crate::graph::StepObserver>]
+                })),
                 ..CoreOptions::default()
             },
         );
-        // The lab never restores a capture that replays: these stay the graph's.
-        let handles = core.handles().clone();
+        // A seek back that replays builds a new graph: these are taken again after one.
+        let mut handles = core.handles().clone();
         let mut paused = self.settings.start_paused;
         let mut step_pending = false;
         let mut ended: Option<RunEnd> = None;
@@ -96,6 +110,12 @@ impl Engine {
                     Control::Step => {
                         if paused {
                             step_pending = true;
+                        }
+                    }
+                    Control::Seek(to) => {
+                        if paused {
+                            self.seek(&mut core, to, cfg, recording, ros2.is_some(), &mut ended);
+                            handles = core.handles().clone();
                         }
                     }
                     Control::SetSpeed(s) => {
@@ -169,25 +189,7 @@ impl Engine {
                 }
             }
             if let Some(end) = &ended {
-                let sched = core.scheduler();
-                let metrics = live_metrics(
-                    cfg,
-                    &handles,
-                    end,
-                    sched.ticks(),
-                    None,
-                    sched.figures(end.at),
-                );
-                let spans = core.scheduler_mut().take_spans();
-                if !spans.is_empty() {
-                    let _ = self.tx.send(Telemetry::Callbacks(spans));
-                }
-                let sched = core.scheduler();
-                self.status(sched.now(), paused, &handles, sched.skipped_ticks());
-                let _ = self.tx.send(Telemetry::Ended {
-                    metrics: Box::new(metrics),
-                    reason: end.reason.clone(),
-                });
+                self.tell_ended(cfg, &mut core, end, paused);
                 continue;
             }
             // Sleep until the next instant is due on the wall (or a few ms at most).
@@ -200,6 +202,91 @@ impl Engine {
                         std::thread::sleep((wake - now).min(Duration::from_millis(10)));
                     }
                 }
+            }
+        }
+    }
+
+    /// Tell the front end the run has ended (`end`): its last callbacks, status and summary.
+    fn tell_ended(&self, cfg: &RunConfig, core: &mut RunCore, end: &RunEnd, paused: bool) {
+        let handles = core.handles().clone();
+        let sched = core.scheduler();
+        let metrics = live_metrics(
+            cfg,
+            &handles,
+            end,
+            sched.ticks(),
+            None,
+            sched.figures(end.at),
+        );
+        let spans = core.scheduler_mut().take_spans();
+        if !spans.is_empty() {
+            let _ = self.tx.send(Telemetry::Callbacks(spans));
+        }
+        let sched = core.scheduler();
+        self.status(sched.now(), paused, &handles, sched.skipped_ticks());
+        let _ = self.tx.send(Telemetry::Ended {
+            metrics: Box::new(metrics),
+            reason: end.reason.clone(),
+        });
+    }
+
+    /// [`Control::Seek`] while paused. Forward, the run goes on to `to` (as steps do). Back —
+    /// not while recording or offered to ROS 2, which keep the run as it ran — the run core
+    /// restores and runs again to `to` with the step telemetry muted (the front end has those
+    /// steps), the run's log keeps the branch's commands, and the front end is told
+    /// [`Telemetry::Rewound`]; what runs next is a new branch.
+    fn seek(
+        &mut self,
+        core: &mut RunCore,
+        to: Nanos,
+        cfg: &RunConfig,
+        recording: &Option<Recording>,
+        offered: bool,
+        ended: &mut Option<RunEnd>,
+    ) {
+        let back = to < core.now();
+        if back && (recording.is_some() || offered) {
+            let why = if offered {
+                "offered to ROS 2"
+            } else {
+                "recorded"
+            };
+            let _ = self.tx.send(Telemetry::Error(format!(
+                "scrubbing back is off while the run is {why}: it keeps the run as it ran"
+            )));
+            return;
+        }
+        if !back && ended.is_some() {
+            return; // nothing runs after the end
+        }
+        self.muted.store(back, Ordering::Relaxed);
+        let result = core.seek(to.min(cfg.duration));
+        self.muted.store(false, Ordering::Relaxed);
+        if let Err(e) = result {
+            let _ = self.tx.send(Telemetry::Error(e.to_string()));
+            return;
+        }
+        let was_ended = ended.is_some();
+        *ended = core.end().cloned().map(|mut end| {
+            if end.reason == EndReason::Duration {
+                end.at = cfg.duration.min(core.now());
+            }
+            end
+        });
+        if back {
+            let _ = self.tx.send(Telemetry::Rewound { at: core.now() });
+            self.branch_log(core.applied());
+        }
+        let handles = core.handles().clone();
+        match ended.clone() {
+            Some(end) if !was_ended => self.tell_ended(cfg, core, &end, true),
+            _ => {
+                let spans = core.scheduler_mut().take_spans();
+                if !spans.is_empty() {
+                    let _ = self.tx.send(Telemetry::Callbacks(spans));
+                }
+                let sched = core.scheduler();
+                self.status(sched.now(), true, &handles, sched.skipped_ticks());
             }
         }
     }

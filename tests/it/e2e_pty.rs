@@ -838,3 +838,76 @@ fn a_program_s_own_kind_runs_in_its_lab() {
     }
     lab.quit();
 }
+
+/// Paused, Shift-← twice puts the run 2 s back: the clock reads 2.00 s less, the latency
+/// histogram holds exactly the actuator's ticks up to then (as a headless run that long),
+/// → moves on a tick, and a change there branches the run: the session log keeps only the
+/// branch's command.
+#[test]
+fn paused_the_arrows_move_through_the_run_and_a_change_branches_it() {
+    let _machine = crate::machine::alone();
+    let dir = tempfile::tempdir().unwrap();
+    let session = dir.path().join("s.session.json");
+    let mut lab = Lab::start_sized(
+        &["--clock", "virtual", "--session", session.to_str().unwrap()],
+        &[],
+        120,
+        40,
+    );
+    lab.wait_for("BALANCED", Duration::from_secs(60));
+    std::thread::sleep(Duration::from_millis(3500));
+    type_slowly(&mut lab, "-"); // 40 Hz from about 3.5 s: a command in the run's future
+    std::thread::sleep(Duration::from_millis(500));
+    type_slowly(&mut lab, " ");
+    let paused = lab.wait_for("PAUSED", Duration::from_secs(5));
+    let t = |s: &str| -> f64 {
+        s.split("│ t ")
+            .nth(1)
+            .and_then(|r| r.split(' ').next())
+            .and_then(|v| v.parse().ok())
+            .unwrap_or_else(|| panic!("no run time on screen:\n{s}"))
+    };
+    let n = |s: &str| -> u64 {
+        s.split("latency since the start: n=")
+            .nth(1)
+            .and_then(|r| r.split(' ').next())
+            .and_then(|v| v.parse().ok())
+            .unwrap_or_else(|| panic!("no latency count on screen:\n{s}"))
+    };
+    let t0 = t(&paused);
+    assert!(t0 > 3.5, "{paused}");
+    // Shift-← (xterm's CSI 1;2 D), twice: 2 s back, before the rate change.
+    for _ in 0..2 {
+        write!(lab.writer, "\x1b[1;2D").unwrap();
+        lab.writer.flush().unwrap();
+        std::thread::sleep(Duration::from_millis(400));
+    }
+    let back = lab.wait_for("back at t=", Duration::from_secs(5));
+    let t1 = t(&back);
+    assert!((t0 - 2.0 - t1).abs() < 1e-9, "{t0} → {t1}:\n{back}");
+    // The actuator ticks at 0, 20 ms, …, t1: each one a latency sample.
+    assert_eq!(n(&back), (t1 / 0.02).round() as u64 + 1, "{back}");
+    assert!(
+        back.contains("50 Hz set"),
+        "the 40 Hz change is in the future:\n{back}"
+    );
+    // → one actuator tick on.
+    write!(lab.writer, "\x1b[C").unwrap();
+    lab.writer.flush().unwrap();
+    let on = lab.wait_until("a tick on", Duration::from_secs(5), |s| {
+        (t(s) - (t1 + 0.02)).abs() < 1e-9
+    });
+    assert_eq!(n(&on), n(&back) + 1);
+    // A change here branches the run: the log keeps it alone.
+    type_slowly(&mut lab, "b");
+    lab.wait_for("control rate → 5 Hz", Duration::from_secs(5));
+    lab.quit();
+    let log: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&session).unwrap()).unwrap();
+    let commands = log["runs"][0]["commands"].as_array().unwrap();
+    assert_eq!(commands.len(), 1, "{commands:?}");
+    assert_eq!(commands[0]["cmd"], "set_control_hz", "{commands:?}");
+    assert_eq!(commands[0]["hz"], 5.0, "{commands:?}");
+    let at_s = commands[0]["at_ns"].as_u64().unwrap() as f64 / 1e9;
+    assert!((at_s - (t1 + 0.04)).abs() < 1e-9, "{at_s}");
+}
