@@ -767,7 +767,7 @@ fn an_exercise_whose_prediction_cannot_be_read_exits_1() {
 #[test]
 fn the_readme_s_lab_screen_is_the_snapshot_s() {
     let snap = std::fs::read_to_string(crate::repo(
-        "lab/tui/snapshots/ratelab__tui__tests__dropping_80x24.snap",
+        "lab/tui/snapshots/ratelab_lab__tui__tests__dropping_80x24.snap",
     ))
     .unwrap();
     let screen: Vec<String> = snap
