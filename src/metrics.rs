@@ -105,10 +105,14 @@ const BLOCK: usize = 512;
 /// have) further samples count in the histogram and the mean only, and the percentiles
 /// come from the histogram (3 significant digits). The HDR histogram is kept beside the
 /// samples for drawing buckets; the mean is exact (an integer sum).
+///
+/// A clone shares the blocks (copied on the next write to each): the run core captures a
+/// run's log every second of run time for seeking ([`crate::runcore`]), and a copy per
+/// capture would grow with the run.
 #[derive(Clone, Debug, Default)]
 pub struct ExactLatency {
     /// Sorted samples, ns: every block sorted, each block's values ≤ the next block's.
-    blocks: Vec<Vec<u64>>,
+    blocks: Vec<std::sync::Arc<Vec<u64>>>,
     /// Samples in `blocks`.
     kept: usize,
     /// Every sample (histogram and exact sum).
@@ -132,13 +136,14 @@ impl ExactLatency {
             .partition_point(|b| b.last().is_some_and(|&x| x <= v))
             .min(last);
         match self.blocks.get_mut(i) {
-            None => self.blocks.push(vec![v]),
+            None => self.blocks.push(std::sync::Arc::new(vec![v])),
             Some(b) => {
+                let b = std::sync::Arc::make_mut(b);
                 let j = b.partition_point(|&x| x <= v);
                 b.insert(j, v);
                 if b.len() > 2 * BLOCK {
                     let tail = b.split_off(BLOCK);
-                    self.blocks.insert(i + 1, tail);
+                    self.blocks.insert(i + 1, std::sync::Arc::new(tail));
                 }
             }
         }
@@ -1023,6 +1028,27 @@ mod tests {
             "200 ms is not below 200"
         );
         assert_eq!(s.count_below(Nanos(u64::MAX)), 5);
+    }
+
+    #[test]
+    fn a_clone_shares_its_blocks_and_keeps_its_samples_when_the_original_goes_on() {
+        let mut a: ExactLatency = (0..5_000u64).map(|i| Nanos(i * 7 % 1_000)).collect();
+        let b = a.clone();
+        assert!(a
+            .blocks
+            .iter()
+            .zip(&b.blocks)
+            .all(|(x, y)| std::sync::Arc::ptr_eq(x, y)));
+        for i in 0..5_000u64 {
+            a.record(Nanos(2_000 + i));
+        }
+        assert_eq!(b.count(), 5_000);
+        assert_eq!(b.max(), Some(Nanos(999)));
+        assert_eq!(b.count_below(Nanos(1_000)), 5_000);
+        assert_eq!(a.count(), 10_000);
+        assert_eq!(a.max(), Some(Nanos(6_999)));
+        assert_eq!(a.count_below(Nanos(1_000)), 5_000);
+        assert_eq!(a.quantile(0.5), Some(Nanos(999)));
     }
 
     #[test]
