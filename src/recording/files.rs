@@ -1,0 +1,124 @@
+//! Where recordings go and how their files are written: the default names (the graph, the
+//! clock, the settings), the first free name in a folder, the output rule
+//! ([`crate::output`]: a temporary file moved into place, replaced only with `--force`), the
+//! reason a full disk gives, and the recording id a virtual run derives from its settings.
+
+use super::*;
+
+/// `<graph>-` for any graph but the chapter's (`cartpole`), which keeps the names it had.
+pub(super) fn graph_prefix(cfg: &RunConfig) -> String {
+    if cfg.graph.name == "cartpole" {
+        String::new()
+    } else {
+        format!("{}-", cfg.graph.name)
+    }
+}
+
+/// `recordings/[<graph>-]<clock>-control<hz>-q<depth>-seed<seed>[-<n>].rrd` under `dir`: the
+/// first name not already taken (`-2`, `-3`, … are appended), so nothing is overwritten.
+pub fn default_path(dir: &Path, cfg: &RunConfig) -> PathBuf {
+    let chain = match (cfg.control_hz(), cfg.queue_depth()) {
+        (Some(hz), Some(depth)) => format!("-control{}-q{depth}", hz_label(hz)),
+        _ => String::new(),
+    };
+    first_free(
+        dir,
+        &format!("{}{}{chain}-seed{}", graph_prefix(cfg), cfg.clock, cfg.seed),
+    )
+}
+
+/// A lab session's recording: `lab-[<graph>-]<clock>-seed<seed>[-<n>].rrd` under `dir`, the
+/// first name not taken. No rate or depth in the name: the learner changes them during the
+/// session (the recording's summary gives them at the start and at the end, its events each
+/// change).
+pub fn default_lab_path(dir: &Path, cfg: &RunConfig) -> PathBuf {
+    first_free(
+        dir,
+        &format!("lab-{}{}-seed{}", graph_prefix(cfg), cfg.clock, cfg.seed),
+    )
+}
+
+pub(super) fn first_free(dir: &Path, stem: &str) -> PathBuf {
+    let first = dir.join(format!("{stem}.rrd"));
+    if !first.exists() {
+        return first;
+    }
+    (2..)
+        .map(|n| dir.join(format!("{stem}-{n}.rrd")))
+        .find(|p| !p.exists())
+        .expect("unbounded")
+}
+
+/// Check that `path` can be written before a run starts: not a folder, a symbolic link or
+/// another non-regular file, not an existing file (unless `force`), and in a folder where
+/// files can be created (a temporary file is created there and removed; the final name is
+/// never touched).
+///
+/// # Errors
+/// [`RecordingError`] naming the problem.
+pub fn check_output_path(path: &Path, force: bool) -> Result<(), RecordingError> {
+    let (pending, _file) = crate::output::PendingFile::create(path, force)?;
+    drop(pending); // removes the probe
+    Ok(())
+}
+
+/// Moves a recording's temporary file into place once, when finished or dropped.
+pub(super) struct Committer(pub(super) Mutex<Option<crate::output::PendingFile>>);
+
+impl Committer {
+    pub(super) fn commit(&self) -> Result<(), crate::output::OutputError> {
+        match self.0.lock().unwrap_or_else(|e| e.into_inner()).take() {
+            Some(mut p) => p.commit(),
+            None => Ok(()),
+        }
+    }
+}
+
+impl Drop for Committer {
+    fn drop(&mut self) {
+        // Best effort: a recording dropped unfinished keeps what it wrote.
+        let _ = self.commit();
+    }
+}
+
+/// Why a write in folder `dir` fails now, if it does: a page written to a temporary file
+/// there and synced (removed after). The reason behind a file writer that stopped.
+pub(super) fn writing_beside_fails(dir: &Path) -> Option<String> {
+    let dir = if dir.as_os_str().is_empty() {
+        Path::new(".")
+    } else {
+        dir
+    };
+    let path = dir.join(format!(".ratelab-probe.{}", std::process::id()));
+    let probe = || -> std::io::Result<()> {
+        // create_new: never through anything already at that name.
+        let mut f = std::fs::OpenOptions::new()
+            .write(true)
+            .create_new(true)
+            .open(&path)?;
+        std::io::Write::write_all(&mut f, &[0; 4096])?;
+        f.sync_all()
+    };
+    let failed = probe().err().map(|e| e.to_string());
+    let _ = std::fs::remove_file(&path);
+    failed
+}
+
+/// The recording id of a virtual run: derived from its settings, so two runs with the same
+/// settings write the same recording. `None` under the real clock (a random id).
+pub(super) fn deterministic_id(cfg: &RunConfig) -> Option<String> {
+    (cfg.clock == ClockKind::Virtual).then(|| {
+        let chain = match (cfg.sensor_hz(), cfg.control_hz(), cfg.queue_depth()) {
+            (Some(s), Some(c), Some(q)) => {
+                format!("-sensor{}-control{}-q{q}", hz_label(s), hz_label(c))
+            }
+            _ => String::new(),
+        };
+        format!(
+            "ratelab-{}virtual{chain}-seed{}-d{}",
+            graph_prefix(cfg),
+            cfg.seed,
+            cfg.duration.0
+        )
+    })
+}

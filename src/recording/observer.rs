@@ -1,0 +1,493 @@
+//! What a recording writes while the run goes: the step observer that turns every actuator
+//! step into rows (the plant, the action, the latency, the bus counters, QoS and liveliness
+//! events, the executor lanes), gathered into chunks and flushed in a fixed order
+//! ([`super::FLUSH_EVERY_STEPS`]), so a virtual run's recording is the same every time.
+
+use super::*;
+
+/// Where the change marks sit on the pole-angle plot: just above the upper fall limit.
+pub(super) const CHANGE_MARK_RAD: f64 = 0.24;
+
+/// The constant reference series (fall limits, rail ends, cart limits) at `t`: logged at the
+/// start, at every flush and at the end, so their lines span the run.
+pub(super) fn reference_lines(buf: &mut ChunkBuffer, t: Nanos, step: u64) {
+    for (name, sign) in [("upper", 1.0), ("lower", -1.0)] {
+        buf.scalar(
+            &format!("plant/fall_limit/{name}"),
+            t,
+            step,
+            sign * THETA_LIMIT_RAD,
+        );
+    }
+    for (name, sign) in [("right", 1.0), ("left", -1.0)] {
+        buf.scalar(
+            &format!("plant/rail_end/{name}"),
+            t,
+            step,
+            sign * RAIL_HALF_LENGTH_M,
+        );
+        buf.scalar(
+            &format!("plant/cart_limit/{name}"),
+            t,
+            step,
+            sign * CART_LIMIT_M,
+        );
+    }
+}
+
+pub(super) struct RecordingObserver {
+    rec: Recording,
+    shape: GraphShape,
+    /// Rates, depths and QoS as last logged.
+    last_state: Option<GraphState>,
+    /// (t, published per topic) over the last second.
+    window: VecDeque<(Nanos, Vec<u64>)>,
+    /// The next command sequence number not yet logged as published.
+    next_command: u64,
+    /// Per topic, the QoS counters logged so far: once reported, a series goes on to the
+    /// end of the run.
+    qos_logged: Vec<Vec<QosCounter>>,
+    /// Per topic, (offered, requested) deadline periods missed at the last step.
+    deadline_seen: Vec<(u64, u64)>,
+    /// Per node, its liveliness as last seen (`None` until it is logged: a node with a
+    /// lease, or one that has lost its liveliness).
+    live_seen: Vec<Option<LiveSeen>>,
+}
+
+impl RecordingObserver {
+    /// An observer writing `shape`'s run into `rec`, nothing logged yet.
+    pub(super) fn new(rec: Recording, shape: GraphShape) -> RecordingObserver {
+        RecordingObserver {
+            rec,
+            shape,
+            last_state: None,
+            window: VecDeque::new(),
+            next_command: 0,
+            qos_logged: Vec::new(),
+            deadline_seen: Vec::new(),
+            live_seen: Vec::new(),
+        }
+    }
+}
+
+/// A node's liveliness as the recording last saw it.
+#[derive(Clone, Copy)]
+struct LiveSeen {
+    alive: bool,
+    not_alive: u64,
+    last_asserted: Nanos,
+}
+
+impl RecordingObserver {
+    /// The node graph with its current labels: nodes (blue) and topics (amber) placed left
+    /// to right, edges publisher → topic → subscriber.
+    fn graph_rows(&self, buf: &mut ChunkBuffer, time: &TimePoint) {
+        let shape = &self.shape;
+        let (positions, _) = graph_positions(shape);
+        let label = |id: &str| {
+            if let Some(n) = shape.nodes.iter().find(|n| n.name == id) {
+                let rate = format!("{id} · {} Hz", hz_label(n.rate.hz()));
+                // Across processes, the node's process on a second line.
+                match &n.process {
+                    Some(p) => (format!("{rate}\nprocess {p}"), NODE_COLOR),
+                    None => (rate, NODE_COLOR),
+                }
+            } else {
+                let topic = shape.topics.iter().find(|t| t.name == id);
+                let depth = topic.map_or(0, |t| (t.stats)().depth);
+                // A topic with QoS beyond the depth shows it in short, a part a line under
+                // its name (`dl 30 ms zero`, `link 20%`), so the label stays about as wide
+                // as its neighbours (one line of every part made the graph's text tiny and
+                // the label covered its arrows); the chapter's keep-last/latest rule goes
+                // without saying (the depth is on the first line).
+                match topic.map(|t| (t.live_qos)()).filter(|q| !q.is_default()) {
+                    Some(q) => {
+                        let mut lines = vec![format!("{id} · depth {depth}")];
+                        lines.extend(
+                            q.short_parts(depth)
+                                .into_iter()
+                                .filter(|p| !(p.starts_with("KL") && p.ends_with(" latest"))),
+                        );
+                        (lines.join("\n"), TOPIC_COLOR)
+                    }
+                    None => (format!("{id} · depth {depth}"), TOPIC_COLOR),
+                }
+            }
+        };
+        let (labels, colors): (Vec<String>, Vec<Color>) = positions
+            .iter()
+            .map(|(id, _)| {
+                let (l, c) = label(id);
+                (l, rgb(c))
+            })
+            .unzip();
+        buf.add(
+            "graph",
+            time,
+            &rerun::GraphNodes::new(positions.iter().map(|(id, _)| id.as_str()))
+                .with_positions(positions.iter().map(|(_, p)| *p))
+                .with_labels(labels)
+                .with_colors(colors),
+        );
+        let mut edges = Vec::new();
+        for t in &shape.topics {
+            edges.push((t.publisher.clone(), t.name.clone()));
+            for s in &t.subscribers {
+                edges.push((t.name.clone(), s.clone()));
+            }
+        }
+        buf.add(
+            "graph",
+            time,
+            &rerun::GraphEdges::new(edges).with_directed_edges(),
+        );
+    }
+
+    /// What changed between two states, as one event line.
+    fn describe_change(&self, old: &GraphState, new: &GraphState) -> String {
+        let mut parts = Vec::new();
+        for (i, node) in self.shape.nodes.iter().enumerate() {
+            if old.rates.get(i) != new.rates.get(i) {
+                parts.push(format!(
+                    "{} rate {} → {} Hz",
+                    node.name,
+                    old.rates.get(i).map_or("?".into(), |h| hz_label(*h)),
+                    new.rates.get(i).map_or("?".into(), |h| hz_label(*h))
+                ));
+            }
+        }
+        for (i, topic) in self.shape.topics.iter().enumerate() {
+            let (d0, d1) = (
+                old.depths.get(i).copied().unwrap_or_default(),
+                new.depths.get(i).copied().unwrap_or_default(),
+            );
+            if d0 != d1 {
+                parts.push(format!("{} depth {d0} → {d1}", topic.name));
+            }
+            if let (Some(q0), Some(q1)) = (old.qos.get(i), new.qos.get(i)) {
+                if q0 != q1 {
+                    parts.push(format!(
+                        "{} QoS {} → {}",
+                        topic.name,
+                        q0.short(d1),
+                        q1.short(d1)
+                    ));
+                }
+            }
+        }
+        parts.join("; ")
+    }
+
+    /// The QoS counters and events of this step (nothing for the chapter's QoS): each topic's
+    /// reported counters as series under its `bus/<topic>/` entity, an event when a deadline
+    /// counter rose, each leased node's not-alive count, and an event when a node's
+    /// liveliness changed.
+    fn qos_rows(&mut self, buf: &mut ChunkBuffer, s: &StepRecord) {
+        let time = buf.at(s.t, s.step);
+        let n = self.shape.topics.len();
+        self.qos_logged.resize(n, Vec::new());
+        self.deadline_seen.resize(n, (0, 0));
+        for (i, topic) in self.shape.topics.iter().enumerate() {
+            // The actuator's counters at this step (deadline periods missed up to now
+            // count before the next message); the topic's own as a fallback.
+            let st = s
+                .topics
+                .as_slice()
+                .get(i)
+                .copied()
+                .unwrap_or_else(|| (topic.stats)());
+            let logged = &mut self.qos_logged[i];
+            for c in st.reported(&[topic.qos, (topic.live_qos)()]) {
+                if !logged.contains(&c) {
+                    logged.push(c);
+                    let color =
+                        QOS_COLORS[QosCounter::ALL.iter().position(|a| *a == c).unwrap_or(0)];
+                    series_style(
+                        buf,
+                        &qos_entity(topic, c),
+                        &format!("{} {}", topic.name, counter_words(c)),
+                        color,
+                    );
+                }
+            }
+            logged.sort_by_key(|c| QosCounter::ALL.iter().position(|a| a == c));
+            for c in logged.iter() {
+                buf.scalar(&qos_entity(topic, *c), s.t, s.step, st.counter(*c) as f64);
+            }
+            let (offered, requested) = (st.offered_deadline_missed, st.requested_deadline_missed);
+            let (o0, r0) = self.deadline_seen[i];
+            if offered > o0 || requested > r0 {
+                // A burst's first miss is said; misses within DEADLINE_EVENT_GAP of the last
+                // line are counted, and said with the next line or at the end.
+                let mut said = self
+                    .rec
+                    .deadline_said
+                    .lock()
+                    .unwrap_or_else(|e| e.into_inner());
+                let (so, sr, last) = match said.get(&topic.name) {
+                    Some(&(o, r, at)) => (o, r, Some(at)),
+                    None => (0, 0, None),
+                };
+                let quiet = last.is_none_or(|at| s.t.saturating_sub(at) > DEADLINE_EVENT_GAP);
+                if quiet {
+                    buf.add(
+                        "events",
+                        &time,
+                        &rerun::TextLog::new(deadline_line(
+                            &topic.name,
+                            (so, sr),
+                            (offered, requested),
+                            "",
+                        ))
+                        .with_level(rerun::components::TextLogLevel::WARN),
+                    );
+                    said.insert(topic.name.clone(), (offered, requested, s.t));
+                }
+            }
+            self.deadline_seen[i] = (offered.max(o0), requested.max(r0));
+        }
+        self.live_seen.resize(self.shape.nodes.len(), None);
+        for (i, node) in self.shape.nodes.iter().enumerate() {
+            let Some(live) = &node.liveliness else {
+                continue;
+            };
+            let status = live.status_at(s.t);
+            let lease = live.lease();
+            let seen = match self.live_seen[i] {
+                Some(seen) => seen,
+                None if lease.is_some() || status.not_alive > 0 => {
+                    let entity = not_alive_entity(&node.name);
+                    series_style(
+                        buf,
+                        &entity,
+                        &format!("{} not alive (times)", node.name),
+                        NOT_ALIVE_COLOR,
+                    );
+                    LiveSeen {
+                        alive: true,
+                        not_alive: 0,
+                        last_asserted: Nanos::ZERO,
+                    }
+                }
+                None => continue,
+            };
+            buf.scalar(
+                &not_alive_entity(&node.name),
+                s.t,
+                s.step,
+                status.not_alive as f64,
+            );
+            // Each loss at the instant its lease ran out (the node's last tick before it
+            // plus the lease), each return at the tick that brought the node back. A node
+            // still not alive has not ticked since its last assertion, so that instant is
+            // exact; one that lapsed and came back between two steps is dated from the
+            // tick seen at the step before.
+            if status.not_alive > seen.not_alive {
+                let before = if status.alive {
+                    seen.last_asserted
+                } else {
+                    status.last_asserted
+                };
+                let lapsed_at = before.saturating_add(lease.unwrap_or(Nanos::ZERO)).min(s.t);
+                let lease_text = lease.map_or(String::new(), |l| format!(" (lease {l})"));
+                let at = buf.at(lapsed_at, s.step);
+                buf.add(
+                    "events",
+                    &at,
+                    &rerun::TextLog::new(format!("node {} not alive{lease_text}", node.name))
+                        .with_level(rerun::components::TextLogLevel::WARN),
+                );
+            }
+            let came_back = status.alive && (!seen.alive || status.not_alive > seen.not_alive);
+            if came_back {
+                let at = buf.at(status.last_asserted, s.step);
+                buf.add(
+                    "events",
+                    &at,
+                    &rerun::TextLog::new(format!("node {} alive again", node.name))
+                        .with_level(rerun::components::TextLogLevel::INFO),
+                );
+            }
+            self.live_seen[i] = Some(LiveSeen {
+                alive: status.alive,
+                not_alive: status.not_alive,
+                last_asserted: status.last_asserted,
+            });
+        }
+    }
+}
+
+impl StepObserver for RecordingObserver {
+    fn attach(&mut self, h: &GraphHandles) {
+        self.shape = GraphShape::from_handles(h);
+        self.rec.attach(&self.shape);
+    }
+
+    fn on_step(&mut self, s: &StepRecord) {
+        self.rec
+            .last_step
+            .store(s.step, std::sync::atomic::Ordering::Relaxed);
+        self.rec
+            .last_step_ns
+            .store(s.t.0, std::sync::atomic::Ordering::Relaxed);
+        let rec = self.rec.clone();
+        let mut buf = rec.lock();
+        rec.log_due_events(&mut buf, s.t, s.step);
+        let time = buf.at(s.t, s.step);
+        let state = self.shape.state();
+        if self.last_state.as_ref() != Some(&state) {
+            match &self.last_state {
+                Some(old) => {
+                    buf.add(
+                        "events",
+                        &time,
+                        &rerun::TextLog::new(self.describe_change(old, &state))
+                            .with_level(rerun::components::TextLogLevel::INFO),
+                    );
+                    buf.scalar("plant/changes", s.t, s.step, CHANGE_MARK_RAD);
+                }
+                None => buf.scalar("plant/changes", Nanos::ZERO, 0, CHANGE_MARK_RAD),
+            }
+            self.graph_rows(&mut buf, &time);
+            self.last_state = Some(state);
+        }
+        let theta = s.pole_angle;
+        let force = s.action * FORCE_PER_CONTROL_N;
+        buf.add(
+            "world/cart",
+            &time,
+            &rerun::Transform3D::from_translation([s.cart_pos as f32, 0.0, 0.0]),
+        );
+        buf.add(
+            "world/cart/pole",
+            &time,
+            &rerun::Transform3D::from_rotation(rerun::RotationAxisAngle::new(
+                [0.0, 1.0, 0.0],
+                rerun::Angle::from_radians(theta as f32),
+            )),
+        );
+        buf.add(
+            "world/cart/force",
+            &time,
+            &rerun::Arrows3D::from_vectors([[(force * 0.04) as f32, 0.0, 0.0]])
+                .with_origins([[0.0, -0.06, 0.0]])
+                .with_colors([rgb(FORCE_COLOR)])
+                .with_radii([0.012])
+                .with_labels([format!("{force:+.1} N")]),
+        );
+        buf.scalar("plant/pole_angle_rad", s.t, s.step, theta);
+        buf.scalar("plant/cart_pos_m", s.t, s.step, s.cart_pos);
+        buf.scalar("action/applied_N", s.t, s.step, force);
+        if let Some(commands) = &self.shape.commands {
+            for msg in commands.peek_from(self.next_command) {
+                self.next_command = msg.seq + 1;
+                let asked = msg.data.newtons;
+                if asked.is_finite() {
+                    buf.scalar("action/published_N", msg.stamp, s.step, asked);
+                }
+            }
+        }
+        if let Some(lat) = s.latency {
+            buf.scalar("latency/sense_to_act_ms", s.t, s.step, lat.as_millis_f64());
+        }
+        if let Some(period) = self.shape.controller_period_ms() {
+            buf.scalar("latency/control_period_ms", s.t, s.step, period);
+        }
+        // Bus counters and msg/s over the last second of run time.
+        let stats: Vec<TopicStats> = self.shape.topics.iter().map(|t| (t.stats)()).collect();
+        self.window
+            .push_back((s.t, stats.iter().map(|st| st.published).collect()));
+        while self
+            .window
+            .front()
+            .is_some_and(|(t, _)| s.t.saturating_sub(*t) > Nanos::SECOND)
+        {
+            self.window.pop_front();
+        }
+        for (i, (topic, st)) in self.shape.topics.iter().zip(&stats).enumerate() {
+            let entity = topic.entity();
+            buf.scalar(
+                &format!("bus/{entity}/published"),
+                s.t,
+                s.step,
+                st.published as f64,
+            );
+            buf.scalar(
+                &format!("bus/{entity}/dropped"),
+                s.t,
+                s.step,
+                st.dropped as f64,
+            );
+            // The window from the topic's first counted message: the first step spans no
+            // time, and a topic counted by another process has no count before that
+            // process's first figures; either way no rate yet (not 0 msg/s, then a jump).
+            // Saturating: a topic's counters from another process may start over (it was
+            // restarted) or arrive from a peer that misbehaves.
+            let from = self
+                .window
+                .iter()
+                .find(|(_, counts)| counts.get(i).is_some_and(|n| *n > 0));
+            if let Some((t0, counts)) = from {
+                let span = s.t.saturating_sub(*t0).as_secs_f64();
+                if span > 0.0 {
+                    let rate = st.published.saturating_sub(counts[i]) as f64 / span;
+                    buf.scalar(&format!("bus/{entity}/msg_per_s"), s.t, s.step, rate);
+                }
+            }
+        }
+        {
+            let mut last = self
+                .rec
+                .last_step_published
+                .lock()
+                .unwrap_or_else(|e| e.into_inner());
+            for (topic, st) in self.shape.topics.iter().zip(&stats) {
+                match last.get_mut(&topic.name) {
+                    Some(n) => *n = st.published,
+                    None => {
+                        last.insert(topic.name.clone(), st.published);
+                    }
+                }
+            }
+        }
+        self.qos_rows(&mut buf, s);
+        if s.fell {
+            // A marker on the angle plot where the pole went past its limit.
+            buf.add(
+                "plant/fall",
+                &TimePoint::default(),
+                &rerun::SeriesPoints::new()
+                    .with_names(["the fall"])
+                    .with_colors([rgb(LIMIT_COLOR)])
+                    .with_marker_sizes([8.0])
+                    .with_markers([rerun::components::MarkerShape::Cross]),
+            );
+            buf.scalar("plant/fall", s.t, s.step, theta);
+            // …and in 3D: from the fall on, the pole is drawn red and labelled.
+            buf.add(
+                "world/cart/pole/fallen",
+                &time,
+                &rerun::Capsules3D::from_lengths_and_radii([1.0], [0.032])
+                    .with_colors([rgb(LIMIT_COLOR)]),
+            );
+            buf.add(
+                "world/cart/pole/fallen/label",
+                &time,
+                &rerun::Points3D::new([[0.0, 0.0, 0.6]])
+                    .with_colors([rgb(LIMIT_COLOR)])
+                    .with_radii([0.02])
+                    .with_labels([format!("FELL at {:.2} s", s.t.as_secs_f64())]),
+            );
+            let text = format!("FELL at t={:.2}s, θ = {:.3} rad", s.t.as_secs_f64(), theta);
+            buf.add(
+                "events",
+                &time,
+                &rerun::TextLog::new(text).with_level(rerun::components::TextLogLevel::WARN),
+            );
+        }
+        if s.step % FLUSH_EVERY_STEPS == 0 || s.fell {
+            reference_lines(&mut buf, s.t, s.step);
+            buf.send(&rec.rec);
+        }
+    }
+}
