@@ -32,7 +32,8 @@
 //!   labels, so topics are drawn as nodes of their own, as ROS's rqt_graph does, in another
 //!   colour; positions run left to right from the sources; labels show the rates and depths
 //!   (a topic with QoS beyond the depth shows it in short, a part a line under its name:
-//!   `dl 30 ms zero`, `link 20%`) and are re-logged when they change;
+//!   `dl 30 ms zero`, `link 20%`; a Python node's label says `python`) and are re-logged
+//!   when they change;
 //! - `nodes/<name>/lateness_us`: per-tick lateness of each node (real clock only);
 //! - across processes (a launch's recording): `bus/<topic>/wire_{p50,p99}_us` for each topic
 //!   that crosses processes (its samples' time on the wire so far, as the subscriber's

@@ -86,12 +86,15 @@ impl RecordingObserver {
         let (positions, _) = graph_positions(shape);
         let label = |id: &str| {
             if let Some(n) = shape.nodes.iter().find(|n| n.name == id) {
-                let rate = format!("{id} · {} Hz", hz_label(n.rate.hz()));
-                // Across processes, the node's process on a second line.
-                match &n.process {
-                    Some(p) => (format!("{rate}\nprocess {p}"), NODE_COLOR),
-                    None => (rate, NODE_COLOR),
+                let mut lines = vec![format!("{id} · {} Hz", hz_label(n.rate.hz()))];
+                // A Python node says so; across processes, the node's process follows.
+                if n.python {
+                    lines.push("python".to_string());
                 }
+                if let Some(p) = &n.process {
+                    lines.push(format!("process {p}"));
+                }
+                (lines.join("\n"), NODE_COLOR)
             } else {
                 let topic = shape.topics.iter().find(|t| t.name == id);
                 let depth = topic.map_or(0, |t| (t.stats)().depth);

@@ -23,6 +23,8 @@ pub struct NodeShape {
     pub liveliness: Option<Arc<Liveliness>>,
     /// The OS process it runs in, for a graph across processes (`None` in one process).
     pub process: Option<String>,
+    /// A learner's Python node (`kind = "python"`): its graph label says so.
+    pub python: bool,
 }
 
 impl NodeShape {
@@ -168,6 +170,7 @@ impl GraphShape {
                     rate: rate.clone(),
                     liveliness: liveliness.get(i).cloned(),
                     process: None,
+                    python: n.python.is_some(),
                 })
                 .collect(),
             topics: spec
@@ -267,6 +270,7 @@ pub(crate) mod tests {
                     rate: Rate::new(50.0).unwrap(),
                     liveliness: None,
                     process: None,
+                    python: false,
                 })
                 .collect(),
             topics: topics

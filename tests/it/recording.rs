@@ -1506,3 +1506,31 @@ fn what_a_python_node_writes_is_in_the_recording_per_node() {
     );
     assert!(lines.iter().all(|l| l == "tick here"), "{lines:?}");
 }
+
+/// A Python node says so on the node graph's label; a built-in node's label is its name and
+/// rate alone.
+#[test]
+fn a_python_node_is_marked_as_one_in_the_node_graph() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("python.rrd");
+    let cfg = RunConfig {
+        clock: ClockKind::Virtual,
+        duration: ratelab::Nanos::SECOND,
+        graph: ratelab::graph::GraphSpec::load(&crate::repo("graphs/cartpole-python.toml"))
+            .unwrap(),
+        ..RunConfig::default()
+    };
+    record(&path, &cfg, None);
+    let labels: Vec<String> = chunks(&path)
+        .iter()
+        .filter(|c| c.entity_path().to_string() == "/graph")
+        .flat_map(|c| c.iter_slices::<String>(rerun::GraphNodes::descriptor_labels().component))
+        .flatten()
+        .map(|s| s.as_str().to_string())
+        .collect();
+    assert!(
+        labels.iter().any(|l| l == "policy · 50 Hz\npython"),
+        "{labels:?}"
+    );
+    assert!(labels.iter().any(|l| l == "sensor · 50 Hz"), "{labels:?}");
+}
