@@ -1,6 +1,6 @@
 //! `ratelab bench`: the real clock's timing quality — per-node tick lateness (p50/p99/max)
 //! and CPU per node — with every node of the graph at one rate; and what a call into
-//! Python costs per tick.
+//! Python costs per tick. `--render` times the lab's frames, `--scrub` its time scrubbing.
 
 use crate::cli::BenchArgs;
 use ratelab::config::duration_from_secs;
@@ -39,6 +39,112 @@ pub fn render_bench(frames: usize) -> anyhow::Result<()> {
         times.quantile(0.99).unwrap_or_default(),
         times.max().unwrap_or_default()
     );
+    Ok(())
+}
+
+/// Time reaching instants of a 10-minute virtual run of the chapter's graph (a quarter of
+/// them in its last minute) as the lab's time scrubbing does, in its two halves: the
+/// engine's seek of the run core (restore the capture kept at or before the instant, one a
+/// second as the lab keeps them, and run on to it, the step telemetry muted), and the lab's
+/// fold of what the run told it up to the instant (its steps, and a status every 50 ms of
+/// run time: the lab's 30 a second at about ×1.7).
+pub fn scrub_bench(seeks: usize) -> anyhow::Result<()> {
+    use crate::tui::app::App;
+    use ratelab::runcore::{CoreOptions, RunCore, HISTORY_EVERY};
+    use ratelab::session::{Speed, Telemetry};
+    let cfg = RunConfig {
+        clock: ClockKind::Virtual,
+        duration: Nanos(600 * Nanos::SECOND.0),
+        ..RunConfig::default()
+    };
+    // What the run tells the lab: its steps (a run that keeps them) …
+    let trace = run(
+        &cfg,
+        Box::new(Scripted),
+        RunOptions {
+            keep_trace: true,
+            ..RunOptions::default()
+        },
+    )?
+    .trace;
+    // … and the engine's core, which keeps none, as the lab's does not.
+    let mut core = RunCore::new(
+        &cfg,
+        Box::new(Scripted),
+        CoreOptions {
+            history_every: Some(HISTORY_EVERY),
+            ..CoreOptions::default()
+        },
+    )?;
+    core.run_until(cfg.duration);
+    let last = core.now();
+    // The lab told the whole run.
+    let (tx, _controls) = crossbeam_channel::unbounded();
+    let mut app = App::new(tx, "scripted".into(), None, Speed::Times(1.0));
+    app.on_telemetry(Telemetry::Started {
+        cfg: cfg.clone(),
+        policy: "scripted".into(),
+        recording: None,
+    });
+    let status_every = Nanos(50 * Nanos::MILLISECOND.0);
+    let mut next_status = Nanos::ZERO;
+    let mut told = 1usize;
+    for s in &trace {
+        app.on_telemetry(Telemetry::Step(Box::new(*s)));
+        told += 1;
+        if s.t >= next_status {
+            app.on_telemetry(Telemetry::Status {
+                now: s.t,
+                paused: false,
+                speed: Speed::Times(1.0),
+                rates: vec![50.0; 3],
+                depths: vec![1, 1],
+                qos: vec![ratelab::qos::TopicQos::default(); 2],
+                alive: vec![None; 3],
+                policy: "scripted".into(),
+                exec: None,
+                topics: Some(Box::new(s.topics)),
+            });
+            told += 1;
+            next_status = s.t.saturating_add(status_every);
+        }
+    }
+    let (mut engine, mut lab) = (
+        ratelab::metrics::LatencyStats::default(),
+        ratelab::metrics::LatencyStats::default(),
+    );
+    let mut k = 0u64;
+    for i in 0..seeks {
+        // Spread over the run, none on a capture; every fourth in the last minute.
+        k = (k + 7_919) % 599_000;
+        let ms = if i % 4 == 3 { 540_000 + k % 59_000 } else { k } + 500;
+        let at = Nanos(ms * Nanos::MILLISECOND.0).min(last);
+        let start = std::time::Instant::now();
+        core.seek(at)?;
+        engine.record(Nanos::from(start.elapsed()));
+        let start = std::time::Instant::now();
+        app.on_telemetry(Telemetry::Rewound { at: core.now() });
+        lab.record(Nanos::from(start.elapsed()));
+        // Back to the end, as the lab would be told it again (not timed).
+        core.seek(last)?;
+        for s in trace.iter().filter(|s| s.t > at) {
+            app.on_telemetry(Telemetry::Step(Box::new(*s)));
+        }
+    }
+    let row = |what: &str, t: &ratelab::metrics::LatencyStats| {
+        println!(
+            "{what}: mean {} | p50 {} | p99 {} | max {}",
+            Nanos(t.mean().unwrap_or(0.0) as u64),
+            t.quantile(0.5).unwrap_or_default(),
+            t.quantile(0.99).unwrap_or_default(),
+            t.max().unwrap_or_default()
+        );
+    };
+    println!(
+        "reaching an instant of a 10-minute virtual run ({seeks} seeks; the lab told {told} messages):"
+    );
+    row("  engine: restore + run on (run core)", &engine);
+    row("  lab: fold the journal up to it", &lab);
     Ok(())
 }
 
@@ -82,6 +188,9 @@ fn print_row(hz: f64, t: &NodeTiming, wall: Duration) {
 pub fn run_bench(a: &BenchArgs, stop: StopFlag) -> anyhow::Result<()> {
     if a.render {
         return render_bench(2000);
+    }
+    if a.scrub {
+        return scrub_bench(100);
     }
     let duration = duration_from_secs(a.duration)?;
     let graph = crate::headless::graph_from_args(&a.graph)?;

@@ -546,6 +546,10 @@ pub struct BenchArgs {
     /// Instead: time the lab's frame rendering at 120×40 (view model + draw).
     #[arg(long)]
     pub render: bool,
+    /// Instead: time reaching instants of a 10-minute virtual run as the lab's scrubbing
+    /// does (the engine's seek and the lab's fold of what it was told).
+    #[arg(long, conflicts_with = "render")]
+    pub scrub: bool,
     /// The graph whose nodes are timed (every node at each --hz).
     #[command(flatten)]
     pub graph: GraphArgs,

@@ -295,6 +295,25 @@ fn cliff_prints_one_rate_per_seed_with_one_decimal() {
 }
 
 #[test]
+fn bench_scrub_times_both_halves_of_reaching_an_instant() {
+    let _m = crate::machine::shared();
+    // Shape only: timings on a shared machine are not asserted anywhere.
+    let o = ratelab(&["bench", "--scrub"]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        out.contains("10-minute virtual run (100 seeks; the lab told 40003 messages)"),
+        "{out}"
+    );
+    for half in [
+        "engine: restore + run on (run core): mean ",
+        "lab: fold the journal up to it: mean ",
+    ] {
+        assert!(out.contains(half), "{half}: {out}");
+    }
+}
+
+#[test]
 fn bench_prints_the_bare_wait_floor_then_each_node() {
     // Shape only: timings on a shared machine are not asserted anywhere.
     let o = ratelab(&["bench", "--hz", "200", "--duration", "0.5", "--stagger"]);
