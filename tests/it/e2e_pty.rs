@@ -842,17 +842,24 @@ fn a_program_s_own_kind_runs_in_its_lab() {
 /// Paused, Shift-← twice puts the run 2 s back: the clock reads 2.00 s less, the latency
 /// histogram holds exactly the actuator's ticks up to then (as a headless run that long),
 /// → moves on a tick, and a change there branches the run: the session log keeps only the
-/// branch's command.
+/// branch's command. At 80×24 and 120×40.
 #[test]
 fn paused_the_arrows_move_through_the_run_and_a_change_branches_it() {
     let _machine = crate::machine::alone();
+    for (cols, rows) in [(80, 24), (120, 40)] {
+        scrub_at(cols, rows);
+    }
+}
+
+/// [`paused_the_arrows_move_through_the_run_and_a_change_branches_it`] at one size.
+fn scrub_at(cols: u16, rows: u16) {
     let dir = tempfile::tempdir().unwrap();
     let session = dir.path().join("s.session.json");
     let mut lab = Lab::start_sized(
         &["--clock", "virtual", "--session", session.to_str().unwrap()],
         &[],
-        120,
-        40,
+        cols,
+        rows,
     );
     lab.wait_for("BALANCED", Duration::from_secs(60));
     std::thread::sleep(Duration::from_millis(3500));
