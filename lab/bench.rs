@@ -33,13 +33,21 @@ pub fn render_bench(frames: usize) -> anyhow::Result<()> {
         times.record(Nanos::from(start.elapsed()));
     }
     println!(
-        "lab frame at 120x40 (view model + draw), {frames} frames: mean {} | p50 {} | p99 {} | max {}",
-        Nanos(times.mean().unwrap_or(0.0) as u64),
-        times.quantile(0.5).unwrap_or_default(),
-        times.quantile(0.99).unwrap_or_default(),
-        times.max().unwrap_or_default()
+        "lab frame at 120x40 (view model + draw), {frames} frames: {}",
+        spread(&times)
     );
     Ok(())
+}
+
+/// `mean … | p50 … | p99 … | max …` of timings.
+fn spread(t: &ratelab::metrics::LatencyStats) -> String {
+    format!(
+        "mean {} | p50 {} | p99 {} | max {}",
+        Nanos(t.mean().unwrap_or(0.0) as u64),
+        t.quantile(0.5).unwrap_or_default(),
+        t.quantile(0.99).unwrap_or_default(),
+        t.max().unwrap_or_default()
+    )
 }
 
 /// Time reaching instants of a 10-minute virtual run of the chapter's graph (a quarter of
@@ -131,15 +139,7 @@ pub fn scrub_bench(seeks: usize) -> anyhow::Result<()> {
             app.on_telemetry(Telemetry::Step(Box::new(*s)));
         }
     }
-    let row = |what: &str, t: &ratelab::metrics::LatencyStats| {
-        println!(
-            "{what}: mean {} | p50 {} | p99 {} | max {}",
-            Nanos(t.mean().unwrap_or(0.0) as u64),
-            t.quantile(0.5).unwrap_or_default(),
-            t.quantile(0.99).unwrap_or_default(),
-            t.max().unwrap_or_default()
-        );
-    };
+    let row = |what: &str, t: &ratelab::metrics::LatencyStats| println!("{what}: {}", spread(t));
     println!(
         "reaching an instant of a 10-minute virtual run ({seeks} seeks; the lab told {told} messages):"
     );

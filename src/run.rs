@@ -134,11 +134,8 @@ pub fn run(
     let start = Instant::now();
     let (end, ticks, timing, exec) = match driver {
         Driver::Virtual(mut core) => {
-            let end = loop {
-                if opts.stop.is_stopped() {
-                    break core.interrupt();
-                }
-                if let (Some(b), Some(t)) = (&bridge, core.next_instant()) {
+            let end = core.run_to_end_with(&opts.stop, |t| {
+                if let Some(b) = &bridge {
                     // Keep pace with the wall clock, then tell ROS 2 the time.
                     let due = start + Duration::from_nanos(t.0);
                     if let Some(wait) = due.checked_duration_since(Instant::now()) {
@@ -146,10 +143,7 @@ pub fn run(
                     }
                     b.clock(t);
                 }
-                if let crate::runcore::Step::Ended(end) = core.step() {
-                    break end;
-                }
-            };
+            });
             let exec = core.scheduler().figures(end.at);
             (end, core.scheduler().ticks().to_vec(), None, exec)
         }

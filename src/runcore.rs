@@ -411,12 +411,25 @@ impl RunCore {
     /// Run to the end, checking `stop` before each instant (a stop ends the run as
     /// interrupted at the newest instant run).
     pub fn run_to_end(&mut self, stop: &StopFlag) -> RunEnd {
+        self.run_to_end_with(stop, |_| {})
+    }
+
+    /// [`RunCore::run_to_end`], calling `before_instant(t)` before each instant with its
+    /// run time (the place to keep pace with the wall clock).
+    pub fn run_to_end_with(
+        &mut self,
+        stop: &StopFlag,
+        mut before_instant: impl FnMut(Nanos),
+    ) -> RunEnd {
         loop {
             if let Some(end) = &self.end {
                 return end.clone();
             }
             if stop.is_stopped() {
                 return self.interrupt();
+            }
+            if let Some(t) = self.next_instant() {
+                before_instant(t);
             }
             self.step();
         }

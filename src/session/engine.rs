@@ -53,7 +53,15 @@ pub const JUDGE_FOR: Nanos = Nanos(30 * Nanos::SECOND.0);
 /// Streams step records to the front end.
 /// Streams step records to the front end, unless muted (while a seek back runs the run again
 /// to the instant asked for: the front end has those steps already).
-pub(super) struct TelemetryObserver(pub(super) Sender<Telemetry>, pub(super) Arc<AtomicBool>);
+#[derive(Clone)]
+pub(super) struct TelemetryObserver(Sender<Telemetry>, Arc<AtomicBool>);
+
+impl TelemetryObserver {
+    /// A boxed copy, for a graph's observers.
+    pub(super) fn observer(&self) -> Box<dyn StepObserver> {
+        Box::new(self.clone())
+    }
+}
 
 impl StepObserver for TelemetryObserver {
     fn on_step(&mut self, rec: &StepRecord) {
@@ -203,10 +211,7 @@ impl Engine {
             }
             None => None,
         };
-        let mut observers: Vec<Box<dyn StepObserver>> = vec![Box::new(TelemetryObserver(
-            self.tx.clone(),
-            self.muted.clone(),
-        ))];
+        let mut observers = vec![self.telemetry_observer().observer()];
         if let Some(r) = &recording {
             observers.push(r.observer());
         }
@@ -403,6 +408,11 @@ impl Engine {
                 let _ = self.tx.send(Telemetry::Error(e));
             }
         }
+    }
+
+    /// The step telemetry to the front end, muted while a seek back runs the run again.
+    pub(super) fn telemetry_observer(&self) -> TelemetryObserver {
+        TelemetryObserver(self.tx.clone(), self.muted.clone())
     }
 
     /// The run went back and branched ([`Control::Seek`]): its log holds the commands of the

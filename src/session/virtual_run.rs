@@ -2,7 +2,6 @@
 //! a time, paced against the wall clock at the chosen speed. Pacing decides only *when* an
 //! instant runs, never its order.
 
-use super::engine::TelemetryObserver;
 use super::engine::{live_metrics, Engine, Next};
 use super::protocol::{Control, Speed, Telemetry};
 use crate::config::RunConfig;
@@ -29,7 +28,7 @@ impl Engine {
     ) -> (Next, RunEnd, Vec<u64>, Option<ExecFigures>) {
         let actuator_bit = 1u64 << (cfg.graph.actuator.0 % 64);
         let policy = self.run_policy.clone();
-        let (tx, muted) = (self.tx.clone(), self.muted.clone());
+        let telemetry = self.telemetry_observer();
         let mut core = RunCore::with_graph(
             cfg,
             graph,
@@ -41,10 +40,7 @@ impl Engine {
                 remake_brain: Some(Box::new(move || {
                     crate::checkpoint::load_policy(&policy).map_err(|e| e.to_string())
                 })),
-                remake_observers: Some(Box::new(move || {
-                    vec![Box::new(TelemetryObserver(tx.clone(), muted.clone()))
-                        as Box<dyn crate::graph::StepObserver>]
-                })),
+                remake_observers: Some(Box::new(move || vec![telemetry.observer()])),
                 ..CoreOptions::default()
             },
         );
@@ -136,12 +132,7 @@ impl Engine {
                 }
             }
             if last_status.elapsed() >= Duration::from_millis(33) {
-                let spans = core.scheduler_mut().take_spans();
-                if !spans.is_empty() {
-                    let _ = self.tx.send(Telemetry::Callbacks(spans));
-                }
-                let sched = core.scheduler();
-                self.status(sched.now(), paused, &handles, sched.skipped_ticks());
+                self.tell_status(&mut core, paused);
                 last_status = Instant::now();
             }
             if ended.is_some() || (paused && !step_pending) {
@@ -170,12 +161,8 @@ impl Engine {
                 }
                 let actuator_ticked = match core.step() {
                     Step::Ran { ticked, .. } => ticked & actuator_bit != 0,
-                    Step::Ended(mut end) => {
-                        if end.reason == EndReason::Duration {
-                            // The lab's run ends at its last instant.
-                            end.at = cfg.duration.min(core.now());
-                        }
-                        ended = Some(end);
+                    Step::Ended(end) => {
+                        ended = Some(lab_end(end, cfg, &core));
                         break;
                     }
                 };
@@ -218,12 +205,7 @@ impl Engine {
             None,
             sched.figures(end.at),
         );
-        let spans = core.scheduler_mut().take_spans();
-        if !spans.is_empty() {
-            let _ = self.tx.send(Telemetry::Callbacks(spans));
-        }
-        let sched = core.scheduler();
-        self.status(sched.now(), paused, &handles, sched.skipped_ticks());
+        self.tell_status(core, paused);
         let _ = self.tx.send(Telemetry::Ended {
             metrics: Box::new(metrics),
             reason: end.reason.clone(),
@@ -267,28 +249,25 @@ impl Engine {
             return;
         }
         let was_ended = ended.is_some();
-        *ended = core.end().cloned().map(|mut end| {
-            if end.reason == EndReason::Duration {
-                end.at = cfg.duration.min(core.now());
-            }
-            end
-        });
+        *ended = core.end().cloned().map(|end| lab_end(end, cfg, core));
         if back {
             let _ = self.tx.send(Telemetry::Rewound { at: core.now() });
             self.branch_log(core.applied());
         }
-        let handles = core.handles().clone();
         match ended.clone() {
             Some(end) if !was_ended => self.tell_ended(cfg, core, &end, true),
-            _ => {
-                let spans = core.scheduler_mut().take_spans();
-                if !spans.is_empty() {
-                    let _ = self.tx.send(Telemetry::Callbacks(spans));
-                }
-                let sched = core.scheduler();
-                self.status(sched.now(), true, &handles, sched.skipped_ticks());
-            }
+            _ => self.tell_status(core, true),
         }
+    }
+
+    /// Tell the front end the callbacks run since it was last told, then the status now.
+    fn tell_status(&self, core: &mut RunCore, paused: bool) {
+        let spans = core.scheduler_mut().take_spans();
+        if !spans.is_empty() {
+            let _ = self.tx.send(Telemetry::Callbacks(spans));
+        }
+        let sched = core.scheduler();
+        self.status(sched.now(), paused, core.handles(), sched.skipped_ticks());
     }
 
     /// Leave the run for `next`: how it ended (interrupted now, unless it had ended), each
@@ -310,6 +289,14 @@ impl Engine {
             sched.figures(sched.now()),
         )
     }
+}
+
+/// How the lab says a run ended: a run that reached its duration ends at its last instant.
+fn lab_end(mut end: RunEnd, cfg: &RunConfig, core: &RunCore) -> RunEnd {
+    if end.reason == EndReason::Duration {
+        end.at = cfg.duration.min(core.now());
+    }
+    end
 }
 
 /// The node a rate command changes, if it is one.
