@@ -365,53 +365,6 @@ fn a_brain_asleep_in_a_c_call_is_interrupted_by_the_first_ctrl_c() {
     }
 }
 
-/// A brain that loops forever holds the virtual clock: Ctrl-C stops it, and the headline
-/// says it hung (not that the node failed), when, for how long, and where; so does
-/// `metrics.json`'s `node_failed`.
-#[test]
-fn a_brain_looping_forever_is_named_hung_when_ctrl_c_stops_it() {
-    let _m = crate::machine::alone();
-    let dir = tempfile::tempdir().unwrap();
-    let p = script(
-        dir.path(),
-        "spin.py",
-        "def act(obs):\n    while True:\n        pass\n",
-    );
-    let out = dir.path().join("out");
-    let child = Command::new(env!("CARGO_BIN_EXE_ratelab"))
-        .args(["run", "--clock", "virtual", "--policy", p.to_str().unwrap()])
-        .arg("--out")
-        .arg(&out)
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    std::thread::sleep(Duration::from_millis(2000));
-    // SAFETY: plain kill(2) on our child.
-    unsafe { libc::kill(child.id() as i32, libc::SIGINT) };
-    let o = child.wait_with_output().unwrap();
-    let stdout = String::from_utf8_lossy(&o.stdout);
-    let headline = stdout
-        .lines()
-        .find(|l| l.contains("HUNG"))
-        .unwrap_or_else(|| panic!("no HUNG headline: {stdout}"));
-    assert!(
-        headline.contains("HUNG in policy's callback at t=0.00s (ran ")
-            && headline.contains(&format!(
-                "s without returning; Ctrl-C interrupted it at {}:",
-                p.display()
-            )),
-        "{headline}"
-    );
-    assert!(!stdout.contains("NODE FAILED"), "{stdout}");
-    let metrics = std::fs::read_to_string(out.join("metrics.json")).unwrap();
-    assert!(
-        metrics.contains("\"node_failed\": \"policy: hung: ran "),
-        "{metrics}"
-    );
-    assert_eq!(o.status.code(), Some(130), "{}", stderr(&o));
-}
-
 /// A node that fails (an exception, `sys.exit`) fails the run in every layout: `run`, a
 /// launch in one process and a launch across processes, under either clock, exit 2 with
 /// one line naming the node, after the summary.
@@ -466,6 +419,9 @@ fn a_failed_node_exits_2_in_every_layout() {
     }
 }
 
+/// A brain that loops forever (under the virtual clock it holds the clock) is reported after
+/// 2 s, Ctrl-C ends the run within a second, and the headline says it hung (not that the
+/// node failed), when, for how long and where; so does `metrics.json`'s `node_failed`.
 #[test]
 fn a_brain_that_never_returns_is_reported_and_ctrl_c_ends_the_run_within_a_second() {
     let _m = crate::machine::alone();
@@ -475,33 +431,64 @@ fn a_brain_that_never_returns_is_reported_and_ctrl_c_ends_the_run_within_a_secon
         "hang.py",
         "def act(obs):\n    while True:\n        pass\n",
     );
-    let child = Command::new(env!("CARGO_BIN_EXE_ratelab"))
-        .args(["run", "--clock", "real", "--policy", p.to_str().unwrap()])
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    // The watchdog reports the callback after 2 s; Ctrl-C at 3 s.
-    std::thread::sleep(Duration::from_millis(3000));
-    let sent = Instant::now();
-    // SAFETY: plain kill(2) on our child.
-    unsafe { libc::kill(child.id() as i32, libc::SIGINT) };
-    let o = child.wait_with_output().unwrap();
-    let took = sent.elapsed();
-    let err = stderr(&o);
-    assert!(took < Duration::from_secs(1), "took {took:?}: {err}");
-    assert!(
-        err.contains(&format!(
-            "the brain {}:act() has not returned after 2 s",
-            p.display()
-        )),
-        "{err}"
-    );
-    assert!(
-        err.contains(&format!("Ctrl-C interrupted it at {}:", p.display())),
-        "{err}"
-    );
-    assert_eq!(o.status.code(), Some(130), "{err}");
+    for clock in ["real", "virtual"] {
+        let out = dir.path().join(clock);
+        let child = Command::new(env!("CARGO_BIN_EXE_ratelab"))
+            .args(["run", "--clock", clock, "--policy", p.to_str().unwrap()])
+            .arg("--out")
+            .arg(&out)
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap();
+        // The watchdog reports the callback after 2 s; Ctrl-C at 3 s.
+        std::thread::sleep(Duration::from_millis(3000));
+        let sent = Instant::now();
+        // SAFETY: plain kill(2) on our child.
+        unsafe { libc::kill(child.id() as i32, libc::SIGINT) };
+        let o = child.wait_with_output().unwrap();
+        let took = sent.elapsed();
+        let err = stderr(&o);
+        assert!(
+            took < Duration::from_secs(1),
+            "{clock}: took {took:?}: {err}"
+        );
+        assert!(
+            err.contains(&format!(
+                "the brain {}:act() has not returned after 2 s",
+                p.display()
+            )),
+            "{clock}: {err}"
+        );
+        assert!(
+            err.contains(&format!("Ctrl-C interrupted it at {}:", p.display())),
+            "{clock}: {err}"
+        );
+        let stdout = String::from_utf8_lossy(&o.stdout);
+        let headline = stdout
+            .lines()
+            .find(|l| l.contains("HUNG"))
+            .unwrap_or_else(|| panic!("{clock}: no HUNG headline: {stdout}"));
+        assert!(
+            headline.contains("HUNG in policy's callback at t=")
+                && headline.contains(&format!(
+                    "s without returning; Ctrl-C interrupted it at {}:",
+                    p.display()
+                )),
+            "{clock}: {headline}"
+        );
+        if clock == "virtual" {
+            // The clock held at the first tick.
+            assert!(headline.contains("at t=0.00s (ran "), "{headline}");
+        }
+        assert!(!stdout.contains("NODE FAILED"), "{clock}: {stdout}");
+        let metrics = std::fs::read_to_string(out.join("metrics.json")).unwrap();
+        assert!(
+            metrics.contains("\"node_failed\": \"policy: hung: ran "),
+            "{clock}: {metrics}"
+        );
+        assert_eq!(o.status.code(), Some(130), "{clock}: {err}");
+    }
 }
 
 /// A Python node's tick that never returns is reported after 100 of the node's periods

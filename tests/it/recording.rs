@@ -52,6 +52,17 @@ fn record_with(
     r.metrics
 }
 
+/// Every label the node graph (`/graph`) was logged with, in the order logged.
+fn graph_labels(chunks: &[Chunk]) -> Vec<String> {
+    chunks
+        .iter()
+        .filter(|c| c.entity_path().to_string() == "/graph")
+        .flat_map(|c| c.iter_slices::<String>(rerun::GraphNodes::descriptor_labels().component))
+        .flatten()
+        .map(|s| s.as_str().to_string())
+        .collect()
+}
+
 /// The recording store's chunks, in file order.
 pub(crate) fn chunks(path: &Path) -> Vec<Chunk> {
     let file = std::io::BufReader::new(std::fs::File::open(path).unwrap());
@@ -862,12 +873,7 @@ fn mid_run_changes_are_events_graph_labels_and_marks() {
         .map(|c| c.num_rows())
         .sum();
     assert_eq!(marks, 3, "the start and two changes");
-    let labels: Vec<String> = of("/graph")
-        .into_iter()
-        .flat_map(|c| c.iter_slices::<String>(rerun::GraphNodes::descriptor_labels().component))
-        .flatten()
-        .map(|s| s.as_str().to_string())
-        .collect();
+    let labels = graph_labels(&all);
     assert!(labels.iter().any(|l| l == "/obs · depth 5"), "{labels:?}");
     assert!(labels.iter().any(|l| l == "policy · 10 Hz"), "{labels:?}");
 }
@@ -1153,13 +1159,7 @@ fn a_qos_run_plots_its_counters_and_logs_its_events() {
     assert_eq!(at("node policy alive again").0, 2_300_000_000);
     // The graph labels the topic with its QoS in short, a part a line (the chapter's
     // keep-last/latest goes without saying).
-    let labels: Vec<String> = all
-        .iter()
-        .filter(|c| c.entity_path().to_string() == "/graph")
-        .flat_map(|c| c.iter_slices::<String>(rerun::GraphNodes::descriptor_labels().component))
-        .flatten()
-        .map(|s| s.as_str().to_string())
-        .collect();
+    let labels = graph_labels(&all);
     assert!(
         labels
             .iter()
@@ -1521,13 +1521,7 @@ fn a_python_node_is_marked_as_one_in_the_node_graph() {
         ..RunConfig::default()
     };
     record(&path, &cfg, None);
-    let labels: Vec<String> = chunks(&path)
-        .iter()
-        .filter(|c| c.entity_path().to_string() == "/graph")
-        .flat_map(|c| c.iter_slices::<String>(rerun::GraphNodes::descriptor_labels().component))
-        .flatten()
-        .map(|s| s.as_str().to_string())
-        .collect();
+    let labels = graph_labels(&chunks(&path));
     assert!(
         labels.iter().any(|l| l == "policy · 50 Hz\npython"),
         "{labels:?}"
