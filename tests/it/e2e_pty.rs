@@ -883,15 +883,24 @@ fn scrub_at(cols: u16, rows: u16) {
     };
     let t0 = t(&paused);
     assert!(t0 > 3.5, "{paused}");
-    // Shift-← (xterm's CSI 1;2 D), twice: 2 s back, before the rate change.
+    // Shift-← (xterm's CSI 1;2 D), twice: 2 s back, before the rate change. Each goes a
+    // second back from the instant on screen, so the second waits for the first to show.
+    let mut back = paused;
     for _ in 0..2 {
+        let from = t(&back);
         write!(lab.writer, "\x1b[1;2D").unwrap();
         lab.writer.flush().unwrap();
-        std::thread::sleep(Duration::from_millis(400));
+        back = lab.wait_until("a second back", Duration::from_secs(10), |s| {
+            s.contains("back at t=") && t(s) < from - 0.5
+        });
     }
-    let back = lab.wait_for("back at t=", Duration::from_secs(5));
     let t1 = t(&back);
-    assert!((t0 - 2.0 - t1).abs() < 1e-9, "{t0} → {t1}:\n{back}");
+    // A seek lands on the run's last instant at or before its target. The pause may land
+    // on any node's instant (the policy's 40 Hz grid among them); before the rate change
+    // every node ticks on the 20 ms grid, so two seconds back is that grid's instant at or
+    // before t0 - 2 s.
+    let want = ((t0 - 2.0) / 0.02 + 1e-6).floor() * 0.02;
+    assert!((t1 - want).abs() < 1e-9, "{t0} → {t1}, not {want}:\n{back}");
     // The actuator ticks at 0, 20 ms, …, t1: each one a latency sample.
     assert_eq!(n(&back), (t1 / 0.02).round() as u64 + 1, "{back}");
     assert!(
