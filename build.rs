@@ -5,15 +5,15 @@
 //!    prediction check is reported as *ignored* (not passed) until the learner writes one.
 
 fn main() {
-    // Both packages of the workspace build with this script; the exercise files are at the
-    // repository's top, which is the library's folder and the lab's parent.
+    // Every package of the workspace but the core builds with this script; the exercise
+    // files are at the repository's top, the nearest folder up that has them.
     let manifest =
         std::path::PathBuf::from(std::env::var("CARGO_MANIFEST_DIR").unwrap_or_default());
-    let root = if manifest.join("exercises").is_dir() {
-        manifest
-    } else {
-        manifest.join("..")
-    };
+    let root = manifest
+        .ancestors()
+        .find(|d| d.join("exercises").is_dir())
+        .unwrap_or(&manifest)
+        .to_path_buf();
     println!("cargo:rerun-if-env-changed=MUJOCO_DYNAMIC_LINK_DIR");
     if let Ok(dir) = std::env::var("MUJOCO_DYNAMIC_LINK_DIR") {
         println!("cargo:rustc-link-arg=-Wl,-rpath,{dir}");

@@ -412,7 +412,7 @@ fn parse_rt_priority(s: &str) -> Result<u8, String> {
 
 fn parse_clock(s: &str) -> Result<ClockKind, String> {
     s.parse()
-        .map_err(|e: ratelab::config::ConfigError| e.to_string())
+        .map_err(|e: ratelab::clock::UnknownClock| e.to_string())
 }
 
 fn parse_offset(s: &str) -> Result<f64, String> {

@@ -306,7 +306,7 @@ pub fn main_with(register: impl FnOnce()) -> ExitCode {
             interrupted.stop();
             stop.stop();
             // A Python callback that never returns would hold its node's tick forever:
-            // one still running after a short grace is interrupted (src/python).
+            // one still running after a short grace is interrupted (src/runtime/python).
             ratelab::python::interrupt_callbacks_after(PYTHON_GRACE);
         });
     }

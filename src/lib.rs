@@ -2,69 +2,53 @@
 //! topics — driving a MuJoCo cartpole, under a deterministic virtual clock or a real one.
 //!
 //! The semantics (drop rule, tie-break order, zero-order hold, metrics) are ported from the
-//! course chapter 2.8 ("Concepts of ROS, without ROS"); time is integer nanoseconds.
-//! This crate knows nothing of terminals: the lab (`lab/`) draws it.
+//! course chapter 2.8 ("Concepts of ROS, without ROS"); time is integer nanoseconds. No
+//! crate of the library knows terminals: the lab (`lab/`) draws it.
 //!
-//! Layout, one module per idea (every module of the crate, by layer):
+//! This crate is the one a Rust program depends on: it re-exports every layer's modules
+//! under one name, and holds the exercises. The layers are crates of their own, each
+//! depending only on those below it (the workspace's `Cargo.toml` lists them):
 //!
-//! - **leaves** that many modules share: [`time`] (the `Nanos` newtype), [`ids`] (node and
-//!   topic ids and their bounds), [`text`] (text from outside, made safe to show), [`procs`]
-//!   (what `/proc` says of a process), [`np_random`] (NumPy-exact seeding), [`input`] and
-//!   [`output`] (the rules for files the user names);
-//! - **the runtime's parts**: [`clock`], [`rate`], [`qos`] (ROS 2's QoS), [`topic`] (a
-//!   subscription's queue and its drop rule), [`msg`] (message types and their registry),
-//!   [`publisher`], [`node`], [`plant`] (the MuJoCo cartpole), [`policy`] (brains; +
-//!   [`checkpoint`] for trained ones, [`python`] for a learner's code), [`graph`] (the graph
-//!   file, [`graph::spec`]; node kinds and their registry), [`executor`] (ROS 2's executors
-//!   as rules), [`scheduler`] (the virtual and real clocks that apply them, + [`realtime`]),
-//!   [`runlog`], [`metrics`], [`config`];
-//! - **runs and their drivers**: [`command`] (changes to a running graph), [`runcore`] (one
-//!   graph under the virtual clock, stepped, commanded, captured and restored), [`summary`]
-//!   (a run's figures from its graph's state), [`run`] (one run), [`textlog`] (what nodes' code and
-//!   ratelab's warnings write, stamped with run time and node), [`session`] (the lab's live runs, their
-//!   log and replay), [`sweep`] (grids and the rate cliff), [`exercise`] (the exercises'
-//!   bands and checks);
-//! - **the world outside**: [`recording`] (rerun `.rrd`), [`ros2`] (ROS 2 on the wire, over
-//!   rmw_zenoh's format), [`distributed`] (the graph across processes, over Zenoh).
+//! - **core** (`ratelab_core`, `src/core/`) — leaves that many modules share: [`time`] (the
+//!   `Nanos` newtype), [`ids`] (node and topic ids and their bounds), [`text`] (text from
+//!   outside, made safe to show), [`textlog`] (what nodes' code and ratelab's warnings write,
+//!   stamped with run time and node), [`procs`] (what `/proc` says of a process),
+//!   [`np_random`] (NumPy-exact seeding), [`input`] and [`output`] (the rules for files the
+//!   user names); and the runtime's parts: [`clock`], [`rate`], [`realtime`], [`qos`]
+//!   (ROS 2's QoS), [`topic`] (a subscription's queue and its drop rule), [`msg`] (message
+//!   types and their registry, with [`ros_types`], their ROS 2 side), [`publisher`],
+//!   [`node`] and [`ports`] (the node traits),
+//!   [`executor`] (ROS 2's executors as rules), [`runlog`], [`metrics`];
+//! - **runtime** (`ratelab_runtime`, `src/runtime/`): [`plant`] (the MuJoCo cartpole),
+//!   [`policy`] (brains; + [`checkpoint`] for trained ones, [`python`] for a learner's
+//!   code), [`graph`] (the graph file, [`graph::spec`]; node kinds and their registry),
+//!   [`config`], [`scheduler`] (the virtual and real clocks), [`command`] (changes to a
+//!   running graph), [`runcore`] (one graph under the virtual clock, stepped, commanded,
+//!   captured and restored), [`summary`] (a run's figures from its graph's state), [`run`]
+//!   (one headless run), [`sweep`] (grids and the rate cliff), [`ros2`] (ROS 2 on the wire,
+//!   over rmw_zenoh's format);
+//! - **recording** (`ratelab_recording`, `src/recording/`): [`recording`] (rerun `.rrd`);
+//! - **session** (`ratelab_session`, `src/session/`): [`session`] (the lab's live runs,
+//!   their log and replay);
+//! - **distributed** (`ratelab_distributed`, `src/distributed/`): [`distributed`] (the graph
+//!   across processes, over Zenoh);
+//! - **this crate**: [`exercise`] (the exercises' bands and checks).
 #![warn(missing_docs)]
 
-pub mod checkpoint;
-pub mod clock;
-pub mod command;
-pub mod config;
-pub mod distributed;
-pub mod executor;
 pub mod exercise;
-pub mod graph;
-pub mod ids;
-pub mod input;
-pub mod metrics;
-pub mod msg;
-pub mod node;
-pub mod np_random;
-pub mod output;
-pub mod plant;
-pub mod policy;
-pub mod procs;
-pub mod publisher;
-pub mod python;
-pub mod qos;
-pub mod rate;
-pub mod realtime;
-pub mod recording;
-pub mod ros2;
-pub mod run;
-pub mod runcore;
-pub mod runlog;
-pub mod scheduler;
-pub mod session;
-pub mod summary;
-pub mod sweep;
-pub mod text;
-pub mod textlog;
-pub mod time;
-pub mod topic;
 
-pub use config::{ClockKind, RunConfig};
-pub use run::{run, RunOptions, RunReport};
-pub use time::Nanos;
+// The core crate's and the runtime crate's modules, under their own names (`ratelab::time`,
+// `ratelab::graph`, …).
+pub use ratelab_core::{
+    clock, executor, ids, input, metrics, msg, node, np_random, output, ports, procs, publisher,
+    qos, rate, realtime, ros_types, runlog, text, textlog, time, topic, Nanos,
+};
+pub use ratelab_runtime::{
+    checkpoint, command, config, graph, plant, policy, python, ros2, run, runcore, scheduler,
+    summary, sweep,
+};
+// (`run` above is the module and, as in the runtime crate, its function.)
+pub use ratelab_distributed as distributed;
+pub use ratelab_recording as recording;
+pub use ratelab_runtime::{ClockKind, RunConfig, RunOptions, RunReport};
+pub use ratelab_session as session;

@@ -66,7 +66,7 @@ impl TickInbox {
     /// Keep `m` until its turn. Ignored: a report for a tick already taken, a second report
     /// for one tick (the first stands), or one whose node is not in the graph or not in the
     /// process the report names (the access control lets only that process's identity put
-    /// on its key, [`crate::distributed::access`]; a holder of its credentials could still
+    /// on its key, [`crate::access`]; a holder of its credentials could still
     /// send a well-formed report that disturbs the run).
     ///
     /// # Errors

@@ -296,7 +296,7 @@ pub struct LiveStats {
     /// Set when this process joined a run already under way (started again mid-run, real
     /// clock): the run time its counts start from, ns. Its counters and ticks count from
     /// then; a watcher that heard the process before it carries that one's counts over
-    /// ([`crate::distributed::monitor::Carried`]), one that did not says so.
+    /// ([`crate::monitor::Carried`]), one that did not says so.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub since_ns: Option<u64>,
 }
@@ -1512,11 +1512,11 @@ impl Refusals {
 #[cfg(test)]
 mod tests {
     use super::{crossings, figures_time, Outlet};
-    use crate::distributed::wire::{WireSample, MAX_SENT_PER_TICK};
     use crate::graph::spec::GraphSpec;
     use crate::graph::NodeId;
     use crate::msg::{force::ForceMsg, MsgData};
     use crate::time::Nanos;
+    use crate::wire::{WireSample, MAX_SENT_PER_TICK};
     use zenoh::Wait;
 
     /// Which topics cross a process's boundary, decided in one place, as a table: the
@@ -1636,7 +1636,7 @@ mod tests {
             seq: 501,
             stamp_ns: 80,
             origin_ns: None,
-            sent_mono_ns: crate::distributed::wire::mono_now_ns(),
+            sent_mono_ns: crate::wire::mono_now_ns(),
             data: force(0.0).to_bytes(),
         }
         .encode()

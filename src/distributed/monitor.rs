@@ -1331,7 +1331,7 @@ mod tests {
                     ..cfg()
                 },
                 Box::new(crate::policy::Scripted),
-                crate::RunOptions::new(),
+                crate::run::RunOptions::new(),
             )
             .unwrap()
             .metrics,

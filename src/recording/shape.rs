@@ -257,7 +257,7 @@ impl GraphShape {
 #[cfg(test)]
 pub(crate) mod tests {
     use super::*;
-    use crate::recording::graph_positions;
+    use crate::graph_positions;
 
     /// A shape with `topics` (name, publisher, subscribers) and `nodes` at 50 Hz; the second
     /// node is the controller.

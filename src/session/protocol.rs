@@ -153,7 +153,7 @@ pub enum Telemetry {
     },
     /// Something went wrong that the user should read (one line).
     Error(String),
-    /// A graph across processes (a watcher, [`crate::distributed::monitor`]): the
+    /// A graph across processes (a watcher, `ratelab::distributed::monitor`): the
     /// over-the-wire latency so far of each topic that crosses a process boundary, as
     /// (topic index, p50 µs, p99 µs), from its publisher's send to its subscriber's delivery.
     Wire(Vec<(usize, f64, f64)>),

@@ -1,8 +1,17 @@
-//! The library's module graph has no cycle: no module imports one that imports it back,
-//! directly or through others (issue "Your own node": facts with no home made two import
-//! cycles; they now live in leaves — `plant`, `ids`, `time`, `qos`, `runlog`).
+//! The architecture, as the compiler and these tests keep it.
 //!
-//! Each `src/**/*.rs` is parsed with `syn`; a module depends on another when its code (not
+//! **Crates by layer.** The library is one crate per layer under `src/` (core, runtime,
+//! recording, session, distributed, and the `ratelab` facade at `src/lib.rs`), the lab in
+//! `lab/`. Each depends only on the layers below it ([`LAYERS`]), and the core on none of
+//! the crates that talk to the world (Zenoh, rerun, PyO3, candle, tract, MuJoCo) — as
+//! `cargo tree` resolves it, not only as its manifest says.
+//!
+//! **No import cycle in a crate.** No module imports one that imports it back, directly or
+//! through others (issue "Your own node": facts with no home made two import cycles; they
+//! now live in leaves — `plant`, `ids`, `time`, `qos`, `runlog`). Across crates Cargo
+//! forbids cycles already.
+//!
+//! Each crate's `*.rs` is parsed with `syn`; a module depends on another when its code (not
 //! its doc comments, not its `#[cfg(test)]` items) names a path into it: `use crate::a::b`,
 //! `crate::a::f()`, `super::x`, also inside macro calls. A path names the deepest module it
 //! reaches (`crate::graph::spec::GraphSpec` → `graph::spec`); a module does not depend on
@@ -24,7 +33,10 @@ fn modules(src: &Path) -> BTreeMap<String, syn::File> {
         for entry in std::fs::read_dir(&dir).expect("read src") {
             let path = entry.expect("dir entry").path();
             if path.is_dir() {
-                stack.push(path);
+                // A folder with a manifest is a crate of its own.
+                if !path.join("Cargo.toml").exists() {
+                    stack.push(path);
+                }
                 continue;
             }
             if path.extension().is_none_or(|e| e != "rs") {
@@ -282,21 +294,173 @@ fn find_cycle(deps: &Deps) -> Option<Vec<String>> {
         .find_map(|m| walk(m, deps, &mut marks, &mut Vec::new()))
 }
 
-#[test]
-fn the_library_has_no_import_cycle() {
-    let deps = dependencies(&crate::repo("src"));
-    // The scan sees what it must: the graph file format imports the QoS and the plant's
-    // facts, the metrics do not import the graph.
+/// The library's crates, lowest layer first: (package, folder, the workspace's packages it
+/// may depend on).
+const LAYERS: &[(&str, &str, &[&str])] = &[
+    ("ratelab-core", "src/core", &[]),
+    ("ratelab-runtime", "src/runtime", &["ratelab-core"]),
+    (
+        "ratelab-recording",
+        "src/recording",
+        &["ratelab-core", "ratelab-runtime"],
+    ),
+    (
+        "ratelab-session",
+        "src/session",
+        &["ratelab-core", "ratelab-runtime", "ratelab-recording"],
+    ),
+    (
+        "ratelab-distributed",
+        "src/distributed",
+        &[
+            "ratelab-core",
+            "ratelab-runtime",
+            "ratelab-recording",
+            "ratelab-session",
+        ],
+    ),
+    (
+        "ratelab",
+        "src",
+        &[
+            "ratelab-core",
+            "ratelab-runtime",
+            "ratelab-recording",
+            "ratelab-session",
+            "ratelab-distributed",
+        ],
+    ),
+    ("ratelab-lab", "lab", &["ratelab"]),
+];
+
+/// The packages a crate's manifest names under `[dependencies]` (its normal dependencies);
+/// the facade's manifest is the workspace's, at the top.
+fn manifest_dependencies(dir: &str) -> BTreeSet<String> {
+    let dir = if dir == "src" { "" } else { dir };
+    let text = std::fs::read_to_string(crate::repo(dir).join("Cargo.toml")).unwrap();
+    let manifest: toml::Table = toml::from_str(&text).unwrap();
+    manifest
+        .get("dependencies")
+        .and_then(|d| d.as_table())
+        .map(|d| d.keys().cloned().collect())
+        .unwrap_or_default()
+}
+
+/// Every package `package` is built with (its normal dependencies, transitively), as
+/// `cargo tree` resolves them.
+fn resolved_dependencies(package: &str) -> BTreeSet<String> {
+    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+    let out = std::process::Command::new(cargo)
+        .current_dir(crate::repo(""))
+        .args([
+            "tree",
+            "--locked",
+            "--offline",
+            "-e",
+            "normal",
+            "--prefix",
+            "none",
+        ])
+        .args(["--format", "{p}", "-p", package])
+        .output()
+        .expect("cargo tree runs");
     assert!(
-        deps["graph::spec"].contains("qos"),
-        "{:?}",
-        deps["graph::spec"]
+        out.status.success(),
+        "cargo tree -p {package}: {}",
+        String::from_utf8_lossy(&out.stderr)
     );
-    assert!(deps["graph::spec"].contains("plant"));
-    assert!(deps["runlog"].contains("ids"));
-    assert!(!deps["metrics"].contains("graph"), "{:?}", deps["metrics"]);
-    if let Some(cycle) = find_cycle(&deps) {
-        panic!("import cycle: {}", cycle.join(" → "));
+    String::from_utf8_lossy(&out.stdout)
+        .lines()
+        .filter_map(|l| l.split_whitespace().next())
+        .map(str::to_string)
+        .collect()
+}
+
+#[test]
+fn each_crate_depends_only_on_the_layers_below_it() {
+    let all: BTreeSet<&str> = LAYERS.iter().map(|(p, ..)| *p).collect();
+    for (package, dir, allowed) in LAYERS {
+        let ours: BTreeSet<String> = manifest_dependencies(dir)
+            .into_iter()
+            .filter(|d| all.contains(d.as_str()))
+            .collect();
+        let allowed: BTreeSet<String> = allowed.iter().map(|s| s.to_string()).collect();
+        assert!(
+            ours.is_subset(&allowed),
+            "{package} depends on {:?}, above its layer",
+            ours.difference(&allowed).collect::<Vec<_>>()
+        );
+    }
+    // Every crate of the workspace is in LAYERS.
+    let text = std::fs::read_to_string(crate::repo("Cargo.toml")).unwrap();
+    let root: toml::Table = toml::from_str(&text).unwrap();
+    let members: BTreeSet<&str> = root["workspace"]["members"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter_map(|m| m.as_str())
+        .collect();
+    let dirs: BTreeSet<&str> = LAYERS
+        .iter()
+        .map(|(_, d, _)| if *d == "src" { "." } else { *d })
+        .collect();
+    assert_eq!(members, dirs);
+}
+
+#[test]
+fn the_core_builds_without_the_crates_that_talk_to_the_world() {
+    let core = resolved_dependencies("ratelab-core");
+    assert!(
+        core.contains("ratelab-core") && core.contains("serde"),
+        "{core:?}"
+    );
+    for heavy in [
+        "zenoh",
+        "rerun",
+        "pyo3",
+        "candle-core",
+        "tract-onnx",
+        "mujoco-rs",
+    ] {
+        assert!(!core.contains(heavy), "ratelab-core is built with {heavy}");
+    }
+    // And no library layer draws on a terminal: none is built with ratatui, none names
+    // crossterm (which rerun's own dependencies bring along) — the lab alone draws.
+    let lab = resolved_dependencies("ratelab-lab");
+    assert!(
+        lab.contains("ratatui") && lab.contains("crossterm"),
+        "{lab:?}"
+    );
+    for (package, dir, _) in LAYERS.iter().filter(|(p, ..)| *p != "ratelab-lab") {
+        let deps = resolved_dependencies(package);
+        assert!(!deps.contains("ratatui"), "{package} is built with ratatui");
+        assert!(
+            !manifest_dependencies(dir).contains("crossterm"),
+            "{package} depends on crossterm"
+        );
+    }
+}
+
+#[test]
+fn no_crate_of_the_library_has_an_import_cycle() {
+    let deps = |dir: &str| dependencies(&crate::repo(dir));
+    let core = deps("src/core");
+    let runtime = deps("src/runtime");
+    // The scan sees what it must: the run log imports the ids, the graph file format the
+    // plant; the core's modules are not the runtime's, nor the crates' the facade's.
+    assert!(core["runlog"].contains("ids"), "{:?}", core["runlog"]);
+    assert!(
+        runtime["graph::spec"].contains("plant"),
+        "{:?}",
+        runtime["graph::spec"]
+    );
+    assert!(!runtime.contains_key("qos") && core.contains_key("qos"));
+    let facade = deps("src");
+    assert!(facade.contains_key("exercise") && !facade.contains_key("graph"));
+    for (_, dir, _) in LAYERS.iter().filter(|(p, ..)| *p != "ratelab-lab") {
+        if let Some(cycle) = find_cycle(&deps(dir)) {
+            panic!("import cycle in {dir}: {}", cycle.join(" → "));
+        }
     }
 }
 
@@ -351,25 +515,61 @@ fn paths_in_code_and_macros_count_and_doc_comments_and_tests_do_not() {
     assert!(set("time").is_empty());
 }
 
-/// The library's module map (`src/lib.rs`'s header) names every module the crate has, so
-/// a maintainer reading it first sees the whole crate (it once left out 8 of 31).
+/// Each library crate's module map (its `lib.rs` header) names every module the crate has,
+/// so a maintainer reading it first sees the whole crate (the library's once left out 8 of
+/// 31); the facade's names every module it re-exports.
 #[test]
-fn the_library_s_module_map_names_every_module() {
-    let lib = std::fs::read_to_string(crate::repo("src/lib.rs")).unwrap();
-    let header: String = lib
-        .lines()
-        .take_while(|l| l.starts_with("//!"))
-        .collect::<Vec<_>>()
-        .join("\n");
-    let modules: Vec<&str> = lib
-        .lines()
-        .filter_map(|l| l.strip_prefix("pub mod "))
-        .map(|l| l.trim_end_matches(';'))
-        .collect();
-    assert!(modules.len() > 20, "{modules:?}");
-    let missing: Vec<&&str> = modules
-        .iter()
-        .filter(|m| !header.contains(&format!("[`{m}`]")))
-        .collect();
-    assert!(missing.is_empty(), "src/lib.rs's header omits {missing:?}");
+fn every_crate_s_module_map_names_every_module() {
+    let mut seen = 0;
+    for (package, dir, _) in LAYERS.iter().filter(|(p, ..)| *p != "ratelab-lab") {
+        let lib = std::fs::read_to_string(crate::repo(dir).join("lib.rs")).unwrap();
+        let header: String = lib
+            .lines()
+            .take_while(|l| l.starts_with("//!"))
+            .collect::<Vec<_>>()
+            .join("\n");
+        // `pub mod x;`, and the facade's re-exported modules (`pub use ratelab_core::{…}`).
+        let mut modules: Vec<String> = lib
+            .lines()
+            .filter_map(|l| l.strip_prefix("pub mod "))
+            .map(|l| l.trim_end_matches(';').to_string())
+            .collect();
+        if *package == "ratelab" {
+            let file = syn::parse_file(&lib).unwrap();
+            for item in file.items {
+                if let syn::Item::Use(u) = item {
+                    if matches!(u.vis, syn::Visibility::Public(_)) {
+                        reexported(&u.tree, &mut modules);
+                    }
+                }
+            }
+        }
+        seen += modules.len();
+        let missing: Vec<&String> = modules
+            .iter()
+            .filter(|m| !header.contains(&format!("[`{m}`]")))
+            .collect();
+        assert!(
+            missing.is_empty(),
+            "{dir}/lib.rs's header omits {missing:?}"
+        );
+    }
+    assert!(seen > 60, "{seen} modules");
+}
+
+/// The lowercase names a `pub use` re-exports (modules, and `run`, a module and its
+/// function; types are capitalised).
+fn reexported(tree: &syn::UseTree, out: &mut Vec<String>) {
+    match tree {
+        syn::UseTree::Path(p) => reexported(&p.tree, out),
+        syn::UseTree::Name(n) => {
+            let name = n.ident.to_string();
+            if name.starts_with(|c: char| c.is_ascii_lowercase()) {
+                out.push(name);
+            }
+        }
+        syn::UseTree::Rename(r) => out.push(r.rename.to_string()),
+        syn::UseTree::Glob(_) => {}
+        syn::UseTree::Group(g) => g.items.iter().for_each(|t| reexported(t, out)),
+    }
 }

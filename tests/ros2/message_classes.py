@@ -1,8 +1,8 @@
-"""Checks ratelab's Python message classes (src/python/support.py: State, Position, Force)
+"""Checks ratelab's Python message classes (src/runtime/python/support.py: State, Position, Force)
 against ROS 2's types as `rosbags` (an independent implementation) serializes them.
 
 Reads one JSON object on stdin: {"state": HEX, "position": HEX, "force": HEX}, CDR that
-ratelab's Rust bridge encoded (src/ros2/types.rs). Prints one JSON object:
+ratelab's Rust bridge encoded (src/core/ros_types.rs). Prints one JSON object:
   from_ros: each decoded with rosbags and read with CLASS.from_ros (fields as floats);
   to_ros: HEX of CDR that rosbags serializes from CLASS(...).to_ros() for the values given
           in the input's "values" (state: 5 floats, position: 2, force: 1);
@@ -15,7 +15,7 @@ import sys
 
 from rosbags.typesys import Stores, get_typestore
 
-sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "..", "src", "python"))
+sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "..", "src", "runtime", "python"))
 import support  # noqa: E402  (ratelab's own module, under test)
 
 store = get_typestore(Stores.LATEST)

@@ -6,8 +6,8 @@
 use super::processes::{before_the_run, Children};
 use super::Launch;
 use crate::config::ClockKind;
-use crate::distributed::wire::{self, ToLauncher, ToMember};
-use crate::distributed::{DistError, REPLY_TIMEOUT};
+use crate::wire::{self, ToLauncher, ToMember};
+use crate::{DistError, REPLY_TIMEOUT};
 use std::time::{Duration, Instant};
 
 /// What the launcher made of a join.

@@ -3,8 +3,8 @@
 //! the run starts.
 
 use super::{Launch, MAX_STDERR_LINE};
-use crate::distributed::{DistError, REPLY_TIMEOUT};
 use crate::scheduler::StopFlag;
+use crate::{DistError, REPLY_TIMEOUT};
 use crossbeam_channel::Receiver;
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
@@ -27,9 +27,7 @@ impl Launch<'_> {
             &self
                 .opts
                 .credentials
-                .only(&crate::distributed::credentials::Role::Process(
-                    p.to_string(),
-                ))?,
+                .only(&crate::credentials::Role::Process(p.to_string()))?,
         )?;
         let mut cmd = Command::new(exe);
         cmd.arg("node").arg("--credentials").arg(&own);
@@ -212,8 +210,8 @@ pub(super) fn before_the_run(stop: &StopFlag, children: &mut Children) -> Result
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::distributed::credentials::{Credentials, Role};
-    use crate::distributed::{Access, Keys};
+    use crate::credentials::{Credentials, Role};
+    use crate::{Access, Keys};
 
     #[test]
     fn a_child_s_stderr_comes_as_bounded_lines_named_by_its_process() {
@@ -232,12 +230,8 @@ mod tests {
             role: &Role::Launcher,
             spec: None,
         };
-        let session = crate::distributed::open_session(
-            &[crate::distributed::LOOPBACK_ANY.into()],
-            &[],
-            access,
-        )
-        .expect("a session");
+        let session =
+            crate::open_session(&[crate::LOOPBACK_ANY.into()], &[], access).expect("a session");
         let (tx, rx) = crossbeam_channel::unbounded();
         pass_stderr("policy", &mut child, tx, session, Keys::new("g").log());
         let _ = child.wait();

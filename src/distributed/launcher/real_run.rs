@@ -8,14 +8,14 @@
 use super::admission::Admission;
 use super::processes::Children;
 use super::Launch;
-use crate::distributed::member::LiveStats;
-use crate::distributed::monitor::{Carried, Silence};
-use crate::distributed::wire::{self, ToLauncher, ToMember};
-use crate::distributed::{DistError, REPLY_TIMEOUT};
 use crate::graph::spec::{RestartPolicy, MAX_RESTARTS};
+use crate::member::LiveStats;
+use crate::monitor::{Carried, Silence};
 use crate::run::GraphState;
 use crate::scheduler::{EndReason, RunEnd};
 use crate::time::Nanos;
+use crate::wire::{self, ToLauncher, ToMember};
+use crate::{DistError, REPLY_TIMEOUT};
 use crossbeam_channel::Receiver;
 use std::collections::BTreeMap;
 use std::time::{Duration, Instant};

@@ -1,19 +1,19 @@
 //! The run under the virtual clock, as the launcher sees it: it follows the whole graph's
 //! order of events, moves the horizon on ahead of them, takes each event's report from its
-//! node's process ([`crate::distributed::lockstep`]), ends the run where a report says so,
+//! node's process ([`crate::lockstep`]), ends the run where a report says so,
 //! and gathers the processes' reports at the end.
 
 use super::admission::Admission;
 use super::{Launch, Link, LockstepCost};
-use crate::distributed::lockstep::{check_tick_report, TickInbox, HORIZON_PERIODS};
-use crate::distributed::wire::{self, Ticked, ToLauncher, ToMember};
-use crate::distributed::{DistError, REPLY_TIMEOUT};
 use crate::graph::{NodeId, TopicId};
+use crate::lockstep::{check_tick_report, TickInbox, HORIZON_PERIODS};
 use crate::node::{Flow, Node};
 use crate::rate::Rate;
 use crate::run::GraphState;
 use crate::scheduler::{EndReason, Event, RunEnd, VirtualScheduler};
 use crate::time::Nanos;
+use crate::wire::{self, Ticked, ToLauncher, ToMember};
+use crate::{DistError, REPLY_TIMEOUT};
 use crossbeam_channel::Receiver;
 use std::collections::BTreeMap;
 use std::sync::Mutex;

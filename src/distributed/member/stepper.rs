@@ -1,4 +1,4 @@
-//! One process's part of the virtual clock's run ([`crate::distributed::lockstep`]), as a
+//! One process's part of the virtual clock's run ([`crate::lockstep`]), as a
 //! state machine advanced wherever what it waits for comes in: on Zenoh's receive thread
 //! when another process's tick reports or an input sample arrive, on the process's main
 //! thread when the launcher moves the horizon on (or every 100 ms, to notice an input that
@@ -11,16 +11,16 @@
 //! sample and one report message a hop.
 
 use super::{held_topics, read_counters, Share};
-use crate::distributed::lockstep::{check_tick_report, TickInbox};
-use crate::distributed::wire::ToMember;
-use crate::distributed::wire::{self, Ticked};
-use crate::distributed::{DistError, REPLY_TIMEOUT};
 use crate::graph::spec::GraphSpec;
 use crate::graph::TopicId;
+use crate::lockstep::{check_tick_report, TickInbox};
 use crate::node::{Flow, Node};
 use crate::run::GraphState;
 use crate::scheduler::{EndReason, Event, StopFlag, VirtualScheduler};
 use crate::time::Nanos;
+use crate::wire::ToMember;
+use crate::wire::{self, Ticked};
+use crate::{DistError, REPLY_TIMEOUT};
 use crossbeam_channel::{Receiver, Sender};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex, TryLockError};
@@ -174,7 +174,7 @@ pub(super) struct Stepper {
     callback_ticks: bool,
     /// When the oldest report in `outbox` was kept.
     kept_at: Option<Instant>,
-    /// Where its reports go ([`crate::distributed::Keys::ticked`]).
+    /// Where its reports go ([`crate::Keys::ticked`]).
     publisher: zenoh::pubsub::Publisher<'static>,
     stop: StopFlag,
 }

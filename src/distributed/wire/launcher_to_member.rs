@@ -38,10 +38,10 @@ impl Setup {
     /// every other setting, validated.
     ///
     /// # Errors
-    /// [`crate::distributed::DistError::Usage`] naming what is wrong (the bytes came from the network).
-    pub fn run_config(&self) -> Result<crate::config::RunConfig, crate::distributed::DistError> {
+    /// [`crate::DistError::Usage`] naming what is wrong (the bytes came from the network).
+    pub fn run_config(&self) -> Result<crate::config::RunConfig, crate::DistError> {
         let spec = crate::graph::spec::GraphSpec::parse(&self.graph_toml, "the launcher's graph")
-            .map_err(|e| crate::distributed::DistError::Usage(e.to_string()))?;
+            .map_err(|e| crate::DistError::Usage(e.to_string()))?;
         let cfg = crate::config::RunConfig {
             seed: self.seed,
             duration: Nanos(self.duration_ns),
@@ -52,9 +52,8 @@ impl Setup {
             rt_priority: self.rt_priority,
             faults: self.faults.clone(),
         };
-        cfg.validate().map_err(|e| {
-            crate::distributed::DistError::Usage(format!("the launcher's settings: {e}"))
-        })?;
+        cfg.validate()
+            .map_err(|e| crate::DistError::Usage(format!("the launcher's settings: {e}")))?;
         Ok(cfg)
     }
 }
@@ -78,7 +77,7 @@ pub enum ToMember {
         /// A process of that name is still running in the graph (as far as the launcher
         /// knows: a process killed a moment ago until its liveliness token is withdrawn). A
         /// process started again at once asks again for a while
-        /// ([`crate::distributed::member::BUSY_RETRY`]).
+        /// ([`crate::member::BUSY_RETRY`]).
         #[serde(default)]
         busy: bool,
     },
@@ -88,7 +87,7 @@ pub enum ToMember {
         start_mono_ns: u64,
     },
     /// Virtual clock: run every tick due at or before run time `until_ns` (the lockstep's
-    /// horizon, [`crate::distributed::lockstep`]). The launcher moves it on ahead of the ticks it has
+    /// horizon, [`crate::lockstep`]). The launcher moves it on ahead of the ticks it has
     /// seen done, and stops moving it to end the run early (an interrupt).
     Horizon {
         /// Run time, ns.

@@ -100,7 +100,7 @@ impl WireSample {
 /// Virtual clock: one event done (a tick started, or its outputs gone out), from its node's
 /// process to every other process and the launcher (key `ratelab/<graph>/@ticked/<process>`,
 /// in a message with the reports of the process's events just before it, [`encode_reports`];
-/// [`crate::distributed::lockstep`]).
+/// [`crate::lockstep`]).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Ticked {
     /// The node's process.
@@ -134,7 +134,7 @@ pub struct Ticked {
 /// The most messages a process sends on one crossing topic for one tick of its publisher
 /// (a node may publish several times in a tick); past it the rest of that tick's are not
 /// sent, and the subscriber counts them lost on the wire when a later one arrives. Reports
-/// are checked against it ([`crate::distributed::launcher::check_report`]).
+/// are checked against it ([`crate::launcher::check_report`]).
 pub const MAX_SENT_PER_TICK: usize = 256;
 
 /// The room for one tick report in a message of them, bytes: a message is read up to

@@ -1,0 +1,241 @@
+//! The actuator's per-tick record and the run's log: one [`StepRecord`] per actuator tick
+//! (the row of `trace.csv`), every topic's counters at that tick ([`TopicCounters`]), and
+//! the [`RunLog`] that accumulates them into what [`crate::metrics`] summarizes.
+//!
+//! Below the graph and the executor, which write it, and beside the metrics, which read it:
+//! it imports only leaves ([`crate::ids`], [`crate::time`], [`crate::topic`]'s counters) and
+//! the latency statistics of [`crate::metrics`].
+
+use crate::ids::{TopicId, MAX_TOPICS};
+use crate::metrics::ExactLatency;
+use crate::time::Nanos;
+use crate::topic::TopicStats;
+use serde::{Deserialize, Serialize};
+
+/// Told of every actuator step, on the actuator's thread (a recorder, the lab's telemetry):
+/// it must not block. `ratelab::graph::StepObserver` is one that also sees the graph built.
+pub trait StepSink: Send {
+    /// One actuator tick happened.
+    fn on_step(&mut self, rec: &StepRecord);
+}
+
+/// Every topic's counters at one instant, by [`TopicId`]: a fixed-size copy (no allocation
+/// per actuator step), at most [`MAX_TOPICS`] entries.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct TopicCounters {
+    len: u8,
+    stats: [TopicStats; MAX_TOPICS],
+}
+
+impl FromIterator<TopicStats> for TopicCounters {
+    /// From each topic's stats, in [`TopicId`] order (entries past [`MAX_TOPICS`] are ignored;
+    /// a validated graph has no more).
+    fn from_iter<I: IntoIterator<Item = TopicStats>>(stats: I) -> Self {
+        let mut c = TopicCounters::default();
+        for s in stats.into_iter().take(MAX_TOPICS) {
+            c.stats[c.len as usize] = s;
+            c.len += 1;
+        }
+        c
+    }
+}
+
+impl TopicCounters {
+    /// Topic `id`'s counters (zeros for an id past the end).
+    pub fn get(&self, id: TopicId) -> TopicStats {
+        self.as_slice().get(id.0).copied().unwrap_or_default()
+    }
+    /// All of them, by [`TopicId`].
+    pub fn as_slice(&self) -> &[TopicStats] {
+        &self.stats[..self.len as usize]
+    }
+    /// Replace topic `id`'s counters (an id past the end is ignored).
+    pub fn set(&mut self, id: TopicId, stats: TopicStats) {
+        if let Some(s) = self.stats[..self.len as usize].get_mut(id.0) {
+            *s = stats;
+        }
+    }
+}
+
+impl Serialize for TopicCounters {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        self.as_slice().serialize(s)
+    }
+}
+
+impl<'de> Deserialize<'de> for TopicCounters {
+    /// A list of at most [`MAX_TOPICS`] counters (more is an error: the bytes may come from
+    /// the network, `ratelab::distributed`).
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        struct Bounded;
+        impl<'de> serde::de::Visitor<'de> for Bounded {
+            type Value = TopicCounters;
+            fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+                write!(f, "a list of at most {MAX_TOPICS} topic counters")
+            }
+            fn visit_seq<A: serde::de::SeqAccess<'de>>(
+                self,
+                mut seq: A,
+            ) -> Result<TopicCounters, A::Error> {
+                let mut c = TopicCounters::default();
+                while let Some(s) = seq.next_element::<TopicStats>()? {
+                    if c.len as usize == MAX_TOPICS {
+                        return Err(serde::de::Error::invalid_length(MAX_TOPICS + 1, &self));
+                    }
+                    c.stats[c.len as usize] = s;
+                    c.len += 1;
+                }
+                Ok(c)
+            }
+        }
+        d.deserialize_seq(Bounded)
+    }
+}
+
+/// One actuator tick.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct StepRecord {
+    /// Actuator step number, from 1 (each steps the plant 20 ms).
+    pub step: u64,
+    /// Run time of the tick.
+    pub t: Nanos,
+    /// Pole angle after the step, rad.
+    pub pole_angle: f64,
+    /// Cart position after the step, m.
+    pub cart_pos: f64,
+    /// The control applied (clipped to [-1, 1]).
+    pub action: f64,
+    /// Sense→act latency of the applied action; `None` before the first action arrives.
+    pub latency: Option<Nanos>,
+    /// True when the brain's newest action was non-finite and the last good one was held.
+    pub nonfinite: bool,
+    /// Every topic's counters at this tick, by [`TopicId`].
+    pub topics: TopicCounters,
+    /// The force the policy published since the previous actuator tick, if it did: (publish
+    /// stamp, N), the newest one. Beside [`StepRecord::action`] (what was applied) it shows
+    /// the zero-order hold.
+    pub published: Option<(Nanos, f64)>,
+    /// True on the tick the pole fell.
+    pub fell: bool,
+}
+
+/// Everything the actuator measured during a run.
+#[derive(Clone, Debug, Default)]
+pub struct RunLog {
+    /// One record per actuator tick, in order (empty when the trace is not kept).
+    pub trace: Vec<StepRecord>,
+    /// Whether to keep every [`StepRecord`] (headless runs do; long lab runs may not).
+    pub keep_trace: bool,
+    /// The newest record.
+    pub last: Option<StepRecord>,
+    /// Actuator ticks so far.
+    pub steps: u64,
+    /// Sense→act latency over every tick that applied a sensed action (exact percentiles).
+    pub latency: ExactLatency,
+    /// Ticks whose newest action was non-finite (the last good action was held).
+    pub nonfinite_actions: u64,
+    /// Run time of the fall, if the pole fell.
+    pub fell_at: Option<Nanos>,
+    /// When the actuator's deadline watchdog stopped the run (`on_deadline_missed =
+    /// "stop"`), with the topic and its deadline: a verdict distinct from a fall.
+    pub watchdog: Option<Watchdog>,
+}
+
+/// The actuator's watchdog fired: no message on `topic` for longer than `deadline`.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Watchdog {
+    /// Run time it fired.
+    pub at: Nanos,
+    /// The actuator's input topic.
+    pub topic: String,
+    /// Its deadline.
+    pub deadline: Nanos,
+}
+
+impl std::fmt::Display for Watchdog {
+    /// `stopped by watchdog at 1.24 s: no message on /cmd for more than 40 ms`.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "stopped by watchdog at {:.2} s: no message on {} for more than {}",
+            self.at.as_secs_f64(),
+            self.topic,
+            self.deadline
+        )
+    }
+}
+
+impl RunLog {
+    /// An empty log; `keep_trace` keeps every step record.
+    pub fn new(keep_trace: bool) -> Self {
+        Self {
+            keep_trace,
+            ..Self::default()
+        }
+    }
+
+    /// The actuator's watchdog stopped the run at `at` (the first firing counts).
+    pub fn watchdog(&mut self, at: Nanos, topic: &str, deadline: Nanos) {
+        if self.watchdog.is_none() {
+            self.watchdog = Some(Watchdog {
+                at,
+                topic: topic.to_string(),
+                deadline,
+            });
+        }
+    }
+
+    /// Account one actuator tick.
+    pub fn push(&mut self, rec: StepRecord) {
+        self.steps = rec.step;
+        if let Some(lat) = rec.latency {
+            self.latency.record(lat);
+        }
+        if rec.nonfinite {
+            self.nonfinite_actions += 1;
+        }
+        if rec.fell && self.fell_at.is_none() {
+            self.fell_at = Some(rec.t);
+        }
+        if self.keep_trace {
+            self.trace.push(rec);
+        }
+        self.last = Some(rec);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn run_log_accounts_falls_once() {
+        let mut log = RunLog::new(true);
+        let base = StepRecord {
+            step: 1,
+            t: Nanos(0),
+            pole_angle: 0.0,
+            cart_pos: 0.0,
+            action: 0.0,
+            latency: None,
+            nonfinite: false,
+            topics: TopicCounters::default(),
+            published: None,
+            fell: false,
+        };
+        log.push(base);
+        log.push(StepRecord {
+            step: 2,
+            t: Nanos(20),
+            fell: true,
+            nonfinite: true,
+            latency: Some(Nanos(5)),
+            ..base
+        });
+        assert_eq!(log.steps, 2);
+        assert_eq!(log.fell_at, Some(Nanos(20)));
+        assert_eq!(log.nonfinite_actions, 1);
+        assert_eq!(log.latency.count(), 1);
+        assert_eq!(log.trace.len(), 2);
+    }
+}

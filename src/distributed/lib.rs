@@ -1,0 +1,496 @@
+//! One graph, many processes: placement groups connected over Zenoh.
+//!
+//! The graph file places each node in a process (`process = "robot"`; by default the plant's
+//! nodes share `robot`, every other node runs alone: [`GraphSpec::process_of`]). Under
+//! `ratelab launch --processes` the launcher ([`launcher`]) starts one OS process per
+//! placement group (`ratelab node`, [`member`]) and they talk over Zenoh, peer to peer
+//! (multicast scouting off; the launcher listens on `tls/127.0.0.1:PORT`, the others connect
+//! to it and find each other by gossip, as rmw_zenoh's defaults do).
+//!
+//! - **Only the graph's own processes.** Every link is TLS 1.3 with mutual
+//!   authentication by a certificate authority made for one launch ([`credentials`]), and
+//!   every session drops what an identity may not say ([`access`]): a peer without the
+//!   launch's credentials cannot connect, and a process cannot publish another's topics,
+//!   reports or tokens, nor the launcher's control.
+//!
+//! - **Topics** are key expressions `ratelab/<graph>/<topic>` ([`Keys`]). Each process
+//!   builds the whole graph but ticks only its own nodes; a topic whose publisher and
+//!   subscriber sit in different processes is forwarded as [`wire::WireSample`]s and
+//!   published into the subscriber's copy of the topic, which keeps the chapter's buffer,
+//!   drop rule and QoS, so `dropped` means what it means in-process. Gaps in the
+//!   publisher's sequence numbers count as `lost` on the wire.
+//! - **Discovery and liveliness** are Zenoh liveliness tokens, one per node and one per
+//!   publisher and subscriber carrying its QoS in short (rmw_zenoh encodes its graph the same
+//!   way, `docs/design.md`): `ratelab top` lists them, and the launcher sees a process go.
+//! - **Time.** Under the real clock the processes share the host's monotonic clock and one
+//!   run-time zero, so stamps and sense→act latency stay exact on one host. Under the
+//!   virtual clock every process replays the one [`crate::scheduler::VirtualScheduler`]
+//!   order of ticks, ticks its own nodes in their turn and reports each tick to the others
+//!   ([`lockstep`]); the launcher is the time authority through the horizon it sets. The
+//!   same seed gives byte-identical metrics in one process and in several.
+//! - **Watching.** [`monitor`] is one more Zenoh session that sees a running launch's
+//!   tokens and reports (the attached lab, `ratelab top`); [`refusals`] passes the TLS
+//!   handshakes Zenoh refused on to the launcher's log; [`wire`] is what travels (samples,
+//!   reports, the lockstep's messages) and how it is encoded.
+
+// The layers below, under their own names (`crate::graph`, `crate::time`, …).
+use ratelab_core::{
+    executor, ids, input, metrics, msg, node, output, procs, qos, rate, runlog, text, time, topic,
+};
+use ratelab_recording as recording;
+use ratelab_runtime::{checkpoint, config, graph, policy, ros2, run, scheduler, ClockKind};
+use ratelab_session as session;
+
+pub mod access;
+pub mod credentials;
+pub mod launcher;
+pub mod lockstep;
+pub mod member;
+pub mod monitor;
+pub mod refusals;
+pub mod wire;
+
+/// The Zenoh crate ratelab is built with (for `ratelab top`'s session).
+pub use zenoh;
+
+use crate::graph::spec::GraphSpec;
+use sha2::Digest;
+use zenoh::Wait;
+
+/// Where a launcher listens when not told (`--listen`), and where `ratelab lab --attach`
+/// looks when not told (`--connect`): a port of ratelab's own on loopback, next to Zenoh's
+/// router port 7447 but not it (a ROS 2 node of rmw_zenoh connects to 7447 by default, and
+/// must not find ratelab's launcher there). A launcher that finds it taken listens on a
+/// free port instead (and says which).
+pub const DEFAULT_ENDPOINT: &str = "tls/127.0.0.1:7449";
+
+/// Where a session that only connects listens: any free port on loopback (peers find it
+/// by gossip).
+pub const LOOPBACK_ANY: &str = "tls/127.0.0.1:0";
+
+/// How long a process waits for a peer's answer (a join, a ready, a granted tick).
+pub const REPLY_TIMEOUT: std::time::Duration = std::time::Duration::from_secs(20);
+
+/// Zenoh's runtime threads in a ratelab process, in the syntax of Zenoh's `ZENOH_RUNTIME`
+/// variable (RON): its receive, send, accept and network pools all handed over to one
+/// application worker thread, instead of Zenoh's default of six workers over five pools.
+/// On a machine with few cores, fewer threads to wake per message is faster: on this
+/// 2-core VM, 7 of 7 lockstep runs and 4 of 4 wire-latency figures measured faster with it
+/// (BENCHMARKS.md, issue 13; the pools are `zenoh_runtime::ZRuntime`).
+pub const ZENOH_RUNTIME: &str = "(rx: (handover: app), tx: (handover: app), \
+    acc: (handover: app), net: (handover: app), app: (worker_threads: 1))";
+
+/// Give this process, and every process it starts, [`ZENOH_RUNTIME`], unless the
+/// environment already sets a non-empty `ZENOH_RUNTIME` (a user's own setting wins; Zenoh
+/// reads it once, at its first use).
+///
+/// Call it first thing in `main`, before any thread starts: it changes the process's
+/// environment, which is not safe while another thread may read it, and swaps the panic
+/// hook for a moment.
+///
+/// # Errors
+/// [`DistError::Usage`] when the user's `ZENOH_RUNTIME` is one Zenoh cannot use (not its
+/// RON syntax, an unknown pool or field, or no worker thread): Zenoh itself would panic on
+/// it at its first use.
+pub fn set_zenoh_runtime() -> Result<(), DistError> {
+    if std::env::var_os("ZENOH_RUNTIME").is_none_or(|v| v.is_empty()) {
+        std::env::set_var("ZENOH_RUNTIME", ZENOH_RUNTIME);
+        return Ok(());
+    }
+    use std::borrow::Borrow;
+    use zenoh_runtime::{RuntimeParam, ZRuntime};
+    // Zenoh parses the variable the first time a pool's settings are read, and panics on
+    // one it cannot parse: read them here, quietly, where a panic can be caught.
+    let hook = std::panic::take_hook();
+    std::panic::set_hook(Box::new(|_| {}));
+    let threads = std::panic::catch_unwind(|| {
+        ZRuntime::iter()
+            .map(|z| {
+                let p: &RuntimeParam = z.borrow();
+                p.worker_threads
+            })
+            .min()
+    });
+    std::panic::set_hook(hook);
+    match threads {
+        Ok(Some(n)) if n > 0 => Ok(()),
+        Ok(_) => Err(DistError::Usage(
+            "ZENOH_RUNTIME gives a Zenoh pool no worker thread (each needs at least one)".into(),
+        )),
+        Err(_) => Err(DistError::Usage(
+            "ZENOH_RUNTIME is not a runtime setting Zenoh can read (its RON syntax, e.g. \
+             '(rx: (worker_threads: 2))'; unset it for ratelab's own)"
+                .into(),
+        )),
+    }
+}
+
+/// Most placement groups one graph may have (each is an OS process).
+pub const MAX_PROCESSES: usize = 16;
+
+/// Something that stops a multi-process run, as one line.
+#[derive(Debug, thiserror::Error)]
+pub enum DistError {
+    /// A bad endpoint or process name, a graph that cannot be split, a port in use.
+    #[error("{0}")]
+    Usage(String),
+    /// Zenoh could not open a session or declare something.
+    #[error("zenoh: {0}")]
+    Zenoh(String),
+    /// A peer did not answer in time, or went away.
+    #[error("{0}")]
+    Peer(String),
+    /// The run could not be built.
+    #[error(transparent)]
+    Run(#[from] crate::run::RunError),
+}
+
+impl From<zenoh::Error> for DistError {
+    fn from(e: zenoh::Error) -> Self {
+        DistError::Zenoh(zenoh_message(&e.to_string()))
+    }
+}
+
+/// A Zenoh error's first line, without the places in Zenoh's source it names (`… at
+/// /root/.cargo/registry/src/…/tcp.rs:61.`): they mean nothing to a user.
+pub fn zenoh_message(msg: &str) -> String {
+    let mut line = msg.lines().next().unwrap_or("error").to_string();
+    let mut from = 0;
+    while let Some(k) = line[from..].find(" at ").map(|k| k + from) {
+        let rest = &line[k + 4..];
+        let token_end = rest
+            .find(|c: char| c.is_whitespace() || c == ']')
+            .unwrap_or(rest.len());
+        if rest[..token_end].contains(".rs:") {
+            line.replace_range(k..k + 4 + token_end, "");
+        } else {
+            from = k + 4;
+        }
+    }
+    line
+}
+
+/// Check a Zenoh endpoint as ratelab uses them: `tls/HOST:PORT` (every link of a graph
+/// across processes is mutually authenticated TLS, [`credentials`]), HOST a name or
+/// address that resolves, PORT in 0..=65535 (0 only for `--listen`: any free port).
+///
+/// # Errors
+/// [`DistError::Usage`] naming the flag.
+pub fn check_endpoint(flag: &str, ep: &str, listen: bool) -> Result<(), DistError> {
+    use std::net::ToSocketAddrs;
+    let bad = |why: &str| DistError::Usage(format!("{flag} {ep}: {why}"));
+    if ep.starts_with("tcp/") {
+        return Err(bad(
+            "a graph's links are mutually authenticated TLS: write tls/HOST:PORT",
+        ));
+    }
+    let rest = ep
+        .strip_prefix("tls/")
+        .ok_or_else(|| bad("expected tls/HOST:PORT"))?;
+    let (host, port) = rest
+        .rsplit_once(':')
+        .ok_or_else(|| bad("expected tls/HOST:PORT"))?;
+    let port: u16 = port
+        .parse()
+        .map_err(|_| bad("the port must be a number in 0..=65535"))?;
+    if port == 0 && !listen {
+        return Err(bad("port 0 means any port: connect to a real one"));
+    }
+    let host = host.trim_start_matches('[').trim_end_matches(']');
+    if host.is_empty() || host.len() > 253 {
+        return Err(bad("no host"));
+    }
+    (host, port)
+        .to_socket_addrs()
+        .map_err(|e| bad(&format!("the host does not resolve ({e})")))?
+        .next()
+        .ok_or_else(|| bad("the host does not resolve"))?;
+    Ok(())
+}
+
+/// The key expressions of one graph, all under `ratelab/<graph>`.
+#[derive(Clone, Debug)]
+pub struct Keys {
+    prefix: String,
+}
+
+impl Keys {
+    /// The keys of graph `name` (characters a key expression cannot hold become `_`).
+    pub fn new(name: &str) -> Keys {
+        let chunk: String = name
+            .chars()
+            .map(|c| {
+                if c.is_ascii_alphanumeric() || c == '_' || c == '-' || c == '.' {
+                    c
+                } else {
+                    '_'
+                }
+            })
+            .collect();
+        Keys {
+            prefix: format!("ratelab/{chunk}"),
+        }
+    }
+
+    /// `ratelab/<graph>`.
+    pub fn prefix(&self) -> &str {
+        &self.prefix
+    }
+
+    /// The graph's name as its keys spell it (`<graph>` in `ratelab/<graph>`).
+    pub fn graph(&self) -> &str {
+        self.prefix.strip_prefix("ratelab/").unwrap_or(&self.prefix)
+    }
+
+    /// A topic's key: `ratelab/<graph>/obs` for `/obs`.
+    pub fn topic(&self, name: &str) -> String {
+        format!("{}/{}", self.prefix, name.trim_matches('/'))
+    }
+
+    /// Where the launcher tells process `p` what to do.
+    pub fn control(&self, p: &str) -> String {
+        format!("{}/@ctl/{p}", self.prefix)
+    }
+
+    /// The launcher's liveliness token: while it exists, the run's authority is alive.
+    pub fn launcher_token(&self) -> String {
+        format!("{}/@launcher", self.prefix)
+    }
+
+    /// Where process `p` tells the launcher ([`wire::ToLauncher`]): its own key, which
+    /// only `p` may publish on ([`access`]).
+    pub fn up_from(&self, p: &str) -> String {
+        format!("{}/@up/{p}", self.prefix)
+    }
+
+    /// Every process's [`Keys::up_from`] (the launcher subscribes here).
+    pub fn up(&self) -> String {
+        format!("{}/@up/*", self.prefix)
+    }
+
+    /// A node's liveliness token: `ratelab/<graph>/@node/<process>/<node>`.
+    pub fn node_token(&self, process: &str, node: &str) -> String {
+        format!("{}/@node/{process}/{node}", self.prefix)
+    }
+
+    /// A publisher's or subscriber's token (`role` is `pub` or `sub`), carrying the topic's
+    /// QoS in short (spaces as `_`): `ratelab/<graph>/@pub/obs/KL1_latest/sensor`.
+    pub fn endpoint_token(&self, role: &str, topic: &str, qos: &str, node: &str) -> String {
+        let qos: String = qos
+            .chars()
+            .map(|c| if c.is_ascii_alphanumeric() { c } else { '_' })
+            .collect();
+        format!(
+            "{}/@{role}/{}/{qos}/{node}",
+            self.prefix,
+            topic.trim_matches('/')
+        )
+    }
+
+    /// Where the launcher answers with the run's settings ([`wire::Setup`]), for watchers.
+    pub fn setup(&self) -> String {
+        format!("{}/@setup", self.prefix)
+    }
+
+    /// Where the launcher says the run is over ([`wire::RunOver`]).
+    pub fn ended(&self) -> String {
+        format!("{}/@ended", self.prefix)
+    }
+
+    /// Where the launcher publishes its progress lines (a process joined, is gone, …).
+    pub fn log(&self) -> String {
+        format!("{}/@log", self.prefix)
+    }
+
+    /// Virtual clock: where process `p` says each event of its nodes is done
+    /// ([`wire::Ticked`], several to a message), for every other process and the launcher.
+    pub fn ticked(&self, p: &str) -> String {
+        format!("{}/@ticked/{p}", self.prefix)
+    }
+
+    /// Virtual clock: process `p` answers here while it is up, so that the others know
+    /// they reach it directly before the run ([`lockstep`]).
+    pub fn here(&self, p: &str) -> String {
+        format!("{}/@here/{p}", self.prefix)
+    }
+
+    /// Where each process publishes its live counters for `ratelab top`.
+    pub fn stats(&self, p: &str) -> String {
+        format!("{}/@stats/{p}", self.prefix)
+    }
+}
+
+/// Check that every topic of `spec` makes a valid key expression.
+///
+/// # Errors
+/// [`DistError::Usage`] naming the topic.
+pub fn check_keys(spec: &GraphSpec) -> Result<(), DistError> {
+    let keys = Keys::new(&spec.name);
+    for t in &spec.topics {
+        let k = keys.topic(&t.name);
+        if zenoh::key_expr::KeyExpr::try_from(k.clone()).is_err() || k.contains("//") {
+            return Err(DistError::Usage(format!(
+                "topic '{}' does not make a Zenoh key expression ('{k}')",
+                t.name
+            )));
+        }
+    }
+    // Every process builds its own plant; only the one the actuator steps moves.
+    let plant = spec.process_of(spec.actuator);
+    for (i, n) in spec.nodes.iter().enumerate() {
+        let p = spec.process_of(crate::graph::NodeId(i));
+        if n.kind.plant() == crate::graph::kind::Plant::Reads && p != plant {
+            return Err(DistError::Usage(format!(
+                "sensor '{}' is placed in process '{p}' but the actuator in '{plant}': the nodes that touch the plant must share one process",
+                n.name
+            )));
+        }
+    }
+    // A topic's subscribers share a process: it holds the topic's counters, and one copy of
+    // the topic there feeds every subscription.
+    for t in &spec.topics {
+        let mut at = t.subscribers.iter().map(|&s| (s, spec.process_of(s)));
+        if let Some((first, p)) = at.next() {
+            if let Some((other, q)) = at.find(|(_, q)| *q != p) {
+                return Err(DistError::Usage(format!(
+                    "topic '{}' has subscribers in two processes ('{}' in '{p}', '{}' in '{q}'): a topic's subscribers share a process across processes (place them together, or give each its own topic)",
+                    t.name,
+                    spec.node(first).name,
+                    spec.node(other).name
+                )));
+            }
+        }
+    }
+    if spec.placement().len() > MAX_PROCESSES {
+        return Err(DistError::Usage(format!(
+            "graph '{}' places its nodes in {} processes (at most {MAX_PROCESSES})",
+            spec.name,
+            spec.placement().len()
+        )));
+    }
+    Ok(())
+}
+
+/// SHA-256 of a graph file's bytes, hex: exchanged at join, so processes given different
+/// files refuse to run together.
+pub fn graph_hash(bytes: &[u8]) -> String {
+    sha2::Sha256::digest(bytes)
+        .iter()
+        .map(|b| format!("{b:02x}"))
+        .collect()
+}
+
+/// The keys of the liveliness tokens alive now under `selector` (at most `max`; asked for
+/// up to `timeout`). Empty when the query cannot be made.
+pub fn live_tokens(
+    session: &zenoh::Session,
+    selector: &str,
+    timeout: std::time::Duration,
+    max: usize,
+) -> Vec<String> {
+    let Ok(replies) = session.liveliness().get(selector).timeout(timeout).wait() else {
+        return Vec::new();
+    };
+    let mut keys = Vec::new();
+    while keys.len() < max {
+        let Ok(reply) = replies.recv() else { break };
+        if let Ok(sample) = reply.result() {
+            keys.push(sample.key_expr().as_str().to_string());
+        }
+    }
+    keys
+}
+
+/// Who a session is and what it knows of the graph: what [`open_session`] needs to
+/// authenticate it and to check what it receives ([`access`]).
+#[derive(Clone, Copy, Debug)]
+pub struct Access<'a> {
+    /// The launch's credentials, holding this session's identity.
+    pub credentials: &'a credentials::Credentials,
+    /// This session's identity.
+    pub role: &'a credentials::Role,
+    /// The graph's shape, when the session knows it (a watcher does not yet).
+    pub spec: Option<&'a GraphSpec>,
+}
+
+/// Open a Zenoh session in peer mode with multicast scouting off, listening on `listen` and
+/// connecting to `connect` (endpoints already checked), authenticated as `access.role` by
+/// mutual TLS and enforcing the graph's access control on what it receives.
+///
+/// # Errors
+/// [`DistError::Usage`] when an endpoint cannot be used (a port in use) or the credentials
+/// lack the role's identity, else [`DistError::Zenoh`].
+pub fn open_session(
+    listen: &[String],
+    connect: &[String],
+    access: Access<'_>,
+) -> Result<zenoh::Session, DistError> {
+    let mut config = zenoh::Config::default();
+    let json = |v: &[String]| serde_json::to_string(v).unwrap_or_else(|_| "[]".into());
+    let set = |c: &mut zenoh::Config, k: &str, v: &str| {
+        c.insert_json5(k, v)
+            .map_err(|e| DistError::Zenoh(format!("config {k}: {e}")))
+    };
+    set(&mut config, "mode", "\"peer\"")?;
+    set(&mut config, "scouting/multicast/enabled", "false")?;
+    set(&mut config, "listen/endpoints", &json(listen))?;
+    set(&mut config, "connect/endpoints", &json(connect))?;
+    // Fail at once on an endpoint that cannot be listened on or connected to, rather than
+    // retrying in the background: the caller exits 2 with one line.
+    set(&mut config, "listen/exit_on_failure", "true")?;
+    set(&mut config, "connect/exit_on_failure", "true")?;
+    set(&mut config, "connect/timeout_ms", "5000")?;
+    for (k, v) in access.credentials.zenoh_tls(access.role)? {
+        set(&mut config, k, &v)?;
+    }
+    let keys = Keys::new(&access.credentials.graph);
+    let acl = access::acl(&keys, &access.credentials.processes, access.spec);
+    set(&mut config, "access_control", &acl.to_string())?;
+    zenoh::open(config).wait().map_err(|e| {
+        let first = zenoh_message(&e.to_string());
+        // Zenoh says only that it could not connect: nobody listens there, or the TLS
+        // handshake was refused (most often credentials of another launch).
+        let hint = if first.contains("Unable to connect")
+            || first.contains("certificate")
+            || first.contains("alert")
+        {
+            " (is the launch running there, and were these credentials made by it? each launch makes its own)"
+        } else {
+            ""
+        };
+        DistError::Usage(format!(
+            "cannot open a Zenoh session (listen {listen:?}, connect {connect:?}): {first}{hint}"
+        ))
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn zenoh_messages_lose_the_source_places_they_name() {
+        let raw = "Can not create a new TCP listener bound to 127.0.0.1:7449: [Address already in use (os error 98) at /root/.cargo/registry/src/index.crates.io-1949cf8c6b5b557f/zenoh-link-commons-1.10.2/src/tcp.rs:61.] at /root/.cargo/registry/src/x/zenoh-transport-1.10.2/src/unicast.rs:338.\nmore";
+        assert_eq!(
+            super::zenoh_message(raw),
+            "Can not create a new TCP listener bound to 127.0.0.1:7449: [Address already in use (os error 98)]"
+        );
+        assert_eq!(
+            super::zenoh_message("Timeout! at src/orchestrator.rs:388."),
+            "Timeout!"
+        );
+        assert_eq!(super::zenoh_message("look at me"), "look at me");
+    }
+
+    #[test]
+    fn a_topics_subscribers_share_a_process() {
+        let monitor = include_str!("../../graphs/cartpole-monitor.toml");
+        let spec = crate::graph::GraphSpec::parse(monitor, "m.toml").unwrap();
+        super::check_keys(&spec).unwrap();
+        let apart = monitor.replace("process = \"policy\"", "process = \"watch\"");
+        let spec = crate::graph::GraphSpec::parse(&apart, "m.toml").unwrap();
+        let e = super::check_keys(&spec).unwrap_err().to_string();
+        assert!(
+            e.contains("topic '/obs' has subscribers in two processes ('policy' in 'policy', 'monitor' in 'watch')"),
+            "{e}"
+        );
+    }
+}

@@ -1,0 +1,1491 @@
+//! Recordings: a run written to a rerun `.rrd` for offline review (rerun 0.36.3).
+//!
+//! Timelines: the runtime clock's time as a duration, named for the clock — `sim_time` under
+//! the virtual clock, `wall_time` (since the run's start) under the real one — and
+//! `control_step` (a sequence). Entities, for a graph described by a [`GraphShape`] (lists of
+//! nodes and topics, so nothing below names a node or a topic):
+//! - `world` (z up): `world/rail` (the cart rests on it), `world/cart` (translated by the cart
+//!   position) with `world/cart/body` (box 0.2 × 0.1 × 0.1 m), `world/cart/fall_limits`
+//!   (two lines at ±12°, labelled by `…/labels`), `world/cart/force` (the applied force as an arrow, 0.04 m per N)
+//!   and `world/cart/pole` (rotated θ about +y) with `world/cart/pole/body` (capsule 1.0 m)
+//!   and, from a fall on, `world/cart/pole/fallen` (the pole drawn red, `…/label` along it, clear of the limits' labels:
+//!   `FELL at 0.84 s`);
+//! - `plant/pole_angle_rad`, `plant/fall_limit/{upper,lower}`, `plant/changes` (a mark at the
+//!   start and at every mid-run change), `plant/cart_pos_m`, `plant/rail_end/{right,left}`,
+//!   `plant/cart_limit/{right,left}`;
+//! - `action/published_N` (the force the policy asked for, at each message it published),
+//!   `action/applied_N` (the force the actuator applied at each step: the zero-order hold);
+//! - `latency/sense_to_act_ms`, `latency/control_period_ms` (the controller's period);
+//! - `bus/<topic>/{published,dropped,msg_per_s}` for every topic (msg/s over a 1 s sliding
+//!   window, from the second actuator step: the first spans no time; and at the run's end
+//!   when the actuator stopped stepping 1 s or more before it, over the time since its last
+//!   step), one colour per topic, the same in every graph, each topic's line narrower than
+//!   the one drawn before it so that equal lines show both colours;
+//! - QoS ([`crate::qos`]): `bus/<topic>/<counter>` (`expired`, `refused`, `lost`,
+//!   `retransmitted`, `offered_deadline_missed`, `requested_deadline_missed`) for each counter
+//!   a topic reports ([`crate::topic::TopicStats::reported`]: its QoS can make it count, or it has
+//!   counted), from the first step it is reported to the end, read at each actuator step
+//!   (deadline periods missed up to that step count before the next message); and
+//!   `nodes/<name>/not_alive` (times the node lost its liveliness) for each node with a
+//!   liveliness lease. A graph with the chapter's QoS logs none of them;
+//! - `graph`: the node graph as rerun `GraphNodes`/`GraphEdges`. Rerun's edges carry no
+//!   labels, so topics are drawn as nodes of their own, as ROS's rqt_graph does, in another
+//!   colour; positions run left to right from the sources; labels show the rates and depths
+//!   (a topic with QoS beyond the depth shows it in short, a part a line under its name:
+//!   `dl 30 ms zero`, `link 20%`; a Python node's label says `python`) and are re-logged
+//!   when they change;
+//! - `nodes/<name>/lateness_us`: per-tick lateness of each node (real clock only);
+//! - across processes (a launch's recording): `bus/<topic>/wire_{p50,p99}_us` for each topic
+//!   that crosses processes (its samples' time on the wire so far, as the subscriber's
+//!   process measured it), and each node's process on its node-graph label;
+//! - with executors or compute times: `nodes/<name>/executor_lane` (the executor timeline:
+//!   the node's rank, raised by 0.8 while its tick holds a thread), `nodes/<name>/response_ms`
+//!   (release → outputs published, per tick) and `nodes/<name>/skipped_ticks` (so far);
+//! - `events`: text logs for the start, rate, depth and QoS changes, brain swaps, the fall and
+//!   the end; and the QoS events: `deadline missed on /cmd: requested +1 (3 in all)` (WARN)
+//!   when a topic's offered or requested deadline counter rises, stamped at the actuator
+//!   step that sees the rise (so up to one actuator period after the deadline timer fired);
+//!   `node policy not alive (lease 60 ms)` (WARN) at the instant its lease ran out (its last
+//!   tick plus the lease) and `node policy alive again` (INFO) at the tick that brought it
+//!   back; `stopped by watchdog at … s: no message on /cmd for more than 30 ms` (WARN) at
+//!   the run's end when the actuator's deadline reaction stopped it. `summary`: the run's
+//!   summary as a markdown document; the settings are also recording properties.
+//!
+//! The blueprint ([`blueprint`], written with [`layout`]'s archetypes) lays these out as a
+//! learner reads them: the cartpole, the
+//! node graph and the summary; the pole angle, the action, the cart position, the latency
+//! (and, under the real clock, the lateness); the bus counters (with the QoS counters in a
+//! view of their own when the graph has any) and the events. Every view
+//! names its entities explicitly, so none matches nothing. The layout is sent twice: when
+//! the graph is built (plots with no scale known up front fit themselves while the run goes)
+//! and at the end, each plot's y range then padded around every value its series took. The
+//! blueprint stores' ids derive from the settings too (virtual clock).
+//!
+//! The rows are written by a step observer ([`observer`]). Determinism: rows are not left
+//! to rerun's background batcher, whose chunk boundaries and
+//! order depend on thread timing. Each entity's rows are gathered into chunks here and sent
+//! every [`FLUSH_EVERY_STEPS`] actuator steps (and at the end), entities in sorted order, all
+//! stamped on the runtime clock. Under the virtual clock the wall-clock `log_time` timeline
+//! is off and the recording id derives from the settings, so two runs with the same settings
+//! write recordings that `rerun rrd compare` finds identical. (Per-node lateness, real clock
+//! only, is logged from the node threads through the ordinary batcher.)
+//!
+//! Files follow [`crate::output`]'s rule: rerun writes a temporary file beside the final
+//! name (`.<name>.<pid>-<n>.tmp`), moved into place when the recording is finished (or
+//! dropped); an existing file is replaced only when the recording was opened with
+//! `force`, and a symbolic link or non-regular file at the final name is refused.
+
+mod blueprint;
+mod files;
+mod layout;
+mod live;
+mod observer;
+mod shape;
+mod style;
+
+use blueprint::layout_for;
+pub use files::{check_output_path, default_lab_path, default_path};
+use files::{deterministic_id, graph_prefix, writing_beside_fails, Committer};
+use observer::{reference_lines, RecordingObserver, CHANGE_MARK_RAD};
+use style::*;
+
+use shape::GraphState;
+pub use shape::{GraphShape, NodeShape, TopicShape};
+
+// The layers below, under their own names (`crate::graph`, `crate::time`, …).
+use ratelab_core::{
+    executor, metrics, msg, output, plant, procs, qos, rate, runlog, textlog, time, topic,
+};
+use ratelab_runtime::{config, graph, scheduler};
+
+use crate::config::{ClockKind, RunConfig};
+use crate::graph::{GraphHandles, StepObserver};
+use crate::metrics::Metrics;
+use crate::plant::{CART_LIMIT_M, THETA_LIMIT_RAD};
+use crate::qos::QosCounter;
+use crate::runlog::StepRecord;
+use crate::scheduler::{EndReason, RunEnd};
+use crate::time::Nanos;
+use crate::topic::TopicStats;
+use layout::{Item, ViewSpec};
+use re_chunk::{Chunk, ChunkBuilder, RowId, TimeColumn};
+use rerun::external::re_sdk_types::blueprint::archetypes as bp;
+use rerun::external::re_sdk_types::blueprint::components as bpc;
+use rerun::external::re_sdk_types::blueprint::datatypes as bpd;
+use rerun::time::{TimePoint, Timeline};
+use rerun::{Color, RecordingStream, RecordingStreamBuilder};
+use std::collections::{BTreeMap, VecDeque};
+use std::path::{Path, PathBuf};
+use std::sync::{Arc, Mutex};
+
+/// The rerun application id of ratelab recordings.
+pub const APP_ID: &str = "ratelab";
+
+/// Buffered rows are sent as chunks this often (actuator steps), so a run cut short loses
+/// at most this much even without a clean exit (a clean exit always sends everything).
+pub const FLUSH_EVERY_STEPS: u64 = 250;
+
+/// A scalar series gathered as columns: run time (ns), control step, value.
+#[derive(Default)]
+struct ScalarColumn {
+    t_ns: Vec<i64>,
+    step: Vec<i64>,
+    value: Vec<f64>,
+}
+
+/// Rows gathered per entity, sent as chunks in a fixed order. Scalars are kept as plain
+/// columns and serialized once per flush (one arrow array per series, not one per row).
+struct ChunkBuffer {
+    /// The time timeline's name ([`timeline_name`]).
+    timeline: &'static str,
+    rows: BTreeMap<String, ChunkBuilder>,
+    scalars: BTreeMap<String, ScalarColumn>,
+    /// The smallest and largest value of every scalar series so far (kept across sends):
+    /// the final layout fits each plot's y range to them.
+    extents: Extents,
+}
+
+/// (min, max) per scalar entity path.
+type Extents = BTreeMap<String, (f64, f64)>;
+
+/// The key of [`Extents`] that says the run's text log wrote lines (`log/<node>`): the final
+/// layout then has a view of them.
+const LOG_MARK: &str = "log";
+
+fn widen(extents: &mut Extents, entity: &str, value: f64) {
+    if !value.is_finite() {
+        return;
+    }
+    match extents.get_mut(entity) {
+        Some((lo, hi)) => {
+            *lo = lo.min(value);
+            *hi = hi.max(value);
+        }
+        None => {
+            extents.insert(entity.to_string(), (value, value));
+        }
+    }
+}
+
+/// The name of the timeline that carries the runtime clock's time: `sim_time` for the
+/// virtual clock (simulated time, as ROS 2 calls time from `/clock`), `wall_time` for the
+/// real clock (time since the run's start on the machine's monotonic clock).
+pub fn timeline_name(clock: ClockKind) -> &'static str {
+    match clock {
+        ClockKind::Virtual => "sim_time",
+        ClockKind::Real => "wall_time",
+    }
+}
+
+impl ChunkBuffer {
+    fn new(timeline: &'static str) -> Self {
+        Self {
+            timeline,
+            rows: BTreeMap::new(),
+            scalars: BTreeMap::new(),
+            extents: Extents::new(),
+        }
+    }
+
+    /// The time point of control step `step` at run time `t`.
+    fn at(&self, t: Nanos, step: u64) -> TimePoint {
+        time_point(self.timeline, t, step)
+    }
+
+    fn add(&mut self, entity: &str, time: &TimePoint, row: &dyn rerun::AsComponents) {
+        let builder = self
+            .rows
+            .remove(entity)
+            .unwrap_or_else(|| Chunk::builder(entity));
+        self.rows.insert(
+            entity.to_string(),
+            builder.with_archetype(RowId::new(), time.clone(), row),
+        );
+    }
+
+    fn scalar(&mut self, entity: &str, t: Nanos, step: u64, value: f64) {
+        if !self.scalars.contains_key(entity) {
+            self.scalars
+                .insert(entity.to_string(), ScalarColumn::default());
+        }
+        let col = self.scalars.get_mut(entity).expect("inserted above");
+        col.t_ns.push(i64::try_from(t.0).unwrap_or(i64::MAX));
+        col.step.push(i64::try_from(step).unwrap_or(i64::MAX));
+        col.value.push(value);
+        widen(&mut self.extents, entity, value);
+    }
+
+    fn send(&mut self, rec: &RecordingStream) {
+        for (_, builder) in std::mem::take(&mut self.rows) {
+            if let Ok(chunk) = builder.build() {
+                rec.send_chunk(chunk);
+            }
+        }
+        for (entity, col) in std::mem::take(&mut self.scalars) {
+            let index = [
+                TimeColumn::new_duration_nanos(self.timeline, col.t_ns),
+                TimeColumn::new_sequence("control_step", col.step),
+            ];
+            if let Ok(columns) = rerun::Scalars::new(col.value).columns_of_unit_batches() {
+                let _ = rec.send_columns(entity, index, columns);
+            }
+        }
+    }
+}
+
+/// A series' name, colour and width (a static row), for a series that appears mid-run.
+fn series_style(buf: &mut ChunkBuffer, entity: &str, name: &str, color: (u8, u8, u8)) {
+    buf.add(
+        entity,
+        &TimePoint::default(),
+        &rerun::SeriesLines::new()
+            .with_names([name])
+            .with_colors([rgb(color)])
+            .with_widths([2.0])
+            .with_interpolation_mode(rerun::components::InterpolationMode::StepAfter),
+    );
+}
+
+/// The range the plots' linked time axes show for a run that ended at `end` (ns): the run
+/// with 5 % of it (at least 100 ms) of room each side, so the labels at its ends show
+/// whole.
+fn time_axis_ns(end: Nanos) -> (i64, i64) {
+    let end = i64::try_from(end.0).unwrap_or(i64::MAX);
+    let pad = (end / 20).max(100_000_000);
+    (-pad, end.saturating_add(pad))
+}
+
+/// The runtime-clock time point of control step `step` at run time `t`, on `timeline`.
+fn time_point(timeline: &'static str, t: Nanos, step: u64) -> TimePoint {
+    TimePoint::default()
+        .with(
+            Timeline::new_duration(timeline),
+            i64::try_from(t.0).unwrap_or(i64::MAX),
+        )
+        .with(
+            Timeline::new_sequence("control_step"),
+            i64::try_from(step).unwrap_or(i64::MAX),
+        )
+}
+
+/// Why a recording cannot be written. One line each, naming the file.
+#[derive(Debug, thiserror::Error)]
+pub enum RecordingError {
+    /// A symbolic link or a non-regular file at the path, or a move into place that failed.
+    #[error("--record {0}")]
+    Output(crate::output::OutputError),
+    /// The path is a folder.
+    #[error("--record path is a directory: {0}")]
+    IsDirectory(PathBuf),
+    /// The file exists and `--force` was not given.
+    #[error("--record file exists: {0} (pass --force to overwrite)")]
+    Exists(PathBuf),
+    /// The file cannot be created.
+    #[error("cannot write recording {path}: {detail}")]
+    Unwritable {
+        /// The path.
+        path: PathBuf,
+        /// The OS's reason.
+        detail: String,
+    },
+    /// rerun refused or failed to write.
+    #[error("recording {path}: {detail}")]
+    Rerun {
+        /// The recording's final path.
+        path: PathBuf,
+        /// rerun's reason.
+        detail: String,
+    },
+}
+
+impl From<crate::output::OutputError> for RecordingError {
+    fn from(e: crate::output::OutputError) -> Self {
+        use crate::output::OutputError;
+        match e {
+            OutputError::Exists(p) => RecordingError::Exists(p),
+            OutputError::NotRegular {
+                path,
+                kind: "a folder",
+            } => RecordingError::IsDirectory(path),
+            OutputError::Io { path, detail } => RecordingError::Unwritable { path, detail },
+            other => RecordingError::Output(other),
+        }
+    }
+}
+
+/// Format a rate for a file name: `50`, `7.5`.
+fn hz_label(hz: f64) -> String {
+    let s = format!("{hz:.3}");
+    s.trim_end_matches('0').trim_end_matches('.').to_string()
+}
+
+/// The entity name of a topic's bus series: `/obs` → `obs`, `/a/b` → `a_b`.
+pub fn bus_name(topic: &str) -> String {
+    topic.trim_start_matches('/').replace('/', "_")
+}
+
+/// The topics of `shape` that cross processes: a subscriber in another process than the
+/// publisher's (none in one process).
+fn crossing_topics(shape: &GraphShape) -> impl Iterator<Item = &TopicShape> {
+    let process = |name: &str| {
+        shape
+            .nodes
+            .iter()
+            .find(|n| n.name == name)
+            .and_then(|n| n.process.as_deref())
+    };
+    shape.topics.iter().filter(move |t| {
+        let from = process(&t.publisher);
+        from.is_some() && t.subscribers.iter().any(|s| process(s) != from)
+    })
+}
+
+/// The force the motor applies per unit of control (the `gear` of `assets/cartpole.xml`), N:
+/// the graph's [`crate::plant::GEAR_N`].
+pub const FORCE_PER_CONTROL_N: f64 = crate::plant::GEAR_N;
+
+/// Half the rail's length (the slider's range in `assets/cartpole.xml`), m.
+pub const RAIL_HALF_LENGTH_M: f64 = 2.9;
+
+/// How to record.
+#[derive(Clone, Debug, Default)]
+pub struct RecordOptions {
+    /// Also stream live to a rerun viewer spawned from PATH.
+    pub spawn: bool,
+}
+
+/// An open recording. Cheap to clone (the stream is a shared handle).
+#[derive(Clone)]
+pub struct Recording {
+    rec: RecordingStream,
+    path: PathBuf,
+    clock: ClockKind,
+    /// The settings the run started with (for the blueprint's scales and ids).
+    cfg: RunConfig,
+    buffer: Arc<Mutex<ChunkBuffer>>,
+    /// The latest actuator step logged (stamps events that arrive between steps).
+    last_step: Arc<std::sync::atomic::AtomicU64>,
+    /// Its run time, ns (the bus counters come with the steps: see [`Recording::finish`]).
+    last_step_ns: Arc<std::sync::atomic::AtomicU64>,
+    /// Each topic's messages published by then, by topic name (for the msg/s from the last
+    /// step to the run's end: see [`Recording::finish`]).
+    last_step_published: Arc<Mutex<BTreeMap<String, u64>>>,
+    /// The graph, once the observer is attached (for the final layout).
+    shape: Arc<Mutex<Option<GraphShape>>>,
+    /// The temporary file rerun writes, moved to `path` by [`Recording::finish`].
+    file: Arc<Committer>,
+    /// Per node (by index): the release of its last tick logged and the periods its timer
+    /// skipped so far ([`Recording::node_span`]).
+    lanes: Arc<Mutex<Vec<Lane>>>,
+    /// Per topic (by name): the deadline misses the events have told so far (offered,
+    /// requested) and when the last such event was ([`DEADLINE_EVENT_GAP`]).
+    deadline_said: Arc<Mutex<BTreeMap<String, DeadlineSaid>>>,
+    /// Lines the summary gains beyond the metrics' ([`Recording::summary_line`]).
+    extra_summary: Arc<Mutex<Vec<String>>>,
+    /// Events known before they happen (an injected fault's start and end), oldest first:
+    /// each is logged once the run reaches its time, so a run that ended first (a fall, a
+    /// watchdog) records none after its end.
+    due_events: Arc<Mutex<VecDeque<DueEvent>>>,
+}
+
+/// An event known in advance: its run time, text and level.
+type DueEvent = (Nanos, String, &'static str);
+
+/// A topic's deadline misses as the events told them: (offered, requested) and the time
+/// of the last event.
+type DeadlineSaid = (u64, u64, Nanos);
+
+/// Deadline misses closer than this to the last event about them are counted, not listed:
+/// a lossy link misses a deadline every few steps, and a line for each buried everything
+/// else in the event list. A burst's first miss gets a line; the end of the run says how
+/// many there were in all.
+const DEADLINE_EVENT_GAP: Nanos = Nanos(1_000_000_000);
+
+/// A node's lane in the executor timeline: the release of its last tick logged, and the
+/// periods its timer skipped so far.
+type Lane = (Option<Nanos>, u64);
+
+/// Does a run of `cfg` measure its executors (compute times, or executors that share
+/// threads)? Its recording then has the executor timeline, response times and skipped
+/// ticks.
+fn measures_executors(cfg: &RunConfig) -> bool {
+    cfg.graph.nodes.iter().any(|n| n.compute.is_some()) || !cfg.graph.execution_plan().is_per_node()
+}
+
+/// How high a node's lane sits in the executor timeline: its tie-break rank, the lane at
+/// `rank` while idle and `rank + LANE_BUSY` while its tick holds a thread.
+const LANE_BUSY: f64 = 0.8;
+
+/// Where the ground grid lies: just under the rail (the rail's top is the cart's bottom).
+const GROUND_Z_M: f64 = -0.08;
+/// The cart body's half height; the pole's hinge is at the body's centre, as in MuJoCo.
+const CART_HALF_HEIGHT_M: f64 = 0.05;
+/// The rail's half thickness.
+const RAIL_HALF_THICKNESS_M: f64 = 0.01;
+
+/// Node-graph positions (id → x, y) in graph units, and the bounds that frame them.
+fn graph_positions(shape: &GraphShape) -> (Vec<(String, [f32; 2])>, bpc::VisualBounds2D) {
+    const DX: f32 = 150.0;
+    const DY: f32 = 70.0;
+    let mut rows: BTreeMap<usize, usize> = BTreeMap::new();
+    let mut out = Vec::new();
+    for (id, col) in shape.columns() {
+        let row = rows.entry(col).or_insert(0);
+        out.push((id, [col as f32 * DX, *row as f32 * DY]));
+        *row += 1;
+    }
+    let max_x = out.iter().map(|(_, p)| p[0]).fold(0.0, f32::max);
+    let max_y = out.iter().map(|(_, p)| p[1]).fold(0.0, f32::max);
+    let range = |lo: f32, hi: f32| rerun::datatypes::Range1D([f64::from(lo), f64::from(hi)]);
+    let bounds = bpc::VisualBounds2D(rerun::datatypes::Range2D {
+        x_range: range(-0.45 * DX, max_x + 0.45 * DX),
+        y_range: range(-0.6 * DY, max_y + 0.6 * DY),
+    });
+    (out, bounds)
+}
+
+/// A spawnable viewer on PATH?
+pub fn viewer_on_path() -> bool {
+    std::env::var_os("PATH")
+        .map(|paths| std::env::split_paths(&paths).any(|d| d.join("rerun").is_file()))
+        .unwrap_or(false)
+}
+
+/// The chapter's settings of a run (`control 50 Hz, sensor 50 Hz, depth 1`), when its
+/// graph has the chapter's chain; `None` for another shape.
+fn chapter_settings(cfg: &RunConfig) -> Option<String> {
+    Some(format!(
+        "control {} Hz, sensor {} Hz, depth {}",
+        hz_label(cfg.control_hz()?),
+        hz_label(cfg.sensor_hz()?),
+        cfg.queue_depth()?
+    ))
+}
+
+/// One-line settings of a run, for the start event and the summary.
+fn settings_line(cfg: &RunConfig) -> String {
+    format!(
+        "{}{}seed {}, {} clock",
+        graph_prefix(cfg).replace('-', ": "),
+        chapter_settings(cfg).map(|c| c + ", ").unwrap_or_default(),
+        cfg.seed,
+        cfg.clock
+    )
+}
+
+impl Recording {
+    /// Open a recording of a run with `cfg` and the brain `policy` at `path`, which must
+    /// not exist yet ([`Recording::create_with`] without `force`).
+    ///
+    /// # Errors
+    /// As [`Recording::create_with`].
+    pub fn create(
+        path: &Path,
+        cfg: &RunConfig,
+        policy: &str,
+        opts: &RecordOptions,
+    ) -> Result<(Self, Option<String>), RecordingError> {
+        Self::create_with(path, cfg, policy, opts, false)
+    }
+
+    /// Open a recording of a run with `cfg` and the brain `policy` at `path`; an existing
+    /// regular file there is replaced (when the recording is finished) only if `force`.
+    /// With `opts.spawn` and a `rerun` viewer on PATH, data is also streamed live. Returns
+    /// the recording and, when `spawn` was asked for but no viewer was found, a one-line
+    /// notice. The viewer layout is sent when the graph is known (the
+    /// [`Recording::observer`] is attached to it).
+    ///
+    /// # Errors
+    /// [`RecordingError`] when the path is refused ([`check_output_path`]'s rules), the
+    /// file cannot be created, or rerun refuses.
+    pub fn create_with(
+        path: &Path,
+        cfg: &RunConfig,
+        policy: &str,
+        opts: &RecordOptions,
+        force: bool,
+    ) -> Result<(Self, Option<String>), RecordingError> {
+        let (pending, file) = crate::output::PendingFile::create(path, force)?;
+        drop(file);
+        let tmp = pending.temp_path().to_path_buf();
+        let mut builder = RecordingStreamBuilder::new(APP_ID);
+        if let Some(id) = deterministic_id(cfg) {
+            builder = builder
+                .recording_id(id)
+                .batcher_config(rerun::log::ChunkBatcherConfig {
+                    flush_tick: std::time::Duration::MAX,
+                    flush_num_bytes: 256 * 1024,
+                    flush_num_rows: u64::MAX,
+                    ..rerun::log::ChunkBatcherConfig::DEFAULT
+                });
+        }
+        let rec_err = |e: rerun::RecordingStreamError| RecordingError::Rerun {
+            path: path.to_path_buf(),
+            detail: e.to_string(),
+        };
+        let mut notice = None;
+        let live = opts.spawn && viewer_on_path();
+        if opts.spawn && !live {
+            notice = Some(
+                "no rerun viewer on PATH: recording to the file only (install one with `cargo install rerun-cli --locked --version 0.36.3` or `pip install rerun-sdk==0.36.3`)".to_string(),
+            );
+        }
+        let rec = if live {
+            // Start the viewer, then write to the file and stream to the viewer at once.
+            let viewer = rerun::spawn(&rerun::SpawnOptions::default()).map_err(|e| {
+                RecordingError::Rerun {
+                    path: path.to_path_buf(),
+                    detail: e.to_string(),
+                }
+            })?;
+            let file =
+                rerun::sink::FileSink::new(&tmp).map_err(|e| RecordingError::Unwritable {
+                    path: path.to_path_buf(),
+                    detail: e.to_string(),
+                })?;
+            // The live sink never holds up the file, even when the viewer cannot start.
+            let sinks: Vec<Box<dyn rerun::sink::LogSink>> = vec![
+                Box::new(file),
+                Box::new(live::LiveSink::new(viewer.child_pid)),
+            ];
+            builder.set_sinks(sinks).map_err(rec_err)?
+        } else {
+            builder.save(&tmp).map_err(rec_err)?
+        };
+        if cfg.clock == ClockKind::Virtual {
+            rec.set_log_time_enabled(false);
+        }
+        let recording = Self {
+            rec,
+            path: path.to_path_buf(),
+            clock: cfg.clock,
+            cfg: cfg.clone(),
+            buffer: Arc::new(Mutex::new(ChunkBuffer::new(timeline_name(cfg.clock)))),
+            file: Arc::new(Committer(Mutex::new(Some(pending)))),
+            last_step: Arc::default(),
+            last_step_ns: Arc::default(),
+            last_step_published: Arc::default(),
+            shape: Arc::default(),
+            lanes: Arc::default(),
+            deadline_said: Arc::default(),
+            extra_summary: Arc::default(),
+            due_events: Arc::default(),
+        };
+        recording.log_settings(cfg, policy);
+        Ok((recording, notice))
+    }
+
+    /// The file being written.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// The underlying rerun stream.
+    pub fn stream(&self) -> &RecordingStream {
+        &self.rec
+    }
+
+    /// Send the viewer layout for a graph of `shape`: when the graph is built (`extents`
+    /// none: plots without a scale known up front fit themselves while the run goes), and
+    /// again when the run is over, every plot's y range then padded around what its series
+    /// took, so nothing sits on a plot's edge. The second layout is a blueprint of its own,
+    /// activated after the first.
+    fn send_layout(
+        &self,
+        shape: &GraphShape,
+        extents: Option<&Extents>,
+        end: Option<Nanos>,
+    ) -> Result<(), RecordingError> {
+        let root = layout_for(shape, &self.cfg, extents);
+        let stage = if extents.is_some() { "final" } else { "start" };
+        let id = deterministic_id(&self.cfg).map(|id| format!("{id}-blueprint-{stage}"));
+        let timeline = timeline_name(self.cfg.clock);
+        let (msgs, activate) =
+            layout::blueprint_messages(APP_ID, id, &root, timeline, end.map(time_axis_ns))
+                .map_err(|detail| RecordingError::Rerun {
+                    path: self.path.clone(),
+                    detail,
+                })?;
+        self.rec.send_blueprint(msgs, activate);
+        Ok(())
+    }
+
+    /// The graph is built: keep its shape, name and colour its series, send the layout.
+    fn attach(&self, shape: &GraphShape) {
+        *self.shape.lock().unwrap_or_else(|e| e.into_inner()) = Some(shape.clone());
+        self.log_styles(shape);
+        if let Err(e) = self.send_layout(shape, None, None) {
+            // The data is still recorded; the viewer falls back to its own layout.
+            self.event(Nanos::ZERO, &format!("no viewer layout: {e}"), "WARN");
+        }
+    }
+
+    fn log_settings(&self, cfg: &RunConfig, policy: &str) {
+        let text = |x: Option<String>| x.unwrap_or_else(|| "none (no chapter chain)".into());
+        let settings = [
+            ("clock", cfg.clock.to_string()),
+            ("policy", policy.to_string()),
+            ("seed", cfg.seed.to_string()),
+            ("duration_s", cfg.duration.as_secs_f64().to_string()),
+            ("sensor_hz", text(cfg.sensor_hz().map(|x| x.to_string()))),
+            ("control_hz", text(cfg.control_hz().map(|x| x.to_string()))),
+            ("actuator_hz", cfg.actuator_hz().to_string()),
+            (
+                "queue_depth",
+                text(cfg.queue_depth().map(|x| x.to_string())),
+            ),
+        ];
+        // The chapter's graph keeps the settings it had; any other names itself.
+        let graph = (cfg.graph.name != "cartpole").then(|| ("graph", cfg.graph.to_string()));
+        let mut values = rerun::AnyValues::default();
+        for (k, v) in settings.iter().chain(graph.iter()) {
+            values = values.with_component::<rerun::components::Text>(*k, [v.as_str()]);
+        }
+        let chain = match (cfg.control_hz(), cfg.queue_depth()) {
+            (Some(hz), Some(depth)) => format!(", control {} Hz, depth {depth}", hz_label(hz)),
+            _ => String::new(),
+        };
+        let name = format!(
+            "{}{} clock{chain}, seed {}",
+            graph_prefix(cfg),
+            cfg.clock,
+            cfg.seed
+        );
+        let properties = rerun::EntityPath::properties();
+        let fixed = TimePoint::default();
+        let mut buf = self.lock();
+        buf.add(
+            &properties.to_string(),
+            &fixed,
+            &rerun::RecordingInfo::update_fields().with_name(name),
+        );
+        buf.add(
+            &properties
+                .join(&rerun::EntityPath::from("settings"))
+                .to_string(),
+            &fixed,
+            &values,
+        );
+        self.log_scene(&mut buf);
+        buf.add(
+            "summary",
+            &fixed,
+            &rerun::TextDocument::from_markdown(format!(
+                "### Run in progress\n\n- {}\n- policy: {policy}\n\nThe summary appears here when the run ends.",
+                settings_line(cfg)
+            )),
+        );
+        let start = buf.at(Nanos::ZERO, 0);
+        buf.add(
+            "events",
+            &start,
+            &rerun::TextLog::new(format!(
+                "start: {}",
+                chapter_settings(cfg).unwrap_or_else(|| cfg.graph.to_string())
+            ))
+            .with_level(rerun::components::TextLogLevel::INFO),
+        );
+        // The faults the run injects (`--stall`, `--kill`), where they happen: a stalled
+        // node's silence is otherwise recorded nowhere but in its not-alive count. Logged
+        // when the run reaches them ([`Recording::log_due_events`]).
+        let mut due = Vec::new();
+        for f in &cfg.faults {
+            let warn = rerun::components::TextLogLevel::WARN;
+            let (text, end) = match f.duration {
+                Some(d) => (
+                    format!(
+                        "injected stall: node {} does no work and asserts no liveliness for {:.2} s (until {:.2} s)",
+                        f.node,
+                        d.as_secs_f64(),
+                        f.at.saturating_add(d).as_secs_f64()
+                    ),
+                    Some(f.at.saturating_add(d)),
+                ),
+                None => (
+                    format!("injected kill: node {} stops for good", f.node),
+                    None,
+                ),
+            };
+            due.push((f.at, text, warn));
+            if let Some(end) = end {
+                due.push((
+                    end,
+                    format!("node {} resumes after its stall", f.node),
+                    rerun::components::TextLogLevel::INFO,
+                ));
+            }
+        }
+        due.sort_by_key(|(t, _, _)| *t);
+        *self.due_events.lock().unwrap_or_else(|e| e.into_inner()) = due.into();
+        buf.send(&self.rec);
+    }
+
+    /// Log the events known in advance that are due by run time `now` (at their own times,
+    /// on control step `step`, the step that reached them).
+    fn log_due_events(&self, buf: &mut ChunkBuffer, now: Nanos, step: u64) {
+        let mut due = self.due_events.lock().unwrap_or_else(|e| e.into_inner());
+        while due.front().is_some_and(|(t, _, _)| *t <= now) {
+            if let Some((t, text, level)) = due.pop_front() {
+                let at = buf.at(t, step);
+                buf.add("events", &at, &rerun::TextLog::new(text).with_level(level));
+            }
+        }
+    }
+
+    /// The static 3D scene: z up, the rail under the cart, the cart, the pole and the ±12°
+    /// fall limits (which move with the cart).
+    fn log_scene(&self, buf: &mut ChunkBuffer) {
+        let fixed = TimePoint::default();
+        buf.add("world", &fixed, &rerun::ViewCoordinates::RIGHT_HAND_Z_UP());
+        let rail_z = -(CART_HALF_HEIGHT_M + RAIL_HALF_THICKNESS_M) as f32;
+        buf.add(
+            "world/rail",
+            &fixed,
+            &rerun::Boxes3D::from_centers_and_half_sizes(
+                [(0.0, 0.0, rail_z)],
+                [(
+                    RAIL_HALF_LENGTH_M as f32,
+                    0.015,
+                    RAIL_HALF_THICKNESS_M as f32,
+                )],
+            )
+            .with_colors([rgb(NEUTRAL_COLOR)]),
+        );
+        buf.add(
+            "world/cart/body",
+            &fixed,
+            &rerun::Boxes3D::from_half_sizes([(0.1, 0.05, CART_HALF_HEIGHT_M as f32)])
+                .with_colors([Color::from_rgb(60, 110, 200)])
+                .with_fill_mode(rerun::components::FillMode::Solid),
+        );
+        buf.add(
+            "world/cart/pole/body",
+            &fixed,
+            &rerun::Capsules3D::from_lengths_and_radii([1.0], [0.02])
+                .with_colors([Color::from_rgb(230, 150, 50)]),
+        );
+        let reach = 1.1;
+        let (sin, cos) = (THETA_LIMIT_RAD.sin() * reach, THETA_LIMIT_RAD.cos() * reach);
+        let deg = THETA_LIMIT_RAD.to_degrees();
+        let tips = [
+            [-sin as f32, 0.0, cos as f32],
+            [sin as f32, 0.0, cos as f32],
+        ];
+        buf.add(
+            "world/cart/fall_limits",
+            &fixed,
+            &rerun::LineStrips3D::new(tips.map(|tip| [[0.0, 0.0, 0.0], tip]))
+                .with_colors([rgb(LIMIT_COLOR)])
+                .with_radii([0.004]),
+        );
+        buf.add(
+            "world/cart/fall_limits/labels",
+            &fixed,
+            &rerun::Points3D::new(tips)
+                .with_colors([rgb(LIMIT_COLOR)])
+                .with_radii([0.01])
+                .with_labels([format!("−{deg:.0}°"), format!("+{deg:.0}°")]),
+        );
+    }
+
+    /// Per-series names and colours, the node graph's first drawing and the reference lines
+    /// at the start, for a graph of `shape`.
+    fn log_styles(&self, shape: &GraphShape) {
+        let fixed = TimePoint::default();
+        let lines = |name: &str, color: (u8, u8, u8), width: f32| {
+            rerun::SeriesLines::new()
+                .with_names([name])
+                .with_colors([rgb(color)])
+                .with_widths([width])
+        };
+        let mut buf = self.lock();
+        buf.add(
+            "plant/pole_angle_rad",
+            &fixed,
+            &lines("pole angle", ANGLE_COLOR, 2.0),
+        );
+        // Both sides of a limit share one name, so the legend shows it once.
+        for side in ["upper", "lower"] {
+            buf.add(
+                &format!("plant/fall_limit/{side}"),
+                &fixed,
+                &lines(
+                    &format!("fall limits ±{THETA_LIMIT_RAD} rad"),
+                    LIMIT_COLOR,
+                    1.5,
+                ),
+            );
+        }
+        buf.add(
+            "plant/changes",
+            &fixed,
+            &rerun::SeriesPoints::new()
+                .with_names(["start, changes (events)"])
+                .with_colors([Color::from_rgb(240, 240, 240)])
+                .with_markers([rerun::components::MarkerShape::Down])
+                .with_marker_sizes([5.0]),
+        );
+        buf.add("plant/cart_pos_m", &fixed, &lines("cart", ANGLE_COLOR, 2.0));
+        for side in ["right", "left"] {
+            buf.add(
+                &format!("plant/rail_end/{side}"),
+                &fixed,
+                &lines(
+                    &format!("rail ends ±{RAIL_HALF_LENGTH_M} m"),
+                    NEUTRAL_COLOR,
+                    1.5,
+                ),
+            );
+            buf.add(
+                &format!("plant/cart_limit/{side}"),
+                &fixed,
+                &lines(&format!("run ends ±{CART_LIMIT_M} m"), LIMIT_COLOR, 1.5),
+            );
+        }
+        buf.add(
+            "action/published_N",
+            &fixed,
+            &rerun::SeriesPoints::new()
+                .with_names(["published (policy)"])
+                .with_colors([rgb(ANGLE_COLOR)])
+                .with_markers([rerun::components::MarkerShape::Circle])
+                .with_marker_sizes([2.5]),
+        );
+        // Wider than the published points drawn over it (where the actuator applies what
+        // was just published, both show).
+        buf.add(
+            "action/applied_N",
+            &fixed,
+            &lines("applied (actuator, held)", FORCE_COLOR, 5.0)
+                .with_interpolation_mode(rerun::components::InterpolationMode::StepAfter),
+        );
+        buf.add(
+            "latency/sense_to_act_ms",
+            &fixed,
+            &lines("latency", ANGLE_COLOR, 2.0),
+        );
+        let controller = shape.controller.clone().unwrap_or_default();
+        buf.add(
+            "latency/control_period_ms",
+            &fixed,
+            &lines(&format!("{controller} period"), NEUTRAL_COLOR, 1.5)
+                .with_interpolation_mode(rerun::components::InterpolationMode::StepAfter),
+        );
+        let widths = layered_widths(&shape.topics.iter().map(|t| t.entity()).collect::<Vec<_>>());
+        for (topic, width) in shape.topics.iter().zip(widths) {
+            for measure in ["published", "dropped", "msg_per_s"] {
+                buf.add(
+                    &format!("bus/{}/{measure}", topic.entity()),
+                    &fixed,
+                    &rerun::SeriesLines::new()
+                        .with_names([topic.name.as_str()])
+                        .with_colors([topic_color(&topic.name)])
+                        .with_widths([width]),
+                );
+            }
+        }
+        if self.clock == ClockKind::Real {
+            // Noisy series that seldom coincide: one width (layered, the spikes hid all).
+            for (i, node) in shape.nodes.iter().enumerate() {
+                buf.add(
+                    &format!("nodes/{}/lateness_us", node.name),
+                    &fixed,
+                    &rerun::SeriesLines::new()
+                        .with_names([node.name.as_str()])
+                        .with_colors([palette(i)])
+                        .with_widths([1.5]),
+                );
+            }
+        }
+        buf.send(&self.rec);
+        reference_lines(&mut buf, Nanos::ZERO, 0);
+    }
+
+    fn lock(&self) -> std::sync::MutexGuard<'_, ChunkBuffer> {
+        self.buffer.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    /// Log a line of the run's text log ([`crate::textlog`]) under `log/<node>` (`log/ratelab`
+    /// for ratelab's own), at its run time (the latest step's when it has none), with its
+    /// level: the final layout shows them in a view of their own.
+    pub fn log_line(&self, line: &crate::textlog::LogLine) {
+        let step = self.last_step.load(std::sync::atomic::Ordering::Relaxed);
+        let mut buf = self.lock();
+        // Outside any tick (a script's loading): at the latest actuator step's time.
+        let t = line.t.unwrap_or_else(|| {
+            Nanos((step as f64 * 1e9 / crate::plant::ACTUATOR_HZ).round() as u64)
+        });
+        let time = buf.at(t, step);
+        let level = match line.level {
+            crate::textlog::Level::Info => rerun::components::TextLogLevel::INFO,
+            crate::textlog::Level::Warn => rerun::components::TextLogLevel::WARN,
+            crate::textlog::Level::Error => rerun::components::TextLogLevel::ERROR,
+        };
+        let who = line.node.as_deref().unwrap_or("ratelab");
+        buf.add(
+            &format!("log/{who}"),
+            &time,
+            &rerun::TextLog::new(line.text.as_str()).with_level(level),
+        );
+        buf.extents.insert(LOG_MARK.to_string(), (0.0, 0.0));
+    }
+
+    /// Log an event line at run time `t` (and the latest control step).
+    pub fn event(&self, t: Nanos, text: &str, level: &str) {
+        let step = self.last_step.load(std::sync::atomic::Ordering::Relaxed);
+        let mut buf = self.lock();
+        let time = buf.at(t, step);
+        buf.add(
+            "events",
+            &time,
+            &rerun::TextLog::new(text).with_level(level),
+        );
+    }
+
+    /// Log a mid-run change made from outside the graph (a brain swap) at run time `t`: an
+    /// event, and a mark on the pole-angle plot.
+    pub fn change(&self, t: Nanos, text: &str) {
+        let step = self.last_step.load(std::sync::atomic::Ordering::Relaxed);
+        let mut buf = self.lock();
+        let time = buf.at(t, step);
+        buf.add(
+            "events",
+            &time,
+            &rerun::TextLog::new(text).with_level(rerun::components::TextLogLevel::INFO),
+        );
+        buf.scalar("plant/changes", t, step, CHANGE_MARK_RAD);
+    }
+
+    /// An observer to hand to the graph: logs every actuator tick. When it is attached to
+    /// the graph, the viewer layout for that graph is sent.
+    pub fn observer(&self) -> Box<dyn StepObserver> {
+        Box::new(self.new_observer(GraphShape::default()))
+    }
+
+    /// An observer of a graph known as data rather than by its handles: one that runs in
+    /// other processes, whose figures arrive over the network
+    /// (`ratelab::distributed::monitor::record`). The viewer layout for `shape` is sent now;
+    /// [`StepObserver::attach`] is not needed (and would replace `shape`).
+    pub fn observer_for(&self, shape: GraphShape) -> Box<dyn StepObserver> {
+        self.attach(&shape);
+        Box::new(self.new_observer(shape))
+    }
+
+    fn new_observer(&self, shape: GraphShape) -> RecordingObserver {
+        RecordingObserver::new(self.clone(), shape)
+    }
+
+    /// Log a real-clock tick: its lateness ([`Recording::node_tick`]) and, when the run
+    /// measures its executors, its span for the executor timeline ([`Recording::node_span`]:
+    /// released at its deadline, started `lateness` after it, ended when it had taken `took`).
+    pub fn real_tick(&self, t: &crate::scheduler::TickReport<'_>) {
+        self.node_tick(t.name, t.now, t.lateness);
+        if measures_executors(&self.cfg) {
+            self.node_span(&crate::executor::CallbackSpan {
+                node: t.node,
+                release: t.now.saturating_sub(t.lateness),
+                start: t.now,
+                end: t.now.saturating_add(t.took),
+            });
+        }
+    }
+
+    /// A hook that logs every span of a virtual run ([`Recording::node_span`]), when the
+    /// run measures its executors (`None` else: nothing to draw).
+    pub fn span_hook(&self) -> Option<crate::executor::SpanHook> {
+        let me = self.clone();
+        measures_executors(&self.cfg)
+            .then(|| Arc::new(move |s: &crate::executor::CallbackSpan| me.node_span(s)) as _)
+    }
+
+    /// Add `line` to the summary written at [`Recording::finish`], after the metrics' lines
+    /// (a launch's processes and wire latencies).
+    pub fn summary_line(&self, line: impl Into<String>) {
+        self.extra_summary
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .push(line.into());
+    }
+
+    /// Log the over-the-wire latency of topic `topic` (a graph across processes) at run time
+    /// `t`: the median and the 99th percentile, µs, of the samples its subscriber's process
+    /// received so far, as `bus/<topic>/wire_p50_us` and `bus/<topic>/wire_p99_us` (named
+    /// and coloured as the topic at their first value).
+    pub fn wire(&self, t: Nanos, topic: &str, p50_us: f64, p99_us: f64) {
+        let step = self.last_step.load(std::sync::atomic::Ordering::Relaxed);
+        let entity = bus_name(topic);
+        let mut buf = self.lock();
+        for (stat, value, width) in [("p50", p50_us, 2.5), ("p99", p99_us, 1.0)] {
+            let path = format!("bus/{entity}/wire_{stat}_us");
+            if !buf.extents.contains_key(&path) {
+                buf.add(
+                    &path,
+                    &TimePoint::default(),
+                    &rerun::SeriesLines::new()
+                        .with_names([format!("{topic} {stat}")])
+                        .with_colors([topic_color(topic)])
+                        .with_widths([width]),
+                );
+            }
+            buf.scalar(&path, t, step, value);
+        }
+    }
+
+    /// Log one node tick's lateness (real clock), on the node's own thread.
+    pub fn node_tick(&self, node: &str, now: Nanos, lateness: Nanos) {
+        let entity = format!("nodes/{node}/lateness_us");
+        let us = lateness.as_micros_f64();
+        widen(&mut self.lock().extents, &entity, us);
+        self.rec.set_time(
+            timeline_name(self.clock),
+            std::time::Duration::from_nanos(now.0),
+        );
+        let _ = self.rec.log(entity, &rerun::Scalars::single(us));
+    }
+
+    /// Log one tick as its executor ran it (virtual clock: the scheduler's span; real clock:
+    /// the tick's start, lateness and time taken) for the executor timeline: node `node`'s
+    /// lane (`nodes/<name>/executor_lane`, its rank, `LANE_BUSY` higher from the tick's start
+    /// to its end), its response time (`nodes/<name>/response_ms`: release → outputs
+    /// published, at the end) and the periods its timer skipped so far
+    /// (`nodes/<name>/skipped_ticks`: a release more than a period after the last, at the
+    /// node's starting rate). Only for runs that measure executors.
+    pub fn node_span(&self, span: &crate::executor::CallbackSpan) {
+        let Some(n) = self.cfg.graph.nodes.get(span.node) else {
+            return;
+        };
+        let base = span.node as f64;
+        let lane = format!("nodes/{}/executor_lane", n.name);
+        let period = crate::rate::period_for_hz(n.rate_hz).map_or(0, |p| p.0.max(1));
+        let (skipped, first_skip) = {
+            let mut lanes = self.lanes.lock().unwrap_or_else(|e| e.into_inner());
+            if lanes.len() <= span.node {
+                lanes.resize(span.node + 1, (None, 0));
+            }
+            let (last, total) = &mut lanes[span.node];
+            let before = *total;
+            if let (Some(l), true) = (*last, period > 0) {
+                let gap = span.release.saturating_sub(l).0;
+                *total += (gap / period).saturating_sub(1);
+            }
+            *last = Some(span.release);
+            (*total, before == 0 && *total > 0)
+        };
+        if first_skip {
+            // The moment a timer first lost periods to a busy thread is trouble to find in
+            // time: a warning, at the release that came late (the total is at the end).
+            self.event(
+                span.release,
+                &format!(
+                    "node {} skipped {} tick(s): its timer's periods passed while its executor's thread was busy",
+                    n.name, skipped
+                ),
+                rerun::components::TextLogLevel::WARN,
+            );
+        }
+        let step = self.last_step.load(std::sync::atomic::Ordering::Relaxed);
+        let mut buf = self.lock();
+        let (start, end) = (span.start, span.end.max(span.start));
+        buf.scalar(&lane, start, step, base + LANE_BUSY);
+        buf.scalar(&lane, end, step, base);
+        buf.scalar(
+            &format!("nodes/{}/response_ms", n.name),
+            end,
+            step,
+            end.saturating_sub(span.release).as_millis_f64(),
+        );
+        buf.scalar(
+            &format!("nodes/{}/skipped_ticks", n.name),
+            end,
+            step,
+            skipped as f64,
+        );
+    }
+
+    /// At the end: for each topic whose deadline misses grew since its last event, one line
+    /// with how many more and how many in all.
+    fn deadline_totals(&self, buf: &mut ChunkBuffer, metrics: &Metrics, end: Nanos) {
+        let said = self.deadline_said.lock().unwrap_or_else(|e| e.into_inner());
+        for (name, t) in &metrics.topics {
+            let total = |k: &str| t.qos_counters.get(k).copied().unwrap_or(0);
+            let now = (
+                total("offered_deadline_missed"),
+                total("requested_deadline_missed"),
+            );
+            let Some(&(so, sr, _)) = said.get(name) else {
+                continue;
+            };
+            if now.0 > so || now.1 > sr {
+                let at = buf.at(end, metrics.steps);
+                buf.add(
+                    "events",
+                    &at,
+                    &rerun::TextLog::new(deadline_line(name, (so, sr), now, ""))
+                        .with_level(rerun::components::TextLogLevel::WARN),
+                );
+            }
+        }
+    }
+
+    /// Log the end of the run (an event and the summary document) at its end time, flush
+    /// the file and move it into place, so the recording is complete whichever way the run
+    /// ended.
+    ///
+    /// # Errors
+    /// [`RecordingError::Rerun`] when the flush fails, [`RecordingError`] when the file
+    /// cannot be moved into place (e.g. its name was taken meanwhile, without `force`).
+    pub fn finish(&self, metrics: &Metrics, end: &RunEnd) -> Result<(), RecordingError> {
+        let summary = metrics.summary_lines(None);
+        let level = match end.reason {
+            EndReason::NodeFailed { .. } => rerun::components::TextLogLevel::ERROR,
+            _ => rerun::components::TextLogLevel::INFO,
+        };
+        let verdict = summary.get(2).cloned().unwrap_or_default();
+        let reason = end.reason.words(metrics.stopped_by_watchdog.is_some());
+        // The known events the run reached after its last step (an actuator killed or
+        // stalled takes no step at them); none past the end.
+        {
+            let mut buf = self.lock();
+            let step = self.last_step.load(std::sync::atomic::Ordering::Relaxed);
+            self.log_due_events(&mut buf, end.at, step);
+        }
+        if let Some(watchdog) = &metrics.stopped_by_watchdog {
+            self.event(end.at, watchdog, rerun::components::TextLogLevel::WARN);
+        }
+        // Each node whose timer skipped periods, in all: the rate it achieved of its own.
+        for (name, n) in &metrics.nodes {
+            if let Some(x) = n.exec.as_ref().filter(|x| x.skipped_ticks > 0) {
+                self.event(
+                    end.at,
+                    &format!(
+                        "node {name} skipped {} tick(s) in all (ticked {} times at {} Hz set): its executor's thread was busy",
+                        x.skipped_ticks, n.ticks, n.rate_hz
+                    ),
+                    rerun::components::TextLogLevel::WARN,
+                );
+            }
+        }
+        self.event(
+            end.at,
+            &format!(
+                "end: {reason}, {}",
+                crate::metrics::counted(metrics.steps, "actuator step")
+            ),
+            level,
+        );
+        let mut doc = format!("**{verdict}** ({reason}).\n\n");
+        for (i, line) in summary.iter().enumerate() {
+            if i != 2 {
+                doc.push_str(&format!("- {line}\n"));
+            }
+        }
+        for line in self
+            .extra_summary
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .iter()
+        {
+            doc.push_str(&format!("- {line}\n"));
+        }
+        {
+            let mut buf = self.lock();
+            self.deadline_totals(&mut buf, metrics, end.at);
+            // The bus counters come with the actuator's steps: an actuator killed (or stalled
+            // past the end) left them short of the run's end, where the summary counts on.
+            // Its totals at the end, so that the bus plots reach them, and, when the steps
+            // stopped a whole window (1 s) or more before the end, its msg/s there: the
+            // messages published from the last step to the end over that time (a publisher
+            // that kept its rate keeps its line level). Over a shorter gap (a real-clock
+            // run's last step a few ms before its end) that quotient is noise: a launch's
+            // merged totals against its last step's counters read as a 500 msg/s spike.
+            let last_ns = self.last_step_ns.load(std::sync::atomic::Ordering::Relaxed);
+            if metrics.steps > 0 && last_ns < end.at.0 {
+                let since_s = end.at.saturating_sub(Nanos(last_ns)).as_secs_f64();
+                let then = self
+                    .last_step_published
+                    .lock()
+                    .unwrap_or_else(|e| e.into_inner())
+                    .clone();
+                for (name, t) in &metrics.topics {
+                    let entity = bus_name(name);
+                    let at = |m: &str| format!("bus/{entity}/{m}");
+                    buf.scalar(&at("published"), end.at, metrics.steps, t.published as f64);
+                    buf.scalar(&at("dropped"), end.at, metrics.steps, t.dropped as f64);
+                    if let (Some(&before), true) = (then.get(name), since_s >= 1.0) {
+                        let rate = t.published.saturating_sub(before) as f64 / since_s;
+                        buf.scalar(&at("msg_per_s"), end.at, metrics.steps, rate);
+                    }
+                }
+            }
+            // The skipped ticks end where metrics.json ends them (a tick still computing
+            // at the end counted its skipped periods when it started, and no span ended).
+            let logged = self.lanes.lock().unwrap_or_else(|e| e.into_inner()).clone();
+            for (name, n) in &metrics.nodes {
+                let spans = logged.get(n.rank).is_some_and(|(last, _)| last.is_some());
+                if let (Some(x), true) = (&n.exec, spans) {
+                    let entity = format!("nodes/{name}/skipped_ticks");
+                    buf.scalar(&entity, end.at, metrics.steps, x.skipped_ticks as f64);
+                }
+            }
+            buf.add(
+                "summary",
+                &TimePoint::default(),
+                &rerun::TextDocument::from_markdown(doc),
+            );
+            reference_lines(&mut buf, end.at, metrics.steps);
+        }
+        let shape = self.shape.lock().unwrap_or_else(|e| e.into_inner()).clone();
+        if let Some(shape) = shape {
+            let extents = self.lock().extents.clone();
+            self.send_layout(&shape, Some(&extents), Some(end.at))?;
+        }
+        self.flush()?;
+        Ok(self.file.commit()?)
+    }
+
+    /// Send every buffered row and flush the file.
+    ///
+    /// # Errors
+    /// [`RecordingError::Rerun`] when the sink fails.
+    pub fn flush(&self) -> Result<(), RecordingError> {
+        self.lock().send(&self.rec);
+        self.rec.flush_blocking().map_err(|e| {
+            // rerun's file writer says only that it stopped: the OS's reason is found by
+            // writing beside the file (a full disk refuses that too).
+            let why = self
+                .path
+                .parent()
+                .and_then(writing_beside_fails)
+                .map_or_else(String::new, |e| format!(" ({e})"));
+            RecordingError::Rerun {
+                path: self.path.clone(),
+                detail: format!(
+                    "{e}{why}: cut short, what was written is kept and opens as a recording cut short"
+                ),
+            }
+        })
+    }
+
+    /// The clock this recording was stamped with.
+    pub fn clock(&self) -> ClockKind {
+        self.clock
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::blueprint::label_top;
+    use super::shape::tests::shape;
+    use super::*;
+
+    #[test]
+    fn a_plot_from_zero_reaches_a_labelled_step() {
+        // A real-clock latency of 80 ms: 0–100, so "100" is labelled, not "0" alone.
+        assert_eq!(label_top(80.0), 100.0);
+        assert_eq!(label_top(0.8), 1.0);
+        assert_eq!(label_top(2400.0), 2400.0);
+        assert_eq!(label_top(60.0), 100.0);
+        // Steps of the power of ten already label it: kept.
+        for hi in [300.0, 50.0, 52.0, 500.0, 1.0, 100.0, 5.0] {
+            assert_eq!(label_top(hi), hi);
+        }
+        // Nothing to label: as is.
+        assert_eq!(label_top(0.0), 0.0);
+        assert!(label_top(f64::NAN).is_nan());
+    }
+
+    #[test]
+    fn a_topic_keeps_its_colour_in_every_graph_and_equal_lines_stay_visible() {
+        // The shipped graphs' topics have a colour each, whatever graph they are in.
+        let shipped = ["/obs", "/action", "/meas", "/state", "/cmd", "/force"];
+        let colours: std::collections::BTreeSet<[u8; 4]> =
+            shipped.iter().map(|t| topic_color(t).to_array()).collect();
+        assert_eq!(colours.len(), shipped.len());
+        assert_eq!(topic_color("/reference"), topic_color("/reference"));
+        assert!(PALETTE.contains(&{
+            let [r, g, b, _] = topic_color("/reference").to_array();
+            (r, g, b)
+        }));
+        // Drawn in entity-path order, each over the last: the first drawn is the widest.
+        let w = layered_widths(&["obs".to_string(), "action".to_string(), "cmd".to_string()]);
+        assert!(w[1] > w[2] && w[2] > w[0], "{w:?}");
+        assert_eq!(layered_widths(&["obs".to_string()]), [2.0]);
+    }
+
+    #[test]
+    fn views_list_every_topic_and_use_only_trailing_subtree_queries() {
+        let s = shape(
+            &[
+                ("/obs", "sensor", &["policy"]),
+                ("/action", "policy", &["actuator"]),
+                ("/debug", "policy", &[]),
+            ],
+            &["sensor", "policy", "actuator"],
+        );
+        for clock in [ClockKind::Virtual, ClockKind::Real] {
+            let cfg = RunConfig {
+                clock,
+                ..RunConfig::default()
+            };
+            let root = layout_for(&s, &cfg, None);
+            let views = root.views();
+            for v in &views {
+                let (title, queries) = v.title_and_queries();
+                assert!(!queries.is_empty(), "{title}");
+                for q in queries {
+                    let body = q.strip_suffix("/**").unwrap_or(q);
+                    assert!(!body.contains('*'), "{title}: {q}");
+                }
+            }
+            let dropped = views
+                .iter()
+                .map(|v| v.title_and_queries())
+                .find(|(t, _)| t.contains("dropped"))
+                .unwrap();
+            assert_eq!(
+                dropped.1,
+                [
+                    "/bus/obs/dropped",
+                    "/bus/action/dropped",
+                    "/bus/debug/dropped"
+                ]
+            );
+            let lateness = views
+                .iter()
+                .map(|v| v.title_and_queries())
+                .find(|(t, _)| t.contains("lateness"));
+            assert_eq!(lateness.is_some(), clock == ClockKind::Real);
+            // Four plots in the middle column leave the cart's room for the rails' ends;
+            // a fifth (the real clock's lateness) leaves it the run's ends alone, a range
+            // the viewer can label.
+            let cart = views
+                .iter()
+                .map(|v| v.title_and_queries())
+                .find(|(t, _)| t.starts_with("cart position"))
+                .unwrap();
+            let rails = cart.1.iter().any(|q| q.contains("rail_end"));
+            assert_eq!(rails, clock == ClockKind::Virtual, "{:?}", cart.1);
+            assert!(cart.1.iter().any(|q| q == "/plant/cart_limit/right"));
+        }
+    }
+
+    #[test]
+    fn qos_counters_get_a_view_only_where_qos_can_move_them() {
+        let mut s = shape(
+            &[
+                ("/obs", "sensor", &["policy"]),
+                ("/action", "policy", &["actuator"]),
+            ],
+            &["sensor", "policy", "actuator"],
+        );
+        let cfg = RunConfig::default();
+        let qos_view = |s: &GraphShape, extents: Option<&Extents>| {
+            layout_for(s, &cfg, extents)
+                .views()
+                .iter()
+                .map(|v| v.title_and_queries())
+                .find(|(t, _)| t.starts_with("QoS"))
+                .map(|(_, q)| q.to_vec())
+        };
+        assert_eq!(qos_view(&s, None), None, "the chapter's QoS adds no view");
+        let mut qos = crate::qos::TopicQos {
+            deadline: Some(Nanos::from_millis(40)),
+            ..Default::default()
+        };
+        qos.history = crate::qos::History::KeepAll;
+        s.topics[1].qos = qos;
+        s.nodes[1].liveliness = Some(Arc::new(crate::qos::Liveliness::new(Some(
+            Nanos::from_millis(60),
+        ))));
+        s.nodes[2].liveliness = Some(Arc::new(crate::qos::Liveliness::new(None)));
+        assert_eq!(
+            qos_view(&s, None).unwrap(),
+            [
+                "/bus/action/refused",
+                "/bus/action/offered_deadline_missed",
+                "/bus/action/requested_deadline_missed",
+            ]
+        );
+        // A leased node's not-alive count: a view (and a scale) of its own.
+        let alive = layout_for(&s, &cfg, None)
+            .views()
+            .iter()
+            .map(|v| v.title_and_queries())
+            .find(|(t, _)| t.starts_with("liveliness"))
+            .map(|(_, q)| q.to_vec());
+        assert_eq!(alive.unwrap(), ["/nodes/policy/not_alive"]);
+        // At the end: what was logged, whatever the QoS says now.
+        let mut ext = Extents::new();
+        widen(&mut ext, "bus/obs/lost", 3.0);
+        widen(&mut ext, "bus/obs/published", 3.0);
+        assert_eq!(qos_view(&s, Some(&ext)).unwrap(), ["/bus/obs/lost"]);
+        assert_eq!(qos_view(&s, Some(&Extents::new())), None);
+    }
+
+    #[test]
+    fn force_and_rail_scales_are_the_model_s() {
+        let mjcf = include_str!("../runtime/assets/cartpole.xml");
+        assert!(mjcf.contains(&format!("gear=\"{FORCE_PER_CONTROL_N}\"")));
+        assert!(mjcf.contains(&format!(
+            "range=\"-{RAIL_HALF_LENGTH_M} {RAIL_HALF_LENGTH_M}\""
+        )));
+    }
+
+    #[test]
+    fn default_paths_never_collide() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut cfg = RunConfig {
+            clock: ClockKind::Virtual,
+            ..RunConfig::default()
+        };
+        cfg.set_control_hz(7.5).unwrap();
+        let first = default_path(dir.path(), &cfg);
+        assert_eq!(
+            first.file_name().unwrap(),
+            "virtual-control7.5-q1-seed0.rrd"
+        );
+        std::fs::write(&first, b"").unwrap();
+        let second = default_path(dir.path(), &cfg);
+        assert_eq!(
+            second.file_name().unwrap(),
+            "virtual-control7.5-q1-seed0-2.rrd"
+        );
+        // A lab session's name claims no rate: the learner changes them as it runs.
+        let lab = default_lab_path(dir.path(), &cfg);
+        assert_eq!(lab.file_name().unwrap(), "lab-virtual-seed0.rrd");
+        std::fs::write(&lab, b"").unwrap();
+        let lab2 = default_lab_path(dir.path(), &cfg);
+        assert_eq!(lab2.file_name().unwrap(), "lab-virtual-seed0-2.rrd");
+    }
+
+    #[test]
+    fn output_path_checks() {
+        let dir = tempfile::tempdir().unwrap();
+        assert!(matches!(
+            check_output_path(dir.path(), false),
+            Err(RecordingError::IsDirectory(_))
+        ));
+        let f = dir.path().join("x.rrd");
+        std::fs::write(&f, b"old").unwrap();
+        assert!(matches!(
+            check_output_path(&f, false),
+            Err(RecordingError::Exists(_))
+        ));
+        assert!(check_output_path(&f, true).is_ok());
+        assert_eq!(
+            std::fs::read(&f).unwrap(),
+            b"old",
+            "a check never touches the file"
+        );
+        let link = dir.path().join("link.rrd");
+        std::os::unix::fs::symlink(&f, &link).unwrap();
+        assert!(matches!(
+            check_output_path(&link, true),
+            Err(RecordingError::Output(_))
+        ));
+        assert!(matches!(
+            check_output_path(Path::new("/proc/ratelab/x.rrd"), false),
+            Err(RecordingError::Unwritable { .. })
+        ));
+    }
+}

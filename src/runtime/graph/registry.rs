@@ -1,0 +1,545 @@
+//! The registry of node kinds: from the name a graph file gives as `kind` to the kind's one
+//! definition ([`super::kind::KindDef`]). The built-in kinds (`sensor`, `estimator`,
+//! `policy`, `safety`, `actuator`, `python`, `external`; one file each in
+//! [`super::nodes`]) are registered here, one line each; a Rust program adds its own with
+//! [`register`].
+//!
+//! A kind written in Rust outside ratelab is a type implementing [`RustNode`] with typed inputs and outputs (copper-rs's
+//! `CuTask` is the model): each a [`Message`] — any registered message type
+//! ([`crate::msg`]: the built-in `StateMsg`, `PositionMsg`, `ForceMsg`, or one of your own,
+//! which registering the kind registers too) — or a tuple of two to four of them, or `()`
+//! for none ([`Inputs`], [`Outputs`]). [`register`] it once, before the graph file is read; from then on
+//! `kind = "NAME"` in a graph file makes one, with the file's `params = { … }`:
+//!
+//! ```no_run
+//! use ratelab::graph::registry::{register, NodeContext, RustNode};
+//! use ratelab::msg::{ForceMsg, StateMsg};
+//! use ratelab::Nanos;
+//!
+//! struct Hold(f64);
+//! impl RustNode for Hold {
+//!     type Input = StateMsg;
+//!     type Output = ForceMsg;
+//!     fn tick(&mut self, _now: Nanos, _input: Option<&StateMsg>) -> Option<ForceMsg> {
+//!         Some(ForceMsg { newtons: self.0 })
+//!     }
+//! }
+//! register("hold", |cx: &NodeContext| Ok(Hold(cx.param_f64("newtons", 0.0)?))).unwrap();
+//! ```
+//!
+//! A node of several inputs or outputs names a tuple, and the graph file lists its topics
+//! in that order (`subscribes = ["/obs", "/reference"]`):
+//!
+//! ```no_run
+//! # use ratelab::graph::registry::RustNode;
+//! # use ratelab::msg::{ForceMsg, PositionMsg, StateMsg};
+//! # use ratelab::Nanos;
+//! struct Track { setpoint_m: f64 }
+//! impl RustNode for Track {
+//!     type Input = (StateMsg, PositionMsg);
+//!     type Output = ForceMsg;
+//!     fn tick(
+//!         &mut self,
+//!         _now: Nanos,
+//!         (state, reference): (Option<&StateMsg>, Option<&PositionMsg>),
+//!     ) -> Option<ForceMsg> {
+//!         if let Some(r) = reference {
+//!             self.setpoint_m = r.cart_pos_m;
+//!         }
+//!         let s = state?;
+//!         Some(ForceMsg { newtons: -(f64::from(s[0]) - self.setpoint_m) })
+//!     }
+//! }
+//! ```
+//!
+//! **At run time**, a tick of a registered node reads each input topic by the topic's QoS
+//! (latest: the newest unread; fifo: the oldest unread) and passes each to
+//! [`RustNode::tick`] when it is new (`None` when nothing arrived on it since the last tick:
+//! a node that needs the last value keeps it, as the chapter's nodes do); what `tick`
+//! returns is published at the tick's end (its time, plus its `compute_ms` if the graph
+//! file gives one: [`crate::executor`]), carrying the **oldest** origin stamp among the
+//! newest messages its inputs delivered (its own tick time before the first, and always for
+//! a node with no inputs), so the actuator measures sense→act latency across it as across
+//! any node — and a slow input (a setpoint published rarely) stretches it, since the output
+//! may rest on a value that old. A registered kind takes the place of a policy (a `state`
+//! input, a `force` output toward the actuator), a safety node (`force` → `force`) or an
+//! estimator in the chapter's chain, like a Python node.
+//!
+//! **Across processes.** The registry is per process: a graph with a registered kind runs
+//! in programs that register it. `ratelab launch --processes` starts `ratelab` binaries,
+//! which know only the built-in kinds, and refuses such a graph by its kind's name; a
+//! program of your own launches it, starting itself as each process: registering its kinds
+//! and handing over to the command line as a library (`ratelab_lab::main_with`, in the
+//! `lab/` crate) gives it `launch` and every other front end, and
+//! `examples/custom_node_processes.rs` is one.
+
+use super::kind::{BuildContext, Code, Kind, KindDef, Params, Plant, Ports, Work};
+use super::nodes;
+use crate::msg::MsgType;
+use crate::node::Flow;
+use crate::time::Nanos;
+use std::sync::{LazyLock, RwLock};
+
+/// The most node kinds one process may have, the seven built-in ones included.
+pub const MAX_KINDS: usize = 64;
+
+pub use crate::ports::{InPort, Inputs, Outputs, RustNode};
+
+/// What making a node is given: its name and settings from the graph file and the run.
+#[derive(Debug)]
+pub struct NodeContext<'a> {
+    /// The node's name in the graph file.
+    pub name: &'a str,
+    /// Its period at the start of the run (1 / `rate_hz`).
+    pub period: Nanos,
+    /// The run's seed (for a node that draws random numbers: derive its generator from it,
+    /// and a virtual run stays byte-identical).
+    pub seed: u64,
+    /// The graph file's `params = { … }` for it.
+    pub params: &'a toml::Table,
+}
+
+impl NodeContext<'_> {
+    /// Parameter `key` as a number (an integer in the file is taken as one), or `default`
+    /// when the file does not set it.
+    ///
+    /// # Errors
+    /// A one-line reason naming the node and the key when it is not a finite number.
+    pub fn param_f64(&self, key: &str, default: f64) -> Result<f64, String> {
+        crate::graph::kind::param_f64(self.name, self.params, key, default)
+    }
+}
+
+/// Why a kind cannot be registered.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum RegistryError {
+    /// The name is not 1 to 32 lowercase letters, digits or '_', starting with a letter.
+    #[error(
+        "node kind '{0}' must be 1 to 32 lowercase letters, digits or '_', starting with a letter"
+    )]
+    BadName(String),
+    /// The name is a built-in kind's or was registered before.
+    #[error("node kind '{0}' is already taken")]
+    Taken(String),
+    /// [`MAX_KINDS`] kinds are registered already.
+    #[error("a process has at most {MAX_KINDS} node kinds, the seven built-in ones included")]
+    Full,
+    /// One of its message types cannot be registered ([`crate::msg::register`]).
+    #[error(transparent)]
+    Message(#[from] crate::msg::MsgRegistryError),
+}
+
+/// Every kind: the built-in ones in the chapter's order, then those registered, in the
+/// order they were (at most [`MAX_KINDS`] of them: a list is quick enough).
+fn registry() -> &'static RwLock<Vec<Kind>> {
+    static REGISTRY: LazyLock<RwLock<Vec<Kind>>> = LazyLock::new(|| {
+        let built_in = [
+            nodes::sensor::def(),
+            nodes::estimator::def(),
+            nodes::policy::def(),
+            nodes::safety::def(),
+            nodes::actuator::def(),
+            nodes::python::def(),
+            nodes::external::def(),
+        ];
+        RwLock::new(
+            built_in
+                .into_iter()
+                .map(|d| Kind(Box::leak(Box::new(d))))
+                .collect(),
+        )
+    });
+    &REGISTRY
+}
+
+/// The kind a graph file's `kind = "<name>"` names, built in or registered.
+pub fn kind(name: &str) -> Option<Kind> {
+    registry()
+        .read()
+        .unwrap_or_else(|e| e.into_inner())
+        .iter()
+        .copied()
+        .find(|k| k.as_str() == name)
+}
+
+/// Every kind: the built-in ones in the chapter's order, then those registered, in the
+/// order they were.
+pub fn kinds() -> Vec<Kind> {
+    registry().read().unwrap_or_else(|e| e.into_inner()).clone()
+}
+
+/// The registry as a Markdown table, one row per kind in [`kinds`]'s order: its name, what
+/// it reads and publishes (message types; `a|b`: either), how it touches the plant, whose
+/// code it runs, its parameters (unit, default, range) and its one line of docs. What
+/// `ratelab kinds` prints and the README's table of kinds is (a test keeps the two equal).
+pub fn kinds_table() -> String {
+    let types = |alts: &[crate::msg::MsgType]| {
+        alts.iter()
+            .map(|t| format!("`{}`", t.as_str()))
+            .collect::<Vec<_>>()
+            .join("\\|")
+    };
+    let ports = |p: &Ports| match p {
+        Ports::Fixed { inputs, outputs } => {
+            let side = |v: &[&'static [crate::msg::MsgType]]| match v {
+                [] => "—".to_string(),
+                v => v
+                    .iter()
+                    .map(|alts| types(alts))
+                    .collect::<Vec<_>>()
+                    .join(", "),
+            };
+            format!("{} → {}", side(inputs), side(outputs))
+        }
+        Ports::Open {
+            max_inputs,
+            min_outputs,
+            max_outputs,
+        } => format!("any: 0–{max_inputs} in → {min_outputs}–{max_outputs} out"),
+    };
+    let plant = |p: Plant| match p {
+        Plant::None => "—",
+        Plant::Reads => "reads",
+        Plant::Steps => "steps",
+    };
+    let code = |c: Code| match c {
+        Code::BuiltIn => "built in",
+        Code::Python => "Python",
+        Code::Rust => "Rust (registered)",
+        Code::Ros2 => "ROS 2",
+    };
+    let number = |x: f64| {
+        if x.is_infinite() {
+            if x > 0.0 { "∞" } else { "−∞" }.to_string()
+        } else {
+            format!("{x}")
+        }
+    };
+    let params = |p: &Params| match p {
+        Params::Free => "any table (the node's code reads it)".to_string(),
+        Params::Numbers([]) => "—".to_string(),
+        Params::Numbers(defs) => defs
+            .iter()
+            .map(|d| {
+                format!(
+                    "`{}` {} (default {}, {}…{})",
+                    d.name,
+                    d.unit,
+                    number(d.default),
+                    number(d.min),
+                    number(d.max)
+                )
+            })
+            .collect::<Vec<_>>()
+            .join("; "),
+    };
+    let mut out = String::from(
+        "| kind | reads → publishes | plant | code | parameters | what it does |\n\
+         | --- | --- | --- | --- | --- | --- |\n",
+    );
+    for k in kinds() {
+        let d = k.def();
+        out += &format!(
+            "| `{}` | {} | {} | {} | {} | {} |\n",
+            d.name,
+            ports(&d.ports),
+            plant(d.plant),
+            code(d.code),
+            params(&d.params),
+            d.doc.replace('|', "\\|")
+        );
+    }
+    out
+}
+
+/// Register node kind `kind`: a graph file's `kind = "<kind>"` then makes a node with
+/// `make`, given the node's [`NodeContext`]. Its message types are registered with it
+/// ([`crate::msg::register`]).
+///
+/// # Errors
+/// [`RegistryError`]: a bad or taken name, too many kinds, or a message type that cannot
+/// be registered.
+pub fn register<N, F>(kind: &str, make: F) -> Result<(), RegistryError>
+where
+    N: RustNode,
+    F: Fn(&NodeContext<'_>) -> Result<N, String> + Send + Sync + 'static,
+{
+    let valid = !kind.is_empty()
+        && kind.len() <= 32
+        && kind.starts_with(|c: char| c.is_ascii_lowercase())
+        && kind
+            .chars()
+            .all(|c| c.is_ascii_lowercase() || c.is_ascii_digit() || c == '_');
+    if !valid {
+        return Err(RegistryError::BadName(kind.to_string()));
+    }
+    let mut reg = registry().write().unwrap_or_else(|e| e.into_inner());
+    if reg.iter().any(|k| k.as_str() == kind) {
+        return Err(RegistryError::Taken(kind.to_string()));
+    }
+    if reg.len() >= MAX_KINDS {
+        return Err(RegistryError::Full);
+    }
+    // Its message types become usable in graph files with it: all checked first, so that a
+    // refusal registers none of them.
+    let types = || {
+        <N::Input as Inputs>::TYPES
+            .iter()
+            .chain(<N::Output as Outputs>::TYPES)
+    };
+    for t in types() {
+        crate::msg::check_type(*t)?;
+    }
+    for t in types() {
+        crate::msg::register_type(*t)?;
+    }
+    let make = move |cx: &mut BuildContext<'_>| {
+        let (Some(inputs), Some(outputs)) = (
+            <N::Input as Inputs>::bind(cx.inputs),
+            <N::Output as Outputs>::bind(cx.outputs, cx.outbox),
+        ) else {
+            // The graph file's types were checked against the kind's when it was read.
+            return Err(format!("node '{}': its topics' types changed", cx.name));
+        };
+        let node = make(&NodeContext {
+            name: cx.name,
+            period: cx.period(),
+            seed: cx.seed,
+            params: cx.params,
+        })?;
+        Ok(Box::new(Bound::<N> {
+            node,
+            inputs,
+            outputs,
+        }) as Box<dyn Work>)
+    };
+    let one = |types: &'static [MsgType]| -> Vec<&'static [MsgType]> {
+        types.iter().map(std::slice::from_ref).collect()
+    };
+    let def = KindDef {
+        name: Box::leak(kind.to_string().into_boxed_str()),
+        doc: "a node kind the program registered in Rust",
+        ports: Ports::Fixed {
+            inputs: one(<N::Input as Inputs>::TYPES),
+            outputs: one(<N::Output as Outputs>::TYPES),
+        },
+        plant: Plant::None,
+        code: Code::Rust,
+        params: Params::Free,
+        uses_brain: false,
+        make: Box::new(make),
+    };
+    reg.push(Kind(Box::leak(Box::new(def))));
+    Ok(())
+}
+
+/// A node with its topics and what it has been given.
+struct Bound<N: RustNode> {
+    node: N,
+    inputs: <N::Input as Inputs>::Ports,
+    outputs: <N::Output as Outputs>::Ports,
+}
+
+impl<N: RustNode> Work for Bound<N> {
+    fn tick(&mut self, now: Nanos) -> Flow {
+        let delivered = <N::Input as Inputs>::read(&mut self.inputs, now);
+        let out = self.node.tick(now, delivered);
+        // The oldest origin its inputs delivered; a source's data begins at its tick.
+        let origin = if <N::Input as Inputs>::TYPES.is_empty() {
+            Some(now)
+        } else {
+            <N::Input as Inputs>::oldest_origin(&self.inputs).or(Some(now))
+        };
+        <N::Output as Outputs>::publish(&self.outputs, out, now, origin);
+        Flow::Continue
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::msg::{AnyTopic, ForceMsg, Message, PositionMsg};
+    use crate::publisher::Outbox;
+    use std::sync::Arc;
+
+    /// Make a node of kind `kind` as the graph's builder would, around a fresh plant.
+    fn make(
+        kind: &str,
+        cx: &NodeContext<'_>,
+        inputs: &[AnyTopic],
+        outputs: &[AnyTopic],
+        outbox: &Outbox,
+    ) -> Result<Box<dyn Work>, String> {
+        let k = super::kind(kind).ok_or_else(|| format!("kind '{kind}' is not registered"))?;
+        let plant = std::sync::Arc::new(std::sync::Mutex::new(
+            crate::plant::CartPole::new().unwrap(),
+        ));
+        let brain = crate::policy::BrainSlot::new(Box::new(crate::policy::Scripted));
+        let log = Arc::new(std::sync::Mutex::new(crate::runlog::RunLog::new(false)));
+        let liveliness = Arc::new(crate::qos::Liveliness::new(None));
+        let rate = crate::rate::Rate::new(1e9 / cx.period.0 as f64).unwrap();
+        let mut observers = None;
+        (k.def().make)(&mut BuildContext {
+            name: cx.name,
+            id: crate::ids::NodeId(0),
+            rate: &rate,
+            seed: cx.seed,
+            params: cx.params,
+            python: None,
+            inputs,
+            outputs,
+            outbox,
+            plant: &plant,
+            brain: &brain,
+            log: &log,
+            topics: inputs,
+            action: None,
+            liveliness: &liveliness,
+            observers: &mut observers,
+            attachment: None,
+        })
+    }
+
+    type Slots = Vec<&'static [MsgType]>;
+
+    fn shape(kind: &str) -> Option<(Slots, Slots)> {
+        match &super::kind(kind)?.def().ports {
+            Ports::Fixed { inputs, outputs } => Some((inputs.clone(), outputs.clone())),
+            Ports::Open { .. } => None,
+        }
+    }
+
+    struct Echo;
+    impl RustNode for Echo {
+        type Input = ForceMsg;
+        type Output = ForceMsg;
+        fn tick(&mut self, _now: Nanos, input: Option<&ForceMsg>) -> Option<ForceMsg> {
+            input.copied()
+        }
+    }
+
+    #[test]
+    fn names_are_checked_and_taken_once() {
+        let ok = |_: &NodeContext<'_>| Ok(Echo);
+        assert_eq!(
+            register("Bad-Name", ok),
+            Err(RegistryError::BadName("Bad-Name".into()))
+        );
+        assert_eq!(
+            register("policy", ok),
+            Err(RegistryError::Taken("policy".into()))
+        );
+        assert_eq!(register("echo_unit", ok), Ok(()));
+        assert_eq!(
+            register("echo_unit", ok),
+            Err(RegistryError::Taken("echo_unit".into()))
+        );
+        let force: &'static [MsgType] = &[ForceMsg::TYPE];
+        assert_eq!(shape("echo_unit"), Some((vec![force], vec![force])));
+        assert!(kinds().iter().any(|k| k.as_str() == "echo_unit"));
+        assert_eq!(kind("echo_unit").unwrap().code(), Code::Rust);
+        assert_eq!(shape("nobody"), None);
+    }
+
+    /// Two inputs, two outputs: a force passed on, and the position it was given echoed.
+    struct Mix;
+    impl RustNode for Mix {
+        type Input = (ForceMsg, PositionMsg);
+        type Output = (ForceMsg, PositionMsg);
+        fn tick(
+            &mut self,
+            _now: Nanos,
+            (force, position): (Option<&ForceMsg>, Option<&PositionMsg>),
+        ) -> (Option<ForceMsg>, Option<PositionMsg>) {
+            (force.copied(), position.copied())
+        }
+    }
+
+    #[test]
+    fn a_node_of_several_inputs_and_outputs_passes_on_the_oldest_origin() {
+        register("mix_bound", |_: &NodeContext<'_>| Ok(Mix)).unwrap();
+        let (f, p): (&'static [MsgType], &'static [MsgType]) =
+            (&[ForceMsg::TYPE], &[PositionMsg::TYPE]);
+        assert_eq!(shape("mix_bound"), Some((vec![f, p], vec![f, p])));
+        let topic = |name: &str, m: MsgType| AnyTopic::new(name, m, 1).unwrap();
+        let inputs = [topic("/f", ForceMsg::TYPE), topic("/p", PositionMsg::TYPE)];
+        let outputs = [
+            topic("/f2", ForceMsg::TYPE),
+            topic("/p2", PositionMsg::TYPE),
+        ];
+        let params = toml::Table::new();
+        let cx = NodeContext {
+            name: "m",
+            period: Nanos(20_000_000),
+            seed: 0,
+            params: &params,
+        };
+        // The wrong number of topics is refused (the graph file is checked before).
+        assert!(make("mix_bound", &cx, &inputs[..1], &outputs, &Outbox::new()).is_err());
+        let mut node = make("mix_bound", &cx, &inputs, &outputs, &Outbox::new()).unwrap();
+        let (f, p) = (
+            inputs[0].typed::<ForceMsg>().unwrap(),
+            inputs[1].typed::<PositionMsg>().unwrap(),
+        );
+        let (f2, p2) = (
+            outputs[0].typed::<ForceMsg>().unwrap(),
+            outputs[1].typed::<PositionMsg>().unwrap(),
+        );
+        let at = |x| PositionMsg {
+            cart_pos_m: x,
+            pole_angle_rad: 0.0,
+        };
+        f.publish(ForceMsg { newtons: 1.0 }, Nanos(8), Some(Nanos(7)));
+        p.publish(at(0.5), Nanos(3), None); // its own stamp is its origin
+        node.tick(Nanos(10));
+        let (mf, mp) = (f2.read(Nanos(10)).unwrap(), p2.read(Nanos(10)).unwrap());
+        assert_eq!((mf.data.newtons, mp.data.cart_pos_m), (1.0, 0.5));
+        assert_eq!(
+            (mf.origin_stamp, mp.origin_stamp),
+            (Some(Nanos(3)), Some(Nanos(3)))
+        );
+        // Only the force is new: only it is published, still with the older origin.
+        f.publish(ForceMsg { newtons: 2.0 }, Nanos(28), Some(Nanos(27)));
+        node.tick(Nanos(30));
+        assert_eq!(f2.read(Nanos(30)).unwrap().origin_stamp, Some(Nanos(3)));
+        assert_eq!(p2.stats().published, 1);
+        // A newer position: now the force's origin (27) is the oldest.
+        p.publish(at(0.7), Nanos(45), None);
+        node.tick(Nanos(50));
+        assert_eq!(p2.read(Nanos(50)).unwrap().origin_stamp, Some(Nanos(27)));
+    }
+
+    #[test]
+    fn a_bound_node_gets_each_message_once_and_passes_its_origin_on() {
+        register("echo_bound", |_: &NodeContext<'_>| Ok(Echo)).unwrap();
+        let input = AnyTopic::new("/in", ForceMsg::TYPE, 1).unwrap();
+        let output = AnyTopic::new("/out", ForceMsg::TYPE, 1).unwrap();
+        let params = toml::Table::new();
+        let cx = NodeContext {
+            name: "e",
+            period: Nanos(20_000_000),
+            seed: 0,
+            params: &params,
+        };
+        let (inputs, outputs) = ([input.clone()], [output.clone()]);
+        let mut node = make("echo_bound", &cx, &inputs, &outputs, &Outbox::new()).unwrap();
+        let (i, o) = (
+            input.typed::<ForceMsg>().unwrap(),
+            output.typed::<ForceMsg>().unwrap(),
+        );
+        i.publish(ForceMsg { newtons: 3.0 }, Nanos(5), Some(Nanos(1)));
+        node.tick(Nanos(10));
+        let m = o.read(Nanos(10)).unwrap();
+        assert_eq!(
+            (m.data.newtons, m.stamp, m.origin_stamp),
+            (3.0, Nanos(10), Some(Nanos(1)))
+        );
+        // Nothing new: Echo publishes nothing.
+        node.tick(Nanos(30));
+        assert_eq!(o.stats().published, 1);
+        assert!(make("nobody", &cx, &inputs, &outputs, &Outbox::new())
+            .err()
+            .unwrap()
+            .contains("kind 'nobody' is not registered"));
+    }
+}

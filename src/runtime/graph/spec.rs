@@ -1,0 +1,2029 @@
+//! Graph files: the node graph as data. A TOML file names the nodes (kind, rate, parameters,
+//! the topics each publishes and subscribes to) and the topics (message type, history
+//! depth); [`GraphSpec::parse`] reads it with `toml` + `serde`, checks every rule, and
+//! computes the tie-break order. Every view of a graph (executors, metrics, recordings,
+//! the lab) is built from the one [`GraphSpec`].
+//!
+//! ```toml
+//! name = "cartpole"
+//!
+//! [[node]]
+//! name = "sensor"
+//! kind = "sensor"          # sensor | estimator | policy | safety | actuator | python
+//!                          # | external | a kind registered in Rust (crate::graph::registry)
+//! rate_hz = 50
+//! publishes = "/obs"
+//!
+//! [[topic]]
+//! name = "/obs"
+//! type = "state"           # state | position | force | a type registered (crate::msg)
+//! depth = 1                # history depth (keep-last), ≥ 1
+//! # QoS, all optional (crate::qos; ROS 2's names): history = "keep_all", delivery = "fifo",
+//! # deadline_ms = 40, lifespan_ms = 60, reliability = "reliable", on_deadline_missed = "zero",
+//! # link = { loss = 0.05, delay_ms = 10, jitter_ms = 3 }
+//! ```
+//!
+//! A node may also take a `compute_ms` and a `callback_group`, and the file
+//! `[executors.NAME]` tables: `src/runtime/graph/spec/executors.rs` has their format and rules;
+//! `[processes.NAME]` tables (restart a launch's process when it fails):
+//! `src/runtime/graph/spec/processes.rs`.
+//!
+//! Rules (each broken rule is a [`SpecError`] with the line and column of the culprit):
+//! - at most [`MAX_NODES`] nodes, names unique; exactly one actuator (the kind that steps
+//!   the plant: it owns the plant step and the zero-order hold);
+//! - each node's `kind` is one the registry knows ([`crate::graph::registry`]: the
+//!   built-in `sensor`, `estimator`, `policy`, `safety`, `actuator`, `python`, `external`,
+//!   and any a Rust program registered), and its topics fit the kind's ports
+//!   ([`crate::graph::kind::Ports`]): a sensor publishes `state` or `position`; an
+//!   estimator reads `position` and publishes `state`; a policy reads `state` and publishes
+//!   `force`; a safety node reads `force` and publishes `force`; the actuator reads `force`;
+//!   a `python` node (the learner's, [`crate::python::node`]) reads and publishes any
+//!   number of topics, of any type (`subscribes = ["/obs", "/reference"]`: a topic or a
+//!   list), and names its `script` (relative to the graph file) and optional `class`; a
+//!   registered kind reads and publishes the types it was registered with, one topic each
+//!   in that order; an external node reads at most one topic and publishes one;
+//! - a node's parameters (`params = { … }`; the built-in kinds' also as keys of the node's
+//!   table, as the chapter's files write `max_force_n = 8`) are the kind's
+//!   ([`crate::graph::kind::Params`]): checked numbers with defaults, or a free table for
+//!   Python and Rust kinds;
+//! - every topic is declared once, has exactly one publisher and any number of subscribers
+//!   (each subscription has a queue of its own, as in ROS 2: the topic's depth, drop rule,
+//!   link and counters per subscriber; the chapter's topics have one), and its type matches
+//!   every end;
+//! - rates in (0, 10 000] Hz; the actuator at the plant's 50 Hz (each tick steps 20 ms of
+//!   physics); depths ≥ 1; no field the format does not know;
+//! - QoS values in range (deadline and lifespan > 0, loss in [0, 1], …) and combined
+//!   sensibly (`on_deadline_missed` only on the actuator's input and with a deadline; no
+//!   reliable link that loses everything). A deadline shorter than its publisher's period
+//!   is allowed (a rate change can make it so mid-run) but is reported by
+//!   [`GraphSpec::qos_warnings`].
+//!
+//! Tie-break among nodes due at the same instant: upstream before downstream, i.e. a
+//! topological order of the topic graph (publisher before subscriber; unordered nodes keep
+//! file order). That reproduces the chapter's sensor < policy < actuator (ch2.8,
+//! `run_virtual`'s priorities). A node's explicit `priority` (an integer, lower first)
+//! overrides: nodes tick in ascending priority, a node without one taking its topological
+//! position; edges into a node with an explicit priority do not order it. A cycle among
+//! nodes without explicit priorities is an error.
+//!
+//! No shape is required beyond one actuator: the chapter's chain (sensor → policy →
+//! actuator, through any estimators and pass-through nodes) is found when the graph has it
+//! ([`GraphSpec::chain`]), and the chapter's shorthands apply to it; a graph without it (an
+//! open-loop source driving the actuator) runs all the same and says so where a shorthand
+//! is used ([`GraphSpec::chain_for`]).
+
+mod executors;
+mod processes;
+
+pub use executors::ExecutorSpec;
+pub use processes::{RestartPolicy, MAX_RESTARTS};
+
+use crate::executor::ComputeTime;
+use crate::ids::{MAX_NODES, MAX_TOPICS};
+use crate::plant::ACTUATOR_HZ;
+use crate::qos::{
+    self, Delivery, History, Link, OnDeadlineMissed, Reliability, TopicQos, MAX_DEPTH,
+};
+use crate::rate::{period_for_hz, MAX_HZ};
+use crate::time::Nanos;
+use serde::{Deserialize, Serialize};
+use std::fmt;
+use std::ops::Range;
+use std::path::Path;
+use toml::Spanned;
+
+/// The most subscribers a topic may have.
+pub const MAX_SUBSCRIBERS: usize = MAX_NODES - 1;
+
+/// A graph file larger than this is refused before it is parsed, bytes.
+pub const MAX_FILE_BYTES: u64 = 64 * 1024;
+
+/// The chapter's graph, shipped as `graphs/cartpole.toml` and built in: the default.
+pub const DEFAULT_GRAPH_TOML: &str = include_str!("../../../graphs/cartpole.toml");
+
+/// A graph file's bytes as a launch hashes and hands them to its processes: the chapter's
+/// ([`DEFAULT_GRAPH_TOML`]) when `path` is `None`, else the file, read as `--graph` reads
+/// it (a regular file of at most [`MAX_FILE_BYTES`]).
+///
+/// # Errors
+/// [`crate::input::InputError`] when the file cannot be read or is too big.
+pub fn graph_file_bytes(path: Option<&Path>) -> Result<Vec<u8>, crate::input::InputError> {
+    match path {
+        None => Ok(DEFAULT_GRAPH_TOML.as_bytes().to_vec()),
+        Some(p) => crate::input::read_regular_file(p, MAX_FILE_BYTES),
+    }
+}
+/// The name the built-in default graph is reported under.
+pub const DEFAULT_GRAPH_ORIGIN: &str = "graphs/cartpole.toml";
+
+pub use crate::graph::kind::{Code, Kind, Plant, PythonCode};
+use crate::graph::kind::{Params, Ports};
+
+pub use crate::msg::MsgType;
+use crate::msg::{ForceMsg, Message, StateMsg};
+
+/// The process that holds the plant's nodes by default ([`GraphSpec::process_of`]).
+pub const DEFAULT_ROBOT_PROCESS: &str = "robot";
+
+pub use crate::ids::{NodeId, TopicId};
+
+/// One node of a validated graph.
+#[derive(Clone, Debug, PartialEq)]
+pub struct NodeSpec {
+    /// Unique name.
+    pub name: String,
+    /// What it is: its kind's one definition ([`crate::graph::kind::KindDef`]).
+    pub kind: Kind,
+    /// Rate at the start of a run, Hz, in (0, 10 000].
+    pub rate_hz: f64,
+    /// The explicit tie-break priority, if the file gave one.
+    pub priority: Option<i64>,
+    /// The topics it reads, in the file's order (as many as its kind's ports take).
+    pub subscribes: Vec<TopicId>,
+    /// The topics it publishes, in the file's order.
+    pub publishes: Vec<TopicId>,
+    /// Its parameters (`params = { … }`): for a kind of numeric parameters, every one it
+    /// declares, checked, defaults filled in (as floats); for a Python or Rust kind, the
+    /// file's table as given.
+    pub params: toml::Table,
+    /// Its liveliness lease: not heard from (not ticked) for longer than this, it is
+    /// reported *not alive* (ROS 2's liveliness lease duration). `None`: not monitored.
+    pub liveliness_lease: Option<Nanos>,
+    /// The placement group (OS process) it runs in under `ratelab launch --processes`, as
+    /// the file gave it; `None` takes the default placement ([`GraphSpec::process_of`]).
+    pub process: Option<String>,
+    /// A Python node's script and class; `None` for every other kind.
+    pub python: Option<PythonCode>,
+    /// What a tick costs ([`crate::executor`]): its outputs are published that long after
+    /// it starts. `None`: nothing (outputs at once, as in the chapter).
+    pub compute: Option<ComputeTime>,
+    /// Its callback group, a group of the executor holding it ([`ExecutorSpec`]); `None`:
+    /// a mutually exclusive group of its own.
+    pub callback_group: Option<String>,
+}
+
+impl NodeSpec {
+    /// Its kind's name, as the graph file spells it.
+    pub fn kind_name(&self) -> &str {
+        self.kind.as_str()
+    }
+
+    /// An external node's waits (from its parameters); `None` for every other kind.
+    pub fn external(&self) -> Option<ExternalNodeSpec> {
+        (self.kind.code() == Code::Ros2).then(|| ExternalNodeSpec::from_params(&self.params))
+    }
+
+    /// Numeric parameter `key` (its checked value, or the kind's default).
+    pub fn param(&self, key: &str) -> Option<f64> {
+        match self.params.get(key)? {
+            toml::Value::Float(x) => Some(*x),
+            toml::Value::Integer(i) => Some(*i as f64),
+            _ => None,
+        }
+    }
+}
+
+pub use crate::graph::nodes::ExternalNodeSpec;
+
+/// The most parameters a Python node may have.
+pub const MAX_PYTHON_PARAMS: usize = 64;
+
+/// One topic of a validated graph.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TopicSpec {
+    /// Name, by convention starting with `/`.
+    pub name: String,
+    /// Message type.
+    pub msg: MsgType,
+    /// History depth at the start of a run (keep-last depth, or keep-all cap), ≥ 1.
+    pub depth: usize,
+    /// The rest of its QoS at the start of a run ([`crate::qos`]).
+    pub qos: TopicQos,
+    /// The one publisher.
+    pub publisher: NodeId,
+    /// The subscribers, in tie-break order (none: nobody reads it). Each has a queue of its
+    /// own ([`crate::msg::AnyTopic::subscription`]).
+    pub subscribers: Vec<NodeId>,
+}
+
+impl TopicSpec {
+    /// The first subscriber (in tie-break order), if any: the chapter's topics have one.
+    pub fn subscriber(&self) -> Option<NodeId> {
+        self.subscribers.first().copied()
+    }
+
+    /// The node whose process keeps this topic's counters when the graph runs across
+    /// processes: its subscriber (whose copy of the topic sees every message that crossed,
+    /// and counts its drops, stale reads and losses; a launch keeps all of a topic's
+    /// subscribers in one process), or its publisher when nobody subscribes. The merged
+    /// `metrics.json`, the watcher's steps and a process's samples all take the topic from
+    /// this node's process.
+    pub fn holder(&self) -> NodeId {
+        self.subscriber().unwrap_or(self.publisher)
+    }
+}
+
+/// The chapter's roles, when a graph has them: the chain sensor → … → policy → … →
+/// actuator ([`GraphSpec::chain`]). The chapter's flags (`--sensor-hz`, `--control-hz`,
+/// `--break`), `metrics.json`'s flat keys (`obs_*`, `action_*`) and the lab's rate keys
+/// speak of these; a graph without the chain has none of them (`--queue-depth`, every
+/// topic's depth, applies to any graph).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Chain {
+    /// The sensor at the head of the actuator's chain.
+    pub sensor: NodeId,
+    /// The policy that drives the actuator (through any safety nodes).
+    pub policy: NodeId,
+    /// The topic the policy reads (`/obs` in the chapter).
+    pub obs: TopicId,
+    /// The topic the policy publishes (`/action` in the chapter).
+    pub action: TopicId,
+}
+
+/// A parsed, validated graph; nodes in tie-break order.
+#[derive(Clone, Debug, PartialEq)]
+pub struct GraphSpec {
+    /// The graph's name.
+    pub name: String,
+    /// Nodes, in tie-break order ([`NodeId`] indexes this).
+    pub nodes: Vec<NodeSpec>,
+    /// Topics, in file order ([`TopicId`] indexes this).
+    pub topics: Vec<TopicSpec>,
+    /// The actuator: the one node that steps the plant.
+    pub actuator: NodeId,
+    /// The chapter's roles, when the graph has its chain: the actuator driven (through
+    /// any pass-through nodes) by a policy whose input comes (through any estimators) from
+    /// a sensor. `None`: some other shape (an open-loop source driving the actuator, a
+    /// policy fed by no sensor); it runs all the same, without the chapter's shorthands.
+    pub chain: Option<Chain>,
+    /// The `[executors]` tables ([`ExecutorSpec`]); empty: every node on a thread of its own.
+    pub executors: Vec<ExecutorSpec>,
+    /// The `[processes]` tables' restart policies, by process, where not
+    /// [`RestartPolicy::Never`] (`src/runtime/graph/spec/processes.rs`).
+    pub restart: std::collections::BTreeMap<String, RestartPolicy>,
+}
+
+/// A graph file that cannot be used: one line `FILE:LINE:COL: reason`, or `FILE: reason`
+/// for what concerns the whole file (it cannot be read, it is not UTF-8).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub struct SpecError {
+    /// The file (or what stands for it, e.g. a session log's run).
+    pub origin: String,
+    /// 1-based line; 0 for the whole file.
+    pub line: usize,
+    /// 1-based column (characters); 0 for the whole file.
+    pub col: usize,
+    /// What is wrong.
+    pub reason: String,
+}
+
+impl std::fmt::Display for SpecError {
+    /// One line: the file's name and the reason may quote the file (a `class`, a `kind`, a
+    /// key), so their control characters are written out ([`crate::text::printable`]).
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let origin = crate::text::printable(&self.origin);
+        let reason = crate::text::printable(&self.reason);
+        match self.line {
+            0 => write!(f, "{origin}: {reason}"),
+            _ => write!(f, "{origin}:{}:{}: {reason}", self.line, self.col),
+        }
+    }
+}
+
+/// A change to a graph's settings that cannot be made (a `--rate`/`--depth` override, a
+/// lab key): one line naming the node or topic.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("{0}")]
+pub struct OverrideError(pub String);
+
+// ---- the file, as serde reads it ------------------------------------------------------
+
+#[derive(Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+struct RawGraph {
+    name: Option<Spanned<String>>,
+    #[serde(default, rename = "node")]
+    nodes: Vec<Spanned<RawNode>>,
+    #[serde(default, rename = "topic")]
+    topics: Vec<Spanned<RawTopic>>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    executors: Option<executors::RawExecutors>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    processes: Option<processes::RawProcesses>,
+}
+
+#[derive(Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+struct RawNode {
+    name: Spanned<String>,
+    kind: Spanned<String>,
+    rate_hz: Spanned<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    priority: Option<Spanned<i64>>,
+    /// A topic name, or a list of them (a python node may have several).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    subscribes: Option<Spanned<toml::Value>>,
+    /// As `subscribes`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    publishes: Option<Spanned<toml::Value>>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    noise_pos_m: Option<Spanned<f64>>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    noise_angle_rad: Option<Spanned<f64>>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    cutoff_hz: Option<Spanned<f64>>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    max_force_n: Option<Spanned<f64>>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    liveliness_lease_ms: Option<Spanned<f64>>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    process: Option<Spanned<String>>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    script: Option<Spanned<String>>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    class: Option<Spanned<String>>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    params: Option<Spanned<std::collections::BTreeMap<String, Spanned<toml::Value>>>>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    compute_ms: Option<Spanned<toml::Value>>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    callback_group: Option<Spanned<String>>,
+}
+
+#[derive(Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+struct RawTopic {
+    name: Spanned<String>,
+    #[serde(rename = "type")]
+    msg: Spanned<MsgType>,
+    depth: Spanned<i64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    history: Option<Spanned<History>>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    delivery: Option<Spanned<Delivery>>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    deadline_ms: Option<Spanned<f64>>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    lifespan_ms: Option<Spanned<f64>>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    reliability: Option<Spanned<Reliability>>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    on_deadline_missed: Option<Spanned<OnDeadlineMissed>>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    link: Option<Spanned<RawLink>>,
+}
+
+#[derive(Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+struct RawLink {
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    loss: Option<Spanned<f64>>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    delay_ms: Option<Spanned<f64>>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    jitter_ms: Option<Spanned<f64>>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    retransmit_ms: Option<Spanned<f64>>,
+}
+
+/// Milliseconds as a graph file writes them (exact for whole microseconds).
+fn nanos_ms(n: Nanos) -> f64 {
+    n.0 as f64 / 1e6
+}
+
+/// A topic's QoS from its table, each key through [`qos::apply_key`] (the `--qos` rules),
+/// errors at the key's position.
+fn topic_qos(cx: &Ctx<'_>, t: &RawTopic, depth: &mut usize) -> Result<TopicQos, SpecError> {
+    let mut q = TopicQos::default();
+    let mut set = |key: &str, value: String, span: Range<usize>| {
+        qos::apply_key(&mut q, depth, key, &value).map_err(|e| cx.err(span, e))
+    };
+    if let Some(v) = &t.deadline_ms {
+        set("deadline_ms", v.get_ref().to_string(), v.span())?;
+    }
+    if let Some(v) = &t.lifespan_ms {
+        set("lifespan_ms", v.get_ref().to_string(), v.span())?;
+    }
+    if let Some(l) = &t.link {
+        let l_ref = l.get_ref();
+        set("loss", "0".into(), l.span())?; // a link, even if every key is left out
+        let values = [
+            &l_ref.loss,
+            &l_ref.delay_ms,
+            &l_ref.jitter_ms,
+            &l_ref.retransmit_ms,
+        ];
+        for (key, v) in qos::LINK_KEYS.into_iter().zip(values) {
+            if let Some(v) = v {
+                set(key, v.get_ref().to_string(), v.span())?;
+            }
+        }
+    }
+    if let Some(v) = &t.history {
+        q.history = *v.get_ref();
+    }
+    if let Some(v) = &t.delivery {
+        q.delivery = *v.get_ref();
+    }
+    if let Some(v) = &t.reliability {
+        q.reliability = *v.get_ref();
+    }
+    if let Some(v) = &t.on_deadline_missed {
+        q.on_deadline_missed = *v.get_ref();
+    }
+    Ok(q)
+}
+
+/// Byte offset → 1-based (line, column in characters).
+fn line_col(text: &str, offset: usize) -> (usize, usize) {
+    let offset = offset.min(text.len());
+    let before = text.get(..offset).unwrap_or(text);
+    let line = before.matches('\n').count() + 1;
+    let col = before.rsplit('\n').next().map_or(0, |l| l.chars().count()) + 1;
+    (line, col)
+}
+
+struct Ctx<'a> {
+    origin: &'a str,
+    text: &'a str,
+}
+
+impl Ctx<'_> {
+    fn err(&self, span: Range<usize>, reason: impl Into<String>) -> SpecError {
+        let (line, col) = line_col(self.text, span.start);
+        SpecError {
+            origin: self.origin.to_string(),
+            line,
+            col,
+            reason: reason.into(),
+        }
+    }
+}
+
+/// "a sensor", "an actuator": the kind with its article, for messages.
+fn a_kind(kind_name: &str) -> String {
+    let an = kind_name.starts_with(['a', 'e', 'i', 'o', 'u']);
+    format!("{} {kind_name}", if an { "an" } else { "a" })
+}
+
+/// A node's `subscribes` or `publishes`: one topic name, or a list of them (at most
+/// [`MAX_TOPICS`], each once), each spanned at the value.
+fn topic_list(
+    cx: &Ctx<'_>,
+    key: &str,
+    v: &Option<Spanned<toml::Value>>,
+) -> Result<Vec<Spanned<String>>, SpecError> {
+    let Some(v) = v else {
+        return Ok(Vec::new());
+    };
+    let bad = || {
+        cx.err(
+            v.span(),
+            format!("{key} must be a topic name or a list of topic names"),
+        )
+    };
+    let names: Vec<String> = match v.get_ref() {
+        toml::Value::String(name) => vec![name.clone()],
+        toml::Value::Array(items) if !items.is_empty() && items.len() <= MAX_TOPICS => items
+            .iter()
+            .map(|i| i.as_str().map(String::from).ok_or_else(bad))
+            .collect::<Result<_, _>>()?,
+        _ => return Err(bad()),
+    };
+    for (i, n) in names.iter().enumerate() {
+        if names[..i].contains(n) {
+            return Err(cx.err(v.span(), format!("{key} names '{n}' twice")));
+        }
+    }
+    Ok(names
+        .into_iter()
+        .map(|n| Spanned::new(v.span(), n))
+        .collect())
+}
+
+fn check_rate_hz(hz: f64) -> Result<(), String> {
+    period_for_hz(hz)
+        .map(|_| ())
+        .map_err(|_| format!("rate_hz must be a finite rate in (0, {MAX_HZ}] Hz, got {hz}"))
+}
+
+fn check_actuator_rate(hz: f64) -> Result<(), String> {
+    if hz == ACTUATOR_HZ {
+        Ok(())
+    } else {
+        Err(format!(
+"actuator rate {hz} Hz refused: it must be {ACTUATOR_HZ} Hz (one 20 ms plant step per tick)"
+        ))
+    }
+}
+
+fn check_depth(depth: i64) -> Result<usize, String> {
+    match usize::try_from(depth) {
+        Ok(d) if (1..=MAX_DEPTH).contains(&d) => Ok(d),
+        _ => Err(format!("depth must be in 1..={MAX_DEPTH}, got {depth}")),
+    }
+}
+
+impl GraphSpec {
+    /// The chapter's three-node graph (`graphs/cartpole.toml`, compiled in).
+    pub fn chapter() -> GraphSpec {
+        GraphSpec::parse(DEFAULT_GRAPH_TOML, DEFAULT_GRAPH_ORIGIN)
+            .expect("the shipped default graph is valid")
+    }
+
+    /// Read a graph file: refused when it is not a regular file or is larger than
+    /// [`MAX_FILE_BYTES`], then parsed as [`GraphSpec::parse`].
+    ///
+    /// # Errors
+    /// A [`SpecError`] (line 0, the whole file, for a file that cannot be read or is not
+    /// UTF-8).
+    pub fn load(path: &Path) -> Result<GraphSpec, SpecError> {
+        let origin = path.display().to_string();
+        let at_start = |reason: String| SpecError {
+            origin: origin.clone(),
+            line: 0,
+            col: 0,
+            reason,
+        };
+        let bytes = crate::input::read_regular_file(path, MAX_FILE_BYTES).map_err(|e| {
+            // The error names the file first; the line's `FILE:` already does.
+            let text = e.to_string();
+            let prefix = format!("{origin}: ");
+            at_start(text.strip_prefix(&prefix).unwrap_or(&text).to_string())
+        })?;
+        let text = String::from_utf8(bytes).map_err(|_| at_start("not UTF-8 text".into()))?;
+        GraphSpec::parse(&text, &origin)
+    }
+
+    /// Parse and validate graph-file `text`; `origin` names it in errors.
+    ///
+    /// # Errors
+    /// The first broken rule, as a [`SpecError`] at the culprit's position.
+    pub fn parse(text: &str, origin: &str) -> Result<GraphSpec, SpecError> {
+        let cx = Ctx { origin, text };
+        let raw: RawGraph = toml::from_str(text).map_err(|e| {
+            let span = e.span().unwrap_or(0..0);
+            let msg = e.message().lines().next().unwrap_or("invalid TOML").trim();
+            cx.err(span, msg.to_string())
+        })?;
+        build(&cx, raw)
+    }
+
+    /// The graph as a graph file (TOML) that [`GraphSpec::parse`] reads back to an equal
+    /// spec, with the current rates and depths. Session logs store this text, so a replay
+    /// does not depend on the file it came from.
+    pub fn to_toml(&self) -> String {
+        let s = |v: String| Spanned::new(0..0, v);
+        let f = |v: f64| Spanned::new(0..0, v);
+        // One topic as a string (as the chapter's files write it), several as a list.
+        let topic_names = |ts: &[TopicId]| -> Option<Spanned<toml::Value>> {
+            let names: Vec<toml::Value> = ts
+                .iter()
+                .map(|t| toml::Value::String(self.topics[t.0].name.clone()))
+                .collect();
+            match names.len() {
+                0 => None,
+                1 => names.into_iter().next(),
+                _ => Some(toml::Value::Array(names)),
+            }
+            .map(|v| Spanned::new(0..0, v))
+        };
+        let raw = RawGraph {
+            name: Some(s(self.name.clone())),
+            nodes: self
+                .nodes
+                .iter()
+                .map(|n| {
+                    // A kind's numeric parameters at their defaults are left out.
+                    let defaults = match n.kind.def().params {
+                        Params::Numbers(defs) => defs,
+                        Params::Free => &[],
+                    };
+                    let params: std::collections::BTreeMap<String, Spanned<toml::Value>> = n
+                        .params
+                        .iter()
+                        .filter(|(k, v)| {
+                            !defaults
+                                .iter()
+                                .any(|d| d.name == k.as_str() && v.as_float() == Some(d.default))
+                        })
+                        .map(|(k, v)| (k.clone(), Spanned::new(0..0, v.clone())))
+                        .collect();
+                    Spanned::new(
+                        0..0,
+                        RawNode {
+                            name: s(n.name.clone()),
+                            kind: s(n.kind_name().to_string()),
+                            rate_hz: f(n.rate_hz),
+                            priority: n.priority.map(|p| Spanned::new(0..0, p)),
+                            subscribes: topic_names(&n.subscribes),
+                            publishes: topic_names(&n.publishes),
+                            noise_pos_m: None,
+                            noise_angle_rad: None,
+                            cutoff_hz: None,
+                            max_force_n: None,
+                            liveliness_lease_ms: n.liveliness_lease.map(|l| f(nanos_ms(l))),
+                            process: n.process.clone().map(s),
+                            script: n.python.as_ref().map(|p| s(p.script.clone())),
+                            class: n.python.as_ref().and_then(|p| p.class.clone()).map(s),
+                            params: (!params.is_empty()).then(|| Spanned::new(0..0, params)),
+                            compute_ms: n
+                                .compute
+                                .map(|c| Spanned::new(0..0, executors::compute_value(&c))),
+                            callback_group: n.callback_group.clone().map(s),
+                        },
+                    )
+                })
+                .collect(),
+            topics: self
+                .topics
+                .iter()
+                .map(|t| {
+                    let q = &t.qos;
+                    let d = TopicQos::default();
+                    let keep = |differs: bool| differs.then_some(());
+                    Spanned::new(
+                        0..0,
+                        RawTopic {
+                            name: s(t.name.clone()),
+                            msg: Spanned::new(0..0, t.msg),
+                            depth: Spanned::new(0..0, t.depth as i64),
+                            history: keep(q.history != d.history)
+                                .map(|()| Spanned::new(0..0, q.history)),
+                            delivery: keep(q.delivery != d.delivery)
+                                .map(|()| Spanned::new(0..0, q.delivery)),
+                            deadline_ms: q.deadline.map(|v| f(nanos_ms(v))),
+                            lifespan_ms: q.lifespan.map(|v| f(nanos_ms(v))),
+                            reliability: keep(q.reliability != d.reliability)
+                                .map(|()| Spanned::new(0..0, q.reliability)),
+                            on_deadline_missed: keep(q.on_deadline_missed != d.on_deadline_missed)
+                                .map(|()| Spanned::new(0..0, q.on_deadline_missed)),
+                            link: q.link.map(|l: Link| {
+                                Spanned::new(
+                                    0..0,
+                                    RawLink {
+                                        loss: Some(f(l.loss)),
+                                        delay_ms: Some(f(nanos_ms(l.delay))),
+                                        jitter_ms: Some(f(nanos_ms(l.jitter))),
+                                        retransmit_ms: Some(f(nanos_ms(l.retransmit))),
+                                    },
+                                )
+                            }),
+                        },
+                    )
+                })
+                .collect(),
+            executors: executors::to_raw(self),
+            processes: processes::to_raw(self),
+        };
+        toml::to_string(&raw).expect("a graph always serializes")
+    }
+
+    /// The placement group (OS process) node `id` runs in under `ratelab launch
+    /// --processes`: the file's `process = "…"`, or by default `robot` for the nodes that
+    /// touch the simulator (sensors and the actuator, as drivers touch hardware), for an
+    /// external node (its proxy) its input's publisher's process, and the node's own name
+    /// for every other node.
+    pub fn process_of(&self, id: NodeId) -> String {
+        let mut at = id;
+        // An external node's proxy goes with its input's publisher (through other external
+        // nodes, at most once round the graph): that process offers the input to ROS 2
+        // and `/clock` after it, in order ([`crate::ros2::external`]).
+        for _ in 0..=self.nodes.len() {
+            let n = self.node(at);
+            match (&n.process, n.subscribes.first().copied()) {
+                (Some(p), _) => return p.clone(),
+                (None, Some(t)) if n.kind.code() == Code::Ros2 && self.topic(t).publisher != id => {
+                    at = self.topic(t).publisher;
+                }
+                (None, _) if n.kind.plant() != Plant::None => {
+                    return DEFAULT_ROBOT_PROCESS.to_string()
+                }
+                (None, _) => return n.name.clone(),
+            }
+        }
+        self.node(id).name.clone()
+    }
+
+    /// The placement: each process with its nodes (in tie-break order), processes in the
+    /// order of their first node.
+    pub fn placement(&self) -> Vec<(String, Vec<NodeId>)> {
+        let mut out: Vec<(String, Vec<NodeId>)> = Vec::new();
+        for i in 0..self.nodes.len() {
+            let p = self.process_of(NodeId(i));
+            match out.iter_mut().find(|(name, _)| *name == p) {
+                Some((_, ids)) => ids.push(NodeId(i)),
+                None => out.push((p, vec![NodeId(i)])),
+            }
+        }
+        out
+    }
+
+    /// The node named `name`.
+    pub fn node_id(&self, name: &str) -> Option<NodeId> {
+        self.nodes.iter().position(|n| n.name == name).map(NodeId)
+    }
+
+    /// The first node of `kind = "external"`, if any: such a graph runs only with `--ros2`
+    /// ([`crate::ros2::external`]; across processes, its proxy beside its input's
+    /// publisher).
+    pub fn first_external(&self) -> Option<&NodeSpec> {
+        self.nodes.iter().find(|n| n.kind.code() == Code::Ros2)
+    }
+
+    /// The topic named `name`.
+    pub fn topic_id(&self, name: &str) -> Option<TopicId> {
+        self.topics.iter().position(|t| t.name == name).map(TopicId)
+    }
+
+    /// Node `id`.
+    pub fn node(&self, id: NodeId) -> &NodeSpec {
+        &self.nodes[id.0]
+    }
+
+    /// Topic `id`.
+    pub fn topic(&self, id: TopicId) -> &TopicSpec {
+        &self.topics[id.0]
+    }
+
+    /// Set node `name`'s rate, under the file's rules.
+    ///
+    /// # Errors
+    /// [`OverrideError`] for an unknown node or a rate the node cannot take.
+    pub fn set_rate(&mut self, name: &str, hz: f64) -> Result<(), OverrideError> {
+        let id = self.known_node(name)?;
+        self.set_rate_of(id, hz)
+    }
+
+    /// Node `name`'s id, or the override error naming the graph's nodes.
+    fn known_node(&self, name: &str) -> Result<NodeId, OverrideError> {
+        self.node_id(name).ok_or_else(|| {
+            OverrideError(format!(
+                "graph '{}' has no node '{name}' (nodes: {})",
+                self.name,
+                self.node_names().join(", ")
+            ))
+        })
+    }
+
+    /// Topic `name`'s id, or the override error naming the graph's topics.
+    fn known_topic(&self, name: &str) -> Result<TopicId, OverrideError> {
+        self.topic_id(name).ok_or_else(|| {
+            OverrideError(format!(
+                "graph '{}' has no topic '{name}' (topics: {})",
+                self.name,
+                self.topics
+                    .iter()
+                    .map(|t| t.name.as_str())
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ))
+        })
+    }
+
+    /// Set node `id`'s rate, under the file's rules.
+    ///
+    /// # Errors
+    /// [`OverrideError`] for a rate the node cannot take.
+    pub fn set_rate_of(&mut self, id: NodeId, hz: f64) -> Result<(), OverrideError> {
+        let node = &mut self.nodes[id.0];
+        check_rate_hz(hz).map_err(|e| OverrideError(format!("node '{}': {e}", node.name)))?;
+        if node.kind.is_actuator() {
+            check_actuator_rate(hz).map_err(OverrideError)?;
+        }
+        node.rate_hz = hz;
+        Ok(())
+    }
+
+    /// Set topic `name`'s history depth.
+    ///
+    /// # Errors
+    /// [`OverrideError`] for an unknown topic or a depth outside 1..=[`MAX_DEPTH`].
+    pub fn set_depth(&mut self, name: &str, depth: usize) -> Result<(), OverrideError> {
+        let id = self.known_topic(name)?;
+        let d = check_depth(i64::try_from(depth).unwrap_or(i64::MAX))
+            .map_err(|e| OverrideError(format!("topic '{name}': {e}")))?;
+        self.topics[id.0].depth = d;
+        Ok(())
+    }
+
+    /// Set every topic's depth (the chapter's `--queue-depth`).
+    ///
+    /// # Errors
+    /// [`OverrideError`] for a depth outside 1..=[`MAX_DEPTH`] (nothing changes).
+    pub fn set_all_depths(&mut self, depth: usize) -> Result<(), OverrideError> {
+        check_depth(i64::try_from(depth).unwrap_or(i64::MAX))
+            .map_err(|e| OverrideError(format!("--queue-depth: {e}")))?;
+        for t in &mut self.topics {
+            t.depth = depth;
+        }
+        Ok(())
+    }
+
+    /// Set topic `name`'s QoS keys from a `KEY=VALUE[,KEY=VALUE…]` list (the graph file's
+    /// keys; `--qos`, `--link`). All or nothing: on an error the topic is unchanged.
+    ///
+    /// # Errors
+    /// [`OverrideError`] naming the topic for an unknown topic, key or value, or a bad
+    /// combination ([`qos::check_combination`]).
+    pub fn set_qos(&mut self, name: &str, pairs: &str) -> Result<(), OverrideError> {
+        let id = self.known_topic(name)?;
+        let err = |e: String| OverrideError(format!("topic '{name}': {e}"));
+        let t = &self.topics[id.0];
+        let (mut q, mut depth) = (t.qos, t.depth);
+        for (k, v) in qos::split_pairs(pairs).map_err(err)? {
+            qos::apply_key(&mut q, &mut depth, k, v).map_err(err)?;
+        }
+        let to_actuator = t
+            .subscribers
+            .iter()
+            .any(|n| self.nodes[n.0].kind.is_actuator());
+        qos::check_combination(&q, to_actuator).map_err(err)?;
+        let t = &mut self.topics[id.0];
+        (t.qos, t.depth) = (q, depth);
+        Ok(())
+    }
+
+    /// Set node `name`'s liveliness lease, ms (`--lease NODE=MS`).
+    ///
+    /// # Errors
+    /// [`OverrideError`] for an unknown node or a lease not in (0, [`qos::MAX_QOS_MS`]].
+    pub fn set_lease(&mut self, name: &str, ms: f64) -> Result<(), OverrideError> {
+        let id = self.known_node(name)?;
+        let lease = qos::ms_to_nanos("liveliness_lease_ms", ms, false)
+            .map_err(|e| OverrideError(format!("node '{name}': {e}")))?;
+        self.nodes[id.0].liveliness_lease = Some(lease);
+        Ok(())
+    }
+
+    /// Settings that are allowed but probably not meant: a deadline shorter than its
+    /// publisher's period misses every period; a node that runs the brain in a graph with no
+    /// sensor → policy → actuator chain (it drives nothing the chapter would call control).
+    /// One line each, naming the topic or node.
+    pub fn qos_warnings(&self) -> Vec<String> {
+        let shape = self
+            .nodes
+            .iter()
+            .filter(|n| self.chain.is_none() && n.kind.def().uses_brain)
+            .map(|n| {
+                format!(
+                    "warning: node '{}' runs the brain, but graph '{}' has no sensor → policy → actuator chain through it: the chapter's figures and shorthands do not apply",
+                    n.name, self.name
+                )
+            });
+        shape
+            .chain(self.topics.iter().filter_map(|t| {
+                let d = t.qos.deadline?;
+                let p = self.nodes[t.publisher.0].rate_hz;
+                let period = period_for_hz(p).ok()?;
+                (d < period).then(|| {
+                    format!(
+                        "warning: topic '{}': deadline {d} is shorter than the period of its publisher '{}' ({period} at {p} Hz): every period will be missed",
+                        t.name, self.nodes[t.publisher.0].name
+                    )
+                })
+            }))
+            .collect()
+    }
+
+    /// Node names in tie-break order.
+    pub fn node_names(&self) -> Vec<&str> {
+        self.nodes.iter().map(|n| n.name.as_str()).collect()
+    }
+
+    /// The chain's policy rate (the chapter's control rate), Hz; `None` without the chain.
+    pub fn control_hz(&self) -> Option<f64> {
+        self.chain.map(|c| self.node(c.policy).rate_hz)
+    }
+
+    /// The chain's sensor rate, Hz; `None` without the chain.
+    pub fn sensor_hz(&self) -> Option<f64> {
+        self.chain.map(|c| self.node(c.sensor).rate_hz)
+    }
+
+    /// The actuator's rate, Hz.
+    pub fn actuator_hz(&self) -> f64 {
+        self.node(self.actuator).rate_hz
+    }
+
+    /// The depth of the policy's input topic (the chapter's one queue depth), at the start;
+    /// `None` without the chain.
+    pub fn queue_depth(&self) -> Option<usize> {
+        self.chain.map(|c| self.topic(c.obs).depth)
+    }
+
+    /// The chain, or a one-line reason naming what uses it (`--control-hz`, a lab key)
+    /// when the graph has none.
+    ///
+    /// # Errors
+    /// [`OverrideError`]: the graph has no chapter chain.
+    pub fn chain_for(&self, what: &str) -> Result<Chain, OverrideError> {
+        self.chain.ok_or_else(|| {
+            OverrideError(format!(
+                "{what} speaks of the chapter's chain (sensor → policy → actuator), which graph '{}' does not have: name a node or topic instead (--rate NODE=HZ, --depth TOPIC=N)",
+                self.name
+            ))
+        })
+    }
+
+    /// Layers for drawing left to right: a node's layer is one more than its publisher's
+    /// (sensors at 0), following subscriptions; nodes in a cycle stay where they were reached.
+    pub fn layers(&self) -> Vec<usize> {
+        let mut layer = vec![0usize; self.nodes.len()];
+        // Longest path over at most MAX_NODES relaxations; a cycle stops growing at the bound.
+        for _ in 0..self.nodes.len() {
+            for (i, n) in self.nodes.iter().enumerate() {
+                for t in &n.subscribes {
+                    let p = self.topics[t.0].publisher.0;
+                    if p != i {
+                        layer[i] = layer[i].max((layer[p] + 1).min(self.nodes.len() - 1));
+                    }
+                }
+            }
+        }
+        layer
+    }
+}
+
+/// Validate `raw` into a spec.
+fn build(cx: &Ctx<'_>, raw: RawGraph) -> Result<GraphSpec, SpecError> {
+    let whole = 0..0;
+    let name = raw
+        .name
+        .as_ref()
+        .map_or_else(|| "graph".to_string(), |n| n.get_ref().clone());
+    if let Some(n) = &raw.name {
+        if n.get_ref().trim().is_empty() || n.get_ref().len() > 64 {
+            return Err(cx.err(n.span(), "name must be 1 to 64 characters"));
+        }
+        // The name titles the lab, names recordings and heads a launch's credentials file:
+        // a control character would repaint a terminal or break that file.
+        if crate::text::has_control(n.get_ref()) {
+            return Err(cx.err(
+                n.span(),
+                format!(
+                    "name '{}' holds a control character",
+                    crate::text::printable(n.get_ref())
+                ),
+            ));
+        }
+    }
+    if raw.nodes.len() > MAX_NODES {
+        return Err(cx.err(
+            raw.nodes[MAX_NODES].span(),
+            format!("a graph has at most {MAX_NODES} nodes"),
+        ));
+    }
+    if raw.nodes.is_empty() {
+        return Err(cx.err(
+            whole,
+            "no [[node]]: a graph needs at least an actuator (it steps the plant), and nodes that drive it",
+        ));
+    }
+
+    // Topics first: names, types, depths.
+    let mut topics: Vec<TopicSpec> = Vec::new();
+    let mut topic_spans = Vec::new();
+    for t in &raw.topics {
+        let t_ref = t.get_ref();
+        let tname = t_ref.name.get_ref();
+        if !valid_topic_name(tname) {
+            return Err(cx.err(
+                t_ref.name.span(),
+                format!("topic name '{tname}' must be '/' then names of letters, digits and '_' separated by single '/', with no '/' at the end (at most 64 characters)"),
+            ));
+        }
+        if topics.iter().any(|x| x.name == *tname) {
+            return Err(cx.err(t_ref.name.span(), format!("duplicate topic '{tname}'")));
+        }
+        let mut depth =
+            check_depth(*t_ref.depth.get_ref()).map_err(|e| cx.err(t_ref.depth.span(), e))?;
+        let qos = topic_qos(cx, t_ref, &mut depth)?;
+        topics.push(TopicSpec {
+            name: tname.clone(),
+            msg: *t_ref.msg.get_ref(),
+            depth,
+            qos,
+            publisher: NodeId(usize::MAX),
+            subscribers: Vec::new(),
+        });
+        topic_spans.push(t_ref.name.span());
+    }
+    if topics.len() > MAX_TOPICS {
+        return Err(cx.err(
+            topic_spans[MAX_TOPICS].clone(),
+            format!("a graph has at most {MAX_TOPICS} topics"),
+        ));
+    }
+    let find_topic = |topics: &[TopicSpec], r: &Spanned<String>| -> Result<usize, SpecError> {
+        topics
+            .iter()
+            .position(|t| t.name == *r.get_ref())
+            .ok_or_else(|| {
+                cx.err(
+                    r.span(),
+                    format!(
+                        "unknown topic '{}': declare it in a [[topic]] table",
+                        r.get_ref()
+                    ),
+                )
+            })
+    };
+
+    // Nodes in file order.
+    let mut file_nodes: Vec<NodeSpec> = Vec::new();
+    let mut node_spans = Vec::new();
+    let mut actuators = Vec::new();
+    for n in &raw.nodes {
+        let r = n.get_ref();
+        let nname = r.name.get_ref();
+        if !valid_node_name(nname) {
+            return Err(cx.err(
+                r.name.span(),
+                format!("node name '{nname}' must be 1 to 32 letters, digits, '_' or '-'"),
+            ));
+        }
+        if file_nodes.iter().any(|x| x.name == *nname) {
+            return Err(cx.err(r.name.span(), format!("duplicate node '{nname}'")));
+        }
+        let kind_name = r.kind.get_ref().as_str();
+        let kind = crate::graph::registry::kind(kind_name).ok_or_else(|| {
+            let known: Vec<&str> = crate::graph::registry::kinds()
+                .iter()
+                .map(|k| k.as_str())
+                .collect();
+            cx.err(
+                r.kind.span(),
+                format!(
+                    "unknown kind `{kind_name}`: expected one of {} (or a kind a Rust \
+                     program registers: ratelab::graph::registry)",
+                    known.join(", ")
+                ),
+            )
+        })?;
+        let hz = *r.rate_hz.get_ref();
+        check_rate_hz(hz).map_err(|e| cx.err(r.rate_hz.span(), e))?;
+        if kind.is_actuator() {
+            check_actuator_rate(hz).map_err(|e| cx.err(r.rate_hz.span(), e))?;
+            actuators.push(r.name.span());
+        }
+        let id = NodeId(file_nodes.len());
+        let sub_names = topic_list(cx, "subscribes", &r.subscribes)?;
+        let pub_names = topic_list(cx, "publishes", &r.publishes)?;
+        // What the kind reads and publishes: per topic, the types it takes (`None`: any).
+        let (reads, writes) = check_ports(cx, kind, r, &sub_names, &pub_names)?;
+        let mut subscribes = Vec::with_capacity(sub_names.len());
+        for (k, s) in sub_names.iter().enumerate() {
+            let ti = find_topic(&topics, s)?;
+            let t = &mut topics[ti];
+            if let Some(want) = reads.get(k).copied().flatten() {
+                if !want.contains(&t.msg) {
+                    return Err(cx.err(
+                        s.span(),
+                        format!(
+                            "type mismatch: '{}' carries {} but {} node reads {}",
+                            t.name,
+                            t.msg.as_str(),
+                            a_kind(kind_name),
+                            type_names(want)
+                        ),
+                    ));
+                }
+            }
+            if t.subscribers.len() >= MAX_SUBSCRIBERS {
+                return Err(cx.err(
+                    s.span(),
+                    format!(
+                        "topic '{}' has {MAX_SUBSCRIBERS} subscribers already (at most {MAX_SUBSCRIBERS})",
+                        t.name
+                    ),
+                ));
+            }
+            t.subscribers.push(id);
+            subscribes.push(TopicId(ti));
+        }
+        let mut publishes = Vec::with_capacity(pub_names.len());
+        for (k, p) in pub_names.iter().enumerate() {
+            let ti = find_topic(&topics, p)?;
+            let t = &mut topics[ti];
+            if let Some(want) = writes.get(k).copied().flatten() {
+                if !want.contains(&t.msg) {
+                    return Err(cx.err(
+                        p.span(),
+                        format!(
+                            "type mismatch: '{}' carries {} but {} node publishes {}",
+                            t.name,
+                            t.msg.as_str(),
+                            a_kind(kind_name),
+                            type_names(want)
+                        ),
+                    ));
+                }
+            }
+            if t.publisher.0 != usize::MAX {
+                let who = file_nodes
+                    .get(t.publisher.0)
+                    .map_or(nname.as_str(), |n| &n.name);
+                return Err(cx.err(
+                    p.span(),
+                    format!(
+                        "topic '{}' already has a publisher ('{who}'): one publisher per topic",
+                        t.name
+                    ),
+                ));
+            }
+            t.publisher = id;
+            publishes.push(TopicId(ti));
+        }
+        let params = node_params(cx, kind, r)?;
+        let python = python_code(cx, kind, r)?;
+        let liveliness_lease = r
+            .liveliness_lease_ms
+            .as_ref()
+            .map(|v| {
+                qos::ms_to_nanos("liveliness_lease_ms", *v.get_ref(), false)
+                    .map_err(|e| cx.err(v.span(), e))
+            })
+            .transpose()?;
+        let process = match &r.process {
+            Some(p) if !valid_node_name(p.get_ref()) => {
+                return Err(cx.err(
+                    p.span(),
+                    format!(
+                        "process name '{}' must be 1 to 32 letters, digits, '_' or '-'",
+                        p.get_ref()
+                    ),
+                ))
+            }
+            p => p.as_ref().map(|p| p.get_ref().clone()),
+        };
+        let compute = r
+            .compute_ms
+            .as_ref()
+            .map(|c| executors::compute(cx, c))
+            .transpose()?
+            .filter(|c| !c.is_zero());
+        if let (Some(_), Some(c)) = (compute, &r.compute_ms) {
+            if kind.is_actuator() {
+                return Err(cx.err(c.span(), executors::ACTUATOR_NO_COMPUTE));
+            }
+        }
+        file_nodes.push(NodeSpec {
+            name: nname.clone(),
+            kind,
+            rate_hz: hz,
+            priority: r.priority.as_ref().map(|p| *p.get_ref()),
+            subscribes,
+            publishes,
+            params,
+            liveliness_lease,
+            process,
+            python,
+            compute,
+            callback_group: r.callback_group.as_ref().map(|g| g.get_ref().clone()),
+        });
+        node_spans.push(r.name.span());
+    }
+    match actuators.len() {
+        1 => {}
+        0 => {
+            return Err(cx.err(
+                whole,
+                "no actuator: a graph needs exactly one (it steps the plant)",
+            ))
+        }
+        _ => {
+            return Err(cx.err(
+                actuators[1].clone(),
+                "a second actuator: a graph has exactly one (it steps the plant)",
+            ))
+        }
+    }
+    for (i, t) in topics.iter().enumerate() {
+        if t.publisher.0 == usize::MAX {
+            let why = if !t.subscribers.is_empty() {
+                "has a subscriber but no publisher"
+            } else {
+                "is declared but no node publishes it"
+            };
+            return Err(cx.err(topic_spans[i].clone(), format!("topic '{}' {why}", t.name)));
+        }
+        let to_actuator = t
+            .subscribers
+            .iter()
+            .any(|n| file_nodes[n.0].kind.is_actuator());
+        qos::check_combination(&t.qos, to_actuator).map_err(|e| {
+            let raw = raw.topics[i].get_ref();
+            let at = raw
+                .on_deadline_missed
+                .as_ref()
+                .map(Spanned::span)
+                .or_else(|| raw.link.as_ref().map(Spanned::span))
+                .unwrap_or_else(|| topic_spans[i].clone());
+            cx.err(at, format!("topic '{}': {e}", t.name))
+        })?;
+    }
+
+    // Tie-break order: topological, explicit priorities override.
+    let order = tie_break_order(&file_nodes, &topics).map_err(|cycle| {
+        let first = cycle[0];
+        let path: Vec<String> = cycle
+            .iter()
+            .chain(std::iter::once(&first))
+            .map(|&i| file_nodes[i].name.clone())
+            .collect();
+        cx.err(
+            node_spans[first].clone(),
+            format!(
+                "cycle {}: give one of its nodes an explicit `priority`",
+                path.join(" → ")
+            ),
+        )
+    })?;
+    let mut new_index = vec![0usize; file_nodes.len()];
+    for (new, &old) in order.iter().enumerate() {
+        new_index[old] = new;
+    }
+    let nodes: Vec<NodeSpec> = order.iter().map(|&i| file_nodes[i].clone()).collect();
+    for t in &mut topics {
+        t.publisher = NodeId(new_index[t.publisher.0]);
+        for s in &mut t.subscribers {
+            *s = NodeId(new_index[s.0]);
+        }
+        t.subscribers.sort();
+    }
+    let actuator = NodeId(nodes.iter().position(|n| n.kind.is_actuator()).unwrap_or(0));
+    let mut spec = GraphSpec {
+        name,
+        nodes,
+        topics,
+        actuator,
+        chain: None,
+        executors: Vec::new(),
+        restart: std::collections::BTreeMap::new(),
+    };
+    let no_executors = executors::RawExecutors::new();
+    spec.executors = executors::executors(
+        cx,
+        raw.executors.as_ref().unwrap_or(&no_executors),
+        &spec,
+        |j| raw.nodes[order[j]].get_ref(),
+    )?;
+    if let Some(p) = &raw.processes {
+        spec.restart = processes::processes(cx, p, &spec)?;
+    }
+    spec.chain = find_chain(&spec);
+    Ok(spec)
+}
+
+/// The chapter's chain, if the graph has it: walk upstream from the actuator's `force`
+/// input. A node that reads `state` (its first such input) is the policy; else one that
+/// reads `force` passes it on (a safety limiter), and the walk goes on up it; else the
+/// node drives the actuator from what it reads (a controller with its own estimator may
+/// read `position` alone) and is the policy, its first input its observation. Up from the
+/// policy, the walk follows first inputs (through estimators) to a node that reads the
+/// plant (a sensor). Any other shape — the actuator fed by a node that reads nothing (an
+/// open-loop source), a policy fed by no sensor — has no chain.
+fn find_chain(spec: &GraphSpec) -> Option<Chain> {
+    let actuator = spec.actuator;
+    // Node `n`'s first input of type `m` (any type: `None`), with its publisher.
+    let input = |n: NodeId, m: Option<MsgType>| -> Option<(TopicId, NodeId)> {
+        let t = *spec.nodes[n.0]
+            .subscribes
+            .iter()
+            .find(|t| m.is_none_or(|m| spec.topics[t.0].msg == m))?;
+        Some((t, spec.topics[t.0].publisher))
+    };
+    let mut cur = actuator;
+    let mut seen = 0;
+    let (policy, action) = loop {
+        let Some((t, p)) = input(cur, Some(ForceMsg::TYPE)) else {
+            return None; // the actuator reads nothing
+        };
+        seen += 1;
+        if seen > MAX_NODES {
+            return None; // pass-through nodes in a loop
+        }
+        let reads = |m: MsgType| input(p, Some(m)).is_some();
+        if reads(StateMsg::TYPE) || !reads(ForceMsg::TYPE) {
+            break (p, t);
+        }
+        cur = p;
+    };
+    // Its `state` input, else its first.
+    let Some((obs, mut src)) = input(policy, Some(StateMsg::TYPE)).or_else(|| input(policy, None))
+    else {
+        return None; // an open-loop source drives the actuator
+    };
+    // Up through the nodes before it to the plant's sensor.
+    for _ in 0..MAX_NODES {
+        if spec.nodes[src.0].kind.plant() == Plant::Reads {
+            return Some(Chain {
+                sensor: src,
+                policy,
+                obs,
+                action,
+            });
+        }
+        match input(src, None) {
+            Some((_, up)) => src = up,
+            None => return None, // fed by a source that is not a sensor
+        }
+    }
+    None
+}
+
+/// A topological order (Kahn; ready nodes in file order), with explicit priorities
+/// overriding. Err: the nodes left in a cycle.
+fn tie_break_order(nodes: &[NodeSpec], topics: &[TopicSpec]) -> Result<Vec<usize>, Vec<usize>> {
+    let n = nodes.len();
+    let mut indegree = vec![0usize; n];
+    let mut edges: Vec<(usize, usize)> = Vec::new();
+    for t in topics {
+        for &s in &t.subscribers {
+            if nodes[s.0].priority.is_none() {
+                edges.push((t.publisher.0, s.0));
+                indegree[s.0] += 1;
+            }
+        }
+    }
+    let mut placed = vec![false; n];
+    let mut topo = Vec::with_capacity(n);
+    while topo.len() < n {
+        let Some(next) = (0..n).find(|&i| !placed[i] && indegree[i] == 0) else {
+            // Every unplaced node waits on another: report a cycle through the first.
+            let start = (0..n).find(|&i| !placed[i]).expect("some node is unplaced");
+            let mut cycle = vec![start];
+            let mut cur = start;
+            loop {
+                let prev = edges
+                    .iter()
+                    .find(|&&(from, to)| to == cur && !placed[from])
+                    .map(|&(from, _)| from)
+                    .expect("an unplaced node with indegree > 0 has an unplaced publisher");
+                if let Some(pos) = cycle.iter().position(|&c| c == prev) {
+                    // Collected against the flow (subscriber ← publisher): reverse it, and
+                    // start at the node that comes first in the file.
+                    let mut c = cycle.split_off(pos);
+                    c.reverse();
+                    let first = (0..c.len()).min_by_key(|&i| c[i]).unwrap_or(0);
+                    c.rotate_left(first);
+                    return Err(c);
+                }
+                cycle.push(prev);
+                cur = prev;
+            }
+        };
+        placed[next] = true;
+        topo.push(next);
+        for &(from, to) in &edges {
+            if from == next {
+                indegree[to] -= 1;
+            }
+        }
+    }
+    let mut pos = vec![0usize; n];
+    for (p, &i) in topo.iter().enumerate() {
+        pos[i] = p;
+    }
+    let mut order = topo.clone();
+    order.sort_by_key(|&i| (nodes[i].priority.unwrap_or(pos[i] as i64), pos[i]));
+    Ok(order)
+}
+
+/// Check a node's topics against its kind's ports: how many it reads and publishes. Per
+/// topic, the types it takes (`None`: any).
+#[allow(clippy::type_complexity)]
+fn check_ports(
+    cx: &Ctx<'_>,
+    kind: Kind,
+    r: &RawNode,
+    sub_names: &[Spanned<String>],
+    pub_names: &[Spanned<String>],
+) -> Result<
+    (
+        Vec<Option<&'static [MsgType]>>,
+        Vec<Option<&'static [MsgType]>>,
+    ),
+    SpecError,
+> {
+    let kind_name = kind.as_str();
+    match &kind.def().ports {
+        Ports::Fixed { inputs, outputs } => {
+            for (key, names, want) in [
+                ("subscribes", sub_names, inputs),
+                ("publishes", pub_names, outputs),
+            ] {
+                if names.len() == want.len() {
+                    continue;
+                }
+                let a = a_kind(kind_name);
+                let (at, reason) = match (names.len(), want.as_slice()) {
+                    // The chapter's kinds read and publish one topic or none.
+                    (0, [t]) if kind.code() == Code::BuiltIn && key == "subscribes" => (
+                        r.name.span(),
+                        format!("{a} node must subscribe to a {} topic", type_names(t)),
+                    ),
+                    (0, [_]) if kind.code() == Code::BuiltIn => {
+                        (r.name.span(), format!("{a} node must publish a topic"))
+                    }
+                    (_, []) if kind.code() == Code::BuiltIn => {
+                        let what = if key == "subscribes" {
+                            "subscribes to"
+                        } else {
+                            "publishes"
+                        };
+                        (names[0].span(), format!("{a} node {what} nothing"))
+                    }
+                    (_, [_]) if kind.code() == Code::BuiltIn => (
+                        names[1].span(),
+                        format!("{a} node {key} one topic (a python node, or a kind registered with several, may have more)"),
+                    ),
+                    _ => {
+                        let list: Vec<String> = want.iter().map(|t| type_names(t)).collect();
+                        let wanted = match list.len() {
+                            0 => "no topic".to_string(),
+                            1 => format!("one {} topic", list[0]),
+                            n => format!("{n} topics: {}", list.join(", ")),
+                        };
+                        (
+                            names.first().map_or_else(|| r.name.span(), |n| n.span()),
+                            format!(
+                                "a node of kind '{kind_name}' {key} {wanted}, in that order (as registered), not {}",
+                                names.len()
+                            ),
+                        )
+                    }
+                };
+                return Err(cx.err(at, reason));
+            }
+            Ok((
+                inputs.iter().map(|t| Some(*t)).collect(),
+                outputs.iter().map(|t| Some(*t)).collect(),
+            ))
+        }
+        &Ports::Open {
+            max_inputs,
+            min_outputs,
+            max_outputs,
+        } => {
+            for (key, names, max) in [
+                ("subscribes", sub_names, max_inputs),
+                ("publishes", pub_names, max_outputs),
+            ] {
+                if let Some(extra) = names.get(max) {
+                    let most = match max {
+                        0 => "nothing".to_string(),
+                        1 => "one topic".to_string(),
+                        n => format!("at most {n} topics"),
+                    };
+                    return Err(cx.err(
+                        extra.span(),
+                        format!("{} node {key} {most}", a_kind(kind_name)),
+                    ));
+                }
+            }
+            if pub_names.len() < min_outputs {
+                let why = if kind.code() == Code::Ros2 {
+                    ": what it publishes is how ratelab hears it"
+                } else {
+                    ""
+                };
+                return Err(cx.err(
+                    r.name.span(),
+                    format!("{} node must publish a topic{why}", a_kind(kind_name)),
+                ));
+            }
+            Ok((vec![None; sub_names.len()], vec![None; pub_names.len()]))
+        }
+    }
+}
+
+/// Message types as a file names them: `state`, or `state or position`.
+fn type_names(types: &[MsgType]) -> String {
+    types
+        .iter()
+        .map(|t| t.as_str())
+        .collect::<Vec<_>>()
+        .join(" or ")
+}
+
+/// The built-in kinds' parameters the file may also give as keys of the node's table, as
+/// the chapter's graphs do (`max_force_n = 8`), not only in `params = { … }`.
+const PARAM_KEYS: [&str; 4] = ["noise_pos_m", "noise_angle_rad", "cutoff_hz", "max_force_n"];
+
+/// A node's parameters, checked against its kind's ([`Params`]): `params = { … }` and the
+/// keys of [`PARAM_KEYS`]. A kind of numeric parameters gets every one it declares (the
+/// file's value, else its default) as a float; a Python or Rust kind its table as given
+/// (numbers, strings, booleans and arrays of them, under Python names).
+fn node_params(cx: &Ctx<'_>, kind: Kind, r: &RawNode) -> Result<toml::Table, SpecError> {
+    let a = a_kind(kind.as_str());
+    // (name, value, where, given as a key of the node's table)
+    let mut given: Vec<(String, toml::Value, Range<usize>, bool)> = Vec::new();
+    if let Some(p) = &r.params {
+        if p.get_ref().len() > MAX_PYTHON_PARAMS {
+            return Err(cx.err(
+                p.span(),
+                format!("a node has at most {MAX_PYTHON_PARAMS} params"),
+            ));
+        }
+        for (k, v) in p.get_ref() {
+            given.push((k.clone(), v.get_ref().clone(), v.span(), false));
+        }
+    }
+    let keys = [
+        &r.noise_pos_m,
+        &r.noise_angle_rad,
+        &r.cutoff_hz,
+        &r.max_force_n,
+    ];
+    for (key, field) in PARAM_KEYS.iter().zip(keys) {
+        if let Some(v) = field {
+            if given.iter().any(|g| g.0 == *key) {
+                return Err(cx.err(
+                    v.span(),
+                    format!("'{key}' is given twice: as a key and in params"),
+                ));
+            }
+            given.push((
+                key.to_string(),
+                toml::Value::Float(*v.get_ref()),
+                v.span(),
+                true,
+            ));
+        }
+    }
+    match kind.def().params {
+        Params::Numbers(defs) => {
+            let mut out = toml::Table::new();
+            for (k, v, span, as_key) in given {
+                let Some(d) = defs.iter().find(|d| d.name == k) else {
+                    let names: Vec<&str> = defs.iter().map(|d| d.name).collect();
+                    let takes = match names.as_slice() {
+                        [] => "takes no parameters".to_string(),
+                        [one] => format!("'s parameter is {one}"),
+                        [init @ .., last] => {
+                            format!("'s parameters are {} and {last}", init.join(", "))
+                        }
+                    };
+                    let sep = if takes.starts_with('\'') { "" } else { " " };
+                    return Err(cx.err(span, format!("{a} node{sep}{takes}, not '{k}'")));
+                };
+                let x = match v {
+                    toml::Value::Float(x) => x,
+                    toml::Value::Integer(i) => i as f64,
+                    _ => f64::NAN,
+                };
+                if !(x.is_finite() && x >= d.min && x <= d.max) {
+                    let name = if as_key { k } else { format!("params.{k}") };
+                    return Err(cx.err(
+                        span,
+                        format!(
+                            "{name} must be a number in {}..={} ({}), got {v}",
+                            d.min, d.max, d.unit
+                        ),
+                    ));
+                }
+                out.insert(d.name.to_string(), toml::Value::Float(x));
+            }
+            for d in defs {
+                out.entry(d.name).or_insert(toml::Value::Float(d.default));
+            }
+            Ok(out)
+        }
+        Params::Free => {
+            let mut out = toml::Table::new();
+            for (k, v, span, as_key) in given {
+                if as_key {
+                    return Err(cx.err(
+                        span,
+                        format!("'{k}' is a built-in kind's parameter, not one of {a} node (give a node's own in params = {{ … }})"),
+                    ));
+                }
+                let scalar = |v: &toml::Value| {
+                    matches!(
+                        v,
+                        toml::Value::Integer(_)
+                            | toml::Value::Float(_)
+                            | toml::Value::Boolean(_)
+                            | toml::Value::String(_)
+                    )
+                };
+                let ok = match &v {
+                    toml::Value::Array(a) => a.len() <= 4096 && a.iter().all(scalar),
+                    v => scalar(v),
+                };
+                if !valid_python_name(&k) || !ok {
+                    return Err(cx.err(
+                        span,
+                        format!("params.{k}: a parameter is a number, a string, a boolean or an array of them, under a Python name"),
+                    ));
+                }
+                out.insert(k, v);
+            }
+            Ok(out)
+        }
+    }
+}
+
+/// A Python node's script and class: required and allowed only on a kind whose code is
+/// Python. The script is resolved against the graph file's folder.
+fn python_code(cx: &Ctx<'_>, kind: Kind, r: &RawNode) -> Result<Option<PythonCode>, SpecError> {
+    if kind.code() != Code::Python {
+        let stray = [
+            r.script.as_ref().map(|v| ("script", v.span())),
+            r.class.as_ref().map(|v| ("class", v.span())),
+        ];
+        if let Some((key, span)) = stray.into_iter().flatten().next() {
+            return Err(cx.err(
+                span,
+                format!(
+                    "'{key}' is for python nodes, not for {} node",
+                    a_kind(kind.as_str())
+                ),
+            ));
+        }
+        return Ok(None);
+    }
+    let script = r.script.as_ref().ok_or_else(|| {
+        cx.err(
+            r.name.span(),
+            "a python node needs `script = \"nodes/NAME.py\"` (relative to the graph file)",
+        )
+    })?;
+    let text = script.get_ref();
+    if !text.ends_with(".py") || text.len() > 4096 || text.contains('\0') {
+        return Err(cx.err(script.span(), "script must name a .py file"));
+    }
+    let folder = Path::new(cx.origin).parent().unwrap_or(Path::new(""));
+    let joined = folder.join(text);
+    let resolved = std::path::absolute(&joined).unwrap_or(joined);
+    let class = match &r.class {
+        Some(c) if !valid_python_name(c.get_ref()) => {
+            return Err(cx.err(
+                c.span(),
+                format!("class '{}' is not a Python class name", c.get_ref()),
+            ))
+        }
+        c => c.as_ref().map(|c| c.get_ref().clone()),
+    };
+    Ok(Some(PythonCode {
+        script: resolved.to_string_lossy().into_owned(),
+        class,
+    }))
+}
+
+/// A Python identifier (ASCII): a class or parameter name.
+fn valid_python_name(s: &str) -> bool {
+    (1..=64).contains(&s.len())
+        && !s.starts_with(|c: char| c.is_ascii_digit())
+        && s.chars().all(|c| c.is_ascii_alphanumeric() || c == '_')
+}
+
+/// A node or process name: 1 to 32 letters, digits, `_` or `-` (also a key-expression chunk).
+pub fn valid_node_name(s: &str) -> bool {
+    (1..=32).contains(&s.len())
+        && s.chars()
+            .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-')
+}
+
+/// `/` then one or more names of letters, digits and `_`, separated by single `/`: as ROS 2
+/// names topics, and so that no two topics map to one Zenoh key (`/a` and `/a/`, `/a//b`).
+fn valid_topic_name(s: &str) -> bool {
+    (2..=64).contains(&s.len())
+        && s.strip_prefix('/').is_some_and(|rest| {
+            rest.split('/').all(|part| {
+                !part.is_empty() && part.chars().all(|c| c.is_ascii_alphanumeric() || c == '_')
+            })
+        })
+}
+
+impl fmt::Display for GraphSpec {
+    /// One line: `cartpole: sensor 50 Hz → /obs → policy 50 Hz → …` in tie-break order.
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}:", self.name)?;
+        for (i, n) in self.nodes.iter().enumerate() {
+            write!(
+                f,
+                "{} {} {} Hz",
+                if i == 0 { "" } else { " |" },
+                n.name,
+                n.rate_hz
+            )?;
+            for (k, t) in n.publishes.iter().enumerate() {
+                let sep = if k == 0 { " →" } else { "," };
+                write!(f, "{sep} {}", self.topics[t.0].name)?;
+            }
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn parse(text: &str) -> Result<GraphSpec, SpecError> {
+        GraphSpec::parse(text, "g.toml")
+    }
+
+    const CHAIN: &str = r#"
+name = "t"
+[[node]]
+name = "actuator"
+kind = "actuator"
+rate_hz = 50
+subscribes = "/action"
+[[node]]
+name = "policy"
+kind = "policy"
+rate_hz = 50
+subscribes = "/obs"
+publishes = "/action"
+[[node]]
+name = "sensor"
+kind = "sensor"
+rate_hz = 50
+publishes = "/obs"
+[[topic]]
+name = "/obs"
+type = "state"
+depth = 1
+[[topic]]
+name = "/action"
+type = "force"
+depth = 1
+"#;
+
+    #[test]
+    fn the_default_graph_orders_sensor_policy_actuator() {
+        let g = GraphSpec::chapter();
+        assert_eq!(g.node_names(), ["sensor", "policy", "actuator"]);
+        let chain = g.chain.unwrap();
+        assert_eq!(chain.obs, g.topic_id("/obs").unwrap());
+        assert_eq!(chain.action, g.topic_id("/action").unwrap());
+        assert_eq!(g.node(g.actuator).name, "actuator");
+        assert_eq!(
+            (g.sensor_hz(), g.control_hz(), g.actuator_hz()),
+            (Some(50.0), Some(50.0), 50.0)
+        );
+        assert_eq!(g.queue_depth(), Some(1));
+    }
+
+    #[test]
+    fn a_topic_is_held_by_its_subscriber_else_by_its_publisher() {
+        let text = format!(
+            "{CHAIN}[[node]]\nname = \"cam\"\nkind = \"sensor\"\nrate_hz = 10\npublishes = \"/img\"\n\
+             [[topic]]\nname = \"/img\"\ntype = \"state\"\ndepth = 1\n"
+        );
+        let g = parse(&text).unwrap();
+        let holder = |t: &str| {
+            g.node(g.topic(g.topic_id(t).unwrap()).holder())
+                .name
+                .clone()
+        };
+        assert_eq!(holder("/obs"), "policy");
+        assert_eq!(holder("/action"), "actuator");
+        assert_eq!(holder("/img"), "cam", "nobody subscribes: its publisher");
+    }
+
+    #[test]
+    fn file_order_does_not_change_the_topological_order() {
+        let g = parse(CHAIN).unwrap();
+        assert_eq!(g.node_names(), ["sensor", "policy", "actuator"]);
+        assert_eq!(g.layers(), vec![0, 1, 2]);
+    }
+
+    #[test]
+    fn explicit_priority_overrides() {
+        let text = CHAIN.replace(
+            "name = \"actuator\"\nkind = \"actuator\"",
+            "name = \"actuator\"\nkind = \"actuator\"\npriority = -1",
+        );
+        let g = parse(&text).unwrap();
+        assert_eq!(g.node_names(), ["actuator", "sensor", "policy"]);
+    }
+
+    #[test]
+    fn round_trips_through_toml() {
+        for text in [DEFAULT_GRAPH_TOML, CHAIN] {
+            let g = parse(text).unwrap();
+            let back = GraphSpec::parse(&g.to_toml(), "again").unwrap();
+            assert_eq!(g, back);
+        }
+    }
+
+    const SETPOINT: &str = include_str!("../../../graphs/cartpole-setpoint.toml");
+
+    #[test]
+    fn a_python_node_may_read_and_publish_several_topics_and_plays_the_policy() {
+        let g = parse(SETPOINT).unwrap();
+        let tracker = g.node_id("tracker").unwrap();
+        let names = |ts: &[TopicId]| -> Vec<String> {
+            ts.iter().map(|t| g.topic(*t).name.clone()).collect()
+        };
+        assert_eq!(names(&g.node(tracker).subscribes), ["/obs", "/reference"]);
+        assert_eq!(names(&g.node(tracker).publishes), ["/action", "/error"]);
+        // The chain: the state input makes it the policy; its output toward the actuator
+        // is the action; /reference's publisher ranks before it (topological order).
+        let chain = g.chain.unwrap();
+        assert_eq!(chain.policy, tracker);
+        assert_eq!(g.topic(chain.obs).name, "/obs");
+        assert_eq!(g.topic(chain.action).name, "/action");
+        assert_eq!(
+            g.node_names(),
+            ["sensor", "reference", "tracker", "actuator"]
+        );
+        assert_eq!(g.layers(), vec![0, 0, 1, 2]);
+        assert!(
+            g.to_string().contains("tracker 50 Hz → /action, /error"),
+            "{g}"
+        );
+        // Several topics are written as a list, one as a string, and read back equal.
+        let text = g.to_toml();
+        assert!(
+            text.contains(r#"subscribes = ["/obs", "/reference"]"#),
+            "{text}"
+        );
+        assert!(text.contains(r#"subscribes = "/action""#), "{text}");
+        assert_eq!(GraphSpec::parse(&text, "again").unwrap(), g);
+    }
+
+    #[test]
+    fn an_open_node_driving_the_actuator_is_the_policy_whatever_it_reads() {
+        let g = parse(include_str!(
+            "../../../graphs/cartpole-position-python.toml"
+        ))
+        .unwrap();
+        let chain = g.chain.unwrap();
+        assert_eq!(g.node(chain.policy).name, "controller");
+        assert_eq!(g.topic(chain.obs).name, "/meas");
+        assert_eq!(g.node(chain.sensor).name, "sensor");
+        // One that reads nothing drives the actuator open loop: a valid graph, without
+        // the chapter's chain.
+        let text = include_str!("../../../graphs/cartpole-position-python.toml")
+            .replace("subscribes = \"/meas\"\n", "");
+        let text = text.replace(
+            "publishes = \"/meas\"",
+            "publishes = \"/meas\"\n[[node]]\nname = \"log\"\nkind = \"python\"\nscript = \"l.py\"\nrate_hz = 1\nsubscribes = \"/meas\"",
+        );
+        let g = parse(&text).unwrap();
+        assert_eq!(g.chain, None);
+        assert_eq!((g.control_hz(), g.queue_depth()), (None, None));
+        assert!(g
+            .chain_for("--control-hz")
+            .unwrap_err()
+            .0
+            .starts_with("--control-hz speaks of the chapter's chain"));
+        // A built-in policy still must read state.
+        let e = parse(&CHAIN.replace("type = \"state\"", "type = \"position\"")).unwrap_err();
+        assert!(e.reason.contains("type mismatch"), "{e}");
+    }
+
+    #[test]
+    fn lists_of_topics_are_checked() {
+        let reason = |from: &str, to: &str| {
+            assert!(SETPOINT.contains(from), "{from}");
+            parse(&SETPOINT.replace(from, to)).unwrap_err().reason
+        };
+        // Only a python node takes several.
+        let e = reason(
+            "subscribes = \"/action\"",
+            "subscribes = [\"/action\", \"/error\"]",
+        );
+        assert_eq!(
+            e,
+            "an actuator node subscribes one topic (a python node, or a kind registered with several, may have more)"
+        );
+        for bad in ["3", "[]", "[\"/obs\", 3]", "{ a = 1 }"] {
+            let e = reason(
+                "subscribes = [\"/obs\", \"/reference\"]",
+                &format!("subscribes = {bad}"),
+            );
+            assert_eq!(
+                e, "subscribes must be a topic name or a list of topic names",
+                "{bad}"
+            );
+        }
+        let e = reason(
+            "publishes = [\"/action\", \"/error\"]",
+            "publishes = [\"/action\", \"/action\"]",
+        );
+        assert_eq!(e, "publishes names '/action' twice");
+        let e = reason(
+            "publishes = [\"/action\", \"/error\"]",
+            "publishes = [\"/action\", \"/nope\"]",
+        );
+        assert!(e.starts_with("unknown topic '/nope'"), "{e}");
+        // Each topic keeps one publisher.
+        let e = reason(
+            "publishes = [\"/action\", \"/error\"]",
+            "publishes = [\"/action\", \"/reference\"]",
+        );
+        assert!(
+            e.contains("topic '/reference' already has a publisher ('reference')"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn every_built_in_kind_is_registered_under_its_name() {
+        for name in [
+            "sensor",
+            "estimator",
+            "policy",
+            "safety",
+            "actuator",
+            "python",
+            "external",
+        ] {
+            let kind = crate::graph::registry::kind(name).expect(name);
+            assert_eq!(kind.as_str(), name);
+        }
+        assert_eq!(crate::graph::registry::kind("registered"), None);
+    }
+
+    #[test]
+    fn a_kinds_parameters_are_checked_and_defaulted() {
+        let safety = include_str!("../../../graphs/cartpole-safety.toml");
+        let g = parse(safety).unwrap();
+        let limit = g.node(g.node_id("safety").unwrap());
+        assert_eq!(limit.param("max_force_n"), Some(8.0));
+        // In params = { … } too, and a default where the file gives none.
+        let g = parse(&safety.replace("max_force_n = 8 ", "params = { max_force_n = 3 }")).unwrap();
+        assert_eq!(
+            g.node(g.node_id("safety").unwrap()).param("max_force_n"),
+            Some(3.0)
+        );
+        let g = parse(&safety.replace("max_force_n = 8 ", "")).unwrap();
+        assert_eq!(
+            g.node(g.node_id("safety").unwrap()).param("max_force_n"),
+            Some(10.0)
+        );
+        let e = parse(&safety.replace("max_force_n = 8 ", "max_force_n = 11 ")).unwrap_err();
+        assert!(
+            e.reason
+                .starts_with("max_force_n must be a number in 0..=10 (N), got 11"),
+            "{e}"
+        );
+        let e =
+            parse(&safety.replace("max_force_n = 8 ", "params = { max_force = 3 }")).unwrap_err();
+        assert_eq!(
+            e.reason,
+            "a safety node's parameter is max_force_n, not 'max_force'"
+        );
+        let e = parse(&safety.replace("max_force_n = 8 ", "cutoff_hz = 3 ")).unwrap_err();
+        assert_eq!(
+            e.reason,
+            "a safety node's parameter is max_force_n, not 'cutoff_hz'"
+        );
+    }
+
+    #[test]
+    fn errors_point_at_the_culprit() {
+        let e = parse(&CHAIN.replace("kind = \"policy\"", "kind = \"planner\"")).unwrap_err();
+        assert_eq!((e.line, e.col), (10, 8), "{e}");
+        assert!(e.reason.contains("unknown kind `planner`"), "{e}");
+        let e = parse(&CHAIN.replace("depth = 1\n[[topic]]", "depth = 0\n[[topic]]")).unwrap_err();
+        assert_eq!(e.line, 22, "{e}");
+        assert!(
+            e.to_string().starts_with("g.toml:22:9: depth must be"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn no_two_topic_names_map_to_one_key() {
+        for bad in ["/obs/", "//obs", "/a//b", "/", "/a b", "obs"] {
+            let text = CHAIN.replace("\"/obs\"", &format!("\"{bad}\""));
+            let e = parse(&text).unwrap_err();
+            assert!(e.reason.contains("topic name"), "{bad}: {e}");
+        }
+        for good in ["/obs", "/robot/obs", "/a_1/b2"] {
+            let text = CHAIN.replace("\"/obs\"", &format!("\"{good}\""));
+            assert!(parse(&text).is_ok(), "{good}");
+        }
+    }
+
+    #[test]
+    fn overrides_follow_the_file_rules() {
+        let mut g = GraphSpec::chapter();
+        g.set_rate("policy", 5.0).unwrap();
+        assert_eq!(g.control_hz(), Some(5.0));
+        assert!(g.set_rate("policy", 0.0).is_err());
+        assert!(g
+            .set_rate("actuator", 40.0)
+            .unwrap_err()
+            .0
+            .contains("50 Hz"));
+        assert!(g
+            .set_rate("planner", 5.0)
+            .unwrap_err()
+            .0
+            .contains("no node 'planner'"));
+        g.set_depth("/obs", 100).unwrap();
+        assert_eq!(g.queue_depth(), Some(100));
+        assert!(g.set_depth("/obs", 0).is_err());
+        assert!(g.set_depth("/nope", 1).is_err());
+    }
+}

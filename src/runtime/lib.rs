@@ -1,0 +1,39 @@
+//! ratelab's runtime: a graph of nodes at fixed rates, exchanging messages on topics, run
+//! against the MuJoCo cartpole under a deterministic virtual clock or a real one. Built on
+//! the core crate (`ratelab_core`: time, rates, QoS, topics, messages, node traits, executor
+//! rules, metrics), whose modules it uses under their own names.
+//!
+//! - **the plant and its brains**: [`plant`] (the MuJoCo cartpole), [`policy`] (brains; +
+//!   [`checkpoint`] for trained ones, [`python`] for a learner's code);
+//! - **graphs**: [`graph`] (the graph file, [`graph::spec`]; node kinds, their registry and
+//!   the built-in nodes), [`config`] (a run's settings and their validation);
+//! - **running them**: [`scheduler`] (the virtual and real clocks that apply the executors'
+//!   rules), [`command`] (changes to a running graph), [`runcore`] (one graph under the
+//!   virtual clock, stepped, commanded, captured and restored), [`summary`] (a run's figures
+//!   from its graph's state), [`run`] (one headless run), [`sweep`] (grids and the rate
+//!   cliff);
+//! - **ROS 2**: [`ros2`] (ROS 2 on the wire, over rmw_zenoh's format).
+#![warn(missing_docs)]
+
+pub mod checkpoint;
+pub mod command;
+pub mod config;
+pub mod graph;
+pub mod plant;
+pub mod policy;
+pub mod python;
+pub mod ros2;
+pub mod run;
+pub mod runcore;
+pub mod scheduler;
+pub mod summary;
+pub mod sweep;
+
+pub use config::{ClockKind, RunConfig};
+pub use ratelab_core::Nanos;
+pub use run::{run, RunOptions, RunReport};
+// The core's modules, under their own names (`crate::time`, `crate::msg`, …).
+use ratelab_core::{
+    clock, executor, ids, input, metrics, msg, node, np_random, output, ports, publisher, qos,
+    rate, realtime, runlog, text, textlog, time, topic,
+};

@@ -1,0 +1,235 @@
+//! A node written in Python, shaped like an rclpy node: a graph file's
+//! `kind = "python"`, `script = "nodes/NAME.py"`, optional `class` and `params`.
+//!
+//! The class's constructor gets a node handle and declares, as in rclpy,
+//! `create_subscription(MsgType, "/topic", callback, qos_depth)`,
+//! `create_publisher(MsgType, "/topic", qos_depth)` and `create_timer(period_s, callback)`;
+//! the handle also has `get_clock().now()` (the run's clock, virtual or real: `.nanoseconds`),
+//! `get_logger().info/warn/error`, `get_parameter(name).value` (the graph file's `params`),
+//! `get_name()`, `get_period()` (the node's tick, s: 1 / its `rate_hz` in this run) and `rng` (a NumPy `Generator` seeded from the run's seed and the node's
+//! name). Message classes, from `import ratelab` (fields are floats in SI units):
+//!
+//! | graph file type | class | fields |
+//! | --- | --- | --- |
+//! | `state` | `ratelab.State` | `cart_pos_m`, `cart_vel_m_s`, `cos_theta`, `sin_theta`, `pole_angvel_rad_s` (float32 on the topic) |
+//! | `position` | `ratelab.Position` | `cart_pos_m`, `pole_angle_rad` |
+//! | `force` | `ratelab.Force` | `newtons` |
+//!
+//! A node may subscribe to several topics and publish several (`subscribes = ["/obs",
+//! "/reference"]` in the graph file): one `create_subscription` per input and one
+//! `create_publisher` per output, each naming a topic the graph file gives it.
+//!
+//! **The executor's order within a tick** (the node ticks at its `rate_hz`, like every
+//! node): first the subscriptions' callbacks, in the order the node created them, each
+//! once for what its topic's QoS delivers at that instant (latest: the newest unread
+//! message; FIFO: the oldest unread) — not called when nothing new arrived on it; then
+//! every timer due at the tick, in the order created (a timer fires on the node's first
+//! tick and then every `period_s`, which must be a whole number of the node's periods).
+//! What the callbacks published goes out at the end of the tick, stamped with the tick's
+//! time, in the order published.
+//!
+//! **Origin stamps** (sense→act latency): what a Python node publishes carries the
+//! **oldest** origin among the newest messages its subscriptions delivered — the oldest
+//! reading the output may depend on, since a node keeps its inputs' last values (a zero-order
+//! hold) — or its own tick time when it subscribes to nothing (it is a source). With one
+//! input that is the origin of the reading it was derived from. So an input that is slow or
+//! stale (a setpoint published once a second) stretches the sense→act latency the actuator
+//! measures: the command really does rest on data that old.
+//!
+//! Errors at load are one line ([`PythonError`]): the script missing or unreadable, a
+//! syntax error, no such class, a topic or type the graph file does not give the node, a
+//! timer period that is not a whole number of ticks. During the run an exception, a
+//! publish of the wrong message type or a parameter that does not exist fails the node
+//! at that tick, naming `FILE:LINE` of the raising frame and the exception.
+
+use super::{describe, start, support, CallbackGuard, PythonError};
+use crate::graph::kind::{BuildContext, PythonCode};
+use crate::msg::AnyTopic;
+use crate::publisher::Outbox;
+use crate::time::Nanos;
+use pyo3::prelude::*;
+use pyo3::types::{PyDict, PyList};
+
+/// A fields tuple of a message as it crosses into Python.
+type Fields = Vec<f64>;
+
+/// One Python node, ready to tick (see the module docs).
+pub struct PythonNode {
+    runtime: Py<PyAny>,
+    script: String,
+    /// The node's name (the lab shows a tick that does not return on its box; what its code
+    /// writes is stamped with it).
+    name: std::sync::Arc<str>,
+    what: String,
+    inputs: Vec<Input>,
+    outputs: Vec<AnyTopic>,
+    /// Where its publishes go (held during a tick with a compute time).
+    outbox: Outbox,
+}
+
+/// One subscription: its topic and what it delivered last.
+struct Input {
+    topic: AnyTopic,
+    /// `seq` of the newest message delivered to the subscription callback.
+    last_seq: Option<u64>,
+    /// Origin stamp of the newest message delivered.
+    origin: Option<Nanos>,
+}
+
+/// Why a tick of a Python node failed: the one-line description the node fails with.
+#[derive(Debug)]
+pub struct TickError(pub String);
+
+impl PythonNode {
+    /// Load the node `cx` makes (its name, period, seed, parameters, topics in the graph
+    /// file's order, outbox) from `code`.
+    ///
+    /// # Errors
+    /// [`PythonError`]: see the module docs.
+    pub fn load(cx: &BuildContext<'_>, code: &PythonCode) -> Result<PythonNode, PythonError> {
+        let (name, params, period, seed) = (cx.name, cx.params, cx.period(), cx.seed);
+        let (inputs, outputs, outbox) =
+            (cx.inputs.to_vec(), cx.outputs.to_vec(), cx.outbox.clone());
+        let script = code.script.as_str();
+        let source = super::brain::read_script(script)?;
+        start()?;
+        let module_name = format!("ratelab_node_{name}");
+        let declared = |ts: &[AnyTopic]| -> Vec<(String, &'static str)> {
+            ts.iter()
+                .map(|t| (t.name().to_string(), t.msg_type().as_str()))
+                .collect()
+        };
+        Python::attach(|py| {
+            let support = support(py)?;
+            let fail = |e: PyErr| PythonError::Script(describe(py, &e, script));
+            let _running = CallbackGuard::enter(&format!("node '{name}' ({script}) loading"));
+            super::install_messages(py).map_err(fail)?;
+            let module = support
+                .call_method1("load_module", (script, source, module_name))
+                .map_err(fail)?;
+            let py_params = PyDict::new(py);
+            for (k, v) in params {
+                py_params.set_item(k, to_python(py, v)).map_err(fail)?;
+            }
+            let runtime = support
+                .call_method1(
+                    "node_runtime",
+                    (
+                        module,
+                        script,
+                        code.class.as_deref(),
+                        name,
+                        period.0,
+                        declared(&inputs),
+                        declared(&outputs),
+                        py_params,
+                        seed,
+                    ),
+                )
+                .map_err(fail)?;
+            Ok(PythonNode {
+                runtime: runtime.unbind(),
+                script: script.to_string(),
+                name: name.into(),
+                what: format!("node '{name}' ({script})"),
+                inputs: inputs
+                    .into_iter()
+                    .map(|topic| Input {
+                        topic,
+                        last_seq: None,
+                        origin: None,
+                    })
+                    .collect(),
+                outputs,
+                outbox,
+            })
+        })
+    }
+
+    /// One tick at run time `now` of a node whose period is now `period` (see the module
+    /// docs for the order of callbacks; a tick running [`super::OVERRUN_PERIODS`] periods
+    /// is reported).
+    ///
+    /// # Errors
+    /// [`TickError`] with the one-line description when a callback raised or published
+    /// something that is not a message of its topic's type.
+    pub fn tick(&mut self, now: Nanos, period: Nanos) -> Result<(), TickError> {
+        // What the node's code writes meanwhile is stamped with this tick.
+        let _stamp = crate::textlog::enter(&self.name, now);
+        // What each input delivers now (by its QoS), if new: (input index, fields).
+        let delivered: Vec<(usize, Fields)> = self
+            .inputs
+            .iter_mut()
+            .enumerate()
+            .filter_map(|(i, input)| {
+                let (seq, origin, fields) = read(&input.topic, now)?;
+                (input.last_seq != Some(seq)).then(|| {
+                    input.last_seq = Some(seq);
+                    input.origin = Some(origin);
+                    (i, fields)
+                })
+            })
+            .collect();
+        let published: Vec<(usize, Fields)> = Python::attach(|py| {
+            let _running = CallbackGuard::enter_tick(&self.what, &self.name, period);
+            self.runtime
+                .call_method1(py, "tick", (now.0, delivered))
+                .and_then(|out| {
+                    let out = out.bind(py).cast::<PyList>().map_err(PyErr::from)?;
+                    out.iter().map(|m| m.extract::<(usize, Fields)>()).collect()
+                })
+                .map_err(|e| TickError(describe(py, &e, &self.script)))
+        })?;
+        let origin = self.origin(now);
+        for (output, fields) in published {
+            // The Python side checked the index against the graph file's outputs.
+            if let Some(out) = self.outputs.get(output) {
+                publish(&self.outbox, out, &fields, now, origin);
+            }
+        }
+        Ok(())
+    }
+
+    /// The origin stamp what it publishes at `now` carries: the oldest origin among the
+    /// newest messages its subscriptions delivered (its inputs' last values, which its
+    /// callbacks used), or `now` when it subscribes to nothing (it is a source). `None`
+    /// before any subscription delivered.
+    fn origin(&self, now: Nanos) -> Option<Nanos> {
+        if self.inputs.is_empty() {
+            return Some(now);
+        }
+        self.inputs.iter().filter_map(|i| i.origin).min()
+    }
+}
+
+/// Read `t` at `now` by its QoS: the message's seq, origin (its own stamp when it has
+/// none) and fields.
+fn read(t: &AnyTopic, now: Nanos) -> Option<(u64, Nanos, Fields)> {
+    let m = t.read(now)?;
+    Some((m.seq, m.origin, m.data.fields()))
+}
+
+/// Publish a fields tuple (checked against the type by the Python side) on `t`.
+fn publish(outbox: &Outbox, t: &AnyTopic, f: &[f64], now: Nanos, origin: Option<Nanos>) {
+    // Of the topic's own type: it cannot be refused.
+    let _ = t.publish(Some(outbox), &t.msg_type().from_fields(f), now, origin);
+}
+
+/// A graph file's parameter as a Python value.
+fn to_python<'py>(py: Python<'py>, v: &toml::Value) -> Bound<'py, PyAny> {
+    use pyo3::IntoPyObjectExt;
+    let any = match v {
+        toml::Value::Integer(i) => i.into_bound_py_any(py),
+        toml::Value::Float(f) => f.into_bound_py_any(py),
+        toml::Value::Boolean(b) => b.into_bound_py_any(py),
+        toml::Value::String(s) => s.into_bound_py_any(py),
+        toml::Value::Array(a) => a
+            .iter()
+            .map(|x| to_python(py, x))
+            .collect::<Vec<_>>()
+            .into_bound_py_any(py),
+        // Refused by the graph file's rules (src/runtime/graph/spec.rs).
+        other => other.to_string().into_bound_py_any(py),
+    };
+    any.unwrap_or_else(|_| py.None().into_bound(py))
+}

@@ -1,0 +1,573 @@
+"""ratelab's side of the embedded interpreter (src/runtime/python): loads a learner's script, calls
+its brain, and says in one line what went wrong. Internal to ratelab, not an API: learners
+write plain functions and classes and never import this module.
+
+Every error a learner can cause is reported as `FILE:LINE: ExceptionType: message`, the
+line being the innermost frame in the learner's own files (the folder of the script), so a
+NumPy internal never hides where the learner's code went wrong.
+"""
+
+import math
+import os
+import sys
+import threading
+import time
+import traceback
+import types
+import unicodedata
+
+
+# ---- blocking calls a stop can interrupt ------------------------------------------------
+# A stop (Ctrl-C, SIGTERM, quitting the lab) raises KeyboardInterrupt inside a learner's
+# callback that is still running (PyThreadState_SetAsyncExc, src/runtime/python/mod.rs), but Python
+# delivers it only between bytecodes: a callback blocked in one long C call (`time.sleep(60)`,
+# `threading.Event().wait()`) would not see it until the call returned. These two, the usual
+# ways a learner waits, are made of slices of at most _SLICE_S seconds, so the stop lands
+# within a slice; what they do and return is unchanged. Other blocking C calls (a socket,
+# a lock's acquire) still block until they return.
+_SLICE_S = 0.05
+_real_sleep = time.sleep
+_real_event_wait = threading.Event.wait
+
+
+def _sleep(seconds):
+    if not isinstance(seconds, (int, float)) or not math.isfinite(seconds) or seconds <= 0:
+        return _real_sleep(seconds)  # its own errors (a type, NaN, inf, a negative value), 0
+    end = time.monotonic() + seconds
+    while True:
+        left = end - time.monotonic()
+        if left <= 0:
+            return None
+        _real_sleep(min(left, _SLICE_S))
+
+
+def _event_wait(self, timeout=None):
+    end = None if timeout is None else time.monotonic() + max(0.0, timeout)
+    while True:
+        left = _SLICE_S if end is None else min(_SLICE_S, end - time.monotonic())
+        if left <= 0:
+            return self.is_set()
+        if _real_event_wait(self, left):
+            return True
+
+
+_sleep.__doc__ = _real_sleep.__doc__
+_event_wait.__doc__ = _real_event_wait.__doc__
+time.sleep = _sleep
+threading.Event.wait = _event_wait
+
+
+# ---- what learners' code writes -----------------------------------------------------------
+# `print`, `sys.stderr`, Python's warnings (NumPy's RuntimeWarning): each line goes to the
+# run's text log (`_log`, src/core/textlog.rs), stamped with the tick it was written in, never
+# straight onto a terminal where the lab draws.
+
+
+class _Lines:
+    """A text stream whose lines go to the run's text log at one level."""
+
+    encoding = "utf-8"
+    errors = "replace"
+    _MAX = 4096  # a line longer than this is cut into pieces of this size
+
+    def __init__(self, level):
+        self._level = level
+        self._buf = ""
+
+    def write(self, s):
+        s = str(s)
+        self._buf += s
+        while "\n" in self._buf:
+            line, self._buf = self._buf.split("\n", 1)
+            _log(self._level, line)
+        while len(self._buf) > self._MAX:
+            _log(self._level, self._buf[: self._MAX])
+            self._buf = self._buf[self._MAX :]
+        return len(s)
+
+    def flush(self):
+        if self._buf:
+            _log(self._level, self._buf)
+            self._buf = ""
+
+    def writable(self):
+        return True
+
+    def isatty(self):
+        return False
+
+
+def _capture_output():
+    sys.stdout = _Lines("info")
+    sys.stderr = _Lines("warn")
+
+
+class ContractError(Exception):
+    """A script broke ratelab's contract (a missing function, a wrong return value)."""
+
+    def __init__(self, where, message):
+        super().__init__(message)
+        self.where = where
+
+
+def _one_line(text):
+    """`text` as one line a terminal shows as it is: whitespace runs (newlines too) become
+    one space, and any other control character (ESC, DEL, C1) is written out as Rust's
+    `char::escape_default` writes it (`\\u{1b}`), as ratelab's `text::printable` does."""
+    folded = " ".join(str(text).split())
+    return "".join(
+        f"\\u{{{ord(c):x}}}" if unicodedata.category(c) == "Cc" else c for c in folded
+    )
+
+
+def describe(exc, script, tb=None):
+    """One line for `exc` raised by code of `script` (its path as the user gave it), `tb`
+    its traceback (default: `exc.__traceback__`)."""
+    if isinstance(exc, ContractError):
+        return f"{exc.where}: {_one_line(exc)}"
+    name = type(exc).__name__
+    if isinstance(exc, SyntaxError) and exc.filename == script:
+        return f"{script}:{exc.lineno}: {name}: {_one_line(exc.msg)}"
+    frames = traceback.extract_tb(tb if tb is not None else exc.__traceback__)
+    folder = os.path.dirname(os.path.abspath(script))
+    mine = [
+        f
+        for f in frames
+        if not f.filename.startswith("<")  # ratelab's own frames (this module)
+        and os.path.dirname(os.path.abspath(f.filename)) == folder
+    ]
+    frame = (mine or frames or [None])[-1]
+    where = f"{frame.filename}:{frame.lineno}" if frame is not None else script
+    message = _one_line(exc)
+    return f"{where}: {name}: {message}" if message else f"{where}: {name}"
+
+
+def load_module(script, source, module_name):
+    """Run `source` (the text of `script`) as a fresh module and return it. The script's
+    folder goes first on sys.path, as `python script.py` does, so it can import its
+    neighbours."""
+    code = compile(source, script, "exec", dont_inherit=True)
+    module = types.ModuleType(module_name)
+    module.__file__ = script
+    folder = os.path.dirname(os.path.abspath(script))
+    if folder not in sys.path:
+        sys.path.insert(0, folder)
+    sys.modules[module_name] = module
+    exec(code, module.__dict__)
+    return module
+
+
+def brain_caller(module, function, script):
+    """The chapter's `load_policy` contract for `FILE.py:FUNCTION`: `FUNCTION(obs)` with the
+    observation as a NumPy float32[5] array, returning a float or a one-element array-like,
+    converted to float32. Returns a callable from a 5-tuple of floats to a Python float
+    (ratelab clips it to [-1, 1])."""
+    fn = getattr(module, function, None)
+    if fn is None:
+        defined = sorted(
+            k for k, v in vars(module).items() if callable(v) and not k.startswith("_")
+        )
+        hint = f" (it defines {', '.join(defined)})" if defined else ""
+        raise ContractError(script, f"no function '{function}'{hint}; a brain is "
+                            f"`def {function}(obs): return action`")
+    if not callable(fn):
+        raise ContractError(script, f"'{function}' is a {type(fn).__name__}, not a function")
+    import numpy as np
+
+    array, asarray, f32 = np.array, np.asarray, np.float32
+    code = getattr(fn, "__code__", None)
+    where = f"{code.co_filename}:{code.co_firstlineno}" if code else script
+
+    def call(obs):
+        result = fn(array(obs, dtype=f32))
+        a = None
+        if result is not None:  # NumPy would take None for NaN: a brain that forgot to return
+            try:
+                a = asarray(result, dtype=f32)
+            except (TypeError, ValueError):
+                pass
+        if a is None or a.size != 1:
+            shown = repr(result)
+            shown = shown if len(shown) <= 60 else shown[:57] + "..."
+            raise ContractError(where, f"{function}() returned {shown}; expected a float "
+                                "or a one-element array (the force command in [-1, 1])")
+        return float(a.reshape(-1)[0])
+
+    return call
+
+
+# ---- Python nodes (src/runtime/python/node.rs): an rclpy-shaped handle over one ratelab node -----
+
+class _Msg:
+    """A message with named fields in SI units; positional or keyword construction."""
+
+    __slots__ = ()
+    FIELDS = ()
+
+    def __init__(self, *args, **kwargs):
+        if len(args) > len(self.FIELDS):
+            raise TypeError(f"{type(self).__name__} has {len(self.FIELDS)} fields: "
+                            f"{', '.join(self.FIELDS)}")
+        values = dict(zip(self.FIELDS, args))
+        for k, v in kwargs.items():
+            if k not in self.FIELDS:
+                raise TypeError(f"{type(self).__name__} has no field '{k}' "
+                                f"(fields: {', '.join(self.FIELDS)})")
+            values[k] = v
+        for k in self.FIELDS:
+            object.__setattr__(self, k, float(values.get(k, 0.0)))
+
+    def __repr__(self):
+        inner = ", ".join(f"{k}={getattr(self, k)!r}" for k in self.FIELDS)
+        return f"{type(self).__name__}({inner})"
+
+    def _fields(self):
+        return tuple(float(getattr(self, k)) for k in self.FIELDS)
+
+
+# The ROS 2 types each class is offered as (`--ros2`, src/core/ros_types.rs; docs/ros2.md):
+# `to_ros()` gives the ROS 2 message's fields as a dict (`JointState(**s.to_ros())` in
+# rclpy; the header is left to the publisher), `from_ros(msg)` reads a ROS 2 message (an
+# rclpy or rosbags object, or a dict) with the same conversion ratelab's bridge uses.
+JOINT_NAMES = ("slider", "hinge")
+
+
+def _ros_field(msg, name):
+    return msg[name] if isinstance(msg, dict) else getattr(msg, name)
+
+
+def _joints(msg, velocities):
+    names = list(_ros_field(msg, "name"))
+    if names and tuple(names) != JOINT_NAMES:
+        raise ValueError(f"JointState names {names}, not {list(JOINT_NAMES)}")
+    pos = [float(v) for v in _ros_field(msg, "position")]
+    vel = [float(v) for v in _ros_field(msg, "velocity")] if velocities else [0.0, 0.0]
+    if len(pos) != 2 or len(vel) != 2:
+        raise ValueError("a JointState needs both joints' positions"
+                         + (" and velocities" if velocities else ""))
+    if not all(math.isfinite(v) for v in pos + vel):
+        raise ValueError("a JointState with a non-finite position or velocity")
+    return pos, vel
+
+
+class State(_Msg):
+    """The full state, the chapter's observation (float32 on the wire): cart position m,
+    cart velocity m/s, cos θ, sin θ, pole angular velocity rad/s. ROS 2:
+    `sensor_msgs/msg/JointState` (joints slider, hinge; the pole's position is
+    atan2(sin θ, cos θ))."""
+
+    __slots__ = ("cart_pos_m", "cart_vel_m_s", "cos_theta", "sin_theta", "pole_angvel_rad_s")
+    FIELDS = __slots__
+    ROS_TYPE = "sensor_msgs/msg/JointState"
+
+    def to_ros(self):
+        theta = math.atan2(self.sin_theta, self.cos_theta)
+        return {"name": list(JOINT_NAMES), "position": [self.cart_pos_m, theta],
+                "velocity": [self.cart_vel_m_s, self.pole_angvel_rad_s], "effort": []}
+
+    @classmethod
+    def from_ros(cls, msg):
+        (x, theta), (x_dot, theta_dot) = _joints(msg, True)
+        return cls(x, x_dot, math.cos(theta), math.sin(theta), theta_dot)
+
+
+class Position(_Msg):
+    """A position measurement: cart position m, pole angle from upright rad. ROS 2:
+    `sensor_msgs/msg/JointState` without velocities."""
+
+    __slots__ = ("cart_pos_m", "pole_angle_rad")
+    FIELDS = __slots__
+    ROS_TYPE = "sensor_msgs/msg/JointState"
+
+    def to_ros(self):
+        return {"name": list(JOINT_NAMES), "position": [self.cart_pos_m, self.pole_angle_rad],
+                "velocity": [], "effort": []}
+
+    @classmethod
+    def from_ros(cls, msg):
+        (x, theta), _ = _joints(msg, False)
+        return cls(x, theta)
+
+
+class Force(_Msg):
+    """A force on the cart, N (the motor's range is ±10 N; the plant clips beyond it).
+    ROS 2: `std_msgs/msg/Float64`."""
+
+    __slots__ = ("newtons",)
+    FIELDS = __slots__
+    ROS_TYPE = "std_msgs/msg/Float64"
+
+    def to_ros(self):
+        return {"data": self.newtons}
+
+    @classmethod
+    def from_ros(cls, msg):
+        return cls(float(_ros_field(msg, "data")))
+
+
+MESSAGE_TYPES = {"state": State, "position": Position, "force": Force}
+
+
+class Time:
+    """A run time, as rclpy's `Time`: `.nanoseconds` (int) and `.seconds` (float)."""
+
+    __slots__ = ("nanoseconds",)
+
+    def __init__(self, nanoseconds):
+        self.nanoseconds = nanoseconds
+
+    @property
+    def seconds(self):
+        return self.nanoseconds / 1e9
+
+    def __repr__(self):
+        return f"Time(nanoseconds={self.nanoseconds})"
+
+
+class Clock:
+    """The run's clock (virtual or real): `now()` is the current tick's run time."""
+
+    def __init__(self, runtime):
+        self._runtime = runtime
+
+    def now(self):
+        return Time(self._runtime.now_ns)
+
+
+class Logger:
+    """`info`, `warn`/`warning`, `error`: one line on stderr, naming the node."""
+
+    def __init__(self, name):
+        self._name = name
+
+    def _say(self, level, text):
+        # To the run's text log (src/core/textlog.rs), stamped with this node and the run time.
+        _log("warn" if level == "warning" else level, f"{level}: {_one_line(text)}", self._name)
+
+    def info(self, text):
+        self._say("info", text)
+
+    def warn(self, text):
+        self._say("warning", text)
+
+    warning = warn
+
+    def error(self, text):
+        self._say("error", text)
+
+
+class Parameter:
+    """A parameter from the graph file's `params`, as rclpy's: `.name`, `.value`."""
+
+    __slots__ = ("name", "value")
+
+    def __init__(self, name, value):
+        self.name, self.value = name, value
+
+
+class Publisher:
+    """What `create_publisher` returns: `publish(msg)` sends `msg` on its topic at the end
+    of the tick that published it, stamped with the tick's time."""
+
+    def __init__(self, runtime, msg_type, topic, index):
+        self._runtime, self.msg_type, self.topic_name = runtime, msg_type, topic
+        self._index = index
+
+    def publish(self, msg):
+        if type(msg) is not self.msg_type:
+            raise TypeError(f"publish on '{self.topic_name}' takes a {self.msg_type.__name__}, "
+                            f"got {type(msg).__name__}")
+        self._runtime.outbox.append((self._index, msg._fields()))
+
+
+def _qos_depth(qos):
+    return qos if isinstance(qos, int) else getattr(qos, "depth", qos)
+
+
+class NodeHandle:
+    """The handle a learner's class gets in its constructor, shaped like an rclpy Node:
+    create_subscription, create_publisher, create_timer, get_clock, get_logger,
+    get_parameter, get_name, and `rng` (a NumPy Generator seeded from the run's seed and
+    the node's name). Topics and types must be the ones the graph file gives the node."""
+
+    def __init__(self, runtime):
+        self._rt = runtime
+
+    def get_name(self):
+        return self._rt.name
+
+    def get_period(self):
+        """The node's period, s: 1 / its rate_hz as this run set it (flags, lab keys)."""
+        return self._rt.period_ns / 1e9
+
+    def _check(self, kind, msg_type, topic, declared):
+        """The index of `topic` among the graph file's `kind` topics for this node, after
+        checking that it is one of them and carries `msg_type`."""
+        names = [name for name, _ in declared]
+        if topic not in names:
+            given = (f"{kind} = " + (f"\"{names[0]}\"" if len(names) == 1 else
+                                      "[" + ", ".join(f"\"{n}\"" for n in names) + "]")
+                     if names else f"no `{kind} = ...`")
+            raise ContractError(self._rt.where(), f"node '{self._rt.name}' {kind} '{topic}', but "
+                                f"the graph file gives it {given}")
+        index = names.index(topic)
+        type_name = declared[index][1]
+        want = MESSAGE_TYPES[type_name]
+        if msg_type is not want:
+            got = getattr(msg_type, "__name__", repr(msg_type))
+            raise ContractError(self._rt.where(), f"'{topic}' carries {want.__name__} "
+                                f"(type = \"{type_name}\"), not {got}")
+        return index
+
+    def create_subscription(self, msg_type, topic, callback, qos_profile=1, **_kw):
+        index = self._check("subscribes", msg_type, topic, self._rt.inputs)
+        if any(i == index for i, _, _ in self._rt.subscriptions):
+            raise ContractError(self._rt.where(), f"a second subscription to '{topic}' (one "
+                                "per topic)")
+        if not callable(callback):
+            raise ContractError(self._rt.where(), "create_subscription's callback is not callable")
+        self._rt.subscriptions.append((index, msg_type, callback))
+        self._rt.qos_depths.append(_qos_depth(qos_profile))
+        return topic
+
+    def create_publisher(self, msg_type, topic, qos_profile=1, **_kw):
+        index = self._check("publishes", msg_type, topic, self._rt.outputs)
+        self._rt.declared_outputs.add(index)
+        self._rt.qos_depths.append(_qos_depth(qos_profile))
+        return Publisher(self._rt, msg_type, topic, index)
+
+    def create_timer(self, timer_period_sec, callback, **_kw):
+        period_ns = self._rt.period_ns
+        ticks = float(timer_period_sec) * 1e9 / period_ns
+        every = round(ticks)
+        if every < 1 or abs(ticks - every) > 1e-6 * max(1.0, ticks):
+            raise ContractError(self._rt.where(), f"create_timer({timer_period_sec}): node "
+                                f"'{self._rt.name}' ticks every {period_ns / 1e6:g} ms (its "
+                                "rate_hz); a timer's period must be a whole number of ticks")
+        if not callable(callback):
+            raise ContractError(self._rt.where(), "create_timer's callback is not callable")
+        self._rt.timers.append((every, callback))
+
+    def get_clock(self):
+        return self._rt.clock
+
+    def get_logger(self):
+        return self._rt.logger
+
+    def get_parameter(self, name):
+        if name not in self._rt.params:
+            known = ", ".join(sorted(self._rt.params)) or "none"
+            raise ContractError(self._rt.where(), f"node '{self._rt.name}' has no parameter "
+                                f"'{name}' (the graph file's params: {known})")
+        return Parameter(name, self._rt.params[name])
+
+    @property
+    def rng(self):
+        if self._rt.rng is None:
+            import zlib
+
+            import numpy as np
+
+            self._rt.rng = np.random.default_rng([self._rt.seed, zlib.crc32(self._rt.name.encode())])
+        return self._rt.rng
+
+
+class NodeRuntime:
+    """One learner's node as ratelab drives it: `tick(now_ns, delivered)` runs the
+    subscriptions' callbacks, in the order created, for what their inputs delivered
+    (`delivered`: (input index, field tuple) pairs), then the timers due at this tick, and
+    returns what was published: (output index, field tuple) pairs, in order."""
+
+    def __init__(self, module, script, class_name, name, period_ns, inputs, outputs, params,
+                 seed):
+        self.script, self.name, self.period_ns = script, name, period_ns
+        self.inputs, self.outputs, self.params, self.seed = inputs, outputs, dict(params), seed
+        self.now_ns, self.ticks, self.outbox = 0, 0, []
+        self.subscriptions, self.timers, self.qos_depths, self.rng = [], [], [], None
+        self.clock, self.logger = Clock(self), Logger(name)
+        self.declared_outputs = set()
+        cls = self._find_class(module, class_name)
+        self.instance = cls(NodeHandle(self))
+        # A topic the graph file gives the node that its constructor never declared: nothing
+        # will come of it, which is easy to miss (a typo'd method, a forgotten line).
+        for index, (topic, _) in enumerate(self.outputs):
+            if index not in self.declared_outputs:
+                _log("warn", f"[ratelab] warning: node '{name}' declares no publisher for "
+                     f"'{topic}', which its graph file gives it: nothing is published there",
+                     name)
+        subscribed = {i for i, _, _ in self.subscriptions}
+        for index, (topic, _) in enumerate(self.inputs):
+            if index not in subscribed:
+                _log("warn", f"[ratelab] warning: node '{name}' declares no subscription to "
+                     f"'{topic}', which its graph file gives it: what arrives there is unread",
+                     name)
+
+    def where(self):
+        """`script:line` of the innermost frame in the learner's script (the call that
+        broke the contract), else the script."""
+        frame = sys._getframe(1)
+        while frame is not None:
+            if frame.f_code.co_filename == self.script:
+                return f"{self.script}:{frame.f_lineno}"
+            frame = frame.f_back
+        return self.script
+
+    def _find_class(self, module, class_name):
+        if class_name is not None:
+            cls = getattr(module, class_name, None)
+            if not isinstance(cls, type):
+                raise ContractError(self.script, f"no class '{class_name}'")
+            return cls
+        mine = [v for v in vars(module).values()
+                if isinstance(v, type) and v.__module__ == module.__name__]
+        if len(mine) != 1:
+            names = ", ".join(c.__name__ for c in mine) or "none"
+            raise ContractError(self.script, f"name the node's class with `class = \"...\"` "
+                                f"(the script defines {len(mine)} classes: {names})")
+        return mine[0]
+
+    def tick(self, now_ns, delivered):
+        self.now_ns, self.outbox = now_ns, []
+        if delivered:
+            fields = dict(delivered)
+            for index, msg_type, callback in self.subscriptions:
+                if index in fields:
+                    callback(msg_type(*fields[index]))
+        for every, callback in self.timers:
+            if self.ticks % every == 0:
+                callback()
+        self.ticks += 1
+        return self.outbox
+
+
+def node_runtime(module, script, class_name, name, period_ns, inputs, outputs, params, seed):
+    return NodeRuntime(module, script, class_name, name, period_ns, inputs, outputs, params,
+                       seed)
+
+
+def install_message_module(registry):
+    """`import ratelab` in a learner's script gives the message classes and Time.
+
+    `registry` is ratelab's message registry (src/core/msg/mod.rs), the one definition of every
+    message type: [(name, class, doc, [(field, unit, doc), ...], ros_type or None), ...].
+    The built-in types' classes are written above (with their ROS 2 conversions) and must
+    match it; a type a Rust program registered gets a class made from its fields."""
+    for name, class_name, doc, fields, ros_type in registry:
+        names = tuple(f for f, _, _ in fields)
+        cls = MESSAGE_TYPES.get(name)
+        if cls is None:
+            described = "; ".join(f"{f} ({u}): {d}" for f, u, d in fields)
+            cls = type(class_name, (_Msg,), {
+                "__slots__": names, "FIELDS": names, "ROS_TYPE": ros_type,
+                "__doc__": f"{doc} Fields: {described}.", "__module__": "ratelab"})
+            MESSAGE_TYPES[name] = cls
+        elif (cls.__name__, cls.FIELDS, cls.ROS_TYPE) != (class_name, names, ros_type):
+            raise RuntimeError(f"ratelab's Python class {cls.__name__} does not match message "
+                               f"type '{name}' as Rust defines it ({class_name}: "
+                               f"{', '.join(names)}; ROS 2 {ros_type})")
+    mod = types.ModuleType("ratelab")
+    mod.__doc__ = ("ratelab's message types for Python nodes ("
+                   + ", ".join(c.__name__ for c in MESSAGE_TYPES.values()) + ") and Time.")
+    for cls in list(MESSAGE_TYPES.values()) + [Time]:
+        setattr(mod, cls.__name__, cls)
+    sys.modules["ratelab"] = mod

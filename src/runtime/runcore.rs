@@ -1,0 +1,736 @@
+//! The run core: one graph in this process under the virtual clock — its nodes, topics,
+//! executors, scheduler and plant — advanced instant by instant, changed by commands, and
+//! **captured** and **restored** whole, so that restoring what was captured at t and running
+//! on gives, byte for byte, the run's own continuation.
+//!
+//! Its drivers: [`crate::run::run`] under the virtual clock (and so the headless run,
+//! `sweep`, `cliff`, the exercises, `bench` and `replay`) and the lab's engine under the
+//! virtual clock (`ratelab::session`), which paces it against the wall clock. Still outside
+//! it: the real clock's threads ([`crate::scheduler::run_real`]), and the graph across
+//! processes (the launcher's lockstep and each process's stepper, `ratelab::distributed`),
+//! which step their graphs with the scheduler's events directly.
+//!
+//! # What an instant is
+//! [`RunCore::step`] runs the next instant of the scheduler ([`VirtualScheduler::run_instant`]:
+//! the executors' rules, the chapter's tie-break order), after applying the commands
+//! scheduled at or before it ([`TimedCommand`]: a command takes effect just before the first
+//! instant at or after its time, as `replay` of a session log applies it) and the executor
+//! plan a command asked for. A run ends when the next instant is past its duration (at the
+//! duration), a node stops the graph (the pole fell), or a node fails.
+//!
+//! # Capture and restore
+//! [`RunCore::capture`] takes the run's complete state between two instants:
+//! - the plant's (MuJoCo's integration state, `mj_getState`, and its step count);
+//! - every node's ([`Node::save`]: held forces, filters, noise and compute-time generators,
+//!   publishes held by a tick still computing);
+//! - every topic's, each subscription's queue (messages buffered and on the link, depth,
+//!   QoS, the link's generator, counters, deadline timers);
+//! - each node's rate and liveliness, the brain in the slot ([`Policy::duplicate`]), the
+//!   executors asked for, the scheduler (timers, running ticks, counters, its plan);
+//! - the run log (step count, exact latency samples, the trace when kept, fall, watchdog),
+//!   the commands applied and those still to come.
+//!
+//! When some part cannot be captured — a Python node's or brain's objects, a ROS 2 node's
+//! proxy, a program's own kind that does not implement [`crate::graph::kind::Work::save`] —
+//! the capture is a *replay*: the commands applied up to then. Restoring it builds the graph
+//! again from its settings (with the brain [`CoreOptions::remake_brain`] makes) and runs it
+//! from 0 to the captured instant under the virtual clock, which is deterministic: the same
+//! state, reached the long way. Such a restore gives a new graph: its step observers are made
+//! again ([`CoreOptions::remake_observers`]); what else was attached to the old one (topic
+//! taps, a ROS 2 offer) is not carried over.
+//!
+//! A restore's cost: copies of the parts above (the trace and the latency samples grow with
+//! the run; BENCHMARKS.md gives the chapter's graph's figures), or, for a replay, the run up
+//! to the instant.
+
+use crate::command::{Command, TimedCommand};
+use crate::config::RunConfig;
+use crate::executor::{ExecutionPlan, ExecutorOverride};
+use crate::graph::{lock, Graph, GraphHandles, StepObserver};
+use crate::msg::TopicSnapshot;
+use crate::node::{Node, NodeState};
+use crate::plant::PlantState;
+use crate::plant::{CartPole, PlantError};
+use crate::policy::{BrainSlot, Policy};
+use crate::qos::LivelinessState;
+use crate::runlog::RunLog;
+use crate::scheduler::{EndReason, InstantOutcome, RunEnd, StopFlag, VirtualScheduler};
+use crate::time::Nanos;
+
+/// A run that could not start.
+#[derive(Debug, thiserror::Error)]
+pub enum RunError {
+    /// Bad settings.
+    #[error(transparent)]
+    Config(#[from] crate::config::ConfigError),
+    /// The plant could not be built.
+    #[error(transparent)]
+    Plant(#[from] PlantError),
+    /// The graph could not be built.
+    #[error(transparent)]
+    Graph(#[from] crate::graph::GraphError),
+    /// The graph could not be offered to ROS 2 (`--ros2`).
+    #[error(transparent)]
+    Ros2(#[from] crate::ros2::Ros2Error),
+}
+
+/// Build the plant (reset to `cfg.seed`) and the graph for `cfg`.
+///
+/// # Errors
+/// [`RunError`] for bad settings or a plant that will not load.
+pub fn build_graph(
+    cfg: &RunConfig,
+    brain: BrainSlot,
+    keep_trace: bool,
+    observers: Vec<Box<dyn StepObserver>>,
+) -> Result<Graph, RunError> {
+    cfg.validate()?;
+    let mut plant = CartPole::new()?;
+    plant.reset(cfg.seed);
+    Ok(Graph::build(
+        &cfg.graph,
+        plant,
+        brain,
+        cfg.seed,
+        keep_trace,
+        observers,
+        &cfg.faults,
+    )?)
+}
+
+/// The virtual-clock executor for `cfg`'s graph: its phase offsets and execution plan
+/// (executors, callback groups); response times are measured when the graph has executors
+/// or compute times.
+pub fn virtual_scheduler(
+    cfg: &RunConfig,
+    nodes: &[Box<dyn crate::node::Node>],
+) -> VirtualScheduler {
+    VirtualScheduler::with_plan(
+        nodes,
+        &cfg.phase_offsets,
+        cfg.graph.execution_plan(),
+        cfg.graph.has_executors_or_compute(),
+    )
+}
+
+/// A number for each graph a run core builds in this process.
+fn next_graph_id() -> u64 {
+    static NEXT: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+    NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed)
+}
+
+/// Makes the run's brain afresh, for a restore that replays ([`RunCore::restore`]).
+pub type BrainFactory = Box<dyn Fn() -> Result<Box<dyn Policy>, String> + Send>;
+
+/// Makes the step observers afresh for the graph a restore that replays builds.
+pub type ObserverFactory = Box<dyn Fn() -> Vec<Box<dyn StepObserver>> + Send>;
+
+/// How a [`RunCore`] is built.
+#[derive(Default)]
+pub struct CoreOptions {
+    /// Keep every step record (`trace.csv`); a capture then copies the trace.
+    pub keep_trace: bool,
+    /// Told about every actuator tick.
+    pub observers: Vec<Box<dyn StepObserver>>,
+    /// Commands to apply at run times (any order: they are sorted by `at_ns`, stably).
+    pub commands: Vec<TimedCommand>,
+    /// Told about every tick as its executor ran it, when executors or compute times apply.
+    pub on_span: Option<crate::executor::SpanHook>,
+    /// Makes the brain again for a restore that replays; without it such a restore fails
+    /// with [`RestoreError::CannotReplay`].
+    pub remake_brain: Option<BrainFactory>,
+    /// Makes the step observers again for the graph a restore that replays builds (without
+    /// it that graph has none).
+    pub remake_observers: Option<ObserverFactory>,
+    /// Keep a capture this often (run time) for [`RunCore::seek`] (the lab's time travel;
+    /// [`HISTORY_EVERY`]); `None`: keep none, and seeking back fails.
+    pub history_every: Option<Nanos>,
+}
+
+/// How often (run time) the lab keeps a capture to seek back to.
+pub const HISTORY_EVERY: Nanos = Nanos(Nanos::SECOND.0);
+
+/// The most captures a run core keeps for seeking. Past it every other one goes and the
+/// spacing doubles, so a long run's history costs bounded memory, and reaching any instant
+/// costs at most one spacing of run time after the restore.
+pub const MAX_HISTORY: usize = 128;
+
+/// What [`RunCore::step`] did.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Step {
+    /// An instant ran at `at`; `ticked` has bit `i % 64` set for each node `i` that ticked.
+    Ran {
+        /// The instant's run time.
+        at: Nanos,
+        /// The nodes that ticked, as bits.
+        ticked: u64,
+    },
+    /// The run has ended (now or earlier), as given.
+    Ended(RunEnd),
+}
+
+/// Why [`RunCore::restore`] could not restore a capture. The run is unchanged.
+#[derive(Debug, thiserror::Error)]
+pub enum RestoreError {
+    /// The capture was taken of another graph: another run core's, or this one's before a
+    /// restore that replayed (a capture restores into the graph it was taken of, whose
+    /// topics a held publish refers to).
+    #[error("this capture is of another graph")]
+    OtherGraph,
+    /// The capture is a replay and no brain factory was given.
+    #[error(
+        "this capture must be replayed from t = 0, and the run core cannot make its brain again"
+    )]
+    CannotReplay,
+    /// Seeking back with no capture kept at or before the instant
+    /// ([`CoreOptions::history_every`]).
+    #[error("no capture kept to seek back to {0}")]
+    NoHistory(Nanos),
+    /// Replaying the run to the captured instant failed.
+    #[error("replaying the run to {at}: {reason}")]
+    Replay {
+        /// The captured instant.
+        at: Nanos,
+        /// Why.
+        reason: String,
+    },
+}
+
+/// A run's state at an instant ([`RunCore::capture`]).
+pub struct Capture {
+    /// The graph it was taken of ([`RunCore::graph_id`]).
+    graph_id: u64,
+    at: Nanos,
+    /// The commands applied up to the capture, each at the instant before which it took
+    /// effect.
+    applied: Vec<TimedCommand>,
+    /// Those of them applied by hand ([`RunCore::apply`]).
+    by_hand: Vec<TimedCommand>,
+    next_scheduled: usize,
+    end: Option<RunEnd>,
+    state: Option<Box<Saved>>,
+}
+
+impl Capture {
+    /// The run time captured: the newest instant that had run (0 before any).
+    pub fn at(&self) -> Nanos {
+        self.at
+    }
+
+    /// True when restoring this capture replays the run from t = 0 (some part of the graph
+    /// could not be captured; module docs).
+    pub fn is_replay(&self) -> bool {
+        self.state.is_none()
+    }
+}
+
+/// The parts of a captured state (module docs).
+struct Saved {
+    plant: PlantState,
+    nodes: Vec<NodeState>,
+    topics: Vec<TopicSnapshot>,
+    liveliness: Vec<LivelinessState>,
+    rates_hz: Vec<f64>,
+    brain: Box<dyn Policy>,
+    log: RunLog,
+    executor: Option<ExecutorOverride>,
+    plan_request: Option<ExecutionPlan>,
+    sched: VirtualScheduler,
+}
+
+/// One graph under the virtual clock (module docs).
+pub struct RunCore {
+    /// This graph's number in the process (a new one for each graph built).
+    graph_id: u64,
+    cfg: RunConfig,
+    nodes: Vec<Box<dyn Node>>,
+    handles: GraphHandles,
+    sched: VirtualScheduler,
+    /// Commands given in advance, sorted by `at_ns`.
+    scheduled: Vec<TimedCommand>,
+    next_scheduled: usize,
+    /// Every command applied, scheduled or not, at the instant before which it took effect.
+    applied: Vec<TimedCommand>,
+    /// The commands applied by hand ([`RunCore::apply`]), which a seek back applies again.
+    by_hand: Vec<TimedCommand>,
+    /// Captures kept to seek back to, oldest first ([`RunCore::seek`]).
+    history: Vec<Capture>,
+    /// Their spacing (`None`: none kept), and when the next is due.
+    history_every: Option<Nanos>,
+    next_history: Nanos,
+    end: Option<RunEnd>,
+    keep_trace: bool,
+    on_span: Option<crate::executor::SpanHook>,
+    remake_brain: Option<BrainFactory>,
+    remake_observers: Option<ObserverFactory>,
+}
+
+impl RunCore {
+    /// Build `cfg`'s graph (the plant reset to `cfg.seed`) with `brain` in its slot, at
+    /// t = 0 with nothing run. `cfg.clock` is not read: the run core is the virtual clock.
+    ///
+    /// # Errors
+    /// [`RunError`] for bad settings, a plant that will not load or a graph that cannot be
+    /// built.
+    pub fn new(
+        cfg: &RunConfig,
+        brain: Box<dyn Policy>,
+        opts: CoreOptions,
+    ) -> Result<Self, RunError> {
+        let mut opts = opts;
+        let observers = std::mem::take(&mut opts.observers);
+        let graph = build_graph(cfg, BrainSlot::new(brain), opts.keep_trace, observers)?;
+        Ok(Self::with_graph(cfg, graph, opts))
+    }
+
+    /// A run core for `graph`, built for `cfg` by [`build_graph`] (with its observers, and
+    /// keeping the trace or not as it was built: `opts.observers` and `opts.keep_trace` are
+    /// not read), at t = 0 with nothing run.
+    pub fn with_graph(cfg: &RunConfig, graph: Graph, opts: CoreOptions) -> Self {
+        let Graph { nodes, handles } = graph;
+        let keep_trace = lock(&handles.log).keep_trace;
+        let mut sched = virtual_scheduler(cfg, &nodes);
+        if let Some(h) = &opts.on_span {
+            sched.set_span_hook(h.clone());
+        }
+        sched.take_plans_from(handles.plan_request.clone());
+        let mut scheduled = opts.commands;
+        scheduled.sort_by_key(|c| c.at_ns);
+        let mut core = RunCore {
+            graph_id: next_graph_id(),
+            cfg: cfg.clone(),
+            nodes,
+            handles,
+            sched,
+            scheduled,
+            next_scheduled: 0,
+            applied: Vec::new(),
+            by_hand: Vec::new(),
+            history: Vec::new(),
+            history_every: opts.history_every.filter(|e| e.0 > 0),
+            next_history: Nanos::ZERO,
+            end: None,
+            keep_trace,
+            on_span: opts.on_span,
+            remake_brain: opts.remake_brain,
+            remake_observers: opts.remake_observers,
+        };
+        core.keep_history();
+        core
+    }
+
+    /// The run's settings.
+    pub fn config(&self) -> &RunConfig {
+        &self.cfg
+    }
+
+    /// The graph's handles (topics, rates, plant, log, brain). Do not keep clones across a
+    /// [`RunCore::restore`] that replays: it builds a new graph.
+    pub fn handles(&self) -> &GraphHandles {
+        &self.handles
+    }
+
+    /// The scheduler (tick counts, the executors' figures, the next due times).
+    pub fn scheduler(&self) -> &VirtualScheduler {
+        &self.sched
+    }
+
+    /// The scheduler, to take its callback spans.
+    pub fn scheduler_mut(&mut self) -> &mut VirtualScheduler {
+        &mut self.sched
+    }
+
+    /// The newest instant that ran (0 before any).
+    pub fn now(&self) -> Nanos {
+        self.sched.now()
+    }
+
+    /// The next instant [`RunCore::step`] would run; `None` once the run has ended or its
+    /// next instant is past its duration.
+    pub fn next_instant(&self) -> Option<Nanos> {
+        if self.end.is_some() {
+            return None;
+        }
+        self.sched.next_due().filter(|&t| t <= self.cfg.duration)
+    }
+
+    /// How the run ended, once it has.
+    pub fn end(&self) -> Option<&RunEnd> {
+        self.end.as_ref()
+    }
+
+    /// The commands applied so far, each at the instant before which it took effect: what
+    /// `replay` applies to give this run again.
+    pub fn applied(&self) -> &[TimedCommand] {
+        &self.applied
+    }
+
+    /// Run the next instant (module docs), or say how the run ended.
+    pub fn step(&mut self) -> Step {
+        if let Some(end) = &self.end {
+            return Step::Ended(end.clone());
+        }
+        let Some(due) = self.next_instant() else {
+            return Step::Ended(self.finish_at_duration());
+        };
+        while let Some(c) = self.scheduled.get(self.next_scheduled) {
+            if c.at_ns > due.0 {
+                break;
+            }
+            // Commands were validated when logged; a failure here changes nothing.
+            let _ = c.command.apply(&self.handles);
+            self.applied.push(c.clone());
+            self.next_scheduled += 1;
+        }
+        self.take_plan();
+        let ended = match self.sched.run_instant(&mut self.nodes) {
+            InstantOutcome::Ran { ticked } => {
+                self.keep_history();
+                return Step::Ran { at: due, ticked };
+            }
+            InstantOutcome::Stopped => RunEnd {
+                at: self.sched.now(),
+                reason: EndReason::NodeStopped,
+            },
+            InstantOutcome::Failed(reason) => RunEnd {
+                at: self.sched.now(),
+                reason,
+            },
+        };
+        self.end = Some(ended.clone());
+        Step::Ended(ended)
+    }
+
+    /// Run every instant up to and including `t` (or to the run's end).
+    pub fn run_until(&mut self, t: Nanos) {
+        while self.next_instant().is_some_and(|due| due <= t) {
+            self.step();
+        }
+    }
+
+    /// Run to the end, checking `stop` before each instant (a stop ends the run as
+    /// interrupted at the newest instant run).
+    pub fn run_to_end(&mut self, stop: &StopFlag) -> RunEnd {
+        self.run_to_end_with(stop, |_| {})
+    }
+
+    /// [`RunCore::run_to_end`], calling `before_instant(t)` before each instant with its
+    /// run time (the place to keep pace with the wall clock).
+    pub fn run_to_end_with(
+        &mut self,
+        stop: &StopFlag,
+        mut before_instant: impl FnMut(Nanos),
+    ) -> RunEnd {
+        loop {
+            if let Some(end) = &self.end {
+                return end.clone();
+            }
+            if stop.is_stopped() {
+                return self.interrupt();
+            }
+            if let Some(t) = self.next_instant() {
+                before_instant(t);
+            }
+            self.step();
+        }
+    }
+
+    /// End the run now, as interrupted, unless it has ended already; returns how it ended.
+    pub fn interrupt(&mut self) -> RunEnd {
+        self.end
+            .get_or_insert_with(|| RunEnd {
+                at: self.sched.now(),
+                reason: EndReason::Interrupted,
+            })
+            .clone()
+    }
+
+    /// Apply `command` between instants: it takes effect before the next instant, and is
+    /// logged at it ([`RunCore::applied`]); a new executor plan runs from that instant.
+    ///
+    /// # Errors
+    /// A one-line description when the run has ended, or the value breaks the graph's rules
+    /// or a brain cannot be loaded ([`Command::apply`]; the run is unchanged).
+    pub fn apply(&mut self, command: Command) -> Result<(), String> {
+        if self.end.is_some() {
+            return Err("the run has ended".into());
+        }
+        command.apply(&self.handles)?;
+        let at = self.sched.next_due().unwrap_or(self.sched.now());
+        let c = TimedCommand {
+            at_ns: at.0,
+            command,
+        };
+        self.applied.push(c.clone());
+        self.by_hand.push(c);
+        self.take_plan();
+        Ok(())
+    }
+
+    /// Keep a capture for seeking when one is due (module docs: [`CoreOptions::history_every`],
+    /// [`MAX_HISTORY`]).
+    fn keep_history(&mut self) {
+        let Some(every) = self.history_every else {
+            return;
+        };
+        let now = self.sched.now();
+        if now < self.next_history && !self.history.is_empty() {
+            return;
+        }
+        self.history.push(self.capture());
+        if self.history.len() > MAX_HISTORY {
+            // Keep the first (t = 0) and every other one after it.
+            let mut k = 0;
+            self.history.retain(|_| {
+                k += 1;
+                k % 2 == 1
+            });
+            self.history_every = Some(Nanos(every.0.saturating_mul(2)));
+        }
+        let every = self.history_every.unwrap_or(every);
+        self.next_history = now.saturating_add(every);
+    }
+
+    /// The run times of the captures kept for seeking, oldest first.
+    pub fn history(&self) -> impl Iterator<Item = Nanos> + '_ {
+        self.history.iter().map(Capture::at)
+    }
+
+    /// Put the run at run time `t`: as it was right after its last instant at or before
+    /// `t`. Forward it runs on. Back it restores the newest capture kept at or before `t`
+    /// and runs on from there to `t`, applying again, at the instants they took effect, the
+    /// commands applied by hand in between ([`RunCore::apply`]; scheduled ones come again
+    /// from their schedule), and forgets what came after `t`: the run branches there, and
+    /// what is applied next is a new future (what `replay` of [`RunCore::applied`] then
+    /// gives). Step observers see the instants run again.
+    ///
+    /// # Errors
+    /// [`RestoreError::NoHistory`] when no capture is kept at or before `t`, or what the
+    /// restore met; the run is then unchanged.
+    pub fn seek(&mut self, t: Nanos) -> Result<(), RestoreError> {
+        if t >= self.sched.now() {
+            self.run_until(t);
+            return Ok(());
+        }
+        let k = self
+            .history
+            .iter()
+            .rposition(|c| c.at <= t)
+            .ok_or(RestoreError::NoHistory(t))?;
+        let by_hand = self.by_hand.clone();
+        let mut kept = self.history.split_off(k);
+        let from = kept.swap_remove(0);
+        if let Err(e) = self.restore_keeping_history(&from) {
+            self.history.push(from);
+            self.history.append(&mut kept);
+            return Err(e);
+        }
+        let mut again = by_hand
+            .into_iter()
+            .skip(from.by_hand.len())
+            .filter(|c| c.at_ns <= t.0)
+            .peekable();
+        self.next_history = from
+            .at
+            .saturating_add(self.history_every.unwrap_or_default());
+        self.history.push(from);
+        while let Some(due) = self.next_instant().filter(|&due| due <= t) {
+            while let Some(c) = again.next_if(|c| c.at_ns <= due.0) {
+                // It was applied once; the graph is as it was then.
+                let _ = c.command.apply(&self.handles);
+                self.applied.push(c.clone());
+                self.by_hand.push(c);
+            }
+            self.take_plan();
+            self.step();
+        }
+        Ok(())
+    }
+
+    fn take_plan(&mut self) {
+        let asked = lock(&self.handles.plan_request).take();
+        if let Some(plan) = asked {
+            self.sched.set_plan(plan);
+        }
+    }
+
+    fn finish_at_duration(&mut self) -> RunEnd {
+        let end = RunEnd {
+            at: self.cfg.duration,
+            reason: EndReason::Duration,
+        };
+        self.end = Some(end.clone());
+        end
+    }
+
+    /// The run's complete state now, between instants (module docs): restoring it and
+    /// running on gives this run's continuation, byte for byte.
+    pub fn capture(&self) -> Capture {
+        Capture {
+            graph_id: self.graph_id,
+            at: self.sched.now(),
+            applied: self.applied.clone(),
+            by_hand: self.by_hand.clone(),
+            next_scheduled: self.next_scheduled,
+            end: self.end.clone(),
+            state: self.save().map(Box::new),
+        }
+    }
+
+    fn save(&self) -> Option<Saved> {
+        let h = &self.handles;
+        let nodes = self
+            .nodes
+            .iter()
+            .map(|n| n.save())
+            .collect::<Option<Vec<_>>>()?;
+        Some(Saved {
+            brain: h.brain.save()?,
+            plant: lock(&h.plant).save(),
+            nodes,
+            topics: h.topics.iter().map(crate::msg::AnyTopic::save).collect(),
+            liveliness: h.liveliness.iter().map(|l| l.save()).collect(),
+            rates_hz: h.rates.iter().map(crate::rate::Rate::hz).collect(),
+            log: lock(&h.log).clone(),
+            executor: *lock(&h.executor),
+            plan_request: lock(&h.plan_request).clone(),
+            sched: self.sched.clone(),
+        })
+    }
+
+    /// Put the run back as `capture` found it (module docs), whatever ran or was applied
+    /// since: in place, or by replaying the run from t = 0 when the capture is a replay.
+    /// The captures kept for seeking are forgotten (they may be of another branch of the
+    /// run); new ones are kept from here.
+    ///
+    /// # Errors
+    /// [`RestoreError`]; the run is then unchanged.
+    pub fn restore(&mut self, capture: &Capture) -> Result<(), RestoreError> {
+        self.restore_keeping_history(capture)?;
+        self.history.clear();
+        self.next_history = capture.at;
+        self.keep_history();
+        Ok(())
+    }
+
+    fn restore_keeping_history(&mut self, capture: &Capture) -> Result<(), RestoreError> {
+        match &capture.state {
+            Some(_) if capture.graph_id != self.graph_id => return Err(RestoreError::OtherGraph),
+            Some(saved) => self.load(saved)?,
+            None => self.replay(capture)?,
+        }
+        self.applied.clone_from(&capture.applied);
+        self.by_hand.clone_from(&capture.by_hand);
+        self.next_scheduled = capture.next_scheduled;
+        self.end.clone_from(&capture.end);
+        Ok(())
+    }
+
+    fn load(&mut self, s: &Saved) -> Result<(), RestoreError> {
+        let h = &self.handles;
+        if s.nodes.len() != self.nodes.len()
+            || s.topics.len() != h.topics.len()
+            || s.liveliness.len() != h.liveliness.len()
+            || s.rates_hz.len() != h.rates.len()
+        {
+            return Err(RestoreError::OtherGraph);
+        }
+        // The plant first: the one part that can refuse without a change elsewhere.
+        lock(&h.plant)
+            .load(&s.plant)
+            .map_err(|_| RestoreError::OtherGraph)?;
+        for (node, state) in self.nodes.iter_mut().zip(&s.nodes) {
+            if !node.load(state) {
+                return Err(RestoreError::OtherGraph);
+            }
+        }
+        for (topic, state) in h.topics.iter().zip(&s.topics) {
+            if !topic.load(state) {
+                return Err(RestoreError::OtherGraph);
+            }
+        }
+        for (l, state) in h.liveliness.iter().zip(&s.liveliness) {
+            l.load(*state);
+        }
+        for (rate, &hz) in h.rates.iter().zip(&s.rates_hz) {
+            // The rate was valid when captured.
+            let _ = rate.set_hz(hz);
+        }
+        h.brain.load(s.brain.as_ref());
+        lock(&h.log).clone_from(&s.log);
+        *lock(&h.executor) = s.executor;
+        lock(&h.plan_request).clone_from(&s.plan_request);
+        self.sched.load(&s.sched);
+        Ok(())
+    }
+
+    fn replay(&mut self, capture: &Capture) -> Result<(), RestoreError> {
+        let remake = self
+            .remake_brain
+            .as_ref()
+            .ok_or(RestoreError::CannotReplay)?;
+        let failed = |reason: String| RestoreError::Replay {
+            at: capture.at,
+            reason,
+        };
+        let brain = remake().map_err(failed)?;
+        let mut fresh = RunCore::new(
+            &self.cfg,
+            brain,
+            CoreOptions {
+                keep_trace: self.keep_trace,
+                observers: self
+                    .remake_observers
+                    .as_ref()
+                    .map(|f| f())
+                    .unwrap_or_default(),
+                commands: capture.applied.clone(),
+                on_span: self.on_span.clone(),
+                remake_brain: None,
+                remake_observers: None,
+                history_every: None,
+            },
+        )
+        .map_err(|e| failed(e.to_string()))?;
+        fresh.run_until(capture.at);
+        // Commands applied after the captured instant ran (logged at the next one).
+        while let Some(c) = fresh.scheduled.get(fresh.next_scheduled) {
+            c.command
+                .apply(&fresh.handles)
+                .map_err(|e| failed(e.clone()))?;
+            fresh.next_scheduled += 1;
+        }
+        fresh.take_plan();
+        if fresh.sched.now() != capture.at && capture.at != Nanos::ZERO {
+            return Err(failed(format!("the replay reached {}", fresh.sched.now())));
+        }
+        self.graph_id = fresh.graph_id;
+        self.nodes = fresh.nodes;
+        self.handles = fresh.handles;
+        self.sched = fresh.sched;
+        Ok(())
+    }
+
+    /// The run's summary (`metrics.json`) at its end, or now while it runs (as interrupted
+    /// now).
+    pub fn metrics(&self) -> crate::metrics::Metrics {
+        let end = self.end.clone().unwrap_or(RunEnd {
+            at: self.sched.now(),
+            reason: EndReason::Interrupted,
+        });
+        let exec = self.sched.figures(end.at);
+        crate::summary::summarize(
+            &self.cfg,
+            &self.handles,
+            &end,
+            self.sched.ticks(),
+            None,
+            exec,
+        )
+    }
+
+    /// Take the step records kept so far (empty unless [`CoreOptions::keep_trace`]).
+    pub fn take_trace(&mut self) -> Vec<crate::runlog::StepRecord> {
+        std::mem::take(&mut lock(&self.handles.log).trace)
+    }
+}

@@ -1,0 +1,30 @@
+//! Live sessions: the graph driven by commands while it runs, for the lab.
+//!
+//! An engine thread owns the graph and talks to its front end (the terminal lab) over
+//! crossbeam channels: [`Control`] in, [`Telemetry`] out. The engine never waits for the
+//! front end (telemetry goes into an unbounded channel that the front end drains each
+//! frame), and the front end never blocks the graph.
+//!
+//! Under the virtual clock the engine works one *instant* at a time (every tick due at the
+//! same virtual time), paced against the wall clock for display at a chosen speed. Pacing
+//! decides only *when* an instant runs, never its order, so it cannot change a result.
+//! A rate, depth or brain change is applied between instants and logged with the virtual
+//! time of the next instant. The [`SessionLog`] (JSON) therefore replays exactly:
+//! [`replay_run`] re-runs a logged run headless and reproduces its metrics byte for byte.
+//! Under the real clock changes are applied at once (from each node's next tick); such
+//! runs are logged but, being concurrent, cannot be replayed exactly.
+
+// The layers below, under their own names (`crate::graph`, `crate::time`, …).
+use ratelab_core::{executor, input, metrics, output, plant, qos, realtime, runlog, time};
+use ratelab_recording as recording;
+use ratelab_runtime::{checkpoint, config, graph, policy, ros2, run, runcore, scheduler};
+
+mod engine;
+mod log;
+mod protocol;
+mod real_run;
+mod virtual_run;
+
+pub use engine::{Engine, SessionSettings};
+pub use log::{replay_run, LoggedRun, ReplayError, SessionLog};
+pub use protocol::{describe, Control, Speed, Telemetry, SPEEDS, UNBOUNDED};
