@@ -318,7 +318,7 @@ fn launch_watched(
             Some(
                 std::thread::Builder::new()
                     .name("recorder".into())
-                    .spawn(move || ratelab::distributed::monitor::record(&rec, &cfg, &rec_rx))?,
+                    .spawn(move || ratelab::recording::watched::record(&rec, &cfg, &rec_rx))?,
             )
         }
         None => {

@@ -37,9 +37,9 @@
 use ratelab_core::{
     executor, ids, input, metrics, msg, node, output, procs, qos, rate, runlog, text, time, topic,
 };
-use ratelab_recording as recording;
-use ratelab_runtime::{checkpoint, config, graph, policy, ros2, run, scheduler, ClockKind};
-use ratelab_session as session;
+use ratelab_runtime::{
+    checkpoint, config, graph, policy, ros2, run, scheduler, telemetry, ClockKind,
+};
 
 pub mod access;
 pub mod credentials;

@@ -29,17 +29,14 @@ use super::{check_endpoint, open_session, Access, DistError, Keys};
 use crate::config::RunConfig;
 use crate::graph::spec::GraphSpec;
 use crate::graph::{NodeId, TopicId};
-use crate::msg::ForceMsg;
-use crate::recording::{GraphShape, Recording};
 use crate::runlog::StepRecord;
 use crate::scheduler::StopFlag;
-use crate::session::{Speed, Telemetry};
+use crate::telemetry::{Speed, Telemetry};
 use crate::time::Nanos;
-use crate::topic::{Topic, TopicStats};
+use crate::topic::TopicStats;
 use crossbeam_channel::Sender;
 use std::collections::BTreeMap;
 use std::collections::BTreeSet;
-use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 use zenoh::Wait;
 
@@ -860,126 +857,6 @@ impl Pending {
     }
 }
 
-/// The level a launcher's line is recorded at: a warning for what went wrong (a process
-/// gone, failed, silent; a join or a report refused), information for the rest (listening,
-/// ready, rejoined, heard again).
-fn launcher_line_level(line: &str) -> &'static str {
-    const TROUBLE: [&str; 5] = [
-        " is gone",
-        " failed",
-        " is silent",
-        "refused ",
-        "does not apply",
-    ];
-    if TROUBLE.iter().any(|t| line.contains(t)) {
-        "WARN"
-    } else {
-        "INFO"
-    }
-}
-
-/// Record what a watcher sees of a run across processes into `rec`, until `telemetry` is
-/// closed: each merged step (the plant, the latency, every topic's counters as its holder
-/// reported them; the force the policy published, from the step), each node tick's
-/// lateness (real clock), the launcher's lines as events, and each node's liveliness token
-/// going and coming back as events (stamped with the newest run time any process reported,
-/// [`Telemetry::Status`]'s `now`). The caller finishes the recording with the merged
-/// summary ([`Recording::finish`]).
-///
-/// What differs from an in-process recording: a topic held by another process shows its
-/// counters as that process sampled them after its newest tick no later than the step (not
-/// at the step itself); the published force is the newest per actuator step; leases are
-/// not recorded (liveliness is the tokens'). So it is not byte-identical to the in-process recording, even under the
-/// virtual clock (`metrics.json` is).
-///
-/// # Errors
-/// [`DistError::Usage`] when a node's rate in `cfg` is invalid (a validated config has none).
-pub fn record(
-    rec: &Recording,
-    cfg: &RunConfig,
-    telemetry: &crossbeam_channel::Receiver<Telemetry>,
-) -> Result<(), DistError> {
-    let spec = &cfg.graph;
-    let counters: Arc<Mutex<Vec<TopicStats>>> =
-        Arc::new(Mutex::new(vec![TopicStats::default(); spec.topics.len()]));
-    // The policy's published forces, when the graph has the chapter's chain.
-    let commands = spec
-        .chain
-        .map(|c| Topic::new(spec.topic(c.action).name.clone(), 1).map(Arc::new))
-        .transpose()
-        .map_err(|e| DistError::Usage(e.to_string()))?;
-    let shape = GraphShape::from_spec(spec, counters.clone(), commands.clone())
-        .map_err(|e| DistError::Usage(e.to_string()))?;
-    let mut observer = rec.observer_for(shape);
-    let mut alive: Vec<Option<bool>> = vec![None; spec.nodes.len()];
-    // Per node: said not alive, and not yet alive again (a node whose token has not come
-    // yet at the start is not alive to the watcher, but its coming is no return).
-    let mut said_gone = vec![false; spec.nodes.len()];
-    let mut now = Nanos::ZERO;
-    for t in telemetry {
-        match t {
-            Telemetry::Step(s) => {
-                now = now.max(s.t);
-                *crate::graph::lock(&counters) = s.topics.as_slice().to_vec();
-                if let (Some((at, newtons)), Some(c)) = (s.published, &commands) {
-                    c.publish(ForceMsg { newtons }, at, None);
-                }
-                observer.on_step(&s);
-            }
-            Telemetry::NodeTick {
-                node,
-                now: at,
-                lateness,
-                ..
-            } => {
-                if let Some(n) = spec.nodes.get(node) {
-                    rec.node_tick(&n.name, at, lateness);
-                }
-            }
-            Telemetry::Wire(links) => {
-                for (i, p50_us, p99_us) in links {
-                    if let Some(t) = spec.topics.get(i) {
-                        rec.wire(now, &t.name, p50_us, p99_us);
-                    }
-                }
-            }
-            Telemetry::Applied(line) => rec.event(now, &line, launcher_line_level(&line)),
-            Telemetry::Error(line) => rec.event(now, &line, "WARN"),
-            Telemetry::Status {
-                now: seen,
-                alive: next,
-                ..
-            } => {
-                // The newest run time any process reported: events are stamped by it, not
-                // by the newest step shown, which waits for every holder's figures (a
-                // process gone and its rejoin were both stamped at the step before).
-                now = now.max(seen);
-                for (i, (was, is)) in alive.iter_mut().zip(next).enumerate() {
-                    let name = &spec.nodes[i].name;
-                    match (*was, is) {
-                        (Some(true), Some(false)) => {
-                            said_gone[i] = true;
-                            rec.event(
-                                now,
-                                &format!("node {name} not alive (its process's liveliness token was withdrawn, or its process is silent)"),
-                                "WARN",
-                            );
-                        }
-                        (Some(false), Some(true)) if said_gone[i] => {
-                            said_gone[i] = false;
-                            rec.event(now, &format!("node {name} alive again"), "INFO");
-                        }
-                        _ => {}
-                    }
-                    *was = is;
-                }
-            }
-            _ => {}
-        }
-    }
-    Ok(())
-}
-
 /// A process of a running graph, as its launcher placed it.
 #[derive(Clone, Debug, PartialEq)]
 pub struct PlacedProcess {
@@ -1356,21 +1233,6 @@ mod tests {
             "{out:?}"
         );
         assert!(f.flush().is_empty(), "the end goes out once");
-    }
-
-    #[test]
-    fn a_launchers_trouble_is_recorded_as_a_warning() {
-        for (line, level) in [
-            ("launch: process 'policy' is gone at t=3.21s (its liveliness token was withdrawn); the others run on", "WARN"),
-            ("launch: process 'policy' failed (signal: 9) at t=2.31s: starting it again", "WARN"),
-            ("launch: process 'robot' is silent at t=4.00s: no figures for 1.0 s", "WARN"),
-            ("launch: refused a join: process 'policy' is already running", "WARN"),
-            ("launch: process 'policy' rejoined", "INFO"),
-            ("launch: process 'robot' is heard again", "INFO"),
-            ("launch: listening on tls/127.0.0.1:7449", "INFO"),
-        ] {
-            assert_eq!(launcher_line_level(line), level, "{line}");
-        }
     }
 
     #[test]

@@ -61,6 +61,9 @@
 //! and at the end, each plot's y range then padded around every value its series took. The
 //! blueprint stores' ids derive from the settings too (virtual clock).
 //!
+//! A graph across processes is recorded as a watcher sees it ([`watched`]): the launch's
+//! merged telemetry in place of the steps.
+//!
 //! The rows are written by a step observer ([`observer`]). Determinism: rows are not left
 //! to rerun's background batcher, whose chunk boundaries and
 //! order depend on thread timing. Each entity's rows are gathered into chunks here and sent
@@ -82,6 +85,7 @@ mod live;
 mod observer;
 mod shape;
 mod style;
+pub mod watched;
 
 use blueprint::layout_for;
 pub use files::{check_output_path, default_lab_path, default_path};
@@ -96,7 +100,7 @@ pub use shape::{GraphShape, NodeShape, TopicShape};
 use ratelab_core::{
     executor, metrics, msg, output, plant, procs, qos, rate, runlog, textlog, time, topic,
 };
-use ratelab_runtime::{config, graph, scheduler};
+use ratelab_runtime::{config, graph, scheduler, telemetry};
 
 use crate::config::{ClockKind, RunConfig};
 use crate::graph::{GraphHandles, StepObserver};
@@ -288,6 +292,10 @@ pub enum RecordingError {
         /// The OS's reason.
         detail: String,
     },
+    /// The graph cannot be drawn as a watcher sees it ([`watched::record`]): its topics
+    /// cannot be made (a validated configuration has none that cannot).
+    #[error("{0}")]
+    Graph(String),
     /// rerun refused or failed to write.
     #[error("recording {path}: {detail}")]
     Rerun {

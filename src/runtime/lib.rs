@@ -7,7 +7,7 @@
 //!   [`checkpoint`] for trained ones, [`python`] for a learner's code);
 //! - **graphs**: [`graph`] (the graph file, [`graph::spec`]; node kinds, their registry and
 //!   the built-in nodes), [`config`] (a run's settings and their validation);
-//! - **running them**: [`scheduler`] (the virtual and real clocks that apply the executors'
+//! - **running them**: [`telemetry`] (a live run's controls and telemetry), [`scheduler`] (the virtual and real clocks that apply the executors'
 //!   rules), [`command`] (changes to a running graph), [`runcore`] (one graph under the
 //!   virtual clock, stepped, commanded, captured and restored), [`summary`] (a run's figures
 //!   from its graph's state), [`run`] (one headless run), [`sweep`] (grids and the rate
@@ -28,6 +28,7 @@ pub mod runcore;
 pub mod scheduler;
 pub mod summary;
 pub mod sweep;
+pub mod telemetry;
 
 pub use config::{ClockKind, RunConfig};
 pub use ratelab_core::Nanos;

@@ -2,7 +2,6 @@
 //! end asks (reset, next seed, switch clock), applies and logs commands, streams telemetry.
 
 use super::log::{LoggedRun, SessionLog};
-use super::protocol::{describe, Control, Speed, Telemetry};
 use crate::checkpoint::load_policy;
 use crate::config::{ClockKind, RunConfig};
 use crate::graph::{GraphHandles, StepObserver};
@@ -12,6 +11,7 @@ use crate::recording::{RecordOptions, Recording};
 use crate::run::{build_graph, summarize, Command, TimedCommand};
 use crate::runlog::StepRecord;
 use crate::scheduler::RunEnd;
+use crate::telemetry::{describe, Control, Speed, Telemetry};
 use crate::time::Nanos;
 use crossbeam_channel::{Receiver, Sender};
 use std::path::PathBuf;

@@ -17,14 +17,15 @@
 // The layers below, under their own names (`crate::graph`, `crate::time`, …).
 use ratelab_core::{executor, input, metrics, output, plant, qos, realtime, runlog, time};
 use ratelab_recording as recording;
-use ratelab_runtime::{checkpoint, config, graph, policy, ros2, run, runcore, scheduler};
+use ratelab_runtime::{
+    checkpoint, config, graph, policy, ros2, run, runcore, scheduler, telemetry,
+};
 
 mod engine;
 mod log;
-mod protocol;
 mod real_run;
 mod virtual_run;
 
 pub use engine::{Engine, SessionSettings};
 pub use log::{replay_run, LoggedRun, ReplayError, SessionLog};
-pub use protocol::{describe, Control, Speed, Telemetry, SPEEDS, UNBOUNDED};
+pub use ratelab_runtime::telemetry::{describe, Control, Speed, Telemetry, SPEEDS, UNBOUNDED};

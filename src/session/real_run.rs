@@ -2,7 +2,6 @@
 //! once (from each node's next tick).
 
 use super::engine::{live_metrics, Engine, Next};
-use super::protocol::{Control, Telemetry};
 use crate::config::RunConfig;
 use crate::executor::ExecFigures;
 use crate::graph::Graph;
@@ -10,6 +9,7 @@ use crate::metrics::NodeTiming;
 use crate::recording::Recording;
 use crate::run::Command;
 use crate::scheduler::{run_real, EndReason, RealOptions, RunEnd, StopFlag};
+use crate::telemetry::{Control, Telemetry};
 use crate::time::Nanos;
 use crossbeam_channel::RecvTimeoutError;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -95,7 +95,7 @@ impl Engine {
                                 | Command::SetSensorHz { .. }
                                 | Command::SetNodeHz { .. }
                         );
-                        let text = super::protocol::describe(&cmd);
+                        let text = crate::telemetry::describe(&cmd);
                         let executor = matches!(cmd, Command::SetExecutor { .. });
                         let applied = if executor {
                             self.apply_for_next_run(cmd, now(), &handles, recording)

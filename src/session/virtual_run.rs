@@ -3,7 +3,6 @@
 //! instant runs, never its order.
 
 use super::engine::{live_metrics, Engine, Next};
-use super::protocol::{Control, Speed, Telemetry};
 use crate::config::RunConfig;
 use crate::executor::ExecFigures;
 use crate::graph::{Graph, GraphHandles};
@@ -11,6 +10,7 @@ use crate::recording::Recording;
 use crate::run::Command;
 use crate::runcore::{CoreOptions, RunCore, Step, HISTORY_EVERY};
 use crate::scheduler::{EndReason, RunEnd, VirtualScheduler};
+use crate::telemetry::{Control, Speed, Telemetry};
 use crate::time::Nanos;
 use crossbeam_channel::RecvTimeoutError;
 use std::sync::atomic::Ordering;
@@ -75,7 +75,7 @@ impl Engine {
                         if ended.is_none() {
                             let at = core.scheduler().next_due().unwrap_or(core.now());
                             let node = rate_target(&cmd, &handles);
-                            let text = super::protocol::describe(&cmd);
+                            let text = crate::telemetry::describe(&cmd);
                             // A new plan (the executor key) runs from the next instant on,
                             // as a replay applies it.
                             let applied = self

@@ -309,15 +309,12 @@ const LAYERS: &[(&str, &str, &[&str])] = &[
         "src/session",
         &["ratelab-core", "ratelab-runtime", "ratelab-recording"],
     ),
+    // Beside the recordings and the lab's sessions, not above them: touching either
+    // rebuilds neither the graph across processes nor the other.
     (
         "ratelab-distributed",
         "src/distributed",
-        &[
-            "ratelab-core",
-            "ratelab-runtime",
-            "ratelab-recording",
-            "ratelab-session",
-        ],
+        &["ratelab-core", "ratelab-runtime"],
     ),
     (
         "ratelab",

@@ -1,5 +1,7 @@
-//! The engine's protocol with its front end: [`Control`] in, [`Telemetry`] out, and the
-//! virtual clock's [`Speed`] ladder.
+//! A live run's messages with its front end: [`Control`] in, [`Telemetry`] out, and the
+//! virtual clock's [`Speed`] ladder. The lab's engine (`ratelab::session`) speaks it with
+//! the terminal, and a watcher of a graph across processes (`ratelab::distributed::monitor`)
+//! tells what it sees in it; both layers sit above this one, neither above the other.
 
 use crate::config::RunConfig;
 use crate::metrics::Metrics;
