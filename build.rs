@@ -18,7 +18,13 @@ fn main() {
     if let Ok(dir) = std::env::var("MUJOCO_DYNAMIC_LINK_DIR") {
         println!("cargo:rustc-link-arg=-Wl,-rpath,{dir}");
     }
-    pyo3_build_config::add_libpython_rpath_link_args();
+    // Only a package that links libpython (a direct dependent of PyO3, which then gives its
+    // build configuration) needs its folder: the Python layer, the facade and the lab.
+    if std::env::var_os("DEP_PYTHON_PYO3_CONFIG").is_some()
+        || std::env::var_os("DEP_PYO3_PYTHON_PYO3_CONFIG").is_some()
+    {
+        pyo3_build_config::add_libpython_rpath_link_args();
+    }
     for (ex, file, keys) in [
         ("ex1", "exercises/ex1_rate_cliff.toml", &["fails_at_hz"][..]),
         (

@@ -23,6 +23,7 @@ use ratelab::{run, ClockKind, RunConfig, RunOptions};
 use std::path::Path;
 
 fn main() {
+    ratelab::init(); // the Python layer, for graphs with Python nodes
     let seed = match std::env::args().nth(1).map(|a| a.parse::<u64>()) {
         None => 0,
         Some(Ok(s)) => s,

@@ -24,6 +24,7 @@ use ratelab::{run, ClockKind, RunConfig, RunOptions};
 const GRAPH: &str = include_str!("cartpole-pd.toml");
 
 fn main() {
+    ratelab::init(); // the Python layer, for graphs with Python nodes
     let args: Vec<String> = std::env::args().skip(1).collect();
     let arg = |i: usize, default: f64| -> f64 {
         match args.get(i).map(|a| a.parse::<f64>()) {

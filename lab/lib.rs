@@ -257,6 +257,7 @@ pub fn main_with(register: impl FnOnce()) -> ExitCode {
         eprintln!("error: {e}");
         return ExitCode::from(EXIT_USAGE);
     }
+    ratelab::init();
     register();
     quiet_on_a_closed_stdout();
     // No flag, name or path of ratelab holds a control character: one in a value (a
@@ -306,7 +307,7 @@ pub fn main_with(register: impl FnOnce()) -> ExitCode {
             interrupted.stop();
             stop.stop();
             // A Python callback that never returns would hold its node's tick forever:
-            // one still running after a short grace is interrupted (src/runtime/python).
+            // one still running after a short grace is interrupted (src/python).
             ratelab::python::interrupt_callbacks_after(PYTHON_GRACE);
         });
     }

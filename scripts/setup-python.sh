@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Python for ratelab's Python brains and nodes (src/runtime/python), idempotent, offline once done:
+# Python for ratelab's Python brains and nodes (src/python), idempotent, offline once done:
 # 1. checks that the `python3` on PATH has the shared libpython the build embeds (PyO3);
 # 2. makes .venv/ (git-ignored) with the packages the shipped Python examples and the tests
 #    import (NumPy, pinned), unless it is already there.

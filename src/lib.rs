@@ -20,13 +20,15 @@
 //!   [`node`] and [`ports`] (the node traits),
 //!   [`executor`] (ROS 2's executors as rules), [`runlog`], [`metrics`];
 //! - **runtime** (`ratelab_runtime`, `src/runtime/`): [`plant`] (the MuJoCo cartpole),
-//!   [`policy`] (brains; + [`checkpoint`] for trained ones, [`python`] for a learner's
-//!   code), [`graph`] (the graph file, [`graph::spec`]; node kinds and their registry),
+//!   [`policy`] (brains; + [`checkpoint`] for trained ones; [`interpreter`], where
+//!   the Python layer plugs in), [`graph`] (the graph file, [`graph::spec`]; node kinds and their registry),
 //!   [`config`], [`scheduler`] (the virtual and real clocks), [`command`] (changes to a
 //!   running graph), [`runcore`] (one graph under the virtual clock, stepped, commanded,
 //!   captured and restored), [`summary`] (a run's figures from its graph's state), [`run`]
 //!   (one headless run), [`sweep`] (grids and the rate cliff), [`ros2`] (ROS 2 on the wire,
 //!   over rmw_zenoh's format);
+//! - **python** (`ratelab_python`, `src/python/`): [`python`] (a learner's Python nodes
+//!   and brains in the embedded interpreter; [`init`] installs it for the runtime);
 //! - **recording** (`ratelab_recording`, `src/recording/`): [`recording`] (rerun `.rrd`);
 //! - **session** (`ratelab_session`, `src/session/`): [`session`] (the lab's live runs,
 //!   their log and replay);
@@ -37,6 +39,15 @@
 
 pub mod exercise;
 
+/// Connect the layers that plug into those below them: install the Python layer's
+/// interpreter ([`python::install`]), which runs Python nodes and brains for the runtime
+/// ([`interpreter`]). The command line calls it first; a program that runs Python nodes or
+/// brains through the library calls it once before (a graph with one is refused otherwise,
+/// in one line saying so). Idempotent and cheap.
+pub fn init() {
+    python::install();
+}
+
 // The core crate's and the runtime crate's modules, under their own names (`ratelab::time`,
 // `ratelab::graph`, …).
 pub use ratelab_core::{
@@ -44,11 +55,12 @@ pub use ratelab_core::{
     qos, rate, realtime, ros_types, runlog, text, textlog, time, topic, Nanos,
 };
 pub use ratelab_runtime::{
-    checkpoint, command, config, graph, plant, policy, python, ros2, run, runcore, scheduler,
+    checkpoint, command, config, graph, interpreter, plant, policy, ros2, run, runcore, scheduler,
     summary, sweep,
 };
 // (`run` above is the module and, as in the runtime crate, its function.)
 pub use ratelab_distributed as distributed;
+pub use ratelab_python as python;
 pub use ratelab_recording as recording;
 pub use ratelab_runtime::{ClockKind, RunConfig, RunOptions, RunReport};
 pub use ratelab_session as session;

@@ -233,6 +233,7 @@ mod tests {
 
     /// An app fed with a real (deterministic) virtual run's telemetry.
     fn app_after(cfg: RunConfig, ended: bool) -> (App, crossbeam_channel::Receiver<Control>) {
+        ratelab::init(); // the shipped graphs include Python nodes
         App::after_virtual_run(cfg, ended).unwrap()
     }
 

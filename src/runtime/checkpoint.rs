@@ -162,9 +162,9 @@ pub enum PolicyError {
         found: Vec<usize>,
     },
     /// A Python brain (`FILE.py[:FUNCTION]`) that cannot be loaded: the one-line reason
-    /// ([`crate::python::PythonError`]).
-    #[error(transparent)]
-    Python(#[from] crate::python::PythonError),
+    /// (the Python layer's, or [`crate::interpreter::NOT_INSTALLED`]).
+    #[error("{0}")]
+    Python(String),
     /// A tensor operation failed (should not happen after validation).
     #[error("{path}: {detail}")]
     Tensor {
@@ -176,7 +176,7 @@ pub enum PolicyError {
 }
 
 /// Load the brain named by `spec`: `scripted`, a Python function (`FILE.py[:FUNCTION]`,
-/// [`crate::python::brain`]), or a checkpoint path (by extension: `.pt`/`.pth` PyTorch zip,
+/// `ratelab::python::brain`), or a checkpoint path (by extension: `.pt`/`.pth` PyTorch zip,
 /// `.safetensors`, `.onnx`).
 ///
 /// # Errors
@@ -187,10 +187,10 @@ pub fn load_policy(spec: &str) -> Result<Box<dyn Policy>, PolicyError> {
     if spec == "scripted" {
         return Ok(Box::new(Scripted));
     }
-    if let Some((script, function)) = crate::python::brain::parse_spec(spec) {
-        return Ok(Box::new(crate::python::brain::PythonBrain::load(
-            script, function,
-        )?));
+    if let Some((script, function)) = crate::interpreter::parse_spec(spec) {
+        return crate::interpreter::installed()
+            .and_then(|python| python.brain(script, function))
+            .map_err(PolicyError::Python);
     }
     let brain = load_checkpoint(spec)?;
     Ok(match caption(Path::new(spec)) {

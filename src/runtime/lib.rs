@@ -4,7 +4,8 @@
 //! rules, metrics), whose modules it uses under their own names.
 //!
 //! - **the plant and its brains**: [`plant`] (the MuJoCo cartpole), [`policy`] (brains; +
-//!   [`checkpoint`] for trained ones, [`python`] for a learner's code);
+//!   [`checkpoint`] for trained ones; [`interpreter`], where the Python layer plugs in a
+//!   learner's code);
 //! - **graphs**: [`graph`] (the graph file, [`graph::spec`]; node kinds, their registry and
 //!   the built-in nodes), [`config`] (a run's settings and their validation);
 //! - **running them**: [`telemetry`] (a live run's controls and telemetry), [`scheduler`] (the virtual and real clocks that apply the executors'
@@ -19,9 +20,9 @@ pub mod checkpoint;
 pub mod command;
 pub mod config;
 pub mod graph;
+pub mod interpreter;
 pub mod plant;
 pub mod policy;
-pub mod python;
 pub mod ros2;
 pub mod run;
 pub mod runcore;

@@ -300,6 +300,11 @@ const LAYERS: &[(&str, &str, &[&str])] = &[
     ("ratelab-core", "src/core", &[]),
     ("ratelab-runtime", "src/runtime", &["ratelab-core"]),
     (
+        "ratelab-python",
+        "src/python",
+        &["ratelab-core", "ratelab-runtime"],
+    ),
+    (
         "ratelab-recording",
         "src/recording",
         &["ratelab-core", "ratelab-runtime"],
@@ -322,6 +327,7 @@ const LAYERS: &[(&str, &str, &[&str])] = &[
         &[
             "ratelab-core",
             "ratelab-runtime",
+            "ratelab-python",
             "ratelab-recording",
             "ratelab-session",
             "ratelab-distributed",
@@ -421,6 +427,12 @@ fn the_core_builds_without_the_crates_that_talk_to_the_world() {
     ] {
         assert!(!core.contains(heavy), "ratelab-core is built with {heavy}");
     }
+    // The runtime embeds no Python: the Python layer plugs in above it.
+    let runtime = resolved_dependencies("ratelab-runtime");
+    assert!(
+        !runtime.contains("pyo3"),
+        "ratelab-runtime is built with pyo3"
+    );
     // And no library layer draws on a terminal: none is built with ratatui, none names
     // crossterm (which rerun's own dependencies bring along) — the lab alone draws.
     let lab = resolved_dependencies("ratelab-lab");

@@ -160,6 +160,7 @@ fn setpoint_graph(dir: &std::path::Path, tracker: Option<&str>) -> GraphSpec {
 
 #[test]
 fn a_registered_kind_of_two_inputs_and_two_outputs_equals_the_python_one() {
+    ratelab::init(); // Python nodes or brains through the library, as a program runs them
     register("track_rs", |_: &NodeContext<'_>| {
         Ok(Tracker {
             state: None,
@@ -407,6 +408,7 @@ fn a_message_type_of_the_programs_own_is_one_definition_and_one_line() {
 /// onto a topic a Rust node reads.
 #[test]
 fn a_registered_message_type_crosses_between_rust_and_python_nodes() {
+    ratelab::init(); // Python nodes or brains through the library, as a program runs them
     #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
     struct Gain {
         scale: f64,

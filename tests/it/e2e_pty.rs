@@ -677,7 +677,7 @@ fn attaching_where_no_graph_runs_says_so() {
 }
 
 /// `q` ends the lab even while a Python brain's call never returns: the call is interrupted
-/// after a short grace (src/runtime/python), and the terminal is restored.
+/// after a short grace (src/python), and the terminal is restored.
 #[test]
 fn quitting_the_lab_interrupts_a_python_brain_that_never_returns() {
     let _machine = crate::machine::alone();

@@ -216,6 +216,7 @@ fn the_command_line_prints_the_executor_lines_and_refuses_bad_executors() {
 /// with the compute times at 0 (the chapter's instant).
 #[test]
 fn the_estimator_graph_adds_each_stages_delay_as_its_comment_says() {
+    ratelab::init(); // Python nodes or brains through the library, as a program runs them
     for file in [
         "graphs/cartpole-estimator.toml",
         "graphs/cartpole-estimator-python.toml",

@@ -142,6 +142,7 @@ fn ex5_measurement_watchdog() {
 
 #[test]
 fn ex6_measurement_your_own_node() {
+    ratelab::init(); // Python nodes or brains through the library, as a program runs them
     let _machine = crate::machine::shared();
     let b = bands();
     let graph = default_graph("ex6", &path(""))

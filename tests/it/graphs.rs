@@ -37,6 +37,7 @@ fn cfg(file: &str, clock: ClockKind, secs: u64) -> RunConfig {
 
 #[test]
 fn every_shipped_graph_balances_under_the_virtual_clock() {
+    ratelab::init(); // Python nodes or brains through the library, as a program runs them
     for file in SHIPPED {
         let r = run(
             &cfg(file, ClockKind::Virtual, 10),
@@ -57,6 +58,7 @@ fn every_shipped_graph_balances_under_the_virtual_clock() {
 
 #[test]
 fn every_shipped_graph_balances_under_the_real_clock() {
+    ratelab::init(); // Python nodes or brains through the library, as a program runs them
     let _machine = crate::machine::alone();
     for file in SHIPPED {
         let r = run(

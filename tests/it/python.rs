@@ -1,4 +1,4 @@
-//! Brains written in Python (`--policy FILE.py[:FUNCTION]`, src/runtime/python): the chapter's
+//! Brains written in Python (`--policy FILE.py[:FUNCTION]`, src/python): the chapter's
 //! arithmetic in Python equals the built-in scripted brain in every figure; every way a
 //! script can be wrong is one line and exit 2; a callback that never returns cannot hang a
 //! run. The tests need NumPy in the active virtual environment (scripts/test.sh makes it).

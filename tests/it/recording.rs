@@ -1511,6 +1511,7 @@ fn what_a_python_node_writes_is_in_the_recording_per_node() {
 /// rate alone.
 #[test]
 fn a_python_node_is_marked_as_one_in_the_node_graph() {
+    ratelab::init(); // Python nodes or brains through the library, as a program runs them
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("python.rrd");
     let cfg = RunConfig {

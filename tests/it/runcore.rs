@@ -126,6 +126,7 @@ fn check_restore(label: &str, cfg: &RunConfig, t_ms: u64, k: usize) {
 
 #[test]
 fn a_restored_run_continues_as_the_uninterrupted_run_in_every_configuration() {
+    ratelab::init(); // Python nodes or brains through the library, as a program runs them
     let _machine = crate::machine::shared();
     for (i, (label, cfg)) in configurations().iter().enumerate() {
         check_restore(label, cfg, 1_000 + 450 * i as u64, i);
@@ -191,6 +192,7 @@ fn a_capture_restores_only_into_the_graph_it_was_taken_of() {
 
 #[test]
 fn a_python_node_makes_the_capture_a_replay_that_gives_the_same_continuation() {
+    ratelab::init(); // Python nodes or brains through the library, as a program runs them
     let _machine = crate::machine::shared();
     let cfg = RunConfig {
         clock: ClockKind::Virtual,

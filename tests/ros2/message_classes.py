@@ -1,4 +1,4 @@
-"""Checks ratelab's Python message classes (src/runtime/python/support.py: State, Position, Force)
+"""Checks ratelab's Python message classes (src/python/support.py: State, Position, Force)
 against ROS 2's types as `rosbags` (an independent implementation) serializes them.
 
 Reads one JSON object on stdin: {"state": HEX, "position": HEX, "force": HEX}, CDR that
@@ -15,7 +15,7 @@ import sys
 
 from rosbags.typesys import Stores, get_typestore
 
-sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "..", "src", "runtime", "python"))
+sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "..", "src", "python"))
 import support  # noqa: E402  (ratelab's own module, under test)
 
 store = get_typestore(Stores.LATEST)

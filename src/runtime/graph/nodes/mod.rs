@@ -1,6 +1,6 @@
 //! The node kinds ratelab has built in, one file each — [`sensor`], [`estimator`],
 //! [`policy`], [`safety`], [`actuator`], [`python`] (a learner's script, run by
-//! [`crate::python::node`]) and [`external`] (a ROS 2 node's proxy) — each its one
+//! `ratelab::python::node`) and [`external`] (a ROS 2 node's proxy) — each its one
 //! definition ([`crate::graph::kind::KindDef`]: ports, plant, parameters, `make`) and its
 //! tick ([`crate::graph::kind::Work`]). [`super::registry`] registers them; a kind written
 //! outside ratelab is registered the same way ([`super::registry::register`]).

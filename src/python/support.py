@@ -1,4 +1,4 @@
-"""ratelab's side of the embedded interpreter (src/runtime/python): loads a learner's script, calls
+"""ratelab's side of the embedded interpreter (src/python): loads a learner's script, calls
 its brain, and says in one line what went wrong. Internal to ratelab, not an API: learners
 write plain functions and classes and never import this module.
 
@@ -19,7 +19,7 @@ import unicodedata
 
 # ---- blocking calls a stop can interrupt ------------------------------------------------
 # A stop (Ctrl-C, SIGTERM, quitting the lab) raises KeyboardInterrupt inside a learner's
-# callback that is still running (PyThreadState_SetAsyncExc, src/runtime/python/mod.rs), but Python
+# callback that is still running (PyThreadState_SetAsyncExc, src/python/lib.rs), but Python
 # delivers it only between bytecodes: a callback blocked in one long C call (`time.sleep(60)`,
 # `threading.Event().wait()`) would not see it until the call returned. These two, the usual
 # ways a learner waits, are made of slices of at most _SLICE_S seconds, so the stop lands
@@ -196,7 +196,7 @@ def brain_caller(module, function, script):
     return call
 
 
-# ---- Python nodes (src/runtime/python/node.rs): an rclpy-shaped handle over one ratelab node -----
+# ---- Python nodes (src/python/node.rs): an rclpy-shaped handle over one ratelab node -----
 
 class _Msg:
     """A message with named fields in SI units; positional or keyword construction."""

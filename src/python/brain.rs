@@ -23,18 +23,7 @@ use crate::policy::Policy;
 use pyo3::prelude::*;
 use std::sync::atomic::{AtomicU64, Ordering};
 
-/// The function a `--policy FILE.py` brain runs when none is named.
-pub const DEFAULT_FUNCTION: &str = "act";
-
-/// Does `spec` name a Python brain (`FILE.py` or `FILE.py:FUNCTION`)? Returns the file and
-/// the function.
-pub fn parse_spec(spec: &str) -> Option<(&str, &str)> {
-    if spec.ends_with(".py") {
-        return Some((spec, DEFAULT_FUNCTION));
-    }
-    let (file, function) = spec.rsplit_once(':')?;
-    (file.ends_with(".py") && !function.is_empty()).then_some((file, function))
-}
+pub use crate::interpreter::{parse_spec, DEFAULT_FUNCTION};
 
 /// The cost of calling into Python once per tick, as `ratelab bench` reports it: `calls`
 /// calls of an empty brain (`def act(obs): return 0.0`) through [`PythonBrain`] (the

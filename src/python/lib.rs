@@ -21,9 +21,26 @@
 //!   after [`OVERRUN_WARNING`]; and [`interrupt_callbacks`] (Ctrl-C) raises `KeyboardInterrupt`
 //!   inside the ones still running (`PyThreadState_SetAsyncExc`), so a `while True: pass`
 //!   cannot hang the run.
+//!
+//! This is the Python layer, a crate above the runtime: the runtime reaches it through the
+//! interpreter it installs ([`install`], the runtime's `interpreter` module), so changing it
+//! rebuilds only this crate and those above. [`kind`] is that interpreter.
 
 pub mod brain;
+pub mod kind;
 pub mod node;
+
+// The layers below, under their own names (`crate::graph`, `crate::time`, …).
+use ratelab_core::{
+    input, metrics, msg, node as core_node, plant, publisher, rate, text, textlog, time,
+};
+use ratelab_runtime::{graph, interpreter, policy};
+
+/// Install the embedded interpreter as the one Python nodes and brains run in (the
+/// runtime's `interpreter::install`); idempotent. `ratelab::init()` calls it.
+pub fn install() {
+    ratelab_runtime::interpreter::install(&kind::Embedded);
+}
 
 use pyo3::prelude::*;
 use pyo3::types::PyModule;

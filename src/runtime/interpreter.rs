@@ -1,0 +1,64 @@
+//! Code in another language that a graph runs: a learner's Python, as a node
+//! (`kind = "python"`) or as a brain (`--policy FILE.py[:FUNCTION]`). The runtime knows
+//! their graph-file and command-line forms; running them is the Python layer's
+//! (`ratelab_python`, above this crate, so that changing it rebuilds neither the runtime
+//! nor anything beside it), which installs itself here ([`install`]). The `ratelab`
+//! facade's `init()` installs it, and the command line calls that first; a Rust program
+//! that runs Python nodes or brains through the library calls it too. Without it, a graph
+//! with a Python node or a Python brain is refused in one line ([`NOT_INSTALLED`]).
+
+use crate::graph::kind::{BuildContext, PythonCode, Work};
+use crate::policy::Policy;
+use std::sync::OnceLock;
+
+/// The function a `--policy FILE.py` brain runs when none is named.
+pub const DEFAULT_FUNCTION: &str = "act";
+
+/// What a Python node or brain meets when no interpreter is installed.
+pub const NOT_INSTALLED: &str =
+    "Python nodes and brains need ratelab's Python layer: call ratelab::init() first (the command line does)";
+
+/// Runs a learner's Python: implemented by the Python layer (`ratelab_python`).
+pub trait Interpreter: Send + Sync {
+    /// The work of node `cx.name` of kind `python`, running `code`.
+    ///
+    /// # Errors
+    /// The one-line reason it cannot start (the script unreadable, raising at import, a
+    /// class or publisher that does not fit the graph file).
+    fn node(&self, cx: &mut BuildContext<'_>, code: &PythonCode) -> Result<Box<dyn Work>, String>;
+
+    /// The brain that calls `function` of `script` once per control tick.
+    ///
+    /// # Errors
+    /// The one-line reason it cannot be loaded.
+    fn brain(&self, script: &str, function: &str) -> Result<Box<dyn Policy>, String>;
+}
+
+static INSTALLED: OnceLock<&'static dyn Interpreter> = OnceLock::new();
+
+/// Install the interpreter Python nodes and brains run in, once per process (a second call
+/// keeps the first).
+pub fn install(interpreter: &'static dyn Interpreter) {
+    let _ = INSTALLED.set(interpreter);
+}
+
+/// The interpreter installed ([`install`]).
+///
+/// # Errors
+/// [`NOT_INSTALLED`] when none is.
+pub fn installed() -> Result<&'static dyn Interpreter, String> {
+    INSTALLED
+        .get()
+        .copied()
+        .ok_or_else(|| NOT_INSTALLED.to_string())
+}
+
+/// Does `spec` name a Python brain (`FILE.py` or `FILE.py:FUNCTION`)? Returns the file and
+/// the function.
+pub fn parse_spec(spec: &str) -> Option<(&str, &str)> {
+    if spec.ends_with(".py") {
+        return Some((spec, DEFAULT_FUNCTION));
+    }
+    let (file, function) = spec.rsplit_once(':')?;
+    (file.ends_with(".py") && !function.is_empty()).then_some((file, function))
+}
