@@ -17,35 +17,40 @@
 //!   user names); and the runtime's parts: [`clock`], [`rate`], [`realtime`], [`qos`]
 //!   (ROS 2's QoS), [`topic`] (a subscription's queue and its drop rule), [`msg`] (message
 //!   types and their registry, with [`ros_types`], their ROS 2 side), [`publisher`],
-//!   [`node`] and [`ports`] (the node traits),
-//!   [`executor`] (ROS 2's executors as rules), [`runlog`], [`metrics`];
+//!   [`node`] and [`ports`] (the node traits), [`executor`] (ROS 2's executors as rules),
+//!   [`runlog`], [`metrics`];
 //! - **runtime** (`ratelab_runtime`, `src/runtime/`): [`plant`] (the MuJoCo cartpole),
-//!   [`policy`] (brains; + [`checkpoint`] for trained ones; [`interpreter`], where
-//!   the Python layer plugs in), [`graph`] (the graph file, [`graph::spec`]; node kinds and their registry),
-//!   [`config`], [`scheduler`] (the virtual and real clocks), [`command`] (changes to a
-//!   running graph), [`runcore`] (one graph under the virtual clock, stepped, commanded,
-//!   captured and restored), [`summary`] (a run's figures from its graph's state), [`run`]
-//!   (one headless run), [`sweep`] (grids and the rate cliff), [`ros2`] (ROS 2 on the wire,
-//!   over rmw_zenoh's format);
+//!   [`policy`] (brains; + [`checkpoint`] for trained ones; [`interpreter`], where the
+//!   Python layer plugs in), [`graph`] (the graph file, [`graph::spec`]; node kinds and
+//!   their registry), [`config`], [`scheduler`] (the virtual and real clocks), [`command`]
+//!   (changes to a running graph), [`runcore`] (one graph under the virtual clock, stepped,
+//!   commanded, captured and restored), [`summary`] (a run's figures from its graph's
+//!   state), [`telemetry`] (a live run's controls and telemetry);
 //! - **python** (`ratelab_python`, `src/python/`): [`python`] (a learner's Python nodes
 //!   and brains in the embedded interpreter; [`init`] installs it for the runtime);
+//! - **ros2** (`ratelab_ros2`, `src/ros2/`): [`ros2`] (ROS 2 on the wire, over rmw_zenoh's
+//!   format; ROS 2 nodes as a graph's external nodes; bags);
 //! - **recording** (`ratelab_recording`, `src/recording/`): [`recording`] (rerun `.rrd`);
-//! - **session** (`ratelab_session`, `src/session/`): [`session`] (the lab's live runs,
-//!   their log and replay);
 //! - **distributed** (`ratelab_distributed`, `src/distributed/`): [`distributed`] (the graph
 //!   across processes, over Zenoh);
+//! - **session** (`ratelab_session`, `src/session/`): [`run`] (one headless run), [`sweep`]
+//!   (grids and the rate cliff), [`session`] (the lab's live runs, their log and replay);
 //! - **this crate**: [`exercise`] (the exercises' bands and checks).
 #![warn(missing_docs)]
 
 pub mod exercise;
 
-/// Connect the layers that plug into those below them: install the Python layer's
-/// interpreter ([`python::install`]), which runs Python nodes and brains for the runtime
-/// ([`interpreter`]). The command line calls it first; a program that runs Python nodes or
-/// brains through the library calls it once before (a graph with one is refused otherwise,
-/// in one line saying so). Idempotent and cheap.
+mod wiring;
+
+/// Connect the layers that plug into others: install the Python layer's interpreter
+/// ([`python::install`]), which runs Python nodes and brains for the runtime
+/// ([`interpreter`]), and the ROS 2 layer's offer of a process's nodes for the graph across
+/// processes ([`distributed::ros2_offer`], `launch --ros2`). The command line calls it
+/// first; a program that runs Python nodes or brains, or launches with `--ros2`, through the
+/// library calls it once before (else that is refused, in one line saying so). Idempotent
+/// and cheap.
 pub fn init() {
-    python::install();
+    wiring::install();
 }
 
 // The core crate's and the runtime crate's modules, under their own names (`ratelab::time`,
@@ -54,13 +59,16 @@ pub use ratelab_core::{
     clock, executor, ids, input, metrics, msg, node, np_random, output, ports, procs, publisher,
     qos, rate, realtime, ros_types, runlog, text, textlog, time, topic, Nanos,
 };
-pub use ratelab_runtime::{
-    checkpoint, command, config, graph, interpreter, plant, policy, ros2, run, runcore, scheduler,
-    summary, sweep,
-};
-// (`run` above is the module and, as in the runtime crate, its function.)
 pub use ratelab_distributed as distributed;
 pub use ratelab_python as python;
 pub use ratelab_recording as recording;
-pub use ratelab_runtime::{ClockKind, RunConfig, RunOptions, RunReport};
+pub use ratelab_ros2 as ros2;
+pub use ratelab_runtime::{
+    checkpoint, command, config, graph, interpreter, plant, policy, runcore, scheduler, summary,
+    telemetry,
+};
+pub use ratelab_runtime::{ClockKind, RunConfig};
+pub use ratelab_session::{run, sweep};
+// `ratelab::run` is the module and, as before the layers were crates, its function.
 pub use ratelab_session as session;
+pub use ratelab_session::run::{run, RunOptions, RunReport};

@@ -32,13 +32,15 @@
 //!   tokens and reports (the attached lab, `ratelab top`); [`refusals`] passes the TLS
 //!   handshakes Zenoh refused on to the launcher's log; [`wire`] is what travels (samples,
 //!   reports, the lockstep's messages) and how it is encoded.
+//! - **ROS 2.** `launch --ros2` offers each process's nodes through [`ros2_offer`], which
+//!   the ROS 2 layer beside this crate fills.
 
 // The layers below, under their own names (`crate::graph`, `crate::time`, …).
 use ratelab_core::{
     executor, ids, input, metrics, msg, node, output, procs, qos, rate, runlog, text, time, topic,
 };
 use ratelab_runtime::{
-    checkpoint, config, graph, policy, ros2, run, scheduler, telemetry, ClockKind,
+    checkpoint, config, graph, policy, runcore, scheduler, summary, telemetry, ClockKind,
 };
 
 pub mod access;
@@ -48,6 +50,7 @@ pub mod lockstep;
 pub mod member;
 pub mod monitor;
 pub mod refusals;
+pub mod ros2_offer;
 pub mod wire;
 
 /// The Zenoh crate ratelab is built with (for `ratelab top`'s session).
@@ -142,7 +145,7 @@ pub enum DistError {
     Peer(String),
     /// The run could not be built.
     #[error(transparent)]
-    Run(#[from] crate::run::RunError),
+    Run(#[from] crate::runcore::RunError),
 }
 
 impl From<zenoh::Error> for DistError {

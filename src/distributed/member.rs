@@ -25,9 +25,9 @@ use crate::metrics::{LatencyStats, NodeTiming};
 use crate::node::Node;
 use crate::policy::BrainSlot;
 use crate::qos::TopicQos;
-use crate::run::GraphState;
 use crate::runlog::StepRecord;
 use crate::scheduler::{run_real, RealOptions, StopFlag};
+use crate::summary::GraphState;
 use crate::time::Nanos;
 use crossbeam_channel::{Receiver, RecvTimeoutError};
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -503,7 +503,7 @@ pub fn run_member(opts: &MemberOptions, stop: &StopFlag) -> Result<(), DistError
     let brain = crate::checkpoint::load_policy(brain_spec)
         .map_err(|e| DistError::Usage(format!("--policy {brain_spec}: {e}")))?;
     let batch: Arc<Mutex<Batch>> = Arc::default();
-    let Graph { nodes, handles } = crate::run::build_graph(
+    let Graph { nodes, handles } = crate::runcore::build_graph(
         &cfg,
         BrainSlot::new(brain),
         false,
@@ -575,7 +575,9 @@ pub fn run_member(opts: &MemberOptions, stop: &StopFlag) -> Result<(), DistError
     // --ros2: this process offers its own nodes; the plant's process `/clock` too. Before
     // saying ready: the wait for external nodes must not eat into the run.
     let ros2 = match setup.ros2_domain {
-        Some(domain) => Some(offer_to_ros2(domain, &cfg, &handles, &mine, stop)?),
+        Some(domain) => {
+            Some(super::ros2_offer::installed()?.offer(domain, &cfg, &handles, &mine, stop)?)
+        }
         None => None,
     };
     send(&ToLauncher::Ready {
@@ -655,15 +657,10 @@ pub fn run_member(opts: &MemberOptions, stop: &StopFlag) -> Result<(), DistError
     };
     stats_done.stop();
     let _ = stats_thread.join();
-    if let Some((bridge, link)) = ros2 {
-        let r = bridge.finish();
-        if let Some(e) = &r.error {
-            eprintln!("[ratelab] warning: ROS 2: {e}");
-        }
-        for w in r.external_warnings() {
+    if let Some(offered) = ros2 {
+        for w in offered.finish() {
             eprintln!("[ratelab] warning: {w}");
         }
-        link.close();
     }
     let state = result?;
     // The launcher vanished mid-run (killed): nobody will take the report or print a
@@ -1062,55 +1059,6 @@ fn spawn_figures(
             std::thread::sleep(STATS_PERIOD);
         })
         .map_err(|e| DistError::Peer(format!("cannot start a thread: {e}")))
-}
-
-/// Offer this process's nodes (`mine`) to ROS 2 on `domain`, `/clock` too when it runs the
-/// plant's actuator, through a session opened as rmw_zenoh's nodes open theirs (the
-/// launcher's program opened one first, so a router answers).
-///
-/// # Errors
-/// [`DistError::Usage`]: what the bridge refuses; [`DistError::Zenoh`]: the session.
-fn offer_to_ros2(
-    domain: u32,
-    cfg: &RunConfig,
-    handles: &crate::graph::GraphHandles,
-    mine: &[NodeId],
-    stop: &StopFlag,
-) -> Result<(crate::ros2::Bridge, crate::ros2::session::Ros2Session), DistError> {
-    use crate::ros2::Ros2Error;
-    let err = |e: Ros2Error| match e {
-        Ros2Error::Usage(m) => DistError::Usage(format!("--ros2: {m}")),
-        Ros2Error::Zenoh(m) => DistError::Zenoh(m),
-    };
-    let env = crate::ros2::session::SessionEnv::from_process();
-    let link = crate::ros2::session::open(&env, stop).map_err(err)?;
-    // The external nodes' proxies run here or elsewhere, all in one process
-    // (`external::check_placement`), which then publishes /clock at their ticks; without
-    // any, the plant's process does.
-    let external: Vec<_> = handles
-        .external
-        .iter()
-        .filter(|p| mine.contains(&p.node))
-        .cloned()
-        .collect();
-    let clock = if handles.external.is_empty() {
-        mine.contains(&cfg.graph.actuator)
-    } else {
-        !external.is_empty()
-    };
-    let offer = crate::ros2::bridge::Offer {
-        local: Some(mine),
-        external: &external,
-        clock,
-        ..crate::ros2::bridge::Offer::whole(handles)
-    };
-    let opts = crate::ros2::Ros2Options {
-        domain,
-        bag: None,
-        force: false,
-    };
-    let bridge = crate::ros2::Bridge::start(&link, &offer, &opts, cfg.clock, stop).map_err(err)?;
-    Ok((bridge, link))
 }
 
 /// The real clock: run the local nodes on their own threads from the shared start instant

@@ -1201,17 +1201,20 @@ mod tests {
         f.stats(at(80, live("robot", vec![], vec![step_at(80)])));
         assert!(f.release().is_empty());
         let over = RunOver {
-            metrics: crate::run(
-                &RunConfig {
-                    duration: Nanos(20_000_000),
-                    clock: crate::ClockKind::Virtual,
-                    ..cfg()
-                },
-                Box::new(crate::policy::Scripted),
-                crate::run::RunOptions::new(),
-            )
-            .unwrap()
-            .metrics,
+            metrics: {
+                let mut core = crate::runcore::RunCore::new(
+                    &RunConfig {
+                        duration: Nanos(20_000_000),
+                        clock: crate::ClockKind::Virtual,
+                        ..cfg()
+                    },
+                    Box::new(crate::policy::Scripted),
+                    crate::runcore::CoreOptions::default(),
+                )
+                .unwrap();
+                core.run_to_end(&crate::scheduler::StopFlag::default());
+                core.metrics()
+            },
             end: crate::scheduler::RunEnd {
                 at: Nanos(80_000_000),
                 reason: crate::scheduler::EndReason::Duration,

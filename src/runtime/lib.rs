@@ -8,12 +8,13 @@
 //!   learner's code);
 //! - **graphs**: [`graph`] (the graph file, [`graph::spec`]; node kinds, their registry and
 //!   the built-in nodes), [`config`] (a run's settings and their validation);
-//! - **running them**: [`telemetry`] (a live run's controls and telemetry), [`scheduler`] (the virtual and real clocks that apply the executors'
-//!   rules), [`command`] (changes to a running graph), [`runcore`] (one graph under the
-//!   virtual clock, stepped, commanded, captured and restored), [`summary`] (a run's figures
-//!   from its graph's state), [`run`] (one headless run), [`sweep`] (grids and the rate
-//!   cliff);
-//! - **ROS 2**: [`ros2`] (ROS 2 on the wire, over rmw_zenoh's format).
+//! - **running them**: [`telemetry`] (a live run's controls and telemetry), [`scheduler`]
+//!   (the virtual and real clocks that apply the executors' rules), [`command`] (changes to
+//!   a running graph), [`runcore`] (one graph under the virtual clock, stepped, commanded,
+//!   captured and restored), [`summary`] (a run's figures from its graph's state).
+//!
+//! The drivers of runs (the headless run, sweeps, the lab's sessions), ROS 2 on the wire,
+//! the graph across processes and recordings are crates above this one.
 #![warn(missing_docs)]
 
 pub mod checkpoint;
@@ -23,19 +24,15 @@ pub mod graph;
 pub mod interpreter;
 pub mod plant;
 pub mod policy;
-pub mod ros2;
-pub mod run;
 pub mod runcore;
 pub mod scheduler;
 pub mod summary;
-pub mod sweep;
 pub mod telemetry;
 
 pub use config::{ClockKind, RunConfig};
 pub use ratelab_core::Nanos;
-pub use run::{run, RunOptions, RunReport};
 // The core's modules, under their own names (`crate::time`, `crate::msg`, …).
 use ratelab_core::{
-    clock, executor, ids, input, metrics, msg, node, np_random, output, ports, publisher, qos,
-    rate, realtime, runlog, text, textlog, time, topic,
+    clock, executor, ids, input, metrics, msg, node, np_random, ports, publisher, qos, rate,
+    realtime, runlog, text, textlog, time, topic,
 };

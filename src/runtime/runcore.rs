@@ -69,9 +69,6 @@ pub enum RunError {
     /// The graph could not be built.
     #[error(transparent)]
     Graph(#[from] crate::graph::GraphError),
-    /// The graph could not be offered to ROS 2 (`--ros2`).
-    #[error(transparent)]
-    Ros2(#[from] crate::ros2::Ros2Error),
 }
 
 /// Build the plant (reset to `cfg.seed`) and the graph for `cfg`.

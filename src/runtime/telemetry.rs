@@ -3,9 +3,9 @@
 //! the terminal, and a watcher of a graph across processes (`ratelab::distributed::monitor`)
 //! tells what it sees in it; both layers sit above this one, neither above the other.
 
+use crate::command::Command;
 use crate::config::RunConfig;
 use crate::metrics::Metrics;
-use crate::run::Command;
 use crate::runlog::StepRecord;
 use crate::scheduler::EndReason;
 use crate::time::Nanos;

@@ -1,4 +1,6 @@
-//! Live sessions: the graph driven by commands while it runs, for the lab.
+//! Runs, from the front ends: [`run`] (one headless run, end to end), [`sweep`] (grids
+//! of runs and the rate cliff), and the lab's live sessions — the graph driven by commands
+//! while it runs — below.
 //!
 //! An engine thread owns the graph and talks to its front end (the terminal lab) over
 //! crossbeam channels: [`Control`] in, [`Telemetry`] out. The engine never waits for the
@@ -17,13 +19,16 @@
 // The layers below, under their own names (`crate::graph`, `crate::time`, …).
 use ratelab_core::{executor, input, metrics, output, plant, qos, realtime, runlog, time};
 use ratelab_recording as recording;
+use ratelab_ros2 as ros2;
 use ratelab_runtime::{
-    checkpoint, config, graph, policy, ros2, run, runcore, scheduler, telemetry,
+    checkpoint, command, config, graph, policy, runcore, scheduler, summary, telemetry,
 };
 
 mod engine;
 mod log;
 mod real_run;
+pub mod run;
+pub mod sweep;
 mod virtual_run;
 
 pub use engine::{Engine, SessionSettings};

@@ -305,6 +305,11 @@ const LAYERS: &[(&str, &str, &[&str])] = &[
         &["ratelab-core", "ratelab-runtime"],
     ),
     (
+        "ratelab-ros2",
+        "src/ros2",
+        &["ratelab-core", "ratelab-runtime"],
+    ),
+    (
         "ratelab-recording",
         "src/recording",
         &["ratelab-core", "ratelab-runtime"],
@@ -312,10 +317,15 @@ const LAYERS: &[(&str, &str, &[&str])] = &[
     (
         "ratelab-session",
         "src/session",
-        &["ratelab-core", "ratelab-runtime", "ratelab-recording"],
+        &[
+            "ratelab-core",
+            "ratelab-runtime",
+            "ratelab-ros2",
+            "ratelab-recording",
+        ],
     ),
-    // Beside the recordings and the lab's sessions, not above them: touching either
-    // rebuilds neither the graph across processes nor the other.
+    // Beside the recordings, the ROS 2 layer and the lab's sessions, not above them:
+    // touching one rebuilds neither the graph across processes nor the others.
     (
         "ratelab-distributed",
         "src/distributed",
@@ -328,6 +338,7 @@ const LAYERS: &[(&str, &str, &[&str])] = &[
             "ratelab-core",
             "ratelab-runtime",
             "ratelab-python",
+            "ratelab-ros2",
             "ratelab-recording",
             "ratelab-session",
             "ratelab-distributed",
@@ -427,12 +438,16 @@ fn the_core_builds_without_the_crates_that_talk_to_the_world() {
     ] {
         assert!(!core.contains(heavy), "ratelab-core is built with {heavy}");
     }
-    // The runtime embeds no Python: the Python layer plugs in above it.
+    // The runtime embeds no Python and speaks no Zenoh: the Python and ROS 2 layers sit
+    // above it, and the recordings are built without Zenoh.
     let runtime = resolved_dependencies("ratelab-runtime");
-    assert!(
-        !runtime.contains("pyo3"),
-        "ratelab-runtime is built with pyo3"
-    );
+    for heavy in ["pyo3", "zenoh"] {
+        assert!(
+            !runtime.contains(heavy),
+            "ratelab-runtime is built with {heavy}"
+        );
+    }
+    assert!(!resolved_dependencies("ratelab-recording").contains("zenoh"));
     // And no library layer draws on a terminal: none is built with ratatui, none names
     // crossterm (which rerun's own dependencies bring along) — the lab alone draws.
     let lab = resolved_dependencies("ratelab-lab");

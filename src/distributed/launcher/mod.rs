@@ -22,8 +22,8 @@ use crate::config::{ClockKind, RunConfig};
 use crate::graph::spec::GraphSpec;
 use crate::graph::NodeId;
 use crate::metrics::Metrics;
-use crate::run::{summarize_state, GraphState};
 use crate::scheduler::{EndReason, RunEnd, StopFlag};
+use crate::summary::{summarize_state, GraphState};
 use crate::time::Nanos;
 use crossbeam_channel::Receiver;
 use processes::{wait_gate, Children};
@@ -419,7 +419,7 @@ pub fn launch(
     stop: &StopFlag,
     say: &dyn Fn(&str),
 ) -> Result<LaunchReport, DistError> {
-    cfg.validate().map_err(crate::run::RunError::from)?;
+    cfg.validate().map_err(crate::runcore::RunError::from)?;
     let spec = &cfg.graph;
     check_keys(spec)?;
     let placement = spec.placement();
@@ -767,7 +767,7 @@ mod tests {
             timing: None,
             exec: None,
             brain: "scripted".into(),
-            actuator: crate::run::ActuatorSummary {
+            actuator: crate::summary::ActuatorSummary {
                 steps: 501,
                 fell_at: None,
                 watchdog: None,

@@ -15,8 +15,8 @@ use crate::graph::spec::GraphSpec;
 use crate::graph::TopicId;
 use crate::lockstep::{check_tick_report, TickInbox};
 use crate::node::{Flow, Node};
-use crate::run::GraphState;
 use crate::scheduler::{EndReason, Event, StopFlag, VirtualScheduler};
+use crate::summary::GraphState;
 use crate::time::Nanos;
 use crate::wire::ToMember;
 use crate::wire::{self, Ticked};
@@ -191,7 +191,7 @@ impl Stepper {
         callback_ticks: bool,
     ) -> Self {
         // The whole graph's plan, as in one process: every process replays every executor.
-        let sched = crate::run::virtual_scheduler(&share.cfg, &nodes);
+        let sched = crate::runcore::virtual_scheduler(&share.cfg, &nodes);
         let held = held_topics(&share.cfg.graph, &share.mine);
         Stepper {
             nodes,

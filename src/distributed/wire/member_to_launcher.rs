@@ -2,8 +2,8 @@
 //! there): the join, ready, its run's end and its report with the over-the-wire latency
 //! of what it received ([`ToLauncher`], [`WireLink`]). JSON.
 
-use crate::run::GraphState;
 use crate::scheduler::RunEnd;
+use crate::summary::GraphState;
 use serde::{Deserialize, Serialize};
 
 /// A placement group → the launcher (key `ratelab/<graph>/@up`).

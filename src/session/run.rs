@@ -3,7 +3,7 @@
 //! thread per node ([`crate::scheduler::run_real`]).
 
 pub use crate::command::{Command, TimedCommand};
-pub use crate::runcore::{build_graph, virtual_scheduler, RunError};
+pub use crate::runcore::{build_graph, virtual_scheduler};
 pub use crate::summary::{summarize, summarize_state, ActuatorSummary, GraphState};
 
 use crate::config::{ClockKind, RunConfig};
@@ -13,6 +13,17 @@ use crate::policy::{BrainSlot, Policy};
 use crate::runlog::StepRecord;
 use crate::scheduler::{run_real, RealOptions, RunEnd, StopFlag};
 use std::time::{Duration, Instant};
+
+/// Why a run could not start.
+#[derive(Debug, thiserror::Error)]
+pub enum RunError {
+    /// Its settings, plant or graph could not be built ([`crate::runcore::RunError`]).
+    #[error(transparent)]
+    Build(#[from] crate::runcore::RunError),
+    /// The graph could not be offered to ROS 2 (`--ros2`).
+    #[error(transparent)]
+    Ros2(#[from] crate::ros2::Ros2Error),
+}
 
 /// Extras for a run.
 #[derive(Default)]

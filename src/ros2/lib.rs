@@ -26,6 +26,10 @@
 //! What is offered is a view: ratelab's own topics, clocks and drop rules are unchanged,
 //! and a run with `--ros2` gives the same results as one without.
 
+// The layers below, under their own names (`crate::graph`, `crate::time`, …).
+use ratelab_core::{msg, output, qos, text, time};
+use ratelab_runtime::{config, graph, scheduler};
+
 pub mod bag;
 pub mod bridge;
 pub mod external;
@@ -66,7 +70,7 @@ pub(crate) fn zerr(e: impl std::fmt::Display) -> Ros2Error {
 /// The ROS 2 type message type `msg` is offered as.
 ///
 /// # Panics
-/// When `msg` has none: [`crate::ros2::bridge::check_graph`] refuses such a graph first.
+/// When `msg` has none: [`crate::bridge::check_graph`] refuses such a graph first.
 pub fn ros_type_of(msg: crate::msg::MsgType) -> &'static types::RosType {
     (msg.ros2()
         .expect("a graph offered to ROS 2 has only mapped types")
