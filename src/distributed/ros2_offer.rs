@@ -57,3 +57,16 @@ pub fn installed() -> Result<&'static dyn Ros2Offer, DistError> {
         .copied()
         .ok_or_else(|| DistError::Usage(NOT_INSTALLED.to_string()))
 }
+
+#[cfg(test)]
+mod tests {
+    /// The crate's own tests install no offer: `--ros2` is refused in one line, as usage.
+    #[test]
+    fn without_the_ros2_layer_an_offer_is_refused_as_usage() {
+        match super::installed() {
+            Err(crate::DistError::Usage(m)) => assert_eq!(m, super::NOT_INSTALLED),
+            Err(e) => panic!("{e}"),
+            Ok(_) => panic!("an offer without the ROS 2 layer"),
+        }
+    }
+}

@@ -62,3 +62,47 @@ pub fn parse_spec(spec: &str) -> Option<(&str, &str)> {
     let (file, function) = spec.rsplit_once(':')?;
     (file.ends_with(".py") && !function.is_empty()).then_some((file, function))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::config::{ClockKind, RunConfig};
+    use crate::graph::spec::GraphSpec;
+
+    #[test]
+    fn a_python_brain_is_spelled_with_its_file_and_function() {
+        assert_eq!(parse_spec("b.py"), Some(("b.py", DEFAULT_FUNCTION)));
+        assert_eq!(
+            parse_spec("dir/b.py:balance"),
+            Some(("dir/b.py", "balance"))
+        );
+        assert_eq!(parse_spec("b.py:"), None);
+        assert_eq!(parse_spec("ppo.pt"), None);
+        assert_eq!(parse_spec("scripted"), None);
+    }
+
+    /// The runtime's own tests install no interpreter: Python is refused in one line.
+    #[test]
+    fn without_the_python_layer_python_is_refused_in_one_line() {
+        let brain = crate::checkpoint::load_policy("graphs/brains/scripted.py");
+        assert_eq!(
+            brain.err().map(|e| e.to_string()).as_deref(),
+            Some(NOT_INSTALLED)
+        );
+        let text = include_str!("../../graphs/cartpole-python.toml");
+        let cfg = RunConfig {
+            graph: GraphSpec::parse(text, "graphs/cartpole-python.toml").unwrap(),
+            clock: ClockKind::Virtual,
+            ..RunConfig::default()
+        };
+        let err = crate::runcore::RunCore::new(
+            &cfg,
+            Box::new(crate::policy::Scripted),
+            crate::runcore::CoreOptions::default(),
+        )
+        .err()
+        .expect("a Python node without an interpreter");
+        assert!(err.to_string().contains(NOT_INSTALLED), "{err}");
+        assert!(!err.to_string().contains('\n'), "{err}");
+    }
+}
