@@ -15,7 +15,7 @@
 //! Errors, one line each: the file missing or unreadable, a syntax error (`FILE:LINE`), an
 //! exception while the module loads, no such function, NumPy missing; during the run an
 //! exception or a wrong return value fails the policy node at that tick (see
-//! [`crate::python`]).
+//! `ratelab::python`).
 
 use super::{describe, start, support, CallbackGuard, PythonError, MAX_SCRIPT_BYTES};
 use crate::plant::{Action, Observation};

@@ -14,7 +14,7 @@
 //! - **Errors are one line**, `FILE:LINE: ExceptionType: message`, at the innermost frame
 //!   in the learner's own folder (`support.py` formats them). A callback that raises
 //!   mid-run panics with that line; the scheduler catches it and the run ends as
-//!   "node 'X' failed" at that instant ([`crate::scheduler::EndReason::NodeFailed`]).
+//!   "node 'X' failed" at that instant (`ratelab::scheduler::EndReason::NodeFailed`).
 //! - **Callbacks that never return.** Every call into learners' code is registered
 //!   ([`CallbackGuard`]); a watchdog thread warns once when one has overrun by far: a
 //!   node's callbacks after [`OVERRUN_PERIODS`] of its periods, a brain's (and any loading)

@@ -972,7 +972,7 @@ impl Recording {
 
     /// An observer of a graph known as data rather than by its handles: one that runs in
     /// other processes, whose figures arrive over the network
-    /// (`ratelab::distributed::monitor::record`). The viewer layout for `shape` is sent now;
+    /// ([`watched::record`]). The viewer layout for `shape` is sent now;
     /// [`StepObserver::attach`] is not needed (and would replace `shape`).
     pub fn observer_for(&self, shape: GraphShape) -> Box<dyn StepObserver> {
         self.attach(&shape);

@@ -21,7 +21,7 @@
 //! - an external node's own tokens and publishers are its program's: ratelab declares none
 //!   for it, and what it publishes is not put again (only written to the bag).
 //!
-//! Messages leave through a [`crate::topic::Tap`] on each topic and a channel to one bridge
+//! Messages leave through a `ratelab::topic::Tap` on each topic and a channel to one bridge
 //! thread: no node puts on Zenoh itself. Under the virtual clock a publisher waits when the
 //! channel is full (the run stays byte-identical, only slower: it keeps pace with the wall
 //! clock anyway); under the real clock a full channel drops the ROS 2 copy and counts it

@@ -3,7 +3,7 @@
 //! **captured** and **restored** whole, so that restoring what was captured at t and running
 //! on gives, byte for byte, the run's own continuation.
 //!
-//! Its drivers: [`crate::run::run`] under the virtual clock (and so the headless run,
+//! Its drivers: `ratelab::run::run` under the virtual clock (and so the headless run,
 //! `sweep`, `cliff`, the exercises, `bench` and `replay`) and the lab's engine under the
 //! virtual clock (`ratelab::session`), which paces it against the wall clock. Still outside
 //! it: the real clock's threads ([`crate::scheduler::run_real`]), and the graph across

@@ -28,7 +28,7 @@ pub struct Setup {
     /// Real clock: `SCHED_FIFO` priority.
     pub rt_priority: Option<u8>,
     /// `--ros2`: the ROS 2 domain each process offers its own nodes on
-    /// ([`crate::ros2::bridge::Offer::local`]); `None`: not offered.
+    /// (`ratelab::ros2::bridge::Offer::local`); `None`: not offered.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub ros2_domain: Option<u32>,
 }

@@ -72,7 +72,7 @@ pub enum Code {
     Python,
     /// A kind a Rust program registered ([`super::registry::register`]).
     Rust,
-    /// A ROS 2 node's, over `--ros2` ([`crate::ros2::external`]): ratelab runs a proxy.
+    /// A ROS 2 node's, over `--ros2` (`ratelab::ros2::external`): ratelab runs a proxy.
     Ros2,
 }
 

@@ -76,7 +76,7 @@ pub struct GraphHandles {
     /// …and the plan the virtual scheduler takes at its next instant.
     pub plan_request: crate::scheduler::PlanRequest,
     /// The ports of the graph's external nodes ([`nodes::external`]), in node order: the
-    /// ROS 2 side ([`crate::ros2::external`]) connects them.
+    /// ROS 2 side (`ratelab::ros2::external`) connects them.
     pub external: Vec<Arc<ExternalPort>>,
 }
 

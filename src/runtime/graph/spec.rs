@@ -37,7 +37,7 @@
 //!   ([`crate::graph::kind::Ports`]): a sensor publishes `state` or `position`; an
 //!   estimator reads `position` and publishes `state`; a policy reads `state` and publishes
 //!   `force`; a safety node reads `force` and publishes `force`; the actuator reads `force`;
-//!   a `python` node (the learner's, [`crate::python::node`]) reads and publishes any
+//!   a `python` node (the learner's, `ratelab::python::node`) reads and publishes any
 //!   number of topics, of any type (`subscribes = ["/obs", "/reference"]`: a topic or a
 //!   list), and names its `script` (relative to the graph file) and optional `class`; a
 //!   registered kind reads and publishes the types it was registered with, one topic each
@@ -688,7 +688,7 @@ impl GraphSpec {
         let mut at = id;
         // An external node's proxy goes with its input's publisher (through other external
         // nodes, at most once round the graph): that process offers the input to ROS 2
-        // and `/clock` after it, in order ([`crate::ros2::external`]).
+        // and `/clock` after it, in order (`ratelab::ros2::external`).
         for _ in 0..=self.nodes.len() {
             let n = self.node(at);
             match (&n.process, n.subscribes.first().copied()) {
@@ -725,7 +725,7 @@ impl GraphSpec {
     }
 
     /// The first node of `kind = "external"`, if any: such a graph runs only with `--ros2`
-    /// ([`crate::ros2::external`]; across processes, its proxy beside its input's
+    /// (`ratelab::ros2::external`; across processes, its proxy beside its input's
     /// publisher).
     pub fn first_external(&self) -> Option<&NodeSpec> {
         self.nodes.iter().find(|n| n.kind.code() == Code::Ros2)

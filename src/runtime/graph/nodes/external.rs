@@ -1,5 +1,5 @@
 //! The **external** node's stand-in inside the graph: a node of `kind = "external"` is run by
-//! another program over ROS 2 ([`crate::ros2::external`] connects it), and this proxy is
+//! another program over ROS 2 (`ratelab::ros2::external` connects it), and this proxy is
 //! where its messages enter ratelab's topics.
 //!
 //! On each tick at run time `t` the proxy reads its input topic as a built-in node of its
@@ -90,7 +90,7 @@ pub fn def() -> KindDef {
     }
 }
 
-/// How long ratelab waits for a `kind = "external"` node ([`crate::ros2::external`]), from
+/// How long ratelab waits for a `kind = "external"` node (`ratelab::ros2::external`), from
 /// the graph file's `params = { appear_timeout_s = …, tick_timeout_ms = … }` ([`PARAMS`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ExternalNodeSpec {
