@@ -311,12 +311,18 @@ fn exercises(c: &mut Criterion) {
     g.bench_function("ex1 + ex2 measurement (24 ten-second virtual runs)", |b| {
         b.iter(|| {
             black_box(
-                ratelab::exercise::measure_ex1(&bands.ex1, &ratelab::graph::GraphSpec::chapter())
-                    .unwrap(),
+                ratelab::exercise::measure_ex1(
+                    &bands.of().unwrap(),
+                    &ratelab::graph::GraphSpec::chapter(),
+                )
+                .unwrap(),
             );
             black_box(
-                ratelab::exercise::measure_ex2(&bands.ex2, &ratelab::graph::GraphSpec::chapter())
-                    .unwrap(),
+                ratelab::exercise::measure_ex2(
+                    &bands.of().unwrap(),
+                    &ratelab::graph::GraphSpec::chapter(),
+                )
+                .unwrap(),
             );
         })
     });

@@ -35,7 +35,7 @@ pub enum Command {
     Replay(ReplayArgs),
     /// Real-clock timing benchmark: per-node tick lateness and CPU at given rates.
     Bench(BenchArgs),
-    /// Run an exercise (ex1 to ex9): prediction first, then the measurement.
+    /// Run an exercise (ex1, ex2, …): prediction first, then the measurement.
     Exercise(ExerciseArgs),
     /// Run a grid of settings; print a table and a plot, write CSV/JSON.
     Sweep(SweepArgs),
@@ -272,9 +272,8 @@ fn parse_topic_depth(s: &str) -> Result<(String, usize), String> {
 /// `ratelab exercise`.
 #[derive(Debug, Clone, Args)]
 pub struct ExerciseArgs {
-    /// ex1 (rate cliff), ex2 (queue-depth trap), ex3 (jitter and phase offsets), ex4 (the
-    /// stale queue), ex5 (the watchdog), ex6 (write your own node), ex7 (the slow callback)
-    /// ex8 (the noisy sensor) or ex9 (the crossing: real processes).
+    /// The exercise: one of the registry's (`ratelab exercise --help` lists them).
+    #[arg(help = ratelab::exercise::menu())]
     pub which: String,
     /// The folder holding the exercise files and bands.toml.
     #[arg(long, default_value = "exercises")]

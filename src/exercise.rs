@@ -1,49 +1,143 @@
-//! The chapter's exercises as data and checks: bands (with provenance) and learner
-//! predictions are TOML files in `exercises/`; measurements are in-process virtual runs.
+//! The chapter's exercises, as a registry: each exercise is one file (`exN.rs`) holding its
+//! bands, what it measures, its checks, its outcome in the terms of the learner's
+//! prediction and how that is said, and what it prints; [`EXERCISES`] lists them, in order.
+//! A new exercise is its file plus one line there (and its TOML in `exercises/`).
 //!
-//! - ex1, the control-rate cliff: sweep the policy rate with sensor and plant at 50 Hz.
-//! - ex2, the queue-depth trap: at 5 Hz, /obs depth 1 against 100.
-//! - ex3, jitter and phase offsets (real clock): matched rates drop from races alone, and
+//! This module holds what they share: reading the learner's file and `bands.toml`
+//! ([`ExerciseFile`], [`Bands`]), the [`Exercise`] trait, the [`Context`] an exercise runs
+//! in (where it prints, its progress, what did not pass), [`run`] (one exercise from
+//! prediction to reconcile, as `ratelab exercise` runs it) and the runs and table cells the
+//! exercises share.
+//!
+//! - [`ex1`], the control-rate cliff: sweep the policy rate with sensor and plant at 50 Hz.
+//! - [`ex2`], the queue-depth trap: at 5 Hz, /obs depth 1 against 100.
+//! - [`ex3`], jitter and phase offsets (real clock): matched rates drop from races alone, and
 //!   their latency is about 20 ms where the virtual clock gives 0; phase offsets remove the
 //!   drops and fix the latency (at the sensor-to-actuator offset, 10 ms).
-//! - ex4, the stale queue ([`ex4`], QoS): a slow policy behind a deep `/obs` queue, latest-wins
+//! - [`ex4`], the stale queue (QoS): a slow policy behind a deep `/obs` queue, latest-wins
 //!   against FIFO delivery, then FIFO with a lifespan.
-//! - ex5, the watchdog ([`ex5`], QoS): the safety graph's `/cmd` across a lossy link, best effort
+//! - [`ex5`], the watchdog (QoS): the safety graph's `/cmd` across a lossy link, best effort
 //!   against a deadline with `hold` or `zero`, and reliable delivery.
-//! - ex6, write your own node ([`ex6`]): the learner's Python safety limiter in the safety graph's
+//! - [`ex6`], write your own node: the learner's Python safety limiter in the safety graph's
 //!   place, over a ladder of clamps, beside the built-in safety node: the smallest clamp
 //!   that still balances, and whether the learner's node limits as the built-in one does.
-//! - ex7, the slow callback ([`ex7`]): a 30 ms policy callback beside the sensor on one
+//! - [`ex7`], the slow callback: a 30 ms policy callback beside the sensor on one
 //!   executor, single-threaded, on two threads in one callback group, and in two groups.
-//! - ex8, the noisy sensor ([`ex8`]): the estimator graph with its sensor's angle noise
+//! - [`ex8`], the noisy sensor: the estimator graph with its sensor's angle noise
 //!   raised, at the estimator's cut-off and a lower one: where the pole first falls.
-//! - ex9, the crossing ([`ex9`], real clock, real processes): the chapter's graph split
+//! - [`ex9`], the crossing (real clock, real processes): the chapter's graph split
 //!   across two processes, without and with phase offsets: what a crossing hop costs.
 
-mod ex4;
-mod ex5;
-mod ex6;
-mod ex7;
-mod ex8;
-mod ex9;
+/// Print one line of an exercise's report through its [`Context`]: `say!(cx, "…", args)`,
+/// or `say!(cx)` for an empty line.
+macro_rules! say {
+    ($cx:expr) => {
+        $cx.say("")
+    };
+    ($cx:expr, $($arg:tt)*) => {
+        $cx.say(&format!($($arg)*))
+    };
+}
 
-pub use ex4::{check_ex4, measure_ex4, outcome_ex4, Ex4Bands, Ex4Run};
-pub use ex5::{check_ex5, measure_ex5, outcome_ex5, Ex5Bands, Ex5Case, Ex5Run};
-pub use ex6::{check_ex6, ex6_differences, measure_ex6, outcome_ex6, Ex6Bands, Ex6Run};
-pub use ex7::{check_ex7, measure_ex7, outcome_ex7, Ex7Bands, Ex7Case, Ex7Run};
-pub use ex8::{check_ex8, first_fall_rad, measure_ex8, outcome_ex8, Ex8Bands, Ex8Run};
-pub use ex9::{check_ex9, measure_ex9, outcome_ex9, Ex9Bands, Ex9Case, Ex9Run};
+pub mod ex1;
+pub mod ex2;
+pub mod ex3;
+pub mod ex4;
+pub mod ex5;
+pub mod ex6;
+pub mod ex7;
+pub mod ex8;
+pub mod ex9;
 
-use crate::config::{duration_from_secs, phase_offset_from_ms, ClockKind, RunConfig};
+pub use ex1::{check_ex1, measure_ex1, Ex1Bands, Ex1Outcome};
+pub use ex2::{check_ex2, measure_ex2, Ex2Bands, Ex2Outcome};
+pub use ex3::{check_ex3, fixed_latency_ms, measure_ex3, Ex3Bands, Ex3Outcome};
+pub use ex4::{check_ex4, measure_ex4, outcome_ex4, Ex4Bands, Ex4Outcome, Ex4Run};
+pub use ex5::EX5_REACTIONS;
+pub use ex5::{check_ex5, measure_ex5, outcome_ex5, Ex5Bands, Ex5Case, Ex5Outcome, Ex5Run};
+pub use ex6::{check_ex6, ex6_differences, measure_ex6, outcome_ex6, Ex6Bands, Ex6Outcome, Ex6Run};
+pub use ex7::{check_ex7, measure_ex7, outcome_ex7, Ex7Bands, Ex7Case, Ex7Outcome, Ex7Run};
+pub use ex8::{check_ex8, first_fall_rad, measure_ex8, outcome_ex8, Ex8Bands, Ex8Outcome, Ex8Run};
+pub use ex9::{check_ex9, measure_ex9, outcome_ex9, Ex9Bands, Ex9Case, Ex9Outcome, Ex9Run};
+
+use crate::config::{duration_from_secs, ClockKind, RunConfig};
 use crate::graph::GraphSpec;
 use crate::metrics::Metrics;
 use crate::policy::{Policy, Scripted};
-use crate::qos::Delivery;
-use crate::sweep::{run_grid, run_pool, Grid, SweepError};
+use crate::sweep::SweepError;
+use serde::de::DeserializeOwned;
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
 
-/// Errors reading exercise files.
+/// Every exercise, in the order the chapter gives them. A new exercise adds its line here.
+pub const EXERCISES: &[&dyn Exercise] = &[
+    &ex1::Ex1,
+    &ex2::Ex2,
+    &ex3::Ex3,
+    &ex4::Ex4,
+    &ex5::Ex5,
+    &ex6::Ex6,
+    &ex7::Ex7,
+    &ex8::Ex8,
+    &ex9::Ex9,
+];
+
+/// One exercise: the learner predicts, ratelab measures, the two are reconciled.
+///
+/// An implementation is a unit struct in its own file, listed in [`EXERCISES`]; its
+/// settings are the `[exN]` table of `bands.toml` (a [`Section`]).
+pub trait Exercise: Sync {
+    /// Its name on the command line: `ex4`.
+    fn id(&self) -> &'static str;
+    /// What it is about, in a few words: `the stale queue`.
+    fn title(&self) -> &'static str;
+    /// The learner's file in the exercises folder: `ex4_stale_queue.toml`.
+    fn file(&self) -> &'static str;
+    /// The keys its prediction must have, besides `why`.
+    fn required_keys(&self) -> &'static [&'static str];
+    /// The graph it runs on when the command line names none, relative to the bands'
+    /// folder (`None`: the chapter's).
+    ///
+    /// # Errors
+    /// [`ExerciseError`] when its bands cannot be read.
+    fn default_graph(&self, bands: &Bands) -> Result<Option<String>, ExerciseError> {
+        let _ = bands;
+        Ok(None)
+    }
+    /// Measure, then print the table, the reconcile, the checks and the explanation
+    /// through `cx`.
+    ///
+    /// # Errors
+    /// [`ExerciseError`] when it cannot run (bad bands, a run that cannot start).
+    fn run(&self, cx: &mut Context<'_>) -> Result<(), ExerciseError>;
+}
+
+/// An exercise's table in `bands.toml`: its settings and the bands its checks assert.
+pub trait Section: DeserializeOwned {
+    /// The table's name, the exercise's id: `ex4`.
+    const NAME: &'static str;
+}
+
+/// The exercise named `id` (`ex4`), if registered.
+pub fn find(id: &str) -> Option<&'static dyn Exercise> {
+    EXERCISES.iter().copied().find(|e| e.id() == id)
+}
+
+/// The registered exercises' ids, in order: `ex1, ex2, …`.
+pub fn ids() -> Vec<&'static str> {
+    EXERCISES.iter().map(|e| e.id()).collect()
+}
+
+/// The registered exercises for a command line's help: `ex1 (the rate cliff), ex2 (…), …`.
+pub fn menu() -> String {
+    EXERCISES
+        .iter()
+        .map(|e| format!("{} ({})", e.id(), e.title()))
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+/// Errors reading exercise files, or running an exercise.
 #[derive(Debug, thiserror::Error)]
 pub enum ExerciseError {
     /// The file cannot be read.
@@ -62,6 +156,25 @@ pub enum ExerciseError {
         /// The parser's complaint (first line).
         detail: String,
     },
+    /// `bands.toml` could not be read or lacks what the exercise needs.
+    #[error("reading the bands: {0}")]
+    Bands(Box<ExerciseError>),
+    /// No exercise has this name.
+    #[error("unknown exercise '{0}' (expected {list})", list = expected())]
+    Unknown(String),
+    /// The learner's file has no prediction yet.
+    #[error(
+        "{path} has no prediction yet: fill in [prediction] ({keys} and why) first — predicting is the exercise"
+    )]
+    NoPrediction {
+        /// The learner's file.
+        path: String,
+        /// The keys it needs, comma-separated.
+        keys: String,
+    },
+    /// What the learner must do first, in one line (ex6's untouched template).
+    #[error("{0}")]
+    NotReady(String),
     /// A run failed.
     #[error(transparent)]
     Sweep(#[from] SweepError),
@@ -79,20 +192,49 @@ pub enum ExerciseError {
     Launch(String),
 }
 
-fn read_toml<T: for<'de> Deserialize<'de>>(path: &Path) -> Result<T, ExerciseError> {
-    let text = std::fs::read_to_string(path).map_err(|e| ExerciseError::Read {
+/// `ex1, ex2, …, ex8 or ex9`.
+fn expected() -> String {
+    match ids().split_last() {
+        Some((last, rest)) if !rest.is_empty() => format!("{} or {last}", rest.join(", ")),
+        Some((last, _)) => (*last).to_string(),
+        None => "none".to_string(),
+    }
+}
+
+/// The file's text, bounded: exercise files and bands are a few KiB.
+const MAX_FILE_BYTES: u64 = 1 << 20;
+
+fn read_text(path: &Path) -> Result<String, ExerciseError> {
+    let read = |detail: String| ExerciseError::Read {
         path: path.display().to_string(),
-        detail: e.to_string(),
-    })?;
-    toml::from_str(&text).map_err(|e| ExerciseError::Parse {
-        path: path.display().to_string(),
+        detail,
+    };
+    let len = std::fs::metadata(path)
+        .map_err(|e| read(e.to_string()))?
+        .len();
+    if len > MAX_FILE_BYTES {
+        return Err(read(format!(
+            "{len} bytes, more than an exercise file's {MAX_FILE_BYTES}"
+        )));
+    }
+    std::fs::read_to_string(path).map_err(|e| read(e.to_string()))
+}
+
+fn parse_error(path: &str, e: &impl std::fmt::Display) -> ExerciseError {
+    ExerciseError::Parse {
+        path: path.to_string(),
         detail: e
             .to_string()
             .lines()
             .next()
             .unwrap_or("invalid TOML")
             .to_string(),
-    })
+    }
+}
+
+fn read_toml<T: for<'de> Deserialize<'de>>(path: &Path) -> Result<T, ExerciseError> {
+    let text = read_text(path)?;
+    toml::from_str(&text).map_err(|e| parse_error(&path.display().to_string(), &e))
 }
 
 /// Where the bands came from.
@@ -108,116 +250,36 @@ pub struct Provenance {
     pub notes: String,
 }
 
-/// ex1's sweep and bands.
-#[derive(Clone, Debug, Deserialize)]
-pub struct Ex1Bands {
-    /// Seeds.
-    pub seeds: Vec<u64>,
-    /// Sensor rate, Hz.
-    pub sensor_hz: f64,
-    /// Policy rates swept, Hz.
-    pub control_hz: Vec<f64>,
-    /// Run length, s.
-    pub duration_s: f64,
-    /// Balances on every seed at and above this rate.
-    pub balances_at_or_above_hz: f64,
-    /// With at least this many steps.
-    pub min_steps: u64,
-    /// Falls on every seed at this rate.
-    pub falls_at_hz: f64,
-}
-
-/// ex2's settings.
-#[derive(Clone, Debug, Deserialize)]
-pub struct Ex2Bands {
-    /// Seeds.
-    pub seeds: Vec<u64>,
-    /// Sensor rate, Hz.
-    pub sensor_hz: f64,
-    /// The too-slow policy rate, Hz.
-    pub control_hz: f64,
-    /// Run length, s.
-    pub duration_s: f64,
-    /// The shallow queue.
-    pub shallow_depth: usize,
-    /// The deep queue.
-    pub deep_depth: usize,
-}
-
-/// ex3's settings.
-#[derive(Clone, Debug, Deserialize)]
-pub struct Ex3Bands {
-    /// Run length, s.
-    pub duration_s: f64,
-    /// Every node's rate, Hz.
-    pub rate_hz: f64,
-    /// Offsets for sensor, policy, actuator, ms.
-    pub phase_offset_ms: [f64; 3],
-    /// Robust bound on /obs drops with the offsets, as a fraction of published.
-    pub max_obs_drop_fraction_with_offsets: f64,
-    /// With the offsets the latency is fixed: its median is the sensor-to-actuator offset
-    /// (the last offset minus the first) within this, ms.
-    pub fixed_latency_tolerance_ms: f64,
-    /// Without offsets the mean sense→act latency is at least this, ms (the virtual clock
-    /// gives 0: same-phase threads race, and the policy often reads the previous tick's
-    /// reading).
-    pub min_mean_latency_ms_matched: f64,
-}
-
-impl Ex3Bands {
-    /// The latency the offsets fix, ms ([`fixed_latency_ms`]).
-    pub fn fixed_latency_ms(&self) -> f64 {
-        fixed_latency_ms(&self.phase_offset_ms)
-    }
-}
-
-/// The sense→act latency phase offsets of the chapter's chain (sensor, policy, actuator,
-/// ms) fix: from the sensor's tick to the actuator's, the last offset minus the first.
-pub fn fixed_latency_ms(phase_offset_ms: &[f64; 3]) -> f64 {
-    phase_offset_ms[2] - phase_offset_ms[0]
-}
-
-/// `exercises/bands.toml`.
-#[derive(Clone, Debug, Deserialize)]
+/// `exercises/bands.toml`: its provenance, and one table per exercise, read when the
+/// exercise asks for it ([`Bands::of`]).
+#[derive(Clone, Debug)]
 pub struct Bands {
     /// Provenance.
     pub provenance: Provenance,
-    /// ex1.
-    pub ex1: Ex1Bands,
-    /// ex2.
-    pub ex2: Ex2Bands,
-    /// ex3.
-    pub ex3: Ex3Bands,
-    /// ex4.
-    pub ex4: Ex4Bands,
-    /// ex5.
-    pub ex5: Ex5Bands,
-    /// ex6.
-    pub ex6: Ex6Bands,
-    /// ex7.
-    pub ex7: Ex7Bands,
-    /// ex8.
-    pub ex8: Ex8Bands,
-    /// ex9.
-    pub ex9: Ex9Bands,
+    /// The file, for errors.
+    path: String,
+    /// Every table.
+    tables: toml::Table,
 }
 
-/// The graph an exercise runs on when none is given: ex5's and ex6's (resolved against the
-/// folder of the bands file, `dir`); `None` for the chapter's.
-///
-/// # Errors
-/// [`ExerciseError`] when the bands cannot be read.
-pub fn default_graph(exercise: &str, dir: &Path) -> Result<Option<PathBuf>, ExerciseError> {
-    let graph = |b: Bands| match exercise {
-        "ex5" => Some(b.ex5.graph),
-        "ex7" => Some(b.ex7.graph),
-        "ex8" => Some(b.ex8.graph),
-        _ => Some(b.ex6.graph),
-    };
-    if !matches!(exercise, "ex5" | "ex6" | "ex7" | "ex8") {
-        return Ok(None);
+impl Bands {
+    /// Exercise `S::NAME`'s table.
+    ///
+    /// # Errors
+    /// [`ExerciseError::Parse`] naming the table when it is missing or not of its shape.
+    pub fn of<S: Section>(&self) -> Result<S, ExerciseError> {
+        let table = self
+            .tables
+            .get(S::NAME)
+            .ok_or_else(|| ExerciseError::Parse {
+                path: self.path.clone(),
+                detail: format!("no [{}] table", S::NAME),
+            })?;
+        table
+            .clone()
+            .try_into()
+            .map_err(|e| parse_error(&format!("{} [{}]", self.path, S::NAME), &e))
     }
-    Ok(graph(load_bands(&dir.join("bands.toml"))?).map(|g| dir.join(g)))
 }
 
 /// Read `exercises/bands.toml`.
@@ -225,7 +287,42 @@ pub fn default_graph(exercise: &str, dir: &Path) -> Result<Option<PathBuf>, Exer
 /// # Errors
 /// [`ExerciseError`] when unreadable or malformed.
 pub fn load_bands(path: &Path) -> Result<Bands, ExerciseError> {
-    read_toml(path)
+    let mut tables: toml::Table = read_toml(path)?;
+    let provenance = tables
+        .remove("provenance")
+        .ok_or_else(|| ExerciseError::Parse {
+            path: path.display().to_string(),
+            detail: "no [provenance] table".into(),
+        })?
+        .try_into()
+        .map_err(|e| parse_error(&format!("{} [provenance]", path.display()), &e))?;
+    Ok(Bands {
+        provenance,
+        path: path.display().to_string(),
+        tables,
+    })
+}
+
+/// The graph an exercise runs on when none is given, resolved against the folder of the
+/// bands file, `dir` (ex5 to ex8 name theirs); `None` for the chapter's, or for an
+/// exercise not registered.
+///
+/// # Errors
+/// [`ExerciseError::Bands`] when the bands cannot be read.
+pub fn default_graph(exercise: &str, dir: &Path) -> Result<Option<PathBuf>, ExerciseError> {
+    let Some(e) = find(exercise) else {
+        return Ok(None);
+    };
+    let in_bands = |e: ExerciseError| ExerciseError::Bands(Box::new(e));
+    let bands = load_bands(&dir.join("bands.toml")).map_err(in_bands)?;
+    Ok(e.default_graph(&bands)
+        .map_err(in_bands)?
+        .map(|g| dir.join(g)))
+}
+
+/// The keys exercise `id`'s prediction must have, besides `why` (none for an unknown id).
+pub fn required_keys(id: &str) -> &'static [&'static str] {
+    find(id).map_or(&[], |e| e.required_keys())
 }
 
 /// An exercise file the learner edits.
@@ -274,278 +371,25 @@ impl ExerciseFile {
             .collect::<Vec<_>>()
             .join("\n")
     }
+
+    /// The prediction beside the outcome, one sentence per predicted key, in words: "You
+    /// predicted the pole first fails at 10 Hz; it first fell at 5 Hz." A key the learner
+    /// left out, or gave in another type, is said so ([`says_unreadable`]).
+    pub fn reconcile(&self, outcome: &impl Reconcile) -> Vec<String> {
+        outcome.reconcile(&self.prediction)
+    }
 }
 
-/// What an exercise measured, in the terms of its prediction's keys.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub enum Outcome {
-    /// ex1: the highest control rate on the grid at which a seed fell (`None`: none fell).
-    Ex1 {
-        /// Rate, Hz.
-        fails_at_hz: Option<f64>,
-    },
-    /// ex2: the deep queue's `/obs` drops (the most over the seeds) and whether every seed
-    /// balanced with it.
-    Ex2 {
-        /// Drops.
-        deep_queue_obs_drops: u64,
-        /// Every seed balanced.
-        deep_queue_balances: bool,
-    },
-    /// ex3: `/obs` drops with matched rates and no offsets.
-    Ex3 {
-        /// Drops.
-        matched_obs_drops: u64,
-    },
-    /// ex4: which deliveries kept the pole up on every seed, and FIFO's latency at the fall.
-    Ex4 {
-        /// Latest-wins balanced on every seed.
-        latest_balances: bool,
-        /// FIFO balanced on every seed.
-        fifo_balances: bool,
-        /// The smallest and largest sense→act latency at the fall over the seeds where FIFO
-        /// fell, ms (`None`: it never fell).
-        fifo_latency_at_fall_ms: Option<(f64, f64)>,
-        /// FIFO with the shortest lifespan balanced on every seed.
-        lifespan_balances: bool,
-        /// That lifespan, ms.
-        lifespan_ms: f64,
-    },
-    /// ex5: what kept the pole up on every seed, and reliable delivery's latency.
-    Ex5 {
-        /// Best effort at the low loss balanced on every seed.
-        low_loss_balances: bool,
-        /// Best effort at the high loss (the zero-order hold) balanced on every seed.
-        high_loss_balances: bool,
-        /// At the high loss, with the deadline: `hold`, `zero`, and reliable delivery,
-        /// each true when it balanced on every seed.
-        keeps_it_up: [bool; 3],
-        /// Reliable delivery's mean sense→act latency (mean over the seeds), ms.
-        reliable_latency_ms: f64,
-        /// The lossless link's, ms.
-        lossless_latency_ms: f64,
-        /// The low and the high loss, for the words.
-        losses: (f64, f64),
-    },
-    /// ex6: the smallest clamp at which the learner's node kept the pole up on every seed
-    /// (`None`: at none), and whether it gave the built-in node's verdicts at every clamp.
-    Ex6 {
-        /// Clamp, N.
-        smallest_clamp_n: Option<f64>,
-        /// Same balanced/fell, at the same step, as the built-in safety node, everywhere.
-        matches_builtin: bool,
-    },
-    /// ex7: the sensor's achieved rate in each case (the lowest over the seeds), its skipped
-    /// ticks single-threaded (the most over the seeds), and the single-threaded verdict.
-    Ex7 {
-        /// Single-threaded, Hz.
-        sensor_hz_single_threaded: f64,
-        /// Single-threaded.
-        skipped_ticks_single_threaded: u64,
-        /// Single-threaded, on every seed.
-        balances_single_threaded: bool,
-        /// Two threads, one mutually exclusive group, Hz.
-        sensor_hz_shared_group: f64,
-        /// Two threads, the sensor in its own group, Hz.
-        sensor_hz_own_group: f64,
-    },
-    /// ex8: the lowest noise at which a seed fell at the estimator's shipped cut-off
-    /// (`None`: none on the grid), and whether the lower cut-off's first fall came at a
-    /// higher noise.
-    Ex8 {
-        /// rad.
-        fails_at_noise_rad: Option<f64>,
-        /// The smoother estimate tolerated more noise.
-        lower_cutoff_tolerates_more: bool,
-    },
-    /// ex9: the median sense→act latency across processes, without and with the offsets.
-    Ex9 {
-        /// ms.
-        p50_latency_across_ms: f64,
-        /// ms.
-        p50_latency_across_offsets_ms: f64,
-    },
+/// What an exercise measured, in the terms of its prediction's keys: each exercise's
+/// outcome type says itself beside a prediction.
+pub trait Reconcile {
+    /// One sentence per key of `prediction` the exercise asks for.
+    fn reconcile(&self, prediction: &toml::Table) -> Vec<String>;
 }
-
-/// The names a learner gives the reactions at the high loss (ex5's `keeps_it_up`), in
-/// [`Outcome::Ex5`]'s `keeps_it_up` order.
-pub const EX5_REACTIONS: [&str; 3] = ["hold", "zero", "reliable"];
 
 /// A prediction value as a number (TOML integer or float).
 fn number(v: &toml::Value) -> Option<f64> {
     v.as_float().or_else(|| v.as_integer().map(|i| i as f64))
-}
-
-impl ExerciseFile {
-    /// The prediction beside the outcome, one sentence per predicted key, in words: "You
-    /// predicted the pole first fails at 10 Hz; it first fell at 5 Hz." A key the learner
-    /// left out, or gave in another type, is said so.
-    pub fn reconcile(&self, outcome: &Outcome) -> Vec<String> {
-        let p = |k: &str| self.prediction.get(k);
-        let survives = |key: &str, what: &str, measured: bool| {
-            predicted_survival(&self.prediction, key, what, measured)
-        };
-        match *outcome {
-            Outcome::Ex7 { .. } => ex7::reconcile(&self.prediction, outcome),
-            Outcome::Ex8 { .. } => ex8::reconcile(&self.prediction, outcome),
-            Outcome::Ex9 { .. } => ex9::reconcile(&self.prediction, outcome),
-            Outcome::Ex1 { fails_at_hz } => {
-                let measured = fails_at_hz.map_or("it never fell in the range".to_string(), |hz| {
-                    format!("it first fell at {hz} Hz")
-                });
-                vec![match p("fails_at_hz").and_then(number) {
-                    Some(hz) if Some(hz) == fails_at_hz => {
-                        format!("You predicted the pole first fails at {hz} Hz; {measured}: right.")
-                    }
-                    Some(hz) => format!("You predicted the pole first fails at {hz} Hz; {measured}."),
-                    None => unreadable("fails_at_hz"),
-                }]
-            }
-            Outcome::Ex2 {
-                deep_queue_obs_drops,
-                deep_queue_balances,
-            } => {
-                let drops = match p("deep_queue_obs_drops").and_then(number) {
-                    Some(n) => format!(
-                        "You predicted {n} /obs drops with the deep queue; there were {deep_queue_obs_drops}."
-                    ),
-                    None => unreadable("deep_queue_obs_drops"),
-                };
-                let measured = if deep_queue_balances {
-                    "it stayed up"
-                } else {
-                    "it fell"
-                };
-                let survives = match p("deep_queue_balances").and_then(toml::Value::as_bool) {
-                    Some(true) => format!("You predicted the deep queue keeps the pole up; {measured}."),
-                    Some(false) => format!("You predicted the pole falls even with the deep queue; {measured}."),
-                    None => unreadable("deep_queue_balances"),
-                };
-                vec![drops, survives]
-            }
-            Outcome::Ex3 { matched_obs_drops } => vec![match p("matched_obs_drops").and_then(number) {
-                Some(n) => format!(
-                    "You predicted {n} /obs drops with matched rates; there were {matched_obs_drops} (the real clock varies run to run)."
-                ),
-                None => unreadable("matched_obs_drops"),
-            }],
-            Outcome::Ex4 {
-                latest_balances,
-                fifo_balances,
-                fifo_latency_at_fall_ms,
-                lifespan_balances,
-                lifespan_ms,
-            } => {
-                let latency = match (p("fifo_latency_at_fall_ms").and_then(number), fifo_latency_at_fall_ms) {
-                    (None, _) => unreadable("fifo_latency_at_fall_ms"),
-                    (Some(n), None) => format!(
-                        "You predicted {n} ms of sense->act latency at the FIFO fall; FIFO never fell."
-                    ),
-                    (Some(n), Some((lo, hi))) => format!(
-                        "You predicted {n} ms of sense->act latency at the FIFO fall; it was {}.",
-                        if lo == hi { format!("{lo:.0} ms") } else { format!("{lo:.0} to {hi:.0} ms over the seeds") }
-                    ),
-                };
-                vec![
-                    survives("latest_balances", "with latest", latest_balances),
-                    survives("fifo_balances", "with fifo", fifo_balances),
-                    latency,
-                    survives(
-                        "lifespan_balances",
-                        &format!("with fifo and a {lifespan_ms} ms lifespan"),
-                        lifespan_balances,
-                    ),
-                ]
-            }
-            Outcome::Ex6 {
-                smallest_clamp_n,
-                matches_builtin,
-            } => {
-                let measured = smallest_clamp_n.map_or_else(
-                    || "your node kept it up at none of the clamps".to_string(),
-                    |c| format!("with your node it was {c} N"),
-                );
-                let clamp = match p("smallest_clamp_n").and_then(number) {
-                    Some(n) if Some(n) == smallest_clamp_n => format!(
-                        "You predicted the smallest clamp that keeps the pole up is {n} N; {measured}: right."
-                    ),
-                    Some(n) => format!(
-                        "You predicted the smallest clamp that keeps the pole up is {n} N; {measured}."
-                    ),
-                    None => unreadable("smallest_clamp_n"),
-                };
-                let node = if matches_builtin {
-                    "Your node limits as the built-in safety node does: the same verdict, at the same step, at every clamp and seed."
-                } else {
-                    "Your node does not limit as the built-in safety node does: see the table for where they differ."
-                };
-                vec![clamp, node.to_string()]
-            }
-            Outcome::Ex5 {
-                low_loss_balances,
-                high_loss_balances,
-                keeps_it_up,
-                reliable_latency_ms,
-                lossless_latency_ms,
-                losses: (low, high),
-            } => {
-                let pct = |p: f64| format!("{}%", p * 100.0);
-                let named = |set: &[bool; 3]| -> String {
-                    let v: Vec<&str> = EX5_REACTIONS
-                        .iter()
-                        .zip(set)
-                        .filter_map(|(n, &up)| up.then_some(*n))
-                        .collect();
-                    if v.is_empty() { "none".into() } else { v.join(", ") }
-                };
-                let kept = match p("keeps_it_up").and_then(toml::Value::as_array) {
-                    Some(list) => {
-                        let names: Option<Vec<&str>> = list.iter().map(toml::Value::as_str).collect();
-                        match names {
-                            Some(names) if names.iter().all(|n| EX5_REACTIONS.contains(n)) => {
-                                let mut said = [false; 3];
-                                for (i, r) in EX5_REACTIONS.iter().enumerate() {
-                                    said[i] = names.contains(r);
-                                }
-                                format!(
-                                    "You predicted these keep the pole up at {} loss: {}; what did: {}{}",
-                                    pct(high),
-                                    named(&said),
-                                    named(&keeps_it_up),
-                                    if said == keeps_it_up { ": right." } else { "." }
-                                )
-                            }
-                            _ => format!(
-                                "Your prediction `keeps_it_up` lists names other than {}.",
-                                EX5_REACTIONS.join(", ")
-                            ),
-                        }
-                    }
-                    None => unreadable("keeps_it_up"),
-                };
-                let latency = match p("reliable_latency_ms").and_then(number) {
-                    Some(n) => format!(
-                        "You predicted {n} ms of mean sense->act latency with reliable delivery; it was {reliable_latency_ms:.1} ms (the lossless link: {lossless_latency_ms:.1} ms)."
-                    ),
-                    None => unreadable("reliable_latency_ms"),
-                };
-                vec![
-                    survives(
-                        "survives_low_loss",
-                        &format!("at {} loss, best effort", pct(low)),
-                        low_loss_balances,
-                    ),
-                    survives(
-                        "survives_high_loss",
-                        &format!("at {} loss, best effort", pct(high)),
-                        high_loss_balances,
-                    ),
-                    kept,
-                    latency,
-                ]
-            }
-        }
-    }
 }
 
 /// The sentence for a prediction key that is missing or not of the expected type.
@@ -575,38 +419,6 @@ fn predicted_survival(prediction: &toml::Table, key: &str, what: &str, measured:
     }
 }
 
-/// The keys each exercise's prediction must have (besides `why`).
-pub fn required_keys(exercise: &str) -> &'static [&'static str] {
-    match exercise {
-        "ex1" => &["fails_at_hz"],
-        "ex2" => &["deep_queue_obs_drops", "deep_queue_balances"],
-        "ex3" => &["matched_obs_drops"],
-        "ex4" => &[
-            "latest_balances",
-            "fifo_balances",
-            "fifo_latency_at_fall_ms",
-            "lifespan_balances",
-        ],
-        "ex5" => &[
-            "survives_low_loss",
-            "survives_high_loss",
-            "keeps_it_up",
-            "reliable_latency_ms",
-        ],
-        "ex6" => &["smallest_clamp_n"],
-        "ex7" => &[
-            "sensor_hz_single_threaded",
-            "skipped_ticks_single_threaded",
-            "balances_single_threaded",
-            "sensor_hz_shared_group",
-            "sensor_hz_own_group",
-        ],
-        "ex8" => &["fails_at_noise_rad", "lower_cutoff_tolerates_more"],
-        "ex9" => &["p50_latency_across_ms", "p50_latency_across_offsets_ms"],
-        _ => &[],
-    }
-}
-
 /// One check's outcome.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Check {
@@ -623,149 +435,194 @@ fn check(name: impl Into<String>, passed: bool) -> Check {
     }
 }
 
+/// Shows that a measurement is under way (the measurements take from seconds to a minute):
+/// `ratelab exercise` draws a spinner with the elapsed time on a terminal.
+pub trait Progress {
+    /// A measurement starts: `measuring ex4`.
+    fn begin(&self, what: &str);
+    /// It ended.
+    fn end(&self);
+}
+
+/// No progress shown.
+impl Progress for () {
+    fn begin(&self, _: &str) {}
+    fn end(&self) {}
+}
+
+/// Where an exercise runs: its inputs, where its report goes, and what did not pass.
+pub struct Context<'a> {
+    /// The exercise's id.
+    pub id: &'static str,
+    /// The exercises folder (the bands' and the learner's files).
+    pub dir: &'a Path,
+    /// The graph it runs on.
+    pub graph: &'a GraphSpec,
+    /// The file `graph` was read from (`None`: the chapter's); ex9's processes load it too.
+    pub graph_path: Option<&'a Path>,
+    /// This program, for an exercise that launches processes (ex9).
+    pub exe: &'a Path,
+    /// The learner's file.
+    pub file: &'a ExerciseFile,
+    /// `bands.toml`.
+    pub bands: &'a Bands,
+    out: &'a mut dyn FnMut(&str),
+    progress: &'a dyn Progress,
+    not_passed: usize,
+}
+
+impl Context<'_> {
+    /// Print one line of the report.
+    pub fn say(&mut self, line: &str) {
+        (self.out)(line);
+    }
+
+    /// This exercise's table of the bands.
+    ///
+    /// # Errors
+    /// [`ExerciseError::Bands`] when it is missing or not of its shape.
+    pub fn bands<S: Section>(&self) -> Result<S, ExerciseError> {
+        self.bands
+            .of()
+            .map_err(|e| ExerciseError::Bands(Box::new(e)))
+    }
+
+    /// Run `f` (a measurement) with its progress shown.
+    pub fn measure<T>(&self, f: impl FnOnce() -> T) -> T {
+        self.progress.begin(&format!("measuring {}", self.id));
+        let out = f();
+        self.progress.end();
+        out
+    }
+
+    /// Print the checks, `[ok]` or `[!!]` each, and count those that failed.
+    pub fn checks(&mut self, checks: &[Check]) {
+        for c in checks {
+            say!(
+                self,
+                "  [{}] {}",
+                if c.passed { "ok" } else { "!!" },
+                c.name
+            );
+            if !c.passed {
+                self.not_passed += 1;
+            }
+        }
+    }
+
+    /// Print the learner's prediction beside `outcome`, and count the keys that could not
+    /// be read.
+    pub fn reconcile(&mut self, outcome: &impl Reconcile) {
+        say!(self);
+        for line in self.file.reconcile(outcome) {
+            self.say(&line);
+            if says_unreadable(&line) {
+                self.not_passed += 1;
+            }
+        }
+    }
+
+    /// Print `text` wrapped at 96 columns.
+    pub fn paragraph(&mut self, text: &str) {
+        let mut line = String::new();
+        for word in text.split_whitespace() {
+            if !line.is_empty() && line.len() + 1 + word.len() > 96 {
+                self.say(&line);
+                line.clear();
+            }
+            if !line.is_empty() {
+                line.push(' ');
+            }
+            line.push_str(word);
+        }
+        if !line.is_empty() {
+            self.say(&line);
+        }
+    }
+}
+
+/// Where `ratelab exercise` runs one: the exercises folder, the graph (and its file), and
+/// this program (ex9 launches it).
+#[derive(Clone, Copy, Debug)]
+pub struct Setup<'a> {
+    /// The exercises folder.
+    pub dir: &'a Path,
+    /// The graph.
+    pub graph: &'a GraphSpec,
+    /// Its file (`None`: the chapter's).
+    pub graph_path: Option<&'a Path>,
+    /// This program.
+    pub exe: &'a Path,
+}
+
+/// Run exercise `which` as `ratelab exercise` does: refuse it without a prediction, print
+/// its heading and the prediction, then let it measure and report, every line through
+/// `out`.
+///
+/// Returns how many checks failed and predictions could not be read (0: passed).
+///
+/// # Errors
+/// [`ExerciseError`] for what kept it from running: an unknown exercise, no prediction,
+/// unreadable files or bands, a run that cannot start.
+pub fn run(
+    which: &str,
+    setup: Setup<'_>,
+    out: &mut dyn FnMut(&str),
+    progress: &dyn Progress,
+) -> Result<usize, ExerciseError> {
+    let exercise = find(which).ok_or_else(|| ExerciseError::Unknown(which.to_string()))?;
+    let path = setup.dir.join(exercise.file());
+    let file = ExerciseFile::load(&path)?;
+    if !file.has_prediction(exercise.required_keys()) {
+        return Err(ExerciseError::NoPrediction {
+            path: path.display().to_string(),
+            keys: exercise.required_keys().join(", "),
+        });
+    }
+    let bands =
+        load_bands(&setup.dir.join("bands.toml")).map_err(|e| ExerciseError::Bands(Box::new(e)))?;
+    let mut cx = Context {
+        id: exercise.id(),
+        dir: setup.dir,
+        graph: setup.graph,
+        graph_path: setup.graph_path,
+        exe: setup.exe,
+        file: &file,
+        bands: &bands,
+        out,
+        progress,
+        not_passed: 0,
+    };
+    say!(
+        cx,
+        "== {}: {} (about {} min)\n{}\n",
+        exercise.id(),
+        file.title,
+        file.estimated_minutes,
+        file.objective.trim()
+    );
+    say!(
+        cx,
+        "Your prediction:\n{}\n",
+        indent(&file.prediction_text())
+    );
+    exercise.run(&mut cx)?;
+    Ok(cx.not_passed)
+}
+
+fn indent(s: &str) -> String {
+    s.lines()
+        .map(|l| format!("  {l}"))
+        .collect::<Vec<_>>()
+        .join("\n")
+}
+
 fn scripted() -> Result<Box<dyn Policy>, String> {
     Ok(Box::new(Scripted))
 }
 
 fn threads() -> usize {
     std::thread::available_parallelism().map_or(1, |n| n.get())
-}
-
-/// ex1's measurements: one [`Metrics`] per (rate, seed), rates in band order, seed fastest.
-///
-/// # Errors
-/// [`ExerciseError`] when a run cannot start.
-pub fn measure_ex1(b: &Ex1Bands, graph: &GraphSpec) -> Result<Vec<Metrics>, ExerciseError> {
-    let grid = Grid {
-        clocks: vec![ClockKind::Virtual],
-        sensor_hz: vec![b.sensor_hz],
-        control_hz: b.control_hz.clone(),
-        queue_depth: vec![1],
-        seeds: b.seeds.clone(),
-        base: RunConfig {
-            duration: duration_from_secs(b.duration_s)?,
-            graph: graph.clone(),
-            ..RunConfig::default()
-        },
-    };
-    Ok(run_grid(&grid, &scripted, threads(), &|_, _| {})?
-        .into_iter()
-        .map(|(_, m)| m)
-        .collect())
-}
-
-/// ex1's checks on its measurements.
-pub fn check_ex1(b: &Ex1Bands, runs: &[Metrics]) -> Vec<Check> {
-    let at = |hz: f64| runs.iter().filter(move |m| m.control_hz == Some(hz));
-    let mut checks = Vec::new();
-    for &hz in b
-        .control_hz
-        .iter()
-        .filter(|&&hz| hz >= b.balances_at_or_above_hz)
-    {
-        checks.push(check(
-            format!(
-                "balances on every seed at {hz} Hz with >= {} steps",
-                b.min_steps
-            ),
-            at(hz).all(|m| m.balanced && m.steps >= b.min_steps),
-        ));
-    }
-    checks.push(check(
-        format!("falls on every seed at {} Hz", b.falls_at_hz),
-        at(b.falls_at_hz).all(|m| !m.balanced),
-    ));
-    let mean = |hz: f64| {
-        let v: Vec<f64> = at(hz).map(|m| m.mean_latency_ms).collect();
-        v.iter().sum::<f64>() / v.len().max(1) as f64
-    };
-    let top = b.control_hz.iter().copied().fold(f64::MIN, f64::max);
-    checks.push(check(
-        format!(
-            "mean latency at {} Hz above {top} Hz's",
-            b.balances_at_or_above_hz
-        ),
-        mean(b.balances_at_or_above_hz) > mean(top),
-    ));
-    checks
-}
-
-/// ex2's measurements: per seed, (shallow, deep).
-///
-/// # Errors
-/// [`ExerciseError`] when a run cannot start.
-pub fn measure_ex2(
-    b: &Ex2Bands,
-    graph: &GraphSpec,
-) -> Result<Vec<(Metrics, Metrics)>, ExerciseError> {
-    let grid = Grid {
-        clocks: vec![ClockKind::Virtual],
-        sensor_hz: vec![b.sensor_hz],
-        control_hz: vec![b.control_hz],
-        queue_depth: vec![b.shallow_depth, b.deep_depth],
-        seeds: b.seeds.clone(),
-        base: RunConfig {
-            duration: duration_from_secs(b.duration_s)?,
-            graph: graph.clone(),
-            ..RunConfig::default()
-        },
-    };
-    let rows: Vec<Metrics> = run_grid(&grid, &scripted, threads(), &|_, _| {})?
-        .into_iter()
-        .map(|(_, m)| m)
-        .collect();
-    let n = b.seeds.len();
-    Ok((0..n)
-        .map(|i| (rows[i].clone(), rows[n + i].clone()))
-        .collect())
-}
-
-/// ex2's checks.
-pub fn check_ex2(b: &Ex2Bands, pairs: &[(Metrics, Metrics)]) -> Vec<Check> {
-    vec![
-        check(
-            format!("depth {} drops 0 /obs on every seed", b.deep_depth),
-            pairs.iter().all(|(_, d)| d.obs_dropped == Some(0)),
-        ),
-        check(
-            format!("depth {} drops > 0 /obs on every seed", b.shallow_depth),
-            pairs.iter().all(|(s, _)| s.obs_dropped > Some(0)),
-        ),
-        check(
-            "neither depth balances",
-            pairs.iter().all(|(s, d)| !s.balanced && !d.balanced),
-        ),
-        check(
-            "both depths fall at the same step per seed",
-            pairs.iter().all(|(s, d)| s.steps == d.steps),
-        ),
-    ]
-}
-
-/// ex3's two real-clock runs: (matched, with phase offsets).
-///
-/// # Errors
-/// [`ExerciseError`] when a run cannot start.
-pub fn measure_ex3(b: &Ex3Bands, graph: &GraphSpec) -> Result<(Metrics, Metrics), ExerciseError> {
-    let mut base = RunConfig {
-        clock: ClockKind::Real,
-        duration: duration_from_secs(b.duration_s)?,
-        graph: graph.clone(),
-        ..RunConfig::default()
-    };
-    base.set_sensor_hz(b.rate_hz)?;
-    base.set_control_hz(b.rate_hz)?;
-    let offsets = b
-        .phase_offset_ms
-        .iter()
-        .map(|&ms| phase_offset_from_ms(ms))
-        .collect::<Result<Vec<_>, _>>()?;
-    let matched = run_scripted(&base)?;
-    let offset = run_scripted(&RunConfig {
-        phase_offsets: offsets,
-        ..base
-    })?;
-    Ok((matched, offset))
 }
 
 /// One run of `cfg` with the scripted balancer, no trace kept (the real-clock exercises:
@@ -778,41 +635,6 @@ fn run_scripted(cfg: &RunConfig) -> Result<Metrics, ExerciseError> {
     Ok(crate::run::run(cfg, Box::new(Scripted), opts)
         .map_err(SweepError::from)?
         .metrics)
-}
-
-/// ex3's checks: only what is robust on a noisy machine (see the bands' provenance).
-pub fn check_ex3(b: &Ex3Bands, matched: &Metrics, offset: &Metrics) -> Vec<Check> {
-    let fixed = b.fixed_latency_ms();
-    vec![
-        check("the pole stays up with matched rates", matched.balanced),
-        check("the pole stays up with phase offsets", offset.balanced),
-        check(
-            "the offsets remove drops: fewer /obs drops than with matched phases",
-            offset.obs_dropped < matched.obs_dropped,
-        ),
-        check(
-            format!(
-                "with offsets, /obs drops <= {:.0}% of published",
-                b.max_obs_drop_fraction_with_offsets * 100.0
-            ),
-            offset.obs_dropped.unwrap_or(0) as f64
-                <= b.max_obs_drop_fraction_with_offsets * offset.obs_published.unwrap_or(0) as f64,
-        ),
-        check(
-            format!(
-                "the offsets fix the latency: median {fixed} ms ± {} ms",
-                b.fixed_latency_tolerance_ms
-            ),
-            (offset.latency_p50_ms - fixed).abs() <= b.fixed_latency_tolerance_ms,
-        ),
-        check(
-            format!(
-                "with matched phases, mean sense->act latency >= {} ms (the virtual clock: 0)",
-                b.min_mean_latency_ms_matched
-            ),
-            matched.mean_latency_ms >= b.min_mean_latency_ms_matched,
-        ),
-    ]
 }
 
 /// One virtual run of an exercise on `graph` with `seed`, keeping its trace (the latency at
@@ -835,9 +657,74 @@ fn run_virtual(
     )
 }
 
+/// A run's verdict in a table cell: `Y`, `n@0.34s` (fell at run time 0.34 s), or
+/// `W@0.34s` (stopped by the watchdog).
+fn verdict(m: &Metrics) -> String {
+    match (m.balanced, m.fell_at_s) {
+        (true, _) => "Y".into(),
+        (false, Some(t)) => format!("n@{t:.2}s"),
+        (false, None) if m.stopped_by_watchdog.is_some() => format!("W@{:.2}s", m.sim_time_s),
+        (false, None) => "n".into(),
+    }
+}
+
+/// A table's seed columns: `seed 0  seed 1 …`.
+fn seeds_header(seeds: &[u64]) -> String {
+    seeds
+        .iter()
+        .map(|s| format!("seed {s:<2}"))
+        .collect::<Vec<_>>()
+        .join(" ")
+}
+
+/// A figure of the chapter's chain, or `-` for a graph without it (the exercises' graphs
+/// all have it).
+fn dash<T: std::fmt::Display>(x: Option<T>) -> String {
+    x.map_or_else(|| "-".to_string(), |v| v.to_string())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::policy::Scripted;
+
+    #[test]
+    fn every_exercise_is_registered_once_with_its_file() {
+        let ids = ids();
+        let mut unique = ids.clone();
+        unique.sort_unstable();
+        unique.dedup();
+        assert_eq!(unique.len(), ids.len(), "{ids:?}");
+        let dir = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/exercises"));
+        let bands = load_bands(&dir.join("bands.toml")).unwrap();
+        for e in EXERCISES {
+            assert!(e.file().starts_with(e.id()), "{}: {}", e.id(), e.file());
+            assert!(dir.join(e.file()).is_file(), "{}", e.file());
+            assert!(!e.required_keys().is_empty(), "{}", e.id());
+            if let Some(g) = e.default_graph(&bands).unwrap() {
+                assert!(dir.join(g).is_file(), "{}", e.id());
+            }
+        }
+        assert_eq!(expected(), "ex1, ex2, ex3, ex4, ex5, ex6, ex7, ex8 or ex9");
+    }
+
+    #[test]
+    fn a_missing_table_is_named() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("bands.toml");
+        std::fs::write(
+            &p,
+            "[provenance]\nmeasured_with = \"\"\nmeasured_on = \"\"\nchapter = \"\"\nnotes = \"\"\n",
+        )
+        .unwrap();
+        let e = load_bands(&p).unwrap().of::<Ex4Bands>().unwrap_err();
+        assert!(e.to_string().ends_with("no [ex4] table"), "{e}");
+        std::fs::write(&p, "x = 1\n").unwrap();
+        assert!(load_bands(&p)
+            .unwrap_err()
+            .to_string()
+            .ends_with("no [provenance] table"));
+    }
 
     fn file(prediction: &str) -> ExerciseFile {
         toml::from_str(&format!(
@@ -848,12 +735,13 @@ mod tests {
 
     #[test]
     fn ex3_checks_pass_on_the_measured_shape_and_fail_off_it() {
-        let b: Bands = toml::from_str(
-            &std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/exercises/bands.toml"))
-                .unwrap(),
-        )
+        let b: Ex3Bands = load_bands(Path::new(concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/exercises/bands.toml"
+        )))
+        .unwrap()
+        .of()
         .unwrap();
-        let b = b.ex3;
         assert_eq!(b.fixed_latency_ms(), 10.0);
         // Any run's metrics, given the figures of one real-clock pair (matched: 40 drops,
         // mean 21.5 ms; offsets 0/5/10: no drop, median 10.0 ms).
@@ -910,7 +798,7 @@ mod tests {
         let f = file(
             "latest_balances = true\nfifo_balances = true\nfifo_latency_at_fall_ms = 100\nlifespan_balances = false\nwhy = \"w\"",
         );
-        let ex4 = Outcome::Ex4 {
+        let ex4 = Ex4Outcome {
             latest_balances: true,
             fifo_balances: false,
             fifo_latency_at_fall_ms: Some((240.0, 340.0)),
@@ -926,7 +814,7 @@ mod tests {
                 "You predicted the pole falls with fifo and a 20 ms lifespan; it stayed up on every seed."
             ]
         );
-        let never = Outcome::Ex4 {
+        let never = Ex4Outcome {
             latest_balances: true,
             fifo_balances: true,
             fifo_latency_at_fall_ms: None,
@@ -937,7 +825,7 @@ mod tests {
         let f = file(
             "survives_low_loss = true\nsurvives_high_loss = false\nkeeps_it_up = [\"reliable\", \"zero\"]\nreliable_latency_ms = 5\nwhy = \"w\"",
         );
-        let ex5 = Outcome::Ex5 {
+        let ex5 = Ex5Outcome {
             low_loss_balances: true,
             high_loss_balances: false,
             keeps_it_up: [false, true, true],
@@ -973,19 +861,19 @@ mod tests {
     fn predictions_are_reconciled_in_words() {
         let f = file("fails_at_hz = 10\nwhy = \"w\"");
         assert_eq!(
-            f.reconcile(&Outcome::Ex1 {
+            f.reconcile(&Ex1Outcome {
                 fails_at_hz: Some(5.0)
             }),
             ["You predicted the pole first fails at 10 Hz; it first fell at 5 Hz."]
         );
         let f = file("fails_at_hz = 5.0\nwhy = \"w\"");
-        assert!(f.reconcile(&Outcome::Ex1 {
+        assert!(f.reconcile(&Ex1Outcome {
             fails_at_hz: Some(5.0)
         })[0]
             .ends_with(": right."));
         let f = file("deep_queue_obs_drops = 0\ndeep_queue_balances = true\nwhy = \"w\"");
         assert_eq!(
-            f.reconcile(&Outcome::Ex2 {
+            f.reconcile(&Ex2Outcome {
                 deep_queue_obs_drops: 0,
                 deep_queue_balances: false
             }),
@@ -995,7 +883,7 @@ mod tests {
             ]
         );
         let f = file("matched_obs_drops = \"many\"\nwhy = \"w\"");
-        assert!(f.reconcile(&Outcome::Ex3 {
+        assert!(f.reconcile(&Ex3Outcome {
             matched_obs_drops: 7
         })[0]
             .contains("not of the expected type"));

@@ -1,7 +1,17 @@
 //! ex4, the stale queue (QoS): a slow policy behind a deep `/obs` queue, latest-wins
 //! against FIFO delivery, then FIFO with a lifespan. Virtual clock: each case is exact.
 
-use super::*;
+use super::{check, run_virtual, threads, verdict, Check, Context, Exercise, ExerciseError};
+use super::{Reconcile, Section};
+use crate::config::RunConfig;
+use crate::graph::GraphSpec;
+use crate::metrics::Metrics;
+use crate::qos::Delivery;
+use crate::sweep::run_pool;
+use serde::Deserialize;
+
+/// ex4: the stale queue.
+pub struct Ex4;
 
 /// ex4's settings: the stale queue.
 #[derive(Clone, Debug, Deserialize)]
@@ -22,6 +32,27 @@ pub struct Ex4Bands {
     pub lifespan_ms: Vec<f64>,
     /// A run that balances has at least this many actuator steps.
     pub min_steps: u64,
+}
+
+impl Section for Ex4Bands {
+    const NAME: &'static str = "ex4";
+}
+
+/// ex4's outcome: which deliveries kept the pole up on every seed, and FIFO's latency at
+/// the fall.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Ex4Outcome {
+    /// Latest-wins balanced on every seed.
+    pub latest_balances: bool,
+    /// FIFO balanced on every seed.
+    pub fifo_balances: bool,
+    /// The smallest and largest sense→act latency at the fall over the seeds where FIFO
+    /// fell, ms (`None`: it never fell).
+    pub fifo_latency_at_fall_ms: Option<(f64, f64)>,
+    /// FIFO with the shortest lifespan balanced on every seed.
+    pub lifespan_balances: bool,
+    /// That lifespan, ms.
+    pub lifespan_ms: f64,
 }
 
 /// One ex4 run: a delivery (and lifespan) on the sensor's topic, one seed.
@@ -125,7 +156,7 @@ pub fn measure_ex4(b: &Ex4Bands, graph: &GraphSpec) -> Result<Vec<Ex4Run>, Exerc
 }
 
 /// ex4's outcome in the terms of its prediction.
-pub fn outcome_ex4(b: &Ex4Bands, runs: &[Ex4Run]) -> Outcome {
+pub fn outcome_ex4(b: &Ex4Bands, runs: &[Ex4Run]) -> Ex4Outcome {
     let all_up = |d: Delivery, l: Option<f64>| {
         runs.iter()
             .filter(|r| r.delivery == d && r.lifespan_ms == l)
@@ -137,7 +168,7 @@ pub fn outcome_ex4(b: &Ex4Bands, runs: &[Ex4Run]) -> Outcome {
         .filter_map(|r| r.latency_at_fall_ms)
         .collect();
     let shortest = b.lifespan_ms.first().copied();
-    Outcome::Ex4 {
+    Ex4Outcome {
         latest_balances: all_up(Delivery::Latest, None),
         fifo_balances: all_up(Delivery::Fifo, None),
         fifo_latency_at_fall_ms: (!falls.is_empty()).then(|| {
@@ -225,4 +256,184 @@ pub fn check_ex4(b: &Ex4Bands, runs: &[Ex4Run]) -> Vec<Check> {
         }
     }
     checks
+}
+
+impl Reconcile for Ex4Outcome {
+    fn reconcile(&self, prediction: &toml::Table) -> Vec<String> {
+        let survives = |key: &str, what: &str, measured: bool| {
+            super::predicted_survival(prediction, key, what, measured)
+        };
+        let latency = match (
+            prediction
+                .get("fifo_latency_at_fall_ms")
+                .and_then(super::number),
+            self.fifo_latency_at_fall_ms,
+        ) {
+            (None, _) => super::unreadable("fifo_latency_at_fall_ms"),
+            (Some(n), None) => format!(
+                "You predicted {n} ms of sense->act latency at the FIFO fall; FIFO never fell."
+            ),
+            (Some(n), Some((lo, hi))) => format!(
+                "You predicted {n} ms of sense->act latency at the FIFO fall; it was {}.",
+                if lo == hi {
+                    format!("{lo:.0} ms")
+                } else {
+                    format!("{lo:.0} to {hi:.0} ms over the seeds")
+                }
+            ),
+        };
+        vec![
+            survives("latest_balances", "with latest", self.latest_balances),
+            survives("fifo_balances", "with fifo", self.fifo_balances),
+            latency,
+            survives(
+                "lifespan_balances",
+                &format!("with fifo and a {} ms lifespan", self.lifespan_ms),
+                self.lifespan_balances,
+            ),
+        ]
+    }
+}
+
+impl Exercise for Ex4 {
+    fn id(&self) -> &'static str {
+        "ex4"
+    }
+
+    fn title(&self) -> &'static str {
+        "the stale queue"
+    }
+
+    fn file(&self) -> &'static str {
+        "ex4_stale_queue.toml"
+    }
+
+    fn required_keys(&self) -> &'static [&'static str] {
+        &[
+            "latest_balances",
+            "fifo_balances",
+            "fifo_latency_at_fall_ms",
+            "lifespan_balances",
+        ]
+    }
+
+    fn run(&self, cx: &mut Context<'_>) -> Result<(), ExerciseError> {
+        let b: Ex4Bands = cx.bands()?;
+        let runs = cx.measure(|| measure_ex4(&b, cx.graph))?;
+        table(cx, &b, &runs);
+        let outcome = outcome_ex4(&b, &runs);
+        cx.reconcile(&outcome);
+        cx.checks(&check_ex4(&b, &runs));
+        say!(cx);
+        cx.paragraph(&explain(&b, &runs, &outcome));
+        Ok(())
+    }
+}
+
+/// ex4's table: per configuration and seed, drops, expiries, the verdict and the latency.
+fn table(cx: &mut Context<'_>, b: &Ex4Bands, runs: &[Ex4Run]) {
+    let head = format!(
+        "{} keep-last {}, policy {} Hz",
+        b.topic, b.depth, b.control_hz
+    );
+    let w = head.len().max(22);
+    say!(
+        cx,
+        "{head:<w$} | seed | {:>7} | expired | balanced | latency mean |   max | at the fall",
+        "dropped"
+    );
+    let mut last = String::new();
+    for r in runs {
+        let label = r.label();
+        let shown = if label == last {
+            String::new()
+        } else {
+            label.clone()
+        };
+        last = label;
+        let m = &r.metrics;
+        say!(
+            cx,
+            "{shown:<w$} | {:>4} | {:>7} | {:>7} | {:>8} | {:>9.1} ms | {:>5.1} | {:>11}",
+            r.seed,
+            m.topics.get(&b.topic).map_or(0, |t| t.dropped),
+            if r.lifespan_ms.is_some() {
+                r.expired(&b.topic).to_string()
+            } else {
+                "-".into()
+            },
+            verdict(m),
+            m.mean_latency_ms,
+            m.latency_max_ms,
+            r.latency_at_fall_ms
+                .map_or("-".into(), |l| format!("{l:.1} ms")),
+        );
+    }
+    say!(cx, "(latency: sense->act, ms; at the fall: the latency of the action applied at the step the pole fell;");
+    say!(cx, " dropped: readings evicted unread; expired: readings the lifespan discarded unread; n@T: fell at T s)");
+}
+
+/// The explanation, with its numbers from the bands and the runs, and each claim about a
+/// verdict said only when the runs bear it out.
+fn explain(b: &Ex4Bands, runs: &[Ex4Run], outcome: &Ex4Outcome) -> String {
+    let per_tick = b.sensor_hz / b.control_hz;
+    let aging_ms = (per_tick - 1.0) * 1e3 / b.sensor_hz;
+    let of = |label: &str| -> Vec<&Ex4Run> { runs.iter().filter(|r| r.label() == label).collect() };
+    let latest_max = of("latest")
+        .iter()
+        .map(|r| r.metrics.latency_max_ms)
+        .fold(0.0, f64::max);
+    let mut text = format!(
+        "Reconcile: under latest the policy reads the newest reading and reads past the rest; the deep \
+         queue holds them, nothing is dropped, and no action is older than {latest_max:.0} ms. Under fifo \
+         the policy takes the OLDEST unread reading, one per tick, while {per_tick} arrive: the backlog \
+         grows by {} a tick, and each reading acted on is {aging_ms:.0} ms older than the one before. \
+         Nothing is dropped, so the drop counter says all is well",
+        per_tick - 1.0
+    );
+    let fifo_falls: Vec<f64> = of("fifo")
+        .iter()
+        .filter_map(|r| r.metrics.fell_at_s)
+        .collect();
+    match outcome.fifo_latency_at_fall_ms {
+        Some((lo, hi)) if fifo_falls.len() == of("fifo").len() => {
+            let t = fifo_falls.iter().copied().fold(0.0, f64::max);
+            text += &format!(
+                ", while the pole is down by {t:.2} s on every seed, acting on readings {lo:.0} to {hi:.0} ms old."
+            );
+        }
+        _ => text += ", while the decisions age.",
+    }
+    if let Some((&first, longer)) = b.lifespan_ms.split_first() {
+        text += &format!(
+            " A lifespan discards a reading older than it before a read can return it: at {first} ms \
+             fifo acts at worst on a reading {first} ms old when read"
+        );
+        text += if of(&format!("fifo, lifespan {first} ms"))
+            .iter()
+            .all(|r| r.metrics.balanced)
+        {
+            ", and the pole stays up."
+        } else {
+            "."
+        };
+        text += " The readings latest reads past are discarded again, and counted as expired: the drops \
+                 are back, under another name.";
+        for &l in longer {
+            let rs = of(&format!("fifo, lifespan {l} ms"));
+            if rs.iter().all(|r| !r.metrics.balanced) {
+                text += &format!(
+                    " At {l} ms the bound is too loose: the pole falls later ({}), but it falls.",
+                    rs.iter()
+                        .filter_map(|r| r.metrics.fell_at_s)
+                        .map(|t| format!("{t:.2} s"))
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                );
+            }
+        }
+    }
+    text += " A slow subscriber of a fast sensor wants the newest reading, not a queue of old ones: \
+             ROS 2's sensor-data QoS profile keeps only the last few, best effort, for this reason.";
+    text
 }

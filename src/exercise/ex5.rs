@@ -2,7 +2,15 @@
 //! against a deadline with `hold` or `zero`, and reliable delivery. Virtual clock: each case
 //! is exact.
 
-use super::*;
+use super::{check, run_virtual, seeds_header, threads, verdict, Check, Context, Exercise};
+use super::{ExerciseError, Reconcile, Section};
+use crate::graph::GraphSpec;
+use crate::metrics::Metrics;
+use crate::sweep::run_pool;
+use serde::Deserialize;
+
+/// ex5: the watchdog.
+pub struct Ex5;
 
 /// ex5's settings: the watchdog.
 #[derive(Clone, Debug, Deserialize)]
@@ -21,6 +29,32 @@ pub struct Ex5Bands {
     pub high_loss: f64,
     /// The deadline on the actuator's input, ms.
     pub deadline_ms: f64,
+}
+
+impl Section for Ex5Bands {
+    const NAME: &'static str = "ex5";
+}
+
+/// The names a learner gives the reactions at the high loss, in
+/// [`Ex5Outcome::keeps_it_up`]'s order.
+pub const EX5_REACTIONS: [&str; 3] = ["hold", "zero", "reliable"];
+
+/// ex5's outcome: what kept the pole up on every seed, and reliable delivery's latency.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Ex5Outcome {
+    /// Best effort at the low loss balanced on every seed.
+    pub low_loss_balances: bool,
+    /// Best effort at the high loss (the zero-order hold) balanced on every seed.
+    pub high_loss_balances: bool,
+    /// At the high loss, with the deadline: `hold`, `zero`, and reliable delivery,
+    /// each true when it balanced on every seed.
+    pub keeps_it_up: [bool; 3],
+    /// Reliable delivery's mean sense→act latency (mean over the seeds), ms.
+    pub reliable_latency_ms: f64,
+    /// The lossless link's, ms.
+    pub lossless_latency_ms: f64,
+    /// The low and the high loss, for the words.
+    pub losses: (f64, f64),
 }
 
 /// ex5's cases, in table order.
@@ -113,7 +147,7 @@ impl Ex5Run {
 }
 
 /// ex5's measurements: every case on every seed, seed fastest, on `graph` (the safety
-/// graph: see [`default_graph`]).
+/// graph: see [`super::default_graph`]).
 ///
 /// # Errors
 /// [`ExerciseError`] when a setting does not fit `graph` or a run cannot start.
@@ -151,12 +185,12 @@ fn mean_latency(runs: &[&Ex5Run]) -> f64 {
 }
 
 /// ex5's outcome in the terms of its prediction.
-pub fn outcome_ex5(b: &Ex5Bands, runs: &[Ex5Run]) -> Outcome {
+pub fn outcome_ex5(b: &Ex5Bands, runs: &[Ex5Run]) -> Ex5Outcome {
     let up = |c: Ex5Case| {
         let rs = ex5_of(runs, c);
         !rs.is_empty() && rs.iter().all(|r| r.metrics.balanced)
     };
-    Outcome::Ex5 {
+    Ex5Outcome {
         low_loss_balances: up(Ex5Case::LowLoss),
         high_loss_balances: up(Ex5Case::HighLoss),
         keeps_it_up: [
@@ -258,4 +292,235 @@ pub fn check_ex5(b: &Ex5Bands, runs: &[Ex5Run]) -> Vec<Check> {
                 > mean_latency(&ex5_of(runs, Ex5Case::Lossless)),
         ),
     ]
+}
+
+impl Reconcile for Ex5Outcome {
+    fn reconcile(&self, prediction: &toml::Table) -> Vec<String> {
+        let p = |k: &str| prediction.get(k);
+        let (low, high) = self.losses;
+        let pct = |p: f64| format!("{}%", p * 100.0);
+        let named = |set: &[bool; 3]| -> String {
+            let v: Vec<&str> = EX5_REACTIONS
+                .iter()
+                .zip(set)
+                .filter_map(|(n, &up)| up.then_some(*n))
+                .collect();
+            if v.is_empty() {
+                "none".into()
+            } else {
+                v.join(", ")
+            }
+        };
+        let kept = match p("keeps_it_up").and_then(toml::Value::as_array) {
+            Some(list) => {
+                let names: Option<Vec<&str>> = list.iter().map(toml::Value::as_str).collect();
+                match names {
+                    Some(names) if names.iter().all(|n| EX5_REACTIONS.contains(n)) => {
+                        let mut said = [false; 3];
+                        for (i, r) in EX5_REACTIONS.iter().enumerate() {
+                            said[i] = names.contains(r);
+                        }
+                        format!(
+                            "You predicted these keep the pole up at {} loss: {}; what did: {}{}",
+                            pct(high),
+                            named(&said),
+                            named(&self.keeps_it_up),
+                            if said == self.keeps_it_up {
+                                ": right."
+                            } else {
+                                "."
+                            }
+                        )
+                    }
+                    _ => format!(
+                        "Your prediction `keeps_it_up` lists names other than {}.",
+                        EX5_REACTIONS.join(", ")
+                    ),
+                }
+            }
+            None => super::unreadable("keeps_it_up"),
+        };
+        let latency = match p("reliable_latency_ms").and_then(super::number) {
+            Some(n) => format!(
+                "You predicted {n} ms of mean sense->act latency with reliable delivery; it was {:.1} ms (the lossless link: {:.1} ms).",
+                self.reliable_latency_ms, self.lossless_latency_ms
+            ),
+            None => super::unreadable("reliable_latency_ms"),
+        };
+        vec![
+            super::predicted_survival(
+                prediction,
+                "survives_low_loss",
+                &format!("at {} loss, best effort", pct(low)),
+                self.low_loss_balances,
+            ),
+            super::predicted_survival(
+                prediction,
+                "survives_high_loss",
+                &format!("at {} loss, best effort", pct(high)),
+                self.high_loss_balances,
+            ),
+            kept,
+            latency,
+        ]
+    }
+}
+
+impl Exercise for Ex5 {
+    fn id(&self) -> &'static str {
+        "ex5"
+    }
+
+    fn title(&self) -> &'static str {
+        "the watchdog"
+    }
+
+    fn file(&self) -> &'static str {
+        "ex5_watchdog.toml"
+    }
+
+    fn required_keys(&self) -> &'static [&'static str] {
+        &[
+            "survives_low_loss",
+            "survives_high_loss",
+            "keeps_it_up",
+            "reliable_latency_ms",
+        ]
+    }
+
+    fn default_graph(&self, bands: &super::Bands) -> Result<Option<String>, ExerciseError> {
+        Ok(Some(bands.of::<Ex5Bands>()?.graph))
+    }
+
+    fn run(&self, cx: &mut Context<'_>) -> Result<(), ExerciseError> {
+        let b: Ex5Bands = cx.bands()?;
+        let runs = cx.measure(|| measure_ex5(&b, cx.graph))?;
+        table(cx, &b, &runs);
+        let outcome = outcome_ex5(&b, &runs);
+        cx.reconcile(&outcome);
+        cx.checks(&check_ex5(&b, &runs));
+        say!(cx);
+        cx.paragraph(&explain(&b, &runs, &outcome));
+        say!(
+            cx,
+            "  ratelab run --clock virtual --graph graphs/cartpole-safety.toml --link {}:loss={},delay_ms=30,jitter_ms=10",
+            b.topic,
+            b.low_loss
+        );
+        say!(
+            cx,
+            "and the same with --qos {}:reliability=reliable.",
+            b.topic
+        );
+        Ok(())
+    }
+}
+
+/// ex5's table: per case, each seed's verdict, the latency and the link's counters.
+fn table(cx: &mut Context<'_>, b: &Ex5Bands, runs: &[Ex5Run]) {
+    let w = Ex5Case::ALL
+        .iter()
+        .map(|c| c.label(b).len())
+        .max()
+        .unwrap_or(0)
+        .max(b.topic.len() + 20);
+    say!(
+        cx,
+        "{:<w$} | {} | latency mean |   max | lost |  retx | dl missed | no cmd",
+        format!("{} (safety -> actuator)", b.topic),
+        seeds_header(&b.seeds)
+    );
+    for case in Ex5Case::ALL {
+        let rs: Vec<&Ex5Run> = runs.iter().filter(|r| r.case == case).collect();
+        let cells: Vec<String> = rs
+            .iter()
+            .map(|r| format!("{:^7}", verdict(&r.metrics)))
+            .collect();
+        let max = rs
+            .iter()
+            .map(|r| r.metrics.latency_max_ms)
+            .fold(0.0, f64::max);
+        let sum = |key: &str| rs.iter().map(|r| r.counter(b, key)).sum::<u64>();
+        say!(
+            cx,
+            "{:<w$} | {} | {:>9.1} ms | {:>5.1} | {:>4} | {:>5} | {:>9} | {:>6}",
+            case.label(b),
+            cells.join(" "),
+            mean_latency(&rs),
+            max,
+            sum("lost"),
+            sum("retransmitted"),
+            if matches!(case, Ex5Case::DeadlineHold | Ex5Case::DeadlineZero) {
+                sum("requested_deadline_missed").to_string()
+            } else {
+                "-".into()
+            },
+            rs.iter().map(|r| r.steps_without_command).sum::<u64>(),
+        );
+    }
+    say!(cx, "(latency: sense->act, ms, the mean of the seeds' means and the largest; lost, retx (retransmitted),");
+    say!(cx, " dl missed (deadline periods with no command arriving; -: no deadline) and no cmd (actuator steps");
+    say!(cx, " that applied no command: no latency) are summed over the seeds; Y: balanced; n@T: fell at T s)");
+}
+
+/// The explanation, with its numbers from the bands and the runs, and each claim about a
+/// verdict said only when the runs bear it out.
+fn explain(b: &Ex5Bands, runs: &[Ex5Run], outcome: &Ex5Outcome) -> String {
+    let max_of = |c: Ex5Case| {
+        ex5_of(runs, c)
+            .iter()
+            .map(|r| r.metrics.latency_max_ms)
+            .fold(0.0, f64::max)
+    };
+    let up = |c: Ex5Case| ex5_of(runs, c).iter().all(|r| r.metrics.balanced);
+    let pct = |p: f64| format!("{}%", p * 100.0);
+    let (low, high) = (pct(b.low_loss), pct(b.high_loss));
+    let mut text = format!(
+        "Reconcile: a lost command is a held command. At {low} loss the actuator re-applies the \
+         previous command for a tick or a few (the oldest command applied was {:.0} ms old)",
+        max_of(Ex5Case::LowLoss)
+    );
+    text += if up(Ex5Case::LowLoss) {
+        ", within what ex1's rate cliff allows, and the pole stays up: the zero-order hold already \
+         is a loss strategy."
+    } else {
+        "."
+    };
+    text += &format!(
+        " At {high} the holds run to {:.0} ms{}",
+        max_of(Ex5Case::HighLoss),
+        if up(Ex5Case::HighLoss) {
+            "."
+        } else {
+            " and the pole falls."
+        }
+    );
+    text += &format!(
+        " A deadline alone changes only the counters: hold is the default reaction. With zero the \
+         actuator stops pushing once its command is older than the deadline ({} ms: a command lost \
+         once is held, the next tick still without one applies no force).",
+        b.deadline_ms
+    );
+    if up(Ex5Case::DeadlineZero) && !up(Ex5Case::HighLoss) {
+        text += " Here a stale push is worse than none, and the pole stays up.";
+    }
+    text +=
+        " Motor drivers do the same with a command timeout (ROS 2's diff_drive_controller stops \
+             the wheels after cmd_vel_timeout).";
+    let timeout = crate::qos::Link::default_retransmit(crate::Nanos::ZERO, crate::Nanos::ZERO);
+    let attempts = crate::qos::MAX_ATTEMPTS;
+    text += &format!(
+        " Reliable delivery sends a lost command again, up to {attempts} times (at {high} loss all \
+         {attempts} sends fail for {:.1}% of commands), and a retransmission comes a timeout later \
+         ({timeout} here: the link has no delay), too late for its tick, which applies an older \
+         command.",
+        b.high_loss.powi(i32::try_from(attempts).unwrap_or(i32::MAX)) * 100.0
+    );
+    text += &format!(
+        " That is its latency cost: {:.1} ms on average, against {:.1} ms without the link.",
+        outcome.reliable_latency_ms, outcome.lossless_latency_ms
+    );
+    text += " On a slow link the timeout is a round trip, and a reliable link keeps order, so one \
+             loss delays every command behind it. Try it:";
+    text
 }

@@ -2,7 +2,16 @@
 //! place, over a ladder of clamps, beside the built-in safety node: the smallest clamp that
 //! still balances, and whether the learner's node limits as the built-in one does.
 
-use super::*;
+use super::{check, run_virtual, seeds_header, threads, Check, Context, Exercise};
+use super::{ExerciseError, Reconcile, Section};
+use crate::graph::GraphSpec;
+use crate::metrics::Metrics;
+use crate::sweep::run_pool;
+use serde::Deserialize;
+use std::path::Path;
+
+/// ex6: write your own node.
+pub struct Ex6;
 
 /// ex6's settings: write your own node (a Python safety limiter).
 #[derive(Clone, Debug, Deserialize)]
@@ -25,6 +34,20 @@ pub struct Ex6Bands {
     /// The smallest clamp of `clamps_n` at which the built-in safety node keeps the pole up
     /// on every seed, N.
     pub smallest_balancing_clamp_n: f64,
+}
+
+impl Section for Ex6Bands {
+    const NAME: &'static str = "ex6";
+}
+
+/// ex6's outcome: the smallest clamp at which the learner's node kept the pole up on every
+/// seed, and whether it gave the built-in node's verdicts at every clamp.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Ex6Outcome {
+    /// Clamp, N (`None`: at none).
+    pub smallest_clamp_n: Option<f64>,
+    /// Same balanced/fell, at the same step, as the built-in safety node, everywhere.
+    pub matches_builtin: bool,
 }
 
 /// One ex6 run: a clamp and a seed, with the built-in safety node or the Python one.
@@ -139,8 +162,8 @@ pub fn ex6_differences(runs: &[Ex6Run]) -> Vec<(f64, u64)> {
 }
 
 /// ex6's outcome in the terms of its prediction.
-pub fn outcome_ex6(runs: &[Ex6Run]) -> Outcome {
-    Outcome::Ex6 {
+pub fn outcome_ex6(runs: &[Ex6Run]) -> Ex6Outcome {
+    Ex6Outcome {
         smallest_clamp_n: ex6_smallest(runs, true),
         matches_builtin: ex6_differences(runs).is_empty(),
     }
@@ -174,4 +197,151 @@ pub fn check_ex6(b: &Ex6Bands, runs: &[Ex6Run]) -> Vec<Check> {
             runs.iter().any(|r| r.python) && ex6_differences(runs).is_empty(),
         ),
     ]
+}
+
+impl Reconcile for Ex6Outcome {
+    fn reconcile(&self, prediction: &toml::Table) -> Vec<String> {
+        let measured = self.smallest_clamp_n.map_or_else(
+            || "your node kept it up at none of the clamps".to_string(),
+            |c| format!("with your node it was {c} N"),
+        );
+        let clamp = match prediction.get("smallest_clamp_n").and_then(super::number) {
+            Some(n) if Some(n) == self.smallest_clamp_n => format!(
+                "You predicted the smallest clamp that keeps the pole up is {n} N; {measured}: right."
+            ),
+            Some(n) => format!(
+                "You predicted the smallest clamp that keeps the pole up is {n} N; {measured}."
+            ),
+            None => super::unreadable("smallest_clamp_n"),
+        };
+        let node = if self.matches_builtin {
+            "Your node limits as the built-in safety node does: the same verdict, at the same step, at every clamp and seed."
+        } else {
+            "Your node does not limit as the built-in safety node does: see the table for where they differ."
+        };
+        vec![clamp, node.to_string()]
+    }
+}
+
+impl Exercise for Ex6 {
+    fn id(&self) -> &'static str {
+        "ex6"
+    }
+
+    fn title(&self) -> &'static str {
+        "write your own node"
+    }
+
+    fn file(&self) -> &'static str {
+        "ex6_own_node.toml"
+    }
+
+    fn required_keys(&self) -> &'static [&'static str] {
+        &["smallest_clamp_n"]
+    }
+
+    fn default_graph(&self, bands: &super::Bands) -> Result<Option<String>, ExerciseError> {
+        Ok(Some(bands.of::<Ex6Bands>()?.graph))
+    }
+
+    fn run(&self, cx: &mut Context<'_>) -> Result<(), ExerciseError> {
+        let b: Ex6Bands = cx.bands()?;
+        let script = cx.dir.join(&b.script);
+        refuse_the_template(&script)?;
+        let runs = cx.measure(|| measure_ex6(&b, cx.graph, &script))?;
+        table(cx, &b, &runs);
+        cx.reconcile(&outcome_ex6(&runs));
+        cx.checks(&check_ex6(&b, &runs));
+        say!(cx);
+        cx.paragraph(&format!(
+            "Reconcile: the balancer's commands are large only in the first second, while it \
+             catches the pole from the reset's tilt; once the pole is up, a few newtons' worth of \
+             command is plenty. Clamped at {} N the pole still comes up on every seed; below it, \
+             a seed whose first pushes need more falls in the first seconds. A limiter is a node \
+             like any other: here it ticks at the same instants as the policy, just after it, so \
+             it adds no sense->act latency. Try your node in the lab, and change its rate (Tab to \
+             select it, then - and +):",
+            b.smallest_balancing_clamp_n
+        ));
+        // The learner's node, not the shipped solution: the graph beside the exercise's files.
+        let graph = cx.dir.join("ex6_my_limiter.toml");
+        say!(
+            cx,
+            "  ./scripts/lab.sh --clock virtual --graph {}",
+            graph.display()
+        );
+        Ok(())
+    }
+}
+
+/// ex6's table: per clamp, the built-in node's verdict per seed, then the learner's.
+fn table(cx: &mut Context<'_>, b: &Ex6Bands, runs: &[Ex6Run]) {
+    let cell = |r: Option<&Ex6Run>| match r {
+        Some(r) if r.metrics.balanced => "Y".to_string(),
+        Some(r) => r
+            .metrics
+            .fell_at_s
+            .map_or("n".into(), |t| format!("n@{t:.2}")),
+        None => "-".into(),
+    };
+    let row = |clamp: f64, python: bool| -> Vec<String> {
+        b.seeds
+            .iter()
+            .map(|&seed| {
+                cell(
+                    runs.iter()
+                        .find(|r| r.clamp_n == clamp && r.seed == seed && r.python == python),
+                )
+            })
+            .map(|c| format!("{c:<7}"))
+            .collect()
+    };
+    say!(
+        cx,
+        "{:>9} | built-in safety node: {} | your node ({}): {}",
+        "max force",
+        seeds_header(&b.seeds),
+        b.script,
+        seeds_header(&b.seeds)
+    );
+    let differ = ex6_differences(runs);
+    for &clamp in &b.clamps_n {
+        let mark = if differ.iter().any(|(c, _)| *c == clamp) {
+            "  <- differs"
+        } else {
+            ""
+        };
+        say!(
+            cx,
+            "{:>7} N | {:>21} {} | {:>w$} {}{mark}",
+            clamp,
+            "",
+            row(clamp, false).join(" "),
+            "",
+            row(clamp, true).join(" "),
+            w = 11 + b.script.len()
+        );
+    }
+    say!(cx, "(Y: balanced the whole run; n@T: fell at T s)");
+}
+
+/// ex6's node as shipped, to tell the learner's from it: running the untouched template
+/// would measure ratelab's pass-through, not the learner's node.
+const EX6_TEMPLATE: &str = include_str!("../../exercises/ex6_my_limiter.py");
+
+/// Refuse ex6's node file when it is still the template as shipped (line endings and
+/// trailing blanks aside).
+///
+/// # Errors
+/// [`ExerciseError::NotReady`]: the file is the untouched template.
+fn refuse_the_template(script: &Path) -> Result<(), ExerciseError> {
+    let normal = |t: &str| t.lines().map(str::trim_end).collect::<Vec<_>>().join("\n");
+    let mine = std::fs::read(script).unwrap_or_default();
+    if normal(&String::from_utf8_lossy(&mine)) == normal(EX6_TEMPLATE).as_str() {
+        return Err(ExerciseError::NotReady(format!(
+            "{} is the template as shipped: make on_action clamp msg.newtons to ±max_force_n (its TODO) first; writing the node is the exercise",
+            script.display()
+        )));
+    }
+    Ok(())
 }

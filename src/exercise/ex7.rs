@@ -4,11 +4,14 @@
 //! timers of one rclpy node, its default group); the same with the sensor in a group of its
 //! own. Virtual clock: each case is exact.
 
-use super::{check, run_virtual, Check, ExerciseError, Outcome};
+use super::{check, run_virtual, Check, Context, Exercise, ExerciseError, Reconcile, Section};
 use crate::executor::ExecutorOverride;
 use crate::graph::GraphSpec;
 use crate::metrics::Metrics;
 use serde::Deserialize;
+
+/// ex7: the slow callback.
+pub struct Ex7;
 
 /// ex7's settings and the bands its checks assert.
 #[derive(Clone, Debug, Deserialize)]
@@ -26,6 +29,26 @@ pub struct Ex7Bands {
     pub single_threaded_sensor_hz: [f64; 2],
     /// The sensor's rate with a group of its own: its set rate within this, Hz.
     pub own_group_tolerance_hz: f64,
+}
+
+impl Section for Ex7Bands {
+    const NAME: &'static str = "ex7";
+}
+
+/// ex7's outcome: the sensor's achieved rate in each case (the lowest over the seeds), its
+/// skipped ticks single-threaded (the most over the seeds), and the single-threaded verdict.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Ex7Outcome {
+    /// Single-threaded, Hz.
+    pub sensor_hz_single_threaded: f64,
+    /// Single-threaded.
+    pub skipped_ticks_single_threaded: u64,
+    /// Single-threaded, on every seed.
+    pub balances_single_threaded: bool,
+    /// Two threads, one mutually exclusive group, Hz.
+    pub sensor_hz_shared_group: f64,
+    /// Two threads, the sensor in its own group, Hz.
+    pub sensor_hz_own_group: f64,
 }
 
 /// The three ways ex7 runs its graph.
@@ -138,8 +161,8 @@ fn sensor_hz(b: &Ex7Bands, runs: &[Ex7Run], case: Ex7Case) -> f64 {
 }
 
 /// ex7's outcome in the terms of its prediction.
-pub fn outcome_ex7(b: &Ex7Bands, runs: &[Ex7Run]) -> Outcome {
-    Outcome::Ex7 {
+pub fn outcome_ex7(b: &Ex7Bands, runs: &[Ex7Run]) -> Ex7Outcome {
+    Ex7Outcome {
         sensor_hz_single_threaded: sensor_hz(b, runs, Ex7Case::SingleThreaded),
         skipped_ticks_single_threaded: of(runs, Ex7Case::SingleThreaded)
             .map(|r| r.sensor_skipped(b))
@@ -194,18 +217,21 @@ pub fn check_ex7(b: &Ex7Bands, runs: &[Ex7Run]) -> Vec<Check> {
 }
 
 /// The learner's ex7 `prediction` beside the outcome, one sentence per key.
-pub(super) fn reconcile(prediction: &toml::Table, outcome: &Outcome) -> Vec<String> {
+impl Reconcile for Ex7Outcome {
+    fn reconcile(&self, prediction: &toml::Table) -> Vec<String> {
+        reconcile(prediction, self)
+    }
+}
+
+fn reconcile(prediction: &toml::Table, outcome: &Ex7Outcome) -> Vec<String> {
     let p = |k: &str| prediction.get(k);
-    let Outcome::Ex7 {
+    let Ex7Outcome {
         sensor_hz_single_threaded,
         skipped_ticks_single_threaded,
         balances_single_threaded,
         sensor_hz_shared_group,
         sensor_hz_own_group,
-    } = *outcome
-    else {
-        return Vec::new();
-    };
+    } = *outcome;
     let hz = |key: &str, what: &str, measured: f64| match p(key).and_then(super::number) {
         Some(n) => format!(
             "You predicted the sensor achieves {n} Hz {what}; it achieved {measured:.1} Hz."
@@ -243,4 +269,92 @@ pub(super) fn reconcile(prediction: &toml::Table, outcome: &Outcome) -> Vec<Stri
             sensor_hz_own_group,
         ),
     ]
+}
+
+impl Exercise for Ex7 {
+    fn id(&self) -> &'static str {
+        "ex7"
+    }
+
+    fn title(&self) -> &'static str {
+        "the slow callback"
+    }
+
+    fn file(&self) -> &'static str {
+        "ex7_slow_callback.toml"
+    }
+
+    fn required_keys(&self) -> &'static [&'static str] {
+        &[
+            "sensor_hz_single_threaded",
+            "skipped_ticks_single_threaded",
+            "balances_single_threaded",
+            "sensor_hz_shared_group",
+            "sensor_hz_own_group",
+        ]
+    }
+
+    fn default_graph(&self, bands: &super::Bands) -> Result<Option<String>, ExerciseError> {
+        Ok(Some(bands.of::<Ex7Bands>()?.graph))
+    }
+
+    /// The table (per case and seed: the sensor's rate and skipped ticks, the policy's
+    /// response time, the executor's utilization, the verdict), the reconcile and the
+    /// checks.
+    fn run(&self, cx: &mut Context<'_>) -> Result<(), ExerciseError> {
+        let b: Ex7Bands = cx.bands()?;
+        let runs = cx.measure(|| measure_ex7(&b, cx.graph))?;
+        say!(
+            cx,
+            "{:<21} | seed | sensor Hz | skipped | policy response p50/max | executor busy | balanced",
+            "executor"
+        );
+        for case in Ex7Case::ALL {
+            for r in of(&runs, case) {
+                let m = &r.metrics;
+                let policy = m
+                    .nodes
+                    .values()
+                    .find(|n| n.kind == "policy")
+                    .and_then(|n| n.exec.clone())
+                    .unwrap_or_default();
+                let busy = m.executors.first().map_or(0.0, |e| e.utilization * 100.0);
+                say!(
+                    cx,
+                    "{:<21} | {:>4} | {:>9.1} | {:>7} | {:>10.1} / {:>5.1} ms | {:>12.0}% | {}",
+                    case.label(),
+                    r.seed,
+                    r.sensor_hz(&b),
+                    r.sensor_skipped(&b),
+                    policy.response_time_p50_ms,
+                    policy.response_time_max_ms,
+                    busy,
+                    if m.balanced {
+                        "Y".to_string()
+                    } else {
+                        m.fell_at_s.map_or("n".into(), |t| format!("n@{t:.2}"))
+                    }
+                );
+            }
+        }
+        cx.reconcile(&outcome_ex7(&b, &runs));
+        cx.checks(&check_ex7(&b, &runs));
+        say!(cx);
+        cx.paragraph(
+            "Reconcile: an executor runs one callback per thread at a time, and a callback is not \
+             interrupted. Single-threaded, each 30 ms policy tick holds the only thread, so the \
+             sensor's timer fires late, and the periods that pass meanwhile are skipped, not \
+             made up (ROS 2's timers stay on their grid). A second thread does nothing while \
+             both callbacks are in one mutually exclusive group: the group, not the thread count, \
+             decides what may run together, and a node's callbacks share its default group. In a \
+             group of its own the sensor gets the second thread and its rate back. The pole \
+             hardly notices either way: the policy reads the newest reading when it starts, and \
+             the action's age is the policy's own 30 ms plus the wait for the actuator's tick. \
+             What the starved sensor costs is every other subscriber of /obs (a logger, an \
+             estimator), which would see a third of its readings missing. Try it with the \
+             policy's compute time changed:",
+        );
+        say!(cx, "  ./scripts/lab.sh run --clock virtual --graph graphs/cartpole-executors.toml --executor single_threaded --compute policy=60");
+        Ok(())
+    }
 }

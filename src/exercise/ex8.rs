@@ -5,10 +5,13 @@
 //! does the pole first fall, and does a smoother estimate (more lag, less noise) move that
 //! point? Virtual clock: every run is exact, the noise seeded.
 
-use super::{check, run_virtual, Check, ExerciseError, Outcome};
+use super::{check, run_virtual, Check, Context, Exercise, ExerciseError, Reconcile, Section};
 use crate::graph::GraphSpec;
 use crate::metrics::Metrics;
 use serde::Deserialize;
+
+/// ex8: the noisy sensor.
+pub struct Ex8;
 
 /// ex8's settings and the bands its checks assert.
 #[derive(Clone, Debug, Deserialize)]
@@ -34,6 +37,20 @@ pub struct Ex8Bands {
     /// At the first cut-off, the lowest noise at which a seed falls lies in this
     /// `[low, high]`, rad.
     pub first_fall_rad: [f64; 2],
+}
+
+impl Section for Ex8Bands {
+    const NAME: &'static str = "ex8";
+}
+
+/// ex8's outcome: the lowest noise at which a seed fell at the estimator's shipped cut-off,
+/// and whether the lower cut-off's first fall came at a higher noise.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Ex8Outcome {
+    /// rad (`None`: none on the grid).
+    pub fails_at_noise_rad: Option<f64>,
+    /// The smoother estimate tolerated more noise.
+    pub lower_cutoff_tolerates_more: bool,
 }
 
 /// One ex8 run.
@@ -104,10 +121,10 @@ pub fn first_fall_rad(runs: &[Ex8Run], cutoff_hz: f64) -> Option<f64> {
 }
 
 /// ex8's outcome in the terms of its prediction.
-pub fn outcome_ex8(b: &Ex8Bands, runs: &[Ex8Run]) -> Outcome {
+pub fn outcome_ex8(b: &Ex8Bands, runs: &[Ex8Run]) -> Ex8Outcome {
     let [shipped, lower] = b.cutoffs_hz;
     let (at_shipped, at_lower) = (first_fall_rad(runs, shipped), first_fall_rad(runs, lower));
-    Outcome::Ex8 {
+    Ex8Outcome {
         fails_at_noise_rad: at_shipped,
         lower_cutoff_tolerates_more: tolerates_more(at_lower, at_shipped),
     }
@@ -156,14 +173,17 @@ pub fn check_ex8(b: &Ex8Bands, runs: &[Ex8Run]) -> Vec<Check> {
 }
 
 /// The learner's ex8 `prediction` beside the outcome, one sentence per key.
-pub(super) fn reconcile(prediction: &toml::Table, outcome: &Outcome) -> Vec<String> {
-    let Outcome::Ex8 {
+impl Reconcile for Ex8Outcome {
+    fn reconcile(&self, prediction: &toml::Table) -> Vec<String> {
+        reconcile(prediction, self)
+    }
+}
+
+fn reconcile(prediction: &toml::Table, outcome: &Ex8Outcome) -> Vec<String> {
+    let Ex8Outcome {
         fails_at_noise_rad,
         lower_cutoff_tolerates_more,
-    } = *outcome
-    else {
-        return Vec::new();
-    };
+    } = *outcome;
     let measured = fails_at_noise_rad
         .map_or("no noise on the grid made it fall".to_string(), |n| {
             format!("it first fell at {n} rad")
@@ -188,6 +208,89 @@ pub(super) fn reconcile(prediction: &toml::Table, outcome: &Outcome) -> Vec<Stri
         None => super::unreadable("lower_cutoff_tolerates_more"),
     };
     vec![first, lower]
+}
+
+impl Exercise for Ex8 {
+    fn id(&self) -> &'static str {
+        "ex8"
+    }
+
+    fn title(&self) -> &'static str {
+        "the noisy sensor"
+    }
+
+    fn file(&self) -> &'static str {
+        "ex8_noisy_sensor.toml"
+    }
+
+    fn required_keys(&self) -> &'static [&'static str] {
+        &["fails_at_noise_rad", "lower_cutoff_tolerates_more"]
+    }
+
+    fn default_graph(&self, bands: &super::Bands) -> Result<Option<String>, ExerciseError> {
+        Ok(Some(bands.of::<Ex8Bands>()?.graph))
+    }
+
+    /// The table (per cut-off and noise: each seed's verdict and the mean sense→act
+    /// latency), the reconcile and the checks.
+    fn run(&self, cx: &mut Context<'_>) -> Result<(), ExerciseError> {
+        let b: Ex8Bands = cx.bands()?;
+        let runs = cx.measure(|| measure_ex8(&b, cx.graph))?;
+        say!(
+            cx,
+            "cut-off | angle noise | seeds: balanced (n@t: fell at t s) | latency mean"
+        );
+        for cutoff in b.cutoffs_hz {
+            for &noise in &b.noise_grid_rad {
+                let row: Vec<&Ex8Run> = runs
+                    .iter()
+                    .filter(|r| r.cutoff_hz == cutoff && r.noise_rad == noise)
+                    .collect();
+                let verdicts: Vec<String> = row
+                    .iter()
+                    .map(|r| {
+                        if r.metrics.balanced {
+                            "Y".to_string()
+                        } else {
+                            r.metrics
+                                .fell_at_s
+                                .map_or("n".into(), |t| format!("n@{t:.2}"))
+                        }
+                    })
+                    .collect();
+                let mean = row.iter().map(|r| r.metrics.mean_latency_ms).sum::<f64>()
+                    / row.len().max(1) as f64;
+                say!(
+                    cx,
+                    "{:>4} Hz | {:>7.3} rad | {:<34} | {:>7.1} ms",
+                    cutoff,
+                    noise,
+                    verdicts.join(" "),
+                    mean
+                );
+            }
+        }
+        cx.reconcile(&outcome_ex8(&b, &runs));
+        cx.checks(&check_ex8(&b, &runs));
+        say!(cx);
+        cx.paragraph(
+            "Reconcile: the estimator ticks at 100 Hz and reads the newest of the two measurements \
+             the 200 Hz sensor published since its last tick, so its velocity is the difference of \
+             two noisy angles 10 ms apart: its noise is about 141 times the angle's \
+             (sqrt(2) / 0.010 s) before the filter. A pole-angle noise of a hundredth of a radian, \
+             half a degree, is a velocity noise of about 1.4 rad/s, and the policy pushes on it. The low-pass filter trades that noise for \
+             lag (about 1 / (2 pi cut-off): 8 ms at 20 Hz, 16 ms at 10 Hz); here the noise is the \
+             larger harm, so the smoother estimate holds on to a higher noise. How far does the \
+             trade go? Copy the graph, lower cutoff_hz to 5 and 2 Hz, raise noise_angle_rad, and \
+             look. The latency column stays at the estimator's and the policy's compute times \
+             plus the waits for the next tick: noise does not delay messages, it corrupts them.",
+        );
+        say!(
+            cx,
+            "  ./scripts/lab.sh run --clock virtual --graph graphs/cartpole-estimator.toml"
+        );
+        Ok(())
+    }
 }
 
 #[cfg(test)]

@@ -6,7 +6,7 @@
 //! Real clock, real processes over Zenoh ([`crate::distributed`]): the checks assert only
 //! what holds on a noisy machine (medians).
 
-use super::{check, Check, ExerciseError, Outcome};
+use super::{check, Check, Context, Exercise, ExerciseError, Reconcile, Section};
 use crate::config::{duration_from_secs, phase_offset_from_ms, ClockKind, RunConfig};
 use crate::distributed::credentials::Credentials;
 use crate::distributed::launcher::{launch, LaunchOptions};
@@ -15,6 +15,9 @@ use crate::metrics::Metrics;
 use crate::scheduler::StopFlag;
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
+
+/// ex9: the crossing.
+pub struct Ex9;
 
 /// ex9's settings and the bands its checks assert.
 #[derive(Clone, Debug, Deserialize)]
@@ -36,6 +39,20 @@ impl Ex9Bands {
     pub fn fixed_latency_ms(&self) -> f64 {
         super::fixed_latency_ms(&self.phase_offset_ms)
     }
+}
+
+impl Section for Ex9Bands {
+    const NAME: &'static str = "ex9";
+}
+
+/// ex9's outcome: the median sense→act latency across processes, without and with the
+/// offsets.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Ex9Outcome {
+    /// ms.
+    pub p50_latency_across_ms: f64,
+    /// ms.
+    pub p50_latency_across_offsets_ms: f64,
 }
 
 /// The three ways ex9 runs the graph.
@@ -164,9 +181,9 @@ fn of(runs: &[Ex9Run], case: Ex9Case) -> Option<&Ex9Run> {
 }
 
 /// ex9's outcome in the terms of its prediction.
-pub fn outcome_ex9(runs: &[Ex9Run]) -> Outcome {
+pub fn outcome_ex9(runs: &[Ex9Run]) -> Ex9Outcome {
     let p50 = |case| of(runs, case).map_or(f64::NAN, |r| r.metrics.latency_p50_ms);
-    Outcome::Ex9 {
+    Ex9Outcome {
         p50_latency_across_ms: p50(Ex9Case::Across),
         p50_latency_across_offsets_ms: p50(Ex9Case::AcrossWithOffsets),
     }
@@ -200,14 +217,17 @@ pub fn check_ex9(b: &Ex9Bands, runs: &[Ex9Run]) -> Vec<Check> {
 }
 
 /// The learner's ex9 `prediction` beside the outcome, one sentence per key.
-pub(super) fn reconcile(prediction: &toml::Table, outcome: &Outcome) -> Vec<String> {
-    let Outcome::Ex9 {
+impl Reconcile for Ex9Outcome {
+    fn reconcile(&self, prediction: &toml::Table) -> Vec<String> {
+        reconcile(prediction, self)
+    }
+}
+
+fn reconcile(prediction: &toml::Table, outcome: &Ex9Outcome) -> Vec<String> {
+    let Ex9Outcome {
         p50_latency_across_ms,
         p50_latency_across_offsets_ms,
-    } = *outcome
-    else {
-        return Vec::new();
-    };
+    } = *outcome;
     let say =
         |key: &str, what: &str, measured: f64| match prediction.get(key).and_then(super::number) {
             Some(n) => format!(
@@ -227,4 +247,80 @@ pub(super) fn reconcile(prediction: &toml::Table, outcome: &Outcome) -> Vec<Stri
             p50_latency_across_offsets_ms,
         ),
     ]
+}
+
+impl Exercise for Ex9 {
+    fn id(&self) -> &'static str {
+        "ex9"
+    }
+
+    fn title(&self) -> &'static str {
+        "the crossing: real processes"
+    }
+
+    fn file(&self) -> &'static str {
+        "ex9_crossing.toml"
+    }
+
+    fn required_keys(&self) -> &'static [&'static str] {
+        &["p50_latency_across_ms", "p50_latency_across_offsets_ms"]
+    }
+
+    /// The table (per case: the latency's mean, median and 99th percentile, the drops, the
+    /// wire's median per crossing topic), the reconcile and the checks.
+    fn run(&self, cx: &mut Context<'_>) -> Result<(), ExerciseError> {
+        let b: Ex9Bands = cx.bands()?;
+        say!(
+            cx,
+            "Running {} s on the real clock three times, twice across two processes (this takes real time)...",
+            b.duration_s
+        );
+        let runs = cx.measure(|| measure_ex9(&b, cx.graph, cx.graph_path, cx.exe))?;
+        say!(cx, "case                   | latency mean |    p50 |    p99 | /obs dropped | /action dropped | wire p50");
+        for case in Ex9Case::ALL {
+            for r in runs.iter().filter(|r| r.case == case) {
+                let m = &r.metrics;
+                let wire: Vec<String> = r
+                    .wire_p50_us
+                    .iter()
+                    .map(|(t, us)| format!("{t} {us:.0} µs"))
+                    .collect();
+                say!(
+                    cx,
+                    "{:<22} | {:>9.1} ms | {:>6.1} | {:>6.1} | {:>12} | {:>15} | {}",
+                    case.label(),
+                    m.mean_latency_ms,
+                    m.latency_p50_ms,
+                    m.latency_p99_ms,
+                    m.obs_dropped.unwrap_or(0),
+                    m.action_dropped.unwrap_or(0),
+                    if wire.is_empty() {
+                        "-".to_string()
+                    } else {
+                        wire.join(", ")
+                    }
+                );
+            }
+        }
+        cx.reconcile(&outcome_ex9(&runs));
+        cx.checks(&check_ex9(&b, &runs));
+        say!(cx);
+        cx.paragraph(
+            "Reconcile: in one process, the policy waking at the sensor's instant races the \
+             sensor's thread for the fresh reading, and wins it sometimes (ex3). Across \
+             processes it never does: the reading is still on the wire (a fraction of a \
+             millisecond), so the policy acts on the one before, a period older (+20 ms); the \
+             force crosses back the same way and the actuator, waking at the policy's instant, \
+             applies the force before (+20 ms). Each crossing hop at a shared instant costs a \
+             full period. Offsets give each hop time to arrive: the sensor at 0, the policy 5 ms \
+             later, the actuator 5 ms after that, and the latency is the 10 ms between sensor and \
+             actuator. An offset of 1 ms is longer than the wire but not than every stall of a \
+             busy machine: then misses come back, some of the time.",
+        );
+        say!(
+            cx,
+            "  ./scripts/lab.sh launch --processes --clock real --duration 5 --phase-offset-ms 0,1,2"
+        );
+        Ok(())
+    }
 }

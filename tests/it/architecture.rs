@@ -597,3 +597,74 @@ fn reexported(tree: &syn::UseTree, out: &mut Vec<String>) {
         syn::UseTree::Group(g) => g.items.iter().for_each(|t| reexported(t, out)),
     }
 }
+
+/// The string literals of one file's code (not its tests), also inside macro calls.
+#[derive(Default)]
+struct Literals(Vec<String>);
+
+impl Literals {
+    fn scan(&mut self, tokens: TokenStream) {
+        for t in tokens {
+            match t {
+                TokenTree::Literal(l) => self.0.push(l.to_string()),
+                TokenTree::Group(g) => self.scan(g.stream()),
+                _ => {}
+            }
+        }
+    }
+}
+
+impl<'ast> Visit<'ast> for Literals {
+    fn visit_item(&mut self, item: &'ast syn::Item) {
+        if !is_cfg_test(attrs(item)) {
+            syn::visit::visit_item(self, item);
+        }
+    }
+
+    fn visit_lit_str(&mut self, l: &'ast syn::LitStr) {
+        self.0.push(format!("{:?}", l.value()));
+    }
+
+    fn visit_macro(&mut self, m: &'ast syn::Macro) {
+        self.scan(m.tokens.clone());
+    }
+}
+
+/// Every `.rs` file under `dir`, recursively.
+fn rust_files(dir: &Path, out: &mut Vec<std::path::PathBuf>) {
+    for entry in std::fs::read_dir(dir).unwrap() {
+        let path = entry.unwrap().path();
+        if path.is_dir() {
+            rust_files(&path, out);
+        } else if path.extension().is_some_and(|e| e == "rs") {
+            out.push(path);
+        }
+    }
+}
+
+/// An exercise is one file plus its line in the registry (issue "One run core…", item 5):
+/// no code outside `src/exercise/exN.rs` names exercise `exN` (the command line, the lab,
+/// the framework list them from the registry).
+#[test]
+fn an_exercise_is_named_only_in_its_own_file() {
+    let mut files = Vec::new();
+    rust_files(&crate::repo("src"), &mut files);
+    rust_files(&crate::repo("lab"), &mut files);
+    let ids = ratelab::exercise::ids();
+    assert!(ids.len() >= 9, "{ids:?}");
+    let mut found = 0;
+    for file in files {
+        let text = std::fs::read_to_string(&file).unwrap();
+        let mut literals = Literals::default();
+        literals.visit_file(&syn::parse_file(&text).unwrap());
+        for id in &ids {
+            let quoted = format!("{id:?}");
+            if literals.0.contains(&quoted) {
+                let own = file.ends_with(format!("src/exercise/{id}.rs"));
+                assert!(own, "{} names {quoted}", file.display());
+                found += 1;
+            }
+        }
+    }
+    assert_eq!(found, ids.len(), "each exercise names itself in its file");
+}

@@ -6,11 +6,14 @@
 use ratelab::exercise::{
     check_ex1, check_ex2, check_ex3, check_ex4, check_ex5, check_ex6, default_graph, load_bands,
     measure_ex1, measure_ex2, measure_ex3, measure_ex4, measure_ex5, measure_ex6, outcome_ex4,
-    outcome_ex5, outcome_ex6, required_keys, Bands, Ex5Case, ExerciseFile, Outcome,
+    outcome_ex5, outcome_ex6, required_keys, Ex5Case, ExerciseFile,
 };
 use ratelab::exercise::{check_ex7, measure_ex7, outcome_ex7, Ex7Case, Ex7Run};
 use ratelab::exercise::{check_ex8, first_fall_rad, measure_ex8, outcome_ex8, Ex8Run};
 use ratelab::exercise::{check_ex9, measure_ex9, outcome_ex9, Ex9Case};
+use ratelab::exercise::{Ex1Bands, Ex2Bands, Ex3Bands, Ex4Bands, Ex5Bands, Ex6Bands};
+use ratelab::exercise::{Ex4Outcome, Ex5Outcome, Ex6Outcome, Ex7Outcome, Ex8Outcome};
+use ratelab::exercise::{Ex7Bands, Ex8Bands, Ex9Bands};
 use ratelab::graph::GraphSpec;
 use std::path::PathBuf;
 
@@ -18,8 +21,32 @@ fn path(name: &str) -> PathBuf {
     PathBuf::from(crate::REPO).join("exercises").join(name)
 }
 
+/// Every exercise's table of `exercises/bands.toml`.
+struct Bands {
+    ex1: Ex1Bands,
+    ex2: Ex2Bands,
+    ex3: Ex3Bands,
+    ex4: Ex4Bands,
+    ex5: Ex5Bands,
+    ex6: Ex6Bands,
+    ex7: Ex7Bands,
+    ex8: Ex8Bands,
+    ex9: Ex9Bands,
+}
+
 fn bands() -> Bands {
-    load_bands(&path("bands.toml")).expect("exercises/bands.toml")
+    let b = load_bands(&path("bands.toml")).expect("exercises/bands.toml");
+    Bands {
+        ex1: b.of().unwrap(),
+        ex2: b.of().unwrap(),
+        ex3: b.of().unwrap(),
+        ex4: b.of().unwrap(),
+        ex5: b.of().unwrap(),
+        ex6: b.of().unwrap(),
+        ex7: b.of().unwrap(),
+        ex8: b.of().unwrap(),
+        ex9: b.of().unwrap(),
+    }
 }
 
 fn assert_all(checks: Vec<ratelab::exercise::Check>) {
@@ -69,7 +96,7 @@ fn ex4_measurement_stale_queue() {
     );
     assert_all(check_ex4(&b.ex4, &runs));
     // The outcome the learner's prediction is compared with.
-    let Outcome::Ex4 {
+    let Ex4Outcome {
         latest_balances,
         fifo_balances,
         fifo_latency_at_fall_ms: Some((lo, hi)),
@@ -108,15 +135,12 @@ fn ex5_measurement_watchdog() {
     let runs = measure_ex5(&b.ex5, &g).unwrap();
     assert_eq!(runs.len(), Ex5Case::ALL.len() * b.ex5.seeds.len());
     assert_all(check_ex5(&b.ex5, &runs));
-    let Outcome::Ex5 {
+    let Ex5Outcome {
         low_loss_balances,
         high_loss_balances,
         keeps_it_up,
         ..
-    } = outcome_ex5(&b.ex5, &runs)
-    else {
-        unreachable!("ex5's outcome")
-    };
+    } = outcome_ex5(&b.ex5, &runs);
     assert!(low_loss_balances && !high_loss_balances);
     assert_eq!(keeps_it_up, [false, true, true], "hold, zero, reliable");
     // A case is what its label says whatever the command line set on the topic (but for
@@ -157,7 +181,7 @@ fn ex6_measurement_your_own_node() {
     assert_all(check_ex6(&b.ex6, &runs));
     assert_eq!(
         outcome_ex6(&runs),
-        Outcome::Ex6 {
+        Ex6Outcome {
             smallest_clamp_n: Some(b.ex6.smallest_balancing_clamp_n),
             matches_builtin: true
         }
@@ -166,13 +190,10 @@ fn ex6_measurement_your_own_node() {
     // node (which falls at the smallest clamps), and the check says so.
     let skeleton = path(&b.ex6.script);
     let runs = measure_ex6(&b.ex6, &g, &skeleton).unwrap();
-    let Outcome::Ex6 {
+    let Ex6Outcome {
         smallest_clamp_n,
         matches_builtin,
-    } = outcome_ex6(&runs)
-    else {
-        unreachable!("ex6's outcome")
-    };
+    } = outcome_ex6(&runs);
     assert!(!matches_builtin);
     assert_eq!(
         smallest_clamp_n,
@@ -198,16 +219,13 @@ fn ex7_measurement_slow_callback() {
     let runs = measure_ex7(&b.ex7, &g).unwrap();
     assert_eq!(runs.len(), Ex7Case::ALL.len() * b.ex7.seeds.len());
     assert_all(check_ex7(&b.ex7, &runs));
-    let Outcome::Ex7 {
+    let Ex7Outcome {
         sensor_hz_single_threaded,
         skipped_ticks_single_threaded,
         balances_single_threaded,
         sensor_hz_shared_group,
         sensor_hz_own_group,
-    } = outcome_ex7(&b.ex7, &runs)
-    else {
-        unreachable!("ex7's outcome")
-    };
+    } = outcome_ex7(&b.ex7, &runs);
     assert!(balances_single_threaded);
     assert!(skipped_ticks_single_threaded > 0);
     assert_eq!(sensor_hz_single_threaded, sensor_hz_shared_group);
@@ -255,13 +273,10 @@ fn ex8_measurement_noisy_sensor() {
         b.ex8.cutoffs_hz.len() * b.ex8.noise_grid_rad.len() * b.ex8.seeds.len()
     );
     assert_all(check_ex8(&b.ex8, &runs));
-    let Outcome::Ex8 {
+    let Ex8Outcome {
         fails_at_noise_rad,
         lower_cutoff_tolerates_more,
-    } = outcome_ex8(&b.ex8, &runs)
-    else {
-        unreachable!("ex8's outcome")
-    };
+    } = outcome_ex8(&b.ex8, &runs);
     assert_eq!(
         fails_at_noise_rad,
         Some(0.014),

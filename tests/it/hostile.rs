@@ -1355,8 +1355,8 @@ fn an_exercise_bands_file_with_an_endless_duration_is_refused() {
     std::fs::write(&p, edited).unwrap();
     let b = ratelab::exercise::load_bands(&p).unwrap();
     let start = Instant::now();
-    let e =
-        ratelab::exercise::measure_ex1(&b.ex1, &ratelab::graph::GraphSpec::chapter()).unwrap_err();
+    let e = ratelab::exercise::measure_ex1(&b.of().unwrap(), &ratelab::graph::GraphSpec::chapter())
+        .unwrap_err();
     assert!(e.to_string().contains("(0, 3600]"), "{e}");
     assert!(start.elapsed() < Duration::from_secs(1));
 }
