@@ -668,3 +668,84 @@ fn an_exercise_is_named_only_in_its_own_file() {
     }
     assert_eq!(found, ids.len(), "each exercise names itself in its file");
 }
+
+/// The most lines of code a source file may hold, tests, comments and blank lines apart
+/// (issue "One run core…", item 6).
+const MAX_FILE_LINES: usize = 1_000;
+/// The most lines a function may span, from its signature to its closing brace.
+const MAX_FN_LINES: usize = 150;
+
+/// Line spans (first, last; 1-based) of a file's test items, and each function's name
+/// with its span.
+#[derive(Default)]
+struct Sizes {
+    tests: Vec<(usize, usize)>,
+    fns: Vec<(String, usize, usize)>,
+}
+
+fn lines_of(span: proc_macro2::Span) -> (usize, usize) {
+    (span.start().line, span.end().line)
+}
+
+impl<'ast> Visit<'ast> for Sizes {
+    fn visit_item(&mut self, item: &'ast syn::Item) {
+        if is_cfg_test(attrs(item)) {
+            self.tests.push(lines_of(syn::spanned::Spanned::span(item)));
+        } else {
+            syn::visit::visit_item(self, item);
+        }
+    }
+
+    fn visit_item_fn(&mut self, f: &'ast syn::ItemFn) {
+        let (a, b) = lines_of(syn::spanned::Spanned::span(f));
+        self.fns.push((f.sig.ident.to_string(), a, b));
+        syn::visit::visit_item_fn(self, f);
+    }
+
+    fn visit_impl_item_fn(&mut self, f: &'ast syn::ImplItemFn) {
+        let (a, b) = lines_of(syn::spanned::Spanned::span(f));
+        self.fns.push((f.sig.ident.to_string(), a, b));
+        syn::visit::visit_impl_item_fn(self, f);
+    }
+
+    fn visit_trait_item_fn(&mut self, f: &'ast syn::TraitItemFn) {
+        let (a, b) = lines_of(syn::spanned::Spanned::span(f));
+        self.fns.push((f.sig.ident.to_string(), a, b));
+        syn::visit::visit_trait_item_fn(self, f);
+    }
+}
+
+/// No source file holds more than [`MAX_FILE_LINES`] lines of code and no function spans
+/// more than [`MAX_FN_LINES`] lines, so that a maintainer can read either whole.
+#[test]
+fn no_file_or_function_is_too_long_to_read() {
+    let mut files = Vec::new();
+    rust_files(&crate::repo("src"), &mut files);
+    rust_files(&crate::repo("lab"), &mut files);
+    let mut over = Vec::new();
+    for file in &files {
+        let text = std::fs::read_to_string(file).unwrap();
+        let mut sizes = Sizes::default();
+        sizes.visit_file(&syn::parse_file(&text).unwrap());
+        let in_tests = |n: usize| sizes.tests.iter().any(|&(a, b)| (a..=b).contains(&n));
+        let code = text
+            .lines()
+            .enumerate()
+            .filter(|&(i, l)| {
+                let l = l.trim();
+                !l.is_empty() && !l.starts_with("//") && !in_tests(i + 1)
+            })
+            .count();
+        let name = file.strip_prefix(crate::repo("")).unwrap_or(file).display();
+        if code > MAX_FILE_LINES {
+            over.push(format!("{name}: {code} lines of code"));
+        }
+        for (f, a, b) in &sizes.fns {
+            if b - a + 1 > MAX_FN_LINES && !in_tests(*a) {
+                over.push(format!("{name}: fn {f}, {} lines", b - a + 1));
+            }
+        }
+    }
+    assert!(files.len() > 100, "{} files", files.len());
+    assert!(over.is_empty(), "too long to read:\n{}", over.join("\n"));
+}
