@@ -13,6 +13,9 @@
 //! file, join the launcher (`Joined`), build the graph, wire the topics that cross its
 //! boundary (`crossings` decides which), say ready, then run its share of the graph
 //! (`Share`) under the virtual clock (in lockstep) or the real one, and report.
+//!
+//! Its parts: `stepper` (the lockstep under the virtual clock), `real_clock` (its nodes on
+//! their threads), `stats` (the live figures it publishes, [`LiveStats`]).
 
 use super::credentials::{Credentials, Role};
 use super::lockstep;
@@ -21,12 +24,11 @@ use super::{check_endpoint, open_session, Access, DistError, Keys, REPLY_TIMEOUT
 use crate::config::RunConfig;
 use crate::graph::spec::GraphSpec;
 use crate::graph::{Graph, NodeId, TopicId};
-use crate::metrics::{LatencyStats, NodeTiming};
-use crate::node::Node;
+use crate::metrics::LatencyStats;
 use crate::policy::BrainSlot;
 use crate::qos::TopicQos;
 use crate::runlog::StepRecord;
-use crate::scheduler::{run_real, RealOptions, StopFlag};
+use crate::scheduler::StopFlag;
 use crate::summary::GraphState;
 use crate::time::Nanos;
 use crossbeam_channel::{Receiver, RecvTimeoutError};
@@ -35,7 +37,13 @@ use std::sync::{Arc, Condvar, Mutex};
 use std::time::{Duration, Instant};
 use zenoh::Wait;
 
+mod real_clock;
+mod stats;
 mod stepper;
+
+use real_clock::real_clock;
+use stats::{held_topics, spawn_figures, Batch, StepTap};
+pub use stats::{LiveStats, MAX_BATCH_COUNTERS, MAX_BATCH_STEPS, MAX_BATCH_TICKS, STATS_PERIOD};
 
 /// A process that starts its part of a real-clock run this long after the run's start
 /// rejoined it (a process restarted mid-run), rather than starting with it, seconds.
@@ -252,176 +260,6 @@ impl Arrivals {
     }
 }
 
-/// Live counters a process publishes for `ratelab top` (key `ratelab/<graph>/@stats/<p>`).
-#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct LiveStats {
-    /// The graph's name.
-    pub graph: String,
-    /// The process.
-    pub process: String,
-    /// Its OS process id.
-    pub pid: u32,
-    /// Run time of these figures, ns: every counter sample up to it is in this message or
-    /// an earlier one (under the real clock, see `figures_time`).
-    pub t_ns: u64,
-    /// Its nodes: name, kind, rate Hz, ticks so far.
-    pub nodes: Vec<(String, String, f64, u64)>,
-    /// The topics whose counters it holds (it runs their subscriber, or their publisher when
-    /// nobody subscribes): name and counters.
-    pub topics: Vec<(String, crate::topic::TopicStats)>,
-    /// Per inbound topic, its over-the-wire latency so far.
-    pub wire: Vec<wire::WireLink>,
-    /// The actuator's steps since the previous figures, oldest first (its process only; at
-    /// most [`MAX_BATCH_STEPS`], the oldest dropped beyond): what `ratelab lab --attach`
-    /// draws the plant, the latency and the topics' counters from.
-    #[serde(default)]
-    pub steps: Vec<StepRecord>,
-    /// Real clock: each tick of its nodes since the previous figures, as (node index, run
-    /// time ns, lateness ns, wall time the tick took ns), oldest first (at most
-    /// [`MAX_BATCH_TICKS`]).
-    #[serde(default)]
-    pub ticks: Vec<(usize, u64, u64, u64)>,
-    /// The counters of each topic it holds, sampled after each tick of its nodes when they
-    /// differ from the previous sample: (run time ns, topic index, counters), oldest first,
-    /// run times never decreasing (at most [`MAX_BATCH_COUNTERS`], the oldest dropped
-    /// beyond). A watcher shows each actuator step with the counters
-    /// its holder had at the step's run time, not at the figures' (under the virtual clock
-    /// 100 ms of wall time is many seconds of run time).
-    #[serde(default)]
-    pub counters: Vec<(u64, usize, crate::topic::TopicStats)>,
-    /// The process's part of the run is over: these are its last figures, and its
-    /// liveliness tokens going next is a process leaving, not dying.
-    #[serde(default)]
-    pub done: bool,
-    /// Set when this process joined a run already under way (started again mid-run, real
-    /// clock): the run time its counts start from, ns. Its counters and ticks count from
-    /// then; a watcher that heard the process before it carries that one's counts over
-    /// ([`crate::monitor::Carried`]), one that did not says so.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub since_ns: Option<u64>,
-}
-
-/// How often each process publishes its [`LiveStats`].
-pub const STATS_PERIOD: Duration = Duration::from_millis(100);
-/// The most actuator steps one [`LiveStats`] carries (the virtual lockstep runs about a
-/// thousand a second; a step is about 1 KB of JSON with a few topics).
-pub const MAX_BATCH_STEPS: usize = 1000;
-/// The most node ticks one [`LiveStats`] carries.
-pub const MAX_BATCH_TICKS: usize = 20_000;
-/// The most counter samples one [`LiveStats`] carries (about 240 bytes each as JSON: a full
-/// batch, with full steps and ticks, stays well under [`wire::MAX_CONTROL_BYTES`]).
-pub const MAX_BATCH_COUNTERS: usize = 8_000;
-
-impl LiveStats {
-    /// Decode figures from the network, refusing any over the bounds a process keeps
-    /// ([`MAX_BATCH_STEPS`], [`MAX_BATCH_TICKS`], a graph's most nodes and topics).
-    ///
-    /// # Errors
-    /// One line.
-    pub fn decode(bytes: &[u8]) -> Result<LiveStats, String> {
-        let m: LiveStats = wire::decode_json(bytes)?;
-        let bounded = m.steps.len() <= MAX_BATCH_STEPS
-            && m.ticks.len() <= MAX_BATCH_TICKS
-            && m.counters.len() <= MAX_BATCH_COUNTERS
-            && m.counters.iter().all(|c| c.1 < crate::ids::MAX_TOPICS)
-            && m.nodes.len() <= crate::ids::MAX_NODES
-            && m.topics.len() <= crate::ids::MAX_TOPICS
-            && m.wire.len() <= crate::ids::MAX_TOPICS;
-        if bounded {
-            Ok(m)
-        } else {
-            Err("figures over a process's bounds".into())
-        }
-    }
-
-    /// A process's figures from a sample on its stats key ([`super::Keys::stats`]), as
-    /// [`LiveStats::decode`] takes them; `None` as well when they name another process than
-    /// the key's (a process's figures count only from its own key).
-    pub fn from_sample(sample: &zenoh::sample::Sample) -> Option<LiveStats> {
-        let from = sample.key_expr().as_str().rsplit('/').next().unwrap_or("");
-        LiveStats::decode(&sample.payload().to_bytes())
-            .ok()
-            .filter(|m| m.process == from)
-    }
-}
-
-/// What happened since the stats thread last published: steps and ticks, bounded.
-#[derive(Default)]
-struct Batch {
-    steps: std::collections::VecDeque<StepRecord>,
-    ticks: std::collections::VecDeque<(usize, u64, u64, u64)>,
-    counters: std::collections::VecDeque<(u64, usize, crate::topic::TopicStats)>,
-    /// Each topic's counters as last sampled (a sample is kept only when they changed).
-    last: Vec<Option<crate::topic::TopicStats>>,
-    /// The run time of the newest sample, ns (samples never go back in time).
-    last_t: u64,
-}
-
-impl Batch {
-    fn push_step(&mut self, s: StepRecord) {
-        if self.steps.len() == MAX_BATCH_STEPS {
-            self.steps.pop_front();
-        }
-        self.steps.push_back(s);
-    }
-    fn push_tick(&mut self, t: (usize, u64, u64, u64)) {
-        if self.ticks.len() == MAX_BATCH_TICKS {
-            self.ticks.pop_front();
-        }
-        self.ticks.push_back(t);
-    }
-    /// Keep the counters `read` of the topics this process holds at run time `t_ns` (after
-    /// a tick of one of its nodes), those that changed. Node threads may come out of order:
-    /// a sample is never older than the one before.
-    fn keep(&mut self, t_ns: u64, read: &[(TopicId, crate::topic::TopicStats)]) {
-        self.last_t = self.last_t.max(t_ns);
-        for &(t, st) in read {
-            if self.last.len() <= t.0 {
-                self.last.resize(t.0 + 1, None);
-            }
-            if self.last[t.0] == Some(st) {
-                continue;
-            }
-            self.last[t.0] = Some(st);
-            if self.counters.len() == MAX_BATCH_COUNTERS {
-                self.counters.pop_front();
-            }
-            self.counters.push_back((self.last_t, t.0, st));
-        }
-    }
-}
-
-/// Read the counters of `held` (before taking the batch's lock: each read locks its topic).
-fn read_counters(
-    held: &[TopicId],
-    handles: &crate::graph::GraphHandles,
-) -> Vec<(TopicId, crate::topic::TopicStats)> {
-    held.iter()
-        .map(|&t| (t, handles.topic(t).stats()))
-        .collect()
-}
-
-/// The topics whose counters process `mine` holds (their [`TopicSpec::holder`] runs in
-/// it): those it subscribes to, and those it publishes that nobody subscribes to (as
-/// [`LiveStats::topics`]).
-///
-/// [`TopicSpec::holder`]: crate::graph::spec::TopicSpec::holder
-fn held_topics(spec: &GraphSpec, mine: &[NodeId]) -> Vec<TopicId> {
-    (0..spec.topics.len())
-        .map(TopicId)
-        .filter(|&t| mine.contains(&spec.topic(t).holder()))
-        .collect()
-}
-
-/// Hands every actuator step to the stats thread.
-struct StepTap(Arc<Mutex<Batch>>);
-
-impl crate::graph::StepObserver for StepTap {
-    fn on_step(&mut self, rec: &StepRecord) {
-        crate::graph::lock(&self.0).push_step(*rec);
-    }
-}
-
 /// How long a process asks again to join while the launcher says a process of its name is
 /// still running (one killed a moment ago: its liveliness token is withdrawn when Zenoh
 /// sees its link close, on localhost within milliseconds). A second copy of a running
@@ -465,28 +303,13 @@ pub fn run_member(opts: &MemberOptions, stop: &StopFlag) -> Result<(), DistError
     // Virtual clock: the other processes' tick reports, then the `here` answer that tells
     // them this subscription is in place (declared in that order, [`lockstep::meet_peers`]).
     let virtual_clock = cfg.clock == crate::ClockKind::Virtual;
-    let (slot, nudged) = match virtual_clock {
+    let (slot, nudged, lockstep_keys) = match virtual_clock {
         true => {
             let (slot, nudged) = stepper::Slot::shared(spec.clone());
-            (Some(slot), nudged)
+            let declared = declare_lockstep(&session, &keys, &opts.process, &slot)?;
+            (Some(slot), nudged, Some(declared))
         }
-        false => (None, crossbeam_channel::never()),
-    };
-    let lockstep_keys = if let Some(slot) = &slot {
-        let slot = slot.clone();
-        let sub = lockstep::subscribe_reports(&session, &keys, Some(&opts.process), move |ms| {
-            slot.reports(ms)
-        })?;
-        let here = keys.here(&opts.process);
-        let queryable = session
-            .declare_queryable(here.clone())
-            .callback(move |q| {
-                let _ = q.reply(here.as_str(), "").wait();
-            })
-            .wait()?;
-        Some((sub, queryable))
-    } else {
-        None
+        false => (None, crossbeam_channel::never(), None),
     };
     let mine: Vec<NodeId> = spec
         .placement()
@@ -494,68 +317,21 @@ pub fn run_member(opts: &MemberOptions, stop: &StopFlag) -> Result<(), DistError
         .find(|(p, _)| *p == opts.process)
         .map(|(_, ids)| ids)
         .unwrap_or_default();
-    // The brain, where one of this process's nodes runs it (a `policy` node).
-    let brain_spec = if mine.iter().any(|&id| spec.node(id).kind.def().uses_brain) {
-        setup.policy.as_str()
-    } else {
-        "scripted"
-    };
-    let brain = crate::checkpoint::load_policy(brain_spec)
-        .map_err(|e| DistError::Usage(format!("--policy {brain_spec}: {e}")))?;
     let batch: Arc<Mutex<Batch>> = Arc::default();
-    let Graph { nodes, handles } = crate::runcore::build_graph(
-        &cfg,
-        BrainSlot::new(brain),
-        false,
-        vec![Box::new(StepTap(batch.clone()))],
+    let Graph { nodes, handles } = build_share(&cfg, &setup.policy, &mine, &batch)?;
+    let (inbound, inbound_ends, publishers) = wire_crossings(
+        &session,
+        &keys,
+        &handles,
+        (&mine, &opts.process),
+        slot.clone(),
     )?;
-    // Topics crossing the boundary.
-    let (inbound, outbound) = crossings(&spec, &mine);
-    for &t in &outbound {
-        // The publisher's side is a plain buffer; the subscriber's copy keeps the QoS.
-        let _ = handles.topic(t).set_depth(1);
-        handles.topic(t).set_qos(TopicQos::default());
-    }
     let Inbound {
         subscribers,
         arrivals,
         wire_latency,
-    } = subscribe_inbound(
-        &session,
-        &keys,
-        &spec,
-        &handles,
-        (&inbound, slot.clone()),
-        &opts.process,
-    )?;
-    let mut publishers = Vec::new();
-    for &t in &outbound {
-        publishers.push((
-            t,
-            session
-                .declare_publisher(keys.topic(&spec.topic(t).name))
-                .congestion_control(block)
-                .wait()?,
-        ));
-    }
-    // Discovery: a token per node, per publisher and per subscriber (with the QoS).
-    let mut tokens = Vec::new();
-    for &id in &mine {
-        let n = spec.node(id);
-        tokens.push(
-            session
-                .liveliness()
-                .declare_token(keys.node_token(&opts.process, &n.name))
-                .wait()?,
-        );
-        let ends = (n.publishes.iter().map(|&t| ("pub", t)))
-            .chain(n.subscribes.iter().map(|&t| ("sub", t)));
-        for (role, t) in ends {
-            let ts = spec.topic(t);
-            let key = keys.endpoint_token(role, &ts.name, &ts.qos.short(ts.depth), &n.name);
-            tokens.push(session.liveliness().declare_token(key).wait()?);
-        }
-    }
+    } = inbound_ends;
+    let tokens = declare_tokens(&session, &keys, &spec, &mine, &opts.process)?;
     for (_, p) in &publishers {
         wait_matching(p, stop, Some(&launcher_gone), "the subscribing process")?;
     }
@@ -614,47 +390,15 @@ pub fn run_member(opts: &MemberOptions, stop: &StopFlag) -> Result<(), DistError
     });
     let stats_done = StopFlag::new();
     let stats_thread = spawn_figures(share.clone(), stats_pub, stats_done.clone())?;
-    let result = match share.cfg.clock {
-        crate::ClockKind::Virtual => stepper::run_lockstep(
-            nodes,
-            &share,
-            (
-                slot.as_ref().expect("set up under the virtual clock"),
-                &nudged,
-            ),
-            &ctl_rx,
-            // Under --ros2 a tick may wait on Zenoh: never on Zenoh's own thread.
-            (ticked_pub, ros2.is_none()),
-            stop,
-            &launcher_gone,
-        ),
-        crate::ClockKind::Real => match recv_own(&ctl_rx, stop, &launcher_gone) {
-            Err(e) => Err(e),
-            // Ended before it started: report the graph as built.
-            Ok(ToMember::Stop { .. }) => {
-                Ok(GraphState::capture(&share.handles, Nanos::ZERO, &[], None))
-            }
-            Ok(ToMember::Start { start_mono_ns }) => {
-                // Started with the run, or restarted into it (a rejoin): say which.
-                let at_s = wire::mono_now_ns().saturating_sub(start_mono_ns) as f64 / 1e9;
-                say(if at_s > REJOIN_AFTER_S {
-                    format!("process '{me}' rejoined the run at t={at_s:.2}s")
-                } else {
-                    format!("process '{me}' started with the run")
-                });
-                real_clock(
-                    nodes,
-                    &share,
-                    start_mono_ns,
-                    &ctl_rx,
-                    stop,
-                    &launcher_gone,
-                    &|m| send(m),
-                )
-            }
-            Ok(other) => Err(DistError::Peer(format!("expected a start, got {other:?}"))),
-        },
-    };
+    let result = run_share(
+        nodes,
+        &share,
+        (slot.as_ref(), &nudged),
+        (&ctl_rx, stop, &launcher_gone),
+        // Under --ros2 a tick may wait on Zenoh: never on Zenoh's own thread.
+        (ticked_pub, ros2.is_none()),
+        (&say, &send),
+    );
     stats_done.stop();
     let _ = stats_thread.join();
     if let Some(offered) = ros2 {
@@ -670,15 +414,7 @@ pub fn run_member(opts: &MemberOptions, stop: &StopFlag) -> Result<(), DistError
             "the launcher went away mid-run: this process stopped with it (no summary)".into(),
         ));
     }
-    let wire = share.wire_links();
-    send(&ToLauncher::Report {
-        process: opts.process.clone(),
-        state: Box::new(state),
-        wire,
-    })?;
-    say(format!(
-        "process '{me}' ended: its report went to the launcher, which prints the run's summary"
-    ));
+    report(&share, state, &send, &say)?;
     // Let the report leave before the session closes.
     std::thread::sleep(Duration::from_millis(200));
     drop(tokens);
@@ -686,6 +422,197 @@ pub fn run_member(opts: &MemberOptions, stop: &StopFlag) -> Result<(), DistError
     drop(lockstep_keys);
     let _ = session.close().wait();
     Ok(())
+}
+
+/// How a process sends a message to the launcher.
+type SendUp<'a> = &'a dyn Fn(&ToLauncher) -> zenoh::Result<()>;
+
+/// The Zenoh publishers of a process's outbound topics.
+type Publishers = Vec<(TopicId, zenoh::pubsub::Publisher<'static>)>;
+
+/// Wire the topics crossing this process's boundary (`mine`, the nodes of `process`):
+/// the publisher's side of each outbound topic becomes a plain buffer (the subscriber's
+/// copy keeps the QoS) and gets a Zenoh publisher that never drops (a lost sample would
+/// stall the run); each inbound topic is subscribed to. Returns the inbound topics, their
+/// subscriptions and the outbound publishers.
+fn wire_crossings(
+    session: &zenoh::Session,
+    keys: &Keys,
+    handles: &crate::graph::GraphHandles,
+    (mine, process): (&[NodeId], &str),
+    slot: Option<stepper::SharedSlot>,
+) -> Result<(Vec<TopicId>, Inbound, Publishers), DistError> {
+    let spec = &handles.spec;
+    let (inbound, outbound) = crossings(spec, mine);
+    for &t in &outbound {
+        let _ = handles.topic(t).set_depth(1);
+        handles.topic(t).set_qos(TopicQos::default());
+    }
+    let ends = subscribe_inbound(session, keys, spec, handles, (&inbound, slot), process)?;
+    let block = zenoh::qos::CongestionControl::Block;
+    let publishers = outbound
+        .iter()
+        .map(|&t| {
+            let key = keys.topic(&spec.topic(t).name);
+            let publisher = session.declare_publisher(key).congestion_control(block);
+            Ok((t, publisher.wait()?))
+        })
+        .collect::<Result<_, DistError>>()?;
+    Ok((inbound, ends, publishers))
+}
+
+/// Build the graph as this process runs it: the brain loaded where one of its nodes, `mine`,
+/// runs it (a `policy` node; `policy` names it), every actuator step handed to `batch`.
+///
+/// # Errors
+/// [`DistError::Usage`] for a brain that cannot be loaded; a graph that cannot be built.
+fn build_share(
+    cfg: &RunConfig,
+    policy: &str,
+    mine: &[NodeId],
+    batch: &Arc<Mutex<Batch>>,
+) -> Result<Graph, DistError> {
+    let spec = &cfg.graph;
+    let brain_spec = if mine.iter().any(|&id| spec.node(id).kind.def().uses_brain) {
+        policy
+    } else {
+        "scripted"
+    };
+    let brain = crate::checkpoint::load_policy(brain_spec)
+        .map_err(|e| DistError::Usage(format!("--policy {brain_spec}: {e}")))?;
+    Ok(crate::runcore::build_graph(
+        cfg,
+        BrainSlot::new(brain),
+        false,
+        vec![Box::new(StepTap(batch.clone()))],
+    )?)
+}
+
+/// Send this process's view of the run, `state`, with its wire latencies to the launcher,
+/// and say so.
+fn report(
+    share: &Share,
+    state: GraphState,
+    send: SendUp<'_>,
+    say: &dyn Fn(String),
+) -> Result<(), DistError> {
+    send(&ToLauncher::Report {
+        process: share.process.clone(),
+        state: Box::new(state),
+        wire: share.wire_links(),
+    })?;
+    say(format!(
+        "process '{}' ended: its report went to the launcher, which prints the run's summary",
+        share.process
+    ));
+    Ok(())
+}
+
+/// Declare what the lockstep needs of this process under the virtual clock: the other
+/// processes' tick reports into `slot`, then the `here` answer that tells them this
+/// subscription is in place (declared in that order, [`lockstep::meet_peers`]). Kept
+/// alive for the run.
+fn declare_lockstep(
+    session: &zenoh::Session,
+    keys: &Keys,
+    process: &str,
+    slot: &stepper::SharedSlot,
+) -> Result<(zenoh::pubsub::Subscriber<()>, zenoh::query::Queryable<()>), DistError> {
+    let slot = slot.clone();
+    let sub =
+        lockstep::subscribe_reports(session, keys, Some(process), move |ms| slot.reports(ms))?;
+    let here = keys.here(process);
+    let queryable = session
+        .declare_queryable(here.clone())
+        .callback(move |q| {
+            let _ = q.reply(here.as_str(), "").wait();
+        })
+        .wait()?;
+    Ok((sub, queryable))
+}
+
+/// Discovery: a liveliness token per node of `mine`, per publisher and per subscriber
+/// (with the topic's QoS), as `ratelab top` and the ROS 2 view read them. Kept alive for
+/// the run.
+fn declare_tokens(
+    session: &zenoh::Session,
+    keys: &Keys,
+    spec: &GraphSpec,
+    mine: &[NodeId],
+    process: &str,
+) -> Result<Vec<zenoh::liveliness::LivelinessToken>, DistError> {
+    let mut tokens = Vec::new();
+    for &id in mine {
+        let n = spec.node(id);
+        tokens.push(
+            session
+                .liveliness()
+                .declare_token(keys.node_token(process, &n.name))
+                .wait()?,
+        );
+        let ends = (n.publishes.iter().map(|&t| ("pub", t)))
+            .chain(n.subscribes.iter().map(|&t| ("sub", t)));
+        for (role, t) in ends {
+            let ts = spec.topic(t);
+            let key = keys.endpoint_token(role, &ts.name, &ts.qos.short(ts.depth), &n.name);
+            tokens.push(session.liveliness().declare_token(key).wait()?);
+        }
+    }
+    Ok(tokens)
+}
+
+/// Run this process's share of the graph to its end: in lockstep under the virtual clock
+/// (`slot` set), else on the real clock from the launcher's start (or not at all when the
+/// launcher stops the run before it starts). Returns its view of the run.
+fn run_share(
+    nodes: Vec<Box<dyn crate::node::Node>>,
+    share: &Arc<Share>,
+    (slot, nudged): (Option<&stepper::SharedSlot>, &Receiver<()>),
+    (ctl_rx, stop, launcher_gone): (&Receiver<ToMember>, &StopFlag, &StopFlag),
+    ticked: (zenoh::pubsub::Publisher<'static>, bool),
+    (say, send): (&dyn Fn(String), SendUp<'_>),
+) -> Result<GraphState, DistError> {
+    let me = &share.process;
+    match (share.cfg.clock, slot) {
+        (crate::ClockKind::Virtual, Some(slot)) => stepper::run_lockstep(
+            nodes,
+            share,
+            (slot, nudged),
+            ctl_rx,
+            ticked,
+            stop,
+            launcher_gone,
+        ),
+        (crate::ClockKind::Virtual, None) => Err(DistError::Peer(
+            "the virtual clock without its lockstep".into(),
+        )),
+        (crate::ClockKind::Real, _) => match recv_own(ctl_rx, stop, launcher_gone) {
+            Err(e) => Err(e),
+            // Ended before it started: report the graph as built.
+            Ok(ToMember::Stop { .. }) => {
+                Ok(GraphState::capture(&share.handles, Nanos::ZERO, &[], None))
+            }
+            Ok(ToMember::Start { start_mono_ns }) => {
+                // Started with the run, or restarted into it (a rejoin): say which.
+                let at_s = wire::mono_now_ns().saturating_sub(start_mono_ns) as f64 / 1e9;
+                say(if at_s > REJOIN_AFTER_S {
+                    format!("process '{me}' rejoined the run at t={at_s:.2}s")
+                } else {
+                    format!("process '{me}' started with the run")
+                });
+                real_clock(
+                    nodes,
+                    share,
+                    start_mono_ns,
+                    ctl_rx,
+                    stop,
+                    launcher_gone,
+                    send,
+                )
+            }
+            Ok(other) => Err(DistError::Peer(format!("expected a start, got {other:?}"))),
+        },
+    }
 }
 
 /// Check `opts` before anything connects: its graph file parses and places
@@ -1029,216 +956,6 @@ fn bridge_outbound(
     bridge
 }
 
-/// Start the thread that puts this process's figures ([`LiveStats`]) on `stats_pub` every
-/// [`STATS_PERIOD`] for `ratelab top` and `ratelab lab --attach`, and once more after
-/// `done` (the run's last steps).
-///
-/// # Errors
-/// [`DistError::Peer`] when the thread cannot start.
-fn spawn_figures(
-    share: Arc<Share>,
-    stats_pub: zenoh::pubsub::Publisher<'static>,
-    done: StopFlag,
-) -> Result<std::thread::JoinHandle<()>, DistError> {
-    std::thread::Builder::new()
-        .name("stats".into())
-        .spawn(move || loop {
-            let last = done.is_stopped();
-            let mut msg = share.live_stats();
-            {
-                let mut b = crate::graph::lock(&share.batch);
-                msg.steps = std::mem::take(&mut b.steps).into();
-                msg.ticks = std::mem::take(&mut b.ticks).into();
-                msg.counters = std::mem::take(&mut b.counters).into();
-            }
-            msg.done = last;
-            let _ = stats_pub.put(wire::encode_json(&msg)).wait();
-            if last {
-                break;
-            }
-            std::thread::sleep(STATS_PERIOD);
-        })
-        .map_err(|e| DistError::Peer(format!("cannot start a thread: {e}")))
-}
-
-/// The real clock: run the local nodes on their own threads from the shared start instant
-/// (a process that joined late starts each node at its next tick on the run's grid), until
-/// the duration, a local stop (the fall) or the launcher's stop.
-fn real_clock(
-    nodes: Vec<Box<dyn Node>>,
-    share: &Share,
-    start: u64,
-    ctl_rx: &Receiver<ToMember>,
-    stop: &StopFlag,
-    launcher_gone: &StopFlag,
-    send: &dyn Fn(&ToLauncher) -> zenoh::Result<()>,
-) -> Result<GraphState, DistError> {
-    let (cfg, handles, process) = (&share.cfg, &share.handles, share.process.as_str());
-    let (bridge, ticks, run_time, batch) =
-        (&share.bridge, &share.ticks, &share.run_time, &share.batch);
-    let local = share.local();
-    let spec = &cfg.graph;
-    let hook_batch = batch.clone();
-    // Joined late (a restart): the first tick of each node is its next one on the grid.
-    let late = Nanos(wire::mono_now_ns().saturating_sub(start));
-    share.joined_at.store(late.0, Ordering::Relaxed);
-    let mut picked: Vec<(usize, Box<dyn Node>)> = nodes
-        .into_iter()
-        .enumerate()
-        .filter(|(i, _)| local.contains(i))
-        .collect();
-    let index: Vec<usize> = picked.iter().map(|(i, _)| *i).collect();
-    let local_nodes: Vec<Box<dyn Node>> = picked.drain(..).map(|(_, n)| n).collect();
-    let hook_ticks = ticks.clone();
-    let hook_time = run_time.clone();
-    let hook_index = index.clone();
-    let fwd = bridge.clone();
-    let mine: Vec<NodeId> = local.iter().map(|&i| NodeId(i)).collect();
-    let hook_held = held_topics(spec, &mine);
-    let hook_handles = handles.clone();
-    let phase_offsets: Vec<Nanos> = index
-        .iter()
-        .map(|&i| {
-            let first = cfg.phase_offsets.get(i).copied().unwrap_or(Nanos::ZERO);
-            let period = handles.rates[i].period();
-            if late <= first || period.0 == 0 {
-                first
-            } else {
-                let k = (late.0 - first.0).div_ceil(period.0);
-                Nanos(first.0.saturating_add(k.saturating_mul(period.0)))
-            }
-        })
-        .collect();
-    // Per local node, the deadline of its next tick, ns: no tick of it not yet sampled is
-    // earlier (see `figures_time`).
-    let next_due: Arc<Vec<AtomicU64>> =
-        Arc::new(phase_offsets.iter().map(|d| AtomicU64::new(d.0)).collect());
-    let (hook_due, end) = (next_due.clone(), cfg.duration.0);
-    let real = RealOptions {
-        spin_margin: cfg.spin_margin,
-        phase_offsets,
-        rt_priority: cfg.rt_priority,
-        on_tick: Some(Arc::new(move |t: &crate::scheduler::TickReport<'_>| {
-            let (k, now, late) = (t.node, t.now, t.lateness);
-            let i = hook_index[k];
-            hook_ticks[i].fetch_add(1, Ordering::Relaxed);
-            fwd.forward_after(i);
-            // The sample is in the batch before the run time says this tick is done.
-            let read = read_counters(&hook_held, &hook_handles);
-            {
-                let mut b = crate::graph::lock(&hook_batch);
-                b.push_tick((i, now.0, late.0, t.took.0));
-                b.keep(now.0, &read);
-            }
-            // Its next tick is due a period after this one's deadline, at the earliest.
-            let period = hook_handles.rates[i].period().0.max(1);
-            let deadline = now.0.saturating_sub(late.0);
-            hook_due[k].store(deadline.saturating_add(period), Ordering::SeqCst);
-            let wall = wire::mono_now_ns().saturating_sub(start);
-            hook_time.fetch_max(
-                figures_time(wall, end, due_now(&hook_due)),
-                Ordering::SeqCst,
-            );
-        })),
-        pause: None,
-        start: Some(wire::instant_at_mono(start)),
-        // This process's executors (an executor never spans processes: `launch` checks).
-        plan: Some(spec.execution_plan().restricted(&index)),
-        track: spec.has_executors_or_compute(),
-    };
-    // The launcher's stop (another process ended the run, or Ctrl-C there).
-    let run_stop = StopFlag::new();
-    let finished = StopFlag::new();
-    let watcher = {
-        let (rx, run_stop, outer) = (ctl_rx.clone(), run_stop.clone(), stop.clone());
-        let (finished, gone) = (finished.clone(), launcher_gone.clone());
-        // The figures' run time is now, not the last tick (a slow node ticks seldom), short
-        // of a tick that may be in progress.
-        let (clock, next_due) = (run_time.clone(), next_due.clone());
-        std::thread::spawn(move || loop {
-            let wall = wire::mono_now_ns().saturating_sub(start);
-            clock.fetch_max(
-                figures_time(wall, end, due_now(&next_due)),
-                Ordering::SeqCst,
-            );
-            match rx.recv_timeout(Duration::from_millis(50)) {
-                Ok(ToMember::Stop { at_ns, .. }) => {
-                    run_stop.stop();
-                    return Some(Nanos(at_ns));
-                }
-                Ok(_) => {}
-                Err(RecvTimeoutError::Disconnected) => return None,
-                Err(RecvTimeoutError::Timeout) if outer.is_stopped() || gone.is_stopped() => {
-                    run_stop.stop();
-                    return None;
-                }
-                Err(RecvTimeoutError::Timeout) if finished.is_stopped() => return None,
-                Err(RecvTimeoutError::Timeout) => {}
-            }
-        })
-    };
-    let r = run_real(local_nodes, cfg.duration, &run_stop, &real);
-    let mut timing: Vec<NodeTiming> = spec
-        .nodes
-        .iter()
-        .map(|n| NodeTiming {
-            node: n.name.clone(),
-            ..NodeTiming::default()
-        })
-        .collect();
-    for (k, t) in r.timing.into_iter().enumerate() {
-        timing[index[k]] = t;
-    }
-    let stopped_by_launcher =
-        run_stop.is_stopped() && r.end.reason == crate::scheduler::EndReason::Interrupted;
-    if !stopped_by_launcher {
-        send(&ToLauncher::Ended {
-            process: process.to_string(),
-            end: r.end.clone(),
-        })?;
-    }
-    // Report at the run's end as the launcher saw it (its stop), else our own.
-    finished.stop();
-    let launcher_at = watcher.join().ok().flatten();
-    let at = match launcher_at {
-        Some(at) if stopped_by_launcher => at,
-        _ => r.end.at,
-    };
-    // Every node thread has ended: the figures are final up to the run's end.
-    run_time.fetch_max(at.0, Ordering::SeqCst);
-    let ticks_now: Vec<u64> = ticks.iter().map(|t| t.load(Ordering::Relaxed)).collect();
-    let mut state = GraphState::capture(handles, at, &ticks_now, Some(timing));
-    // Its nodes' figures by graph index (the others' are their processes' to report), and
-    // its executors'.
-    state.exec = r.exec.map(|x| {
-        let mut nodes = vec![crate::executor::NodeExecFigures::default(); spec.nodes.len()];
-        for (k, f) in x.nodes.into_iter().enumerate() {
-            nodes[index[k]] = f;
-        }
-        crate::executor::ExecFigures {
-            nodes,
-            executors: x.executors,
-        }
-    });
-    Ok(state)
-}
-
-/// The deadlines in `next_due`, ns, as they are now (read on every tick: no allocation).
-fn due_now(next_due: &[AtomicU64]) -> impl Iterator<Item = u64> + '_ {
-    next_due.iter().map(|d| d.load(Ordering::SeqCst))
-}
-
-/// The run time up to which a real-clock process's figures are final, ns: now (`wall_ns`,
-/// at most the run's `end_ns`), but short of the earliest next deadline of its nodes
-/// (`next_due_ns`). A node's tick due by now may be in progress, its counters not yet
-/// sampled; its sample will carry its start time, which is at or after its deadline. So a
-/// watcher that releases a step of run time `t` once the figures cover `t` has every sample
-/// up to `t` ([`LiveStats::t_ns`]).
-fn figures_time(wall_ns: u64, end_ns: u64, next_due_ns: impl IntoIterator<Item = u64>) -> u64 {
-    let due = next_due_ns.into_iter().min().unwrap_or(u64::MAX);
-    wall_ns.min(end_ns).min(due.saturating_sub(1))
-}
-
 /// The next control message: waits as long as the launcher lives (its liveliness token),
 /// so processes started by hand may join minutes apart; an error on a stop or when the
 /// launcher is gone.
@@ -1459,7 +1176,8 @@ impl Refusals {
 
 #[cfg(test)]
 mod tests {
-    use super::{crossings, figures_time, Outlet};
+    use super::real_clock::figures_time;
+    use super::{crossings, Outlet};
     use crate::graph::spec::GraphSpec;
     use crate::graph::NodeId;
     use crate::msg::{force::ForceMsg, MsgData};

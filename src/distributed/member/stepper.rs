@@ -10,7 +10,8 @@
 //! must next wait ([`wire::encode_reports`]): the chapter's graph split in two costs one
 //! sample and one report message a hop.
 
-use super::{held_topics, read_counters, Share};
+use super::stats::{held_topics, read_counters};
+use super::Share;
 use crate::graph::spec::GraphSpec;
 use crate::graph::TopicId;
 use crate::lockstep::{check_tick_report, TickInbox};

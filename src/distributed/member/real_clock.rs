@@ -1,0 +1,250 @@
+//! A process's share of a real-clock run: its nodes on their own threads from the run's
+//! shared start instant, its figures' run time kept short of a tick in progress, and the
+//! launcher's stop watched.
+
+use super::stats::{held_topics, read_counters};
+use super::{wire, DistError, GraphState, NodeId, Share, StopFlag, ToLauncher, ToMember};
+use crate::metrics::NodeTiming;
+use crate::node::Node;
+use crate::scheduler::{run_real, RealOptions};
+use crate::time::Nanos;
+use crossbeam_channel::{Receiver, RecvTimeoutError};
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::Arc;
+use std::time::Duration;
+
+/// The real clock: run the local nodes on their own threads from the shared start instant
+/// (a process that joined late starts each node at its next tick on the run's grid), until
+/// the duration, a local stop (the fall) or the launcher's stop.
+pub(super) fn real_clock(
+    nodes: Vec<Box<dyn Node>>,
+    share: &Share,
+    start: u64,
+    ctl_rx: &Receiver<ToMember>,
+    stop: &StopFlag,
+    launcher_gone: &StopFlag,
+    send: super::SendUp<'_>,
+) -> Result<GraphState, DistError> {
+    let cfg = &share.cfg;
+    let local = share.local();
+    let spec = &cfg.graph;
+    // Joined late (a restart): the first tick of each node is its next one on the grid.
+    let late = Nanos(wire::mono_now_ns().saturating_sub(start));
+    share.joined_at.store(late.0, Ordering::Relaxed);
+    let (index, local_nodes): (Vec<usize>, Vec<Box<dyn Node>>) = nodes
+        .into_iter()
+        .enumerate()
+        .filter(|(i, _)| local.contains(i))
+        .unzip();
+    let phase_offsets = first_ticks(share, &index, late);
+    // Per local node, the deadline of its next tick, ns: no tick of it not yet sampled is
+    // earlier (see `figures_time`).
+    let next_due: Arc<Vec<AtomicU64>> =
+        Arc::new(phase_offsets.iter().map(|d| AtomicU64::new(d.0)).collect());
+    let real = RealOptions {
+        spin_margin: cfg.spin_margin,
+        phase_offsets,
+        rt_priority: cfg.rt_priority,
+        on_tick: Some(tick_hook(share, &index, &next_due, start)),
+        pause: None,
+        start: Some(wire::instant_at_mono(start)),
+        // This process's executors (an executor never spans processes: `launch` checks).
+        plan: Some(spec.execution_plan().restricted(&index)),
+        track: spec.has_executors_or_compute(),
+    };
+    // The launcher's stop (another process ended the run, or Ctrl-C there).
+    let run_stop = StopFlag::new();
+    let finished = StopFlag::new();
+    let watcher = watch_launcher(
+        share,
+        (ctl_rx, stop, launcher_gone),
+        (&run_stop, &finished),
+        (start, &next_due),
+    );
+    let r = run_real(local_nodes, cfg.duration, &run_stop, &real);
+    let stopped_by_launcher =
+        run_stop.is_stopped() && r.end.reason == crate::scheduler::EndReason::Interrupted;
+    if !stopped_by_launcher {
+        send(&ToLauncher::Ended {
+            process: share.process.clone(),
+            end: r.end.clone(),
+        })?;
+    }
+    // Report at the run's end as the launcher saw it (its stop), else our own.
+    finished.stop();
+    let launcher_at = watcher.join().ok().flatten();
+    let at = match launcher_at {
+        Some(at) if stopped_by_launcher => at,
+        _ => r.end.at,
+    };
+    // Every node thread has ended: the figures are final up to the run's end.
+    share.run_time.fetch_max(at.0, Ordering::SeqCst);
+    Ok(local_state(share, &index, at, r))
+}
+
+/// Each local node's first tick (`index`: their graph indices): its phase offset, or for
+/// a process that joined `late` into the run, its next tick on the run's grid.
+fn first_ticks(share: &Share, index: &[usize], late: Nanos) -> Vec<Nanos> {
+    index
+        .iter()
+        .map(|&i| {
+            let first = share
+                .cfg
+                .phase_offsets
+                .get(i)
+                .copied()
+                .unwrap_or(Nanos::ZERO);
+            let period = share.handles.rates[i].period();
+            if late <= first || period.0 == 0 {
+                first
+            } else {
+                let k = (late.0 - first.0).div_ceil(period.0);
+                Nanos(first.0.saturating_add(k.saturating_mul(period.0)))
+            }
+        })
+        .collect()
+}
+
+/// What each tick of a local node does besides the node's own work: count it, forward
+/// what it published to other processes, sample the counters this process holds into the
+/// batch, move its next deadline on and the figures' run time with it.
+fn tick_hook(
+    share: &Share,
+    index: &[usize],
+    next_due: &Arc<Vec<AtomicU64>>,
+    start: u64,
+) -> crate::scheduler::TickHook {
+    let (hook_ticks, hook_time) = (share.ticks.clone(), share.run_time.clone());
+    let hook_batch = share.batch.clone();
+    let hook_index = index.to_vec();
+    let fwd = share.bridge.clone();
+    let mine: Vec<NodeId> = share.local().iter().map(|&i| NodeId(i)).collect();
+    let hook_held = held_topics(&share.cfg.graph, &mine);
+    let hook_handles = share.handles.clone();
+    let (hook_due, end) = (next_due.clone(), share.cfg.duration.0);
+    Arc::new(move |t: &crate::scheduler::TickReport<'_>| {
+        let (k, now, late) = (t.node, t.now, t.lateness);
+        let i = hook_index[k];
+        hook_ticks[i].fetch_add(1, Ordering::Relaxed);
+        fwd.forward_after(i);
+        // The sample is in the batch before the run time says this tick is done.
+        let read = read_counters(&hook_held, &hook_handles);
+        {
+            let mut b = crate::graph::lock(&hook_batch);
+            b.push_tick((i, now.0, late.0, t.took.0));
+            b.keep(now.0, &read);
+        }
+        // Its next tick is due a period after this one's deadline, at the earliest.
+        let period = hook_handles.rates[i].period().0.max(1);
+        let deadline = now.0.saturating_sub(late.0);
+        hook_due[k].store(deadline.saturating_add(period), Ordering::SeqCst);
+        let wall = wire::mono_now_ns().saturating_sub(start);
+        hook_time.fetch_max(
+            figures_time(wall, end, due_now(&hook_due)),
+            Ordering::SeqCst,
+        );
+    })
+}
+
+/// A thread that watches the launcher while the nodes run: its stop (another process
+/// ended the run, or Ctrl-C there) stops the run (`run_stop`) and is returned with its run
+/// time; so does a local stop or the launcher going away (without a time). It keeps the
+/// figures' run time at now, short of a tick that may be in progress, and ends when the
+/// run has (`finished`).
+fn watch_launcher(
+    share: &Share,
+    (ctl_rx, stop, launcher_gone): (&Receiver<ToMember>, &StopFlag, &StopFlag),
+    (run_stop, finished): (&StopFlag, &StopFlag),
+    (start, next_due): (u64, &Arc<Vec<AtomicU64>>),
+) -> std::thread::JoinHandle<Option<Nanos>> {
+    let (rx, run_stop, outer) = (ctl_rx.clone(), run_stop.clone(), stop.clone());
+    let (finished, gone) = (finished.clone(), launcher_gone.clone());
+    // The figures' run time is now, not the last tick (a slow node ticks seldom), short
+    // of a tick that may be in progress.
+    let (clock, next_due, end) = (
+        share.run_time.clone(),
+        next_due.clone(),
+        share.cfg.duration.0,
+    );
+    std::thread::spawn(move || loop {
+        let wall = wire::mono_now_ns().saturating_sub(start);
+        clock.fetch_max(
+            figures_time(wall, end, due_now(&next_due)),
+            Ordering::SeqCst,
+        );
+        match rx.recv_timeout(Duration::from_millis(50)) {
+            Ok(ToMember::Stop { at_ns, .. }) => {
+                run_stop.stop();
+                return Some(Nanos(at_ns));
+            }
+            Ok(_) => {}
+            Err(RecvTimeoutError::Disconnected) => return None,
+            Err(RecvTimeoutError::Timeout) if outer.is_stopped() || gone.is_stopped() => {
+                run_stop.stop();
+                return None;
+            }
+            Err(RecvTimeoutError::Timeout) if finished.is_stopped() => return None,
+            Err(RecvTimeoutError::Timeout) => {}
+        }
+    })
+}
+
+/// This process's view of the run at `at`: the graph's state, with its own nodes' timing
+/// and executor figures (`r`, in local order; `index`: their graph indices) by graph index
+/// (the others' are their processes' to report).
+fn local_state(
+    share: &Share,
+    index: &[usize],
+    at: Nanos,
+    r: crate::scheduler::RealRun,
+) -> GraphState {
+    let spec = &share.cfg.graph;
+    let mut timing: Vec<NodeTiming> = spec
+        .nodes
+        .iter()
+        .map(|n| NodeTiming {
+            node: n.name.clone(),
+            ..NodeTiming::default()
+        })
+        .collect();
+    for (k, t) in r.timing.into_iter().enumerate() {
+        timing[index[k]] = t;
+    }
+    let ticks_now: Vec<u64> = share
+        .ticks
+        .iter()
+        .map(|t| t.load(Ordering::Relaxed))
+        .collect();
+    let mut state = GraphState::capture(&share.handles, at, &ticks_now, Some(timing));
+    state.exec = r.exec.map(|x| {
+        let mut nodes = vec![crate::executor::NodeExecFigures::default(); spec.nodes.len()];
+        for (k, f) in x.nodes.into_iter().enumerate() {
+            nodes[index[k]] = f;
+        }
+        crate::executor::ExecFigures {
+            nodes,
+            executors: x.executors,
+        }
+    });
+    state
+}
+
+/// The deadlines in `next_due`, ns, as they are now (read on every tick: no allocation).
+fn due_now(next_due: &[AtomicU64]) -> impl Iterator<Item = u64> + '_ {
+    next_due.iter().map(|d| d.load(Ordering::SeqCst))
+}
+
+/// The run time up to which a real-clock process's figures are final, ns: now (`wall_ns`,
+/// at most the run's `end_ns`), but short of the earliest next deadline of its nodes
+/// (`next_due_ns`). A node's tick due by now may be in progress, its counters not yet
+/// sampled; its sample will carry its start time, which is at or after its deadline. So a
+/// watcher that releases a step of run time `t` once the figures cover `t` has every sample
+/// up to `t` ([`LiveStats::t_ns`]).
+pub(super) fn figures_time(
+    wall_ns: u64,
+    end_ns: u64,
+    next_due_ns: impl IntoIterator<Item = u64>,
+) -> u64 {
+    let due = next_due_ns.into_iter().min().unwrap_or(u64::MAX);
+    wall_ns.min(end_ns).min(due.saturating_sub(1))
+}

@@ -1,0 +1,213 @@
+//! A process's live figures: what it publishes every [`STATS_PERIOD`] for `ratelab top`
+//! and `ratelab lab --attach` ([`LiveStats`]), and the bounded batch of steps, ticks and
+//! counter samples its nodes fill between two publications.
+
+use super::{wire, DistError, GraphSpec, NodeId, Share, StepRecord, StopFlag, TopicId};
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+use zenoh::Wait;
+
+/// Live counters a process publishes for `ratelab top` (key `ratelab/<graph>/@stats/<p>`).
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct LiveStats {
+    /// The graph's name.
+    pub graph: String,
+    /// The process.
+    pub process: String,
+    /// Its OS process id.
+    pub pid: u32,
+    /// Run time of these figures, ns: every counter sample up to it is in this message or
+    /// an earlier one (under the real clock, see `figures_time`).
+    pub t_ns: u64,
+    /// Its nodes: name, kind, rate Hz, ticks so far.
+    pub nodes: Vec<(String, String, f64, u64)>,
+    /// The topics whose counters it holds (it runs their subscriber, or their publisher when
+    /// nobody subscribes): name and counters.
+    pub topics: Vec<(String, crate::topic::TopicStats)>,
+    /// Per inbound topic, its over-the-wire latency so far.
+    pub wire: Vec<wire::WireLink>,
+    /// The actuator's steps since the previous figures, oldest first (its process only; at
+    /// most [`MAX_BATCH_STEPS`], the oldest dropped beyond): what `ratelab lab --attach`
+    /// draws the plant, the latency and the topics' counters from.
+    #[serde(default)]
+    pub steps: Vec<StepRecord>,
+    /// Real clock: each tick of its nodes since the previous figures, as (node index, run
+    /// time ns, lateness ns, wall time the tick took ns), oldest first (at most
+    /// [`MAX_BATCH_TICKS`]).
+    #[serde(default)]
+    pub ticks: Vec<(usize, u64, u64, u64)>,
+    /// The counters of each topic it holds, sampled after each tick of its nodes when they
+    /// differ from the previous sample: (run time ns, topic index, counters), oldest first,
+    /// run times never decreasing (at most [`MAX_BATCH_COUNTERS`], the oldest dropped
+    /// beyond). A watcher shows each actuator step with the counters
+    /// its holder had at the step's run time, not at the figures' (under the virtual clock
+    /// 100 ms of wall time is many seconds of run time).
+    #[serde(default)]
+    pub counters: Vec<(u64, usize, crate::topic::TopicStats)>,
+    /// The process's part of the run is over: these are its last figures, and its
+    /// liveliness tokens going next is a process leaving, not dying.
+    #[serde(default)]
+    pub done: bool,
+    /// Set when this process joined a run already under way (started again mid-run, real
+    /// clock): the run time its counts start from, ns. Its counters and ticks count from
+    /// then; a watcher that heard the process before it carries that one's counts over
+    /// ([`crate::monitor::Carried`]), one that did not says so.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub since_ns: Option<u64>,
+}
+
+/// How often each process publishes its [`LiveStats`].
+pub const STATS_PERIOD: Duration = Duration::from_millis(100);
+
+/// The most actuator steps one [`LiveStats`] carries (the virtual lockstep runs about a
+/// thousand a second; a step is about 1 KB of JSON with a few topics).
+pub const MAX_BATCH_STEPS: usize = 1000;
+
+/// The most node ticks one [`LiveStats`] carries.
+pub const MAX_BATCH_TICKS: usize = 20_000;
+
+/// The most counter samples one [`LiveStats`] carries (about 240 bytes each as JSON: a full
+/// batch, with full steps and ticks, stays well under [`wire::MAX_CONTROL_BYTES`]).
+pub const MAX_BATCH_COUNTERS: usize = 8_000;
+
+impl LiveStats {
+    /// Decode figures from the network, refusing any over the bounds a process keeps
+    /// ([`MAX_BATCH_STEPS`], [`MAX_BATCH_TICKS`], a graph's most nodes and topics).
+    ///
+    /// # Errors
+    /// One line.
+    pub fn decode(bytes: &[u8]) -> Result<LiveStats, String> {
+        let m: LiveStats = wire::decode_json(bytes)?;
+        let bounded = m.steps.len() <= MAX_BATCH_STEPS
+            && m.ticks.len() <= MAX_BATCH_TICKS
+            && m.counters.len() <= MAX_BATCH_COUNTERS
+            && m.counters.iter().all(|c| c.1 < crate::ids::MAX_TOPICS)
+            && m.nodes.len() <= crate::ids::MAX_NODES
+            && m.topics.len() <= crate::ids::MAX_TOPICS
+            && m.wire.len() <= crate::ids::MAX_TOPICS;
+        if bounded {
+            Ok(m)
+        } else {
+            Err("figures over a process's bounds".into())
+        }
+    }
+
+    /// A process's figures from a sample on its stats key ([`super::Keys::stats`]), as
+    /// [`LiveStats::decode`] takes them; `None` as well when they name another process than
+    /// the key's (a process's figures count only from its own key).
+    pub fn from_sample(sample: &zenoh::sample::Sample) -> Option<LiveStats> {
+        let from = sample.key_expr().as_str().rsplit('/').next().unwrap_or("");
+        LiveStats::decode(&sample.payload().to_bytes())
+            .ok()
+            .filter(|m| m.process == from)
+    }
+}
+
+/// What happened since the stats thread last published: steps and ticks, bounded.
+#[derive(Default)]
+pub(super) struct Batch {
+    steps: std::collections::VecDeque<StepRecord>,
+    ticks: std::collections::VecDeque<(usize, u64, u64, u64)>,
+    counters: std::collections::VecDeque<(u64, usize, crate::topic::TopicStats)>,
+    /// Each topic's counters as last sampled (a sample is kept only when they changed).
+    last: Vec<Option<crate::topic::TopicStats>>,
+    /// The run time of the newest sample, ns (samples never go back in time).
+    last_t: u64,
+}
+
+impl Batch {
+    fn push_step(&mut self, s: StepRecord) {
+        if self.steps.len() == MAX_BATCH_STEPS {
+            self.steps.pop_front();
+        }
+        self.steps.push_back(s);
+    }
+    pub(super) fn push_tick(&mut self, t: (usize, u64, u64, u64)) {
+        if self.ticks.len() == MAX_BATCH_TICKS {
+            self.ticks.pop_front();
+        }
+        self.ticks.push_back(t);
+    }
+    /// Keep the counters `read` of the topics this process holds at run time `t_ns` (after
+    /// a tick of one of its nodes), those that changed. Node threads may come out of order:
+    /// a sample is never older than the one before.
+    pub(super) fn keep(&mut self, t_ns: u64, read: &[(TopicId, crate::topic::TopicStats)]) {
+        self.last_t = self.last_t.max(t_ns);
+        for &(t, st) in read {
+            if self.last.len() <= t.0 {
+                self.last.resize(t.0 + 1, None);
+            }
+            if self.last[t.0] == Some(st) {
+                continue;
+            }
+            self.last[t.0] = Some(st);
+            if self.counters.len() == MAX_BATCH_COUNTERS {
+                self.counters.pop_front();
+            }
+            self.counters.push_back((self.last_t, t.0, st));
+        }
+    }
+}
+
+/// Read the counters of `held` (before taking the batch's lock: each read locks its topic).
+pub(super) fn read_counters(
+    held: &[TopicId],
+    handles: &crate::graph::GraphHandles,
+) -> Vec<(TopicId, crate::topic::TopicStats)> {
+    held.iter()
+        .map(|&t| (t, handles.topic(t).stats()))
+        .collect()
+}
+
+/// The topics whose counters process `mine` holds (their [`TopicSpec::holder`] runs in
+/// it): those it subscribes to, and those it publishes that nobody subscribes to (as
+/// [`LiveStats::topics`]).
+///
+/// [`TopicSpec::holder`]: crate::graph::spec::TopicSpec::holder
+pub(super) fn held_topics(spec: &GraphSpec, mine: &[NodeId]) -> Vec<TopicId> {
+    (0..spec.topics.len())
+        .map(TopicId)
+        .filter(|&t| mine.contains(&spec.topic(t).holder()))
+        .collect()
+}
+
+/// Hands every actuator step to the stats thread.
+pub(super) struct StepTap(pub(super) Arc<Mutex<Batch>>);
+
+impl crate::graph::StepObserver for StepTap {
+    fn on_step(&mut self, rec: &StepRecord) {
+        crate::graph::lock(&self.0).push_step(*rec);
+    }
+}
+
+/// Start the thread that puts this process's figures ([`LiveStats`]) on `stats_pub` every
+/// [`STATS_PERIOD`] for `ratelab top` and `ratelab lab --attach`, and once more after
+/// `done` (the run's last steps).
+///
+/// # Errors
+/// [`DistError::Peer`] when the thread cannot start.
+pub(super) fn spawn_figures(
+    share: Arc<Share>,
+    stats_pub: zenoh::pubsub::Publisher<'static>,
+    done: StopFlag,
+) -> Result<std::thread::JoinHandle<()>, DistError> {
+    std::thread::Builder::new()
+        .name("stats".into())
+        .spawn(move || loop {
+            let last = done.is_stopped();
+            let mut msg = share.live_stats();
+            {
+                let mut b = crate::graph::lock(&share.batch);
+                msg.steps = std::mem::take(&mut b.steps).into();
+                msg.ticks = std::mem::take(&mut b.ticks).into();
+                msg.counters = std::mem::take(&mut b.counters).into();
+            }
+            msg.done = last;
+            let _ = stats_pub.put(wire::encode_json(&msg)).wait();
+            if last {
+                break;
+            }
+            std::thread::sleep(STATS_PERIOD);
+        })
+        .map_err(|e| DistError::Peer(format!("cannot start a thread: {e}")))
+}
