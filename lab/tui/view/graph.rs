@@ -1,0 +1,608 @@
+//! The graph panel: the nodes as boxes in columns by layer (name, kind, rate, ticks and
+//! what is wrong with them), the topics as arrows between them (name, type, QoS, msg/s,
+//! drops), and how tall the panel is at a terminal's size.
+
+use super::*;
+
+/// The graph panel's title: the nodes and topics in layout order.
+fn graph_title(v: &View) -> String {
+    // Columns joined by arrows; what shares a column, by commas.
+    let names: Vec<String> = layout_columns(v)
+        .iter()
+        .map(|c| match c {
+            Column::Nodes(ns) => ns
+                .iter()
+                .map(|&i| v.nodes[i].name.as_str())
+                .collect::<Vec<_>>()
+                .join(", "),
+            Column::Topics(ts) => ts
+                .iter()
+                .map(|&i| v.topics[i].name.as_str())
+                .collect::<Vec<_>>()
+                .join(", "),
+        })
+        .collect();
+    format!(" graph: {} ", names.join(" → "))
+}
+
+/// A column of the graph panel: the nodes of one layer, or the topics they publish.
+enum Column {
+    Nodes(Vec<usize>),
+    Topics(Vec<usize>),
+}
+
+/// Left to right: each layer's nodes, then the topics they publish.
+fn layout_columns(v: &View) -> Vec<Column> {
+    let layers = v.nodes.iter().map(|n| n.layer).max().map_or(0, |l| l + 1);
+    let mut cols = Vec::new();
+    for l in 0..layers {
+        let nodes: Vec<usize> = (0..v.nodes.len())
+            .filter(|&i| v.nodes[i].layer == l)
+            .collect();
+        if nodes.is_empty() {
+            continue;
+        }
+        let topics: Vec<usize> = (0..v.topics.len())
+            .filter(|&t| nodes.contains(&v.topics[t].publisher))
+            .collect();
+        cols.push(Column::Nodes(nodes));
+        if !topics.is_empty() {
+            cols.push(Column::Topics(topics));
+        }
+    }
+    cols
+}
+
+pub(super) fn render_graph(v: &View, area: Rect, buf: &mut Buffer) {
+    let mut block = match selection_title(v) {
+        Some(t) => Block::bordered().title(Line::from(t).black().on_yellow().bold()),
+        None => Block::bordered().title(graph_title(v)),
+    };
+    // What the brain is, when known: a fall with no drops is then no mystery.
+    if let Some(caption) = &v.brain_caption {
+        block = block.title_bottom(Line::from(format!(" brain: {caption} ")).dim());
+    }
+    let inner = block.inner(area);
+    block.render(area, buf);
+    let cols = layout_columns(v);
+    let n = cols.len().max(1) as u32;
+    let areas = Layout::horizontal((0..n).map(|_| Constraint::Ratio(1, n))).split(inner);
+    for (col, rect) in cols.iter().zip(areas.iter()) {
+        let count = match col {
+            Column::Nodes(x) | Column::Topics(x) => x.len().max(1) as u32,
+        };
+        // Node boxes each as tall as they need when the column has room for all of them
+        // (the last takes the rest); else, and for arrows, evenly.
+        let needs: Vec<u16> = match col {
+            Column::Nodes(ns) => ns
+                .iter()
+                .map(|&i| node_rows(&v.nodes[i]) as u16 + 2)
+                .collect(),
+            Column::Topics(_) => Vec::new(),
+        };
+        let cells = if !needs.is_empty() && needs.iter().sum::<u16>() <= rect.height {
+            let last = needs.len() - 1;
+            Layout::vertical(needs.iter().enumerate().map(|(k, &h)| {
+                if k == last {
+                    Constraint::Fill(1)
+                } else {
+                    Constraint::Length(h)
+                }
+            }))
+            .split(*rect)
+        } else {
+            Layout::vertical((0..count).map(|_| Constraint::Ratio(1, count))).split(*rect)
+        };
+        match col {
+            Column::Nodes(ns) => {
+                for (&i, cell) in ns.iter().zip(cells.iter()) {
+                    render_node(&v.nodes[i], *cell, buf, v.clock == "real");
+                }
+            }
+            Column::Topics(ts) => {
+                for (&i, cell) in ts.iter().zip(cells.iter()) {
+                    render_arrow(&v.topics[i], *cell, buf);
+                }
+            }
+        }
+    }
+}
+
+/// A node's box; `real`: under the real clock (a node with no measured rate yet, as one
+/// just started again, is being measured, not on virtual time).
+pub(super) fn render_node(n: &NodeView, area: Rect, buf: &mut Buffer, real: bool) {
+    let wide = area.width >= 14;
+    // Each figure in the first of its forms that fits the box whole (at 80 columns a box is
+    // 9 wide: `200 meas`, `p99 3.5ms`, never `200.0 mea` or `p99 3506 `).
+    let room = usize::from(area.width.saturating_sub(2));
+    let fit = |forms: Vec<String>| first_that_fits(forms, room);
+    let set = match (n.next_hz, wide) {
+        // After the run ended, the rate it ran at beside the next run's.
+        (Some(next), _) => {
+            let (ran, next) = (hz(n.set_hz), hz(next));
+            fit(vec![
+                format!("{ran}→{next} Hz next"),
+                format!("{ran}→{next} Hz"),
+                format!("{ran}→{next}"),
+                format!("→{next} Hz"),
+            ])
+        }
+        (None, true) => format!("{} Hz set", hz(n.set_hz)),
+        (None, false) => format!("{} Hz", hz(n.set_hz)),
+    };
+    let mut lines = vec![Line::from(set)];
+    if let Some(s) = n.in_callback_s {
+        lines.push(
+            Line::from(fit(vec![
+                format!("in callback {s:.1} s"),
+                format!("in callback {s:.0}s"),
+                format!("in cb {s:.1}s"),
+                format!("cb {s:.0}s"),
+            ]))
+            .red()
+            .bold(),
+        );
+    }
+    if n.in_callback_s.is_none() {
+        lines.extend(rate_figures(n, area.width, real));
+    }
+    if let Some(c) = &n.compute {
+        lines.push(
+            Line::from(if wide {
+                format!("{c} compute")
+            } else {
+                c.clone()
+            })
+            .dim(),
+        );
+    }
+    // A Python or ROS 2 node says so under its rate, or in its title when the box has no
+    // room left.
+    let badge_in_title =
+        n.badge.is_some() && lines.len() + 1 > usize::from(area.height.saturating_sub(2));
+    if let (Some(b), false) = (n.badge, badge_in_title) {
+        lines.insert(1, Line::from(b.words().0).cyan());
+    }
+    // What a tick costs, last: only where the box has a row left for it.
+    if let Some(t) = n.tick_p50_us {
+        if lines.len() < usize::from(area.height.saturating_sub(2)) {
+            // Whole, in ms past 999 µs where µs would not fit (a 2 ms compute time).
+            let ms = t / 1000.0;
+            let text = fit(vec![
+                format!("tick p50 {t:.0} µs"),
+                format!("tick p50 {ms:.1} ms"),
+                format!("tick {t:.0} µs"),
+                format!("tick {ms:.1} ms"),
+                format!("tick {ms:.0}ms"),
+            ]);
+            lines.push(Line::from(text).dim());
+        }
+    }
+    if let Some(words) = alarm(n) {
+        // The mark gives way in a narrow box (80 columns): the words must read whole.
+        let full = format!("✗ {words}");
+        let text = if full.chars().count() <= usize::from(area.width.saturating_sub(2)) {
+            full
+        } else {
+            words.to_string()
+        };
+        lines.insert(0, Line::from(text).white().on_red().bold());
+    }
+    let mut name = match &n.process {
+        Some(p) => format!("{}@{p}", n.name),
+        None => n.name.clone(),
+    };
+    // Only where the name still fits whole (a centred title too long loses both ends).
+    if let (Some(b), true) = (n.badge, badge_in_title) {
+        let short = b.words().1;
+        if name.chars().count() + short.len() < usize::from(area.width.saturating_sub(2)) {
+            name.push(' ');
+            name.push_str(short);
+        }
+    }
+    let (title, border) = if n.selected {
+        (
+            Line::from(name).black().on_yellow().bold().centered(),
+            Style::new().fg(Color::Yellow),
+        )
+    } else {
+        (Line::from(name).bold().centered(), Style::new())
+    };
+    Paragraph::new(lines)
+        .alignment(Alignment::Center)
+        .block(Block::bordered().border_style(border).title(title))
+        .render(area, buf);
+}
+
+/// What a node's box says of its rate under the rate it is set to: what it sent, what the
+/// real clock measured and how late its ticks were (p99), or under the virtual clock what
+/// its timer achieved and skipped (executors). Each in the first of its forms that fits a
+/// box `width` wide.
+fn rate_figures(n: &NodeView, width: u16, real: bool) -> Vec<Line<'static>> {
+    let wide = width >= 14;
+    let room = usize::from(width.saturating_sub(2));
+    let fit = |forms: Vec<String>| first_that_fits(forms, room);
+    let mut lines = Vec::new();
+    match (n.published_hz, n.measured_hz, n.lateness_p99_us) {
+        (Some(p), ..) => lines.push(Line::from(fit(vec![
+            format!("{p:.1} Hz sent"),
+            format!("{p:.0} Hz sent"),
+            format!("{p:.0} sent"),
+        ]))),
+        (None, Some(m), Some(l)) => {
+            let mut meas = vec![format!("{m:.1} meas"), format!("{m:.0} meas")];
+            if wide {
+                meas.insert(0, format!("{m:.1} Hz meas"));
+            }
+            lines.push(Line::from(fit(meas)));
+            // What the figure is ("late") goes only after the spaces and digits that can
+            // go (past 999 µs in milliseconds), so that boxes of one width read alike:
+            // a 14-wide box keeps "late" up to 999 ms.
+            let ms = l / 1000.0;
+            lines.push(
+                Line::from(fit(vec![
+                    format!("p99 {l:.0} µs late"),
+                    format!("p99 {l:.0}µs late"),
+                    format!("p99 {ms:.1} ms late"),
+                    format!("p99 {ms:.1}ms late"),
+                    format!("p99 {ms:.0}ms late"),
+                    format!("p99 {l:.0}µs"),
+                    format!("p99 {ms:.1}ms"),
+                    format!("p99 {ms:.0}ms"),
+                ]))
+                .dim(),
+            );
+        }
+        _ => match n.ran {
+            // Executors under the virtual clock: what the timer achieved, and what it skipped.
+            Some((hz, skipped)) => {
+                let text = match (skipped > 0, wide && width >= 22) {
+                    (true, true) => format!("{hz:.1} Hz · {skipped} skip"),
+                    (true, false) => fit(vec![
+                        format!("{hz:.0} Hz·{skipped} skip"),
+                        format!("{hz:.0}Hz {skipped}skip"),
+                        format!("{skipped} skip"),
+                    ]),
+                    (false, _) => fit(vec![
+                        format!("{hz:.1} Hz ran"),
+                        format!("{hz:.0} Hz ran"),
+                        format!("{hz:.1} ran"),
+                    ]),
+                };
+                let line = Line::from(text);
+                lines.push(if skipped > 0 { line.yellow() } else { line });
+            }
+            None if real => lines.push(Line::from("measuring").dim()),
+            None => lines.push(Line::from(if wide { "virtual time" } else { "virtual" }).dim()),
+        },
+    }
+    lines
+}
+
+/// `parts` packed greedily into lines of at most `w` characters.
+fn pack(parts: impl IntoIterator<Item = String>, sep: &str, w: usize) -> Vec<String> {
+    let mut packed: Vec<String> = Vec::new();
+    for p in parts {
+        match packed.last_mut() {
+            Some(l) if l.chars().count() + sep.chars().count() + p.chars().count() <= w => {
+                l.push_str(sep);
+                l.push_str(&p);
+            }
+            _ => packed.push(p),
+        }
+    }
+    packed
+}
+
+/// An arrow's lines at width `w`, for a panel `rows` high: name, shaft, msg/s, dropped (and
+/// stale reads, and the wire latency across processes). When those do not fit in `rows`
+/// (at 80×24), the drops and stale reads share a line (`3 drop ⚠ 126↺`) if it fits `w`, so
+/// the wire line still shows; a wire line wider than `w` shows its p50 only. With QoS set:
+/// name, shaft, drops, msg/s, the QoS counters, the QoS in short, stale reads, packed to the
+/// width, most telling first (a short panel cuts from the end).
+pub(super) fn arrow_lines(t: &TopicView, w: usize, rows: usize) -> Vec<Line<'static>> {
+    if t.subscriber.is_none() {
+        return unsubscribed_arrow(t, w);
+    }
+    let (shaft, style, mark) = if t.dropping {
+        (
+            "═",
+            Style::new().fg(Color::Yellow).add_modifier(Modifier::BOLD),
+            "⚠",
+        )
+    } else if t.unhealthy {
+        ("─", Style::new().fg(Color::Red), "✗")
+    } else {
+        ("─", Style::new().fg(Color::Green), "✓")
+    };
+    let name = if t.selected {
+        Line::from(
+            format!("{} d{}", t.name, t.depth)
+                .black()
+                .on_yellow()
+                .bold(),
+        )
+        .centered()
+    } else {
+        Line::from(t.name.clone().bold()).centered()
+    };
+    let shaft = Line::from(Span::styled(
+        format!("{}▶", shaft.repeat(w.saturating_sub(1))),
+        style,
+    ));
+    let rate = arrow_rate(t, w, style);
+    // Several subscribers: who reads it, under its name.
+    let name = match &t.fan_out {
+        Some(to) => {
+            let to: String = format!("→ {to}").chars().take(w).collect();
+            Line::from(vec![name.spans[0].clone(), Span::raw(" "), to.dim()]).centered()
+        }
+        None => name,
+    };
+    // The mark stays when the words do not fit (`25 drop ⚠` at 80 columns; the line may
+    // take the column before the next box too).
+    let drop_mark = if t.unhealthy && !t.dropping {
+        String::new()
+    } else {
+        format!(" {mark}")
+    };
+    let dropped = first_that_fits(
+        [
+            format!("{} dropped{drop_mark}", t.dropped),
+            format!("{} drop{drop_mark}", t.dropped),
+            format!("{}{drop_mark}", t.dropped),
+        ],
+        w + 1,
+    );
+    let dropped = Line::from(Span::styled(dropped, style)).centered();
+    // The mirror image of a drop, with a symbol of its own: old data read again.
+    let stale_style = if t.staling {
+        Style::new().fg(Color::Magenta).add_modifier(Modifier::BOLD)
+    } else {
+        Style::new().fg(Color::DarkGray)
+    };
+    let stale = (t.segment_stale_reads > 0).then(|| {
+        Line::from(Span::styled(
+            format!("{} stale ↺", t.stale_reads),
+            stale_style,
+        ))
+        .centered()
+    });
+    let wire = t.wire_us.map(|(p50, p99)| {
+        let full = format!("wire {p50:.0}/{p99:.0} µs");
+        let text = if full.chars().count() <= w {
+            full
+        } else {
+            format!("wire {p50:.0} µs")
+        };
+        Line::from(text.dim()).centered()
+    });
+    let Some(parts) = &t.qos else {
+        let mut lines = vec![name, shaft, rate];
+        let (drop_text, stale_text) = (
+            format!("{} drop{drop_mark} ", t.dropped),
+            format!("{}↺", t.stale_reads),
+        );
+        let short =
+            lines.len() + 1 + usize::from(stale.is_some()) + usize::from(wire.is_some()) > rows;
+        if short
+            && stale.is_some()
+            && wire.is_some()
+            && (drop_text.chars().count() + stale_text.chars().count()) <= w
+        {
+            lines.push(
+                Line::from(vec![
+                    Span::styled(drop_text, style),
+                    Span::styled(stale_text, stale_style),
+                ])
+                .centered(),
+            );
+        } else {
+            lines.push(dropped);
+            lines.extend(stale);
+        }
+        lines.extend(wire);
+        return lines;
+    };
+    let (on_shaft, below) = qos_on_shaft(parts, w);
+    let shaft = if on_shaft.is_empty() {
+        shaft
+    } else {
+        let label = on_shaft.join(" ");
+        let run = w
+            .saturating_sub(1)
+            .saturating_sub(label.chars().count() + 2);
+        let (left, right) = (run / 2, run - run / 2);
+        let shaft_style = shaft.spans.first().map_or(Style::new(), |s| s.style);
+        let bar = if t.dropping { "═" } else { "─" };
+        Line::from(vec![
+            Span::styled(format!("{} ", bar.repeat(left)), shaft_style),
+            Span::raw(label).dim(),
+            Span::styled(format!(" {}▶", bar.repeat(right)), shaft_style),
+        ])
+    };
+    // msg/s right after the drops: at 80×24 a panel of five rows still shows it.
+    let mut lines = vec![name, shaft, dropped, rate];
+    lines.extend(qos_counters(t, w));
+    lines.extend(
+        pack(below, " ", w)
+            .into_iter()
+            .map(|l| Line::from(l).dim().centered()),
+    );
+    lines.extend(stale);
+    lines.extend(wire);
+    lines
+}
+
+/// Published, read by no node (a diagnostic output): a dashed arrow to nobody, and no drop
+/// count (every message it evicts is unread, and no one misses it).
+fn unsubscribed_arrow(t: &TopicView, w: usize) -> Vec<Line<'static>> {
+    let grey = Style::new().fg(Color::DarkGray);
+    vec![
+        Line::from(t.name.clone().bold()).centered(),
+        Line::from(Span::styled(
+            format!("{}▷", "╌".repeat(w.saturating_sub(1))),
+            grey,
+        )),
+        Line::from(format!("{:.1} msg/s", t.msg_per_s)).centered(),
+        Line::from(Span::styled("no subscriber", grey)).centered(),
+    ]
+}
+
+/// A QoS counter that says the topic is unhealthy.
+fn faulty(label: &str) -> bool {
+    label == "lost" || label == "dl miss"
+}
+
+/// The arrow's msg/s line. The ✗ of an unhealthy topic stands by what went wrong, never by
+/// a count of 0 drops: by its losses or missed deadlines where its QoS counters show
+/// (`53 lost ✗`), else by its rate (a dead node starves it; a default-QoS topic's losses
+/// on the wire), in `style`.
+fn arrow_rate(t: &TopicView, w: usize, style: Style) -> Line<'static> {
+    let fault_counted = t.qos.is_some()
+        && t.qos_counts
+            .iter()
+            .any(|(label, n)| *n > 0 && faulty(label));
+    let fault_on_rate = t.unhealthy && !t.dropping && !fault_counted;
+    if t.uncounted {
+        Line::from("? msg/s".red()).centered()
+    } else if fault_on_rate {
+        // Room for the rate and " ✗".
+        let text = first_that_fits(
+            [
+                format!("{:.1} msg/s", t.msg_per_s),
+                format!("{:.0} msg/s", t.msg_per_s),
+                format!("{:.0}/s", t.msg_per_s),
+                format!("{:.0}", t.msg_per_s),
+            ],
+            (w + 1).saturating_sub(2),
+        );
+        Line::from(vec![
+            Span::raw(format!("{text} ")),
+            Span::styled("✗", style),
+        ])
+        .centered()
+    } else {
+        Line::from(format!("{:.1} msg/s", t.msg_per_s)).centered()
+    }
+}
+
+/// The QoS parts that go on the shaft itself (`── dl 40 ms stop ──▶`), as many as fit in
+/// `w`, most telling first, and those that go below it. At 80×24 the panel's rows are the
+/// drops', the rate's and the counters'. On a shaft too short for all, the chapter's
+/// keep-last/latest rule gives way first (the depth shows in the header and on the
+/// selected arrow).
+fn qos_on_shaft(parts: &[String], w: usize) -> (Vec<String>, Vec<String>) {
+    let room = w.saturating_sub(3); // the head and a space either side
+    let all = parts.join(" ");
+    if all.chars().count() <= room {
+        return (parts.to_vec(), Vec::new());
+    }
+    let mut fit: Vec<String> = Vec::new();
+    let mut rest: Vec<String> = Vec::new();
+    let latest_rule = |p: &str| p.starts_with("KL") && p.ends_with(" latest");
+    for p in parts.iter().filter(|p| !latest_rule(p)) {
+        let used = fit.iter().map(|f| f.chars().count() + 1).sum::<usize>();
+        // Its compact form when it is too long (`dl 40 stop`: milliseconds, as every
+        // QoS time is), then its first two words (`dl 30`: the deadline without what a
+        // miss does, which goes below with the whole part).
+        let compact = p.replace(" ms", "");
+        let words: Vec<&str> = compact.split(' ').collect();
+        let head = (words.len() > 2).then(|| words[..2].join(" "));
+        let whole = [p.clone(), compact.clone()]
+            .into_iter()
+            .find(|c| rest.is_empty() && used + c.chars().count() <= room);
+        match (whole, head) {
+            (Some(c), _) => fit.push(c),
+            (None, Some(h)) if rest.is_empty() && used + h.chars().count() <= room => {
+                fit.push(h);
+                rest.push(p.clone());
+            }
+            _ => rest.push(p.clone()),
+        }
+    }
+    rest.extend(parts.iter().filter(|p| latest_rule(p)).cloned());
+    (fit, rest)
+}
+
+/// The topic's QoS counters under its arrow, packed into lines of `w`: those that counted
+/// first (a short panel cuts from the end: at 80×24 "41 lost" must not give way to
+/// "0 expired"), the unhealthy topic's ✗ by the first of its losses or missed deadlines
+/// that counted.
+fn qos_counters(t: &TopicView, w: usize) -> Vec<Line<'static>> {
+    let counting = t.qos_counts.iter().any(|(_, n)| *n > 0);
+    let mut counted: Vec<&(&'static str, u64)> = t.qos_counts.iter().collect();
+    counted.sort_by_key(|(_, n)| *n == 0);
+    let marked = counted
+        .iter()
+        .position(|(label, n)| *n > 0 && faulty(label))
+        .filter(|_| t.unhealthy && !t.dropping);
+    let counts = pack(
+        counted.iter().enumerate().map(|(i, (label, n))| {
+            format!("{n} {label}{}", if Some(i) == marked { " ✗" } else { "" })
+        }),
+        " · ",
+        w,
+    );
+    let style = if counting {
+        Style::new().fg(Color::Red).add_modifier(Modifier::BOLD)
+    } else {
+        Style::new().fg(Color::DarkGray)
+    };
+    counts
+        .into_iter()
+        .map(|l| Line::from(Span::styled(l, style)).centered())
+        .collect()
+}
+
+fn render_arrow(t: &TopicView, area: Rect, buf: &mut Buffer) {
+    let w = area.width.saturating_sub(1) as usize;
+    Paragraph::new(arrow_lines(t, w, usize::from(area.height))).render(area, buf);
+}
+
+/// What a node's box raises in red: its lease ran out (`NOT ALIVE`), or, until then, the
+/// fault injected into it (`STALLED`, `KILLED`).
+pub(super) fn alarm(n: &NodeView) -> Option<&'static str> {
+    if n.alive == Some(false) {
+        Some("NOT ALIVE")
+    } else {
+        n.fault
+    }
+}
+
+/// The rows a node's box would fill inside its border: its rate, what it measured (or ran,
+/// or sent), its compute time, badge, tick time and liveliness.
+pub(super) fn node_rows(n: &NodeView) -> usize {
+    let status = match (n.published_hz, n.measured_hz, n.lateness_p99_us) {
+        (None, Some(_), Some(_)) => 2,
+        _ => 1,
+    };
+    1 + status
+        + usize::from(n.compute.is_some())
+        + usize::from(n.badge.is_some())
+        + usize::from(n.tick_p50_us.is_some())
+        + usize::from(alarm(n).is_some())
+}
+
+/// The graph panel's height: 7 rows, more when an arrow's QoS lines or a column of node
+/// boxes need them and the terminal is tall enough (30 rows) to spare them, within `max`.
+pub(super) fn graph_height(v: &View, width: u16, height: u16, max: u16) -> u16 {
+    if height < 30 {
+        return 7;
+    }
+    let cols = layout_columns(v);
+    let n = cols.len().max(1) as u16;
+    let w = (width.saturating_sub(2) / n).saturating_sub(1) as usize;
+    let tallest = cols
+        .iter()
+        .map(|c| match c {
+            Column::Topics(ts) => ts
+                .iter()
+                .map(|&i| arrow_lines(&v.topics[i], w, usize::MAX).len())
+                .sum::<usize>(),
+            Column::Nodes(ns) => ns.iter().map(|&i| node_rows(&v.nodes[i]) + 2).sum(),
+        })
+        .max()
+        .unwrap_or(0) as u16;
+    (tallest + 2).clamp(7, max.max(7))
+}
