@@ -1,0 +1,419 @@
+//! From the lab's state to the [`View`] a frame draws: each node's box, each topic's
+//! arrow, the latency, the segment's counters and the log pane, built from the one graph
+//! spec and what the telemetry told.
+
+use super::*;
+
+impl App {
+    /// The log pane's view: the selected node's lines (all nodes' when none is selected).
+    pub(super) fn log_view(&self) -> LogView {
+        let node = match self.selected {
+            Some(Selected::Node(id)) => Some(self.graph.node(id).name.clone()),
+            _ => None,
+        };
+        let mine =
+            |l: &&ratelab::textlog::LogLine| node.is_none() || l.node.as_deref() == node.as_deref();
+        let lines: Vec<(bool, String)> = self
+            .log
+            .iter()
+            .filter(mine)
+            .map(|l| {
+                let t = l.t.map_or_else(
+                    || "      ".to_string(),
+                    |t| format!("t={:<5.2}", t.as_secs_f64()),
+                );
+                let who = l.node.as_deref().unwrap_or("ratelab");
+                (
+                    l.level != ratelab::textlog::Level::Info,
+                    format!("{t} {who:<9} {}", l.text),
+                )
+            })
+            .collect();
+        LogView {
+            back: self.log_back.min(lines.len().saturating_sub(1)),
+            whose: node.unwrap_or_else(|| "all nodes".to_string()),
+            total: if self.selected.is_some() {
+                lines.len()
+            } else {
+                self.log_total
+            },
+            lines,
+        }
+    }
+
+    pub(super) fn topic_view(&self, id: TopicId) -> TopicView {
+        let spec = self.graph.topic(id);
+        // After the run ended: the QoS it ran with (keys set the next run's).
+        let qos = self
+            .ended_with
+            .as_ref()
+            .and_then(|(_, _, q)| q.get(id.0).copied())
+            .unwrap_or_else(|| self.qos_of(id));
+        // The depth it ran with, and as set for the next run.
+        let (ran_depth, next_depth) = match &self.ended_with {
+            Some((_, d, _)) => {
+                let next = self.depth_of(id);
+                (
+                    d.get(id.0).copied().unwrap_or(next),
+                    (d.get(id.0) != Some(&next)).then_some(next),
+                )
+            }
+            None => (self.depth_of(id), None),
+        };
+        let window = self.live.window_topic(id);
+        let segment = self.live.segment_topic(id);
+        // An attached lab's totals, once the launch ended: its summary's.
+        let ended = self.final_topics.as_ref().and_then(|m| m.get(&spec.name));
+        let dead = |n: NodeId| {
+            self.alive.get(n.0).copied().flatten() == Some(false) || self.fault_of(n).is_some()
+        };
+        TopicView {
+            name: spec.name.clone(),
+            publisher: spec.publisher.0,
+            subscriber: spec.subscriber().map(|n| n.0),
+            fan_out: (spec.subscribers.len() > 1).then(|| {
+                spec.subscribers
+                    .iter()
+                    .map(|n| self.graph.node(*n).name.as_str())
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            }),
+            depth: ran_depth,
+            next_depth,
+            msg_per_s: window.msg_per_s,
+            dropped: window.dropped,
+            // A topic nobody reads evicts every message unread: not a drop anyone suffers.
+            dropping: spec.subscriber().is_some() && window.dropped > 0,
+            unhealthy: dead(spec.publisher)
+                || spec.subscribers.iter().any(|&n| dead(n))
+                || self.live.window_counter(id, QosCounter::Lost) > 0
+                || self
+                    .live
+                    .window_counter(id, QosCounter::RequestedDeadlineMissed)
+                    > 0,
+            uncounted: self.attached.is_some() && dead(spec.holder()),
+            stale_reads: window.stale_reads,
+            staling: window.stale_reads > 0,
+            segment_dropped: ended.map_or(segment.dropped, |t| t.dropped),
+            segment_stale_reads: ended.map_or(segment.stale_reads, |t| t.stale_reads),
+            segment_lost: ended.map_or(segment.lost, |t| {
+                t.qos_counters
+                    .get(QosCounter::Lost.key())
+                    .copied()
+                    .unwrap_or(0)
+            }),
+            qos: (!(qos.is_default() && spec.qos.is_default())).then(|| qos.short_parts(ran_depth)),
+            // Over the window, as its drops and stale reads (totals counted from the start
+            // read as 40 % loss on a 20 % link under an arrow saying "last 5 s").
+            qos_counts: self.last.map_or_else(Vec::new, |l| {
+                l.topics
+                    .get(id)
+                    .reported(&[spec.qos, qos])
+                    .into_iter()
+                    .filter(|c| *c != QosCounter::OfferedDeadlineMissed)
+                    .map(|c| (short_counter(c), self.live.window_counter(id, c)))
+                    .collect()
+            }),
+            selected: self.selected == Some(Selected::Topic(id)),
+            wire_us: self.wire.get(id.0).copied().flatten(),
+        }
+    }
+
+    /// The injected fault node `id` is under now: `STALLED` or `KILLED`.
+    pub(super) fn fault_of(&self, id: NodeId) -> Option<&'static str> {
+        let name = &self.graph.node(id).name;
+        self.faults
+            .iter()
+            .find(|f| &f.node == name && f.covers(self.now))
+            .map(|f| {
+                if f.duration.is_some() {
+                    "STALLED"
+                } else {
+                    "KILLED"
+                }
+            })
+    }
+
+    /// `hung`: the callback held now, if any ([`App::hung_callback`], asked once a frame).
+    pub(super) fn node_view(
+        &self,
+        id: NodeId,
+        layer: usize,
+        hung: Option<&(String, f64)>,
+    ) -> NodeView {
+        let empty = VecDeque::new();
+        let q = self.ticks.get(id.0).unwrap_or(&empty);
+        // No tick for a second or two periods (a node whose process died): 0 Hz now.
+        let quiet = Nanos::from_secs_f64(2.0 / self.rate_of(id).max(1e-3))
+            .unwrap_or(TICK_WINDOW)
+            .max(TICK_WINDOW);
+        let silent = q
+            .back()
+            .is_some_and(|(t, ..)| self.now.saturating_sub(*t) > quiet);
+        let (measured_hz, lateness_p99_us, tick_p50_us) = if self.clock == "real" && q.len() >= 2 {
+            let span = (q.back().expect("len ≥ 2").0)
+                .saturating_sub(q.front().expect("len ≥ 2").0)
+                .as_secs_f64();
+            let mut late: Vec<u64> = q.iter().map(|(_, l, _)| l.0).collect();
+            late.sort_unstable();
+            let p99 = late[((late.len() as f64 * 0.99).ceil() as usize).clamp(1, late.len()) - 1];
+            let mut took: Vec<u64> = q.iter().map(|(.., d)| d.0).collect();
+            took.sort_unstable();
+            let p50 = took[(took.len() - 1) / 2];
+            let hz = if silent {
+                0.0
+            } else {
+                (q.len() - 1) as f64 / span.max(1e-9)
+            };
+            (Some(hz), Some(p99 as f64 / 1e3), Some(p50 as f64 / 1e3))
+        } else {
+            (None, None, None)
+        };
+        // After the run ended: the rate it ran at, and the next run's when a key changed it.
+        let ran_hz = self
+            .ended_with
+            .as_ref()
+            .and_then(|(r, _, _)| r.get(id.0).copied());
+        // Virtual clock with executors: the rate the node achieved and the periods its timer
+        // skipped waiting for a thread, over the arrows' window (since the start until the
+        // run is that long: its tick intervals). Each period of a timer either ticks or is
+        // skipped (rcl's timers, `ratelab::rate::next_deadline`), so the rate achieved is the
+        // set rate times the share of periods that ticked: exactly the set rate for a node
+        // that skipped none, where ticks over the span between two status messages (which
+        // fall between ticks) read a tick off (200.3 Hz for 200).
+        let ran = self.exec.back().and_then(|(at, x)| {
+            let &(ticks, skipped) = x.get(id.0)?;
+            let base = match self.exec.front() {
+                Some((t0, b)) if t0 < at => b.get(id.0).copied(),
+                // One count since a change: nothing to rate yet.
+                _ if self.exec_from.is_some() => return None,
+                _ => None,
+            };
+            let (ticks0, skipped0) = base.unwrap_or((1, 0));
+            let (ticked, missed) = (
+                ticks.saturating_sub(ticks0),
+                skipped.saturating_sub(skipped0),
+            );
+            let hz = if ticked + missed > 0 {
+                ran_hz.unwrap_or_else(|| self.rate_of(id)) * ticked as f64
+                    / (ticked + missed) as f64
+            } else {
+                0.0
+            };
+            Some((hz, missed))
+        });
+        NodeView {
+            name: self.graph.node(id).name.clone(),
+            layer,
+            set_hz: ran_hz.unwrap_or_else(|| self.rate_of(id)),
+            next_hz: ran_hz
+                .map(|_| self.rate_of(id))
+                .filter(|&next| Some(next) != ran_hz),
+            measured_hz,
+            published_hz: match (
+                self.graph.node(id).kind.code(),
+                self.graph.node(id).publishes.first(),
+            ) {
+                (Code::Ros2, Some(&t)) => Some(self.live.window_topic(t).msg_per_s),
+                _ => None,
+            },
+            lateness_p99_us,
+            tick_p50_us,
+            ran,
+            compute: self.graph.node(id).compute.map(|c| c.label()),
+            selected: self.selected == Some(Selected::Node(id)),
+            alive: self.alive.get(id.0).copied().flatten(),
+            fault: self.fault_of(id),
+            process: self.attached.as_ref().map(|_| self.graph.process_of(id)),
+            badge: match self.graph.node(id).kind.code() {
+                Code::Python => Some(Badge::Python),
+                Code::Ros2 => Some(Badge::Ros2),
+                Code::BuiltIn | Code::Rust => None,
+            },
+            in_callback_s: hung
+                .filter(|(node, _)| *node == self.graph.node(id).name)
+                .map(|(_, s)| *s),
+        }
+    }
+
+    /// A learner's callback in this process (a Python node's tick, the brain's call) that
+    /// has not returned for [`HUNG_AFTER`] or longer: its node and how long, s. `None` in
+    /// an attached lab (the graph's code runs in other processes).
+    pub(super) fn hung_callback(&self) -> Option<(String, f64)> {
+        if self.attached.is_some() {
+            return None;
+        }
+        let call = ratelab::python::running_callbacks(HUNG_AFTER)
+            .into_iter()
+            .next()?;
+        // A brain's call is its node's: the one whose kind runs the brain.
+        let node = call.node.or_else(|| {
+            self.graph
+                .nodes
+                .iter()
+                .find(|n| n.kind.def().uses_brain)
+                .map(|n| n.name.clone())
+        })?;
+        Some((node, call.running_for.as_secs_f64()))
+    }
+
+    /// The latency panel: the segment's histogram and percentiles, and the window's.
+    pub(super) fn latency_view(&self) -> LatencyView {
+        let latency = &self.live.segment().latency;
+        let mut buckets: Vec<(String, u64)> = (0..BUCKETS)
+            .map(|i| {
+                // Each bar holds [i·20, (i+1)·20) ms, the last [200, ∞): labelled by the bound a
+                // sample is below ("<20": a fixed 10 ms, or 19.99 ms, is read right).
+                let label = if i + 1 == BUCKETS {
+                    format!("≥{}", i as u64 * BUCKET.0 / 1_000_000)
+                } else {
+                    format!("<{}", (i as u64 + 1) * BUCKET.0 / 1_000_000)
+                };
+                (label, 0)
+            })
+            .collect();
+        // Exact counts per bar (the samples themselves, not the histogram's rounding: a
+        // sample of exactly 200 ms is in the last bar, one of 19.99 ms in the first).
+        let mut below_prev = 0;
+        for (i, b) in buckets.iter_mut().enumerate() {
+            let below = if i + 1 == BUCKETS {
+                latency.count()
+            } else {
+                latency.count_below(Nanos((i as u64 + 1) * BUCKET.0))
+            };
+            b.1 = below.saturating_sub(below_prev);
+            below_prev = below;
+        }
+        let (n, stats) = self.live.window_latency();
+        let down = |n: Option<Nanos>| n.map_or(0.0, tenth_ms_down);
+        LatencyView {
+            buckets,
+            count: latency.count(),
+            no_command: self.live.segment().no_command,
+            p50_ms: down(latency.quantile(0.5)),
+            p99_ms: down(latency.quantile(0.99)),
+            max_ms: down(latency.max()),
+            window: WindowLatency {
+                count: n as u64,
+                no_command: self.live.window_no_command(),
+                p50_ms: down(stats.map(|s| s.0)),
+                p99_ms: down(stats.map(|s| s.1)),
+                max_ms: down(stats.map(|s| s.2)),
+            },
+        }
+    }
+
+    /// The segment since the last change, for the segment line and the angle chart.
+    pub(super) fn segment_view(&self) -> SegmentView {
+        let seg = self.live.segment();
+        let (span, full) = self.live.window_span();
+        SegmentView {
+            index: seg.index,
+            start_s: seg.start.as_secs_f64(),
+            cause: seg.cause.clone(),
+            // Both spans are at most the window's.
+            window_s: span.as_secs_f64(),
+            window_full: full,
+            latency_window_s: self.live.latency_span().0.as_secs_f64(),
+            marks_s: self
+                .live
+                .marks()
+                .map(Nanos::as_secs_f64)
+                .filter(|&t| t > 0.0)
+                .collect(),
+            joined_s: seg.joined().map(Nanos::as_secs_f64),
+        }
+    }
+
+    /// The frame's view model.
+    pub fn view(&self) -> View {
+        // Asked once a frame: the verdict and the nodes' boxes read the same answer.
+        let hung = self.hung_callback();
+        View {
+            clock: self.clock.clone(),
+            // An attached lab's graph runs at the lockstep's pace, not the lab's.
+            speed: if self.clock == "virtual" && self.attached.is_none() {
+                self.speed.to_string()
+            } else {
+                String::new()
+            },
+            paused: self.paused,
+            sim_time_s: self.now.as_secs_f64(),
+            seed: self.seed,
+            // A Python or external policy node is its own brain (`--policy` does not apply).
+            brain: match self.graph.chain.map(|c| self.graph.node(c.policy).kind) {
+                None => "no policy".into(),
+                Some(k) => match k.code() {
+                    Code::Python => "py node".into(),
+                    Code::Ros2 => "ROS 2 node".into(),
+                    Code::Rust => format!("{k} node"),
+                    Code::BuiltIn if k.def().uses_brain => short_brain(&self.policy_spec),
+                    Code::BuiltIn => format!("{k} node"),
+                },
+            },
+            brain_caption: self
+                .brain
+                .split_once(" — ")
+                .map(|(_, caption)| caption.to_string()),
+            recording: self.recording.clone(),
+            nodes: self
+                .graph
+                .layers()
+                .into_iter()
+                .enumerate()
+                .map(|(i, layer)| self.node_view(NodeId(i), layer, hung.as_ref()))
+                .collect(),
+            topics: (0..self.graph.topics.len())
+                .map(|i| self.topic_view(TopicId(i)))
+                .collect(),
+            pole_angle: self.last.map_or(0.0, |s| s.pole_angle),
+            cart_pos: self.last.map_or(0.0, |s| s.cart_pos),
+            // While a callback holds the run, the run is not "balanced": it is hung, since the
+            // run time it holds (the virtual clock stands there; under the real clock, from
+            // when it started).
+            verdict: match (&self.verdict, hung) {
+                (Verdict::Balanced, Some((node, s))) => Verdict::Hung {
+                    node,
+                    since_s: if self.clock == "real" {
+                        (self.now.as_secs_f64() - s).max(0.0)
+                    } else {
+                        self.now.as_secs_f64()
+                    },
+                },
+                (v, _) => v.clone(),
+            },
+            angle_history: self.history.iter().copied().collect(),
+            // Each applied force holds until the next step: a staircase.
+            applied_force: self
+                .applied
+                .iter()
+                .zip(self.applied.iter().skip(1))
+                .flat_map(|(&(t, u), &(t_next, _))| [(t, u), (t_next, u)])
+                .collect(),
+            published_force: self.published.iter().copied().collect(),
+            latency: self.latency_view(),
+            log: self.show_log.then(|| self.log_view()),
+            timeline: self.show_timeline.then(|| {
+                self.timeline.view(
+                    &self.graph,
+                    &self.graph.execution_plan(),
+                    // The rates the ticks ran at (after a fall, not the next run's).
+                    &match &self.ended_with {
+                        Some((r, ..)) => r.clone(),
+                        None => (0..self.graph.nodes.len())
+                            .map(|i| self.rate_of(NodeId(i)))
+                            .collect::<Vec<_>>(),
+                    },
+                    self.now,
+                )
+            }),
+            segment: self.segment_view(),
+            help: self.help,
+            typing: self.typing.clone(),
+            message: self.message.clone(),
+            message_fresh: self.message_at.is_some_and(|at| at.elapsed() < FRESH),
+            attached: self.attached.clone(),
+            endpoint: self.endpoint.clone(),
+        }
+    }
+}
