@@ -311,12 +311,7 @@ pub fn run_member(opts: &MemberOptions, stop: &StopFlag) -> Result<(), DistError
         }
         false => (None, crossbeam_channel::never(), None),
     };
-    let mine: Vec<NodeId> = spec
-        .placement()
-        .into_iter()
-        .find(|(p, _)| *p == opts.process)
-        .map(|(_, ids)| ids)
-        .unwrap_or_default();
+    let mine = nodes_of(&spec, &opts.process);
     let batch: Arc<Mutex<Batch>> = Arc::default();
     let Graph { nodes, handles } = build_share(&cfg, &setup.policy, &mine, &batch)?;
     let (inbound, inbound_ends, publishers) = wire_crossings(
@@ -336,10 +331,7 @@ pub fn run_member(opts: &MemberOptions, stop: &StopFlag) -> Result<(), DistError
         wait_matching(p, stop, Some(&launcher_gone), "the subscribing process")?;
     }
     if virtual_clock {
-        let others: Vec<String> = spec
-            .placement()
-            .into_iter()
-            .map(|(p, _)| p)
+        let others: Vec<String> = (spec.placement().into_iter().map(|(p, _)| p))
             .filter(|p| *p != opts.process)
             .collect();
         lockstep::meet_peers(&session, &keys, &others, stop, &launcher_gone)?;
@@ -459,6 +451,14 @@ fn wire_crossings(
         })
         .collect::<Result<_, DistError>>()?;
     Ok((inbound, ends, publishers))
+}
+
+/// The nodes of process `process` (none when the graph places none there).
+fn nodes_of(spec: &GraphSpec, process: &str) -> Vec<NodeId> {
+    (spec.placement().into_iter())
+        .find(|(p, _)| p == process)
+        .map(|(_, ids)| ids)
+        .unwrap_or_default()
 }
 
 /// Build the graph as this process runs it: the brain loaded where one of its nodes, `mine`,

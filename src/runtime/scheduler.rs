@@ -887,6 +887,103 @@ fn real_tick(
     (flow, done)
 }
 
+/// What a node's own thread gives back when it ends: the node, its timing, its executor
+/// figures, and its panic's message if it panicked.
+type OwnThreadEnd = (Box<dyn Node>, NodeTiming, NodeExecStats, Option<String>);
+
+/// Start node `i` on a thread of its own (a per-node executor): it ticks on its grid from
+/// its phase offset until the run's end or `stop` (a pause holds it; a tick that says stop
+/// records when in `stop_at` and stops the run; a panic stops the run).
+fn spawn_own_thread(
+    i: usize,
+    mut node: Box<dyn Node>,
+    opts: &RealOptions,
+    (clock, waiter, duration): (MonotonicClock, DeadlineWaiter, Nanos),
+    (stop, stop_at): (&StopFlag, &Arc<AtomicU64>),
+) -> std::thread::JoinHandle<OwnThreadEnd> {
+    let track = opts.track;
+    let stop = stop.clone();
+    let stop_at = stop_at.clone();
+    let first = opts.phase_offsets.get(i).copied().unwrap_or(Nanos::ZERO);
+    let name = node.name().to_string();
+    let on_tick = opts.on_tick.clone();
+    let pause = opts.pause.clone();
+    let rt_priority = opts.rt_priority;
+    std::thread::Builder::new()
+        .name(name.clone())
+        .spawn(move || {
+            let sched_error = rt_priority
+                .and_then(|p| crate::realtime::set_current_thread_fifo(p).err())
+                .map(|e| e.to_string());
+            let sched = crate::realtime::current_thread_sched().to_string();
+            let cpu0 = thread_cpu_time();
+            let mut lateness = LatencyStats::default();
+            let mut exec = NodeExecStats::default();
+            let (mut ticks, mut skipped) = (0u64, 0u64);
+            let mut deadline = first;
+            let result = catch_quietly(|| loop {
+                // Wake for the deadline, the run's end or a stop, whichever is
+                // first: a slow node must not sleep past either.
+                waiter.wait_until_or(clock.instant_at(deadline.min(duration)), &|| {
+                    stop.is_stopped()
+                });
+                let mut was_paused = false;
+                while pause.as_ref().is_some_and(|p| p.load(Ordering::SeqCst)) && !stop.is_stopped()
+                {
+                    was_paused = true;
+                    std::thread::sleep(std::time::Duration::from_millis(5));
+                }
+                let now = clock.now();
+                if now >= duration || stop.is_stopped() {
+                    break;
+                }
+                if was_paused {
+                    // Back on the grid after a pause: the ticks missed are not late ticks.
+                    let (next, _) = next_deadline(deadline, now, node.rate().period());
+                    deadline = next;
+                    continue;
+                }
+                let late = now.saturating_sub(deadline);
+                lateness.record(late);
+                ticks += 1;
+                let (flow, done) = real_tick(&mut *node, now, &clock, &stop);
+                if track {
+                    exec.record(deadline, done, done.saturating_sub(now));
+                }
+                if let Some(hook) = &on_tick {
+                    hook(&TickReport {
+                        node: i,
+                        name: &name,
+                        now,
+                        lateness: late,
+                        took: done.saturating_sub(now),
+                    });
+                }
+                if flow == Flow::Stop {
+                    stop_at.fetch_min(now.0, Ordering::SeqCst);
+                    stop.stop();
+                    break;
+                }
+                let (next, missed) = next_deadline(deadline, clock.now(), node.rate().period());
+                deadline = next;
+                skipped += missed;
+            });
+            if result.is_err() {
+                stop.stop();
+            }
+            exec.skipped_ticks = skipped;
+            let elapsed = clock.now().min(duration).saturating_sub(first);
+            let cpu = thread_cpu_time().saturating_sub(cpu0);
+            let timing = NodeTiming {
+                sched,
+                sched_error,
+                ..node_timing(name, ticks, skipped, &lateness, cpu, elapsed)
+            };
+            (node, timing, exec, result.err().map(|p| panic_message(&*p)))
+        })
+        .expect("spawning a node thread")
+}
+
 /// Run `nodes` against a monotonic clock until `duration`, a node's [`Flow::Stop`] (which
 /// stops every thread), or `stop`, on the executors of [`RealOptions::plan`]: by default one
 /// OS thread per node, sleeping to absolute deadlines; a single- or multi-threaded executor's
@@ -914,93 +1011,13 @@ pub fn run_real(
         .collect();
     let mut shared_nodes: Vec<Option<Box<dyn Node>>> = Vec::new();
     let mut handles = Vec::new();
-    for (i, mut node) in nodes.into_iter().enumerate() {
+    for (i, node) in nodes.into_iter().enumerate() {
         if !own_thread[i] {
             shared_nodes.push(Some(node));
             continue;
         }
         shared_nodes.push(None);
-        let stop = stop.clone();
-        let stop_at = stop_at.clone();
-        let first = opts.phase_offsets.get(i).copied().unwrap_or(Nanos::ZERO);
-        let name = node.name().to_string();
-        let on_tick = opts.on_tick.clone();
-        let pause = opts.pause.clone();
-        let rt_priority = opts.rt_priority;
-        let handle = std::thread::Builder::new()
-            .name(name.clone())
-            .spawn(move || {
-                let sched_error = rt_priority
-                    .and_then(|p| crate::realtime::set_current_thread_fifo(p).err())
-                    .map(|e| e.to_string());
-                let sched = crate::realtime::current_thread_sched().to_string();
-                let cpu0 = thread_cpu_time();
-                let mut lateness = LatencyStats::default();
-                let mut exec = NodeExecStats::default();
-                let (mut ticks, mut skipped) = (0u64, 0u64);
-                let mut deadline = first;
-                let result = catch_quietly(|| loop {
-                    // Wake for the deadline, the run's end or a stop, whichever is
-                    // first: a slow node must not sleep past either.
-                    waiter.wait_until_or(clock.instant_at(deadline.min(duration)), &|| {
-                        stop.is_stopped()
-                    });
-                    let mut was_paused = false;
-                    while pause.as_ref().is_some_and(|p| p.load(Ordering::SeqCst))
-                        && !stop.is_stopped()
-                    {
-                        was_paused = true;
-                        std::thread::sleep(std::time::Duration::from_millis(5));
-                    }
-                    let now = clock.now();
-                    if now >= duration || stop.is_stopped() {
-                        break;
-                    }
-                    if was_paused {
-                        // Back on the grid after a pause: the ticks missed are not late ticks.
-                        let (next, _) = next_deadline(deadline, now, node.rate().period());
-                        deadline = next;
-                        continue;
-                    }
-                    let late = now.saturating_sub(deadline);
-                    lateness.record(late);
-                    ticks += 1;
-                    let (flow, done) = real_tick(&mut *node, now, &clock, &stop);
-                    if track {
-                        exec.record(deadline, done, done.saturating_sub(now));
-                    }
-                    if let Some(hook) = &on_tick {
-                        hook(&TickReport {
-                            node: i,
-                            name: &name,
-                            now,
-                            lateness: late,
-                            took: done.saturating_sub(now),
-                        });
-                    }
-                    if flow == Flow::Stop {
-                        stop_at.fetch_min(now.0, Ordering::SeqCst);
-                        stop.stop();
-                        break;
-                    }
-                    let (next, missed) = next_deadline(deadline, clock.now(), node.rate().period());
-                    deadline = next;
-                    skipped += missed;
-                });
-                if result.is_err() {
-                    stop.stop();
-                }
-                exec.skipped_ticks = skipped;
-                let elapsed = clock.now().min(duration).saturating_sub(first);
-                let cpu = thread_cpu_time().saturating_sub(cpu0);
-                let timing = NodeTiming {
-                    sched,
-                    sched_error,
-                    ..node_timing(name, ticks, skipped, &lateness, cpu, elapsed)
-                };
-                (node, timing, exec, result.err().map(|p| panic_message(&*p)))
-            })
-            .expect("spawning a node thread");
+        let handle = spawn_own_thread(i, node, opts, (clock, waiter, duration), (stop, &stop_at));
         handles.push((i, handle));
     }
     // Only when an executor shares threads (its bookkeeping holds a histogram per node).

@@ -3,7 +3,7 @@
 //! graph's) and [`summarize_state`].
 
 use crate::config::RunConfig;
-use crate::graph::{lock, GraphHandles, NodeId, TopicId};
+use crate::graph::{lock, GraphHandles, GraphSpec, NodeId, TopicId};
 use crate::metrics::{round_to, Metrics, NodeMetrics, NodeTiming, TopicMetrics};
 use crate::msg::AnyTopic;
 use crate::scheduler::RunEnd;
@@ -154,91 +154,8 @@ pub fn summarize_state(cfg: &RunConfig, st: &GraphState, end: &RunEnd) -> Metric
         }
     };
     let (p50, p99, max) = log.latency_ms;
-    let nodes: std::collections::BTreeMap<String, NodeMetrics> = spec
-        .nodes
-        .iter()
-        .enumerate()
-        .map(|(i, n)| {
-            let t = st.timing.as_ref().and_then(|t| t.get(i));
-            // Liveliness as it ended (the lease may have been set live, after the start).
-            let live = st.liveliness.get(i);
-            let status = live.map(|l| l.1);
-            let lease = n.liveliness_lease.or(live.and_then(|l| l.0));
-            let faulted = cfg.faults.iter().any(|f| f.node == n.name);
-            let x = st.exec.as_ref().and_then(|x| x.nodes.get(i));
-            let m = NodeMetrics {
-                compute_ms: n.compute.map(|c| c.mean.as_millis_f64()),
-                compute_jitter_ms: n
-                    .compute
-                    .filter(|c| c.jitter.0 > 0)
-                    .map(|c| c.jitter.as_millis_f64()),
-                exec: x.cloned(),
-                kind: n.kind_name().to_string(),
-                rank: i,
-                rate_hz: n.rate_hz,
-                rate_hz_end: st.rates_hz.get(i).copied().filter(|end| *end != n.rate_hz),
-                ticks: st.ticks.get(i).copied().unwrap_or(0),
-                lateness_p99_us: t.map(|t| t.lateness_p99_us),
-                lateness_max_us: t.map(|t| t.lateness_max_us),
-                liveliness_lease_ms: lease.map(Nanos::as_millis_f64),
-                not_alive: status.and_then(|s| lease.map(|_| s.not_alive)),
-                faulted_ticks: status.and_then(|s| faulted.then_some(s.faulted_ticks)),
-                faults: cfg
-                    .faults
-                    .iter()
-                    .filter(|f| f.node == n.name)
-                    .map(crate::metrics::FaultMetrics::from)
-                    .collect(),
-            };
-            (n.name.clone(), m)
-        })
-        .collect();
-    let topics = spec
-        .topics
-        .iter()
-        .zip(stats.as_slice())
-        .enumerate()
-        .map(|(i, (t, s))| {
-            let now_qos = st.topic_qos.get(i).copied().unwrap_or(t.qos);
-            let m = TopicMetrics {
-                msg: t.msg.as_str().to_string(),
-                publisher: spec.node(t.publisher).name.clone(),
-                subscriber: t.subscriber().map(|n| spec.node(n).name.clone()),
-                subscriptions: st
-                    .subscriptions
-                    .get(i)
-                    .filter(|subs| subs.len() > 1)
-                    .map(|subs| {
-                        t.subscribers
-                            .iter()
-                            .zip(subs)
-                            .map(|(n, s)| {
-                                let m = crate::metrics::SubscriptionMetrics {
-                                    dropped: s.dropped,
-                                    stale_reads: s.stale_reads,
-                                    lost: s.lost,
-                                };
-                                (spec.node(*n).name.clone(), m)
-                            })
-                            .collect()
-                    })
-                    .unwrap_or_default(),
-                depth: s.depth,
-                published: s.published,
-                dropped: s.dropped,
-                stale_reads: s.stale_reads,
-                msg_per_s: per_s(s.published),
-                qos: (!(t.qos.is_default() && now_qos.is_default()))
-                    .then(|| now_qos.short(s.depth)),
-                qos_counters: s
-                    .reported(&[t.qos, now_qos])
-                    .into_iter()
-                    .map(|c| (c.key().to_string(), s.counter(c)))
-                    .collect(),
-            };
-            (t.name.clone(), m)
-        })
-        .collect();
+    let nodes = node_metrics(cfg, st);
+    let topics = topic_metrics(spec, st, &stats, &per_s);
     let node_failed = match &end.reason {
         crate::scheduler::EndReason::NodeFailed { node, message } => {
             Some(format!("{node}: {message}"))
@@ -317,4 +234,107 @@ pub fn summarize_state(cfg: &RunConfig, st: &GraphState, end: &RunEnd) -> Metric
         nodes,
         topics,
     }
+}
+
+/// Each node's figures by name: rate, ticks, lateness, liveliness, faults, compute and
+/// executor figures, as the run ended.
+fn node_metrics(
+    cfg: &RunConfig,
+    st: &GraphState,
+) -> std::collections::BTreeMap<String, NodeMetrics> {
+    cfg.graph
+        .nodes
+        .iter()
+        .enumerate()
+        .map(|(i, n)| {
+            let t = st.timing.as_ref().and_then(|t| t.get(i));
+            // Liveliness as it ended (the lease may have been set live, after the start).
+            let live = st.liveliness.get(i);
+            let status = live.map(|l| l.1);
+            let lease = n.liveliness_lease.or(live.and_then(|l| l.0));
+            let faulted = cfg.faults.iter().any(|f| f.node == n.name);
+            let x = st.exec.as_ref().and_then(|x| x.nodes.get(i));
+            let m = NodeMetrics {
+                compute_ms: n.compute.map(|c| c.mean.as_millis_f64()),
+                compute_jitter_ms: n
+                    .compute
+                    .filter(|c| c.jitter.0 > 0)
+                    .map(|c| c.jitter.as_millis_f64()),
+                exec: x.cloned(),
+                kind: n.kind_name().to_string(),
+                rank: i,
+                rate_hz: n.rate_hz,
+                rate_hz_end: st.rates_hz.get(i).copied().filter(|end| *end != n.rate_hz),
+                ticks: st.ticks.get(i).copied().unwrap_or(0),
+                lateness_p99_us: t.map(|t| t.lateness_p99_us),
+                lateness_max_us: t.map(|t| t.lateness_max_us),
+                liveliness_lease_ms: lease.map(Nanos::as_millis_f64),
+                not_alive: status.and_then(|s| lease.map(|_| s.not_alive)),
+                faulted_ticks: status.and_then(|s| faulted.then_some(s.faulted_ticks)),
+                faults: cfg
+                    .faults
+                    .iter()
+                    .filter(|f| f.node == n.name)
+                    .map(crate::metrics::FaultMetrics::from)
+                    .collect(),
+            };
+            (n.name.clone(), m)
+        })
+        .collect()
+}
+
+/// Each topic's figures by name: its counters (`stats`, as the holder counted them), its
+/// subscriptions' where it has several, its rate (`per_s`: messages per second of the run)
+/// and its QoS as the run ended.
+fn topic_metrics(
+    spec: &GraphSpec,
+    st: &GraphState,
+    stats: &crate::runlog::TopicCounters,
+    per_s: &dyn Fn(u64) -> f64,
+) -> std::collections::BTreeMap<String, TopicMetrics> {
+    spec.topics
+        .iter()
+        .zip(stats.as_slice())
+        .enumerate()
+        .map(|(i, (t, s))| {
+            let now_qos = st.topic_qos.get(i).copied().unwrap_or(t.qos);
+            let m = TopicMetrics {
+                msg: t.msg.as_str().to_string(),
+                publisher: spec.node(t.publisher).name.clone(),
+                subscriber: t.subscriber().map(|n| spec.node(n).name.clone()),
+                subscriptions: st
+                    .subscriptions
+                    .get(i)
+                    .filter(|subs| subs.len() > 1)
+                    .map(|subs| {
+                        t.subscribers
+                            .iter()
+                            .zip(subs)
+                            .map(|(n, s)| {
+                                let m = crate::metrics::SubscriptionMetrics {
+                                    dropped: s.dropped,
+                                    stale_reads: s.stale_reads,
+                                    lost: s.lost,
+                                };
+                                (spec.node(*n).name.clone(), m)
+                            })
+                            .collect()
+                    })
+                    .unwrap_or_default(),
+                depth: s.depth,
+                published: s.published,
+                dropped: s.dropped,
+                stale_reads: s.stale_reads,
+                msg_per_s: per_s(s.published),
+                qos: (!(t.qos.is_default() && now_qos.is_default()))
+                    .then(|| now_qos.short(s.depth)),
+                qos_counters: s
+                    .reported(&[t.qos, now_qos])
+                    .into_iter()
+                    .map(|c| (c.key().to_string(), s.counter(c)))
+                    .collect(),
+            };
+            (t.name.clone(), m)
+        })
+        .collect()
 }

@@ -26,7 +26,6 @@ impl Engine {
         recording: &Option<Recording>,
         ros2: Option<&crate::ros2::Bridge>,
     ) -> (Next, RunEnd, Vec<u64>, Option<ExecFigures>) {
-        let actuator_bit = 1u64 << (cfg.graph.actuator.0 % 64);
         let policy = self.run_policy.clone();
         let telemetry = self.telemetry_observer();
         let mut core = RunCore::with_graph(
@@ -73,27 +72,7 @@ impl Engine {
                 match msg {
                     Control::Apply(cmd) => {
                         if ended.is_none() {
-                            let at = core.scheduler().next_due().unwrap_or(core.now());
-                            let node = rate_target(&cmd, &handles);
-                            let text = crate::telemetry::describe(&cmd);
-                            // A new plan (the executor key) runs from the next instant on,
-                            // as a replay applies it.
-                            let applied = self
-                                .apply_with(cmd, at, recording, true, |c| core.apply(c.clone()));
-                            if applied {
-                                let sched = core.scheduler();
-                                let said = match node.and_then(|n| phase_note(sched, &handles, n)) {
-                                    Some(note) => {
-                                        let said = format!("{text} · {note}");
-                                        let _ = self.tx.send(Telemetry::Applied(said.clone()));
-                                        said
-                                    }
-                                    None => text,
-                                };
-                                if node.is_some() {
-                                    self.judge_fresh_run(cfg, &handles, said);
-                                }
-                            }
+                            self.apply_live(&mut core, cmd, cfg, recording, &handles);
                         } else {
                             self.defer(cmd, &handles);
                         }
@@ -149,31 +128,8 @@ impl Engine {
                     }
                 }
             };
-            let budget = Instant::now();
-            loop {
-                if let Some(due) = core.next_instant() {
-                    if target.is_some_and(|t| due > t) {
-                        break;
-                    }
-                    if let Some(b) = ros2 {
-                        b.clock(due);
-                    }
-                }
-                let actuator_ticked = match core.step() {
-                    Step::Ran { ticked, .. } => ticked & actuator_bit != 0,
-                    Step::Ended(end) => {
-                        ended = Some(lab_end(end, cfg, &core));
-                        break;
-                    }
-                };
-                if step_pending && actuator_ticked {
-                    step_pending = false;
-                    break;
-                }
-                // Stay responsive at max speed: come back for controls every few ms.
-                if budget.elapsed() > Duration::from_millis(8) {
-                    break;
-                }
+            if let Some(end) = run_instants(&mut core, target, &mut step_pending, ros2) {
+                ended = Some(lab_end(end, cfg, &core));
             }
             if let Some(end) = &ended {
                 self.tell_ended(cfg, &mut core, end, paused);
@@ -189,6 +145,39 @@ impl Engine {
                         std::thread::sleep((wake - now).min(Duration::from_millis(10)));
                     }
                 }
+            }
+        }
+    }
+
+    /// Apply `cmd` to the running graph at its next instant, as a replay would (a new plan
+    /// runs from then on), and say what it did; a rate change also says where the node's
+    /// ticks now fall and when a fresh run at it would fall.
+    fn apply_live(
+        &mut self,
+        core: &mut RunCore,
+        cmd: Command,
+        cfg: &RunConfig,
+        recording: &Option<Recording>,
+        handles: &GraphHandles,
+    ) {
+        let at = core.scheduler().next_due().unwrap_or(core.now());
+        let node = rate_target(&cmd, &handles);
+        let text = crate::telemetry::describe(&cmd);
+        // A new plan (the executor key) runs from the next instant on,
+        // as a replay applies it.
+        let applied = self.apply_with(cmd, at, recording, true, |c| core.apply(c.clone()));
+        if applied {
+            let sched = core.scheduler();
+            let said = match node.and_then(|n| phase_note(sched, &handles, n)) {
+                Some(note) => {
+                    let said = format!("{text} · {note}");
+                    let _ = self.tx.send(Telemetry::Applied(said.clone()));
+                    said
+                }
+                None => text,
+            };
+            if node.is_some() {
+                self.judge_fresh_run(cfg, &handles, said);
             }
         }
     }
@@ -350,4 +339,40 @@ fn after_sensor(
     } else {
         format!("ticks {after} after the sensor's")
     })
+}
+
+/// Run instants of `core` up to `target` (`None`: no bound), or, with `step_pending`, until
+/// the actuator has ticked once (then `step_pending` is cleared), for a few milliseconds at
+/// most so that the lab stays responsive at max speed. Each instant's time goes to the
+/// ROS 2 bridge's `/clock` first. Returns how the run ended, if it did.
+fn run_instants(
+    core: &mut RunCore,
+    target: Option<Nanos>,
+    step_pending: &mut bool,
+    ros2: Option<&crate::ros2::Bridge>,
+) -> Option<RunEnd> {
+    let actuator_bit = 1u64 << (core.handles().spec.actuator.0 % 64);
+    let budget = Instant::now();
+    loop {
+        if let Some(due) = core.next_instant() {
+            if target.is_some_and(|t| due > t) {
+                return None;
+            }
+            if let Some(b) = ros2 {
+                b.clock(due);
+            }
+        }
+        let actuator_ticked = match core.step() {
+            Step::Ran { ticked, .. } => ticked & actuator_bit != 0,
+            Step::Ended(end) => return Some(end),
+        };
+        if *step_pending && actuator_ticked {
+            *step_pending = false;
+            return None;
+        }
+        // Stay responsive at max speed: come back for controls every few ms.
+        if budget.elapsed() > Duration::from_millis(8) {
+            return None;
+        }
+    }
 }
