@@ -89,29 +89,7 @@ impl Engine {
             let next = match self.rx.recv_timeout(Duration::from_millis(30)) {
                 Ok(Control::Apply(cmd)) => {
                     if result.is_none() {
-                        let rate = matches!(
-                            cmd,
-                            Command::SetControlHz { .. }
-                                | Command::SetSensorHz { .. }
-                                | Command::SetNodeHz { .. }
-                        );
-                        let text = crate::telemetry::describe(&cmd);
-                        let executor = matches!(cmd, Command::SetExecutor { .. });
-                        let applied = if executor {
-                            self.apply_for_next_run(cmd, now(), &handles, recording)
-                        } else {
-                            self.apply(cmd, now(), &handles, recording)
-                        };
-                        if applied {
-                            if rate {
-                                self.judge_fresh_run(cfg, &handles, text);
-                            } else if executor {
-                                // The real clock's threads are made when a run starts.
-                                let _ = self.tx.send(Telemetry::Applied(format!(
-                                    "{text} (from the next run: r; the real clock's threads are made at the start)"
-                                )));
-                            }
-                        }
+                        self.apply_real(cmd, now(), cfg, &handles, recording);
                     } else {
                         self.defer(cmd, &handles);
                     }
@@ -165,6 +143,40 @@ impl Engine {
                 let shown = result.as_ref().map_or_else(now, |end| end.at);
                 self.status(shown, pause.load(Ordering::SeqCst), &handles, None);
                 last_status = Instant::now();
+            }
+        }
+    }
+
+    /// Apply `cmd` to the running real-clock graph at `now`: a rate at once (and when a
+    /// fresh run at it would fall), the executor for the next run (its threads are made at
+    /// a run's start), the rest at once.
+    fn apply_real(
+        &mut self,
+        cmd: Command,
+        now: Nanos,
+        cfg: &RunConfig,
+        handles: &crate::graph::GraphHandles,
+        recording: &Option<Recording>,
+    ) {
+        let rate = matches!(
+            cmd,
+            Command::SetControlHz { .. } | Command::SetSensorHz { .. } | Command::SetNodeHz { .. }
+        );
+        let text = crate::telemetry::describe(&cmd);
+        let executor = matches!(cmd, Command::SetExecutor { .. });
+        let applied = if executor {
+            self.apply_for_next_run(cmd, now, handles, recording)
+        } else {
+            self.apply(cmd, now, handles, recording)
+        };
+        if applied {
+            if rate {
+                self.judge_fresh_run(cfg, handles, text);
+            } else if executor {
+                // The real clock's threads are made when a run starts.
+                let _ = self.tx.send(Telemetry::Applied(format!(
+                    "{text} (from the next run: r; the real clock's threads are made at the start)"
+                )));
             }
         }
     }

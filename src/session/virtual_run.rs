@@ -161,14 +161,14 @@ impl Engine {
         handles: &GraphHandles,
     ) {
         let at = core.scheduler().next_due().unwrap_or(core.now());
-        let node = rate_target(&cmd, &handles);
+        let node = rate_target(&cmd, handles);
         let text = crate::telemetry::describe(&cmd);
         // A new plan (the executor key) runs from the next instant on,
         // as a replay applies it.
         let applied = self.apply_with(cmd, at, recording, true, |c| core.apply(c.clone()));
         if applied {
             let sched = core.scheduler();
-            let said = match node.and_then(|n| phase_note(sched, &handles, n)) {
+            let said = match node.and_then(|n| phase_note(sched, handles, n)) {
                 Some(note) => {
                     let said = format!("{text} · {note}");
                     let _ = self.tx.send(Telemetry::Applied(said.clone()));
@@ -177,7 +177,7 @@ impl Engine {
                 None => text,
             };
             if node.is_some() {
-                self.judge_fresh_run(cfg, &handles, said);
+                self.judge_fresh_run(cfg, handles, said);
             }
         }
     }

@@ -435,21 +435,7 @@ pub fn launch(
     let refusals = super::refusals::Refusals::new();
     let (session, endpoint) = listen(spec, opts)?;
     let keys = Keys::new(&spec.name);
-    let (up_tx, up_rx) = crossbeam_channel::bounded::<ToLauncher>(65_536);
-    let up_prefix = format!("{}/@up/", keys.prefix());
-    let _up_sub = session
-        .declare_subscriber(keys.up())
-        .callback(move |s| {
-            // A process speaks for itself only: the key it may publish on ([`super::access`])
-            // names it, and a message naming another process is dropped.
-            let from = s.key_expr().as_str().strip_prefix(up_prefix.as_str());
-            if let Ok(m) = wire::decode_json::<ToLauncher>(&s.payload().to_bytes()) {
-                if from == Some(m.process()) {
-                    let _ = up_tx.try_send(m);
-                }
-            }
-        })
-        .wait()?;
+    let (_up_sub, up_rx) = hear_processes(&session, &keys)?;
     let me = Launch {
         cfg,
         opts,
@@ -493,27 +479,7 @@ pub fn launch(
     if let Some(tx) = &opts.listening {
         let _ = tx.send(endpoint.clone());
     }
-    // Processes going away: their node tokens are withdrawn.
-    let (gone_tx, gone_rx) = crossbeam_channel::unbounded::<String>();
-    let gone_now: Arc<Mutex<Vec<String>>> = Arc::default();
-    let gone_cb = gone_now.clone();
-    let token_prefix = format!("{}/@node/", keys.prefix());
-    let _live_sub = session
-        .liveliness()
-        .declare_subscriber(format!("{}/@node/**", keys.prefix()))
-        .callback(move |s| {
-            if s.kind() == zenoh::sample::SampleKind::Delete {
-                let k = s.key_expr().as_str();
-                if let Some(p) = k
-                    .strip_prefix(&token_prefix)
-                    .and_then(|r| r.split('/').next())
-                {
-                    crate::graph::lock(&gone_cb).push(p.to_string());
-                    let _ = gone_tx.send(p.to_string());
-                }
-            }
-        })
-        .wait()?;
+    let (_live_sub, gone_rx, gone_now) = watch_gone(&session, &keys)?;
     // Virtual clock: every process's tick reports, to follow the run ([`super::lockstep`]).
     // One by one, at most MAX_AHEAD waiting (more are dropped: a run holds far fewer).
     let (ticked_tx, ticked_rx) = crossbeam_channel::bounded(MAX_AHEAD);
@@ -588,6 +554,66 @@ pub fn launch(
         missing,
         lockstep,
     })
+}
+
+/// What the processes say to the launcher (`ToLauncher`), as it arrives: each from its own
+/// key only, since a process speaks for itself ([`super::access`] lets it publish on the key
+/// that names it, and a message naming another process is dropped). Keep the subscriber.
+fn hear_processes(
+    session: &zenoh::Session,
+    keys: &Keys,
+) -> Result<(zenoh::pubsub::Subscriber<()>, Receiver<ToLauncher>), DistError> {
+    let (up_tx, up_rx) = crossbeam_channel::bounded::<ToLauncher>(65_536);
+    let up_prefix = format!("{}/@up/", keys.prefix());
+    let sub = session
+        .declare_subscriber(keys.up())
+        .callback(move |s| {
+            let from = s.key_expr().as_str().strip_prefix(up_prefix.as_str());
+            if let Ok(m) = wire::decode_json::<ToLauncher>(&s.payload().to_bytes()) {
+                if from == Some(m.process()) {
+                    let _ = up_tx.try_send(m);
+                }
+            }
+        })
+        .wait()?;
+    Ok((sub, up_rx))
+}
+
+/// Processes going away (their node tokens withdrawn): each name as it goes, and the list
+/// of those gone so far. Keep the subscriber.
+#[allow(clippy::type_complexity)]
+fn watch_gone(
+    session: &zenoh::Session,
+    keys: &Keys,
+) -> Result<
+    (
+        zenoh::pubsub::Subscriber<()>,
+        Receiver<String>,
+        Arc<Mutex<Vec<String>>>,
+    ),
+    DistError,
+> {
+    let (gone_tx, gone_rx) = crossbeam_channel::unbounded::<String>();
+    let gone_now: Arc<Mutex<Vec<String>>> = Arc::default();
+    let gone_cb = gone_now.clone();
+    let token_prefix = format!("{}/@node/", keys.prefix());
+    let sub = session
+        .liveliness()
+        .declare_subscriber(format!("{}/@node/**", keys.prefix()))
+        .callback(move |s| {
+            if s.kind() == zenoh::sample::SampleKind::Delete {
+                let k = s.key_expr().as_str();
+                if let Some(p) = k
+                    .strip_prefix(&token_prefix)
+                    .and_then(|r| r.split('/').next())
+                {
+                    crate::graph::lock(&gone_cb).push(p.to_string());
+                    let _ = gone_tx.send(p.to_string());
+                }
+            }
+        })
+        .wait()?;
+    Ok((sub, gone_rx, gone_now))
 }
 
 /// Open the launcher's session: on `--listen` (port 0: a free one), else on Zenoh's usual

@@ -73,19 +73,7 @@ impl Launch<'_> {
     ) -> Result<(RunEnd, Option<LockstepCost>), DistError> {
         let (spec, cfg, opts, stop) = (self.spec, self.cfg, self.opts, self.stop);
         let (names, placement, link) = (&self.names, &self.placement, &self.link);
-        let slots = spec
-            .nodes
-            .iter()
-            .enumerate()
-            .map(|(i, n)| {
-                Ok(Box::new(Slot {
-                    name: n.name.clone(),
-                    id: NodeId(i),
-                    rate: Rate::new(n.rate_hz)?,
-                }) as Box<dyn Node>)
-            })
-            .collect::<Result<Vec<_>, crate::rate::InvalidRate>>()
-            .map_err(|e| DistError::Usage(e.to_string()))?;
+        let slots = slots_of(spec)?;
         // The whole graph's plan: its events are the processes' reports, in order.
         let mut sched =
             VirtualScheduler::with_plan(&slots, &cfg.phase_offsets, spec.execution_plan(), false);
@@ -122,11 +110,7 @@ impl Launch<'_> {
             let (i, t) = event.node_at();
             // Paced: no instant before its wall time (the horizon follows).
             if let Some(speed) = opts.pace.filter(|s| *s > 0.0 && s.is_finite()) {
-                let due = paced_from + Duration::from_secs_f64(t.as_secs_f64() / speed);
-                while !stop.is_stopped() && Instant::now() < due {
-                    let left = due.saturating_duration_since(Instant::now());
-                    std::thread::sleep(left.min(Duration::from_millis(50)));
-                }
+                wait_for_wall_time(paced_from, t, speed, stop);
             }
             self.say_refusals_due();
             // Move the horizon on before the processes reach it; an interrupt stops it.
@@ -339,5 +323,31 @@ fn collect_reports(
             wires.extend(wire);
             reports.insert(process, *state);
         }
+    }
+}
+
+/// The launcher's stand-in for each node of `spec`: its name and rate, no work (the
+/// processes tick the real ones and report).
+fn slots_of(spec: &crate::graph::GraphSpec) -> Result<Vec<Box<dyn Node>>, DistError> {
+    spec.nodes
+        .iter()
+        .enumerate()
+        .map(|(i, n)| {
+            Ok(Box::new(Slot {
+                name: n.name.clone(),
+                id: NodeId(i),
+                rate: Rate::new(n.rate_hz)?,
+            }) as Box<dyn Node>)
+        })
+        .collect::<Result<Vec<_>, crate::rate::InvalidRate>>()
+        .map_err(|e| DistError::Usage(e.to_string()))
+}
+
+/// Paced at `speed` × wall time from `from`: wait until run time `t` is due (or `stop`).
+fn wait_for_wall_time(from: Instant, t: Nanos, speed: f64, stop: &crate::scheduler::StopFlag) {
+    let due = from + Duration::from_secs_f64(t.as_secs_f64() / speed);
+    while !stop.is_stopped() && Instant::now() < due {
+        let left = due.saturating_duration_since(Instant::now());
+        std::thread::sleep(left.min(Duration::from_millis(50)));
     }
 }
