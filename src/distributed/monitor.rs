@@ -624,27 +624,20 @@ impl Watch {
         }
     }
 
-    /// Send the lab the run's telemetry until `stop` is set or the lab hangs up (its
-    /// receiver is dropped): `Started` at once, then steps, ticks, notices and a status every
-    /// [`STATUS_PERIOD`], and `Ended` when the launcher says so; `signals` are told when
-    /// the watch covers the run, and when it has had the processes' last figures.
-    ///
-    /// # Errors
-    /// [`DistError::Zenoh`] when a subscription cannot be declared.
-    pub fn run(
-        self,
-        tx: &Sender<Telemetry>,
-        stop: &StopFlag,
-        signals: Signals,
-    ) -> Result<(), DistError> {
-        let (ev_tx, ev_rx) = crossbeam_channel::bounded::<Event>(EVENTS);
+    /// Subscribe to what a watcher follows, each turned into an [`Event`] on `ev_tx`: the
+    /// processes' figures, their nodes' liveliness, the launcher's, its progress lines and
+    /// its word that the run is over. Keep the subscribers.
+    fn listen(
+        &self,
+        ev_tx: Sender<Event>,
+    ) -> Result<Vec<zenoh::pubsub::Subscriber<()>>, DistError> {
         let keys = &self.keys;
         // A full queue drops the event (the fold is behind; Zenoh's threads never wait).
         let send = |tx: &Sender<Event>, e: Event| {
             let _ = tx.try_send(e);
         };
         let t = ev_tx.clone();
-        let _stats = self
+        let stats = self
             .session
             .declare_subscriber(keys.stats("*"))
             .callback(move |s| {
@@ -655,7 +648,7 @@ impl Watch {
             .wait()?;
         let t = ev_tx.clone();
         let prefix = format!("{}/@node/", keys.prefix());
-        let _nodes = self
+        let nodes = self
             .session
             .liveliness()
             .declare_subscriber(format!("{}/@node/**", keys.prefix()))
@@ -673,7 +666,7 @@ impl Watch {
             })
             .wait()?;
         let t = ev_tx.clone();
-        let _launcher = self
+        let launcher = self
             .session
             .liveliness()
             .declare_subscriber(keys.launcher_token())
@@ -686,7 +679,7 @@ impl Watch {
             })
             .wait()?;
         let t = ev_tx.clone();
-        let _log = self
+        let log = self
             .session
             .declare_subscriber(keys.log())
             .callback(move |s| {
@@ -700,7 +693,7 @@ impl Watch {
             })
             .wait()?;
         let t = ev_tx;
-        let _over = self
+        let over = self
             .session
             .declare_subscriber(keys.ended())
             .callback(move |s| {
@@ -709,7 +702,24 @@ impl Watch {
                 }
             })
             .wait()?;
+        Ok(vec![stats, nodes, launcher, log, over])
+    }
 
+    /// Send the lab the run's telemetry until `stop` is set or the lab hangs up (its
+    /// receiver is dropped): `Started` at once, then steps, ticks, notices and a status every
+    /// [`STATUS_PERIOD`], and `Ended` when the launcher says so; `signals` are told when
+    /// the watch covers the run, and when it has had the processes' last figures.
+    ///
+    /// # Errors
+    /// [`DistError::Zenoh`] when a subscription cannot be declared.
+    pub fn run(
+        self,
+        tx: &Sender<Telemetry>,
+        stop: &StopFlag,
+        signals: Signals,
+    ) -> Result<(), DistError> {
+        let (ev_tx, ev_rx) = crossbeam_channel::bounded::<Event>(EVENTS);
+        let _subscribers = self.listen(ev_tx)?;
         let mut fold = Fold::new(&self.cfg, &self.setup.policy);
         let started = Telemetry::Started {
             cfg: self.cfg.clone(),

@@ -138,30 +138,7 @@ pub(super) fn layout_for(shape: &GraphShape, cfg: &RunConfig, extents: Option<&E
     // run's ends alone, within ±2.5 m, get "-2" to "2" (a cart past them, at the run's end,
     // widens the range).
     let tall = column <= 4;
-    let mut cart_paths = vec!["/plant/cart_pos_m"];
-    if tall {
-        cart_paths.extend(["/plant/rail_end/right", "/plant/rail_end/left"]);
-    }
-    cart_paths.extend(["/plant/cart_limit/right", "/plant/cart_limit/left"]);
-    let cart = plot(
-        "cart",
-        "cart position (m)",
-        paths(&cart_paths),
-        Some((-RAIL_HALF_LENGTH_M, RAIL_HALF_LENGTH_M)),
-        extents,
-    );
-    let cart = if tall {
-        cart
-    } else {
-        let reach = extents
-            .and_then(|e| e.get("plant/cart_pos_m"))
-            .map_or(0.0, |&(lo, hi)| lo.abs().max(hi.abs()));
-        let half = (CART_LIMIT_M + 0.1).max(reach * 1.05);
-        cart.property(
-            "ScalarAxis",
-            &bp::ScalarAxis::new().with_range(rerun::components::Range1D::new(-half, half)),
-        )
-    };
+    let cart = cart_view(tall, extents);
     // Latency, lateness and the bus series have no scale known up front (a lab session may
     // change rates mid-run): rerun fits them while the run goes, the final layout pads them.
     let latency = plot(
@@ -176,35 +153,7 @@ pub(super) fn layout_for(shape: &GraphShape, cfg: &RunConfig, extents: Option<&E
         .map(|v| (1.0, Item::View(v)))
         .collect();
     if measures_executors(cfg) {
-        let lanes = shape.nodes.len().max(1) as f64;
-        let each = |series: &str| -> Vec<String> {
-            shape
-                .nodes
-                .iter()
-                .map(|n| format!("/nodes/{}/{series}", n.name))
-                .collect()
-        };
-        let timeline = plot(
-            "executor-timeline",
-            "executor timeline: a lane per node (by rank), raised while its tick holds a thread",
-            each("executor_lane"),
-            Some((0.0, lanes - 1.0 + LANE_BUSY)),
-            extents,
-        );
-        let response = plot(
-            "response",
-            "response time (ms): a tick's release → its outputs published",
-            each("response_ms"),
-            extents.map(|_| (0.0, 0.0)),
-            extents,
-        );
-        let skipped = totals(plot(
-            "skipped",
-            "skipped ticks (total): periods a node's timer let pass, its thread held",
-            each("skipped_ticks"),
-            extents.map(|_| (0.0, 1.0)),
-            extents,
-        ));
+        let [timeline, response, skipped] = executor_views(shape, extents);
         for v in [timeline, response, skipped] {
             signals.push((1.0, Item::View(v)));
         }
@@ -223,24 +172,7 @@ pub(super) fn layout_for(shape: &GraphShape, cfg: &RunConfig, extents: Option<&E
         );
         signals.push((1.0, Item::View(lateness)));
     }
-    // Across processes: each crossing topic's time on the wire (what its subscriber's process
-    // measured), where there is any.
-    let wire: Vec<String> = crossing_topics(shape)
-        .flat_map(|t| ["p50", "p99"].map(|stat| format!("/bus/{}/wire_{stat}_us", t.entity())))
-        .filter(|q| extents.is_none_or(|e| e.contains_key(&q[1..])))
-        .collect();
-    // With the bus's views (the right column), so that neither column gets too many plots
-    // to label their axes.
-    let wire = (!wire.is_empty()).then(|| {
-        plot(
-            "wire",
-            "over the wire (µs): each crossing topic's p50, p99 so far",
-            wire,
-            extents.map(|_| (0.0, 0.0)),
-            extents,
-        )
-    });
-
+    let wire = wire_view(shape, extents);
     let bus = |measure: &str, title: &str| {
         plot(
             &format!("bus-{measure}"),
@@ -298,43 +230,7 @@ pub(super) fn layout_for(shape: &GraphShape, cfg: &RunConfig, extents: Option<&E
             .contents(["/log/**"])
             .property("TextLogColumns", &text_log_columns(cfg.clock, true))
     });
-    let world = ViewSpec::new("cartpole", "3D", "cartpole")
-        .origin("/world")
-        .property(
-            "EyeControls3D",
-            &bp::EyeControls3D::new()
-                .with_kind(bpc::Eye3DKind::Orbital)
-                .with_position([0.0, -2.1, 1.1])
-                .with_look_target([0.0, 0.0, 0.35])
-                .with_eye_up([0.0, 0.0, 1.0]),
-        )
-        .property(
-            "LineGrid3D",
-            &bp::LineGrid3D::new()
-                .with_plane(rerun::components::Plane3D::new(
-                    [0.0, 0.0, 1.0],
-                    GROUND_Z_M as f32,
-                ))
-                .with_spacing(0.25),
-        );
-    let (_, bounds) = graph_positions(shape);
-    let graph = ViewSpec::new("graph", "Graph", "node graph: nodes blue, topics amber")
-        .origin("/graph")
-        .property("VisualBounds2D", &bp::VisualBounds2D::new(bounds))
-        .property("ForceLink", &bp::ForceLink::new().with_enabled(false))
-        .property(
-            "ForceManyBody",
-            &bp::ForceManyBody::new().with_enabled(false),
-        )
-        .property(
-            "ForcePosition",
-            &bp::ForcePosition::new().with_enabled(false),
-        )
-        .property(
-            "ForceCollisionRadius",
-            &bp::ForceCollisionRadius::new().with_enabled(false),
-        )
-        .property("ForceCenter", &bp::ForceCenter::new().with_enabled(false));
+    let (world, graph) = (world_view(), graph_view(shape));
     let summary = ViewSpec::new("summary", "TextDocument", "summary").contents(["/summary"]);
 
     Item::Horizontal(vec![
@@ -366,6 +262,138 @@ pub(super) fn layout_for(shape: &GraphShape, cfg: &RunConfig, extents: Option<&E
             ),
         ),
     ])
+}
+
+/// The cart's position against the rail's ends and the run's. `tall`: in a column of four
+/// plots, the rails' ends too; in a shorter plot the rails' ends padded (6.96 m) are too
+/// many metres for the viewer to label one (it showed "0" alone): the run's ends alone,
+/// within ±2.5 m, get "-2" to "2" (a cart past them, at the run's end, widens the range).
+fn cart_view(tall: bool, extents: Option<&Extents>) -> ViewSpec {
+    let paths = |list: &[&str]| list.iter().map(|p| p.to_string()).collect::<Vec<_>>();
+    let mut cart_paths = vec!["/plant/cart_pos_m"];
+    if tall {
+        cart_paths.extend(["/plant/rail_end/right", "/plant/rail_end/left"]);
+    }
+    cart_paths.extend(["/plant/cart_limit/right", "/plant/cart_limit/left"]);
+    let cart = plot(
+        "cart",
+        "cart position (m)",
+        paths(&cart_paths),
+        Some((-RAIL_HALF_LENGTH_M, RAIL_HALF_LENGTH_M)),
+        extents,
+    );
+    if tall {
+        cart
+    } else {
+        let reach = extents
+            .and_then(|e| e.get("plant/cart_pos_m"))
+            .map_or(0.0, |&(lo, hi)| lo.abs().max(hi.abs()));
+        let half = (CART_LIMIT_M + 0.1).max(reach * 1.05);
+        cart.property(
+            "ScalarAxis",
+            &bp::ScalarAxis::new().with_range(rerun::components::Range1D::new(-half, half)),
+        )
+    }
+}
+
+/// The executors' views: a lane per node raised while its tick holds a thread, each
+/// tick's response time, and the ticks its timer skipped.
+fn executor_views(shape: &GraphShape, extents: Option<&Extents>) -> [ViewSpec; 3] {
+    let lanes = shape.nodes.len().max(1) as f64;
+    let each = |series: &str| -> Vec<String> {
+        shape
+            .nodes
+            .iter()
+            .map(|n| format!("/nodes/{}/{series}", n.name))
+            .collect()
+    };
+    let timeline = plot(
+        "executor-timeline",
+        "executor timeline: a lane per node (by rank), raised while its tick holds a thread",
+        each("executor_lane"),
+        Some((0.0, lanes - 1.0 + LANE_BUSY)),
+        extents,
+    );
+    let response = plot(
+        "response",
+        "response time (ms): a tick's release → its outputs published",
+        each("response_ms"),
+        extents.map(|_| (0.0, 0.0)),
+        extents,
+    );
+    let skipped = totals(plot(
+        "skipped",
+        "skipped ticks (total): periods a node's timer let pass, its thread held",
+        each("skipped_ticks"),
+        extents.map(|_| (0.0, 1.0)),
+        extents,
+    ));
+    [timeline, response, skipped]
+}
+
+/// Across processes: each crossing topic's time on the wire (what its subscriber's process
+/// measured), where there is any. With the bus's views (the right column), so that neither
+/// column gets too many plots to label their axes.
+fn wire_view(shape: &GraphShape, extents: Option<&Extents>) -> Option<ViewSpec> {
+    let wire: Vec<String> = crossing_topics(shape)
+        .flat_map(|t| ["p50", "p99"].map(|stat| format!("/bus/{}/wire_{stat}_us", t.entity())))
+        .filter(|q| extents.is_none_or(|e| e.contains_key(&q[1..])))
+        .collect();
+    (!wire.is_empty()).then(|| {
+        plot(
+            "wire",
+            "over the wire (µs): each crossing topic's p50, p99 so far",
+            wire,
+            extents.map(|_| (0.0, 0.0)),
+            extents,
+        )
+    })
+}
+
+/// The cart-pole in 3D, seen from the front and above, on the ground's grid.
+fn world_view() -> ViewSpec {
+    ViewSpec::new("cartpole", "3D", "cartpole")
+        .origin("/world")
+        .property(
+            "EyeControls3D",
+            &bp::EyeControls3D::new()
+                .with_kind(bpc::Eye3DKind::Orbital)
+                .with_position([0.0, -2.1, 1.1])
+                .with_look_target([0.0, 0.0, 0.35])
+                .with_eye_up([0.0, 0.0, 1.0]),
+        )
+        .property(
+            "LineGrid3D",
+            &bp::LineGrid3D::new()
+                .with_plane(rerun::components::Plane3D::new(
+                    [0.0, 0.0, 1.0],
+                    GROUND_Z_M as f32,
+                ))
+                .with_spacing(0.25),
+        )
+}
+
+/// The node graph at the positions the recording gives it (no forces: it stays as laid
+/// out), nodes blue and topics amber.
+fn graph_view(shape: &GraphShape) -> ViewSpec {
+    let (_, bounds) = graph_positions(shape);
+    ViewSpec::new("graph", "Graph", "node graph: nodes blue, topics amber")
+        .origin("/graph")
+        .property("VisualBounds2D", &bp::VisualBounds2D::new(bounds))
+        .property("ForceLink", &bp::ForceLink::new().with_enabled(false))
+        .property(
+            "ForceManyBody",
+            &bp::ForceManyBody::new().with_enabled(false),
+        )
+        .property(
+            "ForcePosition",
+            &bp::ForcePosition::new().with_enabled(false),
+        )
+        .property(
+            "ForceCollisionRadius",
+            &bp::ForceCollisionRadius::new().with_enabled(false),
+        )
+        .property("ForceCenter", &bp::ForceCenter::new().with_enabled(false))
 }
 
 /// A text log view's columns: the run's timeline, then (when `entity` is shown) the entity,

@@ -181,6 +181,68 @@ impl RecordingObserver {
         parts.join("; ")
     }
 
+    /// The topics' counters at step `s`, with msg/s over the last second of run time, and
+    /// the counts the recording's summary reads.
+    fn bus_rows(&mut self, buf: &mut ChunkBuffer, s: &StepRecord) {
+        // Bus counters and msg/s over the last second of run time.
+        let stats: Vec<TopicStats> = self.shape.topics.iter().map(|t| (t.stats)()).collect();
+        self.window
+            .push_back((s.t, stats.iter().map(|st| st.published).collect()));
+        while self
+            .window
+            .front()
+            .is_some_and(|(t, _)| s.t.saturating_sub(*t) > Nanos::SECOND)
+        {
+            self.window.pop_front();
+        }
+        for (i, (topic, st)) in self.shape.topics.iter().zip(&stats).enumerate() {
+            let entity = topic.entity();
+            buf.scalar(
+                &format!("bus/{entity}/published"),
+                s.t,
+                s.step,
+                st.published as f64,
+            );
+            buf.scalar(
+                &format!("bus/{entity}/dropped"),
+                s.t,
+                s.step,
+                st.dropped as f64,
+            );
+            // The window from the topic's first counted message: the first step spans no
+            // time, and a topic counted by another process has no count before that
+            // process's first figures; either way no rate yet (not 0 msg/s, then a jump).
+            // Saturating: a topic's counters from another process may start over (it was
+            // restarted) or arrive from a peer that misbehaves.
+            let from = self
+                .window
+                .iter()
+                .find(|(_, counts)| counts.get(i).is_some_and(|n| *n > 0));
+            if let Some((t0, counts)) = from {
+                let span = s.t.saturating_sub(*t0).as_secs_f64();
+                if span > 0.0 {
+                    let rate = st.published.saturating_sub(counts[i]) as f64 / span;
+                    buf.scalar(&format!("bus/{entity}/msg_per_s"), s.t, s.step, rate);
+                }
+            }
+        }
+        {
+            let mut last = self
+                .rec
+                .last_step_published
+                .lock()
+                .unwrap_or_else(|e| e.into_inner());
+            for (topic, st) in self.shape.topics.iter().zip(&stats) {
+                match last.get_mut(&topic.name) {
+                    Some(n) => *n = st.published,
+                    None => {
+                        last.insert(topic.name.clone(), st.published);
+                    }
+                }
+            }
+        }
+    }
+
     /// The QoS counters and events of this step (nothing for the chapter's QoS): each topic's
     /// reported counters as series under its `bus/<topic>/` entity, an event when a deadline
     /// counter rose, each leased node's not-alive count, and an event when a node's
@@ -356,28 +418,7 @@ impl StepObserver for RecordingObserver {
         }
         let theta = s.pole_angle;
         let force = s.action * FORCE_PER_CONTROL_N;
-        buf.add(
-            "world/cart",
-            &time,
-            &rerun::Transform3D::from_translation([s.cart_pos as f32, 0.0, 0.0]),
-        );
-        buf.add(
-            "world/cart/pole",
-            &time,
-            &rerun::Transform3D::from_rotation(rerun::RotationAxisAngle::new(
-                [0.0, 1.0, 0.0],
-                rerun::Angle::from_radians(theta as f32),
-            )),
-        );
-        buf.add(
-            "world/cart/force",
-            &time,
-            &rerun::Arrows3D::from_vectors([[(force * 0.04) as f32, 0.0, 0.0]])
-                .with_origins([[0.0, -0.06, 0.0]])
-                .with_colors([rgb(FORCE_COLOR)])
-                .with_radii([0.012])
-                .with_labels([format!("{force:+.1} N")]),
-        );
+        world_rows(&mut buf, &time, s, force);
         buf.scalar("plant/pole_angle_rad", s.t, s.step, theta);
         buf.scalar("plant/cart_pos_m", s.t, s.step, s.cart_pos);
         buf.scalar("action/applied_N", s.t, s.step, force);
@@ -396,101 +437,80 @@ impl StepObserver for RecordingObserver {
         if let Some(period) = self.shape.controller_period_ms() {
             buf.scalar("latency/control_period_ms", s.t, s.step, period);
         }
-        // Bus counters and msg/s over the last second of run time.
-        let stats: Vec<TopicStats> = self.shape.topics.iter().map(|t| (t.stats)()).collect();
-        self.window
-            .push_back((s.t, stats.iter().map(|st| st.published).collect()));
-        while self
-            .window
-            .front()
-            .is_some_and(|(t, _)| s.t.saturating_sub(*t) > Nanos::SECOND)
-        {
-            self.window.pop_front();
-        }
-        for (i, (topic, st)) in self.shape.topics.iter().zip(&stats).enumerate() {
-            let entity = topic.entity();
-            buf.scalar(
-                &format!("bus/{entity}/published"),
-                s.t,
-                s.step,
-                st.published as f64,
-            );
-            buf.scalar(
-                &format!("bus/{entity}/dropped"),
-                s.t,
-                s.step,
-                st.dropped as f64,
-            );
-            // The window from the topic's first counted message: the first step spans no
-            // time, and a topic counted by another process has no count before that
-            // process's first figures; either way no rate yet (not 0 msg/s, then a jump).
-            // Saturating: a topic's counters from another process may start over (it was
-            // restarted) or arrive from a peer that misbehaves.
-            let from = self
-                .window
-                .iter()
-                .find(|(_, counts)| counts.get(i).is_some_and(|n| *n > 0));
-            if let Some((t0, counts)) = from {
-                let span = s.t.saturating_sub(*t0).as_secs_f64();
-                if span > 0.0 {
-                    let rate = st.published.saturating_sub(counts[i]) as f64 / span;
-                    buf.scalar(&format!("bus/{entity}/msg_per_s"), s.t, s.step, rate);
-                }
-            }
-        }
-        {
-            let mut last = self
-                .rec
-                .last_step_published
-                .lock()
-                .unwrap_or_else(|e| e.into_inner());
-            for (topic, st) in self.shape.topics.iter().zip(&stats) {
-                match last.get_mut(&topic.name) {
-                    Some(n) => *n = st.published,
-                    None => {
-                        last.insert(topic.name.clone(), st.published);
-                    }
-                }
-            }
-        }
+        self.bus_rows(&mut buf, s);
         self.qos_rows(&mut buf, s);
         if s.fell {
-            // A marker on the angle plot where the pole went past its limit.
-            buf.add(
-                "plant/fall",
-                &TimePoint::default(),
-                &rerun::SeriesPoints::new()
-                    .with_names(["the fall"])
-                    .with_colors([rgb(LIMIT_COLOR)])
-                    .with_marker_sizes([8.0])
-                    .with_markers([rerun::components::MarkerShape::Cross]),
-            );
-            buf.scalar("plant/fall", s.t, s.step, theta);
-            // …and in 3D: from the fall on, the pole is drawn red and labelled.
-            buf.add(
-                "world/cart/pole/fallen",
-                &time,
-                &rerun::Capsules3D::from_lengths_and_radii([1.0], [0.032])
-                    .with_colors([rgb(LIMIT_COLOR)]),
-            );
-            buf.add(
-                "world/cart/pole/fallen/label",
-                &time,
-                &rerun::Points3D::new([[0.0, 0.0, 0.6]])
-                    .with_colors([rgb(LIMIT_COLOR)])
-                    .with_radii([0.02])
-                    .with_labels([format!("FELL at {:.2} s", s.t.as_secs_f64())]),
-            );
-            let text = format!("FELL at t={:.2}s, θ = {:.3} rad", s.t.as_secs_f64(), theta);
-            buf.add(
-                "events",
-                &time,
-                &rerun::TextLog::new(text).with_level(rerun::components::TextLogLevel::WARN),
-            );
+            fall_rows(&mut buf, &time, s);
         }
         if s.step % FLUSH_EVERY_STEPS == 0 || s.fell {
             reference_lines(&mut buf, s.t, s.step);
             buf.send(&rec.rec);
         }
     }
+}
+
+/// The cart, the pole at its angle and the applied `force` (N) as an arrow, in 3D.
+fn world_rows(buf: &mut ChunkBuffer, time: &TimePoint, s: &StepRecord, force: f64) {
+    buf.add(
+        "world/cart",
+        time,
+        &rerun::Transform3D::from_translation([s.cart_pos as f32, 0.0, 0.0]),
+    );
+    buf.add(
+        "world/cart/pole",
+        time,
+        &rerun::Transform3D::from_rotation(rerun::RotationAxisAngle::new(
+            [0.0, 1.0, 0.0],
+            rerun::Angle::from_radians(s.pole_angle as f32),
+        )),
+    );
+    buf.add(
+        "world/cart/force",
+        time,
+        &rerun::Arrows3D::from_vectors([[(force * 0.04) as f32, 0.0, 0.0]])
+            .with_origins([[0.0, -0.06, 0.0]])
+            .with_colors([rgb(FORCE_COLOR)])
+            .with_radii([0.012])
+            .with_labels([format!("{force:+.1} N")]),
+    );
+}
+
+/// The fall at step `s`: a marker on the angle plot, the pole drawn red and labelled in 3D
+/// from then on, and a warning among the events.
+fn fall_rows(buf: &mut ChunkBuffer, time: &TimePoint, s: &StepRecord) {
+    // A marker on the angle plot where the pole went past its limit.
+    buf.add(
+        "plant/fall",
+        &TimePoint::default(),
+        &rerun::SeriesPoints::new()
+            .with_names(["the fall"])
+            .with_colors([rgb(LIMIT_COLOR)])
+            .with_marker_sizes([8.0])
+            .with_markers([rerun::components::MarkerShape::Cross]),
+    );
+    buf.scalar("plant/fall", s.t, s.step, s.pole_angle);
+    // …and in 3D: from the fall on, the pole is drawn red and labelled.
+    buf.add(
+        "world/cart/pole/fallen",
+        time,
+        &rerun::Capsules3D::from_lengths_and_radii([1.0], [0.032]).with_colors([rgb(LIMIT_COLOR)]),
+    );
+    buf.add(
+        "world/cart/pole/fallen/label",
+        time,
+        &rerun::Points3D::new([[0.0, 0.0, 0.6]])
+            .with_colors([rgb(LIMIT_COLOR)])
+            .with_radii([0.02])
+            .with_labels([format!("FELL at {:.2} s", s.t.as_secs_f64())]),
+    );
+    let text = format!(
+        "FELL at t={:.2}s, θ = {:.3} rad",
+        s.t.as_secs_f64(),
+        s.pole_angle
+    );
+    buf.add(
+        "events",
+        time,
+        &rerun::TextLog::new(text).with_level(rerun::components::TextLogLevel::WARN),
+    );
 }
