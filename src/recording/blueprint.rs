@@ -173,26 +173,7 @@ pub(super) fn layout_for(shape: &GraphShape, cfg: &RunConfig, extents: Option<&E
         signals.push((1.0, Item::View(lateness)));
     }
     let wire = wire_view(shape, extents);
-    let bus = |measure: &str, title: &str| {
-        plot(
-            &format!("bus-{measure}"),
-            title,
-            shape
-                .topics
-                .iter()
-                .map(|t| format!("/bus/{}/{measure}", t.entity()))
-                .collect(),
-            extents.map(|_| (0.0, 0.0)),
-            extents,
-        )
-    };
-    let published = totals(bus("published", "bus: published (total)"));
-    // Rates run along the top once they settle: their legend bottom right.
-    let msg_per_s = legend_at(
-        bus("msg_per_s", "bus: msg/s (1 s window)"),
-        bpc::Corner2D::RightBottom,
-    );
-    let dropped = totals(bus("dropped", "bus: dropped (total)"));
+    let [published, msg_per_s, dropped] = bus_views(shape, extents);
     // QoS counters only where a topic's QoS can make them count (or they did): the
     // chapter's graph has no such view.
     let qos = qos_series(shape, extents);
@@ -262,6 +243,32 @@ pub(super) fn layout_for(shape: &GraphShape, cfg: &RunConfig, extents: Option<&E
             ),
         ),
     ])
+}
+
+/// The bus's views: each topic's messages published (total), its msg/s over a 1 s window
+/// (legend bottom right: rates run along the top once they settle) and its drops (total).
+fn bus_views(shape: &GraphShape, extents: Option<&Extents>) -> [ViewSpec; 3] {
+    let bus = |measure: &str, title: &str| {
+        plot(
+            &format!("bus-{measure}"),
+            title,
+            shape
+                .topics
+                .iter()
+                .map(|t| format!("/bus/{}/{measure}", t.entity()))
+                .collect(),
+            extents.map(|_| (0.0, 0.0)),
+            extents,
+        )
+    };
+    let published = totals(bus("published", "bus: published (total)"));
+    // Rates run along the top once they settle: their legend bottom right.
+    let msg_per_s = legend_at(
+        bus("msg_per_s", "bus: msg/s (1 s window)"),
+        bpc::Corner2D::RightBottom,
+    );
+    let dropped = totals(bus("dropped", "bus: dropped (total)"));
+    [published, msg_per_s, dropped]
 }
 
 /// The cart's position against the rail's ends and the run's. `tall`: in a column of four

@@ -364,26 +364,8 @@ impl Bridge {
         let domain = opts.domain;
         let session = link.session.clone();
         let router = link.router.clone();
-        let others = if offer.clock {
-            clock_publishers(&session, domain)
-        } else {
-            Vec::new()
-        };
-        if let Some(other) = others.first() {
-            return Err(Ros2Error::Usage(format!(
-                "--ros2: node '{}' already publishes /clock on domain {domain}; two /clock publishers would give ROS 2 nodes two times (stop it, or use another ROS_DOMAIN_ID)",
-                crate::text::printable(other)
-            )));
-        }
         let waits = clock == ClockKind::Virtual;
-        if waits && ports.len() > 1 {
-            // They would share each /clock tick: the second would answer at the first's.
-            return Err(Ros2Error::Usage(format!(
-                "graph '{}' has {} external nodes: under the virtual clock the lockstep takes one (they would share each /clock tick); use the real clock, or make one of them a ratelab node",
-                spec.name,
-                ports.len()
-            )));
-        }
+        refuse_clock_clash(&session, offer, domain, waits)?;
         let notes = super::external::wait_for(&session, domain, spec, ports, stop)?;
         let elsewhere = |n: NodeId| offer.elsewhere(n);
         let zid = session.zid();
@@ -483,53 +465,19 @@ impl Bridge {
             )?;
         }
 
-        let bag = match &opts.bag {
-            Some(dir) => {
-                let mut topics: Vec<BagTopic<'_>> = spec
-                    .topics
-                    .iter()
-                    .enumerate()
-                    .map(|(i, t)| BagTopic {
-                        name: &t.name,
-                        ty: ros_type_of(t.msg),
-                        qos: qos_of(spec, i),
-                    })
-                    .collect();
-                topics.push(BagTopic {
-                    name: CLOCK_TOPIC,
-                    ty: clock_type(),
-                    qos: clock_qos(),
-                });
-                Some(Bag::create(dir, opts.force, &topics)?)
-            }
-            None => None,
-        };
+        let bag = opts
+            .bag
+            .as_ref()
+            .map(|dir| bag_for(spec, dir, opts.force))
+            .transpose()?;
         let inbound = super::external::listen(&session, domain, spec, ports)?;
-        // What an external node reads must reach it from the first message: wait until
-        // Zenoh has matched its subscriptions to the publishers (the tokens came first);
-        // under the virtual clock, /clock too (the lockstep runs on it).
-        for p in ports {
-            let mut feeds: Vec<(&str, &Outlet)> = clock_outlet
-                .as_ref()
-                .filter(|_| waits)
-                .map(|o| (CLOCK_TOPIC, o))
-                .into_iter()
-                .collect();
-            if let Some(t) = p.input {
-                if let Some(o) = &outlets[t.0] {
-                    feeds.push((spec.topics[t.0].name.as_str(), o));
-                }
-            }
-            for (topic, o) in feeds {
-                wait_matched(o, p.settings.appear_timeout.to_duration(), stop).map_err(|()| {
-                    Ros2Error::Usage(format!(
-                        "external node '{}': no subscriber of {topic} matched ratelab's publisher within {:.1} s (under the virtual clock it must subscribe to its input and to /clock)",
-                        p.name,
-                        p.settings.appear_timeout.as_secs_f64()
-                    ))
-                })?;
-            }
-        }
+        wait_feeds_matched(
+            spec,
+            ports,
+            &outlets,
+            clock_outlet.as_ref().filter(|_| waits),
+            stop,
+        )?;
         let (tx, rx) = crossbeam_channel::bounded(CHANNEL_CAPACITY);
         let dropped = Arc::new(AtomicU64::new(0));
         for (i, topic) in topics.iter().enumerate() {
@@ -551,26 +499,13 @@ impl Bridge {
                 }),
             });
         }
-        let thread = std::thread::Builder::new()
-            .name("ros2-bridge".into())
-            .spawn(move || {
-                let r = forward(&rx, &outlets, clock_outlet.as_ref(), bag, lockstep);
-                // Withdrawn: ROS 2's graph no longer shows the run's nodes.
-                for s in inbound {
-                    let _ = s.undeclare().wait();
-                }
-                for t in tokens {
-                    let _ = t.undeclare().wait();
-                }
-                for o in outlets.into_iter().flatten() {
-                    let _ = o.publisher.undeclare().wait();
-                }
-                if let Some(o) = clock_outlet {
-                    let _ = o.publisher.undeclare().wait();
-                }
-                r
-            })
-            .map_err(|e| Ros2Error::Zenoh(format!("cannot start the ROS 2 bridge: {e}")))?;
+        let thread = spawn_forwarder(
+            rx,
+            (outlets, clock_outlet),
+            bag,
+            lockstep,
+            (inbound, tokens),
+        )?;
         Ok(Bridge {
             tx: Some(tx),
             thread: Some(thread),
@@ -846,4 +781,123 @@ mod tests {
     fn gids_differ_per_endpoint() {
         assert_ne!(gid("@ros2_lv/0/a/1/2/MP"), gid("@ros2_lv/0/a/1/3/MP"));
     }
+}
+
+/// Refuse to offer a `/clock` where another node on `domain` already publishes one (ROS 2
+/// nodes would get two times), and, under the virtual clock (`waits`), more than one
+/// external node (they would share each `/clock` tick).
+fn refuse_clock_clash(
+    session: &zenoh::Session,
+    offer: &Offer<'_>,
+    domain: u32,
+    waits: bool,
+) -> Result<(), Ros2Error> {
+    let (spec, ports) = (offer.spec, offer.external);
+    let others = if offer.clock {
+        clock_publishers(session, domain)
+    } else {
+        Vec::new()
+    };
+    if let Some(other) = others.first() {
+        return Err(Ros2Error::Usage(format!(
+            "--ros2: node '{}' already publishes /clock on domain {domain}; two /clock publishers would give ROS 2 nodes two times (stop it, or use another ROS_DOMAIN_ID)",
+            crate::text::printable(other)
+        )));
+    }
+    if waits && ports.len() > 1 {
+        // They would share each /clock tick: the second would answer at the first's.
+        return Err(Ros2Error::Usage(format!(
+            "graph '{}' has {} external nodes: under the virtual clock the lockstep takes one (they would share each /clock tick); use the real clock, or make one of them a ratelab node",
+            spec.name,
+            ports.len()
+        )));
+    }
+    Ok(())
+}
+
+/// A bag in `dir` (`force`: over one there) of every topic of `spec` and `/clock`, with
+/// their ROS 2 types and QoS.
+fn bag_for(spec: &GraphSpec, dir: &std::path::Path, force: bool) -> Result<Bag, Ros2Error> {
+    let mut topics: Vec<BagTopic<'_>> = spec
+        .topics
+        .iter()
+        .enumerate()
+        .map(|(i, t)| BagTopic {
+            name: &t.name,
+            ty: ros_type_of(t.msg),
+            qos: qos_of(spec, i),
+        })
+        .collect();
+    topics.push(BagTopic {
+        name: CLOCK_TOPIC,
+        ty: clock_type(),
+        qos: clock_qos(),
+    });
+    Bag::create(dir, force, &topics)
+}
+
+/// What an external node reads must reach it from the first message: wait until Zenoh has
+/// matched its subscriptions to ratelab's publishers (`outlets`; the tokens came first),
+/// and, under the virtual clock, `/clock`'s (`clock`: the lockstep runs on it), each
+/// within the node's `appear_timeout_s`.
+fn wait_feeds_matched(
+    spec: &GraphSpec,
+    ports: &[Arc<ExternalPort>],
+    outlets: &[Option<Outlet>],
+    clock: Option<&Outlet>,
+    stop: &StopFlag,
+) -> Result<(), Ros2Error> {
+    for p in ports {
+        let mut feeds: Vec<(&str, &Outlet)> = clock.map(|o| (CLOCK_TOPIC, o)).into_iter().collect();
+        if let Some(t) = p.input {
+            if let Some(o) = &outlets[t.0] {
+                feeds.push((spec.topics[t.0].name.as_str(), o));
+            }
+        }
+        for (topic, o) in feeds {
+            wait_matched(o, p.settings.appear_timeout.to_duration(), stop).map_err(|()| {
+                Ros2Error::Usage(format!(
+                    "external node '{}': no subscriber of {topic} matched ratelab's publisher within {:.1} s (under the virtual clock it must subscribe to its input and to /clock)",
+                    p.name,
+                    p.settings.appear_timeout.as_secs_f64()
+                ))
+            })?;
+        }
+    }
+    Ok(())
+}
+
+/// The bridge's thread: forward what the graph publishes (`rx`) to ROS 2 through `outlets`
+/// and `/clock`, into the bag if any (`deferred`: under the lockstep, see [`forward`]);
+/// then withdraw everything it declared (the inbound subscriptions, the liveliness tokens,
+/// the publishers), so that ROS 2's graph no longer shows the run's nodes.
+fn spawn_forwarder(
+    rx: Receiver<Out>,
+    (outlets, clock_outlet): (Vec<Option<Outlet>>, Option<Outlet>),
+    bag: Option<Bag>,
+    deferred: bool,
+    (inbound, tokens): (
+        Vec<zenoh::pubsub::Subscriber<()>>,
+        Vec<zenoh::liveliness::LivelinessToken>,
+    ),
+) -> Result<JoinHandle<Forwarded>, Ros2Error> {
+    std::thread::Builder::new()
+        .name("ros2-bridge".into())
+        .spawn(move || {
+            let r = forward(&rx, &outlets, clock_outlet.as_ref(), bag, deferred);
+            for s in inbound {
+                let _ = s.undeclare().wait();
+            }
+            for t in tokens {
+                let _ = t.undeclare().wait();
+            }
+            for o in outlets.into_iter().flatten() {
+                let _ = o.publisher.undeclare().wait();
+            }
+            if let Some(o) = clock_outlet {
+                let _ = o.publisher.undeclare().wait();
+            }
+            r
+        })
+        .map_err(|e| Ros2Error::Zenoh(format!("cannot start the ROS 2 bridge: {e}")))
 }

@@ -445,18 +445,7 @@ pub fn launch(
         placement,
         names,
         endpoint,
-        setup: Setup {
-            graph_toml: spec.to_toml(),
-            seed: cfg.seed,
-            duration_ns: cfg.duration.0,
-            clock: cfg.clock,
-            policy: opts.policy.clone(),
-            faults: cfg.faults.clone(),
-            phase_offsets_ns: cfg.phase_offsets.iter().map(|n| n.0).collect(),
-            spin_margin_ns: cfg.spin_margin.0,
-            rt_priority: cfg.rt_priority,
-            ros2_domain: opts.ros2_domain,
-        },
+        setup: setup_of(cfg, opts),
         hash: super::graph_hash(&opts.graph_bytes),
         private: PrivateDir::new()?,
         link: Link {
@@ -554,6 +543,22 @@ pub fn launch(
         missing,
         lockstep,
     })
+}
+
+/// The run's settings as every process of the launch and every watcher is given them.
+fn setup_of(cfg: &RunConfig, opts: &LaunchOptions) -> Setup {
+    Setup {
+        graph_toml: cfg.graph.to_toml(),
+        seed: cfg.seed,
+        duration_ns: cfg.duration.0,
+        clock: cfg.clock,
+        policy: opts.policy.clone(),
+        faults: cfg.faults.clone(),
+        phase_offsets_ns: cfg.phase_offsets.iter().map(|n| n.0).collect(),
+        spin_margin_ns: cfg.spin_margin.0,
+        rt_priority: cfg.rt_priority,
+        ros2_domain: opts.ros2_domain,
+    }
 }
 
 /// What the processes say to the launcher (`ToLauncher`), as it arrives: each from its own
