@@ -237,26 +237,7 @@ pub fn run_headless(a: &RunArgs, stop: StopFlag) -> anyhow::Result<RunReport> {
             ratelab::output::check_target(&dir.join(name), a.force)?;
         }
     }
-    let bar = (cfg.clock == ClockKind::Real && std::io::stdout().is_terminal()).then(|| {
-        let bar = ProgressBar::new(cfg.duration.0 / 1_000_000);
-        bar.set_style(
-            ProgressStyle::with_template("{spinner} real clock [{bar:40}] {pos}/{len} ms run time")
-                .expect("static template")
-                .progress_chars("=> "),
-        );
-        bar.enable_steady_tick(Duration::from_millis(100));
-        bar
-    });
-    let ticker = bar.clone().map(|bar| {
-        let stop = stop.clone();
-        std::thread::spawn(move || {
-            let start = std::time::Instant::now();
-            while !stop.is_stopped() && !bar.is_finished() {
-                bar.set_position(start.elapsed().as_millis() as u64);
-                std::thread::sleep(Duration::from_millis(50));
-            }
-        })
-    });
+    let (bar, ticker) = real_clock_bar(&cfg, &stop);
     // Refused before anything is written or opened.
     let ros2 = ros2_options(a, &cfg.graph)?;
     let recording = open_recording(a, &cfg, &brain.label())?;
@@ -295,24 +276,7 @@ pub fn run_headless(a: &RunArgs, stop: StopFlag) -> anyhow::Result<RunReport> {
     // What nodes' code writes (ratelab::textlog): each line on stderr, stamped, as it comes;
     // with --out also kept for log.txt (the first MAX_LOG_LINES); with --record, in the
     // recording (`log/<node>`).
-    let kept = Arc::new(Mutex::new(Vec::<String>::new()));
-    {
-        let keep = a.out.is_some().then(|| kept.clone());
-        let recorded = recording.clone();
-        ratelab::textlog::set_sink(Some(Box::new(move |line| {
-            if let Some(r) = &recorded {
-                r.log_line(&line);
-            }
-            let text = line.prefixed();
-            let _ = writeln!(std::io::stderr(), "{text}");
-            if let Some(k) = &keep {
-                let mut k = k.lock().unwrap_or_else(|e| e.into_inner());
-                if k.len() < MAX_LOG_LINES {
-                    k.push(text);
-                }
-            }
-        })));
-    }
+    let kept = log_sink(a.out.is_some(), recording.clone());
     let report = run(&cfg, brain, opts);
     ratelab::textlog::set_sink(None);
     let report = report?;
@@ -341,27 +305,7 @@ pub fn run_headless(a: &RunArgs, stop: StopFlag) -> anyhow::Result<RunReport> {
     }
     print_summary(&report);
     if let Some(r) = &report.ros2 {
-        println!(
-            "[ratelab] ROS 2: {} messages offered{}",
-            r.offered,
-            if r.dropped > 0 {
-                format!(", {} not (the bridge fell behind)", r.dropped)
-            } else {
-                String::new()
-            }
-        );
-        if let (Some(Ok(n)), Some(dir)) = (&r.bagged, &a.bag) {
-            println!(
-                "[ratelab] bag: {} (rosbag2, MCAP): {n} messages with /clock",
-                dir.display()
-            );
-        }
-        if let Some(e) = &r.error {
-            eprintln!("[ratelab] warning: ROS 2: {e}");
-        }
-        for w in r.external_warnings() {
-            eprintln!("[ratelab] warning: {w}");
-        }
+        print_ros2(r, a.bag.as_deref());
     }
     if cfg.rt_priority.is_some() && cfg.clock == ClockKind::Virtual {
         eprintln!("[ratelab] note: --rt-priority applies to the real clock only; ignored");
@@ -392,6 +336,83 @@ pub fn run_headless(a: &RunArgs, stop: StopFlag) -> anyhow::Result<RunReport> {
     }
     end_is_an_error(&report)?;
     Ok(report)
+}
+
+/// A real-clock run's progress bar on a terminal (run time against the duration) and the
+/// thread that moves it, until `stop` or the bar is finished.
+fn real_clock_bar(
+    cfg: &RunConfig,
+    stop: &StopFlag,
+) -> (Option<ProgressBar>, Option<std::thread::JoinHandle<()>>) {
+    let bar = (cfg.clock == ClockKind::Real && std::io::stdout().is_terminal()).then(|| {
+        let bar = ProgressBar::new(cfg.duration.0 / 1_000_000);
+        bar.set_style(
+            ProgressStyle::with_template("{spinner} real clock [{bar:40}] {pos}/{len} ms run time")
+                .expect("static template")
+                .progress_chars("=> "),
+        );
+        bar.enable_steady_tick(Duration::from_millis(100));
+        bar
+    });
+    let ticker = bar.clone().map(|bar| {
+        let stop = stop.clone();
+        std::thread::spawn(move || {
+            let start = std::time::Instant::now();
+            while !stop.is_stopped() && !bar.is_finished() {
+                bar.set_position(start.elapsed().as_millis() as u64);
+                std::thread::sleep(Duration::from_millis(50));
+            }
+        })
+    });
+    (bar, ticker)
+}
+
+/// Where the lines nodes' code writes go ([`ratelab::textlog`]): each on stderr, stamped,
+/// as it comes; with `keep` (`--out`) also kept for log.txt (the first [`MAX_LOG_LINES`],
+/// returned); with a recording (`recorded`), in it (`log/<node>`).
+fn log_sink(keep: bool, recorded: Option<Recording>) -> Arc<Mutex<Vec<String>>> {
+    let kept = Arc::new(Mutex::new(Vec::<String>::new()));
+    let keep = keep.then(|| kept.clone());
+    ratelab::textlog::set_sink(Some(Box::new(move |line| {
+        if let Some(r) = &recorded {
+            r.log_line(&line);
+        }
+        let text = line.prefixed();
+        let _ = writeln!(std::io::stderr(), "{text}");
+        if let Some(k) = &keep {
+            let mut k = k.lock().unwrap_or_else(|e| e.into_inner());
+            if k.len() < MAX_LOG_LINES {
+                k.push(text);
+            }
+        }
+    })));
+    kept
+}
+
+/// What the run offered ROS 2 (and how many messages it could not), the bag written to
+/// `bag`, and the bridge's warnings.
+fn print_ros2(r: &ratelab::ros2::BridgeReport, bag: Option<&std::path::Path>) {
+    println!(
+        "[ratelab] ROS 2: {} messages offered{}",
+        r.offered,
+        if r.dropped > 0 {
+            format!(", {} not (the bridge fell behind)", r.dropped)
+        } else {
+            String::new()
+        }
+    );
+    if let (Some(Ok(n)), Some(dir)) = (&r.bagged, bag) {
+        println!(
+            "[ratelab] bag: {} (rosbag2, MCAP): {n} messages with /clock",
+            dir.display()
+        );
+    }
+    if let Some(e) = &r.error {
+        eprintln!("[ratelab] warning: ROS 2: {e}");
+    }
+    for w in r.external_warnings() {
+        eprintln!("[ratelab] warning: {w}");
+    }
 }
 
 /// A run that reached its summary and files but did not succeed is, after them, an error

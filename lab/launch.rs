@@ -314,12 +314,7 @@ fn launch_watched(
     let recorder = match recording {
         Some(rec) => {
             sinks.push(rec_tx);
-            let (rec, cfg) = (rec.clone(), cfg.clone());
-            Some(
-                std::thread::Builder::new()
-                    .name("recorder".into())
-                    .spawn(move || ratelab::recording::watched::record(&rec, &cfg, &rec_rx))?,
-            )
+            Some(spawn_recorder(rec, &cfg, rec_rx)?)
         }
         None => {
             drop(rec_rx);
@@ -359,6 +354,34 @@ fn launch_watched(
         r.join()
             .map_err(|_| anyhow::anyhow!("the recorder stopped unexpectedly"))??;
     }
+    print_held(held, &err_rx);
+    lab_result?;
+    let report = report?;
+    if let Some(rec) = recording {
+        finish_recording(rec, &cfg, &report)?;
+    }
+    match watched {
+        Ok(r) => r?,
+        Err(_) => anyhow::bail!("the watcher stopped unexpectedly"),
+    }
+    Ok(report)
+}
+
+/// Record what a watcher of the launch follows (`rx`) into `rec`, on a thread.
+fn spawn_recorder(
+    rec: &ratelab::recording::Recording,
+    cfg: &ratelab::RunConfig,
+    rx: crossbeam_channel::Receiver<Telemetry>,
+) -> anyhow::Result<std::thread::JoinHandle<Result<(), ratelab::recording::RecordingError>>> {
+    let (rec, cfg) = (rec.clone(), cfg.clone());
+    Ok(std::thread::Builder::new()
+        .name("recorder".into())
+        .spawn(move || ratelab::recording::watched::record(&rec, &cfg, &rx))?)
+}
+
+/// After the lab: the launcher's lines it held, then the processes' stderr lines it held
+/// (the first [`MAX_HELD_STDERR_LINES`], and a line saying so when there were more).
+fn print_held(held: Vec<String>, err_rx: &crossbeam_channel::Receiver<String>) {
     for l in held {
         println!("[ratelab] launch: {l}");
     }
@@ -369,20 +392,21 @@ fn launch_watched(
     if cut {
         eprintln!("[ratelab] (the processes' stderr lines after the first {MAX_HELD_STDERR_LINES} are not kept)");
     }
-    lab_result?;
-    let report = report?;
-    if let Some(rec) = recording {
-        rec.summary_line(format!("processes: {}", placement_line(&cfg.graph)));
-        for w in &report.wire {
-            rec.summary_line(wire_line(w));
-        }
-        rec.finish(&report.metrics, &report.end)?;
+}
+
+/// End a launch's recording: its processes and each crossing topic's wire latency in the
+/// summary, then the run's figures.
+fn finish_recording(
+    rec: &ratelab::recording::Recording,
+    cfg: &ratelab::RunConfig,
+    report: &LaunchReport,
+) -> anyhow::Result<()> {
+    rec.summary_line(format!("processes: {}", placement_line(&cfg.graph)));
+    for w in &report.wire {
+        rec.summary_line(wire_line(w));
     }
-    match watched {
-        Ok(r) => r?,
-        Err(_) => anyhow::bail!("the watcher stopped unexpectedly"),
-    }
-    Ok(report)
+    rec.finish(&report.metrics, &report.end)?;
+    Ok(())
 }
 
 /// Start `watch` on a thread, its telemetry copied to every sink; returns its stop flag and

@@ -444,18 +444,10 @@ impl Bridge {
                 subscriptions.push(endpoint(&nodes[sub.0], kind, &topic.name, ty, qos));
             }
         }
-        let clock_ep = endpoint(
-            &clock_node,
-            EndpointKind::Publisher,
-            CLOCK_TOPIC,
-            clock_type(),
-            clock_qos(),
-        );
-        let clock_outlet = if offer.clock {
-            Some(publish(&clock_ep)?)
-        } else {
-            None
-        };
+        // Its id is taken whether or not it is offered, as every endpoint's is.
+        let (ty, qos) = (clock_type(), clock_qos());
+        let clock_ep = endpoint(&clock_node, EndpointKind::Publisher, CLOCK_TOPIC, ty, qos);
+        let clock_outlet = offer.clock.then(|| publish(&clock_ep)).transpose()?;
         for ms in &subscriptions {
             declare(
                 format
@@ -478,27 +470,8 @@ impl Bridge {
             clock_outlet.as_ref().filter(|_| waits),
             stop,
         )?;
-        let (tx, rx) = crossbeam_channel::bounded(CHANNEL_CAPACITY);
-        let dropped = Arc::new(AtomicU64::new(0));
-        for (i, topic) in topics.iter().enumerate() {
-            // What another process publishes arrives here as a copy: its own bridge offers it.
-            if offer
-                .local
-                .is_none_or(|l| l.contains(&spec.topics[i].publisher))
-            {
-                tap(topic, i, tx.clone(), waits, dropped.clone());
-            }
-        }
         let lockstep = waits && !ports.is_empty();
-        for p in ports {
-            let tx = tx.clone();
-            p.connect(ExternalLink {
-                lockstep,
-                announce: Box::new(move |t| {
-                    let _ = tx.send(Out::Announce(t));
-                }),
-            });
-        }
+        let (tx, rx, dropped) = connect_graph(offer, topics, lockstep, waits);
         let thread = spawn_forwarder(
             rx,
             (outlets, clock_outlet),
@@ -900,4 +873,38 @@ fn spawn_forwarder(
             r
         })
         .map_err(|e| Ros2Error::Zenoh(format!("cannot start the ROS 2 bridge: {e}")))
+}
+
+/// Connect the graph to the bridge: each topic published in this program (`offer.local`)
+/// is tapped (a copy of each message goes to the bridge; `waits`: under the virtual clock),
+/// and each external node announces its ticks (`lockstep`: the lockstep waits for them).
+/// Returns the channel's two ends and the count of what did not fit in it.
+fn connect_graph(
+    offer: &Offer<'_>,
+    topics: &[AnyTopic],
+    lockstep: bool,
+    waits: bool,
+) -> (Sender<Out>, Receiver<Out>, Arc<AtomicU64>) {
+    let (spec, ports) = (offer.spec, offer.external);
+    let (tx, rx) = crossbeam_channel::bounded(CHANNEL_CAPACITY);
+    let dropped = Arc::new(AtomicU64::new(0));
+    for (i, topic) in topics.iter().enumerate() {
+        // What another process publishes arrives here as a copy: its own bridge offers it.
+        if offer
+            .local
+            .is_none_or(|l| l.contains(&spec.topics[i].publisher))
+        {
+            tap(topic, i, tx.clone(), waits, dropped.clone());
+        }
+    }
+    for p in ports {
+        let tx = tx.clone();
+        p.connect(ExternalLink {
+            lockstep,
+            announce: Box::new(move |t| {
+                let _ = tx.send(Out::Announce(t));
+            }),
+        });
+    }
+    (tx, rx, dropped)
 }
