@@ -81,22 +81,9 @@ pub fn run_launch(a: &LaunchArgs, force_headless: bool, stop: StopFlag) -> anyho
     // --ros2: checked, and the session (with the embedded router when none answers) opened
     // before any process starts, so that each finds the router and offers its own nodes.
     let ros2_domain = ros2.as_ref().map(|o| o.domain);
-    let _ros2 = match ros2_domain {
-        Some(domain) => {
-            let link = headless::open_ros2(&stop)?;
-            println!(
-                "[ratelab] launch: offering the graph to ROS 2 on domain {domain}: each process its own nodes, {} /clock, {}",
-                if cfg.graph.first_external().is_some() {
-                    "the external nodes' process"
-                } else {
-                    "the plant's process"
-                },
-                link.router.via()
-            );
-            Some(link)
-        }
-        None => None,
-    };
+    let _ros2 = ros2_domain
+        .map(|domain| offer_ros2(domain, &cfg.graph, &stop))
+        .transpose()?;
     let graph_path = run.graph.graph.clone();
     let opts = LaunchOptions {
         graph_bytes: graph_file_bytes(graph_path.as_deref())?,
@@ -126,21 +113,7 @@ pub fn run_launch(a: &LaunchArgs, force_headless: bool, stop: StopFlag) -> anyho
     let report = if on_terminal || recording.is_some() {
         launch_watched(cfg, opts, &stop, on_terminal, recording.as_ref())?
     } else {
-        // Recorded for `lab --attach` and `top` once it listens, removed when it ends.
-        let (listening_tx, listening_rx) = crossbeam_channel::bounded::<String>(1);
-        let mut opts = opts;
-        opts.listening = Some(listening_tx);
-        let observer = opts.credentials.only(&Role::Observer)?;
-        let recorder = std::thread::spawn(move || {
-            let ep = listening_rx.recv().ok()?;
-            crate::rendezvous::record(&ep, &observer, &mut |w| eprintln!("[ratelab] launch: {w}"))
-        });
-        let report = launch(&cfg, &opts, &stop, &|line| {
-            println!("[ratelab] launch: {line}")
-        });
-        drop(opts);
-        let _recorded = recorder.join();
-        report?
+        launch_unwatched(&cfg, opts, &stop)?
     };
     let (wire, lockstep, missing) = (report.wire, report.lockstep, report.missing);
     let report = RunReport {
@@ -175,6 +148,50 @@ pub fn run_launch(a: &LaunchArgs, force_headless: bool, stop: StopFlag) -> anyho
         missing.join(", ")
     );
     headless::end_is_an_error(&report)
+}
+
+/// `--ros2` across processes: the ROS 2 session (with the embedded router when none
+/// answers) opened before any process starts, so that each finds the router and offers its
+/// own nodes; said in one line.
+fn offer_ros2(
+    domain: u32,
+    spec: &ratelab::graph::GraphSpec,
+    stop: &StopFlag,
+) -> anyhow::Result<ratelab::ros2::session::Ros2Session> {
+    let link = headless::open_ros2(stop)?;
+    println!(
+        "[ratelab] launch: offering the graph to ROS 2 on domain {domain}: each process its own nodes, {} /clock, {}",
+        if spec.first_external().is_some() {
+            "the external nodes' process"
+        } else {
+            "the plant's process"
+        },
+        link.router.via()
+    );
+    Ok(link)
+}
+
+/// A launch nobody watches (no terminal, no recording): its lines printed as they come,
+/// its endpoint recorded for `lab --attach` and `top` once it listens (removed when it
+/// ends).
+fn launch_unwatched(
+    cfg: &ratelab::RunConfig,
+    mut opts: LaunchOptions,
+    stop: &StopFlag,
+) -> anyhow::Result<LaunchReport> {
+    let (listening_tx, listening_rx) = crossbeam_channel::bounded::<String>(1);
+    opts.listening = Some(listening_tx);
+    let observer = opts.credentials.only(&Role::Observer)?;
+    let recorder = std::thread::spawn(move || {
+        let ep = listening_rx.recv().ok()?;
+        crate::rendezvous::record(&ep, &observer, &mut |w| eprintln!("[ratelab] launch: {w}"))
+    });
+    let report = launch(cfg, &opts, stop, &|line| {
+        println!("[ratelab] launch: {line}")
+    });
+    drop(opts);
+    let _recorded = recorder.join();
+    Ok(report?)
 }
 
 /// The placement as one line: `robot [sensor, actuator], policy [policy]`.
@@ -241,18 +258,7 @@ fn launch_watched(
     let observer = opts.credentials.only(&Role::Observer)?;
     // Set when the launcher returns (or the user stops it): the watcher stops waiting.
     let launcher_done = StopFlag::new();
-    let launcher = {
-        let (stop, cfg, done) = (stop.clone(), cfg.clone(), launcher_done.clone());
-        std::thread::Builder::new()
-            .name("launcher".into())
-            .spawn(move || {
-                let r = launch(&cfg, &opts, &stop, &|line| {
-                    let _ = line_tx.send(line.to_string());
-                });
-                done.stop();
-                r
-            })?
-    };
+    let launcher = spawn_launcher(&cfg, opts, stop, &launcher_done, line_tx)?;
     let joined = |launcher: std::thread::JoinHandle<Result<LaunchReport, _>>| match launcher.join()
     {
         Ok(r) => Ok(r?),
@@ -288,7 +294,7 @@ fn launch_watched(
     if lab {
         eprintln!("[ratelab] launch: listening on {endpoint}");
     }
-    let watch = match Watch::connect(
+    let mut watch = match Watch::connect(
         std::slice::from_ref(&endpoint),
         &observer,
         ratelab::distributed::REPLY_TIMEOUT,
@@ -302,7 +308,6 @@ fn launch_watched(
             return Err(e.into());
         }
     };
-    let mut watch = watch;
     watch.recording = recording.map(|r| r.path().to_path_buf());
     let policy = watch.setup.policy.clone();
     let (lab_tx, lab_rx) = crossbeam_channel::unbounded::<Telemetry>();
@@ -365,6 +370,27 @@ fn launch_watched(
         Err(_) => anyhow::bail!("the watcher stopped unexpectedly"),
     }
     Ok(report)
+}
+
+/// Run the launcher on a thread, its lines sent to `lines`; `done` is set when it returns.
+fn spawn_launcher(
+    cfg: &ratelab::RunConfig,
+    opts: LaunchOptions,
+    stop: &StopFlag,
+    done: &StopFlag,
+    lines: crossbeam_channel::Sender<String>,
+) -> anyhow::Result<std::thread::JoinHandle<Result<LaunchReport, ratelab::distributed::DistError>>>
+{
+    let (stop, cfg, done) = (stop.clone(), cfg.clone(), done.clone());
+    Ok(std::thread::Builder::new()
+        .name("launcher".into())
+        .spawn(move || {
+            let r = launch(&cfg, &opts, &stop, &|line| {
+                let _ = lines.send(line.to_string());
+            });
+            done.stop();
+            r
+        })?)
 }
 
 /// Record what a watcher of the launch follows (`rx`) into `rec`, on a thread.
@@ -760,26 +786,9 @@ fn table(
         "{:<10} {:>7} {:<10} {:<9} {:>8} {:>8} {:>10} {:<6}",
         "PROCESS", "PID", "NODE", "KIND", "RATE_HZ", "TICKS", "MEAS_HZ", "ALIVE"
     );
-    for (_, placed) in &unheard {
-        let p = &placed.name;
-        for (name, kind, hz) in &placed.nodes {
-            let is_alive = alive.iter().any(|(ap, an)| ap == p && an == name);
-            let _ = writeln!(
-                s,
-                "{:<10} {:>7} {:<10} {:<9} {:>8.1} {:>8} {:>10} {:<6}",
-                p,
-                "-",
-                name,
-                kind,
-                hz,
-                "-",
-                "-",
-                if is_alive { "yes" } else { "GONE" }
-            );
-        }
-    }
+    unheard_node_rows(&mut s, &unheard, alive);
     let mut wire: BTreeMap<String, (f64, f64)> = BTreeMap::new();
-    let mut topics = Vec::new();
+    let mut topics: Vec<TopicRow> = Vec::new();
     for (m, prev) in seen.values() {
         let p = &m.process;
         let known = graphs.get(&m.graph).unwrap_or(&unknown);
@@ -850,9 +859,62 @@ fn table(
         "\n{:<10} {:>8} {:>10} {:>8} {:>6} {:>9} {:>9}",
         "TOPIC", "MSG/S", "PUBLISHED", "DROPPED", "LOST", "WIRE_P50", "WIRE_P99"
     );
-    // A topic held by a process with no figures here still has its row: its counters live
-    // there, so none can be shown, and the row says why.
-    for (_, placed) in &unheard {
+    unheard_topic_rows(&mut topics, &unheard, alive);
+    topics.sort_by(|a, b| a.0.cmp(&b.0));
+    for (name, rate, [published, dropped, lost], why) in topics {
+        let (p50, p99) = match wire.get(&name) {
+            // No figures from its counting process: nothing to show of its wire either.
+            _ if published == "-" => ("-".to_string(), "-".to_string()),
+            Some((a, b)) => (format!("{a:.0} µs"), format!("{b:.0} µs")),
+            None => ("in-proc".to_string(), "-".to_string()),
+        };
+        let line = format!(
+            "{name:<10} {rate:>8} {published:>10} {dropped:>8} {lost:>6} {p50:>9} {p99:>9}  {why}"
+        );
+        let _ = writeln!(s, "{}", line.trim_end());
+    }
+    s
+}
+
+/// A row of `top`'s topic table: name, msg/s, (published, dropped, lost), and who counted.
+type TopicRow = (String, String, [String; 3], String);
+
+/// `top`'s node rows of the placed processes it has no figures from: alive or gone, no
+/// counts.
+fn unheard_node_rows(
+    s: &mut String,
+    unheard: &[(&String, &PlacedProcess)],
+    alive: &[(String, String)],
+) {
+    use std::fmt::Write;
+    for (_, placed) in unheard {
+        let p = &placed.name;
+        for (name, kind, hz) in &placed.nodes {
+            let is_alive = alive.iter().any(|(ap, an)| ap == p && an == name);
+            let _ = writeln!(
+                s,
+                "{:<10} {:>7} {:<10} {:<9} {:>8.1} {:>8} {:>10} {:<6}",
+                p,
+                "-",
+                name,
+                kind,
+                hz,
+                "-",
+                "-",
+                if is_alive { "yes" } else { "GONE" }
+            );
+        }
+    }
+}
+
+/// A topic held by a process with no figures here still has its row: its counters live
+/// there, so none can be shown, and the row says why.
+fn unheard_topic_rows(
+    topics: &mut Vec<TopicRow>,
+    unheard: &[(&String, &PlacedProcess)],
+    alive: &[(String, String)],
+) {
+    for (_, placed) in unheard {
         let gone = !alive.iter().any(|(ap, _)| *ap == placed.name);
         for name in &placed.holds {
             if topics.iter().any(|t| t.0 == *name) {
@@ -871,20 +933,6 @@ fn table(
             ));
         }
     }
-    topics.sort_by(|a, b| a.0.cmp(&b.0));
-    for (name, rate, [published, dropped, lost], why) in topics {
-        let (p50, p99) = match wire.get(&name) {
-            // No figures from its counting process: nothing to show of its wire either.
-            _ if published == "-" => ("-".to_string(), "-".to_string()),
-            Some((a, b)) => (format!("{a:.0} µs"), format!("{b:.0} µs")),
-            None => ("in-proc".to_string(), "-".to_string()),
-        };
-        let line = format!(
-            "{name:<10} {rate:>8} {published:>10} {dropped:>8} {lost:>6} {p50:>9} {p99:>9}  {why}"
-        );
-        let _ = writeln!(s, "{}", line.trim_end());
-    }
-    s
 }
 
 #[cfg(test)]

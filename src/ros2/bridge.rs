@@ -698,64 +698,6 @@ fn forward(
     }
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn the_attachment_is_33_bytes_as_rmw_zenoh_lays_it_out() {
-        let a = attachment(7, -2, &[9; 16]);
-        assert_eq!(a.len(), 33);
-        assert_eq!(a[..8], 7i64.to_le_bytes());
-        assert_eq!(a[8..16], (-2i64).to_le_bytes());
-        assert_eq!(a[16], 16);
-        assert_eq!(a[17..], [9; 16]);
-    }
-
-    #[test]
-    fn the_chapters_graph_can_be_offered_and_clock_is_refused() {
-        let spec = GraphSpec::chapter();
-        assert_eq!(check_graph(&spec), Ok(()));
-        let mut s = spec.clone();
-        s.topics[0].name = "/clock".into();
-        assert!(check_graph(&s)
-            .unwrap_err()
-            .contains("second /clock publisher"));
-        let mut s = spec.clone();
-        s.topics[0].name = "/2obs".into();
-        assert!(check_graph(&s)
-            .unwrap_err()
-            .contains("must not start with a digit"));
-        let mut s = spec;
-        s.nodes[0].name = "ratelab".into();
-        assert!(check_graph(&s)
-            .unwrap_err()
-            .contains("ratelab's /clock publisher"));
-    }
-
-    #[test]
-    fn the_qos_token_says_what_ratelab_runs() {
-        let mut spec = GraphSpec::chapter();
-        spec.set_qos("/action", "deadline_ms=40").unwrap();
-        let q = qos_of(&spec, spec.topic_id("/action").unwrap().0);
-        assert_eq!(q.history, QosHistory::KeepLast(spec.queue_depth().unwrap()));
-        assert_eq!(
-            q.deadline,
-            QosDuration {
-                sec: 0,
-                nsec: 40_000_000
-            }
-        );
-        assert_eq!(q.lifespan, QosDuration::INFINITE);
-        assert_eq!(q.reliability, QosReliability::BestEffort);
-    }
-
-    #[test]
-    fn gids_differ_per_endpoint() {
-        assert_ne!(gid("@ros2_lv/0/a/1/2/MP"), gid("@ros2_lv/0/a/1/3/MP"));
-    }
-}
-
 /// Refuse to offer a `/clock` where another node on `domain` already publishes one (ROS 2
 /// nodes would get two times), and, under the virtual clock (`waits`), more than one
 /// external node (they would share each `/clock` tick).
@@ -907,4 +849,62 @@ fn connect_graph(
         });
     }
     (tx, rx, dropped)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_attachment_is_33_bytes_as_rmw_zenoh_lays_it_out() {
+        let a = attachment(7, -2, &[9; 16]);
+        assert_eq!(a.len(), 33);
+        assert_eq!(a[..8], 7i64.to_le_bytes());
+        assert_eq!(a[8..16], (-2i64).to_le_bytes());
+        assert_eq!(a[16], 16);
+        assert_eq!(a[17..], [9; 16]);
+    }
+
+    #[test]
+    fn the_chapters_graph_can_be_offered_and_clock_is_refused() {
+        let spec = GraphSpec::chapter();
+        assert_eq!(check_graph(&spec), Ok(()));
+        let mut s = spec.clone();
+        s.topics[0].name = "/clock".into();
+        assert!(check_graph(&s)
+            .unwrap_err()
+            .contains("second /clock publisher"));
+        let mut s = spec.clone();
+        s.topics[0].name = "/2obs".into();
+        assert!(check_graph(&s)
+            .unwrap_err()
+            .contains("must not start with a digit"));
+        let mut s = spec;
+        s.nodes[0].name = "ratelab".into();
+        assert!(check_graph(&s)
+            .unwrap_err()
+            .contains("ratelab's /clock publisher"));
+    }
+
+    #[test]
+    fn the_qos_token_says_what_ratelab_runs() {
+        let mut spec = GraphSpec::chapter();
+        spec.set_qos("/action", "deadline_ms=40").unwrap();
+        let q = qos_of(&spec, spec.topic_id("/action").unwrap().0);
+        assert_eq!(q.history, QosHistory::KeepLast(spec.queue_depth().unwrap()));
+        assert_eq!(
+            q.deadline,
+            QosDuration {
+                sec: 0,
+                nsec: 40_000_000
+            }
+        );
+        assert_eq!(q.lifespan, QosDuration::INFINITE);
+        assert_eq!(q.reliability, QosReliability::BestEffort);
+    }
+
+    #[test]
+    fn gids_differ_per_endpoint() {
+        assert_ne!(gid("@ros2_lv/0/a/1/2/MP"), gid("@ros2_lv/0/a/1/3/MP"));
+    }
 }
