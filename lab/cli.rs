@@ -41,10 +41,12 @@ pub enum Command {
     Sweep(SweepArgs),
     /// Find, per seed, the highest control rate at which the pole falls.
     Cliff(CliffArgs),
-    /// Run a graph with each placement group in its own OS process, over Zenoh.
+    /// Run a graph with each of its processes (the nodes' `process = "…"`) in its own OS process, over Zenoh.
     Launch(LaunchArgs),
-    /// Run one placement group of a graph, joining a launcher (`launch` starts these).
-    Node(NodeArgs),
+    /// Run one process of a graph, joining a launcher (`launch` starts these; `node` is its
+    /// old name).
+    #[command(alias = "node")]
+    Process(ProcessArgs),
     /// A table of a running multi-process graph: nodes, rates, topics, wire latency.
     Top(TopArgs),
     /// Write a checkpoint's tensors (.pt/.pth/.safetensors) as NumPy's .npz, for a Python
@@ -79,7 +81,7 @@ pub struct LaunchArgs {
     /// The graph file (default: the chapter's, graphs/cartpole.toml).
     #[arg(value_name = "GRAPH")]
     pub file: Option<PathBuf>,
-    /// One OS process per placement group (the nodes' `process = "…"`; by default the
+    /// One OS process per process of the graph (the nodes' `process = "…"`; by default the
     /// plant's nodes share `robot` and every other node runs alone), connected over Zenoh.
     /// Without it the graph runs in this one process, as `ratelab run`.
     #[arg(long)]
@@ -88,12 +90,12 @@ pub struct LaunchArgs {
     /// is taken).
     #[arg(long, value_name = "tls/HOST:PORT")]
     pub listen: Option<String>,
-    /// Start no processes: wait for each group to join with `ratelab node … --connect …
+    /// Start no processes: wait for each group to join with `ratelab process … --connect …
     /// --credentials FILE` (needs --export-credentials).
     #[arg(long)]
     pub no_spawn: bool,
     /// Write the launch's credentials (its CA's certificate and every process's identity;
-    /// a secret, mode 600) to FILE, for processes started by hand (`ratelab node
+    /// a secret, mode 600) to FILE, for processes started by hand (`ratelab process
     /// --credentials FILE`, also `top` and `lab --attach` on another host). An existing
     /// FILE only with --force.
     #[arg(long, value_name = "FILE")]
@@ -124,13 +126,13 @@ pub struct LabArgs {
     pub run: RunArgs,
 }
 
-/// `ratelab node`.
+/// `ratelab process`.
 #[derive(Debug, Clone, Args)]
-pub struct NodeArgs {
+pub struct ProcessArgs {
     /// The graph file (default: the chapter's); it must be the launcher's, byte for byte.
     #[arg(long, value_name = "FILE")]
     pub graph: Option<PathBuf>,
-    /// The placement group to run.
+    /// The process to run (its name in the graph file).
     #[arg(long, value_name = "NAME")]
     pub process: String,
     /// The launcher's endpoint (repeatable).

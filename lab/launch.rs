@@ -1,14 +1,14 @@
-//! `ratelab launch`, `ratelab node` and `ratelab top`: the graph across processes
+//! `ratelab launch`, `ratelab process` and `ratelab top`: the graph across processes
 //! ([`ratelab::distributed`]), from the command line.
 
-use crate::cli::{LaunchArgs, NodeArgs, TopArgs};
+use crate::cli::{LaunchArgs, ProcessArgs, TopArgs};
 use crate::headless;
 use ratelab::distributed::credentials::{Credentials, Role};
 use ratelab::distributed::launcher::{launch, LaunchOptions, LaunchReport};
-use ratelab::distributed::member::{run_member, LiveStats, MemberOptions};
 use ratelab::distributed::monitor::{
     ask_graph, placed_processes, Carried, PlacedProcess, Signals, Watch,
 };
+use ratelab::distributed::process::{LiveStats, ProcessOptions};
 use ratelab::distributed::zenoh::{self, Wait};
 use ratelab::distributed::{check_endpoint, live_tokens, open_session, Access};
 use ratelab::graph::spec::graph_file_bytes;
@@ -511,8 +511,8 @@ pub fn run_attach(
     lab
 }
 
-/// `ratelab node --process NAME --connect EP`.
-pub fn run_node(a: &NodeArgs, stop: StopFlag) -> anyhow::Result<()> {
+/// `ratelab process --process NAME --connect EP`.
+pub fn run_process(a: &ProcessArgs, stop: StopFlag) -> anyhow::Result<()> {
     for ep in &a.connect {
         check_endpoint("--connect", ep, false)?;
     }
@@ -526,7 +526,7 @@ pub fn run_node(a: &NodeArgs, stop: StopFlag) -> anyhow::Result<()> {
         || "graphs/cartpole.toml".to_string(),
         |p| p.display().to_string(),
     );
-    let opts = MemberOptions {
+    let opts = ProcessOptions {
         graph_bytes: graph_file_bytes(a.graph.as_deref())?,
         graph_origin: origin,
         process: a.process.clone(),
@@ -537,10 +537,11 @@ pub fn run_node(a: &NodeArgs, stop: StopFlag) -> anyhow::Result<()> {
         // children have no stdout (their launcher says it).
         say: Some(|line| {
             // Never fatal: a node whose stdout was closed runs on, unheard.
-            let _ = writeln!(std::io::stdout(), "[ratelab] node: {line}");
+            let _ = writeln!(std::io::stdout(), "[ratelab] {line}");
         }),
     };
-    run_member(&opts, &stop).map_err(|e| anyhow::anyhow!("node '{}': {e}", a.process))
+    ratelab::distributed::process::run_process(&opts, &stop)
+        .map_err(|e| anyhow::anyhow!("process '{}': {e}", a.process))
 }
 
 /// `ratelab top`: refresh a table of every graph reachable from `--connect`.

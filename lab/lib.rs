@@ -294,7 +294,7 @@ pub fn main_with(register: impl FnOnce()) -> ExitCode {
         // a second one exits at once.
         // A node process started by a launcher gets a second signal when the launcher
         // exits (PR_SET_PDEATHSIG): it goes quietly.
-        let say = !matches!(cli.command, Some(Command::Node(_)));
+        let say = !matches!(cli.command, Some(Command::Process(_)));
         let _ = ctrlc::set_handler(move || {
             if interrupted.is_stopped() {
                 if say {
@@ -326,7 +326,7 @@ pub fn main_with(register: impl FnOnce()) -> ExitCode {
         Some(Command::Sweep(args)) => sweep::run_sweep(args, &stop),
         Some(Command::Cliff(args)) => sweep::run_cliff(args, &stop),
         Some(Command::Launch(args)) => launch::run_launch(args, cli.headless, stop),
-        Some(Command::Node(args)) => launch::run_node(args, stop),
+        Some(Command::Process(args)) => launch::run_process(args, stop),
         Some(Command::Top(args)) => launch::run_top(args, stop),
         Some(Command::Export(args)) => export(args),
         Some(Command::Kinds) => {

@@ -76,7 +76,7 @@ pub fn acl(keys: &Keys, processes: &[String], spec: Option<&GraphSpec>) -> Value
     };
     let mut read_keys = vec![format!("{p}/**")];
     read_keys.extend(AT_KEYS.iter().map(|k| at(k)));
-    // `ratelab top` and the members look for any graph's launcher, settings, figures,
+    // `ratelab top` and the processes look for any graph's launcher, settings, figures,
     // nodes and end (what they find is this launch's: no other peer can connect).
     for k in ["@launcher", "@setup", "@stats/*", "@ended", "@node/*/*"] {
         read_keys.push(format!("ratelab/*/{k}"));

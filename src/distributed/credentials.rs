@@ -1,6 +1,6 @@
 //! Who may join a graph across processes: per-launch credentials for mutual TLS.
 //!
-//! Every session of a graph across processes (the launcher, each `ratelab node`, and the
+//! Every session of a graph across processes (the launcher, each `ratelab process`, and the
 //! watchers `ratelab top` and `lab --attach`) speaks Zenoh over TLS 1.3 with mutual
 //! authentication: both ends of every link show a certificate signed by one certificate
 //! authority (CA) that exists for one launch only, so a peer without the launch's
@@ -14,7 +14,7 @@
 //! can issue another identity. The launcher hands each process it starts a file holding
 //! the CA's certificate and that process's identity alone, in a private folder (mode
 //! `0700`, files `0600`) removed when the launch ends; `launch --export-credentials FILE`
-//! writes every identity to a file for processes started by hand (`ratelab node
+//! writes every identity to a file for processes started by hand (`ratelab process
 //! --credentials FILE`). A later launch makes a new CA: old files admit to nothing.
 //!
 //! A credentials file is read as untrusted input: at most [`MAX_CREDENTIALS_BYTES`], TOML
@@ -54,7 +54,7 @@ fn unix_now_s() -> u64 {
 pub enum Role {
     /// The launcher: the run's authority (the control keys, the run's settings, its end).
     Launcher,
-    /// A placement group's process (`ratelab node --process NAME`): it publishes its own
+    /// A process of the graph (`ratelab process --process NAME`): it publishes its own
     /// nodes' topics, reports and tokens.
     Process(String),
     /// A watcher (`ratelab top`, `lab --attach`, the lab beside its launch): it reads, and
@@ -105,7 +105,7 @@ impl std::fmt::Debug for Identity {
 pub struct Credentials {
     /// The graph they admit to (its name).
     pub graph: String,
-    /// The graph's processes (placement groups), in placement order.
+    /// The graph's processes, in placement order.
     pub processes: Vec<String>,
     /// When the certificates stop being valid, seconds since the Unix epoch ([`VALIDITY`]
     /// after they were made; TLS refuses them after it, whatever the file says).

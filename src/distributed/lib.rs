@@ -1,9 +1,9 @@
-//! One graph, many processes: placement groups connected over Zenoh.
+//! One graph, many processes, connected over Zenoh.
 //!
 //! The graph file places each node in a process (`process = "robot"`; by default the plant's
 //! nodes share `robot`, every other node runs alone: [`GraphSpec::process_of`]). Under
 //! `ratelab launch --processes` the launcher ([`launcher`]) starts one OS process per
-//! placement group (`ratelab node`, [`member`]) and they talk over Zenoh, peer to peer
+//! process (`ratelab process`, [`process`]) and they talk over Zenoh, peer to peer
 //! (multicast scouting off; the launcher listens on `tls/127.0.0.1:PORT`, the others connect
 //! to it and find each other by gossip, as rmw_zenoh's defaults do).
 //!
@@ -47,8 +47,8 @@ pub mod access;
 pub mod credentials;
 pub mod launcher;
 pub mod lockstep;
-pub mod member;
 pub mod monitor;
+pub mod process;
 pub mod refusals;
 pub mod ros2_offer;
 pub mod wire;
@@ -128,7 +128,7 @@ pub fn set_zenoh_runtime() -> Result<(), DistError> {
     }
 }
 
-/// Most placement groups one graph may have (each is an OS process).
+/// Most processes one graph may have (each is an OS process).
 pub const MAX_PROCESSES: usize = 16;
 
 /// Something that stops a multi-process run, as one line.

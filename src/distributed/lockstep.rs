@@ -16,10 +16,10 @@
 //! A process sends the reports of its consecutive events together, in one message, when it
 //! must next wait ([`wire::encode_reports`]), straight to the other processes (peer to
 //! peer), and runs its events on the thread that receives what they wait for (Zenoh's
-//! receive callback; the member's `stepper`): between two events of different processes
+//! receive callback; the process's `stepper`): between two events of different processes
 //! there is one report message and no hand-off between threads. The launcher stays the
 //! time authority without being on that path: it lets the processes run up to a horizon
-//! ([`wire::ToMember::Horizon`]), [`HORIZON_PERIODS`] periods of the fastest node ahead of the
+//! ([`wire::ToProcess::Horizon`]), [`HORIZON_PERIODS`] periods of the fastest node ahead of the
 //! events it has seen reported, and ends the run early by not moving it on (a Ctrl-C). It
 //! also follows the reports, to know the end (a stop, a failure, a process gone) and the
 //! last seq of every topic before the processes report.
@@ -219,7 +219,7 @@ pub fn meet_peers(
                 .map(String::as_str)
                 .collect();
             eprintln!(
-                "ratelab: still waiting to reach process(es) {} directly (every process of a virtual-clock run links to every other; on other hosts give each `ratelab node` --listen tls/<its address>:PORT)",
+                "ratelab: still waiting to reach process(es) {} directly (every process of a virtual-clock run links to every other; on other hosts give each `ratelab process` --listen tls/<its address>:PORT)",
                 missing.join(", ")
             );
         }

@@ -7,7 +7,7 @@
 //!
 //! - the run's settings ([`Setup`]) come from the launcher, as the answer to a query on
 //!   `ratelab/<graph>/@setup` ([`Watch::connect`]);
-//! - every process publishes its [`LiveStats`] every [`super::member::STATS_PERIOD`]: the actuator's process
+//! - every process publishes its [`LiveStats`] every [`super::process::STATS_PERIOD`]: the actuator's process
 //!   carries its steps (the plant, the sense→act latency), each process its nodes' ticks
 //!   (real clock: measured rates and lateness) and the counters of the topics it holds;
 //! - a topic's counters live in its subscriber's process (its copy keeps the chapter's buffer
@@ -23,7 +23,7 @@
 //! [`record`] writes the same telemetry to a rerun recording (`launch --processes --record`).
 
 use super::credentials::{Credentials, Role};
-use super::member::LiveStats;
+use super::process::LiveStats;
 use super::wire::{self, RunOver, Setup};
 use super::{check_endpoint, open_session, Access, DistError, Keys};
 use crate::config::RunConfig;

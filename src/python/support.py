@@ -196,7 +196,7 @@ def brain_caller(module, function, script):
     return call
 
 
-# ---- Python nodes (src/python/node.rs): an rclpy-shaped handle over one ratelab node -----
+# ---- Python nodes (src/python/node.rs): an rclpy-shaped handle over one ratelab process -----
 
 class _Msg:
     """A message with named fields in SI units; positional or keyword construction."""

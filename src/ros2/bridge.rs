@@ -1,7 +1,7 @@
 //! A running graph offered as a ROS 2 graph (rmw_zenoh's format, ros2/rmw_zenoh
 //! `docs/design.md`):
 //!
-//! - each ratelab node is a ROS 2 node in the root namespace: a liveliness token
+//! - each ratelab process is a ROS 2 node in the root namespace: a liveliness token
 //!   `@ros2_lv/<domain>/<zid>/<nid>/<nid>/NN/%/%/<name>`; one more node, `ratelab`,
 //!   publishes `/clock`;
 //! - each topic's publisher and subscriber hold MP/MS tokens naming the topic, its type, its
@@ -722,7 +722,7 @@ fn refuse_clock_clash(
     if waits && ports.len() > 1 {
         // They would share each /clock tick: the second would answer at the first's.
         return Err(Ros2Error::Usage(format!(
-            "graph '{}' has {} external nodes: under the virtual clock the lockstep takes one (they would share each /clock tick); use the real clock, or make one of them a ratelab node",
+            "graph '{}' has {} external nodes: under the virtual clock the lockstep takes one (they would share each /clock tick); use the real clock, or make one of them a ratelab process",
             spec.name,
             ports.len()
         )));

@@ -1,4 +1,4 @@
-//! One graph, many processes (`ratelab launch --processes`, `ratelab node`, `ratelab top`):
+//! One graph, many processes (`ratelab launch --processes`, `ratelab process`, `ratelab top`):
 //! the real binary, several OS processes on localhost over Zenoh.
 
 use crate::REPO;
@@ -22,7 +22,7 @@ fn text(b: &[u8]) -> String {
     String::from_utf8_lossy(b).into_owned()
 }
 
-/// Every `ratelab node` process whose command line mentions `needle` (the launcher's
+/// Every `ratelab process` process whose command line mentions `needle` (the launcher's
 /// endpoint).
 pub(crate) fn processes_mentioning(needle: &str) -> Vec<u32> {
     let mut out = Vec::new();
@@ -35,7 +35,8 @@ pub(crate) fn processes_mentioning(needle: &str) -> Vec<u32> {
         }
         if let Ok(cmd) = std::fs::read(e.path().join("cmdline")) {
             let cmd = text(&cmd).replace('\0', " ");
-            if cmd.contains(needle) && cmd.contains(" node ") {
+            // `process` (or its old name, `node`: both run one).
+            if cmd.contains(needle) && (cmd.contains(" process ") || cmd.contains(" node ")) {
                 out.push(pid);
             }
         }
@@ -43,7 +44,7 @@ pub(crate) fn processes_mentioning(needle: &str) -> Vec<u32> {
     out
 }
 
-/// The `ratelab node` processes of placement group `process` connected to the launcher on
+/// The `ratelab process` processes named `process` connected to the launcher on
 /// `port`.
 pub(crate) fn node_processes(port: u16, process: &str) -> Vec<u32> {
     processes_mentioning(&format!(":{port}"))
@@ -60,7 +61,7 @@ pub(crate) fn node_processes(port: u16, process: &str) -> Vec<u32> {
         .collect()
 }
 
-/// After `after`, no `ratelab node` process connected to the launcher on `port` is left.
+/// After `after`, no `ratelab process` process connected to the launcher on `port` is left.
 pub(crate) fn assert_none_left(port: u16, after: Duration) {
     std::thread::sleep(after);
     let left = processes_mentioning(&format!(":{port}"));
@@ -121,7 +122,7 @@ fn virtual_lockstep_is_byte_identical_to_the_in_process_run() {
 }
 
 /// For seeds 0–2 at control 50 and 5 Hz, virtual clock: `launch LAUNCH_GRAPH --processes`
-/// (the chapter's two placement groups, lockstep) writes byte for byte the metrics.json of
+/// (the chapter's two processes, lockstep) writes byte for byte the metrics.json of
 /// `run RUN_GRAPH`. The graph arguments are a `--graph FILE` pair or a launch's positional
 /// file (none for `run`: the chapter's built-in graph).
 pub(crate) fn assert_lockstep_equals_in_process(run_graph: &[&str], launch_graph: &[&str]) {
@@ -386,7 +387,7 @@ fn lockstep_launch(
     ready_launch("virtual", "3600", port, out)
 }
 
-/// SIGKILL the one node process of placement group `process` on the launcher at `port`.
+/// SIGKILL the one OS process of process `process` on the launcher at `port`.
 fn kill_node_process(port: u16, process: &str) -> u32 {
     let pids = node_processes(port, process);
     assert_eq!(pids.len(), 1, "one '{process}' process: {pids:?}");
@@ -395,14 +396,14 @@ fn kill_node_process(port: u16, process: &str) -> u32 {
     pids[0]
 }
 
-/// The chapter's two placement groups started by hand (`ratelab node`) against the
+/// The chapter's two processes started by hand (`ratelab process`) against the
 /// launcher at `ep` with the launch's credentials `creds`, their stderr to `stderr()`.
 fn hand_started(ep: &str, creds: &Path, stderr: fn() -> Stdio) -> Vec<Child> {
     ["robot", "policy"]
         .iter()
         .map(|p| {
             bin()
-                .args(["node", "--process", p, "--connect", ep])
+                .args(["process", "--process", p, "--connect", ep])
                 .arg("--credentials")
                 .arg(creds)
                 .stdout(Stdio::null())
@@ -540,7 +541,7 @@ fn a_killed_node_is_noticed_and_a_restarted_one_rejoins() {
     // may, before the launcher sees the old token go): told to wait, it asks again; the
     // launcher says so once, as what it is (not as a refusal).
     let mut again = bin()
-        .args(["node", "--process", "policy", "--connect", &ep])
+        .args(["process", "--process", "policy", "--connect", &ep])
         .arg("--credentials")
         .arg(dir.path().join("creds.toml"))
         .stdout(Stdio::piped())
@@ -644,11 +645,11 @@ fn a_killed_node_is_noticed_and_a_restarted_one_rejoins() {
     assert!(
         said.len() == 4
             && said[0].starts_with(
-                "[ratelab] node: process 'policy' joined graph 'cartpole' at tls/127.0.0.1:"
+                "[ratelab] process 'policy' joined graph 'cartpole' at tls/127.0.0.1:"
             )
-            && said[1].starts_with("[ratelab] node: process 'policy' ready (real clock)")
-            && said[2].starts_with("[ratelab] node: process 'policy' rejoined the run at t=")
-            && said[3].starts_with("[ratelab] node: process 'policy' ended: its report went"),
+            && said[1].starts_with("[ratelab] process 'policy' ready (real clock)")
+            && said[2].starts_with("[ratelab] process 'policy' rejoined the run at t=")
+            && said[3].starts_with("[ratelab] process 'policy' ended: its report went"),
         "{said:?}"
     );
     // The launcher's log reads in order: a rejoined process is not then said to be silent
@@ -710,7 +711,7 @@ fn a_second_copy_of_a_running_process_gives_up_and_the_run_goes_on() {
     let port = free_port();
     let (mut launcher, rx, mut lines) = ready_launch("real", "12", port, dir.path());
     let second = bin()
-        .args(["node", "--process", "policy", "--connect"])
+        .args(["process", "--process", "policy", "--connect"])
         .arg(format!("tls/127.0.0.1:{port}"))
         .arg("--credentials")
         .arg(dir.path().join("creds.toml"))
@@ -1101,7 +1102,7 @@ fn bad_endpoints_busy_ports_and_unknown_processes_exit_2() {
         "tls/127.0.0.1:99999",
         "tls/no.such.host.invalid:7447",
     ] {
-        let o = ratelab(&["node", "--process", "policy", "--connect", bad]);
+        let o = ratelab(&["process", "--process", "policy", "--connect", bad]);
         assert_one_line_exit_2(&o, "--connect");
         let o = ratelab(&["lab", "--attach", "--connect", bad]);
         assert_one_line_exit_2(&o, "--connect");

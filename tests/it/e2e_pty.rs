@@ -622,7 +622,7 @@ fn the_attached_lab_marks_a_killed_node_not_alive_and_sees_it_rejoin() {
     // Its ticks stopped: its measured rate falls to 0 once a second has passed.
     lab.wait_for("0.0 Hz meas", Duration::from_secs(5));
     let mut again = crate::distributed::bin()
-        .args(["node", "--process", "policy", "--connect", &ep])
+        .args(["process", "--process", "policy", "--connect", &ep])
         .arg("--credentials")
         .arg(&creds)
         .stdout(std::process::Stdio::null())

@@ -4,7 +4,7 @@
 
 use crate::distributed::{bin, free_port};
 use ratelab::distributed::credentials::{Credentials, Role};
-use ratelab::distributed::wire::{encode_json, ToMember, WireSample};
+use ratelab::distributed::wire::{encode_json, ToProcess, WireSample};
 use ratelab::distributed::zenoh::{self, Wait};
 use ratelab::distributed::{open_session, Access, Keys};
 use ratelab::graph::spec::{GraphSpec, DEFAULT_GRAPH_TOML};
@@ -153,7 +153,7 @@ fn an_identity_publishes_only_what_the_graph_gives_it() {
         data: MsgData::new(ForceMsg { newtons: 10.0 }).to_bytes(),
     }
     .encode();
-    let start = encode_json(&ToMember::Start { start_mono_ns: 0 });
+    let start = encode_json(&ToProcess::Start { start_mono_ns: 0 });
     // Publishes `n` forces on /action and `n` starts on robot's control key as `role`, and
     // declares a token for the policy's node; returns how many of each arrived.
     let attempt = |role: Role| -> (usize, usize, usize) {
@@ -249,7 +249,7 @@ fn forgeries_change_nothing_in_a_launch_and_refused_peers_are_said() {
                     data: MsgData::new(ForceMsg { newtons: 10.0 }).to_bytes(),
                 };
                 let _ = forger.put(keys.topic("/action"), force.encode()).wait();
-                let stop = ToMember::Stop {
+                let stop = ToProcess::Stop {
                     at_ns: 0,
                     need: Vec::new(),
                 };
@@ -279,7 +279,7 @@ fn forgeries_change_nothing_in_a_launch_and_refused_peers_are_said() {
         .iter()
         .map(|p| {
             bin()
-                .args(["node", "--process", p, "--connect", &ep, "--credentials"])
+                .args(["process", "--process", p, "--connect", &ep, "--credentials"])
                 .arg(&creds_file)
                 .stdout(Stdio::null())
                 .stderr(Stdio::null())
@@ -489,12 +489,12 @@ impl TwoHosts {
         (launcher, rx, lines)
     }
 
-    /// `ratelab node --process PROCESS` on host `ns`, listening on `listen`, joining the
+    /// `ratelab process --process PROCESS` on host `ns`, listening on `listen`, joining the
     /// launch with `creds`.
     fn node(&self, ns: &str, process: &str, listen: &str, creds: &Path) -> Child {
         self.ratelab(
             ns,
-            &["node", "--process", process, "--connect", TWO_HOSTS_EP],
+            &["process", "--process", process, "--connect", TWO_HOSTS_EP],
         )
         .args(["--listen", listen, "--credentials"])
         .arg(creds)
@@ -563,7 +563,7 @@ fn a_node_on_another_host_joins_with_the_credentials_and_only_with_them() {
     let o = hosts
         .ratelab(
             &hosts.b,
-            &["node", "--process", "policy", "--connect", TWO_HOSTS_EP],
+            &["process", "--process", "policy", "--connect", TWO_HOSTS_EP],
         )
         .args(["--listen", "tls/10.77.0.2:0", "--credentials"])
         .arg(&other)

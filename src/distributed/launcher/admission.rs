@@ -6,7 +6,7 @@
 use super::processes::{before_the_run, Children};
 use super::Launch;
 use crate::config::ClockKind;
-use crate::wire::{self, ToLauncher, ToMember};
+use crate::wire::{self, ToLauncher, ToProcess};
 use crate::{DistError, REPLY_TIMEOUT};
 use std::time::{Duration, Instant};
 
@@ -53,7 +53,7 @@ impl Launch<'_> {
         let tell_refusal = |reason: String, busy: bool| {
             let _ = self.link.tell(
                 process,
-                &ToMember::Reject {
+                &ToProcess::Reject {
                     reason: reason.clone(),
                     busy,
                 },
@@ -99,7 +99,7 @@ impl Launch<'_> {
         }
         let _ = self.link.tell(
             process,
-            &ToMember::Welcome {
+            &ToProcess::Welcome {
                 setup: Box::new(self.setup.clone()),
                 launcher_mono_ns: wire::mono_now_ns(),
             },

@@ -1,5 +1,5 @@
-//! The launcher (`ratelab launch --processes`): starts one `ratelab node` process per
-//! placement group, admits them (the graph file's hash must match), runs the graph (the
+//! The launcher (`ratelab launch --processes`): starts one `ratelab process` process per
+//! process of the graph, admits them (the graph file's hash must match), runs the graph (the
 //! time authority under the virtual clock; the common start under the real one), stops
 //! every process it started, and merges their reports into one `metrics.json`.
 //!
@@ -16,7 +16,7 @@ mod virtual_run;
 use super::credentials::{Credentials, PrivateDir, Role};
 use super::lockstep::{subscribe_reports, MAX_AHEAD};
 use super::monitor::Carried;
-use super::wire::{self, Setup, ToLauncher, ToMember};
+use super::wire::{self, Setup, ToLauncher, ToProcess};
 use super::{check_endpoint, check_keys, Access, DistError, Keys};
 use crate::config::{ClockKind, RunConfig};
 use crate::graph::spec::GraphSpec;
@@ -46,8 +46,8 @@ pub struct LaunchOptions {
     pub listen: Option<String>,
     /// The brain spec (`--policy`).
     pub policy: String,
-    /// The `ratelab` binary to start the placement groups with (`None`: start none, and
-    /// wait for them to be started by hand with `ratelab node`).
+    /// The `ratelab` binary to start the processes with (`None`: start none, and
+    /// wait for them to be started by hand with `ratelab process`).
     pub exe: Option<PathBuf>,
     /// Where the started processes' stderr goes, a line at a time as `PROCESS: LINE` (each
     /// line also published on the graph's log key, [`Keys::log`]); `None`: to the
@@ -109,7 +109,7 @@ struct Link {
 }
 
 impl Link {
-    fn tell(&self, process: &str, m: &ToMember) -> Result<(), DistError> {
+    fn tell(&self, process: &str, m: &ToProcess) -> Result<(), DistError> {
         self.session
             .put(self.keys.control(process), wire::encode_json(m))
             .congestion_control(zenoh::qos::CongestionControl::Block)
@@ -490,7 +490,7 @@ pub fn launch(
         }
     } else {
         me.say(&format!(
-            "waiting for {} to join: ratelab node{} --process NAME --connect {endpoint} --credentials FILE (launch --export-credentials FILE)",
+            "waiting for {} to join: ratelab process{} --process NAME --connect {endpoint} --credentials FILE (launch --export-credentials FILE)",
             me.names.join(", "),
             opts.graph_path
                 .as_ref()
@@ -691,7 +691,7 @@ impl Launch<'_> {
     }
 
     /// A line about joins, unless it was the last one said: a process told to wait asks
-    /// again every 100 ms (`member::BUSY_RETRY`).
+    /// again every 100 ms (`process::BUSY_RETRY`).
     fn say_once(&self, line: String) {
         if *self.last_join_line.borrow() != line {
             self.say(&line);

@@ -1,4 +1,4 @@
-//! The processes a launch starts: each `ratelab node` with its own credentials, its stderr
+//! The processes a launch starts: each `ratelab process` with its own credentials, its stderr
 //! passed on a line at a time, killed with the launch however it ends, and watched until
 //! the run starts.
 
@@ -30,7 +30,7 @@ impl Launch<'_> {
                 .only(&crate::credentials::Role::Process(p.to_string()))?,
         )?;
         let mut cmd = Command::new(exe);
-        cmd.arg("node").arg("--credentials").arg(&own);
+        cmd.arg("process").arg("--credentials").arg(&own);
         if let Some(g) = &self.opts.graph_path {
             cmd.arg("--graph").arg(g);
         }

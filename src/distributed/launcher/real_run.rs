@@ -9,12 +9,12 @@ use super::admission::Admission;
 use super::processes::Children;
 use super::Launch;
 use crate::graph::spec::{RestartPolicy, MAX_RESTARTS};
-use crate::member::LiveStats;
 use crate::monitor::{Carried, Silence};
+use crate::process::LiveStats;
 use crate::scheduler::{EndReason, RunEnd};
 use crate::summary::GraphState;
 use crate::time::Nanos;
-use crate::wire::{self, ToLauncher, ToMember};
+use crate::wire::{self, ToLauncher, ToProcess};
 use crate::{DistError, REPLY_TIMEOUT};
 use crossbeam_channel::Receiver;
 use std::collections::BTreeMap;
@@ -61,7 +61,7 @@ impl Launch<'_> {
         for p in &self.names {
             self.link.tell(
                 p,
-                &ToMember::Start {
+                &ToProcess::Start {
                     start_mono_ns: run.start_mono,
                 },
             )?;
@@ -270,7 +270,7 @@ impl Supervision {
             for p in &l.names {
                 let _ = l.link.tell(
                     p,
-                    &ToMember::Stop {
+                    &ToProcess::Stop {
                         at_ns: e.at.0,
                         need: Vec::new(),
                     },
@@ -355,7 +355,7 @@ impl Supervision {
                 self.rejoining.retain(|p| *p != process);
                 l.link.tell(
                     &process,
-                    &ToMember::Start {
+                    &ToProcess::Start {
                         start_mono_ns: self.start_mono,
                     },
                 )?;

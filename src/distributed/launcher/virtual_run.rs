@@ -12,7 +12,7 @@ use crate::rate::Rate;
 use crate::scheduler::{EndReason, Event, RunEnd, VirtualScheduler};
 use crate::summary::GraphState;
 use crate::time::Nanos;
-use crate::wire::{self, Ticked, ToLauncher, ToMember};
+use crate::wire::{self, Ticked, ToLauncher, ToProcess};
 use crate::{DistError, REPLY_TIMEOUT};
 use crossbeam_channel::Receiver;
 use std::collections::BTreeMap;
@@ -118,7 +118,7 @@ impl Launch<'_> {
             let low = horizon.is_none_or(|h| h < t.0.saturating_add(lookahead / 2));
             if !stop.is_stopped() && low && horizon.is_none_or(|h| want > h) {
                 for p in names {
-                    link.tell(p, &ToMember::Horizon { until_ns: want })?;
+                    link.tell(p, &ToProcess::Horizon { until_ns: want })?;
                 }
                 horizon = Some(want);
             }
@@ -293,7 +293,7 @@ fn collect_reports(
     for p in names {
         let _ = link.tell(
             p,
-            &ToMember::Stop {
+            &ToProcess::Stop {
                 at_ns: end.at.0,
                 need: need.clone(),
             },

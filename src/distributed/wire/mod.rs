@@ -3,26 +3,26 @@
 //! A topic sample is [`WireSample`]: the publisher's `seq`, publish stamp and origin stamp
 //! (the same three numbers an in-process [`crate::topic::Message`] carries), the send time
 //! on the host's monotonic clock (for the over-the-wire latency) and the payload, encoded
-//! with `postcard` (serde's compact binary format). Control messages ([`ToMember`],
+//! with `postcard` (serde's compact binary format). Control messages ([`ToProcess`],
 //! [`ToLauncher`]) are JSON (`serde_json`): few, and readable when debugging with
 //! `z_sub`. Every decode is bounded ([`MAX_SAMPLE_BYTES`], [`MAX_CONTROL_BYTES`]): the
 //! bytes come from the network.
 
 //!
 //! One module per direction of travel, as dora-rs splits its messages:
-//! `member_to_member` (samples and tick reports), `launcher_to_member`,
-//! `member_to_launcher` and `launcher_to_watcher`; the codec, its bounds and the
+//! `process_to_process` (samples and tick reports), `launcher_to_process`,
+//! `process_to_launcher` and `launcher_to_watcher`; the codec, its bounds and the
 //! printable text they share ([`crate::text::printable`]) are here.
 
-mod launcher_to_member;
+mod launcher_to_process;
 mod launcher_to_watcher;
-mod member_to_launcher;
-mod member_to_member;
+mod process_to_launcher;
+mod process_to_process;
 
-pub use launcher_to_member::{Setup, ToMember};
+pub use launcher_to_process::{Setup, ToProcess};
 pub use launcher_to_watcher::RunOver;
-pub use member_to_launcher::{ToLauncher, WireLink};
-pub use member_to_member::{
+pub use process_to_launcher::{ToLauncher, WireLink};
+pub use process_to_process::{
     decode_reports, encode_reports, Ticked, WireSample, MAX_SAMPLE_BYTES, MAX_SENT_PER_TICK,
     MAX_SEQ, MAX_SEQ_JUMP, MAX_TICKS_PER_MESSAGE, MAX_TICK_BYTES,
 };
@@ -185,7 +185,7 @@ mod tests {
         let e = WireSample::decode(&longer).unwrap_err();
         assert!(e.contains("1 bytes after its end"), "{e}");
         assert!(WireSample::decode(&[0u8; 1024]).is_err());
-        assert!(decode_json::<ToMember>(b"{\"msg\":\"nope\"}").is_err());
+        assert!(decode_json::<ToProcess>(b"{\"msg\":\"nope\"}").is_err());
     }
 
     #[test]

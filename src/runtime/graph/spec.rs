@@ -150,7 +150,7 @@ pub struct NodeSpec {
     /// Its liveliness lease: not heard from (not ticked) for longer than this, it is
     /// reported *not alive* (ROS 2's liveliness lease duration). `None`: not monitored.
     pub liveliness_lease: Option<Nanos>,
-    /// The placement group (OS process) it runs in under `ratelab launch --processes`, as
+    /// The process (an OS process) it runs in under `ratelab launch --processes`, as
     /// the file gave it; `None` takes the default placement ([`GraphSpec::process_of`]).
     pub process: Option<String>,
     /// A Python node's script and class; `None` for every other kind.
@@ -596,7 +596,7 @@ impl GraphSpec {
         toml::to_string(&raw).expect("a graph always serializes")
     }
 
-    /// The placement group (OS process) node `id` runs in under `ratelab launch
+    /// The process (an OS process) node `id` runs in under `ratelab launch
     /// --processes`: the file's `process = "…"`, or by default `robot` for the nodes that
     /// touch the simulator (sensors and the actuator, as drivers touch hardware), for an
     /// external node (its proxy) its input's publisher's process, and the node's own name

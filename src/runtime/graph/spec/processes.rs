@@ -1,5 +1,5 @@
 //! The graph file's `[processes.NAME]` tables: what `ratelab launch --processes` does with
-//! a placement group's process (today: whether it starts it again when it fails).
+//! a process of a launch (today: whether it starts it again when it fails).
 //!
 //! ```toml
 //! [processes.policy]
@@ -21,7 +21,7 @@ use toml::Spanned;
 /// The most times one process is started again in one run.
 pub const MAX_RESTARTS: u32 = 3;
 
-/// When the launcher starts a placement group's process again.
+/// When the launcher starts a process again.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum RestartPolicy {

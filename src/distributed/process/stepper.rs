@@ -19,7 +19,7 @@ use crate::node::{Flow, Node};
 use crate::scheduler::{EndReason, Event, StopFlag, VirtualScheduler};
 use crate::summary::GraphState;
 use crate::time::Nanos;
-use crate::wire::ToMember;
+use crate::wire::ToProcess;
 use crate::wire::{self, Ticked};
 use crate::{DistError, REPLY_TIMEOUT};
 use crossbeam_channel::{Receiver, Sender};
@@ -434,7 +434,7 @@ pub(super) fn run_lockstep(
     nodes: Vec<Box<dyn Node>>,
     share: &Arc<Share>,
     (slot, nudged): (&SharedSlot, &Receiver<()>),
-    ctl: &Receiver<ToMember>,
+    ctl: &Receiver<ToProcess>,
     (publisher, callback_ticks): (zenoh::pubsub::Publisher<'static>, bool),
     stop: &StopFlag,
     launcher_gone: &StopFlag,
@@ -461,13 +461,13 @@ pub(super) fn run_lockstep(
         }
         crossbeam_channel::select! {
             recv(ctl) -> m => match m {
-                Ok(ToMember::Horizon { until_ns }) => {
+                Ok(ToProcess::Horizon { until_ns }) => {
                     if let Some(r) = crate::graph::lock(&slot.run).as_mut() {
                         r.horizon(until_ns);
                     }
                     slot.wake(true);
                 }
-                Ok(ToMember::Stop { at_ns, need }) => break (at_ns, need),
+                Ok(ToProcess::Stop { at_ns, need }) => break (at_ns, need),
                 Ok(_) => {}
                 Err(_) => return failed(DistError::Peer("the launcher's channel closed".into())),
             },

@@ -1,12 +1,12 @@
-//! Launcher to member, on the member's control key: the welcome with the run's settings
-//! ([`Setup`]), a refusal, the start, the horizon and the stop ([`ToMember`]). JSON.
+//! Launcher to a process, on the process's control key: the welcome with the run's settings
+//! ([`Setup`]), a refusal, the start, the horizon and the stop ([`ToProcess`]). JSON.
 
 use crate::config::ClockKind;
 use crate::qos::Fault;
 use crate::time::Nanos;
 use serde::{Deserialize, Serialize};
 
-/// What a placement group needs to run its part of the graph: the launcher's settings.
+/// What a process needs to run its part of the graph: the launcher's settings.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Setup {
     /// The resolved graph (every override applied), as a graph file.
@@ -58,16 +58,16 @@ impl Setup {
     }
 }
 
-/// Launcher → one placement group (key `ratelab/<graph>/@ctl/<process>`).
+/// Launcher → one process (key `ratelab/<graph>/@ctl/<process>`).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "msg", rename_all = "snake_case")]
-pub enum ToMember {
+pub enum ToProcess {
     /// Joined: here are the settings.
     Welcome {
         /// The settings.
         setup: Box<Setup>,
         /// The launcher's `CLOCK_MONOTONIC` when it sent this, ns: a real-clock run needs
-        /// one host's clock (a member compares it with its own).
+        /// one host's clock (a process compares it with its own).
         launcher_mono_ns: u64,
     },
     /// Not joined, and why (one line).
@@ -77,7 +77,7 @@ pub enum ToMember {
         /// A process of that name is still running in the graph (as far as the launcher
         /// knows: a process killed a moment ago until its liveliness token is withdrawn). A
         /// process started again at once asks again for a while
-        /// ([`crate::member::BUSY_RETRY`]).
+        /// ([`crate::process::BUSY_RETRY`]).
         #[serde(default)]
         busy: bool,
     },

@@ -1,4 +1,4 @@
-//! One placement group in its own OS process (`ratelab node`): joins the launcher, builds
+//! One process of a launch (`ratelab process`): a graph's nodes placed in it, in their own OS process: joins the launcher, builds
 //! the graph, ticks its own nodes, forwards the topics it publishes to other processes and
 //! takes in those it subscribes to, then reports its view of the run.
 //!
@@ -9,7 +9,7 @@
 //! bridge element of the graph: each message goes out as a
 //! [`WireSample`](super::wire::WireSample) as it is published.
 //!
-//! [`run_member`] goes through its phases in order: check its options against the graph
+//! [`run_process`] goes through its phases in order: check its options against the graph
 //! file, join the launcher (`Joined`), build the graph, wire the topics that cross its
 //! boundary (`crossings` decides which), say ready, then run its share of the graph
 //! (`Share`) under the virtual clock (in lockstep) or the real one, and report.
@@ -19,7 +19,7 @@
 
 use super::credentials::{Credentials, Role};
 use super::lockstep;
-use super::wire::{self, ToLauncher, ToMember, WireSample};
+use super::wire::{self, ToLauncher, ToProcess, WireSample};
 use super::{check_endpoint, open_session, Access, DistError, Keys, REPLY_TIMEOUT};
 use crate::config::RunConfig;
 use crate::graph::spec::GraphSpec;
@@ -49,14 +49,14 @@ pub use stats::{LiveStats, MAX_BATCH_COUNTERS, MAX_BATCH_STEPS, MAX_BATCH_TICKS,
 /// rejoined it (a process restarted mid-run), rather than starting with it, seconds.
 const REJOIN_AFTER_S: f64 = 0.5;
 
-/// How a placement group is started.
+/// How a process is started.
 #[derive(Clone, Debug)]
-pub struct MemberOptions {
+pub struct ProcessOptions {
     /// The graph file's bytes (hashed at join) and its name for messages.
     pub graph_bytes: Vec<u8>,
     /// The graph file's name, for messages.
     pub graph_origin: String,
-    /// The placement group to run.
+    /// The process to run (its name in the graph file).
     pub process: String,
     /// Endpoints to connect to (the launcher's).
     pub connect: Vec<String>,
@@ -65,7 +65,7 @@ pub struct MemberOptions {
     /// The launch's credentials, holding this process's identity (`--credentials FILE`).
     pub credentials: Credentials,
     /// Where the process says what happens to it, one line each: joined, ready, started or
-    /// rejoined (with the run time), ended. `None`: nothing said. `ratelab node` says them on
+    /// rejoined (with the run time), ended. `None`: nothing said. `ratelab process` says them on
     /// its stdout, which a launcher's own children have closed (`/dev/null`), so only a
     /// process started by hand is heard.
     pub say: Option<fn(&str)>,
@@ -266,12 +266,12 @@ impl Arrivals {
 /// process is refused after this.
 pub const BUSY_RETRY: Duration = Duration::from_secs(5);
 
-/// Run placement group `opts.process` until the launcher ends the run (or `stop`).
+/// Run process `opts.process` until the launcher ends the run (or `stop`).
 ///
 /// # Errors
 /// [`DistError`]: bad endpoints, no launcher, a rejected join (another graph file), a run
 /// that cannot be built.
-pub fn run_member(opts: &MemberOptions, stop: &StopFlag) -> Result<(), DistError> {
+pub fn run_process(opts: &ProcessOptions, stop: &StopFlag) -> Result<(), DistError> {
     let file_spec = check_options(opts)?;
     let Joined {
         session,
@@ -568,7 +568,7 @@ fn run_share(
     nodes: Vec<Box<dyn crate::node::Node>>,
     share: &Arc<Share>,
     (slot, nudged): (Option<&stepper::SharedSlot>, &Receiver<()>),
-    (ctl_rx, stop, launcher_gone): (&Receiver<ToMember>, &StopFlag, &StopFlag),
+    (ctl_rx, stop, launcher_gone): (&Receiver<ToProcess>, &StopFlag, &StopFlag),
     ticked: (zenoh::pubsub::Publisher<'static>, bool),
     (say, send): (&dyn Fn(String), SendUp<'_>),
 ) -> Result<GraphState, DistError> {
@@ -589,10 +589,10 @@ fn run_share(
         (crate::ClockKind::Real, _) => match recv_own(ctl_rx, stop, launcher_gone) {
             Err(e) => Err(e),
             // Ended before it started: report the graph as built.
-            Ok(ToMember::Stop { .. }) => {
+            Ok(ToProcess::Stop { .. }) => {
                 Ok(GraphState::capture(&share.handles, Nanos::ZERO, &[], None))
             }
-            Ok(ToMember::Start { start_mono_ns }) => {
+            Ok(ToProcess::Start { start_mono_ns }) => {
                 // Started with the run, or restarted into it (a rejoin): say which.
                 let at_s = wire::mono_now_ns().saturating_sub(start_mono_ns) as f64 / 1e9;
                 say(if at_s > REJOIN_AFTER_S {
@@ -621,7 +621,7 @@ fn run_share(
 ///
 /// # Errors
 /// [`DistError::Usage`], one line naming what is wrong.
-fn check_options(opts: &MemberOptions) -> Result<GraphSpec, DistError> {
+fn check_options(opts: &ProcessOptions) -> Result<GraphSpec, DistError> {
     let text = std::str::from_utf8(&opts.graph_bytes)
         .map_err(|_| DistError::Usage(format!("{}: not UTF-8 text", opts.graph_origin)))?;
     let file_spec =
@@ -671,7 +671,7 @@ struct Joined {
     session: zenoh::Session,
     keys: Keys,
     /// The launcher's control messages to this process.
-    ctl_rx: Receiver<ToMember>,
+    ctl_rx: Receiver<ToProcess>,
     /// Set once the launcher's liveliness token is withdrawn.
     launcher_gone: StopFlag,
     /// Where this process speaks to the launcher (its own key).
@@ -691,7 +691,7 @@ impl Joined {
     /// [`DistError`]: the session cannot open, the launcher runs another graph, the join
     /// is refused, the real clock's processes are on hosts whose clocks differ, `stop`.
     fn join(
-        opts: &MemberOptions,
+        opts: &ProcessOptions,
         file_spec: &GraphSpec,
         stop: &StopFlag,
     ) -> Result<Joined, DistError> {
@@ -708,11 +708,11 @@ impl Joined {
         };
         let session = open_session(&listen, &opts.connect, access)?;
         let keys = Keys::new(&file_spec.name);
-        let (ctl_tx, ctl_rx) = crossbeam_channel::bounded::<ToMember>(4096);
+        let (ctl_tx, ctl_rx) = crossbeam_channel::bounded::<ToProcess>(4096);
         let _ctl_sub = session
             .declare_subscriber(keys.control(&opts.process))
             .callback(move |s| {
-                if let Ok(m) = wire::decode_json::<ToMember>(&s.payload().to_bytes()) {
+                if let Ok(m) = wire::decode_json::<ToProcess>(&s.payload().to_bytes()) {
                     let _ = ctl_tx.try_send(m);
                 }
             })
@@ -771,7 +771,7 @@ impl Joined {
         // messages there too: those are not for this one, which waits on.
         let setup = loop {
             match recv(&ctl_rx, stop, &launcher_gone)? {
-                ToMember::Welcome {
+                ToProcess::Welcome {
                     setup,
                     launcher_mono_ns,
                 } => {
@@ -785,12 +785,12 @@ impl Joined {
                 }
                 // Started again the moment the one before was killed: the launcher has not
                 // yet seen its liveliness token go. Ask again, for a while.
-                ToMember::Reject { busy: true, .. } if first_join.elapsed() < BUSY_RETRY => {
+                ToProcess::Reject { busy: true, .. } if first_join.elapsed() < BUSY_RETRY => {
                     // Soon: every message of the gap is a reading lost to the policy.
                     std::thread::sleep(Duration::from_millis(100));
                     send(&join)?;
                 }
-                ToMember::Reject { reason, .. } => return Err(DistError::Usage(reason)),
+                ToProcess::Reject { reason, .. } => return Err(DistError::Usage(reason)),
                 _ => {}
             }
         };
@@ -959,7 +959,11 @@ fn bridge_outbound(
 /// The next control message: waits as long as the launcher lives (its liveliness token),
 /// so processes started by hand may join minutes apart; an error on a stop or when the
 /// launcher is gone.
-fn recv(rx: &Receiver<ToMember>, stop: &StopFlag, gone: &StopFlag) -> Result<ToMember, DistError> {
+fn recv(
+    rx: &Receiver<ToProcess>,
+    stop: &StopFlag,
+    gone: &StopFlag,
+) -> Result<ToProcess, DistError> {
     loop {
         match rx.recv_timeout(Duration::from_millis(50)) {
             Ok(m) => return Ok(m),
@@ -981,13 +985,13 @@ fn recv(rx: &Receiver<ToMember>, stop: &StopFlag, gone: &StopFlag) -> Result<ToM
 /// process of its name asking to join (the control key is the name's: a second copy, or this
 /// one's own join that crossed its welcome), never for this one.
 fn recv_own(
-    rx: &Receiver<ToMember>,
+    rx: &Receiver<ToProcess>,
     stop: &StopFlag,
     gone: &StopFlag,
-) -> Result<ToMember, DistError> {
+) -> Result<ToProcess, DistError> {
     loop {
         match recv(rx, stop, gone)? {
-            ToMember::Reject { busy: true, .. } => {}
+            ToProcess::Reject { busy: true, .. } => {}
             m => return Ok(m),
         }
     }
@@ -1039,7 +1043,7 @@ fn launchers_seen(session: &zenoh::Session) -> Vec<String> {
 /// This process's share of the graph while it runs: what both clocks, the figures thread
 /// and the final report read.
 struct Share {
-    /// Its placement group's name.
+    /// Its name.
     process: String,
     /// The run's settings (its graph is `cfg.graph`).
     cfg: RunConfig,

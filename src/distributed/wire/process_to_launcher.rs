@@ -1,4 +1,4 @@
-//! Member to launcher, on the member's own key (`@up/<process>`, the only one it may put
+//! Process to launcher, on the process's own key (`@up/<process>`, the only one it may put
 //! there): the join, ready, its run's end and its report with the over-the-wire latency
 //! of what it received ([`ToLauncher`], [`WireLink`]). JSON.
 
@@ -6,7 +6,7 @@ use crate::scheduler::RunEnd;
 use crate::summary::GraphState;
 use serde::{Deserialize, Serialize};
 
-/// A placement group → the launcher (key `ratelab/<graph>/@up`).
+/// A process → the launcher (key `ratelab/<graph>/@up`).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "msg", rename_all = "snake_case")]
 pub enum ToLauncher {

@@ -1,4 +1,4 @@
-//! Member to member, peer to peer: a crossing topic's samples ([`WireSample`], on the
+//! Process to process, peer to peer: a crossing topic's samples ([`WireSample`], on the
 //! topic's key, from its publisher's process to its subscriber's) and, under the virtual
 //! clock, the tick reports of each process's events ([`Ticked`], several to a message, to every
 //! process and the launcher). Both

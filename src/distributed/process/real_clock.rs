@@ -3,7 +3,7 @@
 //! launcher's stop watched.
 
 use super::stats::{held_topics, read_counters};
-use super::{wire, DistError, GraphState, NodeId, Share, StopFlag, ToLauncher, ToMember};
+use super::{wire, DistError, GraphState, NodeId, Share, StopFlag, ToLauncher, ToProcess};
 use crate::metrics::NodeTiming;
 use crate::node::Node;
 use crate::scheduler::{run_real, RealOptions};
@@ -20,7 +20,7 @@ pub(super) fn real_clock(
     nodes: Vec<Box<dyn Node>>,
     share: &Share,
     start: u64,
-    ctl_rx: &Receiver<ToMember>,
+    ctl_rx: &Receiver<ToProcess>,
     stop: &StopFlag,
     launcher_gone: &StopFlag,
     send: super::SendUp<'_>,
@@ -153,7 +153,7 @@ fn tick_hook(
 /// run has (`finished`).
 fn watch_launcher(
     share: &Share,
-    (ctl_rx, stop, launcher_gone): (&Receiver<ToMember>, &StopFlag, &StopFlag),
+    (ctl_rx, stop, launcher_gone): (&Receiver<ToProcess>, &StopFlag, &StopFlag),
     (run_stop, finished): (&StopFlag, &StopFlag),
     (start, next_due): (u64, &Arc<Vec<AtomicU64>>),
 ) -> std::thread::JoinHandle<Option<Nanos>> {
@@ -173,7 +173,7 @@ fn watch_launcher(
             Ordering::SeqCst,
         );
         match rx.recv_timeout(Duration::from_millis(50)) {
-            Ok(ToMember::Stop { at_ns, .. }) => {
+            Ok(ToProcess::Stop { at_ns, .. }) => {
                 run_stop.stop();
                 return Some(Nanos(at_ns));
             }
