@@ -693,21 +693,22 @@ fn conflicting_rates_are_refused_and_a_fault_after_the_end_is_warned_about() {
     );
 }
 
-/// The README's section between `<!-- generated: ratelab WHAT -->` and
-/// `<!-- end: ratelab WHAT -->`, without the markers' lines.
+/// `docs/graphs.md`'s section between `<!-- generated: ratelab WHAT -->` and
+/// `<!-- end: ratelab WHAT -->`, without the markers' lines (the README sends the reader
+/// there for the tables).
 fn readme_section(what: &str) -> String {
-    let readme = std::fs::read_to_string(crate::repo("README.md")).unwrap();
+    let readme = std::fs::read_to_string(crate::repo("docs/graphs.md")).unwrap();
     let start = format!("<!-- generated: ratelab {what} -->\n");
     let end = format!("<!-- end: ratelab {what} -->");
     let from = readme
         .find(&start)
-        .unwrap_or_else(|| panic!("README has no {start:?}"))
+        .unwrap_or_else(|| panic!("docs/graphs.md has no {start:?}"))
         + start.len();
     let to = from + readme[from..].find(&end).expect("the section's end");
     readme[from..to].to_string()
 }
 
-/// The README's tables of node kinds and message types are the registry's, as `ratelab
+/// The reference's tables of node kinds and message types (`docs/graphs.md`) are the registry's, as `ratelab
 /// kinds` and `ratelab msgs` print them: a kind or a type added, or a parameter's range
 /// changed, without the README following fails here (paste the command's output there).
 #[test]
@@ -719,7 +720,7 @@ fn the_readme_tables_of_kinds_and_messages_are_the_registrys() {
         assert_eq!(
             readme_section(what),
             printed,
-            "README.md's table differs from `ratelab {what}`: paste its output between the markers"
+            "docs/graphs.md's table differs from `ratelab {what}`: paste its output between the markers"
         );
     }
     // What the tables must show: every built-in kind and type, parameters with units and
@@ -810,4 +811,23 @@ fn the_readme_s_lab_screen_is_the_snapshot_s() {
         shown, screen,
         "README.md's 80x24 screen differs from the snapshot"
     );
+}
+
+/// `ratelab process` runs one process of a launch; `node`, its old name, is the same
+/// command (scripts and processes started by hand keep working), and the help lists the
+/// process under its one name.
+#[test]
+fn a_process_of_a_launch_is_ratelab_process_and_node_is_its_old_name() {
+    let new = ratelab(&["process", "--help"]);
+    let old = ratelab(&["node", "--help"]);
+    assert!(new.status.success(), "{}", stderr(&new));
+    assert!(old.status.success(), "{}", stderr(&old));
+    let text =
+        |o: &Output| String::from_utf8_lossy(&o.stdout).replace("ratelab node", "ratelab process");
+    assert_eq!(text(&new), text(&old));
+    assert!(text(&new).contains("--process <NAME>"), "{}", text(&new));
+    let help = String::from_utf8_lossy(&ratelab(&["--help"]).stdout).to_string();
+    assert!(help.contains("\n  process "), "{help}");
+    assert!(!help.contains("\n  node "), "{help}");
+    assert!(!help.contains("placement group"), "{help}");
 }

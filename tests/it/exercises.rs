@@ -554,19 +554,22 @@ fn the_texts_read_before_predicting_give_no_answer_away() {
             format!("{}\n{}", f.objective, f.instructions),
         ));
     }
-    // The section of the top-level README an exercise sends the learner to before the
-    // prediction (ex7: "the README's *Executors and compute time* has the keys").
-    let readme = std::fs::read_to_string(crate::repo("README.md")).unwrap();
-    let section = "### Executors and compute time";
+    // The page an exercise sends the learner to before the prediction (ex7:
+    // "docs/executors.md has the keys"), up to its first section.
+    let readme = std::fs::read_to_string(crate::repo("docs/executors.md")).unwrap();
+    let section = "# Executors and compute time";
     let start = readme
         .find(section)
-        .unwrap_or_else(|| panic!("README.md has no {section}"));
+        .unwrap_or_else(|| panic!("docs/executors.md has no {section}"));
     let rest = &readme[start + section.len()..];
     let end = rest
         .find("\n## ")
         .or_else(|| rest.find("\n### "))
         .unwrap_or(rest.len());
-    texts.push((format!("README.md {section}"), rest[..end].to_string()));
+    texts.push((
+        format!("docs/executors.md {section}"),
+        rest[..end].to_string(),
+    ));
     for (name, text) in &texts {
         for (phrase, answer) in spoilers {
             assert!(

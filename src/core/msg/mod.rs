@@ -419,7 +419,7 @@ pub fn registered() -> Vec<MsgType> {
 /// The registered message types as a Markdown table, in [`registered`]'s order: the name a
 /// graph file gives as a topic's `type`, the Python class, the fields with their units,
 /// the ROS 2 type it is offered as (`—`: not offered) and its one line of docs. What
-/// `ratelab msgs` prints and the README's table of message types is (a test keeps the two
+/// `ratelab msgs` prints and `docs/graphs.md`'s table of message types is (a test keeps the two
 /// equal).
 pub fn types_table() -> String {
     let mut out = String::from(

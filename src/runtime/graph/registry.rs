@@ -171,7 +171,7 @@ pub fn kinds() -> Vec<Kind> {
 /// The registry as a Markdown table, one row per kind in [`kinds`]'s order: its name, what
 /// it reads and publishes (message types; `a|b`: either), how it touches the plant, whose
 /// code it runs, its parameters (unit, default, range) and its one line of docs. What
-/// `ratelab kinds` prints and the README's table of kinds is (a test keeps the two equal).
+/// `ratelab kinds` prints and `docs/graphs.md`'s table of kinds is (a test keeps the two equal).
 pub fn kinds_table() -> String {
     let types = |alts: &[crate::msg::MsgType]| {
         alts.iter()
