@@ -406,6 +406,33 @@ mod tests {
         }
     }
 
+    /// At 80×24 the graph panel's title reads whole, for every selection of every shipped
+    /// graph and for a wide graph's own title: what does not fit gives way (the topics in a
+    /// title, `Tab next`), never the end of a word.
+    #[test]
+    fn the_graph_panel_s_title_fits_80_columns_whatever_is_selected() {
+        for file in [
+            "graphs/cartpole.toml",
+            "graphs/cartpole-setpoint.toml",
+            "graphs/cartpole-estimator.toml",
+            "graphs/cartpole-safety.toml",
+        ] {
+            let (mut app, _rx) = app_after(graph_cfg(file, 2), false);
+            let n = app.view().nodes.len() + app.view().topics.len();
+            for _ in 0..=n {
+                let text = render(&app, 80, 24);
+                let title = text.lines().nth(1).unwrap_or("").trim_matches('"');
+                // Whole: the title ends with its space, then the border runs to the corner.
+                let inner = title
+                    .trim_start_matches('┌')
+                    .trim_end_matches('┐')
+                    .trim_end_matches('─');
+                assert!(inner.ends_with(' '), "{file}: the title is cut: {title}");
+                app.on_msg(Msg::SelectNext);
+            }
+        }
+    }
+
     /// A topic whose subscriber missed its deadline gets no green tick, though nothing was
     /// dropped (the policy stalled: no force for half a second).
     #[test]

@@ -557,7 +557,10 @@ fn depths_of(depths: impl Iterator<Item = usize>) -> String {
 
 /// With a selection: what is selected and what the keys now do to it (in an attached lab,
 /// which only watches, nothing: the selection only shows it).
-fn selection_title(v: &View) -> Option<String> {
+/// The graph panel's title while a node or a topic is selected, in the first of its forms
+/// that fits `room` columns: what is selected, what its keys change, how to move on.
+fn selection_title(v: &View, room: usize) -> Option<String> {
+    let fit = |forms: Vec<String>| first_that_fits(forms, room);
     if v.attached.is_some() {
         let name = v
             .nodes
@@ -565,27 +568,37 @@ fn selection_title(v: &View) -> Option<String> {
             .find(|n| n.selected)
             .map(|n| n.name.clone())
             .or_else(|| v.topics.iter().find(|t| t.selected).map(|t| t.name.clone()))?;
-        return Some(format!(
-            " {name} selected (read-only) · Tab next · Esc clears "
-        ));
+        return Some(fit(vec![
+            format!(" {name} selected (read-only) · Tab next · Esc clears "),
+            format!(" {name} selected (read-only) · Esc clears "),
+        ]));
     }
     if let Some(n) = v.nodes.iter().find(|n| n.selected) {
-        return Some(format!(
-            " {} selected: -/+ its rate · Tab next · Esc clears ",
-            n.name
-        ));
+        let name = &n.name;
+        return Some(fit(vec![
+            format!(" {name} selected: -/+ its rate · Tab next · Esc clears "),
+            format!(" {name} selected: -/+ its rate · Esc clears "),
+            format!(" {name}: -/+ rate · Esc "),
+        ]));
     }
     // With QoS set, the selection names it first: at 80×24 the arrow has no row left for it.
-    v.topics.iter().find(|t| t.selected).map(|t| match &t.qos {
-        Some(parts) => format!(
-            " {} selected: {} · [/] depth · f d L l e o QoS · Esc clears ",
-            t.name,
-            parts.join(" ")
-        ),
-        None => format!(
-            " {} selected: [/] its depth ({}) · f/d/L/l/e/o its QoS · Tab next · Esc clears ",
-            t.name, t.depth
-        ),
+    v.topics.iter().find(|t| t.selected).map(|t| {
+        let (name, depth) = (&t.name, t.depth);
+        fit(match &t.qos {
+            Some(parts) => {
+                let qos = parts.join(" ");
+                vec![
+                    format!(" {name} selected: {qos} · [/] depth · f d L l e o QoS · Esc clears "),
+                    format!(" {name}: {qos} · [/] depth · f d L l e o QoS · Esc "),
+                    format!(" {name}: {qos} · Esc "),
+                ]
+            }
+            None => vec![
+                format!(" {name} selected: [/] its depth ({depth}) · f/d/L/l/e/o its QoS · Tab next · Esc clears "),
+                format!(" {name} selected: [/] its depth ({depth}) · f/d/L/l/e/o its QoS · Esc clears "),
+                format!(" {name}: [/] depth ({depth}) · f d L l e o QoS · Esc "),
+            ],
+        })
     })
 }
 

@@ -5,24 +5,44 @@
 use super::*;
 
 /// The graph panel's title: the nodes and topics in layout order.
-fn graph_title(v: &View) -> String {
-    // Columns joined by arrows; what shares a column, by commas.
-    let names: Vec<String> = layout_columns(v)
-        .iter()
-        .map(|c| match c {
-            Column::Nodes(ns) => ns
-                .iter()
-                .map(|&i| v.nodes[i].name.as_str())
-                .collect::<Vec<_>>()
-                .join(", "),
-            Column::Topics(ts) => ts
-                .iter()
-                .map(|&i| v.topics[i].name.as_str())
-                .collect::<Vec<_>>()
-                .join(", "),
-        })
-        .collect();
-    format!(" graph: {} ", names.join(" → "))
+/// The graph panel's title in `room` columns: its columns joined by arrows (what shares a
+/// column, by commas); where that does not fit (a wide graph at 80 columns), its nodes'
+/// columns alone, then its counts.
+fn graph_title(v: &View, room: usize) -> String {
+    let columns = layout_columns(v);
+    let names = |with_topics: bool| -> String {
+        columns
+            .iter()
+            .filter_map(|c| match c {
+                Column::Nodes(ns) => Some(
+                    ns.iter()
+                        .map(|&i| v.nodes[i].name.as_str())
+                        .collect::<Vec<_>>()
+                        .join(", "),
+                ),
+                Column::Topics(ts) if with_topics => Some(
+                    ts.iter()
+                        .map(|&i| v.topics[i].name.as_str())
+                        .collect::<Vec<_>>()
+                        .join(", "),
+                ),
+                Column::Topics(_) => None,
+            })
+            .collect::<Vec<_>>()
+            .join(" → ")
+    };
+    first_that_fits(
+        [
+            format!(" graph: {} ", names(true)),
+            format!(" graph: {} ", names(false)),
+            format!(
+                " graph: {} nodes, {} topics ",
+                v.nodes.len(),
+                v.topics.len()
+            ),
+        ],
+        room,
+    )
 }
 
 /// A column of the graph panel: the nodes of one layer, or the topics they publish.
@@ -54,9 +74,11 @@ fn layout_columns(v: &View) -> Vec<Column> {
 }
 
 pub(super) fn render_graph(v: &View, area: Rect, buf: &mut Buffer) {
-    let mut block = match selection_title(v) {
+    // The title's room: the panel's width less its corners.
+    let room = usize::from(area.width.saturating_sub(2));
+    let mut block = match selection_title(v, room) {
         Some(t) => Block::bordered().title(Line::from(t).black().on_yellow().bold()),
-        None => Block::bordered().title(graph_title(v)),
+        None => Block::bordered().title(graph_title(v, room)),
     };
     // What the brain is, when known: a fall with no drops is then no mystery.
     if let Some(caption) = &v.brain_caption {
