@@ -668,6 +668,15 @@ fn verdict(m: &Metrics) -> String {
     }
 }
 
+/// A run's verdict in a narrow cell: `Y`, `n@0.34` (fell at run time 0.34 s), or `n`.
+fn fell_cell(m: &Metrics) -> String {
+    if m.balanced {
+        "Y".to_string()
+    } else {
+        m.fell_at_s.map_or("n".into(), |t| format!("n@{t:.2}"))
+    }
+}
+
 /// A table's seed columns: `seed 0  seed 1 …`.
 fn seeds_header(seeds: &[u64]) -> String {
     seeds

@@ -276,14 +276,7 @@ impl Exercise for Ex6 {
 
 /// ex6's table: per clamp, the built-in node's verdict per seed, then the learner's.
 fn table(cx: &mut Context<'_>, b: &Ex6Bands, runs: &[Ex6Run]) {
-    let cell = |r: Option<&Ex6Run>| match r {
-        Some(r) if r.metrics.balanced => "Y".to_string(),
-        Some(r) => r
-            .metrics
-            .fell_at_s
-            .map_or("n".into(), |t| format!("n@{t:.2}")),
-        None => "-".into(),
-    };
+    let cell = |r: Option<&Ex6Run>| r.map_or("-".into(), |r| super::fell_cell(&r.metrics));
     let row = |clamp: f64, python: bool| -> Vec<String> {
         b.seeds
             .iter()

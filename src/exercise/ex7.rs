@@ -329,11 +329,7 @@ impl Exercise for Ex7 {
                     policy.response_time_p50_ms,
                     policy.response_time_max_ms,
                     busy,
-                    if m.balanced {
-                        "Y".to_string()
-                    } else {
-                        m.fell_at_s.map_or("n".into(), |t| format!("n@{t:.2}"))
-                    }
+                    super::fell_cell(m)
                 );
             }
         }

@@ -246,18 +246,8 @@ impl Exercise for Ex8 {
                     .iter()
                     .filter(|r| r.cutoff_hz == cutoff && r.noise_rad == noise)
                     .collect();
-                let verdicts: Vec<String> = row
-                    .iter()
-                    .map(|r| {
-                        if r.metrics.balanced {
-                            "Y".to_string()
-                        } else {
-                            r.metrics
-                                .fell_at_s
-                                .map_or("n".into(), |t| format!("n@{t:.2}"))
-                        }
-                    })
-                    .collect();
+                let verdicts: Vec<String> =
+                    row.iter().map(|r| super::fell_cell(&r.metrics)).collect();
                 let mean = row.iter().map(|r| r.metrics.mean_latency_ms).sum::<f64>()
                     / row.len().max(1) as f64;
                 say!(
