@@ -140,14 +140,10 @@ pub fn menu() -> String {
 /// Errors reading exercise files, or running an exercise.
 #[derive(Debug, thiserror::Error)]
 pub enum ExerciseError {
-    /// The file cannot be read.
-    #[error("cannot read {path}: {detail}")]
-    Read {
-        /// The file.
-        path: String,
-        /// Why.
-        detail: String,
-    },
+    /// The file cannot be read: missing, not a regular file, too large, unreadable
+    /// ([`crate::input::read_regular_file`]'s rules).
+    #[error(transparent)]
+    Input(#[from] crate::input::InputError),
     /// The file is not valid TOML of the expected shape.
     #[error("{path}: {detail}")]
     Parse {
@@ -205,19 +201,11 @@ fn expected() -> String {
 const MAX_FILE_BYTES: u64 = 1 << 20;
 
 fn read_text(path: &Path) -> Result<String, ExerciseError> {
-    let read = |detail: String| ExerciseError::Read {
+    let bytes = crate::input::read_regular_file(path, MAX_FILE_BYTES)?;
+    String::from_utf8(bytes).map_err(|_| ExerciseError::Parse {
         path: path.display().to_string(),
-        detail,
-    };
-    let len = std::fs::metadata(path)
-        .map_err(|e| read(e.to_string()))?
-        .len();
-    if len > MAX_FILE_BYTES {
-        return Err(read(format!(
-            "{len} bytes, more than an exercise file's {MAX_FILE_BYTES}"
-        )));
-    }
-    std::fs::read_to_string(path).map_err(|e| read(e.to_string()))
+        detail: "not UTF-8 text".into(),
+    })
 }
 
 fn parse_error(path: &str, e: &impl std::fmt::Display) -> ExerciseError {
@@ -715,6 +703,35 @@ mod tests {
             }
         }
         assert_eq!(expected(), "ex1, ex2, ex3, ex4, ex5, ex6, ex7, ex8 or ex9");
+    }
+
+    #[test]
+    fn exercise_files_are_read_by_the_rules_for_files_the_user_names() {
+        let dir = tempfile::tempdir().unwrap();
+        let missing = load_bands(&dir.path().join("bands.toml")).unwrap_err();
+        assert!(
+            missing.to_string().ends_with("bands.toml: not found"),
+            "{missing}"
+        );
+        let folder = ExerciseFile::load(dir.path()).unwrap_err();
+        assert!(
+            folder.to_string().contains("not a regular file"),
+            "{folder}"
+        );
+        let big = dir.path().join("big.toml");
+        std::fs::write(&big, vec![b'#'; (MAX_FILE_BYTES + 1) as usize]).unwrap();
+        assert!(matches!(
+            ExerciseFile::load(&big),
+            Err(ExerciseError::Input(
+                crate::input::InputError::TooLarge { .. }
+            ))
+        ));
+        let binary = dir.path().join("binary.toml");
+        std::fs::write(&binary, [0xff, 0xfe]).unwrap();
+        assert!(ExerciseFile::load(&binary)
+            .unwrap_err()
+            .to_string()
+            .ends_with("not UTF-8 text"));
     }
 
     #[test]

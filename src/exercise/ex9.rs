@@ -120,11 +120,7 @@ pub fn measure_ex9(
         .iter()
         .map(|&ms| phase_offset_from_ms(ms))
         .collect::<Result<Vec<_>, _>>()?;
-    let graph_bytes =
-        crate::graph::spec::graph_file_bytes(graph_path).map_err(|e| ExerciseError::Read {
-            path: graph_path.map_or_else(String::new, |p| p.display().to_string()),
-            detail: e.to_string(),
-        })?;
+    let graph_bytes = crate::graph::spec::graph_file_bytes(graph_path)?;
     let across = |cfg: &RunConfig| -> Result<(Metrics, Vec<(String, f64)>), ExerciseError> {
         let names: Vec<String> = cfg.graph.placement().into_iter().map(|(p, _)| p).collect();
         let launch_error = |e: crate::distributed::DistError| ExerciseError::Launch(e.to_string());
