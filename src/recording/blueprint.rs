@@ -8,18 +8,18 @@
 use super::*;
 
 /// The top of a y range from 0 that gets a label above 0 in the stock viewer: its grid
-/// labels steps of a power of ten at least about 16 px apart, which a plot of the 1600×900
-/// layout (about 110 px, the range padded by a tenth either side) gives up to about 5.5 of,
-/// so a top over 5.5 × 10^k (a latency of 80 ms: eight steps of 10, too dense, and no step
-/// of 100 under it) shows "0" alone. Such a top is raised to 10^(k+1) (100: "0" and "100");
-/// a lower one stays (msg/s at 52: "0" to "50"; 300: "0" to "300"). Measured in the
-/// viewer's pictures: 5.2 steps labelled, 6.96 steps of a symmetric range not.
+/// labels steps of a power of ten only when they are at least about 18 points apart. The
+/// smallest plot of the layout is about 100 points tall at 1280×720 (its range padded by a
+/// tenth either side), which labels up to about 5.2 steps: a top over 4.4 × 10^k (a
+/// latency of 50 ms, padded to six steps of 10: "0" alone) is raised to 10^(k+1) (100: "0"
+/// and "100"); a lower one stays (43 messages: "0" to "40"; 300: "0" to "300"). Measured in
+/// the viewer's pictures at 1280×720: 5.16 steps in 95 points labelled, 6 in 100 not.
 pub(super) fn label_top(hi: f64) -> f64 {
     if !(hi.is_finite() && hi > 0.0) {
         return hi;
     }
     let step = 10f64.powf(hi.log10().floor());
-    if hi / step > 5.5 {
+    if hi / step > 4.4 {
         step * 10.0
     } else {
         hi
@@ -66,10 +66,10 @@ pub(super) fn plot(
         (Some(r), None) | (None, Some(r)) => Some(r),
         (None, None) => None,
     }
-    // Only a range fitted to the data from 0 (a latency, a count): a scale chosen up front
-    // (an executor's lanes, a liveliness count) stays as chosen.
+    // Only a range from 0 (a latency, a count, the executors' lanes): a range about 0
+    // (the pole angle, the force) is labelled by its own steps.
     .map(|(lo, hi)| {
-        if base == Some((0.0, 0.0)) && lo >= 0.0 {
+        if base.is_some_and(|(from, _)| from == 0.0) && lo >= 0.0 {
             (lo, label_top(hi))
         } else {
             (lo, hi)
@@ -94,88 +94,45 @@ pub(super) fn plot(
     }
 }
 
+/// The share of the middle column's height the pole-angle plot takes beside the latency's
+/// (1): room for its legend, which names the marks' times. The force (0.9) needs least: its
+/// ±12 N range labels in any plot.
+const ANGLE_SHARE: f32 = 1.3;
+/// The cart's share: tall enough (about 140 points at 1280×720) that the six steps of 1 m
+/// between the rail's ends (±3.0 m) get their labels.
+const CART_SHARE: f32 = 1.3;
+
 /// The viewer layout for a run of `shape` with the settings `cfg`; `extents` (the values
 /// every series took) once the run is over.
+///
+/// Three columns, each plot tall enough to label its axes at 1280×720:
+/// - the cartpole, the node graph and the summary;
+/// - the chapter's core, always four plots: the pole angle (with the events' marks), the
+///   force, the cart (with the rail's ends) and the sense→act latency;
+/// - `when` (every event at its run time, the first trouble on top) over tabs, one per
+///   concern the run has: the bus, QoS and liveliness, executors, the real clock's
+///   lateness, processes, the events' log and what the nodes' code wrote. The tab of the
+///   run's own concern is open (executors, else QoS, else processes, else the bus).
 pub(super) fn layout_for(shape: &GraphShape, cfg: &RunConfig, extents: Option<&Extents>) -> Item {
-    let paths = |list: &[&str]| list.iter().map(|p| p.to_string()).collect::<Vec<_>>();
-    let deg = THETA_LIMIT_RAD.to_degrees();
-    let angle = plot(
-        "angle",
-        &format!("pole angle θ (rad), fall limits ±{deg:.0}°"),
-        {
-            let mut p = paths(&[
-                "/plant/pole_angle_rad",
-                "/plant/fall_limit/upper",
-                "/plant/fall_limit/lower",
-                "/plant/changes",
-            ]);
-            // The fall's marker, in the final layout of a run that fell.
-            if extents.is_some_and(|e| e.contains_key("plant/fall")) {
-                p.push("/plant/fall".to_string());
-            }
-            p
-        },
-        Some((-CHANGE_MARK_RAD, CHANGE_MARK_RAD)),
-        extents,
-    );
-    let force = FORCE_PER_CONTROL_N;
-    let action = plot(
-        "action",
-        "force on the cart (N): published vs applied",
-        paths(&["/action/published_N", "/action/applied_N"]),
-        Some((-force, force)),
-        extents,
-    );
-    // The middle column's plots: these four, the executors' three, the real clock's
-    // lateness, the liveliness totals.
-    let alive = liveliness_series(shape, extents);
-    let column = 4
-        + if measures_executors(cfg) { 3 } else { 0 }
-        + usize::from(cfg.clock == ClockKind::Real)
-        + usize::from(!alive.is_empty());
-    // With four, the rails' ends and the run's; in a shorter plot the rails' ends padded
-    // (6.96 m) are too many metres for the viewer to label one (it showed "0" alone): the
-    // run's ends alone, within ±2.5 m, get "-2" to "2" (a cart past them, at the run's end,
-    // widens the range).
-    let tall = column <= 4;
-    let cart = cart_view(tall, extents);
-    // Latency, lateness and the bus series have no scale known up front (a lab session may
-    // change rates mid-run): rerun fits them while the run goes, the final layout pads them.
-    let latency = plot(
-        "latency",
-        "sense→act latency (ms)",
-        paths(&["/latency/sense_to_act_ms", "/latency/control_period_ms"]),
-        extents.map(|_| (0.0, 0.0)),
-        extents,
-    );
-    let mut signals: Vec<(f32, Item)> = [angle, action, cart, latency]
+    let core = Item::Vertical(
+        [
+            (ANGLE_SHARE, angle_view(extents)),
+            (0.9, action_view(extents)),
+            (CART_SHARE, cart_view(extents)),
+            (1.0, latency_view(extents)),
+        ]
         .into_iter()
-        .map(|v| (1.0, Item::View(v)))
-        .collect();
-    if measures_executors(cfg) {
-        let [timeline, response, skipped] = executor_views(shape, extents);
-        for v in [timeline, response, skipped] {
-            signals.push((1.0, Item::View(v)));
-        }
-    }
-    if cfg.clock == ClockKind::Real {
-        let lateness = plot(
-            "lateness",
-            "node tick lateness (µs, real clock)",
-            shape
-                .nodes
-                .iter()
-                .map(|n| format!("/nodes/{}/lateness_us", n.name))
-                .collect(),
-            extents.map(|_| (0.0, 0.0)),
-            extents,
-        );
-        signals.push((1.0, Item::View(lateness)));
-    }
-    let wire = wire_view(shape, extents);
+        .map(|(share, v)| (share, Item::View(v)))
+        .collect(),
+    );
+    let column = |views: Vec<ViewSpec>| {
+        Item::Vertical(views.into_iter().map(|v| (1.0, Item::View(v))).collect())
+    };
+    let mut tabs: Vec<(String, Item)> = Vec::new();
     let [published, msg_per_s, dropped] = bus_views(shape, extents);
-    // QoS counters only where a topic's QoS can make them count (or they did): the
-    // chapter's graph has no such view.
+    tabs.push(("bus".into(), column(vec![published, dropped, msg_per_s])));
+    // QoS counters only where a topic's QoS can make them count (or they did), and the
+    // leased nodes' liveliness: the chapter's graph has neither.
     let qos = qos_series(shape, extents);
     let qos = (!qos.is_empty()).then(|| {
         totals(plot(
@@ -186,6 +143,7 @@ pub(super) fn layout_for(shape: &GraphShape, cfg: &RunConfig, extents: Option<&E
             extents,
         ))
     });
+    let alive = liveliness_series(shape, extents);
     let alive = (!alive.is_empty()).then(|| {
         totals(plot(
             "liveliness",
@@ -196,53 +154,141 @@ pub(super) fn layout_for(shape: &GraphShape, cfg: &RunConfig, extents: Option<&E
             extents,
         ))
     });
-    // A node's liveliness sits with the node's other plots (the middle column).
-    if let Some(v) = alive {
-        signals.push((1.0, Item::View(v)));
+    let qos: Vec<ViewSpec> = qos.into_iter().chain(alive).collect();
+    let qos_tab = (!qos.is_empty()).then(|| {
+        tabs.push(("QoS, liveliness".into(), column(qos)));
+        tabs.len() - 1
+    });
+    let executors_tab = measures_executors(cfg).then(|| {
+        tabs.push((
+            "executors".into(),
+            column(executor_views(shape, extents).into()),
+        ));
+        tabs.len() - 1
+    });
+    if cfg.clock == ClockKind::Real {
+        let lateness = plot(
+            "lateness",
+            "node tick lateness (ms, real clock)",
+            shape
+                .nodes
+                .iter()
+                .map(|n| format!("/nodes/{}/lateness_ms", n.name))
+                .collect(),
+            extents.map(|_| (0.0, 0.0)),
+            extents,
+        );
+        tabs.push(("real clock".into(), column(vec![lateness])));
     }
+    let processes_tab = wire_view(shape, extents).map(|wire| {
+        tabs.push(("processes".into(), column(vec![wire])));
+        tabs.len() - 1
+    });
     let events = ViewSpec::new("events", "TextLog", "events")
         .contents(["/events"])
         .property("TextLogColumns", &text_log_columns(cfg.clock, false));
+    tabs.push(("events".into(), Item::View(events)));
     // What the nodes' code wrote (`log/<node>`), when it wrote anything: the final layout
     // knows (a run whose nodes wrote nothing, as the chapter's, has no such view). The
     // entity column names the node.
-    let log = extents.filter(|e| e.contains_key(LOG_MARK)).map(|_| {
-        ViewSpec::new("log", "TextLog", "log: what the nodes' code wrote")
+    if extents.is_some_and(|e| e.contains_key(LOG_MARK)) {
+        let log = ViewSpec::new("log", "TextLog", "log: what the nodes' code wrote")
             .contents(["/log/**"])
-            .property("TextLogColumns", &text_log_columns(cfg.clock, true))
-    });
+            .property("TextLogColumns", &text_log_columns(cfg.clock, true));
+        tabs.push(("log".into(), Item::View(log)));
+    }
+    let open = executors_tab.or(qos_tab).or(processes_tab).unwrap_or(0);
+    let when =
+        ViewSpec::new("when", "TextDocument", "when: the run's events in time").contents(["/when"]);
     let (world, graph) = (world_view(), graph_view(shape));
     let summary = ViewSpec::new("summary", "TextDocument", "summary").contents(["/summary"]);
 
     Item::Horizontal(vec![
         (
-            0.36,
+            0.30,
             Item::Vertical(vec![
-                (0.42, Item::View(world)),
-                (0.2, Item::View(graph)),
+                (0.38, Item::View(world)),
+                (0.24, Item::View(graph)),
                 (0.38, Item::View(summary)),
             ]),
         ),
-        (0.34, Item::Vertical(signals)),
+        (0.38, core),
         (
-            0.30,
-            Item::Vertical(
-                [
-                    Some(published),
-                    Some(dropped),
-                    qos,
-                    Some(msg_per_s),
-                    wire,
-                    Some(events),
-                    log,
-                ]
-                .into_iter()
-                .flatten()
-                .map(|v| (1.0, Item::View(v)))
-                .collect(),
-            ),
+            0.32,
+            Item::Vertical(vec![(0.3, Item::View(when)), (0.7, Item::Tabs(tabs, open))]),
         ),
     ])
+}
+
+/// The pole angle against its fall limits, with the events' marks (changes above the
+/// limits, trouble and recoveries below, the fall at the pole's angle): at the start every
+/// mark (a live viewer shows them as they come), at the end those the run set.
+fn angle_view(extents: Option<&Extents>) -> ViewSpec {
+    let deg = THETA_LIMIT_RAD.to_degrees();
+    let mut p: Vec<String> = [
+        "/plant/pole_angle_rad",
+        "/plant/fall_limit/upper",
+        "/plant/fall_limit/lower",
+    ]
+    .iter()
+    .map(|p| p.to_string())
+    .collect();
+    for m in Mark::ALL {
+        if extents.is_none_or(|e| e.contains_key(m.entity())) {
+            p.push(format!("/{}", m.entity()));
+        }
+    }
+    // The legend top left: the marks run along the bottom, a fall ends the line at the
+    // right, and the pole starts near 0.
+    legend_at(
+        plot(
+            "angle",
+            &format!("pole angle θ (rad), fall limits ±{deg:.0}°, events marked"),
+            p,
+            Some((-CHANGE_MARK_RAD, CHANGE_MARK_RAD)),
+            extents,
+        ),
+        bpc::Corner2D::LeftTop,
+    )
+}
+
+/// Of `paths`, those the run recorded (every one at the start, when nothing is known yet):
+/// a graph without the chapter's policy publishes no `/action` of its own, one without a
+/// controller has no control period.
+fn recorded(paths: &[&str], extents: Option<&Extents>) -> Vec<String> {
+    paths
+        .iter()
+        .filter(|p| extents.is_none_or(|e| e.contains_key(p.trim_start_matches('/'))))
+        .map(|p| p.to_string())
+        .collect()
+}
+
+/// The force the policy published against the force the actuator applied.
+fn action_view(extents: Option<&Extents>) -> ViewSpec {
+    let force = FORCE_PER_CONTROL_N;
+    plot(
+        "action",
+        "force on the cart (N): published vs applied",
+        recorded(&["/action/published_N", "/action/applied_N"], extents),
+        Some((-force, force)),
+        extents,
+    )
+}
+
+/// The sense→act latency against the controller's period. No scale is known up front (a
+/// lab session may change rates mid-run): rerun fits it while the run goes, the final layout
+/// pads it.
+fn latency_view(extents: Option<&Extents>) -> ViewSpec {
+    plot(
+        "latency",
+        "sense→act latency (ms)",
+        recorded(
+            &["/latency/sense_to_act_ms", "/latency/control_period_ms"],
+            extents,
+        ),
+        extents.map(|_| (0.0, 0.0)),
+        extents,
+    )
 }
 
 /// The bus's views: each topic's messages published (total), its msg/s over a 1 s window
@@ -267,40 +313,43 @@ fn bus_views(shape: &GraphShape, extents: Option<&Extents>) -> [ViewSpec; 3] {
         bus("msg_per_s", "bus: msg/s (1 s window)"),
         bpc::Corner2D::RightBottom,
     );
-    let dropped = totals(bus("dropped", "bus: dropped (total)"));
+    // A drop is a message a full queue let go for a newer one: by design where a topic
+    // of depth 1 is read slower than it is written (the freshest wins), not an alarm.
+    let dropped = totals(bus(
+        "dropped",
+        "bus: dropped (total): older messages a full queue let go",
+    ));
     [published, msg_per_s, dropped]
 }
 
-/// The cart's position against the rail's ends and the run's. `tall`: in a column of four
-/// plots, the rails' ends too; in a shorter plot the rails' ends padded (6.96 m) are too
-/// many metres for the viewer to label one (it showed "0" alone): the run's ends alone,
-/// within ±2.5 m, get "-2" to "2" (a cart past them, at the run's end, widens the range).
-fn cart_view(tall: bool, extents: Option<&Extents>) -> ViewSpec {
-    let paths = |list: &[&str]| list.iter().map(|p| p.to_string()).collect::<Vec<_>>();
-    let mut cart_paths = vec!["/plant/cart_pos_m"];
-    if tall {
-        cart_paths.extend(["/plant/rail_end/right", "/plant/rail_end/left"]);
-    }
-    cart_paths.extend(["/plant/cart_limit/right", "/plant/cart_limit/left"]);
-    let cart = plot(
+/// The cart's position against the rail's ends and the run's ends (past which a run stops),
+/// on a range just past the rail's ends (a cart past them, at the run's end, widens it):
+/// the usual tenth of padding made seven steps of 1 m, too many to label.
+fn cart_view(extents: Option<&Extents>) -> ViewSpec {
+    let reach = extents
+        .and_then(|e| e.get("plant/cart_pos_m"))
+        .map_or(0.0, |&(lo, hi)| lo.abs().max(hi.abs()));
+    let half = (RAIL_HALF_LENGTH_M + 0.1).max(reach * 1.05);
+    plot(
         "cart",
         "cart position (m)",
-        paths(&cart_paths),
+        [
+            "/plant/cart_pos_m",
+            "/plant/rail_end/right",
+            "/plant/rail_end/left",
+            "/plant/cart_limit/right",
+            "/plant/cart_limit/left",
+        ]
+        .iter()
+        .map(|p| p.to_string())
+        .collect(),
         Some((-RAIL_HALF_LENGTH_M, RAIL_HALF_LENGTH_M)),
         extents,
-    );
-    if tall {
-        cart
-    } else {
-        let reach = extents
-            .and_then(|e| e.get("plant/cart_pos_m"))
-            .map_or(0.0, |&(lo, hi)| lo.abs().max(hi.abs()));
-        let half = (CART_LIMIT_M + 0.1).max(reach * 1.05);
-        cart.property(
-            "ScalarAxis",
-            &bp::ScalarAxis::new().with_range(rerun::components::Range1D::new(-half, half)),
-        )
-    }
+    )
+    .property(
+        "ScalarAxis",
+        &bp::ScalarAxis::new().with_range(rerun::components::Range1D::new(-half, half)),
+    )
 }
 
 /// The executors' views: a lane per node raised while its tick holds a thread, each
@@ -314,13 +363,16 @@ fn executor_views(shape: &GraphShape, extents: Option<&Extents>) -> [ViewSpec; 3
             .map(|n| format!("/nodes/{}/{series}", n.name))
             .collect()
     };
+    // The lanes' own range, never raised to a labelled step: their numbers are ranks, the
+    // legend names the nodes.
     let timeline = plot(
         "executor-timeline",
-        "executor timeline: a lane per node (by rank), raised while its tick holds a thread",
+        "executor timeline: a lane per node, raised while its tick holds a thread",
         each("executor_lane"),
-        Some((0.0, lanes - 1.0 + LANE_BUSY)),
-        extents,
-    );
+        None,
+        None,
+    )
+    .property("ScalarAxis", &axis(0.0, lanes - 1.0 + LANE_BUSY));
     let response = plot(
         "response",
         "response time (ms): a tick's release → its outputs published",
@@ -381,26 +433,30 @@ fn world_view() -> ViewSpec {
 }
 
 /// The node graph at the positions the recording gives it (no forces: it stays as laid
-/// out), nodes blue and topics amber.
+/// out), each node and topic in its colour.
 fn graph_view(shape: &GraphShape) -> ViewSpec {
     let (_, bounds) = graph_positions(shape);
-    ViewSpec::new("graph", "Graph", "node graph: nodes blue, topics amber")
-        .origin("/graph")
-        .property("VisualBounds2D", &bp::VisualBounds2D::new(bounds))
-        .property("ForceLink", &bp::ForceLink::new().with_enabled(false))
-        .property(
-            "ForceManyBody",
-            &bp::ForceManyBody::new().with_enabled(false),
-        )
-        .property(
-            "ForcePosition",
-            &bp::ForcePosition::new().with_enabled(false),
-        )
-        .property(
-            "ForceCollisionRadius",
-            &bp::ForceCollisionRadius::new().with_enabled(false),
-        )
-        .property("ForceCenter", &bp::ForceCenter::new().with_enabled(false))
+    ViewSpec::new(
+        "graph",
+        "Graph",
+        "node graph: node → /topic → node, coloured as in the plots",
+    )
+    .origin("/graph")
+    .property("VisualBounds2D", &bp::VisualBounds2D::new(bounds))
+    .property("ForceLink", &bp::ForceLink::new().with_enabled(false))
+    .property(
+        "ForceManyBody",
+        &bp::ForceManyBody::new().with_enabled(false),
+    )
+    .property(
+        "ForcePosition",
+        &bp::ForcePosition::new().with_enabled(false),
+    )
+    .property(
+        "ForceCollisionRadius",
+        &bp::ForceCollisionRadius::new().with_enabled(false),
+    )
+    .property("ForceCenter", &bp::ForceCenter::new().with_enabled(false))
 }
 
 /// A text log view's columns: the run's timeline, then (when `entity` is shown) the entity,

@@ -77,6 +77,9 @@ pub(crate) enum Item {
     Horizontal(Vec<(f32, Item)>),
     /// Children stacked, with relative heights.
     Vertical(Vec<(f32, Item)>),
+    /// Children as tabs, one shown at a time: each with its tab's title (a container's
+    /// display name; a view's tab shows the view's own), and the index of the one open.
+    Tabs(Vec<(String, Item)>, usize),
 }
 
 impl Item {
@@ -88,15 +91,22 @@ impl Item {
             Item::Horizontal(c) | Item::Vertical(c) => {
                 c.iter().flat_map(|(_, i)| i.views()).collect()
             }
+            Item::Tabs(c, _) => c.iter().flat_map(|(_, i)| i.views()).collect(),
         }
     }
 
     fn key(&self) -> String {
+        let join = |keys: Vec<String>| keys.join(",");
         match self {
             Item::View(v) => format!("view:{}", v.key),
             Item::Horizontal(c) | Item::Vertical(c) => {
-                let children: Vec<String> = c.iter().map(|(_, i)| i.key()).collect();
-                format!("container:{}", children.join(","))
+                format!(
+                    "container:{}",
+                    join(c.iter().map(|(_, i)| i.key()).collect())
+                )
+            }
+            Item::Tabs(c, _) => {
+                format!("tabs:{}", join(c.iter().map(|(_, i)| i.key()).collect()))
             }
         }
     }
@@ -138,7 +148,12 @@ fn uuid_string(key: &str) -> String {
     )
 }
 
-fn log_item(stream: &rerun::RecordingStream, item: &Item) -> Result<(), RecordingStreamError> {
+/// Log `item` (and its children); `name`, a container's display name (a tab's title).
+fn log_item(
+    stream: &rerun::RecordingStream,
+    item: &Item,
+    name: Option<&str>,
+) -> Result<(), RecordingStreamError> {
     match item {
         Item::View(v) => {
             let path = item.path();
@@ -165,9 +180,26 @@ fn log_item(stream: &rerun::RecordingStream, item: &Item) -> Result<(), Recordin
             }
             Ok(())
         }
+        Item::Tabs(children, active) => {
+            for (title, child) in children {
+                log_item(stream, child, Some(title))?;
+            }
+            let mut arch = bp::ContainerBlueprint::new(bpc::ContainerKind::Tabs).with_contents(
+                children
+                    .iter()
+                    .map(|(_, c)| bpc::IncludedContent(c.path().as_str().into())),
+            );
+            if let Some((_, open)) = children.get(*active) {
+                arch = arch.with_active_tab(open.path().as_str());
+            }
+            if let Some(name) = name {
+                arch = arch.with_display_name(name);
+            }
+            stream.log(item.path(), &arch)
+        }
         Item::Horizontal(children) | Item::Vertical(children) => {
             for (_, child) in children {
-                log_item(stream, child)?;
+                log_item(stream, child, None)?;
             }
             let (kind, shares) = match item {
                 Item::Horizontal(_) => (bpc::ContainerKind::Horizontal, true),
@@ -184,6 +216,9 @@ fn log_item(stream: &rerun::RecordingStream, item: &Item) -> Result<(), Recordin
             } else {
                 arch.with_row_shares(share_values.map(bpc::RowShare))
             };
+            if let Some(name) = name {
+                arch = arch.with_display_name(name);
+            }
             stream.log(item.path(), &arch)
         }
     }
@@ -240,7 +275,7 @@ fn blueprint_stream(
     let (stream, storage) = builder.memory()?;
     // The viewer identifies blueprint data by this timeline.
     stream.set_time_sequence("blueprint", 0);
-    log_item(&stream, root)?;
+    log_item(&stream, root, None)?;
     if let Some((start, end)) = time_axis_ns {
         stream.log(
             format!("view/{GLOBAL_VIEW_UUID}/TimeAxis"),

@@ -10,9 +10,11 @@
 //!   and `world/cart/pole` (rotated θ about +y) with `world/cart/pole/body` (capsule 1.0 m)
 //!   and, from a fall on, `world/cart/pole/fallen` (the pole drawn red, `…/label` along it, clear of the limits' labels:
 //!   `FELL at 0.84 s`);
-//! - `plant/pole_angle_rad`, `plant/fall_limit/{upper,lower}`, `plant/changes` (a mark at the
-//!   start and at every mid-run change), `plant/cart_pos_m`, `plant/rail_end/{right,left}`,
+//! - `plant/pole_angle_rad`, `plant/fall_limit/{upper,lower}`, `plant/fall` (the fall, at
+//!   the pole's angle), `plant/cart_pos_m`, `plant/rail_end/{right,left}`,
 //!   `plant/cart_limit/{right,left}`;
+//! - `marks/{change,trouble,recovery}`: a mark at each event of that kind, in a row under
+//!   the lower fall limit, each legend naming the times ([`events`]);
 //! - `action/published_N` (the force the policy asked for, at each message it published),
 //!   `action/applied_N` (the force the actuator applied at each step: the zero-order hold);
 //! - `latency/sense_to_act_ms`, `latency/control_period_ms` (the controller's period);
@@ -29,12 +31,14 @@
 //!   `nodes/<name>/not_alive` (times the node lost its liveliness) for each node with a
 //!   liveliness lease. A graph with the chapter's QoS logs none of them;
 //! - `graph`: the node graph as rerun `GraphNodes`/`GraphEdges`. Rerun's edges carry no
-//!   labels, so topics are drawn as nodes of their own, as ROS's rqt_graph does, in another
-//!   colour; positions run left to right from the sources; labels show the rates and depths
+//!   labels, so topics are drawn as nodes of their own, as ROS's rqt_graph does; each node
+//!   and topic in the colour its series have in every plot (a node's: [`style`]'s
+//!   `node_color`); positions run left to right from the sources (a chain longer than five
+//!   columns folded into bands, the second right to left); labels show the rates and depths
 //!   (a topic with QoS beyond the depth shows it in short, a part a line under its name:
 //!   `dl 30 ms zero`, `link 20%`; a Python node's label says `python`) and are re-logged
 //!   when they change;
-//! - `nodes/<name>/lateness_us`: per-tick lateness of each node (real clock only);
+//! - `nodes/<name>/lateness_ms`: per-tick lateness of each node (real clock only);
 //! - across processes (a launch's recording): `bus/<topic>/wire_{p50,p99}_us` for each topic
 //!   that crosses processes (its samples' time on the wire so far, as the subscriber's
 //!   process measured it), and each node's process on its node-graph label;
@@ -48,15 +52,17 @@
 //!   `node policy not alive (lease 60 ms)` (WARN) at the instant its lease ran out (its last
 //!   tick plus the lease) and `node policy alive again` (INFO) at the tick that brought it
 //!   back; `stopped by watchdog at … s: no message on /cmd for more than 30 ms` (WARN) at
-//!   the run's end when the actuator's deadline reaction stopped it. `summary`: the run's
-//!   summary as a markdown document; the settings are also recording properties.
+//!   the run's end when the actuator's deadline reaction stopped it; a launcher's lines at
+//!   the run time they state. `when`: every event in time order, the first trouble on
+//!   top, as a markdown document ([`events`]). `summary`: the run's summary as a markdown
+//!   document; the settings are also recording properties.
 //!
 //! The blueprint ([`blueprint`], written with [`layout`]'s archetypes) lays these out as a
-//! learner reads them: the cartpole, the
-//! node graph and the summary; the pole angle, the action, the cart position, the latency
-//! (and, under the real clock, the lateness); the bus counters (with the QoS counters in a
-//! view of their own when the graph has any) and the events. Every view
-//! names its entities explicitly, so none matches nothing. The layout is sent twice: when
+//! learner reads them, every plot tall enough to label its axes at 1280×720: the cartpole,
+//! the node graph and the summary; the chapter's core (the pole angle with the events'
+//! marks, the action, the cart position, the latency); `when` over tabs per concern (the
+//! bus; QoS and liveliness; executors; the real clock's lateness; processes; the events;
+//! the nodes' log). Every view names its entities explicitly, so none matches nothing. The layout is sent twice: when
 //! the graph is built (plots with no scale known up front fit themselves while the run goes)
 //! and at the end, each plot's y range then padded around every value its series took. The
 //! blueprint stores' ids derive from the settings too (virtual clock).
@@ -79,6 +85,7 @@
 //! `force`, and a symbolic link or non-regular file at the final name is refused.
 
 mod blueprint;
+mod events;
 mod files;
 mod layout;
 mod live;
@@ -88,6 +95,7 @@ mod style;
 pub mod watched;
 
 use blueprint::layout_for;
+use events::{EventList, Mark};
 pub use files::{check_output_path, default_lab_path, default_path};
 use files::{deterministic_id, graph_prefix, writing_beside_fails, Committer};
 use observer::{reference_lines, RecordingObserver, CHANGE_MARK_RAD};
@@ -147,6 +155,8 @@ struct ChunkBuffer {
     /// The smallest and largest value of every scalar series so far (kept across sends):
     /// the final layout fits each plot's y range to them.
     extents: Extents,
+    /// The events so far, for the `when` document and the marks' legends.
+    events: EventList,
 }
 
 /// (min, max) per scalar entity path.
@@ -188,6 +198,7 @@ impl ChunkBuffer {
             rows: BTreeMap::new(),
             scalars: BTreeMap::new(),
             extents: Extents::new(),
+            events: EventList::default(),
         }
     }
 
@@ -238,13 +249,13 @@ impl ChunkBuffer {
 }
 
 /// A series' name, colour and width (a static row), for a series that appears mid-run.
-fn series_style(buf: &mut ChunkBuffer, entity: &str, name: &str, color: (u8, u8, u8)) {
+fn series_style(buf: &mut ChunkBuffer, entity: &str, name: &str, color: Color) {
     buf.add(
         entity,
         &TimePoint::default(),
         &rerun::SeriesLines::new()
             .with_names([name])
-            .with_colors([rgb(color)])
+            .with_colors([color])
             .with_widths([2.0])
             .with_interpolation_mode(rerun::components::InterpolationMode::StepAfter),
     );
@@ -396,8 +407,8 @@ pub struct Recording {
     due_events: Arc<Mutex<VecDeque<DueEvent>>>,
 }
 
-/// An event known in advance: its run time, text and level.
-type DueEvent = (Nanos, String, &'static str);
+/// An event known in advance: its run time, text, level and mark.
+type DueEvent = (Nanos, String, &'static str, Mark);
 
 /// A topic's deadline misses as the events told them: (offered, requested) and the time
 /// of the last event.
@@ -435,11 +446,29 @@ const RAIL_HALF_THICKNESS_M: f64 = 0.01;
 fn graph_positions(shape: &GraphShape) -> (Vec<(String, [f32; 2])>, bpc::VisualBounds2D) {
     const DX: f32 = 150.0;
     const DY: f32 = 70.0;
+    let columns = shape.columns();
+    let n_cols = columns.iter().map(|(_, c)| c + 1).max().unwrap_or(1);
     let mut rows: BTreeMap<usize, usize> = BTreeMap::new();
+    for (_, col) in &columns {
+        *rows.entry(*col).or_insert(0) += 1;
+    }
+    let band_rows = rows.values().copied().max().unwrap_or(1);
+    // The chapter's five columns fit the panel in one band; a longer chain is folded into
+    // two or more bands, the second running right to left (its arrows stay short), so that
+    // its labels keep a readable size in the panel (seven boxes in a row made them tiny).
+    let wrap = if n_cols > 5 {
+        n_cols.div_ceil(2).max(4)
+    } else {
+        n_cols
+    };
+    let mut row_of: BTreeMap<usize, usize> = BTreeMap::new();
     let mut out = Vec::new();
-    for (id, col) in shape.columns() {
-        let row = rows.entry(col).or_insert(0);
-        out.push((id, [col as f32 * DX, *row as f32 * DY]));
+    for (id, col) in columns {
+        let row = row_of.entry(col).or_insert(0);
+        let (band, at) = (col / wrap, col % wrap);
+        let x = if band % 2 == 1 { wrap - 1 - at } else { at };
+        let y = (band * (band_rows + 1) + *row) as f32 * DY;
+        out.push((id, [x as f32 * DX, y]));
         *row += 1;
     }
     let max_x = out.iter().map(|(_, p)| p[0]).fold(0.0, f32::max);
@@ -468,6 +497,21 @@ fn chapter_settings(cfg: &RunConfig) -> Option<String> {
         hz_label(cfg.sensor_hz()?),
         cfg.queue_depth()?
     ))
+}
+
+/// The recording's name: graph, clock, the chain's control rate (`control`: `50`, or
+/// `50 → 5` for a run whose rate changed) and depth, seed.
+fn run_name(cfg: &RunConfig, control: Option<String>) -> String {
+    let chain = match (control, cfg.queue_depth()) {
+        (Some(hz), Some(depth)) => format!(", control {hz} Hz, depth {depth}"),
+        _ => String::new(),
+    };
+    format!(
+        "{}{} clock{chain}, seed {}",
+        graph_prefix(cfg),
+        cfg.clock,
+        cfg.seed
+    )
 }
 
 /// One-line settings of a run, for the start event and the summary.
@@ -649,16 +693,7 @@ impl Recording {
         for (k, v) in settings.iter().chain(graph.iter()) {
             values = values.with_component::<rerun::components::Text>(*k, [v.as_str()]);
         }
-        let chain = match (cfg.control_hz(), cfg.queue_depth()) {
-            (Some(hz), Some(depth)) => format!(", control {} Hz, depth {depth}", hz_label(hz)),
-            _ => String::new(),
-        };
-        let name = format!(
-            "{}{} clock{chain}, seed {}",
-            graph_prefix(cfg),
-            cfg.clock,
-            cfg.seed
-        );
+        let name = run_name(cfg, cfg.control_hz().map(hz_label));
         let properties = rerun::EntityPath::properties();
         let fixed = TimePoint::default();
         let mut buf = self.lock();
@@ -683,16 +718,17 @@ impl Recording {
                 settings_line(cfg)
             )),
         );
-        let start = buf.at(Nanos::ZERO, 0);
-        buf.add(
-            "events",
-            &start,
-            &rerun::TextLog::new(format!(
+        buf.event(
+            Nanos::ZERO,
+            0,
+            None,
+            &format!(
                 "start: {}",
                 chapter_settings(cfg).unwrap_or_else(|| cfg.graph.to_string())
-            ))
-            .with_level(rerun::components::TextLogLevel::INFO),
+            ),
+            rerun::components::TextLogLevel::INFO,
         );
+        buf.when_document(false);
         // The faults the run injects (`--stall`, `--kill`), where they happen: a stalled
         // node's silence is otherwise recorded nowhere but in its not-alive count. Logged
         // when the run reaches them ([`Recording::log_due_events`]).
@@ -714,16 +750,17 @@ impl Recording {
                     None,
                 ),
             };
-            due.push((f.at, text, warn));
+            due.push((f.at, text, warn, Mark::Trouble));
             if let Some(end) = end {
                 due.push((
                     end,
                     format!("node {} resumes after its stall", f.node),
                     rerun::components::TextLogLevel::INFO,
+                    Mark::Recovery,
                 ));
             }
         }
-        due.sort_by_key(|(t, _, _)| *t);
+        due.sort_by_key(|(t, _, _, _)| *t);
         *self.due_events.lock().unwrap_or_else(|e| e.into_inner()) = due.into();
         buf.send(&self.rec);
     }
@@ -732,10 +769,9 @@ impl Recording {
     /// on control step `step`, the step that reached them).
     fn log_due_events(&self, buf: &mut ChunkBuffer, now: Nanos, step: u64) {
         let mut due = self.due_events.lock().unwrap_or_else(|e| e.into_inner());
-        while due.front().is_some_and(|(t, _, _)| *t <= now) {
-            if let Some((t, text, level)) = due.pop_front() {
-                let at = buf.at(t, step);
-                buf.add("events", &at, &rerun::TextLog::new(text).with_level(level));
+        while due.front().is_some_and(|(t, _, _, _)| *t <= now) {
+            if let Some((t, text, level, mark)) = due.pop_front() {
+                buf.event(t, step, Some(mark), &text, level);
             }
         }
     }
@@ -824,15 +860,6 @@ impl Recording {
                 ),
             );
         }
-        buf.add(
-            "plant/changes",
-            &fixed,
-            &rerun::SeriesPoints::new()
-                .with_names(["start, changes (events)"])
-                .with_colors([Color::from_rgb(240, 240, 240)])
-                .with_markers([rerun::components::MarkerShape::Down])
-                .with_marker_sizes([5.0]),
-        );
         buf.add("plant/cart_pos_m", &fixed, &lines("cart", ANGLE_COLOR, 2.0));
         for side in ["right", "left"] {
             buf.add(
@@ -867,10 +894,12 @@ impl Recording {
             &lines("applied (actuator, held)", FORCE_COLOR, 5.0)
                 .with_interpolation_mode(rerun::components::InterpolationMode::StepAfter),
         );
+        // A latency holds from one actuator step to the next: steps, not slopes.
         buf.add(
             "latency/sense_to_act_ms",
             &fixed,
-            &lines("latency", ANGLE_COLOR, 2.0),
+            &lines("latency", ANGLE_COLOR, 2.0)
+                .with_interpolation_mode(rerun::components::InterpolationMode::StepAfter),
         );
         let controller = shape.controller.clone().unwrap_or_default();
         buf.add(
@@ -894,15 +923,40 @@ impl Recording {
         }
         if self.clock == ClockKind::Real {
             // Noisy series that seldom coincide: one width (layered, the spikes hid all).
-            for (i, node) in shape.nodes.iter().enumerate() {
+            for node in &shape.nodes {
                 buf.add(
-                    &format!("nodes/{}/lateness_us", node.name),
+                    &format!("nodes/{}/lateness_ms", node.name),
                     &fixed,
                     &rerun::SeriesLines::new()
                         .with_names([node.name.as_str()])
-                        .with_colors([palette(i)])
+                        .with_colors([node_color(&node.name)])
                         .with_widths([1.5]),
                 );
+            }
+        }
+        if measures_executors(&self.cfg) {
+            // A node's executor series in its colour, named by it; steps, as they hold.
+            // Skipped-tick totals of two nodes often coincide (one thread held both): each
+            // narrower than the one drawn before it, so both colours show.
+            let names: Vec<String> = shape.nodes.iter().map(|n| n.name.clone()).collect();
+            for (node, layered) in shape.nodes.iter().zip(layered_widths(&names)) {
+                for (series, width) in [
+                    ("executor_lane", 2.0),
+                    ("response_ms", 1.5),
+                    ("skipped_ticks", layered),
+                ] {
+                    buf.add(
+                        &format!("nodes/{}/{series}", node.name),
+                        &fixed,
+                        &rerun::SeriesLines::new()
+                            .with_names([node.name.as_str()])
+                            .with_colors([node_color(&node.name)])
+                            .with_widths([width])
+                            .with_interpolation_mode(
+                                rerun::components::InterpolationMode::StepAfter,
+                            ),
+                    );
+                }
             }
         }
         buf.send(&self.rec);
@@ -938,30 +992,28 @@ impl Recording {
         buf.extents.insert(LOG_MARK.to_string(), (0.0, 0.0));
     }
 
-    /// Log an event line at run time `t` (and the latest control step).
+    /// Log an event line at run time `t` (and the latest control step), at `level`
+    /// (`"INFO"`, `"WARN"`, `"ERROR"`): a warning or an error is marked as trouble on the
+    /// pole-angle plot; a return (`rejoined`, `heard again`, `alive again`) as a recovery.
     pub fn event(&self, t: Nanos, text: &str, level: &str) {
+        self.event_marked(t, events::mark_of_line(text, level), text, level);
+    }
+
+    /// Log an event line with its mark (none: listed, not marked).
+    fn event_marked(&self, t: Nanos, mark: Option<Mark>, text: &str, level: &str) {
         let step = self.last_step.load(std::sync::atomic::Ordering::Relaxed);
-        let mut buf = self.lock();
-        let time = buf.at(t, step);
-        buf.add(
-            "events",
-            &time,
-            &rerun::TextLog::new(text).with_level(level),
-        );
+        self.lock().event(t, step, mark, text, level);
     }
 
     /// Log a mid-run change made from outside the graph (a brain swap) at run time `t`: an
     /// event, and a mark on the pole-angle plot.
     pub fn change(&self, t: Nanos, text: &str) {
-        let step = self.last_step.load(std::sync::atomic::Ordering::Relaxed);
-        let mut buf = self.lock();
-        let time = buf.at(t, step);
-        buf.add(
-            "events",
-            &time,
-            &rerun::TextLog::new(text).with_level(rerun::components::TextLogLevel::INFO),
+        self.event_marked(
+            t,
+            Some(Mark::Change),
+            text,
+            rerun::components::TextLogLevel::INFO,
         );
-        buf.scalar("plant/changes", t, step, CHANGE_MARK_RAD);
     }
 
     /// An observer to hand to the graph: logs every actuator tick. When it is attached to
@@ -1023,7 +1075,10 @@ impl Recording {
         let step = self.last_step.load(std::sync::atomic::Ordering::Relaxed);
         let entity = bus_name(topic);
         let mut buf = self.lock();
-        for (stat, value, width) in [("p50", p50_us, 2.5), ("p99", p99_us, 1.0)] {
+        let hue = topic_color(topic);
+        for (stat, value, width, color) in
+            [("p50", p50_us, 2.5, hue), ("p99", p99_us, 1.5, dimmed(hue))]
+        {
             let path = format!("bus/{entity}/wire_{stat}_us");
             if !buf.extents.contains_key(&path) {
                 buf.add(
@@ -1031,7 +1086,7 @@ impl Recording {
                     &TimePoint::default(),
                     &rerun::SeriesLines::new()
                         .with_names([format!("{topic} {stat}")])
-                        .with_colors([topic_color(topic)])
+                        .with_colors([color])
                         .with_widths([width]),
                 );
             }
@@ -1041,14 +1096,14 @@ impl Recording {
 
     /// Log one node tick's lateness (real clock), on the node's own thread.
     pub fn node_tick(&self, node: &str, now: Nanos, lateness: Nanos) {
-        let entity = format!("nodes/{node}/lateness_us");
-        let us = lateness.as_micros_f64();
-        widen(&mut self.lock().extents, &entity, us);
+        let entity = format!("nodes/{node}/lateness_ms");
+        let ms = lateness.as_millis_f64();
+        widen(&mut self.lock().extents, &entity, ms);
         self.rec.set_time(
             timeline_name(self.clock),
             std::time::Duration::from_nanos(now.0),
         );
-        let _ = self.rec.log(entity, &rerun::Scalars::single(us));
+        let _ = self.rec.log(entity, &rerun::Scalars::single(ms));
     }
 
     /// Log one tick as its executor ran it (virtual clock: the scheduler's span; real clock:
@@ -1124,12 +1179,12 @@ impl Recording {
                 continue;
             };
             if now.0 > so || now.1 > sr {
-                let at = buf.at(end, metrics.steps);
-                buf.add(
-                    "events",
-                    &at,
-                    &rerun::TextLog::new(deadline_line(name, (so, sr), now, ""))
-                        .with_level(rerun::components::TextLogLevel::WARN),
+                buf.event(
+                    end,
+                    metrics.steps,
+                    Some(Mark::Trouble),
+                    &deadline_line(name, (so, sr), now, ""),
+                    rerun::components::TextLogLevel::WARN,
                 );
             }
         }
@@ -1163,8 +1218,10 @@ impl Recording {
         // Each node whose timer skipped periods, in all: the rate it achieved of its own.
         for (name, n) in &metrics.nodes {
             if let Some(x) = n.exec.as_ref().filter(|x| x.skipped_ticks > 0) {
-                self.event(
+                // A total (its first skip was marked where it happened).
+                self.event_marked(
                     end.at,
+                    None,
                     &format!(
                         "node {name} skipped {} tick(s) in all (ticked {} times at {} Hz set): its executor's thread was busy",
                         x.skipped_ticks, n.ticks, n.rate_hz
@@ -1173,8 +1230,9 @@ impl Recording {
                 );
             }
         }
-        self.event(
+        self.event_marked(
             end.at,
+            (level == rerun::components::TextLogLevel::ERROR).then_some(Mark::Trouble),
             &format!(
                 "end: {reason}, {}",
                 crate::metrics::counted(metrics.steps, "actuator step")
@@ -1240,6 +1298,20 @@ impl Recording {
                 &TimePoint::default(),
                 &rerun::TextDocument::from_markdown(doc),
             );
+            buf.when_document(true);
+            // A run whose control rate changed (a lab session) says so in its name.
+            if let (Some(a), Some(b)) = (metrics.control_hz, metrics.control_hz_end) {
+                if a != b {
+                    buf.add(
+                        &rerun::EntityPath::properties().to_string(),
+                        &TimePoint::default(),
+                        &rerun::RecordingInfo::update_fields().with_name(run_name(
+                            &self.cfg,
+                            Some(format!("{} → {}", hz_label(a), hz_label(b))),
+                        )),
+                    );
+                }
+            }
             reference_lines(&mut buf, end.at, metrics.steps);
         }
         let shape = self.shape.lock().unwrap_or_else(|e| e.into_inner()).clone();
@@ -1293,8 +1365,10 @@ mod tests {
         assert_eq!(label_top(0.8), 1.0);
         assert_eq!(label_top(2400.0), 2400.0);
         assert_eq!(label_top(60.0), 100.0);
+        // A latency of 50 ms padded is six steps of 10, "0" alone at 1280x720: 0–100.
+        assert_eq!(label_top(50.0), 100.0);
         // Steps of the power of ten already label it: kept.
-        for hi in [300.0, 50.0, 52.0, 500.0, 1.0, 100.0, 5.0] {
+        for hi in [300.0, 43.0, 44.0, 400.0, 1.0, 100.0, 4.0] {
             assert_eq!(label_top(hi), hi);
         }
         // Nothing to label: as is.
@@ -1363,16 +1437,16 @@ mod tests {
                 .map(|v| v.title_and_queries())
                 .find(|(t, _)| t.contains("lateness"));
             assert_eq!(lateness.is_some(), clock == ClockKind::Real);
-            // Four plots in the middle column leave the cart's room for the rails' ends;
-            // a fifth (the real clock's lateness) leaves it the run's ends alone, a range
-            // the viewer can label.
+            // The middle column is always the chapter's four plots (the lateness has a
+            // tab of its own): the cart's plot has room for the rails' ends under both
+            // clocks, so they are never recorded unseen.
             let cart = views
                 .iter()
                 .map(|v| v.title_and_queries())
                 .find(|(t, _)| t.starts_with("cart position"))
                 .unwrap();
-            let rails = cart.1.iter().any(|q| q.contains("rail_end"));
-            assert_eq!(rails, clock == ClockKind::Virtual, "{:?}", cart.1);
+            let rails = cart.1.iter().filter(|q| q.contains("rail_end")).count();
+            assert_eq!(rails, 2, "{:?}", cart.1);
             assert!(cart.1.iter().any(|q| q == "/plant/cart_limit/right"));
         }
     }

@@ -94,7 +94,7 @@ impl RecordingObserver {
                 if let Some(p) = &n.process {
                     lines.push(format!("process {p}"));
                 }
-                (lines.join("\n"), NODE_COLOR)
+                (lines.join("\n"), node_color(id))
             } else {
                 let topic = shape.topics.iter().find(|t| t.name == id);
                 let depth = topic.map_or(0, |t| (t.stats)().depth);
@@ -111,19 +111,14 @@ impl RecordingObserver {
                                 .into_iter()
                                 .filter(|p| !(p.starts_with("KL") && p.ends_with(" latest"))),
                         );
-                        (lines.join("\n"), TOPIC_COLOR)
+                        (lines.join("\n"), topic_color(id))
                     }
-                    None => (format!("{id} · depth {depth}"), TOPIC_COLOR),
+                    None => (format!("{id} · depth {depth}"), topic_color(id)),
                 }
             }
         };
-        let (labels, colors): (Vec<String>, Vec<Color>) = positions
-            .iter()
-            .map(|(id, _)| {
-                let (l, c) = label(id);
-                (l, rgb(c))
-            })
-            .unzip();
+        let (labels, colors): (Vec<String>, Vec<Color>) =
+            positions.iter().map(|(id, _)| label(id)).unzip();
         buf.add(
             "graph",
             time,
@@ -248,7 +243,6 @@ impl RecordingObserver {
     /// counter rose, each leased node's not-alive count, and an event when a node's
     /// liveliness changed.
     fn qos_rows(&mut self, buf: &mut ChunkBuffer, s: &StepRecord) {
-        let time = buf.at(s.t, s.step);
         let n = self.shape.topics.len();
         self.qos_logged.resize(n, Vec::new());
         self.deadline_seen.resize(n, (0, 0));
@@ -271,7 +265,7 @@ impl RecordingObserver {
                         buf,
                         &qos_entity(topic, c),
                         &format!("{} {}", topic.name, counter_words(c)),
-                        color,
+                        rgb(color),
                     );
                 }
             }
@@ -295,16 +289,12 @@ impl RecordingObserver {
                 };
                 let quiet = last.is_none_or(|at| s.t.saturating_sub(at) > DEADLINE_EVENT_GAP);
                 if quiet {
-                    buf.add(
-                        "events",
-                        &time,
-                        &rerun::TextLog::new(deadline_line(
-                            &topic.name,
-                            (so, sr),
-                            (offered, requested),
-                            "",
-                        ))
-                        .with_level(rerun::components::TextLogLevel::WARN),
+                    buf.event(
+                        s.t,
+                        s.step,
+                        Some(Mark::Trouble),
+                        &deadline_line(&topic.name, (so, sr), (offered, requested), ""),
+                        rerun::components::TextLogLevel::WARN,
                     );
                     said.insert(topic.name.clone(), (offered, requested, s.t));
                 }
@@ -326,7 +316,7 @@ impl RecordingObserver {
                         buf,
                         &entity,
                         &format!("{} not alive (times)", node.name),
-                        NOT_ALIVE_COLOR,
+                        node_color(&node.name),
                     );
                     LiveSeen {
                         alive: true,
@@ -355,22 +345,22 @@ impl RecordingObserver {
                 };
                 let lapsed_at = before.saturating_add(lease.unwrap_or(Nanos::ZERO)).min(s.t);
                 let lease_text = lease.map_or(String::new(), |l| format!(" (lease {l})"));
-                let at = buf.at(lapsed_at, s.step);
-                buf.add(
-                    "events",
-                    &at,
-                    &rerun::TextLog::new(format!("node {} not alive{lease_text}", node.name))
-                        .with_level(rerun::components::TextLogLevel::WARN),
+                buf.event(
+                    lapsed_at,
+                    s.step,
+                    Some(Mark::Trouble),
+                    &format!("node {} not alive{lease_text}", node.name),
+                    rerun::components::TextLogLevel::WARN,
                 );
             }
             let came_back = status.alive && (!seen.alive || status.not_alive > seen.not_alive);
             if came_back {
-                let at = buf.at(status.last_asserted, s.step);
-                buf.add(
-                    "events",
-                    &at,
-                    &rerun::TextLog::new(format!("node {} alive again", node.name))
-                        .with_level(rerun::components::TextLogLevel::INFO),
+                buf.event(
+                    status.last_asserted,
+                    s.step,
+                    Some(Mark::Recovery),
+                    &format!("node {} alive again", node.name),
+                    rerun::components::TextLogLevel::INFO,
                 );
             }
             self.live_seen[i] = Some(LiveSeen {
@@ -401,17 +391,16 @@ impl StepObserver for RecordingObserver {
         let time = buf.at(s.t, s.step);
         let state = self.shape.state();
         if self.last_state.as_ref() != Some(&state) {
-            match &self.last_state {
-                Some(old) => {
-                    buf.add(
-                        "events",
-                        &time,
-                        &rerun::TextLog::new(self.describe_change(old, &state))
-                            .with_level(rerun::components::TextLogLevel::INFO),
-                    );
-                    buf.scalar("plant/changes", s.t, s.step, CHANGE_MARK_RAD);
-                }
-                None => buf.scalar("plant/changes", Nanos::ZERO, 0, CHANGE_MARK_RAD),
+            // A change mid-run (the first state is the start's, an event of its own).
+            if let Some(old) = &self.last_state {
+                let text = self.describe_change(old, &state);
+                buf.event(
+                    s.t,
+                    s.step,
+                    Some(Mark::Change),
+                    &text,
+                    rerun::components::TextLogLevel::INFO,
+                );
             }
             self.graph_rows(&mut buf, &time);
             self.last_state = Some(state);
@@ -479,16 +468,7 @@ fn world_rows(buf: &mut ChunkBuffer, time: &TimePoint, s: &StepRecord, force: f6
 /// from then on, and a warning among the events.
 fn fall_rows(buf: &mut ChunkBuffer, time: &TimePoint, s: &StepRecord) {
     // A marker on the angle plot where the pole went past its limit.
-    buf.add(
-        "plant/fall",
-        &TimePoint::default(),
-        &rerun::SeriesPoints::new()
-            .with_names(["the fall"])
-            .with_colors([rgb(LIMIT_COLOR)])
-            .with_marker_sizes([8.0])
-            .with_markers([rerun::components::MarkerShape::Cross]),
-    );
-    buf.scalar("plant/fall", s.t, s.step, s.pole_angle);
+    buf.scalar(Mark::Fall.entity(), s.t, s.step, s.pole_angle);
     // …and in 3D: from the fall on, the pole is drawn red and labelled.
     buf.add(
         "world/cart/pole/fallen",
@@ -508,9 +488,11 @@ fn fall_rows(buf: &mut ChunkBuffer, time: &TimePoint, s: &StepRecord) {
         s.t.as_secs_f64(),
         s.pole_angle
     );
-    buf.add(
-        "events",
-        time,
-        &rerun::TextLog::new(text).with_level(rerun::components::TextLogLevel::WARN),
+    buf.event(
+        s.t,
+        s.step,
+        Some(Mark::Fall),
+        &text,
+        rerun::components::TextLogLevel::WARN,
     );
 }

@@ -15,7 +15,7 @@ use std::sync::Arc;
 /// One node of the graph as the recording draws it.
 #[derive(Clone, Debug)]
 pub struct NodeShape {
-    /// The node's name (as in `nodes/<name>/lateness_us`).
+    /// The node's name (as in `nodes/<name>/lateness_ms`).
     pub name: String,
     /// Its rate, read live (a lab session changes it mid-run).
     pub rate: Rate,

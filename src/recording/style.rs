@@ -24,13 +24,60 @@ pub(super) fn palette(i: usize) -> Color {
 /// (FNV-1a), so a topic keeps its colour when the graph around it changes.
 pub(super) fn topic_color(name: &str) -> Color {
     const FIXED: [&str; 6] = ["/obs", "/action", "/meas", "/state", "/cmd", "/force"];
-    let i = FIXED.iter().position(|t| *t == name).unwrap_or_else(|| {
-        let hash = name.bytes().fold(0xcbf2_9ce4_8422_2325_u64, |h, b| {
-            (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3)
-        });
-        (hash % PALETTE.len() as u64) as usize
-    });
+    let i = FIXED
+        .iter()
+        .position(|t| *t == name)
+        .unwrap_or_else(|| (fnv1a(name) % PALETTE.len() as u64) as usize);
     palette(i)
+}
+
+/// Colours for nodes (readable on rerun's dark background, apart from one another and
+/// from the pole angle's blue): a node has one in every view (its executor lane, response
+/// times, skipped ticks, lateness, liveliness, its box in the node graph).
+pub(super) const NODE_PALETTE: [(u8, u8, u8); 8] = [
+    (255, 120, 95),  // coral
+    (80, 205, 175),  // teal
+    (175, 140, 255), // lilac
+    (235, 190, 90),  // sand
+    (160, 215, 80),  // lime
+    (255, 130, 200), // rose
+    (120, 185, 255), // sky
+    (215, 215, 215), // silver
+];
+
+/// A node's colour, the same in every graph: the shipped graphs' nodes have one each
+/// (`sensor` sky, `policy` coral, `actuator` teal, …), any other node a palette entry chosen
+/// by its name (FNV-1a), so a node keeps its colour when the graph around it changes.
+pub(super) fn node_color(name: &str) -> Color {
+    const FIXED: [&str; 7] = [
+        "policy",
+        "actuator",
+        "estimator",
+        "safety",
+        "monitor",
+        "controller",
+        "sensor",
+    ];
+    let i = FIXED
+        .iter()
+        .position(|n| *n == name)
+        .unwrap_or_else(|| (fnv1a(name) % NODE_PALETTE.len() as u64) as usize);
+    let (r, g, b) = NODE_PALETTE[i];
+    Color::from_rgb(r, g, b)
+}
+
+fn fnv1a(name: &str) -> u64 {
+    name.bytes().fold(0xcbf2_9ce4_8422_2325_u64, |h, b| {
+        (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3)
+    })
+}
+
+/// A dimmer shade of `c` (two thirds of each channel): a second statistic of one topic
+/// (p99 beside p50) in the topic's hue, told apart.
+pub(super) fn dimmed(c: Color) -> Color {
+    let [r, g, b, _] = c.to_array();
+    let d = |x: u8| (u16::from(x) * 2 / 3) as u8;
+    Color::from_rgb(d(r), d(g), d(b))
 }
 
 /// Line widths (px) for series that can coincide (every topic's published count, two
@@ -55,8 +102,6 @@ pub(super) const ANGLE_COLOR: (u8, u8, u8) = (90, 160, 255);
 pub(super) const LIMIT_COLOR: (u8, u8, u8) = (235, 80, 80);
 pub(super) const NEUTRAL_COLOR: (u8, u8, u8) = (150, 150, 150);
 pub(super) const FORCE_COLOR: (u8, u8, u8) = (120, 220, 120);
-pub(super) const NODE_COLOR: (u8, u8, u8) = (110, 170, 255);
-pub(super) const TOPIC_COLOR: (u8, u8, u8) = (245, 170, 60);
 
 /// One colour per QoS counter (in [`QosCounter::ALL`]'s order), and for a node's
 /// not-alive count: a counter keeps its colour whichever topic it is on.
@@ -68,7 +113,6 @@ pub(super) const QOS_COLORS: [(u8, u8, u8); 6] = [
     (245, 150, 50),  // offered deadline missed
     (235, 80, 80),   // requested deadline missed
 ];
-pub(super) const NOT_ALIVE_COLOR: (u8, u8, u8) = (110, 170, 255);
 
 /// A QoS counter as a series name says it: `requested deadline missed`.
 pub(super) fn counter_words(c: QosCounter) -> String {

@@ -93,7 +93,12 @@ pub fn record(
                     }
                 }
             }
-            Telemetry::Applied(line) => rec.event(now, &line, launcher_line_level(&line)),
+            // A launcher's line says when it happened (`at t=5.57s`): placed there.
+            Telemetry::Applied(line) => rec.event(
+                super::events::stated_time(&line).unwrap_or(now),
+                &line,
+                launcher_line_level(&line),
+            ),
             Telemetry::Error(line) => rec.event(now, &line, "WARN"),
             Telemetry::Status {
                 now: seen,

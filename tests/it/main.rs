@@ -57,6 +57,7 @@ mod distributed;
 mod e2e_pty;
 mod executors;
 mod exercises;
+mod glance;
 mod graphs;
 mod hardening;
 mod hostile;

@@ -14,7 +14,11 @@ use re_log_types::{
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
-fn record(path: &Path, cfg: &RunConfig, stop: Option<StopFlag>) -> ratelab::metrics::Metrics {
+pub(crate) fn record(
+    path: &Path,
+    cfg: &RunConfig,
+    stop: Option<StopFlag>,
+) -> ratelab::metrics::Metrics {
     record_with(path, cfg, stop, Vec::new())
 }
 
@@ -125,7 +129,7 @@ fn angle_rows(chunks: &[Chunk]) -> u64 {
         .sum()
 }
 
-fn virtual_cfg() -> RunConfig {
+pub(crate) fn virtual_cfg() -> RunConfig {
     RunConfig {
         clock: ClockKind::Virtual,
         ..RunConfig::default()
@@ -157,7 +161,7 @@ fn fresh_recording_has_the_entities_timelines_and_one_angle_row_per_step() {
         "/plant/pole_angle_rad",
         "/plant/fall_limit/upper",
         "/plant/cart_pos_m",
-        "/plant/changes",
+        "/when",
         "/action/published_N",
         "/action/applied_N",
         "/latency/control_period_ms",
@@ -393,7 +397,7 @@ fn last<C: rerun::Component + Clone>(
 }
 
 /// The chunks of the blueprint the `.rrd` at `path` activates last.
-fn active_blueprint(path: &Path) -> Vec<Chunk> {
+pub(crate) fn active_blueprint(path: &Path) -> Vec<Chunk> {
     let file = std::io::BufReader::new(std::fs::File::open(path).unwrap());
     let mut stores: BTreeMap<String, Vec<Chunk>> = BTreeMap::new();
     let mut active = None;
@@ -557,6 +561,8 @@ pub(crate) fn check_views(path: &Path) -> Vec<BlueprintView> {
     let views = blueprint_views(path);
     let problems = unmatched(&views, &entity_components(path));
     assert!(problems.is_empty(), "{problems:#?}");
+    let queries: Vec<String> = views.iter().flat_map(|v| v.queries.clone()).collect();
+    crate::glance::check_at_a_glance(path, &queries);
     let all = chunks(path);
     // Every plot's time axis is linked to the one range, which shows the whole run with room
     // at both ends, so the last label reads whole ("+10s", not "+1").
@@ -632,7 +638,7 @@ fn every_view_matches_data_in_a_virtual_run_and_a_fall() {
             "no {class} view: {views:#?}"
         );
     }
-    assert_eq!(views.len(), 11, "{views:#?}");
+    assert_eq!(views.len(), 12, "{views:#?}");
     assert!(
         !views.iter().any(|v| v.name.contains("lateness")),
         "no lateness under the virtual clock"
@@ -704,7 +710,7 @@ fn an_executors_run_records_its_timeline_response_times_and_skipped_ticks() {
     };
     let m = record(&path, &cfg, None);
     let views = check_views(&path);
-    assert_eq!(views.len(), 14, "the chapter's 11 and three: {views:#?}");
+    assert_eq!(views.len(), 15, "the chapter's 12 and three: {views:#?}");
     for (title, series) in [
         ("executor timeline", "executor_lane"),
         ("response time", "response_ms"),
@@ -779,8 +785,8 @@ fn every_view_matches_data_in_a_real_clock_run() {
     let views = check_views(&path);
     assert_eq!(
         views.len(),
-        12,
-        "the virtual run's 11 and lateness: {views:#?}"
+        13,
+        "the virtual run's 12 and lateness: {views:#?}"
     );
     let lateness = views
         .iter()
@@ -867,12 +873,12 @@ fn mid_run_changes_are_events_graph_labels_and_marks() {
             "{needle} in {events:#?}"
         );
     }
-    let marks: usize = of("/plant/changes")
+    let marks: usize = of("/marks/change")
         .into_iter()
         .filter(|c| !c.is_static())
         .map(|c| c.num_rows())
         .sum();
-    assert_eq!(marks, 3, "the start and two changes");
+    assert_eq!(marks, 2, "the two changes");
     let labels = graph_labels(&all);
     assert!(labels.iter().any(|l| l == "/obs · depth 5"), "{labels:?}");
     assert!(labels.iter().any(|l| l == "policy · 10 Hz"), "{labels:?}");
@@ -955,10 +961,10 @@ fn a_brain_swap_is_an_event_and_a_mark() {
     );
     let marks: Vec<i64> = all
         .iter()
-        .filter(|c| !c.is_static() && c.entity_path().to_string() == "/plant/changes")
+        .filter(|c| !c.is_static() && c.entity_path().to_string() == "/marks/change")
         .flat_map(|c| times_on(c, "control_step"))
         .collect();
-    assert_eq!(marks, [0, 40], "the start and the swap");
+    assert_eq!(marks, [40], "the swap");
     check_views(&path);
 }
 
@@ -1177,8 +1183,8 @@ fn every_view_matches_data_in_a_qos_run_and_the_counters_have_a_view() {
     let views = check_views(&path);
     assert_eq!(
         views.len(),
-        13,
-        "the chapter's 11, the QoS counters and liveliness: {views:#?}"
+        14,
+        "the chapter's 12, the QoS counters and liveliness: {views:#?}"
     );
     let qos = views
         .iter()

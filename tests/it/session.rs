@@ -892,3 +892,58 @@ fn restarting_at_a_rate_reached_through_another_gives_the_headless_result() {
     );
     assert_eq!((live.latency_p50_ms, live.latency_max_ms), (40.0, 80.0));
 }
+
+/// A lab session's recording (the engine's, with a rate and a depth changed mid-run, as keys
+/// change them) reads at a glance as a headless run's does, its changes marked and listed
+/// at their times, and its name says the rate it ended at (`control 50 → 10 Hz`).
+#[test]
+fn a_lab_session_s_recording_reads_at_a_glance_and_is_named_for_its_rates() {
+    let dir = tempfile::tempdir().unwrap();
+    let rrd = dir.path().join("lab.rrd");
+    let (ctl_tx, ctl_rx) = unbounded();
+    let (tel_tx, tel_rx) = unbounded::<Telemetry>();
+    let mut s = settings(
+        ClockKind::Virtual,
+        0,
+        true,
+        Speed::Max,
+        &dir.path().join("s.json"),
+    );
+    s.record = Some(rrd.clone());
+    let engine = Engine::new(s, ctl_rx, tel_tx).spawn();
+    let mut script = steps(50);
+    script.push(Control::Apply(Command::SetQueueDepth { depth: 5 }));
+    script.extend(steps(50));
+    script.push(Control::Apply(Command::SetControlHz { hz: 10.0 }));
+    script.extend(steps(50));
+    script.push(Control::Quit);
+    for c in script {
+        ctl_tx.send(c).unwrap();
+    }
+    engine.join().unwrap();
+    drop(tel_rx);
+    crate::recording::check_views(&rrd);
+    let all = crate::recording::chunks(&rrd);
+    let marks: usize = all
+        .iter()
+        .filter(|c| !c.is_static() && c.entity_path().to_string() == "/marks/change")
+        .map(|c| c.num_rows())
+        .sum();
+    assert_eq!(marks, 2, "the depth and the rate");
+    let names: Vec<String> = all
+        .iter()
+        .filter(|c| c.entity_path() == &rerun::EntityPath::properties())
+        .flat_map(|c| {
+            c.iter_slices::<String>(rerun::RecordingInfo::descriptor_name().component)
+                .flatten()
+                .map(|s| s.as_str().to_string())
+                .collect::<Vec<_>>()
+        })
+        .collect();
+    assert!(
+        names
+            .last()
+            .is_some_and(|n| n.contains("control 50 → 10 Hz")),
+        "{names:?}"
+    );
+}
