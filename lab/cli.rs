@@ -59,6 +59,9 @@ pub enum Command {
     /// Print the message types this program knows, built in and registered: the Python
     /// class, the fields with their units, the ROS 2 type, as a Markdown table.
     Msgs,
+    /// Read any rmw_zenoh graph as ros2cli does, without ROS 2: `node list|info`,
+    /// `topic list|info|echo|hz` (docs/ros2.md).
+    Ros2(crate::ros2::Ros2Args),
 }
 
 /// `ratelab export`.

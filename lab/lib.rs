@@ -10,6 +10,7 @@ mod exercise;
 mod headless;
 mod launch;
 mod rendezvous;
+mod ros2;
 mod sweep;
 mod tui;
 
@@ -337,6 +338,7 @@ pub fn main_with(register: impl FnOnce()) -> ExitCode {
             print!("{}", ratelab::msg::types_table());
             Ok(())
         }
+        Some(Command::Ros2(args)) => ros2::run(args, stop),
         None => {
             if !cli.headless && std::io::stdout().is_terminal() && std::io::stdin().is_terminal() {
                 lab(&cli.run, stop)

@@ -16,7 +16,9 @@
 //!   rmw_zenoh's 33-byte attachment, and `/clock`;
 //! - [`external`]: nodes of `kind = "external"`, which a ROS 2 node fills: waiting for
 //!   their tokens, checking their types, hearing what they publish, and the lockstep's
-//!   time contract under the virtual clock.
+//!   time contract under the virtual clock;
+//! - [`inspect`] and [`echo`]: `ratelab ros2`, any rmw_zenoh graph read from the other side
+//!   as ros2cli reads it (nodes, topics, QoS, messages as YAML, rates).
 //!
 //! The format is rmw_zenoh's `docs/design.md`; its keys, tokens and QoS strings come from
 //! ZettaScale's `hiroz-protocol`, its hashes from `hiroz-schema`, its CDR from `hiroz-cdr`.
@@ -32,7 +34,9 @@ use ratelab_runtime::{config, graph, scheduler};
 
 pub mod bag;
 pub mod bridge;
+pub mod echo;
 pub mod external;
+pub mod inspect;
 pub mod names;
 pub mod session;
 pub mod types;

@@ -67,6 +67,7 @@ mod realtime;
 mod recording;
 mod reference_runs;
 mod ros2;
+mod ros2_cli;
 mod ros2_external;
 mod runcore;
 mod security;

@@ -1,0 +1,247 @@
+//! `ratelab ros2`: ros2cli's verbs on any rmw_zenoh graph (ratelab's own `--ros2` runs, or
+//! ROS 2 nodes with `RMW_IMPLEMENTATION=rmw_zenoh_cpp`), without a ROS 2 installation. The
+//! graph and its output are `ratelab::ros2::inspect`'s and `::echo`'s; this module parses
+//! the command line, waits for what it asks for, and prints.
+
+use anyhow::{anyhow, Result};
+use clap::{Args, Subcommand};
+use ratelab::ros2::{echo, inspect};
+use ratelab::scheduler::StopFlag;
+use std::io::Write;
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+/// `ratelab ros2`.
+#[derive(Debug, Clone, Args)]
+pub struct Ros2Args {
+    /// The ROS 2 domain, 0-232 (default: ROS_DOMAIN_ID, else 0).
+    #[arg(long, global = true, value_name = "ID")]
+    pub domain: Option<String>,
+    /// The Zenoh router to read the graph through (default tcp/localhost:7447, where
+    /// rmw_zenoh's nodes find theirs).
+    #[arg(long, global = true, value_name = "ENDPOINT")]
+    pub connect: Option<String>,
+    /// How long to wait for the graph's liveliness tokens, seconds.
+    #[arg(long, global = true, default_value_t = 1.0, value_name = "S")]
+    pub wait: f64,
+    /// What to read.
+    #[command(subcommand)]
+    pub what: Ros2Command,
+}
+
+/// `ratelab ros2 …`.
+#[derive(Debug, Clone, Subcommand)]
+pub enum Ros2Command {
+    /// Nodes: `node list`, `node info NODE`.
+    #[command(subcommand)]
+    Node(NodeVerb),
+    /// Topics: `topic list [-t]`, `topic info TOPIC [-v]`, `topic echo TOPIC`, `topic hz TOPIC`.
+    #[command(subcommand)]
+    Topic(TopicVerb),
+}
+
+/// `ratelab ros2 node …`.
+#[derive(Debug, Clone, Subcommand)]
+pub enum NodeVerb {
+    /// Every node's name (`/talker`).
+    List,
+    /// A node's publishers, subscribers, services and clients with their types.
+    Info {
+        /// The node (`/talker` or `talker`).
+        node: String,
+    },
+}
+
+/// `ratelab ros2 topic …`.
+#[derive(Debug, Clone, Subcommand)]
+pub enum TopicVerb {
+    /// Every topic (`-t`: with its type).
+    List {
+        /// Show each topic's type.
+        #[arg(short = 't', long = "show-types")]
+        types: bool,
+    },
+    /// A topic's type and endpoint counts (`-v`: each endpoint with its node and QoS).
+    Info {
+        /// The topic (`/obs`).
+        topic: String,
+        /// Each endpoint with its node, type hash and QoS.
+        #[arg(short, long)]
+        verbose: bool,
+    },
+    /// Print a topic's messages as YAML, `---` between them, until Ctrl-C.
+    Echo {
+        /// The topic.
+        topic: String,
+        /// Print one message and exit.
+        #[arg(long)]
+        once: bool,
+        /// Print this many messages and exit.
+        #[arg(short = 'n', long = "max-count", value_name = "N")]
+        count: Option<u64>,
+    },
+    /// Print a topic's rate every second, until Ctrl-C.
+    Hz {
+        /// The topic.
+        topic: String,
+        /// Messages the figures are taken over (the newest).
+        #[arg(short, long, default_value_t = 10_000)]
+        window: usize,
+        /// Stop after this many seconds (default: at Ctrl-C).
+        #[arg(long, value_name = "S")]
+        duration: Option<f64>,
+    },
+}
+
+/// The domain: `--domain`, else `ROS_DOMAIN_ID`, else 0.
+fn domain(args: &Ros2Args) -> Result<u32> {
+    let parse = |s: &str, what: &str| {
+        ratelab::ros2::names::parse_domain(s).map_err(|e| anyhow!("{what}: {e}"))
+    };
+    match (&args.domain, std::env::var("ROS_DOMAIN_ID")) {
+        (Some(d), _) => parse(d, "--domain"),
+        (None, Ok(d)) if !d.is_empty() => parse(&d, "ROS_DOMAIN_ID"),
+        _ => Ok(0),
+    }
+}
+
+/// Run `ratelab ros2 …` until done or `stop` (Ctrl-C).
+///
+/// # Errors
+/// One line: a bad domain or wait, no router, an unknown node or topic, a topic nobody
+/// publishes within the wait.
+pub fn run(args: &Ros2Args, stop: StopFlag) -> Result<()> {
+    let domain = domain(args)?;
+    if !(args.wait.is_finite() && (0.0..=3600.0).contains(&args.wait)) {
+        return Err(anyhow!(
+            "--wait must be in [0, 3600] seconds, got {}",
+            args.wait
+        ));
+    }
+    let wait = Duration::from_secs_f64(args.wait);
+    let env = ratelab::ros2::session::SessionEnv::from_process();
+    let session = inspect::open(args.connect.as_deref(), &env)?;
+    let g = inspect::seen(&session, domain, wait)?;
+    let mut out = std::io::stdout().lock();
+    match &args.what {
+        Ros2Command::Node(NodeVerb::List) => write!(out, "{}", inspect::node_list(&g))?,
+        Ros2Command::Node(NodeVerb::Info { node }) => write!(
+            out,
+            "{}",
+            inspect::node_info(&g, node).map_err(|e| anyhow!(e))?
+        )?,
+        Ros2Command::Topic(TopicVerb::List { types }) => {
+            write!(out, "{}", inspect::topic_list(&g, *types))?
+        }
+        Ros2Command::Topic(TopicVerb::Info { topic, verbose }) => write!(
+            out,
+            "{}",
+            inspect::topic_info(&g, topic, *verbose).map_err(|e| anyhow!(e))?
+        )?,
+        Ros2Command::Topic(TopicVerb::Echo { topic, once, count }) => {
+            let limit = if *once { Some(1) } else { *count };
+            drop(out);
+            echo_topic(&session, &g, topic, limit, &stop)?;
+        }
+        Ros2Command::Topic(TopicVerb::Hz {
+            topic,
+            window,
+            duration,
+        }) => {
+            drop(out);
+            hz(&session, &g, topic, *window, *duration, &stop)?;
+        }
+    }
+    drop(session);
+    Ok(())
+}
+
+/// The publisher of `topic` a subscriber takes its type and key from.
+fn publisher<'a>(g: &'a inspect::Seen, topic: &str) -> Result<&'a inspect::EndpointEntity> {
+    inspect::publishers(g, topic)
+        .into_iter()
+        .next()
+        .ok_or_else(|| {
+            anyhow!(
+                "no publisher of '{}' on the domain (`ratelab ros2 topic list` lists the topics)",
+                ratelab::text::printable(topic)
+            )
+        })
+}
+
+fn echo_topic(
+    session: &inspect::Session,
+    g: &inspect::Seen,
+    topic: &str,
+    limit: Option<u64>,
+    stop: &StopFlag,
+) -> Result<()> {
+    let p = publisher(g, topic)?;
+    let (name, hash) = inspect::type_and_hash(p);
+    let (tx, rx) = crossbeam_channel::bounded::<Vec<u8>>(1024);
+    let _sub = inspect::subscribe(session, p, move |bytes| {
+        let _ = tx.try_send(bytes);
+    })?;
+    let mut printed = 0u64;
+    while !stop.is_stopped() && limit.is_none_or(|n| printed < n) {
+        let Ok(bytes) = rx.recv_timeout(Duration::from_millis(100)) else {
+            continue;
+        };
+        let text = match echo::decode(&name, &hash, &bytes) {
+            Ok(v) => echo::yaml(&v),
+            Err(why) => format!(
+                "<{} {}: {} bytes, not decoded: {why}>\n",
+                ratelab::text::printable(&name),
+                hash,
+                bytes.len()
+            ),
+        };
+        let mut out = std::io::stdout().lock();
+        writeln!(out, "{text}---")?;
+        out.flush()?;
+        printed += 1;
+    }
+    Ok(())
+}
+
+fn hz(
+    session: &inspect::Session,
+    g: &inspect::Seen,
+    topic: &str,
+    window: usize,
+    duration: Option<f64>,
+    stop: &StopFlag,
+) -> Result<()> {
+    let p = publisher(g, topic)?;
+    let start = Instant::now();
+    let until = match duration {
+        Some(s) if s.is_finite() && s > 0.0 && s <= 1e6 => Some(Duration::from_secs_f64(s)),
+        Some(s) => {
+            return Err(anyhow!(
+                "--duration must be in (0, 1000000] seconds, got {s}"
+            ))
+        }
+        None => None,
+    };
+    let rate = Arc::new(Mutex::new(inspect::Rate::new(window)));
+    let seen = rate.clone();
+    let _sub = inspect::subscribe(session, p, move |_| {
+        let t = start.elapsed().as_secs_f64();
+        seen.lock().unwrap_or_else(|e| e.into_inner()).arrived(t);
+    })?;
+    let mut next = start + Duration::from_secs(1);
+    while !stop.is_stopped() && until.is_none_or(|u| start.elapsed() < u) {
+        std::thread::sleep(Duration::from_millis(20));
+        if Instant::now() >= next {
+            next += Duration::from_secs(1);
+            let report = rate.lock().unwrap_or_else(|e| e.into_inner()).report();
+            let mut out = std::io::stdout().lock();
+            match report {
+                Some(r) => write!(out, "{r}")?,
+                None => writeln!(out, "no new messages")?,
+            }
+            out.flush()?;
+        }
+    }
+    Ok(())
+}

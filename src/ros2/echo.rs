@@ -1,0 +1,517 @@
+//! What `ratelab ros2 topic echo` prints: a message of any described ROS 2 type decoded from
+//! its CDR bytes by its type description (the one rmw_zenoh's tokens name by RIHS01 hash),
+//! written as ros2cli's `echo` writes it (YAML by `serde_yaml`, block style, `---` between
+//! messages).
+//!
+//! The types known here: ratelab's own (`sensor_msgs/msg/JointState`, `std_msgs/msg/Float64`,
+//! `rosgraph_msgs/msg/Clock`) and common ROS 2 ones (`std_msgs` String, Bool, Int32, Int64,
+//! Float32, Header; `builtin_interfaces` Time, Duration; `geometry_msgs` Vector3, Point,
+//! Quaternion, Pose, Twist; `sensor_msgs/msg/Imu`). A message is decoded only when its
+//! type's name **and** hash are one of these (a type of the same name but another
+//! definition is not guessed at); any other is said by name, hash and byte length.
+//!
+//! Decoding walks the description with serde over `hiroz-cdr`'s CDR deserializer (no CDR
+//! is read here by hand), bounded: a payload over [`MAX_PAYLOAD_BYTES`] is not decoded, a
+//! sequence longer than the bytes left is refused, nesting is the descriptions' own (at
+//! most [`MAX_DEPTH`]). `serde_yaml` escapes a string's control characters, so no payload
+//! reaches the terminal raw.
+
+use hiroz_schema::{
+    FieldDescription, FieldTypeDescription, TypeDescription, TypeDescriptionMsg, TypeHash, TypeId,
+};
+use serde::de::{DeserializeSeed, Deserializer, Error as _, SeqAccess, Visitor};
+use std::collections::BTreeMap;
+use std::fmt;
+use std::sync::OnceLock;
+
+/// The largest payload decoded (bytes): a larger one is said by its length alone.
+pub const MAX_PAYLOAD_BYTES: usize = 64 * 1024 * 1024;
+
+/// The deepest nesting of types walked (a described type nests at most 3).
+pub const MAX_DEPTH: usize = 16;
+
+/// A decoded value.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Value {
+    /// `bool`.
+    Bool(bool),
+    /// Any signed integer.
+    Int(i64),
+    /// Any unsigned integer.
+    UInt(u64),
+    /// `float64`, or `float32` widened (printed as Python prints it).
+    Float(f64),
+    /// `string`.
+    Str(String),
+    /// An array or a sequence.
+    List(Vec<Value>),
+    /// A message: its fields in order.
+    Struct(Vec<(String, Value)>),
+}
+
+/// A described type: its full name, description (with the types it refers to) and hash.
+#[derive(Debug)]
+pub struct Described {
+    /// `package/msg/Name`.
+    pub name: String,
+    /// The description as `type_description_interfaces` has it.
+    pub description: TypeDescriptionMsg,
+    /// Its RIHS01 hash.
+    pub hash: TypeHash,
+}
+
+fn field(name: &str, field_type: FieldTypeDescription) -> FieldDescription {
+    FieldDescription {
+        name: name.to_string(),
+        field_type,
+        default_value: String::new(),
+    }
+}
+
+fn prim(name: &str, id: u8) -> FieldDescription {
+    field(name, FieldTypeDescription::primitive(id))
+}
+
+fn nested(name: &str, ty: &str) -> FieldDescription {
+    field(name, FieldTypeDescription::nested(TypeId::NESTED_TYPE, ty))
+}
+
+fn describe(name: &str, fields: Vec<FieldDescription>) -> TypeDescription {
+    TypeDescription {
+        type_name: name.to_string(),
+        fields,
+    }
+}
+
+/// Every type's own description, by name (the ones a type refers to are found here).
+fn own_descriptions() -> Vec<TypeDescription> {
+    use TypeId as T;
+    let xyz = |name: &str, w: bool| {
+        let mut f = vec![
+            prim("x", T::FLOAT64),
+            prim("y", T::FLOAT64),
+            prim("z", T::FLOAT64),
+        ];
+        if w {
+            f.push(prim("w", T::FLOAT64));
+        }
+        describe(name, f)
+    };
+    let seq = |id: u8| FieldTypeDescription::primitive(id + T::UNBOUNDED_SEQUENCE_OFFSET);
+    let cov = || FieldTypeDescription::array(T::FLOAT64 + T::ARRAY_OFFSET, 9);
+    let one = |name: &str, id: u8| describe(name, vec![prim("data", id)]);
+    vec![
+        describe(
+            "builtin_interfaces/msg/Time",
+            vec![prim("sec", T::INT32), prim("nanosec", T::UINT32)],
+        ),
+        describe(
+            "builtin_interfaces/msg/Duration",
+            vec![prim("sec", T::INT32), prim("nanosec", T::UINT32)],
+        ),
+        describe(
+            "std_msgs/msg/Header",
+            vec![
+                nested("stamp", "builtin_interfaces/msg/Time"),
+                prim("frame_id", T::STRING),
+            ],
+        ),
+        one("std_msgs/msg/String", T::STRING),
+        one("std_msgs/msg/Bool", T::BOOL),
+        one("std_msgs/msg/Int32", T::INT32),
+        one("std_msgs/msg/Int64", T::INT64),
+        one("std_msgs/msg/Float32", T::FLOAT32),
+        one("std_msgs/msg/Float64", T::FLOAT64),
+        describe(
+            "rosgraph_msgs/msg/Clock",
+            vec![nested("clock", "builtin_interfaces/msg/Time")],
+        ),
+        xyz("geometry_msgs/msg/Vector3", false),
+        xyz("geometry_msgs/msg/Point", false),
+        xyz("geometry_msgs/msg/Quaternion", true),
+        describe(
+            "geometry_msgs/msg/Pose",
+            vec![
+                nested("position", "geometry_msgs/msg/Point"),
+                nested("orientation", "geometry_msgs/msg/Quaternion"),
+            ],
+        ),
+        describe(
+            "geometry_msgs/msg/Twist",
+            vec![
+                nested("linear", "geometry_msgs/msg/Vector3"),
+                nested("angular", "geometry_msgs/msg/Vector3"),
+            ],
+        ),
+        describe(
+            "sensor_msgs/msg/JointState",
+            vec![
+                nested("header", "std_msgs/msg/Header"),
+                field("name", seq(T::STRING)),
+                field("position", seq(T::FLOAT64)),
+                field("velocity", seq(T::FLOAT64)),
+                field("effort", seq(T::FLOAT64)),
+            ],
+        ),
+        describe(
+            "sensor_msgs/msg/Imu",
+            vec![
+                nested("header", "std_msgs/msg/Header"),
+                nested("orientation", "geometry_msgs/msg/Quaternion"),
+                field("orientation_covariance", cov()),
+                nested("angular_velocity", "geometry_msgs/msg/Vector3"),
+                field("angular_velocity_covariance", cov()),
+                nested("linear_acceleration", "geometry_msgs/msg/Vector3"),
+                field("linear_acceleration_covariance", cov()),
+            ],
+        ),
+    ]
+}
+
+/// The described types, by name.
+pub fn known() -> &'static BTreeMap<String, Described> {
+    static KNOWN: OnceLock<BTreeMap<String, Described>> = OnceLock::new();
+    KNOWN.get_or_init(|| {
+        let own: BTreeMap<String, TypeDescription> = own_descriptions()
+            .into_iter()
+            .map(|d| (d.type_name.clone(), d))
+            .collect();
+        own.values()
+            .map(|d| {
+                // The types it refers to, transitively, sorted by name (as RIHS01 hashes them).
+                let mut referenced: BTreeMap<String, TypeDescription> = BTreeMap::new();
+                let mut todo: Vec<&TypeDescription> = vec![d];
+                while let Some(t) = todo.pop() {
+                    for f in &t.fields {
+                        let n = &f.field_type.nested_type_name;
+                        if let Some(r) = own.get(n).filter(|_| !referenced.contains_key(n)) {
+                            referenced.insert(n.clone(), r.clone());
+                            todo.push(r);
+                        }
+                    }
+                }
+                let description = TypeDescriptionMsg {
+                    type_description: d.clone(),
+                    referenced_type_descriptions: referenced.into_values().collect(),
+                };
+                let hash = hiroz_schema::calculate_hash(&description);
+                (
+                    d.type_name.clone(),
+                    Described {
+                        name: d.type_name.clone(),
+                        description,
+                        hash,
+                    },
+                )
+            })
+            .collect()
+    })
+}
+
+/// Decode `payload` (CDR with its 4-byte encapsulation header) as the described type
+/// `name` whose hash is `hash` (`RIHS01_…`).
+///
+/// # Errors
+/// One line: the type is not known here (or known with another hash), the payload is too
+/// large, its header is not plain CDR, or its bytes do not decode as the type.
+pub fn decode(name: &str, hash: &str, payload: &[u8]) -> Result<Value, String> {
+    let d = known()
+        .get(name)
+        .filter(|d| d.hash.to_rihs_string() == hash)
+        .ok_or_else(|| "a type not described here".to_string())?;
+    if payload.len() > MAX_PAYLOAD_BYTES {
+        return Err(format!("over {MAX_PAYLOAD_BYTES} bytes"));
+    }
+    let (head, body) = payload
+        .split_at_checked(4)
+        .ok_or("shorter than its CDR header")?;
+    let types: BTreeMap<&str, &TypeDescription> = std::iter::once(&d.description.type_description)
+        .chain(&d.description.referenced_type_descriptions)
+        .map(|t| (t.type_name.as_str(), t))
+        .collect();
+    let seed = TypeSeed {
+        types: &types,
+        ty: &d.description.type_description,
+        depth: 0,
+        budget: body.len(),
+    };
+    let out = match (head[0], head[1]) {
+        (0, 1) => hiroz_cdr::from_bytes_with::<_, hiroz_cdr::LittleEndian>(body, seed),
+        (0, 0) => hiroz_cdr::from_bytes_with::<_, hiroz_cdr::BigEndian>(body, seed),
+        _ => return Err(format!("not plain CDR (header {:02x?})", &head[..2])),
+    };
+    out.map(|(v, _)| v).map_err(|e| {
+        let text = e.to_string();
+        crate::text::printable(text.lines().next().unwrap_or_default()).into_owned()
+    })
+}
+
+struct TypeSeed<'a> {
+    types: &'a BTreeMap<&'a str, &'a TypeDescription>,
+    ty: &'a TypeDescription,
+    depth: usize,
+    /// The payload's length: no sequence can hold more elements.
+    budget: usize,
+}
+
+impl<'de> DeserializeSeed<'de> for TypeSeed<'_> {
+    type Value = Value;
+    fn deserialize<D: Deserializer<'de>>(self, d: D) -> Result<Value, D::Error> {
+        if self.depth > MAX_DEPTH {
+            return Err(D::Error::custom("nested too deep"));
+        }
+        let n = self.ty.fields.len();
+        d.deserialize_tuple(n, StructVisitor(self))
+    }
+}
+
+struct StructVisitor<'a>(TypeSeed<'a>);
+
+impl<'de> Visitor<'de> for StructVisitor<'_> {
+    type Value = Value;
+    fn expecting(&self, f: &mut fmt::Formatter) -> fmt::Result {
+        write!(f, "a {}", self.0.ty.type_name)
+    }
+    fn visit_seq<A: SeqAccess<'de>>(self, mut seq: A) -> Result<Value, A::Error> {
+        let s = &self.0;
+        let mut out = Vec::with_capacity(s.ty.fields.len());
+        for f in &s.ty.fields {
+            let seed = FieldSeed {
+                types: s.types,
+                ft: &f.field_type,
+                depth: s.depth,
+                budget: s.budget,
+            };
+            let v = seq
+                .next_element_seed(seed)?
+                .ok_or_else(|| A::Error::custom(format!("no field {}", f.name)))?;
+            out.push((f.name.clone(), v));
+        }
+        Ok(Value::Struct(out))
+    }
+}
+
+/// One field: its type id says single, fixed array (capacity) or sequence.
+#[derive(Clone, Copy)]
+struct FieldSeed<'a> {
+    types: &'a BTreeMap<&'a str, &'a TypeDescription>,
+    ft: &'a FieldTypeDescription,
+    depth: usize,
+    budget: usize,
+}
+
+impl FieldSeed<'_> {
+    /// The element's own type id (1–22) and how it repeats.
+    fn shape(&self) -> (u8, Repeat) {
+        let id = self.ft.type_id;
+        match id {
+            0..=48 => (id, Repeat::Once),
+            49..=96 => (id - TypeId::ARRAY_OFFSET, Repeat::Fixed(self.ft.capacity)),
+            97..=144 => (id - TypeId::BOUNDED_SEQUENCE_OFFSET, Repeat::Seq),
+            _ => (id - TypeId::UNBOUNDED_SEQUENCE_OFFSET, Repeat::Seq),
+        }
+    }
+}
+
+#[derive(Clone, Copy)]
+enum Repeat {
+    Once,
+    Fixed(u64),
+    Seq,
+}
+
+impl<'de> DeserializeSeed<'de> for FieldSeed<'_> {
+    type Value = Value;
+    fn deserialize<D: Deserializer<'de>>(self, d: D) -> Result<Value, D::Error> {
+        let (base, repeat) = self.shape();
+        let one = One { seed: self, base };
+        match repeat {
+            Repeat::Once => one.deserialize(d),
+            Repeat::Fixed(n) => {
+                let n = usize::try_from(n)
+                    .ok()
+                    .filter(|n| *n <= self.budget)
+                    .ok_or_else(|| D::Error::custom("an array longer than the message"))?;
+                d.deserialize_tuple(n, ListVisitor(one, Some(n)))
+            }
+            Repeat::Seq => d.deserialize_seq(ListVisitor(one, None)),
+        }
+    }
+}
+
+/// One element of type `base`.
+#[derive(Clone, Copy)]
+struct One<'a> {
+    seed: FieldSeed<'a>,
+    base: u8,
+}
+
+impl<'de> DeserializeSeed<'de> for One<'_> {
+    type Value = Value;
+    fn deserialize<D: Deserializer<'de>>(self, d: D) -> Result<Value, D::Error> {
+        use serde::Deserialize;
+        use TypeId as T;
+        Ok(match self.base {
+            T::NESTED_TYPE => {
+                let name = self.seed.ft.nested_type_name.as_str();
+                let ty = self
+                    .seed
+                    .types
+                    .get(name)
+                    .ok_or_else(|| D::Error::custom(format!("no description of {name}")))?;
+                return TypeSeed {
+                    types: self.seed.types,
+                    ty,
+                    depth: self.seed.depth + 1,
+                    budget: self.seed.budget,
+                }
+                .deserialize(d);
+            }
+            T::INT8 => Value::Int(i8::deserialize(d)?.into()),
+            T::UINT8 | T::BYTE => Value::UInt(u8::deserialize(d)?.into()),
+            T::INT16 => Value::Int(i16::deserialize(d)?.into()),
+            T::UINT16 => Value::UInt(u16::deserialize(d)?.into()),
+            T::INT32 => Value::Int(i32::deserialize(d)?.into()),
+            T::UINT32 => Value::UInt(u32::deserialize(d)?.into()),
+            T::INT64 => Value::Int(i64::deserialize(d)?),
+            T::UINT64 => Value::UInt(u64::deserialize(d)?),
+            T::FLOAT32 => Value::Float(f32::deserialize(d)?.into()),
+            T::FLOAT64 => Value::Float(f64::deserialize(d)?),
+            T::BOOL => Value::Bool(bool::deserialize(d)?),
+            T::STRING | T::BOUNDED_STRING => Value::Str(String::deserialize(d)?),
+            other => return Err(D::Error::custom(format!("type id {other} not decoded"))),
+        })
+    }
+}
+
+struct ListVisitor<'a>(One<'a>, Option<usize>);
+
+impl<'de> Visitor<'de> for ListVisitor<'_> {
+    type Value = Value;
+    fn expecting(&self, f: &mut fmt::Formatter) -> fmt::Result {
+        f.write_str("a list")
+    }
+    fn visit_seq<A: SeqAccess<'de>>(self, mut seq: A) -> Result<Value, A::Error> {
+        let budget = self.0.seed.budget;
+        let n = self.1.or(seq.size_hint()).unwrap_or(0);
+        if n > budget {
+            return Err(A::Error::custom("a sequence longer than the message"));
+        }
+        let mut out = Vec::with_capacity(n);
+        while out.len() < budget {
+            match seq.next_element_seed(self.0)? {
+                Some(v) => out.push(v),
+                None => break,
+            }
+            if self.1.is_some_and(|n| out.len() == n) {
+                break;
+            }
+        }
+        Ok(Value::List(out))
+    }
+}
+
+impl serde::Serialize for Value {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        use serde::ser::{SerializeMap, SerializeSeq};
+        match self {
+            Value::Bool(b) => s.serialize_bool(*b),
+            Value::Int(i) => s.serialize_i64(*i),
+            Value::UInt(u) => s.serialize_u64(*u),
+            Value::Float(f) => s.serialize_f64(*f),
+            Value::Str(t) => s.serialize_str(t),
+            Value::List(items) => {
+                let mut seq = s.serialize_seq(Some(items.len()))?;
+                for i in items {
+                    seq.serialize_element(i)?;
+                }
+                seq.end()
+            }
+            Value::Struct(fields) => {
+                let mut map = s.serialize_map(Some(fields.len()))?;
+                for (k, v) in fields {
+                    map.serialize_entry(k, v)?;
+                }
+                map.end()
+            }
+        }
+    }
+}
+
+/// `v` as ros2cli's `topic echo` writes a message: YAML in block style (by `serde_yaml`,
+/// which quotes a string that would read back as another value and escapes control
+/// characters), ending in a newline.
+pub fn yaml(v: &Value) -> String {
+    serde_yaml::to_string(v).unwrap_or_else(|e| format!("<not written: {e}>\n"))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use ratelab_core::ros_types::{cdr, JointState};
+
+    #[test]
+    fn ratelab_s_own_types_are_described_as_the_core_describes_them() {
+        for t in [
+            ratelab_core::ros_types::joint_state_type(),
+            ratelab_core::ros_types::float64_type(),
+            ratelab_core::ros_types::clock_type(),
+        ] {
+            assert_eq!(known()[t.name].hash, t.hash, "{}", t.name);
+        }
+    }
+
+    #[test]
+    fn a_joint_state_echoes_as_ros2cli_prints_it() {
+        let js = JointState::of(
+            crate::time::Nanos(1_500_000_000),
+            vec![0.25, -0.5],
+            vec![1.0, 0.0],
+        );
+        let mut bytes = Vec::new();
+        cdr(&js, &mut bytes);
+        let t = ratelab_core::ros_types::joint_state_type();
+        let v = decode(t.name, &t.hash.to_rihs_string(), &bytes).unwrap();
+        assert_eq!(
+            yaml(&v),
+            "header:\n  stamp:\n    sec: 1\n    nanosec: 500000000\n  frame_id: ''\nname:\n- slider\n- hinge\nposition:\n- 0.25\n- -0.5\nvelocity:\n- 1.0\n- 0.0\neffort: []\n"
+        );
+    }
+
+    #[test]
+    fn another_definition_a_short_payload_or_a_huge_sequence_is_refused_in_one_line() {
+        let t = ratelab_core::ros_types::joint_state_type();
+        let hash = t.hash.to_rihs_string();
+        assert!(decode(t.name, "RIHS01_00", &[0, 1, 0, 0]).is_err());
+        assert!(decode("pkg/msg/Unknown", &hash, &[0, 1, 0, 0]).is_err());
+        assert!(decode(t.name, &hash, &[0, 1]).is_err());
+        // A header, then a sequence (the frame id's length) claiming 4 GiB.
+        let mut hostile = vec![0, 1, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0];
+        hostile.extend_from_slice(&[0xff, 0xff, 0xff, 0xff]);
+        let e = decode(t.name, &hash, &hostile).unwrap_err();
+        assert!(!e.contains('\n'), "{e}");
+        let names = {
+            // A header, an empty frame id, then `name` claiming 2^31 strings.
+            let mut b = vec![0, 1, 0, 0];
+            b.extend_from_slice(&[0; 8]); // stamp
+            b.extend_from_slice(&1u32.to_le_bytes()); // frame_id: "" (1 byte, the NUL)
+            b.extend_from_slice(&[0, 0, 0, 0]); // NUL + padding
+            b.extend_from_slice(&0x8000_0000u32.to_le_bytes());
+            b
+        };
+        assert!(decode(t.name, &hash, &names).is_err());
+    }
+
+    #[test]
+    fn strings_are_quoted_as_yaml_needs_and_never_raw() {
+        let s = |x: &str| yaml(&Value::Struct(vec![("s".into(), Value::Str(x.into()))]));
+        assert_eq!(s("base_link"), "s: base_link\n");
+        assert_eq!(s(""), "s: ''\n");
+        assert_eq!(s("1.5"), "s: '1.5'\n");
+        assert_eq!(s("true"), "s: 'true'\n");
+        assert!(!s("\x1b[2Jhi").contains('\x1b'), "{}", s("\x1b[2Jhi"));
+        let f = |x: f64| yaml(&Value::Struct(vec![("f".into(), Value::Float(x))]));
+        assert_eq!(f(1.0), "f: 1.0\n");
+        assert_eq!(f(f64::from(0.1f32)), "f: 0.10000000149011612\n");
+    }
+}
