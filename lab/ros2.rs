@@ -35,9 +35,33 @@ pub enum Ros2Command {
     /// Nodes: `node list`, `node info NODE`.
     #[command(subcommand)]
     Node(NodeVerb),
-    /// Topics: `topic list [-t]`, `topic info TOPIC [-v]`, `topic echo TOPIC`, `topic hz TOPIC`.
+    /// Topics: `topic list [-t]`, `topic info TOPIC [-v]`, `topic echo|hz|bw TOPIC`.
     #[command(subcommand)]
     Topic(TopicVerb),
+    /// Bags (rosbag2, MCAP storage): `bag info DIR`, `bag echo DIR`.
+    #[command(subcommand)]
+    Bag(BagVerb),
+}
+
+/// `ratelab ros2 bag …`.
+#[derive(Debug, Clone, Subcommand)]
+pub enum BagVerb {
+    /// What the bag holds, as `ros2 bag info` says it (times in UTC).
+    Info {
+        /// The bag's folder.
+        dir: std::path::PathBuf,
+    },
+    /// Its messages as YAML, in the file's order, each after a `# TOPIC at T s` line.
+    Echo {
+        /// The bag's folder.
+        dir: std::path::PathBuf,
+        /// Only this topic's messages.
+        #[arg(long)]
+        topic: Option<String>,
+        /// At most this many messages.
+        #[arg(short = 'n', long = "max-count", value_name = "N")]
+        count: Option<u64>,
+    },
 }
 
 /// `ratelab ros2 node …`.
@@ -80,6 +104,17 @@ pub enum TopicVerb {
         #[arg(short = 'n', long = "max-count", value_name = "N")]
         count: Option<u64>,
     },
+    /// Print a topic's bandwidth every second, until Ctrl-C.
+    Bw {
+        /// The topic.
+        topic: String,
+        /// Messages the figures are taken over (the newest).
+        #[arg(short, long, default_value_t = 100)]
+        window: usize,
+        /// Stop after this many seconds (default: at Ctrl-C).
+        #[arg(long, value_name = "S")]
+        duration: Option<f64>,
+    },
     /// Print a topic's rate every second, until Ctrl-C.
     Hz {
         /// The topic.
@@ -111,6 +146,9 @@ fn domain(args: &Ros2Args) -> Result<u32> {
 /// One line: a bad domain or wait, no router, an unknown node or topic, a topic nobody
 /// publishes within the wait.
 pub fn run(args: &Ros2Args, stop: StopFlag) -> Result<()> {
+    if let Ros2Command::Bag(verb) = &args.what {
+        return bag(verb);
+    }
     let domain = domain(args)?;
     if !(args.wait.is_finite() && (0.0..=3600.0).contains(&args.wait)) {
         return Err(anyhow!(
@@ -149,7 +187,25 @@ pub fn run(args: &Ros2Args, stop: StopFlag) -> Result<()> {
             duration,
         }) => {
             drop(out);
-            hz(&session, &g, topic, *window, *duration, &stop)?;
+            every_second(
+                &session,
+                &g,
+                topic,
+                Figures::Hz(inspect::Rate::new(*window)),
+                *duration,
+                &stop,
+            )?;
+        }
+        Ros2Command::Bag(_) => {}
+        Ros2Command::Topic(TopicVerb::Bw {
+            topic,
+            window,
+            duration,
+        }) => {
+            writeln!(out, "Subscribed to [{}]", ratelab::text::printable(topic))?;
+            drop(out);
+            let bw = Figures::Bw(inspect::Bandwidth::new(*window));
+            every_second(&session, &g, topic, bw, *duration, &stop)?;
         }
     }
     drop(session);
@@ -204,11 +260,18 @@ fn echo_topic(
     Ok(())
 }
 
-fn hz(
+/// What `hz` or `bw` keeps of the messages.
+enum Figures {
+    Hz(inspect::Rate),
+    Bw(inspect::Bandwidth),
+}
+
+/// Subscribe to `topic` and print `figures` every second until `duration` or Ctrl-C.
+fn every_second(
     session: &inspect::Session,
     g: &inspect::Seen,
     topic: &str,
-    window: usize,
+    figures: Figures,
     duration: Option<f64>,
     stop: &StopFlag,
 ) -> Result<()> {
@@ -223,24 +286,85 @@ fn hz(
         }
         None => None,
     };
-    let rate = Arc::new(Mutex::new(inspect::Rate::new(window)));
-    let seen = rate.clone();
-    let _sub = inspect::subscribe(session, p, move |_| {
+    let figures = Arc::new(Mutex::new(figures));
+    let seen = figures.clone();
+    let _sub = inspect::subscribe(session, p, move |bytes| {
         let t = start.elapsed().as_secs_f64();
-        seen.lock().unwrap_or_else(|e| e.into_inner()).arrived(t);
+        match &mut *seen.lock().unwrap_or_else(|e| e.into_inner()) {
+            Figures::Hz(r) => r.arrived(t),
+            Figures::Bw(b) => b.arrived(t, bytes.len()),
+        }
     })?;
     let mut next = start + Duration::from_secs(1);
     while !stop.is_stopped() && until.is_none_or(|u| start.elapsed() < u) {
         std::thread::sleep(Duration::from_millis(20));
         if Instant::now() >= next {
             next += Duration::from_secs(1);
-            let report = rate.lock().unwrap_or_else(|e| e.into_inner()).report();
+            let now = start.elapsed().as_secs_f64();
+            let report = match &*figures.lock().unwrap_or_else(|e| e.into_inner()) {
+                Figures::Hz(r) => r.report(),
+                Figures::Bw(b) => b.report(now),
+            };
             let mut out = std::io::stdout().lock();
             match report {
                 Some(r) => write!(out, "{r}")?,
                 None => writeln!(out, "no new messages")?,
             }
             out.flush()?;
+        }
+    }
+    Ok(())
+}
+
+/// `ratelab ros2 bag …`: no session, the bag alone.
+fn bag(verb: &BagVerb) -> Result<()> {
+    use ratelab::ros2::bag_reader::Bag;
+    let mut out = std::io::stdout().lock();
+    match verb {
+        BagVerb::Info { dir } => {
+            let b = Bag::open(dir).map_err(|e| anyhow!(e))?;
+            write!(out, "{}", b.info().map_err(|e| anyhow!(e))?)?;
+        }
+        BagVerb::Echo { dir, topic, count } => {
+            let b = Bag::open(dir).map_err(|e| anyhow!(e))?;
+            let mut printed = 0u64;
+            let mut failed = None;
+            let note = b
+                .messages(|t, ty, hash, at_ns, bytes| {
+                    if topic.as_deref().is_some_and(|want| want != t) {
+                        return true;
+                    }
+                    if count.is_some_and(|n| printed >= n) {
+                        return false;
+                    }
+                    let text = match echo::decode_named(ty, hash, bytes) {
+                        Ok(v) => echo::yaml(&v),
+                        Err(why) => format!(
+                            "<{}: {} bytes, not decoded: {why}>\n",
+                            ratelab::text::printable(ty),
+                            bytes.len()
+                        ),
+                    };
+                    let head = format!(
+                        "# {} at {}.{:09} s\n",
+                        ratelab::text::printable(t),
+                        at_ns / 1_000_000_000,
+                        at_ns % 1_000_000_000
+                    );
+                    if let Err(e) = writeln!(out, "{head}{text}---") {
+                        failed = Some(e);
+                        return false;
+                    }
+                    printed += 1;
+                    true
+                })
+                .map_err(|e| anyhow!(e))?;
+            if let Some(e) = failed {
+                return Err(e.into());
+            }
+            if let Some(n) = note {
+                eprintln!("ratelab: {n}");
+            }
         }
     }
     Ok(())

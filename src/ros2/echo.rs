@@ -246,6 +246,22 @@ pub fn decode(name: &str, hash: &str, payload: &[u8]) -> Result<Value, String> {
     })
 }
 
+/// [`decode`] for a message whose hash may be unknown (`hash` empty: a bag that names
+/// none): then the type's name alone picks the description.
+///
+/// # Errors
+/// As [`decode`].
+pub fn decode_named(name: &str, hash: &str, payload: &[u8]) -> Result<Value, String> {
+    if hash.is_empty() {
+        let d = known()
+            .get(name)
+            .ok_or_else(|| "a type not described here".to_string())?;
+        decode(name, &d.hash.to_rihs_string(), payload)
+    } else {
+        decode(name, hash, payload)
+    }
+}
+
 struct TypeSeed<'a> {
     types: &'a BTreeMap<&'a str, &'a TypeDescription>,
     ty: &'a TypeDescription,

@@ -4,7 +4,7 @@
 //! and QoS), parsed by hiroz-protocol ([`seen`], [`Seen`]); what ros2cli prints of it is
 //! written by pure functions over that data ([`node_list`], [`node_info`], [`topic_list`],
 //! [`topic_info`]), and a topic's messages are heard on its data key ([`subscribe`]) and
-//! written by [`super::echo`] or counted ([`Rate`]).
+//! written by [`super::echo`] or counted ([`Rate`], [`Bandwidth`]).
 //!
 //! Output follows ros2cli (Jazzy): `node list` prints `/talker`; `topic list -t` prints
 //! `/cmd_vel [geometry_msgs/msg/Twist]`; `topic info -v` an endpoint block per node with its
@@ -389,6 +389,62 @@ impl Rate {
     }
 }
 
+/// `ros2 topic bw`'s figures over a window of messages: bytes a second, and the messages'
+/// mean, min and max size, in ros2cli's units (B, KB, MB: powers of 1000).
+#[derive(Debug, Default)]
+pub struct Bandwidth {
+    /// (arrival time s, size bytes), the newest last, at most `window`.
+    seen: std::collections::VecDeque<(f64, usize)>,
+    window: usize,
+}
+
+/// `n` bytes in ros2cli's units: `512.00 B`, `1.20 KB`, `3.40 MB`.
+fn bytes_text(n: f64) -> String {
+    if n < 1000.0 {
+        format!("{n:.2} B")
+    } else if n < 1_000_000.0 {
+        format!("{:.2} KB", n / 1000.0)
+    } else {
+        format!("{:.2} MB", n / 1_000_000.0)
+    }
+}
+
+impl Bandwidth {
+    /// A window of `window` messages (ros2cli's default: 100).
+    pub fn new(window: usize) -> Bandwidth {
+        Bandwidth {
+            seen: Default::default(),
+            window: window.max(2),
+        }
+    }
+
+    /// A message of `bytes` arrived at `t_s`.
+    pub fn arrived(&mut self, t_s: f64, bytes: usize) {
+        if self.seen.len() == self.window {
+            self.seen.pop_front();
+        }
+        self.seen.push_back((t_s, bytes));
+    }
+
+    /// ros2cli's two lines at `now_s`, or `None` before a message:
+    /// `1.20 KB/s from 100 messages\n\tMessage size mean: 12.00 B min: 12.00 B max: 12.00 B\n`.
+    pub fn report(&self, now_s: f64) -> Option<String> {
+        let (first, _) = *self.seen.front()?;
+        let n = self.seen.len();
+        let total: usize = self.seen.iter().map(|(_, b)| b).sum();
+        let span = (now_s - first).max(1e-9);
+        let min = self.seen.iter().map(|(_, b)| *b).min().unwrap_or(0);
+        let max = self.seen.iter().map(|(_, b)| *b).max().unwrap_or(0);
+        Some(format!(
+            "{}/s from {n} messages\n\tMessage size mean: {} min: {} max: {}\n",
+            bytes_text(total as f64 / span),
+            bytes_text(total as f64 / n as f64),
+            bytes_text(min as f64),
+            bytes_text(max as f64)
+        ))
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -489,6 +545,19 @@ mod tests {
         let mut g = talker();
         g.nodes.push(node("evil\x1b[2J", "/"));
         assert!(!node_list(&g).contains('\x1b'));
+    }
+
+    #[test]
+    fn bw_reports_as_ros2cli_does() {
+        let mut b = Bandwidth::new(100);
+        assert!(b.report(0.0).is_none());
+        for i in 0..10 {
+            b.arrived(f64::from(i) * 0.1, 120);
+        }
+        assert_eq!(
+            b.report(1.0).unwrap(),
+            "1.20 KB/s from 10 messages\n\tMessage size mean: 120.00 B min: 120.00 B max: 120.00 B\n"
+        );
     }
 
     #[test]

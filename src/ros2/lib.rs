@@ -10,7 +10,8 @@
 //! - [`session`]: the Zenoh session rmw_zenoh's nodes open by default (peer, a router at
 //!   `tcp/localhost:7447`, `ZENOH_ROUTER_CHECK_ATTEMPTS`, `ZENOH_CONFIG_OVERRIDE`), or an
 //!   embedded router when none answers;
-//! - [`bag`]: `--bag DIR`, what is offered as a rosbag2 bag (MCAP storage);
+//! - [`bag`]: `--bag DIR`, what is offered as a rosbag2 bag (MCAP storage); [`bag_reader`]:
+//!   any such bag read back (`ratelab ros2 bag info|echo`);
 //! - [`bridge`]: the liveliness tokens (NN per node, MP/MS per publisher and subscription,
 //!   with the QoS), a publisher per topic on `<domain>/<topic>/<dds type>/<RIHS01>` with
 //!   rmw_zenoh's 33-byte attachment, and `/clock`;
@@ -33,6 +34,7 @@ use ratelab_core::{msg, output, qos, text, time};
 use ratelab_runtime::{config, graph, scheduler};
 
 pub mod bag;
+pub mod bag_reader;
 pub mod bridge;
 pub mod echo;
 pub mod external;

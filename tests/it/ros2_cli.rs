@@ -3,7 +3,7 @@
 //! `echo` decodes hashed as rosbags (an independent implementation) hashes it.
 
 use crate::distributed::free_port;
-use crate::ros2::{connect_to, oracle_python, ratelab};
+use crate::ros2::{connect_to, oracle_python, ratelab, Oracle};
 use std::io::{BufRead, BufReader};
 use std::process::{Command, Stdio};
 
@@ -99,6 +99,78 @@ fn ros2_verbs_read_a_running_graph_as_ros2cli_prints_it() {
     let _ = run.wait();
 }
 
+/// A graph that is not ratelab's (`tests/ros2/talker.py`: eclipse-zenoh and rosbags playing
+/// ROS 2 nodes): a namespaced node, a type ratelab does not describe, payloads that do not
+/// decode, a node name holding an escape sequence and a newline. Every verb answers as
+/// ros2cli would; what cannot be decoded is one line, and the echo goes on.
+#[test]
+fn ros2_verbs_read_another_graph_and_survive_hostile_tokens_and_payloads() {
+    let endpoint = format!("tcp/127.0.0.1:{}", free_port());
+    let _talker = Oracle::start("tests/ros2/talker.py", &[&endpoint, "0"], "the talker");
+    let ros2 = |verb: &[&str]| {
+        let mut args = vec!["ros2", "--connect", endpoint.as_str()];
+        args.extend_from_slice(verb);
+        ratelab(&args, &[])
+    };
+    let (code, out, err) = ros2(&["node", "list"]);
+    assert_eq!(code, 0, "{err}");
+    assert_eq!(
+        out, "/demo/talker\n/evil\\u{1b}[2J\\nnode\n/hostile\n/listener\n/mystery\n",
+        "the escape and the newline written out"
+    );
+    let (_, out, _) = ros2(&["topic", "list", "-t"]);
+    assert_eq!(
+        out,
+        "/broken [sensor_msgs/msg/JointState]\n/chatter [std_msgs/msg/String]\n/cmd_vel [geometry_msgs/msg/Twist]\n/thing [my_pkg/msg/Thing]\n"
+    );
+    let (_, out, _) = ros2(&["node", "info", "/demo/talker"]);
+    assert_eq!(
+        out,
+        "/demo/talker\n  Subscribers:\n\n  Publishers:\n    /chatter: std_msgs/msg/String\n    /cmd_vel: geometry_msgs/msg/Twist\n  Service Servers:\n\n  Service Clients:\n\n  Action Servers:\n\n  Action Clients:\n\n"
+    );
+    let (_, out, _) = ros2(&["topic", "info", "/chatter", "-v"]);
+    for needle in [
+        "Node name: talker\nNode namespace: /demo\n",
+        "Endpoint type: PUBLISHER\nQoS profile:\n  Reliability: RELIABLE\n  History (Depth): KEEP_LAST (7)\n",
+        "Node name: listener\n",
+        "Endpoint type: SUBSCRIPTION\nQoS profile:\n  Reliability: BEST_EFFORT\n  History (Depth): KEEP_LAST (1)\n  Durability: VOLATILE\n  Lifespan: Infinite\n  Deadline: 100000000 nanoseconds\n",
+    ] {
+        assert!(out.contains(needle), "{needle:?} in {out}");
+    }
+    let (_, out, _) = ros2(&["topic", "echo", "/cmd_vel", "--once"]);
+    assert_eq!(
+        out,
+        "linear:\n  x: 0.5\n  y: 0.0\n  z: 0.0\nangular:\n  x: 0.0\n  y: 0.0\n  z: -0.25\n---\n"
+    );
+    let (_, out, _) = ros2(&["topic", "echo", "/chatter", "-n", "2"]);
+    let lines: Vec<&str> = out.lines().collect();
+    assert_eq!(lines.len(), 4, "{out}");
+    assert!(lines[0].starts_with("data: hello world "), "{out}");
+    let (_, out, _) = ros2(&["topic", "echo", "/thing", "--once"]);
+    assert_eq!(
+        out,
+        format!(
+            "<my_pkg/msg/Thing RIHS01_{}: 12 bytes, not decoded: a type not described here>\n---\n",
+            "ab".repeat(32)
+        )
+    );
+    // Both hostile payloads, one line each, and the echo goes on to the next.
+    let (code, out, _) = ros2(&["topic", "echo", "/broken", "-n", "2"]);
+    assert_eq!(code, 0);
+    let notes: Vec<&str> = out.lines().filter(|l| l.starts_with('<')).collect();
+    assert_eq!(notes.len(), 2, "{out}");
+    assert!(notes.iter().all(|l| l.contains("not decoded")), "{out}");
+    let (_, out, _) = ros2(&["topic", "hz", "/cmd_vel", "--duration", "2.2"]);
+    assert!(
+        out.contains("average rate: 19.") || out.contains("average rate: 20."),
+        "{out}"
+    );
+    let (_, out, _) = ros2(&["topic", "bw", "/chatter", "--duration", "2.2"]);
+    assert!(out.starts_with("Subscribed to [/chatter]\n"), "{out}");
+    assert!(out.contains("\tMessage size mean: 2"), "{out}");
+    assert!(out.contains(" B/s from "), "{out}");
+}
+
 /// With no router, the reader says where it looked and how to start one; a bad domain is
 /// refused before anything is opened.
 #[test]
@@ -140,4 +212,118 @@ fn every_type_echo_decodes_is_hashed_as_rosbags_hashes_it() {
             "{name}"
         );
     }
+}
+
+/// `bag info` and `bag echo` read a bag `--bag` wrote, one rosbags wrote (another writer:
+/// its times since 1970, no type hashes), and a bag cut short (up to where it stops, said).
+#[test]
+fn bag_info_and_echo_read_ratelab_s_bags_rosbags_bags_and_bags_cut_short() {
+    let dir = tempfile::tempdir().unwrap();
+    let ours = dir.path().join("ours");
+    let endpoint = format!("tcp/127.0.0.1:{}", free_port());
+    let (code, _, err) = ratelab(
+        &[
+            "run",
+            "--clock",
+            "virtual",
+            "--duration",
+            "1",
+            "--ros2",
+            "--bag",
+            ours.to_str().unwrap(),
+        ],
+        &[connect_to(&endpoint)],
+    );
+    assert_eq!(code, 0, "{err}");
+    let (code, out, err) = ratelab(&["ros2", "bag", "info", ours.to_str().unwrap()], &[]);
+    assert_eq!(code, 0, "{err}");
+    for needle in [
+        "Files:             ours_0.mcap\n",
+        "Storage id:        mcap\n",
+        "Duration:          1.000000000s\n",
+        "Start:             Jan  1 1970 00:00:00.000000000 (0.000000000)\n",
+        "Messages:          153\n",
+        "Topic information: Topic: /action | Type: std_msgs/msg/Float64 | Count: 51 | Serialization Format: cdr\n",
+        "                   Topic: /obs | Type: sensor_msgs/msg/JointState | Count: 51 | Serialization Format: cdr\n",
+    ] {
+        assert!(out.contains(needle), "{needle:?} in {out}");
+    }
+    let (_, out, _) = ratelab(
+        &[
+            "ros2",
+            "bag",
+            "echo",
+            ours.to_str().unwrap(),
+            "--topic",
+            "/obs",
+            "-n",
+            "2",
+        ],
+        &[],
+    );
+    assert!(
+        out.starts_with("# /obs at 0.000000000 s\nheader:\n"),
+        "{out}"
+    );
+    assert!(out.contains("# /obs at 0.020000000 s\n"), "{out}");
+    assert_eq!(out.matches("---\n").count(), 2, "{out}");
+
+    // rosbags' writer: MCAP storage, times since 1970, no hashes.
+    let theirs = dir.path().join("theirs");
+    let script = format!(
+        r#"
+from rosbags.rosbag2 import Writer, StoragePlugin
+from rosbags.typesys import Stores, get_typestore
+store = get_typestore(Stores.LATEST)
+V, T = store.types['geometry_msgs/msg/Vector3'], store.types['geometry_msgs/msg/Twist']
+with Writer({path:?}, version=9, storage_plugin=StoragePlugin.MCAP) as w:
+    c = w.add_connection('/cmd_vel', 'geometry_msgs/msg/Twist', typestore=store)
+    for i in range(3):
+        msg = T(linear=V(x=0.5, y=0.0, z=0.0), angular=V(x=0.0, y=0.0, z=float(i)))
+        w.write(c, 1_700_000_000_000_000_000 + i * 50_000_000, store.serialize_cdr(msg, 'geometry_msgs/msg/Twist'))
+"#,
+        path = theirs.to_str().unwrap()
+    );
+    let o = Command::new(oracle_python())
+        .args(["-c", &script])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let (code, out, err) = ratelab(&["ros2", "bag", "info", theirs.to_str().unwrap()], &[]);
+    assert_eq!(code, 0, "{err}");
+    assert!(out.contains("ROS Distro:        rosbags\n"), "{out}");
+    assert!(
+        out.contains("Start:             Nov 14 2023 22:13:20.000000000 (1700000000.000000000)\n"),
+        "{out}"
+    );
+    assert!(
+        out.contains("Topic: /cmd_vel | Type: geometry_msgs/msg/Twist | Count: 3 |"),
+        "{out}"
+    );
+    let (_, out, _) = ratelab(&["ros2", "bag", "echo", theirs.to_str().unwrap()], &[]);
+    assert!(
+        out.ends_with("# /cmd_vel at 1700000000.100000000 s\nlinear:\n  x: 0.5\n  y: 0.0\n  z: 0.0\nangular:\n  x: 0.0\n  y: 0.0\n  z: 2.0\n---\n"),
+        "{out}"
+    );
+
+    // Cut short: the first 60 % of ratelab's MCAP file, no summary: read up to the cut.
+    let mcap = ours.join("ours_0.mcap");
+    let bytes = std::fs::read(&mcap).unwrap();
+    std::fs::write(&mcap, &bytes[..bytes.len() * 6 / 10]).unwrap();
+    let (code, out, err) = ratelab(&["ros2", "bag", "echo", ours.to_str().unwrap()], &[]);
+    assert_eq!(code, 0, "{err}");
+    assert!(out.matches("---\n").count() > 10, "{out}");
+    assert!(err.contains("stops short after"), "{err}");
+    assert_eq!(err.lines().count(), 1, "{err}");
+    let (code, _, err) = ratelab(
+        &[
+            "ros2",
+            "bag",
+            "info",
+            dir.path().join("none").to_str().unwrap(),
+        ],
+        &[],
+    );
+    assert_eq!(code, 2);
+    assert!(err.contains("not a folder"), "{err}");
 }
