@@ -46,7 +46,6 @@ use crossbeam_channel::{Receiver, Sender, TrySendError};
 use hiroz_protocol::entity::{EndpointEntity, EndpointKind, NodeEntity};
 use hiroz_protocol::qos::{QosDuration, QosHistory, QosProfile, QosReliability};
 use hiroz_protocol::KeyExprFormat;
-use sha2::Digest;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
 use std::thread::JoinHandle;
@@ -263,13 +262,46 @@ fn clock_qos() -> QosProfile {
     }
 }
 
-/// The 16-byte GID of the endpoint whose token is `token`: the first half of its SHA-256
-/// (unique per session, node and endpoint, as the token is).
-fn gid(token: &str) -> [u8; 16] {
-    let h = sha2::Sha256::digest(token.as_bytes());
-    let mut g = [0u8; 16];
-    g.copy_from_slice(&h[..16]);
-    g
+/// The 16-byte GID of the endpoint whose token is `token`, as rmw_zenoh_cpp computes it:
+/// the XXH3-128 hash of the token, its low 64 bits then its high 64 bits, little endian
+/// (checked against a real rmw_zenoh_cpp 0.6.7 node's attachments, `../shared/fixtures/
+/// ros2-real/`): a subscriber's `MessageInfo.publisher_gid` then matches the GID that
+/// `ros2 topic info -v` shows for the publisher.
+pub fn gid(token: &str) -> [u8; 16] {
+    xxhash_rust::xxh3::xxh3_128(token.as_bytes()).to_le_bytes()
+}
+
+/// An endpoint's liveliness token (hiroz-protocol's), a keep-all history carrying its
+/// depth as rmw_zenoh_cpp writes it (`2,10`; hiroz writes `2,`, which rmw_zenoh_cpp reads as
+/// its default depth, 42).
+fn token_of(
+    format: &KeyExprFormat,
+    e: &EndpointEntity,
+    zid: &zenoh::session::ZenohId,
+    depth: usize,
+) -> Result<String, Ros2Error> {
+    let token = format
+        .liveliness_key_expr(e, zid)
+        .map_err(zerr)?
+        .to_string();
+    Ok(if e.qos.history == QosHistory::KeepAll {
+        with_keep_all_depth(&token, depth)
+    } else {
+        token
+    })
+}
+
+/// `token` with its QoS field's history (the third of the last segment's `:`-fields) `2,`
+/// made `2,<depth>`.
+fn with_keep_all_depth(token: &str, depth: usize) -> String {
+    let Some((head, qos)) = token.rsplit_once('/') else {
+        return token.to_string();
+    };
+    let mut fields: Vec<String> = qos.split(':').map(str::to_string).collect();
+    if fields.get(2).is_some_and(|h| h == "2,") {
+        fields[2] = format!("2,{depth}");
+    }
+    format!("{head}/{}", fields.join(":"))
 }
 
 /// rmw_zenoh's attachment: `int64` sequence number, `int64` source timestamp (ns), the
@@ -416,11 +448,8 @@ impl Bridge {
                 }
             };
         // A publisher: its key declared, its MP token declared, its GID from that token.
-        let mut publish = |e: &EndpointEntity| -> Result<Outlet, Ros2Error> {
-            let token = format
-                .liveliness_key_expr(e, &zid)
-                .map_err(zerr)?
-                .to_string();
+        let mut publish = |e: &EndpointEntity, depth: usize| -> Result<Outlet, Ros2Error> {
+            let token = token_of(&format, e, &zid, depth)?;
             let key = format.topic_key_expr(e).map_err(zerr)?.to_string();
             let publisher = session.declare_publisher(key).wait().map_err(zerr)?;
             let gid = gid(&token);
@@ -437,24 +466,20 @@ impl Bridge {
                 outlets.push(None); // its own program or process publishes it
             } else {
                 let mp = endpoint(publisher, EndpointKind::Publisher, &topic.name, ty, qos);
-                outlets.push(Some(publish(&mp)?));
+                outlets.push(Some(publish(&mp, topic.depth)?));
             }
             for &sub in topic.subscribers.iter().filter(|s| !elsewhere(**s)) {
                 let kind = EndpointKind::Subscription;
-                subscriptions.push(endpoint(&nodes[sub.0], kind, &topic.name, ty, qos));
+                let ms = endpoint(&nodes[sub.0], kind, &topic.name, ty, qos);
+                subscriptions.push((ms, topic.depth));
             }
         }
         // Its id is taken whether or not it is offered, as every endpoint's is.
         let (ty, qos) = (clock_type(), clock_qos());
         let clock_ep = endpoint(&clock_node, EndpointKind::Publisher, CLOCK_TOPIC, ty, qos);
-        let clock_outlet = offer.clock.then(|| publish(&clock_ep)).transpose()?;
-        for ms in &subscriptions {
-            declare(
-                format
-                    .liveliness_key_expr(ms, &zid)
-                    .map_err(zerr)?
-                    .to_string(),
-            )?;
+        let clock_outlet = offer.clock.then(|| publish(&clock_ep, 1)).transpose()?;
+        for (ms, depth) in &subscriptions {
+            declare(token_of(&format, ms, &zid, *depth)?)?;
         }
 
         let bag = opts
@@ -901,6 +926,17 @@ mod tests {
         );
         assert_eq!(q.lifespan, QosDuration::INFINITE);
         assert_eq!(q.reliability, QosReliability::BestEffort);
+    }
+
+    #[test]
+    fn a_keep_all_token_carries_its_depth_as_rmw_zenoh_cpp_writes_it() {
+        let t = "@ros2_lv/0/z/0/1/MP/%/%/sensor/%obs/T/RIHS01_x/1::2,:,:,:,,";
+        assert_eq!(
+            with_keep_all_depth(t, 100),
+            "@ros2_lv/0/z/0/1/MP/%/%/sensor/%obs/T/RIHS01_x/1::2,100:,:,:,,"
+        );
+        let last = "@ros2_lv/0/z/0/1/MP/%/%/sensor/%obs/T/RIHS01_x/2::,1:,:,:,,";
+        assert_eq!(with_keep_all_depth(last, 100), last);
     }
 
     #[test]

@@ -327,3 +327,76 @@ with Writer({path:?}, version=9, storage_plugin=StoragePlugin.MCAP) as w:
     assert_eq!(code, 2);
     assert!(err.contains("not a folder"), "{err}");
 }
+
+/// Where ratelab differed from a real rmw_zenoh_cpp 0.6.7 node (the captures in
+/// `../shared/fixtures/ros2-real/`): a publisher's GID is its MP token's XXH3-128, as in the
+/// real node's attachments, and a keep-all history carries its depth (`2,10`).
+#[test]
+fn gids_and_keep_all_depths_are_rmw_zenoh_cpp_s() {
+    let talker: serde_json::Value = serde_json::from_slice(
+        &std::fs::read(crate::brains::fixture("ros2-real/real-rclpy-talker.json")).unwrap(),
+    )
+    .unwrap();
+    let tokens: Vec<&str> = talker["token_events"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter_map(|e| e["key"].as_str())
+        .filter(|k| k.contains("/MP/"))
+        .collect();
+    let mut checked = 0;
+    for (key, samples) in talker["samples"].as_object().unwrap() {
+        // The data key is `<domain>/<topic>/<type>/<hash>`; the MP token names the same
+        // topic (mangled `%topic`), type and hash.
+        let parts: Vec<&str> = key.splitn(2, '/').collect();
+        let (topic_and_type, _) = (parts[1], parts[0]);
+        let (topic, rest) = topic_and_type.split_once('/').unwrap();
+        let token = tokens
+            .iter()
+            .find(|t| t.contains(&format!("/%{topic}/{rest}/")))
+            .unwrap_or_else(|| panic!("no MP token for {key}"));
+        let real = samples[0]["attachment"]["gid"].as_str().unwrap();
+        let ours: String = ratelab::ros2::bridge::gid(token)
+            .iter()
+            .map(|b| format!("{b:02x}"))
+            .collect();
+        assert_eq!(ours, real, "{token}");
+        checked += 1;
+    }
+    assert!(checked >= 2, "{checked}");
+    // The real node's keep-all probe: `::2,10:` (reliability default, keep all, depth 10).
+    assert!(
+        tokens.iter().any(|t| t.ends_with("/::2,10:,:,:,,")),
+        "{tokens:?}"
+    );
+    // ratelab's keep-all /obs (the fixture's `--qos /obs:history=keep_all,…` run), today:
+    // its depth written out, where the capture (before the fix) had `2,`.
+    let endpoint = format!("tcp/127.0.0.1:{}", free_port());
+    let standin = crate::ros2::StandIn::start("router", &endpoint, 0, &[]);
+    let (code, _, err) = ratelab(
+        &[
+            "run",
+            "--clock",
+            "virtual",
+            "--duration",
+            "0.2",
+            "--ros2",
+            "--qos",
+            "/obs:history=keep_all,reliability=reliable,depth=10",
+        ],
+        &[connect_to(&endpoint)],
+    );
+    assert_eq!(code, 0, "{err}");
+    let r = standin.report();
+    let obs: Vec<String> = r["endpoints"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|e| e["topic"] == "/obs")
+        .map(|e| e["qos"].as_str().unwrap().to_string())
+        .collect();
+    assert!(!obs.is_empty());
+    for q in &obs {
+        assert_eq!(q.split(':').nth(2), Some("2,10"), "{obs:?}");
+    }
+}

@@ -1,5 +1,5 @@
 //! External nodes (`kind = "external"`): a ROS 2 node fills a graph node. The node here is
-//! `tests/ros2/external_policy.py`, the chapter's scripted balancer written as a ROS 2 node
+//! `examples/ros2/zenoh_policy.py`, the chapter's scripted balancer written as a ROS 2 node
 //! would be with independent implementations only (PyPI `eclipse-zenoh`, `rosbags`); the
 //! stand-in (`tests/ros2/standin.py`) plays the Zenoh router and lists what ROS 2 sees.
 
@@ -10,7 +10,7 @@ use serde_json::Value;
 use std::path::Path;
 use std::process::{Command, Stdio};
 
-/// The external policy (`tests/ros2/external_policy.py`), ready: its tokens declared.
+/// The external policy (`examples/ros2/zenoh_policy.py`), ready: its tokens declared.
 struct External;
 
 impl External {
@@ -18,7 +18,7 @@ impl External {
         let domain = domain.to_string();
         let args = [&[endpoint, &domain, rate_hz][..], extra].concat();
         Oracle::start(
-            "tests/ros2/external_policy.py",
+            "examples/ros2/zenoh_policy.py",
             &args,
             "the external policy",
         )

@@ -1,8 +1,19 @@
-"""An external policy for the tests: the chapter's scripted balancer as a ROS 2 node would
-run it under rmw_zenoh, written with independent implementations only (PyPI `eclipse-zenoh`
-for the wire, `rosbags` for CDR and RIHS01 hashes). Nothing here comes from ratelab.
+"""An external policy with no ROS 2 installation: the chapter's scripted balancer as a ROS 2
+node runs it under rmw_zenoh, written with two pip packages, `eclipse-zenoh` (the wire) and
+`rosbags` (CDR and RIHS01 hashes). Nothing here comes from ratelab; the tests run this file.
 
-Usage: external_policy.py ENDPOINT DOMAIN RATE_HZ [--name N] [--type float32] [--mute]
+Try it (two terminals; ratelab runs the Zenoh router and waits 10 s for the node):
+
+    python3 -m venv .venv-zenoh && . .venv-zenoh/bin/activate
+    pip install eclipse-zenoh==1.10.2 rosbags
+    ratelab run --graph graphs/cartpole-external.toml --ros2 --clock virtual    # first
+    python3 examples/ros2/zenoh_policy.py tcp/localhost:7447 0 50              # within 10 s
+
+Under the virtual clock the run's metrics.json and trace.csv are byte-identical to the
+built-in policy's (`ratelab run --clock virtual --out DIR`): it computes the same force from
+the same observation at the same instants (docs/ros2.md, "ROS 2 nodes in the graph").
+
+Usage: zenoh_policy.py ENDPOINT DOMAIN RATE_HZ [--name N] [--type float32] [--mute]
   connects as a Zenoh client to the router at ENDPOINT, declares rmw_zenoh's tokens for a
   node N (default `policy`) subscribing to /obs (sensor_msgs/msg/JointState) and publishing
   /action (std_msgs/msg/Float64; with --type float32, std_msgs/msg/Float32: the wrong type),
