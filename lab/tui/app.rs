@@ -5,8 +5,8 @@
 use super::keymap::{depth_down, depth_up, rate_down, rate_up, Msg};
 use super::live::Live;
 use super::view::{
-    Badge, LatencyView, LogView, NodeView, SegmentView, Selected, TopicView, Verdict, View,
-    WindowLatency,
+    Badge, LatencyView, LogView, NodeView, Ros2View, SegmentView, Selected, TopicView, Verdict,
+    View, WindowLatency,
 };
 use crossbeam_channel::Sender;
 use ratelab::config::{check_rate, BREAK_CONTROL_HZ};
@@ -154,6 +154,10 @@ pub struct App {
     show_log: bool,
     /// How far the pane is scrolled back from the newest line, lines (PgUp / PgDn).
     log_back: usize,
+    /// The ROS 2 domain the graph is offered on (`--ros2`), if it is.
+    ros2_domain: Option<u32>,
+    /// The graph panel shows the graph as ROS 2 sees it (key `g`).
+    show_ros2: bool,
     /// Under the real clock, the executors `x` asked for, for the next run (its threads are
     /// made when a run starts): the timeline keeps drawing the ones that run.
     pending_executor: Option<&'static str>,
@@ -232,6 +236,8 @@ impl App {
             log_total: 0,
             show_log: false,
             log_back: 0,
+            ros2_domain: None,
+            show_ros2: false,
             pending_executor: None,
             exec_from: None,
             ended_with: None,
@@ -284,6 +290,12 @@ impl App {
     /// the run starts; without this the first frames show the chapter's).
     pub fn show_graph(&mut self, spec: GraphSpec) {
         self.graph = spec;
+    }
+
+    /// The graph is offered to ROS 2 on `domain` (`--ros2`): key `g` shows it as ROS 2 sees
+    /// it.
+    pub fn set_ros2_domain(&mut self, domain: u32) {
+        self.ros2_domain = Some(domain);
     }
 
     /// Mark the lab as watching a graph across processes; `label` (`2 processes`) joins the
@@ -777,6 +789,13 @@ impl App {
                 self.show_log = !self.show_log;
                 self.log_back = 0;
             }
+            Msg::ToggleRos2 if self.ros2_domain.is_none() => {
+                self.say(
+                    "not offered to ROS 2: start the lab with --ros2 to see the graph as ROS 2 sees it"
+                        .to_string(),
+                );
+            }
+            Msg::ToggleRos2 => self.show_ros2 = !self.show_ros2,
             Msg::LogOlder if self.show_log => {
                 self.log_back = (self.log_back + LOG_PAGE).min(self.log.len().saturating_sub(1));
             }

@@ -76,6 +76,9 @@ pub enum Msg {
     /// Show the log pane (what nodes' code and ratelab's warnings wrote) instead of the
     /// latency histogram, or back.
     ToggleLog,
+    /// Show the graph as ROS 2 sees it (with `--ros2`: node names, topics with their ROS 2
+    /// types, QoS and endpoint counts, `/clock`) instead of the node graph, or back.
+    ToggleRos2,
     /// Scroll the log pane back (older lines).
     LogOlder,
     /// Scroll the log pane forward (newer lines).
@@ -112,6 +115,7 @@ impl Msg {
                 | Msg::ToggleHelp
                 | Msg::ToggleTimeline
                 | Msg::ToggleLog
+                | Msg::ToggleRos2
                 | Msg::LogOlder
                 | Msg::LogNewer
                 | Msg::Back
@@ -260,9 +264,10 @@ pub const BINDINGS: &[Binding] = &[
             (Char('v'), Msg::ToggleLog),
             (KeyCode::PageUp, Msg::LogOlder),
             (KeyCode::PageDown, Msg::LogNewer),
+            (Char('g'), Msg::ToggleRos2),
         ],
-        label: "? / v, PgUp PgDn",
-        help: "this help / log pane: prints, logs, warnings; scroll it",
+        label: "? / v / g",
+        help: "help / log pane (PgUp PgDn scroll) / graph as ROS 2 sees it",
         footer: Some(("?", "help")),
     },
     Binding {

@@ -93,6 +93,9 @@ pub fn run_lab(settings: SessionSettings, stop: StopFlag) -> anyhow::Result<()> 
         settings.speed,
     );
     app.show_graph(settings.cfg.graph.clone());
+    if let Some((_, opts)) = &settings.ros2 {
+        app.set_ros2_domain(opts.domain);
+    }
     // What nodes' code and ratelab's warnings write goes to the log pane while the screen
     // is up, never over it (bounded: a node printing without end drops lines, not memory).
     let (log_tx, log_rx) = crossbeam_channel::bounded::<ratelab::textlog::LogLine>(LOG_QUEUE);
@@ -1293,6 +1296,39 @@ mod tests {
         assert!(
             render(&app, 80, 24).contains("latency"),
             "the latency panel is back"
+        );
+    }
+
+    /// `g`: with `--ros2`, the graph panel shows the graph as ROS 2 sees it (node names,
+    /// each topic's ROS 2 type, endpoint counts and QoS, `/clock`), at 80x24; `g` again gives
+    /// the node graph back. Without `--ros2` the key says why it shows nothing.
+    #[test]
+    fn g_shows_the_graph_as_ros_2_sees_it_with_ros2_only() {
+        let (mut app, _rx) = app_after(virtual_cfg(50.0, 1), false);
+        app.on_msg(Msg::ToggleRos2);
+        let text = render(&app, 80, 24);
+        assert!(
+            text.contains("not offered to ROS 2: start the lab with --ros2"),
+            "{text}"
+        );
+        assert!(!text.contains("as ROS 2 sees it"), "{text}");
+        app.set_ros2_domain(7);
+        app.on_msg(Msg::ToggleRos2);
+        let text = render(&app, 80, 24);
+        for row in [
+            "as ROS 2 sees it · domain 7 · g: back",
+            "nodes  /sensor  /policy  /actuator  /ratelab",
+            "/obs     sensor_msgs/msg/JointState  1 pub 1 sub  BEST_EFFORT · KEEP_LAST (1)",
+            "/action  std_msgs/msg/Float64        1 pub 1 sub  BEST_EFFORT · KEEP_LAST (1)",
+            "/clock   rosgraph_msgs/msg/Clock     1 pub 0 sub  BEST_EFFORT · KEEP_LAST (1)",
+        ] {
+            assert!(text.contains(row), "{row:?} in\n{text}");
+        }
+        app.on_msg(Msg::ToggleRos2);
+        let text = render(&app, 80, 24);
+        assert!(
+            !text.contains("as ROS 2 sees it") && text.contains("policy"),
+            "{text}"
         );
     }
 

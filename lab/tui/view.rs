@@ -310,6 +310,8 @@ pub struct View {
     pub timeline: Option<super::timeline::TimelineView>,
     /// The log pane, shown in place of the latency histogram (key `v`).
     pub log: Option<LogView>,
+    /// The graph as ROS 2 sees it, shown in place of the node graph (key `g`, `--ros2`).
+    pub ros2: Option<Ros2View>,
     /// The window and the segment the numbers count over.
     pub segment: SegmentView,
     /// Help overlay shown?
@@ -325,6 +327,16 @@ pub struct View {
     /// Attached: where the launch listens (the header's note where it fits, and the
     /// footer's).
     pub endpoint: Option<String>,
+}
+
+/// The graph as ROS 2 sees it (`--ros2`): the domain and what `ros2 node list` and `ros2
+/// topic info -v` would show ([`ratelab::ros2::offered`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Ros2View {
+    /// The ROS 2 domain.
+    pub domain: u32,
+    /// What is offered.
+    pub offered: ratelab::ros2::offered::Offered,
 }
 
 /// The log pane: what nodes' code wrote and ratelab's warnings, newest last.
@@ -401,7 +413,10 @@ impl Widget for &View {
         ])
         .areas(area);
         render_status(self, status, buf);
-        render_graph(self, graph, buf);
+        match &self.ros2 {
+            Some(r) => render_ros2(r, graph, buf),
+            None => render_graph(self, graph, buf),
+        }
         render_segment(self, segment, buf);
         let [cart, chart] =
             Layout::horizontal([Constraint::Percentage(40), Constraint::Percentage(60)])
@@ -421,6 +436,53 @@ impl Widget for &View {
             render_help(area, buf, self.attached.is_some());
         }
     }
+}
+
+/// The graph panel as ROS 2 sees the graph: its node names on one line, then a row per
+/// topic (`/obs  sensor_msgs/msg/JointState  1 pub 1 sub  BEST_EFFORT · KEEP_LAST (1)`),
+/// `/clock` last; a row too long for the panel is cut with `…`.
+fn render_ros2(r: &Ros2View, area: Rect, buf: &mut Buffer) {
+    let block = Block::bordered().title(Line::from(format!(
+        " as ROS 2 sees it · domain {} · g: back ",
+        r.domain
+    )));
+    let inner = block.inner(area);
+    block.render(area, buf);
+    let width = usize::from(inner.width);
+    let cut = |s: String| -> String {
+        if s.chars().count() > width {
+            let mut t: String = s.chars().take(width.saturating_sub(1)).collect();
+            t.push('…');
+            t
+        } else {
+            s
+        }
+    };
+    let name_w = r
+        .offered
+        .topics
+        .iter()
+        .map(|t| t.name.chars().count())
+        .max()
+        .unwrap_or(0);
+    let type_w = r
+        .offered
+        .topics
+        .iter()
+        .map(|t| t.ros_type.chars().count())
+        .max()
+        .unwrap_or(0);
+    let mut lines = vec![Line::from(cut(format!(
+        "nodes  {}",
+        r.offered.nodes.join("  ")
+    )))];
+    for t in &r.offered.topics {
+        lines.push(Line::from(cut(format!(
+            "{:name_w$}  {:type_w$}  {} pub {} sub  {}",
+            t.name, t.ros_type, t.publishers, t.subscriptions, t.qos
+        ))));
+    }
+    Paragraph::new(lines).render(inner, buf);
 }
 
 fn render_too_small(area: Rect, buf: &mut Buffer) {

@@ -229,7 +229,8 @@ pub fn check_graph(spec: &GraphSpec) -> Result<(), String> {
     Ok(())
 }
 
-fn qos_of(spec: &GraphSpec, t: usize) -> QosProfile {
+/// The QoS topic `t` of `spec` is offered with (its publisher's token's).
+pub(crate) fn qos_of(spec: &GraphSpec, t: usize) -> QosProfile {
     let topic = &spec.topics[t];
     let q = &topic.qos;
     let dur = |d: Option<Nanos>| {
@@ -254,7 +255,8 @@ fn qos_of(spec: &GraphSpec, t: usize) -> QosProfile {
     }
 }
 
-fn clock_qos() -> QosProfile {
+/// `/clock`'s QoS: best effort, keep last 1.
+pub(crate) fn clock_qos() -> QosProfile {
     QosProfile {
         reliability: QosReliability::BestEffort,
         history: QosHistory::KeepLast(1),

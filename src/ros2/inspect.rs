@@ -145,6 +145,36 @@ fn duration(d: &QosDuration) -> String {
     }
 }
 
+/// A QoS profile in one short line: `BEST_EFFORT · KEEP_LAST (1)`, then what is not
+/// ROS 2's default (`· deadline 40 ms`, `· lifespan 60 ms`, `· lease 100 ms`,
+/// `· TRANSIENT_LOCAL`).
+pub fn qos_short(q: &QosProfile) -> String {
+    let mut parts = vec![
+        match q.reliability {
+            QosReliability::Reliable => "RELIABLE".to_string(),
+            QosReliability::BestEffort => "BEST_EFFORT".to_string(),
+        },
+        match q.history {
+            QosHistory::KeepLast(n) => format!("KEEP_LAST ({n})"),
+            QosHistory::KeepAll => "KEEP_ALL".to_string(),
+        },
+    ];
+    let ms = |d: &QosDuration| d.sec as f64 * 1e3 + d.nsec as f64 / 1e6;
+    for (what, d) in [
+        ("deadline", &q.deadline),
+        ("lifespan", &q.lifespan),
+        ("lease", &q.liveliness_lease_duration),
+    ] {
+        if *d != QosDuration::INFINITE {
+            parts.push(format!("{what} {} ms", ms(d)));
+        }
+    }
+    if q.durability == hiroz_protocol::qos::QosDurability::TransientLocal {
+        parts.push("TRANSIENT_LOCAL".into());
+    }
+    parts.join(" · ")
+}
+
 fn qos_block(q: &QosProfile) -> String {
     let history = match q.history {
         QosHistory::KeepLast(n) => format!("KEEP_LAST ({n})"),

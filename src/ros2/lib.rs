@@ -19,7 +19,8 @@
 //!   their tokens, checking their types, hearing what they publish, and the lockstep's
 //!   time contract under the virtual clock;
 //! - [`inspect`] and [`echo`]: `ratelab ros2`, any rmw_zenoh graph read from the other side
-//!   as ros2cli reads it (nodes, topics, QoS, messages as YAML, rates).
+//!   as ros2cli reads it (nodes, topics, QoS, messages as YAML, rates); [`offered`]: a
+//!   graph as ROS 2 sees it when offered (the lab's panel).
 //!
 //! The format is rmw_zenoh's `docs/design.md`; its keys, tokens and QoS strings come from
 //! ZettaScale's `hiroz-protocol`, its hashes from `hiroz-schema`, its CDR from `hiroz-cdr`.
@@ -40,6 +41,7 @@ pub mod echo;
 pub mod external;
 pub mod inspect;
 pub mod names;
+pub mod offered;
 pub mod session;
 pub mod types;
 

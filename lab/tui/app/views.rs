@@ -393,6 +393,13 @@ impl App {
             published_force: self.published.iter().copied().collect(),
             latency: self.latency_view(),
             log: self.show_log.then(|| self.log_view()),
+            ros2: match (self.show_ros2, self.ros2_domain) {
+                (true, Some(domain)) => Some(Ros2View {
+                    domain,
+                    offered: ratelab::ros2::offered::offered(&self.graph),
+                }),
+                _ => None,
+            },
             timeline: self.show_timeline.then(|| {
                 self.timeline.view(
                     &self.graph,
