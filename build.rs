@@ -83,6 +83,11 @@ fn main() {
             "exercises/ex9_crossing.toml",
             &["p50_latency_across_ms", "p50_latency_across_offsets_ms"][..],
         ),
+        (
+            "ex13",
+            "exercises/ex13_what_ros2_sees.toml",
+            &["nodes", "obs_type", "action_type", "clock_hz"][..],
+        ),
     ] {
         let file = root.join(file);
         println!("cargo:rerun-if-changed={}", file.display());

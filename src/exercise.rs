@@ -27,6 +27,8 @@
 //!   raised, at the estimator's cut-off and a lower one: where the pole first falls.
 //! - [`ex9`], the crossing (real clock, real processes): the chapter's graph split
 //!   across two processes, without and with phase offsets: what a crossing hop costs.
+//! - [`ex13`], what ROS 2 sees: the chapter's graph offered with `--ros2`, its policy at
+//!   40 Hz: the node list, the topics' ROS 2 types, and how often `/clock` ticks.
 
 /// Print one line of an exercise's report through its [`Context`]: `say!(cx, "…", args)`,
 /// or `say!(cx)` for an empty line.
@@ -40,6 +42,7 @@ macro_rules! say {
 }
 
 pub mod ex1;
+pub mod ex13;
 pub mod ex2;
 pub mod ex3;
 pub mod ex4;
@@ -50,6 +53,7 @@ pub mod ex8;
 pub mod ex9;
 
 pub use ex1::{check_ex1, measure_ex1, Ex1Bands, Ex1Outcome};
+pub use ex13::{check_ex13, measure_ex13, Ex13Bands, Ex13Outcome};
 pub use ex2::{check_ex2, measure_ex2, Ex2Bands, Ex2Outcome};
 pub use ex3::{check_ex3, fixed_latency_ms, measure_ex3, Ex3Bands, Ex3Outcome};
 pub use ex4::{check_ex4, measure_ex4, outcome_ex4, Ex4Bands, Ex4Outcome, Ex4Run};
@@ -80,6 +84,7 @@ pub const EXERCISES: &[&dyn Exercise] = &[
     &ex7::Ex7,
     &ex8::Ex8,
     &ex9::Ex9,
+    &ex13::Ex13,
 ];
 
 /// One exercise: the learner predicts, ratelab measures, the two are reconciled.
@@ -188,7 +193,7 @@ pub enum ExerciseError {
     Launch(String),
 }
 
-/// `ex1, ex2, …, ex8 or ex9`.
+/// `ex1, ex2, …, ex9 or ex13`.
 fn expected() -> String {
     match ids().split_last() {
         Some((last, rest)) if !rest.is_empty() => format!("{} or {last}", rest.join(", ")),
@@ -702,7 +707,10 @@ mod tests {
                 assert!(dir.join(g).is_file(), "{}", e.id());
             }
         }
-        assert_eq!(expected(), "ex1, ex2, ex3, ex4, ex5, ex6, ex7, ex8 or ex9");
+        assert_eq!(
+            expected(),
+            "ex1, ex2, ex3, ex4, ex5, ex6, ex7, ex8, ex9 or ex13"
+        );
     }
 
     #[test]

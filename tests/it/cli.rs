@@ -464,7 +464,7 @@ fn exercise_ex5_runs_on_the_graph_its_bands_name_and_reconciles() {
     let o = ratelab(&["exercise", "ex10", "--dir", d]);
     assert!(
         o.status.code() == Some(2)
-            && stderr(&o).contains("expected ex1, ex2, ex3, ex4, ex5, ex6, ex7, ex8 or ex9"),
+            && stderr(&o).contains("expected ex1, ex2, ex3, ex4, ex5, ex6, ex7, ex8, ex9 or ex13"),
         "{}",
         stderr(&o)
     );

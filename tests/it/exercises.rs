@@ -461,6 +461,15 @@ fn ex9_prediction_recorded() {
 }
 
 #[test]
+#[cfg_attr(
+    ex13_prediction_empty,
+    ignore = "ex13: write your prediction in exercises/ex13_what_ros2_sees.toml"
+)]
+fn ex13_prediction_recorded() {
+    prediction_recorded("ex13", "ex13_what_ros2_sees.toml");
+}
+
+#[test]
 fn exercise_files_are_valid() {
     for file in [
         "ex1_rate_cliff.toml",
@@ -472,6 +481,7 @@ fn exercise_files_are_valid() {
         "ex7_slow_callback.toml",
         "ex8_noisy_sensor.toml",
         "ex9_crossing.toml",
+        "ex13_what_ros2_sees.toml",
     ] {
         let f = ExerciseFile::load(&path(file)).unwrap();
         assert!(

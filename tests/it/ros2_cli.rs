@@ -400,3 +400,81 @@ fn gids_and_keep_all_depths_are_rmw_zenoh_cpp_s() {
         assert_eq!(q.split(':').nth(2), Some("2,10"), "{obs:?}");
     }
 }
+
+/// ex13's answers (what ROS 2 sees of the chapter's graph, its policy at 40 Hz) are what
+/// `ratelab ros2` reads from the wire of such a run: the node list, the topics' types, and
+/// /clock's rate (the run is paced to the wall clock with --ros2, so run time is wall time).
+#[test]
+fn ex13_s_answers_are_what_the_wire_shows() {
+    let _alone = crate::machine::alone();
+    let mut cfg = ratelab::RunConfig {
+        clock: ratelab::ClockKind::Virtual,
+        duration: ratelab::config::duration_from_secs(2.0).unwrap(),
+        ..ratelab::RunConfig::default()
+    };
+    cfg.set_control_hz(40.0).unwrap();
+    let o = ratelab::exercise::measure_ex13(&cfg).unwrap();
+    assert_eq!(o.clock_hz, 80.0);
+    let endpoint = format!("tcp/127.0.0.1:{}", free_port());
+    let mut run = Command::new(env!("CARGO_BIN_EXE_ratelab"))
+        .args([
+            "run",
+            "--clock",
+            "virtual",
+            "--control-hz",
+            "40",
+            "--duration",
+            "10",
+            "--ros2",
+        ])
+        .current_dir(crate::REPO)
+        .env_remove("ROS_DOMAIN_ID")
+        .env_remove("ZENOH_ROUTER_CHECK_ATTEMPTS")
+        .env(connect_to(&endpoint).0, connect_to(&endpoint).1)
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut err = BufReader::new(run.stderr.take().unwrap());
+    let mut said = String::new();
+    while !said.contains("offering the graph to ROS 2") {
+        let mut line = String::new();
+        if err.read_line(&mut line).unwrap() == 0 {
+            break;
+        }
+        said.push_str(&line);
+    }
+    let ros2 = |verb: &[&str]| {
+        let mut args = vec!["ros2", "--connect", endpoint.as_str()];
+        args.extend_from_slice(verb);
+        ratelab(&args, &[])
+    };
+    let (_, out, _) = ros2(&["node", "list"]);
+    let mut nodes = o.nodes.clone();
+    nodes.sort();
+    assert_eq!(
+        out,
+        nodes.iter().map(|n| format!("{n}\n")).collect::<String>()
+    );
+    let (_, out, _) = ros2(&["topic", "list", "-t"]);
+    assert!(out.contains(&format!("/obs [{}]", o.obs_type)), "{out}");
+    assert!(
+        out.contains(&format!("/action [{}]", o.action_type)),
+        "{out}"
+    );
+    let (_, out, _) = ros2(&["topic", "hz", "/clock", "--duration", "3.2"]);
+    let rate: f64 = out
+        .lines()
+        .rev()
+        .find_map(|l| l.strip_prefix("average rate: "))
+        .unwrap_or_else(|| panic!("{out}"))
+        .parse()
+        .unwrap();
+    assert!(
+        (rate - o.clock_hz).abs() < 4.0,
+        "{rate} vs {}: {out}",
+        o.clock_hz
+    );
+    let _ = run.kill();
+    let _ = run.wait();
+}

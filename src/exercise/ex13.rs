@@ -1,0 +1,204 @@
+//! ex13, what ROS 2 sees: the chapter's graph offered with `--ros2`, its policy at another
+//! rate than the sensor's. The learner predicts what `ros2 node list` prints, the ROS 2 types
+//! of `/obs` and `/action`, and how many `/clock` messages a second of run time carries;
+//! ratelab answers from the mapping its bridge declares the graph with
+//! ([`crate::ros2::offered`]) and from the run's own instants (`/clock` is published before
+//! each virtual instant, docs/ros2.md), and prints the `ratelab ros2` commands that read the
+//! same from the wire (a test reads them there and finds the same).
+
+use super::{check, Check, Context, Exercise, ExerciseError, Reconcile, Section};
+use crate::config::{duration_from_secs, ClockKind, RunConfig};
+use crate::policy::Scripted;
+use crate::runcore::{CoreOptions, RunCore, Step};
+use serde::Deserialize;
+
+/// ex13: what ROS 2 sees.
+pub struct Ex13;
+
+/// ex13's settings.
+#[derive(Clone, Debug, Deserialize)]
+pub struct Ex13Bands {
+    /// The policy's rate, Hz (the sensor and actuator keep the graph's).
+    pub control_hz: f64,
+    /// Run time over which `/clock` is counted, s.
+    pub duration_s: f64,
+}
+
+impl Section for Ex13Bands {
+    const NAME: &'static str = "ex13";
+}
+
+/// ex13's outcome: what ROS 2 sees.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Ex13Outcome {
+    /// `ros2 node list`, in the graph's order (`/ratelab` last).
+    pub nodes: Vec<String>,
+    /// `/obs`'s ROS 2 type.
+    pub obs_type: String,
+    /// `/action`'s.
+    pub action_type: String,
+    /// `/clock` messages per second of run time.
+    pub clock_hz: f64,
+}
+
+/// ex13's measurement on the run `cfg` (virtual clock): the graph as offered, and its
+/// instants per second of run time (each one a `/clock` message).
+///
+/// # Errors
+/// [`ExerciseError`] when the run cannot start.
+pub fn measure_ex13(cfg: &RunConfig) -> Result<Ex13Outcome, ExerciseError> {
+    let offered = crate::ros2::offered::offered(&cfg.graph);
+    let type_of = |name: &str| {
+        offered
+            .topics
+            .iter()
+            .find(|t| t.name == name)
+            .map_or_else(|| "?".to_string(), |t| t.ros_type.clone())
+    };
+    let mut core = RunCore::new(cfg, Box::new(Scripted), CoreOptions::default())
+        .map_err(|e| crate::sweep::SweepError::from(crate::run::RunError::from(e)))?;
+    // The instants in [0, duration): each is one /clock message.
+    let mut instants = 0u64;
+    while let Step::Ran { at, .. } = core.step() {
+        if at < cfg.duration {
+            instants += 1;
+        }
+    }
+    Ok(Ex13Outcome {
+        nodes: offered.nodes.clone(),
+        obs_type: type_of("/obs"),
+        action_type: type_of("/action"),
+        clock_hz: instants as f64 / cfg.duration.as_secs_f64(),
+    })
+}
+
+/// ex13's checks: the facts the lesson rests on.
+pub fn check_ex13(b: &Ex13Bands, o: &Ex13Outcome) -> Vec<Check> {
+    vec![
+        check(
+            "ROS 2 sees every node of the graph, and ratelab's own /ratelab (which publishes /clock)",
+            o.nodes.first().is_some_and(|n| n == "/sensor") && o.nodes.last().is_some_and(|n| n == "/ratelab"),
+        ),
+        check(
+            "/obs is a sensor_msgs/msg/JointState, /action a std_msgs/msg/Float64 (newtons)",
+            o.obs_type == "sensor_msgs/msg/JointState" && o.action_type == "std_msgs/msg/Float64",
+        ),
+        check(
+            format!(
+                "/clock ticks at every instant any node ticks: more often than any one node ({} Hz policy, 50 Hz sensor)",
+                b.control_hz
+            ),
+            o.clock_hz > b.control_hz.max(50.0),
+        ),
+    ]
+}
+
+impl Reconcile for Ex13Outcome {
+    fn reconcile(&self, prediction: &toml::Table) -> Vec<String> {
+        let list = |key: &str| -> Option<Vec<String>> {
+            prediction.get(key)?.as_array().map(|a| {
+                a.iter()
+                    .filter_map(|v| v.as_str().map(str::to_string))
+                    .collect()
+            })
+        };
+        let text = |key: &str| {
+            prediction
+                .get(key)
+                .and_then(|v| v.as_str())
+                .map(str::to_string)
+        };
+        let mut out = Vec::new();
+        out.push(match list("nodes") {
+            Some(n) if n == self.nodes => format!("You predicted the node list {n:?}: right."),
+            Some(n) => format!(
+                "You predicted the node list {n:?}; ROS 2 sees {:?} (a node name has its namespace's `/`, and ratelab's own node publishes /clock).",
+                self.nodes
+            ),
+            None => super::unreadable("nodes"),
+        });
+        for (key, seen) in [
+            ("obs_type", &self.obs_type),
+            ("action_type", &self.action_type),
+        ] {
+            out.push(match text(key) {
+                Some(t) if &t == seen => format!("You predicted {key} = {t}: right."),
+                Some(t) => format!("You predicted {key} = {t}; it is {seen}."),
+                None => super::unreadable(key),
+            });
+        }
+        out.push(match prediction.get("clock_hz").and_then(super::number) {
+            Some(n) => format!(
+                "You predicted {n} /clock messages a second; there were {:.1}.",
+                self.clock_hz
+            ),
+            None => super::unreadable("clock_hz"),
+        });
+        out
+    }
+}
+
+impl Exercise for Ex13 {
+    fn id(&self) -> &'static str {
+        "ex13"
+    }
+
+    fn title(&self) -> &'static str {
+        "what ROS 2 sees"
+    }
+
+    fn file(&self) -> &'static str {
+        "ex13_what_ros2_sees.toml"
+    }
+
+    fn required_keys(&self) -> &'static [&'static str] {
+        &["nodes", "obs_type", "action_type", "clock_hz"]
+    }
+
+    fn run(&self, cx: &mut Context<'_>) -> Result<(), ExerciseError> {
+        let b: Ex13Bands = cx.bands()?;
+        let mut cfg = RunConfig {
+            clock: ClockKind::Virtual,
+            duration: duration_from_secs(b.duration_s)?,
+            graph: cx.graph.clone(),
+            ..RunConfig::default()
+        };
+        cfg.set_control_hz(b.control_hz)?;
+        let o = cx.measure(|| measure_ex13(&cfg))?;
+        say!(
+            cx,
+            "what ROS 2 sees of the chapter's graph, policy at {} Hz:",
+            b.control_hz
+        );
+        say!(cx, "  ros2 node list        {}", o.nodes.join("  "));
+        say!(cx, "  /obs                  {}", o.obs_type);
+        say!(cx, "  /action               {}", o.action_type);
+        say!(
+            cx,
+            "  /clock                {:.1} messages per second of run time",
+            o.clock_hz
+        );
+        cx.reconcile(&o);
+        cx.checks(&check_ex13(&b, &o));
+        say!(cx);
+        cx.paragraph(
+            "Reconcile: ROS 2 sees the graph's nodes by name, with the root namespace's `/`, and \
+             one more: ratelab's own `/ratelab`, which publishes /clock. Each topic is offered \
+             as the ROS 2 type its message maps to: the state as a sensor_msgs/msg/JointState \
+             (the cart's slider and the pole's hinge), the force as a std_msgs/msg/Float64 in \
+             newtons. /clock is the virtual clock itself: it is published before every instant \
+             at which any node ticks, so with the sensor at 50 Hz and the policy at 40 Hz it \
+             ticks at the union of both grids (every 20 ms and every 25 ms, together every \
+             100 ms): 50 + 40 - 10 = 80 times a second, more often than any node. A ROS 2 node \
+             with use_sim_time sees time jump from instant to instant. Check it from the other \
+             side, in two terminals:",
+        );
+        say!(
+            cx,
+            "  ./scripts/lab.sh run --clock virtual --control-hz {} --duration 60 --ros2",
+            b.control_hz
+        );
+        say!(cx, "  ./scripts/lab.sh ros2 node list; ./scripts/lab.sh ros2 topic list -t; ./scripts/lab.sh ros2 topic hz /clock");
+        Ok(())
+    }
+}
