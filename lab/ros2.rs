@@ -38,6 +38,16 @@ pub enum Ros2Command {
     /// Topics: `topic list [-t]`, `topic info TOPIC [-v]`, `topic echo|hz|bw TOPIC`.
     #[command(subcommand)]
     Topic(TopicVerb),
+    /// The graph: a line per topic, publisher ──▶ topic [type] msg/s ──▶ subscribers, every
+    /// second until Ctrl-C (`--once`: one measured second, then exit).
+    Graph {
+        /// Print once, after one second of measuring.
+        #[arg(long)]
+        once: bool,
+        /// Stop after this many seconds (default: at Ctrl-C).
+        #[arg(long, value_name = "S")]
+        duration: Option<f64>,
+    },
     /// Bags (rosbag2, MCAP storage): `bag info DIR`, `bag echo DIR`.
     #[command(subcommand)]
     Bag(BagVerb),
@@ -197,6 +207,10 @@ pub fn run(args: &Ros2Args, stop: StopFlag) -> Result<()> {
             )?;
         }
         Ros2Command::Bag(_) => {}
+        Ros2Command::Graph { once, duration } => {
+            drop(out);
+            graph(&session, &g, *once, *duration, &stop)?;
+        }
         Ros2Command::Topic(TopicVerb::Bw {
             topic,
             window,
@@ -367,5 +381,69 @@ fn bag(verb: &BagVerb) -> Result<()> {
             }
         }
     }
+    Ok(())
+}
+
+/// `ratelab ros2 graph`: subscribe to every published topic, count its messages each second,
+/// and print the graph with each topic's msg/s.
+fn graph(
+    session: &inspect::Session,
+    g: &inspect::Seen,
+    once: bool,
+    duration: Option<f64>,
+    stop: &StopFlag,
+) -> Result<()> {
+    let until = match duration {
+        Some(s) if s.is_finite() && s > 0.0 && s <= 1e6 => Some(Duration::from_secs_f64(s)),
+        Some(s) => {
+            return Err(anyhow!(
+                "--duration must be in (0, 1000000] seconds, got {s}"
+            ))
+        }
+        None => None,
+    };
+    let counts: Arc<Mutex<std::collections::BTreeMap<String, u64>>> = Arc::default();
+    let mut subs = Vec::new();
+    let mut topics: Vec<&str> = Vec::new();
+    for e in &g.endpoints {
+        if e.kind == inspect::EndpointKind::Publisher && !topics.contains(&e.topic.as_str()) {
+            topics.push(&e.topic);
+            let (counted, topic) = (counts.clone(), e.topic.clone());
+            subs.push(inspect::subscribe(session, e, move |_| {
+                *counted
+                    .lock()
+                    .unwrap_or_else(|e| e.into_inner())
+                    .entry(topic.clone())
+                    .or_default() += 1;
+            })?);
+        }
+    }
+    let start = Instant::now();
+    let mut last = start;
+    loop {
+        std::thread::sleep(Duration::from_secs(1));
+        let now = Instant::now();
+        let secs = now.duration_since(last).as_secs_f64().max(1e-9);
+        last = now;
+        let counted = std::mem::take(&mut *counts.lock().unwrap_or_else(|e| e.into_inner()));
+        // Every topic listened to has a rate, 0 when nothing came this second.
+        let rates: std::collections::BTreeMap<String, f64> = topics
+            .iter()
+            .map(|t| {
+                (
+                    t.to_string(),
+                    counted.get(*t).copied().unwrap_or(0) as f64 / secs,
+                )
+            })
+            .collect();
+        let mut out = std::io::stdout().lock();
+        write!(out, "{}", inspect::graph_lines(g, &rates))?;
+        if once || stop.is_stopped() || until.is_some_and(|u| start.elapsed() >= u) {
+            break;
+        }
+        writeln!(out, "---")?;
+        out.flush()?;
+    }
+    drop(subs);
     Ok(())
 }

@@ -419,6 +419,65 @@ impl Rate {
     }
 }
 
+/// `ratelab ros2 graph`: the graph as the tokens tell it, a line per topic from its
+/// publishers through the topic (its type and, where measured, its msg/s) to its
+/// subscribers, as the lab draws node → topic → node:
+/// `/sensor ──▶ /obs [sensor_msgs/msg/JointState] 50.0 msg/s ──▶ /policy`. `rates`: msg/s
+/// per topic (absent: not measured). Nodes with no topic follow, one line.
+pub fn graph_lines(g: &Seen, rates: &std::collections::BTreeMap<String, f64>) -> String {
+    /// A topic's publishers, subscribers and types, by node name.
+    #[derive(Default)]
+    struct Ends {
+        pubs: BTreeSet<String>,
+        subs: BTreeSet<String>,
+        types: BTreeSet<String>,
+    }
+    let mut topics: std::collections::BTreeMap<String, Ends> = Default::default();
+    let mut linked: BTreeSet<String> = BTreeSet::new();
+    for e in g.endpoints.iter().filter(|e| is_topic(e)) {
+        let node = e.node.as_ref().map_or_else(|| "?".to_string(), fq_name);
+        linked.insert(node.clone());
+        let entry = topics.entry(e.topic.clone()).or_default();
+        entry.types.insert(type_name(e));
+        match e.kind {
+            EndpointKind::Publisher => entry.pubs.insert(node),
+            _ => entry.subs.insert(node),
+        };
+    }
+    let join = |s: &BTreeSet<String>| s.iter().cloned().collect::<Vec<_>>().join(", ");
+    let mut out = String::new();
+    for (topic, Ends { pubs, subs, types }) in &topics {
+        let rate = rates
+            .get(topic)
+            .map_or_else(String::new, |r| format!(" {r:.1} msg/s"));
+        let left = if pubs.is_empty() {
+            "(no publisher)".to_string()
+        } else {
+            join(pubs)
+        };
+        let right = if subs.is_empty() {
+            String::new()
+        } else {
+            format!(" ──▶ {}", join(subs))
+        };
+        out.push_str(&format!(
+            "{left} ──▶ {} [{}]{rate}{right}\n",
+            printable(topic),
+            join(types)
+        ));
+    }
+    let alone: BTreeSet<String> = g
+        .nodes
+        .iter()
+        .map(fq_name)
+        .filter(|n| !linked.contains(n))
+        .collect();
+    if !alone.is_empty() {
+        out.push_str(&format!("nodes with no topic: {}\n", join(&alone)));
+    }
+    out
+}
+
 /// `ros2 topic bw`'s figures over a window of messages: bytes a second, and the messages'
 /// mean, min and max size, in ros2cli's units (B, KB, MB: powers of 1000).
 #[derive(Debug, Default)]
@@ -575,6 +634,19 @@ mod tests {
         let mut g = talker();
         g.nodes.push(node("evil\x1b[2J", "/"));
         assert!(!node_list(&g).contains('\x1b'));
+    }
+
+    #[test]
+    fn the_graph_reads_publisher_topic_subscriber() {
+        let mut g = talker();
+        g.nodes.push(node("idle", "/"));
+        let rates = std::collections::BTreeMap::from([("/chatter".to_string(), 10.0)]);
+        assert_eq!(
+            graph_lines(&g, &rates),
+            "/talker ──▶ /chatter [std_msgs/msg/String] 10.0 msg/s ──▶ /demo/listener\n\
+             /talker ──▶ /cmd_vel [geometry_msgs/msg/Twist]\n\
+             nodes with no topic: /idle\n"
+        );
     }
 
     #[test]

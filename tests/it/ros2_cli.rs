@@ -165,6 +165,32 @@ fn ros2_verbs_read_another_graph_and_survive_hostile_tokens_and_payloads() {
         out.contains("average rate: 19.") || out.contains("average rate: 20."),
         "{out}"
     );
+    // graph: publisher ──▶ topic [type] msg/s ──▶ subscribers, as the lab draws it.
+    let (code, out, err) = ros2(&["graph", "--once"]);
+    assert_eq!(code, 0, "{err}");
+    let line = |topic: &str| {
+        out.lines()
+            .find(|l| l.contains(&format!(" ──▶ {topic} [")))
+            .unwrap_or_else(|| panic!("{topic} in {out}"))
+            .to_string()
+    };
+    assert!(
+        line("/chatter").starts_with("/demo/talker ──▶ /chatter [std_msgs/msg/String] "),
+        "{out}"
+    );
+    assert!(line("/chatter").ends_with(" msg/s ──▶ /listener"), "{out}");
+    let cmd_vel = line("/cmd_vel");
+    let hz: f64 = cmd_vel
+        .split(" msg/s")
+        .next()
+        .and_then(|l| l.rsplit(' ').next())
+        .and_then(|r| r.parse().ok())
+        .unwrap_or_else(|| panic!("{cmd_vel}"));
+    assert!((15.0..25.0).contains(&hz), "{cmd_vel}");
+    assert!(
+        out.contains("nodes with no topic: /evil\\u{1b}[2J\\nnode"),
+        "{out}"
+    );
     let (_, out, _) = ros2(&["topic", "bw", "/chatter", "--duration", "2.2"]);
     assert!(out.starts_with("Subscribed to [/chatter]\n"), "{out}");
     assert!(out.contains("\tMessage size mean: 2"), "{out}");
