@@ -274,6 +274,20 @@ fn echo_topic(
     Ok(())
 }
 
+/// `--duration S` as a run time limit (`None`: until Ctrl-C).
+///
+/// # Errors
+/// One line when `S` is not in (0, 1000000].
+fn until(duration: Option<f64>) -> Result<Option<Duration>> {
+    match duration {
+        Some(s) if s.is_finite() && s > 0.0 && s <= 1e6 => Ok(Some(Duration::from_secs_f64(s))),
+        Some(s) => Err(anyhow!(
+            "--duration must be in (0, 1000000] seconds, got {s}"
+        )),
+        None => Ok(None),
+    }
+}
+
 /// What `hz` or `bw` keeps of the messages.
 enum Figures {
     Hz(inspect::Rate),
@@ -291,15 +305,7 @@ fn every_second(
 ) -> Result<()> {
     let p = publisher(g, topic)?;
     let start = Instant::now();
-    let until = match duration {
-        Some(s) if s.is_finite() && s > 0.0 && s <= 1e6 => Some(Duration::from_secs_f64(s)),
-        Some(s) => {
-            return Err(anyhow!(
-                "--duration must be in (0, 1000000] seconds, got {s}"
-            ))
-        }
-        None => None,
-    };
+    let until = until(duration)?;
     let figures = Arc::new(Mutex::new(figures));
     let seen = figures.clone();
     let _sub = inspect::subscribe(session, p, move |bytes| {
@@ -393,15 +399,7 @@ fn graph(
     duration: Option<f64>,
     stop: &StopFlag,
 ) -> Result<()> {
-    let until = match duration {
-        Some(s) if s.is_finite() && s > 0.0 && s <= 1e6 => Some(Duration::from_secs_f64(s)),
-        Some(s) => {
-            return Err(anyhow!(
-                "--duration must be in (0, 1000000] seconds, got {s}"
-            ))
-        }
-        None => None,
-    };
+    let until = until(duration)?;
     let counts: Arc<Mutex<std::collections::BTreeMap<String, u64>>> = Arc::default();
     let mut subs = Vec::new();
     let mut topics: Vec<&str> = Vec::new();

@@ -233,11 +233,14 @@ fn angle_view(extents: Option<&Extents>) -> ViewSpec {
     .iter()
     .map(|p| p.to_string())
     .collect();
-    for m in Mark::ALL {
-        if extents.is_none_or(|e| e.contains_key(m.entity())) {
-            p.push(format!("/{}", m.entity()));
-        }
-    }
+    let marks: Vec<String> = Mark::ALL
+        .iter()
+        .map(|m| format!("/{}", m.entity()))
+        .collect();
+    p.extend(recorded(
+        &marks.iter().map(String::as_str).collect::<Vec<_>>(),
+        extents,
+    ));
     // The legend top left: the marks run along the bottom, a fall ends the line at the
     // right, and the pole starts near 0.
     legend_at(

@@ -118,6 +118,9 @@ pub(super) struct Logged {
 pub(super) struct EventList {
     rows: Vec<Logged>,
     more: usize,
+    /// Each mark's legend as last logged: past [`MAX_LISTED`] it no longer changes, and is
+    /// not logged again.
+    legends: BTreeMap<Mark, String>,
 }
 
 impl EventList {
@@ -234,6 +237,10 @@ impl ChunkBuffer {
     fn mark_style(&mut self, m: Mark) {
         let (color, shape, size) = m.style();
         let name = m.legend(&self.events.times(m));
+        if self.events.legends.get(&m) == Some(&name) {
+            return;
+        }
+        self.events.legends.insert(m, name.clone());
         self.add(
             m.entity(),
             &TimePoint::default(),

@@ -149,16 +149,7 @@ fn duration(d: &QosDuration) -> String {
 /// ROS 2's default (`· deadline 40 ms`, `· lifespan 60 ms`, `· lease 100 ms`,
 /// `· TRANSIENT_LOCAL`).
 pub fn qos_short(q: &QosProfile) -> String {
-    let mut parts = vec![
-        match q.reliability {
-            QosReliability::Reliable => "RELIABLE".to_string(),
-            QosReliability::BestEffort => "BEST_EFFORT".to_string(),
-        },
-        match q.history {
-            QosHistory::KeepLast(n) => format!("KEEP_LAST ({n})"),
-            QosHistory::KeepAll => "KEEP_ALL".to_string(),
-        },
-    ];
+    let mut parts = vec![reliability_word(q).to_string(), history_words(q)];
     let ms = |d: &QosDuration| d.sec as f64 * 1e3 + d.nsec as f64 / 1e6;
     for (what, d) in [
         ("deadline", &q.deadline),
@@ -175,15 +166,24 @@ pub fn qos_short(q: &QosProfile) -> String {
     parts.join(" · ")
 }
 
-fn qos_block(q: &QosProfile) -> String {
-    let history = match q.history {
-        QosHistory::KeepLast(n) => format!("KEEP_LAST ({n})"),
-        QosHistory::KeepAll => "KEEP_ALL".into(),
-    };
-    let reliability = match q.reliability {
+/// Reliability as ros2cli writes it: `RELIABLE`, `BEST_EFFORT`.
+fn reliability_word(q: &QosProfile) -> &'static str {
+    match q.reliability {
         QosReliability::Reliable => "RELIABLE",
         QosReliability::BestEffort => "BEST_EFFORT",
-    };
+    }
+}
+
+/// History and depth as ros2cli writes them: `KEEP_LAST (7)`, `KEEP_ALL`.
+fn history_words(q: &QosProfile) -> String {
+    match q.history {
+        QosHistory::KeepLast(n) => format!("KEEP_LAST ({n})"),
+        QosHistory::KeepAll => "KEEP_ALL".into(),
+    }
+}
+
+fn qos_block(q: &QosProfile) -> String {
+    let (history, reliability) = (history_words(q), reliability_word(q));
     let durability = match q.durability {
         hiroz_protocol::qos::QosDurability::Volatile => "VOLATILE",
         hiroz_protocol::qos::QosDurability::TransientLocal => "TRANSIENT_LOCAL",

@@ -225,24 +225,14 @@ fn event_rows(all: &[Chunk]) -> Vec<(i64, String, String)> {
         .filter(|c| c.entity_path().to_string() == "/events")
     {
         let times = run_times(c);
-        let texts: Vec<String> = c
-            .iter_slices::<String>(rerun::TextLog::descriptor_text().component)
-            .map(|s| {
-                s.into_iter()
-                    .map(|x| x.as_str().to_string())
-                    .collect::<Vec<_>>()
-                    .join("")
-            })
-            .collect();
-        let levels: Vec<String> = c
-            .iter_slices::<String>(rerun::TextLog::descriptor_level().component)
-            .map(|s| {
-                s.into_iter()
-                    .map(|x| x.as_str().to_string())
-                    .collect::<Vec<_>>()
-                    .join("")
-            })
-            .collect();
+        // One string per row.
+        let per_row = |component| -> Vec<String> {
+            c.iter_slices::<String>(component)
+                .map(|s| s.iter().map(|x| x.as_str()).collect::<String>())
+                .collect()
+        };
+        let texts = per_row(rerun::TextLog::descriptor_text().component);
+        let levels = per_row(rerun::TextLog::descriptor_level().component);
         for ((t, text), level) in times.iter().zip(texts).zip(levels) {
             out.push((*t, level, text));
         }

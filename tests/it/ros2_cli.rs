@@ -7,33 +7,56 @@ use crate::ros2::{connect_to, oracle_python, ratelab, Oracle};
 use std::io::{BufRead, BufReader};
 use std::process::{Command, Stdio};
 
+/// `ratelab run ARGS` offering its graph to ROS 2 through its own router at a free port,
+/// once its first lines said so (it runs the router and offers the graph); killed when
+/// dropped.
+struct Offering {
+    child: std::process::Child,
+    endpoint: String,
+}
+
+impl Offering {
+    fn start(args: &[&str]) -> Offering {
+        let endpoint = format!("tcp/127.0.0.1:{}", free_port());
+        let mut child = Command::new(env!("CARGO_BIN_EXE_ratelab"))
+            .arg("run")
+            .args(args)
+            .current_dir(crate::REPO)
+            .env_remove("ROS_DOMAIN_ID")
+            .env_remove("ZENOH_ROUTER_CHECK_ATTEMPTS")
+            .env(connect_to(&endpoint).0, connect_to(&endpoint).1)
+            .stdout(Stdio::null())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap();
+        let mut err = BufReader::new(child.stderr.take().unwrap());
+        let mut said = String::new();
+        while !said.contains("offering the graph to ROS 2") {
+            let mut line = String::new();
+            if err.read_line(&mut line).unwrap() == 0 {
+                break;
+            }
+            said.push_str(&line);
+        }
+        assert!(said.contains("offering the graph to ROS 2"), "{said}");
+        Offering { child, endpoint }
+    }
+}
+
+impl Drop for Offering {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
 /// A graph offered to ROS 2 under the real clock, through a router at a free port (the
 /// run's own), read with `ratelab ros2 --connect` while it runs.
 #[test]
 fn ros2_verbs_read_a_running_graph_as_ros2cli_prints_it() {
     let _alone = crate::machine::alone();
-    let endpoint = format!("tcp/127.0.0.1:{}", free_port());
-    let mut run = Command::new(env!("CARGO_BIN_EXE_ratelab"))
-        .args(["run", "--clock", "real", "--duration", "12", "--ros2", "4"])
-        .current_dir(crate::REPO)
-        .env_remove("ROS_DOMAIN_ID")
-        .env_remove("ZENOH_ROUTER_CHECK_ATTEMPTS")
-        .env(connect_to(&endpoint).0, connect_to(&endpoint).1)
-        .stdout(Stdio::null())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    // Its first lines say it runs the router and offers the graph.
-    let mut err = BufReader::new(run.stderr.take().unwrap());
-    let mut said = String::new();
-    while !said.contains("offering the graph to ROS 2") {
-        let mut line = String::new();
-        if err.read_line(&mut line).unwrap() == 0 {
-            break;
-        }
-        said.push_str(&line);
-    }
-    assert!(said.contains("offering the graph to ROS 2"), "{said}");
+    let run = Offering::start(&["--clock", "real", "--duration", "12", "--ros2", "4"]);
+    let endpoint = run.endpoint.clone();
     let ros2 = |verb: &[&str]| {
         let mut args = vec!["ros2", "--connect", endpoint.as_str(), "--domain", "4"];
         args.extend_from_slice(verb);
@@ -95,8 +118,7 @@ fn ros2_verbs_read_a_running_graph_as_ros2cli_prints_it() {
         (code, err.trim()),
         (2, "error: Unable to find node '/nobody'")
     );
-    let _ = run.kill();
-    let _ = run.wait();
+    drop(run);
 }
 
 /// A graph that is not ratelab's (`tests/ros2/talker.py`: eclipse-zenoh and rosbags playing
@@ -441,35 +463,16 @@ fn ex13_s_answers_are_what_the_wire_shows() {
     cfg.set_control_hz(40.0).unwrap();
     let o = ratelab::exercise::measure_ex13(&cfg).unwrap();
     assert_eq!(o.clock_hz, 80.0);
-    let endpoint = format!("tcp/127.0.0.1:{}", free_port());
-    let mut run = Command::new(env!("CARGO_BIN_EXE_ratelab"))
-        .args([
-            "run",
-            "--clock",
-            "virtual",
-            "--control-hz",
-            "40",
-            "--duration",
-            "10",
-            "--ros2",
-        ])
-        .current_dir(crate::REPO)
-        .env_remove("ROS_DOMAIN_ID")
-        .env_remove("ZENOH_ROUTER_CHECK_ATTEMPTS")
-        .env(connect_to(&endpoint).0, connect_to(&endpoint).1)
-        .stdout(Stdio::null())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let mut err = BufReader::new(run.stderr.take().unwrap());
-    let mut said = String::new();
-    while !said.contains("offering the graph to ROS 2") {
-        let mut line = String::new();
-        if err.read_line(&mut line).unwrap() == 0 {
-            break;
-        }
-        said.push_str(&line);
-    }
+    let run = Offering::start(&[
+        "--clock",
+        "virtual",
+        "--control-hz",
+        "40",
+        "--duration",
+        "10",
+        "--ros2",
+    ]);
+    let endpoint = run.endpoint.clone();
     let ros2 = |verb: &[&str]| {
         let mut args = vec!["ros2", "--connect", endpoint.as_str()];
         args.extend_from_slice(verb);
@@ -501,6 +504,5 @@ fn ex13_s_answers_are_what_the_wire_shows() {
         "{rate} vs {}: {out}",
         o.clock_hz
     );
-    let _ = run.kill();
-    let _ = run.wait();
+    drop(run);
 }
