@@ -78,7 +78,7 @@ pub fn run_exercise(
     graph: &ratelab::graph::GraphSpec,
     graph_path: Option<&Path>,
 ) -> anyhow::Result<()> {
-    let exe = std::env::current_exe()?;
+    let exe = ratelab::distributed::launcher::Program::this()?;
     let setup = Setup {
         dir,
         graph,

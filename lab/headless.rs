@@ -229,23 +229,8 @@ pub fn run_headless(a: &RunArgs, stop: StopFlag) -> anyhow::Result<RunReport> {
     let cfg = config_from_args(a)?;
     warn_late_faults(&cfg);
     let brain = ratelab::checkpoint::load_policy(&a.policy)?;
-    if let Some(dir) = &a.out {
-        std::fs::create_dir_all(dir)
-            .with_context(|| format!("cannot create --out folder {}", dir.display()))?;
-        // Refuse before the run, not after it: the outputs will not be writable.
-        for name in ["metrics.json", "trace.csv"] {
-            ratelab::output::check_target(&dir.join(name), a.force)?;
-        }
-    }
+    check_out(a)?;
     let (bar, ticker) = real_clock_bar(&cfg, &stop);
-    // Refused before anything is written or opened.
-    let ros2 = ros2_options(a, &cfg.graph)?;
-    let recording = open_recording(a, &cfg, &brain.label())?;
-    let mut opts = RunOptions {
-        stop: stop.clone(),
-        ros2,
-        ..RunOptions::new()
-    };
     // A long virtual run (up to an hour of run time, seconds to minutes of wall time) shows
     // its run time going by; the observer only reads step times, so results do not change.
     let virtual_bar = (cfg.clock == ClockKind::Virtual
@@ -262,41 +247,17 @@ pub fn run_headless(a: &RunArgs, stop: StopFlag) -> anyhow::Result<RunReport> {
         );
         bar
     });
-    if let Some(bar) = &virtual_bar {
-        opts.observers.push(Box::new(ProgressObserver(bar.clone())));
-    }
-    if let Some(r) = &recording {
-        opts.observers.push(r.observer());
-        let r = r.clone();
-        opts.on_span = r.span_hook();
-        opts.on_node_tick = Some(Arc::new(move |t: &ratelab::scheduler::TickReport<'_>| {
-            r.real_tick(t)
-        }));
-    }
-    // What nodes' code writes (ratelab::textlog): each line on stderr, stamped, as it comes;
-    // with --out also kept for log.txt (the first MAX_LOG_LINES); with --record, in the
-    // recording (`log/<node>`).
-    let kept = log_sink(a.out.is_some(), recording.clone());
-    let report = run(&cfg, brain, opts);
-    ratelab::textlog::set_sink(None);
-    let report = report?;
+    let observers: Vec<Box<dyn ratelab::graph::StepObserver>> = match &virtual_bar {
+        Some(bar) => vec![Box::new(ProgressObserver(bar.clone()))],
+        None => Vec::new(),
+    };
+    let (report, kept, recording) = execute(a, &cfg, brain, stop, observers, true)?;
     if let Some(bar) = virtual_bar {
         bar.finish_and_clear();
     }
     // A recording that could not be finished (a full disk) fails the run after its summary
     // and the other files: it costs the file, not the run's result.
-    let mut unrecorded = None;
-    if let Some(r) = &recording {
-        match r.finish(&report.metrics, &report.end) {
-            // With --spawn the flush also waits for the live viewer; one that could not start
-            // (no display) or went away costs neither the file nor the summary.
-            Err(e) if a.spawn => {
-                eprintln!("[ratelab] warning: live viewer: {e} (the file is written)")
-            }
-            Err(e) => unrecorded = Some(e),
-            Ok(()) => {}
-        }
-    }
+    let unrecorded = finish_recording(a, recording.as_ref(), &report);
     if let Some(bar) = bar {
         bar.finish_and_clear();
     }
@@ -315,8 +276,7 @@ pub fn run_headless(a: &RunArgs, stop: StopFlag) -> anyhow::Result<RunReport> {
     }
     if let Some(dir) = &a.out {
         write_outputs(dir, &report, &cfg.graph, a.force)?;
-        let log = kept.lock().unwrap_or_else(|e| e.into_inner()).join("\n");
-        let log = if log.is_empty() { log } else { log + "\n" };
+        let log = log_text(&kept);
         ratelab::output::write_file(&dir.join("log.txt"), a.force, log.as_bytes())?;
         println!(
             "[ratelab] wrote {}/metrics.json, trace.csv and log.txt (what each key and column means: docs/metrics.md)",
@@ -336,6 +296,96 @@ pub fn run_headless(a: &RunArgs, stop: StopFlag) -> anyhow::Result<RunReport> {
     }
     end_is_an_error(&report)?;
     Ok(report)
+}
+
+/// `--out`'s folder made, and its files checked before the run, not after it (refused when
+/// they will not be writable).
+///
+/// # Errors
+/// The folder cannot be made, or a file is there without `--force`.
+pub fn check_out(a: &RunArgs) -> anyhow::Result<()> {
+    if let Some(dir) = &a.out {
+        std::fs::create_dir_all(dir)
+            .with_context(|| format!("cannot create --out folder {}", dir.display()))?;
+        // Refuse before the run, not after it: the outputs will not be writable.
+        for name in ["metrics.json", "trace.csv"] {
+            ratelab::output::check_target(&dir.join(name), a.force)?;
+        }
+    }
+    Ok(())
+}
+
+/// The lines nodes wrote, as `log.txt` holds them (one per line, a newline after each).
+pub fn log_text(kept: &Mutex<Vec<String>>) -> String {
+    let log = kept.lock().unwrap_or_else(|e| e.into_inner()).join("\n");
+    if log.is_empty() {
+        log
+    } else {
+        log + "\n"
+    }
+}
+
+/// What a run kept of the lines its nodes wrote (`log.txt`'s, the first [`MAX_LOG_LINES`]).
+pub type KeptLog = Arc<Mutex<Vec<String>>>;
+
+/// Run `cfg` (made from `a`) with `brain`, as `ratelab run` does: the recording `a` asks for
+/// opened, ROS 2 offered when asked, `observers` told of every step; every line the nodes
+/// write kept (and written to stderr, stamped, when `echo`). Returns the report, the lines
+/// kept and the recording (not yet finished: [`finish_recording`]).
+///
+/// # Errors
+/// What keeps the run from starting: bad ROS 2 or recording settings, a graph that cannot be
+/// built.
+pub fn execute(
+    a: &RunArgs,
+    cfg: &RunConfig,
+    brain: Box<dyn ratelab::policy::Policy>,
+    stop: StopFlag,
+    observers: Vec<Box<dyn ratelab::graph::StepObserver>>,
+    echo: bool,
+) -> anyhow::Result<(RunReport, KeptLog, Option<Recording>)> {
+    // Refused before anything is written or opened.
+    let ros2 = ros2_options(a, &cfg.graph)?;
+    let recording = open_recording(a, cfg, &brain.label())?;
+    let mut opts = RunOptions {
+        stop,
+        ros2,
+        observers,
+        ..RunOptions::new()
+    };
+    if let Some(r) = &recording {
+        opts.observers.push(r.observer());
+        let r = r.clone();
+        opts.on_span = r.span_hook();
+        opts.on_node_tick = Some(Arc::new(move |t: &ratelab::scheduler::TickReport<'_>| {
+            r.real_tick(t)
+        }));
+    }
+    // What nodes' code writes (ratelab::textlog): each line on stderr, stamped, as it comes
+    // (when `echo`); kept for log.txt (the first MAX_LOG_LINES); with --record, in the
+    // recording (`log/<node>`).
+    let kept = log_sink(echo, recording.clone());
+    let report = run(cfg, brain, opts);
+    ratelab::textlog::set_sink(None);
+    Ok((report?, kept, recording))
+}
+
+/// Finish the run's recording: `Some(error)` when it could not be finished (a full disk),
+/// which fails the run after its summary and other files. With `--spawn` a live viewer
+/// that could not start or went away costs neither the file nor the summary.
+pub fn finish_recording(
+    a: &RunArgs,
+    recording: Option<&Recording>,
+    report: &RunReport,
+) -> Option<ratelab::recording::RecordingError> {
+    match recording?.finish(&report.metrics, &report.end) {
+        Err(e) if a.spawn => {
+            eprintln!("[ratelab] warning: live viewer: {e} (the file is written)");
+            None
+        }
+        Err(e) => Some(e),
+        Ok(()) => None,
+    }
 }
 
 /// A real-clock run's progress bar on a terminal (run time against the duration) and the
@@ -370,20 +420,20 @@ fn real_clock_bar(
 /// Where the lines nodes' code writes go ([`ratelab::textlog`]): each on stderr, stamped,
 /// as it comes; with `keep` (`--out`) also kept for log.txt (the first [`MAX_LOG_LINES`],
 /// returned); with a recording (`recorded`), in it (`log/<node>`).
-fn log_sink(keep: bool, recorded: Option<Recording>) -> Arc<Mutex<Vec<String>>> {
+fn log_sink(echo: bool, recorded: Option<Recording>) -> KeptLog {
     let kept = Arc::new(Mutex::new(Vec::<String>::new()));
-    let keep = keep.then(|| kept.clone());
+    let keep = kept.clone();
     ratelab::textlog::set_sink(Some(Box::new(move |line| {
         if let Some(r) = &recorded {
             r.log_line(&line);
         }
         let text = line.prefixed();
-        let _ = writeln!(std::io::stderr(), "{text}");
-        if let Some(k) = &keep {
-            let mut k = k.lock().unwrap_or_else(|e| e.into_inner());
-            if k.len() < MAX_LOG_LINES {
-                k.push(text);
-            }
+        if echo {
+            let _ = writeln!(std::io::stderr(), "{text}");
+        }
+        let mut k = keep.lock().unwrap_or_else(|e| e.into_inner());
+        if k.len() < MAX_LOG_LINES {
+            k.push(text);
         }
     })));
     kept
@@ -537,7 +587,11 @@ pub fn write_outputs(
 /// and `<topic>_dropped` column (`/obs` → `obs_published`), as the chapter's trace has; then
 /// `<topic>_<counter>` for each QoS counter the topic reports
 /// ([`ratelab::qos::QosCounter::reported`]; none for a topic with the chapter's QoS).
-fn write_trace(out: &mut dyn Write, trace: &[StepRecord], graph: &GraphSpec) -> anyhow::Result<()> {
+pub fn write_trace(
+    out: &mut dyn Write,
+    trace: &[StepRecord],
+    graph: &GraphSpec,
+) -> anyhow::Result<()> {
     let last = trace.last().map(|r| r.topics).unwrap_or_default();
     let qos_columns: Vec<Vec<ratelab::qos::QosCounter>> = graph
         .topics

@@ -93,7 +93,7 @@ pub fn run_launch(a: &LaunchArgs, force_headless: bool, stop: StopFlag) -> anyho
         exe: if a.no_spawn {
             None
         } else {
-            Some(std::env::current_exe()?)
+            Some(ratelab::distributed::launcher::Program::this()?)
         },
         child_stderr: None,
         start_gate: None,

@@ -4,6 +4,7 @@
 //! types of its own gets all of it with them: [`main_with`]. The `ratelab` binary is
 //! `main_with(|| {})`.
 
+pub mod api;
 mod bench;
 mod cli;
 mod exercise;
@@ -221,6 +222,12 @@ const EXIT_CLOSED_PIPE: i32 = 141;
 /// exit 141, as a shell tool killed by SIGPIPE ends (never 0: what was to be said was not).
 /// Any other panic goes on to the hook before it.
 fn quiet_on_a_closed_stdout() {
+    static INSTALLED: std::sync::Once = std::sync::Once::new();
+    INSTALLED.call_once(quiet_hook);
+}
+
+/// The hook [`quiet_on_a_closed_stdout`] installs.
+fn quiet_hook() {
     let before = std::panic::take_hook();
     std::panic::set_hook(Box::new(move |info| {
         let message = ratelab::scheduler::panic_message(info.payload());
@@ -253,50 +260,24 @@ pub const PYTHON_GRACE: std::time::Duration = std::time::Duration::from_millis(3
 /// }
 /// ```
 pub fn main_with(register: impl FnOnce()) -> ExitCode {
-    // Before any thread starts (it sets an environment variable that Zenoh reads).
-    if let Err(e) = ratelab::distributed::set_zenoh_runtime() {
-        eprintln!("error: {e}");
-        return ExitCode::from(EXIT_USAGE);
-    }
-    ratelab::init();
-    register();
-    quiet_on_a_closed_stdout();
-    // No flag, name or path of ratelab holds a control character: one in a value (a
-    // newline pasted into `--listen`) is refused here, in one line that shows it.
-    if let Some(arg) = std::env::args_os()
-        .skip(1)
-        .map(|a| a.to_string_lossy().into_owned())
-        .find(|a| ratelab::text::has_control(a))
-    {
-        eprintln!(
-            "error: the argument '{}' holds a control character; no flag, name or path of ratelab takes one",
-            printable(&arg)
-        );
-        return ExitCode::from(EXIT_USAGE);
-    }
-    let cli = match Cli::try_parse() {
-        Ok(cli) => cli,
-        Err(e) => {
-            if matches!(e.kind(), ErrorKind::DisplayHelp | ErrorKind::DisplayVersion) {
-                let _ = e.print();
-                return ExitCode::SUCCESS;
-            }
-            eprintln!("{}", one_line(&e.render().to_string()));
-            return ExitCode::from(EXIT_USAGE);
-        }
-    };
-    let stop = StopFlag::new();
-    // Set only by a signal (a fall also sets `stop`, under the real clock).
-    let interrupted = StopFlag::new();
-    {
-        let stop = stop.clone();
-        let interrupted = interrupted.clone();
-        // Ctrl-C / SIGTERM: stop the graph cleanly (summaries and files still written);
-        // a second one exits at once.
-        // A node process started by a launcher gets a second signal when the launcher
-        // exits (PR_SET_PDEATHSIG): it goes quietly.
-        let say = !matches!(cli.command, Some(Command::Process(_)));
-        let _ = ctrlc::set_handler(move || {
+    ExitCode::from(run_command_line(std::env::args_os().collect(), register))
+}
+
+/// What Ctrl-C and SIGTERM stop: the command running now (its stop flag, the flag set only
+/// by a signal, and whether a second signal is said), one at a time per process.
+static SIGNALLED: std::sync::Mutex<Option<(StopFlag, StopFlag, bool)>> =
+    std::sync::Mutex::new(None);
+
+/// Ctrl-C / SIGTERM stop the command running ([`SIGNALLED`]) cleanly (summaries and files
+/// still written); a second one exits at once. Installed once per process.
+fn handle_signals() {
+    static INSTALLED: std::sync::Once = std::sync::Once::new();
+    INSTALLED.call_once(|| {
+        let _ = ctrlc::set_handler(|| {
+            let current = SIGNALLED.lock().unwrap_or_else(|e| e.into_inner()).clone();
+            let Some((stop, interrupted, say)) = current else {
+                std::process::exit(i32::from(EXIT_INTERRUPTED));
+            };
             if interrupted.is_stopped() {
                 if say {
                     eprintln!(
@@ -311,7 +292,57 @@ pub fn main_with(register: impl FnOnce()) -> ExitCode {
             // one still running after a short grace is interrupted (src/python).
             ratelab::python::interrupt_callbacks_after(PYTHON_GRACE);
         });
+    });
+}
+
+/// [`main_with`] on the arguments `args` (the program's name first, as `argv`), returning
+/// the exit code instead of ending the process: how ratelab's command line runs inside
+/// another program (the Python wheel's `ratelab` command runs it in the interpreter).
+/// `register` runs before the arguments are read; Ctrl-C and SIGTERM are ratelab's from the
+/// first call on.
+pub fn run_command_line(args: Vec<std::ffi::OsString>, register: impl FnOnce()) -> u8 {
+    // Before any thread starts (it sets an environment variable that Zenoh reads).
+    if let Err(e) = ratelab::distributed::set_zenoh_runtime() {
+        eprintln!("error: {e}");
+        return EXIT_USAGE;
     }
+    ratelab::init();
+    register();
+    quiet_on_a_closed_stdout();
+    // No flag, name or path of ratelab holds a control character: one in a value (a
+    // newline pasted into `--listen`) is refused here, in one line that shows it.
+    if let Some(arg) = args
+        .iter()
+        .skip(1)
+        .map(|a| a.to_string_lossy().into_owned())
+        .find(|a| ratelab::text::has_control(a))
+    {
+        eprintln!(
+            "error: the argument '{}' holds a control character; no flag, name or path of ratelab takes one",
+            printable(&arg)
+        );
+        return EXIT_USAGE;
+    }
+    let cli = match Cli::try_parse_from(&args) {
+        Ok(cli) => cli,
+        Err(e) => {
+            if matches!(e.kind(), ErrorKind::DisplayHelp | ErrorKind::DisplayVersion) {
+                let _ = e.print();
+                return 0;
+            }
+            eprintln!("{}", one_line(&e.render().to_string()));
+            return EXIT_USAGE;
+        }
+    };
+    let stop = StopFlag::new();
+    // Set only by a signal (a fall also sets `stop`, under the real clock).
+    let interrupted = StopFlag::new();
+    // A node process started by a launcher gets a second signal when the launcher exits
+    // (PR_SET_PDEATHSIG): it goes quietly.
+    let say = !matches!(cli.command, Some(Command::Process(_)));
+    *SIGNALLED.lock().unwrap_or_else(|e| e.into_inner()) =
+        Some((stop.clone(), interrupted.clone(), say));
+    handle_signals();
     let result = match &cli.command {
         Some(Command::Run(args)) => headless(args, stop),
         Some(Command::Lab(_)) if cli.headless => Err(anyhow::anyhow!(
@@ -347,9 +378,10 @@ pub fn main_with(register: impl FnOnce()) -> ExitCode {
             }
         }
     };
+    *SIGNALLED.lock().unwrap_or_else(|e| e.into_inner()) = None;
     match result {
-        Ok(()) if interrupted.is_stopped() => ExitCode::from(EXIT_INTERRUPTED),
-        Ok(()) => ExitCode::SUCCESS,
+        Ok(()) if interrupted.is_stopped() => EXIT_INTERRUPTED,
+        Ok(()) => 0,
         Err(e) => {
             // A graph file's error is `FILE:LINE:COL: reason`, as compilers print them.
             // Not `eprintln!`: stderr may be a terminal that hung up (SIGHUP).
@@ -361,13 +393,13 @@ pub fn main_with(register: impl FnOnce()) -> ExitCode {
                 None => writeln!(err, "error: {}", printable(&format!("{e:#}"))),
             };
             // Whatever failed after a Ctrl-C failed because of it.
-            ExitCode::from(if interrupted.is_stopped() {
+            if interrupted.is_stopped() {
                 EXIT_INTERRUPTED
             } else if e.downcast_ref::<exercise::NotPassed>().is_some() {
                 EXIT_NOT_PASSED
             } else {
                 EXIT_USAGE
-            })
+            }
         }
     }
 }

@@ -40,43 +40,10 @@ pub fn progress_bar(total: usize, unit: &str) -> Option<ProgressBar> {
 /// Run a sweep and print/write its table.
 /// Ctrl-C (`stop`) ends the run in progress at once and prints what completed.
 pub fn run_sweep(a: &SweepArgs, stop: &StopFlag) -> anyhow::Result<()> {
-    let brain = brain_factory(&a.policy)?;
-    let grid = Grid {
-        clocks: a.clock.clone(),
-        sensor_hz: a.sensor_hz.clone(),
-        control_hz: a.control_hz.clone(),
-        queue_depth: a.queue_depth.clone(),
-        seeds: a.seeds.clone(),
-        base: RunConfig {
-            duration: duration_from_secs(a.duration)?,
-            graph: crate::headless::graph_from_args(&a.graph)?,
-            faults: crate::headless::faults_from_args(&a.graph),
-            ..RunConfig::default()
-        },
-    };
     for p in [&a.csv, &a.json].into_iter().flatten() {
         ratelab::output::check_target(p, a.force)?; // refuse before hours of runs, not after
     }
-    let total = grid.points().len();
-    let bar = progress_bar(total, "runs");
-    let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
-    let rows = run_grid_until(
-        &grid,
-        &brain,
-        threads,
-        &|done, _| {
-            if let Some(b) = &bar {
-                b.set_position(done as u64);
-            }
-        },
-        stop,
-    )?;
-    if let Some(b) = bar {
-        b.finish_and_clear();
-    }
-    if stop.is_stopped() {
-        println!("interrupted: {} of {total} runs completed", rows.len());
-    }
+    let rows = sweep_rows(a, stop, true)?;
     print_table(&rows);
     println!();
     if std::io::stdout().is_terminal() {
@@ -99,8 +66,14 @@ pub fn run_sweep(a: &SweepArgs, stop: &StopFlag) -> anyhow::Result<()> {
         ratelab::output::write_file(p, a.force, json.as_bytes())?;
         println!("wrote {}", p.display());
     }
-    // After the table and the files, which keep them: a sweep whose runs failed a node is
-    // no success.
+    sweep_failed(&rows)
+}
+
+/// A sweep whose runs failed a node is no success: the error names how many and the first.
+///
+/// # Errors
+/// That line, when one did.
+pub fn sweep_failed(rows: &[(Point, Metrics)]) -> anyhow::Result<()> {
     let failed: Vec<&(Point, Metrics)> = rows
         .iter()
         .filter(|(_, m)| m.node_failed.is_some())
@@ -116,6 +89,53 @@ pub fn run_sweep(a: &SweepArgs, stop: &StopFlag) -> anyhow::Result<()> {
         );
     }
     Ok(())
+}
+
+/// The sweep `a` asks for, run on every core until `stop` (a progress bar on a terminal when
+/// `show`): one row per point of its grid that ran.
+///
+/// # Errors
+/// Bad settings, a brain that cannot be loaded, a run that cannot start.
+pub fn sweep_rows(
+    a: &SweepArgs,
+    stop: &StopFlag,
+    show: bool,
+) -> anyhow::Result<Vec<(Point, Metrics)>> {
+    let brain = brain_factory(&a.policy)?;
+    let grid = Grid {
+        clocks: a.clock.clone(),
+        sensor_hz: a.sensor_hz.clone(),
+        control_hz: a.control_hz.clone(),
+        queue_depth: a.queue_depth.clone(),
+        seeds: a.seeds.clone(),
+        base: RunConfig {
+            duration: duration_from_secs(a.duration)?,
+            graph: crate::headless::graph_from_args(&a.graph)?,
+            faults: crate::headless::faults_from_args(&a.graph),
+            ..RunConfig::default()
+        },
+    };
+    let total = grid.points().len();
+    let bar = progress_bar(total, "runs").filter(|_| show);
+    let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let rows = run_grid_until(
+        &grid,
+        &brain,
+        threads,
+        &|done, _| {
+            if let Some(b) = &bar {
+                b.set_position(done as u64);
+            }
+        },
+        stop,
+    )?;
+    if let Some(b) = bar {
+        b.finish_and_clear();
+    }
+    if show && stop.is_stopped() {
+        println!("interrupted: {} of {total} runs completed", rows.len());
+    }
+    Ok(rows)
 }
 
 fn print_table(rows: &[(Point, Metrics)]) {
@@ -265,7 +285,7 @@ fn print_plot(rows: &[(Point, Metrics)]) {
     }
 }
 
-fn write_csv(out: &mut dyn std::io::Write, rows: &[(Point, Metrics)]) -> anyhow::Result<()> {
+pub fn write_csv(out: &mut dyn std::io::Write, rows: &[(Point, Metrics)]) -> anyhow::Result<()> {
     let mut w = csv::Writer::from_writer(out);
     w.write_record([
         "clock",
@@ -314,6 +334,49 @@ pub const MAX_CLIFF_RATES: f64 = 5000.0;
 /// run on a pool of workers sized to the machine's cores (as `sweep` does), results in
 /// seed order. After Ctrl-C (`stop`) no further seed starts.
 pub fn run_cliff(a: &CliffArgs, stop: &StopFlag) -> anyhow::Result<()> {
+    let (cliffs, graph, duration) = cliffs(a, stop, true)?;
+    let brain = brain_factory(&a.policy)?;
+    // "Balanced" means up for the whole run: a longer run can fall at a rate this one
+    // balances at (8 Hz falls at 22.5 s of a 30 s run).
+    println!(
+        "highest control rate at which the pole falls within a {} s run (virtual clock, {}–{} Hz by {} Hz):",
+        a.duration, a.min_hz, a.max_hz, a.step
+    );
+    for c in &cliffs {
+        match (c.falls_at_hz, c.balances_at_hz) {
+            (Some(f), Some(b)) => println!(
+                "seed {}: {:.1} Hz (falls there; balances at {:.1} Hz; {} runs)",
+                c.seed, f, b, c.runs
+            ),
+            (Some(f), None) => println!(
+                "seed {}: {:.1} Hz (falls even at the top of the range)",
+                c.seed, f
+            ),
+            (None, _) => println!(
+                "seed {}: none (balances at every rate in [{}, {}] Hz)",
+                c.seed, a.min_hz, a.max_hz
+            ),
+        }
+    }
+    if !stop.is_stopped() {
+        print_edge(a, &graph, &brain, duration, &cliffs)?;
+    }
+    Ok(())
+}
+
+/// What [`cliffs`] found, and what it searched with: the graph and the run length.
+pub type CliffSearch = (
+    Vec<ratelab::sweep::Cliff>,
+    ratelab::graph::GraphSpec,
+    ratelab::Nanos,
+);
+
+/// For each seed of `a`, the highest control rate at which the pole falls, until `stop` (a
+/// progress bar on a terminal when `show`).
+///
+/// # Errors
+/// Bad settings (a range upside down or too finely stepped), a brain that cannot be loaded.
+pub fn cliffs(a: &CliffArgs, stop: &StopFlag, show: bool) -> anyhow::Result<CliffSearch> {
     if a.min_hz > a.max_hz {
         anyhow::bail!(
             "--min-hz ({}) must not be above --max-hz ({})",
@@ -336,7 +399,7 @@ pub fn run_cliff(a: &CliffArgs, stop: &StopFlag) -> anyhow::Result<()> {
     let graph = crate::headless::graph_from_args(&a.graph)?;
     let faults = crate::headless::faults_from_args(&a.graph);
     let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
-    let bar = progress_bar(a.seeds.len(), "seeds");
+    let bar = progress_bar(a.seeds.len(), "seeds").filter(|_| show);
     let results = ratelab::sweep::run_pool(&a.seeds, threads, |&seed| {
         if stop.is_stopped() {
             return None;
@@ -366,39 +429,14 @@ pub fn run_cliff(a: &CliffArgs, stop: &StopFlag) -> anyhow::Result<()> {
         b.finish_and_clear();
     }
     let done = results.iter().flatten().count();
-    if done < a.seeds.len() {
+    if show && done < a.seeds.len() {
         println!("interrupted: {done} of {} seeds searched", a.seeds.len());
     }
     let cliffs = results
         .into_iter()
         .flatten()
         .collect::<Result<Vec<_>, _>>()?;
-    // "Balanced" means up for the whole run: a longer run can fall at a rate this one
-    // balances at (8 Hz falls at 22.5 s of a 30 s run).
-    println!(
-        "highest control rate at which the pole falls within a {} s run (virtual clock, {}–{} Hz by {} Hz):",
-        a.duration, a.min_hz, a.max_hz, a.step
-    );
-    for c in &cliffs {
-        match (c.falls_at_hz, c.balances_at_hz) {
-            (Some(f), Some(b)) => println!(
-                "seed {}: {:.1} Hz (falls there; balances at {:.1} Hz; {} runs)",
-                c.seed, f, b, c.runs
-            ),
-            (Some(f), None) => println!(
-                "seed {}: {:.1} Hz (falls even at the top of the range)",
-                c.seed, f
-            ),
-            (None, _) => println!(
-                "seed {}: none (balances at every rate in [{}, {}] Hz)",
-                c.seed, a.min_hz, a.max_hz
-            ),
-        }
-    }
-    if !stop.is_stopped() {
-        print_edge(a, &graph, &brain, duration, &cliffs)?;
-    }
-    Ok(())
+    Ok((cliffs, graph, duration))
 }
 
 /// The most rows the edge plot shows.

@@ -1,6 +1,8 @@
 #!/usr/bin/env bash
-# Run every test: unit, integration, end-to-end (the real binary in a pseudo-terminal).
-# Fetches MuJoCo 3.17.0 into .mujoco/ on first use. Extra arguments go to `cargo test`.
+# Run every test: unit, integration, end-to-end (the real binary in a pseudo-terminal), then
+# the Python package's (scripts/test-python.sh: the wheel in a fresh virtual environment).
+# Fetches MuJoCo 3.17.0 into .mujoco/ on first use. Extra arguments go to `cargo test`, and
+# then only the Rust tests run.
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 "$root/scripts/setup-mujoco.sh"
@@ -12,4 +14,7 @@ export VIRTUAL_ENV
 RATELAB_ORACLE_PYTHON="$("$root/scripts/setup-oracles.sh")"
 export RATELAB_ORACLE_PYTHON
 cd "$root"
-exec cargo test --release --locked "$@"
+cargo test --release --locked "$@"
+if [ $# -eq 0 ]; then
+  "$root/scripts/test-python.sh"
+fi

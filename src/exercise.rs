@@ -454,7 +454,7 @@ pub struct Context<'a> {
     /// The file `graph` was read from (`None`: the chapter's); ex9's processes load it too.
     pub graph_path: Option<&'a Path>,
     /// This program, for an exercise that launches processes (ex9).
-    pub exe: &'a Path,
+    pub exe: &'a crate::distributed::launcher::Program,
     /// The learner's file.
     pub file: &'a ExerciseFile,
     /// `bands.toml`.
@@ -545,7 +545,7 @@ pub struct Setup<'a> {
     /// Its file (`None`: the chapter's).
     pub graph_path: Option<&'a Path>,
     /// This program.
-    pub exe: &'a Path,
+    pub exe: &'a crate::distributed::launcher::Program,
 }
 
 /// Run exercise `which` as `ratelab exercise` does: refuse it without a prediction, print

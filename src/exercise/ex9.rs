@@ -9,12 +9,12 @@
 use super::{check, Check, Context, Exercise, ExerciseError, Reconcile, Section};
 use crate::config::{duration_from_secs, phase_offset_from_ms, ClockKind, RunConfig};
 use crate::distributed::credentials::Credentials;
-use crate::distributed::launcher::{launch, LaunchOptions};
+use crate::distributed::launcher::{launch, LaunchOptions, Program};
 use crate::graph::GraphSpec;
 use crate::metrics::Metrics;
 use crate::scheduler::StopFlag;
 use serde::Deserialize;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 /// ex9: the crossing.
 pub struct Ex9;
@@ -98,7 +98,7 @@ pub struct Ex9Run {
 
 /// ex9's measurements: the three cases, each once, on `graph` (the file at `graph_path`,
 /// `None` for the chapter's compiled-in graph, which the started processes load too),
-/// starting the processes with the `ratelab` binary `exe`.
+/// starting the processes with `exe`, ratelab's command line.
 ///
 /// # Errors
 /// [`ExerciseError`] when a run cannot start, or a launch fails (a process that cannot be
@@ -107,7 +107,7 @@ pub fn measure_ex9(
     b: &Ex9Bands,
     graph: &GraphSpec,
     graph_path: Option<&Path>,
-    exe: &Path,
+    exe: &Program,
 ) -> Result<Vec<Ex9Run>, ExerciseError> {
     let base = RunConfig {
         clock: ClockKind::Real,
@@ -129,7 +129,7 @@ pub fn measure_ex9(
             graph_bytes: graph_bytes.clone(),
             listen: None,
             policy: "scripted".into(),
-            exe: Some(PathBuf::from(exe)),
+            exe: Some(exe.clone()),
             child_stderr: None,
             start_gate: None,
             listening: None,

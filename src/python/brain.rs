@@ -101,6 +101,39 @@ impl PythonBrain {
     }
 }
 
+impl PythonBrain {
+    /// A brain of the function object `function` the caller holds (`ratelab.run(policy=fn)`
+    /// in a notebook): called as a `FILE.py:FUNCTION` brain is, so the same code gives
+    /// exactly the same run. Named in messages by the file and name of its code.
+    ///
+    /// # Errors
+    /// [`PythonError::Script`] when it is not callable; [`PythonError::Interpreter`] without
+    /// NumPy.
+    pub fn from_callable(function: Py<PyAny>) -> Result<PythonBrain, PythonError> {
+        start()?;
+        Python::attach(|py| {
+            let made = support(py)?
+                .call_method1("callable_brain", (function,))
+                .and_then(|t| t.extract::<(Py<PyAny>, String, String)>());
+            let (call, script, function) = made.map_err(|e| {
+                match e.is_instance_of::<pyo3::exceptions::PyImportError>(py) {
+                    true => PythonError::Interpreter(format!(
+                        "a Python brain gets its observation as a NumPy array, and NumPy cannot be imported ({})",
+                        e.value(py)
+                    )),
+                    false => PythonError::Script(describe(py, &e, "policy")),
+                }
+            })?;
+            Ok(PythonBrain {
+                call,
+                what: format!("the brain {script}:{function}()"),
+                script,
+                function,
+            })
+        })
+    }
+}
+
 /// Read a learner's script: a regular file, bounded, UTF-8 (Python's default encoding).
 pub(crate) fn read_script(script: &str) -> Result<String, PythonError> {
     let bytes = crate::input::read_regular_file(std::path::Path::new(script), MAX_SCRIPT_BYTES)

@@ -101,6 +101,48 @@ pub fn support(py: Python<'_>) -> Result<&Bound<'_, PyModule>, PythonError> {
     }
 }
 
+/// Set by [`host`]: ratelab runs inside a Python program's interpreter (the Python package).
+static HOSTED: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+
+/// Say that ratelab runs inside a Python program's own interpreter (`import ratelab`), before
+/// any Python node or brain starts: its `sys.path` is the program's (no virtual environment
+/// is added), and its `sys.stdout`/`sys.stderr` are the program's but while a run goes
+/// ([`capture_output`]).
+pub fn host() {
+    HOSTED.store(true, std::sync::atomic::Ordering::Relaxed);
+}
+
+/// While this lives, what Python code writes to `sys.stdout`/`sys.stderr` goes to the run's
+/// text log ([`crate::textlog`]), as in the `ratelab` binary; dropping it puts the streams
+/// back. For a host's interpreter ([`host`]); call it with the interpreter started.
+pub struct OutputCapture(Option<Py<PyAny>>);
+
+/// Start capturing the interpreter's output ([`OutputCapture`]).
+///
+/// # Errors
+/// [`PythonError::Interpreter`] when the interpreter or the support module cannot start.
+pub fn capture_output() -> Result<OutputCapture, PythonError> {
+    start()?;
+    Python::attach(|py| {
+        let prev = support(py)?
+            .call_method0("_capture_output")
+            .map_err(|e| PythonError::Interpreter(e.to_string()))?;
+        Ok(OutputCapture(Some(prev.unbind())))
+    })
+}
+
+impl Drop for OutputCapture {
+    fn drop(&mut self) {
+        if let Some(prev) = self.0.take() {
+            Python::attach(|py| {
+                if let Ok(s) = support(py) {
+                    let _ = s.call_method1("_restore_output", (prev,));
+                }
+            });
+        }
+    }
+}
+
 /// Start the embedded interpreter if it is not running, add the active virtual
 /// environment's packages, and load the support module. Cheap after the first call.
 ///
@@ -110,13 +152,19 @@ pub fn start() -> Result<(), PythonError> {
     let result = SUPPORT.get_or_init(|| {
         // Signal handling stays ratelab's (Ctrl-C is handled by the binary, not Python).
         Python::initialize();
+        let hosted = HOSTED.load(std::sync::atomic::Ordering::Relaxed);
         Python::attach(|py| {
-            add_virtual_env(py)?;
+            if !hosted {
+                add_virtual_env(py)?;
+            }
             PyModule::from_code(py, SUPPORT_SOURCE, c"<ratelab>", c"_ratelab_support")
                 .and_then(|m| {
-                    // What learners' code writes goes to the run's text log.
+                    // What learners' code writes goes to the run's text log (in a host's
+                    // interpreter only while a run goes: [`capture_output`]).
                     m.add_function(wrap_pyfunction!(log_line, &m)?)?;
-                    m.call_method0("_capture_output")?;
+                    if !hosted {
+                        m.call_method0("_capture_output")?;
+                    }
                     Ok(m)
                 })
                 .map(Bound::unbind)

@@ -98,8 +98,32 @@ class _Lines:
 
 
 def _capture_output():
+    """Send `sys.stdout` and `sys.stderr` to the run's text log; returns what they were."""
+    prev = (sys.stdout, sys.stderr)
     sys.stdout = _Lines("info")
     sys.stderr = _Lines("warn")
+    return prev
+
+
+def _restore_output(prev):
+    """Put back what `_capture_output` returned, after the last partial lines are logged."""
+    for stream in (sys.stdout, sys.stderr):
+        if isinstance(stream, _Lines):
+            stream.flush()
+    sys.stdout, sys.stderr = prev
+
+
+def callable_brain(fn):
+    """`brain_caller` for a function object the caller holds (`ratelab.run(policy=fn)`): the
+    same conversions as for `FILE.py:FUNCTION`, so the same code gives the same run."""
+    import types
+
+    name = getattr(fn, "__name__", "act")
+    if not callable(fn):
+        raise ContractError("policy", f"a {type(fn).__name__} is not a function")
+    code = getattr(fn, "__code__", None)
+    script = code.co_filename if code else "<callable>"
+    return brain_caller(types.SimpleNamespace(**{name: fn}), name, script), script, name
 
 
 class ContractError(Exception):

@@ -345,6 +345,8 @@ const LAYERS: &[(&str, &str, &[&str])] = &[
         ],
     ),
     ("ratelab-lab", "lab", &["ratelab"]),
+    // The Python package's extension module: the command line as a library, in Python.
+    ("ratelab-py", "src/py", &["ratelab", "ratelab-lab"]),
 ];
 
 /// The packages a crate's manifest names under `[dependencies]` (its normal dependencies);
@@ -455,7 +457,9 @@ fn the_core_builds_without_the_crates_that_talk_to_the_world() {
         lab.contains("ratatui") && lab.contains("crossterm"),
         "{lab:?}"
     );
-    for (package, dir, _) in LAYERS.iter().filter(|(p, ..)| *p != "ratelab-lab") {
+    // The lab's crate and the Python package's module above it hold the terminal lab.
+    let below_the_lab = |p: &&str| !matches!(*p, "ratelab-lab" | "ratelab-py");
+    for (package, dir, _) in LAYERS.iter().filter(|(p, ..)| below_the_lab(p)) {
         let deps = resolved_dependencies(package);
         assert!(!deps.contains("ratatui"), "{package} is built with ratatui");
         assert!(

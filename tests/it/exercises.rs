@@ -329,8 +329,10 @@ fn ex9_measurement_crossing() {
         "the chapter's graph"
     );
     let g = GraphSpec::chapter();
-    let exe = std::path::Path::new(env!("CARGO_BIN_EXE_ratelab"));
-    let runs = measure_ex9(&b.ex9, &g, None, exe).unwrap();
+    let exe = ratelab::distributed::launcher::Program::from(std::path::PathBuf::from(env!(
+        "CARGO_BIN_EXE_ratelab"
+    )));
+    let runs = measure_ex9(&b.ex9, &g, None, &exe).unwrap();
     assert_eq!(
         runs.iter().map(|r| r.case).collect::<Vec<_>>(),
         Ex9Case::ALL

@@ -6,7 +6,7 @@ use super::{Launch, MAX_STDERR_LINE};
 use crate::scheduler::StopFlag;
 use crate::{DistError, REPLY_TIMEOUT};
 use crossbeam_channel::Receiver;
-use std::process::{Child, Command, Stdio};
+use std::process::{Child, Stdio};
 use std::time::{Duration, Instant};
 use zenoh::Wait;
 
@@ -29,7 +29,7 @@ impl Launch<'_> {
                 .credentials
                 .only(&crate::credentials::Role::Process(p.to_string()))?,
         )?;
-        let mut cmd = Command::new(exe);
+        let mut cmd = exe.command();
         cmd.arg("process").arg("--credentials").arg(&own);
         if let Some(g) = &self.opts.graph_path {
             cmd.arg("--graph").arg(g);
@@ -56,7 +56,7 @@ impl Launch<'_> {
         }
         let mut child = cmd
             .spawn()
-            .map_err(|e| DistError::Usage(format!("cannot start {}: {e}", exe.display())))?;
+            .map_err(|e| DistError::Usage(format!("cannot start {}: {e}", exe.path.display())))?;
         if let Some(to) = &self.opts.child_stderr {
             pass_stderr(
                 p,
@@ -215,7 +215,7 @@ mod tests {
 
     #[test]
     fn a_child_s_stderr_comes_as_bounded_lines_named_by_its_process() {
-        let mut child = Command::new("sh")
+        let mut child = std::process::Command::new("sh")
             .args([
                 "-c",
                 "echo 'first line' >&2; head -c 10000 /dev/zero | tr '\\0' x >&2; echo >&2; printf 'last, no newline' >&2",

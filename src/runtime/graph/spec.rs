@@ -278,6 +278,16 @@ pub struct SpecError {
     pub reason: String,
 }
 
+/// A [`SpecError`]'s reason when the file is not there.
+const NOT_FOUND: &str = "not found";
+
+impl SpecError {
+    /// Is the error that the file is not there (as opposed to a file that breaks a rule)?
+    pub fn is_missing_file(&self) -> bool {
+        self.line == 0 && self.reason == NOT_FOUND
+    }
+}
+
 impl std::fmt::Display for SpecError {
     /// One line: the file's name and the reason may quote the file (a `class`, a `kind`, a
     /// key), so their control characters are written out ([`crate::text::printable`]).
@@ -463,6 +473,9 @@ impl GraphSpec {
             reason,
         };
         let bytes = crate::input::read_regular_file(path, MAX_FILE_BYTES).map_err(|e| {
+            if matches!(e, crate::input::InputError::NotFound(_)) {
+                return at_start(NOT_FOUND.into());
+            }
             // The error names the file first; the line's `FILE:` already does.
             let text = e.to_string();
             let prefix = format!("{origin}: ");

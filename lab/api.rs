@@ -1,0 +1,138 @@
+//! ratelab's run for a program that hosts the command line as a library (the Python package,
+//! `src/py`): `ratelab run`'s flags in, the contents of the files `ratelab run --out` writes
+//! out (`metrics.json`, `trace.csv`, `log.txt`), made by the same code, so a run asked for
+//! this way equals the command line's in every figure.
+
+use crate::cli::{Cli, Command};
+use crate::headless;
+use clap::Parser;
+use ratelab::policy::Policy;
+use ratelab::scheduler::{EndReason, StopFlag};
+use std::path::PathBuf;
+
+/// `ratelab SUBCOMMAND FLAGS…` read as the command line reads it.
+fn parse(subcommand: &str, flags: &[String]) -> anyhow::Result<Command> {
+    let argv = ["ratelab", subcommand]
+        .into_iter()
+        .map(String::from)
+        .chain(flags.iter().cloned());
+    let cli =
+        Cli::try_parse_from(argv).map_err(|e| anyhow::anyhow!(crate::one_line(&e.to_string())))?;
+    cli.command.ok_or_else(|| anyhow::anyhow!("no subcommand"))
+}
+
+/// `ratelab sweep FLAGS…` until `stop`: its table as `--csv` writes it (a header, then one
+/// row per run: the grid's point and the run's figures), and the line of the first run that
+/// failed a node, when one did. Nothing is printed.
+///
+/// # Errors
+/// Bad flags or settings, a brain that cannot be loaded, a run that cannot start.
+pub fn sweep(flags: &[String], stop: &StopFlag) -> anyhow::Result<(String, Option<String>)> {
+    let Command::Sweep(a) = parse("sweep", flags)? else {
+        anyhow::bail!("not a sweep");
+    };
+    let rows = crate::sweep::sweep_rows(&a, stop, false)?;
+    let mut csv = Vec::new();
+    crate::sweep::write_csv(&mut csv, &rows)?;
+    let failed = crate::sweep::sweep_failed(&rows)
+        .err()
+        .map(|e| e.to_string());
+    Ok((String::from_utf8(csv)?, failed))
+}
+
+/// `ratelab cliff FLAGS…` until `stop`: per seed, the highest control rate at which the pole
+/// falls, as CSV (`seed,falls_at_hz,balances_at_hz,runs`; a rate is empty when there is
+/// none). Nothing is printed.
+///
+/// # Errors
+/// Bad flags or settings, a brain that cannot be loaded, a run that cannot start.
+pub fn cliff(flags: &[String], stop: &StopFlag) -> anyhow::Result<String> {
+    let Command::Cliff(a) = parse("cliff", flags)? else {
+        anyhow::bail!("not a cliff search");
+    };
+    let (cliffs, _, _) = crate::sweep::cliffs(&a, stop, false)?;
+    let mut w = csv::Writer::from_writer(Vec::new());
+    w.write_record(["seed", "falls_at_hz", "balances_at_hz", "runs"])?;
+    let hz = |x: Option<f64>| x.map_or_else(String::new, |x| x.to_string());
+    for c in &cliffs {
+        w.write_record([
+            c.seed.to_string(),
+            hz(c.falls_at_hz),
+            hz(c.balances_at_hz),
+            c.runs.to_string(),
+        ])?;
+    }
+    Ok(String::from_utf8(w.into_inner()?)?)
+}
+
+/// A run's results, as `ratelab run --out DIR` writes them.
+#[derive(Clone, Debug)]
+pub struct RunFiles {
+    /// `metrics.json`'s text (pretty, the same key order; docs/metrics.md).
+    pub metrics_json: String,
+    /// `trace.csv`'s text: a header, then one row per actuator tick.
+    pub trace_csv: String,
+    /// `log.txt`'s text: every line the nodes wrote, stamped `[t=1.234 s node]`.
+    pub log: String,
+    /// The summary `ratelab run` prints, one line each, without its `[ratelab]` prefix and
+    /// the wall time.
+    pub summary: Vec<String>,
+    /// Why the run failed (a node failed: the line `ratelab run` ends with), when it did;
+    /// the figures above are still those up to the failure.
+    pub failed: Option<String>,
+    /// The recording written (`--record`), when one was.
+    pub recording: Option<PathBuf>,
+    /// The wall time the run itself took (what `ratelab run`'s summary gives as `wall`), s.
+    pub wall_s: f64,
+}
+
+/// Run `ratelab run` with the flags `flags` (without `ratelab run`: `["--control-hz",
+/// "5"]`), the brain `brain` in place of `--policy`'s when given, until `stop`. Nothing is
+/// printed: the nodes' lines are kept for [`RunFiles::log`]. With `--out` the files are
+/// written as well.
+///
+/// # Errors
+/// One line, as the command line would print it: bad flags (clap's rule), bad settings, a
+/// brain or graph file that cannot be read, an output that exists without `--force`, a
+/// recording that could not be finished.
+pub fn run(
+    flags: &[String],
+    brain: Option<Box<dyn Policy>>,
+    stop: StopFlag,
+) -> anyhow::Result<RunFiles> {
+    let Command::Run(a) = parse("run", flags)? else {
+        anyhow::bail!("not a run");
+    };
+    let cfg = headless::config_from_args(&a)?;
+    let brain = match brain {
+        Some(b) => b,
+        None => ratelab::checkpoint::load_policy(&a.policy)?,
+    };
+    headless::check_out(&a)?;
+    let (report, kept, recording) = headless::execute(&a, &cfg, brain, stop, Vec::new(), false)?;
+    if let Some(e) = headless::finish_recording(&a, recording.as_ref(), &report) {
+        return Err(e.into());
+    }
+    if let Some(dir) = &a.out {
+        headless::write_outputs(dir, &report, &cfg.graph, a.force)?;
+        let log = headless::log_text(&kept);
+        ratelab::output::write_file(&dir.join("log.txt"), a.force, log.as_bytes())?;
+    }
+    let mut trace = Vec::new();
+    headless::write_trace(&mut trace, &report.trace, &cfg.graph)?;
+    let summary = report.metrics.summary_lines(None);
+    // The command line's words for it (`ratelab run` exits 2 with this line).
+    let failed = matches!(report.end.reason, EndReason::NodeFailed { .. })
+        .then(|| headless::end_is_an_error(&report).err())
+        .flatten()
+        .map(|e| e.to_string());
+    Ok(RunFiles {
+        metrics_json: serde_json::to_string_pretty(&report.metrics)? + "\n",
+        trace_csv: String::from_utf8(trace)?,
+        log: headless::log_text(&kept),
+        summary,
+        failed,
+        recording: recording.map(|r| r.path().to_path_buf()),
+        wall_s: report.wall.as_secs_f64(),
+    })
+}

@@ -1,0 +1,267 @@
+//! `ratelab._native`: ratelab inside the caller's Python interpreter, for the package in
+//! `python/ratelab/` (which is what a user imports).
+//!
+//! - [`main`]: the whole command line (`ratelab lab`, `run`, `launch`, …) in this process,
+//!   as the wheel's `ratelab` command and `python -m ratelab` run it. A launch's processes
+//!   are started as `python -m ratelab process …` (`Program::set_this`).
+//! - [`run`]: one run from `ratelab run`'s flags, its files' contents returned; Python
+//!   nodes and a callable brain run in this interpreter. Ctrl-C (KeyboardInterrupt) stops it.
+//! - [`sweep`], [`cliff`]: `ratelab sweep` and `ratelab cliff`, their tables as CSV.
+//!
+//! Errors become Python exceptions carrying the command line's one line: a missing file
+//! `FileNotFoundError`, one refused for being there `FileExistsError`, a permission
+//! `PermissionError`, anything else the caller gave wrong `ValueError`. Nothing here ends
+//! the process.
+
+use pyo3::exceptions::{
+    PyFileExistsError, PyFileNotFoundError, PyKeyboardInterrupt, PyPermissionError, PyValueError,
+};
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+use ratelab::distributed::launcher::Program;
+use ratelab::scheduler::StopFlag;
+use std::time::Duration;
+
+/// How often a run waiting in [`run`] looks for Ctrl-C.
+const SIGNAL_POLL: Duration = Duration::from_millis(50);
+
+/// ratelab's command line, once per process, for a host interpreter: its Python is this one,
+/// and a launch starts its processes as `sys.executable -m ratelab`.
+fn hosted(py: Python<'_>) -> PyResult<()> {
+    ratelab::python::host();
+    let exe: String = py.import("sys")?.getattr("executable")?.extract()?;
+    Program::set_this(Program {
+        path: exe.into(),
+        args: vec!["-m".into(), "ratelab".into()],
+    });
+    Ok(())
+}
+
+/// Run ratelab's command line on `argv` (the program's name first) in this process and
+/// return its exit code (0 done, 1 an exercise not passed, 2 bad input or a failed run, 130
+/// interrupted). Ctrl-C is ratelab's from then on, as in the binary.
+#[pyfunction]
+fn main(py: Python<'_>, argv: Vec<String>) -> PyResult<u8> {
+    hosted(py)?;
+    let args = argv.into_iter().map(Into::into).collect();
+    // The command's Python output goes to the run's text log, as the binary's does.
+    let capture = ratelab::python::capture_output().ok();
+    let code = py.detach(|| ratelab_lab::run_command_line(args, || {}));
+    drop(capture);
+    Ok(code)
+}
+
+/// The error `e` as the Python exception its cause calls for, with the command line's line.
+fn to_py(e: &anyhow::Error) -> PyErr {
+    let text = match e.downcast_ref::<ratelab::graph::spec::SpecError>() {
+        Some(spec) => spec.to_string(),
+        None => ratelab::text::printable(&format!("{e:#}")).to_string(),
+    };
+    for cause in e.chain() {
+        let missing = match cause.downcast_ref::<ratelab::graph::spec::SpecError>() {
+            Some(spec) => spec.is_missing_file(),
+            None => matches!(
+                cause.downcast_ref::<ratelab::checkpoint::PolicyError>(),
+                Some(ratelab::checkpoint::PolicyError::NotFound(_))
+            ),
+        };
+        if missing {
+            return PyFileNotFoundError::new_err(text);
+        }
+        if let Some(i) = cause.downcast_ref::<ratelab::input::InputError>() {
+            use ratelab::input::InputError;
+            match i {
+                InputError::NotFound(_) => return PyFileNotFoundError::new_err(text),
+                InputError::PermissionDenied(_) => return PyPermissionError::new_err(text),
+                _ => {}
+            }
+        }
+        if let Some(o) = cause.downcast_ref::<ratelab::output::OutputError>() {
+            if matches!(o, ratelab::output::OutputError::Exists(_)) {
+                return PyFileExistsError::new_err(text);
+            }
+        }
+        if let Some(io) = cause.downcast_ref::<std::io::Error>() {
+            match io.kind() {
+                std::io::ErrorKind::NotFound => return PyFileNotFoundError::new_err(text),
+                std::io::ErrorKind::PermissionDenied => return PyPermissionError::new_err(text),
+                _ => {}
+            }
+        }
+    }
+    PyValueError::new_err(text)
+}
+
+/// Do `work` on a thread of its own, its Python output going to the run's text log, while
+/// this (the main) thread waits without the GIL (Python nodes need it) and looks for Ctrl-C:
+/// only the main thread sees Python's signals. A Ctrl-C stops the work (its stop flag, and
+/// a Python callback that does not return) and raises KeyboardInterrupt.
+///
+/// # Errors
+/// KeyboardInterrupt; the work's own error as [`to_py`] maps it.
+fn interruptibly<T: Send + 'static>(
+    py: Python<'_>,
+    work: impl FnOnce(StopFlag) -> anyhow::Result<T> + Send + 'static,
+) -> PyResult<T> {
+    let capture = ratelab::python::capture_output().ok();
+    let stop = StopFlag::new();
+    let (tx, rx) = crossbeam_channel::bounded(1);
+    let running = {
+        let stop = stop.clone();
+        std::thread::Builder::new()
+            .name("ratelab-run".into())
+            .spawn(move || {
+                let _ = tx.send(work(stop));
+            })
+            .map_err(|e| PyValueError::new_err(format!("cannot start the run: {e}")))?
+    };
+    let mut interrupted = None;
+    let result = loop {
+        match py.detach(|| rx.recv_timeout(SIGNAL_POLL)) {
+            Ok(r) => break r,
+            Err(crossbeam_channel::RecvTimeoutError::Disconnected) => {
+                break Err(anyhow::anyhow!("the run ended without a result"))
+            }
+            Err(crossbeam_channel::RecvTimeoutError::Timeout) => {}
+        }
+        if interrupted.is_none() {
+            if let Err(e) = py.check_signals() {
+                stop.stop();
+                // A Python callback that never returns would hold the run: interrupt it.
+                ratelab::python::interrupt_callbacks_after(ratelab_lab::PYTHON_GRACE);
+                interrupted = Some(e);
+            }
+        }
+    };
+    py.detach(|| {
+        let _ = running.join();
+    });
+    drop(capture);
+    if let Some(e) = interrupted {
+        return Err(if e.is_instance_of::<PyKeyboardInterrupt>(py) {
+            e
+        } else {
+            PyKeyboardInterrupt::new_err("the run was interrupted")
+        });
+    }
+    result.map_err(|e| to_py(&e))
+}
+
+/// `ratelab sweep FLAGS…` in this process: `(csv, failed)`, its table as `--csv` writes it
+/// and the line of the first run that failed a node (or None). Ctrl-C stops it.
+#[pyfunction]
+fn sweep(py: Python<'_>, flags: Vec<String>) -> PyResult<(String, Option<String>)> {
+    hosted(py)?;
+    ratelab::init();
+    interruptibly(py, move |stop| ratelab_lab::api::sweep(&flags, &stop))
+}
+
+/// `ratelab cliff FLAGS…` in this process: per seed the highest control rate at which the
+/// pole falls, as CSV (`seed,falls_at_hz,balances_at_hz,runs`). Ctrl-C stops it.
+#[pyfunction]
+fn cliff(py: Python<'_>, flags: Vec<String>) -> PyResult<String> {
+    hosted(py)?;
+    ratelab::init();
+    interruptibly(py, move |stop| ratelab_lab::api::cliff(&flags, &stop))
+}
+
+/// One run of `ratelab run FLAGS…` in this process, with `policy` (a callable taking the
+/// observation, a NumPy float32[5] array, and returning the force command) as its brain when
+/// given. Returns a dict: `metrics_json`, `trace_csv`, `log` (the files' texts),
+/// `trace_columns` (the trace as `(name, dtype, bytes)` per column), `summary`
+/// (lines), `failed` (the line of a node that failed, or None), `recording` (its path or
+/// None). Ctrl-C stops the run and raises KeyboardInterrupt.
+#[pyfunction]
+#[pyo3(signature = (flags, policy=None))]
+fn run<'py>(
+    py: Python<'py>,
+    flags: Vec<String>,
+    policy: Option<Py<PyAny>>,
+) -> PyResult<Bound<'py, PyDict>> {
+    hosted(py)?;
+    ratelab::init();
+    let brain = match policy {
+        Some(f) => Some(Box::new(
+            ratelab::python::brain::PythonBrain::from_callable(f)
+                .map_err(|e| PyValueError::new_err(e.to_string()))?,
+        ) as Box<dyn ratelab::policy::Policy>),
+        None => None,
+    };
+    let files = interruptibly(py, move |stop| ratelab_lab::api::run(&flags, brain, stop))?;
+    let out = PyDict::new(py);
+    out.set_item("metrics_json", files.metrics_json)?;
+    let columns = trace_columns(&files.trace_csv).map_err(|e| to_py(&e))?;
+    let columns: Vec<_> = columns
+        .into_iter()
+        .map(|(n, k, b)| (n, k, pyo3::types::PyBytes::new(py, &b)))
+        .collect();
+    out.set_item("trace_columns", columns)?;
+    out.set_item("trace_csv", files.trace_csv)?;
+    out.set_item("log", files.log)?;
+    out.set_item("summary", files.summary)?;
+    out.set_item("failed", files.failed)?;
+    out.set_item("wall_s", files.wall_s)?;
+    out.set_item(
+        "recording",
+        files.recording.map(|p| p.to_string_lossy().into_owned()),
+    )?;
+    Ok(out)
+}
+
+/// `trace.csv`'s text as columns, each `(name, dtype, bytes)` for `numpy.frombuffer`: the
+/// time series as `float64` (`pole_angle`, `cart_pos`, `action`, `latency_ns`; an empty
+/// cell NaN), the flags as `bool`, the counters as `int64`, little-endian, in the file's
+/// column order. Parsing the text keeps one writer of the columns (the command line's).
+fn trace_columns(csv_text: &str) -> anyhow::Result<Vec<(String, &'static str, Vec<u8>)>> {
+    const FLOATS: [&str; 4] = ["pole_angle", "cart_pos", "action", "latency_ns"];
+    const FLAGS: [&str; 2] = ["nonfinite", "fell"];
+    let mut reader = csv::Reader::from_reader(csv_text.as_bytes());
+    let names: Vec<String> = reader.headers()?.iter().map(str::to_string).collect();
+    let kinds: Vec<&'static str> = names
+        .iter()
+        .map(|n| {
+            if FLOATS.contains(&n.as_str()) {
+                "<f8"
+            } else if FLAGS.contains(&n.as_str()) {
+                "?"
+            } else {
+                "<i8"
+            }
+        })
+        .collect();
+    let mut columns: Vec<Vec<u8>> = vec![Vec::new(); names.len()];
+    for row in reader.records() {
+        let row = row?;
+        for ((cell, kind), column) in row.iter().zip(&kinds).zip(&mut columns) {
+            match *kind {
+                "<f8" => {
+                    let x = if cell.is_empty() {
+                        f64::NAN
+                    } else {
+                        cell.parse()?
+                    };
+                    column.extend_from_slice(&x.to_le_bytes());
+                }
+                "?" => column.push(u8::from(cell == "true")),
+                _ => column.extend_from_slice(&cell.parse::<i64>()?.to_le_bytes()),
+            }
+        }
+    }
+    Ok(names
+        .into_iter()
+        .zip(kinds)
+        .zip(columns)
+        .map(|((n, k), c)| (n, k, c))
+        .collect())
+}
+
+/// The extension module.
+#[pymodule]
+fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_function(wrap_pyfunction!(main, m)?)?;
+    m.add_function(wrap_pyfunction!(run, m)?)?;
+    m.add_function(wrap_pyfunction!(sweep, m)?)?;
+    m.add_function(wrap_pyfunction!(cliff, m)?)?;
+    m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    Ok(())
+}

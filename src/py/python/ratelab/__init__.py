@@ -1,0 +1,304 @@
+"""ratelab in Python: the lab's runs in your notebook, script or pytest.
+
+    import ratelab
+    run = ratelab.run(control_hz=5)          # the chapter's graph, virtual clock, seed 0
+    run.metrics["balanced"], run.metrics["fell_at_s"]
+    run.trace["pole_angle_rad"]              # NumPy arrays, one value per actuator step
+
+A run is `ratelab run --out DIR` made in this process by the same code: `run.metrics` holds
+`metrics.json`'s keys, `run.trace` `trace.csv`'s columns, `run.log` `log.txt`'s lines (what
+each means: docs/metrics.md). A brain (`policy=`) may be a function defined here, in a
+notebook cell: it runs in this interpreter and, under the virtual clock, gives exactly the
+run the same function gives from a file. The `ratelab` command this package installs is
+the whole command line (`ratelab lab`, `ratelab launch`, …).
+
+Errors are exceptions carrying ratelab's one line: `ValueError` for a bad setting,
+`FileNotFoundError` for a missing file, `FileExistsError` for an output that exists (pass
+`force=True`), `NodeFailed` when a node of the run failed (its `.run` holds the figures up
+to then). Ctrl-C (KeyboardInterrupt) stops a run.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import os
+from dataclasses import dataclass
+from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence, Union
+
+from . import _native
+
+__version__: str = _native.__version__
+
+__all__ = ["Run", "Table", "NodeFailed", "run", "sweep", "cliff", "TRACE_COLUMNS"]
+
+#: `trace.csv`'s columns as `Run.trace` names them: units in the names where one applies.
+#: The per-topic counters (`obs_published`, `cmd_lost`, …) keep their names (messages).
+TRACE_COLUMNS: Dict[str, str] = {
+    "step": "step",
+    "t_ns": "t_ns",
+    "pole_angle": "pole_angle_rad",
+    "cart_pos": "cart_pos_m",
+    "action": "action_motor",  # motor command in [-1, 1], x 10 N
+    "latency_ns": "latency_ns",  # NaN before the first sensed force
+    "nonfinite": "nonfinite",
+    "fell": "fell",
+}
+
+PathLike = Union[str, "os.PathLike[str]"]
+
+
+@dataclass(frozen=True)
+class Run:
+    """One run's results, as `ratelab run --out` writes them."""
+
+    #: `metrics.json` as a dict (docs/metrics.md).
+    metrics: Dict[str, Any]
+    #: `trace.csv`'s columns as NumPy arrays, one value per actuator step, named as
+    #: `TRACE_COLUMNS` says (units in the names).
+    trace: Dict[str, Any]
+    #: `log.txt`'s lines: what the nodes wrote, stamped `[t=1.234 s node]`.
+    log: List[str]
+    #: The summary `ratelab run` prints (without the wall time).
+    summary: List[str]
+    #: The recording written (`record=`), or None.
+    recording: Optional[str]
+    #: `metrics.json`'s exact text.
+    metrics_json: str
+    #: `trace.csv`'s exact text.
+    trace_csv: str
+    #: The wall time the run itself took, s (`ratelab run`'s summary's `wall`).
+    wall_s: float
+
+    def __repr__(self) -> str:
+        head = self.summary[0] if self.summary else "run"
+        return f"<ratelab.Run {head}>"
+
+
+class Table:
+    """A table of results (`sweep`, `cliff`): `rows` (one dict per row), `columns` (one list
+    per column), `csv` (the text `ratelab sweep --csv` writes), `to_pandas()`."""
+
+    def __init__(self, csv_text: str):
+        self.csv: str = csv_text
+        reader = csv.DictReader(io.StringIO(csv_text))
+        self.rows: List[Dict[str, Any]] = [
+            {k: _cell(v) for k, v in row.items()} for row in reader
+        ]
+        names = reader.fieldnames or []
+        self.columns: Dict[str, List[Any]] = {n: [r[n] for r in self.rows] for n in names}
+
+    def __len__(self) -> int:
+        return len(self.rows)
+
+    def __iter__(self):
+        return iter(self.rows)
+
+    def __getitem__(self, column: str) -> List[Any]:
+        return self.columns[column]
+
+    def to_pandas(self):
+        """The table as a pandas DataFrame (pandas must be installed)."""
+        import pandas as pd
+
+        return pd.DataFrame(self.columns)
+
+    def __repr__(self) -> str:
+        return f"<ratelab.Table {len(self.rows)} rows: {', '.join(self.columns)}>"
+
+
+def _cell(text: str) -> Any:
+    """A CSV cell as the value it writes: a bool, an int, a float, None (empty) or text."""
+    if text == "":
+        return None
+    if text in ("true", "false"):
+        return text == "true"
+    for kind in (int, float):
+        try:
+            return kind(text)
+        except ValueError:
+            pass
+    return text
+
+
+def _list(name: str, values: Union[float, Sequence[float]]) -> str:
+    if isinstance(values, (int, float)) and not isinstance(values, bool):
+        values = [values]
+    return ",".join(_number(name, v) for v in values)
+
+
+class NodeFailed(RuntimeError):
+    """A node of the run failed (a brain or node raised): the message is ratelab's line,
+    `.run` the run's figures up to the failure (None for a sweep's)."""
+
+    def __init__(self, message: str, run: Optional[Run]):
+        super().__init__(message)
+        self.run = run
+
+
+def _trace_arrays(columns: Sequence[Any]) -> Dict[str, Any]:
+    """`(name, dtype, bytes)` per column (made from trace.csv's text) as NumPy arrays."""
+    import numpy as np
+
+    return {TRACE_COLUMNS.get(n, n): np.frombuffer(b, dtype=k) for n, k, b in columns}
+
+
+def _flag_pairs(flag: str, value: Union[None, Mapping[str, Any], Sequence[str]]) -> List[str]:
+    """`{"policy": 10}` as `--rate policy=10`; a list of `"policy=10"` strings as given."""
+    if value is None:
+        return []
+    items = value.items() if isinstance(value, Mapping) else None
+    out: List[str] = []
+    if items is not None:
+        for k, v in items:
+            out += [flag, f"{k}={v}"]
+    else:
+        if isinstance(value, str):
+            value = [value]
+        for v in value:
+            out += [flag, str(v)]
+    return out
+
+
+def _number(name: str, value: Any) -> str:
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ValueError(f"{name} must be a number, got {value!r}")
+    return repr(value) if isinstance(value, float) else str(value)
+
+
+def run(
+    graph: Optional[PathLike] = None,
+    *,
+    clock: str = "virtual",
+    seed: int = 0,
+    duration_s: float = 10.0,
+    control_hz: Optional[float] = None,
+    sensor_hz: Optional[float] = None,
+    queue_depth: Optional[int] = None,
+    rate: Optional[Mapping[str, float]] = None,
+    depth: Optional[Mapping[str, int]] = None,
+    qos: Union[None, str, Sequence[str]] = None,
+    link: Union[None, str, Sequence[str]] = None,
+    policy: Union[None, str, PathLike, Callable[[Any], Any]] = None,
+    record: Optional[PathLike] = None,
+    out: Optional[PathLike] = None,
+    force: bool = False,
+    flags: Sequence[str] = (),
+) -> Run:
+    """Run a graph, as `ratelab run` does, and return its figures.
+
+    graph: a graph file (default the chapter's: sensor -> /obs -> policy -> /action ->
+        actuator). clock: "virtual" (deterministic: same settings, same bytes) or "real".
+    seed: the reset seed. duration_s: run time in seconds.
+    control_hz, sensor_hz (Hz), queue_depth (messages): the chapter's three knobs.
+    rate: per-node rates in Hz ({"policy": 10}); depth: per-topic history depths
+        ({"/obs": 100}); qos, link: `--qos` and `--link` values ("/obs:history=keep_all").
+    policy: the brain: "scripted" (default), a checkpoint path, "FILE.py[:FUNCTION]", or a
+        callable `f(obs) -> action` (obs a NumPy float32[5]; action a float in [-1, 1]).
+    record: write a rerun recording to this path. out: also write metrics.json, trace.csv
+        and log.txt to this folder (force: replace existing files).
+    flags: any other `ratelab run` flags, as strings (["--executor", "single"]).
+
+    Raises ValueError, FileNotFoundError, FileExistsError, NodeFailed, KeyboardInterrupt.
+    """
+    args: List[str] = ["--clock", str(clock), "--seed", str(int(seed))]
+    args += ["--duration", _number("duration_s", duration_s)]
+    if graph is not None:
+        args += ["--graph", os.fspath(graph)]
+    if control_hz is not None:
+        args += ["--control-hz", _number("control_hz", control_hz)]
+    if sensor_hz is not None:
+        args += ["--sensor-hz", _number("sensor_hz", sensor_hz)]
+    if queue_depth is not None:
+        args += ["--queue-depth", _number("queue_depth", queue_depth)]
+    args += _flag_pairs("--rate", rate)
+    args += _flag_pairs("--depth", depth)
+    args += _flag_pairs("--qos", qos)
+    args += _flag_pairs("--link", link)
+    brain = None
+    if callable(policy):
+        brain = policy
+    elif policy is not None:
+        args += ["--policy", os.fspath(policy)]
+    if record is not None:
+        args += ["--record", os.fspath(record)]
+    if out is not None:
+        args += ["--out", os.fspath(out)]
+    if force:
+        args.append("--force")
+    args += [str(f) for f in flags]
+    files = _native.run(args, brain)
+    result = Run(
+        metrics=json.loads(files["metrics_json"]),
+        trace=_trace_arrays(files["trace_columns"]),
+        log=files["log"].splitlines(),
+        summary=list(files["summary"]),
+        recording=files["recording"],
+        metrics_json=files["metrics_json"],
+        trace_csv=files["trace_csv"],
+        wall_s=files["wall_s"],
+    )
+    if files["failed"] is not None:
+        raise NodeFailed(files["failed"], result)
+    return result
+
+
+def sweep(
+    graph: Optional[PathLike] = None,
+    *,
+    control_hz: Union[float, Sequence[float]] = (50, 25, 20, 15, 10, 5),
+    sensor_hz: Union[float, Sequence[float]] = 50,
+    queue_depth: Union[int, Sequence[int]] = 1,
+    seeds: Union[int, Sequence[int]] = (0, 1, 2),
+    clock: Union[str, Sequence[str]] = "virtual",
+    policy: Union[str, PathLike] = "scripted",
+    duration_s: float = 10.0,
+    flags: Sequence[str] = (),
+) -> Table:
+    """Every combination of the given rates, depths, seeds and clocks, one run each, on every
+    core (as `ratelab sweep`): a `Table` with a row per run (its point and figures: the
+    columns `ratelab sweep --csv` writes). A run that failed a node raises NodeFailed once
+    all have run (its `.run` is None)."""
+    args: List[str] = ["--control-hz", _list("control_hz", control_hz)]
+    args += ["--sensor-hz", _list("sensor_hz", sensor_hz)]
+    args += ["--queue-depth", _list("queue_depth", queue_depth)]
+    args += ["--seeds", _list("seeds", seeds)]
+    args += ["--clock", clock if isinstance(clock, str) else ",".join(clock)]
+    args += ["--policy", os.fspath(policy), "--duration", _number("duration_s", duration_s)]
+    if graph is not None:
+        args += ["--graph", os.fspath(graph)]
+    args += [str(f) for f in flags]
+    text, failed = _native.sweep(args)
+    table = Table(text)
+    if failed is not None:
+        raise NodeFailed(failed, None)
+    return table
+
+
+def cliff(
+    graph: Optional[PathLike] = None,
+    *,
+    seeds: Union[int, Sequence[int]] = (0, 1, 2),
+    sensor_hz: float = 50,
+    queue_depth: int = 1,
+    min_hz: float = 1,
+    max_hz: float = 50,
+    step_hz: float = 0.1,
+    policy: Union[str, PathLike] = "scripted",
+    duration_s: float = 10.0,
+    flags: Sequence[str] = (),
+) -> Table:
+    """Per seed, the highest control rate at which the pole falls within `duration_s`, to
+    `step_hz` (as `ratelab cliff`; virtual clock): a `Table` with the columns seed,
+    falls_at_hz, balances_at_hz (None when there is none) and runs."""
+    args: List[str] = ["--seeds", _list("seeds", seeds)]
+    args += ["--sensor-hz", _number("sensor_hz", sensor_hz)]
+    args += ["--queue-depth", _number("queue_depth", queue_depth)]
+    args += ["--min-hz", _number("min_hz", min_hz), "--max-hz", _number("max_hz", max_hz)]
+    args += ["--step", _number("step_hz", step_hz)]
+    args += ["--policy", os.fspath(policy), "--duration", _number("duration_s", duration_s)]
+    if graph is not None:
+        args += ["--graph", os.fspath(graph)]
+    args += [str(f) for f in flags]
+    return Table(_native.cliff(args))

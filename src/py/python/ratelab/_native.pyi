@@ -1,0 +1,19 @@
+"""Stubs of ratelab's extension module (src/py/lib.rs); use the `ratelab` package."""
+
+from typing import Any, Callable, Dict, List, Optional, Tuple
+
+__version__: str
+
+def main(argv: List[str]) -> int:
+    """ratelab's command line on `argv` (the program's name first); returns the exit code."""
+
+def run(flags: List[str], policy: Optional[Callable[[Any], Any]] = None) -> Dict[str, Any]:
+    """One run of `ratelab run FLAGS...`: metrics_json, trace_csv, log (texts), summary
+    (lines), failed (a node's failure line or None), recording (path or None), wall_s,
+    trace_columns ((name, numpy dtype, bytes) per column of trace_csv)."""
+
+def sweep(flags: List[str]) -> Tuple[str, Optional[str]]:
+    """`ratelab sweep FLAGS...`: (its --csv text, the first failed node's line or None)."""
+
+def cliff(flags: List[str]) -> str:
+    """`ratelab cliff FLAGS...`: CSV seed,falls_at_hz,balances_at_hz,runs."""
