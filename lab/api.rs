@@ -65,6 +65,43 @@ pub fn cliff(flags: &[String], stop: &StopFlag) -> anyhow::Result<String> {
     Ok(String::from_utf8(w.into_inner()?)?)
 }
 
+/// What `ratelab exercise` found, and the report it printed.
+#[derive(Clone, Debug)]
+pub struct ExerciseOutcome {
+    /// Its checks, reconcile sentences and what did not pass.
+    pub report: ratelab::exercise::Report,
+    /// The report as `ratelab exercise` prints it, a line each.
+    pub lines: Vec<String>,
+}
+
+/// `ratelab exercise WHICH FLAGS…` (`--dir`, `--graph`, …), with `prediction_json` (a JSON
+/// object: the keys the exercise's file asks for, and `why`) in place of the learner's
+/// file's prediction when given. Nothing is printed.
+///
+/// # Errors
+/// Bad flags, a prediction that is not a JSON object of TOML values, no prediction, an
+/// exercise that cannot run (unreadable files or bands, a run that cannot start).
+pub fn exercise(
+    which: &str,
+    flags: &[String],
+    prediction_json: Option<&str>,
+) -> anyhow::Result<ExerciseOutcome> {
+    let all: Vec<String> = std::iter::once(which.to_string())
+        .chain(flags.iter().cloned())
+        .collect();
+    let Command::Exercise(a) = parse("exercise", &all)? else {
+        anyhow::bail!("not an exercise");
+    };
+    let prediction: Option<toml::Table> = prediction_json
+        .map(serde_json::from_str)
+        .transpose()
+        .map_err(|e| anyhow::anyhow!("prediction: {e}"))?;
+    let mut lines = Vec::new();
+    let mut out = |text: &str| lines.extend(text.lines().map(str::to_string));
+    let report = crate::exercise::report_from_args(&a, prediction.as_ref(), &mut out, &())?;
+    Ok(ExerciseOutcome { report, lines })
+}
+
 /// A run's results, as `ratelab run --out DIR` writes them.
 #[derive(Clone, Debug)]
 pub struct RunFiles {

@@ -6,7 +6,6 @@
 use anyhow::bail;
 use ratelab::exercise::{Progress, Setup};
 use std::cell::RefCell;
-use std::path::Path;
 
 /// An exercise that ran to its end but did not pass: a check failed or a prediction could
 /// not be read. `ratelab exercise` then exits 1 (2 is for what kept it from running).
@@ -55,6 +54,24 @@ impl Progress for Spinner {
 /// `ratelab exercise`: the graph (the chapter's, or the one the exercise's bands name, with
 /// the command line's overrides), then [`run_exercise`].
 pub fn run_from_args(args: &crate::cli::ExerciseArgs) -> anyhow::Result<()> {
+    let mut out = |line: &str| println!("{line}");
+    match report_from_args(args, None, &mut out, &Spinner::default())?.not_passed {
+        0 => Ok(()),
+        n => Err(NotPassed(n).into()),
+    }
+}
+
+/// `ratelab exercise`'s run, its report's lines through `out` and its findings returned:
+/// with `prediction` in place of the learner's file's when given.
+///
+/// # Errors
+/// What kept it from running: bad flags, no prediction, unreadable files or bands.
+pub fn report_from_args(
+    args: &crate::cli::ExerciseArgs,
+    prediction: Option<&toml::Table>,
+    out: &mut dyn FnMut(&str),
+    progress: &dyn ratelab::exercise::Progress,
+) -> anyhow::Result<ratelab::exercise::Report> {
     let mut graph = args.graph.clone();
     if graph.graph.is_none() {
         graph.graph = ratelab::exercise::default_graph(&args.which, &args.dir)?;
@@ -63,31 +80,18 @@ pub fn run_from_args(args: &crate::cli::ExerciseArgs) -> anyhow::Result<()> {
     if !crate::headless::faults_from_args(&graph).is_empty() {
         bail!("--stall/--kill: the exercises inject no faults; use `ratelab run` or `ratelab lab` with them");
     }
-    run_exercise(&args.which, &args.dir, &g, graph.graph.as_deref())
-}
-
-/// Run exercise `which` from the exercise folder `dir` on `graph` (read from `graph_path`,
-/// `None` for the chapter's: ex9's processes load it too).
-///
-/// # Errors
-/// What kept it from running (exit 2), or [`NotPassed`] after it ran when a check failed or
-/// a prediction could not be read (exit 1).
-pub fn run_exercise(
-    which: &str,
-    dir: &Path,
-    graph: &ratelab::graph::GraphSpec,
-    graph_path: Option<&Path>,
-) -> anyhow::Result<()> {
     let exe = ratelab::distributed::launcher::Program::this()?;
     let setup = Setup {
-        dir,
-        graph,
-        graph_path,
+        dir: &args.dir,
+        graph: &g,
+        graph_path: graph.graph.as_deref(),
         exe: &exe,
+        prediction,
     };
-    let mut out = |line: &str| println!("{line}");
-    match ratelab::exercise::run(which, setup, &mut out, &Spinner::default())? {
-        0 => Ok(()),
-        n => Err(NotPassed(n).into()),
-    }
+    Ok(ratelab::exercise::run_report(
+        &args.which,
+        setup,
+        out,
+        progress,
+    )?)
 }

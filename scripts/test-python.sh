@@ -11,6 +11,6 @@ pip_quiet=(--quiet --disable-pip-version-check)
 echo "ratelab: building the wheel (pip wheel .) ..." >&2
 python3 -m pip wheel "${pip_quiet[@]}" --no-deps --wheel-dir "$work/dist" "$root"
 python3 -m venv "$work/venv"
-"$work/venv/bin/python" -m pip install "${pip_quiet[@]}" "$work"/dist/ratelab-*.whl "pytest==9.2.0" "nbclient==0.11.0" "nbformat==5.11.1" "ipykernel==7.4.0" "matplotlib==3.11.2" "pandas==3.1.1"
+"$work/venv/bin/python" -m pip install "${pip_quiet[@]}" "$work"/dist/ratelab-*.whl "pytest==9.2.0" "nbclient==0.11.0" "nbformat==5.11.1" "ipykernel==7.4.0" "matplotlib==3.11.2" "pandas==3.1.1" "rerun-sdk[notebook]==0.36.3"
 cd "$work"
 exec "$work/venv/bin/python" -m pytest -q -p no:cacheprovider "$@" "$root/tests/py"

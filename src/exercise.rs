@@ -461,7 +461,20 @@ pub struct Context<'a> {
     pub bands: &'a Bands,
     out: &'a mut dyn FnMut(&str),
     progress: &'a dyn Progress,
-    not_passed: usize,
+    /// What it found so far: every check and reconcile line, and what did not pass.
+    report: Report,
+}
+
+/// What an exercise found: its checks, the sentences setting the prediction beside the
+/// outcome, and how many checks failed or predictions could not be read.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Report {
+    /// Every check, in the order printed (`[ok]` / `[!!]`).
+    pub checks: Vec<Check>,
+    /// The prediction beside the outcome, one sentence per predicted key.
+    pub reconcile: Vec<String>,
+    /// Checks that failed plus predictions that could not be read (0: passed).
+    pub not_passed: usize,
 }
 
 impl Context<'_> {
@@ -498,8 +511,9 @@ impl Context<'_> {
                 c.name
             );
             if !c.passed {
-                self.not_passed += 1;
+                self.report.not_passed += 1;
             }
+            self.report.checks.push(c.clone());
         }
     }
 
@@ -510,8 +524,9 @@ impl Context<'_> {
         for line in self.file.reconcile(outcome) {
             self.say(&line);
             if says_unreadable(&line) {
-                self.not_passed += 1;
+                self.report.not_passed += 1;
             }
+            self.report.reconcile.push(line);
         }
     }
 
@@ -546,6 +561,9 @@ pub struct Setup<'a> {
     pub graph_path: Option<&'a Path>,
     /// This program.
     pub exe: &'a crate::distributed::launcher::Program,
+    /// The prediction, in place of the one in the learner's file (`None`: the file's): the
+    /// keys the exercise's file asks for, and `why`.
+    pub prediction: Option<&'a toml::Table>,
 }
 
 /// Run exercise `which` as `ratelab exercise` does: refuse it without a prediction, print
@@ -563,9 +581,26 @@ pub fn run(
     out: &mut dyn FnMut(&str),
     progress: &dyn Progress,
 ) -> Result<usize, ExerciseError> {
+    run_report(which, setup, out, progress).map(|r| r.not_passed)
+}
+
+/// [`run`], returning what the exercise found: its checks and reconcile sentences as well as
+/// how many did not pass (what `ratelab.exercise` in Python returns).
+///
+/// # Errors
+/// As [`run`].
+pub fn run_report(
+    which: &str,
+    setup: Setup<'_>,
+    out: &mut dyn FnMut(&str),
+    progress: &dyn Progress,
+) -> Result<Report, ExerciseError> {
     let exercise = find(which).ok_or_else(|| ExerciseError::Unknown(which.to_string()))?;
     let path = setup.dir.join(exercise.file());
-    let file = ExerciseFile::load(&path)?;
+    let mut file = ExerciseFile::load(&path)?;
+    if let Some(prediction) = setup.prediction {
+        file.prediction = prediction.clone();
+    }
     if !file.has_prediction(exercise.required_keys()) {
         return Err(ExerciseError::NoPrediction {
             path: path.display().to_string(),
@@ -584,7 +619,7 @@ pub fn run(
         bands: &bands,
         out,
         progress,
-        not_passed: 0,
+        report: Report::default(),
     };
     say!(
         cx,
@@ -600,7 +635,7 @@ pub fn run(
         indent(&file.prediction_text())
     );
     exercise.run(&mut cx)?;
-    Ok(cx.not_passed)
+    Ok(cx.report)
 }
 
 fn indent(s: &str) -> String {

@@ -7,6 +7,7 @@
 //! - [`run`]: one run from `ratelab run`'s flags, its files' contents returned; Python
 //!   nodes and a callable brain run in this interpreter. Ctrl-C (KeyboardInterrupt) stops it.
 //! - [`sweep`], [`cliff`]: `ratelab sweep` and `ratelab cliff`, their tables as CSV.
+//! - [`exercise`]: `ratelab exercise`, its checks returned (a prediction may be given).
 //!
 //! Errors become Python exceptions carrying the command line's one line: a missing file
 //! `FileNotFoundError`, one refused for being there `FileExistsError`, a permission
@@ -21,6 +22,13 @@ use pyo3::types::PyDict;
 use ratelab::distributed::launcher::Program;
 use ratelab::scheduler::StopFlag;
 use std::time::Duration;
+
+pyo3::create_exception!(
+    _native,
+    NoPrediction,
+    PyValueError,
+    "An exercise was asked for before its prediction was written (`ratelab exercise` refuses it)."
+);
 
 /// How often a run waiting in [`run`] looks for Ctrl-C.
 const SIGNAL_POLL: Duration = Duration::from_millis(50);
@@ -58,6 +66,9 @@ fn to_py(e: &anyhow::Error) -> PyErr {
         None => ratelab::text::printable(&format!("{e:#}")).to_string(),
     };
     for cause in e.chain() {
+        if let Some(ratelab::exercise::ExerciseError::NoPrediction { .. }) = cause.downcast_ref() {
+            return NoPrediction::new_err(text);
+        }
         let missing = match cause.downcast_ref::<ratelab::graph::spec::SpecError>() {
             Some(spec) => spec.is_missing_file(),
             None => matches!(
@@ -165,21 +176,71 @@ fn cliff(py: Python<'_>, flags: Vec<String>) -> PyResult<String> {
     interruptibly(py, move |stop| ratelab_lab::api::cliff(&flags, &stop))
 }
 
+/// `ratelab exercise WHICH FLAGS…` in this process, with `prediction_json` (a JSON object)
+/// in place of the learner's file's prediction when given. Returns a dict: `checks` (a list
+/// of `(name, passed)`), `reconcile` (sentences), `not_passed` (a count) and `lines` (the
+/// report `ratelab exercise` prints). Ctrl-C stops it.
+#[pyfunction]
+#[pyo3(signature = (which, flags, prediction_json=None))]
+fn exercise<'py>(
+    py: Python<'py>,
+    which: String,
+    flags: Vec<String>,
+    prediction_json: Option<String>,
+) -> PyResult<Bound<'py, PyDict>> {
+    hosted(py)?;
+    ratelab::init();
+    let found = interruptibly(py, move |_stop| {
+        ratelab_lab::api::exercise(&which, &flags, prediction_json.as_deref())
+    })?;
+    let out = PyDict::new(py);
+    let checks: Vec<(String, bool)> = (found.report.checks.iter())
+        .map(|c| (c.name.clone(), c.passed))
+        .collect();
+    out.set_item("checks", checks)?;
+    out.set_item("reconcile", found.report.reconcile)?;
+    out.set_item("not_passed", found.report.not_passed)?;
+    out.set_item("lines", found.lines)?;
+    Ok(out)
+}
+
+/// Put ratelab's message classes (`State`, `Position`, `Force`, the types a program
+/// registered) and `Time` into the `ratelab` package, as Python nodes see them.
+#[pyfunction]
+fn install_messages(py: Python<'_>) -> PyResult<()> {
+    hosted(py)?;
+    ratelab::init();
+    ratelab::python::start().map_err(|e| PyValueError::new_err(e.to_string()))?;
+    ratelab::python::install_messages(py)
+}
+
+/// The exercises, in order: `(id, file, title)` each (`("ex1", "ex1_rate_cliff.toml", "the
+/// rate cliff")`).
+#[pyfunction]
+fn exercises() -> Vec<(&'static str, &'static str, &'static str)> {
+    (ratelab::exercise::EXERCISES.iter())
+        .map(|e| (e.id(), e.file(), e.title()))
+        .collect()
+}
+
 /// One run of `ratelab run FLAGS…` in this process, with `policy` (a callable taking the
 /// observation, a NumPy float32[5] array, and returning the force command) as its brain when
-/// given. Returns a dict: `metrics_json`, `trace_csv`, `log` (the files' texts),
+/// given, and `nodes` (`(node name, class)` pairs) making those Python nodes of the graph
+/// from classes of this interpreter. Returns a dict: `metrics_json`, `trace_csv`, `log` (the files' texts),
 /// `trace_columns` (the trace as `(name, dtype, bytes)` per column), `summary`
 /// (lines), `failed` (the line of a node that failed, or None), `recording` (its path or
 /// None). Ctrl-C stops the run and raises KeyboardInterrupt.
 #[pyfunction]
-#[pyo3(signature = (flags, policy=None))]
+#[pyo3(signature = (flags, policy=None, nodes=Vec::new()))]
 fn run<'py>(
     py: Python<'py>,
     flags: Vec<String>,
     policy: Option<Py<PyAny>>,
+    nodes: Vec<(String, Py<PyAny>)>,
 ) -> PyResult<Bound<'py, PyDict>> {
     hosted(py)?;
     ratelab::init();
+    let _given = ratelab::python::node::give_classes(nodes);
     let brain = match policy {
         Some(f) => Some(Box::new(
             ratelab::python::brain::PythonBrain::from_callable(f)
@@ -262,6 +323,10 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(run, m)?)?;
     m.add_function(wrap_pyfunction!(sweep, m)?)?;
     m.add_function(wrap_pyfunction!(cliff, m)?)?;
+    m.add_function(wrap_pyfunction!(exercise, m)?)?;
+    m.add_function(wrap_pyfunction!(exercises, m)?)?;
+    m.add_function(wrap_pyfunction!(install_messages, m)?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    m.add("NoPrediction", m.py().get_type::<NoPrediction>())?;
     Ok(())
 }

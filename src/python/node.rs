@@ -82,7 +82,8 @@ pub struct TickError(pub String);
 
 impl PythonNode {
     /// Load the node `cx` makes (its name, period, seed, parameters, topics in the graph
-    /// file's order, outbox) from `code`.
+    /// file's order, outbox) from `code`, or from the class the caller gave for it
+    /// ([`give_classes`]).
     ///
     /// # Errors
     /// [`PythonError`]: see the module docs.
@@ -90,8 +91,13 @@ impl PythonNode {
         let (name, params, period, seed) = (cx.name, cx.params, cx.period(), cx.seed);
         let (inputs, outputs, outbox) =
             (cx.inputs.to_vec(), cx.outputs.to_vec(), cx.outbox.clone());
+        let given = given_class(name);
         let script = code.script.as_str();
-        let source = super::brain::read_script(script)?;
+        // A class the caller gave needs no script: its own file names it in messages.
+        let source = match &given {
+            Some(_) => String::new(),
+            None => super::brain::read_script(script)?,
+        };
         start()?;
         let module_name = format!("ratelab_node_{name}");
         let declared = |ts: &[AnyTopic]| -> Vec<(String, &'static str)> {
@@ -101,12 +107,29 @@ impl PythonNode {
         };
         Python::attach(|py| {
             let support = support(py)?;
+            let script: String = match &given {
+                Some(cls) => support
+                    .call_method1("class_script", (cls,))
+                    .and_then(|s| s.extract())
+                    .unwrap_or_else(|_| script.to_string()),
+                None => script.to_string(),
+            };
+            let script = script.as_str();
             let fail = |e: PyErr| PythonError::Script(describe(py, &e, script));
             let _running = CallbackGuard::enter(&format!("node '{name}' ({script}) loading"));
             super::install_messages(py).map_err(fail)?;
-            let module = support
-                .call_method1("load_module", (script, source, module_name))
-                .map_err(fail)?;
+            let (module, class) = match &given {
+                Some(cls) => (py.None().into_bound(py), cls.bind(py).clone()),
+                None => (
+                    support
+                        .call_method1("load_module", (script, source, module_name))
+                        .map_err(fail)?,
+                    match code.class.as_deref() {
+                        Some(c) => pyo3::types::PyString::new(py, c).into_any(),
+                        None => py.None().into_bound(py),
+                    },
+                ),
+            };
             let py_params = PyDict::new(py);
             for (k, v) in params {
                 py_params.set_item(k, to_python(py, v)).map_err(fail)?;
@@ -117,7 +140,7 @@ impl PythonNode {
                     (
                         module,
                         script,
-                        code.class.as_deref(),
+                        class,
                         name,
                         period.0,
                         declared(&inputs),
@@ -232,4 +255,32 @@ fn to_python<'py>(py: Python<'py>, v: &toml::Value) -> Bound<'py, PyAny> {
         other => other.to_string().into_bound_py_any(py),
     };
     any.unwrap_or_else(|_| py.None().into_bound(py))
+}
+
+/// Classes the caller gave for Python nodes, by node name ([`give_classes`]).
+static GIVEN: std::sync::Mutex<Vec<(String, Py<PyAny>)>> = std::sync::Mutex::new(Vec::new());
+
+/// While the returned guard lives, a Python node named as a key of `classes` is made from
+/// the class given (an object of the caller's interpreter: a notebook cell's class) instead
+/// of its graph file's `script` and `class`; it is driven exactly as one from a file
+/// (`ratelab.run(nodes={"policy": MyNode})`). Dropping the guard forgets them.
+pub fn give_classes(classes: Vec<(String, Py<PyAny>)>) -> GivenClasses {
+    *GIVEN.lock().unwrap_or_else(|e| e.into_inner()) = classes;
+    GivenClasses(())
+}
+
+/// Forgets the classes [`give_classes`] gave when dropped.
+pub struct GivenClasses(());
+
+impl Drop for GivenClasses {
+    fn drop(&mut self) {
+        let taken = std::mem::take(&mut *GIVEN.lock().unwrap_or_else(|e| e.into_inner()));
+        Python::attach(|_| drop(taken));
+    }
+}
+
+fn given_class(node: &str) -> Option<Py<PyAny>> {
+    let given = GIVEN.lock().unwrap_or_else(|e| e.into_inner());
+    let found = given.iter().find(|(n, _)| n == node)?;
+    Some(Python::attach(|py| found.1.clone_ref(py)))
 }

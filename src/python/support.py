@@ -537,6 +537,8 @@ class NodeRuntime:
         return self.script
 
     def _find_class(self, module, class_name):
+        if isinstance(class_name, type):
+            return class_name  # a class the caller gave (`ratelab.run(nodes=...)`)
         if class_name is not None:
             cls = getattr(module, class_name, None)
             if not isinstance(cls, type):
@@ -564,6 +566,12 @@ class NodeRuntime:
         return self.outbox
 
 
+def class_script(cls):
+    """The file a class given by the caller was defined in (for messages), or `<NAME>`."""
+    module = sys.modules.get(getattr(cls, "__module__", ""), None)
+    return getattr(module, "__file__", None) or f"<{getattr(cls, '__qualname__', 'class')}>"
+
+
 def node_runtime(module, script, class_name, name, period_ns, inputs, outputs, params, seed):
     return NodeRuntime(module, script, class_name, name, period_ns, inputs, outputs, params,
                        seed)
@@ -589,9 +597,15 @@ def install_message_module(registry):
             raise RuntimeError(f"ratelab's Python class {cls.__name__} does not match message "
                                f"type '{name}' as Rust defines it ({class_name}: "
                                f"{', '.join(names)}; ROS 2 {ros_type})")
-    mod = types.ModuleType("ratelab")
-    mod.__doc__ = ("ratelab's message types for Python nodes ("
-                   + ", ".join(c.__name__ for c in MESSAGE_TYPES.values()) + ") and Time.")
+    package = sys.modules.get("ratelab")
+    if package is not None and hasattr(package, "_native"):
+        # ratelab runs inside the caller's interpreter (`import ratelab`, the Python
+        # package): the classes join the package itself, which scripts then import.
+        mod = package
+    else:
+        mod = types.ModuleType("ratelab")
+        mod.__doc__ = ("ratelab's message types for Python nodes ("
+                       + ", ".join(c.__name__ for c in MESSAGE_TYPES.values()) + ") and Time.")
+        sys.modules["ratelab"] = mod
     for cls in list(MESSAGE_TYPES.values()) + [Time]:
         setattr(mod, cls.__name__, cls)
-    sys.modules["ratelab"] = mod

@@ -7,7 +7,9 @@ import _thread
 import importlib.util
 import json
 import os
+import re
 import shutil
+import signal
 import subprocess
 import sys
 import threading
@@ -164,14 +166,20 @@ def test_a_brain_that_raises_fails_its_node_and_keeps_the_figures():
 
 
 def test_ctrl_c_stops_a_run():
-    # Python's own Ctrl-C: the signal flag a SIGINT sets, raised in the main thread.
-    timer = threading.Timer(1.0, _thread.interrupt_main)
-    timer.start()
-    started = time.monotonic()
-    with pytest.raises(KeyboardInterrupt):
-        ratelab.run(clock="real", duration_s=60.0)
-    assert time.monotonic() - started < 10.0
-    timer.cancel()
+    # Python's own Ctrl-C: the signal flag a SIGINT sets, raised in the main thread. A
+    # process started in the background by a shell ignores SIGINT, and Python then leaves it
+    # so: give it Python's handler, as an interactive interpreter has.
+    before = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        timer = threading.Timer(1.0, _thread.interrupt_main)
+        timer.start()
+        started = time.monotonic()
+        with pytest.raises(KeyboardInterrupt):
+            ratelab.run(clock="real", duration_s=60.0)
+        assert time.monotonic() - started < 10.0
+        timer.cancel()
+    finally:
+        signal.signal(signal.SIGINT, before)
     # The interpreter is still good for another run.
     assert ratelab.run(duration_s=0.5).metrics["steps"] == 26  # t = 0, 20, …, 500 ms
 
@@ -234,3 +242,84 @@ def test_a_cliff_is_where_a_run_falls_and_the_next_rate_up_balances():
     with pytest.raises(ValueError) as e:
         ratelab.cliff(min_hz=20, max_hz=10)
     assert "--min-hz" in str(e.value)
+
+
+def exercises_copy(tmp_path, **predictions):
+    """The exercises folder (and the graphs beside it) copied to `tmp_path`, every prediction
+    emptied, then those given
+    (`ex1='fails_at_hz = 5'`) written with a `why`."""
+    folder = tmp_path / "exercises"
+    shutil.copytree(ROOT / "exercises", folder)
+    # The graphs some exercises run on, named from the exercises folder as `../graphs/…`.
+    shutil.copytree(ROOT / "graphs", tmp_path / "graphs")
+    for e in ratelab.exercises():
+        path = folder / e["file"]
+        text = path.read_text()
+        head = text[: re.search(r"^\[prediction\]", text, re.M).start()]
+        given = predictions.get(e["id"])
+        body = f'{given}\nwhy = "a guess"\n' if given else 'why = ""\n'
+        path.write_text(head + "[prediction]\n" + body)
+    return folder
+
+
+def test_an_exercise_returns_its_checks(tmp_path):
+    folder = exercises_copy(tmp_path)
+    found = ratelab.exercise("ex1", {"fails_at_hz": 5, "why": "too slow to catch it"}, dir=folder)
+    assert found.passed and found.not_passed == 0
+    assert found.checks and all(c.passed for c in found.checks)
+    assert any("5 Hz" in line for line in found.reconcile), found.reconcile
+    assert any(line.startswith("== ex1") for line in found.report)
+    # A prediction of the wrong type is not passed; none at all is refused.
+    bad = ratelab.exercise("ex1", {"fails_at_hz": "five", "why": "?"}, dir=folder)
+    assert not bad.passed and bad.not_passed >= 1
+    with pytest.raises(ratelab.NoPrediction) as e:
+        ratelab.exercise("ex1", dir=folder)
+    assert "ex1_rate_cliff.toml" in str(e.value)
+    with pytest.raises(ValueError):
+        ratelab.exercise("ex99", {"why": "?"}, dir=folder)
+
+
+def test_the_exercises_run_as_pytest_tests_on_the_learner_s_predictions(tmp_path):
+    def pytest_on(folder):
+        return subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider",
+                               str(folder)], capture_output=True, text=True, timeout=300)
+
+    done = pytest_on(exercises_copy(tmp_path / "a", ex1="fails_at_hz = 5"))
+    assert done.returncode == 0, done.stdout
+    assert "1 passed" in done.stdout and "skipped" in done.stdout
+    unreadable = pytest_on(exercises_copy(tmp_path / "b", ex1='fails_at_hz = "five"'))
+    assert unreadable.returncode == 1, unreadable.stdout
+    assert "test_exercise[ex1]" in unreadable.stdout
+
+
+def test_a_node_class_given_here_runs_as_the_same_class_from_its_file():
+    # The class imported from its file, given for the graph's Python node: the reference run.
+    spec = importlib.util.spec_from_file_location(
+        "my_balancer", ROOT / "graphs/nodes/scripted_balancer.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    from_file = ratelab.run(graph="graphs/cartpole-python.toml")
+    given = ratelab.run(graph="graphs/cartpole-python.toml",
+                        nodes={"policy": module.ScriptedBalancer})
+    assert given.trace_csv == from_file.trace_csv
+    assert given.metrics_json == from_file.metrics_json
+    # `import ratelab` is still the package after Python nodes ran (their message classes
+    # joined it).
+    assert sys.modules["ratelab"] is ratelab and ratelab.Force(newtons=1.0).newtons == 1.0
+    with pytest.raises(ValueError):
+        ratelab.run(graph="graphs/cartpole-python.toml", nodes={"policy": "ScriptedBalancer"})
+
+
+def test_a_node_class_defined_in_a_cell_runs_here():
+    from ratelab import Force, State
+
+    class Hold:
+        def __init__(self, node):
+            self.pub = node.create_publisher(Force, "/action", 1)
+            node.create_subscription(State, "/obs", lambda msg: None, 1)
+            node.create_timer(node.get_period(), lambda: self.pub.publish(Force(newtons=0.0)))
+            node.get_logger().info("holding")
+
+    run = ratelab.run(graph="graphs/cartpole-python.toml", nodes={"policy": Hold}, duration_s=3)
+    assert not run.metrics["balanced"]  # no force: the pole falls
+    assert any("holding" in line and "policy" in line for line in run.log), run.log

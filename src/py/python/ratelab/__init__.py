@@ -25,13 +25,42 @@ import io
 import json
 import os
 from dataclasses import dataclass
-from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence, Union
+from typing import TYPE_CHECKING, Any, Callable, Dict, List, Mapping, Optional, Sequence, Union
 
 from . import _native
 
+if TYPE_CHECKING:
+    from ._messages import Force, Position, State, Time  # noqa: F401
+
+
+def __getattr__(name: str) -> Any:
+    # The message classes Python nodes use (`from ratelab import State, Force`), made by
+    # ratelab's message registry when first asked for.
+    if name in ("State", "Position", "Force", "Time") or name[:1].isupper():
+        _native.install_messages()
+        if name in globals():
+            return globals()[name]
+    raise AttributeError(f"module 'ratelab' has no attribute {name!r}")
+
 __version__: str = _native.__version__
 
-__all__ = ["Run", "Table", "NodeFailed", "run", "sweep", "cliff", "TRACE_COLUMNS"]
+__all__ = [
+    "Run",
+    "Table",
+    "Check",
+    "Exercise",
+    "NodeFailed",
+    "NoPrediction",
+    "run",
+    "sweep",
+    "cliff",
+    "exercise",
+    "exercises",
+    "TRACE_COLUMNS",
+]
+
+#: An exercise asked for before its prediction was written (a ValueError).
+NoPrediction = _native.NoPrediction
 
 #: `trace.csv`'s columns as `Run.trace` names them: units in the names where one applies.
 #: The per-topic counters (`obs_published`, `cmd_lost`, …) keep their names (messages).
@@ -184,6 +213,7 @@ def run(
     record: Optional[PathLike] = None,
     out: Optional[PathLike] = None,
     force: bool = False,
+    nodes: Optional[Mapping[str, type]] = None,
     flags: Sequence[str] = (),
 ) -> Run:
     """Run a graph, as `ratelab run` does, and return its figures.
@@ -198,6 +228,9 @@ def run(
         callable `f(obs) -> action` (obs a NumPy float32[5]; action a float in [-1, 1]).
     record: write a rerun recording to this path. out: also write metrics.json, trace.csv
         and log.txt to this folder (force: replace existing files).
+    nodes: classes for the graph's Python nodes, by node name ({"policy": MyNode}): each
+        is made from the class given (defined here, in a notebook cell) instead of its
+        graph file's script, and driven exactly as one from a file.
     flags: any other `ratelab run` flags, as strings (["--executor", "single"]).
 
     Raises ValueError, FileNotFoundError, FileExistsError, NodeFailed, KeyboardInterrupt.
@@ -228,7 +261,11 @@ def run(
     if force:
         args.append("--force")
     args += [str(f) for f in flags]
-    files = _native.run(args, brain)
+    classes = list((nodes or {}).items())
+    for node, cls in classes:
+        if not isinstance(cls, type):
+            raise ValueError(f"nodes[{node!r}] must be a class, got {type(cls).__name__}")
+    files = _native.run(args, brain, classes)
     result = Run(
         metrics=json.loads(files["metrics_json"]),
         trace=_trace_arrays(files["trace_columns"]),
@@ -302,3 +339,64 @@ def cliff(
         args += ["--graph", os.fspath(graph)]
     args += [str(f) for f in flags]
     return Table(_native.cliff(args))
+
+
+@dataclass(frozen=True)
+class Check:
+    """One of an exercise's checks: what was checked, and whether it held."""
+
+    name: str
+    passed: bool
+
+
+@dataclass(frozen=True)
+class Exercise:
+    """What an exercise found (`ratelab exercise`)."""
+
+    #: Its checks, in the order it prints them.
+    checks: List[Check]
+    #: The prediction beside the outcome, one sentence per predicted key.
+    reconcile: List[str]
+    #: Checks that failed plus predictions that could not be read.
+    not_passed: int
+    #: The report `ratelab exercise` prints, a line each.
+    report: List[str]
+
+    @property
+    def passed(self) -> bool:
+        """Every check held and every prediction could be read (exit 0 of the command)."""
+        return self.not_passed == 0
+
+
+def exercise(
+    which: str,
+    prediction: Optional[Mapping[str, Any]] = None,
+    *,
+    dir: PathLike = "exercises",
+    graph: Optional[PathLike] = None,
+    flags: Sequence[str] = (),
+) -> Exercise:
+    """Run exercise `which` ("ex1", …) as `ratelab exercise` does, with `prediction` (the keys
+    its file's [prediction] asks for, and "why") in place of the learner's file's when given.
+
+    Raises NoPrediction (a ValueError) when there is no prediction yet, ValueError for an
+    unknown exercise or bad input, FileNotFoundError for a missing folder or file.
+    """
+    args: List[str] = ["--dir", os.fspath(dir)]
+    if graph is not None:
+        args += ["--graph", os.fspath(graph)]
+    args += [str(f) for f in flags]
+    given = None if prediction is None else json.dumps(dict(prediction))
+    found = _native.exercise(str(which), args, given)
+    return Exercise(
+        checks=[Check(name, passed) for name, passed in found["checks"]],
+        reconcile=list(found["reconcile"]),
+        not_passed=int(found["not_passed"]),
+        report=list(found["lines"]),
+    )
+
+
+def exercises() -> List[Dict[str, str]]:
+    """The exercises, in order: their `id` ("ex1"), `file` in the exercises folder
+    ("ex1_rate_cliff.toml") and `title`."""
+    return [{"id": i, "file": f, "title": t} for i, f, t in _native.exercises()]

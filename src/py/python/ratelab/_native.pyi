@@ -7,7 +7,11 @@ __version__: str
 def main(argv: List[str]) -> int:
     """ratelab's command line on `argv` (the program's name first); returns the exit code."""
 
-def run(flags: List[str], policy: Optional[Callable[[Any], Any]] = None) -> Dict[str, Any]:
+def run(
+    flags: List[str],
+    policy: Optional[Callable[[Any], Any]] = None,
+    nodes: List[Tuple[str, type]] = [],
+) -> Dict[str, Any]:
     """One run of `ratelab run FLAGS...`: metrics_json, trace_csv, log (texts), summary
     (lines), failed (a node's failure line or None), recording (path or None), wall_s,
     trace_columns ((name, numpy dtype, bytes) per column of trace_csv)."""
@@ -17,3 +21,15 @@ def sweep(flags: List[str]) -> Tuple[str, Optional[str]]:
 
 def cliff(flags: List[str]) -> str:
     """`ratelab cliff FLAGS...`: CSV seed,falls_at_hz,balances_at_hz,runs."""
+
+class NoPrediction(ValueError):
+    """An exercise was asked for before its prediction was written."""
+
+def exercise(which: str, flags: List[str], prediction_json: Optional[str] = None) -> Dict[str, Any]:
+    """`ratelab exercise WHICH FLAGS...`: checks [(name, passed)], reconcile, not_passed, lines."""
+
+def exercises() -> List[Tuple[str, str, str]]:
+    """The exercises in order: (id, file, title)."""
+
+def install_messages() -> None:
+    """Put the message classes (State, Position, Force, ...) and Time into `ratelab`."""
