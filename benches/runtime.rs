@@ -7,7 +7,7 @@ use ratelab::plant::CartPole;
 use ratelab::policy::Scripted;
 use ratelab::qos::{apply_key, split_pairs, TopicQos};
 use ratelab::recording::{RecordOptions, Recording};
-use ratelab::topic::Topic;
+use ratelab::topic::Subscription;
 use ratelab::{run, ClockKind, Nanos, RunConfig, RunOptions};
 use std::hint::black_box;
 use std::path::Path;
@@ -54,7 +54,7 @@ fn topic(c: &mut Criterion) {
         for (k, v) in pairs.map(|p| split_pairs(p).unwrap()).unwrap_or_default() {
             apply_key(&mut qos, &mut d, k, v).unwrap();
         }
-        let t: Topic<[f32; 5]> = Topic::with_qos("/obs", d, qos, 0).unwrap();
+        let t: Subscription<[f32; 5]> = Subscription::with_qos("/obs", d, qos, 0).unwrap();
         let mut i = 0u64;
         g.bench_function(label, |b| {
             b.iter(|| {
@@ -74,7 +74,7 @@ fn topic(c: &mut Criterion) {
     }
     g.finish();
     // Two threads: a publisher hammering the topic while we publish+read.
-    let shared: Arc<Topic<[f32; 5]>> = Arc::new(Topic::new("/obs", 1).unwrap());
+    let shared: Arc<Subscription<[f32; 5]>> = Arc::new(Subscription::new("/obs", 1).unwrap());
     let stop = Arc::new(std::sync::atomic::AtomicBool::new(false));
     let other = {
         let (t, stop) = (shared.clone(), stop.clone());

@@ -6,7 +6,7 @@
 use crate::msg::{AnyTopic, Message, MsgType};
 use crate::publisher::{Outbox, Publisher};
 use crate::time::Nanos;
-use crate::topic::Topic;
+use crate::topic::Subscription;
 use std::sync::Arc;
 
 /// What a registered node reads: one [`Message`] type, a tuple of two to four (one topic
@@ -59,7 +59,7 @@ pub trait Outputs: 'static {
 /// One input bound to its topic, with what it delivered last.
 #[doc(hidden)]
 pub struct InPort<M: Message> {
-    topic: Arc<Topic<M>>,
+    topic: Arc<Subscription<M>>,
     /// `seq` of the newest message delivered.
     last_seq: Option<u64>,
     /// Origin stamp of the newest message delivered (its own stamp when it has none).

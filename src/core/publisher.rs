@@ -9,7 +9,7 @@
 //! topic's publish, as it always was.
 
 use crate::time::Nanos;
-use crate::topic::Topic;
+use crate::topic::Subscription;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 
@@ -94,7 +94,7 @@ impl Outbox {
     /// holding, else when it is released.
     pub fn publish<T: Clone + Send + Sync + 'static>(
         &self,
-        topic: &Arc<Topic<T>>,
+        topic: &Arc<Subscription<T>>,
         data: T,
         now: Nanos,
         origin_stamp: Option<Nanos>,
@@ -121,13 +121,13 @@ pub struct Publisher<T> {
 /// The queues a publish goes into.
 #[derive(Clone)]
 enum Queues<T> {
-    One(Arc<Topic<T>>),
-    Many(Arc<[Arc<Topic<T>>]>),
+    One(Arc<Subscription<T>>),
+    Many(Arc<[Arc<Subscription<T>>]>),
 }
 
 impl<T: Clone + Send + Sync + 'static> Publisher<T> {
     /// A publisher on `topic` through the node's `outbox`.
-    pub fn new(topic: Arc<Topic<T>>, outbox: Outbox) -> Publisher<T> {
+    pub fn new(topic: Arc<Subscription<T>>, outbox: Outbox) -> Publisher<T> {
         Publisher {
             queues: Queues::One(topic),
             outbox,
@@ -138,7 +138,7 @@ impl<T: Clone + Send + Sync + 'static> Publisher<T> {
     ///
     /// # Panics
     /// For no queue.
-    pub fn fan_out(queues: Vec<Arc<Topic<T>>>, outbox: Outbox) -> Publisher<T> {
+    pub fn fan_out(queues: Vec<Arc<Subscription<T>>>, outbox: Outbox) -> Publisher<T> {
         assert!(!queues.is_empty(), "a topic has at least one queue");
         Publisher {
             queues: if queues.len() == 1 {
@@ -165,7 +165,7 @@ impl<T: Clone + Send + Sync + 'static> Publisher<T> {
     }
 
     /// The (first subscription's) queue.
-    pub fn topic(&self) -> &Arc<Topic<T>> {
+    pub fn topic(&self) -> &Arc<Subscription<T>> {
         match &self.queues {
             Queues::One(t) => t,
             Queues::Many(ts) => &ts[0],
@@ -179,7 +179,7 @@ mod tests {
 
     #[test]
     fn a_held_publish_goes_out_at_the_release_stamped_then() {
-        let topic = Arc::new(Topic::<u32>::new("/t", 4).unwrap());
+        let topic = Arc::new(Subscription::<u32>::new("/t", 4).unwrap());
         let outbox = Outbox::new();
         let p = Publisher::new(topic.clone(), outbox.clone());
         p.publish(1, Nanos(10), Some(Nanos(9)));

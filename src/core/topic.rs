@@ -1,10 +1,13 @@
-//! Topics: named, thread-safe, bounded message buses with a latest-wins subscriber.
+//! Topics as each subscription receives them: a [`Subscription`] is one subscription's
+//! queue of a topic — named, thread-safe, bounded, read latest-wins or in order — with its
+//! QoS and counters (a topic of several subscribers has one per subscriber:
+//! `ratelab::msg::AnyTopic`). The chapter's `Topic` (ch2.8) is this with its one subscriber.
 //!
-//! The drop rule is the chapter's (ch2.8, `Topic`): a topic buffers at most `depth`
+//! The drop rule is the chapter's (ch2.8, `Topic`): a subscription buffers at most `depth`
 //! messages (its history depth, in QoS terms). Publishing into a full buffer evicts the
 //! oldest message; that eviction is a **drop** exactly when the evicted message was never
 //! read, i.e. its `seq` is above the read high-water mark. Reading with
-//! [`Topic::read`] returns the newest message and moves the high-water mark past
+//! [`Subscription::read`] returns the newest message and moves the high-water mark past
 //! everything buffered: a latest-wins subscriber that caught up skips the backlog.
 //! The drop counter is how a rate mismatch becomes visible.
 //!
@@ -45,7 +48,7 @@ pub struct Message<T> {
 
 /// Told of every message published on a topic, as it is published, on the publisher's
 /// thread and under the topic's lock: it must be quick (a channel send) and must not touch
-/// the topic. Added with [`Topic::add_tap`].
+/// the topic. Added with [`Subscription::add_tap`].
 pub type Tap<T> = Box<dyn Fn(&Message<T>) + Send + Sync>;
 
 /// A topic's counters at one instant.
@@ -363,20 +366,21 @@ impl<T> Inner<T> {
     }
 }
 
-/// A [`Topic`]'s state at an instant ([`Topic::save`]).
+/// A [`Subscription`]'s state at an instant ([`Subscription::save`]).
 #[derive(Clone)]
 pub struct TopicState<T>(Inner<T>);
 
-/// A named bus of `T` messages bounded to `depth` buffered messages. Publishers and
-/// subscribers may live on different threads; every operation takes one short lock.
-pub struct Topic<T> {
+/// One subscription's queue of a topic of `T` messages, bounded to `depth` buffered
+/// messages (ROS 2's subscription with its QoS; the chapter's `Topic`). Publishers and the
+/// subscriber may live on different threads; every operation takes one short lock.
+pub struct Subscription<T> {
     name: String,
     inner: Mutex<Inner<T>>,
     /// The taps, in the order they were added (none: the lock is never made).
     taps: OnceLock<Mutex<Vec<Tap<T>>>>,
 }
 
-impl<T: Clone> Topic<T> {
+impl<T: Clone> Subscription<T> {
     /// A topic named `name` (by convention `/obs`, `/action`) holding at most `depth`
     /// messages, with the chapter's QoS (keep-last, latest, nothing else).
     ///
@@ -441,7 +445,7 @@ impl<T: Clone> Topic<T> {
         TopicState(self.lock().clone())
     }
 
-    /// Put back what [`Topic::save`] gave: the queue is as it was then.
+    /// Put back what [`Subscription::save`] gave: the queue is as it was then.
     pub fn load(&self, state: &TopicState<T>) {
         self.lock().clone_from(&state.0);
     }
@@ -590,7 +594,7 @@ impl<T: Clone> Topic<T> {
     }
 
     /// Change the history depth while running. Shrinking keeps the newest messages and
-    /// evicts the oldest under the same drop rule as [`Topic::publish`].
+    /// evicts the oldest under the same drop rule as [`Subscription::publish`].
     ///
     /// # Errors
     /// [`ZeroDepth`] when `depth` is 0 (the topic is unchanged).
@@ -685,7 +689,7 @@ impl<T: Clone> Topic<T> {
     }
 
     /// The sequence number the next publish will take (= messages published so far, with
-    /// any [`Topic::count_lost`]).
+    /// any [`Subscription::count_lost`]).
     pub fn next_seq(&self) -> u64 {
         self.lock().next_seq
     }
@@ -713,9 +717,9 @@ impl<T: Clone> Topic<T> {
     }
 }
 
-impl<T> std::fmt::Debug for Topic<T> {
+impl<T> std::fmt::Debug for Subscription<T> {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("Topic")
+        f.debug_struct("Subscription")
             .field("name", &self.name)
             .finish_non_exhaustive()
     }
@@ -742,7 +746,7 @@ mod tests {
         }
         assert_eq!(topic.stats().dropped, 2);
         assert_eq!(*second.lock().unwrap(), 3, "every tap sees every message");
-        let lossy = Topic::with_qos(
+        let lossy = Subscription::with_qos(
             "/l",
             1,
             TopicQos {
@@ -772,8 +776,8 @@ mod tests {
     /// does not matter.
     const NOW: Nanos = Nanos(1_000);
 
-    fn t(depth: usize) -> Topic<u32> {
-        Topic::new("/t", depth).unwrap()
+    fn t(depth: usize) -> Subscription<u32> {
+        Subscription::new("/t", depth).unwrap()
     }
 
     #[test]
@@ -870,7 +874,7 @@ mod tests {
         topic.publish(8, Nanos(8), None); // evicts 5 (unread)
         assert_eq!(topic.stats().dropped, 4);
         assert_eq!(topic.set_depth(0), Err(ZeroDepth));
-        assert!(Topic::<u8>::new("/z", 0).is_err());
+        assert!(Subscription::<u8>::new("/z", 0).is_err());
     }
 
     #[test]
@@ -897,7 +901,7 @@ mod tests {
     #[test]
     fn every_message_is_seen_dropped_or_waiting() {
         let topic = t(3);
-        let account = |t: &Topic<u32>| {
+        let account = |t: &Subscription<u32>| {
             let s = t.stats();
             assert_eq!(
                 s.published,
@@ -936,13 +940,13 @@ mod tests {
 
     use crate::qos::{apply_key, split_pairs};
 
-    fn q(depth: usize, pairs: &str) -> Topic<u32> {
+    fn q(depth: usize, pairs: &str) -> Subscription<u32> {
         let mut qos = TopicQos::default();
         let mut d = depth;
         for (k, v) in split_pairs(pairs).unwrap() {
             apply_key(&mut qos, &mut d, k, v).unwrap();
         }
-        Topic::with_qos("/q", d, qos, 7).unwrap()
+        Subscription::with_qos("/q", d, qos, 7).unwrap()
     }
 
     fn ms(v: u64) -> Nanos {
@@ -950,7 +954,7 @@ mod tests {
     }
 
     /// published = seen + dropped + expired + lost + refused + unseen buffered + in flight.
-    fn accounted(t: &Topic<u32>) {
+    fn accounted(t: &Subscription<u32>) {
         let s = t.stats();
         assert_eq!(
             s.published,
@@ -1253,8 +1257,8 @@ mod tests {
                 x ^= x << 17;
                 x % n
             };
-            let a = Topic::<u32>::with_qos("/a", 1, TopicQos::default(), 7).unwrap();
-            let b = Topic::<u32>::with_qos("/b", 1, qos("", true).0, 7).unwrap();
+            let a = Subscription::<u32>::with_qos("/a", 1, TopicQos::default(), 7).unwrap();
+            let b = Subscription::<u32>::with_qos("/b", 1, qos("", true).0, 7).unwrap();
             let mut now = Nanos::ZERO;
             for (i, phase) in phases.iter().enumerate() {
                 if i > 0 {

@@ -8,7 +8,7 @@ use crate::graph::GraphHandles;
 use crate::msg::ForceMsg;
 use crate::qos::{Liveliness, TopicQos};
 use crate::rate::Rate;
-use crate::topic::{Topic, TopicStats};
+use crate::topic::{Subscription, TopicStats};
 use std::collections::BTreeMap;
 use std::sync::Arc;
 
@@ -80,7 +80,7 @@ pub struct GraphShape {
     pub controller: Option<String>,
     /// The topic the policy publishes its force on: each message on it is logged as a
     /// published action (the actuator applies it, or a safety node's version of it).
-    pub commands: Option<Arc<Topic<ForceMsg>>>,
+    pub commands: Option<Arc<Subscription<ForceMsg>>>,
 }
 
 impl GraphShape {
@@ -117,7 +117,7 @@ impl GraphShape {
     pub fn from_spec(
         spec: &crate::graph::GraphSpec,
         stats: Arc<std::sync::Mutex<Vec<TopicStats>>>,
-        commands: Option<Arc<Topic<ForceMsg>>>,
+        commands: Option<Arc<Subscription<ForceMsg>>>,
     ) -> Result<Self, crate::rate::InvalidRate> {
         let rates = spec
             .nodes
@@ -157,7 +157,7 @@ impl GraphShape {
         liveliness: &[Arc<Liveliness>],
         stats: impl Fn(usize) -> Arc<dyn Fn() -> TopicStats + Send + Sync>,
         live_qos: impl Fn(usize) -> Arc<dyn Fn() -> TopicQos + Send + Sync>,
-        commands: Option<Arc<Topic<ForceMsg>>>,
+        commands: Option<Arc<Subscription<ForceMsg>>>,
     ) -> Self {
         Self {
             nodes: spec

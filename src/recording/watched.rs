@@ -5,7 +5,7 @@
 use crate::msg::ForceMsg;
 use crate::telemetry::Telemetry;
 use crate::time::Nanos;
-use crate::topic::{Topic, TopicStats};
+use crate::topic::{Subscription, TopicStats};
 use crate::{GraphShape, Recording, RecordingError, RunConfig};
 use std::sync::{Arc, Mutex};
 
@@ -55,7 +55,7 @@ pub fn record(
     // The policy's published forces, when the graph has the chapter's chain.
     let commands = spec
         .chain
-        .map(|c| Topic::new(spec.topic(c.action).name.clone(), 1).map(Arc::new))
+        .map(|c| Subscription::new(spec.topic(c.action).name.clone(), 1).map(Arc::new))
         .transpose()
         .map_err(|e| RecordingError::Graph(e.to_string()))?;
     let shape = GraphShape::from_spec(spec, counters.clone(), commands.clone())

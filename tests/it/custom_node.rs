@@ -573,3 +573,72 @@ fn a_graph_without_the_chapters_chain_runs_and_says_so() {
         );
     }
 }
+
+/// The built-in kinds are made of the registry's public parts only: each `def()` registered
+/// again under another name through `register_kind`, as a program registers its own, runs
+/// the chapter's graph exactly as the built-in kinds do; and a kind of a program's own with
+/// docs and a parameter with its unit and range (`rust_kind`) is printed and checked like a
+/// built-in one.
+#[test]
+fn the_built_in_kinds_are_registered_through_the_public_api_and_are_its_examples() {
+    use ratelab::graph::kind::{KindDef, ParamDef, Params};
+    use ratelab::graph::nodes;
+    use ratelab::graph::registry::{kinds_table, register_kind, rust_kind};
+    for (name, def) in [
+        ("sensor_again", nodes::sensor::def()),
+        ("policy_again", nodes::policy::def()),
+        ("actuator_again", nodes::actuator::def()),
+    ] {
+        register_kind(KindDef { name, ..def }).unwrap();
+    }
+    let chapter = std::fs::read_to_string(crate::repo("graphs/cartpole.toml")).unwrap();
+    let again = chapter
+        .replace("kind = \"sensor\"", "kind = \"sensor_again\"")
+        .replace("kind = \"policy\"", "kind = \"policy_again\"")
+        .replace("kind = \"actuator\"", "kind = \"actuator_again\"");
+    assert_ne!(again, chapter);
+    let built_in = virtual_run(GraphSpec::parse(&chapter, "cartpole.toml").unwrap());
+    let registered = virtual_run(GraphSpec::parse(&again, "cartpole.toml").unwrap());
+    // Every figure the same; only the kinds' names differ.
+    assert_eq!(
+        serde_json::to_string(&registered)
+            .unwrap()
+            .replace("_again\"", "\""),
+        serde_json::to_string(&built_in).unwrap()
+    );
+    // A program's own kind, with what a built-in one carries: docs, a parameter with its
+    // unit, default and range, checked when the graph file is read.
+    static PUSH: [ParamDef; 1] = [ParamDef {
+        name: "newtons",
+        unit: "N",
+        doc: "the force it pushes with",
+        default: 1.0,
+        min: -10.0,
+        max: 10.0,
+    }];
+    let mut def = rust_kind("push_documented", |cx: &NodeContext<'_>| {
+        Ok(Push {
+            newtons: cx.param_f64("newtons", 0.0)?,
+            sensed: false,
+        })
+    });
+    def.doc = "pushes the cart with a constant force once it has sensed";
+    def.params = Params::Numbers(&PUSH);
+    register_kind(def).unwrap();
+    let table = kinds_table();
+    let row = table
+        .lines()
+        .find(|l| l.starts_with("| `push_documented` |"))
+        .unwrap();
+    assert!(row.contains("`newtons` N (default 1, -10…10)"), "{row}");
+    assert!(row.contains("pushes the cart"), "{row}");
+    let too_hard = graph_with("push_documented", "newtons = 50");
+    let err = GraphSpec::parse(&too_hard, "g.toml")
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("newtons"), "{err}");
+    assert!(
+        register_kind(nodes::sensor::def()).is_err(),
+        "sensor is taken"
+    );
+}

@@ -1,6 +1,6 @@
 //! The topic under contention: counts that must add up exactly whatever the interleaving.
 
-use ratelab::topic::Topic;
+use ratelab::topic::Subscription;
 use ratelab::Nanos;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
@@ -8,7 +8,7 @@ use std::sync::Arc;
 const PUBLISHERS: u64 = 4;
 const EACH: u64 = 20_000;
 
-fn publish_all(topic: &Arc<Topic<u64>>) -> Vec<u64> {
+fn publish_all(topic: &Arc<Subscription<u64>>) -> Vec<u64> {
     let handles: Vec<_> = (0..PUBLISHERS)
         .map(|p| {
             let t = topic.clone();
@@ -31,7 +31,7 @@ fn publish_all(topic: &Arc<Topic<u64>>) -> Vec<u64> {
 fn unread_topic_drops_all_but_depth_exactly() {
     let _machine = crate::machine::shared();
     for depth in [1usize, 3, 64] {
-        let topic = Arc::new(Topic::new("/stress", depth).unwrap());
+        let topic = Arc::new(Subscription::new("/stress", depth).unwrap());
         let seqs = publish_all(&topic);
         let n = PUBLISHERS * EACH;
         // Every publish got its own sequence number: no lost or duplicated update.
@@ -49,7 +49,7 @@ fn unread_topic_drops_all_but_depth_exactly() {
 fn concurrent_reader_sees_time_move_forward_and_counts_stay_bounded() {
     let _machine = crate::machine::shared();
     let depth = 4;
-    let topic = Arc::new(Topic::new("/stress", depth).unwrap());
+    let topic = Arc::new(Subscription::new("/stress", depth).unwrap());
     let done = Arc::new(AtomicBool::new(false));
     let reader = {
         let (t, done) = (topic.clone(), done.clone());
@@ -97,7 +97,7 @@ fn under_every_qos_four_publishers_and_a_reader_account_for_every_message() {
         for (k, v) in split_pairs(pairs).unwrap() {
             apply_key(&mut qos, &mut depth, k, v).unwrap();
         }
-        let topic = Arc::new(Topic::with_qos("/stress", depth, qos, 3).unwrap());
+        let topic = Arc::new(Subscription::with_qos("/stress", depth, qos, 3).unwrap());
         // One clock for every thread, ticking 1 µs per operation.
         let clock = Arc::new(AtomicU64::new(0));
         let now = |c: &AtomicU64| Nanos(c.fetch_add(1_000, Ordering::Relaxed));

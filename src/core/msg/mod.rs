@@ -36,7 +36,7 @@
 //! [`AnyTopic`] is a topic of any registered type, for the views that only count messages
 //! (metrics, the lab, recordings), for changes that do not look inside (depth, QoS), and
 //! for the code that moves payloads without knowing their type (the wire, the ROS 2 bridge,
-//! Python nodes); a node that knows the type gets the typed [`Topic`] back with
+//! Python nodes); a node that knows the type gets the typed [`Subscription`] back with
 //! [`AnyTopic::typed`].
 
 pub mod force;
@@ -52,7 +52,7 @@ pub use state::StateMsg;
 use crate::publisher::Outbox;
 use crate::qos::TopicQos;
 use crate::time::Nanos;
-use crate::topic::{Topic, TopicStats, ZeroDepth};
+use crate::topic::{Subscription, TopicStats, ZeroDepth};
 use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 use std::any::{Any, TypeId};
@@ -155,10 +155,12 @@ fn new_topic<M: Message>(
     link_seed: u64,
     subscriptions: usize,
 ) -> Result<AnyTopic, ZeroDepth> {
-    let queue = |k: usize| -> Result<Arc<Topic<M>>, ZeroDepth> {
+    let queue = |k: usize| -> Result<Arc<Subscription<M>>, ZeroDepth> {
         // Each subscription's link draws its own fates; the first draws the topic's.
         let seed = link_seed ^ ((k as u64) << 48);
-        Ok(Arc::new(Topic::<M>::with_qos(name, depth, qos, seed)?))
+        Ok(Arc::new(Subscription::<M>::with_qos(
+            name, depth, qos, seed,
+        )?))
     };
     Ok(if subscriptions <= 1 {
         AnyTopic(Arc::new(queue(0)?))
@@ -305,9 +307,18 @@ pub enum MsgRegistryError {
     Full,
 }
 
+/// Every message type: the built-in ones first, registered by the rules a program's own
+/// types are ([`register_type`]).
 fn registry() -> &'static RwLock<Vec<MsgType>> {
-    static REGISTRY: LazyLock<RwLock<Vec<MsgType>>> =
-        LazyLock::new(|| RwLock::new(vec![StateMsg::TYPE, PositionMsg::TYPE, ForceMsg::TYPE]));
+    static REGISTRY: LazyLock<RwLock<Vec<MsgType>>> = LazyLock::new(|| {
+        let mut types = Vec::new();
+        for t in [StateMsg::TYPE, PositionMsg::TYPE, ForceMsg::TYPE] {
+            if let Err(e) = admit(&mut types, t) {
+                panic!("a built-in message type breaks the registry's rules: {e}");
+            }
+        }
+        RwLock::new(types)
+    });
     &REGISTRY
 }
 
@@ -344,22 +355,22 @@ pub fn register<M: Message>() -> Result<(), MsgRegistryError> {
     register_type(M::TYPE)
 }
 
-/// [`register`] by handle (a node kind's types: `ratelab::graph::registry::register`).
+/// [`register`] by handle (a node kind's types: `ratelab::graph::registry::register_kind`).
+/// The built-in types (`state`, `position`, `force`) are registered by its rules too.
 ///
 /// # Errors
 /// As [`register`].
 pub fn register_type(t: MsgType) -> Result<(), MsgRegistryError> {
-    if check_type(t)? {
-        return Ok(()); // registered already
-    }
     let mut reg = registry().write().unwrap_or_else(|e| e.into_inner());
-    if reg.iter().any(|o| (o.0.type_id)() == (t.0.type_id)()) {
-        return Ok(());
+    admit(&mut reg, t)
+}
+
+/// Add `t` to the types `reg` holds, by the registry's rules ([`register_type`]); a type
+/// held already is left as it is.
+fn admit(reg: &mut Vec<MsgType>, t: MsgType) -> Result<(), MsgRegistryError> {
+    if !check_in(reg, t)? {
+        reg.push(t);
     }
-    if reg.len() >= MAX_MSG_TYPES {
-        return Err(MsgRegistryError::Full);
-    }
-    reg.push(t);
     Ok(())
 }
 
@@ -368,6 +379,12 @@ pub fn register_type(t: MsgType) -> Result<(), MsgRegistryError> {
 /// # Errors
 /// As [`register`].
 pub fn check_type(t: MsgType) -> Result<bool, MsgRegistryError> {
+    let reg = registry().read().unwrap_or_else(|e| e.into_inner());
+    check_in(&reg, t)
+}
+
+/// [`check_type`] against the types `reg` holds.
+fn check_in(reg: &[MsgType], t: MsgType) -> Result<bool, MsgRegistryError> {
     let (name, class, fields) = (t.as_str(), t.class(), t.fields());
     let bad = |why: &str| Err(MsgRegistryError::Bad(name.to_string(), why.to_string()));
     let name_ok = name.starts_with(|c: char| c.is_ascii_lowercase()) && valid_field(name);
@@ -395,8 +412,7 @@ pub fn check_type(t: MsgType) -> Result<bool, MsgRegistryError> {
             ));
         }
     }
-    let reg = registry().read().unwrap_or_else(|e| e.into_inner());
-    for other in reg.iter() {
+    for other in reg {
         if (other.0.type_id)() == (t.0.type_id)() {
             return Ok(true);
         }
@@ -586,7 +602,7 @@ pub struct Received {
     pub data: MsgData,
 }
 
-impl<M: Message> ErasedTopic for Arc<Topic<M>> {
+impl<M: Message> ErasedTopic for Arc<Subscription<M>> {
     fn msg_type(&self) -> MsgType {
         M::TYPE
     }
@@ -594,37 +610,37 @@ impl<M: Message> ErasedTopic for Arc<Topic<M>> {
         self
     }
     fn name(&self) -> &str {
-        Topic::name(self)
+        Subscription::name(self)
     }
     fn stats(&self) -> TopicStats {
-        Topic::stats(self)
+        Subscription::stats(self)
     }
     fn stats_at(&self, now: Nanos) -> TopicStats {
-        Topic::stats_at(self, now)
+        Subscription::stats_at(self, now)
     }
     fn qos(&self) -> TopicQos {
-        Topic::qos(self)
+        Subscription::qos(self)
     }
     fn set_qos(&self, qos: TopicQos) {
-        Topic::set_qos(self, qos);
+        Subscription::set_qos(self, qos);
     }
     fn set_depth(&self, depth: usize) -> Result<(), ZeroDepth> {
-        Topic::set_depth(self, depth)
+        Subscription::set_depth(self, depth)
     }
     fn buffered(&self) -> usize {
-        Topic::buffered(self)
+        Subscription::buffered(self)
     }
     fn unseen_buffered(&self) -> usize {
-        Topic::unseen_buffered(self)
+        Subscription::unseen_buffered(self)
     }
     fn next_seq(&self) -> u64 {
-        Topic::next_seq(self)
+        Subscription::next_seq(self)
     }
     fn count_lost(&self, n: u64) {
-        Topic::count_lost(self, n);
+        Subscription::count_lost(self, n);
     }
     fn read(&self, now: Nanos) -> Option<Received> {
-        let m = Topic::read(self, now)?;
+        let m = Subscription::read(self, now)?;
         Some(Received {
             seq: m.seq,
             origin: m.origin_stamp.unwrap_or(m.stamp),
@@ -644,7 +660,7 @@ impl<M: Message> ErasedTopic for Arc<Topic<M>> {
         match outbox {
             Some(o) => o.publish(self, m.clone(), stamp, origin),
             None => {
-                Topic::publish(self, m.clone(), stamp, origin);
+                Subscription::publish(self, m.clone(), stamp, origin);
             }
         }
         true
@@ -658,15 +674,18 @@ impl<M: Message> ErasedTopic for Arc<Topic<M>> {
         vec![AnyTopic(Arc::new(self.clone()))]
     }
     fn subscription_stats(&self, now: Option<Nanos>) -> Vec<TopicStats> {
-        vec![now.map_or_else(|| Topic::stats(self), |n| Topic::stats_at(self, n))]
+        vec![now.map_or_else(
+            || Subscription::stats(self),
+            |n| Subscription::stats_at(self, n),
+        )]
     }
     fn save(&self) -> TopicSnapshot {
-        TopicSnapshot(Box::new(Topic::save(self)))
+        TopicSnapshot(Box::new(Subscription::save(self)))
     }
     fn load(&self, state: &TopicSnapshot) -> bool {
         match state.0.downcast_ref::<crate::topic::TopicState<M>>() {
             Some(s) => {
-                Topic::load(self, s);
+                Subscription::load(self, s);
                 true
             }
             None => false,
@@ -683,7 +702,7 @@ impl<M: Message> ErasedTopic for Arc<Topic<M>> {
 /// `retransmitted`, `in_flight`, `requested_deadline_missed`).
 #[derive(Debug)]
 struct FanOut<M> {
-    queues: Vec<Arc<Topic<M>>>,
+    queues: Vec<Arc<Subscription<M>>>,
 }
 
 /// Several subscriptions' counters as one (see [`FanOut`]).
@@ -782,14 +801,14 @@ impl<M: Message> ErasedTopic for FanOut<M> {
     }
     fn save(&self) -> TopicSnapshot {
         let queues: Vec<crate::topic::TopicState<M>> =
-            self.queues.iter().map(|q| Topic::save(q)).collect();
+            self.queues.iter().map(|q| Subscription::save(q)).collect();
         TopicSnapshot(Box::new(queues))
     }
     fn load(&self, state: &TopicSnapshot) -> bool {
         match state.0.downcast_ref::<Vec<crate::topic::TopicState<M>>>() {
             Some(s) if s.len() == self.queues.len() => {
                 for (q, s) in self.queues.iter().zip(s) {
-                    Topic::load(q, s);
+                    Subscription::load(q, s);
                 }
                 true
             }
@@ -858,15 +877,15 @@ impl AnyTopic {
 
     /// The typed queue, if it carries `M` and has one queue (for several subscribers: a
     /// subscriber's own, [`AnyTopic::subscription`]).
-    pub fn typed<M: Message>(&self) -> Option<&Arc<Topic<M>>> {
-        self.0.any().downcast_ref::<Arc<Topic<M>>>()
+    pub fn typed<M: Message>(&self) -> Option<&Arc<Subscription<M>>> {
+        self.0.any().downcast_ref::<Arc<Subscription<M>>>()
     }
 
     /// A publisher of `M` on it, into every subscription's queue, through `outbox`; `None`
     /// when it carries another type.
     pub fn publisher<M: Message>(&self, outbox: &Outbox) -> Option<crate::publisher::Publisher<M>> {
         let any = self.0.any();
-        if let Some(t) = any.downcast_ref::<Arc<Topic<M>>>() {
+        if let Some(t) = any.downcast_ref::<Arc<Subscription<M>>>() {
             return Some(crate::publisher::Publisher::new(t.clone(), outbox.clone()));
         }
         let fan = any.downcast_ref::<FanOut<M>>()?;
@@ -903,7 +922,7 @@ impl AnyTopic {
         self.0.stats()
     }
 
-    /// Counters and depth at run time `now` (see [`Topic::stats_at`]).
+    /// Counters and depth at run time `now` (see [`Subscription::stats_at`]).
     pub fn stats_at(&self, now: Nanos) -> TopicStats {
         self.0.stats_at(now)
     }
@@ -913,12 +932,12 @@ impl AnyTopic {
         self.0.qos()
     }
 
-    /// Change the QoS while running (see [`Topic::set_qos`]).
+    /// Change the QoS while running (see [`Subscription::set_qos`]).
     pub fn set_qos(&self, qos: TopicQos) {
         self.0.set_qos(qos);
     }
 
-    /// Change the history depth (see [`Topic::set_depth`]).
+    /// Change the history depth (see [`Subscription::set_depth`]).
     ///
     /// # Errors
     /// [`ZeroDepth`] for 0.
@@ -931,7 +950,7 @@ impl AnyTopic {
         self.0.buffered()
     }
 
-    /// Buffered messages no subscriber has seen yet (see [`Topic::unseen_buffered`]).
+    /// Buffered messages no subscriber has seen yet (see [`Subscription::unseen_buffered`]).
     pub fn unseen_buffered(&self) -> usize {
         self.0.unseen_buffered()
     }
@@ -941,17 +960,17 @@ impl AnyTopic {
         self.0.name()
     }
 
-    /// The `seq` the next publish takes (see [`Topic::next_seq`]).
+    /// The `seq` the next publish takes (see [`Subscription::next_seq`]).
     pub fn next_seq(&self) -> u64 {
         self.0.next_seq()
     }
 
-    /// Account `n` messages lost on the wire (see [`Topic::count_lost`]).
+    /// Account `n` messages lost on the wire (see [`Subscription::count_lost`]).
     pub fn count_lost(&self, n: u64) {
         self.0.count_lost(n);
     }
 
-    /// Read at `now` by the topic's QoS, as a subscriber does ([`Topic::read`]).
+    /// Read at `now` by the topic's QoS, as a subscriber does ([`Subscription::read`]).
     pub fn read(&self, now: Nanos) -> Option<Received> {
         self.0.read(now)
     }
@@ -981,7 +1000,7 @@ impl AnyTopic {
     }
 
     /// Tell `tap` of every message published from now on, after the taps added before it
-    /// (see [`Topic::add_tap`]).
+    /// (see [`Subscription::add_tap`]).
     pub fn add_data_tap(&self, tap: DataTap) {
         self.0.add_data_tap(tap);
     }

@@ -43,7 +43,7 @@ impl WireSample {
     /// `offset` (the publisher's `seq` minus the copy's, kept by the caller per topic, `None`
     /// before the first sample) lets a subscriber join late: what was published before its
     /// first sample is not its loss. After that, a gap in `seq` is counted as lost on the wire
-    /// ([`crate::topic::Topic::count_lost`]) before the sample is published. A publisher that
+    /// ([`crate::topic::Subscription::count_lost`]) before the sample is published. A publisher that
     /// restarted (its `seq` went back) is taken as a new one. A `seq` more than
     /// [`MAX_SEQ_JUMP`] ahead of the last is refused, not counted as lost: no publisher gets
     /// that far ahead of its subscriber in a run, and a forged number must not inflate `lost`.

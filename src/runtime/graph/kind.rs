@@ -305,7 +305,7 @@ impl fmt::Display for Kind {
 /// that impossible for a validated graph).
 pub fn typed<M: crate::msg::Message>(
     t: Option<&AnyTopic>,
-) -> Result<Arc<crate::topic::Topic<M>>, String> {
+) -> Result<Arc<crate::topic::Subscription<M>>, String> {
     match t {
         Some(t) => t
             .typed::<M>()

@@ -1,8 +1,9 @@
 //! The registry of node kinds: from the name a graph file gives as `kind` to the kind's one
-//! definition ([`super::kind::KindDef`]). The built-in kinds (`sensor`, `estimator`,
-//! `policy`, `safety`, `actuator`, `python`, `external`; one file each in
-//! [`super::nodes`]) are registered here, one line each; a Rust program adds its own with
-//! [`register`].
+//! definition ([`super::kind::KindDef`]). Every kind comes in through [`register_kind`]: the
+//! built-in ones (`sensor`, `estimator`, `policy`, `safety`, `actuator`, `python`,
+//! `external`; one file each in [`super::nodes`], listed here one line each) and a Rust
+//! program's own, by the same rules; [`register`] is the short way for a kind written as a
+//! [`RustNode`], and [`rust_kind`] its definition, to give docs and parameters with units.
 //!
 //! A kind written in Rust outside ratelab is a type implementing [`RustNode`] with typed inputs and outputs (copper-rs's
 //! `CuTask` is the model): each a [`Message`] — any registered message type
@@ -130,7 +131,8 @@ pub enum RegistryError {
 }
 
 /// Every kind: the built-in ones in the chapter's order, then those registered, in the
-/// order they were (at most [`MAX_KINDS`] of them: a list is quick enough).
+/// order they were (at most [`MAX_KINDS`] of them: a list is quick enough). The built-in
+/// kinds come in by the rules a program's own kinds do ([`register_kind`]).
 fn registry() -> &'static RwLock<Vec<Kind>> {
     static REGISTRY: LazyLock<RwLock<Vec<Kind>>> = LazyLock::new(|| {
         let built_in = [
@@ -142,12 +144,14 @@ fn registry() -> &'static RwLock<Vec<Kind>> {
             nodes::python::def(),
             nodes::external::def(),
         ];
-        RwLock::new(
-            built_in
-                .into_iter()
-                .map(|d| Kind(Box::leak(Box::new(d))))
-                .collect(),
-        )
+        let mut kinds = Vec::new();
+        for def in built_in {
+            let name = def.name;
+            if let Err(e) = admit(&mut kinds, def) {
+                panic!("the built-in kind '{name}' breaks the registry's rules: {e}");
+            }
+        }
+        RwLock::new(kinds)
     });
     &REGISTRY
 }
@@ -252,47 +256,71 @@ pub fn kinds_table() -> String {
     out
 }
 
-/// Register node kind `kind`: a graph file's `kind = "<kind>"` then makes a node with
-/// `make`, given the node's [`NodeContext`]. Its message types are registered with it
-/// ([`crate::msg::register`]).
+/// Register the node kind `def`: a graph file's `kind = "<def.name>"` then makes a node
+/// with `def.make`, and the graph file's rules read the rest (its ports, how it touches the
+/// plant, its parameters with units and ranges, its line of docs: `ratelab kinds` prints
+/// them). The built-in kinds are registered by this function's rules: `sensor`,
+/// `estimator`, `policy`, `safety`, `actuator`, `python` and `external` are each a `def()`
+/// in [`super::nodes`], made of this module's public parts only, and so are its examples
+/// (the sensor reads the plant through [`BuildContext::plant`]; the actuator steps it).
+/// Its message types are registered with it ([`crate::msg::register_type`]).
 ///
 /// # Errors
 /// [`RegistryError`]: a bad or taken name, too many kinds, or a message type that cannot
 /// be registered.
-pub fn register<N, F>(kind: &str, make: F) -> Result<(), RegistryError>
-where
-    N: RustNode,
-    F: Fn(&NodeContext<'_>) -> Result<N, String> + Send + Sync + 'static,
-{
-    let valid = !kind.is_empty()
-        && kind.len() <= 32
-        && kind.starts_with(|c: char| c.is_ascii_lowercase())
-        && kind
+pub fn register_kind(def: KindDef) -> Result<(), RegistryError> {
+    let mut reg = registry().write().unwrap_or_else(|e| e.into_inner());
+    admit(&mut reg, def)
+}
+
+/// Add `def` to the kinds `reg` holds, by the registry's rules ([`register_kind`]).
+fn admit(reg: &mut Vec<Kind>, def: KindDef) -> Result<(), RegistryError> {
+    let name = def.name;
+    let valid = !name.is_empty()
+        && name.len() <= 32
+        && name.starts_with(|c: char| c.is_ascii_lowercase())
+        && name
             .chars()
             .all(|c| c.is_ascii_lowercase() || c.is_ascii_digit() || c == '_');
     if !valid {
-        return Err(RegistryError::BadName(kind.to_string()));
+        return Err(RegistryError::BadName(name.to_string()));
     }
-    let mut reg = registry().write().unwrap_or_else(|e| e.into_inner());
-    if reg.iter().any(|k| k.as_str() == kind) {
-        return Err(RegistryError::Taken(kind.to_string()));
+    if reg.iter().any(|k| k.as_str() == name) {
+        return Err(RegistryError::Taken(name.to_string()));
     }
     if reg.len() >= MAX_KINDS {
         return Err(RegistryError::Full);
     }
     // Its message types become usable in graph files with it: all checked first, so that a
     // refusal registers none of them.
-    let types = || {
-        <N::Input as Inputs>::TYPES
+    let types: Vec<MsgType> = match &def.ports {
+        Ports::Fixed { inputs, outputs } => inputs
             .iter()
-            .chain(<N::Output as Outputs>::TYPES)
+            .chain(outputs)
+            .flat_map(|alts| alts.iter().copied())
+            .collect(),
+        Ports::Open { .. } => Vec::new(),
     };
-    for t in types() {
+    for t in &types {
         crate::msg::check_type(*t)?;
     }
-    for t in types() {
-        crate::msg::register_type(*t)?;
+    for t in types {
+        crate::msg::register_type(t)?;
     }
+    reg.push(Kind(Box::leak(Box::new(def))));
+    Ok(())
+}
+
+/// The definition of node kind `kind` written in Rust: a [`RustNode`] made by `make` from
+/// the node's [`NodeContext`], its typed inputs and outputs its ports, touching no plant,
+/// its parameters any table its `make` reads. Set its `doc` and `params` (numbers with
+/// units, defaults and ranges, which the graph file's rules then check) before
+/// [`register_kind`]; [`register`] registers it as it is.
+pub fn rust_kind<N, F>(kind: &str, make: F) -> KindDef
+where
+    N: RustNode,
+    F: Fn(&NodeContext<'_>) -> Result<N, String> + Send + Sync + 'static,
+{
     let make = move |cx: &mut BuildContext<'_>| {
         let (Some(inputs), Some(outputs)) = (
             <N::Input as Inputs>::bind(cx.inputs),
@@ -316,7 +344,7 @@ where
     let one = |types: &'static [MsgType]| -> Vec<&'static [MsgType]> {
         types.iter().map(std::slice::from_ref).collect()
     };
-    let def = KindDef {
+    KindDef {
         name: Box::leak(kind.to_string().into_boxed_str()),
         doc: "a node kind the program registered in Rust",
         ports: Ports::Fixed {
@@ -328,9 +356,22 @@ where
         params: Params::Free,
         uses_brain: false,
         make: Box::new(make),
-    };
-    reg.push(Kind(Box::leak(Box::new(def))));
-    Ok(())
+    }
+}
+
+/// Register node kind `kind` written in Rust ([`rust_kind`]: a graph file's `kind =
+/// "<kind>"` then makes a node with `make`, given the node's [`NodeContext`]); its message
+/// types are registered with it ([`crate::msg::register`]).
+///
+/// # Errors
+/// [`RegistryError`]: a bad or taken name, too many kinds, or a message type that cannot
+/// be registered.
+pub fn register<N, F>(kind: &str, make: F) -> Result<(), RegistryError>
+where
+    N: RustNode,
+    F: Fn(&NodeContext<'_>) -> Result<N, String> + Send + Sync + 'static,
+{
+    register_kind(rust_kind(kind, make))
 }
 
 /// A node with its topics and what it has been given.

@@ -10,7 +10,7 @@ use crate::plant::{lock, SharedPlant, GEAR_N};
 use crate::qos::OnDeadlineMissed;
 use crate::runlog::{RunLog, StepRecord, StepSink};
 use crate::time::Nanos;
-use crate::topic::Topic;
+use crate::topic::Subscription;
 use std::sync::{Arc, Mutex};
 
 /// The kind: `force` in, nothing out; steps the plant (exactly one per graph).
@@ -53,7 +53,7 @@ pub struct Actuator {
     /// The plant it steps.
     pub plant: SharedPlant,
     /// Its input.
-    pub input: Arc<Topic<ForceMsg>>,
+    pub input: Arc<Subscription<ForceMsg>>,
     /// Every topic of the graph, for the per-step counters.
     pub topics: Vec<AnyTopic>,
     /// Where steps are accounted.
@@ -63,7 +63,7 @@ pub struct Actuator {
     /// The last finite command applied (in [-1, 1] units of the motor), with its origin.
     pub held: Option<(f32, Option<Nanos>)>,
     /// The policy's output topic, watched (never read) for what it published.
-    pub policy_output: Option<Arc<Topic<ForceMsg>>>,
+    pub policy_output: Option<Arc<Subscription<ForceMsg>>>,
     /// `seq` of the newest policy message already reported.
     pub reported: Option<u64>,
 }

@@ -12,7 +12,7 @@ use crate::node::Flow;
 use crate::publisher::Publisher;
 use crate::rate::MAX_HZ;
 use crate::time::Nanos;
-use crate::topic::Topic;
+use crate::topic::Subscription;
 use std::sync::Arc;
 
 /// Its parameter: the low-pass cut-off.
@@ -53,7 +53,7 @@ pub fn def() -> KindDef {
 /// An estimator's state.
 pub struct Estimator {
     /// Input.
-    pub input: Arc<Topic<PositionMsg>>,
+    pub input: Arc<Subscription<PositionMsg>>,
     /// Output.
     pub output: Publisher<StateMsg>,
     /// The filter.

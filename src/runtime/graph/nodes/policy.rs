@@ -11,7 +11,7 @@ use crate::plant::GEAR_N;
 use crate::policy::BrainSlot;
 use crate::publisher::Publisher;
 use crate::time::Nanos;
-use crate::topic::Topic;
+use crate::topic::Subscription;
 use std::sync::Arc;
 
 /// The kind: `state` in, `force` out, the brain between.
@@ -45,7 +45,7 @@ pub struct PolicyNode {
     /// The brain.
     pub brain: BrainSlot,
     /// Input.
-    pub input: Arc<Topic<StateMsg>>,
+    pub input: Arc<Subscription<StateMsg>>,
     /// Output.
     pub output: Publisher<ForceMsg>,
 }

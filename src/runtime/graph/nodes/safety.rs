@@ -9,7 +9,7 @@ use crate::node::Flow;
 use crate::plant::GEAR_N;
 use crate::publisher::Publisher;
 use crate::time::Nanos;
-use crate::topic::Topic;
+use crate::topic::Subscription;
 use std::sync::Arc;
 
 /// Its parameter: the clamp.
@@ -48,7 +48,7 @@ pub fn def() -> KindDef {
 /// A safety node's state.
 pub struct Safety {
     /// Input.
-    pub input: Arc<Topic<ForceMsg>>,
+    pub input: Arc<Subscription<ForceMsg>>,
     /// Output.
     pub output: Publisher<ForceMsg>,
     /// Largest magnitude passed on, N.
