@@ -76,6 +76,15 @@ fn lab(args: &cli::RunArgs, stop: StopFlag) -> anyhow::Result<()> {
         None => None,
     };
     let alt_policy = (args.policy != "scripted").then(|| args.policy.clone());
+    // Reload on save: the files the run's code comes from, and the graph read again from
+    // its file with the command line's overrides.
+    let code_files = tui::watch::code_files(args.graph.graph.as_deref(), &cfg.graph, &args.policy);
+    let graph_source = args.graph.graph.as_ref().map(|_| {
+        let flags = args.graph.clone();
+        ratelab::session::GraphSource(std::sync::Arc::new(move || {
+            headless::graph_from_args(&flags).map_err(|e| format!("{e:#}"))
+        }))
+    });
     let settings = SessionSettings {
         force: args.force,
         cfg,
@@ -87,8 +96,9 @@ fn lab(args: &cli::RunArgs, stop: StopFlag) -> anyhow::Result<()> {
         start_paused: false,
         speed: Speed::Times(1.0),
         ros2,
+        graph_source,
     };
-    tui::run_lab(settings, stop)
+    tui::run_lab(settings, code_files, stop)
 }
 
 /// Re-run a session's virtual runs and compare with what the live runs measured.

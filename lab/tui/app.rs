@@ -187,6 +187,16 @@ pub struct App {
     journal: Vec<(Nanos, Telemetry)>,
     /// The journal reached [`MAX_JOURNAL`] and stopped.
     journal_full: bool,
+    /// (t s, θ rad, applied force N) of the run's first [`GHOST_S`] of run time: the ghost
+    /// of the next run when a saved file is reloaded.
+    whole: Vec<(f64, f64, f64)>,
+    /// The run before a reload, drawn dim beside this one ([`Telemetry::Reloaded`]).
+    ghost: Vec<(f64, f64, f64)>,
+    /// A reload was said (its line): the next run's start keeps this one as its ghost, and
+    /// says the line again (a start clears what was said about the run before).
+    reloading: Option<String>,
+    /// A seek back is folding the journal again (its start is not a new run).
+    rewinding: bool,
     /// Attached: the launch's endpoint.
     endpoint: Option<String>,
     /// Attached: each topic's over-the-wire latency (p50, p99 µs) when it crosses processes.
@@ -194,6 +204,10 @@ pub struct App {
     /// Set when the user asked to quit.
     pub quit: bool,
 }
+
+/// How much of a run is kept as the ghost of the next, s of run time (a save usually comes
+/// within seconds of watching a run; 3 000 steps at 50 Hz).
+pub const GHOST_S: f64 = 60.0;
 
 impl App {
     /// A lab sending controls on `tx`. `policy` is the starting brain spec and `alt_policy`
@@ -252,6 +266,10 @@ impl App {
             attached: None,
             journal: Vec::new(),
             journal_full: false,
+            whole: Vec::new(),
+            ghost: Vec::new(),
+            reloading: None,
+            rewinding: false,
             endpoint: None,
             wire: Vec::new(),
             quit: false,
@@ -412,10 +430,24 @@ impl App {
         match t {
             Telemetry::Rewound { at } => self.rewind(at),
             Telemetry::Started { .. } => {
+                let reloaded = if self.rewinding {
+                    None
+                } else {
+                    // A reload keeps the run before as a ghost; any other new run drops it.
+                    let line = self.reloading.take();
+                    self.ghost = match line {
+                        Some(_) => std::mem::take(&mut self.whole),
+                        None => Vec::new(),
+                    };
+                    line
+                };
                 self.journal.clear();
                 self.journal_full = false;
                 self.fold(t.clone());
                 self.journal.push((self.now, t));
+                if let Some(line) = reloaded {
+                    self.say(line);
+                }
             }
             // A status while paused repeats its instant: the newest of an instant stands.
             Telemetry::Status { now, .. }
@@ -451,9 +483,11 @@ impl App {
         }
         let journal = std::mem::take(&mut self.journal);
         let upto = journal.partition_point(|(t, _)| *t <= at);
+        self.rewinding = true;
         for (_, t) in journal.into_iter().take(upto) {
             self.on_telemetry(t);
         }
+        self.rewinding = false;
         self.now = at;
         self.say(format!(
             "back at t={:.3} s: a change or space branches the run here",
@@ -512,6 +546,10 @@ impl App {
             }
             Telemetry::Ended { metrics, reason } => self.on_ended(&metrics, &reason),
             Telemetry::Error(e) => self.say(e),
+            Telemetry::Reloaded { line } => {
+                self.say(line.clone());
+                self.reloading = Some(line);
+            }
             Telemetry::Wire(links) => {
                 self.wire.resize(self.graph.topics.len(), None);
                 for (i, p50, p99) in links {
@@ -561,6 +599,7 @@ impl App {
         self.history.clear();
         self.applied.clear();
         self.published.clear();
+        self.whole.clear();
         self.last = None;
         self.verdict = Verdict::Balanced;
         self.wire.clear();
@@ -574,6 +613,9 @@ impl App {
         self.now = self.now.max(s.t);
         self.live.push(s);
         let now_s = s.t.as_secs_f64();
+        if now_s <= GHOST_S {
+            self.whole.push((now_s, s.pole_angle, s.action * GEAR_N));
+        }
         self.history.push_back((now_s, s.pole_angle));
         self.applied.push_back((now_s, s.action * GEAR_N));
         if let Some((at, newtons)) = s.published {

@@ -7,6 +7,7 @@ pub mod keymap;
 pub mod live;
 pub mod timeline;
 pub mod view;
+pub mod watch;
 
 use anyhow::Context;
 use app::App;
@@ -83,7 +84,11 @@ where
 
 /// Open the lab on the real terminal: start the engine, read keys on a thread, run the
 /// loop, and always restore the terminal (ratatui's panic hook restores it on a panic).
-pub fn run_lab(settings: SessionSettings, stop: StopFlag) -> anyhow::Result<()> {
+pub fn run_lab(
+    settings: SessionSettings,
+    code_files: Vec<std::path::PathBuf>,
+    stop: StopFlag,
+) -> anyhow::Result<()> {
     let (ctl_tx, ctl_rx) = unbounded::<Control>();
     let (tel_tx, tel_rx) = unbounded::<Telemetry>();
     let mut app = App::new(
@@ -103,6 +108,16 @@ pub fn run_lab(settings: SessionSettings, stop: StopFlag) -> anyhow::Result<()> 
     ratelab::textlog::set_sink(Some(Box::new(move |line| {
         let _ = log_tx.try_send(line);
     })));
+    // Reload on save: a save of the graph file or a Python file it runs runs it again.
+    let _watch = match watch::watch(code_files, ctl_tx.clone()) {
+        Ok(w) => Some(w),
+        Err(e) => {
+            app.on_telemetry(Telemetry::Error(format!(
+                "reload on save is off: the files cannot be watched ({e})"
+            )));
+            None
+        }
+    };
     let session_file = settings.session_file.clone();
     let engine = Engine::new(settings, ctl_rx, tel_tx).spawn();
     let result = on_terminal(&mut app, &tel_rx, &stop);

@@ -304,6 +304,11 @@ pub struct View {
     pub applied_force: Vec<(f64, f64)>,
     /// (t s, N) of each force the policy published over the last ~10 s.
     pub published_force: Vec<(f64, f64)>,
+    /// The run before a reload (a saved file): its (t s, θ rad) over the same window, drawn
+    /// dim beside this run's; empty without one.
+    pub ghost_angle: Vec<(f64, f64)>,
+    /// The run before a reload: its applied force, N, as a staircase over the window.
+    pub ghost_force: Vec<(f64, f64)>,
     /// Latency since the last change, and over the window.
     pub latency: LatencyView,
     /// The executor timeline, shown in place of the latency histogram (key `t`).

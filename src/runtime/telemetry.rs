@@ -66,6 +66,13 @@ pub enum Control {
     SwitchClock,
     /// Virtual pacing.
     SetSpeed(Speed),
+    /// A file the run's code comes from was saved (the graph file, a Python node's script, a
+    /// Python brain): run the graph again from t = 0 with what the files hold now, when it
+    /// loads; else keep the run going and say why ([`Telemetry::Reloaded`]).
+    Reload {
+        /// The file saved.
+        file: std::path::PathBuf,
+    },
     /// End the session.
     Quit,
 }
@@ -155,6 +162,13 @@ pub enum Telemetry {
     },
     /// Something went wrong that the user should read (one line).
     Error(String),
+    /// A saved file was taken up ([`Control::Reload`]): the run that follows (its
+    /// `Started` comes next) runs the new code, and the front end keeps the run before as a
+    /// ghost beside it. `line` begins `reloaded FILE:` and says what changed.
+    Reloaded {
+        /// The line to show.
+        line: String,
+    },
     /// A graph across processes (a watcher, `ratelab::distributed::monitor`): the
     /// over-the-wire latency so far of each topic that crosses a process boundary, as
     /// (topic index, p50 µs, p99 µs), from its publisher's send to its subscriber's delivery.

@@ -44,6 +44,9 @@ pub struct SessionSettings {
     /// Offer each run's graph to ROS 2 through this session ([`crate::ros2`]), opened by the
     /// caller before the session starts (one session, one router, for all runs).
     pub ros2: Option<(crate::ros2::session::Ros2Session, crate::ros2::Ros2Options)>,
+    /// Where the graph is read again when a file is saved ([`Control::Reload`]); `None`:
+    /// the graph stays as it is (the compiled-in chapter's), and only brains reload.
+    pub graph_source: Option<super::reload::GraphSource>,
 }
 
 /// How long a fresh run that judges a live rate change runs at most
@@ -89,8 +92,12 @@ pub struct Engine {
 
 /// What ended a run from the engine's side.
 pub(super) enum Next {
-    Reset { next_seed: bool },
+    Reset {
+        next_seed: bool,
+    },
     SwitchClock,
+    /// A saved file was taken up: the next run is this (the new code's), from t = 0.
+    Reload(Box<RunConfig>),
     Quit,
 }
 
@@ -136,6 +143,13 @@ impl Engine {
         let mut policy = self.settings.policy.clone();
         loop {
             let next = match self.one_run(&cfg, &policy) {
+                Ok((Next::Reload(new), _, last_policy)) => {
+                    // The new code's graph, as the files now give it; the brain as it was.
+                    cfg = *new;
+                    policy = last_policy;
+                    self.next_run.clear();
+                    continue;
+                }
                 Ok((next, graph, last_policy)) => {
                     // The next run keeps the settings as the user left them, and takes the
                     // changes made while this one was frozen (checked when they were made).
@@ -164,6 +178,7 @@ impl Engine {
                     }
                 }
                 Next::SwitchClock => cfg.clock = cfg.clock.other(),
+                Next::Reload(new) => cfg = *new,
             }
         }
         self.save_log();
@@ -289,7 +304,7 @@ impl Engine {
         Ok((next, handles.current_spec(), last_policy))
     }
 
-    fn current_policy_spec(&self, initial: &str) -> String {
+    pub(super) fn current_policy_spec(&self, initial: &str) -> String {
         let run = self.log.runs.last().expect("a run");
         run.commands
             .iter()

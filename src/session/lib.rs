@@ -15,9 +15,12 @@
 //! [`replay_run`] re-runs a logged run headless and reproduces its metrics byte for byte.
 //! Under the real clock changes are applied at once (from each node's next tick); such
 //! runs are logged but, being concurrent, cannot be replayed exactly.
+//!
+//! A file the run's code comes from saved ([`Control::Reload`]) runs the graph again with
+//! the new code, judged first and compared with the run before in one line (`reload`).
 
 // The layers below, under their own names (`crate::graph`, `crate::time`, …).
-use ratelab_core::{executor, input, metrics, output, plant, qos, realtime, runlog, time};
+use ratelab_core::{executor, input, metrics, output, plant, qos, realtime, runlog, textlog, time};
 use ratelab_recording as recording;
 use ratelab_ros2 as ros2;
 use ratelab_runtime::{
@@ -27,6 +30,7 @@ use ratelab_runtime::{
 mod engine;
 mod log;
 mod real_run;
+mod reload;
 pub mod run;
 pub mod sweep;
 mod virtual_run;
@@ -34,3 +38,4 @@ mod virtual_run;
 pub use engine::{Engine, SessionSettings};
 pub use log::{replay_run, LoggedRun, ReplayError, SessionLog};
 pub use ratelab_runtime::telemetry::{describe, Control, Speed, Telemetry, SPEEDS, UNBOUNDED};
+pub use reload::GraphSource;

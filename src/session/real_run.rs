@@ -112,6 +112,8 @@ impl Engine {
                 }
                 Ok(Control::Reset { next_seed }) => Some(Next::Reset { next_seed }),
                 Ok(Control::SwitchClock) => Some(Next::SwitchClock),
+                // The real clock's run starts again with the new code (if it loads).
+                Ok(Control::Reload { file }) => self.reload(cfg, &file, None),
                 Ok(Control::Quit) | Err(RecvTimeoutError::Disconnected) => Some(Next::Quit),
                 Err(RecvTimeoutError::Timeout) => None,
             };

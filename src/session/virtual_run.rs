@@ -104,6 +104,12 @@ impl Engine {
                     Control::SwitchClock => {
                         return self.leave(Next::SwitchClock, core.scheduler(), ended)
                     }
+                    Control::Reload { file } => {
+                        let old = self.figures_now(cfg, &mut core, ended.as_ref());
+                        if let Some(next) = self.reload(cfg, &file, Some(&old)) {
+                            return self.leave(next, core.scheduler(), ended);
+                        }
+                    }
                     Control::Quit => return self.leave(Next::Quit, core.scheduler(), ended),
                 }
                 if step_pending {
@@ -180,6 +186,29 @@ impl Engine {
                 self.judge_fresh_run(cfg, handles, said);
             }
         }
+    }
+
+    /// The run's figures now: as it ended, or as far as it has run.
+    fn figures_now(
+        &self,
+        cfg: &RunConfig,
+        core: &mut RunCore,
+        ended: Option<&RunEnd>,
+    ) -> crate::metrics::Metrics {
+        let end = ended.cloned().unwrap_or(RunEnd {
+            at: core.now(),
+            reason: EndReason::Interrupted,
+        });
+        let handles = core.handles().clone();
+        let sched = core.scheduler();
+        live_metrics(
+            cfg,
+            &handles,
+            &end,
+            sched.ticks(),
+            None,
+            sched.figures(end.at),
+        )
     }
 
     /// Tell the front end the run has ended (`end`): its last callbacks, status and summary.

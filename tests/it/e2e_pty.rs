@@ -927,3 +927,53 @@ fn scrub_at(cols: u16, rows: u16) {
     let at_s = commands[0]["at_ns"].as_u64().unwrap() as f64 / 1e9;
     assert!((at_s - (t1 + 0.04)).abs() < 1e-9, "{at_s}");
 }
+
+/// The chapter's scripted balancer as a Python brain (graphs/brains/scripted.py's arithmetic).
+const BALANCER: &str = "import math\n\ndef act(obs):\n    theta = math.atan2(float(obs[3]), float(obs[2]))\n    u = 10.0 * theta + 2.0 * float(obs[4]) + 0.4 * float(obs[0]) + 0.8 * float(obs[1])\n    return max(-1.0, min(1.0, u))\n";
+
+/// Reload on save: a Python brain that pushes nothing (the pole falls), saved as one that
+/// balances: the lab runs the graph again from t = 0 with the new code, says `reloaded
+/// FILE:` and what changed, and draws the run before as a ghost beside the new one; a save
+/// with a syntax error keeps the run going and says FILE:LINE, at both sizes the lab is
+/// made for.
+#[test]
+fn saving_a_brain_reloads_it_beside_the_run_before() {
+    let _machine = crate::machine::alone();
+    for (cols, rows) in [(120, 40), (80, 24)] {
+        let dir = tempfile::tempdir().unwrap();
+        let brain = dir.path().join("brain.py");
+        std::fs::write(&brain, "def act(obs):\n    return 0.0\n").unwrap();
+        let lab = Lab::start_sized(
+            &["--clock", "virtual", "--policy", brain.to_str().unwrap()],
+            &[],
+            cols,
+            rows,
+        );
+        lab.wait_for("FELL", Duration::from_secs(60));
+        std::fs::write(&brain, BALANCER).unwrap();
+        let saved = Instant::now();
+        let screen = lab.wait_for("reloaded", Duration::from_secs(10));
+        assert!(
+            saved.elapsed() < Duration::from_secs(3),
+            "{:?}",
+            saved.elapsed()
+        );
+        assert!(screen.contains("fell at"), "{cols}x{rows}:\n{screen}");
+        // The new run is up, its clock going from 0, and the run before is drawn beside it.
+        let screen = lab.wait_until("the new run balancing", Duration::from_secs(10), |s| {
+            s.contains("BALANCED") && !s.contains("FELL")
+        });
+        if cols >= 100 {
+            assert!(screen.contains("before reload"), "{cols}x{rows}:\n{screen}");
+            assert!(screen.contains("→ balanced"), "{cols}x{rows}:\n{screen}");
+        }
+        // Code that no longer loads: the run goes on, and the error names the line.
+        std::fs::write(&brain, "def act(obs):\n    return (\n").unwrap();
+        let screen = lab.wait_for("not reloaded", Duration::from_secs(10));
+        assert!(screen.contains("brain.py:"), "{cols}x{rows}:\n{screen}");
+        std::thread::sleep(Duration::from_millis(500));
+        let screen = lab.screen();
+        assert!(screen.contains("BALANCED"), "{cols}x{rows}:\n{screen}");
+        lab.quit();
+    }
+}

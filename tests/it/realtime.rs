@@ -281,6 +281,7 @@ fn the_lab_engine_warns_when_the_run_starts_not_when_it_ends() {
             speed: Speed::Times(1.0),
             force: false,
             ros2: None,
+            graph_source: None,
         };
         let (ctl_tx, ctl_rx) = unbounded();
         let (tel_tx, tel_rx) = unbounded::<Telemetry>();

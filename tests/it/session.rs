@@ -30,6 +30,7 @@ fn settings(
         session_file: Some(file.to_path_buf()),
         start_paused,
         ros2: None,
+        graph_source: None,
         speed,
         force: false,
     }

@@ -258,6 +258,18 @@ impl App {
     }
 
     /// The latency panel: the segment's histogram and percentiles, and the window's.
+    /// The ghost's points over the charts' window (the last 10 s of run time, or the first
+    /// 10 s), as `pick` takes them.
+    fn ghost_in_window(&self, pick: impl Fn(&(f64, f64, f64)) -> (f64, f64)) -> Vec<(f64, f64)> {
+        let t1 = self.now.as_secs_f64().max(10.0);
+        let t0 = t1 - 10.0;
+        self.ghost
+            .iter()
+            .filter(|(t, ..)| *t >= t0 && *t <= t1)
+            .map(pick)
+            .collect()
+    }
+
     pub(super) fn latency_view(&self) -> LatencyView {
         let latency = &self.live.segment().latency;
         let mut buckets: Vec<(String, u64)> = (0..BUCKETS)
@@ -391,6 +403,13 @@ impl App {
                 .flat_map(|(&(t, u), &(t_next, _))| [(t, u), (t_next, u)])
                 .collect(),
             published_force: self.published.iter().copied().collect(),
+            ghost_angle: self.ghost_in_window(|&(t, a, _)| (t, a)),
+            // The run before's applied force, as a staircase too.
+            ghost_force: self
+                .ghost_in_window(|&(t, _, f)| (t, f))
+                .windows(2)
+                .flat_map(|w| [(w[0].0, w[0].1), (w[1].0, w[0].1)])
+                .collect(),
             latency: self.latency_view(),
             log: self.show_log.then(|| self.log_view()),
             ros2: match (self.show_ros2, self.ros2_domain) {

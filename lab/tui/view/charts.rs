@@ -104,7 +104,24 @@ pub(super) fn render_angle_chart(v: &View, area: Rect, buf: &mut Buffer) {
         // A tick at the top edge, not a line across: a line read as a ±0.3 rad spike.
         .map(|&t| [(t, 0.26), (t, 0.3)])
         .collect();
-    let mut datasets = vec![
+    let ghost: Vec<(f64, f64)> = v
+        .ghost_angle
+        .iter()
+        .map(|&(t, a)| (t, a.clamp(-0.3, 0.3)))
+        .collect();
+    // The run before a reload first, so that this run's line is drawn over it.
+    let mut datasets = vec![];
+    if !ghost.is_empty() {
+        datasets.push(
+            Dataset::default()
+                .name("before")
+                .marker(Marker::Braille)
+                .graph_type(GraphType::Line)
+                .dark_gray()
+                .data(&ghost),
+        );
+    }
+    datasets.extend([
         Dataset::default()
             .name("θ")
             .marker(Marker::Braille)
@@ -122,7 +139,7 @@ pub(super) fn render_angle_chart(v: &View, area: Rect, buf: &mut Buffer) {
             .graph_type(GraphType::Line)
             .red()
             .data(&lower),
-    ];
+    ]);
     for (i, m) in marks.iter().enumerate() {
         let d = Dataset::default()
             .marker(Marker::Braille)
@@ -147,6 +164,13 @@ pub(super) fn render_angle_chart(v: &View, area: Rect, buf: &mut Buffer) {
         }
     };
     add(&mut title, limits, Style::new().fg(Color::Red));
+    if !ghost.is_empty() {
+        add(
+            &mut title,
+            "before reload ".into(),
+            Style::new().fg(Color::DarkGray),
+        );
+    }
     if !marks.is_empty() {
         add(&mut title, "⡇ change ".into(), Style::new().fg(Color::Cyan));
     }
@@ -184,7 +208,19 @@ pub(super) fn render_hold_chart(v: &View, area: Rect, buf: &mut Buffer) {
             .collect()
     };
     let (applied, published) = (clamp(&v.applied_force), clamp(&v.published_force));
-    let datasets = vec![
+    let ghost = clamp(&v.ghost_force);
+    let mut datasets = vec![];
+    if !ghost.is_empty() {
+        datasets.push(
+            Dataset::default()
+                .name("before")
+                .marker(Marker::Braille)
+                .graph_type(GraphType::Line)
+                .dark_gray()
+                .data(&ghost),
+        );
+    }
+    datasets.extend([
         Dataset::default()
             .name("applied")
             .marker(Marker::Braille)
@@ -197,7 +233,7 @@ pub(super) fn render_hold_chart(v: &View, area: Rect, buf: &mut Buffer) {
             .graph_type(GraphType::Scatter)
             .magenta()
             .data(&published),
-    ];
+    ]);
     // Three labels need three rows of plot. A band of two rows (80×24) cannot put a label
     // on 0 N: the braille grid draws 0 N in the upper row (at its lowest dot), so its rows
     // are labelled by what they hold, ≥ 0 above and < 0 below, not by ±10 at their ends,
@@ -207,13 +243,17 @@ pub(super) fn render_hold_chart(v: &View, area: Rect, buf: &mut Buffer) {
     } else {
         &["<0", "≥0"]
     };
-    let title = Line::from(vec![
+    let mut title = vec![
         " force (N): ".into(),
         "published".magenta(),
         " · ".into(),
         "applied".green(),
         " — the hold ".into(),
-    ]);
+    ];
+    if !ghost.is_empty() && area.width >= 60 {
+        title.extend(["· ".into(), "before reload ".dark_gray()]);
+    }
+    let title = Line::from(title);
     Chart::new(datasets)
         .block(Block::bordered().title(title))
         .hidden_legend_constraints((Constraint::Length(0), Constraint::Length(0)))

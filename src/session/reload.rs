@@ -1,0 +1,144 @@
+//! Reload on save, the engine's side: when a file the run's code comes from is saved (the
+//! graph file, a Python node's script, a Python brain; the lab watches them), the graph is
+//! read and built again from what the files hold now. Code that no longer loads (a syntax
+//! error, a missing class, a bad parameter) leaves the run going, and its one line
+//! (`FILE:LINE: …`) goes to the log pane. Code that loads is first run headless under the
+//! virtual clock, its lines muted, over the span the run before reached (at least 10 s, at
+//! most [`super::engine::JUDGE_FOR`]), so that one line can say what changed — `reloaded
+//! FILE: fell at 0.84 s → balanced (10.0 s) · latency p50 40 → 40 ms · /obs dropped 400 →
+//! 0` — and then the lab runs it again from t = 0 with the run before drawn as a ghost.
+//!
+//! Under the real clock the run starts again from t = 0 with the new code (a real-clock run
+//! cannot be judged exactly: the line says so).
+
+use super::engine::{Engine, Next, JUDGE_FOR};
+use crate::checkpoint::load_policy;
+use crate::config::{ClockKind, RunConfig};
+use crate::graph::GraphSpec;
+use crate::metrics::Metrics;
+use crate::runcore::{CoreOptions, RunCore};
+use crate::scheduler::StopFlag;
+use crate::telemetry::Telemetry;
+use crate::textlog::Level;
+use crate::time::Nanos;
+use std::path::Path;
+use std::sync::Arc;
+
+/// Where the lab's graph comes from, read again on a reload: the graph file with the
+/// command line's overrides (`--rate`, `--depth`, `--qos`, …) applied, as at the start.
+#[derive(Clone)]
+pub struct GraphSource(pub Arc<dyn Fn() -> Result<GraphSpec, String> + Send + Sync>);
+
+impl std::fmt::Debug for GraphSource {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("GraphSource")
+    }
+}
+
+/// The shortest span a reloaded graph is judged over.
+const JUDGE_AT_LEAST: Nanos = Nanos(10 * Nanos::SECOND.0);
+
+impl Engine {
+    /// `file` was saved while the run of `cfg` had reached `old` (its figures so far; `None`
+    /// under the real clock): the graph read and built again, judged, and said.
+    /// `Some(next)`: the next run is the new code's; `None`: it did not load, and the run
+    /// goes on (what failed has been said).
+    pub(super) fn reload(
+        &self,
+        cfg: &RunConfig,
+        file: &Path,
+        old: Option<&Metrics>,
+    ) -> Option<Next> {
+        // As the user named it: relative to the folder the lab runs in, when it is inside.
+        let here = std::env::current_dir().unwrap_or_default();
+        let name = file
+            .strip_prefix(&here)
+            .unwrap_or(file)
+            .display()
+            .to_string();
+        let new_cfg = match self.reloaded_config(cfg) {
+            Ok(c) => c,
+            Err(e) => {
+                self.not_reloaded(&name, &e);
+                return None;
+            }
+        };
+        let policy = self.current_policy_spec(&self.run_policy);
+        let reached = old.map_or(Nanos::ZERO, |m| Nanos((m.sim_time_s * 1e9) as u64));
+        let line = match (judge(&new_cfg, &policy, reached), old) {
+            (Ok(new), Some(old)) => format!("reloaded {name}: {}", changes(old, &new)),
+            (Ok(_), None) => format!(
+                "reloaded {name}: the run starts again with the new code (real clock: not judged)"
+            ),
+            (Err(e), _) => {
+                self.not_reloaded(&name, &e);
+                return None;
+            }
+        };
+        crate::textlog::emit_for(None, None, Level::Info, &line);
+        let _ = self.tx.send(Telemetry::Reloaded { line });
+        Some(Next::Reload(Box::new(new_cfg)))
+    }
+
+    /// `cfg` with its graph read again ([`GraphSource`]; the compiled-in chapter's graph
+    /// stays as it is).
+    fn reloaded_config(&self, cfg: &RunConfig) -> Result<RunConfig, String> {
+        let mut new = cfg.clone();
+        if let Some(source) = &self.settings.graph_source {
+            new.graph = (source.0)()?;
+        }
+        new.validate().map_err(|e| e.to_string())?;
+        Ok(new)
+    }
+
+    /// Say that `file` did not load: the run goes on with the code it had. The reason first
+    /// (it names the file and line: `brain.py:2: SyntaxError: …`), as it must fit 80 columns.
+    fn not_reloaded(&self, file: &str, why: &str) {
+        let why = if why.contains(file) || why.starts_with('/') {
+            why.to_string()
+        } else {
+            format!("{file}: {why}")
+        };
+        let line = format!("not reloaded: {why} (the run goes on with the code before)");
+        crate::textlog::emit_for(None, None, Level::Error, &line);
+        let _ = self.tx.send(Telemetry::Error(line));
+    }
+}
+
+/// Run `cfg`'s graph with brain `policy` headless under the virtual clock, its lines
+/// muted, over the span the run before `reached` (at least [`JUDGE_AT_LEAST`], at most
+/// [`JUDGE_FOR`] and the run's duration): its figures, or why it does not load.
+fn judge(cfg: &RunConfig, policy: &str, reached: Nanos) -> Result<Metrics, String> {
+    let mut fresh = cfg.clone();
+    fresh.clock = ClockKind::Virtual;
+    fresh.duration = reached.max(JUDGE_AT_LEAST).min(JUDGE_FOR).min(cfg.duration);
+    crate::textlog::muted(|| {
+        let brain = load_policy(policy).map_err(|e| e.to_string())?;
+        let mut core =
+            RunCore::new(&fresh, brain, CoreOptions::default()).map_err(|e| e.to_string())?;
+        core.run_to_end(&StopFlag::new());
+        Ok(core.metrics())
+    })
+}
+
+/// What changed from `old` to `new`, in one line: how each run went, the sense→act latency
+/// p50, and each topic's drops (those that dropped anything).
+fn changes(old: &Metrics, new: &Metrics) -> String {
+    let outcome = |m: &Metrics| match (&m.node_failed, m.fell_at_s) {
+        (Some(_), _) => format!("failed at {:.2} s", m.sim_time_s),
+        (None, Some(t)) => format!("fell at {t:.2} s"),
+        (None, None) => format!("balanced ({:.1} s)", m.sim_time_s),
+    };
+    let mut parts = vec![format!("{} → {}", outcome(old), outcome(new))];
+    parts.push(format!(
+        "latency p50 {:.0} → {:.0} ms",
+        old.latency_p50_ms, new.latency_p50_ms
+    ));
+    for (topic, o) in &old.topics {
+        let n = new.topics.get(topic).map_or(0, |t| t.dropped);
+        if o.dropped > 0 || n > 0 {
+            parts.push(format!("{topic} dropped {} → {n}", o.dropped));
+        }
+    }
+    parts.join(" · ")
+}
