@@ -948,3 +948,112 @@ fn a_lab_session_s_recording_reads_at_a_glance_and_is_named_for_its_rates() {
         "{names:?}"
     );
 }
+
+/// Reload on save, the engine's side: a graph file with a Python node, saved with a node that
+/// pushes nothing, then with the policy's rate changed in the graph file, then with a syntax
+/// error. Each loadable save is judged and said (`reloaded …: balanced … → fell …`) and starts
+/// a run of the new code; the broken one is said with its file and line, and the run goes on.
+#[test]
+fn a_saved_graph_or_node_runs_again_and_a_broken_one_is_said() {
+    use ratelab::session::GraphSource;
+    ratelab::init(); // Python nodes
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::create_dir(dir.path().join("nodes")).unwrap();
+    let graph_file = dir.path().join("g.toml");
+    let node_file = dir.path().join("nodes/scripted_balancer.py");
+    let graph_text = std::fs::read_to_string(crate::repo("graphs/cartpole-python.toml")).unwrap();
+    std::fs::write(&graph_file, &graph_text).unwrap();
+    std::fs::copy(crate::repo("graphs/nodes/scripted_balancer.py"), &node_file).unwrap();
+    let file = dir.path().join("session.json");
+    let mut s = settings(ClockKind::Virtual, 1, true, Speed::Max, &file);
+    s.cfg.graph = ratelab::graph::GraphSpec::load(&graph_file).unwrap();
+    let source = graph_file.clone();
+    s.graph_source = Some(GraphSource(std::sync::Arc::new(move || {
+        ratelab::graph::GraphSpec::load(&source).map_err(|e| e.to_string())
+    })));
+    let (ctl_tx, ctl_rx) = unbounded();
+    let (tel_tx, tel_rx) = unbounded::<Telemetry>();
+    let engine = Engine::new(s, ctl_rx, tel_tx).spawn();
+    let said = |what: &dyn Fn(&Telemetry) -> bool| loop {
+        let t = tel_rx
+            .recv_timeout(std::time::Duration::from_secs(30))
+            .expect("telemetry");
+        if what(&t) {
+            return t;
+        }
+    };
+    for c in steps(50) {
+        ctl_tx.send(c).unwrap();
+    }
+    // The first run loaded its node and ran a second: then the node is saved.
+    let stepped = std::cell::Cell::new(0);
+    said(&|t| {
+        stepped.set(stepped.get() + usize::from(matches!(t, Telemetry::Step(_))));
+        stepped.get() == 50
+    });
+    // The node saved as one that pushes nothing: the pole falls.
+    let original = std::fs::read_to_string(&node_file).unwrap();
+    std::fs::write(
+        &node_file,
+        original.replace(
+            "self.pub.publish(Force(newtons=float(command) * MOTOR_N))",
+            "self.pub.publish(Force(newtons=0.0))",
+        ),
+    )
+    .unwrap();
+    ctl_tx
+        .send(Control::Reload {
+            file: node_file.clone(),
+        })
+        .unwrap();
+    let Telemetry::Reloaded { line } = said(&|t| matches!(t, Telemetry::Reloaded { .. })) else {
+        unreachable!()
+    };
+    assert!(line.starts_with("reloaded "), "{line}");
+    assert!(
+        line.contains("balanced (") && line.contains("→ fell at"),
+        "{line}"
+    );
+    let Telemetry::Started { cfg, .. } = said(&|t| matches!(t, Telemetry::Started { .. })) else {
+        unreachable!()
+    };
+    assert_eq!(cfg.graph.nodes[1].rate_hz, 50.0);
+    // The graph file saved with the policy at 25 Hz: the next run has it.
+    std::fs::write(&node_file, &original).unwrap();
+    std::fs::write(
+        &graph_file,
+        graph_text.replacen(
+            "rate_hz = 50\nsubscribes = \"/obs\"",
+            "rate_hz = 25\nsubscribes = \"/obs\"",
+            1,
+        ),
+    )
+    .unwrap();
+    ctl_tx
+        .send(Control::Reload {
+            file: graph_file.clone(),
+        })
+        .unwrap();
+    let Telemetry::Started { cfg, .. } = said(&|t| matches!(t, Telemetry::Started { .. })) else {
+        unreachable!()
+    };
+    assert_eq!(cfg.graph.nodes[1].rate_hz, 25.0);
+    // A syntax error: said with the file and its line; no new run.
+    std::fs::write(&node_file, "class Broken:\n    def __init__(self, node)\n").unwrap();
+    ctl_tx
+        .send(Control::Reload {
+            file: node_file.clone(),
+        })
+        .unwrap();
+    let Telemetry::Error(e) = said(&|t| matches!(t, Telemetry::Error(_))) else {
+        unreachable!()
+    };
+    assert!(e.starts_with("not reloaded: "), "{e}");
+    assert!(e.contains("scripted_balancer.py:2"), "{e}");
+    for c in steps(5) {
+        ctl_tx.send(c).unwrap();
+    }
+    ctl_tx.send(Control::Quit).unwrap();
+    let log = engine.join().unwrap();
+    assert_eq!(log.runs.len(), 3, "the first run and two reloads");
+}
