@@ -84,6 +84,16 @@ fn main() {
             &["p50_latency_across_ms", "p50_latency_across_offsets_ms"][..],
         ),
         (
+            "ex10",
+            "exercises/ex10_held_force.toml",
+            &["stays_up_s"][..],
+        ),
+        (
+            "ex11",
+            "exercises/ex11_my_brain.toml",
+            &["my_cliff_hz", "lower_than_scripted"][..],
+        ),
+        (
             "ex13",
             "exercises/ex13_what_ros2_sees.toml",
             &["nodes", "obs_type", "action_type", "clock_hz"][..],

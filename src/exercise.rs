@@ -27,6 +27,10 @@
 //!   raised, at the estimator's cut-off and a lower one: where the pole first falls.
 //! - [`ex9`], the crossing (real clock, real processes): the chapter's graph split
 //!   across two processes, without and with phase offsets: what a crossing hop costs.
+//! - [`ex10`], the held force: the policy of a balanced pole killed, its lease set: how
+//!   long the pole stays up on the force the actuator goes on holding.
+//! - [`ex11`], your own brain: the learner's Python brain and the scripted balancer, each
+//!   slowed down until the pole falls: whose rate cliff is lower.
 //! - [`ex13`], what ROS 2 sees: the chapter's graph offered with `--ros2`, its policy at
 //!   40 Hz: the node list, the topics' ROS 2 types, and how often `/clock` ticks.
 
@@ -42,6 +46,8 @@ macro_rules! say {
 }
 
 pub mod ex1;
+pub mod ex10;
+pub mod ex11;
 pub mod ex13;
 pub mod ex2;
 pub mod ex3;
@@ -84,6 +90,8 @@ pub const EXERCISES: &[&dyn Exercise] = &[
     &ex7::Ex7,
     &ex8::Ex8,
     &ex9::Ex9,
+    &ex10::Ex10,
+    &ex11::Ex11,
     &ex13::Ex13,
 ];
 

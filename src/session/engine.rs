@@ -18,6 +18,18 @@ use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
+/// Where the lab's graph comes from, read again when a file is saved ([`Control::Reload`]):
+/// the graph file with the command line's overrides (`--rate`, `--depth`, `--qos`, …)
+/// applied, as at the start.
+#[derive(Clone)]
+pub struct GraphSource(pub Arc<dyn Fn() -> Result<crate::graph::GraphSpec, String> + Send + Sync>);
+
+impl std::fmt::Debug for GraphSource {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("GraphSource")
+    }
+}
+
 /// How the lab's engine starts.
 #[derive(Clone, Debug)]
 pub struct SessionSettings {
@@ -46,7 +58,7 @@ pub struct SessionSettings {
     pub ros2: Option<(crate::ros2::session::Ros2Session, crate::ros2::Ros2Options)>,
     /// Where the graph is read again when a file is saved ([`Control::Reload`]); `None`:
     /// the graph stays as it is (the compiled-in chapter's), and only brains reload.
-    pub graph_source: Option<super::reload::GraphSource>,
+    pub graph_source: Option<GraphSource>,
 }
 
 /// How long a fresh run that judges a live rate change runs at most

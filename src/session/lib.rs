@@ -35,7 +35,6 @@ pub mod run;
 pub mod sweep;
 mod virtual_run;
 
-pub use engine::{Engine, SessionSettings};
+pub use engine::{Engine, GraphSource, SessionSettings};
 pub use log::{replay_run, LoggedRun, ReplayError, SessionLog};
 pub use ratelab_runtime::telemetry::{describe, Control, Speed, Telemetry, SPEEDS, UNBOUNDED};
-pub use reload::GraphSource;

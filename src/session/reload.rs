@@ -14,7 +14,6 @@
 use super::engine::{Engine, Next, JUDGE_FOR};
 use crate::checkpoint::load_policy;
 use crate::config::{ClockKind, RunConfig};
-use crate::graph::GraphSpec;
 use crate::metrics::Metrics;
 use crate::runcore::{CoreOptions, RunCore};
 use crate::scheduler::StopFlag;
@@ -22,18 +21,6 @@ use crate::telemetry::Telemetry;
 use crate::textlog::Level;
 use crate::time::Nanos;
 use std::path::Path;
-use std::sync::Arc;
-
-/// Where the lab's graph comes from, read again on a reload: the graph file with the
-/// command line's overrides (`--rate`, `--depth`, `--qos`, …) applied, as at the start.
-#[derive(Clone)]
-pub struct GraphSource(pub Arc<dyn Fn() -> Result<GraphSpec, String> + Send + Sync>);
-
-impl std::fmt::Debug for GraphSource {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str("GraphSource")
-    }
-}
 
 /// The shortest span a reloaded graph is judged over.
 const JUDGE_AT_LEAST: Nanos = Nanos(10 * Nanos::SECOND.0);
@@ -80,7 +67,7 @@ impl Engine {
         Some(Next::Reload(Box::new(new_cfg)))
     }
 
-    /// `cfg` with its graph read again ([`GraphSource`]; the compiled-in chapter's graph
+    /// `cfg` with its graph read again ([`super::GraphSource`]; the compiled-in chapter's graph
     /// stays as it is).
     fn reloaded_config(&self, cfg: &RunConfig) -> Result<RunConfig, String> {
         let mut new = cfg.clone();

@@ -464,6 +464,58 @@ fn ex9_prediction_recorded() {
 
 #[test]
 #[cfg_attr(
+    ex10_prediction_empty,
+    ignore = "ex10: write your prediction in exercises/ex10_held_force.toml"
+)]
+fn ex10_prediction_recorded() {
+    prediction_recorded("ex10", "ex10_held_force.toml");
+}
+
+/// ex10's runs hold its bands: the pole balances until the policy is killed, stays up on
+/// the held force for a band of seconds on every seed, and the policy is said not alive
+/// once.
+#[test]
+fn ex10_measurement_held_force() {
+    use ratelab::exercise::ex10::{check_ex10, measure_ex10, outcome_ex10, Ex10Bands};
+    let b: Ex10Bands = load_bands(&path("bands.toml")).unwrap().of().unwrap();
+    let runs = measure_ex10(&b, &GraphSpec::chapter()).unwrap();
+    assert_eq!(runs.len(), b.seeds.len());
+    for c in check_ex10(&b, &runs) {
+        assert!(c.passed, "{}", c.name);
+    }
+    let outcome = outcome_ex10(&b, &runs);
+    let mean = outcome.mean_s().unwrap();
+    assert!((1.5..2.5).contains(&mean), "{mean}");
+}
+
+#[test]
+#[cfg_attr(
+    ex11_prediction_empty,
+    ignore = "ex11: write your prediction in exercises/ex11_my_brain.toml"
+)]
+fn ex11_prediction_recorded() {
+    prediction_recorded("ex11", "ex11_my_brain.toml");
+}
+
+/// ex11's search holds its bands with the shipped brain: the scripted balancer's cliff where
+/// it was measured, every cliff a real edge, the shipped brain's lower than the scripted
+/// one's (gentler gains tolerate a slower policy).
+#[test]
+fn ex11_measurement_own_brain() {
+    use ratelab::exercise::ex11::{check_ex11, measure_ex11, outcome_ex11, Ex11Bands, BRAIN_FILE};
+    ratelab::init(); // the brain is Python
+    let b: Ex11Bands = load_bands(&path("bands.toml")).unwrap().of().unwrap();
+    let runs = measure_ex11(&b, &GraphSpec::chapter(), &path(BRAIN_FILE)).unwrap();
+    assert_eq!((runs.0.len(), runs.1.len()), (b.seeds.len(), b.seeds.len()));
+    for c in check_ex11(&b, &runs) {
+        assert!(c.passed, "{}", c.name);
+    }
+    let o = outcome_ex11(&runs);
+    assert!(o.mine_hz.unwrap() < o.scripted_hz.unwrap(), "{o:?}");
+}
+
+#[test]
+#[cfg_attr(
     ex13_prediction_empty,
     ignore = "ex13: write your prediction in exercises/ex13_what_ros2_sees.toml"
 )]
@@ -483,6 +535,8 @@ fn exercise_files_are_valid() {
         "ex7_slow_callback.toml",
         "ex8_noisy_sensor.toml",
         "ex9_crossing.toml",
+        "ex10_held_force.toml",
+        "ex11_my_brain.toml",
         "ex13_what_ros2_sees.toml",
     ] {
         let f = ExerciseFile::load(&path(file)).unwrap();
@@ -505,6 +559,11 @@ fn the_texts_read_before_predicting_give_no_answer_away() {
         ("7.5", "ex1's cliff"),
         ("9,8.5,8", "ex1's cliff (a sweep around it)"),
         ("not monotonic", "ex1's latency"),
+        // ex10: how long the held force keeps the pole up.
+        ("two seconds", "ex10's answer"),
+        ("1.8 s", "ex10's answer"),
+        // ex11: the shipped brain's cliff.
+        ("5.5", "ex11's answer"),
         // ex2: the deep queue's drops.
         ("disappears from", "ex2's drops at depth 100"),
         // ex3: drops and latency with and without offsets.
@@ -541,6 +600,10 @@ fn the_texts_read_before_predicting_give_no_answer_away() {
             std::fs::read_to_string(path("README.md")).unwrap(),
         ),
         (
+            "exercises/ex11_my_brain.py".to_string(),
+            std::fs::read_to_string(path("ex11_my_brain.py")).unwrap(),
+        ),
+        (
             "graphs/cartpole-executors.toml".to_string(),
             std::fs::read_to_string(crate::repo("graphs/cartpole-executors.toml")).unwrap(),
         ),
@@ -559,6 +622,8 @@ fn the_texts_read_before_predicting_give_no_answer_away() {
         "ex7_slow_callback.toml",
         "ex8_noisy_sensor.toml",
         "ex9_crossing.toml",
+        "ex10_held_force.toml",
+        "ex11_my_brain.toml",
     ] {
         let f = ExerciseFile::load(&path(ex)).unwrap();
         texts.push((
