@@ -289,6 +289,35 @@ mod tests {
         cfg
     }
 
+    /// A reload keeps the run before as a ghost in the angle and force panels (their titles
+    /// say so); the run after it, started for another reason, drops it.
+    #[test]
+    fn a_reload_draws_the_run_before_as_a_ghost_until_another_run_starts() {
+        let (mut app, _rx) = app_after(virtual_cfg(5.0, 10), true);
+        assert!(app.view().ghost_angle.is_empty());
+        let started = |cfg: RunConfig| Telemetry::Started {
+            cfg,
+            policy: "scripted".into(),
+            recording: None,
+        };
+        app.on_telemetry(Telemetry::Reloaded {
+            line: "reloaded brain.py: fell at 0.84 s → balanced (10.0 s)".into(),
+        });
+        app.on_telemetry(started(virtual_cfg(50.0, 10)));
+        let v = app.view();
+        assert!(v.ghost_angle.len() > 10, "{}", v.ghost_angle.len());
+        assert!(!v.ghost_force.is_empty());
+        assert!(v
+            .message
+            .as_deref()
+            .unwrap_or("")
+            .starts_with("reloaded brain.py:"));
+        let screen = render(&app, 120, 40);
+        assert_eq!(screen.matches("before reload").count(), 2, "{screen}");
+        app.on_telemetry(started(virtual_cfg(50.0, 10)));
+        assert!(app.view().ghost_angle.is_empty());
+    }
+
     #[test]
     fn the_lab_draws_its_own_graph_before_the_run_starts() {
         let (tx, _rx) = crossbeam_channel::unbounded();

@@ -110,17 +110,7 @@ pub(super) fn render_angle_chart(v: &View, area: Rect, buf: &mut Buffer) {
         .map(|&(t, a)| (t, a.clamp(-0.3, 0.3)))
         .collect();
     // The run before a reload first, so that this run's line is drawn over it.
-    let mut datasets = vec![];
-    if !ghost.is_empty() {
-        datasets.push(
-            Dataset::default()
-                .name("before")
-                .marker(Marker::Braille)
-                .graph_type(GraphType::Line)
-                .dark_gray()
-                .data(&ghost),
-        );
-    }
+    let mut datasets: Vec<Dataset<'_>> = ghost_dataset(&ghost).into_iter().collect();
     datasets.extend([
         Dataset::default()
             .name("θ")
@@ -186,6 +176,19 @@ pub(super) fn render_angle_chart(v: &View, area: Rect, buf: &mut Buffer) {
         .render(area, buf);
 }
 
+/// The run before a reload ([`View::ghost_angle`], [`View::ghost_force`]) as a dim line,
+/// `None` without one.
+fn ghost_dataset(points: &[(f64, f64)]) -> Option<Dataset<'_>> {
+    (!points.is_empty()).then(|| {
+        Dataset::default()
+            .name("before")
+            .marker(Marker::Braille)
+            .graph_type(GraphType::Line)
+            .dark_gray()
+            .data(points)
+    })
+}
+
 /// The last 10 s; labelled only where the chart has room for the axis (two rows).
 fn time_axis(t0: f64, t1: f64, area: Rect) -> Axis<'static> {
     let axis = Axis::default().bounds([t0, t1]);
@@ -209,17 +212,7 @@ pub(super) fn render_hold_chart(v: &View, area: Rect, buf: &mut Buffer) {
     };
     let (applied, published) = (clamp(&v.applied_force), clamp(&v.published_force));
     let ghost = clamp(&v.ghost_force);
-    let mut datasets = vec![];
-    if !ghost.is_empty() {
-        datasets.push(
-            Dataset::default()
-                .name("before")
-                .marker(Marker::Braille)
-                .graph_type(GraphType::Line)
-                .dark_gray()
-                .data(&ghost),
-        );
-    }
+    let mut datasets: Vec<Dataset<'_>> = ghost_dataset(&ghost).into_iter().collect();
     datasets.extend([
         Dataset::default()
             .name("applied")
