@@ -201,7 +201,7 @@ pub enum ExerciseError {
     Launch(String),
 }
 
-/// `ex1, ex2, …, ex9 or ex13`.
+/// `ex1, ex2, …, ex11 or ex13`.
 fn expected() -> String {
     match ids().split_last() {
         Some((last, rest)) if !rest.is_empty() => format!("{} or {last}", rest.join(", ")),
@@ -752,7 +752,7 @@ mod tests {
         }
         assert_eq!(
             expected(),
-            "ex1, ex2, ex3, ex4, ex5, ex6, ex7, ex8, ex9 or ex13"
+            "ex1, ex2, ex3, ex4, ex5, ex6, ex7, ex8, ex9, ex10, ex11 or ex13"
         );
     }
 

@@ -461,10 +461,12 @@ fn exercise_ex5_runs_on_the_graph_its_bands_name_and_reconciles() {
         "{}",
         stderr(&o)
     );
-    let o = ratelab(&["exercise", "ex10", "--dir", d]);
+    let o = ratelab(&["exercise", "ex12", "--dir", d]);
     assert!(
         o.status.code() == Some(2)
-            && stderr(&o).contains("expected ex1, ex2, ex3, ex4, ex5, ex6, ex7, ex8, ex9 or ex13"),
+            && stderr(&o).contains(
+                "expected ex1, ex2, ex3, ex4, ex5, ex6, ex7, ex8, ex9, ex10, ex11 or ex13"
+            ),
         "{}",
         stderr(&o)
     );
