@@ -150,10 +150,9 @@ pub fn run(
     if let Some(e) = headless::finish_recording(&a, recording.as_ref(), &report) {
         return Err(e.into());
     }
+    let log = headless::log_text(&kept);
     if let Some(dir) = &a.out {
-        headless::write_outputs(dir, &report, &cfg.graph, a.force)?;
-        let log = headless::log_text(&kept);
-        ratelab::output::write_file(&dir.join("log.txt"), a.force, log.as_bytes())?;
+        headless::write_outputs(dir, &report, &cfg.graph, &log, a.force)?;
     }
     let mut trace = Vec::new();
     headless::write_trace(&mut trace, &report.trace, &cfg.graph)?;
@@ -166,7 +165,7 @@ pub fn run(
     Ok(RunFiles {
         metrics_json: serde_json::to_string_pretty(&report.metrics)? + "\n",
         trace_csv: String::from_utf8(trace)?,
-        log: headless::log_text(&kept),
+        log,
         summary,
         failed,
         recording: recording.map(|r| r.path().to_path_buf()),

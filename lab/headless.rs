@@ -275,9 +275,7 @@ pub fn run_headless(a: &RunArgs, stop: StopFlag) -> anyhow::Result<RunReport> {
         eprintln!("[ratelab] warning: {w}");
     }
     if let Some(dir) = &a.out {
-        write_outputs(dir, &report, &cfg.graph, a.force)?;
-        let log = log_text(&kept);
-        ratelab::output::write_file(&dir.join("log.txt"), a.force, log.as_bytes())?;
+        write_outputs(dir, &report, &cfg.graph, &log_text(&kept), a.force)?;
         println!(
             "[ratelab] wrote {}/metrics.json, trace.csv and log.txt (what each key and column means: docs/metrics.md)",
             dir.display()
@@ -562,12 +560,14 @@ pub fn print_summary(report: &RunReport) {
     }
 }
 
-/// `metrics.json` (pretty, stable key order) and `trace.csv` (one row per actuator tick),
-/// each through [`ratelab::output`] (never over an existing file unless `force`).
+/// `metrics.json` (pretty, stable key order), `trace.csv` (one row per actuator tick) and
+/// `log.txt` (the lines nodes wrote, `log`), each through [`ratelab::output`] (never over an
+/// existing file unless `force`).
 pub fn write_outputs(
     dir: &Path,
     report: &RunReport,
     graph: &GraphSpec,
+    log: &str,
     force: bool,
 ) -> anyhow::Result<()> {
     // Every name is checked before any is written, so a refusal writes nothing.
@@ -580,6 +580,7 @@ pub fn write_outputs(
     ratelab::output::write_with(&trace, force, |w| {
         write_trace(w, &report.trace, graph).map_err(std::io::Error::other)
     })?;
+    ratelab::output::write_file(&dir.join("log.txt"), force, log.as_bytes())?;
     Ok(())
 }
 

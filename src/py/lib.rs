@@ -33,10 +33,12 @@ pyo3::create_exception!(
 /// How often a run waiting in [`run`] looks for Ctrl-C.
 const SIGNAL_POLL: Duration = Duration::from_millis(50);
 
-/// ratelab's command line, once per process, for a host interpreter: its Python is this one,
-/// and a launch starts its processes as `sys.executable -m ratelab`.
+/// ratelab in a host interpreter, once, when the module is imported: its Python is this
+/// one, a launch starts its processes as `sys.executable -m ratelab`, and the Python and ROS
+/// 2 layers are installed (`ratelab::init`).
 fn hosted(py: Python<'_>) -> PyResult<()> {
     ratelab::python::host();
+    ratelab::init();
     let exe: String = py.import("sys")?.getattr("executable")?.extract()?;
     Program::set_this(Program {
         path: exe.into(),
@@ -50,7 +52,6 @@ fn hosted(py: Python<'_>) -> PyResult<()> {
 /// interrupted). Ctrl-C is ratelab's from then on, as in the binary.
 #[pyfunction]
 fn main(py: Python<'_>, argv: Vec<String>) -> PyResult<u8> {
-    hosted(py)?;
     let args = argv.into_iter().map(Into::into).collect();
     // The command's Python output goes to the run's text log, as the binary's does.
     let capture = ratelab::python::capture_output().ok();
@@ -162,8 +163,6 @@ fn interruptibly<T: Send + 'static>(
 /// and the line of the first run that failed a node (or None). Ctrl-C stops it.
 #[pyfunction]
 fn sweep(py: Python<'_>, flags: Vec<String>) -> PyResult<(String, Option<String>)> {
-    hosted(py)?;
-    ratelab::init();
     interruptibly(py, move |stop| ratelab_lab::api::sweep(&flags, &stop))
 }
 
@@ -171,8 +170,6 @@ fn sweep(py: Python<'_>, flags: Vec<String>) -> PyResult<(String, Option<String>
 /// pole falls, as CSV (`seed,falls_at_hz,balances_at_hz,runs`). Ctrl-C stops it.
 #[pyfunction]
 fn cliff(py: Python<'_>, flags: Vec<String>) -> PyResult<String> {
-    hosted(py)?;
-    ratelab::init();
     interruptibly(py, move |stop| ratelab_lab::api::cliff(&flags, &stop))
 }
 
@@ -188,8 +185,6 @@ fn exercise<'py>(
     flags: Vec<String>,
     prediction_json: Option<String>,
 ) -> PyResult<Bound<'py, PyDict>> {
-    hosted(py)?;
-    ratelab::init();
     let found = interruptibly(py, move |_stop| {
         ratelab_lab::api::exercise(&which, &flags, prediction_json.as_deref())
     })?;
@@ -208,8 +203,6 @@ fn exercise<'py>(
 /// registered) and `Time` into the `ratelab` package, as Python nodes see them.
 #[pyfunction]
 fn install_messages(py: Python<'_>) -> PyResult<()> {
-    hosted(py)?;
-    ratelab::init();
     ratelab::python::start().map_err(|e| PyValueError::new_err(e.to_string()))?;
     ratelab::python::install_messages(py)
 }
@@ -238,8 +231,6 @@ fn run<'py>(
     policy: Option<Py<PyAny>>,
     nodes: Vec<(String, Py<PyAny>)>,
 ) -> PyResult<Bound<'py, PyDict>> {
-    hosted(py)?;
-    ratelab::init();
     let _given = ratelab::python::node::give_classes(nodes);
     let brain = match policy {
         Some(f) => Some(Box::new(
@@ -319,6 +310,7 @@ fn trace_columns(csv_text: &str) -> anyhow::Result<Vec<(String, &'static str, Ve
 /// The extension module.
 #[pymodule]
 fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    hosted(m.py())?;
     m.add_function(wrap_pyfunction!(main, m)?)?;
     m.add_function(wrap_pyfunction!(run, m)?)?;
     m.add_function(wrap_pyfunction!(sweep, m)?)?;

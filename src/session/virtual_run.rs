@@ -105,7 +105,7 @@ impl Engine {
                         return self.leave(Next::SwitchClock, core.scheduler(), ended)
                     }
                     Control::Reload { file } => {
-                        let old = self.figures_now(cfg, &mut core, ended.as_ref());
+                        let old = self.figures_now(cfg, &core, ended.as_ref());
                         if let Some(next) = self.reload(cfg, &file, Some(&old)) {
                             return self.leave(next, core.scheduler(), ended);
                         }
@@ -192,7 +192,7 @@ impl Engine {
     fn figures_now(
         &self,
         cfg: &RunConfig,
-        core: &mut RunCore,
+        core: &RunCore,
         ended: Option<&RunEnd>,
     ) -> crate::metrics::Metrics {
         let end = ended.cloned().unwrap_or(RunEnd {
@@ -213,16 +213,7 @@ impl Engine {
 
     /// Tell the front end the run has ended (`end`): its last callbacks, status and summary.
     fn tell_ended(&self, cfg: &RunConfig, core: &mut RunCore, end: &RunEnd, paused: bool) {
-        let handles = core.handles().clone();
-        let sched = core.scheduler();
-        let metrics = live_metrics(
-            cfg,
-            &handles,
-            end,
-            sched.ticks(),
-            None,
-            sched.figures(end.at),
-        );
+        let metrics = self.figures_now(cfg, core, Some(end));
         self.tell_status(core, paused);
         let _ = self.tx.send(Telemetry::Ended {
             metrics: Box::new(metrics),
