@@ -125,11 +125,15 @@ mod tests {
         std::fs::write(&tmp, "def act(obs):\n    return 0.5\n").unwrap();
         std::fs::rename(&tmp, &brain).unwrap();
         std::fs::write(&brain, "def act(obs):\n    return 0.5\n").unwrap();
-        let told = rx.recv_timeout(Duration::from_secs(5)).unwrap();
+        // Told, and only about the brain. Usually once; but a thread descheduled for more
+        // than SETTLE between the rename and the write (a loaded machine) is two saves, told
+        // twice, so the count is not asserted: every message is the brain's reload.
+        let mut told = vec![rx.recv_timeout(Duration::from_secs(5)).unwrap()];
+        told.extend(std::iter::from_fn(|| rx.recv_timeout(SETTLE * 6).ok()));
         assert!(
-            matches!(told, Control::Reload { ref file } if *file == brain),
+            told.iter()
+                .all(|t| matches!(t, Control::Reload { file } if *file == brain)),
             "{told:?}"
         );
-        assert!(rx.recv_timeout(SETTLE * 6).is_err(), "told once");
     }
 }

@@ -269,7 +269,9 @@ fn three_processes_balance_under_the_real_clock_and_leave_nothing_behind() {
     // Offsets 0/5/10/15 ms leave the wire (a fraction of a ms here) room: each node reads
     // what the one before sent 5 ms earlier, so sense->act is 15 ms, as in one process.
     let p50 = m["latency_p50_ms"].as_f64().unwrap();
-    assert!((14.9..=15.5).contains(&p50), "p50 {p50} ms: {m}");
+    // Within the tolerance exercises/bands.toml gives the offsets' median
+    // (offsets_p50_tolerance_ms): a loaded machine can deliver a hair early or late.
+    assert!((p50 - 15.0).abs() <= 0.5, "p50 {p50} ms: {m}");
     for topic in ["/obs", "/action", "/cmd"] {
         assert!(out.contains(&format!("wire {topic} into")), "{out}");
     }
@@ -500,6 +502,10 @@ fn a_killed_node_is_noticed_and_a_restarted_one_rejoins() {
     let dir = tempfile::tempdir().unwrap();
     let port = free_port();
     let ep = format!("tls/127.0.0.1:{port}");
+    // Long enough to hold the waits, the kill, the restart and `top` below on a loaded
+    // machine; the tick counts asserted at the end follow from it (50 Hz).
+    let secs: u64 = 12;
+    let duration = secs.to_string();
     let mut launcher: Child = bin()
         .args([
             "launch",
@@ -507,7 +513,7 @@ fn a_killed_node_is_noticed_and_a_restarted_one_rejoins() {
             "--clock",
             "real",
             "--duration",
-            "6",
+            &duration,
             "--listen",
             &ep,
             "--out",
@@ -667,14 +673,15 @@ fn a_killed_node_is_noticed_and_a_restarted_one_rejoins() {
     );
     // The policy ticked before it was killed and after its restart: its ticks go on from
     // what the killed process counted (its figures up to 100 ms before it died), so only
-    // the gap (well under a second) is missing from 6 s at 50 Hz; counting from the restart
-    // alone said about half. The robot held the last force meanwhile.
+    // the gap (well under a second) is missing from the run's `secs` at 50 Hz; counting
+    // from the restart alone said about half. The robot held the last force meanwhile.
     let m: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(dir.path().join("metrics.json")).unwrap())
             .unwrap();
     let policy_ticks = m["nodes"]["policy"]["ticks"].as_u64().unwrap();
+    let full = secs * 50;
     assert!(
-        (240..=301).contains(&policy_ticks),
+        (full - 60..=full + 1).contains(&policy_ticks),
         "the policy ticked {policy_ticks} times in its two processes"
     );
     assert_eq!(m["policy_ticks"].as_u64(), Some(policy_ticks), "{m}");
@@ -696,7 +703,7 @@ fn a_killed_node_is_noticed_and_a_restarted_one_rejoins() {
         obs["published"].as_u64().unwrap(),
         obs["lost"].as_u64().unwrap_or(0),
     );
-    assert!(published >= 280, "{obs}");
+    assert!(published >= full - 20, "{obs}");
     assert!(
         (1..75).contains(&lost),
         "lost {lost} of {published}: only the gap between the two processes: {obs}"
@@ -858,6 +865,7 @@ fn top_lists_a_running_graph() {
     let dir = tempfile::tempdir().unwrap();
     let creds = dir.path().join("creds.toml");
     let creds = creds.to_str().unwrap();
+    // Long enough to hold the sleeps and the two `top --once` below on a loaded machine.
     let mut launcher = bin()
         .args([
             "launch",
@@ -865,7 +873,7 @@ fn top_lists_a_running_graph() {
             "--clock",
             "real",
             "--duration",
-            "6",
+            "15",
             "--listen",
             &ep,
             "--export-credentials",
@@ -1457,10 +1465,12 @@ fn a_process_that_fails_starts_again_when_its_graph_says_so() {
     .unwrap();
     let port = free_port();
     let rrd = dir.path().join("restart.rrd");
+    // Long enough for the restart (a new process joining) on a loaded machine to come
+    // well before the run's end.
     let (mut launcher, rx, mut lines) = ready_launch_with(
         Some(&graph),
         "real",
-        "8",
+        "20",
         port,
         dir.path(),
         &["--record".as_ref(), rrd.as_os_str()],
@@ -1478,7 +1488,8 @@ fn a_process_that_fails_starts_again_when_its_graph_says_so() {
     let again = node_processes(port, "policy");
     assert_eq!(again.len(), 1, "one policy process again: {again:?}");
     assert_ne!(again[0], killed);
-    let status = exit_within(&mut launcher, 30);
+    // (Up to the 20 s run's end, and its shutdown.)
+    let status = exit_within(&mut launcher, 40);
     lines.extend(rx.try_iter());
     assert!(status.success(), "{lines:?}");
     let said = lines

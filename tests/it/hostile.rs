@@ -1076,8 +1076,10 @@ fn slow_real_clock_nodes_stop_at_the_duration() {
         args.extend_from_slice(slow);
         let o = run_child(&args, dir.path(), Duration::from_secs(20), |_| {});
         assert!(!o.timed_out && o.code.is_some(), "{args:?}: {o:?}");
+        // A loose bound: a loaded machine may start the process slowly, and what this
+        // guards against is waiting a slow node's period (50 s, 100 s, forever).
         assert!(
-            o.wall < Duration::from_secs(2),
+            o.wall < Duration::from_secs(10),
             "{args:?}: a 1 s run took {:?}",
             o.wall
         );
@@ -1092,8 +1094,9 @@ fn slow_real_clock_nodes_stop_at_the_duration() {
             |_| {},
         );
         assert_eq!(o.code, Some(0), "{o:?}");
+        // Loose, as above: the bug is waiting the 100 s period (or forever).
         assert!(
-            o.wall < Duration::from_secs(3),
+            o.wall < Duration::from_secs(10),
             "--hz {hz}: two 1 s runs took {:?}",
             o.wall
         );
@@ -1120,8 +1123,9 @@ fn sigint_stops_a_slow_real_clock_run_within_a_second() {
     let after = sent.unwrap().elapsed();
     assert_eq!(o.code, Some(130), "{o:?}");
     // `after` is measured once the child is reaped, so it bounds the stop from above.
+    // Loose for a loaded machine: the bug is waiting out the 100 s period or the 60 s run.
     assert!(
-        after < Duration::from_secs(1),
+        after < Duration::from_secs(10),
         "stopped {after:?} after SIGINT"
     );
 }
@@ -1166,8 +1170,10 @@ fn sigint_stops_a_real_clock_sweep_within_a_second_and_keeps_what_completed() {
     assert!(done < 3, "{o:?}");
     let rows = o.stdout.lines().filter(|l| l.starts_with("real ")).count();
     assert_eq!(rows, done, "the completed runs are in the table: {o:?}");
+    // Room for a loaded machine, yet short of going on with the sweep (its next run alone
+    // is 2 s).
     assert!(
-        after < Duration::from_secs(1),
+        after < Duration::from_millis(1800),
         "stopped {after:?} after SIGINT"
     );
 }

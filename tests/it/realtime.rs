@@ -286,20 +286,42 @@ fn the_lab_engine_warns_when_the_run_starts_not_when_it_ends() {
         let (ctl_tx, ctl_rx) = unbounded();
         let (tel_tx, tel_rx) = unbounded::<Telemetry>();
         let engine = Engine::new(settings, ctl_rx, tel_tx).spawn();
-        // Everything told while the run is still going.
-        std::thread::sleep(std::time::Duration::from_millis(500));
-        let told: Vec<Telemetry> = tel_rx.try_iter().collect();
+        // Everything told while the run is still going: wait for 15 actuator ticks (each
+        // node then has the 10 ticks assert_node_policies asks for) rather than a fixed
+        // time, which a loaded machine may not fill; the deadline only bounds a hang.
+        let deadline = std::time::Instant::now() + std::time::Duration::from_secs(20);
+        let mut told: Vec<Telemetry> = Vec::new();
+        while told
+            .iter()
+            .filter(|t| matches!(t, Telemetry::Step(_)))
+            .count()
+            < 15
+        {
+            let left = deadline.saturating_duration_since(std::time::Instant::now());
+            match tel_rx.recv_timeout(left) {
+                Ok(t) => told.push(t),
+                Err(_) => panic!("15 steps within 20 s; told: {told:?}"),
+            }
+        }
         ctl_tx.send(Control::Quit).unwrap();
         let log = engine.join().unwrap();
         assert!(
             !told.iter().any(|t| matches!(t, Telemetry::Ended { .. })),
             "the run was still going"
         );
-        let warned = told.iter().any(|t| {
+        let warning = told.iter().position(|t| {
             matches!(t, Telemetry::Applied(text) if text.starts_with(
                 "warning: node threads keep their default policy: SCHED_FIFO priority 7 refused"))
         });
-        assert_eq!(warned, !expect);
+        assert_eq!(warning.is_some(), !expect);
+        // Told when the run starts: before its first step, not only by the end.
+        if let Some(w) = warning {
+            let first_step = told
+                .iter()
+                .position(|t| matches!(t, Telemetry::Step(_)))
+                .expect("counted above");
+            assert!(w < first_step, "warning after the first step: {told:?}");
+        }
         let m = log.runs[0].metrics.as_ref().unwrap();
         assert_node_policies(
             expect,

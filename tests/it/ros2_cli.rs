@@ -183,10 +183,16 @@ fn ros2_verbs_read_another_graph_and_survive_hostile_tokens_and_payloads() {
     assert_eq!(notes.len(), 2, "{out}");
     assert!(notes.iter().all(|l| l.contains("not decoded")), "{out}");
     let (_, out, _) = ros2(&["topic", "hz", "/cmd_vel", "--duration", "2.2"]);
-    assert!(
-        out.contains("average rate: 19.") || out.contains("average rate: 20."),
-        "{out}"
-    );
+    // The talker publishes about 20 Hz, but it sleeps 50 ms after its work rather than to a
+    // deadline, so on a loaded machine it runs a little slower: a band, not the digits.
+    let rate: f64 = out
+        .lines()
+        .rev()
+        .find_map(|l| l.strip_prefix("average rate: "))
+        .unwrap_or_else(|| panic!("{out}"))
+        .parse()
+        .unwrap();
+    assert!((15.0..=21.0).contains(&rate), "{out}");
     // graph: publisher ──▶ topic [type] msg/s ──▶ subscribers, as the lab draws it.
     let (code, out, err) = ros2(&["graph", "--once"]);
     assert_eq!(code, 0, "{err}");

@@ -155,13 +155,28 @@ fn an_identity_publishes_only_what_the_graph_gives_it() {
     .encode();
     let start = encode_json(&ToProcess::Start { start_mono_ns: 0 });
     // Publishes `n` forces on /action and `n` starts on robot's control key as `role`, and
-    // declares a token for the policy's node; returns how many of each arrived.
-    let attempt = |role: Role| -> (usize, usize, usize) {
+    // declares a token for the policy's node; returns how many of each arrived. It waits
+    // (at most 10 s each) for the counts `want` says should arrive, not a fixed time a
+    // loaded machine may not fill, then 300 ms more in which nothing else may arrive.
+    let attempt = |role: Role, want: (usize, usize, usize)| -> (usize, usize, usize) {
         let (a0, c0, t0) = (
             action.load(Ordering::SeqCst),
             control.load(Ordering::SeqCst),
             tokens.load(Ordering::SeqCst),
         );
+        let counts = || {
+            (
+                action.load(Ordering::SeqCst) - a0,
+                control.load(Ordering::SeqCst) - c0,
+                tokens.load(Ordering::SeqCst) - t0,
+            )
+        };
+        let wait_for = |ok: &dyn Fn((usize, usize, usize)) -> bool| {
+            let until = Instant::now() + Duration::from_secs(10);
+            while !ok(counts()) && Instant::now() < until {
+                std::thread::sleep(Duration::from_millis(20));
+            }
+        };
         let s = session(&creds, role, None, &[], std::slice::from_ref(&ep)).unwrap();
         let token = s
             .liveliness()
@@ -178,25 +193,31 @@ fn an_identity_publishes_only_what_the_graph_gives_it() {
             p.put(force.clone()).wait().unwrap();
             s.put(keys.control("robot"), start.clone()).wait().unwrap();
         }
-        std::thread::sleep(Duration::from_millis(600));
+        // What should arrive while the token is declared (its declaration, if allowed), then
+        // time for anything refused to arrive after all, the session still open.
+        wait_for(&|(a, c, t): (usize, usize, usize)| {
+            a >= want.0 && c >= want.1 && t >= want.2.min(1)
+        });
+        std::thread::sleep(Duration::from_millis(300));
         drop(token);
+        // The token's withdrawal, if its declaration arrived.
+        wait_for(&|(_, _, t): (usize, usize, usize)| t >= want.2);
         drop(s);
-        std::thread::sleep(Duration::from_millis(200));
-        (
-            action.load(Ordering::SeqCst) - a0,
-            control.load(Ordering::SeqCst) - c0,
-            tokens.load(Ordering::SeqCst) - t0,
-        )
+        std::thread::sleep(Duration::from_millis(300));
+        counts()
     };
     // The robot's own identity (or an observer's) may not command the actuator, control a
     // process nor declare another process's node: nothing reaches the robot's session.
-    assert_eq!(attempt(Role::Process("robot".into())), (0, 0, 0));
-    assert_eq!(attempt(Role::Observer), (0, 0, 0));
+    assert_eq!(attempt(Role::Process("robot".into()), (0, 0, 0)), (0, 0, 0));
+    assert_eq!(attempt(Role::Observer, (0, 0, 0)), (0, 0, 0));
     // The policy's identity may publish the force, not control; its own node's token
     // (`@node/policy/policy`) arrives declared, then withdrawn.
-    assert_eq!(attempt(Role::Process("policy".into())), (20, 0, 2));
+    assert_eq!(
+        attempt(Role::Process("policy".into()), (20, 0, 2)),
+        (20, 0, 2)
+    );
     // The launcher may control.
-    assert_eq!(attempt(Role::Launcher), (0, 20, 0));
+    assert_eq!(attempt(Role::Launcher, (0, 20, 0)), (0, 20, 0));
 }
 
 /// A launch under attack by a holder of the credentials who forges as the wrong identity,

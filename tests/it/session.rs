@@ -210,7 +210,7 @@ fn a_real_clock_run_is_logged_with_node_timing_and_not_replayed() {
     let _machine = crate::machine::alone();
     let dir = tempfile::tempdir().unwrap();
     let (ctl_tx, ctl_rx) = unbounded();
-    let (tel_tx, _tel_rx) = unbounded::<Telemetry>();
+    let (tel_tx, tel_rx) = unbounded::<Telemetry>();
     let settings = settings(
         ClockKind::Real,
         0,
@@ -219,7 +219,16 @@ fn a_real_clock_run_is_logged_with_node_timing_and_not_replayed() {
         &dir.path().join("real.json"),
     );
     let engine = Engine::new(settings, ctl_rx, tel_tx).spawn();
-    std::thread::sleep(std::time::Duration::from_millis(600));
+    // Quit after 11 actuator steps have been told, not after a fixed time a loaded machine
+    // may not fill; the deadline only bounds a hang.
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(20);
+    let mut stepped = 0;
+    while stepped < 11 {
+        let left = deadline.saturating_duration_since(std::time::Instant::now());
+        if let Telemetry::Step(_) = tel_rx.recv_timeout(left).expect("11 steps within 20 s") {
+            stepped += 1;
+        }
+    }
     ctl_tx.send(Control::Quit).unwrap();
     let log = engine.join().unwrap();
     let m = log.runs[0].metrics.as_ref().unwrap();
