@@ -419,6 +419,33 @@ mod tests {
         assert!(text.contains("STOPPED BY WATCHDOG at t=2.04s"), "{text}");
     }
 
+    /// A subscription its publisher does not connect (incompatible QoS) breaks its arrow in
+    /// red, says why where there is room (at 120 columns the whole request and offer; at
+    /// 80 what was wanted) and the pole falls with no force applied.
+    #[test]
+    fn an_incompatible_subscription_breaks_its_arrow_at_both_sizes() {
+        let (app, _rx) = app_after(graph_cfg("graphs/cartpole-incompatible-qos.toml", 2), true);
+        let small = render(&app, 80, 24);
+        assert!(small.contains("incompatible"), "{small}");
+        assert!(small.contains("wants RELIABLE"), "{small}");
+        assert!(small.contains("FELL"), "{small}");
+        let big = render(&app, 120, 40);
+        assert!(big.contains("incompatible QoS"), "{big}");
+        assert!(big.contains("RELIABLE, offered"), "{big}");
+        assert!(big.contains("BEST_EFFORT"), "{big}");
+        insta::assert_snapshot!("incompatible_80x24", small);
+        insta::assert_snapshot!("incompatible_120x40", big);
+        // The /obs arrow beside it stays whole and green.
+        let obs = app
+            .view()
+            .topics
+            .iter()
+            .find(|t| t.name == "/obs")
+            .cloned()
+            .unwrap();
+        assert!(obs.incompatible.is_empty() && !obs.unhealthy);
+    }
+
     #[test]
     fn snapshot_shipped_graphs_at_80x24() {
         for (name, file) in [

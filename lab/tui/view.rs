@@ -153,6 +153,9 @@ pub struct TopicView {
     /// Attached to a graph across processes, a topic that crosses them: its over-the-wire
     /// latency so far, (p50, p99) µs.
     pub wire_us: Option<(f64, f64)>,
+    /// The subscribers its publisher does not connect, their requested QoS not offered:
+    /// each subscriber's name with the policies that failed.
+    pub incompatible: Vec<(String, Vec<ratelab::qos::compat::Mismatch>)>,
 }
 
 /// The window and the segment: what the live numbers count over.

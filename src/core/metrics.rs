@@ -517,6 +517,23 @@ pub struct TopicMetrics {
     /// `requested_deadline_missed`.
     #[serde(flatten)]
     pub qos_counters: BTreeMap<String, u64>,
+    /// The subscriptions its publisher never connected because what they requested was
+    /// not offered (`[topic.requested.NODE]`, ROS 2's incompatible-QoS event), by node.
+    /// Absent when every subscription was connected.
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub incompatible_qos: BTreeMap<String, IncompatibleQos>,
+}
+
+/// One subscription left unconnected by incompatible QoS ([`TopicMetrics::incompatible_qos`]).
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub struct IncompatibleQos {
+    /// The policy that failed, as ROS 2's event names it (`RELIABILITY`, `DURABILITY`,
+    /// `DEADLINE`, `LIVELINESS`, `LIVELINESS_LEASE_DURATION`; the first of several).
+    pub policy: String,
+    /// The event in one line: `incompatible QoS: requested RELIABLE, offered BEST_EFFORT`.
+    pub event: String,
+    /// Messages published that never reached it.
+    pub not_delivered: u64,
 }
 
 /// One subscription's figures on a topic of several subscribers ([`TopicMetrics::subscriptions`]).
@@ -638,6 +655,18 @@ impl Metrics {
         }
     }
 
+    /// True when the actuator requested a QoS its input's publisher never offered, so
+    /// nothing published reached it ([`TopicMetrics::incompatible_qos`]).
+    fn actuator_unconnected(&self) -> bool {
+        self.topics.values().any(|t| {
+            t.incompatible_qos.iter().any(|(node, i)| {
+                self.nodes.get(node).is_some_and(|n| n.kind == "actuator")
+                    && t.published > 0
+                    && i.not_delivered == t.published
+            })
+        })
+    }
+
     /// QoS lines, only when something is set: `qos: /cmd KL1 latest dl 40 ms link 20%: 41
     /// lost, 12 offered deadline missed …`, `liveliness: policy not alive 1×`, and the
     /// watchdog's verdict.
@@ -695,6 +724,15 @@ impl Metrics {
                 })
                 .collect();
             lines.push(format!("liveliness: {}", parts.join(" | ")));
+        }
+        for (name, t) in self.topics_by_publisher() {
+            for (node, i) in &t.incompatible_qos {
+                lines.push(format!(
+                    "{name} → {node}: {} ({} not delivered)",
+                    i.event,
+                    counted(i.not_delivered, "message")
+                ));
+            }
         }
         if let Some(w) = &self.stopped_by_watchdog {
             lines.push(format!("STOPPED BY WATCHDOG: {w}"));
@@ -887,6 +925,9 @@ impl Metrics {
             if self.action_published == Some(0) {
                 // Nothing reached the actuator: there is no latency to give, not one of 0 ms.
                 "sense->act latency: none (no command was published to the actuator)".to_string()
+            } else if self.actuator_unconnected() {
+                // Published, and never delivered: no latency either.
+                "sense->act latency: none (the actuator's subscription was never connected: incompatible QoS)".to_string()
             } else if self.steps == 0 {
                 // Nothing was applied: the same, from the other end of the chain.
                 "sense->act latency: none (the actuator applied no command)".to_string()

@@ -26,6 +26,8 @@
 //! The defaults are the chapter's topic exactly, so a graph that sets none of them runs
 //! byte-identically to one written before QoS existed.
 
+pub mod compat;
+
 use crate::time::{Nanos, MAX_DURATION_S};
 use serde::{Deserialize, Serialize};
 

@@ -19,7 +19,9 @@
 //! in flight for `delay ± jitter`; a best-effort link *loses* some, a reliable one
 //! *retransmits* them). Time enters through the `now` every operation takes, so under the
 //! virtual clock all of it is deterministic. Every message published is accounted for:
-//! `published = seen + dropped + expired + lost + refused + unseen buffered + in flight`.
+//! `published = seen + dropped + expired + lost + refused + unmatched + unseen buffered + in
+//! flight` (*unmatched*: published while the subscription was left unconnected, its requested
+//! QoS incompatible with the offered: [`crate::qos::compat`]).
 //!
 //! A topic may carry [`Tap`]s, each told of every message as it is published (before the
 //! drop rule or a link decides its fate): how a run offers its topics outside without
@@ -87,6 +89,15 @@ pub struct TopicStats {
     /// Deadline periods that passed with no message arriving at the subscriber (ROS 2's
     /// *requested deadline missed*); beyond the offered ones, a link's losses and delays.
     pub requested_deadline_missed: u64,
+    /// Messages published while the subscription was not matched to its publisher (its
+    /// requested QoS incompatible with the offered, [`crate::qos::compat`]): they never
+    /// reached it, as ROS 2 never connects such a pair.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub unmatched: u64,
+}
+
+fn is_zero(n: &u64) -> bool {
+    *n == 0
 }
 
 impl TopicStats {
@@ -171,6 +182,10 @@ struct Inner<T> {
     retransmitted: u64,
     offered_missed: u64,
     requested_missed: u64,
+    /// False while the subscription's requested QoS is incompatible with the offered: a
+    /// publish is counted (by the publisher) but never reaches the queue.
+    matched: bool,
+    unmatched: u64,
     last_stamp: Nanos,
     /// When the publisher last published (the offered deadline's timer; 0 at the start).
     last_publish: Nanos,
@@ -218,7 +233,7 @@ impl<T> Inner<T> {
     /// Take the short path when the QoS allows it and the link is empty; leave it
     /// otherwise, with the timers brought up to date first.
     fn choose_path(&mut self) {
-        let plain = self.plain_qos && self.in_flight.is_empty();
+        let plain = self.plain_qos && self.in_flight.is_empty() && self.matched;
         if plain == self.plain {
             return;
         }
@@ -429,6 +444,8 @@ impl<T: Clone> Subscription<T> {
                 retransmitted: 0,
                 offered_missed: 0,
                 requested_missed: 0,
+                matched: true,
+                unmatched: 0,
                 last_stamp: Nanos::ZERO,
                 last_publish: Nanos::ZERO,
                 last_arrival: Nanos::ZERO,
@@ -522,6 +539,12 @@ impl<T: Clone> Subscription<T> {
             origin_stamp,
         };
         self.tell_taps(&msg);
+        if !inner.matched {
+            // Published, and told to the taps (the publisher did publish it), but never
+            // connected to this subscription.
+            inner.unmatched += 1;
+            return seq;
+        }
         match inner.qos.link {
             None => {
                 if inner.admit(stamp) {
@@ -626,6 +649,21 @@ impl<T: Clone> Subscription<T> {
         inner.choose_path();
     }
 
+    /// Connect the subscription to its publisher (`true`, as it starts) or leave it
+    /// unconnected (`false`: its requested QoS is incompatible with the offered,
+    /// [`crate::qos::compat`]). While unconnected, every publish is counted `unmatched` and
+    /// never reaches the queue; what was buffered before stays readable.
+    pub fn set_matched(&self, matched: bool) {
+        let mut inner = self.lock();
+        inner.matched = matched;
+        inner.choose_path();
+    }
+
+    /// Whether the subscription is connected to its publisher ([`Subscription::set_matched`]).
+    pub fn matched(&self) -> bool {
+        self.lock().matched
+    }
+
     /// Counters and depth as of the topic's latest operation.
     pub fn stats(&self) -> TopicStats {
         let now = self.lock().timers().0;
@@ -662,6 +700,7 @@ impl<T: Clone> Subscription<T> {
             in_flight: inner.in_flight.len() as u64,
             offered_deadline_missed: offered,
             requested_deadline_missed: requested,
+            unmatched: inner.unmatched,
         }
     }
 
@@ -1306,5 +1345,43 @@ mod tests {
         );
         assert!(s.requested_deadline_missed > 20, "{s:?}");
         assert!(s.lost > 50);
+    }
+
+    /// A subscription left unconnected (its requested QoS incompatible, `crate::qos::compat`)
+    /// gets nothing while the publisher goes on publishing; connected again, it gets what
+    /// is published from then on. Every message stays accounted for.
+    #[test]
+    fn an_unmatched_subscription_receives_nothing_and_counts_it() {
+        for pairs in ["depth=1", "depth=3,deadline_ms=15"] {
+            let topic = q(3, pairs);
+            topic.publish(1, Nanos::from_millis(0), None);
+            topic.set_matched(false);
+            assert!(!topic.matched());
+            for i in 1..=4 {
+                topic.publish(10 + i, Nanos::from_millis(10 * i as u64), None);
+            }
+            // What was buffered before stays readable; nothing since arrived.
+            assert_eq!(topic.read(Nanos::from_millis(45)).map(|m| m.data), Some(1));
+            let s = topic.stats();
+            assert_eq!(
+                (s.published, s.unmatched, s.seen),
+                (5, 4, 1),
+                "{pairs}: {s:?}"
+            );
+            topic.set_matched(true);
+            topic.publish(99, Nanos::from_millis(50), None);
+            assert_eq!(topic.read(Nanos::from_millis(55)).map(|m| m.data), Some(99));
+            let s = topic.stats();
+            assert_eq!(
+                s.published,
+                s.seen + s.dropped + s.unmatched + topic.unseen_buffered() as u64,
+                "{pairs}: {s:?}"
+            );
+            // Captured and restored with the queue.
+            let saved = topic.save();
+            topic.set_matched(false);
+            topic.load(&saved);
+            assert!(topic.matched());
+        }
     }
 }

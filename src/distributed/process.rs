@@ -439,6 +439,9 @@ fn wire_crossings(
     for &t in &outbound {
         let _ = handles.topic(t).set_depth(1);
         handles.topic(t).set_qos(TopicQos::default());
+        // A buffer for the wire, not a subscription: whatever the subscriber requested is
+        // judged in its own process, on its own copy.
+        handles.topic(t).set_matched(true);
     }
     let ends = subscribe_inbound(session, keys, spec, handles, (&inbound, slot), process)?;
     let block = zenoh::qos::CongestionControl::Block;

@@ -255,6 +255,49 @@ pub(crate) fn qos_of(spec: &GraphSpec, t: usize) -> QosProfile {
     }
 }
 
+/// The QoS subscriber `sub`'s subscription to topic `t` of `spec` announces (its token's):
+/// the offered QoS ([`qos_of`]) with each policy it requests in its place
+/// (`[topic.requested.NODE]`, `ratelab::qos::compat`), as a ROS 2 subscription announces
+/// its own requested profile and `ros2 topic info -v` lists both ends.
+pub(crate) fn requested_qos_of(spec: &GraphSpec, t: usize, sub: NodeId) -> QosProfile {
+    use crate::qos::compat::{Durability, LivelinessKind};
+    use hiroz_protocol::qos::{QosDurability, QosLiveliness};
+    let mut q = qos_of(spec, t);
+    let topic = &spec.topics[t];
+    let Some(r) = topic.requested.get(&spec.node(sub).name) else {
+        return q;
+    };
+    let dur = |d: Nanos| QosDuration {
+        sec: d.0 / 1_000_000_000,
+        nsec: d.0 % 1_000_000_000,
+    };
+    if let Some(rel) = r.reliability {
+        q.reliability = match rel {
+            Reliability::BestEffort => QosReliability::BestEffort,
+            Reliability::Reliable => QosReliability::Reliable,
+        };
+    }
+    if let Some(d) = r.durability {
+        q.durability = match d {
+            Durability::Volatile => QosDurability::Volatile,
+            Durability::TransientLocal => QosDurability::TransientLocal,
+        };
+    }
+    if let Some(d) = r.deadline {
+        q.deadline = dur(d);
+    }
+    if let Some(l) = r.liveliness {
+        q.liveliness = match l {
+            LivelinessKind::Automatic => QosLiveliness::Automatic,
+            LivelinessKind::ManualByTopic => QosLiveliness::ManualByTopic,
+        };
+    }
+    if let Some(d) = r.liveliness_lease {
+        q.liveliness_lease_duration = dur(d);
+    }
+    q
+}
+
 /// `/clock`'s QoS: best effort, keep last 1.
 pub(crate) fn clock_qos() -> QosProfile {
     QosProfile {
@@ -472,7 +515,8 @@ impl Bridge {
             }
             for &sub in topic.subscribers.iter().filter(|s| !elsewhere(**s)) {
                 let kind = EndpointKind::Subscription;
-                let ms = endpoint(&nodes[sub.0], kind, &topic.name, ty, qos);
+                let own = requested_qos_of(spec, t, sub);
+                let ms = endpoint(&nodes[sub.0], kind, &topic.name, ty, own);
                 subscriptions.push((ms, topic.depth));
             }
         }
@@ -928,6 +972,46 @@ mod tests {
         );
         assert_eq!(q.lifespan, QosDuration::INFINITE);
         assert_eq!(q.reliability, QosReliability::BestEffort);
+    }
+
+    /// A subscription announces what it requests where it requests something, the offer
+    /// elsewhere: both ends as ROS 2's tools list them.
+    #[test]
+    fn a_subscriptions_token_carries_its_own_requested_qos() {
+        use hiroz_protocol::qos::{QosDurability, QosLiveliness};
+        let text = std::fs::read_to_string(concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../../graphs/cartpole-incompatible-qos.toml"
+        ))
+        .unwrap()
+        .replace(
+            "reliability = \"reliable\"",
+            "reliability = \"reliable\"\ndurability = \"transient_local\"\ndeadline_ms = 25\nliveliness = \"manual_by_topic\"",
+        );
+        let spec = GraphSpec::parse(&text, "g.toml").unwrap();
+        let action = spec.topic_id("/action").unwrap();
+        let offered = qos_of(&spec, action.0);
+        let actuator = spec.node_id("actuator").unwrap();
+        let own = requested_qos_of(&spec, action.0, actuator);
+        assert_eq!(offered.reliability, QosReliability::BestEffort);
+        assert_eq!(own.reliability, QosReliability::Reliable);
+        assert_eq!(own.durability, QosDurability::TransientLocal);
+        assert_eq!(own.liveliness, QosLiveliness::ManualByTopic);
+        assert_eq!(
+            own.deadline,
+            QosDuration {
+                sec: 0,
+                nsec: 25_000_000
+            }
+        );
+        assert_eq!(
+            (own.history, own.lifespan),
+            (offered.history, offered.lifespan)
+        );
+        // Where nothing is requested, the subscription announces the offer.
+        let obs = spec.topic_id("/obs").unwrap();
+        let policy = spec.node_id("policy").unwrap();
+        assert_eq!(requested_qos_of(&spec, obs.0, policy), qos_of(&spec, obs.0));
     }
 
     #[test]

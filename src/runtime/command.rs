@@ -163,6 +163,8 @@ impl Command {
                 let t = spec.topic(id);
                 h.topic(id).set_depth(t.depth).map_err(|e| e.to_string())?;
                 h.topic(id).set_qos(t.qos);
+                // A subscription's request may now be met, or no longer.
+                crate::graph::connect_subscriptions(&h.spec, &h.topics);
                 Ok(())
             }
             Command::SetPolicy { spec } => {

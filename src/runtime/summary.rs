@@ -333,8 +333,57 @@ fn topic_metrics(
                     .into_iter()
                     .map(|c| (c.key().to_string(), s.counter(c)))
                     .collect(),
+                incompatible_qos: incompatible_qos(spec, st, TopicId(i), now_qos, s),
             };
             (t.name.clone(), m)
+        })
+        .collect()
+}
+
+/// Topic `t`'s subscriptions left unconnected by what they requested, by node: those the
+/// QoS at the end (`now_qos`) does not meet, and those that missed messages while a QoS in
+/// force earlier did not (`unmatched`). The event names what failed at the end, or else
+/// at the start.
+fn incompatible_qos(
+    spec: &GraphSpec,
+    st: &GraphState,
+    t: TopicId,
+    now_qos: crate::qos::TopicQos,
+    stats: &crate::topic::TopicStats,
+) -> std::collections::BTreeMap<String, crate::metrics::IncompatibleQos> {
+    let topic = spec.topic(t);
+    if topic.requested.is_empty() {
+        return Default::default();
+    }
+    let at_end = spec.incompatible(t, &now_qos);
+    let at_start = spec.incompatible(t, &topic.qos);
+    let subs = st.subscriptions.get(t.0).filter(|s| s.len() > 1);
+    topic
+        .subscribers
+        .iter()
+        .enumerate()
+        .filter_map(|(k, &n)| {
+            let not_delivered =
+                subs.map_or(stats.unmatched, |s| s.get(k).map_or(0, |s| s.unmatched));
+            let failed = at_end
+                .iter()
+                .chain(&at_start)
+                .find(|(b, ..)| *b == k)
+                .map(|(.., m)| m.clone());
+            if failed.is_none() && not_delivered == 0 {
+                return None;
+            }
+            let m = failed.unwrap_or_default();
+            let i = crate::metrics::IncompatibleQos {
+                policy: m.first().map_or("", |m| m.policy.as_str()).to_string(),
+                event: if m.is_empty() {
+                    "incompatible QoS for part of the run".to_string()
+                } else {
+                    crate::qos::compat::event_text(&m)
+                },
+                not_delivered,
+            };
+            Some((spec.node(n).name.clone(), i))
         })
         .collect()
 }

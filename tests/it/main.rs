@@ -63,6 +63,7 @@ mod hardening;
 mod hostile;
 mod python;
 mod qos;
+mod qos_compat;
 mod realtime;
 mod recording;
 mod reference_runs;

@@ -67,6 +67,12 @@ impl App {
         let dead = |n: NodeId| {
             self.alive.get(n.0).copied().flatten() == Some(false) || self.fault_of(n).is_some()
         };
+        let incompatible: Vec<_> = self
+            .graph
+            .incompatible(id, &qos)
+            .into_iter()
+            .map(|(_, node, m)| (node, m))
+            .collect();
         TopicView {
             name: spec.name.clone(),
             publisher: spec.publisher.0,
@@ -84,7 +90,8 @@ impl App {
             dropped: window.dropped,
             // A topic nobody reads evicts every message unread: not a drop anyone suffers.
             dropping: spec.subscriber().is_some() && window.dropped > 0,
-            unhealthy: dead(spec.publisher)
+            unhealthy: !incompatible.is_empty()
+                || dead(spec.publisher)
                 || spec.subscribers.iter().any(|&n| dead(n))
                 || self.live.window_counter(id, QosCounter::Lost) > 0
                 || self
@@ -116,6 +123,7 @@ impl App {
             }),
             selected: self.selected == Some(Selected::Topic(id)),
             wire_us: self.wire.get(id.0).copied().flatten(),
+            incompatible,
         }
     }
 

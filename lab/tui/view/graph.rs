@@ -361,6 +361,9 @@ pub(super) fn arrow_lines(t: &TopicView, w: usize, rows: usize) -> Vec<Line<'sta
         }
         None => name,
     };
+    if !t.incompatible.is_empty() {
+        return incompatible_arrow(t, name, w, rows);
+    }
     // The mark stays when the words do not fit (`25 drop ⚠` at 80 columns; the line may
     // take the column before the next box too).
     let drop_mark = if t.unhealthy && !t.dropping {
@@ -453,6 +456,62 @@ pub(super) fn arrow_lines(t: &TopicView, w: usize, rows: usize) -> Vec<Line<'sta
     );
     lines.extend(stale);
     lines.extend(wire);
+    lines
+}
+
+/// A subscription its publisher does not connect (what it requested is not offered,
+/// ROS 2's incompatible QoS): a broken red arrow, `incompatible QoS`, then who requested
+/// what as far as the rows go, and the publisher's rate (it goes on publishing).
+fn incompatible_arrow(
+    t: &TopicView,
+    name: Line<'static>,
+    w: usize,
+    rows: usize,
+) -> Vec<Line<'static>> {
+    let red = Style::new().fg(Color::Red).add_modifier(Modifier::BOLD);
+    let run = w.saturating_sub(2);
+    let mut lines = vec![
+        name,
+        Line::from(Span::styled(
+            format!("{}✗{}▷", "╌".repeat(run / 2), "╌".repeat(run - run / 2)),
+            red,
+        )),
+        Line::from(Span::styled(
+            first_that_fits(
+                ["incompatible QoS".to_string(), "incompatible".to_string()],
+                w + 1,
+            ),
+            red,
+        ))
+        .centered(),
+    ];
+    // `actuator: requested RELIABLE, offered BEST_EFFORT` where the rows allow, else what
+    // the first subscriber wanted (`wants RELIABLE`); the log pane has the whole event.
+    let words = t.incompatible.iter().flat_map(|(node, m)| {
+        let each: Vec<String> = m.iter().map(ToString::to_string).collect();
+        format!("{node}: {}", each.join("; "))
+            .split(' ')
+            .map(String::from)
+            .collect::<Vec<_>>()
+    });
+    let why = pack(words, " ", w);
+    let room = rows.saturating_sub(lines.len() + 1);
+    let why = if why.len() <= room {
+        why
+    } else {
+        let wanted = t
+            .incompatible
+            .first()
+            .and_then(|(_, m)| m.first())
+            .map_or_else(String::new, |m| m.requested.clone());
+        vec![first_that_fits([format!("wants {wanted}"), wanted], w + 1)]
+    };
+    lines.extend(
+        why.into_iter()
+            .take(room)
+            .map(|l| Line::from(Span::styled(l, Style::new().fg(Color::Red))).centered()),
+    );
+    lines.push(Line::from(format!("{:.1} msg/s", t.msg_per_s).dim()).centered());
     lines
 }
 

@@ -568,6 +568,8 @@ trait ErasedTopic: Send + Sync + fmt::Debug {
     fn stats_at(&self, now: Nanos) -> TopicStats;
     fn qos(&self) -> TopicQos;
     fn set_qos(&self, qos: TopicQos);
+    fn set_matched(&self, matched: bool);
+    fn matched(&self) -> bool;
     fn set_depth(&self, depth: usize) -> Result<(), ZeroDepth>;
     fn buffered(&self) -> usize;
     fn unseen_buffered(&self) -> usize;
@@ -623,6 +625,12 @@ impl<M: Message> ErasedTopic for Arc<Subscription<M>> {
     }
     fn set_qos(&self, qos: TopicQos) {
         Subscription::set_qos(self, qos);
+    }
+    fn set_matched(&self, matched: bool) {
+        Subscription::set_matched(self, matched);
+    }
+    fn matched(&self) -> bool {
+        Subscription::matched(self)
     }
     fn set_depth(&self, depth: usize) -> Result<(), ZeroDepth> {
         Subscription::set_depth(self, depth)
@@ -719,6 +727,7 @@ fn combined(all: Vec<TopicStats>) -> TopicStats {
         out.retransmitted += s.retransmitted;
         out.in_flight += s.in_flight;
         out.requested_deadline_missed += s.requested_deadline_missed;
+        out.unmatched += s.unmatched;
     }
     out
 }
@@ -746,6 +755,14 @@ impl<M: Message> ErasedTopic for FanOut<M> {
         for q in &self.queues {
             q.set_qos(qos);
         }
+    }
+    fn set_matched(&self, matched: bool) {
+        for q in &self.queues {
+            q.set_matched(matched);
+        }
+    }
+    fn matched(&self) -> bool {
+        self.queues.iter().all(|q| q.matched())
     }
     fn set_depth(&self, depth: usize) -> Result<(), ZeroDepth> {
         self.queues.iter().try_for_each(|q| q.set_depth(depth))
@@ -935,6 +952,19 @@ impl AnyTopic {
     /// Change the QoS while running (see [`Subscription::set_qos`]).
     pub fn set_qos(&self, qos: TopicQos) {
         self.0.set_qos(qos);
+    }
+
+    /// Connect every subscription of this topic (or of the one queue
+    /// [`AnyTopic::subscription`] gave) to the publisher, or leave them unconnected (see
+    /// [`Subscription::set_matched`]).
+    pub fn set_matched(&self, matched: bool) {
+        self.0.set_matched(matched);
+    }
+
+    /// Whether every subscription of it is connected to the publisher
+    /// ([`AnyTopic::set_matched`]).
+    pub fn matched(&self) -> bool {
+        self.0.matched()
     }
 
     /// Change the history depth (see [`Subscription::set_depth`]).

@@ -203,6 +203,48 @@ pub enum GraphError {
     Node(String),
 }
 
+/// Connect each subscription whose requested QoS its topic's QoS now meets, and leave
+/// unconnected each one it does not ([`GraphSpec::incompatible`]: ROS 2's compatibility
+/// rules): at the start of a run, and after a live change of a topic's QoS.
+pub fn connect_subscriptions(spec: &GraphSpec, topics: &[AnyTopic]) {
+    for (i, (t, topic)) in spec.topics.iter().zip(topics).enumerate() {
+        if t.requested.is_empty() {
+            continue;
+        }
+        let bad = spec.incompatible(TopicId(i), &topic.qos());
+        for (k, &n) in t.subscribers.iter().enumerate() {
+            let queue = topic.subscription(k);
+            let failed = bad.iter().find(|(b, ..)| *b == k);
+            let was = queue.matched();
+            queue.set_matched(failed.is_none());
+            // Said when it changes, as ROS 2 raises its event when the pair is discovered.
+            let node = Some(spec.node(n).name.as_str());
+            match failed {
+                Some((.., m)) if was => crate::textlog::emit_for(
+                    node,
+                    None,
+                    crate::textlog::Level::Warn,
+                    &format!(
+                        "incompatible QoS on {}: {}; it receives nothing",
+                        t.name,
+                        m.iter()
+                            .map(ToString::to_string)
+                            .collect::<Vec<_>>()
+                            .join("; ")
+                    ),
+                ),
+                None if !was => crate::textlog::emit_for(
+                    node,
+                    None,
+                    crate::textlog::Level::Info,
+                    &format!("QoS on {} now compatible: connected", t.name),
+                ),
+                _ => {}
+            }
+        }
+    }
+}
+
 impl Graph {
     /// Build `spec` around `plant` (already reset). Every policy node runs `brain`; sensor
     /// noise and links are seeded from `seed`. `observers` are told about every actuator
@@ -238,6 +280,7 @@ impl Graph {
                 )
             })
             .collect::<Result<Vec<_>, _>>()?;
+        connect_subscriptions(spec, &topics);
         let liveliness: Vec<Arc<Liveliness>> = spec
             .nodes
             .iter()

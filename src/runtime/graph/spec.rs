@@ -26,7 +26,9 @@
 //! A node may also take a `compute_ms` and a `callback_group`, and the file
 //! `[executors.NAME]` tables: `src/runtime/graph/spec/executors.rs` has their format and rules;
 //! `[processes.NAME]` tables (restart a launch's process when it fails):
-//! `src/runtime/graph/spec/processes.rs`. Reading a file, rule by rule, is
+//! `src/runtime/graph/spec/processes.rs`; under a `[[topic]]`, `[topic.requested.NODE]`
+//! tables (what that subscription requests, judged by ROS 2's QoS compatibility rules):
+//! `src/runtime/graph/spec/requested.rs`. Reading a file, rule by rule, is
 //! `src/runtime/graph/spec/build.rs`.
 //!
 //! Rules (each broken rule is a [`SpecError`] with the line and column of the culprit):
@@ -76,6 +78,7 @@
 mod build;
 mod executors;
 mod processes;
+mod requested;
 
 pub use executors::ExecutorSpec;
 pub use processes::{RestartPolicy, MAX_RESTARTS};
@@ -205,6 +208,11 @@ pub struct TopicSpec {
     /// The subscribers, in tie-break order (none: nobody reads it). Each has a queue of its
     /// own ([`crate::msg::AnyTopic::subscription`]).
     pub subscribers: Vec<NodeId>,
+    /// What subscriptions request of the publisher beyond the topic's QoS, by subscriber
+    /// name (the file's `[topic.requested.NODE]`; none: every subscription accepts what is
+    /// offered). A request the topic does not meet leaves that subscription unconnected
+    /// ([`GraphSpec::incompatible`], `src/runtime/graph/spec/requested.rs`).
+    pub requested: std::collections::BTreeMap<String, crate::qos::compat::RequestedQos>,
 }
 
 impl TopicSpec {
@@ -382,6 +390,8 @@ struct RawTopic {
     on_deadline_missed: Option<Spanned<OnDeadlineMissed>>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     link: Option<Spanned<RawLink>>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    requested: Option<requested::RawRequests>,
 }
 
 #[derive(Deserialize, Serialize)]
@@ -599,6 +609,7 @@ impl GraphSpec {
                                     },
                                 )
                             }),
+                            requested: requested::to_raw(t),
                         },
                     )
                 })

@@ -3,9 +3,9 @@
 //! their topics, the tie-break order computed and the chapter's chain found.
 
 use super::{
-    check_actuator_rate, check_depth, check_rate_hz, executors, processes, valid_node_name,
-    valid_python_name, valid_topic_name, Chain, Ctx, GraphSpec, NodeSpec, RawGraph, RawNode,
-    RawTopic, SpecError, TopicSpec, MAX_PYTHON_PARAMS, MAX_SUBSCRIBERS,
+    check_actuator_rate, check_depth, check_rate_hz, executors, processes, requested,
+    valid_node_name, valid_python_name, valid_topic_name, Chain, Ctx, GraphSpec, NodeSpec,
+    RawGraph, RawNode, RawTopic, SpecError, TopicSpec, MAX_PYTHON_PARAMS, MAX_SUBSCRIBERS,
 };
 use super::{Code, Kind, MsgType, NodeId, Plant, PythonCode, TopicId};
 use crate::graph::kind::{Params, Ports};
@@ -166,6 +166,14 @@ pub(super) fn build(cx: &Ctx<'_>, raw: RawGraph) -> Result<GraphSpec, SpecError>
     if let Some(p) = &raw.processes {
         spec.restart = processes::processes(cx, p, &spec)?;
     }
+    // The subscriptions' requests, now that every topic knows its subscribers.
+    for (i, t) in raw.topics.iter().enumerate() {
+        if let Some(r) = &t.get_ref().requested {
+            let got =
+                requested::requested(cx, r, &spec.topics[i], |n| spec.nodes[n.0].name.clone())?;
+            spec.topics[i].requested = got;
+        }
+    }
     spec.chain = find_chain(&spec);
     Ok(spec)
 }
@@ -222,6 +230,7 @@ fn read_topics(
             qos,
             publisher: NodeId(usize::MAX),
             subscribers: Vec::new(),
+            requested: std::collections::BTreeMap::new(),
         });
         topic_spans.push(t_ref.name.span());
     }
