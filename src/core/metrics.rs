@@ -522,6 +522,23 @@ pub struct TopicMetrics {
     /// Absent when every subscription was connected.
     #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
     pub incompatible_qos: BTreeMap<String, IncompatibleQos>,
+    /// The subscriptions of nodes that joined late (`start_ms`), by node: when, and what
+    /// they found kept for them. Absent when none did.
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub late_joiners: BTreeMap<String, LateJoiner>,
+}
+
+/// A subscription whose node joined the graph late ([`TopicMetrics::late_joiners`]).
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub struct LateJoiner {
+    /// When it joined, s of run time.
+    pub start_s: f64,
+    /// Messages published before it joined that it received as it joined: a
+    /// transient-local topic's last `depth` (0 from a volatile topic, or when the run ended
+    /// before it joined).
+    pub history: u64,
+    /// The topic's durability: `volatile` or `transient_local`.
+    pub durability: String,
 }
 
 /// One subscription left unconnected by incompatible QoS ([`TopicMetrics::incompatible_qos`]).
@@ -726,6 +743,14 @@ impl Metrics {
             lines.push(format!("liveliness: {}", parts.join(" | ")));
         }
         for (name, t) in self.topics_by_publisher() {
+            for (node, j) in &t.late_joiners {
+                lines.push(format!(
+                    "{name} → {node} joined at {:.2} s and received {} from before ({})",
+                    j.start_s,
+                    counted(j.history, "message"),
+                    j.durability.replace('_', "-")
+                ));
+            }
             for (node, i) in &t.incompatible_qos {
                 lines.push(format!(
                     "{name} → {node}: {} ({} not delivered)",

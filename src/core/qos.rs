@@ -19,6 +19,7 @@
 //! | `deadline_ms` | > 0 | none |
 //! | `lifespan_ms` | > 0 | none |
 //! | `reliability` | `best_effort`, `reliable` | `best_effort` |
+//! | `durability` | `volatile`, `transient_local` (history for late joiners) | `volatile` |
 //! | `on_deadline_missed` | `hold`, `zero`, `stop` (the actuator's input only) | `hold` |
 //! | `loss`, `delay_ms`, `jitter_ms`, `retransmit_ms` | the link (`link = { … }` in a file) | no link |
 //!
@@ -141,6 +142,14 @@ pub struct TopicQos {
     pub link: Option<Link>,
     /// The subscriber's reaction to a missed deadline (the actuator's input only).
     pub on_deadline_missed: OnDeadlineMissed,
+    /// Volatile, or transient local: the publisher keeps its last *depth* messages for a
+    /// subscription that joins later (a node with a `start_ms`), as ROS 2's durability.
+    #[serde(default, skip_serializing_if = "is_volatile")]
+    pub durability: compat::Durability,
+}
+
+fn is_volatile(d: &compat::Durability) -> bool {
+    *d == compat::Durability::Volatile
 }
 
 impl TopicQos {
@@ -181,6 +190,9 @@ impl TopicQos {
         }
         if let Some(l) = self.lifespan {
             parts.push(format!("ls {l}"));
+        }
+        if self.durability == compat::Durability::TransientLocal {
+            parts.push("transient".into());
         }
         let rel = self.reliability == Reliability::Reliable;
         match &self.link {
@@ -274,7 +286,7 @@ pub fn check_combination(q: &TopicQos, subscriber_is_actuator: bool) -> Result<(
 pub const LINK_KEYS: [&str; 4] = ["loss", "delay_ms", "jitter_ms", "retransmit_ms"];
 
 /// Names of the keys [`apply_key`] knows, for messages.
-pub const KEYS: &str = "history, depth, delivery, deadline_ms, lifespan_ms, reliability, on_deadline_missed, loss, delay_ms, jitter_ms, retransmit_ms";
+pub const KEYS: &str = "history, depth, delivery, deadline_ms, lifespan_ms, reliability, durability, on_deadline_missed, loss, delay_ms, jitter_ms, retransmit_ms";
 
 /// Set one key (a `--qos` pair) on `qos` and `depth`, with the graph file's names and
 /// values (`deadline_ms=none` and `lifespan_ms=none` turn them off). A link key on a topic without a link starts one (no loss, no delay). Keys are
@@ -331,6 +343,7 @@ pub fn apply_key(
         "on_deadline_missed" => {
             qos.on_deadline_missed = word(key, value)?;
         }
+        "durability" => qos.durability = word(key, value)?,
         "loss" => {
             let mut l = link(qos);
             l.loss = check_loss(num(value)?)?;

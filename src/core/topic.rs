@@ -94,6 +94,11 @@ pub struct TopicStats {
     /// reached it, as ROS 2 never connects such a pair.
     #[serde(default, skip_serializing_if = "is_zero")]
     pub unmatched: u64,
+    /// A subscription that joined late ([`Subscription::set_joins_at`]), once it has: how
+    /// many messages published before it joined it received (a transient-local topic's
+    /// history; 0 from a volatile one).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub history_on_join: Option<u64>,
 }
 
 fn is_zero(n: &u64) -> bool {
@@ -186,6 +191,12 @@ struct Inner<T> {
     /// publish is counted (by the publisher) but never reaches the queue.
     matched: bool,
     unmatched: u64,
+    /// When the subscription comes into being (its node joins late); `None`: from t = 0.
+    /// Before it, nothing is delivered: a transient-local topic keeps its last `depth`
+    /// messages for it (they arrive as it joins), a volatile one keeps none.
+    joins_at: Option<Nanos>,
+    /// Messages it found kept for it when it joined (transient local); `None` before.
+    joined_with: Option<u64>,
     last_stamp: Nanos,
     /// When the publisher last published (the offered deadline's timer; 0 at the start).
     last_publish: Nanos,
@@ -233,7 +244,8 @@ impl<T> Inner<T> {
     /// Take the short path when the QoS allows it and the link is empty; leave it
     /// otherwise, with the timers brought up to date first.
     fn choose_path(&mut self) {
-        let plain = self.plain_qos && self.in_flight.is_empty() && self.matched;
+        let plain =
+            self.plain_qos && self.in_flight.is_empty() && self.matched && self.joins_at.is_none();
         if plain == self.plain {
             return;
         }
@@ -272,6 +284,28 @@ impl<T> Inner<T> {
         }
     }
 
+    /// A message arriving before the subscription exists ([`Inner::joins_at`]): kept as the
+    /// publisher's history when the topic is transient local (its last `depth`; what falls
+    /// out of it was never delivered), else not delivered at all. True when it is kept.
+    fn keep_for_late_joiner(&mut self) -> bool {
+        if self.qos.durability != crate::qos::compat::Durability::TransientLocal {
+            self.unmatched += 1;
+            return false;
+        }
+        if self.buf.len() >= self.depth && self.buf.pop_front().is_some() {
+            self.unmatched += 1;
+        }
+        true
+    }
+
+    /// The subscription comes into being at `now` when it is due to: what it finds kept
+    /// for it is counted once.
+    fn join(&mut self, now: Nanos) {
+        if self.joined_with.is_none() && self.joins_at.is_some_and(|j| now >= j) {
+            self.joined_with = Some(self.buf.len() as u64);
+        }
+    }
+
     /// A message reaches the subscriber's queue at `at`, under the history rule.
     fn arrive(&mut self, at: Nanos, msg: Message<T>) {
         if self.admit(at) {
@@ -285,6 +319,9 @@ impl<T> Inner<T> {
     /// builds its message in the queue itself (the chapter's topic's hot path).
     #[inline(always)]
     fn admit(&mut self, at: Nanos) -> bool {
+        if self.joins_at.is_some_and(|j| at < j) {
+            return self.keep_for_late_joiner();
+        }
         if let Some(d) = self.qos.deadline {
             self.requested_missed += deadline_misses(at.saturating_sub(self.last_arrival), d);
         }
@@ -446,6 +483,8 @@ impl<T: Clone> Subscription<T> {
                 requested_missed: 0,
                 matched: true,
                 unmatched: 0,
+                joins_at: None,
+                joined_with: None,
                 last_stamp: Nanos::ZERO,
                 last_publish: Nanos::ZERO,
                 last_arrival: Nanos::ZERO,
@@ -524,6 +563,7 @@ impl<T: Clone> Subscription<T> {
             return seq;
         }
         inner.settle(stamp);
+        inner.join(stamp);
         if let Some(d) = inner.qos.deadline {
             inner.offered_missed += deadline_misses(stamp.saturating_sub(inner.last_publish), d);
         }
@@ -593,6 +633,7 @@ impl<T: Clone> Subscription<T> {
             return Some(newest);
         }
         inner.settle(now);
+        inner.join(now);
         if inner.plain_qos {
             inner.choose_path();
         }
@@ -659,6 +700,18 @@ impl<T: Clone> Subscription<T> {
         inner.choose_path();
     }
 
+    /// Make the subscription come into being at run time `at` (its node joins the graph
+    /// late, ROS 2's *late joiner*): before it nothing is delivered; a transient-local topic
+    /// keeps its last `depth` messages for it, which it finds as it joins
+    /// ([`TopicStats::history_on_join`]), and a volatile one keeps none. Its requested
+    /// deadline counts from `at`. Set before the run starts.
+    pub fn set_joins_at(&self, at: Nanos) {
+        let mut inner = self.lock();
+        inner.joins_at = Some(at);
+        inner.last_arrival = inner.last_arrival.max(at);
+        inner.choose_path();
+    }
+
     /// Whether the subscription is connected to its publisher ([`Subscription::set_matched`]).
     pub fn matched(&self) -> bool {
         self.lock().matched
@@ -701,6 +754,7 @@ impl<T: Clone> Subscription<T> {
             offered_deadline_missed: offered,
             requested_deadline_missed: requested,
             unmatched: inner.unmatched,
+            history_on_join: inner.joined_with,
         }
     }
 
@@ -1382,6 +1436,53 @@ mod tests {
             topic.set_matched(false);
             topic.load(&saved);
             assert!(topic.matched());
+        }
+    }
+
+    /// A subscription that comes into being late (its node's `start_ms`) gets nothing
+    /// published before it from a volatile topic, and the last `depth` messages from a
+    /// transient-local one (ROS 2's durability); either way the rest is accounted for.
+    #[test]
+    fn a_late_joiner_gets_history_only_from_a_transient_local_topic() {
+        for (durability, history) in [("volatile", vec![]), ("transient_local", vec![7, 8, 9])] {
+            let topic = q(3, &format!("durability={durability},delivery=fifo"));
+            topic.set_joins_at(Nanos::from_millis(100));
+            for i in 0..10u32 {
+                topic.publish(i, Nanos::from_millis(10 * u64::from(i)), None);
+            }
+            let got: Vec<u32> = (0..history.len().max(1))
+                .filter_map(|k| {
+                    topic
+                        .read(Nanos::from_millis(100 + k as u64))
+                        .map(|m| m.data)
+                })
+                .collect();
+            if history.is_empty() {
+                assert!(got.is_empty(), "{durability}: {got:?}");
+            } else {
+                assert_eq!(got, history, "{durability}");
+            }
+            topic.publish(10, Nanos::from_millis(110), None);
+            assert_eq!(
+                topic.read(Nanos::from_millis(111)).map(|m| m.data),
+                Some(10)
+            );
+            let s = topic.stats();
+            assert_eq!(
+                s.history_on_join,
+                Some(history.len() as u64),
+                "{durability}"
+            );
+            assert_eq!(s.unmatched, 10 - history.len() as u64, "{durability}");
+            assert_eq!(
+                s.dropped, 0,
+                "what fell out of the history was never delivered"
+            );
+            assert_eq!(
+                s.published,
+                s.seen + s.dropped + s.unmatched + topic.unseen_buffered() as u64,
+                "{durability}: {s:?}"
+            );
         }
     }
 }

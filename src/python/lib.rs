@@ -250,7 +250,8 @@ pub fn describe(py: Python<'_>, err: &PyErr, script: &str) -> String {
 
 /// How long this thread's call into learners' code had run when [`interrupt_callbacks`]
 /// interrupted it, if `err` is that interruption and the call had run [`HUNG_AFTER`] or
-/// longer: a hung callback, not a slow one.
+/// longer, or the watchdog had already said it has not returned: a hung callback, not a
+/// slow one (a Ctrl-C that answers "has not returned after 0.5 s" stops a hang).
 fn hung_for(py: Python<'_>, err: &PyErr) -> Option<Duration> {
     if !err.is_instance_of::<pyo3::exceptions::PyKeyboardInterrupt>(py) {
         return None;
@@ -259,7 +260,8 @@ fn hung_for(py: Python<'_>, err: &PyErr) -> Option<Duration> {
     let thread = unsafe { pyo3::ffi::PyThread_get_thread_ident() } as u64;
     let running = lock_running();
     let call = running.get(&thread).filter(|r| r.interrupted)?;
-    Some(call.since.elapsed()).filter(|d| *d >= HUNG_AFTER)
+    let ran = call.since.elapsed();
+    (ran >= HUNG_AFTER || call.warned).then_some(ran)
 }
 
 /// How long a call into learners' code runs without returning (wall time) before it is

@@ -229,7 +229,10 @@ pub fn check_graph(spec: &GraphSpec) -> Result<(), String> {
     Ok(())
 }
 
-/// The QoS topic `t` of `spec` is offered with (its publisher's token's).
+/// The QoS topic `t` of `spec` is offered with (its publisher's token's). Its durability
+/// is always VOLATILE here: a transient-local topic keeps its history for the graph's own
+/// late joiners, and ratelab does not serve that history over Zenoh (rmw_zenoh_cpp's
+/// publication cache) yet, so it does not promise it to ROS 2's.
 pub(crate) fn qos_of(spec: &GraphSpec, t: usize) -> QosProfile {
     let topic = &spec.topics[t];
     let q = &topic.qos;

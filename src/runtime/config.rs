@@ -162,6 +162,21 @@ pub fn phase_offset_from_ms(ms: f64) -> Result<Nanos, ConfigError> {
 }
 
 impl RunConfig {
+    /// Each node's first deadline, by node index: its phase offset, or when it joins the
+    /// graph (`start_ms`, [`crate::graph::spec::NodeSpec::start`]) if later. What every
+    /// scheduler starts a node's timer from.
+    pub fn first_deadlines(&self) -> Vec<Nanos> {
+        self.graph
+            .nodes
+            .iter()
+            .enumerate()
+            .map(|(i, n)| {
+                let phase = self.phase_offsets.get(i).copied().unwrap_or(Nanos::ZERO);
+                n.start.map_or(phase, |s| s.max(phase))
+            })
+            .collect()
+    }
+
     /// The chain sensor's rate at the start, Hz (the chapter's `sensor_hz`); `None` for a
     /// graph without the chapter's chain.
     pub fn sensor_hz(&self) -> Option<f64> {

@@ -104,7 +104,7 @@ pub fn virtual_scheduler(
 ) -> VirtualScheduler {
     VirtualScheduler::with_plan(
         nodes,
-        &cfg.phase_offsets,
+        &cfg.first_deadlines(),
         cfg.graph.execution_plan(),
         cfg.graph.has_executors_or_compute(),
     )

@@ -334,6 +334,7 @@ fn topic_metrics(
                     .map(|c| (c.key().to_string(), s.counter(c)))
                     .collect(),
                 incompatible_qos: incompatible_qos(spec, st, TopicId(i), now_qos, s),
+                late_joiners: late_joiners(spec, st, TopicId(i), now_qos, s),
             };
             (t.name.clone(), m)
         })
@@ -384,6 +385,42 @@ fn incompatible_qos(
                 not_delivered,
             };
             Some((spec.node(n).name.clone(), i))
+        })
+        .collect()
+}
+
+/// Topic `t`'s subscriptions whose nodes joined late (`start_ms`), by node: when, and how
+/// many messages from before they received as they joined (`history_on_join`).
+fn late_joiners(
+    spec: &GraphSpec,
+    st: &GraphState,
+    t: TopicId,
+    now_qos: crate::qos::TopicQos,
+    stats: &crate::topic::TopicStats,
+) -> std::collections::BTreeMap<String, crate::metrics::LateJoiner> {
+    let topic = spec.topic(t);
+    let subs = st.subscriptions.get(t.0).filter(|s| s.len() > 1);
+    topic
+        .subscribers
+        .iter()
+        .enumerate()
+        .filter_map(|(k, &n)| {
+            let start = spec.node(n).start?;
+            let history = subs
+                .map_or(stats.history_on_join, |s| {
+                    s.get(k).and_then(|s| s.history_on_join)
+                })
+                .unwrap_or(0);
+            let durability = match now_qos.durability {
+                crate::qos::compat::Durability::Volatile => "volatile",
+                crate::qos::compat::Durability::TransientLocal => "transient_local",
+            };
+            let j = crate::metrics::LateJoiner {
+                start_s: round_to(start.as_secs_f64(), 6),
+                history,
+                durability: durability.to_string(),
+            };
+            Some((spec.node(n).name.clone(), j))
         })
         .collect()
 }

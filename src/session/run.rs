@@ -77,7 +77,7 @@ pub struct RunReport {
 pub fn real_options(cfg: &RunConfig) -> RealOptions {
     RealOptions {
         spin_margin: cfg.spin_margin,
-        phase_offsets: cfg.phase_offsets.to_vec(),
+        phase_offsets: cfg.first_deadlines(),
         rt_priority: cfg.rt_priority,
         plan: Some(cfg.graph.execution_plan()),
         track: cfg.graph.has_executors_or_compute(),

@@ -23,13 +23,21 @@ fn cfg(graph: GraphSpec, secs: u64) -> RunConfig {
 }
 
 fn run_virtual(cfg: &RunConfig) -> (ratelab::metrics::Metrics, String) {
+    let (m, trace, _) = run_with_physics(cfg);
+    (m, trace)
+}
+
+/// The run's figures, its whole trace (counters included) and each step's pole angle and
+/// action (the physics alone).
+fn run_with_physics(cfg: &RunConfig) -> (ratelab::metrics::Metrics, String, Vec<(f64, f64)>) {
     let opts = RunOptions {
         keep_trace: true,
         ..RunOptions::default()
     };
     let r = run(cfg, Box::new(Scripted), opts).unwrap();
     let trace = format!("{:?}", r.trace);
-    (r.metrics, trace)
+    let physics = r.trace.iter().map(|s| (s.pole_angle, s.action)).collect();
+    (r.metrics, trace, physics)
 }
 
 #[test]
@@ -209,4 +217,102 @@ fn a_launch_across_processes_cuts_off_the_same_subscription() {
     let b = std::fs::read_to_string(many.join("metrics.json")).unwrap();
     assert!(a.contains("\"incompatible_qos\""), "{a}");
     assert_eq!(a, b);
+}
+
+/// The monitor graph with the monitor joining at 2 s and `/obs` of depth 5 and durability
+/// `durability`, written beside a copy of its script.
+fn late_monitor(dir: &std::path::Path, durability: &str) -> GraphSpec {
+    let text = std::fs::read_to_string(repo("graphs/cartpole-monitor.toml"))
+        .unwrap()
+        .replace(
+            "script = \"nodes/obs_monitor.py\"",
+            "script = \"nodes/obs_monitor.py\"\nstart_ms = 2000",
+        )
+        .replace(
+            "name = \"/obs\"\ntype = \"state\"\ndepth = 1",
+            &format!("name = \"/obs\"\ntype = \"state\"\ndepth = 5\ndurability = \"{durability}\""),
+        );
+    assert!(text.contains("start_ms = 2000") && text.contains("durability"));
+    std::fs::create_dir_all(dir.join("nodes")).unwrap();
+    std::fs::copy(
+        repo("graphs/nodes/obs_monitor.py"),
+        dir.join("nodes/obs_monitor.py"),
+    )
+    .unwrap();
+    let file = dir.join(format!("{durability}.toml"));
+    std::fs::write(&file, text).unwrap();
+    GraphSpec::load(&file).unwrap()
+}
+
+/// A node that joins late (`start_ms`) receives what was published before it only from a
+/// transient-local topic, the last `depth` messages; from a volatile one, nothing. The
+/// others' subscriptions, there from the start, are untouched.
+#[test]
+fn a_late_joiner_gets_the_last_depth_messages_only_under_transient_local() {
+    let _machine = crate::machine::shared();
+    ratelab::init(); // Python nodes through the library, as a program runs them
+    let dir = tempfile::tempdir().unwrap();
+    let mut traces = Vec::new();
+    for (durability, history) in [("volatile", 0), ("transient_local", 5)] {
+        let g = late_monitor(dir.path(), durability);
+        assert_eq!(
+            g.node(g.node_id("monitor").unwrap()).start,
+            Some(Nanos(2 * Nanos::SECOND.0))
+        );
+        let (m, _, physics) = run_with_physics(&cfg(g, 5));
+        assert!(m.balanced, "{durability}: {m:?}");
+        let j = &m.topics["/obs"].late_joiners["monitor"];
+        assert_eq!((j.start_s, j.history), (2.0, history), "{durability}");
+        assert_eq!(j.durability, durability);
+        // It ticks from its start: 2.0, 2.1, … 5.0 s at 10 Hz (the run's last instant
+        // included, as every node's).
+        assert_eq!(m.nodes["monitor"].ticks, 31, "{durability}");
+        assert_eq!(m.nodes["sensor"].ticks, 251, "{durability}");
+        let lines = m.summary_lines(None).join("\n");
+        let said = format!(
+            "/obs → monitor joined at 2.00 s and received {history} messages from before ({})",
+            durability.replace('_', "-")
+        );
+        assert!(lines.contains(&said), "{lines}");
+        traces.push(physics);
+    }
+    assert_eq!(
+        traces[0], traces[1],
+        "the policy's own queue is not the monitor's"
+    );
+}
+
+#[test]
+fn bad_durabilities_and_start_times_are_refused_at_their_place() {
+    let chapter = std::fs::read_to_string(repo("graphs/cartpole.toml")).unwrap();
+    let refused = |from: &str, to: &str, says: &str| {
+        assert!(chapter.contains(from), "{from}");
+        let e = GraphSpec::parse(&chapter.replacen(from, to, 1), "g.toml")
+            .unwrap_err()
+            .to_string();
+        assert!(e.starts_with("g.toml:") && e.contains(says), "{e}");
+    };
+    refused(
+        "subscribes = \"/action\"",
+        "subscribes = \"/action\"\nstart_ms = 500",
+        "the actuator steps the plant from t = 0: it cannot join late (start_ms)",
+    );
+    refused(
+        "name = \"policy\"",
+        "name = \"policy\"\nstart_ms = -3",
+        "start_ms must be > 0",
+    );
+    refused(
+        "depth = 1             # history depth",
+        "durability = \"persistent\"\ndepth = 1             # history depth",
+        "unknown variant `persistent`",
+    );
+    // `--qos` takes the key too.
+    let mut g = GraphSpec::chapter();
+    g.set_qos("/obs", "durability=transient_local").unwrap();
+    assert!(g.set_qos("/obs", "durability=forever").is_err());
+    assert_eq!(
+        g.topic(g.topic_id("/obs").unwrap()).qos.short(1),
+        "KL1 latest transient"
+    );
 }

@@ -570,6 +570,7 @@ trait ErasedTopic: Send + Sync + fmt::Debug {
     fn set_qos(&self, qos: TopicQos);
     fn set_matched(&self, matched: bool);
     fn matched(&self) -> bool;
+    fn set_joins_at(&self, at: Nanos);
     fn set_depth(&self, depth: usize) -> Result<(), ZeroDepth>;
     fn buffered(&self) -> usize;
     fn unseen_buffered(&self) -> usize;
@@ -631,6 +632,9 @@ impl<M: Message> ErasedTopic for Arc<Subscription<M>> {
     }
     fn matched(&self) -> bool {
         Subscription::matched(self)
+    }
+    fn set_joins_at(&self, at: Nanos) {
+        Subscription::set_joins_at(self, at);
     }
     fn set_depth(&self, depth: usize) -> Result<(), ZeroDepth> {
         Subscription::set_depth(self, depth)
@@ -763,6 +767,11 @@ impl<M: Message> ErasedTopic for FanOut<M> {
     }
     fn matched(&self) -> bool {
         self.queues.iter().all(|q| q.matched())
+    }
+    fn set_joins_at(&self, at: Nanos) {
+        for q in &self.queues {
+            q.set_joins_at(at);
+        }
     }
     fn set_depth(&self, depth: usize) -> Result<(), ZeroDepth> {
         self.queues.iter().try_for_each(|q| q.set_depth(depth))
@@ -965,6 +974,12 @@ impl AnyTopic {
     /// ([`AnyTopic::set_matched`]).
     pub fn matched(&self) -> bool {
         self.0.matched()
+    }
+
+    /// Make every subscription of it (or the one queue [`AnyTopic::subscription`] gave)
+    /// come into being at `at` (see [`Subscription::set_joins_at`]).
+    pub fn set_joins_at(&self, at: Nanos) {
+        self.0.set_joins_at(at);
     }
 
     /// Change the history depth (see [`Subscription::set_depth`]).

@@ -30,10 +30,9 @@
 //!
 //! A policy a subscription does not request (a key its `[topic.requested.NODE]` table leaves
 //! out) accepts any offer: a graph that requests nothing connects every pair, as the
-//! chapter's graph does. What ratelab offers: a topic's reliability and deadline
-//! ([`crate::qos::TopicQos`]), *volatile* durability (ratelab keeps no history for late
-//! joiners), and its publisher node's liveliness — *automatic* (a node asserts it by
-//! ticking) with the node's lease.
+//! chapter's graph does. What ratelab offers: a topic's reliability, durability and deadline
+//! ([`crate::qos::TopicQos`]), and its publisher node's liveliness — *automatic* (a node
+//! asserts it by ticking) with the node's lease.
 
 use crate::qos::{Reliability, TopicQos};
 use crate::time::Nanos;
@@ -106,12 +105,12 @@ pub struct OfferedQos {
 
 impl OfferedQos {
     /// What a ratelab topic of `qos`, published by a node of liveliness lease `lease`,
-    /// offers: its reliability and deadline, volatile durability, automatic liveliness with
-    /// the lease.
+    /// offers: its reliability, durability and deadline, automatic liveliness with the
+    /// lease.
     pub fn of_topic(qos: &TopicQos, lease: Option<Nanos>) -> OfferedQos {
         OfferedQos {
             reliability: qos.reliability,
-            durability: Durability::Volatile,
+            durability: qos.durability,
             deadline: qos.deadline,
             liveliness: LivelinessKind::Automatic,
             liveliness_lease: lease,

@@ -75,8 +75,12 @@ impl Launch<'_> {
         let (names, placement, link) = (&self.names, &self.placement, &self.link);
         let slots = slots_of(spec)?;
         // The whole graph's plan: its events are the processes' reports, in order.
-        let mut sched =
-            VirtualScheduler::with_plan(&slots, &cfg.phase_offsets, spec.execution_plan(), false);
+        let mut sched = VirtualScheduler::with_plan(
+            &slots,
+            &cfg.first_deadlines(),
+            spec.execution_plan(),
+            false,
+        );
         let lookahead = slots
             .iter()
             .map(|n| n.rate().period().0)

@@ -85,15 +85,11 @@ pub(super) fn real_clock(
 /// Each local node's first tick (`index`: their graph indices): its phase offset, or for
 /// a process that joined `late` into the run, its next tick on the run's grid.
 fn first_ticks(share: &Share, index: &[usize], late: Nanos) -> Vec<Nanos> {
+    let firsts = share.cfg.first_deadlines();
     index
         .iter()
         .map(|&i| {
-            let first = share
-                .cfg
-                .phase_offsets
-                .get(i)
-                .copied()
-                .unwrap_or(Nanos::ZERO);
+            let first = firsts.get(i).copied().unwrap_or(Nanos::ZERO);
             let period = share.handles.rates[i].period();
             if late <= first || period.0 == 0 {
                 first

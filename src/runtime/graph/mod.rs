@@ -281,6 +281,14 @@ impl Graph {
             })
             .collect::<Result<Vec<_>, _>>()?;
         connect_subscriptions(spec, &topics);
+        // A node that joins late has subscriptions that come into being with it.
+        for (t, topic) in spec.topics.iter().zip(&topics) {
+            for (k, &n) in t.subscribers.iter().enumerate() {
+                if let Some(at) = spec.node(n).start {
+                    topic.subscription(k).set_joins_at(at);
+                }
+            }
+        }
         let liveliness: Vec<Arc<Liveliness>> = spec
             .nodes
             .iter()

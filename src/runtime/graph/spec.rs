@@ -20,6 +20,7 @@
 //! depth = 1                # history depth (keep-last), ≥ 1
 //! # QoS, all optional (crate::qos; ROS 2's names): history = "keep_all", delivery = "fifo",
 //! # deadline_ms = 40, lifespan_ms = 60, reliability = "reliable", on_deadline_missed = "zero",
+//! # durability = "transient_local",
 //! # link = { loss = 0.05, delay_ms = 10, jitter_ms = 3 }
 //! ```
 //!
@@ -164,6 +165,11 @@ pub struct NodeSpec {
     /// Its callback group, a group of the executor holding it ([`ExecutorSpec`]); `None`:
     /// a mutually exclusive group of its own.
     pub callback_group: Option<String>,
+    /// When it joins the graph, run time (`start_ms`; ROS 2's *late joiner*): its first
+    /// tick is then (or at its phase offset, if later), and its subscriptions come into
+    /// being then, so what was published before reaches it only from a transient-local
+    /// topic (its last `depth` messages). `None`: from t = 0. Never the actuator's.
+    pub start: Option<Nanos>,
 }
 
 impl NodeSpec {
@@ -356,6 +362,8 @@ struct RawNode {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     liveliness_lease_ms: Option<Spanned<f64>>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
+    start_ms: Option<Spanned<f64>>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     process: Option<Spanned<String>>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     script: Option<Spanned<String>>,
@@ -386,6 +394,8 @@ struct RawTopic {
     lifespan_ms: Option<Spanned<f64>>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     reliability: Option<Spanned<Reliability>>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    durability: Option<Spanned<crate::qos::compat::Durability>>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     on_deadline_missed: Option<Spanned<OnDeadlineMissed>>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -563,6 +573,7 @@ impl GraphSpec {
                             cutoff_hz: None,
                             max_force_n: None,
                             liveliness_lease_ms: n.liveliness_lease.map(|l| f(nanos_ms(l))),
+                            start_ms: n.start.map(|l| f(nanos_ms(l))),
                             process: n.process.clone().map(s),
                             script: n.python.as_ref().map(|p| s(p.script.clone())),
                             class: n.python.as_ref().and_then(|p| p.class.clone()).map(s),
@@ -596,6 +607,8 @@ impl GraphSpec {
                             lifespan_ms: q.lifespan.map(|v| f(nanos_ms(v))),
                             reliability: keep(q.reliability != d.reliability)
                                 .map(|()| Spanned::new(0..0, q.reliability)),
+                            durability: keep(q.durability != d.durability)
+                                .map(|()| Spanned::new(0..0, q.durability)),
                             on_deadline_missed: keep(q.on_deadline_missed != d.on_deadline_missed)
                                 .map(|()| Spanned::new(0..0, q.on_deadline_missed)),
                             link: q.link.map(|l: Link| {

@@ -53,6 +53,9 @@ fn topic_qos(cx: &Ctx<'_>, t: &RawTopic, depth: &mut usize) -> Result<TopicQos, 
     if let Some(v) = &t.reliability {
         q.reliability = *v.get_ref();
     }
+    if let Some(v) = &t.durability {
+        q.durability = *v.get_ref();
+    }
     if let Some(v) = &t.on_deadline_missed {
         q.on_deadline_missed = *v.get_ref();
     }
@@ -322,6 +325,21 @@ fn read_node(
                 .map_err(|e| cx.err(v.span(), e))
         })
         .transpose()?;
+    let start = r
+        .start_ms
+        .as_ref()
+        .map(|v| {
+            let at = qos::ms_to_nanos("start_ms", *v.get_ref(), false)
+                .map_err(|e| cx.err(v.span(), e))?;
+            if kind.is_actuator() {
+                return Err(cx.err(
+                    v.span(),
+                    "the actuator steps the plant from t = 0: it cannot join late (start_ms)",
+                ));
+            }
+            Ok(at)
+        })
+        .transpose()?;
     let process = match &r.process {
         Some(p) if !valid_node_name(p.get_ref()) => {
             return Err(cx.err(
@@ -358,6 +376,7 @@ fn read_node(
         python,
         compute,
         callback_group: r.callback_group.as_ref().map(|g| g.get_ref().clone()),
+        start,
     })
 }
 
