@@ -98,6 +98,18 @@ fn main() {
             "exercises/ex13_what_ros2_sees.toml",
             &["nodes", "obs_type", "action_type", "clock_hz"][..],
         ),
+        (
+            "ex14",
+            "exercises/ex14_incompatible_qos.toml",
+            &[
+                "reliable_from_best_effort",
+                "best_effort_from_reliable",
+                "deadline_20_from_40",
+                "deadline_40_from_20",
+                "late_joiner_volatile",
+                "late_joiner_transient_local",
+            ][..],
+        ),
     ] {
         let file = root.join(file);
         println!("cargo:rerun-if-changed={}", file.display());

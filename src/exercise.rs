@@ -33,6 +33,8 @@
 //!   slowed down until the pole falls: whose rate cliff is lower.
 //! - [`ex13`], what ROS 2 sees: the chapter's graph offered with `--ros2`, its policy at
 //!   40 Hz: the node list, the topics' ROS 2 types, and how often `/clock` ticks.
+//! - [`ex14`], incompatible QoS: four requested/offered pairs on the chapter's `/action`,
+//!   which ROS 2 connects; and a node joining late under each durability: what it gets.
 
 /// Print one line of an exercise's report through its [`Context`]: `say!(cx, "…", args)`,
 /// or `say!(cx)` for an empty line.
@@ -49,6 +51,7 @@ pub mod ex1;
 pub mod ex10;
 pub mod ex11;
 pub mod ex13;
+pub mod ex14;
 pub mod ex2;
 pub mod ex3;
 pub mod ex4;
@@ -93,6 +96,7 @@ pub const EXERCISES: &[&dyn Exercise] = &[
     &ex10::Ex10,
     &ex11::Ex11,
     &ex13::Ex13,
+    &ex14::Ex14,
 ];
 
 /// One exercise: the learner predicts, ratelab measures, the two are reconciled.
@@ -752,7 +756,7 @@ mod tests {
         }
         assert_eq!(
             expected(),
-            "ex1, ex2, ex3, ex4, ex5, ex6, ex7, ex8, ex9, ex10, ex11 or ex13"
+            "ex1, ex2, ex3, ex4, ex5, ex6, ex7, ex8, ex9, ex10, ex11, ex13 or ex14"
         );
     }
 

@@ -465,7 +465,7 @@ fn exercise_ex5_runs_on_the_graph_its_bands_name_and_reconciles() {
     assert!(
         o.status.code() == Some(2)
             && stderr(&o).contains(
-                "expected ex1, ex2, ex3, ex4, ex5, ex6, ex7, ex8, ex9, ex10, ex11 or ex13"
+                "expected ex1, ex2, ex3, ex4, ex5, ex6, ex7, ex8, ex9, ex10, ex11, ex13 or ex14"
             ),
         "{}",
         stderr(&o)

@@ -535,6 +535,60 @@ fn ex13_prediction_recorded() {
 }
 
 #[test]
+#[cfg_attr(
+    ex14_prediction_empty,
+    ignore = "ex14: write your prediction in exercises/ex14_incompatible_qos.toml"
+)]
+fn ex14_prediction_recorded() {
+    prediction_recorded("ex14", "ex14_incompatible_qos.toml");
+}
+
+/// ex14's runs hold its bands: each pair connects exactly as ROS 2's table says (and the
+/// pole balances exactly when it does), a late joiner gets nothing of the past from a
+/// volatile topic and the history depth from a transient-local one; the reconcile speaks
+/// to every key, and says the event of a pair that did not connect.
+#[test]
+fn ex14_measurement_incompatible_qos() {
+    use ratelab::exercise::ex14::{check_ex14, measure_ex14, outcome_ex14, Ex14Bands};
+    use ratelab::exercise::Reconcile;
+    ratelab::init(); // the late joiner is a Python node
+    let b: Ex14Bands = load_bands(&path("bands.toml")).unwrap().of().unwrap();
+    let runs = measure_ex14(&b, &GraphSpec::chapter(), &path("")).unwrap();
+    assert_eq!((runs.pairs.len(), runs.late.len()), (4, 2));
+    for c in check_ex14(&b, &runs) {
+        assert!(c.passed, "{}", c.name);
+    }
+    let o = outcome_ex14(&b, &runs);
+    let delivers: Vec<bool> = o.delivers.iter().map(|(_, d, _)| *d).collect();
+    assert_eq!(delivers, [false, true, false, true]);
+    assert_eq!(
+        o.history,
+        [("volatile".into(), 0), ("transient_local".into(), 5)]
+    );
+    // The checks fail off the measured shape: a table that says every pair connects.
+    let mut wrong = b.clone();
+    for p in &mut wrong.pairs {
+        p.delivers = true;
+    }
+    assert!(!check_ex14(&wrong, &runs)[0].passed);
+    let prediction: toml::Table = toml::from_str(
+        "reliable_from_best_effort = true\nbest_effort_from_reliable = true\ndeadline_20_from_40 = false\ndeadline_40_from_20 = true\nlate_joiner_volatile = 0\nlate_joiner_transient_local = 1\n",
+    )
+    .unwrap();
+    let lines = o.reconcile(&prediction);
+    assert_eq!(lines.len(), 6, "{lines:?}");
+    assert_eq!(
+        lines[0],
+        "You predicted reliable_from_best_effort delivers; it does not (incompatible QoS: requested RELIABLE, offered BEST_EFFORT)."
+    );
+    assert!(lines[2].contains("delivers nothing; it does not (incompatible QoS: requested deadline 20 ms, offered deadline 40 ms)"), "{lines:?}");
+    assert!(
+        lines[5].ends_with("under transient_local; it got 5."),
+        "{lines:?}"
+    );
+}
+
+#[test]
 fn exercise_files_are_valid() {
     for file in [
         "ex1_rate_cliff.toml",
@@ -549,6 +603,7 @@ fn exercise_files_are_valid() {
         "ex10_held_force.toml",
         "ex11_my_brain.toml",
         "ex13_what_ros2_sees.toml",
+        "ex14_incompatible_qos.toml",
     ] {
         let f = ExerciseFile::load(&path(file)).unwrap();
         assert!(
@@ -604,6 +659,10 @@ fn the_texts_read_before_predicting_give_no_answer_away() {
         // ex9: a crossing hop costs a period.
         ("40 ms", "ex9's latency across processes"),
         ("costs a", "ex9's crossing hop"),
+        // ex14: which pairs connect, and what a late joiner gets.
+        ("needs reliable", "ex14's first pair"),
+        ("stronger offer", "ex14's second pair"),
+        ("last 5 messages", "ex14's transient-local history"),
     ];
     let mut texts = vec![
         (
@@ -635,6 +694,7 @@ fn the_texts_read_before_predicting_give_no_answer_away() {
         "ex9_crossing.toml",
         "ex10_held_force.toml",
         "ex11_my_brain.toml",
+        "ex14_incompatible_qos.toml",
     ] {
         let f = ExerciseFile::load(&path(ex)).unwrap();
         texts.push((

@@ -50,6 +50,60 @@ impl Drop for Offering {
     }
 }
 
+/// A subscription announces its own requested QoS (`[topic.requested.NODE]`) beside its
+/// publisher's offer, so `topic info -v` lists both ends as ros2cli does: here a compatible
+/// pair, the policy offering a 40 ms deadline on /action and the actuator accepting 100 ms.
+#[test]
+fn topic_info_lists_the_offer_and_the_subscriptions_own_request() {
+    let _alone = crate::machine::alone();
+    let dir = tempfile::tempdir().unwrap();
+    let graph = dir.path().join("g.toml");
+    // The chapter's file ends with /action's table: the request goes under it.
+    let text = std::fs::read_to_string(crate::repo("graphs/cartpole.toml")).unwrap()
+        + "\n[topic.requested.actuator]\ndeadline_ms = 100\n";
+    std::fs::write(&graph, text).unwrap();
+    let run = Offering::start(&[
+        "--clock",
+        "real",
+        "--duration",
+        "12",
+        "--ros2",
+        "6",
+        "--graph",
+        graph.to_str().unwrap(),
+        "--qos",
+        "/action:deadline_ms=40",
+    ]);
+    let (code, out, err) = ratelab(
+        &[
+            "ros2",
+            "--connect",
+            run.endpoint.as_str(),
+            "--domain",
+            "6",
+            "topic",
+            "info",
+            "/action",
+            "-v",
+        ],
+        &[],
+    );
+    assert_eq!(code, 0, "{err}");
+    let (publisher, subscription) = out
+        .split_once("Endpoint type: SUBSCRIPTION")
+        .unwrap_or_else(|| panic!("{out}"));
+    assert!(publisher.contains("Node name: policy"), "{out}");
+    assert!(
+        publisher.contains("Deadline: 40000000 nanoseconds"),
+        "{out}"
+    );
+    assert!(
+        subscription.contains("Deadline: 100000000 nanoseconds"),
+        "{out}"
+    );
+    assert!(subscription.contains("Reliability: BEST_EFFORT"), "{out}");
+}
+
 /// A graph offered to ROS 2 under the real clock, through a router at a free port (the
 /// run's own), read with `ratelab ros2 --connect` while it runs.
 #[test]

@@ -245,6 +245,18 @@ pub fn connect_subscriptions(spec: &GraphSpec, topics: &[AnyTopic]) {
     }
 }
 
+/// A node that joins late (`start_ms`) has subscriptions that come into being with it
+/// ([`AnyTopic::set_joins_at`]).
+fn start_late_subscriptions(spec: &GraphSpec, topics: &[AnyTopic]) {
+    for (t, topic) in spec.topics.iter().zip(topics) {
+        for (k, &n) in t.subscribers.iter().enumerate() {
+            if let Some(at) = spec.node(n).start {
+                topic.subscription(k).set_joins_at(at);
+            }
+        }
+    }
+}
+
 impl Graph {
     /// Build `spec` around `plant` (already reset). Every policy node runs `brain`; sensor
     /// noise and links are seeded from `seed`. `observers` are told about every actuator
@@ -281,14 +293,7 @@ impl Graph {
             })
             .collect::<Result<Vec<_>, _>>()?;
         connect_subscriptions(spec, &topics);
-        // A node that joins late has subscriptions that come into being with it.
-        for (t, topic) in spec.topics.iter().zip(&topics) {
-            for (k, &n) in t.subscribers.iter().enumerate() {
-                if let Some(at) = spec.node(n).start {
-                    topic.subscription(k).set_joins_at(at);
-                }
-            }
-        }
+        start_late_subscriptions(spec, &topics);
         let liveliness: Vec<Arc<Liveliness>> = spec
             .nodes
             .iter()

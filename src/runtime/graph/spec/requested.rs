@@ -114,7 +114,111 @@ pub(super) fn to_raw(t: &TopicSpec) -> Option<RawRequests> {
     })
 }
 
+/// Set one key of a request (`reliability=reliable`, `deadline_ms=20`, …: the
+/// `[topic.requested.NODE]` table's keys and values; `none` clears a key).
+///
+/// # Errors
+/// A one-line reason for an unknown key or a bad value.
+pub fn apply_requested_key(r: &mut RequestedQos, key: &str, value: &str) -> Result<(), String> {
+    use serde::de::IntoDeserializer;
+    fn word<E: serde::de::DeserializeOwned>(key: &str, value: &str) -> Result<Option<E>, String> {
+        if value.trim() == "none" {
+            return Ok(None);
+        }
+        E::deserialize(value.trim().into_deserializer())
+            .map(Some)
+            .map_err(|e: serde::de::value::Error| format!("{key}: {e}"))
+    }
+    let ms = |value: &str| -> Result<Option<crate::time::Nanos>, String> {
+        if value.trim() == "none" {
+            return Ok(None);
+        }
+        let v: f64 = value
+            .trim()
+            .parse()
+            .map_err(|_| format!("{key}: not a number: '{value}'"))?;
+        qos::ms_to_nanos(key, v, false).map(Some)
+    };
+    match key.trim() {
+        "reliability" => r.reliability = word(key, value)?,
+        "durability" => r.durability = word(key, value)?,
+        "liveliness" => r.liveliness = word(key, value)?,
+        "deadline_ms" => r.deadline = ms(value)?,
+        "liveliness_lease_ms" => r.liveliness_lease = ms(value)?,
+        other => {
+            return Err(format!(
+                "unknown requested QoS key '{}' (known: reliability, durability, deadline_ms, liveliness, liveliness_lease_ms)",
+                crate::text::printable(other)
+            ))
+        }
+    }
+    Ok(())
+}
+
 impl GraphSpec {
+    /// Set what node `node`'s subscription to `topic` requests, `KEY=VALUE[,KEY=VALUE…]`
+    /// over what it requested before ([`apply_requested_key`]'s keys): what a
+    /// `[topic.requested.NODE]` table says, from code (an exercise's pairs).
+    ///
+    /// # Errors
+    /// [`crate::graph::spec::OverrideError`] for an unknown topic, a node that does not
+    /// subscribe to it, or a bad key or value (the spec is unchanged).
+    pub fn set_requested(
+        &mut self,
+        topic: &str,
+        node: &str,
+        pairs: &str,
+    ) -> Result<(), super::OverrideError> {
+        let err = |e: String| super::OverrideError(format!("{topic} requested by {node}: {e}"));
+        let t = self.topic_id(topic).ok_or_else(|| {
+            super::OverrideError(format!("no topic '{topic}' in graph '{}'", self.name))
+        })?;
+        let subscribes = self
+            .topic(t)
+            .subscribers
+            .iter()
+            .any(|&n| self.node(n).name == node);
+        if !subscribes {
+            return Err(err(format!("'{node}' does not subscribe to {topic}")));
+        }
+        let mut r = self
+            .topic(t)
+            .requested
+            .get(node)
+            .copied()
+            .unwrap_or_default();
+        for (k, v) in qos::split_pairs(pairs).map_err(err)? {
+            apply_requested_key(&mut r, k, v).map_err(err)?;
+        }
+        let requested = &mut self.topics[t.0].requested;
+        if r.is_empty() {
+            requested.remove(node);
+        } else {
+            requested.insert(node.to_string(), r);
+        }
+        Ok(())
+    }
+
+    /// Make node `name` join the graph at `ms` of run time ([`super::NodeSpec::start`]'s rules).
+    ///
+    /// # Errors
+    /// [`crate::graph::spec::OverrideError`] for an unknown node, the actuator, or a time
+    /// not in (0, [`qos::MAX_QOS_MS`]].
+    pub fn set_start(&mut self, name: &str, ms: f64) -> Result<(), super::OverrideError> {
+        let id = self.node_id(name).ok_or_else(|| {
+            super::OverrideError(format!("no node '{name}' in graph '{}'", self.name))
+        })?;
+        if self.node(id).kind.is_actuator() {
+            return Err(super::OverrideError(format!(
+                "node '{name}': the actuator steps the plant from t = 0: it cannot join late (start_ms)"
+            )));
+        }
+        let at = qos::ms_to_nanos("start_ms", ms, false)
+            .map_err(|e| super::OverrideError(format!("node '{name}': {e}")))?;
+        self.nodes[id.0].start = Some(at);
+        Ok(())
+    }
+
     /// The subscriptions of topic `t` whose requested QoS the topic does not meet when it
     /// offers `offered_qos` (its QoS now; its publisher's liveliness lease is the spec's):
     /// each as (its index among the topic's subscribers, in tie-break order, its node's
