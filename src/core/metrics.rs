@@ -539,6 +539,8 @@ pub struct LateJoiner {
     pub history: u64,
     /// The topic's durability: `volatile` or `transient_local`.
     pub durability: String,
+    /// Messages published before it joined that it never received.
+    pub missed: u64,
 }
 
 /// One subscription left unconnected by incompatible QoS ([`TopicMetrics::incompatible_qos`]).

@@ -533,6 +533,13 @@ impl Liveliness {
         l.last = l.last.max(now);
     }
 
+    /// The node comes into being at `at` (it joins the graph late): its lease runs from
+    /// then, not from t = 0. Set before the run starts.
+    pub fn starts_at(&self, at: Nanos) {
+        let mut l = self.lock();
+        l.last = l.last.max(at);
+    }
+
     /// A fault swallowed the node's tick at `now`: no assertion.
     pub fn fault_tick(&self) {
         self.lock().faulted_ticks += 1;

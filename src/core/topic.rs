@@ -19,9 +19,10 @@
 //! in flight for `delay ± jitter`; a best-effort link *loses* some, a reliable one
 //! *retransmits* them). Time enters through the `now` every operation takes, so under the
 //! virtual clock all of it is deterministic. Every message published is accounted for:
-//! `published = seen + dropped + expired + lost + refused + unmatched + unseen buffered + in
-//! flight` (*unmatched*: published while the subscription was left unconnected, its requested
-//! QoS incompatible with the offered: [`crate::qos::compat`]).
+//! `published = seen + dropped + expired + lost + refused + unmatched + before join + unseen
+//! buffered + in flight` (*unmatched*: published while the subscription was left unconnected,
+//! its requested QoS incompatible with the offered, [`crate::qos::compat`]; *before join*:
+//! published before a late-joining subscription came into being and not kept for it).
 //!
 //! A topic may carry [`Tap`]s, each told of every message as it is published (before the
 //! drop rule or a link decides its fate): how a run offers its topics outside without
@@ -94,6 +95,11 @@ pub struct TopicStats {
     /// reached it, as ROS 2 never connects such a pair.
     #[serde(default, skip_serializing_if = "is_zero")]
     pub unmatched: u64,
+    /// Messages published before a late-joining subscription came into being
+    /// ([`Subscription::set_joins_at`]) that it never received: all of them from a volatile
+    /// topic, all but the last `depth` from a transient-local one.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub before_join: u64,
     /// A subscription that joined late ([`Subscription::set_joins_at`]), once it has: how
     /// many messages published before it joined it received (a transient-local topic's
     /// history; 0 from a volatile one).
@@ -191,6 +197,8 @@ struct Inner<T> {
     /// publish is counted (by the publisher) but never reaches the queue.
     matched: bool,
     unmatched: u64,
+    /// Messages published before the subscription came into being that it never received.
+    before_join: u64,
     /// When the subscription comes into being (its node joins late); `None`: from t = 0.
     /// Before it, nothing is delivered: a transient-local topic keeps its last `depth`
     /// messages for it (they arrive as it joins), a volatile one keeps none.
@@ -284,16 +292,18 @@ impl<T> Inner<T> {
         }
     }
 
-    /// A message arriving before the subscription exists ([`Inner::joins_at`]): kept as the
+    /// A message published before the subscription exists ([`Inner::joins_at`]; judged by
+    /// its publish stamp, as a volatile publisher sends nothing to a reader not yet there,
+    /// even when the message lands after it joins): kept as the
     /// publisher's history when the topic is transient local (its last `depth`; what falls
     /// out of it was never delivered), else not delivered at all. True when it is kept.
     fn keep_for_late_joiner(&mut self) -> bool {
         if self.qos.durability != crate::qos::compat::Durability::TransientLocal {
-            self.unmatched += 1;
+            self.before_join += 1;
             return false;
         }
         if self.buf.len() >= self.depth && self.buf.pop_front().is_some() {
-            self.unmatched += 1;
+            self.before_join += 1;
         }
         true
     }
@@ -308,7 +318,7 @@ impl<T> Inner<T> {
 
     /// A message reaches the subscriber's queue at `at`, under the history rule.
     fn arrive(&mut self, at: Nanos, msg: Message<T>) {
-        if self.admit(at) {
+        if self.admit(at, msg.stamp) {
             self.buf.push_back(msg);
         }
     }
@@ -318,8 +328,8 @@ impl<T> Inner<T> {
     /// queue refused it. Split from [`Inner::arrive`] so that a publish without a link
     /// builds its message in the queue itself (the chapter's topic's hot path).
     #[inline(always)]
-    fn admit(&mut self, at: Nanos) -> bool {
-        if self.joins_at.is_some_and(|j| at < j) {
+    fn admit(&mut self, at: Nanos, stamp: Nanos) -> bool {
+        if self.joins_at.is_some_and(|j| stamp < j) {
             return self.keep_for_late_joiner();
         }
         if let Some(d) = self.qos.deadline {
@@ -483,6 +493,7 @@ impl<T: Clone> Subscription<T> {
                 requested_missed: 0,
                 matched: true,
                 unmatched: 0,
+                before_join: 0,
                 joins_at: None,
                 joined_with: None,
                 last_stamp: Nanos::ZERO,
@@ -587,7 +598,7 @@ impl<T: Clone> Subscription<T> {
         }
         match inner.qos.link {
             None => {
-                if inner.admit(stamp) {
+                if inner.admit(stamp, stamp) {
                     inner.buf.push_back(msg);
                 }
             }
@@ -712,6 +723,13 @@ impl<T: Clone> Subscription<T> {
         inner.choose_path();
     }
 
+    /// The topic's publisher comes into being at run time `at` (its node joins late): its
+    /// offered deadline counts from then, not from t = 0. Set before the run starts.
+    pub fn set_publisher_start(&self, at: Nanos) {
+        let mut inner = self.lock();
+        inner.last_publish = inner.last_publish.max(at);
+    }
+
     /// Whether the subscription is connected to its publisher ([`Subscription::set_matched`]).
     pub fn matched(&self) -> bool {
         self.lock().matched
@@ -754,6 +772,7 @@ impl<T: Clone> Subscription<T> {
             offered_deadline_missed: offered,
             requested_deadline_missed: requested,
             unmatched: inner.unmatched,
+            before_join: inner.before_join,
             history_on_join: inner.joined_with,
         }
     }
@@ -1473,16 +1492,37 @@ mod tests {
                 Some(history.len() as u64),
                 "{durability}"
             );
-            assert_eq!(s.unmatched, 10 - history.len() as u64, "{durability}");
+            assert_eq!(s.before_join, 10 - history.len() as u64, "{durability}");
+            assert_eq!(s.unmatched, 0, "a late joiner is no incompatible pair");
             assert_eq!(
                 s.dropped, 0,
                 "what fell out of the history was never delivered"
             );
             assert_eq!(
                 s.published,
-                s.seen + s.dropped + s.unmatched + topic.unseen_buffered() as u64,
+                s.seen + s.dropped + s.before_join + topic.unseen_buffered() as u64,
                 "{durability}: {s:?}"
             );
         }
+        // Over a link, a message published before the join and landing after it is still
+        // one from before: a volatile topic never delivers it.
+        let topic = q(3, "delay_ms=30");
+        topic.set_joins_at(Nanos::from_millis(100));
+        topic.publish(1, Nanos::from_millis(90), None);
+        assert_eq!(topic.read(Nanos::from_millis(130)), None);
+        topic.publish(2, Nanos::from_millis(110), None);
+        assert_eq!(topic.read(Nanos::from_millis(140)).map(|m| m.data), Some(2));
+        let s = topic.stats();
+        assert_eq!((s.before_join, s.history_on_join), (1, Some(0)), "{s:?}");
+        // A publisher that joins late owes no deadline before it exists.
+        let topic = q(1, "deadline_ms=20");
+        topic.set_publisher_start(Nanos::from_millis(1000));
+        topic.publish(1, Nanos::from_millis(1000), None);
+        assert_eq!(
+            topic
+                .stats_at(Nanos::from_millis(1010))
+                .offered_deadline_missed,
+            0
+        );
     }
 }

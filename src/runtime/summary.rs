@@ -406,11 +406,9 @@ fn late_joiners(
         .enumerate()
         .filter_map(|(k, &n)| {
             let start = spec.node(n).start?;
-            let history = subs
-                .map_or(stats.history_on_join, |s| {
-                    s.get(k).and_then(|s| s.history_on_join)
-                })
-                .unwrap_or(0);
+            let mine = subs.map_or(Some(stats), |s| s.get(k));
+            let history = mine.and_then(|s| s.history_on_join).unwrap_or(0);
+            let missed = mine.map_or(0, |s| s.before_join);
             let durability = match now_qos.durability {
                 crate::qos::compat::Durability::Volatile => "volatile",
                 crate::qos::compat::Durability::TransientLocal => "transient_local",
@@ -419,6 +417,7 @@ fn late_joiners(
                 start_s: round_to(start.as_secs_f64(), 6),
                 history,
                 durability: durability.to_string(),
+                missed,
             };
             Some((spec.node(n).name.clone(), j))
         })

@@ -439,7 +439,7 @@ proptest! {
             let end = sched.run(&mut nodes, cfg.duration, &StopFlag::new(), &mut |_| {});
             for t in &built.handles.topics {
                 let s = t.stats_at(end.at);
-                let total = s.seen + s.dropped + s.expired + s.lost + s.refused + s.unmatched + t.unseen_buffered() as u64 + s.in_flight;
+                let total = s.seen + s.dropped + s.expired + s.lost + s.refused + s.unmatched + s.before_join + t.unseen_buffered() as u64 + s.in_flight;
                 assert_eq!(s.published, total, "{}: {s:?}", t.name());
             }
             let m = ratelab::run::summarize(&cfg, &built.handles, &end, sched.ticks(), None, None);

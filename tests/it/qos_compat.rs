@@ -226,7 +226,7 @@ fn late_monitor(dir: &std::path::Path, durability: &str) -> GraphSpec {
         .unwrap()
         .replace(
             "script = \"nodes/obs_monitor.py\"",
-            "script = \"nodes/obs_monitor.py\"\nstart_ms = 2000",
+            "script = \"nodes/obs_monitor.py\"\nstart_ms = 2000\nliveliness_lease_ms = 300",
         )
         .replace(
             "name = \"/obs\"\ntype = \"state\"\ndepth = 1",
@@ -264,6 +264,12 @@ fn a_late_joiner_gets_the_last_depth_messages_only_under_transient_local() {
         let j = &m.topics["/obs"].late_joiners["monitor"];
         assert_eq!((j.start_s, j.history), (2.0, history), "{durability}");
         assert_eq!(j.durability, durability);
+        // 100 readings before 2 s (0, 20, … 1980 ms): what it did not get, it missed.
+        assert_eq!(j.missed, 100 - history, "{durability}");
+        assert!(
+            m.topics["/obs"].incompatible_qos.is_empty(),
+            "late is not incompatible"
+        );
         // It ticks from its start: 2.0, 2.1, … 5.0 s at 10 Hz (the run's last instant
         // included, as every node's).
         assert_eq!(m.nodes["monitor"].ticks, 31, "{durability}");

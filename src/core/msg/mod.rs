@@ -571,6 +571,7 @@ trait ErasedTopic: Send + Sync + fmt::Debug {
     fn set_matched(&self, matched: bool);
     fn matched(&self) -> bool;
     fn set_joins_at(&self, at: Nanos);
+    fn set_publisher_start(&self, at: Nanos);
     fn set_depth(&self, depth: usize) -> Result<(), ZeroDepth>;
     fn buffered(&self) -> usize;
     fn unseen_buffered(&self) -> usize;
@@ -635,6 +636,9 @@ impl<M: Message> ErasedTopic for Arc<Subscription<M>> {
     }
     fn set_joins_at(&self, at: Nanos) {
         Subscription::set_joins_at(self, at);
+    }
+    fn set_publisher_start(&self, at: Nanos) {
+        Subscription::set_publisher_start(self, at);
     }
     fn set_depth(&self, depth: usize) -> Result<(), ZeroDepth> {
         Subscription::set_depth(self, depth)
@@ -732,6 +736,7 @@ fn combined(all: Vec<TopicStats>) -> TopicStats {
         out.in_flight += s.in_flight;
         out.requested_deadline_missed += s.requested_deadline_missed;
         out.unmatched += s.unmatched;
+        out.before_join += s.before_join;
     }
     out
 }
@@ -771,6 +776,11 @@ impl<M: Message> ErasedTopic for FanOut<M> {
     fn set_joins_at(&self, at: Nanos) {
         for q in &self.queues {
             q.set_joins_at(at);
+        }
+    }
+    fn set_publisher_start(&self, at: Nanos) {
+        for q in &self.queues {
+            q.set_publisher_start(at);
         }
     }
     fn set_depth(&self, depth: usize) -> Result<(), ZeroDepth> {
@@ -980,6 +990,11 @@ impl AnyTopic {
     /// come into being at `at` (see [`Subscription::set_joins_at`]).
     pub fn set_joins_at(&self, at: Nanos) {
         self.0.set_joins_at(at);
+    }
+
+    /// Its publisher comes into being at `at` (see [`Subscription::set_publisher_start`]).
+    pub fn set_publisher_start(&self, at: Nanos) {
+        self.0.set_publisher_start(at);
     }
 
     /// Change the history depth (see [`Subscription::set_depth`]).

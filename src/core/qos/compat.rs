@@ -204,8 +204,8 @@ fn duration_ok(requested: Option<Nanos>, offered: Option<Nanos>) -> bool {
 }
 
 /// Every policy whose request `offered` does not meet, in the table's order (module docs);
-/// empty when the pair is compatible. ROS 2 would report the last of them as the event's
-/// `last_policy_kind`; ratelab says them all.
+/// empty when the pair is compatible. ROS 2's event names one of them (`last_policy_kind`);
+/// ratelab says them all, and `metrics.json`'s `policy` names the first.
 pub fn check(requested: &RequestedQos, offered: &OfferedQos) -> Vec<Mismatch> {
     let mut out = Vec::new();
     if requested.reliability == Some(Reliability::Reliable)

@@ -246,9 +246,13 @@ pub fn connect_subscriptions(spec: &GraphSpec, topics: &[AnyTopic]) {
 }
 
 /// A node that joins late (`start_ms`) has subscriptions that come into being with it
-/// ([`AnyTopic::set_joins_at`]).
-fn start_late_subscriptions(spec: &GraphSpec, topics: &[AnyTopic]) {
+/// ([`AnyTopic::set_joins_at`]) and publishers that owe no deadline before it
+/// ([`AnyTopic::set_publisher_start`]).
+fn start_late_nodes(spec: &GraphSpec, topics: &[AnyTopic]) {
     for (t, topic) in spec.topics.iter().zip(topics) {
+        if let Some(at) = spec.node(t.publisher).start {
+            topic.set_publisher_start(at);
+        }
         for (k, &n) in t.subscribers.iter().enumerate() {
             if let Some(at) = spec.node(n).start {
                 topic.subscription(k).set_joins_at(at);
@@ -293,11 +297,18 @@ impl Graph {
             })
             .collect::<Result<Vec<_>, _>>()?;
         connect_subscriptions(spec, &topics);
-        start_late_subscriptions(spec, &topics);
+        start_late_nodes(spec, &topics);
         let liveliness: Vec<Arc<Liveliness>> = spec
             .nodes
             .iter()
-            .map(|n| Arc::new(Liveliness::new(n.liveliness_lease)))
+            .map(|n| {
+                let l = Liveliness::new(n.liveliness_lease);
+                // A node that joins late is not missed before it exists.
+                if let Some(at) = n.start {
+                    l.starts_at(at);
+                }
+                Arc::new(l)
+            })
             .collect();
         let rates = spec
             .nodes
