@@ -43,6 +43,10 @@ ln -s "$root/.mujoco" "$work/base/.mujoco"
 # The same MuJoCo path for both builds, so mujoco-rs is not rebuilt between them.
 export MUJOCO_DYNAMIC_LINK_DIR="$root/.mujoco/lib"
 build() { # DIR OUT
+    # Cargo names a path crate's artifacts and fingerprints by its path within the
+    # workspace, so the two checkouts' crates share them: touching this checkout's sources
+    # makes cargo rebuild them instead of taking the other build's as fresh.
+    find "$1/src" "$1/lab" "$1/build.rs" -name '*.rs' -print0 | xargs -0 -r touch
     (cd "$1" && CARGO_TARGET_DIR="$target" cargo build --release --locked -p ratelab-lab --bin ratelab) ||
         { echo "byte-identity: the build of $1 failed" >&2; exit 2; }
     cp "$target/release/ratelab" "$2"
