@@ -245,6 +245,21 @@ pub fn connect_subscriptions(spec: &GraphSpec, topics: &[AnyTopic]) {
     }
 }
 
+/// Each node's liveliness, its lease running from when it joins (t = 0, or its `start_ms`:
+/// a node that joins late is not missed before it exists).
+fn liveliness_of(spec: &GraphSpec) -> Vec<Arc<Liveliness>> {
+    spec.nodes
+        .iter()
+        .map(|n| {
+            let l = Liveliness::new(n.liveliness_lease);
+            if let Some(at) = n.start {
+                l.starts_at(at);
+            }
+            Arc::new(l)
+        })
+        .collect()
+}
+
 /// A node that joins late (`start_ms`) has subscriptions that come into being with it
 /// ([`AnyTopic::set_joins_at`]) and publishers that owe no deadline before it
 /// ([`AnyTopic::set_publisher_start`]).
@@ -298,18 +313,7 @@ impl Graph {
             .collect::<Result<Vec<_>, _>>()?;
         connect_subscriptions(spec, &topics);
         start_late_nodes(spec, &topics);
-        let liveliness: Vec<Arc<Liveliness>> = spec
-            .nodes
-            .iter()
-            .map(|n| {
-                let l = Liveliness::new(n.liveliness_lease);
-                // A node that joins late is not missed before it exists.
-                if let Some(at) = n.start {
-                    l.starts_at(at);
-                }
-                Arc::new(l)
-            })
-            .collect();
+        let liveliness = liveliness_of(spec);
         let rates = spec
             .nodes
             .iter()
