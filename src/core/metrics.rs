@@ -952,6 +952,9 @@ impl Metrics {
             if self.action_published == Some(0) {
                 // Nothing reached the actuator: there is no latency to give, not one of 0 ms.
                 "sense->act latency: none (no command was published to the actuator)".to_string()
+            } else if self.steps > 0 && self.nonfinite_actions >= self.steps {
+                // Every command was NaN or ±inf: none was applied, none has a latency.
+                "sense->act latency: none (no finite command was applied)".to_string()
             } else if self.actuator_unconnected() {
                 // Published, and never delivered: no latency either.
                 "sense->act latency: none (the actuator's subscription was never connected: incompatible QoS)".to_string()
@@ -974,8 +977,13 @@ impl Metrics {
         }
         lines.extend(self.executor_lines());
         if self.nonfinite_actions > 0 {
+            let kept = if self.nonfinite_actions >= self.steps {
+                "no good action came, so no force was applied"
+            } else {
+                "the actuator kept the last good action"
+            };
             lines.push(format!(
-                "non-finite actions held over: {} (the actuator kept the last good action)",
+                "non-finite actions held over: {} ({kept})",
                 self.nonfinite_actions
             ));
         }

@@ -306,6 +306,40 @@ fn a_brain_that_raises_or_returns_nonsense_fails_the_policy_node_at_that_tick() 
     );
 }
 
+/// A brain whose every action is NaN applies nothing: the summary says there is no
+/// latency to give rather than a mean of 0.0 ms.
+#[test]
+fn a_brain_that_never_gives_a_finite_action_has_no_latency_said() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = script(
+        dir.path(),
+        "nan.py",
+        "def act(obs):\n    return float('nan')\n",
+    );
+    let spec = format!("{}:act", p.display());
+    let o = ratelab(&[
+        "run",
+        "--clock",
+        "virtual",
+        "--duration",
+        "2",
+        "--policy",
+        &spec,
+    ]);
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        out.contains("sense->act latency: none (no finite command was applied)"),
+        "{out}"
+    );
+    assert!(!out.contains("mean sense->act latency"), "{out}");
+    assert!(
+        out.contains(
+            "non-finite actions held over: 32 (no good action came, so no force was applied)"
+        ),
+        "{out}"
+    );
+}
+
 /// ±inf from a brain is refused as NaN is: counted, said, and never applied (the actuator
 /// holds its last good force), not clipped to a full push.
 #[test]
