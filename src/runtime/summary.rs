@@ -358,14 +358,12 @@ fn incompatible_qos(
     }
     let at_end = spec.incompatible(t, &now_qos);
     let at_start = spec.incompatible(t, &topic.qos);
-    let subs = st.subscriptions.get(t.0).filter(|s| s.len() > 1);
     topic
         .subscribers
         .iter()
         .enumerate()
         .filter_map(|(k, &n)| {
-            let not_delivered =
-                subs.map_or(stats.unmatched, |s| s.get(k).map_or(0, |s| s.unmatched));
+            let not_delivered = own_stats(st, t, k, stats).map_or(0, |s| s.unmatched);
             let failed = at_end
                 .iter()
                 .chain(&at_start)
@@ -399,27 +397,36 @@ fn late_joiners(
     stats: &crate::topic::TopicStats,
 ) -> std::collections::BTreeMap<String, crate::metrics::LateJoiner> {
     let topic = spec.topic(t);
-    let subs = st.subscriptions.get(t.0).filter(|s| s.len() > 1);
     topic
         .subscribers
         .iter()
         .enumerate()
         .filter_map(|(k, &n)| {
             let start = spec.node(n).start?;
-            let mine = subs.map_or(Some(stats), |s| s.get(k));
+            let mine = own_stats(st, t, k, stats);
             let history = mine.and_then(|s| s.history_on_join).unwrap_or(0);
             let missed = mine.map_or(0, |s| s.before_join);
-            let durability = match now_qos.durability {
-                crate::qos::compat::Durability::Volatile => "volatile",
-                crate::qos::compat::Durability::TransientLocal => "transient_local",
-            };
             let j = crate::metrics::LateJoiner {
                 start_s: round_to(start.as_secs_f64(), 6),
                 history,
-                durability: durability.to_string(),
+                durability: now_qos.durability.as_str().to_string(),
                 missed,
             };
             Some((spec.node(n).name.clone(), j))
         })
         .collect()
+}
+
+/// Subscription `k` of topic `t`'s own counters: its queue's when the topic has several
+/// (`st.subscriptions`), else the topic's, `stats`.
+fn own_stats<'a>(
+    st: &'a GraphState,
+    t: TopicId,
+    k: usize,
+    stats: &'a crate::topic::TopicStats,
+) -> Option<&'a crate::topic::TopicStats> {
+    match st.subscriptions.get(t.0).filter(|s| s.len() > 1) {
+        Some(subs) => subs.get(k),
+        None => Some(stats),
+    }
 }

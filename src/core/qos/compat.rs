@@ -52,6 +52,16 @@ pub enum Durability {
     TransientLocal,
 }
 
+impl Durability {
+    /// Its name in a graph file and `metrics.json`: `volatile`, `transient_local`.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Durability::Volatile => "volatile",
+            Durability::TransientLocal => "transient_local",
+        }
+    }
+}
+
 /// How a publisher's liveliness is asserted (ROS 2 *liveliness* kind).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -85,6 +95,42 @@ impl RequestedQos {
     /// True when it requests nothing (every offer is compatible).
     pub fn is_empty(&self) -> bool {
         *self == RequestedQos::default()
+    }
+
+    /// Set one key (`reliability=reliable`, `deadline_ms=20`, …: the graph file's
+    /// `[topic.requested.NODE]` keys and values, as [`crate::qos::apply_key`] takes a topic's;
+    /// `none` clears a key).
+    ///
+    /// # Errors
+    /// A one-line reason for an unknown key or a bad value.
+    pub fn apply_key(&mut self, key: &str, value: &str) -> Result<(), String> {
+        let none = value.trim() == "none";
+        let ms = || -> Result<Option<Nanos>, String> {
+            let v: f64 = value
+                .trim()
+                .parse()
+                .map_err(|_| format!("{key}: not a number: '{value}'"))?;
+            super::ms_to_nanos(key, v, false).map(Some)
+        };
+        match key.trim() {
+            "reliability" if none => self.reliability = None,
+            "reliability" => self.reliability = Some(super::word(key, value)?),
+            "durability" if none => self.durability = None,
+            "durability" => self.durability = Some(super::word(key, value)?),
+            "liveliness" if none => self.liveliness = None,
+            "liveliness" => self.liveliness = Some(super::word(key, value)?),
+            "deadline_ms" if none => self.deadline = None,
+            "deadline_ms" => self.deadline = ms()?,
+            "liveliness_lease_ms" if none => self.liveliness_lease = None,
+            "liveliness_lease_ms" => self.liveliness_lease = ms()?,
+            other => {
+                return Err(format!(
+                    "unknown requested QoS key '{}' (known: reliability, durability, deadline_ms, liveliness, liveliness_lease_ms)",
+                    crate::text::printable(other)
+                ))
+            }
+        }
+        Ok(())
     }
 }
 

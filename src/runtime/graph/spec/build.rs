@@ -329,15 +329,7 @@ fn read_node(
         .start_ms
         .as_ref()
         .map(|v| {
-            let at = qos::ms_to_nanos("start_ms", *v.get_ref(), false)
-                .map_err(|e| cx.err(v.span(), e))?;
-            if kind.is_actuator() {
-                return Err(cx.err(
-                    v.span(),
-                    "the actuator steps the plant from t = 0: it cannot join late (start_ms)",
-                ));
-            }
-            Ok(at)
+            requested::start_at(*v.get_ref(), kind.is_actuator()).map_err(|e| cx.err(v.span(), e))
         })
         .transpose()?;
     let process = match &r.process {

@@ -114,50 +114,24 @@ pub(super) fn to_raw(t: &TopicSpec) -> Option<RawRequests> {
     })
 }
 
-/// Set one key of a request (`reliability=reliable`, `deadline_ms=20`, …: the
-/// `[topic.requested.NODE]` table's keys and values; `none` clears a key).
+/// A node's `start_ms` as run time: a QoS duration ([`qos::ms_to_nanos`]'s rules), and
+/// never the actuator's, which steps the plant from t = 0.
 ///
 /// # Errors
-/// A one-line reason for an unknown key or a bad value.
-pub fn apply_requested_key(r: &mut RequestedQos, key: &str, value: &str) -> Result<(), String> {
-    use serde::de::IntoDeserializer;
-    fn word<E: serde::de::DeserializeOwned>(key: &str, value: &str) -> Result<Option<E>, String> {
-        if value.trim() == "none" {
-            return Ok(None);
-        }
-        E::deserialize(value.trim().into_deserializer())
-            .map(Some)
-            .map_err(|e: serde::de::value::Error| format!("{key}: {e}"))
+/// A one-line reason.
+pub(super) fn start_at(ms: f64, actuator: bool) -> Result<crate::time::Nanos, String> {
+    let at = qos::ms_to_nanos("start_ms", ms, false)?;
+    if actuator {
+        return Err(
+            "the actuator steps the plant from t = 0: it cannot join late (start_ms)".into(),
+        );
     }
-    let ms = |value: &str| -> Result<Option<crate::time::Nanos>, String> {
-        if value.trim() == "none" {
-            return Ok(None);
-        }
-        let v: f64 = value
-            .trim()
-            .parse()
-            .map_err(|_| format!("{key}: not a number: '{value}'"))?;
-        qos::ms_to_nanos(key, v, false).map(Some)
-    };
-    match key.trim() {
-        "reliability" => r.reliability = word(key, value)?,
-        "durability" => r.durability = word(key, value)?,
-        "liveliness" => r.liveliness = word(key, value)?,
-        "deadline_ms" => r.deadline = ms(value)?,
-        "liveliness_lease_ms" => r.liveliness_lease = ms(value)?,
-        other => {
-            return Err(format!(
-                "unknown requested QoS key '{}' (known: reliability, durability, deadline_ms, liveliness, liveliness_lease_ms)",
-                crate::text::printable(other)
-            ))
-        }
-    }
-    Ok(())
+    Ok(at)
 }
 
 impl GraphSpec {
     /// Set what node `node`'s subscription to `topic` requests, `KEY=VALUE[,KEY=VALUE…]`
-    /// over what it requested before ([`apply_requested_key`]'s keys): what a
+    /// over what it requested before ([`RequestedQos::apply_key`]'s keys): what a
     /// `[topic.requested.NODE]` table says, from code (an exercise's pairs).
     ///
     /// # Errors
@@ -170,9 +144,7 @@ impl GraphSpec {
         pairs: &str,
     ) -> Result<(), super::OverrideError> {
         let err = |e: String| super::OverrideError(format!("{topic} requested by {node}: {e}"));
-        let t = self.topic_id(topic).ok_or_else(|| {
-            super::OverrideError(format!("no topic '{topic}' in graph '{}'", self.name))
-        })?;
+        let t = self.known_topic(topic)?;
         let subscribes = self
             .topic(t)
             .subscribers
@@ -188,7 +160,7 @@ impl GraphSpec {
             .copied()
             .unwrap_or_default();
         for (k, v) in qos::split_pairs(pairs).map_err(err)? {
-            apply_requested_key(&mut r, k, v).map_err(err)?;
+            r.apply_key(k, v).map_err(err)?;
         }
         let requested = &mut self.topics[t.0].requested;
         if r.is_empty() {
@@ -205,15 +177,8 @@ impl GraphSpec {
     /// [`crate::graph::spec::OverrideError`] for an unknown node, the actuator, or a time
     /// not in (0, [`qos::MAX_QOS_MS`]].
     pub fn set_start(&mut self, name: &str, ms: f64) -> Result<(), super::OverrideError> {
-        let id = self.node_id(name).ok_or_else(|| {
-            super::OverrideError(format!("no node '{name}' in graph '{}'", self.name))
-        })?;
-        if self.node(id).kind.is_actuator() {
-            return Err(super::OverrideError(format!(
-                "node '{name}': the actuator steps the plant from t = 0: it cannot join late (start_ms)"
-            )));
-        }
-        let at = qos::ms_to_nanos("start_ms", ms, false)
+        let id = self.known_node(name)?;
+        let at = start_at(ms, self.node(id).kind.is_actuator())
             .map_err(|e| super::OverrideError(format!("node '{name}': {e}")))?;
         self.nodes[id.0].start = Some(at);
         Ok(())
