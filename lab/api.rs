@@ -146,7 +146,8 @@ pub fn run(
         None => ratelab::checkpoint::load_policy(&a.policy)?,
     };
     headless::check_out(&a)?;
-    let (report, kept, recording) = headless::execute(&a, &cfg, brain, stop, Vec::new(), false)?;
+    let (report, kept, recording) =
+        headless::execute(&a, &cfg, brain, stop, Vec::new(), false, true)?;
     if let Some(e) = headless::finish_recording(&a, recording.as_ref(), &report) {
         return Err(e.into());
     }

@@ -98,7 +98,7 @@ pub fn scrub_bench(seeks: usize) -> anyhow::Result<()> {
     let mut next_status = Nanos::ZERO;
     let mut told = 1usize;
     for s in &trace {
-        app.on_telemetry(Telemetry::Step(Box::new(*s)));
+        app.on_telemetry(Telemetry::Step(Box::new(s.clone())));
         told += 1;
         if s.t >= next_status {
             app.on_telemetry(Telemetry::Status {
@@ -111,7 +111,7 @@ pub fn scrub_bench(seeks: usize) -> anyhow::Result<()> {
                 alive: vec![None; 3],
                 policy: "scripted".into(),
                 exec: None,
-                topics: Some(Box::new(s.topics)),
+                topics: Some(Box::new(s.topics.clone())),
             });
             told += 1;
             next_status = s.t.saturating_add(status_every);
@@ -136,7 +136,7 @@ pub fn scrub_bench(seeks: usize) -> anyhow::Result<()> {
         // Back to the end, as the lab would be told it again (not timed).
         core.seek(last)?;
         for s in trace.iter().filter(|s| s.t > at) {
-            app.on_telemetry(Telemetry::Step(Box::new(*s)));
+            app.on_telemetry(Telemetry::Step(Box::new(s.clone())));
         }
     }
     let row = |what: &str, t: &ratelab::metrics::LatencyStats| println!("{what}: {}", spread(t));

@@ -62,6 +62,25 @@ pub enum Command {
     /// Read any rmw_zenoh graph as ros2cli does, without ROS 2: `node list|info`,
     /// `topic list|info|echo|hz` (docs/ros2.md).
     Ros2(crate::ros2::Ros2Args),
+    /// Print a generated graph file of any size: the chapter's loop and, beside it,
+    /// controllers of four nodes each (`ratelab graph --nodes 1000 > big.toml`).
+    Graph(GenerateArgs),
+}
+
+/// `ratelab graph`.
+#[derive(Debug, Clone, Args)]
+pub struct GenerateArgs {
+    /// How many nodes, from 3 (the chapter's graph) to 65536 (ratelab::limits::MAX_NODES).
+    #[arg(long, value_parser = clap::value_parser!(u32).range(3..=ratelab::limits::MAX_NODES as i64))]
+    pub nodes: u32,
+    /// Place the nodes in this many processes for `ratelab launch --processes` (the plant's
+    /// nodes in `robot`, the rest dealt out); 1, the default, places none.
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=ratelab::limits::MAX_PROCESSES as i64))]
+    pub processes: u32,
+    /// Every controller's rate, Hz, instead of 10, 20, 50 and 100 in turn (0.01: idle
+    /// nodes, for measuring what a node costs when it is not due).
+    #[arg(long, value_parser = parse_rate("--controller-hz"))]
+    pub controller_hz: Option<f64>,
 }
 
 /// `ratelab export`.

@@ -251,7 +251,10 @@ pub fn run_headless(a: &RunArgs, stop: StopFlag) -> anyhow::Result<RunReport> {
         Some(bar) => vec![Box::new(ProgressObserver(bar.clone()))],
         None => Vec::new(),
     };
-    let (report, kept, recording) = execute(a, &cfg, brain, stop, observers, true)?;
+    // Every step's record is kept only for trace.csv: a long run of a large graph without
+    // `--out` keeps none.
+    let keep_trace = a.out.is_some();
+    let (report, kept, recording) = execute(a, &cfg, brain, stop, observers, true, keep_trace)?;
     if let Some(bar) = virtual_bar {
         bar.finish_and_clear();
     }
@@ -328,8 +331,9 @@ pub type KeptLog = Arc<Mutex<Vec<String>>>;
 
 /// Run `cfg` (made from `a`) with `brain`, as `ratelab run` does: the recording `a` asks for
 /// opened, ROS 2 offered when asked, `observers` told of every step; every line the nodes
-/// write kept (and written to stderr, stamped, when `echo`). Returns the report, the lines
-/// kept and the recording (not yet finished: [`finish_recording`]).
+/// write kept (and written to stderr, stamped, when `echo`); every step's record kept in
+/// the report when `keep_trace` (for trace.csv). Returns the report, the lines kept and the
+/// recording (not yet finished: [`finish_recording`]).
 ///
 /// # Errors
 /// What keeps the run from starting: bad ROS 2 or recording settings, a graph that cannot be
@@ -341,6 +345,7 @@ pub fn execute(
     stop: StopFlag,
     observers: Vec<Box<dyn ratelab::graph::StepObserver>>,
     echo: bool,
+    keep_trace: bool,
 ) -> anyhow::Result<(RunReport, KeptLog, Option<Recording>)> {
     // Refused before anything is written or opened.
     let ros2 = ros2_options(a, &cfg.graph)?;
@@ -349,6 +354,7 @@ pub fn execute(
         stop,
         ros2,
         observers,
+        keep_trace,
         ..RunOptions::new()
     };
     if let Some(r) = &recording {
@@ -593,7 +599,7 @@ pub fn write_trace(
     trace: &[StepRecord],
     graph: &GraphSpec,
 ) -> anyhow::Result<()> {
-    let last = trace.last().map(|r| r.topics).unwrap_or_default();
+    let last = trace.last().map(|r| r.topics.clone()).unwrap_or_default();
     let qos_columns: Vec<Vec<ratelab::qos::QosCounter>> = graph
         .topics
         .iter()

@@ -675,8 +675,9 @@ pub fn run_top(a: &TopArgs, stop: StopFlag) -> anyhow::Result<()> {
 
 /// The nodes whose liveliness tokens are alive now: `(process, node)`.
 fn alive_nodes(session: &zenoh::Session) -> Vec<(String, String)> {
-    // At most every node of 64 graphs of the largest size.
-    let max = 64 * ratelab::ids::MAX_NODES;
+    // At most every node of 4 graphs of the largest size (a few hundred MB of names at
+    // most from whatever answers).
+    let max = 4 * ratelab::ids::MAX_NODES;
     live_tokens(
         session,
         "ratelab/*/@node/*/*",

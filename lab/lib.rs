@@ -380,6 +380,14 @@ pub fn run_command_line(args: Vec<std::ffi::OsString>, register: impl FnOnce()) 
             Ok(())
         }
         Some(Command::Ros2(args)) => ros2::run(args, stop),
+        Some(Command::Graph(args)) => {
+            print!("{}", ratelab::graph::synthetic::graph_toml_at(
+                args.nodes as usize,
+                args.processes as usize,
+                args.controller_hz,
+            ));
+            Ok(())
+        }
         None => {
             if !cli.headless && std::io::stdout().is_terminal() && std::io::stdin().is_terminal() {
                 lab(&cli.run, stop)

@@ -10,7 +10,7 @@
 //! depending only on those below it (the workspace's `Cargo.toml` lists them):
 //!
 //! - **core** (`ratelab_core`, `src/core/`) — leaves that many modules share: [`time`] (the
-//!   `Nanos` newtype), [`ids`] (node and topic ids and their bounds), [`text`] (text from
+//!   `Nanos` newtype), [`limits`] (every bound on input, in one place), [`ids`] (node and topic ids), [`text`] (text from
 //!   outside, made safe to show), [`textlog`] (what nodes' code and ratelab's warnings write,
 //!   stamped with run time and node), [`procs`] (what `/proc` says of a process),
 //!   [`np_random`] (NumPy-exact seeding), [`input`] and [`output`] (the rules for files the
@@ -56,8 +56,8 @@ pub fn init() {
 // The core crate's and the runtime crate's modules, under their own names (`ratelab::time`,
 // `ratelab::graph`, …).
 pub use ratelab_core::{
-    clock, executor, ids, input, metrics, msg, node, np_random, output, ports, procs, publisher,
-    qos, rate, realtime, ros_types, runlog, text, textlog, time, topic, Nanos,
+    clock, executor, ids, input, limits, metrics, msg, node, np_random, output, ports, procs,
+    publisher, qos, rate, realtime, ros_types, runlog, text, textlog, time, topic, Nanos,
 };
 pub use ratelab_distributed as distributed;
 pub use ratelab_python as python;

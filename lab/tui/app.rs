@@ -41,7 +41,10 @@ struct Collect(std::sync::Arc<std::sync::Mutex<Vec<StepRecord>>>);
 
 impl ratelab::graph::StepObserver for Collect {
     fn on_step(&mut self, r: &StepRecord) {
-        self.0.lock().unwrap_or_else(|e| e.into_inner()).push(*r);
+        self.0
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .push(r.clone());
     }
 }
 
@@ -388,7 +391,7 @@ impl App {
                     topics: None,
                 });
             }
-            app.on_telemetry(Telemetry::Step(Box::new(*s)));
+            app.on_telemetry(Telemetry::Step(Box::new(s.clone())));
         }
         if ended {
             app.on_telemetry(Telemetry::Ended {
@@ -611,7 +614,7 @@ impl App {
     /// An actuator step: the plant, the histories drawn, the verdict.
     fn on_step(&mut self, s: StepRecord) {
         self.now = self.now.max(s.t);
-        self.live.push(s);
+        self.live.push(s.clone());
         let now_s = s.t.as_secs_f64();
         if now_s <= GHOST_S {
             self.whole.push((now_s, s.pole_angle, s.action * GEAR_N));

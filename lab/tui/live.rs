@@ -97,7 +97,7 @@ pub fn order_stats(samples: &mut [u64]) -> Option<(Nanos, Nanos, Nanos)> {
 
 /// Every topic's cumulative counters at one run time: from an actuator's [`StepRecord`], or
 /// from the engine's status (which comes while the actuator is stalled or dead too).
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Debug, Default, PartialEq)]
 pub struct Counts {
     /// Run time they were read.
     pub t: Nanos,
@@ -196,11 +196,12 @@ impl Live {
         if s.latency.is_some() {
             self.first_command = Some(self.first_command.map_or(s.t, |f| f.min(s.t)));
         }
-        self.window.push_back(s);
-        self.counters(Counts {
+        let counts = Counts {
             t: s.t,
-            topics: s.topics,
-        });
+            topics: s.topics.clone(),
+        };
+        self.window.push_back(s);
+        self.counters(counts);
     }
 
     /// Account every topic's counters at a run time: a step's, or the engine's status's
@@ -209,18 +210,18 @@ impl Live {
         if c.t < self.segment.start {
             // Taken before the change but received after it (the real clock's threads):
             // the baseline, not the segment.
-            if self.segment.baseline.is_none_or(|b| b.t <= c.t) {
-                self.segment.baseline = Some(c);
+            if self.segment.baseline.as_ref().is_none_or(|b| b.t <= c.t) {
+                self.segment.baseline = Some(c.clone());
             }
         }
         // A status repeats its instant while paused or frozen: the newest counters of an
         // instant stand for it.
+        if self.newest.as_ref().is_none_or(|n| n.t <= c.t) {
+            self.newest = Some(c.clone());
+        }
         match self.counts.back_mut() {
             Some(back) if back.t == c.t => *back = c,
             _ => self.counts.push_back(c),
-        }
-        if self.newest.is_none_or(|n| n.t <= c.t) {
-            self.newest = Some(c);
         }
         let now = self.now();
         trim(&mut self.counts, |c| c.t, now);
@@ -236,7 +237,7 @@ impl Live {
 
     /// The newest run time accounted.
     fn now(&self) -> Nanos {
-        self.newest.map_or(Nanos::ZERO, |n| n.t)
+        self.newest.as_ref().map_or(Nanos::ZERO, |n| n.t)
     }
 
     /// A change of settings took effect at run time `at`: a new segment starts there.
@@ -246,8 +247,8 @@ impl Live {
             .iter()
             .filter(|c| c.t < at)
             .max_by_key(|c| c.t)
-            .copied()
-            .or(self.segment.baseline.filter(|b| b.t < at));
+            .cloned()
+            .or_else(|| self.segment.baseline.clone().filter(|b| b.t < at));
         // Steps from at or after the change that arrived before it (real clock) belong here.
         let latency = self
             .window
@@ -324,7 +325,7 @@ impl Live {
     /// published in the window (its newest stamp), so a gap before the window (a change from
     /// a slower rate) does not dilute it.
     pub fn window_topic(&self, id: TopicId) -> TopicCounts {
-        let Some(newest) = self.newest else {
+        let Some(newest) = &self.newest else {
             return TopicCounts::default();
         };
         let last = newest.topics.get(id);
@@ -348,7 +349,7 @@ impl Live {
     /// Topic `id`'s QoS counter `c` over the window (what it counted since the window's
     /// baseline), as its drops and stale reads are.
     pub fn window_counter(&self, id: TopicId, c: ratelab::qos::QosCounter) -> u64 {
-        let Some(newest) = self.newest else { return 0 };
+        let Some(newest) = &self.newest else { return 0 };
         let base = self
             .window_base()
             .map_or(0, |b| b.topics.get(id).counter(c));
@@ -357,9 +358,9 @@ impl Live {
 
     /// Topic `id` since the segment started.
     pub fn segment_topic(&self, id: TopicId) -> TopicCounts {
-        match self.newest {
+        match &self.newest {
             Some(n) => TopicCounts::between(
-                self.segment.baseline.map(|b| b.topics.get(id)),
+                self.segment.baseline.as_ref().map(|b| b.topics.get(id)),
                 n.topics.get(id),
                 n.t,
             ),
@@ -527,9 +528,12 @@ mod tests {
         // The latency window holds the steps only: 51 of them.
         assert_eq!(live.window_latency().0, 51);
         // A frozen run repeats its last status: the window stays as it was.
-        let (t, topics) = (Nanos(3_000 * MS), live.newest.unwrap().topics);
+        let (t, topics) = (Nanos(3_000 * MS), live.newest.clone().unwrap().topics);
         for _ in 0..5_000 {
-            live.counters(Counts { t, topics });
+            live.counters(Counts {
+                t,
+                topics: topics.clone(),
+            });
         }
         assert_eq!(live.window_topic(T), w);
         assert!(live.counts.len() < 200, "{}", live.counts.len());

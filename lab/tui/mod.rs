@@ -885,7 +885,7 @@ mod tests {
                 recording: None,
             });
             for s in report.trace.iter().filter(|s| s.t <= upto) {
-                app.on_telemetry(Telemetry::Step(Box::new(*s)));
+                app.on_telemetry(Telemetry::Step(Box::new(s.clone())));
             }
             app
         };
@@ -917,7 +917,7 @@ mod tests {
             .iter()
             .filter(|s| s.t >= ratelab::Nanos(6_000_000_000));
         for s in late {
-            app.on_telemetry(Telemetry::Step(Box::new(*s)));
+            app.on_telemetry(Telemetry::Step(Box::new(s.clone())));
         }
         let text = render(&app, 120, 40);
         assert!(text.contains("latency since 6.00 s (joined): n="), "{text}");

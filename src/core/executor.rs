@@ -366,11 +366,34 @@ pub struct Dispatch {
     plan: ExecutionPlan,
     /// Node indices by tie-break rank (lower first, then index): the registration order.
     order: Vec<usize>,
+    /// Each node's place in `order`.
+    place: Vec<usize>,
+    /// Each executor's nodes, by node index.
+    members: Vec<Vec<usize>>,
     ready: Vec<bool>,
+    /// Ready nodes per executor (only an executor with some polls to any effect).
+    ready_in: Vec<usize>,
+    /// The executors with a ready node.
+    with_ready: std::collections::BTreeSet<usize>,
     in_snapshot: Vec<bool>,
+    /// The places in `order` of the nodes in a snapshot: the candidates of
+    /// [`Dispatch::pick`], lowest rank first (a graph of thousands of nodes has few ready at
+    /// once).
+    snapshot: std::collections::BTreeSet<usize>,
     running: Vec<bool>,
     busy_threads: Vec<usize>,
     busy_groups: Vec<usize>,
+}
+
+/// Each executor of `plan`'s nodes, by node index.
+fn members_of(plan: &ExecutionPlan) -> Vec<Vec<usize>> {
+    let mut members = vec![Vec::new(); plan.executors.len()];
+    for (i, &e) in plan.node_executor.iter().enumerate() {
+        if let Some(m) = members.get_mut(e) {
+            m.push(i);
+        }
+    }
+    members
 }
 
 impl Dispatch {
@@ -380,10 +403,19 @@ impl Dispatch {
         let n = plan.node_executor.len();
         let mut order: Vec<usize> = (0..n).collect();
         order.sort_by_key(|&i| (ranks.get(i).copied().unwrap_or(i as u32), i));
+        let mut place = vec![0; n];
+        for (p, &i) in order.iter().enumerate() {
+            place[i] = p;
+        }
         Dispatch {
             order,
+            place,
+            members: members_of(&plan),
             ready: vec![false; n],
+            ready_in: vec![0; plan.executors.len()],
+            with_ready: Default::default(),
             in_snapshot: vec![false; n],
+            snapshot: Default::default(),
             running: vec![false; n],
             busy_threads: vec![0; plan.executors.len()],
             busy_groups: vec![0; plan.groups.len()],
@@ -418,12 +450,27 @@ impl Dispatch {
             }
         }
         self.in_snapshot.iter_mut().for_each(|s| *s = false);
+        self.snapshot.clear();
+        self.members = members_of(&plan);
+        self.ready_in = vec![0; plan.executors.len()];
+        self.with_ready.clear();
+        for (i, &ready) in self.ready.iter().enumerate() {
+            if ready {
+                let e = plan.node_executor[i];
+                self.ready_in[e] += 1;
+                self.with_ready.insert(e);
+            }
+        }
         self.plan = plan;
     }
 
     /// Node `node`'s timer is due: it waits for a thread (and for its executor's next poll).
     pub fn release(&mut self, node: usize) {
-        self.ready[node] = true;
+        if !std::mem::replace(&mut self.ready[node], true) {
+            let e = self.plan.node_executor[node];
+            self.ready_in[e] += 1;
+            self.with_ready.insert(e);
+        }
     }
 
     /// Is node `node` running (started, outputs not yet published)?
@@ -451,14 +498,19 @@ impl Dispatch {
         {
             return false;
         }
-        let n = self.ready.len();
-        let members = (0..n).filter(|&i| self.plan.node_executor[i] == e);
+        let members = &self.members[e];
         if !members
-            .clone()
-            .any(|i| self.in_snapshot[i] && self.startable(i))
+            .iter()
+            .any(|&i| self.in_snapshot[i] && self.startable(i))
         {
-            for i in members {
-                self.in_snapshot[i] = self.ready[i] && !self.running[i];
+            for &i in members {
+                let now = self.ready[i] && !self.running[i];
+                self.in_snapshot[i] = now;
+                if now {
+                    self.snapshot.insert(self.place[i]);
+                } else {
+                    self.snapshot.remove(&self.place[i]);
+                }
             }
         }
         true
@@ -470,10 +522,11 @@ impl Dispatch {
         if !self.poll_if_idle(e) {
             return None;
         }
-        self.order
+        self.members[e]
             .iter()
             .copied()
-            .find(|&i| self.plan.node_executor[i] == e && self.in_snapshot[i] && self.startable(i))
+            .filter(|&i| self.in_snapshot[i] && self.startable(i))
+            .min_by_key(|&i| self.place[i])
     }
 
     /// The next node to start now, by the rules above, or `None` when every ready node waits
@@ -482,20 +535,31 @@ impl Dispatch {
     /// as its new snapshot); then the lowest-ranked startable node of any snapshot starts.
     /// Call [`Dispatch::start`] with it.
     pub fn pick(&mut self) -> Option<usize> {
-        for e in 0..self.plan.executors.len() {
+        // An executor with no ready node has an empty snapshot (a node leaves its snapshot
+        // only by starting, which is the only way it stops being ready), so its poll would
+        // change nothing.
+        let polled: Vec<usize> = self.with_ready.iter().copied().collect();
+        for e in polled {
             self.poll_if_idle(e);
         }
-        self.order
+        self.snapshot
             .iter()
-            .copied()
-            .find(|&i| self.in_snapshot[i] && self.startable(i))
+            .map(|&p| self.order[p])
+            .find(|&i| self.startable(i))
     }
 
     /// Node `node` starts (it was [`Dispatch::pick`]ed): it holds a thread of its executor and
     /// its group until [`Dispatch::finish`] (at once for a zero compute time).
     pub fn start(&mut self, node: usize) {
-        self.ready[node] = false;
+        if std::mem::take(&mut self.ready[node]) {
+            let e = self.plan.node_executor[node];
+            self.ready_in[e] -= 1;
+            if self.ready_in[e] == 0 {
+                self.with_ready.remove(&e);
+            }
+        }
         self.in_snapshot[node] = false;
+        self.snapshot.remove(&self.place[node]);
         self.running[node] = true;
         self.busy_threads[self.plan.node_executor[node]] += 1;
         self.busy_groups[self.plan.node_group[node]] += 1;

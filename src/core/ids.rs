@@ -5,10 +5,7 @@
 
 use serde::{Deserialize, Serialize};
 
-/// The most nodes a graph may have (the lab lays out up to this many).
-pub const MAX_NODES: usize = 8;
-/// The most topics a graph may have: every node but the actuator publishes at most one.
-pub const MAX_TOPICS: usize = MAX_NODES - 1;
+pub use crate::limits::{MAX_NODES, MAX_TOPICS};
 
 /// Index of a node in the graph's node list (`GraphSpec::nodes`), which is the tie-break
 /// order; below [`MAX_NODES`] in a validated graph.

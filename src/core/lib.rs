@@ -2,8 +2,8 @@
 //! that talks to the world (no MuJoCo, Zenoh, rerun, Python or neural-network crate: the
 //! compiler keeps it so, since none is a dependency).
 //!
-//! - **leaves**: [`time`] (the `Nanos` newtype), [`ids`] (node and topic ids and their
-//!   bounds), [`text`] (text from outside, made safe to show), [`np_random`] (NumPy-exact
+//! - **leaves**: [`limits`] (every bound on what ratelab is given, in one place),
+//!   [`time`] (the `Nanos` newtype), [`ids`] (node and topic ids), [`text`] (text from outside, made safe to show), [`np_random`] (NumPy-exact
 //!   seeding), [`procs`] (what `/proc` says of a process), [`input`] and [`output`] (the
 //!   rules for files the user names), [`textlog`] (what nodes' code and ratelab's warnings
 //!   write, stamped with run time and node);
@@ -22,6 +22,7 @@ pub mod clock;
 pub mod executor;
 pub mod ids;
 pub mod input;
+pub mod limits;
 pub mod metrics;
 pub mod msg;
 pub mod node;

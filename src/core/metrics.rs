@@ -90,6 +90,12 @@ impl LatencyStats {
 /// (8 bytes each, about 1.4 MB) for exact order statistics.
 pub const MAX_EXACT_SAMPLES: usize = (MAX_DURATION_S * ACTUATOR_HZ) as usize + 1;
 
+/// More nodes (or topics) than this, and the summary's rates (topics) line gives the first
+/// [`SUMMARY_SHOWN`] and sums up the rest: a line per graph, whatever its size.
+pub const SUMMARY_ITEMS: usize = 12;
+/// Nodes and topics the summary names one by one in a graph of more than [`SUMMARY_ITEMS`].
+pub const SUMMARY_SHOWN: usize = 8;
+
 /// Samples per block of [`ExactLatency`]'s sorted list (a block splits past twice this).
 const BLOCK: usize = 512;
 
@@ -592,8 +598,38 @@ impl Metrics {
     fn rates_line(&self) -> String {
         let mut nodes: Vec<(&String, &NodeMetrics)> = self.nodes.iter().collect();
         nodes.sort_by_key(|(_, n)| n.rank);
+        let mut parts = self.node_rates(&nodes);
+        if nodes.len() > SUMMARY_ITEMS {
+            // A large graph: the first nodes, then the rest counted by rate.
+            let mut by_rate: Vec<(f64, usize)> = Vec::new();
+            for (_, n) in &nodes[SUMMARY_SHOWN..] {
+                let hz = n.rate_hz_end.unwrap_or(n.rate_hz);
+                match by_rate.iter_mut().find(|(r, _)| *r == hz) {
+                    Some((_, count)) => *count += 1,
+                    None => by_rate.push((hz, 1)),
+                }
+            }
+            by_rate.sort_by(|a, b| a.0.total_cmp(&b.0));
+            let groups: Vec<String> = by_rate
+                .iter()
+                .map(|(hz, count)| format!("{hz} Hz ×{count}"))
+                .collect();
+            parts.truncate(SUMMARY_SHOWN);
+            parts.push(format!(
+                "{} more nodes: {}",
+                nodes.len() - SUMMARY_SHOWN,
+                groups.join(", ")
+            ));
+        }
+        parts.push(self.depths_text());
+        parts.join(" | ")
+    }
+
+    /// Each node's rate as the rates line says it, `nodes` in rank order: `sensor 50 Hz`,
+    /// the chain's one policy as `control`, a rate a live change moved with its start.
+    fn node_rates(&self, nodes: &[(&String, &NodeMetrics)]) -> Vec<String> {
         let one_policy = nodes.iter().filter(|(_, n)| n.kind == "policy").count() == 1;
-        let mut parts: Vec<String> = nodes
+        nodes
             .iter()
             .map(|(name, n)| {
                 let label = if one_policy && n.kind == "policy" {
@@ -606,36 +642,49 @@ impl Metrics {
                     None => format!("{label} {} Hz", n.rate_hz),
                 }
             })
-            .collect();
+            .collect()
+    }
+
+    /// The topics' history depth: `queue_depth 1` when they share one (with the start's
+    /// when a live change moved it), else each topic's (the first few of a large graph's).
+    fn depths_text(&self) -> String {
         let topics = self.topics_by_publisher();
         let depth0 = topics
             .first()
             .map_or(self.queue_depth.unwrap_or(0), |(_, t)| t.depth);
         let shared = topics.iter().all(|(_, t)| t.depth == depth0);
         match self.queue_depth {
+            // A live change moved it: the depth at the end, as the topics report it.
             Some(start) if shared && start != depth0 => {
-                // A live change moved it: the depth at the end, as the topics report it.
-                parts.push(format!(
-                    "queue_depth {depth0} at the end, {start} at the start"
-                ));
+                format!("queue_depth {depth0} at the end, {start} at the start")
             }
-            _ if shared => parts.push(format!("queue_depth {depth0}")),
+            _ if shared => format!("queue_depth {depth0}"),
             _ => {
-                let depths: Vec<String> = topics
+                let mut depths: Vec<String> = topics
                     .iter()
+                    .take(SUMMARY_ITEMS)
                     .map(|(name, t)| format!("{name} {}", t.depth))
                     .collect();
-                parts.push(format!("depths {}", depths.join(", ")));
+                if topics.len() > SUMMARY_ITEMS {
+                    depths.truncate(SUMMARY_SHOWN);
+                    depths.push(format!("and {} more", topics.len() - SUMMARY_SHOWN));
+                }
+                format!("depths {}", depths.join(", "))
             }
         }
-        parts.join(" | ")
     }
 
     /// `/obs 50.0 msg/s (0 dropped) | /action …`, topics in their publishers' rank order; a
     /// topic nobody subscribes to says so instead of its drops (every message it evicts
     /// counts as dropped, read by no one).
     fn topics_line(&self) -> String {
-        self.topics_by_publisher()
+        let topics = self.topics_by_publisher();
+        let shown = if topics.len() > SUMMARY_ITEMS {
+            SUMMARY_SHOWN
+        } else {
+            topics.len()
+        };
+        let mut parts: Vec<String> = topics[..shown]
             .iter()
             .map(|(name, t)| {
                 let rate = self.rate_text(t);
@@ -653,8 +702,23 @@ impl Metrics {
                     None => format!("{name} {rate} (no subscriber)"),
                 }
             })
-            .collect::<Vec<_>>()
-            .join(" | ")
+            .collect();
+        let rest = &topics[shown..];
+        if !rest.is_empty() {
+            // A large graph: the first topics, then the rest summed.
+            let published: u64 = rest.iter().map(|(_, t)| t.published).sum();
+            let dropped: u64 = rest
+                .iter()
+                .filter(|(_, t)| t.subscriber.is_some())
+                .map(|(_, t)| t.dropped)
+                .sum();
+            let unread = rest.iter().filter(|(_, t)| t.subscriber.is_none()).count();
+            parts.push(format!(
+                "{} more topics: {published} msgs, {dropped} dropped, {unread} with no subscriber",
+                rest.len()
+            ));
+        }
+        parts.join(" | ")
     }
 
     /// A topic's traffic as the summary says it: `50.1 msg/s` (`msg_per_s`, the chapter's

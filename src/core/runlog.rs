@@ -11,6 +11,7 @@ use crate::metrics::ExactLatency;
 use crate::time::Nanos;
 use crate::topic::TopicStats;
 use serde::{Deserialize, Serialize};
+use smallvec::SmallVec;
 
 /// Told of every actuator step, on the actuator's thread (a recorder, the lab's telemetry):
 /// it must not block. `ratelab::graph::StepObserver` is one that also sees the graph built.
@@ -19,24 +20,25 @@ pub trait StepSink: Send {
     fn on_step(&mut self, rec: &StepRecord);
 }
 
-/// Every topic's counters at one instant, by [`TopicId`]: a fixed-size copy (no allocation
-/// per actuator step), at most [`MAX_TOPICS`] entries.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+/// Topics whose counters a [`TopicCounters`] holds without allocating: the chapter's
+/// graphs and every shipped one have fewer.
+pub const INLINE_TOPICS: usize = 7;
+
+/// Every topic's counters at one instant, by [`TopicId`], at most [`MAX_TOPICS`] entries:
+/// inline up to [`INLINE_TOPICS`] (no allocation per actuator step for the graphs of the
+/// chapter), on the heap past them.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
 pub struct TopicCounters {
-    len: u8,
-    stats: [TopicStats; MAX_TOPICS],
+    stats: SmallVec<[TopicStats; INLINE_TOPICS]>,
 }
 
 impl FromIterator<TopicStats> for TopicCounters {
     /// From each topic's stats, in [`TopicId`] order (entries past [`MAX_TOPICS`] are ignored;
     /// a validated graph has no more).
     fn from_iter<I: IntoIterator<Item = TopicStats>>(stats: I) -> Self {
-        let mut c = TopicCounters::default();
-        for s in stats.into_iter().take(MAX_TOPICS) {
-            c.stats[c.len as usize] = s;
-            c.len += 1;
+        TopicCounters {
+            stats: stats.into_iter().take(MAX_TOPICS).collect(),
         }
-        c
     }
 }
 
@@ -47,11 +49,11 @@ impl TopicCounters {
     }
     /// All of them, by [`TopicId`].
     pub fn as_slice(&self) -> &[TopicStats] {
-        &self.stats[..self.len as usize]
+        &self.stats
     }
     /// Replace topic `id`'s counters (an id past the end is ignored).
     pub fn set(&mut self, id: TopicId, stats: TopicStats) {
-        if let Some(s) = self.stats[..self.len as usize].get_mut(id.0) {
+        if let Some(s) = self.stats.get_mut(id.0) {
             *s = stats;
         }
     }
@@ -79,11 +81,10 @@ impl<'de> Deserialize<'de> for TopicCounters {
             ) -> Result<TopicCounters, A::Error> {
                 let mut c = TopicCounters::default();
                 while let Some(s) = seq.next_element::<TopicStats>()? {
-                    if c.len as usize == MAX_TOPICS {
+                    if c.stats.len() == MAX_TOPICS {
                         return Err(serde::de::Error::invalid_length(MAX_TOPICS + 1, &self));
                     }
-                    c.stats[c.len as usize] = s;
-                    c.len += 1;
+                    c.stats.push(s);
                 }
                 Ok(c)
             }
@@ -93,7 +94,7 @@ impl<'de> Deserialize<'de> for TopicCounters {
 }
 
 /// One actuator tick.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct StepRecord {
     /// Actuator step number, from 1 (each steps the plant 20 ms).
     pub step: u64,
@@ -198,7 +199,7 @@ impl RunLog {
             self.fell_at = Some(rec.t);
         }
         if self.keep_trace {
-            self.trace.push(rec);
+            self.trace.push(rec.clone());
         }
         self.last = Some(rec);
     }
@@ -223,7 +224,7 @@ mod tests {
             published: None,
             fell: false,
         };
-        log.push(base);
+        log.push(base.clone());
         log.push(StepRecord {
             step: 2,
             t: Nanos(20),

@@ -10,11 +10,7 @@ use serde::{Deserialize, Serialize};
 use std::fmt;
 use std::ops::{Add, AddAssign, Sub};
 
-/// The longest run accepted, seconds (`--duration`, an exercise's bands, `bench`, a session
-/// log's run, a fault's time): one hour. A headless run keeps one trace record per actuator
-/// step (about 180 000 at 50 Hz for an hour, tens of MB), and a virtual hour at the highest
-/// rates takes minutes; a lab run ends there, so its log replays.
-pub const MAX_DURATION_S: f64 = 3600.0;
+pub use crate::limits::MAX_DURATION_S;
 /// [`MAX_DURATION_S`] as run time.
 pub const MAX_DURATION: Nanos = Nanos(MAX_DURATION_S as u64 * Nanos::SECOND.0);
 

@@ -26,8 +26,11 @@ use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::path::Path;
 
-/// The largest credentials file read, bytes.
-pub const MAX_CREDENTIALS_BYTES: u64 = 256 * 1024;
+/// The largest credentials file read, bytes: room for every identity of the largest launch
+/// ([`MAX_PROCESSES`] and two more, each a certificate and a key of at most
+/// `MAX_PEM_BYTES`), and 64 KiB besides (about 4.1 MiB).
+pub const MAX_CREDENTIALS_BYTES: u64 =
+    (MAX_PROCESSES as u64 + 2) * 2 * MAX_PEM_BYTES as u64 + 64 * 1024;
 
 /// The largest certificate or private key in a credentials file, bytes of PEM.
 const MAX_PEM_BYTES: usize = 8 * 1024;
@@ -531,7 +534,9 @@ mod tests {
             Credentials::parse(&odd.to_toml(), "F").unwrap().graph,
             odd.graph
         );
-        let many = (0..40).map(|i| format!("p{i}")).collect::<Vec<_>>();
+        let many = (0..=MAX_PROCESSES)
+            .map(|i| format!("p{i}"))
+            .collect::<Vec<_>>();
         let mut big = c.clone();
         big.processes = many;
         let e = Credentials::parse(&big.to_toml(), "F")

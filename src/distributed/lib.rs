@@ -37,7 +37,8 @@
 
 // The layers below, under their own names (`crate::graph`, `crate::time`, …).
 use ratelab_core::{
-    executor, ids, input, metrics, msg, node, output, procs, qos, rate, runlog, text, time, topic,
+    executor, ids, input, limits, metrics, msg, node, output, procs, qos, rate, runlog, text, time,
+    topic,
 };
 use ratelab_runtime::{
     checkpoint, config, graph, policy, runcore, scheduler, summary, telemetry, ClockKind,
@@ -128,8 +129,7 @@ pub fn set_zenoh_runtime() -> Result<(), DistError> {
     }
 }
 
-/// Most processes one graph may have (each is an OS process).
-pub const MAX_PROCESSES: usize = 16;
+pub use crate::limits::MAX_PROCESSES;
 
 /// Something that stops a multi-process run, as one line.
 #[derive(Debug, thiserror::Error)]
@@ -364,11 +364,17 @@ pub fn check_keys(spec: &GraphSpec) -> Result<(), DistError> {
             }
         }
     }
-    if spec.placement().len() > MAX_PROCESSES {
+    let processes = spec.placement().len();
+    if processes > MAX_PROCESSES {
         return Err(DistError::Usage(format!(
-            "graph '{}' places its nodes in {} processes (at most {MAX_PROCESSES})",
-            spec.name,
-            spec.placement().len()
+            "{}: give nodes a shared `process = \"…\"` (a node without one runs in its own)",
+            limits::refusal(
+                format_args!(
+                    "graph '{}' places its nodes in {processes} processes; a launch has at most {MAX_PROCESSES}",
+                    spec.name
+                ),
+                "MAX_PROCESSES"
+            )
         )));
     }
     Ok(())

@@ -173,7 +173,7 @@ impl Fold {
     /// actuator's process only forwards those topics, so its own copies do not count what
     /// their subscribers do. Steps are merged in run-time order.
     pub fn merge_step(&mut self, step: &StepRecord) -> StepRecord {
-        let mut out = *step;
+        let mut out = step.clone();
         for (i, holder) in self.holders.iter().enumerate() {
             if *holder == self.plant {
                 continue;
@@ -268,7 +268,7 @@ impl Fold {
                     let s = self.pending.pop_front().expect("full");
                     out.push(Telemetry::Step(Box::new(self.merge_step(&s))));
                 }
-                self.pending.push_back(*s);
+                self.pending.push_back(s.clone());
             }
         }
         self.now = self.now.max(Nanos(m.t_ns));

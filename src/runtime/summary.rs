@@ -99,6 +99,7 @@ impl GraphState {
                 latency_ms: log.latency.summary_ms(),
                 final_pole_angle: log
                     .last
+                    .as_ref()
                     .map_or_else(|| lock(&h.plant).state().theta, |r| r.pole_angle),
                 nonfinite_actions: log.nonfinite_actions,
             },

@@ -81,7 +81,7 @@ impl TelemetryObserver {
 impl StepObserver for TelemetryObserver {
     fn on_step(&mut self, rec: &StepRecord) {
         if !self.1.load(Ordering::Relaxed) {
-            let _ = self.0.send(Telemetry::Step(Box::new(*rec)));
+            let _ = self.0.send(Telemetry::Step(Box::new(rec.clone())));
         }
     }
 }

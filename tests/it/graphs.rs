@@ -80,7 +80,7 @@ fn every_shipped_graph_balances_under_the_real_clock() {
 struct Keep(std::sync::Arc<std::sync::Mutex<Vec<StepRecord>>>);
 impl StepObserver for Keep {
     fn on_step(&mut self, r: &StepRecord) {
-        self.0.lock().unwrap().push(*r);
+        self.0.lock().unwrap().push(r.clone());
     }
 }
 
@@ -287,9 +287,14 @@ fn bad_graph_files_exit_2_with_file_line_col() {
     let (code, err) = run_graph_file("name = \n", &[]);
     assert_eq!((code, err.lines().count()), (2, 1), "{err}");
     assert!(err.starts_with("g.toml:1:"), "{err}");
-    let (code, err) = run_graph_file(&"#".repeat(70_000), &[]);
+    let over = ratelab::limits::MAX_GRAPH_FILE_BYTES as usize + 1;
+    let (code, err) = run_graph_file(&"#".repeat(over), &[]);
     assert_eq!((code, err.lines().count()), (2, 1), "{err}");
     assert!(err.contains("at most"), "{err}");
+    assert!(
+        err.contains("ratelab::limits::MAX_GRAPH_FILE_BYTES"),
+        "{err}"
+    );
     let o = Command::new(env!("CARGO_BIN_EXE_ratelab"))
         .args(["run", "--smoke", "--graph", "/dev/zero"])
         .output()

@@ -61,6 +61,7 @@ mod glance;
 mod graphs;
 mod hardening;
 mod hostile;
+mod large_graphs;
 mod python;
 mod qos;
 mod qos_compat;

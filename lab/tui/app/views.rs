@@ -112,7 +112,7 @@ impl App {
             qos: (!(qos.is_default() && spec.qos.is_default())).then(|| qos.short_parts(ran_depth)),
             // Over the window, as its drops and stale reads (totals counted from the start
             // read as 40 % loss on a 20 % link under an arrow saying "last 5 s").
-            qos_counts: self.last.map_or_else(Vec::new, |l| {
+            qos_counts: self.last.as_ref().map_or_else(Vec::new, |l| {
                 l.topics
                     .get(id)
                     .reported(&[spec.qos, qos])
@@ -386,8 +386,8 @@ impl App {
             topics: (0..self.graph.topics.len())
                 .map(|i| self.topic_view(TopicId(i)))
                 .collect(),
-            pole_angle: self.last.map_or(0.0, |s| s.pole_angle),
-            cart_pos: self.last.map_or(0.0, |s| s.cart_pos),
+            pole_angle: self.last.as_ref().map_or(0.0, |s| s.pole_angle),
+            cart_pos: self.last.as_ref().map_or(0.0, |s| s.cart_pos),
             // While a callback holds the run, the run is not "balanced": it is hung, since the
             // run time it holds (the virtual clock stands there; under the real clock, from
             // when it started).

@@ -63,6 +63,11 @@ pub const STATS_PERIOD: Duration = Duration::from_millis(100);
 /// thousand a second; a step is about 1 KB of JSON with a few topics).
 pub const MAX_BATCH_STEPS: usize = 1000;
 
+/// The most topic counters the steps of one [`LiveStats`] carry together (about 150 bytes
+/// each as JSON, so 15 MB at most): a large graph's batch holds fewer steps than
+/// [`MAX_BATCH_STEPS`], the newest.
+pub const MAX_BATCH_STEP_COUNTERS: usize = 100_000;
+
 /// The most node ticks one [`LiveStats`] carries.
 pub const MAX_BATCH_TICKS: usize = 20_000;
 
@@ -79,6 +84,11 @@ impl LiveStats {
     pub fn decode(bytes: &[u8]) -> Result<LiveStats, String> {
         let m: LiveStats = wire::decode_json(bytes)?;
         let bounded = m.steps.len() <= MAX_BATCH_STEPS
+            && m.steps
+                .iter()
+                .map(|s| s.topics.as_slice().len())
+                .sum::<usize>()
+                <= MAX_BATCH_STEP_COUNTERS
             && m.ticks.len() <= MAX_BATCH_TICKS
             && m.counters.len() <= MAX_BATCH_COUNTERS
             && m.counters.iter().all(|c| c.1 < crate::ids::MAX_TOPICS)
@@ -117,7 +127,9 @@ pub(super) struct Batch {
 
 impl Batch {
     fn push_step(&mut self, s: StepRecord) {
-        if self.steps.len() == MAX_BATCH_STEPS {
+        // Steps of one graph carry as many counters each.
+        let room = MAX_BATCH_STEPS.min(MAX_BATCH_STEP_COUNTERS / s.topics.as_slice().len().max(1));
+        while self.steps.len() >= room.max(1) {
             self.steps.pop_front();
         }
         self.steps.push_back(s);
@@ -176,7 +188,7 @@ pub(super) struct StepTap(pub(super) Arc<Mutex<Batch>>);
 
 impl crate::graph::StepObserver for StepTap {
     fn on_step(&mut self, rec: &StepRecord) {
-        crate::graph::lock(&self.0).push_step(*rec);
+        crate::graph::lock(&self.0).push_step(rec.clone());
     }
 }
 

@@ -29,9 +29,7 @@ pub use process_to_process::{
 
 use serde::{Deserialize, Serialize};
 
-/// The largest control message accepted, bytes (a report with its counters is a few KB; a
-/// graph file is at most [`crate::input`]'s bound).
-pub const MAX_CONTROL_BYTES: usize = 4 << 20;
+pub use crate::limits::MAX_CONTROL_BYTES;
 
 /// The host's `CLOCK_MONOTONIC`, ns: the clock every process on one host shares (Rust's
 /// `Instant` reads the same clock on Linux).

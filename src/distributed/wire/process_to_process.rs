@@ -9,8 +9,7 @@ use crate::msg::AnyTopic;
 use crate::time::Nanos;
 use serde::{Deserialize, Serialize};
 
-/// The largest topic sample accepted, bytes (a state sample is about 40).
-pub const MAX_SAMPLE_BYTES: usize = 1024;
+pub use crate::limits::MAX_SAMPLE_BYTES;
 
 /// The largest sequence number accepted: an hour at 10 kHz is 3.6 × 10⁷ messages; this
 /// leaves room and keeps every counter far from overflow.

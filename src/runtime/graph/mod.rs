@@ -11,6 +11,7 @@ pub mod kind;
 pub mod nodes;
 pub mod registry;
 pub mod spec;
+pub mod synthetic;
 
 use crate::executor::ComputeDraw;
 use crate::msg::AnyTopic;

@@ -85,7 +85,6 @@ pub use executors::ExecutorSpec;
 pub use processes::{RestartPolicy, MAX_RESTARTS};
 
 use crate::executor::ComputeTime;
-use crate::ids::MAX_NODES;
 use crate::plant::ACTUATOR_HZ;
 use crate::qos::{
     self, Delivery, History, Link, OnDeadlineMissed, Reliability, TopicQos, MAX_DEPTH,
@@ -98,11 +97,11 @@ use std::ops::Range;
 use std::path::Path;
 use toml::Spanned;
 
-/// The most subscribers a topic may have.
-pub const MAX_SUBSCRIBERS: usize = MAX_NODES - 1;
+pub use crate::limits::MAX_SUBSCRIBERS;
 
-/// A graph file larger than this is refused before it is parsed, bytes.
-pub const MAX_FILE_BYTES: u64 = 64 * 1024;
+/// A graph file larger than this is refused before it is parsed, bytes
+/// ([`crate::limits::MAX_GRAPH_FILE_BYTES`]).
+pub const MAX_FILE_BYTES: u64 = crate::limits::MAX_GRAPH_FILE_BYTES;
 
 /// The chapter's graph, shipped as `graphs/cartpole.toml` and built in: the default.
 pub const DEFAULT_GRAPH_TOML: &str = include_str!("../../../graphs/cartpole.toml");
@@ -497,9 +496,15 @@ impl GraphSpec {
                 return at_start(NOT_FOUND.into());
             }
             // The error names the file first; the line's `FILE:` already does.
+            let too_large = matches!(e, crate::input::InputError::TooLarge { .. });
             let text = e.to_string();
             let prefix = format!("{origin}: ");
-            at_start(text.strip_prefix(&prefix).unwrap_or(&text).to_string())
+            let text = text.strip_prefix(&prefix).unwrap_or(&text);
+            at_start(if too_large {
+                crate::limits::refusal(text, "MAX_GRAPH_FILE_BYTES")
+            } else {
+                text.to_string()
+            })
         })?;
         let text = String::from_utf8(bytes).map_err(|_| at_start("not UTF-8 text".into()))?;
         GraphSpec::parse(&text, &origin)
@@ -880,22 +885,64 @@ impl GraphSpec {
         })
     }
 
-    /// Layers for drawing left to right: a node's layer is one more than its publisher's
-    /// (sensors at 0), following subscriptions; nodes in a cycle stay where they were reached.
+    /// Layers for drawing left to right: a node's layer is one more than its publishers'
+    /// deepest (nodes that read nothing at 0), following subscriptions: the longest path to
+    /// it, in O((nodes + subscriptions) log nodes). A cycle (possible with explicit
+    /// priorities) is entered at its first node (in node order) that something laid out
+    /// already feeds, which goes one past what feeds it, and the rest of the cycle follows.
     pub fn layers(&self) -> Vec<usize> {
-        let mut layer = vec![0usize; self.nodes.len()];
-        // Longest path over at most MAX_NODES relaxations; a cycle stops growing at the bound.
-        for _ in 0..self.nodes.len() {
-            for (i, n) in self.nodes.iter().enumerate() {
-                for t in &n.subscribes {
-                    let p = self.topics[t.0].publisher.0;
-                    if p != i {
-                        layer[i] = layer[i].max((layer[p] + 1).min(self.nodes.len() - 1));
+        let n = self.nodes.len();
+        let publishers = |i: usize| {
+            self.nodes[i]
+                .subscribes
+                .iter()
+                .map(|t| self.topics[t.0].publisher.0)
+                .filter(move |&p| p != i)
+        };
+        let mut waiting: Vec<usize> = (0..n).map(|i| publishers(i).count()).collect();
+        let mut downstream: Vec<Vec<usize>> = vec![Vec::new(); n];
+        for i in 0..n {
+            for p in publishers(i) {
+                downstream[p].push(i);
+            }
+        }
+        let mut layer = vec![0usize; n];
+        let mut placed = vec![false; n];
+        let mut ready: Vec<usize> = (0..n).filter(|&i| waiting[i] == 0).collect();
+        // Unplaced nodes that a placed one feeds, and the first unplaced one in node order.
+        let mut fed = std::collections::BTreeSet::new();
+        let mut next_unplaced = 0;
+        loop {
+            while let Some(p) = ready.pop() {
+                if std::mem::replace(&mut placed[p], true) {
+                    continue;
+                }
+                for &s in downstream[p].iter().filter(|&&s| !placed[s]) {
+                    layer[s] = layer[s].max(layer[p] + 1);
+                    waiting[s] = waiting[s].saturating_sub(1);
+                    if waiting[s] == 0 {
+                        ready.push(s);
+                    } else {
+                        fed.insert(s);
                     }
                 }
             }
+            // Only cycles are left: enter one.
+            let entry = loop {
+                match fed.pop_first() {
+                    Some(s) if placed[s] => continue,
+                    Some(s) => break Some(s),
+                    None => break None,
+                }
+            };
+            while next_unplaced < n && placed[next_unplaced] {
+                next_unplaced += 1;
+            }
+            match entry.or((next_unplaced < n).then_some(next_unplaced)) {
+                Some(s) => ready.push(s),
+                None => return layer,
+            }
         }
-        layer
     }
 }
 
@@ -1018,6 +1065,35 @@ depth = 1
         let g = parse(CHAIN).unwrap();
         assert_eq!(g.node_names(), ["sensor", "policy", "actuator"]);
         assert_eq!(g.layers(), vec![0, 1, 2]);
+    }
+
+    #[test]
+    fn layers_are_the_longest_path_and_a_cycle_goes_past_what_feeds_it() {
+        let g = parse(&crate::graph::synthetic::graph_toml(11, 1)).unwrap();
+        let layer = |name: &str| g.layers()[g.node_id(name).unwrap().0];
+        let chain = ["sensor", "policy", "actuator"].map(layer);
+        assert_eq!(chain, [0, 1, 2]);
+        for k in 0..2 {
+            let controller = ["sensor", "estimator", "policy", "safety"]
+                .map(|kind| layer(&format!("{kind}_{k}")));
+            assert_eq!(controller, [0, 1, 2, 3], "controller {k}");
+        }
+        // Two Python nodes feeding each other (a priority breaks the tie-break's cycle): both
+        // past the sensor that feeds the first.
+        let text = format!(
+            "{CHAIN}\n[[node]]\nname = \"a\"\nkind = \"python\"\nscript = \"a.py\"\nrate_hz = 10\n\
+             subscribes = [\"/obs\", \"/y\"]\npublishes = \"/x\"\npriority = 5\n\
+             [[node]]\nname = \"b\"\nkind = \"python\"\nscript = \"b.py\"\nrate_hz = 10\n\
+             subscribes = \"/x\"\npublishes = \"/y\"\n\
+             [[topic]]\nname = \"/x\"\ntype = \"state\"\ndepth = 1\n\
+             [[topic]]\nname = \"/y\"\ntype = \"state\"\ndepth = 1\n"
+        );
+        let g = parse(&text).unwrap();
+        let layers = g.layers();
+        let at = |name: &str| layers[g.node_id(name).unwrap().0];
+        assert_eq!(at("sensor"), 0);
+        // `a` (fed by the sensor) enters the cycle, `b` follows it.
+        assert_eq!((at("a"), at("b")), (1, 2), "{layers:?}");
     }
 
     #[test]

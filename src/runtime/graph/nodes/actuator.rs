@@ -132,7 +132,7 @@ impl Work for Actuator {
             topics: self.topics.iter().map(|t| t.stats_at(now)).collect(),
             fell: outcome.terminated,
         };
-        log(&self.log).push(rec);
+        log(&self.log).push(rec.clone());
         for obs in &mut self.observers {
             obs.on_step(&rec);
         }

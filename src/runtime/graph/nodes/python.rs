@@ -4,7 +4,7 @@
 //! through the interpreter it installs ([`crate::interpreter`]).
 
 use crate::graph::kind::{BuildContext, Code, KindDef, Params, Plant, Ports};
-use crate::ids::MAX_TOPICS;
+use crate::limits::MAX_NODE_PORTS;
 
 /// The kind.
 pub fn def() -> KindDef {
@@ -12,9 +12,9 @@ pub fn def() -> KindDef {
         name: "python",
         doc: "a learner's node in Python (create_subscription, create_publisher, create_timer)",
         ports: Ports::Open {
-            max_inputs: MAX_TOPICS,
+            max_inputs: MAX_NODE_PORTS,
             min_outputs: 0,
-            max_outputs: MAX_TOPICS,
+            max_outputs: MAX_NODE_PORTS,
         },
         plant: Plant::None,
         code: Code::Python,

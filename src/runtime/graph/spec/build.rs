@@ -9,9 +9,12 @@ use super::{
 };
 use super::{Code, Kind, MsgType, NodeId, Plant, PythonCode, TopicId};
 use crate::graph::kind::{Params, Ports};
-use crate::ids::{MAX_NODES, MAX_TOPICS};
+use crate::ids::MAX_NODES;
+use crate::limits::{self, MAX_NODE_PORTS, MAX_TOPICS};
 use crate::msg::{ForceMsg, Message, StateMsg};
 use crate::qos::{self, TopicQos};
+use std::cmp::Reverse;
+use std::collections::{BinaryHeap, HashMap, HashSet};
 use std::ops::Range;
 use std::path::Path;
 use toml::Spanned;
@@ -69,7 +72,7 @@ fn a_kind(kind_name: &str) -> String {
 }
 
 /// A node's `subscribes` or `publishes`: one topic name, or a list of them (at most
-/// [`MAX_TOPICS`], each once), each spanned at the value.
+/// [`MAX_NODE_PORTS`], each once), each spanned at the value.
 fn topic_list(
     cx: &Ctx<'_>,
     key: &str,
@@ -86,7 +89,19 @@ fn topic_list(
     };
     let names: Vec<String> = match v.get_ref() {
         toml::Value::String(name) => vec![name.clone()],
-        toml::Value::Array(items) if !items.is_empty() && items.len() <= MAX_TOPICS => items
+        toml::Value::Array(items) if items.len() > MAX_NODE_PORTS => {
+            return Err(cx.err(
+                v.span(),
+                limits::refusal(
+                    format_args!(
+                        "{key} names {} topics; a node has at most {MAX_NODE_PORTS}",
+                        items.len()
+                    ),
+                    "MAX_NODE_PORTS",
+                ),
+            ))
+        }
+        toml::Value::Array(items) if !items.is_empty() => items
             .iter()
             .map(|i| i.as_str().map(String::from).ok_or_else(bad))
             .collect::<Result<_, _>>()?,
@@ -111,7 +126,19 @@ pub(super) fn build(cx: &Ctx<'_>, raw: RawGraph) -> Result<GraphSpec, SpecError>
     if raw.nodes.len() > MAX_NODES {
         return Err(cx.err(
             raw.nodes[MAX_NODES].span(),
-            format!("a graph has at most {MAX_NODES} nodes"),
+            limits::refusal(
+                format_args!("a graph has at most {MAX_NODES} nodes"),
+                "MAX_NODES",
+            ),
+        ));
+    }
+    if raw.topics.len() > MAX_TOPICS {
+        return Err(cx.err(
+            raw.topics[MAX_TOPICS].span(),
+            limits::refusal(
+                format_args!("a graph has at most {MAX_TOPICS} topics"),
+                "MAX_TOPICS",
+            ),
         ));
     }
     if raw.nodes.is_empty() {
@@ -121,11 +148,22 @@ pub(super) fn build(cx: &Ctx<'_>, raw: RawGraph) -> Result<GraphSpec, SpecError>
         ));
     }
     let (mut topics, topic_spans) = read_topics(cx, &raw)?;
+    let by_name: HashMap<String, usize> = topics
+        .iter()
+        .enumerate()
+        .map(|(i, t)| (t.name.clone(), i))
+        .collect();
     let mut file_nodes: Vec<NodeSpec> = Vec::new();
+    let mut node_names: HashSet<String> = HashSet::new();
     let mut node_spans = Vec::new();
     let mut actuators = Vec::new();
     for n in &raw.nodes {
-        let node = read_node(cx, n.get_ref(), &mut topics, &file_nodes)?;
+        let known = Known {
+            topics: &by_name,
+            nodes: &node_names,
+        };
+        let node = read_node(cx, n.get_ref(), &mut topics, &file_nodes, known)?;
+        node_names.insert(node.name.clone());
         if node.kind.is_actuator() {
             actuators.push(n.get_ref().name.span());
         }
@@ -209,8 +247,9 @@ fn read_topics(
     cx: &Ctx<'_>,
     raw: &RawGraph,
 ) -> Result<(Vec<TopicSpec>, Vec<Range<usize>>), SpecError> {
-    let mut topics: Vec<TopicSpec> = Vec::new();
-    let mut topic_spans = Vec::new();
+    let mut topics: Vec<TopicSpec> = Vec::with_capacity(raw.topics.len());
+    let mut topic_spans = Vec::with_capacity(raw.topics.len());
+    let mut seen: HashSet<&str> = HashSet::with_capacity(raw.topics.len());
     for t in &raw.topics {
         let t_ref = t.get_ref();
         let tname = t_ref.name.get_ref();
@@ -220,7 +259,7 @@ fn read_topics(
                 format!("topic name '{tname}' must be '/' then names of letters, digits and '_' separated by single '/', with no '/' at the end (at most 64 characters)"),
             ));
         }
-        if topics.iter().any(|x| x.name == *tname) {
+        if !seen.insert(tname.as_str()) {
             return Err(cx.err(t_ref.name.span(), format!("duplicate topic '{tname}'")));
         }
         let mut depth =
@@ -237,29 +276,32 @@ fn read_topics(
         });
         topic_spans.push(t_ref.name.span());
     }
-    if topics.len() > MAX_TOPICS {
-        return Err(cx.err(
-            topic_spans[MAX_TOPICS].clone(),
-            format!("a graph has at most {MAX_TOPICS} topics"),
-        ));
-    }
     Ok((topics, topic_spans))
 }
 
+/// What a node table is checked against: the topics by name, and the names of the nodes
+/// before it (hashed: a graph may have tens of thousands of each).
+#[derive(Clone, Copy)]
+struct Known<'a> {
+    topics: &'a HashMap<String, usize>,
+    nodes: &'a HashSet<String>,
+}
+
 /// The index of the topic `r` names, or an error at `r`.
-fn find_topic(cx: &Ctx<'_>, topics: &[TopicSpec], r: &Spanned<String>) -> Result<usize, SpecError> {
-    topics
-        .iter()
-        .position(|t| t.name == *r.get_ref())
-        .ok_or_else(|| {
-            cx.err(
-                r.span(),
-                format!(
-                    "unknown topic '{}': declare it in a [[topic]] table",
-                    r.get_ref()
-                ),
-            )
-        })
+fn find_topic(
+    cx: &Ctx<'_>,
+    topics: &HashMap<String, usize>,
+    r: &Spanned<String>,
+) -> Result<usize, SpecError> {
+    topics.get(r.get_ref()).copied().ok_or_else(|| {
+        cx.err(
+            r.span(),
+            format!(
+                "unknown topic '{}': declare it in a [[topic]] table",
+                r.get_ref()
+            ),
+        )
+    })
 }
 
 /// One `[[node]]` table, the next of `file_nodes` (which are the ones before it): its kind,
@@ -270,6 +312,7 @@ fn read_node(
     r: &RawNode,
     topics: &mut [TopicSpec],
     file_nodes: &[NodeSpec],
+    known: Known<'_>,
 ) -> Result<NodeSpec, SpecError> {
     let nname = r.name.get_ref();
     if !valid_node_name(nname) {
@@ -278,7 +321,7 @@ fn read_node(
             format!("node name '{nname}' must be 1 to 32 letters, digits, '_' or '-'"),
         ));
     }
-    if file_nodes.iter().any(|x| x.name == *nname) {
+    if known.nodes.contains(nname) {
         return Err(cx.err(r.name.span(), format!("duplicate node '{nname}'")));
     }
     let kind_name = r.kind.get_ref().as_str();
@@ -312,6 +355,7 @@ fn read_node(
         kind_name,
         node_name: nname,
         file_nodes,
+        topic_index: known.topics,
     };
     let subscribes = wiring.subscribe(topics, &sub_names, &reads)?;
     let publishes = wiring.publish(topics, &pub_names, &writes)?;
@@ -380,6 +424,8 @@ struct Wiring<'a> {
     node_name: &'a str,
     /// The nodes before it, in file order.
     file_nodes: &'a [NodeSpec],
+    /// Every topic's index by name.
+    topic_index: &'a HashMap<String, usize>,
 }
 
 impl Wiring<'_> {
@@ -417,15 +463,18 @@ impl Wiring<'_> {
     ) -> Result<Vec<TopicId>, SpecError> {
         let mut subscribes = Vec::with_capacity(names.len());
         for (k, s) in names.iter().enumerate() {
-            let ti = find_topic(self.cx, topics, s)?;
+            let ti = find_topic(self.cx, self.topic_index, s)?;
             let t = &mut topics[ti];
             self.check_type(t, reads.get(k).copied().flatten(), s, "reads")?;
             if t.subscribers.len() >= MAX_SUBSCRIBERS {
                 return Err(self.cx.err(
                     s.span(),
-                    format!(
-                        "topic '{}' has {MAX_SUBSCRIBERS} subscribers already (at most {MAX_SUBSCRIBERS})",
-                        t.name
+                    limits::refusal(
+                        format_args!(
+                            "topic '{}' has {MAX_SUBSCRIBERS} subscribers already (at most {MAX_SUBSCRIBERS})",
+                            t.name
+                        ),
+                        "MAX_SUBSCRIBERS",
                     ),
                 ));
             }
@@ -445,7 +494,7 @@ impl Wiring<'_> {
     ) -> Result<Vec<TopicId>, SpecError> {
         let mut publishes = Vec::with_capacity(names.len());
         for (k, p) in names.iter().enumerate() {
-            let ti = find_topic(self.cx, topics, p)?;
+            let ti = find_topic(self.cx, self.topic_index, p)?;
             let t = &mut topics[ti];
             self.check_type(t, writes.get(k).copied().flatten(), p, "publishes")?;
             if t.publisher.0 != usize::MAX {
@@ -599,33 +648,38 @@ fn find_chain(spec: &GraphSpec) -> Option<Chain> {
     None
 }
 
-/// A topological order (Kahn; ready nodes in file order), with explicit priorities
-/// overriding. Err: the nodes left in a cycle.
+/// A topological order (Kahn; of the nodes ready, the first in the file), with explicit
+/// priorities overriding. Err: the nodes left in a cycle. O((nodes + edges) log nodes).
 fn tie_break_order(nodes: &[NodeSpec], topics: &[TopicSpec]) -> Result<Vec<usize>, Vec<usize>> {
     let n = nodes.len();
     let mut indegree = vec![0usize; n];
-    let mut edges: Vec<(usize, usize)> = Vec::new();
+    // Edges publisher → subscriber, out of and into each node, in topic then subscriber order.
+    let mut downstream: Vec<Vec<usize>> = vec![Vec::new(); n];
+    let mut upstream: Vec<Vec<usize>> = vec![Vec::new(); n];
     for t in topics {
         for &s in &t.subscribers {
             if nodes[s.0].priority.is_none() {
-                edges.push((t.publisher.0, s.0));
+                downstream[t.publisher.0].push(s.0);
+                upstream[s.0].push(t.publisher.0);
                 indegree[s.0] += 1;
             }
         }
     }
     let mut placed = vec![false; n];
     let mut topo = Vec::with_capacity(n);
+    let mut ready: BinaryHeap<Reverse<usize>> =
+        (0..n).filter(|&i| indegree[i] == 0).map(Reverse).collect();
     while topo.len() < n {
-        let Some(next) = (0..n).find(|&i| !placed[i] && indegree[i] == 0) else {
+        let Some(Reverse(next)) = ready.pop() else {
             // Every unplaced node waits on another: report a cycle through the first.
             let start = (0..n).find(|&i| !placed[i]).expect("some node is unplaced");
             let mut cycle = vec![start];
             let mut cur = start;
             loop {
-                let prev = edges
+                let prev = upstream[cur]
                     .iter()
-                    .find(|&&(from, to)| to == cur && !placed[from])
-                    .map(|&(from, _)| from)
+                    .copied()
+                    .find(|&from| !placed[from])
                     .expect("an unplaced node with indegree > 0 has an unplaced publisher");
                 if let Some(pos) = cycle.iter().position(|&c| c == prev) {
                     // Collected against the flow (subscriber ← publisher): reverse it, and
@@ -642,9 +696,10 @@ fn tie_break_order(nodes: &[NodeSpec], topics: &[TopicSpec]) -> Result<Vec<usize
         };
         placed[next] = true;
         topo.push(next);
-        for &(from, to) in &edges {
-            if from == next {
-                indegree[to] -= 1;
+        for &to in &downstream[next] {
+            indegree[to] -= 1;
+            if indegree[to] == 0 {
+                ready.push(Reverse(to));
             }
         }
     }

@@ -1,0 +1,102 @@
+#!/usr/bin/env python3
+"""What an instant of the in-process virtual run costs as the graph grows (BENCHMARKS.md).
+
+For each size, `ratelab graph --nodes N` generates the graph (the chapter's loop and
+controllers of four nodes at 10-100 Hz); `ratelab run --clock virtual` runs it for
+a fixed span of run time, and the summary's wall time (the run alone, not reading the
+file or building the graph) is divided by the node ticks the graph's rates give (the run
+time per size is in SIZES: long enough for a second of wall time or more). Then the
+same graph with every controller idle (`--controller-hz 0.01`: due once in the run) shows
+what a node that is not due costs.
+
+    scripts/bench-graph-size.py [BINARY] [--lockstep]
+
+With --lockstep, also `ratelab launch --processes` of generated graphs under the virtual
+clock: the launcher's wall time per instant as the graph grows (8 processes) and as the
+processes grow (100 nodes).
+
+One sitting, one machine: compare the rows with each other, not with another machine's.
+"""
+import argparse
+import os
+import re
+import subprocess
+import sys
+import tempfile
+import tomllib
+
+# Nodes, and the run time (s) that makes each run take a second or more of wall time.
+SIZES = [(3, 3600.0), (10, 3600.0), (100, 3600.0), (1000, 600.0), (10000, 60.0)]
+
+
+# The lockstep across processes: (nodes, processes, run time s), by size, then by processes.
+LOCKSTEP = [(20, 8, 2.0), (100, 8, 2.0), (1000, 8, 1.0),
+            (100, 2, 2.0), (100, 4, 2.0), (100, 16, 2.0), (100, 64, 2.0)]
+
+
+def run(binary, args):
+    env = dict(os.environ)
+    out = subprocess.run([binary, *args], check=True, capture_output=True, text=True, env=env)
+    return out.stdout
+
+
+def measure(binary, path, duration):
+    out = run(binary, ["run", "--clock", "virtual", "--graph", path, "--duration", str(duration)])
+    wall = float(re.search(r"\(([0-9.]+)s wall\)", out).group(1))
+    with open(path, "rb") as f:
+        graph = tomllib.load(f)
+    # Each node ticks at 0, P, 2P, … up to the end: ⌊duration · rate⌋ + 1 times.
+    ticks = sum(int(duration * n["rate_hz"]) + 1 for n in graph["node"])
+    return wall, ticks
+
+
+def lockstep(binary, nodes, processes, duration):
+    """`launch --processes` of a generated graph under the virtual clock: the launcher's
+    own figure of wall time per instant."""
+    with tempfile.TemporaryDirectory() as d:
+        path = os.path.join(d, "g.toml")
+        with open(path, "w") as f:
+            f.write(run(binary, ["graph", "--nodes", str(nodes), "--processes", str(processes)]))
+        out = run(binary, ["launch", path, "--processes", "--clock", "virtual",
+                           "--duration", str(duration), "--out", os.path.join(d, "out")])
+        m = re.search(r"lockstep: (\d+) ticks at (\d+) instants, (\d+) µs of wall time per instant", out)
+        return int(m.group(1)), int(m.group(2)), int(m.group(3))
+
+
+def main():
+    p = argparse.ArgumentParser()
+    p.add_argument("binary", nargs="?", default="ratelab")
+    p.add_argument("--lockstep", action="store_true",
+                   help="also the virtual lockstep across processes (LOCKSTEP)")
+    a = p.parse_args()
+    print(f"| nodes | run time (s) | node ticks | wall (s) | ns per node tick | idle: wall (s) | idle: ns per instant |")
+    print("| ---: | ---: | ---: | ---: | ---: | ---: | ---: |")
+    with tempfile.TemporaryDirectory() as d:
+        for n, duration in SIZES:
+            path = os.path.join(d, f"g{n}.toml")
+            with open(path, "w") as f:
+                f.write(run(a.binary, ["graph", "--nodes", str(n)]))
+            wall, ticks = measure(a.binary, path, duration)
+            # The same graph, its controllers idle: only the chapter's three (and the extra
+            # sensors) tick at 50 Hz; what is left is the cost of the rest being there.
+            idle = os.path.join(d, f"idle{n}.toml")
+            with open(idle, "w") as f:
+                f.write(run(a.binary, ["graph", "--nodes", str(n), "--controller-hz", "0.01"]))
+            idle_wall, _ = measure(a.binary, idle, duration)
+            instants = int(duration * 50) + 1
+            print(f"| {n} | {duration:.0f} | {ticks} | {wall:.2f} | {wall * 1e9 / ticks:.0f} | {idle_wall:.2f} | "
+                  f"{idle_wall * 1e9 / instants:.0f} |")
+            sys.stdout.flush()
+    if not a.lockstep:
+        return
+    print()
+    print("| nodes | processes | node ticks | instants | µs per instant |")
+    print("| ---: | ---: | ---: | ---: | ---: |")
+    for nodes, processes, duration in LOCKSTEP:
+        ticks, instants, us = lockstep(a.binary, nodes, processes, duration)
+        print(f"| {nodes} | {processes} | {ticks} | {instants} | {us} |")
+        sys.stdout.flush()
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,88 @@
+//! Every bound ratelab puts on what it is given, in one place: how large a graph, a graph
+//! file, a message, a launch and a run may be.
+//!
+//! The bounds are there for hostile or mistaken input (a graph file from the network, a
+//! sample from another process), not to keep graphs small: each is sized for real robot
+//! software (ROS 2 systems run dozens to hundreds of nodes; a camera image is megabytes) and
+//! checked before anything is allocated for it. A refusal names the bound
+//! ([`refusal`]); where raising it is safe, the bound's documentation says how.
+//!
+//! | bound | value | what it protects |
+//! | --- | --- | --- |
+//! | [`MAX_NODES`] | 65 536 | a graph's nodes |
+//! | [`MAX_TOPICS`] | 65 536 | a graph's topics |
+//! | [`MAX_SUBSCRIBERS`] | 65 535 | one topic's subscribers (every node but its publisher) |
+//! | [`MAX_NODE_PORTS`] | 256 | the topics one Python node reads, and those it publishes |
+//! | [`MAX_GRAPH_FILE_BYTES`] | 16 MiB | a graph file, read before it is parsed |
+//! | [`MAX_PROCESSES`] | 256 | the processes of one launch |
+//! | [`MAX_SAMPLE_BYTES`] | 64 MiB | one message between processes, encoded |
+//! | [`MAX_CONTROL_BYTES`] | 64 MiB | one control message between a launch's processes |
+//! | [`MAX_DURATION_S`] | 1 hour | a run's length (the headless run keeps its trace in memory) |
+
+/// The most nodes a graph may have: 65 536. A node costs its scheduler entry, its queues
+/// and its counters (about a kilobyte), so the bound keeps a hostile graph file's graph
+/// under a few hundred MB; a program that needs larger graphs raises it and rebuilds.
+pub const MAX_NODES: usize = 1 << 16;
+
+/// The most topics a graph may have: 65 536 (each has exactly one publisher, and a Python
+/// node may publish up to [`MAX_NODE_PORTS`]).
+pub const MAX_TOPICS: usize = 1 << 16;
+
+/// The most subscribers one topic may have: every node of the largest graph but the
+/// topic's publisher. Each subscription has its own queue (ROS 2's rule), of the topic's
+/// history depth.
+pub const MAX_SUBSCRIBERS: usize = MAX_NODES - 1;
+
+/// The most topics one Python node reads, and the most it publishes: 256 each (a node
+/// with more is better split; the bound keeps one node's per-tick work bounded).
+pub const MAX_NODE_PORTS: usize = 256;
+
+/// A graph file larger than this is refused before it is parsed: 16 MiB (a 10 000-node
+/// graph written out in full is about 1.5 MiB).
+pub const MAX_GRAPH_FILE_BYTES: u64 = 16 << 20;
+
+/// The most processes one launch may start (`ratelab launch`): 256. Each is an operating
+/// system process with its own Zenoh session and identity; the launcher's lockstep waits
+/// on every one at every instant, so its cost grows with this number (`BENCHMARKS.md`).
+pub const MAX_PROCESSES: usize = 256;
+
+/// The largest message one process sends another, encoded: 64 MiB (a 4K RGB image is
+/// 25 MB). A larger sample is refused by the receiver before it is decoded.
+pub const MAX_SAMPLE_BYTES: usize = 64 << 20;
+
+/// The largest control message between a launch's processes, encoded: 64 MiB. Control
+/// messages are JSON; the largest carry a graph file (at most [`MAX_GRAPH_FILE_BYTES`],
+/// escaped) or every topic's counters of a large graph (about 150 bytes a topic).
+pub const MAX_CONTROL_BYTES: usize = 64 << 20;
+
+/// The longest run accepted, seconds (`--duration`, an exercise's bands, `bench`, a session
+/// log's run, a fault's time): one hour. A headless run keeps one trace record per actuator
+/// step (about 180 000 at 50 Hz for an hour, tens of MB), and a virtual hour at the highest
+/// rates takes minutes; a lab run ends there, so its log replays.
+pub const MAX_DURATION_S: f64 = 3600.0;
+
+/// The line that refuses input for passing the bound named `bound`: `what`, then the
+/// constant a program can look up (`"a graph has at most 65536 nodes
+/// (ratelab::limits::MAX_NODES)"`). Every bound of this module is refused so.
+pub fn refusal(what: impl std::fmt::Display, bound: &str) -> String {
+    format!("{what} (ratelab::limits::{bound})")
+}
+
+// A node's ports fit in a graph's topics.
+const _: () = assert!(MAX_NODE_PORTS <= MAX_TOPICS);
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn refusal_names_the_bound() {
+        assert_eq!(
+            refusal(
+                format_args!("a graph has at most {MAX_NODES} nodes"),
+                "MAX_NODES"
+            ),
+            "a graph has at most 65536 nodes (ratelab::limits::MAX_NODES)"
+        );
+    }
+}

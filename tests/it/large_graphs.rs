@@ -1,0 +1,186 @@
+//! Graphs at the size of real robot software: a generated graph of 1,000 nodes runs byte
+//! for byte the same twice in one process and across 8 processes, and every bound of
+//! `ratelab::limits` refuses in one line that names it.
+
+use std::path::Path;
+use std::process::{Command, Output};
+
+fn ratelab(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_ratelab"))
+        .args(args)
+        .output()
+        .expect("runs")
+}
+
+fn text(b: &[u8]) -> String {
+    String::from_utf8_lossy(b).into_owned()
+}
+
+/// `ratelab graph --nodes N --processes P` written to `dir/name`.
+fn generated(dir: &Path, name: &str, nodes: usize, processes: usize) -> String {
+    let o = ratelab(&[
+        "graph",
+        "--nodes",
+        &nodes.to_string(),
+        "--processes",
+        &processes.to_string(),
+    ]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let path = dir.join(name);
+    std::fs::write(&path, &o.stdout).unwrap();
+    path.to_str().unwrap().to_string()
+}
+
+/// `ratelab ARGS --out DIR` succeeded: (metrics.json, trace.csv).
+fn outputs(args: &[&str], dir: &Path) -> (String, String) {
+    let o = ratelab(&[args, &["--out", dir.to_str().unwrap()]].concat());
+    assert!(o.status.success(), "{}{}", text(&o.stdout), text(&o.stderr));
+    let read = |f: &str| std::fs::read_to_string(dir.join(f)).unwrap();
+    (read("metrics.json"), read("trace.csv"))
+}
+
+fn assert_one_line_exit_2(o: &Output, needles: &[&str]) {
+    let err = text(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert_eq!(err.trim_end().lines().count(), 1, "one line: {err:?}");
+    for needle in needles {
+        assert!(err.contains(needle), "{err:?} lacks {needle:?}");
+    }
+}
+
+#[test]
+fn a_thousand_node_graph_runs_byte_identically_twice_in_one_process() {
+    let _m = crate::machine::shared();
+    let dir = tempfile::tempdir().unwrap();
+    let g = generated(dir.path(), "g.toml", 1000, 1);
+    let run = [
+        "run",
+        "--graph",
+        &g,
+        "--clock",
+        "virtual",
+        "--duration",
+        "3",
+    ];
+    let first = outputs(&run, &dir.path().join("a"));
+    let second = outputs(&run, &dir.path().join("b"));
+    assert!(first == second, "two runs of one generated graph differ");
+    // Every node ran, and every topic is in the metrics and the trace.
+    let m: serde_json::Value = serde_json::from_str(&first.0).unwrap();
+    assert_eq!(m["nodes"].as_object().unwrap().len(), 1000);
+    let topics = m["topics"].as_object().unwrap();
+    assert_eq!(topics.len(), 999);
+    assert!(
+        topics.values().all(|t| t["published"].as_u64() > Some(0)),
+        "every topic published"
+    );
+    let header = first.1.lines().next().unwrap();
+    assert_eq!(header.split(',').count(), 8 + 2 * 999, "{header:.200}");
+    // The summary names the first nodes and sums up the rest, on one line each.
+    let o = ratelab(&run);
+    let out = text(&o.stdout);
+    assert!(
+        out.contains("992 more nodes: 10 Hz ×249, 20 Hz ×247, 50 Hz ×248, 100 Hz ×248"),
+        "{out:.2000}"
+    );
+    assert!(out.contains("991 more topics: "), "{out:.2000}");
+    assert!(out.lines().all(|l| l.len() < 1000), "{out:.2000}");
+    // Topics of different depths: the first few named, the rest counted.
+    let o = ratelab(&[&run[..], &["--depth", "/c_0/pos=4"]].concat());
+    let out = text(&o.stdout);
+    assert!(
+        out.contains("depths /obs 1, /action 1, /c_0/pos 4, ") && out.contains(", and 991 more\n"),
+        "{out:.2000}"
+    );
+}
+
+#[test]
+fn a_thousand_node_graph_across_eight_processes_equals_the_in_process_run() {
+    let _m = crate::machine::shared();
+    let dir = tempfile::tempdir().unwrap();
+    let g = generated(dir.path(), "g.toml", 1000, 8);
+    let common = ["--clock", "virtual", "--duration", "1", "--seed", "3"];
+    let one = outputs(
+        &[&["run", "--graph", &g][..], &common].concat(),
+        &dir.path().join("one"),
+    );
+    let o = ratelab(
+        &[
+            &["launch", &g, "--processes"][..],
+            &common,
+            &["--out", dir.path().join("many").to_str().unwrap()],
+        ]
+        .concat(),
+    );
+    let out = text(&o.stdout);
+    assert!(o.status.success(), "{out}{}", text(&o.stderr));
+    assert!(out.contains("in 8 processes: robot ["), "{out:.2000}");
+    let many = std::fs::read_to_string(dir.path().join("many/metrics.json")).unwrap();
+    assert!(
+        one.0 == many,
+        "the launch's metrics.json differs from one process's"
+    );
+}
+
+#[test]
+fn every_bound_refuses_in_one_line_naming_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = |name: &str| dir.path().join(name).to_str().unwrap().to_string();
+    let chapter = std::fs::read_to_string(crate::repo("graphs/cartpole.toml")).unwrap();
+    // A graph file over 16 MiB, refused before it is parsed.
+    let big = path("big.toml");
+    let mut text_over = chapter.clone();
+    text_over.push_str(&"#".repeat(16 << 20));
+    std::fs::write(&big, text_over).unwrap();
+    let o = ratelab(&["run", "--graph", &big, "--clock", "virtual"]);
+    assert_one_line_exit_2(&o, &["big.toml", "16777216"]);
+    // More nodes than MAX_NODES: the 65,537th is the culprit.
+    let many = path("many.toml");
+    let mut nodes = chapter.clone();
+    for i in 0..ratelab::limits::MAX_NODES {
+        nodes.push_str(&format!(
+            "[[node]]\nname = \"n{i}\"\nkind = \"sensor\"\nrate_hz = 1\n"
+        ));
+    }
+    std::fs::write(&many, nodes).unwrap();
+    let o = ratelab(&["run", "--graph", &many, "--clock", "virtual"]);
+    assert_one_line_exit_2(
+        &o,
+        &[
+            "a graph has at most 65536 nodes",
+            "ratelab::limits::MAX_NODES",
+        ],
+    );
+    // A Python node reading more than MAX_NODE_PORTS topics.
+    let ports = path("ports.toml");
+    let list: Vec<String> = (0..257).map(|i| format!("\"/t{i}\"")).collect();
+    std::fs::write(
+        &ports,
+        format!(
+            "{chapter}\n[[node]]\nname = \"wide\"\nkind = \"python\"\nscript = \"w.py\"\nrate_hz = 1\nsubscribes = [{}]\n",
+            list.join(", ")
+        ),
+    )
+    .unwrap();
+    let o = ratelab(&["run", "--graph", &ports, "--clock", "virtual"]);
+    assert_one_line_exit_2(
+        &o,
+        &[
+            "subscribes names 257 topics; a node has at most 256",
+            "ratelab::limits::MAX_NODE_PORTS",
+        ],
+    );
+    // A launch of more than MAX_PROCESSES processes: a node without a `process` is its own.
+    let g = generated(dir.path(), "unplaced.toml", 1003, 1);
+    let o = ratelab(&["launch", &g, "--processes", "--clock", "virtual"]);
+    assert_one_line_exit_2(
+        &o,
+        &[
+            "places its nodes in 752 processes; a launch has at most 256",
+            "ratelab::limits::MAX_PROCESSES",
+        ],
+    );
+    // `ratelab graph` itself keeps to the bounds.
+    let o = ratelab(&["graph", "--nodes", "65537"]);
+    assert_eq!(o.status.code(), Some(2), "{}", text(&o.stderr));
+}
