@@ -6,8 +6,8 @@ controllers of four nodes at 10-100 Hz); `ratelab run --clock virtual` runs it f
 a fixed span of run time, and the summary's wall time (the run alone, not reading the
 file or building the graph) is divided by the node ticks the graph's rates give (the run
 time per size is in SIZES: long enough for a second of wall time or more). Then the
-same graph with every controller idle (`--controller-hz 0.01`: due once in the run) shows
-what a node that is not due costs.
+same graph with every controller and extra sensor idle (`--controller-hz 0.01`: due every
+100 s) shows what a node that is not due costs.
 
     scripts/bench-graph-size.py [BINARY] [--lockstep]
 
@@ -77,8 +77,8 @@ def main():
             with open(path, "w") as f:
                 f.write(run(a.binary, ["graph", "--nodes", str(n)]))
             wall, ticks = measure(a.binary, path, duration)
-            # The same graph, its controllers idle: only the chapter's three (and the extra
-            # sensors) tick at 50 Hz; what is left is the cost of the rest being there.
+            # The same graph, its controllers and extra sensors idle: only the chapter's three
+            # tick at 50 Hz; what is left is the cost of the rest being there.
             idle = os.path.join(d, f"idle{n}.toml")
             with open(idle, "w") as f:
                 f.write(run(a.binary, ["graph", "--nodes", str(n), "--controller-hz", "0.01"]))

@@ -188,7 +188,9 @@ pub struct App {
     /// What the run told since it started, each with the run time the lab was at after it:
     /// folded again up to a seek's instant to show the run as it was then.
     journal: Vec<(Nanos, Telemetry)>,
-    /// The journal reached [`MAX_JOURNAL`] and stopped.
+    /// About how many bytes the journal holds ([`Telemetry::approx_bytes`]).
+    journal_bytes: usize,
+    /// The journal reached [`MAX_JOURNAL`] or [`MAX_JOURNAL_BYTES`] and stopped.
     journal_full: bool,
     /// (t s, θ rad, applied force N) of the run's first [`GHOST_S`] of run time: the ghost
     /// of the next run when a saved file is reloaded.
@@ -268,6 +270,7 @@ impl App {
             confirm_quit: false,
             attached: None,
             journal: Vec::new(),
+            journal_bytes: 0,
             journal_full: false,
             whole: Vec::new(),
             ghost: Vec::new(),
@@ -445,6 +448,7 @@ impl App {
                     line
                 };
                 self.journal.clear();
+                self.journal_bytes = 0;
                 self.journal_full = false;
                 self.fold(t.clone());
                 self.journal.push((self.now, t));
@@ -465,7 +469,11 @@ impl App {
             }
             t => {
                 self.fold(t.clone());
-                if self.journal.len() < MAX_JOURNAL {
+                let bytes = t.approx_bytes();
+                if self.journal.len() < MAX_JOURNAL
+                    && self.journal_bytes.saturating_add(bytes) <= MAX_JOURNAL_BYTES
+                {
+                    self.journal_bytes += bytes;
                     self.journal.push((self.now, t));
                 } else {
                     self.journal_full = true;
@@ -479,8 +487,9 @@ impl App {
     fn rewind(&mut self, at: Nanos) {
         if self.journal_full {
             self.say(format!(
-                "back at t={:.2} s: the run is too long to show as it was ({MAX_JOURNAL} messages); the figures go on from here",
-                at.as_secs_f64()
+                "back at t={:.2} s: the run is too long to show as it was (its journal is full: {MAX_JOURNAL} messages or {} MiB); the figures go on from here",
+                at.as_secs_f64(),
+                MAX_JOURNAL_BYTES >> 20
             ));
             return;
         }
@@ -1115,6 +1124,11 @@ pub const LOG_LINES: usize = 2000;
 /// run at ×1): past it, seeking back still puts the run there, but the lab's figures go on
 /// from there instead of showing the run as it was.
 pub const MAX_JOURNAL: usize = 400_000;
+
+/// The most bytes a run's journal keeps ([`Telemetry::approx_bytes`]): a large graph's steps
+/// carry every topic's counters (a 1,000-topic step is about 140 KB), so its journal stops
+/// after minutes, not an hour; seeking back past that goes on as [`MAX_JOURNAL`] says.
+pub const MAX_JOURNAL_BYTES: usize = 512 << 20;
 
 /// How many lines PgUp / PgDn scroll the log pane.
 pub const LOG_PAGE: usize = 3;

@@ -4,8 +4,9 @@
 //! The bounds are there for hostile or mistaken input (a graph file from the network, a
 //! sample from another process), not to keep graphs small: each is sized for real robot
 //! software (ROS 2 systems run dozens to hundreds of nodes; a camera image is megabytes) and
-//! checked before anything is allocated for it. A refusal names the bound
-//! ([`refusal`]); where raising it is safe, the bound's documentation says how.
+//! checked as early as the input allows (a file's or a message's size before it is read or
+//! decoded; a graph's counts once its file, at most 16 MiB, is parsed). A refusal names the
+//! bound ([`refusal`]); where raising it is safe, the bound's documentation says how.
 //!
 //! | bound | value | what it protects |
 //! | --- | --- | --- |

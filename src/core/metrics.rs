@@ -91,7 +91,8 @@ impl LatencyStats {
 pub const MAX_EXACT_SAMPLES: usize = (MAX_DURATION_S * ACTUATOR_HZ) as usize + 1;
 
 /// More nodes (or topics) than this, and the summary's rates (topics) line gives the first
-/// [`SUMMARY_SHOWN`] and sums up the rest: a line per graph, whatever its size.
+/// [`SUMMARY_SHOWN`] and sums up the rest (the rest's rates: the [`SUMMARY_SHOWN`] slowest
+/// named, the others counted): a line of bounded length, whatever the graph's size.
 pub const SUMMARY_ITEMS: usize = 12;
 /// Nodes and topics the summary names one by one in a graph of more than [`SUMMARY_ITEMS`].
 pub const SUMMARY_SHOWN: usize = 8;
@@ -600,20 +601,26 @@ impl Metrics {
         nodes.sort_by_key(|(_, n)| n.rank);
         let mut parts = self.node_rates(&nodes);
         if nodes.len() > SUMMARY_ITEMS {
-            // A large graph: the first nodes, then the rest counted by rate.
-            let mut by_rate: Vec<(f64, usize)> = Vec::new();
+            // A large graph: the first nodes, then the rest counted by rate (rates are
+            // positive, so their bits order as they do), the most common few named.
+            let mut by_rate: BTreeMap<u64, usize> = BTreeMap::new();
             for (_, n) in &nodes[SUMMARY_SHOWN..] {
-                let hz = n.rate_hz_end.unwrap_or(n.rate_hz);
-                match by_rate.iter_mut().find(|(r, _)| *r == hz) {
-                    Some((_, count)) => *count += 1,
-                    None => by_rate.push((hz, 1)),
-                }
+                *by_rate
+                    .entry(n.rate_hz_end.unwrap_or(n.rate_hz).to_bits())
+                    .or_default() += 1;
             }
-            by_rate.sort_by(|a, b| a.0.total_cmp(&b.0));
-            let groups: Vec<String> = by_rate
+            let mut groups: Vec<String> = by_rate
                 .iter()
-                .map(|(hz, count)| format!("{hz} Hz ×{count}"))
+                .take(SUMMARY_SHOWN)
+                .map(|(hz, count)| format!("{} Hz ×{count}", f64::from_bits(*hz)))
                 .collect();
+            if by_rate.len() > SUMMARY_SHOWN {
+                let rest: usize = by_rate.values().skip(SUMMARY_SHOWN).sum();
+                groups.push(format!(
+                    "{rest} at {} other rates",
+                    by_rate.len() - SUMMARY_SHOWN
+                ));
+            }
             parts.truncate(SUMMARY_SHOWN);
             parts.push(format!(
                 "{} more nodes: {}",

@@ -36,7 +36,7 @@ pub enum ConfigError {
     #[error(transparent)]
     Graph(#[from] OverrideError),
     /// Duration not finite, ≤ 0, or above [`MAX_DURATION_S`].
-    #[error("--duration must be in (0, {max}] seconds, got {0}", max = MAX_DURATION_S)]
+    #[error("--duration must be in (0, {max}] seconds, got {0} (ratelab::limits::MAX_DURATION_S)", max = MAX_DURATION_S)]
     Duration(f64),
     /// Unknown clock name.
     #[error("--clock must be 'real' or 'virtual', got '{0}'")]

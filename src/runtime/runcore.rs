@@ -149,8 +149,29 @@ pub const HISTORY_EVERY: Nanos = Nanos(Nanos::SECOND.0);
 
 /// The most captures a run core keeps for seeking. Past it every other one goes and the
 /// spacing doubles, so a long run's history costs bounded memory, and reaching any instant
-/// costs at most one spacing of run time after the restore.
+/// costs at most one spacing of run time after the restore. A large graph keeps fewer
+/// ([`max_history`]).
 pub const MAX_HISTORY: usize = 128;
+
+/// The fewest captures a run core keeps for seeking, however large its graph.
+pub const MIN_HISTORY: usize = 4;
+
+/// What the captures kept for seeking may take together, bytes (estimated: about
+/// [`CAPTURE_BYTES_PER_PART`] per node and topic; measured 7.5 KB on a generated 1,000-node
+/// graph, BENCHMARKS.md).
+pub const HISTORY_BYTES: usize = 256 << 20;
+
+/// A capture's estimated bytes per node and per topic (their queues, counters and
+/// statistics).
+pub const CAPTURE_BYTES_PER_PART: usize = 8 << 10;
+
+/// How many captures a run core of `nodes` nodes and `topics` topics keeps for seeking:
+/// [`HISTORY_BYTES`] over a capture's estimated size, within [`MIN_HISTORY`] and
+/// [`MAX_HISTORY`] (the chapter's graph keeps 128; a 1,000-node one 16).
+pub fn max_history(nodes: usize, topics: usize) -> usize {
+    let capture = CAPTURE_BYTES_PER_PART.saturating_mul(nodes + topics).max(1);
+    (HISTORY_BYTES / capture).clamp(MIN_HISTORY, MAX_HISTORY)
+}
 
 /// What [`RunCore::step`] did.
 #[derive(Clone, Debug, PartialEq)]
@@ -255,6 +276,8 @@ pub struct RunCore {
     /// Their spacing (`None`: none kept), and when the next is due.
     history_every: Option<Nanos>,
     next_history: Nanos,
+    /// The most captures kept ([`max_history`]).
+    max_history: usize,
     end: Option<RunEnd>,
     keep_trace: bool,
     on_span: Option<crate::executor::SpanHook>,
@@ -306,6 +329,7 @@ impl RunCore {
             history: Vec::new(),
             history_every: opts.history_every.filter(|e| e.0 > 0),
             next_history: Nanos::ZERO,
+            max_history: max_history(cfg.graph.nodes.len(), cfg.graph.topics.len()),
             end: None,
             keep_trace,
             on_span: opts.on_span,
@@ -465,7 +489,7 @@ impl RunCore {
     }
 
     /// Keep a capture for seeking when one is due (module docs: [`CoreOptions::history_every`],
-    /// [`MAX_HISTORY`]).
+    /// [`max_history`]).
     fn keep_history(&mut self) {
         let Some(every) = self.history_every else {
             return;
@@ -475,7 +499,7 @@ impl RunCore {
             return;
         }
         self.history.push(self.capture());
-        if self.history.len() > MAX_HISTORY {
+        if self.history.len() > self.max_history {
             // Keep the first (t = 0) and every other one after it.
             let mut k = 0;
             self.history.retain(|_| {
@@ -729,5 +753,18 @@ impl RunCore {
     /// Take the step records kept so far (empty unless [`CoreOptions::keep_trace`]).
     pub fn take_trace(&mut self) -> Vec<crate::runlog::StepRecord> {
         std::mem::take(&mut lock(&self.handles.log).trace)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_large_graph_keeps_fewer_captures_within_the_bounds() {
+        assert_eq!(max_history(3, 2), MAX_HISTORY, "the chapter's graph");
+        assert_eq!(max_history(1000, 999), 16);
+        assert_eq!(max_history(65_536, 65_536), MIN_HISTORY);
+        assert_eq!(max_history(0, 0), MAX_HISTORY);
     }
 }

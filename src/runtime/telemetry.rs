@@ -175,6 +175,54 @@ pub enum Telemetry {
     Wire(Vec<(usize, f64, f64)>),
 }
 
+impl Telemetry {
+    /// About how many bytes the message holds, itself and what it points to: what a front
+    /// end that keeps messages (the lab's journal, for seeking back) counts against its
+    /// budget. A large graph's step and status carry every topic's counters, so their size
+    /// grows with the graph.
+    pub fn approx_bytes(&self) -> usize {
+        use std::mem::size_of;
+        // Inline up to INLINE_TOPICS, on the heap past them.
+        let spilled = |c: &crate::runlog::TopicCounters| match c.as_slice().len() {
+            n if n > crate::runlog::INLINE_TOPICS => n * size_of::<crate::topic::TopicStats>(),
+            _ => 0,
+        };
+        size_of::<Telemetry>()
+            + match self {
+                Telemetry::Step(s) => size_of::<StepRecord>() + spilled(&s.topics),
+                Telemetry::Status {
+                    rates,
+                    depths,
+                    qos,
+                    alive,
+                    policy,
+                    exec,
+                    topics,
+                    ..
+                } => {
+                    rates.len() * size_of::<f64>()
+                        + depths.len() * size_of::<usize>()
+                        + qos.len() * size_of::<crate::qos::TopicQos>()
+                        + alive.len() * size_of::<Option<bool>>()
+                        + policy.len()
+                        + exec.as_ref().map_or(0, |e| e.len() * 16)
+                        + topics.as_deref().map_or(0, |c| {
+                            size_of::<crate::runlog::TopicCounters>() + spilled(c)
+                        })
+                }
+                Telemetry::Callbacks(spans) => {
+                    spans.len() * size_of::<crate::executor::CallbackSpan>()
+                }
+                Telemetry::Applied(text) | Telemetry::Error(text) => text.len(),
+                Telemetry::Changed { text, .. } => text.len(),
+                Telemetry::Reloaded { line } => line.len(),
+                Telemetry::Wire(w) => w.len() * 24,
+                // Once a run, or small.
+                _ => 4096,
+            }
+    }
+}
+
 /// A command in words, for logs.
 pub fn describe(cmd: &Command) -> String {
     match cmd {
@@ -186,5 +234,35 @@ pub fn describe(cmd: &Command) -> String {
         Command::SetTopicQos { topic, pairs } => format!("{topic} QoS → {pairs}"),
         Command::SetPolicy { spec } => format!("brain → {spec}"),
         Command::SetExecutor { executor } => format!("executor → {executor}"),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::topic::TopicStats;
+
+    fn step(topics: usize) -> Telemetry {
+        Telemetry::Step(Box::new(StepRecord {
+            step: 1,
+            t: Nanos::ZERO,
+            pole_angle: 0.0,
+            cart_pos: 0.0,
+            action: 0.0,
+            latency: None,
+            nonfinite: false,
+            topics: (0..topics).map(|_| TopicStats::default()).collect(),
+            published: None,
+            fell: false,
+        }))
+    }
+
+    #[test]
+    fn a_large_graph_s_step_counts_every_topic_s_counters() {
+        let small = step(3).approx_bytes();
+        let large = step(1000).approx_bytes();
+        assert!(small < 4096, "{small}");
+        assert!(large >= 1000 * std::mem::size_of::<TopicStats>(), "{large}");
+        assert_eq!(step(7).approx_bytes(), small, "inline up to 7 topics");
     }
 }

@@ -94,9 +94,12 @@ pub fn encode_json<T: Serialize>(msg: &T) -> Vec<u8> {
 /// One line.
 pub fn decode_json<T: for<'de> Deserialize<'de>>(bytes: &[u8]) -> Result<T, String> {
     if bytes.len() > MAX_CONTROL_BYTES {
-        return Err(format!(
-            "a control message of {} bytes (at most {MAX_CONTROL_BYTES})",
-            bytes.len()
+        return Err(crate::limits::refusal(
+            format_args!(
+                "a control message of {} bytes (at most {MAX_CONTROL_BYTES})",
+                bytes.len()
+            ),
+            "MAX_CONTROL_BYTES",
         ));
     }
     let malformed = |e: serde_json::Error| format!("a malformed control message: {e}");

@@ -5,6 +5,7 @@
 //! postcard, both bounded and decoded exactly.
 
 use super::decode_exact;
+use crate::limits;
 use crate::msg::AnyTopic;
 use crate::time::Nanos;
 use serde::{Deserialize, Serialize};
@@ -88,6 +89,15 @@ impl WireSample {
     /// # Errors
     /// One line.
     pub fn decode(bytes: &[u8]) -> Result<WireSample, String> {
+        if bytes.len() > MAX_SAMPLE_BYTES {
+            return Err(limits::refusal(
+                format_args!(
+                    "a sample of {} bytes (at most {MAX_SAMPLE_BYTES})",
+                    bytes.len()
+                ),
+                "MAX_SAMPLE_BYTES",
+            ));
+        }
         let s: WireSample = decode_exact(bytes, MAX_SAMPLE_BYTES, "sample")?;
         if s.seq > MAX_SEQ {
             return Err(format!("a sample numbered {} (at most {MAX_SEQ})", s.seq));

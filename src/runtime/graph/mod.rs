@@ -385,7 +385,8 @@ impl Graph {
                     .iter()
                     .map(|t| {
                         let subs = &spec.topic(*t).subscribers;
-                        match subs.iter().position(|s| s.0 == i) {
+                        // Subscribers are sorted (`GraphSpec`'s build).
+                        match subs.binary_search(&NodeId(i)).ok() {
                             Some(k) if subs.len() > 1 => topics[t.0].subscription(k),
                             _ => topics[t.0].clone(),
                         }

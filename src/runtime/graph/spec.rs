@@ -668,11 +668,15 @@ impl GraphSpec {
     /// order of their first node.
     pub fn placement(&self) -> Vec<(String, Vec<NodeId>)> {
         let mut out: Vec<(String, Vec<NodeId>)> = Vec::new();
+        let mut index: std::collections::HashMap<String, usize> = Default::default();
         for i in 0..self.nodes.len() {
             let p = self.process_of(NodeId(i));
-            match out.iter_mut().find(|(name, _)| *name == p) {
-                Some((_, ids)) => ids.push(NodeId(i)),
-                None => out.push((p, vec![NodeId(i)])),
+            match index.get(&p) {
+                Some(&k) => out[k].1.push(NodeId(i)),
+                None => {
+                    index.insert(p.clone(), out.len());
+                    out.push((p, vec![NodeId(i)]));
+                }
             }
         }
         out

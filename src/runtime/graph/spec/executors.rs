@@ -113,6 +113,13 @@ pub(super) fn executors<'r>(
 ) -> Result<Vec<ExecutorSpec>, SpecError> {
     let mut holder: Vec<Option<usize>> = vec![None; spec.nodes.len()];
     let mut out: Vec<ExecutorSpec> = Vec::new();
+    // Node ids by name, once (an executor may list tens of thousands).
+    let ids: std::collections::HashMap<&str, NodeId> = spec
+        .nodes
+        .iter()
+        .enumerate()
+        .map(|(i, n)| (n.name.as_str(), NodeId(i)))
+        .collect();
     for (name, e) in raw {
         let r = e.get_ref();
         if !super::valid_node_name(name) {
@@ -157,7 +164,7 @@ pub(super) fn executors<'r>(
         let index = out.len();
         let mut nodes = Vec::new();
         for n in r.nodes.get_ref() {
-            let id = spec.node_id(n.get_ref()).ok_or_else(|| {
+            let id = ids.get(n.get_ref().as_str()).copied().ok_or_else(|| {
                 cx.err(
                     n.span(),
                     format!("executor '{name}': unknown node '{}'", n.get_ref()),
@@ -273,9 +280,12 @@ impl GraphSpec {
             node_group: vec![0; n_nodes],
         };
         // Per-node executors first (one per node not held), then the declared ones.
-        let held: Vec<bool> = (0..n_nodes)
-            .map(|i| self.executors.iter().any(|e| e.nodes.contains(&NodeId(i))))
-            .collect();
+        let mut held = vec![false; n_nodes];
+        for n in self.executors.iter().flat_map(|e| &e.nodes) {
+            if let Some(h) = held.get_mut(n.0) {
+                *h = true;
+            }
+        }
         for (i, n) in self.nodes.iter().enumerate() {
             if !held[i] {
                 plan.node_executor[i] = plan.executors.len();
