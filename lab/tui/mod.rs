@@ -480,6 +480,27 @@ mod tests {
         }
     }
 
+    #[test]
+    fn a_200_node_graph_shows_what_fits_and_counts_the_rest() {
+        let mut cfg = graph_cfg("graphs/cartpole.toml", 2);
+        cfg.graph = ratelab::graph::GraphSpec::parse(
+            &ratelab::graph::synthetic::graph_toml(200, 1),
+            "synthetic",
+        )
+        .unwrap();
+        let (app, _rx) = app_after(cfg, false);
+        for (w, h) in [(80, 24), (120, 40)] {
+            let text = render(&app, w, h);
+            assert!(text.contains("graph: 200 nodes, 199 topics"), "{text}");
+            assert!(text.contains("sensor_0"), "{text}");
+            // Every column of nodes and of topics counts what it could not show: 4 layers
+            // of nodes, each with a column of the topics it publishes (the last none).
+            let more: usize = text.lines().map(|l| l.matches(" more").count()).sum();
+            assert_eq!(more, 8, "{text}");
+            insta::assert_snapshot!(format!("graph_200_nodes_{w}x{h}"), text);
+        }
+    }
+
     /// At 80×24 the graph panel's title reads whole, for every selection of every shipped
     /// graph and for a wide graph's own title: what does not fit gives way (the topics in a
     /// title, `Tab next`), never the end of a word.

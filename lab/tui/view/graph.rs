@@ -45,6 +45,10 @@ fn graph_title(v: &View, room: usize) -> String {
     )
 }
 
+/// The fewest rows a node's box or a topic's arrow is drawn in (its name's): a column of
+/// more than fit (a large graph's) shows the first ones and counts the rest.
+const MIN_ITEM_ROWS: u16 = 1;
+
 /// A column of the graph panel: the nodes of one layer, or the topics they publish.
 enum Column {
     Nodes(Vec<usize>),
@@ -86,10 +90,35 @@ pub(super) fn render_graph(v: &View, area: Rect, buf: &mut Buffer) {
     }
     let inner = block.inner(area);
     block.render(area, buf);
-    let cols = layout_columns(v);
+    let mut cols = layout_columns(v);
     let n = cols.len().max(1) as u32;
     let areas = Layout::horizontal((0..n).map(|_| Constraint::Ratio(1, n))).split(inner);
-    for (col, rect) in cols.iter().zip(areas.iter()) {
+    for (col, rect) in cols.iter_mut().zip(areas.iter()) {
+        // A column of more than fit (a large graph): the first ones, and a line that counts
+        // the rest.
+        let fit = usize::from(rect.height / MIN_ITEM_ROWS).max(1);
+        let hidden = match col {
+            Column::Nodes(x) | Column::Topics(x) if x.len() > fit => {
+                let hidden = x.len() - (fit - 1);
+                x.truncate(fit - 1);
+                hidden
+            }
+            _ => 0,
+        };
+        let rect = &if hidden > 0 {
+            let last = Rect {
+                y: rect.y + rect.height - 1,
+                height: 1,
+                ..*rect
+            };
+            Paragraph::new(Line::from(format!("+{hidden} more")).dim()).render(last, buf);
+            Rect {
+                height: rect.height - 1,
+                ..*rect
+            }
+        } else {
+            *rect
+        };
         let count = match col {
             Column::Nodes(x) | Column::Topics(x) => x.len().max(1) as u32,
         };
