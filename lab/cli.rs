@@ -346,7 +346,7 @@ pub struct SweepArgs {
     /// The brain for every run.
     #[arg(long, default_value = "scripted")]
     pub policy: String,
-    /// Seconds per run, in (0, 3600].
+    /// Seconds per run, in (0, 315360000] (ten years).
     #[arg(long, allow_negative_numbers = true, default_value = "10", value_parser = parse_duration)]
     pub duration: f64,
     /// Write the table as CSV.
@@ -378,7 +378,7 @@ pub struct CliffArgs {
     /// The brain.
     #[arg(long, default_value = "scripted")]
     pub policy: String,
-    /// Seconds per run, in (0, 3600].
+    /// Seconds per run, in (0, 315360000] (ten years).
     #[arg(long, allow_negative_numbers = true, default_value = "10", value_parser = parse_duration)]
     pub duration: f64,
     /// Lowest rate searched, Hz.
@@ -454,7 +454,7 @@ pub struct RunArgs {
     /// Reset seed (the course env's numpy draws).
     #[arg(long, default_value = "0", allow_negative_numbers = true, value_parser = parse_seed)]
     pub seed: u64,
-    /// Run length in seconds of run time, in (0, 3600] (headless default 10; the lab runs
+    /// Run length in seconds of run time, in (0, 315360000] (ten years; headless default 10; the lab runs
     /// until you stop it).
     #[arg(long, allow_negative_numbers = true, value_parser = parse_duration)]
     pub duration: Option<f64>,
@@ -487,6 +487,11 @@ pub struct RunArgs {
     /// Write metrics.json (and trace.csv, in one process) into this folder.
     #[arg(long, value_name = "DIR")]
     pub out: Option<PathBuf>,
+    /// trace.csv keeps every N-th actuator step (steps 1, 1+N, …) and the last: a long
+    /// run's trace (and its memory) in proportion to what you ask. The metrics count every
+    /// step.
+    #[arg(long, value_name = "N", default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..))]
+    pub trace_every: u64,
     /// Record the run to a rerun .rrd (default: recordings/<clock>-control<hz>-q<depth>-seed<seed>.rrd).
     #[arg(long, value_name = "PATH", num_args = 0..=1)]
     pub record: Option<Option<PathBuf>>,
@@ -552,7 +557,7 @@ pub struct BenchArgs {
     /// Rates to measure, Hz (every node at the same rate).
     #[arg(long, allow_negative_numbers = true, value_delimiter = ',', default_value = "50,1000", value_parser = parse_rate("hz"))]
     pub hz: Vec<f64>,
-    /// Seconds per rate, in (0, 3600].
+    /// Seconds per rate, in (0, 315360000] (ten years).
     #[arg(long, allow_negative_numbers = true, default_value = "5", value_parser = parse_duration)]
     pub duration: f64,
     /// Spin margin, µs (below the period of every rate measured, at most 1000000; default

@@ -355,6 +355,7 @@ pub fn execute(
         ros2,
         observers,
         keep_trace,
+        trace_every: a.trace_every,
         ..RunOptions::new()
     };
     if let Some(r) = &recording {

@@ -9,7 +9,6 @@
 
 use crate::plant::ACTUATOR_HZ;
 use crate::time::Nanos;
-use crate::time::MAX_DURATION_S;
 use hdrhistogram::Histogram;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
@@ -84,11 +83,14 @@ impl LatencyStats {
     }
 }
 
-/// The most sense→act samples a run can have: one per actuator tick, the actuator at the
-/// plant's fixed [`ACTUATOR_HZ`] (a graph cannot change it) for at most [`MAX_DURATION_S`]
-/// (ticks at 0, 20 ms, …, 3600 s): 180 001. [`ExactLatency`] keeps that many samples
-/// (8 bytes each, about 1.4 MB) for exact order statistics.
-pub const MAX_EXACT_SAMPLES: usize = (MAX_DURATION_S * ACTUATOR_HZ) as usize + 1;
+/// The most sense→act samples [`ExactLatency`] keeps for exact order statistics: an hour's
+/// (one per actuator tick, at the plant's fixed [`ACTUATOR_HZ`]: ticks at 0, 20 ms, …,
+/// 3600 s), 180 001, 8 bytes each (about 1.4 MB). A longer run's percentiles come from the
+/// streaming histogram (3 significant digits).
+pub const MAX_EXACT_SAMPLES: usize = (EXACT_SECONDS * ACTUATOR_HZ) as usize + 1;
+
+/// The run time over which sense→act percentiles are exact, seconds: an hour.
+const EXACT_SECONDS: f64 = 3600.0;
 
 /// More nodes (or topics) than this, and the summary's rates (topics) line gives the first
 /// [`SUMMARY_SHOWN`] and sums up the rest (the rest's rates: the [`SUMMARY_SHOWN`] slowest
@@ -108,8 +110,8 @@ const BLOCK: usize = 512;
 /// The samples live in a sorted list of blocks (each at most `2 × 512`), so one insert
 /// costs a binary search and a move within one block, and a percentile a walk over the
 /// blocks' lengths (at most about 350 at [`MAX_EXACT_SAMPLES`]): cheap enough to read every
-/// frame in the lab. Storage is bounded: past [`MAX_EXACT_SAMPLES`] (more than a run can
-/// have) further samples count in the histogram and the mean only, and the percentiles
+/// frame in the lab. Storage is bounded: past [`MAX_EXACT_SAMPLES`] (a run longer than an
+/// hour) further samples count in the histogram and the mean only, and the percentiles
 /// come from the histogram (3 significant digits). The HDR histogram is kept beside the
 /// samples for drawing buckets; the mean is exact (an integer sum).
 ///

@@ -127,6 +127,9 @@ pub struct RunLog {
     pub trace: Vec<StepRecord>,
     /// Whether to keep every [`StepRecord`] (headless runs do; long lab runs may not).
     pub keep_trace: bool,
+    /// Keep only every this many steps' records (steps 1, 1 + n, 1 + 2n, …; 0 and 1: every
+    /// one): what `--trace-every` asks of a long run's trace. The metrics count every step.
+    pub trace_every: u64,
     /// The newest record.
     pub last: Option<StepRecord>,
     /// Actuator ticks so far.
@@ -198,7 +201,7 @@ impl RunLog {
         if rec.fell && self.fell_at.is_none() {
             self.fell_at = Some(rec.t);
         }
-        if self.keep_trace {
+        if self.keep_trace && (rec.step.saturating_sub(1)) % self.trace_every.max(1) == 0 {
             self.trace.push(rec.clone());
         }
         self.last = Some(rec);
@@ -231,12 +234,24 @@ mod tests {
             fell: true,
             nonfinite: true,
             latency: Some(Nanos(5)),
-            ..base
+            ..base.clone()
         });
         assert_eq!(log.steps, 2);
         assert_eq!(log.fell_at, Some(Nanos(20)));
         assert_eq!(log.nonfinite_actions, 1);
         assert_eq!(log.latency.count(), 1);
         assert_eq!(log.trace.len(), 2);
+        // Every third step's record, from the first.
+        let mut thin = RunLog::new(true);
+        thin.trace_every = 3;
+        for step in 1..=7 {
+            thin.push(StepRecord {
+                step,
+                ..base.clone()
+            });
+        }
+        let kept: Vec<u64> = thin.trace.iter().map(|r| r.step).collect();
+        assert_eq!(kept, [1, 4, 7]);
+        assert_eq!(thin.steps, 7);
     }
 }

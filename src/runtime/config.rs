@@ -351,7 +351,7 @@ mod tests {
         assert!(duration_from_secs(MAX_DURATION_S + 1.0)
             .unwrap_err()
             .to_string()
-            .contains("(0, 3600]"));
+            .contains("(0, 315360000]"));
         let names = ["sensor", "policy", "actuator"];
         assert_eq!(phase_offsets_from_ms(&[], &names), Ok(vec![Nanos::ZERO; 3]));
         assert_eq!(

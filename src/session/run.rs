@@ -34,6 +34,9 @@ pub struct RunOptions {
     pub stop: StopFlag,
     /// Keep every step record in the report (default true via [`RunOptions::new`]).
     pub keep_trace: bool,
+    /// Keep only every this many steps' records, and the last (`--trace-every`; 0 and 1:
+    /// every one).
+    pub trace_every: u64,
     /// Commands to apply at run times (sorted by `at_ns`; virtual clock).
     pub commands: Vec<TimedCommand>,
     /// Real clock: told about every node tick.
@@ -124,6 +127,7 @@ pub fn run(
         Driver::Virtual(core) => core.handles().clone(),
         Driver::Real(g) => g.handles.clone(),
     };
+    lock(&handles.log).trace_every = opts.trace_every;
     let link = match &opts.ros2 {
         Some(o) => {
             // What needs no network is refused before a session (or a router) opens.
@@ -174,7 +178,17 @@ pub fn run(
         link.close();
     }
     let metrics = summarize(cfg, &handles, &end, &ticks, timing, exec);
-    let trace = std::mem::take(&mut lock(&handles.log).trace);
+    let trace = {
+        let mut log = lock(&handles.log);
+        let mut trace = std::mem::take(&mut log.trace);
+        // A thinned trace ends with the run's last step all the same.
+        if let Some(last) = log.last.as_ref().filter(|_| log.keep_trace) {
+            if trace.last().is_none_or(|r| r.step != last.step) {
+                trace.push(last.clone());
+            }
+        }
+        trace
+    };
     Ok(RunReport {
         metrics,
         trace,

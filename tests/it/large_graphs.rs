@@ -184,3 +184,76 @@ fn every_bound_refuses_in_one_line_naming_it() {
     let o = ratelab(&["graph", "--nodes", "65537"]);
     assert_eq!(o.status.code(), Some(2), "{}", text(&o.stderr));
 }
+
+/// `ratelab ARGS`'s peak resident memory, KiB (its `VmHWM`, read until it exits), and
+/// whether it succeeded.
+fn peak_kib(args: &[&str]) -> (u64, bool) {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_ratelab"))
+        .args(args)
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    let status = format!("/proc/{}/status", child.id());
+    let mut peak = 0;
+    loop {
+        // The high-water mark only grows: the last reading before the exit is the peak's
+        // (within the last few milliseconds of the run).
+        if let Ok(s) = std::fs::read_to_string(&status) {
+            if let Some(kib) = s
+                .lines()
+                .find_map(|l| l.strip_prefix("VmHWM:"))
+                .and_then(|v| v.trim().trim_end_matches("kB").trim().parse::<u64>().ok())
+            {
+                peak = peak.max(kib);
+            }
+        }
+        if let Some(st) = child.try_wait().unwrap() {
+            return (peak, st.success());
+        }
+        std::thread::sleep(std::time::Duration::from_millis(5));
+    }
+}
+
+#[test]
+fn a_day_of_virtual_run_time_takes_no_more_memory_than_ten_minutes() {
+    let _m = crate::machine::shared();
+    let run = |secs: &str| {
+        let (kib, ok) = peak_kib(&["run", "--clock", "virtual", "--duration", secs]);
+        assert!(ok, "a {secs} s run failed");
+        kib
+    };
+    let ten_minutes = run("600");
+    let day = run("86400");
+    assert!(
+        day * 2 <= ten_minutes * 3,
+        "a day's run peaked at {day} KiB, ten minutes' at {ten_minutes} KiB"
+    );
+    // The trace of a long run is what the user asks for: every 50th step of ten minutes,
+    // and the last.
+    let dir = tempfile::tempdir().unwrap();
+    let (metrics, trace) = outputs(
+        &[
+            "run",
+            "--clock",
+            "virtual",
+            "--duration",
+            "600.5",
+            "--trace-every",
+            "50",
+        ],
+        &dir.path().join("thin"),
+    );
+    let rows: Vec<&str> = trace.lines().skip(1).collect();
+    // Steps 1, 51, …, 30001, and the last, 30026.
+    assert_eq!(rows.len(), 601 + 1, "{:?}", &rows[..3]);
+    assert!(rows[1].starts_with("51,"), "{}", rows[1]);
+    assert!(rows[600].starts_with("30001,"), "{}", rows[600]);
+    assert!(rows[601].starts_with("30026,"), "{}", rows[601]);
+    let m: serde_json::Value = serde_json::from_str(&metrics).unwrap();
+    assert_eq!(
+        m["steps"].as_u64(),
+        Some(30026),
+        "the metrics count every step"
+    );
+}

@@ -327,7 +327,7 @@ fn hand_edited_session_logs_are_checked_like_the_command_line() {
         ),
         (
             "end after the longest run",
-            |v| v["runs"][0]["end_ns"] = 10_000_000_000_000u64.into(),
+            |v| v["runs"][0]["end_ns"] = 400_000_000_000_000_000u64.into(),
             "end_ns",
         ),
         (
