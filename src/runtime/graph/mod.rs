@@ -213,9 +213,12 @@ pub fn connect_subscriptions(spec: &GraphSpec, topics: &[AnyTopic]) {
             continue;
         }
         let bad = spec.incompatible(TopicId(i), &topic.qos());
+        // Each subscription's verdict by its index (hashed: a topic may have many).
+        let verdict: std::collections::HashMap<usize, _> =
+            bad.iter().map(|entry| (entry.0, entry)).collect();
         for (k, &n) in t.subscribers.iter().enumerate() {
             let queue = topic.subscription(k);
-            let failed = bad.iter().find(|(b, ..)| *b == k);
+            let failed = verdict.get(&k).copied();
             let was = queue.matched();
             queue.set_matched(failed.is_none());
             // Said when it changes, as ROS 2 raises its event when the pair is discovered.

@@ -55,9 +55,11 @@ pub(super) fn requested(
     node_name: impl Fn(crate::graph::NodeId) -> String,
 ) -> Result<BTreeMap<String, RequestedQos>, SpecError> {
     let subscribers: Vec<String> = t.subscribers.iter().map(|&n| node_name(n)).collect();
+    // Hashed: a topic may have tens of thousands of subscribers.
+    let known: std::collections::HashSet<&str> = subscribers.iter().map(String::as_str).collect();
     let mut out = BTreeMap::new();
     for (node, r) in raw {
-        if !subscribers.contains(node) {
+        if !known.contains(node.as_str()) {
             return Err(cx.err(
                 r.span(),
                 format!(
