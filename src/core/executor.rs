@@ -538,9 +538,10 @@ impl Dispatch {
         // An executor with no ready node has an empty snapshot (a node leaves its snapshot
         // only by starting, which is the only way it stops being ready), so its poll would
         // change nothing.
-        let polled: Vec<usize> = self.with_ready.iter().copied().collect();
-        for e in polled {
+        let mut next = 0;
+        while let Some(&e) = self.with_ready.range(next..).next() {
             self.poll_if_idle(e);
+            next = e + 1;
         }
         self.snapshot
             .iter()

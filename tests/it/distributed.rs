@@ -14,11 +14,11 @@ pub(crate) fn bin() -> Command {
     c
 }
 
-fn ratelab(args: &[&str]) -> Output {
+pub(crate) fn ratelab(args: &[&str]) -> Output {
     bin().args(args).output().expect("runs")
 }
 
-fn text(b: &[u8]) -> String {
+pub(crate) fn text(b: &[u8]) -> String {
     String::from_utf8_lossy(b).into_owned()
 }
 
@@ -1090,7 +1090,7 @@ fn top_finds_this_users_launch_without_connect() {
     first.wait().unwrap();
 }
 
-fn assert_one_line_exit_2(o: &Output, needle: &str) {
+pub(crate) fn assert_one_line_exit_2(o: &Output, needle: &str) {
     let err = text(&o.stderr);
     assert_eq!(o.status.code(), Some(2), "{err}");
     assert_eq!(err.trim_end().lines().count(), 1, "one line: {err:?}");

@@ -19,14 +19,14 @@ const REFUSE_WITHIN: Duration = Duration::from_secs(5);
 
 /// How a child process ended.
 #[derive(Debug)]
-struct Outcome {
-    code: Option<i32>,
-    stdout: String,
-    stderr: String,
+pub(crate) struct Outcome {
+    pub(crate) code: Option<i32>,
+    pub(crate) stdout: String,
+    pub(crate) stderr: String,
     /// Peak resident set size, MiB.
-    peak_mib: f64,
-    wall: Duration,
-    timed_out: bool,
+    pub(crate) peak_mib: f64,
+    pub(crate) wall: Duration,
+    pub(crate) timed_out: bool,
 }
 
 /// Run `ratelab args` in `cwd`, killing it after `timeout`; `during(pid)` runs once the
@@ -35,7 +35,7 @@ struct Outcome {
     clippy::zombie_processes,
     reason = "the child is reaped by wait4, which also reports its peak memory"
 )]
-fn run_child(
+pub(crate) fn run_child(
     args: &[&str],
     cwd: &Path,
     timeout: Duration,

@@ -2,19 +2,9 @@
 //! for byte the same twice in one process and across 8 processes, and every bound of
 //! `ratelab::limits` refuses in one line that names it.
 
+use crate::distributed::{assert_one_line_exit_2, ratelab, text};
 use std::path::Path;
-use std::process::{Command, Output};
-
-fn ratelab(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_ratelab"))
-        .args(args)
-        .output()
-        .expect("runs")
-}
-
-fn text(b: &[u8]) -> String {
-    String::from_utf8_lossy(b).into_owned()
-}
+use std::time::Duration;
 
 /// `ratelab graph --nodes N --processes P` written to `dir/name`.
 fn generated(dir: &Path, name: &str, nodes: usize, processes: usize) -> String {
@@ -37,15 +27,6 @@ fn outputs(args: &[&str], dir: &Path) -> (String, String) {
     assert!(o.status.success(), "{}{}", text(&o.stdout), text(&o.stderr));
     let read = |f: &str| std::fs::read_to_string(dir.join(f)).unwrap();
     (read("metrics.json"), read("trace.csv"))
-}
-
-fn assert_one_line_exit_2(o: &Output, needles: &[&str]) {
-    let err = text(&o.stderr);
-    assert_eq!(o.status.code(), Some(2), "{err}");
-    assert_eq!(err.trim_end().lines().count(), 1, "one line: {err:?}");
-    for needle in needles {
-        assert!(err.contains(needle), "{err:?} lacks {needle:?}");
-    }
 }
 
 #[test]
@@ -133,7 +114,9 @@ fn every_bound_refuses_in_one_line_naming_it() {
     text_over.push_str(&"#".repeat(16 << 20));
     std::fs::write(&big, text_over).unwrap();
     let o = ratelab(&["run", "--graph", &big, "--clock", "virtual"]);
-    assert_one_line_exit_2(&o, &["big.toml", "16777216"]);
+    for needle in ["big.toml", "16777216"] {
+        assert_one_line_exit_2(&o, needle);
+    }
     // More nodes than MAX_NODES: the 65,537th is the culprit.
     let many = path("many.toml");
     let mut nodes = chapter.clone();
@@ -144,13 +127,12 @@ fn every_bound_refuses_in_one_line_naming_it() {
     }
     std::fs::write(&many, nodes).unwrap();
     let o = ratelab(&["run", "--graph", &many, "--clock", "virtual"]);
-    assert_one_line_exit_2(
-        &o,
-        &[
-            "a graph has at most 65536 nodes",
-            "ratelab::limits::MAX_NODES",
-        ],
-    );
+    for needle in [
+        "a graph has at most 65536 nodes",
+        "ratelab::limits::MAX_NODES",
+    ] {
+        assert_one_line_exit_2(&o, needle);
+    }
     // A Python node reading more than MAX_NODE_PORTS topics.
     let ports = path("ports.toml");
     let list: Vec<String> = (0..257).map(|i| format!("\"/t{i}\"")).collect();
@@ -163,75 +145,44 @@ fn every_bound_refuses_in_one_line_naming_it() {
     )
     .unwrap();
     let o = ratelab(&["run", "--graph", &ports, "--clock", "virtual"]);
-    assert_one_line_exit_2(
-        &o,
-        &[
-            "subscribes names 257 topics; a node has at most 256",
-            "ratelab::limits::MAX_NODE_PORTS",
-        ],
-    );
+    for needle in [
+        "subscribes names 257 topics; a node has at most 256",
+        "ratelab::limits::MAX_NODE_PORTS",
+    ] {
+        assert_one_line_exit_2(&o, needle);
+    }
     // A launch of more than MAX_PROCESSES processes: a node without a `process` is its own.
     let g = generated(dir.path(), "unplaced.toml", 1003, 1);
     let o = ratelab(&["launch", &g, "--processes", "--clock", "virtual"]);
-    assert_one_line_exit_2(
-        &o,
-        &[
-            "places its nodes in 752 processes; a launch has at most 256",
-            "ratelab::limits::MAX_PROCESSES",
-        ],
-    );
+    for needle in [
+        "places its nodes in 752 processes; a launch has at most 256",
+        "ratelab::limits::MAX_PROCESSES",
+    ] {
+        assert_one_line_exit_2(&o, needle);
+    }
     // `ratelab graph` itself keeps to the bounds.
     let o = ratelab(&["graph", "--nodes", "65537"]);
     assert_eq!(o.status.code(), Some(2), "{}", text(&o.stderr));
 }
 
-/// `ratelab ARGS`'s peak resident memory, KiB (its `VmHWM`, read until it exits), and
-/// whether it succeeded.
-fn peak_kib(args: &[&str]) -> (u64, bool) {
-    let mut child = Command::new(env!("CARGO_BIN_EXE_ratelab"))
-        .args(args)
-        .stdout(std::process::Stdio::null())
-        .stderr(std::process::Stdio::null())
-        .spawn()
-        .unwrap();
-    let status = format!("/proc/{}/status", child.id());
-    let mut peak = 0;
-    loop {
-        // The high-water mark only grows: the last reading before the exit is the peak's
-        // (within the last few milliseconds of the run).
-        if let Ok(s) = std::fs::read_to_string(&status) {
-            if let Some(kib) = s
-                .lines()
-                .find_map(|l| l.strip_prefix("VmHWM:"))
-                .and_then(|v| v.trim().trim_end_matches("kB").trim().parse::<u64>().ok())
-            {
-                peak = peak.max(kib);
-            }
-        }
-        if let Some(st) = child.try_wait().unwrap() {
-            return (peak, st.success());
-        }
-        std::thread::sleep(std::time::Duration::from_millis(5));
-    }
-}
-
 #[test]
 fn a_day_of_virtual_run_time_takes_no_more_memory_than_ten_minutes() {
     let _m = crate::machine::shared();
+    let dir = tempfile::tempdir().unwrap();
     let run = |secs: &str| {
-        let (kib, ok) = peak_kib(&["run", "--clock", "virtual", "--duration", secs]);
-        assert!(ok, "a {secs} s run failed");
-        kib
+        let args = ["run", "--clock", "virtual", "--duration", secs];
+        let o = crate::hostile::run_child(&args, dir.path(), Duration::from_secs(600), |_| {});
+        assert_eq!(o.code, Some(0), "a {secs} s run: {o:?}");
+        o.peak_mib
     };
     let ten_minutes = run("600");
     let day = run("86400");
     assert!(
-        day * 2 <= ten_minutes * 3,
-        "a day's run peaked at {day} KiB, ten minutes' at {ten_minutes} KiB"
+        day * 2.0 <= ten_minutes * 3.0,
+        "a day's run peaked at {day} MiB, ten minutes' at {ten_minutes} MiB"
     );
     // The trace of a long run is what the user asks for: every 50th step of ten minutes,
     // and the last.
-    let dir = tempfile::tempdir().unwrap();
     let (metrics, trace) = outputs(
         &[
             "run",
