@@ -176,9 +176,16 @@ pub struct TopArgs {
     /// launch, recorded when it started, else tls/127.0.0.1:7449).
     #[arg(long, value_name = "tls/HOST:PORT")]
     pub connect: Vec<String>,
-    /// Print one table and exit (for scripts).
+    /// Print one table, every row, and exit (for scripts). On a terminal `top` otherwise
+    /// shows a page at a time (PgDn/PgUp or space, Home/End) and `s` sorts by the next
+    /// column; `q` quits.
     #[arg(long)]
     pub once: bool,
+    /// Sort the rows by: name (nodes by process, topics by name), rate (measured Hz and
+    /// msg/s, highest first), count (ticks and published messages, most first), trouble
+    /// (nodes not alive and topics' dropped + lost messages first).
+    #[arg(long, value_enum, default_value_t = crate::top::SortBy::Name)]
+    pub sort: crate::top::SortBy,
     /// The launch's credentials (`launch --export-credentials FILE`; default: those this
     /// user's running launch keeps for its watchers).
     #[arg(long, value_name = "FILE")]

@@ -5,8 +5,8 @@
 use super::keymap::{depth_down, depth_up, rate_down, rate_up, Msg};
 use super::live::Live;
 use super::view::{
-    Badge, LatencyView, LogView, NodeView, Ros2View, SegmentView, Selected, TopicView, Verdict,
-    View, WindowLatency,
+    Badge, LatencyView, LogView, NavView, NodeView, Ros2View, SegmentView, Selected, TopicView,
+    Verdict, View, WindowLatency,
 };
 use crossbeam_channel::Sender;
 use ratelab::config::{check_rate, BREAK_CONTROL_HZ};
@@ -135,6 +135,8 @@ pub struct App {
     exec: VecDeque<(Nanos, Vec<(u64, u64)>)>,
     /// What Tab selected.
     selected: Option<Selected>,
+    /// The graph panel's zoom, scroll and filter.
+    nav: super::navigate::Navigation,
     /// The window (last 5 s) and the segment since the last change.
     live: Live,
     history: VecDeque<(f64, f64)>,
@@ -243,6 +245,7 @@ impl App {
             faults: Vec::new(),
             exec: VecDeque::new(),
             selected: None,
+            nav: super::navigate::Navigation::default(),
             live: Live::default(),
             history: VecDeque::new(),
             applied: VecDeque::new(),
@@ -411,9 +414,14 @@ impl App {
         self.message_at = Some(std::time::Instant::now());
     }
 
-    /// Is an exact rate being typed?
-    pub fn typing(&self) -> bool {
-        self.typing.is_some()
+    /// What is being typed: an exact rate, the graph panel's filter, or nothing.
+    pub fn typing(&self) -> super::keymap::Typing {
+        use super::keymap::Typing;
+        match (&self.typing, &self.nav.typing) {
+            (Some(_), _) => Typing::Rate,
+            (None, Some(_)) => Typing::Filter,
+            (None, None) => Typing::No,
+        }
     }
 
     /// Do ← and → move through the run (paused under the virtual clock, in the lab's own
@@ -770,6 +778,26 @@ impl App {
     /// Handle one key message.
     pub fn on_msg(&mut self, m: Msg) {
         let confirming = std::mem::take(&mut self.confirm_quit);
+        // Typing the graph panel's filter (in an attached lab too: it changes only the view).
+        if self.nav.typing.is_some() {
+            use super::navigate::NavKey;
+            let key = match m {
+                Msg::Input(c) => NavKey::Input(c),
+                Msg::Backspace => NavKey::Backspace,
+                Msg::Submit => NavKey::Submit,
+                Msg::Cancel => NavKey::Cancel,
+                Msg::Quit => return self.on_msg_typed(m, confirming),
+                _ => return,
+            };
+            self.nav.on_key(key);
+            return;
+        }
+        self.on_msg_typed(m, confirming);
+    }
+
+    /// Handle one key message, nothing being typed but a rate (`confirming`: the Esc before
+    /// asked whether to quit).
+    fn on_msg_typed(&mut self, m: Msg, confirming: bool) {
         // Attached, a key that would change the graph changes nothing here either.
         if self.attached.is_some() && !m.only_views() {
             self.say(READ_ONLY.to_string());
@@ -809,6 +837,12 @@ impl App {
             | Msg::CycleOnDeadlineMissed => self.change_qos(m),
             Msg::SelectNext => self.selected = self.cycle(1),
             Msg::SelectPrev => self.selected = self.cycle(-1),
+            Msg::Zoom
+            | Msg::ScrollUp
+            | Msg::ScrollDown
+            | Msg::ScrollTop
+            | Msg::Filter
+            | Msg::ToggleTrouble => self.navigate(m),
             Msg::TypeRate => self.typing = Some(String::new()),
             Msg::Input(c) => {
                 if let Some(t) = &mut self.typing {
@@ -965,6 +999,8 @@ impl App {
             self.help = false;
         } else if self.selected.is_some() {
             self.selected = None;
+        } else if self.nav.clear_filter() {
+            self.say("graph: filter cleared, everything shown".into());
         } else if confirming {
             self.on_msg(Msg::Quit);
         } else {
@@ -974,21 +1010,52 @@ impl App {
     }
 
     /// The selection `step` places on from the current one, around the ring
-    /// nothing → node 0 … node n−1 → topic 0 … topic m−1 → nothing.
+    /// nothing → node 0 … node n−1 → topic 0 … topic m−1 → nothing, past what the graph
+    /// panel's filter hides.
     fn cycle(&self, step: isize) -> Option<Selected> {
         let nodes = self.graph.nodes.len();
         let ring = nodes + self.graph.topics.len() + 1;
-        let pos = match self.selected {
+        let (node_views, topic_views) = self.graph_views(self.hung_callback().as_ref());
+        let shown = |p: usize| match p {
+            0 => true,
+            p if p <= nodes => node_views[p - 1].shown,
+            p => topic_views[p - 1 - nodes].shown,
+        };
+        let mut pos = match self.selected {
             None => 0,
             Some(Selected::Node(n)) => 1 + n.0,
             Some(Selected::Topic(t)) => 1 + nodes + t.0,
         };
-        let next = (pos as isize + step).rem_euclid(ring as isize) as usize;
-        match next {
+        for _ in 0..ring {
+            pos = (pos as isize + step).rem_euclid(ring as isize) as usize;
+            if shown(pos) {
+                break;
+            }
+        }
+        match pos {
             0 => None,
             p if p <= nodes => Some(Selected::Node(NodeId(p - 1))),
             p => Some(Selected::Topic(TopicId(p - 1 - nodes))),
         }
+    }
+
+    /// A key of the graph panel's navigation ([`super::navigate`]).
+    fn navigate(&mut self, m: Msg) {
+        use super::navigate::NavKey;
+        let key = match m {
+            Msg::Zoom => NavKey::Zoom,
+            Msg::ScrollUp => NavKey::Up(1),
+            Msg::ScrollDown => NavKey::Down(1),
+            Msg::ScrollTop => NavKey::Top,
+            Msg::Filter => NavKey::StartFilter,
+            _ => NavKey::ToggleTrouble,
+        };
+        if let Some(said) = self.nav.on_key(key) {
+            self.say(said);
+        }
+        // Never further down than there are rows (the drawing stops at the last window).
+        let rows = self.graph.nodes.len() + self.graph.topics.len();
+        self.nav.scroll = self.nav.scroll.min(rows);
     }
 
     /// Set node `n`'s rate. The chapter's nodes keep the chapter's commands, so a session

@@ -79,6 +79,18 @@ pub enum Msg {
     /// Show the graph as ROS 2 sees it (with `--ros2`: node names, topics with their ROS 2
     /// types, QoS and endpoint counts, `/clock`) instead of the node graph, or back.
     ToggleRos2,
+    /// The graph panel's next zoom: boxes → names → list ([`super::navigate::Zoom`]).
+    Zoom,
+    /// Scroll the graph panel up a row.
+    ScrollUp,
+    /// … down a row.
+    ScrollDown,
+    /// Back to the graph panel's top.
+    ScrollTop,
+    /// Start typing the graph panel's filter (a name, or `@` and a process).
+    Filter,
+    /// Show only the nodes and topics in trouble, or everything again.
+    ToggleTrouble,
     /// Scroll the log pane back (older lines).
     LogOlder,
     /// Scroll the log pane forward (newer lines).
@@ -112,6 +124,12 @@ impl Msg {
             self,
             Msg::SelectNext
                 | Msg::SelectPrev
+                | Msg::Zoom
+                | Msg::ScrollUp
+                | Msg::ScrollDown
+                | Msg::ScrollTop
+                | Msg::Filter
+                | Msg::ToggleTrouble
                 | Msg::ToggleHelp
                 | Msg::ToggleTimeline
                 | Msg::ToggleLog
@@ -144,7 +162,7 @@ impl Binding {
     }
 }
 
-use KeyCode::{BackTab, Char, Esc, Left, Right, Tab};
+use KeyCode::{BackTab, Char, Down, Esc, Home, Left, Right, Tab, Up};
 
 /// Every binding of the lab (Ctrl-C always quits as well).
 pub const BINDINGS: &[Binding] = &[
@@ -202,6 +220,19 @@ pub const BINDINGS: &[Binding] = &[
         label: "Tab / Shift-Tab",
         help: "select the next / previous node or topic",
         footer: Some(("Tab", "select")),
+    },
+    Binding {
+        keys: &[
+            (Char('z'), Msg::Zoom),
+            (Up, Msg::ScrollUp),
+            (Down, Msg::ScrollDown),
+            (Home, Msg::ScrollTop),
+            (Char('/'), Msg::Filter),
+            (Char('!'), Msg::ToggleTrouble),
+        ],
+        label: "z ↑↓ / !",
+        help: "graph: zoom boxes→names→list · scroll · filter · trouble",
+        footer: None,
     },
     Binding {
         keys: &[
@@ -271,15 +302,9 @@ pub const BINDINGS: &[Binding] = &[
         footer: Some(("?", "help")),
     },
     Binding {
-        keys: &[(Esc, Msg::Back)],
-        label: "Esc",
-        help: "close the help or the selection; else ask to quit",
-        footer: None,
-    },
-    Binding {
-        keys: &[(Char('q'), Msg::Quit)],
-        label: "q / Ctrl-C",
-        help: "quit",
+        keys: &[(Esc, Msg::Back), (Char('q'), Msg::Quit)],
+        label: "Esc / q / Ctrl-C",
+        help: "close help / selection / filter, else ask to quit / quit",
         footer: Some(("q", "quit")),
     },
 ];
@@ -301,18 +326,30 @@ pub const HELP_NOTES: [(&str, &str); 4] = [
     ),
 ];
 
-/// Map a key event. `typing` is true while an exact rate is being typed; `scrubbing` while
-/// the run is paused under the virtual clock, when ← and → move through the run (Shift:
-/// by a second) instead of changing a rate.
-pub fn map_key(key: KeyEvent, typing: bool, scrubbing: bool) -> Option<Msg> {
+/// What is being typed, if anything: keys then edit it instead of acting.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Typing {
+    /// Nothing: keys act.
+    No,
+    /// An exact rate: digits and `.` only.
+    Rate,
+    /// The graph panel's filter: any printable character.
+    Filter,
+}
+
+/// Map a key event. `typing` says what is being typed; `scrubbing` is true while the run
+/// is paused under the virtual clock, when ← and → move through the run (Shift: by a
+/// second) instead of changing a rate.
+pub fn map_key(key: KeyEvent, typing: Typing, scrubbing: bool) -> Option<Msg> {
     if key.kind == KeyEventKind::Release {
         return None;
     }
     if key.modifiers.contains(KeyModifiers::CONTROL) && key.code == Char('c') {
         return Some(Msg::Quit);
     }
-    if typing {
+    if typing != Typing::No {
         return match key.code {
+            Char(c) if typing == Typing::Filter && !c.is_control() => Some(Msg::Input(c)),
             Char(c) if c.is_ascii_digit() || c == '.' => Some(Msg::Input(c)),
             KeyCode::Backspace => Some(Msg::Backspace),
             KeyCode::Enter => Some(Msg::Submit),
@@ -441,131 +478,172 @@ mod tests {
     #[test]
     fn default_bindings() {
         assert_eq!(
-            map_key(key(KeyCode::Char('-')), false, false),
+            map_key(key(KeyCode::Char('-')), Typing::No, false),
             Some(Msg::RateDown)
         );
         assert_eq!(
-            map_key(key(KeyCode::Left), false, false),
+            map_key(key(KeyCode::Left), Typing::No, false),
             Some(Msg::RateDown)
         );
         assert_eq!(
-            map_key(key(KeyCode::Char('+')), false, false),
+            map_key(key(KeyCode::Char('+')), Typing::No, false),
             Some(Msg::RateUp)
         );
         assert_eq!(
-            map_key(key(KeyCode::Right), false, false),
+            map_key(key(KeyCode::Right), Typing::No, false),
             Some(Msg::RateUp)
         );
         assert_eq!(
-            map_key(key(KeyCode::Tab), false, false),
+            map_key(key(KeyCode::Tab), Typing::No, false),
             Some(Msg::SelectNext)
         );
         assert_eq!(
-            map_key(key(KeyCode::BackTab), false, false),
+            map_key(key(KeyCode::BackTab), Typing::No, false),
             Some(Msg::SelectPrev)
         );
         assert_eq!(
-            map_key(key(KeyCode::Char('=')), false, false),
+            map_key(key(KeyCode::Char('=')), Typing::No, false),
             Some(Msg::TypeRate)
         );
         assert_eq!(
-            map_key(key(KeyCode::Char('s')), false, false),
+            map_key(key(KeyCode::Char('s')), Typing::No, false),
             Some(Msg::SensorDown)
         );
         assert_eq!(
-            map_key(key(KeyCode::Char('S')), false, false),
+            map_key(key(KeyCode::Char('S')), Typing::No, false),
             Some(Msg::SensorUp)
         );
         assert_eq!(
-            map_key(key(KeyCode::Char('[')), false, false),
+            map_key(key(KeyCode::Char('[')), Typing::No, false),
             Some(Msg::DepthDown)
         );
         assert_eq!(
-            map_key(key(KeyCode::Char(']')), false, false),
+            map_key(key(KeyCode::Char(']')), Typing::No, false),
             Some(Msg::DepthUp)
         );
         assert_eq!(
-            map_key(key(KeyCode::Char('b')), false, false),
+            map_key(key(KeyCode::Char('b')), Typing::No, false),
             Some(Msg::Break)
         );
         assert_eq!(
-            map_key(key(KeyCode::Char(' ')), false, false),
+            map_key(key(KeyCode::Char(' ')), Typing::No, false),
             Some(Msg::TogglePause)
         );
         assert_eq!(
-            map_key(key(KeyCode::Char('.')), false, false),
+            map_key(key(KeyCode::Char('.')), Typing::No, false),
             Some(Msg::Step)
         );
         assert_eq!(
-            map_key(key(KeyCode::Char('r')), false, false),
+            map_key(key(KeyCode::Char('r')), Typing::No, false),
             Some(Msg::Reset)
         );
         assert_eq!(
-            map_key(key(KeyCode::Char('R')), false, false),
+            map_key(key(KeyCode::Char('R')), Typing::No, false),
             Some(Msg::NextSeed)
         );
         assert_eq!(
-            map_key(key(KeyCode::Char('c')), false, false),
+            map_key(key(KeyCode::Char('c')), Typing::No, false),
             Some(Msg::SwitchClock)
         );
         assert_eq!(
-            map_key(key(KeyCode::Char('<')), false, false),
+            map_key(key(KeyCode::Char('<')), Typing::No, false),
             Some(Msg::Slower)
         );
         assert_eq!(
-            map_key(key(KeyCode::Char('>')), false, false),
+            map_key(key(KeyCode::Char('>')), Typing::No, false),
             Some(Msg::Faster)
         );
         assert_eq!(
-            map_key(key(KeyCode::Char('p')), false, false),
+            map_key(key(KeyCode::Char('p')), Typing::No, false),
             Some(Msg::SwapBrain)
         );
         assert_eq!(
-            map_key(key(KeyCode::Char('?')), false, false),
+            map_key(key(KeyCode::Char('?')), Typing::No, false),
             Some(Msg::ToggleHelp)
         );
         assert_eq!(
-            map_key(key(KeyCode::Char('q')), false, false),
+            map_key(key(KeyCode::Char('q')), Typing::No, false),
             Some(Msg::Quit)
         );
-        assert_eq!(map_key(key(KeyCode::Esc), false, false), Some(Msg::Back));
+        assert_eq!(
+            map_key(key(KeyCode::Esc), Typing::No, false),
+            Some(Msg::Back)
+        );
         assert_eq!(
             map_key(
                 KeyEvent::new(KeyCode::Char('c'), KeyModifiers::CONTROL),
-                false,
+                Typing::No,
                 false
             ),
             Some(Msg::Quit)
         );
         assert_eq!(
-            map_key(key(KeyCode::Char('x')), false, false),
+            map_key(key(KeyCode::Char('x')), Typing::No, false),
             Some(Msg::CycleExecutor)
         );
-        assert_eq!(map_key(key(KeyCode::Char('z')), false, false), None);
+        assert_eq!(map_key(key(KeyCode::Char('y')), Typing::No, false), None);
+    }
+
+    #[test]
+    fn the_graph_panel_s_keys_and_its_filter_takes_any_character() {
+        for (code, msg) in [
+            (KeyCode::Char('z'), Msg::Zoom),
+            (KeyCode::Up, Msg::ScrollUp),
+            (KeyCode::Down, Msg::ScrollDown),
+            (KeyCode::Home, Msg::ScrollTop),
+            (KeyCode::Char('/'), Msg::Filter),
+            (KeyCode::Char('!'), Msg::ToggleTrouble),
+        ] {
+            assert_eq!(map_key(key(code), Typing::No, false), Some(msg));
+            // They only change what the lab shows: an attached lab takes them.
+            assert!(msg.only_views(), "{msg:?}");
+        }
+        // Typing a filter, the lab's keys are letters of it.
+        for c in ['q', 'z', '@', '_', '/', '-'] {
+            assert_eq!(
+                map_key(key(KeyCode::Char(c)), Typing::Filter, false),
+                Some(Msg::Input(c))
+            );
+        }
+        assert_eq!(
+            map_key(key(KeyCode::Enter), Typing::Filter, false),
+            Some(Msg::Submit)
+        );
+        assert_eq!(
+            map_key(key(KeyCode::Esc), Typing::Filter, false),
+            Some(Msg::Cancel)
+        );
+        assert_eq!(map_key(key(KeyCode::Up), Typing::Filter, false), None);
     }
 
     #[test]
     fn typing_mode_takes_digits_only() {
         assert_eq!(
-            map_key(key(KeyCode::Char('7')), true, false),
+            map_key(key(KeyCode::Char('7')), Typing::Rate, false),
             Some(Msg::Input('7'))
         );
         assert_eq!(
-            map_key(key(KeyCode::Char('.')), true, false),
+            map_key(key(KeyCode::Char('.')), Typing::Rate, false),
             Some(Msg::Input('.'))
         );
-        assert_eq!(map_key(key(KeyCode::Char('q')), true, false), None);
-        assert_eq!(map_key(key(KeyCode::Enter), true, false), Some(Msg::Submit));
-        assert_eq!(map_key(key(KeyCode::Esc), true, false), Some(Msg::Cancel));
+        assert_eq!(map_key(key(KeyCode::Char('q')), Typing::Rate, false), None);
         assert_eq!(
-            map_key(key(KeyCode::Backspace), true, false),
+            map_key(key(KeyCode::Enter), Typing::Rate, false),
+            Some(Msg::Submit)
+        );
+        assert_eq!(
+            map_key(key(KeyCode::Esc), Typing::Rate, false),
+            Some(Msg::Cancel)
+        );
+        assert_eq!(
+            map_key(key(KeyCode::Backspace), Typing::Rate, false),
             Some(Msg::Backspace)
         );
         // Ctrl-C always quits.
         assert_eq!(
             map_key(
                 KeyEvent::new(KeyCode::Char('c'), KeyModifiers::CONTROL),
-                true,
+                Typing::Rate,
                 false
             ),
             Some(Msg::Quit)
@@ -576,32 +654,32 @@ mod tests {
     fn paused_the_arrows_move_through_the_run_and_shift_by_a_second() {
         let shifted = |c| KeyEvent::new(c, KeyModifiers::SHIFT);
         assert_eq!(
-            map_key(key(KeyCode::Left), false, true),
+            map_key(key(KeyCode::Left), Typing::No, true),
             Some(Msg::SeekBack { second: false })
         );
         assert_eq!(
-            map_key(key(KeyCode::Right), false, true),
+            map_key(key(KeyCode::Right), Typing::No, true),
             Some(Msg::SeekForward { second: false })
         );
         assert_eq!(
-            map_key(shifted(KeyCode::Left), false, true),
+            map_key(shifted(KeyCode::Left), Typing::No, true),
             Some(Msg::SeekBack { second: true })
         );
         assert_eq!(
-            map_key(shifted(KeyCode::Right), false, true),
+            map_key(shifted(KeyCode::Right), Typing::No, true),
             Some(Msg::SeekForward { second: true })
         );
         // The rate keys stay rate keys; running, the arrows are rates again.
         assert_eq!(
-            map_key(key(KeyCode::Char('-')), false, true),
+            map_key(key(KeyCode::Char('-')), Typing::No, true),
             Some(Msg::RateDown)
         );
         assert_eq!(
-            map_key(key(KeyCode::Char('.')), false, true),
+            map_key(key(KeyCode::Char('.')), Typing::No, true),
             Some(Msg::Step)
         );
         assert_eq!(
-            map_key(shifted(KeyCode::Left), false, false),
+            map_key(shifted(KeyCode::Left), Typing::No, false),
             Some(Msg::RateDown)
         );
     }
@@ -610,7 +688,7 @@ mod tests {
     fn key_releases_are_ignored() {
         let mut k = key(KeyCode::Char('-'));
         k.kind = KeyEventKind::Release;
-        assert_eq!(map_key(k, false, false), None);
+        assert_eq!(map_key(k, Typing::No, false), None);
     }
 
     #[test]

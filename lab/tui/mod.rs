@@ -5,6 +5,7 @@
 pub mod app;
 pub mod keymap;
 pub mod live;
+pub mod navigate;
 pub mod timeline;
 pub mod view;
 pub mod watch;
@@ -499,6 +500,145 @@ mod tests {
             assert_eq!(more, 8, "{text}");
             insta::assert_snapshot!(format!("graph_200_nodes_{w}x{h}"), text);
         }
+    }
+
+    /// The same graph zoomed to names and to the list, scrolled, filtered by name and by
+    /// trouble, at both sizes.
+    #[test]
+    fn a_200_node_graph_zooms_scrolls_and_filters() {
+        let mut cfg = graph_cfg("graphs/cartpole.toml", 2);
+        cfg.graph = ratelab::graph::GraphSpec::parse(
+            &ratelab::graph::synthetic::graph_toml(200, 1),
+            "synthetic",
+        )
+        .unwrap();
+        let (mut app, _rx) = app_after(cfg, false);
+        // Scrolled three rows: every long column counts what is above and below.
+        for _ in 0..3 {
+            app.on_msg(Msg::ScrollDown);
+        }
+        let text = render(&app, 120, 40);
+        assert!(text.contains("↑3 ↓"), "{text}");
+        app.on_msg(Msg::ScrollTop);
+        // Names: a row per node and topic, each topic beside its publisher's row.
+        app.on_msg(Msg::Zoom);
+        for (w, h) in [(80, 24), (120, 40)] {
+            let text = render(&app, w, h);
+            assert!(text.contains("sensor_0 "), "{text}");
+            assert!(text.contains("▶ /c_0/pos"), "{text}");
+            // Each topic right under its publisher.
+            let rows: Vec<&str> = text.lines().collect();
+            let at = rows.iter().position(|l| l.contains("sensor_0 ")).unwrap();
+            assert!(rows[at + 1].contains("▶ /c_0/pos"), "{text}");
+            insta::assert_snapshot!(format!("graph_200_names_{w}x{h}"), text);
+        }
+        // The list: every node and topic with its figures, over the plant's rows.
+        app.on_msg(Msg::Zoom);
+        for (w, h) in [(80, 24), (120, 40)] {
+            let text = render(&app, w, h);
+            assert!(text.contains("NODES 200"), "{text}");
+            assert!(!text.contains("cart "), "the plant gave its rows: {text}");
+            insta::assert_snapshot!(format!("graph_200_list_{w}x{h}"), text);
+        }
+        // Scrolled to the end: the last topics, and what is above counted.
+        for _ in 0..1000 {
+            app.on_msg(Msg::ScrollDown);
+        }
+        let text = render(&app, 80, 24);
+        assert!(text.contains("/c_48/cmd"), "{text}");
+        assert!(text.contains("↑ "), "{text}");
+        // A filter by name, typed.
+        app.on_msg(Msg::Filter);
+        for c in "estimator_1".chars() {
+            app.on_msg(Msg::Input(c));
+        }
+        app.on_msg(Msg::Submit);
+        let text = render(&app, 80, 24);
+        assert!(
+            text.contains("NODES 11"),
+            "estimator_1 and _10 … _19:\n{text}"
+        );
+        assert!(!text.contains("sensor_1 "), "{text}");
+        insta::assert_snapshot!("graph_200_list_filtered_80x24", text);
+        // Down the list: the topics they publish.
+        for _ in 0..20 {
+            app.on_msg(Msg::ScrollDown);
+        }
+        let text = render(&app, 80, 24);
+        assert!(text.contains("/c_1/state"), "{text}");
+        // Nothing in trouble in a balanced run: the boxes say so, and how to clear it.
+        app.on_msg(Msg::ToggleTrouble);
+        app.on_msg(Msg::Zoom);
+        let text = render(&app, 80, 24);
+        assert!(
+            text.contains("nothing matches /estimator_1 · trouble"),
+            "{text}"
+        );
+        // Esc clears it: the boxes whole again.
+        app.on_msg(Msg::Back);
+        let text = render(&app, 80, 24);
+        assert!(text.contains("graph: 200 nodes, 199 topics"), "{text}");
+    }
+
+    /// Tab selects only what the filter shows, and the list keeps the selection in view.
+    #[test]
+    fn tab_selects_among_what_the_filter_shows() {
+        let mut cfg = graph_cfg("graphs/cartpole.toml", 2);
+        cfg.graph = ratelab::graph::GraphSpec::parse(
+            &ratelab::graph::synthetic::graph_toml(200, 1),
+            "synthetic",
+        )
+        .unwrap();
+        let (mut app, _rx) = app_after(cfg, false);
+        app.on_msg(Msg::Filter);
+        for c in "@robot".chars() {
+            app.on_msg(Msg::Input(c));
+        }
+        app.on_msg(Msg::Submit);
+        // The process each node runs in under `launch --processes`: the plant's nodes in
+        // `robot` (the chapter's sensor and actuator, 49 controllers' sensors, one extra).
+        let shown = app.view().nodes.iter().filter(|n| n.shown).count();
+        assert_eq!(shown, 52);
+        app.on_msg(Msg::Filter);
+        for c in "safety_48".chars() {
+            app.on_msg(Msg::Input(c));
+        }
+        app.on_msg(Msg::Submit);
+        app.on_msg(Msg::SelectNext);
+        let v = app.view();
+        let sel: Vec<&str> = v
+            .nodes
+            .iter()
+            .filter(|n| n.selected)
+            .map(|n| n.name.as_str())
+            .collect();
+        assert_eq!(sel, ["safety_48"]);
+        // Next: its topic, then nothing, then it again.
+        app.on_msg(Msg::SelectNext);
+        assert!(app
+            .view()
+            .topics
+            .iter()
+            .any(|t| t.selected && t.name == "/c_48/cmd"));
+        app.on_msg(Msg::SelectNext);
+        assert!(!app.view().nodes.iter().any(|n| n.selected));
+        app.on_msg(Msg::SelectPrev);
+        assert!(app
+            .view()
+            .topics
+            .iter()
+            .any(|t| t.selected && t.name == "/c_48/cmd"));
+        // In the list, at the end of 200 rows, the selection is in view.
+        app.on_msg(Msg::Back);
+        app.on_msg(Msg::Back);
+        app.on_msg(Msg::Zoom);
+        app.on_msg(Msg::Zoom);
+        for _ in 0..=(3 + 4 * 48 + 3) {
+            app.on_msg(Msg::SelectNext);
+        }
+        let text = render(&app, 80, 24);
+        assert!(text.contains("safety_48 selected"), "{text}");
+        assert!(text.lines().any(|l| l.contains("│safety_48 ")), "{text}");
     }
 
     /// At 80×24 the graph panel's title reads whole, for every selection of every shipped

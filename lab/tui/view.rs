@@ -17,11 +17,14 @@ use ratelab::graph::{NodeId, TopicId};
 
 mod charts;
 mod graph;
+mod list;
 
+use super::navigate::{window_start, Zoom};
 use charts::{
     render_angle_chart, render_cartpole, render_hold_chart, render_latency, render_segment,
 };
 use graph::{graph_height, render_graph};
+use list::{more_line, name_columns, render_list, render_names};
 
 /// The smallest terminal the lab lays out in.
 pub const MIN_SIZE: (u16, u16) = (80, 24);
@@ -38,10 +41,12 @@ pub enum Selected {
 }
 
 /// One node box.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, Default)]
 pub struct NodeView {
     /// Name.
     pub name: String,
+    /// Shown: the graph panel's filter lets it through ([`super::navigate::Filter`]).
+    pub shown: bool,
     /// Column of the layout, left to right (publisher before subscriber).
     pub layer: usize,
     /// Selected with Tab?
@@ -103,10 +108,12 @@ impl Badge {
 }
 
 /// One topic arrow.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, Default)]
 pub struct TopicView {
     /// Its name (`/obs`).
     pub name: String,
+    /// Shown: the graph panel's filter lets it through ([`super::navigate::Filter`]).
+    pub shown: bool,
     /// The publishing node's index.
     pub publisher: usize,
     /// The subscribing node's index, if any (the first of several).
@@ -335,6 +342,23 @@ pub struct View {
     /// Attached: where the launch listens (the header's note where it fits, and the
     /// footer's).
     pub endpoint: Option<String>,
+    /// The graph panel's zoom, scroll and filter.
+    pub nav: NavView,
+}
+
+/// What the graph panel shows of a large graph ([`super::navigate`]).
+#[derive(Clone, Debug, PartialEq, Default)]
+pub struct NavView {
+    /// The zoom.
+    pub zoom: super::navigate::Zoom,
+    /// Rows scrolled down from the top.
+    pub scroll: usize,
+    /// The filter in a few words (`/sens · trouble`), when one leaves something out.
+    pub filter: Option<String>,
+    /// The filter's text as typed (the footer's prompt shows it while it is typed).
+    pub text: String,
+    /// A filter is being typed.
+    pub typing: bool,
 }
 
 /// The graph as ROS 2 sees it (`--ros2`): the domain and what `ros2 node list` and `ros2
@@ -405,6 +429,26 @@ impl Widget for &View {
             return;
         }
         let hist_h = if area.height >= 34 { 10 } else { 5 };
+        if self.nav.zoom == Zoom::List && self.ros2.is_none() {
+            // The list takes the plant's rows too: a large graph's figures at 80×24.
+            let [status, list, segment, latency, footer] = Layout::vertical([
+                Constraint::Length(1),
+                Constraint::Fill(1),
+                Constraint::Length(1),
+                Constraint::Length(hist_h),
+                Constraint::Length(1),
+            ])
+            .areas(area);
+            render_status(self, status, buf);
+            render_list(self, list, buf);
+            render_segment(self, segment, buf);
+            self.render_bottom(latency, buf);
+            render_footer(self, footer, buf);
+            if self.help {
+                render_help(area, buf, self.attached.is_some());
+            }
+            return;
+        }
         let graph_h = graph_height(
             self,
             area.width,
@@ -434,14 +478,21 @@ impl Widget for &View {
             Layout::vertical([Constraint::Percentage(56), Constraint::Percentage(44)]).areas(chart);
         render_angle_chart(self, angle, buf);
         render_hold_chart(self, hold, buf);
-        match (&self.log, &self.timeline) {
-            (Some(l), _) => render_log(l, latency, buf),
-            (None, Some(t)) => super::timeline::render(t, self.clock == "virtual", latency, buf),
-            (None, None) => render_latency(self, latency, buf),
-        }
+        self.render_bottom(latency, buf);
         render_footer(self, footer, buf);
         if self.help {
             render_help(area, buf, self.attached.is_some());
+        }
+    }
+}
+
+impl View {
+    /// The bottom panel: the log pane, the executor timeline, or the latency histogram.
+    fn render_bottom(&self, area: Rect, buf: &mut Buffer) {
+        match (&self.log, &self.timeline) {
+            (Some(l), _) => render_log(l, area, buf),
+            (None, Some(t)) => super::timeline::render(t, self.clock == "virtual", area, buf),
+            (None, None) => render_latency(self, area, buf),
         }
     }
 }
@@ -769,6 +820,12 @@ fn render_footer(v: &View, area: Rect, buf: &mut Buffer) {
             " rate (Hz): ".bold(),
             format!("{t}▏").into(),
             "  Enter apply · Esc cancel".dim(),
+        ])
+    } else if v.nav.typing {
+        Line::from(vec![
+            " filter: ".bold(),
+            format!("{}▏", v.nav.text).into(),
+            "  name, @process · Enter keep · Esc as before".dim(),
         ])
     } else if let (true, Some(m)) = (ended, &v.message) {
         let m = fit_message(m, usize::from(area.width).saturating_sub(1));

@@ -335,7 +335,7 @@ fn ready_launch(
 }
 
 /// [`ready_launch`] of graph file `graph` (`None`: the chapter's).
-fn ready_launch_of(
+pub(crate) fn ready_launch_of(
     graph: Option<&Path>,
     clock: &str,
     secs: &str,

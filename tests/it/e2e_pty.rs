@@ -387,6 +387,16 @@ fn at_80x24_and_120x40_a_fall_reads_whole_and_typing_a_rate_has_its_prompt() {
     }
 }
 
+/// Keys that are escape sequences (`\x1b[B`, ↓), each written whole (a lone ESC is Esc),
+/// one every 0.4 s.
+fn press(lab: &mut Lab, sequences: &[&str]) {
+    for seq in sequences {
+        lab.writer.write_all(seq.as_bytes()).unwrap();
+        lab.writer.flush().unwrap();
+        std::thread::sleep(Duration::from_millis(400));
+    }
+}
+
 fn type_slowly(lab: &mut Lab, keys: &str) {
     for k in keys.chars() {
         lab.keys(&k.to_string());
@@ -976,4 +986,122 @@ fn saving_a_brain_reloads_it_beside_the_run_before() {
         assert!(screen.contains("BALANCED"), "{cols}x{rows}:\n{screen}");
         lab.quit();
     }
+}
+
+/// A graph of 200 nodes in the lab at the two sizes it is made for (issue 51): at first
+/// its columns show what fits and count the rest; ↓ scrolls them; `z` zooms to names and
+/// then to a list of every node and topic with its figures; `/` filters by name as it is
+/// typed; Tab selects among what the filter shows; Esc clears the selection, then the
+/// filter.
+#[test]
+fn a_200_node_graph_in_the_lab_scrolls_zooms_filters_and_selects() {
+    let _machine = crate::machine::alone();
+    let dir = tempfile::tempdir().unwrap();
+    let graph = crate::large_graphs::generated(dir.path(), "big.toml", 200, 1);
+    for (cols, rows) in [(80, 24), (120, 40)] {
+        let mut lab = Lab::start_sized(&["--clock", "virtual", "--graph", &graph], &[], cols, rows);
+        let at = format!("{cols}x{rows}");
+        let screen = lab.wait_for("BALANCED", Duration::from_secs(90));
+        // Boxes: the first of each column, and how many more below.
+        assert!(screen.contains("more ↓"), "{at}:\n{screen}");
+        // ↓ scrolls every column: the rows above are counted too.
+        press(&mut lab, &["\x1b[B"; 3]);
+        lab.wait_for("↑3 ↓", Duration::from_secs(5));
+        // z: names, a row each.
+        type_slowly(&mut lab, "z");
+        lab.wait_for("graph: names", Duration::from_secs(5));
+        // z: the list, every node and topic with its figures.
+        type_slowly(&mut lab, "z");
+        let list = lab.wait_for("NODES 200", Duration::from_secs(5));
+        assert!(list.contains("graph as a list"), "{at}:\n{list}");
+        assert!(list.contains("Hz"), "{at}: a node's rate:\n{list}");
+        // ↓ scrolls the list; Home goes back to its top.
+        press(&mut lab, &["\x1b[B"; 2]);
+        lab.wait_for("↑2 ↓", Duration::from_secs(5));
+        press(&mut lab, &["\x1b[H"]);
+        lab.wait_for("NODES 200", Duration::from_secs(5));
+        // `/safety_4`: the safety nodes 4 and 40–48 (49 controllers), and what they
+        // publish.
+        type_slowly(&mut lab, "/safety_4");
+        let typed = lab.wait_for("filter: safety_4", Duration::from_secs(5));
+        assert!(typed.contains("NODES 10"), "{at}:\n{typed}");
+        assert!(typed.contains("TOPICS 10"), "{at}:\n{typed}");
+        type_slowly(&mut lab, "\r");
+        let filtered = lab.wait_for("/safety_4 · z boxes", Duration::from_secs(5));
+        for name in ["safety_4 ", "safety_48", "/c_4/cmd"] {
+            assert!(filtered.contains(name), "{at}: {name} missing:\n{filtered}");
+        }
+        assert!(!filtered.contains("sensor_4 "), "{at}:\n{filtered}");
+        // Tab selects the first node the filter shows; its rate keys act on it.
+        type_slowly(&mut lab, "\t");
+        lab.wait_for("safety_4 selected", Duration::from_secs(5));
+        type_slowly(&mut lab, "\t");
+        lab.wait_for("safety_40 selected", Duration::from_secs(5));
+        // Esc: the selection, then the filter; the list is whole again.
+        type_slowly(&mut lab, "\x1b");
+        type_slowly(&mut lab, "\x1b");
+        lab.wait_for("NODES 200", Duration::from_secs(5));
+        // z: the boxes again, the chapter's nodes first.
+        type_slowly(&mut lab, "z");
+        lab.wait_until("the boxes again", Duration::from_secs(5), |s| {
+            !s.contains("NODES 200") && s.contains("more ↓")
+        });
+        lab.quit();
+    }
+}
+
+/// `ratelab top` on a terminal shows a 200-node launch a page at a time: PgDn turns the
+/// page, `s` sorts by the next column, `q` quits and gives the terminal back.
+#[test]
+fn top_pages_and_sorts_a_large_graph_on_a_terminal() {
+    let _machine = crate::machine::alone();
+    let dir = tempfile::tempdir().unwrap();
+    let graph = crate::large_graphs::generated(dir.path(), "big.toml", 200, 2);
+    let port = crate::distributed::free_port();
+    let (mut launcher, _rx, _lines) = crate::distributed::ready_launch_of(
+        Some(std::path::Path::new(&graph)),
+        "real",
+        "60",
+        port,
+        dir.path(),
+    );
+    let ep = format!("tls/127.0.0.1:{port}");
+    let creds = dir.path().join("creds.toml");
+    let mut top = Lab::start_program(
+        env!("CARGO_BIN_EXE_ratelab").as_ref(),
+        &[
+            "top",
+            "--connect",
+            &ep,
+            "--credentials",
+            creds.to_str().unwrap(),
+        ],
+        &[],
+        80,
+        24,
+    );
+    let first = top.wait_for("page 1/", Duration::from_secs(20));
+    assert!(first.contains("sorted by name"), "{first}");
+    let pages: usize = first
+        .split("page 1/")
+        .nth(1)
+        .and_then(|s| s.split(' ').next())
+        .and_then(|n| n.parse().ok())
+        .unwrap_or_else(|| panic!("{first}"));
+    assert!(pages > 10, "200 nodes in pages of 24 rows: {first}");
+    press(&mut top, &["\x1b[6~"]);
+    top.wait_for("page 2/", Duration::from_secs(5));
+    type_slowly(&mut top, "s");
+    let sorted = top.wait_for("sorted by rate", Duration::from_secs(5));
+    assert!(
+        sorted.contains("page 1/"),
+        "a new sort starts at the first page:\n{sorted}"
+    );
+    press(&mut top, &["\x1b[F"]);
+    top.wait_for(&format!("page {pages}/{pages}"), Duration::from_secs(5));
+    top.keys("q");
+    let status = top.exit_status("q");
+    assert!(status.success(), "{status:?}");
+    let _ = launcher.kill();
+    let _ = launcher.wait();
 }

@@ -7,7 +7,7 @@ use std::path::Path;
 use std::time::Duration;
 
 /// `ratelab graph --nodes N --processes P` written to `dir/name`.
-fn generated(dir: &Path, name: &str, nodes: usize, processes: usize) -> String {
+pub(crate) fn generated(dir: &Path, name: &str, nodes: usize, processes: usize) -> String {
     let o = ratelab(&[
         "graph",
         "--nodes",

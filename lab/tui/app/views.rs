@@ -75,6 +75,8 @@ impl App {
             .collect();
         TopicView {
             name: spec.name.clone(),
+            // The filter decides ([`App::graph_views`]).
+            shown: true,
             publisher: spec.publisher.0,
             subscriber: spec.subscriber().map(|n| n.0),
             fan_out: (spec.subscribers.len() > 1).then(|| {
@@ -212,6 +214,8 @@ impl App {
         });
         NodeView {
             name: self.graph.node(id).name.clone(),
+            // The filter decides ([`App::graph_views`]).
+            shown: true,
             layer,
             set_hz: ran_hz.unwrap_or_else(|| self.rate_of(id)),
             next_hz: ran_hz
@@ -349,6 +353,7 @@ impl App {
     pub fn view(&self) -> View {
         // Asked once a frame: the verdict and the nodes' boxes read the same answer.
         let hung = self.hung_callback();
+        let (nodes, topics) = self.graph_views(hung.as_ref());
         View {
             clock: self.clock.clone(),
             // An attached lab's graph runs at the lockstep's pace, not the lab's.
@@ -376,16 +381,8 @@ impl App {
                 .split_once(" — ")
                 .map(|(_, caption)| caption.to_string()),
             recording: self.recording.clone(),
-            nodes: self
-                .graph
-                .layers()
-                .into_iter()
-                .enumerate()
-                .map(|(i, layer)| self.node_view(NodeId(i), layer, hung.as_ref()))
-                .collect(),
-            topics: (0..self.graph.topics.len())
-                .map(|i| self.topic_view(TopicId(i)))
-                .collect(),
+            nodes,
+            topics,
             pole_angle: self.last.as_ref().map_or(0.0, |s| s.pole_angle),
             cart_pos: self.last.as_ref().map_or(0.0, |s| s.cart_pos),
             // While a callback holds the run, the run is not "balanced": it is hung, since the
@@ -448,6 +445,48 @@ impl App {
             message_fresh: self.message_at.is_some_and(|at| at.elapsed() < FRESH),
             attached: self.attached.clone(),
             endpoint: self.endpoint.clone(),
+            nav: NavView {
+                zoom: self.nav.zoom,
+                scroll: self.nav.scroll,
+                filter: self.nav.filter.label(),
+                text: self.nav.filter.text.clone(),
+                typing: self.nav.typing.is_some(),
+            },
         }
+    }
+
+    /// Each node's box and each topic's arrow, marked shown where the graph panel's filter
+    /// lets them through (`hung`: as for [`App::node_view`]).
+    pub(super) fn graph_views(
+        &self,
+        hung: Option<&(String, f64)>,
+    ) -> (Vec<NodeView>, Vec<TopicView>) {
+        let filter = &self.nav.filter;
+        // Processes only where the filter asks for one (a frame of a large graph).
+        let process_of = |id: NodeId| {
+            if filter.text.starts_with('@') {
+                self.graph.process_of(id)
+            } else {
+                String::new()
+            }
+        };
+        let mut nodes: Vec<NodeView> = self
+            .graph
+            .layers()
+            .into_iter()
+            .enumerate()
+            .map(|(i, layer)| self.node_view(NodeId(i), layer, hung))
+            .collect();
+        for (i, n) in nodes.iter_mut().enumerate() {
+            n.shown = filter.node(n, &process_of(NodeId(i)));
+        }
+        let mut topics: Vec<TopicView> = (0..self.graph.topics.len())
+            .map(|i| self.topic_view(TopicId(i)))
+            .collect();
+        for t in &mut topics {
+            let p = NodeId(t.publisher);
+            t.shown = filter.topic(t, &nodes[p.0], &process_of(p));
+        }
+        (nodes, topics)
     }
 }

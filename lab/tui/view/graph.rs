@@ -4,11 +4,24 @@
 
 use super::*;
 
-/// The graph panel's title: the nodes and topics in layout order.
 /// The graph panel's title in `room` columns: its columns joined by arrows (what shares a
 /// column, by commas); where that does not fit (a wide graph at 80 columns), its nodes'
 /// columns alone, then its counts.
-fn graph_title(v: &View, room: usize) -> String {
+fn graph_title(v: &View, room: usize, hidden: bool) -> String {
+    if let Some(f) = &v.nav.filter {
+        let (n, t) = (
+            v.nodes.iter().filter(|n| n.shown).count(),
+            v.topics.iter().filter(|t| t.shown).count(),
+        );
+        let (all_n, all_t) = (v.nodes.len(), v.topics.len());
+        return first_that_fits(
+            [
+                format!(" graph {f}: {n} of {all_n} nodes, {t} of {all_t} topics · Esc clears "),
+                format!(" {f}: {n}/{all_n} nodes, {t}/{all_t} topics "),
+            ],
+            room,
+        );
+    }
     let columns = layout_columns(v);
     let names = |with_topics: bool| -> String {
         columns
@@ -31,18 +44,40 @@ fn graph_title(v: &View, room: usize) -> String {
             .collect::<Vec<_>>()
             .join(" → ")
     };
+    let counts = format!(
+        " graph: {} nodes, {} topics ",
+        v.nodes.len(),
+        v.topics.len()
+    );
+    // A graph larger than the panel says how to find one's way in it.
+    if hidden {
+        return first_that_fits(
+            [
+                format!("{counts}· ↑↓ scroll · z zoom · / filter "),
+                format!("{counts}· z zoom · / filter "),
+                counts,
+            ],
+            room,
+        );
+    }
     first_that_fits(
         [
             format!(" graph: {} ", names(true)),
             format!(" graph: {} ", names(false)),
-            format!(
-                " graph: {} nodes, {} topics ",
-                v.nodes.len(),
-                v.topics.len()
-            ),
+            counts,
         ],
         room,
     )
+}
+
+/// Does the graph panel in `area` leave nodes or topics out (a column longer than it is
+/// high)?
+fn overflows(v: &View, area: Rect) -> bool {
+    let rows = usize::from(area.height.saturating_sub(2) / MIN_ITEM_ROWS);
+    match v.nav.zoom {
+        Zoom::Names => name_columns(v).iter().any(|c| c.len() > rows),
+        _ => layout_columns(v).iter().any(|c| c.items().len() > rows),
+    }
 }
 
 /// The fewest rows a node's box or a topic's arrow is drawn in (its name's): a column of
@@ -50,28 +85,51 @@ fn graph_title(v: &View, room: usize) -> String {
 const MIN_ITEM_ROWS: u16 = 1;
 
 /// A column of the graph panel: the nodes of one layer, or the topics they publish.
-enum Column {
+pub(super) enum Column {
     Nodes(Vec<usize>),
     Topics(Vec<usize>),
 }
 
-/// Left to right: each layer's nodes, then the topics they publish.
-fn layout_columns(v: &View) -> Vec<Column> {
-    let layers = v.nodes.iter().map(|n| n.layer).max().map_or(0, |l| l + 1);
-    let mut cols = Vec::new();
-    for l in 0..layers {
-        let nodes: Vec<usize> = (0..v.nodes.len())
-            .filter(|&i| v.nodes[i].layer == l)
-            .collect();
-        if nodes.is_empty() {
-            continue;
+impl Column {
+    /// Its nodes' or topics' indices, top to bottom.
+    pub(super) fn items(&self) -> &[usize] {
+        match self {
+            Column::Nodes(x) | Column::Topics(x) => x,
         }
-        let topics: Vec<usize> = (0..v.topics.len())
-            .filter(|&t| nodes.contains(&v.topics[t].publisher))
-            .collect();
-        cols.push(Column::Nodes(nodes));
-        if !topics.is_empty() {
-            cols.push(Column::Topics(topics));
+    }
+
+    /// The row of the selected node or topic in it, if it holds it.
+    fn selected_row(&self, v: &View) -> Option<usize> {
+        match self {
+            Column::Nodes(ns) => ns.iter().position(|&i| v.nodes[i].selected),
+            Column::Topics(ts) => ts.iter().position(|&i| v.topics[i].selected),
+        }
+    }
+}
+
+/// Left to right: each layer's nodes, then the topics they publish, those the filter shows
+/// (in one pass over each: a graph of thousands).
+pub(super) fn layout_columns(v: &View) -> Vec<Column> {
+    let layers = v.nodes.iter().map(|n| n.layer).max().map_or(0, |l| l + 1);
+    let mut nodes: Vec<Vec<usize>> = vec![Vec::new(); layers];
+    for (i, n) in v.nodes.iter().enumerate() {
+        if n.shown {
+            nodes[n.layer].push(i);
+        }
+    }
+    let mut topics: Vec<Vec<usize>> = vec![Vec::new(); layers];
+    for (i, t) in v.topics.iter().enumerate() {
+        if let (true, Some(p)) = (t.shown, v.nodes.get(t.publisher)) {
+            topics[p.layer].push(i);
+        }
+    }
+    let mut cols = Vec::new();
+    for (ns, ts) in nodes.into_iter().zip(topics) {
+        if !ns.is_empty() {
+            cols.push(Column::Nodes(ns));
+        }
+        if !ts.is_empty() {
+            cols.push(Column::Topics(ts));
         }
     }
     cols
@@ -82,7 +140,7 @@ pub(super) fn render_graph(v: &View, area: Rect, buf: &mut Buffer) {
     let room = usize::from(area.width.saturating_sub(2));
     let mut block = match selection_title(v, room) {
         Some(t) => Block::bordered().title(Line::from(t).black().on_yellow().bold()),
-        None => Block::bordered().title(graph_title(v, room)),
+        None => Block::bordered().title(graph_title(v, room, overflows(v, area))),
     };
     // What the brain is, when known: a fall with no drops is then no mystery.
     if let Some(caption) = &v.brain_caption {
@@ -90,28 +148,49 @@ pub(super) fn render_graph(v: &View, area: Rect, buf: &mut Buffer) {
     }
     let inner = block.inner(area);
     block.render(area, buf);
+    if v.nav.zoom == Zoom::Names {
+        render_names(v, inner, buf);
+        return;
+    }
     let mut cols = layout_columns(v);
+    if cols.is_empty() {
+        let what = match &v.nav.filter {
+            Some(f) => format!("nothing matches {f} (Esc clears the filter)"),
+            None => "no nodes".to_string(),
+        };
+        Paragraph::new(Line::from(what).dim())
+            .alignment(Alignment::Center)
+            .render(inner, buf);
+        return;
+    }
     let n = cols.len().max(1) as u32;
     let areas = Layout::horizontal((0..n).map(|_| Constraint::Ratio(1, n))).split(inner);
     for (col, rect) in cols.iter_mut().zip(areas.iter()) {
-        // A column of more than fit (a large graph): the first ones, and a line that counts
-        // the rest.
+        // A column of more than fit (a large graph): the window scrolled to (and moved to
+        // the selection), and a line that counts the rest.
         let fit = usize::from(rect.height / MIN_ITEM_ROWS).max(1);
-        let hidden = match col {
-            Column::Nodes(x) | Column::Topics(x) if x.len() > fit => {
-                let hidden = x.len() - (fit - 1);
-                x.truncate(fit - 1);
-                hidden
+        let len = col.items().len();
+        let (above, below) = if len > fit {
+            let rows = fit - 1;
+            let start = window_start(len, rows, v.nav.scroll, col.selected_row(v));
+            match col {
+                Column::Nodes(x) | Column::Topics(x) => {
+                    x.drain(..start);
+                    x.truncate(rows);
+                }
             }
-            _ => 0,
+            (start, len - start - rows)
+        } else {
+            (0, 0)
         };
-        let rect = &if hidden > 0 {
+        let rect = &if above + below > 0 {
             let last = Rect {
                 y: rect.y + rect.height - 1,
                 height: 1,
                 ..*rect
             };
-            Paragraph::new(Line::from(format!("+{hidden} more")).dim()).render(last, buf);
+            Paragraph::new(Line::from(more_line(above, below, usize::from(rect.width))).dim())
+                .render(last, buf);
             Rect {
                 height: rect.height - 1,
                 ..*rect
@@ -703,16 +782,35 @@ pub(super) fn graph_height(v: &View, width: u16, height: u16, max: u16) -> u16 {
     let cols = layout_columns(v);
     let n = cols.len().max(1) as u16;
     let w = (width.saturating_sub(2) / n).saturating_sub(1) as usize;
+    // A column's rows, counted only as far as the panel could grow (a large graph's).
+    let limit = usize::from(max);
+    let rows = |each: &mut dyn FnMut(usize) -> usize, items: &[usize]| {
+        let mut sum = 0;
+        for &i in items {
+            sum += each(i);
+            if sum > limit {
+                break;
+            }
+        }
+        sum
+    };
     let tallest = cols
         .iter()
-        .map(|c| match c {
-            Column::Topics(ts) => ts
+        .map(|c| match (v.nav.zoom, c) {
+            (Zoom::Names, _) => name_columns(v)
                 .iter()
-                .map(|&i| arrow_lines(&v.topics[i], w, usize::MAX).len())
-                .sum::<usize>(),
-            Column::Nodes(ns) => ns.iter().map(|&i| node_rows(&v.nodes[i]) + 2).sum(),
+                .map(Vec::len)
+                .max()
+                .unwrap_or(0)
+                .min(limit + 1),
+            (Zoom::List, c) => c.items().len().min(limit + 1),
+            (Zoom::Boxes, Column::Topics(ts)) => {
+                rows(&mut |i| arrow_lines(&v.topics[i], w, usize::MAX).len(), ts)
+            }
+            (Zoom::Boxes, Column::Nodes(ns)) => rows(&mut |i| node_rows(&v.nodes[i]) + 2, ns),
         })
         .max()
-        .unwrap_or(0) as u16;
+        .unwrap_or(0)
+        .min(usize::from(u16::MAX - 2)) as u16;
     (tallest + 2).clamp(7, max.max(7))
 }
