@@ -509,6 +509,11 @@ pub struct RunArgs {
     /// Stream live to a rerun viewer on PATH as well (implies --record).
     #[arg(long)]
     pub spawn: bool,
+    /// Record only this span of run time, FROM:UNTIL in seconds (3600:3660, :60, 600:): a
+    /// long run's recording as large as you ask. The events and the summary still cover the
+    /// whole run, and the recording says which span its plots hold. Needs --record.
+    #[arg(long, value_name = "FROM:UNTIL", value_parser = ratelab::recording::RecordWindow::parse, requires = "record")]
+    pub record_window: Option<ratelab::recording::RecordWindow>,
     /// Lab: save the session's command log here (default: beside the recording).
     #[arg(long, value_name = "FILE")]
     pub session: Option<PathBuf>,

@@ -534,7 +534,10 @@ pub fn open_recording(
         &path,
         cfg,
         policy,
-        &RecordOptions { spawn: a.spawn },
+        &RecordOptions {
+            spawn: a.spawn,
+            window: a.record_window,
+        },
         a.force,
     )?;
     if let Some(n) = notice {

@@ -93,6 +93,7 @@ fn lab(args: &cli::RunArgs, stop: StopFlag) -> anyhow::Result<()> {
         alt_policy,
         record,
         spawn: args.spawn,
+        record_window: args.record_window,
         session_file,
         start_paused: false,
         speed: Speed::Times(1.0),

@@ -24,7 +24,7 @@ use charts::{
     render_angle_chart, render_cartpole, render_hold_chart, render_latency, render_segment,
 };
 use graph::{graph_height, render_graph};
-use list::{more_line, name_columns, render_list, render_names};
+use list::{more_line, name_columns, render_list, render_names, render_nothing_shown};
 
 /// The smallest terminal the lab lays out in.
 pub const MIN_SIZE: (u16, u16) = (80, 24);

@@ -106,7 +106,7 @@ pub use shape::{GraphShape, NodeShape, TopicShape};
 
 // The layers below, under their own names (`crate::graph`, `crate::time`, …).
 use ratelab_core::{
-    executor, metrics, msg, output, plant, procs, qos, rate, runlog, textlog, time, topic,
+    executor, limits, metrics, msg, output, plant, procs, qos, rate, runlog, textlog, time, topic,
 };
 use ratelab_runtime::{config, graph, scheduler, telemetry};
 
@@ -371,6 +371,73 @@ pub const RAIL_HALF_LENGTH_M: f64 = 2.9;
 pub struct RecordOptions {
     /// Also stream live to a rerun viewer spawned from PATH.
     pub spawn: bool,
+    /// Record only this span of run time (`--record-window`); `None`: all of it.
+    pub window: Option<RecordWindow>,
+}
+
+/// The span of run time a recording keeps the step rows of (`--record-window FROM:UNTIL`,
+/// seconds): a long run's recording as large as the user asks, not as long as the run. The
+/// settings, the events (changes, faults, QoS and liveliness events, the end) and the
+/// summary cover the whole run, and the recording says which span its plots hold. A fall
+/// is recorded wherever it happens.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct RecordWindow {
+    /// The first run time recorded.
+    pub from: Nanos,
+    /// The last run time recorded; `None`: to the end.
+    pub until: Option<Nanos>,
+}
+
+impl RecordWindow {
+    /// Parse `FROM:UNTIL` in seconds of run time, either side empty (`3600:3660`, `:60`,
+    /// `86340:`), each within [`crate::limits::MAX_DURATION_S`].
+    ///
+    /// # Errors
+    /// One line saying what is wrong.
+    pub fn parse(s: &str) -> Result<RecordWindow, String> {
+        let (a, b) = s.split_once(':').ok_or_else(|| {
+            format!("'{s}' is not FROM:UNTIL in seconds of run time (e.g. 3600:3660, :60, 600:)")
+        })?;
+        let secs = |x: &str, what: &str| -> Result<Option<Nanos>, String> {
+            let x = x.trim();
+            if x.is_empty() {
+                return Ok(None);
+            }
+            let v: f64 = x
+                .parse()
+                .map_err(|_| format!("{what} '{x}' is not a number of seconds"))?;
+            if !(v.is_finite() && (0.0..=crate::limits::MAX_DURATION_S).contains(&v)) {
+                return Err(crate::limits::refusal(
+                    format!(
+                        "{what} {v} s is outside 0 … {} s",
+                        crate::limits::MAX_DURATION_S
+                    ),
+                    "MAX_DURATION_S",
+                ));
+            }
+            Ok(Nanos::from_secs_f64(v))
+        };
+        let from = secs(a, "the window's start")?.unwrap_or(Nanos::ZERO);
+        let until = secs(b, "the window's end")?;
+        if until.is_some_and(|u| u < from) {
+            return Err(format!("the window '{s}' ends before it starts"));
+        }
+        Ok(RecordWindow { from, until })
+    }
+
+    /// Is run time `t` inside?
+    pub fn contains(&self, t: Nanos) -> bool {
+        t >= self.from && self.until.is_none_or(|u| t <= u)
+    }
+
+    /// The span in words: `run time 3600–3660 s`, `run time from 600 s`.
+    pub fn describe(&self) -> String {
+        let s = |t: Nanos| format!("{}", t.as_secs_f64());
+        match self.until {
+            Some(u) => format!("run time {}–{} s", s(self.from), s(u)),
+            None => format!("run time from {} s", s(self.from)),
+        }
+    }
 }
 
 /// An open recording. Cheap to clone (the stream is a shared handle).
@@ -405,6 +472,8 @@ pub struct Recording {
     /// each is logged once the run reaches its time, so a run that ended first (a fall, a
     /// watchdog) records none after its end.
     due_events: Arc<Mutex<VecDeque<DueEvent>>>,
+    /// The span of run time whose step rows are recorded ([`RecordOptions::window`]).
+    window: Option<RecordWindow>,
 }
 
 /// An event known in advance: its run time, text, level and mark.
@@ -620,8 +689,19 @@ impl Recording {
             shape: Arc::default(),
             lanes: Arc::default(),
             deadline_said: Arc::default(),
-            extra_summary: Arc::default(),
+            extra_summary: Arc::new(Mutex::new(
+                opts.window
+                    .iter()
+                    .map(|w| {
+                        format!(
+                            "recorded: the plots hold {} of the run (--record-window); the events and this summary cover all of it",
+                            w.describe()
+                        )
+                    })
+                    .collect(),
+            )),
             due_events: Arc::default(),
+            window: opts.window,
         };
         recording.log_settings(cfg, policy);
         Ok((recording, notice))
@@ -630,6 +710,16 @@ impl Recording {
     /// The file being written.
     pub fn path(&self) -> &Path {
         &self.path
+    }
+
+    /// Are the rows of run time `t` recorded (inside the [`RecordWindow`], if any)?
+    pub fn records(&self, t: Nanos) -> bool {
+        self.window.is_none_or(|w| w.contains(t))
+    }
+
+    /// The span of run time recorded, if not all of it.
+    pub fn window(&self) -> Option<RecordWindow> {
+        self.window
     }
 
     /// The underlying rerun stream.
@@ -689,8 +779,9 @@ impl Recording {
         ];
         // The chapter's graph keeps the settings it had; any other names itself.
         let graph = (cfg.graph.name != "cartpole").then(|| ("graph", cfg.graph.to_string()));
+        let window = self.window.map(|w| ("record_window", w.describe()));
         let mut values = rerun::AnyValues::default();
-        for (k, v) in settings.iter().chain(graph.iter()) {
+        for (k, v) in settings.iter().chain(graph.iter()).chain(window.iter()) {
             values = values.with_component::<rerun::components::Text>(*k, [v.as_str()]);
         }
         let name = run_name(cfg, cfg.control_hz().map(hz_label));
@@ -1096,6 +1187,9 @@ impl Recording {
 
     /// Log one node tick's lateness (real clock), on the node's own thread.
     pub fn node_tick(&self, node: &str, now: Nanos, lateness: Nanos) {
+        if !self.records(now) {
+            return;
+        }
         let entity = format!("nodes/{node}/lateness_ms");
         let ms = lateness.as_millis_f64();
         widen(&mut self.lock().extents, &entity, ms);
@@ -1117,6 +1211,9 @@ impl Recording {
         let Some(n) = self.cfg.graph.nodes.get(span.node) else {
             return;
         };
+        if !self.records(span.release) {
+            return;
+        }
         let base = span.node as f64;
         let lane = format!("nodes/{}/executor_lane", n.name);
         let period = crate::rate::period_for_hz(n.rate_hz).map_or(0, |p| p.0.max(1));
@@ -1569,5 +1666,39 @@ mod tests {
             check_output_path(Path::new("/proc/ratelab/x.rrd"), false),
             Err(RecordingError::Unwritable { .. })
         ));
+    }
+}
+
+#[cfg(test)]
+mod window_tests {
+    use super::RecordWindow;
+    use crate::time::Nanos;
+
+    #[test]
+    fn a_window_parses_either_side_open_and_refuses_the_rest() {
+        let w = RecordWindow::parse("3600:3660").unwrap();
+        assert_eq!(
+            (w.from, w.until),
+            (Nanos(3_600_000_000_000), Some(Nanos(3_660_000_000_000)))
+        );
+        assert!(w.contains(Nanos(3_600_000_000_000)) && w.contains(Nanos(3_660_000_000_000)));
+        assert!(!w.contains(Nanos(3_599_000_000_000)) && !w.contains(Nanos(3_661_000_000_000)));
+        assert_eq!(w.describe(), "run time 3600–3660 s");
+        let open = RecordWindow::parse("600:").unwrap();
+        assert_eq!(open.until, None);
+        assert_eq!(open.describe(), "run time from 600 s");
+        assert!(open.contains(Nanos(1_000_000 * 1_000_000_000)));
+        assert_eq!(RecordWindow::parse(":0.5").unwrap().from, Nanos::ZERO);
+        for (bad, says) in [
+            ("5", "FROM:UNTIL"),
+            ("a:5", "not a number"),
+            ("5:2", "ends before it starts"),
+            ("-1:", "outside"),
+            ("1e12:", "ratelab::limits::MAX_DURATION_S"),
+            ("NaN:", "outside"),
+        ] {
+            let e = RecordWindow::parse(bad).unwrap_err();
+            assert!(e.contains(says), "{bad}: {e}");
+        }
     }
 }

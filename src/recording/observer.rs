@@ -52,6 +52,9 @@ pub(super) struct RecordingObserver {
     /// Per node, its liveliness as last seen (`None` until it is logged: a node with a
     /// lease, or one that has lost its liveliness).
     live_seen: Vec<Option<LiveSeen>>,
+    /// With a [`RecordWindow`]: the steps were inside it at the last step (its start and
+    /// end are each marked once).
+    in_window: bool,
 }
 
 impl RecordingObserver {
@@ -66,7 +69,76 @@ impl RecordingObserver {
             qos_logged: Vec::new(),
             deadline_seen: Vec::new(),
             live_seen: Vec::new(),
+            in_window: false,
         }
+    }
+
+    /// With a [`RecordWindow`]: is step `s` outside it (a fall is recorded wherever it
+    /// is)? At the window's first step and the first after it, an event says so.
+    fn outside_window(&mut self, buf: &mut ChunkBuffer, s: &StepRecord) -> bool {
+        let Some(w) = self.rec.window() else {
+            return false;
+        };
+        let inside = w.contains(s.t) || s.fell;
+        if inside != self.in_window {
+            let text = if inside {
+                format!(
+                    "recording from here: the plots hold {} (--record-window)",
+                    w.describe()
+                )
+            } else {
+                format!("recording stops here: the plots hold {} (--record-window); the events go on to the end", w.describe())
+            };
+            buf.event(
+                s.t,
+                s.step,
+                None,
+                &text,
+                rerun::components::TextLogLevel::INFO,
+            );
+            self.in_window = inside;
+        }
+        !inside
+    }
+
+    /// A step outside the window: no rows, only what the rows after it need (the commands
+    /// seen, the counts the msg/s and the end's totals start from).
+    fn pass_over(&mut self, s: &StepRecord) {
+        if let Some(commands) = &self.shape.commands {
+            if let Some(m) = commands.peek_from(self.next_command).last() {
+                self.next_command = m.seq + 1;
+            }
+        }
+        self.note_published(s);
+    }
+
+    /// Each topic's counters at step `s`: into the last second's window (msg/s) and the
+    /// counts [`Recording::finish`] starts from.
+    fn note_published(&mut self, s: &StepRecord) -> Vec<TopicStats> {
+        let stats: Vec<TopicStats> = self.shape.topics.iter().map(|t| (t.stats)()).collect();
+        self.window
+            .push_back((s.t, stats.iter().map(|st| st.published).collect()));
+        while self
+            .window
+            .front()
+            .is_some_and(|(t, _)| s.t.saturating_sub(*t) > Nanos::SECOND)
+        {
+            self.window.pop_front();
+        }
+        let mut last = self
+            .rec
+            .last_step_published
+            .lock()
+            .unwrap_or_else(|e| e.into_inner());
+        for (topic, st) in self.shape.topics.iter().zip(&stats) {
+            match last.get_mut(&topic.name) {
+                Some(n) => *n = st.published,
+                None => {
+                    last.insert(topic.name.clone(), st.published);
+                }
+            }
+        }
+        stats
     }
 }
 
@@ -180,16 +252,7 @@ impl RecordingObserver {
     /// the counts the recording's summary reads.
     fn bus_rows(&mut self, buf: &mut ChunkBuffer, s: &StepRecord) {
         // Bus counters and msg/s over the last second of run time.
-        let stats: Vec<TopicStats> = self.shape.topics.iter().map(|t| (t.stats)()).collect();
-        self.window
-            .push_back((s.t, stats.iter().map(|st| st.published).collect()));
-        while self
-            .window
-            .front()
-            .is_some_and(|(t, _)| s.t.saturating_sub(*t) > Nanos::SECOND)
-        {
-            self.window.pop_front();
-        }
+        let stats = self.note_published(s);
         for (i, (topic, st)) in self.shape.topics.iter().zip(&stats).enumerate() {
             let entity = topic.entity();
             buf.scalar(
@@ -218,21 +281,6 @@ impl RecordingObserver {
                 if span > 0.0 {
                     let rate = st.published.saturating_sub(counts[i]) as f64 / span;
                     buf.scalar(&format!("bus/{entity}/msg_per_s"), s.t, s.step, rate);
-                }
-            }
-        }
-        {
-            let mut last = self
-                .rec
-                .last_step_published
-                .lock()
-                .unwrap_or_else(|e| e.into_inner());
-            for (topic, st) in self.shape.topics.iter().zip(&stats) {
-                match last.get_mut(&topic.name) {
-                    Some(n) => *n = st.published,
-                    None => {
-                        last.insert(topic.name.clone(), st.published);
-                    }
                 }
             }
         }
@@ -388,6 +436,13 @@ impl StepObserver for RecordingObserver {
         let rec = self.rec.clone();
         let mut buf = rec.lock();
         rec.log_due_events(&mut buf, s.t, s.step);
+        if self.outside_window(&mut buf, s) {
+            self.pass_over(s);
+            if s.step % FLUSH_EVERY_STEPS == 0 {
+                buf.send(&rec.rec);
+            }
+            return;
+        }
         let time = buf.at(s.t, s.step);
         let state = self.shape.state();
         if self.last_state.as_ref() != Some(&state) {

@@ -43,6 +43,8 @@ pub struct SessionSettings {
     pub record: Option<PathBuf>,
     /// Stream recordings to a viewer as well.
     pub spawn: bool,
+    /// Record only this span of each run's time (`--record-window`).
+    pub record_window: Option<crate::recording::RecordWindow>,
     /// Where to save the session log after every run and command.
     pub session_file: Option<PathBuf>,
     /// Start paused.
@@ -229,6 +231,7 @@ impl Engine {
                     &brain.label(),
                     &RecordOptions {
                         spawn: self.settings.spawn,
+                        window: self.settings.record_window,
                     },
                     self.settings.force,
                 )

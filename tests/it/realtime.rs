@@ -276,6 +276,7 @@ fn the_lab_engine_warns_when_the_run_starts_not_when_it_ends() {
             alt_policy: None,
             record: None,
             spawn: false,
+            record_window: None,
             session_file: None,
             start_paused: false,
             speed: Speed::Times(1.0),

@@ -1535,3 +1535,128 @@ fn a_python_node_is_marked_as_one_in_the_node_graph() {
     );
     assert!(labels.iter().any(|l| l == "sensor · 50 Hz"), "{labels:?}");
 }
+
+/// `--record-window FROM:UNTIL` (issue 51: a long run's recording bounded by what the user
+/// asks): the plots hold that span of run time only, the recording says so (its settings,
+/// an event at each edge, its summary), the events and the summary still cover the whole
+/// run, and the file is a fraction of the whole run's.
+#[test]
+fn a_record_window_keeps_the_plots_of_that_span_and_says_so() {
+    let dir = tempfile::tempdir().unwrap();
+    let whole = dir.path().join("whole.rrd");
+    let part = dir.path().join("part.rrd");
+    let run = |extra: &[&str], path: &Path| {
+        let mut args = vec!["run", "--clock", "virtual", "--duration", "60", "--record"];
+        args.push(path.to_str().unwrap());
+        args.extend_from_slice(extra);
+        let o = ratelab(&args, dir.path());
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    };
+    run(&[], &whole);
+    run(&["--record-window", "20:25"], &part);
+    let chunks = chunks(&part);
+    let angle = sim_series(&chunks, "/plant/pole_angle_rad");
+    let (first, last) = (angle.first().unwrap().0, angle.last().unwrap().0);
+    assert!(
+        (20_000_000_000..20_030_000_000).contains(&first),
+        "first angle at {first} ns"
+    );
+    assert!(
+        (24_970_000_000..=25_000_000_000).contains(&last),
+        "last angle at {last} ns"
+    );
+    // Every step inside the window: the same rows as the whole run's there.
+    let all = sim_series(&super::recording::chunks(&whole), "/plant/pole_angle_rad");
+    assert!(
+        all.len() > angle.len() * 10,
+        "{} rows of the whole run",
+        all.len()
+    );
+    let inside: Vec<_> = all
+        .iter()
+        .filter(|(t, _)| (20_000_000_000..=25_000_000_000).contains(t))
+        .copied()
+        .collect();
+    assert_eq!(angle, inside);
+    // It says so, and the events cover the whole run.
+    let events = events_with_times(&part);
+    let said = |needle: &str| {
+        events
+            .iter()
+            .find(|(_, _, e)| e.contains(needle))
+            .unwrap_or_else(|| panic!("no event '{needle}': {events:?}"))
+            .0
+    };
+    assert_eq!(
+        said("recording from here: the plots hold run time 20–25 s"),
+        20_000_000_000
+    );
+    assert!(said("recording stops here") > 25_000_000_000);
+    assert!(said("end:") >= 60_000_000_000, "{events:?}");
+    let summary: String = chunks
+        .iter()
+        .filter(|c| c.entity_path().to_string() == "/summary")
+        .flat_map(|c| {
+            c.iter_slices::<String>(rerun::TextDocument::descriptor_text().component)
+                .collect::<Vec<_>>()
+        })
+        .flat_map(|s| s.iter().map(|x| x.as_str().to_string()).collect::<Vec<_>>())
+        .last()
+        .unwrap();
+    assert!(
+        summary.contains("the plots hold run time 20–25 s of the run (--record-window)"),
+        "{summary}"
+    );
+    // A twelfth of the run in about a twelfth of the bytes past what every recording
+    // holds (the scene, the layout, the events: a window of no time).
+    let empty = dir.path().join("empty.rrd");
+    run(&["--record-window", "0:0"], &empty);
+    let size = |p: &Path| std::fs::metadata(p).unwrap().len();
+    let (a, b, z) = (size(&whole), size(&part), size(&empty));
+    assert!(
+        (b - z) * 8 < a - z,
+        "windowed {b} bytes, whole {a} bytes, a window of no time {z} bytes"
+    );
+    // A window needs a recording, and a bad one is one line and exit 2.
+    for (args, says) in [
+        (vec!["run", "--smoke", "--record-window", "1:2"], "--record"),
+        (
+            vec![
+                "run",
+                "--smoke",
+                "--record",
+                "x.rrd",
+                "--record-window",
+                "5:2",
+            ],
+            "ends before it starts",
+        ),
+        (
+            vec![
+                "run",
+                "--smoke",
+                "--record",
+                "x.rrd",
+                "--record-window",
+                "5",
+            ],
+            "FROM:UNTIL",
+        ),
+        (
+            vec![
+                "run",
+                "--smoke",
+                "--record",
+                "x.rrd",
+                "--record-window",
+                "1e12:",
+            ],
+            "ratelab::limits::MAX_DURATION_S",
+        ),
+    ] {
+        let o = ratelab(&args, dir.path());
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{args:?}: {err}");
+        assert!(err.contains(says), "{args:?}: {err}");
+    }
+}

@@ -27,6 +27,7 @@ fn settings(
         alt_policy: None,
         record: None,
         spawn: false,
+        record_window: None,
         session_file: Some(file.to_path_buf()),
         start_paused,
         ros2: None,

@@ -154,13 +154,7 @@ pub(super) fn render_graph(v: &View, area: Rect, buf: &mut Buffer) {
     }
     let mut cols = layout_columns(v);
     if cols.is_empty() {
-        let what = match &v.nav.filter {
-            Some(f) => format!("nothing matches {f} (Esc clears the filter)"),
-            None => "no nodes".to_string(),
-        };
-        Paragraph::new(Line::from(what).dim())
-            .alignment(Alignment::Center)
-            .render(inner, buf);
+        render_nothing_shown(v, inner, buf);
         return;
     }
     let n = cols.len().max(1) as u32;

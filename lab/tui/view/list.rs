@@ -100,6 +100,17 @@ fn cut(text: &str, w: usize) -> String {
     t
 }
 
+/// What the graph panel says when its filter shows nothing.
+pub(super) fn render_nothing_shown(v: &View, area: Rect, buf: &mut Buffer) {
+    let what = match &v.nav.filter {
+        Some(f) => format!("nothing matches {f} (Esc clears the filter)"),
+        None => "no nodes".to_string(),
+    };
+    Paragraph::new(Line::from(what).dim())
+        .alignment(Alignment::Center)
+        .render(area, buf);
+}
+
 /// A row of the names zoom: a node, or a topic it publishes (under it).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(super) enum NameRow {
@@ -142,13 +153,7 @@ pub(super) fn name_columns(v: &View) -> Vec<Vec<NameRow>> {
 pub(super) fn render_names(v: &View, area: Rect, buf: &mut Buffer) {
     let cols = name_columns(v);
     if cols.is_empty() {
-        let what = match &v.nav.filter {
-            Some(f) => format!("nothing matches {f} (Esc clears the filter)"),
-            None => "no nodes".to_string(),
-        };
-        Paragraph::new(Line::from(what).dim())
-            .alignment(Alignment::Center)
-            .render(area, buf);
+        render_nothing_shown(v, area, buf);
         return;
     }
     let n = cols.len() as u32;
