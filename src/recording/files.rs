@@ -1,7 +1,8 @@
 //! Where recordings go and how their files are written: the default names (the graph, the
 //! clock, the settings), the first free name in a folder, the output rule
 //! ([`crate::output`]: a temporary file moved into place, replaced only with `--force`), the
-//! reason a full disk gives, and the recording id a virtual run derives from its settings.
+//! reason a full disk gives, the recording id a virtual run derives from its settings, and
+//! the run's name and settings in a line.
 
 use super::*;
 
@@ -121,4 +122,41 @@ pub(super) fn deterministic_id(cfg: &RunConfig) -> Option<String> {
             cfg.duration.0
         )
     })
+}
+
+/// The chapter's settings of a run (`control 50 Hz, sensor 50 Hz, depth 1`), when its
+/// graph has the chapter's chain; `None` for another shape.
+pub(super) fn chapter_settings(cfg: &RunConfig) -> Option<String> {
+    Some(format!(
+        "control {} Hz, sensor {} Hz, depth {}",
+        hz_label(cfg.control_hz()?),
+        hz_label(cfg.sensor_hz()?),
+        cfg.queue_depth()?
+    ))
+}
+
+/// The recording's name: graph, clock, the chain's control rate (`control`: `50`, or
+/// `50 → 5` for a run whose rate changed) and depth, seed.
+pub(super) fn run_name(cfg: &RunConfig, control: Option<String>) -> String {
+    let chain = match (control, cfg.queue_depth()) {
+        (Some(hz), Some(depth)) => format!(", control {hz} Hz, depth {depth}"),
+        _ => String::new(),
+    };
+    format!(
+        "{}{} clock{chain}, seed {}",
+        graph_prefix(cfg),
+        cfg.clock,
+        cfg.seed
+    )
+}
+
+/// One-line settings of a run, for the start event and the summary.
+pub(super) fn settings_line(cfg: &RunConfig) -> String {
+    format!(
+        "{}{}seed {}, {} clock",
+        graph_prefix(cfg).replace('-', ": "),
+        chapter_settings(cfg).map(|c| c + ", ").unwrap_or_default(),
+        cfg.seed,
+        cfg.clock
+    )
 }

@@ -70,7 +70,8 @@
 //! A graph across processes is recorded as a watcher sees it ([`watched`]): the launch's
 //! merged telemetry in place of the steps.
 //!
-//! The rows are written by a step observer ([`observer`]). Determinism: rows are not left
+//! The rows are written by a step observer ([`observer`]); a long run's recording may keep
+//! the plots of a span of run time only ([`window`]: `--record-window`). Determinism: rows are not left
 //! to rerun's background batcher, whose chunk boundaries and
 //! order depend on thread timing. Each entity's rows are gathered into chunks here and sent
 //! every [`FLUSH_EVERY_STEPS`] actuator steps (and at the end), entities in sorted order, all
@@ -93,13 +94,17 @@ mod observer;
 mod shape;
 mod style;
 pub mod watched;
+mod window;
 
 use blueprint::layout_for;
 use events::{EventList, Mark};
+use files::{
+    chapter_settings, deterministic_id, run_name, settings_line, writing_beside_fails, Committer,
+};
 pub use files::{check_output_path, default_lab_path, default_path};
-use files::{deterministic_id, graph_prefix, writing_beside_fails, Committer};
 use observer::{reference_lines, RecordingObserver, CHANGE_MARK_RAD};
 use style::*;
+pub use window::RecordWindow;
 
 use shape::GraphState;
 pub use shape::{GraphShape, NodeShape, TopicShape};
@@ -375,71 +380,6 @@ pub struct RecordOptions {
     pub window: Option<RecordWindow>,
 }
 
-/// The span of run time a recording keeps the step rows of (`--record-window FROM:UNTIL`,
-/// seconds): a long run's recording as large as the user asks, not as long as the run. The
-/// settings, the events (changes, faults, QoS and liveliness events, the end) and the
-/// summary cover the whole run, and the recording says which span its plots hold. A fall
-/// is recorded wherever it happens.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct RecordWindow {
-    /// The first run time recorded.
-    pub from: Nanos,
-    /// The last run time recorded; `None`: to the end.
-    pub until: Option<Nanos>,
-}
-
-impl RecordWindow {
-    /// Parse `FROM:UNTIL` in seconds of run time, either side empty (`3600:3660`, `:60`,
-    /// `86340:`), each within [`crate::limits::MAX_DURATION_S`].
-    ///
-    /// # Errors
-    /// One line saying what is wrong.
-    pub fn parse(s: &str) -> Result<RecordWindow, String> {
-        let (a, b) = s.split_once(':').ok_or_else(|| {
-            format!("'{s}' is not FROM:UNTIL in seconds of run time (e.g. 3600:3660, :60, 600:)")
-        })?;
-        let secs = |x: &str, what: &str| -> Result<Option<Nanos>, String> {
-            let x = x.trim();
-            if x.is_empty() {
-                return Ok(None);
-            }
-            let v: f64 = x
-                .parse()
-                .map_err(|_| format!("{what} '{x}' is not a number of seconds"))?;
-            if !(v.is_finite() && (0.0..=crate::limits::MAX_DURATION_S).contains(&v)) {
-                return Err(crate::limits::refusal(
-                    format!(
-                        "{what} {v} s is outside 0 … {} s",
-                        crate::limits::MAX_DURATION_S
-                    ),
-                    "MAX_DURATION_S",
-                ));
-            }
-            Ok(Nanos::from_secs_f64(v))
-        };
-        let from = secs(a, "the window's start")?.unwrap_or(Nanos::ZERO);
-        let until = secs(b, "the window's end")?;
-        if until.is_some_and(|u| u < from) {
-            return Err(format!("the window '{s}' ends before it starts"));
-        }
-        Ok(RecordWindow { from, until })
-    }
-
-    /// Is run time `t` inside?
-    pub fn contains(&self, t: Nanos) -> bool {
-        t >= self.from && self.until.is_none_or(|u| t <= u)
-    }
-
-    /// The span in words: `run time 3600–3660 s`, `run time from 600 s`.
-    pub fn describe(&self) -> String {
-        let s = |t: Nanos| format!("{}", t.as_secs_f64());
-        match self.until {
-            Some(u) => format!("run time {}–{} s", s(self.from), s(u)),
-            None => format!("run time from {} s", s(self.from)),
-        }
-    }
-}
-
 /// An open recording. Cheap to clone (the stream is a shared handle).
 #[derive(Clone)]
 pub struct Recording {
@@ -555,43 +495,6 @@ pub fn viewer_on_path() -> bool {
     std::env::var_os("PATH")
         .map(|paths| std::env::split_paths(&paths).any(|d| d.join("rerun").is_file()))
         .unwrap_or(false)
-}
-
-/// The chapter's settings of a run (`control 50 Hz, sensor 50 Hz, depth 1`), when its
-/// graph has the chapter's chain; `None` for another shape.
-fn chapter_settings(cfg: &RunConfig) -> Option<String> {
-    Some(format!(
-        "control {} Hz, sensor {} Hz, depth {}",
-        hz_label(cfg.control_hz()?),
-        hz_label(cfg.sensor_hz()?),
-        cfg.queue_depth()?
-    ))
-}
-
-/// The recording's name: graph, clock, the chain's control rate (`control`: `50`, or
-/// `50 → 5` for a run whose rate changed) and depth, seed.
-fn run_name(cfg: &RunConfig, control: Option<String>) -> String {
-    let chain = match (control, cfg.queue_depth()) {
-        (Some(hz), Some(depth)) => format!(", control {hz} Hz, depth {depth}"),
-        _ => String::new(),
-    };
-    format!(
-        "{}{} clock{chain}, seed {}",
-        graph_prefix(cfg),
-        cfg.clock,
-        cfg.seed
-    )
-}
-
-/// One-line settings of a run, for the start event and the summary.
-fn settings_line(cfg: &RunConfig) -> String {
-    format!(
-        "{}{}seed {}, {} clock",
-        graph_prefix(cfg).replace('-', ": "),
-        chapter_settings(cfg).map(|c| c + ", ").unwrap_or_default(),
-        cfg.seed,
-        cfg.clock
-    )
 }
 
 impl Recording {
@@ -1666,39 +1569,5 @@ mod tests {
             check_output_path(Path::new("/proc/ratelab/x.rrd"), false),
             Err(RecordingError::Unwritable { .. })
         ));
-    }
-}
-
-#[cfg(test)]
-mod window_tests {
-    use super::RecordWindow;
-    use crate::time::Nanos;
-
-    #[test]
-    fn a_window_parses_either_side_open_and_refuses_the_rest() {
-        let w = RecordWindow::parse("3600:3660").unwrap();
-        assert_eq!(
-            (w.from, w.until),
-            (Nanos(3_600_000_000_000), Some(Nanos(3_660_000_000_000)))
-        );
-        assert!(w.contains(Nanos(3_600_000_000_000)) && w.contains(Nanos(3_660_000_000_000)));
-        assert!(!w.contains(Nanos(3_599_000_000_000)) && !w.contains(Nanos(3_661_000_000_000)));
-        assert_eq!(w.describe(), "run time 3600–3660 s");
-        let open = RecordWindow::parse("600:").unwrap();
-        assert_eq!(open.until, None);
-        assert_eq!(open.describe(), "run time from 600 s");
-        assert!(open.contains(Nanos(1_000_000 * 1_000_000_000)));
-        assert_eq!(RecordWindow::parse(":0.5").unwrap().from, Nanos::ZERO);
-        for (bad, says) in [
-            ("5", "FROM:UNTIL"),
-            ("a:5", "not a number"),
-            ("5:2", "ends before it starts"),
-            ("-1:", "outside"),
-            ("1e12:", "ratelab::limits::MAX_DURATION_S"),
-            ("NaN:", "outside"),
-        ] {
-            let e = RecordWindow::parse(bad).unwrap_err();
-            assert!(e.contains(says), "{bad}: {e}");
-        }
     }
 }

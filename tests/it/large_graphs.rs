@@ -208,3 +208,47 @@ fn a_day_of_virtual_run_time_takes_no_more_memory_than_ten_minutes() {
         "the metrics count every step"
     );
 }
+
+/// A 1 MiB camera frame crosses processes whole (issue 51 item 2): the camera's graph at
+/// 1024×1024 px, launched with the camera in `robot` and the image estimator in a process
+/// of its own, writes byte for byte the metrics of the run in one process; every
+/// frame published was measured (a frame cut or garbled measures nothing), and the counts
+/// of `/image` are the in-process run's.
+#[test]
+fn a_megabyte_frame_crosses_processes_whole_with_its_counters_right() {
+    let _m = crate::machine::shared();
+    let dir = tempfile::tempdir().unwrap();
+    let graph = std::fs::read_to_string(Path::new(crate::REPO).join("graphs/cartpole-camera.toml"))
+        .unwrap()
+        .replace(
+            "params = { width_px = 640, height_px = 480 }",
+            "params = { width_px = 1024, height_px = 1024 }",
+        );
+    let file = dir.path().join("camera-1mib.toml");
+    std::fs::write(&file, graph).unwrap();
+    let file = file.to_str().unwrap();
+    let common = ["--clock", "virtual", "--duration", "3", "--seed", "1"];
+    let one = dir.path().join("one");
+    let (m1, t1) = outputs(&[&["run", "--graph", file][..], &common].concat(), &one);
+    let many = dir.path().join("many");
+    let o = ratelab(
+        &[
+            &["launch", file, "--processes"][..],
+            &common,
+            &["--out", many.to_str().unwrap()],
+        ]
+        .concat(),
+    );
+    let out = text(&o.stdout);
+    assert!(o.status.success(), "{out}{}", text(&o.stderr));
+    assert!(out.contains("robot [camera, actuator]"), "{out}");
+    assert!(out.contains("vision [vision]"), "{out}");
+    let m2 = std::fs::read_to_string(many.join("metrics.json")).unwrap();
+    assert_eq!(m1, m2, "metrics differ");
+    assert!(t1.lines().count() > 30, "{t1:.300}");
+    let m: serde_json::Value = serde_json::from_str(&m1).unwrap();
+    let published = |t: &str| m["topics"][t]["published"].as_u64().unwrap();
+    // 30 frames a second (for as long as the pole stays up), each measured once.
+    assert!(published("/image") >= 30, "{m1}");
+    assert_eq!(published("/meas"), published("/image"), "{m1}");
+}

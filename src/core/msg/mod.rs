@@ -40,11 +40,13 @@
 //! [`AnyTopic::typed`].
 
 pub mod force;
+pub mod image;
 pub mod position;
 pub mod ros_mapping;
 pub mod state;
 
 pub use force::ForceMsg;
+pub use image::{ImageData, ImageMsg};
 pub use position::PositionMsg;
 pub use ros_mapping::{RosCodec, RosMapped};
 pub use state::StateMsg;
@@ -59,32 +61,81 @@ use std::any::{Any, TypeId};
 use std::fmt;
 use std::sync::{Arc, LazyLock, RwLock};
 
-/// The most message types one process may have registered (the built-in three included).
+/// The most message types one process may have registered (the built-in four included).
 pub const MAX_MSG_TYPES: usize = 32;
 /// The most fields a message type may have.
 pub const MAX_FIELDS: usize = 64;
-/// The most bytes a message may take on the wire (postcard); larger payloads are refused
-/// when they arrive and never sent.
-pub const MAX_PAYLOAD_BYTES: usize = 4096;
+/// The most bytes a message may take on the wire (postcard): a sample between processes
+/// ([`crate::limits::MAX_SAMPLE_BYTES`], 64 MiB: a camera's frame, a point cloud); larger
+/// payloads are refused when they arrive and never sent.
+pub const MAX_PAYLOAD_BYTES: usize = crate::limits::MAX_SAMPLE_BYTES;
 
 /// One field of a message type: a name (a Python identifier, in SI units by convention:
-/// `cart_pos_m`), its unit as shown (`m`, `rad/s`, `N`, `1` for a pure number) and a few
-/// words on what it is.
+/// `cart_pos_m`), its unit as shown (`m`, `rad/s`, `N`, `1` for a pure number), a few
+/// words on what it is, and what it holds (a number, text or bytes).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Field {
     /// The name, as Python sees it.
     pub name: &'static str,
-    /// The unit, as shown next to a value.
+    /// The unit, as shown next to a value (of bytes: what each is, `px`).
     pub unit: &'static str,
     /// What it is.
     pub doc: &'static str,
+    /// What it holds.
+    pub kind: FieldKind,
+}
+
+/// What a field holds.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum FieldKind {
+    /// A number (`f64`), in the field's unit.
+    Number,
+    /// Text (`sensor_msgs/Image`'s `encoding`).
+    Text,
+    /// Bytes of any length (an image's pixels), shared between subscribers, never copied
+    /// per subscriber in one process.
+    Bytes,
 }
 
 impl Field {
-    /// A field.
+    /// A number field.
     pub const fn new(name: &'static str, unit: &'static str, doc: &'static str) -> Field {
-        Field { name, unit, doc }
+        Field {
+            name,
+            unit,
+            doc,
+            kind: FieldKind::Number,
+        }
     }
+    /// A text field.
+    pub const fn text(name: &'static str, doc: &'static str) -> Field {
+        Field {
+            name,
+            unit: "",
+            doc,
+            kind: FieldKind::Text,
+        }
+    }
+    /// A bytes field; `unit`: what each byte is.
+    pub const fn bytes(name: &'static str, unit: &'static str, doc: &'static str) -> Field {
+        Field {
+            name,
+            unit,
+            doc,
+            kind: FieldKind::Bytes,
+        }
+    }
+}
+
+/// A field's value ([`Message::to_values`]).
+#[derive(Clone, Debug, PartialEq)]
+pub enum Value {
+    /// A number field's.
+    Number(f64),
+    /// A text field's.
+    Text(String),
+    /// A bytes field's (shared, not copied).
+    Bytes(ImageData),
 }
 
 /// A message type: the one definition of what a topic carries (module docs).
@@ -104,11 +155,17 @@ pub trait Message:
     /// Its fields, in order: what [`Message::to_fields`] gives and
     /// [`Message::from_fields`] takes.
     const FIELDS: &'static [Field];
-    /// The fields as numbers, in [`Message::FIELDS`] order.
+    /// The number fields, in [`Message::FIELDS`] order (of a type with text or bytes
+    /// fields, the numbers alone: [`Message::to_values`] gives them all).
     fn to_fields(&self) -> Vec<f64>;
-    /// A message from its fields, in [`Message::FIELDS`] order (always as many; a Python
-    /// node leaves an unset field 0).
+    /// A message from its number fields, in [`Message::FIELDS`] order (always as many; a
+    /// Python node leaves an unset field 0); a text or bytes field is left empty.
     fn from_fields(fields: &[f64]) -> Self;
+    /// Every field's value, in [`Message::FIELDS`] order. A type with text or bytes fields
+    /// must give them here; the default is [`Message::to_fields`] as numbers.
+    fn to_values(&self) -> Vec<Value> {
+        self.to_fields().into_iter().map(Value::Number).collect()
+    }
     /// The ROS 2 type it is offered as over `--ros2`, if any ([`RosCodec::of`] for a type
     /// that implements [`RosMapped`]). A type without one is not offered to ROS 2, and an
     /// external node cannot read or publish it.
@@ -212,6 +269,11 @@ impl MsgType {
     pub fn fields(self) -> &'static [Field] {
         self.0.fields
     }
+    /// Are all its fields numbers (what a Python node's tuples and a ROS 2 bridge without a
+    /// mapping of their own can carry)?
+    pub fn is_numeric(self) -> bool {
+        self.0.fields.iter().all(|f| f.kind == FieldKind::Number)
+    }
     /// Its ROS 2 mapping, if it has one.
     pub fn ros2(self) -> Option<RosCodec> {
         (self.0.ros2)()
@@ -312,7 +374,12 @@ pub enum MsgRegistryError {
 fn registry() -> &'static RwLock<Vec<MsgType>> {
     static REGISTRY: LazyLock<RwLock<Vec<MsgType>>> = LazyLock::new(|| {
         let mut types = Vec::new();
-        for t in [StateMsg::TYPE, PositionMsg::TYPE, ForceMsg::TYPE] {
+        for t in [
+            StateMsg::TYPE,
+            PositionMsg::TYPE,
+            ForceMsg::TYPE,
+            ImageMsg::TYPE,
+        ] {
             if let Err(e) = admit(&mut types, t) {
                 panic!("a built-in message type breaks the registry's rules: {e}");
             }
@@ -446,7 +513,11 @@ pub fn types_table() -> String {
         let fields = t
             .fields()
             .iter()
-            .map(|f| format!("`{}` ({})", f.name, f.unit))
+            .map(|f| match f.kind {
+                FieldKind::Number => format!("`{}` ({})", f.name, f.unit),
+                FieldKind::Text => format!("`{}` (text)", f.name),
+                FieldKind::Bytes => format!("`{}` (bytes: {})", f.name, f.unit),
+            })
             .collect::<Vec<_>>()
             .join(", ");
         let ros = t
@@ -475,6 +546,7 @@ pub struct MsgData {
 trait DynMessage: Any + Send + Sync + fmt::Debug {
     fn as_any(&self) -> &dyn Any;
     fn fields(&self) -> Vec<f64>;
+    fn values(&self) -> Vec<Value>;
     fn to_bytes(&self) -> Vec<u8>;
     fn eq_dyn(&self, other: &dyn DynMessage) -> bool;
 }
@@ -486,8 +558,11 @@ impl<M: Message> DynMessage for M {
     fn fields(&self) -> Vec<f64> {
         self.to_fields()
     }
+    fn values(&self) -> Vec<Value> {
+        self.to_values()
+    }
     fn to_bytes(&self) -> Vec<u8> {
-        // Plain values of numbers: serde cannot fail on them.
+        // Plain values (numbers, text, bytes): serde cannot fail on them.
         postcard::to_allocvec(self).unwrap_or_default()
     }
     fn eq_dyn(&self, other: &dyn DynMessage) -> bool {
@@ -511,25 +586,31 @@ impl MsgData {
     pub fn get<M: Message>(&self) -> Option<&M> {
         self.value.as_any().downcast_ref::<M>()
     }
-    /// Its fields, in its type's order.
+    /// Its number fields, in its type's order ([`Message::to_fields`]).
     pub fn fields(&self) -> Vec<f64> {
         self.value.fields()
+    }
+    /// Every field's value, in its type's order ([`Message::to_values`]).
+    pub fn values(&self) -> Vec<Value> {
+        self.value.values()
     }
     /// Its wire bytes (postcard; the inverse of [`MsgType::decode`]).
     pub fn to_bytes(&self) -> Vec<u8> {
         self.value.to_bytes()
     }
-    /// One line for people: `force: newtons=1.5 N`.
+    /// One line for people: `force: newtons=1.5 N`; text quoted, bytes counted
+    /// (`data=<307200 bytes>`).
     pub fn describe(&self) -> String {
-        let f = self.fields();
         let parts: Vec<String> = self
             .ty
             .fields()
             .iter()
-            .zip(&f)
-            .map(|(d, v)| match d.unit {
-                "1" | "" => format!("{}={v}", d.name),
-                u => format!("{}={v} {u}", d.name),
+            .zip(self.values())
+            .map(|(d, v)| match (v, d.unit) {
+                (Value::Number(v), "1" | "") => format!("{}={v}", d.name),
+                (Value::Number(v), u) => format!("{}={v} {u}", d.name),
+                (Value::Text(t), _) => format!("{}={t:?}", d.name),
+                (Value::Bytes(b), _) => format!("{}=<{} bytes>", d.name, b.len()),
             })
             .collect();
         format!("{}: {}", self.ty, parts.join(", "))

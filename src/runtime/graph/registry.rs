@@ -143,6 +143,8 @@ fn registry() -> &'static RwLock<Vec<Kind>> {
             nodes::actuator::def(),
             nodes::python::def(),
             nodes::external::def(),
+            nodes::camera::def(),
+            nodes::image_estimator::def(),
         ];
         let mut kinds = Vec::new();
         for def in built_in {

@@ -1,5 +1,5 @@
-//! The node kinds ratelab has built in, one file each — [`sensor`], [`estimator`],
-//! [`policy`], [`safety`], [`actuator`], [`python`] (a learner's script, run by
+//! The node kinds ratelab has built in, one file each — [`sensor`], [`camera`],
+//! [`estimator`], [`image_estimator`], [`policy`], [`safety`], [`actuator`], [`python`] (a learner's script, run by
 //! `ratelab::python::node`) and [`external`] (a ROS 2 node's proxy) — each its one
 //! definition ([`crate::graph::kind::KindDef`]: ports, plant, parameters, `make`) and its
 //! tick ([`crate::graph::kind::Work`]). [`super::registry`] registers them; a kind written
@@ -18,8 +18,10 @@
 //! [`super::registry`]'s list; nothing else names a kind.
 
 pub mod actuator;
+pub mod camera;
 pub mod estimator;
 pub mod external;
+pub mod image_estimator;
 pub mod policy;
 pub mod python;
 pub mod safety;

@@ -1,0 +1,165 @@
+//! The **image** message: a camera's frame, laid out as ROS 2's `sensor_msgs/msg/Image`
+//! (height, width, encoding, step, data). Its pixels are shared, never copied per
+//! subscriber: every subscriber of a topic in one process holds the same bytes
+//! ([`ImageData`] is a reference-counted buffer), and across processes they travel once per
+//! sample (postcard writes them as one run of bytes).
+
+use super::{Field, Message, Value};
+use serde::{Deserialize, Serialize};
+use std::sync::Arc;
+
+/// An image's pixels: bytes shared by every holder (cloning it copies a pointer).
+#[derive(Clone, PartialEq, Eq, Default)]
+pub struct ImageData(pub Arc<[u8]>);
+
+impl ImageData {
+    /// How many bytes.
+    pub fn len(&self) -> usize {
+        self.0.len()
+    }
+    /// None?
+    pub fn is_empty(&self) -> bool {
+        self.0.is_empty()
+    }
+    /// The bytes.
+    pub fn as_slice(&self) -> &[u8] {
+        &self.0
+    }
+}
+
+impl From<Vec<u8>> for ImageData {
+    fn from(v: Vec<u8>) -> ImageData {
+        ImageData(Arc::from(v))
+    }
+}
+
+impl std::fmt::Debug for ImageData {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "<{} bytes>", self.0.len())
+    }
+}
+
+impl Serialize for ImageData {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        s.serialize_bytes(&self.0)
+    }
+}
+
+impl<'de> Deserialize<'de> for ImageData {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<ImageData, D::Error> {
+        serde_bytes::ByteBuf::deserialize(d).map(|b| ImageData::from(b.into_vec()))
+    }
+}
+
+/// A camera's frame (ROS 2's `sensor_msgs/msg/Image` without its header: ratelab stamps
+/// every message).
+#[derive(Clone, Debug, PartialEq, Default, Serialize, Deserialize)]
+pub struct ImageMsg {
+    /// Rows, px.
+    pub height: u32,
+    /// Columns, px.
+    pub width: u32,
+    /// How a pixel is laid out, as ROS 2 names it (`mono8`: one byte of brightness).
+    pub encoding: String,
+    /// Bytes per row (`width` for `mono8`).
+    pub step: u32,
+    /// The pixels, row after row: `step × height` bytes.
+    pub data: ImageData,
+}
+
+impl ImageMsg {
+    /// Is it whole: `step × height` bytes, at least a byte per pixel?
+    pub fn is_consistent(&self) -> bool {
+        let rows = self.height as usize;
+        self.step >= self.width && self.data.len() == self.step as usize * rows
+    }
+}
+
+impl Message for ImageMsg {
+    const NAME: &'static str = "image";
+    const CLASS: &'static str = "Image";
+    const DOC: &'static str =
+        "A camera's frame, as sensor_msgs/Image: height, width, encoding, step, data.";
+    const FIELDS: &'static [Field] = &[
+        Field::new("height", "px", "rows"),
+        Field::new("width", "px", "columns"),
+        Field::text("encoding", "pixel layout (mono8: a byte of brightness)"),
+        Field::new("step", "B", "bytes per row"),
+        Field::bytes("data", "pixel bytes", "the pixels, row after row"),
+    ];
+    /// `[height, width, step]`.
+    fn to_fields(&self) -> Vec<f64> {
+        vec![
+            f64::from(self.height),
+            f64::from(self.width),
+            f64::from(self.step),
+        ]
+    }
+    /// An image of no pixels with these dimensions.
+    fn from_fields(f: &[f64]) -> Self {
+        let dim = |x: f64| {
+            if x.is_finite() && x >= 0.0 {
+                x.min(f64::from(u32::MAX)) as u32
+            } else {
+                0
+            }
+        };
+        ImageMsg {
+            height: dim(f[0]),
+            width: dim(f[1]),
+            encoding: String::new(),
+            step: dim(f[2]),
+            data: ImageData::default(),
+        }
+    }
+    fn to_values(&self) -> Vec<Value> {
+        vec![
+            Value::Number(f64::from(self.height)),
+            Value::Number(f64::from(self.width)),
+            Value::Text(self.encoding.clone()),
+            Value::Number(f64::from(self.step)),
+            Value::Bytes(self.data.clone()),
+        ]
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::msg::MsgData;
+
+    #[test]
+    fn an_image_crosses_the_wire_whole_and_its_copies_share_the_pixels() {
+        let pixels: Vec<u8> = (0..1_048_576u32).map(|i| (i % 251) as u8).collect();
+        let img = ImageMsg {
+            height: 1024,
+            width: 1024,
+            encoding: "mono8".into(),
+            step: 1024,
+            data: pixels.into(),
+        };
+        assert!(img.is_consistent());
+        // A copy (a subscriber's) holds the same bytes, not a copy of them.
+        let copy = img.clone();
+        assert!(Arc::ptr_eq(&img.data.0, &copy.data.0));
+        // The wire: the pixels as one run of bytes, after a few of header.
+        let data = MsgData::new(img.clone());
+        let bytes = data.to_bytes();
+        assert!(bytes.len() < 1_048_576 + 32, "{} bytes", bytes.len());
+        let back = ImageMsg::TYPE.decode(&bytes).unwrap();
+        assert_eq!(back, data);
+        assert_eq!(
+            data.describe(),
+            "image: height=1024 px, width=1024 px, encoding=\"mono8\", step=1024 B, data=<1048576 bytes>"
+        );
+        // Cut short, or with bytes after it: refused, in one line.
+        assert!(ImageMsg::TYPE.decode(&bytes[..bytes.len() - 1]).is_err());
+        let mut longer = bytes.clone();
+        longer.push(0);
+        assert!(ImageMsg::TYPE
+            .decode(&longer)
+            .unwrap_err()
+            .contains("after"));
+        assert!(!ImageMsg::TYPE.is_numeric());
+    }
+}
