@@ -462,12 +462,13 @@ pub fn interrupt_callbacks(grace: Duration) {
 }
 
 /// The message registry as Python's `install_message_module` takes it: per type its name,
-/// class, doc, fields `(name, unit, doc)` and ROS 2 type.
+/// class, doc, fields `(name, unit, doc, kind)` (`number`, `text` or `bytes`) and ROS 2
+/// type.
 type RegistryRow = (
     &'static str,
     &'static str,
     &'static str,
-    Vec<(&'static str, &'static str, &'static str)>,
+    Vec<(&'static str, &'static str, &'static str, &'static str)>,
     Option<&'static str>,
 );
 
@@ -479,7 +480,18 @@ fn message_registry() -> Vec<RegistryRow> {
                 t.as_str(),
                 t.class(),
                 t.doc(),
-                t.fields().iter().map(|f| (f.name, f.unit, f.doc)).collect(),
+                t.fields()
+                    .iter()
+                    .map(|f| {
+                        let kind = match f.kind {
+                            crate::msg::FieldKind::Number => "number",
+                            crate::msg::FieldKind::Integer => "integer",
+                            crate::msg::FieldKind::Text => "text",
+                            crate::msg::FieldKind::Bytes => "bytes",
+                        };
+                        (f.name, f.unit, f.doc, kind)
+                    })
+                    .collect(),
                 t.ros2().map(|c| (c.ros_type)().name),
             )
         })

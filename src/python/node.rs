@@ -7,13 +7,15 @@
 //! the handle also has `get_clock().now()` (the run's clock, virtual or real: `.nanoseconds`),
 //! `get_logger().info/warn/error`, `get_parameter(name).value` (the graph file's `params`),
 //! `get_name()`, `get_period()` (the node's tick, s: 1 / its `rate_hz` in this run) and `rng` (a NumPy `Generator` seeded from the run's seed and the node's
-//! name). Message classes, from `import ratelab` (fields are floats in SI units):
+//! name). Message classes, from `import ratelab` (number fields are floats in SI units; a
+//! text field is a `str`, a bytes field `bytes`):
 //!
 //! | graph file type | class | fields |
 //! | --- | --- | --- |
 //! | `state` | `ratelab.State` | `cart_pos_m`, `cart_vel_m_s`, `cos_theta`, `sin_theta`, `pole_angvel_rad_s` (float32 on the topic) |
 //! | `position` | `ratelab.Position` | `cart_pos_m`, `pole_angle_rad` |
 //! | `force` | `ratelab.Force` | `newtons` |
+//! | `image` | `ratelab.Image` | `height`, `width`, `encoding` (str), `step`, `data` (bytes) |
 //!
 //! A node may subscribe to several topics and publish several (`subscribes = ["/obs",
 //! "/reference"]` in the graph file): one `create_subscription` per input and one
@@ -44,14 +46,15 @@
 
 use super::{describe, start, support, CallbackGuard, PythonError};
 use crate::graph::kind::{BuildContext, PythonCode};
-use crate::msg::AnyTopic;
+use crate::msg::{AnyTopic, FieldKind, Value};
 use crate::publisher::Outbox;
 use crate::time::Nanos;
 use pyo3::prelude::*;
-use pyo3::types::{PyDict, PyList};
+use pyo3::types::{PyBytes, PyDict, PyList, PyTuple};
 
-/// A fields tuple of a message as it crosses into Python.
-type Fields = Vec<f64>;
+/// A message's values as they cross into Python: numbers (`float`), text (`str`) and bytes
+/// (`bytes`, which NumPy reads with `np.frombuffer`).
+type Fields = Vec<Value>;
 
 /// One Python node, ready to tick (see the module docs).
 pub struct PythonNode {
@@ -193,22 +196,39 @@ impl PythonNode {
                 })
             })
             .collect();
-        let published: Vec<(usize, Fields)> = Python::attach(|py| {
+        let outputs = &self.outputs;
+        let published: Vec<(usize, crate::msg::MsgData)> = Python::attach(|py| {
             let _running = CallbackGuard::enter_tick(&self.what, &self.name, period);
+            let delivered: Vec<(usize, Bound<'_, PyTuple>)> = delivered
+                .iter()
+                .map(|(i, values)| {
+                    let kinds = self.inputs[*i].topic.msg_type().fields();
+                    Ok((*i, to_python_values(py, kinds, values)?))
+                })
+                .collect::<PyResult<_>>()
+                .map_err(|e| TickError(describe(py, &e, &self.script)))?;
             self.runtime
                 .call_method1(py, "tick", (now.0, delivered))
                 .and_then(|out| {
                     let out = out.bind(py).cast::<PyList>().map_err(PyErr::from)?;
-                    out.iter().map(|m| m.extract::<(usize, Fields)>()).collect()
+                    out.iter()
+                        .map(|m| {
+                            let (index, values) = m.extract::<(usize, Bound<'_, PyTuple>)>()?;
+                            // The Python side checked the index against the graph file's
+                            // outputs.
+                            let topic = outputs.get(index).ok_or_else(|| {
+                                pyo3::exceptions::PyIndexError::new_err("no such output")
+                            })?;
+                            Ok((index, from_python_values(topic, &values)?))
+                        })
+                        .collect()
                 })
                 .map_err(|e| TickError(describe(py, &e, &self.script)))
         })?;
         let origin = self.origin(now);
-        for (output, fields) in published {
-            // The Python side checked the index against the graph file's outputs.
-            if let Some(out) = self.outputs.get(output) {
-                publish(&self.outbox, out, &fields, now, origin);
-            }
+        for (output, data) in published {
+            // Of the topic's own type: it cannot be refused.
+            let _ = self.outputs[output].publish(Some(&self.outbox), &data, now, origin);
         }
         Ok(())
     }
@@ -226,16 +246,54 @@ impl PythonNode {
 }
 
 /// Read `t` at `now` by its QoS: the message's seq, origin (its own stamp when it has
-/// none) and fields.
+/// none) and values.
 fn read(t: &AnyTopic, now: Nanos) -> Option<(u64, Nanos, Fields)> {
     let m = t.read(now)?;
-    Some((m.seq, m.origin, m.data.fields()))
+    Some((m.seq, m.origin, m.data.values()))
 }
 
-/// Publish a fields tuple (checked against the type by the Python side) on `t`.
-fn publish(outbox: &Outbox, t: &AnyTopic, f: &[f64], now: Nanos, origin: Option<Nanos>) {
-    // Of the topic's own type: it cannot be refused.
-    let _ = t.publish(Some(outbox), &t.msg_type().from_fields(f), now, origin);
+/// A message's values (of fields `fields`) as a Python tuple: a whole-number field an
+/// `int`, bytes copied once into a Python `bytes`.
+fn to_python_values<'py>(
+    py: Python<'py>,
+    fields: &[crate::msg::Field],
+    values: &[Value],
+) -> PyResult<Bound<'py, PyTuple>> {
+    use pyo3::IntoPyObjectExt;
+    let items: Vec<Bound<'py, PyAny>> = fields
+        .iter()
+        .zip(values)
+        .map(|(f, v)| match v {
+            Value::Number(x) if f.kind == FieldKind::Integer => (*x as i64).into_bound_py_any(py),
+            Value::Number(x) => x.into_bound_py_any(py),
+            Value::Text(t) => t.into_bound_py_any(py),
+            Value::Bytes(b) => Ok(PyBytes::new(py, b.as_slice()).into_any()),
+        })
+        .collect::<PyResult<_>>()?;
+    PyTuple::new(py, items)
+}
+
+/// A message of `topic`'s type from the values tuple a Python node published (the Python
+/// side made each of its field's kind: a float, a str, bytes).
+fn from_python_values(
+    topic: &AnyTopic,
+    values: &Bound<'_, PyTuple>,
+) -> PyResult<crate::msg::MsgData> {
+    let ty = topic.msg_type();
+    let values: Vec<Value> = ty
+        .fields()
+        .iter()
+        .zip(values.iter())
+        .map(|(f, v)| {
+            Ok(match f.kind {
+                FieldKind::Number | FieldKind::Integer => Value::Number(v.extract()?),
+                FieldKind::Text => Value::Text(v.extract()?),
+                FieldKind::Bytes => Value::Bytes(v.extract::<Vec<u8>>()?.into()),
+            })
+        })
+        .collect::<PyResult<_>>()?;
+    ty.from_values(&values)
+        .map_err(pyo3::exceptions::PyTypeError::new_err)
 }
 
 /// A graph file's parameter as a Python value.

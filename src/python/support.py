@@ -222,11 +222,40 @@ def brain_caller(module, function, script):
 
 # ---- Python nodes (src/python/node.rs): an rclpy-shaped handle over one ratelab process -----
 
+def _as_kind(kind, value, name):
+    """`value` as a field of `kind` holds it: `number` a float, `integer` an int, `text` a
+    str, `bytes` bytes (from bytes, a bytearray or a contiguous NumPy array:
+    `arr.astype(np.uint8)`)."""
+    if kind == "text":
+        return "" if value is None else str(value)
+    if kind == "integer":
+        if value is None:
+            return 0
+        whole = int(value)
+        if whole != value:
+            raise TypeError(f"field '{name}' takes a whole number, got {value!r}")
+        return whole
+    if kind == "bytes":
+        if value is None:
+            return b""
+        try:
+            return bytes(memoryview(value))
+        except (TypeError, ValueError, BufferError) as e:
+            raise TypeError(f"field '{name}' takes bytes (or a contiguous array), got "
+                            f"{type(value).__name__}: {e}") from None
+    return float(0.0 if value is None else value)
+
+
 class _Msg:
     """A message with named fields in SI units; positional or keyword construction."""
 
     __slots__ = ()
     FIELDS = ()
+    # Per field: "number", "text" or "bytes"; empty: every field a number.
+    KINDS = ()
+
+    def _kinds(self):
+        return self.KINDS or ("number",) * len(self.FIELDS)
 
     def __init__(self, *args, **kwargs):
         if len(args) > len(self.FIELDS):
@@ -238,15 +267,19 @@ class _Msg:
                 raise TypeError(f"{type(self).__name__} has no field '{k}' "
                                 f"(fields: {', '.join(self.FIELDS)})")
             values[k] = v
-        for k in self.FIELDS:
-            object.__setattr__(self, k, float(values.get(k, 0.0)))
+        for k, kind in zip(self.FIELDS, self._kinds()):
+            object.__setattr__(self, k, _as_kind(kind, values.get(k), k))
 
     def __repr__(self):
-        inner = ", ".join(f"{k}={getattr(self, k)!r}" for k in self.FIELDS)
+        def shown(k):
+            v = getattr(self, k)
+            return f"<{len(v)} bytes>" if isinstance(v, bytes) else repr(v)
+        inner = ", ".join(f"{k}={shown(k)}" for k in self.FIELDS)
         return f"{type(self).__name__}({inner})"
 
     def _fields(self):
-        return tuple(float(getattr(self, k)) for k in self.FIELDS)
+        return tuple(_as_kind(kind, getattr(self, k), k)
+                     for k, kind in zip(self.FIELDS, self._kinds()))
 
 
 # The ROS 2 types each class is offered as (`--ros2`, src/core/ros_types.rs; docs/ros2.md):
@@ -581,16 +614,21 @@ def install_message_module(registry):
     """`import ratelab` in a learner's script gives the message classes and Time.
 
     `registry` is ratelab's message registry (src/core/msg/mod.rs), the one definition of every
-    message type: [(name, class, doc, [(field, unit, doc), ...], ros_type or None), ...].
-    The built-in types' classes are written above (with their ROS 2 conversions) and must
-    match it; a type a Rust program registered gets a class made from its fields."""
+    message type: [(name, class, doc, [(field, unit, doc, kind), ...], ros_type or None),
+    ...], each field's kind `number`, `integer`, `text` or `bytes`. The built-in types' classes are
+    written above (with their ROS 2 conversions) and must match it; a type a Rust program
+    registered (or a built-in one of text or bytes, as `image`) gets a class made from its
+    fields."""
     for name, class_name, doc, fields, ros_type in registry:
-        names = tuple(f for f, _, _ in fields)
+        names = tuple(f for f, _, _, _ in fields)
+        kinds = tuple(k for _, _, _, k in fields)
         cls = MESSAGE_TYPES.get(name)
         if cls is None:
-            described = "; ".join(f"{f} ({u}): {d}" for f, u, d in fields)
+            described = "; ".join(
+                f"{f} ({u if k in ('number', 'integer') else k}): {d}" for f, u, d, k in fields)
             cls = type(class_name, (_Msg,), {
                 "__slots__": names, "FIELDS": names, "ROS_TYPE": ros_type,
+                "KINDS": () if set(kinds) <= {"number"} else kinds,
                 "__doc__": f"{doc} Fields: {described}.", "__module__": "ratelab"})
             MESSAGE_TYPES[name] = cls
         elif (cls.__name__, cls.FIELDS, cls.ROS_TYPE) != (class_name, names, ros_type):

@@ -14,8 +14,10 @@ use std::process::Command;
 
 use crate::repo;
 
-const SHIPPED: [&str; 9] = [
+const SHIPPED: [&str; 11] = [
     "graphs/cartpole.toml",
+    "graphs/cartpole-camera.toml",
+    "graphs/cartpole-camera-python.toml",
     "graphs/cartpole-estimator.toml",
     "graphs/cartpole-safety.toml",
     "graphs/cartpole-python.toml",
@@ -74,6 +76,37 @@ fn every_shipped_graph_balances_under_the_real_clock() {
             "{file}: one thread per node"
         );
     }
+}
+
+/// A camera's frames cross into a Python node as bytes and NumPy measures every one (issue
+/// 51 item 2): the built-in vision node's graph and the NumPy one's both balance, each
+/// publishes a measurement per frame, and the two measure the same poles (their runs agree
+/// to a hundredth of a degree at the end).
+#[test]
+fn a_numpy_vision_node_measures_every_frame_as_the_built_in_one_does() {
+    ratelab::init();
+    let run_of = |file: &str| {
+        run(
+            &cfg(file, ClockKind::Virtual, 10),
+            Box::new(Scripted),
+            RunOptions::new(),
+        )
+        .unwrap()
+        .metrics
+    };
+    let (rust, numpy) = (
+        run_of("graphs/cartpole-camera.toml"),
+        run_of("graphs/cartpole-camera-python.toml"),
+    );
+    for m in [&rust, &numpy] {
+        assert!(m.balanced, "{:?}", m.fell_at_s);
+        assert_eq!(m.topics["/image"].published, 301);
+        assert_eq!(m.topics["/meas"].published, 301);
+    }
+    let deg = (rust.final_pole_angle - numpy.final_pole_angle)
+        .abs()
+        .to_degrees();
+    assert!(deg < 0.01, "the two runs end {deg}° apart");
 }
 
 /// Keeps every step record.

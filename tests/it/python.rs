@@ -1473,3 +1473,109 @@ fn a_python_node_that_never_declares_a_topic_its_file_gives_it_is_warned_about()
         );
     }
 }
+
+/// Bytes cross into and out of Python nodes (issue 51 item 2): a Python node publishes a
+/// NumPy array as an `Image`'s pixels, another reads them back with `np.frombuffer`, in one
+/// process and across processes (a node that finds a pixel wrong raises, and the run exits
+/// 2); a field of the wrong kind fails the node naming the field.
+#[test]
+fn a_python_node_publishes_and_reads_an_image_s_bytes_in_one_process_and_across() {
+    let _m = crate::machine::shared();
+    let dir = tempfile::tempdir().unwrap();
+    script(
+        dir.path(),
+        "painter.py",
+        "import numpy as np\n\
+         from ratelab import Image\n\
+         class Painter:\n\
+         \x20   def __init__(self, node):\n\
+         \x20       self.k = 0\n\
+         \x20       self.pub = node.create_publisher(Image, '/img', 1)\n\
+         \x20       node.create_timer(node.get_period(), self.tick)\n\
+         \x20   def tick(self):\n\
+         \x20       self.k += 1\n\
+         \x20       frame = (np.arange(12, dtype=np.uint8) * self.k) % 251\n\
+         \x20       self.pub.publish(Image(height=3, width=4, encoding='mono8', step=4, data=PIXELS))\n",
+    );
+    script(
+        dir.path(),
+        "reader.py",
+        "import numpy as np\n\
+         from ratelab import Force, Image\n\
+         class Reader:\n\
+         \x20   def __init__(self, node):\n\
+         \x20       self.pub = node.create_publisher(Force, '/action', 1)\n\
+         \x20       node.create_subscription(Image, '/img', self.on_img, 1)\n\
+         \x20   def on_img(self, img):\n\
+         \x20       assert isinstance(img.data, bytes) and img.encoding == 'mono8', repr(img)\n\
+         \x20       assert (img.height, img.width, img.step) == (3, 4, 4), repr(img)\n\
+         \x20       px = np.frombuffer(img.data, np.uint8).reshape(img.height, img.step)\n\
+         \x20       k = int(px[0, 1])\n\
+         \x20       want = (np.arange(12, dtype=np.uint8) * k) % 251\n\
+         \x20       assert (px.ravel() == want).all(), (k, px)\n\
+         \x20       self.pub.publish(Force(newtons=0.0))\n",
+    );
+    let graph = |pixels: &str| {
+        let painter = std::fs::read_to_string(dir.path().join("painter.py"))
+            .unwrap()
+            .replace("PIXELS", pixels);
+        std::fs::write(dir.path().join("painter_now.py"), painter).unwrap();
+        let g = dir.path().join("bytes.toml");
+        std::fs::write(
+            &g,
+            "name = \"py-bytes\"\n\
+             [[node]]\nname = \"painter\"\nkind = \"python\"\nscript = \"painter_now.py\"\n\
+             class = \"Painter\"\nrate_hz = 10\npublishes = \"/img\"\nprocess = \"paint\"\n\
+             [[node]]\nname = \"reader\"\nkind = \"python\"\nscript = \"reader.py\"\n\
+             class = \"Reader\"\nrate_hz = 10\nsubscribes = \"/img\"\npublishes = \"/action\"\n\
+             [[node]]\nname = \"actuator\"\nkind = \"actuator\"\nrate_hz = 50\nsubscribes = \"/action\"\n\
+             [[topic]]\nname = \"/img\"\ntype = \"image\"\ndepth = 1\n\
+             [[topic]]\nname = \"/action\"\ntype = \"force\"\ndepth = 1\n",
+        )
+        .unwrap();
+        g
+    };
+    let g = graph("frame");
+    let g = g.to_str().unwrap();
+    for (how, args) in [
+        ("in one process", vec!["run", "--graph", g]),
+        ("across processes", vec!["launch", g, "--processes"]),
+    ] {
+        let out = dir.path().join(how.replace(' ', "-"));
+        let o = ratelab(
+            &[
+                &args[..],
+                &["--clock", "virtual", "--duration", "1"],
+                &["--out", out.to_str().unwrap()],
+            ]
+            .concat(),
+        );
+        assert!(o.status.success(), "{how}: {}", stderr(&o));
+        let m: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(out.join("metrics.json")).unwrap())
+                .unwrap();
+        // (Pushed by nothing, the pole falls within a second: what counts is that every
+        // frame painted was read whole.)
+        let painted = &m["nodes"]["painter"]["ticks"];
+        assert!(painted.as_u64().unwrap() >= 5, "{how}: {m}");
+        assert_eq!(&m["topics"]["/img"]["published"], painted, "{how}: {m}");
+        assert_eq!(&m["topics"]["/action"]["published"], painted, "{how}: {m}");
+    }
+    // Pixels that are not bytes: the painter fails at its first tick, naming the field.
+    let g = graph("3.5");
+    let o = ratelab(&[
+        "run",
+        "--graph",
+        g.to_str().unwrap(),
+        "--clock",
+        "virtual",
+        "--duration",
+        "1",
+    ]);
+    let err = stderr(&o);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains("node 'painter' failed") && err.contains("field 'data' takes bytes"),
+        "{err}"
+    );
+}

@@ -81,10 +81,10 @@ impl Message for ImageMsg {
     const DOC: &'static str =
         "A camera's frame, as sensor_msgs/Image: height, width, encoding, step, data.";
     const FIELDS: &'static [Field] = &[
-        Field::new("height", "px", "rows"),
-        Field::new("width", "px", "columns"),
+        Field::integer("height", "px", "rows"),
+        Field::integer("width", "px", "columns"),
         Field::text("encoding", "pixel layout (mono8: a byte of brightness)"),
-        Field::new("step", "B", "bytes per row"),
+        Field::integer("step", "B", "bytes per row"),
         Field::bytes("data", "pixel bytes", "the pixels, row after row"),
     ];
     /// `[height, width, step]`.
@@ -112,6 +112,22 @@ impl Message for ImageMsg {
             data: ImageData::default(),
         }
     }
+    /// From `[height, width, encoding, step, data]` (as [`crate::msg::MsgType::from_values`]
+    /// checks them).
+    fn from_values(v: &[Value]) -> Self {
+        let mut img = ImageMsg::from_fields(&[
+            v.first().map_or(0.0, number),
+            v.get(1).map_or(0.0, number),
+            v.get(3).map_or(0.0, number),
+        ]);
+        if let Some(Value::Text(t)) = v.get(2) {
+            img.encoding = t.clone();
+        }
+        if let Some(Value::Bytes(b)) = v.get(4) {
+            img.data = b.clone();
+        }
+        img
+    }
     fn to_values(&self) -> Vec<Value> {
         vec![
             Value::Number(f64::from(self.height)),
@@ -120,6 +136,14 @@ impl Message for ImageMsg {
             Value::Number(f64::from(self.step)),
             Value::Bytes(self.data.clone()),
         ]
+    }
+}
+
+/// A number value's number (0 for another kind).
+fn number(v: &Value) -> f64 {
+    match v {
+        Value::Number(x) => *x,
+        _ => 0.0,
     }
 }
 
@@ -161,5 +185,17 @@ mod tests {
             .unwrap_err()
             .contains("after"));
         assert!(!ImageMsg::TYPE.is_numeric());
+        // From its values, as a Python node publishes it; a value of the wrong kind is
+        // named.
+        let again = ImageMsg::TYPE.from_values(&img.to_values()).unwrap();
+        assert_eq!(again, data);
+        let mut wrong = img.to_values();
+        wrong[2] = Value::Number(1.0);
+        let e = ImageMsg::TYPE.from_values(&wrong).unwrap_err();
+        assert!(e.contains("Image.encoding holds Text"), "{e}");
+        assert!(ImageMsg::TYPE
+            .from_values(&wrong[..4])
+            .unwrap_err()
+            .contains("5 fields"));
     }
 }

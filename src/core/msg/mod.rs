@@ -90,6 +90,9 @@ pub struct Field {
 pub enum FieldKind {
     /// A number (`f64`), in the field's unit.
     Number,
+    /// A whole number (a count of pixels or bytes): an `f64` in Rust's values (exact below
+    /// 2⁵³), an `int` in Python.
+    Integer,
     /// Text (`sensor_msgs/Image`'s `encoding`).
     Text,
     /// Bytes of any length (an image's pixels), shared between subscribers, never copied
@@ -105,6 +108,15 @@ impl Field {
             unit,
             doc,
             kind: FieldKind::Number,
+        }
+    }
+    /// A whole-number field (Python sees an `int`).
+    pub const fn integer(name: &'static str, unit: &'static str, doc: &'static str) -> Field {
+        Field {
+            name,
+            unit,
+            doc,
+            kind: FieldKind::Integer,
         }
     }
     /// A text field.
@@ -130,7 +142,7 @@ impl Field {
 /// A field's value ([`Message::to_values`]).
 #[derive(Clone, Debug, PartialEq)]
 pub enum Value {
-    /// A number field's.
+    /// A number or whole-number field's.
     Number(f64),
     /// A text field's.
     Text(String),
@@ -166,6 +178,20 @@ pub trait Message:
     fn to_values(&self) -> Vec<Value> {
         self.to_fields().into_iter().map(Value::Number).collect()
     }
+    /// A message from every field's value, in [`Message::FIELDS`] order (as many; each of
+    /// its field's kind, as [`MsgType::from_values`] checks). A type with text or bytes
+    /// fields must take them here; the default takes the numbers to
+    /// [`Message::from_fields`].
+    fn from_values(values: &[Value]) -> Self {
+        let numbers: Vec<f64> = values
+            .iter()
+            .filter_map(|v| match v {
+                Value::Number(x) => Some(*x),
+                _ => None,
+            })
+            .collect();
+        Self::from_fields(&numbers)
+    }
     /// The ROS 2 type it is offered as over `--ros2`, if any ([`RosCodec::of`] for a type
     /// that implements [`RosMapped`]). A type without one is not offered to ROS 2, and an
     /// external node cannot read or publish it.
@@ -186,6 +212,7 @@ pub struct MsgTypeInfo {
     new_topic: fn(&str, usize, TopicQos, u64, usize) -> Result<AnyTopic, ZeroDepth>,
     from_bytes: fn(&[u8]) -> Result<MsgData, String>,
     from_fields: fn(&[f64]) -> MsgData,
+    from_values: fn(&[Value]) -> MsgData,
     ros2: fn() -> Option<RosCodec>,
 }
 
@@ -200,6 +227,7 @@ impl MsgTypeInfo {
             new_topic: new_topic::<M>,
             from_bytes: from_bytes::<M>,
             from_fields: from_fields::<M>,
+            from_values: from_values::<M>,
             ros2: M::ros2,
         }
     }
@@ -231,6 +259,10 @@ fn new_topic<M: Message>(
 
 fn from_fields<M: Message>(f: &[f64]) -> MsgData {
     MsgData::new(M::from_fields(f))
+}
+
+fn from_values<M: Message>(v: &[Value]) -> MsgData {
+    MsgData::new(M::from_values(v))
 }
 
 fn from_bytes<M: Message>(bytes: &[u8]) -> Result<MsgData, String> {
@@ -272,7 +304,10 @@ impl MsgType {
     /// Are all its fields numbers (what a Python node's tuples and a ROS 2 bridge without a
     /// mapping of their own can carry)?
     pub fn is_numeric(self) -> bool {
-        self.0.fields.iter().all(|f| f.kind == FieldKind::Number)
+        self.0
+            .fields
+            .iter()
+            .all(|f| matches!(f.kind, FieldKind::Number | FieldKind::Integer))
     }
     /// Its ROS 2 mapping, if it has one.
     pub fn ros2(self) -> Option<RosCodec> {
@@ -294,6 +329,38 @@ impl MsgType {
         let mut f = fields.to_vec();
         f.resize(self.0.fields.len(), 0.0);
         (self.0.from_fields)(&f)
+    }
+    /// A payload of this type from every field's value, in order.
+    ///
+    /// # Errors
+    /// One line naming the field: too few or too many values, or a value of another kind
+    /// than its field's (a number for `encoding`).
+    pub fn from_values(self, values: &[Value]) -> Result<MsgData, String> {
+        let fields = self.0.fields;
+        if values.len() != fields.len() {
+            return Err(format!(
+                "{} has {} fields, not {}",
+                self.0.class,
+                fields.len(),
+                values.len()
+            ));
+        }
+        for (f, v) in fields.iter().zip(values) {
+            let fits = matches!(
+                (f.kind, v),
+                (FieldKind::Number, Value::Number(_))
+                    | (FieldKind::Integer, Value::Number(_))
+                    | (FieldKind::Text, Value::Text(_))
+                    | (FieldKind::Bytes, Value::Bytes(_))
+            );
+            if !fits {
+                return Err(format!(
+                    "{}.{} holds {:?}, not {v:?}",
+                    self.0.class, f.name, f.kind
+                ));
+            }
+        }
+        Ok((self.0.from_values)(values))
     }
     /// The registered type named `name`.
     pub fn named(name: &str) -> Option<MsgType> {
@@ -514,7 +581,7 @@ pub fn types_table() -> String {
             .fields()
             .iter()
             .map(|f| match f.kind {
-                FieldKind::Number => format!("`{}` ({})", f.name, f.unit),
+                FieldKind::Number | FieldKind::Integer => format!("`{}` ({})", f.name, f.unit),
                 FieldKind::Text => format!("`{}` (text)", f.name),
                 FieldKind::Bytes => format!("`{}` (bytes: {})", f.name, f.unit),
             })

@@ -24,21 +24,6 @@ pub fn def() -> KindDef {
             let code = cx
                 .python
                 .ok_or_else(|| format!("python node '{}' names no script", cx.name))?;
-            // A Python node's messages are tuples of numbers (for now): a type with text
-            // or bytes fields (an image) is refused, by name.
-            if let Some(t) = cx
-                .inputs
-                .iter()
-                .chain(cx.outputs)
-                .find(|t| !t.msg_type().is_numeric())
-            {
-                return Err(format!(
-                    "python node '{}': topic {} carries '{}', whose text or bytes fields a Python node cannot read or publish yet (only numbers)",
-                    cx.name,
-                    t.name(),
-                    t.msg_type()
-                ));
-            }
             crate::interpreter::installed()?.node(cx, code)
         }),
     }
