@@ -291,6 +291,8 @@ fn handle_signals() {
                 std::process::exit(i32::from(EXIT_INTERRUPTED));
             };
             if interrupted.is_stopped() {
+                // A terminal left in raw mode (`top`'s keys) is given back first.
+                let _ = crossterm::terminal::disable_raw_mode();
                 if say {
                     eprintln!(
                         "ratelab: interrupted again: exiting at once, without a summary or files"

@@ -95,6 +95,7 @@ pub fn run_top(a: &TopArgs, stop: StopFlag) -> anyhow::Result<()> {
         }
         if !a.once && !ended.is_empty() && seen.is_empty() {
             let graphs: Vec<&str> = ended.iter().map(String::as_str).collect();
+            drop(keys); // the terminal given back first: the line starts at its start
             println!(
                 "ratelab top: the launch of graph '{}' ended",
                 graphs.join("', '")
@@ -145,7 +146,7 @@ pub fn run_top(a: &TopArgs, stop: StopFlag) -> anyhow::Result<()> {
             let mut text = paging.frame(build_table(&seen, &alive, &graphs), keys.is_some());
             if seen.is_empty() {
                 text.push_str(&format!(
-                    "(waiting for a graph at {})\n",
+                    "\n(waiting for a graph at {})\n",
                     a.connect.join(", ")
                 ));
             }
@@ -718,7 +719,7 @@ fn build_table(
             TopicLine {
                 msg_per_s: rate,
                 published: counts.map(|c| c[0]),
-                trouble: counts.map(|c| c[1] + c[2]),
+                trouble: counts.map(|c| c[1].saturating_add(c[2])),
                 line: line.trim_end().to_string(),
                 name,
             }

@@ -33,9 +33,11 @@ class ImageEstimator:
         # The camera's calibration.
         scale = min(w / 6.0, 0.7 * h / 1.1)  # px per metre
         hinge_row = 0.85 * h
-        half = 0.05 * scale  # the cart's half height, px
-        top, bottom = int(round(hinge_row - half)), min(int(round(hinge_row + half)), h)
         radius = max(0.02 * scale, 1.0)  # the pole's, px
+        half = max(0.05 * scale, radius + 2.0)  # the cart's half height, px
+        # (Rounded half away from zero, as the camera draws: Python's round() goes to even.)
+        top = int(np.floor(hinge_row - half + 0.5))
+        bottom = min(int(np.floor(hinge_row + half + 0.5)), h)
         below_pole = int(np.floor(hinge_row + radius)) + 1
         # The cart: its shade's columns in the rows the pole's round end does not reach.
         cols = np.nonzero(px[max(below_pole, top):bottom] == CART_SHADE)[1]

@@ -227,17 +227,26 @@ def _as_kind(kind, value, name):
     str, `bytes` bytes (from bytes, a bytearray or a contiguous NumPy array:
     `arr.astype(np.uint8)`)."""
     if kind == "text":
-        return "" if value is None else str(value)
+        if value is None:
+            return ""
+        if not isinstance(value, str):
+            raise TypeError(f"field '{name}' takes a str, got {type(value).__name__}")
+        return value
     if kind == "integer":
         if value is None:
             return 0
-        whole = int(value)
-        if whole != value:
+        try:
+            whole = int(value)
+        except (TypeError, ValueError, OverflowError):
+            whole = None
+        if whole is None or whole != value:
             raise TypeError(f"field '{name}' takes a whole number, got {value!r}")
         return whole
     if kind == "bytes":
         if value is None:
             return b""
+        if type(value) is bytes:
+            return value  # as it came in: not copied again
         try:
             return bytes(memoryview(value))
         except (TypeError, ValueError, BufferError) as e:

@@ -1,8 +1,8 @@
 //! Where recordings go and how their files are written: the default names (the graph, the
 //! clock, the settings), the first free name in a folder, the output rule
 //! ([`crate::output`]: a temporary file moved into place, replaced only with `--force`), the
-//! reason a full disk gives, the recording id a virtual run derives from its settings, and
-//! the run's name and settings in a line.
+//! reason a full disk gives, the recording id a virtual run derives from its settings, the
+//! run's name and settings in a line, and the name of its time timeline.
 
 use super::*;
 
@@ -159,4 +159,14 @@ pub(super) fn settings_line(cfg: &RunConfig) -> String {
         cfg.seed,
         cfg.clock
     )
+}
+
+/// The name of the timeline that carries the runtime clock's time: `sim_time` for the
+/// virtual clock (simulated time, as ROS 2 calls time from `/clock`), `wall_time` for the
+/// real clock (time since the run's start on the machine's monotonic clock).
+pub fn timeline_name(clock: ClockKind) -> &'static str {
+    match clock {
+        ClockKind::Virtual => "sim_time",
+        ClockKind::Real => "wall_time",
+    }
 }

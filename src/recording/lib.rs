@@ -90,6 +90,8 @@ mod events;
 mod files;
 mod layout;
 mod live;
+pub use files::timeline_name;
+pub use live::viewer_on_path;
 mod observer;
 mod shape;
 mod style;
@@ -162,6 +164,9 @@ struct ChunkBuffer {
     extents: Extents,
     /// The events so far, for the `when` document and the marks' legends.
     events: EventList,
+    /// Steps outside the [`RecordWindow`]: rows (plots, the scene, the graph) are not
+    /// kept, events are.
+    rows_muted: bool,
 }
 
 /// (min, max) per scalar entity path.
@@ -186,16 +191,6 @@ fn widen(extents: &mut Extents, entity: &str, value: f64) {
     }
 }
 
-/// The name of the timeline that carries the runtime clock's time: `sim_time` for the
-/// virtual clock (simulated time, as ROS 2 calls time from `/clock`), `wall_time` for the
-/// real clock (time since the run's start on the machine's monotonic clock).
-pub fn timeline_name(clock: ClockKind) -> &'static str {
-    match clock {
-        ClockKind::Virtual => "sim_time",
-        ClockKind::Real => "wall_time",
-    }
-}
-
 impl ChunkBuffer {
     fn new(timeline: &'static str) -> Self {
         Self {
@@ -204,6 +199,7 @@ impl ChunkBuffer {
             scalars: BTreeMap::new(),
             extents: Extents::new(),
             events: EventList::default(),
+            rows_muted: false,
         }
     }
 
@@ -213,6 +209,9 @@ impl ChunkBuffer {
     }
 
     fn add(&mut self, entity: &str, time: &TimePoint, row: &dyn rerun::AsComponents) {
+        if self.rows_muted && entity != "events" {
+            return;
+        }
         let builder = self
             .rows
             .remove(entity)
@@ -224,6 +223,9 @@ impl ChunkBuffer {
     }
 
     fn scalar(&mut self, entity: &str, t: Nanos, step: u64, value: f64) {
+        if self.rows_muted {
+            return;
+        }
         if !self.scalars.contains_key(entity) {
             self.scalars
                 .insert(entity.to_string(), ScalarColumn::default());
@@ -488,13 +490,6 @@ fn graph_positions(shape: &GraphShape) -> (Vec<(String, [f32; 2])>, bpc::VisualB
         y_range: range(-0.6 * DY, max_y + 0.6 * DY),
     });
     (out, bounds)
-}
-
-/// A spawnable viewer on PATH?
-pub fn viewer_on_path() -> bool {
-    std::env::var_os("PATH")
-        .map(|paths| std::env::split_paths(&paths).any(|d| d.join("rerun").is_file()))
-        .unwrap_or(false)
 }
 
 impl Recording {

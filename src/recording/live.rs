@@ -1,5 +1,5 @@
 //! The live half of a `--spawn` recording: a gRPC sink to the spawned viewer that can never
-//! hold up the file.
+//! hold up the file (and whether there is a viewer on PATH to spawn).
 //!
 //! rerun's `GrpcSink` keeps retrying to connect for as long as it takes and queues at most
 //! 100 messages meanwhile; the 101st `send` then blocks. Beside a `FileSink` in one
@@ -119,4 +119,11 @@ impl LogSink for LiveSink {
     fn default_batcher_config(&self) -> ChunkBatcherConfig {
         self.shared.grpc.default_batcher_config()
     }
+}
+
+/// A spawnable viewer on PATH?
+pub fn viewer_on_path() -> bool {
+    std::env::var_os("PATH")
+        .map(|paths| std::env::split_paths(&paths).any(|d| d.join("rerun").is_file()))
+        .unwrap_or(false)
 }

@@ -73,43 +73,34 @@ impl RecordingObserver {
         }
     }
 
-    /// With a [`RecordWindow`]: is step `s` outside it (a fall is recorded wherever it
-    /// is)? At the window's first step and the first after it, an event says so.
-    fn outside_window(&mut self, buf: &mut ChunkBuffer, s: &StepRecord) -> bool {
+    /// With a [`RecordWindow`]: (does step `s` enter it, is it outside it)? A fall is
+    /// recorded wherever it is. At the window's first step and the first after it, an
+    /// event says so.
+    fn window_edge(&mut self, buf: &mut ChunkBuffer, s: &StepRecord) -> (bool, bool) {
         let Some(w) = self.rec.window() else {
-            return false;
+            return (false, false);
         };
         let inside = w.contains(s.t) || s.fell;
-        if inside != self.in_window {
-            let text = if inside {
-                format!(
-                    "recording from here: the plots hold {} (--record-window)",
-                    w.describe()
-                )
-            } else {
-                format!("recording stops here: the plots hold {} (--record-window); the events go on to the end", w.describe())
-            };
-            buf.event(
-                s.t,
-                s.step,
-                None,
-                &text,
-                rerun::components::TextLogLevel::INFO,
-            );
-            self.in_window = inside;
+        if inside == self.in_window {
+            return (false, !inside);
         }
-        !inside
-    }
-
-    /// A step outside the window: no rows, only what the rows after it need (the commands
-    /// seen, the counts the msg/s and the end's totals start from).
-    fn pass_over(&mut self, s: &StepRecord) {
-        if let Some(commands) = &self.shape.commands {
-            if let Some(m) = commands.peek_from(self.next_command).last() {
-                self.next_command = m.seq + 1;
-            }
-        }
-        self.note_published(s);
+        let text = if inside {
+            format!(
+                "recording from here: the plots hold {} (--record-window)",
+                w.describe()
+            )
+        } else {
+            format!("recording stops here: the plots hold {} (--record-window); the events go on to the end", w.describe())
+        };
+        buf.event(
+            s.t,
+            s.step,
+            None,
+            &text,
+            rerun::components::TextLogLevel::INFO,
+        );
+        self.in_window = inside;
+        (inside, !inside)
     }
 
     /// Each topic's counters at step `s`: into the last second's window (msg/s) and the
@@ -436,18 +427,17 @@ impl StepObserver for RecordingObserver {
         let rec = self.rec.clone();
         let mut buf = rec.lock();
         rec.log_due_events(&mut buf, s.t, s.step);
-        if self.outside_window(&mut buf, s) {
-            self.pass_over(s);
-            if s.step % FLUSH_EVERY_STEPS == 0 {
-                buf.send(&rec.rec);
-            }
-            return;
-        }
+        // Outside the window the step goes through as any other, its rows muted: the
+        // events (changes, deadlines, liveliness) are recorded all the same.
+        let (entering, outside) = self.window_edge(&mut buf, s);
+        buf.rows_muted = outside;
         let time = buf.at(s.t, s.step);
         let state = self.shape.state();
-        if self.last_state.as_ref() != Some(&state) {
+        let changed = self.last_state.as_ref() != Some(&state);
+        // Entering the window: the graph as it is now, whether or not it changed.
+        if changed || entering {
             // A change mid-run (the first state is the start's, an event of its own).
-            if let Some(old) = &self.last_state {
+            if let (Some(old), true) = (&self.last_state, changed) {
                 let text = self.describe_change(old, &state);
                 buf.event(
                     s.t,
@@ -490,6 +480,7 @@ impl StepObserver for RecordingObserver {
             reference_lines(&mut buf, s.t, s.step);
             buf.send(&rec.rec);
         }
+        buf.rows_muted = false;
     }
 }
 

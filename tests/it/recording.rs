@@ -29,11 +29,22 @@ fn record_with(
     stop: Option<StopFlag>,
     commands: Vec<TimedCommand>,
 ) -> ratelab::metrics::Metrics {
+    record_with_options(path, cfg, stop, commands, &RecordOptions::default())
+}
+
+/// [`record_with`] with these options (a window).
+fn record_with_options(
+    path: &Path,
+    cfg: &RunConfig,
+    stop: Option<StopFlag>,
+    commands: Vec<TimedCommand>,
+    options: &RecordOptions,
+) -> ratelab::metrics::Metrics {
     let (rec, _) = Recording::create(
         path,
         cfg,
         "scripted balancer (built-in, checkpoint-free)",
-        &RecordOptions::default(),
+        options,
     )
     .unwrap();
     let ticks = rec.clone();
@@ -1659,4 +1670,48 @@ fn a_record_window_keeps_the_plots_of_that_span_and_says_so() {
         assert_eq!(o.status.code(), Some(2), "{args:?}: {err}");
         assert!(err.contains(says), "{args:?}: {err}");
     }
+}
+
+/// Outside a record window the events are recorded all the same (a change before the
+/// window, a change inside it); the plots keep to it.
+#[test]
+fn a_record_window_keeps_the_events_outside_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("window-events.rrd");
+    let at = |s: u64, command| TimedCommand {
+        at_ns: s * 1_000_000_000,
+        command,
+    };
+    record_with_options(
+        &path,
+        &RunConfig {
+            duration: ratelab::Nanos(8_000_000_000),
+            ..virtual_cfg()
+        },
+        None,
+        vec![
+            at(3, Command::SetQueueDepth { depth: 5 }),
+            at(5, Command::SetQueueDepth { depth: 2 }),
+        ],
+        &RecordOptions {
+            window: Some(ratelab::recording::RecordWindow::parse("4:6").unwrap()),
+            ..RecordOptions::default()
+        },
+    );
+    let events = events_with_times(&path);
+    let when = |needle: &str| {
+        events
+            .iter()
+            .find(|(_, _, e)| e.contains(needle))
+            .unwrap_or_else(|| panic!("no event '{needle}': {events:?}"))
+            .0
+    };
+    assert_eq!(when("/obs depth 1 → 5"), 3_000_000_000);
+    assert_eq!(when("/obs depth 5 → 2"), 5_000_000_000);
+    let all = chunks(&path);
+    let angle = sim_series(&all, "/plant/pole_angle_rad");
+    assert!(!angle.is_empty());
+    assert!(angle
+        .iter()
+        .all(|(t, _)| (4_000_000_000..=6_000_000_000).contains(t)));
 }

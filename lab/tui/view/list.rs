@@ -277,8 +277,8 @@ fn list_rows(v: &View, w: usize) -> Vec<(String, Style, bool)> {
     rows
 }
 
-/// The list zoom: the nodes, then the topics, a row each with its figures, scrolled (and
-/// moved to the selection); the headings stay.
+/// The list zoom: a heading and the nodes, then a heading and the topics, a row each with
+/// its figures, scrolled as one list (and moved to the selection).
 pub(super) fn render_list(v: &View, area: Rect, buf: &mut Buffer) {
     let room = usize::from(area.width.saturating_sub(2));
     let title = match &v.nav.filter {

@@ -66,9 +66,9 @@ pub const MAX_MSG_TYPES: usize = 32;
 /// The most fields a message type may have.
 pub const MAX_FIELDS: usize = 64;
 /// The most bytes a message may take on the wire (postcard): a sample between processes
-/// ([`crate::limits::MAX_SAMPLE_BYTES`], 64 MiB: a camera's frame, a point cloud); larger
-/// payloads are refused when they arrive and never sent.
-pub const MAX_PAYLOAD_BYTES: usize = crate::limits::MAX_SAMPLE_BYTES;
+/// ([`crate::limits::MAX_SAMPLE_BYTES`], 64 MiB: a camera's frame, a point cloud) less room
+/// for the sample's own header; a larger payload is refused where it arrives.
+pub const MAX_PAYLOAD_BYTES: usize = crate::limits::MAX_SAMPLE_BYTES - 4096;
 
 /// One field of a message type: a name (a Python identifier, in SI units by convention:
 /// `cart_pos_m`), its unit as shown (`m`, `rad/s`, `N`, `1` for a pure number), a few
@@ -183,13 +183,19 @@ pub trait Message:
     /// fields must take them here; the default takes the numbers to
     /// [`Message::from_fields`].
     fn from_values(values: &[Value]) -> Self {
-        let numbers: Vec<f64> = values
+        let mut numbers: Vec<f64> = values
             .iter()
             .filter_map(|v| match v {
                 Value::Number(x) => Some(*x),
                 _ => None,
             })
             .collect();
+        // As many as the type has number fields, whatever was given.
+        let count = Self::FIELDS
+            .iter()
+            .filter(|f| matches!(f.kind, FieldKind::Number | FieldKind::Integer))
+            .count();
+        numbers.resize(count, 0.0);
         Self::from_fields(&numbers)
     }
     /// The ROS 2 type it is offered as over `--ros2`, if any ([`RosCodec::of`] for a type
@@ -1332,7 +1338,9 @@ mod tests {
             StateMsg::TYPE.decode(&bytes).is_err(),
             "too short for a state"
         );
-        assert!(ForceMsg::TYPE.decode(&[0; MAX_PAYLOAD_BYTES + 1]).is_err());
+        assert!(ForceMsg::TYPE
+            .decode(&vec![0; MAX_PAYLOAD_BYTES + 1])
+            .is_err());
         let s = MsgData::new([0.5f32, 1.0, 0.0, 1.0, -2.0]);
         assert_eq!(StateMsg::TYPE.decode(&s.to_bytes()), Ok(s));
     }

@@ -103,9 +103,11 @@ impl FrameGeometry {
         (POLE_RADIUS_M * self.scale).max(1.0)
     }
 
-    /// The rows the cart's box covers, px from the top (end excluded).
+    /// The rows the cart's box covers, px from the top (end excluded): its height, and in a
+    /// small frame at least the pole's radius and two rows more below the hinge (so that
+    /// the rows under the pole's round end show the cart alone).
     pub fn cart_rows(&self) -> std::ops::Range<usize> {
-        let half = CART_HALF_M.1 * self.scale;
+        let half = (CART_HALF_M.1 * self.scale).max(self.pole_radius_px() + 2.0);
         let lo = (self.hinge_row - half).round().max(0.0) as usize;
         let hi = ((self.hinge_row + half).round().max(0.0) as usize).min(self.height as usize);
         lo..hi
@@ -124,7 +126,7 @@ impl FrameGeometry {
         let s = self.scale;
         let (rail, cart, pole) = SHADES;
         // The rail: a row under the cart.
-        let rail_row = (self.hinge_row + CART_HALF_M.1 * s).round() as usize + 1;
+        let rail_row = self.cart_rows().end + 1;
         if rail_row < h {
             px[rail_row * w..(rail_row + 1) * w].fill(rail);
         }

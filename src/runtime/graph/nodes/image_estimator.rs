@@ -145,7 +145,7 @@ mod tests {
 
     #[test]
     fn what_the_camera_draws_the_estimator_measures_to_a_fraction_of_a_pixel() {
-        for (w, h) in [(640, 480), (320, 240), (1024, 1024)] {
+        for (w, h) in [(640, 480), (320, 240), (1024, 1024), (160, 120)] {
             let g = FrameGeometry::new(w, h);
             for (x, th) in [
                 (0.0, 0.0),
