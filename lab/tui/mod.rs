@@ -481,14 +481,20 @@ mod tests {
         }
     }
 
-    #[test]
-    fn a_200_node_graph_shows_what_fits_and_counts_the_rest() {
+    /// A lab's settings with a generated graph of `nodes` nodes in one process.
+    fn synthetic_cfg(nodes: usize) -> RunConfig {
         let mut cfg = graph_cfg("graphs/cartpole.toml", 2);
         cfg.graph = ratelab::graph::GraphSpec::parse(
-            &ratelab::graph::synthetic::graph_toml(200, 1),
+            &ratelab::graph::synthetic::graph_toml(nodes, 1),
             "synthetic",
         )
         .unwrap();
+        cfg
+    }
+
+    #[test]
+    fn a_200_node_graph_shows_what_fits_and_counts_the_rest() {
+        let cfg = synthetic_cfg(200);
         let (app, _rx) = app_after(cfg, false);
         for (w, h) in [(80, 24), (120, 40)] {
             let text = render(&app, w, h);
@@ -506,12 +512,7 @@ mod tests {
     /// trouble, at both sizes.
     #[test]
     fn a_200_node_graph_zooms_scrolls_and_filters() {
-        let mut cfg = graph_cfg("graphs/cartpole.toml", 2);
-        cfg.graph = ratelab::graph::GraphSpec::parse(
-            &ratelab::graph::synthetic::graph_toml(200, 1),
-            "synthetic",
-        )
-        .unwrap();
+        let cfg = synthetic_cfg(200);
         let (mut app, _rx) = app_after(cfg, false);
         // Scrolled three rows: every long column counts what is above and below.
         for _ in 0..3 {
@@ -583,12 +584,7 @@ mod tests {
     /// Tab selects only what the filter shows, and the list keeps the selection in view.
     #[test]
     fn tab_selects_among_what_the_filter_shows() {
-        let mut cfg = graph_cfg("graphs/cartpole.toml", 2);
-        cfg.graph = ratelab::graph::GraphSpec::parse(
-            &ratelab::graph::synthetic::graph_toml(200, 1),
-            "synthetic",
-        )
-        .unwrap();
+        let cfg = synthetic_cfg(200);
         let (mut app, _rx) = app_after(cfg, false);
         app.on_msg(Msg::Filter);
         for c in "@robot".chars() {
