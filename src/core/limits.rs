@@ -18,6 +18,7 @@
 //! | [`MAX_PROCESSES`] | 256 | the processes of one launch |
 //! | [`MAX_SAMPLE_BYTES`] | 64 MiB | one message between processes, encoded |
 //! | [`MAX_CONTROL_BYTES`] | 64 MiB | one control message between a launch's processes |
+//! | [`MAX_ROS_MESSAGE_BYTES`] | 64 MiB | one message from ROS 2 (CDR), before it is decoded |
 //! | [`MAX_DURATION_S`] | 10 years | a run's length, in whole nanoseconds |
 
 /// The most nodes a graph may have: 65 536. A node costs its scheduler entry, its queues
@@ -50,6 +51,12 @@ pub const MAX_PROCESSES: usize = 256;
 /// The largest message one process sends another, encoded: 64 MiB (a 4K RGB image is
 /// 25 MB). A larger sample is refused by the receiver before it is decoded.
 pub const MAX_SAMPLE_BYTES: usize = 64 << 20;
+
+/// The largest message accepted from ROS 2 (CDR with its encapsulation header), checked
+/// before it is decoded: 64 MiB, as [`MAX_SAMPLE_BYTES`] (a cartpole message is under 200
+/// bytes, a camera's `sensor_msgs/msg/Image` megabytes). A sequence inside it is read only
+/// as far as its bytes go, so a hostile length cannot allocate more than the message holds.
+pub const MAX_ROS_MESSAGE_BYTES: usize = MAX_SAMPLE_BYTES;
 
 /// The largest control message between a launch's processes, encoded: 64 MiB. Control
 /// messages are JSON; the largest carry a graph file (at most [`MAX_GRAPH_FILE_BYTES`],

@@ -9,6 +9,7 @@
 //! | state    | `sensor_msgs/msg/JointState` | `name = [slider, hinge]`; `position` = [cart m, pole rad]; `velocity` = [cart m/s, pole rad/s]; `effort` empty |
 //! | position | `sensor_msgs/msg/JointState` | `name = [slider, hinge]`; `position` = [cart m, pole rad]; `velocity`, `effort` empty |
 //! | force    | `std_msgs/msg/Float64`       | `data` = force on the cart, N                                 |
+//! | image    | `sensor_msgs/msg/Image`      | `height`, `width` px; `encoding`; `is_bigendian` = 0; `step` B; `data` = the pixels |
 //! | (clock)  | `rosgraph_msgs/msg/Clock`    | `clock` = run time (`builtin_interfaces/msg/Time`)            |
 //!
 //! The joint names are the MuJoCo model's (`src/assets/cartpole.xml`). The state's pole
@@ -17,11 +18,16 @@
 //! time `/clock` gives ROS 2 nodes with `use_sim_time`. The force is a plain `Float64`
 //! rather than `geometry_msgs/msg/Wrench`: the chapter's action is one number along the
 //! rail, and a `Wrench` would carry five zeros with it.
+//! An image's pixels are written and read as one run of bytes (a `uint8` sequence is its
+//! length and its bytes in CDR); one from ROS 2 must be whole (`step × height` bytes) and
+//! little-endian (`is_bigendian` 0: ratelab's image has no byte order of its own).
 //!
 //! Encoding: CDR little endian after the 4-byte encapsulation header `00 01 00 00`
 //! (`CDR_LE`), as rmw_zenoh sends, by `hiroz-cdr`. The type hashes come from
 //! `hiroz-schema`'s RIHS01 (the tests check them against `rosbags`' `hash_rihs01`).
 
+use crate::limits::{self, MAX_ROS_MESSAGE_BYTES};
+use crate::msg::ImageData;
 use crate::time::Nanos;
 use hiroz_schema::{
     FieldDescription, FieldTypeDescription, TypeDescription, TypeDescriptionMsg, TypeHash, TypeId,
@@ -78,6 +84,7 @@ const FLOAT64: &str = "std_msgs/msg/Float64";
 const CLOCK: &str = "rosgraph_msgs/msg/Clock";
 const TIME: &str = "builtin_interfaces/msg/Time";
 const HEADER: &str = "std_msgs/msg/Header";
+const IMAGE: &str = "sensor_msgs/msg/Image";
 
 fn field(name: &str, field_type: FieldTypeDescription) -> FieldDescription {
     FieldDescription {
@@ -133,6 +140,33 @@ pub fn joint_state_type() -> &'static RosType {
                 field("position", seq(TypeId::FLOAT64)),
                 field("velocity", seq(TypeId::FLOAT64)),
                 field("effort", seq(TypeId::FLOAT64)),
+            ],
+            vec![header(), time()],
+        )
+    })
+}
+
+/// `sensor_msgs/msg/Image`: the type the image message is offered as.
+pub fn image_type() -> &'static RosType {
+    static IMG: OnceLock<RosType> = OnceLock::new();
+    IMG.get_or_init(|| {
+        let one = FieldTypeDescription::primitive;
+        RosType::new(
+            IMAGE,
+            vec![
+                field(
+                    "header",
+                    FieldTypeDescription::nested(TypeId::NESTED_TYPE, HEADER),
+                ),
+                field("height", one(TypeId::UINT32)),
+                field("width", one(TypeId::UINT32)),
+                field("encoding", one(TypeId::STRING)),
+                field("is_bigendian", one(TypeId::UINT8)),
+                field("step", one(TypeId::UINT32)),
+                field(
+                    "data",
+                    one(TypeId::UINT8 + TypeId::UNBOUNDED_SEQUENCE_OFFSET),
+                ),
             ],
             vec![header(), time()],
         )
@@ -260,6 +294,26 @@ impl JointState {
     }
 }
 
+/// `sensor_msgs/msg/Image`. A field missing from a dict reads as zero or empty.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct Image {
+    /// The stamp.
+    pub header: Header,
+    /// Rows, px.
+    pub height: u32,
+    /// Columns, px.
+    pub width: u32,
+    /// The pixel layout, as ROS 2 names it (`mono8`, `rgb8`, …).
+    pub encoding: String,
+    /// 1 when a pixel's multi-byte values are big-endian; ratelab writes 0.
+    pub is_bigendian: u8,
+    /// Bytes per row.
+    pub step: u32,
+    /// The pixels, row after row: `step × height` bytes (one run of bytes in CDR).
+    pub data: ImageData,
+}
+
 /// `std_msgs/msg/Float64`.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Float64 {
@@ -284,19 +338,16 @@ pub fn cdr<T: Serialize>(value: &T, out: &mut Vec<u8>) {
     let _ = value.serialize(&mut ser);
 }
 
-/// The most bytes a message from ROS 2 may have: a cartpole message is under 200.
-pub const MAX_INBOUND_BYTES: usize = 4096;
-
 /// A `T` from CDR with its encapsulation header (`CDR_LE` only), within
-/// [`MAX_INBOUND_BYTES`], with nothing after it but CDR's padding.
+/// [`crate::limits::MAX_ROS_MESSAGE_BYTES`], with nothing after it but CDR's padding.
 ///
 /// # Errors
 /// One line: too long, not CDR_LE, not valid CDR of `T`, or bytes after it.
 pub fn from_cdr<'de, T: Deserialize<'de>>(bytes: &'de [u8]) -> Result<T, String> {
-    if bytes.len() > MAX_INBOUND_BYTES {
-        return Err(format!(
-            "{} bytes (at most {MAX_INBOUND_BYTES})",
-            bytes.len()
+    if bytes.len() > MAX_ROS_MESSAGE_BYTES {
+        return Err(limits::refusal(
+            format_args!("{} bytes, at most {MAX_ROS_MESSAGE_BYTES}", bytes.len()),
+            "MAX_ROS_MESSAGE_BYTES",
         ));
     }
     let body = match bytes {
@@ -381,7 +432,7 @@ mod tests {
         assert!(dec(ForceMsg::TYPE, &[0, 1])
             .unwrap_err()
             .contains("shorter than the 4-byte encapsulation header"));
-        let big = vec![0u8; MAX_INBOUND_BYTES + 1];
+        let big = vec![0u8; MAX_ROS_MESSAGE_BYTES + 1];
         assert!(dec(ForceMsg::TYPE, &big).unwrap_err().contains("at most"));
         // A sequence claiming 2^32-1 names in a few bytes: refused, not allocated.
         let mut js = vec![0, 1, 0, 0];
@@ -420,6 +471,10 @@ mod tests {
         assert_eq!(
             float64_type().hash.to_rihs_string(),
             "RIHS01_705ba9c3d1a09df43737eb67095534de36fd426c0587779bda2bc51fe790182a"
+        );
+        assert_eq!(
+            image_type().hash.to_rihs_string(),
+            "RIHS01_d31d41a9a4c4bc8eae9be757b0beed306564f7526c88ea6a4588fb9582527d47"
         );
         assert_eq!(
             joint_state_type().dds_name(),

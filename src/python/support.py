@@ -371,7 +371,36 @@ class Force(_Msg):
         return cls(float(_ros_field(msg, "data")))
 
 
-MESSAGE_TYPES = {"state": State, "position": Position, "force": Force}
+class Image(_Msg):
+    """A camera's frame: height and width px, encoding (`mono8`: a byte of brightness a
+    pixel), step (bytes per row), data (the pixels, row after row, as bytes:
+    `np.frombuffer(img.data, np.uint8).reshape(img.height, img.step)`). ROS 2:
+    `sensor_msgs/msg/Image` (little-endian pixels)."""
+
+    __slots__ = ("height", "width", "encoding", "step", "data")
+    FIELDS = __slots__
+    KINDS = ("integer", "integer", "text", "integer", "bytes")
+    ROS_TYPE = "sensor_msgs/msg/Image"
+
+    def to_ros(self):
+        return {"height": self.height, "width": self.width, "encoding": self.encoding,
+                "is_bigendian": 0, "step": self.step, "data": self.data}
+
+    @classmethod
+    def from_ros(cls, msg):
+        if int(_ros_field(msg, "is_bigendian")) != 0:
+            raise ValueError("an Image with big-endian pixels (is_bigendian 1): ratelab "
+                             "reads little-endian ones")
+        img = cls(int(_ros_field(msg, "height")), int(_ros_field(msg, "width")),
+                  str(_ros_field(msg, "encoding")), int(_ros_field(msg, "step")),
+                  _ros_field(msg, "data"))
+        if img.step < img.width or len(img.data) != img.step * img.height:
+            raise ValueError(f"an Image of {len(img.data)} bytes, not step × height = "
+                             f"{img.step} × {img.height} (step at least width {img.width})")
+        return img
+
+
+MESSAGE_TYPES = {"state": State, "position": Position, "force": Force, "image": Image}
 
 
 class Time:
@@ -624,10 +653,9 @@ def install_message_module(registry):
 
     `registry` is ratelab's message registry (src/core/msg/mod.rs), the one definition of every
     message type: [(name, class, doc, [(field, unit, doc, kind), ...], ros_type or None),
-    ...], each field's kind `number`, `integer`, `text` or `bytes`. The built-in types' classes are
-    written above (with their ROS 2 conversions) and must match it; a type a Rust program
-    registered (or a built-in one of text or bytes, as `image`) gets a class made from its
-    fields."""
+    ...], each field's kind `number`, `integer`, `text` or `bytes`. The built-in types'
+    classes are written above (with their ROS 2 conversions) and must match it; a type a Rust
+    program registered gets a class made from its fields."""
     for name, class_name, doc, fields, ros_type in registry:
         names = tuple(f for f, _, _, _ in fields)
         kinds = tuple(k for _, _, _, k in fields)

@@ -6,15 +6,17 @@
 //! The types known here: ratelab's own (`sensor_msgs/msg/JointState`, `std_msgs/msg/Float64`,
 //! `rosgraph_msgs/msg/Clock`) and common ROS 2 ones (`std_msgs` String, Bool, Int32, Int64,
 //! Float32, Header; `builtin_interfaces` Time, Duration; `geometry_msgs` Vector3, Point,
-//! Quaternion, Pose, Twist; `sensor_msgs/msg/Imu`). A message is decoded only when its
-//! type's name **and** hash are one of these (a type of the same name but another
+//! Quaternion, Pose, Twist; `sensor_msgs/msg/Imu`, `sensor_msgs/msg/Image`). A message is
+//! decoded only when its type's name **and** hash are one of these (a type of the same name but another
 //! definition is not guessed at); any other is said by name, hash and byte length.
 //!
 //! Decoding walks the description with serde over `hiroz-cdr`'s CDR deserializer (no CDR
 //! is read here by hand), bounded: a payload over [`MAX_PAYLOAD_BYTES`] is not decoded, a
 //! sequence longer than the bytes left is refused, nesting is the descriptions' own (at
 //! most [`MAX_DEPTH`]). `serde_yaml` escapes a string's control characters, so no payload
-//! reaches the terminal raw.
+//! reaches the terminal raw. As ros2cli's default `--truncate-length`, a list or a string
+//! longer than [`TRUNCATE_LENGTH`] is cut there and ends in `...` (an image's pixels are
+//! read through, never held).
 
 use hiroz_schema::{
     FieldDescription, FieldTypeDescription, TypeDescription, TypeDescriptionMsg, TypeHash, TypeId,
@@ -26,6 +28,10 @@ use std::sync::OnceLock;
 
 /// The largest payload decoded (bytes): a larger one is said by its length alone.
 pub const MAX_PAYLOAD_BYTES: usize = 64 * 1024 * 1024;
+
+/// Lists and strings longer than this are cut to it, followed by `'...'` (a list's last
+/// item) or `...` (a string's end): ros2cli's `topic echo` default (`--truncate-length`).
+pub const TRUNCATE_LENGTH: usize = 128;
 
 /// The deepest nesting of types walked (a described type nests at most 3).
 pub const MAX_DEPTH: usize = 16;
@@ -151,6 +157,18 @@ fn own_descriptions() -> Vec<TypeDescription> {
                 field("position", seq(T::FLOAT64)),
                 field("velocity", seq(T::FLOAT64)),
                 field("effort", seq(T::FLOAT64)),
+            ],
+        ),
+        describe(
+            "sensor_msgs/msg/Image",
+            vec![
+                nested("header", "std_msgs/msg/Header"),
+                prim("height", T::UINT32),
+                prim("width", T::UINT32),
+                prim("encoding", T::STRING),
+                prim("is_bigendian", T::UINT8),
+                prim("step", T::UINT32),
+                field("data", seq(T::UINT8)),
             ],
         ),
         describe(
@@ -394,7 +412,7 @@ impl<'de> DeserializeSeed<'de> for One<'_> {
             T::FLOAT32 => Value::Float(f32::deserialize(d)?.into()),
             T::FLOAT64 => Value::Float(f64::deserialize(d)?),
             T::BOOL => Value::Bool(bool::deserialize(d)?),
-            T::STRING | T::BOUNDED_STRING => Value::Str(String::deserialize(d)?),
+            T::STRING | T::BOUNDED_STRING => Value::Str(truncated(String::deserialize(d)?)),
             other => return Err(D::Error::custom(format!("type id {other} not decoded"))),
         })
     }
@@ -413,17 +431,32 @@ impl<'de> Visitor<'de> for ListVisitor<'_> {
         if n > budget {
             return Err(A::Error::custom("a sequence longer than the message"));
         }
-        let mut out = Vec::with_capacity(n);
-        while out.len() < budget {
+        let mut out = Vec::with_capacity(n.min(TRUNCATE_LENGTH + 1));
+        let mut seen = 0;
+        while seen < budget {
             match seq.next_element_seed(self.0)? {
-                Some(v) => out.push(v),
+                // Past the truncation, elements are read (the bytes must be valid) but not kept.
+                Some(v) if seen < TRUNCATE_LENGTH => out.push(v),
+                Some(_) => {}
                 None => break,
             }
-            if self.1.is_some_and(|n| out.len() == n) {
+            seen += 1;
+            if self.1.is_some_and(|n| seen == n) {
                 break;
             }
         }
+        if seen > TRUNCATE_LENGTH {
+            out.push(Value::Str("...".into()));
+        }
         Ok(Value::List(out))
+    }
+}
+
+/// `s` cut to [`TRUNCATE_LENGTH`] characters and `...`, when longer.
+fn truncated(s: String) -> String {
+    match s.char_indices().nth(TRUNCATE_LENGTH) {
+        Some((at, _)) => format!("{}...", &s[..at]),
+        None => s,
     }
 }
 
@@ -472,6 +505,7 @@ mod tests {
             ratelab_core::ros_types::joint_state_type(),
             ratelab_core::ros_types::float64_type(),
             ratelab_core::ros_types::clock_type(),
+            ratelab_core::ros_types::image_type(),
         ] {
             assert_eq!(known()[t.name].hash, t.hash, "{}", t.name);
         }
@@ -492,6 +526,43 @@ mod tests {
             yaml(&v),
             "header:\n  stamp:\n    sec: 1\n    nanosec: 500000000\n  frame_id: ''\nname:\n- slider\n- hinge\nposition:\n- 0.25\n- -0.5\nvelocity:\n- 1.0\n- 0.0\neffort: []\n"
         );
+    }
+
+    #[test]
+    fn an_image_echoes_with_its_pixels_and_long_strings_cut_as_ros2cli_cuts_them() {
+        use ratelab_core::ros_types::{Header, Image, Time};
+        let img = Image {
+            header: Header {
+                stamp: Time { sec: 2, nanosec: 0 },
+                frame_id: "é".repeat(130),
+            },
+            height: 2,
+            width: 100,
+            encoding: "mono8".into(),
+            is_bigendian: 0,
+            step: 100,
+            data: (0..200u8).collect::<Vec<u8>>().into(),
+        };
+        let mut bytes = Vec::new();
+        cdr(&img, &mut bytes);
+        let t = ratelab_core::ros_types::image_type();
+        let text = yaml(&decode(t.name, &t.hash.to_rihs_string(), &bytes).unwrap());
+        let pixels: String = (0..128).map(|i| format!("- {i}\n")).collect();
+        assert_eq!(
+            text,
+            format!(
+                "header:\n  stamp:\n    sec: 2\n    nanosec: 0\n  frame_id: {}...\nheight: 2\nwidth: 100\nencoding: mono8\nis_bigendian: 0\nstep: 100\ndata:\n{pixels}- '...'\n",
+                "é".repeat(128)
+            )
+        );
+        // A list of exactly the length is whole.
+        let img = Image {
+            data: vec![7; 128].into(),
+            ..img
+        };
+        cdr(&img, &mut bytes);
+        let text = yaml(&decode(t.name, &t.hash.to_rihs_string(), &bytes).unwrap());
+        assert!(text.ends_with("- 7\n") && !text.contains("'...'"), "{text}");
     }
 
     #[test]

@@ -379,6 +379,92 @@ fn a_second_clock_a_bad_domain_and_names_ros_2_refuses_are_said_in_one_line() {
     }
 }
 
+#[test]
+fn a_camera_s_frames_reach_ros_2_as_sensor_msgs_image_each_whole_as_the_vision_node_saw_it() {
+    use ratelab::graph::nodes::image_estimator::measure;
+    use ratelab::msg::ImageMsg;
+    let endpoint = format!("tcp/127.0.0.1:{}", free_port());
+    let standin = StandIn::start("router", &endpoint, 4, &[]);
+    let graph = repo("graphs/cartpole-camera.toml");
+    let args = [
+        "run",
+        "--clock",
+        "virtual",
+        "--duration",
+        "0.2",
+        "--ros2",
+        "4",
+    ];
+    let args = [&args[..], &["--graph", graph.to_str().unwrap()]].concat();
+    let (code, stdout, stderr) = ratelab(&args, &[connect_to(&endpoint)]);
+    let r = standin.report();
+    assert_eq!(code, 0, "{stdout}{stderr}");
+    assert_eq!(r["errors"], Value::Array(vec![]), "{}", r["errors"]);
+    assert_eq!(r["hash_ok"]["sensor_msgs/msg/Image"], Value::Bool(true));
+    let frames = r["topics"]["/image"].as_array().unwrap();
+    // 30 frames a second from t = 0: 7 in 0.2 s, every one, in order, stamped at its tick.
+    assert_eq!(frames.len(), 7, "{stdout}");
+    assert_every_one_from(frames, 1);
+    let pixels = |f: &Value| -> Vec<u8> {
+        let h = f["data_hex"].as_str().unwrap();
+        (0..h.len())
+            .step_by(2)
+            .map(|i| u8::from_str_radix(&h[i..i + 2], 16).unwrap())
+            .collect()
+    };
+    let image = |f: &Value| ImageMsg {
+        height: f["height"].as_u64().unwrap() as u32,
+        width: f["width"].as_u64().unwrap() as u32,
+        encoding: f["encoding"].as_str().unwrap().into(),
+        step: f["step"].as_u64().unwrap() as u32,
+        data: pixels(f).into(),
+    };
+    for (k, f) in frames.iter().enumerate() {
+        let stamp = f["stamp_ns"].as_u64().unwrap();
+        // (The period is whole nanoseconds: 33 333 333 at 30 Hz.)
+        assert_eq!(stamp, k as u64 * (1_000_000_000 / 30), "frame {k}");
+        assert_eq!(
+            (&f["height"], &f["width"], &f["step"], &f["encoding"]),
+            (
+                &Value::from(480),
+                &Value::from(640),
+                &Value::from(640),
+                &Value::from("mono8")
+            ),
+        );
+        assert_eq!(
+            (f["is_bigendian"].as_u64(), f["data_len"].as_u64()),
+            (Some(0), Some(640 * 480))
+        );
+        // The drawing's shades: the background, the cart and the pole, and the
+        // anti-aliased edges between them.
+        let shades = f["shades"].as_object().unwrap();
+        for shade in ["64", "128", "255"] {
+            assert!(shades.contains_key(shade), "frame {k}: {shades:?}");
+        }
+    }
+    // What the vision node measured (/meas, a JointState), from each frame as ROS 2 got it:
+    // the same position, to the last bit, so the pixels on the wire are the ones it read.
+    let meas = r["topics"]["/meas"].as_array().unwrap();
+    assert!(meas.len() >= 6, "{meas:?}");
+    for m in meas {
+        let stamp = m["stamp_ns"].as_u64().unwrap();
+        let seen = frames
+            .iter()
+            .rev()
+            .find(|f| f["stamp_ns"].as_u64().unwrap() <= stamp)
+            .unwrap();
+        let p = measure(&image(seen)).expect("the cartpole in the frame");
+        let got: Vec<f64> = m["position"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|x| x.as_f64().unwrap())
+            .collect();
+        assert_eq!(got, [p.cart_pos_m, p.pole_angle_rad], "/meas at {stamp} ns");
+    }
+}
+
 /// Read a bag with rosbags: each topic's type and messages (`/action`'s data, `/obs`'s
 /// positions, `/clock`'s times in ns), and each message's log time.
 fn read_bag(dir: &std::path::Path) -> Value {
@@ -618,7 +704,7 @@ fn a_launch_across_processes_offers_each_processs_own_nodes_and_the_plants_clock
 
 #[test]
 fn every_type_hash_is_the_one_a_second_independent_implementation_computes() {
-    use ratelab::msg::{ForceMsg, Message, MsgType, PositionMsg, StateMsg};
+    use ratelab::msg::{ForceMsg, ImageMsg, Message, MsgType, PositionMsg, StateMsg};
     use ratelab::ros2::types::clock_type;
     let ros_type_of = |t: MsgType| (t.ros2().expect("a ROS 2 mapping").ros_type)();
     // ros2-pyterfaces (pure-Python core, its schemas rewritten from ROS 2's interfaces),
@@ -629,7 +715,8 @@ from ros2_pyterfaces import core
 from ros2_pyterfaces.core.sensor_msgs.msg import JointState
 from ros2_pyterfaces.core.std_msgs.msg import Float64
 from ros2_pyterfaces.core.rosgraph_msgs.msg import Clock
-print(json.dumps({t["__typename"]: core.hash_rihs01(t) for t in (JointState, Float64, Clock)}))
+from ros2_pyterfaces.core.sensor_msgs.msg import Image
+print(json.dumps({t["__typename"]: core.hash_rihs01(t) for t in (JointState, Float64, Clock, Image)}))
 "#;
     let o = Command::new(oracle_python())
         .args(["-c", script])
@@ -641,6 +728,7 @@ print(json.dumps({t["__typename"]: core.hash_rihs01(t) for t in (JointState, Flo
         ros_type_of(StateMsg::TYPE),
         ros_type_of(PositionMsg::TYPE),
         ros_type_of(ForceMsg::TYPE),
+        ros_type_of(ImageMsg::TYPE),
         clock_type(),
     ] {
         assert_eq!(

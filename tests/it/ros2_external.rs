@@ -311,7 +311,7 @@ fn an_external_node_missing_of_another_type_or_silent_is_said_in_one_line() {
 
 #[test]
 fn python_message_classes_convert_to_and_from_ros_2_as_the_bridge_does() {
-    use ratelab::msg::{ForceMsg, Message, MsgData, MsgType, PositionMsg, StateMsg};
+    use ratelab::msg::{ForceMsg, ImageMsg, Message, MsgData, MsgType, PositionMsg, StateMsg};
     let encode = |d: &MsgData, stamp, out: &mut Vec<u8>| {
         assert!((d.msg_type().ros2().unwrap().encode)(d, stamp, out))
     };
@@ -323,6 +323,16 @@ fn python_message_classes_convert_to_and_from_ros_2_as_the_bridge_does() {
         })
     };
     use std::io::Write;
+    // A 4 × 3 mono8 image whose rows are padded to 5 bytes.
+    let pixels: Vec<u8> = (0..15u8).map(|i| i * 17).collect();
+    let pixels_hex: String = pixels.iter().map(|x| format!("{x:02x}")).collect();
+    let image = |data: &[u8]| ImageMsg {
+        height: 3,
+        width: 4,
+        encoding: "mono8".into(),
+        step: 5,
+        data: data.to_vec().into(),
+    };
     let th = 0.125f64;
     let obs = [0.5f32, -1.0, th.cos() as f32, th.sin() as f32, 2.0];
     let hex = |d: MsgData| {
@@ -334,10 +344,12 @@ fn python_message_classes_convert_to_and_from_ros_2_as_the_bridge_does() {
         "state": hex(MsgData::new(obs)),
         "position": hex(position(0.25, -0.5)),
         "force": hex(MsgData::new(ForceMsg { newtons: -3.5 })),
+        "image": hex(MsgData::new(image(&pixels))),
         "values": {
             "state": obs.map(f64::from),
             "position": [0.25, -0.5],
             "force": [-3.5],
+            "image": [3, 4, "mono8", 5, pixels_hex],
         },
     });
     let mut child = Command::new(oracle_python())
@@ -393,6 +405,15 @@ fn python_message_classes_convert_to_and_from_ros_2_as_the_bridge_does() {
         decode(ForceMsg::TYPE, &bytes("force")),
         Ok(MsgData::new(ForceMsg { newtons: -3.5 }))
     );
+    assert_eq!(
+        r["from_ros"]["image"],
+        serde_json::json!([3, 4, "mono8", 5, pixels_hex])
+    );
+    assert_eq!(
+        decode(ImageMsg::TYPE, &bytes("image")),
+        Ok(MsgData::new(image(&pixels)))
+    );
+    assert_eq!(r["ros_type"]["image"], "sensor_msgs/msg/Image");
     assert_eq!(r["ros_type"]["state"], "sensor_msgs/msg/JointState");
     assert_eq!(r["ros_type"]["force"], "std_msgs/msg/Float64");
 }

@@ -11,9 +11,12 @@ tokens), as a simulator with its own clock would. Prints "ready" once listening;
 last samples and prints one JSON report on stdout:
   nodes: [name], endpoints (every token ever declared), alive_at_end: [token], endpoints: [{kind, node, topic, type, hash, qos}],
   hash_ok: {dds type: rosbags' hash == the hash in the keys},
-  topics: {topic: [{seq, source_ns, gid, value...}]}, clock_ns: [...], errors: [...]
+  topics: {topic: [{seq, source_ns, gid, value...}]} (an Image's pixels as data_len,
+    data_sha256, data_hex and shades: {brightness: pixels}), clock_ns: [...], errors: [...]
 """
 
+import collections
+import hashlib
 import json
 import struct
 import sys
@@ -144,6 +147,17 @@ for key, payload, att in got:
         row["velocity"] = [float(v) for v in msg.velocity]
     elif ros_type == "std_msgs/msg/Float64":
         row["data"] = float(msg.data)
+    elif ros_type == "sensor_msgs/msg/Image":
+        row["stamp_ns"] = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+        row.update(height=int(msg.height), width=int(msg.width), encoding=msg.encoding,
+                   is_bigendian=int(msg.is_bigendian), step=int(msg.step))
+        pixels = bytes(msg.data)
+        row["data_len"] = len(pixels)
+        row["data_sha256"] = hashlib.sha256(pixels).hexdigest()
+        row["data_hex"] = pixels.hex()
+        # How many pixels of each brightness, for the ones that occur.
+        counts = collections.Counter(pixels)
+        row["shades"] = {str(k): v for k, v in sorted(counts.items())}
     topics.setdefault(topic, []).append(row)
 
 print(

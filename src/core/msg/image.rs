@@ -2,9 +2,12 @@
 //! (height, width, encoding, step, data). Its pixels are shared, never copied per
 //! subscriber: every subscriber of a topic in one process holds the same bytes
 //! ([`ImageData`] is a reference-counted buffer), and across processes they travel once per
-//! sample (postcard writes them as one run of bytes).
+//! sample (postcard writes them as one run of bytes). ROS 2 sees it as
+//! `sensor_msgs/msg/Image` ([`crate::ros_types::Image`]), stamped with its publish time.
 
-use super::{Field, Message, Value};
+use super::{Field, Message, RosCodec, RosMapped, Value};
+use crate::ros_types::{image_type, Header, Image, RosType, Time};
+use crate::time::Nanos;
 use serde::{Deserialize, Serialize};
 use std::sync::Arc;
 
@@ -128,6 +131,9 @@ impl Message for ImageMsg {
         }
         img
     }
+    fn ros2() -> Option<RosCodec> {
+        Some(RosCodec::of::<Self>())
+    }
     fn to_values(&self) -> Vec<Value> {
         vec![
             Value::Number(f64::from(self.height)),
@@ -136,6 +142,51 @@ impl Message for ImageMsg {
             Value::Number(f64::from(self.step)),
             Value::Bytes(self.data.clone()),
         ]
+    }
+}
+
+impl RosMapped for ImageMsg {
+    type Ros = Image;
+    fn ros_type() -> &'static RosType {
+        image_type()
+    }
+    fn to_ros(&self, stamp: Nanos) -> Image {
+        Image {
+            header: Header {
+                stamp: Time::of(stamp),
+                frame_id: String::new(),
+            },
+            height: self.height,
+            width: self.width,
+            encoding: self.encoding.clone(),
+            is_bigendian: 0,
+            step: self.step,
+            data: self.data.clone(),
+        }
+    }
+    /// A whole image (`step × height` bytes, `step ≥ width`) whose multi-byte pixels, if
+    /// any, are little-endian; the header is not read (ratelab stamps every message).
+    fn from_ros(img: Image) -> Result<Self, String> {
+        if img.is_bigendian != 0 {
+            return Err("an Image with big-endian pixels (is_bigendian 1): ratelab reads little-endian ones".into());
+        }
+        let msg = ImageMsg {
+            height: img.height,
+            width: img.width,
+            encoding: img.encoding,
+            step: img.step,
+            data: img.data,
+        };
+        if !msg.is_consistent() {
+            return Err(format!(
+                "an Image of {} bytes, not step × height = {} × {} (step at least width {})",
+                msg.data.len(),
+                msg.step,
+                msg.height,
+                msg.width
+            ));
+        }
+        Ok(msg)
     }
 }
 
@@ -193,6 +244,32 @@ mod tests {
         wrong[2] = Value::Number(1.0);
         let e = ImageMsg::TYPE.from_values(&wrong).unwrap_err();
         assert!(e.contains("Image.encoding holds Text"), "{e}");
+        // ROS 2's sensor_msgs/Image, stamped: the pixels as one run of bytes after the
+        // header and the four small fields (rosbags reads it: tests/it/ros2.rs).
+        let codec = ImageMsg::TYPE.ros2().unwrap();
+        let mut cdr = Vec::new();
+        assert!((codec.encode)(&data, Nanos(1_500_000_000), &mut cdr));
+        assert_eq!(cdr.len(), 4 + 8 + 4 + 4 + 4 + 4 + 8 + 4 + 4 + 4 + 1_048_576);
+        assert_eq!(cdr[cdr.len() - 1_048_576..], *img.data.as_slice());
+        assert_eq!((codec.decode)(&cdr), Ok(data.clone()));
+        let whole = img.to_ros(Nanos(0));
+        let refused = |i: Image| ImageMsg::from_ros(i).unwrap_err();
+        let short = Image {
+            data: vec![0; 10].into(),
+            ..whole.clone()
+        };
+        assert!(refused(short).contains("10 bytes, not step × height"));
+        let narrow = Image {
+            step: 512,
+            data: vec![0; 512 * 1024].into(),
+            ..whole.clone()
+        };
+        assert!(refused(narrow).contains("step at least width 1024"));
+        let big_endian = Image {
+            is_bigendian: 1,
+            ..whole
+        };
+        assert!(refused(big_endian).contains("big-endian"));
         assert!(ImageMsg::TYPE
             .from_values(&wrong[..4])
             .unwrap_err()

@@ -40,7 +40,7 @@ pub struct RosCodec {
     /// (cleared first); false (and `out` empty) when the payload is not of this type.
     pub encode: fn(&MsgData, Nanos, &mut Vec<u8>) -> bool,
     /// A payload from CDR with its encapsulation header, exactly, within
-    /// [`crate::ros_types::MAX_INBOUND_BYTES`].
+    /// [`crate::limits::MAX_ROS_MESSAGE_BYTES`].
     pub decode: fn(&[u8]) -> Result<MsgData, String>,
 }
 
