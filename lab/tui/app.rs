@@ -1053,9 +1053,6 @@ impl App {
         if let Some(said) = self.nav.on_key(key) {
             self.say(said);
         }
-        // Never further down than there are rows (the drawing stops at the last window).
-        let rows = self.graph.nodes.len() + self.graph.topics.len();
-        self.nav.scroll = self.nav.scroll.min(rows);
     }
 
     /// Set node `n`'s rate. The chapter's nodes keep the chapter's commands, so a session

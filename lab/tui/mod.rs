@@ -514,7 +514,9 @@ mod tests {
     fn a_200_node_graph_zooms_scrolls_and_filters() {
         let cfg = synthetic_cfg(200);
         let (mut app, _rx) = app_after(cfg, false);
-        // Scrolled three rows: every long column counts what is above and below.
+        // Scrolled three rows (after a frame was drawn, as on a screen: the drawing says how
+        // far scrolling can go): every long column counts what is above and below.
+        render(&app, 120, 40);
         for _ in 0..3 {
             app.on_msg(Msg::ScrollDown);
         }
@@ -541,7 +543,9 @@ mod tests {
             assert!(!text.contains("cart "), "the plant gave its rows: {text}");
             insta::assert_snapshot!(format!("graph_200_list_{w}x{h}"), text);
         }
-        // Scrolled to the end: the last topics, and what is above counted.
+        // Scrolled to the end: the last topics, and what is above counted (on the screen
+        // it is drawn on: how far scrolling goes depends on its size).
+        render(&app, 80, 24);
         for _ in 0..1000 {
             app.on_msg(Msg::ScrollDown);
         }

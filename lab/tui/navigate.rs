@@ -127,6 +127,8 @@ pub struct Navigation {
     pub filter: Filter,
     /// A filter is being typed (`/`): the text it had before, restored by Esc.
     pub typing: Option<String>,
+    /// How far scrolling can go, as the last frame drew the panel.
+    pub reach: Reach,
 }
 
 /// What a navigation key asks for.
@@ -168,11 +170,12 @@ impl Navigation {
                 ))
             }
             NavKey::Up(n) => {
-                self.scroll = self.scroll.saturating_sub(n);
+                self.scroll = self.scroll.min(self.reach.get()).saturating_sub(n);
                 None
             }
             NavKey::Down(n) => {
-                self.scroll = self.scroll.saturating_add(n);
+                // Never past the last window drawn: the ↑ that follows moves at once.
+                self.scroll = self.scroll.saturating_add(n).min(self.reach.get());
                 None
             }
             NavKey::Top => {
@@ -226,6 +229,39 @@ impl Navigation {
         had
     }
 }
+
+/// How far scrolling can move the graph panel's windows, as the last frame drew them: the
+/// drawing writes it (the largest first row any window can have), the keys read it, so a ↓
+/// past the end is not counted and the ↑ after it moves at once. Shared between the lab and
+/// the view it draws (clones are one value).
+#[derive(Clone, Debug, Default)]
+pub struct Reach(std::sync::Arc<std::sync::atomic::AtomicUsize>);
+
+impl Reach {
+    /// A new frame: nothing drawn yet.
+    pub fn clear(&self) {
+        self.0.store(0, std::sync::atomic::Ordering::Relaxed);
+    }
+    /// A window `fit` rows high over `len` rows was drawn.
+    pub fn note(&self, len: usize, fit: usize) {
+        self.0.fetch_max(
+            len.saturating_sub(fit.max(1)),
+            std::sync::atomic::Ordering::Relaxed,
+        );
+    }
+    /// The largest useful scroll, rows.
+    pub fn get(&self) -> usize {
+        self.0.load(std::sync::atomic::Ordering::Relaxed)
+    }
+}
+
+impl PartialEq for Reach {
+    fn eq(&self, other: &Reach) -> bool {
+        self.get() == other.get()
+    }
+}
+
+impl Eq for Reach {}
 
 /// The first row of a window `fit` rows high over `len` rows, scrolled `scroll` rows down
 /// and moved, if need be, so that row `keep` (a selection) is inside it. Never past the
@@ -337,6 +373,30 @@ mod tests {
             nav.on_key(NavKey::Input('a'));
         }
         assert_eq!(nav.filter.text.len(), MAX_FILTER_CHARS);
+    }
+
+    #[test]
+    fn scrolling_stops_at_the_last_window_drawn_so_up_moves_at_once() {
+        let mut nav = Navigation::default();
+        // Nothing drawn that scrolls: ↓ does nothing.
+        nav.on_key(NavKey::Down(1));
+        assert_eq!(nav.scroll, 0);
+        // A column of 100 rows in a window of 10, and a shorter one: 90 is as far as it goes.
+        let view_side = nav.reach.clone();
+        view_side.clear();
+        view_side.note(100, 10);
+        view_side.note(30, 10);
+        for _ in 0..120 {
+            nav.on_key(NavKey::Down(1));
+        }
+        assert_eq!(nav.scroll, 90);
+        nav.on_key(NavKey::Up(1));
+        assert_eq!(nav.scroll, 89);
+        // The terminal grew: the next frame draws 100 rows in 40, and ↑ starts from 60.
+        view_side.clear();
+        view_side.note(100, 40);
+        nav.on_key(NavKey::Up(1));
+        assert_eq!(nav.scroll, 59);
     }
 
     #[test]

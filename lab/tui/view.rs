@@ -359,6 +359,8 @@ pub struct NavView {
     pub text: String,
     /// A filter is being typed.
     pub typing: bool,
+    /// Where the drawing says how far scrolling can go ([`super::navigate::Reach`]).
+    pub reach: super::navigate::Reach,
 }
 
 /// The graph as ROS 2 sees it (`--ros2`): the domain and what `ros2 node list` and `ros2
@@ -424,6 +426,8 @@ fn hz(x: f64) -> String {
 
 impl Widget for &View {
     fn render(self, area: Rect, buf: &mut Buffer) {
+        // The windows drawn below say how far scrolling can go (none: nowhere).
+        self.nav.reach.clear();
         if area.width < MIN_SIZE.0 || area.height < MIN_SIZE.1 {
             render_too_small(area, buf);
             return;

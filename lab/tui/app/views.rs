@@ -451,6 +451,7 @@ impl App {
                 filter: self.nav.filter.label(),
                 text: self.nav.filter.text.clone(),
                 typing: self.nav.typing.is_some(),
+                reach: self.nav.reach.clone(),
             },
         }
     }

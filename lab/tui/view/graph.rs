@@ -167,6 +167,7 @@ pub(super) fn render_graph(v: &View, area: Rect, buf: &mut Buffer) {
         let (above, below) = if len > fit {
             let rows = fit - 1;
             let start = window_start(len, rows, v.nav.scroll, col.selected_row(v));
+            v.nav.reach.note(len, rows);
             match col {
                 Column::Nodes(x) | Column::Topics(x) => {
                     x.drain(..start);

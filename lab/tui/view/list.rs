@@ -167,6 +167,7 @@ pub(super) fn render_names(v: &View, area: Rect, buf: &mut Buffer) {
         });
         let (start, body) = if col.len() > fit {
             let body = fit - 1;
+            v.nav.reach.note(col.len(), body);
             (window_start(col.len(), body, v.nav.scroll, selected), body)
         } else {
             (0, col.len())
@@ -301,6 +302,7 @@ pub(super) fn render_list(v: &View, area: Rect, buf: &mut Buffer) {
     let (start, body) = if rows.len() > fit {
         let keep = rows.iter().position(|r| r.2);
         let body = fit - 1;
+        v.nav.reach.note(rows.len(), body);
         (window_start(rows.len(), body, v.nav.scroll, keep), body)
     } else {
         (0, rows.len())
