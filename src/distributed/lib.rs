@@ -410,6 +410,38 @@ pub fn live_tokens(
     keys
 }
 
+/// The environment variable that turns Zenoh's shared memory off for a process and every
+/// process it starts: `RATELAB_SHARED_MEMORY=off` (`on`, the default, leaves it on).
+pub const SHARED_MEMORY_ENV: &str = "RATELAB_SHARED_MEMORY";
+
+/// Whether [`open_session`] offers Zenoh's shared memory to its peers: on unless
+/// [`SHARED_MEMORY_ENV`] says `off`.
+///
+/// With it on, two processes on one host that both offer it (every ratelab process does)
+/// pass a sample of 3 KiB or more (Zenoh's `message_size_threshold`) through a shared
+/// segment of a 16 MiB pool rather than through the socket: the receiver maps the bytes
+/// the sender wrote, so a camera frame crosses without the kernel's two copies
+/// (BENCHMARKS.md measures both). A larger sample than the pool has room for, a peer on
+/// another host, or a host without POSIX shared memory (`/dev/shm`) falls back to the
+/// socket, with the same QoS, counters and lockstep. The segment is readable by the
+/// user's own processes, as the launch's credentials are.
+///
+/// # Errors
+/// [`DistError::Usage`] when the variable holds anything but `on` or `off`.
+pub fn shared_memory() -> Result<bool, DistError> {
+    match std::env::var(SHARED_MEMORY_ENV).as_deref() {
+        Err(std::env::VarError::NotPresent) | Ok("") | Ok("on") => Ok(true),
+        Ok("off") => Ok(false),
+        Ok(other) => Err(DistError::Usage(format!(
+            "{SHARED_MEMORY_ENV} is '{}': on or off",
+            ratelab_core::text::printable(other)
+        ))),
+        Err(std::env::VarError::NotUnicode(_)) => Err(DistError::Usage(format!(
+            "{SHARED_MEMORY_ENV} is not text: on or off"
+        ))),
+    }
+}
+
 /// Who a session is and what it knows of the graph: what [`open_session`] needs to
 /// authenticate it and to check what it receives ([`access`]).
 #[derive(Clone, Copy, Debug)]
@@ -449,6 +481,12 @@ pub fn open_session(
     set(&mut config, "listen/exit_on_failure", "true")?;
     set(&mut config, "connect/exit_on_failure", "true")?;
     set(&mut config, "connect/timeout_ms", "5000")?;
+    let shm = shared_memory()?;
+    set(
+        &mut config,
+        "transport/shared_memory/enabled",
+        &shm.to_string(),
+    )?;
     for (k, v) in access.credentials.zenoh_tls(access.role)? {
         set(&mut config, k, &v)?;
     }

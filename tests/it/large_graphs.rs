@@ -230,25 +230,48 @@ fn a_megabyte_frame_crosses_processes_whole_with_its_counters_right() {
     let common = ["--clock", "virtual", "--duration", "3", "--seed", "1"];
     let one = dir.path().join("one");
     let (m1, t1) = outputs(&[&["run", "--graph", file][..], &common].concat(), &one);
-    let many = dir.path().join("many");
-    let o = ratelab(
-        &[
-            &["launch", file, "--processes"][..],
-            &common,
-            &["--out", many.to_str().unwrap()],
-        ]
-        .concat(),
-    );
-    let out = text(&o.stdout);
-    assert!(o.status.success(), "{out}{}", text(&o.stderr));
-    assert!(out.contains("robot [camera, actuator]"), "{out}");
-    assert!(out.contains("vision [vision]"), "{out}");
-    let m2 = std::fs::read_to_string(many.join("metrics.json")).unwrap();
-    assert_eq!(m1, m2, "metrics differ");
+    // Across processes, with Zenoh's shared memory (the default) and without it: the
+    // frames go through a shared segment or through the socket, the run is the same.
+    for shm in ["on", "off"] {
+        let many = dir.path().join(format!("many-{shm}"));
+        let o = crate::distributed::bin()
+            .env(ratelab::distributed::SHARED_MEMORY_ENV, shm)
+            .args(
+                [
+                    &["launch", file, "--processes"][..],
+                    &common,
+                    &["--out", many.to_str().unwrap()],
+                ]
+                .concat(),
+            )
+            .output()
+            .unwrap();
+        let out = text(&o.stdout);
+        assert!(o.status.success(), "{out}{}", text(&o.stderr));
+        assert!(out.contains("robot [camera, actuator]"), "{out}");
+        assert!(out.contains("vision [vision]"), "{out}");
+        let m2 = std::fs::read_to_string(many.join("metrics.json")).unwrap();
+        assert_eq!(m1, m2, "metrics differ with shared memory {shm}");
+    }
     assert!(t1.lines().count() > 30, "{t1:.300}");
     let m: serde_json::Value = serde_json::from_str(&m1).unwrap();
     let published = |t: &str| m["topics"][t]["published"].as_u64().unwrap();
     // 30 frames a second (for as long as the pole stays up), each measured once.
     assert!(published("/image") >= 30, "{m1}");
     assert_eq!(published("/meas"), published("/image"), "{m1}");
+    // A setting that is neither on nor off is refused in one line.
+    let o = crate::distributed::bin()
+        .env(ratelab::distributed::SHARED_MEMORY_ENV, "maybe")
+        .args([
+            "launch",
+            file,
+            "--processes",
+            "--clock",
+            "virtual",
+            "--duration",
+            "1",
+        ])
+        .output()
+        .unwrap();
+    assert_one_line_exit_2(&o, "RATELAB_SHARED_MEMORY is 'maybe': on or off");
 }

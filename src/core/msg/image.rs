@@ -49,8 +49,29 @@ impl Serialize for ImageData {
 }
 
 impl<'de> Deserialize<'de> for ImageData {
+    /// From bytes (copied once, straight from a borrowed buffer: postcard's, CDR's) or a
+    /// sequence of numbers 0–255 (a format without bytes, as JSON).
     fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<ImageData, D::Error> {
-        serde_bytes::ByteBuf::deserialize(d).map(|b| ImageData::from(b.into_vec()))
+        d.deserialize_bytes(PixelsVisitor)
+    }
+}
+
+struct PixelsVisitor;
+
+impl<'de> serde::de::Visitor<'de> for PixelsVisitor {
+    type Value = ImageData;
+    fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+        f.write_str("an image's bytes")
+    }
+    fn visit_bytes<E: serde::de::Error>(self, v: &[u8]) -> Result<ImageData, E> {
+        Ok(ImageData(Arc::from(v)))
+    }
+    fn visit_byte_buf<E: serde::de::Error>(self, v: Vec<u8>) -> Result<ImageData, E> {
+        Ok(ImageData::from(v))
+    }
+    fn visit_seq<A: serde::de::SeqAccess<'de>>(self, seq: A) -> Result<ImageData, A::Error> {
+        serde_bytes::ByteBuf::deserialize(serde::de::value::SeqAccessDeserializer::new(seq))
+            .map(|b| ImageData::from(b.into_vec()))
     }
 }
 

@@ -35,6 +35,9 @@ pub struct WireSample {
     pub sent_mono_ns: u64,
     /// The payload: the message in its type's wire encoding ([`crate::msg::MsgData::to_bytes`]),
     /// decoded by the receiving topic's type ([`crate::msg::MsgType::decode`]), exactly.
+    /// Written as one run of bytes (postcard's length and the bytes, as a sequence of bytes
+    /// is written, so the wire is the same), copied whole rather than byte by byte.
+    #[serde(with = "serde_bytes")]
     pub data: Vec<u8>,
 }
 

@@ -1,0 +1,128 @@
+#!/usr/bin/env python3
+"""A camera's frames across two processes, in one sitting (BENCHMARKS.md, issue 51 item 5):
+1 MiB payloads at 30 Hz for DURATION seconds, one way, latency from the send to the
+receiver's callback on the host's CLOCK_MONOTONIC (p50, p99 over every frame), and the CPU
+time of every process of the run (getrusage of the children, start-up included).
+
+  ratelab   `ratelab launch benches/graphs/camera-beside.toml --processes --clock real`:
+            /image from `robot` to `vision`, its wire latency as the launch reports it
+            (sent before the payload is encoded, taken once it is in the subscriber's queue).
+            The CPU is the whole graph's (MuJoCo, five nodes, the drawing and the vision).
+  bare      examples/image_floor.rs: bare Zenoh opened as ratelab opens it (mutual TLS,
+            access control, ratelab's runtime threads), nothing else of ratelab's.
+  chapter   the chapter's graph alone, launched the same way: the CPU the camera adds is
+            ratelab's figure less this one.
+  dora      dora-rs 1.1 (`dora run benches/dora/dataflow.yml`, two Python nodes; optional:
+            --dora DIR names a folder with its `dora` and a Python that imports `dora`,
+            e.g. a venv with `pip install dora-rs-cli==1.1.0 dora-rs==1.1.0 pyarrow numpy`).
+
+ratelab and bare run with Zenoh's shared memory on and off (RATELAB_SHARED_MEMORY), each
+configuration ROUNDS times, alternated. Usage:
+  scripts/bench-image.py [--ratelab BIN] [--floor BIN] [--dora DIR] [--duration S] [--rounds N]
+"""
+
+import argparse
+import json
+import os
+import re
+import resource
+import statistics
+import subprocess
+import sys
+import tempfile
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+TARGET = os.environ.get("CARGO_TARGET_DIR", os.path.join(ROOT, "target"))
+
+
+def children_cpu_s():
+    r = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return r.ru_utime + r.ru_stime
+
+
+def run(cmd, env=None, cwd=ROOT):
+    """Run `cmd`; its output and the CPU seconds it and its children used."""
+    before = children_cpu_s()
+    p = subprocess.run(cmd, env={**os.environ, **(env or {})}, cwd=cwd, text=True,
+                       capture_output=True, timeout=600)
+    if p.returncode != 0:
+        sys.exit(f"{' '.join(cmd)} failed ({p.returncode}):\n{p.stdout}\n{p.stderr}")
+    return p.stdout + p.stderr, children_cpu_s() - before
+
+
+def ratelab(binary, duration, shm):
+    out, cpu = run([binary, "launch", "benches/graphs/camera-beside.toml", "--processes",
+                    "--clock", "real", "--duration", str(duration), "--headless"],
+                   {"RATELAB_SHARED_MEMORY": shm})
+    m = re.search(r"wire /image into 'vision': (\d+) samples, p50 ([\d.]+) µs \| p99 ([\d.]+)", out)
+    if not m or "BALANCED" not in out:
+        sys.exit(f"the launch did not report /image or did not balance:\n{out}")
+    return {"frames": int(m[1]), "p50_us": float(m[2]), "p99_us": float(m[3]), "cpu_s": cpu}
+
+
+def chapter(binary, duration):
+    """The chapter's graph alone across the same processes: what the camera adds is the rest."""
+    out, cpu = run([binary, "launch", "--processes", "--clock", "real", "--duration",
+                    str(duration), "--headless"])
+    if "BALANCED" not in out:
+        sys.exit(f"the chapter's graph did not balance:\n{out}")
+    return {"frames": 0, "p50_us": 0.0, "p99_us": 0.0, "cpu_s": cpu}
+
+
+def bare(binary, duration, shm):
+    out, cpu = run([binary, "--count", str(30 * duration)], {"RATELAB_SHARED_MEMORY": shm})
+    r = json.loads(out.strip().splitlines()[-1])
+    if r["wrong"] or r["received"] != r["sent"]:
+        sys.exit(f"bare Zenoh lost or garbled frames: {r}")
+    return {"frames": r["received"], "p50_us": r["p50_us"], "p99_us": r["p99_us"], "cpu_s": cpu}
+
+
+def dora(folder, duration):
+    with tempfile.TemporaryDirectory() as tmp:
+        report = os.path.join(tmp, "report.json")
+        env = {"PATH": folder + os.pathsep + os.environ["PATH"],
+               "VIRTUAL_ENV": os.path.dirname(folder), "REPORT": report,
+               "FRAMES": str(30 * duration)}
+        _, cpu = run([os.path.join(folder, "dora"), "run", "dataflow.yml", "--stop-after",
+                      f"{duration + 30}s"], env, cwd=os.path.join(ROOT, "benches", "dora"))
+        r = json.load(open(report))
+    if r["wrong"]:
+        sys.exit(f"dora garbled frames: {r}")
+    return {"frames": r["received"], "p50_us": r["p50_us"], "p99_us": r["p99_us"], "cpu_s": cpu}
+
+
+def main():
+    a = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    a.add_argument("--ratelab", default=os.path.join(TARGET, "release", "ratelab"))
+    a.add_argument("--floor", default=os.path.join(TARGET, "release", "examples", "image_floor"))
+    a.add_argument("--dora", help="a folder with dora-rs 1.1's `dora` and its Python")
+    a.add_argument("--duration", type=int, default=20)
+    a.add_argument("--rounds", type=int, default=3)
+    o = a.parse_args()
+    rows = {}
+    for i in range(o.rounds):
+        for shm in ("on", "off"):
+            for name, f in (("ratelab", lambda: ratelab(o.ratelab, o.duration, shm)),
+                            ("bare Zenoh", lambda: bare(o.floor, o.duration, shm))):
+                r = f()
+                rows.setdefault((name, shm), []).append(r)
+                print(f"round {i + 1} {name} shm {shm}: {r}", flush=True)
+        r = chapter(o.ratelab, o.duration)
+        rows.setdefault(("ratelab, the chapter's graph alone (no camera)", "-"), []).append(r)
+        print(f"round {i + 1} chapter: {r}", flush=True)
+        if o.dora:
+            r = dora(o.dora, o.duration)
+            rows.setdefault(("dora-rs 1.1 (Python nodes)", "dora's own"), []).append(r)
+            print(f"round {i + 1} dora: {r}", flush=True)
+    print()
+    print("| transport | shared memory | frames | p50 (µs) | p99 (µs) | CPU, every process (s) |")
+    print("| --- | --- | ---: | ---: | ---: | ---: |")
+    for (name, shm), rs in rows.items():
+        cell = lambda k, fmt: ", ".join(fmt.format(r[k]) for r in rs)
+        med = statistics.median(r["p50_us"] for r in rs)
+        print(f"| {name} | {shm} | {cell('frames', '{}')} | {cell('p50_us', '{:.0f}')} "
+              f"(median {med:.0f}) | {cell('p99_us', '{:.0f}')} | {cell('cpu_s', '{:.2f}')} |")
+
+
+if __name__ == "__main__":
+    main()
