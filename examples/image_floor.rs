@@ -3,7 +3,7 @@
 //! process to another, with Zenoh's session opened exactly as ratelab opens it (mutual TLS,
 //! the graph's access control, ratelab's runtime threads, and shared memory unless
 //! `RATELAB_SHARED_MEMORY=off`), and nothing else of ratelab's on the path.
-//! `scripts/bench-image.sh` runs it beside ratelab's own launch of a camera graph, in one
+//! `scripts/bench-image.py` runs it beside ratelab's own launch of a camera graph, in one
 //! sitting, with shared memory on and off.
 //!
 //! ```sh

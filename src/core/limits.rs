@@ -18,7 +18,7 @@
 //! | [`MAX_PROCESSES`] | 256 | the processes of one launch |
 //! | [`MAX_SAMPLE_BYTES`] | 64 MiB | one message between processes, encoded |
 //! | [`MAX_CONTROL_BYTES`] | 64 MiB | one control message between a launch's processes |
-//! | [`MAX_ROS_MESSAGE_BYTES`] | 64 MiB | one message from ROS 2 (CDR), before it is decoded |
+//! | [`MAX_ROS_MESSAGE_BYTES`] | 64 MiB | one message from ROS 2 (CDR), before it is decoded (4 KiB for the cartpole's types) |
 //! | [`MAX_DURATION_S`] | 10 years | a run's length, in whole nanoseconds |
 
 /// The most nodes a graph may have: 65 536. A node costs its scheduler entry, its queues
@@ -53,9 +53,11 @@ pub const MAX_PROCESSES: usize = 256;
 pub const MAX_SAMPLE_BYTES: usize = 64 << 20;
 
 /// The largest message accepted from ROS 2 (CDR with its encapsulation header), checked
-/// before it is decoded: 64 MiB, as [`MAX_SAMPLE_BYTES`] (a cartpole message is under 200
-/// bytes, a camera's `sensor_msgs/msg/Image` megabytes). A sequence inside it is read only
-/// as far as its bytes go, so a hostile length cannot allocate more than the message holds.
+/// before it is decoded: 64 MiB, as [`MAX_SAMPLE_BYTES`], for a type that needs it (a
+/// camera's `sensor_msgs/msg/Image`); each type sets its own bound under this one
+/// (`ratelab::msg::RosMapped::MAX_ROS_BYTES`: 4 KiB for the cartpole's, whose messages are
+/// under 200 bytes and whose decoded form, a `JointState`'s names, can be several times its
+/// bytes). A sequence inside a message is read only as far as its bytes go.
 pub const MAX_ROS_MESSAGE_BYTES: usize = MAX_SAMPLE_BYTES;
 
 /// The largest control message between a launch's processes, encoded: 64 MiB. Control

@@ -338,15 +338,17 @@ pub fn cdr<T: Serialize>(value: &T, out: &mut Vec<u8>) {
     let _ = value.serialize(&mut ser);
 }
 
-/// A `T` from CDR with its encapsulation header (`CDR_LE` only), within
-/// [`crate::limits::MAX_ROS_MESSAGE_BYTES`], with nothing after it but CDR's padding.
+/// A `T` from CDR with its encapsulation header (`CDR_LE` only), within `max` bytes (the
+/// type's [`crate::msg::RosMapped::MAX_ROS_BYTES`], never more than
+/// [`crate::limits::MAX_ROS_MESSAGE_BYTES`]), with nothing after it but CDR's padding.
 ///
 /// # Errors
 /// One line: too long, not CDR_LE, not valid CDR of `T`, or bytes after it.
-pub fn from_cdr<'de, T: Deserialize<'de>>(bytes: &'de [u8]) -> Result<T, String> {
-    if bytes.len() > MAX_ROS_MESSAGE_BYTES {
+pub fn from_cdr<'de, T: Deserialize<'de>>(bytes: &'de [u8], max: usize) -> Result<T, String> {
+    let max = max.min(MAX_ROS_MESSAGE_BYTES);
+    if bytes.len() > max {
         return Err(limits::refusal(
-            format_args!("{} bytes, at most {MAX_ROS_MESSAGE_BYTES}", bytes.len()),
+            format_args!("{} bytes, at most {max} for this type", bytes.len()),
             "MAX_ROS_MESSAGE_BYTES",
         ));
     }
@@ -432,8 +434,16 @@ mod tests {
         assert!(dec(ForceMsg::TYPE, &[0, 1])
             .unwrap_err()
             .contains("shorter than the 4-byte encapsulation header"));
+        // A cartpole type takes 4 KiB at most (its decoded form can be larger than its
+        // bytes); an image up to the bound.
+        let big = vec![0u8; 4097];
+        assert!(dec(ForceMsg::TYPE, &big)
+            .unwrap_err()
+            .contains("4097 bytes, at most 4096 for this type"));
         let big = vec![0u8; MAX_ROS_MESSAGE_BYTES + 1];
-        assert!(dec(ForceMsg::TYPE, &big).unwrap_err().contains("at most"));
+        assert!(dec(crate::msg::ImageMsg::TYPE, &big)
+            .unwrap_err()
+            .contains(&format!("at most {MAX_ROS_MESSAGE_BYTES} for this type")));
         // A sequence claiming 2^32-1 names in a few bytes: refused, not allocated.
         let mut js = vec![0, 1, 0, 0];
         js.extend_from_slice(&[0; 8]); // stamp

@@ -415,7 +415,7 @@ pub fn live_tokens(
 pub const SHARED_MEMORY_ENV: &str = "RATELAB_SHARED_MEMORY";
 
 /// Whether [`open_session`] offers Zenoh's shared memory to its peers: on unless
-/// [`SHARED_MEMORY_ENV`] says `off`.
+/// [`SHARED_MEMORY_ENV`] says `off` (unset or empty: on).
 ///
 /// With it on, two processes on one host that both offer it (every ratelab process does)
 /// pass a sample of 3 KiB or more (Zenoh's `message_size_threshold`) through a shared

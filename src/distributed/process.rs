@@ -85,35 +85,73 @@ struct Outlet {
     newest: AtomicU64,
     /// Messages offered since the publishing tick ended last.
     this_tick: AtomicU64,
+    /// The topic's name, for the line that says a message was too large to send.
+    name: String,
+    /// Whether that line was said (once per topic).
+    said_too_large: std::sync::atomic::AtomicBool,
+}
+
+/// What is said of a message of `len` bytes (encoded) too large to send.
+fn too_large(len: usize) -> String {
+    crate::limits::refusal(
+        format_args!(
+            "a message of {len} bytes is larger than one may be between processes (at most {}: a sample's {} less its header): not sent, counted lost on the wire",
+            crate::msg::MAX_PAYLOAD_BYTES,
+            wire::MAX_SAMPLE_BYTES
+        ),
+        "MAX_SAMPLE_BYTES",
+    )
 }
 
 /// [`Outlet::newest`] when nothing was sent.
 const NOT_SENT: u64 = u64::MAX;
 
 impl Outlet {
-    fn new(publisher: zenoh::pubsub::Publisher<'static>, topic: usize, spill: Arc<Spill>) -> Self {
+    fn new(
+        publisher: zenoh::pubsub::Publisher<'static>,
+        topic: usize,
+        name: &str,
+        spill: Arc<Spill>,
+    ) -> Self {
         Outlet {
             publisher,
             topic,
             spill,
             newest: AtomicU64::new(NOT_SENT),
             this_tick: AtomicU64::new(0),
+            name: name.to_string(),
+            said_too_large: std::sync::atomic::AtomicBool::new(false),
         }
     }
 
     /// Send one message (called from the topic's tap, as it is published). Past
     /// [`wire::MAX_SENT_PER_TICK`] in one tick the rest of that tick's are not sent (the
-    /// subscriber counts them lost on the wire when a later one arrives).
+    /// subscriber counts them lost on the wire when a later one arrives). Nor is a message
+    /// larger encoded than [`crate::msg::MAX_PAYLOAD_BYTES`], which every receiver refuses:
+    /// it stays home, counted lost the same way (the lockstep does not wait for it), and the
+    /// first one is said on stderr, naming the topic, its size and the bound.
     fn send(&self, seq: u64, stamp: Nanos, origin: Option<Nanos>, data: &crate::msg::MsgData) {
         if self.this_tick.fetch_add(1, Ordering::Relaxed) >= wire::MAX_SENT_PER_TICK as u64 {
+            return;
+        }
+        let sent_mono_ns = wire::mono_now_ns();
+        let payload = data.to_bytes();
+        if payload.len() > crate::msg::MAX_PAYLOAD_BYTES {
+            if !self.said_too_large.swap(true, Ordering::Relaxed) {
+                eprintln!(
+                    "[ratelab] {}: {}",
+                    ratelab_core::text::printable(&self.name),
+                    too_large(payload.len())
+                );
+            }
             return;
         }
         let sample = WireSample {
             seq,
             stamp_ns: stamp.0,
             origin_ns: origin.map(|o| o.0),
-            sent_mono_ns: wire::mono_now_ns(),
-            data: data.to_bytes(),
+            sent_mono_ns,
+            data: payload,
         };
         let bytes = sample.encode();
         if self.spill.admit(bytes.len()) {
@@ -923,7 +961,7 @@ fn bridge_outbound(
     let spill = Spill::unbounded();
     let mut outlets: Vec<Option<Outlet>> = (0..spec.topics.len()).map(|_| None).collect();
     for (t, p) in publishers {
-        outlets[t.0] = Some(Outlet::new(p, t.0, spill.clone()));
+        outlets[t.0] = Some(Outlet::new(p, t.0, &spec.topic(t).name, spill.clone()));
     }
     // Per node, the crossing topics it publishes.
     let by_node: Vec<Vec<TopicId>> = (0..spec.nodes.len())
@@ -1255,7 +1293,7 @@ mod tests {
         let publisher = session.declare_publisher("t/action").wait().unwrap();
         let spill = super::Spill::unbounded();
         let bridge = super::Bridge {
-            outlets: vec![Some(Outlet::new(publisher, 0, spill.clone()))],
+            outlets: vec![Some(Outlet::new(publisher, 0, "/action", spill.clone()))],
             by_node: vec![vec![crate::graph::TopicId(0)], vec![]],
             spill: spill.clone(),
         };
@@ -1296,7 +1334,31 @@ mod tests {
         outlet.send(500, Nanos(60), None, &force(0.0));
         got(500);
         assert!(rx.try_recv().is_err(), "nothing more was sent");
-        assert_eq!(bridge.forward_after(0), vec![(0, 500)], "the node's report");
+        // A message too large for a sample (by a byte: the receiver would refuse it) stays
+        // home, unnamed in the report, so the lockstep does not wait for it.
+        let huge = MsgData::new(crate::msg::ImageMsg {
+            height: 1,
+            width: 1,
+            encoding: "mono8".into(),
+            step: 1,
+            data: vec![0u8; crate::msg::MAX_PAYLOAD_BYTES].into(),
+        });
+        assert_eq!(huge.to_bytes().len(), crate::msg::MAX_PAYLOAD_BYTES + 13);
+        assert!(<crate::msg::ImageMsg as crate::msg::Message>::TYPE
+            .decode(&huge.to_bytes())
+            .is_err());
+        outlet.send(501, Nanos(60), None, &huge);
+        assert!(super::too_large(crate::msg::MAX_PAYLOAD_BYTES + 13)
+            .ends_with("not sent, counted lost on the wire (ratelab::limits::MAX_SAMPLE_BYTES)"));
+        assert_eq!(
+            bridge.forward_after(0),
+            vec![(0, 500)],
+            "the node's report: the newest sent, not the huge one"
+        );
+        // The next one (the huge one never arrives first: the wire keeps order).
+        outlet.send(502, Nanos(80), None, &force(0.0));
+        got(502);
+        assert_eq!(outlet.tick_ended(), Some(502));
         assert_eq!(
             bridge.forward_after(1),
             vec![],
@@ -1306,7 +1368,7 @@ mod tests {
         // even one that would fit, and the report names them as sent; the main thread puts
         // them.
         let len = WireSample {
-            seq: 501,
+            seq: 503,
             stamp_ns: 80,
             origin_ns: None,
             sent_mono_ns: crate::wire::mono_now_ns(),
@@ -1315,28 +1377,28 @@ mod tests {
         .encode()
         .len() as i64;
         spill.set_budget(Some(2 * len + len / 2));
-        for seq in 501..506 {
+        for seq in 503..508 {
             outlet.send(seq, Nanos(80), None, &force(0.0));
         }
-        got(501);
-        got(502);
+        got(503);
+        got(504);
         assert!(!spill.is_empty(), "three held back");
         spill.set_budget(Some(i64::MAX));
-        outlet.send(506, Nanos(80), None, &force(0.0));
+        outlet.send(508, Nanos(80), None, &force(0.0));
         assert!(
             rx.try_recv().is_err(),
             "nothing jumps the samples held back"
         );
-        assert_eq!(bridge.forward_after(0), vec![(0, 506)]);
+        assert_eq!(bridge.forward_after(0), vec![(0, 508)]);
         bridge.put_held().unwrap();
         assert!(spill.is_empty());
-        for seq in 503..507 {
+        for seq in 505..509 {
             got(seq);
         }
         // No bound again: each goes as it is published.
         spill.set_budget(None);
-        outlet.send(507, Nanos(100), None, &force(0.0));
-        got(507);
+        outlet.send(509, Nanos(100), None, &force(0.0));
+        got(509);
         assert!(spill.is_empty());
     }
 

@@ -375,7 +375,7 @@ class Image(_Msg):
     """A camera's frame: height and width px, encoding (`mono8`: a byte of brightness a
     pixel), step (bytes per row), data (the pixels, row after row, as bytes:
     `np.frombuffer(img.data, np.uint8).reshape(img.height, img.step)`). ROS 2:
-    `sensor_msgs/msg/Image` (little-endian pixels)."""
+    `sensor_msgs/msg/Image` (multi-byte pixels little-endian)."""
 
     __slots__ = ("height", "width", "encoding", "step", "data")
     FIELDS = __slots__
@@ -388,15 +388,20 @@ class Image(_Msg):
 
     @classmethod
     def from_ros(cls, msg):
-        if int(_ros_field(msg, "is_bigendian")) != 0:
-            raise ValueError("an Image with big-endian pixels (is_bigendian 1): ratelab "
-                             "reads little-endian ones")
         img = cls(int(_ros_field(msg, "height")), int(_ros_field(msg, "width")),
                   str(_ros_field(msg, "encoding")), int(_ros_field(msg, "step")),
                   _ros_field(msg, "data"))
-        if img.step < img.width or len(img.data) != img.step * img.height:
+        # Byte order matters only for pixels of more than a byte (mono16, 32FC1).
+        if (int(_ros_field(msg, "is_bigendian")) != 0
+                and any(bits in img.encoding for bits in ("16", "32", "64"))):
+            raise ValueError(f"an Image of {img.encoding} with big-endian pixels "
+                             "(is_bigendian 1): ratelab reads little-endian ones")
+        if img.step < img.width:
+            raise ValueError(f"an Image whose step ({img.step} bytes a row) is less than its "
+                             f"width ({img.width} px)")
+        if len(img.data) != img.step * img.height:
             raise ValueError(f"an Image of {len(img.data)} bytes, not step × height = "
-                             f"{img.step} × {img.height} (step at least width {img.width})")
+                             f"{img.step} × {img.height}")
         return img
 
 

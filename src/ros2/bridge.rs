@@ -119,8 +119,7 @@ impl BridgeReport {
             if s.overflow > 0 {
                 lines.push(format!(
                     "external node '{name}': {} message(s) dropped (more than {} waiting)",
-                    s.overflow,
-                    crate::graph::nodes::external::INBOX_CAPACITY
+                    s.overflow, s.inbox
                 ));
             }
             if let Some(e) = &s.first_error {

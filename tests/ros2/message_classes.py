@@ -49,16 +49,21 @@ for name, cls in classes.items():
             "effort": np.array(fields["effort"], dtype=np.float64),
         }
     out["to_ros"][name] = bytes(store.serialize_cdr(Msg(**fields), cls.ROS_TYPE)).hex()
-# An image cut short, or with big-endian pixels, is refused.
+# An image cut short, narrower in bytes than in pixels, or with big-endian 16-bit pixels,
+# is refused; a mono8 one that says big-endian is read (a byte has no order).
 for bad, said in (({"height": 2, "width": 2, "encoding": "mono8", "is_bigendian": 0,
                     "step": 2, "data": b"abc"}, "3 bytes, not step"),
+                  ({"height": 1, "width": 4, "encoding": "mono8", "is_bigendian": 0,
+                    "step": 2, "data": b"ab"}, "less than its width"),
                   ({"height": 1, "width": 1, "encoding": "mono16", "is_bigendian": 1,
-                    "step": 2, "data": b"ab"}, "big-endian")):
+                    "step": 2, "data": b"ab"}, "mono16 with big-endian")):
     try:
         support.Image.from_ros(bad)
         raise SystemExit(f"{bad} was accepted")
     except ValueError as e:
         assert said in str(e), e
+assert support.Image.from_ros({"height": 1, "width": 2, "encoding": "mono8", "is_bigendian": 1,
+                               "step": 2, "data": b"ab"}).data == b"ab"
 # A dict works as a message too, and a JointState with other joints is refused.
 assert support.Force.from_ros({"data": 2.5}).newtons == 2.5
 try:

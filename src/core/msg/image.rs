@@ -168,6 +168,8 @@ impl Message for ImageMsg {
 
 impl RosMapped for ImageMsg {
     type Ros = Image;
+    /// A frame may be as large as any message from ROS 2 (a 4K RGB image is 25 MB).
+    const MAX_ROS_BYTES: usize = crate::limits::MAX_ROS_MESSAGE_BYTES;
     fn ros_type() -> &'static RosType {
         image_type()
     }
@@ -186,10 +188,14 @@ impl RosMapped for ImageMsg {
         }
     }
     /// A whole image (`step × height` bytes, `step ≥ width`) whose multi-byte pixels, if
-    /// any, are little-endian; the header is not read (ratelab stamps every message).
+    /// any, are little-endian (`is_bigendian` is not read for an encoding of bytes:
+    /// `mono8`, `rgb8`); the header is not read (ratelab stamps every message).
     fn from_ros(img: Image) -> Result<Self, String> {
-        if img.is_bigendian != 0 {
-            return Err("an Image with big-endian pixels (is_bigendian 1): ratelab reads little-endian ones".into());
+        if img.is_bigendian != 0 && has_multi_byte_channels(&img.encoding) {
+            return Err(format!(
+                "an Image of {} with big-endian pixels (is_bigendian 1): ratelab reads little-endian ones",
+                crate::text::printable(&img.encoding)
+            ));
         }
         let msg = ImageMsg {
             height: img.height,
@@ -198,17 +204,30 @@ impl RosMapped for ImageMsg {
             step: img.step,
             data: img.data,
         };
+        if msg.step < msg.width {
+            return Err(format!(
+                "an Image whose step ({} bytes a row) is less than its width ({} px)",
+                msg.step, msg.width
+            ));
+        }
         if !msg.is_consistent() {
             return Err(format!(
-                "an Image of {} bytes, not step × height = {} × {} (step at least width {})",
+                "an Image of {} bytes, not step × height = {} × {}",
                 msg.data.len(),
                 msg.step,
-                msg.height,
-                msg.width
+                msg.height
             ));
         }
         Ok(msg)
     }
+}
+
+/// Does a pixel of ROS 2's `encoding` hold values of more than one byte (`mono16`, `16UC1`,
+/// `32FC1`, `bayer_rggb16`), whose byte order matters?
+fn has_multi_byte_channels(encoding: &str) -> bool {
+    ["16", "32", "64"]
+        .iter()
+        .any(|bits| encoding.contains(bits))
 }
 
 /// A number value's number (0 for another kind).
@@ -279,18 +298,30 @@ mod tests {
             data: vec![0; 10].into(),
             ..whole.clone()
         };
-        assert!(refused(short).contains("10 bytes, not step × height"));
+        assert!(refused(short).contains("10 bytes, not step × height = 1024 × 1024"));
         let narrow = Image {
             step: 512,
             data: vec![0; 512 * 1024].into(),
             ..whole.clone()
         };
-        assert!(refused(narrow).contains("step at least width 1024"));
+        assert!(refused(narrow).contains("step (512 bytes a row) is less than its width (1024 px)"));
+        // Byte order matters only for pixels of more than a byte.
         let big_endian = Image {
             is_bigendian: 1,
+            ..whole.clone()
+        };
+        assert!(
+            ImageMsg::from_ros(big_endian).is_ok(),
+            "mono8 has no byte order"
+        );
+        let big_endian = Image {
+            is_bigendian: 1,
+            encoding: "mono16".into(),
+            step: 2048,
+            data: vec![0; 2048 * 1024].into(),
             ..whole
         };
-        assert!(refused(big_endian).contains("big-endian"));
+        assert!(refused(big_endian).contains("mono16 with big-endian pixels"));
         assert!(ImageMsg::TYPE
             .from_values(&wrong[..4])
             .unwrap_err()

@@ -19,6 +19,11 @@ pub trait RosMapped: Message {
     /// it as CDR in that order). Missing fields read from a Python dict default
     /// (`#[serde(default)]`).
     type Ros: Serialize + DeserializeOwned;
+    /// The most bytes one message of this type from ROS 2 may have, checked before it is
+    /// decoded: 4 KiB unless the type needs more (an image), at most
+    /// [`crate::limits::MAX_ROS_MESSAGE_BYTES`]. A message's decoded form can be several
+    /// times its bytes (a `JointState` of empty names), so a type keeps it small.
+    const MAX_ROS_BYTES: usize = 4096;
     /// The ROS 2 type: name, description, RIHS01 hash.
     fn ros_type() -> &'static RosType;
     /// The ROS 2 message for `self`, published at run time `stamp` (a header's stamp).
@@ -39,9 +44,11 @@ pub struct RosCodec {
     /// CDR (with its encapsulation header) of a payload published at `stamp`, into `out`
     /// (cleared first); false (and `out` empty) when the payload is not of this type.
     pub encode: fn(&MsgData, Nanos, &mut Vec<u8>) -> bool,
-    /// A payload from CDR with its encapsulation header, exactly, within
-    /// [`crate::limits::MAX_ROS_MESSAGE_BYTES`].
+    /// A payload from CDR with its encapsulation header, exactly, within the type's
+    /// [`RosMapped::MAX_ROS_BYTES`].
     pub decode: fn(&[u8]) -> Result<MsgData, String>,
+    /// The most bytes one message from ROS 2 may have ([`RosMapped::MAX_ROS_BYTES`]).
+    pub max_bytes: usize,
 }
 
 impl RosCodec {
@@ -51,6 +58,7 @@ impl RosCodec {
             ros_type: M::ros_type,
             encode: encode::<M>,
             decode: decode::<M>,
+            max_bytes: M::MAX_ROS_BYTES.min(crate::limits::MAX_ROS_MESSAGE_BYTES),
         }
     }
 }
@@ -67,5 +75,8 @@ fn encode<M: RosMapped>(data: &MsgData, stamp: Nanos, out: &mut Vec<u8>) -> bool
 }
 
 fn decode<M: RosMapped>(bytes: &[u8]) -> Result<MsgData, String> {
-    Ok(MsgData::new(M::from_ros(from_cdr::<M::Ros>(bytes)?)?))
+    Ok(MsgData::new(M::from_ros(from_cdr::<M::Ros>(
+        bytes,
+        M::MAX_ROS_BYTES,
+    )?)?))
 }

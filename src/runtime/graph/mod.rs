@@ -331,11 +331,16 @@ impl Graph {
             .filter_map(|(i, n)| {
                 let settings = n.external()?;
                 let output = *n.publishes.first()?;
+                let largest = spec
+                    .topic(output)
+                    .msg
+                    .ros2()
+                    .map_or(crate::limits::MAX_ROS_MESSAGE_BYTES, |c| c.max_bytes);
                 Some(Arc::new(ExternalPort::new(
                     NodeId(i),
                     &n.name,
                     n.subscribes.first().copied(),
-                    output,
+                    (output, largest),
                     settings,
                 )))
             })

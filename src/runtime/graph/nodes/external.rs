@@ -126,8 +126,20 @@ impl ExternalNodeSpec {
 }
 
 /// Messages from the external node waiting for the proxy, at most; more are dropped and
-/// counted ([`ExternalStats::overflow`]).
+/// counted ([`ExternalStats::overflow`]). Fewer for a type of large messages: see
+/// [`MAX_INBOX_BYTES`].
 pub const INBOX_CAPACITY: usize = 1024;
+
+/// The most bytes of messages from the external node that may wait for the proxy, counting
+/// each at its type's largest (`RosCodec::max_bytes`): 256 MiB, so an image topic waits at
+/// most 4 frames of 64 MiB, and a flood from ROS 2 cannot grow memory past it. At least 2
+/// messages always wait.
+pub const MAX_INBOX_BYTES: usize = 256 << 20;
+
+/// How many messages of at most `max_message_bytes` each the inbox holds.
+pub fn inbox_capacity(max_message_bytes: usize) -> usize {
+    (MAX_INBOX_BYTES / max_message_bytes.max(1)).clamp(2, INBOX_CAPACITY)
+}
 
 /// How the proxy reaches the ROS 2 side, set once it is connected.
 pub struct ExternalLink {
@@ -151,6 +163,8 @@ pub struct ExternalStats {
     pub stray: u64,
     /// Messages dropped because the proxy's inbox was full.
     pub overflow: u64,
+    /// How many messages the inbox holds ([`inbox_capacity`]).
+    pub inbox: usize,
     /// Messages that did not decode as the output's type (the first reason is kept).
     pub undecodable: u64,
     /// Why the first undecodable message did not decode.
@@ -182,15 +196,16 @@ pub struct ExternalPort {
 }
 
 impl ExternalPort {
-    /// A port for node `node` (`name`), reading `input`, publishing `output`.
+    /// A port for node `node` (`name`), reading `input`, publishing `output`, whose
+    /// messages from ROS 2 have at most `max_message_bytes` each ([`inbox_capacity`]).
     pub fn new(
         node: NodeId,
         name: &str,
         input: Option<TopicId>,
-        output: TopicId,
+        (output, max_message_bytes): (TopicId, usize),
         settings: ExternalNodeSpec,
     ) -> ExternalPort {
-        let (tx, rx) = crossbeam_channel::bounded(INBOX_CAPACITY);
+        let (tx, rx) = crossbeam_channel::bounded(inbox_capacity(max_message_bytes));
         ExternalPort {
             node,
             name: name.to_string(),
@@ -235,6 +250,7 @@ impl ExternalPort {
             missed: self.missed.load(Ordering::Relaxed),
             stray: self.stray.load(Ordering::Relaxed),
             overflow: self.overflow.load(Ordering::Relaxed),
+            inbox: self.tx.capacity().unwrap_or(INBOX_CAPACITY),
             undecodable: self.undecodable.load(Ordering::Relaxed),
             first_error: self.first_error.get().cloned(),
         }
@@ -314,5 +330,33 @@ impl Work for External {
             }
         }
         Flow::Continue
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_inbox_holds_many_small_messages_and_few_large_ones() {
+        // The cartpole's types (4 KiB at most from ROS 2): the full count.
+        assert_eq!(inbox_capacity(4096), INBOX_CAPACITY);
+        // Images of up to 64 MiB: 4 wait, 256 MiB in all.
+        assert_eq!(inbox_capacity(64 << 20), 4);
+        // Never fewer than 2, whatever the bound.
+        assert_eq!(inbox_capacity(usize::MAX), 2);
+        assert_eq!(inbox_capacity(0), INBOX_CAPACITY);
+        let port = ExternalPort::new(
+            NodeId(0),
+            "camera",
+            None,
+            (TopicId(0), 64 << 20),
+            ExternalNodeSpec::default(),
+        );
+        assert_eq!(port.stats().inbox, 4);
+        for _ in 0..6 {
+            port.push(MsgData::new(crate::msg::ForceMsg { newtons: 0.0 }));
+        }
+        assert_eq!(port.stats().overflow, 2);
     }
 }
