@@ -32,6 +32,22 @@ pub struct Seen {
     pub nodes: Vec<NodeEntity>,
     /// Every publisher, subscription, service and client.
     pub endpoints: Vec<EndpointEntity>,
+    /// The depth a keep-all endpoint's token gives (by index in `endpoints`), which hiroz's
+    /// decoding drops: ROS 2 shows it (`KEEP_ALL (10)`).
+    pub keep_all_depth: std::collections::BTreeMap<usize, usize>,
+}
+
+/// The depth in a keep-all token's QoS (`…/::2,10:,:,:,,` gives 10), read as rmw_zenoh_cpp
+/// reads it: an empty depth is its default, 42 (the capture in `../shared/fixtures/ros2-real`
+/// shows `KEEP_ALL (42)` for ratelab's tokens of before).
+pub fn keep_all_depth(token: &str) -> usize {
+    token
+        .rsplit('/')
+        .next()
+        .and_then(|qos| qos.split(':').nth(2))
+        .and_then(|history| history.split_once(','))
+        .and_then(|(_, depth)| depth.parse::<usize>().ok())
+        .unwrap_or(hiroz_protocol::qos::RMW_ZENOH_DEFAULT_HISTORY_DEPTH)
 }
 
 /// A node's fully qualified name, `/ns/name` (`/talker` in the root namespace).
@@ -149,7 +165,7 @@ fn duration(d: &QosDuration) -> String {
 /// ROS 2's default (`· deadline 40 ms`, `· lifespan 60 ms`, `· lease 100 ms`,
 /// `· TRANSIENT_LOCAL`).
 pub fn qos_short(q: &QosProfile) -> String {
-    let mut parts = vec![reliability_word(q).to_string(), history_words(q)];
+    let mut parts = vec![reliability_word(q).to_string(), history_words(q, None)];
     let ms = |d: &QosDuration| d.sec as f64 * 1e3 + d.nsec as f64 / 1e6;
     for (what, d) in [
         ("deadline", &q.deadline),
@@ -174,16 +190,18 @@ fn reliability_word(q: &QosProfile) -> &'static str {
     }
 }
 
-/// History and depth as ros2cli writes them: `KEEP_LAST (7)`, `KEEP_ALL`.
-fn history_words(q: &QosProfile) -> String {
-    match q.history {
-        QosHistory::KeepLast(n) => format!("KEEP_LAST ({n})"),
-        QosHistory::KeepAll => "KEEP_ALL".into(),
+/// History and depth as ros2cli writes them: `KEEP_LAST (7)`, `KEEP_ALL (10)` (`KEEP_ALL`
+/// where the depth is not known).
+fn history_words(q: &QosProfile, keep_all_depth: Option<usize>) -> String {
+    match (q.history, keep_all_depth) {
+        (QosHistory::KeepLast(n), _) => format!("KEEP_LAST ({n})"),
+        (QosHistory::KeepAll, Some(n)) => format!("KEEP_ALL ({n})"),
+        (QosHistory::KeepAll, None) => "KEEP_ALL".into(),
     }
 }
 
-fn qos_block(q: &QosProfile) -> String {
-    let (history, reliability) = (history_words(q), reliability_word(q));
+fn qos_block(q: &QosProfile, keep_all_depth: Option<usize>) -> String {
+    let (history, reliability) = (history_words(q, keep_all_depth), reliability_word(q));
     let durability = match q.durability {
         hiroz_protocol::qos::QosDurability::Volatile => "VOLATILE",
         hiroz_protocol::qos::QosDurability::TransientLocal => "TRANSIENT_LOCAL",
@@ -207,16 +225,17 @@ fn qos_block(q: &QosProfile) -> String {
 /// # Errors
 /// One line when no endpoint has that topic (as ros2cli: `Unknown topic '/x'`).
 pub fn topic_info(g: &Seen, topic: &str, verbose: bool) -> Result<String, String> {
-    let ends: Vec<&EndpointEntity> = g
+    let ends: Vec<(usize, &EndpointEntity)> = g
         .endpoints
         .iter()
-        .filter(|e| is_topic(e) && e.topic == topic)
+        .enumerate()
+        .filter(|(_, e)| is_topic(e) && e.topic == topic)
         .collect();
     if ends.is_empty() {
         return Err(format!("Unknown topic '{}'", printable(topic)));
     }
-    let types: BTreeSet<String> = ends.iter().map(|e| type_name(e)).collect();
-    let count = |k: EndpointKind| ends.iter().filter(|e| e.kind == k).count();
+    let types: BTreeSet<String> = ends.iter().map(|(_, e)| type_name(e)).collect();
+    let count = |k: EndpointKind| ends.iter().filter(|(_, e)| e.kind == k).count();
     let mut out = format!(
         "Type: {}\n\nPublisher count: {}\n\n",
         types.into_iter().collect::<Vec<_>>().join(", "),
@@ -224,7 +243,7 @@ pub fn topic_info(g: &Seen, topic: &str, verbose: bool) -> Result<String, String
     );
     let block = |kind: EndpointKind, what: &str| -> String {
         let mut text = String::new();
-        for e in ends.iter().filter(|e| e.kind == kind) {
+        for (i, e) in ends.iter().filter(|(_, e)| e.kind == kind) {
             let (name, ns) = e.node.as_ref().map_or(("?".into(), "?".into()), |n| {
                 let ns = if n.namespace.is_empty() {
                     "/".to_string()
@@ -240,7 +259,7 @@ pub fn topic_info(g: &Seen, topic: &str, verbose: bool) -> Result<String, String
             text.push_str(&format!(
                 "Node name: {name}\nNode namespace: {ns}\nTopic type: {}\nTopic type hash: {hash}\nEndpoint type: {what}\n{}\n",
                 type_name(e),
-                qos_block(&e.qos)
+                qos_block(&e.qos, g.keep_all_depth.get(i).copied())
             ));
         }
         text
@@ -330,7 +349,13 @@ pub fn seen(session: &zenoh::Session, domain: u32, wait: Duration) -> Result<See
         }
         match format.parse_liveliness(sample.key_expr()) {
             Ok(Entity::Node(n)) => g.nodes.push(n),
-            Ok(Entity::Endpoint(e)) => g.endpoints.push(e),
+            Ok(Entity::Endpoint(e)) => {
+                if e.qos.history == QosHistory::KeepAll {
+                    let depth = keep_all_depth(sample.key_expr().as_str());
+                    g.keep_all_depth.insert(g.endpoints.len(), depth);
+                }
+                g.endpoints.push(e);
+            }
             Err(_) => {}
         }
     }
@@ -586,6 +611,7 @@ mod tests {
                     "geometry_msgs::msg::dds_::Twist_",
                 ),
             ],
+            ..Seen::default()
         }
     }
 
@@ -627,6 +653,22 @@ mod tests {
             topic_info(&g, "/x", false).unwrap_err(),
             "Unknown topic '/x'"
         );
+    }
+
+    #[test]
+    fn a_keep_all_endpoint_shows_its_depth_as_ros_2_does() {
+        // The token's depth, or rmw_zenoh_cpp's default for an empty one.
+        let key = |qos: &str| {
+            format!("@ros2_lv/0/z/0/1/MP/%/%/talker/%chatter/std_msgs::msg::dds_::String_/RIHS01_00/{qos}")
+        };
+        assert_eq!(keep_all_depth(&key("::2,10:,:,:,,")), 10);
+        assert_eq!(keep_all_depth(&key("1::2,:,:,:,,")), 42);
+        assert_eq!(keep_all_depth("nonsense"), 42);
+        let mut g = talker();
+        g.endpoints[0].qos.history = QosHistory::KeepAll;
+        g.keep_all_depth.insert(0, 10);
+        let v = topic_info(&g, "/chatter", true).unwrap();
+        assert!(v.contains("  History (Depth): KEEP_ALL (10)\n"), "{v}");
     }
 
     #[test]
