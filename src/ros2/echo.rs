@@ -103,10 +103,9 @@ fn own_descriptions() -> Vec<TypeDescription> {
         }
         describe(name, f)
     };
-    let seq = |id: u8| FieldTypeDescription::primitive(id + T::UNBOUNDED_SEQUENCE_OFFSET);
     let cov = || FieldTypeDescription::array(T::FLOAT64 + T::ARRAY_OFFSET, 9);
     let one = |name: &str, id: u8| describe(name, vec![prim("data", id)]);
-    vec![
+    let mut own = vec![
         describe(
             "builtin_interfaces/msg/Time",
             vec![prim("sec", T::INT32), prim("nanosec", T::UINT32)],
@@ -127,11 +126,6 @@ fn own_descriptions() -> Vec<TypeDescription> {
         one("std_msgs/msg/Int32", T::INT32),
         one("std_msgs/msg/Int64", T::INT64),
         one("std_msgs/msg/Float32", T::FLOAT32),
-        one("std_msgs/msg/Float64", T::FLOAT64),
-        describe(
-            "rosgraph_msgs/msg/Clock",
-            vec![nested("clock", "builtin_interfaces/msg/Time")],
-        ),
         xyz("geometry_msgs/msg/Vector3", false),
         xyz("geometry_msgs/msg/Point", false),
         xyz("geometry_msgs/msg/Quaternion", true),
@@ -150,28 +144,6 @@ fn own_descriptions() -> Vec<TypeDescription> {
             ],
         ),
         describe(
-            "sensor_msgs/msg/JointState",
-            vec![
-                nested("header", "std_msgs/msg/Header"),
-                field("name", seq(T::STRING)),
-                field("position", seq(T::FLOAT64)),
-                field("velocity", seq(T::FLOAT64)),
-                field("effort", seq(T::FLOAT64)),
-            ],
-        ),
-        describe(
-            "sensor_msgs/msg/Image",
-            vec![
-                nested("header", "std_msgs/msg/Header"),
-                prim("height", T::UINT32),
-                prim("width", T::UINT32),
-                prim("encoding", T::STRING),
-                prim("is_bigendian", T::UINT8),
-                prim("step", T::UINT32),
-                field("data", seq(T::UINT8)),
-            ],
-        ),
-        describe(
             "sensor_msgs/msg/Imu",
             vec![
                 nested("header", "std_msgs/msg/Header"),
@@ -183,7 +155,18 @@ fn own_descriptions() -> Vec<TypeDescription> {
                 field("linear_acceleration_covariance", cov()),
             ],
         ),
-    ]
+    ];
+    // ratelab's own types, as their one definition describes them (`ratelab_core::ros_types`).
+    use ratelab_core::ros_types::{clock_type, float64_type, image_type, joint_state_type};
+    for t in [
+        joint_state_type(),
+        float64_type(),
+        clock_type(),
+        image_type(),
+    ] {
+        own.push(t.description.type_description.clone());
+    }
+    own
 }
 
 /// The described types, by name.
