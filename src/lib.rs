@@ -23,7 +23,7 @@
 //!   [`policy`] (brains; + [`checkpoint`] for trained ones; [`interpreter`], where the
 //!   Python layer plugs in), [`graph`] (the graph file, [`graph::spec`]; node kinds and
 //!   their registry), [`config`], [`scheduler`] (the virtual and real clocks), [`command`]
-//!   (changes to a running graph), [`runcore`] (one graph under the virtual clock, stepped,
+//!   (changes to a running graph), [`runcore`] (one graph under either clock, stepped,
 //!   commanded, captured and restored), [`summary`] (a run's figures from its graph's
 //!   state), [`telemetry`] (a live run's controls and telemetry);
 //! - **python** (`ratelab_python`, `src/python/`): [`python`] (a learner's Python nodes
@@ -33,8 +33,9 @@
 //! - **recording** (`ratelab_recording`, `src/recording/`): [`recording`] (rerun `.rrd`);
 //! - **distributed** (`ratelab_distributed`, `src/distributed/`): [`distributed`] (the graph
 //!   across processes, over Zenoh);
-//! - **session** (`ratelab_session`, `src/session/`): [`run`] (one headless run), [`sweep`]
-//!   (grids and the rate cliff), [`session`] (the lab's live runs, their log and replay);
+//! - **drivers** (`ratelab_drivers`, `src/drivers/`): the run core's drivers — [`run`] (one
+//!   headless run), [`sweep`] (grids and the rate cliff), [`session`] (the lab's live
+//!   sessions, their log and replay);
 //! - **this crate**: [`exercise`] (the exercises' bands and checks).
 #![warn(missing_docs)]
 
@@ -60,6 +61,7 @@ pub use ratelab_core::{
     publisher, qos, rate, realtime, ros_types, runlog, text, textlog, time, topic, Nanos,
 };
 pub use ratelab_distributed as distributed;
+pub use ratelab_drivers::{run, session, sweep};
 pub use ratelab_python as python;
 pub use ratelab_recording as recording;
 pub use ratelab_ros2 as ros2;
@@ -68,7 +70,5 @@ pub use ratelab_runtime::{
     telemetry,
 };
 pub use ratelab_runtime::{ClockKind, RunConfig};
-pub use ratelab_session::{run, sweep};
 // `ratelab::run` is the module and, as before the layers were crates, its function.
-pub use ratelab_session as session;
-pub use ratelab_session::run::{run, RunOptions, RunReport};
+pub use ratelab_drivers::run::{run, RunOptions, RunReport};

@@ -23,10 +23,11 @@ use super::wire::{self, ToLauncher, ToProcess, WireSample};
 use super::{check_endpoint, open_session, Access, DistError, Keys, REPLY_TIMEOUT};
 use crate::config::RunConfig;
 use crate::graph::spec::GraphSpec;
-use crate::graph::{Graph, NodeId, TopicId};
+use crate::graph::{NodeId, TopicId};
 use crate::metrics::LatencyStats;
 use crate::policy::BrainSlot;
 use crate::qos::TopicQos;
+use crate::runcore::{CoreOptions, RunCore};
 use crate::runlog::StepRecord;
 use crate::scheduler::StopFlag;
 use crate::summary::GraphState;
@@ -351,7 +352,8 @@ pub fn run_process(opts: &ProcessOptions, stop: &StopFlag) -> Result<(), DistErr
     };
     let mine = nodes_of(&spec, &opts.process);
     let batch: Arc<Mutex<Batch>> = Arc::default();
-    let Graph { nodes, handles } = build_share(&cfg, &setup.policy, &mine, &batch)?;
+    let core = build_share(&cfg, &setup.policy, &mine, &batch)?;
+    let handles = core.handles().clone();
     let (inbound, inbound_ends, publishers) = wire_crossings(
         &session,
         &keys,
@@ -421,7 +423,7 @@ pub fn run_process(opts: &ProcessOptions, stop: &StopFlag) -> Result<(), DistErr
     let stats_done = StopFlag::new();
     let stats_thread = spawn_figures(share.clone(), stats_pub, stats_done.clone())?;
     let result = run_share(
-        nodes,
+        core,
         &share,
         (slot.as_ref(), &nudged),
         (&ctl_rx, stop, &launcher_gone),
@@ -502,7 +504,8 @@ fn nodes_of(spec: &GraphSpec, process: &str) -> Vec<NodeId> {
         .unwrap_or_default()
 }
 
-/// Build the graph as this process runs it: the brain loaded where one of its nodes, `mine`,
+/// Build the graph as this process runs it, in a run core (the whole graph built, its own
+/// nodes run here, under either clock): the brain loaded where one of its nodes, `mine`,
 /// runs it (a `policy` node; `policy` names it), every actuator step handed to `batch`.
 ///
 /// # Errors
@@ -512,7 +515,7 @@ fn build_share(
     policy: &str,
     mine: &[NodeId],
     batch: &Arc<Mutex<Batch>>,
-) -> Result<Graph, DistError> {
+) -> Result<RunCore, DistError> {
     let spec = &cfg.graph;
     let brain_spec = if mine.iter().any(|&id| spec.node(id).kind.def().uses_brain) {
         policy
@@ -521,12 +524,13 @@ fn build_share(
     };
     let brain = crate::checkpoint::load_policy(brain_spec)
         .map_err(|e| DistError::Usage(format!("--policy {brain_spec}: {e}")))?;
-    Ok(crate::runcore::build_graph(
+    let graph = crate::runcore::build_graph(
         cfg,
         BrainSlot::new(brain),
         false,
         vec![Box::new(StepTap(batch.clone()))],
-    )?)
+    )?;
+    Ok(RunCore::with_graph(cfg, graph, CoreOptions::default()))
 }
 
 /// Send this process's view of the run, `state`, with its wire latencies to the launcher,
@@ -606,7 +610,7 @@ fn declare_tokens(
 /// (`slot` set), else on the real clock from the launcher's start (or not at all when the
 /// launcher stops the run before it starts). Returns its view of the run.
 fn run_share(
-    nodes: Vec<Box<dyn crate::node::Node>>,
+    core: RunCore,
     share: &Arc<Share>,
     (slot, nudged): (Option<&stepper::SharedSlot>, &Receiver<()>),
     (ctl_rx, stop, launcher_gone): (&Receiver<ToProcess>, &StopFlag, &StopFlag),
@@ -616,7 +620,7 @@ fn run_share(
     let me = &share.process;
     match (share.cfg.clock, slot) {
         (crate::ClockKind::Virtual, Some(slot)) => stepper::run_lockstep(
-            nodes,
+            core,
             share,
             (slot, nudged),
             ctl_rx,
@@ -642,7 +646,7 @@ fn run_share(
                     format!("process '{me}' started with the run")
                 });
                 real_clock(
-                    nodes,
+                    core,
                     share,
                     start_mono_ns,
                     ctl_rx,

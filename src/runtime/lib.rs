@@ -10,8 +10,8 @@
 //!   the built-in nodes), [`config`] (a run's settings and their validation);
 //! - **running them**: [`telemetry`] (a live run's controls and telemetry), [`scheduler`]
 //!   (the virtual and real clocks that apply the executors' rules), [`command`] (changes to
-//!   a running graph), [`runcore`] (one graph under the virtual clock, stepped, commanded,
-//!   captured and restored), [`summary`] (a run's figures from its graph's state).
+//!   a running graph), [`runcore`] (one graph under either clock, stepped, commanded,
+//!   captured and restored; every run's driver goes through it), [`summary`] (a run's figures from its graph's state).
 //!
 //! The drivers of runs (the headless run, sweeps, the lab's sessions), ROS 2 on the wire,
 //! the graph across processes and recordings are crates above this one.

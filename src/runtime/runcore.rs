@@ -1,14 +1,20 @@
-//! The run core: one graph in this process under the virtual clock — its nodes, topics,
-//! executors, scheduler and plant — advanced instant by instant, changed by commands, and
-//! **captured** and **restored** whole, so that restoring what was captured at t and running
+//! The run core: one graph in this process — its nodes, topics, executors, scheduler and
+//! plant — advanced under the virtual clock instant by instant or event by event, run
+//! under the real clock, changed by commands, and **captured** and **restored** whole, so that restoring what was captured at t and running
 //! on gives, byte for byte, the run's own continuation.
 //!
-//! Its drivers: `ratelab::run::run` under the virtual clock (and so the headless run,
-//! `sweep`, `cliff`, the exercises, `bench` and `replay`) and the lab's engine under the
-//! virtual clock (`ratelab::session`), which paces it against the wall clock. Still outside
-//! it: the real clock's threads ([`crate::scheduler::run_real`]), and the graph across
-//! processes (the launcher's lockstep and each process's stepper, `ratelab::distributed`),
-//! which step their graphs with the scheduler's events directly.
+//! Every run of a graph goes through it; its drivers are thin:
+//! - instant by instant ([`RunCore::step`]): `ratelab::run::run` under the virtual clock
+//!   (and so the headless run, `sweep`, `cliff`, the exercises, `bench` and `replay`) and
+//!   the lab's engine, which paces it against the wall clock (`ratelab::session`);
+//! - event by event ([`RunCore::next_event`], [`RunCore::run_event`],
+//!   [`RunCore::ran_elsewhere`]): each process of a launch under the virtual clock, which
+//!   runs its own nodes' events and takes the others' from their reports
+//!   (`ratelab::distributed`); the launcher follows the same order without ticks
+//!   ([`Follower`]);
+//! - under the real clock ([`RunCore::run_real`]): the headless run, the lab's engine and
+//!   each process of a launch hand the core's graph to the real-clock executor's threads
+//!   ([`crate::scheduler::run_real`]) and take it back at the end.
 //!
 //! # What an instant is
 //! [`RunCore::step`] runs the next instant of the scheduler ([`VirtualScheduler::run_instant`]:
@@ -48,14 +54,20 @@ use crate::config::RunConfig;
 use crate::executor::{ExecutionPlan, ExecutorOverride};
 use crate::graph::{lock, Graph, GraphHandles, StepObserver};
 use crate::msg::TopicSnapshot;
+use crate::node::Flow;
 use crate::node::{Node, NodeState};
 use crate::plant::PlantState;
 use crate::plant::{CartPole, PlantError};
 use crate::policy::{BrainSlot, Policy};
 use crate::qos::LivelinessState;
 use crate::runlog::RunLog;
-use crate::scheduler::{EndReason, InstantOutcome, RunEnd, StopFlag, VirtualScheduler};
+use crate::scheduler::{EndReason, Event, InstantOutcome, RunEnd, StopFlag, VirtualScheduler};
 use crate::time::Nanos;
+
+mod follower;
+mod real;
+pub use follower::Follower;
+pub use real::RealEnd;
 
 /// A run that could not start.
 #[derive(Debug, thiserror::Error)]
@@ -256,7 +268,7 @@ struct Saved {
     sched: VirtualScheduler,
 }
 
-/// One graph under the virtual clock (module docs).
+/// One graph in this process, under either clock (module docs).
 pub struct RunCore {
     /// This graph's number in the process (a new one for each graph built).
     graph_id: u64,
@@ -279,6 +291,8 @@ pub struct RunCore {
     /// The most captures kept ([`max_history`]).
     max_history: usize,
     end: Option<RunEnd>,
+    /// The instant whose events [`RunCore::next_event`] is drawing, if any.
+    open_instant: Option<Nanos>,
     keep_trace: bool,
     on_span: Option<crate::executor::SpanHook>,
     remake_brain: Option<BrainFactory>,
@@ -331,6 +345,7 @@ impl RunCore {
             next_history: Nanos::ZERO,
             max_history: max_history(cfg.graph.nodes.len(), cfg.graph.topics.len()),
             end: None,
+            open_instant: None,
             keep_trace,
             on_span: opts.on_span,
             remake_brain: opts.remake_brain,
@@ -394,16 +409,9 @@ impl RunCore {
         let Some(due) = self.next_instant() else {
             return Step::Ended(self.finish_at_duration());
         };
-        while let Some(c) = self.scheduled.get(self.next_scheduled) {
-            if c.at_ns > due.0 {
-                break;
-            }
-            // Commands were validated when logged; a failure here changes nothing.
-            let _ = c.command.apply(&self.handles);
-            self.applied.push(c.clone());
-            self.next_scheduled += 1;
-        }
+        self.apply_scheduled(due);
         self.take_plan();
+        self.open_instant = None;
         let ended = match self.sched.run_instant(&mut self.nodes) {
             InstantOutcome::Ran { ticked } => {
                 self.keep_history();
@@ -420,6 +428,88 @@ impl RunCore {
         };
         self.end = Some(ended.clone());
         Step::Ended(ended)
+    }
+
+    /// The run's next event, the clock moved on to it: a node's tick starting, or a tick's
+    /// held outputs going out after its compute time ([`Event`]), in the order
+    /// [`RunCore::step`] runs them. Before an instant's first event the commands scheduled
+    /// at or before it are applied, and the executor plan a command asked for is taken, as
+    /// [`RunCore::step`] does. `None` once the run has ended or its next instant is past its
+    /// duration.
+    ///
+    /// For a driver that runs an instant's events one at a time: the graph across processes,
+    /// where each process runs its own nodes' events and takes the others' from their
+    /// reports (`ratelab::distributed::lockstep`). Each event drawn is then either run here
+    /// ([`RunCore::run_event`]) or taken as run elsewhere ([`RunCore::ran_elsewhere`]),
+    /// before the next is drawn. Captures are taken between instants, not between events.
+    pub fn next_event(&mut self) -> Option<Event> {
+        if self.end.is_some() {
+            return None;
+        }
+        loop {
+            if self.open_instant == Some(self.sched.now()) {
+                if let Some(e) = self.sched.event_now() {
+                    return Some(e);
+                }
+            }
+            let due = self.next_instant()?;
+            self.apply_scheduled(due);
+            self.take_plan();
+            self.sched.begin_instant(due);
+            self.open_instant = Some(due);
+        }
+    }
+
+    /// Run `event` ([`RunCore::next_event`]'s) here: a start ticks its node (its compute
+    /// time drawn, its outputs held until it has elapsed); a publish sends the outputs its
+    /// tick held. Returns the node's [`Flow`] and the compute time drawn (zero for a
+    /// publish). A node that stops the graph or fails ends the run ([`RunCore::end`]).
+    ///
+    /// # Errors
+    /// The node panicked: [`EndReason::NodeFailed`] naming it.
+    pub fn run_event(&mut self, event: Event) -> Result<(Flow, Nanos), EndReason> {
+        let ran = match event {
+            Event::Publish { node, at } => {
+                self.nodes[node].publish_held(at);
+                Ok((Flow::Continue, Nanos::ZERO))
+            }
+            Event::Start { node, .. } => self.sched.start_here(&mut self.nodes, node),
+        };
+        let (_, at) = event.node_at();
+        match &ran {
+            Ok((Flow::Stop, _)) => self.ended_at(at, EndReason::NodeStopped),
+            Err(reason) => self.ended_at(at, reason.clone()),
+            Ok(_) => {}
+        }
+        ran
+    }
+
+    /// Take `event` ([`RunCore::next_event`]'s) as run in another process: a start's tick
+    /// computed there for `compute` (as that process reports it; zero when it takes no
+    /// time), which the executors here account for; a publish changes nothing here (its
+    /// messages arrive over the wire).
+    pub fn ran_elsewhere(&mut self, event: Event, compute: Nanos) {
+        if let Event::Start { node, .. } = event {
+            self.sched.start_elsewhere(&self.nodes, node, compute);
+        }
+    }
+
+    /// End the run at `at` for `reason`, unless it has ended already.
+    fn ended_at(&mut self, at: Nanos, reason: EndReason) {
+        self.end.get_or_insert(RunEnd { at, reason });
+    }
+
+    /// Apply the commands scheduled at or before `due`, logging each.
+    fn apply_scheduled(&mut self, due: Nanos) {
+        while let Some(c) = self.scheduled.get(self.next_scheduled) {
+            if c.at_ns > due.0 {
+                break;
+            }
+            // Commands were validated when logged; a failure here changes nothing.
+            let _ = c.command.apply(&self.handles);
+            self.applied.push(c.clone());
+            self.next_scheduled += 1;
+        }
     }
 
     /// Run every instant up to and including `t` (or to the run's end).
@@ -644,6 +734,7 @@ impl RunCore {
         self.by_hand.clone_from(&capture.by_hand);
         self.next_scheduled = capture.next_scheduled;
         self.end.clone_from(&capture.end);
+        self.open_instant = None;
         Ok(())
     }
 

@@ -117,7 +117,7 @@ pub enum InstantOutcome {
 }
 
 /// One event of the virtual clock under the executors' rules
-/// ([`VirtualScheduler::next_event_until`]).
+/// ([`VirtualScheduler::event_now`]).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Event {
     /// Node `node`'s tick has computed until `at`: its held outputs go out now.
@@ -416,7 +416,7 @@ impl VirtualScheduler {
     /// A panic in the node propagates; [`VirtualScheduler::run_instant`] catches it.
     /// For the default plan only (one thread per node, no compute time);
     /// [`VirtualScheduler::run_instant`] applies any plan.
-    pub fn tick_next(&mut self, nodes: &mut [Box<dyn Node>]) -> Option<(Nanos, usize, Flow)> {
+    fn tick_next(&mut self, nodes: &mut [Box<dyn Node>]) -> Option<(Nanos, usize, Flow)> {
         let Reverse((due, prio, i)) = self.releases.pop()?;
         self.now = due;
         self.ticks[i] += 1;
@@ -458,37 +458,28 @@ impl VirtualScheduler {
         InstantOutcome::Ran { ticked }
     }
 
-    /// The next event under the executors' rules, the clock moved on to it: at each instant
-    /// first the ticks whose compute time ends then ([`Event::Publish`], in rank order),
-    /// then every tick that can start ([`Event::Start`], in the executors' order), once the
-    /// timers due then are released. `None` (and nothing taken) when nothing is scheduled
-    /// up to `limit`: a run of duration `limit` ends there, its later events untouched, as
-    /// [`VirtualScheduler::run`] leaves them.
+    /// Move the clock on to the instant `t` (the next due time, [`VirtualScheduler::next_due`],
+    /// which the caller has checked against its run's duration and before which it applied
+    /// its commands): its events are then drawn one by one with
+    /// [`VirtualScheduler::event_now`]. One instant of [`VirtualScheduler::run_instant`] is
+    /// this, event by event; `ratelab::runcore::RunCore::next_event` drives it.
+    pub fn begin_instant(&mut self, t: Nanos) {
+        self.now = t;
+    }
+
+    /// The next event at the current instant under the executors' rules, or `None` when
+    /// every event of the instant has been drawn (everything left is later: a compute time
+    /// ends after its start, a timer is rearmed after its tick). First the ticks whose
+    /// compute time ends now ([`Event::Publish`], in rank order), then every tick that can
+    /// start ([`Event::Start`], in the executors' order), once the timers due now are
+    /// released.
     ///
     /// The scheduler's side of the event is done when this returns (a thread freed, a
     /// thread taken); the node's side is the caller's: [`Node::publish_held`] for a publish
     /// where the node runs, and for a start exactly one of [`VirtualScheduler::start_here`]
     /// (the node ticks here) or [`VirtualScheduler::start_elsewhere`] (it ticks in another
-    /// process, `ratelab::distributed::lockstep`), before the next call. One instant of
-    /// [`VirtualScheduler::run_instant`] is this, event by event.
-    pub fn next_event_until(&mut self, limit: Nanos) -> Option<Event> {
-        loop {
-            if let Some(e) = self.event_now() {
-                return Some(e);
-            }
-            // Nothing more at this instant: everything left is later (a compute time ends
-            // after its start; a timer is rearmed after its tick).
-            let t = self.next_due()?;
-            if t > limit {
-                return None;
-            }
-            self.now = t;
-        }
-    }
-
-    /// The next event at [`VirtualScheduler::now`], if any (see
-    /// [`VirtualScheduler::next_event_until`]).
-    fn event_now(&mut self) -> Option<Event> {
+    /// process, `ratelab::distributed::lockstep`), before the next call.
+    pub fn event_now(&mut self) -> Option<Event> {
         let t = self.now;
         if let Some(&Reverse((at, i))) = self.completions.peek() {
             if at <= t {
@@ -629,8 +620,10 @@ impl VirtualScheduler {
 
     /// Run instant by instant until `duration` (ticks due at exactly `duration` run), a
     /// stop, a failed node, or the flag. `before_instant(t)` runs before every instant with
-    /// its time (the place to apply commands scheduled at virtual instants).
-    pub fn run(
+    /// its time. The scheduler's own tests' loop: a run drives the scheduler through
+    /// `ratelab::runcore::RunCore`.
+    #[cfg(test)]
+    fn run(
         &mut self,
         nodes: &mut [Box<dyn Node>],
         duration: Nanos,

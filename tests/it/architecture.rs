@@ -1,7 +1,7 @@
 //! The architecture, as the compiler and these tests keep it.
 //!
 //! **Crates by layer.** The library is one crate per layer under `src/` (core, runtime,
-//! recording, session, distributed, and the `ratelab` facade at `src/lib.rs`), the lab in
+//! recording, drivers, distributed, and the `ratelab` facade at `src/lib.rs`), the lab in
 //! `lab/`. Each depends only on the layers below it ([`LAYERS`]), and the core on none of
 //! the crates that talk to the world (Zenoh, rerun, PyO3, candle, tract, MuJoCo) — as
 //! `cargo tree` resolves it, not only as its manifest says.
@@ -315,8 +315,8 @@ const LAYERS: &[(&str, &str, &[&str])] = &[
         &["ratelab-core", "ratelab-runtime"],
     ),
     (
-        "ratelab-session",
-        "src/session",
+        "ratelab-drivers",
+        "src/drivers",
         &[
             "ratelab-core",
             "ratelab-runtime",
@@ -340,7 +340,7 @@ const LAYERS: &[(&str, &str, &[&str])] = &[
             "ratelab-python",
             "ratelab-ros2",
             "ratelab-recording",
-            "ratelab-session",
+            "ratelab-drivers",
             "ratelab-distributed",
         ],
     ),

@@ -7,8 +7,9 @@ use proptest::prelude::*;
 use ratelab::graph::{GraphSpec, StepObserver};
 use ratelab::policy::{BrainSlot, Scripted};
 use ratelab::run::build_graph;
+use ratelab::runcore::{CoreOptions, RunCore};
 use ratelab::runlog::StepRecord;
-use ratelab::scheduler::{StopFlag, VirtualScheduler};
+use ratelab::scheduler::StopFlag;
 use ratelab::{run, ClockKind, Nanos, RunConfig, RunOptions};
 use std::process::Command;
 
@@ -510,12 +511,11 @@ fn run_random(graph: &GraphSpec, seed: u64) -> RandomRun {
         ..RunConfig::default()
     };
     let g = build_graph(&cfg, BrainSlot::new(Box::new(Scripted)), true, Vec::new()).unwrap();
-    let mut nodes = g.nodes;
-    let mut sched = VirtualScheduler::new(&nodes);
-    let end = sched.run(&mut nodes, cfg.duration, &StopFlag::new(), &mut |_| {});
-    let m = ratelab::run::summarize(&cfg, &g.handles, &end, sched.ticks(), None, None);
-    let counts = g
-        .handles
+    let mut core = RunCore::with_graph(&cfg, g, CoreOptions::default());
+    core.run_to_end(&StopFlag::new());
+    let m = core.metrics();
+    let counts = core
+        .handles()
         .topics
         .iter()
         .map(|t| {
@@ -523,7 +523,7 @@ fn run_random(graph: &GraphSpec, seed: u64) -> RandomRun {
             [s.published, s.seen, s.dropped, t.unseen_buffered() as u64]
         })
         .collect();
-    let trace = std::mem::take(&mut ratelab::graph::lock(&g.handles.log).trace);
+    let trace = core.take_trace();
     RandomRun {
         json: serde_json::to_string_pretty(&m).unwrap(),
         trace,

@@ -7,7 +7,8 @@ use ratelab::graph::GraphSpec;
 use ratelab::policy::{BrainSlot, Scripted};
 use ratelab::qos::Fault;
 use ratelab::run::build_graph;
-use ratelab::scheduler::{StopFlag, VirtualScheduler};
+use ratelab::runcore::{CoreOptions, RunCore};
+use ratelab::scheduler::StopFlag;
 use ratelab::{run, ClockKind, Nanos, RunConfig, RunOptions};
 
 use crate::{ratelab_in_repo as ratelab, repo};
@@ -434,16 +435,14 @@ proptest! {
         let cfg = RunConfig { seed, ..virtual_cfg(g, 2) };
         let once = || {
             let built = build_graph(&cfg, BrainSlot::new(Box::new(Scripted)), true, Vec::new()).unwrap();
-            let mut nodes = built.nodes;
-            let mut sched = VirtualScheduler::new(&nodes);
-            let end = sched.run(&mut nodes, cfg.duration, &StopFlag::new(), &mut |_| {});
-            for t in &built.handles.topics {
+            let mut core = RunCore::with_graph(&cfg, built, CoreOptions::default());
+            let end = core.run_to_end(&StopFlag::new());
+            for t in &core.handles().topics {
                 let s = t.stats_at(end.at);
                 let total = s.seen + s.dropped + s.expired + s.lost + s.refused + s.unmatched + s.before_join + t.unseen_buffered() as u64 + s.in_flight;
                 assert_eq!(s.published, total, "{}: {s:?}", t.name());
             }
-            let m = ratelab::run::summarize(&cfg, &built.handles, &end, sched.ticks(), None, None);
-            serde_json::to_string(&m).unwrap()
+            serde_json::to_string(&core.metrics()).unwrap()
         };
         prop_assert_eq!(once(), once());
     }

@@ -308,3 +308,86 @@ fn a_long_run_keeps_a_bounded_history_and_still_seeks_exactly() {
     assert_eq!(e.to_string(), "no capture kept to seek back to 1 s");
     assert_eq!(fresh.now(), Nanos(77_760 * Nanos::MILLISECOND.0));
 }
+
+/// The run drawn event by event (as each process of a launch draws it), every event run
+/// here: `metrics.json` and the trace equal those of the run stepped instant by instant,
+/// with commands at run times too; and a follower (the launcher's view) draws the same
+/// events in the same order.
+fn check_events(label: &str, cfg: &RunConfig, commands: Vec<TimedCommand>) {
+    let whole = finish(core(cfg, commands.clone()));
+    let mut c = core(cfg, commands.clone());
+    let mut order = Vec::new();
+    while let Some(event) = c.next_event() {
+        let compute = c
+            .run_event(event)
+            .map_or(Nanos::ZERO, |(_, compute)| compute);
+        order.push((event, compute));
+    }
+    // A node that stopped the run (the fall) ended it; else it ends at its duration, as
+    // a stepped run does.
+    let stopped = c.end().is_some();
+    assert_eq!(finish(c), whole, "{label}: event by event");
+    if commands.is_empty() {
+        let mut follower = ratelab::runcore::Follower::new(cfg).unwrap();
+        for &(event, compute) in &order {
+            assert_eq!(
+                follower.next_event(),
+                Some(event),
+                "{label}: the follower's order"
+            );
+            follower.ran_elsewhere(event, compute);
+        }
+        if !stopped {
+            assert_eq!(follower.next_event(), None, "{label}: the follower's end");
+        }
+    }
+}
+
+#[test]
+fn a_run_drawn_event_by_event_is_the_run_stepped_instant_by_instant() {
+    let _machine = crate::machine::shared();
+    for (label, cfg) in configurations() {
+        check_events(label, &cfg, Vec::new());
+        let at = |ms: u64| ms * Nanos::MILLISECOND.0;
+        let commands = vec![
+            TimedCommand {
+                at_ns: at(1_250),
+                command: divergence(&cfg, 0),
+            },
+            TimedCommand {
+                at_ns: at(2_500),
+                command: divergence(&cfg, 1),
+            },
+            TimedCommand {
+                at_ns: at(4_000),
+                command: Command::SetExecutor {
+                    executor: "single".into(),
+                },
+            },
+        ];
+        check_events(label, &cfg, commands);
+    }
+}
+
+#[test]
+fn a_real_clock_run_gives_its_nodes_back_to_the_core_and_ends_it() {
+    let _machine = crate::machine::shared();
+    let cfg = RunConfig {
+        clock: ClockKind::Real,
+        duration: Nanos(300 * Nanos::MILLISECOND.0),
+        ..RunConfig::default()
+    };
+    let mut c = core(&cfg, Vec::new());
+    let opts = ratelab::run::real_options(&cfg);
+    // Only the sensor and the policy (a process's share): the actuator never ticks.
+    let r = c.run_real(Some(&[0, 1]), &StopFlag::new(), &opts);
+    assert_eq!(r.end.reason, ratelab::scheduler::EndReason::Duration);
+    assert_eq!(r.timing.len(), 2);
+    assert!(r.timing.iter().all(|t| t.ticks > 0), "{:?}", r.timing);
+    assert_eq!(c.end(), Some(&r.end));
+    // Every node is back: a capture of the ended run restores into it.
+    let cap = c.capture();
+    assert!(!cap.is_replay());
+    c.restore(&cap).unwrap();
+    assert_eq!(c.scheduler().ticks().len(), cfg.graph.nodes.len());
+}

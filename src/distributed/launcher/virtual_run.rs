@@ -1,5 +1,6 @@
 //! The run under the virtual clock, as the launcher sees it: it follows the whole graph's
-//! order of events, moves the horizon on ahead of them, takes each event's report from its
+//! order of events as the run core draws it ([`crate::runcore::Follower`]), moves the
+//! horizon on ahead of them, takes each event's report from its
 //! node's process ([`crate::lockstep`]), ends the run where a report says so,
 //! and gathers the processes' reports at the end.
 
@@ -7,9 +8,8 @@ use super::admission::Admission;
 use super::{Launch, Link, LockstepCost};
 use crate::graph::{NodeId, TopicId};
 use crate::lockstep::{check_tick_report, TickInbox, HORIZON_PERIODS};
-use crate::node::{Flow, Node};
-use crate::rate::Rate;
-use crate::scheduler::{EndReason, Event, RunEnd, VirtualScheduler};
+use crate::runcore::Follower;
+use crate::scheduler::{EndReason, Event, RunEnd};
 use crate::summary::GraphState;
 use crate::time::Nanos;
 use crate::wire::{self, Ticked, ToLauncher, ToProcess};
@@ -18,29 +18,6 @@ use crossbeam_channel::Receiver;
 use std::collections::BTreeMap;
 use std::sync::Mutex;
 use std::time::{Duration, Instant};
-
-/// A node as the launcher's scheduler sees it: its name, tie-break rank and rate (it ticks
-/// in its process; the launcher only follows the schedule, [`super::lockstep`]).
-struct Slot {
-    name: String,
-    id: NodeId,
-    rate: Rate,
-}
-
-impl Node for Slot {
-    fn name(&self) -> &str {
-        &self.name
-    }
-    fn priority(&self) -> u32 {
-        self.id.0 as u32
-    }
-    fn rate(&self) -> &Rate {
-        &self.rate
-    }
-    fn tick(&mut self, _now: Nanos) -> Flow {
-        Flow::Continue // never called: the launcher skips every tick
-    }
-}
 
 /// What the launcher's wait for one tick's report came to (virtual clock).
 enum Awaited {
@@ -73,20 +50,10 @@ impl Launch<'_> {
     ) -> Result<(RunEnd, Option<LockstepCost>), DistError> {
         let (spec, cfg, opts, stop) = (self.spec, self.cfg, self.opts, self.stop);
         let (names, placement, link) = (&self.names, &self.placement, &self.link);
-        let slots = slots_of(spec)?;
-        // The whole graph's plan: its events are the processes' reports, in order.
-        let mut sched = VirtualScheduler::with_plan(
-            &slots,
-            &cfg.first_deadlines(),
-            spec.execution_plan(),
-            false,
-        );
-        let lookahead = slots
-            .iter()
-            .map(|n| n.rate().period().0)
-            .min()
-            .unwrap_or(1)
-            .saturating_mul(HORIZON_PERIODS);
+        // The run's order of events, as the run core draws it: each is a tick (or its
+        // outputs going out) in its node's process, which reports it.
+        let mut order = Follower::new(cfg).map_err(|e| DistError::Usage(e.to_string()))?;
+        let lookahead = order.shortest_period().0.saturating_mul(HORIZON_PERIODS);
         let mut inbox = TickInbox::new();
         // No process ticks before the first horizon: anything already here is not a report.
         while ticked_rx.try_recv().is_ok() {}
@@ -105,7 +72,7 @@ impl Launch<'_> {
         };
         let paced_from = Instant::now();
         let end = loop {
-            let Some(event) = sched.next_event_until(cfg.duration) else {
+            let Some(event) = order.next_event() else {
                 break RunEnd {
                     at: cfg.duration,
                     reason: EndReason::Duration,
@@ -129,7 +96,7 @@ impl Launch<'_> {
             if horizon.is_none_or(|h| t.0 > h) {
                 // Only after an interrupt: every tick up to the horizon was seen.
                 break RunEnd {
-                    at: sched.now(),
+                    at: order.now(),
                     reason: EndReason::Interrupted,
                 };
             }
@@ -139,7 +106,7 @@ impl Launch<'_> {
                 Awaited::Report(m) => m,
                 Awaited::Interrupted => {
                     break RunEnd {
-                        at: sched.now(),
+                        at: order.now(),
                         reason: EndReason::Interrupted,
                     }
                 }
@@ -159,9 +126,9 @@ impl Launch<'_> {
                 Err(message) => break failed(i, t, message),
             };
             if let Event::Start { .. } = event {
-                sched.start_elsewhere(&slots, i, compute);
                 started += 1;
             }
+            order.ran_elsewhere(event, compute);
             index += 1;
             if last_t != Some(t) {
                 instants += 1;
@@ -328,23 +295,6 @@ fn collect_reports(
             reports.insert(process, *state);
         }
     }
-}
-
-/// The launcher's stand-in for each node of `spec`: its name and rate, no work (the
-/// processes tick the real ones and report).
-fn slots_of(spec: &crate::graph::GraphSpec) -> Result<Vec<Box<dyn Node>>, DistError> {
-    spec.nodes
-        .iter()
-        .enumerate()
-        .map(|(i, n)| {
-            Ok(Box::new(Slot {
-                name: n.name.clone(),
-                id: NodeId(i),
-                rate: Rate::new(n.rate_hz)?,
-            }) as Box<dyn Node>)
-        })
-        .collect::<Result<Vec<_>, crate::rate::InvalidRate>>()
-        .map_err(|e| DistError::Usage(e.to_string()))
 }
 
 /// Paced at `speed` × wall time from `from`: wait until run time `t` is due (or `stop`).

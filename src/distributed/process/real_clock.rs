@@ -5,19 +5,20 @@
 use super::stats::{held_topics, read_counters};
 use super::{wire, DistError, GraphState, NodeId, Share, StopFlag, ToLauncher, ToProcess};
 use crate::metrics::NodeTiming;
-use crate::node::Node;
-use crate::scheduler::{run_real, RealOptions};
+use crate::runcore::{RealEnd, RunCore};
+use crate::scheduler::RealOptions;
 use crate::time::Nanos;
 use crossbeam_channel::{Receiver, RecvTimeoutError};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
 use std::time::Duration;
 
-/// The real clock: run the local nodes on their own threads from the shared start instant
+/// The real clock: run the local nodes of `core`'s graph on their own threads
+/// ([`RunCore::run_real`]) from the shared start instant
 /// (a process that joined late starts each node at its next tick on the run's grid), until
 /// the duration, a local stop (the fall) or the launcher's stop.
 pub(super) fn real_clock(
-    nodes: Vec<Box<dyn Node>>,
+    mut core: RunCore,
     share: &Share,
     start: u64,
     ctl_rx: &Receiver<ToProcess>,
@@ -31,11 +32,9 @@ pub(super) fn real_clock(
     // Joined late (a restart): the first tick of each node is its next one on the grid.
     let late = Nanos(wire::mono_now_ns().saturating_sub(start));
     share.joined_at.store(late.0, Ordering::Relaxed);
-    let (index, local_nodes): (Vec<usize>, Vec<Box<dyn Node>>) = nodes
-        .into_iter()
-        .enumerate()
-        .filter(|(i, _)| local.contains(i))
-        .unzip();
+    let index: Vec<usize> = (0..spec.nodes.len())
+        .filter(|i| local.contains(i))
+        .collect();
     let phase_offsets = first_ticks(share, &index, late);
     // Per local node, the deadline of its next tick, ns: no tick of it not yet sampled is
     // earlier (see `figures_time`).
@@ -61,7 +60,7 @@ pub(super) fn real_clock(
         (&run_stop, &finished),
         (start, &next_due),
     );
-    let r = run_real(local_nodes, cfg.duration, &run_stop, &real);
+    let r = core.run_real(Some(&index), &run_stop, &real);
     let stopped_by_launcher =
         run_stop.is_stopped() && r.end.reason == crate::scheduler::EndReason::Interrupted;
     if !stopped_by_launcher {
@@ -188,12 +187,7 @@ fn watch_launcher(
 /// This process's view of the run at `at`: the graph's state, with its own nodes' timing
 /// and executor figures (`r`, in local order; `index`: their graph indices) by graph index
 /// (the others' are their processes' to report).
-fn local_state(
-    share: &Share,
-    index: &[usize],
-    at: Nanos,
-    r: crate::scheduler::RealRun,
-) -> GraphState {
+fn local_state(share: &Share, index: &[usize], at: Nanos, r: RealEnd) -> GraphState {
     let spec = &share.cfg.graph;
     let mut timing: Vec<NodeTiming> = spec
         .nodes

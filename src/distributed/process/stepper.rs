@@ -1,5 +1,8 @@
-//! One process's part of the virtual clock's run ([`crate::lockstep`]), as a
-//! state machine advanced wherever what it waits for comes in: on Zenoh's receive thread
+//! One process's part of the virtual clock's run ([`crate::lockstep`]): its graph in a run
+//! core, drawn event by event ([`RunCore::next_event`]), its own nodes' events run here
+//! ([`RunCore::run_event`]) and the others' taken from their reports
+//! ([`RunCore::ran_elsewhere`]). A state machine advanced wherever what it waits for comes
+//! in: on Zenoh's receive thread
 //! when another process's tick reports or an input sample arrive, on the process's main
 //! thread when the launcher moves the horizon on (or every 100 ms, to notice an input that
 //! never came).
@@ -15,8 +18,9 @@ use super::Share;
 use crate::graph::spec::GraphSpec;
 use crate::graph::TopicId;
 use crate::lockstep::{check_tick_report, TickInbox};
-use crate::node::{Flow, Node};
-use crate::scheduler::{EndReason, Event, StopFlag, VirtualScheduler};
+use crate::node::Flow;
+use crate::runcore::RunCore;
+use crate::scheduler::{EndReason, Event, StopFlag};
 use crate::summary::GraphState;
 use crate::time::Nanos;
 use crate::wire::ToProcess;
@@ -146,8 +150,8 @@ impl Slot {
 /// The events of the run's one order, replayed here: this process's run in their turn,
 /// the others' taken from their reports.
 pub(super) struct Stepper {
-    nodes: Vec<Box<dyn Node>>,
-    sched: VirtualScheduler,
+    /// The graph (the whole graph's, this process's nodes run here), drawn event by event.
+    core: RunCore,
     share: Arc<Share>,
     /// The topics whose counters this process holds.
     held: Vec<TopicId>,
@@ -181,22 +185,20 @@ pub(super) struct Stepper {
 }
 
 impl Stepper {
-    /// The run of `nodes` (the whole graph's, this process's built) as `share` sets it up,
-    /// its reports sent on `publisher`; it runs nothing before the first horizon. With
-    /// `callback_ticks` false every event of this process runs on its main thread.
+    /// The run of `core`'s graph (the whole graph's, this process's built) as `share` sets
+    /// it up, its reports sent on `publisher`; it runs nothing before the first horizon.
+    /// With `callback_ticks` false every event of this process runs on its main thread.
     pub(super) fn new(
-        nodes: Vec<Box<dyn Node>>,
+        core: RunCore,
         share: Arc<Share>,
         publisher: zenoh::pubsub::Publisher<'static>,
         stop: StopFlag,
         callback_ticks: bool,
     ) -> Self {
         // The whole graph's plan, as in one process: every process replays every executor.
-        let sched = crate::runcore::virtual_scheduler(&share.cfg, &nodes);
         let held = held_topics(&share.cfg.graph, &share.mine);
         Stepper {
-            nodes,
-            sched,
+            core,
             held,
             local: share.local(),
             sent: vec![None; share.cfg.graph.topics.len()],
@@ -232,7 +234,7 @@ impl Stepper {
             .map(|t| t.load(Ordering::Relaxed))
             .collect();
         let mut state = GraphState::capture(&self.share.handles, at, &ticks, None);
-        state.exec = self.sched.figures(at);
+        state.exec = self.core.scheduler().figures(at);
         state
     }
 
@@ -272,7 +274,7 @@ impl Stepper {
             }
             let event = match self.next {
                 Some(e) => e,
-                None => match self.sched.next_event_until(share.cfg.duration) {
+                None => match self.core.next_event() {
                     Some(e) => *self.next.insert(e),
                     None => {
                         self.done = true;
@@ -309,9 +311,7 @@ impl Stepper {
                         self.sent[topic] = Some(seq);
                     }
                 }
-                if let Event::Start { .. } = event {
-                    self.sched.start_elsewhere(&self.nodes, i, compute);
-                }
+                self.core.ran_elsewhere(event, compute);
                 m.stop || m.failed.is_some()
             };
             self.next = None;
@@ -342,7 +342,10 @@ impl Stepper {
         let mut flow = Flow::Continue;
         let mut compute = Nanos::ZERO;
         match event {
-            Event::Publish { .. } => self.nodes[i].publish_held(t),
+            Event::Publish { .. } => {
+                // Publishing held outputs cannot fail or stop the run.
+                let _ = self.core.run_event(event);
+            }
             Event::Start { .. } => {
                 let inputs = spec.nodes[i].subscribes.iter();
                 for &input in inputs.filter(|t| share.inbound.contains(t)) {
@@ -369,7 +372,7 @@ impl Stepper {
                 self.awaiting = None;
                 if failed.is_none() {
                     let began = Instant::now();
-                    let ticked = self.sched.start_here(&mut self.nodes, i);
+                    let ticked = self.core.run_event(event);
                     let took = u64::try_from(began.elapsed().as_nanos()).unwrap_or(u64::MAX);
                     self.tick_ns[i] = Some(took);
                     match ticked {
@@ -378,7 +381,7 @@ impl Stepper {
                         Err(other) => failed = Some(other.to_string()),
                     }
                 } else {
-                    self.sched.start_elsewhere(&self.nodes, i, Nanos::ZERO);
+                    self.core.ran_elsewhere(event, Nanos::ZERO);
                 }
                 share.ticks[i].fetch_add(1, Ordering::Relaxed);
             }
@@ -420,7 +423,7 @@ impl Stepper {
     }
 }
 
-/// Run this process's part of the virtual clock's run: set up `nodes` in `slot` (whose
+/// Run this process's part of the virtual clock's run: set up `core` in `slot` (whose
 /// callbacks advance it as reports and samples arrive), go on where a callback stopped
 /// (`nudged`), move the horizon on as the launcher's messages on `ctl` say, and at its stop
 /// wait for the last messages sent here and return the figures. `callback_ticks`: its
@@ -431,7 +434,7 @@ impl Stepper {
 /// input that never came, a report that cannot be sent), on `stop`, or when the launcher
 /// goes.
 pub(super) fn run_lockstep(
-    nodes: Vec<Box<dyn Node>>,
+    core: RunCore,
     share: &Arc<Share>,
     (slot, nudged): (&SharedSlot, &Receiver<()>),
     ctl: &Receiver<ToProcess>,
@@ -439,13 +442,7 @@ pub(super) fn run_lockstep(
     stop: &StopFlag,
     launcher_gone: &StopFlag,
 ) -> Result<GraphState, DistError> {
-    let run = Stepper::new(
-        nodes,
-        share.clone(),
-        publisher,
-        stop.clone(),
-        callback_ticks,
-    );
+    let run = Stepper::new(core, share.clone(), publisher, stop.clone(), callback_ticks);
     *crate::graph::lock(&slot.run) = Some(run);
     slot.wake(true);
     let failed = |e: DistError| {

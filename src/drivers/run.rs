@@ -1,17 +1,18 @@
-//! One run, end to end: settings + brain → plant, graph, executor → [`RunReport`]. Under the
-//! virtual clock the run core steps the graph ([`crate::runcore`]); under the real clock, one
-//! thread per node ([`crate::scheduler::run_real`]).
+//! One run, end to end: settings + brain → plant, graph, executor → [`RunReport`]. The run
+//! core holds the graph under either clock ([`crate::runcore`]): it steps it instant by
+//! instant under the virtual clock, and hands it to the real-clock executor's threads under
+//! the real clock ([`crate::runcore::RunCore::run_real`]).
 
 pub use crate::command::{Command, TimedCommand};
 pub use crate::runcore::{build_graph, virtual_scheduler};
 pub use crate::summary::{summarize, summarize_state, ActuatorSummary, GraphState};
 
 use crate::config::{ClockKind, RunConfig};
-use crate::graph::{lock, Graph, StepObserver};
+use crate::graph::{lock, StepObserver};
 use crate::metrics::Metrics;
-use crate::policy::{BrainSlot, Policy};
+use crate::policy::Policy;
 use crate::runlog::StepRecord;
-use crate::scheduler::{run_real, RealOptions, RunEnd, StopFlag};
+use crate::scheduler::{RealOptions, RunEnd, StopFlag};
 use std::time::{Duration, Instant};
 
 /// Why a run could not start.
@@ -102,31 +103,26 @@ pub fn run(
     if opts.ros2.is_none() {
         crate::ros2::external::check_offered(&cfg.graph).map_err(crate::ros2::Ros2Error::Usage)?;
     }
-    // Under the virtual clock the run core steps the graph; under the real clock, one
-    // thread per node.
-    let driver = match cfg.clock {
-        ClockKind::Virtual => Driver::Virtual(Box::new(crate::runcore::RunCore::new(
-            cfg,
-            brain,
-            crate::runcore::CoreOptions {
-                keep_trace: opts.keep_trace,
-                observers: opts.observers,
-                commands: opts.commands.clone(),
-                on_span: opts.on_span.clone(),
-                remake_brain: None,
-                remake_observers: None,
-                history_every: None,
+    let virtual_clock = cfg.clock == ClockKind::Virtual;
+    let mut core = crate::runcore::RunCore::new(
+        cfg,
+        brain,
+        crate::runcore::CoreOptions {
+            keep_trace: opts.keep_trace,
+            observers: opts.observers,
+            // Commands at run times are the virtual clock's (`replay`).
+            commands: if virtual_clock {
+                opts.commands.clone()
+            } else {
+                Vec::new()
             },
-        )?)),
-        ClockKind::Real => {
-            let brain = BrainSlot::new(brain);
-            Driver::Real(build_graph(cfg, brain, opts.keep_trace, opts.observers)?)
-        }
-    };
-    let handles = match &driver {
-        Driver::Virtual(core) => core.handles().clone(),
-        Driver::Real(g) => g.handles.clone(),
-    };
+            on_span: opts.on_span.clone(),
+            remake_brain: None,
+            remake_observers: None,
+            history_every: None,
+        },
+    )?;
+    let handles = core.handles().clone();
     lock(&handles.log).trace_every = opts.trace_every;
     let link = match &opts.ros2 {
         Some(o) => {
@@ -147,30 +143,27 @@ pub fn run(
         _ => None,
     };
     let start = Instant::now();
-    let (end, ticks, timing, exec) = match driver {
-        Driver::Virtual(mut core) => {
-            let end = core.run_to_end_with(&opts.stop, |t| {
-                if let Some(b) = &bridge {
-                    // Keep pace with the wall clock, then tell ROS 2 the time.
-                    let due = start + Duration::from_nanos(t.0);
-                    if let Some(wait) = due.checked_duration_since(Instant::now()) {
-                        std::thread::sleep(wait);
-                    }
-                    b.clock(t);
+    let (end, ticks, timing, exec) = if virtual_clock {
+        let end = core.run_to_end_with(&opts.stop, |t| {
+            if let Some(b) = &bridge {
+                // Keep pace with the wall clock, then tell ROS 2 the time.
+                let due = start + Duration::from_nanos(t.0);
+                if let Some(wait) = due.checked_duration_since(Instant::now()) {
+                    std::thread::sleep(wait);
                 }
-            });
-            let exec = core.scheduler().figures(end.at);
-            (end, core.scheduler().ticks().to_vec(), None, exec)
-        }
-        Driver::Real(Graph { nodes, .. }) => {
-            let real = RealOptions {
-                on_tick: opts.on_node_tick.clone(),
-                ..real_options(cfg)
-            };
-            let r = run_real(nodes, cfg.duration, &opts.stop, &real);
-            let ticks = r.timing.iter().map(|t| t.ticks).collect();
-            (r.end, ticks, Some(r.timing), r.exec)
-        }
+                b.clock(t);
+            }
+        });
+        let exec = core.scheduler().figures(end.at);
+        (end, core.scheduler().ticks().to_vec(), None, exec)
+    } else {
+        let real = RealOptions {
+            on_tick: opts.on_node_tick.clone(),
+            ..real_options(cfg)
+        };
+        let r = core.run_real(None, &opts.stop, &real);
+        let ticks = r.timing.iter().map(|t| t.ticks).collect();
+        (r.end, ticks, Some(r.timing), r.exec)
     };
     let wall = start.elapsed();
     let ros2 = bridge.map(crate::ros2::Bridge::finish);
@@ -196,11 +189,4 @@ pub fn run(
         wall,
         ros2,
     })
-}
-
-/// What steps a run's graph: the run core under the virtual clock, one thread per node
-/// under the real clock.
-enum Driver {
-    Virtual(Box<crate::runcore::RunCore>),
-    Real(Graph),
 }

@@ -1,5 +1,6 @@
-//! A real-clock run in the lab: the graph on its executor's threads, controls applied at
-//! once (from each node's next tick).
+//! A real-clock run in the lab: the run core's graph on its executor's threads
+//! ([`crate::runcore::RunCore::run_real`]), controls applied at once (from each node's next
+//! tick).
 
 use super::engine::{live_metrics, Engine, Next};
 use crate::config::RunConfig;
@@ -8,7 +9,8 @@ use crate::graph::Graph;
 use crate::metrics::NodeTiming;
 use crate::recording::Recording;
 use crate::run::Command;
-use crate::scheduler::{run_real, EndReason, RealOptions, RunEnd, StopFlag};
+use crate::runcore::{CoreOptions, RunCore};
+use crate::scheduler::{EndReason, RealOptions, RunEnd, StopFlag};
 use crate::telemetry::{Control, Telemetry};
 use crate::time::Nanos;
 use crossbeam_channel::RecvTimeoutError;
@@ -25,7 +27,8 @@ impl Engine {
         graph: Graph,
         recording: &Option<Recording>,
     ) -> (Next, RunEnd, Option<Vec<NodeTiming>>, Option<ExecFigures>) {
-        let Graph { nodes, handles } = graph;
+        let handles = graph.handles.clone();
+        let mut core = RunCore::with_graph(cfg, graph, CoreOptions::default());
         if let Some(Err(e)) = cfg.rt_priority.map(crate::realtime::probe_fifo) {
             // Told now, not only when the run ends: node threads inherit this thread's
             // privileges, so they will be refused the same way.
@@ -55,10 +58,9 @@ impl Engine {
         let start = Instant::now();
         let runner = {
             let stop = stop.clone();
-            let duration = cfg.duration;
             std::thread::Builder::new()
                 .name("real-clock".into())
-                .spawn(move || run_real(nodes, duration, &stop, &opts))
+                .spawn(move || core.run_real(None, &stop, &opts))
                 .expect("spawning the real-clock runner")
         };
         let now = || Nanos::from(start.elapsed());

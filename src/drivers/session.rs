@@ -1,6 +1,5 @@
-//! Runs, from the front ends: [`run`] (one headless run, end to end), [`sweep`] (grids
-//! of runs and the rate cliff), and the lab's live sessions — the graph driven by commands
-//! while it runs — below.
+//! The lab's live sessions: one graph run live under either clock, driven by commands
+//! while it runs, with their log and its replay.
 //!
 //! An engine thread owns the graph and talks to its front end (the terminal lab) over
 //! crossbeam channels: [`Control`] in, [`Telemetry`] out. The engine never waits for the
@@ -19,20 +18,10 @@
 //! A file the run's code comes from saved ([`Control::Reload`]) runs the graph again with
 //! the new code, judged first and compared with the run before in one line (`reload`).
 
-// The layers below, under their own names (`crate::graph`, `crate::time`, …).
-use ratelab_core::{executor, input, metrics, output, plant, qos, realtime, runlog, textlog, time};
-use ratelab_recording as recording;
-use ratelab_ros2 as ros2;
-use ratelab_runtime::{
-    checkpoint, command, config, graph, policy, runcore, scheduler, summary, telemetry,
-};
-
 mod engine;
 mod log;
 mod real_run;
 mod reload;
-pub mod run;
-pub mod sweep;
 mod virtual_run;
 
 pub use engine::{Engine, GraphSource, SessionSettings};

@@ -1,0 +1,114 @@
+//! Following a run's order of events without running its ticks: what the launcher of a
+//! graph across processes does under the virtual clock (`ratelab::distributed`), where
+//! every tick runs in its node's process and reports back. The order is the run core's
+//! ([`super::RunCore::next_event`]): the same scheduler, the same instants, the same
+//! executors' rules; only the ticks are elsewhere.
+
+use crate::config::RunConfig;
+use crate::node::{Flow, Node};
+use crate::rate::{InvalidRate, Rate};
+use crate::scheduler::{Event, VirtualScheduler};
+use crate::time::Nanos;
+
+/// A node as a follower sees it: its name, tie-break rank and rate. It never ticks here.
+struct Stand {
+    name: String,
+    rank: u32,
+    rate: Rate,
+}
+
+impl Node for Stand {
+    fn name(&self) -> &str {
+        &self.name
+    }
+    fn priority(&self) -> u32 {
+        self.rank
+    }
+    fn rate(&self) -> &Rate {
+        &self.rate
+    }
+    fn tick(&mut self, _now: Nanos) -> Flow {
+        Flow::Continue // never called: every tick runs elsewhere
+    }
+}
+
+/// A run's order of events, its ticks run elsewhere (module docs).
+pub struct Follower {
+    nodes: Vec<Box<dyn Node>>,
+    sched: VirtualScheduler,
+    duration: Nanos,
+    /// The instant whose events are being drawn, if any.
+    open_instant: Option<Nanos>,
+}
+
+impl Follower {
+    /// Follow the run of `cfg`'s graph: its nodes' rates and phase offsets, its executors,
+    /// its duration. Commands are not followed (a run across processes takes none).
+    ///
+    /// # Errors
+    /// [`InvalidRate`] for a node rate a graph file should not have let through.
+    pub fn new(cfg: &RunConfig) -> Result<Self, InvalidRate> {
+        let spec = &cfg.graph;
+        let nodes = spec
+            .nodes
+            .iter()
+            .enumerate()
+            .map(|(i, n)| {
+                Ok(Box::new(Stand {
+                    name: n.name.clone(),
+                    rank: i as u32,
+                    rate: Rate::new(n.rate_hz)?,
+                }) as Box<dyn Node>)
+            })
+            .collect::<Result<Vec<_>, InvalidRate>>()?;
+        let sched = VirtualScheduler::with_plan(
+            &nodes,
+            &cfg.first_deadlines(),
+            spec.execution_plan(),
+            false,
+        );
+        Ok(Follower {
+            nodes,
+            sched,
+            duration: cfg.duration,
+            open_instant: None,
+        })
+    }
+
+    /// The run's next event, as [`super::RunCore::next_event`] draws it; `None` past the
+    /// run's duration. Each is then taken with [`Follower::ran_elsewhere`].
+    pub fn next_event(&mut self) -> Option<Event> {
+        loop {
+            if self.open_instant == Some(self.sched.now()) {
+                if let Some(e) = self.sched.event_now() {
+                    return Some(e);
+                }
+            }
+            let due = self.sched.next_due().filter(|&t| t <= self.duration)?;
+            self.sched.begin_instant(due);
+            self.open_instant = Some(due);
+        }
+    }
+
+    /// `event` ran in its node's process, a start's tick computing for `compute` there
+    /// ([`super::RunCore::ran_elsewhere`]).
+    pub fn ran_elsewhere(&mut self, event: Event, compute: Nanos) {
+        if let Event::Start { node, .. } = event {
+            self.sched.start_elsewhere(&self.nodes, node, compute);
+        }
+    }
+
+    /// The newest instant drawn (0 before any).
+    pub fn now(&self) -> Nanos {
+        self.sched.now()
+    }
+
+    /// The shortest period of the graph's nodes (1 ns for a graph of none).
+    pub fn shortest_period(&self) -> Nanos {
+        self.nodes
+            .iter()
+            .map(|n| n.rate().period())
+            .min()
+            .unwrap_or(Nanos(1))
+    }
+}
