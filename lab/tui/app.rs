@@ -819,6 +819,16 @@ impl App {
                 let n = self.rate_target_of_chain(|c| c.policy);
                 self.set_rate(n, BREAK_CONTROL_HZ);
             }
+            Msg::Stall => {
+                let n = self.rate_target();
+                let fault = format!(
+                    "{}@{:.3}+{}",
+                    self.graph.node(n).name,
+                    self.now.as_secs_f64(),
+                    super::keymap::STALL_S
+                );
+                self.apply(Command::InjectFault { fault });
+            }
             Msg::SensorDown => {
                 let n = self.rate_target_of_chain(|c| c.sensor);
                 self.set_rate(n, rate_down(self.rate_of(n)));

@@ -5,6 +5,9 @@
 
 use crossterm::event::{KeyCode, KeyEvent, KeyEventKind, KeyModifiers};
 
+/// How long `k` stalls a node, s ([`Msg::Stall`]).
+pub const STALL_S: f64 = 0.5;
+
 /// What a key asks for.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Msg {
@@ -41,6 +44,9 @@ pub enum Msg {
     SelectPrev,
     /// Control rate to 5 Hz.
     Break,
+    /// Stall the selected node (else the chain's policy) for [`STALL_S`] from now: a fault
+    /// injected into the run (`Command::InjectFault`).
+    Stall,
     /// Pause / resume.
     TogglePause,
     /// One actuator step while paused (virtual clock).
@@ -244,9 +250,9 @@ pub const BINDINGS: &[Binding] = &[
         footer: None,
     },
     Binding {
-        keys: &[(Char('b'), Msg::Break)],
-        label: "b",
-        help: "break: control rate to 5 Hz",
+        keys: &[(Char('b'), Msg::Break), (Char('k'), Msg::Stall)],
+        label: "b / k",
+        help: "break: control rate to 5 Hz / stall the selected node 0.5 s",
         footer: Some(("b", "break")),
     },
     Binding {

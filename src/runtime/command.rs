@@ -59,6 +59,24 @@ pub enum Command {
         /// The executors, as `--executor` takes them.
         executor: String,
     },
+    /// Inject a fault into a node while the run goes on, as `--stall` and `--kill` give one
+    /// at the start: `NODE@T+D` stalls it from run time T for D, `NODE@T` kills it from T
+    /// (seconds, or with an `s` or `ms` suffix). A faulted tick does no work and asserts no
+    /// liveliness; a time already past covers the ticks from now on. The summary lists it
+    /// with the node's faults. A fault is an event of the run it is injected into: a new run
+    /// does not keep it.
+    InjectFault {
+        /// The fault, `NODE@T+D` or `NODE@T`.
+        fault: String,
+    },
+}
+
+/// `NODE@T+D` (a stall) or `NODE@T` (a kill), as [`Command::InjectFault`] gives it.
+///
+/// # Errors
+/// One line saying what is wrong ([`crate::qos::Fault::parse`]).
+pub fn parse_fault(text: &str) -> Result<crate::qos::Fault, String> {
+    crate::qos::Fault::parse(text, !text.contains('+'))
 }
 
 impl Command {
@@ -105,6 +123,8 @@ impl Command {
                 graph.set_executor(crate::executor::ExecutorOverride::parse(executor)?);
                 Ok(())
             }
+            // Checked, not kept: a fault is an event of its run.
+            Command::InjectFault { fault } => fault_node(graph, fault).map(|_| ()),
         }
     }
 
@@ -180,8 +200,28 @@ impl Command {
                 *crate::graph::lock(&h.plan_request) = Some(spec.execution_plan());
                 Ok(())
             }
+            Command::InjectFault { fault } => {
+                let (id, f) = fault_node(&h.spec, fault)?;
+                h.faults.inject(id, f)
+            }
         }
     }
+}
+
+/// The fault `text` ([`parse_fault`]) and its node's id in `graph`.
+fn fault_node(
+    graph: &crate::graph::GraphSpec,
+    text: &str,
+) -> Result<(crate::graph::NodeId, crate::qos::Fault), String> {
+    let f = parse_fault(text)?;
+    let id = graph.node_id(&f.node).ok_or_else(|| {
+        format!(
+            "{f}: unknown node '{}' (nodes: {})",
+            f.node,
+            graph.node_names().join(", ")
+        )
+    })?;
+    Ok((id, f))
 }
 
 /// A command stamped with the run time at which it takes effect.

@@ -31,8 +31,9 @@
 //!   publishes held by a tick still computing);
 //! - every topic's, each subscription's queue (messages buffered and on the link, depth,
 //!   QoS, the link's generator, counters, deadline timers);
-//! - each node's rate and liveliness, the brain in the slot ([`Policy::duplicate`]), the
-//!   executors asked for, the scheduler (timers, running ticks, counters, its plan);
+//! - each node's rate and liveliness, the faults injected by command, the brain in the slot
+//!   ([`Policy::duplicate`]), the executors asked for, the scheduler (timers, running
+//!   ticks, counters, its plan);
 //! - the run log (step count, exact latency samples, the trace when kept, fall, watchdog),
 //!   the commands applied and those still to come.
 //!
@@ -261,6 +262,8 @@ struct Saved {
     topics: Vec<TopicSnapshot>,
     liveliness: Vec<LivelinessState>,
     rates_hz: Vec<f64>,
+    /// The faults injected by command so far, with their nodes.
+    faults: Vec<(crate::ids::NodeId, crate::qos::Fault)>,
     brain: Box<dyn Policy>,
     log: RunLog,
     executor: Option<ExecutorOverride>,
@@ -702,6 +705,7 @@ impl RunCore {
             topics: h.topics.iter().map(crate::msg::AnyTopic::save).collect(),
             liveliness: h.liveliness.iter().map(|l| l.save()).collect(),
             rates_hz: h.rates.iter().map(crate::rate::Rate::hz).collect(),
+            faults: h.faults.save(),
             log: lock(&h.log).clone(),
             executor: *lock(&h.executor),
             plan_request: lock(&h.plan_request).clone(),
@@ -768,6 +772,7 @@ impl RunCore {
             // The rate was valid when captured.
             let _ = rate.set_hz(hz);
         }
+        h.faults.load(&s.faults);
         h.brain.load(s.brain.as_ref());
         lock(&h.log).clone_from(&s.log);
         *lock(&h.executor) = s.executor;

@@ -39,6 +39,10 @@ pub struct GraphState {
     pub brain: String,
     /// What the actuator measured.
     pub actuator: ActuatorSummary,
+    /// The faults injected by command while the run went on
+    /// ([`crate::command::Command::InjectFault`]), besides those of its settings.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub injected_faults: Vec<crate::qos::Fault>,
 }
 
 /// The actuator's figures in a [`GraphState`] (ms values rounded as `metrics.json` prints them).
@@ -91,6 +95,7 @@ impl GraphState {
             timing,
             exec: None,
             brain: h.brain_label(),
+            injected_faults: h.faults.injected(),
             actuator: ActuatorSummary {
                 steps: log.steps,
                 fell_at: log.fell_at,
@@ -253,7 +258,12 @@ fn node_metrics(
             let live = st.liveliness.get(i);
             let status = live.map(|l| l.1);
             let lease = n.liveliness_lease.or(live.and_then(|l| l.0));
-            let faulted = cfg.faults.iter().any(|f| f.node == n.name);
+            let faults = || {
+                (cfg.faults.iter())
+                    .chain(&st.injected_faults)
+                    .filter(|f| f.node == n.name)
+            };
+            let faulted = faults().next().is_some();
             let x = st.exec.as_ref().and_then(|x| x.nodes.get(i));
             let m = NodeMetrics {
                 compute_ms: n.compute.map(|c| c.mean.as_millis_f64()),
@@ -272,12 +282,7 @@ fn node_metrics(
                 liveliness_lease_ms: lease.map(Nanos::as_millis_f64),
                 not_alive: status.and_then(|s| lease.map(|_| s.not_alive)),
                 faulted_ticks: status.and_then(|s| faulted.then_some(s.faulted_ticks)),
-                faults: cfg
-                    .faults
-                    .iter()
-                    .filter(|f| f.node == n.name)
-                    .map(crate::metrics::FaultMetrics::from)
-                    .collect(),
+                faults: faults().map(crate::metrics::FaultMetrics::from).collect(),
             };
             (n.name.clone(), m)
         })

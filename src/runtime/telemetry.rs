@@ -3,7 +3,7 @@
 //! the terminal, and a watcher of a graph across processes (`ratelab::distributed::monitor`)
 //! tells what it sees in it; both layers sit above this one, neither above the other.
 
-use crate::command::Command;
+use crate::command::{parse_fault, Command};
 use crate::config::RunConfig;
 use crate::metrics::Metrics;
 use crate::runlog::StepRecord;
@@ -234,6 +234,16 @@ pub fn describe(cmd: &Command) -> String {
         Command::SetTopicQos { topic, pairs } => format!("{topic} QoS → {pairs}"),
         Command::SetPolicy { spec } => format!("brain → {spec}"),
         Command::SetExecutor { executor } => format!("executor → {executor}"),
+        Command::InjectFault { fault } => match parse_fault(fault) {
+            Ok(f) => format!("fault → {f}"),
+            Err(_) => format!(
+                "fault → {}",
+                crate::text::printable(fault)
+                    .chars()
+                    .take(64)
+                    .collect::<String>()
+            ),
+        },
     }
 }
 

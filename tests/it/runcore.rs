@@ -76,10 +76,14 @@ fn finish(mut core: RunCore) -> (String, String) {
     (metrics, format!("{:?}", core.take_trace()))
 }
 
-/// Something that changes the run: a rate, a depth, a QoS.
+/// Something that changes the run: a rate, a depth, a QoS, a fault.
 fn divergence(cfg: &RunConfig, k: usize) -> Command {
     let topic = cfg.graph.topics[0].name.clone();
-    match k % 3 {
+    match k % 4 {
+        // A kill of the first node from t = 0: from now on.
+        3 => Command::InjectFault {
+            fault: format!("{}@0", cfg.graph.nodes[0].name),
+        },
         0 => Command::SetNodeHz {
             node: cfg.graph.nodes[cfg.graph.nodes.len() / 2].name.clone(),
             hz: 7.0,
@@ -145,7 +149,7 @@ proptest! {
     fn capture_restore_continue_is_the_uninterrupted_run(
         which in 0usize..8,
         t_ms in 0u64..6_000,
-        k in 0usize..3,
+        k in 0usize..4,
     ) {
         let _machine = crate::machine::shared();
         let all = configurations();
@@ -390,4 +394,50 @@ fn a_real_clock_run_gives_its_nodes_back_to_the_core_and_ends_it() {
     assert!(!cap.is_replay());
     c.restore(&cap).unwrap();
     assert_eq!(c.scheduler().ticks().len(), cfg.graph.nodes.len());
+}
+
+/// The faults configuration's faults (a policy stall, a sensor kill) injected by command
+/// as the run goes on, instead of given at the start: the same run, byte for byte. And a
+/// fault that names no node, or one past the run's bound, is refused in one line.
+#[test]
+fn a_fault_injected_by_command_is_the_fault_given_at_the_start() {
+    let _machine = crate::machine::shared();
+    let (_, given) = configurations()
+        .into_iter()
+        .find(|(label, _)| *label == "faults")
+        .unwrap();
+    let bare = RunConfig {
+        faults: Vec::new(),
+        ..given.clone()
+    };
+    let inject = |at_ms: u64, fault: &str| TimedCommand {
+        at_ns: at_ms * Nanos::MILLISECOND.0,
+        command: Command::InjectFault {
+            fault: fault.into(),
+        },
+    };
+    let by_command = core(
+        &bare,
+        vec![inject(1_000, "policy@2+0.5"), inject(4_000, "sensor@5s")],
+    );
+    let (metrics, trace) = finish(by_command);
+    assert_eq!((metrics.clone(), trace), finish(core(&given, Vec::new())));
+    assert!(metrics.contains("\"faulted_ticks\": 25"), "{metrics}");
+
+    let mut c = core(&bare, Vec::new());
+    let refused = |c: &mut RunCore, fault: &str| {
+        c.apply(Command::InjectFault {
+            fault: fault.into(),
+        })
+        .unwrap_err()
+    };
+    assert!(refused(&mut c, "nobody@1").contains("unknown node 'nobody'"));
+    assert!(refused(&mut c, "policy").contains("NODE@T"));
+    for _ in 0..ratelab::config::MAX_FAULTS {
+        c.apply(Command::InjectFault {
+            fault: "policy@9+0.1".into(),
+        })
+        .unwrap();
+    }
+    assert!(refused(&mut c, "policy@9+0.1").contains("at most"));
 }

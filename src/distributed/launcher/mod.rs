@@ -341,6 +341,8 @@ pub fn check_report(
         || st.exec.as_ref().is_some_and(|x| {
             x.nodes.len() != n || x.executors.len() > spec.execution_plan().executors.len()
         })
+        // A launch takes no commands: no fault is injected into it.
+        || !st.injected_faults.is_empty()
     {
         return Err(format!(
             "its figures are not shaped as graph '{}' ({n} nodes, {t} topics)",
@@ -849,6 +851,7 @@ mod tests {
             timing: None,
             exec: None,
             brain: "scripted".into(),
+            injected_faults: Vec::new(),
             actuator: crate::summary::ActuatorSummary {
                 steps: 501,
                 fell_at: None,
@@ -875,6 +878,11 @@ mod tests {
         assert!(refused(&|st| st.ticks[0] = 999_999).contains("node 'sensor' ticked 999999 times"));
         assert!(refused(&|st| {
             st.topics.pop();
+        })
+        .contains("not shaped"));
+        assert!(refused(&|st| {
+            st.injected_faults
+                .push(ratelab_runtime::command::parse_fault("sensor@1").unwrap());
         })
         .contains("not shaped"));
         assert!(refused(&|st| st.actuator.latency_ms.2 = f64::NAN).contains("impossible"));

@@ -7,6 +7,7 @@
 //! [`NodeId`]/[`TopicId`].
 
 pub mod estimator;
+pub mod faults;
 pub mod kind;
 pub mod nodes;
 pub mod registry;
@@ -79,6 +80,8 @@ pub struct GraphHandles {
     /// The ports of the graph's external nodes ([`nodes::external`]), in node order: the
     /// ROS 2 side (`ratelab::ros2::external`) connects them.
     pub external: Vec<Arc<ExternalPort>>,
+    /// The nodes' faults: the settings' and those injected by command ([`faults`]).
+    pub faults: Arc<faults::FaultBook>,
 }
 
 impl GraphHandles {
@@ -345,7 +348,9 @@ impl Graph {
                 )))
             })
             .collect();
+        let faults = Arc::new(faults::FaultBook::new(faults, |name| spec.node_id(name)));
         let handles = GraphHandles {
+            faults: faults.clone(),
             spec: Arc::new(spec.clone()),
             rates: rates.clone(),
             topics: topics.clone(),
@@ -378,11 +383,7 @@ impl Graph {
                     id: NodeId(i),
                     rate: rates[i].clone(),
                     liveliness: liveliness[i].clone(),
-                    faults: faults
-                        .iter()
-                        .filter(|f| f.node == n.name)
-                        .cloned()
-                        .collect(),
+                    faults: faults.clone(),
                     outbox: outbox.clone(),
                     compute: n.compute.map(|c| ComputeDraw::new(c, seed, i)),
                 };

@@ -34,7 +34,7 @@ use crate::graph::kind::Work;
 use crate::ids::NodeId;
 use crate::node::{Flow, Node, NodeState};
 use crate::publisher::Outbox;
-use crate::qos::{Fault, Liveliness};
+use crate::qos::Liveliness;
 use crate::rate::Rate;
 use crate::time::Nanos;
 use std::sync::Arc;
@@ -49,8 +49,9 @@ pub struct NodeCore {
     pub rate: Rate,
     /// Its liveliness, asserted by every tick (shared with the graph's handles).
     pub liveliness: Arc<Liveliness>,
-    /// Faults injected into it (`--stall`, `--kill`).
-    pub faults: Vec<Fault>,
+    /// The graph's faults (`--stall`, `--kill`, and those injected by command): its ticks
+    /// look up their own.
+    pub faults: Arc<crate::graph::faults::FaultBook>,
     /// Its publishers' outbox (held during a tick with a compute time).
     pub outbox: Outbox,
     /// Its compute time's draws; `None`: its ticks take no time.
@@ -81,7 +82,7 @@ impl Node for GraphNode {
         &self.core.rate
     }
     fn tick(&mut self, now: Nanos) -> Flow {
-        if self.core.faults.iter().any(|f| f.covers(now)) {
+        if self.core.faults.covers(self.core.id, now) {
             self.core.liveliness.fault_tick();
             return Flow::Continue; // stalled or killed: no work, no liveliness
         }
@@ -124,8 +125,8 @@ impl Node for GraphNode {
 }
 
 /// A [`GraphNode`]'s state ([`Node::save`]): its kind's, what its outbox holds, and its
-/// compute-time generator. Its name, rank, faults and handles never change; its rate and
-/// liveliness are the graph's ([`crate::runcore`] captures them).
+/// compute-time generator. Its name, rank and handles never change; its rate, liveliness
+/// and faults are the graph's ([`crate::runcore`] captures them).
 struct Saved {
     work: NodeState,
     outbox: crate::publisher::OutboxState,
