@@ -1,5 +1,5 @@
-//! Commands to a running graph — a rate, a depth, a QoS, a brain, the executors — as the
-//! lab's keys, a session log and `replay` give them ([`Command`]), and stamped with the run
+//! Commands to a running graph — a rate, a depth, a QoS, a brain, the executors, a phase
+//! offset, a fault — as the lab's keys, a session log and `replay` give them ([`Command`]), and stamped with the run
 //! time they take effect at ([`TimedCommand`]).
 
 use crate::graph::GraphHandles;
@@ -58,6 +58,16 @@ pub enum Command {
     SetExecutor {
         /// The executors, as `--executor` takes them.
         executor: String,
+    },
+    /// Put a node's ticks on a new grid, `phase + k·period`, from the next instant on: its
+    /// phase offset (as `--phase-offset-ms` gives it at the start, in [0, 1000) ms), its rate
+    /// unchanged. Under the virtual clock only (the real clock's threads keep the grid they
+    /// started on). A new run starts at its settings' phase offsets.
+    SetPhase {
+        /// The node's name.
+        node: String,
+        /// Its new phase offset, ms.
+        phase_ms: f64,
     },
     /// Inject a fault into a node while the run goes on, as `--stall` and `--kill` give one
     /// at the start: `NODE@T+D` stalls it from run time T for D, `NODE@T` kills it from T
@@ -123,6 +133,8 @@ impl Command {
                 graph.set_executor(crate::executor::ExecutorOverride::parse(executor)?);
                 Ok(())
             }
+            // Checked, not kept: the next run starts at its settings' phase offsets.
+            Command::SetPhase { node, phase_ms } => phase_node(graph, node, *phase_ms).map(|_| ()),
             // Checked, not kept: a fault is an event of its run.
             Command::InjectFault { fault } => fault_node(graph, fault).map(|_| ()),
         }
@@ -204,8 +216,30 @@ impl Command {
                 let (id, f) = fault_node(&h.spec, fault)?;
                 h.faults.inject(id, f)
             }
+            Command::SetPhase { node, phase_ms } => {
+                let (id, phase) = phase_node(&h.spec, node, *phase_ms)?;
+                crate::graph::lock(&h.phase_request).push((id, phase));
+                Ok(())
+            }
         }
     }
+}
+
+/// Node `node`'s id in `graph` and the phase offset `phase_ms` as a run time.
+fn phase_node(
+    graph: &crate::graph::GraphSpec,
+    node: &str,
+    phase_ms: f64,
+) -> Result<(crate::graph::NodeId, crate::time::Nanos), String> {
+    let id = graph.node_id(node).ok_or_else(|| {
+        format!(
+            "no node '{node}' in graph '{}' (nodes: {})",
+            graph.name,
+            graph.node_names().join(", ")
+        )
+    })?;
+    let phase = crate::config::phase_offset_from_ms(phase_ms).map_err(|e| e.to_string())?;
+    Ok((id, phase))
 }
 
 /// The fault `text` ([`parse_fault`]) and its node's id in `graph`.

@@ -268,6 +268,7 @@ struct Saved {
     log: RunLog,
     executor: Option<ExecutorOverride>,
     plan_request: Option<ExecutionPlan>,
+    phase_request: Vec<(crate::ids::NodeId, Nanos)>,
     sched: VirtualScheduler,
 }
 
@@ -661,10 +662,20 @@ impl RunCore {
         Ok(())
     }
 
+    /// Take what commands asked of the scheduler: an executor plan, phase changes (from the
+    /// next instant on).
     fn take_plan(&mut self) {
         let asked = lock(&self.handles.plan_request).take();
         if let Some(plan) = asked {
             self.sched.set_plan(plan);
+        }
+        let phases = std::mem::take(&mut *lock(&self.handles.phase_request));
+        if !phases.is_empty() {
+            let from = self.sched.next_due().unwrap_or(self.sched.now());
+            for (id, phase) in phases {
+                let period = self.handles.rate(id).period();
+                self.sched.set_phase(id.0, phase, period, from);
+            }
         }
     }
 
@@ -709,6 +720,7 @@ impl RunCore {
             log: lock(&h.log).clone(),
             executor: *lock(&h.executor),
             plan_request: lock(&h.plan_request).clone(),
+            phase_request: lock(&h.phase_request).clone(),
             sched: self.sched.clone(),
         })
     }
@@ -777,6 +789,7 @@ impl RunCore {
         lock(&h.log).clone_from(&s.log);
         *lock(&h.executor) = s.executor;
         lock(&h.plan_request).clone_from(&s.plan_request);
+        lock(&h.phase_request).clone_from(&s.phase_request);
         self.sched.load(&s.sched);
         Ok(())
     }

@@ -246,6 +246,9 @@ pub struct VirtualScheduler {
     span_hook: Option<crate::executor::SpanHook>,
     /// A plan asked for while running (the lab's executor key), taken before each instant.
     plan_request: Option<PlanRequest>,
+    /// Per node, a new grid for its ticks (its phase, run time) to take when its tick now
+    /// released or running starts ([`VirtualScheduler::set_phase`]).
+    regrid: Vec<Option<Nanos>>,
     track: bool,
     /// Any executor shares threads, or ticks take time: the executors' rules apply. Else
     /// (the default) an instant is the chapter's loop, which they reduce to.
@@ -304,6 +307,7 @@ impl VirtualScheduler {
             spans: std::collections::VecDeque::new(),
             span_hook: None,
             plan_request: None,
+            regrid: vec![None; nodes.len()],
             general: track || !plan_per_node,
             track,
         }
@@ -383,6 +387,36 @@ impl VirtualScheduler {
     /// a command applied at an instant (the lab, a replay) changes the executors.
     pub fn take_plans_from(&mut self, request: PlanRequest) {
         self.plan_request = Some(request);
+    }
+
+    /// Put node `node`'s ticks on a new grid, `phase + k·period` (run time; `period` its
+    /// period now), from run time `from` on (the next instant, before which the change is
+    /// applied): its next tick is the grid's first point at or after `from` (and not before
+    /// its first deadline, when it has not ticked yet). A node whose
+    /// tick is released but waiting for a thread takes the grid when that tick starts (its
+    /// next tick the grid's first point after the start). Its rate is unchanged; a rate
+    /// changed later keeps the new grid's last tick as its anchor, as every rate change
+    /// does.
+    pub fn set_phase(&mut self, node: usize, phase: Nanos, period: Nanos, from: Nanos) {
+        if node >= self.next_call.len() {
+            return;
+        }
+        let armed = self.releases.iter().any(|Reverse((_, _, i))| *i == node);
+        if !armed {
+            self.regrid[node] = Some(phase);
+            return;
+        }
+        // A node that has not ticked yet ticks no earlier than its first deadline (when it
+        // joins the graph, `start_ms`).
+        let from = if self.ticks[node] == 0 {
+            from.max(self.next_call[node])
+        } else {
+            from
+        };
+        let next = first_on_grid(phase, period, from);
+        self.releases.retain(|Reverse((_, _, i))| *i != node);
+        self.next_call[node] = next;
+        self.releases.push(Reverse((next, self.ranks[node], node)));
     }
 
     /// Tell `hook` of every tick as it ends (when measuring: executors or compute times).
@@ -570,7 +604,11 @@ impl VirtualScheduler {
     fn started(&mut self, i: usize, period: Nanos, compute: Nanos) {
         let t = self.now;
         let release = self.next_call[i];
-        let (next, skipped) = next_deadline(release, t, period);
+        let (next, skipped) = match self.regrid[i].take() {
+            // A new grid (a phase change while this tick waited): its first point after now.
+            Some(phase) => (first_on_grid(phase, period, t.saturating_add(Nanos(1))), 0),
+            None => next_deadline(release, t, period),
+        };
         self.ticks[i] += 1;
         if self.track {
             self.stats[i].skipped_ticks += skipped;
@@ -672,6 +710,15 @@ impl VirtualScheduler {
             }
         }
     }
+}
+
+/// The first point of the grid `phase + k·period` (k ≥ 0) at or after `from`.
+fn first_on_grid(phase: Nanos, period: Nanos, from: Nanos) -> Nanos {
+    if from <= phase || period.0 == 0 {
+        return phase;
+    }
+    let k = (from.0 - phase.0).div_ceil(period.0);
+    Nanos(phase.0.saturating_add(k.saturating_mul(period.0)))
 }
 
 /// One tick under the real clock, as a [`TickHook`] is told of it.
@@ -1505,5 +1552,16 @@ mod tests {
                 message: "sensor cable unplugged".into()
             }
         );
+    }
+
+    #[test]
+    fn a_new_grid_starts_at_its_first_point_at_or_after_the_change() {
+        let p = Nanos(20);
+        assert_eq!(first_on_grid(Nanos(7), p, Nanos(0)), Nanos(7));
+        assert_eq!(first_on_grid(Nanos(7), p, Nanos(7)), Nanos(7));
+        assert_eq!(first_on_grid(Nanos(7), p, Nanos(8)), Nanos(27));
+        assert_eq!(first_on_grid(Nanos(7), p, Nanos(2005)), Nanos(2007));
+        assert_eq!(first_on_grid(Nanos(7), p, Nanos(2027)), Nanos(2027));
+        assert_eq!(first_on_grid(Nanos(5), Nanos(0), Nanos(99)), Nanos(5));
     }
 }

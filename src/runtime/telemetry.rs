@@ -234,6 +234,7 @@ pub fn describe(cmd: &Command) -> String {
         Command::SetTopicQos { topic, pairs } => format!("{topic} QoS → {pairs}"),
         Command::SetPolicy { spec } => format!("brain → {spec}"),
         Command::SetExecutor { executor } => format!("executor → {executor}"),
+        Command::SetPhase { node, phase_ms } => format!("phase {node} → {phase_ms} ms"),
         Command::InjectFault { fault } => match parse_fault(fault) {
             Ok(f) => format!("fault → {f}"),
             Err(_) => format!(

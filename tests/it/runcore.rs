@@ -76,10 +76,15 @@ fn finish(mut core: RunCore) -> (String, String) {
     (metrics, format!("{:?}", core.take_trace()))
 }
 
-/// Something that changes the run: a rate, a depth, a QoS, a fault.
+/// Something that changes the run: a rate, a depth, a QoS, a fault, a phase.
 fn divergence(cfg: &RunConfig, k: usize) -> Command {
     let topic = cfg.graph.topics[0].name.clone();
-    match k % 4 {
+    match k % 5 {
+        // The middle node's ticks on another grid.
+        4 => Command::SetPhase {
+            node: cfg.graph.nodes[cfg.graph.nodes.len() / 2].name.clone(),
+            phase_ms: 3.0,
+        },
         // A kill of the first node from t = 0: from now on.
         3 => Command::InjectFault {
             fault: format!("{}@0", cfg.graph.nodes[0].name),
@@ -149,7 +154,7 @@ proptest! {
     fn capture_restore_continue_is_the_uninterrupted_run(
         which in 0usize..8,
         t_ms in 0u64..6_000,
-        k in 0usize..4,
+        k in 0usize..5,
     ) {
         let _machine = crate::machine::shared();
         let all = configurations();
@@ -440,4 +445,60 @@ fn a_fault_injected_by_command_is_the_fault_given_at_the_start() {
         .unwrap();
     }
     assert!(refused(&mut c, "policy@9+0.1").contains("at most"));
+}
+
+/// A phase change by command at the start is the run started at that phase offset, byte
+/// for byte; mid-run it puts the node's ticks on the new grid from the next instant on,
+/// rate unchanged; a bad node or offset is refused in one line.
+#[test]
+fn a_phase_change_puts_a_node_s_ticks_on_a_new_grid() {
+    let _machine = crate::machine::shared();
+    let base = configurations()[0].1.clone();
+    let ms = |m: u64| Nanos(m * Nanos::MILLISECOND.0);
+    let mut offset = base.clone();
+    offset.phase_offsets = vec![Nanos::ZERO, ms(10), Nanos::ZERO];
+    let at = |at_ms: u64, phase_ms: f64| TimedCommand {
+        at_ns: ms(at_ms).0,
+        command: Command::SetPhase {
+            node: "policy".into(),
+            phase_ms,
+        },
+    };
+    assert_eq!(
+        finish(core(&base, vec![at(0, 10.0)])),
+        finish(core(&offset, Vec::new()))
+    );
+
+    // Mid-run, at 2.005 s (so before the instant at 2.020 s, the first at or after it): the
+    // policy's ticks were on 0 + k·20 ms, then on 7 + k·20 ms.
+    let mut c = core(&base, vec![at(2_005, 7.0)]);
+    let mut starts = Vec::new();
+    while let Some(e) = c.next_event() {
+        if let ratelab::scheduler::Event::Start { node: 1, at } = e {
+            starts.push(at);
+        }
+        let _ = c.run_event(e);
+    }
+    let (before, after): (Vec<Nanos>, Vec<Nanos>) = starts.iter().partition(|t| **t < ms(2_005));
+    assert!(before.iter().all(|t| t.0 % ms(20).0 == 0), "{before:?}");
+    assert_eq!(before.last(), Some(&ms(2_000)));
+    assert_eq!(after.first(), Some(&ms(2_027)));
+    assert!(after.iter().all(|t| (t.0 - ms(7).0) % ms(20).0 == 0));
+    // One tick a period, the grid 7 ms later: 0…2000 ms and 2027…5987 ms.
+    assert_eq!((before.len(), after.len()), (101, 199));
+
+    let mut c = core(&base, Vec::new());
+    let set = |node: &str, phase_ms: f64| Command::SetPhase {
+        node: node.into(),
+        phase_ms,
+    };
+    assert!(c
+        .apply(set("nobody", 5.0))
+        .unwrap_err()
+        .contains("no node 'nobody'"));
+    assert!(c
+        .apply(set("policy", 1000.0))
+        .unwrap_err()
+        .contains("[0, 1000)"));
+    assert!(c.apply(set("policy", f64::NAN)).is_err());
 }

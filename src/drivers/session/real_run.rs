@@ -162,6 +162,13 @@ impl Engine {
         handles: &crate::graph::GraphHandles,
         recording: &Option<Recording>,
     ) {
+        if let Command::SetPhase { .. } = cmd {
+            // Each node's thread keeps the grid it started on.
+            let _ = self.tx.send(Telemetry::Error(
+                "a phase change applies under the virtual clock (c switches clock); a real-clock run keeps --phase-offset-ms".into(),
+            ));
+            return;
+        }
         let rate = matches!(
             cmd,
             Command::SetControlHz { .. } | Command::SetSensorHz { .. } | Command::SetNodeHz { .. }

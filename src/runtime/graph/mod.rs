@@ -77,6 +77,9 @@ pub struct GraphHandles {
     pub executor: Arc<Mutex<Option<crate::executor::ExecutorOverride>>>,
     /// …and the plan the virtual scheduler takes at its next instant.
     pub plan_request: crate::scheduler::PlanRequest,
+    /// The phase changes asked for while running (`Command::SetPhase`), which the virtual
+    /// scheduler takes before its next instant: each node and its new phase offset.
+    pub phase_request: Arc<Mutex<Vec<(NodeId, crate::time::Nanos)>>>,
     /// The ports of the graph's external nodes ([`nodes::external`]), in node order: the
     /// ROS 2 side (`ratelab::ros2::external`) connects them.
     pub external: Vec<Arc<ExternalPort>>,
@@ -361,6 +364,7 @@ impl Graph {
             external: external.clone(),
             executor: Arc::default(),
             plan_request: Arc::default(),
+            phase_request: Arc::default(),
         };
         for o in &mut observers {
             o.attach(&handles);
