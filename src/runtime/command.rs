@@ -86,7 +86,11 @@ pub enum Command {
 /// # Errors
 /// One line saying what is wrong ([`crate::qos::Fault::parse`]).
 pub fn parse_fault(text: &str) -> Result<crate::qos::Fault, String> {
-    crate::qos::Fault::parse(text, !text.contains('+'))
+    // A stall has a duration after its time (`@T+D`); a node's name has no `@`.
+    let stall = text
+        .split_once('@')
+        .is_some_and(|(_, when)| when.contains('+'));
+    crate::qos::Fault::parse(text, !stall)
 }
 
 impl Command {
@@ -218,7 +222,7 @@ impl Command {
             }
             Command::SetPhase { node, phase_ms } => {
                 let (id, phase) = phase_node(&h.spec, node, *phase_ms)?;
-                crate::graph::lock(&h.phase_request).push((id, phase));
+                h.phase_request.push(id, phase);
                 Ok(())
             }
         }

@@ -305,7 +305,9 @@ pub struct RunCore {
 
 impl RunCore {
     /// Build `cfg`'s graph (the plant reset to `cfg.seed`) with `brain` in its slot, at
-    /// t = 0 with nothing run. `cfg.clock` is not read: the run core is the virtual clock.
+    /// t = 0 with nothing run. `cfg.clock` is not read: the driver picks the clock
+    /// ([`RunCore::step`] and [`RunCore::next_event`] the virtual one, [`RunCore::run_real`]
+    /// the real one).
     ///
     /// # Errors
     /// [`RunError`] for bad settings, a plant that will not load or a graph that cannot be
@@ -410,11 +412,14 @@ impl RunCore {
         if let Some(end) = &self.end {
             return Step::Ended(end.clone());
         }
-        let Some(due) = self.next_instant() else {
+        let Some(due) = self.prepare_instant() else {
             return Step::Ended(self.finish_at_duration());
         };
-        self.apply_scheduled(due);
-        self.take_plan();
+        self.run_prepared(due)
+    }
+
+    /// Run the instant `due` [`RunCore::prepare_instant`] made ready.
+    fn run_prepared(&mut self, due: Nanos) -> Step {
         self.open_instant = None;
         let ended = match self.sched.run_instant(&mut self.nodes) {
             InstantOutcome::Ran { ticked } => {
@@ -456,9 +461,7 @@ impl RunCore {
                     return Some(e);
                 }
             }
-            let due = self.next_instant()?;
-            self.apply_scheduled(due);
-            self.take_plan();
+            let due = self.prepare_instant()?;
             self.sched.begin_instant(due);
             self.open_instant = Some(due);
         }
@@ -503,6 +506,22 @@ impl RunCore {
         self.end.get_or_insert(RunEnd { at, reason });
     }
 
+    /// Make ready the next instant: apply the commands scheduled at or before it and take
+    /// what they asked of the scheduler. A phase change may move the instant later (the
+    /// only node due then now ticks on another grid): the commands up to the new one are
+    /// applied first, and so on, so that the instant returned is the one the scheduler runs
+    /// next. `None` once the run has ended or its next instant is past its duration.
+    fn prepare_instant(&mut self) -> Option<Nanos> {
+        loop {
+            let due = self.next_instant()?;
+            self.apply_scheduled(due);
+            self.take_plan();
+            if self.sched.next_due() == Some(due) {
+                return Some(due);
+            }
+        }
+    }
+
     /// Apply the commands scheduled at or before `due`, logging each.
     fn apply_scheduled(&mut self, due: Nanos) {
         while let Some(c) = self.scheduled.get(self.next_scheduled) {
@@ -518,8 +537,19 @@ impl RunCore {
 
     /// Run every instant up to and including `t` (or to the run's end).
     pub fn run_until(&mut self, t: Nanos) {
-        while self.next_instant().is_some_and(|due| due <= t) {
-            self.step();
+        while self.next_instant().is_some_and(|due| due <= t) && self.step_within(t) {}
+    }
+
+    /// Run the next instant if it is at or before `t` once the commands before it are
+    /// applied (a phase change may move it past `t`); `true` when one ran.
+    fn step_within(&mut self, t: Nanos) -> bool {
+        match self.prepare_instant() {
+            Some(due) if due <= t => matches!(self.run_prepared(due), Step::Ran { .. }),
+            Some(_) => false,
+            None => {
+                self.finish_at_duration();
+                false
+            }
         }
     }
 
@@ -657,7 +687,9 @@ impl RunCore {
                 self.by_hand.push(c);
             }
             self.take_plan();
-            self.step();
+            if !self.step_within(t) {
+                break;
+            }
         }
         Ok(())
     }
@@ -669,12 +701,13 @@ impl RunCore {
         if let Some(plan) = asked {
             self.sched.set_plan(plan);
         }
-        let phases = std::mem::take(&mut *lock(&self.handles.phase_request));
+        let phases = self.handles.phase_request.take();
         if !phases.is_empty() {
             let from = self.sched.next_due().unwrap_or(self.sched.now());
             for (id, phase) in phases {
                 let period = self.handles.rate(id).period();
-                self.sched.set_phase(id.0, phase, period, from);
+                let start = self.cfg.graph.node(id).start.unwrap_or(Nanos::ZERO);
+                self.sched.set_phase(id.0, phase, period, from, start);
             }
         }
     }
@@ -720,7 +753,7 @@ impl RunCore {
             log: lock(&h.log).clone(),
             executor: *lock(&h.executor),
             plan_request: lock(&h.plan_request).clone(),
-            phase_request: lock(&h.phase_request).clone(),
+            phase_request: h.phase_request.save(),
             sched: self.sched.clone(),
         })
     }
@@ -789,7 +822,7 @@ impl RunCore {
         lock(&h.log).clone_from(&s.log);
         *lock(&h.executor) = s.executor;
         lock(&h.plan_request).clone_from(&s.plan_request);
-        lock(&h.phase_request).clone_from(&s.phase_request);
+        h.phase_request.load(&s.phase_request);
         self.sched.load(&s.sched);
         Ok(())
     }

@@ -389,31 +389,45 @@ impl VirtualScheduler {
         self.plan_request = Some(request);
     }
 
-    /// Put node `node`'s ticks on a new grid, `phase + k·period` (run time; `period` its
-    /// period now), from run time `from` on (the next instant, before which the change is
-    /// applied): its next tick is the grid's first point at or after `from` (and not before
-    /// its first deadline, when it has not ticked yet). A node whose
-    /// tick is released but waiting for a thread takes the grid when that tick starts (its
-    /// next tick the grid's first point after the start). Its rate is unchanged; a rate
-    /// changed later keeps the new grid's last tick as its anchor, as every rate change
-    /// does.
-    pub fn set_phase(&mut self, node: usize, phase: Nanos, period: Nanos, from: Nanos) {
+    /// Put node `node`'s ticks on a new grid from the instant `from` on (the next instant,
+    /// before which the change is applied), its rate unchanged (`period`, its period now):
+    /// - a node that has ticked: its next tick is the first point of
+    ///   `(phase mod period) + k·period` at or after `from`; if its tick is released but
+    ///   waiting for a thread, it takes the grid when that tick starts (its next tick the
+    ///   grid's first point after the start);
+    /// - a node that has not ticked yet: its first tick is where its first deadline would be
+    ///   with `phase` as its phase offset, `max(start, phase)` (`start`: when it joins the
+    ///   graph, `start_ms`), moved onto `phase + k·period` at or after `from` once an instant
+    ///   has run. Before any instant it is exactly the run started at that phase offset.
+    pub fn set_phase(
+        &mut self,
+        node: usize,
+        phase: Nanos,
+        period: Nanos,
+        from: Nanos,
+        start: Nanos,
+    ) {
         if node >= self.next_call.len() {
             return;
         }
+        let ticked = self.ticks[node] > 0;
         let armed = self.releases.iter().any(|Reverse((_, _, i))| *i == node);
+        let next = if ticked {
+            let phase = Nanos(phase.0.checked_rem(period.0).unwrap_or(phase.0));
+            if !armed {
+                self.regrid[node] = Some(phase);
+                return;
+            }
+            first_on_grid(phase, period, from)
+        } else {
+            let began = self.ticks.iter().any(|&t| t > 0);
+            let after = if began { from } else { Nanos::ZERO };
+            first_on_grid(phase, period, after).max(start)
+        };
         if !armed {
-            self.regrid[node] = Some(phase);
+            // Released before its first tick, waiting for a thread: it starts when it can.
             return;
         }
-        // A node that has not ticked yet ticks no earlier than its first deadline (when it
-        // joins the graph, `start_ms`).
-        let from = if self.ticks[node] == 0 {
-            from.max(self.next_call[node])
-        } else {
-            from
-        };
-        let next = first_on_grid(phase, period, from);
         self.releases.retain(|Reverse((_, _, i))| *i != node);
         self.next_call[node] = next;
         self.releases.push(Reverse((next, self.ranks[node], node)));

@@ -234,18 +234,20 @@ pub fn describe(cmd: &Command) -> String {
         Command::SetTopicQos { topic, pairs } => format!("{topic} QoS → {pairs}"),
         Command::SetPolicy { spec } => format!("brain → {spec}"),
         Command::SetExecutor { executor } => format!("executor → {executor}"),
-        Command::SetPhase { node, phase_ms } => format!("phase {node} → {phase_ms} ms"),
+        Command::SetPhase { node, phase_ms } => {
+            format!("phase {} → {phase_ms} ms", shown(node))
+        }
         Command::InjectFault { fault } => match parse_fault(fault) {
-            Ok(f) => format!("fault → {f}"),
-            Err(_) => format!(
-                "fault → {}",
-                crate::text::printable(fault)
-                    .chars()
-                    .take(64)
-                    .collect::<String>()
-            ),
+            Ok(f) => format!("fault → {}", shown(&f.to_string())),
+            Err(_) => format!("fault → {}", shown(fault)),
         },
     }
+}
+
+/// Text from a command (a session log is untrusted) as a status line shows it: printable,
+/// at most 64 characters.
+fn shown(text: &str) -> String {
+    crate::text::printable(text).chars().take(64).collect()
 }
 
 #[cfg(test)]

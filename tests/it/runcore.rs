@@ -368,6 +368,16 @@ fn a_run_drawn_event_by_event_is_the_run_stepped_instant_by_instant() {
                 command: divergence(&cfg, 1),
             },
             TimedCommand {
+                at_ns: at(3_005),
+                command: divergence(&cfg, 4),
+            },
+            TimedCommand {
+                at_ns: at(3_500),
+                command: Command::InjectFault {
+                    fault: format!("{}@3.6+0.2", cfg.graph.nodes[0].name),
+                },
+            },
+            TimedCommand {
                 at_ns: at(4_000),
                 command: Command::SetExecutor {
                     executor: "single".into(),
@@ -387,6 +397,7 @@ fn a_real_clock_run_gives_its_nodes_back_to_the_core_and_ends_it() {
         ..RunConfig::default()
     };
     let mut c = core(&cfg, Vec::new());
+    let before = c.capture();
     let opts = ratelab::run::real_options(&cfg);
     // Only the sensor and the policy (a process's share): the actuator never ticks.
     let r = c.run_real(Some(&[0, 1]), &StopFlag::new(), &opts);
@@ -394,11 +405,18 @@ fn a_real_clock_run_gives_its_nodes_back_to_the_core_and_ends_it() {
     assert_eq!(r.timing.len(), 2);
     assert!(r.timing.iter().all(|t| t.ticks > 0), "{:?}", r.timing);
     assert_eq!(c.end(), Some(&r.end));
-    // Every node is back: a capture of the ended run restores into it.
-    let cap = c.capture();
-    assert!(!cap.is_replay());
-    c.restore(&cap).unwrap();
-    assert_eq!(c.scheduler().ticks().len(), cfg.graph.nodes.len());
+    // Run once: a second call gives the end back and runs nothing.
+    let again = c.run_real(None, &StopFlag::new(), &opts);
+    assert_eq!((again.end, again.timing.len()), (r.end, 0));
+    // Every node is back in its place: the capture taken before the run (every node's
+    // state, by position) restores into it, and the run goes on from t = 0 under the
+    // virtual clock.
+    assert!(!before.is_replay());
+    c.restore(&before).unwrap();
+    assert_eq!(c.now(), Nanos::ZERO);
+    assert!(c.end().is_none());
+    c.run_until(Nanos(200 * Nanos::MILLISECOND.0));
+    assert_eq!(c.now(), Nanos(200 * Nanos::MILLISECOND.0));
 }
 
 /// The faults configuration's faults (a policy stall, a sensor kill) injected by command
@@ -501,4 +519,37 @@ fn a_phase_change_puts_a_node_s_ticks_on_a_new_grid() {
         .unwrap_err()
         .contains("[0, 1000)"));
     assert!(c.apply(set("policy", f64::NAN)).is_err());
+}
+
+/// Every node moved to another grid at once: the instant due next no longer runs, and a
+/// command between it and the new one takes effect before the new one, stepped or drawn
+/// event by event alike.
+#[test]
+fn a_phase_change_that_moves_the_next_instant_applies_the_commands_up_to_the_new_one() {
+    let _machine = crate::machine::shared();
+    let cfg = configurations()[0].1.clone();
+    let ms = |m: u64| m * Nanos::MILLISECOND.0;
+    let mut commands: Vec<TimedCommand> = cfg
+        .graph
+        .nodes
+        .iter()
+        .map(|n| TimedCommand {
+            at_ns: ms(2_005),
+            command: Command::SetPhase {
+                node: n.name.clone(),
+                phase_ms: 7.0,
+            },
+        })
+        .collect();
+    commands.push(TimedCommand {
+        at_ns: ms(2_025),
+        command: Command::SetQueueDepth { depth: 3 },
+    });
+    check_events("every node's phase", &cfg, commands.clone());
+    let mut c = core(&cfg, commands);
+    c.run_until(Nanos(ms(2_020)));
+    assert_eq!(c.now(), Nanos(ms(2_000)), "no instant at 2.020 s");
+    c.step();
+    assert_eq!(c.now(), Nanos(ms(2_027)));
+    assert_eq!(c.applied().len(), 4, "the depth too, before 2.027 s");
 }

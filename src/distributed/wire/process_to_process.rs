@@ -118,7 +118,7 @@ pub struct Ticked {
     /// The node's process.
     pub process: String,
     /// The event's place in the run's one order of events (0, 1, …: the virtual
-    /// scheduler's order, [`crate::scheduler::VirtualScheduler::next_event_until`], which every
+    /// scheduler's order, [`crate::runcore::RunCore::next_event`], which every
     /// process computes alike).
     pub index: u64,
     /// The node (index in the graph).

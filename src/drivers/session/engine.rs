@@ -426,6 +426,14 @@ impl Engine {
     /// A change made while the run is frozen: checked now, applied when the next run starts
     /// (r, R or c), so the keys still work after a fall.
     pub(super) fn defer(&mut self, cmd: Command, h: &GraphHandles) {
+        if matches!(cmd, Command::InjectFault { .. } | Command::SetPhase { .. }) {
+            // Events of a run, not settings of the next: a new run starts at its settings.
+            let _ = self.tx.send(Telemetry::Error(format!(
+                "{}: the run has ended (r starts the next)",
+                describe(&cmd)
+            )));
+            return;
+        }
         match cmd.validate(&self.next_spec(h)) {
             Ok(()) => {
                 let _ = self.tx.send(Telemetry::Applied(format!(

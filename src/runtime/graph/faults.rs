@@ -4,8 +4,9 @@
 //! replayed session log). A faulted tick does no work and asserts no liveliness (a stalled
 //! or killed node, as a liveliness lease and a deadline watchdog see it).
 //!
-//! A tick asks the book whether it is faulted: with no fault in the book (almost every run)
-//! that is one relaxed atomic load.
+//! A tick asks the book whether it is faulted: for a node with no fault (every node of
+//! almost every run) that is one relaxed atomic load; the book is locked only for a node
+//! that has one.
 
 use crate::ids::NodeId;
 use crate::qos::Fault;
@@ -15,8 +16,8 @@ use std::sync::Mutex;
 /// The faults of a run's nodes (module docs).
 #[derive(Debug, Default)]
 pub struct FaultBook {
-    /// True once any fault is in the book.
-    any: AtomicBool,
+    /// Per node (by id), true once a fault of its is in the book.
+    faulted: Vec<AtomicBool>,
     /// Each fault with its node, those of the settings first.
     faults: Mutex<Vec<(NodeId, Fault)>>,
     /// How many of them the settings gave (the rest were injected, in order).
@@ -24,15 +25,23 @@ pub struct FaultBook {
 }
 
 impl FaultBook {
-    /// A book holding the run's settings' `faults`, each with its node's id (faults whose
-    /// node `id_of` does not know are left out: the settings' validation refuses them).
-    pub fn new(faults: &[Fault], id_of: impl Fn(&str) -> Option<NodeId>) -> FaultBook {
+    /// A book for `nodes` nodes holding the run's settings' `faults`, each with its node's
+    /// id (faults whose node `id_of` does not know, or gives an id of no node, are left
+    /// out: the settings' validation refuses them).
+    pub fn new(
+        nodes: usize,
+        faults: &[Fault],
+        id_of: impl Fn(&str) -> Option<NodeId>,
+    ) -> FaultBook {
         let faults: Vec<(NodeId, Fault)> = faults
             .iter()
-            .filter_map(|f| Some((id_of(&f.node)?, f.clone())))
+            .filter_map(|f| Some((id_of(&f.node).filter(|id| id.0 < nodes)?, f.clone())))
+            .collect();
+        let faulted = (0..nodes)
+            .map(|i| AtomicBool::new(faults.iter().any(|(n, _)| n.0 == i)))
             .collect();
         FaultBook {
-            any: AtomicBool::new(!faults.is_empty()),
+            faulted,
             from_settings: faults.len(),
             faults: Mutex::new(faults),
         }
@@ -40,7 +49,9 @@ impl FaultBook {
 
     /// True when node `node`'s tick at run time `now` is swallowed by a fault.
     pub fn covers(&self, node: NodeId, now: crate::time::Nanos) -> bool {
-        self.any.load(Ordering::Relaxed)
+        self.faulted
+            .get(node.0)
+            .is_some_and(|f| f.load(Ordering::Relaxed))
             && crate::graph::lock(&self.faults)
                 .iter()
                 .any(|(n, f)| *n == node && f.covers(now))
@@ -50,8 +61,12 @@ impl FaultBook {
     /// already past covers the ticks from now on that it would have covered).
     ///
     /// # Errors
-    /// One line when the book holds [`crate::config::MAX_FAULTS`] faults already.
+    /// One line when the book holds [`crate::config::MAX_FAULTS`] faults already, or `node`
+    /// is no node of the graph.
     pub fn inject(&self, node: NodeId, fault: Fault) -> Result<(), String> {
+        let Some(flag) = self.faulted.get(node.0) else {
+            return Err(format!("no node {} in the graph", node.0));
+        };
         let mut faults = crate::graph::lock(&self.faults);
         if faults.len() >= crate::config::MAX_FAULTS {
             return Err(format!(
@@ -60,7 +75,7 @@ impl FaultBook {
             ));
         }
         faults.push((node, fault));
-        self.any.store(true, Ordering::Relaxed);
+        flag.store(true, Ordering::Relaxed);
         Ok(())
     }
 
@@ -81,8 +96,15 @@ impl FaultBook {
     pub fn load(&self, saved: &[(NodeId, Fault)]) {
         let mut faults = crate::graph::lock(&self.faults);
         faults.truncate(self.from_settings);
-        faults.extend_from_slice(saved);
-        self.any.store(!faults.is_empty(), Ordering::Relaxed);
+        faults.extend(
+            saved
+                .iter()
+                .filter(|(n, _)| n.0 < self.faulted.len())
+                .cloned(),
+        );
+        for (i, flag) in self.faulted.iter().enumerate() {
+            flag.store(faults.iter().any(|(n, _)| n.0 == i), Ordering::Relaxed);
+        }
     }
 }
 
@@ -107,7 +129,7 @@ mod tests {
                 .position(|n| *n == name)
                 .map(NodeId)
         };
-        let book = FaultBook::new(&[stall("policy", 2, 1), stall("nobody", 0, 9)], id);
+        let book = FaultBook::new(2, &[stall("policy", 2, 1), stall("nobody", 0, 9)], id);
         let s = |t: u64| Nanos(t * Nanos::SECOND.0);
         assert!(!book.covers(NodeId(1), s(1)));
         assert!(book.covers(NodeId(1), s(2)));
@@ -136,12 +158,16 @@ mod tests {
 
     #[test]
     fn an_empty_book_faults_nothing_and_is_bounded() {
-        let book = FaultBook::new(&[], |_| None);
+        let book = FaultBook::new(1, &[], |_| None);
         assert!(!book.covers(NodeId(0), Nanos::ZERO));
         for k in 0..crate::config::MAX_FAULTS {
             book.inject(NodeId(0), stall("sensor", k as u64, 1))
                 .unwrap();
         }
         assert!(book.inject(NodeId(0), stall("sensor", 0, 1)).is_err());
+        assert!(
+            book.inject(NodeId(1), stall("sensor", 0, 1)).is_err(),
+            "no such node"
+        );
     }
 }

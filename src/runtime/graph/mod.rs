@@ -78,13 +78,54 @@ pub struct GraphHandles {
     /// …and the plan the virtual scheduler takes at its next instant.
     pub plan_request: crate::scheduler::PlanRequest,
     /// The phase changes asked for while running (`Command::SetPhase`), which the virtual
-    /// scheduler takes before its next instant: each node and its new phase offset.
-    pub phase_request: Arc<Mutex<Vec<(NodeId, crate::time::Nanos)>>>,
+    /// scheduler takes before its next instant.
+    pub phase_request: Arc<PhaseRequests>,
     /// The ports of the graph's external nodes ([`nodes::external`]), in node order: the
     /// ROS 2 side (`ratelab::ros2::external`) connects them.
     pub external: Vec<Arc<ExternalPort>>,
     /// The nodes' faults: the settings' and those injected by command ([`faults`]).
     pub faults: Arc<faults::FaultBook>,
+}
+
+/// Phase changes asked for and not yet taken: each node and its new phase offset
+/// ([`GraphHandles::phase_request`]). Looking for none costs one atomic load.
+#[derive(Debug, Default)]
+pub struct PhaseRequests {
+    pending: std::sync::atomic::AtomicBool,
+    asked: Mutex<Vec<(NodeId, crate::time::Nanos)>>,
+}
+
+impl PhaseRequests {
+    /// Ask for node `node`'s ticks to move to phase offset `phase`.
+    pub fn push(&self, node: NodeId, phase: crate::time::Nanos) {
+        lock(&self.asked).push((node, phase));
+        self.pending
+            .store(true, std::sync::atomic::Ordering::Release);
+    }
+
+    /// Take the changes asked for, oldest first (none: an empty list).
+    pub fn take(&self) -> Vec<(NodeId, crate::time::Nanos)> {
+        if !self
+            .pending
+            .swap(false, std::sync::atomic::Ordering::Acquire)
+        {
+            return Vec::new();
+        }
+        std::mem::take(&mut *lock(&self.asked))
+    }
+
+    /// The changes asked for and not yet taken (a capture's).
+    pub fn save(&self) -> Vec<(NodeId, crate::time::Nanos)> {
+        lock(&self.asked).clone()
+    }
+
+    /// Put back what [`PhaseRequests::save`] gave.
+    pub fn load(&self, saved: &[(NodeId, crate::time::Nanos)]) {
+        let mut asked = lock(&self.asked);
+        asked.clear();
+        asked.extend_from_slice(saved);
+        (self.pending).store(!asked.is_empty(), std::sync::atomic::Ordering::Release);
+    }
 }
 
 impl GraphHandles {
@@ -351,7 +392,9 @@ impl Graph {
                 )))
             })
             .collect();
-        let faults = Arc::new(faults::FaultBook::new(faults, |name| spec.node_id(name)));
+        let faults = Arc::new(faults::FaultBook::new(spec.nodes.len(), faults, |name| {
+            spec.node_id(name)
+        }));
         let handles = GraphHandles {
             faults: faults.clone(),
             spec: Arc::new(spec.clone()),

@@ -29,7 +29,8 @@ impl RunCore {
     /// The nodes come back into the core when the run ends, which is then over
     /// ([`RunCore::end`]; a node that panicked does not come back, and the core then holds
     /// fewer nodes: restoring a capture into it fails); the graph's handles ([`RunCore::handles`]) hold what it
-    /// measured. Commands given in advance are the virtual clock's: a real-clock run takes
+    /// measured. A core whose run has ended runs nothing: its end comes back, with no
+    /// timing. Commands given in advance are the virtual clock's: a real-clock run takes
     /// its commands as they come, applied to the handles.
     pub fn run_real(
         &mut self,
@@ -37,6 +38,14 @@ impl RunCore {
         stop: &StopFlag,
         opts: &RealOptions,
     ) -> RealEnd {
+        if let Some(end) = &self.end {
+            // A run is run once (a node that panicked is gone from it).
+            return RealEnd {
+                end: end.clone(),
+                timing: Vec::new(),
+                exec: None,
+            };
+        }
         let all = std::mem::take(&mut self.nodes);
         let mut slots: Vec<Option<Box<dyn Node>>> = all.into_iter().map(Some).collect();
         let index: Vec<usize> = match part {
