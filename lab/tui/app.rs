@@ -194,11 +194,11 @@ pub struct App {
     journal_bytes: usize,
     /// The journal reached [`MAX_JOURNAL`] or [`MAX_JOURNAL_BYTES`] and stopped.
     journal_full: bool,
-    /// (t s, θ rad, applied force N) of the run's first [`GHOST_S`] of run time: the ghost
-    /// of the next run when a saved file is reloaded.
-    whole: Vec<(f64, f64, f64)>,
+    /// (t s, θ rad, applied force N, sense→act latency) of the run's first [`GHOST_S`] of
+    /// run time: the ghost of the next run when a saved file is reloaded.
+    whole: Vec<GhostStep>,
     /// The run before a reload, drawn dim beside this one ([`Telemetry::Reloaded`]).
-    ghost: Vec<(f64, f64, f64)>,
+    ghost: Vec<GhostStep>,
     /// A reload was said (its line): the next run's start keeps this one as its ghost, and
     /// says the line again (a start clears what was said about the run before).
     reloading: Option<String>,
@@ -215,6 +215,10 @@ pub struct App {
 /// How much of a run is kept as the ghost of the next, s of run time (a save usually comes
 /// within seconds of watching a run; 3 000 steps at 50 Hz).
 pub const GHOST_S: f64 = 60.0;
+
+/// One actuator step of a run kept as a ghost: (t s, θ rad, applied force N, its sense→act
+/// latency, `None` when it applied no command).
+pub type GhostStep = (f64, f64, f64, Option<Nanos>);
 
 impl App {
     /// A lab sending controls on `tx`. `policy` is the starting brain spec and `alt_policy`
@@ -634,7 +638,8 @@ impl App {
         self.live.push(s.clone());
         let now_s = s.t.as_secs_f64();
         if now_s <= GHOST_S {
-            self.whole.push((now_s, s.pole_angle, s.action * GEAR_N));
+            self.whole
+                .push((now_s, s.pole_angle, s.action * GEAR_N, s.latency));
         }
         self.history.push_back((now_s, s.pole_angle));
         self.applied.push_back((now_s, s.action * GEAR_N));

@@ -290,8 +290,8 @@ mod tests {
         cfg
     }
 
-    /// A reload keeps the run before as a ghost in the angle and force panels (their titles
-    /// say so); the run after it, started for another reason, drops it.
+    /// A reload keeps the run before as a ghost in the angle, force and latency panels
+    /// (their titles say so); the run after it, started for another reason, drops it.
     #[test]
     fn a_reload_draws_the_run_before_as_a_ghost_until_another_run_starts() {
         let (mut app, _rx) = app_after(virtual_cfg(5.0, 10), true);
@@ -314,9 +314,25 @@ mod tests {
             .unwrap_or("")
             .starts_with("reloaded brain.py:"));
         let screen = render(&app, 120, 40);
-        assert_eq!(screen.matches("before reload").count(), 2, "{screen}");
+        // The angle and force panels, and the latency panel's pairs.
+        assert_eq!(screen.matches("before reload").count(), 3, "{screen}");
+        // One second into the new run: the latency panel pairs each bar with the run
+        // before's count over its first second.
+        app.on_telemetry(chapter_status(
+            vec![ratelab::qos::TopicQos::default(); 2],
+            vec![None; 3],
+        ));
+        let v = app.view();
+        assert_eq!(v.latency.ghost.len(), v.latency.buckets.len());
+        let before: u64 = v.latency.ghost.iter().sum();
+        assert!((1..=51).contains(&before), "{:?}", v.latency.ghost);
+        for (w, h) in [(120, 40), (80, 24)] {
+            let screen = render(&app, w, h);
+            assert!(screen.contains("dim: before reload"), "{w}×{h}\n{screen}");
+        }
         app.on_telemetry(started(virtual_cfg(50.0, 10)));
         assert!(app.view().ghost_angle.is_empty());
+        assert!(app.view().latency.ghost.is_empty());
     }
 
     #[test]

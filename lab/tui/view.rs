@@ -275,6 +275,9 @@ pub struct LatencyView {
     pub max_ms: f64,
     /// The same over the window.
     pub window: WindowLatency,
+    /// After a reload, the run before's count per bucket over the same span of run time
+    /// (drawn dim beside each bar); empty without one.
+    pub ghost: Vec<u64>,
 }
 
 /// Everything one frame shows.

@@ -472,9 +472,126 @@ impl serde::Serialize for Value {
 
 /// `v` as ros2cli's `topic echo` writes a message: YAML in block style (by `serde_yaml`,
 /// which quotes a string that would read back as another value and escapes control
-/// characters), ending in a newline.
+/// characters), ending in a newline, its floats as ros2cli writes them
+/// ([`python_yaml_float`]: `1.0e-05`, where serde_yaml alone writes `1e-5`).
+///
+/// Each float goes to serde_yaml as a plain placeholder that no string or field name of
+/// `v` contains, and each placeholder in its output is then replaced by the float as Python
+/// and PyYAML write it.
 pub fn yaml(v: &Value) -> String {
-    serde_yaml::to_string(v).unwrap_or_else(|e| format!("<not written: {e}>\n"))
+    let mut mark = String::from("ratelabfloat");
+    while mentions(v, &mark) {
+        mark.push('z');
+    }
+    let mut floats = Vec::new();
+    let marked = with_marks(v, &mark, &mut floats);
+    let out = match serde_yaml::to_string(&marked) {
+        Ok(out) => out,
+        Err(e) => return format!("<not written: {e}>\n"),
+    };
+    // `MARK<i>x`: the i-th float (the `x` ends the number).
+    let mut written = String::with_capacity(out.len());
+    let mut rest = out.as_str();
+    while let Some(at) = rest.find(mark.as_str()) {
+        written.push_str(&rest[..at]);
+        let after = &rest[at + mark.len()..];
+        let digits = after.find('x').unwrap_or(0);
+        match after[..digits]
+            .parse::<usize>()
+            .ok()
+            .and_then(|i| floats.get(i))
+        {
+            Some(&f) => {
+                written.push_str(&python_yaml_float(f));
+                rest = &after[digits + 1..];
+            }
+            None => {
+                written.push_str(&mark);
+                rest = after;
+            }
+        }
+    }
+    written.push_str(rest);
+    written
+}
+
+/// Whether a string or field name of `v` contains `mark`.
+fn mentions(v: &Value, mark: &str) -> bool {
+    match v {
+        Value::Str(t) => t.contains(mark),
+        Value::List(items) => items.iter().any(|i| mentions(i, mark)),
+        Value::Struct(fields) => fields
+            .iter()
+            .any(|(k, v)| k.contains(mark) || mentions(v, mark)),
+        Value::Bool(_) | Value::Int(_) | Value::UInt(_) | Value::Float(_) => false,
+    }
+}
+
+/// `v` with each float replaced by the string `MARK<i>x`, `i` its place in `floats`.
+fn with_marks(v: &Value, mark: &str, floats: &mut Vec<f64>) -> Value {
+    match v {
+        Value::Float(f) => {
+            floats.push(*f);
+            Value::Str(format!("{mark}{}x", floats.len() - 1))
+        }
+        Value::List(items) => {
+            Value::List(items.iter().map(|i| with_marks(i, mark, floats)).collect())
+        }
+        Value::Struct(fields) => Value::Struct(
+            fields
+                .iter()
+                .map(|(k, v)| (k.clone(), with_marks(v, mark, floats)))
+                .collect(),
+        ),
+        other => other.clone(),
+    }
+}
+
+/// `x` as ros2cli's `topic echo` writes a float: Python's `repr` (the shortest digits
+/// that read back to `x`; positional when its decimal point falls 4 places left of the
+/// first digit or nearer, up to 16 digits left of the point; else scientific with a signed
+/// exponent of at least two digits), then PyYAML's float representer (`.0` before the `e`
+/// of a repr with no point; `.nan`, `.inf`, `-.inf`). So `1e-05` is `1.0e-05`, `1e16` is
+/// `1.0e+16`, `0.0001` stays `0.0001` and `100.0` stays `100.0`.
+pub fn python_yaml_float(x: f64) -> String {
+    if x.is_nan() {
+        return ".nan".into();
+    }
+    if x.is_infinite() {
+        return if x > 0.0 { ".inf" } else { "-.inf" }.into();
+    }
+    // Rust's `{:e}` writes the shortest digits that read back, as Python's repr does.
+    let sci = format!("{x:e}");
+    let (mantissa, exponent) = sci.split_once('e').unwrap_or((&sci, "0"));
+    let exponent: i32 = exponent.parse().unwrap_or(0);
+    let (negative, mantissa) = match mantissa.strip_prefix('-') {
+        Some(m) => (true, m),
+        None => (false, mantissa),
+    };
+    let digits: String = mantissa.chars().filter(char::is_ascii_digit).collect();
+    // The decimal point's place after the first digit, as CPython's `decpt` counts it.
+    let point = exponent + 1;
+    let body = if x == 0.0 {
+        "0.0".to_string()
+    } else if point <= -4 || point > 16 {
+        let (first, rest) = digits.split_at(1);
+        let sign = if exponent < 0 { '-' } else { '+' };
+        // PyYAML: a repr with no point gets `.0` before its exponent.
+        let rest = if rest.is_empty() { "0" } else { rest };
+        format!("{first}.{rest}e{sign}{:02}", exponent.unsigned_abs())
+    } else if point <= 0 {
+        format!("0.{}{digits}", "0".repeat(point.unsigned_abs() as usize))
+    } else if point as usize >= digits.len() {
+        format!("{digits}{}.0", "0".repeat(point as usize - digits.len()))
+    } else {
+        let (whole, fraction) = digits.split_at(point as usize);
+        format!("{whole}.{fraction}")
+    };
+    if negative {
+        format!("-{body}")
+    } else {
+        body
+    }
 }
 
 #[cfg(test)]
@@ -583,5 +700,48 @@ mod tests {
         let f = |x: f64| yaml(&Value::Struct(vec![("f".into(), Value::Float(x))]));
         assert_eq!(f(1.0), "f: 1.0\n");
         assert_eq!(f(f64::from(0.1f32)), "f: 0.10000000149011612\n");
+        assert_eq!(f(1e-5), "f: 1.0e-05\n");
+    }
+
+    /// Python 3's `yaml.dump` (PyYAML 6) of each value, as ros2cli's echo writes a float:
+    /// the expected strings were printed by `python3 -c 'import yaml; print(yaml.dump(x))'`.
+    #[test]
+    fn floats_are_written_as_python_and_pyyaml_write_them() {
+        let cases: &[(f64, &str)] = &[
+            (0.0, "0.0"),
+            (-0.0, "-0.0"),
+            (1.0, "1.0"),
+            (-0.5, "-0.5"),
+            (100.0, "100.0"),
+            (0.0001, "0.0001"),
+            (0.00012345, "0.00012345"),
+            (1e-5, "1.0e-05"),
+            (-2.5e-7, "-2.5e-07"),
+            (1.5e-300, "1.5e-300"),
+            (1e15, "1000000000000000.0"),
+            (1e16, "1.0e+16"),
+            (1.2345678901234566e17, "1.2345678901234566e+17"),
+            (123456.789, "123456.789"),
+            (f64::from(0.1f32), "0.10000000149011612"),
+            (f64::MAX, "1.7976931348623157e+308"),
+            (f64::MIN_POSITIVE, "2.2250738585072014e-308"),
+            (5e-324, "5.0e-324"),
+            (f64::NAN, ".nan"),
+            (f64::INFINITY, ".inf"),
+            (f64::NEG_INFINITY, "-.inf"),
+        ];
+        for &(x, want) in cases {
+            assert_eq!(python_yaml_float(x), want, "{x:e}");
+        }
+    }
+
+    /// A string that looks like the floats' placeholder stays a string.
+    #[test]
+    fn a_string_like_the_float_placeholder_is_left_as_it_is() {
+        let v = Value::Struct(vec![
+            ("s".into(), Value::Str("ratelabfloat0x".into())),
+            ("f".into(), Value::Float(1e-5)),
+        ]);
+        assert_eq!(yaml(&v), "s: ratelabfloat0x\nf: 1.0e-05\n");
     }
 }

@@ -272,7 +272,7 @@ impl App {
     /// The latency panel: the segment's histogram and percentiles, and the window's.
     /// The ghost's points over the charts' window (the last 10 s of run time, or the first
     /// 10 s), as `pick` takes them.
-    fn ghost_in_window(&self, pick: impl Fn(&(f64, f64, f64)) -> (f64, f64)) -> Vec<(f64, f64)> {
+    fn ghost_in_window(&self, pick: impl Fn(&super::GhostStep) -> (f64, f64)) -> Vec<(f64, f64)> {
         let t1 = self.now.as_secs_f64().max(10.0);
         let t0 = t1 - 10.0;
         self.ghost
@@ -308,10 +308,26 @@ impl App {
             b.1 = below.saturating_sub(below_prev);
             below_prev = below;
         }
+        // The run before a reload over the same span of run time (this segment's start to
+        // now), in the same bars.
+        let (from, to) = (
+            self.live.segment().start.as_secs_f64(),
+            self.now.as_secs_f64(),
+        );
+        let mut ghost = vec![0u64; if self.ghost.is_empty() { 0 } else { BUCKETS }];
+        let spanned = (self.ghost.iter()).filter(|(t, ..)| *t >= from && *t <= to);
+        for latency in spanned.filter_map(|g| g.3) {
+            let i =
+                usize::try_from(latency.0 / BUCKET.0).map_or(BUCKETS - 1, |i| i.min(BUCKETS - 1));
+            if let Some(b) = ghost.get_mut(i) {
+                *b += 1;
+            }
+        }
         let (n, stats) = self.live.window_latency();
         let down = |n: Option<Nanos>| n.map_or(0.0, tenth_ms_down);
         LatencyView {
             buckets,
+            ghost,
             count: latency.count(),
             no_command: self.live.segment().no_command,
             p50_ms: down(latency.quantile(0.5)),
@@ -408,10 +424,10 @@ impl App {
                 .flat_map(|(&(t, u), &(t_next, _))| [(t, u), (t_next, u)])
                 .collect(),
             published_force: self.published.iter().copied().collect(),
-            ghost_angle: self.ghost_in_window(|&(t, a, _)| (t, a)),
+            ghost_angle: self.ghost_in_window(|&(t, a, ..)| (t, a)),
             // The run before's applied force, as a staircase too.
             ghost_force: self
-                .ghost_in_window(|&(t, _, f)| (t, f))
+                .ghost_in_window(|&(t, _, f, _)| (t, f))
                 .windows(2)
                 .flat_map(|w| [(w[0].0, w[0].1), (w[1].0, w[0].1)])
                 .collect(),

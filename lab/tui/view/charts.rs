@@ -395,20 +395,64 @@ pub(super) fn render_latency(v: &View, area: Rect, buf: &mut Buffer) {
         )
         .into(),
     ]);
+    let inner_w = area.width.saturating_sub(2);
+    let n = l.buckets.len().max(1) as u16;
+    let block = Block::bordered().title(title).title_bottom(window);
+    if l.ghost.len() == l.buckets.len() && !l.ghost.is_empty() {
+        render_latency_beside_ghost(l, block, inner_w / n, area, buf);
+        return;
+    }
     let bars: Vec<Bar> = l
         .buckets
         .iter()
         .map(|(label, n)| Bar::default().value(*n).label(Line::from(label.clone())))
         .collect();
-    let inner_w = area.width.saturating_sub(2);
-    let n = l.buckets.len().max(1) as u16;
     let bar_w = (inner_w / n).saturating_sub(1).clamp(1, 12);
     BarChart::default()
-        .block(Block::bordered().title(title).title_bottom(window))
+        .block(block)
         .data(BarGroup::default().bars(&bars))
         .bar_width(bar_w)
         .bar_gap(1)
         .bar_style(Style::new().fg(Color::Cyan))
         .value_style(Style::new().fg(Color::Black).bg(Color::Cyan))
         .render(area, buf);
+}
+
+/// After a reload: each bucket as a pair, the run before's count over the same span of
+/// run time (dim, left) beside this run's (cyan, right), `per_bucket` columns a pair.
+fn render_latency_beside_ghost(
+    l: &LatencyView,
+    block: Block<'_>,
+    per_bucket: u16,
+    area: Rect,
+    buf: &mut Buffer,
+) {
+    // Two bars and the gap between groups in each bucket's columns.
+    let bar_w = (per_bucket.saturating_sub(1) / 2).clamp(1, 6);
+    let groups: Vec<BarGroup> = l
+        .buckets
+        .iter()
+        .zip(&l.ghost)
+        .map(|((label, n), before)| {
+            BarGroup::default().label(Line::from(label.clone())).bars(&[
+                // Its height only: this run's count is the one written.
+                Bar::default()
+                    .value(*before)
+                    .text_value(String::new())
+                    .style(Style::new().fg(Color::DarkGray)),
+                Bar::default().value(*n),
+            ])
+        })
+        .collect();
+    let mut chart = BarChart::default()
+        .block(block.title_bottom(Line::from(" dim: before reload ".dark_gray()).right_aligned()))
+        .bar_width(bar_w)
+        .bar_gap(0)
+        .group_gap(per_bucket.saturating_sub(2 * bar_w).max(1))
+        .bar_style(Style::new().fg(Color::Cyan))
+        .value_style(Style::new().fg(Color::Black).bg(Color::Cyan));
+    for g in groups {
+        chart = chart.data(g);
+    }
+    chart.render(area, buf);
 }
