@@ -9,8 +9,8 @@ pub use crate::clock::ClockKind;
 /// `--break` sets the control rate to this (the chapter's demonstration of the cliff).
 pub const BREAK_CONTROL_HZ: f64 = 5.0;
 
-/// The most faults one run may inject (`--stall`, `--kill`).
-pub const MAX_FAULTS: usize = 64;
+/// The most faults one run may inject (`--stall`, `--kill`, and by command).
+pub use crate::qos::MAX_FAULTS;
 
 impl From<crate::clock::UnknownClock> for ConfigError {
     fn from(e: crate::clock::UnknownClock) -> ConfigError {

@@ -805,9 +805,10 @@ impl Default for RealOptions {
 pub struct RealRun {
     /// How it ended.
     pub end: RunEnd,
-    /// Per-node tick timing (in node order).
+    /// Per-node tick timing, one per node run, in their order (a node whose thread died,
+    /// panicking, has an empty one).
     pub timing: Vec<NodeTiming>,
-    /// The nodes, returned for reuse or inspection.
+    /// The nodes, returned for reuse or inspection (a node whose thread died is not).
     pub nodes: Vec<Box<dyn Node>>,
     /// What the executors measured, when [`RealOptions::track`] (and no node thread died).
     pub exec: Option<ExecFigures>,
@@ -1123,10 +1124,20 @@ pub fn run_real(
     let mut nodes = Vec::new();
     let mut timing = Vec::new();
     let mut stats = Vec::new();
-    for (node, t, exec) in slots.into_iter().flatten() {
-        nodes.push(node);
-        timing.push(t);
-        stats.push(exec);
+    for (i, slot) in slots.into_iter().enumerate() {
+        match slot {
+            Some((node, t, exec)) => {
+                nodes.push(node);
+                timing.push(t);
+                stats.push(exec);
+            }
+            // Its thread died (the node panicked): no timing, but its place kept, so that
+            // every later node's timing stays its own.
+            None => timing.push(NodeTiming {
+                node: names[i].clone(),
+                ..NodeTiming::default()
+            }),
+        }
     }
     let stopped_at = stop_at.load(Ordering::SeqCst);
     let end = if let Some(reason) = failed {
@@ -1553,8 +1564,11 @@ mod tests {
                 panic!("sensor cable unplugged")
             }
         }
+        // The failed node first: the nodes after it keep their own timing.
+        let mut nodes: Vec<Box<dyn Node>> = vec![Box::new(Boom(Rate::new(50.0).unwrap()))];
+        nodes.extend(probes(&log, [100.0, 100.0, 100.0]));
         let run = run_real(
-            vec![Box::new(Boom(Rate::new(50.0).unwrap()))],
+            nodes,
             Nanos::SECOND,
             &StopFlag::new(),
             &RealOptions::default(),
@@ -1566,6 +1580,8 @@ mod tests {
                 message: "sensor cable unplugged".into()
             }
         );
+        let named: Vec<&str> = run.timing.iter().map(|t| t.node.as_str()).collect();
+        assert_eq!(named, ["boom", "actuator", "sensor", "policy"]);
     }
 
     #[test]

@@ -61,17 +61,17 @@ impl FaultBook {
     /// already past covers the ticks from now on that it would have covered).
     ///
     /// # Errors
-    /// One line when the book holds [`crate::config::MAX_FAULTS`] faults already, or `node`
+    /// One line when the book holds [`crate::qos::MAX_FAULTS`] faults already, or `node`
     /// is no node of the graph.
     pub fn inject(&self, node: NodeId, fault: Fault) -> Result<(), String> {
         let Some(flag) = self.faulted.get(node.0) else {
             return Err(format!("no node {} in the graph", node.0));
         };
         let mut faults = crate::graph::lock(&self.faults);
-        if faults.len() >= crate::config::MAX_FAULTS {
+        if faults.len() >= crate::qos::MAX_FAULTS {
             return Err(format!(
                 "a run holds at most {} faults",
-                crate::config::MAX_FAULTS
+                crate::qos::MAX_FAULTS
             ));
         }
         faults.push((node, fault));
@@ -160,7 +160,7 @@ mod tests {
     fn an_empty_book_faults_nothing_and_is_bounded() {
         let book = FaultBook::new(1, &[], |_| None);
         assert!(!book.covers(NodeId(0), Nanos::ZERO));
-        for k in 0..crate::config::MAX_FAULTS {
+        for k in 0..crate::qos::MAX_FAULTS {
             book.inject(NodeId(0), stall("sensor", k as u64, 1))
                 .unwrap();
         }

@@ -392,9 +392,8 @@ impl Graph {
                 )))
             })
             .collect();
-        let faults = Arc::new(faults::FaultBook::new(spec.nodes.len(), faults, |name| {
-            spec.node_id(name)
-        }));
+        let id_of = |n: &str| spec.node_id(n);
+        let faults = Arc::new(faults::FaultBook::new(spec.nodes.len(), faults, id_of));
         let handles = GraphHandles {
             faults: faults.clone(),
             spec: Arc::new(spec.clone()),
