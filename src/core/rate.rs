@@ -170,6 +170,16 @@ pub fn next_deadline(scheduled: Nanos, now: Nanos, period: Nanos) -> (Nanos, u64
     )
 }
 
+/// The first point of the grid `phase + k·period` (k ≥ 0) at or after `from`: where a node
+/// whose ticks fall on that grid ticks next (a phase change, a process joining a run late).
+pub fn first_on_grid(phase: Nanos, period: Nanos, from: Nanos) -> Nanos {
+    if from <= phase || period.0 == 0 {
+        return phase;
+    }
+    let k = (from.0 - phase.0).div_ceil(period.0);
+    Nanos(phase.0.saturating_add(k.saturating_mul(period.0)))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -225,5 +235,16 @@ mod tests {
         // Overran past one deadline: skip it, land on the grid.
         assert_eq!(next_deadline(Nanos(100), Nanos(120), p), (Nanos(140), 1));
         assert_eq!(next_deadline(Nanos(100), Nanos(175), p), (Nanos(180), 3));
+    }
+
+    #[test]
+    fn a_new_grid_starts_at_its_first_point_at_or_after_the_change() {
+        let p = Nanos(20);
+        assert_eq!(first_on_grid(Nanos(7), p, Nanos(0)), Nanos(7));
+        assert_eq!(first_on_grid(Nanos(7), p, Nanos(7)), Nanos(7));
+        assert_eq!(first_on_grid(Nanos(7), p, Nanos(8)), Nanos(27));
+        assert_eq!(first_on_grid(Nanos(7), p, Nanos(2005)), Nanos(2007));
+        assert_eq!(first_on_grid(Nanos(7), p, Nanos(2027)), Nanos(2027));
+        assert_eq!(first_on_grid(Nanos(5), Nanos(0), Nanos(99)), Nanos(5));
     }
 }

@@ -235,13 +235,7 @@ fn phase_node(
     node: &str,
     phase_ms: f64,
 ) -> Result<(crate::graph::NodeId, crate::time::Nanos), String> {
-    let id = graph.node_id(node).ok_or_else(|| {
-        format!(
-            "no node '{node}' in graph '{}' (nodes: {})",
-            graph.name,
-            graph.node_names().join(", ")
-        )
-    })?;
+    let id = graph.known_node(node).map_err(|e| e.to_string())?;
     let phase = crate::config::phase_offset_from_ms(phase_ms).map_err(|e| e.to_string())?;
     Ok((id, phase))
 }

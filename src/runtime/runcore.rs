@@ -295,8 +295,6 @@ pub struct RunCore {
     /// The most captures kept ([`max_history`]).
     max_history: usize,
     end: Option<RunEnd>,
-    /// The instant whose events [`RunCore::next_event`] is drawing, if any.
-    open_instant: Option<Nanos>,
     keep_trace: bool,
     on_span: Option<crate::executor::SpanHook>,
     remake_brain: Option<BrainFactory>,
@@ -351,7 +349,6 @@ impl RunCore {
             next_history: Nanos::ZERO,
             max_history: max_history(cfg.graph.nodes.len(), cfg.graph.topics.len()),
             end: None,
-            open_instant: None,
             keep_trace,
             on_span: opts.on_span,
             remake_brain: opts.remake_brain,
@@ -420,7 +417,6 @@ impl RunCore {
 
     /// Run the instant `due` [`RunCore::prepare_instant`] made ready.
     fn run_prepared(&mut self, due: Nanos) -> Step {
-        self.open_instant = None;
         let ended = match self.sched.run_instant(&mut self.nodes) {
             InstantOutcome::Ran { ticked } => {
                 self.keep_history();
@@ -456,14 +452,11 @@ impl RunCore {
             return None;
         }
         loop {
-            if self.open_instant == Some(self.sched.now()) {
-                if let Some(e) = self.sched.event_now() {
-                    return Some(e);
-                }
+            if let Some(e) = self.sched.next_in_instant() {
+                return Some(e);
             }
             let due = self.prepare_instant()?;
             self.sched.begin_instant(due);
-            self.open_instant = Some(due);
         }
     }
 
@@ -783,7 +776,6 @@ impl RunCore {
         self.by_hand.clone_from(&capture.by_hand);
         self.next_scheduled = capture.next_scheduled;
         self.end.clone_from(&capture.end);
-        self.open_instant = None;
         Ok(())
     }
 

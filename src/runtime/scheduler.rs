@@ -24,7 +24,7 @@ use crate::executor::{
 };
 use crate::metrics::{LatencyStats, NodeTiming};
 use crate::node::{Flow, Node};
-use crate::rate::{next_deadline, DeadlineWaiter};
+use crate::rate::{first_on_grid, next_deadline, DeadlineWaiter};
 use crate::time::Nanos;
 use std::cmp::Reverse;
 use std::collections::BinaryHeap;
@@ -249,6 +249,9 @@ pub struct VirtualScheduler {
     /// Per node, a new grid for its ticks (its phase, run time) to take when its tick now
     /// released or running starts ([`VirtualScheduler::set_phase`]).
     regrid: Vec<Option<Nanos>>,
+    /// An instant begun with [`VirtualScheduler::begin_instant`] whose events are still
+    /// being drawn ([`VirtualScheduler::next_in_instant`]).
+    instant_open: bool,
     track: bool,
     /// Any executor shares threads, or ticks take time: the executors' rules apply. Else
     /// (the default) an instant is the chapter's loop, which they reduce to.
@@ -308,6 +311,7 @@ impl VirtualScheduler {
             span_hook: None,
             plan_request: None,
             regrid: vec![None; nodes.len()],
+            instant_open: false,
             general: track || !plan_per_node,
             track,
         }
@@ -482,6 +486,7 @@ impl VirtualScheduler {
     /// every tick that can start then (see the type's docs). A node that panics is caught,
     /// named, and ends the graph ([`InstantOutcome::Failed`]).
     pub fn run_instant(&mut self, nodes: &mut [Box<dyn Node>]) -> InstantOutcome {
+        self.instant_open = false;
         if !self.general {
             return self.run_plain_instant(nodes);
         }
@@ -513,6 +518,19 @@ impl VirtualScheduler {
     /// this, event by event; `ratelab::runcore::RunCore::next_event` drives it.
     pub fn begin_instant(&mut self, t: Nanos) {
         self.now = t;
+        self.instant_open = true;
+    }
+
+    /// The next event of the instant begun with [`VirtualScheduler::begin_instant`]
+    /// ([`VirtualScheduler::event_now`]); `None` when none is open or its events are all
+    /// drawn (it is then closed: the caller makes the next one ready and begins it).
+    pub fn next_in_instant(&mut self) -> Option<Event> {
+        if !self.instant_open {
+            return None;
+        }
+        let e = self.event_now();
+        self.instant_open = e.is_some();
+        e
     }
 
     /// The next event at the current instant under the executors' rules, or `None` when
@@ -724,15 +742,6 @@ impl VirtualScheduler {
             }
         }
     }
-}
-
-/// The first point of the grid `phase + k·period` (k ≥ 0) at or after `from`.
-fn first_on_grid(phase: Nanos, period: Nanos, from: Nanos) -> Nanos {
-    if from <= phase || period.0 == 0 {
-        return phase;
-    }
-    let k = (from.0 - phase.0).div_ceil(period.0);
-    Nanos(phase.0.saturating_add(k.saturating_mul(period.0)))
 }
 
 /// One tick under the real clock, as a [`TickHook`] is told of it.
@@ -1582,16 +1591,5 @@ mod tests {
         );
         let named: Vec<&str> = run.timing.iter().map(|t| t.node.as_str()).collect();
         assert_eq!(named, ["boom", "actuator", "sensor", "policy"]);
-    }
-
-    #[test]
-    fn a_new_grid_starts_at_its_first_point_at_or_after_the_change() {
-        let p = Nanos(20);
-        assert_eq!(first_on_grid(Nanos(7), p, Nanos(0)), Nanos(7));
-        assert_eq!(first_on_grid(Nanos(7), p, Nanos(7)), Nanos(7));
-        assert_eq!(first_on_grid(Nanos(7), p, Nanos(8)), Nanos(27));
-        assert_eq!(first_on_grid(Nanos(7), p, Nanos(2005)), Nanos(2007));
-        assert_eq!(first_on_grid(Nanos(7), p, Nanos(2027)), Nanos(2027));
-        assert_eq!(first_on_grid(Nanos(5), Nanos(0), Nanos(99)), Nanos(5));
     }
 }

@@ -89,13 +89,7 @@ fn first_ticks(share: &Share, index: &[usize], late: Nanos) -> Vec<Nanos> {
         .iter()
         .map(|&i| {
             let first = firsts.get(i).copied().unwrap_or(Nanos::ZERO);
-            let period = share.handles.rates[i].period();
-            if late <= first || period.0 == 0 {
-                first
-            } else {
-                let k = (late.0 - first.0).div_ceil(period.0);
-                Nanos(first.0.saturating_add(k.saturating_mul(period.0)))
-            }
+            ratelab_core::rate::first_on_grid(first, share.handles.rates[i].period(), late)
         })
         .collect()
 }

@@ -150,7 +150,8 @@ impl Slot {
 /// The events of the run's one order, replayed here: this process's run in their turn,
 /// the others' taken from their reports.
 pub(super) struct Stepper {
-    /// The graph (the whole graph's, this process's nodes run here), drawn event by event.
+    /// The graph (the whole graph's, this process's nodes run here), drawn event by event
+    /// on the whole graph's plan, as in one process: every process replays every executor.
     core: RunCore,
     share: Arc<Share>,
     /// The topics whose counters this process holds.
@@ -195,7 +196,6 @@ impl Stepper {
         stop: StopFlag,
         callback_ticks: bool,
     ) -> Self {
-        // The whole graph's plan, as in one process: every process replays every executor.
         let held = held_topics(&share.cfg.graph, &share.mine);
         Stepper {
             core,

@@ -719,7 +719,10 @@ impl GraphSpec {
     }
 
     /// Node `name`'s id, or the override error naming the graph's nodes.
-    fn known_node(&self, name: &str) -> Result<NodeId, OverrideError> {
+    ///
+    /// # Errors
+    /// [`OverrideError`] when the graph has no node of that name.
+    pub fn known_node(&self, name: &str) -> Result<NodeId, OverrideError> {
         self.node_id(name).ok_or_else(|| {
             OverrideError(format!(
                 "graph '{}' has no node '{name}' (nodes: {})",

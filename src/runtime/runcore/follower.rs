@@ -37,8 +37,6 @@ pub struct Follower {
     nodes: Vec<Box<dyn Node>>,
     sched: VirtualScheduler,
     duration: Nanos,
-    /// The instant whose events are being drawn, if any.
-    open_instant: Option<Nanos>,
 }
 
 impl Follower {
@@ -71,7 +69,6 @@ impl Follower {
             nodes,
             sched,
             duration: cfg.duration,
-            open_instant: None,
         })
     }
 
@@ -79,14 +76,11 @@ impl Follower {
     /// run's duration. Each is then taken with [`Follower::ran_elsewhere`].
     pub fn next_event(&mut self) -> Option<Event> {
         loop {
-            if self.open_instant == Some(self.sched.now()) {
-                if let Some(e) = self.sched.event_now() {
-                    return Some(e);
-                }
+            if let Some(e) = self.sched.next_in_instant() {
+                return Some(e);
             }
             let due = self.sched.next_due().filter(|&t| t <= self.duration)?;
             self.sched.begin_instant(due);
-            self.open_instant = Some(due);
         }
     }
 
