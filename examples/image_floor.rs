@@ -19,10 +19,13 @@
 //! `{"bytes", "rate_hz", "sent", "received", "p50_us", "p99_us", "cpu_ms_pub",
 //! "cpu_ms_sub", "shared_memory"}`.
 
+#[path = "common/floor.rs"]
+mod floor;
+
 use hdrhistogram::Histogram;
-use ratelab::distributed::credentials::{Credentials, Role};
+use ratelab::distributed::credentials::Credentials;
 use ratelab::distributed::wire::mono_now_ns;
-use ratelab::distributed::{open_session, shared_memory, zenoh, zenoh::Wait, Access};
+use ratelab::distributed::{shared_memory, zenoh::Wait};
 use std::io::{BufRead, BufReader};
 use std::process::{Command, Stdio};
 use std::sync::{Arc, Mutex};
@@ -48,29 +51,14 @@ struct Opts {
     far: Option<Vec<String>>,
 }
 
-/// CPU time (user and system) this process has used so far, ms (Linux's `/proc`).
+/// CPU time (user and system) this process has used so far, ms.
 fn cpu_ms() -> Option<f64> {
-    let stat = std::fs::read_to_string("/proc/self/stat").ok()?;
-    // The fields after the command's closing parenthesis; utime and stime are 14 and 15.
-    let f: Vec<&str> = stat.rsplit_once(')')?.1.split_whitespace().collect();
-    let ticks = f.get(11)?.parse::<u64>().ok()? + f.get(12)?.parse::<u64>().ok()?;
-    // The kernel's USER_HZ is 100 on every Linux this runs on.
-    Some(ticks as f64 * 10.0)
-}
-
-fn session(listen: &[String], connect: &[String], creds: &str, who: &str) -> zenoh::Session {
-    let credentials = Credentials::load(std::path::Path::new(creds)).expect("credentials");
-    let access = Access {
-        credentials: &credentials,
-        role: &Role::Process(who.into()),
-        spec: None,
-    };
-    open_session(listen, connect, access).expect("a session")
+    Some(floor::cpu_ns(std::process::id())? as f64 / 1e6)
 }
 
 /// The subscriber: the latency of each payload of the expected length, until the end.
 fn far(endpoint: &str, creds: &str, bytes: usize) {
-    let session = session(&[endpoint.to_string()], &[], creds, "far");
+    let session = floor::tls_session(&[endpoint.to_string()], &[], creds, "far");
     let hist = Arc::new(Mutex::new(
         Histogram::<u64>::new_with_bounds(1, 60_000_000_000, 3).expect("valid bounds"),
     ));
@@ -141,19 +129,12 @@ fn main() {
         .expect("the subscriber starts");
     let mut lines = BufReader::new(child.stdout.take().expect("its stdout")).lines();
     let _ready = lines.next();
-    let session = session(&[], std::slice::from_ref(&endpoint), &creds, "near");
+    let session = floor::tls_session(&[], std::slice::from_ref(&endpoint), &creds, "near");
     let publisher = session
         .declare_publisher("ratelab/floor/image")
         .wait()
         .expect("a publisher");
-    while !publisher
-        .matching_status()
-        .wait()
-        .map(|m| m.matching())
-        .unwrap_or(false)
-    {
-        std::thread::sleep(Duration::from_millis(10));
-    }
+    floor::wait_matched(&publisher);
     let cpu_before = cpu_ms().unwrap_or(0.0);
     let period = Duration::from_nanos(1_000_000_000 / opts.rate_hz);
     let start = Instant::now();

@@ -30,10 +30,13 @@
 //! far side answers inside Zenoh's receive callback, with no hand-off to a thread).
 //! `--transport` and `--round-trips N` narrow a sitting to one transport's round trips.
 
+#[path = "common/floor.rs"]
+mod floor;
+
 use hdrhistogram::Histogram;
-use ratelab::distributed::credentials::{Credentials, Role};
+use ratelab::distributed::credentials::Credentials;
 use ratelab::distributed::wire::mono_now_ns;
-use ratelab::distributed::{open_session, zenoh, zenoh::Wait, Access};
+use ratelab::distributed::{zenoh, zenoh::Wait};
 use std::io::{BufRead, BufReader, Read, Write};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
@@ -95,17 +98,6 @@ impl Opts {
             std::hint::spin_loop();
         }
     }
-}
-
-/// CPU time (user and system) process `pid` has used so far, ns; `None` off Linux.
-fn cpu_ns(pid: u32) -> Option<u64> {
-    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).ok()?;
-    // The fields after the command's closing parenthesis; utime and stime are 14 and 15.
-    let rest = stat.rsplit_once(')')?.1;
-    let f: Vec<&str> = rest.split_whitespace().collect();
-    let ticks = f.get(11)?.parse::<u64>().ok()? + f.get(12)?.parse::<u64>().ok()?;
-    // The kernel's USER_HZ is 100 on every Linux this runs on.
-    Some(ticks * 10_000_000)
 }
 
 fn encode(kind: u8, sent_ns: u64, received_ns: u64) -> [u8; MSG_BYTES] {
@@ -198,13 +190,7 @@ fn session(
     who: &str,
 ) -> zenoh::Session {
     if transport == "zenoh-tls" {
-        let credentials = Credentials::load(std::path::Path::new(creds)).expect("credentials");
-        let access = Access {
-            credentials: &credentials,
-            role: &Role::Process(who.into()),
-            spec: None,
-        };
-        return open_session(listen, connect, access).expect("a session");
+        return floor::tls_session(listen, connect, creds, who);
     }
     let mut c = zenoh::Config::default();
     let json = |v: &[String]| serde_json::to_string(v).expect("JSON");
@@ -328,7 +314,7 @@ fn round_trips(link: &mut dyn Link, label: &str, n: u64, opts: &Opts, far: u32) 
         link.recv();
     }
     let start = Instant::now();
-    let cpu = || Some(cpu_ns(std::process::id())? + cpu_ns(far)?);
+    let cpu = || Some(floor::cpu_ns(std::process::id())? + floor::cpu_ns(far)?);
     let cpu_before = cpu();
     for _ in 0..n {
         let t = mono_now_ns();
@@ -407,14 +393,7 @@ fn main() {
                     let _ = tx.try_send(m);
                 });
                 // Wait until the far side's subscriber is matched before the first put.
-                while !publisher
-                    .matching_status()
-                    .wait()
-                    .map(|m| m.matching())
-                    .unwrap_or(false)
-                {
-                    std::thread::sleep(Duration::from_millis(10));
-                }
+                floor::wait_matched(&publisher);
                 Box::new(ZenohLink {
                     extra_puts: opts.extra_puts,
                     _session: session,
