@@ -126,6 +126,13 @@ fn replay(args: &cli::ReplayArgs) -> anyhow::Result<()> {
             );
             continue;
         }
+        if let Some(&at) = run.clock_switches_ns.first() {
+            println!(
+                "[ratelab] run {n}: went under the real clock at t={:.3} s (c) — not replayable exactly, skipped",
+                ratelab::Nanos(at).as_secs_f64()
+            );
+            continue;
+        }
         if run.end_ns == 0 {
             println!("[ratelab] run {n}: ended before its first tick, nothing to replay");
             continue;

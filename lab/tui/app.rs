@@ -22,6 +22,7 @@ use ratelab::session::{Control, Speed, Telemetry, SPEEDS};
 use ratelab::Nanos;
 use std::collections::VecDeque;
 
+mod journal;
 mod views;
 
 /// Seconds of pole-angle history kept (and drawn).
@@ -442,83 +443,6 @@ impl App {
         self.send(Control::Apply(cmd));
     }
 
-    /// Fold one telemetry message, and keep it in the run's journal (a seek back shows the
-    /// run as it was by folding the journal again up to then).
-    pub fn on_telemetry(&mut self, t: Telemetry) {
-        match t {
-            Telemetry::Rewound { at } => self.rewind(at),
-            Telemetry::Started { .. } => {
-                let reloaded = if self.rewinding {
-                    None
-                } else {
-                    // A reload keeps the run before as a ghost; any other new run drops it.
-                    let line = self.reloading.take();
-                    self.ghost = match line {
-                        Some(_) => std::mem::take(&mut self.whole),
-                        None => Vec::new(),
-                    };
-                    line
-                };
-                self.journal.clear();
-                self.journal_bytes = 0;
-                self.journal_full = false;
-                self.fold(t.clone());
-                self.journal.push((self.now, t));
-                if let Some(line) = reloaded {
-                    self.say(line);
-                }
-            }
-            // A status while paused repeats its instant: the newest of an instant stands.
-            Telemetry::Status { now, .. }
-                if self.journal.last().is_some_and(|(at, last)| {
-                    *at == now && matches!(last, Telemetry::Status { .. })
-                }) =>
-            {
-                self.fold(t.clone());
-                if let Some(last) = self.journal.last_mut() {
-                    *last = (self.now, t);
-                }
-            }
-            t => {
-                self.fold(t.clone());
-                let bytes = t.approx_bytes();
-                if self.journal.len() < MAX_JOURNAL
-                    && self.journal_bytes.saturating_add(bytes) <= MAX_JOURNAL_BYTES
-                {
-                    self.journal_bytes += bytes;
-                    self.journal.push((self.now, t));
-                } else {
-                    self.journal_full = true;
-                }
-            }
-        }
-    }
-
-    /// The run was put back at `at` ([`Telemetry::Rewound`]): show it as it was then, by
-    /// folding again what the run told up to then (what the screen showed at that run time).
-    fn rewind(&mut self, at: Nanos) {
-        if self.journal_full {
-            self.say(format!(
-                "back at t={:.2} s: the run is too long to show as it was (its journal is full: {MAX_JOURNAL} messages or {} MiB); the figures go on from here",
-                at.as_secs_f64(),
-                MAX_JOURNAL_BYTES >> 20
-            ));
-            return;
-        }
-        let journal = std::mem::take(&mut self.journal);
-        let upto = journal.partition_point(|(t, _)| *t <= at);
-        self.rewinding = true;
-        for (_, t) in journal.into_iter().take(upto) {
-            self.on_telemetry(t);
-        }
-        self.rewinding = false;
-        self.now = at;
-        self.say(format!(
-            "back at t={:.3} s: a change or space branches the run here",
-            at.as_secs_f64()
-        ));
-    }
-
     /// Fold one telemetry message into what the lab shows.
     fn fold(&mut self, t: Telemetry) {
         match t {
@@ -566,6 +490,20 @@ impl App {
                 // The executors' counts start again from the change (as the arrows do).
                 self.exec.retain(|(t, _)| *t >= at);
                 self.exec_from = Some(at);
+                self.say(text);
+            }
+            Telemetry::ClockSwitched { at, clock } => {
+                // The same run goes on: a new segment, as a change starts one.
+                self.clock = clock.to_string();
+                let text = format!(
+                    "clock → {clock} at t={:.2} s: the same run goes on (its state carried across)",
+                    at.as_secs_f64()
+                );
+                self.live.change(at, text.clone());
+                self.exec.retain(|(t, _)| *t >= at);
+                self.exec_from = Some(at);
+                // The real clock's tick windows start again with its ticks.
+                self.ticks.iter_mut().for_each(VecDeque::clear);
                 self.say(text);
             }
             Telemetry::Ended { metrics, reason } => self.on_ended(&metrics, &reason),

@@ -280,7 +280,7 @@ pub const BINDINGS: &[Binding] = &[
     Binding {
         keys: &[(Char('c'), Msg::SwitchClock)],
         label: "c",
-        help: "switch clock (restart under the other one)",
+        help: "switch clock in place (a run that ended restarts)",
         footer: Some(("c", "clock")),
     },
     Binding {

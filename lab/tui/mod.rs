@@ -1076,6 +1076,47 @@ mod tests {
         assert!(a.contains("back at t=5.000 s"), "{a}");
     }
 
+    /// `c` on a running lab: the header names the clock the run goes on under, the footer
+    /// says the same run goes on, and the totals count from the switch; scrubbed back to
+    /// where the real clock's part began, the lab is under the virtual clock as it was.
+    #[test]
+    fn a_clock_switch_in_place_shows_and_a_rewind_to_it_is_virtual_again() {
+        let cfg = virtual_cfg(50.0, 4);
+        let report = run(&cfg, Box::new(Scripted), RunOptions::new()).unwrap();
+        let (tx, _rx) = crossbeam_channel::unbounded();
+        let mut app = App::new(tx, "scripted".into(), None, Speed::Times(1.0));
+        app.on_telemetry(Telemetry::Started {
+            cfg,
+            policy: "scripted".into(),
+            recording: None,
+        });
+        let at = ratelab::Nanos(2_000_000_000);
+        for s in report.trace.iter().filter(|s| s.t <= at) {
+            app.on_telemetry(Telemetry::Step(Box::new(s.clone())));
+        }
+        let before = render(&app, 120, 40);
+        app.on_telemetry(Telemetry::ClockSwitched {
+            at,
+            clock: ClockKind::Real,
+        });
+        for s in report.trace.iter().filter(|s| s.t > at) {
+            app.on_telemetry(Telemetry::Step(Box::new(s.clone())));
+        }
+        for (w, h) in [(80, 24), (120, 40)] {
+            let text = render(&app, w, h);
+            assert!(text.contains("real clock │ t 4.00 s"), "{w}x{h}:\n{text}");
+            assert!(text.contains("since 2.00 s"), "{w}x{h}:\n{text}");
+            assert!(
+                text.contains("clock → real at t=2.00 s: the same run goes on"),
+                "{w}x{h}:\n{text}"
+            );
+        }
+        app.on_telemetry(Telemetry::Rewound { at });
+        let back = render(&app, 120, 40);
+        let rows = |s: &str| s.lines().take(39).map(str::to_string).collect::<Vec<_>>();
+        assert_eq!(rows(&back), rows(&before), "as it was before the switch");
+    }
+
     #[test]
     fn a_lab_attached_mid_run_says_its_latency_counts_from_when_it_joined() {
         // The steps of a run from 6 s on, as a lab attached then sees them.

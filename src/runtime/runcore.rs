@@ -16,6 +16,15 @@
 //!   each process of a launch hand the core's graph to the real-clock executor's threads
 //!   ([`crate::scheduler::run_real`]) and take it back at the end.
 //!
+//! # A clock switch in place
+//! One run may change clocks as it goes (the lab's `c`): [`RunCore::run_real`] from the
+//! instant the virtual clock reached starts each node at its next tick there, with the real
+//! clock reading that instant; when the real clock is stopped the virtual one takes the
+//! graph back at the time it stopped, each node's next tick on the grid it ran on. State
+//! carries across both ways (nodes, topics, counters, the plant, the run log); the real
+//! clock's part is not reproducible, so a capture that replays cannot give a run that went
+//! under it.
+//!
 //! # What an instant is
 //! [`RunCore::step`] runs the next instant of the scheduler ([`VirtualScheduler::run_instant`]:
 //! the executors' rules, the chapter's tie-break order), after applying the commands
@@ -217,6 +226,15 @@ pub enum RestoreError {
     /// ([`CoreOptions::history_every`]).
     #[error("no capture kept to seek back to {0}")]
     NoHistory(Nanos),
+    /// Seeking back into, or across to a time after, a part of the run the real clock ran
+    /// ([`RunCore::run_real`]) from a capture before it: that part cannot be run again.
+    #[error("the real clock ran {from} to {to} of this run: that part cannot run again")]
+    RealPart {
+        /// Where the part began, run time.
+        from: Nanos,
+        /// Where it ended.
+        to: Nanos,
+    },
     /// Replaying the run to the captured instant failed.
     #[error("replaying the run to {at}: {reason}")]
     Replay {
@@ -239,6 +257,8 @@ pub struct Capture {
     by_hand: Vec<TimedCommand>,
     next_scheduled: usize,
     end: Option<RunEnd>,
+    /// The parts of the run the real clock ran by then, `(from, to)` run times.
+    real_parts: Vec<(Nanos, Nanos)>,
     state: Option<Box<Saved>>,
 }
 
@@ -295,6 +315,10 @@ pub struct RunCore {
     /// The most captures kept ([`max_history`]).
     max_history: usize,
     end: Option<RunEnd>,
+    /// The parts of the run the real clock ran and gave back, `(from, to)` run times, oldest
+    /// first ([`RunCore::run_real`]): neither a replay from t = 0 nor a seek can run them
+    /// again.
+    real_parts: Vec<(Nanos, Nanos)>,
     keep_trace: bool,
     on_span: Option<crate::executor::SpanHook>,
     remake_brain: Option<BrainFactory>,
@@ -349,6 +373,7 @@ impl RunCore {
             next_history: Nanos::ZERO,
             max_history: max_history(cfg.graph.nodes.len(), cfg.graph.topics.len()),
             end: None,
+            real_parts: Vec::new(),
             keep_trace,
             on_span: opts.on_span,
             remake_brain: opts.remake_brain,
@@ -615,7 +640,12 @@ impl RunCore {
         if now < self.next_history && !self.history.is_empty() {
             return;
         }
-        self.history.push(self.capture());
+        let capture = self.capture();
+        if capture.is_replay() && !self.real_parts.is_empty() {
+            // It could not be restored (a replay cannot give the real clock's part).
+            return;
+        }
+        self.history.push(capture);
         if self.history.len() > self.max_history {
             // Keep the first (t = 0) and every other one after it.
             let mut k = 0;
@@ -643,8 +673,9 @@ impl RunCore {
     /// gives). Step observers see the instants run again.
     ///
     /// # Errors
-    /// [`RestoreError::NoHistory`] when no capture is kept at or before `t`, or what the
-    /// restore met; the run is then unchanged.
+    /// [`RestoreError::NoHistory`] when no capture is kept at or before `t`;
+    /// [`RestoreError::RealPart`] when the real clock ran part of the run between that
+    /// capture and `t`; or what the restore met. The run is then unchanged.
     pub fn seek(&mut self, t: Nanos) -> Result<(), RestoreError> {
         if t >= self.sched.now() {
             self.run_until(t);
@@ -655,6 +686,14 @@ impl RunCore {
             .iter()
             .rposition(|c| c.at <= t)
             .ok_or(RestoreError::NoHistory(t))?;
+        let from_capture = self.history[k].at;
+        if let Some(&(from, to)) = self
+            .real_parts
+            .iter()
+            .find(|&&(from, to)| from < t && to > from_capture)
+        {
+            return Err(RestoreError::RealPart { from, to });
+        }
         let by_hand = self.by_hand.clone();
         let mut kept = self.history.split_off(k);
         let from = kept.swap_remove(0);
@@ -724,6 +763,7 @@ impl RunCore {
             by_hand: self.by_hand.clone(),
             next_scheduled: self.next_scheduled,
             end: self.end.clone(),
+            real_parts: self.real_parts.clone(),
             state: self.save().map(Box::new),
         }
     }
@@ -776,6 +816,7 @@ impl RunCore {
         self.by_hand.clone_from(&capture.by_hand);
         self.next_scheduled = capture.next_scheduled;
         self.end.clone_from(&capture.end);
+        self.real_parts.clone_from(&capture.real_parts);
         Ok(())
     }
 
@@ -828,6 +869,11 @@ impl RunCore {
             at: capture.at,
             reason,
         };
+        if let Some(&(from, _)) = capture.real_parts.first() {
+            return Err(failed(format!(
+                "the run went under the real clock at {from}, which a replay cannot give"
+            )));
+        }
         let brain = remake().map_err(failed)?;
         let mut fresh = RunCore::new(
             &self.cfg,

@@ -16,6 +16,7 @@
 //!   bug; use the virtual clock to compare runs.
 
 use crate::clock::{Clock, MonotonicClock};
+mod handover;
 mod shared;
 
 use crate::executor::{

@@ -62,7 +62,9 @@ pub enum Control {
         /// Use `seed + 1`.
         next_seed: bool,
     },
-    /// Restart the run with the current settings under the other clock.
+    /// Go on under the other clock: the running graph changes clocks in place (its state
+    /// carries across, [`Telemetry::ClockSwitched`]); a run that has ended, or one offered to
+    /// ROS 2 (its bridge serves one clock), restarts under the other clock instead.
     SwitchClock,
     /// Virtual pacing.
     SetSpeed(Speed),
@@ -152,6 +154,16 @@ pub enum Telemetry {
         at: Nanos,
         /// The change in words ([`describe`]).
         text: String,
+    },
+    /// The running graph changed clocks in place at run time `at` ([`Control::SwitchClock`]
+    /// on a run that has not ended; `ratelab::runcore::RunCore::run_real`): the same run
+    /// goes on under `clock`, its nodes, topics, counters and plant as they were. Like
+    /// [`Telemetry::Changed`] it starts a new segment of the run.
+    ClockSwitched {
+        /// Run time the other clock took over.
+        at: Nanos,
+        /// The clock the run goes on under.
+        clock: crate::config::ClockKind,
     },
     /// The run ended (fall, duration, node failure); the state is frozen until reset or quit.
     Ended {

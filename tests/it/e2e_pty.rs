@@ -490,6 +490,39 @@ fn pause_stops_virtual_time_and_is_refused_under_the_real_clock() {
     lab.quit();
 }
 
+/// `c` in the real binary: the running graph goes on under the real clock from the run time
+/// it had reached (its clock never starts again from 0), then back under the virtual one,
+/// where pausing works again.
+#[test]
+fn c_switches_the_running_lab_s_clock_in_place() {
+    let _machine = crate::machine::alone();
+    let t = |s: &str| -> f64 {
+        s.split("│ t ")
+            .nth(1)
+            .and_then(|r| r.split(' ').next())
+            .and_then(|v| v.parse().ok())
+            .unwrap_or(-1.0)
+    };
+    let mut lab = Lab::start(&["--clock", "virtual"]);
+    lab.wait_until("t ≥ 1 s", Duration::from_secs(60), |s| t(s) >= 1.0);
+    type_slowly(&mut lab, "c");
+    let real = lab.wait_for("the same run goes on", Duration::from_secs(10));
+    assert!(real.contains("real clock │"), "{real}");
+    assert!(t(&real) >= 1.0, "the run time goes on: {real}");
+    let switched = t(&real);
+    let later = lab.wait_until("t 1 s later", Duration::from_secs(20), |s| {
+        t(s) >= switched + 1.0
+    });
+    assert!(later.contains("BALANCED"), "{later}");
+    type_slowly(&mut lab, "c");
+    let back = lab.wait_for("clock → virtual", Duration::from_secs(10));
+    assert!(back.contains("virtual clock"), "{back}");
+    assert!(t(&back) >= switched + 1.0, "{back}");
+    type_slowly(&mut lab, " ");
+    lab.wait_for("PAUSED", Duration::from_secs(5));
+    lab.quit();
+}
+
 /// `ratelab launch --processes` on a terminal opens the lab on the graph it runs across
 /// processes: nodes named with their process, measured rates and topic counters that cross
 /// the boundary, a key that would change the graph refused; quitting stops every process.

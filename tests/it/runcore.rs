@@ -553,3 +553,204 @@ fn a_phase_change_that_moves_the_next_instant_applies_the_commands_up_to_the_new
     assert_eq!(c.now(), Nanos(ms(2_027)));
     assert_eq!(c.applied().len(), 4, "the depth too, before 2.027 s");
 }
+
+/// The scripted balancer, but a brain that cannot be copied: its captures replay.
+struct Uncopied;
+
+impl ratelab::policy::Policy for Uncopied {
+    fn act(&mut self, obs: &ratelab::plant::Observation) -> ratelab::plant::Action {
+        Scripted.act(obs)
+    }
+    fn label(&self) -> String {
+        "uncopied".into()
+    }
+}
+
+/// Switch `core` to the real clock in place for `wall` of wall time, and back. Returns the
+/// real clock's end and, per node, the run time of its first deadline there.
+fn real_for(
+    core: &mut RunCore,
+    wall: std::time::Duration,
+) -> (ratelab::scheduler::RunEnd, Vec<Option<Nanos>>, Vec<u64>) {
+    let firsts = std::sync::Arc::new(std::sync::Mutex::new(vec![
+        None;
+        core.config().graph.nodes.len()
+    ]));
+    let seen = firsts.clone();
+    let opts = ratelab::scheduler::RealOptions {
+        on_tick: Some(std::sync::Arc::new(
+            move |t: &ratelab::scheduler::TickReport<'_>| {
+                let mut f = seen.lock().unwrap();
+                // Scheduled = actual start − lateness, exactly.
+                f[t.node].get_or_insert(t.now.saturating_sub(t.lateness));
+            },
+        )),
+        ..ratelab::run::real_options(core.config())
+    };
+    let stop = StopFlag::new();
+    let stopper = {
+        let stop = stop.clone();
+        std::thread::spawn(move || {
+            std::thread::sleep(wall);
+            stop.stop();
+        })
+    };
+    let r = core.run_real(None, &stop, &opts);
+    stopper.join().unwrap();
+    let ticks = r.timing.iter().map(|t| t.ticks).collect();
+    let firsts = firsts.lock().unwrap().clone();
+    (r.end, firsts, ticks)
+}
+
+/// The lab's `c` on a running core: virtual → real → virtual → real → virtual, one run.
+/// Each node's first real-clock deadline is its next tick as the virtual clock had it; the
+/// virtual clock takes the graph back at the time the real one stopped, each node's next
+/// tick on the grid it ran on; the counters, the run log and the plant go on through every
+/// switch, and the run reaches its end. Seeking back to before the first switch gives the
+/// all-virtual run byte for byte; a capture that replays is refused after a real part.
+#[test]
+fn a_clock_switch_in_place_carries_the_run_across_both_ways() {
+    let _machine = crate::machine::shared();
+    let cfg = RunConfig {
+        clock: ClockKind::Virtual,
+        duration: Nanos(5 * Nanos::SECOND.0),
+        ..RunConfig::default()
+    };
+    let ms = |n: u64| Nanos(n * Nanos::MILLISECOND.0);
+    let all_virtual = finish(seeking(&cfg, Nanos::SECOND));
+    let mut c = seeking(&cfg, Nanos::SECOND);
+    c.run_until(ms(1_250));
+    let t0 = c.now();
+    let n = cfg.graph.nodes.len();
+    let due: Vec<Nanos> = (0..n)
+        .map(|i| c.scheduler().next_due_of(i).unwrap())
+        .collect();
+    let ticks0 = c.scheduler().ticks().to_vec();
+    let before = c.metrics();
+
+    let (end, firsts, real_ticks) = real_for(&mut c, std::time::Duration::from_millis(400));
+    assert_eq!(end.reason, ratelab::scheduler::EndReason::Interrupted);
+    assert!(c.end().is_none(), "a switch does not end the run");
+    assert!(
+        end.at > t0,
+        "the real clock went on from {t0}: stopped at {}",
+        end.at
+    );
+    assert_eq!(c.now(), end.at);
+    for (i, (first, due)) in firsts.iter().zip(&due).enumerate() {
+        if let Some(first) = first {
+            assert_eq!(first, due, "node {i} starts on its virtual next tick");
+        }
+    }
+    assert!(
+        real_ticks.iter().all(|&t| t > 0),
+        "every node ticked: {real_ticks:?}"
+    );
+    let ticks1: Vec<u64> = ticks0.iter().zip(&real_ticks).map(|(a, b)| a + b).collect();
+    assert_eq!(c.scheduler().ticks(), &ticks1[..]);
+    let during = c.metrics();
+    assert!(during.steps > before.steps, "the run log went on");
+    for (name, t) in &during.topics {
+        assert!(
+            t.published > before.topics[name].published,
+            "{name} went on"
+        );
+    }
+    for (i, first) in due.iter().enumerate() {
+        let next = c.scheduler().next_due_of(i).unwrap();
+        let period = c.handles().rates[i].period();
+        assert!(next > end.at, "node {i}: {next} after {}", end.at);
+        assert_eq!((next.0 - first.0) % period.0, 0, "node {i} keeps its grid");
+    }
+
+    // Back under the virtual clock: its instants go on from there.
+    c.run_until(ms(2_500).max(end.at + ms(500)));
+    assert!(c.end().is_none());
+    assert!(c.metrics().steps > during.steps);
+    // And again both ways.
+    let (end2, _, _) = real_for(&mut c, std::time::Duration::from_millis(200));
+    assert_eq!(end2.reason, ratelab::scheduler::EndReason::Interrupted);
+    assert!(end2.at >= c.now());
+    c.run_to_end(&StopFlag::new());
+    assert_eq!(
+        c.end().map(|e| e.reason.clone()),
+        Some(ratelab::scheduler::EndReason::Duration)
+    );
+    let ticks: u64 = c.metrics().nodes.values().map(|m| m.ticks).sum();
+    assert!(ticks > ticks1.iter().sum::<u64>());
+
+    // Not into a part the real clock ran: it cannot be run again.
+    let err = c.seek(t0 + ms(1)).unwrap_err();
+    assert!(
+        matches!(err, ratelab::runcore::RestoreError::RealPart { from, .. } if from == t0),
+        "{err}"
+    );
+    // Back to before the first switch: the run as it was then, and on from there the
+    // all-virtual run.
+    c.seek(Nanos::SECOND).unwrap();
+    assert_eq!(finish(c), all_virtual);
+
+    // A capture that replays cannot give a run with a real-clock part.
+    let mut c = RunCore::new(
+        &cfg,
+        Box::new(Uncopied),
+        CoreOptions {
+            keep_trace: true,
+            remake_brain: Some(Box::new(|| Ok(Box::new(Uncopied)))),
+            history_every: Some(Nanos::SECOND),
+            ..CoreOptions::default()
+        },
+    )
+    .unwrap();
+    c.run_until(ms(1_100));
+    real_for(&mut c, std::time::Duration::from_millis(150));
+    let cap = c.capture();
+    assert!(cap.is_replay());
+    let at = c.now();
+    c.run_until(at + ms(300));
+    let err = c.restore(&cap).unwrap_err().to_string();
+    assert!(err.contains("real clock"), "{err}");
+    // Before the switch a replay still gives the run as it was.
+    c.seek(ms(500)).unwrap();
+    assert_eq!(c.now(), ms(500));
+}
+
+/// A switch in place in each byte-identity configuration (QoS, faults, executors with
+/// compute times whose ticks may be computing at the switch): the run goes on under the
+/// real clock and back, every node's count only grows, and the run reaches its end.
+#[test]
+fn every_configuration_goes_on_through_a_clock_switch_in_place() {
+    let _machine = crate::machine::shared();
+    for (label, cfg) in configurations() {
+        let mut c = core(&cfg, Vec::new());
+        // Before the 5 Hz run falls (0.84 s).
+        c.run_until(Nanos(330 * Nanos::MILLISECOND.0));
+        assert!(c.end().is_none(), "{label}");
+        let before = c.scheduler().ticks().to_vec();
+        let (end, _, real_ticks) = real_for(&mut c, std::time::Duration::from_millis(150));
+        assert!(
+            matches!(
+                end.reason,
+                ratelab::scheduler::EndReason::Interrupted
+                    | ratelab::scheduler::EndReason::NodeStopped
+            ),
+            "{label}: {end:?}"
+        );
+        let after: Vec<u64> = before.iter().zip(&real_ticks).map(|(a, b)| a + b).collect();
+        assert_eq!(c.scheduler().ticks(), &after[..], "{label}");
+        c.run_to_end(&StopFlag::new());
+        let end = c.end().cloned().unwrap();
+        assert!(
+            !matches!(end.reason, ratelab::scheduler::EndReason::NodeFailed { .. }),
+            "{label}: {end:?}"
+        );
+        assert!(
+            c.scheduler()
+                .ticks()
+                .iter()
+                .zip(&after)
+                .all(|(n, a)| n >= a),
+            "{label}"
+        );
+    }
+}

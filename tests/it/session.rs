@@ -1067,3 +1067,87 @@ fn a_saved_graph_or_node_runs_again_and_a_broken_one_is_said() {
     let log = engine.join().unwrap();
     assert_eq!(log.runs.len(), 3, "the first run and two reloads");
 }
+
+impl LiveEngine {
+    /// Wait (at most 20 s) for the first message `pick` takes.
+    fn wait_for<T>(&self, what: &str, mut pick: impl FnMut(&Telemetry) -> Option<T>) -> T {
+        let deadline = std::time::Instant::now() + std::time::Duration::from_secs(20);
+        loop {
+            let left = deadline.saturating_duration_since(std::time::Instant::now());
+            match self.tel.recv_timeout(left) {
+                Ok(t) => {
+                    if let Some(x) = pick(&t) {
+                        return x;
+                    }
+                }
+                Err(_) => panic!("no {what} within 20 s"),
+            }
+        }
+    }
+
+    fn quit_with_log(self) -> SessionLog {
+        self.ctl.send(Control::Quit).unwrap();
+        self.engine.join().unwrap()
+    }
+}
+
+/// `c` on a running lab switches its clock in place: one run goes on, virtual → real →
+/// virtual, its step count growing through both switches and its run time never starting
+/// again; the session log notes the switches in that one run, and `replay` refuses it
+/// (its real part cannot be run again).
+#[test]
+fn c_switches_the_running_graph_s_clock_in_place() {
+    let _machine = crate::machine::alone();
+    let live = LiveEngine::running(ClockKind::Virtual, Speed::Times(1.0), |_| {});
+    let step_at = |t: &Telemetry| match t {
+        Telemetry::Step(s) => Some(s.t),
+        _ => None,
+    };
+    // A second of the virtual clock at ×1.
+    while live.wait_for("a step", step_at) < ratelab::Nanos::SECOND {}
+    live.ctl.send(Control::SwitchClock).unwrap();
+    let (at, clock) = live.wait_for("the switch", |t| match t {
+        Telemetry::Started { .. } => panic!("a new run started: the switch was not in place"),
+        Telemetry::ClockSwitched { at, clock } => Some((*at, *clock)),
+        _ => None,
+    });
+    assert_eq!(clock, ClockKind::Real);
+    assert!(at >= ratelab::Nanos::SECOND, "{at}");
+    // The real clock's ticks go on from there.
+    let tick = live.wait_for("a real-clock tick", |t| match t {
+        Telemetry::NodeTick { now, .. } => Some(*now),
+        _ => None,
+    });
+    assert!(tick >= at, "a tick at {tick}, the switch at {at}");
+    let mut last = ratelab::Nanos::ZERO;
+    while last < at + ratelab::Nanos(500 * ratelab::Nanos::MILLISECOND.0) {
+        last = live.wait_for("a real-clock step", step_at);
+    }
+    live.ctl.send(Control::SwitchClock).unwrap();
+    let (back, clock) = live.wait_for("the switch back", |t| match t {
+        Telemetry::Started { .. } => panic!("a new run started"),
+        Telemetry::ClockSwitched { at, clock } => Some((*at, *clock)),
+        _ => None,
+    });
+    assert_eq!(clock, ClockKind::Virtual);
+    assert!(back > at);
+    let next = live.wait_for("a virtual step", step_at);
+    assert!(next >= back, "{next} after {back}");
+    let log = live.quit_with_log();
+    assert_eq!(log.runs.len(), 1, "one run");
+    let run = &log.runs[0];
+    assert_eq!(run.clock, ClockKind::Virtual);
+    assert_eq!(run.clock_switches_ns, vec![at.0, back.0]);
+    let m = run.metrics.as_ref().unwrap();
+    assert_eq!(m.clock, "virtual", "it ended under the virtual clock");
+    // 50 steps a second, less what a loaded machine's real clock skipped.
+    assert!(
+        m.steps as f64 >= 40.0 * last.as_secs_f64(),
+        "{} steps by t={last}",
+        m.steps
+    );
+    assert!(matches!(
+        replay_run(&log, 0),
+        Err(ratelab::session::ReplayError::SwitchedClock { run: 1, .. })
+    ));
+}

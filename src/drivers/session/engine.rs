@@ -9,6 +9,7 @@ use crate::metrics::{Metrics, NodeTiming};
 use crate::policy::BrainSlot;
 use crate::recording::{RecordOptions, Recording};
 use crate::run::{build_graph, summarize, Command, TimedCommand};
+use crate::runcore::{CoreOptions, RunCore, HISTORY_EVERY};
 use crate::runlog::StepRecord;
 use crate::scheduler::RunEnd;
 use crate::telemetry::{describe, Control, Speed, Telemetry};
@@ -104,6 +105,25 @@ pub struct Engine {
     pub(super) muted: Arc<AtomicBool>,
 }
 
+/// How a run of the lab ended, for the next: what the user asked, and the graph (rates,
+/// depths), brain and clock it ended with.
+struct RunOutcome {
+    next: Next,
+    graph: crate::graph::GraphSpec,
+    policy: String,
+    clock: ClockKind,
+}
+
+/// A part of a run under one clock, as it ended: what the user asked next, how the run
+/// ended (interrupted then, unless it had ended), the real clock's tick timing and the
+/// executors' figures.
+pub(super) type Segment = (
+    Next,
+    RunEnd,
+    Option<Vec<NodeTiming>>,
+    Option<crate::executor::ExecFigures>,
+);
+
 /// What ended a run from the engine's side.
 pub(super) enum Next {
     Reset {
@@ -157,17 +177,28 @@ impl Engine {
         let mut policy = self.settings.policy.clone();
         loop {
             let next = match self.one_run(&cfg, &policy) {
-                Ok((Next::Reload(new), _, last_policy)) => {
+                Ok(RunOutcome {
+                    next: Next::Reload(new),
+                    policy: last_policy,
+                    ..
+                }) => {
                     // The new code's graph, as the files now give it; the brain as it was.
                     cfg = *new;
                     policy = last_policy;
                     self.next_run.clear();
                     continue;
                 }
-                Ok((next, graph, last_policy)) => {
-                    // The next run keeps the settings as the user left them, and takes the
-                    // changes made while this one was frozen (checked when they were made).
+                Ok(RunOutcome {
+                    next,
+                    graph,
+                    policy: last_policy,
+                    clock,
+                }) => {
+                    // The next run keeps the settings as the user left them (the clock it
+                    // went on under included), and takes the changes made while this one
+                    // was frozen (checked when they were made).
                     cfg.graph = graph;
+                    cfg.clock = clock;
                     policy = last_policy;
                     for cmd in self.next_run.drain(..) {
                         let _ = cmd.apply_to_settings(&mut cfg.graph, &mut policy);
@@ -210,13 +241,9 @@ impl Engine {
         Some(base.with_file_name(format!("{stem}-{}.rrd", self.run_index)))
     }
 
-    /// One run; returns what the user asked next, and the graph (rates, depths) and brain
-    /// it ended with.
-    fn one_run(
-        &mut self,
-        cfg: &RunConfig,
-        policy: &str,
-    ) -> Result<(Next, crate::graph::GraphSpec, String), String> {
+    /// One run, under one clock or, switched in place, both; returns what the user asked
+    /// next, and the graph (rates, depths), brain and clock it ended with.
+    fn one_run(&mut self, cfg: &RunConfig, policy: &str) -> Result<RunOutcome, String> {
         self.run_index += 1;
         self.run_policy = policy.to_string();
         let brain = load_policy(policy).map_err(|e| e.to_string())?;
@@ -284,19 +311,51 @@ impl Engine {
         };
         self.log.runs.push(LoggedRun::starting(cfg, policy));
         self.save_log();
-        let handles = graph.handles.clone();
-        let (next, end, ticks, timing, exec) = match cfg.clock {
-            ClockKind::Virtual => {
-                let (next, end, ticks, exec) =
-                    self.virtual_run(cfg, graph, &recording, bridge.as_ref());
-                (next, end, ticks, None, exec)
+        let policy_spec = policy.to_string();
+        let telemetry = self.telemetry_observer();
+        let mut core = RunCore::with_graph(
+            cfg,
+            graph,
+            CoreOptions {
+                on_span: recording.as_ref().and_then(Recording::span_hook),
+                // Time travel (Control::Seek): a capture every second of run time; a graph
+                // whose captures replay makes its brain and telemetry again.
+                history_every: Some(HISTORY_EVERY),
+                remake_brain: Some(Box::new(move || {
+                    load_policy(&policy_spec).map_err(|e| e.to_string())
+                })),
+                remake_observers: Some(Box::new(move || vec![telemetry.observer()])),
+                ..CoreOptions::default()
+            },
+        );
+        let mut clock = cfg.clock;
+        let mut resumed = false;
+        let (next, end, timing, exec) = loop {
+            // The settings as they stand: under the clock the run goes on under.
+            let under = RunConfig {
+                clock,
+                ..cfg.clone()
+            };
+            let part = match clock {
+                ClockKind::Virtual => {
+                    self.virtual_run(&mut core, &under, &recording, bridge.as_ref(), resumed)
+                }
+                ClockKind::Real => self.real_run(&mut core, &under, &recording),
+            };
+            // `c` on a run still going switches its clock in place; on a run that ended, or
+            // one offered to ROS 2 (its bridge serves the clock it started with), the next
+            // run starts under the other clock.
+            if matches!(part.0, Next::SwitchClock) && core.end().is_none() && bridge.is_none() {
+                clock = clock.other();
+                resumed = true;
+                self.clock_switched(clock, core.now());
+                continue;
             }
-            ClockKind::Real => {
-                let (next, end, timing, exec) = self.real_run(cfg, graph, &recording);
-                let ticks = timing.iter().flatten().map(|t| t.ticks).collect();
-                (next, end, ticks, timing, exec)
-            }
+            break part;
         };
+        let clock_now = clock;
+        let handles = core.handles().clone();
+        let ticks = core.scheduler().ticks().to_vec();
         if let Some(r) = bridge.map(crate::ros2::Bridge::finish) {
             if let Some(e) = &r.error {
                 let _ = self
@@ -307,7 +366,12 @@ impl Engine {
                 let _ = self.tx.send(Telemetry::Error(w));
             }
         }
-        let metrics = live_metrics(cfg, &handles, &end, &ticks, timing, exec);
+        // The summary says the clock the run ended under (its log, where it switched).
+        let ended_under = RunConfig {
+            clock: clock_now,
+            ..cfg.clone()
+        };
+        let metrics = live_metrics(&ended_under, &handles, &end, &ticks, timing, exec);
         if let Some(r) = &recording {
             let _ = r.finish(&metrics, &end);
         }
@@ -316,7 +380,22 @@ impl Engine {
         current.metrics = Some(metrics);
         let last_policy = self.current_policy_spec(policy);
         self.save_log();
-        Ok((next, handles.current_spec(), last_policy))
+        Ok(RunOutcome {
+            next,
+            graph: handles.current_spec(),
+            policy: last_policy,
+            clock: clock_now,
+        })
+    }
+
+    /// The running graph went on under `clock` at run time `at`: logged with the run (its
+    /// replay stops being exact there) and told to the front end.
+    fn clock_switched(&mut self, clock: ClockKind, at: Nanos) {
+        if let Some(run) = self.log.runs.last_mut() {
+            run.clock_switches_ns.push(at.0);
+        }
+        self.save_log();
+        let _ = self.tx.send(Telemetry::ClockSwitched { at, clock });
     }
 
     pub(super) fn current_policy_spec(&self, initial: &str) -> String {
@@ -453,11 +532,13 @@ impl Engine {
         TelemetryObserver(self.tx.clone(), self.muted.clone())
     }
 
-    /// The run went back and branched ([`Control::Seek`]): its log holds the commands of the
-    /// branch, `applied` (what `replay` then gives).
-    pub(super) fn branch_log(&mut self, applied: &[TimedCommand]) {
+    /// The run went back to `at` and branched ([`Control::Seek`]): its log holds the
+    /// commands of the branch, `applied` (what `replay` then gives), and the clock switches
+    /// up to `at`.
+    pub(super) fn branch_log(&mut self, applied: &[TimedCommand], at: Nanos) {
         if let Some(run) = self.log.runs.last_mut() {
             run.commands = applied.to_vec();
+            run.clock_switches_ns.retain(|&s| s <= at.0);
         }
         self.save_log();
     }

@@ -27,8 +27,14 @@ pub const MAX_LOGGED: usize = 10_000;
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct LoggedRun {
-    /// `virtual` or `real` (only virtual runs replay exactly).
+    /// `virtual` or `real`: the clock the run started under (only virtual runs replay
+    /// exactly).
     pub clock: ClockKind,
+    /// Run times at which the run went on under the other clock (the lab's `c` on a run
+    /// still going), ns, in order: the first switches from `clock`, the next back, and so
+    /// on. A run with a real-clock part does not replay exactly.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub clock_switches_ns: Vec<u64>,
     /// Seed.
     pub seed: u64,
     /// Version 2: the graph, as a graph file (TOML), with the rates and depths the run
@@ -68,6 +74,7 @@ impl LoggedRun {
     pub fn starting(cfg: &RunConfig, policy: &str) -> LoggedRun {
         LoggedRun {
             clock: cfg.clock,
+            clock_switches_ns: Vec::new(),
             seed: cfg.seed,
             graph: Some(cfg.graph.to_toml()),
             sensor_hz: None,
@@ -214,6 +221,15 @@ pub enum ReplayError {
     /// Real-clock runs are not reproducible.
     #[error("run {0} used the real clock, which cannot be replayed exactly")]
     RealClock(usize),
+    /// A run switched to the real clock part way (the lab's `c`): its real-clock part is
+    /// not reproducible.
+    #[error("run {run} went under the real clock at t={at_s:.3} s (the lab's c), which cannot be replayed exactly")]
+    SwitchedClock {
+        /// The run, from 1.
+        run: usize,
+        /// When it first switched, run time, s.
+        at_s: f64,
+    },
     /// A run could not start.
     #[error(transparent)]
     Run(#[from] crate::run::RunError),
@@ -255,9 +271,14 @@ impl SessionLog {
                 log.version
             )));
         }
-        if log.runs.len() > MAX_LOGGED || log.runs.iter().any(|r| r.commands.len() > MAX_LOGGED) {
+        if log.runs.len() > MAX_LOGGED
+            || log
+                .runs
+                .iter()
+                .any(|r| r.commands.len() > MAX_LOGGED || r.clock_switches_ns.len() > MAX_LOGGED)
+        {
             return Err(ReplayError::Invalid(format!(
-                "{shown}: more than {MAX_LOGGED} runs or commands"
+                "{shown}: more than {MAX_LOGGED} runs, commands or clock switches"
             )));
         }
         for (i, r) in log.runs.iter().enumerate() {
@@ -309,6 +330,12 @@ pub fn replay_run(log: &SessionLog, index: usize) -> Result<Metrics, ReplayError
     let r = &log.runs[index];
     if r.clock != ClockKind::Virtual {
         return Err(ReplayError::RealClock(index + 1));
+    }
+    if let Some(&at) = r.clock_switches_ns.first() {
+        return Err(ReplayError::SwitchedClock {
+            run: index + 1,
+            at_s: Nanos(at).as_secs_f64(),
+        });
     }
     let cfg = r.config(&format!("run {}", index + 1))?;
     let brain = load_policy(&r.policy)?;

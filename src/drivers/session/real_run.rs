@@ -2,14 +2,11 @@
 //! ([`crate::runcore::RunCore::run_real`]), controls applied at once (from each node's next
 //! tick).
 
-use super::engine::{live_metrics, Engine, Next};
+use super::engine::{live_metrics, Engine, Next, Segment};
 use crate::config::RunConfig;
-use crate::executor::ExecFigures;
-use crate::graph::Graph;
-use crate::metrics::NodeTiming;
 use crate::recording::Recording;
 use crate::run::Command;
-use crate::runcore::{CoreOptions, RunCore};
+use crate::runcore::RunCore;
 use crate::scheduler::{EndReason, RealOptions, RunEnd, StopFlag};
 use crate::telemetry::{Control, Telemetry};
 use crate::time::Nanos;
@@ -19,16 +16,20 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 impl Engine {
-    /// Run `graph` under the real clock until the user moves on. Returns what they asked
-    /// next, how the run ended and each node's timing.
+    /// Run `core` under the real clock, from where it is (t = 0, or the instant the
+    /// virtual clock reached: a clock switch in place), until the user moves on. Returns
+    /// what they asked next, how the run ended, each node's timing and the executors'
+    /// figures. The core comes back at the time the real clock stopped.
     pub(super) fn real_run(
         &mut self,
+        core: &mut RunCore,
         cfg: &RunConfig,
-        graph: Graph,
         recording: &Option<Recording>,
-    ) -> (Next, RunEnd, Option<Vec<NodeTiming>>, Option<ExecFigures>) {
-        let handles = graph.handles.clone();
-        let mut core = RunCore::with_graph(cfg, graph, CoreOptions::default());
+    ) -> Segment {
+        let handles = core.handles().clone();
+        let from = core.now();
+        // Ticks so far (under the virtual clock, or earlier parts under this one).
+        let ticked = core.scheduler().ticks().to_vec();
         if let Some(Err(e)) = cfg.rt_priority.map(crate::realtime::probe_fifo) {
             // Told now, not only when the run ends: node threads inherit this thread's
             // privileges, so they will be refused the same way.
@@ -37,7 +38,10 @@ impl Engine {
             )));
         }
         let stop = StopFlag::new();
-        let pause = Arc::new(AtomicBool::new(self.settings.start_paused));
+        // Only a run that starts here starts paused (a lab started with --paused).
+        let pause = Arc::new(AtomicBool::new(
+            self.settings.start_paused && from == Nanos::ZERO,
+        ));
         let tx = self.tx.clone();
         let rec = recording.clone();
         let opts = RealOptions {
@@ -55,100 +59,107 @@ impl Engine {
             pause: Some(pause.clone()),
             ..crate::run::real_options(cfg)
         };
+        // The run time now: the real clock reads `from` at its start.
         let start = Instant::now();
-        let runner = {
-            let stop = stop.clone();
-            std::thread::Builder::new()
+        let now = || from.saturating_add(Nanos::from(start.elapsed()));
+        std::thread::scope(|scope| {
+            let runner = std::thread::Builder::new()
                 .name("real-clock".into())
-                .spawn(move || core.run_real(None, &stop, &opts))
-                .expect("spawning the real-clock runner")
-        };
-        let now = || Nanos::from(start.elapsed());
-        let mut last_status = Instant::now();
-        let mut result: Option<RunEnd> = None;
-        let mut timing = None;
-        let mut exec = None;
-        let mut runner = Some(runner);
-        loop {
-            if result.is_none() && runner.as_ref().is_some_and(|r| r.is_finished()) {
-                let run = runner
-                    .take()
-                    .expect("checked")
-                    .join()
-                    .expect("runner thread");
-                let end = run.end.clone();
-                let ticks: Vec<u64> = run.timing.iter().map(|t| t.ticks).collect();
-                timing = Some(run.timing);
-                exec = run.exec;
-                let metrics =
-                    live_metrics(cfg, &handles, &end, &ticks, timing.clone(), exec.clone());
-                let _ = self.tx.send(Telemetry::Ended {
-                    metrics: Box::new(metrics),
-                    reason: end.reason.clone(),
-                });
-                result = Some(end);
-            }
-            let next = match self.rx.recv_timeout(Duration::from_millis(30)) {
-                Ok(Control::Apply(cmd)) => {
-                    if result.is_none() {
-                        self.apply_real(cmd, now(), cfg, &handles, recording);
-                    } else {
-                        self.defer(cmd, &handles);
-                    }
-                    None
+                .spawn_scoped(scope, || core.run_real(None, &stop, &opts))
+                .expect("spawning the real-clock runner");
+            let mut runner = Some(runner);
+            let mut last_status = Instant::now();
+            let mut result: Option<RunEnd> = None;
+            let mut timing = None;
+            let mut exec = None;
+            loop {
+                if result.is_none() && runner.as_ref().is_some_and(|r| r.is_finished()) {
+                    let run = runner
+                        .take()
+                        .expect("checked")
+                        .join()
+                        .expect("runner thread");
+                    let end = run.end.clone();
+                    let ticks: Vec<u64> = run
+                        .timing
+                        .iter()
+                        .zip(&ticked)
+                        .map(|(t, before)| before + t.ticks)
+                        .collect();
+                    timing = Some(run.timing);
+                    exec = run.exec;
+                    let metrics =
+                        live_metrics(cfg, &handles, &end, &ticks, timing.clone(), exec.clone());
+                    let _ = self.tx.send(Telemetry::Ended {
+                        metrics: Box::new(metrics),
+                        reason: end.reason.clone(),
+                    });
+                    result = Some(end);
                 }
-                Ok(Control::TogglePause) => {
-                    // Wall time cannot stop: a paused real-clock run would only skip ticks
-                    // while its clock (and every latency) ran on. Refused, and said so.
-                    let _ = self.tx.send(Telemetry::Error(
-                        "pause is for the virtual clock: real time does not stop (c switches clock)"
-                            .into(),
-                    ));
-                    None
-                }
-                Ok(Control::Step | Control::Seek(_) | Control::SetSpeed(_)) => {
-                    let _ = self.tx.send(Telemetry::Error(
-                        "single-step, scrubbing and speed apply to the virtual clock only".into(),
-                    ));
-                    None
-                }
-                Ok(Control::Reset { next_seed }) => Some(Next::Reset { next_seed }),
-                Ok(Control::SwitchClock) => Some(Next::SwitchClock),
-                // The real clock's run starts again with the new code (if it loads).
-                Ok(Control::Reload { file }) => self.reload(cfg, &file, None),
-                Ok(Control::Quit) | Err(RecvTimeoutError::Disconnected) => Some(Next::Quit),
-                Err(RecvTimeoutError::Timeout) => None,
-            };
-            if let Some(next) = next {
-                stop.stop();
-                let end = match (result, runner.take()) {
-                    (Some(end), _) => end,
-                    (None, Some(r)) => match r.join() {
-                        Ok(run) => {
-                            timing = Some(run.timing);
-                            exec = run.exec;
-                            run.end
+                let next = match self.rx.recv_timeout(Duration::from_millis(30)) {
+                    Ok(Control::Apply(cmd)) => {
+                        if result.is_none() {
+                            self.apply_real(cmd, now(), cfg, &handles, recording);
+                        } else {
+                            self.defer(cmd, &handles);
                         }
-                        Err(_) => RunEnd {
+                        None
+                    }
+                    Ok(Control::TogglePause) => {
+                        // Wall time cannot stop: a paused real-clock run would only skip
+                        // ticks while its clock (and every latency) ran on. Refused, and
+                        // said so.
+                        let _ = self.tx.send(Telemetry::Error(
+                            "pause is for the virtual clock: real time does not stop (c switches clock)"
+                                .into(),
+                        ));
+                        None
+                    }
+                    Ok(Control::Step | Control::Seek(_) | Control::SetSpeed(_)) => {
+                        let _ = self.tx.send(Telemetry::Error(
+                            "single-step, scrubbing and speed apply to the virtual clock only (c switches clock)".into(),
+                        ));
+                        None
+                    }
+                    Ok(Control::Reset { next_seed }) => Some(Next::Reset { next_seed }),
+                    Ok(Control::SwitchClock) => Some(Next::SwitchClock),
+                    // The real clock's run starts again with the new code (if it loads).
+                    Ok(Control::Reload { file }) => self.reload(cfg, &file, None),
+                    Ok(Control::Quit) | Err(RecvTimeoutError::Disconnected) => Some(Next::Quit),
+                    Err(RecvTimeoutError::Timeout) => None,
+                };
+                if let Some(next) = next {
+                    stop.stop();
+                    let end = match (result, runner.take()) {
+                        (Some(end), _) => end,
+                        (None, Some(r)) => match r.join() {
+                            Ok(run) => {
+                                timing = Some(run.timing);
+                                exec = run.exec;
+                                run.end
+                            }
+                            Err(_) => RunEnd {
+                                at: now(),
+                                reason: EndReason::Interrupted,
+                            },
+                        },
+                        (None, None) => RunEnd {
                             at: now(),
                             reason: EndReason::Interrupted,
                         },
-                    },
-                    (None, None) => RunEnd {
-                        at: now(),
-                        reason: EndReason::Interrupted,
-                    },
-                };
-                return (next, end, timing, exec);
+                    };
+                    return (next, end, timing, exec);
+                }
+                if last_status.elapsed() >= Duration::from_millis(33) {
+                    // Once the run has ended (a fall, a watchdog, a failed node), its clock
+                    // stops where it ended: the lab shows that instant, not wall time
+                    // running on.
+                    let shown = result.as_ref().map_or_else(now, |end| end.at);
+                    self.status(shown, pause.load(Ordering::SeqCst), &handles, None);
+                    last_status = Instant::now();
+                }
             }
-            if last_status.elapsed() >= Duration::from_millis(33) {
-                // Once the run has ended (a fall, a watchdog, a failed node), its clock stops
-                // where it ended: the lab shows that instant, not wall time running on.
-                let shown = result.as_ref().map_or_else(now, |end| end.at);
-                self.status(shown, pause.load(Ordering::SeqCst), &handles, None);
-                last_status = Instant::now();
-            }
-        }
+        })
     }
 
     /// Apply `cmd` to the running real-clock graph at `now`: a rate at once (and when a

@@ -2,13 +2,12 @@
 //! a time, paced against the wall clock at the chosen speed. Pacing decides only *when* an
 //! instant runs, never its order.
 
-use super::engine::{live_metrics, Engine, Next};
+use super::engine::{live_metrics, Engine, Next, Segment};
 use crate::config::RunConfig;
-use crate::executor::ExecFigures;
-use crate::graph::{Graph, GraphHandles};
+use crate::graph::GraphHandles;
 use crate::recording::Recording;
 use crate::run::Command;
-use crate::runcore::{CoreOptions, RunCore, Step, HISTORY_EVERY};
+use crate::runcore::{RestoreError, RunCore, Step};
 use crate::scheduler::{EndReason, RunEnd, VirtualScheduler};
 use crate::telemetry::{Control, Speed, Telemetry};
 use crate::time::Nanos;
@@ -17,39 +16,25 @@ use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
 impl Engine {
-    /// Run `graph` under the virtual clock until the user moves on. Returns what they
-    /// asked next, how the run ended and each node's tick count.
+    /// Run `core` under the virtual clock, from where it is, until the user moves on
+    /// (`resumed`: it went on from the real clock, and starts unpaused). Returns what they
+    /// asked next, how the run ended (interrupted now, unless it had ended) and the
+    /// executors' figures.
     pub(super) fn virtual_run(
         &mut self,
+        core: &mut RunCore,
         cfg: &RunConfig,
-        graph: Graph,
         recording: &Option<Recording>,
         ros2: Option<&crate::ros2::Bridge>,
-    ) -> (Next, RunEnd, Vec<u64>, Option<ExecFigures>) {
-        let policy = self.run_policy.clone();
-        let telemetry = self.telemetry_observer();
-        let mut core = RunCore::with_graph(
-            cfg,
-            graph,
-            CoreOptions {
-                on_span: recording.as_ref().and_then(Recording::span_hook),
-                // Time travel (Control::Seek): a capture every second of run time; a graph
-                // whose captures replay makes its brain and telemetry again.
-                history_every: Some(HISTORY_EVERY),
-                remake_brain: Some(Box::new(move || {
-                    crate::checkpoint::load_policy(&policy).map_err(|e| e.to_string())
-                })),
-                remake_observers: Some(Box::new(move || vec![telemetry.observer()])),
-                ..CoreOptions::default()
-            },
-        );
+        resumed: bool,
+    ) -> Segment {
         // A seek back that replays builds a new graph: these are taken again after one.
         let mut handles = core.handles().clone();
-        let mut paused = self.settings.start_paused;
+        let mut paused = self.settings.start_paused && !resumed;
         let mut step_pending = false;
-        let mut ended: Option<RunEnd> = None;
+        let mut ended: Option<RunEnd> = core.end().cloned();
         // Pacing anchor: virtual time `anchor_v` corresponds to wall instant `anchor_w`.
-        let mut anchor_v = Nanos::ZERO;
+        let mut anchor_v = core.now();
         let mut anchor_w = Instant::now();
         let mut last_status = Instant::now() - Duration::from_secs(1);
         loop {
@@ -72,7 +57,7 @@ impl Engine {
                 match msg {
                     Control::Apply(cmd) => {
                         if ended.is_none() {
-                            self.apply_live(&mut core, cmd, cfg, recording, &handles);
+                            self.apply_live(core, cmd, cfg, recording, &handles);
                         } else {
                             self.defer(cmd, &handles);
                         }
@@ -89,7 +74,7 @@ impl Engine {
                     }
                     Control::Seek(to) => {
                         if paused {
-                            self.seek(&mut core, to, cfg, recording, ros2.is_some(), &mut ended);
+                            self.seek(core, to, cfg, recording, ros2.is_some(), &mut ended);
                             handles = core.handles().clone();
                         }
                     }
@@ -105,7 +90,7 @@ impl Engine {
                         return self.leave(Next::SwitchClock, core.scheduler(), ended)
                     }
                     Control::Reload { file } => {
-                        let old = self.figures_now(cfg, &core, ended.as_ref());
+                        let old = self.figures_now(cfg, core, ended.as_ref());
                         if let Some(next) = self.reload(cfg, &file, Some(&old)) {
                             return self.leave(next, core.scheduler(), ended);
                         }
@@ -117,7 +102,7 @@ impl Engine {
                 }
             }
             if last_status.elapsed() >= Duration::from_millis(33) {
-                self.tell_status(&mut core, paused);
+                self.tell_status(core, paused);
                 last_status = Instant::now();
             }
             if ended.is_some() || (paused && !step_pending) {
@@ -134,11 +119,11 @@ impl Engine {
                     }
                 }
             };
-            if let Some(end) = run_instants(&mut core, target, &mut step_pending, ros2) {
-                ended = Some(lab_end(end, cfg, &core));
+            if let Some(end) = run_instants(core, target, &mut step_pending, ros2) {
+                ended = Some(lab_end(end, cfg, core));
             }
             if let Some(end) = &ended {
-                self.tell_ended(cfg, &mut core, end, paused);
+                self.tell_ended(cfg, core, end, paused);
                 continue;
             }
             // Sleep until the next instant is due on the wall (or a few ms at most).
@@ -225,7 +210,8 @@ impl Engine {
     /// not while recording or offered to ROS 2, which keep the run as it ran — the run core
     /// restores and runs again to `to` with the step telemetry muted (the front end has those
     /// steps), the run's log keeps the branch's commands, and the front end is told
-    /// [`Telemetry::Rewound`]; what runs next is a new branch.
+    /// [`Telemetry::Rewound`]; what runs next is a new branch. Back into a part of the run
+    /// the real clock ran (which cannot run again), it goes to where that part began.
     fn seek(
         &mut self,
         core: &mut RunCore,
@@ -251,7 +237,13 @@ impl Engine {
             return; // nothing runs after the end
         }
         self.muted.store(back, Ordering::Relaxed);
-        let result = core.seek(to.min(cfg.duration));
+        let mut result = core.seek(to.min(cfg.duration));
+        let mut skipped = None;
+        if let Err(e @ RestoreError::RealPart { from, .. }) = &result {
+            // Scrubbing back skips a part the real clock ran: to where it began.
+            skipped = Some(format!("{e}: back to {from}, before it"));
+            result = core.seek(*from);
+        }
         self.muted.store(false, Ordering::Relaxed);
         if let Err(e) = result {
             let _ = self.tx.send(Telemetry::Error(e.to_string()));
@@ -261,7 +253,10 @@ impl Engine {
         *ended = core.end().cloned().map(|end| lab_end(end, cfg, core));
         if back {
             let _ = self.tx.send(Telemetry::Rewound { at: core.now() });
-            self.branch_log(core.applied());
+            self.branch_log(core.applied(), core.now());
+            if let Some(note) = skipped {
+                let _ = self.tx.send(Telemetry::Applied(note));
+            }
         }
         match ended.clone() {
             Some(end) if !was_ended => self.tell_ended(cfg, core, &end, true),
@@ -279,24 +274,14 @@ impl Engine {
         self.status(sched.now(), paused, core.handles(), sched.skipped_ticks());
     }
 
-    /// Leave the run for `next`: how it ended (interrupted now, unless it had ended), each
-    /// node's tick count and the executors' figures.
-    fn leave(
-        &self,
-        next: Next,
-        sched: &VirtualScheduler,
-        ended: Option<RunEnd>,
-    ) -> (Next, RunEnd, Vec<u64>, Option<ExecFigures>) {
+    /// Leave the run for `next`: how it ended (interrupted now, unless it had ended) and
+    /// the executors' figures.
+    fn leave(&self, next: Next, sched: &VirtualScheduler, ended: Option<RunEnd>) -> Segment {
         let end = ended.unwrap_or(RunEnd {
             at: sched.now(),
             reason: EndReason::Interrupted,
         });
-        (
-            next,
-            end,
-            sched.ticks().to_vec(),
-            sched.figures(sched.now()),
-        )
+        (next, end, None, sched.figures(sched.now()))
     }
 }
 

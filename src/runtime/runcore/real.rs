@@ -8,7 +8,8 @@ use super::RunCore;
 use crate::executor::ExecFigures;
 use crate::metrics::NodeTiming;
 use crate::node::Node;
-use crate::scheduler::{run_real, RealOptions, RunEnd, StopFlag};
+use crate::scheduler::{run_real, EndReason, RealOptions, RunEnd, StopFlag};
+use crate::time::Nanos;
 
 /// What a real-clock run of a run core measured ([`RunCore::run_real`]).
 pub struct RealEnd {
@@ -21,17 +22,41 @@ pub struct RealEnd {
 }
 
 impl RunCore {
-    /// Run the graph under the real clock, from its start, on `opts`'s executors, until the
-    /// run's duration, a node stopping the graph (the fall), a node failing, or `stop`;
-    /// `part`: only these nodes (graph indices, ascending: a process's share of a graph
-    /// across processes, whose other nodes run in their own processes), else all.
+    /// Run the graph under the real clock from the instant the core has reached, on
+    /// `opts`'s executors, until the run's duration, a node stopping the graph (the fall), a
+    /// node failing, or `stop`; `part`: only these nodes (graph indices, ascending: a
+    /// process's share of a graph across processes, whose other nodes run in their own
+    /// processes), else all.
     ///
-    /// The nodes come back into the core when the run ends, which is then over
-    /// ([`RunCore::end`]; a node that panicked does not come back, and the core then holds
-    /// fewer nodes: restoring a capture into it fails); the graph's handles ([`RunCore::handles`]) hold what it
-    /// measured. A core whose run has ended runs nothing: its end comes back, with no
-    /// timing. Commands given in advance are the virtual clock's: a real-clock run takes
-    /// its commands as they come, applied to the handles.
+    /// - **From t = 0** (nothing run yet) the run is `opts`'s: its phase offsets, its zero
+    ///   instant ([`RealOptions::start`], which processes of one graph share), its plan.
+    /// - **From an instant t the virtual clock reached** (a clock switch in place) the real
+    ///   clock reads t now and goes on from there: each node's first deadline is its next
+    ///   tick as the virtual scheduler had it, on the executors' plan the scheduler ran
+    ///   ([`VirtualScheduler::hand_over`]); `opts`'s start, phase offsets and plan are not
+    ///   read. A machine up for less than t (its monotonic clock cannot read t now) runs
+    ///   nothing: the run is interrupted at t, not ended.
+    ///
+    /// The nodes come back into the core when the run ends (a node that panicked does not
+    /// come back, and the core then holds fewer nodes: restoring a capture into it fails);
+    /// the core is then at the time the real clock stopped, t′, its scheduler's tick counts
+    /// ([`RunCore::scheduler`]) including the real clock's. A run that `stop` interrupted
+    /// can go on, each node's next tick the first after t′ on
+    /// the grid it ran on ([`VirtualScheduler::take_over`]), so that [`RunCore::step`] goes
+    /// on under the virtual clock (or `run_real` again under the real one) with every
+    /// node's, topic's, counter's and the plant's state as the real clock left it. Any other
+    /// end (duration, fall, failure) ends the core's run ([`RunCore::end`]); a core whose
+    /// run has ended runs nothing: its end comes back, with no timing.
+    ///
+    /// The graph's handles ([`RunCore::handles`]) hold what the real clock measured.
+    /// Commands given in advance are the virtual clock's: a real-clock run takes its
+    /// commands as they come, applied to the handles. Captures are not kept while the real
+    /// clock runs, and a capture that replays cannot give a run that ran under it
+    /// ([`RestoreError::Replay`]).
+    ///
+    /// [`VirtualScheduler::hand_over`]: crate::scheduler::VirtualScheduler::hand_over
+    /// [`VirtualScheduler::take_over`]: crate::scheduler::VirtualScheduler::take_over
+    /// [`RestoreError::Replay`]: super::RestoreError::Replay
     pub fn run_real(
         &mut self,
         part: Option<&[usize]>,
@@ -39,23 +64,46 @@ impl RunCore {
         opts: &RealOptions,
     ) -> RealEnd {
         if let Some(end) = &self.end {
-            // A run is run once (a node that panicked is gone from it).
+            // A run is run to its end once (a node that panicked is gone from it).
             return RealEnd {
                 end: end.clone(),
                 timing: Vec::new(),
                 exec: None,
             };
         }
+        let from = self.sched.now();
+        let resumed = from > Nanos::ZERO || self.sched.ticks().iter().any(|&t| t > 0);
+        let deadlines = self.sched.hand_over(&mut self.nodes);
         let all = std::mem::take(&mut self.nodes);
         let mut slots: Vec<Option<Box<dyn Node>>> = all.into_iter().map(Some).collect();
         let index: Vec<usize> = match part {
             Some(p) => p.iter().copied().filter(|&i| i < slots.len()).collect(),
             None => (0..slots.len()).collect(),
         };
+        let mut opts = opts.clone();
+        if resumed {
+            let Some(start) = std::time::Instant::now().checked_sub(from.to_duration()) else {
+                self.nodes = slots.into_iter().flatten().collect();
+                return RealEnd {
+                    end: RunEnd {
+                        at: from,
+                        reason: EndReason::Interrupted,
+                    },
+                    timing: Vec::new(),
+                    exec: None,
+                };
+            };
+            opts.start = Some(start);
+            opts.phase_offsets = index.iter().map(|&i| deadlines[i]).collect();
+            opts.plan = Some(self.sched.plan().restricted(&index));
+            opts.track = self.sched.tracks();
+        }
         let running: Vec<Box<dyn Node>> = index.iter().filter_map(|&i| slots[i].take()).collect();
-        let run = run_real(running, self.cfg.duration, stop, opts);
+        let count = running.len();
+        let run = run_real(running, self.cfg.duration, stop, &opts);
         // Back in their places, by name (unique in a graph): a node whose thread died (it
         // panicked) does not come back, and the run has ended with it.
+        let came_back = run.nodes.len();
         for node in run.nodes {
             let name = node.name();
             if let Some(&i) = index
@@ -66,7 +114,22 @@ impl RunCore {
             }
         }
         self.nodes = slots.into_iter().flatten().collect();
-        self.end = Some(run.end.clone());
+        // The scheduler takes the graph back at the time the real clock stopped: its tick
+        // counts include the real clock's, and a run that was only interrupted (a clock
+        // switch, or a stop the driver may follow by ending the run) goes on from there.
+        let mut ticked = vec![0u64; self.sched.ticks().len()];
+        for (&i, t) in index.iter().zip(&run.timing) {
+            ticked[i] = t.ticks;
+        }
+        let periods: Vec<Nanos> = self.handles.rates.iter().map(|r| r.period()).collect();
+        self.sched
+            .take_over(run.end.at, &deadlines, &ticked, &periods);
+        if run.end.reason == EndReason::Interrupted && came_back == count {
+            self.real_parts.push((from, run.end.at));
+            self.next_history = self.next_history.max(run.end.at);
+        } else {
+            self.end = Some(run.end.clone());
+        }
         RealEnd {
             end: run.end,
             timing: run.timing,

@@ -1,0 +1,94 @@
+//! The run's journal: every telemetry message the lab was told, kept (within
+//! [`MAX_JOURNAL`] messages and [`MAX_JOURNAL_BYTES`]) so that a seek back
+//! ([`Telemetry::Rewound`]) shows the run as it was then, by folding the journal again up to
+//! that run time.
+
+use super::{App, MAX_JOURNAL, MAX_JOURNAL_BYTES};
+use ratelab::session::Telemetry;
+use ratelab::Nanos;
+
+impl App {
+    /// Fold one telemetry message, and keep it in the run's journal (a seek back shows the
+    /// run as it was by folding the journal again up to then).
+    pub fn on_telemetry(&mut self, t: Telemetry) {
+        match t {
+            Telemetry::Rewound { at } => self.rewind(at),
+            Telemetry::Started { .. } => {
+                let reloaded = if self.rewinding {
+                    None
+                } else {
+                    // A reload keeps the run before as a ghost; any other new run drops it.
+                    let line = self.reloading.take();
+                    self.ghost = match line {
+                        Some(_) => std::mem::take(&mut self.whole),
+                        None => Vec::new(),
+                    };
+                    line
+                };
+                self.journal.clear();
+                self.journal_bytes = 0;
+                self.journal_full = false;
+                self.fold(t.clone());
+                self.journal.push((self.now, t));
+                if let Some(line) = reloaded {
+                    self.say(line);
+                }
+            }
+            // A status while paused repeats its instant: the newest of an instant stands.
+            Telemetry::Status { now, .. }
+                if self.journal.last().is_some_and(|(at, last)| {
+                    *at == now && matches!(last, Telemetry::Status { .. })
+                }) =>
+            {
+                self.fold(t.clone());
+                if let Some(last) = self.journal.last_mut() {
+                    *last = (self.now, t);
+                }
+            }
+            t => {
+                self.fold(t.clone());
+                let bytes = t.approx_bytes();
+                if self.journal.len() < MAX_JOURNAL
+                    && self.journal_bytes.saturating_add(bytes) <= MAX_JOURNAL_BYTES
+                {
+                    self.journal_bytes += bytes;
+                    self.journal.push((self.now, t));
+                } else {
+                    self.journal_full = true;
+                }
+            }
+        }
+    }
+
+    /// The run was put back at `at` ([`Telemetry::Rewound`]): show it as it was then, by
+    /// folding again what the run told up to then (what the screen showed at that run time).
+    fn rewind(&mut self, at: Nanos) {
+        if self.journal_full {
+            self.say(format!(
+                "back at t={:.2} s: the run is too long to show as it was (its journal is full: {MAX_JOURNAL} messages or {} MiB); the figures go on from here",
+                at.as_secs_f64(),
+                MAX_JOURNAL_BYTES >> 20
+            ));
+            return;
+        }
+        let journal = std::mem::take(&mut self.journal);
+        let upto = journal.partition_point(|(t, _)| *t <= at);
+        self.rewinding = true;
+        for (_, t) in journal.into_iter().take(upto) {
+            // A switch at the instant itself came after it (the engine scrubs back to where
+            // a real-clock part began, not into it).
+            if !matches!(t, Telemetry::ClockSwitched { at: s, .. } if s >= at) {
+                self.on_telemetry(t);
+            }
+        }
+        self.rewinding = false;
+        self.now = at;
+        // Only the virtual clock scrubs: a run started under the real clock and switched
+        // since is back under the virtual one.
+        self.clock = ratelab::ClockKind::Virtual.to_string();
+        self.say(format!(
+            "back at t={:.3} s: a change or space branches the run here",
+            at.as_secs_f64()
+        ));
+    }
+}
