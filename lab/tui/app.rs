@@ -25,8 +25,9 @@ use std::collections::VecDeque;
 mod journal;
 mod views;
 
-/// Seconds of pole-angle history kept (and drawn).
-pub const HISTORY_S: f64 = 10.0;
+/// Seconds of pole-angle and force history kept at full rate (the widest window short of
+/// the whole run, [`super::chart_window::FULL_RATE_S`]).
+pub const HISTORY_S: f64 = super::chart_window::FULL_RATE_S;
 /// Window for the real clock's measured node rates and tick lateness. (Topics and latency
 /// count over [`super::live::WINDOW`] and the segment since the last change.)
 pub const TICK_WINDOW: Nanos = Nanos::SECOND;
@@ -141,6 +142,10 @@ pub struct App {
     /// The window (last 5 s) and the segment since the last change.
     live: Live,
     history: VecDeque<(f64, f64)>,
+    /// The whole run's angle and applied force, thinned (the charts' widest window).
+    thinned: super::chart_window::Thinned,
+    /// The charts' time window (`(` / `)`).
+    chart_window: super::chart_window::ChartWindow,
     /// (t s, applied force N) per actuator step over the last [`HISTORY_S`].
     applied: VecDeque<(f64, f64)>,
     /// (t s, published force N) per policy publication seen over the last [`HISTORY_S`].
@@ -253,6 +258,8 @@ impl App {
             nav: super::navigate::Navigation::default(),
             live: Live::default(),
             history: VecDeque::new(),
+            thinned: Default::default(),
+            chart_window: Default::default(),
             applied: VecDeque::new(),
             published: VecDeque::new(),
             ticks: Vec::new(),
@@ -559,6 +566,7 @@ impl App {
         self.now = Nanos::ZERO;
         self.live = Live::default();
         self.history.clear();
+        self.thinned.clear();
         self.applied.clear();
         self.published.clear();
         self.whole.clear();
@@ -580,6 +588,7 @@ impl App {
                 .push((now_s, s.pole_angle, s.action * GEAR_N, s.latency));
         }
         self.history.push_back((now_s, s.pole_angle));
+        self.thinned.push(now_s, s.pole_angle, s.action * GEAR_N);
         self.applied.push_back((now_s, s.action * GEAR_N));
         if let Some((at, newtons)) = s.published {
             self.published.push_back((at.as_secs_f64(), newtons));
@@ -820,6 +829,14 @@ impl App {
             Msg::NextSeed => self.send(Control::Reset { next_seed: true }),
             Msg::SwitchClock => self.send(Control::SwitchClock),
             Msg::Slower | Msg::Faster => self.change_speed(m == Msg::Slower),
+            Msg::ChartsNarrower | Msg::ChartsWider => {
+                self.chart_window = if m == Msg::ChartsNarrower {
+                    self.chart_window.narrower()
+                } else {
+                    self.chart_window.wider()
+                };
+                self.say(format!("charts: {}", self.chart_window.label()));
+            }
             Msg::SwapBrain => self.swap_brain(),
             Msg::ToggleHelp => self.help = !self.help,
             Msg::ToggleTimeline => {

@@ -66,12 +66,16 @@ pub enum Msg {
     Reset,
     /// New run, next seed.
     NextSeed,
-    /// Restart under the other clock.
+    /// Go on under the other clock (a run that ended: restart under it).
     SwitchClock,
     /// Slower virtual pacing.
     Slower,
     /// Faster virtual pacing.
     Faster,
+    /// The charts' window one step narrower (down to 0.2 s).
+    ChartsNarrower,
+    /// … wider (up to the whole run).
+    ChartsWider,
     /// Swap the brain (scripted ↔ the --policy file).
     SwapBrain,
     /// Run the graph on the next executors: one thread per node → one thread for all →
@@ -284,9 +288,14 @@ pub const BINDINGS: &[Binding] = &[
         footer: Some(("c", "clock")),
     },
     Binding {
-        keys: &[(Char('<'), Msg::Slower), (Char('>'), Msg::Faster)],
-        label: "< / >",
-        help: "slower / faster (virtual clock; ×0.25 … ×8, max)",
+        keys: &[
+            (Char('<'), Msg::Slower),
+            (Char('>'), Msg::Faster),
+            (Char('('), Msg::ChartsNarrower),
+            (Char(')'), Msg::ChartsWider),
+        ],
+        label: "< > / ( )",
+        help: "slower / faster (virtual) / charts' window 0.2 s … whole run",
         footer: None,
     },
     Binding {
@@ -558,6 +567,14 @@ mod tests {
         assert_eq!(
             map_key(key(KeyCode::Char('>')), Typing::No, false),
             Some(Msg::Faster)
+        );
+        assert_eq!(
+            map_key(key(KeyCode::Char('(')), Typing::No, false),
+            Some(Msg::ChartsNarrower)
+        );
+        assert_eq!(
+            map_key(key(KeyCode::Char(')')), Typing::No, false),
+            Some(Msg::ChartsWider)
         );
         assert_eq!(
             map_key(key(KeyCode::Char('p')), Typing::No, false),

@@ -30,8 +30,9 @@ pub const WINDOW: Nanos = Nanos(5 * Nanos::SECOND.0);
 /// Records (and counts) the window keeps at most, whatever arrives (the 50 Hz actuator
 /// sends 251 in [`WINDOW`], the engine's status about 150).
 pub const MAX_WINDOW_RECORDS: usize = 1024;
-/// How far back segment marks are kept (the charts show the last 10 s).
-pub const MARK_HISTORY: Nanos = Nanos(10 * Nanos::SECOND.0);
+/// How far back segment marks are kept (the charts' widest window short of the whole run,
+/// [`super::chart_window::FULL_RATE_S`]).
+pub const MARK_HISTORY: Nanos = Nanos(60 * Nanos::SECOND.0);
 /// Segment marks kept at most.
 pub const MAX_MARKS: usize = 256;
 
@@ -650,8 +651,8 @@ mod tests {
         }
         assert_eq!(live.window_span(), (WINDOW, true));
         assert_eq!(live.window_topic(T).stale_reads, 0);
-        // Marks older than the charts' 10 s go.
-        for t in (12_020..=16_100).step_by(20) {
+        // Marks older than the charts' widest window short of the whole run (60 s) go.
+        for t in (12_020..=66_100).step_by(20) {
             live.push(rec(t, 50, 60, stale, 180));
         }
         assert_eq!(live.marks().count(), 0);

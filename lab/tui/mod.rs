@@ -3,6 +3,7 @@
 //! ratatui `Backend` so tests drive it with `TestBackend`.
 
 pub mod app;
+pub mod chart_window;
 pub mod keymap;
 pub mod live;
 pub mod navigate;
@@ -1074,6 +1075,64 @@ mod tests {
         assert_eq!(rows(&a), rows(&b));
         assert_ne!(rows(&a), rows(&before), "8 Hz falls between 5 and 8 s");
         assert!(a.contains("back at t=5.000 s"), "{a}");
+    }
+
+    /// `(` and `)` zoom the charts' window: 0.2 s of a 20 s run shows its last tenths (the
+    /// axis in tenths), 30 s shows it from 0, the whole run of a long run spans it from 0
+    /// with its points thinned; the title names the window.
+    #[test]
+    fn the_charts_zoom_from_0_2_s_to_the_whole_run() {
+        let cfg = virtual_cfg(50.0, 20);
+        let report = run(&cfg, Box::new(Scripted), RunOptions::new()).unwrap();
+        let (tx, _rx) = crossbeam_channel::unbounded();
+        let mut app = App::new(tx, "scripted".into(), None, Speed::Times(1.0));
+        app.on_telemetry(Telemetry::Started {
+            cfg,
+            policy: "scripted".into(),
+            recording: None,
+        });
+        for s in &report.trace {
+            app.on_telemetry(Telemetry::Step(Box::new(s.clone())));
+        }
+        let v = app.view();
+        assert_eq!(
+            (v.chart_s, v.chart_label.as_str()),
+            ((10.0, 20.0), "last 10 s")
+        );
+        let n = v.angle_history.len();
+        assert!((500..=501).contains(&n), "10 s at 50 Hz: {n}");
+        for _ in 0..5 {
+            app.on_msg(Msg::ChartsNarrower);
+        }
+        let v = app.view();
+        assert_eq!(v.chart_label, "last 0.2 s");
+        let n = v.angle_history.len();
+        assert!((10..=11).contains(&n), "0.2 s at 50 Hz: {n}");
+        let text = render(&app, 120, 40);
+        assert!(text.contains("last 0.2 s"), "{text}");
+        assert!(text.contains("19.8s") && text.contains("20.0s"), "{text}");
+        app.on_msg(Msg::ChartsNarrower); // stays at 0.2 s
+        assert_eq!(app.view().chart_label, "last 0.2 s");
+        for _ in 0..6 {
+            app.on_msg(Msg::ChartsWider);
+        }
+        let v = app.view();
+        assert_eq!(
+            (v.chart_s, v.chart_label.as_str()),
+            ((0.0, 30.0), "last 30 s")
+        );
+        assert_eq!(v.angle_history.len(), report.trace.len());
+        for _ in 0..3 {
+            app.on_msg(Msg::ChartsWider); // 60 s, the whole run, and it stays there
+        }
+        let v = app.view();
+        assert_eq!(
+            (v.chart_s, v.chart_label.as_str()),
+            ((0.0, 20.0), "whole run")
+        );
+        assert!(v.published_force.is_empty(), "no dots over the whole run");
+        let text = render(&app, 80, 24);
+        assert!(text.contains("whole run"), "{text}");
     }
 
     /// `c` on a running lab: the header names the clock the run goes on under, the footer

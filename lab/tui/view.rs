@@ -310,12 +310,18 @@ pub struct View {
     pub cart_pos: f64,
     /// Badge.
     pub verdict: Verdict,
-    /// (t s, θ rad) over the last ~10 s.
+    /// The charts' window, run time s, `(from, to)` (`(` / `)` zoom it:
+    /// [`super::chart_window`]).
+    pub chart_s: (f64, f64),
+    /// The window in words for the charts' titles (`last 10 s`, `whole run`).
+    pub chart_label: String,
+    /// (t s, θ rad) over the charts' window.
     pub angle_history: Vec<(f64, f64)>,
-    /// The force the actuator applied, N, as a staircase over the last ~10 s (each step's
-    /// force held until the next: the zero-order hold).
+    /// The force the actuator applied, N, as a staircase over the charts' window (each
+    /// step's force held until the next: the zero-order hold).
     pub applied_force: Vec<(f64, f64)>,
-    /// (t s, N) of each force the policy published over the last ~10 s.
+    /// (t s, N) of each force the policy published over the charts' window (none over the
+    /// whole run).
     pub published_force: Vec<(f64, f64)>,
     /// The run before a reload (a saved file): its (t s, θ rad) over the same window, drawn
     /// dim beside this run's; empty without one.

@@ -76,6 +76,7 @@ use crate::time::Nanos;
 
 mod follower;
 mod real;
+mod restart;
 pub use follower::Follower;
 pub use real::RealEnd;
 
@@ -315,9 +316,10 @@ pub struct RunCore {
     /// The most captures kept ([`max_history`]).
     max_history: usize,
     end: Option<RunEnd>,
-    /// The parts of the run the real clock ran and gave back, `(from, to)` run times, oldest
-    /// first ([`RunCore::run_real`]): neither a replay from t = 0 nor a seek can run them
-    /// again.
+    /// The parts of the run that cannot run again, `(from, to)` run times, oldest first:
+    /// those the real clock ran and gave back ([`RunCore::run_real`]), and the instants nodes
+    /// were restarted in place (`from == to`, [`RunCore::restart_nodes`]). Neither a replay
+    /// from t = 0 nor a seek can run them again.
     real_parts: Vec<(Nanos, Nanos)>,
     keep_trace: bool,
     on_span: Option<crate::executor::SpanHook>,
@@ -642,7 +644,9 @@ impl RunCore {
         }
         let capture = self.capture();
         if capture.is_replay() && !self.real_parts.is_empty() {
-            // It could not be restored (a replay cannot give the real clock's part).
+            // It could not be restored (a replay cannot give the real clock's part): none
+            // is kept, and none tried again before the next is due.
+            self.next_history = now.saturating_add(self.history_every.unwrap_or(every));
             return;
         }
         self.history.push(capture);
@@ -869,9 +873,14 @@ impl RunCore {
             at: capture.at,
             reason,
         };
-        if let Some(&(from, _)) = capture.real_parts.first() {
+        if let Some(&(from, to)) = capture.real_parts.first() {
+            let what = if from == to {
+                "restarted a node in place"
+            } else {
+                "went under the real clock"
+            };
             return Err(failed(format!(
-                "the run went under the real clock at {from}, which a replay cannot give"
+                "the run {what} at {from}, which a replay cannot give"
             )));
         }
         let brain = remake().map_err(failed)?;

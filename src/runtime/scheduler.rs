@@ -253,6 +253,9 @@ pub struct VirtualScheduler {
     /// An instant begun with [`VirtualScheduler::begin_instant`] whose events are still
     /// being drawn ([`VirtualScheduler::next_in_instant`]).
     instant_open: bool,
+    /// Run time the graph spent under another clock ([`VirtualScheduler::take_over`]): the
+    /// executors' figures span the virtual clock's time only.
+    away: Nanos,
     track: bool,
     /// Any executor shares threads, or ticks take time: the executors' rules apply. Else
     /// (the default) an instant is the chapter's loop, which they reduce to.
@@ -313,6 +316,7 @@ impl VirtualScheduler {
             plan_request: None,
             regrid: vec![None; nodes.len()],
             instant_open: false,
+            away: Nanos::ZERO,
             general: track || !plan_per_node,
             track,
         }
@@ -355,7 +359,8 @@ impl VirtualScheduler {
     }
 
     /// What the executors measured, when tracking (else `None`): per node its response
-    /// times, skipped ticks and busy time, per executor its utilization over `elapsed`.
+    /// times, skipped ticks and busy time, per executor its utilization over `elapsed`
+    /// (run time, less any the graph spent under another clock).
     pub fn figures(&self, elapsed: Nanos) -> Option<ExecFigures> {
         self.track.then(|| {
             // Ticks still computing have held their thread since they started.
@@ -366,7 +371,11 @@ impl VirtualScheduler {
                     s.busy = s.busy.saturating_add(held);
                 }
             }
-            figures(self.dispatch.plan(), &stats, elapsed)
+            figures(
+                self.dispatch.plan(),
+                &stats,
+                elapsed.saturating_sub(self.away),
+            )
         })
     }
 
@@ -790,6 +799,10 @@ pub struct RealOptions {
     /// The instant the run's time is zero (`None`: when [`run_real`] starts). Processes of
     /// one graph share it, so their stamps share one clock (`ratelab::distributed`).
     pub start: Option<std::time::Instant>,
+    /// The run time the run starts at: 0, or the instant another clock reached when the run
+    /// goes on from there (`ratelab::runcore::RunCore::run_real`). The executors' figures
+    /// span from here to the end.
+    pub from: Nanos,
     /// The executors ([`crate::executor`]); `None`: one thread per node.
     pub plan: Option<ExecutionPlan>,
     /// Measure response times, skipped ticks and busy time ([`RealRun::exec`]).
@@ -805,6 +818,7 @@ impl Default for RealOptions {
             pause: None,
             rt_priority: None,
             start: None,
+            from: Nanos::ZERO,
             plan: None,
             track: false,
         }
@@ -1171,7 +1185,8 @@ pub fn run_real(
             reason: EndReason::Duration,
         }
     };
-    let exec = (track && stats.len() == names.len()).then(|| figures(&plan, &stats, end.at));
+    let span = end.at.saturating_sub(opts.from);
+    let exec = (track && stats.len() == names.len()).then(|| figures(&plan, &stats, span));
     RealRun {
         end,
         timing,

@@ -566,23 +566,39 @@ impl ratelab::policy::Policy for Uncopied {
     }
 }
 
-/// Switch `core` to the real clock in place for `wall` of wall time, and back. Returns the
-/// real clock's end and, per node, the run time of its first deadline there.
-fn real_for(
+/// What a real-clock part of a run did ([`real_for`]).
+struct RealPart {
+    end: ratelab::scheduler::RunEnd,
+    /// Per node, the run times of its first and last deadlines there.
+    deadlines: Vec<Option<(Nanos, Nanos)>>,
+    /// Per node, its ticks there.
+    ticks: Vec<u64>,
+}
+
+/// Switch `core` to the real clock in place for `wall` of wall time, and back.
+fn real_for(core: &mut RunCore, wall: std::time::Duration) -> RealPart {
+    real_for_with(core, wall, || {})
+}
+
+/// [`real_for`], calling `midway` halfway through (on another thread).
+fn real_for_with(
     core: &mut RunCore,
     wall: std::time::Duration,
-) -> (ratelab::scheduler::RunEnd, Vec<Option<Nanos>>, Vec<u64>) {
-    let firsts = std::sync::Arc::new(std::sync::Mutex::new(vec![
+    midway: impl FnOnce() + Send + 'static,
+) -> RealPart {
+    let deadlines = std::sync::Arc::new(std::sync::Mutex::new(vec![
         None;
         core.config().graph.nodes.len()
     ]));
-    let seen = firsts.clone();
+    let seen = deadlines.clone();
     let opts = ratelab::scheduler::RealOptions {
         on_tick: Some(std::sync::Arc::new(
             move |t: &ratelab::scheduler::TickReport<'_>| {
-                let mut f = seen.lock().unwrap();
+                let mut d = seen.lock().unwrap();
                 // Scheduled = actual start − lateness, exactly.
-                f[t.node].get_or_insert(t.now.saturating_sub(t.lateness));
+                let at = t.now.saturating_sub(t.lateness);
+                let (first, _) = d[t.node].unwrap_or((at, at));
+                d[t.node] = Some((first, at));
             },
         )),
         ..ratelab::run::real_options(core.config())
@@ -591,15 +607,20 @@ fn real_for(
     let stopper = {
         let stop = stop.clone();
         std::thread::spawn(move || {
-            std::thread::sleep(wall);
+            std::thread::sleep(wall / 2);
+            midway();
+            std::thread::sleep(wall / 2);
             stop.stop();
         })
     };
     let r = core.run_real(None, &stop, &opts);
     stopper.join().unwrap();
-    let ticks = r.timing.iter().map(|t| t.ticks).collect();
-    let firsts = firsts.lock().unwrap().clone();
-    (r.end, firsts, ticks)
+    let deadlines = deadlines.lock().unwrap().clone();
+    RealPart {
+        end: r.end,
+        deadlines,
+        ticks: r.timing.iter().map(|t| t.ticks).collect(),
+    }
 }
 
 /// The lab's `c` on a running core: virtual → real → virtual → real → virtual, one run.
@@ -628,7 +649,12 @@ fn a_clock_switch_in_place_carries_the_run_across_both_ways() {
     let ticks0 = c.scheduler().ticks().to_vec();
     let before = c.metrics();
 
-    let (end, firsts, real_ticks) = real_for(&mut c, std::time::Duration::from_millis(400));
+    let RealPart {
+        end,
+        deadlines,
+        ticks: real_ticks,
+    } = real_for(&mut c, std::time::Duration::from_millis(400));
+    let firsts: Vec<Option<Nanos>> = deadlines.iter().map(|d| d.map(|(f, _)| f)).collect();
     assert_eq!(end.reason, ratelab::scheduler::EndReason::Interrupted);
     assert!(c.end().is_none(), "a switch does not end the run");
     assert!(
@@ -668,7 +694,7 @@ fn a_clock_switch_in_place_carries_the_run_across_both_ways() {
     assert!(c.end().is_none());
     assert!(c.metrics().steps > during.steps);
     // And again both ways.
-    let (end2, _, _) = real_for(&mut c, std::time::Duration::from_millis(200));
+    let end2 = real_for(&mut c, std::time::Duration::from_millis(200)).end;
     assert_eq!(end2.reason, ratelab::scheduler::EndReason::Interrupted);
     assert!(end2.at >= c.now());
     c.run_to_end(&StopFlag::new());
@@ -727,14 +753,15 @@ fn every_configuration_goes_on_through_a_clock_switch_in_place() {
         c.run_until(Nanos(330 * Nanos::MILLISECOND.0));
         assert!(c.end().is_none(), "{label}");
         let before = c.scheduler().ticks().to_vec();
-        let (end, _, real_ticks) = real_for(&mut c, std::time::Duration::from_millis(150));
-        assert!(
-            matches!(
-                end.reason,
-                ratelab::scheduler::EndReason::Interrupted
-                    | ratelab::scheduler::EndReason::NodeStopped
-            ),
-            "{label}: {end:?}"
+        let RealPart {
+            end,
+            ticks: real_ticks,
+            ..
+        } = real_for(&mut c, std::time::Duration::from_millis(150));
+        assert_eq!(
+            end.reason,
+            ratelab::scheduler::EndReason::Interrupted,
+            "{label}"
         );
         let after: Vec<u64> = before.iter().zip(&real_ticks).map(|(a, b)| a + b).collect();
         assert_eq!(c.scheduler().ticks(), &after[..], "{label}");
@@ -753,4 +780,42 @@ fn every_configuration_goes_on_through_a_clock_switch_in_place() {
             "{label}"
         );
     }
+}
+
+/// A rate changed while the real clock runs moves the node's grid there (its next deadline
+/// the last plus the new period): the virtual clock takes the node back on that grid, not
+/// on the one it handed over.
+#[test]
+fn the_virtual_clock_takes_a_node_back_on_the_grid_the_real_clock_left_it() {
+    let _machine = crate::machine::shared();
+    let cfg = RunConfig {
+        clock: ClockKind::Virtual,
+        duration: Nanos(5 * Nanos::SECOND.0),
+        ..RunConfig::default()
+    };
+    let mut c = core(&cfg, Vec::new());
+    c.run_until(Nanos(1_010 * Nanos::MILLISECOND.0));
+    let policy = 1;
+    let handed = c.scheduler().next_due_of(policy).unwrap();
+    let rate = c.handles().rates[policy].clone();
+    let part = real_for_with(&mut c, std::time::Duration::from_millis(400), move || {
+        let _ = rate.set_hz(30.0);
+    });
+    assert_eq!(part.end.reason, ratelab::scheduler::EndReason::Interrupted);
+    let (_, last) = part.deadlines[policy].expect("the policy ticked");
+    let period = c.handles().rates[policy].period();
+    let next = c.scheduler().next_due_of(policy).unwrap();
+    assert!(next > part.end.at && next <= part.end.at + period, "{next}");
+    assert_eq!(
+        (next.0 - last.0) % period.0,
+        0,
+        "on the grid through its last deadline"
+    );
+    assert_ne!(
+        (next.0 - handed.0) % period.0,
+        0,
+        "not on the grid it was handed at (20 ms steps, then 33.3 ms)"
+    );
+    c.run_to_end(&StopFlag::new());
+    assert!(c.end().is_some());
 }

@@ -1151,3 +1151,127 @@ fn c_switches_the_running_graph_s_clock_in_place() {
         Err(ratelab::session::ReplayError::SwitchedClock { run: 1, .. })
     ));
 }
+
+/// Under the real clock a saved Python node restarts in place: the run goes on (no new run,
+/// its time never back to 0), the node now runs the saved code (a policy that pushes
+/// nothing: the pole falls), and the line says so; a save that breaks the node is said
+/// and the run goes on with the code before; a save that changes a rate starts the run
+/// again.
+#[test]
+fn under_the_real_clock_a_saved_node_restarts_in_place() {
+    use ratelab::session::GraphSource;
+    ratelab::init(); // Python nodes
+    let _machine = crate::machine::alone();
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::create_dir(dir.path().join("nodes")).unwrap();
+    let graph_file = dir.path().join("g.toml");
+    let node_file = dir.path().join("nodes/scripted_balancer.py");
+    let graph_text = std::fs::read_to_string(crate::repo("graphs/cartpole-python.toml")).unwrap();
+    std::fs::write(&graph_file, &graph_text).unwrap();
+    std::fs::copy(crate::repo("graphs/nodes/scripted_balancer.py"), &node_file).unwrap();
+    let mut s = settings(
+        ClockKind::Real,
+        1,
+        false,
+        Speed::Times(1.0),
+        &dir.path().join("session.json"),
+    );
+    s.cfg.graph = ratelab::graph::GraphSpec::load(&graph_file).unwrap();
+    let source = graph_file.clone();
+    s.graph_source = Some(GraphSource(std::sync::Arc::new(move || {
+        ratelab::graph::GraphSpec::load(&source).map_err(|e| e.to_string())
+    })));
+    let (ctl, ctl_rx) = unbounded();
+    let (tel_tx, tel) = unbounded::<Telemetry>();
+    let engine = Engine::new(s, ctl_rx, tel_tx).spawn();
+    let live = LiveEngine {
+        ctl,
+        tel,
+        engine,
+        _dir: dir,
+    };
+    let step_at = |t: &Telemetry| match t {
+        Telemetry::Step(s) => Some(s.t),
+        _ => None,
+    };
+    while live.wait_for("a step", step_at) < ratelab::Nanos::SECOND {}
+    let original = std::fs::read_to_string(&node_file).unwrap();
+    // A save that does not load: said, and the run goes on.
+    std::fs::write(&node_file, "def broken(:\n").unwrap();
+    live.ctl
+        .send(Control::Reload {
+            file: node_file.clone(),
+        })
+        .unwrap();
+    let said = live.wait_for("not reloaded", |t| match t {
+        Telemetry::Started { .. } => panic!("a new run started"),
+        Telemetry::Error(e) if e.starts_with("not reloaded") => Some(e.clone()),
+        _ => None,
+    });
+    assert!(said.contains("scripted_balancer.py"), "{said}");
+    let before = live.wait_for("a step", step_at);
+    // The node saved as one that pushes nothing.
+    std::fs::write(
+        &node_file,
+        original.replace(
+            "self.pub.publish(Force(newtons=float(command) * MOTOR_N))",
+            "self.pub.publish(Force(newtons=0.0))",
+        ),
+    )
+    .unwrap();
+    live.ctl
+        .send(Control::Reload {
+            file: node_file.clone(),
+        })
+        .unwrap();
+    let line = live.wait_for("the restart", |t| match t {
+        Telemetry::Started { .. } => panic!("a new run started: not in place"),
+        Telemetry::Applied(l) if l.starts_with("reloaded ") => Some(l.clone()),
+        _ => None,
+    });
+    assert!(line.contains("'policy' restarted in place at t="), "{line}");
+    let after = live.wait_for("a step", step_at);
+    assert!(after >= before, "{after} after {before}: the run went on");
+    // Pushing nothing, the pole falls.
+    let reason = live.wait_for("the fall", |t| match t {
+        Telemetry::Started { .. } => panic!("a new run started"),
+        Telemetry::Ended { reason, .. } => Some(reason.clone()),
+        _ => None,
+    });
+    assert_eq!(reason, ratelab::scheduler::EndReason::NodeStopped);
+    // A save after the run ended starts the next run with the code.
+    std::fs::write(&node_file, &original).unwrap();
+    live.ctl
+        .send(Control::Reload {
+            file: node_file.clone(),
+        })
+        .unwrap();
+    live.wait_for("a new run", |t| {
+        matches!(t, Telemetry::Started { .. }).then_some(())
+    });
+    // A save that changes a rate (more than code) starts the run again too.
+    while live.wait_for("a step", step_at) < ratelab::Nanos(500 * ratelab::Nanos::MILLISECOND.0) {}
+    std::fs::write(
+        &graph_file,
+        graph_text.replacen(
+            "rate_hz = 50\nsubscribes = \"/obs\"",
+            "rate_hz = 25\nsubscribes = \"/obs\"",
+            1,
+        ),
+    )
+    .unwrap();
+    live.ctl
+        .send(Control::Reload {
+            file: graph_file.clone(),
+        })
+        .unwrap();
+    let Some(cfg) = live.wait_for("the run again", |t| match t {
+        Telemetry::Started { cfg, .. } => Some(Some(cfg.clone())),
+        _ => None,
+    }) else {
+        unreachable!()
+    };
+    assert_eq!(cfg.graph.nodes[1].rate_hz, 25.0);
+    let log = live.quit_with_log();
+    assert_eq!(log.runs.len(), 3);
+}

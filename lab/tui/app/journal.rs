@@ -63,6 +63,9 @@ impl App {
     /// The run was put back at `at` ([`Telemetry::Rewound`]): show it as it was then, by
     /// folding again what the run told up to then (what the screen showed at that run time).
     fn rewind(&mut self, at: Nanos) {
+        // Only the virtual clock scrubs: a run started under the real clock and switched
+        // since is back under the virtual one.
+        self.clock = ratelab::ClockKind::Virtual.to_string();
         if self.journal_full {
             self.say(format!(
                 "back at t={:.2} s: the run is too long to show as it was (its journal is full: {MAX_JOURNAL} messages or {} MiB); the figures go on from here",
@@ -83,8 +86,6 @@ impl App {
         }
         self.rewinding = false;
         self.now = at;
-        // Only the virtual clock scrubs: a run started under the real clock and switched
-        // since is back under the virtual one.
         self.clock = ratelab::ClockKind::Virtual.to_string();
         self.say(format!(
             "back at t={:.3} s: a change or space branches the run here",

@@ -270,16 +270,34 @@ impl App {
     }
 
     /// The latency panel: the segment's histogram and percentiles, and the window's.
-    /// The ghost's points over the charts' window (the last 10 s of run time, or the first
-    /// 10 s), as `pick` takes them.
+    /// The ghost's points over the charts' window ([`super::super::chart_window`]), as
+    /// `pick` takes them.
     fn ghost_in_window(&self, pick: impl Fn(&super::GhostStep) -> (f64, f64)) -> Vec<(f64, f64)> {
-        let t1 = self.now.as_secs_f64().max(10.0);
-        let t0 = t1 - 10.0;
+        let (t0, t1) = self.chart_window.bounds(self.now.as_secs_f64());
         self.ghost
             .iter()
             .filter(|(t, ..)| *t >= t0 && *t <= t1)
             .map(pick)
             .collect()
+    }
+
+    /// A chart's points over its window: from the full-rate history `full` (t s, value)
+    /// for a finite window, from the whole run's thinned points as `thinned` takes
+    /// them for the whole run.
+    fn in_chart_window(
+        &self,
+        full: &std::collections::VecDeque<(f64, f64)>,
+        thinned: impl Fn(&(f64, f64, f64)) -> (f64, f64),
+    ) -> Vec<(f64, f64)> {
+        let (t0, t1) = self.chart_window.bounds(self.now.as_secs_f64());
+        match self.chart_window.span_s() {
+            Some(_) => full
+                .iter()
+                .copied()
+                .filter(|(t, _)| *t >= t0 && *t <= t1)
+                .collect(),
+            None => self.thinned.points().iter().map(thinned).collect(),
+        }
     }
 
     pub(super) fn latency_view(&self) -> LatencyView {
@@ -415,22 +433,19 @@ impl App {
                 },
                 (v, _) => v.clone(),
             },
-            angle_history: self.history.iter().copied().collect(),
+            angle_history: self.in_chart_window(&self.history, |&(t, a, _)| (t, a)),
             // Each applied force holds until the next step: a staircase.
-            applied_force: self
-                .applied
-                .iter()
-                .zip(self.applied.iter().skip(1))
-                .flat_map(|(&(t, u), &(t_next, _))| [(t, u), (t_next, u)])
-                .collect(),
-            published_force: self.published.iter().copied().collect(),
+            applied_force: staircase(&self.in_chart_window(&self.applied, |&(t, _, f)| (t, f))),
+            // The whole run draws no dots: thinned, they would not be the policy's ticks.
+            published_force: match self.chart_window.span_s() {
+                Some(_) => self.in_chart_window(&self.published, |_| (0.0, 0.0)),
+                None => Vec::new(),
+            },
+            chart_s: self.chart_window.bounds(self.now.as_secs_f64()),
+            chart_label: self.chart_window.label(),
             ghost_angle: self.ghost_in_window(|&(t, a, ..)| (t, a)),
             // The run before's applied force, as a staircase too.
-            ghost_force: self
-                .ghost_in_window(|&(t, _, f, _)| (t, f))
-                .windows(2)
-                .flat_map(|w| [(w[0].0, w[0].1), (w[1].0, w[0].1)])
-                .collect(),
+            ghost_force: staircase(&self.ghost_in_window(|&(t, _, f, _)| (t, f))),
             latency: self.latency_view(),
             log: self.show_log.then(|| self.log_view()),
             ros2: match (self.show_ros2, self.ros2_domain) {
@@ -506,4 +521,13 @@ impl App {
         }
         (nodes, topics)
     }
+}
+
+/// Each force held until the next point's time: a staircase, as the zero-order hold applies
+/// it.
+fn staircase(points: &[(f64, f64)]) -> Vec<(f64, f64)> {
+    points
+        .windows(2)
+        .flat_map(|w| [(w[0].0, w[0].1), (w[1].0, w[0].1)])
+        .collect()
 }

@@ -86,8 +86,7 @@ pub(super) fn render_cartpole(v: &View, area: Rect, buf: &mut Buffer) {
 }
 
 pub(super) fn render_angle_chart(v: &View, area: Rect, buf: &mut Buffer) {
-    let t1 = v.sim_time_s.max(10.0);
-    let t0 = t1 - 10.0;
+    let (t0, t1) = v.chart_s;
     let upper = [(t0, LIMIT_RAD), (t1, LIMIT_RAD)];
     let lower = [(t0, -LIMIT_RAD), (t1, -LIMIT_RAD)];
     let data: Vec<(f64, f64)> = v
@@ -164,7 +163,7 @@ pub(super) fn render_angle_chart(v: &View, area: Rect, buf: &mut Buffer) {
     if !marks.is_empty() {
         add(&mut title, "⡇ change ".into(), Style::new().fg(Color::Cyan));
     }
-    add(&mut title, "last 10 s ".into(), Style::new());
+    add(&mut title, format!("{} ", v.chart_label), Style::new());
     Chart::new(datasets)
         .block(Block::bordered().title(Line::from(title)))
         .x_axis(time_axis(t0, t1, area))
@@ -189,11 +188,13 @@ fn ghost_dataset(points: &[(f64, f64)]) -> Option<Dataset<'_>> {
     })
 }
 
-/// The last 10 s; labelled only where the chart has room for the axis (two rows).
+/// The charts' window, `t0` to `t1` s; labelled only where the chart has room for the axis
+/// (two rows), in tenths of a second for a window under 2 s.
 fn time_axis(t0: f64, t1: f64, area: Rect) -> Axis<'static> {
     let axis = Axis::default().bounds([t0, t1]);
     if area.height >= 8 {
-        axis.labels([format!("{t0:.0}s"), format!("{t1:.0}s")])
+        let digits = usize::from(t1 - t0 < 2.0);
+        axis.labels([format!("{t0:.digits$}s"), format!("{t1:.digits$}s")])
     } else {
         axis
     }
@@ -202,8 +203,7 @@ fn time_axis(t0: f64, t1: f64, area: Rect) -> Axis<'static> {
 /// The zero-order hold, live: the force the policy published (dots, at its ticks) and the
 /// force the actuator applied (a staircase: each step's force held until the next).
 pub(super) fn render_hold_chart(v: &View, area: Rect, buf: &mut Buffer) {
-    let t1 = v.sim_time_s.max(10.0);
-    let t0 = t1 - 10.0;
+    let (t0, t1) = v.chart_s;
     let limit = ratelab::plant::GEAR_N;
     let clamp = |pts: &[(f64, f64)]| -> Vec<(f64, f64)> {
         pts.iter()

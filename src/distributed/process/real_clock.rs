@@ -47,6 +47,7 @@ pub(super) fn real_clock(
         on_tick: Some(tick_hook(share, &index, &next_due, start)),
         pause: None,
         start: Some(wire::instant_at_mono(start)),
+        from: Nanos::ZERO,
         // This process's executors (an executor never spans processes: `launch` checks).
         plan: Some(spec.execution_plan().restricted(&index)),
         track: spec.has_executors_or_compute(),

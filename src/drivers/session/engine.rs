@@ -538,7 +538,13 @@ impl Engine {
     pub(super) fn branch_log(&mut self, applied: &[TimedCommand], at: Nanos) {
         if let Some(run) = self.log.runs.last_mut() {
             run.commands = applied.to_vec();
-            run.clock_switches_ns.retain(|&s| s <= at.0);
+            // Scrubbing runs under the virtual clock: a switch at the instant itself (where
+            // a real-clock part began) came after it, and at t = 0 the whole run is the
+            // virtual clock's from its start.
+            run.clock_switches_ns.retain(|&s| s < at.0);
+            if at == Nanos::ZERO {
+                run.clock = ClockKind::Virtual;
+            }
         }
         self.save_log();
     }

@@ -3,6 +3,7 @@
 //! tick).
 
 use super::engine::{live_metrics, Engine, Next, Segment};
+use super::reload::{InPlace, RealExit, Restart};
 use crate::config::RunConfig;
 use crate::recording::Recording;
 use crate::run::Command;
@@ -15,21 +16,30 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
+/// What a stretch of the real clock runs ([`Engine::real_once`]).
+struct Stretch<'a> {
+    cfg: &'a RunConfig,
+    handles: &'a crate::graph::GraphHandles,
+    /// The run's graph as its nodes were built.
+    running: &'a crate::graph::GraphSpec,
+    recording: &'a Option<Recording>,
+    /// The run has ended (keys set the next run).
+    ended: bool,
+}
+
 impl Engine {
     /// Run `core` under the real clock, from where it is (t = 0, or the instant the
     /// virtual clock reached: a clock switch in place), until the user moves on. Returns
     /// what they asked next, how the run ended, each node's timing and the executors'
-    /// figures. The core comes back at the time the real clock stopped.
+    /// figures. The core comes back at the time the real clock stopped. A saved node's
+    /// code restarts that node in place ([`Engine::reload_in_place`]): the real clock stops,
+    /// the node is built again, and the run goes on from where it was.
     pub(super) fn real_run(
         &mut self,
         core: &mut RunCore,
         cfg: &RunConfig,
         recording: &Option<Recording>,
     ) -> Segment {
-        let handles = core.handles().clone();
-        let from = core.now();
-        // Ticks so far (under the virtual clock, or earlier parts under this one).
-        let ticked = core.scheduler().ticks().to_vec();
         if let Some(Err(e)) = cfg.rt_priority.map(crate::realtime::probe_fifo) {
             // Told now, not only when the run ends: node threads inherit this thread's
             // privileges, so they will be refused the same way.
@@ -37,6 +47,27 @@ impl Engine {
                 "warning: node threads keep their default policy: {e}"
             )));
         }
+        loop {
+            match self.real_once(core, cfg, recording) {
+                RealExit::Done(part) => return part,
+                RealExit::Restart(r) => self.restart_in_place(core, r),
+            }
+        }
+    }
+
+    /// One stretch of [`Engine::real_run`]: the real clock from where the core is, until
+    /// the user moves on or a save restarts nodes in place.
+    fn real_once(
+        &mut self,
+        core: &mut RunCore,
+        cfg: &RunConfig,
+        recording: &Option<Recording>,
+    ) -> RealExit {
+        let handles = core.handles().clone();
+        let running = core.config().graph.clone();
+        let from = core.now();
+        // Ticks so far (under the virtual clock, or earlier parts under this one).
+        let ticked = core.scheduler().ticks().to_vec();
         let stop = StopFlag::new();
         // Only a run that starts here starts paused (a lab started with --paused).
         let pause = Arc::new(AtomicBool::new(
@@ -62,7 +93,11 @@ impl Engine {
         // The run time now: the real clock reads `from` at its start.
         let start = Instant::now();
         let now = || from.saturating_add(Nanos::from(start.elapsed()));
-        std::thread::scope(|scope| {
+        // A runner that panicked (its node threads could not start) took the graph's nodes
+        // with it: the run has ended, whatever the user asks next.
+        let mut lost = false;
+        let mut restart = None;
+        let part = std::thread::scope(|scope| {
             let runner = std::thread::Builder::new()
                 .name("real-clock".into())
                 .spawn_scoped(scope, || core.run_real(None, &stop, &opts))
@@ -74,11 +109,19 @@ impl Engine {
             let mut exec = None;
             loop {
                 if result.is_none() && runner.as_ref().is_some_and(|r| r.is_finished()) {
-                    let run = runner
-                        .take()
-                        .expect("checked")
-                        .join()
-                        .expect("runner thread");
+                    let Ok(run) = runner.take().expect("checked").join() else {
+                        lost = true;
+                        let end = RunEnd {
+                            at: now(),
+                            reason: EndReason::Interrupted,
+                        };
+                        let _ = self.tx.send(Telemetry::Error(
+                            "the real clock's runner failed: the run has ended (r starts the next)"
+                                .into(),
+                        ));
+                        result = Some(end);
+                        continue;
+                    };
                     let end = run.end.clone();
                     let ticks: Vec<u64> = run
                         .timing
@@ -96,38 +139,15 @@ impl Engine {
                     });
                     result = Some(end);
                 }
-                let next = match self.rx.recv_timeout(Duration::from_millis(30)) {
-                    Ok(Control::Apply(cmd)) => {
-                        if result.is_none() {
-                            self.apply_real(cmd, now(), cfg, &handles, recording);
-                        } else {
-                            self.defer(cmd, &handles);
-                        }
-                        None
-                    }
-                    Ok(Control::TogglePause) => {
-                        // Wall time cannot stop: a paused real-clock run would only skip
-                        // ticks while its clock (and every latency) ran on. Refused, and
-                        // said so.
-                        let _ = self.tx.send(Telemetry::Error(
-                            "pause is for the virtual clock: real time does not stop (c switches clock)"
-                                .into(),
-                        ));
-                        None
-                    }
-                    Ok(Control::Step | Control::Seek(_) | Control::SetSpeed(_)) => {
-                        let _ = self.tx.send(Telemetry::Error(
-                            "single-step, scrubbing and speed apply to the virtual clock only (c switches clock)".into(),
-                        ));
-                        None
-                    }
-                    Ok(Control::Reset { next_seed }) => Some(Next::Reset { next_seed }),
-                    Ok(Control::SwitchClock) => Some(Next::SwitchClock),
-                    // The real clock's run starts again with the new code (if it loads).
-                    Ok(Control::Reload { file }) => self.reload(cfg, &file, None),
-                    Ok(Control::Quit) | Err(RecvTimeoutError::Disconnected) => Some(Next::Quit),
-                    Err(RecvTimeoutError::Timeout) => None,
+                let msg = self.rx.recv_timeout(Duration::from_millis(30));
+                let ran = Stretch {
+                    cfg,
+                    handles: &handles,
+                    running: &running,
+                    recording,
+                    ended: result.is_some(),
                 };
+                let next = self.real_control(msg, now(), &ran, &mut restart);
                 if let Some(next) = next {
                     stop.stop();
                     let end = match (result, runner.take()) {
@@ -138,10 +158,13 @@ impl Engine {
                                 exec = run.exec;
                                 run.end
                             }
-                            Err(_) => RunEnd {
-                                at: now(),
-                                reason: EndReason::Interrupted,
-                            },
+                            Err(_) => {
+                                lost = true;
+                                RunEnd {
+                                    at: now(),
+                                    reason: EndReason::Interrupted,
+                                }
+                            }
                         },
                         (None, None) => RunEnd {
                             at: now(),
@@ -159,7 +182,81 @@ impl Engine {
                     last_status = Instant::now();
                 }
             }
-        })
+        });
+        if lost {
+            core.interrupt();
+        }
+        match restart {
+            Some(r) if core.end().is_none() => RealExit::Restart(r),
+            // The run ended as the file was saved: the new code starts the next run.
+            Some(r) => {
+                let next = self
+                    .reload(cfg, &r.file, None)
+                    .unwrap_or(Next::Reset { next_seed: false });
+                RealExit::Done((next, part.1, part.2, part.3))
+            }
+            None => RealExit::Done(part),
+        }
+    }
+
+    /// What the user asked during a stretch of the real clock ([`Engine::real_once`]), at
+    /// run time `now`: `Some(next)` ends the stretch (`restart` set: for a restart in
+    /// place).
+    fn real_control(
+        &mut self,
+        msg: Result<Control, RecvTimeoutError>,
+        now: Nanos,
+        ran: &Stretch<'_>,
+        restart: &mut Option<Restart>,
+    ) -> Option<Next> {
+        match msg {
+            Ok(Control::Apply(cmd)) => {
+                if !ran.ended {
+                    self.apply_real(cmd, now, ran.cfg, ran.handles, ran.recording);
+                } else {
+                    self.defer(cmd, ran.handles);
+                }
+                None
+            }
+            Ok(Control::TogglePause) => {
+                // Wall time cannot stop: a paused real-clock run would only skip
+                // ticks while its clock (and every latency) ran on. Refused, and
+                // said so.
+                let _ = self.tx.send(Telemetry::Error(
+                    "pause is for the virtual clock: real time does not stop (c switches clock)"
+                        .into(),
+                ));
+                None
+            }
+            Ok(Control::Step | Control::Seek(_) | Control::SetSpeed(_)) => {
+                let _ = self.tx.send(Telemetry::Error(
+                    "single-step, scrubbing and speed apply to the virtual clock only (c switches clock)".into(),
+                ));
+                None
+            }
+            Ok(Control::Reset { next_seed }) => Some(Next::Reset { next_seed }),
+            Ok(Control::SwitchClock) => Some(Next::SwitchClock),
+            // A run going on restarts the saved code's nodes in place; one that
+            // ended starts again with the new code (if it loads).
+            Ok(Control::Reload { file }) if !ran.ended => {
+                match self.reload_in_place(ran.cfg, ran.running, &file) {
+                    InPlace::Restart(r) => {
+                        *restart = Some(r);
+                        Some(Next::Quit) // the real clock stops for the restart
+                    }
+                    InPlace::Next(next) => next,
+                    InPlace::Brain { name, swap } => {
+                        if self.apply(swap, now, ran.handles, ran.recording) {
+                            self.brain_reloaded(&name);
+                        }
+                        None
+                    }
+                }
+            }
+            Ok(Control::Reload { file }) => self.reload(ran.cfg, &file, None),
+            Ok(Control::Quit) | Err(RecvTimeoutError::Disconnected) => Some(Next::Quit),
+            Err(RecvTimeoutError::Timeout) => None,
+        }
     }
 
     /// Apply `cmd` to the running real-clock graph at `now`: a rate at once (and when a

@@ -8,13 +8,20 @@
 //! FILE: fell at 0.84 s → balanced (10.0 s) · latency p50 40 → 40 ms · /obs dropped 400 →
 //! 0` — and then the lab runs it again from t = 0 with the run before drawn as a ghost.
 //!
-//! Under the real clock the run starts again from t = 0 with the new code (a real-clock run
-//! cannot be judged exactly: the line says so).
+//! Under the real clock a run cannot start again alike, so the saved code takes effect in
+//! place ([`Engine::reload_in_place`]): the nodes whose code or parameters changed (a Python
+//! node's script, `params` in the graph file) are restarted in place, fresh, while every
+//! other node, topic and the pole go on; a saved brain is swapped in. The real clock stands
+//! still while they load. A save that changes more of the graph (its nodes, rates, topics)
+//! starts the run again from t = 0 with the new code, as does a save after the run ended
+//! (a real-clock run cannot be judged exactly: the line says so).
 
-use super::engine::{Engine, Next, JUDGE_FOR};
+use super::engine::{Engine, Next, Segment, JUDGE_FOR};
 use crate::checkpoint::load_policy;
 use crate::config::{ClockKind, RunConfig};
+use crate::graph::GraphSpec;
 use crate::metrics::Metrics;
+use crate::run::Command;
 use crate::runcore::{CoreOptions, RunCore};
 use crate::scheduler::StopFlag;
 use crate::telemetry::Telemetry;
@@ -36,13 +43,7 @@ impl Engine {
         file: &Path,
         old: Option<&Metrics>,
     ) -> Option<Next> {
-        // As the user named it: relative to the folder the lab runs in, when it is inside.
-        let here = std::env::current_dir().unwrap_or_default();
-        let name = file
-            .strip_prefix(&here)
-            .unwrap_or(file)
-            .display()
-            .to_string();
+        let name = shown_name(file);
         let new_cfg = match self.reloaded_config(cfg) {
             Ok(c) => c,
             Err(e) => {
@@ -90,6 +91,146 @@ impl Engine {
         crate::textlog::emit_for(None, None, Level::Error, &line);
         let _ = self.tx.send(Telemetry::Error(line));
     }
+}
+
+/// How a stretch of the real clock ended ([`Engine::real_run`]).
+pub(super) enum RealExit {
+    /// The user moved on.
+    Done(Segment),
+    /// A save restarts nodes in place; the real clock goes on after.
+    Restart(Restart),
+}
+
+/// Nodes to restart in place on a save under the real clock.
+pub(super) struct Restart {
+    /// The file saved.
+    pub(super) file: std::path::PathBuf,
+    /// Its name as the user knows it.
+    name: String,
+    /// The graph with the new code.
+    spec: GraphSpec,
+    /// The nodes whose code or parameters changed, by graph index.
+    which: Vec<usize>,
+}
+
+/// What a save under the real clock does ([`Engine::reload_in_place`]).
+pub(super) enum InPlace {
+    /// Restart these nodes in place.
+    Restart(Restart),
+    /// As [`Engine::reload`]: the next run (`Some`), or nothing (`None`: it was said).
+    Next(Option<Next>),
+    /// The brain's file: apply `swap` (a live brain change, logged as one) and, when it
+    /// loads, say `reloaded NAME` ([`Engine::brain_reloaded`]).
+    Brain {
+        /// The file as the user knows it.
+        name: String,
+        /// The brain change.
+        swap: Command,
+    },
+}
+
+impl Engine {
+    /// `file` was saved while the real clock runs `running` (the run's graph as its nodes
+    /// were built): the nodes whose code or parameters changed, to restart in place; a
+    /// brain file swapped in at once (a live brain change, logged as one); or, when the
+    /// graph changed beyond its nodes' code, the run started again with the new code
+    /// ([`Engine::reload`]). Code that does not load is said, and the run goes on.
+    pub(super) fn reload_in_place(
+        &mut self,
+        cfg: &RunConfig,
+        running: &GraphSpec,
+        file: &Path,
+    ) -> InPlace {
+        let name = shown_name(file);
+        let new_cfg = match self.reloaded_config(cfg) {
+            Ok(c) => c,
+            Err(e) => {
+                self.not_reloaded(&name, &e);
+                return InPlace::Next(None);
+            }
+        };
+        if let Err(why) = running.same_shape(&new_cfg.graph) {
+            let _ = self
+                .tx
+                .send(Telemetry::Applied(format!("{why}: the run starts again")));
+            return InPlace::Next(self.reload(cfg, file, None));
+        }
+        let which: Vec<usize> = running
+            .nodes
+            .iter()
+            .zip(&new_cfg.graph.nodes)
+            .enumerate()
+            .filter(|(_, (old, new))| {
+                old.params != new.params
+                    || old.python != new.python
+                    || new
+                        .python
+                        .as_ref()
+                        .is_some_and(|p| Path::new(&p.script) == file)
+            })
+            .map(|(i, _)| i)
+            .collect();
+        let policy = self.current_policy_spec(&self.run_policy);
+        if which.is_empty() && Path::new(&policy) == file {
+            // The brain: loaded again from the file and swapped in, as `p` swaps brains.
+            return InPlace::Brain {
+                name,
+                swap: Command::SetPolicy { spec: policy },
+            };
+        }
+        if which.is_empty() {
+            let _ = self.tx.send(Telemetry::Applied(format!(
+                "reloaded {name}: no node's code or parameters changed (the run goes on)"
+            )));
+            return InPlace::Next(None);
+        }
+        InPlace::Restart(Restart {
+            file: file.to_path_buf(),
+            name,
+            spec: new_cfg.graph,
+            which,
+        })
+    }
+
+    /// The brain's file `name` was loaded again and swapped in, under the real clock.
+    pub(super) fn brain_reloaded(&self, name: &str) {
+        let line = format!("reloaded {name}: the brain swapped in place (real clock: not judged)");
+        crate::textlog::emit_for(None, None, Level::Info, &line);
+        let _ = self.tx.send(Telemetry::Applied(line));
+    }
+
+    /// Restart `r`'s nodes in `core` (stopped between two stretches of the real clock),
+    /// and say what was done, or why not (the run goes on with the code before).
+    pub(super) fn restart_in_place(&mut self, core: &mut RunCore, r: Restart) {
+        let at = core.now();
+        match core.restart_nodes(&r.spec, &r.which) {
+            Ok(()) => {
+                let names: Vec<String> = r
+                    .which
+                    .iter()
+                    .map(|&i| format!("'{}'", r.spec.nodes[i].name))
+                    .collect();
+                let line = format!(
+                    "reloaded {}: {} restarted in place at t={:.2} s (real clock: not judged)",
+                    r.name,
+                    names.join(", "),
+                    at.as_secs_f64()
+                );
+                crate::textlog::emit_for(None, None, Level::Info, &line);
+                let _ = self.tx.send(Telemetry::Applied(line));
+            }
+            Err(e) => self.not_reloaded(&r.name, &e),
+        }
+    }
+}
+
+/// `file` as the user named it: relative to the folder the lab runs in, when it is inside.
+fn shown_name(file: &Path) -> String {
+    let here = std::env::current_dir().unwrap_or_default();
+    file.strip_prefix(&here)
+        .unwrap_or(file)
+        .display()
+        .to_string()
 }
 
 /// Run `cfg`'s graph with brain `policy` headless under the virtual clock, its lines

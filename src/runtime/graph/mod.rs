@@ -417,65 +417,93 @@ impl Graph {
                 .map(|o| Box::new(Observer(o)) as Box<dyn StepSink>)
                 .collect(),
         );
-        let action = spec.chain.map(|c| &topics[c.action.0]);
-        let nodes = spec
-            .nodes
-            .iter()
-            .enumerate()
-            .map(|(i, n)| -> Result<Box<dyn Node>, GraphError> {
-                let outbox = Outbox::new();
-                let core = NodeCore {
-                    name: n.name.clone(),
-                    id: NodeId(i),
-                    rate: rates[i].clone(),
-                    liveliness: liveliness[i].clone(),
-                    faults: faults.clone(),
-                    outbox: outbox.clone(),
-                    compute: n.compute.map(|c| ComputeDraw::new(c, seed, i)),
-                };
-                // Its topics, in the graph file's order: what it reads, its own subscription's
-                // queue (a topic of several subscribers has one per subscriber).
-                let inputs: Vec<AnyTopic> = n
-                    .subscribes
-                    .iter()
-                    .map(|t| {
-                        let subs = &spec.topic(*t).subscribers;
-                        // Subscribers are sorted (`GraphSpec`'s build).
-                        match subs.binary_search(&NodeId(i)).ok() {
-                            Some(k) if subs.len() > 1 => topics[t.0].subscription(k),
-                            _ => topics[t.0].clone(),
-                        }
-                    })
-                    .collect();
-                let outputs: Vec<AnyTopic> =
-                    n.publishes.iter().map(|t| topics[t.0].clone()).collect();
-                let attachment = external
-                    .iter()
-                    .find(|p| p.node.0 == i)
-                    .map(|p| p.clone() as Arc<dyn std::any::Any + Send + Sync>);
-                let mut cx = BuildContext {
-                    name: &n.name,
-                    id: NodeId(i),
-                    rate: &rates[i],
-                    seed,
-                    params: &n.params,
-                    python: n.python.as_ref(),
-                    inputs: &inputs,
-                    outputs: &outputs,
-                    outbox: &outbox,
-                    plant: &plant,
-                    brain: &brain,
-                    log: &log,
-                    topics: &topics,
-                    action,
-                    liveliness: &liveliness[i],
-                    observers: &mut observers,
-                    attachment,
-                };
-                let work = (n.kind.def().make)(&mut cx).map_err(GraphError::Node)?;
-                Ok(Box::new(GraphNode::new(core, work)) as Box<dyn Node>)
-            })
+        let nodes = (0..spec.nodes.len())
+            .map(|i| build_node(&handles, seed, i, &mut observers))
             .collect::<Result<Vec<_>, _>>()?;
         Ok(Graph { nodes, handles })
     }
+
+    /// Node `i` of the graph `handles` hold built afresh, as [`Graph::build`] built it (its
+    /// kind's code and parameters as `handles.spec` gives them now, its state new), on the
+    /// graph's topics, rate, liveliness and faults: a node restarted in place in a running
+    /// graph (`ratelab::runcore::RunCore::restart_nodes`). It tells no step observers (the
+    /// graph's stay with the node that had them).
+    ///
+    /// # Errors
+    /// [`GraphError`] for a node whose code cannot be loaded (a Python script that no
+    /// longer loads), or an index past the graph's nodes.
+    pub fn rebuild_node(
+        handles: &GraphHandles,
+        seed: u64,
+        i: usize,
+    ) -> Result<Box<dyn Node>, GraphError> {
+        if i >= handles.spec.nodes.len() {
+            return Err(GraphError::Node(format!("no node {i} in the graph")));
+        }
+        build_node(handles, seed, i, &mut None)
+    }
+}
+
+/// Node `i` of `handles.spec`, on the graph's topics, rates, liveliness, faults, plant,
+/// brain and log; the actuator takes `observers` ([`Graph::build`]).
+fn build_node(
+    handles: &GraphHandles,
+    seed: u64,
+    i: usize,
+    observers: &mut Option<Vec<Box<dyn StepSink>>>,
+) -> Result<Box<dyn Node>, GraphError> {
+    let spec = &handles.spec;
+    let topics = &handles.topics;
+    let n = &spec.nodes[i];
+    let outbox = Outbox::new();
+    let core = NodeCore {
+        name: n.name.clone(),
+        id: NodeId(i),
+        rate: handles.rates[i].clone(),
+        liveliness: handles.liveliness[i].clone(),
+        faults: handles.faults.clone(),
+        outbox: outbox.clone(),
+        compute: n.compute.map(|c| ComputeDraw::new(c, seed, i)),
+    };
+    // Its topics, in the graph file's order: what it reads, its own subscription's queue
+    // (a topic of several subscribers has one per subscriber).
+    let inputs: Vec<AnyTopic> = n
+        .subscribes
+        .iter()
+        .map(|t| {
+            let subs = &spec.topic(*t).subscribers;
+            // Subscribers are sorted (`GraphSpec`'s build).
+            match subs.binary_search(&NodeId(i)).ok() {
+                Some(k) if subs.len() > 1 => topics[t.0].subscription(k),
+                _ => topics[t.0].clone(),
+            }
+        })
+        .collect();
+    let outputs: Vec<AnyTopic> = n.publishes.iter().map(|t| topics[t.0].clone()).collect();
+    let attachment = handles
+        .external
+        .iter()
+        .find(|p| p.node.0 == i)
+        .map(|p| p.clone() as Arc<dyn std::any::Any + Send + Sync>);
+    let mut cx = BuildContext {
+        name: &n.name,
+        id: NodeId(i),
+        rate: &handles.rates[i],
+        seed,
+        params: &n.params,
+        python: n.python.as_ref(),
+        inputs: &inputs,
+        outputs: &outputs,
+        outbox: &outbox,
+        plant: &handles.plant,
+        brain: &handles.brain,
+        log: &handles.log,
+        topics,
+        action: spec.chain.map(|c| &topics[c.action.0]),
+        liveliness: &handles.liveliness[i],
+        observers,
+        attachment,
+    };
+    let work = (n.kind.def().make)(&mut cx).map_err(GraphError::Node)?;
+    Ok(Box::new(GraphNode::new(core, work)) as Box<dyn Node>)
 }

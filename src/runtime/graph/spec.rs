@@ -732,6 +732,42 @@ impl GraphSpec {
         })
     }
 
+    /// Check that `other` is this graph but for its nodes' code and parameters (a Python
+    /// node's script and class, `params`): the same nodes, kinds, rates, topics, QoS,
+    /// executors and processes — what a node restarted in place needs of the graph around
+    /// it (`ratelab::runcore::RunCore::restart_nodes`).
+    ///
+    /// # Errors
+    /// A one-line description naming the first thing that differs (nodes, topics, or
+    /// the rest).
+    pub fn same_shape(&self, other: &GraphSpec) -> Result<(), String> {
+        let blank = |g: &GraphSpec| {
+            let mut g = g.clone();
+            for n in &mut g.nodes {
+                n.params = toml::Table::new();
+                n.python = None;
+            }
+            g
+        };
+        let (a, b) = (blank(self), blank(other));
+        if a == b {
+            return Ok(());
+        }
+        let what = if a.nodes.len() != b.nodes.len() {
+            "its nodes".to_string()
+        } else if let Some((x, _)) = a.nodes.iter().zip(&b.nodes).find(|(x, y)| x != y) {
+            format!("node '{}'", x.name)
+        } else if a.topics != b.topics {
+            "its topics".to_string()
+        } else {
+            "its settings".to_string()
+        };
+        Err(format!(
+            "graph '{}' changed beyond its nodes' code and parameters ({what})",
+            self.name
+        ))
+    }
+
     /// Topic `name`'s id, or the override error naming the graph's topics.
     fn known_topic(&self, name: &str) -> Result<TopicId, OverrideError> {
         self.topic_id(name).ok_or_else(|| {

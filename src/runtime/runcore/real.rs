@@ -8,8 +8,10 @@ use super::RunCore;
 use crate::executor::ExecFigures;
 use crate::metrics::NodeTiming;
 use crate::node::Node;
-use crate::scheduler::{run_real, EndReason, RealOptions, RunEnd, StopFlag};
+use crate::scheduler::{run_real, EndReason, RealOptions, RunEnd, StopFlag, TickReport};
 use crate::time::Nanos;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::Arc;
 
 /// What a real-clock run of a run core measured ([`RunCore::run_real`]).
 pub struct RealEnd {
@@ -28,21 +30,25 @@ impl RunCore {
     /// process's share of a graph across processes, whose other nodes run in their own
     /// processes), else all.
     ///
-    /// - **From t = 0** (nothing run yet) the run is `opts`'s: its phase offsets, its zero
-    ///   instant ([`RealOptions::start`], which processes of one graph share), its plan.
+    /// - The whole graph (`part` `None`) runs on its own timers and executors as the
+    ///   scheduler has them, commands since the start included: each node's first deadline
+    ///   is its next tick there, on the executors' plan it runs
+    ///   ([`VirtualScheduler::hand_over`]); `opts`'s phase offsets, plan and measuring are
+    ///   not read. A process's share from t = 0 runs on `opts`'s (the launch's grid, a late
+    ///   joiner's included).
+    /// - **From t = 0** (nothing run yet) the run's zero instant is `opts`'s
+    ///   ([`RealOptions::start`], which processes of one graph share).
     /// - **From an instant t the virtual clock reached** (a clock switch in place) the real
-    ///   clock reads t now and goes on from there: each node's first deadline is its next
-    ///   tick as the virtual scheduler had it, on the executors' plan the scheduler ran
-    ///   ([`VirtualScheduler::hand_over`]); `opts`'s start, phase offsets and plan are not
-    ///   read. A machine up for less than t (its monotonic clock cannot read t now) runs
-    ///   nothing: the run is interrupted at t, not ended.
+    ///   clock reads t now and goes on from there; the executors' figures span from t
+    ///   ([`RealOptions::from`]). A machine up for less than t (its monotonic clock cannot
+    ///   read t now) runs nothing: the run is interrupted at t, not ended.
     ///
     /// The nodes come back into the core when the run ends (a node that panicked does not
     /// come back, and the core then holds fewer nodes: restoring a capture into it fails);
     /// the core is then at the time the real clock stopped, t′, its scheduler's tick counts
     /// ([`RunCore::scheduler`]) including the real clock's. A run that `stop` interrupted
-    /// can go on, each node's next tick the first after t′ on
-    /// the grid it ran on ([`VirtualScheduler::take_over`]), so that [`RunCore::step`] goes
+    /// can go on, each node's next tick the first after t′ on the grid it ran on (through
+    /// its last real-clock deadline, at its period now: [`VirtualScheduler::take_over`]), so that [`RunCore::step`] goes
     /// on under the virtual clock (or `run_real` again under the real one) with every
     /// node's, topic's, counter's and the plant's state as the real clock left it. Any other
     /// end (duration, fall, failure) ends the core's run ([`RunCore::end`]); a core whose
@@ -81,6 +87,13 @@ impl RunCore {
             None => (0..slots.len()).collect(),
         };
         let mut opts = opts.clone();
+        if resumed || part.is_none() {
+            // The graph's own timers and executors as the scheduler has them (commands may
+            // have changed them since the start); a process's share keeps the launch's.
+            opts.phase_offsets = index.iter().map(|&i| deadlines[i]).collect();
+            opts.plan = Some(self.sched.plan().restricted(&index));
+            opts.track = self.sched.tracks();
+        }
         if resumed {
             let Some(start) = std::time::Instant::now().checked_sub(from.to_duration()) else {
                 self.nodes = slots.into_iter().flatten().collect();
@@ -94,10 +107,26 @@ impl RunCore {
                 };
             };
             opts.start = Some(start);
-            opts.phase_offsets = index.iter().map(|&i| deadlines[i]).collect();
-            opts.plan = Some(self.sched.plan().restricted(&index));
-            opts.track = self.sched.tracks();
+            opts.from = from;
         }
+        // Each node's last deadline under the real clock (its grid, for the virtual clock
+        // to take it back on), kept as each tick is told.
+        let last: Arc<Vec<AtomicU64>> = Arc::new(
+            index
+                .iter()
+                .map(|&i| AtomicU64::new(deadlines[i].0))
+                .collect(),
+        );
+        let told = opts.on_tick.take();
+        let keep = last.clone();
+        opts.on_tick = Some(Arc::new(move |t: &TickReport<'_>| {
+            if let Some(d) = keep.get(t.node) {
+                d.store(t.now.saturating_sub(t.lateness).0, Ordering::Relaxed);
+            }
+            if let Some(hook) = &told {
+                hook(t);
+            }
+        }));
         let running: Vec<Box<dyn Node>> = index.iter().filter_map(|&i| slots[i].take()).collect();
         let count = running.len();
         let run = run_real(running, self.cfg.duration, stop, &opts);
@@ -118,12 +147,13 @@ impl RunCore {
         // counts include the real clock's, and a run that was only interrupted (a clock
         // switch, or a stop the driver may follow by ending the run) goes on from there.
         let mut ticked = vec![0u64; self.sched.ticks().len()];
-        for (&i, t) in index.iter().zip(&run.timing) {
+        let mut grid = deadlines;
+        for (k, (&i, t)) in index.iter().zip(&run.timing).enumerate() {
             ticked[i] = t.ticks;
+            grid[i] = Nanos(last[k].load(Ordering::Relaxed));
         }
         let periods: Vec<Nanos> = self.handles.rates.iter().map(|r| r.period()).collect();
-        self.sched
-            .take_over(run.end.at, &deadlines, &ticked, &periods);
+        self.sched.take_over(run.end.at, &grid, &ticked, &periods);
         if run.end.reason == EndReason::Interrupted && came_back == count {
             self.real_parts.push((from, run.end.at));
             self.next_history = self.next_history.max(run.end.at);

@@ -46,18 +46,20 @@ impl VirtualScheduler {
         self.next_call.clone()
     }
 
-    /// Take the graph back at run time `at` from another clock, which started each node
-    /// at `deadlines[i]` ([`Self::hand_over`]'s) and ran `ticked[i]` of its ticks: the
-    /// clock moves to `at`, each node's tick count grows by its ticks there, and each
-    /// node's next tick is the first point after `at` of the grid it ran on — its first
-    /// deadline there plus whole periods of `periods[i]`, its period now (a node whose
-    /// first deadline is after `at` keeps it). Nothing is released or running; the
-    /// executors' plan and their figures so far are kept (what the other clock measured is
-    /// its own: [`crate::metrics::NodeTiming`]).
+    /// Take the graph back at run time `at` from another clock, on which node `i` ran
+    /// `ticked[i]` ticks on the grid through `deadlines[i]` (its last deadline there, or the
+    /// first, [`Self::hand_over`]'s, if it never ticked): the clock moves to `at`, each
+    /// node's tick count grows by its ticks there, and each node's next tick is the first
+    /// point after `at` of that grid at `periods[i]`, its period now (a node whose first
+    /// deadline is after `at` keeps it; a phase change waiting for its tick takes effect).
+    /// Nothing is released or running; the executors' plan and their figures so far are
+    /// kept, and their utilization spans the virtual clock's time only (what the other
+    /// clock measured is its own: [`crate::metrics::NodeTiming`]).
     ///
     /// Missing entries of `deadlines`, `ticked` or `periods` count as zero ticks and the
     /// node's timer as it was.
     pub fn take_over(&mut self, at: Nanos, deadlines: &[Nanos], ticked: &[u64], periods: &[Nanos]) {
+        self.away = self.away.saturating_add(at.saturating_sub(self.now));
         self.now = self.now.max(at);
         for (i, t) in self.ticks.iter_mut().enumerate() {
             *t = t.saturating_add(ticked.get(i).copied().unwrap_or(0));
@@ -65,7 +67,9 @@ impl VirtualScheduler {
         let after = at.saturating_add(Nanos(1));
         for i in 0..self.next_call.len() {
             if let (Some(&first), Some(&period)) = (deadlines.get(i), periods.get(i)) {
-                self.next_call[i] = first_on_grid(first, period, after);
+                // A phase change still waiting for the node's tick takes effect now.
+                let grid = self.regrid[i].take().unwrap_or(first);
+                self.next_call[i] = first_on_grid(grid, period, after);
             }
         }
         self.completions.clear();
