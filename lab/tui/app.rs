@@ -23,6 +23,7 @@ use ratelab::Nanos;
 use std::collections::VecDeque;
 
 mod journal;
+mod review;
 mod views;
 
 /// Seconds of pole-angle and force history kept at full rate (the widest window short of
@@ -146,6 +147,8 @@ pub struct App {
     thinned: super::chart_window::Thinned,
     /// The charts' time window (`(` / `)`).
     chart_window: super::chart_window::ChartWindow,
+    /// Reviewing an ended real-clock run ([`review`]).
+    review: Option<review::Review>,
     /// (t s, applied force N) per actuator step over the last [`HISTORY_S`].
     applied: VecDeque<(f64, f64)>,
     /// (t s, published force N) per policy publication seen over the last [`HISTORY_S`].
@@ -260,6 +263,7 @@ impl App {
             history: VecDeque::new(),
             thinned: Default::default(),
             chart_window: Default::default(),
+            review: None,
             applied: VecDeque::new(),
             published: VecDeque::new(),
             ticks: Vec::new(),
@@ -439,7 +443,8 @@ impl App {
     /// Do ← and → move through the run (paused under the virtual clock, in the lab's own
     /// session)?
     pub fn scrubbing(&self) -> bool {
-        self.paused && self.clock == "virtual" && self.attached.is_none() && self.typing.is_none()
+        let virtual_paused = self.paused && self.clock == "virtual" && self.attached.is_none();
+        (virtual_paused || self.reviewing()) && self.typing.is_none()
     }
 
     fn send(&mut self, c: Control) {
@@ -820,6 +825,8 @@ impl App {
             }
             Msg::Cancel => self.typing = None,
             Msg::Submit => self.submit_rate(),
+            // An ended real-clock run is reviewed: the engine cannot run it again.
+            Msg::TogglePause if self.reviewing() || self.can_review() => self.toggle_review(),
             Msg::TogglePause => self.send(Control::TogglePause),
             Msg::Step => self.send(Control::Step),
             Msg::SeekBack { second } | Msg::SeekForward { second } => {
@@ -900,7 +907,11 @@ impl App {
         } else {
             self.now.saturating_add(by)
         };
-        self.send(Control::Seek(to));
+        if self.reviewing() {
+            self.review_to(to);
+        } else {
+            self.send(Control::Seek(to));
+        }
     }
 
     /// The next slower or faster speed of [`SPEEDS`].

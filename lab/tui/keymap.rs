@@ -47,7 +47,7 @@ pub enum Msg {
     /// Stall the selected node (else the chain's policy) for [`STALL_S`] from now: a fault
     /// injected into the run (`Command::InjectFault`).
     Stall,
-    /// Pause / resume.
+    /// Pause / resume (virtual clock); review a real-clock run that has ended.
     TogglePause,
     /// One actuator step while paused (virtual clock).
     Step,
@@ -262,7 +262,7 @@ pub const BINDINGS: &[Binding] = &[
     Binding {
         keys: &[(Char(' '), Msg::TogglePause)],
         label: "space",
-        help: "pause / resume",
+        help: "pause / resume · an ended real-clock run: review it",
         footer: Some(("␣", "pause")),
     },
     Binding {

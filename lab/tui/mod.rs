@@ -1077,6 +1077,68 @@ mod tests {
         assert!(a.contains("back at t=5.000 s"), "{a}");
     }
 
+    /// Space on a real-clock run that has ended reviews it: ← and → show the run as it was
+    /// then (the same screen as a lab told the run up to then, in the header REVIEW and the
+    /// real clock), what the engine sends meanwhile waits, and space again shows the run as
+    /// it ended. The engine is never asked (it cannot run the run again).
+    #[test]
+    fn an_ended_real_clock_run_is_reviewed_without_the_engine() {
+        // 8 Hz falls at 22.5 s of a 30 s run (seed 0), as the chapter's cliff says.
+        let mut cfg = virtual_cfg(8.0, 30);
+        let report = run(&cfg, Box::new(Scripted), RunOptions::new()).unwrap();
+        cfg.clock = ClockKind::Real;
+        let told = |upto: Option<ratelab::Nanos>| {
+            let (tx, rx) = crossbeam_channel::unbounded();
+            let mut app = App::new(tx, "scripted".into(), None, Speed::Times(1.0));
+            app.on_telemetry(Telemetry::Started {
+                cfg: cfg.clone(),
+                policy: "scripted".into(),
+                recording: None,
+            });
+            for s in report
+                .trace
+                .iter()
+                .filter(|s| upto.is_none_or(|u| s.t <= u))
+            {
+                app.on_telemetry(Telemetry::Step(Box::new(s.clone())));
+            }
+            if upto.is_none() {
+                app.on_telemetry(Telemetry::Ended {
+                    metrics: Box::new(report.metrics.clone()),
+                    reason: report.end.reason.clone(),
+                });
+            }
+            (app, rx)
+        };
+        let rows = |s: &str| s.lines().take(39).map(str::to_string).collect::<Vec<_>>();
+        let (mut app, rx) = told(None);
+        let ended = render(&app, 120, 40);
+        assert!(ended.contains("FELL"), "{ended}");
+        app.on_msg(Msg::TogglePause);
+        assert!(app.scrubbing());
+        let end = report.end.at;
+        app.on_msg(Msg::SeekBack { second: true });
+        app.on_msg(Msg::SeekBack { second: true });
+        let back = end.saturating_sub(ratelab::Nanos(2_000_000_000));
+        let shown = render(&app, 120, 40);
+        assert!(shown.contains("real clock REVIEW"), "{shown}");
+        let (then, _) = told(Some(back));
+        assert_eq!(
+            rows(&shown)[1..],
+            rows(&render(&then, 120, 40))[1..],
+            "the screen as it was at {back}"
+        );
+        // The engine's repeated status waits; forward stops at the end.
+        app.on_telemetry(chapter_status(vec![Default::default(); 2], vec![None; 3]));
+        for _ in 0..5 {
+            app.on_msg(Msg::SeekForward { second: true });
+        }
+        app.on_msg(Msg::TogglePause);
+        assert!(!app.scrubbing());
+        assert_eq!(rows(&render(&app, 120, 40))[1..], rows(&ended)[1..]);
+        assert!(rx.try_recv().is_err(), "the engine was never asked");
+    }
+
     /// `(` and `)` zoom the charts' window: 0.2 s of a 20 s run shows its last tenths (the
     /// axis in tenths), 30 s shows it from 0, the whole run of a long run spans it from 0
     /// with its points thinned; the title names the window.

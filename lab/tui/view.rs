@@ -289,6 +289,8 @@ pub struct View {
     pub speed: String,
     /// Paused?
     pub paused: bool,
+    /// Reviewing an ended real-clock run (space; ← → move through it)?
+    pub review: bool,
     /// Run time, s.
     pub sim_time_s: f64,
     /// Seed.
@@ -606,7 +608,9 @@ fn render_status(v: &View, area: Rect, buf: &mut Buffer) {
     if !v.speed.is_empty() {
         spans.push(format!(" {}", v.speed).into());
     }
-    if v.paused {
+    if v.review {
+        spans.push(" REVIEW".yellow().bold());
+    } else if v.paused {
         spans.push(" PAUSED".yellow().bold());
     }
     // The brain's label in what is left (cut at a word's end, or left out), so the line

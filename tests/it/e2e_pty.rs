@@ -523,6 +523,32 @@ fn c_switches_the_running_lab_s_clock_in_place() {
     lab.quit();
 }
 
+/// A real-clock run that fell is reviewed in the real binary: space shows REVIEW, Shift-←
+/// goes a second back (the pole BALANCED again, as it was then), space again shows the
+/// fall.
+#[test]
+fn an_ended_real_clock_run_is_reviewed_with_space_and_the_arrows() {
+    let _machine = crate::machine::alone();
+    let mut lab = Lab::start(&["--clock", "real"]);
+    lab.wait_for("BALANCED", Duration::from_secs(60));
+    type_slowly(&mut lab, "b"); // the policy at 5 Hz: the pole falls
+    lab.wait_for("FELL at", Duration::from_secs(30));
+    type_slowly(&mut lab, " ");
+    lab.wait_for("REVIEW", Duration::from_secs(5));
+    press(&mut lab, &["\x1b[1;2D", "\x1b[1;2D"]);
+    let back = lab.wait_for("as recorded", Duration::from_secs(5));
+    assert!(
+        back.contains("BALANCED"),
+        "two seconds before the fall: {back}"
+    );
+    type_slowly(&mut lab, " ");
+    let end = lab.wait_until("the fall again", Duration::from_secs(5), |s| {
+        s.contains("FELL at") && !s.contains("REVIEW")
+    });
+    assert!(end.contains("real clock"), "{end}");
+    lab.quit();
+}
+
 /// `ratelab launch --processes` on a terminal opens the lab on the graph it runs across
 /// processes: nodes named with their process, measured rates and topic counters that cross
 /// the boundary, a key that would change the graph refused; quitting stops every process.

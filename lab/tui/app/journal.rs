@@ -11,6 +11,9 @@ impl App {
     /// Fold one telemetry message, and keep it in the run's journal (a seek back shows the
     /// run as it was by folding the journal again up to then).
     pub fn on_telemetry(&mut self, t: Telemetry) {
+        if self.held_for_review(&t) {
+            return;
+        }
         match t {
             Telemetry::Rewound { at } => self.rewind(at),
             Telemetry::Started { .. } => {
@@ -62,7 +65,7 @@ impl App {
 
     /// The run was put back at `at` ([`Telemetry::Rewound`]): show it as it was then, by
     /// folding again what the run told up to then (what the screen showed at that run time).
-    fn rewind(&mut self, at: Nanos) {
+    pub(super) fn rewind(&mut self, at: Nanos) {
         // Only the virtual clock scrubs: a run started under the real clock and switched
         // since is back under the virtual one.
         self.clock = ratelab::ClockKind::Virtual.to_string();

@@ -397,6 +397,7 @@ impl App {
                 String::new()
             },
             paused: self.paused,
+            review: self.reviewing(),
             sim_time_s: self.now.as_secs_f64(),
             seed: self.seed,
             // A Python or external policy node is its own brain (`--policy` does not apply).
