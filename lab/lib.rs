@@ -79,7 +79,10 @@ fn lab(args: &cli::RunArgs, stop: StopFlag) -> anyhow::Result<()> {
     let alt_policy = (args.policy != "scripted").then(|| args.policy.clone());
     // Reload on save: the files the run's code comes from, and the graph read again from
     // its file with the command line's overrides.
-    let code_files = tui::watch::code_files(args.graph.graph.as_deref(), &cfg.graph, &args.policy);
+    let code = tui::watch::CodeSource {
+        graph_file: args.graph.graph.clone(),
+        policy: args.policy.clone(),
+    };
     let graph_source = args.graph.graph.as_ref().map(|_| {
         let flags = args.graph.clone();
         ratelab::session::GraphSource(std::sync::Arc::new(move || {
@@ -100,7 +103,7 @@ fn lab(args: &cli::RunArgs, stop: StopFlag) -> anyhow::Result<()> {
         ros2,
         graph_source,
     };
-    tui::run_lab(settings, code_files, stop)
+    tui::run_lab(settings, code, stop)
 }
 
 /// Re-run a session's virtual runs and compare with what the live runs measured.

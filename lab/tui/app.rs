@@ -26,6 +26,9 @@ mod journal;
 mod review;
 mod views;
 
+/// Told each new run's graph ([`App::on_graph`]): `Some(line)` to say.
+pub type GraphHook = Box<dyn Fn(&GraphSpec) -> Option<String> + Send>;
+
 /// Seconds of pole-angle and force history kept at full rate (the widest window short of
 /// the whole run, [`super::chart_window::FULL_RATE_S`]).
 pub const HISTORY_S: f64 = super::chart_window::FULL_RATE_S;
@@ -149,6 +152,9 @@ pub struct App {
     chart_window: super::chart_window::ChartWindow,
     /// Reviewing an ended real-clock run ([`review`]).
     review: Option<review::Review>,
+    /// Told each new run's graph (the lab's file watch follows it); returns what to say
+    /// when it cannot.
+    on_graph: Option<GraphHook>,
     /// (t s, applied force N) per actuator step over the last [`HISTORY_S`].
     applied: VecDeque<(f64, f64)>,
     /// (t s, published force N) per policy publication seen over the last [`HISTORY_S`].
@@ -264,6 +270,7 @@ impl App {
             thinned: Default::default(),
             chart_window: Default::default(),
             review: None,
+            on_graph: None,
             applied: VecDeque::new(),
             published: VecDeque::new(),
             ticks: Vec::new(),
@@ -327,6 +334,11 @@ impl App {
             Verdict::Failed(line) => Some(line),
             _ => None,
         }
+    }
+
+    /// Tell `hook` each new run's graph (not the journal's runs folded again).
+    pub fn on_graph(&mut self, hook: GraphHook) {
+        self.on_graph = Some(hook);
     }
 
     /// Draw `spec` until the run's first telemetry says more (the lab knows its graph before
@@ -542,6 +554,11 @@ impl App {
         policy: String,
         recording: Option<std::path::PathBuf>,
     ) {
+        if !self.rewinding {
+            if let Some(said) = self.on_graph.as_ref().and_then(|hook| hook(&cfg.graph)) {
+                self.say(said);
+            }
+        }
         self.clock = cfg.clock.to_string();
         self.seed = cfg.seed;
         self.rates = cfg.graph.nodes.iter().map(|n| n.rate_hz).collect();

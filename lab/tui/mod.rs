@@ -88,7 +88,7 @@ where
 /// loop, and always restore the terminal (ratatui's panic hook restores it on a panic).
 pub fn run_lab(
     settings: SessionSettings,
-    code_files: Vec<std::path::PathBuf>,
+    code: watch::CodeSource,
     stop: StopFlag,
 ) -> anyhow::Result<()> {
     let (ctl_tx, ctl_rx) = unbounded::<Control>();
@@ -111,8 +111,18 @@ pub fn run_lab(
         let _ = log_tx.try_send(line);
     })));
     // Reload on save: a save of the graph file or a Python file it runs runs it again.
-    let _watch = match watch::watch(code_files, ctl_tx.clone()) {
-        Ok(w) => Some(w),
+    let _watch = match watch::watch(code.files(&settings.cfg.graph), ctl_tx.clone()) {
+        Ok(w) => {
+            // Each run's graph gives the files watched (a reload may run scripts elsewhere).
+            let w = std::sync::Arc::new(w);
+            let follow = w.clone();
+            app.on_graph(Box::new(move |graph| {
+                follow.follow(code.files(graph)).err().map(|e| {
+                    format!("reload on save: a folder of this graph cannot be watched ({e})")
+                })
+            }));
+            Some(w)
+        }
         Err(e) => {
             app.on_telemetry(Telemetry::Error(format!(
                 "reload on save is off: the files cannot be watched ({e})"

@@ -3,6 +3,10 @@
 //! (inotify on Linux). A save is told to the engine as [`Control::Reload`], which reads and
 //! judges the new code ([`ratelab::session`]'s `reload`).
 //!
+//! The files follow the run's graph: a reload whose graph runs a script elsewhere (a new
+//! node, a script moved to another folder) has that file, and its folder, watched from then
+//! on ([`FileWatch::follow`]).
+//!
 //! The folders are watched, not the files: an editor that saves by writing a new file and
 //! renaming it over the old one (vim, most IDEs) replaces the file's inode, which a watch
 //! on the file itself would lose. The saves of one file that come within [`SETTLE`] of each
@@ -14,6 +18,7 @@ use ratelab::graph::GraphSpec;
 use ratelab::session::Control;
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
+use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 /// How long a file must be quiet after a save before it is reloaded.
@@ -37,9 +42,73 @@ pub fn code_files(graph_file: Option<&Path>, graph: &GraphSpec, policy: &str) ->
     files.into_iter().collect()
 }
 
+/// Where a run's code comes from: the graph file (`None`: the chapter's, compiled in) and
+/// the brain (`--policy`); [`CodeSource::files`] gives the files of a run's graph.
+#[derive(Clone, Debug)]
+pub struct CodeSource {
+    /// The graph file, if any.
+    pub graph_file: Option<PathBuf>,
+    /// The brain's spec.
+    pub policy: String,
+}
+
+impl CodeSource {
+    /// The files the code of a run of `graph` comes from ([`code_files`]).
+    pub fn files(&self, graph: &GraphSpec) -> Vec<PathBuf> {
+        code_files(self.graph_file.as_deref(), graph, &self.policy)
+    }
+}
+
 /// The watch: while it lives, a save of one of its files sends [`Control::Reload`].
 pub struct FileWatch {
-    _watcher: notify::RecommendedWatcher,
+    watcher: Mutex<notify::RecommendedWatcher>,
+    /// The files whose saves are told.
+    wanted: Arc<Mutex<BTreeSet<PathBuf>>>,
+    /// The folders watched.
+    folders: Mutex<BTreeSet<PathBuf>>,
+}
+
+impl FileWatch {
+    /// Tell the saves of `files` (absolute paths) from now on, instead of those before:
+    /// the files of the run that started (a reload's graph may run scripts elsewhere).
+    /// Their folders not yet watched are watched; those watched stay (a watch costs one
+    /// inotify descriptor, and a file may come back).
+    ///
+    /// # Errors
+    /// A folder could not be watched (gone, too many watches): the files there are not
+    /// told, the others are.
+    pub fn follow(&self, files: Vec<PathBuf>) -> notify::Result<()> {
+        let new: BTreeSet<PathBuf> = folders_of(&files)
+            .difference(&lock(&self.folders))
+            .cloned()
+            .collect();
+        *lock(&self.wanted) = files.into_iter().collect();
+        let mut watcher = lock(&self.watcher);
+        let mut folders = lock(&self.folders);
+        for folder in new {
+            watcher.watch(&folder, RecursiveMode::NonRecursive)?;
+            folders.insert(folder);
+        }
+        Ok(())
+    }
+
+    /// The folders watched now.
+    #[cfg(test)]
+    fn folders(&self) -> Vec<PathBuf> {
+        lock(&self.folders).iter().cloned().collect()
+    }
+}
+
+fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
+    m.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
+}
+
+/// The folders `files` are in.
+fn folders_of(files: &[PathBuf]) -> BTreeSet<PathBuf> {
+    files
+        .iter()
+        .filter_map(|f| f.parent().map(Path::to_path_buf))
+        .collect()
 }
 
 /// Watch `files` (absolute paths), telling each save to `to`.
@@ -49,22 +118,21 @@ pub struct FileWatch {
 /// runs without reloading, and says so.
 pub fn watch(files: Vec<PathBuf>, to: Sender<Control>) -> notify::Result<FileWatch> {
     let (saved_tx, saved_rx) = crossbeam_channel::unbounded::<PathBuf>();
-    let wanted: BTreeSet<PathBuf> = files.iter().cloned().collect();
+    let wanted = Arc::new(Mutex::new(files.iter().cloned().collect::<BTreeSet<_>>()));
+    let told = wanted.clone();
     let mut watcher = notify::recommended_watcher(move |event: notify::Result<notify::Event>| {
         let Ok(event) = event else { return };
         if !matches!(event.kind, EventKind::Create(_) | EventKind::Modify(_)) {
             return;
         }
+        let wanted = lock(&told);
         for path in event.paths {
             if wanted.contains(&path) {
                 let _ = saved_tx.send(path);
             }
         }
     })?;
-    let folders: BTreeSet<PathBuf> = files
-        .iter()
-        .filter_map(|f| f.parent().map(Path::to_path_buf))
-        .collect();
+    let folders = folders_of(&files);
     for folder in &folders {
         watcher.watch(folder, RecursiveMode::NonRecursive)?;
     }
@@ -72,7 +140,11 @@ pub fn watch(files: Vec<PathBuf>, to: Sender<Control>) -> notify::Result<FileWat
     let _ = std::thread::Builder::new()
         .name("file-watch".into())
         .spawn(move || settle(&saved_rx, &to));
-    Ok(FileWatch { _watcher: watcher })
+    Ok(FileWatch {
+        watcher: Mutex::new(watcher),
+        wanted,
+        folders: Mutex::new(folders),
+    })
 }
 
 /// Tell each file saved on `saved` to `to` once it has been quiet for [`SETTLE`].
@@ -134,6 +206,38 @@ mod tests {
             told.iter()
                 .all(|t| matches!(t, Control::Reload { file } if *file == brain)),
             "{told:?}"
+        );
+    }
+
+    /// A reload's graph runs a script in a folder not watched before: following the new
+    /// files watches it, and a save there is told; the file the run no longer uses is not.
+    #[test]
+    fn the_watch_follows_a_reloaded_graph_into_a_new_folder() {
+        let dir = tempfile::tempdir().unwrap();
+        let old = dir.path().join("brain.py");
+        std::fs::write(&old, "x = 1\n").unwrap();
+        std::fs::create_dir(dir.path().join("nodes")).unwrap();
+        let new = dir.path().join("nodes").join("policy.py");
+        std::fs::write(&new, "x = 1\n").unwrap();
+        let (tx, rx) = crossbeam_channel::unbounded();
+        let w = watch(vec![old.clone()], tx).unwrap();
+        w.follow(vec![new.clone()]).unwrap();
+        assert_eq!(
+            w.folders(),
+            vec![dir.path().to_path_buf(), dir.path().join("nodes")]
+        );
+        std::fs::write(&old, "x = 2\n").unwrap();
+        std::fs::write(&new, "x = 2\n").unwrap();
+        let told = rx.recv_timeout(Duration::from_secs(5)).unwrap();
+        assert!(
+            matches!(&told, Control::Reload { file } if *file == new),
+            "{told:?}"
+        );
+        let more: Vec<Control> = std::iter::from_fn(|| rx.recv_timeout(SETTLE * 6).ok()).collect();
+        assert!(
+            more.iter()
+                .all(|t| matches!(t, Control::Reload { file } if *file == new)),
+            "{more:?}"
         );
     }
 }

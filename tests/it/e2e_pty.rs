@@ -1047,6 +1047,50 @@ fn saving_a_brain_reloads_it_beside_the_run_before() {
     }
 }
 
+/// The file watch follows the graph: a reload whose graph runs a node from a folder not
+/// watched before (`other/`) watches it, and a save there reloads the lab (the node then
+/// pushes nothing: the pole falls).
+#[test]
+fn a_reloaded_graph_s_new_folder_is_watched() {
+    let _machine = crate::machine::alone();
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::create_dir(dir.path().join("nodes")).unwrap();
+    std::fs::create_dir(dir.path().join("other")).unwrap();
+    let graph = dir.path().join("g.toml");
+    let text = std::fs::read_to_string(crate::repo("graphs/cartpole-python.toml")).unwrap();
+    std::fs::write(&graph, &text).unwrap();
+    let script = std::fs::read_to_string(crate::repo("graphs/nodes/scripted_balancer.py")).unwrap();
+    std::fs::write(dir.path().join("nodes/scripted_balancer.py"), &script).unwrap();
+    let moved = dir.path().join("other/policy.py");
+    std::fs::write(&moved, &script).unwrap();
+    let lab = Lab::start(&["--clock", "virtual", "--graph", graph.to_str().unwrap()]);
+    lab.wait_for("BALANCED", Duration::from_secs(60));
+    std::fs::write(
+        &graph,
+        text.replace("nodes/scripted_balancer.py", "other/policy.py"),
+    )
+    .unwrap();
+    // Named as relative to the lab's folder: `reloaded .tmpXXXX/g.toml: …`.
+    lab.wait_until("the graph's reload", Duration::from_secs(15), |s| {
+        s.contains("reloaded") && s.contains("g.toml:")
+    });
+    // The new run has started (its graph's files are watched from its start).
+    std::thread::sleep(Duration::from_millis(1500));
+    std::fs::write(
+        &moved,
+        script.replace(
+            "self.pub.publish(Force(newtons=float(command) * MOTOR_N))",
+            "self.pub.publish(Force(newtons=0.0))",
+        ),
+    )
+    .unwrap();
+    let screen = lab.wait_until("the node's reload", Duration::from_secs(15), |s| {
+        s.contains("reloaded") && s.contains("other/policy.py:")
+    });
+    assert!(screen.contains("→ fell at"), "{screen}");
+    lab.quit();
+}
+
 /// A graph of 200 nodes in the lab at the two sizes it is made for (issue 51): at first
 /// its columns show what fits and count the rest; ↓ scrolls them; `z` zooms to names and
 /// then to a list of every node and topic with its figures; `/` filters by name as it is
