@@ -66,6 +66,39 @@ pub fn set_sink(to: Option<Sink>) {
     *sink().lock().unwrap_or_else(|e| e.into_inner()) = to;
 }
 
+/// The recorders ([`add_recorder`]), each with its number.
+fn recorders() -> &'static Mutex<Vec<(u64, Sink)>> {
+    static RECORDERS: Mutex<Vec<(u64, Sink)>> = Mutex::new(Vec::new());
+    &RECORDERS
+}
+
+/// Also give every line to `to`, wherever the sink sends it, while the returned guard
+/// lives: a recording of the run the lines come from (the lab records each run it records
+/// with its lines, while its sink is the log pane). Every recorder added takes every line
+/// written in the process meanwhile.
+pub fn add_recorder(to: Sink) -> Recorder {
+    static NEXT: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+    let id = NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    recorders()
+        .lock()
+        .unwrap_or_else(|e| e.into_inner())
+        .push((id, to));
+    Recorder(id)
+}
+
+/// A recorder added by [`add_recorder`]; dropped, it takes no more lines.
+#[must_use = "the recorder takes lines only while this lives"]
+pub struct Recorder(u64);
+
+impl Drop for Recorder {
+    fn drop(&mut self) {
+        recorders()
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .retain(|(id, _)| *id != self.0);
+    }
+}
+
 thread_local! {
     /// The tick the calling thread is in: its run time and node.
     static TICK: RefCell<Option<(Nanos, Arc<str>)>> = const { RefCell::new(None) };
@@ -121,6 +154,7 @@ pub fn emit_for(node: Option<&str>, t: Option<Nanos>, level: Level, text: &str) 
         return;
     }
     let guard = sink().lock().unwrap_or_else(|e| e.into_inner());
+    let recording = recorders().lock().unwrap_or_else(|e| e.into_inner());
     for line in text.lines().filter(|l| !l.trim().is_empty()) {
         let line = LogLine {
             t,
@@ -128,6 +162,9 @@ pub fn emit_for(node: Option<&str>, t: Option<Nanos>, level: Level, text: &str) 
             level,
             text: crate::text::printable(line.trim_end()).into_owned(),
         };
+        for (_, r) in recording.iter() {
+            r(line.clone());
+        }
         match guard.as_ref() {
             Some(to) => to(line),
             // Not `eprintln!`: a closed stderr must not end the run from a node's print.

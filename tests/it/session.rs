@@ -1275,3 +1275,57 @@ fn under_the_real_clock_a_saved_node_restarts_in_place() {
     let log = live.quit_with_log();
     assert_eq!(log.runs.len(), 3);
 }
+
+/// A lab session's recording carries what a Python node prints, one text log per node
+/// (`log/<node>`), as a headless run's does: 50 steps of a node printing once a tick.
+#[test]
+fn a_lab_session_s_recording_carries_what_its_nodes_print() {
+    ratelab::init(); // Python nodes
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::create_dir(dir.path().join("nodes")).unwrap();
+    let balancer =
+        std::fs::read_to_string(crate::repo("graphs/nodes/scripted_balancer.py")).unwrap();
+    let timer = "    def on_timer(self):\n";
+    assert!(balancer.contains(timer));
+    std::fs::write(
+        dir.path().join("nodes/loud.py"),
+        balancer.replace(timer, &format!("{timer}        print('tick here')\n")),
+    )
+    .unwrap();
+    let graph = std::fs::read_to_string(crate::repo("graphs/cartpole-python.toml"))
+        .unwrap()
+        .replace("nodes/scripted_balancer.py", "nodes/loud.py");
+    let g = dir.path().join("loud.toml");
+    std::fs::write(&g, graph).unwrap();
+    let rrd = dir.path().join("lab.rrd");
+    let (ctl_tx, ctl_rx) = unbounded();
+    let (tel_tx, tel_rx) = unbounded::<Telemetry>();
+    let mut s = settings(
+        ClockKind::Virtual,
+        0,
+        true,
+        Speed::Max,
+        &dir.path().join("s.json"),
+    );
+    s.cfg.graph = ratelab::graph::GraphSpec::load(&g).unwrap();
+    s.record = Some(rrd.clone());
+    let engine = Engine::new(s, ctl_rx, tel_tx).spawn();
+    let mut script = steps(50);
+    script.push(Control::Quit);
+    for c in script {
+        ctl_tx.send(c).unwrap();
+    }
+    engine.join().unwrap();
+    drop(tel_rx);
+    let lines: Vec<String> = crate::recording::chunks(&rrd)
+        .iter()
+        .filter(|c| c.entity_path().to_string() == "/log/policy")
+        .flat_map(|c| c.iter_slices::<String>(rerun::TextLog::descriptor_text().component))
+        .flat_map(|s| s.into_iter().map(|x| x.to_string()).collect::<Vec<_>>())
+        .collect();
+    // The policy ticks with the actuator: once at t = 0 and once per step after. (A
+    // recorder takes every line of the process: a test running beside this one may add
+    // its own.)
+    let ours = lines.iter().filter(|l| *l == "tick here").count();
+    assert!((50..=51).contains(&ours), "{lines:?}");
+}

@@ -311,6 +311,11 @@ impl Engine {
         };
         self.log.runs.push(LoggedRun::starting(cfg, policy));
         self.save_log();
+        // What the nodes' code writes goes in the recording too (`log/<node>`), as a
+        // headless run's does, until the run ends.
+        let mut recorder = recording
+            .clone()
+            .map(|r| crate::textlog::add_recorder(Box::new(move |line| r.log_line(&line))));
         let policy_spec = policy.to_string();
         let telemetry = self.telemetry_observer();
         let mut core = RunCore::with_graph(
@@ -372,6 +377,7 @@ impl Engine {
             ..cfg.clone()
         };
         let metrics = live_metrics(&ended_under, &handles, &end, &ticks, timing, exec);
+        drop(recorder.take());
         if let Some(r) = &recording {
             let _ = r.finish(&metrics, &end);
         }
