@@ -163,7 +163,8 @@ pub fn run_lab(
 /// `ratelab launch --processes`): the same dashboard, fed with `telemetry` by a watcher
 /// ([`ratelab::distributed::monitor::Watch`]) instead of an engine in this process. It only
 /// watches: a key that would change the graph is answered with [`app::READ_ONLY`]. `policy`
-/// is the brain's spec, `spec` the graph. Returns when the user quits (or `stop` is set).
+/// is the brain's spec, `spec` the graph. What the processes' nodes write shows in the log
+/// pane (`v`), stamped as in one process. Returns when the user quits (or `stop` is set).
 ///
 /// # Errors
 /// The terminal cannot be opened or drawn on.
@@ -181,7 +182,16 @@ pub fn run_attached(
     // The footer names where the launch listens (another lab or `top` connects there).
     app.set_endpoint(endpoint.map(str::to_string));
     app.show_graph(spec.clone());
-    on_terminal(&mut app, telemetry, stop)
+    // What the processes' nodes write (passed on by the launcher, read back by the watcher)
+    // and this process's own warnings go to the log pane, never over the screen.
+    let (log_tx, log_rx) = crossbeam_channel::bounded::<ratelab::textlog::LogLine>(LOG_QUEUE);
+    app.take_log(log_rx);
+    ratelab::textlog::set_sink(Some(Box::new(move |line| {
+        let _ = log_tx.try_send(line);
+    })));
+    let result = on_terminal(&mut app, telemetry, stop);
+    ratelab::textlog::set_sink(None);
+    result
 }
 
 /// The header's note on an attached graph: `2 processes`.

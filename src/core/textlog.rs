@@ -50,6 +50,50 @@ impl LogLine {
         };
         format!("{stamp}{}", self.text)
     }
+
+    /// A line as [`LogLine::prefixed`] wrote it, read back at `level` (the prefix does not
+    /// say it): `[t=1.234 s policy] text`, `[t=1.234 s] text`, `[policy] text` or `text`
+    /// (what another process of a graph wrote on its stderr). A bracket that is not a stamp
+    /// is the text's own.
+    pub fn parse_prefixed(line: &str, level: Level) -> LogLine {
+        let plain = LogLine {
+            t: None,
+            node: None,
+            level,
+            text: line.to_string(),
+        };
+        let Some((stamp, text)) = line
+            .strip_prefix('[')
+            .and_then(|rest| rest.split_once("] "))
+        else {
+            return plain;
+        };
+        let (t, node) = match stamp.strip_prefix("t=") {
+            Some(timed) => {
+                let (secs, node) = match timed.split_once(" s") {
+                    Some((secs, rest)) => (secs, rest.strip_prefix(' ')),
+                    None => return plain,
+                };
+                match secs.parse::<f64>() {
+                    Ok(s) if (0.0..1e9).contains(&s) => {
+                        (Some(Nanos((s * 1e9).round() as u64)), node)
+                    }
+                    _ => return plain,
+                }
+            }
+            None if !stamp.is_empty() && !stamp.contains(' ') => (None, Some(stamp)),
+            None => return plain,
+        };
+        if node.is_some_and(|n| n.is_empty() || n.contains(' ')) {
+            return plain;
+        }
+        LogLine {
+            t,
+            node: node.map(str::to_string),
+            level,
+            text: text.to_string(),
+        }
+    }
 }
 
 /// Where lines go, when a program took them.
@@ -179,6 +223,36 @@ pub fn emit_for(node: Option<&str>, t: Option<Nanos>, level: Level, text: &str) 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_prefixed_line_reads_back_as_it_was_written() {
+        let lines = [
+            (Some(Nanos(1_234_000_000)), Some("policy")),
+            (Some(Nanos(0)), None),
+            (None, Some("sensor")),
+            (None, None),
+        ];
+        for (t, node) in lines {
+            let line = LogLine {
+                t,
+                node: node.map(str::to_string),
+                level: Level::Warn,
+                text: "x = [1, 2] ok".into(),
+            };
+            assert_eq!(LogLine::parse_prefixed(&line.prefixed(), Level::Warn), line);
+        }
+        // Brackets that are not a stamp are the text's.
+        for text in [
+            "[1, 2] ok",
+            "[t=x s p] y",
+            "[a b] c",
+            "[] d",
+            "[t=1e300 s] e",
+        ] {
+            let read = LogLine::parse_prefixed(text, Level::Info);
+            assert_eq!((read.t, read.node, read.text.as_str()), (None, None, text));
+        }
+    }
 
     #[test]
     fn lines_carry_their_tick_and_go_where_the_program_says() {

@@ -37,7 +37,8 @@
 
 // The layers below, under their own names (`crate::graph`, `crate::time`, …).
 use ratelab_core::{
-    executor, ids, input, limits, metrics, msg, node, output, procs, qos, runlog, text, time, topic,
+    executor, ids, input, limits, metrics, msg, node, output, procs, qos, runlog, text, textlog,
+    time, topic,
 };
 use ratelab_runtime::{
     checkpoint, config, graph, policy, runcore, scheduler, summary, telemetry, ClockKind,

@@ -740,6 +740,8 @@ impl Watch {
             .into_iter()
             .map(|(p, _)| p)
             .collect();
+        // The graph's processes, whose lines on the log key are their nodes' own.
+        let names = processes.clone();
         let mut pending = Pending {
             signals,
             unheard: processes.clone(),
@@ -774,7 +776,12 @@ impl Watch {
                     ));
                     launcher_seen = false;
                 }
-                Ok(Event::Log(line)) => out.push(Telemetry::Applied(format!("launch: {line}"))),
+                Ok(Event::Log(line)) => match process_line(&line, &names) {
+                    // What a process's nodes wrote: to the lab's log pane, stamped as in
+                    // one process.
+                    Some(l) => crate::textlog::emit_for(l.node.as_deref(), l.t, l.level, &l.text),
+                    None => out.push(Telemetry::Applied(format!("launch: {line}"))),
+                },
                 Ok(Event::Over(over)) if !fold.is_over() => {
                     over_at = Some(Instant::now());
                     out = fold.ended(*over);
@@ -817,6 +824,22 @@ pub struct Signals {
     /// Told once every process has published its last figures ([`LiveStats::done`]) or
     /// withdrawn its nodes' tokens (it left or died): nothing more is coming.
     pub finished: Option<Sender<()>>,
+}
+
+/// A line on the log key that a process of the graph (one of `processes`) wrote on its
+/// stderr, `PROCESS: [t=1.234 s node] text` (the launcher passes each on so), read back as
+/// the line its node wrote; `None` for the launcher's own progress lines.
+fn process_line(line: &str, processes: &[String]) -> Option<crate::textlog::LogLine> {
+    let (process, rest) = line.split_once(": ")?;
+    if !processes.iter().any(|p| p == process) {
+        return None;
+    }
+    let mut l = crate::textlog::LogLine::parse_prefixed(rest, crate::textlog::Level::Info);
+    if l.node.is_none() {
+        // Not a node's: the process's own (a warning, a failure), said as the process's.
+        l.text = format!("{process}: {}", l.text);
+    }
+    Some(l)
 }
 
 /// The processes a watcher's [`Signals`] still wait for.
@@ -941,6 +964,27 @@ mod tests {
             graph: GraphSpec::chapter(),
             ..RunConfig::default()
         }
+    }
+
+    #[test]
+    fn a_process_s_stderr_line_is_its_node_s_and_a_progress_line_is_the_launcher_s() {
+        let processes = vec!["robot".to_string(), "policy".to_string()];
+        let l = process_line("policy: [t=1.240 s policy] tick here", &processes).unwrap();
+        assert_eq!(
+            (l.t, l.node.as_deref(), l.text.as_str()),
+            (
+                Some(crate::time::Nanos(1_240_000_000)),
+                Some("policy"),
+                "tick here"
+            )
+        );
+        let own = process_line("robot: warning: something", &processes).unwrap();
+        assert_eq!(
+            (own.node, own.text.as_str()),
+            (None, "robot: warning: something")
+        );
+        assert!(process_line("process 'policy' joined: 2 of 2", &processes).is_none());
+        assert!(process_line("elsewhere: [t=1.0 s p] x", &processes).is_none());
     }
 
     fn stats(published: u64, dropped: u64) -> TopicStats {

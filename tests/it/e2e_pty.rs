@@ -592,6 +592,62 @@ fn launch_across_processes_opens_the_lab_and_quitting_leaves_nothing_behind() {
     }
 }
 
+/// What a node prints in another process of a launch shows in the lab's log pane (`v`),
+/// stamped with its run time and node as in one process, never over the screen.
+#[test]
+fn a_launch_s_lab_shows_what_its_processes_nodes_print_in_the_log_pane() {
+    let _machine = crate::machine::alone();
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::create_dir(dir.path().join("nodes")).unwrap();
+    let balancer =
+        std::fs::read_to_string(crate::repo("graphs/nodes/scripted_balancer.py")).unwrap();
+    let timer = "    def on_timer(self):\n";
+    assert!(balancer.contains(timer));
+    std::fs::write(
+        dir.path().join("nodes/loud.py"),
+        balancer.replace(timer, &format!("{timer}        print('zqx tick here')\n")),
+    )
+    .unwrap();
+    let graph = std::fs::read_to_string(crate::repo("graphs/cartpole-python.toml"))
+        .unwrap()
+        .replace("nodes/scripted_balancer.py", "nodes/loud.py");
+    let g = dir.path().join("loud.toml");
+    std::fs::write(&g, graph).unwrap();
+    let port = crate::distributed::free_port();
+    let ep = format!("tls/127.0.0.1:{port}");
+    let args = [
+        "launch",
+        "--processes",
+        "--clock",
+        "real",
+        "--listen",
+        &ep,
+        "--graph",
+        g.to_str().unwrap(),
+    ];
+    let mut lab = Lab::start_sized(&args, &[], 120, 40);
+    lab.wait_for("BALANCED", Duration::from_secs(60));
+    type_slowly(&mut lab, "v");
+    // A row of the pane: `│t=7.40  policy    zqx tick here`.
+    let screen = lab.wait_until(
+        "a line of the policy's in the pane",
+        Duration::from_secs(15),
+        |s| {
+            s.lines().any(|l| {
+                l.starts_with("│t=") && l.contains(" policy ") && l.contains("zqx tick here")
+            })
+        },
+    );
+    assert!(
+        !screen
+            .lines()
+            .any(|l| l.starts_with("zqx") || l.starts_with("policy: ")),
+        "nothing over the screen: {screen}"
+    );
+    lab.quit();
+    crate::distributed::assert_none_left(port, Duration::from_millis(500));
+}
+
 /// Under the virtual clock the lab paces the lockstep at ×1, as in one process; the arrows
 /// read each topic's rate (the policy's copy of /obs sampled per tick, not per batch of
 /// figures), and the lockstep's processes stop with the lab.
