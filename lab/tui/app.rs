@@ -777,6 +777,16 @@ impl App {
             self.say(READ_ONLY.to_string());
             return;
         }
+        // Reviewing, the screen is the run as it was: a change would not show.
+        let moves = m.is_seek()
+            || matches!(
+                m,
+                Msg::TogglePause | Msg::Reset | Msg::NextSeed | Msg::SwitchClock
+            );
+        if self.reviewing() && !m.only_views() && !moves {
+            self.say("reviewing the run as recorded: space leaves, then change it".into());
+            return;
+        }
         match m {
             Msg::RateDown => {
                 let n = self.rate_target();

@@ -146,6 +146,8 @@ impl Msg {
                 | Msg::ToggleRos2
                 | Msg::LogOlder
                 | Msg::LogNewer
+                | Msg::ChartsNarrower
+                | Msg::ChartsWider
                 | Msg::Back
                 | Msg::Quit
         )

@@ -75,8 +75,9 @@ impl FileWatch {
     /// inotify descriptor, and a file may come back).
     ///
     /// # Errors
-    /// A folder could not be watched (gone, too many watches): the files there are not
-    /// told, the others are.
+    /// The first folder that could not be watched (gone, too many watches): the files there
+    /// are not told, the others are (each folder is tried, and one that failed is tried
+    /// again on the next call).
     pub fn follow(&self, files: Vec<PathBuf>) -> notify::Result<()> {
         let new: BTreeSet<PathBuf> = folders_of(&files)
             .difference(&lock(&self.folders))
@@ -85,11 +86,16 @@ impl FileWatch {
         *lock(&self.wanted) = files.into_iter().collect();
         let mut watcher = lock(&self.watcher);
         let mut folders = lock(&self.folders);
+        let mut failed = Ok(());
         for folder in new {
-            watcher.watch(&folder, RecursiveMode::NonRecursive)?;
-            folders.insert(folder);
+            match watcher.watch(&folder, RecursiveMode::NonRecursive) {
+                Ok(()) => {
+                    folders.insert(folder);
+                }
+                Err(e) => failed = failed.and(Err(e)),
+            }
         }
-        Ok(())
+        failed
     }
 
     /// The folders watched now.

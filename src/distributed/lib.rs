@@ -131,6 +131,11 @@ pub fn set_zenoh_runtime() -> Result<(), DistError> {
 
 pub use crate::limits::MAX_PROCESSES;
 
+/// The longest line of a started process's stderr that the launcher passes on
+/// ([`launcher::LaunchOptions::child_stderr`], and on the graph's log key to its lab), bytes
+/// (the rest of the line is dropped).
+pub const MAX_STDERR_LINE: usize = 4096;
+
 /// Something that stops a multi-process run, as one line.
 #[derive(Debug, thiserror::Error)]
 pub enum DistError {

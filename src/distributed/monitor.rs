@@ -684,8 +684,9 @@ impl Watch {
             .declare_subscriber(keys.log())
             .callback(move |s| {
                 let bytes = s.payload().to_bytes();
-                // A progress line: short text, its control characters written out.
-                if bytes.len() <= 1024 {
+                // A progress line, or a process's stderr line (at most MAX_STDERR_LINE
+                // bytes, after its process's name): its control characters written out.
+                if bytes.len() <= crate::MAX_STDERR_LINE + 256 {
                     let line = String::from_utf8_lossy(&bytes);
                     let first = line.lines().next().unwrap_or("");
                     send(&t, Event::Log(crate::text::printable(first).into_owned()));
@@ -742,6 +743,13 @@ impl Watch {
             .collect();
         // The graph's processes, whose lines on the log key are their nodes' own.
         let names = processes.clone();
+        let node_names: Vec<String> = self
+            .cfg
+            .graph
+            .nodes
+            .iter()
+            .map(|n| n.name.clone())
+            .collect();
         let mut pending = Pending {
             signals,
             unheard: processes.clone(),
@@ -776,7 +784,7 @@ impl Watch {
                     ));
                     launcher_seen = false;
                 }
-                Ok(Event::Log(line)) => match process_line(&line, &names) {
+                Ok(Event::Log(line)) => match process_line(&line, &names, &node_names) {
                     // What a process's nodes wrote: to the lab's log pane, stamped as in
                     // one process.
                     Some(l) => crate::textlog::emit_for(l.node.as_deref(), l.t, l.level, &l.text),
@@ -829,12 +837,22 @@ pub struct Signals {
 /// A line on the log key that a process of the graph (one of `processes`) wrote on its
 /// stderr, `PROCESS: [t=1.234 s node] text` (the launcher passes each on so), read back as
 /// the line its node wrote; `None` for the launcher's own progress lines.
-fn process_line(line: &str, processes: &[String]) -> Option<crate::textlog::LogLine> {
+fn process_line(
+    line: &str,
+    processes: &[String],
+    nodes: &[String],
+) -> Option<crate::textlog::LogLine> {
     let (process, rest) = line.split_once(": ")?;
     if !processes.iter().any(|p| p == process) {
         return None;
     }
     let mut l = crate::textlog::LogLine::parse_prefixed(rest, crate::textlog::Level::Info);
+    if l.node.as_ref().is_some_and(|n| !nodes.contains(n)) {
+        // A stamp naming no node of the graph (`[ratelab] warning: …`): the text's own.
+        l.t = None;
+        l.node = None;
+        l.text = rest.to_string();
+    }
     if l.node.is_none() {
         // Not a node's: the process's own (a warning, a failure), said as the process's.
         l.text = format!("{process}: {}", l.text);
@@ -969,7 +987,8 @@ mod tests {
     #[test]
     fn a_process_s_stderr_line_is_its_node_s_and_a_progress_line_is_the_launcher_s() {
         let processes = vec!["robot".to_string(), "policy".to_string()];
-        let l = process_line("policy: [t=1.240 s policy] tick here", &processes).unwrap();
+        let nodes = vec!["sensor".to_string(), "policy".to_string()];
+        let l = process_line("policy: [t=1.240 s policy] tick here", &processes, &nodes).unwrap();
         assert_eq!(
             (l.t, l.node.as_deref(), l.text.as_str()),
             (
@@ -978,13 +997,18 @@ mod tests {
                 "tick here"
             )
         );
-        let own = process_line("robot: warning: something", &processes).unwrap();
+        let own = process_line("robot: warning: something", &processes, &nodes).unwrap();
         assert_eq!(
             (own.node, own.text.as_str()),
             (None, "robot: warning: something")
         );
-        assert!(process_line("process 'policy' joined: 2 of 2", &processes).is_none());
-        assert!(process_line("elsewhere: [t=1.0 s p] x", &processes).is_none());
+        let tool = process_line("robot: [ratelab] warning: x", &processes, &nodes).unwrap();
+        assert_eq!(
+            (tool.node, tool.text.as_str()),
+            (None, "robot: [ratelab] warning: x")
+        );
+        assert!(process_line("process 'policy' joined: 2 of 2", &processes, &nodes).is_none());
+        assert!(process_line("elsewhere: [t=1.0 s p] x", &processes, &nodes).is_none());
     }
 
     fn stats(published: u64, dropped: u64) -> TopicStats {

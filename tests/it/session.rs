@@ -1195,6 +1195,13 @@ fn under_the_real_clock_a_saved_node_restarts_in_place() {
         _ => None,
     };
     while live.wait_for("a step", step_at) < ratelab::Nanos::SECOND {}
+    // A live change first: the run's graph is then not the file's, and a save of code
+    // still restarts only the node.
+    live.ctl
+        .send(Control::Apply(ratelab::run::Command::SetQueueDepth {
+            depth: 2,
+        }))
+        .unwrap();
     let original = std::fs::read_to_string(&node_file).unwrap();
     // A save that does not load: said, and the run goes on.
     std::fs::write(&node_file, "def broken(:\n").unwrap();
@@ -1328,4 +1335,62 @@ fn a_lab_session_s_recording_carries_what_its_nodes_print() {
     // its own.)
     let ours = lines.iter().filter(|l| *l == "tick here").count();
     assert!((50..=51).contains(&ours), "{lines:?}");
+}
+
+/// Under the real clock a saved Python brain (`--policy FILE.py`) is loaded again and
+/// swapped in, the run going on: the line says so and the change is logged as a brain
+/// change.
+#[test]
+fn under_the_real_clock_a_saved_brain_is_swapped_in_place() {
+    ratelab::init(); // Python brains
+    let _machine = crate::machine::alone();
+    let dir = tempfile::tempdir().unwrap();
+    let brain = dir.path().join("brain.py");
+    let balancer = "import math\n\ndef act(obs):\n    theta = math.atan2(float(obs[3]), float(obs[2]))\n    u = 10.0 * theta + 2.0 * float(obs[4]) + 0.4 * float(obs[0]) + 0.8 * float(obs[1])\n    return max(-1.0, min(1.0, u))\n";
+    std::fs::write(&brain, balancer).unwrap();
+    let mut s = settings(
+        ClockKind::Real,
+        1,
+        false,
+        Speed::Times(1.0),
+        &dir.path().join("session.json"),
+    );
+    // Named with its function: the file saved is the spec's file part.
+    s.policy = format!("{}:act", brain.display());
+    let (ctl, ctl_rx) = unbounded();
+    let (tel_tx, tel) = unbounded::<Telemetry>();
+    let engine = Engine::new(s, ctl_rx, tel_tx).spawn();
+    let live = LiveEngine {
+        ctl,
+        tel,
+        engine,
+        _dir: dir,
+    };
+    let step_at = |t: &Telemetry| match t {
+        Telemetry::Step(s) => Some(s.t),
+        _ => None,
+    };
+    while live.wait_for("a step", step_at) < ratelab::Nanos(500 * ratelab::Nanos::MILLISECOND.0) {}
+    std::fs::write(&brain, format!("{balancer}# saved again\n")).unwrap();
+    live.ctl
+        .send(Control::Reload {
+            file: brain.clone(),
+        })
+        .unwrap();
+    let line = live.wait_for("the swap", |t| match t {
+        Telemetry::Started { .. } => panic!("a new run started: not in place"),
+        Telemetry::Applied(l) if l.starts_with("reloaded ") => Some(l.clone()),
+        _ => None,
+    });
+    assert!(line.contains("the brain swapped in place"), "{line}");
+    let log = live.quit_with_log();
+    assert_eq!(log.runs.len(), 1);
+    assert!(
+        log.runs[0]
+            .commands
+            .iter()
+            .any(|c| matches!(&c.command, ratelab::run::Command::SetPolicy { .. })),
+        "{:?}",
+        log.runs[0].commands
+    );
 }

@@ -8,6 +8,22 @@ use super::{App, MAX_JOURNAL};
 use ratelab::session::Telemetry;
 use ratelab::Nanos;
 
+/// The clock the run was under at `at`, as `journal` tells it (it may have switched in
+/// place).
+fn clock_at(journal: &[(Nanos, Telemetry)], at: Nanos) -> String {
+    let mut clock = "real".to_string();
+    for (_, m) in journal.iter().take_while(|(t, _)| *t <= at) {
+        match m {
+            Telemetry::Started { cfg, .. } => clock = cfg.clock.to_string(),
+            Telemetry::ClockSwitched { at: s, clock: c } if *s < at => {
+                clock = c.to_string();
+            }
+            _ => {}
+        }
+    }
+    clock
+}
+
 /// Messages kept while reviewing, at most (the run has ended: only notices come).
 const MAX_PENDING: usize = 4096;
 
@@ -24,7 +40,9 @@ pub(in crate::tui) struct Review {
 impl App {
     /// A real-clock run that has ended can be reviewed (space).
     pub(in crate::tui) fn can_review(&self) -> bool {
-        self.clock == "real" && self.ended_with.is_some() && self.attached.is_none()
+        // A fall shows (its step says so) a moment before the engine's end arrives.
+        let ended = self.ended_with.is_some() || matches!(self.verdict, super::Verdict::Fell(_));
+        self.clock == "real" && ended && self.attached.is_none()
     }
 
     /// True while reviewing: ← and → move through the run.
@@ -61,9 +79,10 @@ impl App {
             return;
         };
         let to = to.min(r.end);
+        let clock = clock_at(&r.journal, to);
         self.journal = r.journal.clone();
         self.rewind(to);
-        self.clock = "real".into();
+        self.clock = clock;
         self.say(format!(
             "t={:.3} s as recorded: a real-clock run cannot run again (space leaves)",
             to.as_secs_f64()
@@ -75,9 +94,10 @@ impl App {
         let Some(r) = self.review.take() else {
             return;
         };
+        let clock = clock_at(&r.journal, r.end);
         self.journal = r.journal;
         self.rewind(r.end);
-        self.clock = "real".into();
+        self.clock = clock;
         self.say("the run as it ended".into());
         for t in r.pending {
             self.on_telemetry(t);

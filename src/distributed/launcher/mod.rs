@@ -130,9 +130,7 @@ pub struct LaunchOptions {
     pub ros2_domain: Option<u32>,
 }
 
-/// The longest line of a started process's stderr that [`LaunchOptions::child_stderr`]
-/// passes on, bytes (the rest of the line is dropped).
-pub const MAX_STDERR_LINE: usize = 4096;
+pub use crate::MAX_STDERR_LINE;
 
 /// What a launched run produced.
 pub struct LaunchReport {

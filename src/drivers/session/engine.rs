@@ -103,6 +103,10 @@ pub struct Engine {
     pub(super) run_policy: String,
     /// Mutes the step telemetry while a seek back runs the run again.
     pub(super) muted: Arc<AtomicBool>,
+    /// The graph as its files gave it when they were last read (at the start, or a save's
+    /// reload): what a save under the real clock is compared with, not the run's graph,
+    /// whose rates and depths the keys may have changed since.
+    pub(super) file_graph: crate::graph::GraphSpec,
 }
 
 /// How a run of the lab ended, for the next: what the user asked, and the graph (rates,
@@ -139,7 +143,9 @@ impl Engine {
     /// A new engine; call [`Engine::run`] on its own thread.
     pub fn new(settings: SessionSettings, rx: Receiver<Control>, tx: Sender<Telemetry>) -> Self {
         let speed = settings.speed;
+        let file_graph = settings.cfg.graph.clone();
         Self {
+            file_graph,
             settings,
             rx,
             tx,
@@ -183,6 +189,7 @@ impl Engine {
                     ..
                 }) => {
                     // The new code's graph, as the files now give it; the brain as it was.
+                    self.file_graph = new.graph.clone();
                     cfg = *new;
                     policy = last_policy;
                     self.next_run.clear();
@@ -247,27 +254,12 @@ impl Engine {
         self.run_index += 1;
         self.run_policy = policy.to_string();
         let brain = load_policy(policy).map_err(|e| e.to_string())?;
-        let mut notice = None;
-        let recording = match self.recording_path() {
-            Some(path) => {
-                crate::recording::check_output_path(&path, self.settings.force)
-                    .map_err(|e| e.to_string())?;
-                let (r, n) = Recording::create_with(
-                    &path,
-                    cfg,
-                    &brain.label(),
-                    &RecordOptions {
-                        spawn: self.settings.spawn,
-                        window: self.settings.record_window,
-                    },
-                    self.settings.force,
-                )
-                .map_err(|e| e.to_string())?;
-                notice = n;
-                Some(r)
-            }
-            None => None,
-        };
+        let (recording, notice) = self.create_recording(cfg, &brain.label())?;
+        // What the nodes' code writes goes in the recording too (`log/<node>`), as a
+        // headless run's does — a script's loading included — until the run ends.
+        let mut recorder = recording
+            .clone()
+            .map(|r| crate::textlog::add_recorder(Box::new(move |line| r.log_line(&line))));
         let mut observers = vec![self.telemetry_observer().observer()];
         if let Some(r) = &recording {
             observers.push(r.observer());
@@ -311,11 +303,6 @@ impl Engine {
         };
         self.log.runs.push(LoggedRun::starting(cfg, policy));
         self.save_log();
-        // What the nodes' code writes goes in the recording too (`log/<node>`), as a
-        // headless run's does, until the run ends.
-        let mut recorder = recording
-            .clone()
-            .map(|r| crate::textlog::add_recorder(Box::new(move |line| r.log_line(&line))));
         let policy_spec = policy.to_string();
         let telemetry = self.telemetry_observer();
         let mut core = RunCore::with_graph(
@@ -402,6 +389,32 @@ impl Engine {
         }
         self.save_log();
         let _ = self.tx.send(Telemetry::ClockSwitched { at, clock });
+    }
+
+    /// This run's recording, when the lab records (`--record`), and the notice its
+    /// creation gave (a viewer that could not be spawned).
+    fn create_recording(
+        &self,
+        cfg: &RunConfig,
+        brain: &str,
+    ) -> Result<(Option<Recording>, Option<String>), String> {
+        let Some(path) = self.recording_path() else {
+            return Ok((None, None));
+        };
+        crate::recording::check_output_path(&path, self.settings.force)
+            .map_err(|e| e.to_string())?;
+        let (r, notice) = Recording::create_with(
+            &path,
+            cfg,
+            brain,
+            &RecordOptions {
+                spawn: self.settings.spawn,
+                window: self.settings.record_window,
+            },
+            self.settings.force,
+        )
+        .map_err(|e| e.to_string())?;
+        Ok((Some(r), notice))
     }
 
     pub(super) fn current_policy_spec(&self, initial: &str) -> String {

@@ -207,7 +207,7 @@ impl Engine {
         msg: Result<Control, RecvTimeoutError>,
         now: Nanos,
         ran: &Stretch<'_>,
-        restart: &mut Option<Restart>,
+        restart: &mut Option<Box<Restart>>,
     ) -> Option<Next> {
         match msg {
             Ok(Control::Apply(cmd)) => {

@@ -98,7 +98,7 @@ pub(super) enum RealExit {
     /// The user moved on.
     Done(Segment),
     /// A save restarts nodes in place; the real clock goes on after.
-    Restart(Restart),
+    Restart(Box<Restart>),
 }
 
 /// Nodes to restart in place on a save under the real clock.
@@ -107,8 +107,10 @@ pub(super) struct Restart {
     pub(super) file: std::path::PathBuf,
     /// Its name as the user knows it.
     name: String,
-    /// The graph with the new code.
+    /// The run's graph with the new code.
     spec: GraphSpec,
+    /// The graph as the files now give it.
+    read: GraphSpec,
     /// The nodes whose code or parameters changed, by graph index.
     which: Vec<usize>,
 }
@@ -116,7 +118,7 @@ pub(super) struct Restart {
 /// What a save under the real clock does ([`Engine::reload_in_place`]).
 pub(super) enum InPlace {
     /// Restart these nodes in place.
-    Restart(Restart),
+    Restart(Box<Restart>),
     /// As [`Engine::reload`]: the next run (`Some`), or nothing (`None`: it was said).
     Next(Option<Next>),
     /// The brain's file: apply `swap` (a live brain change, logged as one) and, when it
@@ -149,29 +151,49 @@ impl Engine {
                 return InPlace::Next(None);
             }
         };
-        if let Err(why) = running.same_shape(&new_cfg.graph) {
+        // What the save changed, against the files as last read (the run's graph may hold
+        // rates and depths the keys set since, which stay).
+        let old = &self.file_graph;
+        let moved = old.nodes.iter().zip(&new_cfg.graph.nodes).find(|(o, n)| {
+            o.python.as_ref().map(|p| &p.script) != n.python.as_ref().map(|p| &p.script)
+        });
+        let why = match old.same_shape(&new_cfg.graph) {
+            Err(why) => Some(why),
+            // A node's script moved: its new file is watched from the next run's start.
+            Ok(()) => moved.map(|(o, _)| format!("node '{}' runs another script", o.name)),
+        };
+        if let Some(why) = why {
             let _ = self
                 .tx
                 .send(Telemetry::Applied(format!("{why}: the run starts again")));
             return InPlace::Next(self.reload(cfg, file, None));
         }
-        let which: Vec<usize> = running
+        let saved = std::path::absolute(file).unwrap_or_else(|_| file.to_path_buf());
+        let which: Vec<usize> = old
             .nodes
             .iter()
             .zip(&new_cfg.graph.nodes)
             .enumerate()
-            .filter(|(_, (old, new))| {
-                old.params != new.params
-                    || old.python != new.python
-                    || new
-                        .python
+            .filter(|(_, (o, n))| {
+                o.params != n.params
+                    || o.python != n.python
+                    || n.python
                         .as_ref()
-                        .is_some_and(|p| Path::new(&p.script) == file)
+                        .is_some_and(|p| std::path::absolute(&p.script).is_ok_and(|s| s == saved))
             })
             .map(|(i, _)| i)
             .collect();
+        if which.contains(&running.actuator.0) {
+            // It steps the plant and tells the run's observers: not restarted alone.
+            let _ = self.tx.send(Telemetry::Applied(
+                "the actuator changed: the run starts again".into(),
+            ));
+            return InPlace::Next(self.reload(cfg, file, None));
+        }
         let policy = self.current_policy_spec(&self.run_policy);
-        if which.is_empty() && Path::new(&policy) == file {
+        let brain = ratelab_runtime::interpreter::parse_spec(&policy)
+            .and_then(|(script, _)| std::path::absolute(script).ok());
+        if which.is_empty() && brain.is_some_and(|b| b == saved) {
             // The brain: loaded again from the file and swapped in, as `p` swaps brains.
             return InPlace::Brain {
                 name,
@@ -184,12 +206,19 @@ impl Engine {
             )));
             return InPlace::Next(None);
         }
-        InPlace::Restart(Restart {
+        // The run's graph, its rates and depths as they are, with the saved code.
+        let mut spec = running.clone();
+        for &i in &which {
+            spec.nodes[i].params = new_cfg.graph.nodes[i].params.clone();
+            spec.nodes[i].python = new_cfg.graph.nodes[i].python.clone();
+        }
+        InPlace::Restart(Box::new(Restart {
             file: file.to_path_buf(),
             name,
-            spec: new_cfg.graph,
+            spec,
+            read: new_cfg.graph,
             which,
-        })
+        }))
     }
 
     /// The brain's file `name` was loaded again and swapped in, under the real clock.
@@ -201,10 +230,11 @@ impl Engine {
 
     /// Restart `r`'s nodes in `core` (stopped between two stretches of the real clock),
     /// and say what was done, or why not (the run goes on with the code before).
-    pub(super) fn restart_in_place(&mut self, core: &mut RunCore, r: Restart) {
+    pub(super) fn restart_in_place(&mut self, core: &mut RunCore, r: Box<Restart>) {
         let at = core.now();
         match core.restart_nodes(&r.spec, &r.which) {
             Ok(()) => {
+                self.file_graph = r.read;
                 let names: Vec<String> = r
                     .which
                     .iter()

@@ -19,8 +19,9 @@ impl RunCore {
     ///
     /// # Errors
     /// A one-line description, the run unchanged: `spec` is not the run's graph but for
-    /// code and parameters ([`GraphSpec::same_shape`]), an index is out of range, a node's
-    /// code does not load, or the run has ended.
+    /// code and parameters ([`GraphSpec::same_shape`]), an index is out of range or the
+    /// actuator's (it steps the plant and holds the run's step observers), a node's code
+    /// does not load, or the run has ended.
     pub fn restart_nodes(&mut self, spec: &GraphSpec, which: &[usize]) -> Result<(), String> {
         if self.end.is_some() {
             return Err("the run has ended".into());
@@ -28,6 +29,10 @@ impl RunCore {
         self.cfg.graph.same_shape(spec)?;
         if let Some(&i) = which.iter().find(|&&i| i >= self.nodes.len()) {
             return Err(format!("no node {i} in the graph"));
+        }
+        if which.contains(&spec.actuator.0) {
+            // It steps the plant and tells the run's observers (the lab, a recording).
+            return Err("the actuator cannot restart in place: it holds the run's steps".into());
         }
         let mut handles = self.handles.clone();
         handles.spec = Arc::new(spec.clone());
