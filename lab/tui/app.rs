@@ -509,26 +509,19 @@ impl App {
                     self.timeline.push(s, s.end.max(self.now));
                 }
             }
-            Telemetry::Changed { at, text } => {
-                self.live.change(at, text.clone());
-                // The executors' counts start again from the change (as the arrows do).
-                self.exec.retain(|(t, _)| *t >= at);
-                self.exec_from = Some(at);
-                self.say(text);
-            }
+            Telemetry::Changed { at, text } => self.new_segment(at, text),
             Telemetry::ClockSwitched { at, clock } => {
                 // The same run goes on: a new segment, as a change starts one.
                 self.clock = clock.to_string();
-                let text = format!(
-                    "clock → {clock} at t={:.2} s: the same run goes on (its state carried across)",
-                    at.as_secs_f64()
-                );
-                self.live.change(at, text.clone());
-                self.exec.retain(|(t, _)| *t >= at);
-                self.exec_from = Some(at);
                 // The real clock's tick windows start again with its ticks.
                 self.ticks.iter_mut().for_each(VecDeque::clear);
-                self.say(text);
+                self.new_segment(
+                    at,
+                    format!(
+                        "clock → {clock} at t={:.2} s: the same run goes on (its state carried across)",
+                        at.as_secs_f64()
+                    ),
+                );
             }
             Telemetry::Ended { metrics, reason } => self.on_ended(&metrics, &reason),
             Telemetry::Error(e) => self.say(e),
@@ -545,6 +538,15 @@ impl App {
                 }
             }
         }
+    }
+
+    /// A change at run time `at`, said in `text`, starts a new segment of the run: the
+    /// totals, and the executors' counts, start again there (as the arrows do).
+    fn new_segment(&mut self, at: Nanos, text: String) {
+        self.live.change(at, text.clone());
+        self.exec.retain(|(t, _)| *t >= at);
+        self.exec_from = Some(at);
+        self.say(text);
     }
 
     /// A run started: everything shown is its, from its configuration.

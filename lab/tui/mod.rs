@@ -277,6 +277,31 @@ mod tests {
         App::after_virtual_run(cfg, ended).unwrap()
     }
 
+    /// A lab told the run of `cfg` whose steps are `trace`, up to run time `upto`; and what
+    /// it asked of the engine.
+    fn told(
+        cfg: &RunConfig,
+        trace: &[ratelab::runlog::StepRecord],
+        upto: ratelab::Nanos,
+    ) -> (App, crossbeam_channel::Receiver<Control>) {
+        let (tx, rx) = crossbeam_channel::unbounded();
+        let mut app = App::new(tx, "scripted".into(), None, Speed::Times(1.0));
+        app.on_telemetry(Telemetry::Started {
+            cfg: cfg.clone(),
+            policy: "scripted".into(),
+            recording: None,
+        });
+        for s in trace.iter().filter(|s| s.t <= upto) {
+            app.on_telemetry(Telemetry::Step(Box::new(s.clone())));
+        }
+        (app, rx)
+    }
+
+    /// A 120×40 screen's rows but the footer's (the message line).
+    fn rows(screen: &str) -> Vec<String> {
+        screen.lines().take(39).map(str::to_string).collect()
+    }
+
     fn render(app: &App, w: u16, h: u16) -> String {
         let mut t = Terminal::new(TestBackend::new(w, h)).unwrap();
         let view = app.view();
@@ -1074,24 +1099,13 @@ mod tests {
         let cfg = virtual_cfg(8.0, 8);
         let report = run(&cfg, Box::new(Scripted), RunOptions::new()).unwrap();
         let at = ratelab::Nanos(5_000_000_000);
-        let told = |upto: ratelab::Nanos| {
-            let (tx, _rx) = crossbeam_channel::unbounded();
-            let mut app = App::new(tx, "scripted".into(), None, Speed::Times(1.0));
-            app.on_telemetry(Telemetry::Started {
-                cfg: cfg.clone(),
-                policy: "scripted".into(),
-                recording: None,
-            });
-            for s in report.trace.iter().filter(|s| s.t <= upto) {
-                app.on_telemetry(Telemetry::Step(Box::new(s.clone())));
-            }
-            app
-        };
-        let mut back = told(ratelab::Nanos(8_000_000_000));
+        let (mut back, _) = told(&cfg, &report.trace, ratelab::Nanos(8_000_000_000));
         let before = render(&back, 120, 40);
         back.on_telemetry(Telemetry::Rewound { at });
-        let (a, b) = (render(&back, 120, 40), render(&told(at), 120, 40));
-        let rows = |s: &str| s.lines().take(39).map(str::to_string).collect::<Vec<_>>();
+        let (a, b) = (
+            render(&back, 120, 40),
+            render(&told(&cfg, &report.trace, at).0, 120, 40),
+        );
         assert_eq!(rows(&a), rows(&b));
         assert_ne!(rows(&a), rows(&before), "8 Hz falls between 5 and 8 s");
         assert!(a.contains("back at t=5.000 s"), "{a}");
@@ -1107,31 +1121,11 @@ mod tests {
         let mut cfg = virtual_cfg(8.0, 30);
         let report = run(&cfg, Box::new(Scripted), RunOptions::new()).unwrap();
         cfg.clock = ClockKind::Real;
-        let told = |upto: Option<ratelab::Nanos>| {
-            let (tx, rx) = crossbeam_channel::unbounded();
-            let mut app = App::new(tx, "scripted".into(), None, Speed::Times(1.0));
-            app.on_telemetry(Telemetry::Started {
-                cfg: cfg.clone(),
-                policy: "scripted".into(),
-                recording: None,
-            });
-            for s in report
-                .trace
-                .iter()
-                .filter(|s| upto.is_none_or(|u| s.t <= u))
-            {
-                app.on_telemetry(Telemetry::Step(Box::new(s.clone())));
-            }
-            if upto.is_none() {
-                app.on_telemetry(Telemetry::Ended {
-                    metrics: Box::new(report.metrics.clone()),
-                    reason: report.end.reason.clone(),
-                });
-            }
-            (app, rx)
-        };
-        let rows = |s: &str| s.lines().take(39).map(str::to_string).collect::<Vec<_>>();
-        let (mut app, rx) = told(None);
+        let (mut app, rx) = told(&cfg, &report.trace, report.end.at);
+        app.on_telemetry(Telemetry::Ended {
+            metrics: Box::new(report.metrics.clone()),
+            reason: report.end.reason.clone(),
+        });
         let ended = render(&app, 120, 40);
         assert!(ended.contains("FELL"), "{ended}");
         app.on_msg(Msg::TogglePause);
@@ -1142,7 +1136,7 @@ mod tests {
         let back = end.saturating_sub(ratelab::Nanos(2_000_000_000));
         let shown = render(&app, 120, 40);
         assert!(shown.contains("real clock REVIEW"), "{shown}");
-        let (then, _) = told(Some(back));
+        let (then, _) = told(&cfg, &report.trace, back);
         assert_eq!(
             rows(&shown)[1..],
             rows(&render(&then, 120, 40))[1..],
@@ -1166,16 +1160,7 @@ mod tests {
     fn the_charts_zoom_from_0_2_s_to_the_whole_run() {
         let cfg = virtual_cfg(50.0, 20);
         let report = run(&cfg, Box::new(Scripted), RunOptions::new()).unwrap();
-        let (tx, _rx) = crossbeam_channel::unbounded();
-        let mut app = App::new(tx, "scripted".into(), None, Speed::Times(1.0));
-        app.on_telemetry(Telemetry::Started {
-            cfg,
-            policy: "scripted".into(),
-            recording: None,
-        });
-        for s in &report.trace {
-            app.on_telemetry(Telemetry::Step(Box::new(s.clone())));
-        }
+        let (mut app, _) = told(&cfg, &report.trace, cfg.duration);
         let v = app.view();
         assert_eq!(
             (v.chart_s, v.chart_label.as_str()),
@@ -1224,17 +1209,8 @@ mod tests {
     fn a_clock_switch_in_place_shows_and_a_rewind_to_it_is_virtual_again() {
         let cfg = virtual_cfg(50.0, 4);
         let report = run(&cfg, Box::new(Scripted), RunOptions::new()).unwrap();
-        let (tx, _rx) = crossbeam_channel::unbounded();
-        let mut app = App::new(tx, "scripted".into(), None, Speed::Times(1.0));
-        app.on_telemetry(Telemetry::Started {
-            cfg,
-            policy: "scripted".into(),
-            recording: None,
-        });
         let at = ratelab::Nanos(2_000_000_000);
-        for s in report.trace.iter().filter(|s| s.t <= at) {
-            app.on_telemetry(Telemetry::Step(Box::new(s.clone())));
-        }
+        let (mut app, _) = told(&cfg, &report.trace, at);
         let before = render(&app, 120, 40);
         app.on_telemetry(Telemetry::ClockSwitched {
             at,
@@ -1254,7 +1230,6 @@ mod tests {
         }
         app.on_telemetry(Telemetry::Rewound { at });
         let back = render(&app, 120, 40);
-        let rows = |s: &str| s.lines().take(39).map(str::to_string).collect::<Vec<_>>();
         assert_eq!(rows(&back), rows(&before), "as it was before the switch");
     }
 

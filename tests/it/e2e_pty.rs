@@ -598,21 +598,7 @@ fn launch_across_processes_opens_the_lab_and_quitting_leaves_nothing_behind() {
 fn a_launch_s_lab_shows_what_its_processes_nodes_print_in_the_log_pane() {
     let _machine = crate::machine::alone();
     let dir = tempfile::tempdir().unwrap();
-    std::fs::create_dir(dir.path().join("nodes")).unwrap();
-    let balancer =
-        std::fs::read_to_string(crate::repo("graphs/nodes/scripted_balancer.py")).unwrap();
-    let timer = "    def on_timer(self):\n";
-    assert!(balancer.contains(timer));
-    std::fs::write(
-        dir.path().join("nodes/loud.py"),
-        balancer.replace(timer, &format!("{timer}        print('zqx tick here')\n")),
-    )
-    .unwrap();
-    let graph = std::fs::read_to_string(crate::repo("graphs/cartpole-python.toml"))
-        .unwrap()
-        .replace("nodes/scripted_balancer.py", "nodes/loud.py");
-    let g = dir.path().join("loud.toml");
-    std::fs::write(&g, graph).unwrap();
+    let g = crate::loud_python_graph(dir.path(), "print('zqx tick here')");
     let port = crate::distributed::free_port();
     let ep = format!("tls/127.0.0.1:{port}");
     let args = [
@@ -888,23 +874,10 @@ fn a_brain_that_never_returns_shows_hung_not_balanced() {
 fn what_a_python_node_prints_goes_to_the_log_pane_never_over_the_screen() {
     let _machine = crate::machine::alone();
     let dir = tempfile::tempdir().unwrap();
-    std::fs::create_dir(dir.path().join("nodes")).unwrap();
-    let repo = std::path::Path::new(crate::REPO);
-    let balancer = std::fs::read_to_string(repo.join("graphs/nodes/scripted_balancer.py")).unwrap();
-    let timer = "    def on_timer(self):\n";
-    assert!(balancer.contains(timer));
-    let loud = balancer.replace(
-        timer,
-        &format!(
-            "{timer}        print('printed-by-policy', 42)\n        import sys; print('on-stderr', file=sys.stderr)\n"
-        ),
+    let g = crate::loud_python_graph(
+        dir.path(),
+        "print('printed-by-policy', 42)\nimport sys; print('on-stderr', file=sys.stderr)",
     );
-    std::fs::write(dir.path().join("nodes/loud.py"), loud).unwrap();
-    let graph = std::fs::read_to_string(repo.join("graphs/cartpole-python.toml"))
-        .unwrap()
-        .replace("nodes/scripted_balancer.py", "nodes/loud.py");
-    let g = dir.path().join("loud.toml");
-    std::fs::write(&g, graph).unwrap();
     for (cols, rows) in [(80, 24), (120, 40)] {
         let mut lab = Lab::start_sized(
             &["--clock", "virtual", "--graph", g.to_str().unwrap()],

@@ -14,6 +14,28 @@ pub fn repo(file: &str) -> std::path::PathBuf {
     std::path::Path::new(REPO).join(file)
 }
 
+/// The chapter's graph with a Python policy (`graphs/cartpole-python.toml`) whose timer
+/// callback first runs `code` (Python statements, one per line), written in `dir` as
+/// `loud.toml` and `nodes/loud.py`: a node that writes. Returns the graph file.
+pub fn loud_python_graph(dir: &std::path::Path, code: &str) -> std::path::PathBuf {
+    std::fs::create_dir_all(dir.join("nodes")).unwrap();
+    let balancer = std::fs::read_to_string(repo("graphs/nodes/scripted_balancer.py")).unwrap();
+    let timer = "    def on_timer(self):\n";
+    assert!(balancer.contains(timer));
+    let body: String = code.lines().map(|l| format!("        {l}\n")).collect();
+    std::fs::write(
+        dir.join("nodes/loud.py"),
+        balancer.replace(timer, &format!("{timer}{body}")),
+    )
+    .unwrap();
+    let graph = std::fs::read_to_string(repo("graphs/cartpole-python.toml"))
+        .unwrap()
+        .replace("nodes/scripted_balancer.py", "nodes/loud.py");
+    let g = dir.join("loud.toml");
+    std::fs::write(&g, graph).unwrap();
+    g
+}
+
 /// `ratelab ARGS` run in the repository's top folder: (exit code, stdout, stderr).
 /// metrics.json `m` as pretty text without what names the graph, the brain and the nodes'
 /// kinds (each must be there): what two graphs of the same shape, one with a Python or an

@@ -1480,21 +1480,7 @@ fn the_bus_plots_reach_the_end_when_the_actuator_was_killed() {
 #[test]
 fn what_a_python_node_writes_is_in_the_recording_per_node() {
     let dir = tempfile::tempdir().unwrap();
-    std::fs::create_dir(dir.path().join("nodes")).unwrap();
-    let balancer =
-        std::fs::read_to_string(crate::repo("graphs/nodes/scripted_balancer.py")).unwrap();
-    let timer = "    def on_timer(self):\n";
-    assert!(balancer.contains(timer));
-    std::fs::write(
-        dir.path().join("nodes/loud.py"),
-        balancer.replace(timer, &format!("{timer}        print('tick here')\n")),
-    )
-    .unwrap();
-    let graph = std::fs::read_to_string(crate::repo("graphs/cartpole-python.toml"))
-        .unwrap()
-        .replace("nodes/scripted_balancer.py", "nodes/loud.py");
-    let g = dir.path().join("loud.toml");
-    std::fs::write(&g, graph).unwrap();
+    let g = crate::loud_python_graph(dir.path(), "print('tick here')");
     let rrd = dir.path().join("loud.rrd");
     let o = std::process::Command::new(env!("CARGO_BIN_EXE_ratelab"))
         .args(["run", "--clock", "virtual", "--duration", "0.5", "--graph"])

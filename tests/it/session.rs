@@ -683,10 +683,15 @@ impl LiveEngine {
         edit: impl FnOnce(&mut RunConfig),
     ) -> LiveEngine {
         let dir = tempfile::tempdir().unwrap();
-        let (ctl, ctl_rx) = unbounded();
-        let (tel_tx, tel) = unbounded::<Telemetry>();
         let mut settings = settings(clock, 0, paused, speed, &dir.path().join("session.json"));
         edit(&mut settings.cfg);
+        LiveEngine::with(settings, dir)
+    }
+
+    /// An engine on `settings`, whose files are in `dir` (held while it runs).
+    fn with(settings: SessionSettings, dir: tempfile::TempDir) -> LiveEngine {
+        let (ctl, ctl_rx) = unbounded();
+        let (tel_tx, tel) = unbounded::<Telemetry>();
         let engine = Engine::new(settings, ctl_rx, tel_tx).spawn();
         LiveEngine {
             ctl,
@@ -1068,6 +1073,14 @@ fn a_saved_graph_or_node_runs_again_and_a_broken_one_is_said() {
     assert_eq!(log.runs.len(), 3, "the first run and two reloads");
 }
 
+/// A step's run time, for [`LiveEngine::wait_for`].
+fn step_at(t: &Telemetry) -> Option<ratelab::Nanos> {
+    match t {
+        Telemetry::Step(s) => Some(s.t),
+        _ => None,
+    }
+}
+
 impl LiveEngine {
     /// Wait (at most 20 s) for the first message `pick` takes.
     fn wait_for<T>(&self, what: &str, mut pick: impl FnMut(&Telemetry) -> Option<T>) -> T {
@@ -1099,10 +1112,6 @@ impl LiveEngine {
 fn c_switches_the_running_graph_s_clock_in_place() {
     let _machine = crate::machine::alone();
     let live = LiveEngine::running(ClockKind::Virtual, Speed::Times(1.0), |_| {});
-    let step_at = |t: &Telemetry| match t {
-        Telemetry::Step(s) => Some(s.t),
-        _ => None,
-    };
     // A second of the virtual clock at ×1.
     while live.wait_for("a step", step_at) < ratelab::Nanos::SECOND {}
     live.ctl.send(Control::SwitchClock).unwrap();
@@ -1181,19 +1190,7 @@ fn under_the_real_clock_a_saved_node_restarts_in_place() {
     s.graph_source = Some(GraphSource(std::sync::Arc::new(move || {
         ratelab::graph::GraphSpec::load(&source).map_err(|e| e.to_string())
     })));
-    let (ctl, ctl_rx) = unbounded();
-    let (tel_tx, tel) = unbounded::<Telemetry>();
-    let engine = Engine::new(s, ctl_rx, tel_tx).spawn();
-    let live = LiveEngine {
-        ctl,
-        tel,
-        engine,
-        _dir: dir,
-    };
-    let step_at = |t: &Telemetry| match t {
-        Telemetry::Step(s) => Some(s.t),
-        _ => None,
-    };
+    let live = LiveEngine::with(s, dir);
     while live.wait_for("a step", step_at) < ratelab::Nanos::SECOND {}
     // A live change first: the run's graph is then not the file's, and a save of code
     // still restarts only the node.
@@ -1289,21 +1286,7 @@ fn under_the_real_clock_a_saved_node_restarts_in_place() {
 fn a_lab_session_s_recording_carries_what_its_nodes_print() {
     ratelab::init(); // Python nodes
     let dir = tempfile::tempdir().unwrap();
-    std::fs::create_dir(dir.path().join("nodes")).unwrap();
-    let balancer =
-        std::fs::read_to_string(crate::repo("graphs/nodes/scripted_balancer.py")).unwrap();
-    let timer = "    def on_timer(self):\n";
-    assert!(balancer.contains(timer));
-    std::fs::write(
-        dir.path().join("nodes/loud.py"),
-        balancer.replace(timer, &format!("{timer}        print('tick here')\n")),
-    )
-    .unwrap();
-    let graph = std::fs::read_to_string(crate::repo("graphs/cartpole-python.toml"))
-        .unwrap()
-        .replace("nodes/scripted_balancer.py", "nodes/loud.py");
-    let g = dir.path().join("loud.toml");
-    std::fs::write(&g, graph).unwrap();
+    let g = crate::loud_python_graph(dir.path(), "print('tick here')");
     let rrd = dir.path().join("lab.rrd");
     let (ctl_tx, ctl_rx) = unbounded();
     let (tel_tx, tel_rx) = unbounded::<Telemetry>();
@@ -1357,19 +1340,7 @@ fn under_the_real_clock_a_saved_brain_is_swapped_in_place() {
     );
     // Named with its function: the file saved is the spec's file part.
     s.policy = format!("{}:act", brain.display());
-    let (ctl, ctl_rx) = unbounded();
-    let (tel_tx, tel) = unbounded::<Telemetry>();
-    let engine = Engine::new(s, ctl_rx, tel_tx).spawn();
-    let live = LiveEngine {
-        ctl,
-        tel,
-        engine,
-        _dir: dir,
-    };
-    let step_at = |t: &Telemetry| match t {
-        Telemetry::Step(s) => Some(s.t),
-        _ => None,
-    };
+    let live = LiveEngine::with(s, dir);
     while live.wait_for("a step", step_at) < ratelab::Nanos(500 * ratelab::Nanos::MILLISECOND.0) {}
     std::fs::write(&brain, format!("{balancer}# saved again\n")).unwrap();
     live.ctl

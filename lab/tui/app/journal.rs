@@ -15,7 +15,12 @@ impl App {
             return;
         }
         match t {
-            Telemetry::Rewound { at } => self.rewind(at),
+            Telemetry::Rewound { at } => {
+                self.rewind(at);
+                // Only the virtual clock scrubs in the engine: a run started under the real
+                // clock and switched since is back under the virtual one.
+                self.clock = ratelab::ClockKind::Virtual.to_string();
+            }
             Telemetry::Started { .. } => {
                 let reloaded = if self.rewinding {
                     None
@@ -63,12 +68,10 @@ impl App {
         }
     }
 
-    /// The run was put back at `at` ([`Telemetry::Rewound`]): show it as it was then, by
-    /// folding again what the run told up to then (what the screen showed at that run time).
+    /// The run was put back at `at` ([`Telemetry::Rewound`], or a review): show it as it
+    /// was then, by folding again what the run told up to then (what the screen showed at
+    /// that run time, the clock it was under included).
     pub(super) fn rewind(&mut self, at: Nanos) {
-        // Only the virtual clock scrubs: a run started under the real clock and switched
-        // since is back under the virtual one.
-        self.clock = ratelab::ClockKind::Virtual.to_string();
         if self.journal_full {
             self.say(format!(
                 "back at t={:.2} s: the run is too long to show as it was (its journal is full: {MAX_JOURNAL} messages or {} MiB); the figures go on from here",
@@ -89,7 +92,6 @@ impl App {
         }
         self.rewinding = false;
         self.now = at;
-        self.clock = ratelab::ClockKind::Virtual.to_string();
         self.say(format!(
             "back at t={:.3} s: a change or space branches the run here",
             at.as_secs_f64()

@@ -8,22 +8,6 @@ use super::{App, MAX_JOURNAL};
 use ratelab::session::Telemetry;
 use ratelab::Nanos;
 
-/// The clock the run was under at `at`, as `journal` tells it (it may have switched in
-/// place).
-fn clock_at(journal: &[(Nanos, Telemetry)], at: Nanos) -> String {
-    let mut clock = "real".to_string();
-    for (_, m) in journal.iter().take_while(|(t, _)| *t <= at) {
-        match m {
-            Telemetry::Started { cfg, .. } => clock = cfg.clock.to_string(),
-            Telemetry::ClockSwitched { at: s, clock: c } if *s < at => {
-                clock = c.to_string();
-            }
-            _ => {}
-        }
-    }
-    clock
-}
-
 /// Messages kept while reviewing, at most (the run has ended: only notices come).
 const MAX_PENDING: usize = 4096;
 
@@ -79,10 +63,8 @@ impl App {
             return;
         };
         let to = to.min(r.end);
-        let clock = clock_at(&r.journal, to);
         self.journal = r.journal.clone();
         self.rewind(to);
-        self.clock = clock;
         self.say(format!(
             "t={:.3} s as recorded: a real-clock run cannot run again (space leaves)",
             to.as_secs_f64()
@@ -94,10 +76,8 @@ impl App {
         let Some(r) = self.review.take() else {
             return;
         };
-        let clock = clock_at(&r.journal, r.end);
         self.journal = r.journal;
         self.rewind(r.end);
-        self.clock = clock;
         self.say("the run as it ended".into());
         for t in r.pending {
             self.on_telemetry(t);

@@ -273,12 +273,17 @@ impl App {
     /// The ghost's points over the charts' window ([`super::super::chart_window`]), as
     /// `pick` takes them.
     fn ghost_in_window(&self, pick: impl Fn(&super::GhostStep) -> (f64, f64)) -> Vec<(f64, f64)> {
-        let (t0, t1) = self.chart_window.bounds(self.now.as_secs_f64());
+        let (t0, t1) = self.chart_bounds();
         self.ghost
             .iter()
             .filter(|(t, ..)| *t >= t0 && *t <= t1)
             .map(pick)
             .collect()
+    }
+
+    /// The charts' window now, run time s, `(from, to)`.
+    fn chart_bounds(&self) -> (f64, f64) {
+        self.chart_window.bounds(self.now.as_secs_f64())
     }
 
     /// A chart's points over its window: from the full-rate history `full` (t s, value)
@@ -289,7 +294,7 @@ impl App {
         full: &std::collections::VecDeque<(f64, f64)>,
         thinned: impl Fn(&(f64, f64, f64)) -> (f64, f64),
     ) -> Vec<(f64, f64)> {
-        let (t0, t1) = self.chart_window.bounds(self.now.as_secs_f64());
+        let (t0, t1) = self.chart_bounds();
         match self.chart_window.span_s() {
             Some(_) => full
                 .iter()
@@ -442,7 +447,7 @@ impl App {
                 Some(_) => self.in_chart_window(&self.published, |_| (0.0, 0.0)),
                 None => Vec::new(),
             },
-            chart_s: self.chart_window.bounds(self.now.as_secs_f64()),
+            chart_s: self.chart_bounds(),
             chart_label: self.chart_window.label(),
             ghost_angle: self.ghost_in_window(|&(t, a, ..)| (t, a)),
             // The run before's applied force, as a staircase too.

@@ -320,15 +320,11 @@ impl Engine {
                 ..CoreOptions::default()
             },
         );
-        let mut clock = cfg.clock;
+        // The settings as they stand: under the clock the run goes on under.
+        let mut under = cfg.clone();
         let mut resumed = false;
         let (next, end, timing, exec) = loop {
-            // The settings as they stand: under the clock the run goes on under.
-            let under = RunConfig {
-                clock,
-                ..cfg.clone()
-            };
-            let part = match clock {
+            let part = match under.clock {
                 ClockKind::Virtual => {
                     self.virtual_run(&mut core, &under, &recording, bridge.as_ref(), resumed)
                 }
@@ -338,14 +334,13 @@ impl Engine {
             // one offered to ROS 2 (its bridge serves the clock it started with), the next
             // run starts under the other clock.
             if matches!(part.0, Next::SwitchClock) && core.end().is_none() && bridge.is_none() {
-                clock = clock.other();
+                under.clock = under.clock.other();
                 resumed = true;
-                self.clock_switched(clock, core.now());
+                self.clock_switched(under.clock, core.now());
                 continue;
             }
             break part;
         };
-        let clock_now = clock;
         let handles = core.handles().clone();
         let ticks = core.scheduler().ticks().to_vec();
         if let Some(r) = bridge.map(crate::ros2::Bridge::finish) {
@@ -359,11 +354,7 @@ impl Engine {
             }
         }
         // The summary says the clock the run ended under (its log, where it switched).
-        let ended_under = RunConfig {
-            clock: clock_now,
-            ..cfg.clone()
-        };
-        let metrics = live_metrics(&ended_under, &handles, &end, &ticks, timing, exec);
+        let metrics = live_metrics(&under, &handles, &end, &ticks, timing, exec);
         drop(recorder.take());
         if let Some(r) = &recording {
             let _ = r.finish(&metrics, &end);
@@ -377,7 +368,7 @@ impl Engine {
             next,
             graph: handles.current_spec(),
             policy: last_policy,
-            clock: clock_now,
+            clock: under.clock,
         })
     }
 
