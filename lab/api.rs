@@ -107,6 +107,9 @@ pub fn exercise(
 pub struct RunFiles {
     /// `metrics.json`'s text (pretty, the same key order; docs/metrics.md).
     pub metrics_json: String,
+    /// `estimator.json`'s text, when the graph has an estimator (its error and lag against
+    /// the truth, [`ratelab::estimate::EstimateReport`]).
+    pub estimator_json: Option<String>,
     /// `trace.csv`'s text: a header, then one row per actuator tick.
     pub trace_csv: String,
     /// `log.txt`'s text: every line the nodes wrote, stamped `[t=1.234 s node]`.
@@ -165,6 +168,10 @@ pub fn run(
         .map(|e| e.to_string());
     Ok(RunFiles {
         metrics_json: serde_json::to_string_pretty(&report.metrics)? + "\n",
+        estimator_json: match &report.metrics.estimate {
+            Some(e) => Some(serde_json::to_string_pretty(e)? + "\n"),
+            None => None,
+        },
         trace_csv: String::from_utf8(trace)?,
         log,
         summary,

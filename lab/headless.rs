@@ -279,8 +279,13 @@ pub fn run_headless(a: &RunArgs, stop: StopFlag) -> anyhow::Result<RunReport> {
     }
     if let Some(dir) = &a.out {
         write_outputs(dir, &report, &cfg.graph, &log_text(&kept), a.force)?;
+        let files = if report.metrics.estimate.is_some() {
+            "metrics.json, trace.csv, log.txt and estimator.json"
+        } else {
+            "metrics.json, trace.csv and log.txt"
+        };
         println!(
-            "[ratelab] wrote {}/metrics.json, trace.csv and log.txt (what each key and column means: docs/metrics.md)",
+            "[ratelab] wrote {}/{files} (what each key and column means: docs/metrics.md)",
             dir.display()
         );
     }
@@ -309,12 +314,17 @@ pub fn check_out(a: &RunArgs) -> anyhow::Result<()> {
         std::fs::create_dir_all(dir)
             .with_context(|| format!("cannot create --out folder {}", dir.display()))?;
         // Refuse before the run, not after it: the outputs will not be writable.
-        for name in ["metrics.json", "trace.csv"] {
+        for name in ["metrics.json", "trace.csv", ESTIMATOR_JSON] {
             ratelab::output::check_target(&dir.join(name), a.force)?;
         }
     }
     Ok(())
 }
+
+/// With an estimator in the graph, `--out`'s file of its error and lag against the truth
+/// ([`ratelab::estimate::EstimateReport`]; not in `metrics.json`, whose bytes the reference
+/// runs fix).
+pub const ESTIMATOR_JSON: &str = "estimator.json";
 
 /// The lines nodes wrote, as `log.txt` holds them (one per line, a newline after each).
 pub fn log_text(kept: &Mutex<Vec<String>>) -> String {
@@ -585,8 +595,20 @@ pub fn write_outputs(
     ratelab::output::check_target(&metrics, force)?;
     ratelab::output::check_target(&trace, force)?;
     ratelab::output::check_target(&dir.join("log.txt"), force)?;
+    let estimator = report
+        .metrics
+        .estimate
+        .as_ref()
+        .map(|e| (dir.join(ESTIMATOR_JSON), e));
+    if let Some((path, _)) = &estimator {
+        ratelab::output::check_target(path, force)?;
+    }
     let json = serde_json::to_string_pretty(&report.metrics)? + "\n";
     ratelab::output::write_file(&metrics, force, json.as_bytes())?;
+    if let Some((path, e)) = &estimator {
+        let json = serde_json::to_string_pretty(e)? + "\n";
+        ratelab::output::write_file(path, force, json.as_bytes())?;
+    }
     ratelab::output::write_with(&trace, force, |w| {
         write_trace(w, &report.trace, graph).map_err(std::io::Error::other)
     })?;

@@ -18,7 +18,7 @@
 //!   (ROS 2's QoS), [`topic`] (a subscription's queue and its drop rule), [`msg`] (message
 //!   types and their registry, with [`ros_types`], their ROS 2 side), [`publisher`],
 //!   [`node`] and [`ports`] (the node traits), [`executor`] (ROS 2's executors as rules),
-//!   [`runlog`], [`metrics`];
+//!   [`runlog`], [`estimate`] (an estimator against the truth), [`metrics`];
 //! - **runtime** (`ratelab_runtime`, `src/runtime/`): [`plant`] (the MuJoCo cartpole),
 //!   [`policy`] (brains; + [`checkpoint`] for trained ones; [`interpreter`], where the
 //!   Python layer plugs in), [`graph`] (the graph file, [`graph::spec`]; node kinds and
@@ -57,8 +57,8 @@ pub fn init() {
 // The core crate's and the runtime crate's modules, under their own names (`ratelab::time`,
 // `ratelab::graph`, …).
 pub use ratelab_core::{
-    clock, executor, ids, input, limits, metrics, msg, node, np_random, output, ports, procs,
-    publisher, qos, rate, realtime, ros_types, runlog, text, textlog, time, topic, Nanos,
+    clock, estimate, executor, ids, input, limits, metrics, msg, node, np_random, output, ports,
+    procs, publisher, qos, rate, realtime, ros_types, runlog, text, textlog, time, topic, Nanos,
 };
 pub use ratelab_distributed as distributed;
 pub use ratelab_drivers::{run, session, sweep};

@@ -148,6 +148,9 @@ pub struct App {
     history: VecDeque<(f64, f64)>,
     /// The whole run's angle and applied force, thinned (the charts' widest window).
     thinned: super::chart_window::Thinned,
+    /// (t s, θ̂ rad) per actuator step, with an estimator in the graph (its newest
+    /// estimate, [`ratelab::estimate`]).
+    estimated: super::chart_window::Series,
     /// The charts' time window (`(` / `)`).
     chart_window: super::chart_window::ChartWindow,
     /// Reviewing an ended real-clock run ([`review`]).
@@ -267,6 +270,7 @@ impl App {
             nav: super::navigate::Navigation::default(),
             live: Live::default(),
             history: VecDeque::new(),
+            estimated: Default::default(),
             thinned: Default::default(),
             chart_window: Default::default(),
             review: None,
@@ -591,6 +595,7 @@ impl App {
         self.live = Live::default();
         self.history.clear();
         self.thinned.clear();
+        self.estimated.clear();
         self.applied.clear();
         self.published.clear();
         self.whole.clear();
@@ -613,6 +618,10 @@ impl App {
         }
         self.history.push_back((now_s, s.pole_angle));
         self.thinned.push(now_s, s.pole_angle, s.action * GEAR_N);
+        if let Some(e) = &s.estimate {
+            self.estimated
+                .push(now_s, e.estimate[ratelab::estimate::POLE_ANGLE]);
+        }
         self.applied.push_back((now_s, s.action * GEAR_N));
         if let Some((at, newtons)) = s.published {
             self.published.push_back((at.as_secs_f64(), newtons));

@@ -177,3 +177,34 @@ mod tests {
         assert!(t.points().is_empty());
     }
 }
+
+/// One line of a chart kept as the truth's is: the last [`FULL_RATE_S`] at full rate, the
+/// whole run in [`Thinned`] (the estimator's θ̂ beside the pole angle).
+#[derive(Debug, Default)]
+pub struct Series {
+    /// (t s, value) over the last [`FULL_RATE_S`].
+    pub recent: std::collections::VecDeque<(f64, f64)>,
+    /// The whole run's points (the force slot unused).
+    pub whole: Thinned,
+}
+
+impl Series {
+    /// One point at run time `t_s`, after every earlier one.
+    pub fn push(&mut self, t_s: f64, value: f64) {
+        self.recent.push_back((t_s, value));
+        while self
+            .recent
+            .front()
+            .is_some_and(|(t, _)| t_s - t > FULL_RATE_S)
+        {
+            self.recent.pop_front();
+        }
+        self.whole.push(t_s, value, 0.0);
+    }
+
+    /// Forget the run (a new one starts).
+    pub fn clear(&mut self) {
+        self.recent.clear();
+        self.whole.clear();
+    }
+}

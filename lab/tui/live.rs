@@ -436,6 +436,7 @@ mod tests {
             topics: TopicCounters::from_iter([topic]),
             published: None,
             fell: false,
+            estimate: None,
         }
     }
 

@@ -1153,6 +1153,55 @@ mod tests {
         assert!(rx.try_recv().is_err(), "the engine was never asked");
     }
 
+    /// With an estimator in the graph the pole-angle chart draws its estimate θ̂ beside the
+    /// truth θ, in every window, and its title keys it; without one, nothing of it.
+    #[test]
+    fn the_angle_chart_shows_an_estimator_s_estimate_beside_the_truth() {
+        let mut cfg = virtual_cfg(50.0, 12);
+        cfg.graph = ratelab::graph::GraphSpec::load(
+            &std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+                .join("../graphs/cartpole-estimator.toml"),
+        )
+        .unwrap();
+        let report = run(&cfg, Box::new(Scripted), RunOptions::new()).unwrap();
+        let (mut app, _) = told(&cfg, &report.trace, cfg.duration);
+        let v = app.view();
+        // The last 10 s: one estimate per step, each the step's own.
+        let want: Vec<(f64, f64)> = report
+            .trace
+            .iter()
+            .filter_map(|s| Some((s.t.as_secs_f64(), s.estimate?.estimate[2])))
+            .filter(|(t, _)| *t >= 2.0)
+            .collect();
+        assert_eq!(v.angle_estimate, want);
+        for (w, h, key) in [
+            (
+                120,
+                40,
+                "pole angle (rad) · ── ±0.21 fall · θ̂ estimate · last 10 s",
+            ),
+            (80, 24, "θ (rad) · ── ±0.21 fall · θ̂ est · last 10 s"),
+        ] {
+            let text = render(&app, w, h);
+            assert!(text.contains(key), "{w}×{h}:\n{text}");
+        }
+        for _ in 0..3 {
+            app.on_msg(Msg::ChartsWider); // the whole run, thinned as the truth is
+        }
+        let v = app.view();
+        assert_eq!(v.chart_label, "whole run");
+        assert_eq!(
+            v.angle_estimate.len(),
+            report.trace.len() - 1,
+            "all but t = 0"
+        );
+        let chapter = virtual_cfg(50.0, 2);
+        let report = run(&chapter, Box::new(Scripted), RunOptions::new()).unwrap();
+        let (app, _) = told(&chapter, &report.trace, chapter.duration);
+        assert!(app.view().angle_estimate.is_empty());
+        assert!(!render(&app, 120, 40).contains("θ̂"));
+    }
+
     /// `(` and `)` zoom the charts' window: 0.2 s of a 20 s run shows its last tenths (the
     /// axis in tenths), 30 s shows it from 0, the whole run of a long run spans it from 0
     /// with its points thinned; the title names the window.

@@ -319,6 +319,9 @@ pub struct View {
     pub chart_label: String,
     /// (t s, θ rad) over the charts' window.
     pub angle_history: Vec<(f64, f64)>,
+    /// With an estimator in the graph: (t s, θ̂ rad), the newest estimate at each actuator
+    /// step, over the same window (drawn beside θ, the truth); empty without one.
+    pub angle_estimate: Vec<(f64, f64)>,
     /// The force the actuator applied, N, as a staircase over the charts' window (each
     /// step's force held until the next: the zero-order hold).
     pub applied_force: Vec<(f64, f64)>,

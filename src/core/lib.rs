@@ -13,12 +13,13 @@
 //!   (message types and their registry, with [`ros_types`], their ROS 2 side),
 //!   [`publisher`], [`node`] (the node traits) and [`ports`] (a Rust node's typed inputs and
 //!   outputs), [`executor`] (ROS 2's executors as rules), [`plant`] (the cartpole's facts),
-//!   [`runlog`] (what a run logs) and [`metrics`].
+//!   [`runlog`] (what a run logs), [`estimate`] (an estimator against the truth) and [`metrics`].
 //!
 //! A program depends on `ratelab`, which re-exports every module here under the same name.
 #![warn(missing_docs)]
 
 pub mod clock;
+pub mod estimate;
 pub mod executor;
 pub mod ids;
 pub mod input;

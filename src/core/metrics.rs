@@ -408,6 +408,12 @@ pub struct Metrics {
     /// chain's keys are left out; absent for a graph with it.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub without_chain: Option<String>,
+    /// With an estimator in the graph, its error and lag against the plant's truth
+    /// ([`crate::estimate`]). Not in `metrics.json`, whose bytes the reference runs fix
+    /// (`../shared/fixtures/reference-runs/`): the summary prints it and `--out` writes it
+    /// to `estimator.json`.
+    #[serde(skip)]
+    pub estimate: Option<crate::estimate::EstimateReport>,
 }
 
 /// A fault injected into a node (`--stall NODE@T+D`, `--kill NODE@T`), in `metrics.json`.
@@ -1047,6 +1053,9 @@ impl Metrics {
         lines.extend(self.qos_lines());
         if let Some(why) = &self.without_chain {
             lines.push(why.clone());
+        }
+        if let Some(e) = &self.estimate {
+            lines.push(e.figures.line(&e.topic));
         }
         lines.extend(self.executor_lines());
         if self.nonfinite_actions > 0 {

@@ -118,6 +118,10 @@ pub struct StepRecord {
     pub published: Option<(Nanos, f64)>,
     /// True on the tick the pole fell.
     pub fell: bool,
+    /// With an estimator in the graph: its newest estimate beside the plant's state at
+    /// this tick, before the step ([`crate::estimate`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub estimate: Option<crate::estimate::EstimatePoint>,
 }
 
 /// Everything the actuator measured during a run.
@@ -143,6 +147,9 @@ pub struct RunLog {
     /// When the actuator's deadline watchdog stopped the run (`on_deadline_missed =
     /// "stop"`), with the topic and its deadline: a verdict distinct from a fall.
     pub watchdog: Option<Watchdog>,
+    /// The estimator's error against the truth, folded tick by tick (empty without an
+    /// estimator in the graph).
+    pub estimate: crate::estimate::EstimateError,
 }
 
 /// The actuator's watchdog fired: no message on `topic` for longer than `deadline`.
@@ -198,6 +205,9 @@ impl RunLog {
         if rec.nonfinite {
             self.nonfinite_actions += 1;
         }
+        if let Some(p) = &rec.estimate {
+            self.estimate.push(rec.t, p);
+        }
         if rec.fell && self.fell_at.is_none() {
             self.fell_at = Some(rec.t);
         }
@@ -226,6 +236,7 @@ mod tests {
             topics: TopicCounters::default(),
             published: None,
             fell: false,
+            estimate: None,
         };
         log.push(base.clone());
         log.push(StepRecord {

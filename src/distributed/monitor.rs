@@ -1052,6 +1052,7 @@ mod tests {
             topics: [obs, action].into_iter().collect::<TopicCounters>(),
             published: None,
             fell: false,
+            estimate: None,
         }
     }
 

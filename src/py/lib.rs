@@ -220,6 +220,7 @@ fn exercises() -> Vec<(&'static str, &'static str, &'static str)> {
 /// observation, a NumPy float32[5] array, and returning the force command) as its brain when
 /// given, and `nodes` (`(node name, class)` pairs) making those Python nodes of the graph
 /// from classes of this interpreter. Returns a dict: `metrics_json`, `trace_csv`, `log` (the files' texts),
+/// `estimator_json` (`estimator.json`'s text with an estimator in the graph, else None),
 /// `trace_columns` (the trace as `(name, dtype, bytes)` per column), `summary`
 /// (lines), `failed` (the line of a node that failed, or None), `recording` (its path or
 /// None). Ctrl-C stops the run and raises KeyboardInterrupt.
@@ -242,6 +243,7 @@ fn run<'py>(
     let files = interruptibly(py, move |stop| ratelab_lab::api::run(&flags, brain, stop))?;
     let out = PyDict::new(py);
     out.set_item("metrics_json", files.metrics_json)?;
+    out.set_item("estimator_json", files.estimator_json)?;
     let columns = trace_columns(&files.trace_csv).map_err(|e| to_py(&e))?;
     let columns: Vec<_> = columns
         .into_iter()

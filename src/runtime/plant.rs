@@ -55,6 +55,12 @@ impl CartPoleState {
         self.theta.abs() > THETA_LIMIT_RAD || self.cart_pos.abs() > CART_LIMIT_M
     }
 
+    /// `[cart_pos m, cart_vel m/s, theta rad, pole_angvel rad/s]`, the order of
+    /// [`crate::estimate::COMPONENTS`].
+    pub fn as_array(&self) -> [f64; 4] {
+        [self.cart_pos, self.cart_vel, self.theta, self.pole_angvel]
+    }
+
     /// The observation the sensor publishes (float32, as the course's env).
     pub fn observation(&self) -> Observation {
         [

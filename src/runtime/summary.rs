@@ -62,6 +62,10 @@ pub struct ActuatorSummary {
     pub final_pole_angle: f64,
     /// Ticks whose newest action was non-finite.
     pub nonfinite_actions: u64,
+    /// The estimator's figures against the truth, when the graph has one
+    /// ([`crate::estimate`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub estimate: Option<crate::estimate::EstimateFigures>,
 }
 
 impl GraphState {
@@ -107,6 +111,7 @@ impl GraphState {
                     .as_ref()
                     .map_or_else(|| lock(&h.plant).state().theta, |r| r.pole_angle),
                 nonfinite_actions: log.nonfinite_actions,
+                estimate: log.estimate.figures(),
             },
         }
     }
@@ -239,6 +244,14 @@ pub fn summarize_state(cfg: &RunConfig, st: &GraphState, end: &RunEnd) -> Metric
         graph: spec.name.clone(),
         nodes,
         topics,
+        estimate: spec.estimate_topic().zip(log.estimate.clone()).map(|(t, figures)| {
+            crate::estimate::EstimateReport {
+                estimator: spec.node(spec.topic(t).publisher).name.clone(),
+                topic: spec.topic(t).name.clone(),
+                truth: crate::estimate::TRUTH.to_string(),
+                figures,
+            }
+        }),
     }
 }
 

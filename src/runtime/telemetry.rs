@@ -279,6 +279,7 @@ mod tests {
             topics: (0..topics).map(|_| TopicStats::default()).collect(),
             published: None,
             fell: false,
+            estimate: None,
         }))
     }
 

@@ -154,12 +154,123 @@ fn a_slow_estimator_adds_its_period_to_the_latency_as_computed_by_hand() {
             s.t
         );
     }
+    // The estimate each step saw is the plant's state at the estimator's last tick, read
+    // through a noiseless float32 measurement: the truth the step at that tick took.
+    let truth_at = |t: Nanos| {
+        steps
+            .iter()
+            .find(|s| s.t == t)
+            .unwrap()
+            .estimate
+            .unwrap()
+            .truth
+    };
+    for s in steps.iter() {
+        let p = s.estimate.expect("an estimate beside every step");
+        let then = truth_at(Nanos(s.t.0 - s.t.0 % 200_000_000));
+        for i in [0, 2] {
+            assert!(
+                (p.estimate[i] - then[i]).abs() < 1e-6,
+                "step at {}: {p:?}",
+                s.t
+            );
+        }
+    }
     // /meas: 61 readings, the estimator reads 4 of them (t = 0, 200, 400, 600 ms); the 19
     // between each pair are evicted unread from the depth-1 buffer: 3 × 19 drops.
     let meas = &r.metrics.topics["/meas"];
     assert_eq!((meas.published, meas.dropped), (61, 57));
     // Mean over 3 whole cycles (0..180 ms, mean 90) plus the last step at 600 ms (0 ms).
     assert!((r.metrics.mean_latency_ms - 3.0 * 900.0 / 31.0).abs() < 1e-6);
+}
+
+#[test]
+fn an_estimator_is_measured_against_the_truth_and_only_an_estimator() {
+    let run_with = |cutoff_hz: f64, estimator_hz: f64| {
+        let mut c = cfg("graphs/cartpole-estimator.toml", ClockKind::Virtual, 10);
+        c.graph.set_rate("estimator", estimator_hz).unwrap();
+        for n in c.graph.nodes.iter_mut().filter(|n| n.name == "estimator") {
+            n.params.insert("cutoff_hz".into(), cutoff_hz.into());
+        }
+        let r = run(&c, Box::new(Scripted), RunOptions::new()).unwrap();
+        assert!(r.metrics.balanced);
+        r.metrics
+            .estimate
+            .expect("figures for a graph with an estimator")
+    };
+    let shipped = run_with(20.0, 100.0);
+    assert_eq!(
+        (shipped.estimator.as_str(), shipped.topic.as_str()),
+        ("estimator", "/state")
+    );
+    let f = &shipped.figures;
+    assert_eq!(f.samples, 500, "every step but the first has an estimate");
+    // The angle is measured with 1 mrad of noise, and read newer than the plant's last step.
+    assert!((0.5e-3..2e-3).contains(&f.rms[2]), "{f:?}");
+    assert_eq!(f.pole_angle_lag_ms, Some(0.0), "{f:?}");
+    // A first-order low-pass lags by about 1/(2π·cut-off): 8 ms at 20 Hz, 32 ms at 5 Hz.
+    let lag = |f: &ratelab::estimate::EstimateFigures| f.pole_angvel_lag_ms.unwrap();
+    assert!((5.0..=11.0).contains(&lag(f)), "{f:?}");
+    let smooth = run_with(5.0, 100.0).figures;
+    assert!((24.0..=40.0).contains(&lag(&smooth)), "{smooth:?}");
+    // A slower estimator reads older measurements: its angle lags.
+    let slow = run_with(20.0, 25.0).figures;
+    assert!(slow.pole_angle_lag_ms.unwrap() >= 15.0, "{slow:?}");
+    assert!(slow.rms[2] > f.rms[2]);
+    // A sensor that publishes the state itself is no estimator.
+    for file in ["graphs/cartpole.toml", "graphs/cartpole-safety.toml"] {
+        let r = run(
+            &cfg(file, ClockKind::Virtual, 1),
+            Box::new(Scripted),
+            RunOptions::new(),
+        );
+        assert_eq!(r.unwrap().metrics.estimate, None, "{file}");
+    }
+}
+
+#[test]
+fn an_estimator_s_figures_are_printed_and_written_beside_metrics_json() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = |graph: &str, out: &str, extra: &[&str]| {
+        Command::new(env!("CARGO_BIN_EXE_ratelab"))
+            .args(["run", "--clock", "virtual", "--duration", "2", "--graph"])
+            .arg(repo(graph))
+            .arg("--out")
+            .arg(dir.path().join(out))
+            .args(extra)
+            .output()
+            .unwrap()
+    };
+    let o = run("graphs/cartpole-estimator.toml", "est", &[]);
+    assert!(o.status.success());
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    let line = stdout
+        .lines()
+        .find(|l| l.contains("estimate on /state vs the plant (100 ticks): RMS error x "))
+        .unwrap_or_else(|| panic!("{stdout}"));
+    assert!(
+        line.contains(" mrad · θ̇ ") && line.contains("; lag θ 0 ms, θ̇ "),
+        "{line}"
+    );
+    let json: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.path().join("est/estimator.json")).unwrap())
+            .unwrap();
+    assert_eq!(json["topic"], "/state");
+    assert_eq!(json["samples"], 100);
+    assert_eq!(json["rms"].as_array().unwrap().len(), 4);
+    assert_eq!(json["pole_angle_lag_ms"], 0.0);
+    // metrics.json keeps its keys (the reference runs fix its bytes).
+    let metrics = std::fs::read_to_string(dir.path().join("est/metrics.json")).unwrap();
+    assert!(!metrics.contains("lag_ms"), "{metrics}");
+    // Without an estimator, no file; a file there is not replaced without --force.
+    assert!(run("graphs/cartpole.toml", "chapter", &[]).status.success());
+    assert!(!dir.path().join("chapter/estimator.json").exists());
+    std::fs::write(dir.path().join("chapter/estimator.json"), "mine").unwrap();
+    let o = run("graphs/cartpole-estimator.toml", "chapter", &["--force"]);
+    assert!(o.status.success());
+    let o = run("graphs/cartpole-estimator.toml", "est", &[]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("--force"));
 }
 
 #[test]

@@ -83,6 +83,22 @@ def test_a_run_equals_the_command_line_s_in_every_figure(name, tmp_path):
     assert run.trace["latency_ns"].dtype == np.float64
 
 
+def test_an_estimator_s_error_and_lag_are_the_command_line_s(tmp_path):
+    graph = str(ROOT / "graphs" / "cartpole-estimator.toml")
+    out = tmp_path / "out"
+    subprocess.run([str(COMMAND), "run", "--clock", "virtual", "--graph", graph, "--duration",
+                    "5", "--out", str(out)], check=True, capture_output=True, timeout=120)
+    run = ratelab.run(graph=graph, duration_s=5)
+    assert run.estimator == json.loads((out / "estimator.json").read_text())
+    assert run.estimator["topic"] == "/state" and run.estimator["estimator"] == "estimator"
+    # Every step but the first (the first estimate is out 1 ms after t = 0).
+    assert run.estimator["samples"] == run.metrics["steps"] - 1
+    # The low-pass at 20 Hz lags the angular velocity by about 1/(2π·20) s = 8 ms.
+    assert 4 <= run.estimator["pole_angvel_lag_ms"] <= 12
+    assert any(line.startswith("estimate on /state vs the plant") for line in run.summary)
+    assert ratelab.run(duration_s=1).estimator is None
+
+
 def test_the_rate_cliff_is_the_chapter_s():
     assert ratelab.run().metrics["balanced"]
     fell = ratelab.run(control_hz=5)

@@ -294,6 +294,16 @@ impl App {
         full: &std::collections::VecDeque<(f64, f64)>,
         thinned: impl Fn(&(f64, f64, f64)) -> (f64, f64),
     ) -> Vec<(f64, f64)> {
+        self.in_window_of(full, &self.thinned, thinned)
+    }
+
+    /// [`App::in_chart_window`] with the whole run's points taken from `whole`.
+    fn in_window_of(
+        &self,
+        full: &std::collections::VecDeque<(f64, f64)>,
+        whole: &crate::tui::chart_window::Thinned,
+        thinned: impl Fn(&(f64, f64, f64)) -> (f64, f64),
+    ) -> Vec<(f64, f64)> {
         let (t0, t1) = self.chart_bounds();
         match self.chart_window.span_s() {
             Some(_) => full
@@ -301,7 +311,7 @@ impl App {
                 .copied()
                 .filter(|(t, _)| *t >= t0 && *t <= t1)
                 .collect(),
-            None => self.thinned.points().iter().map(thinned).collect(),
+            None => whole.points().iter().map(thinned).collect(),
         }
     }
 
@@ -440,6 +450,11 @@ impl App {
                 (v, _) => v.clone(),
             },
             angle_history: self.in_chart_window(&self.history, |&(t, a, _)| (t, a)),
+            angle_estimate: self.in_window_of(
+                &self.estimated.recent,
+                &self.estimated.whole,
+                |&(t, a, _)| (t, a),
+            ),
             // Each applied force holds until the next step: a staircase.
             applied_force: staircase(&self.in_chart_window(&self.applied, |&(t, _, f)| (t, f))),
             // The whole run draws no dots: thinned, they would not be the policy's ticks.

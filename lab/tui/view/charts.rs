@@ -108,8 +108,24 @@ pub(super) fn render_angle_chart(v: &View, area: Rect, buf: &mut Buffer) {
         .iter()
         .map(|&(t, a)| (t, a.clamp(-0.3, 0.3)))
         .collect();
-    // The run before a reload first, so that this run's line is drawn over it.
+    let estimate: Vec<(f64, f64)> = v
+        .angle_estimate
+        .iter()
+        .map(|&(t, a)| (t, a.clamp(-0.3, 0.3)))
+        .collect();
+    // The run before a reload first, so that this run's line is drawn over it; the
+    // estimate under the truth.
     let mut datasets: Vec<Dataset<'_>> = ghost_dataset(&ghost).into_iter().collect();
+    if !estimate.is_empty() {
+        datasets.push(
+            Dataset::default()
+                .name("θ̂")
+                .marker(Marker::Braille)
+                .graph_type(GraphType::Line)
+                .magenta()
+                .data(&estimate),
+        );
+    }
     datasets.extend([
         Dataset::default()
             .name("θ")
@@ -141,8 +157,15 @@ pub(super) fn render_angle_chart(v: &View, area: Rect, buf: &mut Buffer) {
     // the fall limits (±0.2095 rad, drawn between the axis's ±0.3 labels), the changes'
     // marks, then the window, each as long as the title has room.
     let room = usize::from(area.width.saturating_sub(2));
-    let mut title = vec![Span::raw(" pole angle (rad) ")];
-    let mut used = 18;
+    // With an estimate, narrow panels (80 columns) name the truth θ to key θ̂ beside it.
+    let narrow = !estimate.is_empty() && room < 60;
+    let name = if narrow {
+        " θ (rad) "
+    } else {
+        " pole angle (rad) "
+    };
+    let mut title = vec![Span::raw(name)];
+    let mut used = name.chars().count();
     let limits = format!("── ±{LIMIT_RAD:.2} fall ");
     let mut add = |title: &mut Vec<Span<'static>>, text: String, style: Style| {
         let n = text.chars().count() + 2;
@@ -153,6 +176,14 @@ pub(super) fn render_angle_chart(v: &View, area: Rect, buf: &mut Buffer) {
         }
     };
     add(&mut title, limits, Style::new().fg(Color::Red));
+    if !estimate.is_empty() {
+        let key = if narrow {
+            "θ̂ est "
+        } else {
+            "θ̂ estimate "
+        };
+        add(&mut title, key.into(), Style::new().fg(Color::Magenta));
+    }
     if !ghost.is_empty() {
         add(
             &mut title,

@@ -858,6 +858,7 @@ mod tests {
                 latency_ms: (20.0, 20.0, 40.0),
                 final_pole_angle: 0.01,
                 nonfinite_actions: 0,
+                estimate: None,
             },
         };
         (spec, st)

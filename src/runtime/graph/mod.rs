@@ -500,6 +500,7 @@ fn build_node(
         log: &handles.log,
         topics,
         action: spec.chain.map(|c| &topics[c.action.0]),
+        estimate: spec.estimate_topic().map(|t| &topics[t.0]),
         liveliness: &handles.liveliness[i],
         observers,
         attachment,

@@ -437,6 +437,7 @@ mod tests {
             log: &log,
             topics: inputs,
             action: None,
+            estimate: None,
             liveliness: &liveliness,
             observers: &mut observers,
             attachment: None,

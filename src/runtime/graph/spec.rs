@@ -477,6 +477,17 @@ impl GraphSpec {
             .expect("the shipped default graph is valid")
     }
 
+    /// The topic carrying the state estimate the chain's policy reads, when the chain runs
+    /// through an estimator: the policy's input is of type `state` and its publisher is not
+    /// the chain's sensor (the built-in estimator, a Python filter). The actuator takes that
+    /// topic's newest message beside the plant's state at each tick ([`crate::estimate`]).
+    pub fn estimate_topic(&self) -> Option<TopicId> {
+        let c = self.chain?;
+        let t = &self.topics[c.obs.0];
+        (t.msg == <crate::msg::StateMsg as crate::msg::Message>::TYPE && t.publisher != c.sensor)
+            .then_some(c.obs)
+    }
+
     /// Read a graph file: refused when it is not a regular file or is larger than
     /// [`MAX_FILE_BYTES`], then parsed as [`GraphSpec::parse`].
     ///

@@ -99,6 +99,10 @@ class Run:
     trace_csv: str
     #: The wall time the run itself took, s (`ratelab run`'s summary's `wall`).
     wall_s: float
+    #: With an estimator in the graph, `estimator.json` as a dict: its RMS error per state
+    #: component (m, m/s, rad, rad/s) and its lag, ms, against the plant's true state
+    #: (docs/metrics.md); None without one.
+    estimator: Optional[Dict[str, Any]] = None
 
     def __repr__(self) -> str:
         head = self.summary[0] if self.summary else "run"
@@ -275,6 +279,9 @@ def run(
         metrics_json=files["metrics_json"],
         trace_csv=files["trace_csv"],
         wall_s=files["wall_s"],
+        estimator=None
+        if files["estimator_json"] is None
+        else json.loads(files["estimator_json"]),
     )
     if files["failed"] is not None:
         raise NodeFailed(files["failed"], result)

@@ -3,8 +3,9 @@
 //! force is refused and the last good one held; a missed deadline gets the input topic's
 //! reaction (hold, zero, stop). It alone steps the plant; a fall stops the graph.
 
+use crate::estimate::EstimatePoint;
 use crate::graph::kind::{typed, BuildContext, Code, KindDef, Params, Plant, Ports, Work};
-use crate::msg::{AnyTopic, ForceMsg, Message};
+use crate::msg::{AnyTopic, ForceMsg, Message, StateMsg};
 use crate::node::Flow;
 use crate::plant::{lock, SharedPlant, GEAR_N};
 use crate::qos::OnDeadlineMissed;
@@ -38,6 +39,9 @@ pub fn def() -> KindDef {
                     .action
                     .and_then(|t| t.subscription(0).typed::<ForceMsg>().cloned()),
                 reported: None,
+                estimate: cx
+                    .estimate
+                    .and_then(|t| t.subscription(0).typed::<StateMsg>().cloned()),
             }) as Box<dyn Work>)
         }),
     }
@@ -66,6 +70,9 @@ pub struct Actuator {
     pub policy_output: Option<Arc<Subscription<ForceMsg>>>,
     /// `seq` of the newest policy message already reported.
     pub reported: Option<u64>,
+    /// The chain's state estimate, when the graph has an estimator: watched (never read)
+    /// beside the plant's state ([`crate::estimate`]).
+    pub estimate: Option<Arc<Subscription<StateMsg>>>,
 }
 
 impl Work for Actuator {
@@ -108,10 +115,15 @@ impl Work for Actuator {
                 }
             }
         }
-        let (outcome, step) = {
+        let (outcome, step, estimate) = {
             let mut plant = lock(&self.plant);
+            // The newest estimate by now beside the state the sensors read now.
+            let estimate = self.estimate.as_ref().and_then(|t| {
+                let m = t.peek_newest()?;
+                Some(EstimatePoint::new(plant.state().as_array(), &m.data))
+            });
             let outcome = plant.step(u);
-            (outcome, plant.steps())
+            (outcome, plant.steps(), estimate)
         };
         let published = self.policy_output.as_ref().and_then(|t| {
             let m = t.peek_newest()?;
@@ -131,6 +143,7 @@ impl Work for Actuator {
             nonfinite,
             topics: self.topics.iter().map(|t| t.stats_at(now)).collect(),
             fell: outcome.terminated,
+            estimate,
         };
         log(&self.log).push(rec.clone());
         for obs in &mut self.observers {
