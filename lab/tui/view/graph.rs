@@ -427,7 +427,7 @@ fn pack(parts: impl IntoIterator<Item = String>, sep: &str, w: usize) -> Vec<Str
 /// width, most telling first (a short panel cuts from the end).
 pub(super) fn arrow_lines(t: &TopicView, w: usize, rows: usize) -> Vec<Line<'static>> {
     if t.subscriber.is_none() {
-        return unsubscribed_arrow(t, w);
+        return unsubscribed_arrow(t, w, rows);
     }
     let (shaft, style, mark) = if t.dropping {
         (
@@ -505,8 +505,21 @@ pub(super) fn arrow_lines(t: &TopicView, w: usize, rows: usize) -> Vec<Line<'sta
         };
         Line::from(text.dim()).centered()
     });
+    // A cell too short for every line (an arrow of a two-row layout at 80×24): the rate
+    // goes on the shaft, so the name, the rate and the drops still show in three rows.
+    // (Name, shaft, rate, the drops with any stale reads beside them, the wire line.)
+    let plain = t.qos.is_none() && 4 + usize::from(wire.is_some()) > rows;
+    let rate_on_shaft = (plain && !t.uncounted && !t.unhealthy)
+        .then(|| {
+            let bar = if t.dropping { "═" } else { "─" };
+            labelled_shaft(bar, "▶", &shaft_rate(t, w)?, w, style, Style::new())
+        })
+        .flatten();
     let Some(parts) = &t.qos else {
-        let mut lines = vec![name, shaft, rate];
+        let mut lines = match rate_on_shaft {
+            Some(shaft) => vec![name, shaft],
+            None => vec![name, shaft, rate],
+        };
         let (drop_text, stale_text) = (
             format!("{} drop{drop_mark} ", t.dropped),
             format!("{}↺", t.stale_reads),
@@ -533,25 +546,42 @@ pub(super) fn arrow_lines(t: &TopicView, w: usize, rows: usize) -> Vec<Line<'sta
         return lines;
     };
     let (on_shaft, below) = qos_on_shaft(parts, w);
+    let bar = if t.dropping { "═" } else { "─" };
     let shaft = if on_shaft.is_empty() {
         shaft
     } else {
-        let label = on_shaft.join(" ");
-        let run = w
-            .saturating_sub(1)
-            .saturating_sub(label.chars().count() + 2);
-        let (left, right) = (run / 2, run - run / 2);
-        let shaft_style = shaft.spans.first().map_or(Style::new(), |s| s.style);
-        let bar = if t.dropping { "═" } else { "─" };
-        Line::from(vec![
-            Span::styled(format!("{} ", bar.repeat(left)), shaft_style),
-            Span::raw(label).dim(),
-            Span::styled(format!(" {}▶", bar.repeat(right)), shaft_style),
-        ])
+        let dim = Style::new().add_modifier(Modifier::DIM);
+        labelled_shaft(bar, "▶", &on_shaft.join(" "), w, style, dim).unwrap_or(shaft)
     };
-    // msg/s right after the drops: at 80×24 a panel of five rows still shows it.
-    let mut lines = vec![name, shaft, dropped, rate];
-    lines.extend(qos_counters(t, w));
+    // msg/s right after the drops: at 80×24 a panel of five rows still shows it. A cell
+    // shorter than its lines (a two-row layout) takes the drops and the rate in one line,
+    // so the QoS counters (expired, deadline misses, losses) still show.
+    let counters = qos_counters(t, w);
+    let one_line = (4 + counters.len() > rows && !t.uncounted)
+        .then(|| {
+            [
+                format!("{} drop{drop_mark} {:.0}/s", t.dropped, t.msg_per_s),
+                format!("{}{drop_mark} {:.0}/s", t.dropped, t.msg_per_s),
+            ]
+            .into_iter()
+            .find(|l| l.chars().count() <= w + 1)
+        })
+        .flatten();
+    let mut lines = vec![name, shaft];
+    let figures = match one_line {
+        Some(l) => vec![Line::from(Span::styled(l, style)).centered()],
+        None => vec![dropped, rate],
+    };
+    // In three rows or fewer, trouble first: counters that counted (a deadline missed,
+    // a message expired or lost) before the drops and the rate, which the line under the
+    // panel totals too.
+    if rows <= 3 && t.qos_counts.iter().any(|(_, n)| *n > 0) {
+        lines.extend(counters);
+        lines.extend(figures);
+    } else {
+        lines.extend(figures);
+        lines.extend(counters);
+    }
     lines.extend(
         pack(below, " ", w)
             .into_iter()
@@ -619,18 +649,69 @@ fn incompatible_arrow(
 }
 
 /// Published, read by no node (a diagnostic output): a dashed arrow to nobody, and no drop
-/// count (every message it evicts is unread, and no one misses it).
-fn unsubscribed_arrow(t: &TopicView, w: usize) -> Vec<Line<'static>> {
+/// count (every message it evicts is unread, and no one misses it). In fewer than four
+/// rows the rate goes on the arrow.
+fn unsubscribed_arrow(t: &TopicView, w: usize, rows: usize) -> Vec<Line<'static>> {
     let grey = Style::new().fg(Color::DarkGray);
+    let name = Line::from(t.name.clone().bold()).centered();
+    let rate = rate_text(t);
+    if rows < 4 {
+        let on_shaft =
+            shaft_rate(t, w).and_then(|r| labelled_shaft("╌", "▷", &r, w, grey, Style::new()));
+        if let Some(shaft) = on_shaft {
+            return vec![
+                name,
+                shaft,
+                Line::from(Span::styled("no subscriber", grey)).centered(),
+            ];
+        }
+    }
     vec![
-        Line::from(t.name.clone().bold()).centered(),
+        name,
         Line::from(Span::styled(
             format!("{}▷", "╌".repeat(w.saturating_sub(1))),
             grey,
         )),
-        Line::from(format!("{:.1} msg/s", t.msg_per_s)).centered(),
+        Line::from(rate).centered(),
         Line::from(Span::styled("no subscriber", grey)).centered(),
     ]
+}
+
+/// A topic's rate as its arrow gives it: `50.0 msg/s`.
+fn rate_text(t: &TopicView) -> String {
+    format!("{:.1} msg/s", t.msg_per_s)
+}
+
+/// The rate in the first form that fits on a shaft `w` wide with a bar either side
+/// (`─ 50.0 msg/s ─▶`, `─ 50 msg/s ─▶`, `─ 50/s ─▶`); `None` when none does.
+fn shaft_rate(t: &TopicView, w: usize) -> Option<String> {
+    [
+        rate_text(t),
+        format!("{:.0} msg/s", t.msg_per_s),
+        format!("{:.0}/s", t.msg_per_s),
+    ]
+    .into_iter()
+    .find(|r| r.chars().count() + 5 <= w)
+}
+
+/// An arrow's shaft `w` wide with `label` on it (`── dl 40 ms ──▶`, `╌ 50.0 msg/s ╌▷`):
+/// `bar`s either side in `style`, the label in `label_style`, then `head`. `None` when
+/// the label does not fit.
+fn labelled_shaft(
+    bar: &str,
+    head: &str,
+    label: &str,
+    w: usize,
+    style: Style,
+    label_style: Style,
+) -> Option<Line<'static>> {
+    let run = w.checked_sub(1 + label.chars().count() + 2)?;
+    let (left, right) = (run / 2, run - run / 2);
+    Some(Line::from(vec![
+        Span::styled(format!("{} ", bar.repeat(left)), style),
+        Span::styled(label.to_string(), label_style),
+        Span::styled(format!(" {}{head}", bar.repeat(right)), style),
+    ]))
 }
 
 /// A QoS counter that says the topic is unhealthy.
@@ -808,4 +889,57 @@ pub(super) fn graph_height(v: &View, width: u16, height: u16, max: u16) -> u16 {
         .unwrap_or(0)
         .min(usize::from(u16::MAX - 2)) as u16;
     (tallest + 2).clamp(7, max.max(7))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn texts(lines: &[Line<'_>]) -> Vec<String> {
+        lines.iter().map(ToString::to_string).collect()
+    }
+
+    fn topic(qos: Option<Vec<String>>, counts: Vec<(&'static str, u64)>) -> TopicView {
+        TopicView {
+            name: "/reference".into(),
+            subscriber: Some(1),
+            depth: 1,
+            msg_per_s: 50.0,
+            qos,
+            qos_counts: counts,
+            ..TopicView::default()
+        }
+    }
+
+    /// An arrow in a cell of two or three rows (a two-row layout at 80×24) keeps its rate
+    /// on the shaft, and its QoS counters before its drops when they counted; in a cell
+    /// with room, the lines are as they were.
+    #[test]
+    fn a_short_arrow_keeps_its_rate_and_its_trouble() {
+        let plain = topic(None, Vec::new());
+        assert_eq!(
+            texts(&arrow_lines(&plain, 14, 3)),
+            ["/reference", "─ 50 msg/s ──▶", "0 dropped ✓"]
+        );
+        assert_eq!(texts(&arrow_lines(&plain, 15, 2))[1], "─ 50.0 msg/s ─▶");
+        assert_eq!(
+            texts(&arrow_lines(&plain, 14, 5)),
+            ["/reference", "─────────────▶", "50.0 msg/s", "0 dropped ✓"]
+        );
+        let late = topic(
+            Some(vec!["dl 30 ms".into()]),
+            vec![("dl miss", 17), ("expired", 3)],
+        );
+        let short = texts(&arrow_lines(&late, 14, 3));
+        assert_eq!(short[2], "17 dl miss", "{short:?}");
+        assert_eq!(short[3], "3 expired", "{short:?}");
+        let tall = texts(&arrow_lines(&late, 14, 6));
+        assert_eq!(tall[2..4], ["0 dropped ✓", "50.0 msg/s"], "{tall:?}");
+        let mut idle = topic(None, Vec::new());
+        idle.subscriber = None;
+        assert_eq!(
+            texts(&arrow_lines(&idle, 14, 3)),
+            ["/reference", "╌ 50 msg/s ╌╌▷", "no subscriber"]
+        );
+    }
 }
