@@ -148,7 +148,7 @@ pub fn run(
         Some(b) => b,
         None => ratelab::checkpoint::load_policy(&a.policy)?,
     };
-    headless::check_out(&a)?;
+    headless::check_out(&a, &cfg.graph)?;
     let (report, kept, recording) =
         headless::execute(&a, &cfg, brain, stop, Vec::new(), false, true)?;
     if let Some(e) = headless::finish_recording(&a, recording.as_ref(), &report) {

@@ -491,7 +491,8 @@ pub struct RunArgs {
     /// Quick deterministic check: virtual clock, 2 s.
     #[arg(long)]
     pub smoke: bool,
-    /// Write metrics.json (and trace.csv, in one process) into this folder.
+    /// Write metrics.json (and trace.csv and log.txt in one process, and estimator.json
+    /// with an estimator in the graph) into this folder.
     #[arg(long, value_name = "DIR")]
     pub out: Option<PathBuf>,
     /// trace.csv keeps every N-th actuator step (steps 1, 1+N, …) and the last: a long

@@ -229,7 +229,7 @@ pub fn run_headless(a: &RunArgs, stop: StopFlag) -> anyhow::Result<RunReport> {
     let cfg = config_from_args(a)?;
     warn_late_faults(&cfg);
     let brain = ratelab::checkpoint::load_policy(&a.policy)?;
-    check_out(a)?;
+    check_out(a, &cfg.graph)?;
     let (bar, ticker) = real_clock_bar(&cfg, &stop);
     // A long virtual run (up to an hour of run time, seconds to minutes of wall time) shows
     // its run time going by; the observer only reads step times, so results do not change.
@@ -309,12 +309,13 @@ pub fn run_headless(a: &RunArgs, stop: StopFlag) -> anyhow::Result<RunReport> {
 ///
 /// # Errors
 /// The folder cannot be made, or a file is there without `--force`.
-pub fn check_out(a: &RunArgs) -> anyhow::Result<()> {
+pub fn check_out(a: &RunArgs, graph: &GraphSpec) -> anyhow::Result<()> {
     if let Some(dir) = &a.out {
         std::fs::create_dir_all(dir)
             .with_context(|| format!("cannot create --out folder {}", dir.display()))?;
         // Refuse before the run, not after it: the outputs will not be writable.
-        for name in ["metrics.json", "trace.csv", ESTIMATOR_JSON] {
+        let estimator = graph.estimate_topic().map(|_| ESTIMATOR_JSON);
+        for name in ["metrics.json", "trace.csv"].into_iter().chain(estimator) {
             ratelab::output::check_target(&dir.join(name), a.force)?;
         }
     }
@@ -602,6 +603,14 @@ pub fn write_outputs(
         .map(|e| (dir.join(ESTIMATOR_JSON), e));
     if let Some((path, _)) = &estimator {
         ratelab::output::check_target(path, force)?;
+    } else if force {
+        // Replacing a run's files: another run's estimator figures do not stay beside them.
+        match std::fs::remove_file(dir.join(ESTIMATOR_JSON)) {
+            Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
+                anyhow::bail!("cannot remove {}: {e}", dir.join(ESTIMATOR_JSON).display())
+            }
+            _ => {}
+        }
     }
     let json = serde_json::to_string_pretty(&report.metrics)? + "\n";
     ratelab::output::write_file(&metrics, force, json.as_bytes())?;

@@ -13,7 +13,7 @@ use ratelab::config::{check_rate, BREAK_CONTROL_HZ};
 use ratelab::executor::{ExecutorKind, ExecutorOverride};
 use ratelab::graph::kind::Code;
 use ratelab::graph::{GraphSpec, NodeId, TopicId};
-use ratelab::plant::GEAR_N;
+use ratelab::plant::{CONTROL_PERIOD, GEAR_N};
 use ratelab::qos::{Delivery, OnDeadlineMissed, QosCounter, Reliability, TopicQos};
 use ratelab::run::Command;
 use ratelab::runlog::StepRecord;
@@ -618,9 +618,12 @@ impl App {
         }
         self.history.push_back((now_s, s.pole_angle));
         self.thinned.push(now_s, s.pole_angle, s.action * GEAR_N);
-        if let Some(e) = &s.estimate {
+        // Drawn where the θ line shows the state it estimates: each θ point is the angle
+        // its step reached, the state the next tick's sensors read (before that step).
+        if let Some(est) = s.estimate.as_ref().and_then(|e| e.estimate) {
+            let at_s = now_s - CONTROL_PERIOD.as_secs_f64();
             self.estimated
-                .push(now_s, e.estimate[ratelab::estimate::POLE_ANGLE]);
+                .push(at_s, est[ratelab::estimate::POLE_ANGLE]);
         }
         self.applied.push_back((now_s, s.action * GEAR_N));
         if let Some((at, newtons)) = s.published {

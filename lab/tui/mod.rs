@@ -1166,11 +1166,19 @@ mod tests {
         let report = run(&cfg, Box::new(Scripted), RunOptions::new()).unwrap();
         let (mut app, _) = told(&cfg, &report.trace, cfg.duration);
         let v = app.view();
-        // The last 10 s: one estimate per step, each the step's own.
-        let want: Vec<(f64, f64)> = report
-            .trace
+        // Each step's estimate, drawn where the θ line shows the state it estimates: the
+        // angle the step before reached is the truth a step's estimate is of.
+        let trace = &report.trace;
+        for w in trace.windows(2) {
+            let truth = w[1].estimate.as_ref().unwrap().truth[2];
+            assert_eq!(truth, w[0].pole_angle, "at {}", w[1].t);
+        }
+        let want: Vec<(f64, f64)> = trace
             .iter()
-            .filter_map(|s| Some((s.t.as_secs_f64(), s.estimate?.estimate[2])))
+            .filter_map(|s| {
+                let e = s.estimate.as_ref()?.estimate?;
+                Some((s.t.as_secs_f64() - 0.02, e[2]))
+            })
             .filter(|(t, _)| *t >= 2.0)
             .collect();
         assert_eq!(v.angle_estimate, want);

@@ -118,10 +118,11 @@ pub struct StepRecord {
     pub published: Option<(Nanos, f64)>,
     /// True on the tick the pole fell.
     pub fell: bool,
-    /// With an estimator in the graph: its newest estimate beside the plant's state at
-    /// this tick, before the step ([`crate::estimate`]).
+    /// With an estimator in the graph: the plant's state at this tick, before the step,
+    /// beside the newest estimate, if any ([`crate::estimate`]; boxed: most graphs have
+    /// none, and every record is kept).
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub estimate: Option<crate::estimate::EstimatePoint>,
+    pub estimate: Option<Box<crate::estimate::EstimatePoint>>,
 }
 
 /// Everything the actuator measured during a run.

@@ -156,21 +156,15 @@ fn a_slow_estimator_adds_its_period_to_the_latency_as_computed_by_hand() {
     }
     // The estimate each step saw is the plant's state at the estimator's last tick, read
     // through a noiseless float32 measurement: the truth the step at that tick took.
-    let truth_at = |t: Nanos| {
-        steps
-            .iter()
-            .find(|s| s.t == t)
-            .unwrap()
-            .estimate
-            .unwrap()
-            .truth
-    };
+    let point = |s: &StepRecord| *s.estimate.clone().expect("a point beside every step");
+    let truth_at = |t: Nanos| point(steps.iter().find(|s| s.t == t).unwrap()).truth;
     for s in steps.iter() {
-        let p = s.estimate.expect("an estimate beside every step");
+        let p = point(s);
+        let estimate = p.estimate.expect("an estimate from the start");
         let then = truth_at(Nanos(s.t.0 - s.t.0 % 200_000_000));
         for i in [0, 2] {
             assert!(
-                (p.estimate[i] - then[i]).abs() < 1e-6,
+                (estimate[i] - then[i]).abs() < 1e-6,
                 "step at {}: {p:?}",
                 s.t
             );
@@ -204,9 +198,13 @@ fn an_estimator_is_measured_against_the_truth_and_only_an_estimator() {
         ("estimator", "/state")
     );
     let f = &shipped.figures;
-    assert_eq!(f.samples, 500, "every step but the first has an estimate");
+    assert_eq!(
+        (f.ticks, f.samples, f.nonfinite),
+        (501, 500, 0),
+        "all but t = 0"
+    );
     // The angle is measured with 1 mrad of noise, and read newer than the plant's last step.
-    assert!((0.5e-3..2e-3).contains(&f.rms[2]), "{f:?}");
+    assert!((0.5e-3..2e-3).contains(&f.rms.unwrap()[2]), "{f:?}");
     assert_eq!(f.pole_angle_lag_ms, Some(0.0), "{f:?}");
     // A first-order low-pass lags by about 1/(2π·cut-off): 8 ms at 20 Hz, 32 ms at 5 Hz.
     let lag = |f: &ratelab::estimate::EstimateFigures| f.pole_angvel_lag_ms.unwrap();
@@ -216,7 +214,7 @@ fn an_estimator_is_measured_against_the_truth_and_only_an_estimator() {
     // A slower estimator reads older measurements: its angle lags.
     let slow = run_with(20.0, 25.0).figures;
     assert!(slow.pole_angle_lag_ms.unwrap() >= 15.0, "{slow:?}");
-    assert!(slow.rms[2] > f.rms[2]);
+    assert!(slow.rms.unwrap()[2] > f.rms.unwrap()[2]);
     // A sensor that publishes the state itself is no estimator.
     for file in ["graphs/cartpole.toml", "graphs/cartpole-safety.toml"] {
         let r = run(
@@ -268,9 +266,20 @@ fn an_estimator_s_figures_are_printed_and_written_beside_metrics_json() {
     std::fs::write(dir.path().join("chapter/estimator.json"), "mine").unwrap();
     let o = run("graphs/cartpole-estimator.toml", "chapter", &["--force"]);
     assert!(o.status.success());
+    // Refused before the run, not after it, with one line.
     let o = run("graphs/cartpole-estimator.toml", "est", &[]);
     assert_eq!(o.status.code(), Some(2));
-    assert!(String::from_utf8_lossy(&o.stderr).contains("--force"));
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        stderr.contains("--force") && stderr.lines().count() == 1,
+        "{stderr}"
+    );
+    assert!(!String::from_utf8_lossy(&o.stdout).contains("BALANCED"));
+    // A run without an estimator replacing the files takes the old figures away with them.
+    assert!(run("graphs/cartpole.toml", "est", &["--force"])
+        .status
+        .success());
+    assert!(!dir.path().join("est/estimator.json").exists());
 }
 
 #[test]

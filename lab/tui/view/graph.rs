@@ -553,9 +553,32 @@ pub(super) fn arrow_lines(t: &TopicView, w: usize, rows: usize) -> Vec<Line<'sta
         let dim = Style::new().add_modifier(Modifier::DIM);
         labelled_shaft(bar, "▶", &on_shaft.join(" "), w, style, dim).unwrap_or(shaft)
     };
-    // msg/s right after the drops: at 80×24 a panel of five rows still shows it. A cell
-    // shorter than its lines (a two-row layout) takes the drops and the rate in one line,
-    // so the QoS counters (expired, deadline misses, losses) still show.
+    let mut lines = vec![name, shaft];
+    lines.extend(qos_figures(t, w, rows, &drop_mark, style, [dropped, rate]));
+    lines.extend(
+        pack(below, " ", w)
+            .into_iter()
+            .map(|l| Line::from(l).dim().centered()),
+    );
+    lines.extend(stale);
+    lines.extend(wire);
+    lines
+}
+
+/// A QoS arrow's figures under its shaft: its drops and rate (`drop_rate`, two lines),
+/// then its QoS counters. msg/s right after the drops: at 80×24 a panel of five rows still
+/// shows it. A cell shorter than its lines (a two-row layout) takes the drops and the rate
+/// in one line, so the QoS counters (expired, deadline misses, losses) still show; in three
+/// rows or fewer, trouble first: counters that counted before the drops and the rate, which
+/// the line under the panel totals too.
+fn qos_figures(
+    t: &TopicView,
+    w: usize,
+    rows: usize,
+    drop_mark: &str,
+    style: Style,
+    drop_rate: [Line<'static>; 2],
+) -> Vec<Line<'static>> {
     let counters = qos_counters(t, w);
     let one_line = (4 + counters.len() > rows && !t.uncounted)
         .then(|| {
@@ -567,29 +590,15 @@ pub(super) fn arrow_lines(t: &TopicView, w: usize, rows: usize) -> Vec<Line<'sta
             .find(|l| l.chars().count() <= w + 1)
         })
         .flatten();
-    let mut lines = vec![name, shaft];
     let figures = match one_line {
         Some(l) => vec![Line::from(Span::styled(l, style)).centered()],
-        None => vec![dropped, rate],
+        None => drop_rate.to_vec(),
     };
-    // In three rows or fewer, trouble first: counters that counted (a deadline missed,
-    // a message expired or lost) before the drops and the rate, which the line under the
-    // panel totals too.
     if rows <= 3 && t.qos_counts.iter().any(|(_, n)| *n > 0) {
-        lines.extend(counters);
-        lines.extend(figures);
+        [counters, figures].concat()
     } else {
-        lines.extend(figures);
-        lines.extend(counters);
+        [figures, counters].concat()
     }
-    lines.extend(
-        pack(below, " ", w)
-            .into_iter()
-            .map(|l| Line::from(l).dim().centered()),
-    );
-    lines.extend(stale);
-    lines.extend(wire);
-    lines
 }
 
 /// A subscription its publisher does not connect (what it requested is not offered,

@@ -442,6 +442,12 @@ pub fn check_report(
                 a.final_pole_angle
             ));
         }
+        if a.estimate.as_ref().is_some_and(|e| !e.plausible(a.steps)) {
+            return Err(format!(
+                "the estimator's figures are impossible in {} steps",
+                a.steps
+            ));
+        }
     }
     Ok(())
 }

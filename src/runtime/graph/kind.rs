@@ -173,9 +173,9 @@ pub struct BuildContext<'a> {
     /// The topic the chapter's policy publishes, when the graph has the chain (the
     /// actuator reports what was published on it).
     pub action: Option<&'a AnyTopic>,
-    /// The topic carrying the chain's state estimate, when the graph has an estimator
+    /// The policy's queue of the chain's state estimate, when the graph has an estimator
     /// ([`crate::graph::GraphSpec::estimate_topic`]; the actuator watches it).
-    pub estimate: Option<&'a AnyTopic>,
+    pub estimate: Option<AnyTopic>,
     /// The node's liveliness.
     pub liveliness: &'a Arc<Liveliness>,
     /// Told of every actuator step (the actuator takes them).

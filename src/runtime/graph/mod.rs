@@ -500,7 +500,14 @@ fn build_node(
         log: &handles.log,
         topics,
         action: spec.chain.map(|c| &topics[c.action.0]),
-        estimate: spec.estimate_topic().map(|t| &topics[t.0]),
+        estimate: spec.estimate_topic().zip(spec.chain).map(|(t, c)| {
+            // The policy's own queue of it, when the topic has several subscribers.
+            let subs = &spec.topic(t).subscribers;
+            match subs.binary_search(&c.policy).ok() {
+                Some(k) if subs.len() > 1 => topics[t.0].subscription(k),
+                _ => topics[t.0].clone(),
+            }
+        }),
         liveliness: &handles.liveliness[i],
         observers,
         attachment,

@@ -14,7 +14,8 @@ def run(
 ) -> Dict[str, Any]:
     """One run of `ratelab run FLAGS...`: metrics_json, trace_csv, log (texts), summary
     (lines), failed (a node's failure line or None), recording (path or None), wall_s,
-    trace_columns ((name, numpy dtype, bytes) per column of trace_csv)."""
+    trace_columns ((name, numpy dtype, bytes) per column of trace_csv), estimator_json
+    (estimator.json's text with an estimator in the graph, else None)."""
 
 def sweep(flags: List[str]) -> Tuple[str, Optional[str]]:
     """`ratelab sweep FLAGS...`: (its --csv text, the first failed node's line or None)."""

@@ -41,7 +41,8 @@ pub fn def() -> KindDef {
                 reported: None,
                 estimate: cx
                     .estimate
-                    .and_then(|t| t.subscription(0).typed::<StateMsg>().cloned()),
+                    .as_ref()
+                    .and_then(|t| t.typed::<StateMsg>().cloned()),
             }) as Box<dyn Work>)
         }),
     }
@@ -70,8 +71,8 @@ pub struct Actuator {
     pub policy_output: Option<Arc<Subscription<ForceMsg>>>,
     /// `seq` of the newest policy message already reported.
     pub reported: Option<u64>,
-    /// The chain's state estimate, when the graph has an estimator: watched (never read)
-    /// beside the plant's state ([`crate::estimate`]).
+    /// The chain's state estimate, when the graph has an estimator: the policy's queue of
+    /// it, watched (never read) beside the plant's state ([`crate::estimate`]).
     pub estimate: Option<Arc<Subscription<StateMsg>>>,
 }
 
@@ -118,9 +119,11 @@ impl Work for Actuator {
         let (outcome, step, estimate) = {
             let mut plant = lock(&self.plant);
             // The newest estimate by now beside the state the sensors read now.
-            let estimate = self.estimate.as_ref().and_then(|t| {
-                let m = t.peek_newest()?;
-                Some(EstimatePoint::new(plant.state().as_array(), &m.data))
+            let estimate = self.estimate.as_ref().map(|t| {
+                let m = t.peek_newest();
+                let point =
+                    EstimatePoint::new(plant.state().as_array(), m.as_ref().map(|m| &m.data));
+                Box::new(point)
             });
             let outcome = plant.step(u);
             (outcome, plant.steps(), estimate)
