@@ -401,11 +401,12 @@ mod tests {
     fn the_angle_is_interpolated_the_short_way_round() {
         let mut e = EstimateError::default();
         let at = |theta: f64| [0.0, 0.0, wrap_angle(theta), 0.0];
-        e.truth.push_back((Nanos(0), [wrap_angle(3.13), 0.0]));
-        e.truth.push_back((Nanos(20), [wrap_angle(3.15), 0.0]));
+        let pi = std::f64::consts::PI;
+        e.truth.push_back((Nanos(0), [wrap_angle(pi - 0.01), 0.0]));
+        e.truth.push_back((Nanos(20), [wrap_angle(pi + 0.01), 0.0]));
         let mid = e.truth_at(Nanos(10))[0];
-        assert!((wrap_angle(mid - 3.14)).abs() < 1e-9, "{mid}");
-        let p = EstimatePoint::new(at(3.15), None);
+        assert!((wrap_angle(mid - pi)).abs() < 1e-9, "{mid}");
+        let p = EstimatePoint::new(at(pi + 0.01), None);
         assert_eq!(p.error(), None);
     }
 
