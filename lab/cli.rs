@@ -122,6 +122,11 @@ pub struct LaunchArgs {
     /// FILE only with --force.
     #[arg(long, value_name = "FILE")]
     pub export_credentials: Option<PathBuf>,
+    /// Kill a process of the graph at run time T, seconds, as a crash would (SIGKILL;
+    /// repeatable; real clock): --kill-process policy@3. With `restart = "on-failure"` in
+    /// its `[processes.NAME]` table it is started again and rejoins.
+    #[arg(long = "kill-process", value_name = "PROCESS@T", value_parser = parse_kill_process)]
+    pub kill_processes: Vec<Fault>,
     /// The run flags.
     #[command(flatten)]
     pub run: RunArgs,
@@ -276,6 +281,10 @@ fn parse_stall(s: &str) -> Result<Fault, String> {
 
 fn parse_kill(s: &str) -> Result<Fault, String> {
     Fault::parse(s, true)
+}
+
+fn parse_kill_process(s: &str) -> Result<Fault, String> {
+    Fault::parse(s, true).map_err(|e| e.replace("NODE@T", "PROCESS@T"))
 }
 
 fn split_assignment<'a>(s: &'a str, what: &str) -> Result<(&'a str, &'a str), String> {

@@ -12,6 +12,7 @@ use ratelab::graph::spec::graph_file_bytes;
 use ratelab::scheduler::StopFlag;
 use ratelab::session::Telemetry;
 use ratelab::RunReport;
+use ratelab::{ClockKind, RunConfig};
 use std::io::{IsTerminal, Write};
 use std::path::Path;
 use std::time::Duration;
@@ -27,8 +28,14 @@ pub fn run_launch(a: &LaunchArgs, force_headless: bool, stop: StopFlag) -> anyho
         _ => {}
     }
     if !a.processes {
-        if a.listen.is_some() || a.no_spawn || a.export_credentials.is_some() {
-            anyhow::bail!("--listen, --no-spawn and --export-credentials need --processes");
+        if a.listen.is_some()
+            || a.no_spawn
+            || a.export_credentials.is_some()
+            || !a.kill_processes.is_empty()
+        {
+            anyhow::bail!(
+                "--listen, --no-spawn, --export-credentials and --kill-process need --processes"
+            );
         }
         return headless::run_headless(&run, stop).map(|_| ());
     }
@@ -55,6 +62,7 @@ pub fn run_launch(a: &LaunchArgs, force_headless: bool, stop: StopFlag) -> anyho
         cfg.duration = ratelab::session::UNBOUNDED; // as the lab: until you quit
     }
     headless::warn_late_faults(&cfg);
+    let kill_processes = kills_of(a, &cfg)?;
     let brain = ratelab::checkpoint::load_policy(&run.policy)?; // a bad --policy fails before any process starts
     if let Some(dir) = &run.out {
         std::fs::create_dir_all(dir)
@@ -97,6 +105,7 @@ pub fn run_launch(a: &LaunchArgs, force_headless: bool, stop: StopFlag) -> anyho
         pace: None,
         credentials,
         ros2_domain,
+        kill_processes,
     };
     let placed = cfg.graph.placement().len();
     println!(
@@ -144,6 +153,40 @@ pub fn run_launch(a: &LaunchArgs, force_headless: bool, stop: StopFlag) -> anyho
         missing.join(", ")
     );
     headless::end_is_an_error(&report)
+}
+
+/// `--kill-process`'s kills, checked: each names a process of the graph that this launch
+/// starts, under the real clock.
+///
+/// # Errors
+/// One line: the virtual clock (its lockstep cannot go on without a process, nor take one
+/// back), `--no-spawn`, or a process the graph does not have.
+fn kills_of(a: &LaunchArgs, cfg: &RunConfig) -> anyhow::Result<Vec<(String, ratelab::Nanos)>> {
+    if a.kill_processes.is_empty() {
+        return Ok(Vec::new());
+    }
+    if cfg.clock != ClockKind::Real {
+        anyhow::bail!("--kill-process needs --clock real: under the virtual clock the processes run in lockstep, which a killed process would stop, and none can rejoin");
+    }
+    if a.no_spawn {
+        anyhow::bail!("--kill-process kills processes this launch starts: not with --no-spawn");
+    }
+    let names: Vec<String> = cfg.graph.placement().into_iter().map(|(p, _)| p).collect();
+    a.kill_processes
+        .iter()
+        .map(|k| {
+            if names.contains(&k.node) {
+                Ok((k.node.clone(), k.at))
+            } else {
+                Err(anyhow::anyhow!(
+                    "--kill-process: graph '{}' has no process '{}' (its processes: {})",
+                    cfg.graph.name,
+                    ratelab::text::printable(&k.node),
+                    names.join(", ")
+                ))
+            }
+        })
+        .collect()
 }
 
 /// `--ros2` across processes: the ROS 2 session (with the embedded router when none

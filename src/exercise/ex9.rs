@@ -136,6 +136,7 @@ pub fn measure_ex9(
             pace: None,
             credentials: Credentials::generate(&cfg.graph.name, &names).map_err(launch_error)?,
             ros2_domain: None,
+            kill_processes: Vec::new(),
         };
         let report = launch(cfg, &opts, &StopFlag::new(), &|_| {}).map_err(launch_error)?;
         if !report.missing.is_empty() {

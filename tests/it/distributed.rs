@@ -1099,6 +1099,64 @@ pub(crate) fn assert_one_line_exit_2(o: &Output, needle: &str) {
 }
 
 #[test]
+fn a_kill_of_a_process_is_refused_where_it_cannot_be_done_in_one_line() {
+    let _m = crate::machine::shared();
+    let restart = Path::new(REPO).join("graphs/cartpole-restart.toml");
+    let graph = restart.to_str().unwrap();
+    for (args, why) in [
+        (
+            vec!["launch", "--kill-process", "policy@1", "--duration", "1"],
+            "need --processes",
+        ),
+        (
+            vec![
+                "launch",
+                "--processes",
+                "--clock",
+                "virtual",
+                graph,
+                "--kill-process",
+                "policy@1",
+            ],
+            "--kill-process needs --clock real",
+        ),
+        (
+            vec![
+                "launch",
+                "--processes",
+                "--clock",
+                "real",
+                graph,
+                "--kill-process",
+                "planner@1",
+            ],
+            "has no process 'planner' (its processes: robot, policy)",
+        ),
+        (
+            vec![
+                "launch",
+                "--processes",
+                "--clock",
+                "real",
+                graph,
+                "--kill-process",
+                "policy",
+            ],
+            "expected PROCESS@T",
+        ),
+    ] {
+        let o = ratelab(&args);
+        if why.starts_with("expected") {
+            // clap's refusal: its usage lines follow, still exit 2 and no run.
+            assert_eq!(o.status.code(), Some(2), "{}", text(&o.stderr));
+            assert!(text(&o.stderr).contains(why), "{}", text(&o.stderr));
+        } else {
+            assert_one_line_exit_2(&o, why);
+        }
+    }
+}
+
+#[test]
 fn bad_endpoints_busy_ports_and_unknown_processes_exit_2() {
     let _m = crate::machine::shared();
     for bad in [

@@ -15,8 +15,9 @@ use std::process::Command;
 
 use crate::repo;
 
-const SHIPPED: [&str; 11] = [
+const SHIPPED: [&str; 12] = [
     "graphs/cartpole.toml",
+    "graphs/cartpole-restart.toml",
     "graphs/cartpole-camera.toml",
     "graphs/cartpole-camera-python.toml",
     "graphs/cartpole-estimator.toml",

@@ -128,6 +128,10 @@ pub struct LaunchOptions {
     /// process `/clock` too (the launcher's program holds the ROS 2 session, and so the
     /// embedded router when none answered, for the launch's length).
     pub ros2_domain: Option<u32>,
+    /// Under the real clock, kill a started process at a run time (SIGKILL, as a crash
+    /// would: `launch --kill-process policy@3`), each once. A process whose graph says
+    /// `restart = "on-failure"` is then started again and rejoins.
+    pub kill_processes: Vec<(String, Nanos)>,
 }
 
 pub use crate::MAX_STDERR_LINE;

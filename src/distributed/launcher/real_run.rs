@@ -66,8 +66,10 @@ impl Launch<'_> {
                 },
             )?;
         }
+        let mut kills = self.opts.kill_processes.clone();
         loop {
             run.hear_figures(self, &stats_rx, carried);
+            run.kill_due(self, children, &mut kills);
             run.restart_failed(self, children);
             run.note_gone(self, gone_rx);
             run.stop_once_ended(self);
@@ -173,6 +175,33 @@ impl Supervision {
                 self.silent.push(p);
             }
         }
+    }
+
+    /// The kills asked for ([`super::LaunchOptions::kill_processes`]) whose time has come:
+    /// each process killed (SIGKILL, as a crash), said, and taken off `kills`.
+    fn kill_due(&mut self, l: &Launch, children: &mut Children, kills: &mut Vec<(String, Nanos)>) {
+        if self.end.is_some() || kills.is_empty() {
+            return;
+        }
+        let now = self.run_time();
+        kills.retain(|(p, at)| {
+            if now < *at {
+                return true;
+            }
+            match children.0.iter_mut().find(|(name, _)| name == p) {
+                Some((_, child)) => match child.kill() {
+                    Ok(()) => l.say(&format!(
+                        "process '{p}' killed at t={:.2}s (--kill-process)",
+                        now.as_secs_f64()
+                    )),
+                    Err(e) => l.say(&format!("process '{p}' could not be killed: {e}")),
+                },
+                None => l.say(&format!(
+                    "process '{p}' was not started by this launch: not killed"
+                )),
+            }
+            false
+        });
     }
 
     /// A started process that failed mid-run starts again where the graph says so
