@@ -94,6 +94,11 @@ fn main() {
             &["my_cliff_hz", "lower_than_scripted"][..],
         ),
         (
+            "ex12",
+            "exercises/ex12_restart.toml",
+            &["readings_lost", "latency_max_ms"][..],
+        ),
+        (
             "ex13",
             "exercises/ex13_what_ros2_sees.toml",
             &["nodes", "obs_type", "action_type", "clock_hz"][..],

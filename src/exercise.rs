@@ -31,6 +31,8 @@
 //!   long the pole stays up on the force the actuator goes on holding.
 //! - [`ex11`], your own brain: the learner's Python brain and the scripted balancer, each
 //!   slowed down until the pole falls: whose rate cliff is lower.
+//! - [`ex12`], the restart (real clock, real processes): the policy's process killed and
+//!   started again: the readings lost across its rejoin, and the held force's age.
 //! - [`ex13`], what ROS 2 sees: the chapter's graph offered with `--ros2`, its policy at
 //!   40 Hz: the node list, the topics' ROS 2 types, and how often `/clock` ticks.
 //! - [`ex14`], incompatible QoS: four requested/offered pairs on the chapter's `/action`,
@@ -50,6 +52,7 @@ macro_rules! say {
 pub mod ex1;
 pub mod ex10;
 pub mod ex11;
+pub mod ex12;
 pub mod ex13;
 pub mod ex14;
 pub mod ex2;
@@ -95,6 +98,7 @@ pub const EXERCISES: &[&dyn Exercise] = &[
     &ex9::Ex9,
     &ex10::Ex10,
     &ex11::Ex11,
+    &ex12::Ex12,
     &ex13::Ex13,
     &ex14::Ex14,
 ];
@@ -205,7 +209,7 @@ pub enum ExerciseError {
     Launch(String),
 }
 
-/// `ex1, ex2, …, ex11 or ex13`.
+/// `ex1, ex2, …, ex13 or ex14`.
 fn expected() -> String {
     match ids().split_last() {
         Some((last, rest)) if !rest.is_empty() => format!("{} or {last}", rest.join(", ")),
@@ -756,7 +760,7 @@ mod tests {
         }
         assert_eq!(
             expected(),
-            "ex1, ex2, ex3, ex4, ex5, ex6, ex7, ex8, ex9, ex10, ex11, ex13 or ex14"
+            "ex1, ex2, ex3, ex4, ex5, ex6, ex7, ex8, ex9, ex10, ex11, ex12, ex13 or ex14"
         );
     }
 

@@ -461,11 +461,11 @@ fn exercise_ex5_runs_on_the_graph_its_bands_name_and_reconciles() {
         "{}",
         stderr(&o)
     );
-    let o = ratelab(&["exercise", "ex12", "--dir", d]);
+    let o = ratelab(&["exercise", "ex15", "--dir", d]);
     assert!(
         o.status.code() == Some(2)
             && stderr(&o).contains(
-                "expected ex1, ex2, ex3, ex4, ex5, ex6, ex7, ex8, ex9, ex10, ex11, ex13 or ex14"
+                "expected ex1, ex2, ex3, ex4, ex5, ex6, ex7, ex8, ex9, ex10, ex11, ex12, ex13 or ex14"
             ),
         "{}",
         stderr(&o)

@@ -527,6 +527,65 @@ fn ex11_measurement_own_brain() {
 
 #[test]
 #[cfg_attr(
+    ex12_prediction_empty,
+    ignore = "ex12: write your prediction in exercises/ex12_restart.toml"
+)]
+fn ex12_prediction_recorded() {
+    prediction_recorded("ex12", "ex12_restart.toml");
+}
+
+/// ex12 starts real processes on the real clock and kills one: alone on the machine. The
+/// policy's process rejoins, the readings lost are those published in the gap, the pole
+/// stays up; the checks fail off the measured shape; the reconcile speaks to every key.
+#[test]
+fn ex12_measurement_restart() {
+    use ratelab::exercise::ex12::{check_ex12, measure_ex12, outcome_ex12, Ex12Bands};
+    use ratelab::exercise::Reconcile;
+    let _machine = crate::machine::alone();
+    let b: Ex12Bands = load_bands(&path("bands.toml")).unwrap().of().unwrap();
+    let file = default_graph("ex12", &path(""))
+        .unwrap()
+        .expect("ex12's graph");
+    let g = GraphSpec::load(&file).unwrap();
+    let exe = ratelab::distributed::launcher::Program::from(std::path::PathBuf::from(env!(
+        "CARGO_BIN_EXE_ratelab"
+    )));
+    let run = measure_ex12(&b, &g, Some(&file), &exe).unwrap();
+    let checks = check_ex12(&b, &g, &run);
+    assert_all(checks.clone());
+    let o = outcome_ex12(&b, &run);
+    assert!(o.readings_lost >= 1 && o.gap_ms > 0.0, "{o:?}");
+    // The policy missed the ticks of the gap, as many as the readings (within one).
+    let ticks = run.metrics.nodes["policy"].ticks;
+    let missed = (b.duration_s * 50.0) as u64 + 1 - ticks;
+    assert!(
+        missed.abs_diff(o.readings_lost) <= 2,
+        "{missed} ticks, {o:?}"
+    );
+    // Off the measured shape, the check says so: no readings lost is not the gap's.
+    let mut none = run.clone();
+    if let Some(t) = none.metrics.topics.get_mut("/obs") {
+        t.qos_counters.insert("lost".into(), 0);
+    }
+    assert!(!check_ex12(&b, &g, &none)[2].passed);
+    let mut never = run.clone();
+    never.rejoined_at = None;
+    assert!(!check_ex12(&b, &g, &never)[1].passed);
+    // A graph that does not restart the process is refused, in one line.
+    let e = measure_ex12(&b, &GraphSpec::chapter(), None, &exe).unwrap_err();
+    assert!(e.to_string().contains("restart = \"on-failure\""), "{e}");
+    let predicted: toml::Table =
+        toml::from_str("readings_lost = 3\nlatency_max_ms = 60\nwhy = \"w\"").unwrap();
+    let lines = o.reconcile(&predicted);
+    assert_eq!(lines.len(), 2, "{lines:?}");
+    assert!(
+        lines[0].contains(&format!("; {} were.", o.readings_lost)),
+        "{lines:?}"
+    );
+}
+
+#[test]
+#[cfg_attr(
     ex13_prediction_empty,
     ignore = "ex13: write your prediction in exercises/ex13_what_ros2_sees.toml"
 )]

@@ -1,0 +1,282 @@
+//! ex12, the restart: the chapter's graph across processes under the real clock, its policy's
+//! process killed mid-run (SIGKILL, as a crash) and started again by the launcher
+//! (`restart = "on-failure"`, `graphs/cartpole-restart.toml`). How many readings are lost
+//! across the rejoin, and how old does the force the actuator holds meanwhile get? Real
+//! clock, real processes over Zenoh ([`crate::distributed`]): the checks assert what holds
+//! on a loaded machine (the readings lost are those published while no policy ran).
+
+use super::{check, Check, Context, Exercise, ExerciseError, Reconcile, Section};
+use crate::config::{duration_from_secs, ClockKind, RunConfig};
+use crate::distributed::credentials::Credentials;
+use crate::distributed::launcher::{launch, LaunchOptions, Program};
+use crate::graph::spec::RestartPolicy;
+use crate::graph::GraphSpec;
+use crate::metrics::Metrics;
+use crate::scheduler::StopFlag;
+use crate::time::Nanos;
+use serde::Deserialize;
+use std::path::Path;
+
+/// ex12: the restart.
+pub struct Ex12;
+
+/// ex12's settings and the bands its checks assert (`bands.toml`'s `[ex12]`).
+#[derive(Clone, Debug, Deserialize)]
+pub struct Ex12Bands {
+    /// The graph, relative to the bands' folder (its policy's process restarts on failure).
+    pub graph: String,
+    /// The process killed.
+    pub process: String,
+    /// The topic whose readings the killed process would have read.
+    pub topic: String,
+    /// When it is killed, s of run time.
+    pub kill_at_s: f64,
+    /// Run length, s.
+    pub duration_s: f64,
+    /// The process rejoins within this long of the kill, s.
+    pub rejoin_within_s: f64,
+    /// The readings lost are those published while no copy of the process ran, within
+    /// this many.
+    pub lost_tolerance: u64,
+}
+
+impl Section for Ex12Bands {
+    const NAME: &'static str = "ex12";
+}
+
+/// What one ex12 run measured.
+#[derive(Clone, Debug)]
+pub struct Ex12Run {
+    /// The merged summary.
+    pub metrics: Metrics,
+    /// When the process rejoined (the launcher let its new copy in), run time; `None`: it
+    /// did not.
+    pub rejoined_at: Option<Nanos>,
+}
+
+/// ex12's outcome in the terms of its prediction.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Ex12Outcome {
+    /// Readings of the topic lost (published, never received by any copy of the process).
+    pub readings_lost: u64,
+    /// From the kill to the rejoin, ms (`NaN`: no rejoin).
+    pub gap_ms: f64,
+    /// The sense→act latency's maximum, ms: the held force's age when a new one came.
+    pub latency_max_ms: f64,
+}
+
+/// ex12's measurement: one launch of `graph` (read from `graph_path`, which the started
+/// processes load too) under the real clock, its `process` killed at `kill_at_s`, starting
+/// the processes with `exe`.
+///
+/// # Errors
+/// [`ExerciseError`] when the graph does not restart the process, or the launch fails.
+pub fn measure_ex12(
+    b: &Ex12Bands,
+    graph: &GraphSpec,
+    graph_path: Option<&Path>,
+    exe: &Program,
+) -> Result<Ex12Run, ExerciseError> {
+    if graph.restart.get(&b.process) != Some(&RestartPolicy::OnFailure) {
+        return Err(ExerciseError::Launch(format!(
+            "graph '{}' does not start process '{}' again ([processes.{}] restart = \"on-failure\")",
+            graph.name, b.process, b.process
+        )));
+    }
+    let cfg = RunConfig {
+        clock: ClockKind::Real,
+        duration: duration_from_secs(b.duration_s)?,
+        graph: graph.clone(),
+        ..RunConfig::default()
+    };
+    let kill_at = duration_from_secs(b.kill_at_s)?;
+    let names: Vec<String> = graph.placement().into_iter().map(|(p, _)| p).collect();
+    let launch_error = |e: crate::distributed::DistError| ExerciseError::Launch(e.to_string());
+    let opts = LaunchOptions {
+        graph_path: graph_path.map(Path::to_path_buf),
+        graph_bytes: crate::graph::spec::graph_file_bytes(graph_path)?,
+        listen: None,
+        policy: "scripted".into(),
+        exe: Some(exe.clone()),
+        child_stderr: None,
+        start_gate: None,
+        listening: None,
+        pace: None,
+        credentials: Credentials::generate(&graph.name, &names).map_err(launch_error)?,
+        ros2_domain: None,
+        kill_processes: vec![(b.process.clone(), kill_at)],
+    };
+    let report = launch(&cfg, &opts, &StopFlag::new(), &|_| {}).map_err(launch_error)?;
+    let rejoined_at = report
+        .wire
+        .iter()
+        .filter(|w| w.process == b.process)
+        .find_map(|w| w.since_ns)
+        .map(Nanos);
+    Ok(Ex12Run {
+        metrics: report.metrics,
+        rejoined_at,
+    })
+}
+
+/// ex12's outcome from its run.
+pub fn outcome_ex12(b: &Ex12Bands, run: &Ex12Run) -> Ex12Outcome {
+    let lost = run
+        .metrics
+        .topics
+        .get(&b.topic)
+        .and_then(|t| t.qos_counters.get("lost").copied())
+        .unwrap_or(0);
+    Ex12Outcome {
+        readings_lost: lost,
+        gap_ms: run
+            .rejoined_at
+            .map_or(f64::NAN, |t| (t.as_secs_f64() - b.kill_at_s) * 1e3),
+        latency_max_ms: run.metrics.latency_max_ms,
+    }
+}
+
+/// The topic's publisher's rate, Hz: how many readings a gap holds.
+fn reading_hz(graph: &GraphSpec, topic: &str) -> Option<f64> {
+    let t = graph.topics.iter().find(|t| t.name == topic)?;
+    Some(graph.nodes[t.publisher.0].rate_hz)
+}
+
+/// ex12's checks: the pole stays up across the restart; the process rejoins in time; the
+/// readings lost are those published in the gap (within the tolerance), at least one; the
+/// held force aged by the gap.
+pub fn check_ex12(b: &Ex12Bands, graph: &GraphSpec, run: &Ex12Run) -> Vec<Check> {
+    let o = outcome_ex12(b, run);
+    let hz = reading_hz(graph, &b.topic).unwrap_or(0.0);
+    let in_gap = o.gap_ms / 1e3 * hz;
+    vec![
+        check(
+            "the pole stays up across the restart",
+            run.metrics.balanced,
+        ),
+        check(
+            format!(
+                "process '{}' is started again and rejoins within {} s of the kill",
+                b.process, b.rejoin_within_s
+            ),
+            o.gap_ms.is_finite() && o.gap_ms >= 0.0 && o.gap_ms <= b.rejoin_within_s * 1e3,
+        ),
+        check(
+            format!(
+                "the {} readings lost are those published while no '{}' ran ({hz} Hz × the gap, within {})",
+                b.topic, b.process, b.lost_tolerance
+            ),
+            o.readings_lost >= 1
+                && in_gap.is_finite()
+                && (o.readings_lost as f64 - in_gap).abs() <= b.lost_tolerance as f64,
+        ),
+        check(
+            "the force the actuator held aged by the whole gap (max sense→act latency ≥ the gap)",
+            o.gap_ms.is_finite() && o.latency_max_ms >= o.gap_ms,
+        ),
+    ]
+}
+
+impl Reconcile for Ex12Outcome {
+    fn reconcile(&self, prediction: &toml::Table) -> Vec<String> {
+        let lost = match prediction.get("readings_lost").and_then(super::number) {
+            Some(n) => format!(
+                "You predicted {n} readings lost across the restart; {} were.",
+                self.readings_lost
+            ),
+            None => super::unreadable("readings_lost"),
+        };
+        let latency = match prediction.get("latency_max_ms").and_then(super::number) {
+            Some(n) => format!(
+                "You predicted a longest sense→act latency of {n} ms; it was {:.1} ms.",
+                self.latency_max_ms
+            ),
+            None => super::unreadable("latency_max_ms"),
+        };
+        vec![lost, latency]
+    }
+}
+
+impl Exercise for Ex12 {
+    fn id(&self) -> &'static str {
+        "ex12"
+    }
+
+    fn title(&self) -> &'static str {
+        "the restart: a process's rejoin"
+    }
+
+    fn file(&self) -> &'static str {
+        "ex12_restart.toml"
+    }
+
+    fn required_keys(&self) -> &'static [&'static str] {
+        &["readings_lost", "latency_max_ms"]
+    }
+
+    fn default_graph(&self, bands: &super::Bands) -> Result<Option<String>, ExerciseError> {
+        Ok(Some(bands.of::<Ex12Bands>()?.graph))
+    }
+
+    /// The run's figures (the gap, the readings lost, the policy's ticks, the latency), the
+    /// reconcile, the checks and the explanation.
+    fn run(&self, cx: &mut Context<'_>) -> Result<(), ExerciseError> {
+        let b: Ex12Bands = cx.bands()?;
+        say!(
+            cx,
+            "Running {} s on the real clock across processes, '{}' killed at t = {} s (this takes real time)...",
+            b.duration_s,
+            b.process,
+            b.kill_at_s
+        );
+        let run = cx.measure(|| measure_ex12(&b, cx.graph, cx.graph_path, cx.exe))?;
+        let o = outcome_ex12(&b, &run);
+        let hz = reading_hz(cx.graph, &b.topic).unwrap_or(0.0);
+        let m = &run.metrics;
+        let ticks = |node: &str| m.nodes.get(node).map_or(0, |n| n.ticks);
+        let expected = (b.duration_s * hz).round() as u64 + 1;
+        say!(
+            cx,
+            "killed at | rejoined at |     gap | {} published | lost | policy ticks | latency p50 | max",
+            b.topic
+        );
+        say!(
+            cx,
+            "{:>7.2} s | {:>9} | {:>7} | {:>14} | {:>4} | {:>5} of {:<4} | {:>8.1} ms | {:.1} ms",
+            b.kill_at_s,
+            run.rejoined_at
+                .map_or("-".into(), |t| format!("{:.2} s", t.as_secs_f64())),
+            if o.gap_ms.is_finite() {
+                format!("{:.0} ms", o.gap_ms)
+            } else {
+                "-".into()
+            },
+            m.topics.get(&b.topic).map_or(0, |t| t.published),
+            o.readings_lost,
+            ticks("policy"),
+            expected,
+            m.latency_p50_ms,
+            m.latency_max_ms
+        );
+        cx.reconcile(&o);
+        cx.checks(&check_ex12(&b, cx.graph, &run));
+        say!(cx);
+        cx.paragraph(&format!(
+            "Reconcile: the kill ends the policy's process at once; its liveliness token goes \
+             with it, and the launcher starts a new copy, which opens its session, proves who it \
+             is and joins the run on the same clock: that took {:.0} ms here. Meanwhile the \
+             sensor went on publishing {} at {hz} Hz to a subscriber that was not there: those \
+             readings are lost (a new process has no history to catch up from, and latest-wins \
+             depth 1 would keep only one anyway). The actuator never stopped: it held the last \
+             force it had, older at every tick, until the new policy's first force came; the \
+             longest sense→act latency is that force's age. A restart is fast, but it is a gap \
+             in the control loop, as long as a process takes to start.",
+            o.gap_ms, b.topic
+        ));
+        say!(
+            cx,
+            "  ./scripts/lab.sh launch --processes --clock real --duration 8 graphs/cartpole-restart.toml --kill-process policy@3"
+        );
+        Ok(())
+    }
+}
