@@ -124,7 +124,8 @@ pub struct LaunchArgs {
     pub export_credentials: Option<PathBuf>,
     /// Kill a process of the graph at run time T, seconds, as a crash would (SIGKILL;
     /// repeatable; real clock): --kill-process policy@3. With `restart = "on-failure"` in
-    /// its `[processes.NAME]` table it is started again and rejoins.
+    /// its `[processes.NAME]` table it is started again and rejoins (not the plant's
+    /// process: killing it ends the run).
     #[arg(long = "kill-process", value_name = "PROCESS@T", value_parser = parse_kill_process)]
     pub kill_processes: Vec<Fault>,
     /// The run flags.

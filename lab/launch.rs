@@ -156,11 +156,12 @@ pub fn run_launch(a: &LaunchArgs, force_headless: bool, stop: StopFlag) -> anyho
 }
 
 /// `--kill-process`'s kills, checked: each names a process of the graph that this launch
-/// starts, under the real clock.
+/// starts, under the real clock, at a time within the run.
 ///
 /// # Errors
 /// One line: the virtual clock (its lockstep cannot go on without a process, nor take one
-/// back), `--no-spawn`, or a process the graph does not have.
+/// back), `--no-spawn`, a time at the start or past the end, or a process the graph does
+/// not have.
 fn kills_of(a: &LaunchArgs, cfg: &RunConfig) -> anyhow::Result<Vec<(String, ratelab::Nanos)>> {
     if a.kill_processes.is_empty() {
         return Ok(Vec::new());
@@ -175,7 +176,14 @@ fn kills_of(a: &LaunchArgs, cfg: &RunConfig) -> anyhow::Result<Vec<(String, rate
     a.kill_processes
         .iter()
         .map(|k| {
-            if names.contains(&k.node) {
+            if k.at == ratelab::Nanos::ZERO || k.at >= cfg.duration {
+                Err(anyhow::anyhow!(
+                    "--kill-process {}@{}: the time must be within the run, after its start and before its end at {} s",
+                    ratelab::text::printable(&k.node),
+                    k.at.as_secs_f64(),
+                    cfg.duration.as_secs_f64()
+                ))
+            } else if names.contains(&k.node) {
                 Ok((k.node.clone(), k.at))
             } else {
                 Err(anyhow::anyhow!(

@@ -1144,6 +1144,32 @@ fn a_kill_of_a_process_is_refused_where_it_cannot_be_done_in_one_line() {
             ],
             "expected PROCESS@T",
         ),
+        (
+            vec![
+                "launch",
+                "--processes",
+                "--clock",
+                "real",
+                "--duration",
+                "2",
+                graph,
+                "--kill-process",
+                "policy@5",
+            ],
+            "--kill-process policy@5: the time must be within the run",
+        ),
+        (
+            vec![
+                "launch",
+                "--processes",
+                "--clock",
+                "real",
+                graph,
+                "--kill-process",
+                "policy@0",
+            ],
+            "after its start and before its end",
+        ),
     ] {
         let o = ratelab(&args);
         if why.starts_with("expected") {

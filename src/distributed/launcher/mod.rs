@@ -152,6 +152,9 @@ pub struct LaunchReport {
     pub missing: Vec<String>,
     /// Virtual clock: the lockstep's cost.
     pub lockstep: Option<LockstepCost>,
+    /// Real clock: the processes killed on request
+    /// ([`LaunchOptions::kill_processes`]), each with the run time it was killed at.
+    pub killed: Vec<(String, Nanos)>,
 }
 
 /// The launcher's link to its processes: publishers per process and the reply channel.
@@ -575,6 +578,8 @@ pub fn launch(
     let mut wires: Vec<wire::WireLink> = Vec::new();
     // What a process started again mid-run counted before (real clock only).
     let mut carried = Carried::new(spec);
+    // The processes killed on request (real clock), with when.
+    let mut killed = Vec::new();
     let (end, lockstep) = match cfg.clock {
         ClockKind::Virtual => {
             me.run_lockstep(&ticked_rx, &gone_now, start, &mut reports, &mut wires)?
@@ -586,6 +591,7 @@ pub fn launch(
                 &mut carried,
                 &mut reports,
                 &mut wires,
+                &mut killed,
             )?,
             None,
         ),
@@ -603,6 +609,7 @@ pub fn launch(
         wire: wires,
         missing,
         lockstep,
+        killed,
     })
 }
 

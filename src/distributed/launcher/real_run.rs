@@ -25,7 +25,9 @@ impl Launch<'_> {
     /// Run the graph under the real clock to its end: `gone_rx` says each process whose
     /// liveliness token went; `children` are the processes the launch started (started
     /// again in place on failure); `carried` keeps what a process started again had
-    /// counted before. Every process's report lands in `reports` and `wires`.
+    /// counted before. Every process's report lands in `reports` and `wires`; the processes
+    /// killed on request ([`super::LaunchOptions::kill_processes`]) in `killed`, with the run
+    /// time each was killed at.
     ///
     /// # Errors
     /// [`DistError`] when the start cannot be sent or the figures cannot be subscribed to.
@@ -36,6 +38,7 @@ impl Launch<'_> {
         carried: &mut Carried,
         reports: &mut BTreeMap<String, GraphState>,
         wires: &mut Vec<wire::WireLink>,
+        killed: &mut Vec<(String, Nanos)>,
     ) -> Result<RunEnd, DistError> {
         // Every process's figures: when they stop, the process is silent; of the
         // processes that may be started again (all but the plant's), what one counted
@@ -84,6 +87,7 @@ impl Launch<'_> {
         for m in stats_rx.try_iter().filter(|m| m.process != self.robot) {
             carried.see(self.spec, &m);
         }
+        *killed = std::mem::take(&mut run.killed);
         Ok(run.end.unwrap_or(RunEnd {
             at: self.cfg.duration,
             reason: EndReason::Duration,
@@ -120,6 +124,8 @@ struct Supervision {
     restarts: BTreeMap<String, u32>,
     /// Processes no longer started again.
     given_up: Vec<String>,
+    /// The processes killed on request, with the run time of each kill.
+    killed: Vec<(String, Nanos)>,
     /// When each process's figures last came.
     silence: Silence,
     /// Processes said to be silent.
@@ -140,6 +146,7 @@ impl Supervision {
             welcomed_pid: BTreeMap::new(),
             restarts: BTreeMap::new(),
             given_up: Vec::new(),
+            killed: Vec::new(),
             silence: Silence::default(),
             silent: Vec::new(),
         }
@@ -178,22 +185,36 @@ impl Supervision {
     }
 
     /// The kills asked for ([`super::LaunchOptions::kill_processes`]) whose time has come:
-    /// each process killed (SIGKILL, as a crash), said, and taken off `kills`.
+    /// each process killed (SIGKILL, as a crash), said, noted in `killed` and taken off
+    /// `kills`. None once the run is over (its duration reached, its end, Ctrl-C), nor of a
+    /// process that has ended or already exited.
     fn kill_due(&mut self, l: &Launch, children: &mut Children, kills: &mut Vec<(String, Nanos)>) {
-        if self.end.is_some() || kills.is_empty() {
+        let now = self.run_time();
+        if self.end.is_some() || l.stop.is_stopped() || now >= l.cfg.duration || kills.is_empty() {
             return;
         }
-        let now = self.run_time();
         kills.retain(|(p, at)| {
             if now < *at {
                 return true;
             }
-            match children.0.iter_mut().find(|(name, _)| name == p) {
-                Some((_, child)) => match child.kill() {
-                    Ok(()) => l.say(&format!(
-                        "process '{p}' killed at t={:.2}s (--kill-process)",
-                        now.as_secs_f64()
-                    )),
+            let child = children.0.iter_mut().find(|(name, _)| name == p);
+            // Still running (a child that exited, reaped or not, is not killed again).
+            let child = child.map(|(_, c)| {
+                let running = matches!(c.try_wait(), Ok(None));
+                (c, running && !self.ended.contains(p))
+            });
+            match child {
+                Some((_, false)) => {
+                    l.say(&format!("process '{p}' had already exited: not killed"));
+                }
+                Some((c, true)) => match c.kill() {
+                    Ok(()) => {
+                        l.say(&format!(
+                            "process '{p}' killed at t={:.3}s (--kill-process)",
+                            now.as_secs_f64()
+                        ));
+                        self.killed.push((p.clone(), now));
+                    }
                     Err(e) => l.say(&format!("process '{p}' could not be killed: {e}")),
                 },
                 None => l.say(&format!(
