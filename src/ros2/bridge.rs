@@ -414,10 +414,11 @@ fn wait_matched(o: &Outlet, within: std::time::Duration, stop: &StopFlag) -> Res
     }
 }
 
-/// A publisher ready to put: its key, its GID.
+/// A publisher ready to put: its key, its GID, and the session that stamps its samples.
 struct Outlet {
     publisher: zenoh::pubsub::Publisher<'static>,
     gid: [u8; 16],
+    session: zenoh::Session,
 }
 
 impl Bridge {
@@ -501,7 +502,11 @@ impl Bridge {
             let publisher = session.declare_publisher(key).wait().map_err(zerr)?;
             let gid = gid(&token);
             declare(token)?;
-            Ok(Outlet { publisher, gid })
+            Ok(Outlet {
+                publisher,
+                gid,
+                session: session.clone(),
+            })
         };
         let mut outlets = Vec::new();
         let mut subscriptions = Vec::new();
@@ -637,10 +642,14 @@ fn tap(topic: &AnyTopic, i: usize, tx: Sender<Out>, waits: bool, dropped: Arc<At
     ));
 }
 
+/// One sample out: its attachment, and its timestamp from the publisher's own session (its
+/// clock and its ZID), as a real rmw_zenoh_cpp node stamps its samples (the captures in
+/// `../shared/fixtures/ros2-real/`), not left for the router to stamp.
 fn put(o: &Outlet, seq: i64, bytes: &[u8]) -> Result<(), String> {
     o.publisher
         .put(bytes.to_vec())
         .attachment(attachment(seq, wall_ns(), &o.gid).to_vec())
+        .timestamp(o.session.new_timestamp())
         .wait()
         .map_err(|e| e.to_string())
 }

@@ -35,6 +35,32 @@ pub struct Seen {
     /// The depth a keep-all endpoint's token gives (by index in `endpoints`), which hiroz's
     /// decoding drops: ROS 2 shows it (`KEEP_ALL (10)`).
     pub keep_all_depth: std::collections::BTreeMap<usize, usize>,
+    /// Each endpoint's GID (by index in `endpoints`), as rmw_zenoh_cpp computes it from its
+    /// token ([`super::bridge::gid`]): `ros2 topic info -v` shows it.
+    pub gids: Vec<[u8; 16]>,
+}
+
+impl Seen {
+    /// Take one liveliness token `key` (`@ros2_lv/<domain>/…`) into the graph: a node, or an
+    /// endpoint with its GID and (keep-all) depth. Returns whether it was a ROS 2 entity.
+    pub fn take(&mut self, key: &str) -> bool {
+        let Ok(k) = zenoh::key_expr::KeyExpr::try_from(key) else {
+            return false;
+        };
+        match KeyExprFormat::default().parse_liveliness(&k) {
+            Ok(Entity::Node(n)) => self.nodes.push(n),
+            Ok(Entity::Endpoint(e)) => {
+                if e.qos.history == QosHistory::KeepAll {
+                    self.keep_all_depth
+                        .insert(self.endpoints.len(), keep_all_depth(key));
+                }
+                self.gids.push(super::bridge::gid(key));
+                self.endpoints.push(e);
+            }
+            Err(_) => return false,
+        }
+        true
+    }
 }
 
 /// The depth in a keep-all token's QoS (`…/::2,10:,:,:,,` gives 10), read as rmw_zenoh_cpp
@@ -256,8 +282,13 @@ pub fn topic_info(g: &Seen, topic: &str, verbose: bool) -> Result<String, String
                 .type_info
                 .as_ref()
                 .map_or("?".into(), |t| t.hash.to_rihs_string());
+            // ros2cli's GID: its bytes in hex, dot-separated.
+            let gid = g.gids.get(*i).map_or(String::new(), |b| {
+                let hex: Vec<String> = b.iter().map(|b| format!("{b:02x}")).collect();
+                format!("GID: {}\n", hex.join("."))
+            });
             text.push_str(&format!(
-                "Node name: {name}\nNode namespace: {ns}\nTopic type: {}\nTopic type hash: {hash}\nEndpoint type: {what}\n{}\n",
+                "Node name: {name}\nNode namespace: {ns}\nTopic type: {}\nTopic type hash: {hash}\nEndpoint type: {what}\n{gid}{}\n",
                 type_name(e),
                 qos_block(&e.qos, g.keep_all_depth.get(i).copied())
             ));
@@ -332,7 +363,6 @@ pub fn open(
 /// # Errors
 /// [`Ros2Error::Zenoh`]: the query failed.
 pub fn seen(session: &zenoh::Session, domain: u32, wait: Duration) -> Result<Seen, Ros2Error> {
-    let format = KeyExprFormat::default();
     let replies = session
         .liveliness()
         .get(format!("@ros2_lv/{domain}/**"))
@@ -344,20 +374,10 @@ pub fn seen(session: &zenoh::Session, domain: u32, wait: Duration) -> Result<See
     while let Ok(reply) = replies.recv() {
         let Ok(sample) = reply.result() else { continue };
         let key = sample.key_expr().as_str().to_string();
-        if seen_keys.len() >= MAX_TOKENS || !seen_keys.insert(key) {
+        if seen_keys.len() >= MAX_TOKENS || !seen_keys.insert(key.clone()) {
             continue;
         }
-        match format.parse_liveliness(sample.key_expr()) {
-            Ok(Entity::Node(n)) => g.nodes.push(n),
-            Ok(Entity::Endpoint(e)) => {
-                if e.qos.history == QosHistory::KeepAll {
-                    let depth = keep_all_depth(sample.key_expr().as_str());
-                    g.keep_all_depth.insert(g.endpoints.len(), depth);
-                }
-                g.endpoints.push(e);
-            }
-            Err(_) => {}
-        }
+        g.take(&key);
     }
     Ok(g)
 }

@@ -231,6 +231,22 @@ fn ros_2s_tools_see_the_graph_its_types_messages_and_clock_and_the_results_do_no
         assert!(msgs.iter().all(|m| m["gid"] == msgs[0]["gid"]));
     }
     assert_ne!(obs[0]["gid"], action[0]["gid"]);
+    // Each sample stamped by its publisher's session (its ZID, the one in its tokens), as a
+    // real rmw_zenoh_cpp node's are (the captures), not by the router.
+    let zid_of = |topic: &str| -> Value {
+        let mp = r["endpoints"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|e| e["kind"] == "MP" && e["topic"] == topic);
+        mp.unwrap()["zid"].clone()
+    };
+    for (topic, msgs) in [("/obs", obs), ("/action", action)] {
+        assert!(
+            msgs.iter().all(|m| m["stamp_zid"] == zid_of(topic)),
+            "{topic}: {msgs:?}"
+        );
+    }
     for (i, row) in rows.iter().enumerate() {
         let stamp_ns = |m: &Value| m["stamp_ns"].as_u64().unwrap();
         // The force the actuator applied at step i is /action's message i, in newtons.

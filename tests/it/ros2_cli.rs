@@ -133,7 +133,8 @@ fn ros2_verbs_read_a_running_graph_as_ros2cli_prints_it() {
     for needle in [
         "Type: sensor_msgs/msg/JointState\n\nPublisher count: 1\n",
         "Node name: sensor\nNode namespace: /\n",
-        "Endpoint type: PUBLISHER\nQoS profile:\n  Reliability: BEST_EFFORT\n  History (Depth): KEEP_LAST (1)\n",
+        "Endpoint type: PUBLISHER\nGID: ",
+        "QoS profile:\n  Reliability: BEST_EFFORT\n  History (Depth): KEEP_LAST (1)\n",
         "Subscription count: 1\n",
         "Node name: policy\n",
     ] {
@@ -207,9 +208,11 @@ fn ros2_verbs_read_another_graph_and_survive_hostile_tokens_and_payloads() {
     let (_, out, _) = ros2(&["topic", "info", "/chatter", "-v"]);
     for needle in [
         "Node name: talker\nNode namespace: /demo\n",
-        "Endpoint type: PUBLISHER\nQoS profile:\n  Reliability: RELIABLE\n  History (Depth): KEEP_LAST (7)\n",
+        "Endpoint type: PUBLISHER\nGID: ",
+        "QoS profile:\n  Reliability: RELIABLE\n  History (Depth): KEEP_LAST (7)\n",
         "Node name: listener\n",
-        "Endpoint type: SUBSCRIPTION\nQoS profile:\n  Reliability: BEST_EFFORT\n  History (Depth): KEEP_LAST (1)\n  Durability: VOLATILE\n  Lifespan: Infinite\n  Deadline: 100000000 nanoseconds\n",
+        "Endpoint type: SUBSCRIPTION\nGID: ",
+        "QoS profile:\n  Reliability: BEST_EFFORT\n  History (Depth): KEEP_LAST (1)\n  Durability: VOLATILE\n  Lifespan: Infinite\n  Deadline: 100000000 nanoseconds\n",
     ] {
         assert!(out.contains(needle), "{needle:?} in {out}");
     }
@@ -565,4 +568,135 @@ fn ex13_s_answers_are_what_the_wire_shows() {
         o.clock_hz
     );
     drop(run);
+}
+
+/// A capture of `../shared/fixtures/ros2-real/` (real rmw_zenoh_cpp 0.6.7 and real rclpy).
+fn real_capture(file: &str) -> serde_json::Value {
+    let path = crate::brains::fixture(&format!("ros2-real/{file}"));
+    serde_json::from_slice(&std::fs::read(&path).unwrap()).unwrap()
+}
+
+/// What `ratelab ros2` reads of a graph is what real ROS 2 read of it, field by field. The
+/// liveliness tokens captured in one run beside a real rclpy probe over real rmw_zenoh_cpp
+/// (`real-probe-and-ratelab-real-clock.json`: the probe's own, with its /rosout and
+/// /parameter_events, and ratelab's) are parsed here; every endpoint real rclpy's graph API
+/// gave in that run (`real-rclpy-graph-view-real-clock.json`) is found by its GID in
+/// `topic info -v`, with its node, namespace, type, type hash and every QoS field as the
+/// graph API gave them, and `node list` names the nodes it named.
+#[test]
+fn topic_info_reads_a_real_graph_as_real_ros2_s_graph_api_does() {
+    use ratelab::ros2::inspect::{node_list, topic_info, Seen};
+    let capture = real_capture("real-probe-and-ratelab-real-clock.json");
+    let view = real_capture("real-rclpy-graph-view-real-clock.json");
+    let mut g = Seen::default();
+    let mut keys = std::collections::BTreeSet::new();
+    for e in capture["token_events"].as_array().unwrap() {
+        let key = e["key"].as_str().unwrap();
+        if e["kind"] == "SampleKind.PUT" && keys.insert(key) {
+            assert!(g.take(key), "a ROS 2 token: {key}");
+        }
+    }
+    let word = |q: &serde_json::Value, what: &str, words: &[(&str, &str)]| -> String {
+        let code = q[what].as_str().unwrap();
+        let w = words.iter().find(|(c, _)| *c == code);
+        w.unwrap_or_else(|| panic!("{what} {code}")).1.to_string()
+    };
+    let (mut checked, mut nodes) = (0, std::collections::BTreeSet::new());
+    for snap in view["snapshots"].as_array().unwrap() {
+        for n in snap["nodes"].as_array().unwrap() {
+            nodes.insert(format!("/{}", n[0].as_str().unwrap()));
+        }
+        for (topic, ends) in snap["endpoints"].as_object().unwrap() {
+            let info = topic_info(&g, topic, true).unwrap();
+            for (side, what) in [
+                ("publishers", "PUBLISHER"),
+                ("subscriptions", "SUBSCRIPTION"),
+            ] {
+                for x in ends[side].as_array().unwrap() {
+                    let q = &x["qos"];
+                    let gid: Vec<String> = (0..16)
+                        .map(|i| x["gid"].as_str().unwrap()[2 * i..2 * i + 2].to_string())
+                        .collect();
+                    let history = match q["history"].as_str().unwrap() {
+                        "1" => format!("KEEP_LAST ({})", q["depth"].as_str().unwrap()),
+                        "2" => format!("KEEP_ALL ({})", q["depth"].as_str().unwrap()),
+                        h => panic!("history {h}"),
+                    };
+                    let block = format!(
+                        "Node name: {}\nNode namespace: {}\nTopic type: {}\nTopic type hash: {}\nEndpoint type: {what}\nGID: {}\nQoS profile:\n  Reliability: {}\n  History (Depth): {history}\n  Durability: {}\n  Lifespan: {}\n  Deadline: {}\n  Liveliness: {}\n  Liveliness lease duration: {}\n",
+                        x["node"].as_str().unwrap(),
+                        x["ns"].as_str().unwrap(),
+                        x["type"].as_str().unwrap(),
+                        x["type_hash"].as_str().unwrap(),
+                        gid.join("."),
+                        word(q, "reliability", &[("1", "RELIABLE"), ("2", "BEST_EFFORT")]),
+                        word(q, "durability", &[("1", "TRANSIENT_LOCAL"), ("2", "VOLATILE")]),
+                        q["lifespan"].as_str().unwrap(),
+                        q["deadline"].as_str().unwrap(),
+                        word(q, "liveliness", &[("1", "AUTOMATIC"), ("3", "MANUAL_BY_TOPIC")]),
+                        q["liveliness_lease_duration"].as_str().unwrap(),
+                    );
+                    assert!(info.contains(&block), "{block}\nis not in\n{info}");
+                    checked += 1;
+                }
+            }
+        }
+    }
+    // The probe's endpoints and ratelab's: publishers, subscriptions, /rosout and
+    // /parameter_events among them.
+    assert!(checked >= 20, "{checked}");
+    let listed: std::collections::BTreeSet<String> =
+        node_list(&g).lines().map(String::from).collect();
+    assert_eq!(listed, nodes);
+}
+
+/// Every sample captured on the wire, from a real rclpy node (`std_msgs/String`,
+/// `sensor_msgs/JointState`) and from ratelab as a real subscriber saw it (`/obs`, `/action`,
+/// `/clock`), decodes here (`ratelab ros2 topic echo`'s decoder, from the types'
+/// descriptions) to the values real rclpy's `deserialize_message` gave, field by field.
+#[test]
+fn the_captured_samples_decode_as_real_rclpy_decoded_them() {
+    fn json(v: &ratelab::ros2::echo::Value) -> serde_json::Value {
+        use ratelab::ros2::echo::Value as V;
+        match v {
+            V::Bool(b) => (*b).into(),
+            V::Int(i) => (*i).into(),
+            V::UInt(u) => (*u).into(),
+            V::Float(f) => (*f).into(),
+            V::Str(s) => s.clone().into(),
+            V::List(l) => l.iter().map(json).collect(),
+            V::Struct(fields) => fields
+                .iter()
+                .map(|(k, v)| (k.clone(), json(v)))
+                .collect::<serde_json::Map<_, _>>()
+                .into(),
+        }
+    }
+    let mut decoded = 0;
+    for file in [
+        "real-rclpy-talker.json",
+        "ratelab-default.json",
+        "ratelab-qos.json",
+        "real-probe-and-ratelab-real-clock.json",
+    ] {
+        let capture = real_capture(file);
+        for (key, samples) in capture["samples"].as_object().unwrap() {
+            // `<domain>/<topic>/<pkg>::msg::dds_::<Type>_/<hash>`
+            let parts: Vec<&str> = key.rsplitn(3, '/').collect();
+            let (hash, dds) = (parts[0], parts[1]);
+            let (pkg, ty) = dds.split_once("::msg::dds_::").unwrap();
+            let name = format!("{pkg}/msg/{}", ty.trim_end_matches('_'));
+            for s in samples.as_array().unwrap() {
+                let hex = s["payload_hex"].as_str().unwrap();
+                let payload: Vec<u8> = (0..hex.len() / 2)
+                    .map(|i| u8::from_str_radix(&hex[2 * i..2 * i + 2], 16).unwrap())
+                    .collect();
+                let v = ratelab::ros2::echo::decode(&name, hash, &payload)
+                    .unwrap_or_else(|e| panic!("{file} {key}: {e}"));
+                assert_eq!(json(&v), s["decoded_with_real_rclpy"], "{file} {key}");
+                decoded += 1;
+            }
+        }
+    }
+    assert!(decoded >= 40, "{decoded}");
 }

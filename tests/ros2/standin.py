@@ -47,9 +47,13 @@ def on_token(sample):
 
 def on_data(sample):
     att = sample.attachment
+    # Who stamped it: a Zenoh timestamp is `<NTP64 time>/<ZID of its clock>`.
+    stamp = sample.timestamp
+    stamp_zid = str(stamp).split("/")[-1] if stamp is not None else None
     with lock:
         samples.append(
-            (str(sample.key_expr), sample.payload.to_bytes(), att.to_bytes() if att else b"")
+            (str(sample.key_expr), sample.payload.to_bytes(), att.to_bytes() if att else b"",
+             stamp_zid)
         )
 
 
@@ -113,6 +117,7 @@ for key in seen_tokens:
                 "type": ros_name(demangle(parts[10])),
                 "hash": parts[11],
                 "qos": parts[12],
+                "zid": parts[2],
             }
         )
     else:
@@ -123,7 +128,7 @@ for e in endpoints:
     hash_ok[e["type"]] = store.hash_rihs01(e["type"]) == e["hash"]
 
 topics, clock_ns = {}, []
-for key, payload, att in got:
+for key, payload, att, stamp_zid in got:
     # <domain>/<topic...>/<dds type>/<hash>
     parts = key.split("/")
     topic = "/" + "/".join(parts[1:-2])
@@ -139,7 +144,8 @@ for key, payload, att in got:
     if ros_type == "rosgraph_msgs/msg/Clock":
         clock_ns.append(msg.clock.sec * 1_000_000_000 + msg.clock.nanosec)
         continue
-    row = {"seq": seq, "source_ns": source_ns, "gid": gid, "type": ros_type}
+    row = {"seq": seq, "source_ns": source_ns, "gid": gid, "type": ros_type,
+           "stamp_zid": stamp_zid}
     if ros_type == "sensor_msgs/msg/JointState":
         row["stamp_ns"] = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
         row["name"] = list(msg.name)
