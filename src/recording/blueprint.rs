@@ -233,6 +233,8 @@ fn angle_view(extents: Option<&Extents>) -> ViewSpec {
     .iter()
     .map(|p| p.to_string())
     .collect();
+    // An estimator's estimate, where the run has one.
+    p.extend(recorded(&["/plant/pole_angle_estimate_rad"], extents));
     let marks: Vec<String> = Mark::ALL
         .iter()
         .map(|m| format!("/{}", m.entity()))

@@ -11,7 +11,9 @@
 //!   and, from a fall on, `world/cart/pole/fallen` (the pole drawn red, `…/label` along it, clear of the limits' labels:
 //!   `FELL at 0.84 s`);
 //! - `plant/pole_angle_rad`, `plant/fall_limit/{upper,lower}`, `plant/fall` (the fall, at
-//!   the pole's angle), `plant/cart_pos_m`, `plant/rail_end/{right,left}`,
+//!   the pole's angle), `plant/pole_angle_estimate_rad` (with an estimator in the graph: its
+//!   estimate θ̂, where the angle's line shows the state it estimates, [`estimate`]),
+//!   `plant/cart_pos_m`, `plant/rail_end/{right,left}`,
 //!   `plant/cart_limit/{right,left}`;
 //! - `marks/{change,trouble,recovery}`: a mark at each event of that kind, in a row under
 //!   the lower fall limit, each legend naming the times ([`events`]);
@@ -106,6 +108,9 @@ use files::{
 pub use files::{check_output_path, default_lab_path, default_path};
 use observer::{reference_lines, RecordingObserver, CHANGE_MARK_RAD};
 use style::*;
+
+/// The entity of an estimator's estimate of the pole angle, rad.
+const ESTIMATE_ENTITY: &str = "plant/pole_angle_estimate_rad";
 pub use window::RecordWindow;
 
 use shape::GraphState;
@@ -113,14 +118,15 @@ pub use shape::{GraphShape, NodeShape, TopicShape};
 
 // The layers below, under their own names (`crate::graph`, `crate::time`, …).
 use ratelab_core::{
-    executor, limits, metrics, msg, output, plant, procs, qos, rate, runlog, textlog, time, topic,
+    estimate, executor, limits, metrics, msg, output, plant, procs, qos, rate, runlog, textlog,
+    time, topic,
 };
 use ratelab_runtime::{config, graph, scheduler, telemetry};
 
 use crate::config::{ClockKind, RunConfig};
 use crate::graph::{GraphHandles, StepObserver};
 use crate::metrics::Metrics;
-use crate::plant::{CART_LIMIT_M, THETA_LIMIT_RAD};
+use crate::plant::{CART_LIMIT_M, CONTROL_PERIOD, THETA_LIMIT_RAD};
 use crate::qos::QosCounter;
 use crate::runlog::StepRecord;
 use crate::scheduler::{EndReason, RunEnd};

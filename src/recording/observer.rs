@@ -55,6 +55,8 @@ pub(super) struct RecordingObserver {
     /// With a [`RecordWindow`]: the steps were inside it at the last step (its start and
     /// end are each marked once).
     in_window: bool,
+    /// The estimate's series has its name and colour (logged with its first point).
+    estimate_styled: bool,
 }
 
 impl RecordingObserver {
@@ -70,6 +72,7 @@ impl RecordingObserver {
             deadline_seen: Vec::new(),
             live_seen: Vec::new(),
             in_window: false,
+            estimate_styled: false,
         }
     }
 
@@ -454,6 +457,21 @@ impl StepObserver for RecordingObserver {
         let force = s.action * FORCE_PER_CONTROL_N;
         world_rows(&mut buf, &time, s, force);
         buf.scalar("plant/pole_angle_rad", s.t, s.step, theta);
+        // With an estimator: its estimate where the angle's line shows the state it
+        // estimates (each angle is the one its step reached, the state the next step's
+        // sensors read), as the lab draws it.
+        let estimate = s.estimate.as_ref().and_then(|e| e.estimate);
+        if let (Some(est), Some(t)) = (estimate, s.t.0.checked_sub(CONTROL_PERIOD.0)) {
+            if !std::mem::replace(&mut self.estimate_styled, true) {
+                let style = rerun::SeriesLines::new()
+                    .with_names(["pole angle estimate θ̂"])
+                    .with_colors([rgb(ESTIMATE_COLOR)])
+                    .with_widths([1.5]);
+                buf.add(ESTIMATE_ENTITY, &TimePoint::default(), &style);
+            }
+            let angle = est[crate::estimate::POLE_ANGLE];
+            buf.scalar(ESTIMATE_ENTITY, Nanos(t), s.step.saturating_sub(1), angle);
+        }
         buf.scalar("plant/cart_pos_m", s.t, s.step, s.cart_pos);
         buf.scalar("action/applied_N", s.t, s.step, force);
         if let Some(commands) = &self.shape.commands {

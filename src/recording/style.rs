@@ -100,6 +100,8 @@ pub(super) fn layered_widths(entities: &[String]) -> Vec<f32> {
 
 pub(super) const ANGLE_COLOR: (u8, u8, u8) = (90, 160, 255);
 pub(super) const LIMIT_COLOR: (u8, u8, u8) = (235, 80, 80);
+/// An estimator's estimate of the pole angle (θ̂), beside the angle's own colour.
+pub(super) const ESTIMATE_COLOR: (u8, u8, u8) = (220, 120, 230);
 pub(super) const NEUTRAL_COLOR: (u8, u8, u8) = (150, 150, 150);
 pub(super) const FORCE_COLOR: (u8, u8, u8) = (120, 220, 120);
 

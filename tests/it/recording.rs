@@ -1701,3 +1701,47 @@ fn a_record_window_keeps_the_events_outside_it() {
         .iter()
         .all(|(t, _)| (4_000_000_000..=6_000_000_000).contains(t)));
 }
+
+/// With an estimator in the graph the recording carries its estimate θ̂ beside the pole
+/// angle, each where the angle's line shows the state it estimates (the step before's
+/// angle), named and coloured, and in the pole-angle view; a graph without one has none.
+#[test]
+fn an_estimator_s_estimate_is_recorded_beside_the_pole_angle() {
+    let dir = tempfile::tempdir().unwrap();
+    let cfg = RunConfig {
+        graph: ratelab::graph::GraphSpec::load(&crate::repo("graphs/cartpole-estimator.toml"))
+            .unwrap(),
+        ..virtual_cfg().with_duration_ms(2000)
+    };
+    let path = dir.path().join("estimator.rrd");
+    record(&path, &cfg, None);
+    let all = chunks(&path);
+    let angle = sim_series(&all, "/plant/pole_angle_rad");
+    let estimate = sim_series(&all, "/plant/pole_angle_estimate_rad");
+    // Every step but the first (no estimate at t = 0), one step earlier.
+    assert_eq!(estimate.len(), angle.len() - 1);
+    let report = run(&cfg, Box::new(Scripted), RunOptions::new()).unwrap();
+    for (s, (t, v)) in report.trace[1..].iter().zip(&estimate) {
+        assert_eq!(*t, (s.t.0 - 20_000_000) as i64);
+        assert_eq!(*v, s.estimate.as_ref().unwrap().estimate.unwrap()[2]);
+    }
+    // Named and coloured, and drawn with the angle.
+    let named = all
+        .iter()
+        .any(|c| c.entity_path().to_string() == "/plant/pole_angle_estimate_rad" && c.is_static());
+    assert!(named);
+    let views = check_views(&path);
+    assert!(
+        views.iter().any(|v| v
+            .queries
+            .iter()
+            .any(|q| q == "/plant/pole_angle_estimate_rad")),
+        "{views:?}"
+    );
+    let chapter = dir.path().join("chapter.rrd");
+    record(&chapter, &virtual_cfg().with_duration_ms(500), None);
+    assert!(sim_series(&chunks(&chapter), "/plant/pole_angle_estimate_rad").is_empty());
+    assert!(!check_views(&chapter)
+        .iter()
+        .any(|v| v.queries.iter().any(|q| q.contains("estimate"))));
+}
