@@ -524,6 +524,31 @@ depth = 1
     let fixed = cycle.replace("name = \"a\"\n", "name = \"a\"\npriority = 10\n");
     let g = GraphSpec::parse(&fixed, "c.toml").unwrap();
     assert_eq!(g.node_names(), ["sensor", "policy", "b", "actuator", "a"]);
+    // A long loop reached from a node downstream of it (first in the file): the loop alone
+    // is named, from its first node in the file, in the flow's direction.
+    let mut long = String::from(
+        "[[node]]\nname = \"sensor\"\nkind = \"sensor\"\nrate_hz = 50\npublishes = \"/obs\"\n[[node]]\nname = \"policy\"\nkind = \"policy\"\nrate_hz = 50\nsubscribes = \"/obs\"\npublishes = \"/action\"\n[[node]]\nname = \"actuator\"\nkind = \"actuator\"\nrate_hz = 50\nsubscribes = \"/action\"\n[[topic]]\nname = \"/obs\"\ntype = \"state\"\ndepth = 1\n[[topic]]\nname = \"/action\"\ntype = \"force\"\ndepth = 1\n",
+    );
+    let n = 300;
+    long.push_str("[[node]]\nname = \"tail\"\nkind = \"safety\"\nrate_hz = 50\nsubscribes = \"/l0\"\npublishes = \"/tail\"\n[[topic]]\nname = \"/tail\"\ntype = \"force\"\ndepth = 1\n");
+    for k in 0..n {
+        // l{k} reads /l{k+1} and publishes /l{k}: the loop runs l{n-1} → … → l0 → l{n-1}.
+        long.push_str(&format!(
+            "[[node]]\nname = \"l{k}\"\nkind = \"safety\"\nrate_hz = 50\nsubscribes = \"/l{}\"\npublishes = \"/l{k}\"\n[[topic]]\nname = \"/l{k}\"\ntype = \"force\"\ndepth = 1\n",
+            (k + 1) % n
+        ));
+    }
+    let e = GraphSpec::parse(&long, "long.toml").unwrap_err();
+    let want: Vec<String> = std::iter::once(0)
+        .chain((1..n).rev())
+        .chain(std::iter::once(0))
+        .map(|k| format!("l{k}"))
+        .collect();
+    assert!(
+        e.reason.contains(&format!("cycle {}", want.join(" → "))),
+        "{e}"
+    );
+    assert!(!e.reason.contains("tail"), "{e}");
 }
 
 #[test]

@@ -480,11 +480,12 @@ fn build_node(
         })
         .collect();
     let outputs: Vec<AnyTopic> = n.publishes.iter().map(|t| topics[t.0].clone()).collect();
+    // The external ports are in node order: found by a binary search, not a scan per node.
     let attachment = handles
         .external
-        .iter()
-        .find(|p| p.node.0 == i)
-        .map(|p| p.clone() as Arc<dyn std::any::Any + Send + Sync>);
+        .binary_search_by_key(&i, |p| p.node.0)
+        .ok()
+        .map(|k| handles.external[k].clone() as Arc<dyn std::any::Any + Send + Sync>);
     let mut cx = BuildContext {
         name: &n.name,
         id: NodeId(i),

@@ -674,6 +674,9 @@ fn tie_break_order(nodes: &[NodeSpec], topics: &[TopicSpec]) -> Result<Vec<usize
             // Every unplaced node waits on another: report a cycle through the first.
             let start = (0..n).find(|&i| !placed[i]).expect("some node is unplaced");
             let mut cycle = vec![start];
+            // Each node's place in `cycle`, so that closing the loop is no scan of it.
+            let mut at = vec![usize::MAX; n];
+            at[start] = 0;
             let mut cur = start;
             loop {
                 let prev = upstream[cur]
@@ -681,7 +684,7 @@ fn tie_break_order(nodes: &[NodeSpec], topics: &[TopicSpec]) -> Result<Vec<usize
                     .copied()
                     .find(|&from| !placed[from])
                     .expect("an unplaced node with indegree > 0 has an unplaced publisher");
-                if let Some(pos) = cycle.iter().position(|&c| c == prev) {
+                if let Some(pos) = Some(at[prev]).filter(|&p| p != usize::MAX) {
                     // Collected against the flow (subscriber ← publisher): reverse it, and
                     // start at the node that comes first in the file.
                     let mut c = cycle.split_off(pos);
@@ -690,6 +693,7 @@ fn tie_break_order(nodes: &[NodeSpec], topics: &[TopicSpec]) -> Result<Vec<usize
                     c.rotate_left(first);
                     return Err(c);
                 }
+                at[prev] = cycle.len();
                 cycle.push(prev);
                 cur = prev;
             }
