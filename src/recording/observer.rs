@@ -467,7 +467,11 @@ impl StepObserver for RecordingObserver {
                     .with_names(["pole angle estimate θ̂"])
                     .with_colors([rgb(ESTIMATE_COLOR)])
                     .with_widths([1.5]);
+                // A static row, written whether or not this step is inside a recording
+                // window (the series keeps its name whenever its points start).
+                let muted = std::mem::replace(&mut buf.rows_muted, false);
                 buf.add(ESTIMATE_ENTITY, &TimePoint::default(), &style);
+                buf.rows_muted = muted;
             }
             let angle = est[crate::estimate::POLE_ANGLE];
             buf.scalar(ESTIMATE_ENTITY, Nanos(t), s.step.saturating_sub(1), angle);

@@ -201,6 +201,13 @@ pub fn open(env: &SessionEnv, stop: &StopFlag) -> Result<Ros2Session, Ros2Error>
     let mut config = zenoh::Config::default();
     set(&mut config, "mode", "\"peer\"")?;
     set(&mut config, "scouting/multicast/enabled", "false")?;
+    // A clock of the session's own (a hybrid logical clock: unique, increasing stamps) for
+    // every sample it puts, as rmw_zenoh_cpp's default session config enables in every mode.
+    set(
+        &mut config,
+        "timestamping/enabled",
+        "{ router: true, peer: true, client: true }",
+    )?;
     set(&mut config, "listen/endpoints", "[\"tcp/localhost:0\"]")?;
     set(
         &mut config,

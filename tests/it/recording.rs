@@ -1738,6 +1738,23 @@ fn an_estimator_s_estimate_is_recorded_beside_the_pole_angle() {
             .any(|q| q == "/plant/pole_angle_estimate_rad")),
         "{views:?}"
     );
+    // Recorded within a window that starts after the first estimate: named all the same.
+    let windowed = dir.path().join("window.rrd");
+    record_with_options(
+        &windowed,
+        &cfg,
+        None,
+        Vec::new(),
+        &RecordOptions {
+            window: Some(ratelab::recording::RecordWindow::parse("1:2").unwrap()),
+            ..RecordOptions::default()
+        },
+    );
+    let inside = chunks(&windowed);
+    assert!(!sim_series(&inside, "/plant/pole_angle_estimate_rad").is_empty());
+    assert!(inside.iter().any(|c| {
+        c.entity_path().to_string() == "/plant/pole_angle_estimate_rad" && c.is_static()
+    }));
     let chapter = dir.path().join("chapter.rrd");
     record(&chapter, &virtual_cfg().with_duration_ms(500), None);
     assert!(sim_series(&chunks(&chapter), "/plant/pole_angle_estimate_rad").is_empty());

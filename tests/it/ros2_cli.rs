@@ -601,10 +601,14 @@ fn topic_info_reads_a_real_graph_as_real_ros2_s_graph_api_does() {
         let w = words.iter().find(|(c, _)| *c == code);
         w.unwrap_or_else(|| panic!("{what} {code}")).1.to_string()
     };
-    let (mut checked, mut nodes) = (0, std::collections::BTreeSet::new());
+    let (mut checked, mut nodes) = (
+        std::collections::BTreeSet::new(),
+        std::collections::BTreeSet::new(),
+    );
     for snap in view["snapshots"].as_array().unwrap() {
         for n in snap["nodes"].as_array().unwrap() {
-            nodes.insert(format!("/{}", n[0].as_str().unwrap()));
+            let ns = n[1].as_str().unwrap().trim_end_matches('/');
+            nodes.insert(format!("{ns}/{}", n[0].as_str().unwrap()));
         }
         for (topic, ends) in snap["endpoints"].as_object().unwrap() {
             let info = topic_info(&g, topic, true).unwrap();
@@ -637,14 +641,22 @@ fn topic_info_reads_a_real_graph_as_real_ros2_s_graph_api_does() {
                         q["liveliness_lease_duration"].as_str().unwrap(),
                     );
                     assert!(info.contains(&block), "{block}\nis not in\n{info}");
-                    checked += 1;
+                    checked.insert(x["gid"].as_str().unwrap().to_string());
                 }
             }
         }
     }
-    // The probe's endpoints and ratelab's: publishers, subscriptions, /rosout and
-    // /parameter_events among them.
-    assert!(checked >= 20, "{checked}");
+    // Every endpoint of the run, each once by its GID: the probe's (its subscriptions,
+    // /rosout and /parameter_events) and ratelab's (its publishers and subscriptions).
+    assert!(checked.len() >= 13, "{checked:?}");
+    let theirs = |node: &str| {
+        g.endpoints
+            .iter()
+            .zip(&g.gids)
+            .filter(|(e, _)| e.node.as_ref().is_some_and(|n| n.name == node))
+            .count()
+    };
+    assert!(theirs("sensor") >= 1 && theirs("probe") >= 1);
     let listed: std::collections::BTreeSet<String> =
         node_list(&g).lines().map(String::from).collect();
     assert_eq!(listed, nodes);
