@@ -13,7 +13,7 @@ use ratelab::config::{check_rate, BREAK_CONTROL_HZ};
 use ratelab::executor::{ExecutorKind, ExecutorOverride};
 use ratelab::graph::kind::Code;
 use ratelab::graph::{GraphSpec, NodeId, TopicId};
-use ratelab::plant::{CONTROL_PERIOD, GEAR_N};
+use ratelab::plant::GEAR_N;
 use ratelab::qos::{Delivery, OnDeadlineMissed, QosCounter, Reliability, TopicQos};
 use ratelab::run::Command;
 use ratelab::runlog::StepRecord;
@@ -618,10 +618,12 @@ impl App {
         }
         self.history.push_back((now_s, s.pole_angle));
         self.thinned.push(now_s, s.pole_angle, s.action * GEAR_N);
-        // Drawn where the θ line shows the state it estimates: each θ point is the angle
-        // its step reached, the state the next tick's sensors read (before that step).
-        if let Some(est) = s.estimate.as_ref().and_then(|e| e.estimate) {
-            let at_s = now_s - CONTROL_PERIOD.as_secs_f64();
+        // Drawn where the θ line shows the state it estimates, at the previous step's time:
+        // each θ point is the angle its step reached, the state the next tick's sensors
+        // read (before that step).
+        let previous_s = self.last.as_ref().map(|l| l.t.as_secs_f64());
+        if let (Some(est), Some(at_s)) = (s.estimate.as_ref().and_then(|e| e.estimate), previous_s)
+        {
             self.estimated
                 .push(at_s, est[ratelab::estimate::POLE_ANGLE]);
         }

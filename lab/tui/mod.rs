@@ -1174,10 +1174,10 @@ mod tests {
             assert_eq!(truth, w[0].pole_angle, "at {}", w[1].t);
         }
         let want: Vec<(f64, f64)> = trace
-            .iter()
-            .filter_map(|s| {
-                let e = s.estimate.as_ref()?.estimate?;
-                Some((s.t.as_secs_f64() - 0.02, e[2]))
+            .windows(2)
+            .filter_map(|w| {
+                let e = w[1].estimate.as_ref()?.estimate?;
+                Some((w[0].t.as_secs_f64(), e[2]))
             })
             .filter(|(t, _)| *t >= 2.0)
             .collect();

@@ -126,7 +126,7 @@ use ratelab_runtime::{config, graph, scheduler, telemetry};
 use crate::config::{ClockKind, RunConfig};
 use crate::graph::{GraphHandles, StepObserver};
 use crate::metrics::Metrics;
-use crate::plant::{CART_LIMIT_M, CONTROL_PERIOD, THETA_LIMIT_RAD};
+use crate::plant::{CART_LIMIT_M, THETA_LIMIT_RAD};
 use crate::qos::QosCounter;
 use crate::runlog::StepRecord;
 use crate::scheduler::{EndReason, RunEnd};

@@ -57,6 +57,10 @@ pub(super) struct RecordingObserver {
     in_window: bool,
     /// The estimate's series has its name and colour (logged with its first point).
     estimate_styled: bool,
+    /// The previous step's run time, step number and whether its rows were muted (outside
+    /// the recording window): an estimate is logged there, where the angle's line shows the
+    /// state it estimates.
+    previous: Option<(Nanos, u64, bool)>,
 }
 
 impl RecordingObserver {
@@ -73,6 +77,7 @@ impl RecordingObserver {
             live_seen: Vec::new(),
             in_window: false,
             estimate_styled: false,
+            previous: None,
         }
     }
 
@@ -459,9 +464,11 @@ impl StepObserver for RecordingObserver {
         buf.scalar("plant/pole_angle_rad", s.t, s.step, theta);
         // With an estimator: its estimate where the angle's line shows the state it
         // estimates (each angle is the one its step reached, the state the next step's
-        // sensors read), as the lab draws it.
+        // sensors read): at the previous step's time and number, muted as its rows were;
+        // as the lab draws it.
         let estimate = s.estimate.as_ref().and_then(|e| e.estimate);
-        if let (Some(est), Some(t)) = (estimate, s.t.0.checked_sub(CONTROL_PERIOD.0)) {
+        let previous = self.previous.replace((s.t, s.step, outside));
+        if let (Some(est), Some((t, step, muted_then))) = (estimate, previous) {
             if !std::mem::replace(&mut self.estimate_styled, true) {
                 let style = rerun::SeriesLines::new()
                     .with_names(["pole angle estimate θ̂"])
@@ -474,7 +481,9 @@ impl StepObserver for RecordingObserver {
                 buf.rows_muted = muted;
             }
             let angle = est[crate::estimate::POLE_ANGLE];
-            buf.scalar(ESTIMATE_ENTITY, Nanos(t), s.step.saturating_sub(1), angle);
+            let muted_now = std::mem::replace(&mut buf.rows_muted, muted_then);
+            buf.scalar(ESTIMATE_ENTITY, t, step, angle);
+            buf.rows_muted = muted_now;
         }
         buf.scalar("plant/cart_pos_m", s.t, s.step, s.cart_pos);
         buf.scalar("action/applied_N", s.t, s.step, force);
