@@ -12,7 +12,8 @@
 //!   `FELL at 0.84 s`);
 //! - `plant/pole_angle_rad`, `plant/fall_limit/{upper,lower}`, `plant/fall` (the fall, at
 //!   the pole's angle), `plant/pole_angle_estimate_rad` (with an estimator in the graph: its
-//!   estimate θ̂, where the angle's line shows the state it estimates, [`estimate`]),
+//!   estimate θ̂, where the angle's line shows the state it estimates,
+//!   `ratelab_core::estimate`),
 //!   `plant/cart_pos_m`, `plant/rail_end/{right,left}`,
 //!   `plant/cart_limit/{right,left}`;
 //! - `marks/{change,trouble,recovery}`: a mark at each event of that kind, in a row under
@@ -108,9 +109,6 @@ use files::{
 pub use files::{check_output_path, default_lab_path, default_path};
 use observer::{reference_lines, RecordingObserver, CHANGE_MARK_RAD};
 use style::*;
-
-/// The entity of an estimator's estimate of the pole angle, rad.
-const ESTIMATE_ENTITY: &str = "plant/pole_angle_estimate_rad";
 pub use window::RecordWindow;
 
 use shape::GraphState;
@@ -118,8 +116,7 @@ pub use shape::{GraphShape, NodeShape, TopicShape};
 
 // The layers below, under their own names (`crate::graph`, `crate::time`, …).
 use ratelab_core::{
-    estimate, executor, limits, metrics, msg, output, plant, procs, qos, rate, runlog, textlog,
-    time, topic,
+    executor, limits, metrics, msg, output, plant, procs, qos, rate, runlog, textlog, time, topic,
 };
 use ratelab_runtime::{config, graph, scheduler, telemetry};
 

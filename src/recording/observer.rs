@@ -35,6 +35,9 @@ pub(super) fn reference_lines(buf: &mut ChunkBuffer, t: Nanos, step: u64) {
     }
 }
 
+/// The entity of an estimator's estimate of the pole angle, rad.
+const ESTIMATE_ENTITY: &str = "plant/pole_angle_estimate_rad";
+
 pub(super) struct RecordingObserver {
     rec: Recording,
     shape: GraphShape,
@@ -480,7 +483,7 @@ impl StepObserver for RecordingObserver {
                 buf.add(ESTIMATE_ENTITY, &TimePoint::default(), &style);
                 buf.rows_muted = muted;
             }
-            let angle = est[crate::estimate::POLE_ANGLE];
+            let angle = est[ratelab_core::estimate::POLE_ANGLE];
             let muted_now = std::mem::replace(&mut buf.rows_muted, muted_then);
             buf.scalar(ESTIMATE_ENTITY, t, step, angle);
             buf.rows_muted = muted_now;
