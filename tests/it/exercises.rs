@@ -728,6 +728,9 @@ fn the_texts_read_before_predicting_give_no_answer_away() {
         // ex9: a crossing hop costs a period.
         ("40 ms", "ex9's latency across processes"),
         ("costs a", "ex9's crossing hop"),
+        // ex12: what a restart loses, and how old the held force gets.
+        ("3 readings", "ex12's readings lost"),
+        ("120 ms", "ex12's longest latency"),
         // ex14: which pairs connect, and what a late joiner gets.
         ("needs reliable", "ex14's first pair"),
         ("stronger offer", "ex14's second pair"),
@@ -763,6 +766,7 @@ fn the_texts_read_before_predicting_give_no_answer_away() {
         "ex9_crossing.toml",
         "ex10_held_force.toml",
         "ex11_my_brain.toml",
+        "ex12_restart.toml",
         "ex14_incompatible_qos.toml",
     ] {
         let f = ExerciseFile::load(&path(ex)).unwrap();
