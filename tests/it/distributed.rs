@@ -697,7 +697,9 @@ fn a_killed_node_is_noticed_and_a_restarted_one_rejoins() {
     // /obs's counters go on from what the killed policy process received (about 120
     // readings, its figures up to 100 ms before it died): only what was sent while no
     // policy process ran (well under a second here: 50 a second) is lost. Counting from
-    // the restart alone called all of the first process's readings lost too.
+    // the restart alone called all of the first process's readings lost too. The new
+    // process was already asking to rejoin, so it may be let in within a sensor period of
+    // the kill and lose none (seen on a clean-clone CI run).
     let obs = &m["topics"]["/obs"];
     let (published, lost) = (
         obs["published"].as_u64().unwrap(),
@@ -705,7 +707,7 @@ fn a_killed_node_is_noticed_and_a_restarted_one_rejoins() {
     );
     assert!(published >= full - 20, "{obs}");
     assert!(
-        (1..75).contains(&lost),
+        lost < 75,
         "lost {lost} of {published}: only the gap between the two processes: {obs}"
     );
     assert_none_left(port, Duration::ZERO);
