@@ -671,6 +671,45 @@ fn threads() -> usize {
 
 /// One run of `cfg` with the scripted balancer, no trace kept (the real-clock exercises:
 /// ex3, ex9): its metrics.
+/// `cfg`'s graph launched across its processes with the scripted balancer (ex9, ex12): the
+/// processes started with `exe`, ratelab's command line, loading the graph file at
+/// `graph_path` (`None`: the chapter's, compiled in) under fresh credentials; the processes
+/// in `kill_processes` killed at their times.
+///
+/// # Errors
+/// [`ExerciseError::Launch`] when the launch fails (a process that cannot be started, a
+/// port that cannot be listened on); the graph file's error when it cannot be read.
+fn launch_across(
+    cfg: &RunConfig,
+    graph_path: Option<&Path>,
+    exe: &crate::distributed::launcher::Program,
+    kill_processes: Vec<(String, crate::time::Nanos)>,
+) -> Result<crate::distributed::launcher::LaunchReport, ExerciseError> {
+    use crate::distributed::launcher::{launch, LaunchOptions};
+    let names: Vec<String> = cfg.graph.placement().into_iter().map(|(p, _)| p).collect();
+    let launch_error = |e: crate::distributed::DistError| ExerciseError::Launch(e.to_string());
+    let opts = LaunchOptions {
+        graph_path: graph_path.map(Path::to_path_buf),
+        graph_bytes: crate::graph::spec::graph_file_bytes(graph_path)?,
+        listen: None,
+        policy: "scripted".into(),
+        exe: Some(exe.clone()),
+        child_stderr: None,
+        start_gate: None,
+        listening: None,
+        pace: None,
+        credentials: crate::distributed::credentials::Credentials::generate(
+            &cfg.graph.name,
+            &names,
+        )
+        .map_err(launch_error)?,
+        ros2_domain: None,
+        kill_processes,
+    };
+    let stop = crate::scheduler::StopFlag::new();
+    launch(cfg, &opts, &stop, &|_| {}).map_err(launch_error)
+}
+
 fn run_scripted(cfg: &RunConfig) -> Result<Metrics, ExerciseError> {
     let opts = crate::run::RunOptions {
         keep_trace: false,

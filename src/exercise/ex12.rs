@@ -7,12 +7,10 @@
 
 use super::{check, Check, Context, Exercise, ExerciseError, Reconcile, Section};
 use crate::config::{duration_from_secs, ClockKind, RunConfig};
-use crate::distributed::credentials::Credentials;
-use crate::distributed::launcher::{launch, LaunchOptions, Program};
+use crate::distributed::launcher::Program;
 use crate::graph::spec::RestartPolicy;
 use crate::graph::GraphSpec;
 use crate::metrics::Metrics;
-use crate::scheduler::StopFlag;
 use crate::time::Nanos;
 use serde::Deserialize;
 use std::path::Path;
@@ -96,23 +94,8 @@ pub fn measure_ex12(
         ..RunConfig::default()
     };
     let kill_at = duration_from_secs(b.kill_at_s)?;
-    let names: Vec<String> = graph.placement().into_iter().map(|(p, _)| p).collect();
-    let launch_error = |e: crate::distributed::DistError| ExerciseError::Launch(e.to_string());
-    let opts = LaunchOptions {
-        graph_path: graph_path.map(Path::to_path_buf),
-        graph_bytes: crate::graph::spec::graph_file_bytes(graph_path)?,
-        listen: None,
-        policy: "scripted".into(),
-        exe: Some(exe.clone()),
-        child_stderr: None,
-        start_gate: None,
-        listening: None,
-        pace: None,
-        credentials: Credentials::generate(&graph.name, &names).map_err(launch_error)?,
-        ros2_domain: None,
-        kill_processes: vec![(b.process.clone(), kill_at)],
-    };
-    let report = launch(&cfg, &opts, &StopFlag::new(), &|_| {}).map_err(launch_error)?;
+    let killed = vec![(b.process.clone(), kill_at)];
+    let report = super::launch_across(&cfg, graph_path, exe, killed)?;
     let rejoined_at = report
         .wire
         .iter()

@@ -8,11 +8,9 @@
 
 use super::{check, Check, Context, Exercise, ExerciseError, Reconcile, Section};
 use crate::config::{duration_from_secs, phase_offset_from_ms, ClockKind, RunConfig};
-use crate::distributed::credentials::Credentials;
-use crate::distributed::launcher::{launch, LaunchOptions, Program};
+use crate::distributed::launcher::Program;
 use crate::graph::GraphSpec;
 use crate::metrics::Metrics;
-use crate::scheduler::StopFlag;
 use serde::Deserialize;
 use std::path::Path;
 
@@ -120,25 +118,8 @@ pub fn measure_ex9(
         .iter()
         .map(|&ms| phase_offset_from_ms(ms))
         .collect::<Result<Vec<_>, _>>()?;
-    let graph_bytes = crate::graph::spec::graph_file_bytes(graph_path)?;
     let across = |cfg: &RunConfig| -> Result<(Metrics, Vec<(String, f64)>), ExerciseError> {
-        let names: Vec<String> = cfg.graph.placement().into_iter().map(|(p, _)| p).collect();
-        let launch_error = |e: crate::distributed::DistError| ExerciseError::Launch(e.to_string());
-        let opts = LaunchOptions {
-            graph_path: graph_path.map(Path::to_path_buf),
-            graph_bytes: graph_bytes.clone(),
-            listen: None,
-            policy: "scripted".into(),
-            exe: Some(exe.clone()),
-            child_stderr: None,
-            start_gate: None,
-            listening: None,
-            pace: None,
-            credentials: Credentials::generate(&cfg.graph.name, &names).map_err(launch_error)?,
-            ros2_domain: None,
-            kill_processes: Vec::new(),
-        };
-        let report = launch(cfg, &opts, &StopFlag::new(), &|_| {}).map_err(launch_error)?;
+        let report = super::launch_across(cfg, graph_path, exe, Vec::new())?;
         if !report.missing.is_empty() {
             return Err(ExerciseError::Launch(format!(
                 "process(es) {} did not report",
