@@ -1105,71 +1105,34 @@ fn a_kill_of_a_process_is_refused_where_it_cannot_be_done_in_one_line() {
     let _m = crate::machine::shared();
     let restart = Path::new(REPO).join("graphs/cartpole-restart.toml");
     let graph = restart.to_str().unwrap();
+    // `launch --processes --clock CLOCK GRAPH` and then `more`.
+    let across = |clock: &'static str, more: &[&'static str]| -> Vec<&str> {
+        let head = ["launch", "--processes", "--clock", clock, graph];
+        head.iter().chain(more).copied().collect()
+    };
     for (args, why) in [
         (
             vec!["launch", "--kill-process", "policy@1", "--duration", "1"],
             "need --processes",
         ),
         (
-            vec![
-                "launch",
-                "--processes",
-                "--clock",
-                "virtual",
-                graph,
-                "--kill-process",
-                "policy@1",
-            ],
+            across("virtual", &["--kill-process", "policy@1"]),
             "--kill-process needs --clock real",
         ),
         (
-            vec![
-                "launch",
-                "--processes",
-                "--clock",
-                "real",
-                graph,
-                "--kill-process",
-                "planner@1",
-            ],
+            across("real", &["--kill-process", "planner@1"]),
             "has no process 'planner' (its processes: robot, policy)",
         ),
         (
-            vec![
-                "launch",
-                "--processes",
-                "--clock",
-                "real",
-                graph,
-                "--kill-process",
-                "policy",
-            ],
+            across("real", &["--kill-process", "policy"]),
             "expected PROCESS@T",
         ),
         (
-            vec![
-                "launch",
-                "--processes",
-                "--clock",
-                "real",
-                "--duration",
-                "2",
-                graph,
-                "--kill-process",
-                "policy@5",
-            ],
+            across("real", &["--duration", "2", "--kill-process", "policy@5"]),
             "--kill-process policy@5: the time must be within the run",
         ),
         (
-            vec![
-                "launch",
-                "--processes",
-                "--clock",
-                "real",
-                graph,
-                "--kill-process",
-                "policy@0",
-            ],
+            across("real", &["--kill-process", "policy@0"]),
             "after its start and before its end",
         ),
     ] {

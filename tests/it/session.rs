@@ -1082,6 +1082,12 @@ fn step_at(t: &Telemetry) -> Option<ratelab::Nanos> {
 }
 
 impl LiveEngine {
+    /// Ask the engine to reload `file` (as the lab's watcher does on a save).
+    fn reload(&self, file: &std::path::Path) {
+        let file = file.to_path_buf();
+        self.ctl.send(Control::Reload { file }).unwrap();
+    }
+
     /// Wait (at most 20 s) for the first message `pick` takes.
     fn wait_for<T>(&self, what: &str, mut pick: impl FnMut(&Telemetry) -> Option<T>) -> T {
         let deadline = std::time::Instant::now() + std::time::Duration::from_secs(20);
@@ -1202,11 +1208,7 @@ fn under_the_real_clock_a_saved_node_restarts_in_place() {
     let original = std::fs::read_to_string(&node_file).unwrap();
     // A save that does not load: said, and the run goes on.
     std::fs::write(&node_file, "def broken(:\n").unwrap();
-    live.ctl
-        .send(Control::Reload {
-            file: node_file.clone(),
-        })
-        .unwrap();
+    live.reload(&node_file);
     let said = live.wait_for("not reloaded", |t| match t {
         Telemetry::Started { .. } => panic!("a new run started"),
         Telemetry::Error(e) if e.starts_with("not reloaded") => Some(e.clone()),
@@ -1223,11 +1225,7 @@ fn under_the_real_clock_a_saved_node_restarts_in_place() {
         ),
     )
     .unwrap();
-    live.ctl
-        .send(Control::Reload {
-            file: node_file.clone(),
-        })
-        .unwrap();
+    live.reload(&node_file);
     let line = live.wait_for("the restart", |t| match t {
         Telemetry::Started { .. } => panic!("a new run started: not in place"),
         Telemetry::Applied(l) if l.starts_with("reloaded ") => Some(l.clone()),
@@ -1245,11 +1243,7 @@ fn under_the_real_clock_a_saved_node_restarts_in_place() {
     assert_eq!(reason, ratelab::scheduler::EndReason::NodeStopped);
     // A save after the run ended starts the next run with the code.
     std::fs::write(&node_file, &original).unwrap();
-    live.ctl
-        .send(Control::Reload {
-            file: node_file.clone(),
-        })
-        .unwrap();
+    live.reload(&node_file);
     live.wait_for("a new run", |t| {
         matches!(t, Telemetry::Started { .. }).then_some(())
     });
@@ -1264,11 +1258,7 @@ fn under_the_real_clock_a_saved_node_restarts_in_place() {
         ),
     )
     .unwrap();
-    live.ctl
-        .send(Control::Reload {
-            file: graph_file.clone(),
-        })
-        .unwrap();
+    live.reload(&graph_file);
     let Some(cfg) = live.wait_for("the run again", |t| match t {
         Telemetry::Started { cfg, .. } => Some(Some(cfg.clone())),
         _ => None,
@@ -1343,11 +1333,7 @@ fn under_the_real_clock_a_saved_brain_is_swapped_in_place() {
     let live = LiveEngine::with(s, dir);
     while live.wait_for("a step", step_at) < ratelab::Nanos(500 * ratelab::Nanos::MILLISECOND.0) {}
     std::fs::write(&brain, format!("{balancer}# saved again\n")).unwrap();
-    live.ctl
-        .send(Control::Reload {
-            file: brain.clone(),
-        })
-        .unwrap();
+    live.reload(&brain);
     let line = live.wait_for("the swap", |t| match t {
         Telemetry::Started { .. } => panic!("a new run started: not in place"),
         Telemetry::Applied(l) if l.starts_with("reloaded ") => Some(l.clone()),
