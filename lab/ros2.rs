@@ -51,7 +51,31 @@ pub enum Ros2Command {
     /// Bags (rosbag2, MCAP storage): `bag info DIR`, `bag echo DIR`.
     #[command(subcommand)]
     Bag(BagVerb),
+    /// Parameters: `param list [NODE]`, `param get NODE NAME` (the nodes' parameter
+    /// services, as `ros2 param` asks them).
+    #[command(subcommand)]
+    Param(ParamVerb),
 }
+
+/// `ratelab ros2 param …`.
+#[derive(Debug, Clone, Subcommand)]
+pub enum ParamVerb {
+    /// The parameters' names of one node, or of every node (each under its name).
+    List {
+        /// The node (`/policy` or `policy`); none: every node.
+        node: Option<String>,
+    },
+    /// One parameter's value, as `ros2 param get` prints it (`Double value is: 50.0`).
+    Get {
+        /// The node (`/policy` or `policy`).
+        node: String,
+        /// The parameter (`rate_hz`).
+        name: String,
+    },
+}
+
+/// How long a node's parameter service is waited for.
+const PARAM_TIMEOUT: Duration = Duration::from_secs(5);
 
 /// `ratelab ros2 bag …`.
 #[derive(Debug, Clone, Subcommand)]
@@ -207,6 +231,7 @@ pub fn run(args: &Ros2Args, stop: StopFlag) -> Result<()> {
             )?;
         }
         Ros2Command::Bag(_) => {}
+        Ros2Command::Param(verb) => write!(out, "{}", param(&session, &g, domain, verb)?)?,
         Ros2Command::Graph { once, duration } => {
             drop(out);
             graph(&session, &g, *once, *duration, &stop)?;
@@ -224,6 +249,65 @@ pub fn run(args: &Ros2Args, stop: StopFlag) -> Result<()> {
     }
     drop(session);
     Ok(())
+}
+
+/// `ratelab ros2 param …`'s output.
+fn param(
+    session: &inspect::Session,
+    g: &inspect::Seen,
+    domain: u32,
+    verb: &ParamVerb,
+) -> Result<String> {
+    use ratelab::ros2::param_cli;
+    let full = |n: &str| {
+        if n.starts_with('/') {
+            n.to_string()
+        } else {
+            format!("/{n}")
+        }
+    };
+    let known = |n: &str| g.nodes.iter().any(|x| inspect::fq_name(x) == n);
+    match verb {
+        ParamVerb::List { node: Some(node) } => {
+            let node = full(node);
+            if !known(&node) {
+                return Err(anyhow!(
+                    "Node not found: {}",
+                    ratelab::text::printable(&node)
+                ));
+            }
+            let names = param_cli::list(session, domain, &node, PARAM_TIMEOUT)?;
+            Ok(param_cli::list_text(&node, &names, false))
+        }
+        ParamVerb::List { node: None } => {
+            // Every node that serves its parameters, by name.
+            let mut nodes: Vec<String> = g
+                .endpoints
+                .iter()
+                .filter(|e| e.kind == inspect::EndpointKind::Service)
+                .filter_map(|e| e.topic.strip_suffix("/list_parameters").map(str::to_string))
+                .collect();
+            nodes.sort();
+            nodes.dedup();
+            let mut out = String::new();
+            for node in nodes {
+                let names = param_cli::list(session, domain, &node, PARAM_TIMEOUT)?;
+                out.push_str(&param_cli::list_text(&node, &names, true));
+            }
+            Ok(out)
+        }
+        ParamVerb::Get { node, name } => {
+            let node = full(node);
+            if !known(&node) {
+                return Err(anyhow!(
+                    "Node not found: {}",
+                    ratelab::text::printable(&node)
+                ));
+            }
+            let value = param_cli::get(session, domain, &node, name, PARAM_TIMEOUT)?;
+            Ok(param_cli::get_text(value.as_ref()))
+        }
+    }
 }
 
 /// The publisher of `topic` a subscriber takes its type and key from.

@@ -517,7 +517,8 @@ impl View {
 
 /// The graph panel as ROS 2 sees the graph: its node names on one line, then a row per
 /// topic (`/obs  sensor_msgs/msg/JointState  1 pub 1 sub  BEST_EFFORT · KEEP_LAST (1)`),
-/// `/clock` last; a row too long for the panel is cut with `…`.
+/// `/clock` last, then what every node offers besides (`/rosout`, …); a row too long for
+/// the panel is cut with `…`.
 fn render_ros2(r: &Ros2View, area: Rect, buf: &mut Buffer) {
     let block = Block::bordered().title(Line::from(format!(
         " as ROS 2 sees it · domain {} · g: back ",
@@ -559,6 +560,7 @@ fn render_ros2(r: &Ros2View, area: Rect, buf: &mut Buffer) {
             t.name, t.ros_type, t.publishers, t.subscriptions, t.qos
         ))));
     }
+    lines.push(Line::from(cut(r.offered.every_node.clone())).dim());
     Paragraph::new(lines).render(inner, buf);
 }
 

@@ -19,6 +19,7 @@
 //! | [`MAX_SAMPLE_BYTES`] | 64 MiB | one message between processes, encoded |
 //! | [`MAX_CONTROL_BYTES`] | 64 MiB | one control message between a launch's processes |
 //! | [`MAX_ROS_MESSAGE_BYTES`] | 64 MiB | one message from ROS 2 (CDR), before it is decoded (4 KiB for the cartpole's types) |
+//! | [`MAX_SERVICE_REQUEST_BYTES`] | 1 MiB | one request to a node's ROS 2 parameter services (CDR), before it is decoded |
 //! | [`MAX_DURATION_S`] | 10 years | a run's length, in whole nanoseconds |
 
 /// The most nodes a graph may have: 65 536. A node costs its scheduler entry, its queues
@@ -59,6 +60,11 @@ pub const MAX_SAMPLE_BYTES: usize = 64 << 20;
 /// under 200 bytes and whose decoded form, a `JointState`'s names, can be several times its
 /// bytes). A sequence inside a message is read only as far as its bytes go.
 pub const MAX_ROS_MESSAGE_BYTES: usize = MAX_SAMPLE_BYTES;
+
+/// The largest request a node's ROS 2 parameter services read (CDR with its header),
+/// checked before it is decoded: 1 MiB. A request names parameters (the largest real one,
+/// `set_parameters` with a long array, is far smaller); a larger one is answered with nothing.
+pub const MAX_SERVICE_REQUEST_BYTES: usize = 1 << 20;
 
 /// The largest control message between a launch's processes, encoded: 64 MiB. Control
 /// messages are JSON; the largest carry a graph file (at most [`MAX_GRAPH_FILE_BYTES`],

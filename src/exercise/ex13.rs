@@ -190,8 +190,11 @@ impl Exercise for Ex13 {
              at which any node ticks, so with the sensor at 50 Hz and the policy at 40 Hz it \
              ticks at the union of both grids (every 20 ms and every 25 ms, together every \
              100 ms): 50 + 40 - 10 = 80 times a second, more often than any node. A ROS 2 node \
-             with use_sim_time sees time jump from instant to instant. Check it from the other \
-             side, in two terminals:",
+             with use_sim_time sees time jump from instant to instant. Like any ROS 2 node, \
+             each also publishes its log on /rosout and its parameters' changes on \
+             /parameter_events (so `topic list` shows both), and answers `ros2 param list` \
+             and `ros2 param get` from the graph file. Check it from the other side, in two \
+             terminals:",
         );
         say!(
             cx,

@@ -29,10 +29,14 @@
 
 use super::bag::{Bag, BagTopic};
 use super::names::{check_node_name, check_topic_name};
+use super::node_api::{self, NodeApi};
+use super::parameters::NodeParameters;
 use super::ros_type_of;
 use super::session::{Ros2Session, Router};
-use super::types::{clock_type, encode_clock, type_info, RosType};
-use super::{zerr, Ros2Error, Ros2Options};
+use super::types::{clock_type, encode_clock, type_info};
+pub use super::wire::{attachment, gid};
+use super::wire::{Declarer, Outlet};
+use super::{Ros2Error, Ros2Options};
 use crate::config::ClockKind;
 use crate::graph::nodes::external::{ExternalLink, ExternalStats};
 use crate::graph::nodes::ExternalPort;
@@ -43,7 +47,7 @@ use crate::qos::{History, Reliability};
 use crate::scheduler::StopFlag;
 use crate::time::Nanos;
 use crossbeam_channel::{Receiver, Sender, TrySendError};
-use hiroz_protocol::entity::{EndpointEntity, EndpointKind, NodeEntity};
+use hiroz_protocol::entity::{EndpointKind, NodeEntity};
 use hiroz_protocol::qos::{QosDuration, QosHistory, QosProfile, QosReliability};
 use hiroz_protocol::KeyExprFormat;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -76,6 +80,8 @@ enum Out {
     Clock(Nanos),
     /// An external node ticks at this time: `/clock` must say it now.
     Announce(Nanos),
+    /// A line of the log, for its node's `/rosout` ([`super::node_api`]).
+    Log(crate::textlog::LogLine),
     /// The run is over: put what came before, then stop.
     End,
 }
@@ -139,6 +145,8 @@ impl BridgeReport {
 pub struct Bridge {
     tx: Option<Sender<Out>>,
     thread: Option<JoinHandle<Forwarded>>,
+    /// Takes the log's lines to `/rosout` while the bridge lives.
+    recorder: Option<crate::textlog::Recorder>,
     dropped: Arc<AtomicU64>,
     ports: Vec<Arc<ExternalPort>>,
     notes: Vec<String>,
@@ -163,6 +171,9 @@ pub struct Offer<'a> {
     pub local: Option<&'a [NodeId]>,
     /// Publish `/clock` (one bridge of a graph does: in a launch, the plant's process).
     pub clock: bool,
+    /// Each node's rate, by node id, shared with the running graph: `rate_hz` as its
+    /// parameter services answer it ([`super::parameters`]).
+    pub rates: &'a [crate::rate::Rate],
 }
 
 impl<'a> Offer<'a> {
@@ -174,6 +185,7 @@ impl<'a> Offer<'a> {
             external: &h.external,
             local: None,
             clock: true,
+            rates: &h.rates,
         }
     }
 
@@ -309,66 +321,6 @@ pub(crate) fn clock_qos() -> QosProfile {
     }
 }
 
-/// The 16-byte GID of the endpoint whose token is `token`, as rmw_zenoh_cpp computes it:
-/// the XXH3-128 hash of the token, its low 64 bits then its high 64 bits, little endian
-/// (checked against a real rmw_zenoh_cpp 0.6.7 node's attachments, `../shared/fixtures/
-/// ros2-real/`): a subscriber's `MessageInfo.publisher_gid` then matches the GID that
-/// `ros2 topic info -v` shows for the publisher.
-pub fn gid(token: &str) -> [u8; 16] {
-    xxhash_rust::xxh3::xxh3_128(token.as_bytes()).to_le_bytes()
-}
-
-/// An endpoint's liveliness token (hiroz-protocol's), a keep-all history carrying its
-/// depth as rmw_zenoh_cpp writes it (`2,10`; hiroz writes `2,`, which rmw_zenoh_cpp reads as
-/// its default depth, 42).
-fn token_of(
-    format: &KeyExprFormat,
-    e: &EndpointEntity,
-    zid: &zenoh::session::ZenohId,
-    depth: usize,
-) -> Result<String, Ros2Error> {
-    let token = format
-        .liveliness_key_expr(e, zid)
-        .map_err(zerr)?
-        .to_string();
-    Ok(if e.qos.history == QosHistory::KeepAll {
-        with_keep_all_depth(&token, depth)
-    } else {
-        token
-    })
-}
-
-/// `token` with its QoS field's history (the third of the last segment's `:`-fields) `2,`
-/// made `2,<depth>`.
-fn with_keep_all_depth(token: &str, depth: usize) -> String {
-    let Some((head, qos)) = token.rsplit_once('/') else {
-        return token.to_string();
-    };
-    let mut fields: Vec<String> = qos.split(':').map(str::to_string).collect();
-    if fields.get(2).is_some_and(|h| h == "2,") {
-        fields[2] = format!("2,{depth}");
-    }
-    format!("{head}/{}", fields.join(":"))
-}
-
-/// rmw_zenoh's attachment: `int64` sequence number, `int64` source timestamp (ns), the
-/// GID as a byte sequence (its length, 16, as one byte, then the 16 bytes): 33 bytes,
-/// little endian (rmw_zenoh `attachment_helpers.cpp`, Zenoh's serializer).
-pub fn attachment(seq: i64, source_ns: i64, gid: &[u8; 16]) -> [u8; 33] {
-    let mut a = [0u8; 33];
-    a[..8].copy_from_slice(&seq.to_le_bytes());
-    a[8..16].copy_from_slice(&source_ns.to_le_bytes());
-    a[16] = 16;
-    a[17..].copy_from_slice(gid);
-    a
-}
-
-fn wall_ns() -> i64 {
-    std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map_or(0, |d| i64::try_from(d.as_nanos()).unwrap_or(i64::MAX))
-}
-
 /// The `/clock` publishers already on the network but not of this session (their nodes'
 /// names), asked of the liveliness tokens for `CLOCK_QUERY`.
 fn clock_publishers(session: &zenoh::Session, domain: u32) -> Vec<String> {
@@ -414,11 +366,15 @@ fn wait_matched(o: &Outlet, within: std::time::Duration, stop: &StopFlag) -> Res
     }
 }
 
-/// A publisher ready to put: its key, its GID, and the session that stamps its samples.
-struct Outlet {
-    publisher: zenoh::pubsub::Publisher<'static>,
-    gid: [u8; 16],
-    session: zenoh::Session,
+/// Give every line of the log (from now until the returned guard is dropped) to the
+/// bridge for its node's `/rosout`; a line that does not fit in the channel is dropped and
+/// counted in `dropped` (the log never waits for ROS 2).
+fn log_to_rosout(tx: Sender<Out>, dropped: Arc<AtomicU64>) -> crate::textlog::Recorder {
+    crate::textlog::add_recorder(Box::new(move |line| {
+        if let Err(TrySendError::Full(_)) = tx.try_send(Out::Log(line)) {
+            dropped.fetch_add(1, Ordering::Relaxed);
+        }
+    }))
 }
 
 impl Bridge {
@@ -449,91 +405,72 @@ impl Bridge {
         let notes = super::external::wait_for(&session, domain, spec, ports, stop)?;
         let elsewhere = |n: NodeId| offer.elsewhere(n);
         let zid = session.zid();
-        let format = KeyExprFormat::default();
         let dom = usize::try_from(domain).unwrap_or(0);
         let node = |id: usize, name: &str| {
             NodeEntity::new(dom, zid, id, name.to_string(), String::new(), String::new())
         };
-        let mut tokens = Vec::new();
-        let mut declare = |ke: String| -> Result<(), Ros2Error> {
-            tokens.push(
-                session
-                    .liveliness()
-                    .declare_token(ke)
-                    .wait()
-                    .map_err(zerr)?,
-            );
-            Ok(())
-        };
+        let mut d = Declarer::new(&session, link);
         let nodes: Vec<NodeEntity> = spec
             .nodes
             .iter()
             .map(|n| node(link.take_id(), &n.name))
             .collect();
         let clock_node = node(link.take_id(), CLOCK_NODE);
-        let own = nodes
+        let own: Vec<(usize, &NodeEntity)> = nodes
             .iter()
             .enumerate()
             .filter(|(i, _)| !elsewhere(NodeId(*i)))
-            .map(|(_, n)| n);
-        for n in own.chain(offer.clock.then_some(&clock_node)) {
-            declare(
-                format
-                    .node_liveliness_key_expr(n)
-                    .map_err(zerr)?
-                    .to_string(),
-            )?;
+            .collect();
+        for n in own
+            .iter()
+            .map(|(_, n)| *n)
+            .chain(offer.clock.then_some(&clock_node))
+        {
+            d.node(n)?;
         }
-        let endpoint =
-            |node: &NodeEntity, kind: EndpointKind, topic: &str, ty: &RosType, qos: QosProfile| {
-                EndpointEntity {
-                    id: link.take_id(),
-                    node: Some(node.clone()),
-                    kind,
-                    topic: topic.to_string(),
-                    type_info: Some(type_info(ty)),
-                    qos,
-                }
-            };
-        // A publisher: its key declared, its MP token declared, its GID from that token.
-        let mut publish = |e: &EndpointEntity, depth: usize| -> Result<Outlet, Ros2Error> {
-            let token = token_of(&format, e, &zid, depth)?;
-            let key = format.topic_key_expr(e).map_err(zerr)?.to_string();
-            let publisher = session.declare_publisher(key).wait().map_err(zerr)?;
-            let gid = gid(&token);
-            declare(token)?;
-            Ok(Outlet {
-                publisher,
-                gid,
-                session: session.clone(),
-            })
-        };
         let mut outlets = Vec::new();
         let mut subscriptions = Vec::new();
         for (t, topic) in spec.topics.iter().enumerate() {
-            let ty = ros_type_of(topic.msg);
+            let ty = type_info(ros_type_of(topic.msg));
             let qos = qos_of(spec, t);
             let publisher = &nodes[topic.publisher.0];
             if elsewhere(topic.publisher) {
                 outlets.push(None); // its own program or process publishes it
             } else {
-                let mp = endpoint(publisher, EndpointKind::Publisher, &topic.name, ty, qos);
-                outlets.push(Some(publish(&mp, topic.depth)?));
+                let mp = d.endpoint(
+                    publisher,
+                    EndpointKind::Publisher,
+                    &topic.name,
+                    ty.clone(),
+                    qos,
+                );
+                outlets.push(Some(d.publisher(&mp, topic.depth)?));
             }
             for &sub in topic.subscribers.iter().filter(|s| !elsewhere(**s)) {
                 let kind = EndpointKind::Subscription;
                 let own = requested_qos_of(spec, t, sub);
-                let ms = endpoint(&nodes[sub.0], kind, &topic.name, ty, own);
+                let ms = d.endpoint(&nodes[sub.0], kind, &topic.name, ty.clone(), own);
                 subscriptions.push((ms, topic.depth));
             }
         }
         // Its id is taken whether or not it is offered, as every endpoint's is.
-        let (ty, qos) = (clock_type(), clock_qos());
-        let clock_ep = endpoint(&clock_node, EndpointKind::Publisher, CLOCK_TOPIC, ty, qos);
-        let clock_outlet = offer.clock.then(|| publish(&clock_ep, 1)).transpose()?;
+        let (ty, qos) = (type_info(clock_type()), clock_qos());
+        let clock_ep = d.endpoint(&clock_node, EndpointKind::Publisher, CLOCK_TOPIC, ty, qos);
+        let clock_outlet = offer.clock.then(|| d.publisher(&clock_ep, 1)).transpose()?;
         for (ms, depth) in &subscriptions {
-            declare(token_of(&format, ms, &zid, *depth)?)?;
+            d.token_of(ms, *depth)?;
         }
+        // What every ROS 2 node declares besides its topics (`super::node_api`).
+        let mut apis = Vec::new();
+        for (i, n) in &own {
+            let params = NodeParameters::of(&spec.nodes[*i], offer.rates.get(*i));
+            apis.push(NodeApi::declare(&mut d, n, params, Nanos(0))?);
+        }
+        if offer.clock {
+            let params = NodeParameters::clock_node(CLOCK_NODE);
+            apis.push(NodeApi::declare(&mut d, &clock_node, params, Nanos(0))?);
+        }
+        let tokens = d.into_tokens();
 
         let bag = opts
             .bag
@@ -550,9 +487,10 @@ impl Bridge {
         )?;
         let lockstep = waits && !ports.is_empty();
         let (tx, rx, dropped) = connect_graph(offer, topics, lockstep, waits);
+        let recorder = log_to_rosout(tx.clone(), dropped.clone());
         let thread = spawn_forwarder(
             rx,
-            (outlets, clock_outlet),
+            (outlets, clock_outlet, apis),
             bag,
             lockstep,
             (inbound, tokens),
@@ -560,6 +498,7 @@ impl Bridge {
         Ok(Bridge {
             tx: Some(tx),
             thread: Some(thread),
+            recorder: Some(recorder),
             dropped,
             ports: ports.to_vec(),
             notes,
@@ -595,6 +534,7 @@ impl Bridge {
     /// Stop offering: every message already handed over is put first (and the bag
     /// finished), then the tokens and publishers are withdrawn; the session stays open.
     pub fn finish(mut self) -> BridgeReport {
+        drop(self.recorder.take());
         // The taps hold senders too (they end with the graph's topics): the thread is told.
         if let Some(tx) = self.tx.take() {
             let _ = tx.send(Out::End);
@@ -642,18 +582,6 @@ fn tap(topic: &AnyTopic, i: usize, tx: Sender<Out>, waits: bool, dropped: Arc<At
     ));
 }
 
-/// One sample out: its attachment, and its timestamp from the publisher's own session (its
-/// clock and its ZID), as a real rmw_zenoh_cpp node stamps its samples (the captures in
-/// `../shared/fixtures/ros2-real/`), not left for the router to stamp.
-fn put(o: &Outlet, seq: i64, bytes: &[u8]) -> Result<(), String> {
-    o.publisher
-        .put(bytes.to_vec())
-        .attachment(attachment(seq, wall_ns(), &o.gid).to_vec())
-        .timestamp(o.session.new_timestamp())
-        .wait()
-        .map_err(|e| e.to_string())
-}
-
 /// What the bridge thread did.
 struct Forwarded {
     offered: u64,
@@ -673,6 +601,10 @@ struct Forwarder<'a> {
     /// The instant whose `/clock` waits, in that mode.
     pending: Option<Nanos>,
     bag: Option<Bag>,
+    /// The nodes' `/rosout`, `/parameter_events` and services, the `/clock` node's last.
+    apis: Vec<NodeApi>,
+    /// When the nodes' rates were last looked at ([`node_api::RATE_POLL`]).
+    polled: std::time::Instant,
     buf: Vec<u8>,
     clock_seq: i64,
     last_clock: Option<Nanos>,
@@ -693,11 +625,41 @@ impl Forwarder<'_> {
             // An external node's (its program put it), or /clock of another process.
             _ => return false,
         };
-        match put(outlet, seq, &self.buf) {
+        match outlet.put(seq, &self.buf) {
             Ok(()) => true,
             Err(e) => {
                 self.error.get_or_insert(e);
                 false
+            }
+        }
+    }
+
+    /// `line` on its node's `/rosout`: the node that wrote it, or (a line of no node's, or
+    /// of a node offered elsewhere) the `/clock` node's, when this bridge offers it.
+    fn log(&mut self, line: &crate::textlog::LogLine) {
+        let by_name = line
+            .node
+            .as_deref()
+            .and_then(|n| self.apis.iter().position(|a| a.name == n));
+        let clock_node = self.apis.iter().position(|a| a.name == CLOCK_NODE);
+        if let Some(i) = by_name.or(clock_node) {
+            if let Err(e) = self.apis[i].log(line, &mut self.buf) {
+                self.error.get_or_insert(e);
+            }
+        }
+    }
+
+    /// Say on `/parameter_events` what rates changed, at most every
+    /// [`node_api::RATE_POLL`].
+    fn poll_rates(&mut self) {
+        if self.polled.elapsed() < node_api::RATE_POLL {
+            return;
+        }
+        self.polled = std::time::Instant::now();
+        let t = self.last_clock.unwrap_or(Nanos(0));
+        for a in &mut self.apis {
+            if let Err(e) = a.poll_rate(t) {
+                self.error.get_or_insert(e);
             }
         }
     }
@@ -717,26 +679,34 @@ impl Forwarder<'_> {
 /// the run's time moved on (`deferred`: as the lockstep wants it), until told the run ended.
 fn forward(
     rx: &Receiver<Out>,
-    outlets: &[Option<Outlet>],
-    clock: Option<&Outlet>,
+    (outlets, clock, apis): (&[Option<Outlet>], Option<&Outlet>, Vec<NodeApi>),
     bag: Option<Bag>,
     deferred: bool,
-) -> Forwarded {
+) -> (Forwarded, Vec<NodeApi>) {
     let mut f = Forwarder {
         outlets,
         clock,
         deferred,
         pending: None,
         bag,
+        apis,
+        polled: std::time::Instant::now(),
         buf: Vec::with_capacity(256),
         clock_seq: 0,
         last_clock: None,
         offered: 0,
         error: None,
     };
-    while let Ok(out) = rx.recv() {
+    loop {
+        f.poll_rates();
+        let out = match rx.recv_timeout(node_api::RATE_POLL) {
+            Ok(out) => out,
+            Err(crossbeam_channel::RecvTimeoutError::Timeout) => continue,
+            Err(crossbeam_channel::RecvTimeoutError::Disconnected) => break,
+        };
         match out {
             Out::End => break,
+            Out::Log(line) => f.log(&line),
             Out::Clock(t) if f.deferred => {
                 // The instant before is over: its time goes out now, this one's waits.
                 if let Some(p) = f.pending.replace(t) {
@@ -773,11 +743,12 @@ fn forward(
     if let Some(p) = f.pending.take() {
         f.tick(p);
     }
-    Forwarded {
+    let forwarded = Forwarded {
         offered: f.offered,
         error: f.error,
         bagged: f.bag.map(Bag::finish),
-    }
+    };
+    (forwarded, f.apis)
 }
 
 /// Refuse to offer a `/clock` where another node on `domain` already publishes one (ROS 2
@@ -870,7 +841,7 @@ fn wait_feeds_matched(
 /// the publishers), so that ROS 2's graph no longer shows the run's nodes.
 fn spawn_forwarder(
     rx: Receiver<Out>,
-    (outlets, clock_outlet): (Vec<Option<Outlet>>, Option<Outlet>),
+    (outlets, clock_outlet, apis): (Vec<Option<Outlet>>, Option<Outlet>, Vec<NodeApi>),
     bag: Option<Bag>,
     deferred: bool,
     (inbound, tokens): (
@@ -881,7 +852,10 @@ fn spawn_forwarder(
     std::thread::Builder::new()
         .name("ros2-bridge".into())
         .spawn(move || {
-            let r = forward(&rx, &outlets, clock_outlet.as_ref(), bag, deferred);
+            let (r, apis) = forward(&rx, (&outlets, clock_outlet.as_ref(), apis), bag, deferred);
+            for a in apis {
+                a.undeclare();
+            }
             for s in inbound {
                 let _ = s.undeclare().wait();
             }
@@ -936,16 +910,6 @@ fn connect_graph(
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn the_attachment_is_33_bytes_as_rmw_zenoh_lays_it_out() {
-        let a = attachment(7, -2, &[9; 16]);
-        assert_eq!(a.len(), 33);
-        assert_eq!(a[..8], 7i64.to_le_bytes());
-        assert_eq!(a[8..16], (-2i64).to_le_bytes());
-        assert_eq!(a[16], 16);
-        assert_eq!(a[17..], [9; 16]);
-    }
 
     #[test]
     fn the_chapters_graph_can_be_offered_and_clock_is_refused() {
@@ -1023,21 +987,5 @@ mod tests {
         let obs = spec.topic_id("/obs").unwrap();
         let policy = spec.node_id("policy").unwrap();
         assert_eq!(requested_qos_of(&spec, obs.0, policy), qos_of(&spec, obs.0));
-    }
-
-    #[test]
-    fn a_keep_all_token_carries_its_depth_as_rmw_zenoh_cpp_writes_it() {
-        let t = "@ros2_lv/0/z/0/1/MP/%/%/sensor/%obs/T/RIHS01_x/1::2,:,:,:,,";
-        assert_eq!(
-            with_keep_all_depth(t, 100),
-            "@ros2_lv/0/z/0/1/MP/%/%/sensor/%obs/T/RIHS01_x/1::2,100:,:,:,,"
-        );
-        let last = "@ros2_lv/0/z/0/1/MP/%/%/sensor/%obs/T/RIHS01_x/2::,1:,:,:,,";
-        assert_eq!(with_keep_all_depth(last, 100), last);
-    }
-
-    #[test]
-    fn gids_differ_per_endpoint() {
-        assert_ne!(gid("@ros2_lv/0/a/1/2/MP"), gid("@ros2_lv/0/a/1/3/MP"));
     }
 }

@@ -6,7 +6,8 @@
 //! The types known here: ratelab's own (`sensor_msgs/msg/JointState`, `std_msgs/msg/Float64`,
 //! `rosgraph_msgs/msg/Clock`) and common ROS 2 ones (`std_msgs` String, Bool, Int32, Int64,
 //! Float32, Header; `builtin_interfaces` Time, Duration; `geometry_msgs` Vector3, Point,
-//! Quaternion, Pose, Twist; `sensor_msgs/msg/Imu`, `sensor_msgs/msg/Image`). A message is
+//! Quaternion, Pose, Twist; `sensor_msgs/msg/Imu`, `sensor_msgs/msg/Image`; every node's
+//! `rcl_interfaces/msg/Log` and `ParameterEvent`). A message is
 //! decoded only when its type's name **and** hash are one of these (a type of the same name but another
 //! definition is not guessed at); any other is said by name, hash and byte length.
 //!
@@ -89,6 +90,61 @@ fn describe(name: &str, fields: Vec<FieldDescription>) -> TypeDescription {
     }
 }
 
+/// `rcl_interfaces`' messages every ROS 2 node publishes (`/rosout`'s `Log`,
+/// `/parameter_events`' `ParameterEvent`) and the types they hold.
+fn rcl_interfaces_descriptions() -> Vec<TypeDescription> {
+    use TypeId as T;
+    let seq = |id: u8| FieldTypeDescription::primitive(id + T::UNBOUNDED_SEQUENCE_OFFSET);
+    let seq_of = |name: &str| {
+        FieldTypeDescription::nested(T::NESTED_TYPE + T::UNBOUNDED_SEQUENCE_OFFSET, name)
+    };
+    let value = "rcl_interfaces/msg/ParameterValue";
+    let parameter = "rcl_interfaces/msg/Parameter";
+    vec![
+        describe(
+            "rcl_interfaces/msg/Log",
+            vec![
+                nested("stamp", "builtin_interfaces/msg/Time"),
+                prim("level", T::UINT8),
+                prim("name", T::STRING),
+                prim("msg", T::STRING),
+                prim("file", T::STRING),
+                prim("function", T::STRING),
+                prim("line", T::UINT32),
+            ],
+        ),
+        describe(
+            value,
+            vec![
+                prim("type", T::UINT8),
+                prim("bool_value", T::BOOL),
+                prim("integer_value", T::INT64),
+                prim("double_value", T::FLOAT64),
+                prim("string_value", T::STRING),
+                field("byte_array_value", seq(T::BYTE)),
+                field("bool_array_value", seq(T::BOOL)),
+                field("integer_array_value", seq(T::INT64)),
+                field("double_array_value", seq(T::FLOAT64)),
+                field("string_array_value", seq(T::STRING)),
+            ],
+        ),
+        describe(
+            parameter,
+            vec![prim("name", T::STRING), nested("value", value)],
+        ),
+        describe(
+            "rcl_interfaces/msg/ParameterEvent",
+            vec![
+                nested("stamp", "builtin_interfaces/msg/Time"),
+                prim("node", T::STRING),
+                field("new_parameters", seq_of(parameter)),
+                field("changed_parameters", seq_of(parameter)),
+                field("deleted_parameters", seq_of(parameter)),
+            ],
+        ),
+    ]
+}
+
 /// Every type's own description, by name (the ones a type refers to are found here).
 fn own_descriptions() -> Vec<TypeDescription> {
     use TypeId as T;
@@ -156,6 +212,7 @@ fn own_descriptions() -> Vec<TypeDescription> {
             ],
         ),
     ];
+    own.extend(rcl_interfaces_descriptions());
     // ratelab's own types, as their one definition describes them (`ratelab_core::ros_types`).
     use ratelab_core::ros_types::{clock_type, float64_type, image_type, joint_state_type};
     for t in [

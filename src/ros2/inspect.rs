@@ -468,7 +468,9 @@ impl Rate {
 /// publishers through the topic (its type and, where measured, its msg/s) to its
 /// subscribers, as the lab draws node → topic → node:
 /// `/sensor ──▶ /obs [sensor_msgs/msg/JointState] 50.0 msg/s ──▶ /policy`. `rates`: msg/s
-/// per topic (absent: not measured). Nodes with no topic follow, one line.
+/// per topic (absent: not measured). Nodes with no topic follow, one line. Every node's
+/// `/rosout` and `/parameter_events` are left out, as rqt_graph's "Hide Debug" leaves them
+/// out, and said so in a last line when there are any.
 pub fn graph_lines(g: &Seen, rates: &std::collections::BTreeMap<String, f64>) -> String {
     /// A topic's publishers, subscribers and types, by node name.
     #[derive(Default)]
@@ -479,7 +481,13 @@ pub fn graph_lines(g: &Seen, rates: &std::collections::BTreeMap<String, f64>) ->
     }
     let mut topics: std::collections::BTreeMap<String, Ends> = Default::default();
     let mut linked: BTreeSet<String> = BTreeSet::new();
+    let hidden = [super::node_api::ROSOUT, super::node_api::PARAMETER_EVENTS];
+    let mut hid = BTreeSet::new();
     for e in g.endpoints.iter().filter(|e| is_topic(e)) {
+        if hidden.contains(&e.topic.as_str()) {
+            hid.insert(e.topic.as_str());
+            continue;
+        }
         let node = e.node.as_ref().map_or_else(|| "?".to_string(), fq_name);
         linked.insert(node.clone());
         let entry = topics.entry(e.topic.clone()).or_default();
@@ -519,6 +527,10 @@ pub fn graph_lines(g: &Seen, rates: &std::collections::BTreeMap<String, f64>) ->
         .collect();
     if !alone.is_empty() {
         out.push_str(&format!("nodes with no topic: {}\n", join(&alone)));
+    }
+    if !hid.is_empty() {
+        let hid: Vec<&str> = hid.into_iter().collect();
+        out.push_str(&format!("(not drawn: {}, every node's)\n", hid.join(", ")));
     }
     out
 }
@@ -701,13 +713,19 @@ mod tests {
     #[test]
     fn the_graph_reads_publisher_topic_subscriber() {
         let mut g = talker();
-        g.nodes.push(node("idle", "/"));
+        let idle = node("idle", "/");
+        g.nodes.push(idle.clone());
+        // Its log alone: not drawn, the node then has no topic.
+        let log = "rcl_interfaces::msg::dds_::Log_";
+        g.endpoints
+            .push(endpoint(&idle, EndpointKind::Publisher, "/rosout", log));
         let rates = std::collections::BTreeMap::from([("/chatter".to_string(), 10.0)]);
         assert_eq!(
             graph_lines(&g, &rates),
             "/talker ──▶ /chatter [std_msgs/msg/String] 10.0 msg/s ──▶ /demo/listener\n\
              /talker ──▶ /cmd_vel [geometry_msgs/msg/Twist]\n\
-             nodes with no topic: /idle\n"
+             nodes with no topic: /idle\n\
+             (not drawn: /rosout, every node's)\n"
         );
     }
 

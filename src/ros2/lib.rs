@@ -18,9 +18,15 @@
 //! - [`external`]: nodes of `kind = "external"`, which a ROS 2 node fills: waiting for
 //!   their tokens, checking their types, hearing what they publish, and the lockstep's
 //!   time contract under the virtual clock;
+//! - [`wire`]: declaring an endpoint (key, token, GID), rmw_zenoh's attachment, a put
+//!   stamped by its publisher's session;
+//! - [`node_api`]: what every ROS 2 node declares besides its topics — `/rosout` (the log
+//!   pane's lines), `/parameter_events` and the parameter services, answering from the graph
+//!   file's parameters ([`parameters`]) in `rcl_interfaces`' types ([`rcl_interfaces`]);
 //! - [`inspect`] and [`echo`]: `ratelab ros2`, any rmw_zenoh graph read from the other side
 //!   as ros2cli reads it (nodes, topics, QoS, messages as YAML, rates); [`offered`]: a
-//!   graph as ROS 2 sees it when offered (the lab's panel).
+//!   graph as ROS 2 sees it when offered (the lab's panel); [`param_cli`]: `ratelab ros2
+//!   param list|get`.
 //!
 //! The format is rmw_zenoh's `docs/design.md`; its keys, tokens and QoS strings come from
 //! ZettaScale's `hiroz-protocol`, its hashes from `hiroz-schema`, its CDR from `hiroz-cdr`.
@@ -31,7 +37,7 @@
 //! and a run with `--ros2` gives the same results as one without.
 
 // The layers below, under their own names (`crate::graph`, `crate::time`, …).
-use ratelab_core::{msg, output, qos, text, time};
+use ratelab_core::{msg, output, qos, rate, text, textlog, time};
 use ratelab_runtime::{config, graph, scheduler};
 
 pub mod bag;
@@ -41,9 +47,14 @@ pub mod echo;
 pub mod external;
 pub mod inspect;
 pub mod names;
+pub mod node_api;
 pub mod offered;
+pub mod param_cli;
+pub mod parameters;
+pub mod rcl_interfaces;
 pub mod session;
 pub mod types;
+pub mod wire;
 
 pub use bridge::{Bridge, BridgeReport};
 

@@ -32,6 +32,8 @@ pub struct Offered {
     pub nodes: Vec<String>,
     /// The topics in the graph's order, then `/clock`.
     pub topics: Vec<OfferedTopic>,
+    /// What every node offers besides ([`super::node_api`]), in one line.
+    pub every_node: String,
 }
 
 /// `spec` as ROS 2 sees it when offered (a graph with a type ROS 2 has no mapping for is
@@ -61,7 +63,16 @@ pub fn offered(spec: &GraphSpec) -> Offered {
         publishers: 1,
         subscriptions: 0,
     });
-    Offered { nodes, topics }
+    let every_node = format!(
+        "every node also: {} · {} · its parameter services (ros2 param)",
+        super::node_api::ROSOUT,
+        super::node_api::PARAMETER_EVENTS
+    );
+    Offered {
+        nodes,
+        topics,
+        every_node,
+    }
 }
 
 #[cfg(test)]
@@ -89,5 +100,6 @@ mod tests {
                 "/clock rosgraph_msgs/msg/Clock BEST_EFFORT · KEEP_LAST (1) 1/0",
             ]
         );
+        assert!(o.every_node.contains("/rosout") && o.every_node.contains("/parameter_events"));
     }
 }

@@ -93,6 +93,7 @@ mod reference_runs;
 mod ros2;
 mod ros2_cli;
 mod ros2_external;
+mod ros2_params;
 mod runcore;
 mod security;
 mod session;

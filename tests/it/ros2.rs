@@ -139,12 +139,84 @@ fn assert_the_chapters_graph(r: &Value) {
     );
 }
 
-/// `(kind, node, topic, type)` of each endpoint token.
+/// The topics every ROS 2 node publishes besides its own (`ratelab::ros2::node_api`).
+pub(crate) const NODE_TOPICS: [&str; 2] = ["/rosout", "/parameter_events"];
+
+/// Each of `nodes` publishes `/rosout` and `/parameter_events` and serves the six parameter
+/// services, as the stand-in `r` saw their tokens: each token's type, type hash and QoS
+/// the same as a real rclpy node's over real rmw_zenoh_cpp (`real-rclpy-talker.json`),
+/// `/rosout`'s durability aside (volatile: `docs/ros2.md`).
+pub(crate) fn assert_every_node_s_own_endpoints(r: &Value, nodes: &[&str]) {
+    let real = crate::ros2_cli::real_capture("real-rclpy-talker.json");
+    let real: Vec<&Value> = real["tokens_parsed"].as_array().unwrap().iter().collect();
+    let demangle = |s: &Value| s.as_str().unwrap().replace('%', "/");
+    let real_of = |kind: &str, name: &str| -> (String, String, String) {
+        let t = real
+            .iter()
+            .find(|t| t["kind"] == kind && demangle(&t["topic"]).ends_with(name))
+            .unwrap_or_else(|| panic!("the real node has no {kind} {name}"));
+        // rcl_interfaces::srv::dds_::GetParameters_ -> rcl_interfaces/srv/GetParameters
+        let dds: Vec<&str> = t["type"].as_str().unwrap().split("::").collect();
+        let ty = format!("{}/{}/{}", dds[0], dds[1], dds[3].trim_end_matches('_'));
+        let qos = t["qos"].as_str().unwrap().to_string();
+        (ty, t["type_hash"].as_str().unwrap().into(), qos)
+    };
+    for node in nodes {
+        for topic in NODE_TOPICS {
+            let e = r["endpoints"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .find(|e| e["kind"] == "MP" && e["node"] == *node && e["topic"] == topic)
+                .unwrap_or_else(|| panic!("{node} has no {topic} publisher: {r}"));
+            let (ty, hash, qos) = real_of("MP", topic);
+            // /rosout: transient local (`:1:`) on a real node, volatile here.
+            let qos = qos.replacen(":1:", "::", 1);
+            assert_eq!(
+                (&e["type"], &e["hash"], &e["qos"]),
+                (&Value::from(ty), &Value::from(hash), &Value::from(qos)),
+                "{node} {topic}"
+            );
+        }
+        let services: Vec<&Value> = r["services"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .filter(|s| s["node"] == *node)
+            .collect();
+        assert_eq!(services.len(), 6, "{node}: {services:?}");
+        for suffix in [
+            "describe_parameters",
+            "get_parameters",
+            "get_parameter_types",
+            "list_parameters",
+            "set_parameters",
+            "set_parameters_atomically",
+        ] {
+            let name = format!("/{node}/{suffix}");
+            let s = services
+                .iter()
+                .find(|s| s["service"] == name.as_str())
+                .unwrap_or_else(|| panic!("no {name}: {services:?}"));
+            let (ty, hash, qos) = real_of("SS", &format!("/{suffix}"));
+            assert_eq!(s["kind"], "SS");
+            assert_eq!(
+                (&s["type"], &s["hash"], &s["qos"]),
+                (&Value::from(ty), &Value::from(hash), &Value::from(qos)),
+                "{name}"
+            );
+        }
+    }
+}
+
+/// `(kind, node, topic, type)` of each endpoint token of the graph's own topics (not
+/// [`NODE_TOPICS`]).
 pub(crate) fn endpoints(r: &Value) -> Vec<(String, String, String, String)> {
     let mut e: Vec<_> = r["endpoints"]
         .as_array()
         .unwrap()
         .iter()
+        .filter(|e| !NODE_TOPICS.contains(&e["topic"].as_str().unwrap()))
         .map(|e| {
             let s = |k: &str| e[k].as_str().unwrap().to_string();
             (s("kind"), s("node"), s("topic"), s("type"))
@@ -199,13 +271,34 @@ fn ros_2s_tools_see_the_graph_its_types_messages_and_clock_and_the_results_do_no
 
     // ros2 node list / ros2 topic list -v: the nodes, who publishes and subscribes what.
     assert_the_chapters_graph(&r);
-    // Every type's hash is rosbags' hash_rihs01 of it.
+    // Each node's /rosout, /parameter_events and parameter services, as a real node's.
+    assert_every_node_s_own_endpoints(&r, &["actuator", "policy", "ratelab", "sensor"]);
+    // Each node said its parameters on /parameter_events as the offer started: the graph
+    // file's (the policy's rate), use_sim_time (ratelab's /clock node makes the time).
+    let events = r["topics"]["/parameter_events"].as_array().unwrap();
+    let event = |node: &str| events.iter().find(|e| e["node"] == node).unwrap();
+    assert_eq!(events.len(), 4, "{events:?}");
+    assert_eq!(
+        event("/policy")["new"]["rate_hz"],
+        serde_json::json!([3, 50.0])
+    );
+    assert_eq!(
+        event("/policy")["new"]["use_sim_time"],
+        serde_json::json!([1, true])
+    );
+    assert_eq!(
+        event("/ratelab")["new"],
+        serde_json::json!({"use_sim_time": [1, false]})
+    );
+    // Every type's hash is rosbags' hash_rihs01 of it (rcl_interfaces' Log and
+    // ParameterEvent too).
     for (ty, ok) in r["hash_ok"].as_object().unwrap() {
         assert_eq!(ok, &Value::Bool(true), "{ty}");
     }
     // The QoS strings, read by rmw's enums: best effort (2), keep last 1; /action has its
     // 40 ms deadline; /clock is best effort, depth 1.
-    for ep in r["endpoints"].as_array().unwrap() {
+    let graph_s = |e: &&Value| !NODE_TOPICS.contains(&e["topic"].as_str().unwrap());
+    for ep in r["endpoints"].as_array().unwrap().iter().filter(graph_s) {
         let qos: Vec<&str> = ep["qos"].as_str().unwrap().split(':').collect();
         assert_eq!(qos[0], "2", "{ep}");
         assert_eq!(qos[2], ",1", "{ep}");
@@ -648,8 +741,9 @@ fn a_finished_bridge_withdraws_its_tokens_and_the_next_takes_fresh_ids_on_the_sa
     };
     let first = bridge();
     let during = tokens();
-    // 4 nodes (the graph's 3 and /clock's), 5 endpoints.
-    assert_eq!(during.len(), 9, "{during:?}");
+    // 4 nodes (the graph's 3 and /clock's), 5 endpoints of the graph, and each node's
+    // /rosout, /parameter_events and 6 parameter services.
+    assert_eq!(during.len(), 4 + 5 + 4 * 8, "{during:?}");
     first.finish();
     assert_eq!(
         tokens(),
@@ -660,7 +754,7 @@ fn a_finished_bridge_withdraws_its_tokens_and_the_next_takes_fresh_ids_on_the_sa
     // first run's tokens (nor its GIDs) comes back.
     let second = bridge();
     let again = tokens();
-    assert_eq!(again.len(), 9);
+    assert_eq!(again.len(), 4 + 5 + 4 * 8);
     assert!(again.iter().all(|k| !during.contains(k)), "{again:?}");
     second.finish();
     link.close();

@@ -122,7 +122,7 @@ fn ros2_verbs_read_a_running_graph_as_ros2cli_prints_it() {
     let (_, out, _) = ros2(&["topic", "list", "-t"]);
     assert_eq!(
         out,
-        "/action [std_msgs/msg/Float64]\n/clock [rosgraph_msgs/msg/Clock]\n/obs [sensor_msgs/msg/JointState]\n"
+        "/action [std_msgs/msg/Float64]\n/clock [rosgraph_msgs/msg/Clock]\n/obs [sensor_msgs/msg/JointState]\n/parameter_events [rcl_interfaces/msg/ParameterEvent]\n/rosout [rcl_interfaces/msg/Log]\n"
     );
     let (_, out, _) = ros2(&["node", "info", "policy"]);
     assert!(
@@ -571,7 +571,7 @@ fn ex13_s_answers_are_what_the_wire_shows() {
 }
 
 /// A capture of `../shared/fixtures/ros2-real/` (real rmw_zenoh_cpp 0.6.7 and real rclpy).
-fn real_capture(file: &str) -> serde_json::Value {
+pub(crate) fn real_capture(file: &str) -> serde_json::Value {
     let path = crate::brains::fixture(&format!("ros2-real/{file}"));
     serde_json::from_slice(&std::fs::read(&path).unwrap()).unwrap()
 }

@@ -10,8 +10,10 @@ With `clock`, it also declares a node 'gazebo' publishing /clock (rmw_zenoh's NN
 tokens), as a simulator with its own clock would. Prints "ready" once listening; when stdin closes (or after 120 s), waits a moment for the
 last samples and prints one JSON report on stdout:
   nodes: [name], endpoints (every token ever declared), alive_at_end: [token], endpoints: [{kind, node, topic, type, hash, qos}],
+  services: [{kind (SS/SC), node, service, type, hash, qos}],
   hash_ok: {dds type: rosbags' hash == the hash in the keys},
-  topics: {topic: [{seq, source_ns, gid, value...}]} (an Image's pixels as data_len,
+  topics: {topic: [{seq, source_ns, gid, value...}]} (a Log's level, name and msg; a
+    ParameterEvent's node and new/changed parameters as {name: [type, value]}; an Image's pixels as data_len,
     data_sha256, data_hex and shades: {brightness: pixels}), clock_ns: [...], errors: [...]
 """
 
@@ -85,7 +87,7 @@ done.wait(120)
 time.sleep(0.5)
 
 errors = []
-nodes, endpoints = [], []
+nodes, endpoints, services = [], [], []
 with lock:
     seen_tokens = sorted(ever)
     alive_at_end = sorted(tokens)
@@ -120,6 +122,17 @@ for key in seen_tokens:
                 "zid": parts[2],
             }
         )
+    elif kind in ("SS", "SC"):
+        services.append(
+            {
+                "kind": kind,
+                "node": parts[8],
+                "service": demangle(parts[9]),
+                "type": ros_name(demangle(parts[10])),
+                "hash": parts[11],
+                "qos": parts[12],
+            }
+        )
     else:
         errors.append(f"unexpected token kind {kind}: {key}")
 
@@ -151,6 +164,26 @@ for key, payload, att, stamp_zid in got:
         row["name"] = list(msg.name)
         row["position"] = [float(v) for v in msg.position]
         row["velocity"] = [float(v) for v in msg.velocity]
+    elif ros_type == "rcl_interfaces/msg/Log":
+        row.update(level=int(msg.level), name=msg.name, msg=msg.msg,
+                   stamp_ns=msg.stamp.sec * 1_000_000_000 + msg.stamp.nanosec)
+    elif ros_type == "rcl_interfaces/msg/ParameterEvent":
+        def values(params):
+            out = {}
+            for p in params:
+                v = p.value
+                field = {1: "bool_value", 2: "integer_value", 3: "double_value",
+                         4: "string_value", 7: "integer_array_value",
+                         8: "double_array_value", 9: "string_array_value"}.get(v.type)
+                value = getattr(v, field) if field else None
+                if hasattr(value, "tolist"):
+                    value = value.tolist()
+                elif isinstance(value, list):
+                    value = list(value)
+                out[p.name] = [int(v.type), value]
+            return out
+        row.update(node=msg.node, new=values(msg.new_parameters),
+                   changed=values(msg.changed_parameters))
     elif ros_type == "std_msgs/msg/Float64":
         row["data"] = float(msg.data)
     elif ros_type == "sensor_msgs/msg/Image":
@@ -171,6 +204,7 @@ print(
         {
             "nodes": sorted(nodes),
             "endpoints": endpoints,
+            "services": services,
             "hash_ok": hash_ok,
             "topics": topics,
             "clock_ns": clock_ns,

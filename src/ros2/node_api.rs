@@ -1,0 +1,259 @@
+//! What every ROS 2 node declares besides its own topics, declared for each node ratelab
+//! offers (a real rclpy node's tokens: `../shared/fixtures/ros2-real/real-rclpy-talker.json`):
+//!
+//! - **`/rosout`** (`rcl_interfaces/msg/Log`, reliable, keep last 1000, lifespan 10 s):
+//!   the node's log, the lines its code writes ([`crate::textlog`]: a Python node's
+//!   `print` and `get_logger()`, ratelab's warnings about it), as the lab's log pane shows
+//!   them. Lines written outside any node go out on the `/clock` publisher's (`ratelab`).
+//!   A real node's `/rosout` is transient local, served from a Zenoh cache to late
+//!   joiners; ratelab's is volatile (`docs/ros2.md`, "Not yet").
+//! - **`/parameter_events`** (`rcl_interfaces/msg/ParameterEvent`, reliable, keep last
+//!   1000): the node's parameters once, as declared, when the offer starts; then `rate_hz`
+//!   each time the run's rate of the node changes (the lab's keys), seen within
+//!   [`RATE_POLL`].
+//! - **the six parameter services** (`/<node>/list_parameters`, `get_parameters`, …), Zenoh
+//!   queryables answering from [`super::parameters`]: `ros2 param list /policy` and
+//!   `ros2 param get /policy rate_hz` answer. A request's reply carries rmw_zenoh's
+//!   attachment with the request's sequence number and the client's GID, as rmw_zenoh_cpp's
+//!   service servers reply; a request without that attachment, too long or not the
+//!   service's CDR, is not answered.
+//!
+//! Not declared: `~/get_type_description` (ratelab's nodes do not serve their types'
+//! descriptions) and the logger-level services.
+
+use super::parameters::NodeParameters;
+use super::rcl_interfaces::{self as rcl, Log, ParameterService};
+use super::wire::{attachment, wall_ns, Declarer, Outlet};
+use super::{zerr, Ros2Error};
+use crate::textlog::{Level, LogLine};
+use crate::time::Nanos;
+use hiroz_protocol::entity::{EndpointKind, NodeEntity};
+use hiroz_protocol::qos::{QosDuration, QosHistory, QosProfile, QosReliability};
+use ratelab_core::ros_types::cdr;
+use std::sync::Arc;
+use std::time::Duration;
+use zenoh::Wait;
+
+/// How often the bridge looks whether a node's rate changed, at most, to say so on
+/// `/parameter_events`.
+pub const RATE_POLL: Duration = Duration::from_millis(100);
+
+/// `/rosout`.
+pub const ROSOUT: &str = "/rosout";
+/// `/parameter_events`.
+pub const PARAMETER_EVENTS: &str = "/parameter_events";
+
+/// rclcpp's and rclpy's QoS for `/rosout` (`rcl_logging`'s), durability aside: reliable,
+/// keep last 1000, lifespan 10 s.
+fn rosout_qos() -> QosProfile {
+    QosProfile {
+        reliability: QosReliability::Reliable,
+        history: QosHistory::KeepLast(1000),
+        lifespan: QosDuration { sec: 10, nsec: 0 },
+        ..QosProfile::default()
+    }
+}
+
+/// rclcpp's `rmw_qos_profile_parameters` and `rmw_qos_profile_parameter_events`: reliable,
+/// keep last 1000, volatile.
+fn parameters_qos() -> QosProfile {
+    QosProfile {
+        reliability: QosReliability::Reliable,
+        history: QosHistory::KeepLast(1000),
+        ..QosProfile::default()
+    }
+}
+
+/// One node's `/rosout`, `/parameter_events` and parameter services, declared.
+pub(crate) struct NodeApi {
+    /// The node's name, its logger's (`policy`).
+    pub name: String,
+    params: Arc<NodeParameters>,
+    rosout: Outlet,
+    events: Outlet,
+    rosout_seq: i64,
+    events_seq: i64,
+    /// The rate last said on `/parameter_events`.
+    said_rate: Option<f64>,
+    queryables: Vec<zenoh::query::Queryable<()>>,
+}
+
+/// `/rosout`'s level of a log line.
+fn level(l: Level) -> u8 {
+    match l {
+        Level::Info => rcl::LOG_INFO,
+        Level::Warn => rcl::LOG_WARN,
+        Level::Error => rcl::LOG_ERROR,
+    }
+}
+
+/// rmw_zenoh's request attachment: the sequence number and the client's GID.
+fn request_id(att: &[u8]) -> Option<(i64, [u8; 16])> {
+    if att.len() != 33 || att[16] != 16 {
+        return None;
+    }
+    let seq = i64::from_le_bytes(att[..8].try_into().ok()?);
+    Some((seq, att[17..].try_into().ok()?))
+}
+
+/// Answer `query` to service `service` from `params` (module header).
+fn serve(query: &zenoh::query::Query, service: ParameterService, params: &NodeParameters) {
+    let Some((seq, client)) = query.attachment().and_then(|a| request_id(&a.to_bytes())) else {
+        return;
+    };
+    let Some(payload) = query.payload() else {
+        return;
+    };
+    // Bounded before it is copied: `answer` refuses what is longer.
+    if payload.len() > ratelab_core::limits::MAX_SERVICE_REQUEST_BYTES {
+        return;
+    }
+    if let Ok(reply) = params.answer(service, &payload.to_bytes()) {
+        let _ = query
+            .reply(query.key_expr().clone(), reply)
+            .attachment(attachment(seq, wall_ns(), &client).to_vec())
+            .wait();
+    }
+}
+
+impl NodeApi {
+    /// Declare `node`'s `/rosout`, `/parameter_events` and parameter services with `d`,
+    /// answering from `params`; its parameters are said declared at run time `t`.
+    ///
+    /// # Errors
+    /// [`Ros2Error::Zenoh`]: a declaration failed.
+    pub fn declare(
+        d: &mut Declarer<'_>,
+        node: &NodeEntity,
+        params: NodeParameters,
+        t: Nanos,
+    ) -> Result<NodeApi, Ros2Error> {
+        let log_type = rcl::type_info("rcl_interfaces/msg/Log", rcl::LOG_HASH);
+        let rosout = d.endpoint(
+            node,
+            EndpointKind::Publisher,
+            ROSOUT,
+            log_type,
+            rosout_qos(),
+        );
+        let rosout = d.publisher(&rosout, 1000)?;
+        let event_type = rcl::type_info(
+            "rcl_interfaces/msg/ParameterEvent",
+            rcl::PARAMETER_EVENT_HASH,
+        );
+        let kind = EndpointKind::Publisher;
+        let events = d.endpoint(node, kind, PARAMETER_EVENTS, event_type, parameters_qos());
+        let events = d.publisher(&events, 1000)?;
+        let params = Arc::new(params);
+        let mut queryables = Vec::new();
+        for service in ParameterService::ALL {
+            let name = format!("/{}/{}", node.name, service.suffix());
+            let ty = rcl::type_info(service.type_name(), service.hash());
+            let ss = d.endpoint(node, EndpointKind::Service, &name, ty, parameters_qos());
+            let key = d.key(&ss)?;
+            let p = Arc::clone(&params);
+            let q = d
+                .session()
+                .declare_queryable(key)
+                .complete(true)
+                .callback(move |query| serve(&query, service, &p))
+                .wait()
+                .map_err(zerr)?;
+            queryables.push(q);
+            d.token_of(&ss, 1000)?;
+        }
+        let mut api = NodeApi {
+            name: node.name.clone(),
+            said_rate: params.rate_hz(),
+            params,
+            rosout,
+            events,
+            rosout_seq: 0,
+            events_seq: 0,
+            queryables,
+        };
+        let declared = api.params.declared_event(t);
+        api.put_event(&declared)?;
+        Ok(api)
+    }
+
+    fn put_event(&mut self, e: &rcl::ParameterEvent) -> Result<(), Ros2Error> {
+        let mut buf = Vec::new();
+        cdr(e, &mut buf);
+        self.events_seq += 1;
+        self.events
+            .put(self.events_seq, &buf)
+            .map_err(Ros2Error::Zenoh)
+    }
+
+    /// Put `line` on this node's `/rosout`, stamped with the wall clock as rcl stamps it.
+    ///
+    /// # Errors
+    /// The put's, in one line.
+    pub fn log(&mut self, line: &LogLine, buf: &mut Vec<u8>) -> Result<(), String> {
+        let now = wall_ns();
+        let msg = Log {
+            stamp: rcl::Time {
+                sec: i32::try_from(now / 1_000_000_000).unwrap_or(i32::MAX),
+                nanosec: (now % 1_000_000_000) as u32,
+            },
+            level: level(line.level),
+            name: self.name.clone(),
+            msg: line.text.clone(),
+            ..Log::default()
+        };
+        cdr(&msg, buf);
+        self.rosout_seq += 1;
+        self.rosout.put(self.rosout_seq, buf)
+    }
+
+    /// Say on `/parameter_events` that the node's rate changed, if it did since last said
+    /// (`t`: the run time to stamp it with).
+    ///
+    /// # Errors
+    /// The put's, in one line.
+    pub fn poll_rate(&mut self, t: Nanos) -> Result<(), String> {
+        let now = self.params.rate_hz();
+        match (now, self.said_rate) {
+            (Some(hz), Some(said)) if hz.to_bits() != said.to_bits() => {
+                self.said_rate = Some(hz);
+                let e = self.params.rate_event(hz, t);
+                self.put_event(&e).map_err(|e| e.to_string())
+            }
+            _ => Ok(()),
+        }
+    }
+
+    /// Withdraw the services and publishers (the tokens go with the bridge's).
+    pub fn undeclare(self) {
+        for q in self.queryables {
+            let _ = q.undeclare().wait();
+        }
+        let _ = self.rosout.publisher.undeclare().wait();
+        let _ = self.events.publisher.undeclare().wait();
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_request_id_is_read_from_rmw_zenoh_s_33_bytes_only() {
+        let a = attachment(42, 7, &[3; 16]);
+        assert_eq!(request_id(&a), Some((42, [3; 16])));
+        assert_eq!(request_id(&a[..32]), None);
+        let mut wrong = a;
+        wrong[16] = 15;
+        assert_eq!(request_id(&wrong), None);
+    }
+
+    /// The QoS strings a real rclpy node's tokens carry for these endpoints (the fixture),
+    /// `/rosout`'s durability aside (volatile here: module header).
+    #[test]
+    fn the_qos_strings_are_a_real_node_s() {
+        let enc = |q: &QosProfile| q.encode();
+        assert_eq!(enc(&parameters_qos()), "::,1000:,:,:,,");
+        assert_eq!(enc(&rosout_qos()), "::,1000:,:10,0:,,");
+    }
+}

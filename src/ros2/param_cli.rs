@@ -1,0 +1,314 @@
+//! `ratelab ros2 param list [NODE]` and `ratelab ros2 param get NODE NAME`: any ROS 2
+//! node's parameters (ratelab's own `--ros2` runs' and real nodes' over rmw_zenoh), asked
+//! of its parameter services as ros2cli's `ros2 param` asks them, printed as it prints
+//! them:
+//!
+//! ```text
+//! $ ratelab ros2 param list            $ ratelab ros2 param get /policy rate_hz
+//! /policy:                             Double value is: 50.0
+//!   rate_hz
+//!   use_sim_time
+//! ```
+//!
+//! A call is a Zenoh get on the service's key (`<domain>/<node>/<service>/<type>/<hash>`)
+//! with the CDR request and rmw_zenoh's attachment (sequence number, timestamp, the
+//! client's GID), as rmw_zenoh_cpp's clients call; the reply is bounded before it is
+//! decoded.
+
+use super::rcl_interfaces::{
+    parameter_type as pt, GetParametersResponse, ListParametersRequest, ListParametersResponse,
+    NamesRequest, ParameterService, ParameterValue,
+};
+use super::wire::{attachment, wall_ns};
+use super::{zerr, Ros2Error};
+use ratelab_core::limits::MAX_ROS_MESSAGE_BYTES;
+use ratelab_core::ros_types::{cdr, from_cdr};
+use std::time::Duration;
+use zenoh::Wait;
+
+/// Ask node `node` (`/policy`) on `domain` service `service` with `request`, waiting at
+/// most `timeout`: the response's CDR (header included).
+///
+/// # Errors
+/// [`Ros2Error::Usage`] when no server answered within `timeout` (as ros2cli, which then
+/// says the service is not available) or the answer is too long; [`Ros2Error::Zenoh`]
+/// when the get failed.
+pub fn call<T: serde::Serialize>(
+    session: &zenoh::Session,
+    domain: u32,
+    node: &str,
+    service: ParameterService,
+    request: &T,
+    timeout: Duration,
+) -> Result<Vec<u8>, Ros2Error> {
+    let info = super::rcl_interfaces::type_info(service.type_name(), service.hash());
+    let key = format!(
+        "{domain}/{}/{}/{}/{}",
+        node.trim_start_matches('/'),
+        service.suffix(),
+        info.name,
+        service.hash()
+    );
+    let mut payload = Vec::new();
+    cdr(request, &mut payload);
+    // The client's GID: this session's, as a real client's is its endpoint's.
+    let gid = xxhash_rust::xxh3::xxh3_128(session.zid().to_string().as_bytes()).to_le_bytes();
+    let replies = session
+        .get(key.as_str())
+        .payload(payload)
+        .attachment(attachment(1, wall_ns(), &gid).to_vec())
+        .timeout(timeout)
+        .wait()
+        .map_err(zerr)?;
+    while let Ok(reply) = replies.recv() {
+        let Ok(sample) = reply.result() else { continue };
+        let bytes = sample.payload();
+        if bytes.len() > MAX_ROS_MESSAGE_BYTES {
+            return Err(Ros2Error::Usage(format!(
+                "{node}: an answer of {} bytes (ratelab::limits::MAX_ROS_MESSAGE_BYTES)",
+                bytes.len()
+            )));
+        }
+        return Ok(bytes.to_bytes().into_owned());
+    }
+    Err(Ros2Error::Usage(format!(
+        "Wait for service timed out waiting for parameter services for node {}",
+        crate::text::printable(node)
+    )))
+}
+
+/// `node`'s parameter names, sorted (`list_parameters`, every level).
+///
+/// # Errors
+/// [`call`]'s, or one line when the answer is not `ListParameters`' response.
+pub fn list(
+    session: &zenoh::Session,
+    domain: u32,
+    node: &str,
+    timeout: Duration,
+) -> Result<Vec<String>, Ros2Error> {
+    let req = ListParametersRequest::default();
+    let bytes = call(session, domain, node, ParameterService::List, &req, timeout)?;
+    let r: ListParametersResponse = from_cdr(&bytes, MAX_ROS_MESSAGE_BYTES)
+        .map_err(|e| Ros2Error::Usage(format!("{node}: list_parameters answered {e}")))?;
+    let mut names = r.result.names;
+    names.sort();
+    Ok(names)
+}
+
+/// `node`'s parameter `name` (`get_parameters`): `None` when the node has no such
+/// parameter.
+///
+/// # Errors
+/// [`call`]'s, or one line when the answer is not `GetParameters`' response.
+pub fn get(
+    session: &zenoh::Session,
+    domain: u32,
+    node: &str,
+    name: &str,
+    timeout: Duration,
+) -> Result<Option<ParameterValue>, Ros2Error> {
+    let req = NamesRequest {
+        names: vec![name.to_string()],
+    };
+    let bytes = call(session, domain, node, ParameterService::Get, &req, timeout)?;
+    let r: GetParametersResponse = from_cdr(&bytes, MAX_ROS_MESSAGE_BYTES)
+        .map_err(|e| Ros2Error::Usage(format!("{node}: get_parameters answered {e}")))?;
+    Ok(r.values.into_iter().next())
+}
+
+/// `x` as Python's `repr` writes it (`50.0`, `1e-05`, `nan`), which `ros2 param get`
+/// prints.
+fn python_float(x: f64) -> String {
+    match super::echo::python_yaml_float(x).as_str() {
+        ".nan" => "nan".into(),
+        ".inf" => "inf".into(),
+        "-.inf" => "-inf".into(),
+        // PyYAML writes `1.0e-05` where repr writes `1e-05`.
+        s => s.replacen(".0e", "e", 1),
+    }
+}
+
+fn python_bool(b: bool) -> &'static str {
+    if b {
+        "True"
+    } else {
+        "False"
+    }
+}
+
+/// A Python string literal as `repr` writes it (single quotes unless the text has one).
+fn python_str(s: &str) -> String {
+    let text = crate::text::printable(s);
+    if text.contains('\'') && !text.contains('"') {
+        format!("\"{text}\"")
+    } else {
+        format!("'{}'", text.replace('\'', "\\'"))
+    }
+}
+
+/// What `ros2 param get` prints of `value` (`None`: the node has no such parameter):
+/// `Double value is: 50.0`, `Integer values are: array('q', [1, 2])`, `Parameter not set.`
+pub fn get_text(value: Option<&ParameterValue>) -> String {
+    let Some(v) = value else {
+        return "Parameter not set.\n".into();
+    };
+    let join = |items: Vec<String>| items.join(", ");
+    let (label, shown) = match v.type_ {
+        pt::BOOL => ("Boolean value is:", python_bool(v.bool_value).to_string()),
+        pt::INTEGER => ("Integer value is:", v.integer_value.to_string()),
+        pt::DOUBLE => ("Double value is:", python_float(v.double_value)),
+        pt::STRING => (
+            "String value is:",
+            crate::text::printable(&v.string_value).into(),
+        ),
+        pt::BYTE_ARRAY => (
+            "Byte values are:",
+            format!(
+                "[{}]",
+                join(
+                    v.byte_array_value
+                        .iter()
+                        .map(|b| format!("b'\\x{b:02x}'"))
+                        .collect()
+                )
+            ),
+        ),
+        pt::BOOL_ARRAY => (
+            "Boolean values are:",
+            format!(
+                "[{}]",
+                join(
+                    v.bool_array_value
+                        .iter()
+                        .map(|b| python_bool(*b).into())
+                        .collect()
+                )
+            ),
+        ),
+        pt::INTEGER_ARRAY => (
+            "Integer values are:",
+            format!(
+                "array('q', [{}])",
+                join(v.integer_array_value.iter().map(i64::to_string).collect())
+            ),
+        ),
+        pt::DOUBLE_ARRAY => (
+            "Double values are:",
+            format!(
+                "array('d', [{}])",
+                join(
+                    v.double_array_value
+                        .iter()
+                        .map(|x| python_float(*x))
+                        .collect()
+                )
+            ),
+        ),
+        pt::STRING_ARRAY => (
+            "String values are:",
+            format!(
+                "[{}]",
+                join(v.string_array_value.iter().map(|s| python_str(s)).collect())
+            ),
+        ),
+        pt::NOT_SET => return "Parameter not set.\n".into(),
+        other => return format!("Unknown parameter type '{other}'\n"),
+    };
+    format!("{label} {shown}\n")
+}
+
+/// What `ros2 param list` prints: each node's names, two spaces in, under its name and a
+/// colon when more than the one node asked for is listed (`header`).
+pub fn list_text(node: &str, names: &[String], header: bool) -> String {
+    let mut out = if header {
+        format!("{}:\n", crate::text::printable(node))
+    } else {
+        String::new()
+    };
+    for n in names {
+        out.push_str(&format!("  {}\n", crate::text::printable(n)));
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn value(type_: u8, f: impl FnOnce(&mut ParameterValue)) -> ParameterValue {
+        let mut v = ParameterValue {
+            type_,
+            ..ParameterValue::default()
+        };
+        f(&mut v);
+        v
+    }
+
+    #[test]
+    fn get_prints_as_ros2_param_get() {
+        let cases = [
+            (
+                value(pt::DOUBLE, |v| v.double_value = 50.0),
+                "Double value is: 50.0\n",
+            ),
+            (
+                value(pt::DOUBLE, |v| v.double_value = 1e-5),
+                "Double value is: 1e-05\n",
+            ),
+            (
+                value(pt::BOOL, |v| v.bool_value = true),
+                "Boolean value is: True\n",
+            ),
+            (
+                value(pt::INTEGER, |v| v.integer_value = -7),
+                "Integer value is: -7\n",
+            ),
+            (
+                value(pt::STRING, |v| v.string_value = "calm".into()),
+                "String value is: calm\n",
+            ),
+            (
+                value(pt::INTEGER_ARRAY, |v| v.integer_array_value = vec![1, 2]),
+                "Integer values are: array('q', [1, 2])\n",
+            ),
+            (
+                value(pt::DOUBLE_ARRAY, |v| v.double_array_value = vec![1.0, 2.5]),
+                "Double values are: array('d', [1.0, 2.5])\n",
+            ),
+            (
+                value(pt::STRING_ARRAY, |v| {
+                    v.string_array_value = vec!["a".into(), "it's".into()]
+                }),
+                "String values are: ['a', \"it's\"]\n",
+            ),
+            (
+                value(pt::BOOL_ARRAY, |v| v.bool_array_value = vec![true, false]),
+                "Boolean values are: [True, False]\n",
+            ),
+            (value(pt::NOT_SET, |_| {}), "Parameter not set.\n"),
+            (value(42, |_| {}), "Unknown parameter type '42'\n"),
+        ];
+        for (v, want) in cases {
+            assert_eq!(get_text(Some(&v)), want);
+        }
+        assert_eq!(get_text(None), "Parameter not set.\n");
+    }
+
+    #[test]
+    fn list_prints_as_ros2_param_list_and_nothing_raw() {
+        let names = vec!["rate_hz".to_string(), "use_sim_time".to_string()];
+        assert_eq!(
+            list_text("/policy", &names, false),
+            "  rate_hz\n  use_sim_time\n"
+        );
+        assert_eq!(
+            list_text("/policy", &names, true),
+            "/policy:\n  rate_hz\n  use_sim_time\n"
+        );
+        let hostile = vec!["a\x1b[2Jb\nc".to_string()];
+        assert!(!list_text("/x", &hostile, true).contains('\x1b'));
+        let v = value(pt::STRING, |v| v.string_value = "\x1b]0;x\x07".into());
+        assert!(!get_text(Some(&v)).contains('\x1b'));
+    }
+}

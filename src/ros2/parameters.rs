@@ -1,0 +1,528 @@
+//! A node's parameters as ROS 2 sees them, and the answers of its parameter services
+//! (`ros2 param list`, `get`, `describe`, `set`): pure functions from a request's CDR to
+//! the response's, so that every rule is tested without a network.
+//!
+//! A ratelab node's parameters are its graph file's:
+//! - `rate_hz` (`DOUBLE`), its rate *now*: the lab's keys change it while the run goes on;
+//! - each key of its `params` table (a nested table's keys joined by `.`, as ROS 2 names
+//!   nested parameters): numbers, booleans, strings, and arrays of one of them;
+//! - `use_sim_time` (`BOOL`), which every ROS 2 node has: `true`, since a ratelab node's
+//!   time is the run's, the time `/clock` carries.
+//!
+//! All are read-only over ROS 2: a rate changed from outside would not be in the run's
+//! session log, and a virtual-clock run would no longer replay. `set_parameters` answers
+//! so, parameter by parameter.
+//!
+//! The services answer as rclcpp's `ParameterService` does (`rclcpp/src/rclcpp/
+//! node_interfaces/node_parameters.cpp`): `list_parameters` by its prefix and depth rule;
+//! `get_parameters` and `describe_parameters` answer nothing when one name is not
+//! declared; `get_parameter_types` gives `NOT_SET` for such a name.
+
+use super::rcl_interfaces::{
+    parameter_type as pt, DescribeParametersResponse, FloatingPointRange,
+    GetParameterTypesResponse, GetParametersResponse, ListParametersRequest,
+    ListParametersResponse, ListParametersResult, NamesRequest, Parameter, ParameterDescriptor,
+    ParameterService, ParameterValue, SetParametersAtomicallyResponse, SetParametersResponse,
+    SetParametersResult, SetRequest,
+};
+use crate::graph::spec::NodeSpec;
+use crate::time::Nanos;
+use ratelab_core::limits::{self, MAX_SERVICE_REQUEST_BYTES};
+use ratelab_core::rate::{Rate, MAX_HZ};
+use ratelab_core::ros_types::{cdr, from_cdr};
+use std::collections::BTreeMap;
+
+/// The separator of nested parameter names (ROS 2's).
+const SEPARATOR: char = '.';
+
+/// How deep a `params` table may nest before its deeper keys are left out of ROS 2's view.
+const MAX_NESTING: usize = 16;
+
+/// One parameter's value: fixed (the graph file's), or the node's rate as it is now.
+#[derive(Clone, Debug)]
+enum Value {
+    Fixed(ParameterValue),
+    Rate(Rate),
+}
+
+impl Value {
+    fn now(&self) -> ParameterValue {
+        match self {
+            Value::Fixed(v) => v.clone(),
+            Value::Rate(r) => double(r.hz()),
+        }
+    }
+}
+
+/// A node's parameters (module header), by name.
+#[derive(Clone, Debug)]
+pub struct NodeParameters {
+    /// The node's fully qualified name (`/policy`).
+    pub node: String,
+    params: BTreeMap<String, Value>,
+    /// What the node's `params` held that ROS 2 has no type for (`key: why`), one each.
+    pub left_out: Vec<String>,
+}
+
+fn double(x: f64) -> ParameterValue {
+    ParameterValue {
+        type_: pt::DOUBLE,
+        double_value: x,
+        ..ParameterValue::default()
+    }
+}
+
+fn boolean(b: bool) -> ParameterValue {
+    ParameterValue {
+        type_: pt::BOOL,
+        bool_value: b,
+        ..ParameterValue::default()
+    }
+}
+
+/// A TOML value as a ROS 2 parameter value; `Err` says why it has none (a mixed or nested
+/// array, an empty one, whose type ROS 2 could not tell).
+fn from_toml(v: &toml::Value) -> Result<ParameterValue, &'static str> {
+    use toml::Value as T;
+    let mut p = ParameterValue::default();
+    match v {
+        T::Boolean(b) => return Ok(boolean(*b)),
+        T::Integer(i) => (p.type_, p.integer_value) = (pt::INTEGER, *i),
+        T::Float(x) => return Ok(double(*x)),
+        T::String(s) => (p.type_, p.string_value) = (pt::STRING, s.clone()),
+        T::Datetime(d) => (p.type_, p.string_value) = (pt::STRING, d.to_string()),
+        T::Array(a) if a.iter().all(T::is_bool) => {
+            p.type_ = pt::BOOL_ARRAY;
+            p.bool_array_value = a.iter().filter_map(T::as_bool).collect();
+        }
+        T::Array(a) if a.iter().all(T::is_integer) => {
+            p.type_ = pt::INTEGER_ARRAY;
+            p.integer_array_value = a.iter().filter_map(T::as_integer).collect();
+        }
+        // Numbers, some written without a point: all doubles, as a YAML loader would.
+        T::Array(a) if a.iter().all(|x| x.is_float() || x.is_integer()) => {
+            p.type_ = pt::DOUBLE_ARRAY;
+            p.double_array_value = a
+                .iter()
+                .filter_map(|x| x.as_float().or(x.as_integer().map(|i| i as f64)))
+                .collect();
+        }
+        T::Array(a) if a.iter().all(T::is_str) => {
+            p.type_ = pt::STRING_ARRAY;
+            p.string_array_value = a
+                .iter()
+                .filter_map(|s| s.as_str().map(String::from))
+                .collect();
+        }
+        T::Array(_) => return Err("an array of mixed or nested values has no ROS 2 type"),
+        T::Table(_) => return Err("a table is a prefix, not a value"),
+    }
+    if matches!(v, T::Array(a) if a.is_empty()) {
+        return Err("an empty array has no ROS 2 type");
+    }
+    Ok(p)
+}
+
+impl NodeParameters {
+    /// The parameters of node `spec`, whose rate is `rate` (shared with the running
+    /// graph: read when asked).
+    pub fn of(spec: &NodeSpec, rate: Option<&Rate>) -> NodeParameters {
+        let mut p = NodeParameters {
+            node: format!("/{}", spec.name),
+            params: BTreeMap::new(),
+            left_out: Vec::new(),
+        };
+        p.add_table("", &spec.params, 0);
+        let rate = rate
+            .cloned()
+            .map_or(Value::Fixed(double(spec.rate_hz)), Value::Rate);
+        p.params.insert("rate_hz".into(), rate);
+        p.params
+            .insert("use_sim_time".into(), Value::Fixed(boolean(true)));
+        p
+    }
+
+    /// The parameters of a node with no graph file behind it (ratelab's `/clock`
+    /// publisher): `use_sim_time` alone, `false` (it makes the time).
+    pub fn clock_node(name: &str) -> NodeParameters {
+        let mut params = BTreeMap::new();
+        params.insert("use_sim_time".into(), Value::Fixed(boolean(false)));
+        NodeParameters {
+            node: format!("/{name}"),
+            params,
+            left_out: Vec::new(),
+        }
+    }
+
+    fn add_table(&mut self, prefix: &str, table: &toml::Table, depth: usize) {
+        for (k, v) in table {
+            let name = format!("{prefix}{k}");
+            match v {
+                toml::Value::Table(t) if depth < MAX_NESTING => {
+                    self.add_table(&format!("{name}{SEPARATOR}"), t, depth + 1);
+                }
+                toml::Value::Table(_) => self
+                    .left_out
+                    .push(format!("{name}: nested more than {MAX_NESTING} deep")),
+                v => match from_toml(v) {
+                    Ok(p) => {
+                        self.params.insert(name, Value::Fixed(p));
+                    }
+                    Err(why) => self.left_out.push(format!("{name}: {why}")),
+                },
+            }
+        }
+    }
+
+    /// Every parameter and its value now, by name.
+    pub fn all(&self) -> Vec<Parameter> {
+        self.params
+            .iter()
+            .map(|(name, v)| Parameter {
+                name: name.clone(),
+                value: v.now(),
+            })
+            .collect()
+    }
+
+    /// The node's rate now, Hz, when it has one.
+    pub fn rate_hz(&self) -> Option<f64> {
+        match self.params.get("rate_hz")? {
+            Value::Rate(r) => Some(r.hz()),
+            Value::Fixed(v) => Some(v.double_value),
+        }
+    }
+
+    fn descriptor(&self, name: &str, v: &Value) -> ParameterDescriptor {
+        let value = v.now();
+        let (description, range) = match name {
+            "rate_hz" => (
+                "the node's rate, Hz (the graph file's rate_hz; the lab's keys change it)",
+                vec![FloatingPointRange {
+                    from_value: 0.0,
+                    to_value: MAX_HZ,
+                    step: 0.0,
+                }],
+            ),
+            "use_sim_time" => ("the node's time is the run's, which /clock carries", vec![]),
+            _ => ("the graph file's params", vec![]),
+        };
+        ParameterDescriptor {
+            name: name.to_string(),
+            type_: value.type_,
+            description: description.into(),
+            additional_constraints:
+                "read-only over ROS 2: set it in the graph file, or with the lab's keys".into(),
+            read_only: true,
+            dynamic_typing: false,
+            floating_point_range: range,
+            integer_range: vec![],
+        }
+    }
+
+    /// `list_parameters` (rclcpp's rule): with no prefixes, every name with fewer than
+    /// `depth` separators (all, for depth 0); else every name equal to a prefix, or under
+    /// one with fewer than `depth` separators after it. `prefixes` lists each listed
+    /// name's part before its last separator, once.
+    pub fn list(&self, req: &ListParametersRequest) -> ListParametersResult {
+        let within = |s: &str| req.depth == 0 || (s.matches(SEPARATOR).count() as u64) < req.depth;
+        let mut out = ListParametersResult::default();
+        for name in self.params.keys() {
+            let all = req.prefixes.is_empty() && within(name);
+            let under = req.prefixes.iter().any(|p| {
+                name == p
+                    || name
+                        .strip_prefix(p.as_str())
+                        .and_then(|rest| rest.strip_prefix(SEPARATOR))
+                        .is_some_and(|rest| within(&format!("{SEPARATOR}{rest}")))
+            });
+            if all || under {
+                out.names.push(name.clone());
+                if let Some((prefix, _)) = name.rsplit_once(SEPARATOR) {
+                    if !out.prefixes.iter().any(|p| p == prefix) {
+                        out.prefixes.push(prefix.to_string());
+                    }
+                }
+            }
+        }
+        out
+    }
+
+    /// The reason `name` cannot be set over ROS 2.
+    fn refusal(&self, name: &str) -> String {
+        match name {
+            "rate_hz" => format!(
+                "{}: rate_hz is read-only over ROS 2 (change it with the lab's keys, so that the run's session log has it)",
+                self.node
+            ),
+            _ if self.params.contains_key(name) => format!(
+                "{}: parameter '{name}' is read-only (it is the graph file's)",
+                self.node
+            ),
+            _ => format!("{}: parameter '{name}' is not declared", self.node),
+        }
+    }
+
+    /// The answer of service `service` to `request` (CDR with its header): the response's
+    /// CDR with its header.
+    ///
+    /// # Errors
+    /// One line when the request is too long ([`MAX_SERVICE_REQUEST_BYTES`]) or not that service's
+    /// CDR: it is then answered with nothing (a ROS 2 client times out, as it would with a
+    /// server that could not read it).
+    pub fn answer(&self, service: ParameterService, request: &[u8]) -> Result<Vec<u8>, String> {
+        if request.len() > MAX_SERVICE_REQUEST_BYTES {
+            return Err(limits::refusal(
+                format_args!(
+                    "a request of {} bytes, at most {MAX_SERVICE_REQUEST_BYTES}",
+                    request.len()
+                ),
+                "MAX_SERVICE_REQUEST_BYTES",
+            ));
+        }
+        let mut out = Vec::new();
+        let names =
+            |r: &[u8]| from_cdr::<NamesRequest>(r, MAX_SERVICE_REQUEST_BYTES).map(|n| n.names);
+        match service {
+            ParameterService::List => {
+                let req = from_cdr::<ListParametersRequest>(request, MAX_SERVICE_REQUEST_BYTES)?;
+                let result = self.list(&req);
+                cdr(&ListParametersResponse { result }, &mut out);
+            }
+            ParameterService::Get => {
+                let names = names(request)?;
+                // rclcpp: one name not declared, no values at all.
+                let values = names
+                    .iter()
+                    .map(|n| self.params.get(n).map(Value::now))
+                    .collect::<Option<Vec<_>>>()
+                    .unwrap_or_default();
+                cdr(&GetParametersResponse { values }, &mut out);
+            }
+            ParameterService::GetTypes => {
+                let types = names(request)?
+                    .iter()
+                    .map(|n| self.params.get(n).map_or(pt::NOT_SET, |v| v.now().type_))
+                    .collect();
+                cdr(&GetParameterTypesResponse { types }, &mut out);
+            }
+            ParameterService::Describe => {
+                let descriptors = names(request)?
+                    .iter()
+                    .map(|n| self.params.get(n).map(|v| self.descriptor(n, v)))
+                    .collect::<Option<Vec<_>>>()
+                    .unwrap_or_default();
+                cdr(&DescribeParametersResponse { descriptors }, &mut out);
+            }
+            ParameterService::Set => {
+                let req = from_cdr::<SetRequest>(request, MAX_SERVICE_REQUEST_BYTES)?;
+                let results = req
+                    .parameters
+                    .iter()
+                    .map(|p| SetParametersResult {
+                        successful: false,
+                        reason: self.refusal(&p.name),
+                    })
+                    .collect();
+                cdr(&SetParametersResponse { results }, &mut out);
+            }
+            ParameterService::SetAtomically => {
+                let req = from_cdr::<SetRequest>(request, MAX_SERVICE_REQUEST_BYTES)?;
+                let reason = req
+                    .parameters
+                    .first()
+                    .map_or_else(|| "no parameters given".into(), |p| self.refusal(&p.name));
+                let result = SetParametersResult {
+                    successful: false,
+                    reason,
+                };
+                cdr(&SetParametersAtomicallyResponse { result }, &mut out);
+            }
+        }
+        Ok(out)
+    }
+
+    /// The event a node publishes on `/parameter_events` when its parameters are declared:
+    /// all of them, new, at run time `t`.
+    pub fn declared_event(&self, t: Nanos) -> super::rcl_interfaces::ParameterEvent {
+        super::rcl_interfaces::ParameterEvent {
+            stamp: super::rcl_interfaces::Time::of(t),
+            node: self.node.clone(),
+            new_parameters: self.all(),
+            ..Default::default()
+        }
+    }
+
+    /// The event saying `rate_hz` is now `hz`, at run time `t`.
+    pub fn rate_event(&self, hz: f64, t: Nanos) -> super::rcl_interfaces::ParameterEvent {
+        super::rcl_interfaces::ParameterEvent {
+            stamp: super::rcl_interfaces::Time::of(t),
+            node: self.node.clone(),
+            changed_parameters: vec![Parameter {
+                name: "rate_hz".into(),
+                value: double(hz),
+            }],
+            ..Default::default()
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::graph::GraphSpec;
+
+    fn policy_with(params: &str) -> NodeParameters {
+        let text = std::fs::read_to_string(concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../../graphs/cartpole.toml"
+        ))
+        .unwrap();
+        let spec = GraphSpec::parse(&text, "g.toml").unwrap();
+        let mut node = spec.node(spec.node_id("policy").unwrap()).clone();
+        node.params = toml::from_str(params).unwrap();
+        NodeParameters::of(&node, Some(&Rate::new(50.0).unwrap()))
+    }
+
+    fn decode<'de, T: serde::Deserialize<'de>>(b: &'de [u8]) -> T {
+        from_cdr(b, usize::MAX).unwrap()
+    }
+
+    fn ask<T: serde::Serialize>(p: &NodeParameters, s: ParameterService, req: &T) -> Vec<u8> {
+        let mut b = Vec::new();
+        cdr(req, &mut b);
+        p.answer(s, &b).unwrap()
+    }
+
+    #[test]
+    fn the_graph_files_parameters_with_their_ros_2_types() {
+        let p = policy_with(
+            "gain = 2.5\nsteps = 3\nname = \"lqr\"\non = true\nk = [1, 2.5]\nids = [1, 2]\n[gains]\nkp = 1.0\n[gains.inner]\nkd = 0.5\n",
+        );
+        let all: BTreeMap<String, ParameterValue> =
+            p.all().into_iter().map(|q| (q.name, q.value)).collect();
+        let ty = |n: &str| all[n].type_;
+        assert_eq!(ty("gain"), pt::DOUBLE);
+        assert_eq!(ty("steps"), pt::INTEGER);
+        assert_eq!(ty("name"), pt::STRING);
+        assert_eq!(ty("on"), pt::BOOL);
+        assert_eq!(all["k"].double_array_value, vec![1.0, 2.5]);
+        assert_eq!(all["ids"].integer_array_value, vec![1, 2]);
+        assert_eq!(all["gains.inner.kd"].double_value, 0.5);
+        assert_eq!(all["rate_hz"].double_value, 50.0);
+        assert!(all["use_sim_time"].bool_value);
+        assert!(p.left_out.is_empty());
+        let odd = policy_with("mixed = [1, \"a\"]\nnone = []\n");
+        assert_eq!(odd.left_out.len(), 2, "{:?}", odd.left_out);
+    }
+
+    #[test]
+    fn rate_hz_is_the_rate_now() {
+        let rate = Rate::new(50.0).unwrap();
+        let spec = GraphSpec::chapter();
+        let p = NodeParameters::of(&spec.nodes[1], Some(&rate));
+        rate.set_hz(20.0).unwrap();
+        let got: GetParametersResponse = decode(&ask(
+            &p,
+            ParameterService::Get,
+            &NamesRequest {
+                names: vec!["rate_hz".into()],
+            },
+        ));
+        assert_eq!(got.values, vec![double(20.0)]);
+    }
+
+    /// rclcpp's `list_parameters` rule, case by case.
+    #[test]
+    fn list_follows_rclcpp_s_prefix_and_depth_rule() {
+        let p = policy_with("a = 1\n[b]\nc = 1\n[b.d]\ne = 1\n");
+        let list = |prefixes: &[&str], depth: u64| {
+            p.list(&ListParametersRequest {
+                prefixes: prefixes.iter().map(|s| s.to_string()).collect(),
+                depth,
+            })
+        };
+        let all = list(&[], 0);
+        assert_eq!(all.names, ["a", "b.c", "b.d.e", "rate_hz", "use_sim_time"]);
+        assert_eq!(all.prefixes, ["b", "b.d"]);
+        assert_eq!(list(&[], 1).names, ["a", "rate_hz", "use_sim_time"]);
+        assert_eq!(list(&[], 2).names, ["a", "b.c", "rate_hz", "use_sim_time"]);
+        assert_eq!(list(&["b"], 0).names, ["b.c", "b.d.e"]);
+        // rclcpp counts the separator after the prefix too: depth 1 lists the prefix alone.
+        assert!(list(&["b"], 1).names.is_empty());
+        assert_eq!(list(&["b"], 2).names, ["b.c"]);
+        assert_eq!(list(&["a"], 1).names, ["a"]);
+        assert!(list(&["x"], 0).names.is_empty());
+    }
+
+    #[test]
+    fn get_and_describe_answer_nothing_for_an_undeclared_name_types_say_not_set() {
+        let p = policy_with("");
+        let names = |n: &[&str]| NamesRequest {
+            names: n.iter().map(|s| s.to_string()).collect(),
+        };
+        let got: GetParametersResponse = decode(&ask(
+            &p,
+            ParameterService::Get,
+            &names(&["rate_hz", "nope"]),
+        ));
+        assert!(got.values.is_empty());
+        let types: GetParameterTypesResponse = decode(&ask(
+            &p,
+            ParameterService::GetTypes,
+            &names(&["rate_hz", "nope"]),
+        ));
+        assert_eq!(types.types, vec![pt::DOUBLE, pt::NOT_SET]);
+        let d: DescribeParametersResponse =
+            decode(&ask(&p, ParameterService::Describe, &names(&["rate_hz"])));
+        assert!(d.descriptors[0].read_only);
+        assert_eq!(d.descriptors[0].floating_point_range[0].to_value, MAX_HZ);
+        let d: DescribeParametersResponse =
+            decode(&ask(&p, ParameterService::Describe, &names(&["nope"])));
+        assert!(d.descriptors.is_empty());
+    }
+
+    #[test]
+    fn every_set_is_refused_with_its_reason() {
+        let p = policy_with("gain = 1.0\n");
+        let set = |n: &str| SetRequest {
+            parameters: vec![Parameter {
+                name: n.into(),
+                value: double(1.0),
+            }],
+        };
+        let r: SetParametersResponse = decode(&ask(&p, ParameterService::Set, &set("rate_hz")));
+        assert!(!r.results[0].successful);
+        assert!(
+            r.results[0].reason.contains("lab's keys"),
+            "{:?}",
+            r.results
+        );
+        let r: SetParametersResponse = decode(&ask(&p, ParameterService::Set, &set("gain")));
+        assert!(r.results[0].reason.contains("read-only"));
+        let r: SetParametersAtomicallyResponse =
+            decode(&ask(&p, ParameterService::SetAtomically, &set("nope")));
+        assert!(r.result.reason.contains("not declared"));
+    }
+
+    #[test]
+    fn a_bad_request_is_one_line_and_no_answer() {
+        let p = policy_with("");
+        for bad in [
+            &b""[..],
+            &[0, 1, 0, 0, 0xff, 0xff, 0xff, 0xff][..],
+            &[0, 0, 0, 0, 1, 0, 0, 0][..],
+        ] {
+            for s in ParameterService::ALL {
+                let e = p.answer(s, bad).unwrap_err();
+                assert!(!e.contains('\n'), "{e}");
+            }
+        }
+        let long = vec![0u8; MAX_SERVICE_REQUEST_BYTES + 1];
+        let e = p.answer(ParameterService::List, &long).unwrap_err();
+        assert!(
+            e.ends_with("(ratelab::limits::MAX_SERVICE_REQUEST_BYTES)"),
+            "{e}"
+        );
+    }
+}

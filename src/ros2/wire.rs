@@ -1,0 +1,233 @@
+//! rmw_zenoh's wire, as every endpoint ratelab offers uses it (rmw_zenoh `docs/design.md`,
+//! checked against a real rmw_zenoh_cpp 0.6.7 node's captures in
+//! `../shared/fixtures/ros2-real/`): declaring an endpoint (its key, its liveliness token,
+//! its GID from that token), the 33-byte attachment each message and each service reply
+//! carries, and putting a message stamped by its publisher's own session.
+
+use super::session::Ros2Session;
+use super::{zerr, Ros2Error};
+use hiroz_protocol::entity::{EndpointEntity, EndpointKind, NodeEntity};
+use hiroz_protocol::qos::{QosHistory, QosProfile};
+use hiroz_protocol::KeyExprFormat;
+use zenoh::Wait;
+
+/// The 16-byte GID of the endpoint whose token is `token`, as rmw_zenoh_cpp computes it:
+/// the XXH3-128 hash of the token, its low 64 bits then its high 64 bits, little endian
+/// (checked against a real rmw_zenoh_cpp 0.6.7 node's attachments, `../shared/fixtures/
+/// ros2-real/`): a subscriber's `MessageInfo.publisher_gid` then matches the GID that
+/// `ros2 topic info -v` shows for the publisher.
+pub fn gid(token: &str) -> [u8; 16] {
+    xxhash_rust::xxh3::xxh3_128(token.as_bytes()).to_le_bytes()
+}
+
+/// An endpoint's liveliness token (hiroz-protocol's), a keep-all history carrying its
+/// depth as rmw_zenoh_cpp writes it (`2,10`; hiroz writes `2,`, which rmw_zenoh_cpp reads as
+/// its default depth, 42).
+fn token_of(
+    format: &KeyExprFormat,
+    e: &EndpointEntity,
+    zid: &zenoh::session::ZenohId,
+    depth: usize,
+) -> Result<String, Ros2Error> {
+    let token = format
+        .liveliness_key_expr(e, zid)
+        .map_err(zerr)?
+        .to_string();
+    Ok(if e.qos.history == QosHistory::KeepAll {
+        with_keep_all_depth(&token, depth)
+    } else {
+        token
+    })
+}
+
+/// `token` with its QoS field's history (the third of the last segment's `:`-fields) `2,`
+/// made `2,<depth>`.
+fn with_keep_all_depth(token: &str, depth: usize) -> String {
+    let Some((head, qos)) = token.rsplit_once('/') else {
+        return token.to_string();
+    };
+    let mut fields: Vec<String> = qos.split(':').map(str::to_string).collect();
+    if fields.get(2).is_some_and(|h| h == "2,") {
+        fields[2] = format!("2,{depth}");
+    }
+    format!("{head}/{}", fields.join(":"))
+}
+
+/// rmw_zenoh's attachment: `int64` sequence number, `int64` source timestamp (ns), the
+/// GID as a byte sequence (its length, 16, as one byte, then the 16 bytes): 33 bytes,
+/// little endian (rmw_zenoh `attachment_helpers.cpp`, Zenoh's serializer).
+pub fn attachment(seq: i64, source_ns: i64, gid: &[u8; 16]) -> [u8; 33] {
+    let mut a = [0u8; 33];
+    a[..8].copy_from_slice(&seq.to_le_bytes());
+    a[8..16].copy_from_slice(&source_ns.to_le_bytes());
+    a[16] = 16;
+    a[17..].copy_from_slice(gid);
+    a
+}
+
+/// The wall clock, ns since the Unix epoch (rmw_zenoh's source timestamps).
+pub(crate) fn wall_ns() -> i64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| i64::try_from(d.as_nanos()).unwrap_or(i64::MAX))
+}
+
+/// A publisher ready to put: its key, its GID, and the session that stamps its samples.
+pub(crate) struct Outlet {
+    pub(crate) publisher: zenoh::pubsub::Publisher<'static>,
+    gid: [u8; 16],
+    session: zenoh::Session,
+}
+
+impl Outlet {
+    /// `bytes` out as message `seq` (rmw_zenoh's sequence number, from 1).
+    ///
+    /// # Errors
+    /// Zenoh's, in one line.
+    pub(crate) fn put(&self, seq: i64, bytes: &[u8]) -> Result<(), String> {
+        put(self, seq, bytes)
+    }
+}
+
+/// What a bridge declares with: the session, the ids it takes, rmw_zenoh's key format, and
+/// the liveliness tokens declared so far (withdrawn when the bridge stops).
+pub(crate) struct Declarer<'a> {
+    session: &'a zenoh::Session,
+    link: &'a Ros2Session,
+    format: KeyExprFormat,
+    tokens: Vec<zenoh::liveliness::LivelinessToken>,
+}
+
+impl<'a> Declarer<'a> {
+    /// A declarer on `session`, taking ids from `link`.
+    pub(crate) fn new(session: &'a zenoh::Session, link: &'a Ros2Session) -> Declarer<'a> {
+        Declarer {
+            session,
+            link,
+            format: KeyExprFormat::default(),
+            tokens: Vec::new(),
+        }
+    }
+
+    /// The tokens declared, to be withdrawn with the offer.
+    pub(crate) fn into_tokens(self) -> Vec<zenoh::liveliness::LivelinessToken> {
+        self.tokens
+    }
+
+    /// Declare node `n`'s NN token.
+    pub(crate) fn node(&mut self, n: &NodeEntity) -> Result<(), Ros2Error> {
+        let ke = self.format.node_liveliness_key_expr(n).map_err(zerr)?;
+        self.token(ke.to_string())
+    }
+
+    /// The session.
+    pub(crate) fn session(&self) -> &zenoh::Session {
+        self.session
+    }
+
+    /// Declare liveliness token `ke`.
+    pub(crate) fn token(&mut self, ke: String) -> Result<(), Ros2Error> {
+        let t = self
+            .session
+            .liveliness()
+            .declare_token(ke)
+            .wait()
+            .map_err(zerr)?;
+        self.tokens.push(t);
+        Ok(())
+    }
+
+    /// Declare endpoint `e`'s token (a keep-all history with `depth`).
+    pub(crate) fn token_of(
+        &mut self,
+        e: &EndpointEntity,
+        depth: usize,
+    ) -> Result<String, Ros2Error> {
+        let token = token_of(&self.format, e, &self.session.zid(), depth)?;
+        self.token(token.clone())?;
+        Ok(token)
+    }
+
+    /// An endpoint of `node` with a fresh id (not declared).
+    pub(crate) fn endpoint(
+        &self,
+        node: &NodeEntity,
+        kind: EndpointKind,
+        topic: &str,
+        ty: hiroz_protocol::entity::TypeInfo,
+        qos: QosProfile,
+    ) -> EndpointEntity {
+        EndpointEntity {
+            id: self.link.take_id(),
+            node: Some(node.clone()),
+            kind,
+            topic: topic.to_string(),
+            type_info: Some(ty),
+            qos,
+        }
+    }
+
+    /// Endpoint `e`'s data key (a topic's, or a service's).
+    pub(crate) fn key(&self, e: &EndpointEntity) -> Result<String, Ros2Error> {
+        Ok(self.format.topic_key_expr(e).map_err(zerr)?.to_string())
+    }
+
+    /// A publisher: its key declared, its MP token declared, its GID from that token.
+    pub(crate) fn publisher(
+        &mut self,
+        e: &EndpointEntity,
+        depth: usize,
+    ) -> Result<Outlet, Ros2Error> {
+        let key = self.key(e)?;
+        let publisher = self.session.declare_publisher(key).wait().map_err(zerr)?;
+        let token = self.token_of(e, depth)?;
+        Ok(Outlet {
+            publisher,
+            gid: gid(&token),
+            session: self.session.clone(),
+        })
+    }
+}
+
+/// One sample out: its attachment, and its timestamp from the publisher's own session (its
+/// clock and its ZID), as a real rmw_zenoh_cpp node stamps its samples (the captures in
+/// `../shared/fixtures/ros2-real/`), not left for the router to stamp.
+fn put(o: &Outlet, seq: i64, bytes: &[u8]) -> Result<(), String> {
+    o.publisher
+        .put(bytes.to_vec())
+        .attachment(attachment(seq, wall_ns(), &o.gid).to_vec())
+        .timestamp(o.session.new_timestamp())
+        .wait()
+        .map_err(|e| e.to_string())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_attachment_is_33_bytes_as_rmw_zenoh_lays_it_out() {
+        let a = attachment(7, -2, &[9; 16]);
+        assert_eq!(a.len(), 33);
+        assert_eq!(a[..8], 7i64.to_le_bytes());
+        assert_eq!(a[8..16], (-2i64).to_le_bytes());
+        assert_eq!(a[16], 16);
+        assert_eq!(a[17..], [9; 16]);
+    }
+
+    #[test]
+    fn a_keep_all_token_carries_its_depth_as_rmw_zenoh_cpp_writes_it() {
+        let t = "@ros2_lv/0/z/0/1/MP/%/%/sensor/%obs/T/RIHS01_x/1::2,:,:,:,,";
+        assert_eq!(
+            with_keep_all_depth(t, 100),
+            "@ros2_lv/0/z/0/1/MP/%/%/sensor/%obs/T/RIHS01_x/1::2,100:,:,:,,"
+        );
+        let last = "@ros2_lv/0/z/0/1/MP/%/%/sensor/%obs/T/RIHS01_x/2::,1:,:,:,,";
+        assert_eq!(with_keep_all_depth(last, 100), last);
+    }
+
+    #[test]
+    fn gids_differ_per_endpoint() {
+        assert_ne!(gid("@ros2_lv/0/a/1/2/MP"), gid("@ros2_lv/0/a/1/3/MP"));
+    }
+}

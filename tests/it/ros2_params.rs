@@ -1,0 +1,280 @@
+//! Each node of a `--ros2` run as a ROS 2 node is besides its topics: `ros2 param list /
+//! get / describe / set` answer from the graph file's parameters, and the node's log
+//! reaches `/rosout`. The client is `tests/ros2/param_client.py` (PyPI `eclipse-zenoh` and
+//! `rosbags`, nothing of ratelab's), calling with the service type hashes a real rclpy node
+//! declared over real rmw_zenoh_cpp (`../shared/fixtures/ros2-real/`).
+
+use crate::ros2::{connect_to, ratelab, Oracle};
+use serde_json::{json, Value};
+use std::io::{BufRead, BufReader};
+use std::process::{Command, Stdio};
+
+/// A Python node that prints every tenth reading it hears, with parameters of every kind
+/// a graph file gives, beside the chapter's graph.
+const CHATTY: &str = r#"
+[[node]]
+name = "chatty"
+kind = "python"
+script = "chatty.py"
+class = "Chatty"
+rate_hz = 10
+subscribes = "/obs"
+params = { gain = 2.5, mode = "calm", window = [1, 2, 3], on = true }
+"#;
+
+const CHATTY_PY: &str = r#"
+from ratelab import State
+
+
+class Chatty:
+    def __init__(self, node):
+        self.heard = 0
+        node.create_subscription(State, "/obs", self.on_obs, 1)
+
+    def on_obs(self, msg):
+        self.heard += 1
+        if self.heard % 10 == 1:
+            print(f"heard {self.heard}")
+"#;
+
+#[test]
+fn ros2_param_answers_from_the_graph_file_and_the_log_reaches_rosout() {
+    let _alone = crate::machine::alone();
+    let dir = tempfile::tempdir().unwrap();
+    let chapter = std::fs::read_to_string(crate::repo("graphs/cartpole.toml")).unwrap();
+    // The node goes before the topics (a `[[node]]` after `[[topic]]` tables is still a node).
+    let graph = dir.path().join("g.toml");
+    std::fs::write(&graph, format!("{chapter}\n{CHATTY}")).unwrap();
+    std::fs::write(dir.path().join("chatty.py"), CHATTY_PY).unwrap();
+    let endpoint = format!("tcp/127.0.0.1:{}", crate::distributed::free_port());
+    let mut run = Command::new(env!("CARGO_BIN_EXE_ratelab"))
+        .args(["run", "--graph", graph.to_str().unwrap()])
+        .args(["--ros2", "6", "--clock", "real", "--duration", "30"])
+        .current_dir(crate::REPO)
+        .env_remove("ROS_DOMAIN_ID")
+        .env_remove("ZENOH_ROUTER_CHECK_ATTEMPTS")
+        .env(connect_to(&endpoint).0, connect_to(&endpoint).1)
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut err = BufReader::new(run.stderr.take().unwrap());
+    let mut said = String::new();
+    while !said.contains("offering the graph to ROS 2") {
+        let mut line = String::new();
+        if err.read_line(&mut line).unwrap() == 0 {
+            break;
+        }
+        said.push_str(&line);
+    }
+    assert!(said.contains("offering the graph to ROS 2"), "{said}");
+    // Its stderr drained meanwhile (the node's prints go there too, headless).
+    std::thread::spawn(move || std::io::copy(&mut err, &mut std::io::sink()));
+    let talker = crate::brains::fixture("ros2-real/real-rclpy-talker.json");
+    let client = Oracle::start(
+        "tests/ros2/param_client.py",
+        &[
+            &endpoint,
+            "6",
+            talker.to_str().unwrap(),
+            "chatty",
+            "policy",
+            "ratelab",
+        ],
+        "the parameter client",
+    );
+    let r = client.report();
+    // `ratelab ros2 node info` lists the services as ros2cli does, while the run goes on.
+    let (code, info, e) = ratelab(
+        &[
+            "ros2",
+            "--connect",
+            &endpoint,
+            "--domain",
+            "6",
+            "node",
+            "info",
+            "/chatty",
+        ],
+        &[],
+    );
+    // ratelab's own `ros2 param` and `topic echo /rosout`, as ros2cli prints them.
+    let ros2 = |verb: &[&str]| {
+        let mut args = vec!["ros2", "--connect", endpoint.as_str(), "--domain", "6"];
+        args.extend_from_slice(verb);
+        ratelab(&args, &[])
+    };
+    let listed = ros2(&["param", "list", "chatty"]);
+    let got = ros2(&["param", "get", "/chatty", "window"]);
+    let all = ros2(&["param", "list"]);
+    let missing = ros2(&["param", "get", "/nobody", "x"]);
+    let log = ros2(&["topic", "echo", "/rosout", "--once"]);
+    let _ = run.kill();
+    let _ = run.wait();
+    assert_eq!(
+        listed,
+        (
+            0,
+            "  gain\n  mode\n  on\n  rate_hz\n  use_sim_time\n  window\n".into(),
+            String::new()
+        )
+    );
+    assert_eq!(
+        got.1, "Integer values are: array('q', [1, 2, 3])\n",
+        "{got:?}"
+    );
+    assert!(
+        all.1
+            .contains("/policy:\n  rate_hz\n  use_sim_time\n/ratelab:\n  use_sim_time\n"),
+        "{all:?}"
+    );
+    assert_eq!(
+        (missing.0, missing.2.trim()),
+        (2, "error: Node not found: /nobody")
+    );
+    assert_eq!(log.0, 0, "{log:?}");
+    assert!(log.1.starts_with("stamp:\n  sec: "), "{log:?}");
+    assert!(log.1.contains("\nlevel: 20\nname: "), "{log:?}");
+    assert_eq!(r["errors"], json!([]), "{r}");
+    let chatty = &r["nodes"]["chatty"];
+    assert_eq!(
+        chatty["names"],
+        json!(["gain", "mode", "on", "rate_hz", "use_sim_time", "window"]),
+        "{r}"
+    );
+    assert_eq!(chatty["prefixes"], json!([]));
+    assert_eq!(
+        chatty["values"],
+        json!({
+            "gain": [3, 2.5], "mode": [4, "calm"], "on": [1, true],
+            "rate_hz": [3, 10.0], "use_sim_time": [1, true], "window": [7, [1, 2, 3]],
+        })
+    );
+    // The undeclared name last: NOT_SET.
+    assert_eq!(chatty["types"], json!([3, 4, 1, 3, 1, 7, 0]));
+    assert_eq!(chatty["described"]["name"], "gain");
+    assert_eq!(chatty["described"]["read_only"], true);
+    // Every set refused, each with its reason.
+    let set = chatty["set"].as_array().unwrap();
+    assert_eq!(set.len(), 7);
+    assert!(set.iter().all(|s| s["successful"] == false), "{set:?}");
+    let reason = |i: usize| set[i]["reason"].as_str().unwrap();
+    assert!(reason(0).contains("'gain' is read-only"), "{}", reason(0));
+    assert!(
+        reason(3).contains("rate_hz is read-only over ROS 2"),
+        "{}",
+        reason(3)
+    );
+    assert!(reason(6).contains("is not declared"), "{}", reason(6));
+    // Each reply carried the request's sequence number and the client's GID.
+    for node in ["chatty", "policy", "ratelab"] {
+        assert_eq!(r["nodes"][node]["attachments_ok"], true, "{node}: {r}");
+    }
+    assert_eq!(r["nodes"]["policy"]["values"]["rate_hz"], json!([3, 50.0]));
+    assert_eq!(
+        r["nodes"]["ratelab"]["values"],
+        json!({"use_sim_time": [1, false]})
+    );
+    // The node's prints, on /rosout as its log (INFO, named for it).
+    let heard: Vec<&Value> = r["rosout"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|l| l["node"] == "chatty")
+        .collect();
+    assert!(!heard.is_empty(), "{r}");
+    assert!(heard.iter().all(|l| l["level"] == 20), "{heard:?}");
+    assert!(
+        heard
+            .iter()
+            .all(|l| l["msg"].as_str().unwrap().starts_with("heard ")),
+        "{heard:?}"
+    );
+    assert_eq!(code, 0, "{e}");
+    for line in [
+        "  Publishers:\n    /parameter_events: rcl_interfaces/msg/ParameterEvent\n    /rosout: rcl_interfaces/msg/Log\n",
+        "  Service Servers:\n    /chatty/describe_parameters: rcl_interfaces/srv/DescribeParameters\n    /chatty/get_parameter_types: rcl_interfaces/srv/GetParameterTypes\n",
+    ] {
+        assert!(info.contains(line), "{line:?} in {info}");
+    }
+}
+
+/// A rate changed while the run goes on (the lab's keys) is said on `/parameter_events`,
+/// as ROS 2 says a changed parameter, and `get_parameters` answers the new rate.
+#[test]
+fn a_changed_rate_is_a_parameter_event() {
+    use ratelab::ros2::session::{open, SessionEnv};
+    use ratelab::ros2::{echo, Bridge, Ros2Options};
+    use zenoh::Wait;
+    let env = SessionEnv {
+        router_check_attempts: Some("-1".into()),
+        config_override: Some(
+            connect_to(&format!(
+                "tcp/127.0.0.1:{}",
+                crate::distributed::free_port()
+            ))
+            .1,
+        ),
+    };
+    let link = open(&env, &ratelab::scheduler::StopFlag::new()).unwrap();
+    let (tx, rx) = std::sync::mpsc::channel();
+    let sub = link
+        .session
+        .declare_subscriber("8/parameter_events/**")
+        .callback(move |s| {
+            let _ = tx.send(s.payload().to_bytes().into_owned());
+        })
+        .wait()
+        .unwrap();
+    let cfg = ratelab::RunConfig::default();
+    let brain = ratelab::checkpoint::load_policy("scripted").unwrap();
+    let slot = ratelab::policy::BrainSlot::new(brain);
+    let graph = ratelab::run::build_graph(&cfg, slot, false, Vec::new()).unwrap();
+    let h = &graph.handles;
+    let opts = Ros2Options {
+        domain: 8,
+        bag: None,
+        force: false,
+    };
+    let stop = ratelab::scheduler::StopFlag::new();
+    let bridge = Bridge::start(
+        &link,
+        &ratelab::ros2::bridge::Offer::whole(h),
+        &opts,
+        cfg.clock,
+        &stop,
+    )
+    .unwrap();
+    let policy = h.spec.node_id("policy").unwrap();
+    h.rates[policy.0].set_hz(20.0).unwrap();
+    let (name, hash) = (
+        "rcl_interfaces/msg/ParameterEvent",
+        ratelab::ros2::rcl_interfaces::PARAMETER_EVENT_HASH,
+    );
+    let mut changed = None;
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(5);
+    while changed.is_none() && std::time::Instant::now() < deadline {
+        let Ok(bytes) = rx.recv_timeout(std::time::Duration::from_millis(200)) else {
+            continue;
+        };
+        let yaml = echo::yaml(&echo::decode(name, hash, &bytes).unwrap());
+        if yaml.contains("changed_parameters:\n- name: rate_hz") {
+            changed = Some(yaml);
+        }
+    }
+    let changed = changed.expect("no event for the changed rate within 5 s");
+    assert!(changed.contains("node: /policy\n"), "{changed}");
+    assert!(changed.contains("    double_value: 20.0\n"), "{changed}");
+    let value = ratelab::ros2::param_cli::get(
+        &link.session,
+        8,
+        "/policy",
+        "rate_hz",
+        std::time::Duration::from_secs(5),
+    )
+    .unwrap();
+    assert_eq!(value.map(|v| v.double_value), Some(20.0));
+    bridge.finish();
+    let _ = sub.undeclare().wait();
+    link.close();
+}
