@@ -48,7 +48,7 @@ use crate::scheduler::StopFlag;
 use crate::time::Nanos;
 use crossbeam_channel::{Receiver, Sender, TrySendError};
 use hiroz_protocol::entity::{EndpointKind, NodeEntity};
-use hiroz_protocol::qos::{QosDuration, QosHistory, QosProfile, QosReliability};
+use hiroz_protocol::qos::{QosDurability, QosDuration, QosHistory, QosProfile, QosReliability};
 use hiroz_protocol::KeyExprFormat;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
@@ -240,10 +240,9 @@ pub fn check_graph(spec: &GraphSpec) -> Result<(), String> {
     Ok(())
 }
 
-/// The QoS topic `t` of `spec` is offered with (its publisher's token's). Its durability
-/// is always VOLATILE here: a transient-local topic keeps its history for the graph's own
-/// late joiners, and ratelab does not serve that history over Zenoh (rmw_zenoh_cpp's
-/// publication cache) yet, so it does not promise it to ROS 2's.
+/// The QoS topic `t` of `spec` is offered with (its publisher's token's), durability
+/// included: a transient-local topic's publisher keeps its last `depth` messages for ROS 2's
+/// late joiners too ([`super::wire`]), as it keeps them for the graph's own.
 pub(crate) fn qos_of(spec: &GraphSpec, t: usize) -> QosProfile {
     let topic = &spec.topics[t];
     let q = &topic.qos;
@@ -261,6 +260,10 @@ pub(crate) fn qos_of(spec: &GraphSpec, t: usize) -> QosProfile {
         history: match q.history {
             History::KeepLast => QosHistory::KeepLast(topic.depth),
             History::KeepAll => QosHistory::KeepAll,
+        },
+        durability: match q.durability {
+            crate::qos::compat::Durability::Volatile => QosDurability::Volatile,
+            crate::qos::compat::Durability::TransientLocal => QosDurability::TransientLocal,
         },
         deadline: dur(q.deadline),
         lifespan: dur(q.lifespan),
@@ -352,11 +355,7 @@ fn clock_publishers(session: &zenoh::Session, domain: u32) -> Vec<String> {
 fn wait_matched(o: &Outlet, within: std::time::Duration, stop: &StopFlag) -> Result<(), ()> {
     let start = std::time::Instant::now();
     loop {
-        if o.publisher
-            .matching_status()
-            .wait()
-            .is_ok_and(|m| m.matching())
-        {
+        if o.matched() {
             return Ok(());
         }
         if start.elapsed() >= within || stop.is_stopped() {
@@ -863,10 +862,10 @@ fn spawn_forwarder(
                 let _ = t.undeclare().wait();
             }
             for o in outlets.into_iter().flatten() {
-                let _ = o.publisher.undeclare().wait();
+                o.undeclare();
             }
             if let Some(o) = clock_outlet {
-                let _ = o.publisher.undeclare().wait();
+                o.undeclare();
             }
             r
         })

@@ -1,12 +1,12 @@
 //! What every ROS 2 node declares besides its own topics, declared for each node ratelab
 //! offers (a real rclpy node's tokens: `../shared/fixtures/ros2-real/real-rclpy-talker.json`):
 //!
-//! - **`/rosout`** (`rcl_interfaces/msg/Log`, reliable, keep last 1000, lifespan 10 s):
+//! - **`/rosout`** (`rcl_interfaces/msg/Log`, reliable, transient local, keep last 1000,
+//!   lifespan 10 s):
 //!   the node's log, the lines its code writes ([`crate::textlog`]: a Python node's
 //!   `print` and `get_logger()`, ratelab's warnings about it), as the lab's log pane shows
 //!   them. Lines written outside any node go out on the `/clock` publisher's (`ratelab`).
-//!   A real node's `/rosout` is transient local, served from a Zenoh cache to late
-//!   joiners; ratelab's is volatile (`docs/ros2.md`, "Not yet").
+//!   As a real node's, its last 1000 lines are kept for subscriptions that join later.
 //! - **`/parameter_events`** (`rcl_interfaces/msg/ParameterEvent`, reliable, keep last
 //!   1000): the node's parameters once, as declared, when the offer starts; then `rate_hz`
 //!   each time the run's rate of the node changes (the lab's keys), seen within
@@ -43,11 +43,13 @@ pub const ROSOUT: &str = "/rosout";
 /// `/parameter_events`.
 pub const PARAMETER_EVENTS: &str = "/parameter_events";
 
-/// rclcpp's and rclpy's QoS for `/rosout` (`rcl_logging`'s), durability aside: reliable,
-/// keep last 1000, lifespan 10 s.
+/// rclcpp's and rclpy's QoS for `/rosout` (`rcl_logging`'s): reliable, transient local
+/// (its last 1000 lines kept for late joiners, [`super::wire`]), keep last 1000, lifespan
+/// 10 s.
 fn rosout_qos() -> QosProfile {
     QosProfile {
         reliability: QosReliability::Reliable,
+        durability: hiroz_protocol::qos::QosDurability::TransientLocal,
         history: QosHistory::KeepLast(1000),
         lifespan: QosDuration { sec: 10, nsec: 0 },
         ..QosProfile::default()
@@ -229,8 +231,8 @@ impl NodeApi {
         for q in self.queryables {
             let _ = q.undeclare().wait();
         }
-        let _ = self.rosout.publisher.undeclare().wait();
-        let _ = self.events.publisher.undeclare().wait();
+        self.rosout.undeclare();
+        self.events.undeclare();
     }
 }
 
@@ -248,12 +250,11 @@ mod tests {
         assert_eq!(request_id(&wrong), None);
     }
 
-    /// The QoS strings a real rclpy node's tokens carry for these endpoints (the fixture),
-    /// `/rosout`'s durability aside (volatile here: module header).
+    /// The QoS strings a real rclpy node's tokens carry for these endpoints (the fixture).
     #[test]
     fn the_qos_strings_are_a_real_node_s() {
         let enc = |q: &QosProfile| q.encode();
         assert_eq!(enc(&parameters_qos()), "::,1000:,:,:,,");
-        assert_eq!(enc(&rosout_qos()), "::,1000:,:10,0:,,");
+        assert_eq!(enc(&rosout_qos()), ":1:,1000:,:10,0:,,");
     }
 }

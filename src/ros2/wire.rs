@@ -3,11 +3,17 @@
 //! `../shared/fixtures/ros2-real/`): declaring an endpoint (its key, its liveliness token,
 //! its GID from that token), the 33-byte attachment each message and each service reply
 //! carries, and putting a message stamped by its publisher's own session.
+//!
+//! A transient-local publisher keeps its last `depth` messages for subscriptions that join
+//! later, as rmw_zenoh_cpp's does: a Zenoh advanced publisher (`zenoh-ext`) with a cache
+//! of `depth` samples and publisher detection, which a late-joining transient-local
+//! subscription (an advanced subscriber asking for history, detecting late publishers)
+//! finds and queries.
 
 use super::session::Ros2Session;
 use super::{zerr, Ros2Error};
 use hiroz_protocol::entity::{EndpointEntity, EndpointKind, NodeEntity};
-use hiroz_protocol::qos::{QosHistory, QosProfile};
+use hiroz_protocol::qos::{QosDurability, QosHistory, QosProfile};
 use hiroz_protocol::KeyExprFormat;
 use zenoh::Wait;
 
@@ -72,20 +78,58 @@ pub(crate) fn wall_ns() -> i64 {
         .map_or(0, |d| i64::try_from(d.as_nanos()).unwrap_or(i64::MAX))
 }
 
+/// The Zenoh publisher behind an outlet: a plain one (volatile), or an advanced one that
+/// keeps the last messages for late joiners (transient local; module header).
+enum Publisher {
+    Volatile(zenoh::pubsub::Publisher<'static>),
+    TransientLocal(zenoh_ext::AdvancedPublisher<'static>),
+}
+
 /// A publisher ready to put: its key, its GID, and the session that stamps its samples.
 pub(crate) struct Outlet {
-    pub(crate) publisher: zenoh::pubsub::Publisher<'static>,
+    publisher: Publisher,
     gid: [u8; 16],
     session: zenoh::Session,
 }
 
 impl Outlet {
-    /// `bytes` out as message `seq` (rmw_zenoh's sequence number, from 1).
+    /// `bytes` out as message `seq` (rmw_zenoh's sequence number, from 1), with rmw_zenoh's
+    /// attachment and a timestamp from the publisher's own session (its clock and its ZID),
+    /// as a real rmw_zenoh_cpp node stamps its samples (the captures in
+    /// `../shared/fixtures/ros2-real/`), not left for the router to stamp. A
+    /// transient-local publisher's cache keeps it, attachment and stamp included.
     ///
     /// # Errors
     /// Zenoh's, in one line.
     pub(crate) fn put(&self, seq: i64, bytes: &[u8]) -> Result<(), String> {
-        put(self, seq, bytes)
+        let att = attachment(seq, wall_ns(), &self.gid).to_vec();
+        let done = match &self.publisher {
+            Publisher::Volatile(p) => p
+                .put(bytes.to_vec())
+                .attachment(att)
+                .timestamp(self.session.new_timestamp())
+                .wait(),
+            // It stamps each sample from the session's clock itself.
+            Publisher::TransientLocal(p) => p.put(bytes.to_vec()).attachment(att).wait(),
+        };
+        done.map_err(|e| e.to_string())
+    }
+
+    /// A subscriber matches it now.
+    pub(crate) fn matched(&self) -> bool {
+        let status = match &self.publisher {
+            Publisher::Volatile(p) => p.matching_status().wait(),
+            Publisher::TransientLocal(p) => p.matching_status().wait(),
+        };
+        status.is_ok_and(|m| m.matching())
+    }
+
+    /// Withdraw it (its cache with it).
+    pub(crate) fn undeclare(self) {
+        let _ = match self.publisher {
+            Publisher::Volatile(p) => p.undeclare().wait(),
+            Publisher::TransientLocal(p) => p.undeclare().wait(),
+        };
     }
 }
 
@@ -172,14 +216,23 @@ impl<'a> Declarer<'a> {
         Ok(self.format.topic_key_expr(e).map_err(zerr)?.to_string())
     }
 
-    /// A publisher: its key declared, its MP token declared, its GID from that token.
+    /// A publisher: its key declared, its MP token declared, its GID from that token. A
+    /// transient-local one (`e`'s QoS) keeps its last `depth` messages (module header).
     pub(crate) fn publisher(
         &mut self,
         e: &EndpointEntity,
         depth: usize,
     ) -> Result<Outlet, Ros2Error> {
+        use zenoh_ext::{AdvancedPublisherBuilderExt, CacheConfig};
         let key = self.key(e)?;
-        let publisher = self.session.declare_publisher(key).wait().map_err(zerr)?;
+        let declared = self.session.declare_publisher(key);
+        let publisher = if e.qos.durability == QosDurability::TransientLocal {
+            let cache = CacheConfig::default().max_samples(depth.max(1));
+            let p = declared.cache(cache).publisher_detection().wait();
+            Publisher::TransientLocal(p.map_err(zerr)?)
+        } else {
+            Publisher::Volatile(declared.wait().map_err(zerr)?)
+        };
         let token = self.token_of(e, depth)?;
         Ok(Outlet {
             publisher,
@@ -187,18 +240,6 @@ impl<'a> Declarer<'a> {
             session: self.session.clone(),
         })
     }
-}
-
-/// One sample out: its attachment, and its timestamp from the publisher's own session (its
-/// clock and its ZID), as a real rmw_zenoh_cpp node stamps its samples (the captures in
-/// `../shared/fixtures/ros2-real/`), not left for the router to stamp.
-fn put(o: &Outlet, seq: i64, bytes: &[u8]) -> Result<(), String> {
-    o.publisher
-        .put(bytes.to_vec())
-        .attachment(attachment(seq, wall_ns(), &o.gid).to_vec())
-        .timestamp(o.session.new_timestamp())
-        .wait()
-        .map_err(|e| e.to_string())
 }
 
 #[cfg(test)]

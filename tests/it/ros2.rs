@@ -144,8 +144,7 @@ pub(crate) const NODE_TOPICS: [&str; 2] = ["/rosout", "/parameter_events"];
 
 /// Each of `nodes` publishes `/rosout` and `/parameter_events` and serves the six parameter
 /// services, as the stand-in `r` saw their tokens: each token's type, type hash and QoS
-/// the same as a real rclpy node's over real rmw_zenoh_cpp (`real-rclpy-talker.json`),
-/// `/rosout`'s durability aside (volatile: `docs/ros2.md`).
+/// the same as a real rclpy node's over real rmw_zenoh_cpp (`real-rclpy-talker.json`).
 pub(crate) fn assert_every_node_s_own_endpoints(r: &Value, nodes: &[&str]) {
     let real = crate::ros2_cli::real_capture("real-rclpy-talker.json");
     let real: Vec<&Value> = real["tokens_parsed"].as_array().unwrap().iter().collect();
@@ -170,8 +169,6 @@ pub(crate) fn assert_every_node_s_own_endpoints(r: &Value, nodes: &[&str]) {
                 .find(|e| e["kind"] == "MP" && e["node"] == *node && e["topic"] == topic)
                 .unwrap_or_else(|| panic!("{node} has no {topic} publisher: {r}"));
             let (ty, hash, qos) = real_of("MP", topic);
-            // /rosout: transient local (`:1:`) on a real node, volatile here.
-            let qos = qos.replacen(":1:", "::", 1);
             assert_eq!(
                 (&e["type"], &e["hash"], &e["qos"]),
                 (&Value::from(ty), &Value::from(hash), &Value::from(qos)),

@@ -8,15 +8,15 @@ use std::io::{BufRead, BufReader};
 use std::process::{Command, Stdio};
 
 /// `ratelab run ARGS` offering its graph to ROS 2 through its own router at a free port,
-/// once its first lines said so (it runs the router and offers the graph); killed when
-/// dropped.
-struct Offering {
+/// once its first lines said so (it runs the router and offers the graph); its stderr
+/// drained from then on; killed when dropped.
+pub(crate) struct Offering {
     child: std::process::Child,
-    endpoint: String,
+    pub(crate) endpoint: String,
 }
 
 impl Offering {
-    fn start(args: &[&str]) -> Offering {
+    pub(crate) fn start(args: &[&str]) -> Offering {
         let endpoint = format!("tcp/127.0.0.1:{}", free_port());
         let mut child = Command::new(env!("CARGO_BIN_EXE_ratelab"))
             .arg("run")
@@ -39,6 +39,8 @@ impl Offering {
             said.push_str(&line);
         }
         assert!(said.contains("offering the graph to ROS 2"), "{said}");
+        // A node's prints go on stderr too (headless): never let the pipe fill.
+        std::thread::spawn(move || std::io::copy(&mut err, &mut std::io::sink()));
         Offering { child, endpoint }
     }
 }

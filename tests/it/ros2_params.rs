@@ -1,13 +1,13 @@
 //! Each node of a `--ros2` run as a ROS 2 node is besides its topics: `ros2 param list /
 //! get / describe / set` answer from the graph file's parameters, and the node's log
-//! reaches `/rosout`. The client is `tests/ros2/param_client.py` (PyPI `eclipse-zenoh` and
+//! reaches `/rosout`; and transient-local durability over the wire: a ROS 2 subscription
+//! joining late gets the last messages of a transient-local topic, and of `/rosout`. The client is `tests/ros2/param_client.py` (PyPI `eclipse-zenoh` and
 //! `rosbags`, nothing of ratelab's), calling with the service type hashes a real rclpy node
 //! declared over real rmw_zenoh_cpp (`../shared/fixtures/ros2-real/`).
 
 use crate::ros2::{connect_to, ratelab, Oracle};
+use crate::ros2_cli::Offering;
 use serde_json::{json, Value};
-use std::io::{BufRead, BufReader};
-use std::process::{Command, Stdio};
 
 /// A Python node that prints every tenth reading it hears, with parameters of every kind
 /// a graph file gives, beside the chapter's graph.
@@ -46,30 +46,17 @@ fn ros2_param_answers_from_the_graph_file_and_the_log_reaches_rosout() {
     let graph = dir.path().join("g.toml");
     std::fs::write(&graph, format!("{chapter}\n{CHATTY}")).unwrap();
     std::fs::write(dir.path().join("chatty.py"), CHATTY_PY).unwrap();
-    let endpoint = format!("tcp/127.0.0.1:{}", crate::distributed::free_port());
-    let mut run = Command::new(env!("CARGO_BIN_EXE_ratelab"))
-        .args(["run", "--graph", graph.to_str().unwrap()])
-        .args(["--ros2", "6", "--clock", "real", "--duration", "30"])
-        .current_dir(crate::REPO)
-        .env_remove("ROS_DOMAIN_ID")
-        .env_remove("ZENOH_ROUTER_CHECK_ATTEMPTS")
-        .env(connect_to(&endpoint).0, connect_to(&endpoint).1)
-        .stdout(Stdio::null())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let mut err = BufReader::new(run.stderr.take().unwrap());
-    let mut said = String::new();
-    while !said.contains("offering the graph to ROS 2") {
-        let mut line = String::new();
-        if err.read_line(&mut line).unwrap() == 0 {
-            break;
-        }
-        said.push_str(&line);
-    }
-    assert!(said.contains("offering the graph to ROS 2"), "{said}");
-    // Its stderr drained meanwhile (the node's prints go there too, headless).
-    std::thread::spawn(move || std::io::copy(&mut err, &mut std::io::sink()));
+    let run = Offering::start(&[
+        "--graph",
+        graph.to_str().unwrap(),
+        "--ros2",
+        "6",
+        "--clock",
+        "real",
+        "--duration",
+        "30",
+    ]);
+    let endpoint = run.endpoint.clone();
     let talker = crate::brains::fixture("ros2-real/real-rclpy-talker.json");
     let client = Oracle::start(
         "tests/ros2/param_client.py",
@@ -109,8 +96,15 @@ fn ros2_param_answers_from_the_graph_file_and_the_log_reaches_rosout() {
     let all = ros2(&["param", "list"]);
     let missing = ros2(&["param", "get", "/nobody", "x"]);
     let log = ros2(&["topic", "echo", "/rosout", "--once"]);
-    let _ = run.kill();
-    let _ = run.wait();
+    // A subscription joining now, transient local as a ROS 2 one to /rosout is: the node's
+    // first line, written seconds ago, is in its history; a volatile one has only what
+    // comes from now on.
+    let late = |how: &[&str]| {
+        let args = [&[endpoint.as_str(), "6/rosout/**", "1000", "1.5"][..], how].concat();
+        Oracle::start("tests/ros2/late_joiner.py", &args, "the late joiner").report()
+    };
+    let (kept, fresh) = (late(&[]), late(&["volatile"]));
+    drop(run);
     assert_eq!(
         listed,
         (
@@ -189,6 +183,19 @@ fn ros2_param_answers_from_the_graph_file_and_the_log_reaches_rosout() {
             .iter()
             .all(|l| l["msg"].as_str().unwrap().starts_with("heard ")),
         "{heard:?}"
+    );
+    let heard_first = |r: &Value| {
+        r["samples"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .any(|s| s["name"] == "chatty" && s["msg"] == "heard 1")
+    };
+    assert!(heard_first(&kept), "{kept}");
+    assert!(!heard_first(&fresh), "{fresh}");
+    assert_eq!(
+        (&kept["errors"], &fresh["errors"]),
+        (&json!([]), &json!([]))
     );
     assert_eq!(code, 0, "{e}");
     for line in [
@@ -277,4 +284,95 @@ fn a_changed_rate_is_a_parameter_event() {
     bridge.finish();
     let _ = sub.undeclare().wait();
     link.close();
+}
+
+/// A node that publishes a count on /beat, a transient-local topic nobody subscribes to.
+const BEAT: &str = r#"
+[[node]]
+name = "beat"
+kind = "python"
+script = "beat.py"
+class = "Beat"
+rate_hz = 10
+publishes = "/beat"
+
+[[topic]]
+name = "/beat"
+type = "force"
+depth = 5
+durability = "transient_local"
+"#;
+
+const BEAT_PY: &str = r#"
+from ratelab import Force
+
+
+class Beat:
+    def __init__(self, node):
+        self.n = 0
+        self.pub = node.create_publisher(Force, "/beat", 5)
+        node.create_timer(node.get_period(), self.on_timer)
+
+    def on_timer(self):
+        self.n += 1
+        self.pub.publish(Force(newtons=float(self.n)))
+"#;
+
+/// A transient-local topic keeps its last `depth` messages for a ROS 2 subscription that
+/// joins late (`tests/ros2/late_joiner.py`, rmw_zenoh_cpp's transient-local subscription
+/// played with eclipse-zenoh's advanced subscriber): /beat's publisher stalls after its
+/// 15th message, and a subscription joining seconds later gets its last 5, numbered as they
+/// were published; a volatile one gets nothing.
+#[test]
+fn a_late_ros_2_subscription_gets_a_transient_local_topic_s_last_messages() {
+    let _alone = crate::machine::alone();
+    let dir = tempfile::tempdir().unwrap();
+    let chapter = std::fs::read_to_string(crate::repo("graphs/cartpole.toml")).unwrap();
+    let graph = dir.path().join("g.toml");
+    std::fs::write(&graph, format!("{chapter}\n{BEAT}")).unwrap();
+    std::fs::write(dir.path().join("beat.py"), BEAT_PY).unwrap();
+    // Ticks at 0, 0.1, …, 1.4 s publish messages 1 to 15; from 1.45 s it is stalled.
+    let run = Offering::start(&[
+        "--graph",
+        graph.to_str().unwrap(),
+        "--ros2",
+        "5",
+        "--clock",
+        "real",
+        "--duration",
+        "30",
+        "--stall",
+        "beat@1.45+60",
+    ]);
+    std::thread::sleep(std::time::Duration::from_secs(3));
+    let late = |how: &[&str]| {
+        let args = [&[run.endpoint.as_str(), "5/beat/**", "5", "1.5"][..], how].concat();
+        Oracle::start("tests/ros2/late_joiner.py", &args, "the late joiner").report()
+    };
+    let (kept, fresh) = (late(&[]), late(&["volatile"]));
+    let (code, info, err) = ratelab(
+        &[
+            "ros2",
+            "--connect",
+            &run.endpoint,
+            "--domain",
+            "5",
+            "topic",
+            "info",
+            "/beat",
+            "-v",
+        ],
+        &[],
+    );
+    drop(run);
+    let seqs: Vec<i64> = kept["samples"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|s| s["seq"].as_i64().unwrap())
+        .collect();
+    assert_eq!(seqs, [11, 12, 13, 14, 15], "{kept}");
+    assert_eq!(fresh["samples"], json!([]), "{fresh}");
+    assert_eq!(code, 0, "{err}");
+    assert!(info.contains("  Durability: TRANSIENT_LOCAL\n"), "{info}");
 }
