@@ -467,6 +467,12 @@ fn print_ros2(r: &ratelab::ros2::BridgeReport, bag: Option<&std::path::Path>) {
             String::new()
         }
     );
+    if r.log_dropped > 0 {
+        println!(
+            "[ratelab] ROS 2: {} log lines not put on /rosout (the bridge fell behind)",
+            r.log_dropped
+        );
+    }
     if let (Some(Ok(n)), Some(dir)) = (&r.bagged, bag) {
         println!(
             "[ratelab] bag: {} (rosbag2, MCAP): {n} messages with /clock",

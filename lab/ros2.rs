@@ -271,10 +271,7 @@ fn param(
         ParamVerb::List { node: Some(node) } => {
             let node = full(node);
             if !known(&node) {
-                return Err(anyhow!(
-                    "Node not found: {}",
-                    ratelab::text::printable(&node)
-                ));
+                return Err(anyhow!("Node not found"));
             }
             let names = param_cli::list(session, domain, &node, PARAM_TIMEOUT)?;
             Ok(param_cli::list_text(&node, &names, false))
@@ -289,23 +286,23 @@ fn param(
                 .collect();
             nodes.sort();
             nodes.dedup();
+            // A node that does not answer is said on stderr, and the others listed (ros2cli).
             let mut out = String::new();
             for node in nodes {
-                let names = param_cli::list(session, domain, &node, PARAM_TIMEOUT)?;
-                out.push_str(&param_cli::list_text(&node, &names, true));
+                match param_cli::list(session, domain, &node, PARAM_TIMEOUT) {
+                    Ok(names) => out.push_str(&param_cli::list_text(&node, &names, true)),
+                    Err(e) => eprintln!("{e}"),
+                }
             }
             Ok(out)
         }
         ParamVerb::Get { node, name } => {
             let node = full(node);
             if !known(&node) {
-                return Err(anyhow!(
-                    "Node not found: {}",
-                    ratelab::text::printable(&node)
-                ));
+                return Err(anyhow!("Node not found"));
             }
             let value = param_cli::get(session, domain, &node, name, PARAM_TIMEOUT)?;
-            Ok(param_cli::get_text(value.as_ref()))
+            param_cli::get_text(value.as_ref()).map_err(|e| anyhow!(e))
         }
     }
 }

@@ -20,6 +20,7 @@
 //! | [`MAX_CONTROL_BYTES`] | 64 MiB | one control message between a launch's processes |
 //! | [`MAX_ROS_MESSAGE_BYTES`] | 64 MiB | one message from ROS 2 (CDR), before it is decoded (4 KiB for the cartpole's types) |
 //! | [`MAX_SERVICE_REQUEST_BYTES`] | 1 MiB | one request to a node's ROS 2 parameter services (CDR), before it is decoded |
+//! | [`MAX_SERVICE_REPLY_BYTES`] | 16 MiB | one reply of a node's ROS 2 parameter services, before it is built |
 //! | [`MAX_DURATION_S`] | 10 years | a run's length, in whole nanoseconds |
 
 /// The most nodes a graph may have: 65 536. A node costs its scheduler entry, its queues
@@ -65,6 +66,11 @@ pub const MAX_ROS_MESSAGE_BYTES: usize = MAX_SAMPLE_BYTES;
 /// checked before it is decoded: 1 MiB. A request names parameters (the largest real one,
 /// `set_parameters` with a long array, is far smaller); a larger one is answered with nothing.
 pub const MAX_SERVICE_REQUEST_BYTES: usize = 1 << 20;
+
+/// The largest reply a node's ROS 2 parameter services build, bounded before it is built:
+/// 16 MiB. A request naming one large parameter many times would otherwise make a reply
+/// thousands of times its own size; it is refused (not answered).
+pub const MAX_SERVICE_REPLY_BYTES: usize = 16 << 20;
 
 /// The largest control message between a launch's processes, encoded: 64 MiB. Control
 /// messages are JSON; the largest carry a graph file (at most [`MAX_GRAPH_FILE_BYTES`],

@@ -45,6 +45,7 @@ use crate::msg::AnyTopic;
 use crate::msg::MsgData;
 use crate::qos::{History, Reliability};
 use crate::scheduler::StopFlag;
+use crate::textlog::LogLine;
 use crate::time::Nanos;
 use crossbeam_channel::{Receiver, Sender, TrySendError};
 use hiroz_protocol::entity::{EndpointKind, NodeEntity};
@@ -80,8 +81,6 @@ enum Out {
     Clock(Nanos),
     /// An external node ticks at this time: `/clock` must say it now.
     Announce(Nanos),
-    /// A line of the log, for its node's `/rosout` ([`super::node_api`]).
-    Log(crate::textlog::LogLine),
     /// The run is over: put what came before, then stop.
     End,
 }
@@ -93,6 +92,8 @@ pub struct BridgeReport {
     pub offered: u64,
     /// ROS 2 copies dropped because the bridge fell behind (real clock only).
     pub dropped: u64,
+    /// Log lines not put on their node's `/rosout` because the bridge fell behind.
+    pub log_dropped: u64,
     /// The first failed put, if any.
     pub error: Option<String>,
     /// The bag, when there is one: the messages written to it (with `/clock`), or why it
@@ -147,6 +148,8 @@ pub struct Bridge {
     thread: Option<JoinHandle<Forwarded>>,
     /// Takes the log's lines to `/rosout` while the bridge lives.
     recorder: Option<crate::textlog::Recorder>,
+    /// Log lines not put on `/rosout` (the bridge fell behind).
+    log_dropped: Arc<AtomicU64>,
     dropped: Arc<AtomicU64>,
     ports: Vec<Arc<ExternalPort>>,
     notes: Vec<String>,
@@ -365,15 +368,20 @@ fn wait_matched(o: &Outlet, within: std::time::Duration, stop: &StopFlag) -> Res
     }
 }
 
+/// Log lines waiting for the bridge thread, at most.
+pub const LOG_CAPACITY: usize = 1024;
+
 /// Give every line of the log (from now until the returned guard is dropped) to the
-/// bridge for its node's `/rosout`; a line that does not fit in the channel is dropped and
-/// counted in `dropped` (the log never waits for ROS 2).
-fn log_to_rosout(tx: Sender<Out>, dropped: Arc<AtomicU64>) -> crate::textlog::Recorder {
-    crate::textlog::add_recorder(Box::new(move |line| {
-        if let Err(TrySendError::Full(_)) = tx.try_send(Out::Log(line)) {
+/// bridge for its node's `/rosout`, on a channel of their own ([`LOG_CAPACITY`]); a line
+/// that does not fit is dropped and counted in `dropped` (the log never waits for ROS 2).
+fn log_to_rosout(dropped: Arc<AtomicU64>) -> (crate::textlog::Recorder, Receiver<LogLine>) {
+    let (tx, rx) = crossbeam_channel::bounded(LOG_CAPACITY);
+    let recorder = crate::textlog::add_recorder(Box::new(move |line| {
+        if let Err(TrySendError::Full(_)) = tx.try_send(line) {
             dropped.fetch_add(1, Ordering::Relaxed);
         }
-    }))
+    }));
+    (recorder, rx)
 }
 
 impl Bridge {
@@ -401,7 +409,7 @@ impl Bridge {
         let router = link.router.clone();
         let waits = clock == ClockKind::Virtual;
         refuse_clock_clash(&session, offer, domain, waits)?;
-        let notes = super::external::wait_for(&session, domain, spec, ports, stop)?;
+        let mut notes = super::external::wait_for(&session, domain, spec, ports, stop)?;
         let elsewhere = |n: NodeId| offer.elsewhere(n);
         let zid = session.zid();
         let dom = usize::try_from(domain).unwrap_or(0);
@@ -463,6 +471,12 @@ impl Bridge {
         let mut apis = Vec::new();
         for (i, n) in &own {
             let params = NodeParameters::of(&spec.nodes[*i], offer.rates.get(*i));
+            for why in &params.left_out {
+                let name = &spec.nodes[*i].name;
+                notes.push(format!(
+                    "node '{name}': parameter {why}: not offered to ROS 2"
+                ));
+            }
             apis.push(NodeApi::declare(&mut d, n, params, Nanos(0))?);
         }
         if offer.clock {
@@ -486,9 +500,10 @@ impl Bridge {
         )?;
         let lockstep = waits && !ports.is_empty();
         let (tx, rx, dropped) = connect_graph(offer, topics, lockstep, waits);
-        let recorder = log_to_rosout(tx.clone(), dropped.clone());
+        let log_dropped = Arc::new(AtomicU64::new(0));
+        let (recorder, logs) = log_to_rosout(log_dropped.clone());
         let thread = spawn_forwarder(
-            rx,
+            (rx, logs),
             (outlets, clock_outlet, apis),
             bag,
             lockstep,
@@ -499,6 +514,7 @@ impl Bridge {
             thread: Some(thread),
             recorder: Some(recorder),
             dropped,
+            log_dropped,
             ports: ports.to_vec(),
             notes,
             router,
@@ -550,6 +566,7 @@ impl Bridge {
         BridgeReport {
             offered: f.offered,
             dropped: self.dropped.load(Ordering::Relaxed),
+            log_dropped: self.log_dropped.load(Ordering::Relaxed),
             error: f.error,
             bagged: f.bagged,
             external: self
@@ -607,6 +624,8 @@ struct Forwarder<'a> {
     buf: Vec<u8>,
     clock_seq: i64,
     last_clock: Option<Nanos>,
+    /// The latest run time seen (a message's stamp, an instant): a parameter event's stamp.
+    latest: Nanos,
     offered: u64,
     error: Option<String>,
 }
@@ -635,7 +654,7 @@ impl Forwarder<'_> {
 
     /// `line` on its node's `/rosout`: the node that wrote it, or (a line of no node's, or
     /// of a node offered elsewhere) the `/clock` node's, when this bridge offers it.
-    fn log(&mut self, line: &crate::textlog::LogLine) {
+    fn log(&mut self, line: &LogLine) {
         let by_name = line
             .node
             .as_deref()
@@ -655,10 +674,51 @@ impl Forwarder<'_> {
             return;
         }
         self.polled = std::time::Instant::now();
-        let t = self.last_clock.unwrap_or(Nanos(0));
+        let t = self.latest;
         for a in &mut self.apis {
             if let Err(e) = a.poll_rate(t) {
                 self.error.get_or_insert(e);
+            }
+        }
+    }
+
+    /// What the graph sent (not [`Out::End`]).
+    fn handle(&mut self, out: Out) {
+        match out {
+            Out::End => {}
+            Out::Clock(t) if self.deferred => {
+                self.latest = self.latest.max(t);
+                // The instant before is over: its time goes out now, this one's waits.
+                if let Some(p) = self.pending.replace(t) {
+                    self.tick(p);
+                }
+            }
+            Out::Clock(t) | Out::Announce(t) => {
+                self.latest = self.latest.max(t);
+                self.pending = self.pending.filter(|p| *p > t);
+                self.tick(t);
+            }
+            Out::Msg {
+                topic,
+                seq,
+                stamp,
+                data,
+            } => {
+                self.latest = self.latest.max(stamp);
+                if !self.deferred {
+                    self.tick(stamp);
+                }
+                // check_graph refused a type without a ROS 2 mapping; nothing to send else.
+                let Some(codec) = data.msg_type().ros2() else {
+                    return;
+                };
+                if !(codec.encode)(&data, stamp, &mut self.buf) {
+                    return;
+                }
+                let seq = i64::try_from(seq).unwrap_or(i64::MAX - 1) + 1;
+                if self.send(topic, seq, stamp) {
+                    self.offered += 1;
+                }
             }
         }
     }
@@ -675,9 +735,11 @@ impl Forwarder<'_> {
 }
 
 /// The bridge thread: put each message (and write it to the bag), and `/clock` whenever
-/// the run's time moved on (`deferred`: as the lockstep wants it), until told the run ended.
+/// the run's time moved on (`deferred`: as the lockstep wants it), each log line on its
+/// node's `/rosout` (`logs`), and the nodes' rate changes on `/parameter_events`, until
+/// told the run ended (then the log lines already written go out too).
 fn forward(
-    rx: &Receiver<Out>,
+    (rx, logs): (&Receiver<Out>, Receiver<LogLine>),
     (outlets, clock, apis): (&[Option<Outlet>], Option<&Outlet>, Vec<NodeApi>),
     bag: Option<Bag>,
     deferred: bool,
@@ -693,51 +755,28 @@ fn forward(
         buf: Vec::with_capacity(256),
         clock_seq: 0,
         last_clock: None,
+        latest: Nanos(0),
         offered: 0,
         error: None,
     };
+    let mut log_rx = logs.clone();
     loop {
         f.poll_rates();
-        let out = match rx.recv_timeout(node_api::RATE_POLL) {
-            Ok(out) => out,
-            Err(crossbeam_channel::RecvTimeoutError::Timeout) => continue,
-            Err(crossbeam_channel::RecvTimeoutError::Disconnected) => break,
-        };
-        match out {
-            Out::End => break,
-            Out::Log(line) => f.log(&line),
-            Out::Clock(t) if f.deferred => {
-                // The instant before is over: its time goes out now, this one's waits.
-                if let Some(p) = f.pending.replace(t) {
-                    f.tick(p);
-                }
-            }
-            Out::Clock(t) | Out::Announce(t) => {
-                f.pending = f.pending.filter(|p| *p > t);
-                f.tick(t);
-            }
-            Out::Msg {
-                topic,
-                seq,
-                stamp,
-                data,
-            } => {
-                if !f.deferred {
-                    f.tick(stamp);
-                }
-                // check_graph refused a type without a ROS 2 mapping; nothing to send else.
-                let Some(codec) = data.msg_type().ros2() else {
-                    continue;
-                };
-                if !(codec.encode)(&data, stamp, &mut f.buf) {
-                    continue;
-                }
-                let seq = i64::try_from(seq).unwrap_or(i64::MAX - 1) + 1;
-                if f.send(topic, seq, stamp) {
-                    f.offered += 1;
-                }
-            }
+        crossbeam_channel::select! {
+            recv(rx) -> out => match out {
+                Ok(Out::End) | Err(_) => break,
+                Ok(out) => f.handle(out),
+            },
+            recv(log_rx) -> line => match line {
+                Ok(line) => f.log(&line),
+                // The recorder is gone (the run is ending): wait for the rest alone.
+                Err(_) => log_rx = crossbeam_channel::never(),
+            },
+            default(node_api::RATE_POLL) => {}
         }
+    }
+    for line in logs.try_iter() {
+        f.log(&line);
     }
     if let Some(p) = f.pending.take() {
         f.tick(p);
@@ -839,7 +878,7 @@ fn wait_feeds_matched(
 /// then withdraw everything it declared (the inbound subscriptions, the liveliness tokens,
 /// the publishers), so that ROS 2's graph no longer shows the run's nodes.
 fn spawn_forwarder(
-    rx: Receiver<Out>,
+    (rx, logs): (Receiver<Out>, Receiver<LogLine>),
     (outlets, clock_outlet, apis): (Vec<Option<Outlet>>, Option<Outlet>, Vec<NodeApi>),
     bag: Option<Bag>,
     deferred: bool,
@@ -851,15 +890,21 @@ fn spawn_forwarder(
     std::thread::Builder::new()
         .name("ros2-bridge".into())
         .spawn(move || {
-            let (r, apis) = forward(&rx, (&outlets, clock_outlet.as_ref(), apis), bag, deferred);
+            let (r, apis) = forward(
+                (&rx, logs),
+                (&outlets, clock_outlet.as_ref(), apis),
+                bag,
+                deferred,
+            );
+            // The tokens first: nothing is announced that is already gone.
+            for t in tokens {
+                let _ = t.undeclare().wait();
+            }
             for a in apis {
                 a.undeclare();
             }
             for s in inbound {
                 let _ = s.undeclare().wait();
-            }
-            for t in tokens {
-                let _ = t.undeclare().wait();
             }
             for o in outlets.into_iter().flatten() {
                 o.undeclare();

@@ -98,8 +98,14 @@ fn request_id(att: &[u8]) -> Option<(i64, [u8; 16])> {
     Some((seq, att[17..].try_into().ok()?))
 }
 
-/// Answer `query` to service `service` from `params` (module header).
-fn serve(query: &zenoh::query::Query, service: ParameterService, params: &NodeParameters) {
+/// Answer `query` to service `service` from `params` (module header), on the service's
+/// own key `key` as rmw_zenoh_cpp's servers reply (a query on a wildcard is answered so
+/// too).
+fn serve(
+    query: &zenoh::query::Query,
+    (service, key): (ParameterService, &zenoh::key_expr::KeyExpr<'static>),
+    params: &NodeParameters,
+) {
     let Some((seq, client)) = query.attachment().and_then(|a| request_id(&a.to_bytes())) else {
         return;
     };
@@ -112,7 +118,7 @@ fn serve(query: &zenoh::query::Query, service: ParameterService, params: &NodePa
     }
     if let Ok(reply) = params.answer(service, &payload.to_bytes()) {
         let _ = query
-            .reply(query.key_expr().clone(), reply)
+            .reply(key.clone(), reply)
             .attachment(attachment(seq, wall_ns(), &client).to_vec())
             .wait();
     }
@@ -152,13 +158,14 @@ impl NodeApi {
             let name = format!("/{}/{}", node.name, service.suffix());
             let ty = rcl::type_info(service.type_name(), service.hash());
             let ss = d.endpoint(node, EndpointKind::Service, &name, ty, parameters_qos());
-            let key = d.key(&ss)?;
+            let key = zenoh::key_expr::KeyExpr::try_from(d.key(&ss)?).map_err(zerr)?;
             let p = Arc::clone(&params);
+            let reply_on = key.clone();
             let q = d
                 .session()
                 .declare_queryable(key)
                 .complete(true)
-                .callback(move |query| serve(&query, service, &p))
+                .callback(move |query| serve(&query, (service, &reply_on), &p))
                 .wait()
                 .map_err(zerr)?;
             queryables.push(q);

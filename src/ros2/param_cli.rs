@@ -137,9 +137,10 @@ fn python_bool(b: bool) -> &'static str {
     }
 }
 
-/// A Python string literal as `repr` writes it (single quotes unless the text has one).
+/// A Python string literal as `repr` writes it (single quotes unless the text has one and
+/// no double quote; backslashes doubled), control characters written out.
 fn python_str(s: &str) -> String {
-    let text = crate::text::printable(s);
+    let text = crate::text::printable(s).replace('\\', "\\\\");
     if text.contains('\'') && !text.contains('"') {
         format!("\"{text}\"")
     } else {
@@ -147,11 +148,29 @@ fn python_str(s: &str) -> String {
     }
 }
 
-/// What `ros2 param get` prints of `value` (`None`: the node has no such parameter):
-/// `Double value is: 50.0`, `Integer values are: array('q', [1, 2])`, `Parameter not set.`
-pub fn get_text(value: Option<&ParameterValue>) -> String {
+/// One byte as Python's `repr` of a one-byte `bytes` writes it: `b'A'`, `b'\x00'`, `b'\n'`,
+/// `b"'"` (rclpy gives a `byte[]` parameter as a list of them).
+fn python_byte(b: u8) -> String {
+    match b {
+        b'\'' => "b\"'\"".into(),
+        b'\\' => "b'\\\\'".into(),
+        b'\t' => "b'\\t'".into(),
+        b'\n' => "b'\\n'".into(),
+        b'\r' => "b'\\r'".into(),
+        0x20..=0x7e => format!("b'{}'", b as char),
+        _ => format!("b'\\x{b:02x}'"),
+    }
+}
+
+/// What `ros2 param get` prints of `value` (Jazzy and later): `Double value is: 50.0`,
+/// `Integer values are: [1, 2]`, `Parameter not set.` for a value of no type.
+///
+/// # Errors
+/// `Parameter not set` when the node has no such parameter (`value` is `None`), as
+/// ros2cli says it.
+pub fn get_text(value: Option<&ParameterValue>) -> Result<String, String> {
     let Some(v) = value else {
-        return "Parameter not set.\n".into();
+        return Err("Parameter not set".into());
     };
     let join = |items: Vec<String>| items.join(", ");
     let (label, shown) = match v.type_ {
@@ -166,12 +185,7 @@ pub fn get_text(value: Option<&ParameterValue>) -> String {
             "Byte values are:",
             format!(
                 "[{}]",
-                join(
-                    v.byte_array_value
-                        .iter()
-                        .map(|b| format!("b'\\x{b:02x}'"))
-                        .collect()
-                )
+                join(v.byte_array_value.iter().map(|b| python_byte(*b)).collect())
             ),
         ),
         pt::BOOL_ARRAY => (
@@ -189,14 +203,14 @@ pub fn get_text(value: Option<&ParameterValue>) -> String {
         pt::INTEGER_ARRAY => (
             "Integer values are:",
             format!(
-                "array('q', [{}])",
+                "[{}]",
                 join(v.integer_array_value.iter().map(i64::to_string).collect())
             ),
         ),
         pt::DOUBLE_ARRAY => (
             "Double values are:",
             format!(
-                "array('d', [{}])",
+                "[{}]",
                 join(
                     v.double_array_value
                         .iter()
@@ -212,16 +226,16 @@ pub fn get_text(value: Option<&ParameterValue>) -> String {
                 join(v.string_array_value.iter().map(|s| python_str(s)).collect())
             ),
         ),
-        pt::NOT_SET => return "Parameter not set.\n".into(),
-        other => return format!("Unknown parameter type '{other}'\n"),
+        pt::NOT_SET => return Ok("Parameter not set.\n".into()),
+        other => return Err(format!("Unknown parameter type '{other}'")),
     };
-    format!("{label} {shown}\n")
+    Ok(format!("{label} {shown}\n"))
 }
 
 /// What `ros2 param list` prints: each node's names, two spaces in, under its name and a
-/// colon when more than the one node asked for is listed (`header`).
+/// colon when more than the one node asked for is listed (`header`) and it has names.
 pub fn list_text(node: &str, names: &[String], header: bool) -> String {
-    let mut out = if header {
+    let mut out = if header && !names.is_empty() {
         format!("{}:\n", crate::text::printable(node))
     } else {
         String::new()
@@ -270,11 +284,11 @@ mod tests {
             ),
             (
                 value(pt::INTEGER_ARRAY, |v| v.integer_array_value = vec![1, 2]),
-                "Integer values are: array('q', [1, 2])\n",
+                "Integer values are: [1, 2]\n",
             ),
             (
                 value(pt::DOUBLE_ARRAY, |v| v.double_array_value = vec![1.0, 2.5]),
-                "Double values are: array('d', [1.0, 2.5])\n",
+                "Double values are: [1.0, 2.5]\n",
             ),
             (
                 value(pt::STRING_ARRAY, |v| {
@@ -287,12 +301,28 @@ mod tests {
                 "Boolean values are: [True, False]\n",
             ),
             (value(pt::NOT_SET, |_| {}), "Parameter not set.\n"),
-            (value(42, |_| {}), "Unknown parameter type '42'\n"),
+            (
+                value(pt::BYTE_ARRAY, |v| {
+                    v.byte_array_value = vec![b'A', 0, b'\'', b'\\']
+                }),
+                "Byte values are: [b'A', b'\\x00', b\"'\", b'\\\\']\n",
+            ),
+            (
+                value(pt::STRING_ARRAY, |v| {
+                    v.string_array_value = vec!["a\\b".into()]
+                }),
+                "String values are: ['a\\\\b']\n",
+            ),
         ];
         for (v, want) in cases {
-            assert_eq!(get_text(Some(&v)), want);
+            assert_eq!(get_text(Some(&v)).as_deref(), Ok(want));
         }
-        assert_eq!(get_text(None), "Parameter not set.\n");
+        assert_eq!(get_text(None), Err("Parameter not set".into()));
+        let odd = value(42, |_| {});
+        assert_eq!(
+            get_text(Some(&odd)),
+            Err("Unknown parameter type '42'".into())
+        );
     }
 
     #[test]
@@ -309,6 +339,11 @@ mod tests {
         let hostile = vec!["a\x1b[2Jb\nc".to_string()];
         assert!(!list_text("/x", &hostile, true).contains('\x1b'));
         let v = value(pt::STRING, |v| v.string_value = "\x1b]0;x\x07".into());
-        assert!(!get_text(Some(&v)).contains('\x1b'));
+        assert!(!get_text(Some(&v)).unwrap().contains('\x1b'));
+        assert_eq!(
+            list_text("/x", &[], true),
+            "",
+            "no header for a node with no names"
+        );
     }
 }

@@ -13,10 +13,13 @@
 //! session log, and a virtual-clock run would no longer replay. `set_parameters` answers
 //! so, parameter by parameter.
 //!
-//! The services answer as rclcpp's `ParameterService` does (`rclcpp/src/rclcpp/
-//! node_interfaces/node_parameters.cpp`): `list_parameters` by its prefix and depth rule;
-//! `get_parameters` and `describe_parameters` answer nothing when one name is not
-//! declared; `get_parameter_types` gives `NOT_SET` for such a name.
+//! The services answer as rclcpp's `ParameterService` does in Jazzy and later (`rclcpp/src/
+//! rclcpp/node_interfaces/node_parameters.cpp`, `parameter_service.cpp`; rclpy's agree):
+//! `list_parameters` by its prefix and depth rule (the depth counted below the prefix,
+//! rclcpp #2300); `get_parameters`, `get_parameter_types` and `describe_parameters` answer
+//! nothing at all when one name is not declared (undeclared parameters are not allowed).
+//! A reply is bounded before it is built ([`MAX_SERVICE_REPLY_BYTES`]): a request naming
+//! one large parameter a hundred thousand times is refused, not answered with gigabytes.
 
 use super::rcl_interfaces::{
     parameter_type as pt, DescribeParametersResponse, FloatingPointRange,
@@ -27,7 +30,7 @@ use super::rcl_interfaces::{
 };
 use crate::graph::spec::NodeSpec;
 use crate::time::Nanos;
-use ratelab_core::limits::{self, MAX_SERVICE_REQUEST_BYTES};
+use ratelab_core::limits::{self, MAX_SERVICE_REPLY_BYTES, MAX_SERVICE_REQUEST_BYTES};
 use ratelab_core::rate::{Rate, MAX_HZ};
 use ratelab_core::ros_types::{cdr, from_cdr};
 use std::collections::BTreeMap;
@@ -78,6 +81,16 @@ fn boolean(b: bool) -> ParameterValue {
         bool_value: b,
         ..ParameterValue::default()
     }
+}
+
+/// At most the bytes `v` takes in CDR (every field, its padding and lengths).
+fn value_bytes(v: &ParameterValue) -> usize {
+    let strings = |s: &[String]| s.iter().map(|x| x.len() + 8).sum::<usize>();
+    64 + v.string_value.len()
+        + v.byte_array_value.len()
+        + v.bool_array_value.len()
+        + 8 * (v.integer_array_value.len() + v.double_array_value.len())
+        + strings(&v.string_array_value)
 }
 
 /// A TOML value as a ROS 2 parameter value; `Err` says why it has none (a mixed or nested
@@ -136,9 +149,16 @@ impl NodeParameters {
         let rate = rate
             .cloned()
             .map_or(Value::Fixed(double(spec.rate_hz)), Value::Rate);
-        p.params.insert("rate_hz".into(), rate);
-        p.params
-            .insert("use_sim_time".into(), Value::Fixed(boolean(true)));
+        for (name, value) in [
+            ("rate_hz", rate),
+            ("use_sim_time", Value::Fixed(boolean(true))),
+        ] {
+            if p.params.insert(name.into(), value).is_some() {
+                p.left_out.push(format!(
+                    "{name}: a params key of that name is shadowed by the node's own {name}"
+                ));
+            }
+        }
         p
     }
 
@@ -165,6 +185,9 @@ impl NodeParameters {
                     .left_out
                     .push(format!("{name}: nested more than {MAX_NESTING} deep")),
                 v => match from_toml(v) {
+                    Ok(_) if self.params.contains_key(&name) => self
+                        .left_out
+                        .push(format!("{name}: given twice (a dotted key and a table)")),
                     Ok(p) => {
                         self.params.insert(name, Value::Fixed(p));
                     }
@@ -220,11 +243,12 @@ impl NodeParameters {
         }
     }
 
-    /// `list_parameters` (rclcpp's rule): with no prefixes, every name with fewer than
-    /// `depth` separators (all, for depth 0); else every name equal to a prefix, or under
-    /// one with fewer than `depth` separators after it. `prefixes` lists each listed
+    /// `list_parameters` (rclcpp's rule since #2300): with no prefixes, every name with fewer
+    /// than `depth` separators (all, for depth 0); else every name equal to a prefix, or under
+    /// one (`prefix.`) with fewer than `depth` separators in what follows `prefix.`. `prefixes` lists each listed
     /// name's part before its last separator, once.
     pub fn list(&self, req: &ListParametersRequest) -> ListParametersResult {
+        // Separators below the name's prefix (the whole name: below the root).
         let within = |s: &str| req.depth == 0 || (s.matches(SEPARATOR).count() as u64) < req.depth;
         let mut out = ListParametersResult::default();
         for name in self.params.keys() {
@@ -234,7 +258,7 @@ impl NodeParameters {
                     || name
                         .strip_prefix(p.as_str())
                         .and_then(|rest| rest.strip_prefix(SEPARATOR))
-                        .is_some_and(|rest| within(&format!("{SEPARATOR}{rest}")))
+                        .is_some_and(within)
             });
             if all || under {
                 out.names.push(name.clone());
@@ -246,6 +270,26 @@ impl NodeParameters {
             }
         }
         out
+    }
+
+    /// Refuse a request naming `names` whose reply could pass [`MAX_SERVICE_REPLY_BYTES`]
+    /// (each name's value, or its descriptor, at most: its value's bytes and 512 more).
+    fn check_reply(&self, names: &[String]) -> Result<(), String> {
+        let mut bytes = 0usize;
+        for n in names {
+            let value = self.params.get(n).map_or(0, |v| value_bytes(&v.now()));
+            bytes = bytes.saturating_add(value + n.len() + 512);
+            if bytes > MAX_SERVICE_REPLY_BYTES {
+                return Err(limits::refusal(
+                    format_args!(
+                        "a reply to {} names would pass {MAX_SERVICE_REPLY_BYTES} bytes",
+                        names.len()
+                    ),
+                    "MAX_SERVICE_REPLY_BYTES",
+                ));
+            }
+        }
+        Ok(())
     }
 
     /// The reason `name` cannot be set over ROS 2.
@@ -281,8 +325,11 @@ impl NodeParameters {
             ));
         }
         let mut out = Vec::new();
-        let names =
-            |r: &[u8]| from_cdr::<NamesRequest>(r, MAX_SERVICE_REQUEST_BYTES).map(|n| n.names);
+        let names = |r: &[u8]| {
+            let names = from_cdr::<NamesRequest>(r, MAX_SERVICE_REQUEST_BYTES)?.names;
+            self.check_reply(&names)?;
+            Ok::<_, String>(names)
+        };
         match service {
             ParameterService::List => {
                 let req = from_cdr::<ListParametersRequest>(request, MAX_SERVICE_REQUEST_BYTES)?;
@@ -300,10 +347,12 @@ impl NodeParameters {
                 cdr(&GetParametersResponse { values }, &mut out);
             }
             ParameterService::GetTypes => {
+                // rclcpp and rclpy: one name not declared, no types at all.
                 let types = names(request)?
                     .iter()
-                    .map(|n| self.params.get(n).map_or(pt::NOT_SET, |v| v.now().type_))
-                    .collect();
+                    .map(|n| self.params.get(n).map(|v| v.now().type_))
+                    .collect::<Option<Vec<_>>>()
+                    .unwrap_or_default();
                 cdr(&GetParameterTypesResponse { types }, &mut out);
             }
             ParameterService::Describe => {
@@ -412,8 +461,12 @@ mod tests {
         assert_eq!(all["rate_hz"].double_value, 50.0);
         assert!(all["use_sim_time"].bool_value);
         assert!(p.left_out.is_empty());
-        let odd = policy_with("mixed = [1, \"a\"]\nnone = []\n");
-        assert_eq!(odd.left_out.len(), 2, "{:?}", odd.left_out);
+        let odd =
+            policy_with("mixed = [1, \"a\"]\nnone = []\nrate_hz = 3\n\"x.y\" = 1\n[x]\ny = 2\n");
+        assert_eq!(odd.left_out.len(), 4, "{:?}", odd.left_out);
+        let all: BTreeMap<String, ParameterValue> =
+            odd.all().into_iter().map(|q| (q.name, q.value)).collect();
+        assert_eq!(all["rate_hz"].double_value, 50.0, "the node's own rate");
     }
 
     #[test]
@@ -448,15 +501,16 @@ mod tests {
         assert_eq!(list(&[], 1).names, ["a", "rate_hz", "use_sim_time"]);
         assert_eq!(list(&[], 2).names, ["a", "b.c", "rate_hz", "use_sim_time"]);
         assert_eq!(list(&["b"], 0).names, ["b.c", "b.d.e"]);
-        // rclcpp counts the separator after the prefix too: depth 1 lists the prefix alone.
-        assert!(list(&["b"], 1).names.is_empty());
-        assert_eq!(list(&["b"], 2).names, ["b.c"]);
+        // The depth below the prefix (rclcpp #2300, Jazzy and later).
+        assert_eq!(list(&["b"], 1).names, ["b.c"]);
+        assert_eq!(list(&["b"], 2).names, ["b.c", "b.d.e"]);
+        assert_eq!(list(&["b.d"], 1).names, ["b.d.e"]);
         assert_eq!(list(&["a"], 1).names, ["a"]);
         assert!(list(&["x"], 0).names.is_empty());
     }
 
     #[test]
-    fn get_and_describe_answer_nothing_for_an_undeclared_name_types_say_not_set() {
+    fn get_types_and_describe_answer_nothing_for_an_undeclared_name() {
         let p = policy_with("");
         let names = |n: &[&str]| NamesRequest {
             names: n.iter().map(|s| s.to_string()).collect(),
@@ -472,7 +526,13 @@ mod tests {
             ParameterService::GetTypes,
             &names(&["rate_hz", "nope"]),
         ));
-        assert_eq!(types.types, vec![pt::DOUBLE, pt::NOT_SET]);
+        assert!(types.types.is_empty());
+        let types: GetParameterTypesResponse = decode(&ask(
+            &p,
+            ParameterService::GetTypes,
+            &names(&["rate_hz", "use_sim_time"]),
+        ));
+        assert_eq!(types.types, vec![pt::DOUBLE, pt::BOOL]);
         let d: DescribeParametersResponse =
             decode(&ask(&p, ParameterService::Describe, &names(&["rate_hz"])));
         assert!(d.descriptors[0].read_only);
@@ -518,6 +578,20 @@ mod tests {
                 assert!(!e.contains('\n'), "{e}");
             }
         }
+        // One large parameter named over and over: refused before the reply is built.
+        let big = policy_with(&format!("s = \"{}\"\n", "x".repeat(100_000)));
+        let mut req = Vec::new();
+        cdr(
+            &NamesRequest {
+                names: vec!["s".into(); 1000],
+            },
+            &mut req,
+        );
+        let e = big.answer(ParameterService::Get, &req).unwrap_err();
+        assert!(
+            e.ends_with("(ratelab::limits::MAX_SERVICE_REPLY_BYTES)"),
+            "{e}"
+        );
         let long = vec![0u8; MAX_SERVICE_REQUEST_BYTES + 1];
         let e = p.answer(ParameterService::List, &long).unwrap_err();
         assert!(

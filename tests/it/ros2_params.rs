@@ -95,6 +95,7 @@ fn ros2_param_answers_from_the_graph_file_and_the_log_reaches_rosout() {
     let got = ros2(&["param", "get", "/chatty", "window"]);
     let all = ros2(&["param", "list"]);
     let missing = ros2(&["param", "get", "/nobody", "x"]);
+    let unset = ros2(&["param", "get", "/policy", "no_such_parameter"]);
     let log = ros2(&["topic", "echo", "/rosout", "--once"]);
     // A subscription joining now, transient local as a ROS 2 one to /rosout is: the node's
     // first line, written seconds ago, is in its history; a volatile one has only what
@@ -113,19 +114,14 @@ fn ros2_param_answers_from_the_graph_file_and_the_log_reaches_rosout() {
             String::new()
         )
     );
-    assert_eq!(
-        got.1, "Integer values are: array('q', [1, 2, 3])\n",
-        "{got:?}"
-    );
+    assert_eq!(got.1, "Integer values are: [1, 2, 3]\n", "{got:?}");
     assert!(
         all.1
             .contains("/policy:\n  rate_hz\n  use_sim_time\n/ratelab:\n  use_sim_time\n"),
         "{all:?}"
     );
-    assert_eq!(
-        (missing.0, missing.2.trim()),
-        (2, "error: Node not found: /nobody")
-    );
+    assert_eq!((missing.0, missing.2.trim()), (2, "error: Node not found"));
+    assert_eq!((unset.0, unset.2.trim()), (2, "error: Parameter not set"));
     assert_eq!(log.0, 0, "{log:?}");
     assert!(log.1.starts_with("stamp:\n  sec: "), "{log:?}");
     assert!(log.1.contains("\nlevel: 20\nname: "), "{log:?}");
@@ -144,8 +140,9 @@ fn ros2_param_answers_from_the_graph_file_and_the_log_reaches_rosout() {
             "rate_hz": [3, 10.0], "use_sim_time": [1, true], "window": [7, [1, 2, 3]],
         })
     );
-    // The undeclared name last: NOT_SET.
-    assert_eq!(chatty["types"], json!([3, 4, 1, 3, 1, 7, 0]));
+    assert_eq!(chatty["types"], json!([3, 4, 1, 3, 1, 7]));
+    // An undeclared name among them: no types at all (rclcpp and rclpy).
+    assert_eq!(chatty["types_with_undeclared"], json!([]));
     assert_eq!(chatty["described"]["name"], "gain");
     assert_eq!(chatty["described"]["read_only"], true);
     // Every set refused, each with its reason.

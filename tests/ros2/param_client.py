@@ -12,10 +12,10 @@ For each NODE it waits (up to 20 s) for its `list_parameters` server's token, th
 as rmw_zenoh_cpp's clients call (a Zenoh get on `<domain>/<node>/<service>/<type>/<hash>`,
 CDR request, the 33-byte attachment: sequence number, timestamp, the client's GID):
 list_parameters (no prefixes, recursive), get_parameters of every name listed,
-get_parameter_types of those and one undeclared name, describe_parameters of the first,
+get_parameter_types of those (and again with one undeclared name), describe_parameters of the first,
 set_parameters of each name (and one undeclared). It listens on /rosout meanwhile and for
 2 s more. Prints "ready" once subscribed, then one JSON report on stdout:
-  nodes: {NODE: {names, prefixes, values: {name: [type, value]}, types: [..],
+  nodes: {NODE: {names, prefixes, values: {name: [type, value]}, types: [..], types_with_undeclared: [..],
           described: {name, type, read_only, description}, set: [{successful, reason}],
           attachments_ok: bool, seq: [..]}},
   rosout: [{node, level, msg}], errors: [...]
@@ -143,8 +143,12 @@ for node in wanted:
         oks.append(ok)
         types, ok = call(node, "get_parameter_types",
                          "rcl_interfaces/msg/GetParameterTypes_Request",
-                         T["rcl_interfaces/msg/GetParameterTypes_Request"](
-                             names=names + ["no_such_parameter"]))
+                         T["rcl_interfaces/msg/GetParameterTypes_Request"](names=names))
+        oks.append(ok)
+        no_types, ok = call(node, "get_parameter_types",
+                            "rcl_interfaces/msg/GetParameterTypes_Request",
+                            T["rcl_interfaces/msg/GetParameterTypes_Request"](
+                                names=names + ["no_such_parameter"]))
         oks.append(ok)
         described, ok = call(node, "describe_parameters",
                              "rcl_interfaces/msg/DescribeParameters_Request",
@@ -169,6 +173,7 @@ for node in wanted:
             "prefixes": list(listed.result.prefixes),
             "values": {n: value(v) for n, v in zip(names, got.values)},
             "types": [int(t) for t in types.types],
+            "types_with_undeclared": [int(t) for t in no_types.types],
             "described": {"name": d.name, "type": int(d.type), "read_only": bool(d.read_only),
                           "description": d.description},
             "set": [{"successful": bool(r.successful), "reason": r.reason}
