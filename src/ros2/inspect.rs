@@ -32,9 +32,6 @@ pub struct Seen {
     pub nodes: Vec<NodeEntity>,
     /// Every publisher, subscription, service and client.
     pub endpoints: Vec<EndpointEntity>,
-    /// The depth a keep-all endpoint's token gives (by index in `endpoints`), which hiroz's
-    /// decoding drops: ROS 2 shows it (`KEEP_ALL (10)`).
-    pub keep_all_depth: std::collections::BTreeMap<usize, usize>,
     /// Each endpoint's GID (by index in `endpoints`), as rmw_zenoh_cpp computes it from its
     /// token ([`super::bridge::gid`]): `ros2 topic info -v` shows it.
     pub gids: Vec<[u8; 16]>,
@@ -42,7 +39,7 @@ pub struct Seen {
 
 impl Seen {
     /// Take one liveliness token `key` (`@ros2_lv/<domain>/…`) into the graph: a node, or an
-    /// endpoint with its GID and (keep-all) depth. Returns whether it was a ROS 2 entity.
+    /// endpoint with its GID. Returns whether it was a ROS 2 entity.
     pub fn take(&mut self, key: &str) -> bool {
         let Ok(k) = zenoh::key_expr::KeyExpr::try_from(key) else {
             return false;
@@ -50,10 +47,6 @@ impl Seen {
         match KeyExprFormat::default().parse_liveliness(&k) {
             Ok(Entity::Node(n)) => self.nodes.push(n),
             Ok(Entity::Endpoint(e)) => {
-                if e.qos.history == QosHistory::KeepAll {
-                    self.keep_all_depth
-                        .insert(self.endpoints.len(), keep_all_depth(key));
-                }
                 self.gids.push(super::bridge::gid(key));
                 self.endpoints.push(e);
             }
@@ -61,19 +54,6 @@ impl Seen {
         }
         true
     }
-}
-
-/// The depth in a keep-all token's QoS (`…/::2,10:,:,:,,` gives 10), read as rmw_zenoh_cpp
-/// reads it: an empty depth is its default, 42 (the capture in `../shared/fixtures/ros2-real`
-/// shows `KEEP_ALL (42)` for ratelab's tokens of before).
-pub fn keep_all_depth(token: &str) -> usize {
-    token
-        .rsplit('/')
-        .next()
-        .and_then(|qos| qos.split(':').nth(2))
-        .and_then(|history| history.split_once(','))
-        .and_then(|(_, depth)| depth.parse::<usize>().ok())
-        .unwrap_or(hiroz_protocol::qos::RMW_ZENOH_DEFAULT_HISTORY_DEPTH)
 }
 
 /// A node's fully qualified name, `/ns/name` (`/talker` in the root namespace).
@@ -191,7 +171,7 @@ fn duration(d: &QosDuration) -> String {
 /// ROS 2's default (`· deadline 40 ms`, `· lifespan 60 ms`, `· lease 100 ms`,
 /// `· TRANSIENT_LOCAL`).
 pub fn qos_short(q: &QosProfile) -> String {
-    let mut parts = vec![reliability_word(q).to_string(), history_words(q, None)];
+    let mut parts = vec![reliability_word(q).to_string(), history_words(q)];
     let ms = |d: &QosDuration| d.sec as f64 * 1e3 + d.nsec as f64 / 1e6;
     for (what, d) in [
         ("deadline", &q.deadline),
@@ -216,18 +196,17 @@ fn reliability_word(q: &QosProfile) -> &'static str {
     }
 }
 
-/// History and depth as ros2cli writes them: `KEEP_LAST (7)`, `KEEP_ALL (10)` (`KEEP_ALL`
-/// where the depth is not known).
-fn history_words(q: &QosProfile, keep_all_depth: Option<usize>) -> String {
-    match (q.history, keep_all_depth) {
-        (QosHistory::KeepLast(n), _) => format!("KEEP_LAST ({n})"),
-        (QosHistory::KeepAll, Some(n)) => format!("KEEP_ALL ({n})"),
-        (QosHistory::KeepAll, None) => "KEEP_ALL".into(),
+/// History and depth as ros2cli writes them: `KEEP_LAST (7)`, and `KEEP_ALL` with no depth
+/// (rclpy's `TopicEndpointInfo.__str__`, Jazzy and later: a keep-all depth is not shown).
+fn history_words(q: &QosProfile) -> String {
+    match q.history {
+        QosHistory::KeepLast(n) => format!("KEEP_LAST ({n})"),
+        QosHistory::KeepAll => "KEEP_ALL".into(),
     }
 }
 
-fn qos_block(q: &QosProfile, keep_all_depth: Option<usize>) -> String {
-    let (history, reliability) = (history_words(q, keep_all_depth), reliability_word(q));
+fn qos_block(q: &QosProfile) -> String {
+    let (history, reliability) = (history_words(q), reliability_word(q));
     let durability = match q.durability {
         hiroz_protocol::qos::QosDurability::Volatile => "VOLATILE",
         hiroz_protocol::qos::QosDurability::TransientLocal => "TRANSIENT_LOCAL",
@@ -290,7 +269,7 @@ pub fn topic_info(g: &Seen, topic: &str, verbose: bool) -> Result<String, String
             text.push_str(&format!(
                 "Node name: {name}\nNode namespace: {ns}\nTopic type: {}\nTopic type hash: {hash}\nEndpoint type: {what}\n{gid}{}\n",
                 type_name(e),
-                qos_block(&e.qos, g.keep_all_depth.get(i).copied())
+                qos_block(&e.qos)
             ));
         }
         text
@@ -688,19 +667,11 @@ mod tests {
     }
 
     #[test]
-    fn a_keep_all_endpoint_shows_its_depth_as_ros_2_does() {
-        // The token's depth, or rmw_zenoh_cpp's default for an empty one.
-        let key = |qos: &str| {
-            format!("@ros2_lv/0/z/0/1/MP/%/%/talker/%chatter/std_msgs::msg::dds_::String_/RIHS01_00/{qos}")
-        };
-        assert_eq!(keep_all_depth(&key("::2,10:,:,:,,")), 10);
-        assert_eq!(keep_all_depth(&key("1::2,:,:,:,,")), 42);
-        assert_eq!(keep_all_depth("nonsense"), 42);
+    fn a_keep_all_endpoint_shows_no_depth_as_ros2cli_does() {
         let mut g = talker();
         g.endpoints[0].qos.history = QosHistory::KeepAll;
-        g.keep_all_depth.insert(0, 10);
         let v = topic_info(&g, "/chatter", true).unwrap();
-        assert!(v.contains("  History (Depth): KEEP_ALL (10)\n"), "{v}");
+        assert!(v.contains("  History (Depth): KEEP_ALL\n"), "{v}");
     }
 
     #[test]
