@@ -5,7 +5,7 @@
 
 use anyhow::{anyhow, Result};
 use clap::{Args, Subcommand};
-use ratelab::ros2::{echo, inspect};
+use ratelab::ros2::{echo, inspect, type_description};
 use ratelab::scheduler::StopFlag;
 use std::io::Write;
 use std::sync::{Arc, Mutex};
@@ -213,7 +213,7 @@ pub fn run(args: &Ros2Args, stop: StopFlag) -> Result<()> {
         Ros2Command::Topic(TopicVerb::Echo { topic, once, count }) => {
             let limit = if *once { Some(1) } else { *count };
             drop(out);
-            echo_topic(&session, &g, topic, limit, &stop)?;
+            echo_topic(&session, (&g, domain), topic, limit, &stop)?;
         }
         Ros2Command::Topic(TopicVerb::Hz {
             topic,
@@ -322,13 +322,17 @@ fn publisher<'a>(g: &'a inspect::Seen, topic: &str) -> Result<&'a inspect::Endpo
 
 fn echo_topic(
     session: &inspect::Session,
-    g: &inspect::Seen,
+    (g, domain): (&inspect::Seen, u32),
     topic: &str,
     limit: Option<u64>,
     stop: &StopFlag,
 ) -> Result<()> {
     let p = publisher(g, topic)?;
     let (name, hash) = inspect::type_and_hash(p);
+    let node = p.node.as_ref().map(inspect::fq_name);
+    // A type not described here: its publisher's node is asked once for its description.
+    let mut fetched: Option<Result<ratelab::ros2::type_description::TypeDescriptionMsg, String>> =
+        None;
     let (tx, rx) = crossbeam_channel::bounded::<Vec<u8>>(1024);
     let _sub = inspect::subscribe(session, p, move |bytes| {
         let _ = tx.try_send(bytes);
@@ -338,7 +342,21 @@ fn echo_topic(
         let Ok(bytes) = rx.recv_timeout(Duration::from_millis(100)) else {
             continue;
         };
-        let text = match echo::decode(&name, &hash, &bytes) {
+        let decoded = match echo::decode(&name, &hash, &bytes) {
+            Err(e) if e == echo::NOT_DESCRIBED => {
+                let d = fetched.get_or_insert_with(|| {
+                    let node = node.as_deref().ok_or("its publisher names no node")?;
+                    let asked = (name.as_str(), hash.as_str());
+                    let d = type_description::fetch(session, domain, node, asked, PARAM_TIMEOUT);
+                    d.map_err(|why| format!("{e}, and {why}"))
+                });
+                d.as_ref()
+                    .map_err(Clone::clone)
+                    .and_then(|d| echo::decode_with(d, &bytes))
+            }
+            other => other,
+        };
+        let text = match decoded {
             Ok(v) => echo::yaml(&v),
             Err(why) => format!(
                 "<{} {}: {} bytes, not decoded: {why}>\n",

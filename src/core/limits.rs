@@ -20,7 +20,8 @@
 //! | [`MAX_CONTROL_BYTES`] | 64 MiB | one control message between a launch's processes |
 //! | [`MAX_ROS_MESSAGE_BYTES`] | 64 MiB | one message from ROS 2 (CDR), before it is decoded (4 KiB for the cartpole's types) |
 //! | [`MAX_SERVICE_REQUEST_BYTES`] | 1 MiB | one request to a node's ROS 2 parameter services (CDR), before it is decoded |
-//! | [`MAX_SERVICE_REPLY_BYTES`] | 16 MiB | one reply of a node's ROS 2 parameter services, before it is built |
+//! | [`MAX_SERVICE_REPLY_BYTES`] | 16 MiB | one reply of a node's ROS 2 parameter services, before it is built; one reply read from a ROS 2 service, before it is decoded |
+//! | [`MAX_DESCRIBED_TYPES`] | 1024 | the types one ROS 2 type description (`get_type_description`) refers to |
 //! | [`MAX_DURATION_S`] | 10 years | a run's length, in whole nanoseconds |
 
 /// The most nodes a graph may have: 65 536. A node costs its scheduler entry, its queues
@@ -71,6 +72,11 @@ pub const MAX_SERVICE_REQUEST_BYTES: usize = 1 << 20;
 /// 16 MiB. A request naming one large parameter many times would otherwise make a reply
 /// thousands of times its own size; it is refused (not answered).
 pub const MAX_SERVICE_REPLY_BYTES: usize = 16 << 20;
+
+/// The most types one ROS 2 type description read from the network may refer to
+/// (`~/get_type_description`'s `referenced_type_descriptions`): 1024 (a real message refers
+/// to tens). Each is walked when a message is decoded by it.
+pub const MAX_DESCRIBED_TYPES: usize = 1024;
 
 /// The largest control message between a launch's processes, encoded: 64 MiB. Control
 /// messages are JSON; the largest carry a graph file (at most [`MAX_GRAPH_FILE_BYTES`],

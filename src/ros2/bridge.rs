@@ -318,6 +318,27 @@ pub(crate) fn requested_qos_of(spec: &GraphSpec, t: usize, sub: NodeId) -> QosPr
     q
 }
 
+/// The types node `n` of `spec` uses, described: its topics' (published or read), and
+/// every node's `/rosout` and `/parameter_events` types (`None`: those alone).
+fn node_types(spec: &GraphSpec, n: Option<NodeId>) -> super::type_description::Descriptions {
+    let mut types = super::type_description::Descriptions::default();
+    for t in &spec.topics {
+        if n.is_some_and(|n| t.publisher == n || t.subscribers.contains(&n)) {
+            types.add(&ros_type_of(t.msg).description);
+        }
+    }
+    let known = super::echo::known();
+    for name in [
+        "rcl_interfaces/msg/Log",
+        "rcl_interfaces/msg/ParameterEvent",
+    ] {
+        if let Some(d) = known.get(name) {
+            types.add(&d.description);
+        }
+    }
+    types
+}
+
 /// `/clock`'s QoS: best effort, keep last 1.
 pub(crate) fn clock_qos() -> QosProfile {
     QosProfile {
@@ -471,17 +492,25 @@ impl Bridge {
         let mut apis = Vec::new();
         for (i, n) in &own {
             let params = NodeParameters::of(&spec.nodes[*i], offer.rates.get(*i));
+            let types = node_types(spec, Some(NodeId(*i)));
             for why in &params.left_out {
                 let name = &spec.nodes[*i].name;
                 notes.push(format!(
                     "node '{name}': parameter {why}: not offered to ROS 2"
                 ));
             }
-            apis.push(NodeApi::declare(&mut d, n, params, Nanos(0))?);
+            apis.push(NodeApi::declare(&mut d, n, (params, types), Nanos(0))?);
         }
         if offer.clock {
             let params = NodeParameters::clock_node(CLOCK_NODE);
-            apis.push(NodeApi::declare(&mut d, &clock_node, params, Nanos(0))?);
+            let mut types = node_types(spec, None);
+            types.add(&clock_type().description);
+            apis.push(NodeApi::declare(
+                &mut d,
+                &clock_node,
+                (params, types),
+                Nanos(0),
+            )?);
         }
         let tokens = d.into_tokens();
 

@@ -276,20 +276,35 @@ pub fn decode(name: &str, hash: &str, payload: &[u8]) -> Result<Value, String> {
     let d = known()
         .get(name)
         .filter(|d| d.hash.to_rihs_string() == hash)
-        .ok_or_else(|| "a type not described here".to_string())?;
+        .ok_or_else(|| NOT_DESCRIBED.to_string())?;
+    decode_with(&d.description, payload)
+}
+
+/// Why [`decode`] could not: the type is not one described here (or of another hash).
+pub const NOT_DESCRIBED: &str = "a type not described here";
+
+/// Decode `payload` (CDR with its 4-byte encapsulation header) by `description` (a type
+/// and the types it refers to), with [`decode`]'s bounds: the caller has checked that it
+/// is the message's type (its hash).
+///
+/// # Errors
+/// One line: the payload is too large, its header is not plain CDR, or its bytes do not
+/// decode as the type.
+pub fn decode_with(description: &TypeDescriptionMsg, payload: &[u8]) -> Result<Value, String> {
+    let d = description;
     if payload.len() > MAX_PAYLOAD_BYTES {
         return Err(format!("over {MAX_PAYLOAD_BYTES} bytes"));
     }
     let (head, body) = payload
         .split_at_checked(4)
         .ok_or("shorter than its CDR header")?;
-    let types: BTreeMap<&str, &TypeDescription> = std::iter::once(&d.description.type_description)
-        .chain(&d.description.referenced_type_descriptions)
+    let types: BTreeMap<&str, &TypeDescription> = std::iter::once(&d.type_description)
+        .chain(&d.referenced_type_descriptions)
         .map(|t| (t.type_name.as_str(), t))
         .collect();
     let seed = TypeSeed {
         types: &types,
-        ty: &d.description.type_description,
+        ty: &d.type_description,
         depth: 0,
         budget: body.len(),
     };
@@ -311,9 +326,7 @@ pub fn decode(name: &str, hash: &str, payload: &[u8]) -> Result<Value, String> {
 /// As [`decode`].
 pub fn decode_named(name: &str, hash: &str, payload: &[u8]) -> Result<Value, String> {
     if hash.is_empty() {
-        let d = known()
-            .get(name)
-            .ok_or_else(|| "a type not described here".to_string())?;
+        let d = known().get(name).ok_or_else(|| NOT_DESCRIBED.to_string())?;
         decode(name, &d.hash.to_rihs_string(), payload)
     } else {
         decode(name, hash, payload)

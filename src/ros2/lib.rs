@@ -22,7 +22,8 @@
 //!   stamped by its publisher's session;
 //! - [`node_api`]: what every ROS 2 node declares besides its topics — `/rosout` (the log
 //!   pane's lines), `/parameter_events` and the parameter services, answering from the graph
-//!   file's parameters ([`parameters`]) in `rcl_interfaces`' types ([`rcl_interfaces`]);
+//!   file's parameters ([`parameters`]) in `rcl_interfaces`' types ([`rcl_interfaces`]), and
+//!   `~/get_type_description` ([`type_description`], which `echo` also asks of other nodes);
 //! - [`inspect`] and [`echo`]: `ratelab ros2`, any rmw_zenoh graph read from the other side
 //!   as ros2cli reads it (nodes, topics, QoS, messages as YAML, rates); [`offered`]: a
 //!   graph as ROS 2 sees it when offered (the lab's panel); [`param_cli`]: `ratelab ros2
@@ -53,6 +54,7 @@ pub mod param_cli;
 pub mod parameters;
 pub mod rcl_interfaces;
 pub mod session;
+pub mod type_description;
 pub mod types;
 pub mod wire;
 

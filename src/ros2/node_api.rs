@@ -18,11 +18,15 @@
 //!   service servers reply; a request without that attachment, too long or not the
 //!   service's CDR, is not answered.
 //!
-//! Not declared: `~/get_type_description` (ratelab's nodes do not serve their types'
-//! descriptions) and the logger-level services.
+//! - **`~/get_type_description`** (`type_description_interfaces/srv/GetTypeDescription`,
+//!   reliable, keep last 10), answering for the types of the node's endpoints
+//!   ([`super::type_description`]).
+//!
+//! Not declared: the logger-level services.
 
 use super::parameters::NodeParameters;
 use super::rcl_interfaces::{self as rcl, Log, ParameterService};
+use super::type_description::Descriptions;
 use super::wire::{attachment, wall_ns, Declarer, Outlet};
 use super::{zerr, Ros2Error};
 use crate::textlog::{Level, LogLine};
@@ -124,6 +128,56 @@ fn serve(
     }
 }
 
+/// Declare `node`'s `~/get_type_description`, answering from `types`.
+fn describe_types(
+    d: &mut Declarer<'_>,
+    node: &NodeEntity,
+    types: Descriptions,
+) -> Result<zenoh::query::Queryable<()>, Ros2Error> {
+    let s = rcl::GET_TYPE_DESCRIPTION;
+    let qos = QosProfile {
+        reliability: QosReliability::Reliable,
+        history: QosHistory::KeepLast(10),
+        ..QosProfile::default()
+    };
+    let name = format!("/{}/{}", node.name, s.suffix);
+    let ss = d.endpoint(
+        node,
+        EndpointKind::Service,
+        &name,
+        rcl::type_info(s.type_name, s.hash),
+        qos,
+    );
+    let key = zenoh::key_expr::KeyExpr::try_from(d.key(&ss)?).map_err(zerr)?;
+    let reply_on = key.clone();
+    let q = d
+        .session()
+        .declare_queryable(key)
+        .complete(true)
+        .callback(move |query| {
+            let Some((seq, client)) = query.attachment().and_then(|a| request_id(&a.to_bytes()))
+            else {
+                return;
+            };
+            let Some(payload) = query
+                .payload()
+                .filter(|p| p.len() <= ratelab_core::limits::MAX_SERVICE_REQUEST_BYTES)
+            else {
+                return;
+            };
+            if let Ok(reply) = types.answer(&payload.to_bytes()) {
+                let _ = query
+                    .reply(reply_on.clone(), reply)
+                    .attachment(attachment(seq, wall_ns(), &client).to_vec())
+                    .wait();
+            }
+        })
+        .wait()
+        .map_err(zerr)?;
+    d.token_of(&ss, 10)?;
+    Ok(q)
+}
+
 impl NodeApi {
     /// Declare `node`'s `/rosout`, `/parameter_events` and parameter services with `d`,
     /// answering from `params`; its parameters are said declared at run time `t`.
@@ -133,7 +187,7 @@ impl NodeApi {
     pub fn declare(
         d: &mut Declarer<'_>,
         node: &NodeEntity,
-        params: NodeParameters,
+        (params, types): (NodeParameters, Descriptions),
         t: Nanos,
     ) -> Result<NodeApi, Ros2Error> {
         let log_type = rcl::type_info("rcl_interfaces/msg/Log", rcl::LOG_HASH);
@@ -171,6 +225,7 @@ impl NodeApi {
             queryables.push(q);
             d.token_of(&ss, 1000)?;
         }
+        queryables.push(describe_types(d, node, types)?);
         let mut api = NodeApi {
             name: node.name.clone(),
             said_rate: params.rate_hz(),

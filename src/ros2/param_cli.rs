@@ -17,7 +17,7 @@
 
 use super::rcl_interfaces::{
     parameter_type as pt, GetParametersResponse, ListParametersRequest, ListParametersResponse,
-    NamesRequest, ParameterService, ParameterValue,
+    NamesRequest, ParameterService, ParameterValue, ServiceType,
 };
 use super::wire::{attachment, wall_ns};
 use super::{zerr, Ros2Error};
@@ -26,8 +26,8 @@ use ratelab_core::ros_types::{cdr, from_cdr};
 use std::time::Duration;
 use zenoh::Wait;
 
-/// Ask node `node` (`/policy`) on `domain` service `service` with `request`, waiting at
-/// most `timeout`: the response's CDR (header included).
+/// Ask node `node` (`/policy`) on `domain` its service of type `service` with `request`,
+/// waiting at most `timeout`: the response's CDR (header included).
 ///
 /// # Errors
 /// [`Ros2Error::Usage`] when no server answered within `timeout` (as ros2cli, which then
@@ -37,17 +37,17 @@ pub fn call<T: serde::Serialize>(
     session: &zenoh::Session,
     domain: u32,
     node: &str,
-    service: ParameterService,
+    service: ServiceType,
     request: &T,
     timeout: Duration,
 ) -> Result<Vec<u8>, Ros2Error> {
-    let info = super::rcl_interfaces::type_info(service.type_name(), service.hash());
+    let info = super::rcl_interfaces::type_info(service.type_name, service.hash);
     let key = format!(
         "{domain}/{}/{}/{}/{}",
         node.trim_start_matches('/'),
-        service.suffix(),
+        service.suffix,
         info.name,
-        service.hash()
+        service.hash
     );
     let mut payload = Vec::new();
     cdr(request, &mut payload);
@@ -72,8 +72,10 @@ pub fn call<T: serde::Serialize>(
         return Ok(bytes.to_bytes().into_owned());
     }
     Err(Ros2Error::Usage(format!(
-        "Wait for service timed out waiting for parameter services for node {}",
-        crate::text::printable(node)
+        "node {} did not answer its {} within {:.1} s",
+        crate::text::printable(node),
+        service.suffix,
+        timeout.as_secs_f64()
     )))
 }
 
@@ -88,7 +90,8 @@ pub fn list(
     timeout: Duration,
 ) -> Result<Vec<String>, Ros2Error> {
     let req = ListParametersRequest::default();
-    let bytes = call(session, domain, node, ParameterService::List, &req, timeout)?;
+    let service = ParameterService::List.service_type();
+    let bytes = call(session, domain, node, service, &req, timeout)?;
     let r: ListParametersResponse = from_cdr(&bytes, MAX_ROS_MESSAGE_BYTES)
         .map_err(|e| Ros2Error::Usage(format!("{node}: list_parameters answered {e}")))?;
     let mut names = r.result.names;
@@ -111,7 +114,8 @@ pub fn get(
     let req = NamesRequest {
         names: vec![name.to_string()],
     };
-    let bytes = call(session, domain, node, ParameterService::Get, &req, timeout)?;
+    let service = ParameterService::Get.service_type();
+    let bytes = call(session, domain, node, service, &req, timeout)?;
     let r: GetParametersResponse = from_cdr(&bytes, MAX_ROS_MESSAGE_BYTES)
         .map_err(|e| Ros2Error::Usage(format!("{node}: get_parameters answered {e}")))?;
     Ok(r.values.into_iter().next())

@@ -249,6 +249,25 @@ pub struct SetParametersAtomicallyResponse {
     pub result: SetParametersResult,
 }
 
+/// A service type every ROS 2 node offers: its name under the node's, its type and hash.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ServiceType {
+    /// The service's name under its node's (`get_parameters`).
+    pub suffix: &'static str,
+    /// Its type (`rcl_interfaces/srv/GetParameters`).
+    pub type_name: &'static str,
+    /// Its type's RIHS01 hash.
+    pub hash: &'static str,
+}
+
+/// `~/get_type_description` (`type_description_interfaces/srv/GetTypeDescription`, REP
+/// 2011): a node's description of a type it uses ([`super::type_description`]).
+pub const GET_TYPE_DESCRIPTION: ServiceType = ServiceType {
+    suffix: "get_type_description",
+    type_name: "type_description_interfaces/srv/GetTypeDescription",
+    hash: "RIHS01_69b9c19c1021405984cc60dbbb1edceb147a6538b411d812ba6afabeed962cd5",
+};
+
 /// A parameter service every ROS 2 node offers (rclcpp's and rclpy's `ParameterService`),
 /// on `/<node>/<suffix>`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -302,6 +321,15 @@ impl ParameterService {
         }
     }
 
+    /// Its name, type and hash together.
+    pub fn service_type(self) -> ServiceType {
+        ServiceType {
+            suffix: self.suffix(),
+            type_name: self.type_name(),
+            hash: self.hash(),
+        }
+    }
+
     /// Its type's RIHS01 hash.
     pub fn hash(self) -> &'static str {
         match self {
@@ -350,6 +378,7 @@ mod tests {
             ("rcl_interfaces/msg/ParameterEvent", PARAMETER_EVENT_HASH),
         ];
         all.extend(ParameterService::ALL.map(|s| (s.type_name(), s.hash())));
+        all.push((GET_TYPE_DESCRIPTION.type_name, GET_TYPE_DESCRIPTION.hash));
         for (name, hash) in all {
             let info = type_info(name, hash);
             assert!(info.name.contains("::dds_::"), "{}", info.name);

@@ -143,7 +143,7 @@ fn assert_the_chapters_graph(r: &Value) {
 pub(crate) const NODE_TOPICS: [&str; 2] = ["/rosout", "/parameter_events"];
 
 /// Each of `nodes` publishes `/rosout` and `/parameter_events` and serves the six parameter
-/// services, as the stand-in `r` saw their tokens: each token's type, type hash and QoS
+/// services and `~/get_type_description`, as the stand-in `r` saw their tokens: each token's type, type hash and QoS
 /// the same as a real rclpy node's over real rmw_zenoh_cpp (`real-rclpy-talker.json`).
 pub(crate) fn assert_every_node_s_own_endpoints(r: &Value, nodes: &[&str]) {
     let real = crate::ros2_cli::real_capture("real-rclpy-talker.json");
@@ -181,7 +181,7 @@ pub(crate) fn assert_every_node_s_own_endpoints(r: &Value, nodes: &[&str]) {
             .iter()
             .filter(|s| s["node"] == *node)
             .collect();
-        assert_eq!(services.len(), 6, "{node}: {services:?}");
+        assert_eq!(services.len(), 7, "{node}: {services:?}");
         for suffix in [
             "describe_parameters",
             "get_parameters",
@@ -189,6 +189,7 @@ pub(crate) fn assert_every_node_s_own_endpoints(r: &Value, nodes: &[&str]) {
             "list_parameters",
             "set_parameters",
             "set_parameters_atomically",
+            "get_type_description",
         ] {
             let name = format!("/{node}/{suffix}");
             let s = services
@@ -739,8 +740,8 @@ fn a_finished_bridge_withdraws_its_tokens_and_the_next_takes_fresh_ids_on_the_sa
     let first = bridge();
     let during = tokens();
     // 4 nodes (the graph's 3 and /clock's), 5 endpoints of the graph, and each node's
-    // /rosout, /parameter_events and 6 parameter services.
-    assert_eq!(during.len(), 4 + 5 + 4 * 8, "{during:?}");
+    // /rosout, /parameter_events, 6 parameter services and ~/get_type_description.
+    assert_eq!(during.len(), 4 + 5 + 4 * 9, "{during:?}");
     first.finish();
     assert_eq!(
         tokens(),
@@ -751,7 +752,7 @@ fn a_finished_bridge_withdraws_its_tokens_and_the_next_takes_fresh_ids_on_the_sa
     // first run's tokens (nor its GIDs) comes back.
     let second = bridge();
     let again = tokens();
-    assert_eq!(again.len(), 4 + 5 + 4 * 8);
+    assert_eq!(again.len(), 4 + 5 + 4 * 9);
     assert!(again.iter().all(|k| !during.contains(k)), "{again:?}");
     second.finish();
     link.close();

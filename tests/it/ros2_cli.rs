@@ -194,13 +194,13 @@ fn ros2_verbs_read_another_graph_and_survive_hostile_tokens_and_payloads() {
     let (code, out, err) = ros2(&["node", "list"]);
     assert_eq!(code, 0, "{err}");
     assert_eq!(
-        out, "/demo/talker\n/evil\\u{1b}[2J\\nnode\n/hostile\n/listener\n/mystery\n",
+        out, "/demo/talker\n/evil\\u{1b}[2J\\nnode\n/gizmo\n/hostile\n/liar\n/listener\n/mystery\n",
         "the escape and the newline written out"
     );
     let (_, out, _) = ros2(&["topic", "list", "-t"]);
     assert_eq!(
         out,
-        "/broken [sensor_msgs/msg/JointState]\n/chatter [std_msgs/msg/String]\n/cmd_vel [geometry_msgs/msg/Twist]\n/thing [my_pkg/msg/Thing]\n"
+        "/broken [sensor_msgs/msg/JointState]\n/chatter [std_msgs/msg/String]\n/cmd_vel [geometry_msgs/msg/Twist]\n/fib [my_pkg/msg/Fib]\n/gadget [my_pkg/msg/Gadget]\n/thing [my_pkg/msg/Thing]\n"
     );
     let (_, out, _) = ros2(&["node", "info", "/demo/talker"]);
     assert_eq!(
@@ -231,10 +231,25 @@ fn ros2_verbs_read_another_graph_and_survive_hostile_tokens_and_payloads() {
     assert_eq!(
         out,
         format!(
-            "<my_pkg/msg/Thing RIHS01_{}: 12 bytes, not decoded: a type not described here>\n---\n",
+            "<my_pkg/msg/Thing RIHS01_{}: 12 bytes, not decoded: a type not described here, and node /mystery did not answer its get_type_description within 5.0 s>\n---\n",
             "ab".repeat(32)
         )
     );
+    // A type ratelab carries no description of, decoded by the one its publisher's node
+    // gives (~/get_type_description), checked against the hash in its key...
+    let (code, out, err) = ros2(&["topic", "echo", "/gadget", "--once"]);
+    assert_eq!(code, 0, "{err}");
+    assert_eq!(
+        out,
+        "label: left arm\nreadings:\n- 0.5\n- -1.25\noffset:\n  x: 1.0\n  y: 2.0\n  z: 3.0\ncounts:\n- 1\n- 2\n- 3\n---\n"
+    );
+    // ...and one whose node describes it falsely is not decoded by that description.
+    let (_, out, _) = ros2(&["topic", "echo", "/fib", "--once"]);
+    assert!(
+        out.starts_with("<my_pkg/msg/Fib RIHS01_") && out.contains(": 20 bytes, not decoded: a type not described here, and its node's description hashes to RIHS01_"),
+        "{out}"
+    );
+    assert!(out.contains(", not to the topic's RIHS01_"), "{out}");
     // Both hostile payloads, one line each, and the echo goes on to the next.
     let (code, out, _) = ros2(&["topic", "echo", "/broken", "-n", "2"]);
     assert_eq!(code, 0);

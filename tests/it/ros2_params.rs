@@ -278,6 +278,41 @@ fn a_changed_rate_is_a_parameter_event() {
     )
     .unwrap();
     assert_eq!(value.map(|v| v.double_value), Some(20.0));
+    // Each node describes the types it uses (~/get_type_description): what it gives hashes
+    // to the hash a real rclpy node declared for the same type (the fixture's talker).
+    let real = crate::ros2_cli::real_capture("real-rclpy-talker.json");
+    let real_hash = |dds: &str| {
+        let t = real["tokens_parsed"].as_array().unwrap().iter();
+        t.clone()
+            .find(|t| t["type"] == dds)
+            .map(|t| t["type_hash"].as_str().unwrap().to_string())
+            .unwrap()
+    };
+    let fetch = |node: &str, ty: &str, dds: &str| {
+        let hash = real_hash(dds);
+        let wait = std::time::Duration::from_secs(5);
+        ratelab::ros2::type_description::fetch(&link.session, 8, node, (ty, hash.as_str()), wait)
+    };
+    let js = fetch(
+        "/policy",
+        "sensor_msgs/msg/JointState",
+        "sensor_msgs::msg::dds_::JointState_",
+    )
+    .unwrap();
+    assert_eq!(js.type_description.fields[0].name, "header");
+    fetch(
+        "/sensor",
+        "rcl_interfaces/msg/Log",
+        "rcl_interfaces::msg::dds_::Log_",
+    )
+    .unwrap();
+    let not_its = fetch(
+        "/sensor",
+        "std_msgs/msg/Float64",
+        "std_msgs::msg::dds_::Float64_",
+    )
+    .unwrap_err();
+    assert!(not_its.contains("is not used by this node"), "{not_its}");
     bridge.finish();
     let _ = sub.undeclare().wait();
     link.close();

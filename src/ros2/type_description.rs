@@ -1,0 +1,238 @@
+//! ROS 2's `~/get_type_description` service (`type_description_interfaces/srv/
+//! GetTypeDescription`, REP 2011: a node describes the types it uses), both sides:
+//!
+//! - **served**: each node ratelab offers answers it for the types of its endpoints (its
+//!   topics', `/rosout`'s `Log`, `/parameter_events`' `ParameterEvent`; `/ratelab`'s
+//!   `Clock`), so that a ROS 2 tool that does not know ratelab's types can decode them;
+//! - **asked**: `ratelab ros2 topic echo` of a type it carries no description of asks the
+//!   publisher's node ([`fetch`]), checks that the description is of the type named and
+//!   hashes (RIHS01) to the hash in the topic's key, and decodes by it.
+//!
+//! What comes from the network is bounded: the reply's bytes before it is decoded
+//! ([`MAX_SERVICE_REPLY_BYTES`]), the types it holds ([`MAX_DESCRIBED_TYPES`]); the decode
+//! walks it with `echo`'s own bounds (depth, sequence lengths).
+
+use super::rcl_interfaces::GET_TYPE_DESCRIPTION;
+use super::{param_cli, Ros2Error};
+pub use hiroz_schema::TypeDescriptionMsg;
+use ratelab_core::limits::{
+    self, MAX_DESCRIBED_TYPES, MAX_SERVICE_REPLY_BYTES, MAX_SERVICE_REQUEST_BYTES,
+};
+use ratelab_core::ros_types::{cdr, from_cdr};
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+use std::time::Duration;
+
+/// `type_description_interfaces/srv/GetTypeDescription` request.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Request {
+    /// `package/msg/Name`.
+    pub type_name: String,
+    /// Its RIHS01 hash (`RIHS01_…`).
+    pub type_hash: String,
+    /// Also the `.msg` sources (ratelab has none to give).
+    pub include_type_sources: bool,
+}
+
+/// `type_description_interfaces/msg/TypeSource`.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct TypeSource {
+    /// The type.
+    pub type_name: String,
+    /// `msg`, `idl`, …
+    pub encoding: String,
+    /// The file's text.
+    pub raw_file_contents: String,
+}
+
+/// `type_description_interfaces/msg/KeyValue`.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct KeyValue {
+    /// The key.
+    pub key: String,
+    /// The value.
+    pub value: String,
+}
+
+/// `type_description_interfaces/srv/GetTypeDescription` response (its
+/// `type_description` is `hiroz-schema`'s, laid out as `type_description_interfaces`').
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
+pub struct Response {
+    /// The type was described.
+    pub successful: bool,
+    /// Why not, when not.
+    pub failure_reason: String,
+    /// The type and every type it refers to.
+    pub type_description: TypeDescriptionMsg,
+    /// Its sources (none from ratelab).
+    pub type_sources: Vec<TypeSource>,
+    /// More, as key and value (none from ratelab).
+    pub extra_information: Vec<KeyValue>,
+}
+
+/// The types a node describes, by name: each description and its RIHS01 hash.
+#[derive(Clone, Debug, Default)]
+pub struct Descriptions {
+    by_name: BTreeMap<String, (TypeDescriptionMsg, String)>,
+}
+
+impl Descriptions {
+    /// Describe `d` too (its hash computed from it).
+    pub fn add(&mut self, d: &TypeDescriptionMsg) {
+        let hash = hiroz_schema::calculate_hash(d).to_rihs_string();
+        let name = d.type_description.type_name.clone();
+        self.by_name.insert(name, (d.clone(), hash));
+    }
+
+    /// The names described.
+    pub fn names(&self) -> impl Iterator<Item = &str> {
+        self.by_name.keys().map(String::as_str)
+    }
+
+    /// The answer to `request` (CDR with its header): the response's CDR. A type not
+    /// described here, or asked with another hash, is answered unsuccessful with the reason.
+    ///
+    /// # Errors
+    /// One line when the request is too long or not the service's CDR (not answered).
+    pub fn answer(&self, request: &[u8]) -> Result<Vec<u8>, String> {
+        if request.len() > MAX_SERVICE_REQUEST_BYTES {
+            return Err(limits::refusal(
+                format_args!("a request of {} bytes", request.len()),
+                "MAX_SERVICE_REQUEST_BYTES",
+            ));
+        }
+        let req: Request = from_cdr(request, MAX_SERVICE_REQUEST_BYTES)?;
+        let mut r = Response::default();
+        match self.by_name.get(&req.type_name) {
+            None => r.failure_reason = format!("type '{}' is not used by this node", req.type_name),
+            Some((_, hash)) if !req.type_hash.is_empty() && *hash != req.type_hash => {
+                r.failure_reason = format!(
+                    "type '{}' is used by this node with hash {hash}, not {}",
+                    req.type_name, req.type_hash
+                );
+            }
+            Some((d, _)) => {
+                r.successful = true;
+                r.type_description = d.clone();
+            }
+        }
+        let mut out = Vec::new();
+        cdr(&r, &mut out);
+        Ok(out)
+    }
+}
+
+/// Ask node `node` (`/talker`) on `domain` for the description of type `type_name` whose
+/// hash is `hash` (the one in its topic's key), within `timeout`; check it.
+///
+/// # Errors
+/// One line: the node did not answer, said it could not, or answered a description that is
+/// too large, of another type, or that does not hash to `hash`.
+pub fn fetch(
+    session: &zenoh::Session,
+    domain: u32,
+    node: &str,
+    (type_name, hash): (&str, &str),
+    timeout: Duration,
+) -> Result<TypeDescriptionMsg, String> {
+    let request = Request {
+        type_name: type_name.to_string(),
+        type_hash: hash.to_string(),
+        include_type_sources: false,
+    };
+    let bytes = param_cli::call(
+        session,
+        domain,
+        node,
+        GET_TYPE_DESCRIPTION,
+        &request,
+        timeout,
+    )
+    .map_err(|e: Ros2Error| e.to_string())?;
+    let r: Response = from_cdr(&bytes, MAX_SERVICE_REPLY_BYTES)
+        .map_err(|e| format!("its node's description is not readable: {e}"))?;
+    if !r.successful {
+        return Err(format!(
+            "its node could not describe it: {}",
+            crate::text::printable(&r.failure_reason)
+        ));
+    }
+    let d = r.type_description;
+    if d.referenced_type_descriptions.len() > MAX_DESCRIBED_TYPES {
+        return Err(limits::refusal(
+            format_args!(
+                "its description refers to {} types",
+                d.referenced_type_descriptions.len()
+            ),
+            "MAX_DESCRIBED_TYPES",
+        ));
+    }
+    if d.type_description.type_name != type_name {
+        return Err(format!(
+            "its node described '{}' instead",
+            crate::text::printable(&d.type_description.type_name)
+        ));
+    }
+    let got = hiroz_schema::calculate_hash(&d).to_rihs_string();
+    if got != hash {
+        return Err(format!(
+            "its node's description hashes to {got}, not to the topic's {}",
+            crate::text::printable(hash)
+        ));
+    }
+    Ok(d)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use ratelab_core::ros_types::joint_state_type;
+
+    fn ask(d: &Descriptions, type_name: &str, type_hash: &str) -> Response {
+        let mut req = Vec::new();
+        cdr(
+            &Request {
+                type_name: type_name.into(),
+                type_hash: type_hash.into(),
+                include_type_sources: true,
+            },
+            &mut req,
+        );
+        from_cdr(&d.answer(&req).unwrap(), usize::MAX).unwrap()
+    }
+
+    #[test]
+    fn a_node_describes_the_types_it_uses_and_no_other() {
+        let mut d = Descriptions::default();
+        let js = joint_state_type();
+        d.add(&js.description);
+        let hash = js.hash.to_rihs_string();
+        let r = ask(&d, js.name, &hash);
+        assert!(r.successful, "{}", r.failure_reason);
+        // What it answers hashes back to the type's hash: a client can check it.
+        assert_eq!(
+            hiroz_schema::calculate_hash(&r.type_description).to_rihs_string(),
+            hash
+        );
+        assert_eq!(r.type_description.referenced_type_descriptions.len(), 2);
+        let r = ask(&d, js.name, "");
+        assert!(r.successful, "an empty hash asks for the type as it is");
+        let r = ask(&d, js.name, "RIHS01_00");
+        assert!(
+            !r.successful && r.failure_reason.contains("not RIHS01_00"),
+            "{}",
+            r.failure_reason
+        );
+        let r = ask(&d, "std_msgs/msg/String", "");
+        assert!(!r.successful && r.failure_reason.contains("not used by this node"));
+    }
+
+    #[test]
+    fn a_bad_request_is_one_line_and_no_answer() {
+        let d = Descriptions::default();
+        for bad in [&b""[..], &[0, 1, 0, 0, 0xff, 0xff, 0xff, 0xff][..]] {
+            let e = d.answer(bad).unwrap_err();
+            assert!(!e.contains('\n'), "{e}");
+        }
+    }
+}
