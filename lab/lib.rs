@@ -102,6 +102,7 @@ fn lab(args: &cli::RunArgs, stop: StopFlag) -> anyhow::Result<()> {
         speed: Speed::Times(1.0),
         ros2,
         graph_source,
+        control: None,
     };
     tui::run_lab(settings, code, stop)
 }

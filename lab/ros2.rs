@@ -51,8 +51,8 @@ pub enum Ros2Command {
     /// Bags (rosbag2, MCAP storage): `bag info DIR`, `bag echo DIR`.
     #[command(subcommand)]
     Bag(BagVerb),
-    /// Parameters: `param list [NODE]`, `param get NODE NAME` (the nodes' parameter
-    /// services, as `ros2 param` asks them).
+    /// Parameters: `param list [NODE]`, `param get NODE NAME`, `param set NODE NAME VALUE`
+    /// (the nodes' parameter services, as `ros2 param` asks them).
     #[command(subcommand)]
     Param(ParamVerb),
 }
@@ -64,6 +64,15 @@ pub enum ParamVerb {
     List {
         /// The node (`/policy` or `policy`); none: every node.
         node: Option<String>,
+    },
+    /// Set one parameter, as `ros2 param set` does (the value read as YAML: `20.0`).
+    Set {
+        /// The node (`/policy` or `policy`).
+        node: String,
+        /// The parameter (`rate_hz`).
+        name: String,
+        /// Its new value (`20.0`, `true`, `[1, 2]`, `text`).
+        value: String,
     },
     /// One parameter's value, as `ros2 param get` prints it (`Double value is: 50.0`).
     Get {
@@ -295,6 +304,20 @@ fn param(
                 }
             }
             Ok(out)
+        }
+        ParamVerb::Set { node, name, value } => {
+            let node = full(node);
+            if !known(&node) {
+                return Err(anyhow!("Node not found"));
+            }
+            let value = param_cli::value_from_text(value).map_err(|e| anyhow!(e))?;
+            Ok(param_cli::set(
+                session,
+                domain,
+                (&node, name),
+                value,
+                PARAM_TIMEOUT,
+            )?)
         }
         ParamVerb::Get { node, name } => {
             let node = full(node);

@@ -87,12 +87,13 @@ where
 /// Open the lab on the real terminal: start the engine, read keys on a thread, run the
 /// loop, and always restore the terminal (ratatui's panic hook restores it on a panic).
 pub fn run_lab(
-    settings: SessionSettings,
+    mut settings: SessionSettings,
     code: watch::CodeSource,
     stop: StopFlag,
 ) -> anyhow::Result<()> {
     let (ctl_tx, ctl_rx) = unbounded::<Control>();
     let (tel_tx, tel_rx) = unbounded::<Telemetry>();
+    settings.control = Some(ctl_tx.clone());
     let mut app = App::new(
         ctl_tx.clone(),
         settings.policy.clone(),

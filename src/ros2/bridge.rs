@@ -177,7 +177,14 @@ pub struct Offer<'a> {
     /// Each node's rate, by node id, shared with the running graph: `rate_hz` as its
     /// parameter services answer it ([`super::parameters`]).
     pub rates: &'a [crate::rate::Rate],
+    /// How a node's rate is set from ROS 2 (`ros2 param set /policy rate_hz 20`): a command
+    /// to the run, by node name and Hz, as the lab's keys give it; `None`: the run takes no
+    /// commands, and `rate_hz` is read-only.
+    pub set_rate: Option<SetNodeRate>,
 }
+
+/// Set node `name`'s rate to `hz` as a command to the run ([`Offer::set_rate`]).
+pub type SetNodeRate = Arc<dyn Fn(&str, f64) -> Result<(), String> + Send + Sync>;
 
 impl<'a> Offer<'a> {
     /// The whole graph behind `h`, in one process, with `/clock`.
@@ -189,6 +196,7 @@ impl<'a> Offer<'a> {
             local: None,
             clock: true,
             rates: &h.rates,
+            set_rate: None,
         }
     }
 
@@ -491,7 +499,11 @@ impl Bridge {
         // What every ROS 2 node declares besides its topics (`super::node_api`).
         let mut apis = Vec::new();
         for (i, n) in &own {
-            let params = NodeParameters::of(&spec.nodes[*i], offer.rates.get(*i));
+            let set_rate = offer.set_rate.clone().map(|set| {
+                let name = spec.nodes[*i].name.clone();
+                std::sync::Arc::new(move |hz| set(&name, hz)) as super::parameters::SetRate
+            });
+            let params = NodeParameters::of(&spec.nodes[*i], offer.rates.get(*i), set_rate);
             let types = node_types(spec, Some(NodeId(*i)));
             for why in &params.left_out {
                 let name = &spec.nodes[*i].name;

@@ -121,6 +121,94 @@ pub fn get(
     Ok(r.values.into_iter().next())
 }
 
+/// A value as `ros2 param set` reads it from the command line: YAML (`20` an INTEGER,
+/// `20.0` a DOUBLE, `true` a BOOL, `[1, 2]` an INTEGER_ARRAY, anything else a STRING).
+///
+/// # Errors
+/// One line for a YAML value ROS 2 has no type for (a map, a mixed or nested list).
+pub fn value_from_text(text: &str) -> Result<ParameterValue, String> {
+    use serde_yaml::Value as Y;
+    let y: Y = serde_yaml::from_str(text).unwrap_or_else(|_| Y::String(text.to_string()));
+    let mut v = ParameterValue::default();
+    let ints = |s: &[Y]| s.iter().map(Y::as_i64).collect::<Option<Vec<_>>>();
+    let floats = |s: &[Y]| s.iter().map(Y::as_f64).collect::<Option<Vec<_>>>();
+    let bools = |s: &[Y]| s.iter().map(Y::as_bool).collect::<Option<Vec<_>>>();
+    let strings = |s: &[Y]| {
+        s.iter()
+            .map(|x| x.as_str().map(str::to_string))
+            .collect::<Option<Vec<_>>>()
+    };
+    match y {
+        Y::Bool(b) => (v.type_, v.bool_value) = (pt::BOOL, b),
+        Y::Number(n) if n.is_i64() => {
+            (v.type_, v.integer_value) = (pt::INTEGER, n.as_i64().unwrap_or(0))
+        }
+        Y::Number(n) => (v.type_, v.double_value) = (pt::DOUBLE, n.as_f64().unwrap_or(f64::NAN)),
+        Y::String(s) => (v.type_, v.string_value) = (pt::STRING, s),
+        Y::Null => (v.type_, v.string_value) = (pt::STRING, text.to_string()),
+        Y::Sequence(s) if !s.is_empty() => {
+            if let Some(b) = bools(&s) {
+                (v.type_, v.bool_array_value) = (pt::BOOL_ARRAY, b);
+            } else if let Some(i) = ints(&s) {
+                (v.type_, v.integer_array_value) = (pt::INTEGER_ARRAY, i);
+            } else if let Some(x) = floats(&s) {
+                (v.type_, v.double_array_value) = (pt::DOUBLE_ARRAY, x);
+            } else if let Some(t) = strings(&s) {
+                (v.type_, v.string_array_value) = (pt::STRING_ARRAY, t);
+            } else {
+                return Err("a list of mixed or nested values has no ROS 2 type".into());
+            }
+        }
+        _ => {
+            return Err(format!(
+                "'{}' has no ROS 2 type",
+                crate::text::printable(text)
+            ))
+        }
+    }
+    Ok(v)
+}
+
+/// `node`'s parameter `name` set to `value` (`set_parameters`): what `ros2 param set`
+/// prints, `Set parameter successful`.
+///
+/// # Errors
+/// [`call`]'s; `Setting parameter failed: REASON` when the node refused.
+pub fn set(
+    session: &zenoh::Session,
+    domain: u32,
+    (node, name): (&str, &str),
+    value: ParameterValue,
+    timeout: Duration,
+) -> Result<String, Ros2Error> {
+    use super::rcl_interfaces::{Parameter, SetParametersResponse, SetRequest};
+    let req = SetRequest {
+        parameters: vec![Parameter {
+            name: name.to_string(),
+            value,
+        }],
+    };
+    let service = ParameterService::Set.service_type();
+    let bytes = call(session, domain, node, service, &req, timeout)?;
+    let r: SetParametersResponse = from_cdr(&bytes, MAX_ROS_MESSAGE_BYTES)
+        .map_err(|e| Ros2Error::Usage(format!("{node}: set_parameters answered {e}")))?;
+    let with = |what: &str, reason: &str| {
+        if reason.is_empty() {
+            what.to_string()
+        } else {
+            format!("{what}: {}", crate::text::printable(reason))
+        }
+    };
+    match r.results.first() {
+        Some(res) if res.successful => Ok(with("Set parameter successful", &res.reason) + "\n"),
+        Some(res) => Err(Ros2Error::Usage(with(
+            "Setting parameter failed",
+            &res.reason,
+        ))),
+        None => Err(Ros2Error::Usage("Setting parameter failed".into())),
+    }
+}
+
 /// `x` as Python's `repr` writes it (`50.0`, `1e-05`, `nan`), which `ros2 param get`
 /// prints.
 fn python_float(x: f64) -> String {
@@ -327,6 +415,21 @@ mod tests {
             get_text(Some(&odd)),
             Err("Unknown parameter type '42'".into())
         );
+    }
+
+    #[test]
+    fn a_value_is_read_as_ros2_param_set_reads_it() {
+        let ty = |t: &str| value_from_text(t).map(|v| v.type_);
+        assert_eq!(ty("20"), Ok(pt::INTEGER));
+        assert_eq!(ty("20.0"), Ok(pt::DOUBLE));
+        assert_eq!(ty("true"), Ok(pt::BOOL));
+        assert_eq!(ty("calm"), Ok(pt::STRING));
+        assert_eq!(ty("[1, 2]"), Ok(pt::INTEGER_ARRAY));
+        assert_eq!(ty("[1.5, 2]"), Ok(pt::DOUBLE_ARRAY));
+        assert_eq!(ty("[a, b]"), Ok(pt::STRING_ARRAY));
+        assert!(ty("{a: 1}").is_err());
+        assert!(ty("[1, [2]]").is_err());
+        assert_eq!(value_from_text("20.5").unwrap().double_value, 20.5);
     }
 
     #[test]

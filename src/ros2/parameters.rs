@@ -9,9 +9,10 @@
 //! - `use_sim_time` (`BOOL`), which every ROS 2 node has: `true`, since a ratelab node's
 //!   time is the run's, the time `/clock` carries.
 //!
-//! All are read-only over ROS 2: a rate changed from outside would not be in the run's
-//! session log, and a virtual-clock run would no longer replay. `set_parameters` answers
-//! so, parameter by parameter.
+//! They are read-only over ROS 2, but one: `rate_hz`, which the lab's keys change, can be
+//! set where the run takes commands (the lab): a set is handed to the run as the key's
+//! command would be ([`SetRate`]), so the run's session log has it and a virtual-clock run
+//! still replays. `set_parameters` answers each parameter, with the reason when not.
 //!
 //! The services answer as rclcpp's `ParameterService` does in Jazzy and later (`rclcpp/src/
 //! rclcpp/node_interfaces/node_parameters.cpp`, `parameter_service.cpp`; rclpy's agree):
@@ -41,6 +42,9 @@ const SEPARATOR: char = '.';
 /// How deep a `params` table may nest before its deeper keys are left out of ROS 2's view.
 const MAX_NESTING: usize = 16;
 
+/// Set a node's rate, Hz, as the lab's keys do (a command to the run); `Err`: why not.
+pub type SetRate = std::sync::Arc<dyn Fn(f64) -> Result<(), String> + Send + Sync>;
+
 /// One parameter's value: fixed (the graph file's), or the node's rate as it is now.
 #[derive(Clone, Debug)]
 enum Value {
@@ -58,13 +62,25 @@ impl Value {
 }
 
 /// A node's parameters (module header), by name.
-#[derive(Clone, Debug)]
+#[derive(Clone)]
 pub struct NodeParameters {
     /// The node's fully qualified name (`/policy`).
     pub node: String,
     params: BTreeMap<String, Value>,
+    /// How its rate is set (`None`: the run takes no commands).
+    set_rate: Option<SetRate>,
     /// What the node's `params` held that ROS 2 has no type for (`key: why`), one each.
     pub left_out: Vec<String>,
+}
+
+impl std::fmt::Debug for NodeParameters {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("NodeParameters")
+            .field("node", &self.node)
+            .field("params", &self.params.keys().collect::<Vec<_>>())
+            .field("rate_settable", &self.set_rate.is_some())
+            .finish()
+    }
 }
 
 fn double(x: f64) -> ParameterValue {
@@ -138,11 +154,12 @@ fn from_toml(v: &toml::Value) -> Result<ParameterValue, &'static str> {
 
 impl NodeParameters {
     /// The parameters of node `spec`, whose rate is `rate` (shared with the running
-    /// graph: read when asked).
-    pub fn of(spec: &NodeSpec, rate: Option<&Rate>) -> NodeParameters {
+    /// graph: read when asked) and set by `set_rate` (`None`: read-only).
+    pub fn of(spec: &NodeSpec, rate: Option<&Rate>, set_rate: Option<SetRate>) -> NodeParameters {
         let mut p = NodeParameters {
             node: format!("/{}", spec.name),
             params: BTreeMap::new(),
+            set_rate,
             left_out: Vec::new(),
         };
         p.add_table("", &spec.params, 0);
@@ -170,6 +187,7 @@ impl NodeParameters {
         NodeParameters {
             node: format!("/{name}"),
             params,
+            set_rate: None,
             left_out: Vec::new(),
         }
     }
@@ -230,13 +248,18 @@ impl NodeParameters {
             "use_sim_time" => ("the node's time is the run's, which /clock carries", vec![]),
             _ => ("the graph file's params", vec![]),
         };
+        let settable = name == "rate_hz" && self.set_rate.is_some();
+        let constraints = if settable {
+            "set as the lab's rate keys set it: a command to the run, in its session log"
+        } else {
+            "read-only over ROS 2: set it in the graph file (rate_hz: in the lab)"
+        };
         ParameterDescriptor {
             name: name.to_string(),
             type_: value.type_,
             description: description.into(),
-            additional_constraints:
-                "read-only over ROS 2: set it in the graph file, or with the lab's keys".into(),
-            read_only: true,
+            additional_constraints: constraints.into(),
+            read_only: !settable,
             dynamic_typing: false,
             floating_point_range: range,
             integer_range: vec![],
@@ -292,11 +315,42 @@ impl NodeParameters {
         Ok(())
     }
 
+    /// Set parameter `p`, if it can be: its result.
+    fn set(&self, p: &Parameter) -> SetParametersResult {
+        let refused = |reason| SetParametersResult {
+            successful: false,
+            reason,
+        };
+        let Some(set) = self.set_rate.as_ref().filter(|_| p.name == "rate_hz") else {
+            return refused(self.refusal(&p.name));
+        };
+        let hz = match p.value.type_ {
+            pt::DOUBLE => p.value.double_value,
+            pt::INTEGER => p.value.integer_value as f64,
+            _ => {
+                return refused(format!(
+                    "{}: rate_hz is a DOUBLE (Hz), not a value of type {}",
+                    self.node, p.value.type_
+                ))
+            }
+        };
+        if let Err(e) = ratelab_core::rate::period_for_hz(hz) {
+            return refused(format!("{}: rate_hz: {e}", self.node));
+        }
+        match set(hz) {
+            Ok(()) => SetParametersResult {
+                successful: true,
+                reason: String::new(),
+            },
+            Err(e) => refused(format!("{}: rate_hz: {e}", self.node)),
+        }
+    }
+
     /// The reason `name` cannot be set over ROS 2.
     fn refusal(&self, name: &str) -> String {
         match name {
             "rate_hz" => format!(
-                "{}: rate_hz is read-only over ROS 2 (change it with the lab's keys, so that the run's session log has it)",
+                "{}: rate_hz is read-only in a run that takes no commands (in the lab, setting it changes the node's rate as its keys do)",
                 self.node
             ),
             _ if self.params.contains_key(name) => format!(
@@ -365,25 +419,31 @@ impl NodeParameters {
             }
             ParameterService::Set => {
                 let req = from_cdr::<SetRequest>(request, MAX_SERVICE_REQUEST_BYTES)?;
-                let results = req
-                    .parameters
-                    .iter()
-                    .map(|p| SetParametersResult {
-                        successful: false,
-                        reason: self.refusal(&p.name),
-                    })
-                    .collect();
+                let results = req.parameters.iter().map(|p| self.set(p)).collect();
                 cdr(&SetParametersResponse { results }, &mut out);
             }
             ParameterService::SetAtomically => {
                 let req = from_cdr::<SetRequest>(request, MAX_SERVICE_REQUEST_BYTES)?;
-                let reason = req
-                    .parameters
-                    .first()
-                    .map_or_else(|| "no parameters given".into(), |p| self.refusal(&p.name));
-                let result = SetParametersResult {
-                    successful: false,
-                    reason,
+                // All or none: each must be settable before any is set.
+                let settable = |p: &Parameter| p.name == "rate_hz" && self.set_rate.is_some();
+                let result = match req.parameters.iter().find(|p| !settable(p)) {
+                    Some(p) => SetParametersResult {
+                        successful: false,
+                        reason: self.refusal(&p.name),
+                    },
+                    None if req.parameters.is_empty() => SetParametersResult {
+                        successful: false,
+                        reason: "no parameters given".into(),
+                    },
+                    None => req
+                        .parameters
+                        .iter()
+                        .map(|p| self.set(p))
+                        .find(|r| !r.successful)
+                        .unwrap_or(SetParametersResult {
+                            successful: true,
+                            reason: String::new(),
+                        }),
                 };
                 cdr(&SetParametersAtomicallyResponse { result }, &mut out);
             }
@@ -430,7 +490,7 @@ mod tests {
         let spec = GraphSpec::parse(&text, "g.toml").unwrap();
         let mut node = spec.node(spec.node_id("policy").unwrap()).clone();
         node.params = toml::from_str(params).unwrap();
-        NodeParameters::of(&node, Some(&Rate::new(50.0).unwrap()))
+        NodeParameters::of(&node, Some(&Rate::new(50.0).unwrap()), None)
     }
 
     fn decode<'de, T: serde::Deserialize<'de>>(b: &'de [u8]) -> T {
@@ -473,7 +533,7 @@ mod tests {
     fn rate_hz_is_the_rate_now() {
         let rate = Rate::new(50.0).unwrap();
         let spec = GraphSpec::chapter();
-        let p = NodeParameters::of(&spec.nodes[1], Some(&rate));
+        let p = NodeParameters::of(&spec.nodes[1], Some(&rate), None);
         rate.set_hz(20.0).unwrap();
         let got: GetParametersResponse = decode(&ask(
             &p,
@@ -554,7 +614,7 @@ mod tests {
         let r: SetParametersResponse = decode(&ask(&p, ParameterService::Set, &set("rate_hz")));
         assert!(!r.results[0].successful);
         assert!(
-            r.results[0].reason.contains("lab's keys"),
+            r.results[0].reason.contains("takes no commands"),
             "{:?}",
             r.results
         );
@@ -563,6 +623,58 @@ mod tests {
         let r: SetParametersAtomicallyResponse =
             decode(&ask(&p, ParameterService::SetAtomically, &set("nope")));
         assert!(r.result.reason.contains("not declared"));
+    }
+
+    /// Where the run takes commands, rate_hz is set through them, checked first; every
+    /// other parameter stays read-only, and an atomic set of both sets neither.
+    #[test]
+    fn rate_hz_is_set_through_the_run_s_commands() {
+        let asked = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
+        let log = asked.clone();
+        let spec = GraphSpec::chapter();
+        let set: SetRate = std::sync::Arc::new(move |hz| {
+            log.lock().unwrap().push(hz);
+            Ok(())
+        });
+        let p = NodeParameters::of(&spec.nodes[1], None, Some(set));
+        let param = |name: &str, v: ParameterValue| Parameter {
+            name: name.into(),
+            value: v,
+        };
+        let int = |i: i64| ParameterValue {
+            type_: pt::INTEGER,
+            integer_value: i,
+            ..ParameterValue::default()
+        };
+        let req = SetRequest {
+            parameters: vec![
+                param("rate_hz", double(20.0)),
+                param("rate_hz", int(25)),
+                param("rate_hz", double(-1.0)),
+                param("rate_hz", boolean(true)),
+                param("use_sim_time", boolean(false)),
+            ],
+        };
+        let r: SetParametersResponse = decode(&ask(&p, ParameterService::Set, &req));
+        let ok: Vec<bool> = r.results.iter().map(|r| r.successful).collect();
+        assert_eq!(ok, [true, true, false, false, false], "{:?}", r.results);
+        assert!(
+            r.results[2].reason.contains("rate must be"),
+            "{:?}",
+            r.results
+        );
+        assert!(r.results[3].reason.contains("a DOUBLE"), "{:?}", r.results);
+        assert_eq!(*asked.lock().unwrap(), [20.0, 25.0]);
+        let both = SetRequest {
+            parameters: vec![
+                param("rate_hz", double(30.0)),
+                param("use_sim_time", boolean(true)),
+            ],
+        };
+        let r: SetParametersAtomicallyResponse =
+            decode(&ask(&p, ParameterService::SetAtomically, &both));
+        assert!(!r.result.successful && r.result.reason.contains("'use_sim_time' is read-only"));
+        assert_eq!(asked.lock().unwrap().len(), 2, "nothing set");
     }
 
     #[test]

@@ -186,6 +186,31 @@ fn the_lab_offers_its_graph_to_ros_2_with_the_virtual_clock_on_clock() {
         Duration::from_secs(60),
     );
     lab.wait_for("BALANCED", Duration::from_secs(10));
+    // `ros2 param set` on a node's rate is the lab's rate key: the run takes it, and
+    // `param get` and /parameter_events say the new rate.
+    let ros2 = |verb: &[&str]| {
+        let args = [&["ros2", "--connect", endpoint.as_str()][..], verb].concat();
+        crate::ros2::ratelab(&args, &[])
+    };
+    let (code, out, err) = ros2(&["param", "set", "/policy", "rate_hz", "25.0"]);
+    assert_eq!(
+        (code, out.as_str()),
+        (0, "Set parameter successful\n"),
+        "{err}"
+    );
+    let deadline = std::time::Instant::now() + Duration::from_secs(10);
+    let mut got = String::new();
+    while std::time::Instant::now() < deadline && got != "Double value is: 25.0\n" {
+        std::thread::sleep(Duration::from_millis(200));
+        got = ros2(&["param", "get", "/policy", "rate_hz"]).1;
+    }
+    assert_eq!(got, "Double value is: 25.0\n");
+    let (code, _, err) = ros2(&["param", "set", "/policy", "use_sim_time", "false"]);
+    assert_eq!(code, 2);
+    assert!(
+        err.contains("Setting parameter failed: /policy: parameter 'use_sim_time' is read-only"),
+        "{err}"
+    );
     // Quit once the header's run time has reached 2 s (not after 2 s of wall time, which
     // a slow start on a loaded machine may eat into): the stand-in has had that much.
     lab.wait_until("run time 2 s", Duration::from_secs(60), |s| {
@@ -210,6 +235,14 @@ fn the_lab_offers_its_graph_to_ros_2_with_the_virtual_clock_on_clock() {
     let clock = clock_ns(&r);
     assert!(clock.windows(2).all(|w| w[0] < w[1]));
     assert!(*clock.last().unwrap() >= 1_500_000_000, "{clock:?}");
+    let events = r["topics"]["/parameter_events"].as_array().unwrap();
+    assert!(
+        events
+            .iter()
+            .any(|e| e["node"] == "/policy"
+                && e["changed"]["rate_hz"] == serde_json::json!([3, 25.0])),
+        "{events:?}"
+    );
 }
 
 #[test]

@@ -283,6 +283,7 @@ fn the_lab_engine_warns_when_the_run_starts_not_when_it_ends() {
             force: false,
             ros2: None,
             graph_source: None,
+            control: None,
         };
         let (ctl_tx, ctl_rx) = unbounded();
         let (tel_tx, tel_rx) = unbounded::<Telemetry>();

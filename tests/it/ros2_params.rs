@@ -96,6 +96,7 @@ fn ros2_param_answers_from_the_graph_file_and_the_log_reaches_rosout() {
     let all = ros2(&["param", "list"]);
     let missing = ros2(&["param", "get", "/nobody", "x"]);
     let unset = ros2(&["param", "get", "/policy", "no_such_parameter"]);
+    let refused = ros2(&["param", "set", "/policy", "rate_hz", "20.0"]);
     let log = ros2(&["topic", "echo", "/rosout", "--once"]);
     // A subscription joining now, transient local as a ROS 2 one to /rosout is: the node's
     // first line, written seconds ago, is in its history; a volatile one has only what
@@ -122,6 +123,12 @@ fn ros2_param_answers_from_the_graph_file_and_the_log_reaches_rosout() {
     );
     assert_eq!((missing.0, missing.2.trim()), (2, "error: Node not found"));
     assert_eq!((unset.0, unset.2.trim()), (2, "error: Parameter not set"));
+    // A headless run takes no commands: its rates are read-only over ROS 2.
+    assert_eq!(refused.0, 2);
+    assert!(
+        refused.2.contains("Setting parameter failed: /policy: rate_hz is read-only in a run that takes no commands"),
+        "{refused:?}"
+    );
     assert_eq!(log.0, 0, "{log:?}");
     assert!(log.1.starts_with("stamp:\n  sec: "), "{log:?}");
     assert!(log.1.contains("\nlevel: 20\nname: "), "{log:?}");
@@ -152,7 +159,7 @@ fn ros2_param_answers_from_the_graph_file_and_the_log_reaches_rosout() {
     let reason = |i: usize| set[i]["reason"].as_str().unwrap();
     assert!(reason(0).contains("'gain' is read-only"), "{}", reason(0));
     assert!(
-        reason(3).contains("rate_hz is read-only over ROS 2"),
+        reason(3).contains("rate_hz is read-only in a run that takes no commands"),
         "{}",
         reason(3)
     );

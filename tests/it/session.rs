@@ -32,6 +32,7 @@ fn settings(
         start_paused,
         ros2: None,
         graph_source: None,
+        control: None,
         speed,
         force: false,
     }

@@ -59,6 +59,9 @@ pub struct SessionSettings {
     /// Offer each run's graph to ROS 2 through this session ([`crate::ros2`]), opened by the
     /// caller before the session starts (one session, one router, for all runs).
     pub ros2: Option<(crate::ros2::session::Ros2Session, crate::ros2::Ros2Options)>,
+    /// Where the front end's controls go (its own sender of them): a node's `rate_hz` set
+    /// from ROS 2 arrives as its rate key's command would. `None`: read-only over ROS 2.
+    pub control: Option<Sender<Control>>,
     /// Where the graph is read again when a file is saved ([`Control::Reload`]); `None`:
     /// the graph stays as it is (the compiled-in chapter's), and only brains reload.
     pub graph_source: Option<GraphSource>,
@@ -284,7 +287,18 @@ impl Engine {
                         x.name, opts.domain
                     )));
                 }
-                let offer = crate::ros2::bridge::Offer::whole(h);
+                // `ros2 param set NODE rate_hz HZ` is the lab's rate key: a command, logged.
+                let set_rate = self.settings.control.clone().map(|tx| {
+                    std::sync::Arc::new(move |node: &str, hz: f64| {
+                        let node = node.to_string();
+                        tx.send(Control::Apply(Command::SetNodeHz { node, hz }))
+                            .map_err(|_| "the lab has ended".to_string())
+                    }) as crate::ros2::bridge::SetNodeRate
+                });
+                let offer = crate::ros2::bridge::Offer {
+                    set_rate,
+                    ..crate::ros2::bridge::Offer::whole(h)
+                };
                 let stop = crate::scheduler::StopFlag::new();
                 match crate::ros2::Bridge::start(link, &offer, opts, cfg.clock, &stop) {
                     Ok(b) => {
