@@ -64,7 +64,7 @@ pub fn offered(spec: &GraphSpec) -> Offered {
         subscriptions: 0,
     });
     let every_node = format!(
-        "every node also: {} · {} · its parameter services (ros2 param)",
+        "every node also: {} · {} · parameter and type services",
         super::node_api::ROSOUT,
         super::node_api::PARAMETER_EVENTS
     );
