@@ -326,25 +326,74 @@ pub(crate) fn requested_qos_of(spec: &GraphSpec, t: usize, sub: NodeId) -> QosPr
     q
 }
 
-/// The types node `n` of `spec` uses, described: its topics' (published or read), and
-/// every node's `/rosout` and `/parameter_events` types (`None`: those alone).
-fn node_types(spec: &GraphSpec, n: Option<NodeId>) -> super::type_description::Descriptions {
-    let mut types = super::type_description::Descriptions::default();
-    for t in &spec.topics {
-        if n.is_some_and(|n| t.publisher == n || t.subscribers.contains(&n)) {
-            types.add(&ros_type_of(t.msg).description);
-        }
-    }
+/// The types each node of `spec` uses, described, by node id (and one more, last, for a
+/// node of no topic: the `/clock` node): its topics' (published or read), and every node's
+/// `/rosout` and `/parameter_events` types. One pass over the topics; hashes as computed once.
+fn node_types(spec: &GraphSpec) -> Vec<super::type_description::Descriptions> {
+    let mut types = vec![super::type_description::Descriptions::default(); spec.nodes.len() + 1];
     let known = super::echo::known();
-    for name in [
+    for d in [
         "rcl_interfaces/msg/Log",
         "rcl_interfaces/msg/ParameterEvent",
-    ] {
-        if let Some(d) = known.get(name) {
-            types.add(&d.description);
+    ]
+    .iter()
+    .filter_map(|name| known.get(*name))
+    {
+        let hash = d.hash.to_rihs_string();
+        types.iter_mut().for_each(|t| t.add(&d.description, &hash));
+    }
+    for t in &spec.topics {
+        let ty = ros_type_of(t.msg);
+        let hash = ty.hash.to_rihs_string();
+        for n in std::iter::once(&t.publisher).chain(&t.subscribers) {
+            types[n.0].add(&ty.description, &hash);
         }
     }
     types
+}
+
+/// Declare the `/rosout`, `/parameter_events`, parameter services and type descriptions
+/// ([`super::node_api`]) of `own` (by node id) and, when this bridge offers it, of the
+/// `/clock` node; what a node's `params` hold that ROS 2 has no type for goes to `notes`.
+fn declare_node_apis(
+    d: &mut Declarer<'_>,
+    offer: &Offer<'_>,
+    (own, clock_node): (&[(usize, &NodeEntity)], Option<&NodeEntity>),
+    notes: &mut Vec<String>,
+) -> Result<Vec<NodeApi>, Ros2Error> {
+    let spec = offer.spec;
+    let mut apis = Vec::new();
+    let rules = Arc::new(spec.clone());
+    let mut described = node_types(spec);
+    for &(i, n) in own {
+        // Checked by the graph's own rules first (the actuator's rate is the plant's step),
+        // so that ROS 2 is told "successful" only for what the run will take.
+        let set_rate = offer.set_rate.clone().map(|set| {
+            let (name, rules) = (spec.nodes[i].name.clone(), rules.clone());
+            Arc::new(move |hz| {
+                let node = name.clone();
+                crate::command::Command::SetNodeHz { node, hz }.validate(&rules)?;
+                set(&name, hz)
+            }) as super::parameters::SetRate
+        });
+        let params = NodeParameters::of(&spec.nodes[i], offer.rates.get(i), set_rate);
+        let name = &spec.nodes[i].name;
+        for why in &params.left_out {
+            notes.push(format!(
+                "node '{name}': parameter {why}: not offered to ROS 2"
+            ));
+        }
+        let types = std::mem::take(&mut described[i]);
+        apis.push(NodeApi::declare(d, n, (params, types), Nanos(0))?);
+    }
+    if let Some(clock_node) = clock_node {
+        let params = NodeParameters::clock_node(CLOCK_NODE);
+        let mut types = described.pop().unwrap_or_default();
+        let clock = clock_type();
+        types.add(&clock.description, &clock.hash.to_rihs_string());
+        apis.push(NodeApi::declare(d, clock_node, (params, types), Nanos(0))?);
+    }
+    Ok(apis)
 }
 
 /// `/clock`'s QoS: best effort, keep last 1.
@@ -482,9 +531,15 @@ impl Bridge {
                 );
                 outlets.push(Some(d.publisher(&mp, topic.depth)?));
             }
+            // An external node's topic reaches the graph through a plain subscriber, which
+            // asks for no history: its subscriptions announce no more than they get.
+            let from_ros = offer.external.iter().any(|p| p.node == topic.publisher);
             for &sub in topic.subscribers.iter().filter(|s| !elsewhere(**s)) {
                 let kind = EndpointKind::Subscription;
-                let own = requested_qos_of(spec, t, sub);
+                let mut own = requested_qos_of(spec, t, sub);
+                if from_ros {
+                    own.durability = QosDurability::Volatile;
+                }
                 let ms = d.endpoint(&nodes[sub.0], kind, &topic.name, ty.clone(), own);
                 subscriptions.push((ms, topic.depth));
             }
@@ -497,33 +552,8 @@ impl Bridge {
             d.token_of(ms, *depth)?;
         }
         // What every ROS 2 node declares besides its topics (`super::node_api`).
-        let mut apis = Vec::new();
-        for (i, n) in &own {
-            let set_rate = offer.set_rate.clone().map(|set| {
-                let name = spec.nodes[*i].name.clone();
-                std::sync::Arc::new(move |hz| set(&name, hz)) as super::parameters::SetRate
-            });
-            let params = NodeParameters::of(&spec.nodes[*i], offer.rates.get(*i), set_rate);
-            let types = node_types(spec, Some(NodeId(*i)));
-            for why in &params.left_out {
-                let name = &spec.nodes[*i].name;
-                notes.push(format!(
-                    "node '{name}': parameter {why}: not offered to ROS 2"
-                ));
-            }
-            apis.push(NodeApi::declare(&mut d, n, (params, types), Nanos(0))?);
-        }
-        if offer.clock {
-            let params = NodeParameters::clock_node(CLOCK_NODE);
-            let mut types = node_types(spec, None);
-            types.add(&clock_type().description);
-            apis.push(NodeApi::declare(
-                &mut d,
-                &clock_node,
-                (params, types),
-                Nanos(0),
-            )?);
-        }
+        let clock_api = offer.clock.then_some(&clock_node);
+        let apis = declare_node_apis(&mut d, offer, (&own, clock_api), &mut notes)?;
         let tokens = d.into_tokens();
 
         let bag = opts

@@ -302,11 +302,16 @@ pub fn decode_with(description: &TypeDescriptionMsg, payload: &[u8]) -> Result<V
         .chain(&d.referenced_type_descriptions)
         .map(|t| (t.type_name.as_str(), t))
         .collect();
+    // Every value decoded costs one of these: at most one per byte per level of nesting,
+    // so a description of empty or deeply repeated types cannot make a few bytes into
+    // millions of values.
+    let values = std::cell::Cell::new(body.len().saturating_mul(MAX_DEPTH + 1) + 1024);
     let seed = TypeSeed {
         types: &types,
         ty: &d.type_description,
         depth: 0,
         budget: body.len(),
+        values: &values,
     };
     let out = match (head[0], head[1]) {
         (0, 1) => hiroz_cdr::from_bytes_with::<_, hiroz_cdr::LittleEndian>(body, seed),
@@ -339,6 +344,19 @@ struct TypeSeed<'a> {
     depth: usize,
     /// The payload's length: no sequence can hold more elements.
     budget: usize,
+    /// The values the whole decode may still make.
+    values: &'a std::cell::Cell<usize>,
+}
+
+/// Take one value of the decode's allowance `values`.
+fn spend<E: serde::de::Error>(values: &std::cell::Cell<usize>) -> Result<(), E> {
+    match values.get().checked_sub(1) {
+        Some(left) => {
+            values.set(left);
+            Ok(())
+        }
+        None => Err(E::custom("more values than its bytes can hold")),
+    }
 }
 
 impl<'de> DeserializeSeed<'de> for TypeSeed<'_> {
@@ -347,6 +365,7 @@ impl<'de> DeserializeSeed<'de> for TypeSeed<'_> {
         if self.depth > MAX_DEPTH {
             return Err(D::Error::custom("nested too deep"));
         }
+        spend::<D::Error>(self.values)?;
         let n = self.ty.fields.len();
         d.deserialize_tuple(n, StructVisitor(self))
     }
@@ -368,6 +387,7 @@ impl<'de> Visitor<'de> for StructVisitor<'_> {
                 ft: &f.field_type,
                 depth: s.depth,
                 budget: s.budget,
+                values: s.values,
             };
             let v = seq
                 .next_element_seed(seed)?
@@ -385,6 +405,7 @@ struct FieldSeed<'a> {
     ft: &'a FieldTypeDescription,
     depth: usize,
     budget: usize,
+    values: &'a std::cell::Cell<usize>,
 }
 
 impl FieldSeed<'_> {
@@ -438,6 +459,9 @@ impl<'de> DeserializeSeed<'de> for One<'_> {
     fn deserialize<D: Deserializer<'de>>(self, d: D) -> Result<Value, D::Error> {
         use serde::Deserialize;
         use TypeId as T;
+        if self.base != T::NESTED_TYPE {
+            spend::<D::Error>(self.seed.values)?;
+        }
         Ok(match self.base {
             T::NESTED_TYPE => {
                 let name = self.seed.ft.nested_type_name.as_str();
@@ -451,6 +475,7 @@ impl<'de> DeserializeSeed<'de> for One<'_> {
                     ty,
                     depth: self.seed.depth + 1,
                     budget: self.seed.budget,
+                    values: self.seed.values,
                 }
                 .deserialize(d);
             }
@@ -667,6 +692,30 @@ pub fn python_yaml_float(x: f64) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A description that would make a few bytes into millions of values (types of many
+    /// fields of types of many fields, down to an empty one) is stopped by the allowance.
+    #[test]
+    fn a_description_cannot_multiply_a_few_bytes_into_millions_of_values() {
+        let name = |k: usize| format!("evil/msg/T{k}");
+        let mut types: Vec<TypeDescription> = (0..MAX_DEPTH)
+            .map(|k| {
+                let fields = (0..8)
+                    .map(|f| nested(&format!("f{f}"), &name(k + 1)))
+                    .collect();
+                describe(&name(k), fields)
+            })
+            .collect();
+        types.push(describe(&name(MAX_DEPTH), vec![]));
+        let top = types.remove(0);
+        let d = TypeDescriptionMsg {
+            type_description: top,
+            referenced_type_descriptions: types,
+        };
+        // Without the allowance this would make 8^16 values (and not return).
+        let e = decode_with(&d, &[0, 1, 0, 0]).unwrap_err();
+        assert!(e.contains("more values than its bytes can hold"), "{e}");
+    }
     use ratelab_core::ros_types::{cdr, JointState};
 
     #[test]

@@ -39,7 +39,7 @@
 
 // The layers below, under their own names (`crate::graph`, `crate::time`, …).
 use ratelab_core::{msg, output, qos, rate, text, textlog, time};
-use ratelab_runtime::{config, graph, scheduler};
+use ratelab_runtime::{command, config, graph, scheduler};
 
 pub mod bag;
 pub mod bag_reader;

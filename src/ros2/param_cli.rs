@@ -121,50 +121,70 @@ pub fn get(
     Ok(r.values.into_iter().next())
 }
 
-/// A value as `ros2 param set` reads it from the command line: YAML (`20` an INTEGER,
-/// `20.0` a DOUBLE, `true` a BOOL, `[1, 2]` an INTEGER_ARRAY, anything else a STRING).
+/// YAML 1.1's boolean words, which PyYAML (ros2cli's reader) takes as booleans.
+fn yaml11_bool(s: &str) -> Option<bool> {
+    match s {
+        "yes" | "Yes" | "YES" | "on" | "On" | "ON" | "true" | "True" | "TRUE" => Some(true),
+        "no" | "No" | "NO" | "off" | "Off" | "OFF" | "false" | "False" | "FALSE" => Some(false),
+        _ => None,
+    }
+}
+
+/// A value as `ros2 param set` reads it from the command line (ros2cli's
+/// `get_parameter_value`: PyYAML, YAML 1.1): `20` an INTEGER, `20.0` a DOUBLE (a float has a
+/// point: `1e3` is text), `true` or `yes` a BOOL, a list of one kind an array of it (`[]` a
+/// BOOL_ARRAY), anything else (text, a map, a mixed list) a STRING of the text as given.
 ///
 /// # Errors
-/// One line for a YAML value ROS 2 has no type for (a map, a mixed or nested list).
+/// One line for an integer out of `int64`'s range.
 pub fn value_from_text(text: &str) -> Result<ParameterValue, String> {
     use serde_yaml::Value as Y;
-    let y: Y = serde_yaml::from_str(text).unwrap_or_else(|_| Y::String(text.to_string()));
-    let mut v = ParameterValue::default();
-    let ints = |s: &[Y]| s.iter().map(Y::as_i64).collect::<Option<Vec<_>>>();
-    let floats = |s: &[Y]| s.iter().map(Y::as_f64).collect::<Option<Vec<_>>>();
-    let bools = |s: &[Y]| s.iter().map(Y::as_bool).collect::<Option<Vec<_>>>();
-    let strings = |s: &[Y]| {
-        s.iter()
-            .map(|x| x.as_str().map(str::to_string))
-            .collect::<Option<Vec<_>>>()
+    let mut v = ParameterValue {
+        type_: pt::STRING,
+        string_value: text.to_string(),
+        ..ParameterValue::default()
     };
+    let y: Y = serde_yaml::from_str(text).unwrap_or(Y::Null);
+    let float_text = text.contains('.') || text.to_ascii_lowercase().contains("inf");
     match y {
         Y::Bool(b) => (v.type_, v.bool_value) = (pt::BOOL, b),
-        Y::Number(n) if n.is_i64() => {
-            (v.type_, v.integer_value) = (pt::INTEGER, n.as_i64().unwrap_or(0))
+        Y::String(s) if yaml11_bool(&s).is_some() => {
+            (v.type_, v.bool_value) = (pt::BOOL, yaml11_bool(&s).unwrap_or_default());
         }
-        Y::Number(n) => (v.type_, v.double_value) = (pt::DOUBLE, n.as_f64().unwrap_or(f64::NAN)),
-        Y::String(s) => (v.type_, v.string_value) = (pt::STRING, s),
-        Y::Null => (v.type_, v.string_value) = (pt::STRING, text.to_string()),
-        Y::Sequence(s) if !s.is_empty() => {
-            if let Some(b) = bools(&s) {
-                (v.type_, v.bool_array_value) = (pt::BOOL_ARRAY, b);
-            } else if let Some(i) = ints(&s) {
-                (v.type_, v.integer_array_value) = (pt::INTEGER_ARRAY, i);
-            } else if let Some(x) = floats(&s) {
-                (v.type_, v.double_array_value) = (pt::DOUBLE_ARRAY, x);
-            } else if let Some(t) = strings(&s) {
-                (v.type_, v.string_array_value) = (pt::STRING_ARRAY, t);
-            } else {
-                return Err("a list of mixed or nested values has no ROS 2 type".into());
+        Y::Number(n) if n.is_i64() => {
+            (v.type_, v.integer_value) = (pt::INTEGER, n.as_i64().unwrap_or_default());
+        }
+        Y::Number(n) if n.is_u64() => return Err(format!("{text}: out of int64's range")),
+        Y::Number(n) if float_text => {
+            (v.type_, v.double_value) = (pt::DOUBLE, n.as_f64().unwrap_or(f64::NAN));
+        }
+        Y::Sequence(items) => {
+            let bool_of = |y: &Y| y.as_bool().or_else(|| y.as_str().and_then(yaml11_bool));
+            let all = |f: &dyn Fn(&Y) -> bool| items.iter().all(f);
+            if all(&|y| bool_of(y).is_some()) {
+                v.type_ = pt::BOOL_ARRAY;
+                v.bool_array_value = items.iter().filter_map(bool_of).collect();
+            } else if all(&|y| y.is_i64()) {
+                v.type_ = pt::INTEGER_ARRAY;
+                v.integer_array_value = items.iter().filter_map(Y::as_i64).collect();
+            } else if all(&|y| y.is_f64() && !y.is_i64() && !y.is_u64()) {
+                v.type_ = pt::DOUBLE_ARRAY;
+                v.double_array_value = items.iter().filter_map(Y::as_f64).collect();
+            } else if all(&|y| y.is_string()) {
+                v.type_ = pt::STRING_ARRAY;
+                v.string_array_value = items
+                    .iter()
+                    .filter_map(|y| y.as_str().map(str::to_string))
+                    .collect();
+            }
+            if v.type_ != pt::STRING {
+                v.string_value.clear();
             }
         }
-        _ => {
-            return Err(format!(
-                "'{}' has no ROS 2 type",
-                crate::text::printable(text)
-            ))
-        }
+        _ => {}
+    }
+    if v.type_ != pt::STRING {
+        v.string_value.clear();
     }
     Ok(v)
 }
@@ -423,12 +443,23 @@ mod tests {
         assert_eq!(ty("20"), Ok(pt::INTEGER));
         assert_eq!(ty("20.0"), Ok(pt::DOUBLE));
         assert_eq!(ty("true"), Ok(pt::BOOL));
+        assert_eq!(ty("yes"), Ok(pt::BOOL), "YAML 1.1, as PyYAML");
         assert_eq!(ty("calm"), Ok(pt::STRING));
+        assert_eq!(ty("1e3"), Ok(pt::STRING), "PyYAML's floats have a point");
         assert_eq!(ty("[1, 2]"), Ok(pt::INTEGER_ARRAY));
-        assert_eq!(ty("[1.5, 2]"), Ok(pt::DOUBLE_ARRAY));
+        assert_eq!(ty("[1.5, 2.5]"), Ok(pt::DOUBLE_ARRAY));
         assert_eq!(ty("[a, b]"), Ok(pt::STRING_ARRAY));
-        assert!(ty("{a: 1}").is_err());
-        assert!(ty("[1, [2]]").is_err());
+        assert_eq!(
+            ty("[]"),
+            Ok(pt::BOOL_ARRAY),
+            "ros2cli tests for booleans first"
+        );
+        // A mixed list, a map: the text as a STRING, as ros2cli gives it.
+        for text in ["[1.5, 2]", "{a: 1}", "[1, [2]]"] {
+            let v = value_from_text(text).unwrap();
+            assert_eq!((v.type_, v.string_value.as_str()), (pt::STRING, text));
+        }
+        assert!(value_from_text("18446744073709551615").is_err());
         assert_eq!(value_from_text("20.5").unwrap().double_value, 20.5);
     }
 

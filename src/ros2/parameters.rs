@@ -315,34 +315,50 @@ impl NodeParameters {
         Ok(())
     }
 
-    /// Set parameter `p`, if it can be: its result.
-    fn set(&self, p: &Parameter) -> SetParametersResult {
-        let refused = |reason| SetParametersResult {
-            successful: false,
-            reason,
-        };
-        let Some(set) = self.set_rate.as_ref().filter(|_| p.name == "rate_hz") else {
-            return refused(self.refusal(&p.name));
-        };
-        let hz = match p.value.type_ {
-            pt::DOUBLE => p.value.double_value,
-            pt::INTEGER => p.value.integer_value as f64,
-            _ => {
-                return refused(format!(
-                    "{}: rate_hz is a DOUBLE (Hz), not a value of type {}",
-                    self.node, p.value.type_
-                ))
-            }
-        };
-        if let Err(e) = ratelab_core::rate::period_for_hz(hz) {
-            return refused(format!("{}: rate_hz: {e}", self.node));
+    /// The rate parameter `p` sets, if it can be set: checked, not yet set.
+    fn check_set(&self, p: &Parameter) -> Result<f64, String> {
+        if p.name != "rate_hz" || self.set_rate.is_none() {
+            return Err(self.refusal(&p.name));
         }
-        match set(hz) {
+        // Its type is fixed (dynamic_typing false): as rclcpp, an INTEGER is refused.
+        if p.value.type_ != pt::DOUBLE {
+            return Err(format!(
+                "Wrong parameter type, parameter {{rate_hz}} is of type {{double}}, setting it to a value of type {} is not allowed.",
+                p.value.type_
+            ));
+        }
+        let hz = p.value.double_value;
+        ratelab_core::rate::period_for_hz(hz)
+            .map(|_| hz)
+            .map_err(|e| format!("{}: rate_hz: {e}", self.node))
+    }
+
+    /// Set the rate checked by [`NodeParameters::check_set`]: its result.
+    fn apply_set(&self, hz: f64) -> SetParametersResult {
+        let done = self
+            .set_rate
+            .as_ref()
+            .map_or(Err("read-only".to_string()), |set| set(hz));
+        match done {
             Ok(()) => SetParametersResult {
                 successful: true,
                 reason: String::new(),
             },
-            Err(e) => refused(format!("{}: rate_hz: {e}", self.node)),
+            Err(e) => SetParametersResult {
+                successful: false,
+                reason: format!("{}: rate_hz: {e}", self.node),
+            },
+        }
+    }
+
+    /// Set parameter `p`, if it can be: its result.
+    fn set(&self, p: &Parameter) -> SetParametersResult {
+        match self.check_set(p) {
+            Ok(hz) => self.apply_set(hz),
+            Err(reason) => SetParametersResult {
+                successful: false,
+                reason,
+            },
         }
     }
 
@@ -424,21 +440,21 @@ impl NodeParameters {
             }
             ParameterService::SetAtomically => {
                 let req = from_cdr::<SetRequest>(request, MAX_SERVICE_REQUEST_BYTES)?;
-                // All or none: each must be settable before any is set.
-                let settable = |p: &Parameter| p.name == "rate_hz" && self.set_rate.is_some();
-                let result = match req.parameters.iter().find(|p| !settable(p)) {
-                    Some(p) => SetParametersResult {
+                // All or none: every one checked before any is set.
+                let checked: Result<Vec<f64>, String> =
+                    req.parameters.iter().map(|p| self.check_set(p)).collect();
+                let result = match checked {
+                    Err(reason) => SetParametersResult {
                         successful: false,
-                        reason: self.refusal(&p.name),
+                        reason,
                     },
-                    None if req.parameters.is_empty() => SetParametersResult {
+                    Ok(rates) if rates.is_empty() => SetParametersResult {
                         successful: false,
                         reason: "no parameters given".into(),
                     },
-                    None => req
-                        .parameters
+                    Ok(rates) => rates
                         .iter()
-                        .map(|p| self.set(p))
+                        .map(|hz| self.apply_set(*hz))
                         .find(|r| !r.successful)
                         .unwrap_or(SetParametersResult {
                             successful: true,
@@ -657,14 +673,21 @@ mod tests {
         };
         let r: SetParametersResponse = decode(&ask(&p, ParameterService::Set, &req));
         let ok: Vec<bool> = r.results.iter().map(|r| r.successful).collect();
-        assert_eq!(ok, [true, true, false, false, false], "{:?}", r.results);
+        assert_eq!(ok, [true, false, false, false, false], "{:?}", r.results);
+        // A DOUBLE's type is fixed: an INTEGER is refused, as rclcpp refuses it.
+        let reason = |i: usize| r.results[i].reason.as_str();
         assert!(
-            r.results[2].reason.contains("rate must be"),
+            reason(1).starts_with("Wrong parameter type"),
             "{:?}",
             r.results
         );
-        assert!(r.results[3].reason.contains("a DOUBLE"), "{:?}", r.results);
-        assert_eq!(*asked.lock().unwrap(), [20.0, 25.0]);
+        assert!(reason(2).contains("rate must be"), "{:?}", r.results);
+        assert!(
+            reason(3).starts_with("Wrong parameter type"),
+            "{:?}",
+            r.results
+        );
+        assert_eq!(*asked.lock().unwrap(), [20.0]);
         let both = SetRequest {
             parameters: vec![
                 param("rate_hz", double(30.0)),
@@ -674,7 +697,17 @@ mod tests {
         let r: SetParametersAtomicallyResponse =
             decode(&ask(&p, ParameterService::SetAtomically, &both));
         assert!(!r.result.successful && r.result.reason.contains("'use_sim_time' is read-only"));
-        assert_eq!(asked.lock().unwrap().len(), 2, "nothing set");
+        // A good rate, then a bad one: neither set.
+        let bad_second = SetRequest {
+            parameters: vec![
+                param("rate_hz", double(30.0)),
+                param("rate_hz", double(-1.0)),
+            ],
+        };
+        let r: SetParametersAtomicallyResponse =
+            decode(&ask(&p, ParameterService::SetAtomically, &bad_second));
+        assert!(!r.result.successful && r.result.reason.contains("rate must be"));
+        assert_eq!(asked.lock().unwrap().len(), 1, "nothing set");
     }
 
     #[test]

@@ -70,27 +70,30 @@ pub struct Response {
     pub extra_information: Vec<KeyValue>,
 }
 
-/// The types a node describes, by name: each description and its RIHS01 hash.
+/// The types a node describes, by RIHS01 hash (as rcl's type registry looks them up).
 #[derive(Clone, Debug, Default)]
 pub struct Descriptions {
-    by_name: BTreeMap<String, (TypeDescriptionMsg, String)>,
+    by_hash: BTreeMap<String, TypeDescriptionMsg>,
 }
 
 impl Descriptions {
-    /// Describe `d` too (its hash computed from it).
-    pub fn add(&mut self, d: &TypeDescriptionMsg) {
-        let hash = hiroz_schema::calculate_hash(d).to_rihs_string();
-        let name = d.type_description.type_name.clone();
-        self.by_name.insert(name, (d.clone(), hash));
+    /// Describe `d`, whose RIHS01 hash is `hash` (computed from it by the caller, once per
+    /// type: `hiroz_schema::calculate_hash`).
+    pub fn add(&mut self, d: &TypeDescriptionMsg, hash: &str) {
+        self.by_hash.insert(hash.to_string(), d.clone());
     }
 
     /// The names described.
     pub fn names(&self) -> impl Iterator<Item = &str> {
-        self.by_name.keys().map(String::as_str)
+        self.by_hash
+            .values()
+            .map(|d| d.type_description.type_name.as_str())
     }
 
-    /// The answer to `request` (CDR with its header): the response's CDR. A type not
-    /// described here, or asked with another hash, is answered unsuccessful with the reason.
+    /// The answer to `request` (CDR with its header): the response's CDR. As rcl answers
+    /// (`rcl/src/rcl/node_type_cache.c`, `type_description_service`): the type is looked up
+    /// by its hash alone; a hash that does not parse, or of no type this node uses, is
+    /// answered unsuccessful with rcl's reason.
     ///
     /// # Errors
     /// One line when the request is too long or not the service's CDR (not answered).
@@ -103,18 +106,13 @@ impl Descriptions {
         }
         let req: Request = from_cdr(request, MAX_SERVICE_REQUEST_BYTES)?;
         let mut r = Response::default();
-        match self.by_name.get(&req.type_name) {
-            None => r.failure_reason = format!("type '{}' is not used by this node", req.type_name),
-            Some((_, hash)) if !req.type_hash.is_empty() && *hash != req.type_hash => {
-                r.failure_reason = format!(
-                    "type '{}' is used by this node with hash {hash}, not {}",
-                    req.type_name, req.type_hash
-                );
-            }
-            Some((d, _)) => {
-                r.successful = true;
-                r.type_description = d.clone();
-            }
+        if hiroz_schema::TypeHash::from_rihs_string(&req.type_hash).is_err() {
+            r.failure_reason = "Failed to parse type hash".into();
+        } else if let Some(d) = self.by_hash.get(&req.type_hash) {
+            r.successful = true;
+            r.type_description = d.clone();
+        } else {
+            r.failure_reason = "Type not currently in use by this node".into();
         }
         let mut out = Vec::new();
         cdr(&r, &mut out);
@@ -167,6 +165,15 @@ pub fn fetch(
             "MAX_DESCRIBED_TYPES",
         ));
     }
+    // A real type has at least one member (ROS 2 gives an empty one a placeholder field); a
+    // type of none decodes from no bytes at all.
+    let all = std::iter::once(&d.type_description).chain(&d.referenced_type_descriptions);
+    if let Some(empty) = all.clone().find(|t| t.fields.is_empty()) {
+        return Err(format!(
+            "its node's description has a type of no fields ('{}')",
+            crate::text::printable(&empty.type_name)
+        ));
+    }
     if d.type_description.type_name != type_name {
         return Err(format!(
             "its node described '{}' instead",
@@ -205,8 +212,8 @@ mod tests {
     fn a_node_describes_the_types_it_uses_and_no_other() {
         let mut d = Descriptions::default();
         let js = joint_state_type();
-        d.add(&js.description);
         let hash = js.hash.to_rihs_string();
+        d.add(&js.description, &hash);
         let r = ask(&d, js.name, &hash);
         assert!(r.successful, "{}", r.failure_reason);
         // What it answers hashes back to the type's hash: a client can check it.
@@ -215,16 +222,18 @@ mod tests {
             hash
         );
         assert_eq!(r.type_description.referenced_type_descriptions.len(), 2);
+        // rcl's answers: a hash that does not parse, a type of no endpoint of the node.
         let r = ask(&d, js.name, "");
-        assert!(r.successful, "an empty hash asks for the type as it is");
-        let r = ask(&d, js.name, "RIHS01_00");
-        assert!(
-            !r.successful && r.failure_reason.contains("not RIHS01_00"),
-            "{}",
-            r.failure_reason
+        assert_eq!(
+            (r.successful, r.failure_reason.as_str()),
+            (false, "Failed to parse type hash")
         );
-        let r = ask(&d, "std_msgs/msg/String", "");
-        assert!(!r.successful && r.failure_reason.contains("not used by this node"));
+        let other = crate::types::float64_type().hash.to_rihs_string();
+        let r = ask(&d, "std_msgs/msg/Float64", &other);
+        assert_eq!(
+            (r.successful, r.failure_reason.as_str()),
+            (false, "Type not currently in use by this node")
+        );
     }
 
     #[test]

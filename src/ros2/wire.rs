@@ -6,9 +6,9 @@
 //!
 //! A transient-local publisher keeps its last `depth` messages for subscriptions that join
 //! later, as rmw_zenoh_cpp's does: a Zenoh advanced publisher (`zenoh-ext`) with a cache
-//! of `depth` samples and publisher detection, which a late-joining transient-local
-//! subscription (an advanced subscriber asking for history, detecting late publishers)
-//! finds and queries.
+//! of `depth` samples and publisher detection (reliable: with sample-miss detection and a
+//! 500 ms sporadic heartbeat too), which a late-joining transient-local subscription (an
+//! advanced subscriber asking for history, detecting late publishers) finds and queries.
 
 use super::session::Ros2Session;
 use super::{zerr, Ros2Error};
@@ -223,13 +223,24 @@ impl<'a> Declarer<'a> {
         e: &EndpointEntity,
         depth: usize,
     ) -> Result<Outlet, Ros2Error> {
-        use zenoh_ext::{AdvancedPublisherBuilderExt, CacheConfig};
+        use zenoh_ext::{AdvancedPublisherBuilderExt, CacheConfig, MissDetectionConfig};
         let key = self.key(e)?;
         let declared = self.session.declare_publisher(key);
         let publisher = if e.qos.durability == QosDurability::TransientLocal {
             let cache = CacheConfig::default().max_samples(depth.max(1));
-            let p = declared.cache(cache).publisher_detection().wait();
-            Publisher::TransientLocal(p.map_err(zerr)?)
+            let p = declared.cache(cache).publisher_detection();
+            // Reliable: numbered samples and a sporadic heartbeat, as rmw_zenoh_cpp's (each
+            // publisher then has its own id in its token, and its late joiners a history of
+            // their own per publisher).
+            let p = if e.qos.reliability == hiroz_protocol::qos::QosReliability::Reliable {
+                let heartbeat = std::time::Duration::from_millis(500);
+                p.sample_miss_detection(
+                    MissDetectionConfig::default().sporadic_heartbeat(heartbeat),
+                )
+            } else {
+                p
+            };
+            Publisher::TransientLocal(p.wait().map_err(zerr)?)
         } else {
             Publisher::Volatile(declared.wait().map_err(zerr)?)
         };

@@ -180,7 +180,18 @@ fn the_lab_offers_its_graph_to_ros_2_with_the_virtual_clock_on_clock() {
     let _machine = crate::machine::alone();
     let endpoint = format!("tcp/127.0.0.1:{}", crate::distributed::free_port());
     let standin = StandIn::start("router", &endpoint, 0, &[]);
-    let lab = Lab::start_with(&["--clock", "virtual", "--ros2"], &[connect_to(&endpoint)]);
+    let dir = tempfile::tempdir().unwrap();
+    let session = dir.path().join("session.json");
+    let lab = Lab::start_with(
+        &[
+            "--clock",
+            "virtual",
+            "--ros2",
+            "--session",
+            session.to_str().unwrap(),
+        ],
+        &[connect_to(&endpoint)],
+    );
     lab.wait_for(
         &format!("ROS 2 domain 0 + /clock: via the router at {endpoint}"),
         Duration::from_secs(60),
@@ -205,6 +216,13 @@ fn the_lab_offers_its_graph_to_ros_2_with_the_virtual_clock_on_clock() {
         got = ros2(&["param", "get", "/policy", "rate_hz"]).1;
     }
     assert_eq!(got, "Double value is: 25.0\n");
+    // The graph's own rules first: the actuator's rate is the plant's step.
+    let (code, _, err) = ros2(&["param", "set", "/actuator", "rate_hz", "40.0"]);
+    assert_eq!(code, 2);
+    assert!(
+        err.contains("Setting parameter failed: /actuator: rate_hz: actuator rate 40 Hz refused"),
+        "{err}"
+    );
     let (code, _, err) = ros2(&["param", "set", "/policy", "use_sim_time", "false"]);
     assert_eq!(code, 2);
     assert!(
@@ -235,6 +253,16 @@ fn the_lab_offers_its_graph_to_ros_2_with_the_virtual_clock_on_clock() {
     let clock = clock_ns(&r);
     assert!(clock.windows(2).all(|w| w[0] < w[1]));
     assert!(*clock.last().unwrap() >= 1_500_000_000, "{clock:?}");
+    // The set is a command of the run, in its session log as the key's would be: `replay`
+    // runs it again.
+    let log: serde_json::Value = serde_json::from_slice(&std::fs::read(&session).unwrap()).unwrap();
+    let commands = &log["runs"][0]["commands"];
+    let set = &commands[0];
+    assert_eq!(
+        (&set["cmd"], &set["node"], &set["hz"]),
+        (&"set_node_hz".into(), &"policy".into(), &25.0.into()),
+        "{commands}"
+    );
     let events = r["topics"]["/parameter_events"].as_array().unwrap();
     assert!(
         events

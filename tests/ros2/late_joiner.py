@@ -2,11 +2,10 @@
 independent implementation only (PyPI `eclipse-zenoh`'s `zenoh.ext`; `rosbags` for CDR).
 Nothing here comes from ratelab.
 
-Usage: late_joiner.py ENDPOINT KEY DEPTH SECONDS [volatile]
-  Connects (client mode) to the router at ENDPOINT and subscribes to KEY for SECONDS:
-  by default as a transient-local subscription (rmw_zenoh_cpp's: an advanced subscriber
-  asking for history of at most DEPTH samples per publisher, detecting late publishers,
-  itself detectable); with `volatile`, as a plain subscriber.
+Usage: late_joiner.py ENDPOINT KEY DEPTH SECONDS
+  Connects (client mode) to the router at ENDPOINT and subscribes to KEY for SECONDS as a
+  transient-local subscription (rmw_zenoh_cpp's: an advanced subscriber asking for history
+  of at most DEPTH samples per publisher, detecting late publishers, itself detectable).
 Prints "ready" at once, then one JSON report: samples: [{t (s after subscribing), seq
 (the attachment's), msg (a Log's text, for rcl_interfaces/msg/Log), name}], errors: [...]
 """
@@ -22,7 +21,6 @@ import zenoh.ext
 from rosbags.typesys import Stores, get_typestore
 
 endpoint, key, depth, seconds = sys.argv[1], sys.argv[2], int(sys.argv[3]), float(sys.argv[4])
-volatile = sys.argv[5:] == ["volatile"]
 store = get_typestore(Stores.LATEST)
 conf = zenoh.Config()
 conf.insert_json5("mode", '"client"')
@@ -50,16 +48,13 @@ def on_sample(sample):
 
 print("ready", flush=True)
 start = time.monotonic()
-if volatile:
-    sub = session.declare_subscriber(key, on_sample)
-else:
-    sub = zenoh.ext.declare_advanced_subscriber(
-        session,
-        key,
-        on_sample,
-        history=zenoh.ext.HistoryConfig(detect_late_publishers=True, max_samples=depth),
-        subscriber_detection=True,
-    )
+sub = zenoh.ext.declare_advanced_subscriber(
+    session,
+    key,
+    on_sample,
+    history=zenoh.ext.HistoryConfig(detect_late_publishers=True, max_samples=depth),
+    subscriber_detection=True,
+)
 time.sleep(seconds)
 with lock:
     report = {"samples": list(got), "errors": list(errors)}

@@ -217,11 +217,15 @@ impl Engine {
                 }
                 Err(e) => {
                     let _ = self.tx.send(Telemetry::Error(e));
-                    // Wait for the user's decision.
-                    match self.rx.recv() {
-                        Ok(Control::Reset { next_seed }) => Next::Reset { next_seed },
-                        Ok(Control::SwitchClock) => Next::SwitchClock,
-                        _ => Next::Quit,
+                    // Wait for the user's decision (a change sent meanwhile, from ROS 2's
+                    // `param set`, is not one: it has no run to go to).
+                    loop {
+                        match self.rx.recv() {
+                            Ok(Control::Reset { next_seed }) => break Next::Reset { next_seed },
+                            Ok(Control::SwitchClock) => break Next::SwitchClock,
+                            Ok(Control::Apply(_)) => continue,
+                            _ => break Next::Quit,
+                        }
                     }
                 }
             };
