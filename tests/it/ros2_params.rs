@@ -44,7 +44,17 @@ fn ros2_param_answers_from_the_graph_file_and_the_log_reaches_rosout() {
     let chapter = std::fs::read_to_string(crate::repo("graphs/cartpole.toml")).unwrap();
     // The node goes before the topics (a `[[node]]` after `[[topic]]` tables is still a node).
     let graph = dir.path().join("g.toml");
-    std::fs::write(&graph, format!("{chapter}\n{CHATTY}")).unwrap();
+    // And a twin that says one line only, at its first reading: two /rosout publishers.
+    let twin = CHATTY
+        .replace("name = \"chatty\"", "name = \"twin\"")
+        .replace("chatty.py", "twin.py")
+        .replace(
+            "params = { gain = 2.5, mode = \"calm\", window = [1, 2, 3], on = true }",
+            "",
+        );
+    std::fs::write(&graph, format!("{chapter}\n{CHATTY}\n{twin}")).unwrap();
+    let once = CHATTY_PY.replace("self.heard % 10 == 1", "self.heard == 1");
+    std::fs::write(dir.path().join("twin.py"), once).unwrap();
     std::fs::write(dir.path().join("chatty.py"), CHATTY_PY).unwrap();
     let run = Offering::start(&[
         "--graph",
@@ -102,6 +112,12 @@ fn ros2_param_answers_from_the_graph_file_and_the_log_reaches_rosout() {
     // first line, written seconds ago, is in its history.
     let args = [endpoint.as_str(), "6/rosout/**", "1000", "1.5"];
     let kept = Oracle::start("tests/ros2/late_joiner.py", &args, "the late joiner").report();
+    // With a history of one per publisher, each node's newest line: the twin's only line,
+    // seconds old, though chatty has written since (every /rosout publisher has a numbered
+    // history of its own, as rmw_zenoh_cpp's reliable ones have; one shared history of
+    // one would hold chatty's newest alone).
+    let args = [endpoint.as_str(), "6/rosout/**", "1", "1.5"];
+    let newest = Oracle::start("tests/ros2/late_joiner.py", &args, "the late joiner").report();
     drop(run);
     assert_eq!(
         listed,
@@ -193,6 +209,14 @@ fn ros2_param_answers_from_the_graph_file_and_the_log_reaches_rosout() {
     };
     assert!(heard_first(&kept), "{kept}");
     assert_eq!(kept["errors"], json!([]));
+    let from = |node: &str| {
+        newest["samples"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .any(|s| s["name"] == node)
+    };
+    assert!(from("twin"), "{newest}");
     assert_eq!(code, 0, "{e}");
     for line in [
         "  Publishers:\n    /parameter_events: rcl_interfaces/msg/ParameterEvent\n    /rosout: rcl_interfaces/msg/Log\n",
