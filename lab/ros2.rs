@@ -268,20 +268,11 @@ fn param(
     verb: &ParamVerb,
 ) -> Result<String> {
     use ratelab::ros2::param_cli;
-    let full = |n: &str| {
-        if n.starts_with('/') {
-            n.to_string()
-        } else {
-            format!("/{n}")
-        }
-    };
-    let known = |n: &str| g.nodes.iter().any(|x| inspect::fq_name(x) == n);
+    // As ros2cli says a node the graph does not have.
+    let known = |n: &str| inspect::known_node(g, n).ok_or_else(|| anyhow!("Node not found"));
     match verb {
         ParamVerb::List { node: Some(node) } => {
-            let node = full(node);
-            if !known(&node) {
-                return Err(anyhow!("Node not found"));
-            }
+            let node = known(node)?;
             let names = param_cli::list(session, domain, &node, PARAM_TIMEOUT)?;
             Ok(param_cli::list_text(&node, &names, false))
         }
@@ -306,10 +297,7 @@ fn param(
             Ok(out)
         }
         ParamVerb::Set { node, name, value } => {
-            let node = full(node);
-            if !known(&node) {
-                return Err(anyhow!("Node not found"));
-            }
+            let node = known(node)?;
             let value = param_cli::value_from_text(value).map_err(|e| anyhow!(e))?;
             Ok(param_cli::set(
                 session,
@@ -320,10 +308,7 @@ fn param(
             )?)
         }
         ParamVerb::Get { node, name } => {
-            let node = full(node);
-            if !known(&node) {
-                return Err(anyhow!("Node not found"));
-            }
+            let node = known(node)?;
             let value = param_cli::get(session, domain, &node, name, PARAM_TIMEOUT)?;
             param_cli::get_text(value.as_ref()).map_err(|e| anyhow!(e))
         }

@@ -251,31 +251,44 @@ pub fn check_graph(spec: &GraphSpec) -> Result<(), String> {
     Ok(())
 }
 
+/// A duration as a QoS token carries it.
+fn ros_duration(d: Nanos) -> QosDuration {
+    QosDuration {
+        sec: d.0 / 1_000_000_000,
+        nsec: d.0 % 1_000_000_000,
+    }
+}
+
+/// ratelab's reliability as ROS 2's.
+fn ros_reliability(r: Reliability) -> QosReliability {
+    match r {
+        Reliability::BestEffort => QosReliability::BestEffort,
+        Reliability::Reliable => QosReliability::Reliable,
+    }
+}
+
+/// ratelab's durability as ROS 2's.
+fn ros_durability(d: crate::qos::compat::Durability) -> QosDurability {
+    match d {
+        crate::qos::compat::Durability::Volatile => QosDurability::Volatile,
+        crate::qos::compat::Durability::TransientLocal => QosDurability::TransientLocal,
+    }
+}
+
 /// The QoS topic `t` of `spec` is offered with (its publisher's token's), durability
 /// included: a transient-local topic's publisher keeps its last `depth` messages for ROS 2's
 /// late joiners too ([`super::wire`]), as it keeps them for the graph's own.
 pub(crate) fn qos_of(spec: &GraphSpec, t: usize) -> QosProfile {
     let topic = &spec.topics[t];
     let q = &topic.qos;
-    let dur = |d: Option<Nanos>| {
-        d.map_or(QosDuration::INFINITE, |d| QosDuration {
-            sec: d.0 / 1_000_000_000,
-            nsec: d.0 % 1_000_000_000,
-        })
-    };
+    let dur = |d: Option<Nanos>| d.map_or(QosDuration::INFINITE, ros_duration);
     QosProfile {
-        reliability: match q.reliability {
-            Reliability::BestEffort => QosReliability::BestEffort,
-            Reliability::Reliable => QosReliability::Reliable,
-        },
+        reliability: ros_reliability(q.reliability),
         history: match q.history {
             History::KeepLast => QosHistory::KeepLast(topic.depth),
             History::KeepAll => QosHistory::KeepAll,
         },
-        durability: match q.durability {
-            crate::qos::compat::Durability::Volatile => QosDurability::Volatile,
-            crate::qos::compat::Durability::TransientLocal => QosDurability::TransientLocal,
-        },
+        durability: ros_durability(q.durability),
         deadline: dur(q.deadline),
         lifespan: dur(q.lifespan),
         liveliness_lease_duration: dur(spec.node(topic.publisher).liveliness_lease),
@@ -288,31 +301,21 @@ pub(crate) fn qos_of(spec: &GraphSpec, t: usize) -> QosProfile {
 /// (`[topic.requested.NODE]`, `ratelab::qos::compat`), as a ROS 2 subscription announces
 /// its own requested profile and `ros2 topic info -v` lists both ends.
 pub(crate) fn requested_qos_of(spec: &GraphSpec, t: usize, sub: NodeId) -> QosProfile {
-    use crate::qos::compat::{Durability, LivelinessKind};
-    use hiroz_protocol::qos::{QosDurability, QosLiveliness};
+    use crate::qos::compat::LivelinessKind;
+    use hiroz_protocol::qos::QosLiveliness;
     let mut q = qos_of(spec, t);
     let topic = &spec.topics[t];
     let Some(r) = topic.requested.get(&spec.node(sub).name) else {
         return q;
     };
-    let dur = |d: Nanos| QosDuration {
-        sec: d.0 / 1_000_000_000,
-        nsec: d.0 % 1_000_000_000,
-    };
     if let Some(rel) = r.reliability {
-        q.reliability = match rel {
-            Reliability::BestEffort => QosReliability::BestEffort,
-            Reliability::Reliable => QosReliability::Reliable,
-        };
+        q.reliability = ros_reliability(rel);
     }
     if let Some(d) = r.durability {
-        q.durability = match d {
-            Durability::Volatile => QosDurability::Volatile,
-            Durability::TransientLocal => QosDurability::TransientLocal,
-        };
+        q.durability = ros_durability(d);
     }
     if let Some(d) = r.deadline {
-        q.deadline = dur(d);
+        q.deadline = ros_duration(d);
     }
     if let Some(l) = r.liveliness {
         q.liveliness = match l {
@@ -321,7 +324,7 @@ pub(crate) fn requested_qos_of(spec: &GraphSpec, t: usize, sub: NodeId) -> QosPr
         };
     }
     if let Some(d) = r.liveliness_lease {
-        q.liveliness_lease_duration = dur(d);
+        q.liveliness_lease_duration = ros_duration(d);
     }
     q
 }

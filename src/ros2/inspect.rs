@@ -100,20 +100,25 @@ pub fn node_list(g: &Seen) -> String {
     names.into_iter().map(|n| n + "\n").collect()
 }
 
+/// Node `node` (`/talker`, or `talker` in the root namespace) by its fully qualified name,
+/// when the graph has it.
+pub fn known_node(g: &Seen, node: &str) -> Option<String> {
+    let want = if node.starts_with('/') {
+        node.to_string()
+    } else {
+        format!("/{node}")
+    };
+    g.nodes.iter().any(|n| fq_name(n) == want).then_some(want)
+}
+
 /// `ros2 node info NODE`: its publishers, subscribers, service servers and clients with
 /// their types.
 ///
 /// # Errors
 /// One line when no node has that name (as ros2cli: `Unable to find node '/x'`).
 pub fn node_info(g: &Seen, node: &str) -> Result<String, String> {
-    let want = if node.starts_with('/') {
-        node.to_string()
-    } else {
-        format!("/{node}")
-    };
-    if !g.nodes.iter().any(|n| fq_name(n) == want) {
-        return Err(format!("Unable to find node '{}'", printable(node)));
-    }
+    let want =
+        known_node(g, node).ok_or_else(|| format!("Unable to find node '{}'", printable(node)))?;
     let of = |kind: EndpointKind| -> String {
         let mut lines: BTreeSet<String> = BTreeSet::new();
         for e in &g.endpoints {

@@ -27,12 +27,13 @@
 use super::parameters::NodeParameters;
 use super::rcl_interfaces::{self as rcl, Log, ParameterService};
 use super::type_description::Descriptions;
-use super::wire::{attachment, wall_ns, Declarer, Outlet};
+use super::wire::{attachment, read_attachment, wall_ns, Declarer, Outlet};
 use super::{zerr, Ros2Error};
 use crate::textlog::{Level, LogLine};
 use crate::time::Nanos;
 use hiroz_protocol::entity::{EndpointKind, NodeEntity};
 use hiroz_protocol::qos::{QosDuration, QosHistory, QosProfile, QosReliability};
+use ratelab_core::limits::MAX_SERVICE_REQUEST_BYTES;
 use ratelab_core::ros_types::cdr;
 use std::sync::Arc;
 use std::time::Duration;
@@ -93,88 +94,56 @@ fn level(l: Level) -> u8 {
     }
 }
 
-/// rmw_zenoh's request attachment: the sequence number and the client's GID.
-fn request_id(att: &[u8]) -> Option<(i64, [u8; 16])> {
-    if att.len() != 33 || att[16] != 16 {
-        return None;
-    }
-    let seq = i64::from_le_bytes(att[..8].try_into().ok()?);
-    Some((seq, att[17..].try_into().ok()?))
-}
+/// A service's answer to a request's CDR: the reply's CDR, or why it is not answered.
+type Answer = dyn Fn(&[u8]) -> Result<Vec<u8>, String> + Send + Sync;
 
-/// Answer `query` to service `service` from `params` (module header), on the service's
-/// own key `key` as rmw_zenoh_cpp's servers reply (a query on a wildcard is answered so
-/// too).
-fn serve(
-    query: &zenoh::query::Query,
-    (service, key): (ParameterService, &zenoh::key_expr::KeyExpr<'static>),
-    params: &NodeParameters,
-) {
-    let Some((seq, client)) = query.attachment().and_then(|a| request_id(&a.to_bytes())) else {
+/// Answer `query` with `answer`'s reply to its payload, on the service's own key `key` as
+/// rmw_zenoh_cpp's servers reply (a query on a wildcard is answered so too), with the
+/// request's sequence number and the client's GID. A request without that attachment, or
+/// longer than [`MAX_SERVICE_REQUEST_BYTES`] (checked before it is copied), or that
+/// `answer` refuses, is not answered (module header).
+fn reply(query: &zenoh::query::Query, key: &zenoh::key_expr::KeyExpr<'static>, answer: &Answer) {
+    let Some((seq, client)) = query
+        .attachment()
+        .and_then(|a| read_attachment(&a.to_bytes()))
+    else {
         return;
     };
-    let Some(payload) = query.payload() else {
+    let Some(payload) = query
+        .payload()
+        .filter(|p| p.len() <= MAX_SERVICE_REQUEST_BYTES)
+    else {
         return;
     };
-    // Bounded before it is copied: `answer` refuses what is longer.
-    if payload.len() > ratelab_core::limits::MAX_SERVICE_REQUEST_BYTES {
-        return;
-    }
-    if let Ok(reply) = params.answer(service, &payload.to_bytes()) {
+    if let Ok(bytes) = answer(&payload.to_bytes()) {
         let _ = query
-            .reply(key.clone(), reply)
+            .reply(key.clone(), bytes)
             .attachment(attachment(seq, wall_ns(), &client).to_vec())
             .wait();
     }
 }
 
-/// Declare `node`'s `~/get_type_description`, answering from `types`.
-fn describe_types(
+/// Declare service `s` of `node` (its queryable, then its SS token, with `qos` and its
+/// depth), answering with `answer` ([`reply`]).
+fn serve(
     d: &mut Declarer<'_>,
     node: &NodeEntity,
-    types: Descriptions,
+    (s, qos, depth): (rcl::ServiceType, QosProfile, usize),
+    answer: impl Fn(&[u8]) -> Result<Vec<u8>, String> + Send + Sync + 'static,
 ) -> Result<zenoh::query::Queryable<()>, Ros2Error> {
-    let s = rcl::GET_TYPE_DESCRIPTION;
-    let qos = QosProfile {
-        reliability: QosReliability::Reliable,
-        history: QosHistory::KeepLast(10),
-        ..QosProfile::default()
-    };
     let name = format!("/{}/{}", node.name, s.suffix);
-    let ss = d.endpoint(
-        node,
-        EndpointKind::Service,
-        &name,
-        rcl::type_info(s.type_name, s.hash),
-        qos,
-    );
+    let ty = rcl::type_info(s.type_name, s.hash);
+    let ss = d.endpoint(node, EndpointKind::Service, &name, ty, qos);
     let key = zenoh::key_expr::KeyExpr::try_from(d.key(&ss)?).map_err(zerr)?;
     let reply_on = key.clone();
     let q = d
         .session()
         .declare_queryable(key)
         .complete(true)
-        .callback(move |query| {
-            let Some((seq, client)) = query.attachment().and_then(|a| request_id(&a.to_bytes()))
-            else {
-                return;
-            };
-            let Some(payload) = query
-                .payload()
-                .filter(|p| p.len() <= ratelab_core::limits::MAX_SERVICE_REQUEST_BYTES)
-            else {
-                return;
-            };
-            if let Ok(reply) = types.answer(&payload.to_bytes()) {
-                let _ = query
-                    .reply(reply_on.clone(), reply)
-                    .attachment(attachment(seq, wall_ns(), &client).to_vec())
-                    .wait();
-            }
-        })
+        .callback(move |query| reply(&query, &reply_on, &answer))
         .wait()
         .map_err(zerr)?;
-    d.token_of(&ss, 10)?;
+    d.token_of(&ss, depth)?;
     Ok(q)
 }
 
@@ -209,23 +178,18 @@ impl NodeApi {
         let params = Arc::new(params);
         let mut queryables = Vec::new();
         for service in ParameterService::ALL {
-            let name = format!("/{}/{}", node.name, service.suffix());
-            let ty = rcl::type_info(service.type_name(), service.hash());
-            let ss = d.endpoint(node, EndpointKind::Service, &name, ty, parameters_qos());
-            let key = zenoh::key_expr::KeyExpr::try_from(d.key(&ss)?).map_err(zerr)?;
             let p = Arc::clone(&params);
-            let reply_on = key.clone();
-            let q = d
-                .session()
-                .declare_queryable(key)
-                .complete(true)
-                .callback(move |query| serve(&query, (service, &reply_on), &p))
-                .wait()
-                .map_err(zerr)?;
-            queryables.push(q);
-            d.token_of(&ss, 1000)?;
+            let s = (service.service_type(), parameters_qos(), 1000);
+            queryables.push(serve(d, node, s, move |req| p.answer(service, req))?);
         }
-        queryables.push(describe_types(d, node, types)?);
+        // rclcpp's `~/get_type_description` QoS: reliable, keep last 10.
+        let qos = QosProfile {
+            reliability: QosReliability::Reliable,
+            history: QosHistory::KeepLast(10),
+            ..QosProfile::default()
+        };
+        let s = (rcl::GET_TYPE_DESCRIPTION, qos, 10);
+        queryables.push(serve(d, node, s, move |req| types.answer(req))?);
         let mut api = NodeApi {
             name: node.name.clone(),
             said_rate: params.rate_hz(),
@@ -301,16 +265,6 @@ impl NodeApi {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn a_request_id_is_read_from_rmw_zenoh_s_33_bytes_only() {
-        let a = attachment(42, 7, &[3; 16]);
-        assert_eq!(request_id(&a), Some((42, [3; 16])));
-        assert_eq!(request_id(&a[..32]), None);
-        let mut wrong = a;
-        wrong[16] = 15;
-        assert_eq!(request_id(&wrong), None);
-    }
 
     /// The QoS strings a real rclpy node's tokens carry for these endpoints (the fixture).
     #[test]

@@ -228,10 +228,7 @@ impl NodeParameters {
 
     /// The node's rate now, Hz, when it has one.
     pub fn rate_hz(&self) -> Option<f64> {
-        match self.params.get("rate_hz")? {
-            Value::Rate(r) => Some(r.hz()),
-            Value::Fixed(v) => Some(v.double_value),
-        }
+        self.params.get("rate_hz").map(|v| v.now().double_value)
     }
 
     fn descriptor(&self, name: &str, v: &Value) -> ParameterDescriptor {

@@ -83,13 +83,6 @@ impl Descriptions {
         self.by_hash.insert(hash.to_string(), d.clone());
     }
 
-    /// The names described.
-    pub fn names(&self) -> impl Iterator<Item = &str> {
-        self.by_hash
-            .values()
-            .map(|d| d.type_description.type_name.as_str())
-    }
-
     /// The answer to `request` (CDR with its header): the response's CDR. As rcl answers
     /// (`rcl/src/rcl/node_type_cache.c`, `type_description_service`): the type is looked up
     /// by its hash alone; a hash that does not parse, or of no type this node uses, is

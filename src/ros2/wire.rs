@@ -71,6 +71,16 @@ pub fn attachment(seq: i64, source_ns: i64, gid: &[u8; 16]) -> [u8; 33] {
     a
 }
 
+/// What [`attachment`] wrote: the sequence number and the GID (a service request's: its
+/// client's); `None` for anything not 33 bytes laid out so.
+pub fn read_attachment(att: &[u8]) -> Option<(i64, [u8; 16])> {
+    if att.len() != 33 || att[16] != 16 {
+        return None;
+    }
+    let seq = i64::from_le_bytes(att[..8].try_into().ok()?);
+    Some((seq, att[17..].try_into().ok()?))
+}
+
 /// The wall clock, ns since the Unix epoch (rmw_zenoh's source timestamps).
 pub(crate) fn wall_ns() -> i64 {
     std::time::SystemTime::now()
@@ -265,6 +275,16 @@ mod tests {
         assert_eq!(a[8..16], (-2i64).to_le_bytes());
         assert_eq!(a[16], 16);
         assert_eq!(a[17..], [9; 16]);
+    }
+
+    #[test]
+    fn an_attachment_reads_back_from_rmw_zenoh_s_33_bytes_only() {
+        let a = attachment(42, 7, &[3; 16]);
+        assert_eq!(read_attachment(&a), Some((42, [3; 16])));
+        assert_eq!(read_attachment(&a[..32]), None);
+        let mut wrong = a;
+        wrong[16] = 15;
+        assert_eq!(read_attachment(&wrong), None);
     }
 
     #[test]

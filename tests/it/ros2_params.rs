@@ -37,13 +37,27 @@ class Chatty:
             print(f"heard {self.heard}")
 "#;
 
+/// The chapter's graph with `extra` (`[[node]]` and `[[topic]]` tables, after its own: an
+/// array of tables may go on anywhere) and the Python `scripts` it runs, written in `dir`
+/// as `g.toml`, `NAME.py`, …; the graph file.
+fn chapter_with(
+    dir: &std::path::Path,
+    extra: &str,
+    scripts: &[(&str, &str)],
+) -> std::path::PathBuf {
+    let chapter = std::fs::read_to_string(crate::repo("graphs/cartpole.toml")).unwrap();
+    let graph = dir.join("g.toml");
+    std::fs::write(&graph, format!("{chapter}\n{extra}")).unwrap();
+    for (name, code) in scripts {
+        std::fs::write(dir.join(name), code).unwrap();
+    }
+    graph
+}
+
 #[test]
 fn ros2_param_answers_from_the_graph_file_and_the_log_reaches_rosout() {
     let _alone = crate::machine::alone();
     let dir = tempfile::tempdir().unwrap();
-    let chapter = std::fs::read_to_string(crate::repo("graphs/cartpole.toml")).unwrap();
-    // The node goes before the topics (a `[[node]]` after `[[topic]]` tables is still a node).
-    let graph = dir.path().join("g.toml");
     // And a twin that says one line only, at its first reading: two /rosout publishers.
     let twin = CHATTY
         .replace("name = \"chatty\"", "name = \"twin\"")
@@ -52,10 +66,12 @@ fn ros2_param_answers_from_the_graph_file_and_the_log_reaches_rosout() {
             "params = { gain = 2.5, mode = \"calm\", window = [1, 2, 3], on = true }",
             "",
         );
-    std::fs::write(&graph, format!("{chapter}\n{CHATTY}\n{twin}")).unwrap();
     let once = CHATTY_PY.replace("self.heard % 10 == 1", "self.heard == 1");
-    std::fs::write(dir.path().join("twin.py"), once).unwrap();
-    std::fs::write(dir.path().join("chatty.py"), CHATTY_PY).unwrap();
+    let graph = chapter_with(
+        dir.path(),
+        &format!("{CHATTY}\n{twin}"),
+        &[("chatty.py", CHATTY_PY), ("twin.py", &once)],
+    );
     let run = Offering::start(&[
         "--graph",
         graph.to_str().unwrap(),
@@ -385,10 +401,7 @@ class Beat:
 fn a_late_ros_2_subscription_gets_a_transient_local_topic_s_last_messages() {
     let _alone = crate::machine::alone();
     let dir = tempfile::tempdir().unwrap();
-    let chapter = std::fs::read_to_string(crate::repo("graphs/cartpole.toml")).unwrap();
-    let graph = dir.path().join("g.toml");
-    std::fs::write(&graph, format!("{chapter}\n{BEAT}")).unwrap();
-    std::fs::write(dir.path().join("beat.py"), BEAT_PY).unwrap();
+    let graph = chapter_with(dir.path(), BEAT, &[("beat.py", BEAT_PY)]);
     // Ticks at 0, 0.1, …, 1.4 s publish messages 1 to 15; from 1.45 s it is stalled.
     let run = Offering::start(&[
         "--graph",
