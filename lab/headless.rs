@@ -682,11 +682,11 @@ pub fn write_trace(
             r.latency.map_or_else(String::new, |l| l.0.to_string()),
             r.nonfinite.to_string(),
         ];
-        for t in r.topics.as_slice() {
+        for t in r.topics.iter() {
             row.push(t.published.to_string());
             row.push(t.dropped.to_string());
         }
-        for (t, counters) in r.topics.as_slice().iter().zip(&qos_columns) {
+        for (t, counters) in r.topics.iter().zip(&qos_columns) {
             for c in counters {
                 row.push(t.counter(*c).to_string());
             }

@@ -12,6 +12,7 @@ use crate::time::Nanos;
 use crate::topic::TopicStats;
 use serde::{Deserialize, Serialize};
 use smallvec::SmallVec;
+use std::sync::Arc;
 
 /// Told of every actuator step, on the actuator's thread (a recorder, the lab's telemetry):
 /// it must not block. `ratelab::graph::StepObserver` is one that also sees the graph built.
@@ -24,44 +25,149 @@ pub trait StepSink: Send {
 /// graphs and every shipped one have fewer.
 pub const INLINE_TOPICS: usize = 7;
 
-/// Every topic's counters at one instant, by [`TopicId`], at most [`MAX_TOPICS`] entries:
-/// inline up to [`INLINE_TOPICS`] (no allocation per actuator step for the graphs of the
-/// chapter), on the heap past them.
-#[derive(Clone, Debug, Default, PartialEq, Eq)]
+/// Topics per shared block of a large graph's [`TopicCounters`]: a clone shares every block,
+/// and changing one topic's counters copies only its block (64 × `TopicStats`, 8 KiB).
+pub const COUNTER_BLOCK: usize = 64;
+
+/// Every topic's counters at one instant, by [`TopicId`], at most [`MAX_TOPICS`] entries.
+///
+/// Up to [`INLINE_TOPICS`] they are inline (no allocation per actuator step for the graphs
+/// of the chapter). Past them they are kept in blocks of [`COUNTER_BLOCK`] shared between
+/// clones (copy on write), so that a step record of a graph of thousands of topics, of which
+/// a few changed since the last step, costs a block or two and not a copy of them all: an
+/// idle topic costs next to nothing (issue 51; `BENCHMARKS.md`, "Graphs of any size").
+#[derive(Clone, Debug, Default)]
 pub struct TopicCounters {
-    stats: SmallVec<[TopicStats; INLINE_TOPICS]>,
+    repr: Repr,
+}
+
+#[derive(Clone, Debug)]
+// Inline on purpose: the chapter's graphs must not allocate per actuator step.
+#[allow(clippy::large_enum_variant)]
+enum Repr {
+    Inline(SmallVec<[TopicStats; INLINE_TOPICS]>),
+    /// `len` topics in blocks of [`COUNTER_BLOCK`] (the last may be shorter).
+    Blocks {
+        len: usize,
+        blocks: Vec<Arc<Vec<TopicStats>>>,
+    },
+}
+
+impl Default for Repr {
+    fn default() -> Self {
+        Repr::Inline(SmallVec::new())
+    }
 }
 
 impl FromIterator<TopicStats> for TopicCounters {
     /// From each topic's stats, in [`TopicId`] order (entries past [`MAX_TOPICS`] are ignored;
     /// a validated graph has no more).
     fn from_iter<I: IntoIterator<Item = TopicStats>>(stats: I) -> Self {
+        let mut it = stats.into_iter().take(MAX_TOPICS);
+        let head: SmallVec<[TopicStats; INLINE_TOPICS]> = it.by_ref().take(INLINE_TOPICS).collect();
+        let Some(next) = it.next() else {
+            return TopicCounters {
+                repr: Repr::Inline(head),
+            };
+        };
+        let all: Vec<TopicStats> = head
+            .into_iter()
+            .chain(std::iter::once(next))
+            .chain(it)
+            .collect();
+        let blocks: Vec<Arc<Vec<TopicStats>>> = all
+            .chunks(COUNTER_BLOCK)
+            .map(|c| Arc::new(c.to_vec()))
+            .collect();
         TopicCounters {
-            stats: stats.into_iter().take(MAX_TOPICS).collect(),
+            repr: Repr::Blocks {
+                len: all.len(),
+                blocks,
+            },
         }
     }
 }
 
+impl PartialEq for TopicCounters {
+    fn eq(&self, other: &Self) -> bool {
+        self.len() == other.len() && self.iter().eq(other.iter())
+    }
+}
+
+impl Eq for TopicCounters {}
+
 impl TopicCounters {
     /// Topic `id`'s counters (zeros for an id past the end).
     pub fn get(&self, id: TopicId) -> TopicStats {
-        self.as_slice().get(id.0).copied().unwrap_or_default()
+        match &self.repr {
+            Repr::Inline(v) => v.get(id.0).copied(),
+            Repr::Blocks { blocks, .. } => blocks
+                .get(id.0 / COUNTER_BLOCK)
+                .and_then(|b| b.get(id.0 % COUNTER_BLOCK))
+                .copied(),
+        }
+        .unwrap_or_default()
     }
-    /// All of them, by [`TopicId`].
-    pub fn as_slice(&self) -> &[TopicStats] {
-        &self.stats
+
+    /// How many topics it holds.
+    pub fn len(&self) -> usize {
+        match &self.repr {
+            Repr::Inline(v) => v.len(),
+            Repr::Blocks { len, .. } => *len,
+        }
     }
-    /// Replace topic `id`'s counters (an id past the end is ignored).
+
+    /// True for a graph of no topics.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// Every topic's counters, by [`TopicId`].
+    pub fn iter(&self) -> impl Iterator<Item = &TopicStats> + '_ {
+        let (inline, blocks): (&[TopicStats], &[Arc<Vec<TopicStats>>]) = match &self.repr {
+            Repr::Inline(v) => (v, &[]),
+            Repr::Blocks { blocks, .. } => (&[], blocks),
+        };
+        inline.iter().chain(blocks.iter().flat_map(|b| b.iter()))
+    }
+
+    /// Bytes of counters on the heap, counted as if no block were shared with another
+    /// clone (0 up to [`INLINE_TOPICS`]): an upper bound, what a front end that keeps step
+    /// records counts against its budget (`ratelab::telemetry`).
+    pub fn heap_bytes(&self) -> usize {
+        match &self.repr {
+            Repr::Inline(_) => 0,
+            Repr::Blocks { len, blocks } => {
+                blocks.len() * std::mem::size_of::<Arc<Vec<TopicStats>>>()
+                    + len * std::mem::size_of::<TopicStats>()
+            }
+        }
+    }
+
+    /// Replace topic `id`'s counters (an id past the end is ignored). In a large graph this
+    /// copies the topic's block first when a clone still shares it.
     pub fn set(&mut self, id: TopicId, stats: TopicStats) {
-        if let Some(s) = self.stats.get_mut(id.0) {
+        let slot = match &mut self.repr {
+            Repr::Inline(v) => v.get_mut(id.0),
+            Repr::Blocks { blocks, .. } => blocks
+                .get_mut(id.0 / COUNTER_BLOCK)
+                .and_then(|b| Arc::make_mut(b).get_mut(id.0 % COUNTER_BLOCK)),
+        };
+        if let Some(s) = slot {
             *s = stats;
         }
     }
 }
 
 impl Serialize for TopicCounters {
+    /// A list of every topic's counters, by [`TopicId`] (the same bytes whatever the layout).
     fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
-        self.as_slice().serialize(s)
+        use serde::ser::SerializeSeq;
+        let mut seq = s.serialize_seq(Some(self.len()))?;
+        for stats in self.iter() {
+            seq.serialize_element(stats)?;
+        }
+        seq.end()
     }
 }
 
@@ -79,14 +185,14 @@ impl<'de> Deserialize<'de> for TopicCounters {
                 self,
                 mut seq: A,
             ) -> Result<TopicCounters, A::Error> {
-                let mut c = TopicCounters::default();
+                let mut all: Vec<TopicStats> = Vec::new();
                 while let Some(s) = seq.next_element::<TopicStats>()? {
-                    if c.stats.len() == MAX_TOPICS {
+                    if all.len() == MAX_TOPICS {
                         return Err(serde::de::Error::invalid_length(MAX_TOPICS + 1, &self));
                     }
-                    c.stats.push(s);
+                    all.push(s);
                 }
-                Ok(c)
+                Ok(all.into_iter().collect())
             }
         }
         d.deserialize_seq(Bounded)
@@ -222,6 +328,60 @@ impl RunLog {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    fn stats(published: u64) -> TopicStats {
+        TopicStats {
+            published,
+            depth: 1,
+            ..TopicStats::default()
+        }
+    }
+
+    #[test]
+    fn counters_of_a_large_graph_share_their_blocks_and_copy_only_the_one_that_changes() {
+        let n = 3 * COUNTER_BLOCK + 5;
+        let mut a: TopicCounters = (0..n as u64).map(stats).collect();
+        let b = a.clone();
+        a.set(TopicId(COUNTER_BLOCK + 1), stats(999));
+        let (Repr::Blocks { blocks: ab, .. }, Repr::Blocks { blocks: bb, .. }) = (&a.repr, &b.repr)
+        else {
+            panic!("past INLINE_TOPICS the counters are in blocks");
+        };
+        let shared: Vec<bool> = ab.iter().zip(bb).map(|(x, y)| Arc::ptr_eq(x, y)).collect();
+        assert_eq!(shared, [true, false, true, true]);
+        assert_eq!(a.get(TopicId(COUNTER_BLOCK + 1)), stats(999));
+        assert_eq!(
+            b.get(TopicId(COUNTER_BLOCK + 1)),
+            stats(COUNTER_BLOCK as u64 + 1)
+        );
+        assert_eq!(a.len(), n);
+        assert_eq!(a.iter().count(), n);
+        assert_eq!(a.get(TopicId(n)), TopicStats::default(), "past the end");
+        assert_ne!(a, b);
+        a.set(TopicId(COUNTER_BLOCK + 1), stats(COUNTER_BLOCK as u64 + 1));
+        assert_eq!(a, b);
+        assert!(a.heap_bytes() >= n * std::mem::size_of::<TopicStats>());
+    }
+
+    #[test]
+    fn counters_read_and_write_as_the_list_they_always_were() {
+        for n in [0, 3, INLINE_TOPICS, INLINE_TOPICS + 1, 200] {
+            let list: Vec<TopicStats> = (0..n as u64).map(stats).collect();
+            let counters: TopicCounters = list.iter().copied().collect();
+            assert_eq!(counters.iter().copied().collect::<Vec<_>>(), list);
+            assert_eq!(
+                postcard::to_allocvec(&counters).unwrap(),
+                postcard::to_allocvec(&list).unwrap()
+            );
+            let json = serde_json::to_string(&counters).unwrap();
+            assert_eq!(json, serde_json::to_string(&list).unwrap());
+            let back: TopicCounters = serde_json::from_str(&json).unwrap();
+            assert_eq!(back, counters);
+        }
+        let too_many: Vec<TopicStats> = vec![TopicStats::default(); MAX_TOPICS + 1];
+        let bytes = postcard::to_allocvec(&too_many).unwrap();
+        assert!(postcard::from_bytes::<TopicCounters>(&bytes).is_err());
+    }
 
     #[test]
     fn run_log_accounts_falls_once() {

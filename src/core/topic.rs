@@ -33,7 +33,8 @@ use crate::qos::{Delivery, History, Link, QosCounter, Reliability, TopicQos, MAX
 use crate::time::Nanos;
 use rand_distr::{Bernoulli, Distribution, Uniform};
 use std::collections::VecDeque;
-use std::sync::{Mutex, MutexGuard, OnceLock};
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, Mutex, MutexGuard, OnceLock};
 
 /// One published value.
 #[derive(Clone, Debug, PartialEq)]
@@ -428,6 +429,58 @@ impl<T> Inner<T> {
     }
 }
 
+/// One counter per topic of a graph, side by side, where the topics' queues count their
+/// changes ([`Subscription::watch_changes`]): a watcher reads thousands of them in one pass
+/// over contiguous memory instead of visiting each topic.
+#[derive(Clone, Debug)]
+pub struct ChangeBoard(Arc<[AtomicU64]>);
+
+impl ChangeBoard {
+    /// `n` counters at zero.
+    pub fn new(n: usize) -> Self {
+        Self((0..n).map(|_| AtomicU64::new(0)).collect())
+    }
+
+    /// Counter `i`, to hand to a queue (`None` past the end).
+    pub fn slot(&self, i: usize) -> Option<ChangeSlot> {
+        (i < self.0.len()).then(|| ChangeSlot {
+            board: self.clone(),
+            index: i,
+        })
+    }
+
+    /// Every counter's count, in order.
+    #[inline]
+    pub fn counts(&self) -> impl Iterator<Item = u64> + '_ {
+        self.0.iter().map(|c| c.load(Ordering::Relaxed))
+    }
+}
+
+/// One counter of a [`ChangeBoard`].
+#[derive(Clone, Debug)]
+pub struct ChangeSlot {
+    board: ChangeBoard,
+    index: usize,
+}
+
+impl ChangeSlot {
+    fn bump(&self) {
+        // Relaxed is enough: the count is moved under the queue's lock, and a watcher takes
+        // that lock to read the counters.
+        self.board.0[self.index].fetch_add(1, Ordering::Relaxed);
+    }
+}
+
+/// A [`Subscription`]'s queue, locked to be read only ([`Subscription::peek`]).
+struct Peek<'a, T>(MutexGuard<'a, Inner<T>>);
+
+impl<T> std::ops::Deref for Peek<'_, T> {
+    type Target = Inner<T>;
+    fn deref(&self) -> &Inner<T> {
+        &self.0
+    }
+}
+
 /// A [`Subscription`]'s state at an instant ([`Subscription::save`]).
 #[derive(Clone)]
 pub struct TopicState<T>(Inner<T>);
@@ -438,6 +491,9 @@ pub struct TopicState<T>(Inner<T>);
 pub struct Subscription<T> {
     name: String,
     inner: Mutex<Inner<T>>,
+    /// Where operations that may change the queue are counted, once someone watches
+    /// ([`Subscription::watch_changes`]); unwatched, nothing is counted.
+    changes: OnceLock<ChangeSlot>,
     /// The taps, in the order they were added (none: the lock is never made).
     taps: OnceLock<Mutex<Vec<Tap<T>>>>,
 }
@@ -501,6 +557,7 @@ impl<T: Clone> Subscription<T> {
                 last_arrival: Nanos::ZERO,
                 now: Nanos::ZERO,
             }),
+            changes: OnceLock::new(),
             taps: OnceLock::new(),
         })
     }
@@ -509,7 +566,7 @@ impl<T: Clone> Subscription<T> {
     /// generator, counters and timers), for a capture of the run (`ratelab::runcore`). Its
     /// name and taps are not state: they stay as they are.
     pub fn save(&self) -> TopicState<T> {
-        TopicState(self.lock().clone())
+        TopicState(self.peek().clone())
     }
 
     /// Put back what [`Subscription::save`] gave: the queue is as it was then.
@@ -540,10 +597,32 @@ impl<T: Clone> Subscription<T> {
         &self.name
     }
 
+    /// The queue, to change it: counted in its [`ChangeSlot`], if watched.
     fn lock(&self) -> MutexGuard<'_, Inner<T>> {
         // A panic elsewhere cannot leave the buffer half-updated (every update is a
-        // single push/pop plus counters), so a poisoned lock is still consistent.
-        self.inner.lock().unwrap_or_else(|e| e.into_inner())
+        // single push/pop plus counters), so a poisoned lock is still consistent. Counted
+        // under the lock, before the change: a watcher that read the old count takes the
+        // lock after this change or before it, and in both cases looks again next time.
+        let inner = self.inner.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some(slot) = self.changes.get() {
+            slot.bump();
+        }
+        inner
+    }
+
+    /// The queue, to read it only (never counted as a change).
+    fn peek(&self) -> Peek<'_, T> {
+        Peek(self.inner.lock().unwrap_or_else(|e| e.into_inner()))
+    }
+
+    /// Count from now on, in `slot`, every operation that may change the queue or its
+    /// counters (publish, read, arrival, QoS, depth, load, …), never one that only looks:
+    /// equal counts at two moments mean equal [`Subscription::stats_at`] at equal `now`
+    /// (with a deadline the counters also move with `now` alone). What lets the actuator's
+    /// step record skip a topic that did nothing. A queue is watched once: false, and
+    /// nothing changes, when it already is.
+    pub fn watch_changes(&self, slot: ChangeSlot) -> bool {
+        self.changes.set(slot).is_ok()
     }
 
     /// Publish a message at run time `stamp` (the publisher's now). Without a link it
@@ -687,7 +766,7 @@ impl<T: Clone> Subscription<T> {
 
     /// The QoS in force.
     pub fn qos(&self) -> TopicQos {
-        self.lock().qos
+        self.peek().qos
     }
 
     /// Change the QoS while running (the lab's keys). Messages already on the link keep
@@ -732,12 +811,12 @@ impl<T: Clone> Subscription<T> {
 
     /// Whether the subscription is connected to its publisher ([`Subscription::set_matched`]).
     pub fn matched(&self) -> bool {
-        self.lock().matched
+        self.peek().matched
     }
 
     /// Counters and depth as of the topic's latest operation.
     pub fn stats(&self) -> TopicStats {
-        let now = self.lock().timers().0;
+        let now = self.peek().timers().0;
         self.stats_at(now)
     }
 
@@ -745,7 +824,13 @@ impl<T: Clone> Subscription<T> {
     /// the topic: deadline periods missed up to `now` count even before the next message
     /// (ROS 2's deadline timer fires without one).
     pub fn stats_at(&self, now: Nanos) -> TopicStats {
-        let inner = self.lock();
+        self.stats_and_timing_at(now).0
+    }
+
+    /// [`Subscription::stats_at`], and whether the counters move with `now` alone (a
+    /// deadline, whose missed periods count without any operation), read under one lock.
+    pub fn stats_and_timing_at(&self, now: Nanos) -> (TopicStats, bool) {
+        let inner = self.peek();
         let (mut offered, mut requested) = (inner.offered_missed, inner.requested_missed);
         if let Some(d) = inner.qos.deadline {
             offered += deadline_misses(now.saturating_sub(inner.last_publish), d);
@@ -757,7 +842,7 @@ impl<T: Clone> Subscription<T> {
             }
             requested += deadline_misses(now.saturating_sub(last), d);
         }
-        TopicStats {
+        let stats = TopicStats {
             published: inner.published,
             dropped: inner.dropped,
             seen: inner.seen,
@@ -774,36 +859,37 @@ impl<T: Clone> Subscription<T> {
             unmatched: inner.unmatched,
             before_join: inner.before_join,
             history_on_join: inner.joined_with,
-        }
+        };
+        (stats, inner.qos.deadline.is_some())
     }
 
     /// When the last message arrived at the subscriber (0 before the first), for a deadline
     /// reaction: the actuator compares it with its deadline.
     pub fn last_arrival(&self) -> Nanos {
-        self.lock().timers().2
+        self.peek().timers().2
     }
 
     /// Buffered messages no subscriber has seen yet.
     pub fn unseen_buffered(&self) -> usize {
-        let inner = self.lock();
+        let inner = self.peek();
         inner.buf.len() - inner.first_unseen()
     }
 
     /// Messages currently buffered (≤ depth).
     pub fn buffered(&self) -> usize {
-        self.lock().buf.len()
+        self.peek().buf.len()
     }
 
     /// The newest buffered message, without reading it (the read high-water mark, and so
     /// the drop count, is unchanged). For onlookers.
     pub fn peek_newest(&self) -> Option<Message<T>> {
-        self.lock().buf.back().cloned()
+        self.peek().buf.back().cloned()
     }
 
     /// The sequence number the next publish will take (= messages published so far, with
     /// any [`Subscription::count_lost`]).
     pub fn next_seq(&self) -> u64 {
-        self.lock().next_seq
+        self.peek().next_seq
     }
 
     /// Account `n` messages published elsewhere that never reached this copy of the topic
@@ -820,7 +906,7 @@ impl<T: Clone> Subscription<T> {
     /// The buffered messages with `seq >= from`, oldest first, without reading them: the read
     /// high-water mark, and so the drop count, is unchanged. For onlookers such as a recorder.
     pub fn peek_from(&self, from: u64) -> Vec<Message<T>> {
-        self.lock()
+        self.peek()
             .buf
             .iter()
             .filter(|m| m.seq >= from)
@@ -840,6 +926,51 @@ impl<T> std::fmt::Debug for Subscription<T> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_watched_queue_counts_what_changes_it_and_never_what_only_looks() {
+        let topic = t(2);
+        let board = ChangeBoard::new(2);
+        assert!(topic.watch_changes(board.slot(1).unwrap()));
+        assert!(!topic.watch_changes(board.slot(0).unwrap()), "watched once");
+        assert!(board.slot(2).is_none());
+        let count = || board.counts().nth(1).unwrap();
+        let mut last = count();
+        let mut moved = |what: &str, expect: bool| {
+            let now = count();
+            assert_eq!(now != last, expect, "{what}");
+            last = now;
+        };
+        topic.publish(1, Nanos(10), None);
+        moved("publish", true);
+        let saved = topic.save();
+        let _ = (
+            topic.stats(),
+            topic.stats_at(Nanos(99)),
+            topic.qos(),
+            topic.matched(),
+        );
+        let _ = (
+            topic.buffered(),
+            topic.unseen_buffered(),
+            topic.peek_newest(),
+        );
+        let _ = (topic.next_seq(), topic.peek_from(0), topic.last_arrival());
+        moved("looking", false);
+        topic.read(Nanos(20));
+        moved("read", true);
+        topic.set_depth(1).unwrap();
+        moved("depth", true);
+        topic.set_qos(TopicQos::default());
+        moved("qos", true);
+        topic.set_matched(true);
+        moved("matched", true);
+        topic.count_lost(1);
+        moved("lost", true);
+        topic.load(&saved);
+        moved("load", true);
+        assert_eq!(board.counts().next(), Some(0), "the other slot never moved");
+    }
 
     #[test]
     fn a_tap_is_told_of_every_message_published_even_those_later_dropped() {

@@ -299,12 +299,11 @@ impl RecordingObserver {
         for (i, topic) in self.shape.topics.iter().enumerate() {
             // The actuator's counters at this step (deadline periods missed up to now
             // count before the next message); the topic's own as a fallback.
-            let st = s
-                .topics
-                .as_slice()
-                .get(i)
-                .copied()
-                .unwrap_or_else(|| (topic.stats)());
+            let st = if i < s.topics.len() {
+                s.topics.get(ratelab_core::ids::TopicId(i))
+            } else {
+                (topic.stats)()
+            };
             let logged = &mut self.qos_logged[i];
             for c in st.reported(&[topic.qos, (topic.live_qos)()]) {
                 if !logged.contains(&c) {

@@ -70,7 +70,7 @@ pub fn record(
         match t {
             Telemetry::Step(s) => {
                 now = now.max(s.t);
-                *crate::graph::lock(&counters) = s.topics.as_slice().to_vec();
+                *crate::graph::lock(&counters) = s.topics.iter().copied().collect();
                 if let (Some((at, newtons)), Some(c)) = (s.published, &commands) {
                     c.publish(ForceMsg { newtons }, at, None);
                 }

@@ -79,7 +79,7 @@ impl GraphState {
     ) -> GraphState {
         let log = lock(&h.log);
         GraphState {
-            topics: h.topic_stats_at(at).as_slice().to_vec(),
+            topics: h.topic_stats_at(at).iter().copied().collect(),
             topic_qos: h.topics.iter().map(AnyTopic::qos).collect(),
             subscriptions: if h.spec.topics.iter().any(|t| t.subscribers.len() > 1) {
                 h.topics
@@ -313,7 +313,7 @@ fn topic_metrics(
 ) -> std::collections::BTreeMap<String, TopicMetrics> {
     spec.topics
         .iter()
-        .zip(stats.as_slice())
+        .zip(stats.iter())
         .enumerate()
         .map(|(i, (t, s))| {
             let now_qos = st.topic_qos.get(i).copied().unwrap_or(t.qos);

@@ -194,11 +194,9 @@ impl Telemetry {
     /// grows with the graph.
     pub fn approx_bytes(&self) -> usize {
         use std::mem::size_of;
-        // Inline up to INLINE_TOPICS, on the heap past them.
-        let spilled = |c: &crate::runlog::TopicCounters| match c.as_slice().len() {
-            n if n > crate::runlog::INLINE_TOPICS => n * size_of::<crate::topic::TopicStats>(),
-            _ => 0,
-        };
+        // Counted whole, though consecutive steps share the blocks of topics that did not
+        // change: an upper bound.
+        let spilled = |c: &crate::runlog::TopicCounters| c.heap_bytes();
         size_of::<Telemetry>()
             + match self {
                 Telemetry::Step(s) => size_of::<StepRecord>() + spilled(&s.topics),

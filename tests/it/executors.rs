@@ -286,7 +286,7 @@ fn an_executor_switched_live_applies_from_its_instant_and_replays_the_same() {
         trace
             .iter()
             .find(|s| s.t.0 >= t_ns)
-            .map(|s| s.topics.as_slice()[0].published)
+            .map(|s| s.topics.get(ratelab::ids::TopicId(0)).published)
             .unwrap()
     };
     assert_eq!(published_at(1_000_000_000), 51, "50 Hz before the switch");

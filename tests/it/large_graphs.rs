@@ -133,6 +133,31 @@ fn every_bound_refuses_in_one_line_naming_it() {
     ] {
         assert_one_line_exit_2(&o, needle);
     }
+    // More topics than MAX_TOPICS: the 65,537th is the culprit, wherever the tables are.
+    let wide = path("wide.toml");
+    let mut topics = chapter.clone();
+    for i in 2..=ratelab::limits::MAX_TOPICS {
+        topics.push_str(&format!(
+            "[[topic]]\nname = \"/t{i}\"\ntype = \"state\"\ndepth = 1\n"
+        ));
+    }
+    // The culprit's table starts on the line above its name (lines count from 1).
+    let culprit = topics
+        .lines()
+        .position(|l| l == "name = \"/t65536\"")
+        .unwrap();
+    std::fs::write(&wide, topics).unwrap();
+    let o = ratelab(&["run", "--graph", &wide, "--clock", "virtual"]);
+    for needle in [
+        &format!("wide.toml:{culprit}:1: "),
+        "a graph has at most 65536 topics",
+        "ratelab::limits::MAX_TOPICS",
+    ] {
+        assert_one_line_exit_2(&o, needle);
+    }
+    // A run longer than MAX_DURATION_S (ten years of run time).
+    let o = ratelab(&["run", "--clock", "virtual", "--duration", "1e9"]);
+    assert_one_line_exit_2(&o, "ratelab::limits::MAX_DURATION_S");
     // A Python node reading more than MAX_NODE_PORTS topics.
     let ports = path("ports.toml");
     let list: Vec<String> = (0..257).map(|i| format!("\"/t{i}\"")).collect();

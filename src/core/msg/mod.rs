@@ -54,7 +54,7 @@ pub use state::StateMsg;
 use crate::publisher::Outbox;
 use crate::qos::TopicQos;
 use crate::time::Nanos;
-use crate::topic::{Subscription, TopicStats, ZeroDepth};
+use crate::topic::{ChangeSlot, Subscription, TopicStats, ZeroDepth};
 use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 use std::any::{Any, TypeId};
@@ -720,6 +720,8 @@ trait ErasedTopic: Send + Sync + fmt::Debug {
     fn name(&self) -> &str;
     fn stats(&self) -> TopicStats;
     fn stats_at(&self, now: Nanos) -> TopicStats;
+    fn stats_and_timing_at(&self, now: Nanos) -> (TopicStats, bool);
+    fn watch_changes(&self, slot: &ChangeSlot) -> bool;
     fn qos(&self) -> TopicQos;
     fn set_qos(&self, qos: TopicQos);
     fn set_matched(&self, matched: bool);
@@ -775,6 +777,12 @@ impl<M: Message> ErasedTopic for Arc<Subscription<M>> {
     }
     fn stats_at(&self, now: Nanos) -> TopicStats {
         Subscription::stats_at(self, now)
+    }
+    fn stats_and_timing_at(&self, now: Nanos) -> (TopicStats, bool) {
+        Subscription::stats_and_timing_at(self, now)
+    }
+    fn watch_changes(&self, slot: &ChangeSlot) -> bool {
+        Subscription::watch_changes(self, slot.clone())
     }
     fn qos(&self) -> TopicQos {
         Subscription::qos(self)
@@ -910,6 +918,25 @@ impl<M: Message> ErasedTopic for FanOut<M> {
     }
     fn stats_at(&self, now: Nanos) -> TopicStats {
         combined(self.queues.iter().map(|q| q.stats_at(now)).collect())
+    }
+    fn stats_and_timing_at(&self, now: Nanos) -> (TopicStats, bool) {
+        let mut timed = false;
+        let all = (self.queues.iter())
+            .map(|q| {
+                let (stats, t) = q.stats_and_timing_at(now);
+                timed |= t;
+                stats
+            })
+            .collect();
+        (combined(all), timed)
+    }
+    fn watch_changes(&self, slot: &ChangeSlot) -> bool {
+        // Every queue counts in the one slot: any of them changing moves it. Each is
+        // asked, even after one refuses.
+        let watched = (self.queues.iter())
+            .filter(|q| Subscription::watch_changes(q, slot.clone()))
+            .count();
+        watched == self.queues.len()
     }
     fn qos(&self) -> TopicQos {
         self.queues[0].qos()
@@ -1115,6 +1142,19 @@ impl AnyTopic {
     /// Counters and depth at run time `now` (see [`Subscription::stats_at`]).
     pub fn stats_at(&self, now: Nanos) -> TopicStats {
         self.0.stats_at(now)
+    }
+
+    /// [`AnyTopic::stats_at`], and whether the counters move with `now` alone (see
+    /// [`Subscription::stats_and_timing_at`]).
+    pub fn stats_and_timing_at(&self, now: Nanos) -> (TopicStats, bool) {
+        self.0.stats_and_timing_at(now)
+    }
+
+    /// Count every change of any of its queues in `slot` from now on (see
+    /// [`Subscription::watch_changes`]); false when a queue was already watched, whose
+    /// changes then do not reach `slot`.
+    pub fn watch_changes(&self, slot: &ChangeSlot) -> bool {
+        self.0.watch_changes(slot)
     }
 
     /// The QoS in force.

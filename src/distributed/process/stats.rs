@@ -84,11 +84,7 @@ impl LiveStats {
     pub fn decode(bytes: &[u8]) -> Result<LiveStats, String> {
         let m: LiveStats = wire::decode_json(bytes)?;
         let bounded = m.steps.len() <= MAX_BATCH_STEPS
-            && m.steps
-                .iter()
-                .map(|s| s.topics.as_slice().len())
-                .sum::<usize>()
-                <= MAX_BATCH_STEP_COUNTERS
+            && m.steps.iter().map(|s| s.topics.len()).sum::<usize>() <= MAX_BATCH_STEP_COUNTERS
             && m.ticks.len() <= MAX_BATCH_TICKS
             && m.counters.len() <= MAX_BATCH_COUNTERS
             && m.counters.iter().all(|c| c.1 < crate::ids::MAX_TOPICS)
@@ -128,7 +124,7 @@ pub(super) struct Batch {
 impl Batch {
     fn push_step(&mut self, s: StepRecord) {
         // Steps of one graph carry as many counters each.
-        let room = MAX_BATCH_STEPS.min(MAX_BATCH_STEP_COUNTERS / s.topics.as_slice().len().max(1));
+        let room = MAX_BATCH_STEPS.min(MAX_BATCH_STEP_COUNTERS / s.topics.len().max(1));
         while self.steps.len() >= room.max(1) {
             self.steps.pop_front();
         }

@@ -5,13 +5,14 @@
 
 use crate::estimate::EstimatePoint;
 use crate::graph::kind::{typed, BuildContext, Code, KindDef, Params, Plant, Ports, Work};
+use crate::ids::TopicId;
 use crate::msg::{AnyTopic, ForceMsg, Message, StateMsg};
 use crate::node::Flow;
 use crate::plant::{lock, SharedPlant, GEAR_N};
 use crate::qos::OnDeadlineMissed;
-use crate::runlog::{RunLog, StepRecord, StepSink};
+use crate::runlog::{RunLog, StepRecord, StepSink, TopicCounters, INLINE_TOPICS};
 use crate::time::Nanos;
-use crate::topic::Subscription;
+use crate::topic::{ChangeBoard, Subscription, TopicStats};
 use std::sync::{Arc, Mutex};
 
 /// The kind: `force` in, nothing out; steps the plant (exactly one per graph).
@@ -31,7 +32,7 @@ pub fn def() -> KindDef {
             Ok(Box::new(Actuator {
                 plant: cx.plant.clone(),
                 input: typed(cx.inputs.first())?,
-                topics: cx.topics.to_vec(),
+                topics: TopicWatch::new(cx.topics.to_vec()),
                 log: cx.log.clone(),
                 observers: cx.observers.take().unwrap_or_default(),
                 held: None,
@@ -53,6 +54,64 @@ fn log(l: &Mutex<RunLog>) -> std::sync::MutexGuard<'_, RunLog> {
     l.lock().unwrap_or_else(|e| e.into_inner())
 }
 
+/// Every topic of the graph, watched for the counters of each step record. A topic is read
+/// again only when it changed since the last step (its queues count their changes on one
+/// [`ChangeBoard`]) or when its counters move with time alone (a deadline, whose missed
+/// periods count up without a message). A topic that did nothing costs one counter in a
+/// contiguous pass, and the record shares the unchanged counters with the one before
+/// ([`TopicCounters`]). Issue 51: an idle node costs next to nothing.
+pub struct TopicWatch {
+    topics: Vec<AnyTopic>,
+    board: ChangeBoard,
+    /// Per topic, when last read: its count and whether its counters move with time; `None`
+    /// to read it every step (never read yet, or its queues were watched by another).
+    read: Vec<Option<(u64, bool)>>,
+    /// Topics read every step regardless (their queues count elsewhere).
+    unwatched: Vec<bool>,
+    counters: TopicCounters,
+}
+
+impl TopicWatch {
+    /// Watch `topics`, in [`crate::ids::TopicId`] order. A graph of at most
+    /// [`INLINE_TOPICS`] topics (the chapter's) is read whole every step, as counting its
+    /// changes would cost more than it saves.
+    pub fn new(topics: Vec<AnyTopic>) -> Self {
+        let board = ChangeBoard::new(topics.len());
+        let watch = topics.len() > INLINE_TOPICS;
+        let unwatched = (0..topics.len())
+            .map(|i| {
+                !(watch
+                    && board
+                        .slot(i)
+                        .is_some_and(|slot| topics[i].watch_changes(&slot)))
+            })
+            .collect();
+        Self {
+            read: vec![None; topics.len()],
+            counters: topics.iter().map(|_| TopicStats::default()).collect(),
+            topics,
+            board,
+            unwatched,
+        }
+    }
+
+    /// Every topic's counters at run time `now`: each one what [`AnyTopic::stats_at`] gives.
+    pub fn at(&mut self, now: Nanos) -> TopicCounters {
+        // The count first: a change after it is seen next time, one before it now.
+        for (i, (read, count)) in self.read.iter_mut().zip(self.board.counts()).enumerate() {
+            if matches!(*read, Some((c, false)) if c == count) {
+                continue;
+            }
+            let (stats, timed) = self.topics[i].stats_and_timing_at(now);
+            *read = Some((count, timed || self.unwatched[i]));
+            if self.counters.get(TopicId(i)) != stats {
+                self.counters.set(TopicId(i), stats);
+            }
+        }
+        self.counters.clone()
+    }
+}
+
 /// The actuator's state.
 pub struct Actuator {
     /// The plant it steps.
@@ -60,7 +119,7 @@ pub struct Actuator {
     /// Its input.
     pub input: Arc<Subscription<ForceMsg>>,
     /// Every topic of the graph, for the per-step counters.
-    pub topics: Vec<AnyTopic>,
+    pub topics: TopicWatch,
     /// Where steps are accounted.
     pub log: Arc<Mutex<RunLog>>,
     /// Told about every step.
@@ -144,7 +203,7 @@ impl Work for Actuator {
             action: outcome.applied,
             latency: origin.map(|o| now.saturating_sub(o)),
             nonfinite,
-            topics: self.topics.iter().map(|t| t.stats_at(now)).collect(),
+            topics: self.topics.at(now),
             fell: outcome.terminated,
             estimate,
         };
@@ -157,5 +216,121 @@ impl Work for Actuator {
         } else {
             Flow::Continue
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::msg::MsgData;
+    use crate::qos::{History, Link, TopicQos};
+
+    /// Topics of every QoS that changes how counters move: the chapter's, a deadline (its
+    /// counters move with time alone), a lifespan over a lossy, delayed link, keep-all, and
+    /// a topic of three subscriptions.
+    fn topics() -> Vec<AnyTopic> {
+        let ms = Nanos::from_millis;
+        let deadline = TopicQos {
+            deadline: Some(ms(30)),
+            ..TopicQos::default()
+        };
+        let linked = TopicQos {
+            lifespan: Some(ms(45)),
+            link: Some(Link {
+                loss: 0.3,
+                delay: ms(15),
+                jitter: ms(10),
+                retransmit: ms(5),
+            }),
+            ..TopicQos::default()
+        };
+        let keep_all = TopicQos {
+            history: History::KeepAll,
+            ..TopicQos::default()
+        };
+        let t = ForceMsg::TYPE;
+        vec![
+            AnyTopic::new("/plain", t, 1).unwrap(),
+            AnyTopic::with_qos("/deadline", t, 2, deadline, 1).unwrap(),
+            AnyTopic::with_qos("/linked", t, 3, linked, 2).unwrap(),
+            AnyTopic::with_qos("/all", t, 4, keep_all, 3).unwrap(),
+            AnyTopic::with_subscriptions("/fan", t, 2, TopicQos::default(), 4, 3).unwrap(),
+        ]
+        .into_iter()
+        .chain((0..INLINE_TOPICS).map(|i| AnyTopic::new(&format!("/more_{i}"), t, 1).unwrap()))
+        .collect()
+    }
+
+    #[test]
+    fn the_watch_gives_every_topic_s_counters_at_every_step_however_they_changed() {
+        let topics = topics();
+        let mut watch = TopicWatch::new(topics.clone());
+        let mut rng = 0x2545_f491_4f6c_dd1d_u64;
+        let mut next = move |n: u64| {
+            // xorshift: a fixed sequence of operations, the same on every machine.
+            rng ^= rng << 13;
+            rng ^= rng >> 7;
+            rng ^= rng << 17;
+            rng % n
+        };
+        let mut blocks_changed = 0;
+        for step in 1..=2000u64 {
+            let now = Nanos::from_millis(step * 5);
+            // Most steps leave most topics alone; some publish, read, or change the QoS.
+            for (i, t) in topics.iter().enumerate() {
+                match next(12) {
+                    0 | 1 => {
+                        let data = MsgData::new(ForceMsg {
+                            newtons: step as f64,
+                        });
+                        t.publish(None, &data, now, Some(now)).unwrap();
+                    }
+                    2 => {
+                        let _ = t.subscription(next(3) as usize).read(now);
+                    }
+                    3 if step % 97 == 0 => t.set_depth(1 + next(4) as usize).unwrap(),
+                    4 if step % 151 == 0 && i == 0 => {
+                        let mut q = t.qos();
+                        q.deadline = q.deadline.xor(Some(Nanos::from_millis(20)));
+                        t.set_qos(q);
+                    }
+                    _ => {}
+                }
+            }
+            let before = watch.counters.clone();
+            let got = watch.at(now);
+            let want: TopicCounters = topics.iter().map(|t| t.stats_at(now)).collect();
+            assert_eq!(got, want, "step {step}");
+            blocks_changed += usize::from(before != got);
+        }
+        assert!(
+            blocks_changed > 100,
+            "the topics did change: {blocks_changed}"
+        );
+    }
+
+    #[test]
+    fn a_topic_watched_by_another_is_read_every_step() {
+        let topics = topics();
+        let first = TopicWatch::new(topics.clone());
+        let mut second = TopicWatch::new(topics.clone());
+        assert!(first.unwatched.iter().all(|&u| !u));
+        let few = TopicWatch::new(topics[..INLINE_TOPICS].to_vec());
+        assert!(
+            few.unwatched.iter().all(|&u| u),
+            "a small graph is read whole"
+        );
+        assert!(
+            second.unwatched.iter().all(|&u| u),
+            "the first watch holds every queue"
+        );
+        let data = MsgData::new(ForceMsg { newtons: 1.0 });
+        for step in 1..=3u64 {
+            let now = Nanos::from_millis(step * 20);
+            topics[0].publish(None, &data, now, None).unwrap();
+            let want: TopicCounters = topics.iter().map(|t| t.stats_at(now)).collect();
+            assert_eq!(second.at(now), want);
+        }
+        drop(first);
     }
 }
