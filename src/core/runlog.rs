@@ -26,7 +26,7 @@ pub trait StepSink: Send {
 pub const INLINE_TOPICS: usize = 7;
 
 /// Topics per shared block of a large graph's [`TopicCounters`]: a clone shares every block,
-/// and changing one topic's counters copies only its block (64 × `TopicStats`, 8 KiB).
+/// and changing one topic's counters copies only its block (64 × `TopicStats`, 8.5 KiB).
 pub const COUNTER_BLOCK: usize = 64;
 
 /// Every topic's counters at one instant, by [`TopicId`], at most [`MAX_TOPICS`] entries.
@@ -138,8 +138,11 @@ impl TopicCounters {
         match &self.repr {
             Repr::Inline(_) => 0,
             Repr::Blocks { len, blocks } => {
-                blocks.len() * std::mem::size_of::<Arc<Vec<TopicStats>>>()
-                    + len * std::mem::size_of::<TopicStats>()
+                // Each block: its pointer here, and its Arc's counts and Vec's header there.
+                let block = std::mem::size_of::<Arc<Vec<TopicStats>>>()
+                    + 2 * std::mem::size_of::<usize>()
+                    + std::mem::size_of::<Vec<TopicStats>>();
+                blocks.len() * block + len * std::mem::size_of::<TopicStats>()
             }
         }
     }

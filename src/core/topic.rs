@@ -465,8 +465,11 @@ pub struct ChangeSlot {
 
 impl ChangeSlot {
     fn bump(&self) {
-        // Relaxed is enough: the count is moved under the queue's lock, and a watcher takes
-        // that lock to read the counters.
+        // Relaxed: the watcher (the actuator) reads the count without the queue's lock. A
+        // change that happened before its step by way of anything it synchronizes with (its
+        // input's lock, the scheduler's hand-off, a process's lockstep) is seen; one made at
+        // the same moment on another thread under the real clock may be seen a step late,
+        // as reading the counters themselves at that moment would.
         self.board.0[self.index].fetch_add(1, Ordering::Relaxed);
     }
 }
@@ -601,8 +604,7 @@ impl<T: Clone> Subscription<T> {
     fn lock(&self) -> MutexGuard<'_, Inner<T>> {
         // A panic elsewhere cannot leave the buffer half-updated (every update is a
         // single push/pop plus counters), so a poisoned lock is still consistent. Counted
-        // under the lock, before the change: a watcher that read the old count takes the
-        // lock after this change or before it, and in both cases looks again next time.
+        // under the lock, before the change is made.
         let inner = self.inner.lock().unwrap_or_else(|e| e.into_inner());
         if let Some(slot) = self.changes.get() {
             slot.bump();

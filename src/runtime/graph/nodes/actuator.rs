@@ -63,10 +63,13 @@ fn log(l: &Mutex<RunLog>) -> std::sync::MutexGuard<'_, RunLog> {
 pub struct TopicWatch {
     topics: Vec<AnyTopic>,
     board: ChangeBoard,
-    /// Per topic, when last read: its count and whether its counters move with time; `None`
-    /// to read it every step (never read yet, or its queues were watched by another).
+    /// Per topic, when last read: its count and whether to read it again whatever the count
+    /// (its counters move with time, or it is unwatched); `None` before its first read.
     read: Vec<Option<(u64, bool)>>,
-    /// Topics read every step regardless (their queues count elsewhere).
+    /// Topics whose changes are not counted on the board, read every step: all of a graph of
+    /// at most [`INLINE_TOPICS`], and those whose queues another watch holds. A queue is
+    /// watched once, so an actuator rebuilt over the same topics reads them all every step:
+    /// the same counters, without the saving.
     unwatched: Vec<bool>,
     counters: TopicCounters,
 }
@@ -273,11 +276,19 @@ mod tests {
             rng ^= rng << 17;
             rng % n
         };
-        let mut blocks_changed = 0;
+        let (mut blocks_changed, mut toggles) = (0, 0);
         for step in 1..=2000u64 {
             let now = Nanos::from_millis(step * 5);
             // Most steps leave most topics alone; some publish, read, or change the QoS.
-            for (i, t) in topics.iter().enumerate() {
+            if step % 151 == 0 {
+                // The deadline on /plain switched on or off: whether its counters move with
+                // time alone changes with it.
+                let mut q = topics[0].qos();
+                q.deadline = q.deadline.xor(Some(Nanos::from_millis(20)));
+                topics[0].set_qos(q);
+                toggles += 1;
+            }
+            for t in &topics {
                 match next(12) {
                     0 | 1 => {
                         let data = MsgData::new(ForceMsg {
@@ -289,11 +300,6 @@ mod tests {
                         let _ = t.subscription(next(3) as usize).read(now);
                     }
                     3 if step % 97 == 0 => t.set_depth(1 + next(4) as usize).unwrap(),
-                    4 if step % 151 == 0 && i == 0 => {
-                        let mut q = t.qos();
-                        q.deadline = q.deadline.xor(Some(Nanos::from_millis(20)));
-                        t.set_qos(q);
-                    }
                     _ => {}
                 }
             }
@@ -307,6 +313,7 @@ mod tests {
             blocks_changed > 100,
             "the topics did change: {blocks_changed}"
         );
+        assert_eq!(toggles, 13, "the deadline switched on and off");
     }
 
     #[test]
@@ -315,7 +322,8 @@ mod tests {
         let first = TopicWatch::new(topics.clone());
         let mut second = TopicWatch::new(topics.clone());
         assert!(first.unwatched.iter().all(|&u| !u));
-        let few = TopicWatch::new(topics[..INLINE_TOPICS].to_vec());
+        // Topics no watch holds, but too few to count.
+        let few = TopicWatch::new(self::topics()[..INLINE_TOPICS].to_vec());
         assert!(
             few.unwatched.iter().all(|&u| u),
             "a small graph is read whole"
