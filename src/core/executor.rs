@@ -383,6 +383,16 @@ pub struct Dispatch {
     running: Vec<bool>,
     busy_threads: Vec<usize>,
     busy_groups: Vec<usize>,
+    /// Each group's executors (those with a node in it), by index.
+    group_executors: Vec<Vec<usize>>,
+    /// The executors whose poll may change something: something it reads changed since it
+    /// last polled (a node of its own released, started or finished; a group of one of its
+    /// nodes taken or let go; a new plan). A poll is idempotent while what it reads stays
+    /// the same, so [`Dispatch::pick`] polls only these, each at most once, instead of
+    /// every executor with a ready node at every pick.
+    stale: Vec<usize>,
+    /// `is_stale[e]`: `e` is in `stale`.
+    is_stale: Vec<bool>,
 }
 
 /// Each executor of `plan`'s nodes, by node index.
@@ -394,6 +404,21 @@ fn members_of(plan: &ExecutionPlan) -> Vec<Vec<usize>> {
         }
     }
     members
+}
+
+/// Each group of `plan`'s executors with a node in it, by executor index, once each.
+fn group_executors_of(plan: &ExecutionPlan) -> Vec<Vec<usize>> {
+    let mut of = vec![Vec::new(); plan.groups.len()];
+    for (&e, &g) in plan.node_executor.iter().zip(&plan.node_group) {
+        if let Some(list) = of.get_mut(g) {
+            list.push(e);
+        }
+    }
+    for list in &mut of {
+        list.sort_unstable();
+        list.dedup();
+    }
+    of
 }
 
 impl Dispatch {
@@ -419,7 +444,29 @@ impl Dispatch {
             running: vec![false; n],
             busy_threads: vec![0; plan.executors.len()],
             busy_groups: vec![0; plan.groups.len()],
+            group_executors: group_executors_of(&plan),
+            stale: Vec::new(),
+            is_stale: vec![false; plan.executors.len()],
             plan,
+        }
+    }
+
+    /// Executor `e` must poll again at the next [`Dispatch::pick`].
+    fn mark_stale(&mut self, e: usize) {
+        if let Some(s) = self.is_stale.get_mut(e) {
+            if !std::mem::replace(s, true) {
+                self.stale.push(e);
+            }
+        }
+    }
+
+    /// Node `node`'s thread and group changed hands: its executor, and every executor with
+    /// a node in its group, must poll again.
+    fn mark_stale_around(&mut self, node: usize) {
+        self.mark_stale(self.plan.node_executor[node]);
+        let g = self.plan.node_group[node];
+        for k in 0..self.group_executors.get(g).map_or(0, Vec::len) {
+            self.mark_stale(self.group_executors[g][k]);
         }
     }
 
@@ -452,6 +499,9 @@ impl Dispatch {
         self.in_snapshot.iter_mut().for_each(|s| *s = false);
         self.snapshot.clear();
         self.members = members_of(&plan);
+        self.group_executors = group_executors_of(&plan);
+        self.stale = (0..plan.executors.len()).collect();
+        self.is_stale = vec![true; plan.executors.len()];
         self.ready_in = vec![0; plan.executors.len()];
         self.with_ready.clear();
         for (i, &ready) in self.ready.iter().enumerate() {
@@ -470,6 +520,7 @@ impl Dispatch {
             let e = self.plan.node_executor[node];
             self.ready_in[e] += 1;
             self.with_ready.insert(e);
+            self.mark_stale(e);
         }
     }
 
@@ -535,13 +586,17 @@ impl Dispatch {
     /// as its new snapshot); then the lowest-ranked startable node of any snapshot starts.
     /// Call [`Dispatch::start`] with it.
     pub fn pick(&mut self) -> Option<usize> {
+        // Polling every executor with a ready node, as the rule says, is polling the stale
+        // ones: the others' polls would change nothing (see `stale`). Polls of different
+        // executors touch only their own nodes' snapshots, so their order does not matter.
         // An executor with no ready node has an empty snapshot (a node leaves its snapshot
         // only by starting, which is the only way it stops being ready), so its poll would
-        // change nothing.
-        let mut next = 0;
-        while let Some(&e) = self.with_ready.range(next..).next() {
-            self.poll_if_idle(e);
-            next = e + 1;
+        // change nothing either.
+        for e in std::mem::take(&mut self.stale) {
+            self.is_stale[e] = false;
+            if self.ready_in[e] > 0 {
+                self.poll_if_idle(e);
+            }
         }
         self.snapshot
             .iter()
@@ -564,6 +619,7 @@ impl Dispatch {
         self.running[node] = true;
         self.busy_threads[self.plan.node_executor[node]] += 1;
         self.busy_groups[self.plan.node_group[node]] += 1;
+        self.mark_stale_around(node);
     }
 
     /// Node `node`'s tick is done: its outputs are published, its thread and group free.
@@ -571,6 +627,7 @@ impl Dispatch {
         if std::mem::take(&mut self.running[node]) {
             self.busy_threads[self.plan.node_executor[node]] -= 1;
             self.busy_groups[self.plan.node_group[node]] -= 1;
+            self.mark_stale_around(node);
         }
     }
 }
@@ -798,5 +855,100 @@ mod tests {
         assert_eq!(drain(&mut d), Vec::<usize>::new(), "still running");
         d.finish(0);
         assert_eq!(drain(&mut d), vec![0]);
+    }
+
+    /// [`Dispatch::pick`] as the rule reads: every executor with a ready node polls, then
+    /// the lowest-ranked startable node of any snapshot starts.
+    fn pick_polling_all(d: &mut Dispatch) -> Option<usize> {
+        for e in d.with_ready.clone() {
+            d.poll_if_idle(e);
+        }
+        d.snapshot
+            .iter()
+            .map(|&p| d.order[p])
+            .find(|&i| d.startable(i))
+    }
+
+    /// A plan of `n` nodes over executors of every kind and groups that span executors.
+    fn mixed_plan(n: usize, next: &mut impl FnMut(u64) -> u64) -> ExecutionPlan {
+        let kinds = [
+            ExecutorKind::PerNode,
+            ExecutorKind::SingleThreaded,
+            ExecutorKind::MultiThreaded,
+        ];
+        let executors: Vec<PlanExecutor> = (0..4)
+            .map(|e| PlanExecutor {
+                name: format!("e{e}"),
+                kind: kinds[e % 3],
+                threads: 1 + next(3) as usize,
+            })
+            .collect();
+        ExecutionPlan {
+            executors,
+            groups: vec![
+                GroupKind::MutuallyExclusive,
+                GroupKind::Reentrant,
+                GroupKind::MutuallyExclusive,
+            ],
+            node_executor: (0..n).map(|_| next(4) as usize).collect(),
+            node_group: (0..n).map(|_| next(3) as usize).collect(),
+        }
+    }
+
+    #[test]
+    fn polling_only_stale_executors_picks_as_polling_every_executor() {
+        let mut rng = 0x9e37_79b9_7f4a_7c15_u64;
+        let mut next = move |n: u64| {
+            rng ^= rng << 13;
+            rng ^= rng >> 7;
+            rng ^= rng << 17;
+            rng % n
+        };
+        let n = 24;
+        let ranks: Vec<u32> = (0..n).map(|_| next(8) as u32).collect();
+        let plan = mixed_plan(n, &mut next);
+        let (mut fast, mut rule) = (
+            Dispatch::new(plan.clone(), &ranks),
+            Dispatch::new(plan, &ranks),
+        );
+        let (mut picks, mut waits) = (0, 0);
+        for round in 0..20_000 {
+            match next(10) {
+                0..=3 => {
+                    let i = next(n as u64) as usize;
+                    fast.release(i);
+                    rule.release(i);
+                }
+                4..=6 => {
+                    let got = fast.pick();
+                    assert_eq!(got, pick_polling_all(&mut rule), "round {round}");
+                    assert_eq!(fast.snapshot, rule.snapshot, "round {round}");
+                    if let Some(i) = got {
+                        fast.start(i);
+                        rule.start(i);
+                        picks += 1;
+                    } else {
+                        waits += 1;
+                    }
+                }
+                7 | 8 => {
+                    // A running node finishes (one that is not: nothing happens).
+                    let running: Vec<usize> = (0..n).filter(|&i| fast.is_running(i)).collect();
+                    let i = match running.len() {
+                        0 => next(n as u64) as usize,
+                        k => running[next(k as u64) as usize],
+                    };
+                    fast.finish(i);
+                    rule.finish(i);
+                }
+                _ if round % 500 == 0 => {
+                    let plan = mixed_plan(n, &mut next);
+                    fast.replan(plan.clone());
+                    rule.replan(plan);
+                }
+                _ => {}
+            }
+        }
+        assert!(picks > 3000 && waits > 1000, "{picks} picks, {waits} waits");
     }
 }

@@ -150,29 +150,40 @@ pub fn decode_report(key: &str, bytes: &[u8], own: Option<&str>) -> Option<Vec<T
     ms.iter().all(|m| m.process == from).then_some(ms)
 }
 
-/// Subscribe to every process's tick reports ([`Keys::ticked`]), as [`decode_report`] lets
-/// them through (`own`: this process, whose own reports are not its peers'): each message's
-/// reports go to `take`, on Zenoh's receive thread.
+/// Subscribe to the tick reports ([`Keys::ticked`]) of every process of `processes` but
+/// `own` (this process, whose own reports are not its peers'), as [`decode_report`] lets
+/// them through: each message's reports go to `take`, on Zenoh's receive thread.
+///
+/// One subscriber per process, each on its process's key, not one on `@ticked/*`: Zenoh
+/// keeps the routes of a key that has subscribers and no wildcard, and routes a sample on
+/// any other key by searching its key tree, which grows with the graph's topics
+/// (`BENCHMARKS.md`, "Graphs of any size").
 ///
 /// # Errors
-/// [`DistError::Zenoh`] when the subscriber cannot be declared.
+/// [`DistError::Zenoh`] when a subscriber cannot be declared.
 pub fn subscribe_reports(
     session: &zenoh::Session,
     keys: &Keys,
+    processes: &[String],
     own: Option<&str>,
     take: impl Fn(Vec<Ticked>) + Send + Sync + 'static,
-) -> Result<zenoh::pubsub::Subscriber<()>, DistError> {
-    let own = own.map(str::to_string);
-    let sub = session
-        .declare_subscriber(keys.ticked("*"))
-        .callback(move |s| {
-            let bytes = s.payload().to_bytes();
-            if let Some(ms) = decode_report(s.key_expr().as_str(), &bytes, own.as_deref()) {
-                take(ms);
-            }
-        })
-        .wait()?;
-    Ok(sub)
+) -> Result<Vec<zenoh::pubsub::Subscriber<()>>, DistError> {
+    let take = std::sync::Arc::new(take);
+    let mut subs = Vec::with_capacity(processes.len());
+    for p in processes.iter().filter(|p| Some(p.as_str()) != own) {
+        let (take, own) = (take.clone(), own.map(str::to_string));
+        let sub = session
+            .declare_subscriber(keys.ticked(p))
+            .callback(move |s| {
+                let bytes = s.payload().to_bytes();
+                if let Some(ms) = decode_report(s.key_expr().as_str(), &bytes, own.as_deref()) {
+                    take(ms);
+                }
+            })
+            .wait()?;
+        subs.push(sub);
+    }
+    Ok(subs)
 }
 
 /// Wait until every process in `others` answers on its [`Keys::here`] key, asking every

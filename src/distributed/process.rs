@@ -562,10 +562,20 @@ fn declare_lockstep(
     keys: &Keys,
     process: &str,
     slot: &stepper::SharedSlot,
-) -> Result<(zenoh::pubsub::Subscriber<()>, zenoh::query::Queryable<()>), DistError> {
+) -> Result<
+    (
+        Vec<zenoh::pubsub::Subscriber<()>>,
+        zenoh::query::Queryable<()>,
+    ),
+    DistError,
+> {
+    let processes: Vec<String> = (slot.spec.placement().into_iter())
+        .map(|(p, _)| p)
+        .collect();
     let slot = slot.clone();
-    let sub =
-        lockstep::subscribe_reports(session, keys, Some(process), move |ms| slot.reports(ms))?;
+    let sub = lockstep::subscribe_reports(session, keys, &processes, Some(process), move |ms| {
+        slot.reports(ms)
+    })?;
     let here = keys.here(process);
     let queryable = session
         .declare_queryable(here.clone())

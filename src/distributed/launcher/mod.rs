@@ -488,6 +488,7 @@ pub fn launch(
     check_keys(spec)?;
     let placement = spec.placement();
     let names: Vec<String> = placement.iter().map(|(p, _)| p.clone()).collect();
+    let processes = names.clone();
     let creds = &opts.credentials;
     if creds.graph != spec.name || creds.processes != names {
         return Err(DistError::Usage(format!(
@@ -536,7 +537,7 @@ pub fn launch(
     // Virtual clock: every process's tick reports, to follow the run ([`super::lockstep`]).
     // One by one, at most MAX_AHEAD waiting (more are dropped: a run holds far fewer).
     let (ticked_tx, ticked_rx) = crossbeam_channel::bounded(MAX_AHEAD);
-    let _ticked_sub = subscribe_reports(&session, &keys, None, move |ms| {
+    let _ticked_subs = subscribe_reports(&session, &keys, &processes, None, move |ms| {
         for m in ms {
             let _ = ticked_tx.try_send(m);
         }

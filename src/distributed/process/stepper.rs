@@ -56,7 +56,7 @@ const MAX_REPORT_WAIT: Duration = Duration::from_millis(10);
 /// before it lets go: a callback never waits for the main thread, which may be waiting for
 /// Zenoh's one thread to send (its held-back samples, [`super::Spill`]).
 pub(super) struct Slot {
-    spec: GraphSpec,
+    pub(super) spec: GraphSpec,
     inbox: Mutex<TickInbox>,
     run: Mutex<Option<Stepper>>,
     /// News came while another thread advanced the run.
