@@ -228,13 +228,9 @@ pub fn kinds_table() -> String {
             .iter()
             .map(|d| {
                 format!(
-                    "`{}`{} (default {}, {}…{})",
+                    "`{}` {} (default {}, {}…{})",
                     d.name,
-                    if d.unit.is_empty() {
-                        String::new()
-                    } else {
-                        format!(" {}", d.unit)
-                    },
+                    d.unit,
                     number(d.default),
                     number(d.min),
                     number(d.max)
