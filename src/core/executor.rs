@@ -888,13 +888,9 @@ mod tests {
 
     #[test]
     fn polling_only_stale_executors_picks_as_polling_every_executor() {
-        let mut rng = 0x9e37_79b9_7f4a_7c15_u64;
-        let mut next = move |n: u64| {
-            rng ^= rng << 13;
-            rng ^= rng >> 7;
-            rng ^= rng << 17;
-            rng % n
-        };
+        // A fixed sequence of operations, the same on every machine.
+        let mut rng = rand_pcg::Pcg64::new(0x9e37_79b9_7f4a_7c15, 0);
+        let mut next = move |n: u64| rand_pcg::rand_core::Rng::next_u64(&mut rng) % n;
         let n = 24;
         let ranks: Vec<u32> = (0..n).map(|_| next(8) as u32).collect();
         let plan = mixed_plan(n, &mut next);

@@ -268,14 +268,9 @@ mod tests {
     fn the_watch_gives_every_topic_s_counters_at_every_step_however_they_changed() {
         let topics = topics();
         let mut watch = TopicWatch::new(topics.clone());
-        let mut rng = 0x2545_f491_4f6c_dd1d_u64;
-        let mut next = move |n: u64| {
-            // xorshift: a fixed sequence of operations, the same on every machine.
-            rng ^= rng << 13;
-            rng ^= rng >> 7;
-            rng ^= rng << 17;
-            rng % n
-        };
+        // A fixed sequence of operations, the same on every machine.
+        let mut rng = rand_pcg::Pcg64::new(0x2545_f491_4f6c_dd1d, 0);
+        let mut next = move |n: u64| rand_pcg::rand_core::Rng::next_u64(&mut rng) % n;
         let (mut blocks_changed, mut toggles) = (0, 0);
         for step in 1..=2000u64 {
             let now = Nanos::from_millis(step * 5);
