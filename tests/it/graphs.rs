@@ -15,10 +15,11 @@ use std::process::Command;
 
 use crate::repo;
 
-const SHIPPED: [&str; 12] = [
+const SHIPPED: [&str; 13] = [
     "graphs/cartpole.toml",
     "graphs/cartpole-restart.toml",
     "graphs/cartpole-camera.toml",
+    "graphs/cartpole-camera-mujoco.toml",
     "graphs/cartpole-camera-python.toml",
     "graphs/cartpole-estimator.toml",
     "graphs/cartpole-safety.toml",
@@ -112,6 +113,65 @@ fn a_numpy_vision_node_measures_every_frame_as_the_built_in_one_does() {
         .abs()
         .to_degrees();
     assert!(deg < 0.01, "the two runs end {deg}° apart");
+}
+
+/// The camera's frames rendered by MuJoCo (issue 51 item 2) balance the pole as the drawn
+/// ones do and end within a degree of the drawn run; on a machine that cannot
+/// render (EGL told to find no driver), the camera says so in one log line and draws.
+#[test]
+fn a_camera_rendered_by_mujoco_balances_as_the_drawn_one_and_draws_where_it_cannot_render() {
+    let dir = tempfile::tempdir().unwrap();
+    let run_with = |graph: &str, out: &str, env: &[(&str, &str)]| {
+        let out = dir.path().join(out);
+        let mut cmd = Command::new(env!("CARGO_BIN_EXE_ratelab"));
+        cmd.args(["run", "--clock", "virtual", "--duration", "10", "--graph"])
+            .arg(repo(graph))
+            .arg("--out")
+            .arg(&out)
+            .envs(env.iter().copied());
+        let o = cmd.output().unwrap();
+        let text = format!(
+            "{}{}",
+            String::from_utf8_lossy(&o.stdout),
+            String::from_utf8_lossy(&o.stderr)
+        );
+        assert!(o.status.success(), "{graph}: {text}");
+        let metrics = std::fs::read_to_string(out.join("metrics.json")).unwrap();
+        let m: serde_json::Value = serde_json::from_str(&metrics).unwrap();
+        (m, text)
+    };
+    let (drawn, _) = run_with("graphs/cartpole-camera.toml", "drawn", &[]);
+    let required = std::env::var("RATELAB_REQUIRE_RENDER").as_deref() == Ok("1");
+    let (rendered, said) = run_with("graphs/cartpole-camera-mujoco.toml", "rendered", &[]);
+    let cannot = said.contains("drawing synthetic frames instead");
+    assert!(!(required && cannot), "RATELAB_REQUIRE_RENDER=1: {said}");
+    for m in [&drawn, &rendered] {
+        assert_eq!(m["balanced"], true, "{m}");
+        assert_eq!(m["topics"]["/meas"]["published"], 301);
+    }
+    // Another rasterizer's edges: a slightly noisier angle (about 1 mrad RMS against 0.4
+    // here), the same balance.
+    let deg = |m: &serde_json::Value| m["final_pole_angle"].as_f64().unwrap().to_degrees();
+    assert!(
+        (deg(&drawn) - deg(&rendered)).abs() < 1.0,
+        "drawn ends at {}°, rendered at {}°",
+        deg(&drawn),
+        deg(&rendered)
+    );
+    // No EGL driver: one warning naming the node, and the drawn run's figures.
+    let (fallback, said) = run_with(
+        "graphs/cartpole-camera-mujoco.toml",
+        "fallback",
+        &[("__EGL_VENDOR_LIBRARY_FILENAMES", "/nonexistent/egl.json")],
+    );
+    let warnings: Vec<&str> = said
+        .lines()
+        .filter(|l| l.contains("drawing synthetic frames instead"))
+        .collect();
+    assert_eq!(warnings.len(), 1, "{said}");
+    assert!(warnings[0].contains("camera"), "{said}");
+    assert_eq!(fallback["topics"], drawn["topics"]);
+    assert_eq!(fallback["final_pole_angle"], drawn["final_pole_angle"]);
 }
 
 /// Keeps every step record.

@@ -228,9 +228,13 @@ pub fn kinds_table() -> String {
             .iter()
             .map(|d| {
                 format!(
-                    "`{}` {} (default {}, {}…{})",
+                    "`{}`{} (default {}, {}…{})",
                     d.name,
-                    d.unit,
+                    if d.unit.is_empty() {
+                        String::new()
+                    } else {
+                        format!(" {}", d.unit)
+                    },
                     number(d.default),
                     number(d.min),
                     number(d.max)

@@ -1,9 +1,11 @@
 //! The **camera** kind: a heavy, slow sensor. Each tick it reads the plant and publishes a
-//! frame of the cartpole (`image`, `mono8`): a synthetic drawing, the same for the same
-//! state on every machine (the rail, the cart, the pole, anti-aliased), not MuJoCo's
-//! offscreen render, which needs an OpenGL context this lab does not assume (a headless
-//! machine, CI). Its message's origin stamp is its own stamp: the moment it looked.
-//! [`FrameGeometry`] says where things are drawn, and the **image_estimator** kind
+//! frame of the cartpole (`image`, `mono8`). By default the frame is a synthetic drawing, the
+//! same for the same state on every machine (the rail, the cart, the pole, anti-aliased).
+//! With `mujoco = 1` it is MuJoCo's offscreen render of the same scene where the machine can
+//! render (an OpenGL context through EGL: a GPU, or Mesa's software renderer), and the
+//! synthetic drawing where it cannot, said once in the node's log ([`super::camera_render`]).
+//! Its message's origin stamp is its own stamp: the moment it looked. [`FrameGeometry`] says
+//! where things are drawn (or rendered), and the **image_estimator** kind
 //! (`image_estimator.rs`) reads them back.
 
 use crate::graph::kind::{
@@ -15,7 +17,7 @@ use crate::plant::{lock, SharedPlant};
 use crate::publisher::Publisher;
 use crate::time::Nanos;
 
-/// Its parameters: the frame's size.
+/// Its parameters: the frame's size, and where it comes from.
 pub const PARAMS: &[ParamDef] = &[
     ParamDef {
         name: "width_px",
@@ -33,13 +35,21 @@ pub const PARAMS: &[ParamDef] = &[
         min: 16.0,
         max: 4096.0,
     },
+    ParamDef {
+        name: "mujoco",
+        unit: "",
+        doc: "1: MuJoCo's offscreen render where the machine can render, else the synthetic frame; 0: the synthetic frame",
+        default: 0.0,
+        min: 0.0,
+        max: 1.0,
+    },
 ];
 
 /// The kind: no input; one `image` output; reads the plant.
 pub fn def() -> KindDef {
     KindDef {
         name: "camera",
-        doc: "reads the plant and publishes a frame of it (image, mono8: synthetic, not rendered)",
+        doc: "reads the plant and publishes a frame of it (image, mono8: synthetic, or rendered by MuJoCo)",
         ports: Ports::Fixed {
             inputs: vec![],
             outputs: vec![&[ImageMsg::TYPE]],
@@ -53,10 +63,27 @@ pub fn def() -> KindDef {
                 cx.param_f64("width_px", 640.0)?,
                 cx.param_f64("height_px", 480.0)?,
             );
+            let geometry = FrameGeometry::new(w.round() as u32, h.round() as u32);
+            let mujoco = cx.param_f64("mujoco", 0.0)?;
+            if mujoco != 0.0 && mujoco != 1.0 {
+                return Err(format!("{}: mujoco must be 0 or 1, got {mujoco}", cx.name));
+            }
+            let render = (mujoco == 1.0)
+                .then(|| super::camera_render::Render::open(geometry))
+                .and_then(|opened| {
+                    opened
+                        .map_err(|e| {
+                            let line = format!("{e}: drawing synthetic frames instead");
+                            let warn = crate::textlog::Level::Warn;
+                            crate::textlog::emit_for(Some(cx.name), None, warn, &line);
+                        })
+                        .ok()
+                });
             Ok(Box::new(Camera {
                 plant: cx.plant.clone(),
                 output: publisher(cx.outputs.first(), cx.outbox)?,
-                geometry: FrameGeometry::new(w.round() as u32, h.round() as u32),
+                geometry,
+                render,
             }) as Box<dyn Work>)
         }),
     }
@@ -175,12 +202,17 @@ impl FrameGeometry {
 
     /// The frame as a message.
     pub fn frame(&self, cart_pos_m: f64, theta_rad: f64) -> ImageMsg {
+        self.frame_of(self.draw(cart_pos_m, theta_rad))
+    }
+
+    /// A frame of this size holding `px` (`mono8`, row after row from the top).
+    pub fn frame_of(&self, px: Vec<u8>) -> ImageMsg {
         ImageMsg {
             height: self.height,
             width: self.width,
             encoding: "mono8".into(),
             step: self.width,
-            data: self.draw(cart_pos_m, theta_rad).into(),
+            data: px.into(),
         }
     }
 }
@@ -193,6 +225,8 @@ pub struct Camera {
     pub output: Publisher<ImageMsg>,
     /// Its frame.
     pub geometry: FrameGeometry,
+    /// MuJoCo's renderer (`mujoco = 1` on a machine that renders): `None` draws the frame.
+    pub render: Option<super::camera_render::Render>,
 }
 
 impl Work for Camera {
@@ -203,10 +237,20 @@ impl Work for Camera {
     fn load(&mut self, state: &crate::node::NodeState) -> bool {
         state.downcast_ref::<()>().is_some()
     }
-    /// One tick at `now`: read the plant, draw it, publish.
+    /// One tick at `now`: read the plant, render or draw it, publish.
     fn tick(&mut self, now: Nanos) -> Flow {
         let state = lock(&self.plant).state();
-        let frame = self.geometry.frame(state.cart_pos, state.theta);
+        let rendered = (self.render.as_ref()).and_then(|r| r.frame(state.cart_pos, state.theta));
+        if rendered.is_none() && self.render.take().is_some() {
+            crate::textlog::emit(
+                crate::textlog::Level::Warn,
+                "MuJoCo's renderer stopped: drawing synthetic frames from here",
+            );
+        }
+        let frame = match rendered {
+            Some(px) => self.geometry.frame_of(px),
+            None => self.geometry.frame(state.cart_pos, state.theta),
+        };
         self.output.publish(frame, now, Some(now));
         Flow::Continue
     }

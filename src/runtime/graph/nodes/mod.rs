@@ -1,4 +1,5 @@
-//! The node kinds ratelab has built in, one file each — [`sensor`], [`camera`],
+//! The node kinds ratelab has built in, one file each — [`sensor`], [`camera`] (and
+//! [`camera_render`], MuJoCo's offscreen render it may use),
 //! [`estimator`], [`image_estimator`], [`policy`], [`safety`], [`actuator`], [`python`] (a learner's script, run by
 //! `ratelab::python::node`) and [`external`] (a ROS 2 node's proxy) — each its one
 //! definition ([`crate::graph::kind::KindDef`]: ports, plant, parameters, `make`) and its
@@ -19,6 +20,7 @@
 
 pub mod actuator;
 pub mod camera;
+pub mod camera_render;
 pub mod estimator;
 pub mod external;
 pub mod image_estimator;
