@@ -120,6 +120,8 @@ fn a_numpy_vision_node_measures_every_frame_as_the_built_in_one_does() {
 /// render (EGL told to find no driver), the camera says so in one log line and draws.
 #[test]
 fn a_camera_rendered_by_mujoco_balances_as_the_drawn_one_and_draws_where_it_cannot_render() {
+    // Software rendering takes every core: not beside the real-clock tests.
+    let _m = crate::machine::shared();
     let dir = tempfile::tempdir().unwrap();
     let run_with = |graph: &str, out: &str, env: &[(&str, &str)]| {
         let out = dir.path().join(out);
@@ -158,20 +160,35 @@ fn a_camera_rendered_by_mujoco_balances_as_the_drawn_one_and_draws_where_it_cann
         deg(&drawn),
         deg(&rendered)
     );
-    // No EGL driver: one warning naming the node, and the drawn run's figures.
-    let (fallback, said) = run_with(
-        "graphs/cartpole-camera-mujoco.toml",
-        "fallback",
-        &[("__EGL_VENDOR_LIBRARY_FILENAMES", "/nonexistent/egl.json")],
-    );
-    let warnings: Vec<&str> = said
-        .lines()
-        .filter(|l| l.contains("drawing synthetic frames instead"))
-        .collect();
-    assert_eq!(warnings.len(), 1, "{said}");
-    assert!(warnings[0].contains("camera"), "{said}");
-    assert_eq!(fallback["topics"], drawn["topics"]);
-    assert_eq!(fallback["final_pole_angle"], drawn["final_pole_angle"]);
+    // Rendering turned off, and (where libglvnd dispatches EGL, which reads the variable)
+    // no EGL driver: one warning naming the node, and the drawn run's figures.
+    let mut cannot_render = vec![("off", vec![("RATELAB_RENDER", "off")])];
+    if std::path::Path::new("/usr/share/glvnd/egl_vendor.d").is_dir() {
+        let none = ("__EGL_VENDOR_LIBRARY_FILENAMES", "/nonexistent/egl.json");
+        cannot_render.push(("no-egl", vec![none]));
+    }
+    for (out, env) in cannot_render {
+        let (fallback, said) = run_with("graphs/cartpole-camera-mujoco.toml", out, &env);
+        let warnings: Vec<&str> = said
+            .lines()
+            .filter(|l| l.contains("drawing synthetic frames instead"))
+            .collect();
+        assert_eq!(warnings.len(), 1, "{out}: {said}");
+        assert!(warnings[0].contains("camera"), "{out}: {said}");
+        assert_eq!(fallback["topics"], drawn["topics"], "{out}");
+        assert_eq!(fallback["final_pole_angle"], drawn["final_pole_angle"]);
+    }
+    // A bad setting is refused in one line.
+    let o = Command::new(env!("CARGO_BIN_EXE_ratelab"))
+        .args(["run", "--clock", "virtual", "--duration", "1", "--graph"])
+        .arg(repo("graphs/cartpole-camera-mujoco.toml"))
+        .env("RATELAB_RENDER", "maybe")
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(err.contains("RATELAB_RENDER must be on or off"), "{err}");
+    assert_eq!(err.trim_end().lines().count(), 1, "{err}");
 }
 
 /// Keeps every step record.

@@ -14,7 +14,7 @@
 //! machines (rasterizers differ in their last bits): a run with `mujoco = 1` replays on the
 //! machine that made it, and only the synthetic frame is byte-identical everywhere.
 
-use super::camera::{FrameGeometry, CART_HALF_M, POLE_LENGTH_M, SHADES};
+use super::frame::{FrameGeometry, CART_HALF_M, POLE_LENGTH_M, SHADES};
 use crossbeam_channel::{bounded, Receiver, Sender};
 use mujoco_rs::prelude::*;
 use mujoco_rs::renderer::MjRenderer;
@@ -22,6 +22,14 @@ use mujoco_rs::renderer::MjRenderer;
 /// How long the camera waits for a frame before it draws the synthetic one instead (a
 /// render of a 4096 × 4096 frame in software takes well under a second).
 const FRAME_TIMEOUT: std::time::Duration = std::time::Duration::from_secs(5);
+
+/// How long opening the renderer may take before the camera draws instead (EGL's start-up,
+/// MuJoCo's context: well under a second in software).
+const OPEN_TIMEOUT: std::time::Duration = std::time::Duration::from_secs(30);
+
+/// The environment variable that turns rendering off (`off`: every camera draws, as on a
+/// machine that cannot render; unset, empty or `on`: cameras with `mujoco = 1` render).
+pub const RENDER_ENV: &str = "RATELAB_RENDER";
 
 /// The scene to render for a frame of `g`: the cartpole's geometry with every material
 /// flat (no lights, no specular; an emission of 0.7 of the colour, which MuJoCo's own
@@ -46,7 +54,7 @@ pub fn scene_xml(g: &FrameGeometry) -> String {
   <visual>
     <global offwidth="{w}" offheight="{h}"/>
     <headlight ambient="0 0 0" diffuse="0 0 0" specular="0 0 0" active="0"/>
-    <quality offsamples="4"/>
+    <quality offsamples="4" shadowsize="0"/>
     <rgba haze="0 0 0 1"/>
   </visual>
   <default>
@@ -86,8 +94,13 @@ impl Render {
     ///
     /// # Errors
     /// One line saying why this machine cannot render (no EGL, no context, a scene MuJoCo
-    /// refuses).
+    /// refuses, [`RENDER_ENV`] set to `off`). A failure MuJoCo treats as fatal inside its
+    /// context's creation (an OpenGL without framebuffer objects) ends the process, as
+    /// MuJoCo's default error handler does.
     pub fn open(g: FrameGeometry) -> Result<Render, String> {
+        if std::env::var(RENDER_ENV).as_deref() == Ok("off") {
+            return Err(format!("{RENDER_ENV}=off"));
+        }
         let (ask, asked) = bounded::<(f64, f64)>(1);
         let (frame_tx, frames) = bounded::<Vec<u8>>(1);
         let (ready_tx, ready) = bounded::<Result<(), String>>(1);
@@ -115,8 +128,8 @@ impl Render {
             })
             .map_err(|e| format!("cannot start the render thread: {e}"))?;
         ready
-            .recv()
-            .map_err(|_| "the render thread stopped before it opened a context".to_string())??;
+            .recv_timeout(OPEN_TIMEOUT)
+            .map_err(|_| "no OpenGL context within 30 s".to_string())??;
         Ok(Render { ask, frames })
     }
 
@@ -126,6 +139,19 @@ impl Render {
         self.ask.send((cart_pos_m, theta_rad)).ok()?;
         self.frames.recv_timeout(FRAME_TIMEOUT).ok()
     }
+}
+
+/// `e` and every error under it, `: `-separated (glutin's own says only "glutin operation
+/// failed"; its cause says what failed).
+fn causes(e: &dyn std::error::Error) -> String {
+    let mut line = e.to_string();
+    let mut under = e.source();
+    while let Some(cause) = under {
+        line.push_str(": ");
+        line.push_str(&cause.to_string());
+        under = cause.source();
+    }
+    line
 }
 
 /// What the render thread holds: the scene's model, its state, and the renderer.
@@ -145,7 +171,7 @@ impl Scene {
             .height(g.height)
             .camera(camera)
             .build(&model)
-            .map_err(|e| format!("MuJoCo cannot render offscreen here: {e}"))?;
+            .map_err(|e| format!("MuJoCo cannot render offscreen here: {}", causes(&e)))?;
         Ok(Scene {
             data: MjData::new(Box::new(model)),
             renderer,

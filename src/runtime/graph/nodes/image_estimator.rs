@@ -1,13 +1,13 @@
 //! The **image_estimator** kind: reads the newest camera frame and measures the cart's
 //! position and the pole's angle from its pixels (what the **camera** kind draws:
-//! [`super::camera::FrameGeometry`]), publishing a `position` for an estimator to turn into
+//! [`super::frame::FrameGeometry`]), publishing a `position` for an estimator to turn into
 //! a state. The cart is found from its lower half (which the pole never covers), the pole
 //! from the brightness above the cart weighted by how much of each pixel it covers: the
 //! angle to a fraction of a pixel at the pole's tip. A frame with no pole in it publishes
 //! nothing. Its message carries the frame's origin stamp (sense→act latency counts from
 //! when the camera looked).
 
-use super::camera::{FrameGeometry, SHADES};
+use super::frame::{FrameGeometry, SHADES};
 use crate::graph::kind::{
     publisher, typed, BuildContext, Code, KindDef, Params, Plant, Ports, Work,
 };

@@ -1,5 +1,6 @@
-//! The node kinds ratelab has built in, one file each — [`sensor`], [`camera`] (and
-//! [`camera_render`], MuJoCo's offscreen render it may use),
+//! The node kinds ratelab has built in, one file each — [`sensor`], [`camera`] (with
+//! [`frame`], where a frame shows the world, and [`camera_render`], MuJoCo's offscreen
+//! render it may use),
 //! [`estimator`], [`image_estimator`], [`policy`], [`safety`], [`actuator`], [`python`] (a learner's script, run by
 //! `ratelab::python::node`) and [`external`] (a ROS 2 node's proxy) — each its one
 //! definition ([`crate::graph::kind::KindDef`]: ports, plant, parameters, `make`) and its
@@ -23,6 +24,7 @@ pub mod camera;
 pub mod camera_render;
 pub mod estimator;
 pub mod external;
+pub mod frame;
 pub mod image_estimator;
 pub mod policy;
 pub mod python;
