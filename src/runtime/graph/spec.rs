@@ -1322,6 +1322,14 @@ depth = 1
                 .starts_with("max_force_n must be a number in 0..=10 (N), got 11"),
             "{e}"
         );
+        // A parameter without a unit says none.
+        let camera = include_str!("../../../graphs/cartpole-camera-mujoco.toml");
+        let e = parse(&camera.replace("mujoco = 1", "mujoco = true")).unwrap_err();
+        assert!(
+            e.reason
+                .starts_with("params.mujoco must be a number in 0..=1, got true"),
+            "{e}"
+        );
         let e =
             parse(&safety.replace("max_force_n = 8 ", "params = { max_force = 3 }")).unwrap_err();
         assert_eq!(

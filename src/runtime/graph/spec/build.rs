@@ -898,11 +898,15 @@ fn node_params(cx: &Ctx<'_>, kind: Kind, r: &RawNode) -> Result<toml::Table, Spe
                 };
                 if !(x.is_finite() && x >= d.min && x <= d.max) {
                     let name = if as_key { k } else { format!("params.{k}") };
+                    let unit = match d.unit {
+                        "" => String::new(),
+                        u => format!(" ({u})"),
+                    };
                     return Err(cx.err(
                         span,
                         format!(
-                            "{name} must be a number in {}..={} ({}), got {v}",
-                            d.min, d.max, d.unit
+                            "{name} must be a number in {}..={}{unit}, got {v}",
+                            d.min, d.max
                         ),
                     ));
                 }
