@@ -2,6 +2,7 @@
 
 use clap::{Args, Parser, Subcommand};
 use ratelab::config::{check_rate, duration_from_secs, phase_offset_from_ms, ClockKind};
+use ratelab::graph::nodes::camera::{MAX_FRAME_PX, MIN_FRAME_PX};
 use ratelab::qos::Fault;
 use std::path::PathBuf;
 
@@ -65,6 +66,22 @@ pub enum Command {
     /// Print a generated graph file of any size: the chapter's loop and, beside it,
     /// controllers of four nodes each (`ratelab graph --nodes 1000 > big.toml`).
     Graph(GenerateArgs),
+    /// Serve a camera's frames rendered by MuJoCo, on stdin and stdout: a camera with
+    /// `mujoco = 1` starts this in a process of its own (`ratelab_runtime::graph::nodes::
+    /// camera_render`); not a person's command, so hidden from the help.
+    #[command(name = "render-camera", hide = true)]
+    RenderCamera(RenderCameraArgs),
+}
+
+/// `ratelab render-camera`: the frame's size, in the camera kind's bounds.
+#[derive(Debug, Clone, Args)]
+pub struct RenderCameraArgs {
+    /// Frame width, px.
+    #[arg(long, value_parser = clap::value_parser!(u32).range(MIN_FRAME_PX as i64..=MAX_FRAME_PX as i64))]
+    pub width: u32,
+    /// Frame height, px.
+    #[arg(long, value_parser = clap::value_parser!(u32).range(MIN_FRAME_PX as i64..=MAX_FRAME_PX as i64))]
+    pub height: u32,
 }
 
 /// `ratelab graph`.

@@ -364,7 +364,11 @@ pub fn run_command_line(args: Vec<std::ffi::OsString>, register: impl FnOnce()) 
     let interrupted = StopFlag::new();
     // A node process started by a launcher gets a second signal when the launcher exits
     // (PR_SET_PDEATHSIG): it goes quietly.
-    let say = !matches!(cli.command, Some(Command::Process(_)));
+    // A camera's renderer goes with its camera, quietly too.
+    let say = !matches!(
+        cli.command,
+        Some(Command::Process(_) | Command::RenderCamera(_))
+    );
     *SIGNALLED.lock().unwrap_or_else(|e| e.into_inner()) =
         Some((stop.clone(), interrupted.clone(), say));
     handle_signals();
@@ -402,6 +406,10 @@ pub fn run_command_line(args: Vec<std::ffi::OsString>, register: impl FnOnce()) 
                 args.controller_hz,
             ));
             Ok(())
+        }
+        Some(Command::RenderCamera(args)) => {
+            ratelab::graph::nodes::camera_render::serve_stdio(args.width, args.height)
+                .map_err(anyhow::Error::msg)
         }
         None => {
             if !cli.headless && std::io::stdout().is_terminal() && std::io::stdin().is_terminal() {

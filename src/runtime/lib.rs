@@ -11,7 +11,9 @@
 //! - **running them**: [`telemetry`] (a live run's controls and telemetry), [`scheduler`]
 //!   (the virtual and real clocks that apply the executors' rules), [`command`] (changes to
 //!   a running graph), [`runcore`] (one graph under either clock, stepped, commanded,
-//!   captured and restored; every run's driver goes through it), [`summary`] (a run's figures from its graph's state).
+//!   captured and restored; every run's driver goes through it), [`summary`] (a run's figures from its graph's state);
+//! - **other processes**: [`program`] (how this command line is started again: a launch's
+//!   processes, a camera's renderer).
 //!
 //! The drivers of runs (the headless run, sweeps, the lab's sessions), ROS 2 on the wire,
 //! the graph across processes and recordings are crates above this one.
@@ -24,6 +26,7 @@ pub mod graph;
 pub mod interpreter;
 pub mod plant;
 pub mod policy;
+pub mod program;
 pub mod runcore;
 pub mod scheduler;
 pub mod summary;

@@ -43,6 +43,7 @@ fn cfg(file: &str, clock: ClockKind, secs: u64) -> RunConfig {
 #[test]
 fn every_shipped_graph_balances_under_the_virtual_clock() {
     ratelab::init(); // Python nodes or brains through the library, as a program runs them
+    render_with_ratelab();
     for file in SHIPPED {
         let r = run(
             &cfg(file, ClockKind::Virtual, 10),
@@ -189,6 +190,64 @@ fn a_camera_rendered_by_mujoco_balances_as_the_drawn_one_and_draws_where_it_cann
     assert_eq!(o.status.code(), Some(2), "{err}");
     assert!(err.contains("RATELAB_RENDER must be on or off"), "{err}");
     assert_eq!(err.trim_end().lines().count(), 1, "{err}");
+}
+
+/// Cameras' renderers in this process are `ratelab render-camera` (this test binary is not
+/// ratelab's command line; the binary, a `main_with` program and the Python package are).
+fn render_with_ratelab() {
+    let exe = std::path::PathBuf::from(env!("CARGO_BIN_EXE_ratelab"));
+    ratelab::distributed::launcher::Program::set_this(exe.into());
+}
+
+/// MuJoCo's render, through `ratelab render-camera` in a process of its own, reads as the
+/// drawing does: the image estimator finds the cart to half a pixel and the pole to a
+/// hundredth of a radian, at two sizes and fifteen poses, and each of the drawing's flat
+/// shades is in the frame exactly. A machine without EGL skips the comparison, unless
+/// `RATELAB_REQUIRE_RENDER=1` (CI installs Mesa's EGL and sets it) makes that a failure.
+#[test]
+fn the_estimator_reads_mujoco_s_render_as_it_reads_the_drawing() {
+    use ratelab::graph::nodes::camera::{FrameGeometry, SHADES};
+    use ratelab::graph::nodes::camera_render::Render;
+    use ratelab::graph::nodes::image_estimator::measure;
+    render_with_ratelab();
+    let _m = crate::machine::shared(); // software rendering takes every core
+    for (w, h) in [(640, 480), (1024, 768)] {
+        let g = FrameGeometry::new(w, h);
+        let render = match Render::open(g) {
+            Ok(r) => r,
+            Err(e) if std::env::var("RATELAB_REQUIRE_RENDER").as_deref() == Ok("1") => {
+                panic!("RATELAB_REQUIRE_RENDER=1, and: {e}")
+            }
+            Err(e) => {
+                eprintln!("not compared, this machine cannot render: {e}");
+                return;
+            }
+        };
+        for x in [-1.5, 0.0, 0.7] {
+            for theta in [-0.4, -0.05, 0.0, 0.12, 0.3] {
+                let px = render.frame(x, theta).expect("a frame");
+                assert_eq!(px.len(), (w * h) as usize);
+                // Flat greys: each shade exactly, inside its shape (edges are blended).
+                let (rail, cart, pole) = SHADES;
+                for shade in [rail, cart, pole] {
+                    assert!(px.contains(&shade), "{w}x{h}: no {shade} in the render");
+                }
+                let drawn = measure(&g.frame(x, theta)).unwrap();
+                let seen = measure(&g.frame_of(px)).unwrap_or_else(|| {
+                    panic!("{w}x{h}: no cart or pole in the render at x {x}, θ {theta}")
+                });
+                // Half a pixel for the cart, a hundredth of a radian for the pole.
+                let dx = (seen.cart_pos_m - x).abs() * g.scale;
+                let dtheta = (seen.pole_angle_rad - theta).abs();
+                assert!(dx <= 0.5, "{w}x{h} x {x} θ {theta}: cart off by {dx} px");
+                assert!(
+                    dtheta <= 0.01,
+                    "{w}x{h} x {x} θ {theta}: pole off by {dtheta}"
+                );
+                assert!((drawn.pole_angle_rad - theta).abs() <= 0.01);
+            }
+        }
+    }
 }
 
 /// Keeps every step record.

@@ -228,6 +228,19 @@ def test_a_launch_starts_its_processes_through_this_python(tmp_path):
         assert (tmp_path / "metrics.json").read_text() == (folder / "metrics.json").read_text()
 
 
+def test_a_camera_renders_through_this_python(tmp_path):
+    # A camera with `mujoco = 1` starts its renderer as `python -m ratelab render-camera`.
+    drawn = ratelab.run(graph="graphs/cartpole-camera.toml", duration_s=3)
+    run = ratelab.run(graph="graphs/cartpole-camera-mujoco.toml", duration_s=3)
+    cannot = [line for line in run.log if "drawing synthetic frames instead" in line]
+    if cannot and os.environ.get("RATELAB_REQUIRE_RENDER") != "1":
+        pytest.skip(f"this machine cannot render: {cannot[0]}")
+    assert not cannot, cannot
+    assert run.metrics["balanced"] and drawn.metrics["balanced"]
+    # Rendered frames are another rasterizer's: the estimate from them is not the drawn one.
+    assert run.estimator["rms"][2] != drawn.estimator["rms"][2]
+
+
 def test_the_stubs_are_shipped():
     folder = Path(ratelab.__file__).parent
     assert (folder / "_native.pyi").is_file()

@@ -34,56 +34,7 @@ use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 use zenoh::Wait;
 
-/// A program that runs ratelab's command line: the executable and the arguments that come
-/// before the subcommand. The `ratelab` binary is itself with none; installed from the
-/// Python wheel it is `python -m ratelab` ([`Program::set_this`]).
-#[derive(Clone, Debug, PartialEq, Eq)]
-pub struct Program {
-    /// The executable.
-    pub path: PathBuf,
-    /// Its arguments before ratelab's subcommand (`["-m", "ratelab"]`).
-    pub args: Vec<std::ffi::OsString>,
-}
-
-/// Set by [`Program::set_this`]: how this process's own command line is started again.
-static THIS_PROGRAM: std::sync::OnceLock<Program> = std::sync::OnceLock::new();
-
-impl Program {
-    /// This process's own command line: what [`Program::set_this`] set, else the running
-    /// executable with no arguments before the subcommand.
-    ///
-    /// # Errors
-    /// When the running executable's path cannot be read.
-    pub fn this() -> std::io::Result<Program> {
-        match THIS_PROGRAM.get() {
-            Some(p) => Ok(p.clone()),
-            None => Ok(Program::from(std::env::current_exe()?)),
-        }
-    }
-
-    /// Say how this process's command line is started again, when it is not the running
-    /// executable alone (ratelab inside a Python interpreter: `python -m ratelab`). The first
-    /// call wins; returns false when one was set already.
-    pub fn set_this(program: Program) -> bool {
-        THIS_PROGRAM.set(program).is_ok()
-    }
-
-    /// A command that runs the program, its leading arguments given.
-    pub fn command(&self) -> std::process::Command {
-        let mut cmd = std::process::Command::new(&self.path);
-        cmd.args(&self.args);
-        cmd
-    }
-}
-
-impl From<PathBuf> for Program {
-    fn from(path: PathBuf) -> Self {
-        Program {
-            path,
-            args: Vec::new(),
-        }
-    }
-}
+pub use ratelab_runtime::program::Program;
 
 /// How to launch.
 #[derive(Clone, Debug)]

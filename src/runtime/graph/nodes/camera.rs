@@ -18,6 +18,11 @@ use crate::plant::{lock, SharedPlant};
 use crate::publisher::Publisher;
 use crate::time::Nanos;
 
+/// The smallest frame side, px.
+pub const MIN_FRAME_PX: u32 = 16;
+/// The largest frame side, px (a frame of 4096 × 4096 `mono8` is 16 MiB).
+pub const MAX_FRAME_PX: u32 = 4096;
+
 /// Its parameters: the frame's size, and where it comes from.
 pub const PARAMS: &[ParamDef] = &[
     ParamDef {
@@ -25,16 +30,16 @@ pub const PARAMS: &[ParamDef] = &[
         unit: "px",
         doc: "frame width",
         default: 640.0,
-        min: 16.0,
-        max: 4096.0,
+        min: MIN_FRAME_PX as f64,
+        max: MAX_FRAME_PX as f64,
     },
     ParamDef {
         name: "height_px",
         unit: "px",
         doc: "frame height",
         default: 480.0,
-        min: 16.0,
-        max: 4096.0,
+        min: MIN_FRAME_PX as f64,
+        max: MAX_FRAME_PX as f64,
     },
     ParamDef {
         name: "mujoco",
