@@ -283,6 +283,12 @@ pub const PYTHON_GRACE: std::time::Duration = std::time::Duration::from_millis(3
 /// }
 /// ```
 pub fn main_with(register: impl FnOnce()) -> ExitCode {
+    // This program is ratelab's command line on its own arguments: a camera may start it
+    // again as its renderer (`render-camera`). Not in `run_command_line`, whose arguments
+    // may be another program's.
+    if let Ok(exe) = std::env::current_exe() {
+        ratelab::distributed::launcher::Program::set_this(exe.into());
+    }
     ExitCode::from(run_command_line(std::env::args_os().collect(), register))
 }
 
@@ -359,16 +365,23 @@ pub fn run_command_line(args: Vec<std::ffi::OsString>, register: impl FnOnce()) 
             return EXIT_USAGE;
         }
     };
+    if let Some(Command::RenderCamera(args)) = &cli.command {
+        // A camera's renderer ends with its pipe, or on SIGTERM as any process does: not
+        // ratelab's signal handling, which would keep it serving until its camera goes.
+        return match ratelab::graph::nodes::camera_render::serve_stdio(args.width, args.height) {
+            Ok(()) => 0,
+            Err(e) => {
+                eprintln!("error: {}", printable(&e));
+                EXIT_USAGE
+            }
+        };
+    }
     let stop = StopFlag::new();
     // Set only by a signal (a fall also sets `stop`, under the real clock).
     let interrupted = StopFlag::new();
     // A node process started by a launcher gets a second signal when the launcher exits
     // (PR_SET_PDEATHSIG): it goes quietly.
-    // A camera's renderer goes with its camera, quietly too.
-    let say = !matches!(
-        cli.command,
-        Some(Command::Process(_) | Command::RenderCamera(_))
-    );
+    let say = !matches!(cli.command, Some(Command::Process(_)));
     *SIGNALLED.lock().unwrap_or_else(|e| e.into_inner()) =
         Some((stop.clone(), interrupted.clone(), say));
     handle_signals();
@@ -407,10 +420,8 @@ pub fn run_command_line(args: Vec<std::ffi::OsString>, register: impl FnOnce()) 
             ));
             Ok(())
         }
-        Some(Command::RenderCamera(args)) => {
-            ratelab::graph::nodes::camera_render::serve_stdio(args.width, args.height)
-                .map_err(anyhow::Error::msg)
-        }
+        // Served above, before ratelab's signal handling.
+        Some(Command::RenderCamera(_)) => Ok(()),
         None => {
             if !cli.headless && std::io::stdout().is_terminal() && std::io::stdin().is_terminal() {
                 lab(&cli.run, stop)

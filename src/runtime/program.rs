@@ -34,6 +34,14 @@ impl Program {
         }
     }
 
+    /// What [`Program::set_this`] set, and nothing else: `Some` only where this process is
+    /// known to run ratelab's command line (the `ratelab` binary, a
+    /// `ratelab_lab::main_with` program, the Python package). A program that only links the
+    /// library has none, and nothing starts it again with ratelab's subcommands.
+    pub fn this_if_set() -> Option<Program> {
+        THIS_PROGRAM.get().cloned()
+    }
+
     /// Say how this process's command line is started again, when it is not the running
     /// executable alone (ratelab inside a Python interpreter: `python -m ratelab`). The first
     /// call wins; returns false when one was set already.

@@ -44,6 +44,7 @@ fn cfg(file: &str, clock: ClockKind, secs: u64) -> RunConfig {
 fn every_shipped_graph_balances_under_the_virtual_clock() {
     ratelab::init(); // Python nodes or brains through the library, as a program runs them
     render_with_ratelab();
+    let _m = crate::machine::shared(); // a rendered camera takes every core for a while
     for file in SHIPPED {
         let r = run(
             &cfg(file, ClockKind::Virtual, 10),
@@ -213,7 +214,7 @@ fn the_estimator_reads_mujoco_s_render_as_it_reads_the_drawing() {
     let _m = crate::machine::shared(); // software rendering takes every core
     for (w, h) in [(640, 480), (1024, 768)] {
         let g = FrameGeometry::new(w, h);
-        let render = match Render::open(g) {
+        let mut render = match Render::open(g) {
             Ok(r) => r,
             Err(e) if std::env::var("RATELAB_REQUIRE_RENDER").as_deref() == Ok("1") => {
                 panic!("RATELAB_REQUIRE_RENDER=1, and: {e}")
@@ -248,6 +249,71 @@ fn the_estimator_reads_mujoco_s_render_as_it_reads_the_drawing() {
             }
         }
     }
+}
+
+/// A renderer that dies in the middle of a run (here SIGTERM, as a crashed driver would end
+/// it) costs the camera its rendered frames and nothing else: the camera says so once, in
+/// its log line with how the renderer ended, draws from there, and the run ends as runs
+/// end. Skipped where the machine cannot render (unless `RATELAB_REQUIRE_RENDER=1`).
+#[test]
+fn a_renderer_that_dies_mid_run_is_said_once_and_the_camera_draws_on() {
+    let _m = crate::machine::shared();
+    let dir = tempfile::tempdir().unwrap();
+    let mut run = Command::new(env!("CARGO_BIN_EXE_ratelab"))
+        .args(["run", "--clock", "real", "--duration", "4", "--graph"])
+        .arg(repo("graphs/cartpole-camera-mujoco.toml"))
+        .arg("--out")
+        .arg(dir.path().join("out"))
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    // The renderer: the run's child process (any of its threads may have started it).
+    let renderer = || -> Option<i32> {
+        let tasks = std::fs::read_dir(format!("/proc/{}/task", run.id())).ok()?;
+        tasks.flatten().find_map(|t| {
+            let children = std::fs::read_to_string(t.path().join("children")).ok()?;
+            children.split_whitespace().next()?.parse().ok()
+        })
+    };
+    let started = std::time::Instant::now();
+    let mut pid = None;
+    while pid.is_none() && started.elapsed() < std::time::Duration::from_secs(3) {
+        std::thread::sleep(std::time::Duration::from_millis(20));
+        pid = renderer();
+    }
+    std::thread::sleep(std::time::Duration::from_millis(500)); // into the run
+    if let Some(pid) = pid {
+        // SAFETY: a signal to the run's own child, found a moment ago.
+        assert_eq!(unsafe { libc::kill(pid, libc::SIGTERM) }, 0);
+    }
+    let out = run.wait_with_output().unwrap();
+    let said = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{said}");
+    if said.contains("drawing synthetic frames instead") {
+        assert_ne!(
+            std::env::var("RATELAB_REQUIRE_RENDER").as_deref(),
+            Ok("1"),
+            "{said}"
+        );
+        return; // this machine cannot render: nothing to kill
+    }
+    assert!(pid.is_some(), "no renderer process was seen");
+    let log = std::fs::read_to_string(dir.path().join("out/log.txt")).unwrap();
+    let lines: Vec<&str> = log
+        .lines()
+        .filter(|l| l.contains("drawing synthetic"))
+        .collect();
+    assert_eq!(lines.len(), 1, "{log}");
+    assert!(lines[0].contains(" camera] "), "{log}");
+    assert!(lines[0].contains("the renderer stopped answering"), "{log}");
+    assert!(lines[0].contains("SIGTERM"), "{log}");
+    let metrics = std::fs::read_to_string(dir.path().join("out/metrics.json")).unwrap();
+    let m: serde_json::Value = serde_json::from_str(&metrics).unwrap();
+    assert!(
+        m["topics"]["/image"]["published"].as_u64().unwrap() > 100,
+        "{m}"
+    );
 }
 
 /// Keeps every step record.

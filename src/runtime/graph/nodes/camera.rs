@@ -91,6 +91,7 @@ pub fn def() -> KindDef {
                         .ok()
                 });
             Ok(Box::new(Camera {
+                name: cx.name.to_string(),
                 plant: cx.plant.clone(),
                 output: publisher(cx.outputs.first(), cx.outbox)?,
                 geometry,
@@ -102,6 +103,8 @@ pub fn def() -> KindDef {
 
 /// A camera's state.
 pub struct Camera {
+    /// Its node's name (its log lines say it).
+    pub name: String,
     /// The plant it looks at.
     pub plant: SharedPlant,
     /// Where it publishes.
@@ -123,13 +126,21 @@ impl Work for Camera {
     /// One tick at `now`: read the plant, render or draw it, publish.
     fn tick(&mut self, now: Nanos) -> Flow {
         let state = lock(&self.plant).state();
-        let rendered = (self.render.as_ref()).and_then(|r| r.frame(state.cart_pos, state.theta));
-        if rendered.is_none() && self.render.take().is_some() {
-            crate::textlog::emit(
-                crate::textlog::Level::Warn,
-                "MuJoCo's renderer stopped: drawing synthetic frames from here",
-            );
-        }
+        let rendered = match self
+            .render
+            .as_mut()
+            .map(|r| r.frame(state.cart_pos, state.theta))
+        {
+            Some(Ok(px)) => Some(px),
+            Some(Err(why)) => {
+                self.render = None;
+                let line = format!("{why}: drawing synthetic frames from here");
+                let warn = crate::textlog::Level::Warn;
+                crate::textlog::emit_for(Some(&self.name), Some(now), warn, &line);
+                None
+            }
+            None => None,
+        };
         let frame = match rendered {
             Some(px) => self.geometry.frame_of(px),
             None => self.geometry.frame(state.cart_pos, state.theta),

@@ -11,7 +11,8 @@
 //! ([`SUBCOMMAND`], [`serve`]), as dora-rs runs a node as its own program. A renderer that
 //! crashes, hangs or corrupts its memory costs the camera its rendered frames, never the
 //! run: the camera says why in one line of its log and draws its synthetic frame instead,
-//! as it does on a machine without EGL or with [`RENDER_ENV`]`=off`.
+//! as it does on a machine without EGL or with [`RENDER_ENV`]`=off`, and in a program that
+//! only links the library (never started again with subcommands it may not know).
 //!
 //! The pipe between them carries fixed-size records, one request and one answer a frame:
 //! - **camera → renderer**: the cart's position (m) and the pole's angle (rad), two
@@ -118,23 +119,30 @@ pub struct Render {
     ask: Sender<(f64, f64)>,
     frames: Receiver<Vec<u8>>,
     child: std::process::Child,
+    /// Its last stderr lines, and a receiver that hears when its stderr has ended.
+    tail: (Tail, Receiver<()>),
 }
 
 impl Render {
     /// Start a renderer for frames of `g`: this program's command line
-    /// ([`Program::this`]) as `render-camera --width W --height H`, then wait for its
-    /// [`HELLO`] (at most [`OPEN_TIMEOUT`]).
+    /// ([`Program::this_if_set`]) as `render-camera --width W --height H`, then wait for its
+    /// [`HELLO`] (at most [`OPEN_TIMEOUT`]). A program that only links the library is never
+    /// started again with arguments it may not know: it draws.
     ///
     /// # Errors
-    /// One line saying why this machine cannot render: [`RENDER_ENV`] set to `off`; the
-    /// program cannot be started; it answered no [`HELLO`] (not ratelab's command line), an
-    /// error (no EGL, no context, a scene MuJoCo refuses), or nothing in time; it exited
-    /// (its last stderr lines follow).
+    /// One line saying why this machine cannot render: [`RENDER_ENV`] set to `off`; this
+    /// process does not run ratelab's command line; the program cannot be started; it
+    /// answered an error (no EGL, no context, a scene MuJoCo refuses), another protocol,
+    /// something else (not ratelab's command line) or nothing in time; it exited (how,
+    /// and its last stderr lines).
     pub fn open(g: FrameGeometry) -> Result<Render, String> {
         if std::env::var(RENDER_ENV).as_deref() == Ok("off") {
             return Err(format!("{RENDER_ENV}=off"));
         }
-        let program = Program::this().map_err(|e| format!("cannot find this program: {e}"))?;
+        let program = Program::this_if_set().ok_or(
+            "this program does not run ratelab's command line (the ratelab binary, \
+             ratelab_lab::main_with, the Python package), so it cannot start a renderer",
+        )?;
         Render::open_with(&program, g, OPEN_TIMEOUT)
     }
 
@@ -144,15 +152,13 @@ impl Render {
         g: FrameGeometry,
         timeout: std::time::Duration,
     ) -> Result<Render, String> {
+        let (width, height) = (g.width.to_string(), g.height.to_string());
         let mut child = program
             .command()
             .arg(SUBCOMMAND)
-            .args([
-                "--width",
-                &g.width.to_string(),
-                "--height",
-                &g.height.to_string(),
-            ])
+            .args(["--width", &width, "--height", &height])
+            // Whatever it runs draws: a renderer never starts a renderer.
+            .env(RENDER_ENV, "off")
             .stdin(Stdio::piped())
             .stdout(Stdio::piped())
             .stderr(Stdio::piped())
@@ -165,10 +171,10 @@ impl Render {
             let _ = child.wait();
             return Err("the renderer's pipes were not opened".into());
         };
-        let (tail, tail_done) = keep_tail(stderr);
+        let tail = keep_tail(stderr);
         let (ask, asked) = bounded::<(f64, f64)>(1);
         let (frame_tx, frames) = bounded::<Vec<u8>>(1);
-        let (ready_tx, ready) = bounded::<Result<(), String>>(1);
+        let (ready_tx, ready) = bounded::<Result<(), (String, bool)>>(1);
         let frame_bytes = g.width as usize * g.height as usize;
         let talk = move || {
             let mut from = BufReader::new(stdout);
@@ -186,7 +192,7 @@ impl Render {
                     .write_all(request.as_flattened())
                     .and_then(|()| to.flush())
                     .and_then(|()| from.read_exact(&mut frame));
-                // A renderer gone or broken: the camera sees the channel close and draws.
+                // A renderer gone or broken: the camera sees the channel close.
                 if answered.is_err() || frame_tx.send(frame).is_err() {
                     return;
                 }
@@ -195,29 +201,60 @@ impl Render {
         let started = std::thread::Builder::new()
             .name("camera-render".into())
             .spawn(talk);
-        let mut render = Render { ask, frames, child };
-        started.map_err(|e| format!("cannot start the render thread: {e}"))?;
-        let why = match ready.recv_timeout(timeout) {
-            Ok(Ok(())) => return Ok(render),
-            Ok(Err(why)) => why,
-            Err(_) => format!("no answer within {} s", timeout.as_secs_f64()),
+        let mut render = Render {
+            ask,
+            frames,
+            child,
+            tail,
         };
-        let status = render.stop(std::time::Duration::from_millis(500));
-        // Its stderr ends with it: wait (a little) for the last lines.
-        let _ = tail_done.recv_timeout(std::time::Duration::from_secs(1));
-        let said = Vec::from(lock_tail(&tail).clone()).join(" / ");
-        Err(match (status, said.is_empty()) {
-            (Some(status), false) => format!("{why}; the renderer {status}: {said}"),
-            (Some(status), true) => format!("{why}; the renderer {status}"),
-            (None, _) => why,
+        started.map_err(|e| format!("cannot start the render thread: {e}"))?;
+        match ready.recv_timeout(timeout) {
+            Ok(Ok(())) => Ok(render),
+            // Its own reason: its stderr says it again.
+            Ok(Err((why, true))) => Err(render.failed(why, false)),
+            Ok(Err((why, false))) => Err(render.failed(why, true)),
+            Err(_) => {
+                let why = format!("no answer within {} s", timeout.as_secs_f64());
+                Err(render.failed(why, true))
+            }
+        }
+    }
+
+    /// The frame of the cart at `cart_pos_m` with its pole at `theta_rad`.
+    ///
+    /// # Errors
+    /// One line when the renderer has stopped (how it ended, its last stderr lines) or is
+    /// slower than [`FRAME_TIMEOUT`]; it is ended then, and every later call errs.
+    pub fn frame(&mut self, cart_pos_m: f64, theta_rad: f64) -> Result<Vec<u8>, String> {
+        use crossbeam_channel::RecvTimeoutError;
+        let answer = match self.ask.send((cart_pos_m, theta_rad)) {
+            Ok(()) => self.frames.recv_timeout(FRAME_TIMEOUT),
+            Err(_) => Err(RecvTimeoutError::Disconnected),
+        };
+        answer.map_err(|e| {
+            let why = match e {
+                RecvTimeoutError::Timeout => {
+                    format!("no frame within {} s", FRAME_TIMEOUT.as_secs())
+                }
+                RecvTimeoutError::Disconnected => "the renderer stopped answering".into(),
+            };
+            self.failed(why, true)
         })
     }
 
-    /// The frame of the cart at `cart_pos_m` with its pole at `theta_rad`; `None` when the
-    /// renderer has stopped or is slower than [`FRAME_TIMEOUT`].
-    pub fn frame(&self, cart_pos_m: f64, theta_rad: f64) -> Option<Vec<u8>> {
-        self.ask.send((cart_pos_m, theta_rad)).ok()?;
-        self.frames.recv_timeout(FRAME_TIMEOUT).ok()
+    /// End the renderer after `why` (given half a second to end by itself), and say it in
+    /// one line: how the renderer ended, and (`with_stderr`) its last stderr lines.
+    fn failed(&mut self, why: String, with_stderr: bool) -> String {
+        let status = self.stop(std::time::Duration::from_millis(500));
+        // Its stderr ends with it: wait (a little) for the last lines.
+        let (tail, ended) = &self.tail;
+        let _ = ended.recv_timeout(std::time::Duration::from_secs(1));
+        let said = Vec::from(lock_tail(tail).clone()).join(" / ");
+        match (status, with_stderr && !said.is_empty()) {
+            (Some(status), true) => format!("{why}; it {status}: {said}"),
+            (Some(status), false) => format!("{why}; it {status}"),
+            (None, _) => why,
+        }
     }
 
     /// End the renderer's process, given `grace` to end by itself first, and reap it; how
@@ -245,19 +282,42 @@ impl Drop for Render {
     }
 }
 
-/// Read the renderer's first line: `Ok` for [`HELLO`]` ok`, else why not.
-fn read_hello(from: &mut impl BufRead) -> Result<(), String> {
+/// How much of a line that is not the renderer's the camera quotes, characters.
+const QUOTED_CHARS: usize = 200;
+
+/// Read the renderer's first line: `Ok` for [`HELLO`]` ok`, else why not, and whether the
+/// renderer said why itself (` error: WHY`).
+fn read_hello(from: &mut impl BufRead) -> Result<(), (String, bool)> {
     let mut line = Vec::new();
     from.take(MAX_HELLO_BYTES)
         .read_until(b'\n', &mut line)
-        .map_err(|e| format!("the renderer's pipe: {e}"))?;
+        .map_err(|e| (format!("the renderer's pipe: {e}"), false))?;
     let line = String::from_utf8_lossy(&line);
     let line = crate::text::printable(line.trim_end());
-    match line.strip_prefix(HELLO) {
-        Some(" ok") => Ok(()),
-        Some(rest) => Err(rest.trim_start().trim_start_matches("error: ").to_string()),
-        None if line.is_empty() => Err("the renderer said nothing".into()),
-        None => Err(format!("not ratelab's renderer: it said '{line}'")),
+    let quoted = || {
+        let mut q: String = line.chars().take(QUOTED_CHARS).collect();
+        if q.len() < line.len() {
+            q.push('…');
+        }
+        q
+    };
+    let Some(rest) = line.strip_prefix(HELLO).and_then(|r| r.strip_prefix(' ')) else {
+        let why = if line.is_empty() {
+            "the renderer said nothing".into()
+        } else if line.starts_with("ratelab-render ") {
+            format!(
+                "the renderer speaks another protocol: it said '{}'",
+                quoted()
+            )
+        } else {
+            format!("not ratelab's renderer: it said '{}'", quoted())
+        };
+        return Err((why, false));
+    };
+    match rest.strip_prefix("error: ") {
+        _ if rest == "ok" => Ok(()),
+        Some(why) if !why.trim().is_empty() => Err((why.to_string(), true)),
+        _ => Err((format!("the renderer said '{}'", quoted()), false)),
     }
 }
 
@@ -265,7 +325,8 @@ fn read_hello(from: &mut impl BufRead) -> Result<(), String> {
 type Tail = Arc<Mutex<VecDeque<String>>>;
 
 /// Read `stderr` to its end on a thread of its own (so that a renderer that talks is never
-/// blocked on a full pipe), keeping its last lines; the receiver hears when it has ended.
+/// blocked on a full pipe), keeping its last lines, each cut to its bound as it is read;
+/// the receiver hears when it has ended.
 fn keep_tail(stderr: impl Read + Send + 'static) -> (Tail, Receiver<()>) {
     let tail: Tail = Arc::default();
     let keep = tail.clone();
@@ -275,18 +336,30 @@ fn keep_tail(stderr: impl Read + Send + 'static) -> (Tail, Receiver<()>) {
         .spawn(move || {
             let _done = done_tx; // dropped at the end: the receiver hears it
             let (lines, width) = STDERR_TAIL;
-            for line in BufReader::new(stderr).split(b'\n') {
-                let Ok(line) = line else { return };
-                let line = String::from_utf8_lossy(&line[..line.len().min(width)]);
-                let line = crate::text::printable(line.trim()).to_string();
-                if line.is_empty() {
+            let mut from = BufReader::new(stderr);
+            let mut line = Vec::with_capacity(width);
+            loop {
+                line.clear();
+                match (&mut from).take(width as u64).read_until(b'\n', &mut line) {
+                    Ok(0) | Err(_) => return,
+                    Ok(_) if line.last() != Some(&b'\n') && line.len() == width => {
+                        // The rest of a long line is not kept.
+                        if from.skip_until(b'\n').is_err() {
+                            return;
+                        }
+                    }
+                    Ok(_) => {}
+                }
+                let text = String::from_utf8_lossy(&line);
+                let text = crate::text::printable(text.trim()).to_string();
+                if text.is_empty() {
                     continue;
                 }
                 let mut tail = lock_tail(&keep);
                 if tail.len() == lines {
                     tail.pop_front();
                 }
-                tail.push_back(line);
+                tail.push_back(text);
             }
         });
     (tail, done)
@@ -309,6 +382,9 @@ pub fn serve(width: u32, height: u32, from: impl Read, mut to: impl Write) -> Re
     let mut scene = match Scene::new(&g) {
         Ok(scene) => scene,
         Err(why) => {
+            // One line (MuJoCo's errors may span several).
+            let why = why.lines().map(str::trim).collect::<Vec<_>>().join(" / ");
+            let why = crate::text::printable(&why).into_owned();
             let _ = writeln!(to, "{HELLO} error: {why}").and_then(|()| to.flush());
             return Err(why);
         }
@@ -352,21 +428,32 @@ pub fn answer(
 /// [`serve`] on this process's stdin and stdout, as `ratelab render-camera` runs it. The
 /// frames go out on a copy of stdout, and stdout itself is pointed at stderr, so that
 /// whatever a library prints (MuJoCo's warnings are printed) can never fall between two
-/// frames.
+/// frames. SIGINT is ignored (a terminal's Ctrl-C is the camera's run's to handle; it ends
+/// the renderer by closing the pipe); SIGTERM ends it.
 ///
 /// # Errors
 /// As [`serve`]'s; stdout that cannot be moved.
 pub fn serve_stdio(width: u32, height: u32) -> Result<(), String> {
     use std::os::fd::FromRawFd;
+    // A terminal's Ctrl-C reaches the whole process group: the camera's run handles it, and
+    // ends its renderer through the pipe. SIGTERM still ends it at once.
+    // SAFETY: setting a signal's disposition to "ignore" installs no handler.
+    unsafe { libc::signal(libc::SIGINT, libc::SIG_IGN) };
     // SAFETY: dup and dup2 on this process's own standard descriptors, before anything is
     // written to stdout; the copy is owned by the File and closed with it.
     let frames = unsafe {
-        let copy = libc::dup(libc::STDOUT_FILENO);
-        if copy < 0 || libc::dup2(libc::STDERR_FILENO, libc::STDOUT_FILENO) < 0 {
+        // Close-on-exec: nothing the driver may start holds the frames' pipe open.
+        let copy = libc::fcntl(libc::STDOUT_FILENO, libc::F_DUPFD_CLOEXEC, 3);
+        if copy < 0 {
             let e = std::io::Error::last_os_error();
-            return Err(format!("cannot move stdout: {e}"));
+            return Err(format!("cannot copy stdout: {e}"));
         }
-        std::fs::File::from_raw_fd(copy)
+        let frames = std::fs::File::from_raw_fd(copy);
+        if libc::dup2(libc::STDERR_FILENO, libc::STDOUT_FILENO) < 0 {
+            let e = std::io::Error::last_os_error();
+            return Err(format!("cannot point stdout at stderr: {e}"));
+        }
+        frames
     };
     serve(
         width,
@@ -389,11 +476,12 @@ fn causes(e: &dyn std::error::Error) -> String {
     line
 }
 
-/// What the render thread holds: the scene's model, its state, and the renderer.
+/// What the renderer's process holds: the scene's model, its state, and MuJoCo's renderer.
 struct Scene {
     data: MjData<Box<MjModel>>,
     renderer: MjRenderer,
-    width: usize,
+    /// The frame's pixels, `width × height`.
+    pixels: usize,
 }
 
 impl Scene {
@@ -410,7 +498,7 @@ impl Scene {
         Ok(Scene {
             data: MjData::new(Box::new(model)),
             renderer,
-            width: g.width as usize,
+            pixels: g.width as usize * g.height as usize,
         })
     }
 
@@ -427,9 +515,13 @@ impl Scene {
             .and_then(|()| self.renderer.render())
             .map_err(|e| e.to_string())?;
         let rgb = self.renderer.rgb_flat().ok_or("no colour buffer")?;
-        let mut px = Vec::with_capacity(rgb.len() / 3);
+        if rgb.len() != 3 * self.pixels {
+            // A driver that rendered another size: refused, never shifted into the next.
+            let got = rgb.len() / 3;
+            return Err(format!("a frame of {got} pixels, not {}", self.pixels));
+        }
+        let mut px = Vec::with_capacity(self.pixels);
         px.extend(rgb.chunks_exact(3).map(|p| p[0]));
-        debug_assert_eq!(px.len() % self.width.max(1), 0);
         Ok(px)
     }
 }
@@ -490,18 +582,35 @@ mod tests {
     #[test]
     fn the_hello_says_ok_or_why_not_and_anything_else_is_not_the_renderer() {
         let hello = |line: &str| read_hello(&mut line.as_bytes());
+        let other = |why: &str| Err((why.to_string(), false));
         assert_eq!(hello("ratelab-render 1 ok\n"), Ok(()));
+        // Its own reason, which its stderr says again.
         assert_eq!(
             hello("ratelab-render 1 error: no EGL device\n"),
-            Err("no EGL device".into())
+            Err(("no EGL device".into(), true))
         );
-        assert_eq!(hello(""), Err("the renderer said nothing".into()));
-        let e = hello("running 0 tests\n").unwrap_err();
-        assert_eq!(e, "not ratelab's renderer: it said 'running 0 tests'");
-        // A line without an end is read no further than its bound.
+        assert_eq!(hello(""), other("the renderer said nothing"));
+        assert_eq!(
+            hello("running 0 tests\n"),
+            other("not ratelab's renderer: it said 'running 0 tests'")
+        );
+        assert_eq!(
+            hello("ratelab-render 12 ok\n"),
+            other("the renderer speaks another protocol: it said 'ratelab-render 12 ok'")
+        );
+        assert_eq!(
+            hello("ratelab-render 1\n"),
+            other("the renderer speaks another protocol: it said 'ratelab-render 1'")
+        );
+        assert_eq!(
+            hello("ratelab-render 1 error: \n"),
+            other("the renderer said 'ratelab-render 1 error:'")
+        );
+        // A line without an end is read no further than its bound, and quoted shorter.
         let endless = "x".repeat(1 << 20);
-        let e = hello(&endless).unwrap_err();
-        assert!(e.len() < MAX_HELLO_BYTES as usize + 100, "{}", e.len());
+        let (e, _) = hello(&endless).unwrap_err();
+        assert!(e.chars().count() < QUOTED_CHARS + 60, "{}", e.len());
+        assert!(e.ends_with("…'"), "{e}");
     }
 
     #[test]
@@ -512,15 +621,27 @@ mod tests {
             "printf 'ratelab-render 1 ok\\n'; dd bs=16 count=1 status=none of=/dev/null; \
              head -c {frame} /dev/zero"
         );
-        let render = open(&script, 10_000).unwrap();
-        assert_eq!(render.frame(0.0, 0.0), Some(vec![0; frame as usize]));
-        assert_eq!(render.frame(0.0, 0.0), None);
+        let mut render = open(&script, 10_000).unwrap();
+        assert_eq!(render.frame(0.0, 0.0), Ok(vec![0; frame as usize]));
+        let e = render.frame(0.0, 0.0).unwrap_err();
+        assert!(e.starts_with("the renderer stopped answering"), "{e}");
+        assert!(e.contains("exited (exit status: 0)"), "{e}");
+        // It is ended: every later frame says so at once.
+        assert!(render.frame(0.0, 0.0).is_err());
+        // One that stalls is given up on after its time, and ended.
+        let script = "printf 'ratelab-render 1 ok\\n'; exec sleep 60";
+        let mut render = open(script, 10_000).unwrap();
+        let e = render.frame(0.0, 0.0).unwrap_err();
+        assert!(e.starts_with("no frame within 5 s"), "{e}");
     }
 
     #[test]
     fn a_renderer_that_cannot_render_is_said_in_one_line_with_why() {
-        let e = open("echo 'ratelab-render 1 error: no EGL device'", 10_000).unwrap_err();
-        assert!(e.starts_with("no EGL device"), "{e}");
+        // Its reason, and its exit: not its stderr, which says the same again.
+        let script =
+            "echo 'ratelab-render 1 error: no EGL device'; echo 'error: no EGL device' >&2";
+        let e = open(script, 10_000).unwrap_err();
+        assert_eq!(e, "no EGL device; it exited (exit status: 0)");
         // Another program (here a test binary's libtest) is not taken for the renderer.
         let e = open("echo 'running 0 tests'", 10_000).unwrap_err();
         assert!(
@@ -544,6 +665,34 @@ mod tests {
             .err()
             .unwrap();
         assert!(e.starts_with("cannot start /nonexistent/ratelab"), "{e}");
+    }
+
+    #[test]
+    fn the_stderr_tail_keeps_the_last_lines_each_cut_to_its_bound() {
+        let (lines, width) = STDERR_TAIL;
+        let long = "y".repeat(10 * width);
+        let text = format!("one\ntwo\n\nthree\n{long}\nfour\x1b[31m\nfive");
+        let (tail, done) = keep_tail(std::io::Cursor::new(text.into_bytes()));
+        let ended = done.recv_timeout(Duration::from_secs(10));
+        assert_eq!(
+            ended,
+            Err(crossbeam_channel::RecvTimeoutError::Disconnected)
+        );
+        let kept = Vec::from(lock_tail(&tail).clone());
+        assert_eq!(kept.len(), lines);
+        assert_eq!(kept[0], "three");
+        assert_eq!(kept[1], "y".repeat(width));
+        assert!(!kept[2].contains('\x1b'), "{kept:?}"); // printable
+        assert_eq!(kept[3], "five");
+    }
+
+    #[test]
+    fn a_program_that_only_links_the_library_is_not_started_again_and_draws() {
+        // No test here sets this test binary as ratelab's command line, and none must: it
+        // is not one (libtest would read `render-camera` as a filter).
+        assert_eq!(Program::this_if_set(), None);
+        let e = Render::open(FrameGeometry::new(SMALL.0, SMALL.1)).unwrap_err();
+        assert!(e.contains("does not run ratelab's command line"), "{e}");
     }
 
     #[test]
