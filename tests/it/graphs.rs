@@ -259,7 +259,7 @@ fn the_estimator_reads_mujoco_s_render_as_it_reads_the_drawing() {
 fn a_renderer_that_dies_mid_run_is_said_once_and_the_camera_draws_on() {
     let _m = crate::machine::shared();
     let dir = tempfile::tempdir().unwrap();
-    let mut run = Command::new(env!("CARGO_BIN_EXE_ratelab"))
+    let run = Command::new(env!("CARGO_BIN_EXE_ratelab"))
         .args(["run", "--clock", "real", "--duration", "4", "--graph"])
         .arg(repo("graphs/cartpole-camera-mujoco.toml"))
         .arg("--out")
