@@ -23,6 +23,12 @@
 //! | [`MAX_SERVICE_REPLY_BYTES`] | 16 MiB | one reply of a node's ROS 2 parameter services, before it is built; one reply read from a ROS 2 service, before it is decoded |
 //! | [`MAX_DESCRIBED_TYPES`] | 1024 | the types one ROS 2 type description (`get_type_description`) refers to |
 //! | [`MAX_DURATION_S`] | 10 years | a run's length, in whole nanoseconds |
+//! | [`MAX_MSG_TYPES`] | 1024 | the message types one process registers, the built-in ones included |
+//! | [`MAX_MSG_FIELDS`] | 64 | one message type's fields |
+//! | [`MAX_NODE_KINDS`] | 1024 | the node kinds one process registers, the built-in ones included |
+//! | [`MAX_NODE_PARAMS`] | 1024 | one node's parameters in a graph file |
+//! | [`MAX_SCRIPT_BYTES`] | 16 MiB | a Python script (a node's or a brain's), read before it runs |
+//! | [`MAX_FAULTS`] | 64 | the faults one run holds (`--stall`, `--kill` and those injected while it runs) |
 
 /// The most nodes a graph may have: 65 536. A node costs its scheduler entry, its queues
 /// and its counters (about a kilobyte), so the bound keeps a hostile graph file's graph
@@ -90,6 +96,31 @@ pub const MAX_CONTROL_BYTES: usize = 64 << 20;
 /// histogram past it); its trace does, one record per actuator step kept only for `--out`
 /// and thinned by `--trace-every`. A lab run ends here, so its log replays.
 pub const MAX_DURATION_S: f64 = 315_360_000.0;
+
+/// The most message types one process may have registered, the built-in ones included:
+/// 1024. Each is a few hundred bytes in a list looked up by name when a graph is built; a
+/// program with more raises it and rebuilds.
+pub const MAX_MSG_TYPES: usize = 1024;
+
+/// The most fields one message type may have: 64 (ROS 2's common messages have a few
+/// dozen at most; an array of values is one bytes field).
+pub const MAX_MSG_FIELDS: usize = 64;
+
+/// The most node kinds one process may have, the built-in ones included: 1024. A list
+/// looked up by name when a graph is built; a program with more raises it and rebuilds.
+pub const MAX_NODE_KINDS: usize = 1024;
+
+/// The most parameters one node may be given in a graph file: 1024 (a table read into a
+/// node's Python dict, or its kind's checks).
+pub const MAX_NODE_PARAMS: usize = 1024;
+
+/// The largest Python script read, a node's or a brain's: 16 MiB, as a graph file (a
+/// learner's node is a few KiB; a generated one may be larger).
+pub const MAX_SCRIPT_BYTES: u64 = 16 << 20;
+
+/// The most faults one run may hold: its settings' (`--stall`, `--kill`) and those
+/// injected by command while it runs: 64. Each is checked at every tick of its node.
+pub const MAX_FAULTS: usize = 64;
 
 /// The line that refuses input for passing the bound named `bound`: `what`, then the
 /// constant a program can look up (`"a graph has at most 65536 nodes

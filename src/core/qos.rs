@@ -570,9 +570,7 @@ impl Liveliness {
     }
 }
 
-/// The most faults one run may hold: its settings' (`--stall`, `--kill`) and those injected
-/// by command while it runs.
-pub const MAX_FAULTS: usize = 64;
+pub use crate::limits::MAX_FAULTS;
 
 /// A fault injected into one node (`--stall NODE@T+D`, `--kill NODE@T`): from run time
 /// `at` (for `duration`, or for good when `None`) the node's ticks do nothing and assert no

@@ -5,7 +5,9 @@
 //! core from `ratelab-distributed`.
 
 // The layers below, under their own names (`crate::graph`, `crate::time`, …).
-use ratelab_core::{executor, input, metrics, output, plant, qos, realtime, runlog, textlog, time};
+use ratelab_core::{
+    executor, input, limits, metrics, output, plant, qos, realtime, runlog, textlog, time,
+};
 use ratelab_recording as recording;
 use ratelab_ros2 as ros2;
 use ratelab_runtime::{

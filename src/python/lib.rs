@@ -48,8 +48,7 @@ use std::collections::HashMap;
 use std::sync::{Mutex, OnceLock};
 use std::time::{Duration, Instant};
 
-/// The largest Python script read, bytes (a learner's node is a few KiB).
-pub const MAX_SCRIPT_BYTES: u64 = 1 << 20;
+pub use ratelab_core::limits::MAX_SCRIPT_BYTES;
 
 /// A Python node's tick that runs this many of the node's periods without returning is
 /// reported once on stderr (an overrun by far: 2 s at 50 Hz, 0.5 s at 200 Hz).

@@ -278,9 +278,11 @@ impl RunConfig {
             crate::realtime::check_priority(p).map_err(|_| ConfigError::RtPriority(p))?;
         }
         if self.faults.len() > MAX_FAULTS {
-            return Err(ConfigError::Fault(format!(
-                "at most {MAX_FAULTS} faults, got {}",
-                self.faults.len()
+            let got = self.faults.len();
+            let line = format_args!("at most {MAX_FAULTS} faults, got {got}");
+            return Err(ConfigError::Fault(crate::limits::refusal(
+                line,
+                "MAX_FAULTS",
             )));
         }
         for f in &self.faults {

@@ -61,10 +61,9 @@ use std::any::{Any, TypeId};
 use std::fmt;
 use std::sync::{Arc, LazyLock, RwLock};
 
-/// The most message types one process may have registered (the built-in four included).
-pub const MAX_MSG_TYPES: usize = 32;
-/// The most fields a message type may have.
-pub const MAX_FIELDS: usize = 64;
+pub use crate::limits::MAX_MSG_TYPES;
+/// The most fields a message type may have ([`crate::limits::MAX_MSG_FIELDS`]).
+pub const MAX_FIELDS: usize = crate::limits::MAX_MSG_FIELDS;
 /// The most bytes a message may take on the wire (postcard): a sample between processes
 /// ([`crate::limits::MAX_SAMPLE_BYTES`], 64 MiB: a camera's frame, a point cloud) less room
 /// for the sample's own header; a larger payload is refused where it arrives.
@@ -438,7 +437,9 @@ pub enum MsgRegistryError {
     #[error("message type '{0}': the name or class '{1}' is taken by another type")]
     Taken(String, String),
     /// [`MAX_MSG_TYPES`] types are registered already.
-    #[error("at most {MAX_MSG_TYPES} message types can be registered")]
+    #[error(
+        "at most {MAX_MSG_TYPES} message types can be registered (ratelab::limits::MAX_MSG_TYPES)"
+    )]
     Full,
 }
 
@@ -542,7 +543,8 @@ fn check_in(reg: &[MsgType], t: MsgType) -> Result<bool, MsgRegistryError> {
         return bad("its class must be 1 to 32 letters, digits or '_', starting with a capital, and not a name `import ratelab` gives already (Time)");
     }
     if fields.is_empty() || fields.len() > MAX_FIELDS {
-        return bad(&format!("it must have 1 to {MAX_FIELDS} fields"));
+        let most = crate::limits::refusal(format_args!("1 to {MAX_FIELDS}"), "MAX_MSG_FIELDS");
+        return bad(&format!("it must have {most} fields"));
     }
     for (i, f) in fields.iter().enumerate() {
         if !valid_field(f.name) || fields[..i].iter().any(|g| g.name == f.name) {
@@ -1350,6 +1352,103 @@ mod tests {
         fn from_fields(f: &[f64]) -> Self {
             Keyword(f[0])
         }
+    }
+
+    /// A program's own type with a bytes field (a laser scan's ranges, packed) and a text
+    /// field, as a point cloud or a map would be written.
+    #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+    struct Scan {
+        frame_id: String,
+        angle_increment_rad: f64,
+        ranges: ImageData,
+    }
+
+    impl Message for Scan {
+        const NAME: &'static str = "scan_unit";
+        const CLASS: &'static str = "ScanUnit";
+        const DOC: &'static str = "Ranges, packed as little-endian f32.";
+        const FIELDS: &'static [Field] = &[
+            Field::text("frame_id", "the sensor's frame"),
+            Field::new("angle_increment_rad", "rad", "between two ranges"),
+            Field::bytes("ranges", "f32 LE", "the ranges, m"),
+        ];
+        fn to_fields(&self) -> Vec<f64> {
+            vec![self.angle_increment_rad]
+        }
+        fn from_fields(f: &[f64]) -> Self {
+            Scan {
+                frame_id: String::new(),
+                angle_increment_rad: f[0],
+                ranges: ImageData::default(),
+            }
+        }
+        fn to_values(&self) -> Vec<Value> {
+            vec![
+                Value::Text(self.frame_id.clone()),
+                Value::Number(self.angle_increment_rad),
+                Value::Bytes(self.ranges.clone()),
+            ]
+        }
+        fn from_values(v: &[Value]) -> Self {
+            match v {
+                [Value::Text(frame_id), Value::Number(inc), Value::Bytes(ranges)] => Scan {
+                    frame_id: frame_id.clone(),
+                    angle_increment_rad: *inc,
+                    ranges: ranges.clone(),
+                },
+                _ => Scan::from_fields(&[0.0]),
+            }
+        }
+    }
+
+    #[test]
+    fn a_program_s_own_type_carries_bytes_shared_in_one_process_and_whole_across() {
+        register::<Scan>().unwrap();
+        let t = MsgType::named("scan_unit").unwrap();
+        let ranges: Vec<u8> = (0..360)
+            .flat_map(|i| (1.0f32 + i as f32).to_le_bytes())
+            .collect();
+        let scan = Scan {
+            frame_id: "laser".into(),
+            angle_increment_rad: 0.0175,
+            ranges: ranges.clone().into(),
+        };
+        // In one process: every subscriber's copy is the publisher's bytes, not a copy.
+        let topic = AnyTopic::new("/scan", t, 1).unwrap();
+        let data = MsgData::new(scan.clone());
+        topic.publish(None, &data, Nanos(5), None).unwrap();
+        let got = topic.read(Nanos(6)).unwrap();
+        let got = got.data.get::<Scan>().unwrap();
+        assert!(Arc::ptr_eq(&got.ranges.0, &scan.ranges.0));
+        // Across processes: encoded and decoded whole, its text and bytes included.
+        let decoded = t.decode(&data.to_bytes()).unwrap();
+        assert_eq!(decoded.get::<Scan>(), Some(&scan));
+        assert_eq!(
+            decoded.get::<Scan>().unwrap().ranges.as_slice(),
+            &ranges[..]
+        );
+        // By field values (Python's way in) and described by size.
+        let values = scan.to_values();
+        assert_eq!(
+            t.from_values(&values).map(|d| d.get::<Scan>().cloned()),
+            Ok(Some(scan))
+        );
+        assert!(
+            data.describe().contains("ranges=<1440 bytes>"),
+            "{}",
+            data.describe()
+        );
+    }
+
+    #[test]
+    fn a_full_registry_refuses_naming_the_bound() {
+        let full = vec![StateMsg::TYPE; MAX_MSG_TYPES];
+        let e = check_in(&full, Setpoint::TYPE).unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "at most 1024 message types can be registered (ratelab::limits::MAX_MSG_TYPES)"
+        );
+        assert_eq!(check_in(&full[1..], Setpoint::TYPE), Ok(false));
     }
 
     #[test]

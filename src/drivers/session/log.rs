@@ -155,7 +155,10 @@ impl LoggedRun {
         if self.faults.len() > crate::config::MAX_FAULTS {
             return Err(bad(
                 "faults",
-                format!("at most {} faults", crate::config::MAX_FAULTS),
+                crate::limits::refusal(
+                    format_args!("at most {} faults", crate::config::MAX_FAULTS),
+                    "MAX_FAULTS",
+                ),
             ));
         }
         for (i, f) in self.faults.iter().enumerate() {

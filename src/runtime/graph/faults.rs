@@ -69,10 +69,9 @@ impl FaultBook {
         };
         let mut faults = crate::graph::lock(&self.faults);
         if faults.len() >= crate::qos::MAX_FAULTS {
-            return Err(format!(
-                "a run holds at most {} faults",
-                crate::qos::MAX_FAULTS
-            ));
+            let most = crate::qos::MAX_FAULTS;
+            let line = format_args!("a run holds at most {most} faults");
+            return Err(crate::limits::refusal(line, "MAX_FAULTS"));
         }
         faults.push((node, fault));
         flag.store(true, Ordering::Relaxed);

@@ -81,8 +81,9 @@ use crate::node::Flow;
 use crate::time::Nanos;
 use std::sync::{LazyLock, RwLock};
 
-/// The most node kinds one process may have, the seven built-in ones included.
-pub const MAX_KINDS: usize = 64;
+/// The most node kinds one process may have, the built-in ones included
+/// ([`crate::limits::MAX_NODE_KINDS`]).
+pub const MAX_KINDS: usize = crate::limits::MAX_NODE_KINDS;
 
 pub use crate::ports::{InPort, Inputs, Outputs, RustNode};
 
@@ -123,7 +124,7 @@ pub enum RegistryError {
     #[error("node kind '{0}' is already taken")]
     Taken(String),
     /// [`MAX_KINDS`] kinds are registered already.
-    #[error("a process has at most {MAX_KINDS} node kinds, the seven built-in ones included")]
+    #[error("a process has at most {MAX_KINDS} node kinds, the built-in ones included (ratelab::limits::MAX_NODE_KINDS)")]
     Full,
     /// One of its message types cannot be registered ([`crate::msg::register`]).
     #[error(transparent)]

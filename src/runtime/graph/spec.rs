@@ -194,8 +194,8 @@ impl NodeSpec {
 
 pub use crate::graph::nodes::ExternalNodeSpec;
 
-/// The most parameters a Python node may have.
-pub const MAX_PYTHON_PARAMS: usize = 64;
+/// The most parameters a node may be given ([`crate::limits::MAX_NODE_PARAMS`]).
+pub const MAX_PYTHON_PARAMS: usize = crate::limits::MAX_NODE_PARAMS;
 
 /// One topic of a validated graph.
 #[derive(Clone, Debug, PartialEq)]

@@ -846,7 +846,10 @@ fn node_params(cx: &Ctx<'_>, kind: Kind, r: &RawNode) -> Result<toml::Table, Spe
         if p.get_ref().len() > MAX_PYTHON_PARAMS {
             return Err(cx.err(
                 p.span(),
-                format!("a node has at most {MAX_PYTHON_PARAMS} params"),
+                crate::limits::refusal(
+                    format_args!("a node has at most {MAX_PYTHON_PARAMS} params"),
+                    "MAX_NODE_PARAMS",
+                ),
             ));
         }
         for (k, v) in p.get_ref() {
