@@ -288,6 +288,13 @@ pub fn run_headless(a: &RunArgs, stop: StopFlag) -> anyhow::Result<RunReport> {
             "[ratelab] wrote {}/{files} (what each key and column means: docs/metrics.md)",
             dir.display()
         );
+        if a.trace_every > 1 {
+            let n = a.trace_every;
+            println!(
+                "[ratelab] trace.csv keeps every {n}th actuator step (--trace-every {n}: steps 1, {}, … and the last); the metrics count every step",
+                1 + n
+            );
+        }
     }
     if let Some(e) = unrecorded {
         return Err(e.into());

@@ -191,6 +191,22 @@ fn replay(args: &cli::ReplayArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// `ratelab graph`: the generated graph file on stdout. Asked for more processes than its
+/// nodes fill (a controller of four nodes each, beside the plant's), it is refused in one
+/// line rather than placed in fewer without a word.
+fn generate_graph(args: &cli::GenerateArgs) -> anyhow::Result<()> {
+    use ratelab::graph::synthetic::{graph_toml_at, nodes_to_fill, processes_filled};
+    let (nodes, processes) = (args.nodes as usize, args.processes as usize);
+    let filled = processes_filled(nodes, processes);
+    anyhow::ensure!(
+        filled >= processes,
+        "--nodes {nodes} fills at most {filled} processes (the plant's, then a controller of 4 nodes each): --processes {processes} needs --nodes {} or more",
+        nodes_to_fill(processes)
+    );
+    print!("{}", graph_toml_at(nodes, processes, args.controller_hz));
+    Ok(())
+}
+
 /// `ratelab export`: a checkpoint's tensors as .npz ([`ratelab::checkpoint::export`]).
 fn export(args: &cli::ExportArgs) -> anyhow::Result<()> {
     use ratelab::checkpoint::export::{checkpoint_tensors, to_npz};
@@ -412,14 +428,7 @@ pub fn run_command_line(args: Vec<std::ffi::OsString>, register: impl FnOnce()) 
             Ok(())
         }
         Some(Command::Ros2(args)) => ros2::run(args, stop),
-        Some(Command::Graph(args)) => {
-            print!("{}", ratelab::graph::synthetic::graph_toml_at(
-                args.nodes as usize,
-                args.processes as usize,
-                args.controller_hz,
-            ));
-            Ok(())
-        }
+        Some(Command::Graph(args)) => generate_graph(args),
         // Served above, before ratelab's signal handling.
         Some(Command::RenderCamera(_)) => Ok(()),
         None => {

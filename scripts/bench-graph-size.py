@@ -13,7 +13,8 @@ same graph with every controller and extra sensor idle (`--controller-hz 0.01`: 
 
 With --lockstep, also `ratelab launch --processes` of generated graphs under the virtual
 clock: the launcher's wall time per instant as the graph grows (8 processes) and as the
-processes grow (100 nodes).
+processes grow (256 nodes: enough to fill 64 processes, a controller each; 32 is the most
+that starts reliably on a 2-core machine, see BENCHMARKS.md).
 
 One sitting, one machine: compare the rows with each other, not with another machine's.
 """
@@ -30,8 +31,8 @@ SIZES = [(3, 3600.0), (10, 3600.0), (100, 3600.0), (1000, 600.0), (10000, 60.0)]
 
 
 # The lockstep across processes: (nodes, processes, run time s), by size, then by processes.
-LOCKSTEP = [(20, 8, 2.0), (100, 8, 2.0), (1000, 8, 1.0),
-            (100, 2, 2.0), (100, 4, 2.0), (100, 16, 2.0), (100, 64, 2.0)]
+LOCKSTEP = [(32, 8, 2.0), (100, 8, 2.0), (1000, 8, 1.0),
+            (256, 2, 2.0), (256, 4, 2.0), (256, 8, 2.0), (256, 16, 2.0), (256, 32, 2.0)]
 
 
 def run(binary, args):
@@ -59,6 +60,9 @@ def lockstep(binary, nodes, processes, duration):
             f.write(run(binary, ["graph", "--nodes", str(nodes), "--processes", str(processes)]))
         out = run(binary, ["launch", path, "--processes", "--clock", "virtual",
                            "--duration", str(duration), "--out", os.path.join(d, "out")])
+        placed = int(re.search(r"in (\d+) processes", out).group(1))
+        if placed != processes:
+            sys.exit(f"{nodes} nodes were placed in {placed} processes, not {processes}")
         m = re.search(r"lockstep: (\d+) ticks at (\d+) instants, (\d+) µs of wall time per instant", out)
         return int(m.group(1)), int(m.group(2)), int(m.group(3))
 

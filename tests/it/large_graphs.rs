@@ -85,21 +85,62 @@ fn a_thousand_node_graph_across_eight_processes_equals_the_in_process_run() {
         &[&["run", "--graph", &g][..], &common].concat(),
         &dir.path().join("one"),
     );
+    // Twice across the processes: each launch equals the run in one process, byte for byte
+    // (a launch writes metrics.json; the trace is one process's).
+    for out_dir in ["many", "again"] {
+        let o = ratelab(
+            &[
+                &["launch", &g, "--processes"][..],
+                &common,
+                &["--out", dir.path().join(out_dir).to_str().unwrap()],
+            ]
+            .concat(),
+        );
+        let out = text(&o.stdout);
+        assert!(o.status.success(), "{out}{}", text(&o.stderr));
+        assert!(out.contains("in 8 processes: robot ["), "{out:.2000}");
+        let many = std::fs::read_to_string(dir.path().join(out_dir).join("metrics.json")).unwrap();
+        assert!(
+            one.0 == many,
+            "the launch's metrics.json ({out_dir}) differs from one process's"
+        );
+    }
+}
+
+/// A launch of 32 processes: a 256-node graph dealt out to 32 processes runs the run of one
+/// process, byte for byte. (Issue 51 asks for 64 and more; on a 2-core machine 64 do not
+/// start, see BENCHMARKS.md.) `ratelab graph` refuses 64 processes of fewer than 255
+/// nodes, rather than fill fewer without a word.
+#[test]
+fn a_launch_of_thirty_two_processes_equals_the_in_process_run() {
+    // 32 processes starting on the machine's cores: nothing else beside them.
+    let _m = crate::machine::alone();
+    let dir = tempfile::tempdir().unwrap();
+    let g = generated(dir.path(), "g.toml", 256, 32);
+    let o = ratelab(&["graph", "--nodes", "100", "--processes", "64"]);
+    assert_one_line_exit_2(&o, "--nodes 100 fills at most 25 processes");
+    assert_one_line_exit_2(&o, "--processes 64 needs --nodes 255 or more");
+    let common = ["--clock", "virtual", "--duration", "0.2", "--seed", "5"];
+    let one = outputs(
+        &[&["run", "--graph", &g][..], &common].concat(),
+        &dir.path().join("one"),
+    );
+    let out_dir = dir.path().join("many");
     let o = ratelab(
         &[
             &["launch", &g, "--processes"][..],
             &common,
-            &["--out", dir.path().join("many").to_str().unwrap()],
+            &["--out", out_dir.to_str().unwrap()],
         ]
         .concat(),
     );
     let out = text(&o.stdout);
     assert!(o.status.success(), "{out}{}", text(&o.stderr));
-    assert!(out.contains("in 8 processes: robot ["), "{out:.2000}");
-    let many = std::fs::read_to_string(dir.path().join("many/metrics.json")).unwrap();
+    assert!(out.contains("in 32 processes: robot ["), "{out:.2000}");
+    let many = std::fs::read_to_string(out_dir.join("metrics.json")).unwrap();
     assert!(
         one.0 == many,
-        "the launch's metrics.json differs from one process's"
+        "the 32-process launch's metrics.json differs from one process's"
     );
 }
 
@@ -185,9 +226,74 @@ fn every_bound_refuses_in_one_line_naming_it() {
     ] {
         assert_one_line_exit_2(&o, needle);
     }
+    // A node given more than MAX_NODE_PARAMS parameters.
+    let params = path("params.toml");
+    let table: Vec<String> = (0..=ratelab::limits::MAX_NODE_PARAMS)
+        .map(|i| format!("p{i} = {i}"))
+        .collect();
+    std::fs::write(
+        &params,
+        format!(
+            "{chapter}\n[[node]]\nname = \"tuned\"\nkind = \"python\"\nscript = \"w.py\"\nrate_hz = 1\nparams = {{ {} }}\n",
+            table.join(", ")
+        ),
+    )
+    .unwrap();
+    let o = ratelab(&["run", "--graph", &params, "--clock", "virtual"]);
+    for needle in [
+        "a node has at most 1024 params",
+        "ratelab::limits::MAX_NODE_PARAMS",
+    ] {
+        assert_one_line_exit_2(&o, needle);
+    }
+    // More faults than MAX_FAULTS.
+    let mut args = vec!["run".to_string(), "--clock".into(), "virtual".into()];
+    for i in 0..=ratelab::limits::MAX_FAULTS {
+        args.extend(["--stall".into(), format!("policy@{i}+0.001")]);
+    }
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    let o = ratelab(&args);
+    for needle in ["at most 64 faults, got 65", "ratelab::limits::MAX_FAULTS"] {
+        assert_one_line_exit_2(&o, needle);
+    }
     // `ratelab graph` itself keeps to the bounds.
     let o = ratelab(&["graph", "--nodes", "65537"]);
     assert_eq!(o.status.code(), Some(2), "{}", text(&o.stderr));
+}
+
+/// A thinned trace says so where the files are said to be written, and only then.
+#[test]
+fn a_thinned_trace_says_so() {
+    let dir = tempfile::tempdir().unwrap();
+    let said = |every: &str, out: &str| {
+        let out = dir.path().join(out);
+        let o = ratelab(&[
+            "run",
+            "--clock",
+            "virtual",
+            "--duration",
+            "2",
+            "--trace-every",
+            every,
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+        assert_eq!(o.status.code(), Some(0), "{}", text(&o.stderr));
+        let rows = std::fs::read_to_string(out.join("trace.csv"))
+            .unwrap()
+            .lines()
+            .count();
+        (text(&o.stdout), rows - 1)
+    };
+    let (thinned, rows) = said("10", "thin");
+    assert!(
+        thinned.contains("trace.csv keeps every 10th actuator step (--trace-every 10: steps 1, 11, … and the last); the metrics count every step"),
+        "{thinned}"
+    );
+    assert_eq!(rows, 11, "steps 1, 11, …, 91 and the last, 101");
+    let (whole, rows) = said("1", "whole");
+    assert!(!whole.contains("trace.csv keeps every"), "{whole}");
+    assert_eq!(rows, 101);
 }
 
 #[test]

@@ -33,6 +33,22 @@ pub fn graph_toml(nodes: usize, processes: usize) -> String {
     graph_toml_at(nodes, processes, None)
 }
 
+/// How many processes [`graph_toml`]`(nodes, processes)` places its nodes in: `robot`
+/// (the plant's nodes), then `policy` and `ctl_1` … with a controller of four nodes each at
+/// least, so at most `1 + (nodes − 3) / 4` (and 1 when `processes` < 2: none placed).
+pub fn processes_filled(nodes: usize, processes: usize) -> usize {
+    if processes < 2 {
+        return 1;
+    }
+    let controllers = (nodes.max(MIN_NODES) - MIN_NODES) / 4;
+    1 + controllers.min(processes - 1).max(1)
+}
+
+/// The fewest nodes that fill `processes` processes ([`processes_filled`]).
+pub fn nodes_to_fill(processes: usize) -> usize {
+    MIN_NODES + 4 * processes.saturating_sub(1)
+}
+
 /// [`graph_toml`] with every controller (and extra sensor) at `controller_hz` when given
 /// (`0.01`: idle, due once in a run of up to 100 s), for measuring what a node that is not
 /// due costs.
@@ -191,10 +207,20 @@ mod tests {
 
     #[test]
     fn a_placed_graph_has_the_processes_asked_for_with_the_plant_s_nodes_together() {
-        for (n, p, want) in [(3, 2, 2), (101, 2, 2), (101, 8, 8), (1000, 8, 8), (7, 8, 2)] {
+        for (n, p, want) in [
+            (3, 2, 2),
+            (101, 2, 2),
+            (101, 8, 8),
+            (1000, 8, 8),
+            (7, 8, 2),
+            (100, 64, 25),
+            (nodes_to_fill(64), 64, 64),
+            (nodes_to_fill(64) - 1, 64, 63),
+        ] {
             let g = GraphSpec::parse(&graph_toml(n, p), "synthetic").unwrap();
             let placement = g.placement();
             assert_eq!(placement.len(), want, "{n} nodes in {p} processes");
+            assert_eq!(processes_filled(n, p), want, "{n} nodes in {p} processes");
             let robot = &placement
                 .iter()
                 .find(|(name, _)| name == "robot")
