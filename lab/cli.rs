@@ -91,7 +91,7 @@ pub struct GenerateArgs {
     #[arg(long, value_parser = clap::value_parser!(u32).range(3..=ratelab::limits::MAX_NODES as i64))]
     pub nodes: u32,
     /// Place the nodes in this many processes for `ratelab launch --processes` (the plant's
-    /// nodes in `robot`, the rest dealt out, a controller of 4 nodes or more each: P
+    /// nodes in `robot`, the rest dealt out, a controller of 4 nodes or more each: P ≥ 3
     /// processes need at least 3 + 4 (P − 1) nodes); 1, the default, places none.
     #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=ratelab::limits::MAX_PROCESSES as i64))]
     pub processes: u32,

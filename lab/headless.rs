@@ -291,7 +291,7 @@ pub fn run_headless(a: &RunArgs, stop: StopFlag) -> anyhow::Result<RunReport> {
         if a.trace_every > 1 {
             let n = a.trace_every;
             println!(
-                "[ratelab] trace.csv keeps every {n}th actuator step (--trace-every {n}: steps 1, {}, … and the last); the metrics count every step",
+                "[ratelab] trace.csv keeps one actuator step in {n} (--trace-every {n}: steps 1, {}, … and the last); the metrics count every step",
                 1 + n
             );
         }

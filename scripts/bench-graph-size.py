@@ -60,7 +60,10 @@ def lockstep(binary, nodes, processes, duration):
             f.write(run(binary, ["graph", "--nodes", str(nodes), "--processes", str(processes)]))
         out = run(binary, ["launch", path, "--processes", "--clock", "virtual",
                            "--duration", str(duration), "--out", os.path.join(d, "out")])
-        placed = int(re.search(r"in (\d+) processes", out).group(1))
+        found = re.search(r"in (\d+) processes", out)
+        if found is None:
+            sys.exit(f"the launch did not say how many processes it ran:\n{out}")
+        placed = int(found.group(1))
         if placed != processes:
             sys.exit(f"{nodes} nodes were placed in {placed} processes, not {processes}")
         m = re.search(r"lockstep: (\d+) ticks at (\d+) instants, (\d+) µs of wall time per instant", out)

@@ -137,7 +137,15 @@ impl PythonBrain {
 /// Read a learner's script: a regular file, bounded, UTF-8 (Python's default encoding).
 pub(crate) fn read_script(script: &str) -> Result<String, PythonError> {
     let bytes = crate::input::read_regular_file(std::path::Path::new(script), MAX_SCRIPT_BYTES)
-        .map_err(|e| PythonError::Input(format!("cannot read Python script {e}")))?;
+        .map_err(|e| {
+            let line = format!("cannot read Python script {e}");
+            PythonError::Input(match e {
+                crate::input::InputError::TooLarge { .. } => {
+                    ratelab_core::limits::refusal(line, "MAX_SCRIPT_BYTES")
+                }
+                _ => line,
+            })
+        })?;
     String::from_utf8(bytes).map_err(|e| {
         let upto = &e.as_bytes()[..e.utf8_error().valid_up_to()];
         let line = upto.iter().filter(|b| **b == b'\n').count() + 1;

@@ -287,12 +287,12 @@ fn a_thinned_trace_says_so() {
     };
     let (thinned, rows) = said("10", "thin");
     assert!(
-        thinned.contains("trace.csv keeps every 10th actuator step (--trace-every 10: steps 1, 11, … and the last); the metrics count every step"),
+        thinned.contains("trace.csv keeps one actuator step in 10 (--trace-every 10: steps 1, 11, … and the last); the metrics count every step"),
         "{thinned}"
     );
     assert_eq!(rows, 11, "steps 1, 11, …, 91 and the last, 101");
     let (whole, rows) = said("1", "whole");
-    assert!(!whole.contains("trace.csv keeps every"), "{whole}");
+    assert!(!whole.contains("trace.csv keeps one"), "{whole}");
     assert_eq!(rows, 101);
 }
 

@@ -782,6 +782,12 @@ fn every_way_a_python_node_is_wrong_is_one_line_and_exit_2() {
     assert!(String::from_utf8_lossy(&o.stdout).contains("FELL"));
     // A missing class; two classes and none named.
     node_refused(OK, "class = \"Other\"", &["FILE: no class 'Other'"]);
+    // A script over MAX_SCRIPT_BYTES.
+    node_refused(
+        &format!("{OK}{}", "#".repeat(16 << 20)),
+        "",
+        &["FILE: too large", "ratelab::limits::MAX_SCRIPT_BYTES"],
+    );
     node_refused(
         &format!("{OK}class Two:\n    pass\n"),
         "",

@@ -543,8 +543,8 @@ fn check_in(reg: &[MsgType], t: MsgType) -> Result<bool, MsgRegistryError> {
         return bad("its class must be 1 to 32 letters, digits or '_', starting with a capital, and not a name `import ratelab` gives already (Time)");
     }
     if fields.is_empty() || fields.len() > MAX_FIELDS {
-        let most = crate::limits::refusal(format_args!("1 to {MAX_FIELDS}"), "MAX_MSG_FIELDS");
-        return bad(&format!("it must have {most} fields"));
+        let line = format_args!("it must have 1 to {MAX_FIELDS} fields");
+        return bad(&crate::limits::refusal(line, "MAX_MSG_FIELDS"));
     }
     for (i, f) in fields.iter().enumerate() {
         if !valid_field(f.name) || fields[..i].iter().any(|g| g.name == f.name) {

@@ -35,7 +35,8 @@ pub fn graph_toml(nodes: usize, processes: usize) -> String {
 
 /// How many processes [`graph_toml`]`(nodes, processes)` places its nodes in: `robot`
 /// (the plant's nodes), then `policy` and `ctl_1` … with a controller of four nodes each at
-/// least, so at most `1 + (nodes − 3) / 4` (and 1 when `processes` < 2: none placed).
+/// least, so at most `1 + max(1, (nodes − 3) / 4)` (and 1 when `processes` < 2: none
+/// placed).
 pub fn processes_filled(nodes: usize, processes: usize) -> usize {
     if processes < 2 {
         return 1;
@@ -44,9 +45,13 @@ pub fn processes_filled(nodes: usize, processes: usize) -> usize {
     1 + controllers.min(processes - 1).max(1)
 }
 
-/// The fewest nodes that fill `processes` processes ([`processes_filled`]).
+/// The fewest nodes that fill `processes` processes ([`processes_filled`]): the chapter's
+/// three fill two (`robot` and `policy`), and each process more takes a controller.
 pub fn nodes_to_fill(processes: usize) -> usize {
-    MIN_NODES + 4 * processes.saturating_sub(1)
+    match processes {
+        0..=2 => MIN_NODES,
+        p => MIN_NODES + 4 * (p - 1),
+    }
 }
 
 /// [`graph_toml`] with every controller (and extra sensor) at `controller_hz` when given
@@ -216,6 +221,9 @@ mod tests {
             (100, 64, 25),
             (nodes_to_fill(64), 64, 64),
             (nodes_to_fill(64) - 1, 64, 63),
+            (nodes_to_fill(2), 2, 2),
+            (nodes_to_fill(3), 3, 3),
+            (nodes_to_fill(3) - 1, 3, 2),
         ] {
             let g = GraphSpec::parse(&graph_toml(n, p), "synthetic").unwrap();
             let placement = g.placement();
