@@ -5,6 +5,9 @@
 //! file is opened with `O_NONBLOCK` (so opening a FIFO with no writer cannot hang) and
 //! checked with `fstat` on the open descriptor (so a swap between check and read cannot
 //! slip a FIFO in). The read itself stops one byte past the cap, whatever the file claims.
+//!
+//! A stream read a line at a time (another process's stderr) is read in bounded lines:
+//! [`read_line_bounded`].
 
 use std::io::Read;
 use std::os::unix::fs::OpenOptionsExt;
@@ -122,9 +125,45 @@ pub fn read_regular_file(path: &Path, max_bytes: u64) -> Result<Vec<u8>, InputEr
     Ok(bytes)
 }
 
+/// Read the next line of `r` into `buf` (cleared first), at most `max` bytes of it with
+/// its `\n` when that fits; the rest of a longer line is skipped without being held. So a
+/// stream that never ends a line costs `max` bytes, not all it sends. `Ok(false)` at the
+/// end of the stream; a last line without `\n` is a line.
+///
+/// # Errors
+/// The stream's, reading the line (an error while skipping a long line's rest is left to
+/// the next read).
+pub fn read_line_bounded(
+    r: &mut impl std::io::BufRead,
+    max: usize,
+    buf: &mut Vec<u8>,
+) -> std::io::Result<bool> {
+    use std::io::BufRead;
+    buf.clear();
+    if std::io::Read::take(&mut *r, max as u64).read_until(b'\n', buf)? == 0 {
+        return Ok(false);
+    }
+    if buf.last() != Some(&b'\n') {
+        let _ = r.skip_until(b'\n');
+    }
+    Ok(true)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_line_is_read_to_its_bound_and_its_rest_skipped() {
+        let text = format!("one\n{}\nthree", "y".repeat(100));
+        let mut r = std::io::BufReader::with_capacity(8, text.as_bytes());
+        let mut buf = Vec::new();
+        let mut lines = Vec::new();
+        while read_line_bounded(&mut r, 10, &mut buf).unwrap() {
+            lines.push(String::from_utf8(buf.clone()).unwrap());
+        }
+        assert_eq!(lines, ["one\n", &"y".repeat(10), "three"]);
+    }
 
     #[test]
     fn refuses_what_is_not_a_small_regular_file() {

@@ -21,6 +21,24 @@ pub(crate) fn generated(dir: &Path, name: &str, nodes: usize, processes: usize) 
     path.to_str().unwrap().to_string()
 }
 
+/// `ratelab launch GRAPH --processes ARGS --out DIR` succeeded in `processes` processes:
+/// its metrics.json.
+fn launched(graph: &str, args: &[&str], dir: &Path, processes: usize) -> String {
+    let o = ratelab(
+        &[
+            &["launch", graph, "--processes"][..],
+            args,
+            &["--out", dir.to_str().unwrap()],
+        ]
+        .concat(),
+    );
+    let out = text(&o.stdout);
+    assert!(o.status.success(), "{out}{}", text(&o.stderr));
+    let placed = format!("in {processes} processes: robot [");
+    assert!(out.contains(&placed), "{out:.2000}");
+    std::fs::read_to_string(dir.join("metrics.json")).unwrap()
+}
+
 /// `ratelab ARGS --out DIR` succeeded: (metrics.json, trace.csv).
 fn outputs(args: &[&str], dir: &Path) -> (String, String) {
     let o = ratelab(&[args, &["--out", dir.to_str().unwrap()]].concat());
@@ -88,18 +106,7 @@ fn a_thousand_node_graph_across_eight_processes_equals_the_in_process_run() {
     // Twice across the processes: each launch equals the run in one process, byte for byte
     // (a launch writes metrics.json; the trace is one process's).
     for out_dir in ["many", "again"] {
-        let o = ratelab(
-            &[
-                &["launch", &g, "--processes"][..],
-                &common,
-                &["--out", dir.path().join(out_dir).to_str().unwrap()],
-            ]
-            .concat(),
-        );
-        let out = text(&o.stdout);
-        assert!(o.status.success(), "{out}{}", text(&o.stderr));
-        assert!(out.contains("in 8 processes: robot ["), "{out:.2000}");
-        let many = std::fs::read_to_string(dir.path().join(out_dir).join("metrics.json")).unwrap();
+        let many = launched(&g, &common, &dir.path().join(out_dir), 8);
         assert!(
             one.0 == many,
             "the launch's metrics.json ({out_dir}) differs from one process's"
@@ -125,19 +132,7 @@ fn a_launch_of_thirty_two_processes_equals_the_in_process_run() {
         &[&["run", "--graph", &g][..], &common].concat(),
         &dir.path().join("one"),
     );
-    let out_dir = dir.path().join("many");
-    let o = ratelab(
-        &[
-            &["launch", &g, "--processes"][..],
-            &common,
-            &["--out", out_dir.to_str().unwrap()],
-        ]
-        .concat(),
-    );
-    let out = text(&o.stdout);
-    assert!(o.status.success(), "{out}{}", text(&o.stderr));
-    assert!(out.contains("in 32 processes: robot ["), "{out:.2000}");
-    let many = std::fs::read_to_string(out_dir.join("metrics.json")).unwrap();
+    let many = launched(&g, &common, &dir.path().join("many"), 32);
     assert!(
         one.0 == many,
         "the 32-process launch's metrics.json differs from one process's"

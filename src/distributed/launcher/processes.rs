@@ -79,7 +79,6 @@ fn pass_stderr(
     session: zenoh::Session,
     log_key: String,
 ) {
-    use std::io::{BufRead, Read};
     let Some(err) = child.stderr.take() else {
         return;
     };
@@ -89,33 +88,9 @@ fn pass_stderr(
         .spawn(move || {
             let mut r = std::io::BufReader::new(err);
             let mut buf = Vec::new();
-            loop {
-                buf.clear();
-                // Bounded: a line longer than the limit is cut, its rest skipped.
-                match r
-                    .by_ref()
-                    .take(MAX_STDERR_LINE as u64)
-                    .read_until(b'\n', &mut buf)
-                {
-                    Ok(0) | Err(_) => return,
-                    Ok(_) => {}
-                }
-                let cut = buf.last() != Some(&b'\n');
-                if cut {
-                    let mut rest = Vec::new();
-                    loop {
-                        rest.clear();
-                        match r
-                            .by_ref()
-                            .take(MAX_STDERR_LINE as u64)
-                            .read_until(b'\n', &mut rest)
-                        {
-                            Ok(0) | Err(_) => break,
-                            Ok(_) if rest.last() == Some(&b'\n') => break,
-                            Ok(_) => {}
-                        }
-                    }
-                }
+            // Bounded: a line longer than the limit is cut, its rest skipped.
+            while let Ok(true) = crate::input::read_line_bounded(&mut r, MAX_STDERR_LINE, &mut buf)
+            {
                 let text = String::from_utf8_lossy(&buf);
                 let line = format!("{process}: {}", crate::text::printable(text.trim_end()));
                 let _ = session.put(log_key.as_str(), line.as_str()).wait();

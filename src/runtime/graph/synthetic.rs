@@ -41,8 +41,12 @@ pub fn processes_filled(nodes: usize, processes: usize) -> usize {
     if processes < 2 {
         return 1;
     }
-    let controllers = (nodes.max(MIN_NODES) - MIN_NODES) / 4;
-    1 + controllers.min(processes - 1).max(1)
+    1 + controllers_of(nodes).min(processes - 1).max(1)
+}
+
+/// The controllers of four nodes a graph of `nodes` has beside the chapter's loop.
+fn controllers_of(nodes: usize) -> usize {
+    (nodes.max(MIN_NODES) - MIN_NODES) / 4
 }
 
 /// The fewest nodes that fill `processes` processes ([`processes_filled`]): the chapter's
@@ -59,7 +63,7 @@ pub fn nodes_to_fill(processes: usize) -> usize {
 /// due costs.
 pub fn graph_toml_at(nodes: usize, processes: usize, controller_hz: Option<f64>) -> String {
     let nodes = nodes.max(MIN_NODES);
-    let controllers = (nodes - MIN_NODES) / 4;
+    let controllers = controllers_of(nodes);
     let extra = (nodes - MIN_NODES) % 4;
     let placed = processes >= 2;
     // The process of the chapter's policy (`None`) or of controller k's nodes off the plant.

@@ -338,18 +338,7 @@ fn keep_tail(stderr: impl Read + Send + 'static) -> (Tail, Receiver<()>) {
             let (lines, width) = STDERR_TAIL;
             let mut from = BufReader::new(stderr);
             let mut line = Vec::with_capacity(width);
-            loop {
-                line.clear();
-                match (&mut from).take(width as u64).read_until(b'\n', &mut line) {
-                    Ok(0) | Err(_) => return,
-                    Ok(_) if line.last() != Some(&b'\n') && line.len() == width => {
-                        // The rest of a long line is not kept.
-                        if from.skip_until(b'\n').is_err() {
-                            return;
-                        }
-                    }
-                    Ok(_) => {}
-                }
+            while let Ok(true) = crate::input::read_line_bounded(&mut from, width, &mut line) {
                 let text = String::from_utf8_lossy(&line);
                 let text = crate::text::printable(text.trim()).to_string();
                 if text.is_empty() {
