@@ -9,12 +9,12 @@ time per size is in SIZES: long enough for a second of wall time or more). Then 
 same graph with every controller and extra sensor idle (`--controller-hz 0.01`: due every
 100 s) shows what a node that is not due costs.
 
-    scripts/bench-graph-size.py [BINARY] [--lockstep]
+    scripts/bench-graph-size.py [BINARY] [--lockstep | --lockstep-only]
 
 With --lockstep, also `ratelab launch --processes` of generated graphs under the virtual
 clock: the launcher's wall time per instant as the graph grows (8 processes) and as the
-processes grow (256 nodes: enough to fill 64 processes, a controller each; 32 is the most
-that starts reliably on a 2-core machine, see BENCHMARKS.md).
+processes grow (256 nodes: enough to fill 64 processes, a controller each). With
+--lockstep-only, that table alone.
 
 One sitting, one machine: compare the rows with each other, not with another machine's.
 """
@@ -32,7 +32,8 @@ SIZES = [(3, 3600.0), (10, 3600.0), (100, 3600.0), (1000, 600.0), (10000, 60.0)]
 
 # The lockstep across processes: (nodes, processes, run time s), by size, then by processes.
 LOCKSTEP = [(32, 8, 2.0), (100, 8, 2.0), (1000, 8, 1.0),
-            (256, 2, 2.0), (256, 4, 2.0), (256, 8, 2.0), (256, 16, 2.0), (256, 32, 2.0)]
+            (256, 2, 2.0), (256, 4, 2.0), (256, 8, 2.0), (256, 16, 2.0), (256, 32, 2.0),
+            (256, 64, 2.0)]
 
 
 def run(binary, args):
@@ -75,32 +76,42 @@ def main():
     p.add_argument("binary", nargs="?", default="ratelab")
     p.add_argument("--lockstep", action="store_true",
                    help="also the virtual lockstep across processes (LOCKSTEP)")
+    p.add_argument("--lockstep-only", action="store_true",
+                   help="only the virtual lockstep across processes")
     a = p.parse_args()
+    if not a.lockstep_only:
+        in_process(a.binary)
+    if a.lockstep or a.lockstep_only:
+        across_processes(a.binary)
+
+
+def in_process(binary):
     print(f"| nodes | run time (s) | node ticks | wall (s) | ns per node tick | idle: wall (s) | idle: ns per instant |")
     print("| ---: | ---: | ---: | ---: | ---: | ---: | ---: |")
     with tempfile.TemporaryDirectory() as d:
         for n, duration in SIZES:
             path = os.path.join(d, f"g{n}.toml")
             with open(path, "w") as f:
-                f.write(run(a.binary, ["graph", "--nodes", str(n)]))
-            wall, ticks = measure(a.binary, path, duration)
+                f.write(run(binary, ["graph", "--nodes", str(n)]))
+            wall, ticks = measure(binary, path, duration)
             # The same graph, its controllers and extra sensors idle: only the chapter's three
             # tick at 50 Hz; what is left is the cost of the rest being there.
             idle = os.path.join(d, f"idle{n}.toml")
             with open(idle, "w") as f:
-                f.write(run(a.binary, ["graph", "--nodes", str(n), "--controller-hz", "0.01"]))
-            idle_wall, _ = measure(a.binary, idle, duration)
+                f.write(run(binary, ["graph", "--nodes", str(n), "--controller-hz", "0.01"]))
+            idle_wall, _ = measure(binary, idle, duration)
             instants = int(duration * 50) + 1
             print(f"| {n} | {duration:.0f} | {ticks} | {wall:.2f} | {wall * 1e9 / ticks:.0f} | {idle_wall:.2f} | "
                   f"{idle_wall * 1e9 / instants:.0f} |")
             sys.stdout.flush()
-    if not a.lockstep:
-        return
+
+
+def across_processes(binary):
     print()
     print("| nodes | processes | node ticks | instants | µs per instant |")
     print("| ---: | ---: | ---: | ---: | ---: |")
     for nodes, processes, duration in LOCKSTEP:
-        ticks, instants, us = lockstep(a.binary, nodes, processes, duration)
+        ticks, instants, us = lockstep(binary, nodes, processes, duration)
         print(f"| {nodes} | {processes} | {ticks} | {instants} | {us} |")
         sys.stdout.flush()
 

@@ -55,6 +55,8 @@ pub const MAX_GRAPH_FILE_BYTES: u64 = 16 << 20;
 /// The most processes one launch may start (`ratelab launch`): 256. Each is an operating
 /// system process with its own Zenoh session and identity; the launcher's lockstep waits
 /// on every one at every instant, so its cost grows with this number (`BENCHMARKS.md`).
+/// Under the virtual clock every process links to every other (P (P − 1) / 2 links): on a
+/// 2-core machine 64 processes start (in about 25 s), 96 did not.
 pub const MAX_PROCESSES: usize = 256;
 
 /// The largest message one process sends another, encoded: 64 MiB (a 4K RGB image is

@@ -75,6 +75,15 @@ pub const LOOPBACK_ANY: &str = "tls/127.0.0.1:0";
 /// How long a process waits for a peer's answer (a join, a ready, a granted tick).
 pub const REPLY_TIMEOUT: std::time::Duration = std::time::Duration::from_secs(20);
 
+/// The lease a ratelab session announces on each of its links (Zenoh's
+/// `transport/link/tx/lease`, 10 s by default): a peer that sends nothing on a link for
+/// this long, not even its keep-alive (one a quarter lease), is cut off, and its tokens go
+/// with it. 30 s, as on a small machine a launch of 64 processes starves some of their
+/// single Zenoh threads for more than 10 s while 2,016 TLS links open (links expired and
+/// their messages were lost). A process frozen or cut off (not exited: a closed socket is
+/// seen at once) is gone after this.
+pub const LINK_LEASE: std::time::Duration = std::time::Duration::from_secs(30);
+
 /// Zenoh's runtime threads in a ratelab process, in the syntax of Zenoh's `ZENOH_RUNTIME`
 /// variable (RON): its receive, send, accept and network pools all handed over to one
 /// application worker thread, instead of Zenoh's default of six workers over five pools.
@@ -486,6 +495,18 @@ pub fn open_session(
     set(&mut config, "listen/exit_on_failure", "true")?;
     set(&mut config, "connect/exit_on_failure", "true")?;
     set(&mut config, "connect/timeout_ms", "5000")?;
+    // Every process of a virtual-clock run links to every other: 64 processes open 2,016
+    // TLS links at once, and on a small machine their handshakes take longer than Zenoh's
+    // 10 s and outnumber its 100 pending (links given up on were not opened again). A
+    // minute and a thousand (about the links of 45 processes pending at one host).
+    set(&mut config, "transport/unicast/open_timeout", "60000")?;
+    set(&mut config, "transport/unicast/accept_timeout", "60000")?;
+    set(&mut config, "transport/unicast/accept_pending", "1000")?;
+    set(
+        &mut config,
+        "transport/link/tx/lease",
+        &LINK_LEASE.as_millis().to_string(),
+    )?;
     let shm = shared_memory()?;
     set(
         &mut config,

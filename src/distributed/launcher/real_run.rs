@@ -175,9 +175,10 @@ impl Supervision {
         for (p, quiet) in self.silence.silent() {
             if self.end.is_none() && !self.gone.contains(&p) && !self.silent.contains(&p) {
                 l.say(&format!(
-                    "process '{p}' is silent at t={:.2}s: no figures for {:.1} s while its tokens live (stopped, starved or cut off?); it is gone if Zenoh's lease (10 s) runs out",
+                    "process '{p}' is silent at t={:.2}s: no figures for {:.1} s while its tokens live (stopped, starved or cut off?); it is gone if Zenoh's lease ({} s) runs out",
                     self.run_time().as_secs_f64(),
-                    quiet.as_secs_f64()
+                    quiet.as_secs_f64(),
+                    crate::LINK_LEASE.as_secs()
                 ));
                 self.silent.push(p);
             }
