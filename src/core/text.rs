@@ -35,9 +35,43 @@ pub fn has_control(text: &str) -> bool {
     text.chars().any(char::is_control)
 }
 
+/// The most names [`listed`] writes before saying how many more there are.
+pub const LISTED_NAMES: usize = 12;
+
+/// `names` for a one-line message: comma-separated, the first [`LISTED_NAMES`] of them,
+/// then `and N more` (a program may register a thousand kinds or message types, and a
+/// refusal stays one readable line). Each name is made [`printable`].
+pub fn listed<'a>(names: impl IntoIterator<Item = &'a str>) -> String {
+    let mut shown = Vec::with_capacity(LISTED_NAMES);
+    let mut more = 0usize;
+    for name in names {
+        if shown.len() < LISTED_NAMES {
+            shown.push(printable(name));
+        } else {
+            more += 1;
+        }
+    }
+    let mut out = shown.join(", ");
+    if more > 0 {
+        out.push_str(&format!(" and {more} more"));
+    }
+    out
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_long_list_of_names_is_cut_saying_how_many_more() {
+        assert_eq!(listed(["a", "b"]), "a, b");
+        assert_eq!(listed([]), "");
+        let many: Vec<String> = (0..1000).map(|i| format!("kind_{i}")).collect();
+        let line = listed(many.iter().map(String::as_str));
+        assert!(line.starts_with("kind_0, kind_1, "), "{line}");
+        assert!(line.ends_with("kind_11 and 988 more"), "{line}");
+        assert_eq!(listed(["x\ny", "z"]), "x\\ny, z");
+    }
 
     #[test]
     fn control_characters_are_written_out_and_the_rest_kept() {

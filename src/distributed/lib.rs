@@ -75,14 +75,57 @@ pub const LOOPBACK_ANY: &str = "tls/127.0.0.1:0";
 /// How long a process waits for a peer's answer (a join, a ready, a granted tick).
 pub const REPLY_TIMEOUT: std::time::Duration = std::time::Duration::from_secs(20);
 
-/// The lease a ratelab session announces on each of its links (Zenoh's
-/// `transport/link/tx/lease`, 10 s by default): a peer that sends nothing on a link for
-/// this long, not even its keep-alive (one a quarter lease), is cut off, and its tokens go
-/// with it. 30 s, as on a small machine a launch of 64 processes starves some of their
-/// single Zenoh threads for more than 10 s while 2,016 TLS links open (links expired and
-/// their messages were lost). A process frozen or cut off (not exited: a closed socket is
-/// seen at once) is gone after this.
-pub const LINK_LEASE: std::time::Duration = std::time::Duration::from_secs(30);
+/// How Zenoh keeps the links of one launch's sessions ([`open_session`]): sized by the
+/// launch's processes, so that a small launch keeps Zenoh's defaults and a large one
+/// starts on a small machine.
+///
+/// Every process of a virtual-clock run links to every other, P (P − 1) / 2 TLS links
+/// opened at once. On 2 cores, 64 processes (2,016 links) went wrong three ways under
+/// Zenoh's defaults: handshakes outlasted its 10 s open and accept timeouts and outnumbered
+/// its 100 pending links, so pairs were never linked; and each process runs Zenoh on one
+/// thread ([`ZENOH_RUNTIME`]), which, starved, sent no keep-alive for more than its 10 s
+/// lease, so links were cut and what was on them lost (`BENCHMARKS.md`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct LinkTimings {
+    /// The lease this session announces on each link (Zenoh's `transport/link/tx/lease`):
+    /// a peer silent on a link this long, not even a keep-alive (one a quarter lease), is
+    /// cut off and its tokens go with it. A process frozen or cut off (not exited: a
+    /// closed socket is seen at once) is gone after this.
+    pub lease: std::time::Duration,
+    /// How long a link may take to open or to be accepted once its TLS handshake is done
+    /// (Zenoh's `transport/unicast/open_timeout`, `accept_timeout`).
+    pub establish: std::time::Duration,
+    /// How many accepted links may be establishing at once (Zenoh's
+    /// `transport/unicast/accept_pending`). Only holders of the launch's certificates get
+    /// this far (mutual TLS comes first).
+    pub pending: usize,
+}
+
+impl LinkTimings {
+    /// The timings for a launch of `processes` processes: Zenoh's defaults (a 10 s lease
+    /// and timeouts, 100 pending) for up to 10; beyond, a second of timeout per process,
+    /// half a second of lease (past 20) and four pending links (past 25: about two tries
+    /// each way per peer). 64 processes: 64 s, 32 s, 256.
+    pub fn for_processes(processes: usize) -> LinkTimings {
+        let p = u32::try_from(processes).unwrap_or(u32::MAX);
+        let at_least =
+            |d: std::time::Duration, min_s: u64| d.max(std::time::Duration::from_secs(min_s));
+        LinkTimings {
+            lease: at_least(std::time::Duration::from_millis(500).saturating_mul(p), 10),
+            establish: at_least(std::time::Duration::from_secs(1).saturating_mul(p), 10),
+            pending: processes.saturating_mul(4).max(100),
+        }
+    }
+}
+
+/// How long the processes of a launch of `processes` take to be ready, at most: each waits
+/// until it reaches every other ([`lockstep::meet_peers`]), the launcher for all of them.
+/// [`REPLY_TIMEOUT`], and half a second more per process (64 processes were ready in 23 to
+/// 29 s on 2 cores; this gives them 52).
+pub fn ready_wait(processes: usize) -> std::time::Duration {
+    let per_process = std::time::Duration::from_millis(500);
+    REPLY_TIMEOUT + per_process.saturating_mul(u32::try_from(processes).unwrap_or(u32::MAX))
+}
 
 /// Zenoh's runtime threads in a ratelab process, in the syntax of Zenoh's `ZENOH_RUNTIME`
 /// variable (RON): its receive, send, accept and network pools all handed over to one
@@ -495,18 +538,26 @@ pub fn open_session(
     set(&mut config, "listen/exit_on_failure", "true")?;
     set(&mut config, "connect/exit_on_failure", "true")?;
     set(&mut config, "connect/timeout_ms", "5000")?;
-    // Every process of a virtual-clock run links to every other: 64 processes open 2,016
-    // TLS links at once, and on a small machine their handshakes take longer than Zenoh's
-    // 10 s and outnumber its 100 pending (links given up on were not opened again). A
-    // minute and a thousand (about the links of 45 processes pending at one host).
-    set(&mut config, "transport/unicast/open_timeout", "60000")?;
-    set(&mut config, "transport/unicast/accept_timeout", "60000")?;
-    set(&mut config, "transport/unicast/accept_pending", "1000")?;
+    // A launch's size sets how its links are kept (LinkTimings: Zenoh's defaults for a
+    // small one).
+    let links = LinkTimings::for_processes(access.credentials.processes.len());
+    let ms = |d: std::time::Duration| d.as_millis().to_string();
     set(
         &mut config,
-        "transport/link/tx/lease",
-        &LINK_LEASE.as_millis().to_string(),
+        "transport/unicast/open_timeout",
+        &ms(links.establish),
     )?;
+    set(
+        &mut config,
+        "transport/unicast/accept_timeout",
+        &ms(links.establish),
+    )?;
+    set(
+        &mut config,
+        "transport/unicast/accept_pending",
+        &links.pending.to_string(),
+    )?;
+    set(&mut config, "transport/link/tx/lease", &ms(links.lease))?;
     let shm = shared_memory()?;
     set(
         &mut config,
@@ -539,6 +590,31 @@ pub fn open_session(
 
 #[cfg(test)]
 mod tests {
+    use std::time::Duration;
+
+    #[test]
+    fn a_small_launch_keeps_zenoh_s_link_timings_and_a_large_one_gets_more() {
+        let zenoh = super::LinkTimings {
+            lease: Duration::from_secs(10),
+            establish: Duration::from_secs(10),
+            pending: 100,
+        };
+        for p in [0, 1, 3, 10] {
+            assert_eq!(super::LinkTimings::for_processes(p), zenoh, "{p} processes");
+        }
+        let big = super::LinkTimings::for_processes(64);
+        assert_eq!(big.lease, Duration::from_secs(32));
+        assert_eq!(big.establish, Duration::from_secs(64));
+        assert_eq!(big.pending, 256);
+        // The most a launch may have, and more, without overflow.
+        let most = super::LinkTimings::for_processes(super::MAX_PROCESSES);
+        assert_eq!(most.lease, Duration::from_secs(128));
+        assert!(super::LinkTimings::for_processes(usize::MAX).pending >= most.pending);
+        assert_eq!(super::ready_wait(64), Duration::from_secs(52));
+        assert_eq!(super::ready_wait(3), Duration::from_millis(21_500));
+        assert!(super::ready_wait(usize::MAX) > super::ready_wait(64));
+    }
+
     #[test]
     fn zenoh_messages_lose_the_source_places_they_name() {
         let raw = "Can not create a new TCP listener bound to 127.0.0.1:7449: [Address already in use (os error 98) at /root/.cargo/registry/src/index.crates.io-1949cf8c6b5b557f/zenoh-link-commons-1.10.2/src/tcp.rs:61.] at /root/.cargo/registry/src/x/zenoh-transport-1.10.2/src/unicast.rs:338.\nmore";

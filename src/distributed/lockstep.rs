@@ -188,7 +188,8 @@ pub fn subscribe_reports(
 
 /// Wait until every process in `others` answers on its [`Keys::here`] key, asking every
 /// 100 ms, for as long as the launcher lives (processes started by hand may come minutes
-/// apart); after [`super::REPLY_TIMEOUT`] it says once, on stderr, whom it waits for. A peer's queryable answers only over a direct
+/// apart); after [`super::ready_wait`] (for `others` and this one) it says once, on stderr,
+/// whom it waits for. A peer's queryable answers only over a direct
 /// link (peers do not route for each other), and it is declared after the peer's
 /// subscription to the tick reports, which Zenoh declares first on the same link: once all
 /// answer, every report this process sends reaches every peer.
@@ -204,7 +205,7 @@ pub fn meet_peers(
     launcher_gone: &StopFlag,
 ) -> Result<(), DistError> {
     let prefix = keys.here("");
-    let hint_at = std::time::Instant::now() + super::REPLY_TIMEOUT;
+    let hint_at = std::time::Instant::now() + super::ready_wait(others.len() + 1);
     let mut hinted = false;
     loop {
         let replies = session
@@ -231,7 +232,7 @@ pub fn meet_peers(
                 .collect();
             eprintln!(
                 "ratelab: still waiting to reach process(es) {} directly (every process of a virtual-clock run links to every other; on other hosts give each `ratelab process` --listen tls/<its address>:PORT)",
-                missing.join(", ")
+                crate::text::listed(missing)
             );
         }
         if stop.is_stopped() {

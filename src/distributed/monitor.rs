@@ -45,7 +45,7 @@ pub const STATUS_PERIOD: Duration = Duration::from_millis(250);
 
 /// A process whose figures (published every 100 ms) stop for this long while its tokens
 /// live is silent: frozen (SIGSTOP), starved, or cut off before Zenoh's lease
-/// ([`crate::LINK_LEASE`]) says it is gone. Its nodes are drawn not alive meanwhile.
+/// ([`crate::LinkTimings`]) says it is gone. Its nodes are drawn not alive meanwhile.
 pub const SILENT_AFTER: Duration = Duration::from_secs(1);
 
 /// When each process's figures last came, for [`SILENT_AFTER`]: the launcher says a silent

@@ -277,9 +277,9 @@ impl Arrivals {
         arrived(&crate::graph::lock(&self.seqs), t, seq)
     }
 
-    /// Wait until topic `t` has received `seq` (or anything after it).
-    fn wait_for(&self, t: TopicId, seq: u64, stop: &StopFlag) -> bool {
-        let deadline = Instant::now() + REPLY_TIMEOUT;
+    /// Wait until topic `t` has received `seq` (or anything after it), until `deadline`
+    /// or `stop`: whether it has.
+    fn wait_for(&self, t: TopicId, seq: u64, deadline: Instant, stop: &StopFlag) -> bool {
         let mut seqs = crate::graph::lock(&self.seqs);
         loop {
             if arrived(&seqs, t, seq) {
@@ -447,13 +447,34 @@ pub fn run_process(opts: &ProcessOptions, stop: &StopFlag) -> Result<(), DistErr
         ));
     }
     report(&share, state, &send, &say)?;
-    // Let the report leave before the session closes.
-    std::thread::sleep(Duration::from_millis(200));
+    // The tokens go only once the launcher has the report (its withdrawal would overtake it).
+    await_report_taken(&ctl_rx, stop, &launcher_gone);
     drop(tokens);
     drop(subscribers);
     drop(lockstep_keys);
     let _ = session.close().wait();
     Ok(())
+}
+
+/// The longest a process waits for the launcher's receipt of its report
+/// ([`ToProcess::ReportTaken`]) before it leaves anyway.
+pub const REPORT_TAKEN_WAIT: Duration = Duration::from_secs(5);
+
+/// Wait until the launcher says it has this process's report ([`ToProcess::ReportTaken`]),
+/// for at most [`REPORT_TAKEN_WAIT`], and not at all on `stop` or once the launcher is gone.
+fn await_report_taken(ctl: &Receiver<ToProcess>, stop: &StopFlag, launcher_gone: &StopFlag) {
+    let deadline = Instant::now() + REPORT_TAKEN_WAIT;
+    while !stop.is_stopped() && !launcher_gone.is_stopped() {
+        let left = deadline.saturating_duration_since(Instant::now());
+        if left.is_zero() {
+            return;
+        }
+        match ctl.recv_timeout(left.min(Duration::from_millis(100))) {
+            Ok(ToProcess::ReportTaken) => return,
+            Ok(_) | Err(crossbeam_channel::RecvTimeoutError::Timeout) => {}
+            Err(crossbeam_channel::RecvTimeoutError::Disconnected) => return,
+        }
+    }
 }
 
 /// How a process sends a message to the launcher.
@@ -688,7 +709,7 @@ fn check_options(opts: &ProcessOptions) -> Result<GraphSpec, DistError> {
             "graph '{}' has no process '{}' (its processes: {})",
             file_spec.name,
             opts.process,
-            names.join(", ")
+            crate::text::listed(names)
         )));
     }
     if opts.connect.is_empty() {

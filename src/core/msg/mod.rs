@@ -415,13 +415,10 @@ impl<'de> Deserialize<'de> for MsgType {
         let name = std::borrow::Cow::<'de, str>::deserialize(d)?;
         MsgType::named(&name).ok_or_else(|| {
             serde::de::Error::custom(format!(
-                "unknown message type `{name}`: expected one of {} (or a type a Rust program \
+                "unknown message type `{}`: expected one of {} (or a type a Rust program \
                  registers: ratelab::msg::register)",
-                registered()
-                    .iter()
-                    .map(|t| t.as_str())
-                    .collect::<Vec<_>>()
-                    .join(", ")
+                crate::text::printable(&name),
+                crate::text::listed(registered().iter().map(|t| t.as_str()))
             ))
         })
     }

@@ -7,7 +7,7 @@ use super::processes::{before_the_run, Children};
 use super::Launch;
 use crate::config::ClockKind;
 use crate::wire::{self, ToLauncher, ToProcess};
-use crate::{DistError, REPLY_TIMEOUT};
+use crate::DistError;
 use std::time::{Duration, Instant};
 
 /// What the launcher made of a join.
@@ -24,14 +24,6 @@ pub(super) enum Admission {
     Busy(String),
     /// Not a join, or from a name no key can answer.
     Ignored,
-}
-
-/// How long the launcher waits for the processes it started to be ready: [`REPLY_TIMEOUT`],
-/// and half a second more per process, as every process of a virtual-clock run links to
-/// every other (P (P − 1) / 2 TLS links: 64 processes took 24 to 29 s on 2 cores).
-pub(super) fn ready_wait(processes: usize) -> Duration {
-    let per_process = Duration::from_millis(500);
-    REPLY_TIMEOUT + per_process * u32::try_from(processes).unwrap_or(u32::MAX)
 }
 
 impl Launch<'_> {
@@ -73,7 +65,7 @@ impl Launch<'_> {
             return refuse(format!(
                 "graph '{}' has no process '{process}' (its processes: {})",
                 spec.name,
-                names.join(", ")
+                crate::text::listed(names.iter().map(String::as_str))
             ));
         }
         let well_formed =
@@ -116,8 +108,8 @@ impl Launch<'_> {
     }
 
     /// Admit joins until every process of the placement is ready (within
-    /// [`REPLY_TIMEOUT`] of the start when the launch started them, an hour when they are
-    /// started by hand).
+    /// [`crate::ready_wait`] of the start when the launch started them, an hour when they
+    /// are started by hand).
     ///
     /// # Errors
     /// [`DistError::Peer`]: Ctrl-C, a started process that exited, or one not ready in
@@ -126,7 +118,7 @@ impl Launch<'_> {
         let names = &self.names;
         let mut joined = Vec::new();
         let mut ready = Vec::new();
-        let wait = ready_wait(names.len());
+        let wait = crate::ready_wait(names.len());
         let deadline = Instant::now()
             + if self.opts.exe.is_some() {
                 wait
@@ -142,9 +134,9 @@ impl Launch<'_> {
                     .map(String::as_str)
                     .collect();
                 return Err(DistError::Peer(format!(
-                    "process(es) {} did not become ready within {} s",
-                    missing.join(", "),
-                    wait.as_secs()
+                    "process(es) {} did not become ready within {:.1} s",
+                    crate::text::listed(missing),
+                    wait.as_secs_f64()
                 )));
             }
             self.say_refusals_due();

@@ -507,7 +507,7 @@ pub fn launch(
     } else {
         me.say(&format!(
             "waiting for {} to join: ratelab process{} --process NAME --connect {endpoint} --credentials FILE (launch --export-credentials FILE)",
-            me.names.join(", "),
+            crate::text::listed(me.names.iter().map(String::as_str)),
             opts.graph_path
                 .as_ref()
                 .map_or(String::new(), |g| format!(" --graph {}", g.display()))

@@ -178,7 +178,9 @@ impl Supervision {
                     "process '{p}' is silent at t={:.2}s: no figures for {:.1} s while its tokens live (stopped, starved or cut off?); it is gone if Zenoh's lease ({} s) runs out",
                     self.run_time().as_secs_f64(),
                     quiet.as_secs_f64(),
-                    crate::LINK_LEASE.as_secs()
+                    crate::LinkTimings::for_processes(l.names.len())
+                        .lease
+                        .as_secs()
                 ));
                 self.silent.push(p);
             }
@@ -422,6 +424,8 @@ impl Supervision {
                 state,
                 wire,
             } => {
+                // Its tokens go after this receipt, not before the report is in.
+                let _ = l.link.tell(&process, &ToProcess::ReportTaken);
                 wires.retain(|w| w.process != process);
                 let since = self.rejoined_at.get(&process).map(|t| t.0);
                 wires.extend(wire.into_iter().map(|w| wire::WireLink {

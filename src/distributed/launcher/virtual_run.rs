@@ -9,7 +9,7 @@ use super::{Launch, Link, LockstepCost};
 use crate::graph::{NodeId, TopicId};
 use crate::lockstep::{check_tick_report, TickInbox, HORIZON_PERIODS};
 use crate::runcore::Follower;
-use crate::scheduler::{EndReason, Event, RunEnd};
+use crate::scheduler::{EndReason, Event, RunEnd, StopFlag};
 use crate::summary::GraphState;
 use crate::time::Nanos;
 use crate::wire::{self, Ticked, ToLauncher, ToProcess};
@@ -166,7 +166,7 @@ impl Launch<'_> {
             .filter_map(|(t, s)| s.map(|s| (t, s)))
             .filter(|&(t, _)| !gone.contains(&spec.process_of(spec.topics[t].publisher)))
             .collect();
-        collect_reports(link, names, gone_now, &end, need, reports, wires);
+        collect_reports((link, stop), names, gone_now, &end, need, reports, wires);
         Ok((end, lockstep))
     }
 
@@ -251,17 +251,18 @@ impl Launch<'_> {
     }
 }
 
-/// How long after a process is seen gone its report may still come once the run is
-/// stopped: a process sends its report, then exits, and the withdrawal of its tokens can
-/// overtake the report on its way through the launcher (by 0.36 s, seen with 64
-/// processes on 2 cores, where reports were lost before this grace).
+/// How long after a process is seen gone, once the run is stopped, its report may still
+/// come. A process keeps its tokens until the launcher has its report
+/// ([`ToProcess::ReportTaken`]); this is for one that sent its report and then died, or
+/// whose wait for the receipt ran out (its tokens' withdrawal can overtake the report:
+/// by 0.36 s, seen with 64 processes on 2 cores before the receipt).
 const GONE_REPORT_GRACE: Duration = Duration::from_secs(2);
 
 /// Stop every process at `end` and gather its report: every process's, or until 5 s past
-/// [`REPLY_TIMEOUT`] (2 s after Ctrl-C); a process seen gone is waited for
-/// [`GONE_REPORT_GRACE`] more, not longer.
+/// [`REPLY_TIMEOUT`] (2 s after Ctrl-C, before or during the wait); a process gone before
+/// the stop is not waited for, one seen gone after it [`GONE_REPORT_GRACE`] more.
 fn collect_reports(
-    link: &Link,
+    (link, stop): (&Link, &StopFlag),
     names: &[String],
     gone: &Mutex<Vec<String>>,
     end: &RunEnd,
@@ -269,6 +270,12 @@ fn collect_reports(
     reports: &mut BTreeMap<String, GraphState>,
     wires: &mut Vec<wire::WireLink>,
 ) {
+    // Gone before the stop: no report will come (a virtual-clock process reports once
+    // told to stop).
+    let mut gone_since: BTreeMap<String, Option<Instant>> = crate::graph::lock(gone)
+        .iter()
+        .map(|p| (p.clone(), None))
+        .collect();
     for p in names {
         let _ = link.tell(
             p,
@@ -281,19 +288,22 @@ fn collect_reports(
     // After Ctrl-C (maybe with a tick hung) the reports get a short while only; else
     // longer than a process waits for its last input messages (REPLY_TIMEOUT), so that
     // its own error, on its stderr, comes first.
+    let interrupted = Duration::from_secs(2);
     let patience = if end.reason == EndReason::Interrupted {
-        Duration::from_secs(2)
+        interrupted
     } else {
         REPLY_TIMEOUT + Duration::from_secs(5)
     };
-    let deadline = Instant::now() + patience;
-    // A process that is gone (its tokens withdrawn) will not report: no wait for it, past
-    // GONE_REPORT_GRACE from when it was first seen gone.
-    let mut gone_since: BTreeMap<String, Instant> = BTreeMap::new();
+    let mut deadline = Instant::now() + patience;
+    let mut cut_short = false;
     loop {
         let now = Instant::now();
+        if stop.is_stopped() && !cut_short {
+            cut_short = true;
+            deadline = deadline.min(now + interrupted);
+        }
         for p in crate::graph::lock(gone).iter() {
-            gone_since.entry(p.clone()).or_insert(now);
+            gone_since.entry(p.clone()).or_insert(Some(now));
         }
         if !awaits_a_report(names, reports, &gone_since, now) || now >= deadline {
             break;
@@ -304,6 +314,8 @@ fn collect_reports(
             wire,
         }) = link.recv(Duration::from_millis(50))
         {
+            // Its tokens go after this receipt, not before the report is in.
+            let _ = link.tell(&process, &ToProcess::ReportTaken);
             wires.extend(wire);
             reports.insert(process, *state);
         }
@@ -311,19 +323,21 @@ fn collect_reports(
 }
 
 /// Whether a report of `names` may still come at `now`: one not in `reports` whose process
-/// is not gone (`gone_since`: when each was first seen gone), or gone less than
-/// [`GONE_REPORT_GRACE`] ago.
+/// is not gone (`gone_since`: `None` for those gone before the stop, else when each was
+/// first seen gone after it) or went less than [`GONE_REPORT_GRACE`] ago.
 fn awaits_a_report<T>(
     names: &[String],
     reports: &BTreeMap<String, T>,
-    gone_since: &BTreeMap<String, Instant>,
+    gone_since: &BTreeMap<String, Option<Instant>>,
     now: Instant,
 ) -> bool {
     names.iter().any(|p| {
         !reports.contains_key(p)
-            && gone_since
-                .get(p)
-                .is_none_or(|&at| now.duration_since(at) < GONE_REPORT_GRACE)
+            && match gone_since.get(p) {
+                None => true,
+                Some(None) => false,
+                Some(&Some(at)) => now.duration_since(at) < GONE_REPORT_GRACE,
+            }
     })
 }
 
@@ -351,7 +365,7 @@ mod tests {
         reports.insert("policy".to_string(), ());
         assert!(awaits_a_report(&names, &reports, &gone, t0), "ctl_0 runs");
         // ctl_0 seen gone: its report, sent before it exited, may still be on its way.
-        gone.insert("ctl_0".to_string(), t0);
+        gone.insert("ctl_0".to_string(), Some(t0));
         assert!(awaits_a_report(&names, &reports, &gone, t0));
         let later = t0 + GONE_REPORT_GRACE;
         assert!(!awaits_a_report(&names, &reports, &gone, later));
@@ -360,7 +374,12 @@ mod tests {
         assert!(!awaits_a_report(&names, &reports, &gone, t0));
         // A gone process that had reported is not waited for; one that runs is.
         reports.remove("policy");
-        gone.insert("robot".to_string(), t0);
+        gone.insert("robot".to_string(), Some(t0));
         assert!(awaits_a_report(&names, &reports, &gone, later));
+        // A process gone before the stop will not report: no grace for it.
+        reports.insert("policy".to_string(), ());
+        reports.remove("ctl_0");
+        gone.insert("ctl_0".to_string(), None);
+        assert!(!awaits_a_report(&names, &reports, &gone, t0));
     }
 }

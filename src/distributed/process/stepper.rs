@@ -35,7 +35,8 @@ use zenoh::Wait;
 /// The longest tick a Zenoh callback runs itself, ns: a node whose last tick here took
 /// longer (or that has not ticked here yet) ticks on the main thread. A tick on Zenoh's one
 /// thread holds up everything Zenoh does for the process (its keep-alives too: a tick of
-/// Zenoh's lease, 10 s, would end the link), so only ticks known to be short run there.
+/// Zenoh's lease, [`crate::LinkTimings`], would end the link), so only ticks known to be short
+/// run there.
 const CALLBACK_TICK_NS: u64 = 2_000_000;
 
 /// The longest failure message a report carries, bytes (a node's panic text may be long;
@@ -487,13 +488,17 @@ pub(super) fn run_lockstep(
         return Err(e);
     }
     // The last messages sent to us are delivered before the counters are read.
+    // One wait for all of them: the launcher waits a little longer for the report, so
+    // this process's own error comes first.
     let spec = &share.cfg.graph;
+    let deadline = Instant::now() + REPLY_TIMEOUT;
     for (t, seq) in need {
         let t = TopicId(t);
-        if share.inbound.contains(&t) && !share.arrivals.wait_for(t, seq, stop) {
+        if share.inbound.contains(&t) && !share.arrivals.wait_for(t, seq, deadline, stop) {
             return Err(DistError::Peer(format!(
-                "message {seq} on {} did not arrive before the end",
-                spec.topic(t).name
+                "message {seq} on {} did not arrive within {} s of the end",
+                spec.topic(t).name,
+                REPLY_TIMEOUT.as_secs()
             )));
         }
     }

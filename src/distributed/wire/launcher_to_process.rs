@@ -1,5 +1,6 @@
 //! Launcher to a process, on the process's control key: the welcome with the run's settings
-//! ([`Setup`]), a refusal, the start, the horizon and the stop ([`ToProcess`]). JSON.
+//! ([`Setup`]), a refusal, the start, the horizon, the stop and the receipt of the report
+//! ([`ToProcess`]). JSON.
 
 use crate::config::ClockKind;
 use crate::qos::Fault;
@@ -103,4 +104,9 @@ pub enum ToProcess {
         #[serde(default)]
         need: Vec<(usize, u64)>,
     },
+    /// The launcher has this process's report: it may leave. A process withdraws its
+    /// tokens only after this (or after [`crate::process::REPORT_TAKEN_WAIT`]): Zenoh sends
+    /// the withdrawal at a higher priority than the report, and a launcher that saw the
+    /// process gone first would not wait for its report.
+    ReportTaken,
 }

@@ -187,6 +187,13 @@ mod tests {
         assert!(e.contains("1 bytes after its end"), "{e}");
         assert!(WireSample::decode(&[0u8; 1024]).is_err());
         assert!(decode_json::<ToProcess>(b"{\"msg\":\"nope\"}").is_err());
+        // The receipt of a report, as it travels.
+        let taken = encode_json(&ToProcess::ReportTaken);
+        assert_eq!(taken, br#"{"msg":"report_taken"}"#);
+        assert_eq!(
+            decode_json::<ToProcess>(&taken).unwrap(),
+            ToProcess::ReportTaken
+        );
     }
 
     #[test]

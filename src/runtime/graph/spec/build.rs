@@ -326,16 +326,14 @@ fn read_node(
     }
     let kind_name = r.kind.get_ref().as_str();
     let kind = crate::graph::registry::kind(kind_name).ok_or_else(|| {
-        let known: Vec<&str> = crate::graph::registry::kinds()
-            .iter()
-            .map(|k| k.as_str())
-            .collect();
+        let kinds = crate::graph::registry::kinds();
         cx.err(
             r.kind.span(),
             format!(
-                "unknown kind `{kind_name}`: expected one of {} (or a kind a Rust \
-                 program registers: ratelab::graph::registry)",
-                known.join(", ")
+                "unknown kind `{}`: expected one of {} (or a kind a Rust program \
+                 registers: ratelab::graph::registry)",
+                crate::text::printable(kind_name),
+                crate::text::listed(kinds.iter().map(|k| k.as_str()))
             ),
         )
     })?;
