@@ -325,6 +325,9 @@ pub(super) fn render_node(n: &NodeView, area: Rect, buf: &mut Buffer, real: bool
             name.push_str(short);
         }
     }
+    // A name longer than the box is cut at its end, marked (`estim…`): a centred title
+    // too long would lose both ends (`mator`).
+    let name = cut_with_ellipsis(name, usize::from(area.width.saturating_sub(2)));
     let (title, border) = if n.selected {
         (
             Line::from(name).black().on_yellow().bold().centered(),
@@ -337,6 +340,40 @@ pub(super) fn render_node(n: &NodeView, area: Rect, buf: &mut Buffer, real: bool
         .alignment(Alignment::Center)
         .block(Block::bordered().border_style(border).title(title))
         .render(area, buf);
+}
+
+/// `text` whole when it has at most `room` characters; else cut and marked `…`: in the
+/// middle when it ends in a number (`esti…_12`: a generated graph's nodes differ there),
+/// else at its end (`estim…`).
+fn cut_with_ellipsis(text: String, room: usize) -> String {
+    let chars: Vec<char> = text.chars().collect();
+    if chars.len() <= room {
+        return text;
+    }
+    if room == 0 {
+        return String::new();
+    }
+    // The number it ends in, with the `_` before it.
+    let digits = chars
+        .iter()
+        .rev()
+        .take_while(|c| c.is_ascii_digit())
+        .count();
+    let underscore =
+        usize::from(digits > 0 && chars.len() > digits && chars[chars.len() - digits - 1] == '_');
+    let suffix = digits + underscore;
+    // At least two characters of the start before the mark, or the number is not kept.
+    let keep_suffix = suffix > 0 && suffix + 3 <= room;
+    let (head, tail) = if keep_suffix {
+        (room - 1 - suffix, &chars[chars.len() - suffix..])
+    } else {
+        (room - 1, &chars[chars.len()..])
+    };
+    chars[..head]
+        .iter()
+        .chain(['…'].iter())
+        .chain(tail)
+        .collect()
 }
 
 /// What a node's box says of its rate under the rate it is set to: what it sent, what the
@@ -457,10 +494,22 @@ pub(super) fn arrow_lines(t: &TopicView, w: usize, rows: usize) -> Vec<Line<'sta
     ));
     let rate = arrow_rate(t, w, style);
     // Several subscribers: who reads it, under its name.
+    // Several subscribers: who reads it, under its name (`/meas → estimator, compare`),
+    // else how many (`/meas → 2 subs`, `/meas →2`), else the name alone.
     let name = match &t.fan_out {
         Some(to) => {
-            let to: String = format!("→ {to}").chars().take(w).collect();
-            Line::from(vec![name.spans[0].clone(), Span::raw(" "), to.dim()]).centered()
+            let room = (w + 1).saturating_sub(name.width() + 1);
+            // Node names hold no ", " (letters, digits, `_` and `-`).
+            let n = to.matches(", ").count() + 1;
+            let to = first_that_fits(
+                [format!("→ {to}"), format!("→ {n} subs"), format!("→{n}")],
+                room,
+            );
+            if to.chars().count() <= room {
+                Line::from(vec![name.spans[0].clone(), Span::raw(" "), to.dim()]).centered()
+            } else {
+                name
+            }
         }
         None => name,
     };
@@ -923,6 +972,36 @@ mod tests {
     /// An arrow in a cell of two or three rows (a two-row layout at 80×24) keeps its rate
     /// on the shaft, and its QoS counters before its drops when they counted; in a cell
     /// with room, the lines are as they were.
+    #[test]
+    fn a_fanned_out_topic_names_its_subscribers_or_counts_them_as_room_allows() {
+        let t = TopicView {
+            name: "/meas".into(),
+            fan_out: Some("estimator, compare".into()),
+            ..topic(None, Vec::new())
+        };
+        let first = |w: usize| texts(&arrow_lines(&t, w, 3))[0].trim().to_string();
+        assert_eq!(first(40), "/meas → estimator, compare");
+        assert_eq!(first(14), "/meas → 2 subs");
+        // At 80 columns with 9 columns of boxes and arrows (an arrow 9 wide).
+        assert_eq!(first(8), "/meas →2");
+        assert_eq!(first(5), "/meas");
+    }
+
+    #[test]
+    fn a_name_longer_than_its_box_is_cut_at_its_end_and_marked() {
+        assert_eq!(cut_with_ellipsis("policy".into(), 6), "policy");
+        assert_eq!(cut_with_ellipsis("estimator".into(), 6), "estim…");
+        // A number at the end is what tells a generated graph's nodes apart: kept.
+        assert_eq!(cut_with_ellipsis("estimator_12".into(), 8), "esti…_12");
+        assert_eq!(cut_with_ellipsis("safety_0".into(), 7), "safe…_0");
+        assert_eq!(cut_with_ellipsis("node1234".into(), 7), "no…1234");
+        // Too little room for the number and a start: cut at the end.
+        assert_eq!(cut_with_ellipsis("estimator_12".into(), 5), "esti…");
+        assert_eq!(cut_with_ellipsis("_1234".into(), 4), "_12…");
+        assert_eq!(cut_with_ellipsis("θ̂ node".into(), 3), "θ\u{302}…");
+        assert_eq!(cut_with_ellipsis("x".into(), 0), "");
+    }
+
     #[test]
     fn a_short_arrow_keeps_its_rate_and_its_trouble() {
         let plain = topic(None, Vec::new());
