@@ -150,7 +150,7 @@ pub fn run_launch(a: &LaunchArgs, force_headless: bool, stop: StopFlag) -> anyho
     anyhow::ensure!(
         missing.is_empty(),
         "process(es) {} did not report: their nodes' figures are missing from the summary",
-        missing.join(", ")
+        ratelab::text::listed(missing.iter().map(String::as_str))
     );
     headless::end_is_an_error(&report)
 }
@@ -190,7 +190,7 @@ fn kills_of(a: &LaunchArgs, cfg: &RunConfig) -> anyhow::Result<Vec<(String, rate
                     "--kill-process: graph '{}' has no process '{}' (its processes: {})",
                     cfg.graph.name,
                     ratelab::text::printable(&k.node),
-                    names.join(", ")
+                    ratelab::text::listed(names.iter().map(String::as_str))
                 ))
             }
         })

@@ -188,8 +188,9 @@ pub fn subscribe_reports(
 
 /// Wait until every process in `others` answers on its [`Keys::here`] key, asking every
 /// 100 ms, for as long as the launcher lives (processes started by hand may come minutes
-/// apart); after [`super::ready_wait`] (for `others` and this one) it says once, on stderr,
-/// whom it waits for. A peer's queryable answers only over a direct
+/// apart); after three quarters of [`super::ready_wait`] (for `others` and this one: before
+/// the launcher gives up on the processes it started) it says once, on stderr, whom it
+/// waits for. A peer's queryable answers only over a direct
 /// link (peers do not route for each other), and it is declared after the peer's
 /// subscription to the tick reports, which Zenoh declares first on the same link: once all
 /// answer, every report this process sends reaches every peer.
@@ -205,7 +206,7 @@ pub fn meet_peers(
     launcher_gone: &StopFlag,
 ) -> Result<(), DistError> {
     let prefix = keys.here("");
-    let hint_at = std::time::Instant::now() + super::ready_wait(others.len() + 1);
+    let hint_at = std::time::Instant::now() + super::ready_wait(others.len() + 1) * 3 / 4;
     let mut hinted = false;
     loop {
         let replies = session

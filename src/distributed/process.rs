@@ -448,7 +448,7 @@ pub fn run_process(opts: &ProcessOptions, stop: &StopFlag) -> Result<(), DistErr
     }
     report(&share, state, &send, &say)?;
     // The tokens go only once the launcher has the report (its withdrawal would overtake it).
-    await_report_taken(&ctl_rx, stop, &launcher_gone);
+    await_report_taken(&ctl_rx, stop, &launcher_gone, REPORT_TAKEN_WAIT);
     drop(tokens);
     drop(subscribers);
     drop(lockstep_keys);
@@ -457,13 +457,21 @@ pub fn run_process(opts: &ProcessOptions, stop: &StopFlag) -> Result<(), DistErr
 }
 
 /// The longest a process waits for the launcher's receipt of its report
-/// ([`ToProcess::ReportTaken`]) before it leaves anyway.
-pub const REPORT_TAKEN_WAIT: Duration = Duration::from_secs(5);
+/// ([`ToProcess::ReportTaken`]) before it leaves anyway: shorter than the launcher gives
+/// the processes it started to exit after the run (5 s, then SIGKILL), as a report that
+/// came after the launcher stopped collecting gets no receipt.
+pub const REPORT_TAKEN_WAIT: Duration = Duration::from_secs(2);
 
 /// Wait until the launcher says it has this process's report ([`ToProcess::ReportTaken`]),
-/// for at most [`REPORT_TAKEN_WAIT`], and not at all on `stop` or once the launcher is gone.
-fn await_report_taken(ctl: &Receiver<ToProcess>, stop: &StopFlag, launcher_gone: &StopFlag) {
-    let deadline = Instant::now() + REPORT_TAKEN_WAIT;
+/// for at most `wait`, and not at all on `stop` or once the launcher is gone. Any other
+/// control message meanwhile is not for this run (it is over) and is dropped.
+fn await_report_taken(
+    ctl: &Receiver<ToProcess>,
+    stop: &StopFlag,
+    launcher_gone: &StopFlag,
+    wait: Duration,
+) {
+    let deadline = Instant::now() + wait;
     while !stop.is_stopped() && !launcher_gone.is_stopped() {
         let left = deadline.saturating_duration_since(Instant::now());
         if left.is_zero() {
@@ -1059,7 +1067,8 @@ fn recv(
 
 /// The next control message for this process once welcomed: a busy refusal is for another
 /// process of its name asking to join (the control key is the name's: a second copy, or this
-/// one's own join that crossed its welcome), never for this one.
+/// one's own join that crossed its welcome), never for this one; a receipt of a report is
+/// for the copy before this one.
 fn recv_own(
     rx: &Receiver<ToProcess>,
     stop: &StopFlag,
@@ -1067,7 +1076,7 @@ fn recv_own(
 ) -> Result<ToProcess, DistError> {
     loop {
         match recv(rx, stop, gone)? {
-            ToProcess::Reject { busy: true, .. } => {}
+            ToProcess::Reject { busy: true, .. } | ToProcess::ReportTaken => {}
             m => return Ok(m),
         }
     }
@@ -1264,6 +1273,50 @@ mod tests {
     use crate::time::Nanos;
     use crate::wire::{WireSample, MAX_SENT_PER_TICK};
     use zenoh::Wait;
+
+    /// A process leaves on the launcher's receipt of its report, not before: other control
+    /// messages meanwhile are dropped; without a receipt it leaves after the wait, and at
+    /// once on Ctrl-C or when the launcher is gone.
+    #[test]
+    fn a_process_waits_for_the_receipt_of_its_report() {
+        use super::{await_report_taken, ToProcess};
+        use crate::scheduler::StopFlag;
+        use std::time::{Duration, Instant};
+        let (tx, rx) = crossbeam_channel::unbounded();
+        let (stop, gone) = (StopFlag::new(), StopFlag::new());
+        let long = Duration::from_secs(60);
+        // The receipt after a late stop and horizon: taken, the wait ends there.
+        tx.send(ToProcess::Stop {
+            at_ns: 0,
+            need: Vec::new(),
+        })
+        .unwrap();
+        tx.send(ToProcess::Horizon { until_ns: 1 }).unwrap();
+        tx.send(ToProcess::ReportTaken).unwrap();
+        tx.send(ToProcess::Horizon { until_ns: 2 }).unwrap();
+        let began = Instant::now();
+        await_report_taken(&rx, &stop, &gone, long);
+        assert!(began.elapsed() < Duration::from_secs(30));
+        assert_eq!(rx.try_recv().ok(), Some(ToProcess::Horizon { until_ns: 2 }));
+        // No receipt: it leaves after the wait.
+        let began = Instant::now();
+        await_report_taken(&rx, &stop, &gone, Duration::from_millis(200));
+        assert!(began.elapsed() >= Duration::from_millis(200));
+        // The launcher gone, or Ctrl-C: at once.
+        gone.stop();
+        let began = Instant::now();
+        await_report_taken(&rx, &stop, &gone, long);
+        assert!(began.elapsed() < Duration::from_secs(30));
+        let gone = StopFlag::new();
+        stop.stop();
+        let began = Instant::now();
+        await_report_taken(&rx, &stop, &gone, long);
+        assert!(began.elapsed() < Duration::from_secs(30));
+        // The channel closed (the session's subscriber gone): at once.
+        let (tx, rx) = crossbeam_channel::unbounded::<ToProcess>();
+        drop(tx);
+        await_report_taken(&rx, &StopFlag::new(), &gone, long);
+    }
 
     /// Which topics cross a process's boundary, decided in one place, as a table: the
     /// chapter's graph as `launch --processes` places it, and the whole graph in one.

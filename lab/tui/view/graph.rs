@@ -313,10 +313,11 @@ pub(super) fn render_node(n: &NodeView, area: Rect, buf: &mut Buffer, real: bool
         };
         lines.insert(0, Line::from(text).white().on_red().bold());
     }
-    let mut name = match &n.process {
-        Some(p) => format!("{}@{p}", n.name),
-        None => n.name.clone(),
-    };
+    let mut name = node_title(
+        &n.name,
+        n.process.as_deref(),
+        usize::from(area.width.saturating_sub(2)),
+    );
     // Only where the name still fits whole (a centred title too long loses both ends).
     if let (Some(b), true) = (n.badge, badge_in_title) {
         let short = b.words().1;
@@ -325,8 +326,7 @@ pub(super) fn render_node(n: &NodeView, area: Rect, buf: &mut Buffer, real: bool
             name.push_str(short);
         }
     }
-    // A name longer than the box is cut at its end, marked (`estim…`): a centred title
-    // too long would lose both ends (`mator`).
+    // Whatever is still too long (a badge added) is cut at its end, marked.
     let name = cut_with_ellipsis(name, usize::from(area.width.saturating_sub(2)));
     let (title, border) = if n.selected {
         (
@@ -342,9 +342,34 @@ pub(super) fn render_node(n: &NodeView, area: Rect, buf: &mut Buffer, real: bool
         .render(area, buf);
 }
 
+/// A node box's title in `room` columns: `name@process` (attached to a launch) when it fits,
+/// else the name, cut ([`cut_with_ellipsis`]) to no fewer than 7 columns, before a cut
+/// `@process` (`estima…_0@c…`), else the name alone, cut (`esti…_0`): the node's own number
+/// is kept, never the process's taken for it.
+fn node_title(name: &str, process: Option<&str>, room: usize) -> String {
+    let Some(p) = process else {
+        return cut_with_ellipsis(name.to_string(), room);
+    };
+    let whole = format!("{name}@{p}");
+    if whole.chars().count() <= room {
+        return whole;
+    }
+    // The name in all but three columns (`@c…`), when that leaves it 7 or whole.
+    let at = format!("@{p}");
+    let name_len = name.chars().count();
+    let name_room = room.saturating_sub(3).min(name_len);
+    if name_room >= name_len.min(7) {
+        let name = cut_with_ellipsis(name.to_string(), name_room);
+        let left = room - name.chars().count();
+        return format!("{name}{}", cut_with_ellipsis(at, left));
+    }
+    cut_with_ellipsis(name.to_string(), room)
+}
+
 /// `text` whole when it has at most `room` characters; else cut and marked `…`: in the
 /// middle when it ends in a number (`esti…_12`: a generated graph's nodes differ there),
-/// else at its end (`estim…`).
+/// else at its end (`estim…`). Characters, not display columns: node and process names
+/// are ASCII (`valid_node_name`), badges too.
 fn cut_with_ellipsis(text: String, room: usize) -> String {
     let chars: Vec<char> = text.chars().collect();
     if chars.len() <= room {
@@ -456,6 +481,41 @@ fn pack(parts: impl IntoIterator<Item = String>, sep: &str, w: usize) -> Vec<Str
     packed
 }
 
+/// An arrow's first line, `w` (+ 1) wide: its name (with its depth when selected) and,
+/// with several subscribers, who reads it (`/meas → estimator, compare`), else how many
+/// (`/meas → 2 subs`, `/meas →2`), else the name alone.
+fn arrow_title(t: &TopicView, w: usize) -> Line<'static> {
+    let name = if t.selected {
+        Line::from(
+            format!("{} d{}", t.name, t.depth)
+                .black()
+                .on_yellow()
+                .bold(),
+        )
+        .centered()
+    } else {
+        Line::from(t.name.clone().bold()).centered()
+    };
+    match &t.fan_out {
+        Some(to) => {
+            // The arrow's lines may take the column before the next box (w + 1).
+            let room = w.saturating_sub(name.width());
+            // Node names hold no ", " (letters, digits, `_` and `-`).
+            let n = to.matches(", ").count() + 1;
+            let to = first_that_fits(
+                [format!("→ {to}"), format!("→ {n} subs"), format!("→{n}")],
+                room,
+            );
+            if to.chars().count() <= room {
+                Line::from(vec![name.spans[0].clone(), Span::raw(" "), to.dim()]).centered()
+            } else {
+                name
+            }
+        }
+        None => name,
+    }
+}
+
 /// An arrow's lines at width `w`, for a panel `rows` high: name, shaft, msg/s, dropped (and
 /// stale reads, and the wire latency across processes). When those do not fit in `rows`
 /// (at 80×24), the drops and stale reads share a line (`3 drop ⚠ 126↺`) if it fits `w`, so
@@ -477,42 +537,12 @@ pub(super) fn arrow_lines(t: &TopicView, w: usize, rows: usize) -> Vec<Line<'sta
     } else {
         ("─", Style::new().fg(Color::Green), "✓")
     };
-    let name = if t.selected {
-        Line::from(
-            format!("{} d{}", t.name, t.depth)
-                .black()
-                .on_yellow()
-                .bold(),
-        )
-        .centered()
-    } else {
-        Line::from(t.name.clone().bold()).centered()
-    };
     let shaft = Line::from(Span::styled(
         format!("{}▶", shaft.repeat(w.saturating_sub(1))),
         style,
     ));
     let rate = arrow_rate(t, w, style);
-    // Several subscribers: who reads it, under its name.
-    // Several subscribers: who reads it, under its name (`/meas → estimator, compare`),
-    // else how many (`/meas → 2 subs`, `/meas →2`), else the name alone.
-    let name = match &t.fan_out {
-        Some(to) => {
-            let room = (w + 1).saturating_sub(name.width() + 1);
-            // Node names hold no ", " (letters, digits, `_` and `-`).
-            let n = to.matches(", ").count() + 1;
-            let to = first_that_fits(
-                [format!("→ {to}"), format!("→ {n} subs"), format!("→{n}")],
-                room,
-            );
-            if to.chars().count() <= room {
-                Line::from(vec![name.spans[0].clone(), Span::raw(" "), to.dim()]).centered()
-            } else {
-                name
-            }
-        }
-        None => name,
-    };
+    let name = arrow_title(t, w);
     if !t.incompatible.is_empty() {
         return incompatible_arrow(t, name, w, rows);
     }
@@ -969,9 +999,6 @@ mod tests {
         }
     }
 
-    /// An arrow in a cell of two or three rows (a two-row layout at 80×24) keeps its rate
-    /// on the shaft, and its QoS counters before its drops when they counted; in a cell
-    /// with room, the lines are as they were.
     #[test]
     fn a_fanned_out_topic_names_its_subscribers_or_counts_them_as_room_allows() {
         let t = TopicView {
@@ -982,6 +1009,9 @@ mod tests {
         let first = |w: usize| texts(&arrow_lines(&t, w, 3))[0].trim().to_string();
         assert_eq!(first(40), "/meas → estimator, compare");
         assert_eq!(first(14), "/meas → 2 subs");
+        // Exactly as wide as the cell (w + 1 columns).
+        assert_eq!(first(13), "/meas → 2 subs");
+        assert_eq!(first(12), "/meas →2");
         // At 80 columns with 9 columns of boxes and arrows (an arrow 9 wide).
         assert_eq!(first(8), "/meas →2");
         assert_eq!(first(5), "/meas");
@@ -1000,8 +1030,20 @@ mod tests {
         assert_eq!(cut_with_ellipsis("_1234".into(), 4), "_12…");
         assert_eq!(cut_with_ellipsis("θ̂ node".into(), 3), "θ\u{302}…");
         assert_eq!(cut_with_ellipsis("x".into(), 0), "");
+        // Attached to a launch: the node's number, not the process's.
+        assert_eq!(
+            node_title("estimator_0", Some("ctl_3"), 30),
+            "estimator_0@ctl_3"
+        );
+        assert_eq!(node_title("estimator_0", Some("ctl_3"), 12), "estima…_0@c…");
+        assert_eq!(node_title("policy", Some("ctl_3"), 10), "policy@ct…");
+        assert_eq!(node_title("estimator_0", Some("ctl_3"), 7), "esti…_0");
+        assert_eq!(node_title("estimator_0", None, 7), "esti…_0");
     }
 
+    /// An arrow in a cell of two or three rows (a two-row layout at 80×24) keeps its rate
+    /// on the shaft, and its QoS counters before its drops when they counted; in a cell
+    /// with room, the lines are as they were.
     #[test]
     fn a_short_arrow_keeps_its_rate_and_its_trouble() {
         let plain = topic(None, Vec::new());

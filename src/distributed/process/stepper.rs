@@ -495,6 +495,9 @@ pub(super) fn run_lockstep(
     for (t, seq) in need {
         let t = TopicId(t);
         if share.inbound.contains(&t) && !share.arrivals.wait_for(t, seq, deadline, stop) {
+            if stop.is_stopped() {
+                return Err(DistError::Peer("interrupted".into()));
+            }
             return Err(DistError::Peer(format!(
                 "message {seq} on {} did not arrive within {} s of the end",
                 spec.topic(t).name,

@@ -96,7 +96,7 @@ pub enum ToProcess {
     },
     /// The run ended at run time `at_ns`: once the local copies of the input topics hold
     /// the messages `need` (topic index, seq: the last its publisher sent; virtual clock),
-    /// report and leave.
+    /// report, and leave once the report is taken ([`ToProcess::ReportTaken`]).
     Stop {
         /// Run time of the end, ns.
         at_ns: u64,
