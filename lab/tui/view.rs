@@ -527,15 +527,6 @@ fn render_ros2(r: &Ros2View, area: Rect, buf: &mut Buffer) {
     let inner = block.inner(area);
     block.render(area, buf);
     let width = usize::from(inner.width);
-    let cut = |s: String| -> String {
-        if s.chars().count() > width {
-            let mut t: String = s.chars().take(width.saturating_sub(1)).collect();
-            t.push('…');
-            t
-        } else {
-            s
-        }
-    };
     let name_w = r
         .offered
         .topics
@@ -550,17 +541,20 @@ fn render_ros2(r: &Ros2View, area: Rect, buf: &mut Buffer) {
         .map(|t| t.ros_type.chars().count())
         .max()
         .unwrap_or(0);
-    let mut lines = vec![Line::from(cut(format!(
-        "nodes  {}",
-        r.offered.nodes.join("  ")
-    )))];
+    let mut lines = vec![Line::from(cut(
+        &format!("nodes  {}", r.offered.nodes.join("  ")),
+        width,
+    ))];
     for t in &r.offered.topics {
-        lines.push(Line::from(cut(format!(
-            "{:name_w$}  {:type_w$}  {} pub {} sub  {}",
-            t.name, t.ros_type, t.publishers, t.subscriptions, t.qos
-        ))));
+        lines.push(Line::from(cut(
+            &format!(
+                "{:name_w$}  {:type_w$}  {} pub {} sub  {}",
+                t.name, t.ros_type, t.publishers, t.subscriptions, t.qos
+            ),
+            width,
+        )));
     }
-    lines.push(Line::from(cut(r.offered.every_node.clone())).dim());
+    lines.push(Line::from(cut(&r.offered.every_node, width)).dim());
     Paragraph::new(lines).render(inner, buf);
 }
 
@@ -781,6 +775,16 @@ fn badge(v: &View) -> Span<'static> {
         .on_yellow()
         .bold(),
     }
+}
+
+/// `text` cut to `w` characters (the last one `…` when cut).
+pub(super) fn cut(text: &str, w: usize) -> String {
+    if text.chars().count() <= w {
+        return text.to_string();
+    }
+    let mut t: String = text.chars().take(w.saturating_sub(1)).collect();
+    t.push('…');
+    t
 }
 
 /// The first of `forms` (longest first) that fits `room` columns whole, else the last: a

@@ -389,12 +389,11 @@ fn cut_with_ellipsis(text: String, room: usize) -> String {
     let suffix = digits + underscore;
     // At least two characters of the start before the mark, or the number is not kept.
     let keep_suffix = suffix > 0 && suffix + 3 <= room;
-    let (head, tail) = if keep_suffix {
-        (room - 1 - suffix, &chars[chars.len() - suffix..])
-    } else {
-        (room - 1, &chars[chars.len()..])
-    };
-    chars[..head]
+    if !keep_suffix {
+        return cut(&text, room);
+    }
+    let (head, tail) = chars.split_at(chars.len() - suffix);
+    head[..room - 1 - suffix]
         .iter()
         .chain(['…'].iter())
         .chain(tail)

@@ -90,16 +90,6 @@ fn row_style(selected: bool, trouble: bool) -> Style {
     }
 }
 
-/// `text` cut to `w` characters (the last one `…` when cut).
-fn cut(text: &str, w: usize) -> String {
-    if text.chars().count() <= w {
-        return text.to_string();
-    }
-    let mut t: String = text.chars().take(w.saturating_sub(1)).collect();
-    t.push('…');
-    t
-}
-
 /// What the graph panel says when its filter shows nothing.
 pub(super) fn render_nothing_shown(v: &View, area: Rect, buf: &mut Buffer) {
     let what = match &v.nav.filter {

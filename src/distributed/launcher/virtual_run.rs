@@ -295,11 +295,11 @@ fn collect_reports(
         REPLY_TIMEOUT + Duration::from_secs(5)
     };
     let mut deadline = Instant::now() + patience;
-    let mut cut_short = false;
     loop {
         let now = Instant::now();
-        if stop.is_stopped() && !cut_short {
-            cut_short = true;
+        // Ctrl-C meanwhile: 2 s from the first time it is seen (later, `now + 2 s` is
+        // never the earlier).
+        if stop.is_stopped() {
             deadline = deadline.min(now + interrupted);
         }
         for p in crate::graph::lock(gone).iter() {
