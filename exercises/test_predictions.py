@@ -5,9 +5,11 @@
 
 Each exercise is one test. One you have not predicted yet is skipped (fill in its
 [prediction] first: predicting is the exercise). One you have is run as `ratelab exercise
-exN` runs it, and fails when one of its checks fails or your prediction cannot be read (a
-key missing, or of the wrong type) — a prediction that turned out wrong is no failure: read
-the reconcile that the failure message and `ratelab exercise exN` print beside it.
+exN` runs it, and passes as the command passes (exit 0): it fails when your prediction
+missed (a value other than the one measured, or an amount off by more than its sentence
+allows), when it cannot be read (a key missing, or of the wrong type), or when one of the
+exercise's checks fails. The failure's message sets each missed prediction beside the
+outcome, in the words `ratelab exercise exN` prints; run that for the whole reconcile.
 """
 
 from pathlib import Path
@@ -25,6 +27,8 @@ def test_exercise(which):
         found = ratelab.exercise(which, dir=HERE)
     except ratelab.NoPrediction as e:
         pytest.skip(str(e))
-    failed = [c.name for c in found.checks if not c.passed]
-    assert not failed, f"{which}: checks that failed: {failed}"
-    assert found.passed, f"{which}: " + " ".join(found.reconcile)
+    wrong = [f"{p.key} ({p.verdict}): {p.said}" for p in found.missed]
+    failed = [f"check failed: {c.name}" for c in found.failed_checks]
+    assert found.passed and not wrong and not failed, f"{which} is not passed:\n" + "\n".join(
+        wrong + failed
+    )

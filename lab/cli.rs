@@ -1,6 +1,6 @@
 //! The command line (clap): `ratelab [run|bench|...]` and the run flags shared by all.
 
-use clap::{Args, Parser, Subcommand};
+use clap::{Args, CommandFactory, FromArgMatches, Parser, Subcommand};
 use ratelab::config::{check_rate, duration_from_secs, phase_offset_from_ms, ClockKind};
 use ratelab::graph::nodes::camera::{MAX_FRAME_PX, MIN_FRAME_PX};
 use ratelab::qos::Fault;
@@ -22,6 +22,64 @@ pub struct Cli {
     /// Run settings (for the default action).
     #[command(flatten)]
     pub run: RunArgs,
+}
+
+impl Cli {
+    /// `argv` (the program's name first) read as the command line reads it: clap's parse,
+    /// with one rule added, [`numbers_may_begin_with_a_hyphen`].
+    ///
+    /// # Errors
+    /// clap's error for an unknown flag, a missing value or a value its rule refuses
+    /// (`--control-hz must be in (0, 10000]`); `--help` and `--version` come back as clap's
+    /// `DisplayHelp`/`DisplayVersion` errors, to be printed.
+    pub fn parse_argv<I, T>(argv: I) -> Result<Cli, clap::Error>
+    where
+        I: IntoIterator<Item = T>,
+        T: Into<std::ffi::OsString> + Clone,
+    {
+        let mut matches =
+            numbers_may_begin_with_a_hyphen(Cli::command()).try_get_matches_from(argv)?;
+        Cli::from_arg_matches_mut(&mut matches)
+    }
+}
+
+/// Every option of `cmd` (and of its subcommands) whose value is a number (and not
+/// optional: `--ros2 [DOMAIN]` keeps clap's reading) takes a value
+/// that begins with `-` (`-inf`, `-1e3`, `-5`) as that value, to be judged by the option's
+/// own rule ("--control-hz must be in (0, 10000]"), rather than as a flag: clap alone reads
+/// `--control-hz -inf` as the flags `-i`, `-n`, `-f` ("unexpected argument '-i' found"),
+/// naming neither the option nor its rule. Options whose value is a name or a path are left
+/// as clap reads them, so `--out --force` still says that `--out` lacks its value.
+pub fn numbers_may_begin_with_a_hyphen(cmd: clap::Command) -> clap::Command {
+    cmd.mut_args(|arg| {
+        if takes_a_number(&arg) {
+            arg.allow_hyphen_values(true)
+        } else {
+            arg
+        }
+    })
+    .mut_subcommands(numbers_may_begin_with_a_hyphen)
+}
+
+/// Whether `arg` takes a value parsed as a number (its value parser's type).
+fn takes_a_number(arg: &clap::Arg) -> bool {
+    use std::any::TypeId;
+    let numbers = [
+        TypeId::of::<f64>(),
+        TypeId::of::<f32>(),
+        TypeId::of::<u8>(),
+        TypeId::of::<u16>(),
+        TypeId::of::<u32>(),
+        TypeId::of::<u64>(),
+        TypeId::of::<usize>(),
+        TypeId::of::<i32>(),
+        TypeId::of::<i64>(),
+    ];
+    let ty = arg.get_value_parser().type_id();
+    // An option whose value may be left out (`--ros2 [DOMAIN]`) keeps clap's reading, so
+    // that a flag after it (`--ros2 --bag DIR`) stays a flag.
+    let value_optional = arg.get_num_args().is_some_and(|n| n.min_values() == 0);
+    arg.get_action().takes_values() && !value_optional && numbers.iter().any(|n| ty == *n)
 }
 
 /// Subcommands.
@@ -364,16 +422,16 @@ fn parse_spin_margin(s: &str) -> Result<u64, String> {
 #[derive(Debug, Clone, Args)]
 pub struct SweepArgs {
     /// Control rates, Hz (comma-separated).
-    #[arg(long, allow_negative_numbers = true, value_delimiter = ',', default_value = "50,25,20,15,10,5", value_parser = parse_rate("control-hz"))]
+    #[arg(long, value_delimiter = ',', default_value = "50,25,20,15,10,5", value_parser = parse_rate("control-hz"))]
     pub control_hz: Vec<f64>,
     /// Sensor rates, Hz.
-    #[arg(long, allow_negative_numbers = true, value_delimiter = ',', default_value = "50", value_parser = parse_rate("sensor-hz"))]
+    #[arg(long, value_delimiter = ',', default_value = "50", value_parser = parse_rate("sensor-hz"))]
     pub sensor_hz: Vec<f64>,
     /// Queue depths.
-    #[arg(long, allow_negative_numbers = true, value_delimiter = ',', default_value = "1", value_parser = parse_depth)]
+    #[arg(long, value_delimiter = ',', default_value = "1", value_parser = parse_depth)]
     pub queue_depth: Vec<usize>,
     /// Seeds.
-    #[arg(long, value_delimiter = ',', default_value = "0,1,2", allow_negative_numbers = true, value_parser = parse_seed)]
+    #[arg(long, value_delimiter = ',', default_value = "0,1,2", value_parser = parse_seed)]
     pub seeds: Vec<u64>,
     /// Clocks (virtual runs in parallel; real runs one at a time, in real time).
     #[arg(long, value_delimiter = ',', default_value = "virtual", value_parser = parse_clock)]
@@ -382,7 +440,7 @@ pub struct SweepArgs {
     #[arg(long, default_value = "scripted")]
     pub policy: String,
     /// Seconds per run, in (0, 315360000] (ten years).
-    #[arg(long, allow_negative_numbers = true, default_value = "10", value_parser = parse_duration)]
+    #[arg(long, default_value = "10", value_parser = parse_duration)]
     pub duration: f64,
     /// Write the table as CSV.
     #[arg(long, value_name = "FILE")]
@@ -402,28 +460,28 @@ pub struct SweepArgs {
 #[derive(Debug, Clone, Args)]
 pub struct CliffArgs {
     /// Seeds (one line of output each).
-    #[arg(long, value_delimiter = ',', default_value = "0,1,2", allow_negative_numbers = true, value_parser = parse_seed)]
+    #[arg(long, value_delimiter = ',', default_value = "0,1,2", value_parser = parse_seed)]
     pub seeds: Vec<u64>,
     /// Sensor rate, Hz.
-    #[arg(long, allow_negative_numbers = true, default_value = "50", value_parser = parse_rate("sensor-hz"))]
+    #[arg(long, default_value = "50", value_parser = parse_rate("sensor-hz"))]
     pub sensor_hz: f64,
     /// Queue depth.
-    #[arg(long, allow_negative_numbers = true, default_value = "1", value_parser = parse_depth)]
+    #[arg(long, default_value = "1", value_parser = parse_depth)]
     pub queue_depth: usize,
     /// The brain.
     #[arg(long, default_value = "scripted")]
     pub policy: String,
     /// Seconds per run, in (0, 315360000] (ten years).
-    #[arg(long, allow_negative_numbers = true, default_value = "10", value_parser = parse_duration)]
+    #[arg(long, default_value = "10", value_parser = parse_duration)]
     pub duration: f64,
     /// Lowest rate searched, Hz.
-    #[arg(long, allow_negative_numbers = true, default_value = "1", value_parser = parse_rate("min-hz"))]
+    #[arg(long, default_value = "1", value_parser = parse_rate("min-hz"))]
     pub min_hz: f64,
     /// Highest rate searched, Hz.
-    #[arg(long, allow_negative_numbers = true, default_value = "50", value_parser = parse_rate("max-hz"))]
+    #[arg(long, default_value = "50", value_parser = parse_rate("max-hz"))]
     pub max_hz: f64,
     /// Resolution, Hz (at most 5000 rates between --min-hz and --max-hz).
-    #[arg(long, allow_negative_numbers = true, default_value = "0.1", value_parser = parse_rate("step"))]
+    #[arg(long, default_value = "0.1", value_parser = parse_rate("step"))]
     pub step: f64,
     /// The graph (the searched rate is its chain policy's).
     #[command(flatten)]
@@ -487,23 +545,23 @@ fn parse_offset(s: &str) -> Result<f64, String> {
 #[derive(Debug, Clone, Args)]
 pub struct RunArgs {
     /// Reset seed (the course env's numpy draws).
-    #[arg(long, default_value = "0", allow_negative_numbers = true, value_parser = parse_seed)]
+    #[arg(long, default_value = "0", value_parser = parse_seed)]
     pub seed: u64,
     /// Run length in seconds of run time, in (0, 315360000] (ten years; headless default 10; the lab runs
     /// until you stop it).
-    #[arg(long, allow_negative_numbers = true, value_parser = parse_duration)]
+    #[arg(long, value_parser = parse_duration)]
     pub duration: Option<f64>,
     /// The graph and overrides of its rates and depths.
     #[command(flatten)]
     pub graph: GraphArgs,
     /// Sensor rate, Hz, in (0, 10000]: the chain's sensor (default: the graph's).
-    #[arg(long, allow_negative_numbers = true, value_parser = parse_rate("sensor-hz"))]
+    #[arg(long, value_parser = parse_rate("sensor-hz"))]
     pub sensor_hz: Option<f64>,
     /// Policy (control) rate, Hz, in (0, 10000]: the chain's policy (default: the graph's).
-    #[arg(long, allow_negative_numbers = true, value_parser = parse_rate("control-hz"))]
+    #[arg(long, value_parser = parse_rate("control-hz"))]
     pub control_hz: Option<f64>,
     /// History depth of every topic, ≥ 1 (default: the graph's).
-    #[arg(long, allow_negative_numbers = true, value_parser = parse_depth)]
+    #[arg(long, value_parser = parse_depth)]
     pub queue_depth: Option<usize>,
     /// Clock: real (node threads against the monotonic clock, by the executors' rules) or
     /// virtual (deterministic).
@@ -524,8 +582,8 @@ pub struct RunArgs {
     #[arg(long, value_name = "DIR")]
     pub out: Option<PathBuf>,
     /// trace.csv keeps every N-th actuator step (steps 1, 1+N, …) and the last: a long
-    /// run's trace (and its memory) in proportion to what you ask. The metrics count every
-    /// step.
+    /// run's trace (its file, written as the run goes) in proportion to what you ask. The
+    /// metrics count every step.
     #[arg(long, value_name = "N", default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..))]
     pub trace_every: u64,
     /// Record the run to a rerun .rrd (default: recordings/<clock>-control<hz>-q<depth>-seed<seed>.rrd).
@@ -548,20 +606,20 @@ pub struct RunArgs {
     pub session: Option<PathBuf>,
     /// Real clock: spin this many µs before each deadline instead of sleeping (below every
     /// node's period, at most 1000000; default 300, or half the fastest period if shorter).
-    #[arg(long, value_name = "US", allow_negative_numbers = true, value_parser = parse_spin_margin)]
+    #[arg(long, value_name = "US", value_parser = parse_spin_margin)]
     pub spin_margin_us: Option<u64>,
     /// First-tick offsets in ms, exactly one per node, in tie-break order (the chapter's
     /// sensor,policy,actuator: e.g. 0,5,10), each in [0, 1000); both clocks.
-    #[arg(long, value_delimiter = ',', allow_negative_numbers = true, value_parser = parse_offset, value_name = "MS,…")]
+    #[arg(long, value_delimiter = ',', value_parser = parse_offset, value_name = "MS,…")]
     pub phase_offset_ms: Vec<f64>,
     /// Real clock: run node threads under SCHED_FIFO at this priority, 1..=99 (needs
     /// CAP_SYS_NICE or `ulimit -r`; refused → a warning, default policy).
-    #[arg(long, value_parser = parse_rt_priority, value_name = "PRIO", allow_negative_numbers = true)]
+    #[arg(long, value_parser = parse_rt_priority, value_name = "PRIO")]
     pub rt_priority: Option<u8>,
     /// Offer the graph to ROS 2 while it runs (rmw_zenoh's format: ros2 topic list/echo/hz
     /// see it), on this domain, 0-232 (default: ROS_DOMAIN_ID, else 0), with the run time
     /// on /clock; the virtual clock then keeps pace with the wall clock (docs/ros2.md).
-    #[arg(long, value_name = "DOMAIN", num_args = 0..=1, allow_negative_numbers = true, value_parser = parse_ros2_domain)]
+    #[arg(long, value_name = "DOMAIN", num_args = 0..=1, value_parser = parse_ros2_domain)]
     pub ros2: Option<Option<u32>>,
     /// With --ros2 (`run`): also write what is offered as a rosbag2 bag (MCAP storage) in
     /// this folder: every topic and /clock, stamped with run time (docs/ros2.md).
@@ -596,17 +654,17 @@ impl RunArgs {
 #[derive(Debug, Clone, Args)]
 pub struct BenchArgs {
     /// Rates to measure, Hz (every node at the same rate).
-    #[arg(long, allow_negative_numbers = true, value_delimiter = ',', default_value = "50,1000", value_parser = parse_rate("hz"))]
+    #[arg(long, value_delimiter = ',', default_value = "50,1000", value_parser = parse_rate("hz"))]
     pub hz: Vec<f64>,
     /// Seconds per rate, in (0, 315360000] (ten years).
-    #[arg(long, allow_negative_numbers = true, default_value = "5", value_parser = parse_duration)]
+    #[arg(long, default_value = "5", value_parser = parse_duration)]
     pub duration: f64,
     /// Spin margin, µs (below the period of every rate measured, at most 1000000; default
     /// 300, or half the period if shorter).
-    #[arg(long, allow_negative_numbers = true, value_parser = parse_spin_margin)]
+    #[arg(long, value_parser = parse_spin_margin)]
     pub spin_margin_us: Option<u64>,
     /// Run node threads (and the bare wait) under SCHED_FIFO at this priority, 1..=99.
-    #[arg(long, value_parser = parse_rt_priority, value_name = "PRIO", allow_negative_numbers = true)]
+    #[arg(long, value_parser = parse_rt_priority, value_name = "PRIO")]
     pub rt_priority: Option<u8>,
     /// Stagger the nodes' first deadlines by P/n each (n nodes; the chapter's three: sensor
     /// 0, policy P/3, actuator 2P/3) so that no two are due at once.
@@ -622,4 +680,74 @@ pub struct BenchArgs {
     /// The graph whose nodes are timed (every node at each --hz).
     #[command(flatten)]
     pub graph: GraphArgs,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::error::ErrorKind;
+
+    /// Every (subcommand path, `--long`) of an option that takes a number.
+    fn numeric_options(cmd: &clap::Command, path: &[String], out: &mut Vec<(Vec<String>, String)>) {
+        for arg in cmd.get_arguments() {
+            if let (true, Some(long)) = (takes_a_number(arg), arg.get_long()) {
+                out.push((path.to_vec(), format!("--{long}")));
+            }
+        }
+        for sub in cmd.get_subcommands() {
+            let mut p = path.to_vec();
+            p.push(sub.get_name().to_string());
+            numeric_options(sub, &p, out);
+        }
+    }
+
+    #[test]
+    fn a_negative_infinity_is_a_value_judged_by_its_rule() {
+        let e = Cli::parse_argv(["ratelab", "run", "--control-hz", "-inf"]).unwrap_err();
+        assert_eq!(e.kind(), ErrorKind::ValueValidation, "{e}");
+        let text = e.to_string();
+        assert!(
+            text.contains("--control-hz") && text.contains("(0, 10000]"),
+            "{text}"
+        );
+        let e = Cli::parse_argv(["ratelab", "run", "--duration", "-1e3"]).unwrap_err();
+        assert_eq!(e.kind(), ErrorKind::ValueValidation, "{e}");
+        // A negative value where one is due, and a flag after it, still read as meant.
+        let cli = Cli::parse_argv(["ratelab", "run", "--phase-offset-ms", "-0", "--headless"]);
+        assert!(cli.is_ok(), "{:?}", cli.err());
+        // A path is no number: a flag in its place is still the flag.
+        let e = Cli::parse_argv(["ratelab", "run", "--out", "--force"]).unwrap_err();
+        assert_ne!(e.kind(), ErrorKind::ValueValidation, "{e}");
+        // Nor is a number whose value may be left out: the flag after it is a flag.
+        let cli = Cli::parse_argv([
+            "ratelab",
+            "run",
+            "--ros2",
+            "--bag",
+            "b",
+            "--qos",
+            "/obs:depth=2",
+        ]);
+        assert!(cli.is_ok(), "{:?}", cli.err());
+    }
+
+    #[test]
+    fn no_numeric_option_reads_a_number_with_a_hyphen_as_a_flag() {
+        let mut found = Vec::new();
+        numeric_options(&Cli::command(), &[], &mut found);
+        assert!(found.len() > 20, "{found:?}");
+        for (path, long) in found {
+            for value in ["-inf", "-1e3", "-5"] {
+                let argv = std::iter::once("ratelab".to_string())
+                    .chain(path.iter().cloned())
+                    .chain([long.clone(), value.to_string()]);
+                if let Err(e) = Cli::parse_argv(argv) {
+                    assert!(
+                        !matches!(e.kind(), ErrorKind::UnknownArgument | ErrorKind::NoEquals),
+                        "{path:?} {long} {value}: {e}"
+                    );
+                }
+            }
+        }
+    }
 }

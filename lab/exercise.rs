@@ -7,17 +7,38 @@ use anyhow::bail;
 use ratelab::exercise::{Progress, Setup};
 use std::cell::RefCell;
 
-/// An exercise that ran to its end but did not pass: a check failed or a prediction could
-/// not be read. `ratelab exercise` then exits 1 (2 is for what kept it from running).
+/// An exercise that ran to its end but did not pass: a check failed, or a prediction
+/// missed or could not be read. `ratelab exercise` then exits 1 (2 is for what kept it from
+/// running).
 #[derive(Debug)]
-pub struct NotPassed(pub usize);
+pub struct NotPassed {
+    /// Checks that failed (`[!!]` above).
+    pub checks_failed: usize,
+    /// Predictions that missed or could not be read (the reconcile's `Your prediction:` line
+    /// names them).
+    pub predictions_missed: usize,
+}
 
 impl std::fmt::Display for NotPassed {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        use ratelab::metrics::counted;
+        let mut what = Vec::new();
+        if self.predictions_missed > 0 {
+            what.push(format!(
+                "{} missed or could not be read",
+                counted(self.predictions_missed as u64, "prediction")
+            ));
+        }
+        if self.checks_failed > 0 {
+            what.push(format!(
+                "{} failed",
+                counted(self.checks_failed as u64, "check")
+            ));
+        }
         write!(
             f,
-            "{} check(s) or prediction(s) did not pass (marked above): the exercise is not passed",
-            self.0
+            "{} (see above): the exercise is not passed",
+            what.join(" and ")
         )
     }
 }
@@ -55,9 +76,14 @@ impl Progress for Spinner {
 /// the command line's overrides), then [`run_exercise`].
 pub fn run_from_args(args: &crate::cli::ExerciseArgs) -> anyhow::Result<()> {
     let mut out = |line: &str| println!("{line}");
-    match report_from_args(args, None, &mut out, &Spinner::default())?.not_passed {
+    let report = report_from_args(args, None, &mut out, &Spinner::default())?;
+    match report.not_passed {
         0 => Ok(()),
-        n => Err(NotPassed(n).into()),
+        _ => Err(NotPassed {
+            checks_failed: report.checks_failed,
+            predictions_missed: report.predictions_missed,
+        }
+        .into()),
     }
 }
 

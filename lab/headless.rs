@@ -1,6 +1,7 @@
 //! The headless run: one graph, the chapter's summary, optional metrics.json and trace.csv.
 
 use crate::cli::{GraphArgs, RunArgs};
+use crate::trace::TraceFile;
 use anyhow::Context;
 use indicatif::{ProgressBar, ProgressStyle};
 use ratelab::config::{phase_offsets_from_ms, BREAK_CONTROL_HZ};
@@ -230,6 +231,17 @@ pub fn run_headless(a: &RunArgs, stop: StopFlag) -> anyhow::Result<RunReport> {
     warn_late_faults(&cfg);
     let brain = ratelab::checkpoint::load_policy(&a.policy)?;
     check_out(a, &cfg.graph)?;
+    // trace.csv is written as the run goes, never held: a day's step records were 4.6 GB
+    // (issue 75). Its file is checked and started before the run.
+    let trace = match &a.out {
+        Some(dir) => Some(TraceFile::create(
+            &dir.join("trace.csv"),
+            a.force,
+            &cfg.graph,
+            a.trace_every,
+        )?),
+        None => None,
+    };
     let (bar, ticker) = real_clock_bar(&cfg, &stop);
     // A long virtual run (up to an hour of run time, seconds to minutes of wall time) shows
     // its run time going by; the observer only reads step times, so results do not change.
@@ -247,14 +259,12 @@ pub fn run_headless(a: &RunArgs, stop: StopFlag) -> anyhow::Result<RunReport> {
         );
         bar
     });
-    let observers: Vec<Box<dyn ratelab::graph::StepObserver>> = match &virtual_bar {
+    let mut observers: Vec<Box<dyn ratelab::graph::StepObserver>> = match &virtual_bar {
         Some(bar) => vec![Box::new(ProgressObserver(bar.clone()))],
         None => Vec::new(),
     };
-    // Every step's record is kept only for trace.csv: a long run of a large graph without
-    // `--out` keeps none.
-    let keep_trace = a.out.is_some();
-    let (report, kept, recording) = execute(a, &cfg, brain, stop, observers, true, keep_trace)?;
+    observers.extend(trace.as_ref().map(TraceFile::observer));
+    let (report, kept, recording) = execute(a, &cfg, brain, stop, observers, true)?;
     if let Some(bar) = virtual_bar {
         bar.finish_and_clear();
     }
@@ -277,8 +287,14 @@ pub fn run_headless(a: &RunArgs, stop: StopFlag) -> anyhow::Result<RunReport> {
     if let Some(w) = report.metrics.sched_warning() {
         eprintln!("[ratelab] warning: {w}");
     }
-    if let Some(dir) = &a.out {
-        write_outputs(dir, &report, &cfg.graph, &log_text(&kept), a.force)?;
+    if let (Some(dir), Some(trace)) = (&a.out, trace) {
+        write_outputs(
+            dir,
+            &report,
+            &log_text(&kept),
+            a.force,
+            TraceCsv::Streamed(trace),
+        )?;
         let files = if report.metrics.estimate.is_some() {
             "metrics.json, trace.csv, log.txt and estimator.json"
         } else {
@@ -348,10 +364,10 @@ pub fn log_text(kept: &Mutex<Vec<String>>) -> String {
 pub type KeptLog = Arc<Mutex<Vec<String>>>;
 
 /// Run `cfg` (made from `a`) with `brain`, as `ratelab run` does: the recording `a` asks for
-/// opened, ROS 2 offered when asked, `observers` told of every step; every line the nodes
-/// write kept (and written to stderr, stamped, when `echo`); every step's record kept in
-/// the report when `keep_trace` (for trace.csv). Returns the report, the lines kept and the
-/// recording (not yet finished: [`finish_recording`]).
+/// opened, ROS 2 offered when asked, `observers` told of every step (trace.csv's writer,
+/// [`crate::trace`], is one); every line the nodes write kept (and written to stderr,
+/// stamped, when `echo`); no step record kept in the report. Returns the report, the lines
+/// kept and the recording (not yet finished: [`finish_recording`]).
 ///
 /// # Errors
 /// What keeps the run from starting: bad ROS 2 or recording settings, a graph that cannot be
@@ -363,7 +379,6 @@ pub fn execute(
     stop: StopFlag,
     observers: Vec<Box<dyn ratelab::graph::StepObserver>>,
     echo: bool,
-    keep_trace: bool,
 ) -> anyhow::Result<(RunReport, KeptLog, Option<Recording>)> {
     // Refused before anything is written or opened.
     let ros2 = ros2_options(a, &cfg.graph)?;
@@ -372,7 +387,8 @@ pub fn execute(
         stop,
         ros2,
         observers,
-        keep_trace,
+        // trace.csv's rows are written by an observer as the run goes (`crate::trace`).
+        keep_trace: false,
         trace_every: a.trace_every,
         ..RunOptions::new()
     };
@@ -594,20 +610,29 @@ pub fn print_summary(report: &RunReport) {
     }
 }
 
-/// `metrics.json` (pretty, stable key order), `trace.csv` (one row per actuator tick) and
-/// `log.txt` (the lines nodes wrote, `log`), each through [`ratelab::output`] (never over an
-/// existing file unless `force`).
+/// `trace.csv` as [`write_outputs`] puts it in place.
+pub enum TraceCsv<'a> {
+    /// Written to a temporary file beside its name as the run went (`ratelab run --out`):
+    /// moved into place.
+    Streamed(TraceFile),
+    /// Held whole (`ratelab.run`, which returns it): written.
+    Held(&'a [u8]),
+}
+
+/// `metrics.json` (pretty, stable key order), `trace.csv` (one row per actuator tick kept:
+/// `trace`) and `log.txt` (the lines nodes wrote, `log`), each through [`ratelab::output`]
+/// (never over an existing file unless `force`).
 pub fn write_outputs(
     dir: &Path,
     report: &RunReport,
-    graph: &GraphSpec,
     log: &str,
     force: bool,
+    trace: TraceCsv<'_>,
 ) -> anyhow::Result<()> {
     // Every name is checked before any is written, so a refusal writes nothing.
-    let (metrics, trace) = (dir.join("metrics.json"), dir.join("trace.csv"));
+    let (metrics, trace_csv) = (dir.join("metrics.json"), dir.join("trace.csv"));
     ratelab::output::check_target(&metrics, force)?;
-    ratelab::output::check_target(&trace, force)?;
+    ratelab::output::check_target(&trace_csv, force)?;
     ratelab::output::check_target(&dir.join("log.txt"), force)?;
     let estimator = report
         .metrics
@@ -631,76 +656,10 @@ pub fn write_outputs(
         let json = serde_json::to_string_pretty(e)? + "\n";
         ratelab::output::write_file(path, force, json.as_bytes())?;
     }
-    ratelab::output::write_with(&trace, force, |w| {
-        write_trace(w, &report.trace, graph).map_err(std::io::Error::other)
-    })?;
+    match trace {
+        TraceCsv::Streamed(file) => file.commit()?,
+        TraceCsv::Held(bytes) => ratelab::output::write_file(&trace_csv, force, bytes)?,
+    }
     ratelab::output::write_file(&dir.join("log.txt"), force, log.as_bytes())?;
-    Ok(())
-}
-
-/// One row per actuator tick; per topic (in the graph's topic order) a `<topic>_published`
-/// and `<topic>_dropped` column (`/obs` → `obs_published`), as the chapter's trace has; then
-/// `<topic>_<counter>` for each QoS counter the topic reports
-/// ([`ratelab::qos::QosCounter::reported`]; none for a topic with the chapter's QoS).
-pub fn write_trace(
-    out: &mut dyn Write,
-    trace: &[StepRecord],
-    graph: &GraphSpec,
-) -> anyhow::Result<()> {
-    let last = trace.last().map(|r| r.topics.clone()).unwrap_or_default();
-    let qos_columns: Vec<Vec<ratelab::qos::QosCounter>> = graph
-        .topics
-        .iter()
-        .enumerate()
-        .map(|(i, t)| last.get(ratelab::graph::TopicId(i)).reported(&[t.qos]))
-        .collect();
-    let mut w = csv::Writer::from_writer(out);
-    let mut header: Vec<String> = [
-        "step",
-        "t_ns",
-        "pole_angle",
-        "cart_pos",
-        "action",
-        "latency_ns",
-        "nonfinite",
-    ]
-    .map(String::from)
-    .to_vec();
-    for t in &graph.topics {
-        let name = ratelab::recording::bus_name(&t.name);
-        header.push(format!("{name}_published"));
-        header.push(format!("{name}_dropped"));
-    }
-    for (t, counters) in graph.topics.iter().zip(&qos_columns) {
-        let name = ratelab::recording::bus_name(&t.name);
-        for c in counters {
-            header.push(format!("{name}_{}", c.key()));
-        }
-    }
-    header.push("fell".into());
-    w.write_record(&header)?;
-    for r in trace {
-        let mut row = vec![
-            r.step.to_string(),
-            r.t.0.to_string(),
-            format!("{:e}", r.pole_angle),
-            format!("{:e}", r.cart_pos),
-            format!("{:e}", r.action),
-            r.latency.map_or_else(String::new, |l| l.0.to_string()),
-            r.nonfinite.to_string(),
-        ];
-        for t in r.topics.iter() {
-            row.push(t.published.to_string());
-            row.push(t.dropped.to_string());
-        }
-        for (t, counters) in r.topics.iter().zip(&qos_columns) {
-            for c in counters {
-                row.push(t.counter(*c).to_string());
-            }
-        }
-        row.push(r.fell.to_string());
-        w.write_record(&row)?;
-    }
-    w.flush()?;
     Ok(())
 }

@@ -14,10 +14,10 @@ mod rendezvous;
 mod ros2;
 mod sweep;
 mod top;
+mod trace;
 mod tui;
 
 use clap::error::ErrorKind;
-use clap::Parser;
 use cli::{Cli, Command};
 use ratelab::scheduler::StopFlag;
 use ratelab::text::printable;
@@ -370,7 +370,7 @@ pub fn run_command_line(args: Vec<std::ffi::OsString>, register: impl FnOnce()) 
         );
         return EXIT_USAGE;
     }
-    let cli = match Cli::try_parse_from(&args) {
+    let cli = match Cli::parse_argv(&args) {
         Ok(cli) => cli,
         Err(e) => {
             if matches!(e.kind(), ErrorKind::DisplayHelp | ErrorKind::DisplayVersion) {

@@ -190,7 +190,7 @@ fn domain(args: &Ros2Args) -> Result<u32> {
 /// publishes within the wait.
 pub fn run(args: &Ros2Args, stop: StopFlag) -> Result<()> {
     if let Ros2Command::Bag(verb) = &args.what {
-        return bag(verb);
+        return bag(verb, &stop);
     }
     let domain = domain(args)?;
     if !(args.wait.is_finite() && (0.0..=3600.0).contains(&args.wait)) {
@@ -443,21 +443,23 @@ fn every_second(
     Ok(())
 }
 
-/// `ratelab ros2 bag …`: no session, the bag alone.
-fn bag(verb: &BagVerb) -> Result<()> {
+/// `ratelab ros2 bag …`: no session, the bag alone, read until done or `stop` (Ctrl-C,
+/// SIGTERM).
+fn bag(verb: &BagVerb, stop: &StopFlag) -> Result<()> {
+    let stopped = || stop.is_stopped();
     use ratelab::ros2::bag_reader::Bag;
     let mut out = std::io::stdout().lock();
     match verb {
         BagVerb::Info { dir } => {
             let b = Bag::open(dir).map_err(|e| anyhow!(e))?;
-            write!(out, "{}", b.info().map_err(|e| anyhow!(e))?)?;
+            write!(out, "{}", b.info(&stopped).map_err(|e| anyhow!(e))?)?;
         }
         BagVerb::Echo { dir, topic, count } => {
             let b = Bag::open(dir).map_err(|e| anyhow!(e))?;
             let mut printed = 0u64;
             let mut failed = None;
             let note = b
-                .messages(|t, ty, hash, at_ns, bytes| {
+                .messages(&stopped, |t, ty, hash, at_ns, bytes| {
                     if topic.as_deref().is_some_and(|want| want != t) {
                         return true;
                     }

@@ -1,6 +1,7 @@
 //! The chapter's exercises, as a registry: each exercise is one file (`exN.rs`) holding its
 //! bands, what it measures, its checks, its outcome in the terms of the learner's
-//! prediction and how that is said, and what it prints; [`EXERCISES`] lists them, in order.
+//! prediction, how that is said and whether the prediction held ([`Said`]), and what it
+//! prints; [`EXERCISES`] lists them, in order.
 //! A new exercise is its file plus one line there (and its TOML in `exercises/`).
 //!
 //! This module holds what they share: reading the learner's file and `bands.toml`
@@ -284,10 +285,37 @@ impl Bands {
                 path: self.path.clone(),
                 detail: format!("no [{}] table", S::NAME),
             })?;
+        if let Some(key) = empty_list(table, "") {
+            return Err(ExerciseError::Parse {
+                path: format!("{} [{}]", self.path, S::NAME),
+                detail: format!(
+                    "`{key}` is an empty list: it would run nothing, and every check over it would pass without a run (give at least one value)"
+                ),
+            });
+        }
         table
             .clone()
             .try_into()
             .map_err(|e| parse_error(&format!("{} [{}]", self.path, S::NAME), &e))
+    }
+}
+
+/// The dotted key of the first empty list in `v` (a table's, at any depth), with `prefix`
+/// before it: every list in the bands drives runs or checks (seeds, rates, depths), and an
+/// empty one makes "on every seed" true of no seed.
+fn empty_list(v: &toml::Value, prefix: &str) -> Option<String> {
+    match v {
+        toml::Value::Array(a) if a.is_empty() => Some(prefix.to_string()),
+        toml::Value::Array(a) => a.iter().find_map(|x| empty_list(x, prefix)),
+        toml::Value::Table(t) => t.iter().find_map(|(k, x)| {
+            let key = if prefix.is_empty() {
+                k.clone()
+            } else {
+                format!("{prefix}.{k}")
+            };
+            empty_list(x, &key)
+        }),
+        _ => None,
     }
 }
 
@@ -381,19 +409,115 @@ impl ExerciseFile {
             .join("\n")
     }
 
-    /// The prediction beside the outcome, one sentence per predicted key, in words: "You
-    /// predicted the pole first fails at 10 Hz; it first fell at 5 Hz." A key the learner
-    /// left out, or gave in another type, is said so ([`says_unreadable`]).
-    pub fn reconcile(&self, outcome: &impl Reconcile) -> Vec<String> {
+    /// The prediction beside the outcome, one sentence per predicted key, in words, each
+    /// graded: "You predicted the pole first fails at 10 Hz; it first fell at 5 Hz." (missed),
+    /// "…; it first fell at 5 Hz: right.". A key the learner left out, or gave in another
+    /// type, is said so ([`Verdict::Unreadable`]).
+    pub fn reconcile(&self, outcome: &impl Reconcile) -> Vec<Said> {
         outcome.reconcile(&self.prediction)
     }
 }
 
 /// What an exercise measured, in the terms of its prediction's keys: each exercise's
-/// outcome type says itself beside a prediction.
+/// outcome type says itself beside a prediction, and grades it.
 pub trait Reconcile {
-    /// One sentence per key of `prediction` the exercise asks for.
-    fn reconcile(&self, prediction: &toml::Table) -> Vec<String>;
+    /// One graded sentence per key of `prediction` the exercise asks for, in the order of
+    /// its file.
+    fn reconcile(&self, prediction: &toml::Table) -> Vec<Said>;
+}
+
+/// How a prediction fared beside the outcome.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Verdict {
+    /// It held: the same value (a yes or no, a name, a value picked from the exercise's own
+    /// list, an exact count), or an amount within the tolerance its sentence names on a miss
+    /// ([`NEAR`] unless the exercise says otherwise).
+    Right,
+    /// It did not: the exercise is not passed (`ratelab exercise` exits 1).
+    Missed,
+    /// It could not be read (missing, or not of its type): not passed either.
+    Unreadable,
+    /// Not graded: the outcome leaves the key moot (a latency at a fall that never came).
+    Open,
+}
+
+impl Verdict {
+    /// Does it keep the exercise from passing (missed, or unreadable)?
+    pub fn fails(self) -> bool {
+        matches!(self, Verdict::Missed | Verdict::Unreadable)
+    }
+
+    /// Its name, as Python's `ratelab.Prediction.verdict` gives it: `right`, `missed`,
+    /// `unreadable` or `open`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Verdict::Right => "right",
+            Verdict::Missed => "missed",
+            Verdict::Unreadable => "unreadable",
+            Verdict::Open => "open",
+        }
+    }
+}
+
+/// One predicted key beside the outcome: the sentence `ratelab exercise` prints, and its
+/// verdict.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Said {
+    /// The prediction's key: `fails_at_hz`.
+    pub key: String,
+    /// The sentence, the prediction beside the outcome: "You predicted the pole first fails
+    /// at 10 Hz; it first fell at 5 Hz."
+    pub line: String,
+    /// Whether the prediction held.
+    pub verdict: Verdict,
+}
+
+/// How far a predicted amount (a latency, a rate, a duration, a count of many) may lie from
+/// the measured one and still be right, as a fraction of the measured: a fifth. A value
+/// picked from the exercise's own list (a rate of the sweep, a clamp), a yes or no, a name
+/// or an exact count must be the same.
+pub const NEAR: f64 = 0.2;
+
+/// Is the predicted amount within [`NEAR`] of the measured one (or within `floor`, for small
+/// counts)?
+fn near(predicted: f64, measured: f64, floor: f64) -> bool {
+    (predicted - measured).abs() <= (NEAR * measured.abs()).max(floor)
+}
+
+/// What a sentence says of an amount more than [`NEAR`] off: `: more than 20% off`.
+fn more_than_near() -> String {
+    format!(": more than {:.0}% off", NEAR * 100.0)
+}
+
+/// Is the predicted value the measured one (a value of the exercise's list: a rate of the
+/// sweep, a clamp, a noise of the grid), to the rounding of a decimal written in TOML?
+fn same(predicted: f64, measured: f64) -> bool {
+    (predicted - measured).abs() <= 1e-9 * predicted.abs().max(measured.abs()).max(1.0)
+}
+
+/// The sentence for `key`, `body` without its last period, graded: `body: right.` when
+/// `right`, else `body` then `miss` (how far off counts as a miss, [`more_than_near`]; `""`
+/// for values compared exactly) and a period.
+fn graded(key: &str, body: &str, right: bool, miss: &str) -> Said {
+    let (line, verdict) = if right {
+        (format!("{body}: right."), Verdict::Right)
+    } else {
+        (format!("{body}{miss}."), Verdict::Missed)
+    };
+    Said {
+        key: key.to_string(),
+        line,
+        verdict,
+    }
+}
+
+/// The sentence for `key` when the outcome leaves it moot: `line`, not graded.
+fn open(key: &str, line: String) -> Said {
+    Said {
+        key: key.to_string(),
+        line,
+        verdict: Verdict::Open,
+    }
 }
 
 /// A prediction value as a number (TOML integer or float).
@@ -402,30 +526,64 @@ fn number(v: &toml::Value) -> Option<f64> {
 }
 
 /// The sentence for a prediction key that is missing or not of the expected type.
-fn unreadable(key: &str) -> String {
-    format!("Your prediction `{key}` is missing or not of the expected type.")
-}
-
-/// Does a reconcile line say a prediction could not be read (missing, or not of its type)?
-/// Such an exercise is not passed (`ratelab exercise` exits 1).
-pub fn says_unreadable(line: &str) -> bool {
-    line.starts_with("Your prediction `")
-        && line.ends_with("is missing or not of the expected type.")
+fn unreadable(key: &str) -> Said {
+    Said {
+        key: key.to_string(),
+        line: format!("Your prediction `{key}` is missing or not of the expected type."),
+        verdict: Verdict::Unreadable,
+    }
 }
 
 /// ex4, ex5 and ex7: the survival `prediction` gives under `key` (true or false) beside the
-/// `measured` one (on every seed), `what` naming the case.
-fn predicted_survival(prediction: &toml::Table, key: &str, what: &str, measured: bool) -> String {
-    let measured = if measured {
+/// `measured` one (on every seed), `what` naming the case; right when they agree.
+fn predicted_survival(prediction: &toml::Table, key: &str, what: &str, measured: bool) -> Said {
+    let said = if measured {
         "it stayed up on every seed"
     } else {
         "it fell"
     };
     match prediction.get(key).and_then(toml::Value::as_bool) {
-        Some(true) => format!("You predicted the pole stays up {what}; {measured}."),
-        Some(false) => format!("You predicted the pole falls {what}; {measured}."),
+        Some(true) => graded(
+            key,
+            &format!("You predicted the pole stays up {what}; {said}"),
+            measured,
+            "",
+        ),
+        Some(false) => graded(
+            key,
+            &format!("You predicted the pole falls {what}; {said}"),
+            !measured,
+            "",
+        ),
         None => unreadable(key),
     }
+}
+
+/// The line after the sentences: how many of the graded predictions were right, and the
+/// keys of those that missed or could not be read.
+fn tally(said: &[Said]) -> String {
+    let keys = |v: Verdict| -> Vec<&str> {
+        said.iter()
+            .filter(|s| s.verdict == v)
+            .map(|s| s.key.as_str())
+            .collect()
+    };
+    let graded = said.iter().filter(|s| s.verdict != Verdict::Open).count();
+    let mut line = format!(
+        "Your prediction: {} of {graded} right",
+        keys(Verdict::Right).len()
+    );
+    for (v, what) in [
+        (Verdict::Missed, "missed"),
+        (Verdict::Unreadable, "not read"),
+    ] {
+        let k = keys(v);
+        if !k.is_empty() {
+            line.push_str(&format!("; {what}: {}", k.join(", ")));
+        }
+    }
+    line.push('.');
+    line
 }
 
 /// One check's outcome.
@@ -477,19 +635,24 @@ pub struct Context<'a> {
     pub bands: &'a Bands,
     out: &'a mut dyn FnMut(&str),
     progress: &'a dyn Progress,
-    /// What it found so far: every check and reconcile line, and what did not pass.
+    /// What it found so far: every check and graded reconcile sentence, and what did not
+    /// pass.
     report: Report,
 }
 
 /// What an exercise found: its checks, the sentences setting the prediction beside the
-/// outcome, and how many checks failed or predictions could not be read.
+/// outcome (each graded), and how many checks failed and predictions missed.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Report {
     /// Every check, in the order printed (`[ok]` / `[!!]`).
     pub checks: Vec<Check>,
-    /// The prediction beside the outcome, one sentence per predicted key.
-    pub reconcile: Vec<String>,
-    /// Checks that failed plus predictions that could not be read (0: passed).
+    /// The prediction beside the outcome, one graded sentence per predicted key.
+    pub reconcile: Vec<Said>,
+    /// Checks that failed.
+    pub checks_failed: usize,
+    /// Predictions that missed or could not be read ([`Verdict::fails`]).
+    pub predictions_missed: usize,
+    /// Both together (0: passed; `ratelab exercise` exits 1 otherwise).
     pub not_passed: usize,
 }
 
@@ -527,23 +690,26 @@ impl Context<'_> {
                 c.name
             );
             if !c.passed {
+                self.report.checks_failed += 1;
                 self.report.not_passed += 1;
             }
             self.report.checks.push(c.clone());
         }
     }
 
-    /// Print the learner's prediction beside `outcome`, and count the keys that could not
-    /// be read.
+    /// Print the learner's prediction beside `outcome`, a graded sentence per key, then how
+    /// many were right; count those that missed or could not be read.
     pub fn reconcile(&mut self, outcome: &impl Reconcile) {
         say!(self);
-        for line in self.file.reconcile(outcome) {
-            self.say(&line);
-            if says_unreadable(&line) {
-                self.report.not_passed += 1;
-            }
-            self.report.reconcile.push(line);
+        let said = self.file.reconcile(outcome);
+        for s in &said {
+            self.say(&s.line);
         }
+        self.say(&tally(&said));
+        let missed = said.iter().filter(|s| s.verdict.fails()).count();
+        self.report.predictions_missed += missed;
+        self.report.not_passed += missed;
+        self.report.reconcile.extend(said);
     }
 
     /// Print `text` wrapped at 96 columns.
@@ -586,7 +752,7 @@ pub struct Setup<'a> {
 /// its heading and the prediction, then let it measure and report, every line through
 /// `out`.
 ///
-/// Returns how many checks failed and predictions could not be read (0: passed).
+/// Returns how many checks failed and predictions missed or could not be read (0: passed).
 ///
 /// # Errors
 /// [`ExerciseError`] for what kept it from running: an unknown exercise, no prediction,
@@ -600,8 +766,8 @@ pub fn run(
     run_report(which, setup, out, progress).map(|r| r.not_passed)
 }
 
-/// [`run`], returning what the exercise found: its checks and reconcile sentences as well as
-/// how many did not pass (what `ratelab.exercise` in Python returns).
+/// [`run`], returning what the exercise found: its checks and graded reconcile sentences as
+/// well as how many did not pass (what `ratelab.exercise` in Python returns).
 ///
 /// # Errors
 /// As [`run`].
@@ -917,8 +1083,19 @@ mod tests {
         assert_eq!(failed(&zero, &offset).len(), 1);
     }
 
+    /// The sentences alone.
+    fn lines(said: &[Said]) -> Vec<&str> {
+        said.iter().map(|s| s.line.as_str()).collect()
+    }
+
+    /// The verdicts alone.
+    fn verdicts(said: &[Said]) -> Vec<Verdict> {
+        said.iter().map(|s| s.verdict).collect()
+    }
+
     #[test]
     fn ex4_and_ex5_predictions_are_reconciled_in_words() {
+        use super::Verdict::{Missed, Open, Right, Unreadable};
         let f = file(
             "latest_balances = true\nfifo_balances = true\nfifo_latency_at_fall_ms = 100\nlifespan_balances = false\nwhy = \"w\"",
         );
@@ -929,15 +1106,23 @@ mod tests {
             lifespan_balances: true,
             lifespan_ms: 20.0,
         };
+        let said = f.reconcile(&ex4);
         assert_eq!(
-            f.reconcile(&ex4),
+            lines(&said),
             [
-                "You predicted the pole stays up with latest; it stayed up on every seed.",
+                "You predicted the pole stays up with latest; it stayed up on every seed: right.",
                 "You predicted the pole stays up with fifo; it fell.",
-                "You predicted 100 ms of sense->act latency at the FIFO fall; it was 240 to 340 ms over the seeds.",
+                "You predicted 100 ms of sense->act latency at the FIFO fall; it was 240 to 340 ms over the seeds: more than 20% off.",
                 "You predicted the pole falls with fifo and a 20 ms lifespan; it stayed up on every seed."
             ]
         );
+        assert_eq!(verdicts(&said), [Right, Missed, Missed, Missed]);
+        // Within a fifth of the range over the seeds is right; a fall that never came is not
+        // graded.
+        for (ms, right) in [(200.0, true), (300.0, true), (400.0, true), (180.0, false)] {
+            let f = file(&format!("fifo_latency_at_fall_ms = {ms}\nwhy = \"w\""));
+            assert_eq!(f.reconcile(&ex4)[2].verdict == Right, right, "{ms}");
+        }
         let never = Ex4Outcome {
             latest_balances: true,
             fifo_balances: true,
@@ -945,7 +1130,9 @@ mod tests {
             lifespan_balances: true,
             lifespan_ms: 20.0,
         };
-        assert!(f.reconcile(&never)[2].ends_with("FIFO never fell."));
+        let said = f.reconcile(&never);
+        assert!(said[2].line.ends_with("FIFO never fell."));
+        assert_eq!(said[2].verdict, Open);
         let f = file(
             "survives_low_loss = true\nsurvives_high_loss = false\nkeeps_it_up = [\"reliable\", \"zero\"]\nreliable_latency_ms = 5\nwhy = \"w\"",
         );
@@ -957,59 +1144,351 @@ mod tests {
             lossless_latency_ms: 0.0,
             losses: (0.2, 0.8),
         };
+        let said = f.reconcile(&ex5);
         assert_eq!(
-            f.reconcile(&ex5),
+            lines(&said),
             [
-                "You predicted the pole stays up at 20% loss, best effort; it stayed up on every seed.",
-                "You predicted the pole falls at 80% loss, best effort; it fell.",
+                "You predicted the pole stays up at 20% loss, best effort; it stayed up on every seed: right.",
+                "You predicted the pole falls at 80% loss, best effort; it fell: right.",
                 "You predicted these keep the pole up at 80% loss: zero, reliable; what did: zero, reliable: right.",
-                "You predicted 5 ms of mean sense->act latency with reliable delivery; it was 16.5 ms (the lossless link: 0.0 ms)."
+                "You predicted 5 ms of mean sense->act latency with reliable delivery; it was 16.5 ms (the lossless link: 0.0 ms): more than 20% off."
             ]
         );
+        assert_eq!(verdicts(&said), [Right, Right, Right, Missed]);
         for bad in ["[\"stop\"]", "[1]", "\"zero\""] {
             let f = file(&format!(
                 "survives_low_loss = true\nsurvives_high_loss = false\nkeeps_it_up = {bad}\nreliable_latency_ms = 5\nwhy = \"w\""
             ));
             let said = &f.reconcile(&ex5)[2];
             assert!(
-                said.contains("other than hold, zero, reliable")
-                    || said.contains("not of the expected type"),
-                "{bad}: {said}"
+                said.line.contains("other than hold, zero, reliable")
+                    || said.line.contains("not of the expected type"),
+                "{bad}: {}",
+                said.line
             );
+            assert_eq!(said.verdict, Unreadable, "{bad}");
         }
         let f = file("keeps_it_up = []\nwhy = \"w\"");
-        assert!(f.reconcile(&ex5)[2].contains("up at 80% loss: none; what did"));
+        let said = &f.reconcile(&ex5)[2];
+        assert!(said.line.contains("up at 80% loss: none; what did"));
+        assert_eq!(said.verdict, Missed);
     }
 
     #[test]
     fn predictions_are_reconciled_in_words() {
         let f = file("fails_at_hz = 10\nwhy = \"w\"");
+        let said = f.reconcile(&Ex1Outcome {
+            fails_at_hz: Some(5.0),
+        });
         assert_eq!(
-            f.reconcile(&Ex1Outcome {
-                fails_at_hz: Some(5.0)
-            }),
+            lines(&said),
             ["You predicted the pole first fails at 10 Hz; it first fell at 5 Hz."]
         );
+        assert_eq!(said[0].verdict, Verdict::Missed);
+        assert_eq!(said[0].key, "fails_at_hz");
         let f = file("fails_at_hz = 5.0\nwhy = \"w\"");
-        assert!(f.reconcile(&Ex1Outcome {
-            fails_at_hz: Some(5.0)
-        })[0]
-            .ends_with(": right."));
+        let said = f.reconcile(&Ex1Outcome {
+            fails_at_hz: Some(5.0),
+        });
+        assert!(said[0].line.ends_with(": right."));
+        assert_eq!(said[0].verdict, Verdict::Right);
         let f = file("deep_queue_obs_drops = 0\ndeep_queue_balances = true\nwhy = \"w\"");
+        let said = f.reconcile(&Ex2Outcome {
+            deep_queue_obs_drops: 0,
+            deep_queue_balances: false,
+        });
         assert_eq!(
-            f.reconcile(&Ex2Outcome {
-                deep_queue_obs_drops: 0,
-                deep_queue_balances: false
-            }),
+            lines(&said),
             [
-                "You predicted 0 /obs drops with the deep queue; there were 0.",
+                "You predicted 0 /obs drops with the deep queue; there were 0: right.",
                 "You predicted the deep queue keeps the pole up; it fell."
             ]
         );
+        assert_eq!(verdicts(&said), [Verdict::Right, Verdict::Missed]);
         let f = file("matched_obs_drops = \"many\"\nwhy = \"w\"");
-        assert!(f.reconcile(&Ex3Outcome {
-            matched_obs_drops: 7
-        })[0]
-            .contains("not of the expected type"));
+        let said = f.reconcile(&Ex3Outcome {
+            matched_obs_drops: 7,
+        });
+        assert!(said[0].line.contains("not of the expected type"));
+        assert_eq!(said[0].verdict, Verdict::Unreadable);
+    }
+
+    /// `prediction` (TOML) read as a table.
+    fn table(prediction: &str) -> toml::Table {
+        toml::from_str(prediction).unwrap()
+    }
+
+    /// Exercise `id`'s outcome `outcome` beside a prediction it bears out (`right`) and one
+    /// it does not (`wrong`, every key wrong): one sentence per key the exercise asks for, in
+    /// its order, graded right (ending `: right.`) or missed; and beside no prediction, every
+    /// key unreadable.
+    fn graded_both_ways(id: &str, outcome: &dyn Reconcile, right: &str, wrong: &str) {
+        let keys = find(id).unwrap().required_keys();
+        for (prediction, want) in [(right, Verdict::Right), (wrong, Verdict::Missed)] {
+            let said = outcome.reconcile(&table(prediction));
+            let said_keys: Vec<&str> = said.iter().map(|s| s.key.as_str()).collect();
+            assert_eq!(said_keys, keys, "{id}: every key, once, in order");
+            for s in &said {
+                assert_eq!(s.verdict, want, "{id}: {}", s.line);
+                assert_eq!(
+                    s.line.ends_with(": right."),
+                    want == Verdict::Right,
+                    "{id}: {}",
+                    s.line
+                );
+                assert!(s.line.starts_with("You predicted"), "{id}: {}", s.line);
+            }
+        }
+        let said = outcome.reconcile(&toml::Table::new());
+        assert_eq!(said.len(), keys.len(), "{id}");
+        assert!(
+            said.iter().all(|s| s.verdict == Verdict::Unreadable),
+            "{id}: {said:?}"
+        );
+    }
+
+    /// Every exercise grades its prediction: made-up outcomes (the bands' answers) beside a
+    /// right prediction and a wrong one. The exercises' runs are measured elsewhere
+    /// (tests/it/exercises.rs); this is the grading alone, for all of them.
+    #[test]
+    fn every_exercise_grades_its_prediction_right_or_missed() {
+        graded_both_ways(
+            "ex1",
+            &Ex1Outcome {
+                fails_at_hz: Some(5.0),
+            },
+            "fails_at_hz = 5",
+            "fails_at_hz = 50",
+        );
+        graded_both_ways(
+            "ex2",
+            &Ex2Outcome {
+                deep_queue_obs_drops: 0,
+                deep_queue_balances: false,
+            },
+            "deep_queue_obs_drops = 0\ndeep_queue_balances = false",
+            "deep_queue_obs_drops = 40\ndeep_queue_balances = true",
+        );
+        let ex3 = Ex3Outcome {
+            matched_obs_drops: 40,
+        };
+        graded_both_ways(
+            "ex3",
+            &ex3,
+            "matched_obs_drops = 100",
+            "matched_obs_drops = 0",
+        );
+        graded_both_ways(
+            "ex3",
+            &ex3,
+            "matched_obs_drops = 14",
+            "matched_obs_drops = 121",
+        );
+        graded_both_ways(
+            "ex4",
+            &Ex4Outcome {
+                latest_balances: true,
+                fifo_balances: false,
+                fifo_latency_at_fall_ms: Some((240.0, 340.0)),
+                lifespan_balances: true,
+                lifespan_ms: 20.0,
+            },
+            "latest_balances = true\nfifo_balances = false\nfifo_latency_at_fall_ms = 300\nlifespan_balances = true",
+            "latest_balances = false\nfifo_balances = true\nfifo_latency_at_fall_ms = 100\nlifespan_balances = false",
+        );
+        graded_both_ways(
+            "ex5",
+            &Ex5Outcome {
+                low_loss_balances: true,
+                high_loss_balances: false,
+                keeps_it_up: [false, true, true],
+                reliable_latency_ms: 16.5,
+                lossless_latency_ms: 0.0,
+                losses: (0.2, 0.8),
+            },
+            "survives_low_loss = true\nsurvives_high_loss = false\nkeeps_it_up = [\"reliable\", \"zero\"]\nreliable_latency_ms = 18",
+            "survives_low_loss = false\nsurvives_high_loss = true\nkeeps_it_up = [\"hold\"]\nreliable_latency_ms = 5",
+        );
+        graded_both_ways(
+            "ex6",
+            &Ex6Outcome {
+                smallest_clamp_n: Some(0.75),
+                matches_builtin: true,
+            },
+            "smallest_clamp_n = 0.75",
+            "smallest_clamp_n = 2",
+        );
+        graded_both_ways(
+            "ex7",
+            &Ex7Outcome {
+                sensor_hz_single_threaded: 33.3,
+                skipped_ticks_single_threaded: 166,
+                balances_single_threaded: true,
+                sensor_hz_shared_group: 33.3,
+                sensor_hz_own_group: 50.0,
+            },
+            "sensor_hz_single_threaded = 33\nskipped_ticks_single_threaded = 167\nbalances_single_threaded = true\nsensor_hz_shared_group = 33\nsensor_hz_own_group = 50",
+            "sensor_hz_single_threaded = 50\nskipped_ticks_single_threaded = 0\nbalances_single_threaded = false\nsensor_hz_shared_group = 50\nsensor_hz_own_group = 25",
+        );
+        graded_both_ways(
+            "ex8",
+            &Ex8Outcome {
+                fails_at_noise_rad: Some(0.014),
+                lower_cutoff_tolerates_more: true,
+            },
+            "fails_at_noise_rad = 0.014\nlower_cutoff_tolerates_more = true",
+            "fails_at_noise_rad = 0.03\nlower_cutoff_tolerates_more = false",
+        );
+        graded_both_ways(
+            "ex9",
+            &ex9::Ex9Outcome {
+                p50_latency_across_ms: 40.0,
+                p50_latency_across_offsets_ms: 10.0,
+            },
+            "p50_latency_across_ms = 40\np50_latency_across_offsets_ms = 10",
+            "p50_latency_across_ms = 20\np50_latency_across_offsets_ms = 0",
+        );
+        graded_both_ways(
+            "ex10",
+            &ex10::Ex10Outcome {
+                stays_up_s: vec![Some(1.74), Some(1.86), Some(2.06)],
+            },
+            "stays_up_s = 2",
+            "stays_up_s = 0.5",
+        );
+        graded_both_ways(
+            "ex11",
+            &ex11::Ex11Outcome {
+                mine_hz: Some(5.5),
+                scripted_hz: Some(7.5),
+            },
+            "my_cliff_hz = 5.5\nlower_than_scripted = true",
+            "my_cliff_hz = 12.5\nlower_than_scripted = false",
+        );
+        graded_both_ways(
+            "ex12",
+            &ex12::Ex12Outcome {
+                readings_lost: 3,
+                gap_ms: 65.0,
+                latency_max_ms: 120.0,
+            },
+            "readings_lost = 4\nlatency_max_ms = 110",
+            "readings_lost = 10\nlatency_max_ms = 60",
+        );
+        let ex13 = Ex13Outcome {
+            nodes: ["/sensor", "/policy", "/actuator", "/ratelab"]
+                .map(String::from)
+                .to_vec(),
+            obs_type: "sensor_msgs/msg/JointState".into(),
+            action_type: "std_msgs/msg/Float64".into(),
+            clock_hz: 80.0,
+        };
+        graded_both_ways(
+            "ex13",
+            &ex13,
+            "nodes = [\"/ratelab\", \"/actuator\", \"/sensor\", \"/policy\"]\nobs_type = \"sensor_msgs/msg/JointState\"\naction_type = \"std_msgs/msg/Float64\"\nclock_hz = 80",
+            "nodes = [\"/sensor\", \"/policy\", \"/actuator\"]\nobs_type = \"sensor_msgs/JointState\"\naction_type = \"std_msgs/msg/Float32\"\nclock_hz = 90",
+        );
+        let event = |e: &str| Some(format!("incompatible QoS: {e}"));
+        graded_both_ways(
+            "ex14",
+            &ex14::Ex14Outcome {
+                delivers: vec![
+                    ("reliable_from_best_effort".into(), false, event("reliability")),
+                    ("best_effort_from_reliable".into(), true, None),
+                    ("deadline_20_from_40".into(), false, event("deadline")),
+                    ("deadline_40_from_20".into(), true, None),
+                ],
+                history: vec![("volatile".into(), 0), ("transient_local".into(), 5)],
+            },
+            "reliable_from_best_effort = false\nbest_effort_from_reliable = true\ndeadline_20_from_40 = false\ndeadline_40_from_20 = true\nlate_joiner_volatile = 0\nlate_joiner_transient_local = 5",
+            "reliable_from_best_effort = true\nbest_effort_from_reliable = false\ndeadline_20_from_40 = true\ndeadline_40_from_20 = false\nlate_joiner_volatile = 3\nlate_joiner_transient_local = 1",
+        );
+    }
+
+    /// ex13's node list is a set: any order, each name with or without the root
+    /// namespace's `/`; a node missing, or one more, is a miss. What it prints is what `ros2
+    /// node list` prints: sorted.
+    #[test]
+    fn ex13_compares_the_node_list_as_a_set() {
+        let o = Ex13Outcome {
+            nodes: ["/sensor", "/policy", "/actuator", "/ratelab"]
+                .map(String::from)
+                .to_vec(),
+            obs_type: "sensor_msgs/msg/JointState".into(),
+            action_type: "std_msgs/msg/Float64".into(),
+            clock_hz: 80.0,
+        };
+        let nodes = |list: &str| o.reconcile(&table(&format!("nodes = {list}"))).remove(0);
+        for right in [
+            "[\"/sensor\", \"/policy\", \"/actuator\", \"/ratelab\"]",
+            "[\"/actuator\", \"/policy\", \"/ratelab\", \"/sensor\"]",
+            "[\"ratelab\", \"sensor\", \"actuator\", \"policy\"]",
+            "[\"/ratelab\", \"sensor\", \"/actuator\", \"policy\", \"/sensor\"]",
+        ] {
+            let said = nodes(right);
+            assert_eq!(said.verdict, Verdict::Right, "{right}: {}", said.line);
+            assert_eq!(
+                said.line,
+                "You predicted the node list /actuator /policy /ratelab /sensor; ros2 node list prints /actuator /policy /ratelab /sensor: right."
+            );
+        }
+        for wrong in [
+            "[\"/sensor\", \"/policy\", \"/actuator\"]",
+            "[\"/sensor\", \"/policy\", \"/actuator\", \"/ratelab\", \"/clock\"]",
+            "[\"/robot/sensor\", \"/policy\", \"/actuator\", \"/ratelab\"]",
+            "[]",
+        ] {
+            let said = nodes(wrong);
+            assert_eq!(said.verdict, Verdict::Missed, "{wrong}: {}", said.line);
+            assert!(
+                said.line.contains(
+                    "; ros2 node list prints /actuator /policy /ratelab /sensor (ROS 2 sees"
+                ),
+                "{}",
+                said.line
+            );
+        }
+        assert!(nodes("[]")
+            .line
+            .starts_with("You predicted the node list none;"));
+        for unreadable in ["[\"/sensor\", 1]", "\"/sensor\""] {
+            assert_eq!(
+                nodes(unreadable).verdict,
+                Verdict::Unreadable,
+                "{unreadable}"
+            );
+        }
+        assert_eq!(
+            ex13::node_set(["sensor", "/policy", "actuator", "/ratelab"]),
+            ["/actuator", "/policy", "/ratelab", "/sensor"]
+                .map(String::from)
+                .into_iter()
+                .collect::<std::collections::BTreeSet<String>>()
+        );
+    }
+
+    /// The line after the sentences counts what was right, and names what was not.
+    #[test]
+    fn the_tally_names_the_keys_that_missed() {
+        let s = |key: &str, verdict| Said {
+            key: key.into(),
+            line: String::new(),
+            verdict,
+        };
+        assert_eq!(
+            tally(&[s("a", Verdict::Right), s("b", Verdict::Right)]),
+            "Your prediction: 2 of 2 right."
+        );
+        assert_eq!(
+            tally(&[
+                s("a", Verdict::Missed),
+                s("b", Verdict::Open),
+                s("c", Verdict::Unreadable),
+                s("d", Verdict::Right),
+                s("e", Verdict::Missed),
+            ]),
+            "Your prediction: 1 of 4 right; missed: a, e; not read: c."
+        );
     }
 }

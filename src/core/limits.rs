@@ -29,6 +29,9 @@
 //! | [`MAX_NODE_PARAMS`] | 1024 | one node's parameters in a graph file |
 //! | [`MAX_SCRIPT_BYTES`] | 16 MiB | a Python script (a node's or a brain's), read before it runs |
 //! | [`MAX_FAULTS`] | 64 | the faults one run holds (`--stall`, `--kill` and those injected while it runs) |
+//! | [`MAX_GRAPH_QUEUE_BYTES`] | 4 GiB | what a graph's queues may hold at worst (every subscription's depth × its type's largest message), computed when the file is read and at every change of a depth, QoS or rate |
+//! | [`MAX_HELD_TRACE_VALUES`] | 64 Mi | the trace a run returns in memory (`ratelab.run`): rows × columns, checked before it starts |
+//! | [`MAX_REAL_CLOCK_THREADS`] | 1024 | the threads a real-clock run starts (one per node on a thread of its own, and the shared executors'), checked before any starts |
 
 /// The most nodes a graph may have: 65 536. A node costs its scheduler entry, its queues
 /// and its counters (about a kilobyte), so the bound keeps a hostile graph file's graph
@@ -95,8 +98,10 @@ pub const MAX_CONTROL_BYTES: usize = 64 << 20;
 /// log's run, a fault's time): ten years of 365 days, 315 360 000 s (run time is whole
 /// nanoseconds in a `u64`, good for 584 years). A run's memory does not grow with its length
 /// (the latency's percentiles are exact over the first hour's samples, from a streaming
-/// histogram past it); its trace does, one record per actuator step kept only for `--out`
-/// and thinned by `--trace-every`. A lab run ends here, so its log replays.
+/// histogram past it), nor does its trace's: `ratelab run --out` writes `trace.csv` a row at
+/// a time as the run goes, and a run that returns its trace in memory (`ratelab.run`) is
+/// refused past [`MAX_HELD_TRACE_VALUES`] before it starts. A lab run ends here, so its log
+/// replays.
 pub const MAX_DURATION_S: f64 = 315_360_000.0;
 
 /// The most message types one process may have registered, the built-in ones included:
@@ -124,6 +129,53 @@ pub const MAX_SCRIPT_BYTES: u64 = 16 << 20;
 /// injected by command while it runs: 64. Each is checked at every tick of its node.
 pub const MAX_FAULTS: usize = 64;
 
+/// The most bytes a graph's queues may hold at worst: 4 GiB. Each topic's worst case is
+/// the messages its queues may hold at once times the largest such message, and the graph's
+/// is the sum over its topics (`ratelab::graph::GraphSpec::queue_bytes`):
+///
+/// - **messages**: each subscription has a queue of its own (ROS 2's rule), of the topic's
+///   history depth (keep-last, or keep-all's cap), and on a link (`link = { … }`) also the
+///   messages in flight, at most the publisher's rate × the longest transit (delay +
+///   jitter, and 15 retransmissions on a reliable link), rounded up, plus one; a topic
+///   nobody reads keeps one queue; and the publisher holds one message more (the frame it is
+///   sending). The pixels of a frame are shared by the queues of one process, but a keep-all
+///   queue read slowly keeps frames the others have let go, so each queue is counted whole;
+/// - **the largest message** of the topic's type: 8 bytes a number, the slot of a text or
+///   bytes field, and the message's stamps, doubled (a queue grows by doubling); for a type
+///   with text or bytes fields (unbounded in themselves) their contents are the size the
+///   graph implies — a `camera`'s frame, `width_px` × `height_px` bytes (`mono8`) — or, with
+///   no size implied (a Python or external node's image), the bound on one message between
+///   processes, [`MAX_SAMPLE_BYTES`].
+///
+/// Why 4 GiB: a 4096 × 4096 frame (16 MiB, the camera's largest) fits 256 times, more than
+/// any robot's image pipeline keeps (ROS 2's default depth is 10, its sensor-data profile's
+/// 5), and half of an 8 GiB machine is left to the process itself, its Python nodes and
+/// brains, and the run's trace. A graph past it (a 4096 × 4096 camera at 100 Hz on a topic of
+/// depth 1000: 15.6 GiB) would fill the machine in seconds and abort; it is refused when read,
+/// in one line naming the topics that take the most. Lower their depth (or the frame); a
+/// machine with more memory may raise this and rebuild. Not counted here: the copies of
+/// the queues the lab keeps for seeking back (`ratelab::runcore::max_history`) and the
+/// run's trace.
+pub const MAX_GRAPH_QUEUE_BYTES: u64 = 4 << 30;
+
+/// The most threads a real-clock run starts: 1024 (the virtual clock starts none). The real
+/// clock runs each node on a thread of its own unless an executor shares threads
+/// (`[executors]` tables, `--executor single_threaded` or `multi_threaded:N`), so a run needs
+/// one thread per node on a thread of its own plus each shared executor's threads (across
+/// a launch's processes, together: they share the machine and the user's process limit).
+/// Checked before any thread starts, so a larger graph is refused in one line that says how
+/// to share threads, never a panic midway.
+///
+/// Why 1024: a node thread reserves the default stack of Rust's threads, 2 MiB of address
+/// space (`RUST_MIN_STACK` sets it; node threads keep it, as a Python callback or a brain
+/// may recurse deeply), so 1024 threads reserve 2 GiB: well inside an 8 GiB address-space
+/// limit, where 5,000 threads (10 GiB) fail to start. It is also below the process limits
+/// machines commonly set (a container's `pids.max`, `RLIMIT_NPROC`, the kernel's
+/// `threads-max` on a small machine), and above what real robot software runs (dozens to
+/// hundreds of nodes). A thread the machine still refuses ends the run cleanly, as a failed
+/// node (exit 2), the threads already started stopped and joined.
+pub const MAX_REAL_CLOCK_THREADS: usize = 1024;
+
 /// The line that refuses input for passing the bound named `bound`: `what`, then the
 /// constant a program can look up (`"a graph has at most 65536 nodes
 /// (ratelab::limits::MAX_NODES)"`). Every bound of this module is refused so.
@@ -133,6 +185,20 @@ pub fn refusal(what: impl std::fmt::Display, bound: &str) -> String {
 
 // A node's ports fit in a graph's topics.
 const _: () = assert!(MAX_NODE_PORTS <= MAX_TOPICS);
+
+// One message of the largest size fits the queues' budget many times over.
+const _: () = assert!(MAX_SAMPLE_BYTES as u64 * 16 <= MAX_GRAPH_QUEUE_BYTES);
+
+/// The most trace values (rows × columns of `trace.csv`: actuator steps kept, each a value
+/// per column) a run returns in memory may hold: 64 Mi (67 108 864). `ratelab.run` in
+/// Python returns its trace as `trace.csv`'s text and as NumPy arrays, about 10 bytes of
+/// text and at most 8 of array per value (estimated from the chapter's rows, not measured),
+/// so about 1.2 GB at the bound and up to twice the text while they are made. The chapter's
+/// graph has 12 columns: a day of its run time (4 320 001 steps, 52 M values) fits, two do
+/// not. Past it a run is refused before it starts (`ratelab.TraceTooLarge`, a
+/// `MemoryError`), naming the `--trace-every` that fits. `ratelab run --out` holds no trace
+/// (it writes `trace.csv` as the run goes), so its trace has no such bound.
+pub const MAX_HELD_TRACE_VALUES: u64 = 1 << 26;
 
 #[cfg(test)]
 mod tests {
@@ -146,6 +212,21 @@ mod tests {
                 "MAX_NODES"
             ),
             "a graph has at most 65536 nodes (ratelab::limits::MAX_NODES)"
+        );
+    }
+
+    #[test]
+    fn the_memory_bounds_are_what_their_documentation_says() {
+        // The camera's largest frame (4096 × 4096 mono8) fits the queues' budget 256 times;
+        // the issue's /image at depth 1000 does not.
+        let frame = 4096u64 * 4096;
+        assert_eq!(MAX_GRAPH_QUEUE_BYTES / frame, 256);
+        assert!(1000 * frame > MAX_GRAPH_QUEUE_BYTES);
+        // The real clock's threads reserve 2 GiB of Rust's default 2 MiB stacks.
+        assert_eq!(MAX_REAL_CLOCK_THREADS as u64 * (2 << 20), 2 << 30);
+        assert_eq!(
+            refusal("too many threads", "MAX_REAL_CLOCK_THREADS"),
+            "too many threads (ratelab::limits::MAX_REAL_CLOCK_THREADS)"
         );
     }
 }

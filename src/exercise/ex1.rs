@@ -2,7 +2,7 @@
 //! 50 Hz, every seed, and find where the pole first falls. Virtual clock: each run is exact.
 
 use super::{check, scripted, threads, Check, Context, Exercise, ExerciseError};
-use super::{Reconcile, Section};
+use super::{Reconcile, Said, Section};
 use crate::config::{duration_from_secs, ClockKind, RunConfig};
 use crate::graph::GraphSpec;
 use crate::metrics::Metrics;
@@ -119,22 +119,24 @@ pub fn check_ex1(b: &Ex1Bands, runs: &[Metrics]) -> Vec<Check> {
     checks
 }
 
+/// A rate of the sweep: right when it is the rate at which the pole first fell.
 impl Reconcile for Ex1Outcome {
-    fn reconcile(&self, prediction: &toml::Table) -> Vec<String> {
+    fn reconcile(&self, prediction: &toml::Table) -> Vec<Said> {
+        let key = "fails_at_hz";
         let measured = self
             .fails_at_hz
             .map_or("it never fell in the range".to_string(), |hz| {
                 format!("it first fell at {hz} Hz")
             });
-        vec![
-            match prediction.get("fails_at_hz").and_then(super::number) {
-                Some(hz) if Some(hz) == self.fails_at_hz => {
-                    format!("You predicted the pole first fails at {hz} Hz; {measured}: right.")
-                }
-                Some(hz) => format!("You predicted the pole first fails at {hz} Hz; {measured}."),
-                None => super::unreadable("fails_at_hz"),
-            },
-        ]
+        vec![match prediction.get(key).and_then(super::number) {
+            Some(hz) => super::graded(
+                key,
+                &format!("You predicted the pole first fails at {hz} Hz; {measured}"),
+                self.fails_at_hz.is_some_and(|f| super::same(hz, f)),
+                "",
+            ),
+            None => super::unreadable(key),
+        }]
     }
 }
 

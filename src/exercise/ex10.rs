@@ -2,7 +2,7 @@
 //! last command (the zero-order hold) while liveliness says the policy is gone. How long
 //! does the pole stay up on a force nobody is computing any more? Virtual clock: exact.
 
-use super::{check, Check, Context, Exercise, ExerciseError, Reconcile, Section};
+use super::{check, Check, Context, Exercise, ExerciseError, Reconcile, Said, Section};
 use crate::config::{duration_from_secs, ClockKind, RunConfig};
 use crate::graph::GraphSpec;
 use crate::metrics::Metrics;
@@ -122,8 +122,10 @@ pub fn check_ex10(b: &Ex10Bands, runs: &[Metrics]) -> Vec<Check> {
     ]
 }
 
+/// The seconds on the held force: right within [`super::NEAR`] of their mean over the seeds
+/// (missed when the pole never fell).
 impl Reconcile for Ex10Outcome {
-    fn reconcile(&self, prediction: &toml::Table) -> Vec<String> {
+    fn reconcile(&self, prediction: &toml::Table) -> Vec<Said> {
         let measured = match self.mean_s() {
             Some(mean) => format!(
                 "it stayed up {} s ({mean:.2} s on average)",
@@ -135,9 +137,15 @@ impl Reconcile for Ex10Outcome {
             ),
             None => "it never fell".into(),
         };
-        vec![match prediction.get("stays_up_s").and_then(super::number) {
-            Some(s) => format!("You predicted the pole stays up {s} s after the kill; {measured}."),
-            None => super::unreadable("stays_up_s"),
+        let key = "stays_up_s";
+        vec![match prediction.get(key).and_then(super::number) {
+            Some(s) => super::graded(
+                key,
+                &format!("You predicted the pole stays up {s} s after the kill; {measured}"),
+                self.mean_s().is_some_and(|mean| super::near(s, mean, 0.0)),
+                &super::more_than_near(),
+            ),
+            None => super::unreadable(key),
         }]
     }
 }

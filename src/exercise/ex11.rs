@@ -2,7 +2,7 @@
 //! observation to action) against the scripted balancer, each slowed down the same ladder
 //! of policy rates until the pole falls: whose rate cliff is lower? Virtual clock: exact.
 
-use super::{check, threads, Check, Context, Exercise, ExerciseError, Reconcile, Section};
+use super::{check, threads, Check, Context, Exercise, ExerciseError, Reconcile, Said, Section};
 use crate::config::{duration_from_secs, ClockKind, RunConfig};
 use crate::graph::GraphSpec;
 use crate::sweep::{find_cliff, run_pool, Cliff};
@@ -130,41 +130,51 @@ pub fn check_ex11(b: &Ex11Bands, runs: &Ex11Runs) -> Vec<Check> {
     ]
 }
 
+/// A rate of the search (a multiple of its step): right when it is the brain's cliff. Lower
+/// or not: right when it agrees; not graded when neither brain fell in the range.
 impl Reconcile for Ex11Outcome {
-    fn reconcile(&self, prediction: &toml::Table) -> Vec<String> {
+    fn reconcile(&self, prediction: &toml::Table) -> Vec<Said> {
         let hz = |x: Option<f64>| x.map_or("none in the range".into(), |hz| format!("{hz} Hz"));
+        // A brain that never fell in the range has its cliff below it: lower than one that did.
         let lower = match (self.mine_hz, self.scripted_hz) {
             (Some(m), Some(s)) => Some(m < s),
             (None, Some(_)) => Some(true),
-            _ => None,
+            (Some(_), None) => Some(false),
+            (None, None) => None,
         };
-        let mut out = vec![match prediction.get("my_cliff_hz").and_then(super::number) {
-            Some(p) => format!(
-                "You predicted your brain's cliff at {p} Hz; it was {} (the scripted balancer's {}).",
-                hz(self.mine_hz),
-                hz(self.scripted_hz)
+        let key = "my_cliff_hz";
+        let cliff = match prediction.get(key).and_then(super::number) {
+            Some(p) => super::graded(
+                key,
+                &format!(
+                    "You predicted your brain's cliff at {p} Hz; it was {} (the scripted balancer's {})",
+                    hz(self.mine_hz),
+                    hz(self.scripted_hz)
+                ),
+                self.mine_hz.is_some_and(|m| super::same(p, m)),
+                "",
             ),
-            None => super::unreadable("my_cliff_hz"),
-        }];
-        out.push(
-            match (
-                prediction
-                    .get("lower_than_scripted")
-                    .and_then(toml::Value::as_bool),
-                lower,
-            ) {
-                (Some(p), Some(l)) => format!(
-                    "You predicted your brain's cliff is {} than the scripted one's; it is {}.",
+            None => super::unreadable(key),
+        };
+        let key = "lower_than_scripted";
+        let lower = match (prediction.get(key).and_then(toml::Value::as_bool), lower) {
+            (Some(p), Some(l)) => super::graded(
+                key,
+                &format!(
+                    "You predicted your brain's cliff is {} than the scripted one's; it is {}",
                     if p { "lower" } else { "not lower" },
                     if l { "lower" } else { "not lower" }
                 ),
-                (Some(_), None) => {
-                    "Neither brain fell in the range: there is no cliff to compare.".into()
-                }
-                (None, _) => super::unreadable("lower_than_scripted"),
-            },
-        );
-        out
+                p == l,
+                "",
+            ),
+            (Some(_), None) => super::open(
+                key,
+                "Neither brain fell in the range: there is no cliff to compare.".into(),
+            ),
+            (None, _) => super::unreadable(key),
+        };
+        vec![cliff, lower]
     }
 }
 

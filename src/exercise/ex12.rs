@@ -5,7 +5,7 @@
 //! clock, real processes over Zenoh ([`crate::distributed`]): the checks assert what holds
 //! on a loaded machine (the readings lost are those published while no policy ran).
 
-use super::{check, Check, Context, Exercise, ExerciseError, Reconcile, Section};
+use super::{check, Check, Context, Exercise, ExerciseError, Reconcile, Said, Section};
 use crate::config::{duration_from_secs, ClockKind, RunConfig};
 use crate::distributed::launcher::Program;
 use crate::graph::spec::RestartPolicy;
@@ -186,21 +186,38 @@ pub fn check_ex12(b: &Ex12Bands, graph: &GraphSpec, run: &Ex12Run) -> Vec<Check>
     ]
 }
 
+/// The readings lost: right within [`super::NEAR`] or one reading. The longest latency:
+/// right within [`super::NEAR`].
 impl Reconcile for Ex12Outcome {
-    fn reconcile(&self, prediction: &toml::Table) -> Vec<String> {
-        let lost = match prediction.get("readings_lost").and_then(super::number) {
-            Some(n) => format!(
-                "You predicted {n} readings lost across the restart; {} were.",
-                self.readings_lost
+    fn reconcile(&self, prediction: &toml::Table) -> Vec<Said> {
+        let key = "readings_lost";
+        let lost = match prediction.get(key).and_then(super::number) {
+            Some(n) => super::graded(
+                key,
+                &format!(
+                    "You predicted {n} readings lost across the restart; {} were",
+                    self.readings_lost
+                ),
+                super::near(n, self.readings_lost as f64, 1.0),
+                &format!(
+                    ": off by more than 1 and by more than {:.0}%",
+                    super::NEAR * 100.0
+                ),
             ),
-            None => super::unreadable("readings_lost"),
+            None => super::unreadable(key),
         };
-        let latency = match prediction.get("latency_max_ms").and_then(super::number) {
-            Some(n) => format!(
-                "You predicted a longest sense→act latency of {n} ms; it was {:.1} ms.",
-                self.latency_max_ms
+        let key = "latency_max_ms";
+        let latency = match prediction.get(key).and_then(super::number) {
+            Some(n) => super::graded(
+                key,
+                &format!(
+                    "You predicted a longest sense→act latency of {n} ms; it was {:.1} ms",
+                    self.latency_max_ms
+                ),
+                super::near(n, self.latency_max_ms, 0.0),
+                &super::more_than_near(),
             ),
-            None => super::unreadable("latency_max_ms"),
+            None => super::unreadable(key),
         };
         vec![lost, latency]
     }

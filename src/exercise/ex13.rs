@@ -6,11 +6,12 @@
 //! each virtual instant, docs/ros2.md), and prints the `ratelab ros2` commands that read the
 //! same from the wire (a test reads them there and finds the same).
 
-use super::{check, Check, Context, Exercise, ExerciseError, Reconcile, Section};
+use super::{check, Check, Context, Exercise, ExerciseError, Reconcile, Said, Section};
 use crate::config::{duration_from_secs, ClockKind, RunConfig};
 use crate::policy::Scripted;
 use crate::runcore::{CoreOptions, RunCore, Step};
 use serde::Deserialize;
+use std::collections::BTreeSet;
 
 /// ex13: what ROS 2 sees.
 pub struct Ex13;
@@ -31,7 +32,8 @@ impl Section for Ex13Bands {
 /// ex13's outcome: what ROS 2 sees.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Ex13Outcome {
-    /// `ros2 node list`, in the graph's order (`/ratelab` last).
+    /// The nodes ROS 2 sees, in the graph's order (`/ratelab` last); `ros2 node list` prints
+    /// them sorted ([`node_set`]).
     pub nodes: Vec<String>,
     /// `/obs`'s ROS 2 type.
     pub obs_type: String,
@@ -93,46 +95,91 @@ pub fn check_ex13(b: &Ex13Bands, o: &Ex13Outcome) -> Vec<Check> {
     ]
 }
 
+/// Node names as `ros2 node list` prints them: each fully qualified (a name without a
+/// namespace is in the root one, `sensor` is `/sensor`, as ros2cli's `node info` takes it),
+/// each once, sorted as ros2cli sorts them (and `ratelab ros2 node list`).
+pub fn node_set<'a>(names: impl IntoIterator<Item = &'a str>) -> BTreeSet<String> {
+    names
+        .into_iter()
+        .map(|n| {
+            if n.starts_with('/') {
+                n.to_string()
+            } else {
+                format!("/{n}")
+            }
+        })
+        .collect()
+}
+
+/// How far the predicted `/clock` rate may be from the measured one, messages a second:
+/// the rate is exact (the instants of the grids' union), so only a rounding.
+const CLOCK_HZ_TOLERANCE: f64 = 0.5;
+
+/// The node list: right when the names are the same set (in any order, `/` or not before a
+/// name in the root namespace). The types: right when the same. `/clock`'s rate: right
+/// within [`CLOCK_HZ_TOLERANCE`].
 impl Reconcile for Ex13Outcome {
-    fn reconcile(&self, prediction: &toml::Table) -> Vec<String> {
-        let list = |key: &str| -> Option<Vec<String>> {
-            prediction.get(key)?.as_array().map(|a| {
-                a.iter()
-                    .filter_map(|v| v.as_str().map(str::to_string))
-                    .collect()
-            })
+    fn reconcile(&self, prediction: &toml::Table) -> Vec<Said> {
+        let key = "nodes";
+        let names: Option<Vec<&str>> = prediction
+            .get(key)
+            .and_then(toml::Value::as_array)
+            .and_then(|a| a.iter().map(toml::Value::as_str).collect());
+        let words = |set: &BTreeSet<String>| -> String {
+            if set.is_empty() {
+                return "none".into();
+            }
+            set.iter()
+                .map(|n| crate::text::printable(n).into_owned())
+                .collect::<Vec<_>>()
+                .join(" ")
         };
-        let text = |key: &str| {
-            prediction
-                .get(key)
-                .and_then(|v| v.as_str())
-                .map(str::to_string)
-        };
-        let mut out = Vec::new();
-        out.push(match list("nodes") {
-            Some(n) if n == self.nodes => format!("You predicted the node list {n:?}: right."),
-            Some(n) => format!(
-                "You predicted the node list {n:?}; ROS 2 sees {:?} (a node name has its namespace's `/`, and ratelab's own node publishes /clock).",
-                self.nodes
-            ),
-            None => super::unreadable("nodes"),
-        });
+        let mut out = vec![match names {
+            Some(names) => {
+                let said = node_set(names);
+                let seen = node_set(self.nodes.iter().map(String::as_str));
+                super::graded(
+                    key,
+                    &format!(
+                        "You predicted the node list {}; ros2 node list prints {}",
+                        words(&said),
+                        words(&seen)
+                    ),
+                    said == seen,
+                    " (ROS 2 sees every node of the graph, and ratelab's own, which publishes /clock)",
+                )
+            }
+            None => super::unreadable(key),
+        }];
         for (key, seen) in [
             ("obs_type", &self.obs_type),
             ("action_type", &self.action_type),
         ] {
-            out.push(match text(key) {
-                Some(t) if &t == seen => format!("You predicted {key} = {t}: right."),
-                Some(t) => format!("You predicted {key} = {t}; it is {seen}."),
+            out.push(match prediction.get(key).and_then(toml::Value::as_str) {
+                Some(t) => super::graded(
+                    key,
+                    &format!(
+                        "You predicted {key} = {}; it is {seen}",
+                        crate::text::printable(t)
+                    ),
+                    t == seen.as_str(),
+                    "",
+                ),
                 None => super::unreadable(key),
             });
         }
-        out.push(match prediction.get("clock_hz").and_then(super::number) {
-            Some(n) => format!(
-                "You predicted {n} /clock messages a second; there were {:.1}.",
-                self.clock_hz
+        let key = "clock_hz";
+        out.push(match prediction.get(key).and_then(super::number) {
+            Some(n) => super::graded(
+                key,
+                &format!(
+                    "You predicted {n} /clock messages a second; there were {:.1}",
+                    self.clock_hz
+                ),
+                (n - self.clock_hz).abs() <= CLOCK_HZ_TOLERANCE,
+                &format!(": off by more than {CLOCK_HZ_TOLERANCE}"),
             ),
-            None => super::unreadable("clock_hz"),
+            None => super::unreadable(key),
         });
         out
     }
@@ -170,7 +217,11 @@ impl Exercise for Ex13 {
             "what ROS 2 sees of the chapter's graph, policy at {} Hz:",
             b.control_hz
         );
-        say!(cx, "  ros2 node list        {}", o.nodes.join("  "));
+        // As `ros2 node list` prints them (and `ratelab ros2 node list`): sorted, one a line.
+        say!(cx, "  ros2 node list");
+        for n in node_set(o.nodes.iter().map(String::as_str)) {
+            say!(cx, "    {}", crate::text::printable(&n));
+        }
         say!(cx, "  /obs                  {}", o.obs_type);
         say!(cx, "  /action               {}", o.action_type);
         say!(

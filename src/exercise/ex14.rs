@@ -3,7 +3,7 @@
 //! node that joins late, under each durability: what it gets of the past. Virtual clock:
 //! exact.
 
-use super::{check, Check, Context, Exercise, ExerciseError, Reconcile, Section};
+use super::{check, Check, Context, Exercise, ExerciseError, Reconcile, Said, Section};
 use crate::config::{duration_from_secs, ClockKind, RunConfig};
 use crate::graph::GraphSpec;
 use crate::metrics::Metrics;
@@ -205,19 +205,28 @@ pub fn check_ex14(b: &Ex14Bands, runs: &Ex14Runs) -> Vec<Check> {
     checks
 }
 
+/// Each pair: right when it agrees. The messages a late joiner gets: an exact count (none,
+/// or the history depth), right when the same.
 impl Reconcile for Ex14Outcome {
-    fn reconcile(&self, prediction: &toml::Table) -> Vec<String> {
-        let mut lines: Vec<String> = self
+    fn reconcile(&self, prediction: &toml::Table) -> Vec<Said> {
+        let mut lines: Vec<Said> = self
             .delivers
             .iter()
-            .map(|(key, _, event)| {
+            .map(|(key, delivers, event)| {
                 let measured = match event {
                     None => "it does".to_string(),
                     Some(e) => format!("it does not ({e})"),
                 };
                 match prediction.get(key).and_then(toml::Value::as_bool) {
-                    Some(true) => format!("You predicted {key} delivers; {measured}."),
-                    Some(false) => format!("You predicted {key} delivers nothing; {measured}."),
+                    Some(p) => {
+                        let what = if p { "delivers" } else { "delivers nothing" };
+                        super::graded(
+                            key,
+                            &format!("You predicted {key} {what}; {measured}"),
+                            p == *delivers,
+                            "",
+                        )
+                    }
                     None => super::unreadable(key),
                 }
             })
@@ -225,8 +234,13 @@ impl Reconcile for Ex14Outcome {
         for (durability, got) in &self.history {
             let key = format!("late_joiner_{durability}");
             lines.push(match prediction.get(&key).and_then(super::number) {
-                Some(n) => format!(
-                    "You predicted a late joiner gets {n} messages from before under {durability}; it got {got}."
+                Some(n) => super::graded(
+                    &key,
+                    &format!(
+                        "You predicted a late joiner gets {n} messages from before under {durability}; it got {got}"
+                    ),
+                    super::same(n, *got as f64),
+                    "",
                 ),
                 None => super::unreadable(&key),
             });

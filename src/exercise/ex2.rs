@@ -2,7 +2,7 @@
 //! against a deep queue, every seed. Virtual clock: each run is exact.
 
 use super::{check, dash, scripted, threads, Check, Context, Exercise, ExerciseError};
-use super::{Reconcile, Section};
+use super::{Reconcile, Said, Section};
 use crate::config::{duration_from_secs, ClockKind, RunConfig};
 use crate::graph::GraphSpec;
 use crate::metrics::Metrics;
@@ -107,27 +107,38 @@ pub fn check_ex2(b: &Ex2Bands, pairs: &[(Metrics, Metrics)]) -> Vec<Check> {
     ]
 }
 
+/// The drops are a count on the virtual clock, exact: right when the same. The survival:
+/// right when it agrees.
 impl Reconcile for Ex2Outcome {
-    fn reconcile(&self, prediction: &toml::Table) -> Vec<String> {
+    fn reconcile(&self, prediction: &toml::Table) -> Vec<Said> {
         let p = |k: &str| prediction.get(k);
-        let drops = match p("deep_queue_obs_drops").and_then(super::number) {
-            Some(n) => format!(
-                "You predicted {n} /obs drops with the deep queue; there were {}.",
-                self.deep_queue_obs_drops
+        let (key, seen) = ("deep_queue_obs_drops", self.deep_queue_obs_drops);
+        let drops = match p(key).and_then(super::number) {
+            Some(n) => super::graded(
+                key,
+                &format!("You predicted {n} /obs drops with the deep queue; there were {seen}"),
+                super::same(n, seen as f64),
+                "",
             ),
-            None => super::unreadable("deep_queue_obs_drops"),
+            None => super::unreadable(key),
         };
-        let measured = if self.deep_queue_balances {
-            "it stayed up"
-        } else {
-            "it fell"
-        };
-        let survives = match p("deep_queue_balances").and_then(toml::Value::as_bool) {
-            Some(true) => format!("You predicted the deep queue keeps the pole up; {measured}."),
-            Some(false) => {
-                format!("You predicted the pole falls even with the deep queue; {measured}.")
-            }
-            None => super::unreadable("deep_queue_balances"),
+        let key = "deep_queue_balances";
+        let up = self.deep_queue_balances;
+        let measured = if up { "it stayed up" } else { "it fell" };
+        let survives = match p(key).and_then(toml::Value::as_bool) {
+            Some(true) => super::graded(
+                key,
+                &format!("You predicted the deep queue keeps the pole up; {measured}"),
+                up,
+                "",
+            ),
+            Some(false) => super::graded(
+                key,
+                &format!("You predicted the pole falls even with the deep queue; {measured}"),
+                !up,
+                "",
+            ),
+            None => super::unreadable(key),
         };
         vec![drops, survives]
     }

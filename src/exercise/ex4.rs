@@ -2,7 +2,7 @@
 //! against FIFO delivery, then FIFO with a lifespan. Virtual clock: each case is exact.
 
 use super::{check, run_virtual, threads, verdict, Check, Context, Exercise, ExerciseError};
-use super::{Reconcile, Section};
+use super::{Reconcile, Said, Section};
 use crate::config::RunConfig;
 use crate::graph::GraphSpec;
 use crate::metrics::Metrics;
@@ -258,28 +258,37 @@ pub fn check_ex4(b: &Ex4Bands, runs: &[Ex4Run]) -> Vec<Check> {
     checks
 }
 
+/// The survivals: right when they agree. The latency at the fall: right within
+/// [`super::NEAR`] of the range over the seeds; not graded when FIFO never fell.
 impl Reconcile for Ex4Outcome {
-    fn reconcile(&self, prediction: &toml::Table) -> Vec<String> {
+    fn reconcile(&self, prediction: &toml::Table) -> Vec<Said> {
         let survives = |key: &str, what: &str, measured: bool| {
             super::predicted_survival(prediction, key, what, measured)
         };
+        let key = "fifo_latency_at_fall_ms";
         let latency = match (
-            prediction
-                .get("fifo_latency_at_fall_ms")
-                .and_then(super::number),
+            prediction.get(key).and_then(super::number),
             self.fifo_latency_at_fall_ms,
         ) {
-            (None, _) => super::unreadable("fifo_latency_at_fall_ms"),
-            (Some(n), None) => format!(
-                "You predicted {n} ms of sense->act latency at the FIFO fall; FIFO never fell."
+            (None, _) => super::unreadable(key),
+            (Some(n), None) => super::open(
+                key,
+                format!(
+                    "You predicted {n} ms of sense->act latency at the FIFO fall; FIFO never fell."
+                ),
             ),
-            (Some(n), Some((lo, hi))) => format!(
-                "You predicted {n} ms of sense->act latency at the FIFO fall; it was {}.",
-                if lo == hi {
-                    format!("{lo:.0} ms")
-                } else {
-                    format!("{lo:.0} to {hi:.0} ms over the seeds")
-                }
+            (Some(n), Some((lo, hi))) => super::graded(
+                key,
+                &format!(
+                    "You predicted {n} ms of sense->act latency at the FIFO fall; it was {}",
+                    if lo == hi {
+                        format!("{lo:.0} ms")
+                    } else {
+                        format!("{lo:.0} to {hi:.0} ms over the seeds")
+                    }
+                ),
+                (lo..=hi).contains(&n) || super::near(n, lo, 0.0) || super::near(n, hi, 0.0),
+                &super::more_than_near(),
             ),
         };
         vec![

@@ -3,7 +3,7 @@
 //! is exact.
 
 use super::{check, run_virtual, seeds_header, threads, verdict, Check, Context, Exercise};
-use super::{ExerciseError, Reconcile, Section};
+use super::{ExerciseError, Reconcile, Said, Section, Verdict};
 use crate::graph::GraphSpec;
 use crate::metrics::Metrics;
 use crate::sweep::run_pool;
@@ -294,8 +294,10 @@ pub fn check_ex5(b: &Ex5Bands, runs: &[Ex5Run]) -> Vec<Check> {
     ]
 }
 
+/// The survivals: right when they agree. What keeps the pole up: right when the set is
+/// the same. Reliable delivery's latency: right within [`super::NEAR`].
 impl Reconcile for Ex5Outcome {
-    fn reconcile(&self, prediction: &toml::Table) -> Vec<String> {
+    fn reconcile(&self, prediction: &toml::Table) -> Vec<Said> {
         let p = |k: &str| prediction.get(k);
         let (low, high) = self.losses;
         let pct = |p: f64| format!("{}%", p * 100.0);
@@ -311,7 +313,8 @@ impl Reconcile for Ex5Outcome {
                 v.join(", ")
             }
         };
-        let kept = match p("keeps_it_up").and_then(toml::Value::as_array) {
+        let key = "keeps_it_up";
+        let kept = match p(key).and_then(toml::Value::as_array) {
             Some(list) => {
                 let names: Option<Vec<&str>> = list.iter().map(toml::Value::as_str).collect();
                 match names {
@@ -320,32 +323,42 @@ impl Reconcile for Ex5Outcome {
                         for (i, r) in EX5_REACTIONS.iter().enumerate() {
                             said[i] = names.contains(r);
                         }
-                        format!(
-                            "You predicted these keep the pole up at {} loss: {}; what did: {}{}",
-                            pct(high),
-                            named(&said),
-                            named(&self.keeps_it_up),
-                            if said == self.keeps_it_up {
-                                ": right."
-                            } else {
-                                "."
-                            }
+                        super::graded(
+                            key,
+                            &format!(
+                                "You predicted these keep the pole up at {} loss: {}; what did: {}",
+                                pct(high),
+                                named(&said),
+                                named(&self.keeps_it_up),
+                            ),
+                            said == self.keeps_it_up,
+                            "",
                         )
                     }
-                    _ => format!(
-                        "Your prediction `keeps_it_up` lists names other than {}.",
-                        EX5_REACTIONS.join(", ")
-                    ),
+                    _ => Said {
+                        key: key.to_string(),
+                        line: format!(
+                            "Your prediction `keeps_it_up` lists names other than {}.",
+                            EX5_REACTIONS.join(", ")
+                        ),
+                        verdict: Verdict::Unreadable,
+                    },
                 }
             }
-            None => super::unreadable("keeps_it_up"),
+            None => super::unreadable(key),
         };
-        let latency = match p("reliable_latency_ms").and_then(super::number) {
-            Some(n) => format!(
-                "You predicted {n} ms of mean sense->act latency with reliable delivery; it was {:.1} ms (the lossless link: {:.1} ms).",
-                self.reliable_latency_ms, self.lossless_latency_ms
+        let key = "reliable_latency_ms";
+        let latency = match p(key).and_then(super::number) {
+            Some(n) => super::graded(
+                key,
+                &format!(
+                    "You predicted {n} ms of mean sense->act latency with reliable delivery; it was {:.1} ms (the lossless link: {:.1} ms)",
+                    self.reliable_latency_ms, self.lossless_latency_ms
+                ),
+                super::near(n, self.reliable_latency_ms, 0.0),
+                &super::more_than_near(),
             ),
-            None => super::unreadable("reliable_latency_ms"),
+            None => super::unreadable(key),
         };
         vec![
             super::predicted_survival(

@@ -3,7 +3,7 @@
 //! still balances, and whether the learner's node limits as the built-in one does.
 
 use super::{check, run_virtual, seeds_header, threads, Check, Context, Exercise};
-use super::{ExerciseError, Reconcile, Section};
+use super::{ExerciseError, Reconcile, Said, Section};
 use crate::graph::GraphSpec;
 use crate::metrics::Metrics;
 use crate::sweep::run_pool;
@@ -199,27 +199,37 @@ pub fn check_ex6(b: &Ex6Bands, runs: &[Ex6Run]) -> Vec<Check> {
     ]
 }
 
+impl Ex6Outcome {
+    /// Whether the learner's node limits as the built-in one does, in words (a finding the
+    /// checks grade, said after the prediction).
+    pub fn node_sentence(&self) -> &'static str {
+        if self.matches_builtin {
+            "Your node limits as the built-in safety node does: the same verdict, at the same step, at every clamp and seed."
+        } else {
+            "Your node does not limit as the built-in safety node does: see the table for where they differ."
+        }
+    }
+}
+
+/// A clamp of the ladder: right when it is the smallest that kept the pole up.
 impl Reconcile for Ex6Outcome {
-    fn reconcile(&self, prediction: &toml::Table) -> Vec<String> {
+    fn reconcile(&self, prediction: &toml::Table) -> Vec<Said> {
+        let key = "smallest_clamp_n";
         let measured = self.smallest_clamp_n.map_or_else(
             || "your node kept it up at none of the clamps".to_string(),
             |c| format!("with your node it was {c} N"),
         );
-        let clamp = match prediction.get("smallest_clamp_n").and_then(super::number) {
-            Some(n) if Some(n) == self.smallest_clamp_n => format!(
-                "You predicted the smallest clamp that keeps the pole up is {n} N; {measured}: right."
+        vec![match prediction.get(key).and_then(super::number) {
+            Some(n) => super::graded(
+                key,
+                &format!(
+                    "You predicted the smallest clamp that keeps the pole up is {n} N; {measured}"
+                ),
+                self.smallest_clamp_n.is_some_and(|c| super::same(n, c)),
+                "",
             ),
-            Some(n) => format!(
-                "You predicted the smallest clamp that keeps the pole up is {n} N; {measured}."
-            ),
-            None => super::unreadable("smallest_clamp_n"),
-        };
-        let node = if self.matches_builtin {
-            "Your node limits as the built-in safety node does: the same verdict, at the same step, at every clamp and seed."
-        } else {
-            "Your node does not limit as the built-in safety node does: see the table for where they differ."
-        };
-        vec![clamp, node.to_string()]
+            None => super::unreadable(key),
+        }]
     }
 }
 
@@ -250,7 +260,9 @@ impl Exercise for Ex6 {
         refuse_the_template(&script)?;
         let runs = cx.measure(|| measure_ex6(&b, cx.graph, &script))?;
         table(cx, &b, &runs);
-        cx.reconcile(&outcome_ex6(&runs));
+        let outcome = outcome_ex6(&runs);
+        cx.reconcile(&outcome);
+        cx.say(outcome.node_sentence());
         cx.checks(&check_ex6(&b, &runs));
         say!(cx);
         cx.paragraph(&format!(

@@ -4,7 +4,9 @@
 //! timers of one rclpy node, its default group); the same with the sensor in a group of its
 //! own. Virtual clock: each case is exact.
 
-use super::{check, run_virtual, Check, Context, Exercise, ExerciseError, Reconcile, Section};
+use super::{
+    check, run_virtual, Check, Context, Exercise, ExerciseError, Reconcile, Said, Section,
+};
 use crate::executor::ExecutorOverride;
 use crate::graph::GraphSpec;
 use crate::metrics::Metrics;
@@ -216,14 +218,15 @@ pub fn check_ex7(b: &Ex7Bands, runs: &[Ex7Run]) -> Vec<Check> {
     ]
 }
 
-/// The learner's ex7 `prediction` beside the outcome, one sentence per key.
+/// The learner's ex7 `prediction` beside the outcome, one sentence per key. The rates and the
+/// skipped ticks: right within [`super::NEAR`]. The survival: right when it agrees.
 impl Reconcile for Ex7Outcome {
-    fn reconcile(&self, prediction: &toml::Table) -> Vec<String> {
+    fn reconcile(&self, prediction: &toml::Table) -> Vec<Said> {
         reconcile(prediction, self)
     }
 }
 
-fn reconcile(prediction: &toml::Table, outcome: &Ex7Outcome) -> Vec<String> {
+fn reconcile(prediction: &toml::Table, outcome: &Ex7Outcome) -> Vec<Said> {
     let p = |k: &str| prediction.get(k);
     let Ex7Outcome {
         sensor_hz_single_threaded,
@@ -233,16 +236,27 @@ fn reconcile(prediction: &toml::Table, outcome: &Ex7Outcome) -> Vec<String> {
         sensor_hz_own_group,
     } = *outcome;
     let hz = |key: &str, what: &str, measured: f64| match p(key).and_then(super::number) {
-        Some(n) => format!(
-            "You predicted the sensor achieves {n} Hz {what}; it achieved {measured:.1} Hz."
+        Some(n) => super::graded(
+            key,
+            &format!(
+                "You predicted the sensor achieves {n} Hz {what}; it achieved {measured:.1} Hz"
+            ),
+            super::near(n, measured, 0.0),
+            &super::more_than_near(),
         ),
         None => super::unreadable(key),
     };
-    let skipped = match p("skipped_ticks_single_threaded").and_then(super::number) {
-        Some(n) => format!(
-            "You predicted {n} skipped sensor ticks single-threaded; there were {skipped_ticks_single_threaded}."
+    let key = "skipped_ticks_single_threaded";
+    let skipped = match p(key).and_then(super::number) {
+        Some(n) => super::graded(
+            key,
+            &format!(
+                "You predicted {n} skipped sensor ticks single-threaded; there were {skipped_ticks_single_threaded}"
+            ),
+            super::near(n, skipped_ticks_single_threaded as f64, 1.0),
+            &super::more_than_near(),
         ),
-        None => super::unreadable("skipped_ticks_single_threaded"),
+        None => super::unreadable(key),
     };
     let balances = super::predicted_survival(
         prediction,

@@ -5,7 +5,9 @@
 //! does the pole first fall, and does a smoother estimate (more lag, less noise) move that
 //! point? Virtual clock: every run is exact, the noise seeded.
 
-use super::{check, run_virtual, Check, Context, Exercise, ExerciseError, Reconcile, Section};
+use super::{
+    check, run_virtual, Check, Context, Exercise, ExerciseError, Reconcile, Said, Section,
+};
 use crate::graph::GraphSpec;
 use crate::metrics::Metrics;
 use serde::Deserialize;
@@ -172,14 +174,16 @@ pub fn check_ex8(b: &Ex8Bands, runs: &[Ex8Run]) -> Vec<Check> {
     ]
 }
 
-/// The learner's ex8 `prediction` beside the outcome, one sentence per key.
+/// The learner's ex8 `prediction` beside the outcome, one sentence per key. A noise of the
+/// grid: right when it is the one at which a seed first fell. The cut-off: right when it
+/// agrees.
 impl Reconcile for Ex8Outcome {
-    fn reconcile(&self, prediction: &toml::Table) -> Vec<String> {
+    fn reconcile(&self, prediction: &toml::Table) -> Vec<Said> {
         reconcile(prediction, self)
     }
 }
 
-fn reconcile(prediction: &toml::Table, outcome: &Ex8Outcome) -> Vec<String> {
+fn reconcile(prediction: &toml::Table, outcome: &Ex8Outcome) -> Vec<Said> {
     let Ex8Outcome {
         fails_at_noise_rad,
         lower_cutoff_tolerates_more,
@@ -188,24 +192,33 @@ fn reconcile(prediction: &toml::Table, outcome: &Ex8Outcome) -> Vec<String> {
         .map_or("no noise on the grid made it fall".to_string(), |n| {
             format!("it first fell at {n} rad")
         });
-    let first = match prediction.get("fails_at_noise_rad").and_then(super::number) {
-        Some(n) => format!("You predicted the pole first falls at a noise of {n} rad; {measured}."),
-        None => super::unreadable("fails_at_noise_rad"),
-    };
-    let lower = match prediction
-        .get("lower_cutoff_tolerates_more")
-        .and_then(toml::Value::as_bool)
-    {
-        Some(p) => format!(
-            "You predicted the lower cut-off {} more noise; it {}.",
-            if p { "tolerates" } else { "does not tolerate" },
-            if lower_cutoff_tolerates_more {
-                "does"
-            } else {
-                "does not"
-            }
+    let key = "fails_at_noise_rad";
+    let first = match prediction.get(key).and_then(super::number) {
+        Some(n) => super::graded(
+            key,
+            &format!("You predicted the pole first falls at a noise of {n} rad; {measured}"),
+            fails_at_noise_rad.is_some_and(|f| super::same(n, f)),
+            "",
         ),
-        None => super::unreadable("lower_cutoff_tolerates_more"),
+        None => super::unreadable(key),
+    };
+    let key = "lower_cutoff_tolerates_more";
+    let lower = match prediction.get(key).and_then(toml::Value::as_bool) {
+        Some(p) => super::graded(
+            key,
+            &format!(
+                "You predicted the lower cut-off {} more noise; it {}",
+                if p { "tolerates" } else { "does not tolerate" },
+                if lower_cutoff_tolerates_more {
+                    "does"
+                } else {
+                    "does not"
+                }
+            ),
+            p == lower_cutoff_tolerates_more,
+            "",
+        ),
+        None => super::unreadable(key),
     };
     vec![first, lower]
 }

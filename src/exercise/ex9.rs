@@ -6,7 +6,7 @@
 //! Real clock, real processes over Zenoh ([`crate::distributed`]): the checks assert only
 //! what holds on a noisy machine (medians).
 
-use super::{check, Check, Context, Exercise, ExerciseError, Reconcile, Section};
+use super::{check, Check, Context, Exercise, ExerciseError, Reconcile, Said, Section};
 use crate::config::{duration_from_secs, phase_offset_from_ms, ClockKind, RunConfig};
 use crate::distributed::launcher::Program;
 use crate::graph::GraphSpec;
@@ -194,25 +194,32 @@ pub fn check_ex9(b: &Ex9Bands, runs: &[Ex9Run]) -> Vec<Check> {
     ]
 }
 
-/// The learner's ex9 `prediction` beside the outcome, one sentence per key.
+/// The learner's ex9 `prediction` beside the outcome, one sentence per key. The medians: right
+/// within [`super::NEAR`] (the real clock moves the tails, not the medians: bands.toml).
 impl Reconcile for Ex9Outcome {
-    fn reconcile(&self, prediction: &toml::Table) -> Vec<String> {
+    fn reconcile(&self, prediction: &toml::Table) -> Vec<Said> {
         reconcile(prediction, self)
     }
 }
 
-fn reconcile(prediction: &toml::Table, outcome: &Ex9Outcome) -> Vec<String> {
+fn reconcile(prediction: &toml::Table, outcome: &Ex9Outcome) -> Vec<Said> {
     let Ex9Outcome {
         p50_latency_across_ms,
         p50_latency_across_offsets_ms,
     } = *outcome;
-    let say =
-        |key: &str, what: &str, measured: f64| match prediction.get(key).and_then(super::number) {
-            Some(n) => format!(
-            "You predicted a median sense→act latency of {n} ms {what}; it was {measured:.1} ms."
-        ),
+    let say = |key: &str, what: &str, measured: f64| {
+        match prediction.get(key).and_then(super::number) {
+            Some(n) => super::graded(
+                key,
+                &format!(
+                    "You predicted a median sense→act latency of {n} ms {what}; it was {measured:.1} ms"
+                ),
+                super::near(n, measured, 0.0),
+                &super::more_than_near(),
+            ),
             None => super::unreadable(key),
-        };
+        }
+    };
     vec![
         say(
             "p50_latency_across_ms",

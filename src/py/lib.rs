@@ -11,11 +11,13 @@
 //!
 //! Errors become Python exceptions carrying the command line's one line: a missing file
 //! `FileNotFoundError`, one refused for being there `FileExistsError`, a permission
-//! `PermissionError`, anything else the caller gave wrong `ValueError`. Nothing here ends
-//! the process.
+//! `PermissionError`, a run whose trace would not fit in memory `TraceTooLarge` (a
+//! `MemoryError`, raised before the run), anything else the caller gave wrong `ValueError`.
+//! Nothing here ends the process.
 
 use pyo3::exceptions::{
-    PyFileExistsError, PyFileNotFoundError, PyKeyboardInterrupt, PyPermissionError, PyValueError,
+    PyFileExistsError, PyFileNotFoundError, PyKeyboardInterrupt, PyMemoryError, PyPermissionError,
+    PyValueError,
 };
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -28,6 +30,13 @@ pyo3::create_exception!(
     NoPrediction,
     PyValueError,
     "An exercise was asked for before its prediction was written (`ratelab exercise` refuses it)."
+);
+
+pyo3::create_exception!(
+    _native,
+    TraceTooLarge,
+    PyMemoryError,
+    "A run whose trace, returned in memory, would hold more values than ratelab's bound (ratelab::limits::MAX_HELD_TRACE_VALUES): refused before it starts."
 );
 
 /// How often a run waiting in [`run`] looks for Ctrl-C.
@@ -69,6 +78,12 @@ fn to_py(e: &anyhow::Error) -> PyErr {
     for cause in e.chain() {
         if let Some(ratelab::exercise::ExerciseError::NoPrediction { .. }) = cause.downcast_ref() {
             return NoPrediction::new_err(text);
+        }
+        if cause
+            .downcast_ref::<ratelab_lab::api::TraceTooLarge>()
+            .is_some()
+        {
+            return TraceTooLarge::new_err(text);
         }
         let missing = match cause.downcast_ref::<ratelab::graph::spec::SpecError>() {
             Some(spec) => spec.is_missing_file(),
@@ -175,8 +190,10 @@ fn cliff(py: Python<'_>, flags: Vec<String>) -> PyResult<String> {
 
 /// `ratelab exercise WHICH FLAGS…` in this process, with `prediction_json` (a JSON object)
 /// in place of the learner's file's prediction when given. Returns a dict: `checks` (a list
-/// of `(name, passed)`), `reconcile` (sentences), `not_passed` (a count) and `lines` (the
-/// report `ratelab exercise` prints). Ctrl-C stops it.
+/// of `(name, passed)`), `reconcile` (sentences), `predictions` (a list of `(key, sentence,
+/// verdict)`, the verdict `right`, `missed`, `unreadable` or `open`), `checks_failed`,
+/// `predictions_missed` and `not_passed` (counts: missed counts the unreadable too, and
+/// not passed is both) and `lines` (the report `ratelab exercise` prints). Ctrl-C stops it.
 #[pyfunction]
 #[pyo3(signature = (which, flags, prediction_json=None))]
 fn exercise<'py>(
@@ -193,7 +210,16 @@ fn exercise<'py>(
         .map(|c| (c.name.clone(), c.passed))
         .collect();
     out.set_item("checks", checks)?;
-    out.set_item("reconcile", found.report.reconcile)?;
+    let reconcile: Vec<String> = (found.report.reconcile.iter())
+        .map(|s| s.line.clone())
+        .collect();
+    out.set_item("reconcile", reconcile)?;
+    let predictions: Vec<(String, String, &str)> = (found.report.reconcile.iter())
+        .map(|s| (s.key.clone(), s.line.clone(), s.verdict.name()))
+        .collect();
+    out.set_item("predictions", predictions)?;
+    out.set_item("checks_failed", found.report.checks_failed)?;
+    out.set_item("predictions_missed", found.report.predictions_missed)?;
     out.set_item("not_passed", found.report.not_passed)?;
     out.set_item("lines", found.lines)?;
     Ok(out)
@@ -223,7 +249,8 @@ fn exercises() -> Vec<(&'static str, &'static str, &'static str)> {
 /// `estimator_json` (`estimator.json`'s text with an estimator in the graph, else None),
 /// `trace_columns` (the trace as `(name, dtype, bytes)` per column), `summary`
 /// (lines), `failed` (the line of a node that failed, or None), `recording` (its path or
-/// None). Ctrl-C stops the run and raises KeyboardInterrupt.
+/// None). Ctrl-C stops the run and raises KeyboardInterrupt; a trace that would pass
+/// `MAX_HELD_TRACE_VALUES` raises `TraceTooLarge` (a MemoryError) before the run.
 #[pyfunction]
 #[pyo3(signature = (flags, policy=None, nodes=Vec::new()))]
 fn run<'py>(
@@ -244,13 +271,17 @@ fn run<'py>(
     let out = PyDict::new(py);
     out.set_item("metrics_json", files.metrics_json)?;
     out.set_item("estimator_json", files.estimator_json)?;
-    let columns = trace_columns(&files.trace_csv).map_err(|e| to_py(&e))?;
+    // A long run's trace is the largest thing here: its text goes to Python first and the
+    // columns are made from Python's copy, so the text is never held twice beside them.
+    let trace_csv = pyo3::types::PyString::new(py, &files.trace_csv);
+    drop(files.trace_csv);
+    let columns = trace_columns(trace_csv.to_str()?).map_err(|e| to_py(&e))?;
     let columns: Vec<_> = columns
         .into_iter()
         .map(|(n, k, b)| (n, k, pyo3::types::PyBytes::new(py, &b)))
         .collect();
     out.set_item("trace_columns", columns)?;
-    out.set_item("trace_csv", files.trace_csv)?;
+    out.set_item("trace_csv", trace_csv)?;
     out.set_item("log", files.log)?;
     out.set_item("summary", files.summary)?;
     out.set_item("failed", files.failed)?;
@@ -322,5 +353,6 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(install_messages, m)?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add("NoPrediction", m.py().get_type::<NoPrediction>())?;
+    m.add("TraceTooLarge", m.py().get_type::<TraceTooLarge>())?;
     Ok(())
 }

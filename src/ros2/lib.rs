@@ -27,7 +27,9 @@
 //! - [`inspect`] and [`echo`]: `ratelab ros2`, any rmw_zenoh graph read from the other side
 //!   as ros2cli reads it (nodes, topics, QoS, messages as YAML, rates); [`offered`]: a
 //!   graph as ROS 2 sees it when offered (the lab's panel); [`param_cli`]: `ratelab ros2
-//!   param list|get`.
+//!   param list|get`;
+//! - [`yaml_depth`]: how deeply YAML read from outside (a bag's `metadata.yaml`, a
+//!   parameter's value) nests, bounded before a parser sees it.
 //!
 //! The format is rmw_zenoh's `docs/design.md`; its keys, tokens and QoS strings come from
 //! ZettaScale's `hiroz-protocol`, its hashes from `hiroz-schema`, its CDR from `hiroz-cdr`.
@@ -57,6 +59,7 @@ pub mod session;
 pub mod type_description;
 pub mod types;
 pub mod wire;
+pub mod yaml_depth;
 
 pub use bridge::{Bridge, BridgeReport};
 

@@ -21,7 +21,7 @@ use super::rcl_interfaces::{
 };
 use super::wire::{attachment, wall_ns};
 use super::{zerr, Ros2Error};
-use ratelab_core::limits::MAX_ROS_MESSAGE_BYTES;
+use ratelab_core::limits::{self, MAX_SERVICE_REPLY_BYTES};
 use ratelab_core::ros_types::{cdr, from_cdr};
 use std::time::Duration;
 use zenoh::Wait;
@@ -31,7 +31,8 @@ use zenoh::Wait;
 ///
 /// # Errors
 /// [`Ros2Error::Usage`] when no server answered within `timeout` (as ros2cli, which then
-/// says the service is not available) or the answer is too long; [`Ros2Error::Zenoh`]
+/// says the service is not available) or the answer passes [`MAX_SERVICE_REPLY_BYTES`]
+/// (checked before a byte of it is copied or decoded); [`Ros2Error::Zenoh`]
 /// when the get failed.
 pub fn call<T: serde::Serialize>(
     session: &zenoh::Session,
@@ -63,10 +64,15 @@ pub fn call<T: serde::Serialize>(
     while let Ok(reply) = replies.recv() {
         let Ok(sample) = reply.result() else { continue };
         let bytes = sample.payload();
-        if bytes.len() > MAX_ROS_MESSAGE_BYTES {
-            return Err(Ros2Error::Usage(format!(
-                "{node}: an answer of {} bytes (ratelab::limits::MAX_ROS_MESSAGE_BYTES)",
-                bytes.len()
+        if bytes.len() > MAX_SERVICE_REPLY_BYTES {
+            return Err(Ros2Error::Usage(limits::refusal(
+                format_args!(
+                    "{}: its {} answered {} bytes; a reply is read up to {MAX_SERVICE_REPLY_BYTES}",
+                    crate::text::printable(node),
+                    service.suffix,
+                    bytes.len()
+                ),
+                "MAX_SERVICE_REPLY_BYTES",
             )));
         }
         return Ok(bytes.to_bytes().into_owned());
@@ -92,7 +98,7 @@ pub fn list(
     let req = ListParametersRequest::default();
     let service = ParameterService::List.service_type();
     let bytes = call(session, domain, node, service, &req, timeout)?;
-    let r: ListParametersResponse = from_cdr(&bytes, MAX_ROS_MESSAGE_BYTES)
+    let r: ListParametersResponse = from_cdr(&bytes, MAX_SERVICE_REPLY_BYTES)
         .map_err(|e| Ros2Error::Usage(format!("{node}: list_parameters answered {e}")))?;
     let mut names = r.result.names;
     names.sort();
@@ -116,7 +122,7 @@ pub fn get(
     };
     let service = ParameterService::Get.service_type();
     let bytes = call(session, domain, node, service, &req, timeout)?;
-    let r: GetParametersResponse = from_cdr(&bytes, MAX_ROS_MESSAGE_BYTES)
+    let r: GetParametersResponse = from_cdr(&bytes, MAX_SERVICE_REPLY_BYTES)
         .map_err(|e| Ros2Error::Usage(format!("{node}: get_parameters answered {e}")))?;
     Ok(r.values.into_iter().next())
 }
@@ -136,7 +142,8 @@ fn yaml11_bool(s: &str) -> Option<bool> {
 /// BOOL_ARRAY), anything else (text, a map, a mixed list) a STRING of the text as given.
 ///
 /// # Errors
-/// One line for an integer out of `int64`'s range.
+/// One line for an integer out of `int64`'s range, or a value nested deeper than
+/// [`crate::yaml_depth::MAX_YAML_DEPTH`] (refused before YAML's parser reads it).
 pub fn value_from_text(text: &str) -> Result<ParameterValue, String> {
     use serde_yaml::Value as Y;
     let mut v = ParameterValue {
@@ -144,6 +151,7 @@ pub fn value_from_text(text: &str) -> Result<ParameterValue, String> {
         string_value: text.to_string(),
         ..ParameterValue::default()
     };
+    crate::yaml_depth::check(text.as_bytes())?;
     let y: Y = serde_yaml::from_str(text).unwrap_or(Y::Null);
     let float_text = text.contains('.') || text.to_ascii_lowercase().contains("inf");
     match y {
@@ -210,7 +218,7 @@ pub fn set(
     };
     let service = ParameterService::Set.service_type();
     let bytes = call(session, domain, node, service, &req, timeout)?;
-    let r: SetParametersResponse = from_cdr(&bytes, MAX_ROS_MESSAGE_BYTES)
+    let r: SetParametersResponse = from_cdr(&bytes, MAX_SERVICE_REPLY_BYTES)
         .map_err(|e| Ros2Error::Usage(format!("{node}: set_parameters answered {e}")))?;
     let with = |what: &str, reason: &str| {
         if reason.is_empty() {

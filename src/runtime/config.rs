@@ -60,6 +60,16 @@ pub enum ConfigError {
         /// Values given.
         got: usize,
     },
+    /// A real-clock run that would start more threads than
+    /// [`crate::limits::MAX_REAL_CLOCK_THREADS`]: the line names the graph, the threads, the
+    /// bound and the ways to fewer.
+    #[error("graph '{graph}': {line}")]
+    Threads {
+        /// The graph's name.
+        graph: String,
+        /// [`crate::scheduler::check_real_clock_threads`]'s line.
+        line: String,
+    },
     /// A spin margin that is not below every node's period (or above one second).
     #[error("--spin-margin-us must be below every node's period (here {period_us} µs, the fastest) and at most 1000000, got {margin_us}")]
     SpinMargin {
@@ -271,6 +281,9 @@ impl RunConfig {
         if self.graph.topics.iter().any(|t| t.depth == 0) {
             return Err(ConfigError::Depth(0));
         }
+        // What the queues may hold at worst (a graph file's and every override's are
+        // checked as they are made; a graph changed in place by a program, here).
+        self.graph.check_queue_bytes()?;
         if self.duration.0 == 0 {
             return Err(ConfigError::Duration(0.0));
         }
@@ -293,6 +306,17 @@ impl RunConfig {
                     self.graph.node_names().join(", ")
                 )));
             }
+        }
+        // The real clock starts a thread per node on a thread of its own, and each shared
+        // executor's: refused here, before the graph is built, past the bound (a launch's
+        // processes counted together: they share the machine).
+        if self.clock == ClockKind::Real {
+            crate::scheduler::check_real_clock_threads(&self.graph.execution_plan()).map_err(
+                |line| ConfigError::Threads {
+                    graph: self.graph.name.clone(),
+                    line,
+                },
+            )?;
         }
         // The spin margin matters to the real clock only (the virtual one never waits).
         let fastest = self.fastest_period();
@@ -396,5 +420,47 @@ mod tests {
         assert_eq!(duration_from_secs(2.0), Ok(Nanos(2_000_000_000)));
         assert_eq!("virtual".parse::<ClockKind>(), Ok(ClockKind::Virtual));
         assert!("wall".parse::<ClockKind>().is_err());
+    }
+
+    #[test]
+    fn a_real_clock_run_of_more_threads_than_the_bound_is_refused_before_it_is_built() {
+        let nodes = crate::limits::MAX_REAL_CLOCK_THREADS + 1;
+        let graph =
+            GraphSpec::parse(&crate::graph::synthetic::graph_toml(nodes, 1), "big").unwrap();
+        let real = RunConfig {
+            graph,
+            clock: ClockKind::Real,
+            ..RunConfig::default()
+        };
+        let e = real.validate().unwrap_err();
+        assert!(matches!(e, ConfigError::Threads { .. }), "{e:?}");
+        let line = e.to_string();
+        assert_eq!(line.lines().count(), 1, "{line}");
+        assert!(
+            line.starts_with(&format!(
+                "graph 'synthetic-{nodes}': the real clock would start {nodes} threads"
+            )),
+            "{line}"
+        );
+        assert!(line.contains("--executor single_threaded"), "{line}");
+        assert!(
+            line.ends_with("(ratelab::limits::MAX_REAL_CLOCK_THREADS)"),
+            "{line}"
+        );
+        // Under the virtual clock (no threads), or on one shared thread, it runs.
+        let virtual_clock = RunConfig {
+            clock: ClockKind::Virtual,
+            ..real.clone()
+        };
+        assert_eq!(virtual_clock.validate(), Ok(()));
+        let mut shared = real;
+        shared
+            .graph
+            .set_executor(crate::executor::ExecutorOverride::parse("single_threaded").unwrap());
+        assert_eq!(
+            crate::scheduler::plan_threads(&shared.graph.execution_plan()),
+            2
+        );
+        assert_eq!(shared.validate(), Ok(()));
     }
 }

@@ -18,6 +18,9 @@
 use crate::clock::{Clock, MonotonicClock};
 mod handover;
 mod shared;
+mod threads;
+pub use threads::{check_real_clock_threads, plan_threads};
+use threads::{none_started, not_started};
 
 use crate::executor::{
     CallbackSpan, Dispatch, ExecFigures, ExecutionPlan, ExecutorFigures, ExecutorKind,
@@ -970,16 +973,26 @@ fn real_tick(
 /// figures, and its panic's message if it panicked.
 type OwnThreadEnd = (Box<dyn Node>, NodeTiming, NodeExecStats, Option<String>);
 
+/// A node [`spawn_own_thread`] could not start: the node back (when it could be taken
+/// back), and the machine's refusal.
+type NotStarted = (Option<Box<dyn Node>>, std::io::Error);
+
 /// Start node `i` on a thread of its own (a per-node executor): it ticks on its grid from
 /// its phase offset until the run's end or `stop` (a pause holds it; a tick that says stop
-/// records when in `stop_at` and stops the run; a panic stops the run).
+/// records when in `stop_at` and stops the run; a panic stops the run). The thread keeps
+/// Rust's default stack (2 MiB, or `RUST_MIN_STACK`): a Python callback or a brain may
+/// need it.
+///
+/// # Errors
+/// The node back with the machine's refusal, when the thread cannot be started (no more
+/// threads, no memory for its stack).
 fn spawn_own_thread(
     i: usize,
-    mut node: Box<dyn Node>,
+    node: Box<dyn Node>,
     opts: &RealOptions,
     (clock, waiter, duration): (MonotonicClock, DeadlineWaiter, Nanos),
     (stop, stop_at): (&StopFlag, &Arc<AtomicU64>),
-) -> std::thread::JoinHandle<OwnThreadEnd> {
+) -> Result<std::thread::JoinHandle<OwnThreadEnd>, NotStarted> {
     let track = opts.track;
     let stop = stop.clone();
     let stop_at = stop_at.clone();
@@ -988,9 +1001,19 @@ fn spawn_own_thread(
     let on_tick = opts.on_tick.clone();
     let pause = opts.pause.clone();
     let rt_priority = opts.rt_priority;
-    std::thread::Builder::new()
+    // Handed over through a cell, so that a thread that cannot start gives the node back.
+    let cell: Arc<std::sync::Mutex<Option<Box<dyn Node>>>> =
+        Arc::new(std::sync::Mutex::new(Some(node)));
+    let handed = cell.clone();
+    let spawned = std::thread::Builder::new()
         .name(name.clone())
         .spawn(move || {
+            let mut node = handed
+                .lock()
+                .unwrap_or_else(|e| e.into_inner())
+                .take()
+                .expect("a node is handed to its thread once");
+            drop(handed);
             let sched_error = rt_priority
                 .and_then(|p| crate::realtime::set_current_thread_fifo(p).err())
                 .map(|e| e.to_string());
@@ -1059,8 +1082,11 @@ fn spawn_own_thread(
                 ..node_timing(name, ticks, skipped, &lateness, cpu, elapsed)
             };
             (node, timing, exec, result.err().map(|p| panic_message(&*p)))
-        })
-        .expect("spawning a node thread")
+        });
+    spawned.map_err(|e| {
+        let node = cell.lock().unwrap_or_else(|p| p.into_inner()).take();
+        (node, e)
+    })
 }
 
 /// Run `nodes` against a monotonic clock until `duration`, a node's [`Flow::Stop`] (which
@@ -1069,6 +1095,14 @@ fn spawn_own_thread(
 /// nodes share its threads by [`crate::executor`]'s rules. Each tick's lateness (actual −
 /// scheduled) is recorded for jitter statistics. A panicking node stops the graph and is
 /// reported in [`EndReason::NodeFailed`].
+///
+/// Never more than [`crate::limits::MAX_REAL_CLOCK_THREADS`] threads ([`plan_threads`]): a
+/// plan that needs more starts none and ends at once as the failure of the first node past
+/// the bound ([`check_real_clock_threads`]'s line; a run's settings refuse such a graph
+/// before it is built, `ratelab::config::RunConfig::validate`). A thread the machine will
+/// not start (no more threads, no memory for its stack) stops the threads started, which
+/// are joined, and ends the run as that node's failure: every node that did not run comes
+/// back untouched.
 pub fn run_real(
     nodes: Vec<Box<dyn Node>>,
     duration: Nanos,
@@ -1088,20 +1122,51 @@ pub fn run_real(
     let own_thread: Vec<bool> = (0..nodes.len())
         .map(|i| plan.executors[plan.node_executor[i]].kind == ExecutorKind::PerNode)
         .collect();
+    // More threads than the bound (a graph the run's settings did not check for the real
+    // clock: the lab's switch of clocks): none starts, every node back.
+    if let Err(line) = check_real_clock_threads(&plan) {
+        return none_started(nodes, &names, &own_thread, line, clock.now().min(duration));
+    }
+    let mut slots: Vec<Option<shared::Finished>> = (0..names.len()).map(|_| None).collect();
+    // A node that did not run comes back as it was, with no ticks.
+    let unrun = |i: usize, node: Box<dyn Node>| -> shared::Finished {
+        let timing = NodeTiming {
+            node: names[i].clone(),
+            ..NodeTiming::default()
+        };
+        (node, timing, NodeExecStats::default())
+    };
     let mut shared_nodes: Vec<Option<Box<dyn Node>>> = Vec::new();
     let mut handles = Vec::new();
+    // The first node whose thread the machine would not start, and why: the run stops
+    // there (the threads started are stopped and joined), and ends as that node's failure.
+    let mut refused: Option<(usize, String)> = None;
     for (i, node) in nodes.into_iter().enumerate() {
+        if refused.is_some() {
+            slots[i] = Some(unrun(i, node));
+            shared_nodes.push(None);
+            continue;
+        }
         if !own_thread[i] {
             shared_nodes.push(Some(node));
             continue;
         }
         shared_nodes.push(None);
-        let handle = spawn_own_thread(i, node, opts, (clock, waiter, duration), (stop, &stop_at));
-        handles.push((i, handle));
+        match spawn_own_thread(i, node, opts, (clock, waiter, duration), (stop, &stop_at)) {
+            Ok(handle) => handles.push((i, handle)),
+            Err((node, e)) => {
+                stop.stop();
+                if let Some(node) = node {
+                    slots[i] = Some(unrun(i, node));
+                }
+                refused = Some((i, not_started("its thread", &e)));
+            }
+        }
     }
-    // Only when an executor shares threads (its bookkeeping holds a histogram per node).
-    let shared = own_thread.contains(&false).then(|| {
-        shared::SharedExecutors::start(
+    // Only when an executor shares threads (its bookkeeping holds a histogram per node),
+    // and every node's own thread started.
+    let shared = if refused.is_none() && own_thread.contains(&false) {
+        Some(shared::SharedExecutors::start(
             shared_nodes,
             &plan,
             shared::Context {
@@ -1111,10 +1176,19 @@ pub fn run_real(
                 stop_at: stop_at.clone(),
                 opts: opts.clone(),
             },
-        )
+        ))
+    } else {
+        for (i, node) in shared_nodes.into_iter().enumerate() {
+            if let Some(node) = node {
+                slots[i] = Some(unrun(i, node));
+            }
+        }
+        None
+    };
+    let mut failed = refused.map(|(i, message)| EndReason::NodeFailed {
+        node: names[i].clone(),
+        message,
     });
-    let mut slots: Vec<Option<shared::Finished>> = (0..names.len()).map(|_| None).collect();
-    let mut failed = None;
     for (i, h) in handles {
         match h.join() {
             Ok((node, t, exec, panic)) => {
@@ -1145,6 +1219,30 @@ pub fn run_real(
             }
         }
     }
+    let (nodes, timing, stats) = gather(slots, &names);
+    let end = real_end(
+        failed,
+        stop_at.load(Ordering::SeqCst),
+        stop,
+        clock.now().min(duration),
+        duration,
+    );
+    let span = end.at.saturating_sub(opts.from);
+    let exec = (track && stats.len() == names.len()).then(|| figures(&plan, &stats, span));
+    RealRun {
+        end,
+        timing,
+        nodes,
+        exec,
+    }
+}
+
+/// Every node's slot after a real-clock run, in the graph's order: the nodes that came
+/// back, every node's timing and the figures of those that came back.
+fn gather(
+    slots: Vec<Option<shared::Finished>>,
+    names: &[String],
+) -> (Vec<Box<dyn Node>>, Vec<NodeTiming>, Vec<NodeExecStats>) {
     let mut nodes = Vec::new();
     let mut timing = Vec::new();
     let mut stats = Vec::new();
@@ -1163,12 +1261,20 @@ pub fn run_real(
             }),
         }
     }
-    let stopped_at = stop_at.load(Ordering::SeqCst);
-    let end = if let Some(reason) = failed {
-        RunEnd {
-            at: clock.now().min(duration),
-            reason,
-        }
+    (nodes, timing, stats)
+}
+
+/// How a real-clock run ended: a node's failure first, then a node's stop at `stopped_at`
+/// (`u64::MAX`: none), then `stop` (an interruption) at `now`, else its `duration`.
+fn real_end(
+    failed: Option<EndReason>,
+    stopped_at: u64,
+    stop: &StopFlag,
+    now: Nanos,
+    duration: Nanos,
+) -> RunEnd {
+    if let Some(reason) = failed {
+        RunEnd { at: now, reason }
     } else if stopped_at != u64::MAX {
         RunEnd {
             at: Nanos(stopped_at),
@@ -1176,7 +1282,7 @@ pub fn run_real(
         }
     } else if stop.is_stopped() {
         RunEnd {
-            at: clock.now().min(duration),
+            at: now,
             reason: EndReason::Interrupted,
         }
     } else {
@@ -1184,20 +1290,13 @@ pub fn run_real(
             at: duration,
             reason: EndReason::Duration,
         }
-    };
-    let span = end.at.saturating_sub(opts.from);
-    let exec = (track && stats.len() == names.len()).then(|| figures(&plan, &stats, span));
-    RealRun {
-        end,
-        timing,
-        nodes,
-        exec,
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::limits::MAX_REAL_CLOCK_THREADS;
     use crate::rate::Rate;
     use std::sync::Mutex;
 
@@ -1607,5 +1706,89 @@ mod tests {
         );
         let named: Vec<&str> = run.timing.iter().map(|t| t.node.as_str()).collect();
         assert_eq!(named, ["boom", "actuator", "sensor", "policy"]);
+    }
+
+    /// A node that never ticks (a real-clock run that starts no thread never calls it).
+    struct Idle(String, Rate);
+    impl Node for Idle {
+        fn name(&self) -> &str {
+            &self.0
+        }
+        fn priority(&self) -> u32 {
+            0
+        }
+        fn rate(&self) -> &Rate {
+            &self.1
+        }
+        fn tick(&mut self, _: Nanos) -> Flow {
+            Flow::Continue
+        }
+    }
+
+    #[test]
+    fn the_threads_a_plan_starts_are_counted_before_any_starts() {
+        let names: Vec<String> = (0..10).map(|i| format!("n{i}")).collect();
+        let names: Vec<&str> = names.iter().map(String::as_str).collect();
+        assert_eq!(plan_threads(&ExecutionPlan::per_node(&names)), 10);
+        let single = ExecutionPlan::one_executor(&names, ExecutorKind::SingleThreaded, 1);
+        assert_eq!(plan_threads(&single), 1);
+        let pool = ExecutionPlan::one_executor(&names, ExecutorKind::MultiThreaded, 4);
+        assert_eq!(plan_threads(&pool), 4);
+        assert_eq!(check_real_clock_threads(&pool), Ok(()));
+        // One past the bound, one thread per node: refused in one line naming it.
+        let many: Vec<String> = (0..=MAX_REAL_CLOCK_THREADS)
+            .map(|i| format!("n{i}"))
+            .collect();
+        let many: Vec<&str> = many.iter().map(String::as_str).collect();
+        let line = check_real_clock_threads(&ExecutionPlan::per_node(&many)).unwrap_err();
+        assert_eq!(line.lines().count(), 1);
+        assert!(
+            line.starts_with("the real clock would start 1025 threads (one per node on a thread of its own, and each shared executor's), at most 1024: run it under the virtual clock (--clock virtual), or share threads among its nodes (--executor single_threaded"),
+            "{line}"
+        );
+        assert!(
+            line.ends_with("(ratelab::limits::MAX_REAL_CLOCK_THREADS)"),
+            "{line}"
+        );
+        // The same nodes on one shared thread are well within it.
+        let shared = ExecutionPlan::one_executor(&many, ExecutorKind::SingleThreaded, 1);
+        assert_eq!(check_real_clock_threads(&shared), Ok(()));
+    }
+
+    #[test]
+    fn a_real_clock_run_past_the_thread_bound_starts_none_and_gives_every_node_back() {
+        let nodes: Vec<Box<dyn Node>> = (0..=MAX_REAL_CLOCK_THREADS)
+            .map(|i| Box::new(Idle(format!("n{i}"), Rate::new(10.0).unwrap())) as Box<dyn Node>)
+            .collect();
+        let stop = StopFlag::new();
+        let run = run_real(nodes, Nanos::SECOND, &stop, &RealOptions::default());
+        match &run.end.reason {
+            EndReason::NodeFailed { node, message } => {
+                assert_eq!(node, &format!("n{MAX_REAL_CLOCK_THREADS}"));
+                assert!(message.contains("MAX_REAL_CLOCK_THREADS"), "{message}");
+            }
+            other => panic!("ended as {other:?}"),
+        }
+        assert!(run.end.at < Nanos::SECOND, "{:?}", run.end);
+        assert_eq!(run.nodes.len(), MAX_REAL_CLOCK_THREADS + 1);
+        assert_eq!(run.timing.len(), MAX_REAL_CLOCK_THREADS + 1);
+        assert!(run.timing.iter().all(|t| t.ticks == 0));
+        assert!(!stop.is_stopped(), "nothing started, nothing to stop");
+    }
+
+    #[test]
+    fn a_thread_the_machine_refuses_reads_as_one_line() {
+        let e = std::io::Error::from_raw_os_error(libc::EAGAIN);
+        let line = not_started("its thread", &e);
+        assert_eq!(line.lines().count(), 1);
+        assert!(
+            line.starts_with("its thread could not be started ("),
+            "{line}"
+        );
+        assert!(line.contains("--clock virtual"), "{line}");
+        assert!(
+            line.ends_with("ratelab::limits::MAX_REAL_CLOCK_THREADS)"),
+            "{line}"
+        );
     }
 }

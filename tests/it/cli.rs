@@ -211,9 +211,11 @@ fn exercise_refuses_without_a_prediction_then_runs_with_one() {
     );
     assert!(out.contains("Reconcile:"), "{out}");
     assert!(
-        out.contains("You predicted 0 /obs drops with the deep queue; there were 0.")
-            && out.contains("You predicted the pole falls even with the deep queue; it fell."),
-        "the prediction is compared with the outcome in words:\n{out}"
+        out.contains("You predicted 0 /obs drops with the deep queue; there were 0: right.")
+            && out
+                .contains("You predicted the pole falls even with the deep queue; it fell: right.")
+            && out.contains("Your prediction: 2 of 2 right."),
+        "the prediction is compared with the outcome in words, and graded:\n{out}"
     );
 }
 
@@ -391,9 +393,16 @@ fn exercise_ex7_runs_its_three_executors_and_reconciles() {
         .replace("# sensor_hz_own_group =\n", "sensor_hz_own_group = 50\n")
         .replace("why = \"\"", "why = \"one thread, one callback at a time\"");
     std::fs::write(&file, text).unwrap();
+    // Every check passes; four of the five predictions miss, so the exercise is not passed.
     let o = ratelab(&["exercise", "ex7", "--dir", d]);
     let out = String::from_utf8_lossy(&o.stdout);
-    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains("4 predictions missed or could not be read (see above)")
+            && !stderr(&o).contains("check"),
+        "{}",
+        stderr(&o)
+    );
     for row in [
         "single_threaded       |    0 |      33.3 |     166 |",
         "2 threads, one group  |    2 |      33.3 |     166 |",
@@ -403,8 +412,9 @@ fn exercise_ex7_runs_its_three_executors_and_reconciles() {
     }
     assert!(out.contains("[ok]") && !out.contains("[!!]"), "{out}");
     assert!(
-        out.contains("You predicted the sensor achieves 50 Hz on two threads, in the policy's group; it achieved 33.3 Hz.")
-            && out.contains("You predicted the pole falls single-threaded; it stayed up on every seed."),
+        out.contains("You predicted the sensor achieves 50 Hz on two threads, in the policy's group; it achieved 33.3 Hz: more than 20% off.")
+            && out.contains("You predicted the pole falls single-threaded; it stayed up on every seed.")
+            && out.contains("You predicted the sensor achieves 50 Hz on two threads, in a group of its own; it achieved 50.0 Hz: right."),
         "{out}"
     );
     assert!(
@@ -437,14 +447,17 @@ fn exercise_ex5_runs_on_the_graph_its_bands_name_and_reconciles() {
         .replace("# reliable_latency_ms =\n", "reliable_latency_ms = 20\n")
         .replace("why = \"\"", "why = \"a lost command is an old command\"");
     std::fs::write(&file, text).unwrap();
+    // Every check passes; the predictions that miss leave the exercise not passed.
     let o = ratelab(&["exercise", "ex5", "--dir", d]);
     let out = String::from_utf8_lossy(&o.stdout);
-    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
     assert!(out.contains("80%, deadline 30 ms + zero |"), "{out}");
     assert!(out.contains("[ok]") && !out.contains("[!!]"), "{out}");
     assert!(
         out.contains("You predicted the pole falls at 20% loss, best effort; it stayed up on every seed.")
-            && out.contains("You predicted these keep the pole up at 80% loss: hold, reliable; what did: zero, reliable."),
+            && out.contains("You predicted these keep the pole up at 80% loss: hold, reliable; what did: zero, reliable.")
+            && out.contains("You predicted the pole falls at 80% loss, best effort; it fell: right.")
+            && out.contains("; missed: survives_low_loss, keeps_it_up"),
         "{out}"
     );
     assert!(out.contains("Reconcile:"), "{out}");
@@ -503,7 +516,7 @@ fn exercise_ex6_runs_the_learners_node_and_says_whether_it_limits() {
     let out = String::from_utf8_lossy(&o.stdout);
     assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
     assert!(
-        stderr(&o).contains("did not pass (marked above): the exercise is not passed"),
+        stderr(&o).contains("1 check failed (see above): the exercise is not passed"),
         "{}",
         stderr(&o)
     );
@@ -527,13 +540,26 @@ fn exercise_ex6_runs_the_learners_node_and_says_whether_it_limits() {
         "Force(newtons=msg.newtons)",
         "Force(newtons=min(max(msg.newtons, -self.max_force_n), self.max_force_n))",
     );
+    // Every check passes now, but the prediction (2 N) missed: exit 1, and it says so.
     std::fs::write(&script, written).unwrap();
     let o = ratelab(&["exercise", "ex6", "--dir", d]);
     let out = String::from_utf8_lossy(&o.stdout);
-    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains(
+            "1 prediction missed or could not be read (see above): the exercise is not passed"
+        ),
+        "{}",
+        stderr(&o)
+    );
     assert!(out.contains("[ok]") && !out.contains("[!!]"), "{out}");
     assert!(
-        out.contains("You predicted the smallest clamp that keeps the pole up is 2 N; with your node it was 0.75 N."),
+        out.contains("You predicted the smallest clamp that keeps the pole up is 2 N; with your node it was 0.75 N.")
+            && out.contains("Your prediction: 0 of 1 right; missed: smallest_clamp_n."),
+        "{out}"
+    );
+    assert!(
+        out.contains("Your node limits as the built-in safety node does"),
         "{out}"
     );
     // A script that does not load: one line naming FILE:LINE, exit 2.
@@ -563,14 +589,19 @@ fn exercise_ex4_shows_the_stale_queue_and_reconciles() {
         .replace("# lifespan_balances =\n", "lifespan_balances = true\n")
         .replace("why = \"\"", "why = \"nothing is dropped\"");
     std::fs::write(&file, text).unwrap();
+    // Every check passes; the fifo predictions miss, so the exercise is not passed.
     let o = ratelab(&["exercise", "ex4", "--dir", dir.to_str().unwrap()]);
     let out = String::from_utf8_lossy(&o.stdout);
-    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
     assert!(out.contains("fifo, lifespan 20 ms"), "{out}");
     assert!(out.contains("[ok]") && !out.contains("[!!]"), "{out}");
     assert!(
         out.contains("You predicted the pole stays up with fifo; it fell.")
-            && out.contains("You predicted 100 ms of sense->act latency at the FIFO fall; it was "),
+            && out.contains("You predicted 100 ms of sense->act latency at the FIFO fall; it was ")
+            && out.contains("over the seeds: more than 20% off.")
+            && out.contains(
+                "Your prediction: 2 of 4 right; missed: fifo_balances, fifo_latency_at_fall_ms."
+            ),
         "{out}"
     );
 }
@@ -778,9 +809,15 @@ fn an_exercise_whose_prediction_cannot_be_read_exits_1() {
     );
     assert!(!out.contains("[!!]"), "the checks pass: {out}");
     assert!(
-        stderr(&o).starts_with("error: 1 check(s) or prediction(s) did not pass"),
+        stderr(&o).starts_with(
+            "error: 1 prediction missed or could not be read (see above): the exercise is not passed"
+        ),
         "{}",
         stderr(&o)
+    );
+    assert!(
+        out.contains("Your prediction: 1 of 2 right; not read: deep_queue_obs_drops."),
+        "{out}"
     );
 }
 

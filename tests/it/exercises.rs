@@ -13,7 +13,7 @@ use ratelab::exercise::{check_ex8, first_fall_rad, measure_ex8, outcome_ex8, Ex8
 use ratelab::exercise::{check_ex9, measure_ex9, outcome_ex9, Ex9Case};
 use ratelab::exercise::{Ex1Bands, Ex2Bands, Ex3Bands, Ex4Bands, Ex5Bands, Ex6Bands};
 use ratelab::exercise::{Ex4Outcome, Ex5Outcome, Ex6Outcome, Ex7Outcome, Ex8Outcome};
-use ratelab::exercise::{Ex7Bands, Ex8Bands, Ex9Bands};
+use ratelab::exercise::{Ex7Bands, Ex8Bands, Ex9Bands, Verdict};
 use ratelab::graph::GraphSpec;
 use std::path::PathBuf;
 
@@ -253,9 +253,25 @@ fn ex7_measurement_slow_callback() {
     let f = ExerciseFile::load(&file).unwrap();
     let lines = f.reconcile(&outcome_ex7(&b.ex7, &runs));
     assert_eq!(lines.len(), 5, "{lines:?}");
-    assert!(lines.iter().all(|l| !l.contains("missing")), "{lines:?}");
-    assert!(lines[0].contains("33.3 Hz"), "{lines:?}");
-    assert!(lines[4].contains("50.0 Hz"), "{lines:?}");
+    assert!(
+        lines.iter().all(|l| !l.line.contains("missing")),
+        "{lines:?}"
+    );
+    assert!(lines[0].line.contains("33.3 Hz"), "{lines:?}");
+    assert!(lines[4].line.contains("50.0 Hz: right."), "{lines:?}");
+    let missed: Vec<&str> = (lines.iter())
+        .filter(|l| l.verdict == Verdict::Missed)
+        .map(|l| l.key.as_str())
+        .collect();
+    assert_eq!(
+        missed,
+        [
+            "sensor_hz_single_threaded",
+            "skipped_ticks_single_threaded",
+            "balances_single_threaded",
+            "sensor_hz_shared_group"
+        ]
+    );
 }
 
 #[test]
@@ -314,8 +330,15 @@ fn ex8_measurement_noisy_sensor() {
     let f = ExerciseFile::load(&file).unwrap();
     let lines = f.reconcile(&outcome_ex8(&b.ex8, &runs));
     assert_eq!(lines.len(), 2, "{lines:?}");
-    assert!(lines[0].contains("first fell at 0.014 rad"), "{lines:?}");
-    assert!(lines[1].contains("it does."), "{lines:?}");
+    assert!(
+        lines[0].line.contains("first fell at 0.014 rad"),
+        "{lines:?}"
+    );
+    assert!(lines[1].line.contains("it does."), "{lines:?}");
+    assert!(
+        lines.iter().all(|l| l.verdict == Verdict::Missed),
+        "{lines:?}"
+    );
 }
 
 /// ex9 starts real processes on the real clock: alone on the machine, its checks on medians.
@@ -364,22 +387,26 @@ fn ex9_measurement_crossing() {
     let f = ExerciseFile::load(&file).unwrap();
     let lines = f.reconcile(&outcome_ex9(&runs));
     assert_eq!(lines.len(), 2, "{lines:?}");
-    // Each line says the measured median, whatever side of a round number it fell on.
+    // Each line says the measured median, whatever side of a round number it fell on, then
+    // its grade.
     let said = |line: &str, predicted: &str| -> f64 {
         line.split(&format!("{predicted}; it was "))
             .nth(1)
-            .and_then(|rest| rest.strip_suffix(" ms."))
+            .and_then(|rest| rest.split(" ms").next())
             .and_then(|n| n.parse().ok())
             .unwrap_or_else(|| panic!("{lines:?}"))
     };
-    let across = said(&lines[0], "20 ms across processes");
+    let across = said(&lines[0].line, "20 ms across processes");
     let [lo, hi] = b.ex9.across_p50_ms;
     assert!((lo..=hi).contains(&across), "{across} outside {lo}..={hi}");
-    let offsets = said(&lines[1], "10 ms across processes with the offsets");
+    // 20 ms is half the measured median: a miss.
+    assert_eq!(lines[0].verdict, Verdict::Missed, "{lines:?}");
+    let offsets = said(&lines[1].line, "10 ms across processes with the offsets");
     assert!(
         (offsets - 10.0).abs() <= b.ex9.offsets_p50_tolerance_ms,
         "{offsets} is not 10 ms"
     );
+    assert_eq!(lines[1].verdict, Verdict::Right, "{lines:?}");
 }
 
 fn prediction_recorded(ex: &str, file: &str) {
@@ -589,7 +616,9 @@ fn ex12_measurement_restart() {
     let lines = o.reconcile(&predicted);
     assert_eq!(lines.len(), 2, "{lines:?}");
     assert!(
-        lines[0].contains(&format!("; {} were.", o.readings_lost)),
+        lines[0]
+            .line
+            .contains(&format!("; {} were", o.readings_lost)),
         "{lines:?}"
     );
 }
@@ -647,13 +676,129 @@ fn ex14_measurement_incompatible_qos() {
     let lines = o.reconcile(&prediction);
     assert_eq!(lines.len(), 6, "{lines:?}");
     assert_eq!(
-        lines[0],
+        lines[0].line,
         "You predicted reliable_from_best_effort delivers; it does not (incompatible QoS: requested RELIABLE, offered BEST_EFFORT)."
     );
-    assert!(lines[2].contains("delivers nothing; it does not (incompatible QoS: requested deadline 20 ms, offered deadline 40 ms)"), "{lines:?}");
+    assert!(lines[2].line.contains("delivers nothing; it does not (incompatible QoS: requested deadline 20 ms, offered deadline 40 ms)"), "{lines:?}");
     assert!(
-        lines[5].ends_with("under transient_local; it got 5."),
+        lines[5].line.ends_with("under transient_local; it got 5."),
         "{lines:?}"
+    );
+    let verdicts: Vec<Verdict> = lines.iter().map(|l| l.verdict).collect();
+    use ratelab::exercise::Verdict::{Missed, Right};
+    assert_eq!(verdicts, [Missed, Right, Right, Right, Right, Missed]);
+}
+
+/// A folder holding the bands and exercise `file`, its `[prediction]` replaced by
+/// `prediction` (TOML lines) and a `why`: what `ratelab exercise --dir` reads.
+fn predicted(file: &str, prediction: &str) -> tempfile::TempDir {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::copy(path("bands.toml"), dir.path().join("bands.toml")).unwrap();
+    let text = std::fs::read_to_string(path(file)).unwrap();
+    let head = &text[..text.find("\n[prediction]\n").expect("a [prediction] table") + 1];
+    std::fs::write(
+        dir.path().join(file),
+        format!("{head}[prediction]\n{prediction}\nwhy = \"a guess\"\n"),
+    )
+    .unwrap();
+    dir
+}
+
+/// `ratelab exercise WHICH --dir DIR`: (exit code, stdout, stderr).
+fn exercise(which: &str, dir: &tempfile::TempDir) -> (i32, String, String) {
+    crate::ratelab_in_repo(&["exercise", which, "--dir", dir.path().to_str().unwrap()])
+}
+
+/// ex1 grades as it says: the rate the bands say the pole falls at is right (exit 0), another
+/// misses (exit 1, every check still `[ok]`), the prediction beside the outcome in both.
+#[test]
+fn ex1_exits_0_on_a_right_prediction_and_1_on_a_missed_one() {
+    let _machine = crate::machine::shared();
+    let b = bands();
+    let (code, out, err) = exercise(
+        "ex1",
+        &predicted(
+            "ex1_rate_cliff.toml",
+            &format!("fails_at_hz = {}", b.ex1.falls_at_hz),
+        ),
+    );
+    assert_eq!(code, 0, "{out}{err}");
+    let right = format!(
+        "You predicted the pole first fails at {hz} Hz; it first fell at {hz} Hz: right.",
+        hz = b.ex1.falls_at_hz
+    );
+    assert!(out.contains(&right), "{out}");
+    assert!(out.contains("Your prediction: 1 of 1 right."), "{out}");
+    let (code, out, err) = exercise("ex1", &predicted("ex1_rate_cliff.toml", "fails_at_hz = 50"));
+    assert_eq!(code, 1, "{out}{err}");
+    assert!(
+        out.contains("fails_at_hz = 50"),
+        "the prediction first:\n{out}"
+    );
+    let missed = format!(
+        "You predicted the pole first fails at 50 Hz; it first fell at {} Hz.",
+        b.ex1.falls_at_hz
+    );
+    assert!(out.contains(&missed), "{out}");
+    assert!(
+        out.contains("Your prediction: 0 of 1 right; missed: fails_at_hz."),
+        "{out}"
+    );
+    assert!(out.contains("[ok]") && !out.contains("[!!]"), "{out}");
+    assert!(
+        err.contains(
+            "error: 1 prediction missed or could not be read (see above): the exercise is not passed"
+        ),
+        "{err}"
+    );
+}
+
+/// ex13 grades as it says, and prints the node list as `ros2 node list` does: sorted, one a
+/// line. The names predicted in another order, some without the root namespace's `/`, are
+/// right (exit 0); a node left out and another /clock rate miss (exit 1).
+#[test]
+fn ex13_exits_0_on_a_right_prediction_and_1_on_a_missed_one() {
+    // It offers the graph to ROS 2 (a router, Zenoh sessions): never beside a timed test.
+    let _machine = crate::machine::shared();
+    let types = "obs_type = \"sensor_msgs/msg/JointState\"\naction_type = \"std_msgs/msg/Float64\"";
+    let (code, out, err) = exercise(
+        "ex13",
+        &predicted(
+            "ex13_what_ros2_sees.toml",
+            &format!(
+                "nodes = [\"ratelab\", \"/sensor\", \"actuator\", \"/policy\"]\n{types}\nclock_hz = 80"
+            ),
+        ),
+    );
+    assert_eq!(code, 0, "{out}{err}");
+    assert!(
+        out.contains("  ros2 node list\n    /actuator\n    /policy\n    /ratelab\n    /sensor\n"),
+        "{out}"
+    );
+    assert!(
+        out.contains("You predicted the node list /actuator /policy /ratelab /sensor; ros2 node list prints /actuator /policy /ratelab /sensor: right."),
+        "{out}"
+    );
+    assert!(out.contains("Your prediction: 4 of 4 right."), "{out}");
+    let (code, out, err) = exercise(
+        "ex13",
+        &predicted(
+            "ex13_what_ros2_sees.toml",
+            &format!("nodes = [\"/sensor\", \"/policy\", \"/actuator\"]\n{types}\nclock_hz = 90"),
+        ),
+    );
+    assert_eq!(code, 1, "{out}{err}");
+    for said in [
+        "You predicted the node list /actuator /policy /sensor; ros2 node list prints /actuator /policy /ratelab /sensor (ROS 2 sees",
+        "You predicted 90 /clock messages a second; there were 80.0: off by more than 0.5.",
+        "Your prediction: 2 of 4 right; missed: nodes, clock_hz.",
+    ] {
+        assert!(out.contains(said), "{said}:\n{out}");
+    }
+    assert!(out.contains("[ok]") && !out.contains("[!!]"), "{out}");
+    assert!(
+        err.contains("2 predictions missed or could not be read (see above)"),
+        "{err}"
     );
 }
 

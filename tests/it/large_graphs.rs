@@ -334,6 +334,56 @@ fn a_day_of_virtual_run_time_takes_no_more_memory_than_ten_minutes() {
     );
 }
 
+/// A long run's trace goes to trace.csv as the run goes, never into memory (issue 75: a
+/// day-long run with `--out` aborted at 4.3 GB, its step records kept for the file, 1 064
+/// bytes each, 50 a second of run time). With `--out`, two hours of run time (360 001
+/// steps: 365 MiB of records before) peak within 1.5× of a minute's, and under 128 MiB;
+/// the files are whole, and no temporary file is left.
+#[test]
+fn a_long_run_with_out_writes_its_trace_as_it_goes_in_flat_memory() {
+    let _m = crate::machine::shared();
+    let dir = tempfile::tempdir().unwrap();
+    let run = |secs: &str| {
+        let out = dir.path().join(format!("out-{secs}"));
+        let args = [
+            "run",
+            "--clock",
+            "virtual",
+            "--duration",
+            secs,
+            "--out",
+            out.to_str().unwrap(),
+        ];
+        let o = crate::hostile::run_child(&args, dir.path(), Duration::from_secs(600), |_| {});
+        assert_eq!(o.code, Some(0), "a {secs} s run: {o:?}");
+        (o.peak_mib, out)
+    };
+    let (minute, _) = run("60");
+    let (hours, out) = run("7200");
+    assert!(
+        hours * 2.0 <= minute * 3.0 && hours < 128.0,
+        "two hours' run with --out peaked at {hours} MiB, a minute's at {minute} MiB"
+    );
+    let m: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("metrics.json")).unwrap()).unwrap();
+    assert_eq!(
+        m["steps"].as_u64(),
+        Some(360_001),
+        "the pole is up the whole run"
+    );
+    let trace = std::fs::read_to_string(out.join("trace.csv")).unwrap();
+    assert!(trace.ends_with('\n'));
+    assert_eq!(trace.lines().count(), 1 + 360_001);
+    let last = trace.lines().last().unwrap();
+    assert!(last.starts_with("360001,7200000000000,"), "{last}");
+    let mut names: Vec<String> = std::fs::read_dir(&out)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    names.sort();
+    assert_eq!(names, ["log.txt", "metrics.json", "trace.csv"]);
+}
+
 /// A 1 MiB camera frame crosses processes whole (issue 51 item 2): the camera's graph at
 /// 1024×1024 px, launched with the camera in `robot` and the image estimator in a process
 /// of its own, writes byte for byte the metrics of the run in one process; every

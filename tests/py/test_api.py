@@ -157,6 +157,22 @@ def test_bad_input_is_an_exception_with_the_one_line():
         ratelab.run(policy="no-such-checkpoint.pt")
 
 
+def test_a_trace_too_large_to_hold_is_refused_before_the_run():
+    # Ten years of run time: its trace would be 15.8 G steps; run, it would never end.
+    started = time.monotonic()
+    with pytest.raises(ratelab.TraceTooLarge) as e:
+        ratelab.run(duration_s=315360000.0)
+    assert time.monotonic() - started < 10.0
+    assert isinstance(e.value, MemoryError) and isinstance(e.value, ratelab.Error)
+    line = str(e.value)
+    assert "\n" not in line and "MAX_HELD_TRACE_VALUES" in line, line
+    assert "trace_every=2820" in line, line
+    # Thinned as asked: steps 1, 11, ..., 101; the metrics count every step.
+    run = ratelab.run(duration_s=2.0, trace_every=10)
+    assert [int(s) for s in run.trace["step"]] == list(range(1, 102, 10))
+    assert run.metrics["steps"] == 101
+
+
 def test_an_output_is_not_replaced_without_force(tmp_path):
     ratelab.run(duration_s=0.5, out=tmp_path)
     with pytest.raises(FileExistsError) as e:
@@ -297,10 +313,19 @@ def test_an_exercise_returns_its_checks(tmp_path):
     assert found.passed and found.not_passed == 0
     assert found.checks and all(c.passed for c in found.checks)
     assert any("5 Hz" in line for line in found.reconcile), found.reconcile
+    assert [(p.key, p.verdict) for p in found.predictions] == [("fails_at_hz", "right")]
+    assert found.predictions[0].said.endswith(": right.") and not found.missed
     assert any(line.startswith("== ex1") for line in found.report)
+    # A prediction that misses is not passed (the command exits 1), checks all held.
+    wrong = ratelab.exercise("ex1", {"fails_at_hz": 50, "why": "a guess"}, dir=folder)
+    assert not wrong.passed and wrong.not_passed == 1 and not wrong.failed_checks
+    assert [(p.key, p.verdict) for p in wrong.missed] == [("fails_at_hz", "missed")]
+    said = "You predicted the pole first fails at 50 Hz; it first fell at 5 Hz."
+    assert wrong.reconcile == [said] and wrong.missed[0].said == said
     # A prediction of the wrong type is not passed; none at all is refused.
     bad = ratelab.exercise("ex1", {"fails_at_hz": "five", "why": "?"}, dir=folder)
     assert not bad.passed and bad.not_passed >= 1
+    assert [p.verdict for p in bad.missed] == ["unreadable"]
     with pytest.raises(ratelab.NoPrediction) as e:
         ratelab.exercise("ex1", dir=folder)
     assert "ex1_rate_cliff.toml" in str(e.value)
@@ -319,6 +344,12 @@ def test_the_exercises_run_as_pytest_tests_on_the_learner_s_predictions(tmp_path
     unreadable = pytest_on(exercises_copy(tmp_path / "b", ex1='fails_at_hz = "five"'))
     assert unreadable.returncode == 1, unreadable.stdout
     assert "test_exercise[ex1]" in unreadable.stdout
+    # A prediction that missed fails its test, the prediction beside the outcome.
+    missed = pytest_on(exercises_copy(tmp_path / "c", ex1="fails_at_hz = 50"))
+    assert missed.returncode == 1, missed.stdout
+    assert "test_exercise[ex1]" in missed.stdout
+    assert ("fails_at_hz (missed): You predicted the pole first fails at 50 Hz; it first fell "
+            "at 5 Hz.") in missed.stdout, missed.stdout
 
 
 def test_a_node_class_given_here_runs_as_the_same_class_from_its_file():

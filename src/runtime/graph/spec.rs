@@ -56,6 +56,11 @@
 //!   every end;
 //! - rates in (0, 10 000] Hz; the actuator at the plant's 50 Hz (each tick steps 20 ms of
 //!   physics); depths ≥ 1; no field the format does not know;
+//! - what the queues may hold at worst — every subscription's queue of its topic's depth
+//!   (and what is in flight on a link) times the largest message of the topic's type, a
+//!   camera's frame at its size — at most [`crate::limits::MAX_GRAPH_QUEUE_BYTES`], checked
+//!   when the file is read and at every change of a depth, QoS or rate
+//!   (`src/runtime/graph/spec/memory.rs`; [`GraphSpec::queue_bytes`]);
 //! - QoS values in range (deadline and lifespan > 0, loss in [0, 1], …) and combined
 //!   sensibly (`on_deadline_missed` only on the actuator's input and with a deadline; no
 //!   reliable link that loses everything). A deadline shorter than its publisher's period
@@ -78,6 +83,7 @@
 
 mod build;
 mod executors;
+mod memory;
 mod processes;
 mod requested;
 
@@ -797,38 +803,71 @@ impl GraphSpec {
     /// Set node `id`'s rate, under the file's rules.
     ///
     /// # Errors
-    /// [`OverrideError`] for a rate the node cannot take.
+    /// [`OverrideError`] for a rate the node cannot take, or one that puts more messages in
+    /// flight on its topics' links than [`crate::limits::MAX_GRAPH_QUEUE_BYTES`] allows
+    /// (nothing changes).
     pub fn set_rate_of(&mut self, id: NodeId, hz: f64) -> Result<(), OverrideError> {
         let node = &mut self.nodes[id.0];
         check_rate_hz(hz).map_err(|e| OverrideError(format!("node '{}': {e}", node.name)))?;
         if node.kind.is_actuator() {
             check_actuator_rate(hz).map_err(OverrideError)?;
         }
-        node.rate_hz = hz;
+        let was = std::mem::replace(&mut node.rate_hz, hz);
+        // A faster publisher has more messages in flight on a link (memory.rs).
+        let linked = self.nodes[id.0]
+            .publishes
+            .iter()
+            .any(|t| self.topics[t.0].qos.link.is_some());
+        if linked && hz > was {
+            if let Err(e) = self.check_queue_bytes() {
+                self.nodes[id.0].rate_hz = was;
+                return Err(OverrideError(format!(
+                    "node '{}': {e}",
+                    self.nodes[id.0].name
+                )));
+            }
+        }
         Ok(())
     }
 
     /// Set topic `name`'s history depth.
     ///
     /// # Errors
-    /// [`OverrideError`] for an unknown topic or a depth outside 1..=[`MAX_DEPTH`].
+    /// [`OverrideError`] for an unknown topic, a depth outside 1..=[`MAX_DEPTH`], or one
+    /// that takes the graph's queues past [`crate::limits::MAX_GRAPH_QUEUE_BYTES`] (nothing
+    /// changes).
     pub fn set_depth(&mut self, name: &str, depth: usize) -> Result<(), OverrideError> {
         let id = self.known_topic(name)?;
         let d = check_depth(i64::try_from(depth).unwrap_or(i64::MAX))
             .map_err(|e| OverrideError(format!("topic '{name}': {e}")))?;
-        self.topics[id.0].depth = d;
+        let was = std::mem::replace(&mut self.topics[id.0].depth, d);
+        if d > was {
+            if let Err(e) = self.check_queue_bytes() {
+                self.topics[id.0].depth = was;
+                return Err(OverrideError(format!("topic '{name}': depth {d}: {e}")));
+            }
+        }
         Ok(())
     }
 
     /// Set every topic's depth (the chapter's `--queue-depth`).
     ///
     /// # Errors
-    /// [`OverrideError`] for a depth outside 1..=[`MAX_DEPTH`] (nothing changes).
+    /// [`OverrideError`] for a depth outside 1..=[`MAX_DEPTH`], or one that takes the
+    /// graph's queues past [`crate::limits::MAX_GRAPH_QUEUE_BYTES`] (nothing changes).
     pub fn set_all_depths(&mut self, depth: usize) -> Result<(), OverrideError> {
         check_depth(i64::try_from(depth).unwrap_or(i64::MAX))
             .map_err(|e| OverrideError(format!("--queue-depth: {e}")))?;
-        for t in &mut self.topics {
-            t.depth = depth;
+        let was: Vec<usize> = self
+            .topics
+            .iter_mut()
+            .map(|t| std::mem::replace(&mut t.depth, depth))
+            .collect();
+        if let Err(e) = self.check_queue_bytes() {
+            for (t, d) in self.topics.iter_mut().zip(was) {
+                t.depth = d;
+            }
+            return Err(OverrideError(format!("--queue-depth {depth}: {e}")));
         }
         Ok(())
     }
@@ -837,8 +876,9 @@ impl GraphSpec {
     /// keys; `--qos`, `--link`). All or nothing: on an error the topic is unchanged.
     ///
     /// # Errors
-    /// [`OverrideError`] naming the topic for an unknown topic, key or value, or a bad
-    /// combination ([`qos::check_combination`]).
+    /// [`OverrideError`] naming the topic for an unknown topic, key or value, a bad
+    /// combination ([`qos::check_combination`]), or a depth or link that takes the graph's
+    /// queues past [`crate::limits::MAX_GRAPH_QUEUE_BYTES`].
     pub fn set_qos(&mut self, name: &str, pairs: &str) -> Result<(), OverrideError> {
         let id = self.known_topic(name)?;
         let err = |e: String| OverrideError(format!("topic '{name}': {e}"));
@@ -853,7 +893,13 @@ impl GraphSpec {
             .any(|n| self.nodes[n.0].kind.is_actuator());
         qos::check_combination(&q, to_actuator).map_err(err)?;
         let t = &mut self.topics[id.0];
+        let was = (t.qos, t.depth);
         (t.qos, t.depth) = (q, depth);
+        if let Err(e) = self.check_queue_bytes() {
+            let t = &mut self.topics[id.0];
+            (t.qos, t.depth) = was;
+            return Err(err(e.0));
+        }
         Ok(())
     }
 

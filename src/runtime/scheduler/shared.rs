@@ -78,14 +78,16 @@ pub(super) struct SharedEnd {
 
 impl SharedExecutors {
     /// Start the threads of `plan`'s shared executors over `nodes` (by node index, `Some`
-    /// for the nodes they hold).
+    /// for the nodes they hold). A thread the machine will not start stops the run: the
+    /// threads started end, and [`SharedExecutors::join`] gives it as the failure of the
+    /// executor's first node.
     pub(super) fn start(
         nodes: Vec<Option<Box<dyn Node>>>,
         plan: &ExecutionPlan,
         cx: Context,
     ) -> SharedExecutors {
         let n = nodes.len();
-        let names = nodes
+        let names: Vec<String> = nodes
             .iter()
             .map(|s| s.as_ref().map(|n| n.name().to_string()).unwrap_or_default())
             .collect();
@@ -117,19 +119,34 @@ impl SharedExecutors {
             plan: plan.clone(),
         });
         let mut threads = Vec::new();
-        for (e, x) in plan.executors.iter().enumerate() {
+        'start: for (e, x) in plan.executors.iter().enumerate() {
             if x.kind == ExecutorKind::PerNode {
                 continue;
             }
             for k in 0..x.threads {
-                let inner = inner.clone();
+                let worker_inner = inner.clone();
                 let name = format!("{}-{k}", x.name);
-                threads.push(
-                    std::thread::Builder::new()
-                        .name(name)
-                        .spawn(move || worker(&inner, e))
-                        .expect("spawning an executor thread"),
-                );
+                match std::thread::Builder::new()
+                    .name(name.clone())
+                    .spawn(move || worker(&worker_inner, e))
+                {
+                    Ok(t) => threads.push(t),
+                    Err(why) => {
+                        // The machine starts no more threads: the run stops (the threads
+                        // started see it and end), as the failure of the executor's first
+                        // node.
+                        inner.cx.stop.stop();
+                        let node = (0..plan.node_executor.len())
+                            .find(|&i| plan.node_executor[i] == e)
+                            .and_then(|i| names.get(i).cloned())
+                            .unwrap_or_else(|| x.name.clone());
+                        let line =
+                            super::not_started(&format!("its executor's thread '{name}'"), &why);
+                        inner.lock().failed.get_or_insert((node, line));
+                        inner.wake.notify_all();
+                        break 'start;
+                    }
+                }
             }
         }
         SharedExecutors {

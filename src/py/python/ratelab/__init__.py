@@ -15,7 +15,10 @@ the whole command line (`ratelab lab`, `ratelab launch`, …).
 Errors are exceptions carrying ratelab's one line: `ValueError` for a bad setting,
 `FileNotFoundError` for a missing file, `FileExistsError` for an output that exists (pass
 `force=True`), `NodeFailed` when a node of the run failed (its `.run` holds the figures up
-to then). Ctrl-C (KeyboardInterrupt) stops a run.
+to then), `TraceTooLarge` (a `ratelab.Error` and a `MemoryError`) before a run whose trace
+would not fit in memory (keep one step in N with `trace_every=N`, or write the trace to a
+file as the run goes with the command `ratelab run --out DIR`). Ctrl-C (KeyboardInterrupt)
+stops a run.
 """
 
 from __future__ import annotations
@@ -48,9 +51,12 @@ __all__ = [
     "Run",
     "Table",
     "Check",
+    "Prediction",
     "Exercise",
     "NodeFailed",
     "NoPrediction",
+    "Error",
+    "TraceTooLarge",
     "run",
     "sweep",
     "cliff",
@@ -61,6 +67,20 @@ __all__ = [
 
 #: An exercise asked for before its prediction was written (a ValueError).
 NoPrediction = _native.NoPrediction
+
+
+class Error(Exception):
+    """An error of ratelab's own kind (bad input is a `ValueError`, a missing file a
+    `FileNotFoundError`, as Python's own)."""
+
+
+class TraceTooLarge(Error, MemoryError):
+    """A run refused before it started: the trace `run` returns (its text and its NumPy
+    arrays) would hold more values, rows x columns, than ratelab's bound
+    (`ratelab::limits::MAX_HELD_TRACE_VALUES`, 64 Mi: a day of the chapter's graph fits).
+    The message names the `trace_every=N` that fits; `ratelab run --out DIR` writes the
+    whole trace to `trace.csv` as the run goes instead, holding none of it."""
+
 
 #: `trace.csv`'s columns as `Run.trace` names them: units in the names where one applies.
 #: The per-topic counters (`obs_published`, `cmd_lost`, …) keep their names (messages).
@@ -84,8 +104,9 @@ class Run:
 
     #: `metrics.json` as a dict (docs/metrics.md).
     metrics: Dict[str, Any]
-    #: `trace.csv`'s columns as NumPy arrays, one value per actuator step, named as
-    #: `TRACE_COLUMNS` says (units in the names).
+    #: `trace.csv`'s columns as NumPy arrays, one value per actuator step (with
+    #: `trace_every=N`, per N-th step and the last), named as `TRACE_COLUMNS` says (units in
+    #: the names).
     trace: Dict[str, Any]
     #: `log.txt`'s lines: what the nodes wrote, stamped `[t=1.234 s node]`.
     log: List[str]
@@ -158,6 +179,11 @@ def _cell(text: str) -> Any:
 def _list(name: str, values: Union[float, Sequence[float]]) -> str:
     if isinstance(values, (int, float)) and not isinstance(values, bool):
         values = [values]
+    values = list(values)
+    if not values:
+        raise ValueError(
+            f"{name}: an empty list runs nothing (every check over it would pass without a run); give at least one value"
+        )
     return ",".join(_number(name, v) for v in values)
 
 
@@ -218,6 +244,7 @@ def run(
     out: Optional[PathLike] = None,
     force: bool = False,
     nodes: Optional[Mapping[str, type]] = None,
+    trace_every: int = 1,
     flags: Sequence[str] = (),
 ) -> Run:
     """Run a graph, as `ratelab run` does, and return its figures.
@@ -235,9 +262,13 @@ def run(
     nodes: classes for the graph's Python nodes, by node name ({"policy": MyNode}): each
         is made from the class given (defined here, in a notebook cell) instead of its
         graph file's script, and driven exactly as one from a file.
+    trace_every: keep one actuator step in this many in `Run.trace` (steps 1, 1 + N, ... and
+        the last; `--trace-every`): a long run's trace in proportion to what you ask. The
+        metrics count every step.
     flags: any other `ratelab run` flags, as strings (["--executor", "single"]).
 
-    Raises ValueError, FileNotFoundError, FileExistsError, NodeFailed, KeyboardInterrupt.
+    Raises ValueError, FileNotFoundError, FileExistsError, NodeFailed, KeyboardInterrupt,
+    and TraceTooLarge (a MemoryError) before a run whose trace would not fit in memory.
     """
     args: List[str] = ["--clock", str(clock), "--seed", str(int(seed))]
     args += ["--duration", _number("duration_s", duration_s)]
@@ -264,12 +295,17 @@ def run(
         args += ["--out", os.fspath(out)]
     if force:
         args.append("--force")
+    if trace_every != 1:
+        args += ["--trace-every", _number("trace_every", trace_every)]
     args += [str(f) for f in flags]
     classes = list((nodes or {}).items())
     for node, cls in classes:
         if not isinstance(cls, type):
             raise ValueError(f"nodes[{node!r}] must be a class, got {type(cls).__name__}")
-    files = _native.run(args, brain, classes)
+    try:
+        files = _native.run(args, brain, classes)
+    except _native.TraceTooLarge as e:
+        raise TraceTooLarge(str(e)) from None
     result = Run(
         metrics=json.loads(files["metrics_json"]),
         trace=_trace_arrays(files["trace_columns"]),
@@ -357,6 +393,23 @@ class Check:
 
 
 @dataclass(frozen=True)
+class Prediction:
+    """One key of the learner's prediction beside the outcome: the key, the sentence saying
+    both ("You predicted the pole first fails at 10 Hz; it first fell at 5 Hz."), and the
+    verdict: "right", "missed", "unreadable" (missing, or not of its type) or "open" (not
+    graded: the outcome left the key moot)."""
+
+    key: str
+    said: str
+    verdict: str
+
+    @property
+    def right(self) -> bool:
+        """It held (or was not graded): it does not keep the exercise from passing."""
+        return self.verdict in ("right", "open")
+
+
+@dataclass(frozen=True)
 class Exercise:
     """What an exercise found (`ratelab exercise`)."""
 
@@ -364,15 +417,27 @@ class Exercise:
     checks: List[Check]
     #: The prediction beside the outcome, one sentence per predicted key.
     reconcile: List[str]
-    #: Checks that failed plus predictions that could not be read.
+    #: Checks that failed plus predictions that missed or could not be read.
     not_passed: int
     #: The report `ratelab exercise` prints, a line each.
     report: List[str]
+    #: The prediction beside the outcome, a key each, with its verdict.
+    predictions: List[Prediction]
 
     @property
     def passed(self) -> bool:
-        """Every check held and every prediction could be read (exit 0 of the command)."""
+        """Every check held and every prediction was right (exit 0 of the command)."""
         return self.not_passed == 0
+
+    @property
+    def failed_checks(self) -> List[Check]:
+        """The checks that did not hold."""
+        return [c for c in self.checks if not c.passed]
+
+    @property
+    def missed(self) -> List[Prediction]:
+        """The predictions that missed or could not be read."""
+        return [p for p in self.predictions if not p.right]
 
 
 def exercise(
@@ -400,6 +465,7 @@ def exercise(
         reconcile=list(found["reconcile"]),
         not_passed=int(found["not_passed"]),
         report=list(found["lines"]),
+        predictions=[Prediction(k, said, v) for k, said, v in found["predictions"]],
     )
 
 

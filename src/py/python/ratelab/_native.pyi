@@ -15,7 +15,8 @@ def run(
     """One run of `ratelab run FLAGS...`: metrics_json, trace_csv, log (texts), summary
     (lines), failed (a node's failure line or None), recording (path or None), wall_s,
     trace_columns ((name, numpy dtype, bytes) per column of trace_csv), estimator_json
-    (estimator.json's text with an estimator in the graph, else None)."""
+    (estimator.json's text with an estimator in the graph, else None). Raises TraceTooLarge
+    before the run when its trace would pass MAX_HELD_TRACE_VALUES."""
 
 def sweep(flags: List[str]) -> Tuple[str, Optional[str]]:
     """`ratelab sweep FLAGS...`: (its --csv text, the first failed node's line or None)."""
@@ -26,8 +27,14 @@ def cliff(flags: List[str]) -> str:
 class NoPrediction(ValueError):
     """An exercise was asked for before its prediction was written."""
 
+class TraceTooLarge(MemoryError):
+    """A run whose trace, returned in memory, would pass MAX_HELD_TRACE_VALUES: refused
+    before it starts."""
+
 def exercise(which: str, flags: List[str], prediction_json: Optional[str] = None) -> Dict[str, Any]:
-    """`ratelab exercise WHICH FLAGS...`: checks [(name, passed)], reconcile, not_passed, lines."""
+    """`ratelab exercise WHICH FLAGS...`: checks [(name, passed)], reconcile [sentence],
+    predictions [(key, sentence, verdict)], checks_failed, predictions_missed, not_passed,
+    lines."""
 
 def exercises() -> List[Tuple[str, str, str]]:
     """The exercises in order: (id, file, title)."""

@@ -23,6 +23,26 @@ pub const MIN_FRAME_PX: u32 = 16;
 /// The largest frame side, px (a frame of 4096 × 4096 `mono8` is 16 MiB).
 pub const MAX_FRAME_PX: u32 = 4096;
 
+/// The kind's name, as a graph file spells it.
+pub const NAME: &str = "camera";
+
+/// The bytes of the frame a camera node with these (checked) parameters publishes: its
+/// `width_px` × `height_px`, rounded as the node rounds them, a byte a pixel (`mono8`);
+/// what a graph's worst-case memory counts for its topic (`ratelab::limits::MAX_GRAPH_QUEUE_BYTES`).
+/// A parameter left out takes its default; one out of range is clamped into it.
+pub fn frame_bytes(params: &toml::Table) -> u64 {
+    let side = |key: &str, default: f64| -> u64 {
+        let v = match params.get(key) {
+            Some(toml::Value::Float(x)) if x.is_finite() => *x,
+            Some(toml::Value::Integer(i)) => *i as f64,
+            _ => default,
+        };
+        v.round()
+            .clamp(f64::from(MIN_FRAME_PX), f64::from(MAX_FRAME_PX)) as u64
+    };
+    side("width_px", 640.0) * side("height_px", 480.0)
+}
+
 /// Its parameters: the frame's size, and where it comes from.
 pub const PARAMS: &[ParamDef] = &[
     ParamDef {
@@ -54,7 +74,7 @@ pub const PARAMS: &[ParamDef] = &[
 /// The kind: no input; one `image` output; reads the plant.
 pub fn def() -> KindDef {
     KindDef {
-        name: "camera",
+        name: NAME,
         doc: "reads the plant and publishes a frame of it (image, mono8: synthetic, or rendered by MuJoCo)",
         ports: Ports::Fixed {
             inputs: vec![],

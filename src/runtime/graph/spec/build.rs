@@ -120,7 +120,8 @@ fn topic_list(
 
 /// Validate `raw` into a spec: its name, its topics, its nodes in file order (wired to
 /// their topics), the whole (one actuator, every topic published, QoS that fit), then the
-/// tie-break order, the executors and the processes.
+/// tie-break order, the executors and the processes, and last what its queues may hold at
+/// worst (`memory.rs`).
 pub(super) fn build(cx: &Ctx<'_>, raw: RawGraph) -> Result<GraphSpec, SpecError> {
     let name = graph_name(cx, &raw)?;
     if raw.nodes.len() > MAX_NODES {
@@ -216,6 +217,15 @@ pub(super) fn build(cx: &Ctx<'_>, raw: RawGraph) -> Result<GraphSpec, SpecError>
         }
     }
     spec.chain = find_chain(&spec);
+    // What its queues may hold at worst, once every topic knows its publisher, subscribers
+    // and QoS: at the depth of the topic that takes the most.
+    if let Some((t, line)) = spec.queue_refusal() {
+        let at = raw
+            .topics
+            .get(t.0)
+            .map_or(0..0, |r| r.get_ref().depth.span());
+        return Err(cx.err(at, line));
+    }
     Ok(spec)
 }
 
