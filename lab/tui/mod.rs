@@ -137,7 +137,16 @@ pub fn run_lab(
     let _ = ctl_tx.send(Control::Quit);
     // A Python callback that never returns would keep the engine from seeing the quit.
     ratelab::python::interrupt_callbacks_after(crate::PYTHON_GRACE);
-    let joined = engine.join();
+    let joined = match join_engine(engine) {
+        Ok(joined) => joined,
+        Err(stuck) => {
+            ratelab::textlog::set_sink(None);
+            result?;
+            anyhow::bail!(
+                "the lab ended without waiting for its engine: {stuck} (a sleep or C code cannot be interrupted)"
+            );
+        }
+    };
     ratelab::textlog::set_sink(None);
     if joined.is_err() {
         anyhow::bail!("the lab's engine stopped unexpectedly");
@@ -158,6 +167,36 @@ pub fn run_lab(
         anyhow::bail!("the lab's last run failed: node {line}");
     }
     Ok(())
+}
+
+/// How long quitting waits for the engine while a call into learners' code that it waits
+/// on has not returned (the quit's `KeyboardInterrupt` cannot end a `time.sleep` or C code)
+/// before the lab ends without it ([`join_engine`]).
+const ENGINE_STUCK_AFTER: Duration = Duration::from_secs(3);
+
+/// Wait for the engine to end after the quit. `Err` (the call it is held by) when, after
+/// [`ENGINE_STUCK_AFTER`], a call into learners' code of the run (not a save's trial, which
+/// the engine never waits on) still has not returned: the lab then ends without waiting.
+fn join_engine(
+    engine: std::thread::JoinHandle<ratelab::session::SessionLog>,
+) -> Result<std::thread::Result<ratelab::session::SessionLog>, String> {
+    let since = std::time::Instant::now();
+    while !engine.is_finished() {
+        if since.elapsed() >= ENGINE_STUCK_AFTER {
+            let stuck = ratelab::python::running_callbacks(ENGINE_STUCK_AFTER)
+                .into_iter()
+                .next();
+            if let Some(call) = stuck {
+                return Err(format!(
+                    "{} has not returned after {:.0} s",
+                    call.what,
+                    call.running_for.as_secs_f64()
+                ));
+            }
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    Ok(engine.join())
 }
 
 /// Open the lab on a graph running across processes (`ratelab lab --attach`, or the lab of

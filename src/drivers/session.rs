@@ -16,12 +16,15 @@
 //! runs are logged but, being concurrent, cannot be replayed exactly.
 //!
 //! A file the run's code comes from saved ([`Control::Reload`]) runs the graph again with
-//! the new code, judged first and compared with the run before in one line (`reload`).
+//! the new code, judged first and compared with the run before in one line (`reload`). The
+//! saved code loads, and is judged, on a thread of its own (`trial`): code whose import or
+//! callback never returns is said, never waited for; the run on screen goes on.
 
 mod engine;
 mod log;
 mod real_run;
 mod reload;
+mod trial;
 mod virtual_run;
 
 pub use engine::{Engine, GraphSource, SessionSettings};

@@ -27,6 +27,14 @@ impl Interpreter for Embedded {
             PythonBrain::load(script, function).map_err(|e| e.to_string())?,
         ))
     }
+
+    fn enter_trial(&self) -> u64 {
+        crate::enter_trial()
+    }
+
+    fn interrupt_trial(&self, thread: u64) -> bool {
+        crate::interrupt_trial(thread)
+    }
 }
 
 /// A Python node with its rate (a timer's period is a whole number of ticks).

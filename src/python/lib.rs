@@ -20,7 +20,9 @@
 //!   node's callbacks after [`OVERRUN_PERIODS`] of its periods, a brain's (and any loading)
 //!   after [`OVERRUN_WARNING`]; and [`interrupt_callbacks`] (Ctrl-C) raises `KeyboardInterrupt`
 //!   inside the ones still running (`PyThreadState_SetAsyncExc`), so a `while True: pass`
-//!   cannot hang the run.
+//!   cannot hang the run. The lab tries saved code on threads of their own
+//!   ([`enter_trial`]): their calls are not the live run's, and a newer save interrupts
+//!   them ([`interrupt_trial`]).
 //!
 //! This is the Python layer, a crate above the runtime: the runtime reaches it through the
 //! interpreter it installs ([`install`], the runtime's `interpreter` module), so changing it
@@ -269,6 +271,52 @@ fn hung_for(py: Python<'_>, err: &PyErr) -> Option<Duration> {
 /// learner sees it at once.
 pub const HUNG_AFTER: Duration = Duration::from_secs(1);
 
+thread_local! {
+    /// The calling thread tries saved code beside the live run ([`enter_trial`]).
+    static TRIAL: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
+}
+
+/// Mark the calling thread, for the rest of its life, as one that tries saved code beside
+/// the live run: the lab's reload on save loads the saved code (its import) and runs its
+/// trial on a thread of its own, never on the one that runs the live graph. Its calls into
+/// learners' code are then not the live run's: [`running_callbacks`] leaves them out (the
+/// lab would show one as the live node's hung callback) and the watchdog does not warn of
+/// them (the lab's engine says a trial that does not return, naming the file saved).
+/// Returns the thread's id for [`interrupt_trial`]. Needs no interpreter.
+pub fn enter_trial() -> u64 {
+    TRIAL.with(|t| t.set(true));
+    // SAFETY: PyThread_get_thread_ident only reads the calling thread's id.
+    unsafe { pyo3::ffi::PyThread_get_thread_ident() as u64 }
+}
+
+/// Raise `KeyboardInterrupt` in the call into learners' code that thread `thread` runs, if
+/// it runs one (a trial superseded by a newer save, [`enter_trial`]); returns whether it
+/// did. The caller never waits for the interpreter (whose lock a busy loop holds for up to
+/// its switch interval, and C code for as long as it runs): the exception is raised from a
+/// thread of its own. It takes effect at the call's next Python instruction, so a call in
+/// `time.sleep` or in C code ends that first.
+pub fn interrupt_trial(thread: u64) -> bool {
+    if SUPPORT.get().is_none() {
+        return false;
+    }
+    match lock_running().get_mut(&thread) {
+        Some(r) => r.interrupted = true,
+        None => return false,
+    }
+    let raised = std::thread::Builder::new()
+        .name("interrupt-trial".into())
+        .spawn(move || {
+            Python::attach(|py| {
+                let exc = py.get_type::<pyo3::exceptions::PyKeyboardInterrupt>();
+                // SAFETY: attached to the interpreter; an id that no longer runs is ignored.
+                unsafe {
+                    pyo3::ffi::PyThreadState_SetAsyncExc(thread as _, exc.as_ptr());
+                }
+            });
+        });
+    raised.is_ok()
+}
+
 /// A call into learners' code in progress: what the watchdog knows of it.
 struct Running {
     /// Who is called (`brain policy.py:act`), for the messages.
@@ -283,8 +331,10 @@ struct Running {
     overrun_text: String,
     /// Already reported as overrunning.
     warned: bool,
-    /// Interrupted by [`interrupt_callbacks`] (Ctrl-C).
+    /// Interrupted by [`interrupt_callbacks`] (Ctrl-C) or [`interrupt_trial`].
     interrupted: bool,
+    /// A trial's call, beside the live run ([`enter_trial`]).
+    trial: bool,
 }
 
 /// Calls in progress, by Python thread id.
@@ -348,6 +398,7 @@ impl CallbackGuard {
                 overrun_text,
                 warned: false,
                 interrupted: false,
+                trial: TRIAL.with(std::cell::Cell::get),
             },
         );
         CallbackGuard { thread }
@@ -375,10 +426,12 @@ pub struct Callback {
 
 /// The calls into learners' code that have run `at_least` (wall time) without returning,
 /// the longest first: what the lab shows as a hung callback (`in callback 3.2 s`, `HUNG`),
-/// since under the virtual clock such a call holds the run's clock.
+/// since under the virtual clock such a call holds the run's clock. A trial's calls beside
+/// the live run ([`enter_trial`]) are not the live run's, and are left out.
 pub fn running_callbacks(at_least: Duration) -> Vec<Callback> {
     let mut calls: Vec<Callback> = lock_running()
         .values()
+        .filter(|r| !r.trial)
         .map(|r| Callback {
             what: r.what.clone(),
             node: r.node.clone(),
@@ -399,7 +452,8 @@ fn start_watchdog() {
             .name("python-watchdog".into())
             .spawn(|| loop {
                 std::thread::sleep(WATCHDOG_POLL);
-                for r in lock_running().values_mut() {
+                // A trial's call is said by the lab's engine, naming the file saved.
+                for r in lock_running().values_mut().filter(|r| !r.trial) {
                     if r.since.elapsed() >= r.overrun && !r.warned {
                         r.warned = true;
                         // To the run's text log: the lab's pane, not over its screen.

@@ -32,6 +32,23 @@ pub trait Interpreter: Send + Sync {
     /// # Errors
     /// The one-line reason it cannot be loaded.
     fn brain(&self, script: &str, function: &str) -> Result<Box<dyn Policy>, String>;
+
+    /// Mark the calling thread, for the rest of its life, as one that tries saved code
+    /// beside the live run (the lab's reload on save loads the saved code, and runs its
+    /// trial, on a thread of its own): its calls into learners' code are not the live run's
+    /// (the lab shows none of them as a live node's hung callback). Returns the thread's id
+    /// for [`Interpreter::interrupt_trial`]; 0 (the default): none.
+    fn enter_trial(&self) -> u64 {
+        0
+    }
+
+    /// Raise `KeyboardInterrupt` in the call into learners' code that the trial thread
+    /// `thread` ([`Interpreter::enter_trial`]) is running, if it runs one, without waiting
+    /// for the interpreter; returns whether it ran one. The default interrupts nothing.
+    fn interrupt_trial(&self, thread: u64) -> bool {
+        let _ = thread;
+        false
+    }
 }
 
 static INSTALLED: OnceLock<&'static dyn Interpreter> = OnceLock::new();

@@ -1352,3 +1352,81 @@ fn under_the_real_clock_a_saved_brain_is_swapped_in_place() {
         log.runs[0].commands
     );
 }
+
+/// A save whose trial never returns (issue 72: the reloaded node's callback loops forever)
+/// is said, never waited for, and not blamed on the run on screen: that run goes on with
+/// the code before (its steps keep coming, no new run starts), the line names the file and
+/// where the trial is stuck, and a newer save supersedes it (the stuck callback interrupted)
+/// and is taken up.
+#[test]
+fn a_reload_whose_trial_never_returns_is_said_and_the_run_goes_on() {
+    use ratelab::session::GraphSource;
+    use ratelab::Nanos;
+    ratelab::init(); // Python nodes
+    let _machine = crate::machine::alone();
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::create_dir(dir.path().join("nodes")).unwrap();
+    let graph_file = dir.path().join("g.toml");
+    let node_file = dir.path().join("nodes/scripted_balancer.py");
+    std::fs::copy(crate::repo("graphs/cartpole-python.toml"), &graph_file).unwrap();
+    std::fs::copy(crate::repo("graphs/nodes/scripted_balancer.py"), &node_file).unwrap();
+    let mut s = settings(
+        ClockKind::Virtual,
+        1,
+        false,
+        Speed::Times(1.0),
+        &dir.path().join("session.json"),
+    );
+    s.cfg.graph = ratelab::graph::GraphSpec::load(&graph_file).unwrap();
+    let source = graph_file.clone();
+    s.graph_source = Some(GraphSource(std::sync::Arc::new(move || {
+        ratelab::graph::GraphSpec::load(&source).map_err(|e| e.to_string())
+    })));
+    let live = LiveEngine::with(s, dir);
+    while live.wait_for("a step", step_at) < Nanos(500 * Nanos::MILLISECOND.0) {}
+    // The node saved with a timer callback that never returns: its trial is stuck at t = 0.
+    let original = std::fs::read_to_string(&node_file).unwrap();
+    let timer = "    def on_timer(self):\n";
+    assert!(original.contains(timer));
+    std::fs::write(
+        &node_file,
+        original.replace(
+            timer,
+            &format!("{timer}        while True:\n            pass\n"),
+        ),
+    )
+    .unwrap();
+    live.reload(&node_file);
+    let saved_at = live.wait_for("a step", step_at);
+    let said = live.wait_for("the stuck trial said", |t| match t {
+        Telemetry::Started { .. } => panic!("a new run started"),
+        Telemetry::Reloaded { line } => panic!("taken up: {line}"),
+        Telemetry::Error(e) if e.contains("has not returned") => Some(e.clone()),
+        _ => None,
+    });
+    assert!(
+        said.starts_with("reload of ")
+            && said.contains(
+                "scripted_balancer.py: its callback has not returned after 2 s of the trial run (t=0.00 s); the run on screen is the code before"
+            ),
+        "{said}"
+    );
+    // The run on screen went on meanwhile (2 s of it at ×1, less what a loaded machine
+    // could not keep up with).
+    let now = live.wait_for("a step", step_at);
+    assert!(now >= saved_at + Nanos::SECOND, "{now} after {saved_at}");
+    // A newer save supersedes it, and is taken up: the run starts again with its code.
+    std::fs::write(&node_file, &original).unwrap();
+    live.reload(&node_file);
+    let line = live.wait_for("the reload", |t| match t {
+        Telemetry::Reloaded { line } => Some(line.clone()),
+        Telemetry::Error(e) if e.starts_with("not reloaded") => panic!("{e}"),
+        _ => None,
+    });
+    assert!(line.contains("balanced ("), "{line}");
+    live.wait_for("the new run", |t| {
+        matches!(t, Telemetry::Started { .. }).then_some(())
+    });
+    let log = live.quit_with_log();
+    assert_eq!(log.runs.len(), 2, "the first run and the reload");
+}

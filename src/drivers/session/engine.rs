@@ -110,6 +110,11 @@ pub struct Engine {
     /// reload): what a save under the real clock is compared with, not the run's graph,
     /// whose rates and depths the keys may have changed since.
     pub(super) file_graph: crate::graph::GraphSpec,
+    /// A save's code loading, or being judged, on a thread of its own (see
+    /// [`super::reload`]).
+    pub(super) reloading: Option<super::trial::Pending>,
+    /// Reloads superseded or dropped, watched until their threads end.
+    pub(super) cancelled: Vec<super::trial::Cancelled>,
 }
 
 /// How a run of the lab ended, for the next: what the user asked, and the graph (rates,
@@ -158,6 +163,8 @@ impl Engine {
             next_run: Vec::new(),
             run_policy: String::new(),
             muted: Arc::new(AtomicBool::new(false)),
+            reloading: None,
+            cancelled: Vec::new(),
         }
     }
 
@@ -218,13 +225,20 @@ impl Engine {
                 Err(e) => {
                     let _ = self.tx.send(Telemetry::Error(e));
                     // Wait for the user's decision (a change sent meanwhile, from ROS 2's
-                    // `param set`, is not one: it has no run to go to).
+                    // `param set`, is not one: it has no run to go to; nor are keys that
+                    // act on a run). A save starts the run again with what the files hold.
                     loop {
                         match self.rx.recv() {
                             Ok(Control::Reset { next_seed }) => break Next::Reset { next_seed },
                             Ok(Control::SwitchClock) => break Next::SwitchClock,
-                            Ok(Control::Apply(_)) => continue,
-                            _ => break Next::Quit,
+                            Ok(Control::Reload { .. }) => match self.reloaded_config(&cfg) {
+                                Ok(new) => break Next::Reload(Box::new(new)),
+                                Err(e) => {
+                                    let _ = self.tx.send(Telemetry::Error(e));
+                                }
+                            },
+                            Ok(Control::Quit) | Err(_) => break Next::Quit,
+                            Ok(_) => continue,
                         }
                     }
                 }
@@ -237,9 +251,14 @@ impl Engine {
                     }
                 }
                 Next::SwitchClock => cfg.clock = cfg.clock.other(),
-                Next::Reload(new) => cfg = *new,
+                Next::Reload(new) => {
+                    self.file_graph = new.graph.clone();
+                    cfg = *new;
+                }
             }
         }
+        // A save's trial still under way is stopped (interrupted, if stuck).
+        self.drop_reload(false);
         self.save_log();
         self.log
     }
@@ -359,6 +378,9 @@ impl Engine {
             }
             break part;
         };
+        // A save still loading was made in this run: the next starts with the code before
+        // (a save that loaded has been taken up: `next` is its run).
+        self.drop_reload(!matches!(next, Next::Quit));
         let handles = core.handles().clone();
         let ticks = core.scheduler().ticks().to_vec();
         if let Some(r) = bridge.map(crate::ros2::Bridge::finish) {

@@ -3,7 +3,8 @@
 //! tick).
 
 use super::engine::{live_metrics, Engine, Next, Segment};
-use super::reload::{InPlace, RealExit, Restart};
+use super::reload::{Ready, RealExit};
+use super::trial::Restart;
 use crate::config::RunConfig;
 use crate::recording::Recording;
 use crate::run::Command;
@@ -147,7 +148,11 @@ impl Engine {
                     recording,
                     ended: result.is_some(),
                 };
-                let next = self.real_control(msg, now(), &ran, &mut restart);
+                let next = match self.real_control(msg, now(), &ran) {
+                    Some(next) => Some(next),
+                    // A save whose code has loaded, taken up now.
+                    None => self.real_ready(now(), &ran, &mut restart),
+                };
                 if let Some(next) = next {
                     stop.stop();
                     let end = match (result, runner.take()) {
@@ -188,11 +193,10 @@ impl Engine {
         }
         match restart {
             Some(r) if core.end().is_none() => RealExit::Restart(r),
-            // The run ended as the file was saved: the new code starts the next run.
+            // The run ended as the file was saved: the new code (it loads) starts the next
+            // run.
             Some(r) => {
-                let next = self
-                    .reload(cfg, &r.file, None)
-                    .unwrap_or(Next::Reset { next_seed: false });
+                let next = self.as_next(cfg, Ready::Restart(r));
                 RealExit::Done((next, part.1, part.2, part.3))
             }
             None => RealExit::Done(part),
@@ -200,14 +204,13 @@ impl Engine {
     }
 
     /// What the user asked during a stretch of the real clock ([`Engine::real_once`]), at
-    /// run time `now`: `Some(next)` ends the stretch (`restart` set: for a restart in
-    /// place).
+    /// run time `now`: `Some(next)` ends the stretch. A save starts its code loading on a
+    /// thread of its own ([`Engine::real_ready`] takes it up).
     fn real_control(
         &mut self,
         msg: Result<Control, RecvTimeoutError>,
         now: Nanos,
         ran: &Stretch<'_>,
-        restart: &mut Option<Box<Restart>>,
     ) -> Option<Next> {
         match msg {
             Ok(Control::Apply(cmd)) => {
@@ -239,23 +242,40 @@ impl Engine {
             // A run going on restarts the saved code's nodes in place; one that
             // ended starts again with the new code (if it loads).
             Ok(Control::Reload { file }) if !ran.ended => {
-                match self.reload_in_place(ran.cfg, ran.running, &file) {
-                    InPlace::Restart(r) => {
-                        *restart = Some(r);
-                        Some(Next::Quit) // the real clock stops for the restart
-                    }
-                    InPlace::Next(next) => next,
-                    InPlace::Brain { name, swap } => {
-                        if self.apply(swap, now, ran.handles, ran.recording) {
-                            self.brain_reloaded(&name);
-                        }
-                        None
-                    }
-                }
+                self.reload_in_place(ran.cfg, ran.running, ran.handles, &file);
+                None
             }
-            Ok(Control::Reload { file }) => self.reload(ran.cfg, &file, None),
+            Ok(Control::Reload { file }) => {
+                self.reload(ran.cfg, &file, None);
+                None
+            }
             Ok(Control::Quit) | Err(RecvTimeoutError::Disconnected) => Some(Next::Quit),
             Err(RecvTimeoutError::Timeout) => None,
+        }
+    }
+
+    /// A save whose code has loaded ([`Engine::reload_ready`]), taken up during a stretch
+    /// of the real clock at run time `now`: `Some(next)` ends the stretch (`restart` set:
+    /// for a restart in place, the real clock standing still while the nodes load again);
+    /// a brain is swapped in at once. A run that has ended starts again with the new code.
+    fn real_ready(
+        &mut self,
+        now: Nanos,
+        ran: &Stretch<'_>,
+        restart: &mut Option<Box<Restart>>,
+    ) -> Option<Next> {
+        match self.reload_ready()? {
+            Ready::Restart(r) if !ran.ended => {
+                *restart = Some(r);
+                Some(Next::Quit) // the real clock stops for the restart
+            }
+            Ready::Brain { name, swap } if !ran.ended => {
+                if self.apply(swap, now, ran.handles, ran.recording) {
+                    self.brain_reloaded(&name);
+                }
+                None
+            }
+            ready => Some(self.as_next(ran.cfg, ready)),
         }
     }
 

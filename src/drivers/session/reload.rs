@@ -15,15 +15,25 @@
 //! still while they load. A save that changes more of the graph (its nodes, rates, topics)
 //! starts the run again from t = 0 with the new code, as does a save after the run ended
 //! (a real-clock run cannot be judged exactly: the line says so).
+//!
+//! No saved code runs on the engine's thread until it has returned once: it loads (a
+//! restart's nodes, a brain) or loads and is judged on a thread of its own ([`Trial`]),
+//! which the engine looks at each time round its loop ([`Engine::reload_ready`]) while the
+//! run on screen goes on and the keys act. One that has not returned after [`SAID_AFTER`]
+//! is said (`loading FILE has not returned after 2 s; the run on screen is the code
+//! before`, or which instant of its trial its callback is stuck in); a newer save
+//! supersedes it, and a new run (`r`, `R`, `c` after the end) or quitting drops it: it is
+//! stopped and interrupted ([`super::trial::Cancelled`]). Once it has returned, the code
+//! is loaded again for the run on screen (a restart in place, the next run), as long as it
+//! took the first time.
 
-use super::engine::{Engine, Next, Segment, JUDGE_FOR};
-use crate::checkpoint::load_policy;
+use super::engine::{Engine, Next, JUDGE_FOR};
+use super::trial::{Job, Pending, Poll, Restart, Then, Trial, SAID_AFTER};
 use crate::config::{ClockKind, RunConfig};
-use crate::graph::GraphSpec;
+use crate::graph::{GraphHandles, GraphSpec};
 use crate::metrics::Metrics;
 use crate::run::Command;
-use crate::runcore::{CoreOptions, RunCore};
-use crate::scheduler::StopFlag;
+use crate::runcore::RunCore;
 use crate::telemetry::Telemetry;
 use crate::textlog::Level;
 use crate::time::Nanos;
@@ -32,45 +42,179 @@ use std::path::Path;
 /// The shortest span a reloaded graph is judged over.
 const JUDGE_AT_LEAST: Nanos = Nanos(10 * Nanos::SECOND.0);
 
+/// A reload whose code has loaded, for the run going on to take up
+/// ([`Engine::reload_ready`]).
+pub(super) enum Ready {
+    /// The next run is the new code's ([`Next::Reload`]); said already.
+    Next(Next),
+    /// Restart these nodes in place (a real-clock run going on).
+    Restart(Box<Restart>),
+    /// Apply `swap` (a live brain change, logged as one) and, when it loads, say `reloaded
+    /// NAME` ([`Engine::brain_reloaded`]) (a real-clock run going on).
+    Brain {
+        /// The file as the user knows it.
+        name: String,
+        /// The brain change.
+        swap: Command,
+    },
+}
+
 impl Engine {
     /// `file` was saved while the run of `cfg` had reached `old` (its figures so far; `None`
-    /// under the real clock): the graph read and built again, judged, and said.
-    /// `Some(next)`: the next run is the new code's; `None`: it did not load, and the run
-    /// goes on (what failed has been said).
-    pub(super) fn reload(
-        &self,
-        cfg: &RunConfig,
-        file: &Path,
-        old: Option<&Metrics>,
-    ) -> Option<Next> {
+    /// under the real clock): the graph read again now, then built and judged on a thread
+    /// of its own ([`Trial`]), superseding a reload under way; [`Engine::reload_ready`]
+    /// takes up what it comes to. A graph that cannot be read again is said at once, and
+    /// the run goes on.
+    pub(super) fn reload(&mut self, cfg: &RunConfig, file: &Path, old: Option<Metrics>) {
+        self.drop_reload(false);
         let name = shown_name(file);
         let new_cfg = match self.reloaded_config(cfg) {
             Ok(c) => c,
             Err(e) => {
                 self.not_reloaded(&name, &e);
-                return None;
+                return;
             }
         };
         let policy = self.current_policy_spec(&self.run_policy);
-        let reached = old.map_or(Nanos::ZERO, |m| Nanos((m.sim_time_s * 1e9) as u64));
-        let line = match (judge(&new_cfg, &policy, reached), old) {
-            (Ok(new), Some(old)) => format!("reloaded {name}: {}", changes(old, &new)),
-            (Ok(_), None) => format!(
-                "reloaded {name}: the run starts again with the new code (real clock: not judged)"
-            ),
-            (Err(e), _) => {
+        let reached = old
+            .as_ref()
+            .map_or(Nanos::ZERO, |m| Nanos((m.sim_time_s * 1e9) as u64));
+        let job = Job::Judge {
+            cfg: Box::new(judged(&new_cfg, reached)),
+            policy,
+        };
+        let then = Then::Reload {
+            cfg: Box::new(new_cfg),
+            old: old.map(Box::new),
+        };
+        self.start_reload(name, job, then);
+    }
+
+    /// Start `job`'s trial of the code saved in `name`, superseding a reload under way.
+    fn start_reload(&mut self, name: String, job: Job, then: Then) {
+        self.drop_reload(false);
+        self.reloading = Some(Pending {
+            name,
+            trial: Trial::start(job),
+            then,
+        });
+    }
+
+    /// Stop the reload under way, if any (a newer save supersedes it, or the run it was
+    /// saved in ends: `say` it in the log then): its trial is stopped, and the call it is
+    /// stuck in interrupted; what it comes to is ignored.
+    pub(super) fn drop_reload(&mut self, say: bool) {
+        let Some(pending) = self.reloading.take() else {
+            return;
+        };
+        if say {
+            crate::textlog::emit_for(
+                None,
+                None,
+                Level::Warn,
+                &format!(
+                    "reload of {} dropped: a new run starts with the code before (save again to reload it)",
+                    pending.name
+                ),
+            );
+        }
+        self.cancelled.push(pending.trial.cancel(pending.name));
+    }
+
+    /// The reload under way, looked at without waiting for it: `Some` once its code has
+    /// loaded (and been judged), for the run going on to take up. A trial that has not
+    /// returned for [`SAID_AFTER`] is said once where it is (loading, or which instant of
+    /// its run); code that does not load is said, and the run goes on with the code before.
+    /// Trials superseded are watched too ([`super::trial::Cancelled::check`]).
+    pub(super) fn reload_ready(&mut self) -> Option<Ready> {
+        self.watch_cancelled();
+        let pending = self.reloading.as_mut()?;
+        let outcome = match pending.trial.poll() {
+            Poll::Going => return None,
+            Poll::Stuck(at) => {
+                let line = stuck_line(&pending.name, at);
+                self.warn(line);
+                return None;
+            }
+            Poll::Done(outcome) => *outcome,
+        };
+        let Pending { name, then, .. } = self.reloading.take()?;
+        let figures = match outcome {
+            Ok(figures) => figures,
+            Err(e) => {
                 self.not_reloaded(&name, &e);
                 return None;
             }
         };
+        Some(match then {
+            Then::Reload { cfg, old } => {
+                let line = match (figures, old) {
+                    (Some(new), Some(old)) => format!("reloaded {name}: {}", changes(&old, &new)),
+                    _ => format!(
+                        "reloaded {name}: the run starts again with the new code (real clock: not judged)"
+                    ),
+                };
+                self.said_reloaded(line);
+                Ready::Next(Next::Reload(cfg))
+            }
+            Then::Restart(r) => Ready::Restart(r),
+            Then::Brain(swap) => Ready::Brain { name, swap },
+        })
+    }
+
+    /// `ready` as the next run, where it cannot be taken up in place (the run has ended, or
+    /// went on under the virtual clock since the save): a restart in place or a brain swap
+    /// starts the run again with the new code, not judged. `cfg`: the run's settings, under
+    /// the clock it goes on under.
+    pub(super) fn as_next(&self, cfg: &RunConfig, ready: Ready) -> Next {
+        let (name, graph) = match ready {
+            Ready::Next(Next::Reload(mut new)) => {
+                new.clock = cfg.clock;
+                return Next::Reload(new);
+            }
+            Ready::Next(next) => return next,
+            Ready::Restart(r) => (r.name, r.read),
+            Ready::Brain { name, .. } => (name, self.file_graph.clone()),
+        };
+        self.said_reloaded(format!(
+            "reloaded {name}: the run starts again with the new code (real clock: not judged)"
+        ));
+        Next::Reload(Box::new(RunConfig {
+            graph,
+            ..cfg.clone()
+        }))
+    }
+
+    /// Say (log pane and footer) that a reload loaded, in `line`: the ghost of the run before
+    /// is drawn beside the next.
+    fn said_reloaded(&self, line: String) {
         crate::textlog::emit_for(None, None, Level::Info, &line);
         let _ = self.tx.send(Telemetry::Reloaded { line });
-        Some(Next::Reload(Box::new(new_cfg)))
+    }
+
+    /// Say `line` in the log pane and the footer, as a warning.
+    fn warn(&self, line: String) {
+        crate::textlog::emit_for(None, None, Level::Warn, &line);
+        let _ = self.tx.send(Telemetry::Error(line));
+    }
+
+    /// Watch the trials superseded until they end, saying those interrupted and those
+    /// abandoned (in the log pane: the footer is the reload's that superseded them).
+    fn watch_cancelled(&mut self) {
+        let mut said = Vec::new();
+        self.cancelled.retain_mut(|c| {
+            let (keep, line) = c.check();
+            said.extend(line);
+            keep
+        });
+        for line in said {
+            crate::textlog::emit_for(None, None, Level::Warn, &line);
+        }
     }
 
     /// `cfg` with its graph read again ([`super::GraphSource`]; the compiled-in chapter's graph
     /// stays as it is).
-    fn reloaded_config(&self, cfg: &RunConfig) -> Result<RunConfig, String> {
+    pub(super) fn reloaded_config(&self, cfg: &RunConfig) -> Result<RunConfig, String> {
         let mut new = cfg.clone();
         if let Some(source) = &self.settings.graph_source {
             new.graph = (source.0)()?;
@@ -96,59 +240,33 @@ impl Engine {
 /// How a stretch of the real clock ended ([`Engine::real_run`]).
 pub(super) enum RealExit {
     /// The user moved on.
-    Done(Segment),
+    Done(super::engine::Segment),
     /// A save restarts nodes in place; the real clock goes on after.
     Restart(Box<Restart>),
 }
 
-/// Nodes to restart in place on a save under the real clock.
-pub(super) struct Restart {
-    /// The file saved.
-    pub(super) file: std::path::PathBuf,
-    /// Its name as the user knows it.
-    name: String,
-    /// The run's graph with the new code.
-    spec: GraphSpec,
-    /// The graph as the files now give it.
-    read: GraphSpec,
-    /// The nodes whose code or parameters changed, by graph index.
-    which: Vec<usize>,
-}
-
-/// What a save under the real clock does ([`Engine::reload_in_place`]).
-pub(super) enum InPlace {
-    /// Restart these nodes in place.
-    Restart(Box<Restart>),
-    /// As [`Engine::reload`]: the next run (`Some`), or nothing (`None`: it was said).
-    Next(Option<Next>),
-    /// The brain's file: apply `swap` (a live brain change, logged as one) and, when it
-    /// loads, say `reloaded NAME` ([`Engine::brain_reloaded`]).
-    Brain {
-        /// The file as the user knows it.
-        name: String,
-        /// The brain change.
-        swap: Command,
-    },
-}
-
 impl Engine {
     /// `file` was saved while the real clock runs `running` (the run's graph as its nodes
-    /// were built): the nodes whose code or parameters changed, to restart in place; a
-    /// brain file swapped in at once (a live brain change, logged as one); or, when the
+    /// were built; `handles`, its handles): the nodes whose code or parameters changed, to
+    /// restart in place once their code has loaded on a thread of its own; a brain file,
+    /// swapped in once it has loaded (a live brain change, logged as one); or, when the
     /// graph changed beyond its nodes' code, the run started again with the new code
-    /// ([`Engine::reload`]). Code that does not load is said, and the run goes on.
+    /// ([`Engine::reload`]). [`Engine::reload_ready`] takes up what the trial comes to;
+    /// what needs no trial is said at once.
     pub(super) fn reload_in_place(
         &mut self,
         cfg: &RunConfig,
         running: &GraphSpec,
+        handles: &GraphHandles,
         file: &Path,
-    ) -> InPlace {
+    ) {
         let name = shown_name(file);
         let new_cfg = match self.reloaded_config(cfg) {
             Ok(c) => c,
             Err(e) => {
+                self.drop_reload(false);
                 self.not_reloaded(&name, &e);
-                return InPlace::Next(None);
+                return;
             }
         };
         // What the save changed, against the files as last read (the run's graph may hold
@@ -166,16 +284,25 @@ impl Engine {
             let _ = self
                 .tx
                 .send(Telemetry::Applied(format!("{why}: the run starts again")));
-            return InPlace::Next(self.reload(cfg, file, None));
+            return self.reload(cfg, file, None);
         }
+        // A restart under way whose code has not loaded yet: its nodes restart with these.
+        let earlier: Vec<usize> = match &self.reloading {
+            Some(Pending {
+                then: Then::Restart(r),
+                ..
+            }) => r.which.clone(),
+            _ => Vec::new(),
+        };
         let saved = std::path::absolute(file).unwrap_or_else(|_| file.to_path_buf());
         let which: Vec<usize> = old
             .nodes
             .iter()
             .zip(&new_cfg.graph.nodes)
             .enumerate()
-            .filter(|(_, (o, n))| {
-                o.params != n.params
+            .filter(|(i, (o, n))| {
+                earlier.contains(i)
+                    || o.params != n.params
                     || o.python != n.python
                     || n.python
                         .as_ref()
@@ -188,23 +315,24 @@ impl Engine {
             let _ = self.tx.send(Telemetry::Applied(
                 "the actuator changed: the run starts again".into(),
             ));
-            return InPlace::Next(self.reload(cfg, file, None));
+            return self.reload(cfg, file, None);
         }
         let policy = self.current_policy_spec(&self.run_policy);
         let brain = ratelab_runtime::interpreter::parse_spec(&policy)
             .and_then(|(script, _)| std::path::absolute(script).ok());
         if which.is_empty() && brain.is_some_and(|b| b == saved) {
             // The brain: loaded again from the file and swapped in, as `p` swaps brains.
-            return InPlace::Brain {
-                name,
-                swap: Command::SetPolicy { spec: policy },
+            let job = Job::Brain {
+                policy: policy.clone(),
             };
+            let then = Then::Brain(Command::SetPolicy { spec: policy });
+            return self.start_reload(name, job, then);
         }
         if which.is_empty() {
             let _ = self.tx.send(Telemetry::Applied(format!(
                 "reloaded {name}: no node's code or parameters changed (the run goes on)"
             )));
-            return InPlace::Next(None);
+            return;
         }
         // The run's graph, its rates and depths as they are, with the saved code.
         let mut spec = running.clone();
@@ -212,13 +340,27 @@ impl Engine {
             spec.nodes[i].params = new_cfg.graph.nodes[i].params.clone();
             spec.nodes[i].python = new_cfg.graph.nodes[i].python.clone();
         }
-        InPlace::Restart(Box::new(Restart {
-            file: file.to_path_buf(),
-            name,
+        // Only a Python node's code can fail to return: those load in the trial, built on
+        // the live run's handles as the restart builds them (and dropped).
+        let python: Vec<usize> = which
+            .iter()
+            .copied()
+            .filter(|&i| spec.nodes[i].python.is_some())
+            .collect();
+        let mut trial = handles.clone();
+        trial.spec = std::sync::Arc::new(spec.clone());
+        let job = Job::Rebuild {
+            handles: trial,
+            seed: cfg.seed,
+            which: python,
+        };
+        let then = Then::Restart(Box::new(Restart {
+            name: name.clone(),
             spec,
             read: new_cfg.graph,
             which,
-        }))
+        }));
+        self.start_reload(name, job, then);
     }
 
     /// The brain's file `name` was loaded again and swapped in, under the real clock.
@@ -229,7 +371,9 @@ impl Engine {
     }
 
     /// Restart `r`'s nodes in `core` (stopped between two stretches of the real clock),
-    /// and say what was done, or why not (the run goes on with the code before).
+    /// and say what was done, or why not (the run goes on with the code before). Their code
+    /// has loaded in a trial already ([`Engine::reload_in_place`]): it loads again here, for
+    /// as long as it took there.
     pub(super) fn restart_in_place(&mut self, core: &mut RunCore, r: Box<Restart>) {
         let at = core.now();
         match core.restart_nodes(&r.spec, &r.which) {
@@ -254,6 +398,31 @@ impl Engine {
     }
 }
 
+/// What the lab says of a reload's trial that has not returned for [`SAID_AFTER`]: still
+/// loading (`at` is `None`), or in the instant at `at` of its run.
+fn stuck_line(name: &str, at: Option<Nanos>) -> String {
+    let secs = SAID_AFTER.as_secs();
+    match at {
+        None => format!(
+            "loading {name} has not returned after {secs} s; the run on screen is the code before"
+        ),
+        Some(t) => format!(
+            "reload of {name}: its callback has not returned after {secs} s of the trial run (t={:.2} s); the run on screen is the code before",
+            t.as_secs_f64()
+        ),
+    }
+}
+
+/// `cfg` as a reload's trial runs it: headless under the virtual clock, over the span the
+/// run before `reached` (at least [`JUDGE_AT_LEAST`], at most [`JUDGE_FOR`] and the run's
+/// duration).
+fn judged(cfg: &RunConfig, reached: Nanos) -> RunConfig {
+    let mut fresh = cfg.clone();
+    fresh.clock = ClockKind::Virtual;
+    fresh.duration = reached.max(JUDGE_AT_LEAST).min(JUDGE_FOR).min(cfg.duration);
+    fresh
+}
+
 /// `file` as the user named it: relative to the folder the lab runs in, when it is inside.
 fn shown_name(file: &Path) -> String {
     let here = std::env::current_dir().unwrap_or_default();
@@ -261,22 +430,6 @@ fn shown_name(file: &Path) -> String {
         .unwrap_or(file)
         .display()
         .to_string()
-}
-
-/// Run `cfg`'s graph with brain `policy` headless under the virtual clock, its lines
-/// muted, over the span the run before `reached` (at least [`JUDGE_AT_LEAST`], at most
-/// [`JUDGE_FOR`] and the run's duration): its figures, or why it does not load.
-fn judge(cfg: &RunConfig, policy: &str, reached: Nanos) -> Result<Metrics, String> {
-    let mut fresh = cfg.clone();
-    fresh.clock = ClockKind::Virtual;
-    fresh.duration = reached.max(JUDGE_AT_LEAST).min(JUDGE_FOR).min(cfg.duration);
-    crate::textlog::muted(|| {
-        let brain = load_policy(policy).map_err(|e| e.to_string())?;
-        let mut core =
-            RunCore::new(&fresh, brain, CoreOptions::default()).map_err(|e| e.to_string())?;
-        core.run_to_end(&StopFlag::new());
-        Ok(core.metrics())
-    })
 }
 
 /// What changed from `old` to `new`, in one line: how each run went, the sense→act latency

@@ -90,16 +90,20 @@ impl Engine {
                         return self.leave(Next::SwitchClock, core.scheduler(), ended)
                     }
                     Control::Reload { file } => {
+                        // Loaded and judged on a thread of its own: taken up below once it has.
                         let old = self.figures_now(cfg, core, ended.as_ref());
-                        if let Some(next) = self.reload(cfg, &file, Some(&old)) {
-                            return self.leave(next, core.scheduler(), ended);
-                        }
+                        self.reload(cfg, &file, Some(old));
                     }
                     Control::Quit => return self.leave(Next::Quit, core.scheduler(), ended),
                 }
                 if step_pending {
                     break;
                 }
+            }
+            // A save whose code has loaded (and been judged): its run is the next.
+            if let Some(ready) = self.reload_ready() {
+                let next = self.as_next(cfg, ready);
+                return self.leave(next, core.scheduler(), ended);
             }
             if last_status.elapsed() >= Duration::from_millis(33) {
                 self.tell_status(core, paused);

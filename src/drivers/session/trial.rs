@@ -1,0 +1,302 @@
+//! A reload's trial on a thread of its own: the saved code loaded (its import: a Python
+//! node's or brain's module-level code, its constructor) and, for a reload judged under the
+//! virtual clock, run headless. Saved code runs on the engine's thread only once it has
+//! returned here, and the engine never waits on a trial: it looks each time round its loop
+//! ([`Trial::poll`]), so the live run goes on, the keys act and `q` quits whatever the saved
+//! code does. A trial that goes [`SAID_AFTER`] without returning (still loading, or one
+//! callback of its run) is said once; a newer save supersedes it ([`Trial::cancel`]): it is
+//! stopped, the call it is stuck in interrupted as Python's `KeyboardInterrupt` (a busy
+//! loop ends there), and one that still does not end (a `time.sleep`, C code) is abandoned
+//! and said ([`Cancelled::check`]).
+//!
+//! A trial's calls hold the interpreter's lock as any Python code does: a busy loop gives it
+//! up every switch interval (5 ms by default) and a sleep at once, so a live run of Python
+//! nodes goes on beside it, slower at worst.
+
+use crate::checkpoint::load_policy;
+use crate::config::RunConfig;
+use crate::graph::{Graph, GraphHandles, GraphSpec};
+use crate::metrics::Metrics;
+use crate::run::Command;
+use crate::runcore::{CoreOptions, RunCore};
+use crate::scheduler::StopFlag;
+use crate::time::Nanos;
+use crossbeam_channel::{Receiver, TryRecvError};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+/// How long a reload's loading (its import), or one callback of its trial run, may go
+/// without returning before the lab says so (as long as the Python layer lets a script's
+/// loading run before it warns).
+pub const SAID_AFTER: Duration = Duration::from_secs(2);
+
+/// How long a superseded trial is given to end, once stopped and interrupted, before its
+/// thread is said abandoned.
+const ABANDONED_AFTER: Duration = Duration::from_secs(1);
+
+/// The trial's progress while its code loads (no instant of its run has started).
+const LOADING: u64 = u64::MAX;
+
+/// A reload under way: the saved code loading (and tried) on a thread of its own
+/// ([`Trial`]), and what is done once it has ([`super::reload`]). One at a time: a newer
+/// save supersedes it.
+pub(super) struct Pending {
+    /// The file saved, as the user knows it.
+    pub(super) name: String,
+    /// Its code, loading and tried.
+    pub(super) trial: Trial,
+    /// What is done once it has loaded.
+    pub(super) then: Then,
+}
+
+/// What a reload does once its code has loaded (and, judged, run).
+pub(super) enum Then {
+    /// Run the graph again from t = 0 with `cfg` (the new code's), said against `old`, the
+    /// run before's figures at the save (`None`: under the real clock, not judged).
+    Reload {
+        /// The next run's settings.
+        cfg: Box<RunConfig>,
+        /// The run before's figures at the save.
+        old: Option<Box<Metrics>>,
+    },
+    /// Restart nodes in place (under the real clock).
+    Restart(Box<Restart>),
+    /// Swap the brain in with this change (under the real clock).
+    Brain(Command),
+}
+
+/// Nodes to restart in place on a save under the real clock.
+pub(super) struct Restart {
+    /// The file saved, as the user knows it.
+    pub(super) name: String,
+    /// The run's graph with the new code.
+    pub(super) spec: GraphSpec,
+    /// The graph as the files now give it.
+    pub(super) read: GraphSpec,
+    /// The nodes whose code or parameters changed, by graph index.
+    pub(super) which: Vec<usize>,
+}
+
+/// What a trial does with the saved code.
+pub(super) enum Job {
+    /// Build `cfg`'s graph with brain `policy` (loading every node's and the brain's code)
+    /// and run it headless to its duration (`cfg` under the virtual clock): its figures.
+    Judge {
+        /// The run, headless, under the virtual clock.
+        cfg: Box<RunConfig>,
+        /// The brain's spec.
+        policy: String,
+    },
+    /// Build nodes `which` of the running graph `handles` holds (its spec the saved code's)
+    /// afresh with `seed`, and drop them: their code loads (a restart in place).
+    Rebuild {
+        /// The live run's handles, their spec the graph with the saved code.
+        handles: GraphHandles,
+        /// The run's seed.
+        seed: u64,
+        /// The nodes to build, by graph index.
+        which: Vec<usize>,
+    },
+    /// Load the brain `policy` and drop it (a brain swapped in place).
+    Brain {
+        /// The brain's spec.
+        policy: String,
+    },
+}
+
+/// What a trial came to: a judged run's figures (`None` for a load only), or why the code
+/// does not load.
+pub(super) type Outcome = Result<Option<Metrics>, String>;
+
+impl Job {
+    fn run(self, progress: &AtomicU64, stop: &StopFlag) -> Outcome {
+        match self {
+            Job::Judge { cfg, policy } => {
+                let brain = load_policy(&policy).map_err(|e| e.to_string())?;
+                let mut core =
+                    RunCore::new(&cfg, brain, CoreOptions::default()).map_err(|e| e.to_string())?;
+                core.run_to_end_with(stop, |t| progress.store(t.0, Ordering::Relaxed));
+                Ok(Some(core.metrics()))
+            }
+            Job::Rebuild {
+                handles,
+                seed,
+                which,
+            } => {
+                for i in which {
+                    drop(Graph::rebuild_node(&handles, seed, i).map_err(|e| e.to_string())?);
+                }
+                Ok(None)
+            }
+            Job::Brain { policy } => load_policy(&policy)
+                .map(|_brain| None)
+                .map_err(|e| e.to_string()),
+        }
+    }
+}
+
+/// A trial on its thread, as the engine sees it.
+pub(super) struct Trial {
+    result: Receiver<Outcome>,
+    /// The run time of the instant its run is in (ns), or [`LOADING`].
+    progress: Arc<AtomicU64>,
+    stop: StopFlag,
+    /// Its thread's id for the interpreter ([`ratelab_runtime::interpreter::Interpreter::enter_trial`];
+    /// 0: not known yet, or no interpreter).
+    thread: Arc<AtomicU64>,
+    /// Set when its thread is done.
+    done: Arc<AtomicBool>,
+    /// The progress last seen, and since when.
+    seen: (u64, Instant),
+    /// The progress at which it was last said not to return.
+    said: Option<u64>,
+}
+
+/// What a look at a trial finds ([`Trial::poll`]).
+pub(super) enum Poll {
+    /// It has come to this.
+    Done(Box<Outcome>),
+    /// It has not returned for [`SAID_AFTER`], first found so where it is: loading (`None`),
+    /// or in an instant of its run (`Some(t)`).
+    Stuck(Option<Nanos>),
+    /// It goes on.
+    Going,
+}
+
+/// Sets its flag when dropped: the trial's thread is done (returned or unwound).
+struct Done(Arc<AtomicBool>);
+
+impl Drop for Done {
+    fn drop(&mut self) {
+        self.0.store(true, Ordering::SeqCst);
+    }
+}
+
+impl Trial {
+    /// Start `job` on a thread of its own, its lines muted (what the code prints is said
+    /// when the run on screen runs it).
+    pub(super) fn start(job: Job) -> Trial {
+        let (tx, result) = crossbeam_channel::bounded(1);
+        let progress = Arc::new(AtomicU64::new(LOADING));
+        let stop = StopFlag::new();
+        let thread = Arc::new(AtomicU64::new(0));
+        let done = Arc::new(AtomicBool::new(false));
+        let (p, s, t, d) = (progress.clone(), stop.clone(), thread.clone(), done.clone());
+        // Not joined: a trial that never returns is left behind (a thread that cannot start
+        // drops `tx`, which the poll finds).
+        let _ = std::thread::Builder::new()
+            .name("reload-trial".into())
+            .spawn(move || {
+                let _done = Done(d);
+                if let Ok(interpreter) = ratelab_runtime::interpreter::installed() {
+                    t.store(interpreter.enter_trial(), Ordering::SeqCst);
+                }
+                let outcome = crate::textlog::muted(|| job.run(&p, &s));
+                let _ = tx.send(outcome);
+            });
+        Trial {
+            result,
+            progress,
+            stop,
+            thread,
+            done,
+            seen: (LOADING, Instant::now()),
+            said: None,
+        }
+    }
+
+    /// Look at the trial without waiting for it.
+    pub(super) fn poll(&mut self) -> Poll {
+        match self.result.try_recv() {
+            Ok(outcome) => return Poll::Done(Box::new(outcome)),
+            Err(TryRecvError::Disconnected) => {
+                return Poll::Done(Box::new(Err(
+                    "its trial ended without an outcome (its thread could not start, or failed)"
+                        .into(),
+                )))
+            }
+            Err(TryRecvError::Empty) => {}
+        }
+        let at = self.progress.load(Ordering::Relaxed);
+        if at != self.seen.0 {
+            self.seen = (at, Instant::now());
+        }
+        if self.seen.1.elapsed() < SAID_AFTER || self.said == Some(at) {
+            return Poll::Going;
+        }
+        self.said = Some(at);
+        Poll::Stuck((at != LOADING).then_some(Nanos(at)))
+    }
+
+    /// Stop the trial (a newer save supersedes it, or the run it was saved in ended): its
+    /// run stops at its next instant and the call it is in, if any, is interrupted. What it
+    /// comes to is ignored; [`Cancelled::check`] watches that it ends. `name`: the file
+    /// saved, as the user knows it.
+    pub(super) fn cancel(self, name: String) -> Cancelled {
+        self.stop.stop();
+        let mut cancelled = Cancelled {
+            name,
+            since: Instant::now(),
+            thread: self.thread,
+            done: self.done,
+            interrupted: false,
+            stuck: self.said.is_some(),
+        };
+        cancelled.interrupt();
+        cancelled
+    }
+}
+
+/// A trial stopped, until its thread is done or abandoned ([`Cancelled::check`]).
+pub(super) struct Cancelled {
+    name: String,
+    since: Instant,
+    thread: Arc<AtomicU64>,
+    done: Arc<AtomicBool>,
+    /// A `KeyboardInterrupt` was raised in the call it was in.
+    interrupted: bool,
+    /// It had been said not to return.
+    stuck: bool,
+}
+
+impl Cancelled {
+    /// Interrupt the call the trial is in, if it is in one (and not interrupted already).
+    fn interrupt(&mut self) {
+        let thread = self.thread.load(Ordering::SeqCst);
+        if self.interrupted || thread == 0 {
+            return;
+        }
+        self.interrupted = ratelab_runtime::interpreter::installed()
+            .is_ok_and(|interpreter| interpreter.interrupt_trial(thread));
+    }
+
+    /// Whether to go on watching it, and what to say of it: a stuck trial that the
+    /// interrupt ended, or one not done [`ABANDONED_AFTER`] it was stopped (a `time.sleep`,
+    /// C code, or Python that catches `KeyboardInterrupt`: its thread is left to end when
+    /// it returns, and what it comes to is ignored).
+    pub(super) fn check(&mut self) -> (bool, Option<String>) {
+        if self.done.load(Ordering::SeqCst) {
+            let said = (self.stuck && self.interrupted).then(|| {
+                format!(
+                    "reload of {}: the code saved before, which had not returned, was interrupted (KeyboardInterrupt)",
+                    self.name
+                )
+            });
+            return (false, said);
+        }
+        if self.since.elapsed() >= ABANDONED_AFTER {
+            return (
+                false,
+                Some(format!(
+                    "reload of {}: the code saved before has not returned {} s after it was interrupted (a sleep or C code cannot be): its thread is abandoned",
+                    self.name,
+                    ABANDONED_AFTER.as_secs()
+                )),
+            );
+        }
+        // A call it entered after it was stopped (it was between two).
+        self.interrupt();
+        (true, None)
+    }
+}
