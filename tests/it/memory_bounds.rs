@@ -94,6 +94,16 @@ fn a_camera_graph_that_would_fill_the_machine_is_refused_when_read() {
             started.elapsed()
         );
         assert!(peak < CAP_MIB, "peak {peak:.0} MiB: {line}");
+        // And under 1 GiB of address space (`ulimit -v`), as the old code filled 8 GiB.
+        let o = crate::hostile_readers::limited_with(
+            &args,
+            &[],
+            1 << 30,
+            Duration::from_secs(60),
+            |_| {},
+        );
+        assert_eq!(o.code, Some(2), "under ulimit -v: {o:?}");
+        assert!(o.stderr.contains("MAX_GRAPH_QUEUE_BYTES"), "{o:?}");
     }
     // The same frames at depth 1 load; deepening /image past the budget from the command
     // line is refused the same way, naming the flag.
@@ -172,6 +182,20 @@ fn a_real_clock_run_of_65536_nodes_is_refused_in_one_line_not_a_panic() {
         assert!(lines[0].contains(needle), "{needle:?} not in {}", lines[0]);
     }
     assert!(o.stdout.is_empty(), "nothing ran: {:.2000}", o.stdout);
+    // Under 8 GiB of address space (`ulimit -v`), where 5,000 nodes' threads once panicked.
+    let o = crate::hostile_readers::limited_with(
+        &["run", "--graph", &g, "--clock", "real", "--duration", "1"],
+        &[],
+        8 << 30,
+        Duration::from_secs(300),
+        |_| {},
+    );
+    assert_eq!(o.code, Some(2), "under ulimit -v: {:.2000}", o.stderr);
+    assert!(
+        o.stderr.contains("MAX_REAL_CLOCK_THREADS"),
+        "{:.2000}",
+        o.stderr
+    );
 }
 
 #[test]
