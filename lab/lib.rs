@@ -26,8 +26,8 @@ use std::process::ExitCode;
 
 /// Exit code for bad input (as clap uses for usage errors).
 const EXIT_USAGE: u8 = 2;
-/// Exit code of an exercise that ran but did not pass (a check failed, a prediction could not
-/// be read), for scripts: 0 passed, 1 not passed, 2 could not run.
+/// Exit code of an exercise that ran but did not pass (a check failed, a prediction missed or
+/// could not be read), for scripts: 0 passed, 1 not passed, 2 could not run.
 const EXIT_NOT_PASSED: u8 = 1;
 /// Exit code of a run stopped by Ctrl-C or SIGTERM (after writing its outputs).
 const EXIT_INTERRUPTED: u8 = 130;
