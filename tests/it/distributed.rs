@@ -373,9 +373,11 @@ fn ready_launch_with(
         .unwrap();
     let rx = stdout_lines(&mut launcher);
     let mut lines = Vec::new();
+    // A bound on a hang, not a timing: a loaded suite once took over 30 s here (a 200-node
+    // launch that starts in 4 s alone).
     for p in ["policy", "robot"] {
         let ready = format!("process '{p}' ready");
-        assert!(wait_line(&rx, &mut lines, &ready, 30), "{lines:?}");
+        assert!(wait_line(&rx, &mut lines, &ready, 90), "{lines:?}");
     }
     std::thread::sleep(Duration::from_millis(1000));
     (launcher, rx, lines)
