@@ -3,7 +3,9 @@
 use clap::{Args, CommandFactory, FromArgMatches, Parser, Subcommand};
 use ratelab::config::{check_rate, duration_from_secs, phase_offset_from_ms, ClockKind};
 use ratelab::graph::nodes::camera::{MAX_FRAME_PX, MIN_FRAME_PX};
+use ratelab::outputs::{Outputs, Ros2Domain};
 use ratelab::qos::Fault;
+use ratelab::run_spec::{GraphSettings, RunSpec, DEFAULT_CLOCK, DEFAULT_POLICY};
 use std::path::PathBuf;
 
 /// ratelab: a graph of nodes at fixed rates keeping a MuJoCo cartpole upright.
@@ -565,11 +567,11 @@ pub struct RunArgs {
     pub queue_depth: Option<usize>,
     /// Clock: real (node threads against the monotonic clock, by the executors' rules) or
     /// virtual (deterministic).
-    #[arg(long, default_value = "real", value_parser = parse_clock)]
+    #[arg(long, default_value_t = DEFAULT_CLOCK, value_parser = parse_clock)]
     pub clock: ClockKind,
     /// The brain: `scripted`, a Python function (`FILE.py[:FUNCTION]`, default `act`), or a
     /// checkpoint (.pt/.pth, .safetensors, .onnx).
-    #[arg(long, default_value = "scripted")]
+    #[arg(long, default_value = DEFAULT_POLICY)]
     pub policy: String,
     /// Break the controller: control rate 5 Hz (the chapter's cliff demo).
     #[arg(long = "break")]
@@ -637,14 +639,57 @@ impl RunArgs {
     /// # Errors
     /// `ROS_DOMAIN_ID` is set to something that is not a domain.
     pub fn ros2_domain(&self) -> Result<Option<u32>, String> {
-        match self.ros2 {
-            None => Ok(None),
-            Some(Some(d)) => Ok(Some(d)),
-            Some(None) => match std::env::var("ROS_DOMAIN_ID") {
-                Ok(v) if !v.trim().is_empty() => ratelab::ros2::names::parse_domain(&v)
-                    .map(Some)
-                    .map_err(|e| format!("ROS_DOMAIN_ID: {e}")),
-                _ => Ok(Some(0)),
+        RunSpec::from(self).outputs.ros2_domain()
+    }
+}
+
+impl From<&GraphArgs> for GraphSettings {
+    /// The graph flags as the library's settings, in the order given.
+    fn from(g: &GraphArgs) -> GraphSettings {
+        GraphSettings {
+            file: g.graph.clone(),
+            rates: g.rates.clone(),
+            depths: g.depths.clone(),
+            qos: g.qos.clone(),
+            links: g.links.clone(),
+            leases_ms: g.leases.clone(),
+            stalls: g.stalls.clone(),
+            kills: g.kills.clone(),
+            computes: g.computes.clone(),
+            executor: g.executor,
+        }
+    }
+}
+
+impl From<&RunArgs> for RunSpec {
+    /// `ratelab run`'s flags as the library's settings: the command line's whole share of a
+    /// run's set-up (every rule is [`RunSpec::config`]'s).
+    fn from(a: &RunArgs) -> RunSpec {
+        RunSpec {
+            graph: GraphSettings::from(&a.graph),
+            seed: a.seed,
+            duration_s: a.duration,
+            clock: a.clock,
+            sensor_hz: a.sensor_hz,
+            control_hz: a.control_hz,
+            break_: a.break_,
+            queue_depth: a.queue_depth,
+            phase_offset_ms: a.phase_offset_ms.clone(),
+            smoke: a.smoke,
+            spin_margin_us: a.spin_margin_us,
+            rt_priority: a.rt_priority,
+            policy: a.policy.clone(),
+            outputs: Outputs {
+                out: a.out.clone(),
+                trace_every: a.trace_every,
+                record: a.record.clone(),
+                spawn: a.spawn,
+                record_window: a.record_window,
+                force: a.force,
+                ros2: a
+                    .ros2
+                    .map(|d| d.map_or(Ros2Domain::FromEnvironment, Ros2Domain::Given)),
+                bag: a.bag.clone(),
             },
         }
     }

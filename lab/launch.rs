@@ -48,7 +48,8 @@ pub fn run_launch(a: &LaunchArgs, force_headless: bool, stop: StopFlag) -> anyho
     let on_terminal =
         !force_headless && std::io::stdout().is_terminal() && std::io::stdin().is_terminal();
     let mut cfg = headless::config_from_args(&run)?;
-    let ros2 = headless::ros2_options(&run, &cfg.graph)?;
+    let outputs = ratelab::run_spec::RunSpec::from(&run).outputs;
+    let ros2 = ratelab::outputs::ros2_options(&outputs, &cfg.graph)?;
     ratelab::ros2::external::check_placement(&cfg.graph).map_err(anyhow::Error::msg)?;
     // Across processes each process spins its own executors: `--executor` makes one per
     // process; an [executors] table must hold one process's nodes.
@@ -114,7 +115,7 @@ pub fn run_launch(a: &LaunchArgs, force_headless: bool, stop: StopFlag) -> anyho
         if placed == 1 { "" } else { "es" },
         placement_line(&cfg.graph)
     );
-    let recording = headless::open_recording(&run, &cfg, &brain.label())?;
+    let recording = ratelab::outputs::open_recording(&outputs, &cfg, &brain.label())?;
     let report = if on_terminal || recording.is_some() {
         launch_watched(cfg, opts, &stop, on_terminal, recording.as_ref())?
     } else {
@@ -152,7 +153,7 @@ pub fn run_launch(a: &LaunchArgs, force_headless: bool, stop: StopFlag) -> anyho
         "process(es) {} did not report: their nodes' figures are missing from the summary",
         ratelab::text::listed(missing.iter().map(String::as_str))
     );
-    headless::end_is_an_error(&report)
+    ratelab::outputs::end_is_an_error(&report)
 }
 
 /// `--kill-process`'s kills, checked: each names a process of the graph that this launch
@@ -205,7 +206,7 @@ fn offer_ros2(
     spec: &ratelab::graph::GraphSpec,
     stop: &StopFlag,
 ) -> anyhow::Result<ratelab::ros2::session::Ros2Session> {
-    let link = headless::open_ros2(stop)?;
+    let link = ratelab::outputs::open_ros2(stop)?;
     println!(
         "[ratelab] launch: offering the graph to ROS 2 on domain {domain}: each process its own nodes, {} /clock, {}",
         if spec.first_external().is_some() {

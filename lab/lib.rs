@@ -14,7 +14,6 @@ mod rendezvous;
 mod ros2;
 mod sweep;
 mod top;
-mod trace;
 mod tui;
 
 use clap::error::ErrorKind;
@@ -72,8 +71,11 @@ fn lab(args: &cli::RunArgs, stop: StopFlag) -> anyhow::Result<()> {
     if args.bag.is_some() {
         anyhow::bail!("--bag writes one run's bag: use it with `ratelab run --ros2`, not the lab");
     }
-    let ros2 = match headless::ros2_options(args, &cfg.graph)? {
-        Some(opts) => Some((headless::open_ros2(&stop)?, opts)),
+    let ros2 = match ratelab::outputs::ros2_options(
+        &ratelab::run_spec::RunSpec::from(args).outputs,
+        &cfg.graph,
+    )? {
+        Some(opts) => Some((ratelab::outputs::open_ros2(&stop)?, opts)),
         None => None,
     };
     let alt_policy = (args.policy != "scripted").then(|| args.policy.clone());
@@ -288,8 +290,9 @@ pub const PYTHON_GRACE: std::time::Duration = std::time::Duration::from_millis(3
 /// ([`ratelab::graph::registry::register`], [`ratelab::msg::register`]): every front end —
 /// the lab, `run`, `launch` (whose processes are this program started again, so each
 /// registers them too), `sweep`, `cliff`, `exercise`, `bench`, `replay`, `kinds`, `msgs` —
-/// then knows them. Returns the exit code: 0 done, 1 an exercise not passed, 2 bad input or
-/// a failed run, 130 interrupted (Ctrl-C, SIGTERM), 141 a closed stdout.
+/// then knows them. Returns the exit code: 0 done, 1 an exercise not passed or what ros2cli
+/// refuses with exit 1 (`ratelab ros2`: `Node not found`, …), 2 bad input or a failed run,
+/// 130 interrupted (Ctrl-C, SIGTERM), 141 a closed stdout.
 ///
 /// ```no_run
 /// fn main() -> std::process::ExitCode {
@@ -447,6 +450,15 @@ pub fn run_command_line(args: Vec<std::ffi::OsString>, register: impl FnOnce()) 
             // A graph file's error is `FILE:LINE:COL: reason`, as compilers print them.
             // Not `eprintln!`: stderr may be a terminal that hung up (SIGHUP).
             let mut err = std::io::stderr();
+            // What ros2cli refuses with its message alone and exit 1 (`ratelab ros2`).
+            if let Some(refused) = e.downcast_ref::<ros2::Refused>() {
+                let _ = writeln!(err, "{}", printable(&refused.0));
+                return if interrupted.is_stopped() {
+                    EXIT_INTERRUPTED
+                } else {
+                    ros2::EXIT_REFUSED
+                };
+            }
             // One line whatever the error quotes (a flag's value, a file's text, a peer's
             // name, a learner's exception): its control characters are written out.
             let _ = match e.downcast_ref::<ratelab::graph::spec::SpecError>() {

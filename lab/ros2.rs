@@ -5,7 +5,7 @@
 
 use anyhow::{anyhow, Result};
 use clap::{Args, Subcommand};
-use ratelab::ros2::{echo, inspect, type_description};
+use ratelab::ros2::{echo, inspect, subscription, type_description};
 use ratelab::scheduler::StopFlag;
 use std::io::Write;
 use std::sync::{Arc, Mutex};
@@ -64,8 +64,12 @@ pub enum ParamVerb {
     List {
         /// The node (`/policy` or `policy`); none: every node.
         node: Option<String>,
+        /// Hidden nodes too (a name beginning with `_`), as ros2cli's.
+        #[arg(long = "include-hidden-nodes")]
+        include_hidden_nodes: bool,
     },
-    /// Set one parameter, as `ros2 param set` does (the value read as YAML: `20.0`).
+    /// Set one parameter, as `ros2 param set` does (the value read as YAML: `20.0`); a set
+    /// the node refuses is said on stderr, exit 0, as ros2cli's.
     Set {
         /// The node (`/policy` or `policy`).
         node: String,
@@ -73,6 +77,9 @@ pub enum ParamVerb {
         name: String,
         /// Its new value (`20.0`, `true`, `[1, 2]`, `text`).
         value: String,
+        /// A hidden node too (a name beginning with `_`), as ros2cli's.
+        #[arg(long = "include-hidden-nodes")]
+        include_hidden_nodes: bool,
     },
     /// One parameter's value, as `ros2 param get` prints it (`Double value is: 50.0`).
     Get {
@@ -80,6 +87,9 @@ pub enum ParamVerb {
         node: String,
         /// The parameter (`rate_hz`).
         name: String,
+        /// A hidden node too (a name beginning with `_`), as ros2cli's.
+        #[arg(long = "include-hidden-nodes")]
+        include_hidden_nodes: bool,
     },
 }
 
@@ -110,12 +120,24 @@ pub enum BagVerb {
 /// `ratelab ros2 node …`.
 #[derive(Debug, Clone, Subcommand)]
 pub enum NodeVerb {
-    /// Every node's name (`/talker`).
-    List,
-    /// A node's publishers, subscribers, services and clients with their types.
+    /// Every node's name (`/talker`), sorted; a name nodes share is listed for each, after a
+    /// warning on stderr, as ros2cli's.
+    List {
+        /// Hidden nodes too (a name beginning with `_`), as ros2cli's `-a`.
+        #[arg(short = 'a', long = "all")]
+        all: bool,
+        /// Only the number of nodes.
+        #[arg(short = 'c', long = "count-nodes")]
+        count: bool,
+    },
+    /// A node's publishers, subscribers, services and clients with their types (nodes that
+    /// share the name: a warning on stderr, and one of them, as ros2cli's).
     Info {
         /// The node (`/talker` or `talker`).
         node: String,
+        /// A hidden node, and hidden topics and services (a name part beginning with `_`).
+        #[arg(long = "include-hidden")]
+        include_hidden: bool,
     },
 }
 
@@ -127,6 +149,12 @@ pub enum TopicVerb {
         /// Show each topic's type.
         #[arg(short = 't', long = "show-types")]
         types: bool,
+        /// Only the number of topics.
+        #[arg(short = 'c', long = "count-topics")]
+        count: bool,
+        /// Hidden topics too (a name part beginning with `_`), as ros2cli's.
+        #[arg(long = "include-hidden-topics")]
+        include_hidden: bool,
     },
     /// A topic's type and endpoint counts (`-v`: each endpoint with its node and QoS).
     Info {
@@ -136,7 +164,8 @@ pub enum TopicVerb {
         #[arg(short, long)]
         verbose: bool,
     },
-    /// Print a topic's messages as YAML, `---` between them, until Ctrl-C.
+    /// Print a topic's messages as YAML, `---` between them, until Ctrl-C (a latched
+    /// topic's stored messages first, at once).
     Echo {
         /// The topic.
         topic: String,
@@ -146,29 +175,98 @@ pub enum TopicVerb {
         /// Print this many messages and exit.
         #[arg(short = 'n', long = "max-count", value_name = "N")]
         count: Option<u64>,
+        /// Stop waiting after this many seconds, as ros2cli's `--timeout` (exit 0).
+        #[arg(long, value_name = "S")]
+        timeout: Option<f64>,
+        /// The QoS to subscribe with.
+        #[command(flatten)]
+        qos: QosArgs,
     },
     /// Print a topic's bandwidth every second, until Ctrl-C.
     Bw {
         /// The topic.
         topic: String,
         /// Messages the figures are taken over (the newest).
-        #[arg(short, long, default_value_t = 100)]
+        #[arg(
+            short,
+            long,
+            default_value_t = 100,
+            value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..)
+        )]
         window: usize,
         /// Stop after this many seconds (default: at Ctrl-C).
         #[arg(long, value_name = "S")]
         duration: Option<f64>,
+        /// The QoS to subscribe with.
+        #[command(flatten)]
+        qos: QosArgs,
     },
     /// Print a topic's rate every second, until Ctrl-C.
     Hz {
         /// The topic.
         topic: String,
-        /// Messages the figures are taken over (the newest).
-        #[arg(short, long, default_value_t = 10_000)]
+        /// Intervals between messages the figures are taken over (the newest), as
+        /// ros2cli's window.
+        #[arg(
+            short,
+            long,
+            default_value_t = 10_000,
+            value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..)
+        )]
         window: usize,
         /// Stop after this many seconds (default: at Ctrl-C).
         #[arg(long, value_name = "S")]
         duration: Option<f64>,
+        /// The QoS to subscribe with.
+        #[command(flatten)]
+        qos: QosArgs,
     },
+}
+
+/// ros2cli's QoS flags of `echo`, `hz` and `bw` (`add_qos_arguments`): with neither, the
+/// subscription takes what every publisher of the topic offers, as ros2cli's `choose_qos`
+/// (`ratelab::ros2::subscription`).
+#[derive(Debug, Clone, Default, Args)]
+pub struct QosArgs {
+    /// Quality of service reliability setting to subscribe with (overrides the
+    /// sensor_data profile's best_effort; default: reliable when every publisher offers
+    /// it, and any --qos-* flag turns that adaptation off, as ros2cli's).
+    #[arg(
+        long = "qos-reliability",
+        value_name = "POLICY",
+        value_parser = clap::builder::PossibleValuesParser::new(subscription::RELIABILITY_KEYS)
+    )]
+    pub reliability: Option<String>,
+    /// Quality of service durability setting to subscribe with (overrides the sensor_data
+    /// profile's volatile; default: transient_local when every publisher offers it, so a
+    /// latched topic's stored messages print at once).
+    #[arg(
+        long = "qos-durability",
+        value_name = "POLICY",
+        value_parser = clap::builder::PossibleValuesParser::new(subscription::DURABILITY_KEYS)
+    )]
+    pub durability: Option<String>,
+}
+
+impl QosArgs {
+    /// The flags, read.
+    ///
+    /// # Errors
+    /// A value that is not one of the keys (clap refuses those first).
+    fn flags(&self) -> Result<subscription::QosFlags> {
+        let reliability = self.reliability.as_deref();
+        let durability = self.durability.as_deref();
+        Ok(subscription::QosFlags {
+            reliability: reliability
+                .map(subscription::reliability_from_key)
+                .transpose()
+                .map_err(|e| anyhow!(e))?,
+            durability: durability
+                .map(subscription::durability_from_key)
+                .transpose()
+                .map_err(|e| anyhow!(e))?,
+        })
+    }
 }
 
 /// The domain: `--domain`, else `ROS_DOMAIN_ID`, else 0.
@@ -183,11 +281,40 @@ fn domain(args: &Ros2Args) -> Result<u32> {
     }
 }
 
+/// A refusal ros2cli makes by a verb's returned message (`return 'Node not found'`) or its
+/// `RuntimeError` (`Cannot echo topic …`), which ros2cli's `main` hands to `sys.exit`: the
+/// message alone on stderr, exit 1 ([`EXIT_REFUSED`]). ratelab's own refusals (a bad flag,
+/// no router, a topic nobody publishes) stay `error: …`, exit 2.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Refused(pub String);
+
+impl std::fmt::Display for Refused {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+impl std::error::Error for Refused {}
+
+/// The exit code of a [`Refused`] verb: ros2cli's, 1 (`sys.exit` of a message).
+pub const EXIT_REFUSED: u8 = 1;
+
+/// `message` as a [`Refused`] error.
+fn refused(message: String) -> anyhow::Error {
+    anyhow::Error::new(Refused(message))
+}
+
+/// ros2cli's warning `w` on stderr, before what it warns of is printed on stdout.
+fn warn(w: &str) {
+    let _ = writeln!(std::io::stderr(), "{w}");
+}
+
 /// Run `ratelab ros2 …` until done or `stop` (Ctrl-C).
 ///
 /// # Errors
-/// One line: a bad domain or wait, no router, an unknown node or topic, a topic nobody
-/// publishes within the wait.
+/// One line: a bad domain or wait, no router, a topic nobody publishes within the wait;
+/// what ros2cli refuses with exit 1 as [`Refused`] (an unknown node or topic, a parameter
+/// not set, a topic of two types to `echo`, `hz` or `bw`).
 pub fn run(args: &Ros2Args, stop: StopFlag) -> Result<()> {
     if let Ros2Command::Bag(verb) = &args.what {
         return bag(verb, &stop);
@@ -205,39 +332,50 @@ pub fn run(args: &Ros2Args, stop: StopFlag) -> Result<()> {
     let g = inspect::seen(&session, domain, wait)?;
     let mut out = std::io::stdout().lock();
     match &args.what {
-        Ros2Command::Node(NodeVerb::List) => write!(out, "{}", inspect::node_list(&g))?,
-        Ros2Command::Node(NodeVerb::Info { node }) => write!(
-            out,
-            "{}",
-            inspect::node_info(&g, node).map_err(|e| anyhow!(e))?
-        )?,
-        Ros2Command::Topic(TopicVerb::List { types }) => {
-            write!(out, "{}", inspect::topic_list(&g, *types))?
+        Ros2Command::Node(verb) => node(&g, verb, &mut out)?,
+        Ros2Command::Topic(TopicVerb::List {
+            types,
+            count,
+            include_hidden,
+        }) => {
+            if *count {
+                writeln!(out, "{}", inspect::topic_count(&g, *include_hidden))?
+            } else {
+                write!(out, "{}", inspect::topic_list(&g, *types, *include_hidden))?
+            }
         }
         Ros2Command::Topic(TopicVerb::Info { topic, verbose }) => write!(
             out,
             "{}",
-            inspect::topic_info(&g, topic, *verbose).map_err(|e| anyhow!(e))?
+            inspect::topic_info(&g, topic, *verbose).map_err(refused)?
         )?,
-        Ros2Command::Topic(TopicVerb::Echo { topic, once, count }) => {
+        Ros2Command::Topic(TopicVerb::Echo {
+            topic,
+            once,
+            count,
+            timeout,
+            qos,
+        }) => {
             let limit = if *once { Some(1) } else { *count };
+            let timeout = until("--timeout", *timeout)?;
             drop(out);
-            echo_topic(&session, (&g, domain), topic, limit, &stop)?;
+            echo_topic(
+                &session,
+                (&g, domain),
+                (topic.as_str(), qos),
+                (limit, timeout),
+                &stop,
+            )?;
         }
         Ros2Command::Topic(TopicVerb::Hz {
             topic,
             window,
             duration,
+            qos,
         }) => {
             drop(out);
-            every_second(
-                &session,
-                &g,
-                topic,
-                Figures::Hz(inspect::Rate::new(*window)),
-                *duration,
-                &stop,
-            )?;
+            let hz = Figures::Hz(inspect::Rate::new(*window));
+            every_second(&session, &g, (topic.as_str(), qos), hz, *duration, &stop)?;
         }
         Ros2Command::Bag(_) => {}
         Ros2Command::Param(verb) => write!(out, "{}", param(&session, &g, domain, verb)?)?,
@@ -249,18 +387,46 @@ pub fn run(args: &Ros2Args, stop: StopFlag) -> Result<()> {
             topic,
             window,
             duration,
+            qos,
         }) => {
-            writeln!(out, "Subscribed to [{}]", ratelab::text::printable(topic))?;
             drop(out);
             let bw = Figures::Bw(inspect::Bandwidth::new(*window));
-            every_second(&session, &g, topic, bw, *duration, &stop)?;
+            every_second(&session, &g, (topic.as_str(), qos), bw, *duration, &stop)?;
         }
     }
     drop(session);
     Ok(())
 }
 
-/// `ratelab ros2 param …`'s output.
+/// `ratelab ros2 node …`: what ros2cli prints on `out`, its warning first on stderr.
+///
+/// # Errors
+/// [`Refused`]: no node of that name (`node info`); `out` failed.
+fn node(g: &inspect::Seen, verb: &NodeVerb, out: &mut impl Write) -> Result<()> {
+    match verb {
+        NodeVerb::List { all, count: true } => writeln!(out, "{}", inspect::node_count(g, *all))?,
+        NodeVerb::List { all, count: false } => {
+            let list = inspect::node_list(g, *all);
+            if let Some(w) = list.warning {
+                warn(w);
+            }
+            write!(out, "{}", list.names)?;
+        }
+        NodeVerb::Info {
+            node,
+            include_hidden,
+        } => {
+            let info = inspect::node_info(g, node, *include_hidden).map_err(refused)?;
+            if let Some(w) = &info.warning {
+                warn(w);
+            }
+            write!(out, "{}", info.text)?;
+        }
+    }
+    Ok(())
+}
+
+/// `ratelab ros2 param …`'s output (a refused `set`: ros2cli's line on stderr, and none).
 fn param(
     session: &inspect::Session,
     g: &inspect::Seen,
@@ -268,21 +434,33 @@ fn param(
     verb: &ParamVerb,
 ) -> Result<String> {
     use ratelab::ros2::param_cli;
-    // As ros2cli says a node the graph does not have.
-    let known = |n: &str| inspect::known_node(g, n).ok_or_else(|| anyhow!("Node not found"));
+    // As ros2cli says a node the graph does not have, or hides.
+    let known = |n: &str, hidden: bool| {
+        inspect::known_node(g, n, hidden).ok_or_else(|| refused("Node not found".into()))
+    };
     match verb {
-        ParamVerb::List { node: Some(node) } => {
-            let node = known(node)?;
+        ParamVerb::List {
+            node: Some(node),
+            include_hidden_nodes,
+        } => {
+            let node = known(node, *include_hidden_nodes)?;
             let names = param_cli::list(session, domain, &node, PARAM_TIMEOUT)?;
             Ok(param_cli::list_text(&node, &names, false))
         }
-        ParamVerb::List { node: None } => {
-            // Every node that serves its parameters, by name.
+        ParamVerb::List {
+            node: None,
+            include_hidden_nodes,
+        } => {
+            // Every node that serves its parameters, by name; a hidden one when asked.
             let mut nodes: Vec<String> = g
                 .endpoints
                 .iter()
                 .filter(|e| e.kind == inspect::EndpointKind::Service)
                 .filter_map(|e| e.topic.strip_suffix("/list_parameters").map(str::to_string))
+                .filter(|n| {
+                    let base = n.rsplit('/').next().unwrap_or_default();
+                    *include_hidden_nodes || !ratelab::ros2::names::is_hidden_node(base)
+                })
                 .collect();
             nodes.sort();
             nodes.dedup();
@@ -296,21 +474,32 @@ fn param(
             }
             Ok(out)
         }
-        ParamVerb::Set { node, name, value } => {
-            let node = known(node)?;
+        ParamVerb::Set {
+            node,
+            name,
+            value,
+            include_hidden_nodes,
+        } => {
+            let node = known(node, *include_hidden_nodes)?;
             let value = param_cli::value_from_text(value).map_err(|e| anyhow!(e))?;
-            Ok(param_cli::set(
-                session,
-                domain,
-                (&node, name),
-                value,
-                PARAM_TIMEOUT,
-            )?)
+            let asked = (node.as_str(), name.as_str());
+            match param_cli::set(session, domain, asked, value, PARAM_TIMEOUT)? {
+                param_cli::SetAnswer::Set(said) => Ok(said + "\n"),
+                // ros2cli prints a refusal on stderr and exits 0.
+                param_cli::SetAnswer::Refused(said) => {
+                    warn(&said);
+                    Ok(String::new())
+                }
+            }
         }
-        ParamVerb::Get { node, name } => {
-            let node = known(node)?;
+        ParamVerb::Get {
+            node,
+            name,
+            include_hidden_nodes,
+        } => {
+            let node = known(node, *include_hidden_nodes)?;
             let value = param_cli::get(session, domain, &node, name, PARAM_TIMEOUT)?;
-            param_cli::get_text(value.as_ref()).map_err(|e| anyhow!(e))
+            param_cli::get_text(value.as_ref()).map_err(refused)
         }
     }
 }
@@ -328,25 +517,60 @@ fn publisher<'a>(g: &'a inspect::Seen, topic: &str) -> Result<&'a inspect::Endpo
         })
 }
 
+/// Subscribe to `topic` as ros2cli subscribes (`ratelab::ros2::subscription`): the QoS
+/// chosen from what its publishers offer and the `qos` flags, ros2cli's lines about that
+/// choice printed first on stdout. `on` gets each payload; the subscription (held while
+/// listening) and the publisher whose key, type and hash it took. A topic of two types is
+/// [`Refused`] first, in ros2cli's words, whichever verb asked.
+fn listen<'a>(
+    session: &inspect::Session,
+    g: &'a inspect::Seen,
+    topic: &str,
+    qos: &QosArgs,
+    on: impl Fn(Vec<u8>) + Send + Sync + 'static,
+) -> Result<(subscription::Subscription, &'a inspect::EndpointEntity)> {
+    // A topic of two types is refused, as ros2cli's `get_msg_class` refuses it.
+    inspect::one_type(g, topic).map_err(refused)?;
+    let p = publisher(g, topic)?;
+    let offered: Vec<subscription::QosProfile> = inspect::publishers(g, topic)
+        .iter()
+        .map(|e| e.qos)
+        .collect();
+    let choice = subscription::choose_qos(&offered, qos.flags()?);
+    if !choice.notes.is_empty() {
+        let mut out = std::io::stdout().lock();
+        for note in &choice.notes {
+            writeln!(out, "{note}")?;
+        }
+        out.flush()?;
+    }
+    let sub = subscription::subscribe(session, p, &choice.qos, on)?;
+    Ok((sub, p))
+}
+
+/// `ratelab ros2 topic echo`: at most `limit` messages, for at most `timeout`.
 fn echo_topic(
     session: &inspect::Session,
     (g, domain): (&inspect::Seen, u32),
-    topic: &str,
-    limit: Option<u64>,
+    (topic, qos): (&str, &QosArgs),
+    (limit, timeout): (Option<u64>, Option<Duration>),
     stop: &StopFlag,
 ) -> Result<()> {
-    let p = publisher(g, topic)?;
+    let start = Instant::now();
+    let (tx, rx) = crossbeam_channel::bounded::<Vec<u8>>(1024);
+    let (_sub, p) = listen(session, g, topic, qos, move |bytes| {
+        let _ = tx.try_send(bytes);
+    })?;
     let (name, hash) = inspect::type_and_hash(p);
     let node = p.node.as_ref().map(inspect::fq_name);
     // A type not described here: its publisher's node is asked once for its description.
     let mut fetched: Option<Result<ratelab::ros2::type_description::TypeDescriptionMsg, String>> =
         None;
-    let (tx, rx) = crossbeam_channel::bounded::<Vec<u8>>(1024);
-    let _sub = inspect::subscribe(session, p, move |bytes| {
-        let _ = tx.try_send(bytes);
-    })?;
     let mut printed = 0u64;
-    while !stop.is_stopped() && limit.is_none_or(|n| printed < n) {
+    while !stop.is_stopped()
+        && limit.is_none_or(|n| printed < n)
+        && timeout.is_none_or(|t| start.elapsed() < t)
+    {
         let Ok(bytes) = rx.recv_timeout(Duration::from_millis(100)) else {
             continue;
         };
@@ -381,16 +605,14 @@ fn echo_topic(
     Ok(())
 }
 
-/// `--duration S` as a run time limit (`None`: until Ctrl-C).
+/// `FLAG S` (`--duration`, `--timeout`) as a time limit (`None`: until Ctrl-C).
 ///
 /// # Errors
 /// One line when `S` is not in (0, 1000000].
-fn until(duration: Option<f64>) -> Result<Option<Duration>> {
+fn until(flag: &str, duration: Option<f64>) -> Result<Option<Duration>> {
     match duration {
         Some(s) if s.is_finite() && s > 0.0 && s <= 1e6 => Ok(Some(Duration::from_secs_f64(s))),
-        Some(s) => Err(anyhow!(
-            "--duration must be in (0, 1000000] seconds, got {s}"
-        )),
+        Some(s) => Err(anyhow!("{flag} must be in (0, 1000000] seconds, got {s}")),
         None => Ok(None),
     }
 }
@@ -401,43 +623,52 @@ enum Figures {
     Bw(inspect::Bandwidth),
 }
 
-/// Subscribe to `topic` and print `figures` every second until `duration` or Ctrl-C.
+/// Subscribe to `topic` (with the QoS ros2cli chooses, [`listen`]) and print `figures`
+/// every second, when they have something to say ([`inspect::Rate::report`],
+/// [`inspect::Bandwidth::report`]), until `duration` or Ctrl-C; `bw` says first that it
+/// subscribed, as ros2cli's.
 fn every_second(
     session: &inspect::Session,
     g: &inspect::Seen,
-    topic: &str,
+    (topic, qos): (&str, &QosArgs),
     figures: Figures,
     duration: Option<f64>,
     stop: &StopFlag,
 ) -> Result<()> {
-    let p = publisher(g, topic)?;
+    let until = until("--duration", duration)?;
     let start = Instant::now();
-    let until = until(duration)?;
+    let bw = matches!(figures, Figures::Bw(_));
     let figures = Arc::new(Mutex::new(figures));
     let seen = figures.clone();
-    let _sub = inspect::subscribe(session, p, move |bytes| {
+    let _sub = listen(session, g, topic, qos, move |bytes| {
         let t = start.elapsed().as_secs_f64();
         match &mut *seen.lock().unwrap_or_else(|e| e.into_inner()) {
             Figures::Hz(r) => r.arrived(t),
             Figures::Bw(b) => b.arrived(t, bytes.len()),
         }
     })?;
+    if bw {
+        let mut out = std::io::stdout().lock();
+        writeln!(out, "Subscribed to [{}]", ratelab::text::printable(topic))?;
+        out.flush()?;
+    }
     let mut next = start + Duration::from_secs(1);
     while !stop.is_stopped() && until.is_none_or(|u| start.elapsed() < u) {
         std::thread::sleep(Duration::from_millis(20));
         if Instant::now() >= next {
             next += Duration::from_secs(1);
             let now = start.elapsed().as_secs_f64();
-            let report = match &*figures.lock().unwrap_or_else(|e| e.into_inner()) {
+            let report = match &mut *figures.lock().unwrap_or_else(|e| e.into_inner()) {
                 Figures::Hz(r) => r.report(),
                 Figures::Bw(b) => b.report(now),
             };
-            let mut out = std::io::stdout().lock();
-            match report {
-                Some(r) => write!(out, "{r}")?,
-                None => writeln!(out, "no new messages")?,
+            // Nothing to report (too few messages; for hz, none new): nothing printed, as
+            // ros2cli prints nothing then.
+            if let Some(r) = report {
+                let mut out = std::io::stdout().lock();
+                write!(out, "{r}")?;
+                out.flush()?;
             }
-            out.flush()?;
         }
     }
     Ok(())
@@ -508,7 +739,7 @@ fn graph(
     duration: Option<f64>,
     stop: &StopFlag,
 ) -> Result<()> {
-    let until = until(duration)?;
+    let until = until("--duration", duration)?;
     let counts: Arc<Mutex<std::collections::BTreeMap<String, u64>>> = Arc::default();
     let mut subs = Vec::new();
     let mut topics: Vec<&str> = Vec::new();

@@ -13,6 +13,9 @@ export VIRTUAL_ENV
 # The ROS 2 tests' independent oracles (eclipse-zenoh, rosbags), in their own environment.
 RATELAB_ORACLE_PYTHON="$("$root/scripts/setup-oracles.sh")"
 export RATELAB_ORACLE_PYTHON
+# A ROS 2 user's environment (PyPI's ROS 2 wheels), which must not break ratelab's Python.
+RATELAB_ROS2_VENV="$("$root/scripts/setup-ros2-wheels.sh")"
+export RATELAB_ROS2_VENV
 cd "$root"
 cargo test --release --locked "$@"
 if [ $# -eq 0 ]; then

@@ -33,7 +33,10 @@
 //! - **recording** (`ratelab_recording`, `src/recording/`): [`recording`] (rerun `.rrd`);
 //! - **distributed** (`ratelab_distributed`, `src/distributed/`): [`distributed`] (the graph
 //!   across processes, over Zenoh);
-//! - **drivers** (`ratelab_drivers`, `src/drivers/`): the run core's drivers — [`run`] (one
+//! - **drivers** (`ratelab_drivers`, `src/drivers/`): [`run_spec`] (a run as data, every
+//!   front end's settings under one set of rules; [`setting`], their names), [`outputs`]
+//!   (what a run writes and offers; [`trace_csv`], its trace as it goes), [`held_run`] (a
+//!   run's results in memory, for a host program), and the run core's drivers — [`run`] (one
 //!   headless run), [`sweep`] (grids and the rate cliff), [`session`] (the lab's live
 //!   sessions, their log and replay);
 //! - **this crate**: [`exercise`] (the exercises' bands and checks).
@@ -61,13 +64,13 @@ pub use ratelab_core::{
     procs, publisher, qos, rate, realtime, ros_types, runlog, text, textlog, time, topic, Nanos,
 };
 pub use ratelab_distributed as distributed;
-pub use ratelab_drivers::{run, session, sweep};
+pub use ratelab_drivers::{held_run, outputs, run, run_spec, session, sweep, trace_csv};
 pub use ratelab_python as python;
 pub use ratelab_recording as recording;
 pub use ratelab_ros2 as ros2;
 pub use ratelab_runtime::{
-    checkpoint, command, config, graph, interpreter, plant, policy, runcore, scheduler, summary,
-    telemetry,
+    checkpoint, command, config, graph, interpreter, plant, policy, runcore, scheduler, setting,
+    summary, telemetry,
 };
 pub use ratelab_runtime::{ClockKind, RunConfig};
 // `ratelab::run` is the module and, as before the layers were crates, its function.

@@ -24,6 +24,7 @@ use std::collections::VecDeque;
 
 mod journal;
 mod review;
+mod settings;
 mod views;
 
 /// Told each new run's graph ([`App::on_graph`]): `Some(line)` to say.
@@ -68,13 +69,17 @@ pub const READ_ONLY: &str = "read-only: live changes do not cross processes yet"
 pub const NO_CHAIN: &str =
     "no sensor → policy → actuator chain here: select a node (Tab), then -/+";
 
-/// The deadlines `d` cycles through on the selected topic, ms (0: none).
-pub const DEADLINES_MS: [f64; 5] = [0.0, 25.0, 50.0, 100.0, 200.0];
+/// The deadlines `d` cycles through on the selected topic, ms (0: none; 30 ms is exercise
+/// ex5's deadline).
+pub const DEADLINES_MS: [f64; 6] = [0.0, 25.0, 30.0, 50.0, 100.0, 200.0];
 /// The link losses `L` cycles through on the selected topic (probabilities; 80 % is the
 /// loss at which exercise ex5 asks what a reliable link still delivers).
 pub const LOSSES: [f64; 6] = [0.0, 0.01, 0.05, 0.2, 0.5, 0.8];
 /// The lifespans `l` cycles through on the selected topic, ms (0: none).
 pub const LIFESPANS_MS: [f64; 5] = [0.0, 20.0, 50.0, 100.0, 200.0];
+/// The phase offsets `P` cycles the selected node (else the policy) through, ms: exercise
+/// ex3 gives the chain 0, 5 and 10 (sense, then think 5 ms later, then act 5 ms after that).
+pub const PHASES_MS: [f64; 4] = [0.0, 5.0, 10.0, 15.0];
 
 /// The first value of the ascending `cycle` above `now`, or the first of all after the
 /// last (a value from a file or flag that is not in the cycle joins it where it fits).
@@ -131,6 +136,11 @@ pub struct App {
     depths: Vec<usize>,
     /// Each topic's QoS, by topic index.
     qos: Vec<TopicQos>,
+    /// Each node's phase offset, ms, by node index: the run's `--phase-offset-ms`, then the
+    /// phase changes the engine made (`P`, a replayed `set_phase`).
+    phases: Vec<f64>,
+    /// The reliable topics whose losses this run has explained (once each, in the footer).
+    explained_losses: Vec<TopicId>,
     /// Each node's liveliness, by node index (`None`: no lease).
     alive: Vec<Option<bool>>,
     /// The run's injected faults (`--stall`, `--kill`).
@@ -263,6 +273,8 @@ impl App {
             pending_rates: Vec::new(),
             depths: Vec::new(),
             qos: Vec::new(),
+            phases: Vec::new(),
+            explained_losses: Vec::new(),
             alive: Vec::new(),
             faults: Vec::new(),
             exec: VecDeque::new(),
@@ -513,7 +525,10 @@ impl App {
                     self.timeline.push(s, s.end.max(self.now));
                 }
             }
-            Telemetry::Changed { at, text } => self.new_segment(at, text),
+            Telemetry::Changed { at, text } => {
+                self.note_phase(&text);
+                self.new_segment(at, text);
+            }
             Telemetry::ClockSwitched { at, clock } => {
                 // The same run goes on: a new segment, as a change starts one.
                 self.clock = clock.to_string();
@@ -571,6 +586,10 @@ impl App {
         self.pending_rates.clear();
         self.depths = cfg.graph.topics.iter().map(|t| t.depth).collect();
         self.qos = cfg.graph.topics.iter().map(|t| t.qos).collect();
+        self.phases = (0..cfg.graph.nodes.len())
+            .map(|i| cfg.phase_offsets.get(i).map_or(0.0, |p| p.as_millis_f64()))
+            .collect();
+        self.explained_losses.clear();
         self.faults = cfg.faults.clone();
         self.alive = cfg
             .graph
@@ -639,6 +658,7 @@ impl App {
         if s.fell {
             self.verdict = Verdict::Fell(s.t.as_secs_f64());
         }
+        self.explain_reliable_losses(&s);
         self.last = Some(s);
     }
 
@@ -854,6 +874,7 @@ impl App {
             | Msg::Filter
             | Msg::ToggleTrouble => self.navigate(m),
             Msg::TypeRate => self.typing = Some(String::new()),
+            Msg::CyclePhase => self.cycle_phase(),
             Msg::Input(c) => {
                 if let Some(t) = &mut self.typing {
                     if t.len() < 8 {
@@ -1101,107 +1122,6 @@ impl App {
             }
         };
         self.apply(cmd);
-    }
-
-    /// The selected topic's QoS, one key at a time: `f` latest ↔ fifo, `d` the next
-    /// deadline of [`DEADLINES_MS`], `L` the next link loss of [`LOSSES`], `l` the next
-    /// lifespan of [`LIFESPANS_MS`], `e` best effort ↔ reliable, `o` the actuator's
-    /// reaction to a missed deadline (hold → zero → stop). Each change is a logged command,
-    /// so it replays; one the graph refuses (e.g. `o` on a topic without a deadline) is
-    /// refused with the reason on the status line.
-    fn change_qos(&mut self, m: Msg) {
-        let Some(Selected::Topic(t)) = self.selected else {
-            self.say(
-                "select a topic with Tab first: f d L l e o change the selected topic's QoS".into(),
-            );
-            return;
-        };
-        let q = self
-            .qos
-            .get(t.0)
-            .copied()
-            .unwrap_or(self.graph.topic(t).qos);
-        let pairs = match m {
-            Msg::ToggleDelivery => match q.delivery {
-                Delivery::Latest => "delivery=fifo".to_string(),
-                Delivery::Fifo => "delivery=latest".to_string(),
-            },
-            Msg::CycleDeadline => {
-                let now_ms = q.deadline.map(|d| d.as_millis_f64());
-                let next = next_in_cycle(&DEADLINES_MS, now_ms.unwrap_or(0.0));
-                if next == 0.0 {
-                    // Off again: without a deadline there is no reaction either.
-                    "deadline_ms=none,on_deadline_missed=hold".to_string()
-                } else {
-                    format!("deadline_ms={next}")
-                }
-            }
-            Msg::CycleLoss => {
-                let loss = q.link.map_or(0.0, |l| l.loss);
-                format!("loss={}", next_in_cycle(&LOSSES, loss))
-            }
-            Msg::CycleLifespan => {
-                let now_ms = q.lifespan.map_or(0.0, |d| d.as_millis_f64());
-                let next = next_in_cycle(&LIFESPANS_MS, now_ms);
-                if next == 0.0 {
-                    "lifespan_ms=none".to_string()
-                } else {
-                    format!("lifespan_ms={next}")
-                }
-            }
-            Msg::ToggleReliability => match q.reliability {
-                Reliability::BestEffort => "reliability=reliable".to_string(),
-                Reliability::Reliable => "reliability=best_effort".to_string(),
-            },
-            Msg::CycleOnDeadlineMissed => {
-                // Said here in a line that fits 80 columns (the graph would refuse it too).
-                let actuator = self.graph.actuator;
-                if !self.graph.topic(t).subscribers.contains(&actuator) {
-                    let read = self
-                        .graph
-                        .topics
-                        .iter()
-                        .find(|x| x.subscribers.contains(&actuator))
-                        .map_or_else(String::new, |x| format!(" ({})", x.name));
-                    self.say(format!(
-                        "o: the actuator's reaction: select the topic it reads{read}"
-                    ));
-                    return;
-                }
-                if q.deadline.is_none() && q.on_deadline_missed == OnDeadlineMissed::Hold {
-                    self.say("o: reacts to a missed deadline: set one first with d".into());
-                    return;
-                }
-                let next = match q.on_deadline_missed {
-                    OnDeadlineMissed::Hold => "zero",
-                    OnDeadlineMissed::Zero => "stop",
-                    OnDeadlineMissed::Stop => "hold",
-                };
-                format!("on_deadline_missed={next}")
-            }
-            _ => return,
-        };
-        let topic = self.graph.topic(t).name.clone();
-        self.apply(Command::SetTopicQos { topic, pairs });
-    }
-
-    /// Step the selected topic's depth, or every topic's (as one command) when none is.
-    fn change_depth(&mut self, step: fn(usize) -> usize) {
-        match self.selected {
-            Some(Selected::Topic(t)) => {
-                let depth = step(self.depths.get(t.0).copied().unwrap_or(1));
-                if let Some(d) = self.depths.get_mut(t.0) {
-                    *d = depth;
-                }
-                let topic = self.graph.topic(t).name.clone();
-                self.apply(Command::SetTopicDepth { topic, depth });
-            }
-            _ => {
-                let depth = step(self.depths.first().copied().unwrap_or(1));
-                self.depths.iter_mut().for_each(|d| *d = depth);
-                self.apply(Command::SetQueueDepth { depth });
-            }
-        }
     }
 }
 

@@ -17,6 +17,10 @@ pub enum Msg {
     RateUp,
     /// Start typing an exact rate for the selected node (or the policy).
     TypeRate,
+    /// The selected node's (else the policy's) phase offset: the next of 0, 5, 10, 15 ms
+    /// (`super::app::PHASES_MS`), from the next instant on (`Command::SetPhase`; virtual
+    /// clock).
+    CyclePhase,
     /// Sensor rate down the ladder.
     SensorDown,
     /// Sensor rate up the ladder.
@@ -27,7 +31,8 @@ pub enum Msg {
     DepthUp,
     /// The selected topic's delivery: latest ↔ fifo.
     ToggleDelivery,
-    /// The selected topic's deadline: the next of none, 25, 50, 100, 200 ms.
+    /// The selected topic's deadline: the next of none, 25, 30, 50, 100, 200 ms
+    /// (`super::app::DEADLINES_MS`).
     CycleDeadline,
     /// The selected topic's link loss: the next of 0, 1 %, 5 %, 20 %, 50 %, 80 %.
     CycleLoss,
@@ -196,9 +201,19 @@ pub const BINDINGS: &[Binding] = &[
         footer: None,
     },
     Binding {
-        keys: &[(Char('s'), Msg::SensorDown), (Char('S'), Msg::SensorUp)],
-        label: "s / S",
-        help: "sensor rate down / up",
+        keys: &[(Char('P'), Msg::CyclePhase)],
+        label: "P",
+        help: "its phase offset: the next of 0, 5, 10, 15 ms (virtual)",
+        footer: None,
+    },
+    Binding {
+        keys: &[
+            (Char('s'), Msg::SensorDown),
+            (Char('S'), Msg::SensorUp),
+            (Char('p'), Msg::SwapBrain),
+        ],
+        label: "s / S / p",
+        help: "sensor rate down / up / swap brain: scripted ↔ --policy file",
         footer: None,
     },
     Binding {
@@ -301,12 +316,6 @@ pub const BINDINGS: &[Binding] = &[
         footer: None,
     },
     Binding {
-        keys: &[(Char('p'), Msg::SwapBrain)],
-        label: "p",
-        help: "swap brain: scripted ↔ the --policy file",
-        footer: None,
-    },
-    Binding {
         keys: &[
             (Char('?'), Msg::ToggleHelp),
             (Char('v'), Msg::ToggleLog),
@@ -326,8 +335,10 @@ pub const BINDINGS: &[Binding] = &[
     },
 ];
 
-/// Lines the help overlay adds after the bindings: (label, text).
-pub const HELP_NOTES: [(&str, &str); 4] = [
+/// Lines the help overlay adds after the bindings: (label, text). The last, the wire's, only
+/// in a lab attached to a graph across processes (the only one to show it); the others only
+/// in the lab's own session.
+pub const HELP_NOTES: [(&str, &str); 5] = [
     (
         "rate ladder (Hz)",
         "1000 500 200 100 60 50 40 30 25 20 15 12 10 8 7 6 5 4 3 2 1",
@@ -336,6 +347,11 @@ pub const HELP_NOTES: [(&str, &str); 4] = [
     (
         "after a fall",
         "the lab freezes; keys set the next run, r/R/c start it",
+    ),
+    (
+        // What `N lost` means under reliable delivery ([`ratelab::qos::MAX_ATTEMPTS`]).
+        "reliable, N lost",
+        "given up after 16 sends, each one lost (retx: the resends)",
     ),
     (
         "wire p50/p99 µs",
@@ -607,6 +623,69 @@ mod tests {
             Some(Msg::CycleExecutor)
         );
         assert_eq!(map_key(key(KeyCode::Char('y')), Typing::No, false), None);
+    }
+
+    /// `P` steps the selected node's phase offset (ex3's subject), a change of the run (an
+    /// attached lab refuses it); `p` still swaps the brain, on the sensor's row of the help.
+    #[test]
+    fn shift_p_sets_a_phase_offset_and_p_still_swaps_the_brain() {
+        assert_eq!(
+            map_key(key(KeyCode::Char('P')), Typing::No, false),
+            Some(Msg::CyclePhase)
+        );
+        assert_eq!(
+            map_key(
+                KeyEvent::new(KeyCode::Char('P'), KeyModifiers::SHIFT),
+                Typing::No,
+                true
+            ),
+            Some(Msg::CyclePhase)
+        );
+        assert!(!Msg::CyclePhase.only_views());
+        assert_eq!(
+            map_key(key(KeyCode::Char('p')), Typing::No, false),
+            Some(Msg::SwapBrain)
+        );
+        let row = |m: Msg| {
+            BINDINGS
+                .iter()
+                .find(|b| b.keys.iter().any(|(_, x)| *x == m))
+                .map(|b| (b.label, b.help))
+        };
+        assert_eq!(
+            row(Msg::CyclePhase),
+            Some((
+                "P",
+                "its phase offset: the next of 0, 5, 10, 15 ms (virtual)"
+            ))
+        );
+        assert_eq!(row(Msg::SwapBrain).map(|r| r.0), Some("s / S / p"));
+    }
+
+    /// The help explains what `N lost` means on a reliable topic: messages given up after
+    /// the reliable link's every send (its retransmit budget) was lost.
+    #[test]
+    fn the_help_says_what_lost_means_under_reliable_delivery() {
+        let (label, text) = HELP_NOTES
+            .iter()
+            .find(|(label, _)| label.starts_with("reliable"))
+            .expect("a note on reliable losses");
+        assert_eq!(*label, "reliable, N lost");
+        assert!(
+            text.contains(&format!("after {} sends", ratelab::qos::MAX_ATTEMPTS)),
+            "{text}"
+        );
+        // Every help row fits the 80-column overlay: 16 for the label, 2, then the text.
+        for b in BINDINGS {
+            assert!(b.label.chars().count() <= 16, "{}", b.label);
+            assert!(b.help.chars().count() <= 60, "{}", b.help);
+        }
+        for (label, text) in HELP_NOTES {
+            assert!(
+                label.chars().count() <= 16 && text.chars().count() <= 60,
+                "{label}"
+            );
+        }
     }
 
     #[test]

@@ -48,6 +48,8 @@ pub struct TopicCounts {
     /// Messages its link lost (a lossy best-effort link, or a crossing topic's sequence
     /// gaps: QoS counter `lost`).
     pub lost: u64,
+    /// Unread messages that outlived the topic's lifespan (QoS counter `expired`).
+    pub expired: u64,
     /// Messages per second: the messages published over the span of their publish stamps
     /// (so a 5 Hz topic reads 5.0), the span reaching to now once the publisher has been
     /// silent for more than twice its mean interval (a stalled or dead publisher's rate
@@ -74,6 +76,7 @@ impl TopicCounts {
             dropped: last.dropped.saturating_sub(base.dropped),
             stale_reads: last.stale_reads.saturating_sub(base.stale_reads),
             lost: last.lost.saturating_sub(base.lost),
+            expired: last.expired.saturating_sub(base.expired),
             msg_per_s: if span.0 > 0 && base.published > 0 {
                 // Both integers, so an exact rate divides exactly (249 in 4.98 s is 50.0).
                 published as f64 * Nanos::SECOND.0 as f64 / span.0 as f64

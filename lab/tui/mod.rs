@@ -1777,6 +1777,7 @@ mod tests {
                 node: Some(if i % 2 == 0 { "policy" } else { "sensor" }.into()),
                 level: if i == 39 { Level::Warn } else { Level::Info },
                 text: format!("line {i}"),
+                logged: None,
             })
             .unwrap();
         }
@@ -1869,9 +1870,10 @@ mod tests {
         assert_eq!(fell.failed_node(), None);
     }
 
-    /// A live rate change's notice, as the engine says it: at 120 columns where the policy's
-    /// ticks now fall against the sensor's stays beside the fresh run's verdict; at 80 the
-    /// verdict stays (#25: the phase relative to the sensor).
+    /// A live rate change's notice, as the engine says it, in the footer's two rows when it
+    /// does not fit one: where the policy's ticks now fall against the sensor's stays beside
+    /// the fresh run's verdict at both sizes (#25; at 80 columns one row dropped it, #72),
+    /// whole at 120; the latency panel gives the row.
     #[test]
     fn a_rate_changes_notice_keeps_the_phase_against_the_sensor_where_it_fits() {
         let notice = "control rate → 7 Hz · 142.857 ms off a fresh run's phase · ticks 2.857 ms after the sensor's (r realigns) · a fresh run falls at 4.06 s: judge no sooner";
@@ -1879,19 +1881,215 @@ mod tests {
             let (mut app, _rx) = app_after(virtual_cfg(50.0, 1), false);
             app.on_telemetry(Telemetry::Applied(notice.into()));
             let text = render(&app, w, h);
-            let footer = text.lines().last().unwrap_or_default();
-            assert!(footer.contains("control rate → 7 Hz"), "{w}x{h}: {footer}");
-            assert!(
-                footer.contains("a fresh run falls at 4.06 s: judge no sooner"),
-                "{w}x{h}: {footer}"
-            );
-            if w >= 120 {
-                assert!(
-                    footer.contains("ticks 2.857 ms after the sensor's (r realigns)"),
-                    "{footer}"
-                );
+            let lines: Vec<&str> = text.lines().collect();
+            let footer = lines[lines.len() - 2..].join("\n");
+            for part in [
+                "● control rate → 7 Hz",
+                "ticks 2.857 ms after the sensor's (r realigns)",
+                "a fresh run falls at 4.06 s: judge no sooner",
+            ] {
+                assert!(footer.contains(part), "{w}x{h}: {part}:\n{footer}");
             }
+            assert_eq!(
+                footer.contains("142.857 ms off a fresh run's phase"),
+                w >= 120,
+                "{footer}"
+            );
+            // Above it, the latency panel's foot (a row shorter while the notice leads).
+            assert!(lines[lines.len() - 3].contains("└ last"), "{text}");
         }
+        // A notice that fits keeps the footer at one row.
+        let (mut app, _rx) = app_after(virtual_cfg(50.0, 1), false);
+        app.on_telemetry(Telemetry::Applied("control rate → 7 Hz".into()));
+        let text = render(&app, 80, 24);
+        let lines: Vec<&str> = text.lines().collect();
+        assert!(lines[23].contains("● control rate → 7 Hz"), "{text}");
+        assert!(lines[22].contains("└ last"), "{text}");
+    }
+
+    /// At 80×24 the force band has three rows of plot, labelled 10, 0 and -10 N (its two
+    /// rows told only the force's sign, ≥0 and <0: #72), and the angle chart keeps its three
+    /// (-0.3, 0, 0.3 rad), the band's top border serving as the chart's bottom one.
+    #[test]
+    fn at_80x24_the_force_band_reads_in_newtons() {
+        let (app, _rx) = app_after(virtual_cfg(50.0, 1), false);
+        let text = render(&app, 80, 24);
+        assert!(
+            text.contains("├ force (N): published · applied — the hold"),
+            "{text}"
+        );
+        for label in ["│10 │", "│0  │", "│-10│", "│0.3 │", "│0   │", "│-0.3│"]
+        {
+            assert_eq!(text.matches(label).count(), 1, "{label}:\n{text}");
+        }
+        assert!(!text.contains("│≥0│") && !text.contains("│<0│"), "{text}");
+        cart_sits_on_the_rail(&text, 80, 24);
+    }
+
+    /// `P` steps the selected node's phase offset (else the policy's) through 0, 5, 10 and
+    /// 15 ms from the run's `--phase-offset-ms`, as logged `set_phase` commands (exercise
+    /// ex3's offsets: sensor 0, policy 5, actuator 10); the engine's word for a change (what
+    /// a seek back folds again) sets the lab's figure; the node's title says it at 120
+    /// columns. Under the real clock, which keeps its grid, the lab does not step its figure
+    /// (the engine refuses, saying why).
+    #[test]
+    fn shift_p_steps_a_node_s_phase_offset_as_logged_commands() {
+        use ratelab::run::Command::SetPhase;
+        let phase = |node: &str, phase_ms: f64| {
+            Control::Apply(SetPhase {
+                node: node.into(),
+                phase_ms,
+            })
+        };
+        let mut cfg = virtual_cfg(50.0, 1);
+        cfg.phase_offsets = vec![
+            ratelab::Nanos::ZERO,
+            ratelab::Nanos(5_000_000),
+            ratelab::Nanos::ZERO,
+        ];
+        let (mut app, rx) = app_after(cfg.clone(), false);
+        // Nothing selected: the policy's, from its 5 ms.
+        app.on_msg(Msg::CyclePhase);
+        // The actuator: twice.
+        while app
+            .view()
+            .nodes
+            .iter()
+            .all(|n| !(n.selected && n.name == "actuator"))
+        {
+            app.on_msg(Msg::SelectNext);
+        }
+        app.on_msg(Msg::CyclePhase);
+        app.on_msg(Msg::CyclePhase);
+        let text = render(&app, 120, 40);
+        assert!(
+            text.contains("actuator selected: -/+ its rate · P its phase (10 ms)"),
+            "{text}"
+        );
+        // The engine's word: the policy at 15 ms; Esc, then `P` wraps it to 0.
+        app.on_telemetry(Telemetry::Changed {
+            at: ratelab::Nanos::SECOND,
+            text: ratelab::session::describe(&SetPhase {
+                node: "policy".into(),
+                phase_ms: 15.0,
+            }),
+        });
+        app.on_msg(Msg::Back);
+        app.on_msg(Msg::CyclePhase);
+        let sent: Vec<Control> = rx.try_iter().collect();
+        assert_eq!(
+            sent,
+            vec![
+                phase("policy", 10.0),
+                phase("actuator", 5.0),
+                phase("actuator", 10.0),
+                phase("policy", 0.0),
+            ]
+        );
+        // Real clock: the same command each time (refused by the engine), the figure kept.
+        cfg.clock = ClockKind::Real;
+        let (mut real, rx) = told(&cfg, &[], ratelab::Nanos::ZERO);
+        real.on_msg(Msg::CyclePhase);
+        real.on_msg(Msg::CyclePhase);
+        let sent: Vec<Control> = rx.try_iter().collect();
+        assert_eq!(sent, vec![phase("policy", 10.0), phase("policy", 10.0)]);
+    }
+
+    /// `d` on the selected topic (/action, the actuator's input, as in exercise ex5) steps
+    /// its deadline through none, 25, 30 (ex5's), 50, 100 and 200 ms, then off again.
+    #[test]
+    fn the_deadline_key_has_ex5_s_30_ms() {
+        let (mut app, rx) = app_after(virtual_cfg(50.0, 1), false);
+        while !app.view().topics.last().unwrap().selected {
+            app.on_msg(Msg::SelectNext);
+        }
+        let mut graph = ratelab::graph::GraphSpec::chapter();
+        let mut sent = Vec::new();
+        for _ in 0..6 {
+            app.on_msg(Msg::CycleDeadline);
+            for c in rx.try_iter() {
+                if let Control::Apply(ratelab::run::Command::SetTopicQos { topic, pairs }) = c {
+                    graph.set_qos(&topic, &pairs).unwrap();
+                    sent.push(pairs);
+                }
+            }
+            let qos = graph.topics.iter().map(|t| t.qos).collect();
+            app.on_telemetry(chapter_status(qos, vec![None; 3]));
+        }
+        assert_eq!(
+            sent,
+            [
+                "deadline_ms=25",
+                "deadline_ms=30",
+                "deadline_ms=50",
+                "deadline_ms=100",
+                "deadline_ms=200",
+                "deadline_ms=none,on_deadline_missed=hold",
+            ]
+        );
+    }
+
+    /// The totals line under the graph counts lifespan's `expired` beside drops, stale reads
+    /// and losses (#72: it left them out), at both sizes.
+    #[test]
+    fn the_totals_line_counts_expired_messages() {
+        let mut cfg = virtual_cfg(10.0, 2);
+        cfg.graph
+            .set_qos(
+                "/obs",
+                "history=keep_last,depth=100,delivery=fifo,lifespan_ms=20",
+            )
+            .unwrap();
+        let (app, _rx) = app_after(cfg, false);
+        let expired = app.view().topics[0].segment_expired;
+        assert!(expired > 10, "{expired}");
+        for (w, h) in [(80, 24), (120, 40)] {
+            let text = render(&app, w, h);
+            let totals = text
+                .lines()
+                .find(|l| l.contains("since the start:") || l.contains(" totals: "))
+                .unwrap_or_else(|| panic!("no totals line:\n{text}"));
+            assert!(
+                totals.contains("/obs 0 drop") && totals.contains(&format!("{expired} expired")),
+                "{w}x{h}: {totals}"
+            );
+        }
+    }
+
+    /// A reliable topic that still counts lost messages has it explained once, in the
+    /// footer, the first time it counts one (#72: "6 lost" under reliable delivery was not
+    /// explained); a best-effort link's losses need no word.
+    #[test]
+    fn a_reliable_topic_s_first_loss_is_explained() {
+        let mut cfg = virtual_cfg(50.0, 2);
+        cfg.graph
+            .set_qos("/action", "reliability=reliable,loss=0.9")
+            .unwrap();
+        let (app, _rx) = app_after(cfg, false);
+        assert!(app.view().topics[1].segment_lost > 0);
+        let said = app.view().message.unwrap_or_default();
+        assert_eq!(
+            said,
+            "/action: lost though reliable · a message counts lost once all 16 of its sends are lost (retx: the resends)"
+        );
+        // At 80×24 it leads the footer whole, in two rows.
+        let text = render(&app, 80, 24);
+        let lines: Vec<&str> = text.lines().collect();
+        assert!(
+            lines[22].contains("● /action: lost though reliable ·"),
+            "{text}"
+        );
+        assert!(
+            lines[23].contains(
+                "a message counts lost once all 16 of its sends are lost (retx: the resends)"
+            ),
+            "{text}"
+        );
+        let mut cfg = virtual_cfg(50.0, 2);
+        cfg.graph.set_qos("/action", "loss=0.9").unwrap();
+        let (app, _rx) = app_after(cfg, false);
+        assert!(app.view().topics[1].segment_lost > 0);
+        assert_eq!(app.view().message, None);
     }
 
     /// A refused rate reads whole enough to act on at both sizes: the value tried and the

@@ -53,6 +53,9 @@ pub struct NodeView {
     pub selected: bool,
     /// Rate as set, Hz (after the run ended: the rate it ran at).
     pub set_hz: f64,
+    /// Its phase offset, ms: its ticks fall on `phase + k·period` (`--phase-offset-ms`, the
+    /// key `P`).
+    pub phase_ms: f64,
     /// After the run ended: the next run's rate, Hz, when a key changed it.
     pub next_hz: Option<f64>,
     /// Real clock: measured rate over the last second, Hz.
@@ -157,6 +160,9 @@ pub struct TopicView {
     pub segment_stale_reads: u64,
     /// Messages its link lost since then (QoS counter `lost`), in the segment line when any.
     pub segment_lost: u64,
+    /// Unread messages that outlived its lifespan since then (QoS counter `expired`), in the
+    /// segment line when any.
+    pub segment_expired: u64,
     /// Attached to a graph across processes, a topic that crosses them: its over-the-wire
     /// latency so far, (p50, p99) µs.
     pub wire_us: Option<(f64, f64)>,
@@ -446,7 +452,9 @@ impl Widget for &View {
             render_too_small(area, buf);
             return;
         }
-        let hist_h = if area.height >= 34 { 10 } else { 5 };
+        // A notice that needs two rows takes the second from the latency panel while it leads.
+        let foot_h = footer_rows(self, area.width);
+        let hist_h: u16 = (if area.height >= 34 { 10 } else { 5 }) - (foot_h - 1);
         if self.nav.zoom == Zoom::List && self.ros2.is_none() {
             // The list takes the plant's rows too: a large graph's figures at 80×24.
             let [status, list, segment, latency, footer] = Layout::vertical([
@@ -454,7 +462,7 @@ impl Widget for &View {
                 Constraint::Fill(1),
                 Constraint::Length(1),
                 Constraint::Length(hist_h),
-                Constraint::Length(1),
+                Constraint::Length(foot_h),
             ])
             .areas(area);
             render_status(self, status, buf);
@@ -471,7 +479,7 @@ impl Widget for &View {
             self,
             area.width,
             area.height,
-            area.height.saturating_sub(hist_h + 11),
+            area.height.saturating_sub(hist_h + foot_h + 10),
         );
         let [status, graph, segment, middle, latency, footer] = Layout::vertical([
             Constraint::Length(1),
@@ -479,7 +487,7 @@ impl Widget for &View {
             Constraint::Length(1),
             Constraint::Min(8),
             Constraint::Length(hist_h),
-            Constraint::Length(1),
+            Constraint::Length(foot_h),
         ])
         .areas(area);
         render_status(self, status, buf);
@@ -492,16 +500,35 @@ impl Widget for &View {
             Layout::horizontal([Constraint::Percentage(40), Constraint::Percentage(60)])
                 .areas(middle);
         render_cartpole(self, cart, buf);
-        let [angle, hold] =
-            Layout::vertical([Constraint::Percentage(56), Constraint::Percentage(44)]).areas(chart);
-        render_angle_chart(self, angle, buf);
-        render_hold_chart(self, hold, buf);
+        let (angle, hold, shared) = chart_areas(chart);
+        render_angle_chart(self, angle, buf, shared);
+        render_hold_chart(self, hold, buf, shared);
         self.render_bottom(latency, buf);
         render_footer(self, footer, buf);
         if self.help {
             render_help(area, buf, self.attached.is_some());
         }
     }
+}
+
+/// The rows of the force band (the zero-order hold's chart) at least, borders included:
+/// three rows of plot, one each for ≥ 10 N, 0 N and ≤ −10 N (two could only tell the force's
+/// sign).
+pub const HOLD_ROWS: u16 = 5;
+
+/// The angle chart's and the force band's areas in `chart`, and whether they share a border:
+/// 56 % and 44 % of it, unless that leaves the force band under [`HOLD_ROWS`] (80×24): then
+/// it takes [`HOLD_ROWS`] and the angle chart the rest, drawn without its bottom border,
+/// which the force band's top border (its title) serves for both.
+fn chart_areas(chart: Rect) -> (Rect, Rect, bool) {
+    let [angle, hold] =
+        Layout::vertical([Constraint::Percentage(56), Constraint::Percentage(44)]).areas(chart);
+    if hold.height >= HOLD_ROWS || chart.height < HOLD_ROWS + 3 {
+        return (angle, hold, false);
+    }
+    let [angle, hold] =
+        Layout::vertical([Constraint::Fill(1), Constraint::Length(HOLD_ROWS)]).areas(chart);
+    (angle, hold, true)
 }
 
 impl View {
@@ -713,6 +740,10 @@ fn selection_title(v: &View, room: usize) -> Option<String> {
     if let Some(n) = v.nodes.iter().find(|n| n.selected) {
         let name = &n.name;
         return Some(fit(vec![
+            format!(
+                " {name} selected: -/+ its rate · P its phase ({} ms) · Tab next · Esc clears ",
+                hz(n.phase_ms)
+            ),
             format!(" {name} selected: -/+ its rate · Tab next · Esc clears "),
             format!(" {name} selected: -/+ its rate · Esc clears "),
             format!(" {name}: -/+ rate · Esc "),
@@ -837,34 +868,148 @@ fn fit_message(m: &str, width: usize) -> String {
     format!("{cut}…")
 }
 
-fn render_footer(v: &View, area: Rect, buf: &mut Buffer) {
+/// A notice made to fit `rows` rows of `width` columns: whole where it fits; else its parts
+/// (separated by ` · `) packed into the rows, the middle ones dropped from the first as
+/// [`fit_message`] drops them until the rest fit (a row the next goes on from ends in ` ·`);
+/// else its words wrapped, the last row cut as [`fit_message`] cuts. In one row it is
+/// [`fit_message`]'s.
+fn fit_rows(m: &str, width: usize, rows: usize) -> Vec<String> {
+    if rows <= 1 || m.chars().count() <= width {
+        return vec![fit_message(m, width)];
+    }
+    let parts: Vec<&str> = m.split(" · ").collect();
+    let n = parts.len();
+    for drop in 0..=n.saturating_sub(2) {
+        let kept: Vec<&str> = if drop == 0 {
+            parts.clone()
+        } else {
+            std::iter::once(parts[0])
+                .chain(parts[1 + drop..n - 1].iter().copied())
+                .chain(std::iter::once(parts[n - 1]))
+                .collect()
+        };
+        if let Some(packed) = pack_parts(&kept, width, rows) {
+            return packed;
+        }
+    }
+    wrap_words(m, width, rows)
+}
+
+/// `parts` in at most `rows` rows of `width` columns, as many whole parts a row as fit,
+/// joined by ` · ` (a row the next goes on from ends in ` ·` where it has room); `None` when
+/// they do not fit.
+fn pack_parts(parts: &[&str], width: usize, rows: usize) -> Option<Vec<String>> {
+    let len = |s: &str| s.chars().count();
+    let mut out: Vec<String> = Vec::new();
+    let mut row = String::new();
+    for part in parts {
+        if len(part) > width {
+            return None;
+        }
+        if row.is_empty() {
+            row.push_str(part);
+        } else if len(&row) + 3 + len(part) <= width {
+            row.push_str(" · ");
+            row.push_str(part);
+        } else {
+            if len(&row) + 2 <= width {
+                row.push_str(" ·");
+            }
+            out.push(std::mem::take(&mut row));
+            row.push_str(part);
+        }
+    }
+    out.push(row);
+    (out.len() <= rows).then_some(out)
+}
+
+/// `m` wrapped at its spaces into at most `rows` rows of `width` columns (a word longer
+/// than a row is cut where the row ends), the last row cut as [`fit_message`] cuts.
+fn wrap_words(m: &str, width: usize, rows: usize) -> Vec<String> {
+    let mut out = Vec::new();
+    let mut rest = m.trim();
+    while out.len() + 1 < rows && rest.chars().count() > width {
+        // The row's end: at a space within it (or right after it), else at its width.
+        let end = rest
+            .char_indices()
+            .nth(width)
+            .map_or(rest.len(), |(i, _)| i);
+        let at = if rest[end..].starts_with(' ') {
+            Some(end)
+        } else {
+            rest[..end].rfind(' ').filter(|&i| i > 0)
+        };
+        let (row, next) = rest.split_at(at.unwrap_or(end));
+        out.push(row.trim_end().to_string());
+        rest = next.trim_start();
+    }
+    out.push(fit_message(rest, width));
+    out
+}
+
+/// The notice that leads the footer, if one does, with its prefix's width: after a run's end
+/// its last word (` `), else a fresh notice (` ● `); none while something is typed.
+fn leading_notice(v: &View) -> Option<(&str, usize)> {
+    if v.typing.is_some() || v.nav.typing {
+        return None;
+    }
+    let m = v.message.as_deref()?;
     // A hung callback is no end: the run goes on once it returns.
     let ended = !matches!(v.verdict, Verdict::Balanced | Verdict::Hung { .. });
+    if ended {
+        Some((m, 1))
+    } else if v.message_fresh {
+        Some((m, 3))
+    } else {
+        None
+    }
+}
+
+/// The footer's rows at `width` columns: two while the notice that leads it does not fit in
+/// one (at 80 columns a live rate change's notice: what changed, where the node's ticks now
+/// fall against the sensor's, and a fresh run's verdict), else one.
+pub(super) fn footer_rows(v: &View, width: u16) -> u16 {
+    match leading_notice(v) {
+        Some((m, prefix)) if m.chars().count() + prefix > usize::from(width) => 2,
+        _ => 1,
+    }
+}
+
+fn render_footer(v: &View, area: Rect, buf: &mut Buffer) {
+    let width = usize::from(area.width);
     // Typing a rate shows its prompt even after a fall, where the verdict leads otherwise.
-    let line = if let Some(t) = &v.typing {
-        Line::from(vec![
+    let lines: Vec<Line> = if let Some(t) = &v.typing {
+        vec![Line::from(vec![
             " rate (Hz): ".bold(),
             format!("{t}▏").into(),
             "  Enter apply · Esc cancel".dim(),
-        ])
+        ])]
     } else if v.nav.typing {
-        Line::from(vec![
+        vec![Line::from(vec![
             " filter: ".bold(),
             format!("{}▏", v.nav.text).into(),
             "  name, @process · Enter keep · Esc as before".dim(),
-        ])
-    } else if let (true, Some(m)) = (ended, &v.message) {
-        let m = fit_message(m, usize::from(area.width).saturating_sub(1));
-        Line::from(Span::from(format!(" {m}")).bold())
-    } else if let (true, Some(m)) = (v.message_fresh, &v.message) {
-        let width = usize::from(area.width);
-        let m = fit_message(m, width.saturating_sub(3));
-        let keys = (m.chars().count() + 3 + 10 <= width).then(|| "  (? keys)".dim());
-        Line::from(
-            std::iter::once(Span::from(format!(" ● {m}")).bold())
-                .chain(keys)
-                .collect::<Vec<_>>(),
-        )
+        ])]
+    } else if let Some((m, prefix)) = leading_notice(v) {
+        // In as many rows as the footer has (two when it does not fit one: footer_rows).
+        let rows = fit_rows(m, width.saturating_sub(prefix), usize::from(area.height));
+        let last = rows.len().saturating_sub(1);
+        rows.into_iter()
+            .enumerate()
+            .map(|(i, row)| match (prefix, i) {
+                (1, _) => Line::from(Span::from(format!(" {row}")).bold()),
+                _ => {
+                    let lead = if i == 0 { " ● " } else { "   " };
+                    let keys = (i == last && row.chars().count() + 3 + 10 <= width)
+                        .then(|| "  (? keys)".dim());
+                    Line::from(
+                        std::iter::once(Span::from(format!("{lead}{row}")).bold())
+                            .chain(keys)
+                            .collect::<Vec<_>>(),
+                    )
+                }
+            })
+            .collect()
     } else {
         // Attached to a graph across processes, only the keys that change the view act.
         let mut spans: Vec<Span> = match v.attached {
@@ -884,13 +1029,13 @@ fn render_footer(v: &View, area: Rect, buf: &mut Buffer) {
         // The last message after the keys, made to fit what is left (its verdict kept),
         // or left out where too little is (never a cut word or a bare `│`).
         let used: usize = spans.iter().map(|s| s.content.chars().count()).sum();
-        let left = usize::from(area.width).saturating_sub(used + 4);
+        let left = width.saturating_sub(used + 4);
         if let (Some(m), true) = (&v.message, left >= 12) {
             spans.push(Span::from(format!("  │ {}", fit_message(m, left))).italic());
         }
-        Line::from(spans)
+        vec![Line::from(spans)]
     };
-    Paragraph::new(line).render(area, buf);
+    Paragraph::new(lines).render(area, buf);
 }
 
 /// The key help over the lab; `attached`: only the keys that act in a lab that watches a
@@ -903,8 +1048,9 @@ fn render_help(area: Rect, buf: &mut Buffer, attached: bool) {
         .collect();
     let notes: Vec<Line> = HELP_NOTES
         .iter()
-        // Attached, the ladders and the fall's keys do not apply; the wire's note does.
-        .filter(|(k, _)| !attached || k.starts_with("wire"))
+        // Attached, the ladders, the fall's keys and reliable delivery's losses do not apply;
+        // the wire's note does, and only there.
+        .filter(|(k, _)| attached == k.starts_with("wire"))
         .map(|(k, d)| Line::from(vec![format!("{k:>16}  ").bold(), (*d).into()]))
         .collect();
     // A blank line between keys and notes where it fits with the footer's row left free
@@ -934,7 +1080,60 @@ fn render_help(area: Rect, buf: &mut Buffer, attached: bool) {
 
 #[cfg(test)]
 mod tests {
-    use super::fit_message;
+    use super::{chart_areas, fit_message, fit_rows, HOLD_ROWS};
+    use ratatui::layout::Rect;
+
+    /// In two rows a live rate change's notice keeps where the node's ticks now fall against
+    /// the sensor's beside the fresh run's verdict at 80 columns (one row dropped it, #72),
+    /// and reads whole at 120.
+    #[test]
+    fn a_long_notice_in_two_rows_keeps_the_phase_against_the_sensor() {
+        let m = "control rate → 7 Hz · 142.857 ms off a fresh run's phase · ticks 2.857 ms after the sensor's (r realigns) · a fresh run falls at 4.06 s: judge no sooner";
+        assert_eq!(
+            fit_rows(m, 77, 2),
+            [
+                "control rate → 7 Hz · ticks 2.857 ms after the sensor's (r realigns) ·",
+                "a fresh run falls at 4.06 s: judge no sooner",
+            ]
+        );
+        assert_eq!(
+            fit_rows(m, 117, 2),
+            [
+                "control rate → 7 Hz · 142.857 ms off a fresh run's phase · ticks 2.857 ms after the sensor's (r realigns) ·",
+                "a fresh run falls at 4.06 s: judge no sooner",
+            ]
+        );
+        // One row is fit_message's; a short notice keeps one row.
+        assert_eq!(fit_rows(m, 77, 1), [fit_message(m, 77)]);
+        assert_eq!(fit_rows("short", 77, 2), ["short"]);
+        // One long part: its words wrapped, the last row cut at a word's end.
+        let long = "policy: my_balancer.py:41: ValueError: the gain must be positive and below the limit the plant can take without tipping over";
+        assert_eq!(
+            fit_rows(long, 40, 2),
+            [
+                "policy: my_balancer.py:41: ValueError:",
+                "the gain must be positive and below…"
+            ]
+        );
+        // A word longer than a row is cut where the row ends.
+        let word = "x".repeat(50);
+        assert_eq!(fit_rows(&word, 40, 2)[0], "x".repeat(40));
+    }
+
+    /// At 80×24 the charts' column has 9 rows: the force band takes [`HOLD_ROWS`] (three rows
+    /// of plot: ≥ 10, 0 and ≤ −10 N, not only the force's sign), the angle chart the other 4
+    /// (three rows of plot, its bottom border the band's top one). Taller, 56 % and 44 %.
+    #[test]
+    fn at_80x24_the_force_band_has_three_rows_of_plot() {
+        let at = |height| Rect::new(32, 10, 48, height);
+        let (angle, hold, shared) = chart_areas(at(9));
+        assert!(shared);
+        assert_eq!((angle.y, angle.height), (10, 4));
+        assert_eq!((hold.y, hold.height), (14, HOLD_ROWS));
+        let (angle, hold, shared) = chart_areas(at(21));
+        assert!(!shared);
+        assert!(hold.height >= HOLD_ROWS && angle.height > hold.height);
+    }
 
     #[test]
     fn a_long_status_keeps_what_changed_and_the_verdict() {

@@ -765,6 +765,38 @@ impl Metrics {
         })
     }
 
+    /// Why no command reached the actuator, when none did though the chain above it ran: each
+    /// topic it reads was never published (`/cmd was never published`: a publisher killed,
+    /// stalled or silent from the start) or lost every message on its link (`every /cmd
+    /// message was lost on its link`). `None` when one reached it, or the graph names no
+    /// actuator or none of its inputs. Read from the topics' counters alone, so it says the
+    /// same of a `metrics.json` read back.
+    fn no_command_reached(&self) -> Option<String> {
+        let (actuator, _) = self.nodes.iter().find(|(_, n)| n.kind == "actuator")?;
+        let reads = |t: &TopicMetrics| {
+            t.subscriber.as_ref() == Some(actuator) || t.subscriptions.contains_key(actuator)
+        };
+        let lost = |t: &TopicMetrics| match t.subscriptions.get(actuator) {
+            Some(s) => s.lost,
+            None => t
+                .qos_counters
+                .get(crate::qos::QosCounter::Lost.key())
+                .copied()
+                .unwrap_or(0),
+        };
+        let mut why = Vec::new();
+        for (name, t) in self.topics.iter().filter(|(_, t)| reads(t)) {
+            if t.published == 0 {
+                why.push(format!("{name} was never published"));
+            } else if lost(t) >= t.published {
+                why.push(format!("every {name} message was lost on its link"));
+            } else {
+                return None;
+            }
+        }
+        (!why.is_empty()).then(|| why.join(", "))
+    }
+
     /// QoS lines, only when something is set: `qos: /cmd KL1 latest dl 40 ms link 20%: 41
     /// lost, 12 offered deadline missed …`, `liveliness: policy not alive 1×`, and the
     /// watchdog's verdict.
@@ -1040,6 +1072,10 @@ impl Metrics {
             } else if self.steps == 0 {
                 // Nothing was applied: the same, from the other end of the chain.
                 "sense->act latency: none (the actuator applied no command)".to_string()
+            } else if let Some(why) = self.no_command_reached() {
+                // Its input's publisher never published (or its link lost everything): the
+                // mean of no samples is no latency, not 0.0 ms.
+                format!("sense->act latency: none (no command reached the actuator: {why})")
             } else {
                 format!(
                     "mean sense->act latency: {:.1} ms  (p50 {:.1} | p99 {:.1} | max {:.1} ms{policy_period})",
@@ -1097,6 +1133,60 @@ impl Metrics {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The safety graph's `metrics.json` of a run whose `/cmd` (safety → actuator) was
+    /// published `cmd` times, `lost` of them on its link, and whose mean latency reads 0.0 ms
+    /// (a mean of no samples, or of samples at matched rates under the virtual clock).
+    fn safety_run(cmd: u64, lost: u64) -> Metrics {
+        let lost = if lost > 0 {
+            format!(r#", "lost": {lost}"#)
+        } else {
+            String::new()
+        };
+        let json = format!(
+            r#"{{
+  "balanced": false, "clock": "virtual", "control_hz": 50.0, "actuator_hz": 50.0, "seed": 0,
+  "duration_s": 2.0, "steps": 32, "sim_time_s": 0.62, "final_pole_angle": 0.21,
+  "mean_latency_ms": 0.0, "latency_p50_ms": 0.0, "latency_p99_ms": 0.0, "latency_max_ms": 0.0,
+  "action_published": 32, "fell_at_s": 0.62, "policy": "scripted", "nonfinite_actions": 0,
+  "nodes": {{
+    "actuator": {{"kind": "actuator", "rank": 3, "rate_hz": 50.0, "ticks": 32}},
+    "safety": {{"kind": "safety", "rank": 2, "rate_hz": 50.0, "ticks": 32}}
+  }},
+  "topics": {{
+    "/cmd": {{"type": "force", "publisher": "safety", "subscriber": "actuator", "depth": 1,
+      "published": {cmd}, "dropped": 0, "stale_reads": 0, "msg_per_s": 0.0{lost}}}
+  }}
+}}"#
+        );
+        serde_json::from_str(&json).unwrap()
+    }
+
+    /// No command reached the actuator (its input's publisher never published, as a safety
+    /// node killed at t = 0): no latency, said "none" as the non-finite case says it, not a
+    /// mean of 0.0 ms; and the figures of `metrics.json` stay as they were (#72).
+    #[test]
+    fn no_command_reaching_the_actuator_is_no_latency_not_0_ms() {
+        let silent = safety_run(0, 0);
+        assert_eq!(
+            silent.summary_lines(None)[4],
+            "sense->act latency: none (no command reached the actuator: /cmd was never published)"
+        );
+        assert_eq!(silent.mean_latency_ms, 0.0);
+        let lost = safety_run(20, 20);
+        assert_eq!(
+            lost.summary_lines(None)[4],
+            "sense->act latency: none (no command reached the actuator: every /cmd message was lost on its link)"
+        );
+        // Commands that arrived at matched rates under the virtual clock: 0 ms is a latency.
+        for m in [safety_run(32, 0), safety_run(32, 5)] {
+            assert!(
+                m.summary_lines(None)[4].starts_with("mean sense->act latency: 0.0 ms"),
+                "{:?}",
+                m.summary_lines(None)
+            );
+        }
+    }
 
     #[test]
     fn latency_stats_mean_is_exact_and_quantiles_close() {

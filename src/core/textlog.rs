@@ -9,6 +9,11 @@
 //! The run time and node of a line are those of the tick the calling thread is in
 //! ([`enter`], set by the node around its tick): a line written outside any tick (a script's
 //! loading) has neither. Text is made safe to show ([`crate::text::printable`]).
+//!
+//! A line a node's logger wrote ([`emit_logged`]: a Python node's `get_logger().info(…)`)
+//! keeps its message apart from the level word it is shown with (`info: text`), and where
+//! the logger was called ([`Logged`]): `/rosout` carries them as rcl does (the message
+//! alone in `msg`; `file`, `function`, `line`).
 
 use crate::time::Nanos;
 use std::cell::RefCell;
@@ -25,6 +30,36 @@ pub enum Level {
     Error,
 }
 
+impl Level {
+    /// The word a logger's line is shown with (`info: text`): `info`, `warning`, `error`,
+    /// as the Python logger's methods name them.
+    pub fn word(self) -> &'static str {
+        match self {
+            Level::Info => "info",
+            Level::Warn => "warning",
+            Level::Error => "error",
+        }
+    }
+}
+
+/// What a node's logger logged, as rcl puts it on `/rosout` (`rcl_interfaces/msg/Log`'s
+/// `msg`, `file`, `function`, `line`): the message without the level word, and the call
+/// that logged it. For a Python node the frame that called `get_logger().info(…)`, as
+/// rclpy takes it (`rclpy/impl/rcutils_logger.py`: the caller's `co_filename`, `co_name`,
+/// `f_lineno`).
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct Logged {
+    /// The message, one line, control characters written out.
+    pub msg: String,
+    /// The source file, as the interpreter names it (a Python node's script: its absolute
+    /// path); empty when not known.
+    pub file: String,
+    /// The function that called the logger (`__init__`, `on_obs`); empty when not known.
+    pub function: String,
+    /// The line of that call, from 1; 0 when not known.
+    pub line: u32,
+}
+
 /// One line of the log.
 #[derive(Clone, Debug, PartialEq)]
 pub struct LogLine {
@@ -34,8 +69,12 @@ pub struct LogLine {
     pub node: Option<String>,
     /// How much it matters.
     pub level: Level,
-    /// The text, one line, control characters written out.
+    /// The text, one line, control characters written out: as shown (a logger's line with
+    /// its level word first, `info: text`).
     pub text: String,
+    /// For a line a node's logger wrote: its message alone and where it was logged
+    /// ([`emit_logged`]); `None` for what code printed and ratelab's own lines.
+    pub logged: Option<Logged>,
 }
 
 impl LogLine {
@@ -61,6 +100,7 @@ impl LogLine {
             node: None,
             level,
             text: line.to_string(),
+            logged: None,
         };
         let Some((stamp, text)) = line
             .strip_prefix('[')
@@ -92,6 +132,7 @@ impl LogLine {
             node: node.map(str::to_string),
             level,
             text: text.to_string(),
+            logged: None,
         }
     }
 }
@@ -194,18 +235,51 @@ pub fn emit(level: Level, text: &str) {
 
 /// Write `text` about node `node` at run time `t` (either unknown: `None`).
 pub fn emit_for(node: Option<&str>, t: Option<Nanos>, level: Level, text: &str) {
+    deliver(
+        text.lines()
+            .filter(|l| !l.trim().is_empty())
+            .map(|line| LogLine {
+                t,
+                node: node.map(str::to_string),
+                level,
+                text: crate::text::printable(line.trim_end()).into_owned(),
+                logged: None,
+            }),
+    );
+}
+
+/// Write what node `node`'s logger logged at `level`, stamped with the calling thread's
+/// tick's run time ([`enter`]): one line, `logged.msg` (its control characters, a newline
+/// too, written out, as are the file's and function's), shown as `info: msg` (the level's
+/// [`Level::word`]) and kept apart with where it was logged ([`LogLine::logged`]).
+pub fn emit_logged(node: Option<&str>, level: Level, logged: Logged) {
+    let safe = |s: &str| crate::text::printable(s).into_owned();
+    let logged = Logged {
+        msg: safe(logged.msg.trim_end()),
+        file: safe(&logged.file),
+        function: safe(&logged.function),
+        line: logged.line,
+    };
+    deliver(std::iter::once(LogLine {
+        t: now(),
+        node: node.map(str::to_string),
+        level,
+        text: format!("{}: {}", level.word(), logged.msg)
+            .trim_end()
+            .to_string(),
+        logged: Some(logged),
+    }));
+}
+
+/// Give `lines` to every recorder and to the sink (stderr without one), all of them
+/// together (no other thread's line comes between them); none on a muted thread.
+fn deliver(lines: impl Iterator<Item = LogLine>) {
     if MUTED.with(std::cell::Cell::get) {
         return;
     }
     let guard = sink().lock().unwrap_or_else(|e| e.into_inner());
     let recording = recorders().lock().unwrap_or_else(|e| e.into_inner());
-    for line in text.lines().filter(|l| !l.trim().is_empty()) {
-        let line = LogLine {
-            t,
-            node: node.map(str::to_string),
-            level,
-            text: crate::text::printable(line.trim_end()).into_owned(),
-        };
+    for line in lines {
         for (_, r) in recording.iter() {
             r(line.clone());
         }
@@ -238,6 +312,7 @@ mod tests {
                 node: node.map(str::to_string),
                 level: Level::Warn,
                 text: "x = [1, 2] ok".into(),
+                logged: None,
             };
             assert_eq!(LogLine::parse_prefixed(&line.prefixed(), Level::Warn), line);
         }
@@ -288,5 +363,56 @@ mod tests {
             ]
         );
         assert_eq!(got[1].level, Level::Warn);
+    }
+
+    /// A logger's line is shown with its level word, as before, and keeps its message
+    /// alone and its caller for `/rosout`, each made safe to show.
+    #[test]
+    fn a_loggers_line_keeps_its_message_apart_from_its_level_word() {
+        let got = Arc::new(Mutex::new(Vec::new()));
+        let keep = got.clone();
+        let _recorder = add_recorder(Box::new(move |l| keep.lock().unwrap().push(l)));
+        {
+            let _tick = enter(&Arc::from("policy"), Nanos(20_000_000));
+            let logged = Logged {
+                msg: "qzx heard 3 \u{1b}[2J".into(),
+                file: "/tmp/p.py".into(),
+                function: "on_obs".into(),
+                line: 12,
+            };
+            emit_logged(Some("policy"), Level::Warn, logged);
+        }
+        emit_logged(
+            Some("sensor"),
+            Level::Info,
+            Logged {
+                msg: "qzx\nbuilt".into(),
+                ..Logged::default()
+            },
+        );
+        let got: Vec<LogLine> = got
+            .lock()
+            .unwrap()
+            .iter()
+            .filter(|l| l.logged.as_ref().is_some_and(|g| g.msg.starts_with("qzx")))
+            .cloned()
+            .collect();
+        assert_eq!(got.len(), 2, "{got:?}");
+        assert_eq!(
+            got[0].prefixed(),
+            "[t=0.020 s policy] warning: qzx heard 3 \\u{1b}[2J"
+        );
+        assert_eq!(
+            got[0].logged,
+            Some(Logged {
+                msg: "qzx heard 3 \\u{1b}[2J".into(),
+                file: "/tmp/p.py".into(),
+                function: "on_obs".into(),
+                line: 12,
+            })
+        );
+        // Outside any tick: no run time; a newline written out, the line stays one.
+        assert_eq!(got[1].prefixed(), "[sensor] info: qzx\\nbuilt");
+        assert_eq!(got[1].logged.as_ref().map(|l| l.line), Some(0));
     }
 }

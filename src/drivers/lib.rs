@@ -1,4 +1,7 @@
-//! The drivers of the run core ([`ratelab_runtime::runcore`]), one per front end: [`run`]
+//! A run as data, [`run_spec`] (every front end's settings and their rules, in one place),
+//! its [`outputs`] (files, recording, ROS 2; [`trace_csv`], the trace written as it goes),
+//! [`held_run`] (a run's results returned in memory, for a host program),
+//! and the drivers of the run core ([`ratelab_runtime::runcore`]), one per front end: [`run`]
 //! (one headless run, end to end, under either clock), [`sweep`] (grids of runs and the
 //! rate cliff) and [`session`] (the lab's live sessions: the graph driven by commands
 //! while it runs, their log and its replay). The graph across processes drives the same
@@ -14,6 +17,10 @@ use ratelab_runtime::{
     checkpoint, command, config, graph, policy, runcore, scheduler, summary, telemetry,
 };
 
+pub mod held_run;
+pub mod outputs;
 pub mod run;
+pub mod run_spec;
 pub mod session;
 pub mod sweep;
+pub mod trace_csv;

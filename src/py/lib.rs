@@ -4,8 +4,10 @@
 //! - [`main`]: the whole command line (`ratelab lab`, `run`, `launch`, …) in this process,
 //!   as the wheel's `ratelab` command and `python -m ratelab` run it. A launch's processes
 //!   are started as `python -m ratelab process …` (`Program::set_this`).
-//! - [`run`]: one run from `ratelab run`'s flags, its files' contents returned; Python
-//!   nodes and a callable brain run in this interpreter. Ctrl-C (KeyboardInterrupt) stops it.
+//! - [`run`]: one run from `ratelab.run`'s settings ([`run_spec`]: a dict of its keywords,
+//!   read into the library's `RunSpec`, no argument list), its files' contents returned;
+//!   Python nodes and a callable brain run in this interpreter. Ctrl-C (KeyboardInterrupt)
+//!   stops it.
 //! - [`sweep`], [`cliff`]: `ratelab sweep` and `ratelab cliff`, their tables as CSV.
 //! - [`exercise`]: `ratelab exercise`, its checks returned (a prediction may be given).
 //!
@@ -23,6 +25,9 @@ use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use ratelab::distributed::launcher::Program;
 use ratelab::scheduler::StopFlag;
+use ratelab::setting::Speech;
+
+mod run_spec;
 use std::time::Duration;
 
 pyo3::create_exception!(
@@ -80,7 +85,7 @@ fn to_py(e: &anyhow::Error) -> PyErr {
             return NoPrediction::new_err(text);
         }
         if cause
-            .downcast_ref::<ratelab_lab::api::TraceTooLarge>()
+            .downcast_ref::<ratelab::held_run::TraceTooLarge>()
             .is_some()
         {
             return TraceTooLarge::new_err(text);
@@ -104,8 +109,14 @@ fn to_py(e: &anyhow::Error) -> PyErr {
             }
         }
         if let Some(o) = cause.downcast_ref::<ratelab::output::OutputError>() {
-            if matches!(o, ratelab::output::OutputError::Exists(_)) {
-                return PyFileExistsError::new_err(text);
+            if let ratelab::output::OutputError::Exists(path) = o {
+                // In Python's words: the keyword, not the flag.
+                let said = format!(
+                    "{}: file exists (pass {} to overwrite)",
+                    path.display(),
+                    Speech::Keywords.force()
+                );
+                return PyFileExistsError::new_err(text.replace(&o.to_string(), &said));
             }
         }
         if let Some(io) = cause.downcast_ref::<std::io::Error>() {
@@ -242,23 +253,28 @@ fn exercises() -> Vec<(&'static str, &'static str, &'static str)> {
         .collect()
 }
 
-/// One run of `ratelab run FLAGS…` in this process, with `policy` (a callable taking the
-/// observation, a NumPy float32[5] array, and returning the force command) as its brain when
-/// given, and `nodes` (`(node name, class)` pairs) making those Python nodes of the graph
-/// from classes of this interpreter. Returns a dict: `metrics_json`, `trace_csv`, `log` (the files' texts),
+/// One run in this process, of `settings` (a dict keyed by `ratelab.run`'s keywords: see
+/// [`run_spec`]), with `policy` (a callable taking the observation, a NumPy float32[5]
+/// array, and returning the force command) as its brain when given, and `nodes` (`(node
+/// name, class)` pairs) making those Python nodes of the graph from classes of this
+/// interpreter. Returns a dict: `metrics_json`, `trace_csv`, `log` (the files' texts),
 /// `estimator_json` (`estimator.json`'s text with an estimator in the graph, else None),
-/// `trace_columns` (the trace as `(name, dtype, bytes)` per column), `summary`
-/// (lines), `failed` (the line of a node that failed, or None), `recording` (its path or
-/// None). Ctrl-C stops the run and raises KeyboardInterrupt; a trace that would pass
-/// `MAX_HELD_TRACE_VALUES` raises `TraceTooLarge` (a MemoryError) before the run.
+/// `trace_columns` (the trace as `(name, dtype, bytes)` per column), `summary` (lines),
+/// `failed` (the line of a node that failed, or None), `failed_exception` (the Python
+/// exception that failed it, with its traceback, when it was Python code's), `recording`
+/// (its path or None). Refusals name the keywords (`control_hz must be …`). Ctrl-C stops the run and raises
+/// KeyboardInterrupt; a trace that would pass `MAX_HELD_TRACE_VALUES` raises
+/// `TraceTooLarge` (a MemoryError) before the run.
 #[pyfunction]
-#[pyo3(signature = (flags, policy=None, nodes=Vec::new()))]
+#[pyo3(signature = (settings, policy=None, nodes=Vec::new()))]
 fn run<'py>(
     py: Python<'py>,
-    flags: Vec<String>,
+    settings: &Bound<'py, PyDict>,
     policy: Option<Py<PyAny>>,
     nodes: Vec<(String, Py<PyAny>)>,
 ) -> PyResult<Bound<'py, PyDict>> {
+    let spec = run_spec::from_settings(settings)?;
+    let classes: Vec<String> = nodes.iter().map(|(n, _)| n.clone()).collect();
     let _given = ratelab::python::node::give_classes(nodes);
     let brain = match policy {
         Some(f) => Some(Box::new(
@@ -267,7 +283,11 @@ fn run<'py>(
         ) as Box<dyn ratelab::policy::Policy>),
         None => None,
     };
-    let files = interruptibly(py, move |stop| ratelab_lab::api::run(&flags, brain, stop))?;
+    // An earlier run's failure is not this one's.
+    drop(ratelab::python::take_failure());
+    let files = interruptibly(py, move |stop| {
+        ratelab::held_run::run(&spec, brain, &classes, Speech::Keywords, stop)
+    })?;
     let out = PyDict::new(py);
     out.set_item("metrics_json", files.metrics_json)?;
     out.set_item("estimator_json", files.estimator_json)?;
@@ -284,6 +304,13 @@ fn run<'py>(
     out.set_item("trace_csv", trace_csv)?;
     out.set_item("log", files.log)?;
     out.set_item("summary", files.summary)?;
+    // The node's own exception, with its traceback: `NodeFailed`'s `__cause__`.
+    let cause = files
+        .failed
+        .as_ref()
+        .and_then(|_| ratelab::python::take_failure())
+        .map(|e| e.into_value(py));
+    out.set_item("failed_exception", cause)?;
     out.set_item("failed", files.failed)?;
     out.set_item("wall_s", files.wall_s)?;
     out.set_item(

@@ -4,9 +4,11 @@
 //!
 //! - **Which Python.** The `libpython` ratelab was built against (the `python3` on `PATH`
 //!   at build time; `.cargo/config.toml` pins `PYO3_PYTHON` so the build does not change
-//!   with the shell), found at run time through an rpath. An active virtual environment
-//!   (`VIRTUAL_ENV`) has its `site-packages` added, so `import numpy` or `import torch`
-//!   work as in that environment's `python`.
+//!   with the shell), found at run time through an rpath, with its own installation as its
+//!   home: never a `python3` or virtual environment first on `PATH` at run time ([`embed`]).
+//!   An active virtual environment (`VIRTUAL_ENV`, else a conda one: `CONDA_PREFIX`) has its
+//!   `site-packages` added, so `import numpy` or `import torch` work as in that
+//!   environment's `python`; a `.pth` file there may not re-execute or end the process.
 //! - **One interpreter, one lock.** Python code of every node shares the interpreter and its
 //!   global interpreter lock (GIL): under the real clock two Python callbacks never run at
 //!   once, whatever threads their nodes have. Under the virtual clock nothing changes: ticks
@@ -29,6 +31,7 @@
 //! rebuilds only this crate and those above. [`kind`] is that interpreter.
 
 pub mod brain;
+pub mod embed;
 pub mod kind;
 pub mod node;
 
@@ -144,19 +147,23 @@ impl Drop for OutputCapture {
     }
 }
 
-/// Start the embedded interpreter if it is not running, add the active virtual
-/// environment's packages, and load the support module. Cheap after the first call.
+/// Start the embedded interpreter if it is not running (by ratelab's rules, [`embed`]: its
+/// home from the libpython linked, never from a `python3` on `PATH`), run its start-up
+/// (`site` and the active environment's packages, every `.pth` guarded), and load the
+/// support module. Cheap after the first call.
 ///
 /// # Errors
-/// [`PythonError::Interpreter`] when the support module cannot be loaded.
+/// [`PythonError::Interpreter`] when the interpreter cannot start (one line naming the
+/// interpreter found and why) or the support module cannot be loaded.
 pub fn start() -> Result<(), PythonError> {
     let result = SUPPORT.get_or_init(|| {
-        // Signal handling stays ratelab's (Ctrl-C is handled by the binary, not Python).
+        let started_here = embed::initialize()?;
+        // The interpreter runs now: PyO3's own initialisation only records that it is up.
         Python::initialize();
         let hosted = HOSTED.load(std::sync::atomic::Ordering::Relaxed);
         Python::attach(|py| {
             if !hosted {
-                add_virtual_env(py)?;
+                embed::run_startup(py, started_here)?;
             }
             PyModule::from_code(py, SUPPORT_SOURCE, c"<ratelab>", c"_ratelab_support")
                 .and_then(|m| {
@@ -179,54 +186,60 @@ pub fn start() -> Result<(), PythonError> {
     }
 }
 
-/// `site.addsitedir` the `site-packages` of `$VIRTUAL_ENV`, as its `python` would see it.
-fn add_virtual_env(py: Python<'_>) -> Result<(), String> {
-    let Some(venv) = std::env::var_os("VIRTUAL_ENV").filter(|v| !v.is_empty()) else {
-        return Ok(());
-    };
-    let version = py.version_info();
-    let dir = std::path::Path::new(&venv).join(format!(
-        "lib/python{}.{}/site-packages",
-        version.major, version.minor
-    ));
-    if !dir.is_dir() {
-        // A virtual environment of another Python version: say so rather than guess.
-        eprintln!(
-            "[ratelab] warning: VIRTUAL_ENV={} has no {} (ratelab embeds Python {}.{}); its packages are not importable",
-            crate::text::printable(&venv.to_string_lossy()),
-            crate::text::printable(&dir.to_string_lossy()),
-            version.major,
-            version.minor
-        );
-        return Ok(());
-    }
-    py.import("site")
-        .and_then(|site| site.call_method1("addsitedir", (dir.to_string_lossy().as_ref(),)))
-        .map(drop)
-        .map_err(|e| format!("cannot add {} to Python's path: {e}", dir.display()))
-}
-
-/// `_ratelab_support._log(level, text, node=None)`: a line (or lines) a learner's code wrote
-/// (`print`, `sys.stderr`, a warning, `get_logger()`), to the run's text log
+/// `_ratelab_support._log(level, text, node=None, caller=None)`: a line (or lines) a
+/// learner's code wrote (`print`, `sys.stderr`, a warning), to the run's text log
 /// ([`crate::textlog`]), stamped with the calling thread's tick, or with `node` (a logger's
-/// own) when given.
+/// own) when given. With `caller`, `(file, function, line)` of the frame that called a
+/// node's logger (`get_logger().info(text)`), `text` is that logger's message, one line:
+/// shown with its level word, and on `/rosout` alone with its caller
+/// ([`crate::textlog::emit_logged`]).
 #[pyfunction]
-#[pyo3(name = "_log", signature = (level, text, node=None))]
-fn log_line(level: &str, text: &str, node: Option<&str>) {
-    use crate::textlog::{emit, emit_for, Level};
+#[pyo3(name = "_log", signature = (level, text, node=None, caller=None))]
+fn log_line(level: &str, text: &str, node: Option<&str>, caller: Option<(String, String, u32)>) {
+    use crate::textlog::{emit, emit_for, emit_logged, Level, Logged};
     let level = match level {
         "info" => Level::Info,
         "error" => Level::Error,
         _ => Level::Warn,
     };
-    match node {
-        Some(n) => emit_for(Some(n), crate::textlog::now(), level, text),
-        None => emit(level, text),
+    match (node, caller) {
+        (_, Some((file, function, line))) => {
+            let msg = text.to_string();
+            emit_logged(
+                node,
+                level,
+                Logged {
+                    msg,
+                    file,
+                    function,
+                    line,
+                },
+            );
+        }
+        (Some(n), None) => emit_for(Some(n), crate::textlog::now(), level, text),
+        (None, None) => emit(level, text),
     }
 }
 
-/// One line for a Python exception raised by code of `script` (see the module docs).
+/// The exception of the learner's code last described ([`describe`]): what failed a node or
+/// a brain, for a host to chain to its own error ([`take_failure`]).
+static LAST_FAILURE: Mutex<Option<PyErr>> = Mutex::new(None);
+
+/// The Python exception last described ([`describe`]) since the last call, taken: the
+/// learner's code's own error with its traceback, which a host (`ratelab.run`) raises as the
+/// cause of its `NodeFailed`. Take it once before a run (to forget an earlier run's) and
+/// once after.
+pub fn take_failure() -> Option<PyErr> {
+    LAST_FAILURE
+        .lock()
+        .unwrap_or_else(|e| e.into_inner())
+        .take()
+}
+
+/// One line for a Python exception raised by code of `script` (see the module docs). The
+/// exception is kept for [`take_failure`].
 pub fn describe(py: Python<'_>, err: &PyErr, script: &str) -> String {
+    *LAST_FAILURE.lock().unwrap_or_else(|e| e.into_inner()) = Some(err.clone_ref(py));
     let described = support(py).ok().and_then(|m| {
         // The traceback goes separately: before Python 3.12 a fetched exception's
         // `__traceback__` is not always set.

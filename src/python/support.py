@@ -144,6 +144,20 @@ def _one_line(text):
     )
 
 
+def _where(filename, lineno):
+    """`FILE:LINE`, or for code of a notebook cell the name IPython shows it by ("Cell
+    In[3], line 5") rather than the kernel's temporary file."""
+    ipython = sys.modules.get("IPython")
+    try:
+        shell = ipython.get_ipython() if ipython is not None else None
+        named = shell.compile.format_code_name(filename) if shell is not None else None
+    except Exception:  # an IPython without it: the file's name
+        named = None
+    if named:
+        return f"{named[0]} {named[1]}, line {lineno}"
+    return f"{filename}:{lineno}"
+
+
 def describe(exc, script, tb=None):
     """One line for `exc` raised by code of `script` (its path as the user gave it), `tb`
     its traceback (default: `exc.__traceback__`)."""
@@ -161,7 +175,7 @@ def describe(exc, script, tb=None):
         and os.path.dirname(os.path.abspath(f.filename)) == folder
     ]
     frame = (mine or frames or [None])[-1]
-    where = f"{frame.filename}:{frame.lineno}" if frame is not None else script
+    where = _where(frame.filename, frame.lineno) if frame is not None else script
     message = _one_line(exc)
     return f"{where}: {name}: {message}" if message else f"{where}: {name}"
 
@@ -435,14 +449,23 @@ class Clock:
 
 
 class Logger:
-    """`info`, `warn`/`warning`, `error`: one line on stderr, naming the node."""
+    """`info`, `warn`/`warning`, `error`: one line of the run's text log, naming the node,
+    shown as `info: text`; on /rosout the text alone, with the file, function and line
+    that called the logger (as rclpy's logger gives rcl)."""
 
     def __init__(self, name):
         self._name = name
 
     def _say(self, level, text):
-        # To the run's text log (src/core/textlog.rs), stamped with this node and the run time.
-        _log("warn" if level == "warning" else level, f"{level}: {_one_line(text)}", self._name)
+        # To the run's text log (src/core/textlog.rs), stamped with this node and the run
+        # time, with the frame that called info/warn/error (two above this one), as
+        # rclpy/impl/rcutils_logger.py takes it: co_filename, co_name, f_lineno.
+        try:
+            frame = sys._getframe(2)
+            caller = (frame.f_code.co_filename, frame.f_code.co_name, frame.f_lineno or 0)
+        except ValueError:  # called from the bottom of a stack: where is not known
+            caller = ("", "", 0)
+        _log("warn" if level == "warning" else level, _one_line(text), self._name, caller)
 
     def info(self, text):
         self._say("info", text)
@@ -457,12 +480,25 @@ class Logger:
 
 
 class Parameter:
-    """A parameter from the graph file's `params`, as rclpy's: `.name`, `.value`."""
+    """A node's parameter, as rclpy's: `.name`, `.value`."""
 
     __slots__ = ("name", "value")
 
     def __init__(self, name, value):
         self.name, self.value = name, value
+
+    def __repr__(self):
+        return f"Parameter({self.name!r}, {self.value!r})"
+
+
+class ParameterAlreadyDeclaredException(ContractError):
+    """`declare_parameter` of a name this node already declared (rclpy's exception of the
+    same name)."""
+
+
+class ParameterNotDeclaredException(ContractError):
+    """`get_parameter` of a name neither declared nor given in the graph file's `params`
+    (rclpy's exception of the same name)."""
 
 
 class Publisher:
@@ -487,8 +523,16 @@ def _qos_depth(qos):
 class NodeHandle:
     """The handle a learner's class gets in its constructor, shaped like an rclpy Node:
     create_subscription, create_publisher, create_timer, get_clock, get_logger,
-    get_parameter, get_name, and `rng` (a NumPy Generator seeded from the run's seed and
-    the node's name). Topics and types must be the ones the graph file gives the node."""
+    declare_parameter(s), get_parameter, has_parameter, get_name, and `rng` (a NumPy
+    Generator seeded from the run's seed and the node's name). Topics and types must be the
+    ones the graph file gives the node.
+
+    Parameters are rclpy's, the graph file's `params` playing the part of a launch file's
+    overrides: `declare_parameter(name, value)` returns the Parameter, whose value is the
+    graph file's when it gives the name (unless `ignore_override=True`), else `value`;
+    declaring a name twice raises ParameterAlreadyDeclaredException. `get_parameter(name)`
+    returns a declared parameter, or one the graph file gives (declared or not, as ratelab's
+    nodes always read them); any other name raises ParameterNotDeclaredException."""
 
     def __init__(self, runtime):
         self._rt = runtime
@@ -554,11 +598,49 @@ class NodeHandle:
     def get_logger(self):
         return self._rt.logger
 
+    def declare_parameter(self, name, value=None, descriptor=None, ignore_override=False):
+        """Declare parameter `name` with default `value` and return it (a Parameter): its
+        value is the graph file's `params` entry when there is one (an override, as a launch
+        file's in ROS 2) unless `ignore_override`, else `value`."""
+        if not isinstance(name, str) or not name:
+            raise ContractError(self._rt.where(), f"declare_parameter's name must be a "
+                                f"non-empty str, got {name!r}")
+        if name in self._rt.declared:
+            raise ParameterAlreadyDeclaredException(
+                self._rt.where(), f"node '{self._rt.name}' declares parameter '{name}' twice "
+                "(ParameterAlreadyDeclaredException)")
+        if name in self._rt.params and not ignore_override:
+            value = self._rt.params[name]
+        parameter = Parameter(name, value)
+        self._rt.declared[name] = parameter
+        return parameter
+
+    def declare_parameters(self, namespace, parameters, ignore_override=False):
+        """Declare several: `parameters` a list of `(name, value)` (or `(name,)`) tuples,
+        each named `namespace.name` (just `name` when `namespace` is empty); returns the
+        Parameters in order."""
+        declared = []
+        for entry in parameters:
+            name, value = entry[0], (entry[1] if len(entry) > 1 else None)
+            full = f"{namespace}.{name}" if namespace else name
+            declared.append(self.declare_parameter(full, value, ignore_override=ignore_override))
+        return declared
+
+    def has_parameter(self, name):
+        """Whether `get_parameter(name)` finds it: declared, or in the graph file's params."""
+        return name in self._rt.declared or name in self._rt.params
+
     def get_parameter(self, name):
+        declared = self._rt.declared.get(name)
+        if declared is not None:
+            return declared
         if name not in self._rt.params:
             known = ", ".join(sorted(self._rt.params)) or "none"
-            raise ContractError(self._rt.where(), f"node '{self._rt.name}' has no parameter "
-                                f"'{name}' (the graph file's params: {known})")
+            mine = ", ".join(sorted(self._rt.declared)) or "none"
+            raise ParameterNotDeclaredException(
+                self._rt.where(), f"node '{self._rt.name}' has no parameter '{name}' "
+                f"(ParameterNotDeclaredException; declared: {mine}; the graph file's params: "
+                f"{known})")
         return Parameter(name, self._rt.params[name])
 
     @property
@@ -582,6 +664,7 @@ class NodeRuntime:
                  seed):
         self.script, self.name, self.period_ns = script, name, period_ns
         self.inputs, self.outputs, self.params, self.seed = inputs, outputs, dict(params), seed
+        self.declared = {}  # name -> Parameter, as declare_parameter declared them
         self.now_ns, self.ticks, self.outbox = 0, 0, []
         self.subscriptions, self.timers, self.qos_depths, self.rng = [], [], [], None
         self.clock, self.logger = Clock(self), Logger(name)

@@ -4,13 +4,19 @@
 //!
 //! The MCAP file has the `ros2` profile; one schema per type (encoding `ros2msg`: the `.msg`
 //! text with its dependencies after rosbag2's `====…` / `MSG: pkg/Type` separators), one
-//! channel per topic (CDR) and `/clock`; each message's log and publish times are its run
-//! time, ns, so a bag of a virtual run holds the same messages at the same times on every
-//! run of it (the MCAP summary's record order is the `mcap` crate's and varies), and its
-//! starting time reads 1970-01-01 (run time starts at 0). `metadata.yaml` is rosbag2's version 9 with
-//! each topic's type, RIHS01 hash, message count and offered QoS profile (the QoS ratelab
-//! ran it with, as its publisher's token says; also in each MCAP channel's metadata, where
-//! `ros2 bag play` reads it). MCAP is written by the `mcap` crate,
+//! channel per topic (CDR): the graph's, `/clock`, and what every ROS 2 node publishes
+//! besides, `/rosout` and `/parameter_events` (which `ros2 bag record -a` takes too); each
+//! message's log and publish times are its run time, ns (a log line's: the run time it was
+//! written at, or the latest seen), so a bag of a virtual run holds the same topic messages
+//! at the same times on every run of it (the MCAP summary's record order is the `mcap`
+//! crate's and varies; a `/rosout` line is stamped with the wall clock, as rcl stamps it),
+//! and its starting time reads 1970-01-01 (run time starts at 0). `metadata.yaml` is
+//! rosbag2's version 9 with each topic's type, RIHS01 hash, message count and offered QoS
+//! profiles (one per publisher, the QoS ratelab ran it with, as its publisher's token says).
+//! Each MCAP channel's metadata holds the same two as rosbag2_storage_mcap writes them
+//! (`mcap_storage.cpp`, `create_topic`): `offered_qos_profiles` (that YAML) and
+//! `topic_type_hash` (`RIHS01_<64 hex>`), where `ros2 bag play` and `ros2 bag info` read
+//! them. MCAP is written by the `mcap` crate,
 //! the YAML by `serde_yaml`; a bag cut short (killed run) has its MCAP data but no
 //! `metadata.yaml`, which `ros2 bag reindex` rebuilds. A bag that could not be written
 //! whole (a full disk) is not left under its name: its MCAP file is removed, and the run
@@ -18,19 +24,41 @@
 
 use super::types::RosType;
 use super::Ros2Error;
-use hiroz_protocol::qos::{QosDuration, QosHistory, QosProfile, QosReliability};
+use hiroz_protocol::qos::{QosDurability, QosDuration, QosHistory, QosProfile, QosReliability};
+use hiroz_schema::TypeDescriptionMsg;
 use serde::Serialize;
 use std::collections::BTreeMap;
 use std::io::BufWriter;
 use std::path::{Path, PathBuf};
 
-/// The `.msg` text of each type the bags carry, as ROS 2 Jazzy ships it (comments dropped).
+/// The `.msg` text of each type the bags carry, as ROS 2 Jazzy ships it (comments dropped;
+/// `rcl_interfaces`' from ros2/rcl_interfaces 2.2.0, the same in Kilted).
 fn msg_text(name: &str) -> &'static str {
     match name {
+        "rcl_interfaces/msg/Log" => {
+            "uint8 DEBUG=10\nuint8 INFO=20\nuint8 WARN=30\nuint8 ERROR=40\nuint8 FATAL=50\n\
+             builtin_interfaces/Time stamp\nuint8 level\nstring name\nstring msg\nstring file\n\
+             string function\nuint32 line\n"
+        }
+        "rcl_interfaces/msg/ParameterEvent" => {
+            "builtin_interfaces/Time stamp\nstring node\nParameter[] new_parameters\n\
+             Parameter[] changed_parameters\nParameter[] deleted_parameters\n"
+        }
+        "rcl_interfaces/msg/Parameter" => "string name\nParameterValue value\n",
+        "rcl_interfaces/msg/ParameterValue" => {
+            "uint8 type\nbool bool_value\nint64 integer_value\nfloat64 double_value\n\
+             string string_value\nbyte[] byte_array_value\nbool[] bool_array_value\n\
+             int64[] integer_array_value\nfloat64[] double_array_value\n\
+             string[] string_array_value\n"
+        }
         "builtin_interfaces/msg/Time" => "int32 sec\nuint32 nanosec\n",
         "std_msgs/msg/Header" => "builtin_interfaces/Time stamp\nstring frame_id\n",
         "sensor_msgs/msg/JointState" => {
             "std_msgs/Header header\nstring[] name\nfloat64[] position\nfloat64[] velocity\nfloat64[] effort\n"
+        }
+        "sensor_msgs/msg/Image" => {
+            "std_msgs/Header header\nuint32 height\nuint32 width\nstring encoding\n\
+             uint8 is_bigendian\nuint32 step\nuint8[] data\n"
         }
         "std_msgs/msg/Float64" => "float64 data\n",
         "rosgraph_msgs/msg/Clock" => "builtin_interfaces/Time clock\n",
@@ -38,10 +66,11 @@ fn msg_text(name: &str) -> &'static str {
     }
 }
 
-/// rosbag2's `ros2msg` schema: the type's text, then each type it refers to.
-fn schema(ty: &RosType) -> String {
-    let mut s = msg_text(ty.name).to_string();
-    for r in &ty.description.referenced_type_descriptions {
+/// rosbag2's `ros2msg` schema of the type `description` describes: its text, then each
+/// type it refers to.
+fn schema(description: &TypeDescriptionMsg) -> String {
+    let mut s = msg_text(&description.type_description.type_name).to_string();
+    for r in &description.referenced_type_descriptions {
         let short = r.type_name.replacen("/msg/", "/", 1);
         s.push_str(&format!("{}\nMSG: {short}\n", "=".repeat(80)));
         s.push_str(msg_text(&r.type_name));
@@ -53,10 +82,26 @@ fn schema(ty: &RosType) -> String {
 pub struct BagTopic<'a> {
     /// Its name (`/obs`).
     pub name: &'a str,
-    /// Its ROS 2 type.
-    pub ty: &'static RosType,
-    /// The QoS its publisher offered.
-    pub qos: QosProfile,
+    /// Its ROS 2 type's description (its name, `sensor_msgs/msg/JointState`, and the types
+    /// it refers to): the channel's schema.
+    pub description: &'a TypeDescriptionMsg,
+    /// Its type's RIHS01 hash, `RIHS01_<64 hex>`.
+    pub hash: String,
+    /// The QoS each of its publishers offered, one profile per publisher (rosbag2 lists
+    /// them so).
+    pub qos: Vec<QosProfile>,
+}
+
+impl<'a> BagTopic<'a> {
+    /// Topic `name` of type `ty`, with one publisher offering `qos`.
+    pub fn of(name: &'a str, ty: &'a RosType, qos: QosProfile) -> BagTopic<'a> {
+        BagTopic {
+            name,
+            description: &ty.description,
+            hash: ty.hash.to_rihs_string(),
+            qos: vec![qos],
+        }
+    }
 }
 
 /// A QoS profile as rosbag2's metadata (version 9) writes it.
@@ -96,8 +141,10 @@ impl QosYaml {
                 QosReliability::Reliable => "reliable",
                 QosReliability::BestEffort => "best_effort",
             },
-            // ratelab keeps nothing for late joiners.
-            durability: "volatile",
+            durability: match q.durability {
+                QosDurability::Volatile => "volatile",
+                QosDurability::TransientLocal => "transient_local",
+            },
             deadline: d(q.deadline),
             lifespan: d(q.lifespan),
             liveliness: "automatic",
@@ -107,10 +154,22 @@ impl QosYaml {
     }
 }
 
+/// An MCAP channel's metadata as rosbag2_storage_mcap writes it (`create_topic`): its
+/// publishers' offered QoS profiles (`offered_qos_profiles`, the YAML of `metadata.yaml`'s
+/// version 9) and its type's hash (`topic_type_hash`, `RIHS01_<64 hex>`).
+fn channel_metadata(qos: &[QosYaml], hash: &str) -> BTreeMap<String, String> {
+    let offered = serde_yaml::to_string(qos).unwrap_or_default();
+    BTreeMap::from([
+        ("offered_qos_profiles".to_string(), offered),
+        ("topic_type_hash".to_string(), hash.to_string()),
+    ])
+}
+
 struct Counted {
     name: String,
-    ty: &'static RosType,
-    qos: QosYaml,
+    type_name: String,
+    hash: String,
+    qos: Vec<QosYaml>,
     channel: u16,
     count: u64,
 }
@@ -192,25 +251,25 @@ impl Bag {
         let mut counted = Vec::new();
         let mut schemas: BTreeMap<&str, u16> = BTreeMap::new();
         for t in topics {
-            let schema_id = match schemas.get(t.ty.name) {
+            let type_name = t.description.type_description.type_name.as_str();
+            let schema_id = match schemas.get(type_name) {
                 Some(id) => *id,
                 None => {
                     let id = writer
-                        .add_schema(t.ty.name, "ros2msg", schema(t.ty).as_bytes())
+                        .add_schema(type_name, "ros2msg", schema(t.description).as_bytes())
                         .map_err(|e| io(&mcap_path, e))?;
-                    schemas.insert(t.ty.name, id);
+                    schemas.insert(type_name, id);
                     id
                 }
             };
-            let qos = QosYaml::of(&t.qos);
-            let offered = serde_yaml::to_string(&[&qos]).unwrap_or_default();
-            let meta = BTreeMap::from([("offered_qos_profiles".to_string(), offered)]);
+            let qos: Vec<QosYaml> = t.qos.iter().map(QosYaml::of).collect();
             let channel = writer
-                .add_channel(schema_id, t.name, "cdr", &meta)
+                .add_channel(schema_id, t.name, "cdr", &channel_metadata(&qos, &t.hash))
                 .map_err(|e| io(&mcap_path, e))?;
             counted.push(Counted {
                 name: t.name.to_string(),
-                ty: t.ty,
+                type_name: type_name.to_string(),
+                hash: t.hash.clone(),
                 qos,
                 channel,
                 count: 0,
@@ -306,10 +365,10 @@ impl Bag {
                     .map(|t| TopicCount {
                         topic_metadata: TopicMeta {
                             name: t.name.clone(),
-                            r#type: t.ty.name,
+                            r#type: t.type_name.clone(),
                             serialization_format: "cdr",
-                            offered_qos_profiles: vec![t.qos.clone()],
-                            type_description_hash: t.ty.hash.to_rihs_string(),
+                            offered_qos_profiles: t.qos.clone(),
+                            type_description_hash: t.hash.clone(),
                         },
                         message_count: t.count,
                     })
@@ -377,7 +436,7 @@ struct TopicCount {
 #[derive(Serialize)]
 struct TopicMeta {
     name: String,
-    r#type: &'static str,
+    r#type: String,
     serialization_format: &'static str,
     offered_qos_profiles: Vec<QosYaml>,
     type_description_hash: String,
@@ -397,9 +456,77 @@ mod tests {
 
     #[test]
     fn a_schema_carries_the_types_it_refers_to() {
-        let s = schema(super::super::types::joint_state_type());
+        let s = schema(&super::super::types::joint_state_type().description);
         assert!(s.starts_with("std_msgs/Header header\n"), "{s}");
         assert!(s.contains("\nMSG: std_msgs/Header\nbuiltin_interfaces/Time stamp\n"));
         assert!(s.contains("\nMSG: builtin_interfaces/Time\nint32 sec\n"));
+    }
+
+    /// Every type a bag carries has its text: the graph's types, `/clock`'s, and those of
+    /// `/rosout` and `/parameter_events` with each type they refer to.
+    #[test]
+    fn every_bagged_type_has_its_msg_text() {
+        use super::super::types::{clock_type, float64_type, image_type};
+        let known = super::super::echo::known();
+        let node_types = [
+            "rcl_interfaces/msg/Log",
+            "rcl_interfaces/msg/ParameterEvent",
+        ]
+        .map(|n| &known[n].description);
+        let own = [
+            super::super::types::joint_state_type(),
+            float64_type(),
+            clock_type(),
+            image_type(),
+        ]
+        .map(|t| &t.description);
+        for d in own.into_iter().chain(node_types) {
+            let names = std::iter::once(&d.type_description)
+                .chain(&d.referenced_type_descriptions)
+                .map(|t| t.type_name.as_str());
+            for name in names {
+                assert!(!msg_text(name).is_empty(), "{name}");
+            }
+        }
+        let log = schema(node_types[0]);
+        assert!(log.starts_with("uint8 DEBUG=10\n"), "{log}");
+        assert!(log.ends_with("\nMSG: builtin_interfaces/Time\nint32 sec\nuint32 nanosec\n"));
+        let events = schema(node_types[1]);
+        assert!(
+            events.contains("\nMSG: rcl_interfaces/Parameter\nstring name\n"),
+            "{events}"
+        );
+        assert!(events.contains("\nMSG: rcl_interfaces/ParameterValue\nuint8 type\n"));
+    }
+
+    /// A channel's metadata as rosbag2_storage_mcap writes it: both keys, the hash as
+    /// `RIHS01_<64 hex>` (a real rosbag2 bag's `/rosout` channel: `topic_type_hash:
+    /// RIHS01_e28c…8eac`, rosbag2's `rosbag2_cpp/test/rosbag2_cpp/bags/only_topics.mcap`).
+    #[test]
+    fn a_channel_carries_its_offered_qos_and_its_type_hash() {
+        let qos = QosYaml::of(&super::super::node_api::rosout_qos());
+        let meta = channel_metadata(&[qos.clone(), qos], super::super::rcl_interfaces::LOG_HASH);
+        assert_eq!(
+            meta.keys().collect::<Vec<_>>(),
+            ["offered_qos_profiles", "topic_type_hash"]
+        );
+        assert_eq!(
+            meta["topic_type_hash"],
+            "RIHS01_e28ce254ca8abc06abf92773b74602cdbf116ed34fbaf294fb9f81da9f318eac"
+        );
+        let offered = &meta["offered_qos_profiles"];
+        assert_eq!(
+            offered.matches("- history: keep_last\n").count(),
+            2,
+            "{offered}"
+        );
+        assert!(
+            offered.contains("  durability: transient_local\n"),
+            "{offered}"
+        );
+        assert!(
+            offered.contains("  lifespan:\n    sec: 10\n    nsec: 0\n"),
+            "{offered}"
+        );
     }
 }

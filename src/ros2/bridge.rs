@@ -19,7 +19,12 @@
 //!   nodes ranked before the external node ticking at `t` (or all of instant `t`'s when none
 //!   ticks then): a message is then ahead of `/clock` until the clock reaches its instant;
 //! - an external node's own tokens and publishers are its program's: ratelab declares none
-//!   for it, and what it publishes is not put again (only written to the bag).
+//!   for it, and what it publishes is not put again (only written to the bag);
+//! - each node's log goes out on its `/rosout` ([`super::node_api`]), the lines its
+//!   constructor wrote while the graph was built first ([`Offer::build_lines`]);
+//! - with `--bag`, everything put is also written to a rosbag2 bag ([`super::bag`]): the
+//!   graph's topics, `/clock`, and each node's `/rosout` and `/parameter_events` (its
+//!   declared parameters first, at run time 0).
 //!
 //! Messages leave through a `ratelab::topic::Tap` on each topic and a channel to one bridge
 //! thread: no node puts on Zenoh itself. Under the virtual clock a publisher waits when the
@@ -181,6 +186,10 @@ pub struct Offer<'a> {
     /// to the run, by node name and Hz, as the lab's keys give it; `None`: the run takes no
     /// commands, and `rate_hz` is read-only.
     pub set_rate: Option<SetNodeRate>,
+    /// The lines the nodes wrote while the graph was built (their constructors'), oldest
+    /// first: each node offered here puts its own on its `/rosout` before any other line
+    /// ([`crate::graph::GraphHandles::build_lines`]).
+    pub build_lines: &'a [LogLine],
 }
 
 /// Set node `name`'s rate to `hz` as a command to the run ([`Offer::set_rate`]).
@@ -197,6 +206,7 @@ impl<'a> Offer<'a> {
             clock: true,
             rates: &h.rates,
             set_rate: None,
+            build_lines: &h.build_lines,
         }
     }
 
@@ -562,7 +572,7 @@ impl Bridge {
         let bag = opts
             .bag
             .as_ref()
-            .map(|dir| bag_for(spec, dir, opts.force))
+            .map(|dir| bag_for(spec, dir, opts.force, apis.len()))
             .transpose()?;
         let inbound = super::external::listen(&session, domain, spec, ports)?;
         wait_feeds_matched(
@@ -577,7 +587,7 @@ impl Bridge {
         let log_dropped = Arc::new(AtomicU64::new(0));
         let (recorder, logs) = log_to_rosout(log_dropped.clone());
         let thread = spawn_forwarder(
-            (rx, logs),
+            (rx, logs, offer.build_lines.to_vec()),
             (outlets, clock_outlet, apis),
             bag,
             lockstep,
@@ -726,8 +736,16 @@ impl Forwarder<'_> {
         }
     }
 
-    /// `line` on its node's `/rosout`: the node that wrote it, or (a line of no node's, or
-    /// of a node offered elsewhere) the `/clock` node's, when this bridge offers it.
+    /// `self.buf` into the bag (if any) as a message of `extra` at run time `t`.
+    fn bag_extra(&mut self, extra: BagExtra, t: Nanos) {
+        if let Some(b) = self.bag.as_mut() {
+            b.write(self.outlets.len() + extra as usize, t.0, &self.buf);
+        }
+    }
+
+    /// `line` on its node's `/rosout` (and in the bag, at the run time it was written, else
+    /// the latest seen): the node that wrote it, or (a line of no node's, or of a node
+    /// offered elsewhere) the `/clock` node's, when this bridge offers it.
     fn log(&mut self, line: &LogLine) {
         let by_name = line
             .node
@@ -735,13 +753,43 @@ impl Forwarder<'_> {
             .and_then(|n| self.apis.iter().position(|a| a.name == n));
         let clock_node = self.apis.iter().position(|a| a.name == CLOCK_NODE);
         if let Some(i) = by_name.or(clock_node) {
-            if let Err(e) = self.apis[i].log(line, &mut self.buf) {
-                self.error.get_or_insert(e);
+            match self.apis[i].log(line, &mut self.buf) {
+                Ok(()) => self.bag_extra(BagExtra::Rosout, line.t.unwrap_or(self.latest)),
+                Err(e) => {
+                    self.error.get_or_insert(e);
+                }
             }
         }
     }
 
-    /// Say on `/parameter_events` what rates changed, at most every
+    /// The lines the nodes wrote while the graph was built, each on its own node's
+    /// `/rosout` (and in the bag at run time 0), before any other line: those of a node
+    /// offered here (another process offers its own).
+    fn log_built(&mut self, lines: &[LogLine]) {
+        for line in lines {
+            let ours = line
+                .node
+                .as_deref()
+                .is_some_and(|n| self.apis.iter().any(|a| a.name == n));
+            if ours {
+                self.log(line);
+            }
+        }
+    }
+
+    /// Each node's declaration of its parameters (put when declared) into the bag, at run
+    /// time 0.
+    fn bag_declared(&mut self) {
+        let index = self.outlets.len() + BagExtra::Events as usize;
+        for a in &mut self.apis {
+            let cdr = a.take_declared();
+            if let Some(b) = self.bag.as_mut().filter(|_| !cdr.is_empty()) {
+                b.write(index, 0, &cdr);
+            }
+        }
+    }
+
+    /// Say on `/parameter_events` (and in the bag) what rates changed, at most every
     /// [`node_api::RATE_POLL`].
     fn poll_rates(&mut self) {
         if self.polled.elapsed() < node_api::RATE_POLL {
@@ -749,9 +797,18 @@ impl Forwarder<'_> {
         }
         self.polled = std::time::Instant::now();
         let t = self.latest;
+        let index = self.outlets.len() + BagExtra::Events as usize;
         for a in &mut self.apis {
-            if let Err(e) = a.poll_rate(t) {
-                self.error.get_or_insert(e);
+            match a.poll_rate(t, &mut self.buf) {
+                Ok(true) => {
+                    if let Some(b) = self.bag.as_mut() {
+                        b.write(index, t.0, &self.buf);
+                    }
+                }
+                Ok(false) => {}
+                Err(e) => {
+                    self.error.get_or_insert(e);
+                }
             }
         }
     }
@@ -803,17 +860,20 @@ impl Forwarder<'_> {
             self.last_clock = Some(t);
             self.clock_seq += 1;
             encode_clock(t, &mut self.buf);
-            self.send(self.outlets.len(), self.clock_seq, t);
+            let index = self.outlets.len() + BagExtra::Clock as usize;
+            self.send(index, self.clock_seq, t);
         }
     }
 }
 
 /// The bridge thread: put each message (and write it to the bag), and `/clock` whenever
 /// the run's time moved on (`deferred`: as the lockstep wants it), each log line on its
-/// node's `/rosout` (`logs`), and the nodes' rate changes on `/parameter_events`, until
-/// told the run ended (then the log lines already written go out too).
+/// node's `/rosout` (`built` first, the lines of the graph's building, then `logs`), and
+/// the nodes' rate changes on `/parameter_events`, until told the run ended (then the log
+/// lines already written go out too). The bag takes all of it, and each node's
+/// declaration of its parameters first.
 fn forward(
-    (rx, logs): (&Receiver<Out>, Receiver<LogLine>),
+    (rx, logs, built): (&Receiver<Out>, Receiver<LogLine>, &[LogLine]),
     (outlets, clock, apis): (&[Option<Outlet>], Option<&Outlet>, Vec<NodeApi>),
     bag: Option<Bag>,
     deferred: bool,
@@ -833,6 +893,8 @@ fn forward(
         offered: 0,
         error: None,
     };
+    f.bag_declared();
+    f.log_built(built);
     let mut log_rx = logs.clone();
     loop {
         f.poll_rates();
@@ -895,24 +957,61 @@ fn refuse_clock_clash(
     Ok(())
 }
 
-/// A bag in `dir` (`force`: over one there) of every topic of `spec` and `/clock`, with
-/// their ROS 2 types and QoS.
-fn bag_for(spec: &GraphSpec, dir: &std::path::Path, force: bool) -> Result<Bag, Ros2Error> {
+/// The bag's topics after the graph's own (numbered as their topic ids), in this order
+/// ([`bag_for`]): number `spec.topics.len() + extra as usize`.
+#[derive(Clone, Copy)]
+enum BagExtra {
+    /// `/clock`.
+    Clock = 0,
+    /// `/rosout`, every node's offered here.
+    Rosout = 1,
+    /// `/parameter_events`, every node's offered here.
+    Events = 2,
+}
+
+/// A bag in `dir` (`force`: over one there) of every topic of `spec`, `/clock`, and the
+/// `/rosout` and `/parameter_events` of the `nodes` ROS 2 nodes offered here (each one a
+/// publisher of both, as `ros2 bag record -a` takes them), with their ROS 2 types and QoS.
+fn bag_for(
+    spec: &GraphSpec,
+    dir: &std::path::Path,
+    force: bool,
+    nodes: usize,
+) -> Result<Bag, Ros2Error> {
     let mut topics: Vec<BagTopic<'_>> = spec
         .topics
         .iter()
         .enumerate()
-        .map(|(i, t)| BagTopic {
-            name: &t.name,
-            ty: ros_type_of(t.msg),
-            qos: qos_of(spec, i),
-        })
+        .map(|(i, t)| BagTopic::of(&t.name, ros_type_of(t.msg), qos_of(spec, i)))
         .collect();
-    topics.push(BagTopic {
-        name: CLOCK_TOPIC,
-        ty: clock_type(),
-        qos: clock_qos(),
-    });
+    topics.push(BagTopic::of(CLOCK_TOPIC, clock_type(), clock_qos()));
+    let known = super::echo::known();
+    for (name, ty, qos) in [
+        (
+            node_api::ROSOUT,
+            "rcl_interfaces/msg/Log",
+            node_api::rosout_qos(),
+        ),
+        (
+            node_api::PARAMETER_EVENTS,
+            "rcl_interfaces/msg/ParameterEvent",
+            node_api::parameters_qos(),
+        ),
+    ] {
+        let d = known.get(ty).ok_or_else(|| {
+            Ros2Error::Usage(format!("--bag: no description of {ty} (a ratelab bug)"))
+        })?;
+        topics.push(BagTopic {
+            name,
+            description: &d.description,
+            hash: d.hash.to_rihs_string(),
+            qos: vec![qos; nodes],
+        });
+    }
+    debug_assert_eq!(
+        topics.len(),
+        spec.topics.len() + BagExtra::Events as usize + 1
+    );
     Bag::create(dir, force, &topics)
 }
 
@@ -952,7 +1051,7 @@ fn wait_feeds_matched(
 /// then withdraw everything it declared (the inbound subscriptions, the liveliness tokens,
 /// the publishers), so that ROS 2's graph no longer shows the run's nodes.
 fn spawn_forwarder(
-    (rx, logs): (Receiver<Out>, Receiver<LogLine>),
+    (rx, logs, built): (Receiver<Out>, Receiver<LogLine>, Vec<LogLine>),
     (outlets, clock_outlet, apis): (Vec<Option<Outlet>>, Option<Outlet>, Vec<NodeApi>),
     bag: Option<Bag>,
     deferred: bool,
@@ -965,7 +1064,7 @@ fn spawn_forwarder(
         .name("ros2-bridge".into())
         .spawn(move || {
             let (r, apis) = forward(
-                (&rx, logs),
+                (&rx, logs, &built),
                 (&outlets, clock_outlet.as_ref(), apis),
                 bag,
                 deferred,

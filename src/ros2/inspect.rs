@@ -4,13 +4,22 @@
 //! and QoS), parsed by hiroz-protocol ([`seen`], [`Seen`]); what ros2cli prints of it is
 //! written by pure functions over that data ([`node_list`], [`node_info`], [`topic_list`],
 //! [`topic_info`]), and a topic's messages are heard on its data key ([`subscribe`]) and
-//! written by [`super::echo`] or counted ([`Rate`], [`Bandwidth`]).
+//! written by [`super::echo`] or counted ([`Rate`], [`Bandwidth`], from [`super::figures`]).
 //!
-//! Output follows ros2cli (Jazzy): `node list` prints `/talker`; `topic list -t` prints
-//! `/cmd_vel [geometry_msgs/msg/Twist]`; `topic info -v` an endpoint block per node with its
-//! QoS; `topic hz` `average rate: 20.000` then `\tmin: …s max: …s std dev: …s window: N`.
-//! Names from the wire are written with their control characters escaped.
+//! Output follows ros2cli (0.36.1, Kilted's; checked against its captures in
+//! `../shared/fixtures/ros2-real/kilted-ros2cli/`): `node list` prints `/talker`; `topic
+//! list -t` prints `/cmd_vel [geometry_msgs/msg/Twist]`; `topic info` a line each, `-v` an
+//! endpoint block per node with its QoS; `topic hz` `average rate: 20.000` then `\tmin: …s
+//! max: …s std dev: …s window: N` (N intervals); `topic bw` `524 B/s from 20 messages` then
+//! the sizes in the same unit. Its rules too: a name with a part beginning with `_` is hidden
+//! unless asked for ([`super::names::is_hidden_name`], [`super::names::is_hidden_node`]);
+//! nodes that share a name are listed each and warned of ([`SHARED_NAME_WARNING`]), and
+//! `node info` shows one of them, never their union; a topic of two types is refused by
+//! `echo`, `hz` and `bw` ([`one_type`]). Names from the wire are written with their control
+//! characters escaped.
 
+pub use super::figures::{Bandwidth, Rate};
+use super::names::{is_hidden_name, is_hidden_node};
 use super::{zerr, Ros2Error};
 pub use hiroz_protocol::entity::{EndpointEntity, EndpointKind, Entity, NodeEntity};
 use hiroz_protocol::qos::{QosDuration, QosHistory, QosLiveliness, QosProfile, QosReliability};
@@ -94,64 +103,176 @@ fn is_topic(e: &EndpointEntity) -> bool {
     matches!(e.kind, EndpointKind::Publisher | EndpointKind::Subscription)
 }
 
-/// `ros2 node list`: every node's fully qualified name, sorted, one per line.
-pub fn node_list(g: &Seen) -> String {
-    let names: BTreeSet<String> = g.nodes.iter().map(fq_name).collect();
-    names.into_iter().map(|n| n + "\n").collect()
+/// ros2cli's warning on stderr, before the list, when `ros2 node list` lists a name twice
+/// (ros2node's `verb/list.py`).
+pub const SHARED_NAME_WARNING: &str = "WARNING: Be aware that there are nodes in the graph that share an exact name, which can have unintended side effects.";
+
+/// ros2cli's warning on stderr, before the information, when `ros2 node info NODE` is asked
+/// of a name `count` nodes share (ros2node's `INFO_NONUNIQUE_WARNING_TEMPLATE`): `There are 2
+/// nodes in the graph with the exact name "/dup". You are seeing information about only one
+/// of them.`
+pub fn shared_name_info_warning(count: usize, node: &str) -> String {
+    format!(
+        "There are {count} nodes in the graph with the exact name \"{}\". You are seeing information about only one of them.",
+        printable(node)
+    )
 }
 
-/// Node `node` (`/talker`, or `talker` in the root namespace) by its fully qualified name,
-/// when the graph has it.
-pub fn known_node(g: &Seen, node: &str) -> Option<String> {
-    let want = if node.starts_with('/') {
+/// The nodes ros2cli shows: every one when `all`, else those whose base name is not hidden
+/// ([`is_hidden_node`]: ros2node's `get_node_names`).
+fn shown_nodes(g: &Seen, all: bool) -> impl Iterator<Item = &NodeEntity> {
+    g.nodes
+        .iter()
+        .filter(move |n| all || !is_hidden_node(&n.name))
+}
+
+/// `node` as ros2node's `get_absolute_node_name` makes it: `/` before a name without one.
+fn absolute(node: &str) -> String {
+    if node.starts_with('/') {
         node.to_string()
     } else {
         format!("/{node}")
-    };
-    g.nodes.iter().any(|n| fq_name(n) == want).then_some(want)
+    }
 }
 
-/// `ros2 node info NODE`: its publishers, subscribers, service servers and clients with
-/// their types.
+/// What `ros2 node list` prints.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct NodeList {
+    /// stdout: each node's fully qualified name, sorted, one a line; a name `k` nodes share,
+    /// `k` times (ros2cli lists them, it does not merge them).
+    pub names: String,
+    /// stderr, first: [`SHARED_NAME_WARNING`] when two listed nodes share a name.
+    pub warning: Option<&'static str>,
+}
+
+/// `ros2 node list [-a]` (ros2node's `verb/list.py`): every node's fully qualified name,
+/// sorted, one a line, duplicates kept and warned of; a node whose base name begins with `_`
+/// only when `all` (`-a`, `--all`), as [`is_hidden_node`] says.
+pub fn node_list(g: &Seen, all: bool) -> NodeList {
+    let mut names: Vec<String> = shown_nodes(g, all).map(fq_name).collect();
+    names.sort();
+    let shared = names.windows(2).any(|w| w[0] == w[1]);
+    NodeList {
+        names: names.into_iter().map(|n| n + "\n").collect(),
+        warning: shared.then_some(SHARED_NAME_WARNING),
+    }
+}
+
+/// `ros2 node list -c [-a]`: how many nodes `node list` lists (a shared name once per node).
+pub fn node_count(g: &Seen, all: bool) -> usize {
+    shown_nodes(g, all).count()
+}
+
+/// Node `node` (`/talker`, or `talker` in the root namespace) by its fully qualified name,
+/// when the graph has it and ros2cli shows it (`all`: a hidden one too, as ros2cli's
+/// `--include-hidden-nodes`; else ros2cli says `Node not found`).
+pub fn known_node(g: &Seen, node: &str, all: bool) -> Option<String> {
+    let want = absolute(node);
+    shown_nodes(g, all)
+        .any(|n| fq_name(n) == want)
+        .then_some(want)
+}
+
+/// What `ros2 node info` prints.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct NodeInfo {
+    /// stdout: the name, then each section.
+    pub text: String,
+    /// stderr, first: [`shared_name_info_warning`] when nodes share the name.
+    pub warning: Option<String>,
+}
+
+/// Whether `a` and `b` are one node: one session's node id, and its name.
+fn same_node(a: &NodeEntity, b: &NodeEntity) -> bool {
+    a.z_id == b.z_id && a.id == b.id && a.name == b.name && a.namespace == b.namespace
+}
+
+/// `ros2 node info NODE [--include-hidden]` (ros2node's `verb/info.py`): its subscribers,
+/// publishers, service servers and clients, each name with its types (`/mixed: a, b` when
+/// the node has it under two), sorted; an endpoint with a hidden name ([`is_hidden_name`])
+/// only when `include_hidden`, and a hidden node is found only then. When nodes share the
+/// name, ros2cli warns and shows one of them, never their union: rmw_zenoh_cpp's graph
+/// cache keeps them in a multimap and answers for the first it discovered, which depends
+/// on discovery order; ratelab shows the same one every time, the first by Zenoh session
+/// id, then node id.
 ///
 /// # Errors
-/// One line when no node has that name (as ros2cli: `Unable to find node '/x'`).
-pub fn node_info(g: &Seen, node: &str) -> Result<String, String> {
-    let want =
-        known_node(g, node).ok_or_else(|| format!("Unable to find node '{}'", printable(node)))?;
+/// One line when no shown node has that name (ros2cli's `Unable to find node '/x'`).
+pub fn node_info(g: &Seen, node: &str, include_hidden: bool) -> Result<NodeInfo, String> {
+    let want = absolute(node);
+    let mut named: Vec<&NodeEntity> = shown_nodes(g, include_hidden)
+        .filter(|n| fq_name(n) == want)
+        .collect();
+    named.sort_by_key(|n| (n.z_id, n.id));
+    let Some(&one) = named.first() else {
+        return Err(format!("Unable to find node '{}'", printable(node)));
+    };
+    let shared = named.len() > 1;
+    // A name one node has: its endpoints by name, as ever; a shared one: the chosen node's.
+    let mine = |n: &NodeEntity| {
+        if shared {
+            same_node(n, one)
+        } else {
+            fq_name(n) == want
+        }
+    };
     let of = |kind: EndpointKind| -> String {
-        let mut lines: BTreeSet<String> = BTreeSet::new();
+        let mut topics: std::collections::BTreeMap<String, BTreeSet<String>> = Default::default();
         for e in &g.endpoints {
-            if e.kind == kind && e.node.as_ref().is_some_and(|n| fq_name(n) == want) {
-                lines.insert(format!("    {}: {}\n", printable(&e.topic), type_name(e)));
+            let shown = include_hidden || !is_hidden_name(&e.topic);
+            if e.kind == kind && shown && e.node.as_ref().is_some_and(mine) {
+                topics
+                    .entry(printable(&e.topic))
+                    .or_default()
+                    .insert(type_name(e));
             }
         }
         // ros2cli prints an empty section as an empty line.
-        if lines.is_empty() {
-            "\n".to_string()
-        } else {
-            lines.into_iter().collect()
+        if topics.is_empty() {
+            return "\n".to_string();
         }
+        topics
+            .into_iter()
+            .map(|(t, tys)| {
+                format!(
+                    "    {t}: {}\n",
+                    tys.into_iter().collect::<Vec<_>>().join(", ")
+                )
+            })
+            .collect()
     };
-    Ok(format!(
+    let text = format!(
         "{want}\n  Subscribers:\n{}  Publishers:\n{}  Service Servers:\n{}  Service Clients:\n{}  Action Servers:\n\n  Action Clients:\n\n",
         of(EndpointKind::Subscription),
         of(EndpointKind::Publisher),
         of(EndpointKind::Service),
         of(EndpointKind::Client),
-    ))
+    );
+    let warning = shared.then(|| shared_name_info_warning(named.len(), &want));
+    Ok(NodeInfo { text, warning })
 }
 
-/// `ros2 topic list [-t]`: every topic, sorted, with its types when `types`.
-pub fn topic_list(g: &Seen, types: bool) -> String {
+/// Every topic (a publisher's or a subscription's name) with its types, sorted; one with a
+/// hidden name ([`is_hidden_name`]) only when `include_hidden`.
+fn topics(g: &Seen, include_hidden: bool) -> std::collections::BTreeMap<String, BTreeSet<String>> {
     let mut topics: std::collections::BTreeMap<String, BTreeSet<String>> = Default::default();
     for e in g.endpoints.iter().filter(|e| is_topic(e)) {
-        topics
-            .entry(printable(&e.topic))
-            .or_default()
-            .insert(type_name(e));
+        if include_hidden || !is_hidden_name(&e.topic) {
+            topics
+                .entry(printable(&e.topic))
+                .or_default()
+                .insert(type_name(e));
+        }
     }
     topics
+}
+
+/// `ros2 topic list [-t] [--include-hidden-topics]` (ros2topic's `verb/list.py`): every
+/// topic, sorted, with its types when `types` (`/mixed [a, b]`: sorted, where ros2cli takes
+/// rmw_zenoh_cpp's order, which is no fixed one); a hidden one ([`is_hidden_name`]) only
+/// when `include_hidden`.
+pub fn topic_list(g: &Seen, types: bool, include_hidden: bool) -> String {
+    topics(g, include_hidden)
         .into_iter()
         .map(|(t, tys)| {
             if types {
@@ -162,6 +283,36 @@ pub fn topic_list(g: &Seen, types: bool) -> String {
             }
         })
         .collect()
+}
+
+/// `ros2 topic list -c`: how many topics `topic list` lists.
+pub fn topic_count(g: &Seen, include_hidden: bool) -> usize {
+    topics(g, include_hidden).len()
+}
+
+/// The one type `echo`, `hz` and `bw` take `topic` to have, over its publishers and
+/// subscriptions (hidden or not), as ros2topic's `api._get_msg_class` requires; `None` when
+/// no endpoint has the topic.
+///
+/// # Errors
+/// ros2cli's words, whichever of the three verbs asked, when the topic has more than one:
+/// `Cannot echo topic '/mixed', as it contains more than one type: [std_msgs/msg/Int32,
+/// std_msgs/msg/String]` (the types sorted).
+pub fn one_type(g: &Seen, topic: &str) -> Result<Option<String>, String> {
+    let types: BTreeSet<String> = g
+        .endpoints
+        .iter()
+        .filter(|e| is_topic(e) && e.topic == topic)
+        .map(type_name)
+        .collect();
+    if types.len() > 1 {
+        return Err(format!(
+            "Cannot echo topic '{}', as it contains more than one type: [{}]",
+            printable(topic),
+            types.into_iter().collect::<Vec<_>>().join(", ")
+        ));
+    }
+    Ok(types.into_iter().next())
 }
 
 fn duration(d: &QosDuration) -> String {
@@ -229,8 +380,11 @@ fn qos_block(q: &QosProfile) -> String {
     )
 }
 
-/// `ros2 topic info TOPIC [-v]`: its type, publisher and subscription counts and, verbose,
-/// each endpoint with its node, type hash and QoS.
+/// `ros2 topic info TOPIC [-v]` (ros2topic's `verb/info.py`): its type, publisher and
+/// subscription counts, a line each (`-v`: an empty line after each, and each endpoint with
+/// its node, type hash and QoS). A topic of two types shows them as Python prints a list,
+/// `Type: ['std_msgs/msg/Int32', 'std_msgs/msg/String']` (sorted). A hidden topic is found
+/// too, as ros2cli's.
 ///
 /// # Errors
 /// One line when no endpoint has that topic (as ros2cli: `Unknown topic '/x'`).
@@ -244,11 +398,27 @@ pub fn topic_info(g: &Seen, topic: &str, verbose: bool) -> Result<String, String
     if ends.is_empty() {
         return Err(format!("Unknown topic '{}'", printable(topic)));
     }
-    let types: BTreeSet<String> = ends.iter().map(|(_, e)| type_name(e)).collect();
+    let types: Vec<String> = ends
+        .iter()
+        .map(|(_, e)| type_name(e))
+        .collect::<BTreeSet<String>>()
+        .into_iter()
+        .collect();
+    // ros2cli: `'Type: %s' % (types[0] if len(types) == 1 else types)`.
+    let type_text = match types.as_slice() {
+        [one] => one.clone(),
+        many => {
+            let quoted: Vec<String> = many
+                .iter()
+                .map(|t| super::param_cli::python_str(t))
+                .collect();
+            format!("[{}]", quoted.join(", "))
+        }
+    };
     let count = |k: EndpointKind| ends.iter().filter(|(_, e)| e.kind == k).count();
+    let end = if verbose { "\n\n" } else { "\n" };
     let mut out = format!(
-        "Type: {}\n\nPublisher count: {}\n\n",
-        types.into_iter().collect::<Vec<_>>().join(", "),
+        "Type: {type_text}{end}Publisher count: {}{end}",
         count(EndpointKind::Publisher)
     );
     let block = |kind: EndpointKind, what: &str| -> String {
@@ -283,7 +453,7 @@ pub fn topic_info(g: &Seen, topic: &str, verbose: bool) -> Result<String, String
         out.push_str(&block(EndpointKind::Publisher, "PUBLISHER"));
     }
     out.push_str(&format!(
-        "Subscription count: {}\n\n",
+        "Subscription count: {}{end}",
         count(EndpointKind::Subscription)
     ));
     if verbose {
@@ -374,8 +544,10 @@ pub fn publishers<'a>(g: &'a Seen, topic: &str) -> Vec<&'a EndpointEntity> {
         .collect()
 }
 
-/// Subscribe to `publisher`'s topic on its data key (its domain, topic, type and hash):
-/// `on` gets each message's payload.
+/// Subscribe to `publisher`'s topic on its data key (its domain, topic, type and hash), a
+/// plain (volatile) subscriber, as `ratelab ros2 graph` counts messages: `on` gets each
+/// message's payload. `echo`, `hz` and `bw` subscribe with the QoS ros2cli chooses instead
+/// ([`super::subscription::subscribe`]).
 ///
 /// # Errors
 /// [`Ros2Error::Zenoh`]: the key could not be made or the declaration failed.
@@ -392,60 +564,6 @@ pub fn subscribe(
         .callback(move |s| on(s.payload().to_bytes().into_owned()))
         .wait()
         .map_err(zerr)
-}
-
-/// `ros2 topic hz`'s figures over a window of arrival times (s): messages a second, and the
-/// periods' min, max and standard deviation, as ros2cli computes them.
-#[derive(Debug, Default)]
-pub struct Rate {
-    /// Arrival times (s), the newest last, at most `window`.
-    times: std::collections::VecDeque<f64>,
-    window: usize,
-}
-
-impl Rate {
-    /// A window of `window` arrivals (ros2cli's default: 10000).
-    pub fn new(window: usize) -> Rate {
-        Rate {
-            times: Default::default(),
-            window: window.max(2),
-        }
-    }
-
-    /// A message arrived at `t_s`.
-    pub fn arrived(&mut self, t_s: f64) {
-        if self.times.len() == self.window {
-            self.times.pop_front();
-        }
-        self.times.push_back(t_s);
-    }
-
-    /// ros2cli's two lines, or `None` before two messages:
-    /// `average rate: 20.000\n\tmin: 0.050s max: 0.050s std dev: 0.00010s window: 21\n`.
-    pub fn report(&self) -> Option<String> {
-        let n = self.times.len();
-        if n < 2 {
-            return None;
-        }
-        let periods: Vec<f64> = self
-            .times
-            .iter()
-            .zip(self.times.iter().skip(1))
-            .map(|(a, b)| b - a)
-            .collect();
-        let mean = periods.iter().sum::<f64>() / periods.len() as f64;
-        if mean <= 0.0 {
-            return None;
-        }
-        let var = periods.iter().map(|p| (p - mean).powi(2)).sum::<f64>() / periods.len() as f64;
-        let min = periods.iter().copied().fold(f64::INFINITY, f64::min);
-        let max = periods.iter().copied().fold(0.0, f64::max);
-        Some(format!(
-            "average rate: {:.3}\n\tmin: {min:.3}s max: {max:.3}s std dev: {:.5}s window: {n}\n",
-            1.0 / mean,
-            var.sqrt()
-        ))
-    }
 }
 
 /// `ratelab ros2 graph`: the graph as the tokens tell it, a line per topic from its
@@ -519,62 +637,6 @@ pub fn graph_lines(g: &Seen, rates: &std::collections::BTreeMap<String, f64>) ->
     out
 }
 
-/// `ros2 topic bw`'s figures over a window of messages: bytes a second, and the messages'
-/// mean, min and max size, in ros2cli's units (B, KB, MB: powers of 1000).
-#[derive(Debug, Default)]
-pub struct Bandwidth {
-    /// (arrival time s, size bytes), the newest last, at most `window`.
-    seen: std::collections::VecDeque<(f64, usize)>,
-    window: usize,
-}
-
-/// `n` bytes in ros2cli's units: `512.00 B`, `1.20 KB`, `3.40 MB`.
-fn bytes_text(n: f64) -> String {
-    if n < 1000.0 {
-        format!("{n:.2} B")
-    } else if n < 1_000_000.0 {
-        format!("{:.2} KB", n / 1000.0)
-    } else {
-        format!("{:.2} MB", n / 1_000_000.0)
-    }
-}
-
-impl Bandwidth {
-    /// A window of `window` messages (ros2cli's default: 100).
-    pub fn new(window: usize) -> Bandwidth {
-        Bandwidth {
-            seen: Default::default(),
-            window: window.max(2),
-        }
-    }
-
-    /// A message of `bytes` arrived at `t_s`.
-    pub fn arrived(&mut self, t_s: f64, bytes: usize) {
-        if self.seen.len() == self.window {
-            self.seen.pop_front();
-        }
-        self.seen.push_back((t_s, bytes));
-    }
-
-    /// ros2cli's two lines at `now_s`, or `None` before a message:
-    /// `1.20 KB/s from 100 messages\n\tMessage size mean: 12.00 B min: 12.00 B max: 12.00 B\n`.
-    pub fn report(&self, now_s: f64) -> Option<String> {
-        let (first, _) = *self.seen.front()?;
-        let n = self.seen.len();
-        let total: usize = self.seen.iter().map(|(_, b)| b).sum();
-        let span = (now_s - first).max(1e-9);
-        let min = self.seen.iter().map(|(_, b)| *b).min().unwrap_or(0);
-        let max = self.seen.iter().map(|(_, b)| *b).max().unwrap_or(0);
-        Some(format!(
-            "{}/s from {n} messages\n\tMessage size mean: {} min: {} max: {}\n",
-            bytes_text(total as f64 / span),
-            bytes_text(total as f64 / n as f64),
-            bytes_text(min as f64),
-            bytes_text(max as f64)
-        ))
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -583,7 +645,8 @@ mod tests {
     fn node(name: &str, ns: &str) -> NodeEntity {
         NodeEntity::new(
             0,
-            zenoh::session::ZenohId::default(),
+            // One fixed session (`ZenohId::default()` is a random one).
+            "1".parse::<zenoh::session::ZenohId>().expect("a Zenoh id"),
             0,
             name.into(),
             ns.into(),
@@ -634,29 +697,40 @@ mod tests {
     #[test]
     fn lists_read_as_ros2cli_s() {
         let g = talker();
-        assert_eq!(node_list(&g), "/demo/listener\n/talker\n");
-        assert_eq!(topic_list(&g, false), "/chatter\n/cmd_vel\n");
+        let list = node_list(&g, false);
+        assert_eq!(list.names, "/demo/listener\n/talker\n");
+        assert_eq!(list.warning, None);
+        assert_eq!(topic_list(&g, false, false), "/chatter\n/cmd_vel\n");
         assert_eq!(
-            topic_list(&g, true),
+            topic_list(&g, true, false),
             "/chatter [std_msgs/msg/String]\n/cmd_vel [geometry_msgs/msg/Twist]\n"
         );
+        assert_eq!((node_count(&g, false), topic_count(&g, false)), (2, 2));
     }
 
     #[test]
     fn info_names_endpoints_types_and_qos() {
         let g = talker();
-        let info = node_info(&g, "/talker").unwrap();
+        let info = node_info(&g, "/talker", false).unwrap();
+        assert_eq!(info.warning, None);
+        let info = info.text;
         assert!(info.starts_with("/talker\n  Subscribers:\n\n  Publishers:\n    /chatter: std_msgs/msg/String\n    /cmd_vel: geometry_msgs/msg/Twist\n  Service Servers:\n\n"), "{info}");
         assert_eq!(
-            node_info(&g, "/nobody").unwrap_err(),
+            node_info(&g, "/nobody", false).unwrap_err(),
             "Unable to find node '/nobody'"
         );
+        // Plain: a line each (real ros2cli's `topic info /chatter`, kilted-ros2cli/step2).
         let t = topic_info(&g, "/chatter", false).unwrap();
         assert_eq!(
             t,
-            "Type: std_msgs/msg/String\n\nPublisher count: 1\n\nSubscription count: 1\n"
+            "Type: std_msgs/msg/String\nPublisher count: 1\nSubscription count: 1\n"
         );
+        // Verbose: an empty line after each.
         let v = topic_info(&g, "/chatter", true).unwrap();
+        assert!(
+            v.starts_with("Type: std_msgs/msg/String\n\nPublisher count: 1\n\nNode name: talker\n"),
+            "{v}"
+        );
         for needle in [
             "Node name: talker\nNode namespace: /\nTopic type: std_msgs/msg/String\n",
             "Endpoint type: PUBLISHER\nQoS profile:\n  Reliability: RELIABLE\n  History (Depth): KEEP_LAST (10)\n",
@@ -683,7 +757,7 @@ mod tests {
     fn a_name_from_the_wire_never_reaches_the_terminal_raw() {
         let mut g = talker();
         g.nodes.push(node("evil\x1b[2J", "/"));
-        assert!(!node_list(&g).contains('\x1b'));
+        assert!(!node_list(&g, true).names.contains('\x1b'));
     }
 
     #[test]
@@ -705,37 +779,154 @@ mod tests {
         );
     }
 
-    #[test]
-    fn bw_reports_as_ros2cli_does() {
-        let mut b = Bandwidth::new(100);
-        assert!(b.report(0.0).is_none());
-        for i in 0..10 {
-            b.arrived(f64::from(i) * 0.1, 120);
+    /// A node `name` in `ns` with node id `id` of session 0.
+    fn node_id(name: &str, ns: &str, id: usize) -> NodeEntity {
+        NodeEntity {
+            id,
+            ..node(name, ns)
         }
+    }
+
+    const STRING: &str = "std_msgs::msg::dds_::String_";
+    const INT32: &str = "std_msgs::msg::dds_::Int32_";
+
+    /// The real graph of `kilted-ros2cli/step2/edge` (real rclpy over rmw_zenoh_cpp), in
+    /// part: a hidden node publishing a hidden topic, two nodes named `/dup` (the first, by
+    /// node id, publishing `/dup/private` and serving a service; the second `/mixed` as
+    /// Int32), and `/talker` publishing `/mixed` as String.
+    fn edges() -> Seen {
+        let hidden = node_id("_hidden_node", "", 0);
+        let (dup1, dup2) = (node_id("dup", "", 1), node_id("dup", "", 2));
+        let talker = node_id("talker", "", 3);
+        let private = endpoint(&dup1, EndpointKind::Publisher, "/dup/private", STRING);
+        let srv = "rcl_interfaces::srv::dds_::ListParameters_";
+        Seen {
+            // Listed as a liveliness query may answer: not in node id order.
+            nodes: vec![talker.clone(), dup2.clone(), hidden.clone(), dup1.clone()],
+            endpoints: vec![
+                endpoint(&hidden, EndpointKind::Publisher, "/_secret", STRING),
+                endpoint(&dup1, EndpointKind::Service, "/dup/list_parameters", srv),
+                private,
+                endpoint(&dup2, EndpointKind::Publisher, "/mixed", INT32),
+                endpoint(&talker, EndpointKind::Publisher, "/mixed", STRING),
+                endpoint(&talker, EndpointKind::Service, "/talker/_hidden_srv", srv),
+            ],
+            ..Seen::default()
+        }
+    }
+
+    #[test]
+    fn hidden_nodes_and_topics_are_listed_only_when_asked() {
+        let g = edges();
+        // Real ros2cli's `node list` (edge/ros2-node-list.txt): /_hidden_node left out...
+        assert_eq!(node_list(&g, false).names, "/dup\n/dup\n/talker\n");
+        // ...and listed with -a (ros2-node-list-a.txt, less ros2cli's own /_ros2cli_ node).
         assert_eq!(
-            b.report(1.0).unwrap(),
-            "1.20 KB/s from 10 messages\n\tMessage size mean: 120.00 B min: 120.00 B max: 120.00 B\n"
+            node_list(&g, true).names,
+            "/_hidden_node\n/dup\n/dup\n/talker\n"
+        );
+        assert_eq!((node_count(&g, false), node_count(&g, true)), (3, 4));
+        // ros2-topic-list-t.txt and ros2-topic-list-t-hidden.txt.
+        assert_eq!(
+            topic_list(&g, true, false),
+            "/dup/private [std_msgs/msg/String]\n/mixed [std_msgs/msg/Int32, std_msgs/msg/String]\n"
+        );
+        assert_eq!(
+            topic_list(&g, false, true),
+            "/_secret\n/dup/private\n/mixed\n"
+        );
+        assert_eq!((topic_count(&g, false), topic_count(&g, true)), (2, 3));
+        // A hidden node is not found unless asked for; a hidden topic's info is given.
+        assert_eq!(known_node(&g, "/_hidden_node", false), None);
+        assert_eq!(
+            known_node(&g, "_hidden_node", true).as_deref(),
+            Some("/_hidden_node")
+        );
+        assert_eq!(
+            node_info(&g, "/_hidden_node", false).unwrap_err(),
+            "Unable to find node '/_hidden_node'"
+        );
+        let info = node_info(&g, "/_hidden_node", true).unwrap().text;
+        assert!(
+            info.contains("  Publishers:\n    /_secret: std_msgs/msg/String\n"),
+            "{info}"
+        );
+        assert!(topic_info(&g, "/_secret", false).is_ok());
+        // A node's hidden service, only with --include-hidden.
+        let shown = node_info(&g, "/talker", false).unwrap().text;
+        assert!(shown.contains("  Service Servers:\n\n"), "{shown}");
+        let all = node_info(&g, "/talker", true).unwrap().text;
+        assert!(
+            all.contains(
+                "  Service Servers:\n    /talker/_hidden_srv: rcl_interfaces/srv/ListParameters\n"
+            ),
+            "{all}"
         );
     }
 
     #[test]
-    fn hz_reports_as_ros2cli_does() {
-        let mut r = Rate::new(10_000);
-        assert!(r.report().is_none());
-        for i in 0..21 {
-            r.arrived(f64::from(i) * 0.05);
-        }
-        let text = r.report().unwrap();
-        assert!(
-            text.starts_with(
-                "average rate: 20.000\n\tmin: 0.050s max: 0.050s std dev: 0.00000s window: 21\n"
-            ),
-            "{text}"
+    fn a_shared_node_name_is_listed_twice_warned_of_and_never_merged() {
+        let g = edges();
+        assert_eq!(node_list(&g, false).warning, Some(SHARED_NAME_WARNING));
+        // ros2node's words, as real ros2cli printed them (edge/ros2-node-list.txt).
+        assert_eq!(
+            SHARED_NAME_WARNING,
+            "WARNING: Be aware that there are nodes in the graph that share an exact name, which can have unintended side effects."
         );
-        let mut small = Rate::new(3);
-        for i in 0..10 {
-            small.arrived(f64::from(i));
-        }
-        assert!(small.report().unwrap().ends_with("window: 3\n"));
+        // A name shared only by hidden nodes warns only when they are listed.
+        let mut quiet = edges();
+        quiet.nodes.retain(|n| n.name != "dup");
+        quiet.nodes.push(node_id("_twin", "", 7));
+        quiet.nodes.push(node_id("_twin", "", 8));
+        assert_eq!(node_list(&quiet, false).warning, None);
+        assert_eq!(node_list(&quiet, true).warning, Some(SHARED_NAME_WARNING));
+        // node info: the warning (edge/ros2-node-info-dup.txt), then one node's endpoints,
+        // the first by node id, whatever order the graph was heard in; not the other's.
+        let info = node_info(&g, "/dup", false).unwrap();
+        assert_eq!(
+            info.warning.as_deref(),
+            Some("There are 2 nodes in the graph with the exact name \"/dup\". You are seeing information about only one of them.")
+        );
+        assert_eq!(
+            info.text,
+            "/dup\n  Subscribers:\n\n  Publishers:\n    /dup/private: std_msgs/msg/String\n  Service Servers:\n    /dup/list_parameters: rcl_interfaces/srv/ListParameters\n  Service Clients:\n\n  Action Servers:\n\n  Action Clients:\n\n"
+        );
+        let mut reversed = g.clone();
+        reversed.nodes.reverse();
+        reversed.endpoints.reverse();
+        assert_eq!(node_info(&reversed, "dup", false).unwrap(), info);
+    }
+
+    #[test]
+    fn a_topic_of_two_types_is_shown_as_ros2cli_shows_it_and_refused_to_echo() {
+        let g = edges();
+        // edge/ros2-topic-info-mixed.txt, line for line.
+        assert_eq!(
+            topic_info(&g, "/mixed", false).unwrap(),
+            "Type: ['std_msgs/msg/Int32', 'std_msgs/msg/String']\nPublisher count: 2\nSubscription count: 0\n"
+        );
+        assert!(topic_info(&g, "/mixed", true).unwrap().starts_with(
+            "Type: ['std_msgs/msg/Int32', 'std_msgs/msg/String']\n\nPublisher count: 2\n\n"
+        ));
+        // edge/ros2-echo-mixed.txt.
+        assert_eq!(
+            one_type(&g, "/mixed").unwrap_err(),
+            "Cannot echo topic '/mixed', as it contains more than one type: [std_msgs/msg/Int32, std_msgs/msg/String]"
+        );
+        assert_eq!(
+            one_type(&g, "/dup/private"),
+            Ok(Some("std_msgs/msg/String".to_string()))
+        );
+        assert_eq!(one_type(&g, "/nothing"), Ok(None));
+        // A node holding a topic under two types says both on one line, as ros2cli joins them.
+        let mut both = g.clone();
+        let talker = node_id("talker", "", 3);
+        both.endpoints
+            .push(endpoint(&talker, EndpointKind::Publisher, "/mixed", INT32));
+        let info = node_info(&both, "/talker", false).unwrap().text;
+        assert!(
+            info.contains("  Publishers:\n    /mixed: std_msgs/msg/Int32, std_msgs/msg/String\n"),
+            "{info}"
+        );
     }
 }

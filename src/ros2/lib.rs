@@ -25,9 +25,11 @@
 //!   file's parameters ([`parameters`]) in `rcl_interfaces`' types ([`rcl_interfaces`]), and
 //!   `~/get_type_description` ([`type_description`], which `echo` also asks of other nodes);
 //! - [`inspect`] and [`echo`]: `ratelab ros2`, any rmw_zenoh graph read from the other side
-//!   as ros2cli reads it (nodes, topics, QoS, messages as YAML, rates); [`offered`]: a
-//!   graph as ROS 2 sees it when offered (the lab's panel); [`param_cli`]: `ratelab ros2
-//!   param list|get`;
+//!   as ros2cli reads it (nodes, topics, QoS, messages as YAML, rates: [`figures`]);
+//!   [`offered`]: a graph as ROS 2 sees it when offered (the lab's panel); [`param_cli`]:
+//!   `ratelab ros2 param list|get`; [`subscription`]: how `echo`, `hz` and `bw` subscribe
+//!   (ros2cli's QoS choice, rmw_zenoh_cpp's subscription for it: a latched topic's stored
+//!   messages at once);
 //! - [`yaml_depth`]: how deeply YAML read from outside (a bag's `metadata.yaml`, a
 //!   parameter's value) nests, bounded before a parser sees it.
 //!
@@ -48,6 +50,7 @@ pub mod bag_reader;
 pub mod bridge;
 pub mod echo;
 pub mod external;
+pub mod figures;
 pub mod inspect;
 pub mod names;
 pub mod node_api;
@@ -56,6 +59,7 @@ pub mod param_cli;
 pub mod parameters;
 pub mod rcl_interfaces;
 pub mod session;
+pub mod subscription;
 pub mod type_description;
 pub mod types;
 pub mod wire;

@@ -4,6 +4,7 @@
 //! The rules are rmw's (`rmw/validate_full_topic_name.h`, `rmw/validate_node_name.h`,
 //! REP 144 "ROS Package Naming" for tokens) and ROS 2's domain range (`ROS_DOMAIN_ID`,
 //! 0–232 so that the DDS port formula stays below 65535; rmw_zenoh keeps the same range).
+//! Which names ros2cli hides is rclpy's rule ([`is_hidden_name`], [`is_hidden_node`]).
 
 /// The largest domain id ROS 2 accepts (`ROS_DOMAIN_ID`, "0–232" in ROS 2's docs).
 pub const MAX_DOMAIN_ID: u32 = 232;
@@ -103,6 +104,27 @@ pub fn check_node_name(name: &str) -> Result<(), String> {
     Ok(())
 }
 
+/// What begins a hidden name's token: rclpy's `HIDDEN_TOPIC_PREFIX` and
+/// `HIDDEN_NODE_PREFIX` (`rclpy/topic_or_service_is_hidden.py`, `rclpy/node.py`), `_`.
+pub const HIDDEN_PREFIX: char = '_';
+
+/// Whether ros2cli hides a topic or service name (`/_secret`, `/a/_b/c`,
+/// `/talker/_action/status`; not `/a_b`): rclpy's `topic_or_service_is_hidden`, "any of the
+/// name tokens begins with an underscore", which `ros2 topic list` applies unless
+/// `--include-hidden-topics` (ros2topic's `api.get_topic_names_and_types`) and `ros2 node
+/// info` to each endpoint unless `--include-hidden` (ros2node's `api._is_hidden_name`).
+pub fn is_hidden_name(name: &str) -> bool {
+    name.split('/').any(|t| t.starts_with(HIDDEN_PREFIX))
+}
+
+/// Whether ros2cli hides a node, given its base name (`_ros2cli_123`, no namespace): the
+/// name is empty or begins with `_` (ros2node's `api.get_node_names`, which `ros2 node list`
+/// applies unless `-a`, `node info` unless `--include-hidden` and `ros2 param` unless
+/// `--include-hidden-nodes`). The namespace does not count: `/_ns/talker` is shown.
+pub fn is_hidden_node(base_name: &str) -> bool {
+    base_name.is_empty() || base_name.starts_with(HIDDEN_PREFIX)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -138,5 +160,30 @@ mod tests {
         assert!(check_node_name("2policy").unwrap_err().contains("digit"));
         assert!(check_node_name("po-licy").unwrap_err().contains("'-'"));
         assert!(check_node_name("").is_err());
+    }
+
+    #[test]
+    fn hidden_names_are_rclpy_s() {
+        for hidden in [
+            "/_secret",
+            "/a/_b/c",
+            "/talker/_action/status",
+            "_x",
+            "/ns/_",
+        ] {
+            assert!(is_hidden_name(hidden), "{hidden}");
+        }
+        for shown in ["/secret", "/a_b", "/a/b_/c", "/", ""] {
+            assert!(!is_hidden_name(shown), "{shown}");
+        }
+    }
+
+    #[test]
+    fn hidden_nodes_are_ros2node_s() {
+        assert!(is_hidden_node("_hidden_node"));
+        assert!(is_hidden_node("_ros2cli_28379"));
+        assert!(is_hidden_node(""), "an empty name is not listed either");
+        assert!(!is_hidden_node("talker"));
+        assert!(!is_hidden_node("dup_"));
     }
 }

@@ -51,7 +51,7 @@ pub const PARAMETER_EVENTS: &str = "/parameter_events";
 /// rclcpp's and rclpy's QoS for `/rosout` (`rcl_logging`'s): reliable, transient local
 /// (its last 1000 lines kept for late joiners, [`super::wire`]), keep last 1000, lifespan
 /// 10 s.
-fn rosout_qos() -> QosProfile {
+pub(crate) fn rosout_qos() -> QosProfile {
     QosProfile {
         reliability: QosReliability::Reliable,
         durability: hiroz_protocol::qos::QosDurability::TransientLocal,
@@ -63,7 +63,7 @@ fn rosout_qos() -> QosProfile {
 
 /// rclcpp's `rmw_qos_profile_parameters` and `rmw_qos_profile_parameter_events`: reliable,
 /// keep last 1000, volatile.
-fn parameters_qos() -> QosProfile {
+pub(crate) fn parameters_qos() -> QosProfile {
     QosProfile {
         reliability: QosReliability::Reliable,
         history: QosHistory::KeepLast(1000),
@@ -82,6 +82,9 @@ pub(crate) struct NodeApi {
     events_seq: i64,
     /// The rate last said on `/parameter_events`.
     said_rate: Option<f64>,
+    /// The CDR of the event that declared the parameters (put when declared), until
+    /// [`NodeApi::take_declared`] takes it for the bag.
+    declared: Vec<u8>,
     queryables: Vec<zenoh::query::Queryable<()>>,
 }
 
@@ -91,6 +94,27 @@ fn level(l: Level) -> u8 {
         Level::Info => rcl::LOG_INFO,
         Level::Warn => rcl::LOG_WARN,
         Level::Error => rcl::LOG_ERROR,
+    }
+}
+
+/// `line` as node `name`'s `/rosout` message at wall time `now` (ns since the Unix epoch),
+/// as rcl writes one ([`NodeApi::log`]).
+fn log_message(name: &str, line: &LogLine, now: u64) -> Log {
+    let (msg, file, function, at) = match &line.logged {
+        Some(l) => (l.msg.clone(), l.file.clone(), l.function.clone(), l.line),
+        None => (line.text.clone(), String::new(), String::new(), 0),
+    };
+    Log {
+        stamp: rcl::Time {
+            sec: i32::try_from(now / 1_000_000_000).unwrap_or(i32::MAX),
+            nanosec: (now % 1_000_000_000) as u32,
+        },
+        level: level(line.level),
+        name: name.to_string(),
+        msg,
+        file,
+        function,
+        line: at,
     }
 }
 
@@ -198,57 +222,58 @@ impl NodeApi {
             events,
             rosout_seq: 0,
             events_seq: 0,
+            declared: Vec::new(),
             queryables,
         };
         let declared = api.params.declared_event(t);
-        api.put_event(&declared)?;
+        let mut buf = Vec::new();
+        api.put_event(&declared, &mut buf)
+            .map_err(Ros2Error::Zenoh)?;
+        api.declared = buf;
         Ok(api)
     }
 
-    fn put_event(&mut self, e: &rcl::ParameterEvent) -> Result<(), Ros2Error> {
-        let mut buf = Vec::new();
-        cdr(e, &mut buf);
+    /// Put `e` on `/parameter_events`, its CDR left in `buf`.
+    fn put_event(&mut self, e: &rcl::ParameterEvent, buf: &mut Vec<u8>) -> Result<(), String> {
+        cdr(e, buf);
         self.events_seq += 1;
-        self.events
-            .put(self.events_seq, &buf)
-            .map_err(Ros2Error::Zenoh)
+        self.events.put(self.events_seq, buf)
     }
 
-    /// Put `line` on this node's `/rosout`, stamped with the wall clock as rcl stamps it.
+    /// The CDR of the `/parameter_events` message that declared the node's parameters, once
+    /// (empty after): for the bag, which records what was put.
+    pub fn take_declared(&mut self) -> Vec<u8> {
+        std::mem::take(&mut self.declared)
+    }
+
+    /// Put `line` on this node's `/rosout`, stamped with the wall clock as rcl stamps it:
+    /// a logger's line as its message alone with the file, function and line that logged
+    /// it ([`crate::textlog::Logged`]), any other as its text with those empty (line 0).
+    /// The message's CDR is left in `buf` (for the bag).
     ///
     /// # Errors
     /// The put's, in one line.
     pub fn log(&mut self, line: &LogLine, buf: &mut Vec<u8>) -> Result<(), String> {
-        let now = wall_ns();
-        let msg = Log {
-            stamp: rcl::Time {
-                sec: i32::try_from(now / 1_000_000_000).unwrap_or(i32::MAX),
-                nanosec: (now % 1_000_000_000) as u32,
-            },
-            level: level(line.level),
-            name: self.name.clone(),
-            msg: line.text.clone(),
-            ..Log::default()
-        };
-        cdr(&msg, buf);
+        cdr(&log_message(&self.name, line, wall_ns().max(0) as u64), buf);
         self.rosout_seq += 1;
         self.rosout.put(self.rosout_seq, buf)
     }
 
     /// Say on `/parameter_events` that the node's rate changed, if it did since last said
-    /// (`t`: the run time to stamp it with).
+    /// (`t`: the run time to stamp it with). True when it did, the message's CDR left in
+    /// `buf` (for the bag).
     ///
     /// # Errors
     /// The put's, in one line.
-    pub fn poll_rate(&mut self, t: Nanos) -> Result<(), String> {
+    pub fn poll_rate(&mut self, t: Nanos, buf: &mut Vec<u8>) -> Result<bool, String> {
         let now = self.params.rate_hz();
         match (now, self.said_rate) {
             (Some(hz), Some(said)) if hz.to_bits() != said.to_bits() => {
                 self.said_rate = Some(hz);
                 let e = self.params.rate_event(hz, t);
-                self.put_event(&e).map_err(|e| e.to_string())
+                self.put_event(&e, buf).map(|()| true)
             }
-            _ => Ok(()),
+            _ => Ok(false),
         }
     }
 
@@ -272,5 +297,51 @@ mod tests {
         let enc = |q: &QosProfile| q.encode();
         assert_eq!(enc(&parameters_qos()), "::,1000:,:,:,,");
         assert_eq!(enc(&rosout_qos()), ":1:,1000:,:10,0:,,");
+    }
+
+    /// A logger's line goes out as rcl writes it (a real rclpy node's line, the fixture's
+    /// `kilted-ros2cli/step2/ros2cli/topic-echo-rosout-n.txt`: `msg: published temperature
+    /// 45.0`, `file: <scratch>/thermo.py`, `function: tick`, `line: 20`): its message without
+    /// the level word the log pane shows, and its caller; a print's has none.
+    #[test]
+    fn a_loggers_line_is_its_message_and_its_caller_as_rcl_writes_it() {
+        use crate::textlog::Logged;
+        let logged = LogLine {
+            t: Some(Nanos(200_000_000)),
+            node: Some("thermo".into()),
+            level: Level::Info,
+            text: "info: published temperature 45.0".into(),
+            logged: Some(Logged {
+                msg: "published temperature 45.0".into(),
+                file: "/scratch/thermo.py".into(),
+                function: "tick".into(),
+                line: 20,
+            }),
+        };
+        let now = 1_795_822_167_937_444_103;
+        let m = log_message("thermo", &logged, now);
+        assert_eq!(
+            (m.msg.as_str(), m.file.as_str(), m.function.as_str(), m.line),
+            (
+                "published temperature 45.0",
+                "/scratch/thermo.py",
+                "tick",
+                20
+            )
+        );
+        assert_eq!((m.level, m.name.as_str()), (rcl::LOG_INFO, "thermo"));
+        assert_eq!((m.stamp.sec, m.stamp.nanosec), (1_795_822_167, 937_444_103));
+        let printed = LogLine {
+            level: Level::Warn,
+            text: "heard 3".into(),
+            logged: None,
+            ..logged
+        };
+        let m = log_message("thermo", &printed, now);
+        assert_eq!(
+            (m.msg.as_str(), m.file.as_str(), m.function.as_str(), m.line),
+            ("heard 3", "", "", 0)
+        );
+        assert_eq!(m.level, rcl::LOG_WARN);
     }
 }

@@ -197,18 +197,28 @@ pub fn value_from_text(text: &str) -> Result<ParameterValue, String> {
     Ok(v)
 }
 
-/// `node`'s parameter `name` set to `value` (`set_parameters`): what `ros2 param set`
-/// prints, `Set parameter successful`.
+/// What a node answered `ros2 param set` (ros2param's `verb/set.py`).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum SetAnswer {
+    /// Set: `Set parameter successful` (`: REASON` when the node gave one), for stdout.
+    Set(String),
+    /// Refused by the node: `Setting parameter failed` (`: REASON` when it gave one), for
+    /// stderr. Not an error of the command: ros2cli prints it and exits 0.
+    Refused(String),
+}
+
+/// `node`'s parameter `name` set to `value` (`set_parameters`), and what `ros2 param set`
+/// prints of the node's answer ([`SetAnswer`]).
 ///
 /// # Errors
-/// [`call`]'s; `Setting parameter failed: REASON` when the node refused.
+/// [`call`]'s; an answer that is not `set_parameters`' CDR, or holds no result.
 pub fn set(
     session: &zenoh::Session,
     domain: u32,
     (node, name): (&str, &str),
     value: ParameterValue,
     timeout: Duration,
-) -> Result<String, Ros2Error> {
+) -> Result<SetAnswer, Ros2Error> {
     use super::rcl_interfaces::{Parameter, SetParametersResponse, SetRequest};
     let req = SetRequest {
         parameters: vec![Parameter {
@@ -228,12 +238,18 @@ pub fn set(
         }
     };
     match r.results.first() {
-        Some(res) if res.successful => Ok(with("Set parameter successful", &res.reason) + "\n"),
-        Some(res) => Err(Ros2Error::Usage(with(
+        Some(res) if res.successful => Ok(SetAnswer::Set(with(
+            "Set parameter successful",
+            &res.reason,
+        ))),
+        Some(res) => Ok(SetAnswer::Refused(with(
             "Setting parameter failed",
             &res.reason,
         ))),
-        None => Err(Ros2Error::Usage("Setting parameter failed".into())),
+        None => Err(Ros2Error::Usage(format!(
+            "{}: set_parameters answered no result",
+            crate::text::printable(node)
+        ))),
     }
 }
 
@@ -259,7 +275,7 @@ fn python_bool(b: bool) -> &'static str {
 
 /// A Python string literal as `repr` writes it (single quotes unless the text has one and
 /// no double quote; backslashes doubled), control characters written out.
-fn python_str(s: &str) -> String {
+pub(crate) fn python_str(s: &str) -> String {
     let text = crate::text::printable(s).replace('\\', "\\\\");
     if text.contains('\'') && !text.contains('"') {
         format!("\"{text}\"")

@@ -2,6 +2,7 @@
 
 use crate::graph::spec::{GraphSpec, OverrideError};
 use crate::rate::{period_for_hz, MAX_HZ};
+use crate::setting::{Setting, Speech};
 use crate::time::{Nanos, MAX_DURATION_S};
 
 pub use crate::clock::ClockKind;
@@ -18,40 +19,32 @@ impl From<crate::clock::UnknownClock> for ConfigError {
     }
 }
 
-/// A setting that cannot be used. Each message is one line.
-#[derive(Debug, thiserror::Error, PartialEq)]
+/// A setting that cannot be used. Each message is one line, naming the setting as its
+/// front end takes it ([`ConfigError::line`]); `Display` is the command line's words.
+#[derive(Debug, PartialEq)]
 pub enum ConfigError {
     /// A rate outside (0, 10 000] Hz or not finite.
-    #[error("--{flag} must be a finite rate in (0, {max}] Hz, got {hz}", max = MAX_HZ)]
     Rate {
-        /// The flag's name (`sensor-hz`, `control-hz`).
+        /// The flag's name without its dashes (`sensor-hz`, `control-hz`).
         flag: &'static str,
         /// The rejected value.
         hz: f64,
     },
     /// Queue depth 0.
-    #[error("--queue-depth must be at least 1, got {0}")]
     Depth(usize),
     /// A graph override (`--rate`, `--depth`, a chapter shorthand) that does not fit.
-    #[error(transparent)]
-    Graph(#[from] OverrideError),
+    Graph(OverrideError),
     /// Duration not finite, ≤ 0, or above [`MAX_DURATION_S`].
-    #[error("--duration must be in (0, {max}] seconds, got {0} (ratelab::limits::MAX_DURATION_S)", max = MAX_DURATION_S)]
     Duration(f64),
     /// Unknown clock name.
-    #[error("--clock must be 'real' or 'virtual', got '{0}'")]
     Clock(String),
     /// A fault names no node of the graph, or there are too many.
-    #[error("--stall/--kill: {0}")]
     Fault(String),
     /// A real-time priority outside 1..=99.
-    #[error("--rt-priority must be in 1..=99, got {0}")]
     RtPriority(u8),
     /// A phase offset not finite, negative, or not below one second.
-    #[error("--phase-offset-ms values must be finite and in [0, 1000) ms, got {0}")]
     PhaseOffset(f64),
     /// Not exactly one phase offset per node.
-    #[error("--phase-offset-ms takes exactly {nodes} values (one per node, in order {order}), got {got}")]
     PhaseOffsetCount {
         /// Nodes in the graph.
         nodes: usize,
@@ -63,7 +56,6 @@ pub enum ConfigError {
     /// A real-clock run that would start more threads than
     /// [`crate::limits::MAX_REAL_CLOCK_THREADS`]: the line names the graph, the threads, the
     /// bound and the ways to fewer.
-    #[error("graph '{graph}': {line}")]
     Threads {
         /// The graph's name.
         graph: String,
@@ -71,13 +63,88 @@ pub enum ConfigError {
         line: String,
     },
     /// A spin margin that is not below every node's period (or above one second).
-    #[error("--spin-margin-us must be below every node's period (here {period_us} µs, the fastest) and at most 1000000, got {margin_us}")]
     SpinMargin {
         /// The margin, µs.
         margin_us: u64,
         /// The shortest node period, µs.
         period_us: u64,
     },
+}
+
+impl From<OverrideError> for ConfigError {
+    fn from(e: OverrideError) -> ConfigError {
+        ConfigError::Graph(e)
+    }
+}
+
+impl ConfigError {
+    /// The refusal in `speech`'s words: `--queue-depth must be at least 1, got 0` on the
+    /// command line, `queue_depth must be at least 1, got 0` in Python.
+    pub fn line(&self, speech: Speech) -> String {
+        let name = |s: Setting| speech.name(s);
+        match self {
+            ConfigError::Rate { flag, hz } => {
+                let named = match *flag {
+                    "sensor-hz" => name(Setting::SensorHz).to_string(),
+                    "control-hz" => name(Setting::ControlHz).to_string(),
+                    "rate" => name(Setting::Rate).to_string(),
+                    other if speech == Speech::Keywords => other.replace('-', "_"),
+                    other => format!("--{other}"),
+                };
+                format!("{named} must be a finite rate in (0, {MAX_HZ}] Hz, got {hz}")
+            }
+            ConfigError::Depth(d) => {
+                format!("{} must be at least 1, got {d}", name(Setting::QueueDepth))
+            }
+            ConfigError::Graph(e) => e.to_string(),
+            ConfigError::Duration(s) => format!(
+                "{} must be in (0, {MAX_DURATION_S}] seconds, got {s} (ratelab::limits::MAX_DURATION_S)",
+                name(Setting::Duration)
+            ),
+            ConfigError::Clock(c) => {
+                format!("{} must be 'real' or 'virtual', got '{c}'", name(Setting::Clock))
+            }
+            ConfigError::Fault(f) => match speech {
+                Speech::Flags => format!("--stall/--kill: {f}"),
+                Speech::Keywords => format!("stall/kill: {f}"),
+            },
+            ConfigError::RtPriority(p) => {
+                format!("{} must be in 1..=99, got {p}", name(Setting::RtPriority))
+            }
+            ConfigError::PhaseOffset(ms) => format!(
+                "{} values must be finite and in [0, 1000) ms, got {ms}",
+                name(Setting::PhaseOffset)
+            ),
+            ConfigError::PhaseOffsetCount { nodes, order, got } => format!(
+                "{} takes exactly {nodes} values (one per node, in order {order}), got {got}",
+                name(Setting::PhaseOffset)
+            ),
+            ConfigError::Threads { graph, line } => format!("graph '{graph}': {line}"),
+            ConfigError::SpinMargin {
+                margin_us,
+                period_us,
+            } => format!(
+                "{} must be below every node's period (here {period_us} µs, the fastest) and at most 1000000, got {margin_us}",
+                name(Setting::SpinMargin)
+            ),
+        }
+    }
+}
+
+impl std::fmt::Display for ConfigError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.line(Speech::Flags))
+    }
+}
+
+impl std::error::Error for ConfigError {
+    fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
+        match self {
+            // Transparent, as the line is the override's own.
+            ConfigError::Graph(e) => std::error::Error::source(e),
+            _ => None,
+        }
+    }
 }
 
 /// Everything that defines one run of the graph.

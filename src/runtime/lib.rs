@@ -7,7 +7,8 @@
 //!   [`checkpoint`] for trained ones; [`interpreter`], where the Python layer plugs in a
 //!   learner's code);
 //! - **graphs**: [`graph`] (the graph file, [`graph::spec`]; node kinds, their registry and
-//!   the built-in nodes), [`config`] (a run's settings and their validation);
+//!   the built-in nodes), [`config`] (a run's settings and their validation; [`setting`], their
+//!   names in each front end's words);
 //! - **running them**: [`telemetry`] (a live run's controls and telemetry), [`scheduler`]
 //!   (the virtual and real clocks that apply the executors' rules), [`command`] (changes to
 //!   a running graph), [`runcore`] (one graph under either clock, stepped, commanded,
@@ -29,6 +30,7 @@ pub mod policy;
 pub mod program;
 pub mod runcore;
 pub mod scheduler;
+pub mod setting;
 pub mod summary;
 pub mod telemetry;
 

@@ -819,7 +819,7 @@ fn every_way_a_python_node_is_wrong_is_one_line_and_exit_2() {
             "self.on_obs, 1)\n        node.get_parameter('gain')",
         ),
         "params = { k = 1 }",
-        &["FILE:6: node 'policy' has no parameter 'gain' (the graph file's params: k)"],
+        &["FILE:6: node 'policy' has no parameter 'gain' (ParameterNotDeclaredException; declared: none; the graph file's params: k)"],
     );
     // A missing script.
     let dir = tempfile::tempdir().unwrap();

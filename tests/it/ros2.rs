@@ -573,7 +573,8 @@ fn a_camera_s_frames_reach_ros_2_as_sensor_msgs_image_each_whole_as_the_vision_n
 }
 
 /// Read a bag with rosbags: each topic's type and messages (`/action`'s data, `/obs`'s
-/// positions, `/clock`'s times in ns), and each message's log time.
+/// positions, `/clock`'s times in ns, `/rosout`'s level, name, text, file, function and
+/// line, `/parameter_events`' node, stamp and declared names), and each message's log time.
 fn read_bag(dir: &std::path::Path) -> Value {
     let script = r#"
 import json, sys
@@ -597,8 +598,43 @@ with Reader(sys.argv[1]) as r:
             rows["v"].append(float(m.data))
         elif c.msgtype == "rosgraph_msgs/msg/Clock":
             rows["v"].append(m.clock.sec * 10**9 + m.clock.nanosec)
+        elif c.msgtype == "rcl_interfaces/msg/Log":
+            rows["v"].append([int(m.level), m.name, m.msg, m.file, m.function, int(m.line)])
+        elif c.msgtype == "rcl_interfaces/msg/ParameterEvent":
+            stamp = m.stamp.sec * 10**9 + m.stamp.nanosec
+            rows["v"].append([m.node, stamp, [p.name for p in m.new_parameters]])
         else:
             rows["v"].append([float(x) for x in m.position])
+print(json.dumps(out))
+"#;
+    let o = Command::new(oracle_python())
+        .args(["-c", script, dir.to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    serde_json::from_slice(&o.stdout).unwrap()
+}
+
+/// Each MCAP channel of a bag read with Foxglove's `mcap` (nothing of rosbag2's or
+/// ratelab's): by topic, its schema's name, its metadata's `topic_type_hash` and
+/// `offered_qos_profiles`, and the hash rosbags computes for the schema's type.
+fn read_channels(dir: &std::path::Path) -> Value {
+    let script = r#"
+import glob, json, sys
+from mcap.reader import make_reader
+from rosbags.typesys import Stores, get_typestore
+ts = get_typestore(Stores.LATEST)
+out = {}
+with open(glob.glob(sys.argv[1] + "/*.mcap")[0], "rb") as f:
+    summary = make_reader(f).get_summary()
+for c in summary.channels.values():
+    name = summary.schemas[c.schema_id].name
+    out[c.topic] = {
+        "type": name,
+        "hash": c.metadata.get("topic_type_hash"),
+        "qos": c.metadata.get("offered_qos_profiles"),
+        "rosbags_hash": ts.hash_rihs01(name),
+    }
 print(json.dumps(out))
 "#;
     let o = Command::new(oracle_python())
@@ -631,16 +667,43 @@ fn a_bag_of_the_run_reads_back_with_rosbags_every_message_the_same_on_every_run(
         &[&["--out", out.to_str().unwrap()][..], &deadline].concat(),
     );
     assert_eq!(code, 0, "{stdout}{stderr}");
+    // 51 of each topic and of /clock, and each of the 4 nodes' declared parameters (the
+    // graph's 3 and /ratelab) on /parameter_events; these nodes write no log line.
     assert!(
-        stdout.contains("(rosbag2, MCAP): 153 messages with /clock"),
+        stdout.contains("(rosbag2, MCAP): 157 messages with /clock"),
         "{stdout}"
     );
     let r = read_bag(&first);
-    assert_eq!(r["count"], 153);
+    assert_eq!(r["count"], 157);
     let topic = |t: &str| &r["topics"][t];
     assert_eq!(topic("/obs")["type"], "sensor_msgs/msg/JointState");
     assert_eq!(topic("/action")["type"], "std_msgs/msg/Float64");
     assert_eq!(topic("/clock")["type"], "rosgraph_msgs/msg/Clock");
+    // As `ros2 bag record -a` takes them: each node's parameters as declared, at run time 0.
+    let events = topic("/parameter_events");
+    assert_eq!(events["type"], "rcl_interfaces/msg/ParameterEvent");
+    assert_eq!(events["t"], serde_json::json!([0, 0, 0, 0]));
+    let declared: std::collections::BTreeMap<&str, (u64, Vec<String>)> = events["v"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|e| {
+            (
+                e[0].as_str().unwrap(),
+                (e[1].as_u64().unwrap(), strs(&e[2])),
+            )
+        })
+        .collect();
+    assert_eq!(
+        declared.keys().copied().collect::<Vec<&str>>(),
+        ["/actuator", "/policy", "/ratelab", "/sensor"]
+    );
+    assert!(
+        declared.values().all(|(stamp, _)| *stamp == 0),
+        "{declared:?}"
+    );
+    assert_eq!(declared["/policy"].1, ["rate_hz", "use_sim_time"]);
+    assert_eq!(declared["/ratelab"].1, ["use_sim_time"]);
     // Each topic's offered QoS is the one ratelab ran it with (`ros2 bag play` offers it).
     let qos = |t: &str| r["qos"][t].to_string();
     let inf = "9223372036,854775807";
@@ -656,6 +719,31 @@ fn a_bag_of_the_run_reads_back_with_rosbags_every_message_the_same_on_every_run(
         qos("/clock"),
         format!("[[\"KEEP_LAST\",1,\"BEST_EFFORT\",\"VOLATILE\",{inf}]]")
     );
+    // /rosout's: each of the 4 nodes' publisher (rcl's QoS, transient local), as rosbag2
+    // lists one profile per publisher.
+    let rosout = "[\"KEEP_LAST\",1000,\"RELIABLE\",\"TRANSIENT_LOCAL\",9223372036,854775807]";
+    assert_eq!(qos("/rosout"), format!("[{}]", [rosout; 4].join(",")));
+    // Each channel's metadata as rosbag2_storage_mcap writes it, read with Foxglove's mcap:
+    // the offered profiles and the type's hash, which rosbags computes again.
+    let channels = read_channels(&first);
+    assert_eq!(
+        channels.as_object().unwrap().keys().collect::<Vec<_>>(),
+        ["/action", "/clock", "/obs", "/parameter_events", "/rosout"]
+    );
+    for (name, c) in channels.as_object().unwrap() {
+        assert!(
+            c["hash"].as_str().unwrap().starts_with("RIHS01_"),
+            "{name}: {c}"
+        );
+        assert_eq!(c["hash"], c["rosbags_hash"], "{name}: {c}");
+        assert!(
+            c["qos"]
+                .as_str()
+                .unwrap()
+                .starts_with("- history: keep_last\n"),
+            "{name}: {c}"
+        );
+    }
     // The forces applied, in newtons, step by step; log times are run times.
     let rows = trace(&out);
     let forces = topic("/action")["v"].as_array().unwrap();
@@ -686,7 +774,7 @@ fn a_bag_of_the_run_reads_back_with_rosbags_every_message_the_same_on_every_run(
     assert!(stderr.contains("--force"), "{stderr}");
     let ((code, _, stderr), _) = bag("first", &["--force"]);
     assert_eq!(code, 0, "{stderr}");
-    assert_eq!(read_bag(&first)["count"], 153);
+    assert_eq!(read_bag(&first)["count"], 157);
 }
 
 #[test]

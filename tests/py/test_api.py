@@ -1,7 +1,9 @@
 """The Python package, installed from its wheel into a fresh virtual environment
 (scripts/test-python.sh): `ratelab.run` against the command line and the reference runs,
-a callable brain against the same brain from a file, errors as exceptions, Ctrl-C, and the
-installed `ratelab` command."""
+a callable brain against the same brain from a file, errors as exceptions naming Python's
+parameters, keywords, NumPy values, the defaults (`ratelab run`'s), Ctrl-C, and the
+installed `ratelab` command. A run that must be deterministic says `clock="virtual"`: the
+default clock is the real one, as `ratelab run`'s."""
 
 import _thread
 import importlib.util
@@ -13,6 +15,7 @@ import signal
 import subprocess
 import sys
 import threading
+import traceback
 import time
 from pathlib import Path
 
@@ -43,13 +46,17 @@ def reference(name):
 
 
 # Three of the chapter's configurations, and a graph with a Python node (which runs in this
-# interpreter).
+# interpreter); the reference runs are the virtual clock's (commands.txt).
 CASES = {
-    "default": {},
-    "control5": {"control_hz": 5},
-    "control10-depth100-seed2": {"seed": 2, "control_hz": 10, "queue_depth": 100},
-    "python": {"graph": "graphs/cartpole-python.toml"},
+    "default": {"clock": "virtual"},
+    "control5": {"clock": "virtual", "control_hz": 5},
+    "control10-depth100-seed2": {"clock": "virtual", "seed": 2, "control_hz": 10,
+                                 "queue_depth": 100},
+    "python": {"clock": "virtual", "graph": "graphs/cartpole-python.toml"},
 }
+
+#: The deterministic clock, for runs whose figures a test compares.
+VIRTUAL = {"clock": "virtual"}
 
 
 @pytest.mark.parametrize("name", sorted(CASES))
@@ -88,7 +95,7 @@ def test_an_estimator_s_error_and_lag_are_the_command_line_s(tmp_path):
     out = tmp_path / "out"
     subprocess.run([str(COMMAND), "run", "--clock", "virtual", "--graph", graph, "--duration",
                     "5", "--out", str(out)], check=True, capture_output=True, timeout=120)
-    run = ratelab.run(graph=graph, duration_s=5)
+    run = ratelab.run(graph=graph, duration_s=5, **VIRTUAL)
     assert run.estimator == json.loads((out / "estimator.json").read_text())
     assert run.estimator["topic"] == "/state" and run.estimator["estimator"] == "estimator"
     # Every step but the first (the first estimate is out 1 ms after t = 0).
@@ -96,15 +103,15 @@ def test_an_estimator_s_error_and_lag_are_the_command_line_s(tmp_path):
     # The low-pass at 20 Hz lags the angular velocity by about 1/(2π·20) s = 8 ms.
     assert 4 <= run.estimator["pole_angvel_lag_ms"] <= 12
     assert any(line.startswith("estimate on /state vs the plant") for line in run.summary)
-    assert ratelab.run(duration_s=1).estimator is None
+    assert ratelab.run(duration_s=1, **VIRTUAL).estimator is None
 
 
 def test_the_rate_cliff_is_the_chapter_s():
-    assert ratelab.run().metrics["balanced"]
-    fell = ratelab.run(control_hz=5)
+    assert ratelab.run(**VIRTUAL).metrics["balanced"]
+    fell = ratelab.run(control_hz=5, **VIRTUAL)
     assert not fell.metrics["balanced"]
     assert 0 < fell.metrics["fell_at_s"] < 2.0
-    deep = ratelab.run(control_hz=10, queue_depth=100, seed=2)
+    deep = ratelab.run(control_hz=10, queue_depth=100, seed=2, **VIRTUAL)
     assert deep.metrics["queue_depth"] == 100
 
 
@@ -116,8 +123,8 @@ def load_brain():
 
 
 def test_a_callable_brain_equals_the_same_brain_from_a_file():
-    from_file = ratelab.run(policy="graphs/brains/scripted.py", control_hz=10)
-    from_here = ratelab.run(policy=load_brain(), control_hz=10)
+    from_file = ratelab.run(policy="graphs/brains/scripted.py", control_hz=10, **VIRTUAL)
+    from_here = ratelab.run(policy=load_brain(), control_hz=10, **VIRTUAL)
     assert from_here.trace_csv == from_file.trace_csv
     a, b = dict(from_file.metrics), dict(from_here.metrics)
     assert a.pop("policy").endswith("scripted.py:act")
@@ -134,7 +141,7 @@ def test_a_brain_defined_here_runs_here_and_its_prints_go_to_the_log(capsys):
             print("first observation", obs.dtype)
         return 0.0
 
-    run = ratelab.run(policy=act, duration_s=1.0)
+    run = ratelab.run(policy=act, duration_s=1.0, **VIRTUAL)
     assert calls and calls[0] == (5,)
     assert any("first observation float32" in line for line in run.log), run.log
     # Nothing was written over the caller's own output, which is its own again.
@@ -145,11 +152,14 @@ def test_a_brain_defined_here_runs_here_and_its_prints_go_to_the_log(capsys):
 def test_bad_input_is_an_exception_with_the_one_line():
     with pytest.raises(ValueError) as e:
         ratelab.run(control_hz=-1)
-    assert "\n" not in str(e.value) and "control-hz" in str(e.value)
+    assert "\n" not in str(e.value) and "control_hz" in str(e.value)
+    assert isinstance(e.value, ratelab.SettingError) and isinstance(e.value, ratelab.Error)
     with pytest.raises(ValueError):
         ratelab.run(clock="sundial")
-    with pytest.raises(ValueError):
+    with pytest.raises(TypeError) as e:
         ratelab.run(duration_s="ten")
+    assert "duration_s" in str(e.value) and " s," in str(e.value), str(e.value)
+    assert isinstance(e.value, ratelab.SettingTypeError) and isinstance(e.value, ratelab.Error)
     with pytest.raises(FileNotFoundError) as e:
         ratelab.run(graph="graphs/no-such-graph.toml")
     assert "no-such-graph.toml" in str(e.value)
@@ -161,24 +171,25 @@ def test_a_trace_too_large_to_hold_is_refused_before_the_run():
     # Ten years of run time: its trace would be 15.8 G steps; run, it would never end.
     started = time.monotonic()
     with pytest.raises(ratelab.TraceTooLarge) as e:
-        ratelab.run(duration_s=315360000.0)
+        ratelab.run(duration_s=315360000.0, **VIRTUAL)
     assert time.monotonic() - started < 10.0
     assert isinstance(e.value, MemoryError) and isinstance(e.value, ratelab.Error)
     line = str(e.value)
     assert "\n" not in line and "MAX_HELD_TRACE_VALUES" in line, line
     assert "trace_every=2820" in line, line
     # Thinned as asked: steps 1, 11, ..., 101; the metrics count every step.
-    run = ratelab.run(duration_s=2.0, trace_every=10)
+    run = ratelab.run(duration_s=2.0, trace_every=10, **VIRTUAL)
     assert [int(s) for s in run.trace["step"]] == list(range(1, 102, 10))
     assert run.metrics["steps"] == 101
 
 
 def test_an_output_is_not_replaced_without_force(tmp_path):
-    ratelab.run(duration_s=0.5, out=tmp_path)
+    ratelab.run(duration_s=0.5, out=tmp_path, **VIRTUAL)
     with pytest.raises(FileExistsError) as e:
-        ratelab.run(duration_s=0.5, out=tmp_path)
-    assert "--force" in str(e.value)
-    ratelab.run(duration_s=0.5, out=tmp_path, force=True)
+        ratelab.run(duration_s=0.5, out=tmp_path, **VIRTUAL)
+    # The Python parameter, not the command line's flag.
+    assert "force" in str(e.value) and "--force" not in str(e.value), str(e.value)
+    ratelab.run(duration_s=0.5, out=tmp_path, force=True, **VIRTUAL)
 
 
 def test_a_brain_that_raises_fails_its_node_and_keeps_the_figures():
@@ -191,10 +202,41 @@ def test_a_brain_that_raises_fails_its_node_and_keeps_the_figures():
         return 0.5
 
     with pytest.raises(ratelab.NodeFailed) as e:
-        ratelab.run(policy=act)
+        ratelab.run(policy=act, **VIRTUAL)
+    assert isinstance(e.value, RuntimeError) and isinstance(e.value, ratelab.Error)
     assert "too far right" in str(e.value) and "policy" in str(e.value)
     assert e.value.run.metrics["balanced"] is False
     assert e.value.run.metrics["steps"] > 0
+    # The brain's own exception is the cause, its traceback reaching into `act`.
+    cause = e.value.__cause__
+    assert isinstance(cause, RuntimeError) and str(cause) == "too far right", repr(cause)
+    frames = traceback.extract_tb(cause.__traceback__)
+    assert frames and frames[-1].name == "act", frames
+    assert frames[-1].filename == __file__, frames
+
+
+def test_a_node_class_that_raises_is_the_cause_with_its_traceback():
+    with pytest.raises(ratelab.NodeFailed) as e:
+        ratelab.run(graph="graphs/cartpole-python.toml", nodes={"policy": _RaisingBalancer},
+                    duration_s=1.0, **VIRTUAL)
+    assert "no good" in str(e.value), str(e.value)
+    cause = e.value.__cause__
+    assert isinstance(cause, ValueError) and str(cause) == "no good", repr(cause)
+    frames = traceback.extract_tb(cause.__traceback__)
+    assert any(f.name == "on_obs" and f.filename == __file__ for f in frames), frames
+
+
+class _RaisingBalancer:
+    """A Python node class for the policy that raises on its first observation."""
+
+    def __init__(self, node):
+        from ratelab import Force, State
+
+        self.pub = node.create_publisher(Force, "/action", 1)
+        node.create_subscription(State, "/obs", self.on_obs, 1)
+
+    def on_obs(self, msg):
+        raise ValueError("no good")
 
 
 def test_ctrl_c_stops_a_run():
@@ -213,7 +255,7 @@ def test_ctrl_c_stops_a_run():
     finally:
         signal.signal(signal.SIGINT, before)
     # The interpreter is still good for another run.
-    assert ratelab.run(duration_s=0.5).metrics["steps"] == 26  # t = 0, 20, …, 500 ms
+    assert ratelab.run(duration_s=0.5, **VIRTUAL).metrics["steps"] == 26  # t = 0, 20, …, 500 ms
 
 
 def test_the_installed_command_and_module():
@@ -246,8 +288,8 @@ def test_a_launch_starts_its_processes_through_this_python(tmp_path):
 
 def test_a_camera_renders_through_this_python(tmp_path):
     # A camera with `mujoco = 1` starts its renderer as `python -m ratelab render-camera`.
-    drawn = ratelab.run(graph="graphs/cartpole-camera.toml", duration_s=3)
-    run = ratelab.run(graph="graphs/cartpole-camera-mujoco.toml", duration_s=3)
+    drawn = ratelab.run(graph="graphs/cartpole-camera.toml", duration_s=3, **VIRTUAL)
+    run = ratelab.run(graph="graphs/cartpole-camera-mujoco.toml", duration_s=3, **VIRTUAL)
     cannot = [line for line in run.log if "drawing synthetic frames instead" in line]
     if cannot and os.environ.get("RATELAB_REQUIRE_RENDER") != "1":
         pytest.skip(f"this machine cannot render: {cannot[0]}")
@@ -282,8 +324,8 @@ def test_a_cliff_is_where_a_run_falls_and_the_next_rate_up_balances():
     assert row["seed"] == 0 and row["runs"] > 0
     falls, balances = row["falls_at_hz"], row["balances_at_hz"]
     assert balances == pytest.approx(falls + 0.5)
-    assert not ratelab.run(control_hz=falls).metrics["balanced"]
-    assert ratelab.run(control_hz=balances).metrics["balanced"]
+    assert not ratelab.run(control_hz=falls, **VIRTUAL).metrics["balanced"]
+    assert ratelab.run(control_hz=balances, **VIRTUAL).metrics["balanced"]
     with pytest.raises(ValueError) as e:
         ratelab.cliff(min_hz=20, max_hz=10)
     assert "--min-hz" in str(e.value)
@@ -358,15 +400,15 @@ def test_a_node_class_given_here_runs_as_the_same_class_from_its_file():
         "my_balancer", ROOT / "graphs/nodes/scripted_balancer.py")
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
-    from_file = ratelab.run(graph="graphs/cartpole-python.toml")
+    from_file = ratelab.run(graph="graphs/cartpole-python.toml", **VIRTUAL)
     given = ratelab.run(graph="graphs/cartpole-python.toml",
-                        nodes={"policy": module.ScriptedBalancer})
+                        nodes={"policy": module.ScriptedBalancer}, **VIRTUAL)
     assert given.trace_csv == from_file.trace_csv
     assert given.metrics_json == from_file.metrics_json
     # `import ratelab` is still the package after Python nodes ran (their message classes
     # joined it).
     assert sys.modules["ratelab"] is ratelab and ratelab.Force(newtons=1.0).newtons == 1.0
-    with pytest.raises(ValueError):
+    with pytest.raises(TypeError):
         ratelab.run(graph="graphs/cartpole-python.toml", nodes={"policy": "ScriptedBalancer"})
 
 
@@ -380,6 +422,176 @@ def test_a_node_class_defined_in_a_cell_runs_here():
             node.create_timer(node.get_period(), lambda: self.pub.publish(Force(newtons=0.0)))
             node.get_logger().info("holding")
 
-    run = ratelab.run(graph="graphs/cartpole-python.toml", nodes={"policy": Hold}, duration_s=3)
+    run = ratelab.run(graph="graphs/cartpole-python.toml", nodes={"policy": Hold}, duration_s=3,
+                      **VIRTUAL)
     assert not run.metrics["balanced"]  # no force: the pole falls
     assert any("holding" in line and "policy" in line for line in run.log), run.log
+
+
+# ---- #71: the package in Python's terms ------------------------------------------------------
+
+
+def test_an_unknown_keyword_names_the_nearest_one():
+    with pytest.raises(TypeError) as e:
+        ratelab.run(contol_hz=5)
+    assert str(e.value) == ("run() got an unexpected keyword argument 'contol_hz'; "
+                            "did you mean 'control_hz'?")
+    assert isinstance(e.value, ratelab.Error)
+    with pytest.raises(TypeError, match="did you mean 'seeds'"):
+        ratelab.sweep(seed=[0, 1])
+    with pytest.raises(TypeError, match="did you mean 'min_hz'"):
+        ratelab.cliff(minhz=4)
+    with pytest.raises(TypeError, match="did you mean 'dir'"):
+        ratelab.exercise("ex1", dri="exercises")
+    # No front end parses another's arguments: run() takes no flags.
+    with pytest.raises(TypeError, match="'flags'"):
+        ratelab.run(flags=["--executor", "single_threaded"])
+    # The signature is still the function's own, for help() and an editor.
+    import inspect
+    params = inspect.signature(ratelab.run).parameters
+    assert "control_hz" in params and "stall" in params and "flags" not in params
+
+
+def test_a_node_name_the_graph_does_not_have_is_refused():
+    from ratelab import Force, State
+
+    class Hold:
+        def __init__(self, node):
+            self.pub = node.create_publisher(Force, "/action", 1)
+            node.create_subscription(State, "/obs", lambda msg: None, 1)
+
+    with pytest.raises(ValueError) as e:
+        ratelab.run(graph="graphs/cartpole-python.toml", nodes={"polcy": Hold}, duration_s=1,
+                    **VIRTUAL)
+    # The bad name, and the graph's Python nodes to choose from.
+    assert "polcy" in str(e.value) and "policy" in str(e.value), str(e.value)
+    # On the chapter's graph (no Python node at all) it is refused too, not ignored.
+    with pytest.raises(ValueError) as e:
+        ratelab.run(nodes={"policy": Hold}, duration_s=1, **VIRTUAL)
+    assert "policy" in str(e.value)
+
+
+def test_numpy_scalars_and_arrays_are_numbers_and_lists():
+    plain = ratelab.run(control_hz=10, queue_depth=100, seed=2, duration_s=10, **VIRTUAL)
+    numpy = ratelab.run(control_hz=np.float64(10), queue_depth=np.int64(100), seed=np.int64(2),
+                        duration_s=np.float32(10), **VIRTUAL)
+    assert numpy.metrics_json == plain.metrics_json
+    assert ratelab.run(control_hz=np.int32(5), duration_s=1, **VIRTUAL).metrics["control_hz"] == 5
+    # Per-node and per-topic values, and a list as an array.
+    by_node = ratelab.run(rate={"policy": np.float64(10)}, depth={"/obs": np.int64(100)},
+                          seed=2, **VIRTUAL)
+    assert by_node.metrics["control_hz"] == 10 and by_node.metrics["queue_depth"] == 100
+    offsets = ratelab.run(phase_offset_ms=np.array([0.0, 5.0, 10.0]), duration_s=2, **VIRTUAL)
+    assert offsets.metrics_json == ratelab.run(phase_offset_ms=[0, 5, 10], duration_s=2,
+                                               **VIRTUAL).metrics_json
+    # A bool is not a number; a float is not a count.
+    with pytest.raises(TypeError, match="control_hz.*Hz"):
+        ratelab.run(control_hz=True)
+    with pytest.raises(TypeError, match="queue_depth.*messages"):
+        ratelab.run(queue_depth=2.5)
+    # sweep and cliff: arrays, NumPy scalars.
+    table = ratelab.sweep(control_hz=np.array([50.0, 5.0]), seeds=np.arange(2),
+                          sensor_hz=np.float64(50), queue_depth=np.int64(1),
+                          duration_s=np.float64(2))
+    assert table.csv == ratelab.sweep(control_hz=[50, 5], seeds=[0, 1], duration_s=2).csv
+    assert ratelab.sweep(control_hz=np.float64(50), seeds=np.int64(0), duration_s=1).rows[0][
+        "balanced"] is True
+    cliff = ratelab.cliff(seeds=np.array([0]), min_hz=np.float64(4), max_hz=np.int64(12),
+                          step_hz=np.float32(0.5))
+    assert cliff.csv == ratelab.cliff(seeds=[0], min_hz=4, max_hz=12, step_hz=0.5).csv
+
+
+def test_a_run_says_whether_it_balanced_or_fell():
+    up = ratelab.run(duration_s=1, **VIRTUAL)
+    assert repr(up) == "<ratelab.Run balanced 1.0 s, control 50 Hz, seed 0, virtual clock>"
+    down = ratelab.run(control_hz=5, **VIRTUAL)
+    fell = down.metrics["fell_at_s"]
+    assert repr(down) == f"<ratelab.Run fell at {fell:.2f} s, control 5 Hz, seed 0, virtual clock>"
+    html = down._repr_html_()
+    assert html.startswith("<table") and "fell at" in html and "control_hz" in html
+    # Jupyter's tables of a sweep and a cliff, and what they print.
+    table = ratelab.sweep(control_hz=[50, 5], seeds=[0], duration_s=2)
+    assert isinstance(table, ratelab.Table) and isinstance(table, ratelab.Sweep)
+    assert repr(table).startswith("<ratelab.Sweep 2 runs: 1 balanced, 1 fell")
+    assert "<th>control_hz</th>" in table._repr_html_()
+    cliff = ratelab.cliff(seeds=[0], min_hz=4, max_hz=12, step_hz=0.5)
+    assert repr(cliff).startswith("<ratelab.Cliff seed 0: falls at ")
+    # Text is escaped.
+    odd = ratelab.Table("name,value\n<b>,a&b\n")
+    assert "&lt;b&gt;" in odd._repr_html_() and "a&amp;b" in odd._repr_html_()
+
+
+def test_a_node_declares_and_reads_parameters_as_rclpy_s(tmp_path):
+    from ratelab import Force, State
+
+    # The chapter's Python graph with a parameter the graph file gives (an override).
+    text = (ROOT / "graphs/cartpole-python.toml").read_text()
+    script = ROOT / "graphs/nodes/scripted_balancer.py"
+    text = text.replace('script = "nodes/scripted_balancer.py"', f'script = "{script}"')
+    text = text.replace('class = "ScriptedBalancer"',
+                        'class = "ScriptedBalancer"\nparams = { gain = 3.0 }')
+    assert "params = { gain = 3.0 }" in text
+    graph = tmp_path / "tuned.toml"
+    graph.write_text(text)
+    said = []
+
+    class Tuned:
+        def __init__(self, node):
+            gain = node.declare_parameter("gain", 10.0)  # the graph file's 3.0 wins
+            hold = node.declare_parameter("hold_n", 0.5)  # not in the file: the default
+            said.append((gain.name, gain.value, hold.value, node.get_parameter("hold_n").value,
+                         node.get_parameter("gain").value, node.has_parameter("gain"),
+                         node.has_parameter("nope")))
+            try:
+                node.declare_parameter("gain", 1.0)
+            except Exception as e:  # noqa: BLE001 (rclpy's exception, by its name)
+                said.append(type(e).__name__)
+            try:
+                node.get_parameter("nope")
+            except Exception as e:  # noqa: BLE001
+                said.append(type(e).__name__)
+            self.pub = node.create_publisher(Force, "/action", 1)
+            node.create_subscription(State, "/obs", lambda msg: None, 1)
+            node.create_timer(node.get_period(), lambda: self.pub.publish(Force(newtons=0.0)))
+
+    ratelab.run(graph=graph, nodes={"policy": Tuned}, duration_s=1, **VIRTUAL)
+    assert said == [("gain", 3.0, 0.5, 0.5, 3.0, True, False),
+                    "ParameterAlreadyDeclaredException", "ParameterNotDeclaredException"]
+
+
+def test_the_defaults_are_ratelab_run_s(tmp_path):
+    # One default clock for every front end: the real one, as `ratelab run`'s.
+    out = tmp_path / "out"
+    subprocess.run([str(COMMAND), "run", "--duration", "1", "--out", str(out)],
+                   capture_output=True, timeout=120)
+    command = json.loads((out / "metrics.json").read_text())
+    run = ratelab.run(duration_s=1)
+    assert run.metrics["clock"] == command["clock"] == "real"
+    same = ["clock", "seed", "duration_s", "control_hz", "sensor_hz", "queue_depth", "policy",
+            "graph"]
+    assert {k: run.metrics[k] for k in same} == {k: command[k] for k in same}
+    assert set(run.metrics) == set(command)
+    assert "real clock" in repr(run)
+
+
+FLAG = re.compile(r"--[a-z]")
+
+
+@pytest.mark.parametrize("settings, name", [
+    ({"control_hz": 0}, "control_hz"),
+    ({"sensor_hz": 0}, "sensor_hz"),
+    ({"queue_depth": 0}, "queue_depth"),
+    ({"duration_s": 0}, "duration_s"),
+    ({"trace_every": 0}, "trace_every"),
+    ({"seed": -1}, "seed"),
+    ({"clock": "sundial"}, "clock"),
+    ({"rate": {"policy": 0}}, "rate"),
+    ({"executor": "bogus"}, "executor"),
+    ({"phase_offset_ms": [0, 5]}, "phase_offset_ms"),
+])
+def test_errors_name_python_parameters_never_flags(settings, name):
+    with pytest.raises(ValueError) as e:
+        ratelab.run(**{"duration_s": 1, **VIRTUAL, **settings})
+    line = str(e.value)
+    assert name in line and not FLAG.search(line), line
+    assert isinstance(e.value, ratelab.Error)

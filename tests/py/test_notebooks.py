@@ -32,3 +32,32 @@ def test_the_notebook_runs_and_its_checks_pass(name, tmp_path, monkeypatch):
 def test_there_are_notebooks():
     assert {p.name for p in NOTEBOOKS.glob("*.ipynb")} >= {
         "rate_cliff.ipynb", "your_own_brain.ipynb", "recording.ipynb"}
+
+
+def test_a_node_class_from_a_cell_that_fails_names_the_cell_and_chains_its_error(tmp_path):
+    # A learner's node class defined in a cell: the failure's line names the cell as IPython
+    # does ("Cell In[1], line 8"), not the kernel's temporary file, and the class's own
+    # exception, its traceback in the cell, is NodeFailed's cause.
+    graph = Path(__file__).resolve().parents[2] / "graphs" / "cartpole-python.toml"
+    cell = "\n".join([
+        "import ratelab",
+        "class Bad:",
+        "    def __init__(self, node):",
+        "        from ratelab import Force, State",
+        "        self.pub = node.create_publisher(Force, '/action', 1)",
+        "        node.create_subscription(State, '/obs', self.on_obs, 1)",
+        "    def on_obs(self, msg):",
+        "        raise ValueError('no good')",
+    ])
+    check = "\n".join([
+        "try:",
+        f"    ratelab.run(graph={str(graph)!r}, nodes={{'policy': Bad}}, duration_s=1.0,",
+        "                clock='virtual')",
+        "except ratelab.NodeFailed as e:",
+        "    failed = e",
+        "assert 'Cell In[1], line 8: ValueError: no good' in str(failed), str(failed)",
+        "assert isinstance(failed.__cause__, ValueError), repr(failed.__cause__)",
+    ])
+    notebook = nbformat.v4.new_notebook(cells=[
+        nbformat.v4.new_code_cell(cell), nbformat.v4.new_code_cell(check)])
+    nbclient.NotebookClient(notebook, timeout=600, kernel_name="python3").execute()

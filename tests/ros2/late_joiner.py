@@ -7,7 +7,8 @@ Usage: late_joiner.py ENDPOINT KEY DEPTH SECONDS
   transient-local subscription (rmw_zenoh_cpp's: an advanced subscriber asking for history
   of at most DEPTH samples per publisher, detecting late publishers, itself detectable).
 Prints "ready" at once, then one JSON report: samples: [{t (s after subscribing), seq
-(the attachment's), msg (a Log's text, for rcl_interfaces/msg/Log), name}], errors: [...]
+(the attachment's), and for rcl_interfaces/msg/Log its msg, name, level, file, function and
+line}], errors: [...]
 """
 
 import json
@@ -39,7 +40,8 @@ def on_sample(sample):
     if "rcl_interfaces::msg::dds_::Log_" in str(sample.key_expr):
         try:
             m = store.deserialize_cdr(sample.payload.to_bytes(), "rcl_interfaces/msg/Log")
-            row.update(msg=m.msg, name=m.name)
+            row.update(msg=m.msg, name=m.name, level=int(m.level), file=m.file,
+                       function=m.function, line=int(m.line))
         except Exception as e:  # noqa: BLE001 - a report, not a crash
             errors.append(f"Log: {e}")
     with lock:

@@ -111,6 +111,12 @@ impl App {
                     .copied()
                     .unwrap_or(0)
             }),
+            segment_expired: ended.map_or(segment.expired, |t| {
+                t.qos_counters
+                    .get(QosCounter::Expired.key())
+                    .copied()
+                    .unwrap_or(0)
+            }),
             qos: (!(qos.is_default() && spec.qos.is_default())).then(|| qos.short_parts(ran_depth)),
             // Over the window, as its drops and stale reads (totals counted from the start
             // read as 40 % loss on a 20 % link under an arrow saying "last 5 s").
@@ -218,6 +224,7 @@ impl App {
             shown: true,
             layer,
             set_hz: ran_hz.unwrap_or_else(|| self.rate_of(id)),
+            phase_ms: self.phases.get(id.0).copied().unwrap_or(0.0),
             next_hz: ran_hz
                 .map(|_| self.rate_of(id))
                 .filter(|&next| Some(next) != ran_hz),

@@ -85,7 +85,9 @@ pub(super) fn render_cartpole(v: &View, area: Rect, buf: &mut Buffer) {
         .render(area, buf);
 }
 
-pub(super) fn render_angle_chart(v: &View, area: Rect, buf: &mut Buffer) {
+/// The pole angle against its fall limits over the charts' window; `open`: without a bottom
+/// border, the force band's top one below serving for both (`chart_areas` in `view.rs`).
+pub(super) fn render_angle_chart(v: &View, area: Rect, buf: &mut Buffer, open: bool) {
     let (t0, t1) = v.chart_s;
     let upper = [(t0, LIMIT_RAD), (t1, LIMIT_RAD)];
     let lower = [(t0, -LIMIT_RAD), (t1, -LIMIT_RAD)];
@@ -195,8 +197,14 @@ pub(super) fn render_angle_chart(v: &View, area: Rect, buf: &mut Buffer) {
         add(&mut title, "⡇ change ".into(), Style::new().fg(Color::Cyan));
     }
     add(&mut title, format!("{} ", v.chart_label), Style::new());
+    let block = if open {
+        use ratatui::widgets::Borders;
+        Block::new().borders(Borders::TOP | Borders::LEFT | Borders::RIGHT)
+    } else {
+        Block::bordered()
+    };
     Chart::new(datasets)
-        .block(Block::bordered().title(Line::from(title)))
+        .block(block.title(Line::from(title)))
         .x_axis(time_axis(t0, t1, area))
         .y_axis(
             Axis::default()
@@ -233,7 +241,8 @@ fn time_axis(t0: f64, t1: f64, area: Rect) -> Axis<'static> {
 
 /// The zero-order hold, live: the force the policy published (dots, at its ticks) and the
 /// force the actuator applied (a staircase: each step's force held until the next).
-pub(super) fn render_hold_chart(v: &View, area: Rect, buf: &mut Buffer) {
+/// `joined`: right under the angle chart, its top border that chart's bottom one (`├ ┤`).
+pub(super) fn render_hold_chart(v: &View, area: Rect, buf: &mut Buffer, joined: bool) {
     let (t0, t1) = v.chart_s;
     let limit = ratelab::plant::GEAR_N;
     let clamp = |pts: &[(f64, f64)]| -> Vec<(f64, f64)> {
@@ -258,10 +267,10 @@ pub(super) fn render_hold_chart(v: &View, area: Rect, buf: &mut Buffer) {
             .magenta()
             .data(&published),
     ]);
-    // Three labels need three rows of plot. A band of two rows (80×24) cannot put a label
-    // on 0 N: the braille grid draws 0 N in the upper row (at its lowest dot), so its rows
-    // are labelled by what they hold, ≥ 0 above and < 0 below, not by ±10 at their ends,
-    // which read as if 0 N were 10 N.
+    // Three labels need three rows of plot (80×24 has them: [`super::HOLD_ROWS`]). A band
+    // of two rows cannot put a label on 0 N: the braille grid draws 0 N in the upper row (at
+    // its lowest dot), so its rows are labelled by what they hold, ≥ 0 above and < 0 below,
+    // not by ±10 at their ends, which read as if 0 N were 10 N.
     let labels: &[&str] = if area.height >= 5 {
         &["-10", "0", "10"]
     } else {
@@ -278,8 +287,18 @@ pub(super) fn render_hold_chart(v: &View, area: Rect, buf: &mut Buffer) {
         title.extend(["· ".into(), "before reload ".dark_gray()]);
     }
     let title = Line::from(title);
+    let block = if joined {
+        use ratatui::symbols::{border, line};
+        Block::bordered().border_set(border::Set {
+            top_left: line::VERTICAL_RIGHT,
+            top_right: line::VERTICAL_LEFT,
+            ..border::PLAIN
+        })
+    } else {
+        Block::bordered()
+    };
     Chart::new(datasets)
-        .block(Block::bordered().title(title))
+        .block(block.title(title))
         .hidden_legend_constraints((Constraint::Length(0), Constraint::Length(0)))
         .x_axis(time_axis(t0, t1, area))
         .y_axis(
@@ -332,6 +351,14 @@ pub(super) fn render_segment(v: &View, area: Rect, buf: &mut Buffer) {
                     format!(" {} lost", t.segment_lost).red()
                 } else {
                     format!(", {} lost", t.segment_lost).red()
+                });
+            }
+            // Lifespan's count: unread messages that grew too old (never read, as a drop).
+            if t.segment_expired > 0 {
+                spans.push(if short > 1 {
+                    format!(" {} expired", t.segment_expired).yellow()
+                } else {
+                    format!(", {} expired", t.segment_expired).yellow()
                 });
             }
         }

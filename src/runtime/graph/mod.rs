@@ -85,6 +85,38 @@ pub struct GraphHandles {
     pub external: Vec<Arc<ExternalPort>>,
     /// The nodes' faults: the settings' and those injected by command ([`faults`]).
     pub faults: Arc<faults::FaultBook>,
+    /// The lines of the text log ([`crate::textlog`]) the graph's nodes wrote while
+    /// [`Graph::build`] built them (a Python node's constructor's `get_logger()` lines and
+    /// prints), on the building thread, oldest first, at most [`BUILD_LINES`] (the last
+    /// ones): a ROS 2 offer started after the build puts them on each node's `/rosout`
+    /// first, as a ROS 2 node's constructor's lines are its first. Empty in copies made
+    /// while building (a step observer's).
+    pub build_lines: Arc<[crate::textlog::LogLine]>,
+}
+
+/// The most lines [`GraphHandles::build_lines`] keeps: `/rosout`'s depth (rcl's, keep last
+/// 1000).
+pub const BUILD_LINES: usize = 1000;
+
+/// Keep the lines written with a node's name on the calling thread (the graph's building)
+/// from now until the returned recorder is dropped, the last [`BUILD_LINES`] of them.
+fn record_build_lines() -> (
+    Arc<Mutex<std::collections::VecDeque<crate::textlog::LogLine>>>,
+    crate::textlog::Recorder,
+) {
+    let kept = Arc::new(Mutex::new(std::collections::VecDeque::new()));
+    let keep = kept.clone();
+    let builder = std::thread::current().id();
+    let recorder = crate::textlog::add_recorder(Box::new(move |line: crate::textlog::LogLine| {
+        if line.node.is_some() && std::thread::current().id() == builder {
+            let mut kept = lock(&keep);
+            if kept.len() == BUILD_LINES {
+                kept.pop_front();
+            }
+            kept.push_back(line);
+        }
+    }));
+    (kept, recorder)
 }
 
 /// Phase changes asked for and not yet taken: each node and its new phase offset
@@ -407,7 +439,9 @@ impl Graph {
             executor: Arc::default(),
             plan_request: Arc::default(),
             phase_request: Arc::default(),
+            build_lines: Arc::from(Vec::new()),
         };
+        let (built, recorder) = record_build_lines();
         for o in &mut observers {
             o.attach(&handles);
         }
@@ -420,6 +454,9 @@ impl Graph {
         let nodes = (0..spec.nodes.len())
             .map(|i| build_node(&handles, seed, i, &mut observers))
             .collect::<Result<Vec<_>, _>>()?;
+        drop(recorder);
+        let mut handles = handles;
+        handles.build_lines = Arc::from(Vec::from(std::mem::take(&mut *lock(&built))));
         Ok(Graph { nodes, handles })
     }
 

@@ -1,34 +1,57 @@
 """ratelab in Python: the lab's runs in your notebook, script or pytest.
 
-    import ratelab
-    run = ratelab.run(control_hz=5)          # the chapter's graph, virtual clock, seed 0
-    run.metrics["balanced"], run.metrics["fell_at_s"]
-    run.trace["pole_angle_rad"]              # NumPy arrays, one value per actuator step
+>>> import ratelab
+>>> run = ratelab.run(control_hz=5, clock="virtual")  # the chapter's graph, seed 0, 10 s
+>>> run
+<ratelab.Run fell at ... s, control 5 Hz, seed 0, virtual clock>
+>>> run.metrics["balanced"], run.metrics["fell_at_s"]
+(False, ...)
+>>> len(run.trace["pole_angle_rad"]) == run.metrics["steps"]  # NumPy arrays, one value a step
+True
 
-A run is `ratelab run --out DIR` made in this process by the same code: `run.metrics` holds
-`metrics.json`'s keys, `run.trace` `trace.csv`'s columns, `run.log` `log.txt`'s lines (what
-each means: docs/metrics.md). A brain (`policy=`) may be a function defined here, in a
-notebook cell: it runs in this interpreter and, under the virtual clock, gives exactly the
-run the same function gives from a file. The `ratelab` command this package installs is
-the whole command line (`ratelab lab`, `ratelab launch`, …).
+A run is `ratelab run --out DIR` made in this process by the same code, with the same
+defaults (the real clock among them: `clock="virtual"` is the deterministic one, the same
+settings giving the same bytes): `run.metrics` holds `metrics.json`'s keys, `run.trace`
+`trace.csv`'s columns, `run.log` `log.txt`'s lines (what each means: docs/metrics.md). A
+brain (`policy=`) may be a function defined here, in a notebook cell: it runs in this
+interpreter and, under the virtual clock, gives exactly the run the same function gives
+from a file. The `ratelab` command this package installs is the whole command line
+(`ratelab lab`, `ratelab launch`, …).
 
-Errors are exceptions carrying ratelab's one line: `ValueError` for a bad setting,
-`FileNotFoundError` for a missing file, `FileExistsError` for an output that exists (pass
-`force=True`), `NodeFailed` when a node of the run failed (its `.run` holds the figures up
-to then), `TraceTooLarge` (a `ratelab.Error` and a `MemoryError`) before a run whose trace
-would not fit in memory (keep one step in N with `trace_every=N`, or write the trace to a
-file as the run goes with the command `ratelab run --out DIR`). Ctrl-C (KeyboardInterrupt)
-stops a run.
+Errors are exceptions carrying ratelab's one line, which names the Python parameter: a
+`ratelab.Error` each where it is ratelab's own. `SettingError` (a `ValueError`) for a bad
+value, `SettingTypeError` (a `TypeError`) for a value of the wrong type or an unknown
+keyword, `FileNotFoundError` for a missing file, `FileExistsError` for an output that exists
+(pass `force=True`), `NodeFailed` (a `RuntimeError`) when a node of the run failed (its
+`.run` holds the figures up to then), `TraceTooLarge` (a `MemoryError`) before a run whose
+trace would not fit in memory (keep one step in N with `trace_every=N`, or write the trace
+to a file as the run goes with the command `ratelab run --out DIR`). Ctrl-C
+(KeyboardInterrupt) stops a run.
 """
 
 from __future__ import annotations
 
 import csv
+import functools
+import inspect
 import io
 import json
+import numbers
 import os
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, Callable, Dict, List, Mapping, Optional, Sequence, Union
+from typing import (
+    TYPE_CHECKING,
+    Any,
+    Callable,
+    Dict,
+    Iterable,
+    List,
+    Mapping,
+    Optional,
+    Sequence,
+    Tuple,
+    Union,
+)
 
 from . import _native
 
@@ -50,12 +73,16 @@ __version__: str = _native.__version__
 __all__ = [
     "Run",
     "Table",
+    "Sweep",
+    "Cliff",
     "Check",
     "Prediction",
     "Exercise",
     "NodeFailed",
     "NoPrediction",
     "Error",
+    "SettingError",
+    "SettingTypeError",
     "TraceTooLarge",
     "run",
     "sweep",
@@ -70,8 +97,20 @@ NoPrediction = _native.NoPrediction
 
 
 class Error(Exception):
-    """An error of ratelab's own kind (bad input is a `ValueError`, a missing file a
-    `FileNotFoundError`, as Python's own)."""
+    """An error of ratelab's own kind. Each is also the Python exception of its cause: a bad
+    setting a `ValueError` (`SettingError`) or a `TypeError` (`SettingTypeError`), a failed
+    node a `RuntimeError` (`NodeFailed`), a trace too large a `MemoryError`
+    (`TraceTooLarge`)."""
+
+
+class SettingError(Error, ValueError):
+    """A setting ratelab refuses (`run(control_hz=0)`): the message names the Python
+    parameter and its unit."""
+
+
+class SettingTypeError(Error, TypeError):
+    """A setting of the wrong type (`run(control_hz="fast")`), or a keyword the function
+    does not take (`run(contol_hz=5)`: the message names the nearest one it does take)."""
 
 
 class TraceTooLarge(Error, MemoryError):
@@ -98,9 +137,322 @@ TRACE_COLUMNS: Dict[str, str] = {
 PathLike = Union[str, "os.PathLike[str]"]
 
 
-@dataclass(frozen=True)
+# ---- reading the caller's values ---------------------------------------------------------
+# Every number may be a Python number, a NumPy scalar (np.float64(5), np.int64(5),
+# np.float32(0.5)) or a 0-d array; every list any sequence or a NumPy array. NumPy itself is
+# not imported for it (duck typing: `.shape == ()` and `.item()`), so `import ratelab` stays
+# cheap. A bool is refused as a number.
+
+
+def _scalar(value: Any) -> Any:
+    """A NumPy scalar or 0-d array (anything with `shape == ()` and `item()`) as the Python
+    number it holds; anything else as it is."""
+    if getattr(value, "shape", None) == () and callable(getattr(value, "item", None)):
+        return value.item()
+    return value
+
+
+def _is_bool(value: Any) -> bool:
+    return isinstance(value, bool) or (
+        type(value).__module__ == "numpy" and type(value).__name__ in ("bool", "bool_")
+    )
+
+
+def _in(unit: str) -> str:
+    """`, in Hz,` before the `got …` of a message (`,` without a unit)."""
+    return f", in {unit}," if unit else ","
+
+
+def _real(name: str, value: Any, unit: str = "") -> float:
+    """`value` as a float, or SettingTypeError naming `name` and its unit."""
+    value = _scalar(value)
+    if _is_bool(value) or not isinstance(value, numbers.Real):
+        raise SettingTypeError(f"{name} must be a number{_in(unit)} got {value!r}")
+    return float(value)
+
+
+def _whole(name: str, value: Any, unit: str = "", negative_ok: bool = False) -> int:
+    """`value` as an int (an int, a NumPy integer: not a float), or an error naming `name`
+    and its unit; negative refused here unless `negative_ok` (the native side says the rule
+    of a setting it can hold negative, as for every front end)."""
+    value = _scalar(value)
+    if _is_bool(value) or not isinstance(value, numbers.Integral):
+        raise SettingTypeError(f"{name} must be a whole number{_in(unit)} got {value!r}")
+    value = int(value)
+    if value < 0 and not negative_ok:
+        raise SettingError(f"{name} must not be negative{_in(unit)} got {value}")
+    return value
+
+
+def _text(name: str, value: Any, what: str) -> str:
+    if not isinstance(value, str):
+        raise SettingTypeError(f"{name} must be a str ({what}), got {value!r}")
+    return value
+
+
+def _path(name: str, value: Any) -> str:
+    try:
+        return os.fspath(value)
+    except TypeError:
+        raise SettingTypeError(
+            f"{name} must be a path (a str or os.PathLike), got {value!r}"
+        ) from None
+
+
+def _is_list(value: Any) -> bool:
+    """A sequence of values (a list, a tuple, a NumPy array, …), not a text or a mapping."""
+    return (
+        not isinstance(value, (str, bytes, Mapping))
+        and hasattr(value, "__iter__")
+        and hasattr(value, "__len__")
+        and getattr(value, "shape", None) != ()
+    )
+
+
+def _values(
+    name: str, values: Any, read: Callable[[str, Any], Any], empty_ok: bool = False
+) -> List[Any]:
+    """One value or a sequence of them (a list, a NumPy array, any iterable) as a list, each
+    read by `read`; an empty one refused (every check over it would pass without a run)
+    unless `empty_ok`."""
+    values = _scalar(values)
+    if isinstance(values, numbers.Number) or _is_bool(values):
+        values = [values]
+    elif isinstance(values, (str, bytes, Mapping)) or not hasattr(values, "__iter__"):
+        raise SettingTypeError(f"{name} must be a number or a list of numbers, got {values!r}")
+    if getattr(values, "ndim", 1) != 1:
+        raise SettingTypeError(
+            f"{name} must be one number or a one-dimensional list, got an array of shape "
+            f"{getattr(values, 'shape', '?')}"
+        )
+    out = [read(name, v) for v in values]
+    if not out and not empty_ok:
+        raise SettingError(
+            f"{name}: an empty list runs nothing (every check over it would pass without a "
+            "run); give at least one value"
+        )
+    return out
+
+
+def _number_text(value: Any) -> str:
+    """A number as ratelab reads it in text: 10, 0.2, 1e-05 (a whole float without `.0`)."""
+    value = _scalar(value)
+    if isinstance(value, numbers.Integral) and not _is_bool(value):
+        return str(int(value))
+    x = float(value)
+    return str(int(x)) if x.is_integer() and abs(x) < 1e15 else repr(x)
+
+
+def _keyed(name: str, value: Any, what: str) -> List[Tuple[str, Any]]:
+    """`{key: v, …}` or `[(key, v), …]` as `[(key, v), …]`, each key a str (`what` says what
+    the keys name: node, topic)."""
+    if isinstance(value, Mapping):
+        items = list(value.items())
+    elif _is_list(value):
+        items = []
+        for item in value:
+            if not _is_list(item) or len(item) != 2:
+                raise SettingTypeError(
+                    f"{name} takes {{{what}: value}} or a list of ({what}, value) pairs, got "
+                    f"{item!r}"
+                )
+            items.append((item[0], item[1]))
+    else:
+        raise SettingTypeError(f"{name} takes {{{what}: value}}, got {value!r}")
+    for key, _ in items:
+        if not isinstance(key, str):
+            raise SettingTypeError(f"{name}'s keys are {what} names (str), got {key!r}")
+    return items
+
+
+def _pairs_text(name: str, value: Any) -> str:
+    """A topic's QoS or link settings as the graph file's `key=value,…` text: given so, or
+    as a dict (`{"history": "keep_all", "depth": 100}`)."""
+    if isinstance(value, str):
+        return value.strip()
+    if isinstance(value, Mapping):
+        parts = []
+        for key, v in value.items():
+            v = _scalar(v)
+            if _is_bool(v):
+                text = "true" if v else "false"
+            elif isinstance(v, numbers.Real):
+                text = _number_text(v)
+            elif isinstance(v, str):
+                text = v
+            else:
+                raise SettingTypeError(f"{name}[{key!r}] must be a number or a str, got {v!r}")
+            parts.append(f"{key}={text}")
+        return ",".join(parts)
+    raise SettingTypeError(
+        f"{name} must be 'key=value,…' or a dict of the graph file's keys, got {value!r}"
+    )
+
+
+def _topic_pairs(name: str, value: Any) -> List[Tuple[str, str]]:
+    """`qos=`/`link=`: `{"/obs": "history=keep_all"}`, `{"/obs": {"history": "keep_all"}}`,
+    or one or a list of `"/obs:history=keep_all"` texts, as `[(topic, "key=value,…")]`."""
+    if isinstance(value, str):
+        value = [value]
+    if _is_list(value) and all(isinstance(v, str) for v in value):
+        out = []
+        for text in value:
+            topic, sep, pairs = text.partition(":")
+            if not sep or not topic.strip() or not pairs.strip():
+                raise SettingError(
+                    f"{name}: expected {{'/topic': 'key=value,…'}} or '/topic:key=value,…', "
+                    f"got {text!r}"
+                )
+            out.append((topic.strip(), pairs.strip()))
+        return out
+    return [
+        (topic, _pairs_text(f"{name}[{topic!r}]", pairs))
+        for topic, pairs in _keyed(name, value, "topic")
+    ]
+
+
+def _compute_text(name: str, value: Any) -> str:
+    """A compute time, ms: 30, "30", "30±5" or (30, 5) (mean, uniform jitter)."""
+    value = _scalar(value)
+    if isinstance(value, str):
+        return value.strip()
+    if _is_list(value) and len(value) == 2:
+        mean, jitter = (_real(name, v, "ms") for v in value)
+        return f"{_number_text(mean)}±{_number_text(jitter)}"
+    return _number_text(_real(name, value, "ms"))
+
+
+def _stalls(value: Any) -> List[Tuple[str, float, float]]:
+    """`stall=`: `{"policy": (2.0, 0.5)}` (at 2 s, for 0.5 s), `{"policy": [(2, 0.5), (5,
+    1)]}` or `[("policy", 2.0, 0.5), …]`."""
+    rows: List[Tuple[Any, Any]] = []
+    if isinstance(value, Mapping):
+        for node, spec in value.items():
+            many = _is_list(spec) and len(spec) > 0 and all(_is_list(s) for s in spec)
+            rows += [(node, s) for s in (spec if many else [spec])]
+    elif _is_list(value):
+        for entry in value:
+            if not _is_list(entry) or len(entry) != 3:
+                raise SettingTypeError(
+                    "stall takes {node: (at_s, for_s)} or a list of (node, at_s, for_s), got "
+                    f"{entry!r}"
+                )
+            rows.append((entry[0], tuple(entry[1:])))
+    else:
+        raise SettingTypeError(f"stall takes {{node: (at_s, for_s)}}, got {value!r}")
+    out = []
+    for node, spec in rows:
+        if not isinstance(node, str):
+            raise SettingTypeError(f"stall's keys are node names (str), got {node!r}")
+        if not _is_list(spec) or len(spec) != 2:
+            raise SettingTypeError(f"stall[{node!r}] must be (at_s, for_s), got {spec!r}")
+        at_s = _real(f"stall[{node!r}] at_s", spec[0], "s")
+        for_s = _real(f"stall[{node!r}] for_s", spec[1], "s")
+        out.append((node, at_s, for_s))
+    return out
+
+
+# ---- keywords ----------------------------------------------------------------------------
+
+#: Keywords a function once took or that people try, and what to say about them.
+_GONE = {
+    "run": {
+        "flags": "each of `ratelab run`'s settings is a keyword of run() of its own "
+        "(executor=, stall=, compute_ms=, …; help(ratelab.run) lists them)",
+    },
+}
+
+
+def _keywords(fn: Callable) -> Callable:
+    """`fn` refusing an unknown keyword with a `TypeError` (`SettingTypeError`) that names
+    the nearest keyword it takes; its signature and docstring stay `fn`'s (help(), an
+    editor's completion)."""
+    taken = [
+        p.name
+        for p in inspect.signature(fn).parameters.values()
+        if p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)
+    ]
+    known = frozenset(taken)
+
+    @functools.wraps(fn)
+    def checked(*args: Any, **kwargs: Any) -> Any:
+        for key in kwargs:
+            if key not in known:
+                raise SettingTypeError(_unknown_keyword(fn.__name__, key, taken))
+        return fn(*args, **kwargs)
+
+    return checked
+
+
+def _unknown_keyword(function: str, key: str, taken: List[str]) -> str:
+    import difflib
+
+    head = f"{function}() got an unexpected keyword argument {key!r}"
+    said = _GONE.get(function, {}).get(key)
+    if said is not None:
+        return f"{head}: {said}"
+    near = difflib.get_close_matches(key, taken, n=1, cutoff=0.6)
+    if not near:
+        folded = key.lower()
+        near = [t for t in taken if len(folded) >= 3 and (folded in t or t in folded)][:1]
+    if near:
+        return f"{head}; did you mean {near[0]!r}?"
+    return f"{head} (it takes {', '.join(taken)})"
+
+
+def _native_call(fn: Callable, *args: Any) -> Any:
+    """`_native.fn(*args)`, its refusals as ratelab's exceptions: a bad setting (a plain
+    ValueError or TypeError) a `SettingError` or `SettingTypeError`, a trace too large a
+    `TraceTooLarge`."""
+    try:
+        return fn(*args)
+    except _native.TraceTooLarge as e:
+        raise TraceTooLarge(str(e)) from None
+    except (ValueError, TypeError) as e:
+        if type(e) is ValueError:
+            raise SettingError(str(e)) from None
+        if type(e) is TypeError:
+            raise SettingTypeError(str(e)) from None
+        raise  # NoPrediction and the like: already of their own kind
+
+
+# ---- what a run returns --------------------------------------------------------------------
+
+
+def _g(x: Any) -> str:
+    return f"{x:g}" if isinstance(x, (int, float)) and not isinstance(x, bool) else str(x)
+
+
+def _outcome(metrics: Mapping[str, Any]) -> str:
+    """How the run ended, in a few words: balanced 10.0 s, fell at 1.24 s, …"""
+    at = metrics.get("sim_time_s")
+    at_s = f" at {at:.2f} s" if isinstance(at, (int, float)) else ""
+    if metrics.get("node_failed"):
+        node = str(metrics["node_failed"]).split(":", 1)[0]
+        return f"node {node} failed{at_s}"
+    if metrics.get("fell_at_s") is not None:
+        return f"fell at {metrics['fell_at_s']:.2f} s"
+    if metrics.get("stopped_by_watchdog"):
+        return f"stopped by watchdog{at_s}"
+    if metrics.get("balanced"):
+        ran = at if isinstance(at, (int, float)) else metrics.get("duration_s", 0.0)
+        return f"balanced {ran:.1f} s"
+    return f"not balanced{at_s}"
+
+
+#: The figures `Run`'s HTML table shows, in order, where the metrics have them.
+_RUN_FIGURES = (
+    "clock", "seed", "duration_s", "graph", "policy", "control_hz", "sensor_hz",
+    "queue_depth", "steps", "fell_at_s", "mean_latency_ms", "latency_p99_ms",
+    "obs_dropped", "action_dropped",
+)
+
+
+@dataclass(frozen=True, repr=False)
 class Run:
-    """One run's results, as `ratelab run --out` writes them."""
+    """One run's results, as `ratelab run --out` writes them. Printed, it says how the run
+    ended (`<ratelab.Run balanced 10.0 s, control 50 Hz, seed 0, virtual clock>`); in
+    Jupyter it is a table of its headline figures."""
 
     #: `metrics.json` as a dict (docs/metrics.md).
     metrics: Dict[str, Any]
@@ -125,14 +477,49 @@ class Run:
     #: (docs/metrics.md); None without one.
     estimator: Optional[Dict[str, Any]] = None
 
+    @property
+    def balanced(self) -> bool:
+        """The pole stayed up the whole run (`metrics["balanced"]`)."""
+        return bool(self.metrics.get("balanced"))
+
     def __repr__(self) -> str:
-        head = self.summary[0] if self.summary else "run"
-        return f"<ratelab.Run {head}>"
+        m = self.metrics
+        parts = [_outcome(m)]
+        if m.get("control_hz") is not None:
+            parts.append(f"control {_g(m['control_hz'])} Hz")
+        if m.get("graph") not in (None, "cartpole"):
+            parts.append(f"graph {m['graph']}")
+        if m.get("seed") is not None:
+            parts.append(f"seed {m['seed']}")
+        if m.get("clock"):
+            parts.append(f"{m['clock']} clock")
+        return f"<ratelab.Run {', '.join(parts)}>"
+
+    def _repr_html_(self) -> str:
+        from html import escape
+
+        head = self.summary[0] if self.summary else _outcome(self.metrics)
+        rows = [
+            f"<tr><th style='text-align:left'>{escape(k)}</th>"
+            f"<td style='text-align:left'>{escape(_g(self.metrics[k]))}</td></tr>"
+            for k in _RUN_FIGURES
+            if k in self.metrics and self.metrics[k] is not None
+        ]
+        return (
+            f"<table><caption style='text-align:left'><b>ratelab.Run</b>: "
+            f"{escape(_outcome(self.metrics))} &mdash; {escape(head)}</caption>"
+            + "".join(rows)
+            + "</table>"
+        )
 
 
 class Table:
     """A table of results (`sweep`, `cliff`): `rows` (one dict per row), `columns` (one list
-    per column), `csv` (the text `ratelab sweep --csv` writes), `to_pandas()`."""
+    per column), `csv` (the text `ratelab sweep --csv` writes), `to_pandas()`. In Jupyter it
+    is drawn as an HTML table."""
+
+    #: What the table is, for its repr.
+    _what = "Table"
 
     def __init__(self, csv_text: str):
         self.csv: str = csv_text
@@ -153,13 +540,92 @@ class Table:
         return self.columns[column]
 
     def to_pandas(self):
-        """The table as a pandas DataFrame (pandas must be installed)."""
+        """The table as a pandas DataFrame (pandas must be installed: `pip install
+        '.[notebooks]'` brings it)."""
         import pandas as pd
 
         return pd.DataFrame(self.columns)
 
+    def _says(self) -> str:
+        return f"{len(self.rows)} rows: {', '.join(self.columns)}"
+
     def __repr__(self) -> str:
-        return f"<ratelab.Table {len(self.rows)} rows: {', '.join(self.columns)}>"
+        return f"<ratelab.{self._what} {self._says()}>"
+
+    #: At most this many rows are drawn in Jupyter (`rows` holds them all).
+    _HTML_ROWS = 60
+
+    def _repr_html_(self) -> str:
+        from html import escape
+
+        def cell(v: Any) -> str:
+            return "" if v is None else escape(_g(v))
+
+        head = "".join(f"<th>{escape(n)}</th>" for n in self.columns)
+        body = "".join(
+            "<tr>" + "".join(f"<td>{cell(r[n])}</td>" for n in self.columns) + "</tr>"
+            for r in self.rows[: self._HTML_ROWS]
+        )
+        more = len(self.rows) - self._HTML_ROWS
+        if more > 0:
+            body += f"<tr><td colspan='{len(self.columns)}'>… and {more} more rows</td></tr>"
+        return (
+            f"<table><caption style='text-align:left'><b>ratelab.{self._what}</b>: "
+            f"{escape(self._says())}</caption><thead><tr>{head}</tr></thead>"
+            f"<tbody>{body}</tbody></table>"
+        )
+
+
+def _span(values: Iterable[Any]) -> str:
+    known = sorted({v for v in values if v is not None})
+    if not known:
+        return "?"
+    return _g(known[0]) if len(known) == 1 else f"{_g(known[0])}–{_g(known[-1])}"
+
+
+class Sweep(Table):
+    """`sweep`'s table, a row per run (the columns `ratelab sweep --csv` writes). Printed, it
+    says how many runs balanced and how many fell."""
+
+    _what = "Sweep"
+
+    def _says(self) -> str:
+        n = len(self.rows)
+        balanced = sum(1 for r in self.rows if r.get("balanced") is True)
+        fell = sum(1 for r in self.rows if r.get("fell_at_s") is not None)
+        said = f"{n} run{'' if n == 1 else 's'}: {balanced} balanced, {fell} fell"
+        other = n - balanced - fell
+        if other > 0:
+            said += f", {other} neither (a node failed or the run stopped)"
+        if n:
+            said += (
+                f"; control {_span(r.get('control_hz') for r in self.rows)} Hz, "
+                f"seeds {_span(r.get('seed') for r in self.rows)}"
+            )
+        return said
+
+
+class Cliff(Table):
+    """`cliff`'s table, a row per seed: `seed`, `falls_at_hz` (the highest control rate at
+    which the pole falls), `balances_at_hz` (the next rate up; None when there is none),
+    `runs`. Printed, it says where each seed falls."""
+
+    _what = "Cliff"
+
+    def _says(self) -> str:
+        said = []
+        for r in self.rows[:3]:
+            falls, balances = r.get("falls_at_hz"), r.get("balances_at_hz")
+            said.append(
+                f"seed {r.get('seed')}: "
+                + (f"falls at {_g(falls)} Hz" if falls is not None else "no fall found")
+                + ", "
+                + (f"balances at {_g(balances)} Hz" if balances is not None
+                   else "no balance found")
+            )
+        if len(self.rows) > 3:
+            said.append(f"… ({len(self.rows)} seeds)")
+        return "; ".join(said) if said else "no seeds"
 
 
 def _cell(text: str) -> Any:
@@ -176,20 +642,11 @@ def _cell(text: str) -> Any:
     return text
 
 
-def _list(name: str, values: Union[float, Sequence[float]]) -> str:
-    if isinstance(values, (int, float)) and not isinstance(values, bool):
-        values = [values]
-    values = list(values)
-    if not values:
-        raise ValueError(
-            f"{name}: an empty list runs nothing (every check over it would pass without a run); give at least one value"
-        )
-    return ",".join(_number(name, v) for v in values)
-
-
-class NodeFailed(RuntimeError):
+class NodeFailed(Error, RuntimeError):
     """A node of the run failed (a brain or node raised): the message is ratelab's line,
-    `.run` the run's figures up to the failure (None for a sweep's)."""
+    `.run` the run's figures up to the failure (None for a sweep's). When Python code
+    failed it (`ratelab.run`), its own exception, with its traceback, is `__cause__`:
+    `%debug` or `pdb.post_mortem(e.__cause__.__traceback__)` go into the node's frame."""
 
     def __init__(self, message: str, run: Optional[Run]):
         super().__init__(message)
@@ -203,109 +660,171 @@ def _trace_arrays(columns: Sequence[Any]) -> Dict[str, Any]:
     return {TRACE_COLUMNS.get(n, n): np.frombuffer(b, dtype=k) for n, k, b in columns}
 
 
-def _flag_pairs(flag: str, value: Union[None, Mapping[str, Any], Sequence[str]]) -> List[str]:
-    """`{"policy": 10}` as `--rate policy=10`; a list of `"policy=10"` strings as given."""
-    if value is None:
-        return []
-    items = value.items() if isinstance(value, Mapping) else None
-    out: List[str] = []
-    if items is not None:
-        for k, v in items:
-            out += [flag, f"{k}={v}"]
-    else:
-        if isinstance(value, str):
-            value = [value]
-        for v in value:
-            out += [flag, str(v)]
-    return out
+# ---- run -------------------------------------------------------------------------------------
 
 
-def _number(name: str, value: Any) -> str:
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise ValueError(f"{name} must be a number, got {value!r}")
-    return repr(value) if isinstance(value, float) else str(value)
-
-
+@_keywords
 def run(
     graph: Optional[PathLike] = None,
     *,
-    clock: str = "virtual",
-    seed: int = 0,
-    duration_s: float = 10.0,
+    clock: Optional[str] = None,
+    seed: Optional[int] = None,
+    duration_s: Optional[float] = None,
     control_hz: Optional[float] = None,
     sensor_hz: Optional[float] = None,
     queue_depth: Optional[int] = None,
-    rate: Optional[Mapping[str, float]] = None,
-    depth: Optional[Mapping[str, int]] = None,
-    qos: Union[None, str, Sequence[str]] = None,
-    link: Union[None, str, Sequence[str]] = None,
+    rate: Union[None, Mapping[str, float], Sequence[Tuple[str, float]]] = None,
+    depth: Union[None, Mapping[str, int], Sequence[Tuple[str, int]]] = None,
+    qos: Union[None, str, Mapping[str, Union[str, Mapping[str, Any]]], Sequence[str]] = None,
+    link: Union[None, str, Mapping[str, Union[str, Mapping[str, Any]]], Sequence[str]] = None,
+    lease_ms: Union[None, Mapping[str, float], Sequence[Tuple[str, float]]] = None,
+    stall: Union[
+        None, Mapping[str, Tuple[float, float]], Sequence[Tuple[str, float, float]]
+    ] = None,
+    kill: Union[None, Mapping[str, float], Sequence[Tuple[str, float]]] = None,
+    compute_ms: Union[None, Mapping[str, Union[float, str, Tuple[float, float]]]] = None,
+    executor: Optional[str] = None,
+    phase_offset_ms: Optional[Sequence[float]] = None,
     policy: Union[None, str, PathLike, Callable[[Any], Any]] = None,
     record: Optional[PathLike] = None,
     out: Optional[PathLike] = None,
     force: bool = False,
     nodes: Optional[Mapping[str, type]] = None,
-    trace_every: int = 1,
-    flags: Sequence[str] = (),
+    trace_every: Optional[int] = None,
 ) -> Run:
-    """Run a graph, as `ratelab run` does, and return its figures.
+    """Run a graph, as `ratelab run` does, and return its figures. A setting left out (None)
+    is `ratelab run`'s default: the same defaults for every front end.
+
+    >>> import ratelab
+    >>> run = ratelab.run(clock="virtual", duration_s=1)
+    >>> run
+    <ratelab.Run balanced 1.0 s, control 50 Hz, seed 0, virtual clock>
+    >>> run.metrics["steps"], run.trace["pole_angle_rad"].dtype
+    (51, dtype('float64'))
+    >>> import numpy as np
+    >>> ratelab.run(clock="virtual", duration_s=np.float64(2), control_hz=np.int64(25),
+    ...             compute_ms={"policy": (30, 5)}, executor="single_threaded",
+    ...             stall={"policy": (0.5, 0.2)}, phase_offset_ms=np.array([0, 5, 10]))
+    <ratelab.Run ..., control 25 Hz, seed 0, virtual clock>
 
     graph: a graph file (default the chapter's: sensor -> /obs -> policy -> /action ->
-        actuator). clock: "virtual" (deterministic: same settings, same bytes) or "real".
-    seed: the reset seed. duration_s: run time in seconds.
-    control_hz, sensor_hz (Hz), queue_depth (messages): the chapter's three knobs.
-    rate: per-node rates in Hz ({"policy": 10}); depth: per-topic history depths
-        ({"/obs": 100}); qos, link: `--qos` and `--link` values ("/obs:history=keep_all").
+        actuator).
+    clock: "real" (the default, as `ratelab run`'s: node threads against the monotonic
+        clock, not reproducible) or "virtual" (deterministic: same settings, same bytes).
+    seed: the reset seed (default 0). duration_s: run time, s (default 10).
+    control_hz, sensor_hz (Hz), queue_depth (messages): the chapter's three knobs (default:
+        the graph's).
+    rate: per-node rates, Hz ({"policy": 10}). depth: per-topic history depths, messages
+        ({"/obs": 100}).
+    qos: per-topic QoS, with the graph file's keys ({"/obs": {"history": "keep_all",
+        "depth": 100}}, {"/obs": "history=keep_all,depth=100"}, or ["/obs:history=keep_all"]).
+    link: per-topic lossy links ({"/action": {"loss": 0.2, "delay_ms": 10}}, same forms).
+    lease_ms: per-node liveliness leases, ms ({"policy": 100}).
+    stall: per-node stalls, s: {"policy": (2.0, 0.5)} stalls it at 2 s for 0.5 s (several:
+        {"policy": [(2, 0.5), (5, 1)]}, or [("policy", 2.0, 0.5), …]).
+    kill: per-node kills, s of run time ({"policy": 3.0}).
+    compute_ms: per-node compute time of a tick, ms ({"policy": 30}; with uniform jitter
+        {"policy": (30, 5)} or {"policy": "30±5"}).
+    executor: every node on one executor: "single_threaded", "multi_threaded:N" or
+        "per_node" (replaces the graph file's [executors]).
+    phase_offset_ms: first-tick offsets, ms, one per node in tie-break order ([0, 5, 10],
+        or a NumPy array).
     policy: the brain: "scripted" (default), a checkpoint path, "FILE.py[:FUNCTION]", or a
         callable `f(obs) -> action` (obs a NumPy float32[5]; action a float in [-1, 1]).
     record: write a rerun recording to this path. out: also write metrics.json, trace.csv
         and log.txt to this folder (force: replace existing files).
     nodes: classes for the graph's Python nodes, by node name ({"policy": MyNode}): each
         is made from the class given (defined here, in a notebook cell) instead of its
-        graph file's script, and driven exactly as one from a file.
+        graph file's script, and driven exactly as one from a file. A name the graph has no
+        Python node of is refused.
     trace_every: keep one actuator step in this many in `Run.trace` (steps 1, 1 + N, ... and
-        the last; `--trace-every`): a long run's trace in proportion to what you ask. The
-        metrics count every step.
-    flags: any other `ratelab run` flags, as strings (["--executor", "single"]).
+        the last; default 1): a long run's trace in proportion to what you ask. The metrics
+        count every step.
 
-    Raises ValueError, FileNotFoundError, FileExistsError, NodeFailed, KeyboardInterrupt,
-    and TraceTooLarge (a MemoryError) before a run whose trace would not fit in memory.
+    Numbers may be NumPy scalars and lists NumPy arrays. An unknown keyword raises
+    SettingTypeError (a TypeError) naming the nearest one; a bad value SettingError (a
+    ValueError) naming the parameter. Also raises FileNotFoundError, FileExistsError,
+    NodeFailed, KeyboardInterrupt, and TraceTooLarge (a MemoryError) before a run whose
+    trace would not fit in memory.
     """
-    args: List[str] = ["--clock", str(clock), "--seed", str(int(seed))]
-    args += ["--duration", _number("duration_s", duration_s)]
+    settings: Dict[str, Any] = {}
     if graph is not None:
-        args += ["--graph", os.fspath(graph)]
+        settings["graph"] = _path("graph", graph)
+    if clock is not None:
+        settings["clock"] = _text("clock", clock, '"real" or "virtual"')
+    if seed is not None:
+        settings["seed"] = _whole("seed", seed, negative_ok=True)
+    if duration_s is not None:
+        settings["duration_s"] = _real("duration_s", duration_s, "s")
     if control_hz is not None:
-        args += ["--control-hz", _number("control_hz", control_hz)]
+        settings["control_hz"] = _real("control_hz", control_hz, "Hz")
     if sensor_hz is not None:
-        args += ["--sensor-hz", _number("sensor_hz", sensor_hz)]
+        settings["sensor_hz"] = _real("sensor_hz", sensor_hz, "Hz")
     if queue_depth is not None:
-        args += ["--queue-depth", _number("queue_depth", queue_depth)]
-    args += _flag_pairs("--rate", rate)
-    args += _flag_pairs("--depth", depth)
-    args += _flag_pairs("--qos", qos)
-    args += _flag_pairs("--link", link)
+        settings["queue_depth"] = _whole("queue_depth", queue_depth, "messages", negative_ok=True)
+    lists: Dict[str, List[Any]] = {}
+    if rate is not None:
+        lists["rate"] = [
+            (n, _real(f"rate[{n!r}]", hz, "Hz")) for n, hz in _keyed("rate", rate, "node")
+        ]
+    if depth is not None:
+        lists["depth"] = [
+            (t, _whole(f"depth[{t!r}]", d, "messages"))
+            for t, d in _keyed("depth", depth, "topic")
+        ]
+    if qos is not None:
+        lists["qos"] = _topic_pairs("qos", qos)
+    if link is not None:
+        lists["link"] = _topic_pairs("link", link)
+    if lease_ms is not None:
+        lists["lease_ms"] = [
+            (n, _real(f"lease_ms[{n!r}]", ms, "ms"))
+            for n, ms in _keyed("lease_ms", lease_ms, "node")
+        ]
+    if stall is not None:
+        lists["stall"] = _stalls(stall)
+    if kill is not None:
+        lists["kill"] = [
+            (n, _real(f"kill[{n!r}]", at, "s")) for n, at in _keyed("kill", kill, "node")
+        ]
+    if compute_ms is not None:
+        lists["compute_ms"] = [
+            (n, _compute_text(f"compute_ms[{n!r}]", ms))
+            for n, ms in _keyed("compute_ms", compute_ms, "node")
+        ]
+    if phase_offset_ms is not None:
+        lists["phase_offset_ms"] = _values(
+            "phase_offset_ms", phase_offset_ms, lambda n, v: _real(n, v, "ms"), empty_ok=True
+        )
+    settings.update((k, v) for k, v in lists.items() if v)
+    if executor is not None:
+        settings["executor"] = _text(
+            "executor", executor, '"single_threaded", "multi_threaded:N" or "per_node"'
+        )
     brain = None
     if callable(policy):
         brain = policy
     elif policy is not None:
-        args += ["--policy", os.fspath(policy)]
+        settings["policy"] = _path("policy", policy)
     if record is not None:
-        args += ["--record", os.fspath(record)]
+        settings["record"] = _path("record", record)
     if out is not None:
-        args += ["--out", os.fspath(out)]
+        settings["out"] = _path("out", out)
     if force:
-        args.append("--force")
-    if trace_every != 1:
-        args += ["--trace-every", _number("trace_every", trace_every)]
-    args += [str(f) for f in flags]
-    classes = list((nodes or {}).items())
-    for node, cls in classes:
-        if not isinstance(cls, type):
-            raise ValueError(f"nodes[{node!r}] must be a class, got {type(cls).__name__}")
-    try:
-        files = _native.run(args, brain, classes)
-    except _native.TraceTooLarge as e:
-        raise TraceTooLarge(str(e)) from None
+        if not _is_bool(force):
+            raise SettingTypeError(f"force must be True or False, got {force!r}")
+        settings["force"] = True
+    if trace_every is not None:
+        settings["trace_every"] = _whole("trace_every", trace_every, "steps", negative_ok=True)
+    classes = []
+    if nodes is not None:
+        for node, cls in _keyed("nodes", nodes, "node"):
+            if not isinstance(cls, type):
+                raise SettingTypeError(
+                    f"nodes[{node!r}] must be a class, got {type(cls).__name__}"
+                )
+            classes.append((node, cls))
+    files = _native_call(_native.run, settings, brain, classes)
     result = Run(
         metrics=json.loads(files["metrics_json"]),
         trace=_trace_arrays(files["trace_columns"]),
@@ -320,10 +839,38 @@ def run(
         else json.loads(files["estimator_json"]),
     )
     if files["failed"] is not None:
+        cause = files.get("failed_exception")
+        if cause is not None:
+            # The node's own exception, its traceback included: what to debug into.
+            raise NodeFailed(files["failed"], result) from cause
         raise NodeFailed(files["failed"], result)
     return result
 
 
+# ---- sweep, cliff ----------------------------------------------------------------------------
+# Their native side still takes `ratelab sweep`'s and `ratelab cliff`'s flags: the values are
+# read here (NumPy scalars and arrays too) and written as the flags' text.
+
+
+def _reals_text(name: str, values: Any, unit: str) -> str:
+    return ",".join(_number_text(x) for x in _values(name, values, lambda n, v: _real(n, v, unit)))
+
+
+def _wholes_text(name: str, values: Any, unit: str = "") -> str:
+    return ",".join(str(x) for x in _values(name, values, lambda n, v: _whole(n, v, unit)))
+
+
+def _brain_path(function: str, policy: Any) -> str:
+    if callable(policy):
+        raise SettingTypeError(
+            f"{function}(policy=...) takes \"scripted\", a checkpoint path or "
+            "\"FILE.py[:FUNCTION]\": a function defined here is not taken yet (ratelab.run "
+            "takes one); save it to a file and give \"FILE.py:FUNCTION\""
+        )
+    return _path("policy", policy)
+
+
+@_keywords
 def sweep(
     graph: Optional[PathLike] = None,
     *,
@@ -335,27 +882,42 @@ def sweep(
     policy: Union[str, PathLike] = "scripted",
     duration_s: float = 10.0,
     flags: Sequence[str] = (),
-) -> Table:
+) -> Sweep:
     """Every combination of the given rates, depths, seeds and clocks, one run each, on every
-    core (as `ratelab sweep`): a `Table` with a row per run (its point and figures: the
-    columns `ratelab sweep --csv` writes). A run that failed a node raises NodeFailed once
-    all have run (its `.run` is None)."""
-    args: List[str] = ["--control-hz", _list("control_hz", control_hz)]
-    args += ["--sensor-hz", _list("sensor_hz", sensor_hz)]
-    args += ["--queue-depth", _list("queue_depth", queue_depth)]
-    args += ["--seeds", _list("seeds", seeds)]
-    args += ["--clock", clock if isinstance(clock, str) else ",".join(clock)]
-    args += ["--policy", os.fspath(policy), "--duration", _number("duration_s", duration_s)]
+    core (as `ratelab sweep`): a `Sweep` table with a row per run (its point and figures: the
+    columns `ratelab sweep --csv` writes). Each of control_hz (Hz), sensor_hz (Hz),
+    queue_depth (messages) and seeds is one value or a list (a NumPy array too). A run that
+    failed a node raises NodeFailed once all have run (its `.run` is None).
+
+    >>> import ratelab
+    >>> table = ratelab.sweep(control_hz=[50, 5], seeds=[0], duration_s=2)
+    >>> table
+    <ratelab.Sweep 2 runs: 1 balanced, 1 fell; control 5–50 Hz, seeds 0>
+    >>> sorted((row["control_hz"], row["balanced"]) for row in table)
+    [(5, False), (50, True)]
+    """
+    args: List[str] = ["--control-hz", _reals_text("control_hz", control_hz, "Hz")]
+    args += ["--sensor-hz", _reals_text("sensor_hz", sensor_hz, "Hz")]
+    args += ["--queue-depth", _wholes_text("queue_depth", queue_depth, "messages")]
+    args += ["--seeds", _wholes_text("seeds", seeds)]
+    if isinstance(clock, str):
+        clocks = clock
+    else:
+        clocks = ",".join(_text("clock", c, '"real" or "virtual"') for c in clock)
+    args += ["--clock", clocks]
+    args += ["--policy", _brain_path("sweep", policy)]
+    args += ["--duration", _number_text(_real("duration_s", duration_s, "s"))]
     if graph is not None:
-        args += ["--graph", os.fspath(graph)]
+        args += ["--graph", _path("graph", graph)]
     args += [str(f) for f in flags]
-    text, failed = _native.sweep(args)
-    table = Table(text)
+    text, failed = _native_call(_native.sweep, args)
+    table = Sweep(text)
     if failed is not None:
         raise NodeFailed(failed, None)
     return table
 
 
+@_keywords
 def cliff(
     graph: Optional[PathLike] = None,
     *,
@@ -368,20 +930,31 @@ def cliff(
     policy: Union[str, PathLike] = "scripted",
     duration_s: float = 10.0,
     flags: Sequence[str] = (),
-) -> Table:
+) -> Cliff:
     """Per seed, the highest control rate at which the pole falls within `duration_s`, to
-    `step_hz` (as `ratelab cliff`; virtual clock): a `Table` with the columns seed,
-    falls_at_hz, balances_at_hz (None when there is none) and runs."""
-    args: List[str] = ["--seeds", _list("seeds", seeds)]
-    args += ["--sensor-hz", _number("sensor_hz", sensor_hz)]
-    args += ["--queue-depth", _number("queue_depth", queue_depth)]
-    args += ["--min-hz", _number("min_hz", min_hz), "--max-hz", _number("max_hz", max_hz)]
-    args += ["--step", _number("step_hz", step_hz)]
-    args += ["--policy", os.fspath(policy), "--duration", _number("duration_s", duration_s)]
+    `step_hz` (as `ratelab cliff`; virtual clock): a `Cliff` table with the columns seed,
+    falls_at_hz, balances_at_hz (None when there is none) and runs.
+
+    >>> import ratelab
+    >>> table = ratelab.cliff(seeds=[0], min_hz=4, max_hz=12, step_hz=0.5)
+    >>> table
+    <ratelab.Cliff seed 0: falls at ... Hz, balances at ... Hz>
+    >>> row = table.rows[0]
+    >>> row["balances_at_hz"] - row["falls_at_hz"]
+    0.5
+    """
+    args: List[str] = ["--seeds", _wholes_text("seeds", seeds)]
+    args += ["--sensor-hz", _number_text(_real("sensor_hz", sensor_hz, "Hz"))]
+    args += ["--queue-depth", str(_whole("queue_depth", queue_depth, "messages"))]
+    args += ["--min-hz", _number_text(_real("min_hz", min_hz, "Hz"))]
+    args += ["--max-hz", _number_text(_real("max_hz", max_hz, "Hz"))]
+    args += ["--step", _number_text(_real("step_hz", step_hz, "Hz"))]
+    args += ["--policy", _brain_path("cliff", policy)]
+    args += ["--duration", _number_text(_real("duration_s", duration_s, "s"))]
     if graph is not None:
-        args += ["--graph", os.fspath(graph)]
+        args += ["--graph", _path("graph", graph)]
     args += [str(f) for f in flags]
-    return Table(_native.cliff(args))
+    return Cliff(_native_call(_native.cliff, args))
 
 
 @dataclass(frozen=True)
@@ -440,6 +1013,7 @@ class Exercise:
         return [p for p in self.predictions if not p.right]
 
 
+@_keywords
 def exercise(
     which: str,
     prediction: Optional[Mapping[str, Any]] = None,
@@ -454,12 +1028,12 @@ def exercise(
     Raises NoPrediction (a ValueError) when there is no prediction yet, ValueError for an
     unknown exercise or bad input, FileNotFoundError for a missing folder or file.
     """
-    args: List[str] = ["--dir", os.fspath(dir)]
+    args: List[str] = ["--dir", _path("dir", dir)]
     if graph is not None:
-        args += ["--graph", os.fspath(graph)]
+        args += ["--graph", _path("graph", graph)]
     args += [str(f) for f in flags]
     given = None if prediction is None else json.dumps(dict(prediction))
-    found = _native.exercise(str(which), args, given)
+    found = _native_call(_native.exercise, _text("which", which, '"ex1", …'), args, given)
     return Exercise(
         checks=[Check(name, passed) for name, passed in found["checks"]],
         reconcile=list(found["reconcile"]),
@@ -471,5 +1045,10 @@ def exercise(
 
 def exercises() -> List[Dict[str, str]]:
     """The exercises, in order: their `id` ("ex1"), `file` in the exercises folder
-    ("ex1_rate_cliff.toml") and `title`."""
+    ("ex1_rate_cliff.toml") and `title`.
+
+    >>> import ratelab
+    >>> ratelab.exercises()[0]["id"], ratelab.exercises()[0]["file"]
+    ('ex1', 'ex1_rate_cliff.toml')
+    """
     return [{"id": i, "file": f, "title": t} for i, f, t in _native.exercises()]

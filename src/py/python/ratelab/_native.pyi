@@ -8,15 +8,22 @@ def main(argv: List[str]) -> int:
     """ratelab's command line on `argv` (the program's name first); returns the exit code."""
 
 def run(
-    flags: List[str],
+    settings: Dict[str, Any],
     policy: Optional[Callable[[Any], Any]] = None,
     nodes: List[Tuple[str, type]] = [],
 ) -> Dict[str, Any]:
-    """One run of `ratelab run FLAGS...`: metrics_json, trace_csv, log (texts), summary
-    (lines), failed (a node's failure line or None), recording (path or None), wall_s,
-    trace_columns ((name, numpy dtype, bytes) per column of trace_csv), estimator_json
-    (estimator.json's text with an estimator in the graph, else None). Raises TraceTooLarge
-    before the run when its trace would pass MAX_HELD_TRACE_VALUES."""
+    """One run of the settings given, each key optional (left out: `ratelab run`'s default):
+    graph (str), clock ("real" | "virtual"), seed (int), duration_s, control_hz, sensor_hz
+    (float), queue_depth (int), rate [(node, hz)], depth [(topic, n)], qos [(topic,
+    "key=value,...")], link [(topic, "key=value,...")], lease_ms [(node, ms)], stall [(node,
+    at_s, for_s)], kill [(node, at_s)], compute_ms [(node, "30" | "30±5")], executor (str),
+    phase_offset_ms [float], policy (str), record (str), out (str), force (bool),
+    trace_every (int); `policy` a callable brain, `nodes` (node, class) pairs for the graph's
+    Python nodes. Returns metrics_json, trace_csv, log (texts), summary (lines), failed (a
+    node's failure line or None), recording (path or None), wall_s, trace_columns ((name,
+    numpy dtype, bytes) per column of trace_csv), estimator_json (estimator.json's text with
+    an estimator in the graph, else None). Raises ValueError naming the Python parameter,
+    and TraceTooLarge before the run when its trace would pass MAX_HELD_TRACE_VALUES."""
 
 def sweep(flags: List[str]) -> Tuple[str, Optional[str]]:
     """`ratelab sweep FLAGS...`: (its --csv text, the first failed node's line or None)."""

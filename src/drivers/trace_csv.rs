@@ -12,7 +12,7 @@
 //! graph's QoS ([`qos_columns`] with no record), where the end's records could add one for a
 //! counter that counted without its QoS enabling it. The headless run and `ratelab.run`
 //! apply no command that changes a topic's QoS, and a counter counts only under the QoS
-//! that enables it ([`ratelab::qos::QosCounter::enabled_by`]), so the two are the same.
+//! that enables it ([`ratelab_core::qos::QosCounter::enabled_by`]), so the two are the same.
 //!
 //! Rows reach the file whole, a chunk at a time: a file cut short (the process killed) ends
 //! at a row's end. A write that fails (a full disk) empties the file, giving its space
@@ -20,10 +20,10 @@
 //! failure is the run's error once its summary and its other files are written, as any
 //! output's is.
 
-use ratelab::graph::{GraphSpec, StepObserver, TopicId};
-use ratelab::output::{OutputError, PendingFile};
-use ratelab::qos::QosCounter;
-use ratelab::runlog::{StepRecord, TopicCounters};
+use ratelab_core::output::{OutputError, PendingFile};
+use ratelab_core::qos::QosCounter;
+use ratelab_core::runlog::{StepRecord, TopicCounters};
+use ratelab_runtime::graph::{GraphSpec, StepObserver, TopicId};
 use std::io::Write;
 use std::path::Path;
 use std::sync::{Arc, Mutex, MutexGuard};
@@ -85,12 +85,12 @@ fn header(graph: &GraphSpec, qos: &[Vec<QosCounter>]) -> Vec<String> {
     .map(String::from)
     .to_vec();
     for t in &graph.topics {
-        let name = ratelab::recording::bus_name(&t.name);
+        let name = ratelab_recording::bus_name(&t.name);
         header.push(format!("{name}_published"));
         header.push(format!("{name}_dropped"));
     }
     for (t, counters) in graph.topics.iter().zip(qos) {
-        let name = ratelab::recording::bus_name(&t.name);
+        let name = ratelab_recording::bus_name(&t.name);
         for c in counters {
             header.push(format!("{name}_{}", c.key()));
         }
@@ -239,8 +239,8 @@ fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
 /// `trace.csv` of one run, written as it goes: attach [`TraceStream::observer`] to the run
 /// (it writes each step kept as it happens, on the actuator's thread), then
 /// [`TraceStream::finish`] it once the run has ended. The rows are the run log's when it
-/// keeps every `every`-th record and the last (`ratelab::runlog::RunLog::push`,
-/// `ratelab::run::run`).
+/// keeps every `every`-th record and the last (`ratelab_core::runlog::RunLog::push`,
+/// `crate::run::run`).
 pub struct TraceStream<W: TraceSink> {
     shared: Arc<Mutex<Shared<W>>>,
 }
@@ -316,7 +316,7 @@ impl<W: TraceSink> StepObserver for TraceObserver<W> {
 }
 
 /// `trace.csv` streamed to a temporary file beside its name as the run goes, moved into
-/// place by [`TraceFile::commit`] ([`ratelab::output`]'s rule: never over a file without
+/// place by [`TraceFile::commit`] ([`ratelab_core::output`]'s rule: never over a file without
 /// `--force`, never through a link; removed when dropped uncommitted).
 pub struct TraceFile {
     pending: PendingFile,
@@ -375,10 +375,12 @@ fn io_error(path: &Path, e: &std::io::Error) -> OutputError {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use ratelab::policy::Scripted;
-    use ratelab::runlog::RunLog;
-    use ratelab::topic::TopicStats;
-    use ratelab::{run, ClockKind, Nanos, RunConfig, RunOptions};
+    use crate::run::{run, RunOptions};
+    use ratelab_core::runlog::RunLog;
+    use ratelab_core::topic::TopicStats;
+    use ratelab_core::Nanos;
+    use ratelab_runtime::policy::Scripted;
+    use ratelab_runtime::{ClockKind, RunConfig};
 
     /// `trace.csv` as it was written before it streamed: from every record the run kept,
     /// at its end (`headless::write_trace` at 9d7223d, verbatim).
@@ -406,12 +408,12 @@ mod tests {
             .map(String::from)
             .to_vec();
             for t in &graph.topics {
-                let name = ratelab::recording::bus_name(&t.name);
+                let name = ratelab_recording::bus_name(&t.name);
                 header.push(format!("{name}_published"));
                 header.push(format!("{name}_dropped"));
             }
             for (t, counters) in graph.topics.iter().zip(&qos_columns) {
-                let name = ratelab::recording::bus_name(&t.name);
+                let name = ratelab_recording::bus_name(&t.name);
                 for c in counters {
                     header.push(format!("{name}_{}", c.key()));
                 }

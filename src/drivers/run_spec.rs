@@ -1,0 +1,467 @@
+//! A run as data: [`RunSpec`], what every front end (the command line, the lab, a launch,
+//! the Python package) fills in and the library turns into a [`RunConfig`] by one set of
+//! rules.
+//!
+//! Each rule refuses a bad setting in one line naming it as its front end takes it
+//! ([`Speech`]: `--control-hz` on the command line, `control_hz` from Python), so no front
+//! end builds another's argument list to reach a run.
+
+use crate::config::{phase_offsets_from_ms, BREAK_CONTROL_HZ};
+use crate::executor::{ComputeTime, ExecutorOverride};
+use crate::graph::GraphSpec;
+use crate::outputs::Outputs;
+use crate::qos::Fault;
+use crate::time::Nanos;
+use ratelab_runtime::config::{check_rate, duration_from_secs, ConfigError};
+use ratelab_runtime::setting::{Setting, Speech};
+use ratelab_runtime::{ClockKind, RunConfig};
+use std::path::PathBuf;
+
+/// A run lasts this long unless its settings say otherwise, s (a headless run, a run from
+/// Python; the lab runs until it is quit).
+pub const DEFAULT_DURATION_S: f64 = 10.0;
+
+/// The clock of a run whose settings name none, for every front end: the real clock, one
+/// thread per node against the monotonic clock, as the chapter's `--clock real` ("the
+/// authentic one"). Ask for the virtual clock for a deterministic run.
+pub const DEFAULT_CLOCK: ClockKind = ClockKind::Real;
+
+/// The brain of a run whose settings name none: the chapter's scripted balancer.
+pub const DEFAULT_POLICY: &str = "scripted";
+
+/// The graph to run and the overrides of its nodes and topics, in the order given.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct GraphSettings {
+    /// The graph file; `None` for the chapter's (sensor → /obs → policy → /action →
+    /// actuator).
+    pub file: Option<PathBuf>,
+    /// Node rates, Hz: `(node, hz)`.
+    pub rates: Vec<(String, f64)>,
+    /// Topic history depths, messages: `(topic, depth)`.
+    pub depths: Vec<(String, usize)>,
+    /// Topic QoS with the graph file's keys: `(topic, "history=keep_all,depth=100")`.
+    pub qos: Vec<(String, String)>,
+    /// Lossy links: `(topic, "loss=0.2,delay_ms=10")`, only link keys
+    /// ([`crate::qos::LINK_KEYS`]).
+    pub links: Vec<(String, String)>,
+    /// Liveliness leases, ms: `(node, ms)`.
+    pub leases_ms: Vec<(String, f64)>,
+    /// Injected stalls (each with a duration).
+    pub stalls: Vec<Fault>,
+    /// Injected kills.
+    pub kills: Vec<Fault>,
+    /// Compute times of nodes' ticks: `(node, time)`.
+    pub computes: Vec<(String, ComputeTime)>,
+    /// Every node on one executor, replacing the graph file's `[executors]`.
+    pub executor: Option<ExecutorOverride>,
+}
+
+impl GraphSettings {
+    /// The graph these settings describe: the file (or the chapter's) with every override
+    /// applied, in order. Its QoS warnings are the caller's to show
+    /// ([`GraphSpec::qos_warnings`]).
+    ///
+    /// # Errors
+    /// A graph file that cannot be read, or the first override that does not fit, in one
+    /// line naming it in `speech`'s words.
+    pub fn graph(&self, speech: Speech) -> anyhow::Result<GraphSpec> {
+        let mut spec = match &self.file {
+            Some(path) => GraphSpec::load(path)?,
+            None => GraphSpec::chapter(),
+        };
+        let entry =
+            |s: Setting, key: &str, value: &dyn std::fmt::Display| speech.entry(s, key, value);
+        for (node, hz) in &self.rates {
+            check_rate("rate", *hz).map_err(|e| {
+                anyhow::anyhow!("{}: {}", entry(Setting::Rate, node, hz), e.line(speech))
+            })?;
+            spec.set_rate(node, *hz)
+                .map_err(|e| anyhow::anyhow!("{}: {e}", entry(Setting::Rate, node, hz)))?;
+        }
+        for (topic, depth) in &self.depths {
+            if *depth == 0 {
+                anyhow::bail!(
+                    "{}: a history depth is at least 1",
+                    entry(Setting::Depth, topic, depth)
+                );
+            }
+            spec.set_depth(topic, *depth)
+                .map_err(|e| anyhow::anyhow!("{}: {e}", entry(Setting::Depth, topic, depth)))?;
+        }
+        for (setting, list) in [(Setting::Qos, &self.qos), (Setting::Link, &self.links)] {
+            for (topic, pairs) in list {
+                let given = match speech {
+                    Speech::Flags => format!("{} {topic}:{pairs}", setting.flag()),
+                    Speech::Keywords => entry(setting, topic, &format!("{pairs:?}")),
+                };
+                if setting == Setting::Link {
+                    if let Some((k, _)) = crate::qos::split_pairs(pairs)
+                        .map_err(|e| anyhow::anyhow!("{given}: {e}"))?
+                        .into_iter()
+                        .find(|(k, _)| !crate::qos::LINK_KEYS.contains(k))
+                    {
+                        anyhow::bail!(
+                            "{given}: '{k}' is not a link key ({}); use {}",
+                            crate::qos::LINK_KEYS.join(", "),
+                            speech.name(Setting::Qos)
+                        );
+                    }
+                }
+                spec.set_qos(topic, pairs)
+                    .map_err(|e| anyhow::anyhow!("{given}: {e}"))?;
+            }
+        }
+        for (node, ms) in &self.leases_ms {
+            let given = entry(Setting::Lease, node, ms);
+            crate::qos::ms_to_nanos("lease", *ms, false)
+                .map_err(|e| anyhow::anyhow!("{given}: {e}"))?;
+            spec.set_lease(node, *ms)
+                .map_err(|e| anyhow::anyhow!("{given}: {e}"))?;
+        }
+        if let Some(over) = self.executor {
+            spec.set_executor(over);
+        }
+        for (node, c) in &self.computes {
+            spec.set_compute(node, *c).map_err(|e| {
+                let why = e.0.strip_prefix("--compute: ").unwrap_or(&e.0);
+                match speech {
+                    Speech::Flags => anyhow::anyhow!("--compute: {why}"),
+                    Speech::Keywords => {
+                        anyhow::anyhow!(
+                            "{}: {why}",
+                            entry(Setting::Compute, node, &(c.mean.0 as f64 / 1e6))
+                        )
+                    }
+                }
+            })?;
+        }
+        Ok(spec)
+    }
+
+    /// The faults these settings inject: the stalls, then the kills.
+    pub fn faults(&self) -> Vec<Fault> {
+        self.stalls.iter().chain(&self.kills).cloned().collect()
+    }
+}
+
+/// One run's settings, as data: the graph and its overrides, the clock, the chain's
+/// shorthands, the seed and duration, the brain, and where its results go. Fill in the
+/// fields (each `None` or empty takes the graph's or the library's default) and call
+/// [`RunSpec::config`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct RunSpec {
+    /// The graph and its overrides.
+    pub graph: GraphSettings,
+    /// The reset seed (the course env's NumPy draws; also seeds sensor noise).
+    pub seed: u64,
+    /// Run time, s, in (0, [`crate::time::MAX_DURATION_S`]]; `None` is
+    /// [`DEFAULT_DURATION_S`].
+    pub duration_s: Option<f64>,
+    /// The clock ([`DEFAULT_CLOCK`] unless asked).
+    pub clock: ClockKind,
+    /// The chain sensor's rate, Hz.
+    pub sensor_hz: Option<f64>,
+    /// The chain policy's (control) rate, Hz.
+    pub control_hz: Option<f64>,
+    /// Break the controller: control rate [`BREAK_CONTROL_HZ`] (the chapter's cliff demo).
+    pub break_: bool,
+    /// Every topic's history depth, messages (≥ 1).
+    pub queue_depth: Option<usize>,
+    /// First-tick offsets, ms, one per node in tie-break order (empty: all 0), each in
+    /// [0, 1000).
+    pub phase_offset_ms: Vec<f64>,
+    /// A quick deterministic check: virtual clock, 2 s.
+    pub smoke: bool,
+    /// Real clock: spin this many µs before each deadline instead of sleeping (`None`: the
+    /// default, [`RunConfig::default_spin_margin`]).
+    pub spin_margin_us: Option<u64>,
+    /// Real clock: `SCHED_FIFO` priority, 1..=99.
+    pub rt_priority: Option<u8>,
+    /// The brain: `scripted`, `FILE.py[:FUNCTION]` or a checkpoint path. A front end may
+    /// supply a brain object instead (a Python callable); this then only names the default.
+    pub policy: String,
+    /// Where the results go.
+    pub outputs: Outputs,
+}
+
+impl Default for RunSpec {
+    /// The chapter's graph at its rates, seed 0, [`DEFAULT_DURATION_S`], [`DEFAULT_CLOCK`],
+    /// the scripted balancer, nothing written.
+    fn default() -> Self {
+        Self {
+            graph: GraphSettings::default(),
+            seed: 0,
+            duration_s: None,
+            clock: DEFAULT_CLOCK,
+            sensor_hz: None,
+            control_hz: None,
+            break_: false,
+            queue_depth: None,
+            phase_offset_ms: Vec::new(),
+            smoke: false,
+            spin_margin_us: None,
+            rt_priority: None,
+            policy: DEFAULT_POLICY.to_string(),
+            outputs: Outputs::default(),
+        }
+    }
+}
+
+impl RunSpec {
+    /// The run these settings describe, every rule checked once: the graph and its
+    /// overrides, the chain's shorthands (each refusing a graph without the chain by its own
+    /// name, and two settings of one rate refused), `smoke`, the spin margin's default, then
+    /// [`RunConfig::validate`]. The QoS warnings of the graph are the caller's to show.
+    ///
+    /// # Errors
+    /// The first setting that cannot be used, in one line naming it in `speech`'s words.
+    pub fn config(&self, speech: Speech) -> anyhow::Result<RunConfig> {
+        let said = |e: ConfigError| anyhow::anyhow!(e.line(speech));
+        let name = |s: Setting| speech.name(s);
+        if self.outputs.trace_every == 0 {
+            anyhow::bail!("{} must be at least 1, got 0", name(Setting::TraceEvery));
+        }
+        let duration_s = self.duration_s.unwrap_or(DEFAULT_DURATION_S);
+        let mut cfg = RunConfig {
+            seed: self.seed,
+            duration: duration_from_secs(duration_s).map_err(said)?,
+            graph: self.graph.graph(speech)?,
+            clock: self.clock,
+            spin_margin: Nanos(self.spin_margin_us.unwrap_or(0).saturating_mul(1_000)),
+            rt_priority: self.rt_priority,
+            faults: self.graph.faults(),
+            ..RunConfig::default()
+        };
+        self.check_brain(&cfg.graph, speech)?;
+        let control_hz = self.check_chain_rates(&cfg.graph, speech)?;
+        if let Some(hz) = self.sensor_hz {
+            cfg.set_sensor_hz(hz).map_err(said)?;
+        }
+        if let Some(hz) = control_hz {
+            cfg.set_control_hz(hz).map_err(said)?;
+        }
+        if let Some(depth) = self.queue_depth {
+            cfg.set_queue_depth(depth).map_err(said)?;
+        }
+        cfg.phase_offsets =
+            phase_offsets_from_ms(&self.phase_offset_ms, &cfg.graph.node_names()).map_err(said)?;
+        if self.smoke {
+            cfg.clock = ClockKind::Virtual;
+            cfg.duration = Nanos(2 * Nanos::SECOND.0);
+        }
+        if self.spin_margin_us.is_none() {
+            cfg.spin_margin = cfg.default_spin_margin();
+        }
+        cfg.validate().map_err(said)?;
+        Ok(cfg)
+    }
+
+    /// A brain is what a built-in policy node runs: refused by name for a graph whose
+    /// policy is a Python node, or with no node that runs a brain.
+    fn check_brain(&self, graph: &GraphSpec, speech: Speech) -> anyhow::Result<()> {
+        if self.policy == DEFAULT_POLICY {
+            return Ok(());
+        }
+        let given = speech.value(Setting::Policy, &self.policy);
+        let policy = graph.chain.map(|c| graph.node(c.policy));
+        if let Some((policy, python)) = policy.and_then(|p| p.python.as_ref().map(|py| (p, py))) {
+            // A Python node is its own brain.
+            anyhow::bail!(
+                "{given}: graph '{}' has a Python node as its policy ('{}', {}), which computes its own actions; {} is for a graph whose policy is kind = \"policy\"",
+                graph.name,
+                policy.name,
+                python.script,
+                speech.name(Setting::Policy)
+            );
+        }
+        if !graph.nodes.iter().any(|n| n.kind.def().uses_brain) {
+            anyhow::bail!(
+                "{given}: graph '{}' has no node that runs a brain (kind = \"policy\"); its nodes compute their own actions",
+                graph.name
+            );
+        }
+        Ok(())
+    }
+
+    /// The chain's shorthands checked against the graph and against `rates`: two settings
+    /// of one node's rate refused, a graph without the chain refused by the shorthand's own
+    /// name. Returns the control rate to set (`break_`'s or `control_hz`).
+    fn check_chain_rates(&self, graph: &GraphSpec, speech: Speech) -> anyhow::Result<Option<f64>> {
+        let name = |s: Setting| speech.name(s);
+        // Two shorthands for the policy's rate would leave one of them ignored.
+        if let (true, Some(hz)) = (
+            self.break_,
+            self.control_hz.filter(|hz| *hz != BREAK_CONTROL_HZ),
+        ) {
+            anyhow::bail!(
+                "{} sets the policy to {BREAK_CONTROL_HZ} Hz and {} to {hz} Hz; give one",
+                name(Setting::Break),
+                name(Setting::ControlHz)
+            );
+        }
+        let control_hz = if self.break_ {
+            Some(BREAK_CONTROL_HZ)
+        } else {
+            self.control_hz
+        };
+        // A chain shorthand and a rate of the same node would leave one of them ignored.
+        let chain = graph.chain;
+        let control = if self.break_ {
+            Setting::Break
+        } else {
+            Setting::ControlHz
+        };
+        for (setting, hz, node) in [
+            (Setting::SensorHz, self.sensor_hz, chain.map(|c| c.sensor)),
+            (control, control_hz, chain.map(|c| c.policy)),
+        ] {
+            let Some(node) = node else { continue }; // refused below, by name
+            let node = &graph.node(node).name;
+            if let (Some(hz), Some((_, rate))) =
+                (hz, self.graph.rates.iter().find(|(n, _)| n == node))
+            {
+                if hz != *rate {
+                    anyhow::bail!(
+                        "{} and {} ({hz} Hz) both set the rate of node '{node}'; give one",
+                        speech.entry(Setting::Rate, node, rate),
+                        name(setting)
+                    );
+                }
+            }
+        }
+        // Each shorthand of the chain refuses a graph without it, by its own name.
+        for (setting, given) in [
+            (Setting::SensorHz, self.sensor_hz.is_some()),
+            (Setting::Break, self.break_),
+            (Setting::ControlHz, self.control_hz.is_some()),
+        ] {
+            if given {
+                graph.chain_for(name(setting))?;
+            }
+        }
+        Ok(control_hz)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn spec() -> RunSpec {
+        RunSpec {
+            clock: ClockKind::Virtual,
+            ..RunSpec::default()
+        }
+    }
+
+    #[test]
+    fn the_default_spec_is_the_chapter_s_run_on_the_default_clock() {
+        let cfg = RunSpec::default().config(Speech::Flags).unwrap();
+        assert_eq!(cfg.clock, DEFAULT_CLOCK);
+        assert_eq!(cfg.duration, Nanos(10 * Nanos::SECOND.0));
+        assert_eq!(cfg.graph, GraphSpec::chapter());
+        assert_eq!(cfg.spin_margin, cfg.default_spin_margin());
+    }
+
+    #[test]
+    fn a_refusal_names_the_setting_in_its_front_end_s_words() {
+        let bad = RunSpec {
+            control_hz: Some(0.0),
+            ..spec()
+        };
+        let flags = bad.config(Speech::Flags).unwrap_err().to_string();
+        assert_eq!(
+            flags,
+            "--control-hz must be a finite rate in (0, 10000] Hz, got 0"
+        );
+        let words = bad.config(Speech::Keywords).unwrap_err().to_string();
+        assert_eq!(
+            words,
+            "control_hz must be a finite rate in (0, 10000] Hz, got 0"
+        );
+        let depth = RunSpec {
+            queue_depth: Some(0),
+            ..spec()
+        };
+        let line = depth.config(Speech::Keywords).unwrap_err().to_string();
+        assert_eq!(line, "queue_depth must be at least 1, got 0");
+        let long = RunSpec {
+            duration_s: Some(-1.0),
+            ..spec()
+        };
+        let line = long.config(Speech::Keywords).unwrap_err().to_string();
+        assert!(line.starts_with("duration_s must be in (0, "), "{line}");
+    }
+
+    #[test]
+    fn keyed_settings_are_named_by_key() {
+        let mut s = spec();
+        s.graph.rates.push(("polcy".into(), 10.0));
+        let line = s.config(Speech::Keywords).unwrap_err().to_string();
+        assert!(line.starts_with("rate[\"polcy\"]=10: "), "{line}");
+        assert!(line.contains("policy"), "{line}");
+        let line = s.config(Speech::Flags).unwrap_err().to_string();
+        assert!(line.starts_with("--rate polcy=10: "), "{line}");
+        let mut s = spec();
+        s.graph.depths.push(("/obs".into(), 0));
+        let line = s.config(Speech::Keywords).unwrap_err().to_string();
+        assert_eq!(line, "depth[\"/obs\"]=0: a history depth is at least 1");
+        let mut s = spec();
+        s.graph.links.push(("/obs".into(), "depth=3".into()));
+        let line = s.config(Speech::Keywords).unwrap_err().to_string();
+        assert!(line.ends_with("; use qos"), "{line}");
+    }
+
+    #[test]
+    fn two_settings_of_one_rate_are_refused_naming_both() {
+        let mut s = spec();
+        s.control_hz = Some(10.0);
+        s.graph.rates.push(("policy".into(), 20.0));
+        assert_eq!(
+            s.config(Speech::Flags).unwrap_err().to_string(),
+            "--rate policy=20 and --control-hz (10 Hz) both set the rate of node 'policy'; give one"
+        );
+        assert_eq!(
+            s.config(Speech::Keywords).unwrap_err().to_string(),
+            "rate[\"policy\"]=20 and control_hz (10 Hz) both set the rate of node 'policy'; give one"
+        );
+        let s = RunSpec {
+            break_: true,
+            control_hz: Some(10.0),
+            ..spec()
+        };
+        assert_eq!(
+            s.config(Speech::Flags).unwrap_err().to_string(),
+            "--break sets the policy to 5 Hz and --control-hz to 10 Hz; give one"
+        );
+    }
+
+    #[test]
+    fn the_shorthands_and_smoke_set_the_run() {
+        let s = RunSpec {
+            control_hz: Some(20.0),
+            sensor_hz: Some(40.0),
+            queue_depth: Some(3),
+            smoke: true,
+            clock: ClockKind::Real,
+            ..RunSpec::default()
+        };
+        let cfg = s.config(Speech::Keywords).unwrap();
+        assert_eq!(cfg.control_hz(), Some(20.0));
+        assert_eq!(cfg.sensor_hz(), Some(40.0));
+        assert_eq!(cfg.queue_depth(), Some(3));
+        assert_eq!(cfg.clock, ClockKind::Virtual);
+        assert_eq!(cfg.duration, Nanos(2 * Nanos::SECOND.0));
+        let zero = RunSpec {
+            outputs: Outputs {
+                trace_every: 0,
+                ..Outputs::default()
+            },
+            ..spec()
+        };
+        assert_eq!(
+            zero.config(Speech::Keywords).unwrap_err().to_string(),
+            "trace_every must be at least 1, got 0"
+        );
+    }
+}
