@@ -15,6 +15,19 @@ pub(crate) fn oracle_python() -> String {
     )
 }
 
+/// What the oracle's Python script `script` (run as `python -c script args…`) prints on
+/// stdout, read as JSON; the script must succeed (its stderr is the failure's message).
+pub(crate) fn oracle_json(script: &str, args: &[&str]) -> Value {
+    let o = Command::new(oracle_python())
+        .arg("-c")
+        .arg(script)
+        .args(args)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    serde_json::from_slice(&o.stdout).unwrap()
+}
+
 /// A test oracle's Python script (`tests/ros2/*.py`), running and ready: it printed
 /// `ready` on stdout; closing its stdin tells it to finish and print one JSON report.
 pub(crate) struct Oracle {
@@ -607,12 +620,7 @@ with Reader(sys.argv[1]) as r:
             rows["v"].append([float(x) for x in m.position])
 print(json.dumps(out))
 "#;
-    let o = Command::new(oracle_python())
-        .args(["-c", script, dir.to_str().unwrap()])
-        .output()
-        .unwrap();
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    serde_json::from_slice(&o.stdout).unwrap()
+    oracle_json(script, &[dir.to_str().unwrap()])
 }
 
 /// Each MCAP channel of a bag read with Foxglove's `mcap` (nothing of rosbag2's or
@@ -637,12 +645,7 @@ for c in summary.channels.values():
     }
 print(json.dumps(out))
 "#;
-    let o = Command::new(oracle_python())
-        .args(["-c", script, dir.to_str().unwrap()])
-        .output()
-        .unwrap();
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    serde_json::from_slice(&o.stdout).unwrap()
+    oracle_json(script, &[dir.to_str().unwrap()])
 }
 
 #[test]
@@ -914,12 +917,7 @@ from ros2_pyterfaces.core.rosgraph_msgs.msg import Clock
 from ros2_pyterfaces.core.sensor_msgs.msg import Image
 print(json.dumps({t["__typename"]: core.hash_rihs01(t) for t in (JointState, Float64, Clock, Image)}))
 "#;
-    let o = Command::new(oracle_python())
-        .args(["-c", script])
-        .output()
-        .unwrap();
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let theirs: Value = serde_json::from_slice(&o.stdout).unwrap();
+    let theirs = oracle_json(script, &[]);
     for ty in [
         ros_type_of(StateMsg::TYPE),
         ros_type_of(PositionMsg::TYPE),

@@ -51,25 +51,10 @@ pub(crate) fn ratelab_within(args: &[&str], limit: Duration) -> (i32, String, St
     (code, out.join().unwrap(), err.join().unwrap(), took)
 }
 
-/// A capture of the real `ros2` command (`kilted-ros2cli/PATH`: the command line, `# rc=…`,
-/// then its stdout and stderr): its exit code and its stdout, without the zenoh-c log lines
-/// that reached ros2cli's stdout (each begins with an escape sequence).
+/// A capture of the real `ros2` command (`kilted-ros2cli/PATH`): its exit code and its
+/// stdout, without the zenoh-c log lines ([`crate::ros2_cli_rules::capture`]).
 fn ros2cli(path: &str) -> (i32, String) {
-    let file = crate::brains::fixture(&format!("ros2-real/kilted-ros2cli/{path}"));
-    let text = std::fs::read_to_string(file).unwrap();
-    let rc: i32 = text
-        .lines()
-        .find_map(|l| l.strip_prefix("# rc="))
-        .and_then(|r| r.split_whitespace().next())
-        .and_then(|r| r.parse().ok())
-        .unwrap_or_else(|| panic!("no rc in {path}"));
-    let (_, out) = text.split_once("# --- stdout\n").unwrap();
-    let (out, _) = out.split_once("# --- stderr").unwrap();
-    let out: String = out
-        .lines()
-        .filter(|l| !l.starts_with('\x1b'))
-        .map(|l| format!("{l}\n"))
-        .collect();
+    let (rc, out, _) = crate::ros2_cli_rules::capture(path);
     (rc, out)
 }
 

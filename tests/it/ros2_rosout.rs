@@ -10,11 +10,10 @@
 //! `rosbags` (`tests/ros2/late_joiner.py`).
 
 use crate::distributed::free_port;
-use crate::ros2::{connect_to, oracle_python, ratelab, Oracle};
+use crate::ros2::{connect_to, oracle_json, ratelab, Oracle};
 use crate::ros2_cli::Offering;
 use serde_json::{json, Value};
 use std::path::{Path, PathBuf};
-use std::process::Command;
 
 /// A Python node that logs in its constructor, and at its first reading logs a warning and
 /// prints a line.
@@ -86,12 +85,7 @@ with open(glob.glob(sys.argv[1] + "/*.mcap")[0], "rb") as f:
                      "file": m.file, "function": m.function, "line": m.line})
 print(json.dumps(rows))
 "#;
-    let o = Command::new(oracle_python())
-        .args(["-c", script, dir.to_str().unwrap()])
-        .output()
-        .unwrap();
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    serde_json::from_slice(&o.stdout).unwrap()
+    serde_json::from_value(oracle_json(script, &[dir.to_str().unwrap()])).unwrap()
 }
 
 #[test]
