@@ -118,6 +118,10 @@ impl LinkTimings {
     }
 }
 
+/// The most processes a launch may have and keep Zenoh's default link timings and a 5 s
+/// connect timeout ([`LinkTimings::for_processes`], [`open_session`]).
+pub const SMALL_LAUNCH: usize = 10;
+
 /// How long the processes of a launch of `processes` take to be ready, at most: each waits
 /// until it reaches every other ([`lockstep::meet_peers`]), the launcher for all of them.
 /// [`REPLY_TIMEOUT`], and half a second more per process (64 processes were ready in 23 to
@@ -537,11 +541,20 @@ pub fn open_session(
     // retrying in the background: the caller exits 2 with one line.
     set(&mut config, "listen/exit_on_failure", "true")?;
     set(&mut config, "connect/exit_on_failure", "true")?;
-    set(&mut config, "connect/timeout_ms", "5000")?;
     // A launch's size sets how its links are kept (LinkTimings: Zenoh's defaults for a
     // small one).
-    let links = LinkTimings::for_processes(access.credentials.processes.len());
+    let processes = access.credentials.processes.len();
+    let links = LinkTimings::for_processes(processes);
     let ms = |d: std::time::Duration| d.as_millis().to_string();
+    // A small launch's process fails in 5 s on an endpoint nobody answers; a large one's
+    // processes all connect at once on a loaded machine (64 starting on 2 cores took longer
+    // than 5 s to be answered), so they wait as long as a link may take to establish.
+    let connect = if processes > SMALL_LAUNCH {
+        links.establish
+    } else {
+        std::time::Duration::from_millis(5000)
+    };
+    set(&mut config, "connect/timeout_ms", &ms(connect))?;
     set(
         &mut config,
         "transport/unicast/open_timeout",
