@@ -1,10 +1,10 @@
 //! ratelab's commands for a program that hosts the command line as a library (the Python
-//! package, `src/py`): `sweep`, `cliff` and `exercise` from their flags, their tables and
-//! reports returned, nothing printed. A single run is the library's, from its `RunSpec`
-//! ([`run`], re-exported from `ratelab::held_run`).
+//! package, `src/py`): `exercise` from its flags, its report returned, nothing printed. A
+//! single run is the library's, from its `RunSpec` ([`run`], re-exported from
+//! `ratelab::held_run`), and so are a sweep and a cliff search, from their
+//! `ratelab::sweep_spec::{SweepSpec, CliffSpec}`.
 
 use crate::cli::{Cli, Command};
-use ratelab::scheduler::StopFlag;
 
 // A run from its `RunSpec`, its results in memory: the library's (`ratelab::held_run`).
 pub use ratelab::held_run::{check_held_trace, run, RunFiles, TraceTooLarge};
@@ -18,50 +18,6 @@ fn parse(subcommand: &str, flags: &[String]) -> anyhow::Result<Command> {
     let cli =
         Cli::parse_argv(argv).map_err(|e| anyhow::anyhow!(crate::one_line(&e.to_string())))?;
     cli.command.ok_or_else(|| anyhow::anyhow!("no subcommand"))
-}
-
-/// `ratelab sweep FLAGS…` until `stop`: its table as `--csv` writes it (a header, then one
-/// row per run: the grid's point and the run's figures), and the line of the first run that
-/// failed a node, when one did. Nothing is printed.
-///
-/// # Errors
-/// Bad flags or settings, a brain that cannot be loaded, a run that cannot start.
-pub fn sweep(flags: &[String], stop: &StopFlag) -> anyhow::Result<(String, Option<String>)> {
-    let Command::Sweep(a) = parse("sweep", flags)? else {
-        anyhow::bail!("not a sweep");
-    };
-    let rows = crate::sweep::sweep_rows(&a, stop, false)?;
-    let mut csv = Vec::new();
-    crate::sweep::write_csv(&mut csv, &rows)?;
-    let failed = crate::sweep::sweep_failed(&rows)
-        .err()
-        .map(|e| e.to_string());
-    Ok((String::from_utf8(csv)?, failed))
-}
-
-/// `ratelab cliff FLAGS…` until `stop`: per seed, the highest control rate at which the pole
-/// falls, as CSV (`seed,falls_at_hz,balances_at_hz,runs`; a rate is empty when there is
-/// none). Nothing is printed.
-///
-/// # Errors
-/// Bad flags or settings, a brain that cannot be loaded, a run that cannot start.
-pub fn cliff(flags: &[String], stop: &StopFlag) -> anyhow::Result<String> {
-    let Command::Cliff(a) = parse("cliff", flags)? else {
-        anyhow::bail!("not a cliff search");
-    };
-    let (cliffs, _, _) = crate::sweep::cliffs(&a, stop, false)?;
-    let mut w = csv::Writer::from_writer(Vec::new());
-    w.write_record(["seed", "falls_at_hz", "balances_at_hz", "runs"])?;
-    let hz = |x: Option<f64>| x.map_or_else(String::new, |x| x.to_string());
-    for c in &cliffs {
-        w.write_record([
-            c.seed.to_string(),
-            hz(c.falls_at_hz),
-            hz(c.balances_at_hz),
-            c.runs.to_string(),
-        ])?;
-    }
-    Ok(String::from_utf8(w.into_inner()?)?)
 }
 
 /// What `ratelab exercise` found, and the report it printed.

@@ -6,6 +6,7 @@ use ratelab::graph::nodes::camera::{MAX_FRAME_PX, MIN_FRAME_PX};
 use ratelab::outputs::{Outputs, Ros2Domain};
 use ratelab::qos::Fault;
 use ratelab::run_spec::{GraphSettings, RunSpec, DEFAULT_CLOCK, DEFAULT_POLICY};
+use ratelab::sweep_spec::{CliffSpec, SweepSpec};
 use std::path::PathBuf;
 
 /// ratelab: a graph of nodes at fixed rates keeping a MuJoCo cartpole upright.
@@ -121,7 +122,10 @@ pub enum Command {
     /// class, the fields with their units, the ROS 2 type, as a Markdown table.
     Msgs,
     /// Read any rmw_zenoh graph as ros2cli does, without ROS 2: `node list|info`,
-    /// `topic list|info|echo|hz` (docs/ros2.md).
+    /// `topic list|info|echo|bw|hz`, `graph`, `param list|get|set`, and rosbag2 bags with
+    /// `bag info|echo` (docs/ros2.md).
+    // Every verb of the subcommand tree is named here: a unit test checks it
+    // (`the_ros2_summary_names_every_verb`).
     Ros2(crate::ros2::Ros2Args),
     /// Print a generated graph file of any size: the chapter's loop and, beside it,
     /// controllers of four nodes each (`ratelab graph --nodes 1000 > big.toml`).
@@ -268,8 +272,8 @@ pub struct TopArgs {
     /// Sort the rows by: name (nodes by process, topics by name), rate (measured Hz and
     /// msg/s, highest first), count (ticks and published messages, most first), trouble
     /// (nodes not alive and topics' dropped + lost messages first).
-    #[arg(long, value_enum, default_value_t = crate::top::SortBy::Name)]
-    pub sort: crate::top::SortBy,
+    #[arg(long, value_enum, default_value_t = SortBy::Name)]
+    pub sort: SortBy,
     /// The launch's credentials (`launch --export-credentials FILE`; default: those this
     /// user's running launch keeps for its watchers).
     #[arg(long, value_name = "FILE")]
@@ -695,6 +699,49 @@ impl From<&RunArgs> for RunSpec {
     }
 }
 
+impl From<&SweepArgs> for SweepSpec {
+    /// `ratelab sweep`'s flags as the library's sweep: the grid's lists, and the settings
+    /// every run shares (every rule is [`SweepSpec::grid`]'s).
+    fn from(a: &SweepArgs) -> SweepSpec {
+        SweepSpec {
+            base: RunSpec {
+                graph: GraphSettings::from(&a.graph),
+                duration_s: Some(a.duration),
+                clock: ClockKind::Virtual,
+                policy: a.policy.clone(),
+                ..RunSpec::default()
+            },
+            clocks: a.clock.clone(),
+            sensor_hz: a.sensor_hz.clone(),
+            control_hz: a.control_hz.clone(),
+            queue_depth: a.queue_depth.clone(),
+            seeds: a.seeds.clone(),
+        }
+    }
+}
+
+impl From<&CliffArgs> for CliffSpec {
+    /// `ratelab cliff`'s flags as the library's search (every rule is
+    /// [`CliffSpec::config`]'s).
+    fn from(a: &CliffArgs) -> CliffSpec {
+        CliffSpec {
+            base: RunSpec {
+                graph: GraphSettings::from(&a.graph),
+                duration_s: Some(a.duration),
+                clock: ClockKind::Virtual,
+                sensor_hz: Some(a.sensor_hz),
+                queue_depth: Some(a.queue_depth),
+                policy: a.policy.clone(),
+                ..RunSpec::default()
+            },
+            seeds: a.seeds.clone(),
+            min_hz: a.min_hz,
+            max_hz: a.max_hz,
+            step_hz: a.step,
+        }
+    }
+}
+
 /// Settings of the real-clock timing benchmark.
 #[derive(Debug, Clone, Args)]
 pub struct BenchArgs {
@@ -727,6 +774,42 @@ pub struct BenchArgs {
     pub graph: GraphArgs,
 }
 
+/// What `top`'s rows are sorted by (`--sort`, key `s` cycles).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum)]
+pub enum SortBy {
+    /// Nodes by process then name, topics by name.
+    #[default]
+    Name,
+    /// The measured rate (nodes' Hz, topics' msg/s), highest first.
+    Rate,
+    /// Nodes' ticks, topics' published messages, most first.
+    Count,
+    /// Topics' dropped and lost messages, most first (nodes: not alive first).
+    Trouble,
+}
+
+impl SortBy {
+    /// The next sort key: name → rate → count → trouble → name.
+    pub fn next(self) -> SortBy {
+        match self {
+            SortBy::Name => SortBy::Rate,
+            SortBy::Rate => SortBy::Count,
+            SortBy::Count => SortBy::Trouble,
+            SortBy::Trouble => SortBy::Name,
+        }
+    }
+
+    /// Its name, as `--sort` takes it.
+    pub fn word(self) -> &'static str {
+        match self {
+            SortBy::Name => "name",
+            SortBy::Rate => "rate",
+            SortBy::Count => "count",
+            SortBy::Trouble => "trouble",
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -743,6 +826,52 @@ mod tests {
             let mut p = path.to_vec();
             p.push(sub.get_name().to_string());
             numeric_options(sub, &p, out);
+        }
+    }
+
+    /// `ratelab ros2`'s summary (its about, the line `ratelab --help` lists it by and the
+    /// first of `ratelab ros2 --help`) names every verb of its subcommand tree, a group's
+    /// verbs as `` `topic list|info|echo|bw|hz` ``, a verb of none as `` `graph` ``: a verb
+    /// added to the tree and not to the summary fails here.
+    #[test]
+    fn the_ros2_summary_names_every_verb() {
+        let cli = Cli::command();
+        let ros2 = cli.find_subcommand("ros2").expect("ratelab ros2");
+        let about = [ros2.get_about(), ros2.get_long_about()]
+            .into_iter()
+            .flatten()
+            .map(|t| t.to_string())
+            .collect::<Vec<_>>()
+            .join("\n");
+        // The verbs the summary lists after `` `NAME``, up to the closing backtick.
+        let listed = |name: &str| -> Option<Vec<String>> {
+            let at = about.find(&format!("`{name}"))? + 1 + name.len();
+            let rest = &about[at..];
+            let group = rest[..rest.find('`')?].trim();
+            let mut verbs: Vec<String> = group
+                .split('|')
+                .filter(|v| !v.is_empty())
+                .map(String::from)
+                .collect();
+            verbs.sort();
+            Some(verbs)
+        };
+        let shown = |c: &&clap::Command| !c.is_hide_set() && c.get_name() != "help";
+        let groups: Vec<&clap::Command> = ros2.get_subcommands().filter(shown).collect();
+        assert!(groups.len() >= 5, "{groups:?}");
+        for group in groups {
+            let mut verbs: Vec<String> = group
+                .get_subcommands()
+                .filter(shown)
+                .map(|v| v.get_name().to_string())
+                .collect();
+            verbs.sort();
+            assert_eq!(
+                listed(group.get_name()).as_ref(),
+                Some(&verbs),
+                "`ratelab ros2`'s summary does not list `{}`'s verbs {verbs:?}: {about}",
+                group.get_name()
+            );
         }
     }
 
@@ -774,6 +903,35 @@ mod tests {
             "/obs:depth=2",
         ]);
         assert!(cli.is_ok(), "{:?}", cli.err());
+    }
+
+    #[test]
+    fn sweep_and_cliff_flags_default_to_the_library_s_specs() {
+        use ratelab::setting::Speech;
+        let Some(Command::Sweep(a)) = Cli::parse_argv(["ratelab", "sweep"]).unwrap().command else {
+            panic!("not a sweep")
+        };
+        let flags = SweepSpec::from(&a).grid(Speech::Flags).unwrap();
+        let library = SweepSpec::default().grid(Speech::Flags).unwrap();
+        assert_eq!(flags.points(), library.points());
+        assert_eq!(flags.base, library.base);
+        let Some(Command::Cliff(a)) = Cli::parse_argv(["ratelab", "cliff"]).unwrap().command else {
+            panic!("not a cliff search")
+        };
+        let (flags, library) = (CliffSpec::from(&a), CliffSpec::default());
+        assert_eq!(
+            (&flags.seeds, flags.min_hz, flags.max_hz, flags.step_hz),
+            (
+                &library.seeds,
+                library.min_hz,
+                library.max_hz,
+                library.step_hz
+            )
+        );
+        assert_eq!(
+            flags.config(Speech::Flags).unwrap(),
+            library.config(Speech::Flags).unwrap()
+        );
     }
 
     #[test]

@@ -24,7 +24,7 @@ pub fn graph_from_args(g: &GraphArgs) -> anyhow::Result<GraphSpec> {
 }
 
 /// A graph's QoS warnings ([`GraphSpec::qos_warnings`]), a `[ratelab]` line each on stderr.
-fn warn_qos(spec: &GraphSpec) {
+pub fn warn_qos(spec: &GraphSpec) {
     for w in spec.qos_warnings() {
         eprintln!("[ratelab] {w}");
     }

@@ -255,10 +255,11 @@ fn placement_line(spec: &ratelab::graph::GraphSpec) -> String {
 }
 
 /// A crossing topic's time on the wire, as the summary says it (a process that rejoined
-/// counts from its rejoin, and the line says so).
+/// counts from its rejoin, and the line says so, at the time the launcher's line and the
+/// recording give it: `rejoined at t=3.110s`).
 fn wire_line(w: &ratelab::distributed::wire::WireLink) -> String {
     let since = w.since_ns.map_or(String::new(), |t| {
-        format!(" since its rejoin at {:.2} s", t as f64 / 1e9)
+        format!(" since its rejoin at {:.3} s", t as f64 / 1e9)
     });
     format!(
         "wire {} into '{}': {} samples{since}, p50 {} µs | p99 {} µs | max {} µs",

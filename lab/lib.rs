@@ -3,6 +3,7 @@
 //! `export`, `kinds`, `msgs`) — as a library, so that a program with node kinds and message
 //! types of its own gets all of it with them: [`main_with`]. The `ratelab` binary is
 //! `main_with(|| {})`.
+#![warn(missing_docs)]
 
 pub mod api;
 mod bench;
@@ -292,7 +293,8 @@ pub const PYTHON_GRACE: std::time::Duration = std::time::Duration::from_millis(3
 /// registers them too), `sweep`, `cliff`, `exercise`, `bench`, `replay`, `kinds`, `msgs` —
 /// then knows them. Returns the exit code: 0 done, 1 an exercise not passed or what ros2cli
 /// refuses with exit 1 (`ratelab ros2`: `Node not found`, …), 2 bad input or a failed run,
-/// 130 interrupted (Ctrl-C, SIGTERM), 141 a closed stdout.
+/// 130 interrupted (Ctrl-C, SIGTERM; `ratelab ros2 topic echo|hz|bw`: ros2cli's code, 2, or
+/// 0 for `hz` once subscribed), 141 a closed stdout.
 ///
 /// ```no_run
 /// fn main() -> std::process::ExitCode {
@@ -446,6 +448,10 @@ pub fn run_command_line(args: Vec<std::ffi::OsString>, register: impl FnOnce()) 
     match result {
         Ok(()) if interrupted.is_stopped() => EXIT_INTERRUPTED,
         Ok(()) => 0,
+        // `ratelab ros2 topic echo|hz|bw` stopped by Ctrl-C: ros2cli's exit code, nothing said.
+        Err(e) if e.downcast_ref::<ros2::Interrupted>().is_some() => e
+            .downcast_ref::<ros2::Interrupted>()
+            .map_or(EXIT_INTERRUPTED, |i| i.0),
         Err(e) => {
             // A graph file's error is `FILE:LINE:COL: reason`, as compilers print them.
             // Not `eprintln!`: stderr may be a terminal that hung up (SIGHUP).

@@ -35,7 +35,7 @@ pub enum Ros2Command {
     /// Nodes: `node list`, `node info NODE`.
     #[command(subcommand)]
     Node(NodeVerb),
-    /// Topics: `topic list [-t]`, `topic info TOPIC [-v]`, `topic echo|hz|bw TOPIC`.
+    /// Topics: `topic list [-t|-v]`, `topic info TOPIC [-v]`, `topic echo|hz|bw TOPIC`.
     #[command(subcommand)]
     Topic(TopicVerb),
     /// The graph: a line per topic, publisher ──▶ topic [type] msg/s ──▶ subscribers, every
@@ -104,7 +104,8 @@ pub enum BagVerb {
         /// The bag's folder.
         dir: std::path::PathBuf,
     },
-    /// Its messages as YAML, in the file's order, each after a `# TOPIC at T s` line.
+    /// Its messages as YAML, in the file's order, each after a `# TOPIC at T s` line; a
+    /// type ratelab has no description of is decoded by the ros2msg schema the bag carries.
     Echo {
         /// The bag's folder.
         dir: std::path::PathBuf,
@@ -144,11 +145,16 @@ pub enum NodeVerb {
 /// `ratelab ros2 topic …`.
 #[derive(Debug, Clone, Subcommand)]
 pub enum TopicVerb {
-    /// Every topic (`-t`: with its type).
+    /// Every topic (`-t`: with its type; `-v`: published and subscribed topics with their
+    /// endpoint counts).
     List {
         /// Show each topic's type.
         #[arg(short = 't', long = "show-types")]
         types: bool,
+        /// List full details about each topic, as ros2cli's `-v`: a `Published topics:` and
+        /// a `Subscribed topics:` section, ` * /topic [type] N publisher(s)` each.
+        #[arg(short = 'v', long = "verbose")]
+        verbose: bool,
         /// Only the number of topics.
         #[arg(short = 'c', long = "count-topics")]
         count: bool,
@@ -165,7 +171,9 @@ pub enum TopicVerb {
         verbose: bool,
     },
     /// Print a topic's messages as YAML, `---` between them, until Ctrl-C (a latched
-    /// topic's stored messages first, at once).
+    /// topic's stored messages first, at once). A topic only subscribed to so far is
+    /// listened to for publishers to come; one no node has is refused, as ros2cli's (its
+    /// warning on stdout, `Could not determine the type for the passed topic`, exit 1).
     Echo {
         /// The topic.
         topic: String,
@@ -182,7 +190,8 @@ pub enum TopicVerb {
         #[command(flatten)]
         qos: QosArgs,
     },
-    /// Print a topic's bandwidth every second, until Ctrl-C.
+    /// Print a topic's bandwidth every second, until Ctrl-C (a topic no node has yet is
+    /// waited for, after ros2cli's warning).
     Bw {
         /// The topic.
         topic: String,
@@ -201,7 +210,8 @@ pub enum TopicVerb {
         #[command(flatten)]
         qos: QosArgs,
     },
-    /// Print a topic's rate every second, until Ctrl-C.
+    /// Print a topic's rate every second, until Ctrl-C (a topic no node has yet is
+    /// waited for, after ros2cli's warning).
     Hz {
         /// The topic.
         topic: String,
@@ -282,9 +292,10 @@ fn domain(args: &Ros2Args) -> Result<u32> {
 }
 
 /// A refusal ros2cli makes by a verb's returned message (`return 'Node not found'`) or its
-/// `RuntimeError` (`Cannot echo topic …`), which ros2cli's `main` hands to `sys.exit`: the
-/// message alone on stderr, exit 1 ([`EXIT_REFUSED`]). ratelab's own refusals (a bad flag,
-/// no router, a topic nobody publishes) stay `error: …`, exit 2.
+/// `RuntimeError` (`Cannot echo topic …`, `Could not determine the type for the passed
+/// topic`), which ros2cli's `main` hands to `sys.exit`: the message alone on stderr, exit 1
+/// ([`EXIT_REFUSED`]). ratelab's own refusals (a bad flag, no router) stay `error: …`,
+/// exit 2.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Refused(pub String);
 
@@ -299,6 +310,64 @@ impl std::error::Error for Refused {}
 /// The exit code of a [`Refused`] verb: ros2cli's, 1 (`sys.exit` of a message).
 pub const EXIT_REFUSED: u8 = 1;
 
+/// How a verb that Ctrl-C (or SIGTERM: ratelab does not tell them apart) stopped ends, as
+/// ros2cli's does: its exit code, nothing said. ros2cli's `main` (`ros2cli/cli.py`) catches
+/// the `KeyboardInterrupt` that reaches it and returns `signal.SIGINT`, which `sys.exit`
+/// makes exit code 2 ([`EXIT_KEYBOARD_INTERRUPT`]): `echo` and `bw` let it reach `main`, and
+/// so do `hz` and `bw` while they wait for the topic (`get_msg_class(blocking=True)` sleeps
+/// outside any `try`); `hz` catches it around its spin once subscribed and ends 0
+/// (`verb/hz.py`, `except (KeyboardInterrupt, ExternalShutdownException): pass`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Interrupted(pub u8);
+
+impl std::fmt::Display for Interrupted {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "interrupted (exit {})", self.0)
+    }
+}
+
+impl std::error::Error for Interrupted {}
+
+/// ros2cli's exit code when a `KeyboardInterrupt` reaches its `main`: `signal.SIGINT`, 2.
+pub const EXIT_KEYBOARD_INTERRUPT: u8 = 2;
+
+/// `code` as an [`Interrupted`] error.
+fn interrupted(code: u8) -> anyhow::Error {
+    anyhow::Error::new(Interrupted(code))
+}
+
+/// What ros2cli's `get_msg_class` says on stdout when no node has the topic (ros2topic's
+/// `api/__init__.py`), the topic as it was given.
+fn not_published_yet(topic: &str) -> String {
+    format!(
+        "WARNING: topic [{}] does not appear to be published yet",
+        ratelab::text::printable(topic)
+    )
+}
+
+/// ros2cli's `echo` refusal when no node has the topic (`verb/echo.py`: its `RuntimeError`,
+/// exit 1).
+pub const NO_TYPE: &str = "Could not determine the type for the passed topic";
+
+/// `line` on stdout at once (ros2cli's stdout is line-buffered).
+fn say(line: &str) -> Result<()> {
+    let mut out = std::io::stdout().lock();
+    writeln!(out, "{line}")?;
+    out.flush()?;
+    Ok(())
+}
+
+/// `topic` as ros2cli's `get_msg_class` looks it up: rclpy's `expand_topic_name` in its
+/// node's namespace, `/`, so a relative name (`chatter`) is `/chatter`. (`~` and
+/// substitutions, which name ros2cli's own node, are left as given: no such topic.)
+fn expanded(topic: &str) -> String {
+    if topic.starts_with(['/', '~', '{']) {
+        topic.to_string()
+    } else {
+        format!("/{topic}")
+    }
+}
+
 /// `message` as a [`Refused`] error.
 fn refused(message: String) -> anyhow::Error {
     anyhow::Error::new(Refused(message))
@@ -312,9 +381,10 @@ fn warn(w: &str) {
 /// Run `ratelab ros2 …` until done or `stop` (Ctrl-C).
 ///
 /// # Errors
-/// One line: a bad domain or wait, no router, a topic nobody publishes within the wait;
-/// what ros2cli refuses with exit 1 as [`Refused`] (an unknown node or topic, a parameter
-/// not set, a topic of two types to `echo`, `hz` or `bw`).
+/// One line: a bad domain or wait, no router; what ros2cli refuses with exit 1 as
+/// [`Refused`] (an unknown node or topic, a parameter not set, a topic of two types to
+/// `echo`, `hz` or `bw`, a topic no node has to `echo`); `echo`, `hz` or `bw` stopped by
+/// Ctrl-C as [`Interrupted`], with ros2cli's exit code.
 pub fn run(args: &Ros2Args, stop: StopFlag) -> Result<()> {
     if let Ros2Command::Bag(verb) = &args.what {
         return bag(verb, &stop);
@@ -337,9 +407,13 @@ pub fn run(args: &Ros2Args, stop: StopFlag) -> Result<()> {
             types,
             count,
             include_hidden,
+            verbose,
         }) => {
+            // ros2cli: `-c` first, then `-v` (whatever `-t` says), then the plain list.
             if *count {
                 writeln!(out, "{}", inspect::topic_count(&g, *include_hidden))?
+            } else if *verbose {
+                write!(out, "{}", inspect::topic_list_verbose(&g, *include_hidden))?
             } else {
                 write!(out, "{}", inspect::topic_list(&g, *types, *include_hidden))?
             }
@@ -375,7 +449,8 @@ pub fn run(args: &Ros2Args, stop: StopFlag) -> Result<()> {
         }) => {
             drop(out);
             let hz = Figures::Hz(inspect::Rate::new(*window));
-            every_second(&session, &g, (topic.as_str(), qos), hz, *duration, &stop)?;
+            let graph = (&g, domain, wait);
+            every_second(&session, graph, (topic.as_str(), qos), hz, *duration, &stop)?;
         }
         Ros2Command::Bag(_) => {}
         Ros2Command::Param(verb) => write!(out, "{}", param(&session, &g, domain, verb)?)?,
@@ -391,7 +466,8 @@ pub fn run(args: &Ros2Args, stop: StopFlag) -> Result<()> {
         }) => {
             drop(out);
             let bw = Figures::Bw(inspect::Bandwidth::new(*window));
-            every_second(&session, &g, (topic.as_str(), qos), bw, *duration, &stop)?;
+            let graph = (&g, domain, wait);
+            every_second(&session, graph, (topic.as_str(), qos), bw, *duration, &stop)?;
         }
     }
     drop(session);
@@ -504,24 +580,25 @@ fn param(
     }
 }
 
-/// The publisher of `topic` a subscriber takes its type and key from.
-fn publisher<'a>(g: &'a inspect::Seen, topic: &str) -> Result<&'a inspect::EndpointEntity> {
-    inspect::publishers(g, topic)
-        .into_iter()
-        .next()
-        .ok_or_else(|| {
-            anyhow!(
-                "no publisher of '{}' on the domain (`ratelab ros2 topic list` lists the topics)",
-                ratelab::text::printable(topic)
-            )
-        })
+/// The endpoint of topic `name` (expanded) a subscriber takes its type, hash and data key
+/// from: its first publisher, else its first subscription, for a topic only subscribed to so
+/// far (ros2cli's `get_msg_class` takes the type of any endpoint: `get_topic_names_and_types`
+/// lists both), whose publishers to come put on the same key.
+fn source<'a>(g: &'a inspect::Seen, name: &str) -> Option<&'a inspect::EndpointEntity> {
+    inspect::publishers(g, name).into_iter().next().or_else(|| {
+        g.endpoints
+            .iter()
+            .find(|e| e.kind == inspect::EndpointKind::Subscription && e.topic == name)
+    })
 }
 
 /// Subscribe to `topic` as ros2cli subscribes (`ratelab::ros2::subscription`): the QoS
 /// chosen from what its publishers offer and the `qos` flags, ros2cli's lines about that
-/// choice printed first on stdout. `on` gets each payload; the subscription (held while
-/// listening) and the publisher whose key, type and hash it took. A topic of two types is
-/// [`Refused`] first, in ros2cli's words, whichever verb asked.
+/// choice printed first on stdout (`echo`'s `choose_qos` comes before its
+/// `get_msg_class`). `on` gets each payload; the subscription (held while listening) and the
+/// endpoint whose key, type and hash it took ([`source`]). [`Refused`] in ros2cli's words,
+/// whichever verb asked: a topic of two types; a topic no node has, after ros2cli's warning
+/// on stdout (`echo`'s words: `hz` and `bw` wait for the topic first, [`wait_for_topic`]).
 fn listen<'a>(
     session: &inspect::Session,
     g: &'a inspect::Seen,
@@ -529,23 +606,61 @@ fn listen<'a>(
     qos: &QosArgs,
     on: impl Fn(Vec<u8>) + Send + Sync + 'static,
 ) -> Result<(subscription::Subscription, &'a inspect::EndpointEntity)> {
-    // A topic of two types is refused, as ros2cli's `get_msg_class` refuses it.
-    inspect::one_type(g, topic).map_err(refused)?;
-    let p = publisher(g, topic)?;
-    let offered: Vec<subscription::QosProfile> = inspect::publishers(g, topic)
+    let name = expanded(topic);
+    let offered: Vec<subscription::QosProfile> = inspect::publishers(g, &name)
         .iter()
         .map(|e| e.qos)
         .collect();
     let choice = subscription::choose_qos(&offered, qos.flags()?);
-    if !choice.notes.is_empty() {
-        let mut out = std::io::stdout().lock();
-        for note in &choice.notes {
-            writeln!(out, "{note}")?;
-        }
-        out.flush()?;
+    for note in &choice.notes {
+        say(note)?;
     }
+    // A topic of two types is refused, as ros2cli's `get_msg_class` refuses it.
+    inspect::one_type_as(g, &name, topic).map_err(refused)?;
+    let Some(p) = source(g, &name) else {
+        say(&not_published_yet(topic))?;
+        return Err(refused(NO_TYPE.into()));
+    };
     let sub = subscription::subscribe(session, p, &choice.qos, on)?;
     Ok((sub, p))
+}
+
+/// ros2cli's `get_msg_class(…, blocking=True)` (`hz`, `bw`): the graph once some node has
+/// `topic` (a publisher or a subscription); until then, ros2cli's warning once on stdout and
+/// the graph read again every 0.1 s, as ros2cli's loop sleeps. `None` when `stopped` (Ctrl-C,
+/// `--duration`) first.
+///
+/// # Errors
+/// [`Refused`]: the topic has two types (ros2cli's words); the graph could not be read.
+fn wait_for_topic<'a>(
+    session: &inspect::Session,
+    (g, domain, wait): (&'a inspect::Seen, u32, Duration),
+    topic: &str,
+    stopped: &dyn Fn() -> bool,
+) -> Result<Option<std::borrow::Cow<'a, inspect::Seen>>> {
+    let name = expanded(topic);
+    let mut g = std::borrow::Cow::Borrowed(g);
+    let mut warned = false;
+    loop {
+        if inspect::one_type_as(&g, &name, topic)
+            .map_err(refused)?
+            .is_some()
+        {
+            return Ok(Some(g));
+        }
+        if !warned {
+            say(&not_published_yet(topic))?;
+            warned = true;
+        }
+        if stopped() {
+            return Ok(None);
+        }
+        std::thread::sleep(Duration::from_millis(100));
+        if stopped() {
+            return Ok(None);
+        }
+        g = std::borrow::Cow::Owned(inspect::seen(session, domain, wait)?);
+    }
 }
 
 /// `ratelab ros2 topic echo`: at most `limit` messages, for at most `timeout`.
@@ -602,6 +717,10 @@ fn echo_topic(
         out.flush()?;
         printed += 1;
     }
+    // ros2cli's `echo` lets Ctrl-C's KeyboardInterrupt reach its `main` ([`Interrupted`]).
+    if stop.is_stopped() {
+        return Err(interrupted(EXIT_KEYBOARD_INTERRUPT));
+    }
     Ok(())
 }
 
@@ -623,24 +742,36 @@ enum Figures {
     Bw(inspect::Bandwidth),
 }
 
-/// Subscribe to `topic` (with the QoS ros2cli chooses, [`listen`]) and print `figures`
-/// every second, when they have something to say ([`inspect::Rate::report`],
-/// [`inspect::Bandwidth::report`]), until `duration` or Ctrl-C; `bw` says first that it
-/// subscribed, as ros2cli's.
+/// Subscribe to `topic` (with the QoS ros2cli chooses, [`listen`]; a topic no node has yet
+/// waited for first, [`wait_for_topic`]) and print `figures` every second from then, when
+/// they have something to say ([`inspect::Rate::report`], [`inspect::Bandwidth::report`]),
+/// until `duration` (counted from the start, the wait included) or Ctrl-C ([`Interrupted`]:
+/// 2 while waiting and for `bw`, 0 for `hz` once subscribed, as ros2cli's); `bw` says first
+/// that it subscribed, as ros2cli's.
 fn every_second(
     session: &inspect::Session,
-    g: &inspect::Seen,
+    graph: (&inspect::Seen, u32, Duration),
     (topic, qos): (&str, &QosArgs),
     figures: Figures,
     duration: Option<f64>,
     stop: &StopFlag,
 ) -> Result<()> {
     let until = until("--duration", duration)?;
-    let start = Instant::now();
+    let begun = Instant::now();
+    let over = || until.is_some_and(|u| begun.elapsed() >= u);
     let bw = matches!(figures, Figures::Bw(_));
+    let stopped = || stop.is_stopped() || over();
+    let Some(g) = wait_for_topic(session, graph, topic, &stopped)? else {
+        // Ctrl-C: its KeyboardInterrupt reaches ros2cli's `main`; `--duration`: done.
+        if stop.is_stopped() {
+            return Err(interrupted(EXIT_KEYBOARD_INTERRUPT));
+        }
+        return Ok(());
+    };
+    let start = Instant::now();
     let figures = Arc::new(Mutex::new(figures));
     let seen = figures.clone();
-    let _sub = listen(session, g, topic, qos, move |bytes| {
+    let _sub = listen(session, &g, topic, qos, move |bytes| {
         let t = start.elapsed().as_secs_f64();
         match &mut *seen.lock().unwrap_or_else(|e| e.into_inner()) {
             Figures::Hz(r) => r.arrived(t),
@@ -653,7 +784,7 @@ fn every_second(
         out.flush()?;
     }
     let mut next = start + Duration::from_secs(1);
-    while !stop.is_stopped() && until.is_none_or(|u| start.elapsed() < u) {
+    while !stop.is_stopped() && !over() {
         std::thread::sleep(Duration::from_millis(20));
         if Instant::now() >= next {
             next += Duration::from_secs(1);
@@ -670,6 +801,10 @@ fn every_second(
                 out.flush()?;
             }
         }
+    }
+    if stop.is_stopped() {
+        // `hz` catches Ctrl-C's KeyboardInterrupt around its spin; `bw` does not.
+        return Err(interrupted(if bw { EXIT_KEYBOARD_INTERRUPT } else { 0 }));
     }
     Ok(())
 }
@@ -690,26 +825,27 @@ fn bag(verb: &BagVerb, stop: &StopFlag) -> Result<()> {
             let mut printed = 0u64;
             let mut failed = None;
             let note = b
-                .messages(&stopped, |t, ty, hash, at_ns, bytes| {
-                    if topic.as_deref().is_some_and(|want| want != t) {
+                .messages(&stopped, |m| {
+                    if topic.as_deref().is_some_and(|want| want != m.topic) {
                         return true;
                     }
                     if count.is_some_and(|n| printed >= n) {
                         return false;
                     }
-                    let text = match echo::decode_named(ty, hash, bytes) {
+                    // By ratelab's description of the type, else by the bag's ros2msg schema.
+                    let text = match m.decode() {
                         Ok(v) => echo::yaml(&v),
                         Err(why) => format!(
                             "<{}: {} bytes, not decoded: {why}>\n",
-                            ratelab::text::printable(ty),
-                            bytes.len()
+                            ratelab::text::printable(m.type_name),
+                            m.data.len()
                         ),
                     };
                     let head = format!(
                         "# {} at {}.{:09} s\n",
-                        ratelab::text::printable(t),
-                        at_ns / 1_000_000_000,
-                        at_ns % 1_000_000_000
+                        ratelab::text::printable(m.topic),
+                        m.log_time / 1_000_000_000,
+                        m.log_time % 1_000_000_000
                     );
                     if let Err(e) = writeln!(out, "{head}{text}---") {
                         failed = Some(e);

@@ -1,24 +1,17 @@
-//! `ratelab sweep` (a parameter grid to CSV/JSON with a plot) and `ratelab cliff`.
+//! `ratelab sweep` (a parameter grid to CSV/JSON with a plot) and `ratelab cliff`: their
+//! flags read as the library's [`SweepSpec`] and [`CliffSpec`] (whose rules and runs these
+//! are, as `ratelab.sweep` and `ratelab.cliff`'s in Python), and here what the terminal shows
+//! and the files written: tables, progress bars, plots.
 
 use crate::cli::{CliffArgs, SweepArgs};
 use indicatif::{ProgressBar, ProgressStyle};
-use ratelab::checkpoint::load_policy;
-use ratelab::config::duration_from_secs;
 use ratelab::metrics::Metrics;
-use ratelab::policy::Policy;
 use ratelab::scheduler::StopFlag;
-use ratelab::sweep::{find_cliff, run_grid, run_grid_until, Grid, Point};
+use ratelab::setting::Speech;
+use ratelab::sweep::{run_grid, run_grid_until, write_csv, BrainFactory, Cliff, Grid, Point};
+use ratelab::sweep_spec::{brain_factory, threads, CliffSpec, SweepSpec};
 use ratelab::{ClockKind, RunConfig};
 use std::io::IsTerminal;
-
-/// A factory of fresh brains for parallel runs; the spec is checked once, before any run.
-fn brain_factory(
-    spec: &str,
-) -> anyhow::Result<impl Fn() -> Result<Box<dyn Policy>, String> + Sync> {
-    load_policy(spec)?;
-    let spec = spec.to_string();
-    Ok(move || load_policy(&spec).map_err(|e| e.to_string()))
-}
 
 /// A progress bar on stderr (when it is a terminal), redrawn every 200 ms so that even a
 /// run of many seconds shows the time going by.
@@ -43,7 +36,7 @@ pub fn run_sweep(a: &SweepArgs, stop: &StopFlag) -> anyhow::Result<()> {
     for p in [&a.csv, &a.json].into_iter().flatten() {
         ratelab::output::check_target(p, a.force)?; // refuse before hours of runs, not after
     }
-    let rows = sweep_rows(a, stop, true)?;
+    let rows = sweep_rows(a, stop)?;
     print_table(&rows);
     println!();
     if std::io::stdout().is_terminal() {
@@ -66,62 +59,29 @@ pub fn run_sweep(a: &SweepArgs, stop: &StopFlag) -> anyhow::Result<()> {
         ratelab::output::write_file(p, a.force, json.as_bytes())?;
         println!("wrote {}", p.display());
     }
-    sweep_failed(&rows)
-}
-
-/// A sweep whose runs failed a node is no success: the error names how many and the first.
-///
-/// # Errors
-/// That line, when one did.
-pub fn sweep_failed(rows: &[(Point, Metrics)]) -> anyhow::Result<()> {
-    let failed: Vec<&(Point, Metrics)> = rows
-        .iter()
-        .filter(|(_, m)| m.node_failed.is_some())
-        .collect();
-    if let Some((p, m)) = failed.first() {
-        anyhow::bail!(
-            "{} of {} runs failed a node (the first, control {} Hz seed {}: {})",
-            failed.len(),
-            rows.len(),
-            p.control_hz,
-            p.seed,
-            m.node_failed.as_deref().unwrap_or("?")
-        );
+    // A sweep whose runs failed a node is no success.
+    match ratelab::sweep::failed_line(&rows) {
+        Some(line) => Err(anyhow::anyhow!(line)),
+        None => Ok(()),
     }
-    Ok(())
 }
 
-/// The sweep `a` asks for, run on every core until `stop` (a progress bar on a terminal when
-/// `show`): one row per point of its grid that ran.
+/// The sweep `a` asks for ([`SweepSpec`]), run on every core until `stop`, a progress bar on
+/// a terminal: one row per point of its grid that ran.
 ///
 /// # Errors
 /// Bad settings, a brain that cannot be loaded, a run that cannot start.
-pub fn sweep_rows(
-    a: &SweepArgs,
-    stop: &StopFlag,
-    show: bool,
-) -> anyhow::Result<Vec<(Point, Metrics)>> {
-    let brain = brain_factory(&a.policy)?;
-    let grid = Grid {
-        clocks: a.clock.clone(),
-        sensor_hz: a.sensor_hz.clone(),
-        control_hz: a.control_hz.clone(),
-        queue_depth: a.queue_depth.clone(),
-        seeds: a.seeds.clone(),
-        base: RunConfig {
-            duration: duration_from_secs(a.duration)?,
-            graph: crate::headless::graph_from_args(&a.graph)?,
-            faults: crate::headless::faults_from_args(&a.graph),
-            ..RunConfig::default()
-        },
-    };
+fn sweep_rows(a: &SweepArgs, stop: &StopFlag) -> anyhow::Result<Vec<(Point, Metrics)>> {
+    let spec = SweepSpec::from(a);
+    let brain = brain_factory(&spec.base.policy)?;
+    let grid = spec.grid(Speech::Flags)?;
+    crate::headless::warn_qos(&grid.base.graph);
     let total = grid.points().len();
-    let bar = progress_bar(total, "runs").filter(|_| show);
-    let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let bar = progress_bar(total, "runs");
     let rows = run_grid_until(
         &grid,
         &brain,
-        threads,
+        threads(),
         &|done, _| {
             if let Some(b) = &bar {
                 b.set_position(done as u64);
@@ -132,7 +92,7 @@ pub fn sweep_rows(
     if let Some(b) = bar {
         b.finish_and_clear();
     }
-    if show && stop.is_stopped() {
+    if stop.is_stopped() {
         println!("interrupted: {} of {total} runs completed", rows.len());
     }
     Ok(rows)
@@ -285,57 +245,37 @@ fn print_plot(rows: &[(Point, Metrics)]) {
     }
 }
 
-pub fn write_csv(out: &mut dyn std::io::Write, rows: &[(Point, Metrics)]) -> anyhow::Result<()> {
-    let mut w = csv::Writer::from_writer(out);
-    w.write_record([
-        "clock",
-        "sensor_hz",
-        "control_hz",
-        "queue_depth",
-        "seed",
-        "balanced",
-        "steps",
-        "fell_at_s",
-        "obs_published",
-        "obs_dropped",
-        "action_published",
-        "action_dropped",
-        "mean_latency_ms",
-        "latency_p99_ms",
-        "policy",
-    ])?;
-    for (p, m) in rows {
-        w.write_record([
-            p.clock.as_str().to_string(),
-            p.sensor_hz.to_string(),
-            p.control_hz.to_string(),
-            p.queue_depth.to_string(),
-            p.seed.to_string(),
-            m.balanced.to_string(),
-            m.steps.to_string(),
-            m.fell_at_s.map_or(String::new(), |t| t.to_string()),
-            m.obs_published.map_or(String::new(), |x| x.to_string()),
-            m.obs_dropped.map_or(String::new(), |x| x.to_string()),
-            m.action_published.map_or(String::new(), |x| x.to_string()),
-            m.action_dropped.map_or(String::new(), |x| x.to_string()),
-            m.mean_latency_ms.to_string(),
-            m.latency_p99_ms.to_string(),
-            m.policy.clone(),
-        ])?;
-    }
-    w.flush()?;
-    Ok(())
-}
-
-/// At most this many control rates are searched per seed (`--step` against the range).
-pub const MAX_CLIFF_RATES: f64 = 5000.0;
-
-/// For each seed, the highest control rate at which the pole falls, to `step` Hz. Seeds
-/// run on a pool of workers sized to the machine's cores (as `sweep` does), results in
-/// seed order. After Ctrl-C (`stop`) no further seed starts.
+/// For each seed, the highest control rate at which the pole falls, to `--step` Hz
+/// ([`CliffSpec`]). Seeds run on a pool of workers sized to the machine's cores (as `sweep`
+/// does), results in seed order, a progress bar on a terminal. After Ctrl-C (`stop`) no
+/// further seed starts.
 pub fn run_cliff(a: &CliffArgs, stop: &StopFlag) -> anyhow::Result<()> {
-    let (cliffs, graph, duration) = cliffs(a, stop, true)?;
-    let brain = brain_factory(&a.policy)?;
+    let spec = CliffSpec::from(a);
+    let brain = brain_factory(&spec.base.policy)?;
+    let base = spec.config(Speech::Flags)?;
+    crate::headless::warn_qos(&base.graph);
+    let bar = progress_bar(spec.seeds.len(), "seeds");
+    let searched = spec.search(
+        &base,
+        &brain,
+        &|done, _| {
+            if let Some(b) = &bar {
+                b.set_position(done as u64);
+            }
+        },
+        stop,
+    );
+    if let Some(b) = bar {
+        b.finish_and_clear();
+    }
+    let cliffs = searched?;
+    if cliffs.len() < spec.seeds.len() {
+        println!(
+            "interrupted: {} of {} seeds searched",
+            cliffs.len(),
+            spec.seeds.len()
+        );
+    }
     // "Balanced" means up for the whole run: a longer run can fall at a rate this one
     // balances at (8 Hz falls at 22.5 s of a 30 s run).
     println!(
@@ -359,84 +299,9 @@ pub fn run_cliff(a: &CliffArgs, stop: &StopFlag) -> anyhow::Result<()> {
         }
     }
     if !stop.is_stopped() {
-        print_edge(a, &graph, &brain, duration, &cliffs)?;
+        print_edge(a, &base, &brain, &cliffs)?;
     }
     Ok(())
-}
-
-/// What [`cliffs`] found, and what it searched with: the graph and the run length.
-pub type CliffSearch = (
-    Vec<ratelab::sweep::Cliff>,
-    ratelab::graph::GraphSpec,
-    ratelab::Nanos,
-);
-
-/// For each seed of `a`, the highest control rate at which the pole falls, until `stop` (a
-/// progress bar on a terminal when `show`).
-///
-/// # Errors
-/// Bad settings (a range upside down or too finely stepped), a brain that cannot be loaded.
-pub fn cliffs(a: &CliffArgs, stop: &StopFlag, show: bool) -> anyhow::Result<CliffSearch> {
-    if a.min_hz > a.max_hz {
-        anyhow::bail!(
-            "--min-hz ({}) must not be above --max-hz ({})",
-            a.min_hz,
-            a.max_hz
-        );
-    }
-    let rates = ((a.max_hz - a.min_hz) / a.step).floor() + 1.0;
-    if rates.is_nan() || rates > MAX_CLIFF_RATES {
-        anyhow::bail!(
-            "--step {} is too fine for --min-hz {} to --max-hz {}: at most {MAX_CLIFF_RATES} rates are searched (use --step ≥ {:.4})",
-            a.step,
-            a.min_hz,
-            a.max_hz,
-            (a.max_hz - a.min_hz) / (MAX_CLIFF_RATES - 1.0)
-        );
-    }
-    let duration = duration_from_secs(a.duration)?;
-    let brain = brain_factory(&a.policy)?;
-    let graph = crate::headless::graph_from_args(&a.graph)?;
-    let faults = crate::headless::faults_from_args(&a.graph);
-    let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
-    let bar = progress_bar(a.seeds.len(), "seeds").filter(|_| show);
-    let results = ratelab::sweep::run_pool(&a.seeds, threads, |&seed| {
-        if stop.is_stopped() {
-            return None;
-        }
-        let base = RunConfig {
-            clock: ClockKind::Virtual,
-            seed,
-            graph: graph.clone(),
-            duration,
-            faults: faults.clone(),
-            ..RunConfig::default()
-        }
-        .with_chapter(
-            a.sensor_hz,
-            graph.control_hz().unwrap_or(a.max_hz),
-            a.queue_depth,
-        );
-        let r = base
-            .map_err(ratelab::sweep::SweepError::from)
-            .and_then(|base| find_cliff(&base, &brain, a.min_hz, a.max_hz, a.step));
-        if let Some(b) = &bar {
-            b.inc(1);
-        }
-        Some(r)
-    });
-    if let Some(b) = bar {
-        b.finish_and_clear();
-    }
-    let done = results.iter().flatten().count();
-    if show && done < a.seeds.len() {
-        println!("interrupted: {done} of {} seeds searched", a.seeds.len());
-    }
-    let cliffs = results
-        .into_iter()
-        .flatten()
-        .collect::<Result<Vec<_>, _>>()?;
-    Ok((cliffs, graph, duration))
 }
 
 /// The most rows the edge plot shows.
@@ -446,10 +311,9 @@ const EDGE_ROWS: usize = 41;
 /// per rate, as a text plot. The edge is ragged, not a line: phase decides too.
 fn print_edge(
     a: &CliffArgs,
-    graph: &ratelab::graph::GraphSpec,
-    brain: ratelab::sweep::BrainFactory<'_>,
-    duration: ratelab::Nanos,
-    cliffs: &[ratelab::sweep::Cliff],
+    base: &RunConfig,
+    brain: BrainFactory<'_>,
+    cliffs: &[Cliff],
 ) -> anyhow::Result<()> {
     let falls: Vec<f64> = cliffs.iter().filter_map(|c| c.falls_at_hz).collect();
     let (Some(lowest), Some(highest)) = (
@@ -474,14 +338,9 @@ fn print_edge(
         control_hz: rates.clone(),
         queue_depth: vec![a.queue_depth],
         seeds: a.seeds.clone(),
-        base: RunConfig {
-            duration,
-            graph: graph.clone(),
-            ..RunConfig::default()
-        },
+        base: base.clone(),
     };
-    let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
-    let rows = run_grid(&grid, brain, threads, &|_, _| {})?;
+    let rows = run_grid(&grid, brain, threads(), &|_, _| {})?;
     println!(
         "\nThe edge is ragged, not a line: whether a seed survives depends on the phase between the\n\
          policy's ticks and the sensor's readings as much as on the rate, so a seed can fall at one\n\

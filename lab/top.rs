@@ -2,7 +2,7 @@
 //! table, as `top` shows processes: on a terminal one page at a time (PgDn/PgUp), sorted by
 //! a column (`--sort`, key `s`); `--once` prints every row for scripts.
 
-use crate::cli::TopArgs;
+use crate::cli::{SortBy, TopArgs};
 use ratelab::distributed::credentials::Role;
 use ratelab::distributed::monitor::{ask_graph, placed_processes, Carried, PlacedProcess};
 use ratelab::distributed::process::LiveStats;
@@ -381,42 +381,6 @@ impl Known {
         match m.since_ns {
             Some(t) if !carried => format!("since it rejoined at {:.2} s", t as f64 / 1e9),
             _ => String::new(),
-        }
-    }
-}
-
-/// What `top`'s rows are sorted by (`--sort`, key `s` cycles).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum)]
-pub enum SortBy {
-    /// Nodes by process then name, topics by name.
-    #[default]
-    Name,
-    /// The measured rate (nodes' Hz, topics' msg/s), highest first.
-    Rate,
-    /// Nodes' ticks, topics' published messages, most first.
-    Count,
-    /// Topics' dropped and lost messages, most first (nodes: not alive first).
-    Trouble,
-}
-
-impl SortBy {
-    /// The next sort key: name → rate → count → trouble → name.
-    pub fn next(self) -> SortBy {
-        match self {
-            SortBy::Name => SortBy::Rate,
-            SortBy::Rate => SortBy::Count,
-            SortBy::Count => SortBy::Trouble,
-            SortBy::Trouble => SortBy::Name,
-        }
-    }
-
-    /// Its name, as `--sort` takes it.
-    pub fn word(self) -> &'static str {
-        match self {
-            SortBy::Name => "name",
-            SortBy::Rate => "rate",
-            SortBy::Count => "count",
-            SortBy::Trouble => "trouble",
         }
     }
 }

@@ -16,7 +16,8 @@
 //!   [`np_random`] (NumPy-exact seeding), [`input`] and [`output`] (the rules for files the
 //!   user names); and the runtime's parts: [`clock`], [`rate`], [`realtime`], [`qos`]
 //!   (ROS 2's QoS), [`topic`] (a subscription's queue and its drop rule), [`msg`] (message
-//!   types and their registry, with [`ros_types`], their ROS 2 side), [`publisher`],
+//!   types and their registry, with [`ros_types`], their ROS 2 side, and [`pixels`], an
+//!   image's shared bytes), [`publisher`],
 //!   [`node`] and [`ports`] (the node traits), [`executor`] (ROS 2's executors as rules),
 //!   [`runlog`], [`estimate`] (an estimator against the truth), [`metrics`];
 //! - **runtime** (`ratelab_runtime`, `src/runtime/`): [`plant`] (the MuJoCo cartpole),
@@ -37,7 +38,8 @@
 //!   front end's settings under one set of rules; [`setting`], their names), [`outputs`]
 //!   (what a run writes and offers; [`trace_csv`], its trace as it goes), [`held_run`] (a
 //!   run's results in memory, for a host program), and the run core's drivers — [`run`] (one
-//!   headless run), [`sweep`] (grids and the rate cliff), [`session`] (the lab's live
+//!   headless run), [`sweep`] (grids and the rate cliff; [`sweep_spec`], a sweep or cliff
+//!   search as data, under the same rules for every front end), [`session`] (the lab's live
 //!   sessions, their log and replay);
 //! - **this crate**: [`exercise`] (the exercises' bands and checks).
 #![warn(missing_docs)]
@@ -60,11 +62,14 @@ pub fn init() {
 // The core crate's and the runtime crate's modules, under their own names (`ratelab::time`,
 // `ratelab::graph`, …).
 pub use ratelab_core::{
-    clock, estimate, executor, ids, input, limits, metrics, msg, node, np_random, output, ports,
-    procs, publisher, qos, rate, realtime, ros_types, runlog, text, textlog, time, topic, Nanos,
+    clock, estimate, executor, ids, input, limits, metrics, msg, node, np_random, output, pixels,
+    ports, procs, publisher, qos, rate, realtime, ros_types, runlog, text, textlog, time, topic,
+    Nanos,
 };
 pub use ratelab_distributed as distributed;
-pub use ratelab_drivers::{held_run, outputs, run, run_spec, session, sweep, trace_csv};
+pub use ratelab_drivers::{
+    held_run, outputs, run, run_spec, session, sweep, sweep_spec, trace_csv,
+};
 pub use ratelab_python as python;
 pub use ratelab_recording as recording;
 pub use ratelab_ros2 as ros2;

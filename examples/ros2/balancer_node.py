@@ -31,6 +31,14 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64
 
+try:  # what `spin` raises when the context is shut down under it (Kilted: at Ctrl-C)
+    from rclpy.executors import ExternalShutdownException
+except ImportError:  # an older rclpy, which does not have it: Ctrl-C alone ends `spin`
+
+    class ExternalShutdownException(Exception):
+        """Stands in for rclpy's, which this rclpy never raises."""
+
+
 RATE_HZ = 50.0  # the graph file's rate_hz for `policy`
 GEAR_N = 10.0  # the cartpole's motor: newtons per unit of action
 
@@ -74,7 +82,10 @@ def main():
     node = Balancer()
     try:
         rclpy.spin(node)
-    except KeyboardInterrupt:
+    except (KeyboardInterrupt, ExternalShutdownException):
+        # Ctrl-C: Kilted's rclpy shuts the context down on SIGINT and `spin` raises
+        # ExternalShutdownException (older ones raise KeyboardInterrupt); either ends here
+        # quietly, as ROS 2's demos end.
         pass
     finally:
         node.destroy_node()

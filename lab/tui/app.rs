@@ -22,7 +22,9 @@ use ratelab::session::{Control, Speed, Telemetry, SPEEDS};
 use ratelab::Nanos;
 use std::collections::VecDeque;
 
+mod hang;
 mod journal;
+mod log;
 mod review;
 mod settings;
 mod views;
@@ -185,8 +187,17 @@ pub struct App {
     log_total: usize,
     /// The log pane shown in place of the latency histogram (key `v`).
     show_log: bool,
-    /// How far the pane is scrolled back from the newest line, lines (PgUp / PgDn).
+    /// How far the pane is scrolled back from the newest line, lines (PgUp / PgDn): its
+    /// selected entry.
     log_back: usize,
+    /// The line shown whole over the lab (Enter), by its number among all received.
+    log_open: Option<usize>,
+    /// Rows of the line shown whole scrolled past (PgUp / PgDn while it is shown).
+    log_scroll: usize,
+    /// The folder paths in the log pane are shown relative to (the graph file's).
+    code_folder: Option<String>,
+    /// When Ctrl-C last interrupted a hung callback (a second one quits).
+    interrupted_at: Option<std::time::Instant>,
     /// The ROS 2 domain the graph is offered on (`--ros2`), if it is.
     ros2_domain: Option<u32>,
     /// The graph panel shows the graph as ROS 2 sees it (key `g`).
@@ -230,6 +241,12 @@ pub struct App {
     /// A reload was said (its line): the next run's start keeps this one as its ghost, and
     /// says the line again (a start clears what was said about the run before).
     reloading: Option<String>,
+    /// The reload line of the run on screen, when it runs code just saved: said again when
+    /// it ends, its end going to the status bar ([`App::ended_word`]).
+    run_reload: Option<String>,
+    /// How the run on screen ended, for the status bar, while its reload line holds the
+    /// footer.
+    ended_word: Option<String>,
     /// A seek back is folding the journal again (its start is not a new run).
     rewinding: bool,
     /// Attached: the launch's endpoint.
@@ -297,6 +314,10 @@ impl App {
             log_total: 0,
             show_log: false,
             log_back: 0,
+            log_open: None,
+            log_scroll: 0,
+            code_folder: None,
+            interrupted_at: None,
             ros2_domain: None,
             show_ros2: false,
             pending_executor: None,
@@ -317,6 +338,8 @@ impl App {
             whole: Vec::new(),
             ghost: Vec::new(),
             reloading: None,
+            run_reload: None,
+            ended_word: None,
             rewinding: false,
             endpoint: None,
             wire: Vec::new(),
@@ -620,6 +643,7 @@ impl App {
         self.whole.clear();
         self.last = None;
         self.verdict = Verdict::Balanced;
+        self.ended_word = None;
         self.wire.clear();
         // What was said belongs to the run before (e.g. "… (from the next run)").
         self.message = None;
@@ -734,13 +758,27 @@ impl App {
             },
         };
         let reason = reason.words(metrics.stopped_by_watchdog.is_some());
-        self.say(match (metrics.sched_warning(), &self.attached) {
+        let ended = match (metrics.sched_warning(), &self.attached) {
             (Some(w), _) => format!("{reason} — {w}"),
             (None, Some(_)) => format!("{reason} — the launch is over · q quit"),
             (None, None) => {
                 format!("{reason} — keys set the next run · r/R reset · c clock · q quit")
             }
-        });
+        };
+        // A failed node's script read as the log pane reads it: relative to the graph file.
+        let ended = match &self.code_folder {
+            Some(folder) => log::relative_to(&ended, folder),
+            None => ended,
+        };
+        // A run of code just saved keeps its reload line in the footer (what changed, read
+        // whole), and says how it ended in the status bar.
+        match self.run_reload.clone() {
+            Some(line) => {
+                self.ended_word = Some(ended);
+                self.say(line);
+            }
+            None => self.say(ended),
+        }
     }
 
     /// The node `-`/`+`/`=` act on: the selected node, else the chain's policy, else (a
@@ -796,7 +834,7 @@ impl App {
                 Msg::Backspace => NavKey::Backspace,
                 Msg::Submit => NavKey::Submit,
                 Msg::Cancel => NavKey::Cancel,
-                Msg::Quit => return self.on_msg_typed(m, confirming),
+                Msg::Quit | Msg::Interrupt => return self.on_msg_typed(m, confirming),
                 _ => return,
             };
             self.nav.on_key(key);
@@ -913,10 +951,12 @@ impl App {
             Msg::ToggleTimeline => {
                 self.show_timeline = !self.show_timeline;
                 self.show_log = false;
+                self.log_open = None;
             }
             Msg::ToggleLog => {
                 self.show_log = !self.show_log;
                 self.log_back = 0;
+                self.log_open = None;
             }
             Msg::ToggleRos2 if self.ros2_domain.is_none() => {
                 self.say(
@@ -925,6 +965,10 @@ impl App {
                 );
             }
             Msg::ToggleRos2 => self.show_ros2 = !self.show_ros2,
+            Msg::LogOlder | Msg::LogNewer if self.log_open.is_some() => {
+                self.scroll_entry(m == Msg::LogOlder)
+            }
+            Msg::LogEntry => self.toggle_entry(),
             Msg::LogOlder if self.show_log => {
                 self.log_back = (self.log_back + LOG_PAGE).min(self.log.len().saturating_sub(1));
             }
@@ -938,6 +982,7 @@ impl App {
                 self.send(Control::Quit);
                 self.quit = true;
             }
+            Msg::Interrupt => self.interrupt(),
         }
     }
 
@@ -1037,11 +1082,13 @@ impl App {
         });
     }
 
-    /// Esc: close the help, else clear the selection, else ask before quitting (a second
-    /// Esc, `confirming`, quits).
+    /// Esc: close the help, else the log entry shown whole, else clear the selection, else
+    /// ask before quitting (a second Esc, `confirming`, quits).
     fn back(&mut self, confirming: bool) {
         if self.help {
             self.help = false;
+        } else if self.log_open.is_some() {
+            self.log_open = None;
         } else if self.selected.is_some() {
             self.selected = None;
         } else if self.nav.clear_filter() {

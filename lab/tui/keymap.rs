@@ -110,12 +110,19 @@ pub enum Msg {
     LogOlder,
     /// Scroll the log pane forward (newer lines).
     LogNewer,
+    /// Show the log pane's selected entry whole (its text, a failure's frames and whole
+    /// traceback) over the lab, or close it.
+    LogEntry,
     /// Show / hide the key help.
     ToggleHelp,
     /// Close the help or the selection; when neither is open, ask, and quit on a second one.
     Back,
     /// Leave the lab.
     Quit,
+    /// Ctrl-C: interrupt a callback of the run on screen that has not returned (Python's
+    /// `KeyboardInterrupt`, as Ctrl-C does in a headless run), or say that a save's trial is
+    /// what hangs; with nothing hung, or a second time, leave the lab.
+    Interrupt,
     /// While typing a rate: a character.
     Input(char),
     /// While typing: delete one character.
@@ -151,10 +158,12 @@ impl Msg {
                 | Msg::ToggleRos2
                 | Msg::LogOlder
                 | Msg::LogNewer
+                | Msg::LogEntry
                 | Msg::ChartsNarrower
                 | Msg::ChartsWider
                 | Msg::Back
                 | Msg::Quit
+                | Msg::Interrupt
         )
     }
 }
@@ -181,7 +190,7 @@ impl Binding {
 
 use KeyCode::{BackTab, Char, Down, Esc, Home, Left, Right, Tab, Up};
 
-/// Every binding of the lab (Ctrl-C always quits as well).
+/// Every binding of the lab (Ctrl-C, always: [`Msg::Interrupt`]).
 pub const BINDINGS: &[Binding] = &[
     Binding {
         keys: &[
@@ -321,16 +330,17 @@ pub const BINDINGS: &[Binding] = &[
             (Char('v'), Msg::ToggleLog),
             (KeyCode::PageUp, Msg::LogOlder),
             (KeyCode::PageDown, Msg::LogNewer),
+            (KeyCode::Enter, Msg::LogEntry),
             (Char('g'), Msg::ToggleRos2),
         ],
-        label: "? / v / g",
-        help: "help / log pane (PgUp PgDn scroll) / graph as ROS 2 sees it",
+        label: "? / v / ↵ / g",
+        help: "help / log pane (PgUp PgDn, ↵ an entry whole) / ROS 2 view",
         footer: Some(("?", "help")),
     },
     Binding {
         keys: &[(Esc, Msg::Back), (Char('q'), Msg::Quit)],
         label: "Esc / q / Ctrl-C",
-        help: "close help / selection / filter, else ask to quit / quit",
+        help: "close help, selection, filter / quit / stop a hang, or quit",
         footer: Some(("q", "quit")),
     },
 ];
@@ -378,7 +388,7 @@ pub fn map_key(key: KeyEvent, typing: Typing, scrubbing: bool) -> Option<Msg> {
         return None;
     }
     if key.modifiers.contains(KeyModifiers::CONTROL) && key.code == Char('c') {
-        return Some(Msg::Quit);
+        return Some(Msg::Interrupt);
     }
     if typing != Typing::No {
         return match key.code {
@@ -616,7 +626,11 @@ mod tests {
                 Typing::No,
                 false
             ),
-            Some(Msg::Quit)
+            Some(Msg::Interrupt)
+        );
+        assert_eq!(
+            map_key(key(KeyCode::Enter), Typing::No, false),
+            Some(Msg::LogEntry)
         );
         assert_eq!(
             map_key(key(KeyCode::Char('x')), Typing::No, false),
@@ -743,14 +757,14 @@ mod tests {
             map_key(key(KeyCode::Backspace), Typing::Rate, false),
             Some(Msg::Backspace)
         );
-        // Ctrl-C always quits.
+        // Ctrl-C always interrupts (a hung callback first, else it quits).
         assert_eq!(
             map_key(
                 KeyEvent::new(KeyCode::Char('c'), KeyModifiers::CONTROL),
                 Typing::Rate,
                 false
             ),
-            Some(Msg::Quit)
+            Some(Msg::Interrupt)
         );
     }
 

@@ -4,12 +4,14 @@
 
 pub mod app;
 pub mod chart_window;
+pub mod fit;
 pub mod keymap;
 pub mod live;
 pub mod navigate;
 pub mod timeline;
 pub mod view;
 pub mod watch;
+pub mod zoom;
 
 use anyhow::Context;
 use app::App;
@@ -111,6 +113,17 @@ pub fn run_lab(
     ratelab::textlog::set_sink(Some(Box::new(move |line| {
         let _ = log_tx.try_send(line);
     })));
+    // A callback's exception reaches the pane as one entry, with its traceback; its paths
+    // read relative to the graph file's folder (else the lab's own).
+    ratelab::python::log_failures(true);
+    // (As the graph resolves its scripts: std::path::absolute, `..` kept.)
+    let folder = code
+        .graph_file
+        .as_ref()
+        .and_then(|g| std::path::absolute(g).ok())
+        .and_then(|g| g.parent().map(std::path::Path::to_path_buf))
+        .unwrap_or_else(|| std::env::current_dir().unwrap_or_default());
+    app.set_code_folder(&folder);
     // Reload on save: a save of the graph file or a Python file it runs runs it again.
     let _watch = match watch::watch(code.files(&settings.cfg.graph), ctl_tx.clone()) {
         Ok(w) => {
@@ -137,6 +150,7 @@ pub fn run_lab(
     let _ = ctl_tx.send(Control::Quit);
     // A Python callback that never returns would keep the engine from seeing the quit.
     ratelab::python::interrupt_callbacks_after(crate::PYTHON_GRACE);
+    ratelab::python::log_failures(false);
     let joined = match join_engine(engine) {
         Ok(joined) => joined,
         Err(stuck) => {
@@ -343,9 +357,12 @@ mod tests {
     }
 
     fn render(app: &App, w: u16, h: u16) -> String {
+        render_view(&app.view(), w, h)
+    }
+
+    fn render_view(view: &super::view::View, w: u16, h: u16) -> String {
         let mut t = Terminal::new(TestBackend::new(w, h)).unwrap();
-        let view = app.view();
-        t.draw(|f| f.render_widget(&view, f.area())).unwrap();
+        t.draw(|f| f.render_widget(view, f.area())).unwrap();
         t.backend().to_string()
     }
 
@@ -1174,7 +1191,14 @@ mod tests {
         app.on_msg(Msg::SeekBack { second: true });
         app.on_msg(Msg::SeekBack { second: true });
         let back = end.saturating_sub(ratelab::Nanos(2_000_000_000));
-        let shown = render(&app, 120, 40);
+        // The charts' titles read the run at the cursor; the rest is the screen as it was.
+        let mut view = app.view();
+        let readout = view
+            .readout
+            .take()
+            .expect("reviewing: the readout at the cursor");
+        assert_eq!(readout.cursor_s, back.as_secs_f64());
+        let shown = render_view(&view, 120, 40);
         assert!(shown.contains("real clock REVIEW"), "{shown}");
         let (then, _) = told(&cfg, &report.trace, back);
         assert_eq!(
@@ -1665,6 +1689,75 @@ mod tests {
         );
     }
 
+    /// Paused, ← puts the run a tick back and the charts' titles read it there: the cursor's
+    /// run time, θ and θ̇, the force applied and its command's age, and the selected topic's
+    /// counters, all the actuator's record at that tick (its `trace.csv` row's).
+    #[test]
+    fn paused_the_charts_read_the_run_at_the_scrub_cursor() {
+        let cfg = virtual_cfg(8.0, 3);
+        let report = run(&cfg, Box::new(Scripted), RunOptions::new()).unwrap();
+        let end = ratelab::Nanos(3_000_000_000);
+        let (mut app, rx) = told(&cfg, &report.trace, end);
+        assert!(app.view().readout.is_none(), "running: no readout");
+        let paused = |now| Telemetry::Status {
+            now,
+            paused: true,
+            speed: Speed::Times(1.0),
+            rates: vec![50.0, 8.0, 50.0],
+            depths: vec![1, 1],
+            qos: vec![Default::default(); 2],
+            alive: vec![None; 3],
+            policy: "scripted".into(),
+            exec: None,
+            topics: None,
+        };
+        app.on_telemetry(paused(end));
+        assert!(app.view().readout.is_some(), "paused: the readout at once");
+        // Tab to /obs (sensor, policy, actuator, /obs), then ← a tick of the actuator back.
+        for _ in 0..4 {
+            app.on_msg(Msg::SelectNext);
+        }
+        app.on_msg(Msg::SeekBack { second: false });
+        let Ok(Control::Seek(at)) = rx.try_recv() else {
+            panic!("← asks the engine for the run a tick back");
+        };
+        assert_eq!(at, ratelab::Nanos(2_980_000_000));
+        // The engine ran the run again to there, and says so.
+        app.on_telemetry(Telemetry::Rewound { at });
+        app.on_telemetry(paused(at));
+        let rec = report.trace.iter().rev().find(|s| s.t <= at).unwrap();
+        let obs = rec.topics.get(ratelab::graph::TopicId(0));
+        let r = app.view().readout.expect("paused: the readout");
+        assert_eq!(r.cursor_s, at.as_secs_f64());
+        assert_eq!(
+            (r.step_s, r.theta_rad, r.theta_dot_rad_s, r.force_n),
+            (
+                rec.t.as_secs_f64(),
+                rec.pole_angle,
+                rec.pole_angvel,
+                rec.action * ratelab::plant::GEAR_N
+            )
+        );
+        assert_eq!(
+            r.counters
+                .as_ref()
+                .map(|c| (c.topic.as_str(), c.msgs, c.dropped)),
+            Some(("/obs", obs.published, obs.dropped))
+        );
+        assert!(obs.dropped > 0, "8 Hz drops /obs");
+        let text = render(&app, 80, 24);
+        assert!(text.contains("t=2.980 s · θ "), "{text}");
+        let counts = format!("{} msg {} drop", obs.published, obs.dropped);
+        assert!(text.contains(&counts), "{text}");
+        insta::assert_snapshot!("readout_paused_80x24", text);
+        let wide = render(&app, 120, 40);
+        let counts = format!("/obs {} msgs, {} dropped", obs.published, obs.dropped);
+        assert!(
+            wide.contains("t=2.980 s · θ ") && wide.contains(&counts),
+            "{wide}"
+        );
+    }
+
     #[test]
     fn snapshot_start() {
         let (app, _rx) = app_after(virtual_cfg(50.0, 2), false);
@@ -1778,6 +1871,7 @@ mod tests {
                 level: if i == 39 { Level::Warn } else { Level::Info },
                 text: format!("line {i}"),
                 logged: None,
+                traceback: None,
             })
             .unwrap();
         }
@@ -2329,5 +2423,144 @@ mod tests {
         // At 80 columns the totals shorten, and still say the loss.
         let text = render(&app, 80, 24);
         assert!(text.contains("/obs 93 drop, 4 stale, 7 lost"), "{text}");
+    }
+    /// A run of code just saved that falls keeps its reload line in the footer (two rows at
+    /// 80×24, where it is said last how the trial stalled) and says the fall in the status
+    /// bar: both read, neither replaces the other. A run not reloaded says its fall in the
+    /// footer, as before.
+    #[test]
+    fn a_reload_line_and_the_fall_after_it_both_read_at_80x24() {
+        let (mut app, _rx) = app_after(virtual_cfg(50.0, 1), true);
+        let line = "reloaded nodes/policy.py: balanced (5.5 s) → fell at 0.84 s · over the first 0.84 s of each: latency p50 40 → 80 ms, /obs dropped 0 → 37 · the trial's callback stalled 5.0 s at t=0.50 s";
+        app.on_telemetry(Telemetry::Reloaded { line: line.into() });
+        app.on_telemetry(Telemetry::Started {
+            cfg: virtual_cfg(5.0, 10),
+            policy: "scripted".into(),
+            recording: None,
+        });
+        let fell = run(&virtual_cfg(5.0, 10), Box::new(Scripted), RunOptions::new()).unwrap();
+        assert!(fell.metrics.fell_at_s.is_some());
+        let ended = Telemetry::Ended {
+            metrics: Box::new(fell.metrics.clone()),
+            reason: EndReason::NodeStopped,
+        };
+        app.on_telemetry(ended.clone());
+        let text = render(&app, 80, 24);
+        let rows: Vec<&str> = text.lines().collect();
+        assert!(rows[0].contains("the pole fell"), "{text}");
+        let footer = rows[rows.len() - 2..].join("\n");
+        assert!(
+            footer.contains("reloaded nodes/policy.py: balanced (5.5 s) → fell at 0.84 s"),
+            "{text}"
+        );
+        assert!(
+            footer.contains("the trial's callback stalled 5.0 s at t=0.50 s"),
+            "{text}"
+        );
+        // The next run, not a reload's, says its fall in the footer again.
+        app.on_telemetry(Telemetry::Started {
+            cfg: virtual_cfg(5.0, 10),
+            policy: "scripted".into(),
+            recording: None,
+        });
+        app.on_telemetry(ended);
+        let text = render(&app, 80, 24);
+        let last = text.lines().last().unwrap_or_default();
+        assert!(last.contains("the pole fell — keys set"), "{text}");
+        assert!(
+            !text.lines().next().unwrap_or_default().contains("fell"),
+            "{text}"
+        );
+    }
+
+    /// A callback's exception is one entry of the log pane: its message whole, wrapped, its
+    /// paths relative to the graph file's folder, the learner's frames under it; Enter shows
+    /// it whole over the lab with its traceback, and Esc closes it.
+    #[test]
+    fn a_callback_s_failure_reads_whole_in_the_log_pane_and_enter_shows_its_traceback() {
+        use ratelab::textlog::{Frame, Level, LogLine, Traceback};
+        let (mut app, _rx) = app_after(virtual_cfg(50.0, 1), false);
+        app.set_code_folder(std::path::Path::new("/home/me/lab"));
+        let (tx, rx) = crossbeam_channel::unbounded();
+        app.take_log(rx);
+        let frame = |line: u32, function: &str, code: &str| Frame {
+            file: "/home/me/lab/nodes/policy.py".into(),
+            line,
+            function: function.into(),
+            code: code.into(),
+        };
+        tx.send(LogLine {
+            t: Some(ratelab::Nanos(1_200_000_000)),
+            node: Some("policy".into()),
+            level: Level::Error,
+            text: "/home/me/lab/nodes/policy.py:12: ValueError: the gain schedule has no entry for a pole angle of 0.2137 rad (the table ends at 0.2)".into(),
+            logged: None,
+            traceback: Some(Box::new(Traceback {
+                frames: vec![
+                    frame(9, "on_timer", "u = self.gain(theta) * theta"),
+                    frame(12, "gain", "raise ValueError(...)"),
+                ],
+                lines: vec![
+                    "Traceback (most recent call last):".into(),
+                    "  File \"/home/me/lab/nodes/policy.py\", line 9, in on_timer".into(),
+                    "  File \"/home/me/lab/nodes/policy.py\", line 12, in gain".into(),
+                    "ValueError: the gain schedule has no entry".into(),
+                ],
+            })),
+        })
+        .unwrap();
+        app.drain_log();
+        app.on_msg(Msg::ToggleLog);
+        let text = render(&app, 120, 40);
+        assert!(!text.contains("/home/me/lab"), "{text}");
+        assert!(
+            text.contains("t=1.20  policy    nodes/policy.py:12: ValueError: the gain schedule"),
+            "{text}"
+        );
+        // Wrapped, never cut: the message's end is on the next row.
+        assert!(
+            text.contains("│                  table ends at 0.2)"),
+            "{text}"
+        );
+        assert!(
+            text.contains("↳ nodes/policy.py:9 in on_timer: u = self.gain(theta) * theta"),
+            "{text}"
+        );
+        assert!(text.contains("↵ traceback"), "{text}");
+        app.on_msg(Msg::LogEntry);
+        for (w, h) in [(80, 24), (120, 40)] {
+            let text = render(&app, w, h);
+            assert!(
+                text.contains("log entry · ↵ or Esc closes"),
+                "{w}x{h}:\n{text}"
+            );
+            assert!(
+                text.contains("Traceback (most recent call last):"),
+                "{text}"
+            );
+            assert!(
+                text.contains("File \"nodes/policy.py\", line 12, in gain"),
+                "{text}"
+            );
+        }
+        app.on_msg(Msg::Back);
+        assert!(!render(&app, 80, 24).contains("Traceback (most recent"));
+        // Enter with the pane closed says how to open it.
+        app.on_msg(Msg::ToggleLog);
+        app.on_msg(Msg::LogEntry);
+        assert!(app
+            .view()
+            .message
+            .unwrap_or_default()
+            .contains("v opens the pane"));
+    }
+
+    /// Ctrl-C with no callback hung quits the lab, as `q` does.
+    #[test]
+    fn ctrl_c_with_nothing_hung_quits() {
+        let (mut app, rx) = app_after(virtual_cfg(50.0, 1), true);
+        app.on_msg(Msg::Interrupt);
+        assert!(app.quit);
+        assert!(rx.try_iter().any(|c| matches!(c, Control::Quit)));
     }
 }

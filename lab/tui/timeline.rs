@@ -195,7 +195,7 @@ pub fn render(v: &TimelineView, virtual_clock: bool, area: Rect, buf: &mut Buffe
         format!(" {legend} │ red: late "),
         format!(" {legend} "),
     ];
-    let title = super::view::first_that_fits(titles, usize::from(area.width.saturating_sub(2)));
+    let title = super::fit::first_that_fits(titles, usize::from(area.width.saturating_sub(2)));
     let block = Block::bordered().title(title);
     let inner = block.inner(area);
     block.render(area, buf);

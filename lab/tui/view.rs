@@ -1,7 +1,8 @@
 //! The view model (an immutable snapshot the app builds each frame) and its rendering:
 //! pure functions from a [`View`] to a buffer, one `render_*` helper per panel: the graph
-//! panel in `view/graph.rs`, the plant and the figures in `view/charts.rs`, the status,
-//! log, footer and help here.
+//! panel in `view/graph.rs`, the plant and the figures in `view/charts.rs` (paused, their
+//! titles read the run at the scrub cursor: `view/readout.rs`), the log pane and an entry
+//! of it opened in `view/log.rs`, the status, footer and help here.
 
 use super::keymap::{BINDINGS, HELP_NOTES};
 use ratatui::buffer::Buffer;
@@ -18,8 +19,14 @@ use ratelab::graph::{NodeId, TopicId};
 mod charts;
 mod graph;
 mod list;
+mod log;
+mod readout;
 
-use super::navigate::{window_start, Zoom};
+pub use self::log::{entry_rows, LogEntry, LogView, OpenEntry};
+pub use readout::{Readout, TopicCounts};
+
+pub(super) use super::fit::first_that_fits;
+use super::zoom::{window_start, Zoom};
 use charts::{
     render_angle_chart, render_cartpole, render_hold_chart, render_latency, render_segment,
 };
@@ -341,10 +348,18 @@ pub struct View {
     pub ghost_force: Vec<(f64, f64)>,
     /// Latency since the last change, and over the window.
     pub latency: LatencyView,
+    /// Paused under the virtual clock, or reviewing: the run at the scrub cursor, read in
+    /// the pole-angle chart's and the force band's titles (`None` otherwise, or before the
+    /// actuator's first tick).
+    pub readout: Option<Readout>,
     /// The executor timeline, shown in place of the latency histogram (key `t`).
     pub timeline: Option<super::timeline::TimelineView>,
     /// The log pane, shown in place of the latency histogram (key `v`).
     pub log: Option<LogView>,
+    /// The run has ended and its reload line holds the footer (a run of code just saved that
+    /// fell or failed): how it ended, for the status bar (`the pole fell — r/R reset · …`),
+    /// so that both read whole at 80×24. `None` otherwise (the footer says how it ended).
+    pub ended: Option<String>,
     /// The graph as ROS 2 sees it, shown in place of the node graph (key `g`, `--ros2`).
     pub ros2: Option<Ros2View>,
     /// The window and the segment the numbers count over.
@@ -370,7 +385,7 @@ pub struct View {
 #[derive(Clone, Debug, PartialEq, Default)]
 pub struct NavView {
     /// The zoom.
-    pub zoom: super::navigate::Zoom,
+    pub zoom: super::zoom::Zoom,
     /// Rows scrolled down from the top.
     pub scroll: usize,
     /// The filter in a few words (`/sens · trouble`), when one leaves something out.
@@ -380,7 +395,7 @@ pub struct NavView {
     /// A filter is being typed.
     pub typing: bool,
     /// Where the drawing says how far scrolling can go ([`super::navigate::Reach`]).
-    pub reach: super::navigate::Reach,
+    pub reach: super::zoom::Reach,
 }
 
 /// The graph as ROS 2 sees it (`--ros2`): the domain and what `ros2 node list` and `ros2
@@ -391,52 +406,6 @@ pub struct Ros2View {
     pub domain: u32,
     /// What is offered.
     pub offered: ratelab::ros2::offered::Offered,
-}
-
-/// The log pane: what nodes' code wrote and ratelab's warnings, newest last.
-#[derive(Clone, Debug, PartialEq, Default)]
-pub struct LogView {
-    /// Whose lines: `all nodes`, or the selected node's name.
-    pub whose: String,
-    /// How many lines the lab holds of it in all.
-    pub total: usize,
-    /// The newest lines: (is it a warning or an error, `t=1.23 policy  text`).
-    pub lines: Vec<(bool, String)>,
-    /// Scrolled back this many lines from the newest (PgUp / PgDn).
-    pub back: usize,
-}
-
-fn render_log(l: &LogView, area: Rect, buf: &mut Buffer) {
-    let title = if l.back > 0 {
-        format!(
-            " log: {} ({} lines, {} back) · PgDn newer · v hides ",
-            l.whose, l.total, l.back
-        )
-    } else {
-        format!(" log: {} ({} lines) · v hides ", l.whose, l.total)
-    };
-    let block = Block::bordered().title(title);
-    let inner = block.inner(area);
-    block.render(area, buf);
-    let rows = usize::from(inner.height);
-    let width = usize::from(inner.width);
-    let shown: Vec<Line> = if l.lines.is_empty() {
-        vec![Line::from("nothing written yet (print, get_logger, warnings)").dim()]
-    } else {
-        let end = l.lines.len().saturating_sub(l.back);
-        l.lines[end.saturating_sub(rows)..end]
-            .iter()
-            .map(|(warn, text)| {
-                let cut: String = text.chars().take(width).collect();
-                if *warn {
-                    Line::from(cut).yellow()
-                } else {
-                    Line::from(cut)
-                }
-            })
-            .collect()
-    };
-    ratatui::widgets::Paragraph::new(shown).render(inner, buf);
 }
 
 fn hz(x: f64) -> String {
@@ -470,9 +439,7 @@ impl Widget for &View {
             render_segment(self, segment, buf);
             self.render_bottom(latency, buf);
             render_footer(self, footer, buf);
-            if self.help {
-                render_help(area, buf, self.attached.is_some());
-            }
+            self.render_overlays(area, buf);
             return;
         }
         let graph_h = graph_height(
@@ -505,9 +472,7 @@ impl Widget for &View {
         render_hold_chart(self, hold, buf, shared);
         self.render_bottom(latency, buf);
         render_footer(self, footer, buf);
-        if self.help {
-            render_help(area, buf, self.attached.is_some());
-        }
+        self.render_overlays(area, buf);
     }
 }
 
@@ -532,10 +497,20 @@ fn chart_areas(chart: Rect) -> (Rect, Rect, bool) {
 }
 
 impl View {
+    /// What is drawn over the lab: a log entry opened (Enter), then the help (`?`).
+    fn render_overlays(&self, area: Rect, buf: &mut Buffer) {
+        if let Some(open) = self.log.as_ref().and_then(|l| l.open.as_ref()) {
+            log::render_entry(open, area, buf);
+        }
+        if self.help {
+            render_help(area, buf, self.attached.is_some());
+        }
+    }
+
     /// The bottom panel: the log pane, the executor timeline, or the latency histogram.
     fn render_bottom(&self, area: Rect, buf: &mut Buffer) {
         match (&self.log, &self.timeline) {
-            (Some(l), _) => render_log(l, area, buf),
+            (Some(l), _) => log::render_log(l, area, buf),
             (None, Some(t)) => super::timeline::render(t, self.clock == "virtual", area, buf),
             (None, None) => render_latency(self, area, buf),
         }
@@ -603,7 +578,29 @@ fn render_too_small(area: Rect, buf: &mut Buffer) {
     );
 }
 
+/// The status bar of a run that ended while its reload line holds the footer
+/// ([`View::ended`]): the clock and run time, then how it ended, made to fit.
+fn render_ended_status(v: &View, ended: &str, area: Rect, buf: &mut Buffer) {
+    let speed = if v.speed.is_empty() {
+        String::new()
+    } else {
+        format!(" {}", v.speed)
+    };
+    let head = format!(" {} clock{speed} │ t {:.2} s │ ", v.clock, v.sim_time_s);
+    let badge = " ratelab ";
+    let room = usize::from(area.width).saturating_sub(badge.chars().count() + head.chars().count());
+    let spans = vec![
+        badge.black().on_cyan().bold(),
+        head.into(),
+        Span::from(fit_message(ended, room)).red().bold(),
+    ];
+    Paragraph::new(Line::from(spans)).render(area, buf);
+}
+
 fn render_status(v: &View, area: Rect, buf: &mut Buffer) {
+    if let Some(ended) = &v.ended {
+        return render_ended_status(v, ended, area, buf);
+    }
     let mut spans = vec![
         " ratelab ".black().on_cyan().bold(),
         format!(" {} clock", v.clock).into(),
@@ -816,19 +813,6 @@ pub(super) fn cut(text: &str, w: usize) -> String {
     let mut t: String = text.chars().take(w.saturating_sub(1)).collect();
     t.push('…');
     t
-}
-
-/// The first of `forms` (longest first) that fits `room` columns whole, else the last: a
-/// figure or title never cut mid-word.
-pub(super) fn first_that_fits(forms: impl IntoIterator<Item = String>, room: usize) -> String {
-    let mut last = String::new();
-    for f in forms {
-        if f.chars().count() <= room {
-            return f;
-        }
-        last = f;
-    }
-    last
 }
 
 /// A status message made to fit `width` columns: whole when it fits; else its parts

@@ -10,7 +10,8 @@
 //! - **the runtime's parts**: [`clock`] (virtual and monotonic time, [`clock::ClockKind`]),
 //!   [`rate`] (rates, periods and sleeping to a deadline), [`realtime`] (thread priorities),
 //!   [`qos`] (ROS 2's QoS), [`topic`] (a subscription's queue and its drop rule), [`msg`]
-//!   (message types and their registry, with [`ros_types`], their ROS 2 side),
+//!   (message types and their registry, with [`ros_types`], their ROS 2 side, and [`pixels`],
+//!   an image's shared bytes, beneath both),
 //!   [`publisher`], [`node`] (the node traits) and [`ports`] (a Rust node's typed inputs and
 //!   outputs), [`executor`] (ROS 2's executors as rules), [`plant`] (the cartpole's facts),
 //!   [`runlog`] (what a run logs), [`estimate`] (an estimator against the truth) and [`metrics`].
@@ -29,6 +30,7 @@ pub mod msg;
 pub mod node;
 pub mod np_random;
 pub mod output;
+pub mod pixels;
 pub mod plant;
 pub mod ports;
 pub mod procs;

@@ -27,7 +27,7 @@
 //! `hiroz-schema`'s RIHS01 (the tests check them against `rosbags`' `hash_rihs01`).
 
 use crate::limits::{self, MAX_ROS_MESSAGE_BYTES};
-use crate::msg::ImageData;
+use crate::pixels::ImageData;
 use crate::time::Nanos;
 use hiroz_schema::{
     FieldDescription, FieldTypeDescription, TypeDescription, TypeDescriptionMsg, TypeHash, TypeId,

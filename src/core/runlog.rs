@@ -211,12 +211,22 @@ pub struct StepRecord {
     pub t: Nanos,
     /// Pole angle after the step, rad.
     pub pole_angle: f64,
+    /// Pole angular velocity after the step, rad/s (the plant's state beside
+    /// [`StepRecord::pole_angle`]; not a column of `trace.csv`).
+    #[serde(default)]
+    pub pole_angvel: f64,
     /// Cart position after the step, m.
     pub cart_pos: f64,
     /// The control applied (clipped to [-1, 1]).
     pub action: f64,
     /// Sense→act latency of the applied action; `None` before the first action arrives.
     pub latency: Option<Nanos>,
+    /// When the command the actuator applied at this tick was published (its message's
+    /// stamp): the zero-order hold re-applies it until a newer one arrives, so `t −
+    /// held_stamp` is the age of the command it holds. `None` when it applied none (before
+    /// the first arrived, or zero after a missed deadline). Not a column of `trace.csv`.
+    #[serde(default)]
+    pub held_stamp: Option<Nanos>,
     /// True when the brain's newest action was non-finite and the last good one was held.
     pub nonfinite: bool,
     /// Every topic's counters at this tick, by [`TopicId`].
@@ -393,9 +403,11 @@ mod tests {
             step: 1,
             t: Nanos(0),
             pole_angle: 0.0,
+            pole_angvel: 0.0,
             cart_pos: 0.0,
             action: 0.0,
             latency: None,
+            held_stamp: None,
             nonfinite: false,
             topics: TopicCounters::default(),
             published: None,

@@ -14,6 +14,11 @@
 //! keeps its message apart from the level word it is shown with (`info: text`), and where
 //! the logger was called ([`Logged`]): `/rosout` carries them as rcl does (the message
 //! alone in `msg`; `file`, `function`, `line`).
+//!
+//! A callback's failure, when the program asks for it (the terminal lab, through the Python
+//! layer), is one line too ([`emit_failure`]): its one-line description, carrying the
+//! learner's frames and the whole traceback ([`Traceback`]), which the lab's log pane shows
+//! under it and on demand.
 
 use crate::time::Nanos;
 use std::cell::RefCell;
@@ -60,6 +65,28 @@ pub struct Logged {
     pub line: u32,
 }
 
+/// A Python exception's traceback, as a callback's failure carries it ([`emit_failure`]).
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct Traceback {
+    /// The learner's own frames (those in the failed script's folder), outermost first.
+    pub frames: Vec<Frame>,
+    /// The whole traceback as Python prints it, line by line.
+    pub lines: Vec<String>,
+}
+
+/// One frame of a traceback: where the code was, and its line of code.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct Frame {
+    /// The source file, as the interpreter names it (a script's absolute path).
+    pub file: String,
+    /// The line, from 1; 0 when not known.
+    pub line: u32,
+    /// The function it was in.
+    pub function: String,
+    /// Its line of code, stripped; empty when not known.
+    pub code: String,
+}
+
 /// One line of the log.
 #[derive(Clone, Debug, PartialEq)]
 pub struct LogLine {
@@ -75,6 +102,9 @@ pub struct LogLine {
     /// For a line a node's logger wrote: its message alone and where it was logged
     /// ([`emit_logged`]); `None` for what code printed and ratelab's own lines.
     pub logged: Option<Logged>,
+    /// For a callback's failure ([`emit_failure`]): its traceback; `None` for every other
+    /// line.
+    pub traceback: Option<Box<Traceback>>,
 }
 
 impl LogLine {
@@ -101,6 +131,7 @@ impl LogLine {
             level,
             text: line.to_string(),
             logged: None,
+            traceback: None,
         };
         let Some((stamp, text)) = line
             .strip_prefix('[')
@@ -133,6 +164,7 @@ impl LogLine {
             level,
             text: text.to_string(),
             logged: None,
+            traceback: None,
         }
     }
 }
@@ -244,6 +276,7 @@ pub fn emit_for(node: Option<&str>, t: Option<Nanos>, level: Level, text: &str) 
                 level,
                 text: crate::text::printable(line.trim_end()).into_owned(),
                 logged: None,
+                traceback: None,
             }),
     );
 }
@@ -268,6 +301,38 @@ pub fn emit_logged(node: Option<&str>, level: Level, logged: Logged) {
             .trim_end()
             .to_string(),
         logged: Some(logged),
+        traceback: None,
+    }));
+}
+
+/// Write a callback's failure at [`Level::Error`], stamped with the calling thread's tick
+/// ([`enter`]): one line, `text` (its one-line description, `FILE:LINE: Type: message`),
+/// carrying `traceback` ([`LogLine::traceback`]), every part made safe to show. Only a
+/// program that asks for failures in its log writes them (the terminal lab, through the
+/// Python layer's `log_failures`): a headless run says a failure once, in its summary.
+pub fn emit_failure(text: &str, traceback: Traceback) {
+    let safe = |s: &str| crate::text::printable(s).into_owned();
+    let (t, node) = TICK.with(|t| t.borrow().clone()).unzip();
+    let traceback = Traceback {
+        frames: traceback
+            .frames
+            .iter()
+            .map(|f| Frame {
+                file: safe(&f.file),
+                line: f.line,
+                function: safe(&f.function),
+                code: safe(f.code.trim()),
+            })
+            .collect(),
+        lines: traceback.lines.iter().map(|l| safe(l.trim_end())).collect(),
+    };
+    deliver(std::iter::once(LogLine {
+        t,
+        node: node.as_deref().map(str::to_string),
+        level: Level::Error,
+        text: safe(text.trim()),
+        logged: None,
+        traceback: Some(Box::new(traceback)),
     }));
 }
 
@@ -313,6 +378,7 @@ mod tests {
                 level: Level::Warn,
                 text: "x = [1, 2] ok".into(),
                 logged: None,
+                traceback: None,
             };
             assert_eq!(LogLine::parse_prefixed(&line.prefixed(), Level::Warn), line);
         }
@@ -414,5 +480,45 @@ mod tests {
         // Outside any tick: no run time; a newline written out, the line stays one.
         assert_eq!(got[1].prefixed(), "[sensor] info: qzx\\nbuilt");
         assert_eq!(got[1].logged.as_ref().map(|l| l.line), Some(0));
+    }
+
+    /// A callback's failure is one line at the error level, stamped with its tick, carrying
+    /// its frames and traceback, every part made safe to show.
+    #[test]
+    fn a_failure_is_one_line_carrying_its_traceback() {
+        let got = Arc::new(Mutex::new(Vec::new()));
+        let keep = got.clone();
+        let _recorder = add_recorder(Box::new(move |l| keep.lock().unwrap().push(l)));
+        {
+            let _tick = enter(&Arc::from("policy"), Nanos(480_000_000));
+            emit_failure(
+                "zqf p.py:3: ZeroDivisionError: division by zero\n",
+                Traceback {
+                    frames: vec![Frame {
+                        file: "/g/p.py".into(),
+                        line: 3,
+                        function: "on_timer".into(),
+                        code: "  x = 1 / 0 \u{1b}[2J ".into(),
+                    }],
+                    lines: vec!["Traceback (most recent call last):".into(), "x\t".into()],
+                },
+            );
+        }
+        let got: Vec<LogLine> = got
+            .lock()
+            .unwrap()
+            .iter()
+            .filter(|l| l.text.starts_with("zqf "))
+            .cloned()
+            .collect();
+        assert_eq!(got.len(), 1, "{got:?}");
+        assert_eq!(
+            got[0].prefixed(),
+            "[t=0.480 s policy] zqf p.py:3: ZeroDivisionError: division by zero"
+        );
+        assert_eq!(got[0].level, Level::Error);
+        let tb = got[0].traceback.as_deref().expect("its traceback");
+        assert_eq!(tb.frames[0].code, "x = 1 / 0 \\u{1b}[2J");
+        assert_eq!(tb.lines, ["Traceback (most recent call last):", "x"]);
     }
 }

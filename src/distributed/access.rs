@@ -23,8 +23,8 @@
 
 use super::credentials::Role;
 use super::Keys;
-use crate::graph::spec::GraphSpec;
-use crate::graph::NodeId;
+use ratelab_runtime::graph::spec::GraphSpec;
+use ratelab_runtime::graph::NodeId;
 use serde_json::{json, Value};
 
 /// The `@` keys of a graph (each must be named: `**` does not match them).
@@ -191,7 +191,7 @@ mod tests {
     use super::*;
 
     fn chapter() -> GraphSpec {
-        GraphSpec::parse(crate::graph::spec::DEFAULT_GRAPH_TOML, "chapter").unwrap()
+        GraphSpec::parse(ratelab_runtime::graph::spec::DEFAULT_GRAPH_TOML, "chapter").unwrap()
     }
 
     /// The key expressions `role` may `message` on (what a session receives from it).

@@ -136,7 +136,7 @@ fn check_certificate(pem: &str) -> Result<(), String> {
         .map_err(|e| {
             format!(
                 "is not valid PEM ({})",
-                crate::text::printable(&e.to_string())
+                ratelab_core::text::printable(&e.to_string())
             )
         })?;
     let [cert] = certs.as_slice() else {
@@ -259,7 +259,7 @@ impl Credentials {
             "# ratelab credentials for graph '{}': a secret. Whoever holds this file can join \
              the graph's launch as the identities below.\n{body}",
             // A comment holds no control character (TOML), whatever the graph is called.
-            crate::text::printable(&self.graph)
+            ratelab_core::text::printable(&self.graph)
         )
     }
 
@@ -288,11 +288,11 @@ impl Credentials {
         if let Some(p) = c
             .processes
             .iter()
-            .find(|p| !crate::graph::spec::valid_node_name(p))
+            .find(|p| !ratelab_runtime::graph::spec::valid_node_name(p))
         {
             return Err(bad(format!(
                 "'{}' is not a process name",
-                crate::text::printable(p)
+                ratelab_core::text::printable(p)
             )));
         }
         let pem_ok = |s: &str| s.len() <= MAX_PEM_BYTES && s.starts_with("-----BEGIN ");
@@ -301,7 +301,7 @@ impl Credentials {
         }
         check_certificate(&c.ca).map_err(|why| bad(format!("the CA certificate {why}")))?;
         for (cn, id) in &c.identities {
-            let who = crate::text::printable(cn);
+            let who = ratelab_core::text::printable(cn);
             if cn.len() > MAX_NAME_BYTES || !pem_ok(&id.cert) || !pem_ok(&id.key) {
                 return Err(bad(format!(
                     "identity '{who}' is not a PEM certificate and key"
@@ -312,7 +312,7 @@ impl Credentials {
             rcgen::KeyPair::from_pem(&id.key).map_err(|e| {
                 bad(format!(
                     "identity '{who}': its key is not a valid PEM private key ({})",
-                    crate::text::printable(&e.to_string())
+                    ratelab_core::text::printable(&e.to_string())
                 ))
             })?;
         }
@@ -327,7 +327,7 @@ impl Credentials {
     pub fn load(path: &Path) -> Result<Credentials, DistError> {
         use std::os::unix::fs::PermissionsExt as _;
         let shown = path.display();
-        let bytes = crate::input::read_regular_file(path, MAX_CREDENTIALS_BYTES)
+        let bytes = ratelab_core::input::read_regular_file(path, MAX_CREDENTIALS_BYTES)
             .map_err(|e| DistError::Usage(format!("--credentials: {e}")))?;
         if let Ok(m) = std::fs::metadata(path) {
             if m.permissions().mode() & 0o077 != 0 {
@@ -352,12 +352,12 @@ impl Credentials {
     }
 
     /// Write them to `path`, readable by its owner alone; an existing file only with
-    /// `force` ([`crate::output`]'s rule).
+    /// `force` ([`ratelab_core::output`]'s rule).
     ///
     /// # Errors
     /// [`DistError::Usage`], one line naming the file.
     pub fn write(&self, path: &Path, force: bool) -> Result<(), DistError> {
-        crate::output::write_private(path, force, self.to_toml().as_bytes())
+        ratelab_core::output::write_private(path, force, self.to_toml().as_bytes())
             .map_err(|e| DistError::Usage(e.to_string()))
     }
 

@@ -24,7 +24,7 @@
 //!   way, `docs/design.md`): `ratelab top` lists them, and the launcher sees a process go.
 //! - **Time.** Under the real clock the processes share the host's monotonic clock and one
 //!   run-time zero, so stamps and sense→act latency stay exact on one host. Under the
-//!   virtual clock every process replays the one [`crate::scheduler::VirtualScheduler`]
+//!   virtual clock every process replays the one [`ratelab_runtime::scheduler::VirtualScheduler`]
 //!   order of ticks, ticks its own nodes in their turn and reports each tick to the others
 //!   ([`lockstep`]); the launcher is the time authority through the horizon it sets. The
 //!   same seed gives byte-identical metrics in one process and in several.
@@ -34,15 +34,9 @@
 //!   reports, the lockstep's messages) and how it is encoded.
 //! - **ROS 2.** `launch --ros2` offers each process's nodes through [`ros2_offer`], which
 //!   the ROS 2 layer beside this crate fills.
+#![warn(missing_docs)]
 
-// The layers below, under their own names (`crate::graph`, `crate::time`, …).
-use ratelab_core::{
-    executor, ids, input, limits, metrics, msg, node, output, procs, qos, runlog, text, textlog,
-    time, topic,
-};
-use ratelab_runtime::{
-    checkpoint, config, graph, policy, runcore, scheduler, summary, telemetry, ClockKind,
-};
+use ratelab_runtime::ClockKind;
 
 pub mod access;
 pub mod credentials;
@@ -57,7 +51,7 @@ pub mod wire;
 /// The Zenoh crate ratelab is built with (for `ratelab top`'s session).
 pub use zenoh;
 
-use crate::graph::spec::GraphSpec;
+use ratelab_runtime::graph::spec::GraphSpec;
 use sha2::Digest;
 use zenoh::Wait;
 
@@ -124,11 +118,16 @@ pub const SMALL_LAUNCH: usize = 10;
 
 /// How long the processes of a launch of `processes` take to be ready, at most: each waits
 /// until it reaches every other ([`lockstep::meet_peers`]), the launcher for all of them.
-/// [`REPLY_TIMEOUT`], and half a second more per process (64 processes were ready in 23 to
-/// 29 s on 2 cores; this gives them 52).
+/// [`REPLY_TIMEOUT`], half a second more per process, and 20 ms more per link of the mesh
+/// (P(P−1)/2 TLS links, each a handshake on the machine's cores): 64 processes, 2,016
+/// links, were ready in 23 to 29 s on 2 cores alone, and took over 52 s beside a loaded test
+/// suite; this gives them 92.
 pub fn ready_wait(processes: usize) -> std::time::Duration {
-    let per_process = std::time::Duration::from_millis(500);
-    REPLY_TIMEOUT + per_process.saturating_mul(u32::try_from(processes).unwrap_or(u32::MAX))
+    let p = u32::try_from(processes).unwrap_or(u32::MAX);
+    let links = p.saturating_mul(p.saturating_sub(1)) / 2;
+    REPLY_TIMEOUT
+        .saturating_add(std::time::Duration::from_millis(500).saturating_mul(p))
+        .saturating_add(std::time::Duration::from_millis(20).saturating_mul(links))
 }
 
 /// Zenoh's runtime threads in a ratelab process, in the syntax of Zenoh's `ZENOH_RUNTIME`
@@ -185,7 +184,7 @@ pub fn set_zenoh_runtime() -> Result<(), DistError> {
     }
 }
 
-pub use crate::limits::MAX_PROCESSES;
+pub use ratelab_core::limits::MAX_PROCESSES;
 
 /// The longest line of a started process's stderr that the launcher passes on
 /// ([`launcher::LaunchOptions::child_stderr`], and on the graph's log key to its lab), bytes
@@ -206,7 +205,7 @@ pub enum DistError {
     Peer(String),
     /// The run could not be built.
     #[error(transparent)]
-    Run(#[from] crate::runcore::RunError),
+    Run(#[from] ratelab_runtime::runcore::RunError),
 }
 
 impl From<zenoh::Error> for DistError {
@@ -402,8 +401,8 @@ pub fn check_keys(spec: &GraphSpec) -> Result<(), DistError> {
     // Every process builds its own plant; only the one the actuator steps moves.
     let plant = spec.process_of(spec.actuator);
     for (i, n) in spec.nodes.iter().enumerate() {
-        let p = spec.process_of(crate::graph::NodeId(i));
-        if n.kind.plant() == crate::graph::kind::Plant::Reads && p != plant {
+        let p = spec.process_of(ratelab_runtime::graph::NodeId(i));
+        if n.kind.plant() == ratelab_runtime::graph::kind::Plant::Reads && p != plant {
             return Err(DistError::Usage(format!(
                 "sensor '{}' is placed in process '{p}' but the actuator in '{plant}': the nodes that touch the plant must share one process",
                 n.name
@@ -429,7 +428,7 @@ pub fn check_keys(spec: &GraphSpec) -> Result<(), DistError> {
     if processes > MAX_PROCESSES {
         return Err(DistError::Usage(format!(
             "{}: give nodes a shared `process = \"…\"` (a node without one runs in its own)",
-            limits::refusal(
+            ratelab_core::limits::refusal(
                 format_args!(
                     "graph '{}' places its nodes in {processes} processes; a launch has at most {MAX_PROCESSES}",
                     spec.name
@@ -623,8 +622,8 @@ mod tests {
         let most = super::LinkTimings::for_processes(super::MAX_PROCESSES);
         assert_eq!(most.lease, Duration::from_secs(128));
         assert!(super::LinkTimings::for_processes(usize::MAX).pending >= most.pending);
-        assert_eq!(super::ready_wait(64), Duration::from_secs(52));
-        assert_eq!(super::ready_wait(3), Duration::from_millis(21_500));
+        assert_eq!(super::ready_wait(64), Duration::from_millis(92_320));
+        assert_eq!(super::ready_wait(3), Duration::from_millis(21_560));
         assert!(super::ready_wait(usize::MAX) > super::ready_wait(64));
     }
 
@@ -645,10 +644,10 @@ mod tests {
     #[test]
     fn a_topics_subscribers_share_a_process() {
         let monitor = include_str!("../../graphs/cartpole-monitor.toml");
-        let spec = crate::graph::GraphSpec::parse(monitor, "m.toml").unwrap();
+        let spec = ratelab_runtime::graph::GraphSpec::parse(monitor, "m.toml").unwrap();
         super::check_keys(&spec).unwrap();
         let apart = monitor.replace("process = \"policy\"", "process = \"watch\"");
-        let spec = crate::graph::GraphSpec::parse(&apart, "m.toml").unwrap();
+        let spec = ratelab_runtime::graph::GraphSpec::parse(&apart, "m.toml").unwrap();
         let e = super::check_keys(&spec).unwrap_err().to_string();
         assert!(
             e.contains("topic '/obs' has subscribers in two processes ('policy' in 'policy', 'monitor' in 'watch')"),

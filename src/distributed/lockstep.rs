@@ -32,10 +32,10 @@
 
 use super::wire::{self, Ticked};
 use super::{DistError, Keys};
-use crate::graph::spec::GraphSpec;
-use crate::graph::NodeId;
-use crate::scheduler::{Event, StopFlag};
-use crate::time::Nanos;
+use ratelab_core::time::Nanos;
+use ratelab_runtime::graph::spec::GraphSpec;
+use ratelab_runtime::graph::NodeId;
+use ratelab_runtime::scheduler::{Event, StopFlag};
 use std::collections::{BTreeMap, BTreeSet};
 use std::time::Duration;
 use zenoh::Wait;
@@ -100,7 +100,7 @@ impl TickInbox {
 ///
 /// # Errors
 /// One line when the report is for another node, another run time, the other kind of
-/// event, or claims a compute time over [`crate::executor::MAX_COMPUTE`] (or any at the
+/// event, or claims a compute time over [`ratelab_core::executor::MAX_COMPUTE`] (or any at the
 /// end of a compute time): the processes are out of step, and the run cannot go on.
 pub fn check_tick_report(
     m: &Ticked,
@@ -125,13 +125,13 @@ pub fn check_tick_report(
         ));
     }
     let compute = Nanos(m.compute_ns);
-    if compute > crate::executor::MAX_COMPUTE || (publish && compute.0 > 0) {
+    if compute > ratelab_core::executor::MAX_COMPUTE || (publish && compute.0 > 0) {
         return Err(format!(
             "process '{}' reported a compute time of {} ns for {} at event {index} (at most {} ns at a start, none when outputs go out)",
             m.process,
             m.compute_ns,
             name(node),
-            crate::executor::MAX_COMPUTE.0
+            ratelab_core::executor::MAX_COMPUTE.0
         ));
     }
     Ok(compute)
@@ -233,7 +233,7 @@ pub fn meet_peers(
                 .collect();
             eprintln!(
                 "ratelab: still waiting to reach process(es) {} directly (every process of a virtual-clock run links to every other; on other hosts give each `ratelab process` --listen tls/<its address>:PORT)",
-                crate::text::listed(missing)
+                ratelab_core::text::listed(missing)
             );
         }
         if stop.is_stopped() {
@@ -249,7 +249,7 @@ pub fn meet_peers(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::graph::spec::DEFAULT_GRAPH_TOML;
+    use ratelab_runtime::graph::spec::DEFAULT_GRAPH_TOML;
 
     fn report(process: &str, index: u64, node: usize) -> Ticked {
         Ticked {
@@ -297,7 +297,7 @@ mod tests {
         assert!(e.contains("the outputs of policy"), "{e}");
         // A compute time no node may declare, or one claimed when outputs go out.
         other = m.clone();
-        other.compute_ns = crate::executor::MAX_COMPUTE.0 + 1;
+        other.compute_ns = ratelab_core::executor::MAX_COMPUTE.0 + 1;
         assert!(check_tick_report(&other, 5, start, &spec).is_err());
         let publish = Event::Publish {
             node: policy,

@@ -26,15 +26,15 @@ use super::credentials::{Credentials, Role};
 use super::process::LiveStats;
 use super::wire::{self, RunOver, Setup};
 use super::{check_endpoint, open_session, Access, DistError, Keys};
-use crate::config::RunConfig;
-use crate::graph::spec::GraphSpec;
-use crate::graph::{NodeId, TopicId};
-use crate::runlog::StepRecord;
-use crate::scheduler::StopFlag;
-use crate::telemetry::{Speed, Telemetry};
-use crate::time::Nanos;
-use crate::topic::TopicStats;
 use crossbeam_channel::Sender;
+use ratelab_core::runlog::StepRecord;
+use ratelab_core::time::Nanos;
+use ratelab_core::topic::TopicStats;
+use ratelab_runtime::config::RunConfig;
+use ratelab_runtime::graph::spec::GraphSpec;
+use ratelab_runtime::graph::{NodeId, TopicId};
+use ratelab_runtime::scheduler::StopFlag;
+use ratelab_runtime::telemetry::{Speed, Telemetry};
 use std::collections::BTreeMap;
 use std::collections::BTreeSet;
 use std::time::{Duration, Instant};
@@ -418,7 +418,7 @@ impl Fold {
 /// summary both count this way.
 #[derive(Clone, Debug)]
 pub struct Carried {
-    /// The process holding each topic's counters ([`crate::graph::spec::TopicSpec::holder`]).
+    /// The process holding each topic's counters ([`ratelab_runtime::graph::spec::TopicSpec::holder`]).
     holders: Vec<String>,
     /// Each process's OS process id as last heard: a new one is a restart.
     pids: BTreeMap<String, u32>,
@@ -657,7 +657,7 @@ impl Watch {
                 let alive = s.kind() == zenoh::sample::SampleKind::Put;
                 let rest = s.key_expr().as_str().strip_prefix(&prefix).unwrap_or("");
                 // Names that are not a graph file's (any text can be a Zenoh key) are not ours.
-                let named = |x: &str| crate::graph::spec::valid_node_name(x);
+                let named = |x: &str| ratelab_runtime::graph::spec::valid_node_name(x);
                 if let Some((p, n)) = rest.split_once('/').filter(|(p, n)| named(p) && named(n)) {
                     // Liveliness is news the fold must not miss: wait a little for room.
                     let e = Event::Alive(p.to_string(), n.to_string(), alive);
@@ -689,7 +689,10 @@ impl Watch {
                 if bytes.len() <= crate::MAX_STDERR_LINE + 256 {
                     let line = String::from_utf8_lossy(&bytes);
                     let first = line.lines().next().unwrap_or("");
-                    send(&t, Event::Log(crate::text::printable(first).into_owned()));
+                    send(
+                        &t,
+                        Event::Log(ratelab_core::text::printable(first).into_owned()),
+                    );
                 }
             })
             .wait()?;
@@ -787,7 +790,9 @@ impl Watch {
                 Ok(Event::Log(line)) => match process_line(&line, &names, &node_names) {
                     // What a process's nodes wrote: to the lab's log pane, stamped as in
                     // one process.
-                    Some(l) => crate::textlog::emit_for(l.node.as_deref(), l.t, l.level, &l.text),
+                    Some(l) => {
+                        ratelab_core::textlog::emit_for(l.node.as_deref(), l.t, l.level, &l.text)
+                    }
                     None => out.push(Telemetry::Applied(format!("launch: {line}"))),
                 },
                 Ok(Event::Over(over)) if !fold.is_over() => {
@@ -841,12 +846,13 @@ fn process_line(
     line: &str,
     processes: &[String],
     nodes: &[String],
-) -> Option<crate::textlog::LogLine> {
+) -> Option<ratelab_core::textlog::LogLine> {
     let (process, rest) = line.split_once(": ")?;
     if !processes.iter().any(|p| p == process) {
         return None;
     }
-    let mut l = crate::textlog::LogLine::parse_prefixed(rest, crate::textlog::Level::Info);
+    let mut l =
+        ratelab_core::textlog::LogLine::parse_prefixed(rest, ratelab_core::textlog::Level::Info);
     if l.node.as_ref().is_some_and(|n| !nodes.contains(n)) {
         // A stamp naming no node of the graph (`[ratelab] warning: …`): the text's own.
         l.t = None;
@@ -916,7 +922,7 @@ pub struct PlacedProcess {
     /// Its nodes: name, kind, rate (Hz).
     pub nodes: Vec<(String, String, f64)>,
     /// The topics whose counters it holds (their subscriber's process, or the publisher's
-    /// when nobody subscribes: [`crate::graph::spec::TopicSpec::holder`]), by name.
+    /// when nobody subscribes: [`ratelab_runtime::graph::spec::TopicSpec::holder`]), by name.
     pub holds: Vec<String>,
 }
 
@@ -975,7 +981,7 @@ fn ask_setup(session: &zenoh::Session, selector: &str) -> Option<Setup> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::runlog::TopicCounters;
+    use ratelab_core::runlog::TopicCounters;
 
     fn cfg() -> RunConfig {
         RunConfig {
@@ -992,7 +998,7 @@ mod tests {
         assert_eq!(
             (l.t, l.node.as_deref(), l.text.as_str()),
             (
-                Some(crate::time::Nanos(1_240_000_000)),
+                Some(ratelab_core::time::Nanos(1_240_000_000)),
                 Some("policy"),
                 "tick here"
             )
@@ -1045,9 +1051,11 @@ mod tests {
             step: 1,
             t: Nanos(t_ms * 1_000_000),
             pole_angle: 0.0,
+            pole_angvel: 0.0,
             cart_pos: 0.0,
             action: 0.0,
             latency: None,
+            held_stamp: None,
             nonfinite: false,
             topics: [obs, action].into_iter().collect::<TopicCounters>(),
             published: None,
@@ -1281,22 +1289,22 @@ mod tests {
         assert!(f.release().is_empty());
         let over = RunOver {
             metrics: {
-                let mut core = crate::runcore::RunCore::new(
+                let mut core = ratelab_runtime::runcore::RunCore::new(
                     &RunConfig {
                         duration: Nanos(20_000_000),
                         clock: crate::ClockKind::Virtual,
                         ..cfg()
                     },
-                    Box::new(crate::policy::Scripted),
-                    crate::runcore::CoreOptions::default(),
+                    Box::new(ratelab_runtime::policy::Scripted),
+                    ratelab_runtime::runcore::CoreOptions::default(),
                 )
                 .unwrap();
-                core.run_to_end(&crate::scheduler::StopFlag::default());
+                core.run_to_end(&ratelab_runtime::scheduler::StopFlag::default());
                 core.metrics()
             },
-            end: crate::scheduler::RunEnd {
+            end: ratelab_runtime::scheduler::RunEnd {
                 at: Nanos(80_000_000),
-                reason: crate::scheduler::EndReason::Duration,
+                reason: ratelab_runtime::scheduler::EndReason::Duration,
             },
         };
         // The run's end waits for the step's holder (its last figures may come after it);

@@ -21,18 +21,18 @@ use super::credentials::{Credentials, Role};
 use super::lockstep;
 use super::wire::{self, ToLauncher, ToProcess, WireSample};
 use super::{check_endpoint, open_session, Access, DistError, Keys, REPLY_TIMEOUT};
-use crate::config::RunConfig;
-use crate::graph::spec::GraphSpec;
-use crate::graph::{NodeId, TopicId};
-use crate::metrics::LatencyStats;
-use crate::policy::BrainSlot;
-use crate::qos::TopicQos;
-use crate::runcore::{CoreOptions, RunCore};
-use crate::runlog::StepRecord;
-use crate::scheduler::StopFlag;
-use crate::summary::GraphState;
-use crate::time::Nanos;
 use crossbeam_channel::{Receiver, RecvTimeoutError};
+use ratelab_core::metrics::LatencyStats;
+use ratelab_core::qos::TopicQos;
+use ratelab_core::runlog::StepRecord;
+use ratelab_core::time::Nanos;
+use ratelab_runtime::config::RunConfig;
+use ratelab_runtime::graph::spec::GraphSpec;
+use ratelab_runtime::graph::{NodeId, TopicId};
+use ratelab_runtime::policy::BrainSlot;
+use ratelab_runtime::runcore::{CoreOptions, RunCore};
+use ratelab_runtime::scheduler::StopFlag;
+use ratelab_runtime::summary::GraphState;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Condvar, Mutex};
 use std::time::{Duration, Instant};
@@ -94,10 +94,10 @@ struct Outlet {
 
 /// What is said of a message of `len` bytes (encoded) too large to send.
 fn too_large(len: usize) -> String {
-    crate::limits::refusal(
+    ratelab_core::limits::refusal(
         format_args!(
             "a message of {len} bytes is larger than one may be between processes (at most {}: a sample's {} less its header): not sent, counted lost on the wire",
-            crate::msg::MAX_PAYLOAD_BYTES,
+            ratelab_core::msg::MAX_PAYLOAD_BYTES,
             wire::MAX_SAMPLE_BYTES
         ),
         "MAX_SAMPLE_BYTES",
@@ -128,16 +128,22 @@ impl Outlet {
     /// Send one message (called from the topic's tap, as it is published). Past
     /// [`wire::MAX_SENT_PER_TICK`] in one tick the rest of that tick's are not sent (the
     /// subscriber counts them lost on the wire when a later one arrives). Nor is a message
-    /// larger encoded than [`crate::msg::MAX_PAYLOAD_BYTES`], which every receiver refuses:
+    /// larger encoded than [`ratelab_core::msg::MAX_PAYLOAD_BYTES`], which every receiver refuses:
     /// it stays home, counted lost the same way (the lockstep does not wait for it), and the
     /// first one is said on stderr, naming the topic, its size and the bound.
-    fn send(&self, seq: u64, stamp: Nanos, origin: Option<Nanos>, data: &crate::msg::MsgData) {
+    fn send(
+        &self,
+        seq: u64,
+        stamp: Nanos,
+        origin: Option<Nanos>,
+        data: &ratelab_core::msg::MsgData,
+    ) {
         if self.this_tick.fetch_add(1, Ordering::Relaxed) >= wire::MAX_SENT_PER_TICK as u64 {
             return;
         }
         let sent_mono_ns = wire::mono_now_ns();
         let payload = data.to_bytes();
-        if payload.len() > crate::msg::MAX_PAYLOAD_BYTES {
+        if payload.len() > ratelab_core::msg::MAX_PAYLOAD_BYTES {
             if !self.said_too_large.swap(true, Ordering::Relaxed) {
                 eprintln!(
                     "[ratelab] {}: {}",
@@ -212,12 +218,12 @@ impl Spill {
     }
 
     fn hold(&self, topic: usize, bytes: Vec<u8>) {
-        crate::graph::lock(&self.held).push_back((topic, bytes));
+        ratelab_runtime::graph::lock(&self.held).push_back((topic, bytes));
     }
 
     /// No sample is held back.
     pub(super) fn is_empty(&self) -> bool {
-        crate::graph::lock(&self.held).is_empty()
+        ratelab_runtime::graph::lock(&self.held).is_empty()
     }
 }
 
@@ -249,7 +255,8 @@ impl Bridge {
     /// When the session is closed.
     pub(super) fn put_held(&self) -> zenoh::Result<()> {
         loop {
-            let Some((t, bytes)) = crate::graph::lock(&self.spill.held).pop_front() else {
+            let Some((t, bytes)) = ratelab_runtime::graph::lock(&self.spill.held).pop_front()
+            else {
                 return Ok(());
             };
             if let Some(o) = self.outlets.get(t).and_then(Option::as_ref) {
@@ -274,13 +281,13 @@ struct Arrivals {
 impl Arrivals {
     /// Topic `t` has received `seq` (or anything after it).
     fn has(&self, t: TopicId, seq: u64) -> bool {
-        arrived(&crate::graph::lock(&self.seqs), t, seq)
+        arrived(&ratelab_runtime::graph::lock(&self.seqs), t, seq)
     }
 
     /// Wait until topic `t` has received `seq` (or anything after it), until `deadline`
     /// or `stop`: whether it has.
     fn wait_for(&self, t: TopicId, seq: u64, deadline: Instant, stop: &StopFlag) -> bool {
-        let mut seqs = crate::graph::lock(&self.seqs);
+        let mut seqs = ratelab_runtime::graph::lock(&self.seqs);
         loop {
             if arrived(&seqs, t, seq) {
                 return true;
@@ -499,7 +506,7 @@ type Publishers = Vec<(TopicId, zenoh::pubsub::Publisher<'static>)>;
 fn wire_crossings(
     session: &zenoh::Session,
     keys: &Keys,
-    handles: &crate::graph::GraphHandles,
+    handles: &ratelab_runtime::graph::GraphHandles,
     (mine, process): (&[NodeId], &str),
     slot: Option<stepper::SharedSlot>,
 ) -> Result<(Vec<TopicId>, Inbound, Publishers), DistError> {
@@ -551,9 +558,9 @@ fn build_share(
     } else {
         "scripted"
     };
-    let brain = crate::checkpoint::load_policy(brain_spec)
+    let brain = ratelab_runtime::checkpoint::load_policy(brain_spec)
         .map_err(|e| DistError::Usage(format!("--policy {brain_spec}: {e}")))?;
-    let graph = crate::runcore::build_graph(
+    let graph = ratelab_runtime::runcore::build_graph(
         cfg,
         BrainSlot::new(brain),
         false,
@@ -717,7 +724,7 @@ fn check_options(opts: &ProcessOptions) -> Result<GraphSpec, DistError> {
             "graph '{}' has no process '{}' (its processes: {})",
             file_spec.name,
             opts.process,
-            crate::text::listed(names)
+            ratelab_core::text::listed(names)
         )));
     }
     if opts.connect.is_empty() {
@@ -926,7 +933,7 @@ fn subscribe_inbound(
     session: &zenoh::Session,
     keys: &Keys,
     spec: &GraphSpec,
-    handles: &crate::graph::GraphHandles,
+    handles: &ratelab_runtime::graph::GraphHandles,
     (inbound, slot): (&[TopicId], Option<stepper::SharedSlot>),
     process: &str,
 ) -> Result<Inbound, DistError> {
@@ -958,13 +965,15 @@ fn subscribe_inbound(
                         Err(e) => return refusals.note(&process, topic.name(), &e),
                     };
                     let (seq, sent) = (sample.seq, sample.sent_mono_ns);
-                    if let Err(e) = sample.deliver(&topic, &mut crate::graph::lock(&offset)) {
+                    if let Err(e) =
+                        sample.deliver(&topic, &mut ratelab_runtime::graph::lock(&offset))
+                    {
                         return refusals.note(&process, topic.name(), &e);
                     }
                     let took = wire::mono_now_ns().saturating_sub(sent);
-                    crate::graph::lock(&lat[t.0]).record(Nanos(took));
+                    ratelab_runtime::graph::lock(&lat[t.0]).record(Nanos(took));
                     {
-                        let mut seqs = crate::graph::lock(&arrivals.seqs);
+                        let mut seqs = ratelab_runtime::graph::lock(&arrivals.seqs);
                         seqs[t.0] = Some(seq);
                         arrivals.cv.notify_all();
                     }
@@ -998,7 +1007,7 @@ struct Inbound {
 /// boundary and the newest seq sent on each.
 fn bridge_outbound(
     spec: &GraphSpec,
-    handles: &crate::graph::GraphHandles,
+    handles: &ratelab_runtime::graph::GraphHandles,
     publishers: Vec<(TopicId, zenoh::pubsub::Publisher<'static>)>,
 ) -> Arc<Bridge> {
     let spill = Spill::unbounded();
@@ -1132,7 +1141,7 @@ struct Share {
     process: String,
     /// The run's settings (its graph is `cfg.graph`).
     cfg: RunConfig,
-    handles: crate::graph::GraphHandles,
+    handles: ratelab_runtime::graph::GraphHandles,
     /// Its nodes, in graph order.
     mine: Vec<NodeId>,
     /// The topics another process publishes and one of its nodes reads.
@@ -1216,9 +1225,11 @@ fn wire_links(
     inbound
         .iter()
         .map(|&t| {
-            let l = crate::graph::lock(&lat[t.0]);
+            let l = ratelab_runtime::graph::lock(&lat[t.0]);
             let us = |n: Option<Nanos>| {
-                n.map_or(0.0, |n| crate::metrics::round_to(n.as_micros_f64(), 1))
+                n.map_or(0.0, |n| {
+                    ratelab_core::metrics::round_to(n.as_micros_f64(), 1)
+                })
             };
             wire::WireLink {
                 topic: spec.topic(t).name.clone(),
@@ -1267,11 +1278,11 @@ impl Refusals {
 mod tests {
     use super::real_clock::figures_time;
     use super::{crossings, Outlet};
-    use crate::graph::spec::GraphSpec;
-    use crate::graph::NodeId;
-    use crate::msg::{force::ForceMsg, MsgData};
-    use crate::time::Nanos;
     use crate::wire::{WireSample, MAX_SENT_PER_TICK};
+    use ratelab_core::msg::{force::ForceMsg, MsgData};
+    use ratelab_core::time::Nanos;
+    use ratelab_runtime::graph::spec::GraphSpec;
+    use ratelab_runtime::graph::NodeId;
     use zenoh::Wait;
 
     /// A process leaves on the launcher's receipt of its report, not before: other control
@@ -1280,7 +1291,7 @@ mod tests {
     #[test]
     fn a_process_waits_for_the_receipt_of_its_report() {
         use super::{await_report_taken, ToProcess};
-        use crate::scheduler::StopFlag;
+        use ratelab_runtime::scheduler::StopFlag;
         use std::time::{Duration, Instant};
         let (tx, rx) = crossbeam_channel::unbounded();
         let (stop, gone) = (StopFlag::new(), StopFlag::new());
@@ -1323,7 +1334,7 @@ mod tests {
     #[test]
     fn crossings_follow_the_placement() {
         let spec = GraphSpec::chapter();
-        let names = |ids: Vec<crate::graph::TopicId>| -> Vec<String> {
+        let names = |ids: Vec<ratelab_runtime::graph::TopicId>| -> Vec<String> {
             ids.into_iter()
                 .map(|t| spec.topic(t).name.clone())
                 .collect()
@@ -1382,7 +1393,7 @@ mod tests {
         let spill = super::Spill::unbounded();
         let bridge = super::Bridge {
             outlets: vec![Some(Outlet::new(publisher, 0, "/action", spill.clone()))],
-            by_node: vec![vec![crate::graph::TopicId(0)], vec![]],
+            by_node: vec![vec![ratelab_runtime::graph::TopicId(0)], vec![]],
             spill: spill.clone(),
         };
         let outlet = bridge.outlets[0].as_ref().unwrap();
@@ -1424,19 +1435,24 @@ mod tests {
         assert!(rx.try_recv().is_err(), "nothing more was sent");
         // A message too large for a sample (by a byte: the receiver would refuse it) stays
         // home, unnamed in the report, so the lockstep does not wait for it.
-        let huge = MsgData::new(crate::msg::ImageMsg {
+        let huge = MsgData::new(ratelab_core::msg::ImageMsg {
             height: 1,
             width: 1,
             encoding: "mono8".into(),
             step: 1,
-            data: vec![0u8; crate::msg::MAX_PAYLOAD_BYTES].into(),
+            data: vec![0u8; ratelab_core::msg::MAX_PAYLOAD_BYTES].into(),
         });
-        assert_eq!(huge.to_bytes().len(), crate::msg::MAX_PAYLOAD_BYTES + 13);
-        assert!(<crate::msg::ImageMsg as crate::msg::Message>::TYPE
-            .decode(&huge.to_bytes())
-            .is_err());
+        assert_eq!(
+            huge.to_bytes().len(),
+            ratelab_core::msg::MAX_PAYLOAD_BYTES + 13
+        );
+        assert!(
+            <ratelab_core::msg::ImageMsg as ratelab_core::msg::Message>::TYPE
+                .decode(&huge.to_bytes())
+                .is_err()
+        );
         outlet.send(501, Nanos(60), None, &huge);
-        assert!(super::too_large(crate::msg::MAX_PAYLOAD_BYTES + 13)
+        assert!(super::too_large(ratelab_core::msg::MAX_PAYLOAD_BYTES + 13)
             .ends_with("not sent, counted lost on the wire (ratelab::limits::MAX_SAMPLE_BYTES)"));
         assert_eq!(
             bridge.forward_after(0),

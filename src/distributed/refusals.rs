@@ -66,11 +66,11 @@ impl<S: Subscriber> Layer<S> for RefusalLayer {
         };
         let reason = reason.trim().to_string();
         let reason = super::wire::cut_to_bytes(
-            crate::text::printable(&reason).into_owned(),
+            ratelab_core::text::printable(&reason).into_owned(),
             MAX_REASON_BYTES,
         );
         if let Some(sinks) = SINKS.get() {
-            crate::graph::lock(sinks).retain(|s| match s.try_send(reason.clone()) {
+            ratelab_runtime::graph::lock(sinks).retain(|s| match s.try_send(reason.clone()) {
                 Ok(()) | Err(crossbeam_channel::TrySendError::Full(_)) => true,
                 Err(crossbeam_channel::TrySendError::Disconnected(_)) => false,
             });
@@ -89,7 +89,7 @@ pub fn watch() -> Receiver<String> {
         installed = true;
         Mutex::new(Vec::new())
     });
-    crate::graph::lock(sinks).push(tx);
+    ratelab_runtime::graph::lock(sinks).push(tx);
     if installed {
         let _ = tracing::subscriber::set_global_default(
             tracing_subscriber::registry().with(RefusalLayer),

@@ -5,10 +5,10 @@
 //! which the command line calls first). Without it, `--ros2` is refused in one line
 //! ([`NOT_INSTALLED`]).
 
-use crate::config::RunConfig;
-use crate::graph::{GraphHandles, NodeId};
-use crate::scheduler::StopFlag;
 use crate::DistError;
+use ratelab_runtime::config::RunConfig;
+use ratelab_runtime::graph::{GraphHandles, NodeId};
+use ratelab_runtime::scheduler::StopFlag;
 use std::sync::OnceLock;
 
 /// What `--ros2` meets in a process when no offer is installed.

@@ -3,19 +3,11 @@
 //! [`held_run`] (a run's results returned in memory, for a host program),
 //! and the drivers of the run core ([`ratelab_runtime::runcore`]), one per front end: [`run`]
 //! (one headless run, end to end, under either clock), [`sweep`] (grids of runs and the
-//! rate cliff) and [`session`] (the lab's live sessions: the graph driven by commands
+//! rate cliff; [`sweep_spec`], a sweep or cliff search as data, checked by one set of rules
+//! for every front end) and [`session`] (the lab's live sessions: the graph driven by commands
 //! while it runs, their log and its replay). The graph across processes drives the same
 //! core from `ratelab-distributed`.
-
-// The layers below, under their own names (`crate::graph`, `crate::time`, …).
-use ratelab_core::{
-    executor, input, limits, metrics, output, plant, qos, realtime, runlog, textlog, time,
-};
-use ratelab_recording as recording;
-use ratelab_ros2 as ros2;
-use ratelab_runtime::{
-    checkpoint, command, config, graph, policy, runcore, scheduler, summary, telemetry,
-};
+#![warn(missing_docs)]
 
 pub mod held_run;
 pub mod outputs;
@@ -23,4 +15,5 @@ pub mod run;
 pub mod run_spec;
 pub mod session;
 pub mod sweep;
+pub mod sweep_spec;
 pub mod trace_csv;

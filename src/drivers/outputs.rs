@@ -304,6 +304,10 @@ pub fn open_recording(
         &RecordOptions {
             spawn: a.spawn,
             window: a.record_window,
+            // Said in its settings: a run offered to ROS 2, and bagged (checked already by
+            // `ros2_options`, which a bad `ROS_DOMAIN_ID` fails first).
+            ros2_domain: a.ros2_domain().ok().flatten(),
+            bag: a.bag.clone().filter(|_| a.ros2.is_some()),
         },
         a.force,
     )?;

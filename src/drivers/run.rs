@@ -1,29 +1,29 @@
 //! One run, end to end: settings + brain → plant, graph, executor → [`RunReport`]. The run
-//! core holds the graph under either clock ([`crate::runcore`]): it steps it instant by
+//! core holds the graph under either clock ([`ratelab_runtime::runcore`]): it steps it instant by
 //! instant under the virtual clock, and hands it to the real-clock executor's threads under
-//! the real clock ([`crate::runcore::RunCore::run_real`]).
+//! the real clock ([`ratelab_runtime::runcore::RunCore::run_real`]).
 
-pub use crate::command::{Command, TimedCommand};
-pub use crate::runcore::{build_graph, virtual_scheduler};
-pub use crate::summary::{summarize, summarize_state, ActuatorSummary, GraphState};
+pub use ratelab_runtime::command::{Command, TimedCommand};
+pub use ratelab_runtime::runcore::{build_graph, virtual_scheduler};
+pub use ratelab_runtime::summary::{summarize, summarize_state, ActuatorSummary, GraphState};
 
-use crate::config::{ClockKind, RunConfig};
-use crate::graph::{lock, StepObserver};
-use crate::metrics::Metrics;
-use crate::policy::Policy;
-use crate::runlog::StepRecord;
-use crate::scheduler::{RealOptions, RunEnd, StopFlag};
+use ratelab_core::metrics::Metrics;
+use ratelab_core::runlog::StepRecord;
+use ratelab_runtime::config::{ClockKind, RunConfig};
+use ratelab_runtime::graph::{lock, StepObserver};
+use ratelab_runtime::policy::Policy;
+use ratelab_runtime::scheduler::{RealOptions, RunEnd, StopFlag};
 use std::time::{Duration, Instant};
 
 /// Why a run could not start.
 #[derive(Debug, thiserror::Error)]
 pub enum RunError {
-    /// Its settings, plant or graph could not be built ([`crate::runcore::RunError`]).
+    /// Its settings, plant or graph could not be built ([`ratelab_runtime::runcore::RunError`]).
     #[error(transparent)]
-    Build(#[from] crate::runcore::RunError),
+    Build(#[from] ratelab_runtime::runcore::RunError),
     /// The graph could not be offered to ROS 2 (`--ros2`).
     #[error(transparent)]
-    Ros2(#[from] crate::ros2::Ros2Error),
+    Ros2(#[from] ratelab_ros2::Ros2Error),
 }
 
 /// Extras for a run.
@@ -41,14 +41,14 @@ pub struct RunOptions {
     /// Commands to apply at run times (sorted by `at_ns`; virtual clock).
     pub commands: Vec<TimedCommand>,
     /// Real clock: told about every node tick.
-    pub on_node_tick: Option<crate::scheduler::TickHook>,
+    pub on_node_tick: Option<ratelab_runtime::scheduler::TickHook>,
     /// Virtual clock, when executors or compute times apply: told about every tick as its
     /// executor ran it (release, start, end).
-    pub on_span: Option<crate::executor::SpanHook>,
-    /// Offer the graph to ROS 2 while it runs ([`crate::ros2`]). Under the virtual clock the
+    pub on_span: Option<ratelab_core::executor::SpanHook>,
+    /// Offer the graph to ROS 2 while it runs ([`ratelab_ros2`]). Under the virtual clock the
     /// run then keeps pace with the wall clock (one second of run time per second), so
     /// that ROS 2's tools see the graph's rates; its results are unchanged.
-    pub ros2: Option<crate::ros2::Ros2Options>,
+    pub ros2: Option<ratelab_ros2::Ros2Options>,
 }
 
 impl RunOptions {
@@ -72,7 +72,7 @@ pub struct RunReport {
     /// Wall time the run took.
     pub wall: Duration,
     /// What was offered to ROS 2 (with [`RunOptions::ros2`]).
-    pub ros2: Option<crate::ros2::BridgeReport>,
+    pub ros2: Option<ratelab_ros2::BridgeReport>,
 }
 
 /// The real-clock executor's options for `cfg`: its spin margin, phase offsets, real-time
@@ -93,7 +93,7 @@ pub fn real_options(cfg: &RunConfig) -> RealOptions {
 ///
 /// # Errors
 /// [`RunError`] when the run cannot start. A node that panics (under either clock) ends
-/// the run with [`crate::scheduler::EndReason::NodeFailed`] instead: the report has what
+/// the run with [`ratelab_runtime::scheduler::EndReason::NodeFailed`] instead: the report has what
 /// was measured up to then.
 pub fn run(
     cfg: &RunConfig,
@@ -101,13 +101,14 @@ pub fn run(
     opts: RunOptions,
 ) -> Result<RunReport, RunError> {
     if opts.ros2.is_none() {
-        crate::ros2::external::check_offered(&cfg.graph).map_err(crate::ros2::Ros2Error::Usage)?;
+        ratelab_ros2::external::check_offered(&cfg.graph)
+            .map_err(ratelab_ros2::Ros2Error::Usage)?;
     }
     let virtual_clock = cfg.clock == ClockKind::Virtual;
-    let mut core = crate::runcore::RunCore::new(
+    let mut core = ratelab_runtime::runcore::RunCore::new(
         cfg,
         brain,
-        crate::runcore::CoreOptions {
+        ratelab_runtime::runcore::CoreOptions {
             keep_trace: opts.keep_trace,
             observers: opts.observers,
             // Commands at run times are the virtual clock's (`replay`).
@@ -127,16 +128,16 @@ pub fn run(
     let link = match &opts.ros2 {
         Some(o) => {
             // What needs no network is refused before a session (or a router) opens.
-            crate::ros2::bridge::check(&cfg.graph, o).map_err(crate::ros2::Ros2Error::Usage)?;
-            let env = crate::ros2::session::SessionEnv::from_process();
-            Some(crate::ros2::session::open(&env, &opts.stop)?)
+            ratelab_ros2::bridge::check(&cfg.graph, o).map_err(ratelab_ros2::Ros2Error::Usage)?;
+            let env = ratelab_ros2::session::SessionEnv::from_process();
+            Some(ratelab_ros2::session::open(&env, &opts.stop)?)
         }
         None => None,
     };
     let bridge = match (&opts.ros2, &link) {
         (Some(o), Some(link)) => {
-            let offer = crate::ros2::bridge::Offer::whole(&handles);
-            let b = crate::ros2::Bridge::start(link, &offer, o, cfg.clock, &opts.stop)?;
+            let offer = ratelab_ros2::bridge::Offer::whole(&handles);
+            let b = ratelab_ros2::Bridge::start(link, &offer, o, cfg.clock, &opts.stop)?;
             eprintln!("[ratelab] {}", b.describe());
             Some(b)
         }
@@ -166,7 +167,7 @@ pub fn run(
         (r.end, ticks, Some(r.timing), r.exec)
     };
     let wall = start.elapsed();
-    let ros2 = bridge.map(crate::ros2::Bridge::finish);
+    let ros2 = bridge.map(ratelab_ros2::Bridge::finish);
     if let Some(link) = link {
         link.close();
     }

@@ -6,13 +6,13 @@
 //! ([`Speech`]: `--control-hz` on the command line, `control_hz` from Python), so no front
 //! end builds another's argument list to reach a run.
 
-use crate::config::{phase_offsets_from_ms, BREAK_CONTROL_HZ};
-use crate::executor::{ComputeTime, ExecutorOverride};
-use crate::graph::GraphSpec;
 use crate::outputs::Outputs;
-use crate::qos::Fault;
-use crate::time::Nanos;
+use ratelab_core::executor::{ComputeTime, ExecutorOverride};
+use ratelab_core::qos::Fault;
+use ratelab_core::time::Nanos;
 use ratelab_runtime::config::{check_rate, duration_from_secs, ConfigError};
+use ratelab_runtime::config::{phase_offsets_from_ms, BREAK_CONTROL_HZ};
+use ratelab_runtime::graph::GraphSpec;
 use ratelab_runtime::setting::{Setting, Speech};
 use ratelab_runtime::{ClockKind, RunConfig};
 use std::path::PathBuf;
@@ -42,7 +42,7 @@ pub struct GraphSettings {
     /// Topic QoS with the graph file's keys: `(topic, "history=keep_all,depth=100")`.
     pub qos: Vec<(String, String)>,
     /// Lossy links: `(topic, "loss=0.2,delay_ms=10")`, only link keys
-    /// ([`crate::qos::LINK_KEYS`]).
+    /// ([`ratelab_core::qos::LINK_KEYS`]).
     pub links: Vec<(String, String)>,
     /// Liveliness leases, ms: `(node, ms)`.
     pub leases_ms: Vec<(String, f64)>,
@@ -95,14 +95,14 @@ impl GraphSettings {
                     Speech::Keywords => entry(setting, topic, &format!("{pairs:?}")),
                 };
                 if setting == Setting::Link {
-                    if let Some((k, _)) = crate::qos::split_pairs(pairs)
+                    if let Some((k, _)) = ratelab_core::qos::split_pairs(pairs)
                         .map_err(|e| anyhow::anyhow!("{given}: {e}"))?
                         .into_iter()
-                        .find(|(k, _)| !crate::qos::LINK_KEYS.contains(k))
+                        .find(|(k, _)| !ratelab_core::qos::LINK_KEYS.contains(k))
                     {
                         anyhow::bail!(
                             "{given}: '{k}' is not a link key ({}); use {}",
-                            crate::qos::LINK_KEYS.join(", "),
+                            ratelab_core::qos::LINK_KEYS.join(", "),
                             speech.name(Setting::Qos)
                         );
                     }
@@ -113,7 +113,7 @@ impl GraphSettings {
         }
         for (node, ms) in &self.leases_ms {
             let given = entry(Setting::Lease, node, ms);
-            crate::qos::ms_to_nanos("lease", *ms, false)
+            ratelab_core::qos::ms_to_nanos("lease", *ms, false)
                 .map_err(|e| anyhow::anyhow!("{given}: {e}"))?;
             spec.set_lease(node, *ms)
                 .map_err(|e| anyhow::anyhow!("{given}: {e}"))?;
@@ -154,7 +154,7 @@ pub struct RunSpec {
     pub graph: GraphSettings,
     /// The reset seed (the course env's NumPy draws; also seeds sensor noise).
     pub seed: u64,
-    /// Run time, s, in (0, [`crate::time::MAX_DURATION_S`]]; `None` is
+    /// Run time, s, in (0, [`ratelab_core::time::MAX_DURATION_S`]]; `None` is
     /// [`DEFAULT_DURATION_S`].
     pub duration_s: Option<f64>,
     /// The clock ([`DEFAULT_CLOCK`] unless asked).

@@ -16,10 +16,12 @@
 //! runs are logged but, being concurrent, cannot be replayed exactly.
 //!
 //! A file the run's code comes from saved ([`Control::Reload`]) runs the graph again with
-//! the new code, judged first and compared with the run before in one line (`reload`). The
-//! saved code loads, and is judged, on a thread of its own (`trial`): code whose import or
-//! callback never returns is said, never waited for; the run on screen goes on.
+//! the new code, judged first and compared with the run before in one line (`reload`), over
+//! the span of run time both ran (`compare`). The saved code loads, and is judged, on a
+//! thread of its own (`trial`): code whose import or callback never returns is said, never
+//! waited for; the run on screen goes on.
 
+mod compare;
 mod engine;
 mod log;
 mod real_run;

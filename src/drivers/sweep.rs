@@ -1,14 +1,17 @@
 //! Sweeps: run the graph over a grid of settings, and find the rate cliff.
 //!
 //! Runs are independent, so they are spread over the machine's cores; results come back in
-//! grid order, so a sweep's table is the same however many threads ran it.
+//! grid order, so a sweep's table is the same however many threads ran it. Their tables as
+//! CSV ([`write_csv`], [`write_cliffs_csv`]) are every front end's: `ratelab sweep --csv`
+//! writes the one `ratelab.sweep` returns. What to sweep, as data, checked once in the front
+//! end's words: [`crate::sweep_spec`].
 
-use crate::config::{ClockKind, RunConfig};
-use crate::metrics::Metrics;
-use crate::policy::Policy;
 use crate::run::{run, RunError, RunOptions};
-use crate::scheduler::{EndReason, StopFlag};
-use crate::time::Nanos;
+use ratelab_core::metrics::Metrics;
+use ratelab_core::time::Nanos;
+use ratelab_runtime::config::{ClockKind, RunConfig};
+use ratelab_runtime::policy::Policy;
+use ratelab_runtime::scheduler::{EndReason, StopFlag};
 use serde::Serialize;
 
 /// Builds a fresh brain for each run (runs may be on different threads).
@@ -101,7 +104,7 @@ pub enum SweepError {
     Brain(String),
     /// A point's settings do not fit the graph.
     #[error(transparent)]
-    Config(#[from] crate::config::ConfigError),
+    Config(#[from] ratelab_runtime::config::ConfigError),
     /// A worker thread failed outside any run (a bug): its panic message.
     #[error("sweep worker failed: {0}")]
     Worker(String),
@@ -191,7 +194,9 @@ pub fn run_grid_until(
             .into_iter()
             .map(|h| {
                 h.join().unwrap_or_else(|p| {
-                    Err(SweepError::Worker(crate::scheduler::panic_message(&*p)))
+                    Err(SweepError::Worker(
+                        ratelab_runtime::scheduler::panic_message(&*p),
+                    ))
                 })
             })
             .collect()
@@ -315,10 +320,100 @@ pub fn find_cliff(
     })
 }
 
+/// The line of a sweep whose runs failed a node: how many of all, and the first (its control
+/// rate, seed and failure); `None` when none did. A sweep that has it is no success.
+pub fn failed_line(rows: &[(Point, Metrics)]) -> Option<String> {
+    let failed: Vec<&(Point, Metrics)> = rows
+        .iter()
+        .filter(|(_, m)| m.node_failed.is_some())
+        .collect();
+    let (p, m) = failed.first()?;
+    Some(format!(
+        "{} of {} runs failed a node (the first, control {} Hz seed {}: {})",
+        failed.len(),
+        rows.len(),
+        p.control_hz,
+        p.seed,
+        m.node_failed.as_deref().unwrap_or("?")
+    ))
+}
+
+/// A sweep's rows as CSV into `out`, as `ratelab sweep --csv` writes them: a header, then a
+/// row per run, its point (`clock`, `sensor_hz`, `control_hz` in Hz, `queue_depth` in
+/// messages, `seed`) and figures (`balanced`, `steps`, `fell_at_s` in s, the `/obs` and
+/// `/action` counts, `mean_latency_ms`, `latency_p99_ms`, `policy`); a figure the run has
+/// none of is an empty cell.
+///
+/// # Errors
+/// What writing to `out` gives.
+pub fn write_csv(out: &mut dyn std::io::Write, rows: &[(Point, Metrics)]) -> anyhow::Result<()> {
+    let mut w = csv::Writer::from_writer(out);
+    w.write_record([
+        "clock",
+        "sensor_hz",
+        "control_hz",
+        "queue_depth",
+        "seed",
+        "balanced",
+        "steps",
+        "fell_at_s",
+        "obs_published",
+        "obs_dropped",
+        "action_published",
+        "action_dropped",
+        "mean_latency_ms",
+        "latency_p99_ms",
+        "policy",
+    ])?;
+    let opt = |x: Option<u64>| x.map_or(String::new(), |x| x.to_string());
+    for (p, m) in rows {
+        w.write_record([
+            p.clock.as_str().to_string(),
+            p.sensor_hz.to_string(),
+            p.control_hz.to_string(),
+            p.queue_depth.to_string(),
+            p.seed.to_string(),
+            m.balanced.to_string(),
+            m.steps.to_string(),
+            m.fell_at_s.map_or(String::new(), |t| t.to_string()),
+            opt(m.obs_published),
+            opt(m.obs_dropped),
+            opt(m.action_published),
+            opt(m.action_dropped),
+            m.mean_latency_ms.to_string(),
+            m.latency_p99_ms.to_string(),
+            m.policy.clone(),
+        ])?;
+    }
+    w.flush()?;
+    Ok(())
+}
+
+/// A cliff search's results as CSV into `out`: `seed,falls_at_hz,balances_at_hz,runs`, a row
+/// per seed (rates in Hz; a rate is an empty cell when there is none).
+///
+/// # Errors
+/// What writing to `out` gives.
+pub fn write_cliffs_csv(out: &mut dyn std::io::Write, cliffs: &[Cliff]) -> anyhow::Result<()> {
+    let mut w = csv::Writer::from_writer(out);
+    w.write_record(["seed", "falls_at_hz", "balances_at_hz", "runs"])?;
+    let hz = |x: Option<f64>| x.map_or_else(String::new, |x| x.to_string());
+    for c in cliffs {
+        w.write_record([
+            c.seed.to_string(),
+            hz(c.falls_at_hz),
+            hz(c.balances_at_hz),
+            c.runs.to_string(),
+        ])?;
+    }
+    w.flush()?;
+    Ok(())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::policy::Scripted;
+    use ratelab_runtime::policy::Scripted;
 
     #[test]
     fn the_pool_keeps_order_and_uses_at_most_its_workers() {
@@ -372,6 +467,64 @@ mod tests {
     }
 
     #[test]
+    fn the_tables_are_the_command_line_s() {
+        struct Exploding;
+        impl Policy for Exploding {
+            fn act(&mut self, _: &ratelab_core::plant::Observation) -> ratelab_core::plant::Action {
+                panic!("boom")
+            }
+            fn label(&self) -> String {
+                "exploding".into()
+            }
+        }
+        let g = Grid {
+            clocks: vec![ClockKind::Virtual],
+            sensor_hz: vec![50.0],
+            control_hz: vec![5.0],
+            queue_depth: vec![1],
+            seeds: vec![2],
+            base: RunConfig {
+                duration: Nanos(Nanos::SECOND.0),
+                ..RunConfig::default()
+            },
+        };
+        let scripted = || Ok(Box::new(Scripted) as Box<dyn Policy>);
+        let exploding = || Ok(Box::new(Exploding) as Box<dyn Policy>);
+        let mut rows = run_grid(&g, &scripted, 1, &|_, _| {}).unwrap();
+        assert_eq!(failed_line(&rows), None);
+        rows.extend(run_grid(&g, &exploding, 1, &|_, _| {}).unwrap());
+        assert_eq!(
+            failed_line(&rows).as_deref(),
+            Some("1 of 2 runs failed a node (the first, control 5 Hz seed 2: policy: boom)")
+        );
+        let mut csv = Vec::new();
+        write_csv(&mut csv, &rows).unwrap();
+        let text = String::from_utf8(csv).unwrap();
+        assert!(
+            text.starts_with("clock,sensor_hz,control_hz,queue_depth,seed,balanced,"),
+            "{text}"
+        );
+        assert_eq!(text.lines().count(), 3);
+        assert!(text
+            .lines()
+            .nth(1)
+            .unwrap()
+            .starts_with("virtual,50,5,1,2,"));
+        let cliffs = [Cliff {
+            seed: 0,
+            falls_at_hz: Some(7.5),
+            balances_at_hz: None,
+            runs: 3,
+        }];
+        let mut csv = Vec::new();
+        write_cliffs_csv(&mut csv, &cliffs).unwrap();
+        assert_eq!(
+            String::from_utf8(csv).unwrap(),
+            "seed,falls_at_hz,balances_at_hz,runs\n0,7.5,,3\n"
+        );
+    }
+
+    #[test]
     fn grid_order_is_seed_fastest() {
         let g = Grid {
             clocks: vec![ClockKind::Virtual],
@@ -391,7 +544,7 @@ mod tests {
     fn a_node_that_panics_is_reported_not_fatal() {
         struct Exploding;
         impl Policy for Exploding {
-            fn act(&mut self, _: &crate::plant::Observation) -> crate::plant::Action {
+            fn act(&mut self, _: &ratelab_core::plant::Observation) -> ratelab_core::plant::Action {
                 panic!("weights on fire")
             }
             fn label(&self) -> String {

@@ -8,7 +8,10 @@
 //!   read into the library's `RunSpec`, no argument list), its files' contents returned;
 //!   Python nodes and a callable brain run in this interpreter. Ctrl-C (KeyboardInterrupt)
 //!   stops it.
-//! - [`sweep`], [`cliff`]: `ratelab sweep` and `ratelab cliff`, their tables as CSV.
+//! - [`sweep`], [`cliff`]: a sweep and a cliff search from `ratelab.sweep`'s and
+//!   `ratelab.cliff`'s settings ([`run_spec`]: dicts read into the library's `SweepSpec` and
+//!   `CliffSpec`), their tables as CSV (`ratelab sweep --csv`'s); a callable brain runs in
+//!   this interpreter, a fresh wrapper of it per run, the runs on every core.
 //! - [`exercise`]: `ratelab exercise`, its checks returned (a prediction may be given).
 //!
 //! Errors become Python exceptions carrying the command line's one line: a missing file
@@ -16,6 +19,7 @@
 //! `PermissionError`, a run whose trace would not fit in memory `TraceTooLarge` (a
 //! `MemoryError`, raised before the run), anything else the caller gave wrong `ValueError`.
 //! Nothing here ends the process.
+#![warn(missing_docs)]
 
 use pyo3::exceptions::{
     PyFileExistsError, PyFileNotFoundError, PyKeyboardInterrupt, PyMemoryError, PyPermissionError,
@@ -24,6 +28,8 @@ use pyo3::exceptions::{
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use ratelab::distributed::launcher::Program;
+use ratelab::policy::Policy;
+use ratelab::python::brain::PythonBrain;
 use ratelab::scheduler::StopFlag;
 use ratelab::setting::Speech;
 
@@ -185,18 +191,100 @@ fn interruptibly<T: Send + 'static>(
     result.map_err(|e| to_py(&e))
 }
 
-/// `ratelab sweep FLAGS…` in this process: `(csv, failed)`, its table as `--csv` writes it
-/// and the line of the first run that failed a node (or None). Ctrl-C stops it.
-#[pyfunction]
-fn sweep(py: Python<'_>, flags: Vec<String>) -> PyResult<(String, Option<String>)> {
-    interruptibly(py, move |stop| ratelab_lab::api::sweep(&flags, &stop))
+/// A factory of brains calling `callable` (a Python function `f(obs) -> action`), checked
+/// once here (callable, NumPy importable): each run gets a fresh wrapper of it
+/// ([`PythonBrain::from_callable`]). A wrapper takes the GIL for each call (`Python::attach`),
+/// so runs on several threads call it in turn; the one function object is every run's, so
+/// state it keeps between calls is shared by the runs.
+///
+/// # Errors
+/// `ValueError` when it is not callable or NumPy cannot be imported.
+fn callable_brains(py: Python<'_>, callable: Py<PyAny>) -> PyResult<Brains> {
+    PythonBrain::from_callable(callable.clone_ref(py))
+        .map_err(|e| PyValueError::new_err(e.to_string()))?;
+    Ok(Box::new(move || {
+        let f = Python::attach(|py| callable.clone_ref(py));
+        PythonBrain::from_callable(f)
+            .map(|b| Box::new(b) as Box<dyn Policy>)
+            .map_err(|e| e.to_string())
+    }))
 }
 
-/// `ratelab cliff FLAGS…` in this process: per seed the highest control rate at which the
-/// pole falls, as CSV (`seed,falls_at_hz,balances_at_hz,runs`). Ctrl-C stops it.
+/// A factory of fresh brains, for the runs of a sweep or search (on several threads).
+type Brains = Box<dyn Fn() -> Result<Box<dyn Policy>, String> + Send + Sync>;
+
+/// `work` with the brains of `callable` when given, else of `policy` (a name, file or
+/// checkpoint: loaded once to check it, then for each run).
+///
+/// # Errors
+/// The brain cannot be loaded; `work`'s own.
+fn with_brains<T>(
+    callable: Option<&Brains>,
+    policy: &str,
+    work: impl FnOnce(ratelab::sweep::BrainFactory<'_>) -> anyhow::Result<T>,
+) -> anyhow::Result<T> {
+    match callable {
+        Some(brains) => work(&**brains),
+        None => work(&ratelab::sweep_spec::brain_factory(policy)?),
+    }
+}
+
+/// A sweep in this process, of `settings` (a dict of what every run shares, keyed by
+/// `ratelab.sweep`'s keywords) and `grid` (its lists: `clock`, `sensor_hz`, `control_hz`,
+/// `queue_depth`, `seeds`; see [`run_spec`]), with `brain` (a callable `f(obs) -> action`)
+/// as every run's brain when given: `(csv, failed)`, its table as `ratelab sweep --csv`
+/// writes it and the line of the first run that failed a node (or None). Runs go on every
+/// core; a callable brain is called under the GIL, one call at a time. Refusals name the
+/// keywords (`seeds: an empty list runs nothing …`). Ctrl-C stops it.
 #[pyfunction]
-fn cliff(py: Python<'_>, flags: Vec<String>) -> PyResult<String> {
-    interruptibly(py, move |stop| ratelab_lab::api::cliff(&flags, &stop))
+#[pyo3(signature = (settings, grid, brain=None))]
+fn sweep<'py>(
+    py: Python<'py>,
+    settings: &Bound<'py, PyDict>,
+    grid: &Bound<'py, PyDict>,
+    brain: Option<Py<PyAny>>,
+) -> PyResult<(String, Option<String>)> {
+    let spec = run_spec::sweep_from(settings, grid)?;
+    let brains = brain.map(|f| callable_brains(py, f)).transpose()?;
+    let done = interruptibly(py, move |stop| {
+        let rows = with_brains(brains.as_ref(), &spec.base.policy, |brain| {
+            spec.run(Speech::Keywords, brain, &|_, _| {}, &stop)
+        })?;
+        let mut csv = Vec::new();
+        ratelab::sweep::write_csv(&mut csv, &rows)?;
+        Ok((String::from_utf8(csv)?, ratelab::sweep::failed_line(&rows)))
+    });
+    // A failed run's Python exception is not kept for a later run.
+    drop(ratelab::python::take_failure());
+    done
+}
+
+/// A cliff search in this process, of `settings` (a dict of what every run shares, keyed by
+/// `ratelab.cliff`'s keywords) and `search` (`seeds`, `min_hz`, `max_hz`, `step_hz`; see
+/// [`run_spec`]), with `brain` (a callable `f(obs) -> action`) as every run's brain when
+/// given: per seed the highest control rate at which the pole falls, as CSV
+/// (`seed,falls_at_hz,balances_at_hz,runs`). Seeds go on every core; a callable brain is
+/// called under the GIL, one call at a time. Refusals name the keywords. Ctrl-C stops it.
+#[pyfunction]
+#[pyo3(signature = (settings, search, brain=None))]
+fn cliff<'py>(
+    py: Python<'py>,
+    settings: &Bound<'py, PyDict>,
+    search: &Bound<'py, PyDict>,
+    brain: Option<Py<PyAny>>,
+) -> PyResult<String> {
+    let spec = run_spec::cliff_from(settings, search)?;
+    let brains = brain.map(|f| callable_brains(py, f)).transpose()?;
+    let done = interruptibly(py, move |stop| {
+        let cliffs = with_brains(brains.as_ref(), &spec.base.policy, |brain| {
+            spec.run(Speech::Keywords, brain, &|_, _| {}, &stop)
+        })?;
+        let mut csv = Vec::new();
+        ratelab::sweep::write_cliffs_csv(&mut csv, &cliffs)?;
+        Ok(String::from_utf8(csv)?)
+    });
+    drop(ratelab::python::take_failure());
+    done
 }
 
 /// `ratelab exercise WHICH FLAGS…` in this process, with `prediction_json` (a JSON object)
@@ -278,9 +366,8 @@ fn run<'py>(
     let _given = ratelab::python::node::give_classes(nodes);
     let brain = match policy {
         Some(f) => Some(Box::new(
-            ratelab::python::brain::PythonBrain::from_callable(f)
-                .map_err(|e| PyValueError::new_err(e.to_string()))?,
-        ) as Box<dyn ratelab::policy::Policy>),
+            PythonBrain::from_callable(f).map_err(|e| PyValueError::new_err(e.to_string()))?,
+        ) as Box<dyn Policy>),
         None => None,
     };
     // An earlier run's failure is not this one's.

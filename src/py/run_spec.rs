@@ -1,22 +1,29 @@
 //! `ratelab.run`'s settings (a dict keyed by its keywords, made by the package's Python
-//! side) as the library's [`RunSpec`]: Python's half of a run's set-up. Every rule of the
-//! values is [`RunSpec::config`]'s; here only their types are read, and a wrong type is a
-//! `TypeError` naming the keyword.
+//! side) as the library's [`RunSpec`]: Python's half of a run's set-up; and `ratelab.sweep`'s
+//! and `ratelab.cliff`'s, the same dict for what every run shares and one more for the grid
+//! or the search, as the library's [`SweepSpec`] and [`CliffSpec`]. Every rule of the values
+//! is the library's ([`RunSpec::config`], [`SweepSpec::grid`], [`CliffSpec::config`]); here
+//! only their types are read, and a wrong type is a `TypeError` naming the keyword.
 //!
-//! The keys, each optional (left out: `ratelab run`'s default):
+//! The keys of a run's settings, each optional (left out: `ratelab run`'s default):
 //! `graph` (str), `clock` ("real" | "virtual"), `seed` (int ≥ 0), `duration_s`,
 //! `control_hz`, `sensor_hz` (float), `queue_depth` (int), `rate` ([(node, hz)]),
 //! `depth` ([(topic, n)]), `qos`, `link` ([(topic, "key=value,…")]), `lease_ms`
 //! ([(node, ms)]), `stall` ([(node, at_s, for_s)]), `kill` ([(node, at_s)]), `compute_ms`
 //! ([(node, "30" | "30±5")]), `executor` (str), `phase_offset_ms` ([float]), `policy`
-//! (str), `record`, `out` (str), `force` (bool), `trace_every` (int ≥ 1).
+//! (str), `record`, `out` (str), `force` (bool), `trace_every` (int ≥ 1). A sweep's and a
+//! search's take those of [`SHARED_KEYS`] (a search's `sensor_hz` and `queue_depth` too); a
+//! grid's keys are `clock` ([str]), `sensor_hz`, `control_hz` ([float]), `queue_depth`,
+//! `seeds` ([int]), a search's `seeds` ([int]), `min_hz`, `max_hz`, `step_hz` (float).
 
 use pyo3::exceptions::{PyTypeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
+use ratelab::config::ClockKind;
 use ratelab::executor::{ComputeTime, ExecutorOverride};
 use ratelab::qos::Fault;
 use ratelab::run_spec::RunSpec;
+use ratelab::sweep_spec::{CliffSpec, SweepSpec};
 use ratelab::time::{Nanos, MAX_DURATION_S};
 use std::path::PathBuf;
 
@@ -45,6 +52,66 @@ pub const KEYS: [&str; 22] = [
     "force",
     "trace_every",
 ];
+
+/// The keys of a run's settings a sweep's and a cliff search's take: what every one of their
+/// runs shares (the seed, clock and chain's rates are the grid's or the search's; nothing
+/// is written).
+pub const SHARED_KEYS: [&str; 13] = [
+    "graph",
+    "duration_s",
+    "rate",
+    "depth",
+    "qos",
+    "link",
+    "lease_ms",
+    "stall",
+    "kill",
+    "compute_ms",
+    "executor",
+    "phase_offset_ms",
+    "policy",
+];
+
+/// A cliff search's shared keys: [`SHARED_KEYS`], and the sensor's rate and queue depth it
+/// keeps for every run.
+const CLIFF_KEYS: [&str; 15] = [
+    "graph",
+    "duration_s",
+    "rate",
+    "depth",
+    "qos",
+    "link",
+    "lease_ms",
+    "stall",
+    "kill",
+    "compute_ms",
+    "executor",
+    "phase_offset_ms",
+    "policy",
+    "sensor_hz",
+    "queue_depth",
+];
+
+/// A grid's keys ([`sweep_from`]).
+const GRID_KEYS: [&str; 5] = ["clock", "sensor_hz", "control_hz", "queue_depth", "seeds"];
+
+/// A search's keys ([`cliff_from`]).
+const SEARCH_KEYS: [&str; 4] = ["seeds", "min_hz", "max_hz", "step_hz"];
+
+/// Refuse a key of `settings` not among `keys`: a `TypeError` naming it, `function` and the
+/// keys it takes.
+fn known_keys(settings: &Bound<'_, PyDict>, function: &str, keys: &[&str]) -> PyResult<()> {
+    for key in settings.keys() {
+        let key: String = key.extract()?;
+        if !keys.contains(&key.as_str()) {
+            return Err(PyTypeError::new_err(format!(
+                "{function}() got an unexpected setting '{key}' (settings: {})",
+                keys.join(", ")
+            )));
+        }
+    }
+    Ok(())
+}
 
 /// The value of `key` in `settings`, read as `T`; `None` when it is left out or None.
 ///
@@ -90,15 +157,12 @@ fn fault_time(key: &str, node: &str, secs: f64) -> PyResult<Nanos> {
 /// no setting can take (a negative seed, a compute time or executor that does not parse,
 /// a stall of 0 s).
 pub fn from_settings(settings: &Bound<'_, PyDict>) -> PyResult<RunSpec> {
-    for key in settings.keys() {
-        let key: String = key.extract()?;
-        if !KEYS.contains(&key.as_str()) {
-            return Err(PyTypeError::new_err(format!(
-                "run() got an unexpected setting '{key}' (settings: {})",
-                KEYS.join(", ")
-            )));
-        }
-    }
+    known_keys(settings, "run", &KEYS)?;
+    read_spec(settings)
+}
+
+/// `settings` as a [`RunSpec`], its keys already known.
+fn read_spec(settings: &Bound<'_, PyDict>) -> PyResult<RunSpec> {
     let mut spec = RunSpec::default();
     let g = &mut spec.graph;
     g.file = get::<PathBuf>(settings, "graph", "a path")?;
@@ -189,4 +253,106 @@ fn read_run(settings: &Bound<'_, PyDict>, spec: &mut RunSpec) -> PyResult<()> {
             })?;
     }
     Ok(())
+}
+
+/// The whole numbers of `key` in `settings` as `T` (seeds, depths); `None` when left out.
+///
+/// # Errors
+/// `TypeError` for a value that is not a list of ints; `ValueError` for one `T` cannot hold
+/// (negative), naming the key and the value.
+fn wholes<T: TryFrom<i128>>(
+    settings: &Bound<'_, PyDict>,
+    key: &str,
+    what: &str,
+) -> PyResult<Option<Vec<T>>> {
+    let Some(values) = get::<Vec<i128>>(settings, key, "a list of ints")? else {
+        return Ok(None);
+    };
+    values
+        .into_iter()
+        .map(|v| {
+            T::try_from(v)
+                .map_err(|_| PyValueError::new_err(format!("{key} must be {what}, got {v}")))
+        })
+        .collect::<PyResult<Vec<T>>>()
+        .map(Some)
+}
+
+/// The `seeds` of `settings` (each in 0..=u64::MAX); `None` when left out.
+fn seeds(settings: &Bound<'_, PyDict>) -> PyResult<Option<Vec<u64>>> {
+    wholes(
+        settings,
+        "seeds",
+        &format!("whole numbers in 0..={}", u64::MAX),
+    )
+}
+
+/// `ratelab.sweep`'s settings as a [`SweepSpec`]: `settings` what every run shares (the keys
+/// of [`SHARED_KEYS`]), `grid` the grid's lists (keys left out take `ratelab sweep`'s
+/// defaults, [`SweepSpec::default`]).
+///
+/// # Errors
+/// As [`from_settings`]; an unknown key of either dict, a clock that is neither `real` nor
+/// `virtual`, a negative seed or depth.
+pub fn sweep_from(settings: &Bound<'_, PyDict>, grid: &Bound<'_, PyDict>) -> PyResult<SweepSpec> {
+    known_keys(settings, "sweep", &SHARED_KEYS)?;
+    known_keys(grid, "sweep", &GRID_KEYS)?;
+    let mut spec = SweepSpec {
+        base: read_spec(settings)?,
+        ..SweepSpec::default()
+    };
+    if let Some(clocks) = get::<Vec<String>>(grid, "clock", "a list of 'real' or 'virtual'")? {
+        spec.clocks = clocks
+            .iter()
+            .map(|c| {
+                c.parse::<ClockKind>().map_err(|_| {
+                    PyValueError::new_err(format!("clock must be 'real' or 'virtual', got {c:?}"))
+                })
+            })
+            .collect::<PyResult<_>>()?;
+    }
+    if let Some(hz) = get(grid, "sensor_hz", "a list of rates in Hz")? {
+        spec.sensor_hz = hz;
+    }
+    if let Some(hz) = get(grid, "control_hz", "a list of rates in Hz")? {
+        spec.control_hz = hz;
+    }
+    if let Some(depths) = wholes(grid, "queue_depth", "at least 1")? {
+        spec.queue_depth = depths;
+    }
+    if let Some(seeds) = seeds(grid)? {
+        spec.seeds = seeds;
+    }
+    Ok(spec)
+}
+
+/// `ratelab.cliff`'s settings as a [`CliffSpec`]: `settings` what every run shares (the keys
+/// of [`SHARED_KEYS`], `sensor_hz` and `queue_depth`), `search` the seeds and the range
+/// (keys left out take `ratelab cliff`'s defaults, [`CliffSpec::default`]).
+///
+/// # Errors
+/// As [`from_settings`]; an unknown key of either dict, a negative seed.
+pub fn cliff_from(settings: &Bound<'_, PyDict>, search: &Bound<'_, PyDict>) -> PyResult<CliffSpec> {
+    known_keys(settings, "cliff", &CLIFF_KEYS)?;
+    known_keys(search, "cliff", &SEARCH_KEYS)?;
+    let mut spec = CliffSpec::default();
+    let defaults = spec.base.clone();
+    spec.base = read_spec(settings)?;
+    // Left out, the command line's: sensor 50 Hz, depth 1.
+    spec.base.sensor_hz = spec.base.sensor_hz.or(defaults.sensor_hz);
+    spec.base.queue_depth = spec.base.queue_depth.or(defaults.queue_depth);
+    spec.base.clock = defaults.clock;
+    if let Some(seeds) = seeds(search)? {
+        spec.seeds = seeds;
+    }
+    for (key, field) in [
+        ("min_hz", &mut spec.min_hz),
+        ("max_hz", &mut spec.max_hz),
+        ("step_hz", &mut spec.step_hz),
+    ] {
+        if let Some(hz) = get(search, key, "a rate in Hz")? {
+            *field = hz;
+        }
+    }
+    Ok(spec)
 }

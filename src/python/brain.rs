@@ -17,13 +17,15 @@
 //! exception or a wrong return value fails the policy node at that tick (see
 //! `ratelab::python`).
 
-use super::{describe, start, support, CallbackGuard, PythonError, MAX_SCRIPT_BYTES};
-use crate::plant::{Action, Observation};
-use crate::policy::Policy;
+use super::{
+    describe, describe_failure, start, support, CallbackGuard, PythonError, MAX_SCRIPT_BYTES,
+};
 use pyo3::prelude::*;
+use ratelab_core::plant::{Action, Observation};
+use ratelab_runtime::policy::Policy;
 use std::sync::atomic::{AtomicU64, Ordering};
 
-pub use crate::interpreter::{parse_spec, DEFAULT_FUNCTION};
+pub use ratelab_runtime::interpreter::{parse_spec, DEFAULT_FUNCTION};
 
 /// The cost of calling into Python once per tick, as `ratelab bench` reports it: `calls`
 /// calls of an empty brain (`def act(obs): return 0.0`) through [`PythonBrain`] (the
@@ -34,12 +36,12 @@ pub use crate::interpreter::{parse_spec, DEFAULT_FUNCTION};
 /// [`PythonError`] when the interpreter or NumPy is not available.
 pub fn call_cost(calls: usize) -> Result<(u64, u64), PythonError> {
     let mut brain = PythonBrain::from_source("<bench>", "def act(obs):\n    return 0.0\n", "act")?;
-    let mut times = crate::metrics::LatencyStats::default();
+    let mut times = ratelab_core::metrics::LatencyStats::default();
     let obs = [0.0, 0.0, 1.0, 0.0, 0.0];
     for _ in 0..calls.max(1) {
         let start = std::time::Instant::now();
         std::hint::black_box(brain.act(std::hint::black_box(&obs)));
-        times.record(crate::time::Nanos::from(start.elapsed()));
+        times.record(ratelab_core::time::Nanos::from(start.elapsed()));
     }
     let q = |p: f64| times.quantile(p).map_or(0, |n| n.0);
     Ok((q(0.5), q(0.99)))
@@ -136,16 +138,17 @@ impl PythonBrain {
 
 /// Read a learner's script: a regular file, bounded, UTF-8 (Python's default encoding).
 pub(crate) fn read_script(script: &str) -> Result<String, PythonError> {
-    let bytes = crate::input::read_regular_file(std::path::Path::new(script), MAX_SCRIPT_BYTES)
-        .map_err(|e| {
-            let line = format!("cannot read Python script {e}");
-            PythonError::Input(match e {
-                crate::input::InputError::TooLarge { .. } => {
-                    ratelab_core::limits::refusal(line, "MAX_SCRIPT_BYTES")
-                }
-                _ => line,
-            })
-        })?;
+    let bytes =
+        ratelab_core::input::read_regular_file(std::path::Path::new(script), MAX_SCRIPT_BYTES)
+            .map_err(|e| {
+                let line = format!("cannot read Python script {e}");
+                PythonError::Input(match e {
+                    ratelab_core::input::InputError::TooLarge { .. } => {
+                        ratelab_core::limits::refusal(line, "MAX_SCRIPT_BYTES")
+                    }
+                    _ => line,
+                })
+            })?;
     String::from_utf8(bytes).map_err(|e| {
         let upto = &e.as_bytes()[..e.utf8_error().valid_up_to()];
         let line = upto.iter().filter(|b| **b == b'\n').count() + 1;
@@ -164,7 +167,7 @@ impl Policy for PythonBrain {
             self.call
                 .call1(py, (obs,))
                 .and_then(|v| v.extract::<f64>(py))
-                .map_err(|e| describe(py, &e, &self.script))
+                .map_err(|e| describe_failure(py, &e, &self.script))
         });
         match result {
             // f64 of a float32 is exact, and so is the way back. A non-finite command

@@ -60,9 +60,9 @@ pub fn initialize() -> Result<bool, String> {
     unsafe { start_interpreter(&home, &executable) }.map_err(|e| {
         format!(
             "Python {major}.{minor} ({}, home {}) cannot start: {}",
-            crate::text::printable(&library.to_string_lossy()),
-            crate::text::printable(&home.to_string_lossy()),
-            crate::text::printable(&e)
+            ratelab_core::text::printable(&library.to_string_lossy()),
+            ratelab_core::text::printable(&home.to_string_lossy()),
+            ratelab_core::text::printable(&e)
         )
     })?;
     Ok(true)
@@ -87,7 +87,7 @@ pub fn run_startup(py: Python<'_>, run_site: bool) -> Result<(), String> {
     .and_then(|w| w.extract::<Vec<String>>())
     .map_err(|e| format!("Python's start-up failed: {e}"))?;
     for w in warnings {
-        eprintln!("[ratelab] warning: {}", crate::text::printable(&w));
+        eprintln!("[ratelab] warning: {}", ratelab_core::text::printable(&w));
     }
     Ok(())
 }
@@ -167,12 +167,12 @@ fn home(library: &Path, major: u32, minor: u32) -> Result<PathBuf, String> {
     let pythonhome = set.map_or_else(String::new, |h| {
         format!(
             ", nor does PYTHONHOME={}",
-            crate::text::printable(&h.to_string_lossy())
+            ratelab_core::text::printable(&h.to_string_lossy())
         )
     });
     Err(format!(
         "ratelab embeds Python {major}.{minor} from {}, but no folder above it holds that Python's standard library (lib/python{major}.{minor}/os.py){pythonhome}: reinstall that Python, or rebuild ratelab with a complete one (scripts/setup-python.sh)",
-        crate::text::printable(&library.to_string_lossy()),
+        ratelab_core::text::printable(&library.to_string_lossy()),
     ))
 }
 
@@ -207,8 +207,8 @@ fn environment_packages(major: u8, minor: u8) -> Vec<String> {
         // An environment of another Python version: say so rather than guess.
         eprintln!(
             "[ratelab] warning: {var}={} has no {} (ratelab embeds Python {major}.{minor}); its packages are not importable",
-            crate::text::printable(&env.to_string_lossy()),
-            crate::text::printable(&dir.to_string_lossy()),
+            ratelab_core::text::printable(&env.to_string_lossy()),
+            ratelab_core::text::printable(&dir.to_string_lossy()),
         );
         return Vec::new();
     }

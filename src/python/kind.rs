@@ -2,13 +2,13 @@
 //! the interpreter the runtime calls to make them ([`Embedded`], installed by [`crate::install`]).
 
 use crate::brain::PythonBrain;
-use crate::core_node::Flow;
-use crate::graph::kind::{BuildContext, PythonCode, Work};
-use crate::interpreter::Interpreter;
 use crate::node::PythonNode;
-use crate::policy::Policy;
-use crate::rate::Rate;
-use crate::time::Nanos;
+use ratelab_core::node::Flow;
+use ratelab_core::rate::Rate;
+use ratelab_core::time::Nanos;
+use ratelab_runtime::graph::kind::{BuildContext, PythonCode, Work};
+use ratelab_runtime::interpreter::Interpreter;
+use ratelab_runtime::policy::Policy;
 
 /// The embedded interpreter (PyO3) as the runtime calls it.
 pub struct Embedded;

@@ -16,7 +16,10 @@
 //! - **Errors are one line**, `FILE:LINE: ExceptionType: message`, at the innermost frame
 //!   in the learner's own folder (`support.py` formats them). A callback that raises
 //!   mid-run panics with that line; the scheduler catches it and the run ends as
-//!   "node 'X' failed" at that instant (`ratelab::scheduler::EndReason::NodeFailed`).
+//!   "node 'X' failed" at that instant (`ratelab::scheduler::EndReason::NodeFailed`). A
+//!   program that asks ([`log_failures`]: the terminal lab) also gets each callback's
+//!   failure in the run's text log, that line carrying the learner's frames and the whole
+//!   traceback (`ratelab::textlog::emit_failure`).
 //! - **Callbacks that never return.** Every call into learners' code is registered
 //!   ([`CallbackGuard`]); a watchdog thread warns once when one has overrun by far: a
 //!   node's callbacks after [`OVERRUN_PERIODS`] of its periods, a brain's (and any loading)
@@ -24,25 +27,21 @@
 //!   inside the ones still running (`PyThreadState_SetAsyncExc`), so a `while True: pass`
 //!   cannot hang the run. The lab tries saved code on threads of their own
 //!   ([`enter_trial`]): their calls are not the live run's, and a newer save interrupts
-//!   them ([`interrupt_trial`]).
+//!   them ([`interrupt_trial`]); its first Ctrl-C interrupts the live run's hung calls
+//!   alone ([`interrupt_hung_callbacks`]).
 //!
 //! This is the Python layer, a crate above the runtime: the runtime reaches it through the
 //! interpreter it installs ([`install`], the runtime's `interpreter` module), so changing it
 //! rebuilds only this crate and those above. [`kind`] is that interpreter.
+#![warn(missing_docs)]
 
 pub mod brain;
 pub mod embed;
 pub mod kind;
 pub mod node;
 
-// The layers below, under their own names (`crate::graph`, `crate::time`, …).
-use ratelab_core::{
-    input, metrics, msg, node as core_node, plant, publisher, rate, text, textlog, time,
-};
-use ratelab_runtime::{graph, interpreter, policy};
-
 /// Install the embedded interpreter as the one Python nodes and brains run in (the
-/// runtime's `interpreter::install`); idempotent. `ratelab::init()` calls it.
+/// runtime's `ratelab_runtime::interpreter::install`); idempotent. `ratelab::init()` calls it.
 pub fn install() {
     ratelab_runtime::interpreter::install(&kind::Embedded);
 }
@@ -117,7 +116,7 @@ pub fn host() {
 }
 
 /// While this lives, what Python code writes to `sys.stdout`/`sys.stderr` goes to the run's
-/// text log ([`crate::textlog`]), as in the `ratelab` binary; dropping it puts the streams
+/// text log ([`ratelab_core::textlog`]), as in the `ratelab` binary; dropping it puts the streams
 /// back. For a host's interpreter ([`host`]); call it with the interpreter started.
 pub struct OutputCapture(Option<Py<PyAny>>);
 
@@ -188,15 +187,15 @@ pub fn start() -> Result<(), PythonError> {
 
 /// `_ratelab_support._log(level, text, node=None, caller=None)`: a line (or lines) a
 /// learner's code wrote (`print`, `sys.stderr`, a warning), to the run's text log
-/// ([`crate::textlog`]), stamped with the calling thread's tick, or with `node` (a logger's
+/// ([`ratelab_core::textlog`]), stamped with the calling thread's tick, or with `node` (a logger's
 /// own) when given. With `caller`, `(file, function, line)` of the frame that called a
 /// node's logger (`get_logger().info(text)`), `text` is that logger's message, one line:
 /// shown with its level word, and on `/rosout` alone with its caller
-/// ([`crate::textlog::emit_logged`]).
+/// ([`ratelab_core::textlog::emit_logged`]).
 #[pyfunction]
 #[pyo3(name = "_log", signature = (level, text, node=None, caller=None))]
 fn log_line(level: &str, text: &str, node: Option<&str>, caller: Option<(String, String, u32)>) {
-    use crate::textlog::{emit, emit_for, emit_logged, Level, Logged};
+    use ratelab_core::textlog::{emit, emit_for, emit_logged, Level, Logged};
     let level = match level {
         "info" => Level::Info,
         "error" => Level::Error,
@@ -216,7 +215,7 @@ fn log_line(level: &str, text: &str, node: Option<&str>, caller: Option<(String,
                 },
             );
         }
-        (Some(n), None) => emit_for(Some(n), crate::textlog::now(), level, text),
+        (Some(n), None) => emit_for(Some(n), ratelab_core::textlog::now(), level, text),
         (None, None) => emit(level, text),
     }
 }
@@ -253,13 +252,64 @@ pub fn describe(py: Python<'_>, err: &PyErr, script: &str) -> String {
         // A callback that never returned, stopped by Ctrl-C: say it hung, and where it was.
         Some(ran) => format!(
             "{}ran {:.1} s without returning; Ctrl-C interrupted it at {}",
-            crate::metrics::HUNG,
+            ratelab_core::metrics::HUNG,
             ran.as_secs_f64(),
             line.strip_suffix(": KeyboardInterrupt").unwrap_or(&line)
         ),
         None => line,
     };
-    crate::text::printable(&line).into_owned()
+    ratelab_core::text::printable(&line).into_owned()
+}
+
+/// Set by [`log_failures`].
+static FAILURE_ENTRIES: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+
+/// From now on (`on`), say each exception a callback raises (a Python node's tick, a brain's
+/// call) in the run's text log as well: one line, its description, carrying the learner's
+/// frames and the whole traceback (`ratelab::textlog::emit_failure`), which the terminal
+/// lab's log pane shows. Off (the default), a failure is said once, where the run ends (a
+/// headless run's summary, the Python package's exception).
+pub fn log_failures(on: bool) {
+    FAILURE_ENTRIES.store(on, std::sync::atomic::Ordering::Relaxed);
+}
+
+/// [`describe`] of an exception `err` a callback of `script` raised (the calling thread is
+/// in its node's tick, [`ratelab_core::textlog::enter`]); with [`log_failures`] on, also said in
+/// the run's text log with its traceback.
+pub(crate) fn describe_failure(py: Python<'_>, err: &PyErr, script: &str) -> String {
+    let line = describe(py, err, script);
+    if FAILURE_ENTRIES.load(std::sync::atomic::Ordering::Relaxed) {
+        ratelab_core::textlog::emit_failure(&line, traceback_of(py, err, script));
+    }
+    line
+}
+
+/// The learner's frames of `err` (raised by code of `script`) and its whole traceback, as
+/// `support.py`'s `traceback_of` gives them (none when it cannot).
+fn traceback_of(py: Python<'_>, err: &PyErr, script: &str) -> ratelab_core::textlog::Traceback {
+    type Frames = Vec<(String, u32, String, String)>;
+    let got = support(py).ok().and_then(|m| {
+        m.call_method1("traceback_of", (err.value(py), script, err.traceback(py)))
+            .and_then(|t| t.extract::<(Frames, Vec<String>)>())
+            .ok()
+    });
+    let Some((frames, lines)) = got else {
+        return ratelab_core::textlog::Traceback::default();
+    };
+    ratelab_core::textlog::Traceback {
+        frames: frames
+            .into_iter()
+            .map(
+                |(file, line, function, code)| ratelab_core::textlog::Frame {
+                    file,
+                    line,
+                    function,
+                    code,
+                },
+            )
+            .collect(),
+        lines,
+    }
 }
 
 /// How long this thread's call into learners' code had run when [`interrupt_callbacks`]
@@ -330,6 +380,57 @@ pub fn interrupt_trial(thread: u64) -> bool {
     raised.is_ok()
 }
 
+/// Raise `KeyboardInterrupt` in every call into learners' code of the live run (a trial's,
+/// [`enter_trial`], is not one) that has run `at_least` without returning: the lab's first
+/// Ctrl-C, which interrupts a hung callback as Ctrl-C does in a headless run (the call fails
+/// its node, saying where it was: [`describe`]). Returns who was interrupted, as the
+/// warnings name them (`node 'policy' (p.py)`); empty when no call had hung. The caller
+/// never waits for the interpreter: the exception is raised from a thread of its own (a busy
+/// loop holds the interpreter's lock for up to its switch interval, C code for as long as it
+/// runs).
+pub fn interrupt_hung_callbacks(at_least: Duration) -> Vec<String> {
+    if SUPPORT.get().is_none() {
+        return Vec::new();
+    }
+    let mut who = Vec::new();
+    let threads: Vec<u64> = lock_running()
+        .iter_mut()
+        .filter(|(_, r)| !r.trial && r.since.elapsed() >= at_least)
+        .map(|(t, r)| {
+            r.interrupted = true;
+            who.push(r.what.clone());
+            *t
+        })
+        .collect();
+    if threads.is_empty() {
+        return who;
+    }
+    let _ = std::thread::Builder::new()
+        .name("interrupt-hung".into())
+        .spawn(move || {
+            Python::attach(|py| {
+                let exc = py.get_type::<pyo3::exceptions::PyKeyboardInterrupt>();
+                for t in threads {
+                    // SAFETY: attached to the interpreter; an id that no longer runs is
+                    // ignored.
+                    unsafe {
+                        pyo3::ffi::PyThreadState_SetAsyncExc(t as _, exc.as_ptr());
+                    }
+                }
+            });
+        });
+    who
+}
+
+/// Whether a call into learners' code of a save's trial ([`enter_trial`]) has run
+/// `at_least` without returning: not the live run's, which the lab's first Ctrl-C then says
+/// (a newer save cancels the trial, [`interrupt_trial`]).
+pub fn trial_hung(at_least: Duration) -> bool {
+    lock_running()
+        .values()
+        .any(|r| r.trial && r.since.elapsed() >= at_least)
+}
+
 /// A call into learners' code in progress: what the watchdog knows of it.
 struct Running {
     /// Who is called (`brain policy.py:act`), for the messages.
@@ -344,7 +445,8 @@ struct Running {
     overrun_text: String,
     /// Already reported as overrunning.
     warned: bool,
-    /// Interrupted by [`interrupt_callbacks`] (Ctrl-C) or [`interrupt_trial`].
+    /// Interrupted by [`interrupt_callbacks`] (Ctrl-C), [`interrupt_hung_callbacks`] (the
+    /// lab's Ctrl-C) or [`interrupt_trial`].
     interrupted: bool,
     /// A trial's call, beside the live run ([`enter_trial`]).
     trial: bool,
@@ -380,7 +482,7 @@ impl CallbackGuard {
 
     /// Register the calling thread as running a tick of a node whose period is `period`:
     /// reported after [`OVERRUN_PERIODS`] periods without returning.
-    pub fn enter_tick(what: &str, node: &str, period: crate::time::Nanos) -> CallbackGuard {
+    pub fn enter_tick(what: &str, node: &str, period: ratelab_core::time::Nanos) -> CallbackGuard {
         let overrun = Duration::from_nanos(period.0.saturating_mul(u64::from(OVERRUN_PERIODS)));
         Self::enter_with(
             what,
@@ -431,7 +533,7 @@ pub struct Callback {
     /// b.py:act()`).
     pub what: String,
     /// The node whose tick it is; `None` for a brain's call (the node that runs the run's
-    /// brain: [`crate::graph::kind::KindDef::uses_brain`]) or a script's loading.
+    /// brain: [`ratelab_runtime::graph::kind::KindDef::uses_brain`]) or a script's loading.
     pub node: Option<String>,
     /// How long it has run so far (wall time).
     pub running_for: Duration,
@@ -470,10 +572,10 @@ fn start_watchdog() {
                     if r.since.elapsed() >= r.overrun && !r.warned {
                         r.warned = true;
                         // To the run's text log: the lab's pane, not over its screen.
-                        crate::textlog::emit_for(
+                        ratelab_core::textlog::emit_for(
                             r.node.as_deref(),
                             None,
-                            crate::textlog::Level::Warn,
+                            ratelab_core::textlog::Level::Warn,
                             &format!(
                                 "[ratelab] warning: {} has not returned after {} (Ctrl-C interrupts it)",
                                 r.what, r.overrun_text
@@ -539,7 +641,7 @@ type RegistryRow = (
 );
 
 fn message_registry() -> Vec<RegistryRow> {
-    crate::msg::registered()
+    ratelab_core::msg::registered()
         .into_iter()
         .map(|t| {
             (
@@ -550,10 +652,10 @@ fn message_registry() -> Vec<RegistryRow> {
                     .iter()
                     .map(|f| {
                         let kind = match f.kind {
-                            crate::msg::FieldKind::Number => "number",
-                            crate::msg::FieldKind::Integer => "integer",
-                            crate::msg::FieldKind::Text => "text",
-                            crate::msg::FieldKind::Bytes => "bytes",
+                            ratelab_core::msg::FieldKind::Number => "number",
+                            ratelab_core::msg::FieldKind::Integer => "integer",
+                            ratelab_core::msg::FieldKind::Text => "text",
+                            ratelab_core::msg::FieldKind::Bytes => "bytes",
                         };
                         (f.name, f.unit, f.doc, kind)
                     })
@@ -565,7 +667,7 @@ fn message_registry() -> Vec<RegistryRow> {
 }
 
 /// Make `import ratelab` give every registered message type's class (and `Time`), as a
-/// Python node sees them ([`crate::msg`]: the one definition of each type).
+/// Python node sees them ([`ratelab_core::msg`]: the one definition of each type).
 ///
 /// # Errors
 /// The support module's error: a built-in class that does not match the registry.

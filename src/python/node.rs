@@ -44,13 +44,13 @@
 //! publish of the wrong message type or a parameter that does not exist fails the node
 //! at that tick, naming `FILE:LINE` of the raising frame and the exception.
 
-use super::{describe, start, support, CallbackGuard, PythonError};
-use crate::graph::kind::{BuildContext, PythonCode};
-use crate::msg::{AnyTopic, FieldKind, Value};
-use crate::publisher::Outbox;
-use crate::time::Nanos;
+use super::{describe, describe_failure, start, support, CallbackGuard, PythonError};
 use pyo3::prelude::*;
 use pyo3::types::{PyBytes, PyDict, PyList, PyTuple};
+use ratelab_core::msg::{AnyTopic, FieldKind, Value};
+use ratelab_core::publisher::Outbox;
+use ratelab_core::time::Nanos;
+use ratelab_runtime::graph::kind::{BuildContext, PythonCode};
 
 /// A message's values as they cross into Python: numbers (`float`), text (`str`) and bytes
 /// (`bytes`, which NumPy reads with `np.frombuffer`).
@@ -181,7 +181,7 @@ impl PythonNode {
     /// something that is not a message of its topic's type.
     pub fn tick(&mut self, now: Nanos, period: Nanos) -> Result<(), TickError> {
         // What the node's code writes meanwhile is stamped with this tick.
-        let _stamp = crate::textlog::enter(&self.name, now);
+        let _stamp = ratelab_core::textlog::enter(&self.name, now);
         // What each input delivers now (by its QoS), if new: (input index, fields).
         let delivered: Vec<(usize, Fields)> = self
             .inputs
@@ -197,7 +197,7 @@ impl PythonNode {
             })
             .collect();
         let outputs = &self.outputs;
-        let published: Vec<(usize, crate::msg::MsgData)> = Python::attach(|py| {
+        let published: Vec<(usize, ratelab_core::msg::MsgData)> = Python::attach(|py| {
             let _running = CallbackGuard::enter_tick(&self.what, &self.name, period);
             let delivered: Vec<(usize, Bound<'_, PyTuple>)> = delivered
                 .iter()
@@ -206,7 +206,7 @@ impl PythonNode {
                     Ok((*i, to_python_values(py, kinds, values)?))
                 })
                 .collect::<PyResult<_>>()
-                .map_err(|e| TickError(describe(py, &e, &self.script)))?;
+                .map_err(|e| TickError(describe_failure(py, &e, &self.script)))?;
             self.runtime
                 .call_method1(py, "tick", (now.0, delivered))
                 .and_then(|out| {
@@ -223,7 +223,7 @@ impl PythonNode {
                         })
                         .collect()
                 })
-                .map_err(|e| TickError(describe(py, &e, &self.script)))
+                .map_err(|e| TickError(describe_failure(py, &e, &self.script)))
         })?;
         let origin = self.origin(now);
         for (output, data) in published {
@@ -256,7 +256,7 @@ fn read(t: &AnyTopic, now: Nanos) -> Option<(u64, Nanos, Fields)> {
 /// `int`, bytes copied once into a Python `bytes`.
 fn to_python_values<'py>(
     py: Python<'py>,
-    fields: &[crate::msg::Field],
+    fields: &[ratelab_core::msg::Field],
     values: &[Value],
 ) -> PyResult<Bound<'py, PyTuple>> {
     use pyo3::IntoPyObjectExt;
@@ -278,7 +278,7 @@ fn to_python_values<'py>(
 fn from_python_values(
     topic: &AnyTopic,
     values: &Bound<'_, PyTuple>,
-) -> PyResult<crate::msg::MsgData> {
+) -> PyResult<ratelab_core::msg::MsgData> {
     let ty = topic.msg_type();
     let values: Vec<Value> = ty
         .fields()

@@ -167,17 +167,37 @@ def describe(exc, script, tb=None):
     if isinstance(exc, SyntaxError) and exc.filename == script:
         return f"{script}:{exc.lineno}: {name}: {_one_line(exc.msg)}"
     frames = traceback.extract_tb(tb if tb is not None else exc.__traceback__)
-    folder = os.path.dirname(os.path.abspath(script))
-    mine = [
-        f
-        for f in frames
-        if not f.filename.startswith("<")  # ratelab's own frames (this module)
-        and os.path.dirname(os.path.abspath(f.filename)) == folder
-    ]
+    mine = _mine(frames, script)
     frame = (mine or frames or [None])[-1]
     where = _where(frame.filename, frame.lineno) if frame is not None else script
     message = _one_line(exc)
     return f"{where}: {name}: {message}" if message else f"{where}: {name}"
+
+
+def _mine(frames, script):
+    """The frames of `frames` in the learner's own files: those in the folder of `script`,
+    never ratelab's own (this module's, whose file name starts with `<`)."""
+    folder = os.path.dirname(os.path.abspath(script))
+    return [
+        f
+        for f in frames
+        if not f.filename.startswith("<")
+        and os.path.dirname(os.path.abspath(f.filename)) == folder
+    ]
+
+
+def traceback_of(exc, script, tb=None):
+    """What the lab's log pane shows of `exc`, raised in a callback of `script`, beside its
+    one line (`describe`): the learner's frames (as `describe` takes them), outermost first,
+    each `(file, line, function, code)`, and the whole traceback as Python prints it, line
+    by line. `tb` is its traceback (default: `exc.__traceback__`)."""
+    tb = tb if tb is not None else exc.__traceback__
+    mine = [
+        (f.filename, f.lineno or 0, f.name, (f.line or "").strip())
+        for f in _mine(traceback.extract_tb(tb), script)
+    ]
+    whole = "".join(traceback.format_exception(type(exc), exc, tb)).splitlines()
+    return mine, whole
 
 
 def load_module(script, source, module_name):

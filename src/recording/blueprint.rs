@@ -4,6 +4,10 @@
 //! QoS, executors and processes where the run has them; the events and the text logs), each
 //! plot's axis and legend placed so it reads at the viewer's usual sizes. Written with
 //! [`super::layout`]'s archetypes.
+//!
+//! Whatever the graph's size, no plot draws more than
+//! [`super::groups::MAX_SERIES_PER_VIEW`] series ([`plot`]); a large graph's bus and node
+//! graph are drawn by group ([`grouped_bus_tabs`], [`super::grouped`]).
 
 use super::*;
 
@@ -27,14 +31,15 @@ pub(super) fn label_top(hi: f64) -> f64 {
 }
 
 /// A y range with a margin around `[lo, hi]`, so no line sits on the plot's edge.
-pub(super) fn axis(lo: f64, hi: f64) -> bp::ScalarAxis {
+pub(super) fn padded(lo: f64, hi: f64) -> (f64, f64) {
     let pad = if hi > lo { (hi - lo) * 0.1 } else { 1.0 };
-    bp::ScalarAxis::new().with_range(rerun::components::Range1D::new(lo - pad, hi + pad))
+    (lo - pad, hi + pad)
 }
 
-/// A legend in `corner` (in place of [`plot`]'s top right).
+/// A legend in `corner` (in place of [`plot`]'s top right). The final layout may move it
+/// where the plot's series are not ([`super::legend::place_legends`]).
 pub(super) fn legend_at(view: ViewSpec, corner: bpc::Corner2D) -> ViewSpec {
-    view.property("PlotLegend", &bp::PlotLegend::new().with_corner(corner))
+    view.legend(corner)
 }
 
 /// Totals (counters that only grow, from 0 at the start) rise from bottom left to top
@@ -43,9 +48,10 @@ pub(super) fn totals(view: ViewSpec) -> ViewSpec {
     legend_at(view, bpc::Corner2D::LeftTop)
 }
 
-/// A time series view of the series `entities` (exact paths), its legend top right. Its y
-/// range spans `base` (a scale chosen up front) and, when the run is over, every value the
-/// series took (`extents`); with neither, rerun fits the data itself.
+/// A time series view of the series `entities` (exact paths; at most
+/// [`super::groups::MAX_SERIES_PER_VIEW`] of them: [`at_most_a_dozen`]), its legend top
+/// right. Its y range spans `base` (a scale chosen up front) and, when the run is over,
+/// every value the series took (`extents`); with neither, rerun fits the data itself.
 pub(super) fn plot(
     key: &str,
     name: &str,
@@ -53,6 +59,7 @@ pub(super) fn plot(
     base: Option<(f64, f64)>,
     extents: Option<&Extents>,
 ) -> ViewSpec {
+    let (entities, name) = at_most_a_dozen(entities, name, extents);
     let seen = extents.map(|ext| {
         entities
             .iter()
@@ -80,18 +87,44 @@ pub(super) fn plot(
     // follows.
     let view = ViewSpec::new(key, "TimeSeries", name)
         .contents(entities)
-        .property(
-            "PlotLegend",
-            &bp::PlotLegend::new().with_corner(bpc::Corner2D::RightTop),
-        )
+        .legend(bpc::Corner2D::RightTop)
         .property(
             "TimeAxis",
             &bp::TimeAxis::new().with_link(bpc::LinkAxis::LinkToGlobal),
         );
-    match range {
-        Some((lo, hi)) => view.property("ScalarAxis", &axis(lo, hi)),
+    match range.map(|(lo, hi)| padded(lo, hi)) {
+        Some((lo, hi)) => view.y_range(lo, hi),
         None => view,
     }
+}
+
+/// `entities` as a plot draws them, with its title: at most
+/// [`super::groups::MAX_SERIES_PER_VIEW`], whatever the graph's size. Past that, those that
+/// rose highest once the run is over (at the start, the first ones:
+/// [`super::groups::pick`]), the title saying how many of how many; the rest are recorded
+/// all the same, in the entity tree.
+fn at_most_a_dozen(
+    entities: Vec<String>,
+    name: &str,
+    extents: Option<&Extents>,
+) -> (Vec<String>, String) {
+    let n = entities.len();
+    if n <= super::groups::MAX_SERIES_PER_VIEW {
+        return (entities, name.to_string());
+    }
+    let largest = |i: usize| {
+        let e = entities[i].trim_start_matches('/');
+        extents.and_then(|x| x.get(e)).map(|&(_, hi)| hi)
+    };
+    let kept: Vec<String> = super::groups::pick(n, largest)
+        .into_iter()
+        .map(|i| entities[i].clone())
+        .collect();
+    let title = match extents {
+        Some(_) => format!("{name} · the {} highest of {n}", kept.len()),
+        None => format!("{name} · {} of {n}", kept.len()),
+    };
+    (kept, title)
 }
 
 /// The share of the middle column's height the pole-angle plot takes beside the latency's
@@ -125,12 +158,73 @@ pub(super) fn layout_for(shape: &GraphShape, cfg: &RunConfig, extents: Option<&E
         .map(|(share, v)| (share, Item::View(v)))
         .collect(),
     );
-    let column = |views: Vec<ViewSpec>| {
-        Item::Vertical(views.into_iter().map(|v| (1.0, Item::View(v))).collect())
+    let groups = super::groups::Groups::of(shape);
+    let (mut tabs, open) = concern_tabs(shape, groups.as_ref(), cfg, extents);
+    let events = ViewSpec::new("events", "TextLog", "events")
+        .contents(["/events"])
+        .property("TextLogColumns", &text_log_columns(cfg.clock, false));
+    tabs.push(("events".into(), Item::View(events)));
+    // What the nodes' code wrote (`log/<node>`), when it wrote anything: the final layout
+    // knows (a run whose nodes wrote nothing, as the chapter's, has no such view). The
+    // entity column names the node.
+    if extents.is_some_and(|e| e.contains_key(LOG_MARK)) {
+        let log = ViewSpec::new("log", "TextLog", "log: what the nodes' code wrote")
+            .contents(["/log/**"])
+            .property("TextLogColumns", &text_log_columns(cfg.clock, true));
+        tabs.push(("log".into(), Item::View(log)));
+    }
+    let when =
+        ViewSpec::new("when", "TextDocument", "when: the run's events in time").contents(["/when"]);
+    let (world, graph) = (world_view(), graph_view(shape, groups.as_ref()));
+    let summary = ViewSpec::new("summary", "TextDocument", "summary").contents(["/summary"]);
+    // A large graph's node graph gets the room its boxes take to read at the chapter's
+    // scale (two bands of up to four columns: `grouped`'s tests); a graph drawn node by
+    // node keeps its share.
+    let [world_share, graph_share, summary_share] = if groups.is_some() {
+        [0.30, 0.40, 0.30]
+    } else {
+        [0.38, 0.24, 0.38]
     };
-    let mut tabs: Vec<(String, Item)> = Vec::new();
-    let [published, msg_per_s, dropped] = bus_views(shape, extents);
-    tabs.push(("bus".into(), column(vec![published, dropped, msg_per_s])));
+
+    Item::Horizontal(vec![
+        (
+            0.30,
+            Item::Vertical(vec![
+                (world_share, Item::View(world)),
+                (graph_share, Item::View(graph)),
+                (summary_share, Item::View(summary)),
+            ]),
+        ),
+        (0.38, core),
+        (
+            0.32,
+            Item::Vertical(vec![(0.3, Item::View(when)), (0.7, Item::Tabs(tabs, open))]),
+        ),
+    ])
+}
+
+/// Views stacked in a column, each an equal share.
+fn column(views: Vec<ViewSpec>) -> Item {
+    Item::Vertical(views.into_iter().map(|v| (1.0, Item::View(v))).collect())
+}
+
+/// The right column's tabs, one per concern the run has (the bus; QoS and liveliness;
+/// executors; the real clock's lateness; processes), and the index of the one open: the
+/// run's own concern's (executors, else QoS, else processes, else the bus). A large graph's
+/// bus is drawn by group ([`grouped_bus_tabs`]), with its groups listed in a tab.
+fn concern_tabs(
+    shape: &GraphShape,
+    groups: Option<&super::groups::Groups>,
+    cfg: &RunConfig,
+    extents: Option<&Extents>,
+) -> (Vec<(String, Item)>, usize) {
+    let mut tabs: Vec<(String, Item)> = match groups {
+        None => {
+            let [published, msg_per_s, dropped] = bus_views(shape, extents);
+            vec![("bus".into(), column(vec![published, dropped, msg_per_s]))]
+        }
+        Some(groups) => grouped_bus_tabs(shape, groups, extents),
+    };
     // QoS counters only where a topic's QoS can make them count (or they did), and the
     // leased nodes' liveliness: the chapter's graph has neither.
     let qos = qos_series(shape, extents);
@@ -184,40 +278,145 @@ pub(super) fn layout_for(shape: &GraphShape, cfg: &RunConfig, extents: Option<&E
         tabs.push(("processes".into(), column(vec![wire])));
         tabs.len() - 1
     });
-    let events = ViewSpec::new("events", "TextLog", "events")
-        .contents(["/events"])
-        .property("TextLogColumns", &text_log_columns(cfg.clock, false));
-    tabs.push(("events".into(), Item::View(events)));
-    // What the nodes' code wrote (`log/<node>`), when it wrote anything: the final layout
-    // knows (a run whose nodes wrote nothing, as the chapter's, has no such view). The
-    // entity column names the node.
-    if extents.is_some_and(|e| e.contains_key(LOG_MARK)) {
-        let log = ViewSpec::new("log", "TextLog", "log: what the nodes' code wrote")
-            .contents(["/log/**"])
-            .property("TextLogColumns", &text_log_columns(cfg.clock, true));
-        tabs.push(("log".into(), Item::View(log)));
+    if groups.is_some() {
+        let doc = ViewSpec::new(
+            "groups",
+            "TextDocument",
+            "groups: the graph's nodes and topics by group, and where their own series are",
+        )
+        .contents([format!("/{}", super::groups::DOC_ENTITY)]);
+        tabs.push(("groups".into(), Item::View(doc)));
     }
-    let open = executors_tab.or(qos_tab).or(processes_tab).unwrap_or(0);
-    let when =
-        ViewSpec::new("when", "TextDocument", "when: the run's events in time").contents(["/when"]);
-    let (world, graph) = (world_view(), graph_view(shape));
-    let summary = ViewSpec::new("summary", "TextDocument", "summary").contents(["/summary"]);
+    (
+        tabs,
+        executors_tab.or(qos_tab).or(processes_tab).unwrap_or(0),
+    )
+}
 
-    Item::Horizontal(vec![
-        (
-            0.30,
-            Item::Vertical(vec![
-                (0.38, Item::View(world)),
-                (0.24, Item::View(graph)),
-                (0.38, Item::View(summary)),
-            ]),
-        ),
-        (0.38, core),
-        (
-            0.32,
-            Item::Vertical(vec![(0.3, Item::View(when)), (0.7, Item::Tabs(tabs, open))]),
-        ),
-    ])
+/// A large graph's bus ([`super::groups`]): a tab per page of topic groups, each with the
+/// three plots of the chapter's bus (published and dropped in all, msg/s), a group of a few
+/// topics drawn topic by topic and a larger one by its largest, median and smallest value;
+/// and once the run is over, the topics that dropped most, each by its own series, in a
+/// tab of their own.
+fn grouped_bus_tabs(
+    shape: &GraphShape,
+    groups: &super::groups::Groups,
+    extents: Option<&Extents>,
+) -> Vec<(String, Item)> {
+    use super::groups::{aggregate_entity, bus_pages, STATS};
+    let recorded = |q: &String| extents.is_none_or(|e| e.contains_key(&q[1..]));
+    let pages = bus_pages(groups);
+    let mut tabs = Vec::new();
+    for (p, page) in pages.iter().enumerate() {
+        let series = |measure: &str| -> Vec<String> {
+            page.iter()
+                .flat_map(|&g| {
+                    let group = &groups.topics[g];
+                    if group.aggregated() {
+                        STATS
+                            .iter()
+                            .map(|stat| format!("/{}", aggregate_entity(group, measure, stat)))
+                            .collect::<Vec<_>>()
+                    } else {
+                        group
+                            .members
+                            .iter()
+                            .map(|&i| format!("/bus/{}/{measure}", shape.topics[i].entity()))
+                            .collect()
+                    }
+                })
+                .filter(|q| recorded(q))
+                .collect()
+        };
+        let (key, of) = match (p, pages.len()) {
+            (_, 1) => (String::new(), String::new()),
+            (p, n) => (format!("-{}", p + 1), format!(" ({}/{n})", p + 1)),
+        };
+        let bus = |measure: &str, title: &str| {
+            let list = series(measure);
+            (!list.is_empty()).then(|| {
+                plot(
+                    &format!("bus-{measure}{key}"),
+                    &format!("{title}{of}"),
+                    list,
+                    extents.map(|_| (0.0, 0.0)),
+                    extents,
+                )
+            })
+        };
+        let views: Vec<ViewSpec> = [
+            bus("published", "bus: published (total)").map(totals),
+            bus(
+                "dropped",
+                "bus: dropped (total): older messages a full queue let go",
+            )
+            .map(totals),
+            bus("msg_per_s", "bus: msg/s (1 s window)")
+                .map(|v| legend_at(v, bpc::Corner2D::RightBottom)),
+        ]
+        .into_iter()
+        .flatten()
+        .collect();
+        if !views.is_empty() {
+            let title = if p == 0 {
+                "bus".to_string()
+            } else {
+                format!("bus {}", p + 1)
+            };
+            tabs.push((title, column(views)));
+        }
+    }
+    if let Some(views) = most_dropped_views(shape, extents) {
+        tabs.push(("bus: most drops".into(), column(views)));
+    }
+    tabs
+}
+
+/// Once the run is over, the [`super::groups::WORST_K`] topics that dropped most (none when
+/// none dropped), each by its own series: its drops, and its msg/s.
+fn most_dropped_views(shape: &GraphShape, extents: Option<&Extents>) -> Option<Vec<ViewSpec>> {
+    let ext = extents?;
+    let drops: Vec<(usize, f64)> = shape
+        .topics
+        .iter()
+        .enumerate()
+        .filter_map(|(i, t)| {
+            ext.get(&format!("bus/{}/dropped", t.entity()))
+                .map(|&(_, hi)| (i, hi))
+        })
+        .collect();
+    let worst = super::groups::worst(&drops, super::groups::WORST_K);
+    if worst.is_empty() {
+        return None;
+    }
+    let each = |measure: &str| -> Vec<String> {
+        worst
+            .iter()
+            .map(|&i| format!("/bus/{}/{measure}", shape.topics[i].entity()))
+            .filter(|q| ext.contains_key(&q[1..]))
+            .collect()
+    };
+    let mut views = vec![totals(plot(
+        "bus-worst-dropped",
+        &format!("bus: the {} topics that dropped most (total)", worst.len()),
+        each("dropped"),
+        Some((0.0, 0.0)),
+        extents,
+    ))];
+    let rates = each("msg_per_s");
+    if !rates.is_empty() {
+        views.push(legend_at(
+            plot(
+                "bus-worst-msg_per_s",
+                "bus: msg/s of the topics that dropped most",
+                rates,
+                Some((0.0, 0.0)),
+                extents,
+            ),
+            bpc::Corner2D::RightBottom,
+        ));
+    }
+    Some(views)
 }
 
 /// The pole angle against its fall limits, with the events' marks (changes above the
@@ -244,7 +443,9 @@ fn angle_view(extents: Option<&Extents>) -> ViewSpec {
         extents,
     ));
     // The legend top left: the marks run along the bottom, a fall ends the line at the
-    // right, and the pole starts near 0.
+    // right, and the pole starts near 0. Where the final layout finds no place off the
+    // pole's line for it (a run with many marks), it is hidden: the title names the
+    // series, and `when` the marks and their times.
     legend_at(
         plot(
             "angle",
@@ -255,6 +456,7 @@ fn angle_view(extents: Option<&Extents>) -> ViewSpec {
         ),
         bpc::Corner2D::LeftTop,
     )
+    .legend_optional()
 }
 
 /// Of `paths`, those the run recorded (every one at the start, when nothing is known yet):
@@ -351,43 +553,57 @@ fn cart_view(extents: Option<&Extents>) -> ViewSpec {
         Some((-RAIL_HALF_LENGTH_M, RAIL_HALF_LENGTH_M)),
         extents,
     )
-    .property(
-        "ScalarAxis",
-        &bp::ScalarAxis::new().with_range(rerun::components::Range1D::new(-half, half)),
-    )
+    .y_range(-half, half)
 }
 
 /// The executors' views: a lane per node raised while its tick holds a thread, each
 /// tick's response time, and the ticks its timer skipped.
 fn executor_views(shape: &GraphShape, extents: Option<&Extents>) -> [ViewSpec; 3] {
-    let lanes = shape.nodes.len().max(1) as f64;
+    // At most a dozen nodes, the same in the three plots: once the run is over, those whose
+    // timers skipped most (`groups::pick`); every node of a graph of a dozen or fewer.
+    let chosen = super::groups::pick(shape.nodes.len(), |i| {
+        let e = format!("nodes/{}/skipped_ticks", shape.nodes[i].name);
+        extents.and_then(|x| x.get(&e)).map(|&(_, hi)| hi)
+    });
+    let of = if chosen.len() == shape.nodes.len() {
+        String::new()
+    } else {
+        let why = if extents.is_some() {
+            ", those that skipped most"
+        } else {
+            ""
+        };
+        format!(" · {} of {} nodes{why}", chosen.len(), shape.nodes.len())
+    };
     let each = |series: &str| -> Vec<String> {
-        shape
-            .nodes
+        chosen
             .iter()
-            .map(|n| format!("/nodes/{}/{series}", n.name))
+            .map(|&i| format!("/nodes/{}/{series}", shape.nodes[i].name))
             .collect()
     };
     // The lanes' own range, never raised to a labelled step: their numbers are ranks, the
     // legend names the nodes.
+    let first = chosen.first().copied().unwrap_or(0) as f64;
+    let last = chosen.last().copied().unwrap_or(0) as f64;
+    let (lo, hi) = padded(first, last + LANE_BUSY);
     let timeline = plot(
         "executor-timeline",
-        "executor timeline: a lane per node, raised while its tick holds a thread",
+        &format!("executor timeline: a lane per node, raised while its tick holds a thread{of}"),
         each("executor_lane"),
         None,
         None,
     )
-    .property("ScalarAxis", &axis(0.0, lanes - 1.0 + LANE_BUSY));
+    .y_range(lo, hi);
     let response = plot(
         "response",
-        "response time (ms): a tick's release → its outputs published",
+        &format!("response time (ms): a tick's release → its outputs published{of}"),
         each("response_ms"),
         extents.map(|_| (0.0, 0.0)),
         extents,
     );
     let skipped = totals(plot(
         "skipped",
-        "skipped ticks (total): periods a node's timer let pass, its thread held",
+        &format!("skipped ticks (total): periods a node's timer let pass, its thread held{of}"),
         each("skipped_ticks"),
         extents.map(|_| (0.0, 1.0)),
         extents,
@@ -438,30 +654,36 @@ fn world_view() -> ViewSpec {
 }
 
 /// The node graph at the positions the recording gives it (no forces: it stays as laid
-/// out), each node and topic in its colour.
-fn graph_view(shape: &GraphShape) -> ViewSpec {
-    let (_, bounds) = graph_positions(shape);
-    ViewSpec::new(
-        "graph",
-        "Graph",
-        "node graph: node → /topic → node, coloured as in the plots",
-    )
-    .origin("/graph")
-    .property("VisualBounds2D", &bp::VisualBounds2D::new(bounds))
-    .property("ForceLink", &bp::ForceLink::new().with_enabled(false))
-    .property(
-        "ForceManyBody",
-        &bp::ForceManyBody::new().with_enabled(false),
-    )
-    .property(
-        "ForcePosition",
-        &bp::ForcePosition::new().with_enabled(false),
-    )
-    .property(
-        "ForceCollisionRadius",
-        &bp::ForceCollisionRadius::new().with_enabled(false),
-    )
-    .property("ForceCenter", &bp::ForceCenter::new().with_enabled(false))
+/// out), each node and topic in its colour; a large graph's a box per group of nodes and
+/// of topics ([`super::groups`]).
+fn graph_view(shape: &GraphShape, groups: Option<&super::groups::Groups>) -> ViewSpec {
+    let (bounds, title) = match groups {
+        None => (
+            graph_positions(shape).1,
+            "node graph: node → /topic → node, coloured as in the plots",
+        ),
+        Some(groups) => (
+            super::grouped::graph_positions(shape, groups).1,
+            "node graph by group: nodes ×count → /topics ×count → nodes",
+        ),
+    };
+    ViewSpec::new("graph", "Graph", title)
+        .origin("/graph")
+        .property("VisualBounds2D", &bp::VisualBounds2D::new(bounds))
+        .property("ForceLink", &bp::ForceLink::new().with_enabled(false))
+        .property(
+            "ForceManyBody",
+            &bp::ForceManyBody::new().with_enabled(false),
+        )
+        .property(
+            "ForcePosition",
+            &bp::ForcePosition::new().with_enabled(false),
+        )
+        .property(
+            "ForceCollisionRadius",
+            &bp::ForceCollisionRadius::new().with_enabled(false),
+        )
+        .property("ForceCenter", &bp::ForceCenter::new().with_enabled(false))
 }
 
 /// A text log view's columns: the run's timeline, then (when `entity` is shown) the entity,

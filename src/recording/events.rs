@@ -6,6 +6,12 @@
 //! reviewer reads first: the stock viewer labels a plot's time axis only at power-of-ten
 //! steps at least about 150 px apart, so a plot alone cannot say when something happened
 //! ("+0s" alone under a 10 s run at 1280×720).
+//!
+//! Every event is stamped on the run's one clock (a launch's: the launcher's run clock, as
+//! its lines state it) and listed in time order ([`in_time_order`]: stable, so events of one
+//! instant keep the order they were logged in, their causal order). Besides what the graph
+//! shows, a live session's own changes are events with marks ([`Recording::injected_fault`],
+//! [`Recording::clock_switched`], [`Recording::reloaded`], [`Recording::parameter_set`]).
 
 use super::*;
 
@@ -123,10 +129,20 @@ pub(super) struct EventList {
     legends: BTreeMap<Mark, String>,
 }
 
+/// Sort `rows` by their run time (`t` of each), stably: rows of one instant keep the order
+/// they came in (a process gone before its rejoin, both at one step's time).
+pub(super) fn in_time_order<T>(rows: &mut [T], t: impl Fn(&T) -> Nanos) {
+    rows.sort_by_key(t);
+}
+
 impl EventList {
+    /// Add `row` in time order: after every row at or before its time (a launcher's line can
+    /// state a time before the newest step's), so that the list stays as
+    /// [`in_time_order`] sorts it.
     fn push(&mut self, row: Logged) {
         if self.rows.len() < MAX_LISTED {
-            self.rows.push(row);
+            let at = self.rows.partition_point(|r| r.t <= row.t);
+            self.rows.insert(at, row);
         } else {
             self.more += 1;
         }
@@ -148,7 +164,7 @@ impl EventList {
     /// time order, `2.000 s ▲ text`. `ended`: the run is over (else it says so).
     pub(super) fn document(&self, ended: bool) -> String {
         let mut rows: Vec<&Logged> = self.rows.iter().collect();
-        rows.sort_by_key(|r| r.t);
+        in_time_order(&mut rows, |r| r.t);
         let line = |r: &Logged| {
             let symbol = r.mark.map_or(if r.warn { "!" } else { "·" }, Mark::symbol);
             format!("{:.3} s {symbol} {}", r.t.as_secs_f64(), escape(&r.text))
@@ -241,11 +257,11 @@ impl ChunkBuffer {
             return;
         }
         self.events.legends.insert(m, name.clone());
-        self.add(
+        self.style(
             m.entity(),
-            &TimePoint::default(),
+            &name,
             &rerun::SeriesPoints::new()
-                .with_names([name])
+                .with_names([name.as_str()])
                 .with_colors([rgb(color)])
                 .with_markers([shape])
                 .with_marker_sizes([size]),
@@ -287,6 +303,113 @@ pub(super) fn stated_time(text: &str) -> Option<Nanos> {
         .unwrap_or(rest.len());
     let s: f64 = rest[..end].parse().ok()?;
     (s.is_finite() && (0.0..1e9).contains(&s)).then(|| Nanos((s * 1e9).round() as u64))
+}
+
+/// The events of fault `f`: a stall's start (trouble) and end (a recovery), a kill's start
+/// (trouble), from run time `from` on: a fault injected while the run goes on (`live`, said
+/// so) covers the ticks from when it was applied, its own time being past. A stall over
+/// before `from` is listed, unmarked, as having done nothing.
+pub(super) fn fault_events(f: &ratelab_core::qos::Fault, from: Nanos, live: bool) -> Vec<DueEvent> {
+    let (warn, info) = (
+        rerun::components::TextLogLevel::WARN,
+        rerun::components::TextLogLevel::INFO,
+    );
+    let how = if live { " (live)" } else { "" };
+    let start = f.at.max(from);
+    let Some(d) = f.duration else {
+        let text = format!("injected kill{how}: node {} stops for good", f.node);
+        return vec![(start, text, warn, Some(Mark::Trouble))];
+    };
+    let end = f.at.saturating_add(d);
+    if end <= start {
+        let text = format!(
+            "injected stall{how}: node {} from {:.2} s to {:.2} s, over before it was injected: no effect",
+            f.node,
+            f.at.as_secs_f64(),
+            end.as_secs_f64()
+        );
+        return vec![(start, text, info, None)];
+    }
+    vec![
+        (
+            start,
+            format!(
+                "injected stall{how}: node {} does no work and asserts no liveliness for {:.2} s (until {:.2} s)",
+                f.node,
+                end.saturating_sub(start).as_secs_f64(),
+                end.as_secs_f64()
+            ),
+            warn,
+            Some(Mark::Trouble),
+        ),
+        (
+            end,
+            format!("node {} resumes after its stall", f.node),
+            info,
+            Some(Mark::Recovery),
+        ),
+    ]
+}
+
+/// A ROS 2 parameter set's event line: `ROS 2 parameter set: policy rate_hz = 10 Hz (ros2
+/// param set)`.
+fn parameter_line(node: &str, hz: f64) -> String {
+    format!(
+        "ROS 2 parameter set: {node} rate_hz = {} Hz (ros2 param set)",
+        hz_label(hz)
+    )
+}
+
+/// A clock switch's event line, the recording's time axis named by `timeline`.
+fn clock_line(to: ClockKind, timeline: &str) -> String {
+    format!("clock switched: the run goes on under the {to} clock, its state carried across (the time axis stays {timeline})")
+}
+
+/// A live session's own changes, each an event with a mark at the run time it took effect.
+impl Recording {
+    /// A fault injected while the run goes on (the lab's stall key `k`, a session log's
+    /// `inject_fault` replayed), applied at run time `at`: its start is marked as trouble at
+    /// the run time it took effect (its own time, or `at` when that had passed) and a
+    /// stall's end as a recovery, each logged once the run reaches it (a run that ended
+    /// first records none after its end), as `--stall` and `--kill` are.
+    pub fn injected_fault(&self, at: Nanos, fault: &ratelab_core::qos::Fault) {
+        let mut due = self.due_events.lock().unwrap_or_else(|e| e.into_inner());
+        for e in fault_events(fault, at, true) {
+            // After every event due at or before it: one instant's in the order known.
+            let i = due.partition_point(|d| d.0 <= e.0);
+            due.insert(i, e);
+        }
+    }
+
+    /// The run went on under the clock `to` at run time `at` (the lab's `c` on a run going
+    /// on, its state carried across): an event with a change mark. The recording's time
+    /// axis keeps the name of the clock the run started under.
+    pub fn clock_switched(&self, at: Nanos, to: ClockKind) {
+        let text = clock_line(to, timeline_name(self.clock));
+        let info = rerun::components::TextLogLevel::INFO;
+        self.event_marked(at, Some(Mark::Change), &text, info);
+    }
+
+    /// Saved code taken up at run time `at` (a Python node's script restarted in place; a
+    /// run that starts again from t = 0 with the new code, in the next recording): `text` as
+    /// an event with a change mark.
+    pub fn reloaded(&self, at: Nanos, text: &str) {
+        let info = rerun::components::TextLogLevel::INFO;
+        self.event_marked(at, Some(Mark::Change), text, info);
+    }
+
+    /// A ROS 2 parameter set (`ros2 param set NODE rate_hz HZ`) that set node `node`'s rate
+    /// to `hz` at run time `at`: an event with a change mark. The graph's own line for that
+    /// rate change (`policy rate 50 → 10 Hz`, at the next step) is then listed unmarked, so
+    /// one change has one mark.
+    pub fn parameter_set(&self, at: Nanos, node: &str, hz: f64) {
+        self.announced
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .push((node.to_string(), hz));
+        let info = rerun::components::TextLogLevel::INFO;
+        self.event_marked(at, Some(Mark::Change), &parameter_line(node, hz), info);
+    }
 }
 
 #[cfg(test)]
@@ -357,5 +480,206 @@ mod tests {
         for hostile in ["t=", "t=.", "t=1.2.3s", "at t=-3s", "t=99999999999s"] {
             assert_eq!(stated_time(hostile), None, "{hostile}");
         }
+    }
+
+    /// A recording of the chapter's graph (virtual clock) in a folder of its own.
+    fn recording() -> (tempfile::TempDir, Recording) {
+        let dir = tempfile::tempdir().unwrap();
+        let cfg = RunConfig {
+            clock: ClockKind::Virtual,
+            ..RunConfig::default()
+        };
+        let path = dir.path().join("r.rrd");
+        let (rec, _) =
+            Recording::create(&path, &cfg, "scripted", &RecordOptions::default()).unwrap();
+        (dir, rec)
+    }
+
+    /// The events listed so far: (run time, mark, text), in the list's order.
+    fn listed(rec: &Recording) -> Vec<(Nanos, Option<Mark>, String)> {
+        rec.lock()
+            .events
+            .rows
+            .iter()
+            .map(|r| (r.t, r.mark, r.text.clone()))
+            .collect()
+    }
+
+    #[test]
+    fn events_come_out_in_time_order_and_one_instant_s_in_the_order_logged() {
+        let ms = |ms: u64| Nanos(ms * 1_000_000);
+        let row = |t: Nanos, text: &str| Logged {
+            t,
+            mark: None,
+            warn: false,
+            text: text.to_string(),
+        };
+        // As a launch's events came before (#73): a rejoin stamped before the kill it
+        // follows; and two events of one instant, the process gone before its node.
+        let mut list = EventList::default();
+        for (t, text) in [
+            (ms(3110), "process 'policy' rejoined at t=3.110s"),
+            (ms(3027), "process 'policy' killed at t=3.027s"),
+            (ms(3080), "process 'policy' failed at t=3.080s"),
+            (ms(3080), "node policy not alive"),
+            (ms(0), "start"),
+        ] {
+            list.push(row(t, text));
+        }
+        let texts: Vec<&str> = list.rows.iter().map(|r| r.text.as_str()).collect();
+        assert_eq!(
+            texts,
+            [
+                "start",
+                "process 'policy' killed at t=3.027s",
+                "process 'policy' failed at t=3.080s",
+                "node policy not alive",
+                "process 'policy' rejoined at t=3.110s",
+            ]
+        );
+        let doc = list.document(true);
+        let at = |needle: &str| {
+            doc.find(needle)
+                .unwrap_or_else(|| panic!("{needle}: {doc}"))
+        };
+        assert!(at("- 3.027 s") < at("- 3.080 s · process") && at("not alive") < at("- 3.110 s"));
+        // The sort itself: by time, stable.
+        let mut v = vec![(ms(5), 'a'), (ms(1), 'b'), (ms(5), 'c'), (ms(1), 'd')];
+        in_time_order(&mut v, |r| r.0);
+        assert_eq!(
+            v.iter().map(|r| r.1).collect::<String>(),
+            "bdac",
+            "equal stamps keep their order"
+        );
+    }
+
+    #[test]
+    fn a_fault_s_events_start_where_it_took_effect() {
+        let s = |ms: u64| Nanos(ms * 1_000_000);
+        let stall = ratelab_core::qos::Fault::parse("policy@2+0.5", false).unwrap();
+        // From the settings: at its time, as `--stall` always said it.
+        let set = fault_events(&stall, Nanos::ZERO, false);
+        assert_eq!(set[0].0, s(2000));
+        assert_eq!(
+            set[0].1,
+            "injected stall: node policy does no work and asserts no liveliness for 0.50 s (until 2.50 s)"
+        );
+        assert_eq!((set[1].0, set[1].3), (s(2500), Some(Mark::Recovery)));
+        // Injected live at 2.3 s, its time past: from 2.3 s to its end.
+        let live = fault_events(&stall, s(2300), true);
+        assert_eq!(
+            (live[0].0, live[0].2, live[0].3),
+            (s(2300), "WARN", Some(Mark::Trouble))
+        );
+        assert!(
+            live[0].1.starts_with("injected stall (live): node policy"),
+            "{}",
+            live[0].1
+        );
+        assert!(
+            live[0].1.contains("for 0.20 s (until 2.50 s)"),
+            "{}",
+            live[0].1
+        );
+        // Injected after its end: listed, unmarked.
+        let late = fault_events(&stall, s(3000), true);
+        assert_eq!(late.len(), 1);
+        assert_eq!((late[0].2, late[0].3), ("INFO", None));
+        let kill = ratelab_core::qos::Fault::parse("policy@1", true).unwrap();
+        let killed = fault_events(&kill, s(1500), true);
+        assert_eq!(killed.len(), 1);
+        assert_eq!((killed[0].0, killed[0].3), (s(1500), Some(Mark::Trouble)));
+        assert_eq!(
+            killed[0].1,
+            "injected kill (live): node policy stops for good"
+        );
+    }
+
+    #[test]
+    fn the_lab_s_stall_key_is_trouble_at_the_run_time_it_took_effect() {
+        let (_dir, rec) = recording();
+        let stall = ratelab_core::qos::Fault::parse("policy@2.3+2", false).unwrap();
+        rec.injected_fault(Nanos(2_300_000_000), &stall);
+        // Logged once the run reaches it, at its own time.
+        assert!(!listed(&rec).iter().any(|r| r.2.contains("stall")));
+        {
+            let mut buf = rec.lock();
+            rec.log_due_events(&mut buf, Nanos(3_000_000_000), 150);
+        }
+        let rows = listed(&rec);
+        let stalled = rows
+            .iter()
+            .find(|r| r.2.contains("injected stall (live)"))
+            .unwrap();
+        assert_eq!(
+            (stalled.0, stalled.1),
+            (Nanos(2_300_000_000), Some(Mark::Trouble))
+        );
+        assert!(
+            !rows.iter().any(|r| r.2.contains("resumes")),
+            "not yet: {rows:?}"
+        );
+        {
+            let mut buf = rec.lock();
+            rec.log_due_events(&mut buf, Nanos(5_000_000_000), 250);
+        }
+        let back = listed(&rec);
+        let resumed = back.iter().find(|r| r.2.contains("resumes")).unwrap();
+        assert_eq!(
+            (resumed.0, resumed.1),
+            (Nanos(4_300_000_000), Some(Mark::Recovery))
+        );
+        assert_eq!(
+            rec.lock()
+                .events
+                .legends
+                .get(&Mark::Trouble)
+                .map(String::as_str),
+            Some("▲ trouble at 2.30 s")
+        );
+    }
+
+    #[test]
+    fn a_clock_switch_a_reload_and_a_ros2_parameter_set_are_marked_changes() {
+        let (_dir, rec) = recording();
+        let ms = |ms: u64| Nanos(ms * 1_000_000);
+        rec.parameter_set(ms(3000), "policy", 10.0);
+        rec.clock_switched(ms(1500), ClockKind::Real);
+        let reload = "reloaded nodes/x.py: 'policy' restarted in place at t=2.50 s";
+        rec.reloaded(ms(2500), reload);
+        let rows = listed(&rec);
+        let changes: Vec<(Nanos, &str)> = rows
+            .iter()
+            .filter(|r| r.1 == Some(Mark::Change))
+            .map(|r| (r.0, r.2.as_str()))
+            .collect();
+        assert_eq!(
+            changes,
+            [
+                (
+                    ms(1500),
+                    "clock switched: the run goes on under the real clock, its state carried across (the time axis stays sim_time)"
+                ),
+                (ms(2500), reload),
+                (
+                    ms(3000),
+                    "ROS 2 parameter set: policy rate_hz = 10 Hz (ros2 param set)"
+                ),
+            ],
+            "in time order, each marked"
+        );
+        assert_eq!(
+            rec.lock()
+                .events
+                .legends
+                .get(&Mark::Change)
+                .map(String::as_str),
+            Some("◆ change at 1.50, 2.50, 3.00 s")
+        );
+        // The graph's own line for that rate is then listed unmarked (its observer).
+        assert_eq!(
+            *rec.announced.lock().unwrap(),
+            [("policy".to_string(), 10.0)]
+        );
     }
 }

@@ -1,6 +1,6 @@
 //! Where recordings go and how their files are written: the default names (the graph, the
 //! clock, the settings), the first free name in a folder, the output rule
-//! ([`crate::output`]: a temporary file moved into place, replaced only with `--force`), the
+//! ([`ratelab_core::output`]: a temporary file moved into place, replaced only with `--force`), the
 //! reason a full disk gives, the recording id a virtual run derives from its settings, the
 //! run's name and settings in a line, and the name of its time timeline.
 
@@ -58,16 +58,16 @@ pub(super) fn first_free(dir: &Path, stem: &str) -> PathBuf {
 /// # Errors
 /// [`RecordingError`] naming the problem.
 pub fn check_output_path(path: &Path, force: bool) -> Result<(), RecordingError> {
-    let (pending, _file) = crate::output::PendingFile::create(path, force)?;
+    let (pending, _file) = ratelab_core::output::PendingFile::create(path, force)?;
     drop(pending); // removes the probe
     Ok(())
 }
 
 /// Moves a recording's temporary file into place once, when finished or dropped.
-pub(super) struct Committer(pub(super) Mutex<Option<crate::output::PendingFile>>);
+pub(super) struct Committer(pub(super) Mutex<Option<ratelab_core::output::PendingFile>>);
 
 impl Committer {
-    pub(super) fn commit(&self) -> Result<(), crate::output::OutputError> {
+    pub(super) fn commit(&self) -> Result<(), ratelab_core::output::OutputError> {
         match self.0.lock().unwrap_or_else(|e| e.into_inner()).take() {
             Some(mut p) => p.commit(),
             None => Ok(()),

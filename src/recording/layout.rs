@@ -16,6 +16,8 @@ use rerun::{AsComponents, RecordingStreamBuilder, RecordingStreamError};
 
 /// A view: its class (`"TimeSeries"`, `"Spatial3D"`, …), title, origin, contents (entity
 /// query expressions) and properties (archetypes logged under the view, by short name).
+/// A plot's y range and legend corner are also kept as values
+/// ([`ViewSpec::y_range`], [`ViewSpec::legend`]): the legend's placement reads and moves them.
 pub(crate) struct ViewSpec {
     key: String,
     class: &'static str,
@@ -23,6 +25,10 @@ pub(crate) struct ViewSpec {
     origin: String,
     contents: Vec<String>,
     properties: Vec<(&'static str, Vec<SerializedComponentBatch>)>,
+    y_range: Option<(f64, f64)>,
+    legend: Option<bpc::Corner2D>,
+    /// Its legend may be hidden where it would cover data ([`ViewSpec::legend_optional`]).
+    legend_optional: bool,
 }
 
 impl ViewSpec {
@@ -35,6 +41,9 @@ impl ViewSpec {
             origin: "/".to_string(),
             contents: vec!["$origin/**".to_string()],
             properties: Vec::new(),
+            y_range: None,
+            legend: None,
+            legend_optional: false,
         }
     }
 
@@ -59,14 +68,87 @@ impl ViewSpec {
         (&self.name, &self.contents)
     }
 
-    /// A view property, e.g. `("ScalarAxis", &ScalarAxis::new()…)`; one set before under
-    /// the same name is replaced (a view has one of each).
+    /// A view property, e.g. `("EyeControls3D", &EyeControls3D::new()…)`; one set before
+    /// under the same name is replaced (a view has one of each).
     pub(crate) fn property(mut self, name: &'static str, archetype: &dyn AsComponents) -> Self {
+        self.set_property(name, archetype);
+        self
+    }
+
+    fn set_property(&mut self, name: &'static str, archetype: &dyn AsComponents) {
         self.properties.retain(|(n, _)| *n != name);
         self.properties
             .push((name, archetype.as_serialized_batches()));
+    }
+
+    /// A plot's y range, `[lo, hi]` (its `ScalarAxis`).
+    pub(crate) fn y_range(mut self, lo: f64, hi: f64) -> Self {
+        self.set_y_range(lo, hi);
         self
     }
+
+    /// [`ViewSpec::y_range`], in place.
+    pub(crate) fn set_y_range(&mut self, lo: f64, hi: f64) {
+        self.y_range = Some((lo, hi));
+        let axis = bp::ScalarAxis::new().with_range(rerun::components::Range1D::new(lo, hi));
+        self.set_property("ScalarAxis", &axis);
+    }
+
+    /// A plot's legend, aligned to `corner` (its `PlotLegend`).
+    pub(crate) fn legend(mut self, corner: bpc::Corner2D) -> Self {
+        self.set_legend(corner);
+        self
+    }
+
+    /// [`ViewSpec::legend`], in place.
+    pub(crate) fn set_legend(&mut self, corner: bpc::Corner2D) {
+        self.legend = Some(corner);
+        self.set_property("PlotLegend", &bp::PlotLegend::new().with_corner(corner));
+    }
+
+    /// A plot whose legend may be hidden where no place keeps it off the data: its title
+    /// names its series, and what its legend adds is written elsewhere (the pole angle's
+    /// marks: in `when`).
+    pub(crate) fn legend_optional(mut self) -> Self {
+        self.legend_optional = true;
+        self
+    }
+
+    /// Whether its legend may be hidden ([`ViewSpec::legend_optional`]).
+    pub(crate) fn is_legend_optional(&self) -> bool {
+        self.legend_optional
+    }
+
+    /// Hide its legend (kept aligned to its corner, should the viewer show it).
+    pub(crate) fn hide_legend(&mut self) {
+        let corner = self.legend.unwrap_or_default();
+        let legend = bp::PlotLegend::new()
+            .with_corner(corner)
+            .with_visible(false);
+        self.set_property("PlotLegend", &legend);
+    }
+
+    /// What a plot's legend placement reads of the view, as set.
+    pub(crate) fn plot_parts(&self) -> PlotParts<'_> {
+        PlotParts {
+            class: self.class,
+            contents: &self.contents,
+            y_range: self.y_range,
+            legend: self.legend,
+        }
+    }
+}
+
+/// A view as legend placement reads it ([`ViewSpec::plot_parts`]).
+pub(crate) struct PlotParts<'a> {
+    /// The view's class.
+    pub class: &'a str,
+    /// Its contents' query expressions.
+    pub contents: &'a [String],
+    /// Its y range, when set.
+    pub y_range: Option<(f64, f64)>,
+    /// Its legend's corner, when set.
+    pub legend: Option<bpc::Corner2D>,
 }
 
 /// A node of the layout tree.

@@ -13,7 +13,8 @@
 //! - `plant/pole_angle_rad`, `plant/fall_limit/{upper,lower}`, `plant/fall` (the fall, at
 //!   the pole's angle), `plant/pole_angle_estimate_rad` (with an estimator in the graph: its
 //!   estimate θ̂, where the angle's line shows the state it estimates,
-//!   `ratelab_core::estimate`),
+//!   `ratelab_core::estimate`; drawn under the angle, wider and lighter, so that where it
+//!   lies on its truth it shows as a band either side of the angle's line: [`style`]),
 //!   `plant/cart_pos_m`, `plant/rail_end/{right,left}`,
 //!   `plant/cart_limit/{right,left}`;
 //! - `marks/{change,trouble,recovery}`: a mark at each event of that kind, in a row under
@@ -24,11 +25,12 @@
 //! - `bus/<topic>/{published,dropped,msg_per_s}` for every topic (msg/s over a 1 s sliding
 //!   window, from the second actuator step: the first spans no time; and at the run's end
 //!   when the actuator stopped stepping 1 s or more before it, over the time since its last
-//!   step), one colour per topic, the same in every graph, each topic's line narrower than
-//!   the one drawn before it so that equal lines show both colours;
-//! - QoS ([`crate::qos`]): `bus/<topic>/<counter>` (`expired`, `refused`, `lost`,
+//!   step), one colour per topic, the same in every graph and apart from every other
+//!   topic's, QoS counter's and node's ([`style`]), each topic's line narrower than the one
+//!   drawn before it so that equal lines show both colours;
+//! - QoS ([`ratelab_core::qos`]): `bus/<topic>/<counter>` (`expired`, `refused`, `lost`,
 //!   `retransmitted`, `offered_deadline_missed`, `requested_deadline_missed`) for each counter
-//!   a topic reports ([`crate::topic::TopicStats::reported`]: its QoS can make it count, or it has
+//!   a topic reports ([`ratelab_core::topic::TopicStats::reported`]: its QoS can make it count, or it has
 //!   counted), from the first step it is reported to the end, read at each actuator step
 //!   (deadline periods missed up to that step count before the next message); and
 //!   `nodes/<name>/not_alive` (times the node lost its liveliness) for each node with a
@@ -56,12 +58,19 @@
 //!   tick plus the lease) and `node policy alive again` (INFO) at the tick that brought it
 //!   back; `stopped by watchdog at … s: no message on /cmd for more than 30 ms` (WARN) at
 //!   the run's end when the actuator's deadline reaction stopped it; a launcher's lines at
-//!   the run time they state. `when`: every event in time order, the first trouble on
-//!   top, as a markdown document ([`events`]). `summary`: the run's summary as a markdown
-//!   document; the settings are also recording properties.
+//!   the run time they state, on the launcher's run clock (`killed at t=3.027s`, `rejoined
+//!   at t=3.110s`: the summary's wire line gives the rejoin the same time); and a live
+//!   session's own changes, each with a mark at the run time it took effect: a fault
+//!   injected from the lab (its stall key, trouble, and the stall's end), a clock switch, a
+//!   reload of saved code and a ROS 2 parameter set (changes). `when`: every event in time
+//!   order (stable: one instant's in the order logged), the first trouble on top, as a
+//!   markdown document ([`events`]). `summary`: the run's summary as a markdown document;
+//!   the settings are also recording properties, with a run's ROS 2 domain and bag folder
+//!   when it is offered to ROS 2 or bagged ([`settings`]).
 //!
 //! The blueprint ([`blueprint`], written with [`layout`]'s archetypes) lays these out as a
-//! learner reads them, every plot tall enough to label its axes at 1280×720: the cartpole,
+//! learner reads them, every plot tall enough to label its axes at 1280×720, its legend
+//! where none of its series is (the final layout: [`legend`]): the cartpole,
 //! the node graph and the summary; the chapter's core (the pole angle with the events'
 //! marks, the action, the cart position, the latency); `when` over tabs per concern (the
 //! bus; QoS and liveliness; executors; the real clock's lateness; processes; the events;
@@ -69,6 +78,21 @@
 //! the graph is built (plots with no scale known up front fit themselves while the run goes)
 //! and at the end, each plot's y range then padded around every value its series took. The
 //! blueprint stores' ids derive from the settings too (virtual clock).
+//!
+//! A graph of any size reads ([`groups`]): one of more than [`groups::GROUP_ABOVE`] nodes or
+//! topics (none of the shipped graphs, which are recorded as they always were) is drawn by
+//! group, its names grouped with their digits read as `*` (`sensor_*`, `/c_*/pos`). Beside
+//! every topic's and node's own series (recorded in full, in the entity tree), each topic
+//! group of more than [`groups::SHOWN_EACH_UP_TO`] topics gets
+//! `bus_groups/<group>/<measure>/{max,median,min}` (its largest, median and smallest
+//! published count, drops and msg/s at every actuator step: [`grouped`]); the bus's plots
+//! draw those on pages of whole groups, the topics that dropped most each by its own
+//! series, and `groups`, a document, lists every group's members with the paths of their
+//! own series; the node graph draws a box per group (`sensor_* ×249`, `/c_*/pos ×249`).
+//! No time-series view draws more than [`groups::MAX_SERIES_PER_VIEW`] series, whatever the
+//! graph: past that, a plot of per-node or per-topic series (QoS, liveliness, executors,
+//! lateness, the wire) shows those that rose highest; and the rule that widens coinciding
+//! lines stops at [`style`]'s `MAX_LAYERED_WIDTH_PX`.
 //!
 //! A graph across processes is recorded as a watcher sees it ([`watched`]): the launch's
 //! merged telemetry in place of the steps.
@@ -83,19 +107,24 @@
 //! write recordings that `rerun rrd compare` finds identical. (Per-node lateness, real clock
 //! only, is logged from the node threads through the ordinary batcher.)
 //!
-//! Files follow [`crate::output`]'s rule: rerun writes a temporary file beside the final
+//! Files follow [`ratelab_core::output`]'s rule: rerun writes a temporary file beside the final
 //! name (`.<name>.<pid>-<n>.tmp`), moved into place when the recording is finished (or
 //! dropped); an existing file is replaced only when the recording was opened with
 //! `force`, and a symbolic link or non-regular file at the final name is refused.
+#![warn(missing_docs)]
 
 mod blueprint;
 mod events;
 mod files;
+mod grouped;
+pub mod groups;
 mod layout;
+mod legend;
 mod live;
 pub use files::timeline_name;
 pub use live::viewer_on_path;
 mod observer;
+mod settings;
 mod shape;
 mod style;
 pub mod watched;
@@ -114,22 +143,16 @@ pub use window::RecordWindow;
 use shape::GraphState;
 pub use shape::{GraphShape, NodeShape, TopicShape};
 
-// The layers below, under their own names (`crate::graph`, `crate::time`, …).
-use ratelab_core::{
-    executor, limits, metrics, msg, output, plant, procs, qos, rate, runlog, textlog, time, topic,
-};
-use ratelab_runtime::{config, graph, scheduler, telemetry};
-
-use crate::config::{ClockKind, RunConfig};
-use crate::graph::{GraphHandles, StepObserver};
-use crate::metrics::Metrics;
-use crate::plant::{CART_LIMIT_M, THETA_LIMIT_RAD};
-use crate::qos::QosCounter;
-use crate::runlog::StepRecord;
-use crate::scheduler::{EndReason, RunEnd};
-use crate::time::Nanos;
-use crate::topic::TopicStats;
 use layout::{Item, ViewSpec};
+use ratelab_core::metrics::Metrics;
+use ratelab_core::plant::{CART_LIMIT_M, THETA_LIMIT_RAD};
+use ratelab_core::qos::QosCounter;
+use ratelab_core::runlog::StepRecord;
+use ratelab_core::time::Nanos;
+use ratelab_core::topic::TopicStats;
+use ratelab_runtime::config::{ClockKind, RunConfig};
+use ratelab_runtime::graph::{GraphHandles, StepObserver};
+use ratelab_runtime::scheduler::{EndReason, RunEnd};
 use re_chunk::{Chunk, ChunkBuilder, RowId, TimeColumn};
 use rerun::external::re_sdk_types::blueprint::archetypes as bp;
 use rerun::external::re_sdk_types::blueprint::components as bpc;
@@ -165,6 +188,10 @@ struct ChunkBuffer {
     /// The smallest and largest value of every scalar series so far (kept across sends):
     /// the final layout fits each plot's y range to them.
     extents: Extents,
+    /// Where in time every scalar series so far took its values, coarsely, and each
+    /// series' legend name (kept across sends): the final layout places each plot's legend
+    /// where no series is ([`legend`]).
+    seen: legend::Seen,
     /// The events so far, for the `when` document and the marks' legends.
     events: EventList,
     /// Steps outside the [`RecordWindow`]: rows (plots, the scene, the graph) are not
@@ -201,6 +228,7 @@ impl ChunkBuffer {
             rows: BTreeMap::new(),
             scalars: BTreeMap::new(),
             extents: Extents::new(),
+            seen: legend::Seen::default(),
             events: EventList::default(),
             rows_muted: false,
         }
@@ -225,6 +253,13 @@ impl ChunkBuffer {
         );
     }
 
+    /// A series' style (a static row, `row`), its legend naming it `name`: logged, and the
+    /// name kept for its legend's size ([`legend`]).
+    fn style(&mut self, entity: &str, name: &str, row: &dyn rerun::AsComponents) {
+        self.seen.name(entity, name);
+        self.add(entity, &TimePoint::default(), row);
+    }
+
     fn scalar(&mut self, entity: &str, t: Nanos, step: u64, value: f64) {
         if self.rows_muted {
             return;
@@ -238,6 +273,7 @@ impl ChunkBuffer {
         col.step.push(i64::try_from(step).unwrap_or(i64::MAX));
         col.value.push(value);
         widen(&mut self.extents, entity, value);
+        self.seen.occupy(entity, t, value);
     }
 
     fn send(&mut self, rec: &RecordingStream) {
@@ -260,9 +296,9 @@ impl ChunkBuffer {
 
 /// A series' name, colour and width (a static row), for a series that appears mid-run.
 fn series_style(buf: &mut ChunkBuffer, entity: &str, name: &str, color: Color) {
-    buf.add(
+    buf.style(
         entity,
-        &TimePoint::default(),
+        name,
         &rerun::SeriesLines::new()
             .with_names([name])
             .with_colors([color])
@@ -298,7 +334,7 @@ fn time_point(timeline: &'static str, t: Nanos, step: u64) -> TimePoint {
 pub enum RecordingError {
     /// A symbolic link or a non-regular file at the path, or a move into place that failed.
     #[error("--record {0}")]
-    Output(crate::output::OutputError),
+    Output(ratelab_core::output::OutputError),
     /// The path is a folder.
     #[error("--record path is a directory: {0}")]
     IsDirectory(PathBuf),
@@ -327,9 +363,9 @@ pub enum RecordingError {
     },
 }
 
-impl From<crate::output::OutputError> for RecordingError {
-    fn from(e: crate::output::OutputError) -> Self {
-        use crate::output::OutputError;
+impl From<ratelab_core::output::OutputError> for RecordingError {
+    fn from(e: ratelab_core::output::OutputError) -> Self {
+        use ratelab_core::output::OutputError;
         match e {
             OutputError::Exists(p) => RecordingError::Exists(p),
             OutputError::NotRegular {
@@ -370,8 +406,8 @@ fn crossing_topics(shape: &GraphShape) -> impl Iterator<Item = &TopicShape> {
 }
 
 /// The force the motor applies per unit of control (the `gear` of `assets/cartpole.xml`), N:
-/// the graph's [`crate::plant::GEAR_N`].
-pub const FORCE_PER_CONTROL_N: f64 = crate::plant::GEAR_N;
+/// the graph's [`ratelab_core::plant::GEAR_N`].
+pub const FORCE_PER_CONTROL_N: f64 = ratelab_core::plant::GEAR_N;
 
 /// Half the rail's length (the slider's range in `assets/cartpole.xml`), m.
 pub const RAIL_HALF_LENGTH_M: f64 = 2.9;
@@ -383,6 +419,11 @@ pub struct RecordOptions {
     pub spawn: bool,
     /// Record only this span of run time (`--record-window`); `None`: all of it.
     pub window: Option<RecordWindow>,
+    /// The run is offered to ROS 2 on this domain (`--ros2`): said in its settings.
+    pub ros2_domain: Option<u32>,
+    /// What the run offers to ROS 2 is also written as a rosbag2 bag in this folder
+    /// (`--bag DIR`): said in its settings.
+    pub bag: Option<PathBuf>,
 }
 
 /// An open recording. Cheap to clone (the stream is a shared handle).
@@ -419,10 +460,13 @@ pub struct Recording {
     due_events: Arc<Mutex<VecDeque<DueEvent>>>,
     /// The span of run time whose step rows are recorded ([`RecordOptions::window`]).
     window: Option<RecordWindow>,
+    /// Node rates a ROS 2 parameter set changed, (node, Hz), whose change the graph has not
+    /// shown yet ([`Recording::parameter_set`]).
+    announced: Arc<Mutex<Vec<(String, f64)>>>,
 }
 
-/// An event known in advance: its run time, text, level and mark.
-type DueEvent = (Nanos, String, &'static str, Mark);
+/// An event known in advance: its run time, text, level and mark (none: listed only).
+type DueEvent = (Nanos, String, &'static str, Option<Mark>);
 
 /// A topic's deadline misses as the events told them: (offered, requested) and the time
 /// of the last event.
@@ -458,9 +502,15 @@ const RAIL_HALF_THICKNESS_M: f64 = 0.01;
 
 /// Node-graph positions (id → x, y) in graph units, and the bounds that frame them.
 fn graph_positions(shape: &GraphShape) -> (Vec<(String, [f32; 2])>, bpc::VisualBounds2D) {
+    positions_of(shape.columns())
+}
+
+/// Positions (id → x, y) in graph units for boxes in left-to-right `columns` (id, column),
+/// and the bounds that frame them: a node graph's, or a large graph's groups'
+/// ([`grouped`]).
+fn positions_of(columns: Vec<(String, usize)>) -> (Vec<(String, [f32; 2])>, bpc::VisualBounds2D) {
     const DX: f32 = 150.0;
     const DY: f32 = 70.0;
-    let columns = shape.columns();
     let n_cols = columns.iter().map(|(_, c)| c + 1).max().unwrap_or(1);
     let mut rows: BTreeMap<usize, usize> = BTreeMap::new();
     for (_, col) in &columns {
@@ -527,7 +577,7 @@ impl Recording {
         opts: &RecordOptions,
         force: bool,
     ) -> Result<(Self, Option<String>), RecordingError> {
-        let (pending, file) = crate::output::PendingFile::create(path, force)?;
+        let (pending, file) = ratelab_core::output::PendingFile::create(path, force)?;
         drop(file);
         let tmp = pending.temp_path().to_path_buf();
         let mut builder = RecordingStreamBuilder::new(APP_ID);
@@ -603,8 +653,9 @@ impl Recording {
             )),
             due_events: Arc::default(),
             window: opts.window,
+            announced: Arc::default(),
         };
-        recording.log_settings(cfg, policy);
+        recording.log_settings(cfg, policy, opts);
         Ok((recording, notice))
     }
 
@@ -628,27 +679,31 @@ impl Recording {
         &self.rec
     }
 
-    /// Send the viewer layout for a graph of `shape`: when the graph is built (`extents`
-    /// none: plots without a scale known up front fit themselves while the run goes), and
-    /// again when the run is over, every plot's y range then padded around what its series
-    /// took, so nothing sits on a plot's edge. The second layout is a blueprint of its own,
-    /// activated after the first.
+    /// Send the viewer layout for a graph of `shape`: when the graph is built (`over` none:
+    /// plots without a scale known up front fit themselves while the run goes), and again
+    /// when the run is over (`over`: the values every series took, where in time, and the
+    /// run's end), every plot's y range then padded around what its series took, so nothing
+    /// sits on a plot's edge, and its legend placed where none of its series is
+    /// ([`legend::place_legends`]). The second layout is a blueprint of its own, activated
+    /// after the first.
     fn send_layout(
         &self,
         shape: &GraphShape,
-        extents: Option<&Extents>,
-        end: Option<Nanos>,
+        over: Option<(&Extents, &legend::Seen, Nanos)>,
     ) -> Result<(), RecordingError> {
-        let root = layout_for(shape, &self.cfg, extents);
-        let stage = if extents.is_some() { "final" } else { "start" };
+        let mut root = layout_for(shape, &self.cfg, over.map(|(e, _, _)| e));
+        let axis = over.map(|(_, _, end)| time_axis_ns(end));
+        if let (Some((extents, seen, _)), Some(x)) = (over, axis) {
+            legend::place_legends(&mut root, seen, extents, x);
+        }
+        let stage = if over.is_some() { "final" } else { "start" };
         let id = deterministic_id(&self.cfg).map(|id| format!("{id}-blueprint-{stage}"));
         let timeline = timeline_name(self.cfg.clock);
-        let (msgs, activate) =
-            layout::blueprint_messages(APP_ID, id, &root, timeline, end.map(time_axis_ns))
-                .map_err(|detail| RecordingError::Rerun {
-                    path: self.path.clone(),
-                    detail,
-                })?;
+        let (msgs, activate) = layout::blueprint_messages(APP_ID, id, &root, timeline, axis)
+            .map_err(|detail| RecordingError::Rerun {
+                path: self.path.clone(),
+                detail,
+            })?;
         self.rec.send_blueprint(msgs, activate);
         Ok(())
     }
@@ -657,104 +712,10 @@ impl Recording {
     fn attach(&self, shape: &GraphShape) {
         *self.shape.lock().unwrap_or_else(|e| e.into_inner()) = Some(shape.clone());
         self.log_styles(shape);
-        if let Err(e) = self.send_layout(shape, None, None) {
+        if let Err(e) = self.send_layout(shape, None) {
             // The data is still recorded; the viewer falls back to its own layout.
             self.event(Nanos::ZERO, &format!("no viewer layout: {e}"), "WARN");
         }
-    }
-
-    fn log_settings(&self, cfg: &RunConfig, policy: &str) {
-        let text = |x: Option<String>| x.unwrap_or_else(|| "none (no chapter chain)".into());
-        let settings = [
-            ("clock", cfg.clock.to_string()),
-            ("policy", policy.to_string()),
-            ("seed", cfg.seed.to_string()),
-            ("duration_s", cfg.duration.as_secs_f64().to_string()),
-            ("sensor_hz", text(cfg.sensor_hz().map(|x| x.to_string()))),
-            ("control_hz", text(cfg.control_hz().map(|x| x.to_string()))),
-            ("actuator_hz", cfg.actuator_hz().to_string()),
-            (
-                "queue_depth",
-                text(cfg.queue_depth().map(|x| x.to_string())),
-            ),
-        ];
-        // The chapter's graph keeps the settings it had; any other names itself.
-        let graph = (cfg.graph.name != "cartpole").then(|| ("graph", cfg.graph.to_string()));
-        let window = self.window.map(|w| ("record_window", w.describe()));
-        let mut values = rerun::AnyValues::default();
-        for (k, v) in settings.iter().chain(graph.iter()).chain(window.iter()) {
-            values = values.with_component::<rerun::components::Text>(*k, [v.as_str()]);
-        }
-        let name = run_name(cfg, cfg.control_hz().map(hz_label));
-        let properties = rerun::EntityPath::properties();
-        let fixed = TimePoint::default();
-        let mut buf = self.lock();
-        buf.add(
-            &properties.to_string(),
-            &fixed,
-            &rerun::RecordingInfo::update_fields().with_name(name),
-        );
-        buf.add(
-            &properties
-                .join(&rerun::EntityPath::from("settings"))
-                .to_string(),
-            &fixed,
-            &values,
-        );
-        self.log_scene(&mut buf);
-        buf.add(
-            "summary",
-            &fixed,
-            &rerun::TextDocument::from_markdown(format!(
-                "### Run in progress\n\n- {}\n- policy: {policy}\n\nThe summary appears here when the run ends.",
-                settings_line(cfg)
-            )),
-        );
-        buf.event(
-            Nanos::ZERO,
-            0,
-            None,
-            &format!(
-                "start: {}",
-                chapter_settings(cfg).unwrap_or_else(|| cfg.graph.to_string())
-            ),
-            rerun::components::TextLogLevel::INFO,
-        );
-        buf.when_document(false);
-        // The faults the run injects (`--stall`, `--kill`), where they happen: a stalled
-        // node's silence is otherwise recorded nowhere but in its not-alive count. Logged
-        // when the run reaches them ([`Recording::log_due_events`]).
-        let mut due = Vec::new();
-        for f in &cfg.faults {
-            let warn = rerun::components::TextLogLevel::WARN;
-            let (text, end) = match f.duration {
-                Some(d) => (
-                    format!(
-                        "injected stall: node {} does no work and asserts no liveliness for {:.2} s (until {:.2} s)",
-                        f.node,
-                        d.as_secs_f64(),
-                        f.at.saturating_add(d).as_secs_f64()
-                    ),
-                    Some(f.at.saturating_add(d)),
-                ),
-                None => (
-                    format!("injected kill: node {} stops for good", f.node),
-                    None,
-                ),
-            };
-            due.push((f.at, text, warn, Mark::Trouble));
-            if let Some(end) = end {
-                due.push((
-                    end,
-                    format!("node {} resumes after its stall", f.node),
-                    rerun::components::TextLogLevel::INFO,
-                    Mark::Recovery,
-                ));
-            }
-        }
-        due.sort_by_key(|(t, _, _, _)| *t);
-        *self.due_events.lock().unwrap_or_else(|e| e.into_inner()) = due.into();
-        buf.send(&self.rec);
     }
 
     /// Log the events known in advance that are due by run time `now` (at their own times,
@@ -763,217 +724,30 @@ impl Recording {
         let mut due = self.due_events.lock().unwrap_or_else(|e| e.into_inner());
         while due.front().is_some_and(|(t, _, _, _)| *t <= now) {
             if let Some((t, text, level, mark)) = due.pop_front() {
-                buf.event(t, step, Some(mark), &text, level);
+                buf.event(t, step, mark, &text, level);
             }
         }
-    }
-
-    /// The static 3D scene: z up, the rail under the cart, the cart, the pole and the ±12°
-    /// fall limits (which move with the cart).
-    fn log_scene(&self, buf: &mut ChunkBuffer) {
-        let fixed = TimePoint::default();
-        buf.add("world", &fixed, &rerun::ViewCoordinates::RIGHT_HAND_Z_UP());
-        let rail_z = -(CART_HALF_HEIGHT_M + RAIL_HALF_THICKNESS_M) as f32;
-        buf.add(
-            "world/rail",
-            &fixed,
-            &rerun::Boxes3D::from_centers_and_half_sizes(
-                [(0.0, 0.0, rail_z)],
-                [(
-                    RAIL_HALF_LENGTH_M as f32,
-                    0.015,
-                    RAIL_HALF_THICKNESS_M as f32,
-                )],
-            )
-            .with_colors([rgb(NEUTRAL_COLOR)]),
-        );
-        buf.add(
-            "world/cart/body",
-            &fixed,
-            &rerun::Boxes3D::from_half_sizes([(0.1, 0.05, CART_HALF_HEIGHT_M as f32)])
-                .with_colors([Color::from_rgb(60, 110, 200)])
-                .with_fill_mode(rerun::components::FillMode::Solid),
-        );
-        buf.add(
-            "world/cart/pole/body",
-            &fixed,
-            &rerun::Capsules3D::from_lengths_and_radii([1.0], [0.02])
-                .with_colors([Color::from_rgb(230, 150, 50)]),
-        );
-        let reach = 1.1;
-        let (sin, cos) = (THETA_LIMIT_RAD.sin() * reach, THETA_LIMIT_RAD.cos() * reach);
-        let deg = THETA_LIMIT_RAD.to_degrees();
-        let tips = [
-            [-sin as f32, 0.0, cos as f32],
-            [sin as f32, 0.0, cos as f32],
-        ];
-        buf.add(
-            "world/cart/fall_limits",
-            &fixed,
-            &rerun::LineStrips3D::new(tips.map(|tip| [[0.0, 0.0, 0.0], tip]))
-                .with_colors([rgb(LIMIT_COLOR)])
-                .with_radii([0.004]),
-        );
-        buf.add(
-            "world/cart/fall_limits/labels",
-            &fixed,
-            &rerun::Points3D::new(tips)
-                .with_colors([rgb(LIMIT_COLOR)])
-                .with_radii([0.01])
-                .with_labels([format!("−{deg:.0}°"), format!("+{deg:.0}°")]),
-        );
-    }
-
-    /// Per-series names and colours, the node graph's first drawing and the reference lines
-    /// at the start, for a graph of `shape`.
-    fn log_styles(&self, shape: &GraphShape) {
-        let fixed = TimePoint::default();
-        let lines = |name: &str, color: (u8, u8, u8), width: f32| {
-            rerun::SeriesLines::new()
-                .with_names([name])
-                .with_colors([rgb(color)])
-                .with_widths([width])
-        };
-        let mut buf = self.lock();
-        buf.add(
-            "plant/pole_angle_rad",
-            &fixed,
-            &lines("pole angle", ANGLE_COLOR, 2.0),
-        );
-        // Both sides of a limit share one name, so the legend shows it once.
-        for side in ["upper", "lower"] {
-            buf.add(
-                &format!("plant/fall_limit/{side}"),
-                &fixed,
-                &lines(
-                    &format!("fall limits ±{THETA_LIMIT_RAD} rad"),
-                    LIMIT_COLOR,
-                    1.5,
-                ),
-            );
-        }
-        buf.add("plant/cart_pos_m", &fixed, &lines("cart", ANGLE_COLOR, 2.0));
-        for side in ["right", "left"] {
-            buf.add(
-                &format!("plant/rail_end/{side}"),
-                &fixed,
-                &lines(
-                    &format!("rail ends ±{RAIL_HALF_LENGTH_M} m"),
-                    NEUTRAL_COLOR,
-                    1.5,
-                ),
-            );
-            buf.add(
-                &format!("plant/cart_limit/{side}"),
-                &fixed,
-                &lines(&format!("run ends ±{CART_LIMIT_M} m"), LIMIT_COLOR, 1.5),
-            );
-        }
-        buf.add(
-            "action/published_N",
-            &fixed,
-            &rerun::SeriesPoints::new()
-                .with_names(["published (policy)"])
-                .with_colors([rgb(ANGLE_COLOR)])
-                .with_markers([rerun::components::MarkerShape::Circle])
-                .with_marker_sizes([2.5]),
-        );
-        // Wider than the published points drawn over it (where the actuator applies what
-        // was just published, both show).
-        buf.add(
-            "action/applied_N",
-            &fixed,
-            &lines("applied (actuator, held)", FORCE_COLOR, 5.0)
-                .with_interpolation_mode(rerun::components::InterpolationMode::StepAfter),
-        );
-        // A latency holds from one actuator step to the next: steps, not slopes.
-        buf.add(
-            "latency/sense_to_act_ms",
-            &fixed,
-            &lines("latency", ANGLE_COLOR, 2.0)
-                .with_interpolation_mode(rerun::components::InterpolationMode::StepAfter),
-        );
-        let controller = shape.controller.clone().unwrap_or_default();
-        buf.add(
-            "latency/control_period_ms",
-            &fixed,
-            &lines(&format!("{controller} period"), NEUTRAL_COLOR, 1.5)
-                .with_interpolation_mode(rerun::components::InterpolationMode::StepAfter),
-        );
-        let widths = layered_widths(&shape.topics.iter().map(|t| t.entity()).collect::<Vec<_>>());
-        for (topic, width) in shape.topics.iter().zip(widths) {
-            for measure in ["published", "dropped", "msg_per_s"] {
-                buf.add(
-                    &format!("bus/{}/{measure}", topic.entity()),
-                    &fixed,
-                    &rerun::SeriesLines::new()
-                        .with_names([topic.name.as_str()])
-                        .with_colors([topic_color(&topic.name)])
-                        .with_widths([width]),
-                );
-            }
-        }
-        if self.clock == ClockKind::Real {
-            // Noisy series that seldom coincide: one width (layered, the spikes hid all).
-            for node in &shape.nodes {
-                buf.add(
-                    &format!("nodes/{}/lateness_ms", node.name),
-                    &fixed,
-                    &rerun::SeriesLines::new()
-                        .with_names([node.name.as_str()])
-                        .with_colors([node_color(&node.name)])
-                        .with_widths([1.5]),
-                );
-            }
-        }
-        if measures_executors(&self.cfg) {
-            // A node's executor series in its colour, named by it; steps, as they hold.
-            // Skipped-tick totals of two nodes often coincide (one thread held both): each
-            // narrower than the one drawn before it, so both colours show.
-            let names: Vec<String> = shape.nodes.iter().map(|n| n.name.clone()).collect();
-            for (node, layered) in shape.nodes.iter().zip(layered_widths(&names)) {
-                for (series, width) in [
-                    ("executor_lane", 2.0),
-                    ("response_ms", 1.5),
-                    ("skipped_ticks", layered),
-                ] {
-                    buf.add(
-                        &format!("nodes/{}/{series}", node.name),
-                        &fixed,
-                        &rerun::SeriesLines::new()
-                            .with_names([node.name.as_str()])
-                            .with_colors([node_color(&node.name)])
-                            .with_widths([width])
-                            .with_interpolation_mode(
-                                rerun::components::InterpolationMode::StepAfter,
-                            ),
-                    );
-                }
-            }
-        }
-        buf.send(&self.rec);
-        reference_lines(&mut buf, Nanos::ZERO, 0);
     }
 
     fn lock(&self) -> std::sync::MutexGuard<'_, ChunkBuffer> {
         self.buffer.lock().unwrap_or_else(|e| e.into_inner())
     }
 
-    /// Log a line of the run's text log ([`crate::textlog`]) under `log/<node>` (`log/ratelab`
+    /// Log a line of the run's text log ([`ratelab_core::textlog`]) under `log/<node>` (`log/ratelab`
     /// for ratelab's own), at its run time (the latest step's when it has none), with its
     /// level: the final layout shows them in a view of their own.
-    pub fn log_line(&self, line: &crate::textlog::LogLine) {
+    pub fn log_line(&self, line: &ratelab_core::textlog::LogLine) {
         let step = self.last_step.load(std::sync::atomic::Ordering::Relaxed);
         let mut buf = self.lock();
         // Outside any tick (a script's loading): at the latest actuator step's time.
         let t = line.t.unwrap_or_else(|| {
-            Nanos((step as f64 * 1e9 / crate::plant::ACTUATOR_HZ).round() as u64)
+            Nanos((step as f64 * 1e9 / ratelab_core::plant::ACTUATOR_HZ).round() as u64)
         });
         let time = buf.at(t, step);
         let level = match line.level {
-            crate::textlog::Level::Info => rerun::components::TextLogLevel::INFO,
-            crate::textlog::Level::Warn => rerun::components::TextLogLevel::WARN,
-            crate::textlog::Level::Error => rerun::components::TextLogLevel::ERROR,
+            ratelab_core::textlog::Level::Info => rerun::components::TextLogLevel::INFO,
+            ratelab_core::textlog::Level::Warn => rerun::components::TextLogLevel::WARN,
+            ratelab_core::textlog::Level::Error => rerun::components::TextLogLevel::ERROR,
         };
         let who = line.node.as_deref().unwrap_or("ratelab");
         buf.add(
@@ -1030,10 +804,10 @@ impl Recording {
     /// Log a real-clock tick: its lateness ([`Recording::node_tick`]) and, when the run
     /// measures its executors, its span for the executor timeline ([`Recording::node_span`]:
     /// released at its deadline, started `lateness` after it, ended when it had taken `took`).
-    pub fn real_tick(&self, t: &crate::scheduler::TickReport<'_>) {
+    pub fn real_tick(&self, t: &ratelab_runtime::scheduler::TickReport<'_>) {
         self.node_tick(t.name, t.now, t.lateness);
         if measures_executors(&self.cfg) {
-            self.node_span(&crate::executor::CallbackSpan {
+            self.node_span(&ratelab_core::executor::CallbackSpan {
                 node: t.node,
                 release: t.now.saturating_sub(t.lateness),
                 start: t.now,
@@ -1044,10 +818,10 @@ impl Recording {
 
     /// A hook that logs every span of a virtual run ([`Recording::node_span`]), when the
     /// run measures its executors (`None` else: nothing to draw).
-    pub fn span_hook(&self) -> Option<crate::executor::SpanHook> {
+    pub fn span_hook(&self) -> Option<ratelab_core::executor::SpanHook> {
         let me = self.clone();
         measures_executors(&self.cfg)
-            .then(|| Arc::new(move |s: &crate::executor::CallbackSpan| me.node_span(s)) as _)
+            .then(|| Arc::new(move |s: &ratelab_core::executor::CallbackSpan| me.node_span(s)) as _)
     }
 
     /// Add `line` to the summary written at [`Recording::finish`], after the metrics' lines
@@ -1073,11 +847,12 @@ impl Recording {
         {
             let path = format!("bus/{entity}/wire_{stat}_us");
             if !buf.extents.contains_key(&path) {
-                buf.add(
+                let name = format!("{topic} {stat}");
+                buf.style(
                     &path,
-                    &TimePoint::default(),
+                    &name,
                     &rerun::SeriesLines::new()
-                        .with_names([format!("{topic} {stat}")])
+                        .with_names([name.as_str()])
                         .with_colors([color])
                         .with_widths([width]),
                 );
@@ -1108,7 +883,7 @@ impl Recording {
     /// published, at the end) and the periods its timer skipped so far
     /// (`nodes/<name>/skipped_ticks`: a release more than a period after the last, at the
     /// node's starting rate). Only for runs that measure executors.
-    pub fn node_span(&self, span: &crate::executor::CallbackSpan) {
+    pub fn node_span(&self, span: &ratelab_core::executor::CallbackSpan) {
         let Some(n) = self.cfg.graph.nodes.get(span.node) else {
             return;
         };
@@ -1117,7 +892,7 @@ impl Recording {
         }
         let base = span.node as f64;
         let lane = format!("nodes/{}/executor_lane", n.name);
-        let period = crate::rate::period_for_hz(n.rate_hz).map_or(0, |p| p.0.max(1));
+        let period = ratelab_core::rate::period_for_hz(n.rate_hz).map_or(0, |p| p.0.max(1));
         let (skipped, first_skip) = {
             let mut lanes = self.lanes.lock().unwrap_or_else(|e| e.into_inner());
             if lanes.len() <= span.node {
@@ -1233,7 +1008,7 @@ impl Recording {
             (level == rerun::components::TextLogLevel::ERROR).then_some(Mark::Trouble),
             &format!(
                 "end: {reason}, {}",
-                crate::metrics::counted(metrics.steps, "actuator step")
+                ratelab_core::metrics::counted(metrics.steps, "actuator step")
             ),
             level,
         );
@@ -1280,6 +1055,11 @@ impl Recording {
                         buf.scalar(&at("msg_per_s"), end.at, metrics.steps, rate);
                     }
                 }
+                // A large graph's groups reach the end with their topics.
+                let shape = self.shape.lock().unwrap_or_else(|e| e.into_inner());
+                if let Some(shape) = shape.as_ref() {
+                    grouped::end_rows(&mut buf, shape, end.at, metrics.steps);
+                }
             }
             // The skipped ticks end where metrics.json ends them (a tick still computing
             // at the end counted its skipped periods when it started, and no span ended).
@@ -1314,8 +1094,11 @@ impl Recording {
         }
         let shape = self.shape.lock().unwrap_or_else(|e| e.into_inner()).clone();
         if let Some(shape) = shape {
-            let extents = self.lock().extents.clone();
-            self.send_layout(&shape, Some(&extents), Some(end.at))?;
+            let (extents, seen) = {
+                let buf = self.lock();
+                (buf.extents.clone(), buf.seen.clone())
+            };
+            self.send_layout(&shape, Some((&extents, &seen, end.at)))?;
         }
         self.flush()?;
         Ok(self.file.commit()?)
@@ -1468,16 +1251,16 @@ mod tests {
                 .map(|(_, q)| q.to_vec())
         };
         assert_eq!(qos_view(&s, None), None, "the chapter's QoS adds no view");
-        let mut qos = crate::qos::TopicQos {
+        let mut qos = ratelab_core::qos::TopicQos {
             deadline: Some(Nanos::from_millis(40)),
             ..Default::default()
         };
-        qos.history = crate::qos::History::KeepAll;
+        qos.history = ratelab_core::qos::History::KeepAll;
         s.topics[1].qos = qos;
-        s.nodes[1].liveliness = Some(Arc::new(crate::qos::Liveliness::new(Some(
+        s.nodes[1].liveliness = Some(Arc::new(ratelab_core::qos::Liveliness::new(Some(
             Nanos::from_millis(60),
         ))));
-        s.nodes[2].liveliness = Some(Arc::new(crate::qos::Liveliness::new(None)));
+        s.nodes[2].liveliness = Some(Arc::new(ratelab_core::qos::Liveliness::new(None)));
         assert_eq!(
             qos_view(&s, None).unwrap(),
             [

@@ -39,7 +39,7 @@ impl Shared {
         let hopeless = match self.grpc.status() {
             GrpcSinkConnectionState::Connected => false,
             GrpcSinkConnectionState::Connecting { .. } => {
-                !self.viewer.is_none_or(crate::procs::process_alive)
+                !self.viewer.is_none_or(ratelab_core::procs::process_alive)
             }
             GrpcSinkConnectionState::Disconnected(_) => true,
         };

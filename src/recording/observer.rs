@@ -60,6 +60,9 @@ pub(super) struct RecordingObserver {
     in_window: bool,
     /// The estimate's series has its name and colour (logged with its first point).
     estimate_styled: bool,
+    /// A large graph's groups ([`super::groups`]): its bus also drawn by group, its node
+    /// graph a box per group. `None` for a graph drawn node by node.
+    groups: Option<super::groups::Groups>,
     /// The previous step's run time, step number and whether its rows were muted (outside
     /// the recording window): an estimate is logged there, where the angle's line shows the
     /// state it estimates.
@@ -71,6 +74,7 @@ impl RecordingObserver {
     pub(super) fn new(rec: Recording, shape: GraphShape) -> RecordingObserver {
         RecordingObserver {
             rec,
+            groups: super::groups::Groups::of(&shape),
             shape,
             last_state: None,
             window: VecDeque::new(),
@@ -156,39 +160,22 @@ impl RecordingObserver {
     /// The node graph with its current labels: nodes (blue) and topics (amber) placed left
     /// to right, edges publisher → topic → subscriber.
     fn graph_rows(&self, buf: &mut ChunkBuffer, time: &TimePoint) {
+        if let Some(groups) = &self.groups {
+            // A large graph: a box per group ([`super::groups`]).
+            super::grouped::graph_rows(buf, time, &self.shape, groups);
+            return;
+        }
         let shape = &self.shape;
         let (positions, _) = graph_positions(shape);
+        // A node's label and a topic's (`NodeShape::label`, `TopicShape::label`): its rate
+        // or depth, a Python node or a node's process, a topic's QoS in short.
         let label = |id: &str| {
             if let Some(n) = shape.nodes.iter().find(|n| n.name == id) {
-                let mut lines = vec![format!("{id} · {} Hz", hz_label(n.rate.hz()))];
-                // A Python node says so; across processes, the node's process follows.
-                if n.python {
-                    lines.push("python".to_string());
-                }
-                if let Some(p) = &n.process {
-                    lines.push(format!("process {p}"));
-                }
-                (lines.join("\n"), node_color(id))
+                (n.label(), node_color(id))
             } else {
                 let topic = shape.topics.iter().find(|t| t.name == id);
-                let depth = topic.map_or(0, |t| (t.stats)().depth);
-                // A topic with QoS beyond the depth shows it in short, a part a line under
-                // its name (`dl 30 ms zero`, `link 20%`), so the label stays about as wide
-                // as its neighbours (one line of every part made the graph's text tiny and
-                // the label covered its arrows); the chapter's keep-last/latest rule goes
-                // without saying (the depth is on the first line).
-                match topic.map(|t| (t.live_qos)()).filter(|q| !q.is_default()) {
-                    Some(q) => {
-                        let mut lines = vec![format!("{id} · depth {depth}")];
-                        lines.extend(
-                            q.short_parts(depth)
-                                .into_iter()
-                                .filter(|p| !(p.starts_with("KL") && p.ends_with(" latest"))),
-                        );
-                        (lines.join("\n"), topic_color(id))
-                    }
-                    None => (format!("{id} · depth {depth}"), topic_color(id)),
-                }
+                let text = topic.map_or_else(|| format!("{id} · depth 0"), |t| t.label());
+                (text, topic_color(id))
             }
         };
         let (labels, colors): (Vec<String>, Vec<Color>) =
@@ -250,11 +237,44 @@ impl RecordingObserver {
         parts.join("; ")
     }
 
+    /// Whether every change from `old` to `new` is a node's rate that a ROS 2 parameter set
+    /// announced ([`Recording::parameter_set`], whose own event marks it). The announcements
+    /// about the nodes whose rate changed are used up either way.
+    fn announced(&self, old: &GraphState, new: &GraphState) -> bool {
+        let rates: Vec<(&str, f64)> = self
+            .shape
+            .nodes
+            .iter()
+            .zip(old.rates.iter().zip(&new.rates))
+            .filter(|(_, (a, b))| a != b)
+            .map(|(n, (_, b))| (n.name.as_str(), *b))
+            .collect();
+        let mut said = self.rec.announced.lock().unwrap_or_else(|e| e.into_inner());
+        let all = !rates.is_empty()
+            && old.depths == new.depths
+            && old.qos == new.qos
+            && rates.iter().all(|(n, hz)| {
+                said.iter()
+                    .any(|(m, h)| m.as_str() == *n && (h - hz).abs() < 1e-9)
+            });
+        said.retain(|(m, _)| !rates.iter().any(|(n, _)| m.as_str() == *n));
+        all
+    }
+
     /// The topics' counters at step `s`, with msg/s over the last second of run time, and
     /// the counts the recording's summary reads.
     fn bus_rows(&mut self, buf: &mut ChunkBuffer, s: &StepRecord) {
         // Bus counters and msg/s over the last second of run time.
         let stats = self.note_published(s);
+        // A large graph's groups take each topic's values too (published, dropped, msg/s).
+        let mut values: Option<[Vec<Option<f64>>; 3]> = self.groups.as_ref().map(|_| {
+            let n = stats.len();
+            [
+                Vec::with_capacity(n),
+                Vec::with_capacity(n),
+                Vec::with_capacity(n),
+            ]
+        });
         for (i, (topic, st)) in self.shape.topics.iter().zip(&stats).enumerate() {
             let entity = topic.entity();
             buf.scalar(
@@ -278,13 +298,23 @@ impl RecordingObserver {
                 .window
                 .iter()
                 .find(|(_, counts)| counts.get(i).is_some_and(|n| *n > 0));
+            let mut rate = None;
             if let Some((t0, counts)) = from {
                 let span = s.t.saturating_sub(*t0).as_secs_f64();
                 if span > 0.0 {
-                    let rate = st.published.saturating_sub(counts[i]) as f64 / span;
-                    buf.scalar(&format!("bus/{entity}/msg_per_s"), s.t, s.step, rate);
+                    let r = st.published.saturating_sub(counts[i]) as f64 / span;
+                    buf.scalar(&format!("bus/{entity}/msg_per_s"), s.t, s.step, r);
+                    rate = Some(r);
                 }
             }
+            if let Some([published, dropped, msg_per_s]) = &mut values {
+                published.push(Some(st.published as f64));
+                dropped.push(Some(st.dropped as f64));
+                msg_per_s.push(rate);
+            }
+        }
+        if let (Some(groups), Some(values)) = (&self.groups, &values) {
+            super::grouped::bus_rows(buf, groups, s.t, s.step, values);
         }
     }
 
@@ -424,6 +454,7 @@ impl RecordingObserver {
 impl StepObserver for RecordingObserver {
     fn attach(&mut self, h: &GraphHandles) {
         self.shape = GraphShape::from_handles(h);
+        self.groups = super::groups::Groups::of(&self.shape);
         self.rec.attach(&self.shape);
     }
 
@@ -446,13 +477,15 @@ impl StepObserver for RecordingObserver {
         let changed = self.last_state.as_ref() != Some(&state);
         // Entering the window: the graph as it is now, whether or not it changed.
         if changed || entering {
-            // A change mid-run (the first state is the start's, an event of its own).
+            // A change mid-run (the first state is the start's, an event of its own). A rate
+            // set from ROS 2 is marked at the parameter set's own event: listed here only.
             if let (Some(old), true) = (&self.last_state, changed) {
                 let text = self.describe_change(old, &state);
+                let mark = (!self.announced(old, &state)).then_some(Mark::Change);
                 buf.event(
                     s.t,
                     s.step,
-                    Some(Mark::Change),
+                    mark,
                     &text,
                     rerun::components::TextLogLevel::INFO,
                 );
@@ -472,14 +505,17 @@ impl StepObserver for RecordingObserver {
         let previous = self.previous.replace((s.t, s.step, outside));
         if let (Some(est), Some((t, step, muted_then))) = (estimate, previous) {
             if !std::mem::replace(&mut self.estimate_styled, true) {
+                // Drawn before the angle (its entity sorts first) and wider: where the
+                // estimate lies on its truth, a band either side of the angle's line.
+                let name = "pole angle estimate θ̂";
                 let style = rerun::SeriesLines::new()
-                    .with_names(["pole angle estimate θ̂"])
+                    .with_names([name])
                     .with_colors([rgb(ESTIMATE_COLOR)])
-                    .with_widths([1.5]);
+                    .with_widths([ESTIMATE_WIDTH]);
                 // A static row, written whether or not this step is inside a recording
                 // window (the series keeps its name whenever its points start).
                 let muted = std::mem::replace(&mut buf.rows_muted, false);
-                buf.add(ESTIMATE_ENTITY, &TimePoint::default(), &style);
+                buf.style(ESTIMATE_ENTITY, name, &style);
                 buf.rows_muted = muted;
             }
             let angle = est[ratelab_core::estimate::POLE_ANGLE];

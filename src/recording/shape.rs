@@ -4,11 +4,11 @@
 //! entities, the blueprint's per-topic and per-node series) comes from a [`GraphShape`],
 //! which is built in one place, [`GraphShape::from_handles`].
 
-use crate::graph::GraphHandles;
-use crate::msg::ForceMsg;
-use crate::qos::{Liveliness, TopicQos};
-use crate::rate::Rate;
-use crate::topic::{Subscription, TopicStats};
+use ratelab_core::msg::ForceMsg;
+use ratelab_core::qos::{Liveliness, TopicQos};
+use ratelab_core::rate::Rate;
+use ratelab_core::topic::{Subscription, TopicStats};
+use ratelab_runtime::graph::GraphHandles;
 use std::collections::BTreeMap;
 use std::sync::Arc;
 
@@ -29,8 +29,25 @@ pub struct NodeShape {
 
 impl NodeShape {
     /// Its liveliness lease now, if it has one.
-    pub(crate) fn lease(&self) -> Option<crate::time::Nanos> {
+    pub(crate) fn lease(&self) -> Option<ratelab_core::time::Nanos> {
         self.liveliness.as_ref().and_then(|l| l.lease())
+    }
+
+    /// Its label in the node graph: `policy · 50 Hz`, then `python` for a Python node and,
+    /// across processes, `process <name>`, a line each.
+    pub(crate) fn label(&self) -> String {
+        let mut lines = vec![format!(
+            "{} · {} Hz",
+            self.name,
+            super::hz_label(self.rate.hz())
+        )];
+        if self.python {
+            lines.push("python".to_string());
+        }
+        if let Some(p) = &self.process {
+            lines.push(format!("process {p}"));
+        }
+        lines.join("\n")
     }
 }
 
@@ -55,6 +72,28 @@ impl TopicShape {
     /// The entity path part of the topic: its name without the leading `/`.
     pub(crate) fn entity(&self) -> String {
         super::bus_name(&self.name)
+    }
+
+    /// Its label in the node graph, with its depth now: `/obs · depth 1`. A topic with QoS
+    /// beyond the depth shows it in short, a part a line under its name (`dl 30 ms zero`,
+    /// `link 20%`), so the label stays about as wide as its neighbours (one line of every
+    /// part made the graph's text tiny and the label covered its arrows); the chapter's
+    /// keep-last/latest rule goes without saying (the depth is on the first line).
+    pub(crate) fn label(&self) -> String {
+        let depth = (self.stats)().depth;
+        let first = format!("{} · depth {depth}", self.name);
+        match Some((self.live_qos)()).filter(|q| !q.is_default()) {
+            Some(q) => {
+                let mut lines = vec![first];
+                lines.extend(
+                    q.short_parts(depth)
+                        .into_iter()
+                        .filter(|p| !(p.starts_with("KL") && p.ends_with(" latest"))),
+                );
+                lines.join("\n")
+            }
+            None => first,
+        }
     }
 }
 
@@ -112,13 +151,13 @@ impl GraphShape {
 
     /// The shape of a graph that runs elsewhere (in other processes), as data: each node at
     /// its rate in `spec` (no liveliness) in its process (`spec`'s placement), each topic's counters read from `stats` (by
-    /// [`crate::graph::TopicId`]; zeros for a topic it lacks), its QoS as `spec` has it, and
+    /// [`ratelab_runtime::graph::TopicId`]; zeros for a topic it lacks), its QoS as `spec` has it, and
     /// the published force read from `commands`.
     pub fn from_spec(
-        spec: &crate::graph::GraphSpec,
+        spec: &ratelab_runtime::graph::GraphSpec,
         stats: Arc<std::sync::Mutex<Vec<TopicStats>>>,
         commands: Option<Arc<Subscription<ForceMsg>>>,
-    ) -> Result<Self, crate::rate::InvalidRate> {
+    ) -> Result<Self, ratelab_core::rate::InvalidRate> {
         let rates = spec
             .nodes
             .iter()
@@ -131,7 +170,7 @@ impl GraphShape {
             |i| {
                 let stats = stats.clone();
                 Arc::new(move || {
-                    crate::graph::lock(&stats)
+                    ratelab_runtime::graph::lock(&stats)
                         .get(i)
                         .copied()
                         .unwrap_or_default()
@@ -144,7 +183,7 @@ impl GraphShape {
             commands,
         );
         for (i, n) in shape.nodes.iter_mut().enumerate() {
-            n.process = Some(spec.process_of(crate::graph::NodeId(i)));
+            n.process = Some(spec.process_of(ratelab_runtime::graph::NodeId(i)));
         }
         Ok(shape)
     }
@@ -152,7 +191,7 @@ impl GraphShape {
     /// The one place the shape is put together: nodes with `rates` (and `liveliness`,
     /// where known), topics with the readers `stats(i)` and `live_qos(i)`.
     fn build(
-        spec: &crate::graph::GraphSpec,
+        spec: &ratelab_runtime::graph::GraphSpec,
         rates: &[Rate],
         liveliness: &[Arc<Liveliness>],
         stats: impl Fn(usize) -> Arc<dyn Fn() -> TopicStats + Send + Sync>,

@@ -2,18 +2,19 @@
 //! (`ratelab::distributed::monitor` folds the processes' reports into it) written into a
 //! [`Recording`], for `ratelab launch --record`.
 
-use crate::msg::ForceMsg;
-use crate::telemetry::Telemetry;
-use crate::time::Nanos;
-use crate::topic::{Subscription, TopicStats};
 use crate::{GraphShape, Recording, RecordingError, RunConfig};
+use ratelab_core::msg::ForceMsg;
+use ratelab_core::time::Nanos;
+use ratelab_core::topic::{Subscription, TopicStats};
+use ratelab_runtime::telemetry::Telemetry;
 use std::sync::{Arc, Mutex};
 
 /// The level a launcher's line is recorded at: a warning for what went wrong (a process
-/// gone, failed, silent; a join or a report refused), information for the rest (listening,
-/// ready, rejoined, heard again).
+/// killed, gone, failed, silent; a join or a report refused), information for the rest
+/// (listening, ready, rejoined, heard again).
 fn launcher_line_level(line: &str) -> &'static str {
-    const TROUBLE: [&str; 5] = [
+    const TROUBLE: [&str; 6] = [
+        " killed at t=",
         " is gone",
         " failed",
         " is silent",
@@ -31,9 +32,12 @@ fn launcher_line_level(line: &str) -> &'static str {
 /// closed: each merged step (the plant, the latency, every topic's counters as its holder
 /// reported them; the force the policy published, from the step), each node tick's
 /// lateness (real clock), the launcher's lines as events, and each node's liveliness token
-/// going and coming back as events (stamped with the newest run time any process reported,
-/// [`Telemetry::Status`]'s `now`). The caller finishes the recording with the merged
-/// summary ([`Recording::finish`]).
+/// going and coming back as events. Every event is on the launcher's run clock: a
+/// launcher's line at the run time it states (`… rejoined at t=3.110s`, the time its
+/// summary gives too), and the rest at the newest run time known, any process's
+/// ([`Telemetry::Status`]'s `now`) or a line's stated one, so an event is never stamped
+/// before one the launcher said before it. The caller finishes the recording with the
+/// merged summary ([`Recording::finish`]).
 ///
 /// What differs from an in-process recording: a topic held by another process shows its
 /// counters as that process sampled them after its newest tick no later than the step (not
@@ -70,7 +74,7 @@ pub fn record(
         match t {
             Telemetry::Step(s) => {
                 now = now.max(s.t);
-                *crate::graph::lock(&counters) = s.topics.iter().copied().collect();
+                *ratelab_runtime::graph::lock(&counters) = s.topics.iter().copied().collect();
                 if let (Some((at, newtons)), Some(c)) = (s.published, &commands) {
                     c.publish(ForceMsg { newtons }, at, None);
                 }
@@ -93,12 +97,13 @@ pub fn record(
                     }
                 }
             }
-            // A launcher's line says when it happened (`at t=5.57s`): placed there.
-            Telemetry::Applied(line) => rec.event(
-                super::events::stated_time(&line).unwrap_or(now),
-                &line,
-                launcher_line_level(&line),
-            ),
+            // A launcher's line says when it happened (`at t=5.570s`, its run clock): placed
+            // there, and the events after it are not stamped before it.
+            Telemetry::Applied(line) => {
+                let at = super::events::stated_time(&line).unwrap_or(now);
+                now = now.max(at);
+                rec.event(at, &line, launcher_line_level(&line));
+            }
             Telemetry::Error(line) => rec.event(now, &line, "WARN"),
             Telemetry::Status {
                 now: seen,
@@ -144,9 +149,11 @@ mod tests {
         for (line, level) in [
             ("launch: process 'policy' is gone at t=3.21s (its liveliness token was withdrawn); the others run on", "WARN"),
             ("launch: process 'policy' failed (signal: 9) at t=2.31s: starting it again", "WARN"),
+            ("launch: process 'policy' killed at t=3.027s (--kill-process)", "WARN"),
+            ("launch: process 'policy' had already exited: not killed", "INFO"),
             ("launch: process 'robot' is silent at t=4.00s: no figures for 1.0 s", "WARN"),
             ("launch: refused a join: process 'policy' is already running", "WARN"),
-            ("launch: process 'policy' rejoined", "INFO"),
+            ("launch: process 'policy' rejoined at t=3.110s", "INFO"),
             ("launch: process 'robot' is heard again", "INFO"),
             ("launch: listening on tls/127.0.0.1:7449", "INFO"),
         ] {

@@ -1,7 +1,7 @@
 //! The span of run time a recording keeps the plots of (`--record-window`), for runs too
 //! long to record whole.
 
-use crate::time::Nanos;
+use ratelab_core::time::Nanos;
 
 /// The span of run time a recording keeps the step rows of (`--record-window FROM:UNTIL`,
 /// seconds): a long run's recording as large as the user asks, not as long as the run. The
@@ -18,7 +18,7 @@ pub struct RecordWindow {
 
 impl RecordWindow {
     /// Parse `FROM:UNTIL` in seconds of run time, either side empty (`3600:3660`, `:60`,
-    /// `86340:`), each within [`crate::limits::MAX_DURATION_S`].
+    /// `86340:`), each within [`ratelab_core::limits::MAX_DURATION_S`].
     ///
     /// # Errors
     /// One line saying what is wrong.
@@ -34,11 +34,11 @@ impl RecordWindow {
             let v: f64 = x
                 .parse()
                 .map_err(|_| format!("{what} '{x}' is not a number of seconds"))?;
-            if !(v.is_finite() && (0.0..=crate::limits::MAX_DURATION_S).contains(&v)) {
-                return Err(crate::limits::refusal(
+            if !(v.is_finite() && (0.0..=ratelab_core::limits::MAX_DURATION_S).contains(&v)) {
+                return Err(ratelab_core::limits::refusal(
                     format!(
                         "{what} {v} s is outside 0 … {} s",
-                        crate::limits::MAX_DURATION_S
+                        ratelab_core::limits::MAX_DURATION_S
                     ),
                     "MAX_DURATION_S",
                 ));
@@ -71,7 +71,7 @@ impl RecordWindow {
 #[cfg(test)]
 mod tests {
     use super::RecordWindow;
-    use crate::time::Nanos;
+    use ratelab_core::time::Nanos;
 
     #[test]
     fn a_window_parses_either_side_open_and_refuses_the_rest() {

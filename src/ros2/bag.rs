@@ -22,9 +22,9 @@
 //! whole (a full disk) is not left under its name: its MCAP file is removed, and the run
 //! says so and fails ([`Bag::finish`]), as `--out` and `--record` do.
 
+use super::rmw_zenoh::qos::{QosDurability, QosDuration, QosHistory, QosProfile, QosReliability};
 use super::types::RosType;
 use super::Ros2Error;
-use hiroz_protocol::qos::{QosDurability, QosDuration, QosHistory, QosProfile, QosReliability};
 use hiroz_schema::TypeDescriptionMsg;
 use serde::Serialize;
 use std::collections::BTreeMap;
@@ -32,8 +32,10 @@ use std::io::BufWriter;
 use std::path::{Path, PathBuf};
 
 /// The `.msg` text of each type the bags carry, as ROS 2 Jazzy ships it (comments dropped;
-/// `rcl_interfaces`' from ros2/rcl_interfaces 2.2.0, the same in Kilted).
-fn msg_text(name: &str) -> &'static str {
+/// `rcl_interfaces`' from ros2/rcl_interfaces 2.2.0, the same in Kilted); empty for a type
+/// of no text here. Also the sources `~/get_type_description` gives when asked
+/// ([`super::type_description`]).
+pub(crate) fn msg_text(name: &str) -> &'static str {
     match name {
         "rcl_interfaces/msg/Log" => {
             "uint8 DEBUG=10\nuint8 INFO=20\nuint8 WARN=30\nuint8 ERROR=40\nuint8 FATAL=50\n\
@@ -132,7 +134,7 @@ impl QosYaml {
         };
         let (history, depth) = match q.history {
             QosHistory::KeepLast(n) => ("keep_last", n),
-            QosHistory::KeepAll => ("keep_all", 0),
+            QosHistory::KeepAll(_) => ("keep_all", 0),
         };
         QosYaml {
             history,
@@ -216,7 +218,7 @@ impl Bag {
         }
         let (mcap, meta) = Bag::files(dir);
         for p in [&mcap, &meta] {
-            crate::output::check_target(p, force).map_err(|e| io(p, e))?;
+            ratelab_core::output::check_target(p, force).map_err(|e| io(p, e))?;
         }
         Ok(())
     }
@@ -391,7 +393,7 @@ impl Bag {
             },
         };
         let yaml = serde_yaml::to_string(&meta).map_err(|e| e.to_string())?;
-        crate::output::write_file(&self.dir.join("metadata.yaml"), true, yaml.as_bytes())
+        ratelab_core::output::write_file(&self.dir.join("metadata.yaml"), true, yaml.as_bytes())
             .map_err(|e| e.to_string())
     }
 }

@@ -6,21 +6,31 @@
 //! messages are read with the `mcap` crate (every message, in the file's order, so a bag cut
 //! short, without its summary, still reads up to where it stops, and says so). A topic's
 //! type is its channel's schema name; its RIHS01 hash is the channel's `topic_type_hash`
-//! (rosbag2's MCAP metadata) or `metadata.yaml`'s `type_description_hash`; a bag that gives
-//! none is decoded by the type's name alone. Bounded: the MCAP file at most
+//! (rosbag2's MCAP metadata) or `metadata.yaml`'s `type_description_hash`. A message is
+//! decoded ([`BagMessage::decode`]) by the description ratelab has of its type when the
+//! name and hash are one it knows ([`super::echo::known`]; a bag that gives no hash, by the
+//! name alone); else by the `ros2msg` schema the bag carries for its channel
+//! ([`super::msg_schema`]), whose description must hash to the bag's hash when the bag
+//! gives one. Bounded: the MCAP file at most
 //! [`MAX_BAG_BYTES`], `metadata.yaml` at most [`MAX_METADATA_BYTES`] and
 //! [`crate::yaml_depth::MAX_YAML_DEPTH`] deep, the folder's listing at most
 //! [`MAX_DIR_ENTRIES`] entries, every record's length by the bytes there are, a chunk's
 //! inflated size by [`MAX_CHUNK_BYTES`], by what it declares and by its codec's ratio
-//! ([`max_inflation`]); Ctrl-C and SIGTERM end a read between records. The `mcap` crate's
-//! own `MessageStream` is not used: it reads a record's declared length unchecked (a 64-byte
-//! file claiming 2⁶⁴ − 1 bytes panics it) and loops forever on a chunk that inflates past
-//! what it declares.
+//! ([`max_inflation`]), the schemas held by [`super::msg_schema::MAX_SCHEMA_BYTES`] each
+//! and [`MAX_HELD_SCHEMA_BYTES`] in all; Ctrl-C and SIGTERM end a read between records. The
+//! `mcap` crate's own `MessageStream` is not used: it reads a record's declared length
+//! unchecked (a 64-byte file claiming 2⁶⁴ − 1 bytes panics it) and loops forever on a chunk
+//! that inflates past what it declares.
 
+use super::echo::{self, NOT_DESCRIBED};
+use super::msg_schema::{self, MAX_SCHEMA_BYTES};
+use hiroz_schema::TypeDescriptionMsg;
 use std::borrow::Cow;
+use std::cell::OnceCell;
 use std::collections::{BTreeMap, HashMap};
 use std::io::Read;
 use std::path::{Path, PathBuf};
+use std::rc::Rc;
 
 /// The largest MCAP file read (bytes): it is read whole into memory.
 pub const MAX_BAG_BYTES: u64 = 2 * 1024 * 1024 * 1024;
@@ -28,6 +38,10 @@ pub const MAX_BAG_BYTES: u64 = 2 * 1024 * 1024 * 1024;
 /// so this holds thousands of topics; YAML's parser holds every event of a file at once
 /// (16 MiB of flat entries took 530 MB and 1.6 s, 4 MiB about a quarter of that).
 pub const MAX_METADATA_BYTES: u64 = 4 << 20;
+/// The most schema text held while a bag is read (bytes, every schema's together): 64 MiB.
+/// A bag declares one schema a type, a few KiB each; a schema past this is not held, and
+/// its messages are said undecoded, with the reason.
+pub const MAX_HELD_SCHEMA_BYTES: usize = 64 << 20;
 /// The most entries of the bag's folder looked at for its `*.mcap`.
 pub const MAX_DIR_ENTRIES: usize = 10_000;
 /// The largest chunk inflated (the uncompressed size it declares, checked before a byte is
@@ -91,8 +105,8 @@ pub struct Bag {
 fn err(path: &Path, what: impl std::fmt::Display) -> String {
     format!(
         "{}: {}",
-        crate::text::printable(&path.display().to_string()),
-        crate::text::printable(&what.to_string())
+        ratelab_core::text::printable(&path.display().to_string()),
+        ratelab_core::text::printable(&what.to_string())
     )
 }
 
@@ -173,9 +187,10 @@ impl Bag {
         })
     }
 
-    /// Every message in the file's order, to `each` (topic, type, hash, log time ns,
-    /// payload); stops early when `each` returns false, or when `stop` says so (Ctrl-C,
-    /// SIGTERM: checked between records and every MiB a chunk inflates). Returns a note when
+    /// Every message in the file's order, to `each` ([`BagMessage`]: its topic, type, hash,
+    /// log time and payload, and how to decode it); stops early when `each` returns false,
+    /// or when `stop` says so (Ctrl-C, SIGTERM: checked between records and every MiB a
+    /// chunk inflates). Returns a note when
     /// the file stops short of its end (a bag cut short) or the read was stopped.
     ///
     /// The records are walked by the `mcap` crate's [`mcap::read::LinearReader`], which
@@ -192,16 +207,17 @@ impl Bag {
     pub fn messages(
         &self,
         stop: &dyn Fn() -> bool,
-        mut each: impl FnMut(&str, &str, &str, u64, &[u8]) -> bool,
+        mut each: impl FnMut(&BagMessage<'_>) -> bool,
     ) -> Result<Option<String>, String> {
         let mut walk = Walk {
             bag: self,
             schemas: HashMap::new(),
             channels: HashMap::new(),
+            held: 0,
             count: 0,
             stop,
         };
-        let read = catching_panics(|| walk.file(&mut each));
+        let read = super::catching_panics(|| walk.file(&mut each));
         match read {
             Ok(r) => r.map_err(|e| err(&self.file, e)),
             Err(why) => Err(err(
@@ -223,12 +239,12 @@ impl Bag {
         }
         let mut topics: BTreeMap<String, Topic> = BTreeMap::new();
         let (mut first, mut last, mut total) = (u64::MAX, 0u64, 0u64);
-        let note = self.messages(stop, |topic, ty, _, t, _| {
-            let e = topics.entry(topic.to_string()).or_default();
-            e.ty = ty.to_string();
+        let note = self.messages(stop, |m| {
+            let e = topics.entry(m.topic.to_string()).or_default();
+            e.ty = m.type_name.to_string();
             e.count += 1;
-            first = first.min(t);
-            last = last.max(t);
+            first = first.min(m.log_time);
+            last = last.max(m.log_time);
             total += 1;
             true
         })?;
@@ -242,16 +258,16 @@ impl Bag {
         let mut rows = topics.iter().map(|(t, x)| {
             format!(
                 "Topic: {} | Type: {} | Count: {} | Serialization Format: cdr",
-                crate::text::printable(t),
-                crate::text::printable(&x.ty),
+                ratelab_core::text::printable(t),
+                ratelab_core::text::printable(&x.ty),
                 x.count
             )
         });
         let mut out = format!(
             "\nFiles:             {}\nBag size:          {}\nStorage id:        mcap\nROS Distro:        {}\nDuration:          {}s\nStart:             {}\nEnd:               {}\nMessages:          {total}\nTopic information: {}\n",
-            crate::text::printable(&name),
+            ratelab_core::text::printable(&name),
             size_text(self.bytes.len() as u64),
-            crate::text::printable(
+            ratelab_core::text::printable(
                 self.distro
                     .as_deref()
                     .filter(|d| !d.is_empty())
@@ -273,16 +289,111 @@ impl Bag {
     }
 }
 
-/// What is told of each message: (topic, type, RIHS01 hash, log time ns, payload) → go on.
-type Each<'e> = dyn FnMut(&str, &str, &str, u64, &[u8]) -> bool + 'e;
+/// One message of a bag, as [`Bag::messages`] tells it.
+pub struct BagMessage<'m> {
+    /// Its topic.
+    pub topic: &'m str,
+    /// Its type: its channel's schema name (`?` for a channel of no schema).
+    pub type_name: &'m str,
+    /// Its type's RIHS01 hash, when the bag gives one (else empty).
+    pub hash: &'m str,
+    /// Its log time, ns.
+    pub log_time: u64,
+    /// Its payload: CDR with its 4-byte header.
+    pub data: &'m [u8],
+    /// Its channel's schema, when it has one.
+    schema: Option<&'m Schema>,
+}
+
+impl BagMessage<'_> {
+    /// The message decoded as `ratelab ros2 bag echo` prints it ([`echo::yaml`]), with
+    /// echo's bounds: by the description ratelab has of its type when the type's name and
+    /// the bag's hash are one it knows (the name alone when the bag gives no hash, as
+    /// [`echo::decode_named`]); else by the `ros2msg` schema the bag carries for it
+    /// ([`msg_schema::describe`]), whose description must hash to the bag's hash when it
+    /// gives one.
+    ///
+    /// # Errors
+    /// One line: [`NOT_DESCRIBED`] and why the schema did not serve (none, not `ros2msg`,
+    /// refused, another hash), or why the payload does not decode.
+    pub fn decode(&self) -> Result<echo::Value, String> {
+        let by_name = || echo::decode_named(self.type_name, self.hash, self.data);
+        let and = |e: String, why: &str| {
+            if e == NOT_DESCRIBED {
+                format!("{e}, and {why}")
+            } else {
+                e
+            }
+        };
+        let Some(schema) = self.schema else {
+            return by_name().map_err(|e| and(e, "the bag carries no schema of it"));
+        };
+        match by_name() {
+            Err(e) if e == NOT_DESCRIBED => {}
+            decoded => return decoded,
+        }
+        let (d, hash) = schema
+            .description()
+            .map_err(|why| format!("{NOT_DESCRIBED}, and {why}"))?;
+        if !self.hash.is_empty() && hash != self.hash {
+            return Err(format!(
+                "{NOT_DESCRIBED}, and the ros2msg schema describes a type of hash {hash}, not of the bag's {}",
+                ratelab_core::text::printable(self.hash)
+            ));
+        }
+        echo::decode_with(d, self.data)
+    }
+}
+
+/// A schema the bag declares: its type's name and text, described (with its RIHS01 hash)
+/// when a message of it is first decoded.
+struct Schema {
+    name: String,
+    encoding: String,
+    /// The text's length, whether held or not.
+    len: usize,
+    /// The text, or why it is not held (not `ros2msg`, too long, past what a bag may hold).
+    text: Result<Vec<u8>, String>,
+    described: OnceCell<Result<(TypeDescriptionMsg, String), String>>,
+}
+
+impl Schema {
+    /// The description the schema gives its type, and that description's RIHS01 hash.
+    fn description(&self) -> Result<&(TypeDescriptionMsg, String), String> {
+        self.described
+            .get_or_init(|| {
+                let text = self.text.as_ref().map_err(Clone::clone)?;
+                let d = msg_schema::describe(&self.name, text)?;
+                let hash = hiroz_schema::calculate_hash(&d).to_rihs_string();
+                Ok((d, hash))
+            })
+            .as_ref()
+            .map_err(Clone::clone)
+    }
+}
+
+/// A channel the bag declares.
+struct Channel {
+    topic: String,
+    /// Its type: its schema's name, or `?`.
+    ty: String,
+    /// Its type's RIHS01 hash, or empty.
+    hash: String,
+    schema: Option<Rc<Schema>>,
+}
+
+/// What is told of each message ([`BagMessage`]) → go on.
+type Each<'e> = dyn FnMut(&BagMessage<'_>) -> bool + 'e;
 
 /// A walk through a bag's records: the schemas and channels declared so far.
 struct Walk<'b, 's> {
     bag: &'b Bag,
-    /// Schema id → the type's name.
-    schemas: HashMap<u16, String>,
-    /// Channel id → (topic, type, RIHS01 hash).
-    channels: HashMap<u16, (String, String, String)>,
+    /// Schema id → the schema.
+    schemas: HashMap<u16, Rc<Schema>>,
+    /// Channel id → the channel.
+    channels: HashMap<u16, Channel>,
+    /// The schema text held, bytes ([`MAX_HELD_SCHEMA_BYTES`] at most).
+    held: usize,
     /// Messages given to `each` so far.
     count: u64,
     stop: &'s dyn Fn() -> bool,
@@ -327,7 +438,7 @@ impl Walk<'_, '_> {
                     return Ok(Some(format!(
                         "the bag stops short after {} messages ({}): cut short?",
                         self.count,
-                        crate::text::printable(&e.to_string())
+                        ratelab_core::text::printable(&e.to_string())
                     )))
                 }
             };
@@ -365,33 +476,48 @@ impl Walk<'_, '_> {
     ) -> Result<Flow, String> {
         use mcap::records::Record;
         match record {
-            Record::Schema { header, .. } => {
-                self.schemas.insert(header.id, header.name);
-            }
+            Record::Schema { header, data } => self.schema(header, &data),
             Record::Channel(c) => {
-                let ty = match c.schema_id {
-                    0 => "?".to_string(),
-                    id => self.schemas.get(&id).cloned().ok_or_else(|| {
+                let schema = match c.schema_id {
+                    0 => None,
+                    id => Some(self.schemas.get(&id).cloned().ok_or_else(|| {
                         format!(
                             "channel {} names schema {id}, never declared",
-                            crate::text::printable(&c.topic)
+                            ratelab_core::text::printable(&c.topic)
                         )
-                    })?,
+                    })?),
                 };
+                let ty = schema
+                    .as_ref()
+                    .map_or_else(|| "?".to_string(), |s| s.name.clone());
                 let hash = c
                     .metadata
                     .get("topic_type_hash")
                     .or_else(|| self.bag.hashes.get(&c.topic))
                     .cloned()
                     .unwrap_or_default();
-                self.channels.insert(c.id, (c.topic, ty, hash));
+                let channel = Channel {
+                    topic: c.topic,
+                    ty,
+                    hash,
+                    schema,
+                };
+                self.channels.insert(c.id, channel);
             }
             Record::Message { header, data } => {
-                let (topic, ty, hash) = self.channels.get(&header.channel_id).ok_or_else(|| {
+                let c = self.channels.get(&header.channel_id).ok_or_else(|| {
                     format!("a message on channel {}, never declared", header.channel_id)
                 })?;
                 self.count += 1;
-                if !each(topic, ty, hash, header.log_time, &data) {
+                let m = BagMessage {
+                    topic: &c.topic,
+                    type_name: &c.ty,
+                    hash: &c.hash,
+                    log_time: header.log_time,
+                    data: &data,
+                    schema: c.schema.as_deref(),
+                };
+                if !each(&m) {
                     return Ok(Flow::Done);
                 }
             }
@@ -401,6 +527,47 @@ impl Walk<'_, '_> {
             _ => {}
         }
         Ok(Flow::Go)
+    }
+
+    /// A schema record: kept (a copy of one already declared is not kept twice), its text
+    /// held when it is `ros2msg` and within [`MAX_SCHEMA_BYTES`] and [`MAX_HELD_SCHEMA_BYTES`].
+    fn schema(&mut self, header: mcap::records::SchemaHeader, data: &[u8]) {
+        let same = self.schemas.get(&header.id).is_some_and(|s| {
+            s.name == header.name
+                && s.encoding == header.encoding
+                && s.len == data.len()
+                && s.text.as_deref().map_or(true, |t| t == data)
+        });
+        if same {
+            return;
+        }
+        let text = if header.encoding != "ros2msg" {
+            Err(format!(
+                "its schema is encoded '{}', not ros2msg, which ratelab does not read",
+                ratelab_core::text::printable(&header.encoding)
+            ))
+        } else if data.len() > MAX_SCHEMA_BYTES {
+            Err(msg_schema::too_long(data.len()))
+        } else if data.iter().all(u8::is_ascii_whitespace) {
+            // What a writer with no definition of the type writes (a bag converted from
+            // one that carried none): no definition, rather than one of no fields.
+            Err("its ros2msg schema is empty (its writer had no definition of it)".into())
+        } else if self.held + data.len() > MAX_HELD_SCHEMA_BYTES {
+            Err(format!(
+                "the bag's schemas pass {MAX_HELD_SCHEMA_BYTES} bytes, more than ratelab holds (ratelab::ros2::bag_reader::MAX_HELD_SCHEMA_BYTES)"
+            ))
+        } else {
+            self.held += data.len();
+            Ok(data.to_vec())
+        };
+        let schema = Schema {
+            name: header.name,
+            encoding: header.encoding,
+            len: data.len(),
+            text,
+            described: OnceCell::new(),
+        };
+        self.schemas.insert(header.id, Rc::new(schema));
     }
 
     /// A chunk's records, inflated under the bounds; `None` when stopped while inflating.
@@ -414,7 +581,7 @@ impl Walk<'_, '_> {
         let ratio = max_inflation(codec).ok_or_else(|| {
             format!(
                 "a chunk compressed with '{}', which ratelab cannot read (zstd, lz4 or none)",
-                crate::text::printable(codec)
+                ratelab_core::text::printable(codec)
             )
         })?;
         if declared > MAX_CHUNK_BYTES {
@@ -486,21 +653,6 @@ impl Walk<'_, '_> {
     }
 }
 
-/// `f()`, with a panic inside it (in a dependency reading outside bytes) caught and given
-/// back as its message, printed by nobody: one line is said of it by the caller.
-fn catching_panics<T>(f: impl FnOnce() -> T) -> Result<T, String> {
-    let hook = std::panic::take_hook();
-    std::panic::set_hook(Box::new(|_| {}));
-    let r = std::panic::catch_unwind(std::panic::AssertUnwindSafe(f));
-    std::panic::set_hook(hook);
-    r.map_err(|p| {
-        p.downcast_ref::<&str>()
-            .map(|s| (*s).to_string())
-            .or_else(|| p.downcast_ref::<String>().cloned())
-            .unwrap_or_else(|| "a panic".into())
-    })
-}
-
 /// `9.980000000` (s, nine decimals).
 fn seconds(ns: u64) -> String {
     format!("{}.{:09}", ns / 1_000_000_000, ns % 1_000_000_000)
@@ -545,6 +697,77 @@ mod tests {
         );
         assert_eq!(size_text(512), "512 B");
         assert_eq!(size_text(37_478), "36.6 KiB");
+    }
+
+    /// A message of a type ratelab has no description of decodes by its channel's `ros2msg`
+    /// schema when the schema describes a type of the bag's hash (or the bag gives none);
+    /// else it is said, in one line, why not.
+    #[test]
+    fn a_type_ratelab_does_not_know_decodes_by_the_bag_s_schema() {
+        let dir = tempfile::tempdir().unwrap();
+        let text = b"# a made-up type\nuint8 KIND=1\nfloat64 x\nstring s\n";
+        let d = msg_schema::describe("my_pkg/msg/Small", text).unwrap();
+        let hash = hiroz_schema::calculate_hash(&d).to_rihs_string();
+        let file = std::fs::File::create(dir.path().join("b.mcap")).unwrap();
+        let mut w = mcap::WriteOptions::new()
+            .profile("ros2")
+            .create(std::io::BufWriter::new(file))
+            .unwrap();
+        let small = w.add_schema("my_pkg/msg/Small", "ros2msg", text).unwrap();
+        let idl = w
+            .add_schema("my_pkg/msg/Idl", "ros2idl", b"module my_pkg {};")
+            .unwrap();
+        let meta = |h: &str| BTreeMap::from([("topic_type_hash".to_string(), h.to_string())]);
+        let liar = format!("RIHS01_{}", "0".repeat(64));
+        let channels = [
+            w.add_channel(small, "/small", "cdr", &meta(&hash)).unwrap(),
+            w.add_channel(small, "/nohash", "cdr", &BTreeMap::new())
+                .unwrap(),
+            w.add_channel(small, "/liar", "cdr", &meta(&liar)).unwrap(),
+            w.add_channel(idl, "/idl", "cdr", &BTreeMap::new()).unwrap(),
+        ];
+        // x = 1.5, s = "hi"
+        let mut cdr = vec![0, 1, 0, 0];
+        cdr.extend_from_slice(&1.5f64.to_le_bytes());
+        cdr.extend_from_slice(&3u32.to_le_bytes());
+        cdr.extend_from_slice(b"hi\0");
+        for (t, channel_id) in (0u64..).zip(channels) {
+            let header = mcap::records::MessageHeader {
+                channel_id,
+                sequence: 0,
+                log_time: t,
+                publish_time: t,
+            };
+            w.write_to_known_channel(&header, &cdr).unwrap();
+        }
+        w.finish().unwrap();
+        drop(w);
+        let bag = Bag::open(dir.path()).unwrap();
+        let mut got = Vec::new();
+        let note = bag
+            .messages(&|| false, |m| {
+                got.push((m.topic.to_string(), m.decode().map(|v| echo::yaml(&v))));
+                true
+            })
+            .unwrap();
+        assert_eq!(note, None);
+        let decoded = Ok("x: 1.5\ns: hi\n".to_string());
+        assert_eq!(got[0], ("/small".to_string(), decoded.clone()));
+        assert_eq!(got[1], ("/nohash".to_string(), decoded));
+        let why = |i: usize| got[i].1.clone().unwrap_err();
+        assert!(
+            why(2).starts_with(&format!(
+                "a type not described here, and the ros2msg schema describes a type of hash {hash}, not of the bag's {liar}"
+            )),
+            "{}",
+            why(2)
+        );
+        assert!(
+            why(3).contains("encoded 'ros2idl', not ros2msg"),
+            "{}",
+            why(3)
+        );
+        assert!(!why(2).contains('\n') && !why(3).contains('\n'));
     }
 
     #[test]

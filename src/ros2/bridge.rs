@@ -5,8 +5,9 @@
 //!   `@ros2_lv/<domain>/<zid>/<nid>/<nid>/NN/%/%/<name>`; one more node, `ratelab`,
 //!   publishes `/clock`;
 //! - each topic's publisher and subscriber hold MP/MS tokens naming the topic, its type, its
-//!   RIHS01 hash and its QoS (history and depth, deadline, lifespan, reliability, the
-//!   publisher's liveliness lease) as ratelab runs it;
+//!   RIHS01 hash and its QoS as ratelab runs it: a publisher's what it offers (history and
+//!   depth, deadline, lifespan, reliability, durability, its node's liveliness lease), a
+//!   subscription's its own (`requested_qos_of`: no lifespan, no lease unless requested);
 //! - each message is put on `<domain>/<topic>/<dds type>/<RIHS01>` as CDR
 //!   ([`super::types`]) with rmw_zenoh's attachment: sequence number (ratelab's `seq` + 1,
 //!   so it starts at 1 and grows by 1), source timestamp (wall clock, ns since the Unix
@@ -36,26 +37,26 @@ use super::bag::{Bag, BagTopic};
 use super::names::{check_node_name, check_topic_name};
 use super::node_api::{self, NodeApi};
 use super::parameters::NodeParameters;
+use super::rmw_zenoh::entity::{EndpointKind, Entity, NodeEntity};
+use super::rmw_zenoh::key_expr::KeyExprFormat;
+use super::rmw_zenoh::qos::{QosDurability, QosDuration, QosHistory, QosProfile, QosReliability};
 use super::ros_type_of;
 use super::session::{Ros2Session, Router};
 use super::types::{clock_type, encode_clock, type_info};
 pub use super::wire::{attachment, gid};
 use super::wire::{Declarer, Outlet};
 use super::{Ros2Error, Ros2Options};
-use crate::config::ClockKind;
-use crate::graph::nodes::external::{ExternalLink, ExternalStats};
-use crate::graph::nodes::ExternalPort;
-use crate::graph::{GraphSpec, NodeId};
-use crate::msg::AnyTopic;
-use crate::msg::MsgData;
-use crate::qos::{History, Reliability};
-use crate::scheduler::StopFlag;
-use crate::textlog::LogLine;
-use crate::time::Nanos;
 use crossbeam_channel::{Receiver, Sender, TrySendError};
-use hiroz_protocol::entity::{EndpointKind, NodeEntity};
-use hiroz_protocol::qos::{QosDurability, QosDuration, QosHistory, QosProfile, QosReliability};
-use hiroz_protocol::KeyExprFormat;
+use ratelab_core::msg::AnyTopic;
+use ratelab_core::msg::MsgData;
+use ratelab_core::qos::{History, Reliability};
+use ratelab_core::textlog::LogLine;
+use ratelab_core::time::Nanos;
+use ratelab_runtime::config::ClockKind;
+use ratelab_runtime::graph::nodes::external::{ExternalLink, ExternalStats};
+use ratelab_runtime::graph::nodes::ExternalPort;
+use ratelab_runtime::graph::{GraphSpec, NodeId};
+use ratelab_runtime::scheduler::StopFlag;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
 use std::thread::JoinHandle;
@@ -152,7 +153,7 @@ pub struct Bridge {
     tx: Option<Sender<Out>>,
     thread: Option<JoinHandle<Forwarded>>,
     /// Takes the log's lines to `/rosout` while the bridge lives.
-    recorder: Option<crate::textlog::Recorder>,
+    recorder: Option<ratelab_core::textlog::Recorder>,
     /// Log lines not put on `/rosout` (the bridge fell behind).
     log_dropped: Arc<AtomicU64>,
     dropped: Arc<AtomicU64>,
@@ -181,14 +182,14 @@ pub struct Offer<'a> {
     pub clock: bool,
     /// Each node's rate, by node id, shared with the running graph: `rate_hz` as its
     /// parameter services answer it ([`super::parameters`]).
-    pub rates: &'a [crate::rate::Rate],
+    pub rates: &'a [ratelab_core::rate::Rate],
     /// How a node's rate is set from ROS 2 (`ros2 param set /policy rate_hz 20`): a command
     /// to the run, by node name and Hz, as the lab's keys give it; `None`: the run takes no
     /// commands, and `rate_hz` is read-only.
     pub set_rate: Option<SetNodeRate>,
     /// The lines the nodes wrote while the graph was built (their constructors'), oldest
     /// first: each node offered here puts its own on its `/rosout` before any other line
-    /// ([`crate::graph::GraphHandles::build_lines`]).
+    /// ([`ratelab_runtime::graph::GraphHandles::build_lines`]).
     pub build_lines: &'a [LogLine],
 }
 
@@ -197,7 +198,7 @@ pub type SetNodeRate = Arc<dyn Fn(&str, f64) -> Result<(), String> + Send + Sync
 
 impl<'a> Offer<'a> {
     /// The whole graph behind `h`, in one process, with `/clock`.
-    pub fn whole(h: &'a crate::graph::GraphHandles) -> Offer<'a> {
+    pub fn whole(h: &'a ratelab_runtime::graph::GraphHandles) -> Offer<'a> {
         Offer {
             spec: &h.spec,
             topics: &h.topics,
@@ -278,10 +279,10 @@ fn ros_reliability(r: Reliability) -> QosReliability {
 }
 
 /// ratelab's durability as ROS 2's.
-fn ros_durability(d: crate::qos::compat::Durability) -> QosDurability {
+fn ros_durability(d: ratelab_core::qos::compat::Durability) -> QosDurability {
     match d {
-        crate::qos::compat::Durability::Volatile => QosDurability::Volatile,
-        crate::qos::compat::Durability::TransientLocal => QosDurability::TransientLocal,
+        ratelab_core::qos::compat::Durability::Volatile => QosDurability::Volatile,
+        ratelab_core::qos::compat::Durability::TransientLocal => QosDurability::TransientLocal,
     }
 }
 
@@ -296,7 +297,7 @@ pub(crate) fn qos_of(spec: &GraphSpec, t: usize) -> QosProfile {
         reliability: ros_reliability(q.reliability),
         history: match q.history {
             History::KeepLast => QosHistory::KeepLast(topic.depth),
-            History::KeepAll => QosHistory::KeepAll,
+            History::KeepAll => QosHistory::KeepAll(topic.depth),
         },
         durability: ros_durability(q.durability),
         deadline: dur(q.deadline),
@@ -307,13 +308,23 @@ pub(crate) fn qos_of(spec: &GraphSpec, t: usize) -> QosProfile {
 }
 
 /// The QoS subscriber `sub`'s subscription to topic `t` of `spec` announces (its token's):
-/// the offered QoS ([`qos_of`]) with each policy it requests in its place
-/// (`[topic.requested.NODE]`, `ratelab::qos::compat`), as a ROS 2 subscription announces
-/// its own requested profile and `ros2 topic info -v` lists both ends.
+/// its own profile, as a ROS 2 subscription announces the one it was made with (a real
+/// rclpy subscription's token carries its own lifespan and lease, `Infinite` when it sets
+/// none: `../shared/fixtures/ros2-real/real-rclpy-graph-view-qos.json`), so `ros2 topic
+/// info -v` lists both ends. What the subscriber has of the topic in ratelab's graph: its
+/// queue's history and depth, the reliability and durability it is delivered with, and the
+/// deadline it watches (ratelab counts requested deadline misses on it); each replaced by
+/// what it requests (`[topic.requested.NODE]`, `ratelab::qos::compat`). Not the publisher's
+/// lifespan (a publisher's policy) nor its node's liveliness lease ([`qos_of`]): a
+/// subscription's lease is the longest it accepts, infinite unless it requests one.
 pub(crate) fn requested_qos_of(spec: &GraphSpec, t: usize, sub: NodeId) -> QosProfile {
-    use crate::qos::compat::LivelinessKind;
-    use hiroz_protocol::qos::QosLiveliness;
-    let mut q = qos_of(spec, t);
+    use super::rmw_zenoh::qos::QosLiveliness;
+    use ratelab_core::qos::compat::LivelinessKind;
+    let mut q = QosProfile {
+        lifespan: QosDuration::INFINITE,
+        liveliness_lease_duration: QosDuration::INFINITE,
+        ..qos_of(spec, t)
+    };
     let topic = &spec.topics[t];
     let Some(r) = topic.requested.get(&spec.node(sub).name) else {
         return q;
@@ -385,7 +396,7 @@ fn declare_node_apis(
             let (name, rules) = (spec.nodes[i].name.clone(), rules.clone());
             Arc::new(move |hz| {
                 let node = name.clone();
-                crate::command::Command::SetNodeHz { node, hz }.validate(&rules)?;
+                ratelab_runtime::command::Command::SetNodeHz { node, hz }.validate(&rules)?;
                 set(&name, hz)
             }) as super::parameters::SetRate
         });
@@ -429,13 +440,11 @@ fn clock_publishers(session: &zenoh::Session, domain: u32) -> Vec<String> {
     else {
         return Vec::new();
     };
-    let format = KeyExprFormat::default();
+    let format = KeyExprFormat;
     let mut found = Vec::new();
     while let Ok(r) = replies.recv() {
         let Ok(sample) = r.result() else { continue };
-        if let Ok(hiroz_protocol::entity::Entity::Endpoint(e)) =
-            format.parse_liveliness(sample.key_expr())
-        {
+        if let Ok(Entity::Endpoint(e)) = format.parse_liveliness(sample.key_expr().as_str()) {
             let ours = e.node.as_ref().is_some_and(|n| n.z_id == session.zid());
             if e.kind == EndpointKind::Publisher && e.topic == CLOCK_TOPIC && !ours {
                 found.push(e.node.map_or_else(|| "?".to_string(), |n| n.name));
@@ -465,9 +474,9 @@ pub const LOG_CAPACITY: usize = 1024;
 /// Give every line of the log (from now until the returned guard is dropped) to the
 /// bridge for its node's `/rosout`, on a channel of their own ([`LOG_CAPACITY`]); a line
 /// that does not fit is dropped and counted in `dropped` (the log never waits for ROS 2).
-fn log_to_rosout(dropped: Arc<AtomicU64>) -> (crate::textlog::Recorder, Receiver<LogLine>) {
+fn log_to_rosout(dropped: Arc<AtomicU64>) -> (ratelab_core::textlog::Recorder, Receiver<LogLine>) {
     let (tx, rx) = crossbeam_channel::bounded(LOG_CAPACITY);
-    let recorder = crate::textlog::add_recorder(Box::new(move |line| {
+    let recorder = ratelab_core::textlog::add_recorder(Box::new(move |line| {
         if let Err(TrySendError::Full(_)) = tx.try_send(line) {
             dropped.fetch_add(1, Ordering::Relaxed);
         }
@@ -943,7 +952,7 @@ fn refuse_clock_clash(
     if let Some(other) = others.first() {
         return Err(Ros2Error::Usage(format!(
             "--ros2: node '{}' already publishes /clock on domain {domain}; two /clock publishers would give ROS 2 nodes two times (stop it, or use another ROS_DOMAIN_ID)",
-            crate::text::printable(other)
+            ratelab_core::text::printable(other)
         )));
     }
     if waits && ports.len() > 1 {
@@ -1170,7 +1179,7 @@ mod tests {
     /// elsewhere: both ends as ROS 2's tools list them.
     #[test]
     fn a_subscriptions_token_carries_its_own_requested_qos() {
-        use hiroz_protocol::qos::{QosDurability, QosLiveliness};
+        use crate::rmw_zenoh::qos::{QosDurability, QosLiveliness};
         let text = std::fs::read_to_string(concat!(
             env!("CARGO_MANIFEST_DIR"),
             "/../../graphs/cartpole-incompatible-qos.toml"
@@ -1200,9 +1209,63 @@ mod tests {
             (own.history, own.lifespan),
             (offered.history, offered.lifespan)
         );
-        // Where nothing is requested, the subscription announces the offer.
+        // Where nothing is requested, and the topic has no lifespan and its publisher no
+        // lease, the subscription announces what the topic runs with, as the offer does.
         let obs = spec.topic_id("/obs").unwrap();
         let policy = spec.node_id("policy").unwrap();
         assert_eq!(requested_qos_of(&spec, obs.0, policy), qos_of(&spec, obs.0));
+    }
+
+    /// The captured run (`ratelab-qos.json`: `--qos /action:deadline_ms=40,lifespan_ms=60
+    /// --lease policy=100`) announced the actuator's subscription with the policy's
+    /// lifespan and lease, where a real rclpy subscription announces its own (`Infinite`
+    /// when it sets none: the probe's in `real-rclpy-graph-view-qos.json`). The
+    /// subscription's token now carries the actuator's: the topic's history, reliability,
+    /// durability and the deadline it watches, no lifespan and no lease; a lease it
+    /// requests is its own.
+    #[test]
+    fn a_subscription_announces_its_own_lifespan_and_lease_not_its_publisher_s() {
+        let mut spec = GraphSpec::chapter();
+        spec.set_qos("/action", "deadline_ms=40,lifespan_ms=60")
+            .unwrap();
+        spec.set_lease("policy", 100.0).unwrap();
+        let action = spec.topic_id("/action").unwrap().0;
+        let actuator = spec.node_id("actuator").unwrap();
+        let ms = |n: u64| QosDuration {
+            sec: 0,
+            nsec: n * 1_000_000,
+        };
+        let offered = qos_of(&spec, action);
+        assert_eq!(
+            (
+                offered.deadline,
+                offered.lifespan,
+                offered.liveliness_lease_duration
+            ),
+            (ms(40), ms(60), ms(100))
+        );
+        let own = requested_qos_of(&spec, action, actuator);
+        assert_eq!(
+            (own.deadline, own.lifespan, own.liveliness_lease_duration),
+            (ms(40), QosDuration::INFINITE, QosDuration::INFINITE)
+        );
+        assert_eq!(
+            (own.history, own.reliability, own.durability, own.liveliness),
+            (
+                offered.history,
+                offered.reliability,
+                offered.durability,
+                offered.liveliness
+            )
+        );
+        // A lease the actuator requests is what its token says.
+        spec.topics[action]
+            .requested
+            .entry("actuator".into())
+            .or_default()
+            .liveliness_lease = Some(Nanos(250_000_000));
+        let own = requested_qos_of(&spec, action, actuator);
+        assert_eq!(own.liveliness_lease_duration, ms(250));
+        assert_eq!(own.lifespan, QosDuration::INFINITE);
     }
 }

@@ -320,7 +320,7 @@ pub fn decode_with(description: &TypeDescriptionMsg, payload: &[u8]) -> Result<V
     };
     out.map(|(v, _)| v).map_err(|e| {
         let text = e.to_string();
-        crate::text::printable(text.lines().next().unwrap_or_default()).into_owned()
+        ratelab_core::text::printable(text.lines().next().unwrap_or_default()).into_owned()
     })
 }
 
@@ -733,7 +733,7 @@ mod tests {
     #[test]
     fn a_joint_state_echoes_as_ros2cli_prints_it() {
         let js = JointState::of(
-            crate::time::Nanos(1_500_000_000),
+            ratelab_core::time::Nanos(1_500_000_000),
             vec![0.25, -0.5],
             vec![1.0, 0.0],
         );

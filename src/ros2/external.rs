@@ -1,7 +1,7 @@
 //! External nodes: a graph node of `kind = "external"` that ratelab does not run. Any
 //! process speaking rmw_zenoh fills it (an rclpy or rclcpp node on a ROS 2 machine, or a
 //! plain Zenoh program): it subscribes to the node's input and publishes its output as
-//! ROS 2 topics, and ratelab's proxy ([`crate::graph::nodes::external`]) delivers what it
+//! ROS 2 topics, and ratelab's proxy ([`ratelab_runtime::graph::nodes::external`]) delivers what it
 //! publishes into the graph.
 //!
 //! Before the run starts, ratelab waits (up to the node's `appear_timeout_s`) for the node's
@@ -22,15 +22,15 @@
 //! subscriber in order; an rclpy executor may still run a timer before a subscription
 //! callback that arrived first (docs/ros2.md).
 
+use super::rmw_zenoh::entity::{EndpointEntity, EndpointKind, Entity, NodeEntity, TypeHash};
+use super::rmw_zenoh::key_expr::KeyExprFormat;
+use super::rmw_zenoh::qos::QosProfile;
 use super::ros_type_of;
 use super::types::{type_info, RosType};
 use super::{zerr, Ros2Error};
-use crate::graph::nodes::ExternalPort;
-use crate::graph::GraphSpec;
-use crate::scheduler::StopFlag;
-use hiroz_protocol::entity::{EndpointEntity, EndpointKind, Entity, NodeEntity, TypeHash};
-use hiroz_protocol::qos::QosProfile;
-use hiroz_protocol::KeyExprFormat;
+use ratelab_runtime::graph::nodes::ExternalPort;
+use ratelab_runtime::graph::GraphSpec;
+use ratelab_runtime::scheduler::StopFlag;
 use std::collections::BTreeSet;
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
@@ -67,7 +67,7 @@ fn short_hash(h: &[u8; 32]) -> String {
 struct Tokens {
     seen: Arc<Mutex<BTreeSet<Seen>>>,
     /// Tokens ignored because a name in them holds a control character: how many, and the
-    /// first's key, written out ([`crate::text::printable`]).
+    /// first's key, written out ([`ratelab_core::text::printable`]).
     ignored: Arc<Mutex<(u64, Option<String>)>>,
     _sub: zenoh::pubsub::Subscriber<()>,
 }
@@ -110,10 +110,10 @@ pub fn check_offered(spec: &GraphSpec) -> Result<(), String> {
 pub fn check_placement(spec: &GraphSpec) -> Result<(), String> {
     let mut host: Option<(String, &str)> = None;
     for (i, n) in spec.nodes.iter().enumerate() {
-        if n.kind.code() != crate::graph::kind::Code::Ros2 {
+        if n.kind.code() != ratelab_runtime::graph::kind::Code::Ros2 {
             continue;
         }
-        let p = spec.process_of(crate::graph::NodeId(i));
+        let p = spec.process_of(ratelab_runtime::graph::NodeId(i));
         if let Some(&t) = n.subscribes.first() {
             let feeder = spec.process_of(spec.topic(t).publisher);
             if feeder != p {
@@ -160,7 +160,7 @@ pub fn wait_for(
         .iter()
         .map(|p| {
             let mut endpoints = Vec::new();
-            let topic = |t: crate::graph::TopicId| &spec.topics[t.0];
+            let topic = |t: ratelab_runtime::graph::TopicId| &spec.topics[t.0];
             let out = topic(p.output);
             endpoints.push((
                 EndpointKind::Publisher,
@@ -210,8 +210,9 @@ pub fn wait_for(
                 let theirs = mine.filter_map(|(_, _, _, got)| got.as_ref()).next();
                 if let (Some((gname, ghash)), None) = (theirs, &other_type) {
                     let what = endpoint_word(*kind);
-                    let shown = crate::text::printable(&hiroz_schema::ros_from_dds_strict(gname))
-                        .into_owned();
+                    let shown =
+                        ratelab_core::text::printable(&hiroz_schema::ros_from_dds_strict(gname))
+                            .into_owned();
                     let differs = if *gname == want.0 {
                         format!(
                             "{shown} with type hash {}, ratelab's is {} (another ROS 2 distribution's definition?)",
@@ -263,13 +264,13 @@ fn watch(session: &zenoh::Session, domain: u32) -> Result<Tokens, Ros2Error> {
     let kept = seen.clone();
     let ignored = Arc::new(Mutex::new((0u64, None)));
     let noted = ignored.clone();
-    let format = KeyExprFormat::default();
+    let format = KeyExprFormat;
     let sub = session
         .liveliness()
         .declare_subscriber(format!("@ros2_lv/{domain}/**"))
         .history(true)
         .callback(move |sample| {
-            let Ok(entity) = format.parse_liveliness(sample.key_expr()) else {
+            let Ok(entity) = format.parse_liveliness(sample.key_expr().as_str()) else {
                 return; // not a ROS 2 token: ignored
             };
             let entry = match entity {
@@ -286,16 +287,16 @@ fn watch(session: &zenoh::Session, domain: u32) -> Result<Tokens, Ros2Error> {
             // ignored, with a note, never fatal.
             if [&entry.1, &entry.2]
                 .iter()
-                .any(|t| crate::text::has_control(t))
+                .any(|t| ratelab_core::text::has_control(t))
                 || entry
                     .3
                     .as_ref()
-                    .is_some_and(|t| crate::text::has_control(&t.0))
+                    .is_some_and(|t| ratelab_core::text::has_control(&t.0))
             {
                 let mut n = noted.lock().unwrap_or_else(|e| e.into_inner());
                 n.0 += 1;
                 n.1.get_or_insert_with(|| {
-                    crate::text::printable(sample.key_expr().as_ref()).into_owned()
+                    ratelab_core::text::printable(sample.key_expr().as_ref()).into_owned()
                 });
                 return;
             }
@@ -344,7 +345,7 @@ fn data_key(
         type_info: Some(type_info(ty)),
         qos: QosProfile::default(),
     };
-    Ok(format.topic_key_expr(&e).map_err(zerr)?.to_string())
+    format.topic_key_expr(&e).map_err(zerr)
 }
 
 /// Subscribe to what each external node publishes, on its output's data key, delivering
@@ -359,7 +360,7 @@ pub fn listen(
     spec: &GraphSpec,
     ports: &[Arc<ExternalPort>],
 ) -> Result<Vec<zenoh::pubsub::Subscriber<()>>, Ros2Error> {
-    let format = KeyExprFormat::default();
+    let format = KeyExprFormat;
     ports
         .iter()
         .map(|p| {

@@ -1,7 +1,7 @@
 //! `ratelab ros2`: any rmw_zenoh graph read from the other side, as ros2cli reads it, without
 //! a ROS 2 installation. The graph is what the domain's liveliness tokens say
 //! (`@ros2_lv/<domain>/…`: a node's NN, a publisher's MP, a subscription's MS, with types
-//! and QoS), parsed by hiroz-protocol ([`seen`], [`Seen`]); what ros2cli prints of it is
+//! and QoS), parsed by [`super::rmw_zenoh`] ([`seen`], [`Seen`]); what ros2cli prints of it is
 //! written by pure functions over that data ([`node_list`], [`node_info`], [`topic_list`],
 //! [`topic_info`]), and a topic's messages are heard on its data key ([`subscribe`]) and
 //! written by [`super::echo`] or counted ([`Rate`], [`Bandwidth`], from [`super::figures`]).
@@ -20,10 +20,12 @@
 
 pub use super::figures::{Bandwidth, Rate};
 use super::names::{is_hidden_name, is_hidden_node};
+pub use super::rmw_zenoh::entity::{EndpointEntity, EndpointKind, Entity, NodeEntity};
+use super::rmw_zenoh::key_expr::KeyExprFormat;
+use super::rmw_zenoh::qos::{
+    QosDurability, QosDuration, QosHistory, QosLiveliness, QosProfile, QosReliability,
+};
 use super::{zerr, Ros2Error};
-pub use hiroz_protocol::entity::{EndpointEntity, EndpointKind, Entity, NodeEntity};
-use hiroz_protocol::qos::{QosDuration, QosHistory, QosLiveliness, QosProfile, QosReliability};
-use hiroz_protocol::KeyExprFormat;
 use std::collections::BTreeSet;
 use std::time::Duration;
 /// The Zenoh session a reader holds.
@@ -50,10 +52,7 @@ impl Seen {
     /// Take one liveliness token `key` (`@ros2_lv/<domain>/…`) into the graph: a node, or an
     /// endpoint with its GID. Returns whether it was a ROS 2 entity.
     pub fn take(&mut self, key: &str) -> bool {
-        let Ok(k) = zenoh::key_expr::KeyExpr::try_from(key) else {
-            return false;
-        };
-        match KeyExprFormat::default().parse_liveliness(&k) {
+        match KeyExprFormat.parse_liveliness(key) {
             Ok(Entity::Node(n)) => self.nodes.push(n),
             Ok(Entity::Endpoint(e)) => {
                 self.gids.push(super::bridge::gid(key));
@@ -78,7 +77,7 @@ pub fn fq_name(node: &NodeEntity) -> String {
 }
 
 fn printable(s: &str) -> String {
-    crate::text::printable(s).into_owned()
+    ratelab_core::text::printable(s).into_owned()
 }
 
 /// An endpoint's type as ROS 2 names it (`std_msgs/msg/Float64`), from its DDS name.
@@ -285,6 +284,54 @@ pub fn topic_list(g: &Seen, types: bool, include_hidden: bool) -> String {
         .collect()
 }
 
+/// `ros2 topic list -v [--include-hidden-topics]` (ros2topic's `verb/list.py`,
+/// `show_topic_info`, each section printed by `print`, so an empty line after it): a
+/// `Published topics:` section with a line ` * /chatter [std_msgs/msg/String] 1 publisher`
+/// (`2 publishers`) per topic some node publishes, then `Subscribed topics:` with ` * … 1
+/// subscriber` per topic some node subscribes to, the topics as [`topic_list`] lists them
+/// (sorted, hidden ones only when `include_hidden`), every endpoint of the topic counted, a
+/// hidden node's too (rclpy's `count_publishers`). Nothing at all when there is no topic.
+/// ros2cli's own node (`/_ros2cli_…`) adds its `/rosout` and `/parameter_events` publishers
+/// to their counts; ratelab reads the graph without being a node, so it adds none.
+pub fn topic_list_verbose(g: &Seen, include_hidden: bool) -> String {
+    let types = topics(g, include_hidden);
+    if types.is_empty() {
+        return String::new();
+    }
+    // (publishers, subscriptions) by topic, in one pass.
+    let mut counts: std::collections::BTreeMap<String, (usize, usize)> = Default::default();
+    for e in g.endpoints.iter().filter(|e| is_topic(e)) {
+        let c = counts.entry(printable(&e.topic)).or_default();
+        match e.kind {
+            EndpointKind::Publisher => c.0 += 1,
+            _ => c.1 += 1,
+        }
+    }
+    let section = |published: bool| {
+        let (head, what) = if published {
+            ("Published", "publisher")
+        } else {
+            ("Subscribed", "subscriber")
+        };
+        let mut text = format!("{head} topics:\n");
+        for (topic, tys) in &types {
+            let n = counts
+                .get(topic)
+                .map_or(0, |&(p, s)| if published { p } else { s });
+            if n > 0 {
+                let tys: Vec<&str> = tys.iter().map(String::as_str).collect();
+                let plural = if n > 1 { "s" } else { "" };
+                text.push_str(&format!(
+                    " * {topic} [{}] {n} {what}{plural}\n",
+                    tys.join(", ")
+                ));
+            }
+        }
+        text + "\n"
+    };
+    section(true) + &section(false)
+}
+
 /// `ros2 topic list -c`: how many topics `topic list` lists.
 pub fn topic_count(g: &Seen, include_hidden: bool) -> usize {
     topics(g, include_hidden).len()
@@ -299,6 +346,15 @@ pub fn topic_count(g: &Seen, include_hidden: bool) -> usize {
 /// `Cannot echo topic '/mixed', as it contains more than one type: [std_msgs/msg/Int32,
 /// std_msgs/msg/String]` (the types sorted).
 pub fn one_type(g: &Seen, topic: &str) -> Result<Option<String>, String> {
+    one_type_as(g, topic, topic)
+}
+
+/// [`one_type`] of `topic` (the name expanded, `/chatter`) for a command given it as `said`
+/// (`chatter`): ros2cli's refusal quotes the name as it was given.
+///
+/// # Errors
+/// [`one_type`]'s, naming `said`.
+pub fn one_type_as(g: &Seen, topic: &str, said: &str) -> Result<Option<String>, String> {
     let types: BTreeSet<String> = g
         .endpoints
         .iter()
@@ -308,7 +364,7 @@ pub fn one_type(g: &Seen, topic: &str) -> Result<Option<String>, String> {
     if types.len() > 1 {
         return Err(format!(
             "Cannot echo topic '{}', as it contains more than one type: [{}]",
-            printable(topic),
+            printable(said),
             types.into_iter().collect::<Vec<_>>().join(", ")
         ));
     }
@@ -319,7 +375,9 @@ fn duration(d: &QosDuration) -> String {
     if *d == QosDuration::INFINITE {
         "Infinite".into()
     } else {
-        format!("{} nanoseconds", d.sec * 1_000_000_000 + d.nsec)
+        // Saturating: a token's numbers are anyone's (up to u64::MAX each).
+        let ns = d.sec.saturating_mul(1_000_000_000).saturating_add(d.nsec);
+        format!("{ns} nanoseconds")
     }
 }
 
@@ -338,7 +396,7 @@ pub fn qos_short(q: &QosProfile) -> String {
             parts.push(format!("{what} {} ms", ms(d)));
         }
     }
-    if q.durability == hiroz_protocol::qos::QosDurability::TransientLocal {
+    if q.durability == QosDurability::TransientLocal {
         parts.push("TRANSIENT_LOCAL".into());
     }
     parts.join(" · ")
@@ -357,19 +415,18 @@ fn reliability_word(q: &QosProfile) -> &'static str {
 fn history_words(q: &QosProfile) -> String {
     match q.history {
         QosHistory::KeepLast(n) => format!("KEEP_LAST ({n})"),
-        QosHistory::KeepAll => "KEEP_ALL".into(),
+        QosHistory::KeepAll(_) => "KEEP_ALL".into(),
     }
 }
 
 fn qos_block(q: &QosProfile) -> String {
     let (history, reliability) = (history_words(q), reliability_word(q));
     let durability = match q.durability {
-        hiroz_protocol::qos::QosDurability::Volatile => "VOLATILE",
-        hiroz_protocol::qos::QosDurability::TransientLocal => "TRANSIENT_LOCAL",
+        QosDurability::Volatile => "VOLATILE",
+        QosDurability::TransientLocal => "TRANSIENT_LOCAL",
     };
     let liveliness = match q.liveliness {
         QosLiveliness::Automatic => "AUTOMATIC",
-        QosLiveliness::ManualByNode => "MANUAL_BY_NODE",
         QosLiveliness::ManualByTopic => "MANUAL_BY_TOPIC",
     };
     format!(
@@ -556,11 +613,9 @@ pub fn subscribe(
     publisher: &EndpointEntity,
     on: impl Fn(Vec<u8>) + Send + Sync + 'static,
 ) -> Result<zenoh::pubsub::Subscriber<()>, Ros2Error> {
-    let key = KeyExprFormat::default()
-        .topic_key_expr(publisher)
-        .map_err(zerr)?;
+    let key = KeyExprFormat.topic_key_expr(publisher).map_err(zerr)?;
     session
-        .declare_subscriber(key.to_string())
+        .declare_subscriber(key)
         .callback(move |s| on(s.payload().to_bytes().into_owned()))
         .wait()
         .map_err(zerr)
@@ -640,7 +695,7 @@ pub fn graph_lines(g: &Seen, rates: &std::collections::BTreeMap<String, f64>) ->
 #[cfg(test)]
 mod tests {
     use super::*;
-    use hiroz_protocol::entity::{TypeHash, TypeInfo};
+    use crate::rmw_zenoh::entity::{TypeHash, TypeInfo};
 
     fn node(name: &str, ns: &str) -> NodeEntity {
         NodeEntity::new(
@@ -708,6 +763,26 @@ mod tests {
         assert_eq!((node_count(&g, false), topic_count(&g, false)), (2, 2));
     }
 
+    /// `topic list -v` as ros2topic's `verb/list.py` prints it: two sections, each followed
+    /// by an empty line, a count per topic with `s` after more than one, a topic in a
+    /// section only when it has such endpoints; nothing for an empty graph.
+    #[test]
+    fn the_verbose_list_reads_as_ros2cli_s() {
+        let mut g = talker();
+        let other = node("other", "/");
+        g.endpoints.push(endpoint(
+            &other,
+            EndpointKind::Publisher,
+            "/chatter",
+            "std_msgs::msg::dds_::String_",
+        ));
+        assert_eq!(
+            topic_list_verbose(&g, false),
+            "Published topics:\n * /chatter [std_msgs/msg/String] 2 publishers\n * /cmd_vel [geometry_msgs/msg/Twist] 1 publisher\n\nSubscribed topics:\n * /chatter [std_msgs/msg/String] 1 subscriber\n\n"
+        );
+        assert_eq!(topic_list_verbose(&Seen::default(), false), "");
+    }
+
     #[test]
     fn info_names_endpoints_types_and_qos() {
         let g = talker();
@@ -748,7 +823,7 @@ mod tests {
     #[test]
     fn a_keep_all_endpoint_shows_no_depth_as_ros2cli_does() {
         let mut g = talker();
-        g.endpoints[0].qos.history = QosHistory::KeepAll;
+        g.endpoints[0].qos.history = QosHistory::KeepAll(10);
         let v = topic_info(&g, "/chatter", true).unwrap();
         assert!(v.contains("  History (Depth): KEEP_ALL\n"), "{v}");
     }

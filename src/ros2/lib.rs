@@ -6,18 +6,23 @@
 //! The parts, one idea each:
 //! - [`names`]: ROS 2's rules for domains, topic and node names (pure, checked first);
 //! - [`types`]: the ROS 2 types ratelab's message types are offered as (each type's own
-//!   definition names its mapping, [`crate::msg::RosMapped`]), their RIHS01 hashes and CDR;
+//!   definition names its mapping, [`ratelab_core::msg::RosMapped`]), their RIHS01 hashes and CDR;
 //! - [`session`]: the Zenoh session rmw_zenoh's nodes open by default (peer, a router at
 //!   `tcp/localhost:7447`, `ZENOH_ROUTER_CHECK_ATTEMPTS`, `ZENOH_CONFIG_OVERRIDE`), or an
 //!   embedded router when none answers;
 //! - [`bag`]: `--bag DIR`, what is offered as a rosbag2 bag (MCAP storage); [`bag_reader`]:
-//!   any such bag read back (`ratelab ros2 bag info|echo`);
+//!   any such bag read back (`ratelab ros2 bag info|echo`), a type ratelab has no
+//!   description of decoded by the `ros2msg` schema the bag carries ([`msg_schema`], parsed
+//!   by rerun's `re_ros_msg`);
 //! - [`bridge`]: the liveliness tokens (NN per node, MP/MS per publisher and subscription,
 //!   with the QoS), a publisher per topic on `<domain>/<topic>/<dds type>/<RIHS01>` with
 //!   rmw_zenoh's 33-byte attachment, and `/clock`;
 //! - [`external`]: nodes of `kind = "external"`, which a ROS 2 node fills: waiting for
 //!   their tokens, checking their types, hearing what they publish, and the lockstep's
 //!   time contract under the virtual clock;
+//! - [`rmw_zenoh`]: rmw_zenoh's key expressions, liveliness tokens and QoS strings,
+//!   written and read (ratelab's own, from rmw_zenoh's `docs/design.md`), every token read
+//!   from the network bounded and checked;
 //! - [`wire`]: declaring an endpoint (key, token, GID), rmw_zenoh's attachment, a put
 //!   stamped by its publisher's session;
 //! - [`node_api`]: what every ROS 2 node declares besides its topics — `/rosout` (the log
@@ -33,17 +38,15 @@
 //! - [`yaml_depth`]: how deeply YAML read from outside (a bag's `metadata.yaml`, a
 //!   parameter's value) nests, bounded before a parser sees it.
 //!
-//! The format is rmw_zenoh's `docs/design.md`; its keys, tokens and QoS strings come from
-//! ZettaScale's `hiroz-protocol`, its hashes from `hiroz-schema`, its CDR from `hiroz-cdr`.
+//! The format is rmw_zenoh's `docs/design.md`; its keys, tokens and QoS strings are
+//! ratelab's own ([`rmw_zenoh`]), its hashes come from ZettaScale's `hiroz-schema`, its CDR
+//! from `hiroz-cdr`.
 //! The tests check all of it against independent implementations (`eclipse-zenoh`,
 //! `rosbags`); no ROS 2 installation was available to check against (docs/ros2.md).
 //!
 //! What is offered is a view: ratelab's own topics, clocks and drop rules are unchanged,
 //! and a run with `--ros2` gives the same results as one without.
-
-// The layers below, under their own names (`crate::graph`, `crate::time`, …).
-use ratelab_core::{msg, output, qos, rate, text, textlog, time};
-use ratelab_runtime::{command, config, graph, scheduler};
+#![warn(missing_docs)]
 
 pub mod bag;
 pub mod bag_reader;
@@ -52,12 +55,14 @@ pub mod echo;
 pub mod external;
 pub mod figures;
 pub mod inspect;
+pub mod msg_schema;
 pub mod names;
 pub mod node_api;
 pub mod offered;
 pub mod param_cli;
 pub mod parameters;
 pub mod rcl_interfaces;
+pub mod rmw_zenoh;
 pub mod session;
 pub mod subscription;
 pub mod type_description;
@@ -99,8 +104,39 @@ pub(crate) fn zerr(e: impl std::fmt::Display) -> Ros2Error {
 ///
 /// # Panics
 /// When `msg` has none: [`crate::bridge::check_graph`] refuses such a graph first.
-pub fn ros_type_of(msg: crate::msg::MsgType) -> &'static types::RosType {
+pub fn ros_type_of(msg: ratelab_core::msg::MsgType) -> &'static types::RosType {
     (msg.ros2()
         .expect("a graph offered to ROS 2 has only mapped types")
         .ros_type)()
+}
+
+/// `f()`, with a panic inside it (in a dependency reading outside bytes: a bag's records,
+/// a bag's `ros2msg` schema) caught and given back as its message, printed by nobody: one
+/// line is said of it by the caller ([`bag_reader`], [`msg_schema`]).
+///
+/// The process's panic hook is silenced meanwhile: by one thread at a time (so that two
+/// threads cannot leave it silenced for good), once for calls inside calls (a bag's walk
+/// decoding by a schema), which run within the outer call's silence.
+pub(crate) fn catching_panics<T>(f: impl FnOnce() -> T) -> Result<T, String> {
+    use std::cell::Cell;
+    use std::panic::{catch_unwind, set_hook, take_hook, AssertUnwindSafe};
+    thread_local!(static SILENCED: Cell<bool> = const { Cell::new(false) });
+    static HOOK: std::sync::Mutex<()> = std::sync::Mutex::new(());
+    let message = |p: Box<dyn std::any::Any + Send>| {
+        p.downcast_ref::<&str>()
+            .map(|s| (*s).to_string())
+            .or_else(|| p.downcast_ref::<String>().cloned())
+            .unwrap_or_else(|| "a panic".into())
+    };
+    if SILENCED.with(Cell::get) {
+        return catch_unwind(AssertUnwindSafe(f)).map_err(message);
+    }
+    let _one = HOOK.lock().unwrap_or_else(|e| e.into_inner());
+    SILENCED.with(|s| s.set(true));
+    let hook = take_hook();
+    set_hook(Box::new(|_| {}));
+    let r = catch_unwind(AssertUnwindSafe(f));
+    set_hook(hook);
+    SILENCED.with(|s| s.set(false));
+    r.map_err(message)
 }

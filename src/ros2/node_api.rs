@@ -3,7 +3,7 @@
 //!
 //! - **`/rosout`** (`rcl_interfaces/msg/Log`, reliable, transient local, keep last 1000,
 //!   lifespan 10 s):
-//!   the node's log, the lines its code writes ([`crate::textlog`]: a Python node's
+//!   the node's log, the lines its code writes ([`ratelab_core::textlog`]: a Python node's
 //!   `print` and `get_logger()`, ratelab's warnings about it), as the lab's log pane shows
 //!   them. Lines written outside any node go out on the `/clock` publisher's (`ratelab`).
 //!   As a real node's, its last 1000 lines are kept for subscriptions that join later.
@@ -26,15 +26,15 @@
 
 use super::parameters::NodeParameters;
 use super::rcl_interfaces::{self as rcl, Log, ParameterService};
+use super::rmw_zenoh::entity::{EndpointKind, NodeEntity};
+use super::rmw_zenoh::qos::{QosDurability, QosDuration, QosHistory, QosProfile, QosReliability};
 use super::type_description::Descriptions;
 use super::wire::{attachment, read_attachment, wall_ns, Declarer, Outlet};
 use super::{zerr, Ros2Error};
-use crate::textlog::{Level, LogLine};
-use crate::time::Nanos;
-use hiroz_protocol::entity::{EndpointKind, NodeEntity};
-use hiroz_protocol::qos::{QosDuration, QosHistory, QosProfile, QosReliability};
 use ratelab_core::limits::MAX_SERVICE_REQUEST_BYTES;
 use ratelab_core::ros_types::cdr;
+use ratelab_core::textlog::{Level, LogLine};
+use ratelab_core::time::Nanos;
 use std::sync::Arc;
 use std::time::Duration;
 use zenoh::Wait;
@@ -54,7 +54,7 @@ pub const PARAMETER_EVENTS: &str = "/parameter_events";
 pub(crate) fn rosout_qos() -> QosProfile {
     QosProfile {
         reliability: QosReliability::Reliable,
-        durability: hiroz_protocol::qos::QosDurability::TransientLocal,
+        durability: QosDurability::TransientLocal,
         history: QosHistory::KeepLast(1000),
         lifespan: QosDuration { sec: 10, nsec: 0 },
         ..QosProfile::default()
@@ -248,7 +248,7 @@ impl NodeApi {
 
     /// Put `line` on this node's `/rosout`, stamped with the wall clock as rcl stamps it:
     /// a logger's line as its message alone with the file, function and line that logged
-    /// it ([`crate::textlog::Logged`]), any other as its text with those empty (line 0).
+    /// it ([`ratelab_core::textlog::Logged`]), any other as its text with those empty (line 0).
     /// The message's CDR is left in `buf` (for the bag).
     ///
     /// # Errors
@@ -305,7 +305,7 @@ mod tests {
     /// the level word the log pane shows, and its caller; a print's has none.
     #[test]
     fn a_loggers_line_is_its_message_and_its_caller_as_rcl_writes_it() {
-        use crate::textlog::Logged;
+        use ratelab_core::textlog::Logged;
         let logged = LogLine {
             t: Some(Nanos(200_000_000)),
             node: Some("thermo".into()),
@@ -317,6 +317,7 @@ mod tests {
                 function: "tick".into(),
                 line: 20,
             }),
+            traceback: None,
         };
         let now = 1_795_822_167_937_444_103;
         let m = log_message("thermo", &logged, now);

@@ -7,7 +7,7 @@ use super::bridge::{clock_qos, qos_of, CLOCK_NODE, CLOCK_TOPIC};
 use super::inspect::qos_short;
 use super::ros_type_of;
 use super::types::clock_type;
-use crate::graph::GraphSpec;
+use ratelab_runtime::graph::GraphSpec;
 
 /// One topic as ROS 2 sees it.
 #[derive(Clone, Debug, PartialEq, Eq)]

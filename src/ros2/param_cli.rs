@@ -68,7 +68,7 @@ pub fn call<T: serde::Serialize>(
             return Err(Ros2Error::Usage(limits::refusal(
                 format_args!(
                     "{}: its {} answered {} bytes; a reply is read up to {MAX_SERVICE_REPLY_BYTES}",
-                    crate::text::printable(node),
+                    ratelab_core::text::printable(node),
                     service.suffix,
                     bytes.len()
                 ),
@@ -79,7 +79,7 @@ pub fn call<T: serde::Serialize>(
     }
     Err(Ros2Error::Usage(format!(
         "node {} did not answer its {} within {:.1} s",
-        crate::text::printable(node),
+        ratelab_core::text::printable(node),
         service.suffix,
         timeout.as_secs_f64()
     )))
@@ -234,7 +234,7 @@ pub fn set(
         if reason.is_empty() {
             what.to_string()
         } else {
-            format!("{what}: {}", crate::text::printable(reason))
+            format!("{what}: {}", ratelab_core::text::printable(reason))
         }
     };
     match r.results.first() {
@@ -248,7 +248,7 @@ pub fn set(
         ))),
         None => Err(Ros2Error::Usage(format!(
             "{}: set_parameters answered no result",
-            crate::text::printable(node)
+            ratelab_core::text::printable(node)
         ))),
     }
 }
@@ -276,7 +276,7 @@ fn python_bool(b: bool) -> &'static str {
 /// A Python string literal as `repr` writes it (single quotes unless the text has one and
 /// no double quote; backslashes doubled), control characters written out.
 pub(crate) fn python_str(s: &str) -> String {
-    let text = crate::text::printable(s).replace('\\', "\\\\");
+    let text = ratelab_core::text::printable(s).replace('\\', "\\\\");
     if text.contains('\'') && !text.contains('"') {
         format!("\"{text}\"")
     } else {
@@ -315,7 +315,7 @@ pub fn get_text(value: Option<&ParameterValue>) -> Result<String, String> {
         pt::DOUBLE => ("Double value is:", python_float(v.double_value)),
         pt::STRING => (
             "String value is:",
-            crate::text::printable(&v.string_value).into(),
+            ratelab_core::text::printable(&v.string_value).into(),
         ),
         pt::BYTE_ARRAY => (
             "Byte values are:",
@@ -372,12 +372,12 @@ pub fn get_text(value: Option<&ParameterValue>) -> Result<String, String> {
 /// colon when more than the one node asked for is listed (`header`) and it has names.
 pub fn list_text(node: &str, names: &[String], header: bool) -> String {
     let mut out = if header && !names.is_empty() {
-        format!("{}:\n", crate::text::printable(node))
+        format!("{}:\n", ratelab_core::text::printable(node))
     } else {
         String::new()
     };
     for n in names {
-        out.push_str(&format!("  {}\n", crate::text::printable(n)));
+        out.push_str(&format!("  {}\n", ratelab_core::text::printable(n)));
     }
     out
 }

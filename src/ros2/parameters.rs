@@ -12,7 +12,10 @@
 //! They are read-only over ROS 2, but one: `rate_hz`, which the lab's keys change, can be
 //! set where the run takes commands (the lab): a set is handed to the run as the key's
 //! command would be ([`SetRate`]), so the run's session log has it and a virtual-clock run
-//! still replays. `set_parameters` answers each parameter, with the reason when not.
+//! still replays. `use_sim_time` is read-only everywhere because no set of it could take
+//! effect: the run's clock is chosen when it starts ([`SIM_TIME_FIXED`], which its
+//! descriptor and a refused set say). `set_parameters` answers each parameter, with the
+//! reason when not.
 //!
 //! The services answer as rclcpp's `ParameterService` does in Jazzy and later (`rclcpp/src/
 //! rclcpp/node_interfaces/node_parameters.cpp`, `parameter_service.cpp`; rclpy's agree):
@@ -29,15 +32,22 @@ use super::rcl_interfaces::{
     ParameterService, ParameterValue, SetParametersAtomicallyResponse, SetParametersResponse,
     SetParametersResult, SetRequest,
 };
-use crate::graph::spec::NodeSpec;
-use crate::time::Nanos;
 use ratelab_core::limits::{self, MAX_SERVICE_REPLY_BYTES, MAX_SERVICE_REQUEST_BYTES};
 use ratelab_core::rate::{Rate, MAX_HZ};
 use ratelab_core::ros_types::{cdr, from_cdr};
+use ratelab_core::time::Nanos;
+use ratelab_runtime::graph::spec::NodeSpec;
 use std::collections::BTreeMap;
 
 /// The separator of nested parameter names (ROS 2's).
 const SEPARATOR: char = '.';
+
+/// Why `use_sim_time` is read-only over ROS 2 (its descriptor's `additional_constraints`,
+/// a refused set's reason): no set of it could take effect. A ratelab node's time is the
+/// run's under either clock (`/clock` carries it), and the clock itself is the run's
+/// `--clock`, kept while the run is offered to ROS 2 (the lab's `c` restarts such a run
+/// under the other clock rather than switching it in place).
+pub const SIM_TIME_FIXED: &str = "ratelab's clock is chosen when the run starts (--clock); it cannot change mid-run, and the nodes' time is the run's, on /clock, under either clock";
 
 /// How deep a `params` table may nest before its deeper keys are left out of ROS 2's view.
 const MAX_NESTING: usize = 16;
@@ -242,20 +252,26 @@ impl NodeParameters {
                     step: 0.0,
                 }],
             ),
+            "use_sim_time" if self.makes_time() => (
+                "false: this node publishes /clock, the run's time, rather than following it",
+                vec![],
+            ),
             "use_sim_time" => ("the node's time is the run's, which /clock carries", vec![]),
             _ => ("the graph file's params", vec![]),
         };
         let settable = name == "rate_hz" && self.set_rate.is_some();
         let constraints = if settable {
-            "set as the lab's rate keys set it: a command to the run, in its session log"
+            "set as the lab's rate keys set it: a command to the run, in its session log".into()
+        } else if name == "use_sim_time" {
+            format!("read-only: {SIM_TIME_FIXED}")
         } else {
-            "read-only over ROS 2: set it in the graph file (rate_hz: in the lab)"
+            "read-only over ROS 2: set it in the graph file (rate_hz: in the lab)".into()
         };
         ParameterDescriptor {
             name: name.to_string(),
             type_: value.type_,
             description: description.into(),
-            additional_constraints: constraints.into(),
+            additional_constraints: constraints,
             read_only: !settable,
             dynamic_typing: false,
             floating_point_range: range,
@@ -359,11 +375,21 @@ impl NodeParameters {
         }
     }
 
+    /// Whether this node makes the run's time (ratelab's `/clock` publisher, whose
+    /// `use_sim_time` is `false`) rather than following it.
+    fn makes_time(&self) -> bool {
+        matches!(self.params.get("use_sim_time"), Some(Value::Fixed(v)) if !v.bool_value)
+    }
+
     /// The reason `name` cannot be set over ROS 2.
     fn refusal(&self, name: &str) -> String {
         match name {
             "rate_hz" => format!(
                 "{}: rate_hz is read-only in a run that takes no commands (in the lab, setting it changes the node's rate as its keys do)",
+                self.node
+            ),
+            "use_sim_time" if self.params.contains_key(name) => format!(
+                "{}: parameter 'use_sim_time' is read-only: {SIM_TIME_FIXED}",
                 self.node
             ),
             _ if self.params.contains_key(name) => format!(
@@ -492,7 +518,7 @@ impl NodeParameters {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::graph::GraphSpec;
+    use ratelab_runtime::graph::GraphSpec;
 
     fn policy_with(params: &str) -> NodeParameters {
         let text = std::fs::read_to_string(concat!(
@@ -636,6 +662,60 @@ mod tests {
         let r: SetParametersAtomicallyResponse =
             decode(&ask(&p, ParameterService::SetAtomically, &set("nope")));
         assert!(r.result.reason.contains("not declared"));
+    }
+
+    /// `use_sim_time` cannot take effect when set (the run's clock is its `--clock`): it is
+    /// read-only on every node, and its descriptor and a refused set say why.
+    #[test]
+    fn use_sim_time_is_read_only_and_says_why() {
+        let flag = |b: bool| SetRequest {
+            parameters: vec![Parameter {
+                name: "use_sim_time".into(),
+                value: boolean(b),
+            }],
+        };
+        let describe = NamesRequest {
+            names: vec!["use_sim_time".into()],
+        };
+        // A graph node (one whose run takes commands too) and ratelab's /clock publisher.
+        let set: SetRate = std::sync::Arc::new(|_hz: f64| -> Result<(), String> { Ok(()) });
+        let spec = GraphSpec::chapter();
+        let nodes = [
+            (policy_with(""), true),
+            (NodeParameters::of(&spec.nodes[1], None, Some(set)), true),
+            (NodeParameters::clock_node("ratelab"), false),
+        ];
+        for (p, value) in nodes {
+            for b in [false, true] {
+                let r: SetParametersResponse = decode(&ask(&p, ParameterService::Set, &flag(b)));
+                assert!(!r.results[0].successful, "{:?}", r.results);
+                assert_eq!(
+                    r.results[0].reason,
+                    format!(
+                        "{}: parameter 'use_sim_time' is read-only: {SIM_TIME_FIXED}",
+                        p.node
+                    )
+                );
+                assert!(!r.results[0].reason.contains('\n'));
+            }
+            let d: DescribeParametersResponse =
+                decode(&ask(&p, ParameterService::Describe, &describe));
+            let d = &d.descriptors[0];
+            assert!(d.read_only, "{}", p.node);
+            assert_eq!(d.type_, pt::BOOL);
+            assert_eq!(
+                d.additional_constraints,
+                "read-only: ratelab's clock is chosen when the run starts (--clock); it cannot change mid-run, and the nodes' time is the run's, on /clock, under either clock"
+            );
+            assert_eq!(
+                d.description.starts_with("false:"),
+                !value,
+                "{}",
+                d.description
+            );
+            let got: GetParametersResponse = decode(&ask(&p, ParameterService::Get, &describe));
+            assert_eq!(got.values, vec![boolean(value)]);
+        }
     }
 
     /// Where the run takes commands, rate_hz is set through them, checked first; every

@@ -8,6 +8,7 @@
 //! compare every token ratelab declares with that node's, and `rosbags` (an independent
 //! implementation) computes the two message types' hashes again.
 
+use super::rmw_zenoh::entity::{TypeHash, TypeInfo};
 use serde::{Deserialize, Serialize};
 
 pub use ratelab_core::ros_types::Time;
@@ -355,16 +356,15 @@ impl ParameterService {
     }
 }
 
-/// hiroz-protocol's type info of the type named `ros_name` (`rcl_interfaces/msg/Log`) with
+/// The type info ([`TypeInfo`]) of the type named `ros_name` (`rcl_interfaces/msg/Log`) with
 /// hash `rihs` (`RIHS01_…`, one of this module's).
 ///
 /// # Panics
 /// When `rihs` is not a RIHS01 string: this module's constants all are (a test reads each).
-pub fn type_info(ros_name: &str, rihs: &str) -> hiroz_protocol::entity::TypeInfo {
-    use hiroz_protocol::entity::{TypeHash as Hash, TypeInfo};
+pub fn type_info(ros_name: &str, rihs: &str) -> TypeInfo {
     let hash = hiroz_schema::TypeHash::from_rihs_string(rihs).expect("a RIHS01 constant");
     let dds = hiroz_schema::dds_from_canonical(ros_name).unwrap_or_else(|| ros_name.to_string());
-    TypeInfo::new(&dds, Hash::new(1, hash.0))
+    TypeInfo::new(&dds, TypeHash::new(1, hash.0))
 }
 
 #[cfg(test)]

@@ -15,7 +15,7 @@
 //! use this session: it carries the ROS 2 view only (docs/ros2.md).
 
 use super::Ros2Error;
-use crate::scheduler::StopFlag;
+use ratelab_runtime::scheduler::StopFlag;
 use std::time::{Duration, Instant};
 use zenoh::Wait;
 
@@ -236,7 +236,7 @@ pub fn open(env: &SessionEnv, stop: &StopFlag) -> Result<Ros2Session, Ros2Error>
         if attempt == 1 && check == RouterCheck::Forever {
             eprintln!(
                 "[ratelab] waiting for a Zenoh router at {} (ZENOH_ROUTER_CHECK_ATTEMPTS=0) ...",
-                crate::text::printable(&endpoint.to_string())
+                ratelab_core::text::printable(&endpoint.to_string())
             );
         }
         let until = Instant::now() + Duration::from_secs(1);

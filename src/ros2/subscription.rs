@@ -30,10 +30,10 @@
 //! publisher's). The history queries time out after zenoh-ext's default, 10 s, where
 //! rmw_zenoh_cpp waits without limit.
 
+use super::rmw_zenoh::entity::EndpointEntity;
+use super::rmw_zenoh::key_expr::KeyExprFormat;
+pub use super::rmw_zenoh::qos::{QosDurability, QosProfile, QosReliability};
 use super::{zerr, Ros2Error};
-use hiroz_protocol::entity::EndpointEntity;
-pub use hiroz_protocol::qos::{QosDurability, QosProfile, QosReliability};
-use hiroz_protocol::KeyExprFormat;
 use zenoh::Wait;
 
 /// rclpy's `sensor_data` preset's depth (`rmw_qos_profile_sensor_data`): the history a
@@ -66,7 +66,7 @@ pub fn reliability_from_key(key: &str) -> Result<QosReliability, String> {
         "best_effort" => Ok(QosReliability::BestEffort),
         _ => Err(format!(
             "--qos-reliability '{}' is not one of {}",
-            crate::text::printable(key),
+            ratelab_core::text::printable(key),
             RELIABILITY_KEYS.join(", ")
         )),
     }
@@ -83,7 +83,7 @@ pub fn durability_from_key(key: &str) -> Result<QosDurability, String> {
         "transient_local" => Ok(QosDurability::TransientLocal),
         _ => Err(format!(
             "--qos-durability '{}' is not one of {}",
-            crate::text::printable(key),
+            ratelab_core::text::printable(key),
             DURABILITY_KEYS.join(", ")
         )),
     }
@@ -201,10 +201,7 @@ pub fn subscribe(
     on: impl Fn(Vec<u8>) + Send + Sync + 'static,
 ) -> Result<Subscription, Ros2Error> {
     use zenoh_ext::{AdvancedSubscriberBuilderExt, HistoryConfig, RecoveryConfig};
-    let key = KeyExprFormat::default()
-        .topic_key_expr(publisher)
-        .map_err(zerr)?
-        .to_string();
+    let key = KeyExprFormat.topic_key_expr(publisher).map_err(zerr)?;
     let deliver = move |s: zenoh::sample::Sample| on(s.payload().to_bytes().into_owned());
     if qos.durability == QosDurability::Volatile {
         let sub = session

@@ -10,11 +10,11 @@
 //! 500 ms sporadic heartbeat too), which a late-joining transient-local subscription (an
 //! advanced subscriber asking for history, detecting late publishers) finds and queries.
 
+use super::rmw_zenoh::entity::{EndpointEntity, EndpointKind, NodeEntity, TypeInfo};
+use super::rmw_zenoh::key_expr::KeyExprFormat;
+use super::rmw_zenoh::qos::{QosDurability, QosHistory, QosProfile, QosReliability};
 use super::session::Ros2Session;
 use super::{zerr, Ros2Error};
-use hiroz_protocol::entity::{EndpointEntity, EndpointKind, NodeEntity};
-use hiroz_protocol::qos::{QosDurability, QosHistory, QosProfile};
-use hiroz_protocol::KeyExprFormat;
 use zenoh::Wait;
 
 /// The 16-byte GID of the endpoint whose token is `token`, as rmw_zenoh_cpp computes it:
@@ -26,37 +26,15 @@ pub fn gid(token: &str) -> [u8; 16] {
     xxhash_rust::xxh3::xxh3_128(token.as_bytes()).to_le_bytes()
 }
 
-/// An endpoint's liveliness token (hiroz-protocol's), a keep-all history carrying its
-/// depth as rmw_zenoh_cpp writes it (`2,10`; hiroz writes `2,`, which rmw_zenoh_cpp reads as
-/// its default depth, 42).
-fn token_of(
-    format: &KeyExprFormat,
-    e: &EndpointEntity,
-    zid: &zenoh::session::ZenohId,
-    depth: usize,
-) -> Result<String, Ros2Error> {
-    let token = format
-        .liveliness_key_expr(e, zid)
-        .map_err(zerr)?
-        .to_string();
-    Ok(if e.qos.history == QosHistory::KeepAll {
-        with_keep_all_depth(&token, depth)
-    } else {
-        token
-    })
-}
-
-/// `token` with its QoS field's history (the third of the last segment's `:`-fields) `2,`
-/// made `2,<depth>`.
-fn with_keep_all_depth(token: &str, depth: usize) -> String {
-    let Some((head, qos)) = token.rsplit_once('/') else {
-        return token.to_string();
-    };
-    let mut fields: Vec<String> = qos.split(':').map(str::to_string).collect();
-    if fields.get(2).is_some_and(|h| h == "2,") {
-        fields[2] = format!("2,{depth}");
+/// An endpoint's liveliness token ([`KeyExprFormat::liveliness_key_expr`]), a keep-all
+/// history carrying depth `depth`, the depth ratelab keeps, as rmw_zenoh_cpp writes a
+/// keep-all profile's depth (`2,10`; left out, rmw_zenoh_cpp would read its default, 42).
+fn token_of(format: &KeyExprFormat, e: &EndpointEntity, depth: usize) -> Result<String, Ros2Error> {
+    let mut e = e.clone();
+    if let QosHistory::KeepAll(_) = e.qos.history {
+        e.qos.history = QosHistory::KeepAll(depth);
     }
-    format!("{head}/{}", fields.join(":"))
+    format.liveliness_key_expr(&e).map_err(zerr)
 }
 
 /// rmw_zenoh's attachment: `int64` sequence number, `int64` source timestamp (ns), the
@@ -158,7 +136,7 @@ impl<'a> Declarer<'a> {
         Declarer {
             session,
             link,
-            format: KeyExprFormat::default(),
+            format: KeyExprFormat,
             tokens: Vec::new(),
         }
     }
@@ -171,7 +149,7 @@ impl<'a> Declarer<'a> {
     /// Declare node `n`'s NN token.
     pub(crate) fn node(&mut self, n: &NodeEntity) -> Result<(), Ros2Error> {
         let ke = self.format.node_liveliness_key_expr(n).map_err(zerr)?;
-        self.token(ke.to_string())
+        self.token(ke)
     }
 
     /// The session.
@@ -197,7 +175,7 @@ impl<'a> Declarer<'a> {
         e: &EndpointEntity,
         depth: usize,
     ) -> Result<String, Ros2Error> {
-        let token = token_of(&self.format, e, &self.session.zid(), depth)?;
+        let token = token_of(&self.format, e, depth)?;
         self.token(token.clone())?;
         Ok(token)
     }
@@ -208,7 +186,7 @@ impl<'a> Declarer<'a> {
         node: &NodeEntity,
         kind: EndpointKind,
         topic: &str,
-        ty: hiroz_protocol::entity::TypeInfo,
+        ty: TypeInfo,
         qos: QosProfile,
     ) -> EndpointEntity {
         EndpointEntity {
@@ -223,7 +201,7 @@ impl<'a> Declarer<'a> {
 
     /// Endpoint `e`'s data key (a topic's, or a service's).
     pub(crate) fn key(&self, e: &EndpointEntity) -> Result<String, Ros2Error> {
-        Ok(self.format.topic_key_expr(e).map_err(zerr)?.to_string())
+        self.format.topic_key_expr(e).map_err(zerr)
     }
 
     /// A publisher: its key declared, its MP token declared, its GID from that token. A
@@ -242,7 +220,7 @@ impl<'a> Declarer<'a> {
             // Reliable: numbered samples and a sporadic heartbeat, as rmw_zenoh_cpp's (each
             // publisher then has its own id in its token, and its late joiners a history of
             // their own per publisher).
-            let p = if e.qos.reliability == hiroz_protocol::qos::QosReliability::Reliable {
+            let p = if e.qos.reliability == QosReliability::Reliable {
                 let heartbeat = std::time::Duration::from_millis(500);
                 p.sample_miss_detection(
                     MissDetectionConfig::default().sporadic_heartbeat(heartbeat),
@@ -289,13 +267,27 @@ mod tests {
 
     #[test]
     fn a_keep_all_token_carries_its_depth_as_rmw_zenoh_cpp_writes_it() {
-        let t = "@ros2_lv/0/z/0/1/MP/%/%/sensor/%obs/T/RIHS01_x/1::2,:,:,:,,";
-        assert_eq!(
-            with_keep_all_depth(t, 100),
-            "@ros2_lv/0/z/0/1/MP/%/%/sensor/%obs/T/RIHS01_x/1::2,100:,:,:,,"
-        );
-        let last = "@ros2_lv/0/z/0/1/MP/%/%/sensor/%obs/T/RIHS01_x/2::,1:,:,:,,";
-        assert_eq!(with_keep_all_depth(last, 100), last);
+        let zid = "1".parse::<zenoh::session::ZenohId>().unwrap();
+        let node = NodeEntity::new(0, zid, 0, "sensor".into(), String::new(), String::new());
+        let hash = crate::rmw_zenoh::entity::TypeHash::new(1, [0; 32]);
+        let mut e = EndpointEntity {
+            id: 1,
+            node: Some(node),
+            kind: EndpointKind::Publisher,
+            topic: "/obs".into(),
+            type_info: Some(TypeInfo::new("T", hash)),
+            qos: QosProfile {
+                history: QosHistory::KeepAll(7),
+                ..QosProfile::default()
+            },
+        };
+        let format = KeyExprFormat;
+        let t = token_of(&format, &e, 100).unwrap();
+        let want = format!("/%obs/T/RIHS01_{}/::2,100:,:,:,,", "00".repeat(32));
+        assert!(t.ends_with(&want), "{t}");
+        e.qos.history = QosHistory::KeepLast(1);
+        let last = token_of(&format, &e, 100).unwrap();
+        assert!(last.ends_with("/::,1:,:,:,,"), "{last}");
     }
 
     #[test]

@@ -24,10 +24,10 @@
 //!   [`MAX_ONNX_ELEMENTS`], at most [`MAX_ONNX_ITEMS`] nodes and edges; after typing
 //!   with the batch pinned to 1, every intermediate tensor is checked the same way.
 
-use crate::input::{read_regular_file, InputError};
 use crate::plant::{Action, Observation, ACT_DIM, OBS_DIM};
 use crate::policy::{Policy, Scripted};
 use candle_core::{DType, Device, Tensor};
+use ratelab_core::input::{read_regular_file, InputError};
 use std::collections::HashMap;
 use std::ops::RangeInclusive;
 use std::path::{Path, PathBuf};
@@ -208,20 +208,27 @@ pub const MAX_CAPTION_BYTES: u64 = 1024;
 /// What a checkpoint is, in one line, when known: the first line of a sidecar
 /// `<checkpoint>.caption` beside it, else the caption of a known checkpoint by the file's
 /// SHA-256 (`src/runtime/assets/captions.toml`: the course's fixtures). `None` when neither says.
-/// Read through [`crate::input`]'s rule, bounded; a sidecar that cannot be read is ignored.
+/// Read through [`ratelab_core::input`]'s rule, bounded; a sidecar that cannot be read is ignored.
 pub fn caption(path: &Path) -> Option<String> {
     let mut sidecar = path.as_os_str().to_owned();
     sidecar.push(".caption");
-    if let Ok(bytes) = crate::input::read_regular_file(Path::new(&sidecar), MAX_CAPTION_BYTES) {
+    if let Ok(bytes) =
+        ratelab_core::input::read_regular_file(Path::new(&sidecar), MAX_CAPTION_BYTES)
+    {
         let text = String::from_utf8_lossy(&bytes);
         let line = text.lines().next().unwrap_or("").trim();
         if !line.is_empty() {
             // The label of the brain in the summary, the lab and a recording.
-            return Some(crate::text::printable(line).chars().take(200).collect());
+            return Some(
+                ratelab_core::text::printable(line)
+                    .chars()
+                    .take(200)
+                    .collect(),
+            );
         }
     }
     use sha2::Digest;
-    let bytes = crate::input::read_regular_file(path, MAX_FILE_BYTES).ok()?;
+    let bytes = ratelab_core::input::read_regular_file(path, MAX_FILE_BYTES).ok()?;
     let digest = sha2::Sha256::digest(&bytes);
     let hex: String = digest.iter().map(|b| format!("{b:02x}")).collect();
     let known: toml::Table = toml::from_str(include_str!("assets/captions.toml")).ok()?;
@@ -261,7 +268,7 @@ fn extension(path: &Path) -> Option<String> {
 /// of an unsupported type (a missing file is named as missing, whatever its extension).
 fn not_a_checkpoint(path: &Path) -> PolicyError {
     match std::fs::metadata(path) {
-        Err(e) => input_err(path, crate::input::io_error(path, &e)),
+        Err(e) => input_err(path, ratelab_core::input::io_error(path, &e)),
         Ok(m) if !m.is_file() => PolicyError::NotAFile(path.to_path_buf()),
         Ok(_) => PolicyError::UnknownType(path.to_path_buf()),
     }

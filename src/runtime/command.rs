@@ -39,7 +39,7 @@ pub enum Command {
         depth: usize,
     },
     /// Set one topic's QoS keys (`KEY=VALUE[,KEY=VALUE…]`, the graph file's keys; see
-    /// [`crate::qos`]): the lab's `f` (delivery), `d` (deadline) and `L` (link loss).
+    /// [`ratelab_core::qos`]): the lab's `f` (delivery), `d` (deadline) and `L` (link loss).
     SetTopicQos {
         /// The topic's name.
         topic: String,
@@ -84,19 +84,19 @@ pub enum Command {
 /// `NODE@T+D` (a stall) or `NODE@T` (a kill), as [`Command::InjectFault`] gives it.
 ///
 /// # Errors
-/// One line saying what is wrong ([`crate::qos::Fault::parse`]).
-pub fn parse_fault(text: &str) -> Result<crate::qos::Fault, String> {
+/// One line saying what is wrong ([`ratelab_core::qos::Fault::parse`]).
+pub fn parse_fault(text: &str) -> Result<ratelab_core::qos::Fault, String> {
     // A stall has a duration after its time (`@T+D`); a node's name has no `@`.
     let stall = text
         .split_once('@')
         .is_some_and(|(_, when)| when.contains('+'));
-    crate::qos::Fault::parse(text, !stall)
+    ratelab_core::qos::Fault::parse(text, !stall)
 }
 
 impl Command {
     /// Apply to the settings a run starts with: `graph`'s rates and depths, the brain
     /// spec `policy`. The checks are the command line's: rates in (0, 10 000] Hz (the
-    /// actuator at 50), depths in 1..=[`crate::qos::MAX_DEPTH`], names that exist.
+    /// actuator at 50), depths in 1..=[`ratelab_core::qos::MAX_DEPTH`], names that exist.
     /// A brain is not loaded here (see [`Command::validate`]).
     ///
     /// # Errors
@@ -134,7 +134,7 @@ impl Command {
                 Ok(())
             }
             Command::SetExecutor { executor } => {
-                graph.set_executor(crate::executor::ExecutorOverride::parse(executor)?);
+                graph.set_executor(ratelab_core::executor::ExecutorOverride::parse(executor)?);
                 Ok(())
             }
             // Checked, not kept: the next run starts at its settings' phase offsets.
@@ -209,7 +209,7 @@ impl Command {
                 Ok(())
             }
             Command::SetExecutor { executor } => {
-                let over = crate::executor::ExecutorOverride::parse(executor)?;
+                let over = ratelab_core::executor::ExecutorOverride::parse(executor)?;
                 let mut spec = h.current_spec();
                 spec.set_executor(over);
                 *crate::graph::lock(&h.executor) = Some(over);
@@ -234,7 +234,7 @@ fn phase_node(
     graph: &crate::graph::GraphSpec,
     node: &str,
     phase_ms: f64,
-) -> Result<(crate::graph::NodeId, crate::time::Nanos), String> {
+) -> Result<(crate::graph::NodeId, ratelab_core::time::Nanos), String> {
     let id = graph.known_node(node).map_err(|e| e.to_string())?;
     let phase = crate::config::phase_offset_from_ms(phase_ms).map_err(|e| e.to_string())?;
     Ok((id, phase))
@@ -244,7 +244,7 @@ fn phase_node(
 fn fault_node(
     graph: &crate::graph::GraphSpec,
     text: &str,
-) -> Result<(crate::graph::NodeId, crate::qos::Fault), String> {
+) -> Result<(crate::graph::NodeId, ratelab_core::qos::Fault), String> {
     let f = parse_fault(text)?;
     let id = graph.node_id(&f.node).ok_or_else(|| {
         format!(

@@ -1,20 +1,20 @@
 //! Run settings and their validation: one place decides what a usable run is.
 
 use crate::graph::spec::{GraphSpec, OverrideError};
-use crate::rate::{period_for_hz, MAX_HZ};
 use crate::setting::{Setting, Speech};
-use crate::time::{Nanos, MAX_DURATION_S};
+use ratelab_core::rate::{period_for_hz, MAX_HZ};
+use ratelab_core::time::{Nanos, MAX_DURATION_S};
 
-pub use crate::clock::ClockKind;
+pub use ratelab_core::clock::ClockKind;
 
 /// `--break` sets the control rate to this (the chapter's demonstration of the cliff).
 pub const BREAK_CONTROL_HZ: f64 = 5.0;
 
 /// The most faults one run may inject (`--stall`, `--kill`, and by command).
-pub use crate::qos::MAX_FAULTS;
+pub use ratelab_core::qos::MAX_FAULTS;
 
-impl From<crate::clock::UnknownClock> for ConfigError {
-    fn from(e: crate::clock::UnknownClock) -> ConfigError {
+impl From<ratelab_core::clock::UnknownClock> for ConfigError {
+    fn from(e: ratelab_core::clock::UnknownClock) -> ConfigError {
         ConfigError::Clock(e.0)
     }
 }
@@ -54,7 +54,7 @@ pub enum ConfigError {
         got: usize,
     },
     /// A real-clock run that would start more threads than
-    /// [`crate::limits::MAX_REAL_CLOCK_THREADS`]: the line names the graph, the threads, the
+    /// [`ratelab_core::limits::MAX_REAL_CLOCK_THREADS`]: the line names the graph, the threads, the
     /// bound and the ways to fewer.
     Threads {
         /// The graph's name.
@@ -88,6 +88,9 @@ impl ConfigError {
                     "sensor-hz" => name(Setting::SensorHz).to_string(),
                     "control-hz" => name(Setting::ControlHz).to_string(),
                     "rate" => name(Setting::Rate).to_string(),
+                    "min-hz" => name(Setting::MinHz).to_string(),
+                    "max-hz" => name(Setting::MaxHz).to_string(),
+                    "step" => name(Setting::Step).to_string(),
                     other if speech == Speech::Keywords => other.replace('-', "_"),
                     other => format!("--{other}"),
                 };
@@ -166,7 +169,7 @@ pub struct RunConfig {
     /// the kernel allows (see [`crate::scheduler::RealOptions::rt_priority`]); `None` keeps the default policy.
     pub rt_priority: Option<u8>,
     /// Faults injected into nodes (`--stall`, `--kill`), in the order given.
-    pub faults: Vec<crate::qos::Fault>,
+    pub faults: Vec<ratelab_core::qos::Fault>,
 }
 
 impl Default for RunConfig {
@@ -177,7 +180,7 @@ impl Default for RunConfig {
             duration: Nanos(10 * Nanos::SECOND.0),
             graph: GraphSpec::chapter(),
             clock: ClockKind::Real,
-            spin_margin: crate::rate::DEFAULT_SPIN_MARGIN,
+            spin_margin: ratelab_core::rate::DEFAULT_SPIN_MARGIN,
             phase_offsets: Vec::new(),
             rt_priority: None,
             faults: Vec::new(),
@@ -355,12 +358,12 @@ impl RunConfig {
             return Err(ConfigError::Duration(0.0));
         }
         if let Some(p) = self.rt_priority {
-            crate::realtime::check_priority(p).map_err(|_| ConfigError::RtPriority(p))?;
+            ratelab_core::realtime::check_priority(p).map_err(|_| ConfigError::RtPriority(p))?;
         }
         if self.faults.len() > MAX_FAULTS {
             let got = self.faults.len();
             let line = format_args!("at most {MAX_FAULTS} faults, got {got}");
-            return Err(ConfigError::Fault(crate::limits::refusal(
+            return Err(ConfigError::Fault(ratelab_core::limits::refusal(
                 line,
                 "MAX_FAULTS",
             )));
@@ -388,7 +391,8 @@ impl RunConfig {
         // The spin margin matters to the real clock only (the virtual one never waits).
         let fastest = self.fastest_period();
         if self.clock == ClockKind::Real
-            && (self.spin_margin >= fastest || self.spin_margin > crate::rate::MAX_SPIN_MARGIN)
+            && (self.spin_margin >= fastest
+                || self.spin_margin > ratelab_core::rate::MAX_SPIN_MARGIN)
         {
             return Err(ConfigError::SpinMargin {
                 margin_us: self.spin_margin.0 / 1_000,
@@ -408,11 +412,11 @@ impl RunConfig {
             .unwrap_or(Nanos(u64::MAX))
     }
 
-    /// The spin margin to use when none was asked for: [`crate::rate::DEFAULT_SPIN_MARGIN`],
+    /// The spin margin to use when none was asked for: [`ratelab_core::rate::DEFAULT_SPIN_MARGIN`],
     /// or half the fastest node's period if that is shorter (a node never spins a whole
     /// period).
     pub fn default_spin_margin(&self) -> Nanos {
-        crate::rate::DEFAULT_SPIN_MARGIN.min(Nanos(self.fastest_period().0 / 2))
+        ratelab_core::rate::DEFAULT_SPIN_MARGIN.min(Nanos(self.fastest_period().0 / 2))
     }
 }
 
@@ -491,7 +495,7 @@ mod tests {
 
     #[test]
     fn a_real_clock_run_of_more_threads_than_the_bound_is_refused_before_it_is_built() {
-        let nodes = crate::limits::MAX_REAL_CLOCK_THREADS + 1;
+        let nodes = ratelab_core::limits::MAX_REAL_CLOCK_THREADS + 1;
         let graph =
             GraphSpec::parse(&crate::graph::synthetic::graph_toml(nodes, 1), "big").unwrap();
         let real = RunConfig {
@@ -521,9 +525,9 @@ mod tests {
         };
         assert_eq!(virtual_clock.validate(), Ok(()));
         let mut shared = real;
-        shared
-            .graph
-            .set_executor(crate::executor::ExecutorOverride::parse("single_threaded").unwrap());
+        shared.graph.set_executor(
+            ratelab_core::executor::ExecutorOverride::parse("single_threaded").unwrap(),
+        );
         assert_eq!(
             crate::scheduler::plan_threads(&shared.graph.execution_plan()),
             2

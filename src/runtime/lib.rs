@@ -36,8 +36,3 @@ pub mod telemetry;
 
 pub use config::{ClockKind, RunConfig};
 pub use ratelab_core::Nanos;
-// The core's modules, under their own names (`crate::time`, `crate::msg`, …).
-use ratelab_core::{
-    clock, estimate, executor, ids, input, limits, metrics, msg, node, np_random, ports, publisher,
-    qos, rate, realtime, runlog, text, textlog, time, topic,
-};

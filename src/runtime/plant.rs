@@ -6,9 +6,9 @@
 //! frictionless ±2.9 m slider driven by one motor (gear 10, ctrl in [-1, 1]); a 0.1 kg,
 //! 1 m capsule pole on an undamped hinge about +y; no contacts; `implicitfast`.
 
-use crate::np_random::NumpyGenerator;
-use crate::time::Nanos;
 use mujoco_rs::prelude::*;
+use ratelab_core::np_random::NumpyGenerator;
+use ratelab_core::time::Nanos;
 use std::sync::{Arc, Mutex, MutexGuard};
 
 pub use ratelab_core::plant::*;
@@ -56,7 +56,7 @@ impl CartPoleState {
     }
 
     /// `[cart_pos m, cart_vel m/s, theta rad, pole_angvel rad/s]`, the order of
-    /// [`crate::estimate::COMPONENTS`].
+    /// [`ratelab_core::estimate::COMPONENTS`].
     pub fn as_array(&self) -> [f64; 4] {
         [self.cart_pos, self.cart_vel, self.theta, self.pole_angvel]
     }

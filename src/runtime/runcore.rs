@@ -61,18 +61,18 @@
 
 use crate::command::{Command, TimedCommand};
 use crate::config::RunConfig;
-use crate::executor::{ExecutionPlan, ExecutorOverride};
 use crate::graph::{lock, Graph, GraphHandles, StepObserver};
-use crate::msg::TopicSnapshot;
-use crate::node::Flow;
-use crate::node::{Node, NodeState};
 use crate::plant::PlantState;
 use crate::plant::{CartPole, PlantError};
 use crate::policy::{BrainSlot, Policy};
-use crate::qos::LivelinessState;
-use crate::runlog::RunLog;
 use crate::scheduler::{EndReason, Event, InstantOutcome, RunEnd, StopFlag, VirtualScheduler};
-use crate::time::Nanos;
+use ratelab_core::executor::{ExecutionPlan, ExecutorOverride};
+use ratelab_core::msg::TopicSnapshot;
+use ratelab_core::node::Flow;
+use ratelab_core::node::{Node, NodeState};
+use ratelab_core::qos::LivelinessState;
+use ratelab_core::runlog::RunLog;
+use ratelab_core::time::Nanos;
 
 mod follower;
 mod real;
@@ -123,7 +123,7 @@ pub fn build_graph(
 /// or compute times.
 pub fn virtual_scheduler(
     cfg: &RunConfig,
-    nodes: &[Box<dyn crate::node::Node>],
+    nodes: &[Box<dyn ratelab_core::node::Node>],
 ) -> VirtualScheduler {
     VirtualScheduler::with_plan(
         nodes,
@@ -155,7 +155,7 @@ pub struct CoreOptions {
     /// Commands to apply at run times (any order: they are sorted by `at_ns`, stably).
     pub commands: Vec<TimedCommand>,
     /// Told about every tick as its executor ran it, when executors or compute times apply.
-    pub on_span: Option<crate::executor::SpanHook>,
+    pub on_span: Option<ratelab_core::executor::SpanHook>,
     /// Makes the brain again for a restore that replays; without it such a restore fails
     /// with [`RestoreError::CannotReplay`].
     pub remake_brain: Option<BrainFactory>,
@@ -284,12 +284,12 @@ struct Saved {
     liveliness: Vec<LivelinessState>,
     rates_hz: Vec<f64>,
     /// The faults injected by command so far, with their nodes.
-    faults: Vec<(crate::ids::NodeId, crate::qos::Fault)>,
+    faults: Vec<(ratelab_core::ids::NodeId, ratelab_core::qos::Fault)>,
     brain: Box<dyn Policy>,
     log: RunLog,
     executor: Option<ExecutorOverride>,
     plan_request: Option<ExecutionPlan>,
-    phase_request: Vec<(crate::ids::NodeId, Nanos)>,
+    phase_request: Vec<(ratelab_core::ids::NodeId, Nanos)>,
     sched: VirtualScheduler,
 }
 
@@ -322,7 +322,7 @@ pub struct RunCore {
     /// from t = 0 nor a seek can run them again.
     real_parts: Vec<(Nanos, Nanos)>,
     keep_trace: bool,
-    on_span: Option<crate::executor::SpanHook>,
+    on_span: Option<ratelab_core::executor::SpanHook>,
     remake_brain: Option<BrainFactory>,
     remake_observers: Option<ObserverFactory>,
 }
@@ -783,9 +783,13 @@ impl RunCore {
             brain: h.brain.save()?,
             plant: lock(&h.plant).save(),
             nodes,
-            topics: h.topics.iter().map(crate::msg::AnyTopic::save).collect(),
+            topics: h
+                .topics
+                .iter()
+                .map(ratelab_core::msg::AnyTopic::save)
+                .collect(),
             liveliness: h.liveliness.iter().map(|l| l.save()).collect(),
-            rates_hz: h.rates.iter().map(crate::rate::Rate::hz).collect(),
+            rates_hz: h.rates.iter().map(ratelab_core::rate::Rate::hz).collect(),
             faults: h.faults.save(),
             log: lock(&h.log).clone(),
             executor: *lock(&h.executor),
@@ -923,7 +927,7 @@ impl RunCore {
 
     /// The run's summary (`metrics.json`) at its end, or now while it runs (as interrupted
     /// now).
-    pub fn metrics(&self) -> crate::metrics::Metrics {
+    pub fn metrics(&self) -> ratelab_core::metrics::Metrics {
         let end = self.end.clone().unwrap_or(RunEnd {
             at: self.sched.now(),
             reason: EndReason::Interrupted,
@@ -940,7 +944,7 @@ impl RunCore {
     }
 
     /// Take the step records kept so far (empty unless [`CoreOptions::keep_trace`]).
-    pub fn take_trace(&mut self) -> Vec<crate::runlog::StepRecord> {
+    pub fn take_trace(&mut self) -> Vec<ratelab_core::runlog::StepRecord> {
         std::mem::take(&mut lock(&self.handles.log).trace)
     }
 }

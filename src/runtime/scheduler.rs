@@ -1,4 +1,4 @@
-//! The two clocks that run one graph, by the executors' rules ([`crate::executor`]).
+//! The two clocks that run one graph, by the executors' rules ([`ratelab_core::executor`]).
 //!
 //! - [`VirtualScheduler`]: a discrete-event model over a virtual clock (ch2.8,
 //!   `run_virtual`). A min-heap of `(due, priority, index)`: pop the earliest, stop if it is
@@ -15,21 +15,21 @@
 //!   drop counts and latencies vary by a handful. That is the nature of concurrency, not a
 //!   bug; use the virtual clock to compare runs.
 
-use crate::clock::{Clock, MonotonicClock};
+use ratelab_core::clock::{Clock, MonotonicClock};
 mod handover;
 mod shared;
 mod threads;
 pub use threads::{check_real_clock_threads, plan_threads};
 use threads::{none_started, not_started};
 
-use crate::executor::{
+use ratelab_core::executor::{
     CallbackSpan, Dispatch, ExecFigures, ExecutionPlan, ExecutorFigures, ExecutorKind,
     NodeExecFigures,
 };
-use crate::metrics::{LatencyStats, NodeTiming};
-use crate::node::{Flow, Node};
-use crate::rate::{first_on_grid, next_deadline, DeadlineWaiter};
-use crate::time::Nanos;
+use ratelab_core::metrics::{LatencyStats, NodeTiming};
+use ratelab_core::node::{Flow, Node};
+use ratelab_core::rate::{first_on_grid, next_deadline, DeadlineWaiter};
+use ratelab_core::time::Nanos;
 use std::cmp::Reverse;
 use std::collections::BinaryHeap;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
@@ -75,7 +75,7 @@ pub enum EndReason {
 impl EndReason {
     /// How the run ended, in words: as it displays ("the pole fell", "duration reached", …),
     /// except that a stop by the actuator's deadline watchdog (`watchdog`: the run's
-    /// [`crate::metrics::Metrics::stopped_by_watchdog`] is set), which ends the run as a node's
+    /// [`ratelab_core::metrics::Metrics::stopped_by_watchdog`] is set), which ends the run as a node's
     /// stop as a fall does, says "stopped by watchdog".
     pub fn words(&self, watchdog: bool) -> String {
         if watchdog {
@@ -218,7 +218,7 @@ pub fn figures(plan: &ExecutionPlan, stats: &[NodeExecStats], elapsed: Nanos) ->
 /// the wall clock for display; pacing never changes the order of ticks). Every virtual run
 /// (headless, sweep, replay, exercises, the lab) goes through [`VirtualScheduler::run_instant`].
 ///
-/// It applies the [`ExecutionPlan`]'s rules ([`crate::executor`]) at virtual instants: at
+/// It applies the [`ExecutionPlan`]'s rules ([`ratelab_core::executor`]) at virtual instants: at
 /// each instant, first the ticks whose compute time ends then publish their outputs (in
 /// rank order), then the timers due then are released, then every tick that can start
 /// starts (in the executors' order; a tick with no compute time publishes at once, so a
@@ -244,10 +244,10 @@ pub struct VirtualScheduler {
     /// Per node: what its executor measured (only when `track`).
     stats: Vec<NodeExecStats>,
     /// The ticks that ended since [`VirtualScheduler::take_spans`] last took them (only when
-    /// `track`; at most [`crate::executor::MAX_SPANS`], the oldest dropped).
+    /// `track`; at most [`ratelab_core::executor::MAX_SPANS`], the oldest dropped).
     spans: std::collections::VecDeque<CallbackSpan>,
     /// Told of every span as it ends (only when `track`).
-    span_hook: Option<crate::executor::SpanHook>,
+    span_hook: Option<ratelab_core::executor::SpanHook>,
     /// A plan asked for while running (the lab's executor key), taken before each instant.
     plan_request: Option<PlanRequest>,
     /// Per node, a new grid for its ticks (its phase, run time) to take when its tick now
@@ -390,7 +390,7 @@ impl VirtualScheduler {
 
     /// Run on `plan` from the next instant: the executors' rules apply from then on, and
     /// their figures are measured from then on when they were not before (see
-    /// [`crate::executor::Dispatch::replan`]).
+    /// [`ratelab_core::executor::Dispatch::replan`]).
     pub fn set_plan(&mut self, plan: ExecutionPlan) {
         self.dispatch.replan(plan);
         self.general = true;
@@ -451,7 +451,7 @@ impl VirtualScheduler {
     }
 
     /// Tell `hook` of every tick as it ends (when measuring: executors or compute times).
-    pub fn set_span_hook(&mut self, hook: crate::executor::SpanHook) {
+    pub fn set_span_hook(&mut self, hook: ratelab_core::executor::SpanHook) {
         self.span_hook = Some(hook);
     }
 
@@ -459,7 +459,7 @@ impl VirtualScheduler {
         if let Some(h) = &self.span_hook {
             h(&span);
         }
-        if self.spans.len() == crate::executor::MAX_SPANS {
+        if self.spans.len() == ratelab_core::executor::MAX_SPANS {
             self.spans.pop_front();
         }
         self.spans.push_back(span);
@@ -793,7 +793,7 @@ pub struct RealOptions {
     pub pause: Option<Arc<AtomicBool>>,
     /// Run every node thread under `SCHED_FIFO` at this priority (1..=99), if the kernel
     /// allows; a refusal is reported in [`NodeTiming::sched_error`] and the node runs on
-    /// under its default policy. See [`crate::realtime`].
+    /// under its default policy. See [`ratelab_core::realtime`].
     ///
     /// One priority for all nodes, on purpose: ordering them by tie-break priority (sensor
     /// highest) was measured (BENCHMARKS.md) and moved all waiting for a core onto the
@@ -806,7 +806,7 @@ pub struct RealOptions {
     /// goes on from there (`ratelab::runcore::RunCore::run_real`). The executors' figures
     /// span from here to the end.
     pub from: Nanos,
-    /// The executors ([`crate::executor`]); `None`: one thread per node.
+    /// The executors ([`ratelab_core::executor`]); `None`: one thread per node.
     pub plan: Option<ExecutionPlan>,
     /// Measure response times, skipped ticks and busy time ([`RealRun::exec`]).
     pub track: bool,
@@ -815,7 +815,7 @@ pub struct RealOptions {
 impl Default for RealOptions {
     fn default() -> Self {
         Self {
-            spin_margin: crate::rate::DEFAULT_SPIN_MARGIN,
+            spin_margin: ratelab_core::rate::DEFAULT_SPIN_MARGIN,
             phase_offsets: Vec::new(),
             on_tick: None,
             pause: None,
@@ -884,7 +884,7 @@ pub fn catch_quietly<T>(f: impl FnOnce() -> T) -> std::thread::Result<T> {
 }
 
 /// The message of a caught panic, its control characters written out
-/// ([`crate::text::printable`]): a node's code (a registered kind's, a learner's) says what
+/// ([`ratelab_core::text::printable`]): a node's code (a registered kind's, a learner's) says what
 /// it likes, and the message reaches the summary, `metrics.json`, the lab and a recording.
 pub fn panic_message(p: &(dyn std::any::Any + Send)) -> String {
     let message = p
@@ -892,7 +892,7 @@ pub fn panic_message(p: &(dyn std::any::Any + Send)) -> String {
         .map(|s| s.to_string())
         .or_else(|| p.downcast_ref::<String>().cloned())
         .unwrap_or_else(|| "panic".to_string());
-    crate::text::printable(&message).into_owned()
+    ratelab_core::text::printable(&message).into_owned()
 }
 
 /// A node's figures at the end of a real-clock run: `ticks` ticked and `skipped` deadlines
@@ -1015,9 +1015,9 @@ fn spawn_own_thread(
                 .expect("a node is handed to its thread once");
             drop(handed);
             let sched_error = rt_priority
-                .and_then(|p| crate::realtime::set_current_thread_fifo(p).err())
+                .and_then(|p| ratelab_core::realtime::set_current_thread_fifo(p).err())
                 .map(|e| e.to_string());
-            let sched = crate::realtime::current_thread_sched().to_string();
+            let sched = ratelab_core::realtime::current_thread_sched().to_string();
             let cpu0 = thread_cpu_time();
             let mut lateness = LatencyStats::default();
             let mut exec = NodeExecStats::default();
@@ -1092,11 +1092,11 @@ fn spawn_own_thread(
 /// Run `nodes` against a monotonic clock until `duration`, a node's [`Flow::Stop`] (which
 /// stops every thread), or `stop`, on the executors of [`RealOptions::plan`]: by default one
 /// OS thread per node, sleeping to absolute deadlines; a single- or multi-threaded executor's
-/// nodes share its threads by [`crate::executor`]'s rules. Each tick's lateness (actual −
+/// nodes share its threads by [`ratelab_core::executor`]'s rules. Each tick's lateness (actual −
 /// scheduled) is recorded for jitter statistics. A panicking node stops the graph and is
 /// reported in [`EndReason::NodeFailed`].
 ///
-/// Never more than [`crate::limits::MAX_REAL_CLOCK_THREADS`] threads ([`plan_threads`]): a
+/// Never more than [`ratelab_core::limits::MAX_REAL_CLOCK_THREADS`] threads ([`plan_threads`]): a
 /// plan that needs more starts none and ends at once as the failure of the first node past
 /// the bound ([`check_real_clock_threads`]'s line; a run's settings refuse such a graph
 /// before it is built, `ratelab::config::RunConfig::validate`). A thread the machine will
@@ -1296,8 +1296,8 @@ fn real_end(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::limits::MAX_REAL_CLOCK_THREADS;
-    use crate::rate::Rate;
+    use ratelab_core::limits::MAX_REAL_CLOCK_THREADS;
+    use ratelab_core::rate::Rate;
     use std::sync::Mutex;
 
     struct Probe {
@@ -1564,7 +1564,7 @@ mod tests {
     fn one_slow_callback_on_a_single_threaded_executor_starves_the_timer_beside_it() {
         let plan = ExecutionPlan::one_executor(
             &["sensor", "policy"],
-            crate::executor::ExecutorKind::SingleThreaded,
+            ratelab_core::executor::ExecutorKind::SingleThreaded,
             1,
         );
         let (log, sched, _) = two_workers(plan, 30);
@@ -1582,7 +1582,7 @@ mod tests {
         // Twice the same: the virtual clock models the executor exactly.
         let plan = ExecutionPlan::one_executor(
             &["sensor", "policy"],
-            crate::executor::ExecutorKind::SingleThreaded,
+            ratelab_core::executor::ExecutorKind::SingleThreaded,
             1,
         );
         let (again, _, _) = two_workers(plan, 30);
@@ -1628,7 +1628,7 @@ mod tests {
     fn two_threads_give_the_sensor_its_grid_back() {
         let plan = ExecutionPlan::one_executor(
             &["sensor", "policy"],
-            crate::executor::ExecutorKind::MultiThreaded,
+            ratelab_core::executor::ExecutorKind::MultiThreaded,
             2,
         );
         let (log, _, _) = two_workers(plan, 30);

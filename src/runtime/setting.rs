@@ -5,7 +5,8 @@
 //! (`--control-hz`), the Python package as a keyword (`control_hz`). A rule writes
 //! [`Speech::name`] where it names a setting, never a flag by hand.
 
-/// One setting of a run (the fields of `ratelab_drivers::run_spec::RunSpec`).
+/// One setting of a run (the fields of `ratelab_drivers::run_spec::RunSpec`), or of a sweep or
+/// cliff search (`ratelab_drivers::sweep_spec::{SweepSpec, CliffSpec}`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum Setting {
     /// The graph file.
@@ -58,6 +59,14 @@ pub enum Setting {
     Record,
     /// Replace existing outputs.
     Force,
+    /// A sweep's or cliff search's seeds.
+    Seeds,
+    /// A cliff search's lowest control rate, Hz.
+    MinHz,
+    /// A cliff search's highest control rate, Hz.
+    MaxHz,
+    /// A cliff search's resolution, Hz.
+    Step,
 }
 
 /// Whose words a refusal uses for a [`Setting`].
@@ -99,11 +108,16 @@ impl Setting {
             Setting::TraceEvery => "--trace-every",
             Setting::Record => "--record",
             Setting::Force => "--force",
+            Setting::Seeds => "--seeds",
+            Setting::MinHz => "--min-hz",
+            Setting::MaxHz => "--max-hz",
+            Setting::Step => "--step",
         }
     }
 
-    /// `ratelab.run`'s keyword, units in the name where the flag leaves them to its help:
-    /// `control_hz`, `duration_s`, `lease_ms`.
+    /// `ratelab.run`'s keyword (or `ratelab.sweep`'s, `ratelab.cliff`'s), units in the name
+    /// where the flag leaves them to its help: `control_hz`, `duration_s`, `lease_ms`,
+    /// `step_hz`.
     pub fn keyword(self) -> &'static str {
         match self {
             Setting::Graph => "graph",
@@ -131,6 +145,10 @@ impl Setting {
             Setting::TraceEvery => "trace_every",
             Setting::Record => "record",
             Setting::Force => "force",
+            Setting::Seeds => "seeds",
+            Setting::MinHz => "min_hz",
+            Setting::MaxHz => "max_hz",
+            Setting::Step => "step_hz",
         }
     }
 }
@@ -188,6 +206,9 @@ mod tests {
             "rate[\"policy\"]=10"
         );
         assert_eq!(Speech::Keywords.value(Setting::Seed, &3), "seed=3");
+        assert_eq!(Speech::Flags.name(Setting::Step), "--step");
+        assert_eq!(Speech::Keywords.name(Setting::Step), "step_hz");
+        assert_eq!(Speech::Keywords.name(Setting::Seeds), "seeds");
     }
 
     #[test]
@@ -219,6 +240,10 @@ mod tests {
             TraceEvery,
             Record,
             Force,
+            Seeds,
+            MinHz,
+            MaxHz,
+            Step,
         ] {
             let k = s.keyword();
             assert!(k.chars().all(|c| c.is_ascii_lowercase() || c == '_'), "{k}");

@@ -1,13 +1,13 @@
-//! A run's figures (`metrics.json`, [`crate::metrics::Metrics`]) from its graph's state at
+//! A run's figures (`metrics.json`, [`ratelab_core::metrics::Metrics`]) from its graph's state at
 //! the end: [`GraphState`] (what is read of a graph, as data: one process's or the whole
 //! graph's) and [`summarize_state`].
 
 use crate::config::RunConfig;
 use crate::graph::{lock, GraphHandles, GraphSpec, NodeId, TopicId};
-use crate::metrics::{round_to, Metrics, NodeMetrics, NodeTiming, TopicMetrics};
-use crate::msg::AnyTopic;
 use crate::scheduler::RunEnd;
-use crate::time::Nanos;
+use ratelab_core::metrics::{round_to, Metrics, NodeMetrics, NodeTiming, TopicMetrics};
+use ratelab_core::msg::AnyTopic;
+use ratelab_core::time::Nanos;
 
 /// What [`summarize`] reads of a graph, as data: the whole graph's state when it ran in one
 /// process, or one process's view of it under `ratelab launch --processes` (sent to the
@@ -16,15 +16,15 @@ use crate::time::Nanos;
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct GraphState {
     /// Each topic's counters at the end.
-    pub topics: Vec<crate::topic::TopicStats>,
+    pub topics: Vec<ratelab_core::topic::TopicStats>,
     /// Each topic's QoS in force at the end.
-    pub topic_qos: Vec<crate::qos::TopicQos>,
+    pub topic_qos: Vec<ratelab_core::qos::TopicQos>,
     /// Each topic's subscriptions' counters at the end, when some topic has several
     /// subscribers (empty when none has).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
-    pub subscriptions: Vec<Vec<crate::topic::TopicStats>>,
+    pub subscriptions: Vec<Vec<ratelab_core::topic::TopicStats>>,
     /// Each node's liveliness lease and status at the end.
-    pub liveliness: Vec<(Option<Nanos>, crate::qos::LivelinessStatus)>,
+    pub liveliness: Vec<(Option<Nanos>, ratelab_core::qos::LivelinessStatus)>,
     /// Each node's rate at the end, Hz.
     pub rates_hz: Vec<f64>,
     /// Each node's tick count (empty when unknown).
@@ -32,9 +32,9 @@ pub struct GraphState {
     /// Real clock: each node's tick timing.
     pub timing: Option<Vec<NodeTiming>>,
     /// What the executors measured, when the graph has executors or compute times
-    /// ([`crate::executor`]).
+    /// ([`ratelab_core::executor`]).
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub exec: Option<crate::executor::ExecFigures>,
+    pub exec: Option<ratelab_core::executor::ExecFigures>,
     /// The brain's label.
     pub brain: String,
     /// What the actuator measured.
@@ -42,7 +42,7 @@ pub struct GraphState {
     /// The faults injected by command while the run went on
     /// ([`crate::command::Command::InjectFault`]), besides those of its settings.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
-    pub injected_faults: Vec<crate::qos::Fault>,
+    pub injected_faults: Vec<ratelab_core::qos::Fault>,
 }
 
 /// The actuator's figures in a [`GraphState`] (ms values rounded as `metrics.json` prints them).
@@ -63,9 +63,9 @@ pub struct ActuatorSummary {
     /// Ticks whose newest action was non-finite.
     pub nonfinite_actions: u64,
     /// The estimator's figures against the truth, when the graph has one
-    /// ([`crate::estimate`]).
+    /// ([`ratelab_core::estimate`]).
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub estimate: Option<crate::estimate::EstimateFigures>,
+    pub estimate: Option<ratelab_core::estimate::EstimateFigures>,
 }
 
 impl GraphState {
@@ -125,7 +125,7 @@ pub fn summarize(
     end: &RunEnd,
     ticks: &[u64],
     timing: Option<Vec<NodeTiming>>,
-    exec: Option<crate::executor::ExecFigures>,
+    exec: Option<ratelab_core::executor::ExecFigures>,
 ) -> Metrics {
     let mut st = GraphState::capture(h, end.at, ticks, timing);
     st.exec = exec;
@@ -136,11 +136,11 @@ pub fn summarize(
 pub fn summarize_state(cfg: &RunConfig, st: &GraphState, end: &RunEnd) -> Metrics {
     let spec = &cfg.graph;
     let log = &st.actuator;
-    let stats: crate::runlog::TopicCounters = st.topics.iter().copied().collect();
+    let stats: ratelab_core::runlog::TopicCounters = st.topics.iter().copied().collect();
     let chain = spec.chain;
     // The chain's topics as its reader sees them: with several subscribers, the queue of the
     // policy (for /obs) and of the node it drives (for /action).
-    let as_read_by = |t: TopicId, reader: NodeId| -> crate::topic::TopicStats {
+    let as_read_by = |t: TopicId, reader: NodeId| -> ratelab_core::topic::TopicStats {
         let k = spec.topic(t).subscribers.iter().position(|&s| s == reader);
         k.and_then(|k| st.subscriptions.get(t.0)?.get(k).copied())
             .filter(|_| spec.topic(t).subscribers.len() > 1)
@@ -198,7 +198,7 @@ pub fn summarize_state(cfg: &RunConfig, st: &GraphState, end: &RunEnd) -> Metric
             .exec
             .iter()
             .flat_map(|x| &x.executors)
-            .filter(|e| e.kind != crate::executor::ExecutorKind::PerNode)
+            .filter(|e| e.kind != ratelab_core::executor::ExecutorKind::PerNode)
             .cloned()
             .collect(),
         clock: cfg.clock.as_str().to_string(),
@@ -245,10 +245,10 @@ pub fn summarize_state(cfg: &RunConfig, st: &GraphState, end: &RunEnd) -> Metric
         nodes,
         topics,
         estimate: spec.estimate_topic().zip(log.estimate.clone()).map(|(t, figures)| {
-            crate::estimate::EstimateReport {
+            ratelab_core::estimate::EstimateReport {
                 estimator: spec.node(spec.topic(t).publisher).name.clone(),
                 topic: spec.topic(t).name.clone(),
-                truth: crate::estimate::TRUTH.to_string(),
+                truth: ratelab_core::estimate::TRUTH.to_string(),
                 figures,
             }
         }),
@@ -295,7 +295,9 @@ fn node_metrics(
                 liveliness_lease_ms: lease.map(Nanos::as_millis_f64),
                 not_alive: status.and_then(|s| lease.map(|_| s.not_alive)),
                 faulted_ticks: status.and_then(|s| faulted.then_some(s.faulted_ticks)),
-                faults: faults().map(crate::metrics::FaultMetrics::from).collect(),
+                faults: faults()
+                    .map(ratelab_core::metrics::FaultMetrics::from)
+                    .collect(),
             };
             (n.name.clone(), m)
         })
@@ -308,7 +310,7 @@ fn node_metrics(
 fn topic_metrics(
     spec: &GraphSpec,
     st: &GraphState,
-    stats: &crate::runlog::TopicCounters,
+    stats: &ratelab_core::runlog::TopicCounters,
     per_s: &dyn Fn(u64) -> f64,
 ) -> std::collections::BTreeMap<String, TopicMetrics> {
     spec.topics
@@ -330,7 +332,7 @@ fn topic_metrics(
                             .iter()
                             .zip(subs)
                             .map(|(n, s)| {
-                                let m = crate::metrics::SubscriptionMetrics {
+                                let m = ratelab_core::metrics::SubscriptionMetrics {
                                     dropped: s.dropped,
                                     stale_reads: s.stale_reads,
                                     lost: s.lost,
@@ -368,9 +370,9 @@ fn incompatible_qos(
     spec: &GraphSpec,
     st: &GraphState,
     t: TopicId,
-    now_qos: crate::qos::TopicQos,
-    stats: &crate::topic::TopicStats,
-) -> std::collections::BTreeMap<String, crate::metrics::IncompatibleQos> {
+    now_qos: ratelab_core::qos::TopicQos,
+    stats: &ratelab_core::topic::TopicStats,
+) -> std::collections::BTreeMap<String, ratelab_core::metrics::IncompatibleQos> {
     let topic = spec.topic(t);
     if topic.requested.is_empty() {
         return Default::default();
@@ -392,12 +394,12 @@ fn incompatible_qos(
                 return None;
             }
             let m = failed.unwrap_or_default();
-            let i = crate::metrics::IncompatibleQos {
+            let i = ratelab_core::metrics::IncompatibleQos {
                 policy: m.first().map_or("", |m| m.policy.as_str()).to_string(),
                 event: if m.is_empty() {
                     "incompatible QoS for part of the run".to_string()
                 } else {
-                    crate::qos::compat::event_text(&m)
+                    ratelab_core::qos::compat::event_text(&m)
                 },
                 not_delivered,
             };
@@ -412,9 +414,9 @@ fn late_joiners(
     spec: &GraphSpec,
     st: &GraphState,
     t: TopicId,
-    now_qos: crate::qos::TopicQos,
-    stats: &crate::topic::TopicStats,
-) -> std::collections::BTreeMap<String, crate::metrics::LateJoiner> {
+    now_qos: ratelab_core::qos::TopicQos,
+    stats: &ratelab_core::topic::TopicStats,
+) -> std::collections::BTreeMap<String, ratelab_core::metrics::LateJoiner> {
     let topic = spec.topic(t);
     topic
         .subscribers
@@ -425,7 +427,7 @@ fn late_joiners(
             let mine = own_stats(st, t, k, stats);
             let history = mine.and_then(|s| s.history_on_join).unwrap_or(0);
             let missed = mine.map_or(0, |s| s.before_join);
-            let j = crate::metrics::LateJoiner {
+            let j = ratelab_core::metrics::LateJoiner {
                 start_s: round_to(start.as_secs_f64(), 6),
                 history,
                 durability: now_qos.durability.as_str().to_string(),
@@ -442,8 +444,8 @@ fn own_stats<'a>(
     st: &'a GraphState,
     t: TopicId,
     k: usize,
-    stats: &'a crate::topic::TopicStats,
-) -> Option<&'a crate::topic::TopicStats> {
+    stats: &'a ratelab_core::topic::TopicStats,
+) -> Option<&'a ratelab_core::topic::TopicStats> {
     match st.subscriptions.get(t.0).filter(|s| s.len() > 1) {
         Some(subs) => subs.get(k),
         None => Some(stats),

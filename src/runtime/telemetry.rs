@@ -5,15 +5,15 @@
 
 use crate::command::{parse_fault, Command};
 use crate::config::RunConfig;
-use crate::metrics::Metrics;
-use crate::runlog::StepRecord;
 use crate::scheduler::EndReason;
-use crate::time::Nanos;
+use ratelab_core::metrics::Metrics;
+use ratelab_core::runlog::StepRecord;
+use ratelab_core::time::Nanos;
 use std::path::PathBuf;
 
 /// "Run until stopped": the duration of an open-ended lab run, the longest any run may be
-/// ([`crate::time::MAX_DURATION`]), so that its session log replays.
-pub const UNBOUNDED: Nanos = crate::time::MAX_DURATION;
+/// ([`ratelab_core::time::MAX_DURATION`]), so that its session log replays.
+pub const UNBOUNDED: Nanos = ratelab_core::time::MAX_DURATION;
 
 /// Virtual-clock pacing: wall seconds per virtual second, or as fast as possible.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -125,23 +125,23 @@ pub enum Telemetry {
         depths: Vec<usize>,
         /// Each topic's QoS, by topic index (as [`Telemetry::Status::depths`]: while
         /// frozen, the next run's).
-        qos: Vec<crate::qos::TopicQos>,
+        qos: Vec<ratelab_core::qos::TopicQos>,
         /// Each node's liveliness now, by node index: `None` without a lease.
         alive: Vec<Option<bool>>,
         /// The brain's label.
         policy: String,
         /// Virtual clock, when the graph has executors or compute times
-        /// ([`crate::executor`]): each node's ticks and skipped ticks so far, by node index.
+        /// ([`ratelab_core::executor`]): each node's ticks and skipped ticks so far, by node index.
         exec: Option<Vec<(u64, u64)>>,
         /// Every topic's counters at `now`, as a step record carries them: they keep the
         /// lab's counts current while the actuator sends no step (stalled, killed).
         /// `None` where the sender has none (a lab attached to a launch).
-        topics: Option<Box<crate::runlog::TopicCounters>>,
+        topics: Option<Box<ratelab_core::runlog::TopicCounters>>,
     },
     /// Virtual clock with executors or compute times: the ticks that ended since the last
-    /// such message, oldest first ([`crate::executor::CallbackSpan`]; the lab's executor
+    /// such message, oldest first ([`ratelab_core::executor::CallbackSpan`]; the lab's executor
     /// timeline). Under the real clock [`Telemetry::NodeTick`] gives the same.
-    Callbacks(Vec<crate::executor::CallbackSpan>),
+    Callbacks(Vec<ratelab_core::executor::CallbackSpan>),
     /// A notice for the front end's log line (a change set for the next run, a refused
     /// real-time priority).
     Applied(String),
@@ -196,7 +196,7 @@ impl Telemetry {
         use std::mem::size_of;
         // Counted whole, though consecutive steps share the blocks of topics that did not
         // change: an upper bound.
-        let spilled = |c: &crate::runlog::TopicCounters| c.heap_bytes();
+        let spilled = |c: &ratelab_core::runlog::TopicCounters| c.heap_bytes();
         size_of::<Telemetry>()
             + match self {
                 Telemetry::Step(s) => size_of::<StepRecord>() + spilled(&s.topics),
@@ -212,16 +212,16 @@ impl Telemetry {
                 } => {
                     rates.len() * size_of::<f64>()
                         + depths.len() * size_of::<usize>()
-                        + qos.len() * size_of::<crate::qos::TopicQos>()
+                        + qos.len() * size_of::<ratelab_core::qos::TopicQos>()
                         + alive.len() * size_of::<Option<bool>>()
                         + policy.len()
                         + exec.as_ref().map_or(0, |e| e.len() * 16)
                         + topics.as_deref().map_or(0, |c| {
-                            size_of::<crate::runlog::TopicCounters>() + spilled(c)
+                            size_of::<ratelab_core::runlog::TopicCounters>() + spilled(c)
                         })
                 }
                 Telemetry::Callbacks(spans) => {
-                    spans.len() * size_of::<crate::executor::CallbackSpan>()
+                    spans.len() * size_of::<ratelab_core::executor::CallbackSpan>()
                 }
                 Telemetry::Applied(text) | Telemetry::Error(text) => text.len(),
                 Telemetry::Changed { text, .. } => text.len(),
@@ -257,22 +257,27 @@ pub fn describe(cmd: &Command) -> String {
 /// Text from a command (a session log is untrusted) as a status line shows it: printable,
 /// at most 64 characters.
 fn shown(text: &str) -> String {
-    crate::text::printable(text).chars().take(64).collect()
+    ratelab_core::text::printable(text)
+        .chars()
+        .take(64)
+        .collect()
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::topic::TopicStats;
+    use ratelab_core::topic::TopicStats;
 
     fn step(topics: usize) -> Telemetry {
         Telemetry::Step(Box::new(StepRecord {
             step: 1,
             t: Nanos::ZERO,
             pole_angle: 0.0,
+            pole_angvel: 0.0,
             cart_pos: 0.0,
             action: 0.0,
             latency: None,
+            held_stamp: None,
             nonfinite: false,
             topics: (0..topics).map(|_| TopicStats::default()).collect(),
             published: None,

@@ -485,7 +485,8 @@ fn no_crate_of_the_library_has_an_import_cycle() {
     assert!(!runtime.contains_key("qos") && core.contains_key("qos"));
     let facade = deps("src");
     assert!(facade.contains_key("exercise") && !facade.contains_key("graph"));
-    for (_, dir, _) in LAYERS.iter().filter(|(p, ..)| *p != "ratelab-lab") {
+    // Every crate, the lab's too (issue "One front-end kit…", item 5).
+    for (_, dir, _) in LAYERS {
         if let Some(cycle) = find_cycle(&deps(dir)) {
             panic!("import cycle in {dir}: {}", cycle.join(" → "));
         }
@@ -752,4 +753,116 @@ fn no_file_or_function_is_too_long_to_read() {
     }
     assert!(files.len() > 100, "{} files", files.len());
     assert!(over.is_empty(), "too long to read:\n{}", over.join("\n"));
+}
+
+/// The modules of other workspace crates a `use` item brings under a name of this crate
+/// (`use ratelab_core::{time, qos};`, `use ratelab_ros2 as ros2;`): with one, `crate::time`
+/// in a line of this crate is another crate's module, which the line does not say. A name
+/// counts as a module when it is one of `modules` (the workspace's top-level modules) and is
+/// imported straight from a crate's root; a function or type (`ratelab::text::printable`)
+/// is not.
+fn module_aliases(
+    tree: &syn::UseTree,
+    depth: usize,
+    modules: &BTreeSet<String>,
+    out: &mut Vec<String>,
+) {
+    match tree {
+        syn::UseTree::Path(p) => {
+            if depth == 0 && !p.ident.to_string().starts_with("ratelab") {
+                return;
+            }
+            module_aliases(&p.tree, depth + 1, modules, out);
+        }
+        syn::UseTree::Name(n) if depth == 1 && modules.contains(&n.ident.to_string()) => {
+            out.push(n.ident.to_string());
+        }
+        syn::UseTree::Rename(r) => {
+            let name = r.ident.to_string();
+            if (depth == 0 && name.starts_with("ratelab"))
+                || (depth == 1 && modules.contains(&name))
+            {
+                out.push(format!("{name} as {}", r.rename));
+            }
+        }
+        syn::UseTree::Group(g) => g
+            .items
+            .iter()
+            .for_each(|t| module_aliases(t, depth, modules, out)),
+        _ => {}
+    }
+}
+
+/// Issue "One front-end kit…", item 5: no crate of the library names another crate's
+/// module as its own (`crate::plant` was the core's plant in one crate and the runtime's in
+/// another); a line names the crate it uses (`ratelab_runtime::plant`). The facade's public
+/// re-exports are its API, not aliases, and stay.
+#[test]
+fn no_crate_aliases_another_crate_s_modules() {
+    // Every crate's top-level modules, and the facade's re-exported ones.
+    let mut modules = BTreeSet::new();
+    for (package, dir, _) in LAYERS {
+        let lib = std::fs::read_to_string(crate::repo(dir).join("lib.rs")).unwrap();
+        for l in lib.lines() {
+            if let Some(m) = l.strip_prefix("pub mod ") {
+                modules.insert(m.trim_end_matches(';').to_string());
+            }
+        }
+        if *package == "ratelab" {
+            let mut reexports = Vec::new();
+            for item in syn::parse_file(&lib).unwrap().items {
+                if let syn::Item::Use(u) = item {
+                    if matches!(u.vis, syn::Visibility::Public(_)) {
+                        reexported(&u.tree, &mut reexports);
+                    }
+                }
+            }
+            modules.extend(reexports);
+        }
+    }
+    assert!(
+        modules.contains("time") && modules.contains("graph"),
+        "{modules:?}"
+    );
+    let aliases = |t: &str| -> Vec<String> {
+        let file = syn::parse_file(t).unwrap();
+        let mut out = Vec::new();
+        for item in file.items {
+            if let syn::Item::Use(u) = item {
+                if !matches!(u.vis, syn::Visibility::Public(_)) {
+                    module_aliases(&u.tree, 0, &modules, &mut out);
+                }
+            }
+        }
+        out
+    };
+    // The scan finds what it must, and only that.
+    assert_eq!(
+        aliases(
+            "use ratelab_core::{time, Nanos, qos::Qos};\nuse ratelab_ros2 as ros2;\n\
+             use ratelab::text::printable;\nuse std::fmt;\npub use ratelab_core::plant;"
+        ),
+        ["time", "ratelab_ros2 as ros2"]
+    );
+    for (_, dir, _) in LAYERS {
+        let lib = std::fs::read_to_string(crate::repo(dir).join("lib.rs")).unwrap();
+        let found = aliases(&lib);
+        assert!(
+            found.is_empty(),
+            "{dir}/lib.rs brings other crates' modules under its own name: {found:?}"
+        );
+    }
+}
+
+/// Issue "One front-end kit…", item 5: every crate warns of a public item without docs
+/// (and CI's clippy makes the warning an error).
+#[test]
+fn every_crate_warns_of_a_public_item_without_docs() {
+    for (_, dir, _) in LAYERS {
+        let lib = std::fs::read_to_string(crate::repo(dir).join("lib.rs")).unwrap();
+        assert!(
+            lib.lines().any(|l| l.trim() == "#![warn(missing_docs)]"),
+            "{dir}/lib.rs lacks #![warn(missing_docs)]"
+        );
+    }
 }

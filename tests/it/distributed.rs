@@ -1574,6 +1574,49 @@ fn a_process_that_fails_starts_again_when_its_graph_says_so() {
     let rejoined = at("INFO", "process 'policy' rejoined");
     let alive = at("INFO", "node policy alive again");
     assert!(failed < rejoined && not_alive < alive, "{events:#?}");
+    // Every event on the launcher's run clock, listed in time (#73: a rejoin was listed
+    // before the kill it followed, and the summary gave it another time): the failure
+    // before the rejoin, the node's loss before its return, and the rejoin at the time its
+    // line states, the time the summary's wire line gives it.
+    let timed = crate::recording::events_on(&rrd, "wall_time");
+    let t_of = |needle: &str| {
+        timed
+            .iter()
+            .find(|(_, _, e)| e.contains(needle))
+            .map(|(t, _, e)| (*t, e.clone()))
+            .unwrap_or_else(|| panic!("no {needle:?} in {timed:#?}"))
+    };
+    let (failed_t, _) = t_of("process 'policy' failed (signal: 9");
+    let (rejoined_t, rejoin_line) = t_of("process 'policy' rejoined at t=");
+    let (not_alive_t, _) = t_of("node policy not alive");
+    let (alive_t, _) = t_of("node policy alive again");
+    assert!(
+        failed_t <= rejoined_t && not_alive_t <= alive_t,
+        "{timed:#?}"
+    );
+    let stated = rejoin_line
+        .split_once("t=")
+        .and_then(|(_, rest)| rest.split_once('s'))
+        .map(|(t, _)| t.to_string())
+        .unwrap();
+    assert_eq!(
+        format!("{:.3}", rejoined_t as f64 / 1e9),
+        stated,
+        "{rejoin_line}"
+    );
+    let wire = lines
+        .iter()
+        .find(|l| l.contains("wire /obs into 'policy'"))
+        .unwrap_or_else(|| panic!("{lines:?}"));
+    assert!(
+        wire.contains(&format!(" since its rejoin at {stated} s")),
+        "{wire} against {rejoin_line}"
+    );
+    let when = crate::recording::when_times(&rrd);
+    assert!(
+        when.len() >= 4 && when.windows(2).all(|w| w[0] <= w[1]),
+        "the `when` document lists its events in time: {when:?}"
+    );
     assert_none_left(port, Duration::ZERO);
 }
 

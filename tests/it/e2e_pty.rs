@@ -5,6 +5,10 @@ use std::io::{Read, Write};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
+mod failures;
+mod hangs;
+mod readout;
+
 /// A pseudo-terminal of `cols` × `rows` (the tests' screens are 100×30 unless they test
 /// the two sizes the lab is made for, 80×24 and 120×40).
 fn pty(cols: u16, rows: u16) -> portable_pty::PtyPair {

@@ -96,6 +96,7 @@ mod reference_runs;
 mod ros2;
 mod ros2_cli;
 mod ros2_cli_rules;
+mod ros2_cli_waits;
 mod ros2_external;
 mod ros2_latched;
 mod ros2_params;

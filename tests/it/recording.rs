@@ -1025,6 +1025,12 @@ pub(crate) fn events_with_levels(path: &Path) -> Vec<(String, String)> {
 
 /// The event lines of a recording with their `sim_time` (ns) and `control_step`.
 pub(crate) fn events_with_times(path: &Path) -> Vec<(i64, i64, String)> {
+    events_on(path, "sim_time")
+}
+
+/// The event lines of a recording with their time on `timeline` (`sim_time`, or a real-clock
+/// run's `wall_time`; ns) and `control_step`, in time order.
+pub(crate) fn events_on(path: &Path, timeline: &str) -> Vec<(i64, i64, String)> {
     let mut out = Vec::new();
     for c in chunks(path)
         .into_iter()
@@ -1039,7 +1045,7 @@ pub(crate) fn events_with_times(path: &Path) -> Vec<(i64, i64, String)> {
                 times
             }
         };
-        let (t, step) = (col("sim_time"), col("control_step"));
+        let (t, step) = (col(timeline), col("control_step"));
         let texts: Vec<String> = c
             .iter_slices::<String>(rerun::TextLog::descriptor_text().component)
             .map(|s| {
@@ -1054,6 +1060,24 @@ pub(crate) fn events_with_times(path: &Path) -> Vec<(i64, i64, String)> {
     }
     out.sort();
     out
+}
+
+/// The run times (s) the last `when` document lists its events at, in its order.
+pub(crate) fn when_times(path: &Path) -> Vec<f64> {
+    let doc = chunks(path)
+        .iter()
+        .filter(|c| c.entity_path().to_string() == "/when")
+        .flat_map(|c| {
+            c.iter_slices::<String>(rerun::TextDocument::descriptor_text().component)
+                .flatten()
+                .map(|s| s.as_str().to_string())
+                .collect::<Vec<_>>()
+        })
+        .last()
+        .expect("a `when` document");
+    doc.lines()
+        .filter_map(|l| l.strip_prefix("- ")?.split_once(" s ")?.0.parse().ok())
+        .collect()
 }
 
 /// The last value of a scalar series and its number of samples.
@@ -1658,6 +1682,89 @@ fn a_record_window_keeps_the_plots_of_that_span_and_says_so() {
     }
 }
 
+/// A run offered to ROS 2 (`--ros2`) and bagged (`--bag DIR`) says so in its settings
+/// (#73): its recording properties name the domain and the bag's folder, and its summary,
+/// in progress and at the end, has a line for each. A run offered nowhere has neither.
+#[test]
+fn a_run_offered_to_ros2_and_bagged_says_so_in_its_settings() {
+    let dir = tempfile::tempdir().unwrap();
+    let cfg = virtual_cfg().with_duration_ms(500);
+    let bag = dir.path().join("bag");
+    let offered = dir.path().join("offered.rrd");
+    record_with_options(
+        &offered,
+        &cfg,
+        None,
+        Vec::new(),
+        &RecordOptions {
+            ros2_domain: Some(7),
+            bag: Some(bag.clone()),
+            ..RecordOptions::default()
+        },
+    );
+    let settings_of = |path: &Path| -> BTreeMap<&'static str, Vec<String>> {
+        let entity = EntityPath::properties().join(&EntityPath::from("settings"));
+        let all = chunks(path);
+        ["clock", "ros2", "bag"]
+            .into_iter()
+            .map(|key| {
+                let values: Vec<String> = all
+                    .iter()
+                    .filter(|c| c.entity_path() == &entity)
+                    .flat_map(|c| {
+                        c.iter_slices::<String>(re_chunk::ComponentIdentifier::from(key))
+                            .flatten()
+                            .map(|s| s.as_str().to_string())
+                            .collect::<Vec<_>>()
+                    })
+                    .collect();
+                (key, values)
+            })
+            .collect()
+    };
+    let summaries = |path: &Path| -> Vec<String> {
+        chunks(path)
+            .iter()
+            .filter(|c| c.entity_path().to_string() == "/summary")
+            .flat_map(|c| {
+                c.iter_slices::<String>(rerun::TextDocument::descriptor_text().component)
+                    .flatten()
+                    .map(|s| s.as_str().to_string())
+                    .collect::<Vec<_>>()
+            })
+            .collect()
+    };
+    let settings = settings_of(&offered);
+    assert_eq!(settings["clock"], ["virtual"], "{settings:?}");
+    assert_eq!(settings["ros2"], ["offered on domain 7"], "{settings:?}");
+    assert_eq!(settings["bag"], [bag.display().to_string()], "{settings:?}");
+    let docs = summaries(&offered);
+    assert_eq!(docs.len(), 2, "in progress, then at the end: {docs:?}");
+    for doc in &docs {
+        assert!(doc.contains("- ROS 2: offered on domain 7"), "{doc}");
+        assert!(
+            doc.contains(&format!(
+                "- bag: what was offered to ROS 2, written as a rosbag2 bag (MCAP) in {}",
+                bag.display()
+            )),
+            "{doc}"
+        );
+    }
+    check_views(&offered);
+    // Offered nowhere: neither, and the settings as they always were.
+    let plain = dir.path().join("plain.rrd");
+    record(&plain, &cfg, None);
+    let settings = settings_of(&plain);
+    assert_eq!(settings["clock"], ["virtual"]);
+    assert!(
+        settings["ros2"].is_empty() && settings["bag"].is_empty(),
+        "{settings:?}"
+    );
+    assert!(summaries(&plain)
+        .iter()
+        .all(|d| !d.contains("ROS 2") && !d.contains("bag:")));
+}
+
 /// Outside a record window the events are recorded all the same (a change before the
 /// window, a change inside it); the plots keep to it.
 #[test]
@@ -1725,11 +1832,20 @@ fn an_estimator_s_estimate_is_recorded_beside_the_pole_angle() {
         assert_eq!(*t, (s.t.0 - 20_000_000) as i64);
         assert_eq!(*v, s.estimate.as_ref().unwrap().estimate.unwrap()[2]);
     }
-    // Named and coloured, and drawn with the angle.
+    // Named and coloured, and drawn with the angle: under it (its entity sorts first) and
+    // wider, so that where it lies on its truth it shows either side of the angle's line.
     let named = all
         .iter()
         .any(|c| c.entity_path().to_string() == "/plant/pole_angle_estimate_rad" && c.is_static());
     assert!(named);
+    let (estimate_color, estimate_width) =
+        series_style(&all, "/plant/pole_angle_estimate_rad").unwrap();
+    let (angle_color, angle_width) = series_style(&all, "/plant/pole_angle_rad").unwrap();
+    assert!(
+        estimate_width >= angle_width + 2.0,
+        "{estimate_width} over {angle_width}"
+    );
+    assert_ne!(estimate_color, angle_color);
     let views = check_views(&path);
     assert!(
         views.iter().any(|v| v
@@ -1761,4 +1877,190 @@ fn an_estimator_s_estimate_is_recorded_beside_the_pole_angle() {
     assert!(!check_views(&chapter)
         .iter()
         .any(|v| v.queries.iter().any(|q| q.contains("estimate"))));
+}
+
+/// What a large graph's recording (more than `groups::GROUP_ABOVE` nodes or topics, #73)
+/// must be, read from the file: its blueprint resolves (every view's queries match
+/// recorded data of the view's kind), no time-series view's contents match more than
+/// `groups::MAX_SERIES_PER_VIEW` series, every plot is tall enough at 1280×720, and every
+/// recorded series is in a view or, a topic's or node's own, listed in the `groups`
+/// document (the rule: reachable in the entity tree, drawn in no plot). The views.
+fn check_grouped_views(path: &Path) -> Vec<BlueprintView> {
+    use ratelab::recording::groups::{DOC_ENTITY, MAX_SERIES_PER_VIEW};
+    let views = blueprint_views(path);
+    let entities = entity_components(path);
+    let problems = unmatched(&views, &entities);
+    assert!(problems.is_empty(), "{problems:#?}");
+    let scalars: Vec<&EntityPath> = entities
+        .iter()
+        .filter(|(_, c)| c.contains("Scalars:scalars"))
+        .map(|(e, _)| e)
+        .collect();
+    let mut shown: BTreeSet<&EntityPath> = BTreeSet::new();
+    for v in views.iter().filter(|v| v.class == "TimeSeries") {
+        let origin = EntityPath::parse_forgiving(&v.origin);
+        let filter = EntityPathFilter::from_query_expressions(v.queries.iter().map(String::as_str))
+            .resolve_forgiving(&EntityPathSubs::new_with_origin(&origin));
+        let matched: Vec<&EntityPath> = scalars
+            .iter()
+            .copied()
+            .filter(|e| filter.matches(e))
+            .collect();
+        assert!(
+            !matched.is_empty() && matched.len() <= MAX_SERIES_PER_VIEW,
+            "{:?} draws {} series: {:?}",
+            v.name,
+            matched.len(),
+            v.queries
+        );
+        shown.extend(matched);
+    }
+    let doc: String = chunks(path)
+        .iter()
+        .filter(|c| c.entity_path().to_string() == format!("/{DOC_ENTITY}"))
+        .flat_map(|c| {
+            c.iter_slices::<String>(rerun::TextDocument::descriptor_text().component)
+                .flatten()
+                .map(|s| s.as_str().to_string())
+                .collect::<Vec<_>>()
+        })
+        .last()
+        .expect("a `groups` document");
+    assert!(
+        views
+            .iter()
+            .any(|v| v.queries == [format!("/{DOC_ENTITY}")]),
+        "the `groups` document has a view: {views:#?}"
+    );
+    for e in scalars.iter().filter(|e| !shown.contains(*e)) {
+        let e = e.to_string();
+        let owner = e.rsplit_once('/').map_or(e.as_str(), |(owner, _)| owner);
+        assert!(
+            (owner.starts_with("/bus/") || owner.starts_with("/nodes/"))
+                && doc.contains(&format!("`{owner}`")),
+            "{e} is in no view and not listed as reachable in `groups`"
+        );
+    }
+    for (v, px) in crate::glance::view_heights(path) {
+        if v.class == "TimeSeries" {
+            assert!(
+                px >= crate::glance::MIN_PLOT_PX,
+                "{:?} is {px:.0} px tall at 1280x720",
+                v.name
+            );
+        }
+    }
+    views
+}
+
+/// Any graph size reads (#73, item 2): a generated graph of 100 nodes and one of 1,000
+/// (`ratelab graph --nodes N`) record every topic's own series as before, each bus group's
+/// largest, median and smallest value beside them, plots of at most a dozen series that
+/// all resolve, lines no wider than the cap (the 100-node graph's `/action` was 296 px),
+/// and a node graph of a box per group (199 boxes made a microscopic strip).
+#[test]
+fn a_generated_graph_of_any_size_records_views_that_read() {
+    use ratelab::recording::groups::MAX_GROUPS;
+    let _m = crate::machine::shared();
+    let dir = tempfile::tempdir().unwrap();
+    for nodes in [100, 1000] {
+        let g = crate::large_graphs::generated(dir.path(), &format!("g{nodes}.toml"), nodes, 1);
+        let cfg = RunConfig {
+            graph: ratelab::graph::GraphSpec::load(Path::new(&g)).unwrap(),
+            ..virtual_cfg().with_duration_ms(2000)
+        };
+        let path = dir.path().join(format!("g{nodes}.rrd"));
+        let m = record(&path, &cfg, None);
+        let views = check_grouped_views(&path);
+        let all = chunks(&path);
+        let entities: BTreeSet<String> = all.iter().map(|c| c.entity_path().to_string()).collect();
+        // Every topic's own series, as before.
+        assert_eq!(m.topics.len(), nodes - 1);
+        for topic in m.topics.keys() {
+            let entity = ratelab::recording::bus_name(topic);
+            for measure in ["published", "dropped", "msg_per_s"] {
+                let e = format!("/bus/{entity}/{measure}");
+                assert!(entities.contains(&e), "{nodes} nodes: no {e}");
+            }
+        }
+        // A controller's position topics, a group drawn by its aggregates: in the bus's
+        // msg/s plot, the group's largest the largest of its topics' at the end.
+        let rates = views
+            .iter()
+            .find(|v| {
+                v.queries
+                    .contains(&"/bus_groups/c_k_pos/msg_per_s/median".to_string())
+            })
+            .unwrap_or_else(|| panic!("{nodes} nodes: no view of /c_*/pos's msg/s: {views:#?}"));
+        assert!(rates.name.starts_with("bus: msg/s"), "{rates:?}");
+        let (max, _) = last_scalar(&all, "/bus_groups/c_k_pos/published/max").unwrap();
+        let (min, _) = last_scalar(&all, "/bus_groups/c_k_pos/published/min").unwrap();
+        let (median, n) = last_scalar(&all, "/bus_groups/c_k_pos/published/median").unwrap();
+        assert_eq!(n as u64, m.steps, "one sample a step");
+        // Each position topic's own count at the last step (control_step, value).
+        let mut last: BTreeMap<String, (i64, f64)> = BTreeMap::new();
+        for c in all.iter().filter(|c| !c.is_static()) {
+            let e = c.entity_path().to_string();
+            if !(e.starts_with("/bus/c_") && e.ends_with("_pos/published")) {
+                continue;
+            }
+            let values: Vec<f64> = c
+                .iter_slices::<f64>(rerun::Scalars::descriptor_scalars().component)
+                .flat_map(|b| b.to_vec())
+                .collect();
+            for (step, v) in times_on(c, "control_step").into_iter().zip(values) {
+                let slot = last.entry(e.clone()).or_insert((step, v));
+                if step >= slot.0 {
+                    *slot = (step, v);
+                }
+            }
+        }
+        let controllers = (nodes - 3) / 4;
+        assert_eq!(last.len(), controllers, "{nodes} nodes");
+        let most = last.values().map(|(_, v)| *v).fold(f64::MIN, f64::max);
+        let least = last.values().map(|(_, v)| *v).fold(f64::MAX, f64::min);
+        assert_eq!((min, max), (least, most), "{nodes} nodes");
+        // Controllers at 10, 20, 50 and 100 Hz in turn: the median between.
+        assert!(min < median && median < max, "{min} {median} {max}");
+        // The chapter's topics, groups of one, drawn each by its own series.
+        assert!(
+            views
+                .iter()
+                .any(|v| v.queries.contains(&"/bus/action/published".to_string())),
+            "{views:#?}"
+        );
+        // The rule that widens coinciding lines, capped.
+        for e in ["/bus/action/published", "/bus/c_0_pos/published"] {
+            let (_, width) = series_style(&all, e).unwrap();
+            assert!((2.0..=14.0).contains(&width), "{e}: {width} px");
+        }
+        // The node graph: a box per group, each group's count and rates.
+        let labels = graph_labels(&all);
+        assert!(labels.len() <= 2 * MAX_GROUPS, "{labels:?}");
+        for label in [
+            format!("sensor_* ×{controllers}\n10–100 Hz"),
+            format!("/c_*/pos ×{controllers}\ndepth 1"),
+            "policy · 50 Hz".to_string(),
+            "/obs · depth 1".to_string(),
+        ] {
+            assert!(labels.contains(&label), "{label:?} in {labels:?}");
+        }
+    }
+}
+
+/// The chapter's graph is drawn as it always was (#73: the size rules act above the
+/// threshold only): the fresh recording's views are the reference recording's, and none
+/// is a group's.
+#[test]
+fn the_chapter_s_blueprint_is_the_reference_s() {
+    let dir = tempfile::tempdir().unwrap();
+    let fresh = dir.path().join("fresh.rrd");
+    record(&fresh, &virtual_cfg(), None);
+    let views = |p: &Path| format!("{:#?}", blueprint_views(p));
+    assert_eq!(views(&fresh), views(&reference()));
+    let fresh = views(&fresh);
+    assert!(
+        !fresh.contains("/bus_groups/") && !fresh.contains("\"/groups\""),
+        "{fresh}"
+    );
 }

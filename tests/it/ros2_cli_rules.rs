@@ -1,9 +1,11 @@
 //! ros2cli's rules in `ratelab ros2` (#74 item 5): hidden names (`node list -a`, `topic list
 //! --include-hidden-topics`, `node info --include-hidden`), nodes that share a name (listed
 //! each, warned of, never merged), a topic of two types (refused by `echo`, `hz` and `bw`),
-//! the formats of `hz`, `bw` and plain `topic info`, and ros2cli's exit codes. Checked
-//! against the real `ros2` command's output on a real graph (`../shared/fixtures/ros2-real/
-//! kilted-ros2cli/step2`: ros2cli 0.36.1, real rclpy over real rmw_zenoh_cpp 0.6.7), the
+//! the formats of `hz`, `bw`, plain `topic info` and `topic list -v` (ros2topic's
+//! `verb/list.py`: no capture of it), and ros2cli's exit codes (a topic not published yet,
+//! and Ctrl-C: `ros2_cli_waits.rs`). Checked against the real `ros2` command's output on a
+//! real graph (`../shared/fixtures/ros2-real/kilted-ros2cli/step2`: ros2cli 0.36.1, real
+//! rclpy over real rmw_zenoh_cpp 0.6.7), the
 //! graph played by stand-ins written with eclipse-zenoh and rosbags only, nothing of
 //! ratelab's: `tests/ros2/edges.py` (the capture's edge cases) and `tests/ros2/latcher.py`
 //! (its latched topic).
@@ -300,4 +302,87 @@ fn a_window_below_one_is_refused_in_one_line() {
         assert_eq!(err.trim_end().lines().count(), 1, "{err}");
         assert!(err.contains("--window"), "{err}");
     }
+}
+
+/// `topic list -v`'s lines (` * /topic [a, b] N publishers`) as (topic, its types as a set),
+/// each section's.
+fn verbose_topics(section: &str) -> Vec<(String, BTreeSet<String>)> {
+    section
+        .lines()
+        .skip(1)
+        .map(|l| {
+            let l = l.strip_prefix(" * ").unwrap_or_else(|| panic!("{l}"));
+            let (listed, _count) = l.rsplit_once("] ").unwrap_or_else(|| panic!("{l}"));
+            format!("{listed}]")
+        })
+        .flat_map(|l| by_topic(&l))
+        .collect()
+}
+
+/// `topic list -v` as ros2topic's `verb/list.py` prints it (ros2cli 0.36.1; no capture of
+/// `-v` exists, so the format is the source's, `show_topic_info`, each section `print`ed
+/// and so followed by an empty line): ` * /topic [types] N publisher(s)` under `Published
+/// topics:` for each topic with a publisher, ` * … N subscriber(s)` under `Subscribed
+/// topics:`, a hidden node's endpoints counted too (rclpy's `count_publishers`), a hidden
+/// topic only with `--include-hidden-topics`, and `-c` first. On the real graph's edge
+/// cases (`tests/ros2/edges.py`), whose topics and types are those real ros2cli's `topic list
+/// -t` listed (`step2/edge/ros2-topic-list-t*.txt`; a two-typed topic's types sorted here,
+/// where rmw_zenoh_cpp gives no fixed order). Real ros2cli would count its own node's
+/// /rosout and /parameter_events publishers too; ratelab reads the graph without a node.
+#[test]
+fn the_verbose_topic_list_reads_as_ros2cli_s_list_py_writes_it() {
+    // Processes of its own beside the suite: never beside a timing test.
+    let _m = crate::machine::shared();
+    let endpoint = format!("tcp/127.0.0.1:{}", free_port());
+    let talker = crate::brains::fixture("ros2-real/real-rclpy-talker.json");
+    let args = [endpoint.as_str(), "0", talker.to_str().unwrap()];
+    let _edges = Oracle::start("tests/ros2/edges.py", &args, "the edge graph");
+    let ros2 = |verb: &[&str]| ros2_at(&endpoint, verb);
+    let (code, out, err) = ros2(&["topic", "list", "-v"]);
+    assert_eq!(code, 0, "{err}");
+    assert_eq!(
+        out,
+        "Published topics:\n \
+         * /dup/private [std_msgs/msg/String] 1 publisher\n \
+         * /mixed [std_msgs/msg/Int32, std_msgs/msg/String] 2 publishers\n \
+         * /ns/chatter [std_msgs/msg/String] 1 publisher\n \
+         * /parameter_events [rcl_interfaces/msg/ParameterEvent] 4 publishers\n \
+         * /rosout [rcl_interfaces/msg/Log] 4 publishers\n\
+         \n\
+         Subscribed topics:\n \
+         * /ns/chatter [std_msgs/msg/String] 1 subscriber\n\
+         \n"
+    );
+    // `-t` changes nothing under `-v`; `-c` counts instead, as ros2cli's.
+    assert_eq!(ros2(&["topic", "list", "-v", "-t"]).1, out);
+    assert_eq!(ros2(&["topic", "list", "-v", "-c"]).1, "5\n");
+    for (flags, file) in [
+        (&["-v"][..], "ros2-topic-list-t.txt"),
+        (
+            &["-v", "--include-hidden-topics"][..],
+            "ros2-topic-list-t-hidden.txt",
+        ),
+    ] {
+        let (rc, real) = edge(file);
+        let (code, out, err) = ros2(&[&["topic", "list"][..], flags].concat());
+        assert_eq!(code, rc, "{err}");
+        let (published, subscribed) = out
+            .trim_end()
+            .split_once("\n\n")
+            .unwrap_or_else(|| panic!("{out}"));
+        assert!(published.starts_with("Published topics:\n"), "{out}");
+        assert!(subscribed.starts_with("Subscribed topics:\n"), "{out}");
+        let mut listed = verbose_topics(published);
+        listed.extend(verbose_topics(subscribed));
+        listed.sort();
+        listed.dedup();
+        assert_eq!(listed, by_topic(&real), "{file}: {out}");
+    }
+    let (_, hidden, _) = ros2(&["topic", "list", "-v", "--include-hidden-topics"]);
+    assert!(
+        hidden.starts_with(
+            "Published topics:\n * /_secret [std_msgs/msg/String] 1 publisher\n * /dup/private "
+        ),
+        "{hidden}"
+    );
 }

@@ -932,6 +932,10 @@ fn a_lab_session_s_recording_reads_at_a_glance_and_is_named_for_its_rates() {
     script.push(Control::Apply(Command::SetQueueDepth { depth: 5 }));
     script.extend(steps(50));
     script.push(Control::Apply(Command::SetControlHz { hz: 10.0 }));
+    // As the lab's stall key (`k`) injects one: a fault, from 2.5 s for 0.2 s.
+    script.push(Control::Apply(Command::InjectFault {
+        fault: "policy@2.5+0.2".into(),
+    }));
     script.extend(steps(50));
     script.push(Control::Quit);
     for c in script {
@@ -941,12 +945,29 @@ fn a_lab_session_s_recording_reads_at_a_glance_and_is_named_for_its_rates() {
     drop(tel_rx);
     crate::recording::check_views(&rrd);
     let all = crate::recording::chunks(&rrd);
-    let marks: usize = all
+    let marks = |entity: &str| -> usize {
+        all.iter()
+            .filter(|c| !c.is_static() && c.entity_path().to_string() == entity)
+            .map(|c| c.num_rows())
+            .sum()
+    };
+    assert_eq!(marks("/marks/change"), 2, "the depth and the rate");
+    // The stall is trouble where it took effect, its end a recovery (#73), as a headless
+    // `--stall` is.
+    assert_eq!(marks("/marks/trouble"), 1, "the stall");
+    assert_eq!(marks("/marks/recovery"), 1, "its end");
+    let events = crate::recording::events_with_times(&rrd);
+    let stall = events
         .iter()
-        .filter(|c| !c.is_static() && c.entity_path().to_string() == "/marks/change")
-        .map(|c| c.num_rows())
-        .sum();
-    assert_eq!(marks, 2, "the depth and the rate");
+        .find(|(_, _, e)| e.starts_with("injected stall (live): node policy"))
+        .unwrap_or_else(|| panic!("{events:#?}"));
+    assert_eq!(stall.0, 2_500_000_000, "{stall:?}");
+    assert!(
+        events
+            .iter()
+            .any(|(t, _, e)| *t == 2_700_000_000 && e == "node policy resumes after its stall"),
+        "{events:#?}"
+    );
     let names: Vec<String> = all
         .iter()
         .filter(|c| c.entity_path() == &rerun::EntityPath::properties())

@@ -8,6 +8,7 @@ default clock is the real one, as `ratelab run`'s."""
 import _thread
 import importlib.util
 import json
+import math
 import os
 import re
 import shutil
@@ -273,6 +274,57 @@ def test_the_installed_command_and_module():
     assert "site-packages" in ratelab.__file__
 
 
+def in_a_fresh_interpreter(code):
+    """`code` run by `python -c` in a fresh process of this environment: its stdout."""
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          timeout=120)
+    assert done.returncode == 0, done.stderr
+    return done.stdout
+
+
+def test_import_ratelab_does_not_import_numpy():
+    # #76: `import ratelab` costs the package, not NumPy (the command imports it too).
+    said = in_a_fresh_interpreter(
+        "import sys, ratelab; print('numpy' in sys.modules, 'pandas' in sys.modules)")
+    assert said.split() == ["False", "False"], said
+
+
+def test_a_run_imports_numpy_only_when_its_trace_is_asked_for():
+    # #76: a fresh process's `ratelab.run()` costs what `ratelab run` does; NumPy is imported
+    # when the trace's arrays are first asked for, and they are the same as ever.
+    said = in_a_fresh_interpreter("\n".join([
+        "import json, sys, ratelab",
+        "run = ratelab.run(clock='virtual', duration_s=1)",
+        "repr(run), run._repr_html_(), run.metrics, run.log, run.trace_csv",
+        "print(json.dumps({'after_run': 'numpy' in sys.modules}))",
+        "trace = run.trace",
+        "print(json.dumps({'after_trace': 'numpy' in sys.modules,",
+        "                  'cached': run.trace is trace, 'dict': type(trace) is dict,",
+        "                  'columns': [[k, v.dtype.str, v.tobytes().hex()]",
+        "                              for k, v in trace.items()]}))",
+    ]))
+    before, after = (json.loads(line) for line in said.splitlines())
+    assert before == {"after_run": False}
+    assert after["after_trace"] and after["cached"] and after["dict"], after
+    here = ratelab.run(clock="virtual", duration_s=1)
+    assert after["columns"] == [[k, v.dtype.str, v.tobytes().hex()]
+                                for k, v in here.trace.items()]
+    # The arrays are trace.csv's text: floats (an empty cell NaN), flags, counts.
+    header, *rows = (line.split(",") for line in here.trace_csv.splitlines())
+    assert list(here.trace) == [ratelab.TRACE_COLUMNS.get(n, n) for n in header]
+    for i, array in enumerate(here.trace.values()):
+        cells = [row[i] for row in rows]
+        if array.dtype == np.float64:
+            text = np.array([float(c) if c else math.nan for c in cells])
+        elif array.dtype == bool:
+            text = np.array([c == "true" for c in cells])
+        else:
+            assert array.dtype == np.int64, array.dtype
+            text = np.array([int(c) for c in cells], dtype=np.int64)
+        assert np.array_equal(array, text, equal_nan=array.dtype == np.float64), header[i]
+    assert here.trace["pole_angle_rad"].dtype == np.float64 and len(here.trace["step"]) == 51
+
+
 def test_a_launch_starts_its_processes_through_this_python(tmp_path):
     # `launch --processes` starts `python -m ratelab process …` for each process.
     done = subprocess.run(
@@ -328,7 +380,88 @@ def test_a_cliff_is_where_a_run_falls_and_the_next_rate_up_balances():
     assert ratelab.run(control_hz=balances, **VIRTUAL).metrics["balanced"]
     with pytest.raises(ValueError) as e:
         ratelab.cliff(min_hz=20, max_hz=10)
-    assert "--min-hz" in str(e.value)
+    assert str(e.value) == "min_hz (20) must not be above max_hz (10)"
+    assert isinstance(e.value, ratelab.SettingError)
+
+
+def scripted_act(obs):
+    """The built-in scripted balancer (src/runtime/policy.rs, `Scripted`) in Python, the same
+    arithmetic in the same order on the same doubles: θ = atan2(sin θ, cos θ),
+    u = 10θ + 2·pole_angvel + 0.4·cart_pos + 0.8·cart_vel, clipped to [-1, 1]."""
+    theta = math.atan2(float(obs[3]), float(obs[2]))
+    u = 10.0 * theta + 2.0 * float(obs[4]) + 0.4 * float(obs[0]) + 0.8 * float(obs[1])
+    return min(max(u, -1.0), 1.0)
+
+
+def without_policy(table):
+    """A table's rows without the brain's name (a callable is named by its file and name)."""
+    return [{k: v for k, v in row.items() if k != "policy"} for row in table]
+
+
+def test_a_sweep_takes_a_brain_defined_here():
+    grid = dict(control_hz=np.array([5, 10, 50]), seeds=[0, 1], duration_s=2, clock="virtual")
+    mine = ratelab.sweep(policy=scripted_act, **grid)
+    built_in = ratelab.sweep(policy="scripted", **grid)
+    from_file = ratelab.sweep(policy="graphs/brains/scripted.py", **grid)
+    assert len(mine) == 6
+    # Every figure, to the last bit: the rows' cells are the CSV's text.
+    assert without_policy(mine) == without_policy(built_in) == without_policy(from_file)
+    assert any(row["fell_at_s"] is not None for row in mine)
+    assert all(row["policy"].endswith(":scripted_act") for row in mine), mine.rows[0]
+
+
+def test_a_callable_brain_equals_a_brain_file_in_a_sweep(tmp_path):
+    brain = tmp_path / "zero.py"
+    brain.write_text("def act(obs):\n    return 0.0\n")
+    grid = dict(control_hz=np.array([10, 50]), seeds=[0], duration_s=1, clock="virtual")
+    mine = ratelab.sweep(policy=lambda obs: 0.0, **grid)
+    from_file = ratelab.sweep(policy=str(brain), **grid)
+    assert len(mine) == 2
+    assert without_policy(mine) == without_policy(from_file)
+    assert mine.rows[0]["policy"].endswith(":<lambda>"), mine.rows[0]
+
+
+def test_a_cliff_takes_a_brain_defined_here():
+    search = dict(seeds=[0], min_hz=4, max_hz=12, step_hz=0.5)
+    assert ratelab.cliff(policy=scripted_act, **search).csv == ratelab.cliff(**search).csv
+
+
+def test_a_brain_that_raises_in_a_sweep_fails_its_runs():
+    def act(obs):
+        raise RuntimeError("not today")
+
+    with pytest.raises(ratelab.NodeFailed) as e:
+        ratelab.sweep(policy=act, control_hz=[50, 10], seeds=[0], duration_s=1)
+    assert "2 of 2 runs failed a node" in str(e.value) and "not today" in str(e.value)
+    assert e.value.run is None
+    with pytest.raises(ValueError) as e:
+        ratelab.cliff(policy=act, seeds=[0], min_hz=4, max_hz=12, step_hz=0.5)
+    assert "not today" in str(e.value) and "seed 0" in str(e.value)
+
+
+@pytest.mark.parametrize("call, name", [
+    (lambda: ratelab.sweep(seeds=[]), "seeds"),
+    (lambda: ratelab.sweep(control_hz=np.array([])), "control_hz"),
+    (lambda: ratelab.sweep(clock=[]), "clock"),
+    (lambda: ratelab.sweep(control_hz=[10, 0]), "control_hz"),
+    (lambda: ratelab.sweep(queue_depth=[0]), "queue_depth"),
+    (lambda: ratelab.sweep(duration_s=0), "duration_s"),
+    (lambda: ratelab.sweep(clock=["virtual", "sundial"]), "clock"),
+    (lambda: ratelab.sweep(rate={"policy": 20}), "rate"),
+    (lambda: ratelab.cliff(seeds=[]), "seeds"),
+    (lambda: ratelab.cliff(step_hz=0), "step_hz"),
+    (lambda: ratelab.cliff(step_hz=0.0001), "step_hz"),
+    (lambda: ratelab.cliff(max_hz=np.inf), "max_hz"),
+], ids=lambda x: x if isinstance(x, str) else None)
+def test_a_sweep_s_and_a_cliff_s_errors_name_python_parameters(call, name):
+    with pytest.raises(ValueError) as e:
+        call()
+    line = str(e.value)
+    assert line.startswith(name) or f" {name}" in line, line
+    assert "\n" not in line and not FLAG.search(line), line
+    assert isinstance(e.value, ratelab.SettingError)
+    if name == "seeds":
+        assert line.startswith("seeds: an empty list runs nothing"), line
 
 
 def exercises_copy(tmp_path, **predictions):
@@ -441,6 +574,12 @@ def test_an_unknown_keyword_names_the_nearest_one():
         ratelab.sweep(seed=[0, 1])
     with pytest.raises(TypeError, match="did you mean 'min_hz'"):
         ratelab.cliff(minhz=4)
+    with pytest.raises(TypeError, match="did you mean 'control_hz'"):
+        ratelab.sweep(control=[5, 10])
+    # Nor do sweep() and cliff(): their settings are keywords of their own.
+    for function in (ratelab.sweep, ratelab.cliff):
+        with pytest.raises(TypeError, match="'flags'"):
+            function(flags=["--seeds", "0"])
     with pytest.raises(TypeError, match="did you mean 'dir'"):
         ratelab.exercise("ex1", dri="exercises")
     # No front end parses another's arguments: run() takes no flags.

@@ -38,6 +38,10 @@ impl App {
                 self.journal_full = false;
                 self.fold(t.clone());
                 self.journal.push((self.now, t));
+                if !self.rewinding {
+                    // Said again when the run ends ([`App::on_ended`]).
+                    self.run_reload = reloaded.clone();
+                }
                 if let Some(line) = reloaded {
                     self.say(line);
                 }

@@ -1,46 +1,10 @@
 //! From the lab's state to the [`View`] a frame draws: each node's box, each topic's
-//! arrow, the latency, the segment's counters and the log pane, built from the one graph
-//! spec and what the telemetry told.
+//! arrow, the latency and the segment's counters, built from the one graph spec and what the
+//! telemetry told (the log pane's in `app/log.rs`).
 
 use super::*;
 
 impl App {
-    /// The log pane's view: the selected node's lines (all nodes' when none is selected).
-    pub(super) fn log_view(&self) -> LogView {
-        let node = match self.selected {
-            Some(Selected::Node(id)) => Some(self.graph.node(id).name.clone()),
-            _ => None,
-        };
-        let mine =
-            |l: &&ratelab::textlog::LogLine| node.is_none() || l.node.as_deref() == node.as_deref();
-        let lines: Vec<(bool, String)> = self
-            .log
-            .iter()
-            .filter(mine)
-            .map(|l| {
-                let t = l.t.map_or_else(
-                    || "      ".to_string(),
-                    |t| format!("t={:<5.2}", t.as_secs_f64()),
-                );
-                let who = l.node.as_deref().unwrap_or("ratelab");
-                (
-                    l.level != ratelab::textlog::Level::Info,
-                    format!("{t} {who:<9} {}", l.text),
-                )
-            })
-            .collect();
-        LogView {
-            back: self.log_back.min(lines.len().saturating_sub(1)),
-            whose: node.unwrap_or_else(|| "all nodes".to_string()),
-            total: if self.selected.is_some() {
-                lines.len()
-            } else {
-                self.log_total
-            },
-            lines,
-        }
-    }
-
     pub(super) fn topic_view(&self, id: TopicId) -> TopicView {
         let spec = self.graph.topic(id);
         // After the run ended: the QoS it ran with (keys set the next run's).
@@ -255,27 +219,6 @@ impl App {
         }
     }
 
-    /// A learner's callback in this process (a Python node's tick, the brain's call) that
-    /// has not returned for [`HUNG_AFTER`] or longer: its node and how long, s. `None` in
-    /// an attached lab (the graph's code runs in other processes).
-    pub(super) fn hung_callback(&self) -> Option<(String, f64)> {
-        if self.attached.is_some() {
-            return None;
-        }
-        let call = ratelab::python::running_callbacks(HUNG_AFTER)
-            .into_iter()
-            .next()?;
-        // A brain's call is its node's: the one whose kind runs the brain.
-        let node = call.node.or_else(|| {
-            self.graph
-                .nodes
-                .iter()
-                .find(|n| n.kind.def().uses_brain)
-                .map(|n| n.name.clone())
-        })?;
-        Some((node, call.running_for.as_secs_f64()))
-    }
-
     /// The latency panel: the segment's histogram and percentiles, and the window's.
     /// The ghost's points over the charts' window ([`super::super::chart_window`]), as
     /// `pick` takes them.
@@ -383,6 +326,42 @@ impl App {
         }
     }
 
+    /// Paused under the virtual clock, or reviewing: the run at the scrub cursor (`now`),
+    /// from the actuator's tick at or before it — the step record its `trace.csv` row is
+    /// written from — with the selected topic's counters at that tick (a node's: the first
+    /// topic it publishes, else the first it reads). `None` otherwise, or before the first
+    /// tick.
+    pub(super) fn readout(&self) -> Option<super::super::view::Readout> {
+        let paused = self.paused && self.clock == "virtual" && self.attached.is_none();
+        let rec = self.last.as_ref().filter(|_| paused || self.reviewing())?;
+        let topic = match self.selected {
+            Some(Selected::Topic(t)) => Some(t),
+            Some(Selected::Node(n)) => {
+                let node = self.graph.node(n);
+                node.publishes.first().or(node.subscribes.first()).copied()
+            }
+            None => None,
+        };
+        let counters = topic.map(|id| {
+            let stats = rec.topics.get(id);
+            let spec = self.graph.topic(id);
+            super::super::view::TopicCounts {
+                topic: spec.name.clone(),
+                msgs: stats.published,
+                dropped: stats.dropped,
+                stale_reads: stats.stale_reads,
+                // Those its arrow labels (the publisher's deadline misses it leaves out).
+                qos: stats
+                    .reported(&[spec.qos, self.qos_of(id)])
+                    .into_iter()
+                    .filter(|c| *c != QosCounter::OfferedDeadlineMissed)
+                    .map(|c| (short_counter(c), stats.counter(c)))
+                    .collect(),
+            }
+        });
+        Some(super::super::view::Readout::at(self.now, rec, counters))
+    }
+
     /// The segment since the last change, for the segment line and the angle chart.
     pub(super) fn segment_view(&self) -> SegmentView {
         let seg = self.live.segment();
@@ -475,7 +454,9 @@ impl App {
             // The run before's applied force, as a staircase too.
             ghost_force: staircase(&self.ghost_in_window(|&(t, _, f, _)| (t, f))),
             latency: self.latency_view(),
+            readout: self.readout(),
             log: self.show_log.then(|| self.log_view()),
+            ended: self.ended_word.clone(),
             ros2: match (self.show_ros2, self.ros2_domain) {
                 (true, Some(domain)) => Some(Ros2View {
                     domain,

@@ -166,8 +166,15 @@ pub(super) fn render_angle_chart(v: &View, area: Rect, buf: &mut Buffer, open: b
     } else {
         " pole angle (rad) "
     };
-    let mut title = vec![Span::raw(name)];
-    let mut used = name.chars().count();
+    // Paused, the run at the scrub cursor leads (the key follows where there is room).
+    let (mut title, mut used) = match &v.readout {
+        Some(r) => {
+            let line = format!(" {} ", r.plant_line(room.saturating_sub(2)));
+            let used = Span::raw(line.as_str()).width();
+            (vec![Span::styled(line, Style::new().bold())], used)
+        }
+        None => (vec![Span::raw(name)], name.chars().count()),
+    };
     let limits = format!("── ±{LIMIT_RAD:.2} fall ");
     let mut add = |title: &mut Vec<Span<'static>>, text: String, style: Style| {
         let n = text.chars().count() + 2;
@@ -276,14 +283,25 @@ pub(super) fn render_hold_chart(v: &View, area: Rect, buf: &mut Buffer, joined: 
     } else {
         &["<0", "≥0"]
     };
-    let mut title = vec![
-        " force (N): ".into(),
-        "published".magenta(),
-        " · ".into(),
-        "applied".green(),
-        " — the hold ".into(),
-    ];
-    if !ghost.is_empty() && area.width >= 60 {
+    // Paused, the hold at the scrub cursor (the force, its command's age) and the selected
+    // topic's counters; else the band's key.
+    let room = usize::from(area.width.saturating_sub(2));
+    let mut title = match &v.readout {
+        Some(r) => vec![Span::styled(
+            format!(" {} ", r.hold_line(room.saturating_sub(2))),
+            Style::new().bold(),
+        )],
+        None => vec![
+            " force (N): ".into(),
+            "published".magenta(),
+            " · ".into(),
+            "applied".green(),
+            " — the hold ".into(),
+        ],
+    };
+    let used: usize = title.iter().map(Span::width).sum();
+    let key_fits = v.readout.is_none() || used + "· before reload ".chars().count() <= room;
+    if !ghost.is_empty() && area.width >= 60 && key_fits {
         title.extend(["· ".into(), "before reload ".dark_gray()]);
     }
     let title = Line::from(title);

@@ -5,9 +5,9 @@
 
 use super::processes::{before_the_run, Children};
 use super::Launch;
-use crate::config::ClockKind;
 use crate::wire::{self, ToLauncher, ToProcess};
 use crate::DistError;
+use ratelab_runtime::config::ClockKind;
 use std::time::{Duration, Instant};
 
 /// What the launcher made of a join.
@@ -46,7 +46,7 @@ impl Launch<'_> {
         else {
             return Admission::Ignored;
         };
-        if !crate::graph::spec::valid_node_name(process) {
+        if !ratelab_runtime::graph::spec::valid_node_name(process) {
             return Admission::Ignored; // no key to answer on
         }
         let (spec, names, hash) = (self.spec, &self.names, &self.hash);
@@ -65,7 +65,7 @@ impl Launch<'_> {
             return refuse(format!(
                 "graph '{}' has no process '{process}' (its processes: {})",
                 spec.name,
-                crate::text::listed(names.iter().map(String::as_str))
+                ratelab_core::text::listed(names.iter().map(String::as_str))
             ));
         }
         let well_formed =
@@ -135,7 +135,7 @@ impl Launch<'_> {
                     .collect();
                 return Err(DistError::Peer(format!(
                     "process(es) {} did not become ready within {:.1} s",
-                    crate::text::listed(missing),
+                    ratelab_core::text::listed(missing),
                     wait.as_secs_f64()
                 )));
             }

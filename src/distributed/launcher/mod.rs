@@ -18,15 +18,15 @@ use super::lockstep::{subscribe_reports, MAX_AHEAD};
 use super::monitor::Carried;
 use super::wire::{self, Setup, ToLauncher, ToProcess};
 use super::{check_endpoint, check_keys, Access, DistError, Keys};
-use crate::config::{ClockKind, RunConfig};
-use crate::graph::spec::GraphSpec;
-use crate::graph::NodeId;
-use crate::metrics::Metrics;
-use crate::scheduler::{EndReason, RunEnd, StopFlag};
-use crate::summary::{summarize_state, GraphState};
-use crate::time::Nanos;
 use crossbeam_channel::Receiver;
 use processes::{wait_gate, Children};
+use ratelab_core::metrics::Metrics;
+use ratelab_core::time::Nanos;
+use ratelab_runtime::config::{ClockKind, RunConfig};
+use ratelab_runtime::graph::spec::GraphSpec;
+use ratelab_runtime::graph::NodeId;
+use ratelab_runtime::scheduler::{EndReason, RunEnd, StopFlag};
+use ratelab_runtime::summary::{summarize_state, GraphState};
 use std::cell::RefCell;
 use std::collections::BTreeMap;
 use std::path::PathBuf;
@@ -150,7 +150,7 @@ fn free_port(host: &str) -> Result<u16, DistError> {
 }
 
 /// Merge the processes' views into the graph's: each node's figures from its own process,
-/// each topic's from its [holder](crate::graph::spec::TopicSpec::holder)'s process (its
+/// each topic's from its [holder](ratelab_runtime::graph::spec::TopicSpec::holder)'s process (its
 /// subscriber's, whose copy saw every message that crossed, or its publisher's when nobody
 /// subscribes); the actuator's measurements from the
 /// actuator's process, the brain's label from the policy's. `None` without the actuator's
@@ -216,7 +216,7 @@ pub fn merge_states(
             // The subscriber's process did not report (it died): what it counted until its
             // last figures (at most 100 ms before it went), and what was sent after those
             // counted as lost, never a clean 0 dropped.
-            let mut c = carried.total(i).unwrap_or(crate::topic::TopicStats {
+            let mut c = carried.total(i).unwrap_or(ratelab_core::topic::TopicStats {
                 depth: t.depth,
                 ..Default::default()
             });
@@ -239,7 +239,7 @@ pub fn merge_states(
 fn merge_exec(
     spec: &GraphSpec,
     states: &BTreeMap<String, GraphState>,
-) -> Option<crate::executor::ExecFigures> {
+) -> Option<ratelab_core::executor::ExecFigures> {
     let exec_of = |id: NodeId| {
         states
             .get(&spec.process_of(id))
@@ -268,7 +268,7 @@ fn merge_exec(
                 .cloned()
         })
         .collect();
-    Some(crate::executor::ExecFigures { nodes, executors })
+    Some(ratelab_core::executor::ExecFigures { nodes, executors })
 }
 
 /// Check that process `process`'s report could be true of a run that ended at `at`: its
@@ -354,7 +354,7 @@ pub fn check_report(
     if let Some(x) = &st.exec {
         // A response may end after the run (a tick computing at the end): up to the longest
         // compute time past it.
-        let late_ms = run_ms + crate::executor::MAX_COMPUTE.as_millis_f64();
+        let late_ms = run_ms + ratelab_core::executor::MAX_COMPUTE.as_millis_f64();
         let ok_response = |ms: f64| ms.is_finite() && (0.0..=late_ms).contains(&ms);
         for (i, f) in x.nodes.iter().enumerate() {
             if spec.process_of(NodeId(i)) != process {
@@ -434,7 +434,8 @@ pub fn launch(
     stop: &StopFlag,
     say: &dyn Fn(&str),
 ) -> Result<LaunchReport, DistError> {
-    cfg.validate().map_err(crate::runcore::RunError::from)?;
+    cfg.validate()
+        .map_err(ratelab_runtime::runcore::RunError::from)?;
     let spec = &cfg.graph;
     check_keys(spec)?;
     let placement = spec.placement();
@@ -507,7 +508,7 @@ pub fn launch(
     } else {
         me.say(&format!(
             "waiting for {} to join: ratelab process{} --process NAME --connect {endpoint} --credentials FILE (launch --export-credentials FILE)",
-            crate::text::listed(me.names.iter().map(String::as_str)),
+            ratelab_core::text::listed(me.names.iter().map(String::as_str)),
             opts.graph_path
                 .as_ref()
                 .map_or(String::new(), |g| format!(" --graph {}", g.display()))
@@ -632,7 +633,7 @@ fn watch_gone(
                     .strip_prefix(&token_prefix)
                     .and_then(|r| r.split('/').next())
                 {
-                    crate::graph::lock(&gone_cb).push(p.to_string());
+                    ratelab_runtime::graph::lock(&gone_cb).push(p.to_string());
                     let _ = gone_tx.send(p.to_string());
                 }
             }
@@ -802,24 +803,24 @@ mod tests {
 
     /// A 10 s run of the chapter's graph as process `robot` would report it.
     fn robot_report() -> (GraphSpec, GraphState) {
-        let spec = GraphSpec::parse(crate::graph::spec::DEFAULT_GRAPH_TOML, "t").unwrap();
-        let obs = crate::topic::TopicStats {
+        let spec = GraphSpec::parse(ratelab_runtime::graph::spec::DEFAULT_GRAPH_TOML, "t").unwrap();
+        let obs = ratelab_core::topic::TopicStats {
             published: 501,
             dropped: 0,
             ..Default::default()
         };
         let st = GraphState {
             topics: vec![obs, obs],
-            topic_qos: vec![crate::qos::TopicQos::default(); 2],
+            topic_qos: vec![ratelab_core::qos::TopicQos::default(); 2],
             subscriptions: Vec::new(),
-            liveliness: vec![(None, crate::qos::LivelinessStatus::default()); 3],
+            liveliness: vec![(None, ratelab_core::qos::LivelinessStatus::default()); 3],
             rates_hz: vec![50.0; 3],
             ticks: vec![501, 0, 501],
             timing: None,
             exec: None,
             brain: "scripted".into(),
             injected_faults: Vec::new(),
-            actuator: crate::summary::ActuatorSummary {
+            actuator: ratelab_runtime::summary::ActuatorSummary {
                 steps: 501,
                 fell_at: None,
                 watchdog: None,

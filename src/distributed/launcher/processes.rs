@@ -3,9 +3,9 @@
 //! the run starts.
 
 use super::{Launch, MAX_STDERR_LINE};
-use crate::scheduler::StopFlag;
 use crate::{DistError, REPLY_TIMEOUT};
 use crossbeam_channel::Receiver;
+use ratelab_runtime::scheduler::StopFlag;
 use std::process::{Child, Stdio};
 use std::time::{Duration, Instant};
 use zenoh::Wait;
@@ -89,10 +89,14 @@ fn pass_stderr(
             let mut r = std::io::BufReader::new(err);
             let mut buf = Vec::new();
             // Bounded: a line longer than the limit is cut, its rest skipped.
-            while let Ok(true) = crate::input::read_line_bounded(&mut r, MAX_STDERR_LINE, &mut buf)
+            while let Ok(true) =
+                ratelab_core::input::read_line_bounded(&mut r, MAX_STDERR_LINE, &mut buf)
             {
                 let text = String::from_utf8_lossy(&buf);
-                let line = format!("{process}: {}", crate::text::printable(text.trim_end()));
+                let line = format!(
+                    "{process}: {}",
+                    ratelab_core::text::printable(text.trim_end())
+                );
                 let _ = session.put(log_key.as_str(), line.as_str()).wait();
                 let _ = to.try_send(line);
             }

@@ -8,15 +8,15 @@
 use super::admission::Admission;
 use super::processes::Children;
 use super::Launch;
-use crate::graph::spec::{RestartPolicy, MAX_RESTARTS};
 use crate::monitor::{Carried, Silence};
 use crate::process::LiveStats;
-use crate::scheduler::{EndReason, RunEnd};
-use crate::summary::GraphState;
-use crate::time::Nanos;
 use crate::wire::{self, ToLauncher, ToProcess};
 use crate::{DistError, REPLY_TIMEOUT};
 use crossbeam_channel::Receiver;
+use ratelab_core::time::Nanos;
+use ratelab_runtime::graph::spec::{RestartPolicy, MAX_RESTARTS};
+use ratelab_runtime::scheduler::{EndReason, RunEnd};
+use ratelab_runtime::summary::GraphState;
 use std::collections::BTreeMap;
 use std::time::{Duration, Instant};
 use zenoh::Wait;
@@ -166,7 +166,11 @@ impl Supervision {
             self.silence.heard(&m);
             if let Some(i) = self.silent.iter().position(|p| *p == m.process) {
                 self.silent.remove(i);
-                l.say(&format!("process '{}' is heard again", m.process));
+                l.say(&format!(
+                    "process '{}' is heard again at t={:.3}s",
+                    m.process,
+                    self.run_time().as_secs_f64()
+                ));
             }
             if m.process != l.robot {
                 carried.see(l.spec, &m);
@@ -175,7 +179,7 @@ impl Supervision {
         for (p, quiet) in self.silence.silent() {
             if self.end.is_none() && !self.gone.contains(&p) && !self.silent.contains(&p) {
                 l.say(&format!(
-                    "process '{p}' is silent at t={:.2}s: no figures for {:.1} s while its tokens live (stopped, starved or cut off?); it is gone if Zenoh's lease ({} s) runs out",
+                    "process '{p}' is silent at t={:.3}s: no figures for {:.1} s while its tokens live (stopped, starved or cut off?); it is gone if Zenoh's lease ({} s) runs out",
                     self.run_time().as_secs_f64(),
                     quiet.as_secs_f64(),
                     crate::LinkTimings::for_processes(l.names.len())
@@ -259,7 +263,7 @@ impl Supervision {
             match l.start_process(p) {
                 Ok(Some(c)) => {
                     l.say(&format!(
-                        "process '{p}' failed ({status}) at t={:.2}s: starting it again (restart = \"on-failure\", {n} of {MAX_RESTARTS})",
+                        "process '{p}' failed ({status}) at t={:.3}s: starting it again (restart = \"on-failure\", {n} of {MAX_RESTARTS})",
                         self.run_time().as_secs_f64(),
                     ));
                     *child = c;
@@ -305,7 +309,7 @@ impl Supervision {
                 "the others run on"
             };
             l.say(&format!(
-                "process '{p}' is gone at t={:.2}s (its liveliness token was withdrawn); {then}",
+                "process '{p}' is gone at t={:.3}s (its liveliness token was withdrawn); {then}",
                 self.run_time().as_secs_f64()
             ));
         }
@@ -341,7 +345,7 @@ impl Supervision {
                 ToLauncher::Join { pid, .. } => *pid,
                 _ => 0,
             };
-            asked.elapsed() < Duration::from_millis(300) && crate::procs::process_alive(pid)
+            asked.elapsed() < Duration::from_millis(300) && ratelab_core::procs::process_alive(pid)
         });
         let gone = &self.gone;
         let last_run_gone = self
@@ -385,8 +389,14 @@ impl Supervision {
                         // "heard again") about a process that has just rejoined.
                         self.silence.forget(&process);
                         self.silent.retain(|p| *p != process);
-                        self.rejoined_at.insert(process.clone(), self.run_time());
-                        l.say(&format!("process '{process}' rejoined"));
+                        // Said at the run time the summary's wire line counts from, so that
+                        // the log, the recording and the summary give the rejoin one time.
+                        let at = self.run_time();
+                        self.rejoined_at.insert(process.clone(), at);
+                        l.say(&format!(
+                            "process '{process}' rejoined at t={:.3}s",
+                            at.as_secs_f64()
+                        ));
                         self.rejoining.push(process);
                     }
                     Admission::Refused(r) | Admission::OtherGraph(r) => l.say_refused(&r),

@@ -1,20 +1,20 @@
 //! The run under the virtual clock, as the launcher sees it: it follows the whole graph's
-//! order of events as the run core draws it ([`crate::runcore::Follower`]), moves the
+//! order of events as the run core draws it ([`ratelab_runtime::runcore::Follower`]), moves the
 //! horizon on ahead of them, takes each event's report from its
 //! node's process ([`crate::lockstep`]), ends the run where a report says so,
 //! and gathers the processes' reports at the end.
 
 use super::admission::Admission;
 use super::{Launch, Link, LockstepCost};
-use crate::graph::{NodeId, TopicId};
 use crate::lockstep::{check_tick_report, TickInbox, HORIZON_PERIODS};
-use crate::runcore::Follower;
-use crate::scheduler::{EndReason, Event, RunEnd, StopFlag};
-use crate::summary::GraphState;
-use crate::time::Nanos;
 use crate::wire::{self, Ticked, ToLauncher, ToProcess};
 use crate::{DistError, REPLY_TIMEOUT};
 use crossbeam_channel::Receiver;
+use ratelab_core::time::Nanos;
+use ratelab_runtime::graph::{NodeId, TopicId};
+use ratelab_runtime::runcore::Follower;
+use ratelab_runtime::scheduler::{EndReason, Event, RunEnd, StopFlag};
+use ratelab_runtime::summary::GraphState;
 use std::collections::BTreeMap;
 use std::sync::Mutex;
 use std::time::{Duration, Instant};
@@ -159,7 +159,7 @@ impl Launch<'_> {
         // Every message sent is delivered before the reports: the last ones too, but those
         // of a process that is gone, which may have died with them still to send (its
         // report reached us, its sample not the subscriber).
-        let gone = crate::graph::lock(gone_now).clone();
+        let gone = ratelab_runtime::graph::lock(gone_now).clone();
         let need: Vec<(usize, u64)> = published
             .iter()
             .enumerate()
@@ -208,7 +208,7 @@ impl Launch<'_> {
             // Any of the graph's processes, not only this tick's: a tick of another
             // process may be waiting for the gone one's message, and would only
             // time out (REPLY_TIMEOUT) before saying so.
-            let gone = crate::graph::lock(gone_now)
+            let gone = ratelab_runtime::graph::lock(gone_now)
                 .iter()
                 .find(|p| names.contains(p))
                 .cloned();
@@ -272,7 +272,7 @@ fn collect_reports(
 ) {
     // Gone before the stop: no report will come (a virtual-clock process reports once
     // told to stop).
-    let mut gone_since: BTreeMap<String, Option<Instant>> = crate::graph::lock(gone)
+    let mut gone_since: BTreeMap<String, Option<Instant>> = ratelab_runtime::graph::lock(gone)
         .iter()
         .map(|p| (p.clone(), None))
         .collect();
@@ -302,7 +302,7 @@ fn collect_reports(
         if stop.is_stopped() {
             deadline = deadline.min(now + interrupted);
         }
-        for p in crate::graph::lock(gone).iter() {
+        for p in ratelab_runtime::graph::lock(gone).iter() {
             gone_since.entry(p.clone()).or_insert(Some(now));
         }
         if !awaits_a_report(names, reports, &gone_since, now) || now >= deadline {
@@ -342,7 +342,12 @@ fn awaits_a_report<T>(
 }
 
 /// Paced at `speed` × wall time from `from`: wait until run time `t` is due (or `stop`).
-fn wait_for_wall_time(from: Instant, t: Nanos, speed: f64, stop: &crate::scheduler::StopFlag) {
+fn wait_for_wall_time(
+    from: Instant,
+    t: Nanos,
+    speed: f64,
+    stop: &ratelab_runtime::scheduler::StopFlag,
+) {
     let due = from + Duration::from_secs_f64(t.as_secs_f64() / speed);
     while !stop.is_stopped() && Instant::now() < due {
         let left = due.saturating_duration_since(Instant::now());

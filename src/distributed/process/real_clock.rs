@@ -4,11 +4,11 @@
 
 use super::stats::{held_topics, read_counters};
 use super::{wire, DistError, GraphState, NodeId, Share, StopFlag, ToLauncher, ToProcess};
-use crate::metrics::NodeTiming;
-use crate::runcore::{RealEnd, RunCore};
-use crate::scheduler::RealOptions;
-use crate::time::Nanos;
 use crossbeam_channel::{Receiver, RecvTimeoutError};
+use ratelab_core::metrics::NodeTiming;
+use ratelab_core::time::Nanos;
+use ratelab_runtime::runcore::{RealEnd, RunCore};
+use ratelab_runtime::scheduler::RealOptions;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
 use std::time::Duration;
@@ -63,7 +63,7 @@ pub(super) fn real_clock(
     );
     let r = core.run_real(Some(&index), &run_stop, &real);
     let stopped_by_launcher =
-        run_stop.is_stopped() && r.end.reason == crate::scheduler::EndReason::Interrupted;
+        run_stop.is_stopped() && r.end.reason == ratelab_runtime::scheduler::EndReason::Interrupted;
     if !stopped_by_launcher {
         send(&ToLauncher::Ended {
             process: share.process.clone(),
@@ -103,7 +103,7 @@ fn tick_hook(
     index: &[usize],
     next_due: &Arc<Vec<AtomicU64>>,
     start: u64,
-) -> crate::scheduler::TickHook {
+) -> ratelab_runtime::scheduler::TickHook {
     let (hook_ticks, hook_time) = (share.ticks.clone(), share.run_time.clone());
     let hook_batch = share.batch.clone();
     let hook_index = index.to_vec();
@@ -112,7 +112,7 @@ fn tick_hook(
     let hook_held = held_topics(&share.cfg.graph, &mine);
     let hook_handles = share.handles.clone();
     let (hook_due, end) = (next_due.clone(), share.cfg.duration.0);
-    Arc::new(move |t: &crate::scheduler::TickReport<'_>| {
+    Arc::new(move |t: &ratelab_runtime::scheduler::TickReport<'_>| {
         let (k, now, late) = (t.node, t.now, t.lateness);
         let i = hook_index[k];
         hook_ticks[i].fetch_add(1, Ordering::Relaxed);
@@ -120,7 +120,7 @@ fn tick_hook(
         // The sample is in the batch before the run time says this tick is done.
         let read = read_counters(&hook_held, &hook_handles);
         {
-            let mut b = crate::graph::lock(&hook_batch);
+            let mut b = ratelab_runtime::graph::lock(&hook_batch);
             b.push_tick((i, now.0, late.0, t.took.0));
             b.keep(now.0, &read);
         }
@@ -202,11 +202,11 @@ fn local_state(share: &Share, index: &[usize], at: Nanos, r: RealEnd) -> GraphSt
         .collect();
     let mut state = GraphState::capture(&share.handles, at, &ticks_now, Some(timing));
     state.exec = r.exec.map(|x| {
-        let mut nodes = vec![crate::executor::NodeExecFigures::default(); spec.nodes.len()];
+        let mut nodes = vec![ratelab_core::executor::NodeExecFigures::default(); spec.nodes.len()];
         for (k, f) in x.nodes.into_iter().enumerate() {
             nodes[index[k]] = f;
         }
-        crate::executor::ExecFigures {
+        ratelab_core::executor::ExecFigures {
             nodes,
             executors: x.executors,
         }

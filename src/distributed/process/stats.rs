@@ -23,7 +23,7 @@ pub struct LiveStats {
     pub nodes: Vec<(String, String, f64, u64)>,
     /// The topics whose counters it holds (it runs their subscriber, or their publisher when
     /// nobody subscribes): name and counters.
-    pub topics: Vec<(String, crate::topic::TopicStats)>,
+    pub topics: Vec<(String, ratelab_core::topic::TopicStats)>,
     /// Per inbound topic, its over-the-wire latency so far.
     pub wire: Vec<wire::WireLink>,
     /// The actuator's steps since the previous figures, oldest first (its process only; at
@@ -43,7 +43,7 @@ pub struct LiveStats {
     /// its holder had at the step's run time, not at the figures' (under the virtual clock
     /// 100 ms of wall time is many seconds of run time).
     #[serde(default)]
-    pub counters: Vec<(u64, usize, crate::topic::TopicStats)>,
+    pub counters: Vec<(u64, usize, ratelab_core::topic::TopicStats)>,
     /// The process's part of the run is over: these are its last figures, and its
     /// liveliness tokens going next is a process leaving, not dying.
     #[serde(default)]
@@ -87,10 +87,12 @@ impl LiveStats {
             && m.steps.iter().map(|s| s.topics.len()).sum::<usize>() <= MAX_BATCH_STEP_COUNTERS
             && m.ticks.len() <= MAX_BATCH_TICKS
             && m.counters.len() <= MAX_BATCH_COUNTERS
-            && m.counters.iter().all(|c| c.1 < crate::ids::MAX_TOPICS)
-            && m.nodes.len() <= crate::ids::MAX_NODES
-            && m.topics.len() <= crate::ids::MAX_TOPICS
-            && m.wire.len() <= crate::ids::MAX_TOPICS;
+            && m.counters
+                .iter()
+                .all(|c| c.1 < ratelab_core::ids::MAX_TOPICS)
+            && m.nodes.len() <= ratelab_core::ids::MAX_NODES
+            && m.topics.len() <= ratelab_core::ids::MAX_TOPICS
+            && m.wire.len() <= ratelab_core::ids::MAX_TOPICS;
         if bounded {
             Ok(m)
         } else {
@@ -114,9 +116,9 @@ impl LiveStats {
 pub(super) struct Batch {
     steps: std::collections::VecDeque<StepRecord>,
     ticks: std::collections::VecDeque<(usize, u64, u64, u64)>,
-    counters: std::collections::VecDeque<(u64, usize, crate::topic::TopicStats)>,
+    counters: std::collections::VecDeque<(u64, usize, ratelab_core::topic::TopicStats)>,
     /// Each topic's counters as last sampled (a sample is kept only when they changed).
-    last: Vec<Option<crate::topic::TopicStats>>,
+    last: Vec<Option<ratelab_core::topic::TopicStats>>,
     /// The run time of the newest sample, ns (samples never go back in time).
     last_t: u64,
 }
@@ -139,7 +141,7 @@ impl Batch {
     /// Keep the counters `read` of the topics this process holds at run time `t_ns` (after
     /// a tick of one of its nodes), those that changed. Node threads may come out of order:
     /// a sample is never older than the one before.
-    pub(super) fn keep(&mut self, t_ns: u64, read: &[(TopicId, crate::topic::TopicStats)]) {
+    pub(super) fn keep(&mut self, t_ns: u64, read: &[(TopicId, ratelab_core::topic::TopicStats)]) {
         self.last_t = self.last_t.max(t_ns);
         for &(t, st) in read {
             if self.last.len() <= t.0 {
@@ -160,8 +162,8 @@ impl Batch {
 /// Read the counters of `held` (before taking the batch's lock: each read locks its topic).
 pub(super) fn read_counters(
     held: &[TopicId],
-    handles: &crate::graph::GraphHandles,
-) -> Vec<(TopicId, crate::topic::TopicStats)> {
+    handles: &ratelab_runtime::graph::GraphHandles,
+) -> Vec<(TopicId, ratelab_core::topic::TopicStats)> {
     held.iter()
         .map(|&t| (t, handles.topic(t).stats()))
         .collect()
@@ -171,7 +173,7 @@ pub(super) fn read_counters(
 /// it): those it subscribes to, and those it publishes that nobody subscribes to (as
 /// [`LiveStats::topics`]).
 ///
-/// [`TopicSpec::holder`]: crate::graph::spec::TopicSpec::holder
+/// [`TopicSpec::holder`]: ratelab_runtime::graph::spec::TopicSpec::holder
 pub(super) fn held_topics(spec: &GraphSpec, mine: &[NodeId]) -> Vec<TopicId> {
     (0..spec.topics.len())
         .map(TopicId)
@@ -182,9 +184,9 @@ pub(super) fn held_topics(spec: &GraphSpec, mine: &[NodeId]) -> Vec<TopicId> {
 /// Hands every actuator step to the stats thread.
 pub(super) struct StepTap(pub(super) Arc<Mutex<Batch>>);
 
-impl crate::graph::StepObserver for StepTap {
+impl ratelab_runtime::graph::StepObserver for StepTap {
     fn on_step(&mut self, rec: &StepRecord) {
-        crate::graph::lock(&self.0).push_step(rec.clone());
+        ratelab_runtime::graph::lock(&self.0).push_step(rec.clone());
     }
 }
 
@@ -205,7 +207,7 @@ pub(super) fn spawn_figures(
             let last = done.is_stopped();
             let mut msg = share.live_stats();
             {
-                let mut b = crate::graph::lock(&share.batch);
+                let mut b = ratelab_runtime::graph::lock(&share.batch);
                 msg.steps = std::mem::take(&mut b.steps).into();
                 msg.ticks = std::mem::take(&mut b.ticks).into();
                 msg.counters = std::mem::take(&mut b.counters).into();

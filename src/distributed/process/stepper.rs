@@ -15,18 +15,18 @@
 
 use super::stats::{held_topics, read_counters};
 use super::Share;
-use crate::graph::spec::GraphSpec;
-use crate::graph::TopicId;
 use crate::lockstep::{check_tick_report, TickInbox};
-use crate::node::Flow;
-use crate::runcore::RunCore;
-use crate::scheduler::{EndReason, Event, StopFlag};
-use crate::summary::GraphState;
-use crate::time::Nanos;
 use crate::wire::ToProcess;
 use crate::wire::{self, Ticked};
 use crate::{DistError, REPLY_TIMEOUT};
 use crossbeam_channel::{Receiver, Sender};
+use ratelab_core::node::Flow;
+use ratelab_core::time::Nanos;
+use ratelab_runtime::graph::spec::GraphSpec;
+use ratelab_runtime::graph::TopicId;
+use ratelab_runtime::runcore::RunCore;
+use ratelab_runtime::scheduler::{EndReason, Event, StopFlag};
+use ratelab_runtime::summary::GraphState;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex, TryLockError};
 use std::time::{Duration, Instant};
@@ -91,10 +91,10 @@ impl Slot {
     /// Zenoh's receive thread).
     pub(super) fn reports(&self, ms: Vec<Ticked>) {
         {
-            let mut inbox = crate::graph::lock(&self.inbox);
+            let mut inbox = ratelab_runtime::graph::lock(&self.inbox);
             for m in ms {
                 if let Err(e) = inbox.accept(m, &self.spec) {
-                    crate::graph::lock(&self.error).get_or_insert(e);
+                    ratelab_runtime::graph::lock(&self.error).get_or_insert(e);
                     return;
                 }
             }
@@ -110,7 +110,7 @@ impl Slot {
         self.dirty.store(true, Ordering::SeqCst);
         loop {
             let mut run = if on_main {
-                crate::graph::lock(&self.run)
+                ratelab_runtime::graph::lock(&self.run)
             } else {
                 match self.run.try_lock() {
                     Ok(g) => g,
@@ -120,13 +120,13 @@ impl Slot {
             };
             self.dirty.store(false, Ordering::SeqCst);
             if let Some(r) = run.as_mut() {
-                if crate::graph::lock(&self.error).is_none() {
+                if ratelab_runtime::graph::lock(&self.error).is_none() {
                     match r.advance(&self.inbox, on_main) {
                         Ok(false) => {}
                         Ok(true) => {
                             let _ = self.nudge.try_send(());
                         }
-                        Err(e) => *crate::graph::lock(&self.error) = Some(e),
+                        Err(e) => *ratelab_runtime::graph::lock(&self.error) = Some(e),
                     }
                 }
             }
@@ -139,12 +139,12 @@ impl Slot {
 
     /// Why the run cannot go on, if it cannot.
     fn take_error(&self) -> Option<DistError> {
-        crate::graph::lock(&self.error).take()
+        ratelab_runtime::graph::lock(&self.error).take()
     }
 
     /// Take the run out: the callbacks leave it alone from now on.
     fn take_run(&self) -> Option<Stepper> {
-        crate::graph::lock(&self.run).take()
+        ratelab_runtime::graph::lock(&self.run).take()
     }
 }
 
@@ -301,7 +301,7 @@ impl Stepper {
                     None => break, // an input message is still on its way
                 }
             } else {
-                let Some(m) = crate::graph::lock(inbox).take(self.index) else {
+                let Some(m) = ratelab_runtime::graph::lock(inbox).take(self.index) else {
                     break;
                 };
                 let compute =
@@ -394,7 +394,7 @@ impl Stepper {
             Vec::new()
         };
         let read = read_counters(&self.held, &share.handles);
-        crate::graph::lock(&share.batch).keep(t.0, &read);
+        ratelab_runtime::graph::lock(&share.batch).keep(t.0, &read);
         let over = flow == Flow::Stop || failed.is_some();
         self.kept_at.get_or_insert_with(Instant::now);
         self.outbox.push(Ticked {
@@ -444,7 +444,7 @@ pub(super) fn run_lockstep(
     launcher_gone: &StopFlag,
 ) -> Result<GraphState, DistError> {
     let run = Stepper::new(core, share.clone(), publisher, stop.clone(), callback_ticks);
-    *crate::graph::lock(&slot.run) = Some(run);
+    *ratelab_runtime::graph::lock(&slot.run) = Some(run);
     slot.wake(true);
     let failed = |e: DistError| {
         slot.take_run();
@@ -460,7 +460,7 @@ pub(super) fn run_lockstep(
         crossbeam_channel::select! {
             recv(ctl) -> m => match m {
                 Ok(ToProcess::Horizon { until_ns }) => {
-                    if let Some(r) = crate::graph::lock(&slot.run).as_mut() {
+                    if let Some(r) = ratelab_runtime::graph::lock(&slot.run).as_mut() {
                         r.horizon(until_ns);
                     }
                     slot.wake(true);

@@ -2,9 +2,9 @@
 //! ([`Setup`]), a refusal, the start, the horizon, the stop and the receipt of the report
 //! ([`ToProcess`]). JSON.
 
-use crate::config::ClockKind;
-use crate::qos::Fault;
-use crate::time::Nanos;
+use ratelab_core::qos::Fault;
+use ratelab_core::time::Nanos;
+use ratelab_runtime::config::ClockKind;
 use serde::{Deserialize, Serialize};
 
 /// What a process needs to run its part of the graph: the launcher's settings.
@@ -40,10 +40,13 @@ impl Setup {
     ///
     /// # Errors
     /// [`crate::DistError::Usage`] naming what is wrong (the bytes came from the network).
-    pub fn run_config(&self) -> Result<crate::config::RunConfig, crate::DistError> {
-        let spec = crate::graph::spec::GraphSpec::parse(&self.graph_toml, "the launcher's graph")
-            .map_err(|e| crate::DistError::Usage(e.to_string()))?;
-        let cfg = crate::config::RunConfig {
+    pub fn run_config(&self) -> Result<ratelab_runtime::config::RunConfig, crate::DistError> {
+        let spec = ratelab_runtime::graph::spec::GraphSpec::parse(
+            &self.graph_toml,
+            "the launcher's graph",
+        )
+        .map_err(|e| crate::DistError::Usage(e.to_string()))?;
+        let cfg = ratelab_runtime::config::RunConfig {
             seed: self.seed,
             duration: Nanos(self.duration_ns),
             graph: spec,

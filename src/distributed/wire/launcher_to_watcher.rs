@@ -1,7 +1,7 @@
 //! Launcher to watchers (`ratelab top`, `lab --attach`, a recording), on the graph's
 //! ended key: the merged summary and how the run ended ([`RunOver`]). JSON.
 
-use crate::scheduler::RunEnd;
+use ratelab_runtime::scheduler::RunEnd;
 use serde::{Deserialize, Serialize};
 
 /// The launcher's word that the run is over (key `ratelab/<graph>/@ended`): the merged
@@ -9,7 +9,7 @@ use serde::{Deserialize, Serialize};
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct RunOver {
     /// The merged metrics.
-    pub metrics: crate::metrics::Metrics,
+    pub metrics: ratelab_core::metrics::Metrics,
     /// How the run ended.
     pub end: RunEnd,
 }

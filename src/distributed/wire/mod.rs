@@ -1,7 +1,7 @@
 //! What crosses a process boundary: topic samples and the launcher's control messages.
 //!
 //! A topic sample is [`WireSample`]: the publisher's `seq`, publish stamp and origin stamp
-//! (the same three numbers an in-process [`crate::topic::Message`] carries), the send time
+//! (the same three numbers an in-process [`ratelab_core::topic::Message`] carries), the send time
 //! on the host's monotonic clock (for the over-the-wire latency) and the payload, encoded
 //! with `postcard` (serde's compact binary format). Control messages ([`ToProcess`],
 //! [`ToLauncher`]) are JSON (`serde_json`): few, and readable when debugging with
@@ -12,7 +12,7 @@
 //! One module per direction of travel, as dora-rs splits its messages:
 //! `process_to_process` (samples and tick reports), `launcher_to_process`,
 //! `process_to_launcher` and `launcher_to_watcher`; the codec, its bounds and the
-//! printable text they share ([`crate::text::printable`]) are here.
+//! printable text they share ([`ratelab_core::text::printable`]) are here.
 
 mod launcher_to_process;
 mod launcher_to_watcher;
@@ -29,7 +29,7 @@ pub use process_to_process::{
 
 use serde::{Deserialize, Serialize};
 
-pub use crate::limits::MAX_CONTROL_BYTES;
+pub use ratelab_core::limits::MAX_CONTROL_BYTES;
 
 /// The host's `CLOCK_MONOTONIC`, ns: the clock every process on one host shares (Rust's
 /// `Instant` reads the same clock on Linux).
@@ -86,15 +86,15 @@ pub fn encode_json<T: Serialize>(msg: &T) -> Vec<u8> {
 /// Decode a control message, refusing anything over [`MAX_CONTROL_BYTES`] or malformed.
 /// Its text arrives printable: every control character in any string or map key (an escape
 /// sequence that would clear a terminal, a C1 control, DEL) is written out as `\u{1b}`
-/// ([`crate::text::printable`]) before anything prints or records it. The one exception is a [`Setup`]'s
+/// ([`ratelab_core::text::printable`]) before anything prints or records it. The one exception is a [`Setup`]'s
 /// `graph_toml`, a file's text with its newlines, which is parsed and validated
-/// ([`crate::graph::GraphSpec::parse`]), never printed.
+/// ([`ratelab_runtime::graph::GraphSpec::parse`]), never printed.
 ///
 /// # Errors
 /// One line.
 pub fn decode_json<T: for<'de> Deserialize<'de>>(bytes: &[u8]) -> Result<T, String> {
     if bytes.len() > MAX_CONTROL_BYTES {
-        return Err(crate::limits::refusal(
+        return Err(ratelab_core::limits::refusal(
             format_args!(
                 "a control message of {} bytes (at most {MAX_CONTROL_BYTES})",
                 bytes.len()
@@ -126,7 +126,7 @@ fn make_printable(v: &mut serde_json::Value) {
     use serde_json::Value;
     match v {
         Value::String(s) if s.chars().any(char::is_control) => {
-            *s = crate::text::printable(s).into_owned()
+            *s = ratelab_core::text::printable(s).into_owned()
         }
         Value::Array(a) => a.iter_mut().for_each(make_printable),
         Value::Object(o) => {
@@ -135,7 +135,7 @@ fn make_printable(v: &mut serde_json::Value) {
                 if k != "graph_toml" {
                     make_printable(&mut x);
                 }
-                o.insert(crate::text::printable(&k).into_owned(), x);
+                o.insert(ratelab_core::text::printable(&k).into_owned(), x);
             }
         }
         _ => {}
@@ -158,9 +158,9 @@ pub fn cut_to_bytes(mut text: String, max: usize) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::config::ClockKind;
-    use crate::msg::AnyTopic;
-    use crate::msg::{ForceMsg, Message, MsgData, PositionMsg};
+    use ratelab_core::msg::AnyTopic;
+    use ratelab_core::msg::{ForceMsg, Message, MsgData, PositionMsg};
+    use ratelab_runtime::config::ClockKind;
 
     #[test]
     fn a_sample_round_trips_and_hostile_bytes_are_refused() {
@@ -223,10 +223,10 @@ mod tests {
             decode_json::<ToLauncher>(r#"{"msg":"ready","process":"robot \"1\" é"}"#.as_bytes())
                 .unwrap();
         assert_eq!(plain.process(), "robot \"1\" é");
-        assert_eq!(crate::text::printable("50 Hz · ok"), "50 Hz · ok");
+        assert_eq!(ratelab_core::text::printable("50 Hz · ok"), "50 Hz · ok");
         // A graph file's text keeps its lines (it is parsed, not printed).
         let setup = Setup {
-            graph_toml: crate::graph::GraphSpec::chapter().to_toml(),
+            graph_toml: ratelab_runtime::graph::GraphSpec::chapter().to_toml(),
             seed: 0,
             duration_ns: 1,
             clock: ClockKind::Virtual,

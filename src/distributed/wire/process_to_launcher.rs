@@ -2,8 +2,8 @@
 //! there): the join, ready, its run's end and its report with the over-the-wire latency
 //! of what it received ([`ToLauncher`], [`WireLink`]). JSON.
 
-use crate::scheduler::RunEnd;
-use crate::summary::GraphState;
+use ratelab_runtime::scheduler::RunEnd;
+use ratelab_runtime::summary::GraphState;
 use serde::{Deserialize, Serialize};
 
 /// A process → the launcher (key `ratelab/<graph>/@up`).

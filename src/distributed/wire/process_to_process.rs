@@ -5,12 +5,12 @@
 //! postcard, both bounded and decoded exactly.
 
 use super::decode_exact;
-use crate::limits;
-use crate::msg::AnyTopic;
-use crate::time::Nanos;
+use ratelab_core::limits;
+use ratelab_core::msg::AnyTopic;
+use ratelab_core::time::Nanos;
 use serde::{Deserialize, Serialize};
 
-pub use crate::limits::MAX_SAMPLE_BYTES;
+pub use ratelab_core::limits::MAX_SAMPLE_BYTES;
 
 /// The largest sequence number accepted: an hour at 10 kHz is 3.6 × 10⁷ messages; this
 /// leaves room and keeps every counter far from overflow.
@@ -33,8 +33,8 @@ pub struct WireSample {
     /// When it was sent, on the host's `CLOCK_MONOTONIC`, ns: receive time minus this is
     /// the over-the-wire latency (exact on one host; across hosts, see docs/distributed.md).
     pub sent_mono_ns: u64,
-    /// The payload: the message in its type's wire encoding ([`crate::msg::MsgData::to_bytes`]),
-    /// decoded by the receiving topic's type ([`crate::msg::MsgType::decode`]), exactly.
+    /// The payload: the message in its type's wire encoding ([`ratelab_core::msg::MsgData::to_bytes`]),
+    /// decoded by the receiving topic's type ([`ratelab_core::msg::MsgType::decode`]), exactly.
     /// Written as one run of bytes (postcard's length and the bytes, as a sequence of bytes
     /// is written, so the wire is the same), copied whole rather than byte by byte.
     #[serde(with = "serde_bytes")]
@@ -46,7 +46,7 @@ impl WireSample {
     /// `offset` (the publisher's `seq` minus the copy's, kept by the caller per topic, `None`
     /// before the first sample) lets a subscriber join late: what was published before its
     /// first sample is not its loss. After that, a gap in `seq` is counted as lost on the wire
-    /// ([`crate::topic::Subscription::count_lost`]) before the sample is published. A publisher that
+    /// ([`ratelab_core::topic::Subscription::count_lost`]) before the sample is published. A publisher that
     /// restarted (its `seq` went back) is taken as a new one. A `seq` more than
     /// [`MAX_SEQ_JUMP`] ahead of the last is refused, not counted as lost: no publisher gets
     /// that far ahead of its subscriber in a run, and a forged number must not inflate `lost`.
@@ -118,7 +118,7 @@ pub struct Ticked {
     /// The node's process.
     pub process: String,
     /// The event's place in the run's one order of events (0, 1, …: the virtual
-    /// scheduler's order, [`crate::runcore::RunCore::next_event`], which every
+    /// scheduler's order, [`ratelab_runtime::runcore::RunCore::next_event`], which every
     /// process computes alike).
     pub index: u64,
     /// The node (index in the graph).
@@ -133,13 +133,13 @@ pub struct Ticked {
     /// The node panicked (or its input never came): the message.
     pub failed: Option<String>,
     /// The event is the end of the tick's compute time (its held outputs went out then,
-    /// [`crate::scheduler::Event::Publish`]), not its start. Only under executors or compute
-    /// times ([`crate::executor`]).
+    /// [`ratelab_runtime::scheduler::Event::Publish`]), not its start. Only under executors or compute
+    /// times ([`ratelab_core::executor`]).
     pub publish: bool,
     /// At a start: the tick's compute time as the node drew it, ns (0: its outputs went out
     /// at once). Every other process schedules the tick's end by it
-    /// ([`crate::scheduler::VirtualScheduler::start_elsewhere`]); at most
-    /// [`crate::executor::MAX_COMPUTE`].
+    /// ([`ratelab_runtime::scheduler::VirtualScheduler::start_elsewhere`]); at most
+    /// [`ratelab_core::executor::MAX_COMPUTE`].
     pub compute_ns: u64,
 }
 
@@ -185,11 +185,11 @@ pub fn decode_reports(bytes: &[u8]) -> Result<Vec<Ticked>, String> {
         ));
     }
     for t in &mut ts {
-        t.process = crate::text::printable(&t.process).into_owned();
+        t.process = ratelab_core::text::printable(&t.process).into_owned();
         t.failed = t
             .failed
             .as_deref()
-            .map(|f| crate::text::printable(f).into_owned());
+            .map(|f| ratelab_core::text::printable(f).into_owned());
     }
     Ok(ts)
 }

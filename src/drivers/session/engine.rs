@@ -2,19 +2,19 @@
 //! end asks (reset, next seed, switch clock), applies and logs commands, streams telemetry.
 
 use super::log::{LoggedRun, SessionLog};
-use crate::checkpoint::load_policy;
-use crate::config::{ClockKind, RunConfig};
-use crate::graph::{GraphHandles, StepObserver};
-use crate::metrics::{Metrics, NodeTiming};
-use crate::policy::BrainSlot;
-use crate::recording::{RecordOptions, Recording};
 use crate::run::{build_graph, summarize, Command, TimedCommand};
-use crate::runcore::{CoreOptions, RunCore, HISTORY_EVERY};
-use crate::runlog::StepRecord;
-use crate::scheduler::RunEnd;
-use crate::telemetry::{describe, Control, Speed, Telemetry};
-use crate::time::Nanos;
 use crossbeam_channel::{Receiver, Sender};
+use ratelab_core::metrics::{Metrics, NodeTiming};
+use ratelab_core::runlog::StepRecord;
+use ratelab_core::time::Nanos;
+use ratelab_recording::{RecordOptions, Recording};
+use ratelab_runtime::checkpoint::load_policy;
+use ratelab_runtime::config::{ClockKind, RunConfig};
+use ratelab_runtime::graph::{GraphHandles, StepObserver};
+use ratelab_runtime::policy::BrainSlot;
+use ratelab_runtime::runcore::{CoreOptions, RunCore, HISTORY_EVERY};
+use ratelab_runtime::scheduler::RunEnd;
+use ratelab_runtime::telemetry::{describe, Control, Speed, Telemetry};
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
@@ -23,7 +23,9 @@ use std::sync::Arc;
 /// the graph file with the command line's overrides (`--rate`, `--depth`, `--qos`, …)
 /// applied, as at the start.
 #[derive(Clone)]
-pub struct GraphSource(pub Arc<dyn Fn() -> Result<crate::graph::GraphSpec, String> + Send + Sync>);
+pub struct GraphSource(
+    pub Arc<dyn Fn() -> Result<ratelab_runtime::graph::GraphSpec, String> + Send + Sync>,
+);
 
 impl std::fmt::Debug for GraphSource {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
@@ -45,7 +47,7 @@ pub struct SessionSettings {
     /// Stream recordings to a viewer as well.
     pub spawn: bool,
     /// Record only this span of each run's time (`--record-window`).
-    pub record_window: Option<crate::recording::RecordWindow>,
+    pub record_window: Option<ratelab_recording::RecordWindow>,
     /// Where to save the session log after every run and command.
     pub session_file: Option<PathBuf>,
     /// Start paused.
@@ -56,9 +58,12 @@ pub struct SessionSettings {
     /// file exists is refused, never overwritten. The session log is checked once, by the
     /// caller, before the session starts, and then rewritten by the session as it goes.
     pub force: bool,
-    /// Offer each run's graph to ROS 2 through this session ([`crate::ros2`]), opened by the
+    /// Offer each run's graph to ROS 2 through this session ([`ratelab_ros2`]), opened by the
     /// caller before the session starts (one session, one router, for all runs).
-    pub ros2: Option<(crate::ros2::session::Ros2Session, crate::ros2::Ros2Options)>,
+    pub ros2: Option<(
+        ratelab_ros2::session::Ros2Session,
+        ratelab_ros2::Ros2Options,
+    )>,
     /// Where the front end's controls go (its own sender of them): a node's `rate_hz` set
     /// from ROS 2 arrives as its rate key's command would. `None`: read-only over ROS 2.
     pub control: Option<Sender<Control>>,
@@ -109,19 +114,25 @@ pub struct Engine {
     /// The graph as its files gave it when they were last read (at the start, or a save's
     /// reload): what a save under the real clock is compared with, not the run's graph,
     /// whose rates and depths the keys may have changed since.
-    pub(super) file_graph: crate::graph::GraphSpec,
+    pub(super) file_graph: ratelab_runtime::graph::GraphSpec,
     /// A save's code loading, or being judged, on a thread of its own (see
     /// [`super::reload`]).
     pub(super) reloading: Option<super::trial::Pending>,
     /// Reloads superseded or dropped, watched until their threads end.
     pub(super) cancelled: Vec<super::trial::Cancelled>,
+    /// Node rates set from ROS 2 (`ros2 param set NODE rate_hz HZ`), (node, Hz), not yet
+    /// applied: the command that applies one is recorded as a ROS 2 parameter set.
+    ros2_sets: Arc<std::sync::Mutex<Vec<(String, f64)>>>,
+    /// The run's actuator ticks over its first [`JUDGE_FOR`], which a save's reload line
+    /// compares the new code's with ([`super::compare`]).
+    pub(super) opening: super::compare::Opening,
 }
 
 /// How a run of the lab ended, for the next: what the user asked, and the graph (rates,
 /// depths), brain and clock it ended with.
 struct RunOutcome {
     next: Next,
-    graph: crate::graph::GraphSpec,
+    graph: ratelab_runtime::graph::GraphSpec,
     policy: String,
     clock: ClockKind,
 }
@@ -133,7 +144,7 @@ pub(super) type Segment = (
     Next,
     RunEnd,
     Option<Vec<NodeTiming>>,
-    Option<crate::executor::ExecFigures>,
+    Option<ratelab_core::executor::ExecFigures>,
 );
 
 /// What ended a run from the engine's side.
@@ -165,6 +176,8 @@ impl Engine {
             muted: Arc::new(AtomicBool::new(false)),
             reloading: None,
             cancelled: Vec::new(),
+            ros2_sets: Arc::default(),
+            opening: super::compare::Opening::upto(JUDGE_FOR),
         }
     }
 
@@ -285,8 +298,13 @@ impl Engine {
         // headless run's does — a script's loading included — until the run ends.
         let mut recorder = recording
             .clone()
-            .map(|r| crate::textlog::add_recorder(Box::new(move |line| r.log_line(&line))));
-        let mut observers = vec![self.telemetry_observer().observer()];
+            .map(|r| ratelab_core::textlog::add_recorder(Box::new(move |line| r.log_line(&line))));
+        // This run's first ticks, for a save's reload line (a new run, a new opening).
+        self.opening = super::compare::Opening::upto(JUDGE_FOR);
+        let mut observers = vec![
+            self.telemetry_observer().observer(),
+            self.opening.observer(),
+        ];
         if let Some(r) = &recording {
             observers.push(r.observer());
         }
@@ -310,20 +328,13 @@ impl Engine {
                         x.name, opts.domain
                     )));
                 }
-                // `ros2 param set NODE rate_hz HZ` is the lab's rate key: a command, logged.
-                let set_rate = self.settings.control.clone().map(|tx| {
-                    std::sync::Arc::new(move |node: &str, hz: f64| {
-                        let node = node.to_string();
-                        tx.send(Control::Apply(Command::SetNodeHz { node, hz }))
-                            .map_err(|_| "the lab has ended".to_string())
-                    }) as crate::ros2::bridge::SetNodeRate
-                });
-                let offer = crate::ros2::bridge::Offer {
+                let set_rate = self.ros2_set_rate();
+                let offer = ratelab_ros2::bridge::Offer {
                     set_rate,
-                    ..crate::ros2::bridge::Offer::whole(h)
+                    ..ratelab_ros2::bridge::Offer::whole(h)
                 };
-                let stop = crate::scheduler::StopFlag::new();
-                match crate::ros2::Bridge::start(link, &offer, opts, cfg.clock, &stop) {
+                let stop = ratelab_runtime::scheduler::StopFlag::new();
+                match ratelab_ros2::Bridge::start(link, &offer, opts, cfg.clock, &stop) {
                     Ok(b) => {
                         let _ = self.tx.send(Telemetry::Applied(b.status()));
                         Some(b)
@@ -342,6 +353,7 @@ impl Engine {
         self.save_log();
         let policy_spec = policy.to_string();
         let telemetry = self.telemetry_observer();
+        let opening = self.opening.clone();
         let mut core = RunCore::with_graph(
             cfg,
             graph,
@@ -353,7 +365,9 @@ impl Engine {
                 remake_brain: Some(Box::new(move || {
                     load_policy(&policy_spec).map_err(|e| e.to_string())
                 })),
-                remake_observers: Some(Box::new(move || vec![telemetry.observer()])),
+                remake_observers: Some(Box::new(move || {
+                    vec![telemetry.observer(), opening.observer()]
+                })),
                 ..CoreOptions::default()
             },
         );
@@ -374,6 +388,9 @@ impl Engine {
                 under.clock = under.clock.other();
                 resumed = true;
                 self.clock_switched(under.clock, core.now());
+                if let Some(r) = &recording {
+                    r.clock_switched(core.now(), under.clock);
+                }
                 continue;
             }
             break part;
@@ -383,7 +400,7 @@ impl Engine {
         self.drop_reload(!matches!(next, Next::Quit));
         let handles = core.handles().clone();
         let ticks = core.scheduler().ticks().to_vec();
-        if let Some(r) = bridge.map(crate::ros2::Bridge::finish) {
+        if let Some(r) = bridge.map(ratelab_ros2::Bridge::finish) {
             if let Some(e) = &r.error {
                 let _ = self
                     .tx
@@ -397,7 +414,7 @@ impl Engine {
         let metrics = live_metrics(&under, &handles, &end, &ticks, timing, exec);
         drop(recorder.take());
         if let Some(r) = &recording {
-            let _ = r.finish(&metrics, &end);
+            finish_recording(r, &next, &metrics, &end);
         }
         let current = self.log.runs.last_mut().expect("pushed above");
         current.end_ns = end.at.0;
@@ -422,6 +439,21 @@ impl Engine {
         let _ = self.tx.send(Telemetry::ClockSwitched { at, clock });
     }
 
+    /// `ros2 param set NODE rate_hz HZ` is the lab's rate key: a command, logged (and
+    /// recorded as a parameter set: `ros2_sets`). `None`: read-only over ROS 2.
+    fn ros2_set_rate(&self) -> Option<ratelab_ros2::bridge::SetNodeRate> {
+        let sets = self.ros2_sets.clone();
+        ratelab_runtime::graph::lock(&sets).clear();
+        self.settings.control.clone().map(|tx| {
+            Arc::new(move |node: &str, hz: f64| {
+                let node = node.to_string();
+                ratelab_runtime::graph::lock(&sets).push((node.clone(), hz));
+                tx.send(Control::Apply(Command::SetNodeHz { node, hz }))
+                    .map_err(|_| "the lab has ended".to_string())
+            }) as ratelab_ros2::bridge::SetNodeRate
+        })
+    }
+
     /// This run's recording, when the lab records (`--record`), and the notice its
     /// creation gave (a viewer that could not be spawned).
     fn create_recording(
@@ -432,7 +464,7 @@ impl Engine {
         let Some(path) = self.recording_path() else {
             return Ok((None, None));
         };
-        crate::recording::check_output_path(&path, self.settings.force)
+        ratelab_recording::check_output_path(&path, self.settings.force)
             .map_err(|e| e.to_string())?;
         let (r, notice) = Recording::create_with(
             &path,
@@ -441,6 +473,8 @@ impl Engine {
             &RecordOptions {
                 spawn: self.settings.spawn,
                 window: self.settings.record_window,
+                ros2_domain: self.settings.ros2.as_ref().map(|(_, o)| o.domain),
+                bag: self.settings.ros2.as_ref().and_then(|(_, o)| o.bag.clone()),
             },
             self.settings.force,
         )
@@ -473,7 +507,7 @@ impl Engine {
         let open = spec
             .nodes
             .iter()
-            .any(|n| n.kind.code() != crate::graph::kind::Code::BuiltIn);
+            .any(|n| n.kind.code() != ratelab_runtime::graph::kind::Code::BuiltIn);
         let policy = self.current_policy_spec(&self.run_policy);
         if open || policy.contains(".py") {
             return;
@@ -543,7 +577,7 @@ impl Engine {
 
     /// The graph the next run starts with: this run's as it is now, with the changes made
     /// while it was frozen.
-    fn next_spec(&self, h: &GraphHandles) -> crate::graph::GraphSpec {
+    fn next_spec(&self, h: &GraphHandles) -> ratelab_runtime::graph::GraphSpec {
         let mut next = h.current_spec();
         let mut brain = String::new();
         for cmd in &self.next_run {
@@ -644,13 +678,20 @@ impl Engine {
         now: bool,
         apply: impl FnOnce(&Command) -> Result<(), String>,
     ) -> bool {
+        // A rate set from ROS 2 arrives as the rate key's command: told apart here.
+        let from_ros2 = match &cmd {
+            Command::SetNodeHz { node, hz } => {
+                let mut sets = ratelab_runtime::graph::lock(&self.ros2_sets);
+                let found = sets.iter().position(|(n, h)| n == node && h == hz);
+                found.map(|i| sets.remove(i)).is_some()
+            }
+            _ => false,
+        };
         match apply(&cmd) {
             Ok(()) => {
                 let text = describe(&cmd);
                 if let Some(r) = recording {
-                    if let Command::SetPolicy { .. } = cmd {
-                        r.change(at, &text);
-                    }
+                    record_change(r, at, &cmd, &text, from_ros2);
                 }
                 self.log
                     .runs
@@ -675,6 +716,33 @@ impl Engine {
     }
 }
 
+/// Finish a run's recording (its summary `metrics`, its end `end`); a run that ends for a
+/// save's reload (`next`) says so at its end: the saved code runs from t = 0 in the next.
+fn finish_recording(r: &Recording, next: &Next, metrics: &Metrics, end: &RunEnd) {
+    if let Next::Reload(_) = next {
+        let text = "reloaded: the saved code runs again from t = 0, in the next recording";
+        r.reloaded(end.at, text);
+    }
+    let _ = r.finish(metrics, end);
+}
+
+/// Record a command applied at run time `at` that the graph's own rows do not show as an
+/// event with a mark: a brain swap (`text`), a fault injected (the stall key `k`), a rate
+/// set from ROS 2 (`from_ros2`). Rates, depths and QoS changed from the keys are the
+/// graph's, recorded by its observer.
+fn record_change(r: &Recording, at: Nanos, cmd: &Command, text: &str, from_ros2: bool) {
+    match cmd {
+        Command::SetPolicy { .. } => r.change(at, text),
+        Command::InjectFault { fault } => {
+            if let Ok(f) = ratelab_runtime::command::parse_fault(fault) {
+                r.injected_fault(at, &f);
+            }
+        }
+        Command::SetNodeHz { node, hz } if from_ros2 => r.parameter_set(at, node, *hz),
+        _ => {}
+    }
+}
+
 /// The summary of a live run that ended at `end.at` (its duration, for an open-ended run).
 pub(super) fn live_metrics(
     cfg: &RunConfig,
@@ -682,7 +750,7 @@ pub(super) fn live_metrics(
     end: &RunEnd,
     ticks: &[u64],
     timing: Option<Vec<NodeTiming>>,
-    exec: Option<crate::executor::ExecFigures>,
+    exec: Option<ratelab_core::executor::ExecFigures>,
 ) -> Metrics {
     summarize(
         &RunConfig {

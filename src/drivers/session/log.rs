@@ -1,14 +1,14 @@
 //! The session log (JSON): every run of a lab session with the commands applied and the
 //! virtual instants they took effect at, and its exact replay.
 
-use crate::checkpoint::load_policy;
-use crate::config::{ClockKind, RunConfig};
-use crate::graph::GraphSpec;
-use crate::metrics::Metrics;
-use crate::plant::ACTUATOR_HZ;
 use crate::run::{RunOptions, TimedCommand};
-use crate::time::Nanos;
-use crate::time::MAX_DURATION;
+use ratelab_core::metrics::Metrics;
+use ratelab_core::plant::ACTUATOR_HZ;
+use ratelab_core::time::Nanos;
+use ratelab_core::time::MAX_DURATION;
+use ratelab_runtime::checkpoint::load_policy;
+use ratelab_runtime::config::{ClockKind, RunConfig};
+use ratelab_runtime::graph::GraphSpec;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
@@ -58,7 +58,7 @@ pub struct LoggedRun {
     pub phase_offsets_ns: Vec<u64>,
     /// Faults injected (`--stall`, `--kill`), when any was.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
-    pub faults: Vec<crate::qos::Fault>,
+    pub faults: Vec<ratelab_core::qos::Fault>,
     /// Brain at the start.
     pub policy: String,
     /// Run time at which the run ended (the last instant run), ns.
@@ -152,11 +152,11 @@ impl LoggedRun {
                 ),
             ));
         }
-        if self.faults.len() > crate::config::MAX_FAULTS {
+        if self.faults.len() > ratelab_runtime::config::MAX_FAULTS {
             return Err(bad(
                 "faults",
-                crate::limits::refusal(
-                    format_args!("at most {} faults", crate::config::MAX_FAULTS),
+                ratelab_core::limits::refusal(
+                    format_args!("at most {} faults", ratelab_runtime::config::MAX_FAULTS),
                     "MAX_FAULTS",
                 ),
             ));
@@ -238,7 +238,7 @@ pub enum ReplayError {
     Run(#[from] crate::run::RunError),
     /// The brain could not be loaded.
     #[error(transparent)]
-    Policy(#[from] crate::checkpoint::PolicyError),
+    Policy(#[from] ratelab_runtime::checkpoint::PolicyError),
 }
 
 impl SessionLog {
@@ -258,7 +258,7 @@ impl SessionLog {
     /// [`ReplayError`] naming the file, and the run and field at fault.
     pub fn load(path: &Path) -> Result<Self, ReplayError> {
         let shown = path.display().to_string();
-        let bytes = crate::input::read_regular_file(path, MAX_SESSION_BYTES)
+        let bytes = ratelab_core::input::read_regular_file(path, MAX_SESSION_BYTES)
             .map_err(|e| ReplayError::Read(e.to_string()))?;
         let text = String::from_utf8(bytes).map_err(|_| ReplayError::Parse {
             path: shown.clone(),
@@ -290,17 +290,17 @@ impl SessionLog {
         Ok(log)
     }
 
-    /// Write it (pretty JSON) through [`crate::output`]: a temporary file beside `path`,
+    /// Write it (pretty JSON) through [`ratelab_core::output`]: a temporary file beside `path`,
     /// moved into place; never through a symbolic link or into a non-regular file. The
     /// session rewrites its own log after every run and command, so an existing regular
     /// file is replaced: whoever starts a session checks the name once first
-    /// ([`crate::output::check_target`], honouring `--force`).
+    /// ([`ratelab_core::output::check_target`], honouring `--force`).
     ///
     /// # Errors
-    /// [`crate::output::OutputError`] naming the file.
-    pub fn save(&self, path: &Path) -> Result<(), crate::output::OutputError> {
+    /// [`ratelab_core::output::OutputError`] naming the file.
+    pub fn save(&self, path: &Path) -> Result<(), ratelab_core::output::OutputError> {
         let text = serde_json::to_string_pretty(self).expect("serializable") + "\n";
-        crate::output::write_file(path, true, text.as_bytes())
+        ratelab_core::output::write_file(path, true, text.as_bytes())
     }
 
     /// Whether `replayed` (run `index` replayed) matches the live run's metrics byte for byte,

@@ -1,18 +1,18 @@
 //! A real-clock run in the lab: the run core's graph on its executor's threads
-//! ([`crate::runcore::RunCore::run_real`]), controls applied at once (from each node's next
+//! ([`ratelab_runtime::runcore::RunCore::run_real`]), controls applied at once (from each node's next
 //! tick).
 
 use super::engine::{live_metrics, Engine, Next, Segment};
 use super::reload::{Ready, RealExit};
 use super::trial::Restart;
-use crate::config::RunConfig;
-use crate::recording::Recording;
 use crate::run::Command;
-use crate::runcore::RunCore;
-use crate::scheduler::{EndReason, RealOptions, RunEnd, StopFlag};
-use crate::telemetry::{Control, Telemetry};
-use crate::time::Nanos;
 use crossbeam_channel::RecvTimeoutError;
+use ratelab_core::time::Nanos;
+use ratelab_recording::Recording;
+use ratelab_runtime::config::RunConfig;
+use ratelab_runtime::runcore::RunCore;
+use ratelab_runtime::scheduler::{EndReason, RealOptions, RunEnd, StopFlag};
+use ratelab_runtime::telemetry::{Control, Telemetry};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -20,9 +20,9 @@ use std::time::{Duration, Instant};
 /// What a stretch of the real clock runs ([`Engine::real_once`]).
 struct Stretch<'a> {
     cfg: &'a RunConfig,
-    handles: &'a crate::graph::GraphHandles,
+    handles: &'a ratelab_runtime::graph::GraphHandles,
     /// The run's graph as its nodes were built.
-    running: &'a crate::graph::GraphSpec,
+    running: &'a ratelab_runtime::graph::GraphSpec,
     recording: &'a Option<Recording>,
     /// The run has ended (keys set the next run).
     ended: bool,
@@ -41,7 +41,7 @@ impl Engine {
         cfg: &RunConfig,
         recording: &Option<Recording>,
     ) -> Segment {
-        if let Some(Err(e)) = cfg.rt_priority.map(crate::realtime::probe_fifo) {
+        if let Some(Err(e)) = cfg.rt_priority.map(ratelab_core::realtime::probe_fifo) {
             // Told now, not only when the run ends: node threads inherit this thread's
             // privileges, so they will be refused the same way.
             let _ = self.tx.send(Telemetry::Applied(format!(
@@ -51,7 +51,13 @@ impl Engine {
         loop {
             match self.real_once(core, cfg, recording) {
                 RealExit::Done(part) => return part,
-                RealExit::Restart(r) => self.restart_in_place(core, r),
+                RealExit::Restart(r) => {
+                    let at = core.now();
+                    // Restarted in place: an event of the run, marked as a change.
+                    if let (Some(line), Some(rec)) = (self.restart_in_place(core, r), recording) {
+                        rec.reloaded(at, &line);
+                    }
+                }
             }
         }
     }
@@ -77,17 +83,19 @@ impl Engine {
         let tx = self.tx.clone();
         let rec = recording.clone();
         let opts = RealOptions {
-            on_tick: Some(Arc::new(move |t: &crate::scheduler::TickReport<'_>| {
-                let _ = tx.send(Telemetry::NodeTick {
-                    node: t.node,
-                    now: t.now,
-                    lateness: t.lateness,
-                    took: t.took,
-                });
-                if let Some(r) = &rec {
-                    r.real_tick(t);
-                }
-            })),
+            on_tick: Some(Arc::new(
+                move |t: &ratelab_runtime::scheduler::TickReport<'_>| {
+                    let _ = tx.send(Telemetry::NodeTick {
+                        node: t.node,
+                        now: t.now,
+                        lateness: t.lateness,
+                        took: t.took,
+                    });
+                    if let Some(r) = &rec {
+                        r.real_tick(t);
+                    }
+                },
+            )),
             pause: Some(pause.clone()),
             ..crate::run::real_options(cfg)
         };
@@ -287,7 +295,7 @@ impl Engine {
         cmd: Command,
         now: Nanos,
         cfg: &RunConfig,
-        handles: &crate::graph::GraphHandles,
+        handles: &ratelab_runtime::graph::GraphHandles,
         recording: &Option<Recording>,
     ) {
         if let Command::SetPhase { .. } = cmd {
@@ -301,7 +309,7 @@ impl Engine {
             cmd,
             Command::SetControlHz { .. } | Command::SetSensorHz { .. } | Command::SetNodeHz { .. }
         );
-        let text = crate::telemetry::describe(&cmd);
+        let text = ratelab_runtime::telemetry::describe(&cmd);
         let executor = matches!(cmd, Command::SetExecutor { .. });
         let applied = if executor {
             self.apply_for_next_run(cmd, now, handles, recording)

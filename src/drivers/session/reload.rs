@@ -5,8 +5,10 @@
 //! (`FILE:LINE: …`) goes to the log pane. Code that loads is first run headless under the
 //! virtual clock, its lines muted, over the span the run before reached (at least 10 s, at
 //! most [`super::engine::JUDGE_FOR`]), so that one line can say what changed — `reloaded
-//! FILE: fell at 0.84 s → balanced (10.0 s) · latency p50 40 → 40 ms · /obs dropped 400 →
-//! 0` — and then the lab runs it again from t = 0 with the run before drawn as a ghost.
+//! FILE: fell at 0.84 s → balanced (10.0 s) · over the first 0.84 s of each: latency p50 40
+//! → 40 ms, /obs dropped 9 → 0`, both runs' figures over the run time both ran
+//! ([`super::compare`]) — and then the lab runs it again from t = 0 with the run before
+//! drawn as a ghost.
 //!
 //! Under the real clock a run cannot start again alike, so the saved code takes effect in
 //! place ([`Engine::reload_in_place`]): the nodes whose code or parameters changed (a Python
@@ -25,18 +27,20 @@
 //! supersedes it, and a new run (`r`, `R`, `c` after the end) or quitting drops it: it is
 //! stopped and interrupted ([`super::trial::Cancelled`]). Once it has returned, the code
 //! is loaded again for the run on screen (a restart in place, the next run), as long as it
-//! took the first time.
+//! took the first time. A judged trial that stalled on its way (a callback that sleeps 5 s)
+//! says so at the end of its reload line (`· the trial's callback stalled 5.0 s at t=1.20
+//! s`: [`super::trial::Tried::stall_note`]).
 
+use super::compare::{changes, RunFigures};
 use super::engine::{Engine, Next, JUDGE_FOR};
 use super::trial::{Job, Pending, Poll, Restart, Then, Trial, SAID_AFTER};
-use crate::config::{ClockKind, RunConfig};
-use crate::graph::{GraphHandles, GraphSpec};
-use crate::metrics::Metrics;
 use crate::run::Command;
-use crate::runcore::RunCore;
-use crate::telemetry::Telemetry;
-use crate::textlog::Level;
-use crate::time::Nanos;
+use ratelab_core::textlog::Level;
+use ratelab_core::time::Nanos;
+use ratelab_runtime::config::{ClockKind, RunConfig};
+use ratelab_runtime::graph::{GraphHandles, GraphSpec};
+use ratelab_runtime::runcore::RunCore;
+use ratelab_runtime::telemetry::Telemetry;
 use std::path::Path;
 
 /// The shortest span a reloaded graph is judged over.
@@ -60,12 +64,12 @@ pub(super) enum Ready {
 }
 
 impl Engine {
-    /// `file` was saved while the run of `cfg` had reached `old` (its figures so far; `None`
-    /// under the real clock): the graph read again now, then built and judged on a thread
-    /// of its own ([`Trial`]), superseding a reload under way; [`Engine::reload_ready`]
-    /// takes up what it comes to. A graph that cannot be read again is said at once, and
-    /// the run goes on.
-    pub(super) fn reload(&mut self, cfg: &RunConfig, file: &Path, old: Option<Metrics>) {
+    /// `file` was saved while the run of `cfg` had reached `old` (its figures so far, its
+    /// ticks among them; `None` under the real clock): the graph read again now, then built
+    /// and judged on a thread of its own ([`Trial`]), superseding a reload under way;
+    /// [`Engine::reload_ready`] takes up what it comes to. A graph that cannot be read again
+    /// is said at once, and the run goes on.
+    pub(super) fn reload(&mut self, cfg: &RunConfig, file: &Path, old: Option<RunFigures>) {
         self.drop_reload(false);
         let name = shown_name(file);
         let new_cfg = match self.reloaded_config(cfg) {
@@ -76,9 +80,7 @@ impl Engine {
             }
         };
         let policy = self.current_policy_spec(&self.run_policy);
-        let reached = old
-            .as_ref()
-            .map_or(Nanos::ZERO, |m| Nanos((m.sim_time_s * 1e9) as u64));
+        let reached = old.as_ref().map_or(Nanos::ZERO, |o| o.span);
         let job = Job::Judge {
             cfg: Box::new(judged(&new_cfg, reached)),
             policy,
@@ -108,7 +110,7 @@ impl Engine {
             return;
         };
         if say {
-            crate::textlog::emit_for(
+            ratelab_core::textlog::emit_for(
                 None,
                 None,
                 Level::Warn,
@@ -139,21 +141,27 @@ impl Engine {
             Poll::Done(outcome) => *outcome,
         };
         let Pending { name, then, .. } = self.reloading.take()?;
-        let figures = match outcome {
-            Ok(figures) => figures,
+        let tried = match outcome {
+            Ok(tried) => tried,
             Err(e) => {
                 self.not_reloaded(&name, &e);
                 return None;
             }
         };
+        let stalled = tried.stall_note();
         Some(match then {
             Then::Reload { cfg, old } => {
-                let line = match (figures, old) {
+                let mut line = match (tried.figures, old) {
                     (Some(new), Some(old)) => format!("reloaded {name}: {}", changes(&old, &new)),
                     _ => format!(
                         "reloaded {name}: the run starts again with the new code (real clock: not judged)"
                     ),
                 };
+                // Where the trial stalled, the run on screen will too: said last, which a
+                // narrow footer keeps.
+                if let Some(note) = stalled {
+                    line = format!("{line} · {note}");
+                }
                 self.said_reloaded(line);
                 Ready::Next(Next::Reload(cfg))
             }
@@ -188,13 +196,13 @@ impl Engine {
     /// Say (log pane and footer) that a reload loaded, in `line`: the ghost of the run before
     /// is drawn beside the next.
     fn said_reloaded(&self, line: String) {
-        crate::textlog::emit_for(None, None, Level::Info, &line);
+        ratelab_core::textlog::emit_for(None, None, Level::Info, &line);
         let _ = self.tx.send(Telemetry::Reloaded { line });
     }
 
     /// Say `line` in the log pane and the footer, as a warning.
     fn warn(&self, line: String) {
-        crate::textlog::emit_for(None, None, Level::Warn, &line);
+        ratelab_core::textlog::emit_for(None, None, Level::Warn, &line);
         let _ = self.tx.send(Telemetry::Error(line));
     }
 
@@ -208,7 +216,7 @@ impl Engine {
             keep
         });
         for line in said {
-            crate::textlog::emit_for(None, None, Level::Warn, &line);
+            ratelab_core::textlog::emit_for(None, None, Level::Warn, &line);
         }
     }
 
@@ -232,7 +240,7 @@ impl Engine {
             format!("{file}: {why}")
         };
         let line = format!("not reloaded: {why} (the run goes on with the code before)");
-        crate::textlog::emit_for(None, None, Level::Error, &line);
+        ratelab_core::textlog::emit_for(None, None, Level::Error, &line);
         let _ = self.tx.send(Telemetry::Error(line));
     }
 }
@@ -366,7 +374,7 @@ impl Engine {
     /// The brain's file `name` was loaded again and swapped in, under the real clock.
     pub(super) fn brain_reloaded(&self, name: &str) {
         let line = format!("reloaded {name}: the brain swapped in place (real clock: not judged)");
-        crate::textlog::emit_for(None, None, Level::Info, &line);
+        ratelab_core::textlog::emit_for(None, None, Level::Info, &line);
         let _ = self.tx.send(Telemetry::Applied(line));
     }
 
@@ -374,7 +382,12 @@ impl Engine {
     /// and say what was done, or why not (the run goes on with the code before). Their code
     /// has loaded in a trial already ([`Engine::reload_in_place`]): it loads again here, for
     /// as long as it took there.
-    pub(super) fn restart_in_place(&mut self, core: &mut RunCore, r: Box<Restart>) {
+    /// Returns the line said when the nodes restarted (for the recording), `None` when not.
+    pub(super) fn restart_in_place(
+        &mut self,
+        core: &mut RunCore,
+        r: Box<Restart>,
+    ) -> Option<String> {
         let at = core.now();
         match core.restart_nodes(&r.spec, &r.which) {
             Ok(()) => {
@@ -390,10 +403,14 @@ impl Engine {
                     names.join(", "),
                     at.as_secs_f64()
                 );
-                crate::textlog::emit_for(None, None, Level::Info, &line);
-                let _ = self.tx.send(Telemetry::Applied(line));
+                ratelab_core::textlog::emit_for(None, None, Level::Info, &line);
+                let _ = self.tx.send(Telemetry::Applied(line.clone()));
+                Some(line)
             }
-            Err(e) => self.not_reloaded(&r.name, &e),
+            Err(e) => {
+                self.not_reloaded(&r.name, &e);
+                None
+            }
         }
     }
 }
@@ -401,7 +418,12 @@ impl Engine {
 /// What the lab says of a reload's trial that has not returned for [`SAID_AFTER`]: still
 /// loading (`at` is `None`), or in the instant at `at` of its run.
 fn stuck_line(name: &str, at: Option<Nanos>) -> String {
-    let secs = SAID_AFTER.as_secs();
+    stuck_after(name, at, SAID_AFTER)
+}
+
+/// [`stuck_line`] for a trial that has not returned for `after` (whole seconds are said).
+fn stuck_after(name: &str, at: Option<Nanos>, after: std::time::Duration) -> String {
+    let secs = after.as_secs();
     match at {
         None => format!(
             "loading {name} has not returned after {secs} s; the run on screen is the code before"
@@ -432,24 +454,42 @@ fn shown_name(file: &Path) -> String {
         .to_string()
 }
 
-/// What changed from `old` to `new`, in one line: how each run went, the sense→act latency
-/// p50, and each topic's drops (those that dropped anything).
-fn changes(old: &Metrics, new: &Metrics) -> String {
-    let outcome = |m: &Metrics| match (&m.node_failed, m.fell_at_s) {
-        (Some(_), _) => format!("failed at {:.2} s", m.sim_time_s),
-        (None, Some(t)) => format!("fell at {t:.2} s"),
-        (None, None) => format!("balanced ({:.1} s)", m.sim_time_s),
-    };
-    let mut parts = vec![format!("{} → {}", outcome(old), outcome(new))];
-    parts.push(format!(
-        "latency p50 {:.0} → {:.0} ms",
-        old.latency_p50_ms, new.latency_p50_ms
-    ));
-    for (topic, o) in &old.topics {
-        let n = new.topics.get(topic).map_or(0, |t| t.dropped);
-        if o.dropped > 0 || n > 0 {
-            parts.push(format!("{topic} dropped {} → {n}", o.dropped));
-        }
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A trial stuck in a callback names the file saved, how long, the run time of the
+    /// trial's instant, and that the run on screen is the code before; one stuck loading
+    /// says so.
+    #[test]
+    fn a_stuck_trial_is_said_with_its_file_and_where_it_is() {
+        assert_eq!(
+            stuck_line("nodes/policy.py", Some(Nanos(1_200_000_000))),
+            "reload of nodes/policy.py: its callback has not returned after 2 s of the trial run (t=1.20 s); the run on screen is the code before"
+        );
+        assert_eq!(
+            stuck_after("nodes/policy.py", Some(Nanos::ZERO), std::time::Duration::from_secs(5)),
+            "reload of nodes/policy.py: its callback has not returned after 5 s of the trial run (t=0.00 s); the run on screen is the code before"
+        );
+        assert_eq!(
+            stuck_line("brain.py", None),
+            "loading brain.py has not returned after 2 s; the run on screen is the code before"
+        );
     }
-    parts.join(" · ")
+
+    /// A trial is judged over the span the run before reached, at least 10 s, at most 30 s
+    /// and the run's duration, headless under the virtual clock.
+    #[test]
+    fn a_trial_runs_over_the_span_the_run_before_reached() {
+        let cfg = RunConfig {
+            clock: ClockKind::Real,
+            duration: Nanos(20 * Nanos::SECOND.0),
+            ..RunConfig::default()
+        };
+        let secs = |reached: u64| judged(&cfg, Nanos(reached * Nanos::SECOND.0)).duration;
+        assert_eq!(secs(2), JUDGE_AT_LEAST);
+        assert_eq!(secs(15), Nanos(15 * Nanos::SECOND.0));
+        assert_eq!(secs(25), cfg.duration);
+        assert_eq!(judged(&cfg, Nanos::ZERO).clock, ClockKind::Virtual);
+    }
 }

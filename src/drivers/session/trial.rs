@@ -12,16 +12,20 @@
 //! A trial's calls hold the interpreter's lock as any Python code does: a busy loop gives it
 //! up every switch interval (5 ms by default) and a sleep at once, so a live run of Python
 //! nodes goes on beside it, slower at worst.
+//!
+//! A trial that stalled and then returned (a callback that sleeps 5 s) is taken up as any
+//! other, and says so ([`Tried::stall_note`]): the reload line ends `· the trial's callback
+//! stalled 5.0 s at t=1.20 s`, as the run on screen will stall there too.
 
-use crate::checkpoint::load_policy;
-use crate::config::RunConfig;
-use crate::graph::{Graph, GraphHandles, GraphSpec};
-use crate::metrics::Metrics;
+use super::compare::{Opening, RunFigures};
 use crate::run::Command;
-use crate::runcore::{CoreOptions, RunCore};
-use crate::scheduler::StopFlag;
-use crate::time::Nanos;
 use crossbeam_channel::{Receiver, TryRecvError};
+use ratelab_core::time::Nanos;
+use ratelab_runtime::checkpoint::load_policy;
+use ratelab_runtime::config::RunConfig;
+use ratelab_runtime::graph::{Graph, GraphHandles, GraphSpec};
+use ratelab_runtime::runcore::{CoreOptions, RunCore};
+use ratelab_runtime::scheduler::StopFlag;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -58,7 +62,7 @@ pub(super) enum Then {
         /// The next run's settings.
         cfg: Box<RunConfig>,
         /// The run before's figures at the save.
-        old: Option<Box<Metrics>>,
+        old: Option<Box<RunFigures>>,
     },
     /// Restart nodes in place (under the real clock).
     Restart(Box<Restart>),
@@ -81,7 +85,8 @@ pub(super) struct Restart {
 /// What a trial does with the saved code.
 pub(super) enum Job {
     /// Build `cfg`'s graph with brain `policy` (loading every node's and the brain's code)
-    /// and run it headless to its duration (`cfg` under the virtual clock): its figures.
+    /// and run it headless to its duration (`cfg` under the virtual clock): its figures,
+    /// its actuator's ticks among them ([`RunFigures`]).
     Judge {
         /// The run, headless, under the virtual clock.
         cfg: Box<RunConfig>,
@@ -105,19 +110,123 @@ pub(super) enum Job {
     },
 }
 
-/// What a trial came to: a judged run's figures (`None` for a load only), or why the code
-/// does not load.
-pub(super) type Outcome = Result<Option<Metrics>, String>;
+/// What a trial came to ([`Tried`]), or why the code does not load.
+pub(super) type Outcome = Result<Tried, String>;
+
+/// A trial that returned: a judged run's figures, and where it stalled.
+pub(super) struct Tried {
+    /// The judged run's figures (`None` for a load only).
+    pub(super) figures: Option<Box<RunFigures>>,
+    /// How long its code took to load (its import, its constructor, the graph's building).
+    pub(super) loading: Duration,
+    /// Its longest instant, when it was one of a judged run: its run time, and how long it
+    /// took (wall time).
+    pub(super) longest: Option<(Nanos, Duration)>,
+}
+
+/// A judged run's instant (its callbacks) that took this long (wall time) is said in the
+/// reload line ([`Tried::stall_note`]): the run on screen will stall there too. Far past
+/// what an instant of a graph that balances takes (its period is 20 ms).
+pub(super) const STALL_SAID: Duration = Duration::from_secs(1);
+
+impl Tried {
+    /// A trial that only loaded code, in `loading`.
+    fn loaded(loading: Duration) -> Tried {
+        Tried {
+            figures: None,
+            loading,
+            longest: None,
+        }
+    }
+
+    /// What the reload line adds of where the trial stalled, if it did: its longest instant
+    /// when that took [`STALL_SAID`] or longer (`the trial's callback stalled 5.0 s at
+    /// t=1.20 s`), its loading when that took [`SAID_AFTER`] or longer (`loading it took
+    /// 3.0 s`); `None` when it did neither.
+    pub(super) fn stall_note(&self) -> Option<String> {
+        let mut notes = Vec::new();
+        if self.loading >= SAID_AFTER {
+            notes.push(format!(
+                "loading it took {:.1} s",
+                self.loading.as_secs_f64()
+            ));
+        }
+        if let Some((at, took)) = self.longest.filter(|(_, took)| *took >= STALL_SAID) {
+            notes.push(format!(
+                "the trial's callback stalled {:.1} s at t={:.2} s",
+                took.as_secs_f64(),
+                at.as_secs_f64()
+            ));
+        }
+        (!notes.is_empty()).then(|| notes.join(" · "))
+    }
+}
+
+/// Times a judged run's instants as it runs them ([`RunCore::run_to_end_with`] calls
+/// [`Stopwatch::next`] before each): its longest, and how long it took to come to its first
+/// (its loading, from when the stopwatch was made).
+struct Stopwatch {
+    /// When the stretch under way began: the trial's start, then each instant's.
+    from: Instant,
+    /// The instant under way (`None`: still loading).
+    at: Option<Nanos>,
+    loading: Duration,
+    longest: Option<(Nanos, Duration)>,
+}
+
+impl Stopwatch {
+    fn new() -> Stopwatch {
+        Stopwatch {
+            from: Instant::now(),
+            at: None,
+            loading: Duration::ZERO,
+            longest: None,
+        }
+    }
+
+    /// The run comes to its instant at `next` (`None`: it has ended): the stretch before
+    /// (its loading, or the instant before) is timed.
+    fn next(&mut self, next: Option<Nanos>) {
+        let took = self.from.elapsed();
+        match self.at {
+            None => self.loading = took,
+            Some(at) => {
+                if self.longest.is_none_or(|(_, most)| took > most) {
+                    self.longest = Some((at, took));
+                }
+            }
+        }
+        self.from = Instant::now();
+        self.at = next;
+    }
+}
 
 impl Job {
     fn run(self, progress: &AtomicU64, stop: &StopFlag) -> Outcome {
+        let started = Instant::now();
         match self {
             Job::Judge { cfg, policy } => {
+                let mut watch = Stopwatch::new();
                 let brain = load_policy(&policy).map_err(|e| e.to_string())?;
-                let mut core =
-                    RunCore::new(&cfg, brain, CoreOptions::default()).map_err(|e| e.to_string())?;
-                core.run_to_end_with(stop, |t| progress.store(t.0, Ordering::Relaxed));
-                Ok(Some(core.metrics()))
+                let opening = Opening::upto(cfg.duration);
+                let opts = CoreOptions {
+                    observers: vec![opening.observer()],
+                    ..CoreOptions::default()
+                };
+                let mut core = RunCore::new(&cfg, brain, opts).map_err(|e| e.to_string())?;
+                core.run_to_end_with(stop, |t| {
+                    progress.store(t.0, Ordering::Relaxed);
+                    watch.next(Some(t));
+                });
+                watch.next(None);
+                let topics = core.handles().spec.topics.iter();
+                let topics = topics.map(|t| t.name.clone()).collect();
+                let figures = RunFigures::of(&core.metrics(), topics, opening.ticks());
+                Ok(Tried {
+                    figures: Some(Box::new(figures)),
+                    loading: watch.loading,
+                    longest: watch.longest,
+                })
             }
             Job::Rebuild {
                 handles,
@@ -127,10 +236,10 @@ impl Job {
                 for i in which {
                     drop(Graph::rebuild_node(&handles, seed, i).map_err(|e| e.to_string())?);
                 }
-                Ok(None)
+                Ok(Tried::loaded(started.elapsed()))
             }
             Job::Brain { policy } => load_policy(&policy)
-                .map(|_brain| None)
+                .map(|_brain| Tried::loaded(started.elapsed()))
                 .map_err(|e| e.to_string()),
         }
     }
@@ -192,7 +301,7 @@ impl Trial {
                 if let Ok(interpreter) = ratelab_runtime::interpreter::installed() {
                     t.store(interpreter.enter_trial(), Ordering::SeqCst);
                 }
-                let outcome = crate::textlog::muted(|| job.run(&p, &s));
+                let outcome = ratelab_core::textlog::muted(|| job.run(&p, &s));
                 let _ = tx.send(outcome);
             });
         Trial {
@@ -298,5 +407,63 @@ impl Cancelled {
         // A call it entered after it was stopped (it was between two).
         self.interrupt();
         (true, None)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn tried(loading_ms: u64, longest: Option<(u64, u64)>) -> Tried {
+        Tried {
+            figures: None,
+            loading: Duration::from_millis(loading_ms),
+            longest: longest
+                .map(|(at_ms, took_ms)| (Nanos(at_ms * 1_000_000), Duration::from_millis(took_ms))),
+        }
+    }
+
+    /// A trial whose callback slept 5 s says where and how long, as the reload line ends;
+    /// one that went at its pace says nothing; a long loading is said apart.
+    #[test]
+    fn a_trial_that_stalled_and_returned_says_where() {
+        assert_eq!(
+            tried(40, Some((1_200, 5_000))).stall_note().as_deref(),
+            Some("the trial's callback stalled 5.0 s at t=1.20 s")
+        );
+        assert_eq!(tried(40, Some((20, 3))).stall_note(), None);
+        assert_eq!(tried(40, Some((20, 999))).stall_note(), None);
+        assert_eq!(tried(40, None).stall_note(), None);
+        assert_eq!(
+            tried(3_000, Some((0, 1_000))).stall_note().as_deref(),
+            Some("loading it took 3.0 s · the trial's callback stalled 1.0 s at t=0.00 s")
+        );
+        assert_eq!(
+            Tried::loaded(Duration::from_millis(2_500))
+                .stall_note()
+                .as_deref(),
+            Some("loading it took 2.5 s")
+        );
+    }
+
+    /// The stopwatch times the loading up to the first instant, then each instant up to the
+    /// next (the last up to the run's end), keeping the longest and its run time.
+    #[test]
+    fn the_stopwatch_keeps_the_loading_and_the_longest_instant() {
+        let mut watch = Stopwatch::new();
+        std::thread::sleep(Duration::from_millis(30));
+        watch.next(Some(Nanos::ZERO));
+        watch.next(Some(Nanos(20_000_000)));
+        std::thread::sleep(Duration::from_millis(60));
+        watch.next(Some(Nanos(40_000_000)));
+        watch.next(None);
+        assert!(
+            watch.loading >= Duration::from_millis(30),
+            "{:?}",
+            watch.loading
+        );
+        let (at, took) = watch.longest.expect("instants ran");
+        assert_eq!(at, Nanos(20_000_000));
+        assert!(took >= Duration::from_millis(60), "{took:?}");
     }
 }

@@ -1,17 +1,18 @@
-//! A virtual-clock run in the lab: the run core ([`crate::runcore`]) stepped one instant at
+//! A virtual-clock run in the lab: the run core ([`ratelab_runtime::runcore`]) stepped one instant at
 //! a time, paced against the wall clock at the chosen speed. Pacing decides only *when* an
 //! instant runs, never its order.
 
+use super::compare::RunFigures;
 use super::engine::{live_metrics, Engine, Next, Segment};
-use crate::config::RunConfig;
-use crate::graph::GraphHandles;
-use crate::recording::Recording;
 use crate::run::Command;
-use crate::runcore::{RestoreError, RunCore, Step};
-use crate::scheduler::{EndReason, RunEnd, VirtualScheduler};
-use crate::telemetry::{Control, Speed, Telemetry};
-use crate::time::Nanos;
 use crossbeam_channel::RecvTimeoutError;
+use ratelab_core::time::Nanos;
+use ratelab_recording::Recording;
+use ratelab_runtime::config::RunConfig;
+use ratelab_runtime::graph::GraphHandles;
+use ratelab_runtime::runcore::{RestoreError, RunCore, Step};
+use ratelab_runtime::scheduler::{EndReason, RunEnd, VirtualScheduler};
+use ratelab_runtime::telemetry::{Control, Speed, Telemetry};
 use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
@@ -25,7 +26,7 @@ impl Engine {
         core: &mut RunCore,
         cfg: &RunConfig,
         recording: &Option<Recording>,
-        ros2: Option<&crate::ros2::Bridge>,
+        ros2: Option<&ratelab_ros2::Bridge>,
         resumed: bool,
     ) -> Segment {
         // A seek back that replays builds a new graph: these are taken again after one.
@@ -92,6 +93,9 @@ impl Engine {
                     Control::Reload { file } => {
                         // Loaded and judged on a thread of its own: taken up below once it has.
                         let old = self.figures_now(cfg, core, ended.as_ref());
+                        let topics = core.handles().spec.topics.iter();
+                        let topics = topics.map(|t| t.name.clone()).collect();
+                        let old = RunFigures::of(&old, topics, self.opening.ticks());
                         self.reload(cfg, &file, Some(old));
                     }
                     Control::Quit => return self.leave(Next::Quit, core.scheduler(), ended),
@@ -157,7 +161,7 @@ impl Engine {
     ) {
         let at = core.scheduler().next_due().unwrap_or(core.now());
         let node = rate_target(&cmd, handles);
-        let text = crate::telemetry::describe(&cmd);
+        let text = ratelab_runtime::telemetry::describe(&cmd);
         // A new plan (the executor key) runs from the next instant on,
         // as a replay applies it.
         let applied = self.apply_with(cmd, at, recording, true, |c| core.apply(c.clone()));
@@ -183,7 +187,7 @@ impl Engine {
         cfg: &RunConfig,
         core: &RunCore,
         ended: Option<&RunEnd>,
-    ) -> crate::metrics::Metrics {
+    ) -> ratelab_core::metrics::Metrics {
         let end = ended.cloned().unwrap_or(RunEnd {
             at: core.now(),
             reason: EndReason::Interrupted,
@@ -358,7 +362,7 @@ fn run_instants(
     core: &mut RunCore,
     target: Option<Nanos>,
     step_pending: &mut bool,
-    ros2: Option<&crate::ros2::Bridge>,
+    ros2: Option<&ratelab_ros2::Bridge>,
 ) -> Option<RunEnd> {
     let actuator_bit = 1u64 << (core.handles().spec.actuator.0 % 64);
     let budget = Instant::now();

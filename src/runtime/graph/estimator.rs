@@ -14,8 +14,8 @@
 //! already lags. A learner sees both in the estimator graph's sense→act latency and in the
 //! pole's wobble.
 
-use crate::msg::{PositionMsg, StateMsg};
-use crate::time::Nanos;
+use ratelab_core::msg::{PositionMsg, StateMsg};
+use ratelab_core::time::Nanos;
 use std::f64::consts::PI;
 
 /// The filter's state between measurements.

@@ -8,8 +8,8 @@
 //! almost every run) that is one relaxed atomic load; the book is locked only for a node
 //! that has one.
 
-use crate::ids::NodeId;
-use crate::qos::Fault;
+use ratelab_core::ids::NodeId;
+use ratelab_core::qos::Fault;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Mutex;
 
@@ -48,7 +48,7 @@ impl FaultBook {
     }
 
     /// True when node `node`'s tick at run time `now` is swallowed by a fault.
-    pub fn covers(&self, node: NodeId, now: crate::time::Nanos) -> bool {
+    pub fn covers(&self, node: NodeId, now: ratelab_core::time::Nanos) -> bool {
         self.faulted
             .get(node.0)
             .is_some_and(|f| f.load(Ordering::Relaxed))
@@ -61,17 +61,17 @@ impl FaultBook {
     /// already past covers the ticks from now on that it would have covered).
     ///
     /// # Errors
-    /// One line when the book holds [`crate::qos::MAX_FAULTS`] faults already, or `node`
+    /// One line when the book holds [`ratelab_core::qos::MAX_FAULTS`] faults already, or `node`
     /// is no node of the graph.
     pub fn inject(&self, node: NodeId, fault: Fault) -> Result<(), String> {
         let Some(flag) = self.faulted.get(node.0) else {
             return Err(format!("no node {} in the graph", node.0));
         };
         let mut faults = crate::graph::lock(&self.faults);
-        if faults.len() >= crate::qos::MAX_FAULTS {
-            let most = crate::qos::MAX_FAULTS;
+        if faults.len() >= ratelab_core::qos::MAX_FAULTS {
+            let most = ratelab_core::qos::MAX_FAULTS;
             let line = format_args!("a run holds at most {most} faults");
-            return Err(crate::limits::refusal(line, "MAX_FAULTS"));
+            return Err(ratelab_core::limits::refusal(line, "MAX_FAULTS"));
         }
         faults.push((node, fault));
         flag.store(true, Ordering::Relaxed);
@@ -110,7 +110,7 @@ impl FaultBook {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::time::Nanos;
+    use ratelab_core::time::Nanos;
 
     fn stall(node: &str, at_s: u64, for_s: u64) -> Fault {
         Fault {
@@ -159,7 +159,7 @@ mod tests {
     fn an_empty_book_faults_nothing_and_is_bounded() {
         let book = FaultBook::new(1, &[], |_| None);
         assert!(!book.covers(NodeId(0), Nanos::ZERO));
-        for k in 0..crate::qos::MAX_FAULTS {
+        for k in 0..ratelab_core::qos::MAX_FAULTS {
             book.inject(NodeId(0), stall("sensor", k as u64, 1))
                 .unwrap();
         }

@@ -14,16 +14,16 @@
 //! A leaf of the graph module: it knows message types, topics and the plant, not the graph
 //! file or the graph built from it.
 
-use crate::ids::NodeId;
-use crate::msg::{AnyTopic, MsgType};
-use crate::node::Flow;
 use crate::plant::SharedPlant;
 use crate::policy::BrainSlot;
-use crate::publisher::Outbox;
-use crate::qos::Liveliness;
-use crate::rate::Rate;
-use crate::runlog::{RunLog, StepSink};
-use crate::time::Nanos;
+use ratelab_core::ids::NodeId;
+use ratelab_core::msg::{AnyTopic, MsgType};
+use ratelab_core::node::Flow;
+use ratelab_core::publisher::Outbox;
+use ratelab_core::qos::Liveliness;
+use ratelab_core::rate::Rate;
+use ratelab_core::runlog::{RunLog, StepSink};
+use ratelab_core::time::Nanos;
 use std::any::Any;
 use std::fmt;
 use std::sync::{Arc, Mutex};
@@ -127,16 +127,16 @@ pub trait Work: Send {
     fn alive_by_ticking(&self) -> bool {
         true
     }
-    /// The node's own state now ([`crate::node::Node::save`]): `None` (the default) when it
+    /// The node's own state now ([`ratelab_core::node::Node::save`]): `None` (the default) when it
     /// cannot be captured, which makes a capture of its graph a replay
     /// ([`crate::runcore`]). A kind whose `tick` keeps nothing between ticks returns
     /// `Some(Box::new(()))`.
-    fn save(&self) -> Option<crate::node::NodeState> {
+    fn save(&self) -> Option<ratelab_core::node::NodeState> {
         None
     }
     /// Take back what [`Work::save`] gave; false (nothing changed) when it is not this
     /// kind's.
-    fn load(&mut self, _state: &crate::node::NodeState) -> bool {
+    fn load(&mut self, _state: &ratelab_core::node::NodeState) -> bool {
         false
     }
 }
@@ -306,9 +306,9 @@ impl fmt::Display for Kind {
 /// # Errors
 /// One line naming the topic, when it carries another type (the graph file's rules make
 /// that impossible for a validated graph).
-pub fn typed<M: crate::msg::Message>(
+pub fn typed<M: ratelab_core::msg::Message>(
     t: Option<&AnyTopic>,
-) -> Result<Arc<crate::topic::Subscription<M>>, String> {
+) -> Result<Arc<ratelab_core::topic::Subscription<M>>, String> {
     match t {
         Some(t) => t
             .typed::<M>()
@@ -324,10 +324,10 @@ pub fn typed<M: crate::msg::Message>(
 /// # Errors
 /// One line naming the topic, when it carries another type (the graph file's rules make
 /// that impossible for a validated graph).
-pub fn publisher<M: crate::msg::Message>(
+pub fn publisher<M: ratelab_core::msg::Message>(
     t: Option<&AnyTopic>,
     outbox: &Outbox,
-) -> Result<crate::publisher::Publisher<M>, String> {
+) -> Result<ratelab_core::publisher::Publisher<M>, String> {
     match t {
         Some(t) => t
             .publisher::<M>(outbox)

@@ -14,20 +14,20 @@ pub mod registry;
 pub mod spec;
 pub mod synthetic;
 
-use crate::executor::ComputeDraw;
-use crate::msg::AnyTopic;
-use crate::node::Node;
 use crate::plant::CartPole;
 pub use crate::plant::SharedPlant;
 use crate::policy::BrainSlot;
-use crate::publisher::Outbox;
-use crate::qos::{Fault, Liveliness};
-use crate::rate::{InvalidRate, Rate};
-use crate::runlog::{RunLog, StepRecord, StepSink, TopicCounters};
-use crate::topic::ZeroDepth;
 use kind::{BuildContext, Code};
 pub use kind::{Kind, KindDef};
 use nodes::{ExternalPort, GraphNode, NodeCore};
+use ratelab_core::executor::ComputeDraw;
+use ratelab_core::msg::AnyTopic;
+use ratelab_core::node::Node;
+use ratelab_core::publisher::Outbox;
+use ratelab_core::qos::{Fault, Liveliness};
+use ratelab_core::rate::{InvalidRate, Rate};
+use ratelab_core::runlog::{RunLog, StepRecord, StepSink, TopicCounters};
+use ratelab_core::topic::ZeroDepth;
 pub use spec::{Chain, GraphSpec, MsgType, NodeId, TopicId};
 use std::sync::{Arc, Mutex, MutexGuard};
 
@@ -74,7 +74,7 @@ pub struct GraphHandles {
     pub liveliness: Vec<Arc<Liveliness>>,
     /// The executors asked for while running (`Command::SetExecutor`): the override, for
     /// [`GraphHandles::current_spec`]…
-    pub executor: Arc<Mutex<Option<crate::executor::ExecutorOverride>>>,
+    pub executor: Arc<Mutex<Option<ratelab_core::executor::ExecutorOverride>>>,
     /// …and the plan the virtual scheduler takes at its next instant.
     pub plan_request: crate::scheduler::PlanRequest,
     /// The phase changes asked for while running (`Command::SetPhase`), which the virtual
@@ -85,13 +85,13 @@ pub struct GraphHandles {
     pub external: Vec<Arc<ExternalPort>>,
     /// The nodes' faults: the settings' and those injected by command ([`faults`]).
     pub faults: Arc<faults::FaultBook>,
-    /// The lines of the text log ([`crate::textlog`]) the graph's nodes wrote while
+    /// The lines of the text log ([`ratelab_core::textlog`]) the graph's nodes wrote while
     /// [`Graph::build`] built them (a Python node's constructor's `get_logger()` lines and
     /// prints), on the building thread, oldest first, at most [`BUILD_LINES`] (the last
     /// ones): a ROS 2 offer started after the build puts them on each node's `/rosout`
     /// first, as a ROS 2 node's constructor's lines are its first. Empty in copies made
     /// while building (a step observer's).
-    pub build_lines: Arc<[crate::textlog::LogLine]>,
+    pub build_lines: Arc<[ratelab_core::textlog::LogLine]>,
 }
 
 /// The most lines [`GraphHandles::build_lines`] keeps: `/rosout`'s depth (rcl's, keep last
@@ -101,21 +101,23 @@ pub const BUILD_LINES: usize = 1000;
 /// Keep the lines written with a node's name on the calling thread (the graph's building)
 /// from now until the returned recorder is dropped, the last [`BUILD_LINES`] of them.
 fn record_build_lines() -> (
-    Arc<Mutex<std::collections::VecDeque<crate::textlog::LogLine>>>,
-    crate::textlog::Recorder,
+    Arc<Mutex<std::collections::VecDeque<ratelab_core::textlog::LogLine>>>,
+    ratelab_core::textlog::Recorder,
 ) {
     let kept = Arc::new(Mutex::new(std::collections::VecDeque::new()));
     let keep = kept.clone();
     let builder = std::thread::current().id();
-    let recorder = crate::textlog::add_recorder(Box::new(move |line: crate::textlog::LogLine| {
-        if line.node.is_some() && std::thread::current().id() == builder {
-            let mut kept = lock(&keep);
-            if kept.len() == BUILD_LINES {
-                kept.pop_front();
+    let recorder = ratelab_core::textlog::add_recorder(Box::new(
+        move |line: ratelab_core::textlog::LogLine| {
+            if line.node.is_some() && std::thread::current().id() == builder {
+                let mut kept = lock(&keep);
+                if kept.len() == BUILD_LINES {
+                    kept.pop_front();
+                }
+                kept.push_back(line);
             }
-            kept.push_back(line);
-        }
-    }));
+        },
+    ));
     (kept, recorder)
 }
 
@@ -124,19 +126,19 @@ fn record_build_lines() -> (
 #[derive(Debug, Default)]
 pub struct PhaseRequests {
     pending: std::sync::atomic::AtomicBool,
-    asked: Mutex<Vec<(NodeId, crate::time::Nanos)>>,
+    asked: Mutex<Vec<(NodeId, ratelab_core::time::Nanos)>>,
 }
 
 impl PhaseRequests {
     /// Ask for node `node`'s ticks to move to phase offset `phase`.
-    pub fn push(&self, node: NodeId, phase: crate::time::Nanos) {
+    pub fn push(&self, node: NodeId, phase: ratelab_core::time::Nanos) {
         lock(&self.asked).push((node, phase));
         self.pending
             .store(true, std::sync::atomic::Ordering::Release);
     }
 
     /// Take the changes asked for, oldest first (none: an empty list).
-    pub fn take(&self) -> Vec<(NodeId, crate::time::Nanos)> {
+    pub fn take(&self) -> Vec<(NodeId, ratelab_core::time::Nanos)> {
         if !self
             .pending
             .swap(false, std::sync::atomic::Ordering::Acquire)
@@ -147,12 +149,12 @@ impl PhaseRequests {
     }
 
     /// The changes asked for and not yet taken (a capture's).
-    pub fn save(&self) -> Vec<(NodeId, crate::time::Nanos)> {
+    pub fn save(&self) -> Vec<(NodeId, ratelab_core::time::Nanos)> {
         lock(&self.asked).clone()
     }
 
     /// Put back what [`PhaseRequests::save`] gave.
-    pub fn load(&self, saved: &[(NodeId, crate::time::Nanos)]) {
+    pub fn load(&self, saved: &[(NodeId, ratelab_core::time::Nanos)]) {
         let mut asked = lock(&self.asked);
         asked.clear();
         asked.extend_from_slice(saved);
@@ -217,7 +219,7 @@ impl GraphHandles {
     }
 
     /// Every topic's counters at run time `now`, by [`TopicId`].
-    pub fn topic_stats_at(&self, now: crate::time::Nanos) -> TopicCounters {
+    pub fn topic_stats_at(&self, now: ratelab_core::time::Nanos) -> TopicCounters {
         self.topics.iter().map(|t| t.stats_at(now)).collect()
     }
 
@@ -303,10 +305,10 @@ pub fn connect_subscriptions(spec: &GraphSpec, topics: &[AnyTopic]) {
             // Said when it changes, as ROS 2 raises its event when the pair is discovered.
             let node = Some(spec.node(n).name.as_str());
             match failed {
-                Some((.., m)) if was => crate::textlog::emit_for(
+                Some((.., m)) if was => ratelab_core::textlog::emit_for(
                     node,
                     None,
-                    crate::textlog::Level::Warn,
+                    ratelab_core::textlog::Level::Warn,
                     &format!(
                         "incompatible QoS on {}: {}; it receives nothing",
                         t.name,
@@ -316,10 +318,10 @@ pub fn connect_subscriptions(spec: &GraphSpec, topics: &[AnyTopic]) {
                             .join("; ")
                     ),
                 ),
-                None if !was => crate::textlog::emit_for(
+                None if !was => ratelab_core::textlog::emit_for(
                     node,
                     None,
-                    crate::textlog::Level::Info,
+                    ratelab_core::textlog::Level::Info,
                     &format!("QoS on {} now compatible: connected", t.name),
                 ),
                 _ => {}
@@ -414,7 +416,7 @@ impl Graph {
                     .topic(output)
                     .msg
                     .ros2()
-                    .map_or(crate::limits::MAX_ROS_MESSAGE_BYTES, |c| c.max_bytes);
+                    .map_or(ratelab_core::limits::MAX_ROS_MESSAGE_BYTES, |c| c.max_bytes);
                 Some(Arc::new(ExternalPort::new(
                     NodeId(i),
                     &n.name,

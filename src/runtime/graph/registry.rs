@@ -7,7 +7,7 @@
 //!
 //! A kind written in Rust outside ratelab is a type implementing [`RustNode`] with typed inputs and outputs (copper-rs's
 //! `CuTask` is the model): each a [`Message`] — any registered message type
-//! ([`crate::msg`]: the built-in `StateMsg`, `PositionMsg`, `ForceMsg`, or one of your own,
+//! ([`ratelab_core::msg`]: the built-in `StateMsg`, `PositionMsg`, `ForceMsg`, or one of your own,
 //! which registering the kind registers too) — or a tuple of two to four of them, or `()`
 //! for none ([`Inputs`], [`Outputs`]). [`register`] it once, before the graph file is read; from then on
 //! `kind = "NAME"` in a graph file makes one, with the file's `params = { … }`:
@@ -58,7 +58,7 @@
 //! [`RustNode::tick`] when it is new (`None` when nothing arrived on it since the last tick:
 //! a node that needs the last value keeps it, as the chapter's nodes do); what `tick`
 //! returns is published at the tick's end (its time, plus its `compute_ms` if the graph
-//! file gives one: [`crate::executor`]), carrying the **oldest** origin stamp among the
+//! file gives one: [`ratelab_core::executor`]), carrying the **oldest** origin stamp among the
 //! newest messages its inputs delivered (its own tick time before the first, and always for
 //! a node with no inputs), so the actuator measures sense→act latency across it as across
 //! any node — and a slow input (a setpoint published rarely) stretches it, since the output
@@ -76,16 +76,16 @@
 
 use super::kind::{BuildContext, Code, Kind, KindDef, Params, Plant, Ports, Work};
 use super::nodes;
-use crate::msg::MsgType;
-use crate::node::Flow;
-use crate::time::Nanos;
+use ratelab_core::msg::MsgType;
+use ratelab_core::node::Flow;
+use ratelab_core::time::Nanos;
 use std::sync::{LazyLock, RwLock};
 
 /// The most node kinds one process may have, the built-in ones included
-/// ([`crate::limits::MAX_NODE_KINDS`]).
-pub const MAX_KINDS: usize = crate::limits::MAX_NODE_KINDS;
+/// ([`ratelab_core::limits::MAX_NODE_KINDS`]).
+pub const MAX_KINDS: usize = ratelab_core::limits::MAX_NODE_KINDS;
 
-pub use crate::ports::{InPort, Inputs, Outputs, RustNode};
+pub use ratelab_core::ports::{InPort, Inputs, Outputs, RustNode};
 
 /// What making a node is given: its name and settings from the graph file and the run.
 #[derive(Debug)]
@@ -126,9 +126,9 @@ pub enum RegistryError {
     /// [`MAX_KINDS`] kinds are registered already.
     #[error("a process has at most {MAX_KINDS} node kinds, the built-in ones included (ratelab::limits::MAX_NODE_KINDS)")]
     Full,
-    /// One of its message types cannot be registered ([`crate::msg::register`]).
+    /// One of its message types cannot be registered ([`ratelab_core::msg::register`]).
     #[error(transparent)]
-    Message(#[from] crate::msg::MsgRegistryError),
+    Message(#[from] ratelab_core::msg::MsgRegistryError),
 }
 
 /// Every kind: the built-in ones in the chapter's order, then those registered, in the
@@ -180,7 +180,7 @@ pub fn kinds() -> Vec<Kind> {
 /// code it runs, its parameters (unit, default, range) and its one line of docs. What
 /// `ratelab kinds` prints and `docs/graphs.md`'s table of kinds is (a test keeps the two equal).
 pub fn kinds_table() -> String {
-    let types = |alts: &[crate::msg::MsgType]| {
+    let types = |alts: &[ratelab_core::msg::MsgType]| {
         alts.iter()
             .map(|t| format!("`{}`", t.as_str()))
             .collect::<Vec<_>>()
@@ -188,7 +188,7 @@ pub fn kinds_table() -> String {
     };
     let ports = |p: &Ports| match p {
         Ports::Fixed { inputs, outputs } => {
-            let side = |v: &[&'static [crate::msg::MsgType]]| match v {
+            let side = |v: &[&'static [ratelab_core::msg::MsgType]]| match v {
                 [] => "—".to_string(),
                 v => v
                     .iter()
@@ -270,7 +270,7 @@ pub fn kinds_table() -> String {
 /// `estimator`, `policy`, `safety`, `actuator`, `python` and `external` are each a `def()`
 /// in [`super::nodes`], made of this module's public parts only, and so are its examples
 /// (the sensor reads the plant through [`BuildContext::plant`]; the actuator steps it).
-/// Its message types are registered with it ([`crate::msg::register_type`]).
+/// Its message types are registered with it ([`ratelab_core::msg::register_type`]).
 ///
 /// # Errors
 /// [`RegistryError`]: a bad or taken name, too many kinds, or a message type that cannot
@@ -309,10 +309,10 @@ fn admit(reg: &mut Vec<Kind>, def: KindDef) -> Result<(), RegistryError> {
         Ports::Open { .. } => Vec::new(),
     };
     for t in &types {
-        crate::msg::check_type(*t)?;
+        ratelab_core::msg::check_type(*t)?;
     }
     for t in types {
-        crate::msg::register_type(t)?;
+        ratelab_core::msg::register_type(t)?;
     }
     reg.push(Kind(Box::leak(Box::new(def))));
     Ok(())
@@ -368,7 +368,7 @@ where
 
 /// Register node kind `kind` written in Rust ([`rust_kind`]: a graph file's `kind =
 /// "<kind>"` then makes a node with `make`, given the node's [`NodeContext`]); its message
-/// types are registered with it ([`crate::msg::register`]).
+/// types are registered with it ([`ratelab_core::msg::register`]).
 ///
 /// # Errors
 /// [`RegistryError`]: a bad or taken name, too many kinds, or a message type that cannot
@@ -406,8 +406,8 @@ impl<N: RustNode> Work for Bound<N> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::msg::{AnyTopic, ForceMsg, Message, PositionMsg};
-    use crate::publisher::Outbox;
+    use ratelab_core::msg::{AnyTopic, ForceMsg, Message, PositionMsg};
+    use ratelab_core::publisher::Outbox;
     use std::sync::Arc;
 
     /// Make a node of kind `kind` as the graph's builder would, around a fresh plant.
@@ -423,13 +423,15 @@ mod tests {
             crate::plant::CartPole::new().unwrap(),
         ));
         let brain = crate::policy::BrainSlot::new(Box::new(crate::policy::Scripted));
-        let log = Arc::new(std::sync::Mutex::new(crate::runlog::RunLog::new(false)));
-        let liveliness = Arc::new(crate::qos::Liveliness::new(None));
-        let rate = crate::rate::Rate::new(1e9 / cx.period.0 as f64).unwrap();
+        let log = Arc::new(std::sync::Mutex::new(ratelab_core::runlog::RunLog::new(
+            false,
+        )));
+        let liveliness = Arc::new(ratelab_core::qos::Liveliness::new(None));
+        let rate = ratelab_core::rate::Rate::new(1e9 / cx.period.0 as f64).unwrap();
         let mut observers = None;
         (k.def().make)(&mut BuildContext {
             name: cx.name,
-            id: crate::ids::NodeId(0),
+            id: ratelab_core::ids::NodeId(0),
             rate: &rate,
             seed: cx.seed,
             params: cx.params,

@@ -16,9 +16,9 @@
 //!
 //! [[topic]]
 //! name = "/obs"
-//! type = "state"           # state | position | force | a type registered (crate::msg)
+//! type = "state"           # state | position | force | a type registered (ratelab_core::msg)
 //! depth = 1                # history depth (keep-last), ≥ 1
-//! # QoS, all optional (crate::qos; ROS 2's names): history = "keep_all", delivery = "fifo",
+//! # QoS, all optional (ratelab_core::qos; ROS 2's names): history = "keep_all", delivery = "fifo",
 //! # deadline_ms = 40, lifespan_ms = 60, reliability = "reliable", on_deadline_missed = "zero",
 //! # durability = "transient_local",
 //! # link = { loss = 0.05, delay_ms = 10, jitter_ms = 3 }
@@ -58,7 +58,7 @@
 //!   physics); depths ≥ 1; no field the format does not know;
 //! - what the queues may hold at worst — every subscription's queue of its topic's depth
 //!   (and what is in flight on a link) times the largest message of the topic's type, a
-//!   camera's frame at its size — at most [`crate::limits::MAX_GRAPH_QUEUE_BYTES`], checked
+//!   camera's frame at its size — at most [`ratelab_core::limits::MAX_GRAPH_QUEUE_BYTES`], checked
 //!   when the file is read and at every change of a depth, QoS or rate
 //!   (`src/runtime/graph/spec/memory.rs`; [`GraphSpec::queue_bytes`]);
 //! - QoS values in range (deadline and lifespan > 0, loss in [0, 1], …) and combined
@@ -90,24 +90,24 @@ mod requested;
 pub use executors::ExecutorSpec;
 pub use processes::{RestartPolicy, MAX_RESTARTS};
 
-use crate::executor::ComputeTime;
 use crate::plant::ACTUATOR_HZ;
-use crate::qos::{
+use ratelab_core::executor::ComputeTime;
+use ratelab_core::qos::{
     self, Delivery, History, Link, OnDeadlineMissed, Reliability, TopicQos, MAX_DEPTH,
 };
-use crate::rate::{period_for_hz, MAX_HZ};
-use crate::time::Nanos;
+use ratelab_core::rate::{period_for_hz, MAX_HZ};
+use ratelab_core::time::Nanos;
 use serde::{Deserialize, Serialize};
 use std::fmt;
 use std::ops::Range;
 use std::path::Path;
 use toml::Spanned;
 
-pub use crate::limits::MAX_SUBSCRIBERS;
+pub use ratelab_core::limits::MAX_SUBSCRIBERS;
 
 /// A graph file larger than this is refused before it is parsed, bytes
-/// ([`crate::limits::MAX_GRAPH_FILE_BYTES`]).
-pub const MAX_FILE_BYTES: u64 = crate::limits::MAX_GRAPH_FILE_BYTES;
+/// ([`ratelab_core::limits::MAX_GRAPH_FILE_BYTES`]).
+pub const MAX_FILE_BYTES: u64 = ratelab_core::limits::MAX_GRAPH_FILE_BYTES;
 
 /// The chapter's graph, shipped as `graphs/cartpole.toml` and built in: the default.
 pub const DEFAULT_GRAPH_TOML: &str = include_str!("../../../graphs/cartpole.toml");
@@ -117,11 +117,11 @@ pub const DEFAULT_GRAPH_TOML: &str = include_str!("../../../graphs/cartpole.toml
 /// it (a regular file of at most [`MAX_FILE_BYTES`]).
 ///
 /// # Errors
-/// [`crate::input::InputError`] when the file cannot be read or is too big.
-pub fn graph_file_bytes(path: Option<&Path>) -> Result<Vec<u8>, crate::input::InputError> {
+/// [`ratelab_core::input::InputError`] when the file cannot be read or is too big.
+pub fn graph_file_bytes(path: Option<&Path>) -> Result<Vec<u8>, ratelab_core::input::InputError> {
     match path {
         None => Ok(DEFAULT_GRAPH_TOML.as_bytes().to_vec()),
-        Some(p) => crate::input::read_regular_file(p, MAX_FILE_BYTES),
+        Some(p) => ratelab_core::input::read_regular_file(p, MAX_FILE_BYTES),
     }
 }
 /// The name the built-in default graph is reported under.
@@ -130,12 +130,12 @@ pub const DEFAULT_GRAPH_ORIGIN: &str = "graphs/cartpole.toml";
 use crate::graph::kind::Params;
 pub use crate::graph::kind::{Code, Kind, Plant, PythonCode};
 
-pub use crate::msg::MsgType;
+pub use ratelab_core::msg::MsgType;
 
 /// The process that holds the plant's nodes by default ([`GraphSpec::process_of`]).
 pub const DEFAULT_ROBOT_PROCESS: &str = "robot";
 
-pub use crate::ids::{NodeId, TopicId};
+pub use ratelab_core::ids::{NodeId, TopicId};
 
 /// One node of a validated graph.
 #[derive(Clone, Debug, PartialEq)]
@@ -164,7 +164,7 @@ pub struct NodeSpec {
     pub process: Option<String>,
     /// A Python node's script and class; `None` for every other kind.
     pub python: Option<PythonCode>,
-    /// What a tick costs ([`crate::executor`]): its outputs are published that long after
+    /// What a tick costs ([`ratelab_core::executor`]): its outputs are published that long after
     /// it starts. `None`: nothing (outputs at once, as in the chapter).
     pub compute: Option<ComputeTime>,
     /// Its callback group, a group of the executor holding it ([`ExecutorSpec`]); `None`:
@@ -200,8 +200,8 @@ impl NodeSpec {
 
 pub use crate::graph::nodes::ExternalNodeSpec;
 
-/// The most parameters a node may be given ([`crate::limits::MAX_NODE_PARAMS`]).
-pub const MAX_PYTHON_PARAMS: usize = crate::limits::MAX_NODE_PARAMS;
+/// The most parameters a node may be given ([`ratelab_core::limits::MAX_NODE_PARAMS`]).
+pub const MAX_PYTHON_PARAMS: usize = ratelab_core::limits::MAX_NODE_PARAMS;
 
 /// One topic of a validated graph.
 #[derive(Clone, Debug, PartialEq)]
@@ -212,18 +212,18 @@ pub struct TopicSpec {
     pub msg: MsgType,
     /// History depth at the start of a run (keep-last depth, or keep-all cap), ≥ 1.
     pub depth: usize,
-    /// The rest of its QoS at the start of a run ([`crate::qos`]).
+    /// The rest of its QoS at the start of a run ([`ratelab_core::qos`]).
     pub qos: TopicQos,
     /// The one publisher.
     pub publisher: NodeId,
     /// The subscribers, in tie-break order (none: nobody reads it). Each has a queue of its
-    /// own ([`crate::msg::AnyTopic::subscription`]).
+    /// own ([`ratelab_core::msg::AnyTopic::subscription`]).
     pub subscribers: Vec<NodeId>,
     /// What subscriptions request of the publisher beyond the topic's QoS, by subscriber
     /// name (the file's `[topic.requested.NODE]`; none: every subscription accepts what is
     /// offered). A request the topic does not meet leaves that subscription unconnected
     /// ([`GraphSpec::incompatible`], `src/runtime/graph/spec/requested.rs`).
-    pub requested: std::collections::BTreeMap<String, crate::qos::compat::RequestedQos>,
+    pub requested: std::collections::BTreeMap<String, ratelab_core::qos::compat::RequestedQos>,
 }
 
 impl TopicSpec {
@@ -309,10 +309,10 @@ impl SpecError {
 
 impl std::fmt::Display for SpecError {
     /// One line: the file's name and the reason may quote the file (a `class`, a `kind`, a
-    /// key), so their control characters are written out ([`crate::text::printable`]).
+    /// key), so their control characters are written out ([`ratelab_core::text::printable`]).
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        let origin = crate::text::printable(&self.origin);
-        let reason = crate::text::printable(&self.reason);
+        let origin = ratelab_core::text::printable(&self.origin);
+        let reason = ratelab_core::text::printable(&self.reason);
         match self.line {
             0 => write!(f, "{origin}: {reason}"),
             _ => write!(f, "{origin}:{}:{}: {reason}", self.line, self.col),
@@ -400,7 +400,7 @@ struct RawTopic {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     reliability: Option<Spanned<Reliability>>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    durability: Option<Spanned<crate::qos::compat::Durability>>,
+    durability: Option<Spanned<ratelab_core::qos::compat::Durability>>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     on_deadline_missed: Option<Spanned<OnDeadlineMissed>>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -486,11 +486,12 @@ impl GraphSpec {
     /// The topic carrying the state estimate the chain's policy reads, when the chain runs
     /// through an estimator: the policy's input is of type `state` and its publisher is not
     /// the chain's sensor (the built-in estimator, a Python filter). The actuator takes that
-    /// topic's newest message beside the plant's state at each tick ([`crate::estimate`]).
+    /// topic's newest message beside the plant's state at each tick ([`ratelab_core::estimate`]).
     pub fn estimate_topic(&self) -> Option<TopicId> {
         let c = self.chain?;
         let t = &self.topics[c.obs.0];
-        (t.msg == <crate::msg::StateMsg as crate::msg::Message>::TYPE && t.publisher != c.sensor)
+        (t.msg == <ratelab_core::msg::StateMsg as ratelab_core::msg::Message>::TYPE
+            && t.publisher != c.sensor)
             .then_some(c.obs)
     }
 
@@ -508,17 +509,17 @@ impl GraphSpec {
             col: 0,
             reason,
         };
-        let bytes = crate::input::read_regular_file(path, MAX_FILE_BYTES).map_err(|e| {
-            if matches!(e, crate::input::InputError::NotFound(_)) {
+        let bytes = ratelab_core::input::read_regular_file(path, MAX_FILE_BYTES).map_err(|e| {
+            if matches!(e, ratelab_core::input::InputError::NotFound(_)) {
                 return at_start(NOT_FOUND.into());
             }
             // The error names the file first; the line's `FILE:` already does.
-            let too_large = matches!(e, crate::input::InputError::TooLarge { .. });
+            let too_large = matches!(e, ratelab_core::input::InputError::TooLarge { .. });
             let text = e.to_string();
             let prefix = format!("{origin}: ");
             let text = text.strip_prefix(&prefix).unwrap_or(&text);
             at_start(if too_large {
-                crate::limits::refusal(text, "MAX_GRAPH_FILE_BYTES")
+                ratelab_core::limits::refusal(text, "MAX_GRAPH_FILE_BYTES")
             } else {
                 text.to_string()
             })
@@ -804,7 +805,7 @@ impl GraphSpec {
     ///
     /// # Errors
     /// [`OverrideError`] for a rate the node cannot take, or one that puts more messages in
-    /// flight on its topics' links than [`crate::limits::MAX_GRAPH_QUEUE_BYTES`] allows
+    /// flight on its topics' links than [`ratelab_core::limits::MAX_GRAPH_QUEUE_BYTES`] allows
     /// (nothing changes).
     pub fn set_rate_of(&mut self, id: NodeId, hz: f64) -> Result<(), OverrideError> {
         let node = &mut self.nodes[id.0];
@@ -834,7 +835,7 @@ impl GraphSpec {
     ///
     /// # Errors
     /// [`OverrideError`] for an unknown topic, a depth outside 1..=[`MAX_DEPTH`], or one
-    /// that takes the graph's queues past [`crate::limits::MAX_GRAPH_QUEUE_BYTES`] (nothing
+    /// that takes the graph's queues past [`ratelab_core::limits::MAX_GRAPH_QUEUE_BYTES`] (nothing
     /// changes).
     pub fn set_depth(&mut self, name: &str, depth: usize) -> Result<(), OverrideError> {
         let id = self.known_topic(name)?;
@@ -854,7 +855,7 @@ impl GraphSpec {
     ///
     /// # Errors
     /// [`OverrideError`] for a depth outside 1..=[`MAX_DEPTH`], or one that takes the
-    /// graph's queues past [`crate::limits::MAX_GRAPH_QUEUE_BYTES`] (nothing changes).
+    /// graph's queues past [`ratelab_core::limits::MAX_GRAPH_QUEUE_BYTES`] (nothing changes).
     pub fn set_all_depths(&mut self, depth: usize) -> Result<(), OverrideError> {
         check_depth(i64::try_from(depth).unwrap_or(i64::MAX))
             .map_err(|e| OverrideError(format!("--queue-depth: {e}")))?;
@@ -878,7 +879,7 @@ impl GraphSpec {
     /// # Errors
     /// [`OverrideError`] naming the topic for an unknown topic, key or value, a bad
     /// combination ([`qos::check_combination`]), or a depth or link that takes the graph's
-    /// queues past [`crate::limits::MAX_GRAPH_QUEUE_BYTES`].
+    /// queues past [`ratelab_core::limits::MAX_GRAPH_QUEUE_BYTES`].
     pub fn set_qos(&mut self, name: &str, pairs: &str) -> Result<(), OverrideError> {
         let id = self.known_topic(name)?;
         let err = |e: String| OverrideError(format!("topic '{name}': {e}"));

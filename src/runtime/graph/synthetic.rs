@@ -22,7 +22,7 @@ pub const MIN_NODES: usize = 3;
 const RATES_HZ: [f64; 4] = [10.0, 20.0, 50.0, 100.0];
 
 /// A graph file of `nodes` nodes (at least [`MIN_NODES`]; more than
-/// [`crate::limits::MAX_NODES`] is refused when read): the chapter's three, then
+/// [`ratelab_core::limits::MAX_NODES`] is refused when read): the chapter's three, then
 /// `(nodes − 3) / 4` controllers of four nodes (controller `k`: `sensor_k` publishes its
 /// `position` on `/c_k/pos`, `estimator_k` turns it into `/c_k/state`, `policy_k` gives a
 /// `force` on `/c_k/force`, `safety_k` clamps it to 5 N on `/c_k/cmd`, which nothing reads),

@@ -5,10 +5,10 @@
 //! executors' rules; only the ticks are elsewhere.
 
 use crate::config::RunConfig;
-use crate::node::{Flow, Node};
-use crate::rate::{InvalidRate, Rate};
 use crate::scheduler::{Event, VirtualScheduler};
-use crate::time::Nanos;
+use ratelab_core::node::{Flow, Node};
+use ratelab_core::rate::{InvalidRate, Rate};
+use ratelab_core::time::Nanos;
 
 /// A node as a follower sees it: its name, tie-break rank and rate. It never ticks here.
 struct Stand {

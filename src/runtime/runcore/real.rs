@@ -5,11 +5,11 @@
 //! [`super::RunCore::step`] and [`super::RunCore::next_event`].
 
 use super::RunCore;
-use crate::executor::ExecFigures;
-use crate::metrics::NodeTiming;
-use crate::node::Node;
 use crate::scheduler::{run_real, EndReason, RealOptions, RunEnd, StopFlag, TickReport};
-use crate::time::Nanos;
+use ratelab_core::executor::ExecFigures;
+use ratelab_core::metrics::NodeTiming;
+use ratelab_core::node::Node;
+use ratelab_core::time::Nanos;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
 

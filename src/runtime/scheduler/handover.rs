@@ -8,10 +8,10 @@
 //! needs back is the time the real clock stopped at and each node's ticks there.
 
 use super::VirtualScheduler;
-use crate::executor::{Dispatch, ExecutionPlan};
-use crate::node::Node;
-use crate::rate::first_on_grid;
-use crate::time::Nanos;
+use ratelab_core::executor::{Dispatch, ExecutionPlan};
+use ratelab_core::node::Node;
+use ratelab_core::rate::first_on_grid;
+use ratelab_core::time::Nanos;
 use std::cmp::Reverse;
 
 impl VirtualScheduler {
@@ -54,7 +54,7 @@ impl VirtualScheduler {
     /// deadline is after `at` keeps it; a phase change waiting for its tick takes effect).
     /// Nothing is released or running; the executors' plan and their figures so far are
     /// kept, and their utilization spans the virtual clock's time only (what the other
-    /// clock measured is its own: [`crate::metrics::NodeTiming`]).
+    /// clock measured is its own: [`ratelab_core::metrics::NodeTiming`]).
     ///
     /// Missing entries of `deadlines`, `ticked` or `periods` count as zero ticks and the
     /// node's timer as it was.

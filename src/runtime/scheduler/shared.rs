@@ -1,5 +1,5 @@
 //! The real clock's shared executors: the threads of single- and multi-threaded executors
-//! ([`crate::executor`]), which take their nodes' ticks by the same rules the virtual clock
+//! ([`ratelab_core::executor`]), which take their nodes' ticks by the same rules the virtual clock
 //! models (timers released when due, snapshots polled when done, callback groups), with
 //! the monotonic clock's instants. One lock guards the executors' bookkeeping; a tick runs
 //! outside it, and its end wakes the executors' waiting threads.
@@ -8,11 +8,11 @@ use super::{
     catch_quietly, next_deadline, node_timing, panic_message, real_tick, thread_cpu_time,
     LatencyStats, NodeExecStats, RealOptions, StopFlag,
 };
-use crate::clock::{Clock, MonotonicClock};
-use crate::executor::{Dispatch, ExecutionPlan, ExecutorKind};
-use crate::metrics::NodeTiming;
-use crate::node::{Flow, Node};
-use crate::time::Nanos;
+use ratelab_core::clock::{Clock, MonotonicClock};
+use ratelab_core::executor::{Dispatch, ExecutionPlan, ExecutorKind};
+use ratelab_core::metrics::NodeTiming;
+use ratelab_core::node::{Flow, Node};
+use ratelab_core::time::Nanos;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Condvar, Mutex, MutexGuard};
 use std::thread::JoinHandle;
@@ -202,12 +202,12 @@ fn worker(inner: &Inner, e: usize) {
     let sched_error = cx
         .opts
         .rt_priority
-        .and_then(|p| crate::realtime::set_current_thread_fifo(p).err())
+        .and_then(|p| ratelab_core::realtime::set_current_thread_fifo(p).err())
         .map(|e| e.to_string());
     {
         let mut st = inner.lock();
         if st.sched.is_empty() {
-            st.sched = crate::realtime::current_thread_sched().to_string();
+            st.sched = ratelab_core::realtime::current_thread_sched().to_string();
             st.sched_error = sched_error;
         }
     }

@@ -3,11 +3,11 @@
 //! one line that refuses a plan past it or a thread the machine would not start.
 
 use super::{EndReason, RealRun, RunEnd};
-use crate::executor::{ExecutionPlan, ExecutorKind};
-use crate::limits::MAX_REAL_CLOCK_THREADS;
-use crate::metrics::NodeTiming;
-use crate::node::Node;
-use crate::time::Nanos;
+use ratelab_core::executor::{ExecutionPlan, ExecutorKind};
+use ratelab_core::limits::MAX_REAL_CLOCK_THREADS;
+use ratelab_core::metrics::NodeTiming;
+use ratelab_core::node::Node;
+use ratelab_core::time::Nanos;
 
 /// The threads [`run_real`] starts for `plan`: one per node on a per-node executor, and
 /// each shared executor's threads (which start whether or not their nodes are due).
@@ -31,7 +31,7 @@ pub fn plan_threads(plan: &ExecutionPlan) -> usize {
 }
 
 /// Check that a real-clock run of `plan` starts at most
-/// [`crate::limits::MAX_REAL_CLOCK_THREADS`] threads ([`plan_threads`]).
+/// [`ratelab_core::limits::MAX_REAL_CLOCK_THREADS`] threads ([`plan_threads`]).
 ///
 /// # Errors
 /// One line: the threads it would start, the bound, and the ways to fewer threads (the
@@ -41,7 +41,7 @@ pub fn check_real_clock_threads(plan: &ExecutionPlan) -> Result<(), String> {
     if threads <= MAX_REAL_CLOCK_THREADS {
         return Ok(());
     }
-    Err(crate::limits::refusal(
+    Err(ratelab_core::limits::refusal(
         format_args!(
             "the real clock would start {threads} threads (one per node on a thread of its own, and each shared executor's), at most {MAX_REAL_CLOCK_THREADS}: run it under the virtual clock (--clock virtual), or share threads among its nodes (--executor single_threaded or multi_threaded:N, or [executors] tables in the graph file)"
         ),

@@ -13,9 +13,9 @@ A run is `ratelab run --out DIR` made in this process by the same code, with the
 defaults (the real clock among them: `clock="virtual"` is the deterministic one, the same
 settings giving the same bytes): `run.metrics` holds `metrics.json`'s keys, `run.trace`
 `trace.csv`'s columns, `run.log` `log.txt`'s lines (what each means: docs/metrics.md). A
-brain (`policy=`) may be a function defined here, in a notebook cell: it runs in this
-interpreter and, under the virtual clock, gives exactly the run the same function gives
-from a file. The `ratelab` command this package installs is the whole command line
+brain (`policy=`, of `run`, `sweep` and `cliff` alike) may be a function defined here, in a
+notebook cell: it runs in this interpreter and, under the virtual clock, gives exactly the
+run the same function gives from a file. The `ratelab` command this package installs is the whole command line
 (`ratelab lab`, `ratelab launch`, …).
 
 Errors are exceptions carrying ratelab's one line, which names the Python parameter: a
@@ -360,6 +360,14 @@ _GONE = {
         "flags": "each of `ratelab run`'s settings is a keyword of run() of its own "
         "(executor=, stall=, compute_ms=, …; help(ratelab.run) lists them)",
     },
+    "sweep": {
+        "flags": "each of `ratelab sweep`'s settings is a keyword of sweep() of its own "
+        "(rate=, stall=, executor=, …; help(ratelab.sweep) lists them)",
+    },
+    "cliff": {
+        "flags": "each of `ratelab cliff`'s settings is a keyword of cliff() of its own "
+        "(rate=, stall=, executor=, …; help(ratelab.cliff) lists them)",
+    },
 }
 
 
@@ -448,6 +456,38 @@ _RUN_FIGURES = (
 )
 
 
+class _Columns:
+    """The trace as the run returned it, `(name, dtype, bytes)` per column: what `Run.trace`
+    makes its NumPy arrays of when first asked for."""
+
+    def __init__(self, columns: Sequence[Any]):
+        self.columns = columns
+
+
+class _Trace:
+    """`Run.trace`, made when first asked for: the run's columns (`_Columns`) become NumPy
+    arrays then, and NumPy is imported then, not by `import ratelab` nor by every run
+    (importing it costs more than the chapter's run: a fresh process's `ratelab.run()`
+    would cost twice `ratelab run`'s). The dataclass's `trace` field, as a data descriptor:
+    `Run(trace=…)` takes a dict of arrays as before (or the columns), held in the
+    instance's `__dict__` under the field's name. On the class it raises AttributeError,
+    so the field has no default, as before."""
+
+    def __get__(self, run: Any, owner: Any = None) -> Dict[str, Any]:
+        if run is None:
+            raise AttributeError("trace")
+        held = run.__dict__["trace"]
+        if type(held) is _Columns:
+            # Two threads asking at once may each make the arrays (the same values); the
+            # later is kept.
+            held = run.__dict__["trace"] = _trace_arrays(held.columns)
+        return held
+
+    def __set__(self, run: Any, value: Any) -> None:
+        # Only the dataclass's __init__ sets it (the instance is frozen).
+        run.__dict__["trace"] = value
+
+
 @dataclass(frozen=True, repr=False)
 class Run:
     """One run's results, as `ratelab run --out` writes them. Printed, it says how the run
@@ -458,8 +498,8 @@ class Run:
     metrics: Dict[str, Any]
     #: `trace.csv`'s columns as NumPy arrays, one value per actuator step (with
     #: `trace_every=N`, per N-th step and the last), named as `TRACE_COLUMNS` says (units in
-    #: the names).
-    trace: Dict[str, Any]
+    #: the names). Made when first asked for (NumPy is imported then).
+    trace: Dict[str, Any] = _Trace()
     #: `log.txt`'s lines: what the nodes wrote, stamped `[t=1.234 s node]`.
     log: List[str]
     #: The summary `ratelab run` prints (without the wall time).
@@ -660,6 +700,79 @@ def _trace_arrays(columns: Sequence[Any]) -> Dict[str, Any]:
     return {TRACE_COLUMNS.get(n, n): np.frombuffer(b, dtype=k) for n, k, b in columns}
 
 
+# ---- the settings run, sweep and cliff share ---------------------------------------------------
+
+
+def _graph_settings(
+    graph: Any,
+    rate: Any,
+    depth: Any,
+    qos: Any,
+    link: Any,
+    lease_ms: Any,
+    stall: Any,
+    kill: Any,
+    compute_ms: Any,
+    executor: Any,
+    phase_offset_ms: Any,
+) -> Dict[str, Any]:
+    """The graph and its overrides as `_native`'s settings (a key each, left out when not
+    given; see `run` for what each takes), every value read here into its type."""
+    settings: Dict[str, Any] = {}
+    if graph is not None:
+        settings["graph"] = _path("graph", graph)
+    lists: Dict[str, List[Any]] = {}
+    if rate is not None:
+        lists["rate"] = [
+            (n, _real(f"rate[{n!r}]", hz, "Hz")) for n, hz in _keyed("rate", rate, "node")
+        ]
+    if depth is not None:
+        lists["depth"] = [
+            (t, _whole(f"depth[{t!r}]", d, "messages"))
+            for t, d in _keyed("depth", depth, "topic")
+        ]
+    if qos is not None:
+        lists["qos"] = _topic_pairs("qos", qos)
+    if link is not None:
+        lists["link"] = _topic_pairs("link", link)
+    if lease_ms is not None:
+        lists["lease_ms"] = [
+            (n, _real(f"lease_ms[{n!r}]", ms, "ms"))
+            for n, ms in _keyed("lease_ms", lease_ms, "node")
+        ]
+    if stall is not None:
+        lists["stall"] = _stalls(stall)
+    if kill is not None:
+        lists["kill"] = [
+            (n, _real(f"kill[{n!r}]", at, "s")) for n, at in _keyed("kill", kill, "node")
+        ]
+    if compute_ms is not None:
+        lists["compute_ms"] = [
+            (n, _compute_text(f"compute_ms[{n!r}]", ms))
+            for n, ms in _keyed("compute_ms", compute_ms, "node")
+        ]
+    if phase_offset_ms is not None:
+        lists["phase_offset_ms"] = _values(
+            "phase_offset_ms", phase_offset_ms, lambda n, v: _real(n, v, "ms"), empty_ok=True
+        )
+    settings.update((k, v) for k, v in lists.items() if v)
+    if executor is not None:
+        settings["executor"] = _text(
+            "executor", executor, '"single_threaded", "multi_threaded:N" or "per_node"'
+        )
+    return settings
+
+
+def _brain(settings: Dict[str, Any], policy: Any) -> Optional[Callable[[Any], Any]]:
+    """`policy=`: a callable brain, returned (it runs in this interpreter); else a name or a
+    file, put in `settings` (None: the default, the scripted balancer)."""
+    if callable(policy):
+        return policy
+    if policy is not None:
+        settings["policy"] = _path("policy", policy)
+    return None
+
+
 # ---- run -------------------------------------------------------------------------------------
 
 
@@ -747,9 +860,10 @@ def run(
     NodeFailed, KeyboardInterrupt, and TraceTooLarge (a MemoryError) before a run whose
     trace would not fit in memory.
     """
-    settings: Dict[str, Any] = {}
-    if graph is not None:
-        settings["graph"] = _path("graph", graph)
+    settings = _graph_settings(
+        graph, rate, depth, qos, link, lease_ms, stall, kill, compute_ms, executor,
+        phase_offset_ms,
+    )
     if clock is not None:
         settings["clock"] = _text("clock", clock, '"real" or "virtual"')
     if seed is not None:
@@ -762,50 +876,7 @@ def run(
         settings["sensor_hz"] = _real("sensor_hz", sensor_hz, "Hz")
     if queue_depth is not None:
         settings["queue_depth"] = _whole("queue_depth", queue_depth, "messages", negative_ok=True)
-    lists: Dict[str, List[Any]] = {}
-    if rate is not None:
-        lists["rate"] = [
-            (n, _real(f"rate[{n!r}]", hz, "Hz")) for n, hz in _keyed("rate", rate, "node")
-        ]
-    if depth is not None:
-        lists["depth"] = [
-            (t, _whole(f"depth[{t!r}]", d, "messages"))
-            for t, d in _keyed("depth", depth, "topic")
-        ]
-    if qos is not None:
-        lists["qos"] = _topic_pairs("qos", qos)
-    if link is not None:
-        lists["link"] = _topic_pairs("link", link)
-    if lease_ms is not None:
-        lists["lease_ms"] = [
-            (n, _real(f"lease_ms[{n!r}]", ms, "ms"))
-            for n, ms in _keyed("lease_ms", lease_ms, "node")
-        ]
-    if stall is not None:
-        lists["stall"] = _stalls(stall)
-    if kill is not None:
-        lists["kill"] = [
-            (n, _real(f"kill[{n!r}]", at, "s")) for n, at in _keyed("kill", kill, "node")
-        ]
-    if compute_ms is not None:
-        lists["compute_ms"] = [
-            (n, _compute_text(f"compute_ms[{n!r}]", ms))
-            for n, ms in _keyed("compute_ms", compute_ms, "node")
-        ]
-    if phase_offset_ms is not None:
-        lists["phase_offset_ms"] = _values(
-            "phase_offset_ms", phase_offset_ms, lambda n, v: _real(n, v, "ms"), empty_ok=True
-        )
-    settings.update((k, v) for k, v in lists.items() if v)
-    if executor is not None:
-        settings["executor"] = _text(
-            "executor", executor, '"single_threaded", "multi_threaded:N" or "per_node"'
-        )
-    brain = None
-    if callable(policy):
-        brain = policy
-    elif policy is not None:
-        settings["policy"] = _path("policy", policy)
+    brain = _brain(settings, policy)
     if record is not None:
         settings["record"] = _path("record", record)
     if out is not None:
@@ -827,7 +898,7 @@ def run(
     files = _native_call(_native.run, settings, brain, classes)
     result = Run(
         metrics=json.loads(files["metrics_json"]),
-        trace=_trace_arrays(files["trace_columns"]),
+        trace=_Columns(files["trace_columns"]),  # NumPy arrays when first asked for
         log=files["log"].splitlines(),
         summary=list(files["summary"]),
         recording=files["recording"],
@@ -848,26 +919,27 @@ def run(
 
 
 # ---- sweep, cliff ----------------------------------------------------------------------------
-# Their native side still takes `ratelab sweep`'s and `ratelab cliff`'s flags: the values are
-# read here (NumPy scalars and arrays too) and written as the flags' text.
+# The settings every run shares go as `run`'s do (a dict of the keywords); the grid's lists
+# and the search's range in a dict of their own. Every rule is the library's (an empty list
+# refused among them), in Python's words.
 
 
-def _reals_text(name: str, values: Any, unit: str) -> str:
-    return ",".join(_number_text(x) for x in _values(name, values, lambda n, v: _real(n, v, unit)))
+def _reals(name: str, values: Any, unit: str) -> List[float]:
+    return _values(name, values, lambda n, v: _real(n, v, unit), empty_ok=True)
 
 
-def _wholes_text(name: str, values: Any, unit: str = "") -> str:
-    return ",".join(str(x) for x in _values(name, values, lambda n, v: _whole(n, v, unit)))
+def _wholes(name: str, values: Any, unit: str = "") -> List[int]:
+    return _values(name, values, lambda n, v: _whole(n, v, unit), empty_ok=True)
 
 
-def _brain_path(function: str, policy: Any) -> str:
-    if callable(policy):
-        raise SettingTypeError(
-            f"{function}(policy=...) takes \"scripted\", a checkpoint path or "
-            "\"FILE.py[:FUNCTION]\": a function defined here is not taken yet (ratelab.run "
-            "takes one); save it to a file and give \"FILE.py:FUNCTION\""
-        )
-    return _path("policy", policy)
+def _clocks(value: Any) -> List[str]:
+    """`clock=`: "virtual", "real", or a list of them."""
+    what = '"real" or "virtual"'
+    if isinstance(value, str):
+        return [value]
+    if not _is_list(value):
+        raise SettingTypeError(f"clock must be {what} or a list of them, got {value!r}")
+    return [_text("clock", c, what) for c in value]
 
 
 @_keywords
@@ -879,15 +951,27 @@ def sweep(
     queue_depth: Union[int, Sequence[int]] = 1,
     seeds: Union[int, Sequence[int]] = (0, 1, 2),
     clock: Union[str, Sequence[str]] = "virtual",
-    policy: Union[str, PathLike] = "scripted",
+    policy: Union[str, PathLike, Callable[[Any], Any]] = "scripted",
     duration_s: float = 10.0,
-    flags: Sequence[str] = (),
+    rate: Union[None, Mapping[str, float], Sequence[Tuple[str, float]]] = None,
+    depth: Union[None, Mapping[str, int], Sequence[Tuple[str, int]]] = None,
+    qos: Union[None, str, Mapping[str, Union[str, Mapping[str, Any]]], Sequence[str]] = None,
+    link: Union[None, str, Mapping[str, Union[str, Mapping[str, Any]]], Sequence[str]] = None,
+    lease_ms: Union[None, Mapping[str, float], Sequence[Tuple[str, float]]] = None,
+    stall: Union[
+        None, Mapping[str, Tuple[float, float]], Sequence[Tuple[str, float, float]]
+    ] = None,
+    kill: Union[None, Mapping[str, float], Sequence[Tuple[str, float]]] = None,
+    compute_ms: Union[None, Mapping[str, Union[float, str, Tuple[float, float]]]] = None,
+    executor: Optional[str] = None,
+    phase_offset_ms: Optional[Sequence[float]] = None,
 ) -> Sweep:
     """Every combination of the given rates, depths, seeds and clocks, one run each, on every
     core (as `ratelab sweep`): a `Sweep` table with a row per run (its point and figures: the
     columns `ratelab sweep --csv` writes). Each of control_hz (Hz), sensor_hz (Hz),
-    queue_depth (messages) and seeds is one value or a list (a NumPy array too). A run that
-    failed a node raises NodeFailed once all have run (its `.run` is None).
+    queue_depth (messages), seeds and clock ("virtual", "real") is one value or a list (a
+    NumPy array too); an empty list is refused. A run that failed a node raises NodeFailed
+    once all have run (its `.run` is None).
 
     >>> import ratelab
     >>> table = ratelab.sweep(control_hz=[50, 5], seeds=[0], duration_s=2)
@@ -895,22 +979,46 @@ def sweep(
     <ratelab.Sweep 2 runs: 1 balanced, 1 fell; control 5–50 Hz, seeds 0>
     >>> sorted((row["control_hz"], row["balanced"]) for row in table)
     [(5, False), (50, True)]
+
+    The brain may be a function defined here, as for `run`: the scripted balancer's
+    arithmetic in Python gives the built-in's figures.
+
+    >>> import math
+    >>> def act(obs):
+    ...     theta = math.atan2(float(obs[3]), float(obs[2]))
+    ...     return 10 * theta + 2 * float(obs[4]) + 0.4 * float(obs[0]) + 0.8 * float(obs[1])
+    >>> mine = ratelab.sweep(policy=act, control_hz=[50, 5], seeds=[0], duration_s=2)
+    >>> [row["fell_at_s"] for row in mine] == [row["fell_at_s"] for row in table]
+    True
+
+    policy: the brain of every run: "scripted" (default), a checkpoint path,
+        "FILE.py[:FUNCTION]", or a callable `f(obs) -> action` (as `run`'s). A callable is
+        called in this interpreter, a call at a time (under the GIL) though the runs go on
+        every core; the one function is every run's, so it should keep no state between
+        calls (a file's brain is loaded afresh for each run).
+    duration_s: each run's length, s (default 10). graph, rate, depth, qos, link, lease_ms,
+        stall, kill, compute_ms, executor, phase_offset_ms: the graph and its overrides, as
+        `run` takes them (the grid sets the chain's sensor and control rates and every
+        topic's depth; a `rate` of the sensor or the policy is refused beside it).
+
+    An unknown keyword raises SettingTypeError (a TypeError) naming the nearest one; a bad
+    value SettingError (a ValueError) naming the parameter (`seeds: an empty list runs
+    nothing …`). Also raises FileNotFoundError, NodeFailed, KeyboardInterrupt.
     """
-    args: List[str] = ["--control-hz", _reals_text("control_hz", control_hz, "Hz")]
-    args += ["--sensor-hz", _reals_text("sensor_hz", sensor_hz, "Hz")]
-    args += ["--queue-depth", _wholes_text("queue_depth", queue_depth, "messages")]
-    args += ["--seeds", _wholes_text("seeds", seeds)]
-    if isinstance(clock, str):
-        clocks = clock
-    else:
-        clocks = ",".join(_text("clock", c, '"real" or "virtual"') for c in clock)
-    args += ["--clock", clocks]
-    args += ["--policy", _brain_path("sweep", policy)]
-    args += ["--duration", _number_text(_real("duration_s", duration_s, "s"))]
-    if graph is not None:
-        args += ["--graph", _path("graph", graph)]
-    args += [str(f) for f in flags]
-    text, failed = _native_call(_native.sweep, args)
+    settings = _graph_settings(
+        graph, rate, depth, qos, link, lease_ms, stall, kill, compute_ms, executor,
+        phase_offset_ms,
+    )
+    settings["duration_s"] = _real("duration_s", duration_s, "s")
+    brain = _brain(settings, policy)
+    grid: Dict[str, Any] = {
+        "control_hz": _reals("control_hz", control_hz, "Hz"),
+        "sensor_hz": _reals("sensor_hz", sensor_hz, "Hz"),
+        "queue_depth": _wholes("queue_depth", queue_depth, "messages"),
+        "seeds": _wholes("seeds", seeds),
+        "clock": _clocks(clock),
+    }
+    text, failed = _native_call(_native.sweep, settings, grid, brain)
     table = Sweep(text)
     if failed is not None:
         raise NodeFailed(failed, None)
@@ -927,9 +1035,20 @@ def cliff(
     min_hz: float = 1,
     max_hz: float = 50,
     step_hz: float = 0.1,
-    policy: Union[str, PathLike] = "scripted",
+    policy: Union[str, PathLike, Callable[[Any], Any]] = "scripted",
     duration_s: float = 10.0,
-    flags: Sequence[str] = (),
+    rate: Union[None, Mapping[str, float], Sequence[Tuple[str, float]]] = None,
+    depth: Union[None, Mapping[str, int], Sequence[Tuple[str, int]]] = None,
+    qos: Union[None, str, Mapping[str, Union[str, Mapping[str, Any]]], Sequence[str]] = None,
+    link: Union[None, str, Mapping[str, Union[str, Mapping[str, Any]]], Sequence[str]] = None,
+    lease_ms: Union[None, Mapping[str, float], Sequence[Tuple[str, float]]] = None,
+    stall: Union[
+        None, Mapping[str, Tuple[float, float]], Sequence[Tuple[str, float, float]]
+    ] = None,
+    kill: Union[None, Mapping[str, float], Sequence[Tuple[str, float]]] = None,
+    compute_ms: Union[None, Mapping[str, Union[float, str, Tuple[float, float]]]] = None,
+    executor: Optional[str] = None,
+    phase_offset_ms: Optional[Sequence[float]] = None,
 ) -> Cliff:
     """Per seed, the highest control rate at which the pole falls within `duration_s`, to
     `step_hz` (as `ratelab cliff`; virtual clock): a `Cliff` table with the columns seed,
@@ -942,19 +1061,36 @@ def cliff(
     >>> row = table.rows[0]
     >>> row["balances_at_hz"] - row["falls_at_hz"]
     0.5
+
+    seeds: one or a list (a NumPy array too), not empty. sensor_hz (Hz), queue_depth
+        (messages): the chain's sensor rate and every topic's depth in every run.
+    min_hz, max_hz, step_hz: the control rates searched, Hz: from max_hz down by step_hz
+        to min_hz (at most 5000 rates), until the first fall.
+    policy: the brain, as `sweep`'s (a callable too: seeds go on every core, its calls
+        one at a time). duration_s, graph and its overrides: as `sweep`'s (a `rate` of the
+        policy is refused: the search sets it).
+
+    An unknown keyword raises SettingTypeError (a TypeError) naming the nearest one; a bad
+    value SettingError (a ValueError) naming the parameter (`min_hz (20) must not be above
+    max_hz (10)`). A brain that raised stops the search with a ValueError naming the seed,
+    the rate and the exception (such a run neither balanced nor fell). Also raises
+    FileNotFoundError, KeyboardInterrupt.
     """
-    args: List[str] = ["--seeds", _wholes_text("seeds", seeds)]
-    args += ["--sensor-hz", _number_text(_real("sensor_hz", sensor_hz, "Hz"))]
-    args += ["--queue-depth", str(_whole("queue_depth", queue_depth, "messages"))]
-    args += ["--min-hz", _number_text(_real("min_hz", min_hz, "Hz"))]
-    args += ["--max-hz", _number_text(_real("max_hz", max_hz, "Hz"))]
-    args += ["--step", _number_text(_real("step_hz", step_hz, "Hz"))]
-    args += ["--policy", _brain_path("cliff", policy)]
-    args += ["--duration", _number_text(_real("duration_s", duration_s, "s"))]
-    if graph is not None:
-        args += ["--graph", _path("graph", graph)]
-    args += [str(f) for f in flags]
-    return Cliff(_native_call(_native.cliff, args))
+    settings = _graph_settings(
+        graph, rate, depth, qos, link, lease_ms, stall, kill, compute_ms, executor,
+        phase_offset_ms,
+    )
+    settings["duration_s"] = _real("duration_s", duration_s, "s")
+    settings["sensor_hz"] = _real("sensor_hz", sensor_hz, "Hz")
+    settings["queue_depth"] = _whole("queue_depth", queue_depth, "messages", negative_ok=True)
+    brain = _brain(settings, policy)
+    search = {
+        "seeds": _wholes("seeds", seeds),
+        "min_hz": _real("min_hz", min_hz, "Hz"),
+        "max_hz": _real("max_hz", max_hz, "Hz"),
+        "step_hz": _real("step_hz", step_hz, "Hz"),
+    }
+    return Cliff(_native_call(_native.cliff, settings, search, brain))
 
 
 @dataclass(frozen=True)

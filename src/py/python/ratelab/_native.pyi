@@ -25,11 +25,25 @@ def run(
     an estimator in the graph, else None). Raises ValueError naming the Python parameter,
     and TraceTooLarge before the run when its trace would pass MAX_HELD_TRACE_VALUES."""
 
-def sweep(flags: List[str]) -> Tuple[str, Optional[str]]:
-    """`ratelab sweep FLAGS...`: (its --csv text, the first failed node's line or None)."""
+def sweep(
+    settings: Dict[str, Any],
+    grid: Dict[str, Any],
+    brain: Optional[Callable[[Any], Any]] = None,
+) -> Tuple[str, Optional[str]]:
+    """A sweep: `settings` what every run shares (run's keys graph, duration_s, rate, depth,
+    qos, link, lease_ms, stall, kill, compute_ms, executor, phase_offset_ms, policy), `grid`
+    its lists (clock [str], sensor_hz [float], control_hz [float], queue_depth [int], seeds
+    [int]), `brain` a callable brain for every run. Returns (its `ratelab sweep --csv` text,
+    the first failed node's line or None). Raises ValueError naming the Python parameter."""
 
-def cliff(flags: List[str]) -> str:
-    """`ratelab cliff FLAGS...`: CSV seed,falls_at_hz,balances_at_hz,runs."""
+def cliff(
+    settings: Dict[str, Any],
+    search: Dict[str, Any],
+    brain: Optional[Callable[[Any], Any]] = None,
+) -> str:
+    """A cliff search: `settings` what every run shares (sweep's keys, and sensor_hz,
+    queue_depth), `search` seeds [int], min_hz, max_hz, step_hz (float), `brain` a callable
+    brain for every run. Returns CSV seed,falls_at_hz,balances_at_hz,runs."""
 
 class NoPrediction(ValueError):
     """An exercise was asked for before its prediction was written."""

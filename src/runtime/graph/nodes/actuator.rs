@@ -3,16 +3,16 @@
 //! force is refused and the last good one held; a missed deadline gets the input topic's
 //! reaction (hold, zero, stop). It alone steps the plant; a fall stops the graph.
 
-use crate::estimate::EstimatePoint;
 use crate::graph::kind::{typed, BuildContext, Code, KindDef, Params, Plant, Ports, Work};
-use crate::ids::TopicId;
-use crate::msg::{AnyTopic, ForceMsg, Message, StateMsg};
-use crate::node::Flow;
 use crate::plant::{lock, SharedPlant, GEAR_N};
-use crate::qos::OnDeadlineMissed;
-use crate::runlog::{RunLog, StepRecord, StepSink, TopicCounters, INLINE_TOPICS};
-use crate::time::Nanos;
-use crate::topic::{ChangeBoard, Subscription, TopicStats};
+use ratelab_core::estimate::EstimatePoint;
+use ratelab_core::ids::TopicId;
+use ratelab_core::msg::{AnyTopic, ForceMsg, Message, StateMsg};
+use ratelab_core::node::Flow;
+use ratelab_core::qos::OnDeadlineMissed;
+use ratelab_core::runlog::{RunLog, StepRecord, StepSink, TopicCounters, INLINE_TOPICS};
+use ratelab_core::time::Nanos;
+use ratelab_core::topic::{ChangeBoard, Subscription, TopicStats};
 use std::sync::{Arc, Mutex};
 
 /// The kind: `force` in, nothing out; steps the plant (exactly one per graph).
@@ -36,6 +36,7 @@ pub fn def() -> KindDef {
                 log: cx.log.clone(),
                 observers: cx.observers.take().unwrap_or_default(),
                 held: None,
+                held_stamp: None,
                 policy_output: cx
                     .action
                     .and_then(|t| t.subscription(0).typed::<ForceMsg>().cloned()),
@@ -75,7 +76,7 @@ pub struct TopicWatch {
 }
 
 impl TopicWatch {
-    /// Watch `topics`, in [`crate::ids::TopicId`] order. A graph of at most
+    /// Watch `topics`, in [`ratelab_core::ids::TopicId`] order. A graph of at most
     /// [`INLINE_TOPICS`] topics (the chapter's) is read whole every step, as counting its
     /// changes would cost more than it saves.
     pub fn new(topics: Vec<AnyTopic>) -> Self {
@@ -129,26 +130,30 @@ pub struct Actuator {
     pub observers: Vec<Box<dyn StepSink>>,
     /// The last finite command applied (in [-1, 1] units of the motor), with its origin.
     pub held: Option<(f32, Option<Nanos>)>,
+    /// When the held command was published (its message's stamp), for its age in each
+    /// step record ([`StepRecord::held_stamp`]).
+    pub held_stamp: Option<Nanos>,
     /// The policy's output topic, watched (never read) for what it published.
     pub policy_output: Option<Arc<Subscription<ForceMsg>>>,
     /// `seq` of the newest policy message already reported.
     pub reported: Option<u64>,
     /// The chain's state estimate, when the graph has an estimator: the policy's queue of
-    /// it, watched (never read) beside the plant's state ([`crate::estimate`]).
+    /// it, watched (never read) beside the plant's state ([`ratelab_core::estimate`]).
     pub estimate: Option<Arc<Subscription<StateMsg>>>,
 }
 
 impl Work for Actuator {
-    fn save(&self) -> Option<crate::node::NodeState> {
-        // The force it holds (zero-order hold) and the newest policy message it reported.
-        Some(Box::new((self.held, self.reported)))
+    fn save(&self) -> Option<ratelab_core::node::NodeState> {
+        // The force it holds (zero-order hold), when it was published, and the newest
+        // policy message it reported.
+        Some(Box::new((self.held, self.reported, self.held_stamp)))
     }
-    fn load(&mut self, state: &crate::node::NodeState) -> bool {
-        type Kept = (Option<(f32, Option<Nanos>)>, Option<u64>);
-        let Some(&(held, reported)) = state.downcast_ref::<Kept>() else {
+    fn load(&mut self, state: &ratelab_core::node::NodeState) -> bool {
+        type Kept = (Option<(f32, Option<Nanos>)>, Option<u64>, Option<Nanos>);
+        let Some(&(held, reported, held_stamp)) = state.downcast_ref::<Kept>() else {
             return false;
         };
-        (self.held, self.reported) = (held, reported);
+        (self.held, self.reported, self.held_stamp) = (held, reported, held_stamp);
         true
     }
     /// One tick at `now`: apply, step, record.
@@ -159,18 +164,20 @@ impl Work for Actuator {
                 // Exact: a brain's f32 command × 10 is exact in f64, and so is ÷ 10.
                 let command = (msg.data.newtons / GEAR_N) as f32;
                 self.held = Some((command, msg.origin_stamp));
+                self.held_stamp = Some(msg.stamp);
             } else {
                 nonfinite = true; // hold the last good force instead
             }
         }
         let (mut u, mut origin) = self.held.unwrap_or((0.0, None));
+        let mut held_stamp = self.held_stamp;
         // The deadline reaction (QoS): no message within the deadline.
         let qos = self.input.qos();
         if let Some(deadline) = qos.deadline {
             if now.saturating_sub(self.input.last_arrival()) > deadline {
                 match qos.on_deadline_missed {
                     OnDeadlineMissed::Hold => {}
-                    OnDeadlineMissed::Zero => (u, origin) = (0.0, None),
+                    OnDeadlineMissed::Zero => (u, origin, held_stamp) = (0.0, None, None),
                     OnDeadlineMissed::Stop => {
                         log(&self.log).watchdog(now, self.input.name(), deadline);
                         return Flow::Stop;
@@ -202,9 +209,11 @@ impl Work for Actuator {
             step,
             t: now,
             pole_angle: outcome.state.theta,
+            pole_angvel: outcome.state.pole_angvel,
             cart_pos: outcome.state.cart_pos,
             action: outcome.applied,
             latency: origin.map(|o| now.saturating_sub(o)),
+            held_stamp,
             nonfinite,
             topics: self.topics.at(now),
             fell: outcome.terminated,
@@ -225,8 +234,8 @@ impl Work for Actuator {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::msg::MsgData;
-    use crate::qos::{History, Link, TopicQos};
+    use ratelab_core::msg::MsgData;
+    use ratelab_core::qos::{History, Link, TopicQos};
 
     /// Topics of every QoS that changes how counters move: the chapter's, a deadline (its
     /// counters move with time alone), a lifespan over a lossy, delayed link, keep-all, and

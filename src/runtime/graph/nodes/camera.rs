@@ -12,11 +12,11 @@ pub use super::frame::{FrameGeometry, CART_HALF_M, POLE_LENGTH_M, SHADES};
 use crate::graph::kind::{
     publisher, BuildContext, Code, KindDef, ParamDef, Params, Plant, Ports, Work,
 };
-use crate::msg::{ImageMsg, Message};
-use crate::node::Flow;
 use crate::plant::{lock, SharedPlant};
-use crate::publisher::Publisher;
-use crate::time::Nanos;
+use ratelab_core::msg::{ImageMsg, Message};
+use ratelab_core::node::Flow;
+use ratelab_core::publisher::Publisher;
+use ratelab_core::time::Nanos;
 
 /// The smallest frame side, px.
 pub const MIN_FRAME_PX: u32 = 16;
@@ -105,8 +105,8 @@ pub fn def() -> KindDef {
                     opened
                         .map_err(|e| {
                             let line = format!("{e}: drawing synthetic frames instead");
-                            let warn = crate::textlog::Level::Warn;
-                            crate::textlog::emit_for(Some(cx.name), None, warn, &line);
+                            let warn = ratelab_core::textlog::Level::Warn;
+                            ratelab_core::textlog::emit_for(Some(cx.name), None, warn, &line);
                         })
                         .ok()
                 });
@@ -136,11 +136,11 @@ pub struct Camera {
 }
 
 impl Work for Camera {
-    fn save(&self) -> Option<crate::node::NodeState> {
+    fn save(&self) -> Option<ratelab_core::node::NodeState> {
         // A camera keeps nothing between frames.
         Some(Box::new(()))
     }
-    fn load(&mut self, state: &crate::node::NodeState) -> bool {
+    fn load(&mut self, state: &ratelab_core::node::NodeState) -> bool {
         state.downcast_ref::<()>().is_some()
     }
     /// One tick at `now`: read the plant, render or draw it, publish.
@@ -155,8 +155,8 @@ impl Work for Camera {
             Some(Err(why)) => {
                 self.render = None;
                 let line = format!("{why}: drawing synthetic frames from here");
-                let warn = crate::textlog::Level::Warn;
-                crate::textlog::emit_for(Some(&self.name), Some(now), warn, &line);
+                let warn = ratelab_core::textlog::Level::Warn;
+                ratelab_core::textlog::emit_for(Some(&self.name), Some(now), warn, &line);
                 None
             }
             None => None,

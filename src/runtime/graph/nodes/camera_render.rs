@@ -293,7 +293,7 @@ fn read_hello(from: &mut impl BufRead) -> Result<(), (String, bool)> {
         .read_until(b'\n', &mut line)
         .map_err(|e| (format!("the renderer's pipe: {e}"), false))?;
     let line = String::from_utf8_lossy(&line);
-    let line = crate::text::printable(line.trim_end());
+    let line = ratelab_core::text::printable(line.trim_end());
     let quoted = || {
         let mut q: String = line.chars().take(QUOTED_CHARS).collect();
         if q.len() < line.len() {
@@ -338,9 +338,10 @@ fn keep_tail(stderr: impl Read + Send + 'static) -> (Tail, Receiver<()>) {
             let (lines, width) = STDERR_TAIL;
             let mut from = BufReader::new(stderr);
             let mut line = Vec::with_capacity(width);
-            while let Ok(true) = crate::input::read_line_bounded(&mut from, width, &mut line) {
+            while let Ok(true) = ratelab_core::input::read_line_bounded(&mut from, width, &mut line)
+            {
                 let text = String::from_utf8_lossy(&line);
-                let text = crate::text::printable(text.trim()).to_string();
+                let text = ratelab_core::text::printable(text.trim()).to_string();
                 if text.is_empty() {
                     continue;
                 }
@@ -373,7 +374,7 @@ pub fn serve(width: u32, height: u32, from: impl Read, mut to: impl Write) -> Re
         Err(why) => {
             // One line (MuJoCo's errors may span several).
             let why = why.lines().map(str::trim).collect::<Vec<_>>().join(" / ");
-            let why = crate::text::printable(&why).into_owned();
+            let why = ratelab_core::text::printable(&why).into_owned();
             let _ = writeln!(to, "{HELLO} error: {why}").and_then(|()| to.flush());
             return Err(why);
         }

@@ -7,12 +7,12 @@ use crate::graph::estimator::VelocityFilter;
 use crate::graph::kind::{
     publisher, typed, BuildContext, Code, KindDef, ParamDef, Params, Plant, Ports, Work,
 };
-use crate::msg::{Message, PositionMsg, StateMsg};
-use crate::node::Flow;
-use crate::publisher::Publisher;
-use crate::rate::MAX_HZ;
-use crate::time::Nanos;
-use crate::topic::Subscription;
+use ratelab_core::msg::{Message, PositionMsg, StateMsg};
+use ratelab_core::node::Flow;
+use ratelab_core::publisher::Publisher;
+use ratelab_core::rate::MAX_HZ;
+use ratelab_core::time::Nanos;
+use ratelab_core::topic::Subscription;
 use std::sync::Arc;
 
 /// Its parameter: the low-pass cut-off.
@@ -65,10 +65,10 @@ pub struct Estimator {
 }
 
 impl Work for Estimator {
-    fn save(&self) -> Option<crate::node::NodeState> {
+    fn save(&self) -> Option<ratelab_core::node::NodeState> {
         Some(Box::new((self.filter.clone(), self.last_seq, self.origin)))
     }
-    fn load(&mut self, state: &crate::node::NodeState) -> bool {
+    fn load(&mut self, state: &ratelab_core::node::NodeState) -> bool {
         type Kept = (VelocityFilter, Option<u64>, Option<Nanos>);
         let Some((filter, last_seq, origin)) = state.downcast_ref::<Kept>() else {
             return false;

@@ -23,13 +23,13 @@
 //! when it delivers.
 
 use crate::graph::kind::{BuildContext, Code, KindDef, ParamDef, Params, Plant, Ports, Work};
-use crate::ids::{NodeId, TopicId};
-use crate::msg::{AnyTopic, MsgData};
-use crate::node::Flow;
-use crate::publisher::Outbox;
-use crate::qos::Liveliness;
-use crate::time::Nanos;
 use crossbeam_channel::{Receiver, RecvTimeoutError, Sender, TrySendError};
+use ratelab_core::ids::{NodeId, TopicId};
+use ratelab_core::msg::{AnyTopic, MsgData};
+use ratelab_core::node::Flow;
+use ratelab_core::publisher::Outbox;
+use ratelab_core::qos::Liveliness;
+use ratelab_core::time::Nanos;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, OnceLock};
 
@@ -355,7 +355,7 @@ mod tests {
         );
         assert_eq!(port.stats().inbox, 4);
         for _ in 0..6 {
-            port.push(MsgData::new(crate::msg::ForceMsg { newtons: 0.0 }));
+            port.push(MsgData::new(ratelab_core::msg::ForceMsg { newtons: 0.0 }));
         }
         assert_eq!(port.stats().overflow, 2);
     }

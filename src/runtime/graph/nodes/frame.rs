@@ -4,7 +4,7 @@
 //! render ([`super::camera_render`]) is placed by it, and the **image_estimator** kind
 //! reads frames back through it.
 
-use crate::msg::ImageMsg;
+use ratelab_core::msg::ImageMsg;
 
 /// Where a frame of `width` × `height` draws the world: the rail along the bottom, the
 /// hinge on it, metres to pixels at one scale both ways (6 m of rail across, the 1 m pole

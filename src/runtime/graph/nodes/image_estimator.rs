@@ -11,11 +11,11 @@ use super::frame::{FrameGeometry, SHADES};
 use crate::graph::kind::{
     publisher, typed, BuildContext, Code, KindDef, Params, Plant, Ports, Work,
 };
-use crate::msg::{ImageMsg, Message, PositionMsg};
-use crate::node::Flow;
-use crate::publisher::Publisher;
-use crate::time::Nanos;
-use crate::topic::Subscription;
+use ratelab_core::msg::{ImageMsg, Message, PositionMsg};
+use ratelab_core::node::Flow;
+use ratelab_core::publisher::Publisher;
+use ratelab_core::time::Nanos;
+use ratelab_core::topic::Subscription;
 use std::sync::Arc;
 
 /// The kind: `image` in, `position` out.
@@ -115,10 +115,10 @@ pub struct ImageEstimator {
 }
 
 impl Work for ImageEstimator {
-    fn save(&self) -> Option<crate::node::NodeState> {
+    fn save(&self) -> Option<ratelab_core::node::NodeState> {
         Some(Box::new(self.last_seq))
     }
-    fn load(&mut self, state: &crate::node::NodeState) -> bool {
+    fn load(&mut self, state: &ratelab_core::node::NodeState) -> bool {
         let Some(seq) = state.downcast_ref::<Option<u64>>() else {
             return false;
         };

@@ -33,14 +33,14 @@ pub mod sensor;
 
 pub use external::{ExternalNodeSpec, ExternalPort};
 
-use crate::executor::ComputeDraw;
 use crate::graph::kind::Work;
-use crate::ids::NodeId;
-use crate::node::{Flow, Node, NodeState};
-use crate::publisher::Outbox;
-use crate::qos::Liveliness;
-use crate::rate::Rate;
-use crate::time::Nanos;
+use ratelab_core::executor::ComputeDraw;
+use ratelab_core::ids::NodeId;
+use ratelab_core::node::{Flow, Node, NodeState};
+use ratelab_core::publisher::Outbox;
+use ratelab_core::qos::Liveliness;
+use ratelab_core::rate::Rate;
+use ratelab_core::time::Nanos;
 use std::sync::Arc;
 
 /// What every node carries: its identity, tie-break rank and rate.
@@ -133,6 +133,6 @@ impl Node for GraphNode {
 /// and faults are the graph's ([`crate::runcore`] captures them).
 struct Saved {
     work: NodeState,
-    outbox: crate::publisher::OutboxState,
+    outbox: ratelab_core::publisher::OutboxState,
     compute: Option<ComputeDraw>,
 }

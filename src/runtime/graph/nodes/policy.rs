@@ -5,13 +5,13 @@
 use crate::graph::kind::{
     publisher, typed, BuildContext, Code, KindDef, Params, Plant, Ports, Work,
 };
-use crate::msg::{ForceMsg, Message, StateMsg};
-use crate::node::Flow;
 use crate::plant::GEAR_N;
 use crate::policy::BrainSlot;
-use crate::publisher::Publisher;
-use crate::time::Nanos;
-use crate::topic::Subscription;
+use ratelab_core::msg::{ForceMsg, Message, StateMsg};
+use ratelab_core::node::Flow;
+use ratelab_core::publisher::Publisher;
+use ratelab_core::time::Nanos;
+use ratelab_core::topic::Subscription;
 use std::sync::Arc;
 
 /// The kind: `state` in, `force` out, the brain between.
@@ -40,7 +40,7 @@ pub fn def() -> KindDef {
 
 /// A policy node's state.
 pub struct PolicyNode {
-    /// The node's name: what its brain writes is stamped with it ([`crate::textlog`]).
+    /// The node's name: what its brain writes is stamped with it ([`ratelab_core::textlog`]).
     pub name: std::sync::Arc<str>,
     /// The brain.
     pub brain: BrainSlot,
@@ -52,10 +52,10 @@ pub struct PolicyNode {
 
 impl Work for PolicyNode {
     // Nothing kept between ticks (the brain is the graph's, captured apart).
-    fn save(&self) -> Option<crate::node::NodeState> {
+    fn save(&self) -> Option<ratelab_core::node::NodeState> {
         Some(Box::new(()))
     }
-    fn load(&mut self, state: &crate::node::NodeState) -> bool {
+    fn load(&mut self, state: &ratelab_core::node::NodeState) -> bool {
         state.is::<()>()
     }
     fn tick(&mut self, now: Nanos) -> Flow {
@@ -63,7 +63,7 @@ impl Work for PolicyNode {
             return Flow::Continue; // nothing sensed yet
         };
         let action = {
-            let _stamp = crate::textlog::enter(&self.name, now);
+            let _stamp = ratelab_core::textlog::enter(&self.name, now);
             self.brain.lock().act(&msg.data)
         };
         let force = ForceMsg {

@@ -4,7 +4,7 @@
 //! through the interpreter it installs ([`crate::interpreter`]).
 
 use crate::graph::kind::{BuildContext, Code, KindDef, Params, Plant, Ports};
-use crate::limits::MAX_NODE_PORTS;
+use ratelab_core::limits::MAX_NODE_PORTS;
 
 /// The kind.
 pub fn def() -> KindDef {

@@ -4,12 +4,12 @@
 use crate::graph::kind::{
     publisher, typed, BuildContext, Code, KindDef, ParamDef, Params, Plant, Ports, Work,
 };
-use crate::msg::{ForceMsg, Message};
-use crate::node::Flow;
 use crate::plant::GEAR_N;
-use crate::publisher::Publisher;
-use crate::time::Nanos;
-use crate::topic::Subscription;
+use ratelab_core::msg::{ForceMsg, Message};
+use ratelab_core::node::Flow;
+use ratelab_core::publisher::Publisher;
+use ratelab_core::time::Nanos;
+use ratelab_core::topic::Subscription;
 use std::sync::Arc;
 
 /// Its parameter: the clamp.
@@ -57,10 +57,10 @@ pub struct Safety {
 
 impl Work for Safety {
     // Nothing kept between ticks (the brain is the graph's, captured apart).
-    fn save(&self) -> Option<crate::node::NodeState> {
+    fn save(&self) -> Option<ratelab_core::node::NodeState> {
         Some(Box::new(()))
     }
-    fn load(&mut self, state: &crate::node::NodeState) -> bool {
+    fn load(&mut self, state: &ratelab_core::node::NodeState) -> bool {
         state.is::<()>()
     }
     fn tick(&mut self, now: Nanos) -> Flow {

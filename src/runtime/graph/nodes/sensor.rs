@@ -3,13 +3,13 @@
 //! the positions. Its message's origin stamp is its own stamp: the reading.
 
 use crate::graph::kind::{BuildContext, Code, KindDef, ParamDef, Params, Plant, Ports, Work};
-use crate::ids::NodeId;
-use crate::msg::{Message, PositionMsg, StateMsg};
-use crate::node::Flow;
 use crate::plant::{lock, SharedPlant};
-use crate::publisher::Publisher;
-use crate::time::Nanos;
 use rand_distr::{Distribution, Normal};
+use ratelab_core::ids::NodeId;
+use ratelab_core::msg::{Message, PositionMsg, StateMsg};
+use ratelab_core::node::Flow;
+use ratelab_core::publisher::Publisher;
+use ratelab_core::time::Nanos;
 
 /// Its parameters: noise on each measured position.
 pub const PARAMS: &[ParamDef] = &[
@@ -113,11 +113,11 @@ impl SensorNoise {
 }
 
 impl Work for Sensor {
-    fn save(&self) -> Option<crate::node::NodeState> {
+    fn save(&self) -> Option<ratelab_core::node::NodeState> {
         // The noise's generator is all a sensor keeps between ticks.
         Some(Box::new(self.noise.as_ref().map(|n| n.rng.clone())))
     }
-    fn load(&mut self, state: &crate::node::NodeState) -> bool {
+    fn load(&mut self, state: &ratelab_core::node::NodeState) -> bool {
         let Some(rng) = state.downcast_ref::<Option<rand_pcg::Pcg64>>() else {
             return false;
         };

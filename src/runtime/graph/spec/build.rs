@@ -9,10 +9,10 @@ use super::{
 };
 use super::{Code, Kind, MsgType, NodeId, Plant, PythonCode, TopicId};
 use crate::graph::kind::{Params, Ports};
-use crate::ids::MAX_NODES;
-use crate::limits::{self, MAX_NODE_PORTS, MAX_TOPICS};
-use crate::msg::{ForceMsg, Message, StateMsg};
-use crate::qos::{self, TopicQos};
+use ratelab_core::ids::MAX_NODES;
+use ratelab_core::limits::{self, MAX_NODE_PORTS, MAX_TOPICS};
+use ratelab_core::msg::{ForceMsg, Message, StateMsg};
+use ratelab_core::qos::{self, TopicQos};
 use std::cmp::Reverse;
 use std::collections::{BinaryHeap, HashMap, HashSet};
 use std::ops::Range;
@@ -239,12 +239,12 @@ fn graph_name(cx: &Ctx<'_>, raw: &RawGraph) -> Result<String, SpecError> {
     }
     // The name titles the lab, names recordings and heads a launch's credentials file:
     // a control character would repaint a terminal or break that file.
-    if crate::text::has_control(n.get_ref()) {
+    if ratelab_core::text::has_control(n.get_ref()) {
         return Err(cx.err(
             n.span(),
             format!(
                 "name '{}' holds a control character",
-                crate::text::printable(n.get_ref())
+                ratelab_core::text::printable(n.get_ref())
             ),
         ));
     }
@@ -342,8 +342,8 @@ fn read_node(
             format!(
                 "unknown kind `{}`: expected one of {} (or a kind a Rust program \
                  registers: ratelab::graph::registry)",
-                crate::text::printable(kind_name),
-                crate::text::listed(kinds.iter().map(|k| k.as_str()))
+                ratelab_core::text::printable(kind_name),
+                ratelab_core::text::listed(kinds.iter().map(|k| k.as_str()))
             ),
         )
     })?;
@@ -854,7 +854,7 @@ fn node_params(cx: &Ctx<'_>, kind: Kind, r: &RawNode) -> Result<toml::Table, Spe
         if p.get_ref().len() > MAX_PYTHON_PARAMS {
             return Err(cx.err(
                 p.span(),
-                crate::limits::refusal(
+                ratelab_core::limits::refusal(
                     format_args!("a node has at most {MAX_PYTHON_PARAMS} params"),
                     "MAX_NODE_PARAMS",
                 ),

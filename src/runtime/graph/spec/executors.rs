@@ -1,4 +1,4 @@
-//! The graph file's executors and compute times ([`crate::executor`]): a node's
+//! The graph file's executors and compute times ([`ratelab_core::executor`]): a node's
 //! `compute_ms` and `callback_group`, and `[executors.NAME]` tables.
 //!
 //! ```toml
@@ -22,7 +22,7 @@
 //! `[executors]` table runs on a thread of its own (`per_node`), in a group of its own.
 
 use super::{Ctx, GraphSpec, NodeId, OverrideError, RawNode, SpecError};
-use crate::executor::{
+use ratelab_core::executor::{
     ComputeTime, ExecutionPlan, ExecutorKind, ExecutorOverride, GroupKind, PlanExecutor,
     MAX_THREADS,
 };
@@ -92,7 +92,7 @@ pub(super) fn compute(cx: &Ctx<'_>, raw: &Spanned<toml::Value>) -> Result<Comput
 
 /// `compute_ms` as the graph file writes it back ([`GraphSpec::to_toml`]).
 pub(super) fn compute_value(c: &ComputeTime) -> toml::Value {
-    let ms = |n: crate::time::Nanos| toml::Value::Float(n.as_millis_f64());
+    let ms = |n: ratelab_core::time::Nanos| toml::Value::Float(n.as_millis_f64());
     if c.jitter.0 == 0 {
         ms(c.mean)
     } else {
@@ -438,7 +438,7 @@ impl GraphSpec {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::time::Nanos;
+    use ratelab_core::time::Nanos;
 
     const CHAIN: &str = r#"
 name = "g"

@@ -1,5 +1,5 @@
 //! What a graph's queues may hold at worst, and its bound
-//! ([`crate::limits::MAX_GRAPH_QUEUE_BYTES`], whose documentation states the rule): every
+//! ([`ratelab_core::limits::MAX_GRAPH_QUEUE_BYTES`], whose documentation states the rule): every
 //! subscription's queue of its topic's depth (and what is in flight on a link), times the
 //! largest message of the topic's type — a camera's frame at the size its node gives.
 //! Computed when a graph file is read ([`super::build`]) and again at every change of a
@@ -10,9 +10,9 @@
 use super::{GraphSpec, OverrideError, TopicId, TopicSpec};
 use crate::graph::kind::Code;
 use crate::graph::nodes::camera;
-use crate::limits::{self, MAX_GRAPH_QUEUE_BYTES, MAX_SAMPLE_BYTES};
-use crate::msg::{FieldKind, ImageMsg, Message};
-use crate::qos::{Reliability, MAX_ATTEMPTS};
+use ratelab_core::limits::{self, MAX_GRAPH_QUEUE_BYTES, MAX_SAMPLE_BYTES};
+use ratelab_core::msg::{FieldKind, ImageMsg, Message};
+use ratelab_core::qos::{Reliability, MAX_ATTEMPTS};
 
 /// What a queued message holds beside its fields, bytes: its publish stamp, sequence
 /// number and origin stamp, and on a link its arrival time.
@@ -60,7 +60,7 @@ impl GraphSpec {
     /// doubling), plus, for a type with text or bytes fields, their contents: a `camera`'s
     /// frame (`width_px` × `height_px` bytes, `mono8`, and its encoding's name) when a camera
     /// publishes the topic, else the bound on one message,
-    /// [`crate::limits::MAX_SAMPLE_BYTES`].
+    /// [`ratelab_core::limits::MAX_SAMPLE_BYTES`].
     pub fn largest_message_bytes(&self, t: TopicId) -> u64 {
         let topic = self.topic(t);
         let fields = topic.msg.fields();
@@ -129,14 +129,14 @@ impl GraphSpec {
 
     /// What the graph's queues may hold at worst, bytes: the sum of its topics'
     /// ([`GraphSpec::topic_queue_bytes`]), bounded by
-    /// [`crate::limits::MAX_GRAPH_QUEUE_BYTES`].
+    /// [`ratelab_core::limits::MAX_GRAPH_QUEUE_BYTES`].
     pub fn queue_bytes(&self) -> u64 {
         (0..self.topics.len())
             .map(|i| self.topic_queue_bytes(TopicId(i)))
             .fold(0, u64::saturating_add)
     }
 
-    /// Check the graph's worst case against [`crate::limits::MAX_GRAPH_QUEUE_BYTES`].
+    /// Check the graph's worst case against [`ratelab_core::limits::MAX_GRAPH_QUEUE_BYTES`].
     ///
     /// # Errors
     /// One line: the graph's worst case, the topics that take the most (each with its

@@ -1,6 +1,6 @@
 //! A subscription's own requested QoS: the graph file's `[topic.requested.NODE]` table,
 //! under the `[[topic]]` it belongs to, and the check of each request against what the
-//! topic offers ([`crate::qos::compat`]: ROS 2's compatibility rules).
+//! topic offers ([`ratelab_core::qos::compat`]: ROS 2's compatibility rules).
 //!
 //! ```toml
 //! [[topic]]
@@ -18,12 +18,14 @@
 //!
 //! Every key is optional; a key left out accepts any offer. Rules (a [`SpecError`] at the
 //! culprit): the table's name is a node that subscribes to the topic; durations as
-//! `deadline_ms` (> 0, at most [`crate::qos::MAX_QOS_MS`]). An incompatible request is not
+//! `deadline_ms` (> 0, at most [`ratelab_core::qos::MAX_QOS_MS`]). An incompatible request is not
 //! an error: it is the lesson. The run connects the pair never, and says so.
 
 use super::{Ctx, GraphSpec, SpecError, TopicSpec};
-use crate::qos::compat::{self, Durability, LivelinessKind, Mismatch, OfferedQos, RequestedQos};
-use crate::qos::{self, Reliability, TopicQos};
+use ratelab_core::qos::compat::{
+    self, Durability, LivelinessKind, Mismatch, OfferedQos, RequestedQos,
+};
+use ratelab_core::qos::{self, Reliability, TopicQos};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use toml::Spanned;
@@ -64,7 +66,7 @@ pub(super) fn requested(
                 r.span(),
                 format!(
                     "[topic.requested.{node:?}]: '{}' does not subscribe to {} (its subscribers: {})",
-                    crate::text::printable(node),
+                    ratelab_core::text::printable(node),
                     t.name,
                     if subscribers.is_empty() {
                         "none".to_string()
@@ -98,7 +100,7 @@ pub(super) fn requested(
 
 /// A topic's requests as the graph file writes them back ([`GraphSpec::to_toml`]).
 pub(super) fn to_raw(t: &TopicSpec) -> Option<RawRequests> {
-    let f = |n: crate::time::Nanos| Spanned::new(0..0, n.0 as f64 / 1e6);
+    let f = |n: ratelab_core::time::Nanos| Spanned::new(0..0, n.0 as f64 / 1e6);
     (!t.requested.is_empty()).then(|| {
         t.requested
             .iter()
@@ -121,7 +123,7 @@ pub(super) fn to_raw(t: &TopicSpec) -> Option<RawRequests> {
 ///
 /// # Errors
 /// A one-line reason.
-pub(super) fn start_at(ms: f64, actuator: bool) -> Result<crate::time::Nanos, String> {
+pub(super) fn start_at(ms: f64, actuator: bool) -> Result<ratelab_core::time::Nanos, String> {
     let at = qos::ms_to_nanos("start_ms", ms, false)?;
     if actuator {
         return Err(
@@ -218,7 +220,7 @@ impl GraphSpec {
 #[cfg(test)]
 mod tests {
     use super::super::{GraphSpec, TopicId};
-    use crate::qos::compat::{Durability, PolicyKind};
+    use ratelab_core::qos::compat::{Durability, PolicyKind};
 
     const GRAPH: &str = r#"
 [[node]]
@@ -284,8 +286,8 @@ deadline_ms = 40
         );
         // Offered what it asks, the pair connects.
         let mut q = spec.topic(action).qos;
-        q.reliability = crate::qos::Reliability::Reliable;
-        q.deadline = Some(crate::time::Nanos::from_millis(20));
+        q.reliability = ratelab_core::qos::Reliability::Reliable;
+        q.deadline = Some(ratelab_core::time::Nanos::from_millis(20));
         assert_eq!(
             spec.incompatible(action, &q)[0].2.len(),
             1,

@@ -1,0 +1,55 @@
+//! End to end, a callback's exception (issue 72, item 2): one entry of the log pane, its
+//! message whole and the learner's frames, paths relative to the graph file; Enter shows
+//! its whole traceback over the lab, at 80×24.
+
+use super::Lab;
+use std::time::Duration;
+
+/// A Python node whose timer callback calls a helper that divides by zero at its 25th tick:
+/// the node fails; in the log pane (`v`) its exception is one entry naming
+/// `nodes/loud.py:LINE` (relative to the graph file's folder), its title offers the
+/// traceback, and Enter shows it whole (both frames, the exception); Esc closes it.
+#[test]
+fn a_callback_s_exception_is_one_entry_and_enter_shows_its_traceback() {
+    let _machine = crate::machine::alone();
+    let dir = tempfile::tempdir().unwrap();
+    let graph = crate::loud_python_graph(
+        dir.path(),
+        "self.n = getattr(self, 'n', 0) + 1\ndef gain(n):\n    return 1 / (25 - n)\ngain(self.n)",
+    );
+    let mut lab = Lab::start_sized(
+        &["--clock", "virtual", "--graph", graph.to_str().unwrap()],
+        &[],
+        80,
+        24,
+    );
+    lab.wait_for("NODE FAILED", Duration::from_secs(60));
+    lab.keys("v");
+    let screen = lab.wait_for("log: all nodes", Duration::from_secs(5));
+    assert!(
+        screen.contains("nodes/loud.py:") && screen.contains("ZeroDivisionError"),
+        "{screen}"
+    );
+    assert!(
+        !screen.contains(&dir.path().display().to_string()),
+        "a path not relative to the graph file:\n{screen}"
+    );
+    assert!(screen.contains("↵ traceback"), "{screen}");
+    // Enter (a carriage return, as a terminal sends it).
+    lab.keys("\r");
+    let screen = lab.wait_for("Traceback (most recent call last):", Duration::from_secs(5));
+    assert!(screen.contains("log entry"), "{screen}");
+    assert!(
+        screen.contains("in on_timer") && screen.contains("in gain"),
+        "{screen}"
+    );
+    assert!(screen.contains("return 1 / (25 - n)"), "{screen}");
+    lab.keys("\x1b");
+    lab.wait_until("the entry closed", Duration::from_secs(5), |s| {
+        !s.contains("Traceback (most recent")
+    });
+    lab.keys("q");
+    let status = lab.exit_status("q");
+    // The run's node failed: the lab says so in its exit status.
+    assert!(!status.success(), "{status:?}");
+}
