@@ -221,7 +221,7 @@ pub fn run_bench(a: &BenchArgs, stop: StopFlag) -> anyhow::Result<()> {
             ),
             |us| us.to_string()
         ),
-        std::thread::available_parallelism().map_or(1, |n| n.get())
+        ratelab::sweep_spec::threads()
     );
     println!(
         "{:>8}  {:<10} {:>7} {:>9} {:>9} {:>9} {:>9} {:>8}  policy",

@@ -82,6 +82,8 @@ use crate::graph::GraphSpec;
 use crate::metrics::Metrics;
 use crate::policy::{Policy, Scripted};
 use crate::sweep::SweepError;
+// One thread per core, as a sweep runs (`ratelab sweep`).
+use crate::sweep_spec::threads;
 use serde::de::DeserializeOwned;
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
@@ -829,10 +831,6 @@ fn indent(s: &str) -> String {
 
 fn scripted() -> Result<Box<dyn Policy>, String> {
     Ok(Box::new(Scripted))
-}
-
-fn threads() -> usize {
-    std::thread::available_parallelism().map_or(1, |n| n.get())
 }
 
 /// One run of `cfg` with the scripted balancer, no trace kept (the real-clock exercises:

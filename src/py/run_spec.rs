@@ -74,23 +74,17 @@ pub const SHARED_KEYS: [&str; 13] = [
 
 /// A cliff search's shared keys: [`SHARED_KEYS`], and the sensor's rate and queue depth it
 /// keeps for every run.
-const CLIFF_KEYS: [&str; 15] = [
-    "graph",
-    "duration_s",
-    "rate",
-    "depth",
-    "qos",
-    "link",
-    "lease_ms",
-    "stall",
-    "kill",
-    "compute_ms",
-    "executor",
-    "phase_offset_ms",
-    "policy",
-    "sensor_hz",
-    "queue_depth",
-];
+const CLIFF_KEYS: [&str; SHARED_KEYS.len() + 2] = {
+    let mut keys = [""; SHARED_KEYS.len() + 2];
+    let mut i = 0;
+    while i < SHARED_KEYS.len() {
+        keys[i] = SHARED_KEYS[i];
+        i += 1;
+    }
+    keys[i] = "sensor_hz";
+    keys[i + 1] = "queue_depth";
+    keys
+};
 
 /// A grid's keys ([`sweep_from`]).
 const GRID_KEYS: [&str; 5] = ["clock", "sensor_hz", "control_hz", "queue_depth", "seeds"];

@@ -29,7 +29,7 @@ use crate::ros2::Oracle;
 use crate::ros2_cli_rules::capture;
 use crate::ros2_latched::ratelab_within;
 use std::io::{BufRead, BufReader, Read};
-use std::process::{Child, Command, Stdio};
+use std::process::{Child, Stdio};
 use std::sync::mpsc;
 use std::time::{Duration, Instant};
 
@@ -44,13 +44,8 @@ struct Running {
 
 impl Running {
     fn start(endpoint: &str, verb: &[&str]) -> Running {
-        let mut child = Command::new(env!("CARGO_BIN_EXE_ratelab"))
-            .args(["ros2", "--connect", endpoint])
+        let mut child = crate::ros2_latched::ratelab_command(&["ros2", "--connect", endpoint])
             .args(verb)
-            .current_dir(crate::REPO)
-            .env_remove("ROS_DOMAIN_ID")
-            .env_remove("ZENOH_ROUTER_CHECK_ATTEMPTS")
-            .env_remove("ZENOH_CONFIG_OVERRIDE")
             .stdout(Stdio::piped())
             .stderr(Stdio::piped())
             .spawn()

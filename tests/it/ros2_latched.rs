@@ -12,17 +12,25 @@ use std::io::Read;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
+/// `ratelab ARGS`, to be spawned in the repository without the ROS 2 environment variables
+/// a developer's shell may hold (`ROS_DOMAIN_ID`, `ZENOH_ROUTER_CHECK_ATTEMPTS`,
+/// `ZENOH_CONFIG_OVERRIDE`).
+pub(crate) fn ratelab_command<S: AsRef<std::ffi::OsStr>>(args: &[S]) -> Command {
+    let mut c = Command::new(env!("CARGO_BIN_EXE_ratelab"));
+    c.args(args)
+        .current_dir(crate::REPO)
+        .env_remove("ROS_DOMAIN_ID")
+        .env_remove("ZENOH_ROUTER_CHECK_ATTEMPTS")
+        .env_remove("ZENOH_CONFIG_OVERRIDE");
+    c
+}
+
 /// `ratelab ARGS` (in the repository, without the ROS 2 environment variables), killed if it
 /// has not ended within `limit`: its exit code (-1 when killed), stdout, stderr, and how
 /// long it ran.
 pub(crate) fn ratelab_within(args: &[&str], limit: Duration) -> (i32, String, String, Duration) {
     let start = Instant::now();
-    let mut child = Command::new(env!("CARGO_BIN_EXE_ratelab"))
-        .args(args)
-        .current_dir(crate::REPO)
-        .env_remove("ROS_DOMAIN_ID")
-        .env_remove("ZENOH_ROUTER_CHECK_ATTEMPTS")
-        .env_remove("ZENOH_CONFIG_OVERRIDE")
+    let mut child = ratelab_command(args)
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
         .spawn()
