@@ -29,8 +29,9 @@
 //!
 //! Messages leave through a `ratelab::topic::Tap` on each topic and a channel to one bridge
 //! thread: no node puts on Zenoh itself. Under the virtual clock a publisher waits when the
-//! channel is full (the run stays byte-identical, only slower: it keeps pace with the wall
-//! clock anyway); under the real clock a full channel drops the ROS 2 copy and counts it
+//! channel is full, and the bridge's Zenoh publishers wait for room in Zenoh's queue
+//! ([`Declarer::waiting`]) (the run stays byte-identical, only slower: it keeps pace with
+//! the wall clock anyway); under the real clock a full channel drops the ROS 2 copy and counts it
 //! ([`BridgeReport::dropped`]), so the nodes' timing is never the bridge's.
 
 use super::bag::{Bag, BagTopic};
@@ -516,7 +517,7 @@ impl Bridge {
         let node = |id: usize, name: &str| {
             NodeEntity::new(dom, zid, id, name.to_string(), String::new(), String::new())
         };
-        let mut d = Declarer::new(&session, link);
+        let mut d = Declarer::new(&session, link).waiting(waits);
         let nodes: Vec<NodeEntity> = spec
             .nodes
             .iter()

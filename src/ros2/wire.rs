@@ -128,6 +128,7 @@ pub(crate) struct Declarer<'a> {
     link: &'a Ros2Session,
     format: KeyExprFormat,
     tokens: Vec<zenoh::liveliness::LivelinessToken>,
+    congestion: zenoh::qos::CongestionControl,
 }
 
 impl<'a> Declarer<'a> {
@@ -138,7 +139,21 @@ impl<'a> Declarer<'a> {
             link,
             format: KeyExprFormat,
             tokens: Vec::new(),
+            congestion: zenoh::qos::CongestionControl::Drop,
         }
+    }
+
+    /// Its publishers wait for room in Zenoh's queue (`waits`: under the virtual clock)
+    /// instead of dropping a sample the link cannot take within Zenoh's
+    /// `congestion_control/drop` wait (1 ms, 50 ms for a fragmented message: a camera
+    /// frame), as rmw_zenoh_cpp's do for every QoS but reliable keep-all. The virtual clock
+    /// keeps pace with the wall clock when offered, so a wait slows nothing a node sees;
+    /// dropping would lose frames only because the link was briefly busy at start-up.
+    pub(crate) fn waiting(mut self, waits: bool) -> Declarer<'a> {
+        if waits {
+            self.congestion = zenoh::qos::CongestionControl::Block;
+        }
+        self
     }
 
     /// The tokens declared, to be withdrawn with the offer.
@@ -213,7 +228,10 @@ impl<'a> Declarer<'a> {
     ) -> Result<Outlet, Ros2Error> {
         use zenoh_ext::{AdvancedPublisherBuilderExt, CacheConfig, MissDetectionConfig};
         let key = self.key(e)?;
-        let declared = self.session.declare_publisher(key);
+        let declared = self
+            .session
+            .declare_publisher(key)
+            .congestion_control(self.congestion);
         let publisher = if e.qos.durability == QosDurability::TransientLocal {
             let cache = CacheConfig::default().max_samples(depth.max(1));
             let p = declared.cache(cache).publisher_detection();
