@@ -149,7 +149,7 @@ fn episode(c: &mut Criterion) {
             |rec| {
                 let opts = RunOptions {
                     keep_trace: false,
-                    observers: vec![rec.observer()],
+                    observers: vec![Box::new(ratelab::observer::Recorded::new(&rec))],
                     ..Default::default()
                 };
                 let r = run(&cfg, Box::new(Scripted), opts).unwrap();

@@ -1,16 +1,21 @@
-//! The headless run: one graph, the chapter's summary, optional metrics.json and trace.csv.
+//! The headless run (`ratelab run`): its flags read into the library's `RunSpec`
+//! (`From<&RunArgs>`, in `cli`), started and run by the library ([`RunSpec::start`]: every
+//! settings rule, the checks, the trace, the recording and ROS 2 are its), and what the
+//! command line prints of it: progress on a terminal, the chapter's summary, what was offered
+//! to ROS 2, the files written. The graph's and the run's settings for the other commands
+//! (the lab, a launch, `exercise`, `bench`) are read here too, through the same rules.
 
 use crate::cli::{GraphArgs, RunArgs};
 use indicatif::{ProgressBar, ProgressStyle};
 use ratelab::graph::GraphSpec;
-use ratelab::outputs::{
-    check_out, end_is_an_error, execute, finish_recording, log_text, write_outputs, TraceCsv,
-};
-use ratelab::run_spec::{GraphSettings, RunSpec};
+use ratelab::metrics::Metrics;
+use ratelab::observer::RunObserver;
+use ratelab::outputs::end_is_an_error;
+use ratelab::run_spec::{late_fault_warnings, GraphSettings, RunSpec};
 use ratelab::runlog::StepRecord;
-use ratelab::scheduler::{EndReason, StopFlag};
+use ratelab::scheduler::{EndReason, RunEnd, StopFlag};
 use ratelab::setting::Speech;
-use ratelab::trace_csv::TraceFile;
+use ratelab::start::StartOptions;
 use ratelab::{ClockKind, Nanos, RunConfig, RunReport};
 use std::io::{IsTerminal, Write};
 use std::time::Duration;
@@ -44,44 +49,91 @@ pub fn config_from_args(a: &RunArgs) -> anyhow::Result<RunConfig> {
 }
 
 /// Warn on stderr of each injected fault (`--stall`, `--kill`) that starts after `cfg`'s
-/// run ends, so does nothing. Call it once the run's duration is final (the lab and a
-/// launch on a terminal run until quit, with no end to be after).
+/// run ends, so does nothing ([`late_fault_warnings`]). Call it once the run's duration is
+/// final (the lab and a launch on a terminal run until quit, with no end to be after).
 pub fn warn_late_faults(cfg: &RunConfig) {
-    if cfg.duration == ratelab::session::UNBOUNDED {
-        return;
+    for line in late_fault_warnings(cfg) {
+        eprintln!("[ratelab] {line}");
     }
-    for f in cfg.faults.iter().filter(|f| f.at >= cfg.duration) {
-        eprintln!(
-            "[ratelab] warning: the {} of '{}' at {} s starts after the run ends ({} s): it does nothing",
-            if f.duration.is_some() { "--stall" } else { "--kill" },
-            f.node,
-            f.at.as_secs_f64(),
-            cfg.duration.as_secs_f64()
+}
+
+/// `ratelab run`: the run its flags describe, started by the library ([`RunSpec::start`]),
+/// with a progress bar on a terminal; then its summary, what it offered ROS 2, its files,
+/// its recording. Returns the report.
+///
+/// # Errors
+/// A refusal before the run (one line, exit 2); after its summary and files, a recording
+/// that could not be finished, a bag that is not whole, a run that failed
+/// ([`end_is_an_error`]).
+pub fn run_headless(a: &RunArgs, stop: StopFlag) -> anyhow::Result<RunReport> {
+    let mut run = RunSpec::from(a).start(StartOptions::command_line(stop.clone()))?;
+    let (clock, rt_priority) = (run.config().clock, run.config().rt_priority);
+    let (bar, ticker) = real_clock_bar(run.config(), &stop);
+    if let Some(bar) = virtual_clock_bar(run.config()) {
+        run.observe(Box::new(ProgressObserver(bar)));
+    }
+    let mut done = run.wait()?;
+    if let Some(bar) = bar {
+        bar.finish_and_clear();
+    }
+    if let Some(t) = ticker {
+        let _ = t.join();
+    }
+    print_summary(&done.report);
+    if let Some(r) = &done.report.ros2 {
+        print_ros2(r, a.bag.as_deref());
+    }
+    if rt_priority.is_some() && clock == ClockKind::Virtual {
+        eprintln!("[ratelab] note: --rt-priority applies to the real clock only; ignored");
+    }
+    if let Some(w) = done.report.metrics.sched_warning() {
+        eprintln!("[ratelab] warning: {w}");
+    }
+    if let Some(dir) = &a.out {
+        done.write_files()?;
+        print_written(dir, &done.report, a.trace_every);
+    }
+    // A recording that could not be finished (a full disk) fails the run after its summary
+    // and the other files: it costs the file, not the run's result.
+    if let Some(e) = done.unrecorded.take() {
+        return Err(e.into());
+    }
+    if let Some(r) = &done.recording {
+        println!("[ratelab] recording: {}", r.path().display());
+        println!("[ratelab] open it with: rerun {}", r.path().display());
+    }
+    if let Some(Err(e)) = done.report.ros2.as_ref().and_then(|r| r.bagged.as_ref()) {
+        // After the summary and the other outputs: a bag that is not whole is an error.
+        anyhow::bail!("--bag {e}");
+    }
+    end_is_an_error(&done.report)?;
+    Ok(done.report)
+}
+
+/// The files `--out` got (in `dir`), and how thin its trace is (one step in `every`).
+fn print_written(dir: &std::path::Path, report: &RunReport, every: u64) {
+    let files = if report.metrics.estimate.is_some() {
+        "metrics.json, trace.csv, log.txt and estimator.json"
+    } else {
+        "metrics.json, trace.csv and log.txt"
+    };
+    println!(
+        "[ratelab] wrote {}/{files} (what each key and column means: docs/metrics.md)",
+        dir.display()
+    );
+    if every > 1 {
+        println!(
+            "[ratelab] trace.csv keeps one actuator step in {every} (--trace-every {every}: steps 1, {}, … and the last); the metrics count every step",
+            1 + every
         );
     }
 }
 
-pub fn run_headless(a: &RunArgs, stop: StopFlag) -> anyhow::Result<RunReport> {
-    let cfg = config_from_args(a)?;
-    warn_late_faults(&cfg);
-    let brain = ratelab::checkpoint::load_policy(&a.policy)?;
-    let outputs = RunSpec::from(a).outputs;
-    check_out(&outputs, &cfg.graph)?;
-    // trace.csv is written as the run goes, never held: a day's step records were 4.6 GB
-    // (issue 75). Its file is checked and started before the run.
-    let trace = match &a.out {
-        Some(dir) => Some(TraceFile::create(
-            &dir.join("trace.csv"),
-            a.force,
-            &cfg.graph,
-            a.trace_every,
-        )?),
-        None => None,
-    };
-    let (bar, ticker) = real_clock_bar(&cfg, &stop);
-    // A long virtual run (up to an hour of run time, seconds to minutes of wall time) shows
-    // its run time going by; the observer only reads step times, so results do not change.
-    let virtual_bar = (cfg.clock == ClockKind::Virtual
+/// A long virtual run's progress bar on a terminal (up to an hour of run time, seconds to
+/// minutes of wall time): its run time going by. Its observer only reads step times, so
+/// results do not change.
+fn virtual_clock_bar(cfg: &RunConfig) -> Option<ProgressBar> {
+    (cfg.clock == ClockKind::Virtual
         && cfg.duration >= Nanos(60 * Nanos::SECOND.0)
         && std::io::stdout().is_terminal())
     .then(|| {
@@ -94,73 +146,7 @@ pub fn run_headless(a: &RunArgs, stop: StopFlag) -> anyhow::Result<RunReport> {
             .progress_chars("=> "),
         );
         bar
-    });
-    let mut observers: Vec<Box<dyn ratelab::graph::StepObserver>> = match &virtual_bar {
-        Some(bar) => vec![Box::new(ProgressObserver(bar.clone()))],
-        None => Vec::new(),
-    };
-    observers.extend(trace.as_ref().map(TraceFile::observer));
-    let (report, kept, recording) = execute(&outputs, &cfg, brain, stop, observers, true)?;
-    if let Some(bar) = virtual_bar {
-        bar.finish_and_clear();
-    }
-    // A recording that could not be finished (a full disk) fails the run after its summary
-    // and the other files: it costs the file, not the run's result.
-    let unrecorded = finish_recording(&outputs, recording.as_ref(), &report);
-    if let Some(bar) = bar {
-        bar.finish_and_clear();
-    }
-    if let Some(t) = ticker {
-        let _ = t.join();
-    }
-    print_summary(&report);
-    if let Some(r) = &report.ros2 {
-        print_ros2(r, a.bag.as_deref());
-    }
-    if cfg.rt_priority.is_some() && cfg.clock == ClockKind::Virtual {
-        eprintln!("[ratelab] note: --rt-priority applies to the real clock only; ignored");
-    }
-    if let Some(w) = report.metrics.sched_warning() {
-        eprintln!("[ratelab] warning: {w}");
-    }
-    if let (Some(dir), Some(trace)) = (&a.out, trace) {
-        write_outputs(
-            dir,
-            &report,
-            &log_text(&kept),
-            a.force,
-            TraceCsv::Streamed(trace),
-        )?;
-        let files = if report.metrics.estimate.is_some() {
-            "metrics.json, trace.csv, log.txt and estimator.json"
-        } else {
-            "metrics.json, trace.csv and log.txt"
-        };
-        println!(
-            "[ratelab] wrote {}/{files} (what each key and column means: docs/metrics.md)",
-            dir.display()
-        );
-        if a.trace_every > 1 {
-            let n = a.trace_every;
-            println!(
-                "[ratelab] trace.csv keeps one actuator step in {n} (--trace-every {n}: steps 1, {}, … and the last); the metrics count every step",
-                1 + n
-            );
-        }
-    }
-    if let Some(e) = unrecorded {
-        return Err(e.into());
-    }
-    if let Some(r) = &recording {
-        println!("[ratelab] recording: {}", r.path().display());
-        println!("[ratelab] open it with: rerun {}", r.path().display());
-    }
-    if let Some(Err(e)) = report.ros2.as_ref().and_then(|r| r.bagged.as_ref()) {
-        // After the summary and the other outputs: a bag that is not whole is an error.
-        anyhow::bail!("--bag {e}");
-    }
-    end_is_an_error(&report)?;
-    Ok(report)
+    })
 }
 
 /// A real-clock run's progress bar on a terminal (run time against the duration) and the
@@ -224,12 +210,16 @@ fn print_ros2(r: &ratelab::ros2::BridgeReport, bag: Option<&std::path::Path>) {
     }
 }
 
-/// Moves a progress bar to each actuator step's run time, in ms.
+/// Moves a progress bar to each actuator step's run time, in ms; clears it at the end.
 struct ProgressObserver(ProgressBar);
 
-impl ratelab::graph::StepObserver for ProgressObserver {
-    fn on_step(&mut self, rec: &StepRecord) {
+impl RunObserver for ProgressObserver {
+    fn on_step_record(&mut self, rec: &StepRecord) {
         self.0.set_position(rec.t.0 / 1_000_000);
+    }
+
+    fn on_end(&mut self, _metrics: &Metrics, _end: &RunEnd) {
+        self.0.finish_and_clear();
     }
 }
 

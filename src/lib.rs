@@ -35,8 +35,10 @@
 //! - **distributed** (`ratelab_distributed`, `src/distributed/`): [`distributed`] (the graph
 //!   across processes, over Zenoh);
 //! - **drivers** (`ratelab_drivers`, `src/drivers/`): [`run_spec`] (a run as data, every
-//!   front end's settings under one set of rules; [`setting`], their names), [`outputs`]
-//!   (what a run writes and offers; [`trace_csv`], its trace as it goes), [`held_run`] (a
+//!   front end's settings under one set of rules; [`setting`], their names), [`start`] (a
+//!   run started from them, as every front end starts one), [`outputs`]
+//!   (what a run writes and offers; [`trace_csv`], its trace as it goes), [`observer`]
+//!   (what watches a run as it goes: a recording, a progress bar), [`held_run`] (a
 //!   run's results in memory, for a host program), and the run core's drivers — [`run`] (one
 //!   headless run), [`sweep`] (grids and the rate cliff; [`sweep_spec`], a sweep or cliff
 //!   search as data, under the same rules for every front end), [`session`] (the lab's live
@@ -68,7 +70,7 @@ pub use ratelab_core::{
 };
 pub use ratelab_distributed as distributed;
 pub use ratelab_drivers::{
-    held_run, outputs, run, run_spec, session, sweep, sweep_spec, trace_csv,
+    held_run, observer, outputs, run, run_spec, session, start, sweep, sweep_spec, trace_csv,
 };
 pub use ratelab_python as python;
 pub use ratelab_recording as recording;

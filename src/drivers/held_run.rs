@@ -6,7 +6,7 @@
 //! is refused before it starts ([`TraceTooLarge`]).
 
 use crate::run_spec::RunSpec;
-use crate::trace_csv::TraceStream;
+use crate::start::{StartCheck, StartOptions};
 use ratelab_core::limits::MAX_HELD_TRACE_VALUES;
 use ratelab_runtime::graph::GraphSpec;
 use ratelab_runtime::policy::Policy;
@@ -102,13 +102,13 @@ pub fn check_held_trace(cfg: &RunConfig, every: u64) -> Result<(), TraceTooLarge
     })
 }
 
-/// One run of `spec`, as `ratelab run --out` makes it, with the brain `brain` in place of
-/// `spec.policy`'s when given, until `stop`; `classes` names the graph's Python nodes a
-/// caller gives classes for (each must be one). Refusals name settings in `speech`'s words.
-/// Nothing is printed but the graph's QoS warnings (stderr): the nodes' lines are kept for
-/// [`RunFiles::log`]. With `spec.outputs.out` the files are written as well. The trace's
-/// rows are written into memory as the run goes (no step record is kept beside them),
-/// within [`MAX_HELD_TRACE_VALUES`].
+/// One run of `spec`, as `ratelab run --out` makes it ([`RunSpec::start`]), with the brain
+/// `brain` in place of `spec.policy`'s when given, until `stop`; `classes` names the
+/// graph's Python nodes a caller gives classes for (each must be one). Refusals name
+/// settings in `speech`'s words. Nothing is printed but the graph's QoS warnings (stderr):
+/// the nodes' lines are kept for [`RunFiles::log`]. With `spec.outputs.out` the files are
+/// written as well. The trace's rows are written into memory as the run goes (no step
+/// record is kept beside them), within [`MAX_HELD_TRACE_VALUES`].
 ///
 /// # Errors
 /// One line: bad settings ([`RunSpec::config`]), a class for a node that is not one of the
@@ -122,41 +122,30 @@ pub fn run(
     speech: Speech,
     stop: StopFlag,
 ) -> anyhow::Result<RunFiles> {
-    let cfg = spec.config(speech)?;
-    for w in cfg.graph.qos_warnings() {
-        eprintln!("[ratelab] {w}");
-    }
-    check_classes(&cfg.graph, classes, speech)?;
-    let a = &spec.outputs;
-    // The trace is returned in memory: one that would not fit is refused now, not when the
-    // process runs out of memory.
-    check_held_trace(&cfg, a.trace_every)?;
-    let brain = match brain {
-        Some(b) => b,
-        None => ratelab_runtime::checkpoint::load_policy(&spec.policy)?,
+    let classes = classes.to_vec();
+    let every = spec.outputs.trace_every;
+    let check: StartCheck = Box::new(move |cfg: &RunConfig| -> anyhow::Result<()> {
+        check_classes(&cfg.graph, &classes, speech)?;
+        // The trace is returned in memory: one that would not fit is refused now, not when
+        // the process runs out of memory.
+        check_held_trace(cfg, every)?;
+        Ok(())
+    });
+    let opts = StartOptions {
+        brain,
+        check: Some(check),
+        ..StartOptions::held(speech, stop)
     };
-    crate::outputs::check_out(a, &cfg.graph)?;
-    let trace = TraceStream::new(Vec::new(), &cfg.graph, a.trace_every)?;
-    let (report, kept, recording) =
-        crate::outputs::execute(a, &cfg, brain, stop, vec![trace.observer()], false)?;
-    if let Some(e) = crate::outputs::finish_recording(a, recording.as_ref(), &report) {
+    let mut done = spec.clone().start(opts)?.wait()?;
+    if let Some(e) = done.unrecorded.take() {
         return Err(e.into());
     }
-    let trace = trace.finish()?;
-    let log = crate::outputs::log_text(&kept);
-    if let Some(dir) = &a.out {
-        crate::outputs::write_outputs(
-            dir,
-            &report,
-            &log,
-            a.force,
-            crate::outputs::TraceCsv::Held(&trace),
-        )?;
-    }
+    let trace = done.write_files()?.unwrap_or_default();
+    let report = &done.report;
     let summary = report.metrics.summary_lines(None);
     // The command line's words for it (`ratelab run` exits 2 with this line).
     let failed = matches!(report.end.reason, EndReason::NodeFailed { .. })
-        .then(|| crate::outputs::end_is_an_error(&report).err())
+        .then(|| crate::outputs::end_is_an_error(report).err())
         .flatten()
         .map(|e| e.to_string());
     Ok(RunFiles {
@@ -166,11 +155,11 @@ pub fn run(
             None => None,
         },
         trace_csv: String::from_utf8(trace)?,
-        log,
+        log: std::mem::take(&mut done.log),
         summary,
         failed,
-        recording: recording.map(|r| r.path().to_path_buf()),
-        wall_s: report.wall.as_secs_f64(),
+        recording: done.recording.as_ref().map(|r| r.path().to_path_buf()),
+        wall_s: done.report.wall.as_secs_f64(),
     })
 }
 

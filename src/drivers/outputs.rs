@@ -3,18 +3,18 @@
 //! `log.txt`, `estimator.json`), the rerun recording, the ROS 2 offer and its bag, the text
 //! log the nodes write; and a run that reached its summary but failed, as an error.
 //!
-//! [`Outputs`] is the data (a field of [`crate::run_spec::RunSpec`]); [`execute`] runs a
-//! graph with them opened and attached (the recording as an observer and hooks, ROS 2 by
-//! the run's options), [`finish_recording`] and [`write_outputs`] finish them.
+//! [`Outputs`] is the data (a field of [`crate::run_spec::RunSpec`]); each is checked and
+//! opened here ([`ros2_options`], [`open_ros2`], [`check_out`], [`open_recording`]), and
+//! finished here ([`finish_recording`], [`write_outputs`]). `RunSpec::start`
+//! ([`crate::start`]) opens them for a run and attaches them to it.
 
-use crate::run::{RunOptions, RunReport};
+use crate::run::RunReport;
 use crate::trace_csv::TraceFile;
 use anyhow::Context;
 use ratelab_recording::{check_output_path, default_path, RecordOptions, Recording};
 use ratelab_runtime::graph::GraphSpec;
 use ratelab_runtime::scheduler::{EndReason, StopFlag};
 use ratelab_runtime::RunConfig;
-use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 
@@ -86,7 +86,6 @@ impl Outputs {
     }
 }
 
-/// Run headless and print the summary. Returns the report.
 /// `--ros2` as `a` gives it (the domain from the flag or `ROS_DOMAIN_ID`, the bag), checked
 /// against `graph` before anything opens: ROS 2's names, `/clock`, the bag's folder. Without
 /// `--ros2` the graph must have no external node (nothing else could fill it). Used by
@@ -160,52 +159,6 @@ pub fn log_text(kept: &Mutex<Vec<String>>) -> String {
 /// What a run kept of the lines its nodes wrote (`log.txt`'s, the first [`MAX_LOG_LINES`]).
 pub type KeptLog = Arc<Mutex<Vec<String>>>;
 
-/// Run `cfg` (made from `a`) with `brain`, as `ratelab run` does: the recording `a` asks for
-/// opened, ROS 2 offered when asked, `observers` told of every step (trace.csv's writer,
-/// [`crate::trace_csv`], is one); every line the nodes write kept (and written to stderr,
-/// stamped, when `echo`); no step record kept in the report. Returns the report, the lines
-/// kept and the recording (not yet finished: [`finish_recording`]).
-///
-/// # Errors
-/// What keeps the run from starting: bad ROS 2 or recording settings, a graph that cannot be
-/// built.
-pub fn execute(
-    a: &Outputs,
-    cfg: &RunConfig,
-    brain: Box<dyn ratelab_runtime::policy::Policy>,
-    stop: StopFlag,
-    observers: Vec<Box<dyn ratelab_runtime::graph::StepObserver>>,
-    echo: bool,
-) -> anyhow::Result<(RunReport, KeptLog, Option<Recording>)> {
-    // Refused before anything is written or opened.
-    let ros2 = ros2_options(a, &cfg.graph)?;
-    let recording = open_recording(a, cfg, &brain.label())?;
-    let mut opts = RunOptions {
-        stop,
-        ros2,
-        observers,
-        // trace.csv's rows are written by an observer as the run goes (`crate::trace_csv`).
-        keep_trace: false,
-        trace_every: a.trace_every,
-        ..RunOptions::new()
-    };
-    if let Some(r) = &recording {
-        opts.observers.push(r.observer());
-        let r = r.clone();
-        opts.on_span = r.span_hook();
-        opts.on_node_tick = Some(Arc::new(
-            move |t: &ratelab_runtime::scheduler::TickReport<'_>| r.real_tick(t),
-        ));
-    }
-    // What nodes' code writes (ratelab_core::textlog): each line on stderr, stamped, as it comes
-    // (when `echo`); kept for log.txt (the first MAX_LOG_LINES); with --record, in the
-    // recording (`log/<node>`).
-    let kept = log_sink(echo, recording.clone());
-    let report = crate::run::run(cfg, brain, opts);
-    ratelab_core::textlog::set_sink(None);
-    Ok((report?, kept, recording))
-}
-
 /// Finish the run's recording: `Some(error)` when it could not be finished (a full disk),
 /// which fails the run after its summary and other files. With `--spawn` a live viewer
 /// that could not start or went away costs neither the file nor the summary.
@@ -222,28 +175,6 @@ pub fn finish_recording(
         Err(e) => Some(e),
         Ok(()) => None,
     }
-}
-
-/// Where the lines nodes' code writes go ([`ratelab_core::textlog`]): each on stderr, stamped,
-/// as it comes; with `keep` (`--out`) also kept for log.txt (the first [`MAX_LOG_LINES`],
-/// returned); with a recording (`recorded`), in it (`log/<node>`).
-fn log_sink(echo: bool, recorded: Option<Recording>) -> KeptLog {
-    let kept = Arc::new(Mutex::new(Vec::<String>::new()));
-    let keep = kept.clone();
-    ratelab_core::textlog::set_sink(Some(Box::new(move |line| {
-        if let Some(r) = &recorded {
-            r.log_line(&line);
-        }
-        let text = line.prefixed();
-        if echo {
-            let _ = writeln!(std::io::stderr(), "{text}");
-        }
-        let mut k = keep.lock().unwrap_or_else(|e| e.into_inner());
-        if k.len() < MAX_LOG_LINES {
-            k.push(text);
-        }
-    })));
-    kept
 }
 
 /// A run that reached its summary and files but did not succeed is, after them, an error

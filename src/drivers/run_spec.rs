@@ -1,6 +1,7 @@
 //! A run as data: [`RunSpec`], what every front end (the command line, the lab, a launch,
 //! the Python package) fills in and the library turns into a [`RunConfig`] by one set of
-//! rules.
+//! rules ([`RunSpec::config`]; [`late_fault_warnings`], what it warns of), and starts
+//! (`RunSpec::start`, in `crate::start`).
 //!
 //! Each rule refuses a bad setting in one line naming it as its front end takes it
 //! ([`Speech`]: `--control-hz` on the command line, `control_hz` from Python), so no front
@@ -28,6 +29,31 @@ pub const DEFAULT_CLOCK: ClockKind = ClockKind::Real;
 
 /// The brain of a run whose settings name none: the chapter's scripted balancer.
 pub const DEFAULT_POLICY: &str = "scripted";
+
+/// A warning for each injected fault (`--stall`, `--kill`) of `cfg` that starts after its
+/// run ends, so does nothing: a line each, without a prefix. None for a run with no end
+/// ([`ratelab_runtime::telemetry::UNBOUNDED`]: the lab and a launch on a terminal run until
+/// quit). Ask once the run's duration is final.
+pub fn late_fault_warnings(cfg: &RunConfig) -> Vec<String> {
+    if cfg.duration == ratelab_runtime::telemetry::UNBOUNDED {
+        return Vec::new();
+    }
+    (cfg.faults.iter().filter(|f| f.at >= cfg.duration))
+        .map(|f| {
+            format!(
+                "warning: the {} of '{}' at {} s starts after the run ends ({} s): it does nothing",
+                if f.duration.is_some() {
+                    "--stall"
+                } else {
+                    "--kill"
+                },
+                f.node,
+                f.at.as_secs_f64(),
+                cfg.duration.as_secs_f64()
+            )
+        })
+        .collect()
+}
 
 /// The graph to run and the overrides of its nodes and topics, in the order given.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -147,7 +173,8 @@ impl GraphSettings {
 /// One run's settings, as data: the graph and its overrides, the clock, the chain's
 /// shorthands, the seed and duration, the brain, and where its results go. Fill in the
 /// fields (each `None` or empty takes the graph's or the library's default) and call
-/// [`RunSpec::config`].
+/// [`RunSpec::start`] to run it (`crate::start`), or [`RunSpec::config`] for the settings
+/// alone.
 #[derive(Clone, Debug, PartialEq)]
 pub struct RunSpec {
     /// The graph and its overrides.

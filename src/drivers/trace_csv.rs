@@ -454,7 +454,7 @@ mod tests {
         cfg.duration = Nanos(secs * Nanos::SECOND.0);
         let stream = TraceStream::new(Vec::new(), &cfg.graph, every).unwrap();
         let opts = RunOptions {
-            observers: vec![stream.observer()],
+            observers: vec![crate::observer::steps(stream.observer())],
             trace_every: every,
             ..RunOptions::new()
         };

@@ -5,7 +5,8 @@
 //!   as the wheel's `ratelab` command and `python -m ratelab` run it. A launch's processes
 //!   are started as `python -m ratelab process …` (`Program::set_this`).
 //! - [`run`]: one run from `ratelab.run`'s settings ([`run_spec`]: a dict of its keywords,
-//!   read into the library's `RunSpec`, no argument list), its files' contents returned;
+//!   read into the library's `RunSpec`, no argument list) and started as `ratelab run` starts
+//!   one (`RunSpec::start`, through `ratelab::held_run`), its files' contents returned;
 //!   Python nodes and a callable brain run in this interpreter. Ctrl-C (KeyboardInterrupt)
 //!   stops it.
 //! - [`sweep`], [`cliff`]: a sweep and a cliff search from `ratelab.sweep`'s and

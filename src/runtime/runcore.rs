@@ -105,6 +105,22 @@ pub fn build_graph(
     observers: Vec<Box<dyn StepObserver>>,
 ) -> Result<Graph, RunError> {
     cfg.validate()?;
+    build_validated_graph(cfg, brain, keep_trace, observers)
+}
+
+/// [`build_graph`] for a `cfg` its caller has validated ([`RunConfig::validate`], as
+/// `ratelab_drivers::run_spec::RunSpec::config` does last): the plant (reset to `cfg.seed`)
+/// and the graph, without checking `cfg` again. Given a `cfg` that was not validated, the
+/// graph may be built from settings [`build_graph`] refuses.
+///
+/// # Errors
+/// [`RunError`] for a plant that will not load or a graph that cannot be built.
+pub fn build_validated_graph(
+    cfg: &RunConfig,
+    brain: BrainSlot,
+    keep_trace: bool,
+    observers: Vec<Box<dyn StepObserver>>,
+) -> Result<Graph, RunError> {
     let mut plant = CartPole::new()?;
     plant.reset(cfg.seed);
     Ok(Graph::build(

@@ -1,6 +1,7 @@
 //! Recordings: decode fresh `.rrd` files in Rust, check their content, their determinism,
 //! the shipped reference recording, and the refusals before a run starts.
 
+use ratelab::observer::Recorded;
 use ratelab::policy::Scripted;
 use ratelab::recording::{RecordOptions, Recording};
 use ratelab::run::{Command, TimedCommand};
@@ -47,15 +48,11 @@ fn record_with_options(
         options,
     )
     .unwrap();
-    let ticks = rec.clone();
     let mut opts = RunOptions {
-        observers: vec![rec.observer()],
-        // As `ratelab run` does: per-node lateness (logged by the real clock only) and,
-        // with executors or compute times, every tick's span for the executor timeline.
-        on_node_tick: Some(std::sync::Arc::new(
-            move |t: &ratelab::scheduler::TickReport<'_>| ticks.real_tick(t),
-        )),
-        on_span: rec.span_hook(),
+        // As `ratelab run` attaches it: every step, per-node lateness (logged by the real
+        // clock only) and, with executors or compute times, every tick's span for the
+        // executor timeline.
+        observers: vec![Box::new(Recorded::new(&rec))],
         commands,
         ..RunOptions::new()
     };
@@ -265,7 +262,10 @@ fn a_run_cut_short_leaves_a_complete_file() {
     let stop = StopFlag::new();
     let (rec, _) = Recording::create(&path, &cfg, "scripted", &RecordOptions::default()).unwrap();
     let opts = RunOptions {
-        observers: vec![rec.observer(), Box::new(StopAfter(100, stop.clone()))],
+        observers: vec![
+            Box::new(Recorded::new(&rec)),
+            Box::new(StopAfter(100, stop.clone())),
+        ],
         stop,
         ..RunOptions::new()
     };
@@ -952,7 +952,10 @@ fn a_brain_swap_is_an_event_and_a_mark() {
     let cfg = virtual_cfg().with_duration_ms(2000);
     let (rec, _) = Recording::create(&path, &cfg, "scripted", &RecordOptions::default()).unwrap();
     let opts = RunOptions {
-        observers: vec![rec.observer(), Box::new(SwapAt(rec.clone(), 40))],
+        observers: vec![
+            Box::new(Recorded::new(&rec)),
+            Box::new(SwapAt(rec.clone(), 40)),
+        ],
         ..RunOptions::new()
     };
     let r = run(&cfg, Box::new(Scripted), opts).unwrap();
