@@ -11,8 +11,19 @@
 //! |---|---|---|
 //! | everyone | nothing | subscribers, queries, liveliness subscribers and queries on the graph's keys |
 //! | the launcher | control (`@ctl/*`), the end (`@ended`), progress lines (`@log`) | its token `@launcher`, the settings' queryable `@setup` (and its replies) |
-//! | process `P` | the topics its nodes publish, its reports `@up/P`, ticks `@ticked/P`, counters `@stats/P` | its nodes' tokens `@node/P/*`, their endpoints' `@pub`/`@sub` tokens, its queryable `@here/P` (and replies) |
+//! | process `P` | the topics its nodes publish (on their keys, and on `@via/<topic>` for the launcher to pass on), its reports `@up/P`, ticks `@ticked/P`, counters `@stats/P` | its nodes' tokens `@node/P/*`, their endpoints' `@pub`/`@sub` tokens |
 //! | an observer | nothing | nothing more |
+//! | the launcher's router | anything on the graph's keys | anything on the graph's keys |
+//!
+//! A launch is a star ([`super::open_router`]): every process and watcher links to the
+//! launcher's router alone, so the check that matters is the router's, on each message
+//! as it arrives from the identity that sent it; what the router then passes on arrives
+//! at the others under the router's identity, which may say anything (the launcher
+//! itself speaks through it, and it passes on only what it let in). A process therefore
+//! still cannot publish another's topic, report or token, nor control anybody: the router
+//! drops it before any other process sees it. Nobody but the launcher holds the router's
+//! identity ([`super::credentials::Role::Router`]). Two sessions linked directly (a test,
+//! the transport-floor examples) check each other by the same rules.
 //!
 //! A session that does not know the graph's shape (a watcher, before it asks the settings)
 //! lets every process publish on any topic and declare any endpoint token: what it
@@ -28,14 +39,15 @@ use ratelab_runtime::graph::NodeId;
 use serde_json::{json, Value};
 
 /// The `@` keys of a graph (each must be named: `**` does not match them).
-const AT_KEYS: [&str; 12] = [
+const AT_KEYS: [&str; 13] = [
     "@node/**",
     "@pub/**",
     "@sub/**",
     "@ctl/**",
     "@up/**",
     "@ticked/**",
-    "@here/**",
+    "@relayed/**",
+    "@via/**",
     "@stats/**",
     "@setup",
     "@ended",
@@ -95,9 +107,11 @@ pub fn acl(keys: &Keys, processes: &[String], spec: Option<&GraphSpec>) -> Value
             "declare_liveliness_subscriber",
             "liveliness_query",
         ],
-        read_keys,
+        read_keys.clone(),
     );
-    let mut roles = vec![Role::Launcher, Role::Observer];
+    // The router passes on what it let in, and says what the launcher says.
+    let routed = rule("router-routes".into(), &ALL_MESSAGES, read_keys);
+    let mut roles = vec![Role::Launcher, Role::Observer, Role::Router];
     roles.extend(processes.iter().cloned().map(Role::Process));
     let subjects: Vec<Value> = roles
         .iter()
@@ -110,6 +124,7 @@ pub fn acl(keys: &Keys, processes: &[String], spec: Option<&GraphSpec>) -> Value
     let mut own = |role: &Role, rules: Vec<String>| {
         policies.push(json!({ "rules": rules, "subjects": [subject_id(role)] }));
     };
+    own(&Role::Router, vec![routed]);
     let launcher = vec![
         rule(
             "launcher-put".into(),
@@ -140,6 +155,7 @@ pub fn acl(keys: &Keys, processes: &[String], spec: Option<&GraphSpec>) -> Value
                 for t in &spec.topics {
                     if spec.process_of(t.publisher) == *proc_name {
                         puts.push(keys.topic(&t.name));
+                        puts.push(keys.via(&t.name));
                     }
                 }
                 for (i, n) in spec.nodes.iter().enumerate() {
@@ -151,6 +167,7 @@ pub fn acl(keys: &Keys, processes: &[String], spec: Option<&GraphSpec>) -> Value
             }
             None => {
                 puts.push(format!("{p}/**"));
+                puts.push(at("@via/**"));
                 tokens.push(at("@pub/**"));
                 tokens.push(at("@sub/**"));
             }
@@ -160,11 +177,6 @@ pub fn acl(keys: &Keys, processes: &[String], spec: Option<&GraphSpec>) -> Value
         let mine = vec![
             rule(format!("{id}-put"), &["put"], puts),
             rule(format!("{id}-token"), &["liveliness_token"], tokens),
-            rule(
-                format!("{id}-here"),
-                &["declare_queryable", "reply"],
-                vec![keys.here(proc_name)],
-            ),
         ];
         own(&role, mine);
     }
@@ -183,6 +195,7 @@ fn subject_id(role: &Role) -> String {
         Role::Launcher => "launcher".into(),
         Role::Observer => "observer".into(),
         Role::Process(p) => format!("process-{p}"),
+        Role::Router => "router".into(),
     }
 }
 
@@ -238,7 +251,9 @@ mod tests {
         let p = keys.prefix();
         let robot = allowed(&acl, &Role::Process("robot".into()), "put");
         assert!(robot.contains(&format!("{p}/obs")), "{robot:?}");
+        assert!(robot.contains(&format!("{p}/@via/obs")), "{robot:?}");
         assert!(!robot.contains(&format!("{p}/action")), "{robot:?}");
+        assert!(!robot.contains(&format!("{p}/@via/action")), "{robot:?}");
         let policy = allowed(&acl, &Role::Process("policy".into()), "put");
         assert!(policy.contains(&format!("{p}/action")), "{policy:?}");
         assert!(!policy.contains(&format!("{p}/obs")), "{policy:?}");
@@ -253,6 +268,21 @@ mod tests {
         );
         assert!(allowed(&acl, &Role::Observer, "put").is_empty());
         assert!(allowed(&acl, &Role::Observer, "liveliness_token").is_empty());
+        // Only the router hands on the lockstep's reports; it may say anything on the
+        // graph's keys (it passes on what it let in).
+        let relayed = format!("{p}/@relayed/**");
+        let router_puts = allowed(&acl, &Role::Router, "put");
+        assert!(router_puts.contains(&relayed), "{router_puts:?}");
+        assert!(router_puts.contains(&format!("{p}/**")), "{router_puts:?}");
+        for role in [
+            Role::Launcher,
+            Role::Observer,
+            Role::Process("robot".into()),
+            Role::Process("policy".into()),
+        ] {
+            let puts = allowed(&acl, &role, "put");
+            assert!(!puts.iter().any(|k| k.contains("@relayed")), "{role:?}");
+        }
         // A process's node tokens are under its own name only.
         let tokens = allowed(&acl, &Role::Process("policy".into()), "liveliness_token");
         assert!(

@@ -7,7 +7,9 @@
 //! credentials cannot connect, read or write anything (ROS 2's own answer for rmw_zenoh is
 //! the same Zenoh mechanism, `zenoh_security_tools`). The certificate's common name is the
 //! peer's identity, which Zenoh's access control ([`super::access`]) checks on every
-//! message: [`Role::common_name`].
+//! message: [`Role::common_name`]. The launcher's session, the router every other session
+//! links to, has an identity of its own ([`Role::Router`]) that never leaves the launcher:
+//! no file holds it ([`Credentials::to_toml`]), so nobody else can speak as the router.
 //!
 //! [`Credentials::generate`] makes the CA and one certificate per identity (ECDSA P-256,
 //! by `rcgen`); the CA's private key is dropped at once, so nobody, not even the launcher,
@@ -27,10 +29,14 @@ use std::collections::BTreeMap;
 use std::path::Path;
 
 /// The largest credentials file read, bytes: room for every identity of the largest launch
-/// ([`MAX_PROCESSES`] and two more, each a certificate and a key of at most
+/// ([`MAX_PROCESSES`] and three more, each a certificate and a key of at most
 /// `MAX_PEM_BYTES`), and 64 KiB besides (about 4.1 MiB).
 pub const MAX_CREDENTIALS_BYTES: u64 =
-    (MAX_PROCESSES as u64 + 2) * 2 * MAX_PEM_BYTES as u64 + 64 * 1024;
+    (MAX_PROCESSES as u64 + MORE_IDENTITIES as u64) * 2 * MAX_PEM_BYTES as u64 + 64 * 1024;
+
+/// The identities of a launch beside its processes': the launcher, an observer and the
+/// launcher's router.
+const MORE_IDENTITIES: usize = 3;
 
 /// The largest certificate or private key in a credentials file, bytes of PEM.
 const MAX_PEM_BYTES: usize = 8 * 1024;
@@ -63,6 +69,10 @@ pub enum Role {
     /// A watcher (`ratelab top`, `lab --attach`, the lab beside its launch): it reads, and
     /// publishes nothing the graph acts on.
     Observer,
+    /// The launcher's session as the router of the launch's star ([`super::open_router`]):
+    /// it passes on what every other identity says, each message checked on arrival by the
+    /// identity it came from, and what the launcher itself says. Only the launcher holds it.
+    Router,
 }
 
 impl Role {
@@ -73,6 +83,7 @@ impl Role {
             Role::Launcher => "ratelab-launcher".into(),
             Role::Process(p) => format!("ratelab-process-{p}"),
             Role::Observer => "ratelab-observer".into(),
+            Role::Router => "ratelab-router".into(),
         }
     }
 
@@ -82,6 +93,7 @@ impl Role {
             Role::Launcher => "the launcher".into(),
             Role::Process(p) => format!("process '{p}'"),
             Role::Observer => "an observer".into(),
+            Role::Router => "the launcher's router".into(),
         }
     }
 }
@@ -148,8 +160,8 @@ fn check_certificate(pem: &str) -> Result<(), String> {
 }
 
 impl Credentials {
-    /// A new CA and an identity for the launcher, an observer and each of `processes`,
-    /// for graph `graph`. The CA's private key is not kept.
+    /// A new CA and an identity for the launcher, an observer, the launcher's router and
+    /// each of `processes`, for graph `graph`. The CA's private key is not kept.
     ///
     /// # Errors
     /// [`DistError::Usage`] when a key or certificate cannot be made (the system's
@@ -184,7 +196,7 @@ impl Credentials {
         let ca_key = KeyPair::generate().map_err(tls_error)?;
         let ca_cert = ca_params.self_signed(&ca_key).map_err(tls_error)?;
         let issuer = Issuer::new(ca_params, ca_key);
-        let mut roles = vec![Role::Launcher, Role::Observer];
+        let mut roles = vec![Role::Launcher, Role::Observer, Role::Router];
         roles.extend(processes.iter().cloned().map(Role::Process));
         let mut identities = BTreeMap::new();
         for role in roles {
@@ -252,9 +264,13 @@ impl Credentials {
         })
     }
 
-    /// The file's text (TOML, with a first line saying it is a secret).
+    /// The file's text (TOML, with a first line saying it is a secret), without the
+    /// router's identity ([`Role::Router`]): it never leaves the launcher, whatever file is
+    /// written (an export, a started process's own).
     pub fn to_toml(&self) -> String {
-        let body = toml::to_string(self).unwrap_or_default();
+        let mut written = self.clone();
+        written.identities.remove(&Role::Router.common_name());
+        let body = toml::to_string(&written).unwrap_or_default();
         format!(
             "# ratelab credentials for graph '{}': a secret. Whoever holds this file can join \
              the graph's launch as the identities below.\n{body}",
@@ -279,10 +295,11 @@ impl Credentials {
         if c.graph.is_empty() || c.graph.len() > MAX_NAME_BYTES {
             return Err(bad("the graph's name is empty or too long".into()));
         }
-        if c.processes.len() > MAX_PROCESSES || c.identities.len() > MAX_PROCESSES + 2 {
+        if c.processes.len() > MAX_PROCESSES || c.identities.len() > MAX_PROCESSES + MORE_IDENTITIES
+        {
             return Err(bad(format!(
                 "more than {MAX_PROCESSES} processes or {} identities",
-                MAX_PROCESSES + 2
+                MAX_PROCESSES + MORE_IDENTITIES
             )));
         }
         if let Some(p) = c
@@ -453,11 +470,19 @@ mod tests {
                 "ratelab-launcher",
                 "ratelab-observer",
                 "ratelab-process-policy",
-                "ratelab-process-robot"
+                "ratelab-process-robot",
+                "ratelab-router"
             ]
         );
+        // Every identity but the router's, which never leaves the launcher.
         let back = Credentials::parse(&c.to_toml(), "x").unwrap();
-        assert_eq!(back, c);
+        assert!(back.identity(&Role::Router).is_err());
+        let mut all_but_router = c.clone();
+        all_but_router
+            .identities
+            .remove(&Role::Router.common_name());
+        assert_eq!(back, all_but_router);
+        assert!(c.zenoh_tls(&Role::Router).is_ok());
         let one = c.only(&Role::Process("robot".into())).unwrap();
         assert_eq!(one.identities.len(), 1);
         assert!(one.identity(&Role::Launcher).is_err());
@@ -555,11 +580,13 @@ mod tests {
         );
         let c = Credentials::generate("g", &procs()).unwrap();
         let f = dir.write("all", &c).unwrap();
+        let mut written = c.clone();
+        written.identities.remove(&Role::Router.common_name());
         assert_eq!(
             std::fs::metadata(&f).unwrap().permissions().mode() & 0o777,
             0o600
         );
-        assert_eq!(Credentials::load(&f).unwrap(), c);
+        assert_eq!(Credentials::load(&f).unwrap(), written);
         let e = c.write(&f, false).unwrap_err().to_string();
         assert!(e.contains("--force"), "{e}");
         c.write(&f, true).unwrap();

@@ -3,15 +3,17 @@
 //! The graph file places each node in a process (`process = "robot"`; by default the plant's
 //! nodes share `robot`, every other node runs alone: [`GraphSpec::process_of`]). Under
 //! `ratelab launch --processes` the launcher ([`launcher`]) starts one OS process per
-//! process (`ratelab process`, [`process`]) and they talk over Zenoh, peer to peer
-//! (multicast scouting off; the launcher listens on `tls/127.0.0.1:PORT`, the others connect
-//! to it and find each other by gossip, as rmw_zenoh's defaults do).
+//! process (`ratelab process`, [`process`]) and they talk over Zenoh in a star: the
+//! launcher's session is a Zenoh router listening on `tls/127.0.0.1:PORT` ([`open_router`]),
+//! and every process, and every watcher, is a client of it ([`open_client`]): one link each,
+//! P links for P processes (where a mesh of peers took P (P − 1) / 2), and processes never
+//! link to each other.
 //!
 //! - **Only the graph's own processes.** Every link is TLS 1.3 with mutual
 //!   authentication by a certificate authority made for one launch ([`credentials`]), and
-//!   every session drops what an identity may not say ([`access`]): a peer without the
-//!   launch's credentials cannot connect, and a process cannot publish another's topics,
-//!   reports or tokens, nor the launcher's control.
+//!   the router drops what an identity may not say, by the identity of the link it came on
+//!   ([`access`]): a peer without the launch's credentials cannot connect, and a process
+//!   cannot publish another's topics, reports or tokens, nor the launcher's control.
 //!
 //! - **Topics** are key expressions `ratelab/<graph>/<topic>` ([`Keys`]). Each process
 //!   builds the whole graph but ticks only its own nodes; a topic whose publisher and
@@ -25,13 +27,15 @@
 //! - **Time.** Under the real clock the processes share the host's monotonic clock and one
 //!   run-time zero, so stamps and sense→act latency stay exact on one host. Under the
 //!   virtual clock every process replays the one [`ratelab_runtime::scheduler::VirtualScheduler`]
-//!   order of ticks, ticks its own nodes in their turn and reports each tick to the others
+//!   order of ticks, ticks its own nodes in their turn and reports each tick to the
+//!   launcher, which hands every process the others' reports when its turn comes
 //!   ([`lockstep`]); the launcher is the time authority through the horizon it sets. The
 //!   same seed gives byte-identical metrics in one process and in several.
-//! - **Watching.** [`monitor`] is one more Zenoh session that sees a running launch's
-//!   tokens and reports (the attached lab, `ratelab top`); [`refusals`] passes the TLS
-//!   handshakes Zenoh refused on to the launcher's log; [`wire`] is what travels (samples,
-//!   reports, the lockstep's messages) and how it is encoded.
+//! - **Watching.** [`monitor`] is one more client of the launcher's router that sees a
+//!   running launch's tokens and reports (the attached lab; `ratelab top` is a peer linked
+//!   to it alone, [`open_session`]); [`refusals`] passes the TLS handshakes Zenoh refused
+//!   on to the launcher's log; [`wire`] is what travels (samples, reports, the lockstep's
+//!   messages) and how it is encoded.
 //! - **ROS 2.** `launch --ros2` offers each process's nodes through [`ros2_offer`], which
 //!   the ROS 2 layer beside this crate fills.
 #![warn(missing_docs)]
@@ -62,23 +66,25 @@ use zenoh::Wait;
 /// free port instead (and says which).
 pub const DEFAULT_ENDPOINT: &str = "tls/127.0.0.1:7449";
 
-/// Where a session that only connects listens: any free port on loopback (peers find it
-/// by gossip).
+/// Where a peer session that only connects listens (`ratelab top`'s, [`open_session`]): any
+/// free port on loopback.
 pub const LOOPBACK_ANY: &str = "tls/127.0.0.1:0";
 
 /// How long a process waits for a peer's answer (a join, a ready, a granted tick).
 pub const REPLY_TIMEOUT: std::time::Duration = std::time::Duration::from_secs(20);
 
-/// How Zenoh keeps the links of one launch's sessions ([`open_session`]): sized by the
-/// launch's processes, so that a small launch keeps Zenoh's defaults and a large one
-/// starts on a small machine.
+/// How Zenoh keeps the links of one launch's sessions ([`open_router`], [`open_client`]):
+/// sized by the launch's processes, so that a small launch keeps Zenoh's defaults and a
+/// large one starts on a small machine.
 ///
-/// Every process of a virtual-clock run links to every other, P (P − 1) / 2 TLS links
-/// opened at once. On 2 cores, 64 processes (2,016 links) went wrong three ways under
-/// Zenoh's defaults: handshakes outlasted its 10 s open and accept timeouts and outnumbered
-/// its 100 pending links, so pairs were never linked; and each process runs Zenoh on one
-/// thread ([`ZENOH_RUNTIME`]), which, starved, sent no keep-alive for more than its 10 s
-/// lease, so links were cut and what was on them lost (`BENCHMARKS.md`).
+/// Every process links to the launcher's router, P TLS links opened at once and accepted
+/// by the launcher's one Zenoh thread ([`ZENOH_RUNTIME`]), which also carries every message
+/// of the run. These sizes were first measured on a mesh of peers (2,016 links for 64
+/// processes on 2 cores, `BENCHMARKS.md`): under Zenoh's defaults handshakes outlasted its
+/// 10 s open and accept timeouts and outnumbered its 100 pending links, and a starved
+/// Zenoh thread sent no keep-alive for more than its 10 s lease, so links were cut. A star
+/// opens far fewer links, but its one router thread carries them all: the same margins
+/// stand for a loaded machine.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct LinkTimings {
     /// The lease this session announces on each link (Zenoh's `transport/link/tx/lease`):
@@ -113,18 +119,18 @@ impl LinkTimings {
 }
 
 /// The most processes a launch may have and keep Zenoh's default link timings and a 5 s
-/// connect timeout ([`LinkTimings::for_processes`], [`open_session`]).
+/// connect timeout ([`LinkTimings::for_processes`], [`open_client`]).
 pub const SMALL_LAUNCH: usize = 10;
 
-/// How long the processes of a launch of `processes` take to be ready, at most: each waits
-/// until it reaches every other ([`lockstep::meet_peers`]), the launcher for all of them.
-/// [`REPLY_TIMEOUT`], half a second more per process, and 20 ms more per link of the mesh
-/// (P(P−1)/2 TLS links, each a handshake on the machine's cores): 64 processes, 2,016
-/// links, were ready in 23 to 29 s on 2 cores alone, and took over 52 s beside a loaded test
-/// suite; this gives them 92.
+/// How long the processes of a launch of `processes` take to be ready, at most: each
+/// starts, links to the launcher's router and says it is ready, the launcher waits for all
+/// of them. [`REPLY_TIMEOUT`], half a second more per process (its start on the machine's
+/// cores), and 20 ms more per link of the star (one per process, a TLS handshake each with
+/// the launcher's one Zenoh thread): 64 processes get 53.3 s, 256 get 153.1 s. (The mesh of
+/// peers before it needed 20 ms per pair of processes: 92 s for 64.)
 pub fn ready_wait(processes: usize) -> std::time::Duration {
     let p = u32::try_from(processes).unwrap_or(u32::MAX);
-    let links = p.saturating_mul(p.saturating_sub(1)) / 2;
+    let links = p;
     REPLY_TIMEOUT
         .saturating_add(std::time::Duration::from_millis(500).saturating_mul(p))
         .saturating_add(std::time::Duration::from_millis(20).saturating_mul(links))
@@ -310,6 +316,13 @@ impl Keys {
         format!("{}/{}", self.prefix, name.trim_matches('/'))
     }
 
+    /// Where a topic's publisher's process puts its samples for the launcher, which passes
+    /// each on to the topic's key ([`Keys::topic`]) from a thread of its own (Zenoh's one
+    /// thread must never wait to send: `launcher`'s outbox): `ratelab/<graph>/@via/obs`.
+    pub fn via(&self, name: &str) -> String {
+        format!("{}/@via/{}", self.prefix, name.trim_matches('/'))
+    }
+
     /// Where the launcher tells process `p` what to do.
     pub fn control(&self, p: &str) -> String {
         format!("{}/@ctl/{p}", self.prefix)
@@ -366,15 +379,17 @@ impl Keys {
     }
 
     /// Virtual clock: where process `p` says each event of its nodes is done
-    /// ([`wire::Ticked`], several to a message), for every other process and the launcher.
+    /// ([`wire::Ticked`], several to a message), for the launcher, which hands the reports
+    /// on ([`Keys::relayed`]).
     pub fn ticked(&self, p: &str) -> String {
         format!("{}/@ticked/{p}", self.prefix)
     }
 
-    /// Virtual clock: process `p` answers here while it is up, so that the others know
-    /// they reach it directly before the run ([`lockstep`]).
-    pub fn here(&self, p: &str) -> String {
-        format!("{}/@here/{p}", self.prefix)
+    /// Virtual clock: where the launcher hands process `p` the other processes' tick
+    /// reports it has not had, when its turn comes ([`lockstep`]; only the launcher's
+    /// router may put here, [`access`]).
+    pub fn relayed(&self, p: &str) -> String {
+        format!("{}/@relayed/{p}", self.prefix)
     }
 
     /// Where each process publishes its live counters for `ratelab top`.
@@ -474,12 +489,22 @@ pub fn live_tokens(
 /// process it starts: `RATELAB_SHARED_MEMORY=off` (`on`, the default, leaves it on).
 pub const SHARED_MEMORY_ENV: &str = "RATELAB_SHARED_MEMORY";
 
+/// The smallest message Zenoh puts in shared memory by itself, bytes (its
+/// `transport_optimization/message_size_threshold`; Zenoh's default is 3072). A message that
+/// fits in one of Zenoh's batches (64 KiB) crosses the socket: the first message over the
+/// threshold makes its sender create Zenoh's 16 MiB pool, which Zenoh locks in memory in
+/// the sender and in every process that maps it, plus about 8 MiB of watchdog queues. At
+/// 3072 the plant's live figures (about 6 KB ten times a second) made the chapter's launch
+/// hold 46 MiB more than without shared memory (issue 76); camera frames (300 KiB and up)
+/// still go through it.
+pub const SHM_THRESHOLD_BYTES: usize = 64 * 1024;
+
 /// Whether [`open_session`] offers Zenoh's shared memory to its peers: on unless
 /// [`SHARED_MEMORY_ENV`] says `off` (unset or empty: on).
 ///
 /// With it on, two processes on one host that both offer it (every ratelab process does)
-/// pass a sample of 3 KiB or more (Zenoh's `message_size_threshold`) through a shared
-/// segment of a 16 MiB pool rather than through the socket: the receiver maps the bytes
+/// pass a sample of [`SHM_THRESHOLD_BYTES`] or more (Zenoh's `message_size_threshold`)
+/// through a shared segment of a 16 MiB pool rather than through the socket: the receiver maps the bytes
 /// the sender wrote, so a camera frame crosses without the kernel's two copies
 /// (BENCHMARKS.md measures both). A larger sample than the pool has room for, a peer on
 /// another host, or a host without POSIX shared memory (`/dev/shm`) falls back to the
@@ -514,14 +539,86 @@ pub struct Access<'a> {
     pub spec: Option<&'a GraphSpec>,
 }
 
-/// Open a Zenoh session in peer mode with multicast scouting off, listening on `listen` and
-/// connecting to `connect` (endpoints already checked), authenticated as `access.role` by
-/// mutual TLS and enforcing the graph's access control on what it receives.
+/// What a session is in a launch's star ([`open_router`], [`open_client`],
+/// [`open_session`]): its Zenoh mode.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Mode {
+    /// The launcher's: a router every other session links to.
+    Router,
+    /// A process's or a watcher's: a client, linked to the launcher's router alone.
+    Client,
+    /// A peer that links only where it is told (gossip off).
+    Peer,
+}
+
+impl Mode {
+    fn json(self) -> &'static str {
+        match self {
+            Mode::Router => "\"router\"",
+            Mode::Client => "\"client\"",
+            Mode::Peer => "\"peer\"",
+        }
+    }
+}
+
+/// Open the launcher's session: a Zenoh router listening on `listen` (endpoints already
+/// checked), authenticated as `access.role` (the launcher's router,
+/// [`credentials::Role::Router`]) by mutual TLS, and dropping what each identity that links
+/// to it may not say ([`access`]). Every process and watcher of the launch links to it and
+/// to nothing else, and it routes what they say to each other; it gossips nothing, so no
+/// two of them learn of each other.
+///
+/// # Errors
+/// [`DistError::Usage`] when an endpoint cannot be used (a port in use) or the credentials
+/// lack the role's identity, else [`DistError::Zenoh`].
+pub fn open_router(listen: &[String], access: Access<'_>) -> Result<zenoh::Session, DistError> {
+    open_as(Mode::Router, listen, &[], access)
+}
+
+/// Open a process's or a watcher's session: a Zenoh client of the launcher's router at
+/// `connect` (endpoints already checked), authenticated as `access.role` by mutual TLS. It
+/// listens nowhere, so its one link is the router's, and everything it receives comes from
+/// there (checked by the router on arrival, [`access`]).
+///
+/// A client rather than a peer linked to the router alone, because of how Zenoh 1.10
+/// routes: a router relays between its clients (they make one region, which the router
+/// brokers), so what one process publishes reaches every other through it, and liveliness
+/// tokens, queries and a publisher's matching status (Zenoh's interests, answered by the
+/// router) work as between peers. Peers linked to a router make a region of their own in
+/// which each is expected to reach the others directly (peers do not relay for each
+/// other): two processes linked as peers to the router alone, gossip off, would not hear
+/// each other; with gossip on they would link to each other, the mesh again. A peer linked
+/// to the router alone still hears every client through it (`ratelab top`'s session).
+///
+/// # Errors
+/// [`DistError::Usage`] when nobody answers at `connect` or the TLS handshake is refused
+/// (another launch's credentials), or the credentials lack the role's identity, else
+/// [`DistError::Zenoh`].
+pub fn open_client(connect: &[String], access: Access<'_>) -> Result<zenoh::Session, DistError> {
+    open_as(Mode::Client, &[], connect, access)
+}
+
+/// Open a Zenoh session in peer mode with multicast scouting and gossip off, listening on
+/// `listen` and connecting to `connect` (endpoints already checked): it links to what it
+/// connects to and what connects to it, nothing else. Authenticated as `access.role` by
+/// mutual TLS, enforcing the graph's access control on what it receives. `ratelab top`
+/// opens one linked to a launcher's router; tests and the transport-floor examples link
+/// two directly.
 ///
 /// # Errors
 /// [`DistError::Usage`] when an endpoint cannot be used (a port in use) or the credentials
 /// lack the role's identity, else [`DistError::Zenoh`].
 pub fn open_session(
+    listen: &[String],
+    connect: &[String],
+    access: Access<'_>,
+) -> Result<zenoh::Session, DistError> {
+    open_as(Mode::Peer, listen, connect, access)
+}
+
+/// Open a session of `mode` ([`open_router`], [`open_client`], [`open_session`]).
+fn open_as(
+    mode: Mode,
     listen: &[String],
     connect: &[String],
     access: Access<'_>,
@@ -532,8 +629,23 @@ pub fn open_session(
         c.insert_json5(k, v)
             .map_err(|e| DistError::Zenoh(format!("config {k}: {e}")))
     };
-    set(&mut config, "mode", "\"peer\"")?;
+    set(&mut config, "mode", mode.json())?;
     set(&mut config, "scouting/multicast/enabled", "false")?;
+    // Nobody learns of anybody from anybody: each session links where it is told.
+    set(&mut config, "scouting/gossip/enabled", "false")?;
+    if mode == Mode::Router {
+        // A router waits this long after it opens for scouting (500 ms by default): there
+        // is none.
+        set(&mut config, "scouting/delay", "0")?;
+        // What Zenoh's one thread passes on itself (declarations, the answers to queries)
+        // must find room in a link's queue, or that thread would wait for room only it can
+        // make: Zenoh's most batches a priority (16 of 64 KiB, allocated as used) rather
+        // than 2. Samples and reports go out from the launcher's own thread.
+        let sixteen = r#"{"control": 16, "real_time": 16, "interactive_high": 16,
+            "interactive_low": 16, "data_high": 16, "data": 16, "data_low": 16,
+            "background": 16}"#;
+        set(&mut config, "transport/link/tx/queue/size", sixteen)?;
+    }
     set(&mut config, "listen/endpoints", &json(listen))?;
     set(&mut config, "connect/endpoints", &json(connect))?;
     // Fail at once on an endpoint that cannot be listened on or connected to, rather than
@@ -548,34 +660,31 @@ pub fn open_session(
     // A small launch's process fails in 5 s on an endpoint nobody answers; a large one's
     // processes all connect at once on a loaded machine (64 starting on 2 cores took longer
     // than 5 s to be answered), so they wait as long as a link may take to establish.
-    let connect = if processes > SMALL_LAUNCH {
+    let connect_wait = if processes > SMALL_LAUNCH {
         links.establish
     } else {
         std::time::Duration::from_millis(5000)
     };
-    set(&mut config, "connect/timeout_ms", &ms(connect))?;
-    set(
-        &mut config,
-        "transport/unicast/open_timeout",
-        &ms(links.establish),
-    )?;
-    set(
-        &mut config,
-        "transport/unicast/accept_timeout",
-        &ms(links.establish),
-    )?;
-    set(
-        &mut config,
-        "transport/unicast/accept_pending",
-        &links.pending.to_string(),
-    )?;
-    set(&mut config, "transport/link/tx/lease", &ms(links.lease))?;
-    let shm = shared_memory()?;
-    set(
-        &mut config,
-        "transport/shared_memory/enabled",
-        &shm.to_string(),
-    )?;
+    set(&mut config, "connect/timeout_ms", &ms(connect_wait))?;
+    for (k, v) in [
+        ("transport/unicast/open_timeout", ms(links.establish)),
+        ("transport/unicast/accept_timeout", ms(links.establish)),
+        (
+            "transport/unicast/accept_pending",
+            links.pending.to_string(),
+        ),
+        ("transport/link/tx/lease", ms(links.lease)),
+        (
+            "transport/shared_memory/enabled",
+            shared_memory()?.to_string(),
+        ),
+        (
+            "transport/shared_memory/transport_optimization/message_size_threshold",
+            SHM_THRESHOLD_BYTES.to_string(),
+        ),
+    ] {
+        set(&mut config, k, &v)?;
+    }
     for (k, v) in access.credentials.zenoh_tls(access.role)? {
         set(&mut config, k, &v)?;
     }
@@ -622,8 +731,10 @@ mod tests {
         let most = super::LinkTimings::for_processes(super::MAX_PROCESSES);
         assert_eq!(most.lease, Duration::from_secs(128));
         assert!(super::LinkTimings::for_processes(usize::MAX).pending >= most.pending);
-        assert_eq!(super::ready_wait(64), Duration::from_millis(92_320));
+        // A star: one link per process to the launcher's router.
+        assert_eq!(super::ready_wait(64), Duration::from_millis(53_280));
         assert_eq!(super::ready_wait(3), Duration::from_millis(21_560));
+        assert_eq!(super::ready_wait(256), Duration::from_millis(153_120));
         assert!(super::ready_wait(usize::MAX) > super::ready_wait(64));
     }
 

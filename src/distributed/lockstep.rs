@@ -4,7 +4,7 @@
 //! with the whole graph's executors, so all of them know the run's one order of events (a
 //! tick's start, and when the tick computes, the instant its held outputs go out:
 //! [`Event`]; by time, then the executors' order) and number them 0, 1, …. A process runs
-//! an event of its own node when its turn comes and says so to everyone ([`Ticked`], on
+//! an event of its own node when its turn comes and says so ([`Ticked`], on
 //! `ratelab/<graph>/@ticked/<process>`, with the seq it sent, the compute time its node
 //! drew at a start, and whether the node stopped the graph or failed); at another process's
 //! event it waits for that report ([`check_tick_report`]) and schedules the tick's end by
@@ -13,15 +13,25 @@
 //! the report names), and every process stops at the same event: the same seed gives
 //! byte-identical metrics in one process and in several, executors' figures included.
 //!
-//! A process sends the reports of its consecutive events together, in one message, when it
-//! must next wait ([`wire::encode_reports`]), straight to the other processes (peer to
-//! peer), and runs its events on the thread that receives what they wait for (Zenoh's
-//! receive callback; the process's `stepper`): between two events of different processes
-//! there is one report message and no hand-off between threads. The launcher stays the
-//! time authority without being on that path: it lets the processes run up to a horizon
-//! ([`wire::ToProcess::Horizon`]), [`HORIZON_PERIODS`] periods of the fastest node ahead of the
-//! events it has seen reported, and ends the run early by not moving it on (a Ctrl-C). It
-//! also follows the reports, to know the end (a stop, a failure, a process gone) and the
+//! What a process must know before it runs an event is every report before it: the compute
+//! times it schedules by, the seqs its inputs wait for, and whether the run stopped. The
+//! reports go through the launcher, the router of the launch's star: a process sends the
+//! reports of its consecutive events together, in one message, when it must next wait
+//! ([`wire::encode_reports`]), to the launcher alone; the launcher follows them in the
+//! run's order on the thread that receives them and, when an event is next, hands its
+//! node's process every report it has not had, in one message on its own key
+//! ([`crate::Keys::relayed`], [`subscribe_relayed`]); at the end it hands every process the
+//! rest, and each takes them before it reports ([`wire::ToProcess::Events`]). An instant
+//! in which P processes each run an event costs P messages in and P out, where sending
+//! each report to every other process cost P (P − 1). A process runs its events on the
+//! thread that receives what they wait for (Zenoh's receive callback; the process's
+//! `stepper`): between two events of different processes there is one report message to
+//! the launcher and one from it, and one hand-off between threads on the way (to the
+//! launcher's outbox, which sends for it: Zenoh's one thread must never wait to send). The launcher
+//! is also the time authority: it lets the processes run up to a horizon
+//! ([`wire::ToProcess::Horizon`]), [`HORIZON_PERIODS`] periods of the fastest node ahead of
+//! the events it has seen reported, and ends the run early by not moving it on (a Ctrl-C).
+//! Following the reports, it knows the end (a stop, a failure, a process gone) and the
 //! last seq of every topic before the processes report.
 //!
 //! This is conservative parallel discrete-event simulation in the sense of Chandy and
@@ -35,18 +45,17 @@ use super::{DistError, Keys};
 use ratelab_core::time::Nanos;
 use ratelab_runtime::graph::spec::GraphSpec;
 use ratelab_runtime::graph::NodeId;
-use ratelab_runtime::scheduler::{Event, StopFlag};
-use std::collections::{BTreeMap, BTreeSet};
-use std::time::Duration;
+use ratelab_runtime::scheduler::Event;
+use std::collections::BTreeMap;
 use zenoh::Wait;
 
 /// How far ahead of the ticks it has seen reported the launcher lets the processes run, in
 /// periods of the graph's fastest node (the horizon is moved on when half of it is used).
 pub const HORIZON_PERIODS: u64 = 8;
 
-/// The most reports of other processes' ticks one process keeps ahead of their turn (each
-/// process runs at most to the horizon, so a run holds at most the other processes' ticks
-/// of one horizon: [`HORIZON_PERIODS`] periods of the fastest node).
+/// The most reports of other processes' ticks one process (or the launcher) keeps ahead of
+/// their turn (each process runs at most to the horizon, so a run holds at most the other
+/// processes' ticks of one horizon: [`HORIZON_PERIODS`] periods of the fastest node).
 pub const MAX_AHEAD: usize = 65_536;
 
 /// The other processes' tick reports, handed out in the run's order.
@@ -151,8 +160,8 @@ pub fn decode_report(key: &str, bytes: &[u8], own: Option<&str>) -> Option<Vec<T
 }
 
 /// Subscribe to the tick reports ([`Keys::ticked`]) of every process of `processes` but
-/// `own` (this process, whose own reports are not its peers'), as [`decode_report`] lets
-/// them through: each message's reports go to `take`, on Zenoh's receive thread.
+/// `own` (`None` for the launcher, which takes them all), as [`decode_report`] lets them
+/// through: each message's reports go to `take`, on Zenoh's receive thread.
 ///
 /// One subscriber per process, each on its process's key, not one on `@ticked/*`: Zenoh
 /// keeps the routes of a key that has subscribers and no wildcard, and routes a sample on
@@ -186,64 +195,42 @@ pub fn subscribe_reports(
     Ok(subs)
 }
 
-/// Wait until every process in `others` answers on its [`Keys::here`] key, asking every
-/// 100 ms, for as long as the launcher lives (processes started by hand may come minutes
-/// apart); after three quarters of [`super::ready_wait`] (for `others` and this one: before
-/// the launcher gives up on the processes it started) it says once, on stderr, whom it
-/// waits for. A peer's queryable answers only over a direct
-/// link (peers do not route for each other), and it is declared after the peer's
-/// subscription to the tick reports, which Zenoh declares first on the same link: once all
-/// answer, every report this process sends reaches every peer.
+/// Decode a message of tick reports the launcher handed process `own` ([`Keys::relayed`],
+/// [`wire::decode_relayed`]): `None` for bytes that are not one; `own`'s own reports are left
+/// out (it ran those events). Only the launcher's router may put on the key ([`crate::access`]).
+pub fn decode_relayed(bytes: &[u8], own: &str) -> Option<Vec<Ticked>> {
+    let mut ms = wire::decode_relayed(bytes).ok()?;
+    ms.retain(|m| m.process != own);
+    Some(ms)
+}
+
+/// Subscribe process `own` to the tick reports the launcher hands it ([`Keys::relayed`]),
+/// as [`decode_relayed`] lets them through: each message's reports go to `take`, on
+/// Zenoh's receive thread. Declared before the process says it is ready: Zenoh sends a
+/// declaration ahead of the messages after it on the same link, so the launcher, which
+/// starts the run once every process is ready, never hands on a report before its
+/// subscription is in place.
 ///
 /// # Errors
-/// [`DistError::Peer`] on `stop` or when the launcher goes; [`DistError::Zenoh`] when the
-/// query cannot be sent.
-pub fn meet_peers(
+/// [`DistError::Zenoh`] when the subscriber cannot be declared.
+pub fn subscribe_relayed(
     session: &zenoh::Session,
     keys: &Keys,
-    others: &[String],
-    stop: &StopFlag,
-    launcher_gone: &StopFlag,
-) -> Result<(), DistError> {
-    let prefix = keys.here("");
-    let hint_at = std::time::Instant::now() + super::ready_wait(others.len() + 1) * 3 / 4;
-    let mut hinted = false;
-    loop {
-        let replies = session
-            .get(keys.here("*"))
-            .timeout(Duration::from_millis(500))
-            .wait()?;
-        let mut met = BTreeSet::new();
-        while let Ok(r) = replies.recv() {
-            if let Ok(s) = r.result() {
-                if let Some(p) = s.key_expr().as_str().strip_prefix(&prefix) {
-                    met.insert(p.to_string());
+    own: &str,
+    take: impl Fn(Vec<Ticked>) + Send + Sync + 'static,
+) -> Result<zenoh::pubsub::Subscriber<()>, DistError> {
+    let own = own.to_string();
+    let sub = session
+        .declare_subscriber(keys.relayed(&own))
+        .callback(move |s| {
+            if let Some(ms) = decode_relayed(&s.payload().to_bytes(), &own) {
+                if !ms.is_empty() {
+                    take(ms);
                 }
             }
-        }
-        if others.iter().all(|p| met.contains(p)) {
-            return Ok(());
-        }
-        if !hinted && std::time::Instant::now() >= hint_at {
-            hinted = true;
-            let missing: Vec<&str> = others
-                .iter()
-                .filter(|p| !met.contains(*p))
-                .map(String::as_str)
-                .collect();
-            eprintln!(
-                "ratelab: still waiting to reach process(es) {} directly (every process of a virtual-clock run links to every other; on other hosts give each `ratelab process` --listen tls/<its address>:PORT)",
-                ratelab_core::text::listed(missing)
-            );
-        }
-        if stop.is_stopped() {
-            return Err(DistError::Peer("interrupted".into()));
-        }
-        if launcher_gone.is_stopped() {
-            return Err(DistError::Peer("the launcher went away".into()));
-        }
-        std::thread::sleep(Duration::from_millis(100));
-    }
+        })
+        .wait()?;
+    Ok(sub)
 }
 
 #[cfg(test)]
@@ -387,6 +374,29 @@ mod tests {
         failed.failed = Some("boom \u{1b}[2J".into());
         let got = decode_report(&key("policy"), &wire::encode_reports(&[failed]), None).unwrap();
         assert_eq!(got[0].failed.as_deref(), Some("boom \\u{1b}[2J"));
+    }
+
+    #[test]
+    fn relayed_reports_are_any_process_s_but_one_s_own() {
+        let (a, b) = (report("policy", 3, 1), report("robot", 4, 0));
+        let bytes = wire::encode_relayed(&[&a, &b]);
+        assert_eq!(
+            decode_relayed(&bytes, "ctl_0"),
+            Some(vec![a.clone(), b.clone()])
+        );
+        assert_eq!(decode_relayed(&bytes, "robot"), Some(vec![a.clone()]));
+        assert_eq!(decode_relayed(b"\xff{", "robot"), None);
+        let mut longer = bytes.clone();
+        longer.push(0);
+        assert_eq!(decode_relayed(&longer, "robot"), None);
+        assert_eq!(decode_relayed(&wire::encode_relayed(&[]), "robot"), None);
+        let many = vec![&a; wire::MAX_RELAYED + 1];
+        assert_eq!(decode_relayed(&wire::encode_relayed(&many), "robot"), None);
+        // A process's own message of reports has the same form.
+        assert_eq!(
+            wire::decode_relayed(&wire::encode_reports(std::slice::from_ref(&a))),
+            Ok(vec![a])
+        );
     }
 
     #[test]

@@ -1,7 +1,8 @@
 //! Watching a running multi-process graph from outside it: `ratelab lab --attach`, and the
 //! lab that `ratelab launch --processes` opens on a terminal.
 //!
-//! A watcher is one more Zenoh peer. It turns what the graph's processes publish into the
+//! A watcher is one more client of the launcher's router ([`super::open_client`]): it links
+//! to the launcher alone, as the processes do. It turns what the graph's processes publish into the
 //! lab's own [`Telemetry`], so the one lab (its `App` and `View`) draws a graph in one process
 //! and a graph across several alike:
 //!
@@ -25,7 +26,7 @@
 use super::credentials::{Credentials, Role};
 use super::process::LiveStats;
 use super::wire::{self, RunOver, Setup};
-use super::{check_endpoint, open_session, Access, DistError, Keys};
+use super::{check_endpoint, open_client, Access, DistError, Keys};
 use crossbeam_channel::Sender;
 use ratelab_core::runlog::StepRecord;
 use ratelab_core::time::Nanos;
@@ -568,7 +569,7 @@ pub struct Watch {
 }
 
 impl Watch {
-    /// Connect to `connect` (a launcher's or a node's endpoint) as an observer of the
+    /// Connect to `connect` (a launcher's endpoint: its router) as an observer of the
     /// launch whose `credentials` these are, and ask for its graph's settings, for up to
     /// `wait`.
     ///
@@ -594,7 +595,7 @@ impl Watch {
             role: &Role::Observer,
             spec: None,
         };
-        let session = open_session(&[super::LOOPBACK_ANY.to_string()], connect, access)?;
+        let session = open_client(connect, access)?;
         let selector = Keys::new(&credentials.graph).setup();
         let deadline = Instant::now() + wait;
         loop {
@@ -830,8 +831,8 @@ impl Watch {
 #[derive(Debug, Default)]
 pub struct Signals {
     /// Told once figures have come from every process of the graph's placement: from then
-    /// on nothing any process publishes misses this watcher (Zenoh delivers each peer's
-    /// samples in order), so a launcher that waits for it before the run
+    /// on nothing any process publishes misses this watcher (Zenoh delivers each process's
+    /// samples in order, through the router too), so a launcher that waits for it before the run
     /// ([`super::launcher::LaunchOptions`]'s `start_gate`) has the whole run watched.
     pub watching: Option<Sender<()>>,
     /// Told once every process has published its last figures ([`LiveStats::done`]) or

@@ -20,7 +20,7 @@
 use super::credentials::{Credentials, Role};
 use super::lockstep;
 use super::wire::{self, ToLauncher, ToProcess, WireSample};
-use super::{check_endpoint, open_session, Access, DistError, Keys, REPLY_TIMEOUT};
+use super::{check_endpoint, open_client, Access, DistError, Keys, REPLY_TIMEOUT};
 use crossbeam_channel::{Receiver, RecvTimeoutError};
 use ratelab_core::metrics::LatencyStats;
 use ratelab_core::qos::TopicQos;
@@ -59,9 +59,11 @@ pub struct ProcessOptions {
     pub graph_origin: String,
     /// The process to run (its name in the graph file).
     pub process: String,
-    /// Endpoints to connect to (the launcher's).
+    /// Endpoints to connect to (the launcher's router): the process's one link.
     pub connect: Vec<String>,
-    /// Endpoints to listen on (default [`super::LOOPBACK_ANY`]: peers find it by gossip).
+    /// Endpoints given to listen on (`--listen`): checked, and not used since a launch is a
+    /// star: a process links to its launcher's router alone and nothing links to it
+    /// ([`super::open_client`]), on one host or across hosts.
     pub listen: Vec<String>,
     /// The launch's credentials, holding this process's identity (`--credentials FILE`).
     pub credentials: Credentials,
@@ -346,8 +348,8 @@ pub fn run_process(opts: &ProcessOptions, stop: &StopFlag) -> Result<(), DistErr
     let block = zenoh::qos::CongestionControl::Block;
     let cfg = setup.run_config()?;
     let spec = cfg.graph.clone();
-    // Virtual clock: the other processes' tick reports, then the `here` answer that tells
-    // them this subscription is in place (declared in that order, [`lockstep::meet_peers`]).
+    // Virtual clock: the other processes' tick reports as the launcher hands them on,
+    // subscribed to before this process says it is ready ([`lockstep::subscribe_relayed`]).
     let virtual_clock = cfg.clock == crate::ClockKind::Virtual;
     let (slot, nudged, lockstep_keys) = match virtual_clock {
         true => {
@@ -374,14 +376,10 @@ pub fn run_process(opts: &ProcessOptions, stop: &StopFlag) -> Result<(), DistErr
         wire_latency,
     } = inbound_ends;
     let tokens = declare_tokens(&session, &keys, &spec, &mine, &opts.process)?;
+    // The launcher hears them before any process starts; the subscribing process
+    // subscribes before it says it is ready, and the run starts once all are.
     for (_, p) in &publishers {
-        wait_matching(p, stop, Some(&launcher_gone), "the subscribing process")?;
-    }
-    if virtual_clock {
-        let others: Vec<String> = (spec.placement().into_iter().map(|(p, _)| p))
-            .filter(|p| *p != opts.process)
-            .collect();
-        lockstep::meet_peers(&session, &keys, &others, stop, &launcher_gone)?;
+        wait_matching(p, stop, Some(&launcher_gone), "the launcher")?;
     }
     let ticked_pub = session
         .declare_publisher(keys.ticked(&opts.process))
@@ -501,8 +499,9 @@ type Publishers = Vec<(TopicId, zenoh::pubsub::Publisher<'static>)>;
 /// Wire the topics crossing this process's boundary (`mine`, the nodes of `process`):
 /// the publisher's side of each outbound topic becomes a plain buffer (the subscriber's
 /// copy keeps the QoS) and gets a Zenoh publisher that never drops (a lost sample would
-/// stall the run); each inbound topic is subscribed to. Returns the inbound topics, their
-/// subscriptions and the outbound publishers.
+/// stall the run), on the key through which the launcher passes its samples on
+/// ([`Keys::via`]); each inbound topic is subscribed to, on its key. Returns the inbound
+/// topics, their subscriptions and the outbound publishers.
 fn wire_crossings(
     session: &zenoh::Session,
     keys: &Keys,
@@ -524,7 +523,7 @@ fn wire_crossings(
     let publishers = outbound
         .iter()
         .map(|&t| {
-            let key = keys.topic(&spec.topic(t).name);
+            let key = keys.via(&spec.topic(t).name);
             let publisher = session.declare_publisher(key).congestion_control(block);
             Ok((t, publisher.wait()?))
         })
@@ -590,36 +589,16 @@ fn report(
 }
 
 /// Declare what the lockstep needs of this process under the virtual clock: the other
-/// processes' tick reports into `slot`, then the `here` answer that tells them this
-/// subscription is in place (declared in that order, [`lockstep::meet_peers`]). Kept
-/// alive for the run.
+/// processes' tick reports, as the launcher hands them on, into `slot`. Kept alive for the
+/// run.
 fn declare_lockstep(
     session: &zenoh::Session,
     keys: &Keys,
     process: &str,
     slot: &stepper::SharedSlot,
-) -> Result<
-    (
-        Vec<zenoh::pubsub::Subscriber<()>>,
-        zenoh::query::Queryable<()>,
-    ),
-    DistError,
-> {
-    let processes: Vec<String> = (slot.spec.placement().into_iter())
-        .map(|(p, _)| p)
-        .collect();
+) -> Result<zenoh::pubsub::Subscriber<()>, DistError> {
     let slot = slot.clone();
-    let sub = lockstep::subscribe_reports(session, keys, &processes, Some(process), move |ms| {
-        slot.reports(ms)
-    })?;
-    let here = keys.here(process);
-    let queryable = session
-        .declare_queryable(here.clone())
-        .callback(move |q| {
-            let _ = q.reply(here.as_str(), "").wait();
-        })
-        .wait()?;
-    Ok((sub, queryable))
+    lockstep::subscribe_relayed(session, keys, process, move |ms| slot.reports(ms))
 }
 
 /// Discovery: a liveliness token per node of `mine`, per publisher and per subscriber
@@ -787,17 +766,13 @@ impl Joined {
         stop: &StopFlag,
     ) -> Result<Joined, DistError> {
         let role = Role::Process(opts.process.clone());
-        let listen = if opts.listen.is_empty() {
-            vec![super::LOOPBACK_ANY.to_string()]
-        } else {
-            opts.listen.clone()
-        };
         let access = Access {
             credentials: &opts.credentials,
             role: &role,
             spec: Some(file_spec),
         };
-        let session = open_session(&listen, &opts.connect, access)?;
+        // A client of the launcher's router: its one link ([`super::open_client`]).
+        let session = open_client(&opts.connect, access)?;
         let keys = Keys::new(&file_spec.name);
         let (ctl_tx, ctl_rx) = crossbeam_channel::bounded::<ToProcess>(4096);
         let _ctl_sub = session

@@ -3,18 +3,29 @@
 //! time authority under the virtual clock; the common start under the real one), stops
 //! every process it started, and merges their reports into one `metrics.json`.
 //!
+//! The launcher's session is the router of the launch's star ([`crate::open_router`]): every
+//! process and watcher links to it alone, and it passes on what they say to each other,
+//! each message checked by the identity that sent it ([`crate::access`]); the crossing
+//! topics' samples and the lockstep's reports it passes on from a thread of its own
+//! (`outbox`: Zenoh's one thread must never wait to send). A program that calls [`launch`]
+//! calls [`crate::set_zenoh_runtime`] first thing in its `main`, as the `ratelab` binary
+//! does: on Zenoh's default runtime the router's TLS links break under load
+//! (eclipse-zenoh/zenoh#2557; the tests get the setting from `.cargo/config.toml`).
+//!
 //! [`launch`] goes through the phases in order, one module each: the processes it starts
 //! (`processes`), who joins (`admission`), the run under the virtual clock
-//! (`virtual_run`) or the real one (`real_run`); the session, the summary and the
-//! merge of the processes' figures are here.
+//! (`virtual_run`, with `relay`, which follows the lockstep's reports and hands each
+//! process the others' in its turn) or the real one (`real_run`); the session, the summary
+//! and the merge of the processes' figures are here.
 
 mod admission;
+mod outbox;
 mod processes;
 mod real_run;
+mod relay;
 mod virtual_run;
 
 use super::credentials::{Credentials, PrivateDir, Role};
-use super::lockstep::{subscribe_reports, MAX_AHEAD};
 use super::monitor::Carried;
 use super::wire::{self, Setup, ToLauncher, ToProcess};
 use super::{check_endpoint, check_keys, Access, DistError, Keys};
@@ -71,7 +82,8 @@ pub struct LaunchOptions {
     /// fast as the processes go (headless, a recording, the benchmarks).
     pub pace: Option<f64>,
     /// The launch's credentials, every identity ([`Credentials::generate`] for this graph
-    /// and its placement): the launcher is authenticated with its own, and hands each
+    /// and its placement): the launcher's session, the launch's router, is authenticated
+    /// with the router's identity ([`Role::Router`], which no file holds), and hands each
     /// process it starts that process's alone (a file in a private folder, removed when
     /// the launch ends).
     pub credentials: Credentials,
@@ -486,14 +498,16 @@ pub fn launch(
         let _ = tx.send(endpoint.clone());
     }
     let (_live_sub, gone_rx, gone_now) = watch_gone(&session, &keys)?;
-    // Virtual clock: every process's tick reports, to follow the run ([`super::lockstep`]).
-    // One by one, at most MAX_AHEAD waiting (more are dropped: a run holds far fewer).
-    let (ticked_tx, ticked_rx) = crossbeam_channel::bounded(MAX_AHEAD);
-    let _ticked_subs = subscribe_reports(&session, &keys, &processes, None, move |ms| {
-        for m in ms {
-            let _ = ticked_tx.try_send(m);
-        }
-    })?;
+    // The crossing topics' samples, passed on from the outbox's thread ([`outbox`]; dropped
+    // when it is full under the real clock only); under the virtual clock every process's
+    // tick reports too, to follow the run and hand each process the others' in its turn
+    // ([`relay`]). Heard before any process starts.
+    let outbox = outbox::Outbox::start()?;
+    let real = cfg.clock == ClockKind::Real;
+    let _forwarded = outbox::forward_topics(&session, &keys, spec, &outbox, real)?;
+    let relaying = (!real)
+        .then(|| relay::Relay::start(&session, &keys, spec, (&processes[..], &outbox)))
+        .transpose()?;
     let _launcher_token = session
         .liveliness()
         .declare_token(keys.launcher_token())
@@ -533,11 +547,9 @@ pub fn launch(
     let mut carried = Carried::new(spec);
     // The processes killed on request (real clock), with when.
     let mut killed = Vec::new();
-    let (end, lockstep) = match cfg.clock {
-        ClockKind::Virtual => {
-            me.run_lockstep(&ticked_rx, &gone_now, start, &mut reports, &mut wires)?
-        }
-        ClockKind::Real => (
+    let (end, lockstep) = match &relaying {
+        Some(relaying) => me.run_lockstep(relaying, &gone_now, start, &mut reports, &mut wires)?,
+        None => (
             me.supervise(
                 &gone_rx,
                 &mut children,
@@ -589,15 +601,18 @@ fn hear_processes(
     session: &zenoh::Session,
     keys: &Keys,
 ) -> Result<(zenoh::pubsub::Subscriber<()>, Receiver<ToLauncher>), DistError> {
-    let (up_tx, up_rx) = crossbeam_channel::bounded::<ToLauncher>(65_536);
+    // At most this many wait; unbounded so that its slots are allocated as messages
+    // queue (a bounded channel allocates and touches every slot at once: 5.8 MB here).
+    const MAX_UP: usize = 65_536;
+    let (up_tx, up_rx) = crossbeam_channel::unbounded::<ToLauncher>();
     let up_prefix = format!("{}/@up/", keys.prefix());
     let sub = session
         .declare_subscriber(keys.up())
         .callback(move |s| {
             let from = s.key_expr().as_str().strip_prefix(up_prefix.as_str());
             if let Ok(m) = wire::decode_json::<ToLauncher>(&s.payload().to_bytes()) {
-                if from == Some(m.process()) {
-                    let _ = up_tx.try_send(m);
+                if from == Some(m.process()) && up_tx.len() < MAX_UP {
+                    let _ = up_tx.send(m);
                 }
             }
         })
@@ -642,17 +657,16 @@ fn watch_gone(
     Ok((sub, gone_rx, gone_now))
 }
 
-/// Open the launcher's session: on `--listen` (port 0: a free one), else on Zenoh's usual
-/// port when it is free (watchers look there), else on any free one. Returns the session and
-/// the endpoint it listens on.
+/// Open the launcher's session, the router of the launch's star: on `--listen` (port 0: a
+/// free one), else on ratelab's usual port when it is free (watchers look there), else on
+/// any free one. Returns the session and the endpoint it listens on.
 fn listen(spec: &GraphSpec, opts: &LaunchOptions) -> Result<(zenoh::Session, String), DistError> {
     let access = Access {
         credentials: &opts.credentials,
-        role: &Role::Launcher,
+        role: &Role::Router,
         spec: Some(spec),
     };
-    let open_session =
-        |listen: &[String], connect: &[String]| super::open_session(listen, connect, access);
+    let open = |listen: &[String]| super::open_router(listen, access);
     Ok(match &opts.listen {
         Some(ep) => {
             check_endpoint("--listen", ep, true)?;
@@ -663,13 +677,13 @@ fn listen(spec: &GraphSpec, opts: &LaunchOptions) -> Result<(zenoh::Session, Str
                 }
                 _ => ep.clone(),
             };
-            (open_session(std::slice::from_ref(&ep), &[])?, ep)
+            (open(std::slice::from_ref(&ep))?, ep)
         }
-        None => match open_session(&[super::DEFAULT_ENDPOINT.to_string()], &[]) {
+        None => match open(&[super::DEFAULT_ENDPOINT.to_string()]) {
             Ok(s) => (s, super::DEFAULT_ENDPOINT.to_string()),
             Err(_) => {
                 let ep = format!("tls/127.0.0.1:{}", free_port("127.0.0.1")?);
-                (open_session(std::slice::from_ref(&ep), &[])?, ep)
+                (open(std::slice::from_ref(&ep))?, ep)
             }
         },
     })

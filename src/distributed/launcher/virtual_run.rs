@@ -1,239 +1,170 @@
-//! The run under the virtual clock, as the launcher sees it: it follows the whole graph's
-//! order of events as the run core draws it ([`ratelab_runtime::runcore::Follower`]), moves the
-//! horizon on ahead of them, takes each event's report from its
-//! node's process ([`crate::lockstep`]), ends the run where a report says so,
-//! and gathers the processes' reports at the end.
+//! The run under the virtual clock, as the launcher sees it: its relay follows the whole
+//! graph's order of events as the processes report them and hands each process the others'
+//! reports in its turn ([`super::relay`], on Zenoh's receive thread); here the main thread
+//! moves the horizon on ahead of them, ends the run where a process goes, stops answering
+//! or Ctrl-C stops it, and gathers the processes' reports at the end.
 
 use super::admission::Admission;
+use super::relay::{failed, Relay, Relaying};
 use super::{Launch, Link, LockstepCost};
-use crate::lockstep::{check_tick_report, TickInbox, HORIZON_PERIODS};
-use crate::wire::{self, Ticked, ToLauncher, ToProcess};
+use crate::wire::{self, ToLauncher, ToProcess};
 use crate::{DistError, REPLY_TIMEOUT};
 use crossbeam_channel::Receiver;
-use ratelab_core::time::Nanos;
-use ratelab_runtime::graph::{NodeId, TopicId};
-use ratelab_runtime::runcore::Follower;
-use ratelab_runtime::scheduler::{EndReason, Event, RunEnd, StopFlag};
+use ratelab_runtime::graph::NodeId;
+use ratelab_runtime::scheduler::{EndReason, RunEnd, StopFlag};
 use ratelab_runtime::summary::GraphState;
 use std::collections::BTreeMap;
 use std::sync::Mutex;
 use std::time::{Duration, Instant};
 
-/// What the launcher's wait for one tick's report came to (virtual clock).
-enum Awaited {
-    /// The report.
-    Report(Ticked),
-    /// The run cannot go on: why (the node's process is silent, or out of step).
-    Failed(String),
-    /// A process of the graph is gone (its liveliness token withdrawn): its ticks will not
-    /// come, and a tick awaited elsewhere may wait on its messages.
-    Gone(String),
-    /// Ctrl-C while the tick hung.
-    Interrupted,
-}
-
 impl Launch<'_> {
-    /// Follow the run in lockstep from `start` (every process ready) to its end: each
-    /// event's report from `ticked` (every process's tick reports), a process of the graph
-    /// going (`gone_now`) ending it. Then stop every process and gather its report
-    /// (`reports`, `wires`). Returns how the run ended and, unpaced, its cost.
+    /// Follow the run in lockstep from `start` (every process ready) to its end, through
+    /// `relaying` (every process's tick reports, followed and handed on), a process of the
+    /// graph going (`gone_now`) ending it. Then hand every process the reports it has not
+    /// had, stop every process and gather its report (`reports`, `wires`). Returns how the
+    /// run ended and, unpaced, its cost.
     ///
     /// # Errors
-    /// [`DistError`] when a horizon cannot be sent.
+    /// [`DistError`] when a horizon cannot be sent, or the run's order cannot be followed.
     pub(super) fn run_lockstep(
         &self,
-        ticked_rx: &Receiver<Ticked>,
+        relaying: &Relaying,
         gone_now: &Mutex<Vec<String>>,
         start: Instant,
         reports: &mut BTreeMap<String, GraphState>,
         wires: &mut Vec<wire::WireLink>,
     ) -> Result<(RunEnd, Option<LockstepCost>), DistError> {
-        let (spec, cfg, opts, stop) = (self.spec, self.cfg, self.opts, self.stop);
-        let (names, placement, link) = (&self.names, &self.placement, &self.link);
-        // The run's order of events, as the run core draws it: each is a tick (or its
-        // outputs going out) in its node's process, which reports it.
-        let mut order = Follower::new(cfg).map_err(|e| DistError::Usage(e.to_string()))?;
-        let lookahead = order.shortest_period().0.saturating_mul(HORIZON_PERIODS);
-        let mut inbox = TickInbox::new();
-        // No process ticks before the first horizon: anything already here is not a report.
-        while ticked_rx.try_recv().is_ok() {}
-        let mut published: Vec<Option<u64>> = vec![None; spec.topics.len()];
-        let mut horizon: Option<u64> = None;
-        // Events (ticks' starts, and their outputs going out after a compute time), the
-        // ticks among them, and the instants they fell on.
-        let (mut index, mut started, mut instants) = (0u64, 0u64, 0u64);
-        let mut last_t = None;
-        let failed = |i: usize, at: Nanos, message: String| RunEnd {
-            at,
-            reason: EndReason::NodeFailed {
-                node: spec.nodes[i].name.clone(),
-                message,
-            },
-        };
-        let paced_from = Instant::now();
-        let end = loop {
-            let Some(event) = order.next_event() else {
-                break RunEnd {
-                    at: cfg.duration,
-                    reason: EndReason::Duration,
-                };
-            };
-            let (i, t) = event.node_at();
-            // Paced: no instant before its wall time (the horizon follows).
-            if let Some(speed) = opts.pace.filter(|s| *s > 0.0 && s.is_finite()) {
-                wait_for_wall_time(paced_from, t, speed, stop);
-            }
-            self.say_refusals_due();
-            // Move the horizon on before the processes reach it; an interrupt stops it.
-            let want = t.0.saturating_add(lookahead).min(cfg.duration.0);
-            let low = horizon.is_none_or(|h| h < t.0.saturating_add(lookahead / 2));
-            if !stop.is_stopped() && low && horizon.is_none_or(|h| want > h) {
-                for p in names {
-                    link.tell(p, &ToProcess::Horizon { until_ns: want })?;
-                }
-                horizon = Some(want);
-            }
-            if horizon.is_none_or(|h| t.0 > h) {
-                // Only after an interrupt: every tick up to the horizon was seen.
-                break RunEnd {
-                    at: order.now(),
-                    reason: EndReason::Interrupted,
-                };
-            }
-            // The tick's report, from its node's process.
-            let report = self.await_report(ticked_rx, gone_now, &mut inbox, index, i);
-            let m = match report {
-                Awaited::Report(m) => m,
-                Awaited::Interrupted => {
-                    break RunEnd {
-                        at: order.now(),
-                        reason: EndReason::Interrupted,
-                    }
-                }
-                Awaited::Failed(message) => break failed(i, t, message),
-                Awaited::Gone(p) => {
-                    // The failed node is the gone process's (its first), not the awaited one.
-                    let node = placement
-                        .iter()
-                        .find(|(name, _)| *name == p)
-                        .and_then(|(_, ids)| ids.first().map(|n| n.0))
-                        .unwrap_or(i);
-                    break failed(node, t, format!("process '{p}' is gone"));
-                }
-            };
-            let compute = match check_tick_report(&m, index, event, spec) {
-                Ok(c) => c,
-                Err(message) => break failed(i, t, message),
-            };
-            if let Event::Start { .. } = event {
-                started += 1;
-            }
-            order.ran_elsewhere(event, compute);
-            index += 1;
-            if last_t != Some(t) {
-                instants += 1;
-                last_t = Some(t);
-            }
-            for &(topic, seq) in &m.published {
-                // Only a topic the node publishes (a report is untrusted input).
-                if spec.nodes[i].publishes.contains(&TopicId(topic)) {
-                    published[topic] = Some(seq);
-                }
-            }
-            if let Some(message) = m.failed {
-                break failed(i, t, message);
-            }
-            if m.stop {
-                break RunEnd {
-                    at: t,
-                    reason: EndReason::NodeStopped,
-                };
-            }
-        };
+        let (spec, names, link) = (self.spec, &self.names, &self.link);
+        let relay = &relaying.relay;
+        let lookahead = relay.begin(self.cfg)?;
+        let end = self.follow(relay, &relaying.nudged, gone_now, lookahead)?;
+        let tally = relay.tally();
         // Paced, the wall time is the pace's, not the lockstep's cost.
-        let lockstep = opts.pace.is_none().then(|| LockstepCost {
-            ticks: started,
-            instants,
-            us_per_instant: start.elapsed().as_secs_f64() * 1e6 / instants.max(1) as f64,
+        let lockstep = self.opts.pace.is_none().then(|| LockstepCost {
+            ticks: tally.started,
+            instants: tally.instants,
+            us_per_instant: start.elapsed().as_secs_f64() * 1e6 / tally.instants.max(1) as f64,
         });
         // Every message sent is delivered before the reports: the last ones too, but those
         // of a process that is gone, which may have died with them still to send (its
         // report reached us, its sample not the subscriber).
         let gone = ratelab_runtime::graph::lock(gone_now).clone();
-        let need: Vec<(usize, u64)> = published
-            .iter()
-            .enumerate()
+        let need: Vec<(usize, u64)> = (tally.published.iter().enumerate())
             .filter_map(|(t, s)| s.map(|s| (t, s)))
             .filter(|&(t, _)| !gone.contains(&spec.process_of(spec.topics[t].publisher)))
             .collect();
-        collect_reports((link, stop), names, gone_now, &end, need, reports, wires);
+        // Every process takes every event of the run before it reports: the order it
+        // replayed (its executors' figures) is then the whole run's.
+        relay.hand_over_all();
+        for p in names {
+            let _ = link.tell(
+                p,
+                &ToProcess::Events {
+                    count: tally.events,
+                },
+            );
+        }
+        collect_reports(
+            (link, self.stop),
+            names,
+            gone_now,
+            &end,
+            need,
+            reports,
+            wires,
+        );
         Ok((end, lockstep))
     }
 
-    /// Wait for the report of event `index`, a tick of node `i` (from `ticked_rx` through
-    /// `inbox`, which keeps reports that came early): it, a process of the graph gone
-    /// (`gone_now`), no answer within twice [`REPLY_TIMEOUT`], or Ctrl-C with the tick still
-    /// hung after a second's grace. A join meanwhile is refused (nobody joins a lockstep).
-    fn await_report(
+    /// Follow the run to its end as the relay takes the reports: move the horizon on
+    /// [`crate::lockstep::HORIZON_PERIODS`] periods of the fastest node (`lookahead`, ns)
+    /// ahead of the next event (paced: of the wall time, too), and end the run when the
+    /// relay does, when a process of the graph is gone, when the next
+    /// event's process does not answer within twice [`REPLY_TIMEOUT`], or on Ctrl-C (at
+    /// the horizon, or after a second's grace for a tick that hangs). A join meanwhile is
+    /// refused (nobody joins a lockstep).
+    ///
+    /// # Errors
+    /// [`DistError`] when a horizon cannot be sent.
+    fn follow(
         &self,
-        ticked_rx: &Receiver<Ticked>,
+        relay: &Relay,
+        nudged: &Receiver<()>,
         gone_now: &Mutex<Vec<String>>,
-        inbox: &mut TickInbox,
-        index: u64,
-        i: usize,
-    ) -> Awaited {
-        let (spec, names, stop, link) = (self.spec, &self.names, self.stop, &self.link);
-        let process = spec.process_of(NodeId(i));
-        // Longer than a process waits for an input message itself, so that its
-        // own, more precise error comes first.
+        lookahead: u64,
+    ) -> Result<RunEnd, DistError> {
+        let (spec, cfg, stop, link) = (self.spec, self.cfg, self.stop, &self.link);
+        // Longer than a process waits for an input message itself, so that its own, more
+        // precise error comes first.
         let patience = 2 * REPLY_TIMEOUT;
-        let deadline = Instant::now() + patience;
+        let pace = self.opts.pace.filter(|s| *s > 0.0 && s.is_finite());
+        let paced_from = Instant::now();
+        let mut horizon: Option<u64> = None;
+        let (mut seen, mut waiting_since) = (u64::MAX, Instant::now());
         let mut interrupted_at: Option<Instant> = None;
         loop {
-            // Reports already here count before a process's going (it may have
-            // reported, then died).
-            let mut overflow = None;
-            while let Ok(m) = ticked_rx.try_recv() {
-                if let Err(e) = inbox.accept(m, spec) {
-                    overflow = Some(e.to_string());
-                    break;
+            self.say_refusals_due();
+            let now = relay.progress();
+            if let Some(end) = now.end {
+                return Ok(end);
+            }
+            let Some((i, t)) = now.next else {
+                // (Never: the relay draws the next event until the run ends.)
+                return Ok(relay.finish(RunEnd {
+                    at: cfg.duration,
+                    reason: EndReason::Duration,
+                }));
+            };
+            // Paced: no instant more than the lookahead ahead of its wall time.
+            let base = pace.map_or(t.0, |speed| t.0.min(wall_run_time(paced_from, speed)));
+            let want = base.saturating_add(lookahead).min(cfg.duration.0);
+            let low = horizon.is_none_or(|h| h < base.saturating_add(lookahead / 2));
+            if !stop.is_stopped() && low && horizon.is_none_or(|h| want > h) {
+                for p in &self.names {
+                    link.tell(p, &ToProcess::Horizon { until_ns: want })?;
+                }
+                horizon = Some(want);
+                relay.set_horizon(want);
+            }
+            // The next event lies past the horizon: nobody may run it yet.
+            let beyond = horizon.is_none_or(|h| t.0 > h);
+            if stop.is_stopped() {
+                // Ctrl-C: every event up to the horizon, or a second's grace for one that
+                // hangs; then the run ends here.
+                let since = *interrupted_at.get_or_insert_with(Instant::now);
+                if beyond || since.elapsed() >= Duration::from_secs(1) {
+                    return Ok(relay.interrupt());
                 }
             }
-            if let Some(e) = overflow {
-                return Awaited::Failed(e);
-            }
-            if let Some(m) = inbox.take(index) {
-                return Awaited::Report(m);
-            }
-            // Any of the graph's processes, not only this tick's: a tick of another
-            // process may be waiting for the gone one's message, and would only
-            // time out (REPLY_TIMEOUT) before saying so.
+            // Any of the graph's processes, not only the next event's: a tick of another
+            // process may be waiting for the gone one's message, and would only time out
+            // (REPLY_TIMEOUT) before saying so.
             let gone = ratelab_runtime::graph::lock(gone_now)
                 .iter()
-                .find(|p| names.contains(p))
+                .find(|p| self.names.contains(p))
                 .cloned();
             if let Some(p) = gone {
-                return Awaited::Gone(p);
+                // The failed node is the gone process's (its first), not the awaited one.
+                let node = (self.placement.iter())
+                    .find(|(name, _)| *name == p)
+                    .and_then(|(_, ids)| ids.first().map(|n| n.0))
+                    .unwrap_or(i);
+                let message = format!("process '{p}' is gone");
+                return Ok(relay.finish(failed(spec, node, t, message)));
             }
-            if Instant::now() >= deadline {
-                return Awaited::Failed(format!(
+            if now.index != seen || beyond {
+                (seen, waiting_since) = (now.index, Instant::now());
+            }
+            if waiting_since.elapsed() >= patience {
+                let process = spec.process_of(NodeId(i));
+                let message = format!(
                     "process '{process}' did not answer within {} s",
                     patience.as_secs()
-                ));
-            }
-            // Ctrl-C while a tick hangs: a second's grace, then the run ends here.
-            if stop.is_stopped() {
-                let since = *interrupted_at.get_or_insert_with(Instant::now);
-                if since.elapsed() >= Duration::from_secs(1) {
-                    return Awaited::Interrupted;
-                }
+                );
+                return Ok(relay.finish(failed(spec, i, t, message)));
             }
             crossbeam_channel::select! {
-                recv(ticked_rx) -> m => if let Ok(m) = m {
-                    if let Err(e) = inbox.accept(m, spec) {
-                        return Awaited::Failed(e.to_string());
-                    }
-                },
+                recv(nudged) -> _ => {},
                 recv(link.up) -> m => match m {
                     // Nobody joins a run in lockstep: say so to whoever tries.
                     Ok(m @ ToLauncher::Join { .. }) => match self.admit(&m, true, &[], &[]) {
@@ -243,11 +174,24 @@ impl Launch<'_> {
                         Admission::Welcomed | Admission::Ignored => {}
                     },
                     Ok(_) => {}
-                    Err(_) => return Awaited::Failed("the launcher's channel closed".into()),
+                    Err(_) => {
+                        let message = "the launcher's channel closed".to_string();
+                        return Ok(relay.finish(failed(spec, i, t, message)));
+                    }
                 },
-                default(Duration::from_millis(50)) => {}
+                default(Duration::from_millis(20)) => {}
             }
         }
+    }
+}
+
+/// Paced at `speed` × wall time from `from`: the run time due now, ns.
+fn wall_run_time(from: Instant, speed: f64) -> u64 {
+    let ns = from.elapsed().as_secs_f64() * speed * 1e9;
+    if ns.is_finite() && ns > 0.0 {
+        ns.min(u64::MAX as f64) as u64
+    } else {
+        0
     }
 }
 
@@ -339,20 +283,6 @@ fn awaits_a_report<T>(
                 Some(&Some(at)) => now.duration_since(at) < GONE_REPORT_GRACE,
             }
     })
-}
-
-/// Paced at `speed` × wall time from `from`: wait until run time `t` is due (or `stop`).
-fn wait_for_wall_time(
-    from: Instant,
-    t: Nanos,
-    speed: f64,
-    stop: &ratelab_runtime::scheduler::StopFlag,
-) {
-    let due = from + Duration::from_secs_f64(t.as_secs_f64() / speed);
-    while !stop.is_stopped() && Instant::now() < due {
-        let left = due.saturating_duration_since(Instant::now());
-        std::thread::sleep(left.min(Duration::from_millis(50)));
-    }
 }
 
 #[cfg(test)]

@@ -1,11 +1,12 @@
 //! One process's part of the virtual clock's run ([`crate::lockstep`]): its graph in a run
 //! core, drawn event by event ([`RunCore::next_event`]), its own nodes' events run here
 //! ([`RunCore::run_event`]) and the others' taken from their reports
-//! ([`RunCore::ran_elsewhere`]). A state machine advanced wherever what it waits for comes
-//! in: on Zenoh's receive thread
-//! when another process's tick reports or an input sample arrive, on the process's main
-//! thread when the launcher moves the horizon on (or every 100 ms, to notice an input that
-//! never came).
+//! ([`RunCore::ran_elsewhere`]), which the launcher hands on. A state machine advanced
+//! wherever what it waits for comes in: on Zenoh's receive thread when other processes'
+//! tick reports or an input sample arrive, on the process's main thread when the launcher
+//! moves the horizon on (or every 100 ms, to notice an input that never came). At the end
+//! it takes the reports of every event of the run before it reports
+//! ([`crate::wire::ToProcess::Events`]).
 //!
 //! So an instant's path has no hand-off between threads: the thread that receives the
 //! message a tick waits for runs the tick, publishes its samples and sends its report. And
@@ -174,6 +175,9 @@ pub(super) struct Stepper {
     awaiting: Option<(TopicId, u64, Instant)>,
     /// Reports of this process's events not yet sent.
     outbox: Vec<Ticked>,
+    /// The run's events, once the launcher has said how many: none at or past this runs
+    /// here ([`Stepper::last`]).
+    limit: Option<u64>,
     /// Per node, how long its last tick here took, ns (`None`: it has not ticked here).
     tick_ns: Vec<Option<u64>>,
     /// Ticks may run in a Zenoh callback at all (not under `--ros2`: a ROS 2 node's tick
@@ -209,6 +213,7 @@ impl Stepper {
             done: false,
             awaiting: None,
             outbox: Vec::new(),
+            limit: None,
             tick_ns: vec![None; share.cfg.graph.nodes.len()],
             callback_ticks,
             kept_at: None,
@@ -226,6 +231,21 @@ impl Stepper {
     /// The launcher ended the run: nothing more runs here.
     pub(super) fn end(&mut self) {
         self.done = true;
+    }
+
+    /// The run had `events` events (the launcher's word at its end): take the reports of
+    /// every one before it, run nothing at or past it.
+    pub(super) fn last(&mut self, events: u64) {
+        self.limit = Some(events);
+    }
+
+    /// The events of the run still to take here before it reports (0 without the
+    /// launcher's word, or once the run is over here).
+    fn left(&self) -> u64 {
+        match self.limit {
+            Some(l) if !self.done => l.saturating_sub(self.index),
+            _ => 0,
+        }
     }
 
     /// The figures at run time `at`, once the last messages sent here have arrived: the
@@ -272,6 +292,9 @@ impl Stepper {
         while !self.done {
             if self.stop.is_stopped() {
                 return Err(DistError::Peer("interrupted".into()));
+            }
+            if self.limit.is_some_and(|l| self.index >= l) {
+                break; // the run's last event is taken
             }
             let event = match self.next {
                 Some(e) => e,
@@ -465,6 +488,12 @@ pub(super) fn run_lockstep(
                     }
                     slot.wake(true);
                 }
+                Ok(ToProcess::Events { count }) => {
+                    if let Some(r) = ratelab_runtime::graph::lock(&slot.run).as_mut() {
+                        r.last(count);
+                    }
+                    slot.wake(true);
+                }
                 Ok(ToProcess::Stop { at_ns, need }) => break (at_ns, need),
                 Ok(_) => {}
                 Err(_) => return failed(DistError::Peer("the launcher's channel closed".into())),
@@ -479,6 +508,14 @@ pub(super) fn run_lockstep(
             }
         }
     };
+    // Every event of the run taken here (the others' reports, which the launcher handed on
+    // at the end): the replayed order, executors' figures and all, is the whole run's. One
+    // wait for them and for the last messages below: the launcher waits a little longer for
+    // the report, so this process's own error comes first.
+    let deadline = Instant::now() + REPLY_TIMEOUT;
+    if let Err(e) = take_the_rest(slot, nudged, (stop, launcher_gone), deadline) {
+        return failed(e);
+    }
     let Some(mut run) = slot.take_run() else {
         return Err(DistError::Peer("the run was not set up".into()));
     };
@@ -488,10 +525,7 @@ pub(super) fn run_lockstep(
         return Err(e);
     }
     // The last messages sent to us are delivered before the counters are read.
-    // One wait for all of them: the launcher waits a little longer for the report, so
-    // this process's own error comes first.
     let spec = &share.cfg.graph;
-    let deadline = Instant::now() + REPLY_TIMEOUT;
     for (t, seq) in need {
         let t = TopicId(t);
         if share.inbound.contains(&t) && !share.arrivals.wait_for(t, seq, deadline, stop) {
@@ -506,4 +540,47 @@ pub(super) fn run_lockstep(
         }
     }
     Ok(run.capture(Nanos(at_ns)))
+}
+
+/// At the run's end, wait until the run in `slot` has taken every event the launcher
+/// counted ([`Stepper::last`]; at once without its word), going on where a callback stopped
+/// (`nudged`), until `deadline`.
+///
+/// # Errors
+/// [`DistError::Peer`] when the run cannot go on here, on `stop`, when the launcher goes
+/// (`launcher_gone`), or when the reports do not come in time.
+fn take_the_rest(
+    slot: &SharedSlot,
+    nudged: &Receiver<()>,
+    (stop, launcher_gone): (&StopFlag, &StopFlag),
+    deadline: Instant,
+) -> Result<(), DistError> {
+    loop {
+        slot.wake(true);
+        if let Some(e) = slot.take_error() {
+            return Err(e);
+        }
+        let left = ratelab_runtime::graph::lock(&slot.run)
+            .as_ref()
+            .map_or(0, Stepper::left);
+        if left == 0 {
+            return Ok(());
+        }
+        if stop.is_stopped() {
+            return Err(DistError::Peer("interrupted".into()));
+        }
+        if launcher_gone.is_stopped() {
+            return Err(DistError::Peer("the launcher went away".into()));
+        }
+        if Instant::now() >= deadline {
+            return Err(DistError::Peer(format!(
+                "the reports of the run's last {left} events did not arrive within {} s of its end",
+                REPLY_TIMEOUT.as_secs()
+            )));
+        }
+        crossbeam_channel::select! {
+            recv(nudged) -> _ => {},
+            default(Duration::from_millis(20)) => {},
+        }
+    }
 }

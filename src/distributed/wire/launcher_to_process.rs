@@ -1,7 +1,10 @@
 //! Launcher to a process, on the process's control key: the welcome with the run's settings
-//! ([`Setup`]), a refusal, the start, the horizon, the stop and the receipt of the report
-//! ([`ToProcess`]). JSON.
+//! ([`Setup`]), a refusal, the start, the horizon, the run's length in events, the stop and
+//! the receipt of the report ([`ToProcess`]). JSON. And under the virtual clock, on the
+//! process's relayed key, the other processes' tick reports the launcher hands it
+//! ([`encode_relayed`], postcard as they came).
 
+use super::process_to_process::{decode_report_list, Ticked};
 use ratelab_core::qos::Fault;
 use ratelab_core::time::Nanos;
 use ratelab_runtime::config::ClockKind;
@@ -97,6 +100,13 @@ pub enum ToProcess {
         /// Run time, ns.
         until_ns: u64,
     },
+    /// Virtual clock, before the stop: the run had `count` events (numbered from 0): take
+    /// the report of every one of them before reporting, so that every process has replayed
+    /// the whole run's order (its executors' figures are then the run's).
+    Events {
+        /// The run's events.
+        count: u64,
+    },
     /// The run ended at run time `at_ns`: once the local copies of the input topics hold
     /// the messages `need` (topic index, seq: the last its publisher sent; virtual clock),
     /// report, and leave once the report is taken ([`ToProcess::ReportTaken`]).
@@ -112,4 +122,27 @@ pub enum ToProcess {
     /// the withdrawal at a higher priority than the report, and a launcher that saw the
     /// process gone first would not wait for its report.
     ReportTaken,
+}
+
+/// The most tick reports one message from the launcher to a process carries
+/// ([`encode_relayed`]): a process is handed the reports it has not had when its turn comes,
+/// or once this many wait for it.
+pub const MAX_RELAYED: usize = 1024;
+
+/// Encode tick reports the launcher hands a process (key `ratelab/<graph>/@relayed/<process>`,
+/// [`crate::Keys::relayed`]), oldest first, as one message: postcard, the same form as a
+/// process's own message of reports. At most [`MAX_RELAYED`] (the caller splits more).
+pub fn encode_relayed(reports: &[&Ticked]) -> Vec<u8> {
+    postcard::to_allocvec(reports).unwrap_or_default()
+}
+
+/// Decode a message of tick reports from the launcher, refusing it whole when it holds none
+/// or more than [`MAX_RELAYED`], is over [`MAX_RELAYED`] × [`super::MAX_TICK_BYTES`] bytes or
+/// is malformed (exactly, as [`super::decode_reports`]); its text arrives printable. Each
+/// report names the process whose event it was.
+///
+/// # Errors
+/// One line.
+pub fn decode_relayed(bytes: &[u8]) -> Result<Vec<Ticked>, String> {
+    decode_report_list(bytes, MAX_RELAYED)
 }

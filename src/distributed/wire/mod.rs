@@ -10,16 +10,17 @@
 
 //!
 //! One module per direction of travel, as dora-rs splits its messages:
-//! `process_to_process` (samples and tick reports), `launcher_to_process`,
-//! `process_to_launcher` and `launcher_to_watcher`; the codec, its bounds and the
-//! printable text they share ([`ratelab_core::text::printable`]) are here.
+//! `process_to_process` (samples and tick reports), `launcher_to_process` (control, and the
+//! tick reports the launcher hands on), `process_to_launcher` and `launcher_to_watcher`;
+//! the codec, its bounds and the printable text they share
+//! ([`ratelab_core::text::printable`]) are here.
 
 mod launcher_to_process;
 mod launcher_to_watcher;
 mod process_to_launcher;
 mod process_to_process;
 
-pub use launcher_to_process::{Setup, ToProcess};
+pub use launcher_to_process::{decode_relayed, encode_relayed, Setup, ToProcess, MAX_RELAYED};
 pub use launcher_to_watcher::RunOver;
 pub use process_to_launcher::{ToLauncher, WireLink};
 pub use process_to_process::{

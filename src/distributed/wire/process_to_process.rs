@@ -1,7 +1,7 @@
-//! Process to process, peer to peer: a crossing topic's samples ([`WireSample`], on the
-//! topic's key, from its publisher's process to its subscriber's) and, under the virtual
-//! clock, the tick reports of each process's events ([`Ticked`], several to a message, to every
-//! process and the launcher). Both
+//! Process to process: a crossing topic's samples ([`WireSample`], on the topic's key, from
+//! its publisher's process to its subscriber's, through the launcher's router) and, under
+//! the virtual clock, the tick reports of each process's events ([`Ticked`], several to a
+//! message, to the launcher, which hands them to the other processes in their turn). Both
 //! postcard, both bounded and decoded exactly.
 
 use super::decode_exact;
@@ -110,9 +110,9 @@ impl WireSample {
 }
 
 /// Virtual clock: one event done (a tick started, or its outputs gone out), from its node's
-/// process to every other process and the launcher (key `ratelab/<graph>/@ticked/<process>`,
-/// in a message with the reports of the process's events just before it, [`encode_reports`];
-/// [`crate::lockstep`]).
+/// process to the launcher (key `ratelab/<graph>/@ticked/<process>`, in a message with the
+/// reports of the process's events just before it, [`encode_reports`]), which hands it to
+/// every other process ([`crate::lockstep`]).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Ticked {
     /// The node's process.
@@ -176,11 +176,21 @@ pub fn encode_reports(reports: &[Ticked]) -> Vec<u8> {
 /// # Errors
 /// One line.
 pub fn decode_reports(bytes: &[u8]) -> Result<Vec<Ticked>, String> {
-    let max = MAX_TICKS_PER_MESSAGE * MAX_TICK_BYTES;
+    decode_report_list(bytes, MAX_TICKS_PER_MESSAGE)
+}
+
+/// Decode a message of 1 to `most` tick reports (at most `most` × [`MAX_TICK_BYTES`] bytes),
+/// exactly, their text made printable: [`decode_reports`], and the launcher's relayed ones
+/// (`super::decode_relayed`).
+///
+/// # Errors
+/// One line.
+pub(super) fn decode_report_list(bytes: &[u8], most: usize) -> Result<Vec<Ticked>, String> {
+    let max = most.saturating_mul(MAX_TICK_BYTES);
     let mut ts: Vec<Ticked> = decode_exact(bytes, max, "message of tick reports")?;
-    if ts.is_empty() || ts.len() > MAX_TICKS_PER_MESSAGE {
+    if ts.is_empty() || ts.len() > most {
         return Err(format!(
-            "a message of {} tick reports (1 to {MAX_TICKS_PER_MESSAGE})",
+            "a message of {} tick reports (1 to {most})",
             ts.len()
         ));
     }

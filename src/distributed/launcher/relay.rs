@@ -1,0 +1,538 @@
+//! The lockstep's reports, gathered and handed on by the launcher (virtual clock).
+//!
+//! Each process sends the reports of its events once, to the launcher ([`Keys::ticked`]),
+//! whose session is the router of the launch's star. The launcher follows the run's one
+//! order of events as the reports come in ([`Follower`], on the thread that receives them:
+//! Zenoh's) and, when an event is
+//! next, sends its node's process every report that process has not had, in one message on
+//! the process's own key ([`Keys::relayed`]): before its turn a process must know every
+//! event before it ([`crate::lockstep`]). A process that has [`MAX_RELAYED`] reports waiting
+//! for it without a turn is sent them then, and at the run's end every process is sent the
+//! rest ([`Relay::hand_over_all`]), so each replays the whole run.
+//!
+//! So an instant in which P processes each run an event costs P messages in and P out,
+//! where each process sending its reports to every other cost P (P − 1). The messages go
+//! out through the launcher's outbox ([`super::outbox`]: Zenoh's one thread must never wait
+//! to send), after any sample handed in before them; the callback tells the launcher's
+//! main thread when the horizon must move on.
+
+use super::outbox::{Out, Outbox};
+use crate::lockstep::{check_tick_report, subscribe_reports, TickInbox, HORIZON_PERIODS};
+use crate::wire::{self, Ticked, MAX_RELAYED};
+use crate::{DistError, Keys};
+use crossbeam_channel::{Receiver, Sender};
+use ratelab_core::time::Nanos;
+use ratelab_runtime::config::RunConfig;
+use ratelab_runtime::graph::lock;
+use ratelab_runtime::graph::spec::GraphSpec;
+use ratelab_runtime::graph::{NodeId, TopicId};
+use ratelab_runtime::runcore::Follower;
+use ratelab_runtime::scheduler::{EndReason, Event, RunEnd};
+use std::collections::VecDeque;
+use std::sync::{Arc, Mutex};
+use zenoh::Wait;
+
+/// A run's end at `at`: node `node` (of `spec`) failed with `message`.
+pub(super) fn failed(spec: &GraphSpec, node: usize, at: Nanos, message: String) -> RunEnd {
+    let name = spec.nodes.get(node).map_or("?", |n| n.name.as_str());
+    RunEnd {
+        at,
+        reason: EndReason::NodeFailed {
+            node: name.to_string(),
+            message,
+        },
+    }
+}
+
+/// The launcher's relay of the lockstep's reports, shared by Zenoh's callbacks and the
+/// launcher's main thread.
+pub(super) struct Relay {
+    spec: GraphSpec,
+    /// Per process (placement order), the publisher of its relayed key.
+    outs: Vec<Out>,
+    /// Where the messages go out.
+    outbox: Arc<Outbox>,
+    /// Per node of the graph, its process's place in `outs`.
+    process_of: Vec<usize>,
+    /// The run as followed so far (`None` before it starts: what comes then is not a
+    /// report).
+    course: Mutex<Option<Course>>,
+    /// Tells the main thread to look: the horizon low, the run over.
+    nudge: Sender<()>,
+}
+
+/// A relay in place: the relay, the main thread's end of its nudges and the subscriptions
+/// to the processes' reports (kept for the run).
+pub(super) struct Relaying {
+    /// The relay.
+    pub(super) relay: Arc<Relay>,
+    /// Where the relay tells the main thread to look.
+    pub(super) nudged: Receiver<()>,
+    _subscribers: Vec<zenoh::pubsub::Subscriber<()>>,
+}
+
+/// Where the run is, as the relay has followed it.
+pub(super) struct Progress {
+    /// Events taken (the next one's index).
+    pub(super) index: u64,
+    /// The next event's node and run time (`None` once the run is over).
+    pub(super) next: Option<(usize, Nanos)>,
+    /// How the run ended, once it has.
+    pub(super) end: Option<RunEnd>,
+}
+
+/// What the run came to, as the relay counted it.
+pub(super) struct Tally {
+    /// Events taken: the run's events.
+    pub(super) events: u64,
+    /// Ticks started among them.
+    pub(super) started: u64,
+    /// Distinct instants they fell on.
+    pub(super) instants: u64,
+    /// Per topic, the newest seq its publisher's process reported sent across.
+    pub(super) published: Vec<Option<u64>>,
+}
+
+/// The run as the relay follows it (under [`Relay::course`]'s lock).
+struct Course {
+    order: Follower,
+    duration: Nanos,
+    /// How far the horizon reaches ahead, ns (its move is due at half of it).
+    lookahead: u64,
+    inbox: TickInbox,
+    /// Events taken: the next one's index.
+    index: u64,
+    /// The next event, once drawn and until its report is taken.
+    next: Option<Event>,
+    /// The reports taken, the first numbered `log_from` (those every process has had are
+    /// dropped).
+    log: VecDeque<Ticked>,
+    log_from: u64,
+    /// Per process, the reports below this index it has been sent (or were its own).
+    given: Vec<u64>,
+    /// The horizon the main thread last sent, ns.
+    horizon: Option<u64>,
+    published: Vec<Option<u64>>,
+    started: u64,
+    instants: u64,
+    last_t: Option<Nanos>,
+    end: Option<RunEnd>,
+}
+
+impl Course {
+    /// Take every report whose turn has come, in the run's order, drawing each next event;
+    /// the end where one says so (a stop, a failure, a process out of step) or where the
+    /// run's duration is reached.
+    fn advance(&mut self, spec: &GraphSpec) {
+        while self.end.is_none() {
+            let event = match self.next {
+                Some(e) => e,
+                None => match self.order.next_event() {
+                    Some(e) => *self.next.insert(e),
+                    None => {
+                        self.end = Some(RunEnd {
+                            at: self.duration,
+                            reason: EndReason::Duration,
+                        });
+                        break;
+                    }
+                },
+            };
+            let (i, t) = event.node_at();
+            let Some(m) = self.inbox.take(self.index) else {
+                break;
+            };
+            let compute = match check_tick_report(&m, self.index, event, spec) {
+                Ok(c) => c,
+                Err(message) => {
+                    self.end = Some(failed(spec, i, t, message));
+                    break;
+                }
+            };
+            if let Event::Start { .. } = event {
+                self.started += 1;
+            }
+            self.order.ran_elsewhere(event, compute);
+            self.next = None;
+            self.index += 1;
+            if self.last_t != Some(t) {
+                self.instants += 1;
+                self.last_t = Some(t);
+            }
+            for &(topic, seq) in &m.published {
+                // Only a topic the node publishes (a report is untrusted input).
+                if spec.nodes[i].publishes.contains(&TopicId(topic)) {
+                    self.published[topic] = Some(seq);
+                }
+            }
+            if let Some(message) = &m.failed {
+                self.end = Some(failed(spec, i, t, message.clone()));
+            } else if m.stop {
+                self.end = Some(RunEnd {
+                    at: t,
+                    reason: EndReason::NodeStopped,
+                });
+            }
+            self.log.push_back(m);
+        }
+    }
+
+    /// The run cannot go on: `message`, at the next event (its node's failure).
+    fn fail_next(&mut self, spec: &GraphSpec, message: String) {
+        let (i, t) = self
+            .next
+            .map_or((spec.actuator.0, self.order.now()), |e| e.node_at());
+        if self.end.is_none() {
+            self.end = Some(failed(spec, i, t, message));
+        }
+    }
+
+    /// The messages of reports due now, each (process's place, bytes): to the next event's
+    /// process, every report it has not had (it waits for them); to any other, its reports
+    /// once [`MAX_RELAYED`] wait for it. Then the reports every process has had are
+    /// dropped.
+    fn due(&mut self, process_of: &[usize]) -> Vec<(usize, Vec<u8>)> {
+        let mut out = Vec::new();
+        if self.end.is_none() {
+            if let Some(e) = self.next {
+                if let Some(&p) = process_of.get(e.node_at().0) {
+                    self.hand(p, process_of, &mut out);
+                }
+            }
+        }
+        let waited: Vec<usize> = (self.given.iter().enumerate())
+            .filter(|(_, had)| self.index.saturating_sub(**had) >= MAX_RELAYED as u64)
+            .map(|(p, _)| p)
+            .collect();
+        for p in waited {
+            self.hand(p, process_of, &mut out);
+        }
+        self.forget_handed();
+        out
+    }
+
+    /// Hand process `p` every report it has not had (not its own), in messages of at most
+    /// [`MAX_RELAYED`], onto `out`.
+    fn hand(&mut self, p: usize, process_of: &[usize], out: &mut Vec<(usize, Vec<u8>)>) {
+        let Some(given) = self.given.get_mut(p) else {
+            return;
+        };
+        let from = (*given).max(self.log_from);
+        *given = self.index;
+        if from >= self.index {
+            return;
+        }
+        let skip = usize::try_from(from - self.log_from).unwrap_or(usize::MAX);
+        let theirs: Vec<&Ticked> = (self.log.iter().skip(skip))
+            .filter(|m| process_of.get(m.node) != Some(&p))
+            .collect();
+        for chunk in theirs.chunks(MAX_RELAYED) {
+            out.push((p, wire::encode_relayed(chunk)));
+        }
+    }
+
+    /// Drop the reports every process has been handed.
+    fn forget_handed(&mut self) {
+        let all_had = self.given.iter().copied().min().unwrap_or(self.index);
+        while self.log_from < all_had {
+            if self.log.pop_front().is_none() {
+                self.log_from = all_had;
+                break;
+            }
+            self.log_from += 1;
+        }
+    }
+}
+
+impl Relay {
+    /// A relay for the processes `names` (placement order) of `spec`'s graph, on the
+    /// launcher's `session` (the router): a publisher per process's relayed key, whose
+    /// messages go out through `outbox`, and a subscription to every process's reports,
+    /// which it follows once the run begins ([`Relay::begin`]).
+    ///
+    /// # Errors
+    /// [`DistError::Zenoh`] when a publisher or subscriber cannot be declared.
+    pub(super) fn start(
+        session: &zenoh::Session,
+        keys: &Keys,
+        spec: &GraphSpec,
+        (names, outbox): (&[String], &Arc<Outbox>),
+    ) -> Result<Relaying, DistError> {
+        let block = zenoh::qos::CongestionControl::Block;
+        let mut outs = Vec::with_capacity(names.len());
+        for p in names {
+            let publisher = session
+                .declare_publisher(keys.relayed(p))
+                .congestion_control(block)
+                .wait()?;
+            outs.push(Arc::new(publisher));
+        }
+        let process_of = (0..spec.nodes.len())
+            .map(|i| {
+                let p = spec.process_of(NodeId(i));
+                names.iter().position(|n| *n == p).unwrap_or(usize::MAX)
+            })
+            .collect();
+        let (nudge, nudged) = crossbeam_channel::bounded(1);
+        let relay = Arc::new(Relay {
+            spec: spec.clone(),
+            outs,
+            outbox: outbox.clone(),
+            process_of,
+            course: Mutex::new(None),
+            nudge,
+        });
+        let taker = relay.clone();
+        let subscribers = subscribe_reports(session, keys, names, None, move |ms| taker.take(ms))?;
+        Ok(Relaying {
+            relay,
+            nudged,
+            _subscribers: subscribers,
+        })
+    }
+
+    /// Begin following the run of `cfg` (every process ready, none run yet: anything that
+    /// came before is not a report): its first event drawn. Returns how far the horizon
+    /// reaches ahead, ns ([`HORIZON_PERIODS`] periods of the fastest node).
+    ///
+    /// # Errors
+    /// [`DistError::Usage`] for a node rate a graph file should not have let through.
+    pub(super) fn begin(&self, cfg: &RunConfig) -> Result<u64, DistError> {
+        let order = Follower::new(cfg).map_err(|e| DistError::Usage(e.to_string()))?;
+        let lookahead = order.shortest_period().0.saturating_mul(HORIZON_PERIODS);
+        let mut course = Course {
+            order,
+            duration: cfg.duration,
+            lookahead,
+            inbox: TickInbox::new(),
+            index: 0,
+            next: None,
+            log: VecDeque::new(),
+            log_from: 0,
+            given: vec![0; self.outs.len()],
+            horizon: None,
+            published: vec![None; self.spec.topics.len()],
+            started: 0,
+            instants: 0,
+            last_t: None,
+            end: None,
+        };
+        course.advance(&self.spec);
+        *lock(&self.course) = Some(course);
+        Ok(lookahead)
+    }
+
+    /// Take in a process's message of reports (on Zenoh's receive thread), follow the run
+    /// as far as they let it go, and hand the next event's process what it waits for.
+    fn take(&self, ms: Vec<Ticked>) {
+        let (due, wake) = {
+            let mut guard = lock(&self.course);
+            let Some(c) = guard.as_mut() else { return };
+            if c.end.is_some() {
+                return;
+            }
+            for m in ms {
+                if let Err(e) = c.inbox.accept(m, &self.spec) {
+                    c.fail_next(&self.spec, e.to_string());
+                    break;
+                }
+            }
+            c.advance(&self.spec);
+            let low = match (c.horizon, c.next) {
+                (Some(h), Some(e)) => e.node_at().1 .0.saturating_add(c.lookahead / 2) > h,
+                _ => false,
+            };
+            (c.due(&self.process_of), low || c.end.is_some())
+        };
+        self.send(due);
+        if wake {
+            let _ = self.nudge.try_send(());
+        }
+    }
+
+    /// Hand `messages` ((process's place, bytes) each) to the outbox, in order.
+    fn send(&self, messages: Vec<(usize, Vec<u8>)>) {
+        for (p, bytes) in messages {
+            if let Some(out) = self.outs.get(p) {
+                self.outbox.put(out, bytes.into(), false);
+            }
+        }
+    }
+
+    /// Where the run is.
+    pub(super) fn progress(&self) -> Progress {
+        match lock(&self.course).as_ref() {
+            Some(c) => Progress {
+                index: c.index,
+                next: c.next.map(|e| e.node_at()),
+                end: c.end.clone(),
+            },
+            None => Progress {
+                index: 0,
+                next: None,
+                end: None,
+            },
+        }
+    }
+
+    /// The main thread let the processes run up to `until_ns`.
+    pub(super) fn set_horizon(&self, until_ns: u64) {
+        if let Some(c) = lock(&self.course).as_mut() {
+            c.horizon = Some(until_ns);
+        }
+    }
+
+    /// End the run with `end`, unless it has ended already: the end that stands (reports
+    /// that come after it are not followed).
+    pub(super) fn finish(&self, end: RunEnd) -> RunEnd {
+        match lock(&self.course).as_mut() {
+            Some(c) => c.end.get_or_insert(end).clone(),
+            None => end,
+        }
+    }
+
+    /// End the run as interrupted (Ctrl-C), at the newest instant drawn, unless it has
+    /// ended already: the end that stands.
+    pub(super) fn interrupt(&self) -> RunEnd {
+        match lock(&self.course).as_mut() {
+            Some(c) => {
+                let at = c.order.now();
+                c.end
+                    .get_or_insert(RunEnd {
+                        at,
+                        reason: EndReason::Interrupted,
+                    })
+                    .clone()
+            }
+            None => RunEnd {
+                at: Nanos::ZERO,
+                reason: EndReason::Interrupted,
+            },
+        }
+    }
+
+    /// At the run's end: send every process every report it has not had, so that each
+    /// replays the whole run before it reports.
+    pub(super) fn hand_over_all(&self) {
+        let mut due = Vec::new();
+        if let Some(c) = lock(&self.course).as_mut() {
+            for p in 0..c.given.len() {
+                c.hand(p, &self.process_of, &mut due);
+            }
+            c.forget_handed();
+        }
+        self.send(due);
+    }
+
+    /// What the run came to.
+    pub(super) fn tally(&self) -> Tally {
+        match lock(&self.course).as_ref() {
+            Some(c) => Tally {
+                events: c.index,
+                started: c.started,
+                instants: c.instants,
+                published: c.published.clone(),
+            },
+            None => Tally {
+                events: 0,
+                started: 0,
+                instants: 0,
+                published: vec![None; self.spec.topics.len()],
+            },
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn report(process: &str, index: u64, node: usize) -> Ticked {
+        Ticked {
+            process: process.into(),
+            index,
+            node,
+            t_ns: 0,
+            stop: false,
+            published: Vec::new(),
+            failed: None,
+            publish: false,
+            compute_ns: 0,
+        }
+    }
+
+    /// A course of a graph of three processes, nodes 0, 1, 2 in processes 0, 1, 2, with
+    /// `n` reports taken (node `k % 3`'s at index `k`), none handed on yet.
+    fn course_with(n: u64) -> Course {
+        let cfg = RunConfig::default();
+        Course {
+            order: Follower::new(&cfg).unwrap(),
+            duration: cfg.duration,
+            lookahead: 1,
+            inbox: TickInbox::new(),
+            index: n,
+            next: None,
+            log: (0..n)
+                .map(|k| report(&format!("p{}", k % 3), k, (k % 3) as usize))
+                .collect(),
+            log_from: 0,
+            given: vec![0; 3],
+            horizon: None,
+            published: Vec::new(),
+            started: 0,
+            instants: 0,
+            last_t: None,
+            end: None,
+        }
+    }
+
+    fn decoded(bytes: &[u8]) -> Vec<u64> {
+        wire::decode_relayed(bytes)
+            .unwrap()
+            .iter()
+            .map(|m| m.index)
+            .collect()
+    }
+
+    #[test]
+    fn a_process_is_handed_the_others_reports_once_and_never_its_own() {
+        let process_of = [0, 1, 2];
+        let mut c = course_with(5);
+        let mut out = Vec::new();
+        c.hand(1, &process_of, &mut out);
+        assert_eq!(out.len(), 1);
+        assert_eq!(out[0].0, 1);
+        assert_eq!(decoded(&out[0].1), [0, 2, 3], "not 1 and 4, its own");
+        // Nothing new: nothing handed.
+        out.clear();
+        c.hand(1, &process_of, &mut out);
+        assert!(out.is_empty());
+        // What every process has had is forgotten; the rest is kept for the others.
+        c.forget_handed();
+        assert_eq!((c.log_from, c.log.len()), (0, 5));
+        c.hand(0, &process_of, &mut out);
+        c.hand(2, &process_of, &mut out);
+        c.forget_handed();
+        assert_eq!((c.log_from, c.log.len()), (5, 0));
+        assert_eq!(decoded(&out[0].1), [1, 2, 4]);
+        assert_eq!(decoded(&out[1].1), [0, 1, 3, 4]);
+    }
+
+    #[test]
+    fn a_process_without_a_turn_is_handed_its_reports_in_messages_of_a_bounded_size() {
+        let process_of = [0, 1, 2];
+        let n = 3 * MAX_RELAYED as u64;
+        let mut c = course_with(n);
+        // Every process has waited past the bound: each is handed its reports (two
+        // thirds of them the others'), in messages of at most MAX_RELAYED.
+        let out = c.due(&process_of);
+        assert_eq!(out.len(), 6, "two messages for each of three processes");
+        for (p, bytes) in &out {
+            let got = wire::decode_relayed(bytes).unwrap();
+            assert!(got.len() <= MAX_RELAYED);
+            assert!(got.iter().all(|m| m.node != *p));
+        }
+        assert_eq!(c.log.len(), 0, "all handed, all forgotten");
+        assert_eq!(c.given, vec![n; 3]);
+    }
+}
