@@ -160,9 +160,9 @@ pub struct App {
     history: VecDeque<(f64, f64)>,
     /// The whole run's angle and applied force, thinned (the charts' widest window).
     thinned: super::chart_window::Thinned,
-    /// (t s, θ̂ rad) per actuator step, with an estimator in the graph (its newest
-    /// estimate, [`ratelab::estimate`]).
-    estimated: super::chart_window::Series,
+    /// With an estimator in the graph: its estimate's lines and figures, step by step
+    /// ([`super::estimates`]).
+    estimates: super::estimates::Estimates,
     /// The charts' time window (`(` / `)`).
     chart_window: super::chart_window::ChartWindow,
     /// Reviewing an ended real-clock run ([`review`]).
@@ -299,7 +299,7 @@ impl App {
             nav: super::navigate::Navigation::default(),
             live: Live::default(),
             history: VecDeque::new(),
-            estimated: Default::default(),
+            estimates: Default::default(),
             thinned: Default::default(),
             chart_window: Default::default(),
             review: None,
@@ -567,6 +567,11 @@ impl App {
             }
             Telemetry::Ended { metrics, reason } => self.on_ended(&metrics, &reason),
             Telemetry::Error(e) => self.say(e),
+            Telemetry::Recount(e) => {
+                if self.message.as_deref().is_some_and(|m| recount_of(m, &e)) {
+                    self.say(e);
+                }
+            }
             Telemetry::Reloaded { line } => {
                 self.say(line.clone());
                 self.reloading = Some(line);
@@ -637,7 +642,7 @@ impl App {
         self.live = Live::default();
         self.history.clear();
         self.thinned.clear();
-        self.estimated.clear();
+        self.estimates.clear();
         self.applied.clear();
         self.published.clear();
         self.whole.clear();
@@ -661,15 +666,9 @@ impl App {
         }
         self.history.push_back((now_s, s.pole_angle));
         self.thinned.push(now_s, s.pole_angle, s.action * GEAR_N);
-        // Drawn where the θ line shows the state it estimates, at the previous step's time:
-        // each θ point is the angle its step reached, the state the next tick's sensors
-        // read (before that step).
-        let previous_s = self.last.as_ref().map(|l| l.t.as_secs_f64());
-        if let (Some(est), Some(at_s)) = (s.estimate.as_ref().and_then(|e| e.estimate), previous_s)
-        {
-            self.estimated
-                .push(at_s, est[ratelab::estimate::POLE_ANGLE]);
-        }
+        // Drawn where the θ line shows the state it estimates, at the previous step's time;
+        // folded as the summary folds it.
+        self.estimates.push(&s);
         self.applied.push_back((now_s, s.action * GEAR_N));
         if let Some((at, newtons)) = s.published {
             self.published.push_back((at.as_secs_f64(), newtons));
@@ -746,6 +745,7 @@ impl App {
         if self.attached.is_some() {
             self.final_topics = Some(metrics.topics.clone());
         }
+        self.estimates.ended(metrics.estimate.as_ref());
         self.verdict = match reason {
             EndReason::NodeFailed { node, message } => {
                 Verdict::Failed(format!("{node}: {message}"))
@@ -1215,9 +1215,27 @@ fn merge_pending(
     rates
 }
 
+/// `new` is `shown` with other numbers (the same words around its counts): a
+/// [`Telemetry::Recount`] of the line on screen.
+fn recount_of(shown: &str, new: &str) -> bool {
+    let words = |s: &str| -> String { s.chars().filter(|c| !c.is_ascii_digit()).collect() };
+    words(shown) == words(new)
+}
+
 #[cfg(test)]
 mod pending_tests {
-    use super::merge_pending;
+    use super::{merge_pending, recount_of};
+
+    /// A recount replaces the line it counts, not another message.
+    #[test]
+    fn a_recount_is_the_same_words_with_another_count() {
+        let first =
+            "reload of a.py: its callback has not returned after 2 s of the trial run (t=0.50 s)";
+        let again =
+            "reload of a.py: its callback has not returned after 13 s of the trial run (t=0.50 s)";
+        assert!(recount_of(first, again));
+        assert!(!recount_of("Ctrl-C: the run on screen is not hung", again));
+    }
     use ratelab::Nanos;
 
     #[test]

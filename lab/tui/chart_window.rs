@@ -201,10 +201,4 @@ impl Series {
         }
         self.whole.push(t_s, value, 0.0);
     }
-
-    /// Forget the run (a new one starts).
-    pub fn clear(&mut self) {
-        self.recent.clear();
-        self.whole.clear();
-    }
 }

@@ -4,6 +4,7 @@
 
 pub mod app;
 pub mod chart_window;
+pub mod estimates;
 pub mod fit;
 pub mod keymap;
 pub mod live;
@@ -1272,6 +1273,116 @@ mod tests {
         let (app, _) = told(&chapter, &report.trace, chapter.duration);
         assert!(app.view().angle_estimate.is_empty());
         assert!(!render(&app, 120, 40).contains("θ̂"));
+    }
+
+    /// Tab to the estimator swaps the pole-angle chart for the estimator's: θ̇ and its
+    /// estimate over the window (each where the θ line shows the state it is of), the
+    /// estimate drawn over the truth in dashes, and its RMS error and lag the run's
+    /// summary's (the same fold of the same points); its topic shows it too, Esc gives the
+    /// pole angle back. Without it selected, the angle chart's bottom border gives θ̂'s
+    /// figures and where the estimator's chart is.
+    #[test]
+    fn tab_to_the_estimator_shows_its_velocity_estimate_and_the_summary_s_figures() {
+        use ratelab::estimate::{POLE_ANGLE, POLE_ANGVEL};
+        let cfg = graph_cfg("graphs/cartpole-estimator.toml", 4);
+        let report = run(&cfg, Box::new(Scripted), RunOptions::new()).unwrap();
+        let summary = report.metrics.estimate.clone().expect("an estimator");
+        let rms = summary.figures.rms.expect("estimates reached the policy");
+        let (mut app, _) = told(&cfg, &report.trace, cfg.duration);
+        let e = app.view().estimator.expect("the graph has an estimator");
+        assert!(!e.shown && e.angvel.is_empty());
+        assert_eq!((e.node.as_str(), e.topic.as_str()), ("estimator", "/state"));
+        assert_eq!(e.figures.as_ref(), Some(&summary.figures));
+        let angle = render(&app, 120, 40);
+        let theta = format!("θ̂ RMS error {:.2} mrad", rms[POLE_ANGLE] * 1e3);
+        assert!(angle.contains(&theta), "{angle}");
+        assert!(angle.contains("Tab to estimator"), "{angle}");
+        insta::assert_snapshot!("estimator_angle_120x40", angle);
+        // Tab → sensor, Tab → estimator.
+        app.on_msg(Msg::SelectNext);
+        app.on_msg(Msg::SelectNext);
+        let e = app.view().estimator.unwrap();
+        assert!(e.shown);
+        let points = |pick: fn(&ratelab::estimate::EstimatePoint) -> Option<f64>| {
+            report
+                .trace
+                .windows(2)
+                .filter_map(|w| Some((w[0].t.as_secs_f64(), pick(w[1].estimate.as_ref()?)?)))
+                .collect::<Vec<(f64, f64)>>()
+        };
+        assert_eq!(e.angvel, points(|p| Some(p.truth[POLE_ANGVEL])));
+        assert_eq!(
+            e.angvel_estimate,
+            points(|p| p.estimate.map(|x| x[POLE_ANGVEL]))
+        );
+        // The truth a point is of is the θ̇ the step before reached.
+        for w in report.trace.windows(2) {
+            let truth = w[1].estimate.as_ref().unwrap().truth[POLE_ANGVEL];
+            assert_eq!(truth, w[0].pole_angvel, "at {}", w[1].t);
+        }
+        assert_eq!(e.angvel_estimate.len(), report.trace.len() - 1);
+        let small = render(&app, 80, 24);
+        let big = render(&app, 120, 40);
+        let w = rms[POLE_ANGVEL] * 1e3;
+        let lag = summary
+            .figures
+            .pole_angvel_lag_ms
+            .expect("a lag under 250 ms");
+        for text in [&small, &big] {
+            assert!(text.contains(&format!("RMS {w:.1} mrad/s")), "{text}");
+            assert!(text.contains(&format!("lag {lag:.0} ms")), "{text}");
+            assert!(
+                !text.contains("pole angle") && !text.contains("θ (rad)"),
+                "{text}"
+            );
+        }
+        assert!(small.contains("θ̇ vs est rad/s"), "{small}");
+        assert!(big.contains("θ̇ (rad/s): true · estimate"), "{big}");
+        // 120×40 has the bottom border: the error of θ and θ̇ and their lags.
+        let both = format!(
+            "RMS error θ {:.2} mrad · θ̇ {w:.1} mrad/s",
+            rms[POLE_ANGLE] * 1e3
+        );
+        assert!(big.contains(&both), "{big}");
+        insta::assert_snapshot!("estimator_80x24", small);
+        insta::assert_snapshot!("estimator_120x40", big);
+        // Paused, the title reads the tick at the cursor: θ̇ beside its estimate.
+        app.on_telemetry(Telemetry::Status {
+            now: cfg.duration,
+            paused: true,
+            speed: Speed::Times(1.0),
+            rates: vec![200.0, 100.0, 50.0, 50.0],
+            depths: vec![1; 3],
+            qos: vec![Default::default(); 3],
+            alive: vec![None; 4],
+            policy: "scripted".into(),
+            exec: None,
+            topics: None,
+        });
+        let rec = report
+            .trace
+            .iter()
+            .rev()
+            .find(|s| s.t <= cfg.duration)
+            .unwrap();
+        let p = rec.estimate.as_ref().unwrap();
+        let pair = format!(
+            "θ̇ {:+.3} · est {:+.3} rad/s",
+            p.truth[POLE_ANGVEL],
+            p.estimate.unwrap()[POLE_ANGVEL]
+        );
+        let text = render(&app, 120, 40);
+        assert!(text.contains(&pair), "{text}");
+        // Its topic shows it too (policy, actuator, /meas, /state); Esc gives the angle back.
+        for _ in 0..4 {
+            app.on_msg(Msg::SelectNext);
+        }
+        assert!(app.view().estimator.unwrap().shown);
+        app.on_msg(Msg::Back);
+        assert!(!app.view().estimator.unwrap().shown);
+        // The angle chart again (paused, its title reads the plant at the cursor).
+        let text = render(&app, 80, 24);
+        assert!(text.contains("-0.3") && !text.contains("· est "), "{text}");
     }
 
     /// `(` and `)` zoom the charts' window: 0.2 s of a 20 s run shows its last tenths (the

@@ -1,8 +1,9 @@
 //! The view model (an immutable snapshot the app builds each frame) and its rendering:
 //! pure functions from a [`View`] to a buffer, one `render_*` helper per panel: the graph
 //! panel in `view/graph.rs`, the plant and the figures in `view/charts.rs` (paused, their
-//! titles read the run at the scrub cursor: `view/readout.rs`), the log pane and an entry
-//! of it opened in `view/log.rs`, the status, footer and help here.
+//! titles read the run at the scrub cursor: `view/readout.rs`), the estimator's chart in
+//! `view/estimator.rs`, the log pane and an entry of it opened in `view/log.rs`, the
+//! status, footer and help here.
 
 use super::keymap::{BINDINGS, HELP_NOTES};
 use ratatui::buffer::Buffer;
@@ -16,13 +17,16 @@ use ratatui::widgets::{
 };
 use ratelab::graph::{NodeId, TopicId};
 
+mod axis;
 mod charts;
+mod estimator;
 mod graph;
 mod list;
 mod log;
 mod readout;
 
 pub use self::log::{entry_rows, LogEntry, LogView, OpenEntry};
+pub use estimator::EstimatorView;
 pub use readout::{Readout, TopicCounts};
 
 pub(super) use super::fit::first_that_fits;
@@ -335,6 +339,10 @@ pub struct View {
     /// With an estimator in the graph: (t s, θ̂ rad), the newest estimate at each actuator
     /// step, over the same window (drawn beside θ, the truth); empty without one.
     pub angle_estimate: Vec<(f64, f64)>,
+    /// With an estimator in the graph: its chart (θ̇ and its estimate, the error and lag
+    /// as the run's summary gives them), drawn in the pole-angle chart's place while the
+    /// estimator is selected; `None` without one.
+    pub estimator: Option<EstimatorView>,
     /// The force the actuator applied, N, as a staircase over the charts' window (each
     /// step's force held until the next: the zero-order hold).
     pub applied_force: Vec<(f64, f64)>,
@@ -468,7 +476,11 @@ impl Widget for &View {
                 .areas(middle);
         render_cartpole(self, cart, buf);
         let (angle, hold, shared) = chart_areas(chart);
-        render_angle_chart(self, angle, buf, shared);
+        // Tab to the estimator: its chart takes the pole angle's place.
+        match self.estimator.as_ref().filter(|e| e.shown) {
+            Some(e) => estimator::render_estimator_chart(self, e, angle, buf, shared),
+            None => render_angle_chart(self, angle, buf, shared),
+        }
         render_hold_chart(self, hold, buf, shared);
         self.render_bottom(latency, buf);
         render_footer(self, footer, buf);

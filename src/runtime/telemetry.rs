@@ -174,6 +174,11 @@ pub enum Telemetry {
     },
     /// Something went wrong that the user should read (one line).
     Error(String),
+    /// The [`Telemetry::Error`] line said last, again with a new count (a call that still
+    /// has not returned: `… after 3 s …`): the front end shows it in place of that line
+    /// only while that line is what it shows (it does not cover a newer message), and does
+    /// not log it again.
+    Recount(String),
     /// A saved file was taken up ([`Control::Reload`]): the run that follows (its
     /// `Started` comes next) runs the new code, and the front end keeps the run before as a
     /// ghost beside it. `line` begins `reloaded FILE:` and says what changed.

@@ -1432,6 +1432,17 @@ fn a_reload_whose_trial_never_returns_is_said_and_the_run_goes_on() {
             ),
         "{said}"
     );
+    // The footer's count goes up while it still has not returned (the log keeps the first
+    // line only).
+    let recount = live.wait_for("the count going up", |t| match t {
+        Telemetry::Recount(e) => Some(e.clone()),
+        Telemetry::Error(e) if e.contains("has not returned") => panic!("said again: {e}"),
+        _ => None,
+    });
+    assert!(
+        recount.contains("its callback has not returned after 3 s of the trial run (t=0.00 s)"),
+        "{recount}"
+    );
     // The run on screen went on meanwhile (2 s of it at ×1, less what a loaded machine
     // could not keep up with).
     let now = live.wait_for("a step", step_at);

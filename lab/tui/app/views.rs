@@ -362,6 +362,31 @@ impl App {
         Some(super::super::view::Readout::at(self.now, rec, counters))
     }
 
+    /// With an estimator in the graph, its chart's view: shown in the pole-angle chart's
+    /// place while the estimator node or the topic of its estimate is selected (Tab), its
+    /// lines taken over the charts' window only then; the figures always (the summary's).
+    pub(super) fn estimator_view(&self) -> Option<super::super::view::EstimatorView> {
+        let topic = self.graph.estimate_topic()?;
+        let node = self.graph.topic(topic).publisher;
+        let shown = self.selected == Some(Selected::Node(node))
+            || self.selected == Some(Selected::Topic(topic));
+        let line = |s: &crate::tui::chart_window::Series| -> Vec<(f64, f64)> {
+            if shown {
+                self.in_window_of(&s.recent, &s.whole, |&(t, v, _)| (t, v))
+            } else {
+                Vec::new()
+            }
+        };
+        Some(super::super::view::EstimatorView {
+            node: self.graph.node(node).name.clone(),
+            topic: self.graph.topic(topic).name.clone(),
+            shown,
+            angvel: line(&self.estimates.angvel),
+            angvel_estimate: line(&self.estimates.angvel_estimate),
+            figures: self.estimates.figures(),
+        })
+    }
+
     /// The segment since the last change, for the segment line and the angle chart.
     pub(super) fn segment_view(&self) -> SegmentView {
         let seg = self.live.segment();
@@ -437,10 +462,11 @@ impl App {
             },
             angle_history: self.in_chart_window(&self.history, |&(t, a, _)| (t, a)),
             angle_estimate: self.in_window_of(
-                &self.estimated.recent,
-                &self.estimated.whole,
+                &self.estimates.angle.recent,
+                &self.estimates.angle.whole,
                 |&(t, a, _)| (t, a),
             ),
+            estimator: self.estimator_view(),
             // Each applied force holds until the next step: a staircase.
             applied_force: staircase(&self.in_chart_window(&self.applied, |&(t, _, f)| (t, f))),
             // The whole run draws no dots: thinned, they would not be the policy's ticks.

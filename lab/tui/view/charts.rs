@@ -115,26 +115,22 @@ pub(super) fn render_angle_chart(v: &View, area: Rect, buf: &mut Buffer, open: b
         .iter()
         .map(|&(t, a)| (t, a.clamp(-0.3, 0.3)))
         .collect();
-    // The run before a reload first, so that this run's line is drawn over it; the
-    // estimate under the truth.
+    // The estimate over the truth in dashes, so that both show where they coincide (within
+    // a braille dot at ±0.3 rad): `view/estimator.rs`.
+    let dashes =
+        super::estimator::dashes(&estimate, (t0, t1), super::estimator::plot_cols(area, 4));
+    // The run before a reload first, so that this run's line is drawn over it.
     let mut datasets: Vec<Dataset<'_>> = ghost_dataset(&ghost).into_iter().collect();
-    if !estimate.is_empty() {
-        datasets.push(
-            Dataset::default()
-                .name("θ̂")
-                .marker(Marker::Braille)
-                .graph_type(GraphType::Line)
-                .magenta()
-                .data(&estimate),
-        );
-    }
-    datasets.extend([
+    datasets.push(
         Dataset::default()
             .name("θ")
             .marker(Marker::Braille)
             .graph_type(GraphType::Line)
             .yellow()
             .data(&data),
+    );
+    datasets.extend(super::estimator::dash_datasets(&dashes, "θ̂"));
+    datasets.extend([
         Dataset::default()
             .name("±12°")
             .marker(Marker::Braille)
@@ -204,21 +200,35 @@ pub(super) fn render_angle_chart(v: &View, area: Rect, buf: &mut Buffer, open: b
         add(&mut title, "⡇ change ".into(), Style::new().fg(Color::Cyan));
     }
     add(&mut title, format!("{} ", v.chart_label), Style::new());
-    let block = if open {
-        use ratatui::widgets::Borders;
-        Block::new().borders(Borders::TOP | Borders::LEFT | Borders::RIGHT)
-    } else {
-        Block::bordered()
-    };
     Chart::new(datasets)
-        .block(block.title(Line::from(title)))
-        .x_axis(time_axis(t0, t1, area))
+        .block(angle_block(v, area, open).title(Line::from(title)))
+        .x_axis(super::axis::time_axis(t0, t1, area))
         .y_axis(
             Axis::default()
                 .bounds([-0.3, 0.3])
                 .labels(["-0.3", "0", "0.3"]),
         )
         .render(area, buf);
+}
+
+/// The pole-angle chart's block; `open`: without its bottom border. With an estimator in the
+/// graph, its bottom border (where it has one) gives θ̂'s error and lag and says where the
+/// estimator's chart is (`view/estimator.rs`).
+fn angle_block(v: &View, area: Rect, open: bool) -> Block<'static> {
+    if open {
+        use ratatui::widgets::Borders;
+        return Block::new().borders(Borders::TOP | Borders::LEFT | Borders::RIGHT);
+    }
+    let room = usize::from(area.width.saturating_sub(2));
+    let foot = v
+        .estimator
+        .as_ref()
+        .filter(|_| area.height >= 3)
+        .and_then(|e| super::estimator::angle_foot(e, room));
+    match foot {
+        Some(foot) => Block::bordered().title_bottom(foot),
+        None => Block::bordered(),
+    }
 }
 
 /// The run before a reload ([`View::ghost_angle`], [`View::ghost_force`]) as a dim line,
@@ -232,18 +242,6 @@ fn ghost_dataset(points: &[(f64, f64)]) -> Option<Dataset<'_>> {
             .dark_gray()
             .data(points)
     })
-}
-
-/// The charts' window, `t0` to `t1` s; labelled only where the chart has room for the axis
-/// (two rows), in tenths of a second for a window under 2 s.
-fn time_axis(t0: f64, t1: f64, area: Rect) -> Axis<'static> {
-    let axis = Axis::default().bounds([t0, t1]);
-    if area.height >= 8 {
-        let digits = usize::from(t1 - t0 < 2.0);
-        axis.labels([format!("{t0:.digits$}s"), format!("{t1:.digits$}s")])
-    } else {
-        axis
-    }
 }
 
 /// The zero-order hold, live: the force the policy published (dots, at its ticks) and the
@@ -318,7 +316,7 @@ pub(super) fn render_hold_chart(v: &View, area: Rect, buf: &mut Buffer, joined: 
     Chart::new(datasets)
         .block(block.title(title))
         .hidden_legend_constraints((Constraint::Length(0), Constraint::Length(0)))
-        .x_axis(time_axis(t0, t1, area))
+        .x_axis(super::axis::time_axis(t0, t1, area))
         .y_axis(
             Axis::default()
                 .bounds([-limit, limit])

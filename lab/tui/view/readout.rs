@@ -11,7 +11,9 @@
 //! from, so the readout and the trace agree; θ̇ and the command's age are in the record,
 //! not among the file's columns. The app builds a [`Readout`] each frame (a view model,
 //! immutable once built); [`Readout::plant_line`] and [`Readout::hold_line`] give its two
-//! lines, each the fullest of its forms that fits the title.
+//! lines, each the fullest of its forms that fits the title. With the estimator's chart
+//! shown (`view/estimator.rs`), [`Readout::estimate_line`] reads the tick's estimate of θ̇
+//! beside the truth it is of, the pair the run's summary folds into its error.
 
 use ratatui::text::Span;
 use ratelab::plant::GEAR_N;
@@ -46,6 +48,10 @@ pub struct Readout {
     pub theta_rad: f64,
     /// The pole's angular velocity after that tick, rad/s.
     pub theta_dot_rad_s: f64,
+    /// With an estimator in the graph: at that tick, the plant's θ̇ before its step and the
+    /// newest estimate of it, rad/s (`None`: none yet) — the tick's
+    /// [`ratelab::estimate::EstimatePoint`].
+    pub angvel_pair: Option<(f64, Option<f64>)>,
     /// The force applied at that tick, N (`trace.csv`'s `action` × [`GEAR_N`]).
     pub force_n: f64,
     /// The age of the command the actuator held at that tick, ms: the time since it was
@@ -64,6 +70,10 @@ impl Readout {
             step_s: rec.t.as_secs_f64(),
             theta_rad: rec.pole_angle,
             theta_dot_rad_s: rec.pole_angvel,
+            angvel_pair: rec.estimate.as_deref().map(|p| {
+                let i = ratelab::estimate::POLE_ANGVEL;
+                (p.truth[i], p.estimate.map(|e| e[i]))
+            }),
             force_n: rec.action * GEAR_N,
             age_ms: rec
                 .held_stamp
@@ -76,11 +86,7 @@ impl Readout {
     /// `t=2.340 s · θ +0.0123 rad · θ̇ -0.045 rad/s` (with `(tick 2.320 s)` after the run
     /// time when the tick read is before the cursor), or a shorter form that fits.
     pub fn plant_line(&self, room: usize) -> String {
-        let t = if (self.cursor_s - self.step_s).abs() < 5e-7 {
-            format!("t={:.3} s", self.cursor_s)
-        } else {
-            format!("t={:.3} s (tick {:.3} s)", self.cursor_s, self.step_s)
-        };
+        let t = self.when();
         let (theta, dot) = (self.theta_rad, self.theta_dot_rad_s);
         fit(
             [
@@ -90,6 +96,46 @@ impl Readout {
             ],
             room,
         )
+    }
+
+    /// `t=2.340 s`, or `t=2.350 s (tick 2.340 s)` when the tick read is before the cursor.
+    fn when(&self) -> String {
+        if (self.cursor_s - self.step_s).abs() < 5e-7 {
+            format!("t={:.3} s", self.cursor_s)
+        } else {
+            format!("t={:.3} s (tick {:.3} s)", self.cursor_s, self.step_s)
+        }
+    }
+
+    /// The estimator's line, for its chart's title `room` columns wide: the tick's θ̇ (the
+    /// plant's, before the step) and its estimate, `t=2.340 s · θ̇ -0.045 · est -0.051
+    /// rad/s · error -6.0 mrad/s`, or a shorter form that fits; [`Readout::plant_line`]
+    /// without an estimator.
+    pub fn estimate_line(&self, room: usize) -> String {
+        let Some((truth, estimate)) = self.angvel_pair else {
+            return self.plant_line(room);
+        };
+        let t = self.when();
+        match estimate {
+            Some(e) => fit(
+                [
+                    format!(
+                        "{t} · θ̇ {truth:+.3} · est {e:+.3} rad/s · error {:+.1} mrad/s",
+                        (e - truth) * 1e3
+                    ),
+                    format!("{t} · θ̇ {truth:+.3} · est {e:+.3} rad/s"),
+                    format!("{t} θ̇ {truth:+.2} est {e:+.2}"),
+                ],
+                room,
+            ),
+            None => fit(
+                [
+                    format!("{t} · θ̇ {truth:+.3} rad/s · no estimate yet"),
+                    format!("{t} θ̇ {truth:+.2} no est"),
+                ],
+                room,
+            ),
+        }
     }
 
     /// The hold's line, for the force band's title `room` columns wide: the force applied,
@@ -247,6 +293,39 @@ mod tests {
         // Nothing selected: the force and the command alone.
         let r = Readout::at(Nanos(2_340_000_000), &tick(), None);
         assert_eq!(r.hold_line(44), "F +3.20 N · cmd 40 ms old");
+    }
+
+    /// With an estimator, the estimator's line reads the tick's θ̇ beside its estimate and
+    /// their difference; without one it is the plant's line.
+    #[test]
+    fn the_estimate_line_reads_the_tick_s_estimate_beside_its_truth() {
+        let r = Readout::at(Nanos(2_340_000_000), &tick(), None);
+        assert_eq!(r.angvel_pair, None);
+        assert_eq!(r.estimate_line(70), r.plant_line(70));
+        let mut rec = tick();
+        rec.estimate = Some(Box::new(ratelab::estimate::EstimatePoint {
+            truth: [0.1, 0.0, 0.0123, -0.045],
+            estimate: Some([0.1, 0.0, 0.0121, -0.051]),
+            nonfinite: false,
+        }));
+        let r = Readout::at(Nanos(2_340_000_000), &rec, None);
+        assert_eq!(r.angvel_pair, Some((-0.045, Some(-0.051))));
+        assert_eq!(
+            r.estimate_line(70),
+            "t=2.340 s · θ̇ -0.045 · est -0.051 rad/s · error -6.0 mrad/s"
+        );
+        // At 80 columns the chart's title has 46, less its padding.
+        assert_eq!(
+            r.estimate_line(44),
+            "t=2.340 s · θ̇ -0.045 · est -0.051 rad/s"
+        );
+        assert_eq!(r.estimate_line(30), "t=2.340 s θ̇ -0.04 est -0.05");
+        rec.estimate.as_mut().unwrap().estimate = None;
+        let r = Readout::at(Nanos(2_340_000_000), &rec, None);
+        assert_eq!(
+            r.estimate_line(70),
+            "t=2.340 s · θ̇ -0.045 rad/s · no estimate yet"
+        );
     }
 
     #[test]

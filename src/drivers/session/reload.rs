@@ -21,7 +21,7 @@
 //! No saved code runs on the engine's thread until it has returned once: it loads (a
 //! restart's nodes, a brain) or loads and is judged on a thread of its own ([`Trial`]),
 //! which the engine looks at each time round its loop ([`Engine::reload_ready`]) while the
-//! run on screen goes on and the keys act. One that has not returned after [`SAID_AFTER`]
+//! run on screen goes on and the keys act. One that has not returned after [`super::trial::SAID_AFTER`]
 //! is said (`loading FILE has not returned after 2 s; the run on screen is the code
 //! before`, or which instant of its trial its callback is stuck in); a newer save
 //! supersedes it, and a new run (`r`, `R`, `c` after the end) or quitting drops it: it is
@@ -33,7 +33,7 @@
 
 use super::compare::{changes, RunFigures};
 use super::engine::{Engine, Next, JUDGE_FOR};
-use super::trial::{Job, Pending, Poll, Restart, Then, Trial, SAID_AFTER};
+use super::trial::{Job, Pending, Poll, Restart, Then, Trial};
 use crate::run::Command;
 use ratelab_core::textlog::Level;
 use ratelab_core::time::Nanos;
@@ -125,17 +125,22 @@ impl Engine {
 
     /// The reload under way, looked at without waiting for it: `Some` once its code has
     /// loaded (and been judged), for the run going on to take up. A trial that has not
-    /// returned for [`SAID_AFTER`] is said once where it is (loading, or which instant of
-    /// its run); code that does not load is said, and the run goes on with the code before.
+    /// returned for [`super::trial::SAID_AFTER`] is said where it is (loading, or which instant of its
+    /// run): once in the log, and in the footer counting up each second; code that does not load is said, and the run goes on with the code before.
     /// Trials superseded are watched too ([`super::trial::Cancelled::check`]).
     pub(super) fn reload_ready(&mut self) -> Option<Ready> {
         self.watch_cancelled();
         let pending = self.reloading.as_mut()?;
         let outcome = match pending.trial.poll() {
             Poll::Going => return None,
-            Poll::Stuck(at) => {
-                let line = stuck_line(&pending.name, at);
-                self.warn(line);
+            Poll::Stuck { at, after, first } => {
+                let line = stuck_after(&pending.name, at, after);
+                if first {
+                    self.warn(line);
+                } else {
+                    // The count goes up in the footer; the log keeps the first line.
+                    let _ = self.tx.send(Telemetry::Recount(line));
+                }
                 return None;
             }
             Poll::Done(outcome) => *outcome,
@@ -415,13 +420,8 @@ impl Engine {
     }
 }
 
-/// What the lab says of a reload's trial that has not returned for [`SAID_AFTER`]: still
-/// loading (`at` is `None`), or in the instant at `at` of its run.
-fn stuck_line(name: &str, at: Option<Nanos>) -> String {
-    stuck_after(name, at, SAID_AFTER)
-}
-
-/// [`stuck_line`] for a trial that has not returned for `after` (whole seconds are said).
+/// What the lab says of a reload's trial that has not returned for `after` (whole seconds
+/// are said): still loading (`at` is `None`), or in the instant at `at` of its run.
 fn stuck_after(name: &str, at: Option<Nanos>, after: std::time::Duration) -> String {
     let secs = after.as_secs();
     match at {
@@ -457,6 +457,7 @@ fn shown_name(file: &Path) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::session::trial::SAID_AFTER;
 
     /// A trial stuck in a callback names the file saved, how long, the run time of the
     /// trial's instant, and that the run on screen is the code before; one stuck loading
@@ -464,7 +465,7 @@ mod tests {
     #[test]
     fn a_stuck_trial_is_said_with_its_file_and_where_it_is() {
         assert_eq!(
-            stuck_line("nodes/policy.py", Some(Nanos(1_200_000_000))),
+            stuck_after("nodes/policy.py", Some(Nanos(1_200_000_000)), SAID_AFTER),
             "reload of nodes/policy.py: its callback has not returned after 2 s of the trial run (t=1.20 s); the run on screen is the code before"
         );
         assert_eq!(
@@ -472,7 +473,7 @@ mod tests {
             "reload of nodes/policy.py: its callback has not returned after 5 s of the trial run (t=0.00 s); the run on screen is the code before"
         );
         assert_eq!(
-            stuck_line("brain.py", None),
+            stuck_after("brain.py", None, SAID_AFTER),
             "loading brain.py has not returned after 2 s; the run on screen is the code before"
         );
     }

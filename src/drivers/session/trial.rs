@@ -258,17 +258,25 @@ pub(super) struct Trial {
     done: Arc<AtomicBool>,
     /// The progress last seen, and since when.
     seen: (u64, Instant),
-    /// The progress at which it was last said not to return.
-    said: Option<u64>,
+    /// The progress at which it was last said not to return, and the whole seconds said.
+    said: Option<(u64, u64)>,
 }
 
 /// What a look at a trial finds ([`Trial::poll`]).
 pub(super) enum Poll {
     /// It has come to this.
     Done(Box<Outcome>),
-    /// It has not returned for [`SAID_AFTER`], first found so where it is: loading (`None`),
-    /// or in an instant of its run (`Some(t)`).
-    Stuck(Option<Nanos>),
+    /// It has not returned for [`SAID_AFTER`] or longer (`after`, whole seconds: found so
+    /// again at each further second), where it is: loading (`at` `None`), or in an instant
+    /// of its run (`Some(t)`). `first`: the first time it is found so at this place.
+    Stuck {
+        /// Where it is.
+        at: Option<Nanos>,
+        /// How long it has not returned, whole seconds.
+        after: Duration,
+        /// First found so here.
+        first: bool,
+    },
     /// It goes on.
     Going,
 }
@@ -331,11 +339,17 @@ impl Trial {
         if at != self.seen.0 {
             self.seen = (at, Instant::now());
         }
-        if self.seen.1.elapsed() < SAID_AFTER || self.said == Some(at) {
+        let secs = self.seen.1.elapsed().as_secs();
+        if secs < SAID_AFTER.as_secs() || self.said == Some((at, secs)) {
             return Poll::Going;
         }
-        self.said = Some(at);
-        Poll::Stuck((at != LOADING).then_some(Nanos(at)))
+        let first = self.said.is_none_or(|(said_at, _)| said_at != at);
+        self.said = Some((at, secs));
+        Poll::Stuck {
+            at: (at != LOADING).then_some(Nanos(at)),
+            after: Duration::from_secs(secs),
+            first,
+        }
     }
 
     /// Stop the trial (a newer save supersedes it, or the run it was saved in ended): its
