@@ -379,7 +379,7 @@ pub fn run_process(opts: &ProcessOptions, stop: &StopFlag) -> Result<(), DistErr
     // The launcher hears them before any process starts; the subscribing process
     // subscribes before it says it is ready, and the run starts once all are.
     for (_, p) in &publishers {
-        wait_matching(p, stop, Some(&launcher_gone), "the launcher")?;
+        wait_matching(p, stop, (Some(&launcher_gone), REPLY_TIMEOUT), "the launcher")?;
     }
     let ticked_pub = session
         .declare_publisher(keys.ticked(&opts.process))
@@ -823,7 +823,10 @@ impl Joined {
                 )));
             }
         }
-        wait_matching(&up, stop, None, "the launcher")?;
+        // As long as the launcher waits for its processes to be ready: a launch of
+        // hundreds starting on a few cores is answered late.
+        let patience = super::ready_wait(opts.credentials.processes.len());
+        wait_matching(&up, stop, (None, patience), "the launcher")?;
         let send = |m: &ToLauncher| up.put(wire::encode_json(m)).wait();
         let join = ToLauncher::Join {
             process: opts.process.clone(),
@@ -1067,14 +1070,14 @@ fn recv_own(
 }
 
 /// Wait until `p` has a matching subscriber (`who`, for the error): while the launcher
-/// lives when `gone` watches it, else for [`REPLY_TIMEOUT`].
+/// lives when `gone` watches it, else for `patience`.
 fn wait_matching(
     p: &zenoh::pubsub::Publisher<'_>,
     stop: &StopFlag,
-    gone: Option<&StopFlag>,
+    (gone, patience): (Option<&StopFlag>, Duration),
     who: &str,
 ) -> Result<(), DistError> {
-    let deadline = Instant::now() + REPLY_TIMEOUT;
+    let deadline = Instant::now() + patience;
     loop {
         if p.matching_status().wait().is_ok_and(|m| m.matching()) {
             return Ok(());
@@ -1089,7 +1092,7 @@ fn wait_matching(
             return Err(DistError::Peer(format!(
                 "{who} did not subscribe to {} within {} s",
                 p.key_expr(),
-                REPLY_TIMEOUT.as_secs()
+                patience.as_secs()
             )));
         }
         std::thread::sleep(Duration::from_millis(10));
