@@ -379,7 +379,12 @@ pub fn run_process(opts: &ProcessOptions, stop: &StopFlag) -> Result<(), DistErr
     // The launcher hears them before any process starts; the subscribing process
     // subscribes before it says it is ready, and the run starts once all are.
     for (_, p) in &publishers {
-        wait_matching(p, stop, (Some(&launcher_gone), REPLY_TIMEOUT), "the launcher")?;
+        wait_matching(
+            p,
+            stop,
+            (Some(&launcher_gone), REPLY_TIMEOUT),
+            "the launcher",
+        )?;
     }
     let ticked_pub = session
         .declare_publisher(keys.ticked(&opts.process))
