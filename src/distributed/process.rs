@@ -378,13 +378,9 @@ pub fn run_process(opts: &ProcessOptions, stop: &StopFlag) -> Result<(), DistErr
     let tokens = declare_tokens(&session, &keys, &spec, &mine, &opts.process)?;
     // The launcher hears them before any process starts; the subscribing process
     // subscribes before it says it is ready, and the run starts once all are.
+    let while_there = (Some(&launcher_gone), REPLY_TIMEOUT);
     for (_, p) in &publishers {
-        wait_matching(
-            p,
-            stop,
-            (Some(&launcher_gone), REPLY_TIMEOUT),
-            "the launcher",
-        )?;
+        wait_matching(p, stop, while_there, "the launcher")?;
     }
     let ticked_pub = session
         .declare_publisher(keys.ticked(&opts.process))

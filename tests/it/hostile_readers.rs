@@ -488,7 +488,12 @@ fn a_parameter_reply_past_its_bound_is_refused_before_it_is_decoded() {
     let _services = peer
         .declare_queryable("0/evil/**")
         .callback(move |q| {
-            let _ = q.reply(q.key_expr().clone(), reply.clone()).wait();
+            // Answered from a thread of its own: the tests run Zenoh on one thread
+            // (`.cargo/config.toml`), which must not wait to send 64 MiB itself.
+            let reply = reply.clone();
+            std::thread::spawn(move || {
+                let _ = q.reply(q.key_expr().clone(), reply).wait();
+            });
         })
         .wait()
         .unwrap();
