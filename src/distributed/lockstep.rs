@@ -234,11 +234,13 @@ pub fn subscribe_relayed(
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use ratelab_runtime::graph::spec::DEFAULT_GRAPH_TOML;
 
-    fn report(process: &str, index: u64, node: usize) -> Ticked {
+    /// Process `process`'s report of event `index`, a tick of `node` that published nothing
+    /// (also the relay's tests').
+    pub(crate) fn report(process: &str, index: u64, node: usize) -> Ticked {
         Ticked {
             process: process.into(),
             index,

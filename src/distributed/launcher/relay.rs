@@ -446,20 +446,7 @@ impl Relay {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    fn report(process: &str, index: u64, node: usize) -> Ticked {
-        Ticked {
-            process: process.into(),
-            index,
-            node,
-            t_ns: 0,
-            stop: false,
-            published: Vec::new(),
-            failed: None,
-            publish: false,
-            compute_ns: 0,
-        }
-    }
+    use crate::lockstep::tests::report;
 
     /// A course of a graph of three processes, nodes 0, 1, 2 in processes 0, 1, 2, with
     /// `n` reports taken (node `k % 3`'s at index `k`), none handed on yet.
