@@ -62,9 +62,10 @@ pub struct LaunchOptions {
     /// The program to start the processes with, ratelab's command line (`None`: start none,
     /// and wait for them to be started by hand with `ratelab process`).
     pub exe: Option<Program>,
-    /// Where the started processes' stderr goes, a line at a time as `PROCESS: LINE` (each
-    /// line also published on the graph's log key, [`Keys::log`]); `None`: to the
-    /// launcher's own stderr. A lab on the terminal takes them, so that no child writes
+    /// Where the started processes' stderr goes, a line at a time as `PROCESS: LINE`;
+    /// `None`: to the launcher's own stderr, as each process wrote it. Either way each
+    /// line is also published on the graph's log key ([`Keys::log`]), where a lab attached
+    /// from elsewhere reads it. A lab on the terminal takes them, so that no child writes
     /// over its screen. Lines are cut at [`MAX_STDERR_LINE`] bytes; a line that finds the
     /// channel full is dropped here (give a bounded one: it is on the log key anyway).
     pub child_stderr: Option<crossbeam_channel::Sender<String>>,
@@ -485,6 +486,7 @@ pub fn launch(
         say_to: say,
         last_join_line: RefCell::new(String::new()),
         refusals: RefCell::new(refusals),
+        relays: processes::Relays::default(),
     };
     let endpoint = me.endpoint.clone();
     me.say(&format!("listening on {endpoint}"));
@@ -716,6 +718,9 @@ struct Launch<'a> {
     /// The last line about a join (not said twice in a row).
     last_join_line: RefCell<String>,
     refusals: RefCell<super::refusals::Refusals>,
+    /// The threads passing the started processes' stderr on ([`processes`]): waited for
+    /// (briefly) when the launch ends, so a process's last words are not lost.
+    relays: processes::Relays,
 }
 
 impl Launch<'_> {

@@ -41,11 +41,9 @@ impl Launch<'_> {
             .process_group(0)
             .stdin(Stdio::null())
             .stdout(Stdio::null())
-            .stderr(if self.opts.child_stderr.is_some() {
-                Stdio::piped()
-            } else {
-                Stdio::inherit()
-            });
+            // Piped always: its lines also go on the graph's log key, for a lab attached
+            // from another terminal (`ratelab lab --attach`).
+            .stderr(Stdio::piped());
         // A node dies with the launcher, however the launcher ends.
         // SAFETY: prctl is async-signal-safe and touches only this (child) process.
         unsafe {
@@ -57,33 +55,32 @@ impl Launch<'_> {
         let mut child = cmd
             .spawn()
             .map_err(|e| DistError::Usage(format!("cannot start {}: {e}", exe.path.display())))?;
-        if let Some(to) = &self.opts.child_stderr {
-            pass_stderr(
-                p,
-                &mut child,
-                to.clone(),
-                self.link.session.clone(),
-                self.link.keys.log(),
-            );
+        if let Some(relay) = pass_stderr(
+            p,
+            &mut child,
+            self.opts.child_stderr.clone(),
+            self.link.session.clone(),
+            self.link.keys.log(),
+        ) {
+            self.relays.0.borrow_mut().push(relay);
         }
         Ok(Some(child))
     }
 }
 
-/// Pass `child`'s stderr on a line at a time, as `PROCESS: LINE`, to `to` and on the log
-/// key, until the child closes it (a thread that ends with the child).
+/// Pass `child`'s stderr on a line at a time, as `PROCESS: LINE`, on the log key (where an
+/// attached lab reads it) and to `to`, or, without `to`, to the launcher's own stderr as
+/// the child wrote it; until the child closes it (a thread that ends with the child).
 fn pass_stderr(
     process: &str,
     child: &mut Child,
-    to: crossbeam_channel::Sender<String>,
+    to: Option<crossbeam_channel::Sender<String>>,
     session: zenoh::Session,
     log_key: String,
-) {
-    let Some(err) = child.stderr.take() else {
-        return;
-    };
+) -> Option<std::thread::JoinHandle<()>> {
+    let err = child.stderr.take()?;
     let process = process.to_string();
-    let _ = std::thread::Builder::new()
+    std::thread::Builder::new()
         .name(format!("stderr {process}"))
         .spawn(move || {
             let mut r = std::io::BufReader::new(err);
@@ -93,14 +90,45 @@ fn pass_stderr(
                 ratelab_core::input::read_line_bounded(&mut r, MAX_STDERR_LINE, &mut buf)
             {
                 let text = String::from_utf8_lossy(&buf);
-                let line = format!(
-                    "{process}: {}",
-                    ratelab_core::text::printable(text.trim_end())
-                );
+                let text = text.trim_end();
+                let line = format!("{process}: {}", ratelab_core::text::printable(text));
                 let _ = session.put(log_key.as_str(), line.as_str()).wait();
-                let _ = to.try_send(line);
+                match &to {
+                    Some(to) => {
+                        let _ = to.try_send(line);
+                    }
+                    None => {
+                        use std::io::Write as _;
+                        let _ = writeln!(std::io::stderr().lock(), "{text}");
+                    }
+                }
             }
-        });
+        })
+        .ok()
+}
+
+/// The threads passing the started processes' stderr on. Dropped (with the launch, after
+/// its processes: their pipes are closed then), each is waited for until it has passed its
+/// last line, for up to [`RELAY_GRACE`] in all: a grandchild that holds a pipe open (a
+/// node's own subprocess) does not hold the launcher.
+#[derive(Default)]
+pub(super) struct Relays(std::cell::RefCell<Vec<std::thread::JoinHandle<()>>>);
+
+/// How long a launch that ends waits, in all, for its processes' last stderr lines.
+const RELAY_GRACE: Duration = Duration::from_secs(1);
+
+impl Drop for Relays {
+    fn drop(&mut self) {
+        let deadline = Instant::now() + RELAY_GRACE;
+        for relay in self.0.get_mut().drain(..) {
+            while !relay.is_finished() && Instant::now() < deadline {
+                std::thread::sleep(Duration::from_millis(5));
+            }
+            if relay.is_finished() {
+                let _ = relay.join();
+            }
+        }
+    }
 }
 
 /// The child processes; every one still running is killed when this is dropped.
@@ -212,7 +240,13 @@ mod tests {
         let session =
             crate::open_session(&[crate::LOOPBACK_ANY.into()], &[], access).expect("a session");
         let (tx, rx) = crossbeam_channel::unbounded();
-        pass_stderr("policy", &mut child, tx, session, Keys::new("g").log());
+        pass_stderr(
+            "policy",
+            &mut child,
+            Some(tx),
+            session,
+            Keys::new("g").log(),
+        );
         let _ = child.wait();
         let lines: Vec<String> =
             std::iter::from_fn(|| rx.recv_timeout(Duration::from_secs(5)).ok()).collect();
