@@ -9,11 +9,16 @@
 //!
 //! | who | may publish (`put`) | may declare |
 //! |---|---|---|
-//! | everyone | nothing | subscribers, queries, liveliness subscribers and queries on the graph's keys |
-//! | the launcher | control (`@ctl/*`), the end (`@ended`), progress lines (`@log`) | its token `@launcher`, the settings' queryable `@setup` (and its replies) |
-//! | process `P` | the topics its nodes publish (on their keys, and on `@via/<topic>` for the launcher to pass on), its reports `@up/P`, ticks `@ticked/P`, counters `@stats/P` | its nodes' tokens `@node/P/*`, their endpoints' `@pub`/`@sub` tokens |
+//! | everyone | nothing | subscribers, queries, liveliness subscribers and queries on the graph's topics, tokens (`@node`, `@pub`, `@sub`, `@launcher`), figures (`@stats`), settings (`@setup`), log and end |
+//! | the launcher | control (`@ctl/*`), the end (`@ended`), progress lines (`@log`) | its token `@launcher`, the settings' queryable `@setup` (and its replies); subscribers to the launch's own traffic: reports (`@up`), ticks (`@ticked`), the samples it passes on (`@via`), control and relayed reports |
+//! | process `P` | the topics its nodes publish, on `@via/<topic>` for the launcher to pass on (a topic's own key is the router's), its reports `@up/P`, ticks `@ticked/P`, counters `@stats/P` | its nodes' tokens `@node/P/*`, their endpoints' `@pub`/`@sub` tokens; subscribers to its own control `@ctl/P` and relayed reports `@relayed/P` |
 //! | an observer | nothing | nothing more |
 //! | the launcher's router | anything on the graph's keys | anything on the graph's keys |
+//!
+//! The launch's own traffic is the launcher's to hear: the router passes it on from the
+//! one thread Zenoh runs it on, waiting for room in every subscriber's link
+//! ([`super::launcher`]'s outbox), so a subscriber that stops reading it (a frozen watcher)
+//! would hold the whole star.
 //!
 //! A launch is a star ([`super::open_router`]): every process and watcher links to the
 //! launcher's router alone, so the check that matters is the router's, on each message
@@ -55,6 +60,20 @@ const AT_KEYS: [&str; 13] = [
     "@launcher",
 ];
 
+/// The `@` keys everyone may read: all but the launch's own traffic (`@ctl`, `@up`,
+/// `@ticked`, `@relayed`, `@via`), which only the launcher hears (a process its own control
+/// and relayed reports).
+const LAUNCH_TRAFFIC_FREE: [&str; 8] = [
+    "@node/**",
+    "@pub/**",
+    "@sub/**",
+    "@stats/**",
+    "@setup",
+    "@ended",
+    "@log",
+    "@launcher",
+];
+
 /// Every message kind Zenoh's access control knows.
 const ALL_MESSAGES: [&str; 9] = [
     "put",
@@ -86,31 +105,34 @@ pub fn acl(keys: &Keys, processes: &[String], spec: Option<&GraphSpec>) -> Value
         }));
         id
     };
-    let mut read_keys = vec![format!("{p}/**")];
-    read_keys.extend(AT_KEYS.iter().map(|k| at(k)));
+    let mut all_keys = vec![format!("{p}/**")];
+    all_keys.extend(AT_KEYS.iter().map(|k| at(k)));
     // `ratelab top` and the processes look for any graph's launcher, settings, figures,
     // nodes and end (what they find is this launch's: no other peer can connect).
-    for k in ["@launcher", "@setup", "@stats/*", "@ended", "@node/*/*"] {
-        read_keys.push(format!("ratelab/*/{k}"));
-    }
+    let discovery = ["@launcher", "@setup", "@stats/*", "@ended", "@node/*/*"]
+        .map(|k| format!("ratelab/*/{k}"));
+    all_keys.extend(discovery.iter().cloned());
+    // What everyone may read: the graph's topics, tokens, figures, settings, log and end;
+    // not the launch's own traffic (see the module's header).
+    let mut shared_reads = vec![format!("{p}/**")];
+    shared_reads.extend(LAUNCH_TRAFFIC_FREE.iter().map(|k| at(k)));
+    shared_reads.extend(discovery.iter().cloned());
     // With a default of deny, Zenoh filters what a session sends too: it sends anything
     // on the graph's keys (what it may send is bounded where it is received).
-    let send = rule_on("egress", "send".into(), &ALL_MESSAGES, read_keys.clone());
+    let send = rule_on("egress", "send".into(), &ALL_MESSAGES, all_keys.clone());
     let mut rule = |id: String, messages: &[&str], key_exprs: Vec<String>| {
         rule_on("ingress", id, messages, key_exprs)
     };
-    let read = rule(
-        "read".into(),
-        &[
-            "declare_subscriber",
-            "query",
-            "declare_liveliness_subscriber",
-            "liveliness_query",
-        ],
-        read_keys.clone(),
-    );
+    const READS: [&str; 4] = [
+        "declare_subscriber",
+        "query",
+        "declare_liveliness_subscriber",
+        "liveliness_query",
+    ];
+    let read = rule("read".into(), &READS, shared_reads);
+    let read_all = rule("launcher-read".into(), &READS, all_keys.clone());
     // The router passes on what it let in, and says what the launcher says.
-    let routed = rule("router-routes".into(), &ALL_MESSAGES, read_keys);
+    let routed = rule("router-routes".into(), &ALL_MESSAGES, all_keys);
     let mut roles = vec![Role::Launcher, Role::Observer, Role::Router];
     roles.extend(processes.iter().cloned().map(Role::Process));
     let subjects: Vec<Value> = roles
@@ -126,6 +148,7 @@ pub fn acl(keys: &Keys, processes: &[String], spec: Option<&GraphSpec>) -> Value
     };
     own(&Role::Router, vec![routed]);
     let launcher = vec![
+        read_all,
         rule(
             "launcher-put".into(),
             &["put"],
@@ -152,9 +175,10 @@ pub fn acl(keys: &Keys, processes: &[String], spec: Option<&GraphSpec>) -> Value
         let mut tokens = vec![format!("{p}/@node/{proc_name}/**")];
         match spec {
             Some(spec) => {
+                // On `@via` only: the router alone puts on a topic's key (from its outbox's
+                // thread, never from Zenoh's).
                 for t in &spec.topics {
                     if spec.process_of(t.publisher) == *proc_name {
-                        puts.push(keys.topic(&t.name));
                         puts.push(keys.via(&t.name));
                     }
                 }
@@ -177,6 +201,11 @@ pub fn acl(keys: &Keys, processes: &[String], spec: Option<&GraphSpec>) -> Value
         let mine = vec![
             rule(format!("{id}-put"), &["put"], puts),
             rule(format!("{id}-token"), &["liveliness_token"], tokens),
+            rule(
+                format!("{id}-read"),
+                &READS,
+                vec![keys.control(proc_name), keys.relayed(proc_name)],
+            ),
         ];
         own(&role, mine);
     }
@@ -250,13 +279,15 @@ mod tests {
         let acl = acl(&keys, &procs, Some(&spec));
         let p = keys.prefix();
         let robot = allowed(&acl, &Role::Process("robot".into()), "put");
-        assert!(robot.contains(&format!("{p}/obs")), "{robot:?}");
         assert!(robot.contains(&format!("{p}/@via/obs")), "{robot:?}");
+        // A topic's own key is the router's (passed on from `@via`).
+        assert!(!robot.contains(&format!("{p}/obs")), "{robot:?}");
         assert!(!robot.contains(&format!("{p}/action")), "{robot:?}");
         assert!(!robot.contains(&format!("{p}/@via/action")), "{robot:?}");
         let policy = allowed(&acl, &Role::Process("policy".into()), "put");
-        assert!(policy.contains(&format!("{p}/action")), "{policy:?}");
-        assert!(!policy.contains(&format!("{p}/obs")), "{policy:?}");
+        assert!(policy.contains(&format!("{p}/@via/action")), "{policy:?}");
+        assert!(!policy.contains(&format!("{p}/action")), "{policy:?}");
+        assert!(!policy.iter().any(|k| k.ends_with("obs")), "{policy:?}");
         assert!(!policy.iter().any(|k| k.contains("@ctl")), "{policy:?}");
         assert_eq!(
             allowed(&acl, &Role::Launcher, "put"),
@@ -293,6 +324,42 @@ mod tests {
             !tokens.iter().any(|k| k.contains("@node/robot")),
             "{tokens:?}"
         );
+    }
+
+    #[test]
+    fn only_the_launcher_subscribes_to_the_launch_s_own_traffic() {
+        let spec = chapter();
+        let keys = Keys::new(&spec.name);
+        let procs: Vec<String> = spec.placement().into_iter().map(|(p, _)| p).collect();
+        let p = keys.prefix();
+        for shape in [Some(&spec), None] {
+            let acl = acl(&keys, &procs, shape);
+            let subs = |role: &Role| allowed(&acl, role, "declare_subscriber");
+            let launcher = subs(&Role::Launcher);
+            for k in ["@via/**", "@up/**", "@ticked/**", "@ctl/**", "@relayed/**"] {
+                assert!(launcher.contains(&format!("{p}/{k}")), "{k}: {launcher:?}");
+            }
+            let traffic = ["@via", "@up", "@ticked", "@ctl", "@relayed"];
+            let observer = subs(&Role::Observer);
+            assert!(observer.contains(&format!("{p}/**")), "{observer:?}");
+            assert!(observer.contains(&format!("{p}/@stats/**")), "{observer:?}");
+            assert!(
+                !observer
+                    .iter()
+                    .any(|k| traffic.iter().any(|t| k.contains(t))),
+                "{observer:?}"
+            );
+            let policy = subs(&Role::Process("policy".into()));
+            let own: Vec<&String> = policy
+                .iter()
+                .filter(|k| traffic.iter().any(|t| k.contains(t)))
+                .collect();
+            assert_eq!(
+                own,
+                [&keys.control("policy"), &keys.relayed("policy")],
+                "{policy:?}"
+            );
+        }
     }
 
     #[test]

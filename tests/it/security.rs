@@ -124,20 +124,22 @@ fn an_identity_publishes_only_what_the_graph_gives_it() {
     let keys = Keys::new(&spec.name);
     let creds = Credentials::generate(&spec.name, &chapter_processes()).unwrap();
     let ep = format!("tls/127.0.0.1:{}", free_port());
-    // The robot's process: it subscribes to /action and to its control key.
-    let robot = session(
+    // The launcher's session, which hears what processes publish for it to pass on
+    // (`@via/action`), and here also the topic's own key and the robot's control key.
+    let launcher = session(
         &creds,
-        Role::Process("robot".into()),
+        Role::Launcher,
         Some(&spec),
         std::slice::from_ref(&ep),
         &[],
     )
     .unwrap();
-    let (action, _a) = counting(&robot, &keys.topic("/action"));
-    let (control, _c) = counting(&robot, &keys.control("robot"));
+    let (via, _v) = counting(&launcher, &keys.via("/action"));
+    let (topic, _t) = counting(&launcher, &keys.topic("/action"));
+    let (control, _c) = counting(&launcher, &keys.control("robot"));
     let tokens = Arc::new(AtomicUsize::new(0));
     let t = tokens.clone();
-    let _live = robot
+    let _live = launcher
         .liveliness()
         .declare_subscriber(format!("{}/@node/**", keys.prefix()))
         .callback(move |_| {
@@ -154,24 +156,24 @@ fn an_identity_publishes_only_what_the_graph_gives_it() {
     }
     .encode();
     let start = encode_json(&ToProcess::Start { start_mono_ns: 0 });
-    // Publishes `n` forces on /action and `n` starts on robot's control key as `role`, and
-    // declares a token for the policy's node; returns how many of each arrived. It waits
-    // (at most 10 s each) for the counts `want` says should arrive, not a fixed time a
-    // loaded machine may not fill, then 300 ms more in which nothing else may arrive.
-    let attempt = |role: Role, want: (usize, usize, usize)| -> (usize, usize, usize) {
-        let (a0, c0, t0) = (
-            action.load(Ordering::SeqCst),
-            control.load(Ordering::SeqCst),
-            tokens.load(Ordering::SeqCst),
-        );
-        let counts = || {
+    type Counts = (usize, usize, usize, usize);
+    // Publishes `n` forces on `@via/action` and on `/action`'s own key and `n` starts on
+    // robot's control key as `role`, and declares a token for the policy's node; returns
+    // how many of each arrived. It waits (at most 10 s each) for the counts `want` says
+    // should arrive, not a fixed time a loaded machine may not fill, then 300 ms more in
+    // which nothing else may arrive.
+    let attempt = |role: Role, want: Counts| -> Counts {
+        let before = [&via, &topic, &control, &tokens].map(|c| c.load(Ordering::SeqCst));
+        let counts = || -> Counts {
+            let now = [&via, &topic, &control, &tokens].map(|n| n.load(Ordering::SeqCst));
             (
-                action.load(Ordering::SeqCst) - a0,
-                control.load(Ordering::SeqCst) - c0,
-                tokens.load(Ordering::SeqCst) - t0,
+                now[0] - before[0],
+                now[1] - before[1],
+                now[2] - before[2],
+                now[3] - before[3],
             )
         };
-        let wait_for = |ok: &dyn Fn((usize, usize, usize)) -> bool| {
+        let wait_for = |ok: &dyn Fn(Counts) -> bool| {
             let until = Instant::now() + Duration::from_secs(10);
             while !ok(counts()) && Instant::now() < until {
                 std::thread::sleep(Duration::from_millis(20));
@@ -183,41 +185,104 @@ fn an_identity_publishes_only_what_the_graph_gives_it() {
             .declare_token(keys.node_token("policy", "policy"))
             .wait()
             .unwrap();
-        // Declarations travel first: wait until the robot's subscriptions reach this session.
-        let p = s.declare_publisher(keys.topic("/action")).wait().unwrap();
+        // Declarations travel first: wait until the launcher's subscriptions reach this
+        // session.
+        let p = s.declare_publisher(keys.via("/action")).wait().unwrap();
+        let direct = s.declare_publisher(keys.topic("/action")).wait().unwrap();
         let until = Instant::now() + Duration::from_secs(5);
-        while !p.matching_status().wait().unwrap().matching() && Instant::now() < until {
+        while !(p.matching_status().wait().unwrap().matching()
+            && direct.matching_status().wait().unwrap().matching())
+            && Instant::now() < until
+        {
             std::thread::sleep(Duration::from_millis(20));
         }
         for _ in 0..20 {
             p.put(force.clone()).wait().unwrap();
+            direct.put(force.clone()).wait().unwrap();
             s.put(keys.control("robot"), start.clone()).wait().unwrap();
         }
         // What should arrive while the token is declared (its declaration, if allowed), then
         // time for anything refused to arrive after all, the session still open.
-        wait_for(&|(a, c, t): (usize, usize, usize)| {
-            a >= want.0 && c >= want.1 && t >= want.2.min(1)
+        wait_for(&|(v, t, c, k): Counts| {
+            v >= want.0 && t >= want.1 && c >= want.2 && k >= want.3.min(1)
         });
         std::thread::sleep(Duration::from_millis(300));
         drop(token);
         // The token's withdrawal, if its declaration arrived.
-        wait_for(&|(_, _, t): (usize, usize, usize)| t >= want.2);
+        wait_for(&|(_, _, _, k): Counts| k >= want.3);
         drop(s);
         std::thread::sleep(Duration::from_millis(300));
         counts()
     };
     // The robot's own identity (or an observer's) may not command the actuator, control a
-    // process nor declare another process's node: nothing reaches the robot's session.
-    assert_eq!(attempt(Role::Process("robot".into()), (0, 0, 0)), (0, 0, 0));
-    assert_eq!(attempt(Role::Observer, (0, 0, 0)), (0, 0, 0));
-    // The policy's identity may publish the force, not control; its own node's token
+    // process nor declare another process's node: nothing reaches the launcher's session.
+    assert_eq!(
+        attempt(Role::Process("robot".into()), (0, 0, 0, 0)),
+        (0, 0, 0, 0)
+    );
+    assert_eq!(attempt(Role::Observer, (0, 0, 0, 0)), (0, 0, 0, 0));
+    // The policy's identity may publish the force for the launcher to pass on, not on the
+    // topic's own key (the router's), nor control; its own node's token
     // (`@node/policy/policy`) arrives declared, then withdrawn.
     assert_eq!(
-        attempt(Role::Process("policy".into()), (20, 0, 2)),
-        (20, 0, 2)
+        attempt(Role::Process("policy".into()), (20, 0, 0, 2)),
+        (20, 0, 0, 2)
     );
     // The launcher may control.
-    assert_eq!(attempt(Role::Launcher, (0, 20, 0)), (0, 20, 0));
+    assert_eq!(attempt(Role::Launcher, (0, 0, 20, 0)), (0, 0, 20, 0));
+}
+
+/// What the launch's own traffic is, only the launcher hears: a session of an observer's or
+/// of a process's identity that subscribes to the samples passed on (`@via`), the reports
+/// (`@up`, `@ticked`) or another process's control and relayed reports receives none, while
+/// the launcher's own subscriber (and the process's to its own control) does.
+#[test]
+fn only_the_launcher_hears_the_launch_s_own_traffic() {
+    let _m = crate::machine::shared();
+    let spec = GraphSpec::parse(DEFAULT_GRAPH_TOML, "chapter").unwrap();
+    let keys = Keys::new(&spec.name);
+    let creds = Credentials::generate(&spec.name, &chapter_processes()).unwrap();
+    let ep = format!("tls/127.0.0.1:{}", free_port());
+    // The router's identity speaks for the launch, as the launcher's router does.
+    let router = session(
+        &creds,
+        Role::Router,
+        Some(&spec),
+        std::slice::from_ref(&ep),
+        &[],
+    )
+    .unwrap();
+    let traffic = [
+        keys.via("/obs"),
+        keys.up_from("policy"),
+        keys.ticked("policy"),
+        keys.control("policy"),
+        keys.relayed("policy"),
+    ];
+    let hear = |role: Role| -> Vec<usize> {
+        let s = session(&creds, role, None, &[], std::slice::from_ref(&ep)).unwrap();
+        let counters: Vec<_> = traffic.iter().map(|k| counting(&s, k)).collect();
+        // Room for the subscriptions to reach the router (or be refused there).
+        std::thread::sleep(Duration::from_millis(500));
+        for _ in 0..10 {
+            for k in &traffic {
+                router.put(k.as_str(), b"x".to_vec()).wait().unwrap();
+            }
+        }
+        let until = Instant::now() + Duration::from_secs(3);
+        while Instant::now() < until {
+            std::thread::sleep(Duration::from_millis(50));
+        }
+        counters
+            .iter()
+            .map(|(n, _)| n.load(Ordering::SeqCst))
+            .collect()
+    };
+    assert_eq!(hear(Role::Launcher), vec![10; 5]);
+    assert_eq!(hear(Role::Observer), vec![0; 5]);
+    // The policy's process hears its own control and relayed reports, nothing else of it.
+    assert_eq!(hear(Role::Process("policy".into())), vec![0, 0, 0, 10, 10]);
+    assert_eq!(hear(Role::Process("robot".into())), vec![0; 5]);
 }
 
 /// A launch under attack by a holder of the credentials who forges as the wrong identity,
