@@ -143,6 +143,12 @@ pub struct App {
     phases: Vec<f64>,
     /// The reliable topics whose losses this run has explained (once each, in the footer).
     explained_losses: Vec<TopicId>,
+    /// Each topic's losses counted before it was last made reliable (by topic index;
+    /// `None` while it is best effort): losses under best effort are not explained as
+    /// reliable delivery's.
+    lost_before_reliable: Vec<Option<u64>>,
+    /// Each topic's losses at the last step folded, by topic index.
+    lost_at_last_step: Vec<u64>,
     /// Each node's liveliness, by node index (`None`: no lease).
     alive: Vec<Option<bool>>,
     /// The run's injected faults (`--stall`, `--kill`).
@@ -292,6 +298,8 @@ impl App {
             qos: Vec::new(),
             phases: Vec::new(),
             explained_losses: Vec::new(),
+            lost_before_reliable: Vec::new(),
+            lost_at_last_step: Vec::new(),
             alive: Vec::new(),
             faults: Vec::new(),
             exec: VecDeque::new(),
@@ -618,6 +626,8 @@ impl App {
             .map(|i| cfg.phase_offsets.get(i).map_or(0.0, |p| p.as_millis_f64()))
             .collect();
         self.explained_losses.clear();
+        self.lost_before_reliable.clear();
+        self.lost_at_last_step.clear();
         self.faults = cfg.faults.clone();
         self.alive = cfg
             .graph

@@ -2297,6 +2297,49 @@ mod tests {
         assert_eq!(app.view().message, None);
     }
 
+    /// Losses counted while a topic was best effort are not explained as reliable
+    /// delivery's once `R` makes it reliable: only a loss counted after the switch is.
+    #[test]
+    fn losses_from_before_a_topic_was_made_reliable_are_not_explained() {
+        ratelab::init();
+        let mut cfg = virtual_cfg(50.0, 2);
+        cfg.graph.set_qos("/action", "loss=0.9").unwrap();
+        let report = run(&cfg, Box::new(Scripted), RunOptions::new()).unwrap();
+        // Switched at 0.3 s (at 90% loss the pole falls within the second).
+        let second = ratelab::Nanos(300 * ratelab::Nanos::MILLISECOND.0);
+        let (mut app, _rx) = told(&cfg, &report.trace, second);
+        let lost_at =
+            |s: &ratelab::runlog::StepRecord| s.topics.get(ratelab::graph::TopicId(1)).lost;
+        let last = report.trace.iter().rfind(|s| s.t <= second).unwrap();
+        assert!(lost_at(last) > 0, "best effort lost some");
+        assert_eq!(app.view().message, None);
+        // `R`: /action made reliable (the engine's status says so).
+        let mut qos: Vec<_> = cfg.graph.topics.iter().map(|t| t.qos).collect();
+        qos[1].reliability = ratelab::qos::Reliability::Reliable;
+        app.on_telemetry(chapter_status(qos, vec![None; 3]));
+        // A step with no loss since: nothing to explain.
+        app.on_telemetry(Telemetry::Step(Box::new(last.clone())));
+        assert_eq!(app.view().message, None);
+        // The next loss is reliable delivery's.
+        let next = report
+            .trace
+            .iter()
+            .find(|s| s.t > second && lost_at(s) > lost_at(last))
+            .unwrap_or_else(|| {
+                let lost: Vec<_> = report.trace.iter().map(|s| (s.t.0, lost_at(s))).collect();
+                panic!("no loss after 0.3 s: {lost:?}")
+            });
+        app.on_telemetry(Telemetry::Step(Box::new(next.clone())));
+        assert!(
+            app.view()
+                .message
+                .unwrap_or_default()
+                .starts_with("/action: lost though reliable"),
+            "{:?}",
+            app.view().message
+        );
+    }
+
     /// A refused rate reads whole enough to act on at both sizes: the value tried and the
     /// rule (#25: at 80×24 "must be 50 Hz, got 4" when 40 was tried).
     #[test]

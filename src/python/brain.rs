@@ -136,8 +136,15 @@ impl PythonBrain {
     }
 }
 
-/// Read a learner's script: a regular file, bounded, UTF-8 (Python's default encoding).
+/// Read a learner's script: a regular file, bounded, UTF-8 (Python's default encoding);
+/// or the text the calling thread is pinned to ([`ratelab_runtime::interpreter::script_text`]).
 pub(crate) fn read_script(script: &str) -> Result<String, PythonError> {
+    ratelab_runtime::interpreter::script_text(script, || read_script_file(script))
+        .map(|text| text.to_string())
+}
+
+/// Read a learner's script from its file: a regular file, bounded, UTF-8.
+fn read_script_file(script: &str) -> Result<String, PythonError> {
     let bytes =
         ratelab_core::input::read_regular_file(std::path::Path::new(script), MAX_SCRIPT_BYTES)
             .map_err(|e| {

@@ -9,7 +9,9 @@
 
 use crate::graph::kind::{BuildContext, PythonCode, Work};
 use crate::policy::Policy;
-use std::sync::OnceLock;
+use std::cell::RefCell;
+use std::collections::BTreeMap;
+use std::sync::{Arc, OnceLock};
 
 /// The function a `--policy FILE.py` brain runs when none is named.
 pub const DEFAULT_FUNCTION: &str = "act";
@@ -70,6 +72,52 @@ pub fn installed() -> Result<&'static dyn Interpreter, String> {
         .ok_or_else(|| NOT_INSTALLED.to_string())
 }
 
+/// Learners' scripts by the path they were read from, their text as read: what a thread
+/// read ([`scripts_read`]), or what it is to read instead of the files ([`pin_scripts`]).
+pub type Scripts = BTreeMap<String, Arc<str>>;
+
+thread_local! {
+    /// Every script the thread read, as it last read it.
+    static READ: RefCell<Scripts> = const { RefCell::new(BTreeMap::new()) };
+    /// The scripts the thread reads instead of their files, if pinned.
+    static PINNED: RefCell<Option<Scripts>> = const { RefCell::new(None) };
+}
+
+/// The text of the learner's script `script`, as the calling thread is to read it: the text
+/// it is pinned to ([`pin_scripts`]), else what `read` gives (the file as it is now);
+/// either way kept as what the thread last read of it ([`scripts_read`]). The Python layer
+/// reads every script through this.
+///
+/// # Errors
+/// `read`'s error.
+pub fn script_text<E>(
+    script: &str,
+    read: impl FnOnce() -> Result<String, E>,
+) -> Result<Arc<str>, E> {
+    let text = match PINNED.with_borrow(|p| p.as_ref().and_then(|p| p.get(script).cloned())) {
+        Some(pinned) => pinned,
+        None => Arc::from(read()?),
+    };
+    READ.with_borrow_mut(|r| r.insert(script.to_string(), text.clone()));
+    Ok(text)
+}
+
+/// Every script the calling thread read ([`script_text`]), each as it last read it: the
+/// code of the run that thread built last (the lab's engine builds the run on screen on a
+/// thread of its own; a save's trial loads the saved code on another).
+pub fn scripts_read() -> Scripts {
+    READ.with_borrow(Clone::clone)
+}
+
+/// From now on the calling thread reads `scripts` instead of their files (`None`: the files
+/// again); a script not among them is read from its file. The lab pins the code of the run
+/// on screen when a save's code was not taken up (it did not load, or its trial was
+/// dropped), so that the next run starts with the code before, as it says, until a save
+/// is taken up.
+pub fn pin_scripts(scripts: Option<Scripts>) {
+    PINNED.with_borrow_mut(|p| *p = scripts);
+}
+
 /// Does `spec` name a Python brain (`FILE.py` or `FILE.py:FUNCTION`)? Returns the file and
 /// the function.
 pub fn parse_spec(spec: &str) -> Option<(&str, &str)> {
@@ -85,6 +133,34 @@ mod tests {
     use super::*;
     use crate::config::{ClockKind, RunConfig};
     use crate::graph::spec::GraphSpec;
+
+    #[test]
+    fn a_pinned_script_is_read_as_pinned_and_every_read_is_kept() {
+        let disk = |text: &str| {
+            let text = text.to_string();
+            move || Ok::<_, String>(text)
+        };
+        assert_eq!(&*script_text("a.py", disk("one")).unwrap(), "one");
+        assert_eq!(&*scripts_read()["a.py"], "one");
+        // The file changed: read again, and kept.
+        assert_eq!(&*script_text("a.py", disk("two")).unwrap(), "two");
+        pin_scripts(Some(scripts_read()));
+        // Pinned: the file's new text is not read; a script not pinned is.
+        assert_eq!(&*script_text("a.py", disk("three")).unwrap(), "two");
+        assert_eq!(&*script_text("b.py", disk("b")).unwrap(), "b");
+        assert_eq!(
+            script_text("c.py", || Err::<String, _>("unreadable")),
+            Err("unreadable")
+        );
+        // Another thread is not pinned.
+        std::thread::spawn(move || {
+            assert_eq!(&*script_text("a.py", disk("three")).unwrap(), "three");
+        })
+        .join()
+        .unwrap();
+        pin_scripts(None);
+        assert_eq!(&*script_text("a.py", disk("four")).unwrap(), "four");
+    }
 
     #[test]
     fn a_python_brain_is_spelled_with_its_file_and_function() {

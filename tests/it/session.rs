@@ -1462,3 +1462,98 @@ fn a_reload_whose_trial_never_returns_is_said_and_the_run_goes_on() {
     let log = live.quit_with_log();
     assert_eq!(log.runs.len(), 2, "the first run and the reload");
 }
+
+/// The code before is what runs after a save that was not taken up (issue 72): with a
+/// save's trial stuck, `r` drops the trial and starts the run again with the code the run
+/// on screen had (not the saved code, which hangs), and so does `r` after a save that did
+/// not load (a syntax error); a later save that loads is taken up as ever.
+#[test]
+fn after_a_save_not_taken_up_the_next_run_has_the_code_before() {
+    use ratelab::session::GraphSource;
+    use ratelab::Nanos;
+    ratelab::init(); // Python nodes
+    let _machine = crate::machine::alone();
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::create_dir(dir.path().join("nodes")).unwrap();
+    let graph_file = dir.path().join("g.toml");
+    let node_file = dir.path().join("nodes/scripted_balancer.py");
+    std::fs::copy(crate::repo("graphs/cartpole-python.toml"), &graph_file).unwrap();
+    std::fs::copy(crate::repo("graphs/nodes/scripted_balancer.py"), &node_file).unwrap();
+    let mut s = settings(
+        ClockKind::Virtual,
+        1,
+        false,
+        Speed::Times(1.0),
+        &dir.path().join("session.json"),
+    );
+    s.cfg.graph = ratelab::graph::GraphSpec::load(&graph_file).unwrap();
+    let source = graph_file.clone();
+    s.graph_source = Some(GraphSource(std::sync::Arc::new(move || {
+        ratelab::graph::GraphSpec::load(&source).map_err(|e| e.to_string())
+    })));
+    let live = LiveEngine::with(s, dir);
+    while live.wait_for("a step", step_at) < Nanos(300 * Nanos::MILLISECOND.0) {}
+    let original = std::fs::read_to_string(&node_file).unwrap();
+    let timer = "    def on_timer(self):\n";
+    assert!(original.contains(timer));
+    // A new run that gets past 0.5 s of run time: its code is not the hanging one.
+    let runs_past_half_a_second = |what: &str| {
+        live.wait_for(what, |t| {
+            matches!(t, Telemetry::Started { .. }).then_some(())
+        });
+        while live.wait_for(what, step_at) < Nanos(500 * Nanos::MILLISECOND.0) {}
+    };
+    // 1. The saved callback never returns: its trial is stuck; `r` drops it.
+    std::fs::write(
+        &node_file,
+        original.replace(
+            timer,
+            &format!("{timer}        while True:\n            pass\n"),
+        ),
+    )
+    .unwrap();
+    live.reload(&node_file);
+    live.wait_for("the stuck trial said", |t| match t {
+        Telemetry::Error(e) if e.contains("has not returned") => Some(()),
+        Telemetry::Reloaded { line } => panic!("taken up: {line}"),
+        _ => None,
+    });
+    live.ctl.send(Control::Reset { next_seed: false }).unwrap();
+    runs_past_half_a_second("the run after the dropped trial");
+    // And again (the code before stays until a save is taken up).
+    live.ctl.send(Control::Reset { next_seed: false }).unwrap();
+    runs_past_half_a_second("a second run after the dropped trial");
+    // 2. A save that does not load: the run goes on, and `r` starts it with the code before.
+    std::fs::write(&node_file, format!("{original}\ndef broken(:\n")).unwrap();
+    live.reload(&node_file);
+    live.wait_for("the save refused", |t| match t {
+        Telemetry::Error(e) if e.starts_with("not reloaded") => Some(()),
+        Telemetry::Reloaded { line } => panic!("taken up: {line}"),
+        _ => None,
+    });
+    live.ctl.send(Control::Reset { next_seed: false }).unwrap();
+    runs_past_half_a_second("the run after the refused save");
+    // 3. A save that loads is taken up, and the files are read again from then on.
+    let quiet = original.replace(
+        "self.pub.publish(Force(newtons=float(command) * MOTOR_N))",
+        "self.pub.publish(Force(newtons=0.0))",
+    );
+    assert_ne!(quiet, original);
+    std::fs::write(&node_file, &quiet).unwrap();
+    live.reload(&node_file);
+    let line = live.wait_for("the reload", |t| match t {
+        Telemetry::Reloaded { line } => Some(line.clone()),
+        Telemetry::Error(e) if e.starts_with("not reloaded") => panic!("{e}"),
+        _ => None,
+    });
+    assert!(
+        line.contains("fell at"),
+        "the saved code pushes nothing: {line}"
+    );
+    let log = live.quit_with_log();
+    assert_eq!(
+        log.runs.len(),
+        5,
+        "the first run, three with `r`, the reload"
+    );
+}

@@ -155,18 +155,33 @@ impl App {
         }
     }
 
-    /// After step `s`: a reliable topic that counts its first loss of the run has it
-    /// explained in the footer ([`reliable_loss_line`]), once a topic and run (a seek back,
-    /// folding the run again, does not say it again).
+    /// After step `s`: a reliable topic that counts its first loss of the run under reliable
+    /// delivery has it explained in the footer ([`reliable_loss_line`]), once a topic and run
+    /// (a seek back, folding the run again, does not say it again). Losses counted while
+    /// the topic was best effort (before `R` made it reliable) are not reliable delivery's.
     pub(super) fn explain_reliable_losses(&mut self, s: &StepRecord) {
-        let fresh: Vec<TopicId> = (0..self.qos.len().min(self.graph.topics.len()))
-            .map(TopicId)
-            .filter(|&id| {
-                self.qos[id.0].reliability == Reliability::Reliable
-                    && s.topics.get(id).lost > 0
-                    && !self.explained_losses.contains(&id)
-            })
-            .collect();
+        let n = self.qos.len().min(self.graph.topics.len());
+        self.lost_before_reliable.resize(n, None);
+        self.lost_at_last_step.resize(n, 0);
+        let mut fresh = Vec::new();
+        for i in 0..n {
+            let lost = s.topics.get(TopicId(i)).lost;
+            let before = &mut self.lost_before_reliable[i];
+            if lost < self.lost_at_last_step[i] {
+                // Counted again from the start (the run folded again from t = 0).
+                *before = before.map(|_| 0);
+            }
+            if self.qos[i].reliability == Reliability::Reliable {
+                // Made reliable since the last step (or reliable from the start: 0).
+                let since = *before.get_or_insert(self.lost_at_last_step[i]);
+                if lost > since && !self.explained_losses.contains(&TopicId(i)) {
+                    fresh.push(TopicId(i));
+                }
+            } else {
+                *before = None;
+            }
+            self.lost_at_last_step[i] = lost;
+        }
         for id in fresh {
             self.explained_losses.push(id);
             if !self.rewinding {

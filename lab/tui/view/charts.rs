@@ -434,7 +434,15 @@ pub(super) fn render_segment(v: &View, area: Rect, buf: &mut Buffer) {
 
 /// `n=81 (+19 no cmd) │ p50 20.0 │ p99 220.0 │ max 220.0 ms `: a latency panel's figures.
 /// Steps that applied no command have no latency: said beside n, not silently left out.
+/// With no sample there is no latency to give, not one of 0 ms: `none (20 steps, no
+/// command applied) `, as the summary says `none`.
 fn latency_figures(count: u64, no_command: u64, p50_ms: f64, p99_ms: f64, max_ms: f64) -> String {
+    if count == 0 {
+        return match no_command {
+            0 => "none (no command applied) ".to_string(),
+            n => format!("none ({n} steps, no command applied) "),
+        };
+    }
     let no_cmd = if no_command > 0 {
         format!(" (+{no_command} no cmd)")
     } else {

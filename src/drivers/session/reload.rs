@@ -110,6 +110,8 @@ impl Engine {
             return;
         };
         if say {
+            // The files hold the saved code: the next run reads the code before.
+            pin_code_before();
             ratelab_core::textlog::emit_for(
                 None,
                 None,
@@ -153,6 +155,8 @@ impl Engine {
                 return None;
             }
         };
+        // Taken up: the runs from here read the files as saved.
+        ratelab_runtime::interpreter::pin_scripts(None);
         let stalled = tried.stall_note();
         Some(match then {
             Then::Reload { cfg, old } => {
@@ -245,9 +249,19 @@ impl Engine {
             format!("{file}: {why}")
         };
         let line = format!("not reloaded: {why} (the run goes on with the code before)");
+        // And so does the next run (`r`, a fall): its files hold code that did not load.
+        pin_code_before();
         ratelab_core::textlog::emit_for(None, None, Level::Error, &line);
         let _ = self.tx.send(Telemetry::Error(line));
     }
+}
+
+/// Pin the scripts the run on screen was built with (read on this, the engine's, thread),
+/// so that the runs after it start with that code rather than the files' saved code, which
+/// was not taken up ([`ratelab_runtime::interpreter::pin_scripts`]); until a save is.
+fn pin_code_before() {
+    use ratelab_runtime::interpreter::{pin_scripts, scripts_read};
+    pin_scripts(Some(scripts_read()));
 }
 
 /// How a stretch of the real clock ended ([`Engine::real_run`]).

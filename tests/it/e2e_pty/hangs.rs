@@ -118,3 +118,56 @@ fn the_first_ctrl_c_interrupts_a_hung_callback_and_the_second_quits() {
         "still on the alternate screen"
     );
 }
+
+/// At 80×24: a saved node whose callback loops forever is named as the reload's trial, the
+/// run on screen advancing; `r` then drops the stuck trial and starts the run again with the
+/// code before, as it says — the new run advances and nothing is called hung — and quits
+/// with `q`.
+#[test]
+fn at_80x24_r_drops_a_stuck_trial_and_the_run_starts_again_with_the_code_before() {
+    let _machine = crate::machine::alone();
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::create_dir(dir.path().join("nodes")).unwrap();
+    let graph = dir.path().join("g.toml");
+    std::fs::copy(crate::repo("graphs/cartpole-python.toml"), &graph).unwrap();
+    let node = dir.path().join("nodes/scripted_balancer.py");
+    let script = std::fs::read_to_string(crate::repo("graphs/nodes/scripted_balancer.py")).unwrap();
+    std::fs::write(&node, &script).unwrap();
+    let timer = "    def on_timer(self):\n";
+    assert!(script.contains(timer));
+    let mut lab = Lab::start_sized(
+        &["--clock", "virtual", "--graph", graph.to_str().unwrap()],
+        &[],
+        80,
+        24,
+    );
+    lab.wait_for("BALANCED", Duration::from_secs(60));
+    std::fs::write(
+        &node,
+        script.replace(
+            timer,
+            &format!("{timer}        while True:\n            pass\n"),
+        ),
+    )
+    .unwrap();
+    // Wrapped on two rows at 80 columns.
+    let screen = lab.wait_until("the stuck trial said", Duration::from_secs(15), |s| {
+        s.contains("its callback has not") && s.contains("of the trial run (t=0.00 s)")
+    });
+    assert!(!screen.contains("HUNG"), "{screen}");
+    let t0 = shown_run_time(&screen).unwrap_or_else(|| panic!("{screen}"));
+    lab.wait_until("the run time advancing", Duration::from_secs(10), |s| {
+        shown_run_time(s).is_some_and(|t| t >= t0 + 0.5)
+    });
+    lab.keys("r");
+    // The new run, with the code before: it starts from t = 0 and gets past 1.5 s.
+    lab.wait_until("the new run from t = 0", Duration::from_secs(10), |s| {
+        shown_run_time(s).is_some_and(|t| t < t0)
+    });
+    let screen = lab.wait_until("the new run advancing", Duration::from_secs(20), |s| {
+        shown_run_time(s).is_some_and(|t| t >= 1.5)
+    });
+    assert!(!screen.contains("HUNG"), "{screen}");
+    assert!(screen.contains("BALANCED"), "{screen}");
+    lab.quit();
+}
