@@ -482,6 +482,30 @@ def exercises_copy(tmp_path, **predictions):
     return folder
 
 
+def test_the_learners_pytest_of_predictions_passes_a_right_one_and_fails_a_wrong_one(tmp_path):
+    """`python -m pytest exercises/` (exercises/test_predictions.py) as a learner runs it:
+    ex1 predicted right passes, the others unpredicted are skipped; predicted wrong, its test
+    fails with the prediction beside the outcome."""
+
+    def pytest_of(prediction):
+        folder = exercises_copy(tmp_path / prediction.replace(" ", ""), ex1=prediction)
+        return subprocess.run(
+            [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider",
+             str(folder / "test_predictions.py")],
+            capture_output=True, text=True, cwd=folder, timeout=600,
+        )
+
+    right = pytest_of("fails_at_hz = 5")
+    assert right.returncode == 0, right.stdout + right.stderr
+    assert "1 passed" in right.stdout and "skipped" in right.stdout, right.stdout
+    wrong = pytest_of("fails_at_hz = 50")
+    assert wrong.returncode == 1, wrong.stdout + wrong.stderr
+    assert "1 failed" in wrong.stdout, wrong.stdout
+    assert "ex1 is not passed" in wrong.stdout, wrong.stdout
+    assert ("fails_at_hz (missed): You predicted the pole first fails at 50 Hz; "
+            "it first fell at 5 Hz.") in wrong.stdout, wrong.stdout
+
+
 def test_an_exercise_returns_its_checks(tmp_path):
     folder = exercises_copy(tmp_path)
     found = ratelab.exercise("ex1", {"fails_at_hz": 5, "why": "too slow to catch it"}, dir=folder)

@@ -53,3 +53,45 @@ fn a_callback_s_exception_is_one_entry_and_enter_shows_its_traceback() {
     // The run's node failed: the lab says so in its exit status.
     assert!(!status.success(), "{status:?}");
 }
+
+/// A long exception message (three lines' worth at 80 columns) reads whole at 80×24: the
+/// log pane's entry begins with the file and line and the exception, and Enter shows the
+/// message entire, wrapped, its last word included.
+#[test]
+fn a_long_exception_message_reads_whole_at_80x24() {
+    let _machine = crate::machine::alone();
+    let dir = tempfile::tempdir().unwrap();
+    let words: Vec<String> = (1..=30).map(|i| format!("word{i:02}")).collect();
+    let message = words.join(" ");
+    let graph = crate::loud_python_graph(
+        dir.path(),
+        &format!("raise ValueError('the gain is wrong: {message} END')"),
+    );
+    let mut lab = Lab::start_sized(
+        &["--clock", "virtual", "--graph", graph.to_str().unwrap()],
+        &[],
+        80,
+        24,
+    );
+    lab.wait_for("NODE FAILED", Duration::from_secs(60));
+    lab.keys("v");
+    let screen = lab.wait_for("log: all nodes", Duration::from_secs(5));
+    assert!(
+        screen.contains("nodes/loud.py:") && screen.contains("ValueError: the gain is wrong"),
+        "{screen}"
+    );
+    lab.keys("\r");
+    let screen = lab.wait_for("Traceback (most recent call last):", Duration::from_secs(5));
+    // Every word of the message, in order, across the wrapped rows.
+    let text: String = screen.split_whitespace().collect::<Vec<_>>().join(" ");
+    let mut at = 0;
+    for w in words.iter().map(String::as_str).chain(["END"]) {
+        let found = text[at..]
+            .find(w)
+            .unwrap_or_else(|| panic!("'{w}' missing or out of order:\n{screen}"));
+        at += found + w.len();
+    }
+    lab.keys("\x1b");
+    lab.keys("q");
+    let _ = lab.exit_status("q");
+}

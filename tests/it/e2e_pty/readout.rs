@@ -46,6 +46,67 @@ fn paused_a_tick_back_the_readout_reads_the_run_at_the_cursor() {
         "{back}"
     );
     lab.quit();
+    // What it reads is the run's: θ and the applied force equal `trace.csv`'s at that
+    // instant, the same run (the chapter's graph, seed 0) written headless.
+    let (theta, force) = readout_theta_and_force(&back);
+    let dir = tempfile::tempdir().unwrap();
+    let duration = format!("{}", at.ceil() + 1.0);
+    let out = crate::distributed::ratelab(&[
+        "run",
+        "--clock",
+        "virtual",
+        "--duration",
+        &duration,
+        "--out",
+        dir.path().to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{out:?}");
+    let csv = std::fs::read_to_string(dir.path().join("trace.csv")).unwrap();
+    let header: Vec<&str> = csv.lines().next().unwrap().split(',').collect();
+    let col = |name: &str| header.iter().position(|h| *h == name).unwrap();
+    let t_ns = (at * 1e9).round() as u64;
+    let row: Vec<&str> = csv
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').collect::<Vec<_>>())
+        .find(|r| r[col("t_ns")].parse::<u64>().ok() == Some(t_ns))
+        .unwrap_or_else(|| panic!("no step at {t_ns} ns in trace.csv"));
+    let cell = |name: &str| row[col(name)].parse::<f64>().unwrap();
+    // Shown to 4 decimals (θ, rad) and 2 (force, N: the command times the motor's 10 N).
+    assert!(
+        (theta - cell("pole_angle")).abs() <= 0.5e-4 + 1e-12,
+        "θ {theta} against {}:\n{back}",
+        cell("pole_angle")
+    );
+    assert!(
+        (force - cell("action") * 10.0).abs() <= 0.5e-2 + 1e-12,
+        "F {force} against {}:\n{back}",
+        cell("action") * 10.0
+    );
+}
+
+/// The readout's θ (`· θ -0.1959 rad`) and applied force (`F -2.35 N · cmd`).
+fn readout_theta_and_force(screen: &str) -> (f64, f64) {
+    let number = |s: Option<&str>| -> f64 {
+        s.and_then(|v| v.split_whitespace().next())
+            .and_then(|v| v.parse().ok())
+            .unwrap_or_else(|| panic!("no readout value:\n{screen}"))
+    };
+    let theta = number(
+        screen
+            .lines()
+            .find(|l| l.contains(" rad/s"))
+            .and_then(|l| l.split("· θ ").nth(1)),
+    );
+    let force = number(
+        screen
+            .lines()
+            .find(|l| l.contains(" N · cmd"))
+            .and_then(|l| l.split_once(" N · cmd"))
+            .and_then(|(left, _)| left.rsplit_once("F "))
+            .map(|(_, v)| v),
+    );
+    (theta, force)
 }
 
 /// The run time the scrub cursor's readout reads (`t=2.980 s · θ …`, the pole-angle chart's
