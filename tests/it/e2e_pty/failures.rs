@@ -54,12 +54,19 @@ fn a_callback_s_exception_is_one_entry_and_enter_shows_its_traceback() {
     assert!(!status.success(), "{status:?}");
 }
 
-/// A long exception message (three lines' worth at 80 columns) reads whole at 80×24: the
-/// log pane's entry begins with the file and line and the exception, and Enter shows the
-/// message entire, wrapped, its last word included.
+/// A long exception message (three lines' worth at 80 columns) reads whole at 80×24 and
+/// 120×40: the log pane's entry begins with the file and line and the exception, and Enter
+/// shows the message entire, wrapped, its last word included.
 #[test]
-fn a_long_exception_message_reads_whole_at_80x24() {
+fn a_long_exception_message_reads_whole_at_both_sizes() {
     let _machine = crate::machine::alone();
+    for (cols, rows) in [(80, 24), (120, 40)] {
+        long_exception_at(cols, rows);
+    }
+}
+
+/// The test above at `cols`×`rows`.
+fn long_exception_at(cols: u16, rows: u16) {
     let dir = tempfile::tempdir().unwrap();
     let words: Vec<String> = (1..=30).map(|i| format!("word{i:02}")).collect();
     let message = words.join(" ");
@@ -70,8 +77,8 @@ fn a_long_exception_message_reads_whole_at_80x24() {
     let mut lab = Lab::start_sized(
         &["--clock", "virtual", "--graph", graph.to_str().unwrap()],
         &[],
-        80,
-        24,
+        cols,
+        rows,
     );
     lab.wait_for("NODE FAILED", Duration::from_secs(60));
     lab.keys("v");

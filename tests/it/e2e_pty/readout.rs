@@ -7,11 +7,19 @@ use std::time::Duration;
 
 /// Paused, ← a tick back: the pole-angle chart's title reads the run at the cursor, its run
 /// time the cursor's (the footer's `back at t=…`, the header's to its hundredth), with θ,
-/// θ̇, the force applied and the held command's age. At 80×24.
+/// θ̇, the force applied and the held command's age; θ and the force equal `trace.csv`'s
+/// there. At 80×24 and 120×40.
 #[test]
 fn paused_a_tick_back_the_readout_reads_the_run_at_the_cursor() {
     let _machine = crate::machine::alone();
-    let mut lab = Lab::start_sized(&["--clock", "virtual"], &[], 80, 24);
+    for (cols, rows) in [(80, 24), (120, 40)] {
+        readout_a_tick_back(cols, rows);
+    }
+}
+
+/// The test above at `cols`×`rows`.
+fn readout_a_tick_back(cols: u16, rows: u16) {
+    let mut lab = Lab::start_sized(&["--clock", "virtual"], &[], cols, rows);
     lab.wait_for("BALANCED", Duration::from_secs(60));
     std::thread::sleep(Duration::from_millis(1500));
     type_slowly(&mut lab, " ");
