@@ -877,10 +877,10 @@ fn virtual_exercises() -> Vec<Graded> {
     // ex2, ex4, ex5: the verdicts and amounts their checks and provenance comments state
     // (ex4: FIFO's latency at the fall is 240-340 ms over the seeds; ex5: reliable delivery's
     // mean latency at 80% loss is 16.5 ms; a latency is right within 20%).
-    let ex4 = |fifo_balances| {
+    let ex4 = |fifo_balances: bool| {
         format!("latest_balances = true\nfifo_balances = {fifo_balances}\nfifo_latency_at_fall_ms = 300\nlifespan_balances = true")
     };
-    let ex5 = |keeps| {
+    let ex5 = |keeps: &str| {
         format!("survives_low_loss = true\nsurvives_high_loss = false\nkeeps_it_up = {keeps}\nreliable_latency_ms = 16.5")
     };
     // ex6: the learner's node is the reference limiter, so the smallest clamp is the bands'.
@@ -903,12 +903,13 @@ fn virtual_exercises() -> Vec<Graded> {
     };
     // ex8: the first fall at the 20 Hz cut-off, a noise of the grid (exact): 0.014 rad, the
     // middle of the bands' band, as ex8_measurement_noisy_sensor asserts.
-    let ex8 = |lower| format!("fails_at_noise_rad = 0.014\nlower_cutoff_tolerates_more = {lower}");
+    let ex8 =
+        |lower: bool| format!("fails_at_noise_rad = 0.014\nlower_cutoff_tolerates_more = {lower}");
     // ex10: the middle of the bands' band (measured 1.89 s on average; right within 20%).
     let stays_up = (ex10.stays_up_at_least_s + ex10.stays_up_at_most_s) / 2.0;
     // ex11, the shipped brain: it falls at 5.5 Hz, below the scripted balancer's 7.5 Hz
     // (measured; a rate of the search, exact).
-    let ex11_prediction = |lower| format!("my_cliff_hz = 5.5\nlower_than_scripted = {lower}");
+    let ex11_prediction = |lower: bool| format!("my_cliff_hz = 5.5\nlower_than_scripted = {lower}");
     let mut ex11 = row(
         "ex11",
         "ex11_my_brain.toml",
@@ -918,7 +919,7 @@ fn virtual_exercises() -> Vec<Graded> {
     );
     ex11.beside = vec![(path(BRAIN_FILE), BRAIN_FILE.to_string())];
     // ex13: the bridge's names and types, and /clock at every instant (bands.toml: 80 a s).
-    let ex13 = |clock_hz| {
+    let ex13 = |clock_hz: u32| {
         format!("nodes = [\"/actuator\", \"/policy\", \"/ratelab\", \"/sensor\"]\nobs_type = \"sensor_msgs/msg/JointState\"\naction_type = \"std_msgs/msg/Float64\"\nclock_hz = {clock_hz}")
     };
     // ex14: each pair as the bands' table says; a late joiner gets nothing of the past from a
@@ -926,8 +927,9 @@ fn virtual_exercises() -> Vec<Graded> {
     let pairs: String = (ex14.pairs.iter())
         .map(|p| format!("{} = {}\n", p.key, p.delivers))
         .collect();
-    let ex14_prediction =
-        |kept| format!("{pairs}late_joiner_volatile = 0\nlate_joiner_transient_local = {kept}");
+    let ex14_prediction = |kept: usize| {
+        format!("{pairs}late_joiner_volatile = 0\nlate_joiner_transient_local = {kept}")
+    };
     vec![
         row(
             "ex1",
@@ -943,7 +945,13 @@ fn virtual_exercises() -> Vec<Graded> {
             "deep_queue_obs_drops = 0\ndeep_queue_balances = true".into(),
             "deep_queue_balances",
         ),
-        row("ex4", "ex4_stale_queue.toml", ex4(false), ex4(true), "fifo_balances"),
+        row(
+            "ex4",
+            "ex4_stale_queue.toml",
+            ex4(false),
+            ex4(true),
+            "fifo_balances",
+        ),
         row(
             "ex5",
             "ex5_watchdog.toml",
@@ -959,7 +967,13 @@ fn virtual_exercises() -> Vec<Graded> {
             ex7(starved),
             "sensor_hz_own_group",
         ),
-        row("ex8", "ex8_noisy_sensor.toml", ex8(true), ex8(false), "lower_cutoff_tolerates_more"),
+        row(
+            "ex8",
+            "ex8_noisy_sensor.toml",
+            ex8(true),
+            ex8(false),
+            "lower_cutoff_tolerates_more",
+        ),
         row(
             "ex10",
             "ex10_held_force.toml",
@@ -968,7 +982,13 @@ fn virtual_exercises() -> Vec<Graded> {
             "stays_up_s",
         ),
         ex11,
-        row("ex13", "ex13_what_ros2_sees.toml", ex13(80), ex13(90), "clock_hz"),
+        row(
+            "ex13",
+            "ex13_what_ros2_sees.toml",
+            ex13(80),
+            ex13(90),
+            "clock_hz",
+        ),
         row(
             "ex14",
             "ex14_incompatible_qos.toml",
@@ -1003,7 +1023,11 @@ fn every_virtual_exercise_exits_0_on_a_right_prediction_and_1_on_a_wrong_one() {
         assert_eq!(code, 0, "{} right:\n{out}{err}", r.which);
         let all_right = format!("Your prediction: {keys} of {keys} right.");
         assert!(out.contains(&all_right), "{} right:\n{out}", r.which);
-        assert!(out.contains("[ok]") && !out.contains("[!!]"), "{}:\n{out}", r.which);
+        assert!(
+            out.contains("[ok]") && !out.contains("[!!]"),
+            "{}:\n{out}",
+            r.which
+        );
         let (_root, dir) = predicted_in_tree(r.file, &r.wrong, &r.beside);
         let (code, out, err) = exercise_in(r.which, &dir);
         assert_eq!(code, 1, "{} wrong:\n{out}{err}", r.which);
@@ -1013,7 +1037,11 @@ fn every_virtual_exercise_exits_0_on_a_right_prediction_and_1_on_a_wrong_one() {
             r.missed
         );
         assert!(out.contains(&one_missed), "{} wrong:\n{out}", r.which);
-        assert!(out.contains("[ok]") && !out.contains("[!!]"), "{}:\n{out}", r.which);
+        assert!(
+            out.contains("[ok]") && !out.contains("[!!]"),
+            "{}:\n{out}",
+            r.which
+        );
         assert!(
             err.contains("error: 1 prediction missed or could not be read"),
             "{} wrong:\n{err}",
