@@ -504,11 +504,11 @@ pub fn launch(
     // when it is full under the real clock only); under the virtual clock every process's
     // tick reports too, to follow the run and hand each process the others' in its turn
     // ([`relay`]). Heard before any process starts.
-    let outbox = outbox::Outbox::start()?;
+    let outboxes = outbox::Outboxes::start(&processes)?;
     let real = cfg.clock == ClockKind::Real;
-    let _forwarded = outbox::forward_topics(&session, &keys, spec, &outbox, real)?;
+    let _forwarded = outbox::forward_topics(&session, &keys, spec, &outboxes, real)?;
     let relaying = (!real)
-        .then(|| relay::Relay::start(&session, &keys, spec, (&processes[..], &outbox)))
+        .then(|| relay::Relay::start(&session, &keys, spec, (&processes[..], &outboxes)))
         .transpose()?;
     let _launcher_token = session
         .liveliness()

@@ -15,22 +15,32 @@
 //! report names reaches its subscriber before the report does.
 //!
 //! With shared memory the sample stays a reference to the publisher's segment all the way.
-//! The queue is bounded by bytes ([`MAX_QUEUED_BYTES`]): past it (a process that reads its
-//! topics slower than they are published, under the real clock) samples are dropped, and
-//! their subscriber counts them lost on the wire, as a link would.
+//!
+//! There is an outbox, with its thread, per process the launch passes messages on to
+//! ([`Outboxes`]): a process that stops reading (frozen, or slower than its topics) holds
+//! only what goes to it, never what goes to the others. Each queue is bounded by bytes
+//! ([`MAX_QUEUED_BYTES_PER_PROCESS`], and [`MAX_QUEUED_BYTES`] for them all): past it
+//! (under the real clock) samples are dropped, and their subscriber counts them lost on the
+//! wire, as a link would.
 
 use crate::{DistError, Keys};
 use crossbeam_channel::Sender;
 use ratelab_runtime::graph::spec::GraphSpec;
+use std::collections::BTreeMap;
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::sync::Arc;
 use zenoh::bytes::ZBytes;
 use zenoh::Wait;
 
-/// The most bytes of samples the outbox holds; past it a sample handed in is dropped
-/// (under the real clock; [`forward_topics`]). A sample is charged at least
+/// The most bytes of samples the outboxes hold in all; past it a sample handed in is
+/// dropped (under the real clock; [`forward_topics`]). A sample is charged at least
 /// [`MIN_CHARGE_BYTES`].
 pub const MAX_QUEUED_BYTES: usize = 256 * 1024 * 1024;
+
+/// The most bytes of samples the outbox of one process holds; past it a sample for that
+/// process is dropped (as past [`MAX_QUEUED_BYTES`]), so that one process that stopped
+/// reading leaves room for the others.
+pub const MAX_QUEUED_BYTES_PER_PROCESS: usize = 64 * 1024 * 1024;
 
 /// What a sample is charged at least, bytes: a received payload may hold on to one of
 /// Zenoh's receive batches (64 KiB) however small it is.
@@ -51,39 +61,44 @@ struct Job {
     sample: bool,
 }
 
-/// The launcher's outbox and its sending thread (which ends once every handle to the
+/// The outbox of one process and its sending thread (which ends once every handle to the
 /// outbox is gone).
 pub(super) struct Outbox {
+    /// The process it passes messages on to.
+    process: String,
     tx: Sender<Job>,
-    /// Bytes of samples handed in and not yet put.
-    queued: Arc<AtomicUsize>,
+    /// Bytes of samples handed in and not yet put, to this process (`.0`) and to all
+    /// (`.1`, shared by every outbox of the launch).
+    queued: (Arc<AtomicUsize>, Arc<AtomicUsize>),
     /// Whether a dropped sample was said (once).
     said_full: AtomicBool,
 }
 
 impl Outbox {
-    /// An outbox and its thread.
+    /// An outbox for `process` and its thread; `all` counts the bytes every outbox holds.
     ///
     /// # Errors
     /// [`DistError::Usage`] when the thread cannot start.
-    pub(super) fn start() -> Result<Arc<Outbox>, DistError> {
+    fn start(process: &str, all: &Arc<AtomicUsize>) -> Result<Arc<Outbox>, DistError> {
         let (tx, rx) = crossbeam_channel::unbounded::<Job>();
-        let queued = Arc::new(AtomicUsize::new(0));
+        let queued = (Arc::new(AtomicUsize::new(0)), all.clone());
         let counted = queued.clone();
         // Detached: it ends once the outbox is dropped (its channel closed).
         let _detached = std::thread::Builder::new()
-            .name("launcher outbox".into())
+            .name(format!("outbox {process}"))
             .spawn(move || {
                 for job in rx {
                     let bytes = if job.sample { charge(&job.payload) } else { 0 };
                     // Under congestion control `Block` a put fails only when the session
                     // is closed: the launch is over.
                     let _ = job.out.put(job.payload).wait();
-                    counted.fetch_sub(bytes, Ordering::SeqCst);
+                    counted.0.fetch_sub(bytes, Ordering::SeqCst);
+                    counted.1.fetch_sub(bytes, Ordering::SeqCst);
                 }
             })
             .map_err(|e| DistError::Usage(format!("cannot start the launcher's outbox: {e}")))?;
         Ok(Arc::new(Outbox {
+            process: process.to_string(),
             tx,
             queued,
             said_full: AtomicBool::new(false),
@@ -91,15 +106,17 @@ impl Outbox {
     }
 
     /// Hand in `payload` to put on `out` (from any thread, never waiting). A `sample` is
-    /// dropped when [`MAX_QUEUED_BYTES`] of samples wait already (said once, on stderr).
+    /// dropped when [`MAX_QUEUED_BYTES_PER_PROCESS`] of samples wait for this process
+    /// already, or [`MAX_QUEUED_BYTES`] for all (said once, on stderr).
     pub(super) fn put(&self, out: &Out, payload: ZBytes, sample: bool) {
+        let len = if sample { charge(&payload) } else { 0 };
         if sample {
-            let len = charge(&payload);
-            if self.queued.fetch_add(len, Ordering::SeqCst) + len > MAX_QUEUED_BYTES {
-                self.queued.fetch_sub(len, Ordering::SeqCst);
+            if !admit(&self.queued, len) {
                 if !self.said_full.swap(true, Ordering::Relaxed) {
                     eprintln!(
-                        "[ratelab] launch: over {} MiB of samples wait to be passed on (a process reads its topics slower than they come): the rest are dropped, counted lost by their subscribers",
+                        "[ratelab] launch: over {} MiB of samples wait to be passed on to process '{}' ({} MiB for all; it reads its topics slower than they come): the rest are dropped, counted lost by their subscribers",
+                        MAX_QUEUED_BYTES_PER_PROCESS / (1024 * 1024),
+                        self.process,
                         MAX_QUEUED_BYTES / (1024 * 1024)
                     );
                 }
@@ -111,20 +128,55 @@ impl Outbox {
             payload,
             sample,
         };
-        if let Err(e) = self.tx.send(job) {
+        if self.tx.send(job).is_err() {
             // The thread is gone (it never ends before the outbox): nothing to count.
-            if e.0.sample {
-                self.queued
-                    .fetch_sub(charge(&e.0.payload), Ordering::SeqCst);
-            }
+            self.queued.0.fetch_sub(len, Ordering::SeqCst);
+            self.queued.1.fetch_sub(len, Ordering::SeqCst);
         }
+    }
+}
+
+/// Count `len` bytes more into `queued` (one process's, and all processes') if both stay
+/// within their bounds ([`MAX_QUEUED_BYTES_PER_PROCESS`], [`MAX_QUEUED_BYTES`]); `false`
+/// (nothing counted) when either would pass it.
+fn admit(queued: &(Arc<AtomicUsize>, Arc<AtomicUsize>), len: usize) -> bool {
+    let mine = queued.0.fetch_add(len, Ordering::SeqCst) + len;
+    let all = queued.1.fetch_add(len, Ordering::SeqCst) + len;
+    if mine > MAX_QUEUED_BYTES_PER_PROCESS || all > MAX_QUEUED_BYTES {
+        queued.0.fetch_sub(len, Ordering::SeqCst);
+        queued.1.fetch_sub(len, Ordering::SeqCst);
+        return false;
+    }
+    true
+}
+
+/// The launch's outboxes, one per process, each with its own thread.
+pub(super) struct Outboxes(BTreeMap<String, Arc<Outbox>>);
+
+impl Outboxes {
+    /// An outbox for each of `processes`.
+    ///
+    /// # Errors
+    /// [`DistError::Usage`] when a thread cannot start.
+    pub(super) fn start(processes: &[String]) -> Result<Outboxes, DistError> {
+        let all = Arc::new(AtomicUsize::new(0));
+        processes
+            .iter()
+            .map(|p| Ok((p.clone(), Outbox::start(p, &all)?)))
+            .collect::<Result<_, DistError>>()
+            .map(Outboxes)
+    }
+
+    /// The outbox of `process`, if the launch has it.
+    pub(super) fn of(&self, process: &str) -> Option<&Arc<Outbox>> {
+        self.0.get(process)
     }
 }
 
 /// Pass every crossing topic of `spec` (its publisher and subscriber in different
 /// processes) through the launcher: hear `@via/<topic>` ([`Keys::via`]; only the
-/// publisher's process may put there, [`crate::access`]) and hand each sample to `outbox`
-/// for the topic's key, in the order they came, each a sample the outbox may drop when full
+/// publisher's process may put there, [`crate::access`]) and hand each sample to the
+/// outbox of its subscriber's process for the topic's key, in the order they came, each a sample the outbox may drop when full
 /// only when `droppable` (the real clock: under the virtual clock its subscriber waits for
 /// it, and the lockstep's horizon bounds what waits). Keep the subscribers.
 ///
@@ -134,7 +186,7 @@ pub(super) fn forward_topics(
     session: &zenoh::Session,
     keys: &Keys,
     spec: &GraphSpec,
-    outbox: &Arc<Outbox>,
+    outboxes: &Outboxes,
     droppable: bool,
 ) -> Result<Vec<zenoh::pubsub::Subscriber<()>>, DistError> {
     let block = zenoh::qos::CongestionControl::Block;
@@ -143,9 +195,13 @@ pub(super) fn forward_topics(
         let Some(reader) = t.subscriber() else {
             continue;
         };
-        if spec.process_of(t.publisher) == spec.process_of(reader) {
+        let to = spec.process_of(reader);
+        if spec.process_of(t.publisher) == to {
             continue;
         }
+        let Some(outbox) = outboxes.of(&to) else {
+            continue; // not a process of this launch: nothing to pass on to
+        };
         let out: Out = Arc::new(
             session
                 .declare_publisher(keys.topic(&t.name))
@@ -160,4 +216,46 @@ pub(super) fn forward_topics(
         subscribers.push(subscriber);
     }
     Ok(subscribers)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A process that stopped reading fills its own bound, and the others still have room,
+    /// up to the bound of all.
+    #[test]
+    fn one_process_s_full_queue_leaves_room_for_the_others() {
+        let all = Arc::new(AtomicUsize::new(0));
+        let queue = || (Arc::new(AtomicUsize::new(0)), all.clone());
+        let (frozen, other) = (queue(), queue());
+        let mib = 1024 * 1024;
+        let per = MAX_QUEUED_BYTES_PER_PROCESS / mib;
+        for _ in 0..per {
+            assert!(admit(&frozen, mib));
+        }
+        assert!(!admit(&frozen, mib), "past its own bound");
+        assert_eq!(
+            frozen.0.load(Ordering::SeqCst),
+            MAX_QUEUED_BYTES_PER_PROCESS
+        );
+        assert!(admit(&other, mib), "another process still has room");
+        // Processes enough to fill the bound of all: then nobody has room.
+        let mut queues = vec![frozen, other];
+        while all.load(Ordering::SeqCst) + mib <= MAX_QUEUED_BYTES {
+            let q = queues.last().unwrap().clone();
+            if !admit(&q, mib) {
+                queues.push(queue());
+            }
+        }
+        assert_eq!(all.load(Ordering::SeqCst), MAX_QUEUED_BYTES);
+        assert!(!admit(&queue(), mib), "past the bound of all");
+        assert_eq!(all.load(Ordering::SeqCst), MAX_QUEUED_BYTES);
+    }
+
+    #[test]
+    fn a_small_sample_is_charged_a_receive_batch() {
+        assert_eq!(charge(&ZBytes::from(vec![0u8; 10])), MIN_CHARGE_BYTES);
+        assert_eq!(charge(&ZBytes::from(vec![0u8; 100_000])), 100_000);
+    }
 }

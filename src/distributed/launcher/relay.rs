@@ -16,7 +16,7 @@
 //! to send), after any sample handed in before them; the callback tells the launcher's
 //! main thread when the horizon must move on.
 
-use super::outbox::{Out, Outbox};
+use super::outbox::{Out, Outbox, Outboxes};
 use crate::lockstep::{check_tick_report, subscribe_reports, TickInbox, HORIZON_PERIODS};
 use crate::wire::{self, Ticked, MAX_RELAYED};
 use crate::{DistError, Keys};
@@ -48,10 +48,10 @@ pub(super) fn failed(spec: &GraphSpec, node: usize, at: Nanos, message: String) 
 /// launcher's main thread.
 pub(super) struct Relay {
     spec: GraphSpec,
-    /// Per process (placement order), the publisher of its relayed key.
-    outs: Vec<Out>,
-    /// Where the messages go out.
-    outbox: Arc<Outbox>,
+    /// Per process (placement order), the publisher of its relayed key and the outbox its
+    /// messages go out through (the one its crossing topics' samples take, so that a
+    /// sample a report names reaches it first).
+    outs: Vec<(Out, Arc<Outbox>)>,
     /// Per node of the graph, its process's place in `outs`.
     process_of: Vec<usize>,
     /// The run as followed so far (`None` before it starts: what comes then is not a
@@ -256,7 +256,7 @@ impl Relay {
         session: &zenoh::Session,
         keys: &Keys,
         spec: &GraphSpec,
-        (names, outbox): (&[String], &Arc<Outbox>),
+        (names, outboxes): (&[String], &Outboxes),
     ) -> Result<Relaying, DistError> {
         let block = zenoh::qos::CongestionControl::Block;
         let mut outs = Vec::with_capacity(names.len());
@@ -265,7 +265,10 @@ impl Relay {
                 .declare_publisher(keys.relayed(p))
                 .congestion_control(block)
                 .wait()?;
-            outs.push(Arc::new(publisher));
+            let outbox = outboxes
+                .of(p)
+                .ok_or_else(|| DistError::Usage(format!("no outbox for process '{p}'")))?;
+            outs.push((Arc::new(publisher), outbox.clone()));
         }
         let process_of = (0..spec.nodes.len())
             .map(|i| {
@@ -277,7 +280,6 @@ impl Relay {
         let relay = Arc::new(Relay {
             spec: spec.clone(),
             outs,
-            outbox: outbox.clone(),
             process_of,
             course: Mutex::new(None),
             nudge,
@@ -353,8 +355,8 @@ impl Relay {
     /// Hand `messages` ((process's place, bytes) each) to the outbox, in order.
     fn send(&self, messages: Vec<(usize, Vec<u8>)>) {
         for (p, bytes) in messages {
-            if let Some(out) = self.outs.get(p) {
-                self.outbox.put(out, bytes.into(), false);
+            if let Some((out, outbox)) = self.outs.get(p) {
+                outbox.put(out, bytes.into(), false);
             }
         }
     }
