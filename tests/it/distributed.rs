@@ -1831,3 +1831,86 @@ fn a_launch_of_128_processes_equals_the_in_process_run() {
     let common = ["--clock", "virtual", "--duration", "0.2", "--seed", "5"];
     assert_generated_launch_equals_in_process(511, 128, &common);
 }
+
+/// A process that stops reading holds only what goes to it (the launcher's outbox per
+/// process): the chapter's chain beside a camera whose 900 KiB frames go to a process of
+/// their own, `viewer`, without shared memory (so each frame fills the viewer's link).
+/// Frozen (SIGSTOP) for 3 s mid-run, the viewer's link fills and the launcher waits to
+/// pass it frames; the chain's samples, which go to `policy` and `robot`, still cross at
+/// once: the pole stays up and `/obs` and `/action` never wait on the wire for as long as
+/// the freeze.
+#[test]
+fn a_frozen_process_holds_only_what_goes_to_it() {
+    let _m = crate::machine::alone();
+    let dir = tempfile::tempdir().unwrap();
+    let graph = dir.path().join("viewer.toml");
+    let chapter = ratelab::graph::spec::DEFAULT_GRAPH_TOML;
+    std::fs::write(
+        &graph,
+        chapter.replacen(
+            "[[topic]]",
+            "[[node]]\nname = \"camera\"\nkind = \"camera\"\nrate_hz = 30\npublishes = \"/image\"\n\
+             params = { width_px = 640, height_px = 480 }\n\n\
+             [[node]]\nname = \"vision\"\nkind = \"image_estimator\"\nrate_hz = 30\n\
+             subscribes = \"/image\"\npublishes = \"/meas\"\nprocess = \"viewer\"\n\n\
+             [[topic]]\nname = \"/image\"\ntype = \"image\"\ndepth = 1\n\n\
+             [[topic]]\nname = \"/meas\"\ntype = \"position\"\ndepth = 1\n\n[[topic]]",
+            1,
+        ),
+    )
+    .unwrap();
+    let port = free_port();
+    let ep = format!("tls/127.0.0.1:{port}");
+    let mut launcher = bin()
+        .args([
+            "launch",
+            "--processes",
+            "--clock",
+            "real",
+            "--duration",
+            "8",
+        ])
+        .args(["--listen", &ep])
+        .arg(&graph)
+        .env(ratelab::distributed::SHARED_MEMORY_ENV, "off")
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let (rx, mut lines) = listening(&mut launcher);
+    assert!(
+        wait_line(&rx, &mut lines, "process 'viewer' ready", 60),
+        "{lines:?}"
+    );
+    let viewer = node_processes(port, "viewer");
+    assert_eq!(viewer.len(), 1, "{viewer:?}");
+    std::thread::sleep(Duration::from_secs(2));
+    // SAFETY: plain kill(2) on a process this test's launcher started.
+    unsafe { libc::kill(viewer[0] as i32, libc::SIGSTOP) };
+    std::thread::sleep(Duration::from_secs(3));
+    // SAFETY: as above.
+    unsafe { libc::kill(viewer[0] as i32, libc::SIGCONT) };
+    assert!(wait_line(&rx, &mut lines, "wire /action", 60), "{lines:?}");
+    let status = exit_within(&mut launcher, 30);
+    lines.extend(rx.try_iter());
+    let out = lines.join("\n");
+    assert!(status.success(), "{out}");
+    assert!(out.contains("BALANCED"), "the chain went on:\n{out}");
+    for topic in ["/obs", "/action"] {
+        let line = lines
+            .iter()
+            .find(|l| l.contains(&format!("wire {topic} into")))
+            .unwrap_or_else(|| panic!("no wire line for {topic}:\n{out}"));
+        let max_us: f64 = line
+            .rsplit("max ")
+            .next()
+            .and_then(|m| m.split_whitespace().next())
+            .and_then(|m| m.parse().ok())
+            .unwrap_or_else(|| panic!("{line}"));
+        assert!(
+            max_us < 1e6,
+            "{topic} waited behind the frozen viewer: {line}"
+        );
+    }
+    assert_none_left(port, Duration::ZERO);
+}
