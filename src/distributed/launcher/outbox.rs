@@ -110,18 +110,16 @@ impl Outbox {
     /// already, or [`MAX_QUEUED_BYTES`] for all (said once, on stderr).
     pub(super) fn put(&self, out: &Out, payload: ZBytes, sample: bool) {
         let len = if sample { charge(&payload) } else { 0 };
-        if sample {
-            if !admit(&self.queued, len) {
-                if !self.said_full.swap(true, Ordering::Relaxed) {
-                    eprintln!(
-                        "[ratelab] launch: over {} MiB of samples wait to be passed on to process '{}' ({} MiB for all; it reads its topics slower than they come): the rest are dropped, counted lost by their subscribers",
-                        MAX_QUEUED_BYTES_PER_PROCESS / (1024 * 1024),
-                        self.process,
-                        MAX_QUEUED_BYTES / (1024 * 1024)
-                    );
-                }
-                return;
+        if sample && !admit(&self.queued, len) {
+            if !self.said_full.swap(true, Ordering::Relaxed) {
+                eprintln!(
+                    "[ratelab] launch: over {} MiB of samples wait to be passed on to process '{}' ({} MiB for all; it reads its topics slower than they come): the rest are dropped, counted lost by their subscribers",
+                    MAX_QUEUED_BYTES_PER_PROCESS / (1024 * 1024),
+                    self.process,
+                    MAX_QUEUED_BYTES / (1024 * 1024)
+                );
             }
+            return;
         }
         let job = Job {
             out: out.clone(),
