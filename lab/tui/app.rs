@@ -143,10 +143,10 @@ pub struct App {
     phases: Vec<f64>,
     /// The reliable topics whose losses this run has explained (once each, in the footer).
     explained_losses: Vec<TopicId>,
-    /// Each topic's losses counted before it was last made reliable (by topic index;
-    /// `None` while it is best effort): losses under best effort are not explained as
-    /// reliable delivery's.
-    lost_before_reliable: Vec<Option<u64>>,
+    /// Each topic's first step seen reliable since it was last made so, and its losses
+    /// counted before it (by topic index; `None` while it is best effort): losses under
+    /// best effort are not explained as reliable delivery's.
+    lost_before_reliable: Vec<Option<(ratelab::Nanos, u64)>>,
     /// Each topic's losses at the last step folded, by topic index.
     lost_at_last_step: Vec<u64>,
     /// Each node's liveliness, by node index (`None`: no lease).

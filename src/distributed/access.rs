@@ -16,9 +16,11 @@
 //! | the launcher's router | anything on the graph's keys | anything on the graph's keys |
 //!
 //! The launch's own traffic is the launcher's to hear: the router passes it on from the
-//! one thread Zenoh runs it on, waiting for room in every subscriber's link
-//! ([`super::launcher`]'s outbox), so a subscriber that stops reading it (a frozen watcher)
-//! would hold the whole star.
+//! one thread Zenoh runs it on, waiting for room in every subscriber's link, so a
+//! subscriber that stops reading it (a frozen watcher) would hold the whole star. The
+//! topics' own keys stay readable by everyone: the launcher puts them from a thread per
+//! receiving process (its outbox), so a frozen watcher subscribed to a topic holds only
+//! that topic's process's outbox (under the virtual clock, the lockstep with it).
 //!
 //! A launch is a star ([`super::open_router`]): every process and watcher links to the
 //! launcher's router alone, so the check that matters is the router's, on each message

@@ -102,18 +102,29 @@ pub fn script_text<E>(
     Ok(text)
 }
 
-/// Every script the calling thread read ([`script_text`]), each as it last read it: the
-/// code of the run that thread built last (the lab's engine builds the run on screen on a
-/// thread of its own; a save's trial loads the saved code on another).
+/// Every script the calling thread read ([`script_text`]) since it last forgot them
+/// ([`forget_scripts_read`]), each as it last read it. The lab's engine forgets at each
+/// run's start, so this is the code of the run on screen (the engine builds it on a thread
+/// of its own; a save's trial loads the saved code on another).
 pub fn scripts_read() -> Scripts {
     READ.with_borrow(Clone::clone)
 }
 
+/// Forget what the calling thread read ([`scripts_read`]).
+pub fn forget_scripts_read() {
+    READ.with_borrow_mut(BTreeMap::clear);
+}
+
+/// The scripts the calling thread is pinned to ([`pin_scripts`]), if it is.
+pub fn pinned_scripts() -> Option<Scripts> {
+    PINNED.with_borrow(Clone::clone)
+}
+
 /// From now on the calling thread reads `scripts` instead of their files (`None`: the files
 /// again); a script not among them is read from its file. The lab pins the code of the run
-/// on screen when a save's code was not taken up (it did not load, or its trial was
-/// dropped), so that the next run starts with the code before, as it says, until a save
-/// is taken up.
+/// on screen from the moment a file is saved, so that what the engine builds meanwhile (a
+/// seek's replay) and after a save that is not taken up (it did not load, its trial was
+/// dropped) has the code before, as the lab says, until a save is taken up.
 pub fn pin_scripts(scripts: Option<Scripts>) {
     PINNED.with_borrow_mut(|p| *p = scripts);
 }
@@ -158,8 +169,12 @@ mod tests {
         })
         .join()
         .unwrap();
+        assert!(pinned_scripts().is_some());
         pin_scripts(None);
+        assert_eq!(pinned_scripts(), None);
         assert_eq!(&*script_text("a.py", disk("four")).unwrap(), "four");
+        forget_scripts_read();
+        assert!(scripts_read().is_empty());
     }
 
     #[test]

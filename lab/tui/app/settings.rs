@@ -167,14 +167,11 @@ impl App {
         for i in 0..n {
             let lost = s.topics.get(TopicId(i)).lost;
             let before = &mut self.lost_before_reliable[i];
-            if lost < self.lost_at_last_step[i] {
-                // Counted again from the start (the run folded again from t = 0).
-                *before = before.map(|_| 0);
-            }
             if self.qos[i].reliability == Reliability::Reliable {
-                // Made reliable since the last step (or reliable from the start: 0).
-                let since = *before.get_or_insert(self.lost_at_last_step[i]);
-                if lost > since && !self.explained_losses.contains(&TopicId(i)) {
+                // Made reliable since the last step (or reliable from the start: 0). A
+                // step before it (the run folded again after a seek back) is not judged.
+                let (from, since) = *before.get_or_insert((s.t, self.lost_at_last_step[i]));
+                if s.t >= from && lost > since && !self.explained_losses.contains(&TopicId(i)) {
                     fresh.push(TopicId(i));
                 }
             } else {

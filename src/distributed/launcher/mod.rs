@@ -63,9 +63,10 @@ pub struct LaunchOptions {
     /// and wait for them to be started by hand with `ratelab process`).
     pub exe: Option<Program>,
     /// Where the started processes' stderr goes, a line at a time as `PROCESS: LINE`;
-    /// `None`: to the launcher's own stderr, as each process wrote it. Either way each
-    /// line is also published on the graph's log key ([`Keys::log`]), where a lab attached
-    /// from elsewhere reads it. A lab on the terminal takes them, so that no child writes
+    /// `None`: to the launcher's own stderr, each line as the process wrote it but cut at
+    /// [`MAX_STDERR_LINE`] bytes and ended (a process's stderr is a pipe, not the terminal).
+    /// Either way each line is also published on the graph's log key ([`Keys::log`]),
+    /// where a lab attached from elsewhere reads it. A lab on the terminal takes them, so that no child writes
     /// over its screen. Lines are cut at [`MAX_STDERR_LINE`] bytes; a line that finds the
     /// channel full is dropped here (give a bounded one: it is on the log key anyway).
     pub child_stderr: Option<crossbeam_channel::Sender<String>>,

@@ -68,9 +68,10 @@ impl Launch<'_> {
     }
 }
 
-/// Pass `child`'s stderr on a line at a time, as `PROCESS: LINE`, on the log key (where an
-/// attached lab reads it) and to `to`, or, without `to`, to the launcher's own stderr as
-/// the child wrote it; until the child closes it (a thread that ends with the child).
+/// Pass `child`'s stderr on a line at a time (each cut at [`MAX_STDERR_LINE`] bytes, its
+/// rest skipped), as `PROCESS: LINE`, on the log key (where an attached lab reads it) and
+/// to `to`, or, without `to`, to the launcher's own stderr as the child wrote the line;
+/// until the child closes it (a thread that ends with the child).
 fn pass_stderr(
     process: &str,
     child: &mut Child,

@@ -292,6 +292,9 @@ impl Engine {
     fn one_run(&mut self, cfg: &RunConfig, policy: &str) -> Result<RunOutcome, String> {
         self.run_index += 1;
         self.run_policy = policy.to_string();
+        // What this run's code is read from here: the code of the run on screen, which a
+        // save not taken up leaves pinned (`reload::pin_code_before`).
+        ratelab_runtime::interpreter::forget_scripts_read();
         let brain = load_policy(policy).map_err(|e| e.to_string())?;
         let (recording, notice) = self.create_recording(cfg, &brain.label())?;
         // What the nodes' code writes goes in the recording too (`log/<node>`), as a

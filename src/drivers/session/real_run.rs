@@ -277,9 +277,15 @@ impl Engine {
                 *restart = Some(r);
                 Some(Next::Quit) // the real clock stops for the restart
             }
-            Ready::Brain { name, swap } if !ran.ended => {
+            Ready::Brain {
+                name,
+                swap,
+                pinned_before,
+            } if !ran.ended => {
                 if self.apply(swap, now, ran.handles, ran.recording) {
                     self.brain_reloaded(&name);
+                } else {
+                    super::reload::repin(pinned_before);
                 }
                 None
             }

@@ -39,6 +39,7 @@ use ratelab_core::textlog::Level;
 use ratelab_core::time::Nanos;
 use ratelab_runtime::config::{ClockKind, RunConfig};
 use ratelab_runtime::graph::{GraphHandles, GraphSpec};
+use ratelab_runtime::interpreter::Scripts;
 use ratelab_runtime::runcore::RunCore;
 use ratelab_runtime::telemetry::Telemetry;
 use std::path::Path;
@@ -60,6 +61,9 @@ pub(super) enum Ready {
         name: String,
         /// The brain change.
         swap: Command,
+        /// What the engine's thread was pinned to for the file: pinned again if the swap
+        /// fails.
+        pinned_before: Scripts,
     },
 }
 
@@ -89,14 +93,19 @@ impl Engine {
             cfg: Box::new(new_cfg),
             old: old.map(Box::new),
         };
-        self.start_reload(name, job, then);
+        self.start_reload((name, file), job, then);
     }
 
-    /// Start `job`'s trial of the code saved in `name`, superseding a reload under way.
-    fn start_reload(&mut self, name: String, job: Job, then: Then) {
+    /// Start `job`'s trial of the code saved in `file` (`name` as the user knows it),
+    /// superseding a reload under way. From the save on, the engine's thread reads the
+    /// code of the run on screen, not the saved files ([`pin_code_before`]), until a save
+    /// is taken up.
+    fn start_reload(&mut self, (name, file): (String, &Path), job: Job, then: Then) {
         self.drop_reload(false);
+        pin_code_before();
         self.reloading = Some(Pending {
             name,
+            file: file.to_path_buf(),
             trial: Trial::start(job),
             then,
         });
@@ -147,7 +156,9 @@ impl Engine {
             }
             Poll::Done(outcome) => *outcome,
         };
-        let Pending { name, then, .. } = self.reloading.take()?;
+        let Pending {
+            name, then, file, ..
+        } = self.reloading.take()?;
         let tried = match outcome {
             Ok(tried) => tried,
             Err(e) => {
@@ -155,8 +166,6 @@ impl Engine {
                 return None;
             }
         };
-        // Taken up: the runs from here read the files as saved.
-        ratelab_runtime::interpreter::pin_scripts(None);
         let stalled = tried.stall_note();
         Some(match then {
             Then::Reload { cfg, old } => {
@@ -172,10 +181,21 @@ impl Engine {
                     line = format!("{line} · {note}");
                 }
                 self.said_reloaded(line);
+                // Taken up, every file judged: the runs from here read the files as saved.
+                ratelab_runtime::interpreter::pin_scripts(None);
                 Ready::Next(Next::Reload(cfg))
             }
-            Then::Restart(r) => Ready::Restart(r),
-            Then::Brain(swap) => Ready::Brain { name, swap },
+            // The saved file alone is read as saved from here; any other file whose save
+            // was not taken up stays as it was.
+            Then::Restart(mut r) => {
+                r.pinned_before = unpin_file(&file);
+                Ready::Restart(r)
+            }
+            Then::Brain(swap) => Ready::Brain {
+                name,
+                swap,
+                pinned_before: unpin_file(&file),
+            },
         })
     }
 
@@ -256,12 +276,40 @@ impl Engine {
     }
 }
 
-/// Pin the scripts the run on screen was built with (read on this, the engine's, thread),
-/// so that the runs after it start with that code rather than the files' saved code, which
-/// was not taken up ([`ratelab_runtime::interpreter::pin_scripts`]); until a save is.
+/// Pin the engine's thread to the code of the run on screen, unless it is pinned already
+/// (to the code before an earlier save not taken up): what it read since the run started
+/// ([`ratelab_runtime::interpreter::scripts_read`]). What it builds from here (a seek's
+/// replay, the next run) reads that code rather than the files' saved code, until a save is
+/// taken up.
 fn pin_code_before() {
-    use ratelab_runtime::interpreter::{pin_scripts, scripts_read};
-    pin_scripts(Some(scripts_read()));
+    use ratelab_runtime::interpreter::{pin_scripts, pinned_scripts, scripts_read};
+    if pinned_scripts().is_none() {
+        pin_scripts(Some(scripts_read()));
+    }
+}
+
+/// Let the engine's thread read `file` as saved again (its code is taken up: a restart in
+/// place, a brain swapped), every other pinned script staying pinned; returns what was
+/// pinned for it ([`repin`] it if taking it up fails).
+fn unpin_file(file: &Path) -> Scripts {
+    use ratelab_runtime::interpreter::{pin_scripts, pinned_scripts};
+    let Some(pinned) = pinned_scripts() else {
+        return Scripts::new();
+    };
+    let target = std::path::absolute(file).ok();
+    let (gone, kept): (Scripts, Scripts) = pinned
+        .into_iter()
+        .partition(|(k, _)| std::path::absolute(k).ok() == target);
+    pin_scripts(Some(kept));
+    gone
+}
+
+/// Pin `before` again (what [`unpin_file`] returned): its saved code was not taken up.
+pub(super) fn repin(before: Scripts) {
+    use ratelab_runtime::interpreter::{pin_scripts, pinned_scripts};
+    let mut pinned = pinned_scripts().unwrap_or_default();
+    pinned.extend(before);
+    pin_scripts(Some(pinned));
 }
 
 /// How a stretch of the real clock ended ([`Engine::real_run`]).
@@ -353,7 +401,7 @@ impl Engine {
                 policy: policy.clone(),
             };
             let then = Then::Brain(Command::SetPolicy { spec: policy });
-            return self.start_reload(name, job, then);
+            return self.start_reload((name, file), job, then);
         }
         if which.is_empty() {
             let _ = self.tx.send(Telemetry::Applied(format!(
@@ -386,8 +434,9 @@ impl Engine {
             spec,
             read: new_cfg.graph,
             which,
+            pinned_before: Scripts::new(),
         }));
-        self.start_reload(name, job, then);
+        self.start_reload((name, file), job, then);
     }
 
     /// The brain's file `name` was loaded again and swapped in, under the real clock.
@@ -427,6 +476,7 @@ impl Engine {
                 Some(line)
             }
             Err(e) => {
+                repin(r.pinned_before);
                 self.not_reloaded(&r.name, &e);
                 None
             }
@@ -506,5 +556,51 @@ mod tests {
         assert_eq!(secs(15), Nanos(15 * Nanos::SECOND.0));
         assert_eq!(secs(25), cfg.duration);
         assert_eq!(judged(&cfg, Nanos::ZERO).clock, ClockKind::Virtual);
+    }
+
+    /// From a save on, the engine's thread reads the code of the run on screen (pinned
+    /// once: a later save keeps the first pin); a file taken up is unpinned alone, and
+    /// pinned again when taking it up fails.
+    #[test]
+    fn a_save_pins_the_code_before_and_a_file_taken_up_is_unpinned_alone() {
+        use ratelab_runtime::interpreter::{forget_scripts_read, pinned_scripts, script_text};
+        // A thread of its own: pins are the calling thread's.
+        std::thread::spawn(|| {
+            forget_scripts_read();
+            let dir = std::env::temp_dir();
+            let (a, b) = (dir.join("ratelab-pin-a.py"), dir.join("ratelab-pin-b.py"));
+            let (a, b) = (a.to_str().unwrap(), b.to_str().unwrap());
+            let read = |path: &str, text: &str| {
+                let text = text.to_string();
+                script_text(path, move || Ok::<_, String>(text))
+                    .unwrap()
+                    .to_string()
+            };
+            assert_eq!(read(a, "a1"), "a1");
+            assert_eq!(read(b, "b1"), "b1");
+            pin_code_before();
+            // The files hold the saved code; the engine reads the code before.
+            assert_eq!(read(a, "a2"), "a1");
+            assert_eq!(read(b, "b2"), "b1");
+            pin_code_before();
+            let pinned = || {
+                pinned_scripts()
+                    .unwrap()
+                    .into_iter()
+                    .map(|(k, v)| (k, v.to_string()))
+                    .collect::<Vec<_>>()
+            };
+            assert_eq!(pinned(), [(a.into(), "a1".into()), (b.into(), "b1".into())]);
+            // a.py taken up (a restart in place): read as saved; b.py still pinned.
+            let before = unpin_file(Path::new(a));
+            assert_eq!(read(a, "a2"), "a2");
+            assert_eq!(read(b, "b2"), "b1");
+            // Its restart failed: pinned again.
+            repin(before);
+            assert_eq!(read(a, "a2"), "a1");
+            assert_eq!(pinned(), [(a.into(), "a1".into()), (b.into(), "b1".into())]);
+        })
+        .join()
+        .unwrap();
     }
 }

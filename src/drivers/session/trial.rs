@@ -48,6 +48,8 @@ const LOADING: u64 = u64::MAX;
 pub(super) struct Pending {
     /// The file saved, as the user knows it.
     pub(super) name: String,
+    /// The file saved, its path.
+    pub(super) file: std::path::PathBuf,
     /// Its code, loading and tried.
     pub(super) trial: Trial,
     /// What is done once it has loaded.
@@ -80,6 +82,9 @@ pub(super) struct Restart {
     pub(super) read: GraphSpec,
     /// The nodes whose code or parameters changed, by graph index.
     pub(super) which: Vec<usize>,
+    /// What the engine's thread was pinned to for the saved file until the restart took
+    /// it up: pinned again if the restart fails ([`ratelab_runtime::interpreter`]).
+    pub(super) pinned_before: ratelab_runtime::interpreter::Scripts,
 }
 
 /// What a trial does with the saved code.
