@@ -1334,13 +1334,7 @@ fn saving_a_node_whose_import_never_returns_never_holds_the_lab() {
     ] {
         let case = format!("{clock} clock, {hang:?}");
         let dir = tempfile::tempdir().unwrap();
-        std::fs::create_dir(dir.path().join("nodes")).unwrap();
-        let graph = dir.path().join("g.toml");
-        std::fs::copy(crate::repo("graphs/cartpole-python.toml"), &graph).unwrap();
-        let node = dir.path().join("nodes/scripted_balancer.py");
-        let script =
-            std::fs::read_to_string(crate::repo("graphs/nodes/scripted_balancer.py")).unwrap();
-        std::fs::write(&node, &script).unwrap();
+        let (graph, node, script) = crate::python_graph_copy(dir.path());
         let mut lab = Lab::start_sized(
             &["--clock", clock, "--graph", graph.to_str().unwrap()],
             &[],

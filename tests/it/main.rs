@@ -14,6 +14,22 @@ pub fn repo(file: &str) -> std::path::PathBuf {
     std::path::Path::new(REPO).join(file)
 }
 
+/// The chapter's graph with its Python policy, `graphs/cartpole-python.toml` and its
+/// `graphs/nodes/scripted_balancer.py`, copied into `dir` as `g.toml` and
+/// `nodes/scripted_balancer.py` for a test to save over: the graph file, the node's file and
+/// the node's text.
+pub fn python_graph_copy(
+    dir: &std::path::Path,
+) -> (std::path::PathBuf, std::path::PathBuf, String) {
+    std::fs::create_dir_all(dir.join("nodes")).unwrap();
+    let graph = dir.join("g.toml");
+    std::fs::copy(repo("graphs/cartpole-python.toml"), &graph).unwrap();
+    let node = dir.join("nodes/scripted_balancer.py");
+    let script = std::fs::read_to_string(repo("graphs/nodes/scripted_balancer.py")).unwrap();
+    std::fs::write(&node, &script).unwrap();
+    (graph, node, script)
+}
+
 /// The chapter's graph with a Python policy (`graphs/cartpole-python.toml`) whose timer
 /// callback first runs `code` (Python statements, one per line), written in `dir` as
 /// `loud.toml` and `nodes/loud.py`: a node that writes. Returns the graph file.

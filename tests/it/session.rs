@@ -1374,23 +1374,14 @@ fn under_the_real_clock_a_saved_brain_is_swapped_in_place() {
     );
 }
 
-/// A save whose trial never returns (issue 72: the reloaded node's callback loops forever)
-/// is said, never waited for, and not blamed on the run on screen: that run goes on with
-/// the code before (its steps keep coming, no new run starts), the line names the file and
-/// where the trial is stuck, and a newer save supersedes it (the stuck callback interrupted)
-/// and is taken up.
-#[test]
-fn a_reload_whose_trial_never_returns_is_said_and_the_run_goes_on() {
+/// A live engine at ×1 on a copy of the chapter's graph with its Python policy
+/// ([`crate::python_graph_copy`]), which reads the graph file again on a save as the lab
+/// does; and the node's file, to save over.
+fn python_graph_engine() -> (LiveEngine, std::path::PathBuf) {
     use ratelab::session::GraphSource;
-    use ratelab::Nanos;
     ratelab::init(); // Python nodes
-    let _machine = crate::machine::alone();
     let dir = tempfile::tempdir().unwrap();
-    std::fs::create_dir(dir.path().join("nodes")).unwrap();
-    let graph_file = dir.path().join("g.toml");
-    let node_file = dir.path().join("nodes/scripted_balancer.py");
-    std::fs::copy(crate::repo("graphs/cartpole-python.toml"), &graph_file).unwrap();
-    std::fs::copy(crate::repo("graphs/nodes/scripted_balancer.py"), &node_file).unwrap();
+    let (graph_file, node_file, _) = crate::python_graph_copy(dir.path());
     let mut s = settings(
         ClockKind::Virtual,
         1,
@@ -1399,11 +1390,22 @@ fn a_reload_whose_trial_never_returns_is_said_and_the_run_goes_on() {
         &dir.path().join("session.json"),
     );
     s.cfg.graph = ratelab::graph::GraphSpec::load(&graph_file).unwrap();
-    let source = graph_file.clone();
     s.graph_source = Some(GraphSource(std::sync::Arc::new(move || {
-        ratelab::graph::GraphSpec::load(&source).map_err(|e| e.to_string())
+        ratelab::graph::GraphSpec::load(&graph_file).map_err(|e| e.to_string())
     })));
-    let live = LiveEngine::with(s, dir);
+    (LiveEngine::with(s, dir), node_file)
+}
+
+/// A save whose trial never returns (issue 72: the reloaded node's callback loops forever)
+/// is said, never waited for, and not blamed on the run on screen: that run goes on with
+/// the code before (its steps keep coming, no new run starts), the line names the file and
+/// where the trial is stuck, and a newer save supersedes it (the stuck callback interrupted)
+/// and is taken up.
+#[test]
+fn a_reload_whose_trial_never_returns_is_said_and_the_run_goes_on() {
+    use ratelab::Nanos;
+    let _machine = crate::machine::alone();
+    let (live, node_file) = python_graph_engine();
     while live.wait_for("a step", step_at) < Nanos(500 * Nanos::MILLISECOND.0) {}
     // The node saved with a timer callback that never returns: its trial is stuck at t = 0.
     let original = std::fs::read_to_string(&node_file).unwrap();
@@ -1469,29 +1471,9 @@ fn a_reload_whose_trial_never_returns_is_said_and_the_run_goes_on() {
 /// not load (a syntax error); a later save that loads is taken up as ever.
 #[test]
 fn after_a_save_not_taken_up_the_next_run_has_the_code_before() {
-    use ratelab::session::GraphSource;
     use ratelab::Nanos;
-    ratelab::init(); // Python nodes
     let _machine = crate::machine::alone();
-    let dir = tempfile::tempdir().unwrap();
-    std::fs::create_dir(dir.path().join("nodes")).unwrap();
-    let graph_file = dir.path().join("g.toml");
-    let node_file = dir.path().join("nodes/scripted_balancer.py");
-    std::fs::copy(crate::repo("graphs/cartpole-python.toml"), &graph_file).unwrap();
-    std::fs::copy(crate::repo("graphs/nodes/scripted_balancer.py"), &node_file).unwrap();
-    let mut s = settings(
-        ClockKind::Virtual,
-        1,
-        false,
-        Speed::Times(1.0),
-        &dir.path().join("session.json"),
-    );
-    s.cfg.graph = ratelab::graph::GraphSpec::load(&graph_file).unwrap();
-    let source = graph_file.clone();
-    s.graph_source = Some(GraphSource(std::sync::Arc::new(move || {
-        ratelab::graph::GraphSpec::load(&source).map_err(|e| e.to_string())
-    })));
-    let live = LiveEngine::with(s, dir);
+    let (live, node_file) = python_graph_engine();
     while live.wait_for("a step", step_at) < Nanos(300 * Nanos::MILLISECOND.0) {}
     let original = std::fs::read_to_string(&node_file).unwrap();
     let timer = "    def on_timer(self):\n";

@@ -11,17 +11,13 @@ use std::time::{Duration, Instant};
 fn a_launched_process_s_print_reaches_a_lab_attached_from_elsewhere() {
     let _machine = crate::machine::alone();
     let dir = tempfile::tempdir().unwrap();
-    std::fs::create_dir(dir.path().join("nodes")).unwrap();
-    let graph = dir.path().join("g.toml");
-    std::fs::copy(crate::repo("graphs/cartpole-python.toml"), &graph).unwrap();
-    let script = std::fs::read_to_string(crate::repo("graphs/nodes/scripted_balancer.py"))
-        .unwrap()
-        .replace(
-            "        s = self.obs\n",
-            "        s = self.obs\n        print('policy says cos', round(s.cos_theta, 1))\n",
-        );
+    let (graph, node, script) = crate::python_graph_copy(dir.path());
+    let script = script.replace(
+        "        s = self.obs\n",
+        "        s = self.obs\n        print('policy says cos', round(s.cos_theta, 1))\n",
+    );
     assert!(script.contains("policy says"), "the script's line moved");
-    std::fs::write(dir.path().join("nodes/scripted_balancer.py"), script).unwrap();
+    std::fs::write(node, script).unwrap();
     let port = crate::distributed::free_port();
     let ep = format!("tls/127.0.0.1:{port}");
     let creds = dir.path().join("creds.toml");

@@ -16,12 +16,7 @@ use std::time::Duration;
 fn a_saved_callback_that_never_returns_hangs_its_trial_never_the_run_on_screen() {
     let _machine = crate::machine::alone();
     let dir = tempfile::tempdir().unwrap();
-    std::fs::create_dir(dir.path().join("nodes")).unwrap();
-    let graph = dir.path().join("g.toml");
-    std::fs::copy(crate::repo("graphs/cartpole-python.toml"), &graph).unwrap();
-    let node = dir.path().join("nodes/scripted_balancer.py");
-    let script = std::fs::read_to_string(crate::repo("graphs/nodes/scripted_balancer.py")).unwrap();
-    std::fs::write(&node, &script).unwrap();
+    let (graph, node, script) = crate::python_graph_copy(dir.path());
     let timer = "    def on_timer(self):\n";
     assert!(script.contains(timer));
     let with = |body: &str| script.replace(timer, &format!("{timer}{body}"));
@@ -127,12 +122,7 @@ fn the_first_ctrl_c_interrupts_a_hung_callback_and_the_second_quits() {
 fn at_80x24_r_drops_a_stuck_trial_and_the_run_starts_again_with_the_code_before() {
     let _machine = crate::machine::alone();
     let dir = tempfile::tempdir().unwrap();
-    std::fs::create_dir(dir.path().join("nodes")).unwrap();
-    let graph = dir.path().join("g.toml");
-    std::fs::copy(crate::repo("graphs/cartpole-python.toml"), &graph).unwrap();
-    let node = dir.path().join("nodes/scripted_balancer.py");
-    let script = std::fs::read_to_string(crate::repo("graphs/nodes/scripted_balancer.py")).unwrap();
-    std::fs::write(&node, &script).unwrap();
+    let (graph, node, script) = crate::python_graph_copy(dir.path());
     let timer = "    def on_timer(self):\n";
     assert!(script.contains(timer));
     let mut lab = Lab::start_sized(
