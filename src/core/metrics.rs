@@ -22,34 +22,33 @@ pub const HUNG: &str = "hung: ";
 /// significant digits: percentiles are within 0.1% of the sample, rounded up) with an exact
 /// integer sum for the mean. Constant memory, for counts without a bound (node lateness
 /// under the real clock); sense→act latency uses [`ExactLatency`].
-#[derive(Clone, Debug)]
-
+///
+/// The histogram (1 ns to an hour at 3 digits: about 270 KB) is allocated at the first
+/// sample, so statistics kept for every node or topic of a large graph cost nothing where
+/// nothing is recorded (a launch's process holds one per topic it receives).
+#[derive(Clone, Debug, Default)]
 pub struct LatencyStats {
-    hist: Histogram<u64>,
+    hist: Option<Histogram<u64>>,
     sum_ns: u128,
 }
 
-impl Default for LatencyStats {
-    fn default() -> Self {
-        Self {
-            // 1 ns .. 1 hour at 3 significant digits.
-            hist: Histogram::new_with_bounds(1, 3_600_000_000_000, 3)
-                .expect("static bounds are valid"),
-            sum_ns: 0,
-        }
-    }
+/// 1 ns .. 1 hour at 3 significant digits.
+fn new_histogram() -> Histogram<u64> {
+    Histogram::new_with_bounds(1, 3_600_000_000_000, 3).expect("static bounds are valid")
 }
 
 impl LatencyStats {
     /// Record one sample (saturated at one hour).
     pub fn record(&mut self, value: Nanos) {
-        self.hist.saturating_record(value.0);
+        self.hist
+            .get_or_insert_with(new_histogram)
+            .saturating_record(value.0);
         self.sum_ns += u128::from(value.0);
     }
 
     /// Number of samples.
     pub fn count(&self) -> u64 {
-        self.hist.len()
+        self.hist.as_ref().map_or(0, Histogram::len)
     }
 
     /// Exact mean, or `None` with no samples.
@@ -59,17 +58,22 @@ impl LatencyStats {
 
     /// The value at quantile `q` in [0, 1] (HDR precision), or `None` with no samples.
     pub fn quantile(&self, q: f64) -> Option<Nanos> {
-        (self.count() > 0).then(|| Nanos(self.hist.value_at_quantile(q)))
+        let h = self.hist.as_ref().filter(|h| !h.is_empty())?;
+        Some(Nanos(h.value_at_quantile(q)))
     }
 
     /// The largest sample (HDR precision), or `None` with no samples.
     pub fn max(&self) -> Option<Nanos> {
-        (self.count() > 0).then(|| Nanos(self.hist.max()))
+        let h = self.hist.as_ref().filter(|h| !h.is_empty())?;
+        Some(Nanos(h.max()))
     }
 
-    /// The underlying histogram (for drawing buckets).
+    /// The underlying histogram (for drawing buckets); an empty one before the first sample.
     pub fn histogram(&self) -> &Histogram<u64> {
-        &self.hist
+        static EMPTY: std::sync::OnceLock<Histogram<u64>> = std::sync::OnceLock::new();
+        self.hist
+            .as_ref()
+            .unwrap_or_else(|| EMPTY.get_or_init(new_histogram))
     }
 
     /// p50/p99/max in ms, rounded to µs; zeros with no samples.
@@ -1199,6 +1203,20 @@ mod tests {
         let p50 = s.quantile(0.5).unwrap().as_millis_f64();
         assert!((p50 - 20.0).abs() < 0.05, "{p50}");
         assert!((s.max().unwrap().as_millis_f64() - 40.0).abs() < 0.05);
+    }
+
+    #[test]
+    fn latency_stats_allocate_their_histogram_at_the_first_sample() {
+        let s = LatencyStats::default();
+        assert!(s.hist.is_none(), "no histogram before a sample");
+        assert_eq!((s.count(), s.quantile(0.5), s.max()), (0, None, None));
+        assert!(s.histogram().is_empty());
+        assert_eq!(s.summary_ms(), (0.0, 0.0, 0.0));
+        let mut s = s.clone();
+        s.record(Nanos::from_millis(3));
+        assert!(s.hist.is_some());
+        assert_eq!(s.count(), 1);
+        assert_eq!(s.histogram().len(), 1);
     }
 
     #[test]

@@ -321,6 +321,8 @@ pub const BUSY_RETRY: Duration = Duration::from_secs(5);
 /// that cannot be built.
 pub fn run_process(opts: &ProcessOptions, stop: &StopFlag) -> Result<(), DistError> {
     let file_spec = check_options(opts)?;
+    // `RUST_LOG`, when set, selects Zenoh's (and ratelab's) log lines for stderr.
+    super::refusals::install();
     let Joined {
         session,
         keys,
@@ -920,14 +922,17 @@ fn subscribe_inbound(
         seqs: Mutex::new(vec![None; spec.topics.len()]),
         cv: Condvar::new(),
     });
+    // One histogram per inbound topic only (about 270 KB each: one per topic of a
+    // 1,000-topic graph held 280 MB in every process).
     let wire_latency: Arc<Vec<Mutex<LatencyStats>>> = Arc::new(
-        (0..spec.topics.len())
+        inbound
+            .iter()
             .map(|_| Mutex::new(LatencyStats::default()))
             .collect(),
     );
     let mut subscribers = Vec::new();
     let refusals = Arc::new(Refusals::default());
-    for &t in inbound {
+    for (i, &t) in inbound.iter().enumerate() {
         let topic = handles.topic(t).clone();
         let arrivals = arrivals.clone();
         let lat = wire_latency.clone();
@@ -950,7 +955,7 @@ fn subscribe_inbound(
                         return refusals.note(&process, topic.name(), &e);
                     }
                     let took = wire::mono_now_ns().saturating_sub(sent);
-                    ratelab_runtime::graph::lock(&lat[t.0]).record(Nanos(took));
+                    ratelab_runtime::graph::lock(&lat[i]).record(Nanos(took));
                     {
                         let mut seqs = ratelab_runtime::graph::lock(&arrivals.seqs);
                         seqs[t.0] = Some(seq);
@@ -976,7 +981,7 @@ struct Inbound {
     subscribers: Vec<zenoh::pubsub::Subscriber<()>>,
     /// The newest seq received on each topic.
     arrivals: Arc<Arrivals>,
-    /// Per topic, the over-the-wire latency of what arrived.
+    /// Per inbound topic (in the order given), the over-the-wire latency of what arrived.
     wire_latency: Arc<Vec<Mutex<LatencyStats>>>,
 }
 
@@ -1127,7 +1132,7 @@ struct Share {
     inbound: Vec<TopicId>,
     /// The newest seq received on each inbound topic.
     arrivals: Arc<Arrivals>,
-    /// Per topic, the over-the-wire latency of what arrived.
+    /// Per inbound topic (in the order given), the over-the-wire latency of what arrived.
     wire_latency: Arc<Vec<Mutex<LatencyStats>>>,
     /// The crossing topics it publishes: what a local node's event sent across the
     /// boundary, and the samples held back from Zenoh's receive thread.
@@ -1194,7 +1199,8 @@ impl Share {
     }
 }
 
-/// The over-the-wire latency of each inbound topic so far (µs, to 0.1).
+/// The over-the-wire latency of each inbound topic so far (µs, to 0.1); `lat` holds one
+/// per inbound topic, in `inbound`'s order ([`subscribe_inbound`]).
 fn wire_links(
     process: &str,
     spec: &GraphSpec,
@@ -1203,8 +1209,9 @@ fn wire_links(
 ) -> Vec<wire::WireLink> {
     inbound
         .iter()
-        .map(|&t| {
-            let l = ratelab_runtime::graph::lock(&lat[t.0]);
+        .zip(lat)
+        .map(|(&t, l)| {
+            let l = ratelab_runtime::graph::lock(l);
             let us = |n: Option<Nanos>| {
                 n.map_or(0.0, |n| {
                     ratelab_core::metrics::round_to(n.as_micros_f64(), 1)

@@ -3,12 +3,13 @@
 //! of its TLS link (`zenoh_link_tls`, through the `tracing` crate). [`watch`] installs a
 //! `tracing` subscriber that passes those warnings on, and nothing else (every other
 //! callsite is disabled once, at registration, so it costs nothing after); [`Refusals`]
-//! turns them into the launcher's progress lines, rate-limited.
+//! turns them into the launcher's progress lines, rate-limited. With `RUST_LOG` set (Zenoh's
+//! own convention, `RUST_LOG=zenoh=debug`), the same subscriber also writes what it selects
+//! to stderr, as a Zenoh program would: ratelab's subscriber is the process's one.
 
 use crossbeam_channel::{Receiver, Sender};
 use std::sync::{Mutex, OnceLock};
 use std::time::{Duration, Instant};
-use tracing::subscriber::Interest;
 use tracing::{Event, Metadata, Subscriber};
 use tracing_subscriber::layer::{Context, Layer};
 use tracing_subscriber::prelude::*;
@@ -34,18 +35,6 @@ fn is_refusal(meta: &Metadata<'_>) -> bool {
 struct RefusalLayer;
 
 impl<S: Subscriber> Layer<S> for RefusalLayer {
-    fn register_callsite(&self, meta: &'static Metadata<'static>) -> Interest {
-        if is_refusal(meta) {
-            Interest::always()
-        } else {
-            Interest::never()
-        }
-    }
-
-    fn enabled(&self, meta: &Metadata<'_>, _: Context<'_, S>) -> bool {
-        is_refusal(meta)
-    }
-
     fn on_event(&self, event: &Event<'_>, _: Context<'_, S>) {
         struct Message(String);
         impl tracing::field::Visit for Message {
@@ -79,23 +68,49 @@ impl<S: Subscriber> Layer<S> for RefusalLayer {
 }
 
 /// Start passing on this process's refused connections, and return where they come (one
-/// reason per refused connection, printable, at most [`MAX_WAITING`] waiting). The first
-/// call installs the process's global `tracing` subscriber; when another is installed
-/// already, nothing comes (the run goes on).
+/// reason per refused connection, printable, at most [`MAX_WAITING`] waiting). Installs the
+/// process's global `tracing` subscriber ([`install`]) if no call did yet; when another
+/// program's is installed already, nothing comes (the run goes on).
 pub fn watch() -> Receiver<String> {
     let (tx, rx) = crossbeam_channel::bounded(MAX_WAITING);
-    let mut installed = false;
-    let sinks = SINKS.get_or_init(|| {
-        installed = true;
-        Mutex::new(Vec::new())
-    });
-    ratelab_runtime::graph::lock(sinks).push(tx);
-    if installed {
-        let _ = tracing::subscriber::set_global_default(
-            tracing_subscriber::registry().with(RefusalLayer),
-        );
+    install();
+    if let Some(sinks) = SINKS.get() {
+        ratelab_runtime::graph::lock(sinks).push(tx);
     }
     rx
+}
+
+/// Install the process's global `tracing` subscriber, once: refused connections for
+/// [`watch`], and what `RUST_LOG` selects on stderr (a process of a launch calls it at its
+/// start, so `RUST_LOG=zenoh=warn ratelab launch …` shows every process's Zenoh warnings).
+/// Does nothing after the first call, or when another subscriber is installed already.
+pub fn install() {
+    SINKS.get_or_init(|| {
+        // Each layer its own filter: a callsite neither selects is disabled at registration.
+        let refusals = RefusalLayer.with_filter(tracing_subscriber::filter::filter_fn(is_refusal));
+        let _ = tracing::subscriber::set_global_default(
+            tracing_subscriber::registry()
+                .with(refusals)
+                .with(log_to_stderr()),
+        );
+        Mutex::new(Vec::new())
+    });
+}
+
+/// What `RUST_LOG` selects, written to stderr; `None` when it is unset or not a filter
+/// `tracing_subscriber::EnvFilter` can read (then nothing is logged, as in Zenoh's own
+/// `init_log_from_env`).
+fn log_to_stderr<S>() -> Option<impl Layer<S>>
+where
+    S: Subscriber + for<'a> tracing_subscriber::registry::LookupSpan<'a>,
+{
+    let filter = tracing_subscriber::EnvFilter::try_from_default_env().ok()?;
+    Some(
+        tracing_subscriber::fmt::layer()
+            .with_writer(std::io::stderr)
+            .with_ansi(false)
+            .with_filter(filter),
+    )
 }
 
 /// The launcher's account of refused connections: the first said at once, then at most

@@ -1832,6 +1832,23 @@ fn a_launch_of_128_processes_equals_the_in_process_run() {
     assert_generated_launch_equals_in_process(511, 128, &common);
 }
 
+/// A launch of 256 processes (issue 76 item 2), a 1,023-node generated graph dealt out to
+/// them (four nodes each, the robot's three), runs the run of one process, byte for byte.
+/// Ignored in the suite, as the 128-process one above (about a minute here, 10 GiB
+/// together). Run it alone:
+///
+/// ```sh
+/// cargo test --release -p ratelab-lab --test it -- --ignored --exact \
+///     distributed::a_launch_of_256_processes_equals_the_in_process_run
+/// ```
+#[test]
+#[ignore = "256 processes: run it alone (its comment says how)"]
+fn a_launch_of_256_processes_equals_the_in_process_run() {
+    let _m = crate::machine::alone();
+    let common = ["--clock", "virtual", "--duration", "0.2", "--seed", "6"];
+    assert_generated_launch_equals_in_process(1023, 256, &common);
+}
+
 /// A process that stops reading holds only what goes to it (the launcher's outbox per
 /// process): the chapter's chain beside a camera whose 900 KiB frames go to a process of
 /// their own, `viewer`, without shared memory (so each frame fills the viewer's link).

@@ -116,7 +116,7 @@ pub(crate) fn run_child(
 
 /// `VmHWM` of the `/proc/PID/status` file `path`, KiB (0 when it cannot be read: the
 /// process has ended).
-fn vm_hwm_kib(path: &str) -> u64 {
+pub(crate) fn vm_hwm_kib(path: &str) -> u64 {
     std::fs::read_to_string(path)
         .ok()
         .and_then(|s| {

@@ -119,8 +119,8 @@ impl Engine {
             return;
         };
         if say {
-            // The files hold the saved code: the next run reads the code before.
-            pin_code_before();
+            // The files hold the saved code: the next run reads the code before, pinned
+            // since the save (`start_reload`).
             ratelab_core::textlog::emit_for(
                 None,
                 None,
