@@ -1931,3 +1931,37 @@ fn a_frozen_process_holds_only_what_goes_to_it() {
     }
     assert_none_left(port, Duration::ZERO);
 }
+
+/// `RUST_LOG` selects Zenoh's log lines for stderr in the launcher and in each process it
+/// starts (whose stderr it passes on): with `zenoh=info` each of the three sessions of the
+/// chapter's launch says the Zenoh id it uses; unset, nothing of Zenoh's is written.
+#[test]
+fn rust_log_shows_zenoh_s_lines_from_the_launcher_and_every_process() {
+    let _m = crate::machine::shared();
+    let args = [
+        "launch",
+        "--processes",
+        "--clock",
+        "virtual",
+        "--duration",
+        "0.2",
+    ];
+    let launch = |rust_log: Option<&str>| {
+        let mut c = bin();
+        c.args(args).arg("--headless").env_remove("RUST_LOG");
+        if let Some(filter) = rust_log {
+            c.env("RUST_LOG", filter);
+        }
+        let o = c.output().unwrap();
+        assert!(o.status.success(), "{}", text(&o.stderr));
+        text(&o.stderr)
+    };
+    let logged = launch(Some("zenoh=info"));
+    let ids = logged
+        .lines()
+        .filter(|l| l.contains("INFO zenoh::net::runtime: Using ZID: "))
+        .count();
+    assert_eq!(ids, 3, "the launcher and its two processes:\n{logged}");
+    let quiet = launch(None);
+    assert!(!quiet.contains("zenoh"), "{quiet}");
+}
