@@ -1984,6 +1984,10 @@ impl TwoHosts {
             names: [format!("ratelab-a-{id}"), format!("ratelab-b-{id}")],
         };
         let [a, b] = &hosts.names;
+        // Left by an earlier run that was killed, with this process's id: gone first.
+        for n in [a, b] {
+            let _ = Command::new("ip").args(["netns", "del", n]).output();
+        }
         let (va, vb) = (format!("rl{id}a"), format!("rl{id}b"));
         let steps: [Vec<&str>; 9] = [
             vec!["netns", "add", a],
