@@ -256,7 +256,17 @@ fn three_processes_balance_under_the_real_clock_and_leave_nothing_behind() {
         let ticks = m["nodes"][publisher]["ticks"].as_u64().unwrap();
         let t = &m["topics"][topic];
         let lost = t["lost"].as_u64().unwrap_or(0);
-        assert_eq!(t["published"].as_u64().unwrap(), ticks, "{topic}: {t}");
+        // The sensor publishes at every tick. The policy and the safety node publish what
+        // they read, so each may publish once less: at its first tick, 5 ms after the node
+        // before it, the run's first sample on that route may not have crossed the
+        // launcher's router yet (seen here in about 1 launch in 4: /action 199 and /cmd 199,
+        // or /cmd 199 alone, all ticks 200, nothing lost).
+        let published = t["published"].as_u64().unwrap();
+        let first_read = u64::from(publisher != "sensor");
+        assert!(
+            published <= ticks && published + first_read >= ticks,
+            "{topic}: {published} published in {ticks} ticks: {t}"
+        );
         assert!(
             lost <= 1,
             "{topic}: no losses on localhost but the last in flight: {t}"
