@@ -73,10 +73,7 @@ impl<S: Subscriber> Layer<S> for RefusalLayer {
 /// program's is installed already, nothing comes (the run goes on).
 pub fn watch() -> Receiver<String> {
     let (tx, rx) = crossbeam_channel::bounded(MAX_WAITING);
-    install();
-    if let Some(sinks) = SINKS.get() {
-        ratelab_runtime::graph::lock(sinks).push(tx);
-    }
+    ratelab_runtime::graph::lock(sinks()).push(tx);
     rx
 }
 
@@ -85,6 +82,11 @@ pub fn watch() -> Receiver<String> {
 /// start, so `RUST_LOG=zenoh=warn ratelab launch …` shows every process's Zenoh warnings).
 /// Does nothing after the first call, or when another subscriber is installed already.
 pub fn install() {
+    sinks();
+}
+
+/// Where refusals go ([`SINKS`]), the subscriber installed at the first call ([`install`]).
+fn sinks() -> &'static Mutex<Vec<Sender<String>>> {
     SINKS.get_or_init(|| {
         // Each layer its own filter: a callsite neither selects is disabled at registration.
         let refusals = RefusalLayer.with_filter(tracing_subscriber::filter::filter_fn(is_refusal));
@@ -94,7 +96,7 @@ pub fn install() {
                 .with(log_to_stderr()),
         );
         Mutex::new(Vec::new())
-    });
+    })
 }
 
 /// What `RUST_LOG` selects, written to stderr; `None` when it is unset or not a filter

@@ -412,12 +412,29 @@ fn kill_node_process(port: u16, process: &str) -> u32 {
 
 /// The chapter's two processes started by hand (`ratelab process`) against the
 /// launcher at `ep` with the launch's credentials `creds`, their stderr to `stderr()`.
-fn hand_started(ep: &str, creds: &Path, stderr: fn() -> Stdio) -> Vec<Child> {
+pub(crate) fn hand_started(ep: &str, creds: &Path, stderr: fn() -> Stdio) -> Vec<Child> {
+    hand_started_by(
+        |args| {
+            let mut c = bin();
+            c.args(args);
+            c
+        },
+        (ep, creds),
+        stderr,
+    )
+}
+
+/// [`hand_started`], each process's command made by `command` from its arguments (on
+/// another host: [`TwoHosts::ratelab`]).
+fn hand_started_by(
+    command: impl Fn(&[&str]) -> Command,
+    (ep, creds): (&str, &Path),
+    stderr: fn() -> Stdio,
+) -> Vec<Child> {
     ["robot", "policy"]
         .iter()
         .map(|p| {
-            bin()
-                .args(["process", "--process", p, "--connect", ep])
+            command(&["process", "--process", p, "--connect", ep])
                 .arg("--credentials")
                 .arg(creds)
                 .stdout(Stdio::null())
@@ -2074,7 +2091,7 @@ fn a_launch_across_two_hosts_equals_the_in_process_run() {
     let ep = format!("tls/{}:7449", TwoHosts::FIRST);
     let creds = dir.path().join("creds.toml");
     let many = dir.path().join("many");
-    let launcher = hosts
+    let mut launcher = hosts
         .ratelab(0, &["launch", "--processes", "--no-spawn", "--listen", &ep])
         .args(common)
         .arg("--export-credentials")
@@ -2082,13 +2099,11 @@ fn a_launch_across_two_hosts_equals_the_in_process_run() {
         .arg("--out")
         .arg(&many)
         .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
+        .stderr(Stdio::null())
         .spawn()
         .unwrap();
-    let until = Instant::now() + Duration::from_secs(20);
-    while !creds.exists() && Instant::now() < until {
-        std::thread::sleep(Duration::from_millis(50));
-    }
+    // The credentials are written before it listens.
+    let (rx, mut lines) = listening(&mut launcher);
     // Not reachable from the second host but across the link: its own loopback has no
     // launcher.
     let local = hosts
@@ -2107,25 +2122,14 @@ fn a_launch_across_two_hosts_equals_the_in_process_run() {
         .output()
         .unwrap();
     assert_eq!(local.status.code(), Some(2), "{}", text(&local.stderr));
-    let processes: Vec<Child> = ["robot", "policy"]
-        .iter()
-        .map(|p| {
-            hosts
-                .ratelab(1, &["process", "--process", p, "--connect", &ep])
-                .arg("--credentials")
-                .arg(&creds)
-                .stdout(Stdio::null())
-                .stderr(Stdio::piped())
-                .spawn()
-                .unwrap()
-        })
-        .collect();
-    let o = launcher.wait_with_output().unwrap();
+    let processes = hand_started_by(|args| hosts.ratelab(1, args), (&ep, &creds), Stdio::piped);
+    let status = launcher.wait().unwrap();
     for p in processes {
         let p = p.wait_with_output().unwrap();
         assert!(p.status.success(), "{}", text(&p.stderr));
     }
-    assert!(o.status.success(), "{}{}", text(&o.stdout), text(&o.stderr));
+    lines.extend(rx.try_iter());
+    assert!(status.success(), "{lines:?}");
     let many = std::fs::read_to_string(many.join("metrics.json")).unwrap();
     assert!(
         one == many,

@@ -361,18 +361,7 @@ fn forgeries_change_nothing_in_a_launch_and_refused_peers_are_said() {
         })
     };
     std::thread::sleep(Duration::from_millis(300));
-    let nodes: Vec<_> = ["robot", "policy"]
-        .iter()
-        .map(|p| {
-            bin()
-                .args(["process", "--process", p, "--connect", &ep, "--credentials"])
-                .arg(&creds_file)
-                .stdout(Stdio::null())
-                .stderr(Stdio::null())
-                .spawn()
-                .unwrap()
-        })
-        .collect();
+    let nodes = crate::distributed::hand_started(&ep, &creds_file, Stdio::null);
     let status = launcher.wait().unwrap();
     done.store(true, Ordering::SeqCst);
     forging.join().unwrap();

@@ -63,12 +63,12 @@ pub struct LaunchOptions {
     /// and wait for them to be started by hand with `ratelab process`).
     pub exe: Option<Program>,
     /// Where the started processes' stderr goes, a line at a time as `PROCESS: LINE`;
-    /// `None`: to the launcher's own stderr, each line as the process wrote it but cut at
-    /// [`MAX_STDERR_LINE`] bytes and ended (a process's stderr is a pipe, not the terminal).
-    /// Either way each line is also published on the graph's log key ([`Keys::log`]),
-    /// where a lab attached from elsewhere reads it. A lab on the terminal takes them, so that no child writes
-    /// over its screen. Lines are cut at [`MAX_STDERR_LINE`] bytes; a line that finds the
-    /// channel full is dropped here (give a bounded one: it is on the log key anyway).
+    /// `None`: to the launcher's own stderr, each line as the process wrote it (a
+    /// process's stderr is a pipe, not the terminal). Either way each line is also
+    /// published on the graph's log key ([`Keys::log`]), where a lab attached from
+    /// elsewhere reads it. A lab on the terminal takes them, so that no child writes over
+    /// its screen. Lines are cut at [`MAX_STDERR_LINE`] bytes and ended; a line that finds
+    /// the channel full is dropped here (give a bounded one: it is on the log key anyway).
     pub child_stderr: Option<crossbeam_channel::Sender<String>>,
     /// The run starts only once this receives (or is told, within [`REPLY_TIMEOUT`]): a
     /// watcher that must see the whole run (a recording, the lab) says here that it has
