@@ -394,6 +394,12 @@ impl App {
         self.graph = spec;
     }
 
+    /// Name `clock` in the header until the run's first telemetry says more: a run whose
+    /// start is held (a node's script loading that never returns) still says its clock.
+    pub fn show_clock(&mut self, clock: ratelab::ClockKind) {
+        self.clock = clock.to_string();
+    }
+
     /// The graph is offered to ROS 2 on `domain` (`--ros2`): key `g` shows it as ROS 2 sees
     /// it.
     pub fn set_ros2_domain(&mut self, domain: u32) {

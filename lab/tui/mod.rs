@@ -104,6 +104,7 @@ pub fn run_lab(
         settings.speed,
     );
     app.show_graph(settings.cfg.graph.clone());
+    app.show_clock(settings.cfg.clock);
     if let Some((_, opts)) = &settings.ros2 {
         app.set_ros2_domain(opts.domain);
     }

@@ -72,7 +72,7 @@ fn contains_ignoring_case(hay: &str, needle: &str) -> bool {
 /// A node is in trouble when its liveliness lease ran out, a fault is injected into it, or
 /// a callback of it has not returned.
 pub fn node_in_trouble(n: &NodeView) -> bool {
-    n.alive == Some(false) || n.fault.is_some() || n.in_callback_s.is_some()
+    n.alive == Some(false) || n.fault.is_some() || n.held.is_some()
 }
 
 /// A topic is in trouble when it drops messages a subscriber misses or is read stale over

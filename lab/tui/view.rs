@@ -97,9 +97,30 @@ pub struct NodeView {
     /// (`kind = "python"`), `ROS 2` for an external node (`kind = "external"`, run by a ROS 2
     /// program); `None` for the built-in kinds.
     pub badge: Option<Badge>,
-    /// A callback of the node (a Python tick, the brain's call) that has not returned for
-    /// this long, s: its box says `in callback 3.2 s` instead of its timing.
-    pub in_callback_s: Option<f64>,
+    /// A call into the node's code (a Python tick, the brain's call, its script's loading)
+    /// that has not returned for a while, and how long, s: its box says `in callback 3.2 s`
+    /// (`loading 3.2 s`) instead of its timing.
+    pub held: Option<(HeldIn, f64)>,
+}
+
+/// What of a node's code holds the run ([`NodeView::held`], [`Verdict::Hung`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum HeldIn {
+    /// A tick's callback, or the brain's call.
+    #[default]
+    Callback,
+    /// Its script's loading: the module's top level (a sleep or a loop at module level).
+    Loading,
+}
+
+impl HeldIn {
+    /// How a node's box and the list say it, before the time (`in callback`, `loading`).
+    pub fn words(self) -> &'static str {
+        match self {
+            HeldIn::Callback => "in callback",
+            HeldIn::Loading => "loading",
+        }
+    }
 }
 
 /// Who runs a node that ratelab's built-in kinds do not: [`NodeView::badge`].
@@ -249,8 +270,10 @@ pub enum Verdict {
     /// A node's callback (a Python tick or brain call) has not returned for a while: under
     /// the virtual clock it holds the run's clock, so the pole is not "balanced" meanwhile.
     Hung {
-        /// The node whose callback it is.
+        /// The node whose callback (or script's loading) it is.
         node: String,
+        /// A callback, or its script's loading.
+        held_in: HeldIn,
         /// The run time it has held since, s.
         since_s: f64,
     },
@@ -800,8 +823,22 @@ fn badge(v: &View) -> Span<'static> {
             .on_red()
             .bold(),
         Verdict::Failed(_) => " NODE FAILED ✗ ".white().on_red().bold(),
-        Verdict::Hung { node, since_s } => Span::from(format!(
+        Verdict::Hung {
+            node,
+            since_s,
+            held_in: HeldIn::Callback,
+        } => Span::from(format!(
             " HUNG in {node}'s callback since t={since_s:.2}s ✗ "
+        ))
+        .white()
+        .on_red()
+        .bold(),
+        Verdict::Hung {
+            node,
+            since_s,
+            held_in: HeldIn::Loading,
+        } => Span::from(format!(
+            " HUNG loading {node}'s script since t={since_s:.2}s ✗ "
         ))
         .white()
         .on_red()

@@ -80,7 +80,7 @@ impl PythonBrain {
         Python::attach(|py| {
             let support = support(py)?;
             let loaded = {
-                let _running = CallbackGuard::enter(&format!("loading {script}"));
+                let _running = CallbackGuard::enter_loading(&format!("loading {script}"), None);
                 support.call_method1("load_module", (script, source, module_name))
             };
             let module = loaded.map_err(|e| PythonError::Script(describe(py, &e, script)))?;

@@ -435,7 +435,8 @@ pub fn trial_hung(at_least: Duration) -> bool {
 struct Running {
     /// Who is called (`brain policy.py:act`), for the messages.
     what: String,
-    /// The node whose tick it is (`None`: a brain's call or a script's loading).
+    /// The node whose tick it is, or whose script loads (`None`: a brain's call or the
+    /// loading of a brain's script).
     node: Option<String>,
     /// When the call started.
     since: Instant,
@@ -450,6 +451,8 @@ struct Running {
     interrupted: bool,
     /// A trial's call, beside the live run ([`enter_trial`]).
     trial: bool,
+    /// A script's loading (its module's top level runs), not a tick or a brain's call.
+    loading: bool,
 }
 
 /// Calls in progress, by Python thread id.
@@ -477,6 +480,21 @@ impl CallbackGuard {
             None,
             OVERRUN_WARNING,
             format!("{} s", OVERRUN_WARNING.as_secs_f64()),
+            false,
+        )
+    }
+
+    /// Register the calling thread as loading a script (its module's top level runs):
+    /// `node`'s (`None`: a brain's script), reported if it runs [`OVERRUN_WARNING`] without
+    /// returning. A load that never returns (a sleep or a loop at module level) is then
+    /// seen as its node's, as a tick that never returns is ([`Callback::loading`]).
+    pub fn enter_loading(what: &str, node: Option<&str>) -> CallbackGuard {
+        Self::enter_with(
+            what,
+            node,
+            OVERRUN_WARNING,
+            format!("{} s", OVERRUN_WARNING.as_secs_f64()),
+            true,
         )
     }
 
@@ -492,6 +510,7 @@ impl CallbackGuard {
                 "{} s, {OVERRUN_PERIODS} of its {period} periods",
                 overrun.as_secs_f64()
             ),
+            false,
         )
     }
 
@@ -500,6 +519,7 @@ impl CallbackGuard {
         node: Option<&str>,
         overrun: Duration,
         overrun_text: String,
+        loading: bool,
     ) -> CallbackGuard {
         // SAFETY: PyThread_get_thread_ident only reads the calling thread's id.
         let thread = unsafe { pyo3::ffi::PyThread_get_thread_ident() } as u64;
@@ -514,6 +534,7 @@ impl CallbackGuard {
                 warned: false,
                 interrupted: false,
                 trial: TRIAL.with(std::cell::Cell::get),
+                loading,
             },
         );
         CallbackGuard { thread }
@@ -532,11 +553,15 @@ pub struct Callback {
     /// Who is called, as the warnings say it (`node 'policy' (mine.py)`, `the brain
     /// b.py:act()`).
     pub what: String,
-    /// The node whose tick it is; `None` for a brain's call (the node that runs the run's
-    /// brain: [`ratelab_runtime::graph::kind::KindDef::uses_brain`]) or a script's loading.
+    /// The node whose tick it is, or whose script loads; `None` for a brain's call or the
+    /// loading of a brain's script (the node that runs the run's brain:
+    /// [`ratelab_runtime::graph::kind::KindDef::uses_brain`]).
     pub node: Option<String>,
     /// How long it has run so far (wall time).
     pub running_for: Duration,
+    /// A script's loading (its module's top level), not a tick or a brain's call
+    /// ([`CallbackGuard::enter_loading`]).
+    pub loading: bool,
 }
 
 /// The calls into learners' code that have run `at_least` (wall time) without returning,
@@ -551,6 +576,7 @@ pub fn running_callbacks(at_least: Duration) -> Vec<Callback> {
             what: r.what.clone(),
             node: r.node.clone(),
             running_for: r.since.elapsed(),
+            loading: r.loading,
         })
         .filter(|c| c.running_for >= at_least)
         .collect();

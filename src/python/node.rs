@@ -119,7 +119,10 @@ impl PythonNode {
             };
             let script = script.as_str();
             let fail = |e: PyErr| PythonError::Script(describe(py, &e, script));
-            let _running = CallbackGuard::enter(&format!("node '{name}' ({script}) loading"));
+            let _running = CallbackGuard::enter_loading(
+                &format!("node '{name}' ({script}) loading"),
+                Some(name),
+            );
             super::install_messages(py).map_err(fail)?;
             let (module, class) = match &given {
                 Some(cls) => (py.None().into_bound(py), cls.bind(py).clone()),

@@ -118,6 +118,15 @@ impl Lab {
         self.parser.lock().unwrap().screen().contents()
     }
 
+    /// Wait (at most 60 s) until the run on screen steps: `BALANCED` with its run time past
+    /// 0.2 s, so its nodes' code has loaded. A save before then may be read by the run's
+    /// own start (whose first frames already say `BALANCED` at t 0.00 s), not as a save.
+    fn wait_for_the_run(&self) -> String {
+        self.wait_until("the run stepping, balanced", Duration::from_secs(60), |s| {
+            s.contains("BALANCED") && shown_run_time(s).is_some_and(|t| t > 0.2)
+        })
+    }
+
     fn wait_for(&self, needle: &str, timeout: Duration) -> String {
         self.wait_until(&format!("'{needle}'"), timeout, |s| s.contains(needle))
     }
@@ -1160,7 +1169,7 @@ fn a_reloaded_graph_s_new_folder_is_watched() {
     let moved = dir.path().join("other/policy.py");
     std::fs::write(&moved, &script).unwrap();
     let lab = Lab::start(&["--clock", "virtual", "--graph", graph.to_str().unwrap()]);
-    lab.wait_for("BALANCED", Duration::from_secs(60));
+    lab.wait_for_the_run();
     std::fs::write(
         &graph,
         text.replace("nodes/scripted_balancer.py", "other/policy.py"),
@@ -1341,7 +1350,7 @@ fn saving_a_node_whose_import_never_returns_never_holds_the_lab() {
             120,
             40,
         );
-        lab.wait_for("BALANCED", Duration::from_secs(60));
+        lab.wait_for_the_run();
         std::fs::write(&node, format!("{hang}{script}")).unwrap();
         // Said once the import has run 2 s (the wait leaves a loaded machine room).
         let screen = lab.wait_for(

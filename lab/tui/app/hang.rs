@@ -3,13 +3,26 @@
 //! Ctrl-C does in a headless run before it quits the lab.
 
 use super::*;
+use crate::tui::view::HeldIn;
+
+/// A call into the code of the run on screen that has not returned for [`HUNG_AFTER`] or
+/// longer ([`App::hung_callback`]).
+#[derive(Clone, Debug, PartialEq)]
+pub(super) struct HungCall {
+    /// The node whose call it is.
+    pub node: String,
+    /// A tick's callback (or the brain's call), or the node's script loading.
+    pub held_in: HeldIn,
+    /// How long it has run, s (wall time).
+    pub running_s: f64,
+}
 
 impl App {
     /// A learner's callback in this process (a Python node's tick, the brain's call) that
-    /// has not returned for [`HUNG_AFTER`] or longer: its node and how long, s. `None` in
-    /// an attached lab (the graph's code runs in other processes). A save's trial is not the
-    /// run on screen: its calls are never this ([`ratelab::python::enter_trial`]).
-    pub(super) fn hung_callback(&self) -> Option<(String, f64)> {
+    /// (or its script's loading) that has not returned for [`HUNG_AFTER`] or longer. `None`
+    /// in an attached lab (the graph's code runs in other processes). A save's trial is not
+    /// the run on screen: its calls are never this ([`ratelab::python::enter_trial`]).
+    pub(super) fn hung_callback(&self) -> Option<HungCall> {
         if self.attached.is_some() {
             return None;
         }
@@ -24,7 +37,15 @@ impl App {
                 .find(|n| n.kind.def().uses_brain)
                 .map(|n| n.name.clone())
         })?;
-        Some((node, call.running_for.as_secs_f64()))
+        Some(HungCall {
+            node,
+            held_in: if call.loading {
+                HeldIn::Loading
+            } else {
+                HeldIn::Callback
+            },
+            running_s: call.running_for.as_secs_f64(),
+        })
     }
 
     /// Ctrl-C: a callback of the run on screen hung ([`App::hung_callback`]) is interrupted
@@ -37,15 +58,23 @@ impl App {
         let since = self.interrupted_at.map(|at| at.elapsed().as_secs_f64());
         match self.hung_callback() {
             // The call hung now began before the last Ctrl-C: that one did not end it.
-            Some((_, s)) if since.is_some_and(|e| e <= s) => self.on_msg(Msg::Quit),
-            Some((node, s)) => {
+            Some(h) if since.is_some_and(|e| e <= h.running_s) => self.on_msg(Msg::Quit),
+            Some(HungCall {
+                node,
+                held_in,
+                running_s: s,
+            }) => {
                 if ratelab::python::interrupt_hung_callbacks(HUNG_AFTER).is_empty() {
                     // It returned meanwhile: nothing to interrupt.
                     return self.on_msg(Msg::Quit);
                 }
                 self.interrupted_at = Some(std::time::Instant::now());
+                let what = match held_in {
+                    HeldIn::Callback => "callback",
+                    HeldIn::Loading => "script's loading",
+                };
                 self.say(format!(
-                    "Ctrl-C: {node}'s callback, {s:.1} s without returning, interrupted (KeyboardInterrupt) · Ctrl-C again quits"
+                    "Ctrl-C: {node}'s {what}, {s:.1} s without returning, interrupted (KeyboardInterrupt) · Ctrl-C again quits"
                 ));
             }
             None if since.is_none_or(|e| e > CTRL_C_AGAIN_S)

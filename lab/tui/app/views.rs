@@ -119,7 +119,7 @@ impl App {
         &self,
         id: NodeId,
         layer: usize,
-        hung: Option<&(String, f64)>,
+        hung: Option<&hang::HungCall>,
     ) -> NodeView {
         let empty = VecDeque::new();
         let q = self.ticks.get(id.0).unwrap_or(&empty);
@@ -213,9 +213,9 @@ impl App {
                 Code::Ros2 => Some(Badge::Ros2),
                 Code::BuiltIn | Code::Rust => None,
             },
-            in_callback_s: hung
-                .filter(|(node, _)| *node == self.graph.node(id).name)
-                .map(|(_, s)| *s),
+            held: hung
+                .filter(|h| h.node == self.graph.node(id).name)
+                .map(|h| (h.held_in, h.running_s)),
         }
     }
 
@@ -450,10 +450,11 @@ impl App {
             // run time it holds (the virtual clock stands there; under the real clock, from
             // when it started).
             verdict: match (&self.verdict, hung) {
-                (Verdict::Balanced, Some((node, s))) => Verdict::Hung {
-                    node,
+                (Verdict::Balanced, Some(h)) => Verdict::Hung {
+                    node: h.node,
+                    held_in: h.held_in,
                     since_s: if self.clock == "real" {
-                        (self.now.as_secs_f64() - s).max(0.0)
+                        (self.now.as_secs_f64() - h.running_s).max(0.0)
                     } else {
                         self.now.as_secs_f64()
                     },
@@ -526,7 +527,7 @@ impl App {
     /// lets them through (`hung`: as for [`App::node_view`]).
     pub(super) fn graph_views(
         &self,
-        hung: Option<&(String, f64)>,
+        hung: Option<&hang::HungCall>,
     ) -> (Vec<NodeView>, Vec<TopicView>) {
         let filter = &self.nav.filter;
         // Processes only where the filter asks for one (a frame of a large graph).

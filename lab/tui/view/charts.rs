@@ -12,10 +12,18 @@ pub(super) fn render_cartpole(v: &View, area: Rect, buf: &mut Buffer) {
     let room = usize::from(area.width.saturating_sub(2));
     let verdict = match &v.verdict {
         // The hang's verdict in the first of its forms that fits the panel whole.
-        Verdict::Hung { node, since_s } => {
+        Verdict::Hung {
+            node,
+            since_s,
+            held_in,
+        } => {
+            let what = match held_in {
+                HeldIn::Callback => format!("in {node}'s callback"),
+                HeldIn::Loading => format!("loading {node}'s script"),
+            };
             let forms = vec![
-                format!(" HUNG in {node}'s callback since t={since_s:.2}s ✗ "),
-                format!(" HUNG in {node}'s callback t={since_s:.2}s "),
+                format!(" HUNG {what} since t={since_s:.2}s ✗ "),
+                format!(" HUNG {what} t={since_s:.2}s "),
                 format!(" HUNG: {node} since t={since_s:.2}s "),
                 format!(" HUNG: {node} t={since_s:.2}s "),
             ];

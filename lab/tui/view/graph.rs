@@ -256,19 +256,24 @@ pub(super) fn render_node(n: &NodeView, area: Rect, buf: &mut Buffer, real: bool
         (None, false) => format!("{} Hz", hz(n.set_hz)),
     };
     let mut lines = vec![Line::from(set)];
-    if let Some(s) = n.in_callback_s {
+    if let Some((held_in, s)) = n.held {
+        let words = held_in.words();
+        let short = match held_in {
+            HeldIn::Callback => "cb",
+            HeldIn::Loading => "load",
+        };
         lines.push(
             Line::from(fit(vec![
-                format!("in callback {s:.1} s"),
-                format!("in callback {s:.0}s"),
-                format!("in cb {s:.1}s"),
-                format!("cb {s:.0}s"),
+                format!("{words} {s:.1} s"),
+                format!("{words} {s:.0}s"),
+                format!("{short} {s:.1}s"),
+                format!("{short} {s:.0}s"),
             ]))
             .red()
             .bold(),
         );
     }
-    if n.in_callback_s.is_none() {
+    if n.held.is_none() {
         lines.extend(rate_figures(n, area.width, real));
     }
     if let Some(c) = &n.compute {

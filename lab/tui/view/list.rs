@@ -53,9 +53,10 @@ fn node_rate(n: &NodeView, room: usize) -> String {
 
 /// What is wrong with a node, in a word or two (`NOT ALIVE`, `in callback 3.2 s`).
 fn node_trouble(n: &NodeView) -> Option<String> {
-    alarm(n)
-        .map(str::to_string)
-        .or_else(|| n.in_callback_s.map(|s| format!("in callback {s:.1} s")))
+    alarm(n).map(str::to_string).or_else(|| {
+        n.held
+            .map(|(held_in, s)| format!("{} {s:.1} s", held_in.words()))
+    })
 }
 
 /// What is wrong with a topic, in a few words (`3 drop`, `41 lost ✗`, `incompatible QoS`).

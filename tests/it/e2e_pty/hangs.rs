@@ -1,7 +1,8 @@
 //! End to end, code that hangs (issue 72, item 1): a saved node whose callback never returns
 //! hangs its reload's trial, not the run on screen, and a newer save supersedes it; a
 //! trial that stalled and returned says so in its reload line; and in the run on screen a
-//! hung callback is interrupted by the first Ctrl-C, the second quitting the lab.
+//! hung callback is interrupted by the first Ctrl-C, the second quitting the lab, as is a
+//! script's loading that never returns at the lab's start.
 
 use super::{shown_run_time, Lab};
 use std::time::Duration;
@@ -26,7 +27,7 @@ fn a_saved_callback_that_never_returns_hangs_its_trial_never_the_run_on_screen()
         120,
         40,
     );
-    lab.wait_for("BALANCED", Duration::from_secs(60));
+    lab.wait_for_the_run();
     std::fs::write(&node, with("        while True:\n            pass\n")).unwrap();
     // Said once the trial's callback has run 2 s (the wait leaves a loaded machine room).
     let screen = lab.wait_for(
@@ -131,7 +132,7 @@ fn at_80x24_r_drops_a_stuck_trial_and_the_run_starts_again_with_the_code_before(
         80,
         24,
     );
-    lab.wait_for("BALANCED", Duration::from_secs(60));
+    lab.wait_for_the_run();
     std::fs::write(
         &node,
         script.replace(
@@ -160,4 +161,44 @@ fn at_80x24_r_drops_a_stuck_trial_and_the_run_starts_again_with_the_code_before(
     assert!(!screen.contains("HUNG"), "{screen}");
     assert!(screen.contains("BALANCED"), "{screen}");
     lab.quit();
+}
+
+/// A node whose script's loading never returns at the lab's start (a sleep at module level)
+/// holds the run before its first step: the lab says so (`HUNG loading policy's script`,
+/// the node's box `loading`, the header naming the clock the run starts under), the first
+/// Ctrl-C interrupts the loading and the footer says where it was, and a save of the fixed
+/// script starts the run, which balances; `q` then quits with exit 0.
+#[test]
+fn a_script_whose_loading_never_returns_at_the_start_is_said_and_a_save_starts_the_run() {
+    let _machine = crate::machine::alone();
+    let dir = tempfile::tempdir().unwrap();
+    let (graph, node, script) = crate::python_graph_copy(dir.path());
+    std::fs::write(&node, format!("import time\ntime.sleep(10**6)\n{script}")).unwrap();
+    let mut lab = Lab::start_sized(
+        &["--clock", "virtual", "--graph", graph.to_str().unwrap()],
+        &[],
+        120,
+        40,
+    );
+    let screen = lab.wait_for("HUNG loading policy's script", Duration::from_secs(30));
+    assert!(
+        screen.contains("virtual clock") && screen.contains("│ t 0.00 s"),
+        "{screen}"
+    );
+    assert!(screen.contains("loading "), "the policy's box:\n{screen}");
+    lab.keys("\x03");
+    let screen = lab.wait_for("Ctrl-C interrupted it at", Duration::from_secs(10));
+    assert!(screen.contains("scripted_balancer.py:2"), "{screen}");
+    assert!(!screen.contains("HUNG"), "{screen}");
+    assert!(
+        lab.child.try_wait().unwrap().is_none(),
+        "the first Ctrl-C quit:\n{screen}"
+    );
+    std::fs::write(&node, &script).unwrap();
+    lab.wait_until("the fixed run stepping", Duration::from_secs(30), |s| {
+        s.contains("BALANCED") && shown_run_time(s).is_some_and(|t| t > 1.0)
+    });
+    lab.keys("q");
+    let status = lab.exit_status("q");
+    assert!(status.success(), "{status:?}");
 }
