@@ -302,7 +302,7 @@ fn brains(c: &mut Criterion) {
 }
 
 fn exercises(c: &mut Criterion) {
-    let bands = ratelab::exercise::load_bands(
+    let bands = ratelab_exercises::load_bands(
         &Path::new(env!("CARGO_MANIFEST_DIR")).join("exercises/bands.toml"),
     )
     .unwrap();
@@ -311,14 +311,14 @@ fn exercises(c: &mut Criterion) {
     g.bench_function("ex1 + ex2 measurement (24 ten-second virtual runs)", |b| {
         b.iter(|| {
             black_box(
-                ratelab::exercise::measure_ex1(
+                ratelab_exercises::measure_ex1(
                     &bands.of().unwrap(),
                     &ratelab::graph::GraphSpec::chapter(),
                 )
                 .unwrap(),
             );
             black_box(
-                ratelab::exercise::measure_ex2(
+                ratelab_exercises::measure_ex2(
                     &bands.of().unwrap(),
                     &ratelab::graph::GraphSpec::chapter(),
                 )

@@ -24,7 +24,7 @@ fn parse(subcommand: &str, flags: &[String]) -> anyhow::Result<Command> {
 #[derive(Clone, Debug)]
 pub struct ExerciseOutcome {
     /// Its checks, reconcile sentences and what did not pass.
-    pub report: ratelab::exercise::Report,
+    pub report: ratelab_exercises::Report,
     /// The report as `ratelab exercise` prints it, a line each.
     pub lines: Vec<String>,
 }

@@ -396,7 +396,7 @@ fn parse_topic_depth(s: &str) -> Result<(String, usize), String> {
 #[derive(Debug, Clone, Args)]
 pub struct ExerciseArgs {
     /// The exercise: one of the registry's (`ratelab exercise --help` lists them).
-    #[arg(help = ratelab::exercise::menu())]
+    #[arg(help = ratelab_exercises::menu())]
     pub which: String,
     /// The folder holding the exercise files and bands.toml.
     #[arg(long, default_value = "exercises")]

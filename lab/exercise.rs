@@ -1,10 +1,10 @@
 //! `ratelab exercise ex1|…`: predict, run, reconcile. The exercises themselves are the
-//! library's registry ([`ratelab::exercise::EXERCISES`]); this is where their report goes
+//! library's registry ([`ratelab_exercises::EXERCISES`]); this is where their report goes
 //! (stdout), their progress (a spinner on stderr) and what their outcome means for the exit
 //! code.
 
 use anyhow::bail;
-use ratelab::exercise::{Progress, Setup};
+use ratelab_exercises::{Progress, Setup};
 use std::cell::RefCell;
 
 /// An exercise that ran to its end but did not pass: a check failed, or a prediction
@@ -96,11 +96,11 @@ pub fn report_from_args(
     args: &crate::cli::ExerciseArgs,
     prediction: Option<&toml::Table>,
     out: &mut dyn FnMut(&str),
-    progress: &dyn ratelab::exercise::Progress,
-) -> anyhow::Result<ratelab::exercise::Report> {
+    progress: &dyn ratelab_exercises::Progress,
+) -> anyhow::Result<ratelab_exercises::Report> {
     let mut graph = args.graph.clone();
     if graph.graph.is_none() {
-        graph.graph = ratelab::exercise::default_graph(&args.which, &args.dir)?;
+        graph.graph = ratelab_exercises::default_graph(&args.which, &args.dir)?;
     }
     let g = crate::headless::graph_from_args(&graph)?;
     if !crate::headless::faults_from_args(&graph).is_empty() {
@@ -114,7 +114,7 @@ pub fn report_from_args(
         exe: &exe,
         prediction,
     };
-    Ok(ratelab::exercise::run_report(
+    Ok(ratelab_exercises::run_report(
         &args.which,
         setup,
         out,

@@ -6,7 +6,8 @@
 //! crate of the library knows terminals: the lab (`lab/`) draws it.
 //!
 //! This crate is the one a Rust program depends on: it re-exports every layer's modules
-//! under one name, and holds the exercises. The layers are crates of their own, each
+//! under one name (the exercises, `ratelab-exercises` in `src/exercises/`, are the lab's,
+//! not the facade's). The layers are crates of their own, each
 //! depending only on those below it (the workspace's `Cargo.toml` lists them):
 //!
 //! - **core** (`ratelab_core`, `src/core/`) — leaves that many modules share: [`time`] (the
@@ -42,11 +43,8 @@
 //!   run's results in memory, for a host program), and the run core's drivers — [`run`] (one
 //!   headless run), [`sweep`] (grids and the rate cliff; [`sweep_spec`], a sweep or cliff
 //!   search as data, under the same rules for every front end), [`session`] (the lab's live
-//!   sessions, their log and replay);
-//! - **this crate**: [`exercise`] (the exercises' bands and checks).
+//!   sessions, their log and replay).
 #![warn(missing_docs)]
-
-pub mod exercise;
 
 mod wiring;
 

@@ -88,7 +88,7 @@ fn to_py(e: &anyhow::Error) -> PyErr {
         None => ratelab::text::printable(&format!("{e:#}")).to_string(),
     };
     for cause in e.chain() {
-        if let Some(ratelab::exercise::ExerciseError::NoPrediction { .. }) = cause.downcast_ref() {
+        if let Some(ratelab_exercises::ExerciseError::NoPrediction { .. }) = cause.downcast_ref() {
             return NoPrediction::new_err(text);
         }
         if cause
@@ -337,7 +337,7 @@ fn install_messages(py: Python<'_>) -> PyResult<()> {
 /// rate cliff")`).
 #[pyfunction]
 fn exercises() -> Vec<(&'static str, &'static str, &'static str)> {
-    (ratelab::exercise::EXERCISES.iter())
+    (ratelab_exercises::EXERCISES.iter())
         .map(|e| (e.id(), e.file(), e.title()))
         .collect()
 }

@@ -3,18 +3,18 @@
 //! learner writes one, it checks that the prediction is complete and prints it beside the
 //! measured outcome.
 
-use ratelab::exercise::{
+use ratelab::graph::GraphSpec;
+use ratelab_exercises::{
     check_ex1, check_ex2, check_ex3, check_ex4, check_ex5, check_ex6, default_graph, load_bands,
     measure_ex1, measure_ex2, measure_ex3, measure_ex4, measure_ex5, measure_ex6, outcome_ex4,
     outcome_ex5, outcome_ex6, required_keys, Ex5Case, ExerciseFile,
 };
-use ratelab::exercise::{check_ex7, measure_ex7, outcome_ex7, Ex7Case, Ex7Run};
-use ratelab::exercise::{check_ex8, first_fall_rad, measure_ex8, outcome_ex8, Ex8Run};
-use ratelab::exercise::{check_ex9, measure_ex9, outcome_ex9, Ex9Case};
-use ratelab::exercise::{Ex1Bands, Ex2Bands, Ex3Bands, Ex4Bands, Ex5Bands, Ex6Bands};
-use ratelab::exercise::{Ex4Outcome, Ex5Outcome, Ex6Outcome, Ex7Outcome, Ex8Outcome};
-use ratelab::exercise::{Ex7Bands, Ex8Bands, Ex9Bands, Verdict};
-use ratelab::graph::GraphSpec;
+use ratelab_exercises::{check_ex7, measure_ex7, outcome_ex7, Ex7Case, Ex7Run};
+use ratelab_exercises::{check_ex8, first_fall_rad, measure_ex8, outcome_ex8, Ex8Run};
+use ratelab_exercises::{check_ex9, measure_ex9, outcome_ex9, Ex9Case};
+use ratelab_exercises::{Ex1Bands, Ex2Bands, Ex3Bands, Ex4Bands, Ex5Bands, Ex6Bands};
+use ratelab_exercises::{Ex4Outcome, Ex5Outcome, Ex6Outcome, Ex7Outcome, Ex8Outcome};
+use ratelab_exercises::{Ex7Bands, Ex8Bands, Ex9Bands, Verdict};
 use std::path::{Path, PathBuf};
 
 fn path(name: &str) -> PathBuf {
@@ -49,7 +49,7 @@ fn bands() -> Bands {
     }
 }
 
-fn assert_all(checks: Vec<ratelab::exercise::Check>) {
+fn assert_all(checks: Vec<ratelab_exercises::Check>) {
     let failed: Vec<_> = checks
         .iter()
         .filter(|c| !c.passed)
@@ -110,7 +110,7 @@ fn ex4_measurement_stale_queue() {
     assert!(lo <= hi);
     // Virtual runs: the exercise measures the same thing twice.
     let again = measure_ex4(&b.ex4, &GraphSpec::chapter()).unwrap();
-    let json = |rs: &[ratelab::exercise::Ex4Run]| {
+    let json = |rs: &[ratelab_exercises::Ex4Run]| {
         rs.iter()
             .map(|r| serde_json::to_string(&r.metrics).unwrap())
             .collect::<Vec<_>>()
@@ -152,7 +152,7 @@ fn ex5_measurement_watchdog() {
             "loss=0.5,reliability=reliable,deadline_ms=50,on_deadline_missed=stop",
         )
         .unwrap();
-    let json = |rs: &[ratelab::exercise::Ex5Run]| {
+    let json = |rs: &[ratelab_exercises::Ex5Run]| {
         rs.iter()
             .filter(|r| r.case != Ex5Case::Lossless)
             .map(|r| serde_json::to_string(&r.metrics).unwrap())
@@ -514,7 +514,7 @@ fn ex10_prediction_recorded() {
 /// once.
 #[test]
 fn ex10_measurement_held_force() {
-    use ratelab::exercise::ex10::{check_ex10, measure_ex10, outcome_ex10, Ex10Bands};
+    use ratelab_exercises::ex10::{check_ex10, measure_ex10, outcome_ex10, Ex10Bands};
     let b: Ex10Bands = load_bands(&path("bands.toml")).unwrap().of().unwrap();
     let runs = measure_ex10(&b, &GraphSpec::chapter()).unwrap();
     assert_eq!(runs.len(), b.seeds.len());
@@ -540,7 +540,7 @@ fn ex11_prediction_recorded() {
 /// one's (gentler gains tolerate a slower policy).
 #[test]
 fn ex11_measurement_own_brain() {
-    use ratelab::exercise::ex11::{check_ex11, measure_ex11, outcome_ex11, Ex11Bands, BRAIN_FILE};
+    use ratelab_exercises::ex11::{check_ex11, measure_ex11, outcome_ex11, Ex11Bands, BRAIN_FILE};
     ratelab::init(); // the brain is Python
     let b: Ex11Bands = load_bands(&path("bands.toml")).unwrap().of().unwrap();
     let runs = measure_ex11(&b, &GraphSpec::chapter(), &path(BRAIN_FILE)).unwrap();
@@ -566,8 +566,8 @@ fn ex12_prediction_recorded() {
 /// stays up; the checks fail off the measured shape; the reconcile speaks to every key.
 #[test]
 fn ex12_measurement_restart() {
-    use ratelab::exercise::ex12::{check_ex12, measure_ex12, outcome_ex12, Ex12Bands};
-    use ratelab::exercise::Reconcile;
+    use ratelab_exercises::ex12::{check_ex12, measure_ex12, outcome_ex12, Ex12Bands};
+    use ratelab_exercises::Reconcile;
     let _machine = crate::machine::alone();
     let b: Ex12Bands = load_bands(&path("bands.toml")).unwrap().of().unwrap();
     let file = default_graph("ex12", &path(""))
@@ -592,7 +592,7 @@ fn ex12_measurement_restart() {
     // lost in.
     let ticks = run.metrics.nodes["policy"].ticks;
     let missed = (b.duration_s * 50.0) as u64 + 1 - ticks;
-    let (_, most) = ratelab::exercise::ex12::lost_bounds(&b, 50.0, o.gap_ms).unwrap();
+    let (_, most) = ratelab_exercises::ex12::lost_bounds(&b, 50.0, o.gap_ms).unwrap();
     assert!(missed <= most, "{missed} ticks, {o:?}");
     // Off the measured shape, the check says so: a gap a second longer would have lost 50
     // readings more than were.
@@ -647,8 +647,8 @@ fn ex14_prediction_recorded() {
 /// to every key, and says the event of a pair that did not connect.
 #[test]
 fn ex14_measurement_incompatible_qos() {
-    use ratelab::exercise::ex14::{check_ex14, measure_ex14, outcome_ex14, Ex14Bands};
-    use ratelab::exercise::Reconcile;
+    use ratelab_exercises::ex14::{check_ex14, measure_ex14, outcome_ex14, Ex14Bands};
+    use ratelab_exercises::Reconcile;
     ratelab::init(); // the late joiner is a Python node
     let b: Ex14Bands = load_bands(&path("bands.toml")).unwrap().of().unwrap();
     let runs = measure_ex14(&b, &GraphSpec::chapter(), &path("")).unwrap();
@@ -685,7 +685,7 @@ fn ex14_measurement_incompatible_qos() {
         "{lines:?}"
     );
     let verdicts: Vec<Verdict> = lines.iter().map(|l| l.verdict).collect();
-    use ratelab::exercise::Verdict::{Missed, Right};
+    use ratelab_exercises::Verdict::{Missed, Right};
     assert_eq!(verdicts, [Missed, Right, Right, Right, Right, Missed]);
 }
 
@@ -859,9 +859,9 @@ const NOT_VIRTUAL: [&str; 3] = ["ex3", "ex9", "ex12"];
 /// measured (printed as "You predicted X; it was Y" on a miss), as bands.toml's provenance
 /// comments and the measurement tests above say.
 fn virtual_exercises() -> Vec<Graded> {
-    use ratelab::exercise::ex10::Ex10Bands;
-    use ratelab::exercise::ex11::BRAIN_FILE;
-    use ratelab::exercise::ex14::Ex14Bands;
+    use ratelab_exercises::ex10::Ex10Bands;
+    use ratelab_exercises::ex11::BRAIN_FILE;
+    use ratelab_exercises::ex14::Ex14Bands;
     let b = bands();
     let all = load_bands(&path("bands.toml")).unwrap();
     let ex10: Ex10Bands = all.of().unwrap();
@@ -1012,7 +1012,7 @@ fn every_virtual_exercise_exits_0_on_a_right_prediction_and_1_on_a_wrong_one() {
     // Every exercise is a row or left out on purpose: a new one must be placed.
     let mut covered: Vec<&str> = rows.iter().map(|r| r.which).chain(NOT_VIRTUAL).collect();
     covered.sort_unstable();
-    let mut ids = ratelab::exercise::ids();
+    let mut ids = ratelab_exercises::ids();
     ids.sort_unstable();
     assert_eq!(covered, ids);
     for r in &rows {

@@ -1389,9 +1389,9 @@ fn an_exercise_bands_file_with_an_endless_duration_is_refused() {
     assert!(changed > 0, "bands.toml has no duration_s");
     let p = dir.path().join("bands.toml");
     std::fs::write(&p, edited).unwrap();
-    let b = ratelab::exercise::load_bands(&p).unwrap();
+    let b = ratelab_exercises::load_bands(&p).unwrap();
     let start = Instant::now();
-    let e = ratelab::exercise::measure_ex1(&b.of().unwrap(), &ratelab::graph::GraphSpec::chapter())
+    let e = ratelab_exercises::measure_ex1(&b.of().unwrap(), &ratelab::graph::GraphSpec::chapter())
         .unwrap_err();
     assert!(e.to_string().contains("(0, 315360000]"), "{e}");
     assert!(start.elapsed() < Duration::from_secs(1));

@@ -451,9 +451,9 @@ fn an_empty_list_in_the_bands_is_refused_naming_its_key() {
     let dir = tempfile::tempdir().unwrap();
     let p = dir.path().join("bands.toml");
     std::fs::write(&p, edited).unwrap();
-    let b = ratelab::exercise::load_bands(&p).unwrap();
+    let b = ratelab_exercises::load_bands(&p).unwrap();
     let e = b
-        .of::<ratelab::exercise::ex1::Ex1Bands>()
+        .of::<ratelab_exercises::ex1::Ex1Bands>()
         .unwrap_err()
         .to_string();
     assert!(

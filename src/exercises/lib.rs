@@ -4,7 +4,9 @@
 //! prints; [`EXERCISES`] lists them, in order.
 //! A new exercise is its file plus one line there (and its TOML in `exercises/`).
 //!
-//! This module holds what they share: reading the learner's file and `bands.toml`
+//! A crate of its own (`ratelab-exercises`, above the drivers and the graph across
+//! processes): the facade does not hold it, so a change to an exercise rebuilds only this
+//! crate and the lab. The crate root holds what they share: reading the learner's file and `bands.toml`
 //! ([`ExerciseFile`], [`Bands`]), the [`Exercise`] trait, the [`Context`] an exercise runs
 //! in (where it prints, its progress, what did not pass), [`run`] (one exercise from
 //! prediction to reconcile, as `ratelab exercise` runs it) and the runs and table cells the
@@ -38,6 +40,7 @@
 //!   40 Hz: the node list, the topics' ROS 2 types, and how often `/clock` ticks.
 //! - [`ex14`], incompatible QoS: four requested/offered pairs on the chapter's `/action`,
 //!   which ROS 2 connects; and a node joining late under each durability: what it gets.
+#![warn(missing_docs)]
 
 /// Print one line of an exercise's report through its [`Context`]: `say!(cx, "…", args)`,
 /// or `say!(cx)` for an empty line.
@@ -77,13 +80,13 @@ pub use ex7::{check_ex7, measure_ex7, outcome_ex7, Ex7Bands, Ex7Case, Ex7Outcome
 pub use ex8::{check_ex8, first_fall_rad, measure_ex8, outcome_ex8, Ex8Bands, Ex8Outcome, Ex8Run};
 pub use ex9::{check_ex9, measure_ex9, outcome_ex9, Ex9Bands, Ex9Case, Ex9Outcome, Ex9Run};
 
-use crate::config::{duration_from_secs, ClockKind, RunConfig};
-use crate::graph::GraphSpec;
-use crate::metrics::Metrics;
-use crate::policy::{Policy, Scripted};
-use crate::sweep::SweepError;
+use ratelab_core::metrics::Metrics;
+use ratelab_drivers::sweep::SweepError;
+use ratelab_runtime::config::{duration_from_secs, ClockKind, RunConfig};
+use ratelab_runtime::graph::GraphSpec;
+use ratelab_runtime::policy::{Policy, Scripted};
 // One thread per core, as a sweep runs (`ratelab sweep`).
-use crate::sweep_spec::threads;
+use ratelab_drivers::sweep_spec::threads;
 use serde::de::DeserializeOwned;
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
@@ -165,9 +168,9 @@ pub fn menu() -> String {
 #[derive(Debug, thiserror::Error)]
 pub enum ExerciseError {
     /// The file cannot be read: missing, not a regular file, too large, unreadable
-    /// ([`crate::input::read_regular_file`]'s rules).
+    /// ([`ratelab_core::input::read_regular_file`]'s rules).
     #[error(transparent)]
-    Input(#[from] crate::input::InputError),
+    Input(#[from] ratelab_core::input::InputError),
     /// The file is not valid TOML of the expected shape.
     #[error("{path}: {detail}")]
     Parse {
@@ -200,10 +203,10 @@ pub enum ExerciseError {
     Sweep(#[from] SweepError),
     /// A setting in the bands is invalid.
     #[error("bands: {0}")]
-    Config(#[from] crate::config::ConfigError),
+    Config(#[from] ratelab_runtime::config::ConfigError),
     /// A QoS or rate the bands set does not fit the graph.
     #[error("bands: {0}")]
-    Setting(#[from] crate::graph::spec::OverrideError),
+    Setting(#[from] ratelab_runtime::graph::spec::OverrideError),
     /// The graph lacks a node the bands name.
     #[error("bands: the graph has no node '{0}'")]
     NoNode(String),
@@ -225,7 +228,7 @@ fn expected() -> String {
 const MAX_FILE_BYTES: u64 = 1 << 20;
 
 fn read_text(path: &Path) -> Result<String, ExerciseError> {
-    let bytes = crate::input::read_regular_file(path, MAX_FILE_BYTES)?;
+    let bytes = ratelab_core::input::read_regular_file(path, MAX_FILE_BYTES)?;
     String::from_utf8(bytes).map_err(|_| ExerciseError::Parse {
         path: path.display().to_string(),
         detail: "not UTF-8 text".into(),
@@ -406,7 +409,7 @@ impl ExerciseFile {
     pub fn prediction_text(&self) -> String {
         self.prediction
             .iter()
-            .map(|(k, v)| format!("{} = {v}", crate::text::printable(k)))
+            .map(|(k, v)| format!("{} = {v}", ratelab_core::text::printable(k)))
             .collect::<Vec<_>>()
             .join("\n")
     }
@@ -630,7 +633,7 @@ pub struct Context<'a> {
     /// The file `graph` was read from (`None`: the chapter's); ex9's processes load it too.
     pub graph_path: Option<&'a Path>,
     /// This program, for an exercise that launches processes (ex9).
-    pub exe: &'a crate::distributed::launcher::Program,
+    pub exe: &'a ratelab_distributed::launcher::Program,
     /// The learner's file.
     pub file: &'a ExerciseFile,
     /// `bands.toml`.
@@ -744,7 +747,7 @@ pub struct Setup<'a> {
     /// Its file (`None`: the chapter's).
     pub graph_path: Option<&'a Path>,
     /// This program.
-    pub exe: &'a crate::distributed::launcher::Program,
+    pub exe: &'a ratelab_distributed::launcher::Program,
     /// The prediction, in place of the one in the learner's file (`None`: the file's): the
     /// keys the exercise's file asks for, and `why`.
     pub prediction: Option<&'a toml::Table>,
@@ -846,15 +849,15 @@ fn scripted() -> Result<Box<dyn Policy>, String> {
 fn launch_across(
     cfg: &RunConfig,
     graph_path: Option<&Path>,
-    exe: &crate::distributed::launcher::Program,
-    kill_processes: Vec<(String, crate::time::Nanos)>,
-) -> Result<crate::distributed::launcher::LaunchReport, ExerciseError> {
-    use crate::distributed::launcher::{launch, LaunchOptions};
+    exe: &ratelab_distributed::launcher::Program,
+    kill_processes: Vec<(String, ratelab_core::time::Nanos)>,
+) -> Result<ratelab_distributed::launcher::LaunchReport, ExerciseError> {
+    use ratelab_distributed::launcher::{launch, LaunchOptions};
     let names: Vec<String> = cfg.graph.placement().into_iter().map(|(p, _)| p).collect();
-    let launch_error = |e: crate::distributed::DistError| ExerciseError::Launch(e.to_string());
+    let launch_error = |e: ratelab_distributed::DistError| ExerciseError::Launch(e.to_string());
     let opts = LaunchOptions {
         graph_path: graph_path.map(Path::to_path_buf),
-        graph_bytes: crate::graph::spec::graph_file_bytes(graph_path)?,
+        graph_bytes: ratelab_runtime::graph::spec::graph_file_bytes(graph_path)?,
         listen: None,
         policy: "scripted".into(),
         exe: Some(exe.clone()),
@@ -862,7 +865,7 @@ fn launch_across(
         start_gate: None,
         listening: None,
         pace: None,
-        credentials: crate::distributed::credentials::Credentials::generate(
+        credentials: ratelab_distributed::credentials::Credentials::generate(
             &cfg.graph.name,
             &names,
         )
@@ -870,16 +873,16 @@ fn launch_across(
         ros2_domain: None,
         kill_processes,
     };
-    let stop = crate::scheduler::StopFlag::new();
+    let stop = ratelab_runtime::scheduler::StopFlag::new();
     launch(cfg, &opts, &stop, &|_| {}).map_err(launch_error)
 }
 
 fn run_scripted(cfg: &RunConfig) -> Result<Metrics, ExerciseError> {
-    let opts = crate::run::RunOptions {
+    let opts = ratelab_drivers::run::RunOptions {
         keep_trace: false,
         ..Default::default()
     };
-    Ok(crate::run::run(cfg, Box::new(Scripted), opts)
+    Ok(ratelab_drivers::run::run(cfg, Box::new(Scripted), opts)
         .map_err(SweepError::from)?
         .metrics)
 }
@@ -890,7 +893,7 @@ fn run_virtual(
     graph: GraphSpec,
     seed: u64,
     duration_s: f64,
-) -> Result<crate::run::RunReport, ExerciseError> {
+) -> Result<ratelab_drivers::run::RunReport, ExerciseError> {
     let cfg = RunConfig {
         clock: ClockKind::Virtual,
         duration: duration_from_secs(duration_s)?,
@@ -898,10 +901,12 @@ fn run_virtual(
         seed,
         ..RunConfig::default()
     };
-    Ok(
-        crate::run::run(&cfg, Box::new(Scripted), crate::run::RunOptions::new())
-            .map_err(SweepError::from)?,
+    Ok(ratelab_drivers::run::run(
+        &cfg,
+        Box::new(Scripted),
+        ratelab_drivers::run::RunOptions::new(),
     )
+    .map_err(SweepError::from)?)
 }
 
 /// A run's verdict in a table cell: `Y`, `n@0.34s` (fell at run time 0.34 s), or
@@ -942,7 +947,7 @@ fn dash<T: std::fmt::Display>(x: Option<T>) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::policy::Scripted;
+    use ratelab_runtime::policy::Scripted;
 
     #[test]
     fn every_exercise_is_registered_once_with_its_file() {
@@ -951,7 +956,7 @@ mod tests {
         unique.sort_unstable();
         unique.dedup();
         assert_eq!(unique.len(), ids.len(), "{ids:?}");
-        let dir = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/exercises"));
+        let dir = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../../exercises"));
         let bands = load_bands(&dir.join("bands.toml")).unwrap();
         for e in EXERCISES {
             assert!(e.file().starts_with(e.id()), "{}: {}", e.id(), e.file());
@@ -985,7 +990,7 @@ mod tests {
         assert!(matches!(
             ExerciseFile::load(&big),
             Err(ExerciseError::Input(
-                crate::input::InputError::TooLarge { .. }
+                ratelab_core::input::InputError::TooLarge { .. }
             ))
         ));
         let binary = dir.path().join("binary.toml");
@@ -1025,7 +1030,7 @@ mod tests {
     fn ex3_checks_pass_on_the_measured_shape_and_fail_off_it() {
         let b: Ex3Bands = load_bands(Path::new(concat!(
             env!("CARGO_MANIFEST_DIR"),
-            "/exercises/bands.toml"
+            "/../../exercises/bands.toml"
         )))
         .unwrap()
         .of()
@@ -1035,12 +1040,16 @@ mod tests {
         // mean 21.5 ms; offsets 0/5/10: no drop, median 10.0 ms).
         let cfg = RunConfig {
             clock: ClockKind::Virtual,
-            duration: crate::time::Nanos::from_millis(100),
+            duration: ratelab_core::time::Nanos::from_millis(100),
             ..RunConfig::default()
         };
-        let base = crate::run::run(&cfg, Box::new(Scripted), crate::run::RunOptions::new())
-            .unwrap()
-            .metrics;
+        let base = ratelab_drivers::run::run(
+            &cfg,
+            Box::new(Scripted),
+            ratelab_drivers::run::RunOptions::new(),
+        )
+        .unwrap()
+        .metrics;
         let matched = Metrics {
             obs_published: Some(250),
             obs_dropped: Some(40),

@@ -2,14 +2,14 @@
 //! rate than the sensor's. The learner predicts what `ros2 node list` prints, the ROS 2 types
 //! of `/obs` and `/action`, and how many `/clock` messages a second of run time carries;
 //! ratelab answers from the mapping its bridge declares the graph with
-//! ([`crate::ros2::offered`]) and from the run's own instants (`/clock` is published before
+//! ([`ratelab_ros2::offered`]) and from the run's own instants (`/clock` is published before
 //! each virtual instant, docs/ros2.md), and prints the `ratelab ros2` commands that read the
 //! same from the wire (a test reads them there and finds the same).
 
 use super::{check, Check, Context, Exercise, ExerciseError, Reconcile, Said, Section};
-use crate::config::{duration_from_secs, ClockKind, RunConfig};
-use crate::policy::Scripted;
-use crate::runcore::{CoreOptions, RunCore, Step};
+use ratelab_runtime::config::{duration_from_secs, ClockKind, RunConfig};
+use ratelab_runtime::policy::Scripted;
+use ratelab_runtime::runcore::{CoreOptions, RunCore, Step};
 use serde::Deserialize;
 use std::collections::BTreeSet;
 
@@ -49,7 +49,7 @@ pub struct Ex13Outcome {
 /// # Errors
 /// [`ExerciseError`] when the run cannot start.
 pub fn measure_ex13(cfg: &RunConfig) -> Result<Ex13Outcome, ExerciseError> {
-    let offered = crate::ros2::offered::offered(&cfg.graph);
+    let offered = ratelab_ros2::offered::offered(&cfg.graph);
     let type_of = |name: &str| {
         offered
             .topics
@@ -57,8 +57,9 @@ pub fn measure_ex13(cfg: &RunConfig) -> Result<Ex13Outcome, ExerciseError> {
             .find(|t| t.name == name)
             .map_or_else(|| "?".to_string(), |t| t.ros_type.clone())
     };
-    let mut core = RunCore::new(cfg, Box::new(Scripted), CoreOptions::default())
-        .map_err(|e| crate::sweep::SweepError::from(crate::run::RunError::from(e)))?;
+    let mut core = RunCore::new(cfg, Box::new(Scripted), CoreOptions::default()).map_err(|e| {
+        ratelab_drivers::sweep::SweepError::from(ratelab_drivers::run::RunError::from(e))
+    })?;
     // The instants in [0, duration): each is one /clock message.
     let mut instants = 0u64;
     while let Step::Ran { at, .. } = core.step() {
@@ -130,7 +131,7 @@ impl Reconcile for Ex13Outcome {
                 return "none".into();
             }
             set.iter()
-                .map(|n| crate::text::printable(n).into_owned())
+                .map(|n| ratelab_core::text::printable(n).into_owned())
                 .collect::<Vec<_>>()
                 .join(" ")
         };
@@ -160,7 +161,7 @@ impl Reconcile for Ex13Outcome {
                     key,
                     &format!(
                         "You predicted {key} = {}; it is {seen}",
-                        crate::text::printable(t)
+                        ratelab_core::text::printable(t)
                     ),
                     t == seen.as_str(),
                     "",
@@ -220,7 +221,7 @@ impl Exercise for Ex13 {
         // As `ros2 node list` prints them (and `ratelab ros2 node list`): sorted, one a line.
         say!(cx, "  ros2 node list");
         for n in node_set(o.nodes.iter().map(String::as_str)) {
-            say!(cx, "    {}", crate::text::printable(&n));
+            say!(cx, "    {}", ratelab_core::text::printable(&n));
         }
         say!(cx, "  /obs                  {}", o.obs_type);
         say!(cx, "  /action               {}", o.action_type);

@@ -4,9 +4,9 @@
 
 use super::{check, run_virtual, seeds_header, threads, verdict, Check, Context, Exercise};
 use super::{ExerciseError, Reconcile, Said, Section, Verdict};
-use crate::graph::GraphSpec;
-use crate::metrics::Metrics;
-use crate::sweep::run_pool;
+use ratelab_core::metrics::Metrics;
+use ratelab_drivers::sweep::run_pool;
+use ratelab_runtime::graph::GraphSpec;
 use serde::Deserialize;
 
 /// ex5: the watchdog.
@@ -267,7 +267,7 @@ pub fn check_ex5(b: &Ex5Bands, runs: &[Ex5Run]) -> Vec<Check> {
             format!(
                 "{}: loses under a tenth of the share of commands best effort loses (it gives up only after {} sends)",
                 label(Ex5Case::Reliable),
-                crate::qos::MAX_ATTEMPTS
+                ratelab_core::qos::MAX_ATTEMPTS
             ),
             {
                 let share = |c: Ex5Case| {
@@ -520,8 +520,11 @@ fn explain(b: &Ex5Bands, runs: &[Ex5Run], outcome: &Ex5Outcome) -> String {
     text +=
         " Motor drivers do the same with a command timeout (ROS 2's diff_drive_controller stops \
              the wheels after cmd_vel_timeout).";
-    let timeout = crate::qos::Link::default_retransmit(crate::Nanos::ZERO, crate::Nanos::ZERO);
-    let attempts = crate::qos::MAX_ATTEMPTS;
+    let timeout = ratelab_core::qos::Link::default_retransmit(
+        ratelab_core::Nanos::ZERO,
+        ratelab_core::Nanos::ZERO,
+    );
+    let attempts = ratelab_core::qos::MAX_ATTEMPTS;
     text += &format!(
         " Reliable delivery sends a lost command again, up to {attempts} times (at {high} loss all \
          {attempts} sends fail for {:.1}% of commands), and a retransmission comes a timeout later \

@@ -3,14 +3,14 @@
 //! first with every node waking at the same instant, then with phase offsets. A message
 //! that crosses processes takes a fraction of a millisecond on the wire, so the node that
 //! ticks at the instant it was published never has it: each crossing hop costs a period.
-//! Real clock, real processes over Zenoh ([`crate::distributed`]): the checks assert only
+//! Real clock, real processes over Zenoh ([`ratelab_distributed`]): the checks assert only
 //! what holds on a noisy machine (medians).
 
 use super::{check, Check, Context, Exercise, ExerciseError, Reconcile, Said, Section};
-use crate::config::{duration_from_secs, phase_offset_from_ms, ClockKind, RunConfig};
-use crate::distributed::launcher::Program;
-use crate::graph::GraphSpec;
-use crate::metrics::Metrics;
+use ratelab_core::metrics::Metrics;
+use ratelab_distributed::launcher::Program;
+use ratelab_runtime::config::{duration_from_secs, phase_offset_from_ms, ClockKind, RunConfig};
+use ratelab_runtime::graph::GraphSpec;
 use serde::Deserialize;
 use std::path::Path;
 

@@ -3,9 +3,9 @@
 //! of policy rates until the pole falls: whose rate cliff is lower? Virtual clock: exact.
 
 use super::{check, threads, Check, Context, Exercise, ExerciseError, Reconcile, Said, Section};
-use crate::config::{duration_from_secs, ClockKind, RunConfig};
-use crate::graph::GraphSpec;
-use crate::sweep::{find_cliff, run_pool, Cliff};
+use ratelab_drivers::sweep::{find_cliff, run_pool, Cliff};
+use ratelab_runtime::config::{duration_from_secs, ClockKind, RunConfig};
+use ratelab_runtime::graph::GraphSpec;
 use serde::Deserialize;
 use std::path::Path;
 
@@ -60,27 +60,29 @@ pub fn measure_ex11(
     brain: &Path,
 ) -> Result<Ex11Runs, ExerciseError> {
     let spec = brain.display().to_string();
-    crate::checkpoint::load_policy(&spec).map_err(|e| ExerciseError::NotReady(e.to_string()))?;
-    let mine = move || crate::checkpoint::load_policy(&spec).map_err(|e| e.to_string());
+    ratelab_runtime::checkpoint::load_policy(&spec)
+        .map_err(|e| ExerciseError::NotReady(e.to_string()))?;
+    let mine = move || ratelab_runtime::checkpoint::load_policy(&spec).map_err(|e| e.to_string());
     let scripted = super::scripted;
-    let cliffs = |brain: crate::sweep::BrainFactory<'_>| -> Result<Vec<Cliff>, ExerciseError> {
-        let base = RunConfig {
-            clock: ClockKind::Virtual,
-            duration: duration_from_secs(b.duration_s)?,
-            graph: graph.clone(),
-            ..RunConfig::default()
-        };
-        run_pool(&b.seeds, threads(), |&seed| {
-            let cfg = RunConfig {
-                seed,
-                ..base.clone()
+    let cliffs =
+        |brain: ratelab_drivers::sweep::BrainFactory<'_>| -> Result<Vec<Cliff>, ExerciseError> {
+            let base = RunConfig {
+                clock: ClockKind::Virtual,
+                duration: duration_from_secs(b.duration_s)?,
+                graph: graph.clone(),
+                ..RunConfig::default()
             };
-            find_cliff(&cfg, brain, b.min_hz, b.max_hz, b.step_hz)
-        })
-        .into_iter()
-        .map(|r| r.map_err(ExerciseError::from))
-        .collect()
-    };
+            run_pool(&b.seeds, threads(), |&seed| {
+                let cfg = RunConfig {
+                    seed,
+                    ..base.clone()
+                };
+                find_cliff(&cfg, brain, b.min_hz, b.max_hz, b.step_hz)
+            })
+            .into_iter()
+            .map(|r| r.map_err(ExerciseError::from))
+            .collect()
+        };
     Ok((cliffs(&mine)?, cliffs(&scripted)?))
 }
 

@@ -5,9 +5,9 @@
 
 use super::{check, dash, run_scripted, Check, Context, Exercise, ExerciseError};
 use super::{Reconcile, Said, Section};
-use crate::config::{duration_from_secs, phase_offset_from_ms, ClockKind, RunConfig};
-use crate::graph::GraphSpec;
-use crate::metrics::Metrics;
+use ratelab_core::metrics::Metrics;
+use ratelab_runtime::config::{duration_from_secs, phase_offset_from_ms, ClockKind, RunConfig};
+use ratelab_runtime::graph::GraphSpec;
 use serde::Deserialize;
 
 /// ex3: jitter and phase offsets.

@@ -3,11 +3,11 @@
 //! does the pole stay up on a force nobody is computing any more? Virtual clock: exact.
 
 use super::{check, Check, Context, Exercise, ExerciseError, Reconcile, Said, Section};
-use crate::config::{duration_from_secs, ClockKind, RunConfig};
-use crate::graph::GraphSpec;
-use crate::metrics::Metrics;
-use crate::qos::Fault;
-use crate::time::Nanos;
+use ratelab_core::metrics::Metrics;
+use ratelab_core::qos::Fault;
+use ratelab_core::time::Nanos;
+use ratelab_runtime::config::{duration_from_secs, ClockKind, RunConfig};
+use ratelab_runtime::graph::GraphSpec;
 use serde::Deserialize;
 
 /// ex10: the held force.

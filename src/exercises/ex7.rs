@@ -1,4 +1,4 @@
-//! ex7, the slow callback ([`crate::executor`]): the policy's tick computes for 30 ms, the
+//! ex7, the slow callback ([`ratelab_core::executor`]): the policy's tick computes for 30 ms, the
 //! sensor beside it at 50 Hz, on one executor three ways: a single-threaded executor; a
 //! multi-threaded one of two threads with both in one mutually exclusive callback group (two
 //! timers of one rclpy node, its default group); the same with the sensor in a group of its
@@ -7,9 +7,9 @@
 use super::{
     check, run_virtual, Check, Context, Exercise, ExerciseError, Reconcile, Said, Section,
 };
-use crate::executor::ExecutorOverride;
-use crate::graph::GraphSpec;
-use crate::metrics::Metrics;
+use ratelab_core::executor::ExecutorOverride;
+use ratelab_core::metrics::Metrics;
+use ratelab_runtime::graph::GraphSpec;
 use serde::Deserialize;
 
 /// ex7: the slow callback.
@@ -122,10 +122,11 @@ fn case_graph(b: &Ex7Bands, graph: &GraphSpec, case: Ex7Case) -> Result<GraphSpe
         .node_id(&b.sensor)
         .ok_or_else(|| ExerciseError::NoNode(b.sensor.clone()))?;
     match case {
-        Ex7Case::SingleThreaded => g.set_executor(
-            ExecutorOverride::parse("single_threaded")
-                .map_err(|e| ExerciseError::Setting(crate::graph::spec::OverrideError(e)))?,
-        ),
+        Ex7Case::SingleThreaded => {
+            g.set_executor(ExecutorOverride::parse("single_threaded").map_err(|e| {
+                ExerciseError::Setting(ratelab_runtime::graph::spec::OverrideError(e))
+            })?)
+        }
         Ex7Case::SharedGroup => {}
         Ex7Case::OwnGroup => g.nodes[sensor.0].callback_group = None,
     }

@@ -4,9 +4,9 @@
 
 use super::{check, run_virtual, seeds_header, threads, Check, Context, Exercise};
 use super::{ExerciseError, Reconcile, Said, Section};
-use crate::graph::GraphSpec;
-use crate::metrics::Metrics;
-use crate::sweep::run_pool;
+use ratelab_core::metrics::Metrics;
+use ratelab_drivers::sweep::run_pool;
+use ratelab_runtime::graph::GraphSpec;
 use serde::Deserialize;
 use std::path::Path;
 
@@ -81,8 +81,8 @@ fn ex6_graph(
         .insert("max_force_n".into(), toml::Value::Float(clamp_n));
     if let Some(script) = script {
         let absolute = std::path::absolute(script).unwrap_or_else(|_| script.to_path_buf());
-        node.kind = crate::graph::registry::kind("python").expect("a built-in kind");
-        node.python = Some(crate::graph::kind::PythonCode {
+        node.kind = ratelab_runtime::graph::registry::kind("python").expect("a built-in kind");
+        node.python = Some(ratelab_runtime::graph::kind::PythonCode {
             script: absolute.to_string_lossy().into_owned(),
             class: None,
         });

@@ -2,16 +2,16 @@
 //! process killed mid-run (SIGKILL, as a crash) and started again by the launcher
 //! (`restart = "on-failure"`, `graphs/cartpole-restart.toml`). How many readings are lost
 //! across the rejoin, and how old does the force the actuator holds meanwhile get? Real
-//! clock, real processes over Zenoh ([`crate::distributed`]): the checks assert what holds
+//! clock, real processes over Zenoh ([`ratelab_distributed`]): the checks assert what holds
 //! on a loaded machine (the readings lost are those published while no policy ran).
 
 use super::{check, Check, Context, Exercise, ExerciseError, Reconcile, Said, Section};
-use crate::config::{duration_from_secs, ClockKind, RunConfig};
-use crate::distributed::launcher::Program;
-use crate::graph::spec::RestartPolicy;
-use crate::graph::GraphSpec;
-use crate::metrics::Metrics;
-use crate::time::Nanos;
+use ratelab_core::metrics::Metrics;
+use ratelab_core::time::Nanos;
+use ratelab_distributed::launcher::Program;
+use ratelab_runtime::config::{duration_from_secs, ClockKind, RunConfig};
+use ratelab_runtime::graph::spec::RestartPolicy;
+use ratelab_runtime::graph::GraphSpec;
 use serde::Deserialize;
 use std::path::Path;
 
@@ -34,7 +34,7 @@ pub struct Ex12Bands {
     /// The process rejoins within this long of the kill, s.
     pub rejoin_within_s: f64,
     /// How old the killed copy's last figures can be, ms (a process publishes its figures
-    /// every [`crate::distributed::process::STATS_PERIOD`]): readings it counted after them
+    /// every [`ratelab_distributed::process::STATS_PERIOD`]): readings it counted after them
     /// are counted lost.
     pub figures_age_ms: f64,
     /// How long the new copy takes from its welcome to its subscription, at most, ms:

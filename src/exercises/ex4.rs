@@ -3,11 +3,11 @@
 
 use super::{check, run_virtual, threads, verdict, Check, Context, Exercise, ExerciseError};
 use super::{Reconcile, Said, Section};
-use crate::config::RunConfig;
-use crate::graph::GraphSpec;
-use crate::metrics::Metrics;
-use crate::qos::Delivery;
-use crate::sweep::run_pool;
+use ratelab_core::metrics::Metrics;
+use ratelab_core::qos::Delivery;
+use ratelab_drivers::sweep::run_pool;
+use ratelab_runtime::config::RunConfig;
+use ratelab_runtime::graph::GraphSpec;
 use serde::Deserialize;
 
 /// ex4: the stale queue.

@@ -3,10 +3,10 @@
 
 use super::{check, dash, scripted, threads, Check, Context, Exercise, ExerciseError};
 use super::{Reconcile, Said, Section};
-use crate::config::{duration_from_secs, ClockKind, RunConfig};
-use crate::graph::GraphSpec;
-use crate::metrics::Metrics;
-use crate::sweep::{run_grid, Grid};
+use ratelab_core::metrics::Metrics;
+use ratelab_drivers::sweep::{run_grid, Grid};
+use ratelab_runtime::config::{duration_from_secs, ClockKind, RunConfig};
+use ratelab_runtime::graph::GraphSpec;
 use serde::Deserialize;
 
 /// ex2: the queue-depth trap.

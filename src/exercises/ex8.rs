@@ -8,8 +8,8 @@
 use super::{
     check, run_virtual, Check, Context, Exercise, ExerciseError, Reconcile, Said, Section,
 };
-use crate::graph::GraphSpec;
-use crate::metrics::Metrics;
+use ratelab_core::metrics::Metrics;
+use ratelab_runtime::graph::GraphSpec;
 use serde::Deserialize;
 
 /// ex8: the noisy sensor.

@@ -4,9 +4,9 @@
 //! exact.
 
 use super::{check, Check, Context, Exercise, ExerciseError, Reconcile, Said, Section};
-use crate::config::{duration_from_secs, ClockKind, RunConfig};
-use crate::graph::GraphSpec;
-use crate::metrics::Metrics;
+use ratelab_core::metrics::Metrics;
+use ratelab_runtime::config::{duration_from_secs, ClockKind, RunConfig};
+use ratelab_runtime::graph::GraphSpec;
 use serde::Deserialize;
 use std::path::Path;
 
@@ -309,7 +309,7 @@ impl Exercise for Ex14 {
             say!(
                 cx,
                 "  {durability:<16} {} from before its join",
-                crate::metrics::counted(*got, "message")
+                ratelab_core::metrics::counted(*got, "message")
             );
         }
         cx.reconcile(&outcome);
