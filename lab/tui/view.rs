@@ -121,6 +121,15 @@ impl HeldIn {
             HeldIn::Loading => "loading",
         }
     }
+
+    /// What holds the run, as the verdict says it after `HUNG` (`in policy's callback`,
+    /// `loading policy's script`).
+    pub fn holding(self, node: &str) -> String {
+        match self {
+            HeldIn::Callback => format!("in {node}'s callback"),
+            HeldIn::Loading => format!("loading {node}'s script"),
+        }
+    }
 }
 
 /// Who runs a node that ratelab's built-in kinds do not: [`NodeView::badge`].
@@ -826,19 +835,10 @@ fn badge(v: &View) -> Span<'static> {
         Verdict::Hung {
             node,
             since_s,
-            held_in: HeldIn::Callback,
+            held_in,
         } => Span::from(format!(
-            " HUNG in {node}'s callback since t={since_s:.2}s ✗ "
-        ))
-        .white()
-        .on_red()
-        .bold(),
-        Verdict::Hung {
-            node,
-            since_s,
-            held_in: HeldIn::Loading,
-        } => Span::from(format!(
-            " HUNG loading {node}'s script since t={since_s:.2}s ✗ "
+            " HUNG {} since t={since_s:.2}s ✗ ",
+            held_in.holding(node)
         ))
         .white()
         .on_red()

@@ -17,10 +17,7 @@ pub(super) fn render_cartpole(v: &View, area: Rect, buf: &mut Buffer) {
             since_s,
             held_in,
         } => {
-            let what = match held_in {
-                HeldIn::Callback => format!("in {node}'s callback"),
-                HeldIn::Loading => format!("loading {node}'s script"),
-            };
+            let what = held_in.holding(node);
             let forms = vec![
                 format!(" HUNG {what} since t={since_s:.2}s ✗ "),
                 format!(" HUNG {what} t={since_s:.2}s "),
