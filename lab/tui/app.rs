@@ -22,6 +22,7 @@ use ratelab::session::{Control, Speed, Telemetry, SPEEDS};
 use ratelab::Nanos;
 use std::collections::VecDeque;
 
+mod checkpoints;
 mod hang;
 mod journal;
 mod log;
@@ -239,6 +240,9 @@ pub struct App {
     journal_bytes: usize,
     /// The journal reached [`MAX_JOURNAL`] or [`MAX_JOURNAL_BYTES`] and stopped.
     journal_full: bool,
+    /// The lab's folded view every so many journal messages: a seek back folds from the
+    /// nearest ([`checkpoints`]).
+    checkpoints: checkpoints::Checkpoints,
     /// (t s, θ rad, applied force N, sense→act latency) of the run's first [`GHOST_S`] of
     /// run time: the ghost of the next run when a saved file is reloaded.
     whole: Vec<GhostStep>,
@@ -343,6 +347,7 @@ impl App {
             journal: Vec::new(),
             journal_bytes: 0,
             journal_full: false,
+            checkpoints: Default::default(),
             whole: Vec::new(),
             ghost: Vec::new(),
             reloading: None,

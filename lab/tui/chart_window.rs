@@ -93,6 +93,11 @@ impl Default for Thinned {
 }
 
 impl Thinned {
+    /// How many points it holds.
+    pub fn kept(&self) -> usize {
+        self.points.len()
+    }
+
     /// One actuator step.
     pub fn push(&mut self, t_s: f64, angle_rad: f64, force_n: f64) {
         if self.seen % self.stride == 0 {
@@ -180,7 +185,7 @@ mod tests {
 
 /// One line of a chart kept as the truth's is: the last [`FULL_RATE_S`] at full rate, the
 /// whole run in [`Thinned`] (the estimator's θ̂ beside the pole angle).
-#[derive(Debug, Default)]
+#[derive(Clone, Debug, Default)]
 pub struct Series {
     /// (t s, value) over the last [`FULL_RATE_S`].
     pub recent: std::collections::VecDeque<(f64, f64)>,

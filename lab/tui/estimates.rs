@@ -17,7 +17,7 @@ use ratelab::estimate::{EstimateError, EstimateFigures, EstimateReport, POLE_ANG
 use ratelab::runlog::StepRecord;
 
 /// What the lab keeps of a run's estimator ([`Estimates::push`] each step).
-#[derive(Debug, Default)]
+#[derive(Clone, Debug, Default)]
 pub struct Estimates {
     /// (t s, θ̂ rad): the pole angle's estimate, drawn beside the angle.
     pub angle: Series,
@@ -36,6 +36,15 @@ pub struct Estimates {
 }
 
 impl Estimates {
+    /// How many points its lines hold, recent and thinned (a checkpoint's size,
+    /// `app/checkpoints.rs`).
+    pub fn points(&self) -> usize {
+        [&self.angle, &self.angvel, &self.angvel_estimate]
+            .iter()
+            .map(|s| s.recent.len() + s.whole.kept())
+            .sum()
+    }
+
     /// One actuator step (every step, in order): its point folded, and drawn at the step
     /// before's run time.
     pub fn push(&mut self, s: &StepRecord) {

@@ -186,6 +186,11 @@ fn trim<T>(q: &mut VecDeque<T>, at: impl Fn(&T) -> Nanos, now: Nanos) {
 }
 
 impl Live {
+    /// How many step records it holds (the window's).
+    pub fn records(&self) -> usize {
+        self.window.len()
+    }
+
     /// Account one actuator step.
     pub fn push(&mut self, s: StepRecord) {
         if s.t >= self.segment.start {

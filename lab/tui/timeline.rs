@@ -27,12 +27,17 @@ pub const WINDOW: Nanos = Nanos::SECOND;
 const MAX_KEPT: usize = 8192;
 
 /// The ticks heard of over the last [`WINDOW`].
-#[derive(Debug, Default)]
+#[derive(Clone, Debug, Default)]
 pub struct Timeline {
     spans: VecDeque<CallbackSpan>,
 }
 
 impl Timeline {
+    /// How many ticks it holds.
+    pub fn kept(&self) -> usize {
+        self.spans.len()
+    }
+
     /// Forget every tick (a new run).
     pub fn clear(&mut self) {
         self.spans.clear();

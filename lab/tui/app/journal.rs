@@ -1,7 +1,7 @@
 //! The run's journal: every telemetry message the lab was told, kept (within
 //! [`MAX_JOURNAL`] messages and [`MAX_JOURNAL_BYTES`]) so that a seek back
 //! ([`Telemetry::Rewound`]) shows the run as it was then, by folding the journal again up to
-//! that run time.
+//! that run time, from the nearest checkpoint of the folded view ([`super::checkpoints`]).
 
 use super::{App, MAX_JOURNAL, MAX_JOURNAL_BYTES};
 use ratelab::session::Telemetry;
@@ -36,6 +36,7 @@ impl App {
                 self.journal.clear();
                 self.journal_bytes = 0;
                 self.journal_full = false;
+                self.checkpoints.clear();
                 self.fold(t.clone());
                 self.journal.push((self.now, t));
                 if !self.rewinding {
@@ -56,6 +57,7 @@ impl App {
                 if let Some(last) = self.journal.last_mut() {
                     *last = (self.now, t);
                 }
+                self.journal_replaced_last();
             }
             t => {
                 self.fold(t.clone());
@@ -65,6 +67,7 @@ impl App {
                 {
                     self.journal_bytes += bytes;
                     self.journal.push((self.now, t));
+                    self.checkpoint_if_due();
                 } else {
                     self.journal_full = true;
                 }
@@ -84,10 +87,12 @@ impl App {
             ));
             return;
         }
-        let journal = std::mem::take(&mut self.journal);
-        let upto = journal.partition_point(|(t, _)| *t <= at);
+        let upto = self.journal.partition_point(|(t, _)| *t <= at);
+        // From the nearest checkpoint of the folded view at or before `at` (or from the
+        // run's start): the messages after it, up to `at`, are folded again.
+        let again = self.restore_for(upto, at);
         self.rewinding = true;
-        for (_, t) in journal.into_iter().take(upto) {
+        for (_, t) in again {
             // A switch at the instant itself came after it (the engine scrubs back to where
             // a real-clock part began, not into it).
             if !matches!(t, Telemetry::ClockSwitched { at: s, .. } if s >= at) {
