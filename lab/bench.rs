@@ -55,7 +55,8 @@ fn spread(t: &ratelab::metrics::LatencyStats) -> String {
 /// engine's seek of the run core (restore the capture kept at or before the instant, one a
 /// second as the lab keeps them, and run on to it, the step telemetry muted), and the lab's
 /// fold of what the run told it up to the instant (its steps, and a status every 50 ms of
-/// run time: the lab's 30 a second at about ×1.7).
+/// run time: the lab's 30 a second at about ×1.7), from the lab's nearest checkpoint of its
+/// folded view (`tui/app/checkpoints.rs`).
 pub fn scrub_bench(seeks: usize) -> anyhow::Result<()> {
     use crate::tui::app::App;
     use ratelab::runcore::{CoreOptions, RunCore, HISTORY_EVERY};
