@@ -22,8 +22,8 @@
 //!   [`node`] and [`ports`] (the node traits), [`executor`] (ROS 2's executors as rules),
 //!   [`runlog`], [`estimate`] (an estimator against the truth), [`metrics`];
 //! - **runtime** (`ratelab_runtime`, `src/runtime/`): [`plant`] (the MuJoCo cartpole),
-//!   [`policy`] (brains; + [`checkpoint`] for trained ones; [`interpreter`], where the
-//!   Python layer plugs in), [`graph`] (the graph file, [`graph::spec`]; node kinds and
+//!   [`policy`] (brains; + [`checkpoint`] for trained ones; [`graph::interpreter`],
+//!   where the Python layer plugs in), [`graph`] (the graph file, [`graph::spec`]; node kinds and
 //!   their registry), [`config`], [`scheduler`] (the virtual and real clocks), [`command`]
 //!   (changes to a running graph), [`runcore`] (one graph under either clock, stepped,
 //!   commanded, captured and restored), [`summary`] (a run's figures from its graph's
@@ -50,7 +50,7 @@ mod wiring;
 
 /// Connect the layers that plug into others: install the Python layer's interpreter
 /// ([`python::install`]), which runs Python nodes and brains for the runtime
-/// ([`interpreter`]), and the ROS 2 layer's offer of a process's nodes for the graph across
+/// ([`graph::interpreter`]), and the ROS 2 layer's offer of a process's nodes for the graph across
 /// processes ([`distributed::ros2_offer`], `launch --ros2`). The command line calls it
 /// first; a program that runs Python nodes or brains, or launches with `--ros2`, through the
 /// library calls it once before (else that is refused, in one line saying so). Idempotent
@@ -74,8 +74,8 @@ pub use ratelab_python as python;
 pub use ratelab_recording as recording;
 pub use ratelab_ros2 as ros2;
 pub use ratelab_runtime::{
-    checkpoint, command, config, graph, interpreter, plant, policy, runcore, scheduler, setting,
-    summary, telemetry,
+    checkpoint, command, config, graph, plant, policy, runcore, scheduler, setting, summary,
+    telemetry,
 };
 pub use ratelab_runtime::{ClockKind, RunConfig};
 // `ratelab::run` is the module and, as before the layers were crates, its function.

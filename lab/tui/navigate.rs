@@ -5,7 +5,7 @@
 //! first zoom, is drawn exactly as it always was.
 
 use super::view::{NodeView, TopicView};
-pub use super::zoom::{window_start, Reach, Zoom};
+pub use super::zoom::{Reach, Zoom};
 
 /// The longest filter text kept, characters (a name is matched by a part of it).
 pub const MAX_FILTER_CHARS: usize = 32;
@@ -17,7 +17,7 @@ pub struct Filter {
     /// it, a topic whose name or publisher's name holds it. Starting with `@`, the rest is
     /// matched against the process a node runs in (a topic: its publisher's). Empty: all.
     pub text: String,
-    /// Only what is in trouble ([`node_in_trouble`], [`topic_in_trouble`]); key `!`.
+    /// Only what is in trouble ([`NodeView::in_trouble`], [`TopicView::in_trouble`]); key `!`.
     pub trouble: bool,
 }
 
@@ -37,7 +37,7 @@ impl Filter {
 
     /// Is node `n`, running in `process`, shown?
     pub fn node(&self, n: &NodeView, process: &str) -> bool {
-        self.text_matches(&n.name, process) && (!self.trouble || node_in_trouble(n))
+        self.text_matches(&n.name, process) && (!self.trouble || n.in_trouble())
     }
 
     /// Is topic `t`, published by `publisher` (running in `process`), shown?
@@ -47,7 +47,7 @@ impl Filter {
         } else {
             self.text_matches(&t.name, process) || self.text_matches(&publisher.name, process)
         };
-        text && (!self.trouble || topic_in_trouble(t))
+        text && (!self.trouble || t.in_trouble())
     }
 
     /// The filter in a few words for the panel's title (`/sens · trouble`), `None` when
@@ -67,19 +67,6 @@ impl Filter {
 /// `hay` holds `needle`, ignoring ASCII and Unicode case (an empty needle: always).
 fn contains_ignoring_case(hay: &str, needle: &str) -> bool {
     needle.is_empty() || hay.to_lowercase().contains(&needle.to_lowercase())
-}
-
-/// A node is in trouble when its liveliness lease ran out, a fault is injected into it, or
-/// a callback of it has not returned.
-pub fn node_in_trouble(n: &NodeView) -> bool {
-    n.alive == Some(false) || n.fault.is_some() || n.held.is_some()
-}
-
-/// A topic is in trouble when it drops messages a subscriber misses or is read stale over
-/// the window, loses messages or misses deadlines (its ✗), or offers a QoS a subscriber
-/// cannot take.
-pub fn topic_in_trouble(t: &TopicView) -> bool {
-    t.dropping || t.staling || t.unhealthy || !t.incompatible.is_empty()
 }
 
 /// The lab's navigation of the graph panel.
@@ -200,6 +187,7 @@ impl Navigation {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::tui::zoom::window_start;
 
     fn node(name: &str) -> NodeView {
         NodeView {

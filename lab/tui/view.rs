@@ -103,6 +103,14 @@ pub struct NodeView {
     pub held: Option<(HeldIn, f64)>,
 }
 
+impl NodeView {
+    /// In trouble: its liveliness lease ran out, a fault is injected into it, or a callback
+    /// of it has not returned (the graph panel's `!` filter, and the list's alarm colour).
+    pub fn in_trouble(&self) -> bool {
+        self.alive == Some(false) || self.fault.is_some() || self.held.is_some()
+    }
+}
+
 /// What of a node's code holds the run ([`NodeView::held`], [`Verdict::Hung`]).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum HeldIn {
@@ -210,6 +218,15 @@ pub struct TopicView {
     /// The subscribers its publisher does not connect, their requested QoS not offered:
     /// each subscriber's name with the policies that failed.
     pub incompatible: Vec<(String, Vec<ratelab::qos::compat::Mismatch>)>,
+}
+
+impl TopicView {
+    /// In trouble: it drops messages a subscriber misses or is read stale over the window,
+    /// loses messages or misses deadlines (its ✗), or offers a QoS a subscriber cannot take
+    /// (the graph panel's `!` filter, and the list's alarm colour).
+    pub fn in_trouble(&self) -> bool {
+        self.dropping || self.staling || self.unhealthy || !self.incompatible.is_empty()
+    }
 }
 
 /// The window and the segment: what the live numbers count over.

@@ -25,7 +25,7 @@ use ratelab_core::plant::{Action, Observation};
 use ratelab_runtime::policy::Policy;
 use std::sync::atomic::{AtomicU64, Ordering};
 
-pub use ratelab_runtime::interpreter::{parse_spec, DEFAULT_FUNCTION};
+pub use ratelab_runtime::graph::interpreter::{parse_spec, DEFAULT_FUNCTION};
 
 /// The cost of calling into Python once per tick, as `ratelab bench` reports it: `calls`
 /// calls of an empty brain (`def act(obs): return 0.0`) through [`PythonBrain`] (the
@@ -137,9 +137,9 @@ impl PythonBrain {
 }
 
 /// Read a learner's script: a regular file, bounded, UTF-8 (Python's default encoding);
-/// or the text the calling thread is pinned to ([`ratelab_runtime::interpreter::script_text`]).
+/// or the text the calling thread is pinned to ([`ratelab_runtime::graph::interpreter::script_text`]).
 pub(crate) fn read_script(script: &str) -> Result<String, PythonError> {
-    ratelab_runtime::interpreter::script_text(script, || read_script_file(script))
+    ratelab_runtime::graph::interpreter::script_text(script, || read_script_file(script))
         .map(|text| text.to_string())
 }
 

@@ -6,8 +6,8 @@ use crate::node::PythonNode;
 use ratelab_core::node::Flow;
 use ratelab_core::rate::Rate;
 use ratelab_core::time::Nanos;
+use ratelab_runtime::graph::interpreter::Interpreter;
 use ratelab_runtime::graph::kind::{BuildContext, PythonCode, Work};
-use ratelab_runtime::interpreter::Interpreter;
 use ratelab_runtime::policy::Policy;
 
 /// The embedded interpreter (PyO3) as the runtime calls it.

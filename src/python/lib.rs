@@ -41,9 +41,9 @@ pub mod kind;
 pub mod node;
 
 /// Install the embedded interpreter as the one Python nodes and brains run in (the
-/// runtime's `ratelab_runtime::interpreter::install`); idempotent. `ratelab::init()` calls it.
+/// runtime's `ratelab_runtime::graph::interpreter::install`); idempotent. `ratelab::init()` calls it.
 pub fn install() {
-    ratelab_runtime::interpreter::install(&kind::Embedded);
+    ratelab_runtime::graph::interpreter::install(&kind::Embedded);
 }
 
 use pyo3::prelude::*;

@@ -162,7 +162,7 @@ pub enum PolicyError {
         found: Vec<usize>,
     },
     /// A Python brain (`FILE.py[:FUNCTION]`) that cannot be loaded: the one-line reason
-    /// (the Python layer's, or [`crate::interpreter::NOT_INSTALLED`]).
+    /// (the Python layer's, or [`crate::graph::interpreter::NOT_INSTALLED`]).
     #[error("{0}")]
     Python(String),
     /// A tensor operation failed (should not happen after validation).
@@ -187,8 +187,8 @@ pub fn load_policy(spec: &str) -> Result<Box<dyn Policy>, PolicyError> {
     if spec == "scripted" {
         return Ok(Box::new(Scripted));
     }
-    if let Some((script, function)) = crate::interpreter::parse_spec(spec) {
-        return crate::interpreter::installed()
+    if let Some((script, function)) = crate::graph::interpreter::parse_spec(spec) {
+        return crate::graph::interpreter::installed()
             .and_then(|python| python.brain(script, function))
             .map_err(PolicyError::Python);
     }

@@ -4,10 +4,10 @@
 //! rules, metrics), whose modules it uses under their own names.
 //!
 //! - **the plant and its brains**: [`plant`] (the MuJoCo cartpole), [`policy`] (brains; +
-//!   [`checkpoint`] for trained ones; [`interpreter`], where the Python layer plugs in a
-//!   learner's code);
+//!   [`checkpoint`] for trained ones; [`graph::interpreter`], where the Python layer plugs
+//!   in a learner's code);
 //! - **graphs**: [`graph`] (the graph file, [`graph::spec`]; node kinds, their registry and
-//!   the built-in nodes), [`config`] (a run's settings and their validation; [`setting`], their
+//!   the built-in nodes; the interpreter their Python nodes and brains are made by), [`config`] (a run's settings and their validation; [`setting`], their
 //!   names in each front end's words);
 //! - **running them**: [`telemetry`] (a live run's controls and telemetry), [`scheduler`]
 //!   (the virtual and real clocks that apply the executors' rules), [`command`] (changes to
@@ -24,7 +24,6 @@ pub mod checkpoint;
 pub mod command;
 pub mod config;
 pub mod graph;
-pub mod interpreter;
 pub mod plant;
 pub mod policy;
 pub mod program;

@@ -5,7 +5,7 @@
 
 use super::graph::{alarm, layout_columns, Column};
 use super::*;
-use crate::tui::navigate::{node_in_trouble, topic_in_trouble, window_start};
+use crate::tui::zoom::window_start;
 
 /// What a scrolled column or list leaves out, in `w` columns: `above` rows above it and
 /// `below` under it (`+47 more ↓`, `↑ 12 more`, `↑12 ↓35 more`; narrower, `+47↓`, `↑12↓35`).
@@ -171,7 +171,7 @@ pub(super) fn render_names(v: &View, area: Rect, buf: &mut Buffer) {
                     let figure = node_trouble(n).unwrap_or_else(|| node_rate(n, w / 2));
                     let name_w = w.saturating_sub(figure.chars().count() + 1).max(w / 2);
                     let text = format!("{} {figure}", cut(&n.name, name_w));
-                    Line::from(cut(&text, w)).style(row_style(n.selected, node_in_trouble(n)))
+                    Line::from(cut(&text, w)).style(row_style(n.selected, n.in_trouble()))
                 }
                 NameRow::Topic(i) => {
                     let t = &v.topics[i];
@@ -179,7 +179,7 @@ pub(super) fn render_names(v: &View, area: Rect, buf: &mut Buffer) {
                         topic_trouble(t).unwrap_or_else(|| format!("{:.0}/s", t.msg_per_s));
                     let name_w = w.saturating_sub(figure.chars().count() + 4).max(w / 2);
                     let text = format!(" ▶ {} {figure}", cut(&t.name, name_w));
-                    Line::from(cut(&text, w)).style(row_style(t.selected, topic_in_trouble(t)))
+                    Line::from(cut(&text, w)).style(row_style(t.selected, t.in_trouble()))
                 }
             })
             .collect();
@@ -234,7 +234,7 @@ fn list_rows(v: &View, w: usize) -> Vec<(String, Style, bool)> {
             Some(t) => format!("{:<name_w$} {rate} · ✗ {t}", cut(&name, name_w)),
             None => format!("{:<name_w$} {rate}", cut(&name, name_w)),
         };
-        let style = row_style(n.selected, node_in_trouble(n));
+        let style = row_style(n.selected, n.in_trouble());
         rows.push((cut(&text, w), style, n.selected));
     }
     rows.push((
@@ -263,7 +263,7 @@ fn list_rows(v: &View, w: usize) -> Vec<(String, Style, bool)> {
         if let Some(trouble) = topic_trouble(t) {
             text.push_str(&format!(" · {trouble}"));
         }
-        let style = row_style(t.selected, topic_in_trouble(t));
+        let style = row_style(t.selected, t.in_trouble());
         rows.push((cut(&text, w), style, t.selected));
     }
     rows

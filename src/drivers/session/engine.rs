@@ -294,7 +294,7 @@ impl Engine {
         self.run_policy = policy.to_string();
         // What this run's code is read from here: the code of the run on screen, which a
         // save not taken up leaves pinned (`reload::pin_code_before`).
-        ratelab_runtime::interpreter::forget_scripts_read();
+        ratelab_runtime::graph::interpreter::forget_scripts_read();
         let brain = load_policy(policy).map_err(|e| e.to_string())?;
         let (recording, notice) = self.create_recording(cfg, &brain.label())?;
         // What the nodes' code writes goes in the recording too (`log/<node>`), as a

@@ -38,8 +38,8 @@ use crate::run::Command;
 use ratelab_core::textlog::Level;
 use ratelab_core::time::Nanos;
 use ratelab_runtime::config::{ClockKind, RunConfig};
+use ratelab_runtime::graph::interpreter::Scripts;
 use ratelab_runtime::graph::{GraphHandles, GraphSpec};
-use ratelab_runtime::interpreter::Scripts;
 use ratelab_runtime::runcore::RunCore;
 use ratelab_runtime::telemetry::Telemetry;
 use std::path::Path;
@@ -182,7 +182,7 @@ impl Engine {
                 }
                 self.said_reloaded(line);
                 // Taken up, every file judged: the runs from here read the files as saved.
-                ratelab_runtime::interpreter::pin_scripts(None);
+                ratelab_runtime::graph::interpreter::pin_scripts(None);
                 Ready::Next(Next::Reload(cfg))
             }
             // The saved file alone is read as saved from here; any other file whose save
@@ -278,11 +278,11 @@ impl Engine {
 
 /// Pin the engine's thread to the code of the run on screen, unless it is pinned already
 /// (to the code before an earlier save not taken up): what it read since the run started
-/// ([`ratelab_runtime::interpreter::scripts_read`]). What it builds from here (a seek's
+/// ([`ratelab_runtime::graph::interpreter::scripts_read`]). What it builds from here (a seek's
 /// replay, the next run) reads that code rather than the files' saved code, until a save is
 /// taken up.
 fn pin_code_before() {
-    use ratelab_runtime::interpreter::{pin_scripts, pinned_scripts, scripts_read};
+    use ratelab_runtime::graph::interpreter::{pin_scripts, pinned_scripts, scripts_read};
     if pinned_scripts().is_none() {
         pin_scripts(Some(scripts_read()));
     }
@@ -292,7 +292,7 @@ fn pin_code_before() {
 /// place, a brain swapped), every other pinned script staying pinned; returns what was
 /// pinned for it ([`repin`] it if taking it up fails).
 fn unpin_file(file: &Path) -> Scripts {
-    use ratelab_runtime::interpreter::{pin_scripts, pinned_scripts};
+    use ratelab_runtime::graph::interpreter::{pin_scripts, pinned_scripts};
     let Some(pinned) = pinned_scripts() else {
         return Scripts::new();
     };
@@ -306,7 +306,7 @@ fn unpin_file(file: &Path) -> Scripts {
 
 /// Pin `before` again (what [`unpin_file`] returned): its saved code was not taken up.
 pub(super) fn repin(before: Scripts) {
-    use ratelab_runtime::interpreter::{pin_scripts, pinned_scripts};
+    use ratelab_runtime::graph::interpreter::{pin_scripts, pinned_scripts};
     let mut pinned = pinned_scripts().unwrap_or_default();
     pinned.extend(before);
     pin_scripts(Some(pinned));
@@ -393,7 +393,7 @@ impl Engine {
             return self.reload(cfg, file, None);
         }
         let policy = self.current_policy_spec(&self.run_policy);
-        let brain = ratelab_runtime::interpreter::parse_spec(&policy)
+        let brain = ratelab_runtime::graph::interpreter::parse_spec(&policy)
             .and_then(|(script, _)| std::path::absolute(script).ok());
         if which.is_empty() && brain.is_some_and(|b| b == saved) {
             // The brain: loaded again from the file and swapped in, as `p` swaps brains.
@@ -563,7 +563,9 @@ mod tests {
     /// pinned again when taking it up fails.
     #[test]
     fn a_save_pins_the_code_before_and_a_file_taken_up_is_unpinned_alone() {
-        use ratelab_runtime::interpreter::{forget_scripts_read, pinned_scripts, script_text};
+        use ratelab_runtime::graph::interpreter::{
+            forget_scripts_read, pinned_scripts, script_text,
+        };
         // A thread of its own: pins are the calling thread's.
         std::thread::spawn(|| {
             forget_scripts_read();

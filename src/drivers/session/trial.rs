@@ -83,8 +83,8 @@ pub(super) struct Restart {
     /// The nodes whose code or parameters changed, by graph index.
     pub(super) which: Vec<usize>,
     /// What the engine's thread was pinned to for the saved file until the restart took
-    /// it up: pinned again if the restart fails ([`ratelab_runtime::interpreter`]).
-    pub(super) pinned_before: ratelab_runtime::interpreter::Scripts,
+    /// it up: pinned again if the restart fails ([`ratelab_runtime::graph::interpreter`]).
+    pub(super) pinned_before: ratelab_runtime::graph::interpreter::Scripts,
 }
 
 /// What a trial does with the saved code.
@@ -256,7 +256,7 @@ pub(super) struct Trial {
     /// The run time of the instant its run is in (ns), or [`LOADING`].
     progress: Arc<AtomicU64>,
     stop: StopFlag,
-    /// Its thread's id for the interpreter ([`ratelab_runtime::interpreter::Interpreter::enter_trial`];
+    /// Its thread's id for the interpreter ([`ratelab_runtime::graph::interpreter::Interpreter::enter_trial`];
     /// 0: not known yet, or no interpreter).
     thread: Arc<AtomicU64>,
     /// Set when its thread is done.
@@ -311,7 +311,7 @@ impl Trial {
             .name("reload-trial".into())
             .spawn(move || {
                 let _done = Done(d);
-                if let Ok(interpreter) = ratelab_runtime::interpreter::installed() {
+                if let Ok(interpreter) = ratelab_runtime::graph::interpreter::installed() {
                     t.store(interpreter.enter_trial(), Ordering::SeqCst);
                 }
                 let outcome = ratelab_core::textlog::muted(|| job.run(&p, &s));
@@ -395,7 +395,7 @@ impl Cancelled {
         if self.interrupted || thread == 0 {
             return;
         }
-        self.interrupted = ratelab_runtime::interpreter::installed()
+        self.interrupted = ratelab_runtime::graph::interpreter::installed()
             .is_ok_and(|interpreter| interpreter.interrupt_trial(thread));
     }
 

@@ -4,10 +4,12 @@
 //! sensor → `/obs` → policy → `/action` → actuator is `graphs/cartpole.toml`, the default).
 //! [`Graph::build`] turns a spec into runnable nodes ([`nodes`]) and the [`GraphHandles`]
 //! every view uses (rates, topics, brain, plant, the run log), all indexed by the spec's
-//! [`NodeId`]/[`TopicId`].
+//! [`NodeId`]/[`TopicId`]. A node or brain in another language (a learner's Python) is made
+//! by the interpreter its layer installs ([`interpreter`]).
 
 pub mod estimator;
 pub mod faults;
+pub mod interpreter;
 pub mod kind;
 pub mod nodes;
 pub mod registry;

@@ -1,7 +1,7 @@
 //! The **python** kind: a learner's node written in Python, shaped like an rclpy node
 //! (`script = "nodes/NAME.py"`, optional `class` and `params`). Any inputs and outputs, of
 //! any message type. Its runtime is the Python layer's (`ratelab::python::node`), reached
-//! through the interpreter it installs ([`crate::interpreter`]).
+//! through the interpreter it installs ([`crate::graph::interpreter`]).
 
 use crate::graph::kind::{BuildContext, Code, KindDef, Params, Plant, Ports};
 use ratelab_core::limits::MAX_NODE_PORTS;
@@ -24,7 +24,7 @@ pub fn def() -> KindDef {
             let code = cx
                 .python
                 .ok_or_else(|| format!("python node '{}' names no script", cx.name))?;
-            crate::interpreter::installed()?.node(cx, code)
+            crate::graph::interpreter::installed()?.node(cx, code)
         }),
     }
 }

@@ -197,7 +197,7 @@ mod tests {
             brain.err().map(|e| e.to_string()).as_deref(),
             Some(NOT_INSTALLED)
         );
-        let text = include_str!("../../graphs/cartpole-python.toml");
+        let text = include_str!("../../../graphs/cartpole-python.toml");
         let cfg = RunConfig {
             graph: GraphSpec::parse(text, "graphs/cartpole-python.toml").unwrap(),
             clock: ClockKind::Virtual,
