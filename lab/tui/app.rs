@@ -586,6 +586,10 @@ impl App {
             }
             Telemetry::Ended { metrics, reason } => self.on_ended(&metrics, &reason),
             Telemetry::Error(e) => self.say(e),
+            Telemetry::NotStarted(e) => {
+                self.verdict = Verdict::NotStarted;
+                self.say(e);
+            }
             Telemetry::Recount(e) => {
                 if self.message.as_deref().is_some_and(|m| recount_of(m, &e)) {
                     self.say(e);

@@ -2076,6 +2076,39 @@ mod tests {
         assert_eq!(fell.failed_node(), None);
     }
 
+    /// A run that could not start (a node's script fails to load) reads NOT STARTED, not the
+    /// BALANCED of a run that never stepped nor the verdict of the run before, its reason in
+    /// the footer at both sizes; the run a save starts is balanced again.
+    #[test]
+    fn a_run_that_could_not_start_is_not_called_balanced() {
+        let (tx, _rx) = crossbeam_channel::unbounded();
+        let mut app = App::new(tx, "scripted".into(), None, Speed::Times(1.0));
+        let why =
+            "policy: nodes/scripted_balancer.py:1: ModuleNotFoundError: No module named 'nump'";
+        app.on_telemetry(Telemetry::NotStarted(why.into()));
+        for (w, h) in [(80, 24), (120, 40)] {
+            let text = render(&app, w, h);
+            assert!(
+                text.contains("NOT STARTED") && !text.contains("BALANCED"),
+                "{text}"
+            );
+            assert!(text.contains("nodes/scripted_balancer.py:1"), "{text}");
+        }
+        let (mut fell, _rx) = app_after(virtual_cfg(5.0, 10), true);
+        fell.on_telemetry(Telemetry::NotStarted(why.into()));
+        assert_eq!(fell.view().verdict, super::view::Verdict::NotStarted);
+        app.on_telemetry(Telemetry::Started {
+            cfg: virtual_cfg(50.0, 10),
+            policy: "scripted".into(),
+            recording: None,
+        });
+        let text = render(&app, 120, 40);
+        assert!(
+            text.contains("BALANCED") && !text.contains("NOT STARTED"),
+            "{text}"
+        );
+    }
+
     /// A live rate change's notice, as the engine says it, in the footer's two rows when it
     /// does not fit one: where the policy's ticks now fall against the sensor's stays beside
     /// the fresh run's verdict at both sizes (#25; at 80 columns one row dropped it, #72),

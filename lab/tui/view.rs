@@ -303,6 +303,9 @@ pub enum Verdict {
         /// The run time it has held since, s.
         since_s: f64,
     },
+    /// The run could not start ([`ratelab::session::Telemetry::NotStarted`]): no run is
+    /// going; the footer says why, until a save, `r` or `c` starts one.
+    NotStarted,
     /// The run ended neither fallen nor balanced the whole run: the summary's headline
     /// ([`ratelab::metrics::Metrics::headline`], e.g. `STOPPED BY WATCHDOG at t=2.04s (…)`).
     Stopped(String),
@@ -849,6 +852,7 @@ fn badge(v: &View) -> Span<'static> {
             .on_red()
             .bold(),
         Verdict::Failed(_) => " NODE FAILED ✗ ".white().on_red().bold(),
+        Verdict::NotStarted => " NOT STARTED ✗ ".white().on_red().bold(),
         Verdict::Hung {
             node,
             since_s,

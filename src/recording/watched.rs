@@ -105,6 +105,7 @@ pub fn record(
                 rec.event(at, &line, launcher_line_level(&line));
             }
             Telemetry::Error(line) => rec.event(now, &line, "WARN"),
+            Telemetry::NotStarted(line) => rec.event(now, &line, "ERROR"),
             Telemetry::Status {
                 now: seen,
                 alive: next,

@@ -174,6 +174,11 @@ pub enum Telemetry {
     },
     /// Something went wrong that the user should read (one line).
     Error(String),
+    /// The run could not start, and why (one line): its brain, its recording, its graph (a
+    /// node's script that fails to load) or its ROS 2 link. No `Started` came; the engine
+    /// waits for a save, a reset or a switch of clocks. The front end shows that no run is
+    /// going rather than the run before's verdict.
+    NotStarted(String),
     /// The [`Telemetry::Error`] line said last, again with a new count (a call that still
     /// has not returned: `… after 3 s …`): the front end shows it in place of that line
     /// only while that line is what it shows (it does not cover a newer message), and does
@@ -228,7 +233,9 @@ impl Telemetry {
                 Telemetry::Callbacks(spans) => {
                     spans.len() * size_of::<ratelab_core::executor::CallbackSpan>()
                 }
-                Telemetry::Applied(text) | Telemetry::Error(text) => text.len(),
+                Telemetry::Applied(text) | Telemetry::Error(text) | Telemetry::NotStarted(text) => {
+                    text.len()
+                }
                 Telemetry::Changed { text, .. } => text.len(),
                 Telemetry::Reloaded { line } => line.len(),
                 Telemetry::Wire(w) => w.len() * 24,

@@ -236,7 +236,7 @@ impl Engine {
                     next
                 }
                 Err(e) => {
-                    let _ = self.tx.send(Telemetry::Error(e));
+                    let _ = self.tx.send(Telemetry::NotStarted(e));
                     // Wait for the user's decision (a change sent meanwhile, from ROS 2's
                     // `param set`, is not one: it has no run to go to; nor are keys that
                     // act on a run). A save starts the run again with what the files hold.

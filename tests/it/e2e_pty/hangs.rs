@@ -190,6 +190,11 @@ fn a_script_whose_loading_never_returns_at_the_start_is_said_and_a_save_starts_t
     let screen = lab.wait_for("Ctrl-C interrupted it at", Duration::from_secs(10));
     assert!(screen.contains("scripted_balancer.py:2"), "{screen}");
     assert!(!screen.contains("HUNG"), "{screen}");
+    // No run is going: not the BALANCED of a run that never stepped.
+    assert!(
+        screen.contains("NOT STARTED") && !screen.contains("BALANCED"),
+        "{screen}"
+    );
     assert!(
         lab.child.try_wait().unwrap().is_none(),
         "the first Ctrl-C quit:\n{screen}"
