@@ -460,6 +460,8 @@ fn the_labs_later_recordings_never_replace_a_file_without_force() {
             .try_iter()
             .filter_map(|t| match t {
                 Telemetry::Error(e) => Some(e),
+                // The run could not start: said so, not as a plain error.
+                Telemetry::NotStarted(e) => Some(format!("not started: {e}")),
                 _ => None,
             })
             .collect();
@@ -468,7 +470,9 @@ fn the_labs_later_recordings_never_replace_a_file_without_force() {
             assert_ne!(std::fs::read(&canary).unwrap(), b"keep me");
         } else {
             assert!(
-                errors.iter().any(|e| e.contains("rec-2.rrd")),
+                errors
+                    .iter()
+                    .any(|e| e.starts_with("not started: ") && e.contains("rec-2.rrd")),
                 "the second run is refused, naming the file: {errors:?}"
             );
             assert_eq!(std::fs::read(&canary).unwrap(), b"keep me");
