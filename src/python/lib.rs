@@ -31,7 +31,7 @@
 //!   alone ([`interrupt_hung_callbacks`]).
 //!
 //! This is the Python layer, a crate above the runtime: the runtime reaches it through the
-//! interpreter it installs ([`install`], the runtime's `interpreter` module), so changing it
+//! interpreter it installs ([`install`], the runtime's `graph::interpreter` module), so changing it
 //! rebuilds only this crate and those above. [`kind`] is that interpreter.
 #![warn(missing_docs)]
 

@@ -540,10 +540,9 @@ fn no_crate_of_the_library_has_an_import_cycle() {
     let facade = deps("src");
     assert!(!facade.contains_key("exercise") && !facade.contains_key("graph"));
     assert!(deps("src/exercises").contains_key("ex14"));
-    // Every crate, the lab's too (issue "One front-end kit…", item 5).
-    // Its modules among their siblings, a parent with its children (item 5's parent→child
-    // edges), the lab's too (issue "One front-end kit…", item 5).
-    // Every cycle is named (each found, then cut at its first edge, and the search goes on).
+    // Every crate, the lab's too, its modules among their siblings, a parent with its
+    // children (issue "One front-end kit…", item 5's parent→child edges). Every cycle is
+    // named (each found, then cut at its first edge, and the search goes on).
     let mut cycles = Vec::new();
     for (_, dir, _) in LAYERS {
         let (mut siblings, because) = between_siblings(&deps(dir));

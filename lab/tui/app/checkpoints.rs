@@ -7,11 +7,13 @@
 //!
 //! A checkpoint holds every field the fold writes ([`Folded`]), taken right after the
 //! journal's `upto`-th message was folded. The fields left out are the user's (selection,
-//! panels, typing), the journal's own, or fixed for a journal's whole life (its graph: a new
-//! graph is a new run, which starts a new journal). [`App::folded`] names every field of the
+//! panels, typing), the journal's own, what keys asked for that no status has shown yet
+//! (dropped by a seek, as by a run's start), or fixed for a journal's whole life (its graph
+//! but its executors: a new graph is a new run, which starts a new journal). [`App::folded`] names every field of the
 //! lab's state, so a new field does not compile until it is sorted into one side or the other.
 
 use super::{App, GhostStep, Live, StepRecord, Verdict};
+use ratelab::graph::spec::ExecutorSpec;
 use ratelab::graph::TopicId;
 use ratelab::qos::{Fault, TopicQos};
 use ratelab::session::{Speed, Telemetry};
@@ -40,7 +42,6 @@ pub(super) struct Folded {
     brain: String,
     recording: Option<String>,
     rates: Vec<f64>,
-    pending_rates: Vec<Option<(f64, Nanos)>>,
     depths: Vec<usize>,
     qos: Vec<TopicQos>,
     phases: Vec<f64>,
@@ -58,7 +59,10 @@ pub(super) struct Folded {
     published: VecDeque<(f64, f64)>,
     ticks: Vec<VecDeque<(Nanos, Nanos, Nanos)>>,
     timeline: crate::tui::timeline::Timeline,
-    pending_executor: Option<&'static str>,
+    /// The graph's executors and its nodes' callback groups (`x` changes them under the
+    /// virtual clock; the rest of the graph is fixed for a journal's life).
+    executors: Vec<ExecutorSpec>,
+    callback_groups: Vec<Option<String>>,
     exec_from: Option<Nanos>,
     ended_with: Option<(Vec<f64>, Vec<usize>, Vec<TopicQos>)>,
     final_topics: Option<BTreeMap<String, ratelab::metrics::TopicMetrics>>,
@@ -116,9 +120,17 @@ pub(super) struct Checkpoints {
     every: usize,
     /// Their [`Folded::approx_bytes`], added.
     bytes: usize,
+    /// The journal's length at which the next is due (`usize::MAX`: none for this journal).
+    next_at: usize,
+    /// None is taken while set: a seek's fold that left out a clock switch (the journal
+    /// folded again is then not the one a review puts back, past the switch).
+    held: bool,
     /// None is ever due (a test's lab that folds every seek from the run's start).
     #[cfg(test)]
     never: bool,
+    /// The messages of the checkpoint the last seek started from (`Some(0)`: none).
+    #[cfg(test)]
+    started_from: Option<usize>,
 }
 
 impl Default for Checkpoints {
@@ -127,8 +139,12 @@ impl Default for Checkpoints {
             kept: Vec::new(),
             every: FIRST_EVERY,
             bytes: 0,
+            next_at: FIRST_EVERY,
+            held: false,
             #[cfg(test)]
             never: false,
+            #[cfg(test)]
+            started_from: None,
         }
     }
 }
@@ -139,6 +155,12 @@ impl Checkpoints {
         self.kept.clear();
         self.every = FIRST_EVERY;
         self.bytes = 0;
+        self.next_at = FIRST_EVERY;
+    }
+
+    /// Take none while `held` ([`Checkpoints::held`]).
+    pub(super) fn hold(&mut self, held: bool) {
+        self.held = held;
     }
 
     /// Journal messages between two checkpoints now.
@@ -159,7 +181,13 @@ impl Checkpoints {
         if self.never {
             return false;
         }
-        len >= self.kept.last().map_or(0, |c| c.upto) + self.every
+        !self.held && len >= self.next_at
+    }
+
+    /// The next is due `every` messages after the last kept.
+    fn due_after_the_last(&mut self) {
+        let last = self.kept.last().map_or(0, |c| c.upto);
+        self.next_at = last.saturating_add(self.every);
     }
 
     /// Keep `state`, the fold of `journal` (the whole journal so far).
@@ -179,7 +207,9 @@ impl Checkpoints {
             .max();
         let bytes = state.approx_bytes();
         if bytes > MAX_CHECKPOINT_BYTES / 4 {
-            // Too large to keep even a few: seeks fold from the run's start, as before.
+            // Too large to keep even a few: this journal's seeks fold from the run's start
+            // (and no copy is made again).
+            self.next_at = usize::MAX;
             return;
         }
         self.bytes += bytes;
@@ -192,6 +222,7 @@ impl Checkpoints {
         while self.kept.len() > MAX_CHECKPOINTS || self.bytes > MAX_CHECKPOINT_BYTES {
             self.thin();
         }
+        self.due_after_the_last();
     }
 
     /// Every other checkpoint goes (the first, the third, …: those kept stay on multiples of
@@ -221,21 +252,17 @@ impl Checkpoints {
     /// is folded again from it, and is not what it was after it).
     fn start_for(&mut self, upto: usize, at: Nanos) -> Option<(usize, Folded)> {
         let usable = |c: &Checkpoint| c.upto <= upto && c.switched_at.is_none_or(|s| s < at);
+        #[cfg(test)]
+        {
+            self.started_from = Some(self.kept.iter().rfind(|c| usable(c)).map_or(0, |c| c.upto));
+        }
         let i = self.kept.iter().rposition(usable)?;
         for c in self.kept.drain(i + 1..) {
             self.bytes -= c.bytes;
         }
+        self.due_after_the_last();
         let c = &self.kept[i];
         Some((c.upto, (*c.state).clone()))
-    }
-
-    /// Keep no checkpoint after the journal's first `len` messages.
-    fn truncate(&mut self, len: usize) {
-        while self.kept.last().is_some_and(|c| c.upto > len) {
-            if let Some(c) = self.kept.pop() {
-                self.bytes -= c.bytes;
-            }
-        }
     }
 }
 
@@ -270,7 +297,6 @@ impl App {
         let tail = journal.split_off(from);
         self.journal = journal;
         self.restore_folded(state);
-        self.checkpoints.truncate(from);
         tail
     }
 
@@ -310,9 +336,14 @@ impl App {
             journal_full: _,
             checkpoints: _,
             rewinding: _,
-            // Fixed for a journal's life: its run's graph, and the run before a reload.
-            graph: _,
+            // What keys asked for and no status has shown yet: a seek back drops it, as a
+            // run's start does (the engine's run core is put back before it too).
+            pending_rates: _,
+            pending_executor: _,
+            // The run before a reload, fixed for a journal's life; of the run's graph, fixed
+            // too, only the executors are copied (below).
             ghost: _,
+            graph,
             clock,
             speed,
             paused,
@@ -321,7 +352,6 @@ impl App {
             brain,
             recording,
             rates,
-            pending_rates,
             depths,
             qos,
             phases,
@@ -339,7 +369,6 @@ impl App {
             published,
             ticks,
             timeline,
-            pending_executor,
             exec_from,
             ended_with,
             final_topics,
@@ -363,7 +392,6 @@ impl App {
             brain: brain.clone(),
             recording: recording.clone(),
             rates: rates.clone(),
-            pending_rates: pending_rates.clone(),
             depths: depths.clone(),
             qos: qos.clone(),
             phases: phases.clone(),
@@ -381,7 +409,12 @@ impl App {
             published: published.clone(),
             ticks: ticks.clone(),
             timeline: timeline.clone(),
-            pending_executor: *pending_executor,
+            executors: graph.executors.clone(),
+            callback_groups: graph
+                .nodes
+                .iter()
+                .map(|n| n.callback_group.clone())
+                .collect(),
             exec_from: *exec_from,
             ended_with: ended_with.clone(),
             final_topics: final_topics.clone(),
@@ -409,7 +442,6 @@ impl App {
             brain,
             recording,
             rates,
-            pending_rates,
             depths,
             qos,
             phases,
@@ -427,7 +459,8 @@ impl App {
             published,
             ticks,
             timeline,
-            pending_executor,
+            executors,
+            callback_groups,
             exec_from,
             ended_with,
             final_topics,
@@ -450,7 +483,7 @@ impl App {
         self.brain = brain;
         self.recording = recording;
         self.rates = rates;
-        self.pending_rates = pending_rates;
+        self.pending_rates.clear();
         self.depths = depths;
         self.qos = qos;
         self.phases = phases;
@@ -468,7 +501,11 @@ impl App {
         self.published = published;
         self.ticks = ticks;
         self.timeline = timeline;
-        self.pending_executor = pending_executor;
+        self.pending_executor = None;
+        self.graph.executors = executors;
+        for (n, group) in self.graph.nodes.iter_mut().zip(callback_groups) {
+            n.callback_group = group;
+        }
         self.exec_from = exec_from;
         self.ended_with = ended_with;
         self.final_topics = final_topics;
@@ -487,7 +524,8 @@ impl App {
 
 #[cfg(test)]
 mod tests {
-    use super::{App, Checkpoints, FIRST_EVERY, MAX_CHECKPOINTS};
+    use super::{App, Checkpoints, FIRST_EVERY, MAX_CHECKPOINTS, MAX_CHECKPOINT_BYTES};
+    use crate::tui::keymap::Msg;
     use ratelab::policy::Scripted;
     use ratelab::runlog::StepRecord;
     use ratelab::session::{Speed, Telemetry};
@@ -545,8 +583,10 @@ mod tests {
     }
 
     /// A seek back from a checkpoint shows what folding the journal from the run's start
-    /// shows, at instants before the first checkpoint, between checkpoints, on a clock
-    /// switch's instant and at the end; and the run told on after the seek shows the same.
+    /// shows: before the first checkpoint, between checkpoints, on a clock switch's instant
+    /// and just after it, at the end; with a rate asked for by a key and not yet seen; and
+    /// the run told on after the seek shows the same. Each seek is from a lab told the whole
+    /// run.
     #[test]
     fn a_seek_from_a_checkpoint_shows_what_a_fold_from_the_start_shows() {
         let cfg = RunConfig {
@@ -556,41 +596,56 @@ mod tests {
         };
         let report = run(&cfg, Box::new(Scripted), RunOptions::new()).unwrap();
         let told = telemetry(&cfg, &report.trace);
-        let (mut kept, mut none) = (lab(), lab());
-        // Never due: every seek folds from the run's start, as before checkpoints.
-        none.checkpoints.never = true;
-        for t in &told {
-            kept.on_telemetry(t.clone());
-            none.on_telemetry(t.clone());
-        }
-        assert!(kept.checkpoints.len() >= 4, "{}", kept.checkpoints.len());
-        assert_eq!(none.checkpoints.len(), 0);
-        assert_eq!(kept.view(), none.view());
         let ms = |ms: u64| Nanos(ms * 1_000_000);
+        let key_at = told
+            .iter()
+            .position(|t| matches!(t, Telemetry::Step(s) if s.t == ms(25_000)))
+            .unwrap();
         for at in [
-            ms(59_990),
+            ms(1_500),
+            ms(5_120),
+            ms(20_000),
+            ms(25_010),
             ms(31_000),
             ms(40_000),
             ms(40_020),
-            ms(1_500),
-            ms(5_120),
             ms(45_300),
-            ms(20_000),
+            ms(59_990),
         ] {
+            let (mut kept, mut none) = (lab(), lab());
+            // Never due: every seek folds from the run's start, as before checkpoints.
+            none.checkpoints.never = true;
+            for (i, t) in told.iter().enumerate() {
+                kept.on_telemetry(t.clone());
+                none.on_telemetry(t.clone());
+                if i == key_at {
+                    // The policy's rate, asked for at 25 s (its status comes later).
+                    kept.on_msg(Msg::RateUp);
+                    none.on_msg(Msg::RateUp);
+                }
+            }
+            assert!(kept.checkpoints.len() >= 4, "{}", kept.checkpoints.len());
+            assert_eq!(none.checkpoints.len(), 0);
             kept.on_telemetry(Telemetry::Rewound { at });
             none.on_telemetry(Telemetry::Rewound { at });
             assert_eq!(kept.view(), none.view(), "back at {at:?}");
+            assert_eq!(kept.pending_rates, none.pending_rates, "back at {at:?}");
+            let from = kept.checkpoints.started_from.unwrap();
+            if at < ms(3_000) {
+                assert_eq!(from, 0, "back at {at:?}: no checkpoint so early");
+            } else {
+                assert!(from > 0, "back at {at:?}: folded from the run's start");
+            }
+            // Told on from `at`: the run goes on as the engine runs it again.
+            for t in told
+                .iter()
+                .skip_while(|t| !matches!(t, Telemetry::Step(s) if s.t > at))
+            {
+                kept.on_telemetry(t.clone());
+                none.on_telemetry(t.clone());
+            }
+            assert_eq!(kept.view(), none.view(), "told on from {at:?}");
         }
-        // Told on from 20 s: the run goes on as the engine runs it again.
-        for t in told
-            .iter()
-            .skip_while(|t| !matches!(t, Telemetry::Step(s) if s.t > ms(20_000)))
-        {
-            kept.on_telemetry(t.clone());
-            none.on_telemetry(t.clone());
-        }
-        assert_eq!(kept.view(), none.view());
-        assert!(kept.checkpoints.len() >= 4, "{}", kept.checkpoints.len());
     }
 
     /// However long the journal, at most [`MAX_CHECKPOINTS`] are kept: every other goes
@@ -650,5 +705,36 @@ mod tests {
         c.keep(&journal[..FIRST_EVERY * 2], state.clone());
         c.keep(&journal[..FIRST_EVERY * 3], state);
         assert_eq!(c.start_for(every, at(switch + 1)).map(|s| s.0), Some(every));
+    }
+
+    /// A view too large to keep a few of is not kept, nor copied again for its journal; the
+    /// checkpoints kept hold at most [`MAX_CHECKPOINT_BYTES`] together.
+    #[test]
+    fn the_checkpoints_hold_their_byte_budget_and_refuse_a_view_too_large() {
+        let each = |bytes: usize| {
+            let mut state = lab().folded();
+            state.whole =
+                vec![(0.0, 0.0, 0.0, None); bytes / std::mem::size_of::<super::GhostStep>()];
+            state
+        };
+        let journal: Vec<(Nanos, Telemetry)> = (0..FIRST_EVERY * 16)
+            .map(|i| (Nanos(i as u64 * 1_000_000), Telemetry::Error(String::new())))
+            .collect();
+        let mut c = Checkpoints::default();
+        c.keep(
+            &journal[..FIRST_EVERY],
+            each(MAX_CHECKPOINT_BYTES / 4 + 1024),
+        );
+        assert_eq!(c.len(), 0);
+        assert!(!c.due(journal.len()), "copied again");
+        let mut c = Checkpoints::default();
+        let fifth = each(MAX_CHECKPOINT_BYTES / 5);
+        for len in 1..=journal.len() {
+            if c.due(len) {
+                c.keep(&journal[..len], fifth.clone());
+                assert!(c.bytes <= MAX_CHECKPOINT_BYTES, "{} bytes", c.bytes);
+            }
+        }
+        assert!((2..=4).contains(&c.len()), "{}", c.len());
     }
 }

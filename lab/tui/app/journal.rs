@@ -95,10 +95,15 @@ impl App {
         for (_, t) in again {
             // A switch at the instant itself came after it (the engine scrubs back to where
             // a real-clock part began, not into it).
-            if !matches!(t, Telemetry::ClockSwitched { at: s, .. } if s >= at) {
+            if matches!(t, Telemetry::ClockSwitched { at: s, .. } if s >= at) {
+                // The journal folded again lacks it from here: no checkpoint of it is taken
+                // until this fold ends (a review puts the whole journal back).
+                self.checkpoints.hold(true);
+            } else {
                 self.on_telemetry(t);
             }
         }
+        self.checkpoints.hold(false);
         self.rewinding = false;
         self.now = at;
         self.say(format!(

@@ -94,7 +94,8 @@ impl App {
             return false;
         };
         match t {
-            Telemetry::Started { .. } => {
+            // A new run, or one that could not start: the review ends first.
+            Telemetry::Started { .. } | Telemetry::NotStarted(_) => {
                 self.leave_review();
                 false
             }
