@@ -1,0 +1,282 @@
+//! A process joining its launch: its options checked against the graph file
+//! ([`check_options`]), its session opened to the launcher's router with its identity, the
+//! launcher's setup taken ([`Joined`]), and the waits on the launcher's messages and
+//! matching subscribers that joining and running share.
+
+use super::*;
+
+/// Check `opts` before anything connects: its graph file parses and places
+/// `opts.process`, the credentials are this graph's and this placement's and hold the
+/// process's identity, the endpoints are well formed. Returns the graph file's graph.
+///
+/// # Errors
+/// [`DistError::Usage`], one line naming what is wrong.
+pub(super) fn check_options(opts: &ProcessOptions) -> Result<GraphSpec, DistError> {
+    let text = std::str::from_utf8(&opts.graph_bytes)
+        .map_err(|_| DistError::Usage(format!("{}: not UTF-8 text", opts.graph_origin)))?;
+    let file_spec =
+        GraphSpec::parse(text, &opts.graph_origin).map_err(|e| DistError::Usage(e.to_string()))?;
+    let placement = file_spec.placement();
+    if !placement.iter().any(|(p, _)| *p == opts.process) {
+        let names: Vec<&str> = placement.iter().map(|(p, _)| p.as_str()).collect();
+        return Err(DistError::Usage(format!(
+            "graph '{}' has no process '{}' (its processes: {})",
+            file_spec.name,
+            opts.process,
+            ratelab_core::text::listed(names)
+        )));
+    }
+    if opts.connect.is_empty() {
+        return Err(DistError::Usage(
+            "--connect tls/HOST:PORT is required: the launcher's endpoint".into(),
+        ));
+    }
+    let role = Role::Process(opts.process.clone());
+    if opts.credentials.graph != file_spec.name {
+        return Err(DistError::Usage(format!(
+            "--credentials are for graph '{}', not '{}': were they exported by another launch?",
+            opts.credentials.graph, file_spec.name
+        )));
+    }
+    let placed: Vec<String> = placement.iter().map(|(p, _)| p.clone()).collect();
+    if opts.credentials.processes != placed {
+        return Err(DistError::Usage(format!(
+            "--credentials are for processes {:?}, but the graph file places {placed:?}: were they exported by a launch of another version of it?",
+            opts.credentials.processes
+        )));
+    }
+    opts.credentials.identity(&role)?;
+    for ep in &opts.connect {
+        check_endpoint("--connect", ep, false)?;
+    }
+    for ep in &opts.listen {
+        check_endpoint("--listen", ep, true)?;
+    }
+    Ok(file_spec)
+}
+
+/// A process joined to its launcher: its session, the launcher's control messages and the
+/// run's settings from the welcome.
+pub(super) struct Joined {
+    pub(super) session: zenoh::Session,
+    pub(super) keys: Keys,
+    /// The launcher's control messages to this process.
+    pub(super) ctl_rx: Receiver<ToProcess>,
+    /// Set once the launcher's liveliness token is withdrawn.
+    pub(super) launcher_gone: StopFlag,
+    /// Where this process speaks to the launcher (its own key).
+    pub(super) up: zenoh::pubsub::Publisher<'static>,
+    /// The run's settings.
+    pub(super) setup: Box<wire::Setup>,
+    pub(super) _ctl_sub: zenoh::pubsub::Subscriber<()>,
+    pub(super) _launcher_watch: zenoh::pubsub::Subscriber<()>,
+}
+
+impl Joined {
+    /// Open the session to `opts.connect`, wait for the launcher, join with the graph
+    /// file's hash and wait for the welcome (asking again for [`BUSY_RETRY`] while a
+    /// process of this name still runs).
+    ///
+    /// # Errors
+    /// [`DistError`]: the session cannot open, the launcher runs another graph, the join
+    /// is refused, the real clock's processes are on hosts whose clocks differ, `stop`.
+    pub(super) fn join(
+        opts: &ProcessOptions,
+        file_spec: &GraphSpec,
+        stop: &StopFlag,
+    ) -> Result<Joined, DistError> {
+        let role = Role::Process(opts.process.clone());
+        let access = Access {
+            credentials: &opts.credentials,
+            role: &role,
+            spec: Some(file_spec),
+        };
+        // A client of the launcher's router: its one link ([`crate::open_client`]).
+        let session = open_client(&opts.connect, access)?;
+        let keys = Keys::new(&file_spec.name);
+        let (ctl_tx, ctl_rx) = crossbeam_channel::bounded::<ToProcess>(4096);
+        let _ctl_sub = session
+            .declare_subscriber(keys.control(&opts.process))
+            .callback(move |s| {
+                if let Ok(m) = wire::decode_json::<ToProcess>(&s.payload().to_bytes()) {
+                    let _ = ctl_tx.try_send(m);
+                }
+            })
+            .wait()?;
+        // The launcher's token: withdrawn, the run is over for us too.
+        let launcher_gone = StopFlag::new();
+        let _launcher_watch = {
+            let gone = launcher_gone.clone();
+            session
+                .liveliness()
+                .declare_subscriber(keys.launcher_token())
+                .history(true)
+                .callback(move |s| {
+                    if s.kind() == zenoh::sample::SampleKind::Delete {
+                        gone.stop();
+                    }
+                })
+                .wait()?
+        };
+        // Control messages and samples are never dropped under congestion (Zenoh's default
+        // drops): a lost grant or report would stall the run.
+        let block = zenoh::qos::CongestionControl::Block;
+        let up = session
+            .declare_publisher(keys.up_from(&opts.process))
+            .congestion_control(block)
+            .wait()?;
+        // Not matched at once: a launcher of another graph at the endpoint means this process
+        // was given another graph file (the keys carry the graph's name, so the hash exchanged
+        // at join never comes): say so now rather than after the wait.
+        let soon = Instant::now() + Duration::from_secs(2);
+        while Instant::now() < soon && !up.matching_status().wait().is_ok_and(|m| m.matching()) {
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        if !up.matching_status().wait().is_ok_and(|m| m.matching()) {
+            let seen = launchers_seen(&session);
+            if !seen.is_empty() && !seen.iter().any(|g| g == keys.graph()) {
+                return Err(DistError::Usage(format!(
+                    "the launcher at {} runs graph '{}', not '{}': was this process given another graph file?",
+                    opts.connect.join(", "),
+                    seen.join("', '"),
+                    keys.graph()
+                )));
+            }
+        }
+        // As long as the launcher waits for its processes to be ready: a launch of
+        // hundreds starting on a few cores is answered late.
+        let patience = crate::ready_wait(opts.credentials.processes.len());
+        wait_matching(&up, stop, (None, patience), "the launcher")?;
+        let send = |m: &ToLauncher| up.put(wire::encode_json(m)).wait();
+        let join = ToLauncher::Join {
+            process: opts.process.clone(),
+            graph_sha256: crate::graph_hash(&opts.graph_bytes),
+            pid: std::process::id(),
+        };
+        send(&join)?;
+        let first_join = std::time::Instant::now();
+        // The answer to the join. The control key is the process name's, so a process of that
+        // name already running (this one is a second copy, or rejoins too early) gets its run's
+        // messages there too: those are not for this one, which waits on.
+        let setup = loop {
+            match recv(&ctl_rx, stop, &launcher_gone)? {
+                ToProcess::Welcome {
+                    setup,
+                    launcher_mono_ns,
+                } => {
+                    let apart_s = wire::mono_now_ns().abs_diff(launcher_mono_ns) as f64 / 1e9;
+                    if setup.clock == crate::ClockKind::Real && apart_s > 2.0 {
+                        return Err(DistError::Usage(format!(
+                            "the real clock needs every process on the launcher's host (the monotonic clocks differ by {apart_s:.0} s); across hosts use --clock virtual"
+                        )));
+                    }
+                    break setup;
+                }
+                // Started again the moment the one before was killed: the launcher has not
+                // yet seen its liveliness token go. Ask again, for a while.
+                ToProcess::Reject { busy: true, .. } if first_join.elapsed() < BUSY_RETRY => {
+                    // Soon: every message of the gap is a reading lost to the policy.
+                    std::thread::sleep(Duration::from_millis(100));
+                    send(&join)?;
+                }
+                ToProcess::Reject { reason, .. } => return Err(DistError::Usage(reason)),
+                _ => {}
+            }
+        };
+        Ok(Joined {
+            session,
+            keys,
+            ctl_rx,
+            launcher_gone,
+            up,
+            setup,
+            _ctl_sub,
+            _launcher_watch,
+        })
+    }
+}
+
+/// The next control message: waits as long as the launcher lives (its liveliness token),
+/// so processes started by hand may join minutes apart; an error on a stop or when the
+/// launcher is gone.
+pub(super) fn recv(
+    rx: &Receiver<ToProcess>,
+    stop: &StopFlag,
+    gone: &StopFlag,
+) -> Result<ToProcess, DistError> {
+    loop {
+        match rx.recv_timeout(Duration::from_millis(50)) {
+            Ok(m) => return Ok(m),
+            Err(RecvTimeoutError::Disconnected) => {
+                return Err(DistError::Peer("the launcher's channel closed".into()))
+            }
+            Err(RecvTimeoutError::Timeout) if gone.is_stopped() => {
+                return Err(DistError::Peer("the launcher went away".into()))
+            }
+            Err(RecvTimeoutError::Timeout) if stop.is_stopped() => {
+                return Err(DistError::Peer("interrupted".into()))
+            }
+            Err(RecvTimeoutError::Timeout) => {}
+        }
+    }
+}
+
+/// The next control message for this process once welcomed: a busy refusal is for another
+/// process of its name asking to join (the control key is the name's: a second copy, or this
+/// one's own join that crossed its welcome), never for this one; a receipt of a report is
+/// for the copy before this one.
+pub(super) fn recv_own(
+    rx: &Receiver<ToProcess>,
+    stop: &StopFlag,
+    gone: &StopFlag,
+) -> Result<ToProcess, DistError> {
+    loop {
+        match recv(rx, stop, gone)? {
+            ToProcess::Reject { busy: true, .. } | ToProcess::ReportTaken => {}
+            m => return Ok(m),
+        }
+    }
+}
+
+/// Wait until `p` has a matching subscriber (`who`, for the error): while the launcher
+/// lives when `gone` watches it, else for `patience`.
+pub(super) fn wait_matching(
+    p: &zenoh::pubsub::Publisher<'_>,
+    stop: &StopFlag,
+    (gone, patience): (Option<&StopFlag>, Duration),
+    who: &str,
+) -> Result<(), DistError> {
+    let deadline = Instant::now() + patience;
+    loop {
+        if p.matching_status().wait().is_ok_and(|m| m.matching()) {
+            return Ok(());
+        }
+        if stop.is_stopped() {
+            return Err(DistError::Peer("interrupted".into()));
+        }
+        if gone.is_some_and(StopFlag::is_stopped) {
+            return Err(DistError::Peer("the launcher went away".into()));
+        }
+        if gone.is_none() && Instant::now() >= deadline {
+            return Err(DistError::Peer(format!(
+                "{who} did not subscribe to {} within {} s",
+                p.key_expr(),
+                patience.as_secs()
+            )));
+        }
+        std::thread::sleep(Duration::from_millis(10));
+    }
+}
+
+/// The graphs (their names as in their keys) whose launchers this session sees, by their
+/// liveliness tokens (at most 16; asked for up to 1 s).
+pub(super) fn launchers_seen(session: &zenoh::Session) -> Vec<String> {
+    crate::live_tokens(session, "ratelab/*/@launcher", Duration::from_secs(1), 16)
+        .iter()
+        .filter_map(|key| {
+            key.strip_prefix("ratelab/")
+                .and_then(|k| k.strip_suffix("/@launcher"))
+                .map(str::to_string)
+        })
+        .collect()
+}
