@@ -222,6 +222,16 @@ impl<'ast> Visit<'ast> for Names {
     }
 }
 
+/// A module's name as its path's segments (`tui::view` → `["tui", "view"]`; the crate's
+/// root, `crate`, → none).
+fn module_path(name: &str) -> Vec<String> {
+    if name == "crate" {
+        Vec::new()
+    } else {
+        name.split("::").map(str::to_string).collect()
+    }
+}
+
 /// Which module each module's code depends on (itself, its ancestors' declarations of it
 /// and its own submodules left out).
 fn dependencies(src: &Path) -> Deps {
@@ -229,13 +239,8 @@ fn dependencies(src: &Path) -> Deps {
     let known: BTreeSet<String> = mods.keys().cloned().collect();
     let mut deps = Deps::new();
     for (name, file) in &mods {
-        let module: Vec<String> = if name == "crate" {
-            Vec::new()
-        } else {
-            name.split("::").map(str::to_string).collect()
-        };
         let mut names = Names {
-            module,
+            module: module_path(name),
             found: Vec::new(),
         };
         names.visit_file(file);
@@ -305,18 +310,11 @@ fn find_cycle(deps: &Deps) -> Option<Vec<String>> {
 /// siblings is then a circle in the code: each sibling, its children included, needs the
 /// next. Also returned: for each edge between siblings, one dependency it stands for.
 fn between_siblings(deps: &Deps) -> (Deps, Because) {
-    let path = |m: &str| -> Vec<String> {
-        if m == "crate" {
-            Vec::new()
-        } else {
-            m.split("::").map(str::to_string).collect()
-        }
-    };
     let (mut lifted, mut because) = (Deps::new(), BTreeMap::new());
     for (a, bs) in deps {
-        let pa = path(a);
+        let pa = module_path(a);
         for b in bs {
-            let pb = path(b);
+            let pb = module_path(b);
             let common = pa.iter().zip(&pb).take_while(|(x, y)| x == y).count();
             if common == pa.len() || common == pb.len() {
                 continue;
