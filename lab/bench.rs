@@ -50,6 +50,28 @@ fn spread(t: &ratelab::metrics::LatencyStats) -> String {
     )
 }
 
+/// How often, in run time, the scrub bench tells the lab the engine's status: the lab's 30 a
+/// second at about ×1.7.
+pub(crate) const STATUS_EVERY: Nanos = Nanos(50 * Nanos::MILLISECOND.0);
+
+/// The engine's status at step `s` of the chapter's graph run with the scripted brain as
+/// set out (every node at 50 Hz, each topic at depth 1 with the default QoS), with the
+/// step's topic counters: what a lab is told beside the steps.
+pub(crate) fn chapter_status(s: &ratelab::runlog::StepRecord) -> ratelab::session::Telemetry {
+    ratelab::session::Telemetry::Status {
+        now: s.t,
+        paused: false,
+        speed: ratelab::session::Speed::Times(1.0),
+        rates: vec![50.0; 3],
+        depths: vec![1, 1],
+        qos: vec![ratelab::qos::TopicQos::default(); 2],
+        alive: vec![None; 3],
+        policy: "scripted".into(),
+        exec: None,
+        topics: Some(Box::new(s.topics.clone())),
+    }
+}
+
 /// Time reaching instants of a 10-minute virtual run of the chapter's graph (a quarter of
 /// them in its last minute) as the lab's time scrubbing does, in its two halves: the
 /// engine's seek of the run core (restore the capture kept at or before the instant, one a
@@ -95,27 +117,15 @@ pub fn scrub_bench(seeks: usize) -> anyhow::Result<()> {
         policy: "scripted".into(),
         recording: None,
     });
-    let status_every = Nanos(50 * Nanos::MILLISECOND.0);
     let mut next_status = Nanos::ZERO;
     let mut told = 1usize;
     for s in &trace {
         app.on_telemetry(Telemetry::Step(Box::new(s.clone())));
         told += 1;
         if s.t >= next_status {
-            app.on_telemetry(Telemetry::Status {
-                now: s.t,
-                paused: false,
-                speed: Speed::Times(1.0),
-                rates: vec![50.0; 3],
-                depths: vec![1, 1],
-                qos: vec![ratelab::qos::TopicQos::default(); 2],
-                alive: vec![None; 3],
-                policy: "scripted".into(),
-                exec: None,
-                topics: Some(Box::new(s.topics.clone())),
-            });
+            app.on_telemetry(chapter_status(s));
             told += 1;
-            next_status = s.t.saturating_add(status_every);
+            next_status = s.t.saturating_add(STATUS_EVERY);
         }
     }
     let (mut engine, mut lab) = (

@@ -252,11 +252,12 @@ impl Checkpoints {
     /// is folded again from it, and is not what it was after it).
     fn start_for(&mut self, upto: usize, at: Nanos) -> Option<(usize, Folded)> {
         let usable = |c: &Checkpoint| c.upto <= upto && c.switched_at.is_none_or(|s| s < at);
+        let i = self.kept.iter().rposition(usable);
         #[cfg(test)]
         {
-            self.started_from = Some(self.kept.iter().rfind(|c| usable(c)).map_or(0, |c| c.upto));
+            self.started_from = Some(i.map_or(0, |i| self.kept[i].upto));
         }
-        let i = self.kept.iter().rposition(usable)?;
+        let i = i?;
         for c in self.kept.drain(i + 1..) {
             self.bytes -= c.bytes;
         }
@@ -525,6 +526,7 @@ impl App {
 #[cfg(test)]
 mod tests {
     use super::{App, Checkpoints, FIRST_EVERY, MAX_CHECKPOINTS, MAX_CHECKPOINT_BYTES};
+    use crate::bench::{chapter_status, STATUS_EVERY};
     use crate::tui::keymap::Msg;
     use ratelab::policy::Scripted;
     use ratelab::runlog::StepRecord;
@@ -564,19 +566,8 @@ mod tests {
                 });
             }
             if s.t >= next_status {
-                told.push(Telemetry::Status {
-                    now: s.t,
-                    paused: false,
-                    speed: Speed::Times(1.0),
-                    rates: vec![50.0; 3],
-                    depths: vec![1, 1],
-                    qos: vec![ratelab::qos::TopicQos::default(); 2],
-                    alive: vec![None; 3],
-                    policy: "scripted".into(),
-                    exec: None,
-                    topics: Some(Box::new(s.topics.clone())),
-                });
-                next_status = s.t.saturating_add(Nanos(50_000_000));
+                told.push(chapter_status(s));
+                next_status = s.t.saturating_add(STATUS_EVERY);
             }
         }
         told
