@@ -10,9 +10,11 @@ pub use ratelab_runtime::summary::{summarize, summarize_state, ActuatorSummary, 
 use crate::observer::{Observers, RunObserver};
 use ratelab_core::metrics::Metrics;
 use ratelab_core::runlog::StepRecord;
+use ratelab_core::time::Nanos;
 use ratelab_runtime::config::{ClockKind, RunConfig};
 use ratelab_runtime::graph::lock;
 use ratelab_runtime::policy::Policy;
+use ratelab_runtime::runcore::drive::{drive, Drove, Pacer, Unpaced};
 use ratelab_runtime::runcore::{CoreOptions, RunCore};
 use ratelab_runtime::scheduler::{RealOptions, RunEnd, StopFlag};
 use std::time::{Duration, Instant};
@@ -109,7 +111,7 @@ pub fn run(
     }
     .map_err(ratelab_ros2::Ros2Error::Usage)?;
     let observers = Observers::new(std::mem::take(&mut opts.observers));
-    drive(cfg, brain, opts, &observers, Checked::No)
+    run_end_to_end(cfg, brain, opts, &observers, Checked::No)
 }
 
 /// [`run`] for a run [`crate::start`] made: `cfg` validated by `RunSpec::config` (its last
@@ -125,7 +127,7 @@ pub(crate) fn run_checked(
     opts: RunOptions,
     observers: &Observers,
 ) -> Result<RunReport, RunError> {
-    drive(cfg, brain, opts, observers, Checked::Yes)
+    run_end_to_end(cfg, brain, opts, observers, Checked::Yes)
 }
 
 /// Whether a run's settings were validated and its ROS 2 checked already.
@@ -206,7 +208,7 @@ fn offer_to_ros2(
 /// One run, end to end, once its checks are done (`checked`) or skipped: the run core
 /// built, offered to ROS 2, run under `cfg.clock`, summarized; `observers` told of it all
 /// and of its end.
-fn drive(
+fn run_end_to_end(
     cfg: &RunConfig,
     brain: Box<dyn Policy>,
     mut opts: RunOptions,
@@ -221,16 +223,20 @@ fn drive(
     let bridge = ros2.as_ref().map(|(b, _)| b);
     let start = Instant::now();
     let (end, ticks, timing, exec) = if virtual_clock {
-        let end = core.run_to_end_with(&opts.stop, |t| {
-            if let Some(b) = bridge {
-                // Keep pace with the wall clock, then tell ROS 2 the time.
-                let due = start + Duration::from_nanos(t.0);
-                if let Some(wait) = due.checked_duration_since(Instant::now()) {
-                    std::thread::sleep(wait);
-                }
-                b.clock(t);
-            }
-        });
+        // Offered to ROS 2, the run keeps pace with the wall clock and tells /clock.
+        let drove = match bridge {
+            Some(b) => drive(
+                &mut core,
+                &mut Pacer::new(Nanos::ZERO, Some(1.0)),
+                &opts.stop,
+                Some(b),
+            ),
+            None => drive(&mut core, &mut Unpaced, &opts.stop, None),
+        };
+        let end = match drove {
+            Drove::Ended(end) => end,
+            Drove::Left => core.interrupt(), // neither policy leaves
+        };
         let exec = core.scheduler().figures(end.at);
         (end, core.scheduler().ticks().to_vec(), None, exec)
     } else {

@@ -7,10 +7,14 @@
 //! same from the wire (a test reads them there and finds the same).
 
 use super::{check, Check, Context, Exercise, ExerciseError, Reconcile, Said, Section};
+use ratelab_core::time::Nanos;
 use ratelab_runtime::config::{duration_from_secs, ClockKind, RunConfig};
 use ratelab_runtime::policy::Scripted;
-use ratelab_runtime::runcore::{CoreOptions, RunCore, Step};
+use ratelab_runtime::runcore::drive::{drive, ClockOut, Unpaced};
+use ratelab_runtime::runcore::{CoreOptions, RunCore};
+use ratelab_runtime::scheduler::StopFlag;
 use serde::Deserialize;
+use std::cell::Cell;
 use std::collections::BTreeSet;
 
 /// ex13: what ROS 2 sees.
@@ -60,19 +64,34 @@ pub fn measure_ex13(cfg: &RunConfig) -> Result<Ex13Outcome, ExerciseError> {
     let mut core = RunCore::new(cfg, Box::new(Scripted), CoreOptions::default()).map_err(|e| {
         ratelab_drivers::sweep::SweepError::from(ratelab_drivers::run::RunError::from(e))
     })?;
-    // The instants in [0, duration): each is one /clock message.
-    let mut instants = 0u64;
-    while let Step::Ran { at, .. } = core.step() {
-        if at < cfg.duration {
-            instants += 1;
-        }
-    }
+    // Driven as `ratelab run --ros2` drives it, /clock counted where it is told: one
+    // message per instant in [0, duration).
+    let clock = ClockCount {
+        before: cfg.duration,
+        told: Cell::new(0),
+    };
+    drive(&mut core, &mut Unpaced, &StopFlag::new(), Some(&clock));
+    let instants = clock.told.get();
     Ok(Ex13Outcome {
         nodes: offered.nodes.clone(),
         obs_type: type_of("/obs"),
         action_type: type_of("/action"),
         clock_hz: instants as f64 / cfg.duration.as_secs_f64(),
     })
+}
+
+/// Counts the `/clock` messages a run tells before run time `before` (ns).
+struct ClockCount {
+    before: Nanos,
+    told: Cell<u64>,
+}
+
+impl ClockOut for ClockCount {
+    fn clock(&self, t: Nanos) {
+        if t < self.before {
+            self.told.set(self.told.get() + 1);
+        }
+    }
 }
 
 /// ex13's checks: the facts the lesson rests on.

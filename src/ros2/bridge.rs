@@ -1134,6 +1134,13 @@ fn connect_graph(
     (tx, rx, dropped)
 }
 
+/// `/clock` for a run driven instant by instant ([`ratelab_runtime::runcore::drive`]).
+impl ratelab_runtime::runcore::drive::ClockOut for Bridge {
+    fn clock(&self, t: Nanos) {
+        Bridge::clock(self, t);
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -4,9 +4,11 @@
 //! on gives, byte for byte, the run's own continuation.
 //!
 //! Every run of a graph goes through it; its drivers are thin:
-//! - instant by instant ([`RunCore::step`]): `ratelab::run::run` under the virtual clock
-//!   (and so the headless run, `sweep`, `cliff`, the exercises, `bench` and `replay`) and
-//!   the lab's engine, which paces it against the wall clock (`ratelab::session`);
+//! - instant by instant ([`RunCore::step`]), through one loop, [`drive::drive`], under a
+//!   policy that supplies the pace, the commands and what is told after each instant:
+//!   `ratelab::run::run` under the virtual clock (and so the headless run, `sweep`,
+//!   `cliff`, the exercises, `bench` and `replay`), the lab's trial judge and the lab's
+//!   engine, which paces it against the wall clock (`ratelab::session`);
 //! - event by event ([`RunCore::next_event`], [`RunCore::run_event`],
 //!   [`RunCore::ran_elsewhere`]): each process of a launch under the virtual clock, which
 //!   runs its own nodes' events and takes the others' from their reports
@@ -75,6 +77,7 @@ use ratelab_core::runlog::RunLog;
 use ratelab_core::time::Nanos;
 
 mod capture;
+pub mod drive;
 mod follower;
 mod real;
 mod restart;
@@ -509,29 +512,12 @@ impl RunCore {
     }
 
     /// Run to the end, checking `stop` before each instant (a stop ends the run as
-    /// interrupted at the newest instant run).
+    /// interrupted at the newest instant run): [`drive::drive`] with nothing paced or taken in
+    /// between ([`drive::Unpaced`]).
     pub fn run_to_end(&mut self, stop: &StopFlag) -> RunEnd {
-        self.run_to_end_with(stop, |_| {})
-    }
-
-    /// [`RunCore::run_to_end`], calling `before_instant(t)` before each instant with its
-    /// run time (the place to keep pace with the wall clock).
-    pub fn run_to_end_with(
-        &mut self,
-        stop: &StopFlag,
-        mut before_instant: impl FnMut(Nanos),
-    ) -> RunEnd {
-        loop {
-            if let Some(end) = &self.end {
-                return end.clone();
-            }
-            if stop.is_stopped() {
-                return self.interrupt();
-            }
-            if let Some(t) = self.next_instant() {
-                before_instant(t);
-            }
-            self.step();
+        match drive::drive(self, &mut drive::Unpaced, stop, None) {
+            drive::Drove::Ended(end) => end,
+            drive::Drove::Left => self.interrupt(), // Unpaced never leaves
         }
     }
 

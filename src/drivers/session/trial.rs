@@ -24,6 +24,7 @@ use ratelab_core::time::Nanos;
 use ratelab_runtime::checkpoint::load_policy;
 use ratelab_runtime::config::RunConfig;
 use ratelab_runtime::graph::{Graph, GraphHandles, GraphSpec};
+use ratelab_runtime::runcore::drive::{drive, DrivePolicy, Pace};
 use ratelab_runtime::runcore::{CoreOptions, RunCore};
 use ratelab_runtime::scheduler::StopFlag;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
@@ -167,8 +168,8 @@ impl Tried {
     }
 }
 
-/// Times a judged run's instants as it runs them ([`RunCore::run_to_end_with`] calls
-/// [`Stopwatch::next`] before each): its longest, and how long it took to come to its first
+/// Times a judged run's instants as it runs them ([`Judged`] calls [`Stopwatch::next`]
+/// before each): its longest, and how long it took to come to its first
 /// (its loading, from when the stopwatch was made).
 struct Stopwatch {
     /// When the stretch under way began: the trial's start, then each instant's.
@@ -206,6 +207,21 @@ impl Stopwatch {
     }
 }
 
+/// A judged run's drive policy: each instant, as it comes, is the trial's progress (run time,
+/// ns, for the lab's bar) and starts the stopwatch's next stretch; nothing is paced.
+struct Judged<'a> {
+    progress: &'a AtomicU64,
+    watch: &'a mut Stopwatch,
+}
+
+impl DrivePolicy for Judged<'_> {
+    fn pace(&mut self, t: Nanos) -> Pace {
+        self.progress.store(t.0, Ordering::Relaxed);
+        self.watch.next(Some(t));
+        Pace::Now
+    }
+}
+
 impl Job {
     fn run(self, progress: &AtomicU64, stop: &StopFlag) -> Outcome {
         let started = Instant::now();
@@ -219,10 +235,11 @@ impl Job {
                     ..CoreOptions::default()
                 };
                 let mut core = RunCore::new(&cfg, brain, opts).map_err(|e| e.to_string())?;
-                core.run_to_end_with(stop, |t| {
-                    progress.store(t.0, Ordering::Relaxed);
-                    watch.next(Some(t));
-                });
+                let mut judged = Judged {
+                    progress,
+                    watch: &mut watch,
+                };
+                drive(&mut core, &mut judged, stop, None);
                 watch.next(None);
                 let topics = core.handles().spec.topics.iter();
                 let topics = topics.map(|t| t.name.clone()).collect();

@@ -10,17 +10,18 @@ use ratelab_core::time::Nanos;
 use ratelab_recording::Recording;
 use ratelab_runtime::config::RunConfig;
 use ratelab_runtime::graph::GraphHandles;
-use ratelab_runtime::runcore::{RestoreError, RunCore, Step};
-use ratelab_runtime::scheduler::{EndReason, RunEnd, VirtualScheduler};
+use ratelab_runtime::runcore::drive::{drive, ClockOut, DrivePolicy, Intake, Pace, Pacer, Ran};
+use ratelab_runtime::runcore::{RestoreError, RunCore};
+use ratelab_runtime::scheduler::{EndReason, RunEnd, StopFlag, VirtualScheduler};
 use ratelab_runtime::telemetry::{Control, Speed, Telemetry};
 use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
 impl Engine {
     /// Run `core` under the virtual clock, from where it is, until the user moves on
-    /// (`resumed`: it went on from the real clock, and starts unpaused). Returns what they
-    /// asked next, how the run ended (interrupted now, unless it had ended) and the
-    /// executors' figures.
+    /// (`resumed`: it went on from the real clock, and starts unpaused): the one drive loop
+    /// ([`drive`]) under the lab's policy ([`Paced`]). Returns what they asked next, how the
+    /// run ended (interrupted now, unless it had ended) and the executors' figures.
     pub(super) fn virtual_run(
         &mut self,
         core: &mut RunCore,
@@ -29,123 +30,25 @@ impl Engine {
         ros2: Option<&ratelab_ros2::Bridge>,
         resumed: bool,
     ) -> Segment {
-        // A seek back that replays builds a new graph: these are taken again after one.
-        let mut handles = core.handles().clone();
-        let mut paused = self.settings.start_paused && !resumed;
-        let mut step_pending = false;
-        let mut ended: Option<RunEnd> = core.end().cloned();
-        // Pacing anchor: virtual time `anchor_v` corresponds to wall instant `anchor_w`.
-        let mut anchor_v = core.now();
-        let mut anchor_w = Instant::now();
-        let mut last_status = Instant::now() - Duration::from_secs(1);
-        loop {
-            // Controls, between instants.
-            loop {
-                let msg = if paused || ended.is_some() {
-                    match self.rx.recv_timeout(Duration::from_millis(30)) {
-                        Ok(m) => m,
-                        Err(RecvTimeoutError::Timeout) => break,
-                        Err(RecvTimeoutError::Disconnected) => {
-                            return self.leave(Next::Quit, core.scheduler(), ended)
-                        }
-                    }
-                } else {
-                    match self.rx.try_recv() {
-                        Ok(m) => m,
-                        Err(_) => break,
-                    }
-                };
-                match msg {
-                    Control::Apply(cmd) => {
-                        if ended.is_none() {
-                            self.apply_live(core, cmd, cfg, recording, &handles);
-                        } else {
-                            self.defer(cmd, &handles);
-                        }
-                    }
-                    Control::TogglePause => {
-                        paused = !paused;
-                        anchor_v = core.now();
-                        anchor_w = Instant::now();
-                    }
-                    Control::Step => {
-                        if paused {
-                            step_pending = true;
-                        }
-                    }
-                    Control::Seek(to) => {
-                        if paused {
-                            self.seek(core, to, cfg, recording, ros2.is_some(), &mut ended);
-                            handles = core.handles().clone();
-                        }
-                    }
-                    Control::SetSpeed(s) => {
-                        self.speed = s;
-                        anchor_v = core.now();
-                        anchor_w = Instant::now();
-                    }
-                    Control::Reset { next_seed } => {
-                        return self.leave(Next::Reset { next_seed }, core.scheduler(), ended)
-                    }
-                    Control::SwitchClock => {
-                        return self.leave(Next::SwitchClock, core.scheduler(), ended)
-                    }
-                    Control::Reload { file } => {
-                        // Loaded and judged on a thread of its own: taken up below once it has.
-                        let old = self.figures_now(cfg, core, ended.as_ref());
-                        let topics = core.handles().spec.topics.iter();
-                        let topics = topics.map(|t| t.name.clone()).collect();
-                        let old = RunFigures::of(&old, topics, self.opening.ticks());
-                        self.reload(cfg, &file, Some(old));
-                    }
-                    Control::Quit => return self.leave(Next::Quit, core.scheduler(), ended),
-                }
-                if step_pending {
-                    break;
-                }
-            }
-            // A save whose code has loaded (and been judged): its run is the next.
-            if let Some(ready) = self.reload_ready() {
-                let next = self.as_next(cfg, ready);
-                return self.leave(next, core.scheduler(), ended);
-            }
-            if last_status.elapsed() >= Duration::from_millis(33) {
-                self.tell_status(core, paused);
-                last_status = Instant::now();
-            }
-            if ended.is_some() || (paused && !step_pending) {
-                continue;
-            }
-            // Which instants may run now?
-            let target = if step_pending {
-                None // one actuator step: until the actuator ticks
-            } else {
-                match self.speed {
-                    Speed::Max => None,
-                    Speed::Times(x) => {
-                        Some(anchor_v + Nanos((anchor_w.elapsed().as_nanos() as f64 * x) as u64))
-                    }
-                }
-            };
-            if let Some(end) = run_instants(core, target, &mut step_pending, ros2) {
-                ended = Some(lab_end(end, cfg, core));
-            }
-            if let Some(end) = &ended {
-                self.tell_ended(cfg, core, end, paused);
-                continue;
-            }
-            // Sleep until the next instant is due on the wall (or a few ms at most).
-            if let (Some(due), Speed::Times(x)) = (core.next_instant(), self.speed) {
-                if !step_pending {
-                    let wait_v = due.saturating_sub(anchor_v).0 as f64 / x;
-                    let wake = anchor_w + Duration::from_nanos(wait_v as u64);
-                    let now = Instant::now();
-                    if wake > now {
-                        std::thread::sleep((wake - now).min(Duration::from_millis(10)));
-                    }
-                }
-            }
-        }
+        let mut paced = Paced {
+            handles: core.handles().clone(),
+            paused: self.settings.start_paused && !resumed,
+            step_pending: false,
+            ended: core.end().cloned(),
+            pacer: Pacer::new(core.now(), times(self.speed)),
+            last_status: None,
+            next: None,
+            cfg,
+            recording,
+            offered: ros2.is_some(),
+            engine: self,
+        };
+        let clock = ros2.map(|b| b as &dyn ClockOut);
+        // No stop flag of its own: the lab's run is left by its controls (`Paced::leave`),
+        // and an ended run is kept, to be scrubbed, until then.
+        drive(core, &mut paced, &StopFlag::new(), clock);
+        let Paced { next, ended, .. } = paced;
+        self.leave(next.unwrap_or(Next::Quit), core.scheduler(), ended)
     }
 
     /// Apply `cmd` to the running graph at its next instant, as a replay would (a new plan
@@ -354,38 +257,158 @@ fn after_sensor(
     })
 }
 
-/// Run instants of `core` up to `target` (`None`: no bound), or, with `step_pending`, until
-/// the actuator has ticked once (then `step_pending` is cleared), for a few milliseconds at
-/// most so that the lab stays responsive at max speed. Each instant's time goes to the
-/// ROS 2 bridge's `/clock` first. Returns how the run ended, if it did.
-fn run_instants(
-    core: &mut RunCore,
-    target: Option<Nanos>,
-    step_pending: &mut bool,
-    ros2: Option<&ratelab_ros2::Bridge>,
-) -> Option<RunEnd> {
-    let actuator_bit = 1u64 << (core.handles().spec.actuator.0 % 64);
-    let budget = Instant::now();
-    loop {
-        if let Some(due) = core.next_instant() {
-            if target.is_some_and(|t| due > t) {
-                return None;
+/// The lab's drive policy: the keys' controls taken between instants, the run paced at the
+/// chosen speed (or one actuator step at a time while paused), the status told every 33 ms,
+/// and an ended run held, frozen and seekable, until the user moves on.
+struct Paced<'a> {
+    engine: &'a mut Engine,
+    cfg: &'a RunConfig,
+    recording: &'a Option<Recording>,
+    /// Offered to ROS 2 (no scrubbing back).
+    offered: bool,
+    /// A seek back that replays builds a new graph: these are taken again after one.
+    handles: GraphHandles,
+    paused: bool,
+    /// `.` while paused: run until the actuator has ticked once.
+    step_pending: bool,
+    /// How the run ended, as the lab says it ([`lab_end`]); `None` while it runs.
+    ended: Option<RunEnd>,
+    pacer: Pacer,
+    /// When the status was last told (`None`: not yet).
+    last_status: Option<Instant>,
+    /// What the user asked next, once they have.
+    next: Option<Next>,
+}
+
+/// The pacer's speed for the lab's `speed` (`None`: as fast as it runs).
+fn times(speed: Speed) -> Option<f64> {
+    match speed {
+        Speed::Times(x) => Some(x),
+        Speed::Max => None,
+    }
+}
+
+impl Paced<'_> {
+    /// Leave the run for `next`.
+    fn leave(&mut self, next: Next) -> Intake {
+        self.next = Some(next);
+        Intake::Leave
+    }
+
+    /// One control from the keys (or from ROS 2's `param set`); `Some` when it leaves.
+    fn control(&mut self, core: &mut RunCore, msg: Control) -> Option<Intake> {
+        let e = &mut *self.engine;
+        match msg {
+            Control::Apply(cmd) => {
+                if self.ended.is_none() {
+                    e.apply_live(core, cmd, self.cfg, self.recording, &self.handles);
+                } else {
+                    e.defer(cmd, &self.handles);
+                }
             }
-            if let Some(b) = ros2 {
-                b.clock(due);
+            Control::TogglePause => {
+                self.paused = !self.paused;
+                self.pacer.anchor(core.now());
+            }
+            Control::Step => self.step_pending |= self.paused,
+            Control::Seek(to) => {
+                if self.paused {
+                    e.seek(
+                        core,
+                        to,
+                        self.cfg,
+                        self.recording,
+                        self.offered,
+                        &mut self.ended,
+                    );
+                    self.handles = core.handles().clone();
+                }
+            }
+            Control::SetSpeed(s) => {
+                e.speed = s;
+                self.pacer.set_speed(core.now(), times(s));
+            }
+            Control::Reset { next_seed } => return Some(self.leave(Next::Reset { next_seed })),
+            Control::SwitchClock => return Some(self.leave(Next::SwitchClock)),
+            Control::Reload { file } => {
+                // Loaded and judged on a thread of its own: taken up in `intake` once it has.
+                let old = e.figures_now(self.cfg, core, self.ended.as_ref());
+                let topics = core.handles().spec.topics.iter();
+                let topics = topics.map(|t| t.name.clone()).collect();
+                let old = RunFigures::of(&old, topics, e.opening.ticks());
+                e.reload(self.cfg, &file, Some(old));
+            }
+            Control::Quit => return Some(self.leave(Next::Quit)),
+        }
+        None
+    }
+}
+
+impl DrivePolicy for Paced<'_> {
+    /// The controls that have come (waiting up to 30 ms for one while paused or ended), a
+    /// save whose code has loaded, the status every 33 ms.
+    fn intake(&mut self, core: &mut RunCore) -> Intake {
+        loop {
+            let msg = if self.paused || self.ended.is_some() {
+                match self.engine.rx.recv_timeout(Duration::from_millis(30)) {
+                    Ok(m) => m,
+                    Err(RecvTimeoutError::Timeout) => break,
+                    Err(RecvTimeoutError::Disconnected) => return self.leave(Next::Quit),
+                }
+            } else {
+                match self.engine.rx.try_recv() {
+                    Ok(m) => m,
+                    Err(_) => break,
+                }
+            };
+            if let Some(left) = self.control(core, msg) {
+                return left;
+            }
+            if self.step_pending {
+                break;
             }
         }
-        let actuator_ticked = match core.step() {
-            Step::Ran { ticked, .. } => ticked & actuator_bit != 0,
-            Step::Ended(end) => return Some(end),
-        };
-        if *step_pending && actuator_ticked {
-            *step_pending = false;
-            return None;
+        // A save whose code has loaded (and been judged): its run is the next.
+        if let Some(ready) = self.engine.reload_ready() {
+            let next = self.engine.as_next(self.cfg, ready);
+            return self.leave(next);
         }
-        // Stay responsive at max speed: come back for controls every few ms.
-        if budget.elapsed() > Duration::from_millis(8) {
-            return None;
+        if self
+            .last_status
+            .is_none_or(|at| at.elapsed() >= Duration::from_millis(33))
+        {
+            self.engine.tell_status(core, self.paused);
+            self.last_status = Some(Instant::now());
         }
+        if self.ended.is_some() || (self.paused && !self.step_pending) {
+            Intake::Hold
+        } else {
+            Intake::Go
+        }
+    }
+
+    /// One step runs at once; otherwise at the chosen speed.
+    fn pace(&mut self, t: Nanos) -> Pace {
+        if self.step_pending {
+            Pace::Now
+        } else {
+            self.pacer.pace(t)
+        }
+    }
+
+    /// A step is done once the actuator has ticked.
+    fn ran(&mut self, _core: &mut RunCore, ran: Ran) {
+        let actuator_bit = 1u64 << (self.handles.spec.actuator.0 % 64);
+        if ran.ticked & actuator_bit != 0 {
+            self.step_pending = false;
+        }
+    }
+
+    /// The run is told it ended, and held: frozen, and scrubbed until the user moves on.
+    fn at_end(&mut self, core: &mut RunCore, end: &RunEnd) -> Intake {
+        let end = lab_end(end.clone(), self.cfg, core);
+        self.engine.tell_ended(self.cfg, core, &end, self.paused);
+        self.ended = Some(end);
+        Intake::Hold
     }
 }
