@@ -7,6 +7,7 @@ use super::{wire, DistError, GraphState, NodeId, Share, StopFlag, ToLauncher, To
 use crossbeam_channel::{Receiver, RecvTimeoutError};
 use ratelab_core::metrics::NodeTiming;
 use ratelab_core::time::Nanos;
+use ratelab_runtime::runcore::drive::{drive_real, Intake, RealPolicy};
 use ratelab_runtime::runcore::{RealEnd, RunCore};
 use ratelab_runtime::scheduler::RealOptions;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -52,18 +53,27 @@ pub(super) fn real_clock(
         plan: Some(spec.execution_plan().restricted(&index)),
         track: spec.has_executors_or_compute(),
     };
-    // The launcher's stop (another process ended the run, or Ctrl-C there).
-    let run_stop = StopFlag::new();
-    let finished = StopFlag::new();
-    let watcher = watch_launcher(
-        share,
-        (ctl_rx, stop, launcher_gone),
-        (&run_stop, &finished),
-        (start, &next_due),
-    );
-    let r = core.run_real(Some(&index), &run_stop, &real);
+    // The launcher's stop (another process ended the run, or Ctrl-C there), watched on
+    // this thread while the nodes run on theirs.
+    let mut watch = Watch {
+        rx: Some(ctl_rx),
+        outer: stop,
+        gone: launcher_gone,
+        launcher_at: None,
+        left: false,
+        run_time: &share.run_time,
+        next_due: &next_due,
+        start,
+        end: share.cfg.duration.0,
+    };
+    let Some(r) = drive_real(&mut core, Some(&index), &real, &mut watch, &StopFlag::new()) else {
+        return Err(DistError::Usage(format!(
+            "process {}: the real clock's runner failed (its node threads could not start)",
+            share.process
+        )));
+    };
     let stopped_by_launcher =
-        run_stop.is_stopped() && r.end.reason == ratelab_runtime::scheduler::EndReason::Interrupted;
+        watch.left && r.end.reason == ratelab_runtime::scheduler::EndReason::Interrupted;
     if !stopped_by_launcher {
         send(&ToLauncher::Ended {
             process: share.process.clone(),
@@ -71,9 +81,7 @@ pub(super) fn real_clock(
         })?;
     }
     // Report at the run's end as the launcher saw it (its stop), else our own.
-    finished.stop();
-    let launcher_at = watcher.join().ok().flatten();
-    let at = match launcher_at {
+    let at = match watch.launcher_at {
         Some(at) if stopped_by_launcher => at,
         _ => r.end.at,
     };
@@ -136,47 +144,59 @@ fn tick_hook(
     })
 }
 
-/// A thread that watches the launcher while the nodes run: its stop (another process
-/// ended the run, or Ctrl-C there) stops the run (`run_stop`) and is returned with its run
-/// time; so does a local stop or the launcher going away (without a time). It keeps the
-/// figures' run time at now, short of a tick that may be in progress, and ends when the
-/// run has (`finished`).
-fn watch_launcher(
-    share: &Share,
-    (ctl_rx, stop, launcher_gone): (&Receiver<ToProcess>, &StopFlag, &StopFlag),
-    (run_stop, finished): (&StopFlag, &StopFlag),
-    (start, next_due): (u64, &Arc<Vec<AtomicU64>>),
-) -> std::thread::JoinHandle<Option<Nanos>> {
-    let (rx, run_stop, outer) = (ctl_rx.clone(), run_stop.clone(), stop.clone());
-    let (finished, gone) = (finished.clone(), launcher_gone.clone());
-    // The figures' run time is now, not the last tick (a slow node ticks seldom), short
-    // of a tick that may be in progress.
-    let (clock, next_due, end) = (
-        share.run_time.clone(),
-        next_due.clone(),
-        share.cfg.duration.0,
-    );
-    std::thread::spawn(move || loop {
-        let wall = wire::mono_now_ns().saturating_sub(start);
-        clock.fetch_max(
-            figures_time(wall, end, due_now(&next_due)),
-            Ordering::SeqCst,
-        );
-        match rx.recv_timeout(Duration::from_millis(50)) {
+/// Watches the launcher while the nodes run ([`drive_real`]'s policy): its stop (another
+/// process ended the run, or Ctrl-C there) stops the run, with its run time kept
+/// (`launcher_at`); so does a local stop or the launcher going away (without a time). It
+/// keeps the figures' run time at now, short of a tick that may be in progress.
+struct Watch<'a> {
+    /// The launcher's messages (`None` once its channel has closed).
+    rx: Option<&'a Receiver<ToProcess>>,
+    outer: &'a StopFlag,
+    gone: &'a StopFlag,
+    /// The launcher's stop's run time, once it has come.
+    launcher_at: Option<Nanos>,
+    /// The watch stopped the run.
+    left: bool,
+    run_time: &'a AtomicU64,
+    next_due: &'a [AtomicU64],
+    /// The run's start, on the monotonic clock (ns).
+    start: u64,
+    /// The run's duration, ns.
+    end: u64,
+}
+
+impl RealPolicy for Watch<'_> {
+    fn intake(&mut self, _ended: bool) -> Intake {
+        // The figures' run time is now, not the last tick (a slow node ticks seldom), short
+        // of a tick that may be in progress.
+        let wall = wire::mono_now_ns().saturating_sub(self.start);
+        let at = figures_time(wall, self.end, due_now(self.next_due));
+        self.run_time.fetch_max(at, Ordering::SeqCst);
+        let wait = Duration::from_millis(50);
+        let got = match self.rx {
+            Some(rx) => rx.recv_timeout(wait),
+            None => {
+                std::thread::sleep(wait);
+                Err(RecvTimeoutError::Timeout)
+            }
+        };
+        match got {
             Ok(ToProcess::Stop { at_ns, .. }) => {
-                run_stop.stop();
-                return Some(Nanos(at_ns));
+                self.launcher_at = Some(Nanos(at_ns));
+                self.left = true;
+                return Intake::Leave;
             }
             Ok(_) => {}
-            Err(RecvTimeoutError::Disconnected) => return None,
-            Err(RecvTimeoutError::Timeout) if outer.is_stopped() || gone.is_stopped() => {
-                run_stop.stop();
-                return None;
+            // Its stop cannot come now; a local stop or its going away still can.
+            Err(RecvTimeoutError::Disconnected) => self.rx = None,
+            Err(RecvTimeoutError::Timeout) if self.outer.is_stopped() || self.gone.is_stopped() => {
+                self.left = true;
+                return Intake::Leave;
             }
-            Err(RecvTimeoutError::Timeout) if finished.is_stopped() => return None,
             Err(RecvTimeoutError::Timeout) => {}
         }
-    })
+        Intake::Go
+    }
 }
 
 /// This process's view of the run at `at`: the graph's state, with its own nodes' timing

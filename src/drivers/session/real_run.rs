@@ -7,10 +7,13 @@ use super::reload::{Ready, RealExit};
 use super::trial::Restart;
 use crate::run::Command;
 use crossbeam_channel::RecvTimeoutError;
+use ratelab_core::executor::ExecFigures;
+use ratelab_core::metrics::NodeTiming;
 use ratelab_core::time::Nanos;
 use ratelab_recording::Recording;
 use ratelab_runtime::config::RunConfig;
-use ratelab_runtime::runcore::RunCore;
+use ratelab_runtime::runcore::drive::{drive_real, Intake, RealPolicy};
+use ratelab_runtime::runcore::{RealEnd, RunCore};
 use ratelab_runtime::scheduler::{EndReason, RealOptions, RunEnd, StopFlag};
 use ratelab_runtime::telemetry::{Control, Telemetry};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -63,7 +66,8 @@ impl Engine {
     }
 
     /// One stretch of [`Engine::real_run`]: the real clock from where the core is, until
-    /// the user moves on or a save restarts nodes in place.
+    /// the user moves on or a save restarts nodes in place: the drive loop's real-clock mode
+    /// ([`drive_real`]) under the lab's policy ([`RealPaced`]).
     fn real_once(
         &mut self,
         core: &mut RunCore,
@@ -75,7 +79,6 @@ impl Engine {
         let from = core.now();
         // Ticks so far (under the virtual clock, or earlier parts under this one).
         let ticked = core.scheduler().ticks().to_vec();
-        let stop = StopFlag::new();
         // Only a run that starts here starts paused (a lab started with --paused).
         let pause = Arc::new(AtomicBool::new(
             self.settings.start_paused && from == Nanos::ZERO,
@@ -99,106 +102,45 @@ impl Engine {
             pause: Some(pause.clone()),
             ..crate::run::real_options(cfg)
         };
-        // The run time now: the real clock reads `from` at its start.
-        let start = Instant::now();
-        let now = || from.saturating_add(Nanos::from(start.elapsed()));
-        // A runner that panicked (its node threads could not start) took the graph's nodes
-        // with it: the run has ended, whatever the user asks next.
-        let mut lost = false;
-        let mut restart = None;
-        let part = std::thread::scope(|scope| {
-            let runner = std::thread::Builder::new()
-                .name("real-clock".into())
-                .spawn_scoped(scope, || core.run_real(None, &stop, &opts))
-                .expect("spawning the real-clock runner");
-            let mut runner = Some(runner);
-            let mut last_status = Instant::now();
-            let mut result: Option<RunEnd> = None;
-            let mut timing = None;
-            let mut exec = None;
-            loop {
-                if result.is_none() && runner.as_ref().is_some_and(|r| r.is_finished()) {
-                    let Ok(run) = runner.take().expect("checked").join() else {
-                        lost = true;
-                        let end = RunEnd {
-                            at: now(),
-                            reason: EndReason::Interrupted,
-                        };
-                        let _ = self.tx.send(Telemetry::Error(
-                            "the real clock's runner failed: the run has ended (r starts the next)"
-                                .into(),
-                        ));
-                        result = Some(end);
-                        continue;
-                    };
-                    let end = run.end.clone();
-                    let ticks: Vec<u64> = run
-                        .timing
-                        .iter()
-                        .zip(&ticked)
-                        .map(|(t, before)| before + t.ticks)
-                        .collect();
-                    timing = Some(run.timing);
-                    exec = run.exec;
-                    let metrics =
-                        live_metrics(cfg, &handles, &end, &ticks, timing.clone(), exec.clone());
-                    let _ = self.tx.send(Telemetry::Ended {
-                        metrics: Box::new(metrics),
-                        reason: end.reason.clone(),
-                    });
-                    result = Some(end);
-                }
-                let msg = self.rx.recv_timeout(Duration::from_millis(30));
-                let ran = Stretch {
-                    cfg,
-                    handles: &handles,
-                    running: &running,
-                    recording,
-                    ended: result.is_some(),
+        let mut policy = RealPaced {
+            stretch: Stretch {
+                cfg,
+                handles: &handles,
+                running: &running,
+                recording,
+                ended: false,
+            },
+            from,
+            start: Instant::now(),
+            ticked: &ticked,
+            pause: &pause,
+            last_status: Instant::now(),
+            told: None,
+            next: None,
+            restart: None,
+            engine: self,
+        };
+        // No stop of its own: the lab's run is left by its controls.
+        let ran = drive_real(core, None, &opts, &mut policy, &StopFlag::new());
+        let now = policy.now();
+        let RealPaced {
+            told,
+            next,
+            restart,
+            ..
+        } = policy;
+        let next = next.unwrap_or(Next::Quit);
+        let part = match (told, ran) {
+            (Some((end, timing, exec)), _) => (next, end, timing, exec),
+            (None, Some(run)) => (next, run.end, Some(run.timing), run.exec),
+            (None, None) => {
+                let end = RunEnd {
+                    at: now,
+                    reason: EndReason::Interrupted,
                 };
-                let next = match self.real_control(msg, now(), &ran) {
-                    Some(next) => Some(next),
-                    // A save whose code has loaded, taken up now.
-                    None => self.real_ready(now(), &ran, &mut restart),
-                };
-                if let Some(next) = next {
-                    stop.stop();
-                    let end = match (result, runner.take()) {
-                        (Some(end), _) => end,
-                        (None, Some(r)) => match r.join() {
-                            Ok(run) => {
-                                timing = Some(run.timing);
-                                exec = run.exec;
-                                run.end
-                            }
-                            Err(_) => {
-                                lost = true;
-                                RunEnd {
-                                    at: now(),
-                                    reason: EndReason::Interrupted,
-                                }
-                            }
-                        },
-                        (None, None) => RunEnd {
-                            at: now(),
-                            reason: EndReason::Interrupted,
-                        },
-                    };
-                    return (next, end, timing, exec);
-                }
-                if last_status.elapsed() >= Duration::from_millis(33) {
-                    // Once the run has ended (a fall, a watchdog, a failed node), its clock
-                    // stops where it ended: the lab shows that instant, not wall time
-                    // running on.
-                    let shown = result.as_ref().map_or_else(now, |end| end.at);
-                    self.status(shown, pause.load(Ordering::SeqCst), &handles, None);
-                    last_status = Instant::now();
-                }
+                (next, end, None, None)
             }
-        });
-        if lost {
-            core.interrupt();
-        }
+        };
         match restart {
             Some(r) if core.end().is_none() => RealExit::Restart(r),
             // The run ended as the file was saved: the new code (it loads) starts the next
@@ -332,5 +274,106 @@ impl Engine {
                 )));
             }
         }
+    }
+}
+
+/// How a stretch of the real clock ended, as the lab told it: the end, each node's timing
+/// and the executors' figures.
+type Told = (RunEnd, Option<Vec<NodeTiming>>, Option<ExecFigures>);
+
+/// The lab's policy for a stretch of the real clock ([`drive_real`]): the keys' controls
+/// applied at once to the running graph, a save's code taken up when it has loaded, the
+/// status every 33 ms, and an ended run held (its clock stopped where it ended) until the
+/// user moves on.
+struct RealPaced<'a> {
+    engine: &'a mut Engine,
+    stretch: Stretch<'a>,
+    /// The run time the real clock read at `start`.
+    from: Nanos,
+    start: Instant,
+    /// Each node's ticks before this stretch.
+    ticked: &'a [u64],
+    /// The run's pause (only a run started paused at t = 0 has one set).
+    pause: &'a AtomicBool,
+    last_status: Instant,
+    /// How the run ended, once the runner has returned and the lab has told it.
+    told: Option<Told>,
+    /// What the user asked next, once they have.
+    next: Option<Next>,
+    /// A save whose nodes restart in place.
+    restart: Option<Box<Restart>>,
+}
+
+impl RealPaced<'_> {
+    /// The run time now: the real clock read `from` at `start`.
+    fn now(&self) -> Nanos {
+        self.from.saturating_add(Nanos::from(self.start.elapsed()))
+    }
+}
+
+impl RealPolicy for RealPaced<'_> {
+    fn intake(&mut self, ended: bool) -> Intake {
+        self.stretch.ended = ended;
+        let msg = self.engine.rx.recv_timeout(Duration::from_millis(30));
+        let now = self.now();
+        let next = match self.engine.real_control(msg, now, &self.stretch) {
+            Some(next) => Some(next),
+            // A save whose code has loaded, taken up now.
+            None => self
+                .engine
+                .real_ready(now, &self.stretch, &mut self.restart),
+        };
+        if let Some(next) = next {
+            self.next = Some(next);
+            return Intake::Leave;
+        }
+        if self.last_status.elapsed() >= Duration::from_millis(33) {
+            // Once the run has ended (a fall, a watchdog, a failed node), its clock stops
+            // where it ended: the lab shows that instant, not wall time running on.
+            let shown = self.told.as_ref().map_or(now, |(end, ..)| end.at);
+            let paused = self.pause.load(Ordering::SeqCst);
+            self.engine
+                .status(shown, paused, self.stretch.handles, None);
+            self.last_status = Instant::now();
+        }
+        Intake::Go
+    }
+
+    /// The run ended on its own: the front end is told how (or that the runner failed),
+    /// and the ended run is held.
+    fn at_end(&mut self, run: Option<&RealEnd>) -> Intake {
+        let told = match run {
+            Some(run) => {
+                let end = run.end.clone();
+                let ticks: Vec<u64> = run
+                    .timing
+                    .iter()
+                    .zip(self.ticked)
+                    .map(|(t, before)| before + t.ticks)
+                    .collect();
+                let (timing, exec) = (Some(run.timing.clone()), run.exec.clone());
+                let cfg = self.stretch.cfg;
+                let handles = self.stretch.handles;
+                let metrics =
+                    live_metrics(cfg, handles, &end, &ticks, timing.clone(), exec.clone());
+                let _ = self.engine.tx.send(Telemetry::Ended {
+                    metrics: Box::new(metrics),
+                    reason: end.reason.clone(),
+                });
+                (end, timing, exec)
+            }
+            None => {
+                let _ = self.engine.tx.send(Telemetry::Error(
+                    "the real clock's runner failed: the run has ended (r starts the next)".into(),
+                ));
+                let end = RunEnd {
+                    at: self.now(),
+                    reason: EndReason::Interrupted,
+                };
+                (end, None, None)
+            }
+        };
+        self.told = Some(told);
+        Intake::Hold
     }
 }

@@ -6,8 +6,11 @@
 //! Every front end that steps a [`RunCore`] goes through it: the headless run and everything
 //! built on it (`ratelab_drivers::run`: `sweep`, `cliff`, `bench`, `replay`, the exercises), the
 //! lab's trial judge, ex13's count of `/clock` and the lab's paced session
-//! (`ratelab_drivers::session`). A run across processes goes event by event and a real-clock
-//! run hands the graph to threads; neither uses it yet (docs/design/drive-loop.md).
+//! (`ratelab_drivers::session`). Under the real clock, [`drive_real`] is the same loop's
+//! other mode: the graph on the real clock's threads, the front end's controls taken on the
+//! calling thread ([`RealPolicy`]): the lab's real-clock stretches and each process of a
+//! launch. A run across processes under the virtual clock goes event by event and does not
+//! use it yet (docs/design/drive-loop.md).
 //!
 //! # The order around an instant
 //! 1. The stop flag: set, the run ends as interrupted at the newest instant run.
@@ -28,6 +31,9 @@
 //!
 //! Pacing and `/clock` change only *when* an instant runs, never what it is: a driven run
 //! equals [`RunCore::step`] called to the end, byte for byte (tests below).
+
+mod real;
+pub use real::{drive_real, RealPolicy};
 
 use super::{RunCore, Step};
 use crate::scheduler::{RunEnd, StopFlag};
