@@ -260,9 +260,10 @@ mod tests {
     }
 
     fn chapter(duration_s: f64) -> RunConfig {
-        let mut cfg = RunConfig::default();
-        cfg.duration = secs(duration_s);
-        cfg
+        RunConfig {
+            duration: secs(duration_s),
+            ..RunConfig::default()
+        }
     }
 
     /// Records the instants `/clock` is told.

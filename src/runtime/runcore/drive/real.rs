@@ -86,9 +86,11 @@ mod tests {
     use std::time::{Duration, Instant};
 
     fn core(duration: Nanos) -> (RunCore, RunConfig) {
-        let mut cfg = RunConfig::default();
-        cfg.clock = ClockKind::Real;
-        cfg.duration = duration;
+        let cfg = RunConfig {
+            clock: ClockKind::Real,
+            duration,
+            ..RunConfig::default()
+        };
         let c = RunCore::new(
             &cfg,
             Box::new(crate::policy::Scripted),
