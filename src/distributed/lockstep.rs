@@ -1,6 +1,6 @@
 //! The virtual clock across processes: one order of events, replayed in every process.
 //!
-//! Every process (and the launcher) runs the same [`VirtualScheduler`] over the whole graph,
+//! Every process (and the launcher) runs the same [`VirtualScheduler`](ratelab_runtime::scheduler::VirtualScheduler) over the whole graph,
 //! with the whole graph's executors, so all of them know the run's one order of events (a
 //! tick's start, and when the tick computes, the instant its held outputs go out:
 //! [`Event`]; by time, then the executors' order) and number them 0, 1, …. A process runs

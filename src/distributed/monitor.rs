@@ -21,7 +21,8 @@
 //! - the launcher's progress lines (`@log`) become notices, and its merged summary
 //!   (`@ended`, [`RunOver`]) ends the run in the lab.
 //!
-//! [`record`] writes the same telemetry to a rerun recording (`launch --processes --record`).
+//! `ratelab_recording::watched::record` writes the same telemetry to a rerun recording
+//! (`launch --processes --record`).
 
 use super::credentials::{Credentials, Role};
 use super::process::LiveStats;

@@ -7,7 +7,7 @@
 //! plain latest-wins buffer here (its QoS lives with the subscriber's copy, which sees every
 //! message in publish order and so counts exactly what the in-process topic would); it is a
 //! bridge element of the graph: each message goes out as a
-//! [`WireSample`](super::wire::WireSample) as it is published.
+//! [`super::wire::WireSample`] as it is published.
 //!
 //! [`run_process`] goes through its phases in order: check its options against the graph
 //! file, join the launcher (`Joined`), build the graph, wire the topics that cross its

@@ -68,7 +68,7 @@ impl<S: Subscriber> Layer<S> for RefusalLayer {
 }
 
 /// Start passing on this process's refused connections, and return where they come (one
-/// reason per refused connection, printable, at most [`MAX_WAITING`] waiting). Installs the
+/// reason per refused connection, printable, at most `MAX_WAITING` waiting). Installs the
 /// process's global `tracing` subscriber ([`install`]) if no call did yet; when another
 /// program's is installed already, nothing comes (the run goes on).
 pub fn watch() -> Receiver<String> {

@@ -137,7 +137,7 @@ const CLOCK_HZ_TOLERANCE: f64 = 0.5;
 
 /// The node list: right when the names are the same set (in any order, `/` or not before a
 /// name in the root namespace). The types: right when the same. `/clock`'s rate: right
-/// within [`CLOCK_HZ_TOLERANCE`].
+/// within `CLOCK_HZ_TOLERANCE`.
 impl Reconcile for Ex13Outcome {
     fn reconcile(&self, prediction: &toml::Table) -> Vec<Said> {
         let key = "nodes";

@@ -70,7 +70,7 @@ pub struct LaunchOptions {
     /// its screen. Lines are cut at [`MAX_STDERR_LINE`] bytes and ended; a line that finds
     /// the channel full is dropped here (give a bounded one: it is on the log key anyway).
     pub child_stderr: Option<crossbeam_channel::Sender<String>>,
-    /// The run starts only once this receives (or is told, within [`REPLY_TIMEOUT`]): a
+    /// The run starts only once this receives (or is told, within [`REPLY_TIMEOUT`](crate::REPLY_TIMEOUT)): a
     /// watcher that must see the whole run (a recording, the lab) says here that it has
     /// figures from every process ([`super::monitor::Watch::run`]). `None`: start when
     /// every process is ready.

@@ -10,7 +10,9 @@ use super::{Launch, Link, LockstepCost};
 use crate::wire::{self, ToLauncher, ToProcess};
 use crate::{DistError, REPLY_TIMEOUT};
 use crossbeam_channel::Receiver;
+use ratelab_core::time::Nanos;
 use ratelab_runtime::graph::NodeId;
+use ratelab_runtime::runcore::drive::Pacer;
 use ratelab_runtime::scheduler::{EndReason, RunEnd, StopFlag};
 use ratelab_runtime::summary::GraphState;
 use std::collections::BTreeMap;
@@ -97,8 +99,8 @@ impl Launch<'_> {
         // Longer than a process waits for an input message itself, so that its own, more
         // precise error comes first.
         let patience = 2 * REPLY_TIMEOUT;
-        let pace = self.opts.pace.filter(|s| *s > 0.0 && s.is_finite());
-        let paced_from = Instant::now();
+        // Paced: run time runs at `pace` × the wall's from now (the drive loop's pacer).
+        let pacer = Pacer::new(Nanos::ZERO, self.opts.pace);
         let mut horizon: Option<u64> = None;
         let (mut seen, mut waiting_since) = (u64::MAX, Instant::now());
         let mut interrupted_at: Option<Instant> = None;
@@ -116,7 +118,7 @@ impl Launch<'_> {
                 }));
             };
             // Paced: no instant more than the lookahead ahead of its wall time.
-            let base = pace.map_or(t.0, |speed| t.0.min(wall_run_time(paced_from, speed)));
+            let base = pacer.run_time_now().map_or(t.0, |due| t.0.min(due.0));
             let want = base.saturating_add(lookahead).min(cfg.duration.0);
             let low = horizon.is_none_or(|h| h < base.saturating_add(lookahead / 2));
             if !stop.is_stopped() && low && horizon.is_none_or(|h| want > h) {
@@ -182,16 +184,6 @@ impl Launch<'_> {
                 default(Duration::from_millis(20)) => {}
             }
         }
-    }
-}
-
-/// Paced at `speed` × wall time from `from`: the run time due now, ns.
-fn wall_run_time(from: Instant, speed: f64) -> u64 {
-    let ns = from.elapsed().as_secs_f64() * speed * 1e9;
-    if ns.is_finite() && ns > 0.0 {
-        ns.min(u64::MAX as f64) as u64
-    } else {
-        0
     }
 }
 

@@ -67,8 +67,8 @@ pub(super) fn real_clock(
         end: share.cfg.duration.0,
     };
     let Some(r) = drive_real(&mut core, Some(&index), &real, &mut watch, &StopFlag::new()) else {
-        return Err(DistError::Usage(format!(
-            "process {}: the real clock's runner failed (its node threads could not start)",
+        return Err(DistError::Peer(format!(
+            "process '{}': the real clock's runner failed; its nodes are gone",
             share.process
         )));
     };

@@ -171,7 +171,7 @@ pub fn encode_reports(reports: &[Ticked]) -> Vec<u8> {
 /// Decode a message of tick reports, refusing it whole when it is over
 /// [`MAX_TICKS_PER_MESSAGE`] × [`MAX_TICK_BYTES`] bytes, holds more than
 /// [`MAX_TICKS_PER_MESSAGE`] reports or none, or is malformed (it must decode exactly, no
-/// byte after its end); its text arrives printable ([`printable`]).
+/// byte after its end); its text arrives printable ([`printable`](ratelab_core::text::printable)).
 ///
 /// # Errors
 /// One line.

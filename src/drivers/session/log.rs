@@ -198,7 +198,7 @@ impl LoggedRun {
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct SessionLog {
-    /// Format version: 1 or 2 ([`SESSION_VERSION`]).
+    /// Format version: 1 or 2 (`SESSION_VERSION`).
     pub version: u32,
     /// The runs.
     pub runs: Vec<LoggedRun>,
@@ -251,7 +251,7 @@ impl SessionLog {
     }
 
     /// Read a session log (JSON) and check every run as the command line checks the same
-    /// values: refused when not a regular file, larger than [`MAX_SESSION_BYTES`], of an
+    /// values: refused when not a regular file, larger than `MAX_SESSION_BYTES`, of an
     /// unknown version, or holding any value a flag would refuse.
     ///
     /// # Errors

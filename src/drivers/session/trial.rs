@@ -24,7 +24,7 @@ use ratelab_core::time::Nanos;
 use ratelab_runtime::checkpoint::load_policy;
 use ratelab_runtime::config::RunConfig;
 use ratelab_runtime::graph::{Graph, GraphHandles, GraphSpec};
-use ratelab_runtime::runcore::drive::{drive, DrivePolicy, Pace};
+use ratelab_runtime::runcore::drive::{drive, DrivePolicy};
 use ratelab_runtime::runcore::{CoreOptions, RunCore};
 use ratelab_runtime::scheduler::StopFlag;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
@@ -215,10 +215,9 @@ struct Judged<'a> {
 }
 
 impl DrivePolicy for Judged<'_> {
-    fn pace(&mut self, t: Nanos) -> Pace {
+    fn starting(&mut self, t: Nanos) {
         self.progress.store(t.0, Ordering::Relaxed);
         self.watch.next(Some(t));
-        Pace::Now
     }
 }
 

@@ -48,6 +48,8 @@ impl Engine {
         // and an ended run is kept, to be scrubbed, until then.
         drive(core, &mut paced, &StopFlag::new(), clock);
         let Paced { next, ended, .. } = paced;
+        // (An end is told at the next intake, so `ended` has it; the core's is the fallback.)
+        let ended = ended.or_else(|| core.end().cloned().map(|end| lab_end(end, cfg, core)));
         self.leave(next.unwrap_or(Next::Quit), core.scheduler(), ended)
     }
 
@@ -345,11 +347,19 @@ impl Paced<'_> {
 }
 
 impl DrivePolicy for Paced<'_> {
-    /// The controls that have come (waiting up to 30 ms for one while paused or ended), a
-    /// save whose code has loaded, the status every 33 ms.
+    /// The run's end first, if the last instant ended it (so that no control is taken as
+    /// if it ran on); then the controls that have come (waiting up to 30 ms for one while
+    /// paused, with no step pending, or ended), a save whose code has loaded, the status
+    /// every 33 ms.
     fn intake(&mut self, core: &mut RunCore) -> Intake {
+        if self.ended.is_none() {
+            if let Some(end) = core.end().cloned() {
+                self.at_end(core, &end);
+            }
+        }
         loop {
-            let msg = if self.paused || self.ended.is_some() {
+            let wait = (self.paused && !self.step_pending) || self.ended.is_some();
+            let msg = if wait {
                 match self.engine.rx.recv_timeout(Duration::from_millis(30)) {
                     Ok(m) => m,
                     Err(RecvTimeoutError::Timeout) => break,
@@ -404,7 +414,8 @@ impl DrivePolicy for Paced<'_> {
         }
     }
 
-    /// The run is told it ended, and held: frozen, and scrubbed until the user moves on.
+    /// The run is told it ended, and held: frozen, and scrubbed until the user moves on
+    /// (`intake` notices the end first; this is for a run `drive` finds ended).
     fn at_end(&mut self, core: &mut RunCore, end: &RunEnd) -> Intake {
         let end = lab_end(end.clone(), self.cfg, core);
         self.engine.tell_ended(self.cfg, core, &end, self.paused);

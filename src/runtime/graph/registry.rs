@@ -6,7 +6,7 @@
 //! [`RustNode`], and [`rust_kind`] its definition, to give docs and parameters with units.
 //!
 //! A kind written in Rust outside ratelab is a type implementing [`RustNode`] with typed inputs and outputs (copper-rs's
-//! `CuTask` is the model): each a [`Message`] — any registered message type
+//! `CuTask` is the model): each a [`Message`](ratelab_core::msg::Message) — any registered message type
 //! ([`ratelab_core::msg`]: the built-in `StateMsg`, `PositionMsg`, `ForceMsg`, or one of your own,
 //! which registering the kind registers too) — or a tuple of two to four of them, or `()`
 //! for none ([`Inputs`], [`Outputs`]). [`register`] it once, before the graph file is read; from then on

@@ -33,7 +33,7 @@
 //! `src/runtime/graph/spec/build.rs`.
 //!
 //! Rules (each broken rule is a [`SpecError`] with the line and column of the culprit):
-//! - at most [`MAX_NODES`] nodes, names unique; exactly one actuator (the kind that steps
+//! - at most [`MAX_NODES`](ratelab_core::limits::MAX_NODES) nodes, names unique; exactly one actuator (the kind that steps
 //!   the plant: it owns the plant step and the zero-order hold);
 //! - each node's `kind` is one the registry knows ([`crate::graph::registry`]: the
 //!   built-in `sensor`, `estimator`, `policy`, `safety`, `actuator`, `python`, `external`,

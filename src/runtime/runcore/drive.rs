@@ -26,8 +26,8 @@
 //!    ([`crate::command::TimedCommand`]). A phase change may move it later; then it is paced
 //!    again, with no intake, since a command taken now would be logged after the scheduled
 //!    ones of its instant, where a replay puts it before them.
-//! 6. `/clock` told the instant that runs ([`ClockOut`]), the instant run, and
-//!    [`DrivePolicy::ran`] told which nodes ticked.
+//! 6. [`DrivePolicy::starting`] and `/clock` ([`ClockOut`]) told the instant that runs,
+//!    the instant run, and [`DrivePolicy::ran`] told which nodes ticked.
 //!
 //! Pacing and `/clock` change only *when* an instant runs, never what it is: a driven run
 //! equals [`RunCore::step`] called to the end, byte for byte (tests below).
@@ -106,12 +106,18 @@ pub trait DrivePolicy {
         Pace::Now
     }
 
+    /// The instant at `t` runs now: paced, made ready (it is where a scheduled phase
+    /// change put it), just before `/clock` is told it. Called once per instant.
+    fn starting(&mut self, _t: Nanos) {}
+
     /// An instant ran.
     fn ran(&mut self, _core: &mut RunCore, _ran: Ran) {}
 
     /// The run has ended (`end`): [`Intake::Leave`] (the default) returns
-    /// [`Drove::Ended`]; [`Intake::Hold`] keeps the ended run (asked again after each
-    /// intake, which should then wait for its controls).
+    /// [`Drove::Ended`]; [`Intake::Hold`] (and `Go`, the same here) keeps the ended run. It
+    /// is asked again after each intake that returns `Go`, so a policy that holds an ended
+    /// run should return `Hold` from `intake` (after waiting for its controls) until it
+    /// leaves.
     fn at_end(&mut self, _core: &mut RunCore, _end: &RunEnd) -> Intake {
         Intake::Leave
     }
@@ -126,7 +132,9 @@ impl DrivePolicy for Unpaced {}
 /// Keeps pace with the wall clock at a speed: run time `anchor` is the wall instant the
 /// pacer was anchored at, and run time passes `speed` times as fast as the wall's (`None`:
 /// as fast as the instants run). The headless run offered to ROS 2 runs at ×1; the lab at
-/// the speed its keys chose, anchored again when paused, resumed or sped up.
+/// the speed its keys chose, anchored again when paused, resumed or sped up; a launch the
+/// lab follows keeps its lockstep's horizon within the run time due
+/// ([`Pacer::run_time_now`]).
 #[derive(Clone, Copy, Debug)]
 pub struct Pacer {
     anchor_run: Nanos,
@@ -161,6 +169,17 @@ impl Pacer {
         let x = self.speed?;
         let ahead_ns = t.saturating_sub(self.anchor_run).0 as f64 / x;
         Some(self.anchor_wall + Duration::from_nanos(ahead_ns as u64))
+    }
+
+    /// The run time due now: how far the wall clock has come since the anchor, at the
+    /// speed (`None`: unpaced, nothing holds the run back).
+    pub fn run_time_now(&self) -> Option<Nanos> {
+        let x = self.speed?;
+        let ahead_ns = self.anchor_wall.elapsed().as_secs_f64() * x * 1e9;
+        Some(
+            self.anchor_run
+                .saturating_add(Nanos(ahead_ns.min(u64::MAX as f64) as u64)),
+        )
     }
 
     /// Run `t` now when it is due, else sleep until it is (at most [`MAX_PACING_SLEEP`]).
@@ -227,6 +246,7 @@ pub fn drive<P: DrivePolicy + ?Sized>(
                 std::thread::sleep(wait.min(MAX_PACING_SLEEP));
             }
         }
+        policy.starting(t);
         if let Some(out) = clock {
             out.clock(t);
         }
@@ -331,19 +351,29 @@ mod tests {
     }
 
     #[test]
-    fn a_command_taken_between_instants_is_logged_at_the_next_and_replays_the_same() {
+    fn a_command_taken_between_instants_is_logged_at_the_next_before_its_scheduled_ones() {
         let cfg = chapter(1.0);
-        let mut c = core(&cfg, vec![]);
+        // The instants of the run, to schedule a command on the 41st.
+        let mut plain = Script::default();
+        drive(&mut core(&cfg, vec![]), &mut plain, &StopFlag::new(), None);
+        let scheduled = TimedCommand {
+            at_ns: plain.ran[40].0,
+            command: Command::SetSensorHz { hz: 40.0 },
+        };
+        let mut c = core(&cfg, vec![scheduled.clone()]);
         let mut script = Script {
             apply_after: Some((40, Command::SetControlHz { hz: 25.0 })),
             ..Script::default()
         };
         drive(&mut c, &mut script, &StopFlag::new(), None);
         let applied = c.applied().to_vec();
-        assert_eq!(applied.len(), 1);
-        assert!(
-            script.ran[39] < Nanos(applied[0].at_ns) && Nanos(applied[0].at_ns) == script.ran[40]
-        );
+        assert_eq!(applied.len(), 2);
+        assert_eq!(script.ran[40], plain.ran[40]);
+        // Taken before the instant was made ready: logged at it, before the scheduled one,
+        // the order a seek and a replay apply them in.
+        assert_eq!(Nanos(applied[0].at_ns), script.ran[40]);
+        assert_eq!(applied[0].command, Command::SetControlHz { hz: 25.0 });
+        assert_eq!(applied[1], scheduled);
         let driven = format!("{:?}", c.metrics());
         // The same command, scheduled: the same run.
         let (_, replayed, _) = stepped_to_end(core(&cfg, applied));
@@ -374,6 +404,58 @@ mod tests {
         assert!(!script.ran.contains(&Nanos(500_000_000)));
         let (_, stepped, _) = stepped_to_end(core(&cfg, commands));
         assert_eq!(format!("{:?}", c.metrics()), stepped);
+    }
+
+    /// Sleeps once before the instant `moved`, counting the intakes until it has run.
+    struct WaitAtMoved {
+        moved: Nanos,
+        slept: bool,
+        ran_moved: bool,
+        intakes_while_waiting: usize,
+    }
+    impl DrivePolicy for WaitAtMoved {
+        fn intake(&mut self, _core: &mut RunCore) -> Intake {
+            if self.slept && !self.ran_moved {
+                self.intakes_while_waiting += 1;
+            }
+            Intake::Go
+        }
+        fn pace(&mut self, t: Nanos) -> Pace {
+            if t == self.moved && !self.slept {
+                self.slept = true;
+                return Pace::Sleep(Duration::from_millis(1));
+            }
+            Pace::Now
+        }
+        fn ran(&mut self, _core: &mut RunCore, ran: Ran) {
+            self.ran_moved |= ran.at == self.moved;
+        }
+    }
+
+    #[test]
+    fn an_instant_a_phase_change_moved_is_waited_for_without_intake() {
+        let cfg = chapter(1.0);
+        let commands: Vec<TimedCommand> = (cfg.graph.nodes.iter())
+            .map(|n| TimedCommand {
+                at_ns: 500_000_000,
+                command: Command::SetPhase {
+                    node: n.name.clone(),
+                    phase_ms: 7.0,
+                },
+            })
+            .collect();
+        let mut p = WaitAtMoved {
+            moved: Nanos(507_000_000),
+            slept: false,
+            ran_moved: false,
+            intakes_while_waiting: 0,
+        };
+        drive(&mut core(&cfg, commands), &mut p, &StopFlag::new(), None);
+        assert!(
+            p.slept && p.ran_moved,
+            "the instant moved to 507 ms, and ran"
+        );
+        assert_eq!(p.intakes_while_waiting, 0);
     }
 
     /// Stops after `n` instants; holds once the run has ended.
@@ -481,6 +563,9 @@ mod tests {
             Pace::Now => panic!("not yet due"),
         }
         assert_eq!(p.pace(secs(60.0)), Pace::Sleep(MAX_PACING_SLEEP));
+        let now = p.run_time_now().unwrap();
+        assert!(now >= secs(1.0) && now < secs(3.0), "{now:?}");
+        assert_eq!(Pacer::new(Nanos::ZERO, None).run_time_now(), None);
         let due = p.due(secs(3.0)).unwrap();
         let ahead = due.duration_since(p.anchor_wall);
         assert_eq!(ahead, Duration::from_secs(1), "2 s of run time at ×2");

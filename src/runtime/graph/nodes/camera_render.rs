@@ -126,7 +126,7 @@ pub struct Render {
 impl Render {
     /// Start a renderer for frames of `g`: this program's command line
     /// ([`Program::this_if_set`]) as `render-camera --width W --height H`, then wait for its
-    /// [`HELLO`] (at most [`OPEN_TIMEOUT`]). A program that only links the library is never
+    /// [`HELLO`] (at most `OPEN_TIMEOUT`). A program that only links the library is never
     /// started again with arguments it may not know: it draws.
     ///
     /// # Errors
@@ -224,7 +224,7 @@ impl Render {
     ///
     /// # Errors
     /// One line when the renderer has stopped (how it ended, its last stderr lines) or is
-    /// slower than [`FRAME_TIMEOUT`]; it is ended then, and every later call errs.
+    /// slower than `FRAME_TIMEOUT`; it is ended then, and every later call errs.
     pub fn frame(&mut self, cart_pos_m: f64, theta_rad: f64) -> Result<Vec<u8>, String> {
         use crossbeam_channel::RecvTimeoutError;
         let answer = match self.ask.send((cart_pos_m, theta_rad)) {

@@ -42,6 +42,8 @@ pub fn drive_real<P: RealPolicy + ?Sized>(
 ) -> Option<RealEnd> {
     let run_stop = StopFlag::new();
     let ran = std::thread::scope(|scope| {
+        // A policy that panics still stops the run, so that the scope's join returns.
+        let _stops = StopOnDrop(&run_stop);
         let runner = std::thread::Builder::new()
             .name("real-clock".into())
             .spawn_scoped(scope, || core.run_real(part, &run_stop, opts));
@@ -74,6 +76,15 @@ pub fn drive_real<P: RealPolicy + ?Sized>(
         core.interrupt();
     }
     ran
+}
+
+/// Stops the run when dropped: on return, and while unwinding from a policy's panic.
+struct StopOnDrop<'a>(&'a StopFlag);
+
+impl Drop for StopOnDrop<'_> {
+    fn drop(&mut self) {
+        self.0.stop();
+    }
 }
 
 #[cfg(test)]
@@ -140,9 +151,10 @@ mod tests {
     fn a_run_to_its_duration_is_told_its_end_and_held_until_the_policy_leaves() {
         let (mut c, _) = core(Nanos(200_000_000));
         let real = RealOptions::default();
+        // Leaves after 10 s at the latest: a loop that forgot the end fails, not hangs.
         let mut p = Count {
             intakes: 0,
-            leave_after: None,
+            leave_after: Some(2_000),
             ends: vec![],
             hold: 3,
         };

@@ -9,7 +9,7 @@ use ratelab_core::metrics::NodeTiming;
 use ratelab_core::node::Node;
 use ratelab_core::time::Nanos;
 
-/// The threads [`run_real`] starts for `plan`: one per node on a per-node executor, and
+/// The threads [`run_real`](super::run_real) starts for `plan`: one per node on a per-node executor, and
 /// each shared executor's threads (which start whether or not their nodes are due).
 pub fn plan_threads(plan: &ExecutionPlan) -> usize {
     let per_node = plan
