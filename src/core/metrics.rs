@@ -531,7 +531,7 @@ pub struct TopicMetrics {
     /// Its QoS in short (`KA100 fifo dl 40 ms`), when not the chapter's.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub qos: Option<String>,
-    /// The QoS counters it reports ([`crate::qos::QosCounter::reported`]): `expired`,
+    /// The QoS counters it reports ([`crate::topic::TopicStats::reported`]): `expired`,
     /// `refused`, `lost`, `retransmitted`, `offered_deadline_missed`,
     /// `requested_deadline_missed`.
     #[serde(flatten)]

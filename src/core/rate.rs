@@ -3,7 +3,7 @@
 //! A period is `round(1e9 / hz)` ns. The real scheduler never sleeps "for a period": it
 //! sleeps *until* the next absolute deadline (`previous deadline + period`), so a late
 //! wake-up does not push every later tick back (no drift). Plain `thread::sleep` wakes
-//! 100–250 µs late on a shared Linux machine, so [`Rate::wait_until`] sleeps to `spin_margin`
+//! 100–250 µs late on a shared Linux machine, so [`DeadlineWaiter::wait_until`] sleeps to `spin_margin`
 //! before the deadline and spins the rest (the `spin_sleep` crate).
 
 use crate::time::Nanos;

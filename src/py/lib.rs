@@ -1,19 +1,19 @@
 //! `ratelab._native`: ratelab inside the caller's Python interpreter, for the package in
 //! `python/ratelab/` (which is what a user imports).
 //!
-//! - [`main`]: the whole command line (`ratelab lab`, `run`, `launch`, …) in this process,
+//! - `main`: the whole command line (`ratelab lab`, `run`, `launch`, …) in this process,
 //!   as the wheel's `ratelab` command and `python -m ratelab` run it. A launch's processes
 //!   are started as `python -m ratelab process …` (`Program::set_this`).
-//! - [`run`]: one run from `ratelab.run`'s settings ([`run_spec`]: a dict of its keywords,
+//! - `run`: one run from `ratelab.run`'s settings (`run_spec`: a dict of its keywords,
 //!   read into the library's `RunSpec`, no argument list) and started as `ratelab run` starts
 //!   one (`RunSpec::start`, through `ratelab::held_run`), its files' contents returned;
 //!   Python nodes and a callable brain run in this interpreter. Ctrl-C (KeyboardInterrupt)
 //!   stops it.
-//! - [`sweep`], [`cliff`]: a sweep and a cliff search from `ratelab.sweep`'s and
-//!   `ratelab.cliff`'s settings ([`run_spec`]: dicts read into the library's `SweepSpec` and
+//! - `sweep`, `cliff`: a sweep and a cliff search from `ratelab.sweep`'s and
+//!   `ratelab.cliff`'s settings (`run_spec`: dicts read into the library's `SweepSpec` and
 //!   `CliffSpec`), their tables as CSV (`ratelab sweep --csv`'s); a callable brain runs in
 //!   this interpreter, a fresh wrapper of it per run, the runs on every core.
-//! - [`exercise`]: `ratelab exercise`, its checks returned (a prediction may be given).
+//! - `exercise`: `ratelab exercise`, its checks returned (a prediction may be given).
 //!
 //! Errors become Python exceptions carrying the command line's one line: a missing file
 //! `FileNotFoundError`, one refused for being there `FileExistsError`, a permission

@@ -14,11 +14,11 @@
 //!   the pole's angle), `plant/pole_angle_estimate_rad` (with an estimator in the graph: its
 //!   estimate θ̂, where the angle's line shows the state it estimates,
 //!   `ratelab_core::estimate`; drawn under the angle, wider and lighter, so that where it
-//!   lies on its truth it shows as a band either side of the angle's line: [`style`]),
+//!   lies on its truth it shows as a band either side of the angle's line: `style`),
 //!   `plant/cart_pos_m`, `plant/rail_end/{right,left}`,
 //!   `plant/cart_limit/{right,left}`;
 //! - `marks/{change,trouble,recovery}`: a mark at each event of that kind, in a row under
-//!   the lower fall limit, each legend naming the times ([`events`]);
+//!   the lower fall limit, each legend naming the times (`events`);
 //! - `action/published_N` (the force the policy asked for, at each message it published),
 //!   `action/applied_N` (the force the actuator applied at each step: the zero-order hold);
 //! - `latency/sense_to_act_ms`, `latency/control_period_ms` (the controller's period);
@@ -26,7 +26,7 @@
 //!   window, from the second actuator step: the first spans no time; and at the run's end
 //!   when the actuator stopped stepping 1 s or more before it, over the time since its last
 //!   step), one colour per topic, the same in every graph and apart from every other
-//!   topic's, QoS counter's and node's ([`style`]), each topic's line narrower than the one
+//!   topic's, QoS counter's and node's (`style`), each topic's line narrower than the one
 //!   drawn before it so that equal lines show both colours;
 //! - QoS ([`ratelab_core::qos`]): `bus/<topic>/<counter>` (`expired`, `refused`, `lost`,
 //!   `retransmitted`, `offered_deadline_missed`, `requested_deadline_missed`) for each counter
@@ -112,6 +112,8 @@
 //! dropped); an existing file is replaced only when the recording was opened with
 //! `force`, and a symbolic link or non-regular file at the final name is refused.
 #![warn(missing_docs)]
+// The crate's docs map its private modules for a maintainer: links to them are meant.
+#![allow(rustdoc::private_intra_doc_links)]
 
 mod blueprint;
 mod events;

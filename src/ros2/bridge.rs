@@ -30,7 +30,7 @@
 //! Messages leave through a `ratelab::topic::Tap` on each topic and a channel to one bridge
 //! thread: no node puts on Zenoh itself. Under the virtual clock a publisher waits when the
 //! channel is full, and the bridge's Zenoh publishers wait for room in Zenoh's queue
-//! ([`Declarer::waiting`]) (the run stays byte-identical, only slower: it keeps pace with
+//! (`Declarer::waiting`) (the run stays byte-identical, only slower: it keeps pace with
 //! the wall clock anyway); under the real clock a full channel drops the ROS 2 copy and counts it
 //! ([`BridgeReport::dropped`]), so the nodes' timing is never the bridge's.
 

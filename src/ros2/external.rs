@@ -9,7 +9,8 @@
 //! on each output and a subscription (MS) on each input. A token for one of those topics
 //! with another type (name or RIHS01 hash) is refused at once, in one line naming both:
 //! the silent failure ROS 2 users otherwise meet (a subscriber that hears nothing). Then
-//! ratelab subscribes to the output's data key and decodes each message ([`super::types::decode`]).
+//! ratelab subscribes to the output's data key and decodes each message (the decoder of its
+//! message type's ROS 2 mapping, `ros2().decode`).
 //!
 //! The time contract under the virtual clock (the lockstep): `/clock` reaches `t` at the
 //! external node's tick at `t`, after every message the nodes ranked before it published at

@@ -16,7 +16,9 @@
 //!   ([`Follower`]);
 //! - under the real clock ([`RunCore::run_real`]): the headless run, the lab's engine and
 //!   each process of a launch hand the core's graph to the real-clock executor's threads
-//!   ([`crate::scheduler::run_real`]) and take it back at the end.
+//!   ([`crate::scheduler::run_real`]) and take it back at the end; the lab's engine and a
+//!   launch's process through the drive loop's real-clock mode ([`drive::drive_real`]),
+//!   which takes their controls on the calling thread meanwhile.
 //!
 //! # A clock switch in place
 //! One run may change clocks as it goes (the lab's `c`): [`RunCore::run_real`] from the
