@@ -40,10 +40,10 @@
 //!   run started from them, as every front end starts one), [`outputs`]
 //!   (what a run writes and offers; [`trace_csv`], its trace as it goes), [`observer`]
 //!   (what watches a run as it goes: a recording, a progress bar), [`held_run`] (a
-//!   run's results in memory, for a host program), and the run core's drivers — [`run()`] (one
-//!   headless run), [`sweep`] (grids and the rate cliff; [`sweep_spec`], a sweep or cliff
-//!   search as data, under the same rules for every front end), [`session`] (the lab's live
-//!   sessions, their log and replay).
+//!   run's results in memory, for a host program), and the run core's drivers —
+//!   [`run`](mod@run) (one headless run), [`sweep`] (grids and the rate cliff;
+//!   [`sweep_spec`], a sweep or cliff search as data, under the same rules for every front
+//!   end), [`session`] (the lab's live sessions, their log and replay).
 #![warn(missing_docs)]
 
 mod wiring;
