@@ -14,7 +14,7 @@ use ratelab_core::time::Nanos;
 use ratelab_runtime::config::{ClockKind, RunConfig};
 use ratelab_runtime::graph::lock;
 use ratelab_runtime::policy::Policy;
-use ratelab_runtime::runcore::drive::{drive, Drove, Pacer, Unpaced};
+use ratelab_runtime::runcore::drive::{drive, ClockOut, Drove, Pacer};
 use ratelab_runtime::runcore::{CoreOptions, RunCore};
 use ratelab_runtime::scheduler::{RealOptions, RunEnd, StopFlag};
 use std::time::{Duration, Instant};
@@ -223,19 +223,14 @@ fn run_end_to_end(
     let bridge = ros2.as_ref().map(|(b, _)| b);
     let start = Instant::now();
     let (end, ticks, timing, exec) = if virtual_clock {
-        // Offered to ROS 2, the run keeps pace with the wall clock and tells /clock.
-        let drove = match bridge {
-            Some(b) => drive(
-                &mut core,
-                &mut Pacer::new(Nanos::ZERO, Some(1.0)),
-                &opts.stop,
-                Some(b),
-            ),
-            None => drive(&mut core, &mut Unpaced, &opts.stop, None),
-        };
+        // Offered to ROS 2, the run keeps pace with the wall clock and tells /clock;
+        // otherwise it runs unpaced.
+        let mut pacer = Pacer::new(Nanos::ZERO, bridge.map(|_| 1.0));
+        let clock = bridge.map(|b| b as &dyn ClockOut);
+        let drove = drive(&mut core, &mut pacer, &opts.stop, clock);
         let end = match drove {
             Drove::Ended(end) => end,
-            Drove::Left => core.interrupt(), // neither policy leaves
+            Drove::Left => core.interrupt(), // a pacer never leaves
         };
         let exec = core.scheduler().figures(end.at);
         (end, core.scheduler().ticks().to_vec(), None, exec)

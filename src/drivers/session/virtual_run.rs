@@ -47,9 +47,8 @@ impl Engine {
         // No stop flag of its own: the lab's run is left by its controls (`Paced::leave`),
         // and an ended run is kept, to be scrubbed, until then.
         drive(core, &mut paced, &StopFlag::new(), clock);
+        // `drive` leaves only from an intake, which has taken up an end first: `ended` has it.
         let Paced { next, ended, .. } = paced;
-        // (An end is told at the next intake, so `ended` has it; the core's is the fallback.)
-        let ended = ended.or_else(|| core.end().cloned().map(|end| lab_end(end, cfg, core)));
         self.leave(next.unwrap_or(Next::Quit), core.scheduler(), ended)
     }
 
