@@ -3,7 +3,7 @@
 //! Each process sends the reports of its events once, to the launcher ([`Keys::ticked`]),
 //! whose session is the router of the launch's star. The launcher follows the run's one
 //! order of events as the reports come in ([`Follower`], on the thread that receives them:
-//! Zenoh's) and, when an event is
+//! Zenoh's, through the drive loop's event mode, `drive_events`) and, when an event is
 //! next, sends its node's process every report that process has not had, in one message on
 //! the process's own key ([`Keys::relayed`]): before its turn a process must know every
 //! event before it ([`crate::lockstep`]). A process that has [`MAX_RELAYED`] reports waiting
@@ -26,6 +26,7 @@ use ratelab_runtime::config::RunConfig;
 use ratelab_runtime::graph::lock;
 use ratelab_runtime::graph::spec::GraphSpec;
 use ratelab_runtime::graph::{NodeId, TopicId};
+use ratelab_runtime::runcore::drive::{drive_events, Cursor, Drew, EventPolicy, Taken};
 use ratelab_runtime::runcore::Follower;
 use ratelab_runtime::scheduler::{EndReason, Event, RunEnd};
 use std::collections::VecDeque;
@@ -96,14 +97,13 @@ pub(super) struct Tally {
 /// The run as the relay follows it (under [`Relay::course`]'s lock).
 struct Course {
     order: Follower,
+    /// Events taken (its index: the next one's) and the next event, once drawn and until
+    /// its report is taken.
+    cursor: Cursor,
     duration: Nanos,
     /// How far the horizon reaches ahead, ns (its move is due at half of it).
     lookahead: u64,
     inbox: TickInbox,
-    /// Events taken: the next one's index.
-    index: u64,
-    /// The next event, once drawn and until its report is taken.
-    next: Option<Event>,
     /// The reports taken, the first numbered `log_from` (those every process has had are
     /// dropped).
     log: VecDeque<Ticked>,
@@ -112,75 +112,103 @@ struct Course {
     given: Vec<u64>,
     /// The horizon the main thread last sent, ns.
     horizon: Option<u64>,
+    counts: Counts,
+    end: Option<RunEnd>,
+}
+
+/// What the reports taken came to, beside their count.
+#[derive(Default)]
+struct Counts {
     published: Vec<Option<u64>>,
     started: u64,
     instants: u64,
     last_t: Option<Nanos>,
-    end: Option<RunEnd>,
+}
+
+/// The relay's event source for the drive loop's event mode ([`drive_events`]): every
+/// event is taken from its process's report, once it is in; a report out of step, a stop
+/// or a failure ends the run.
+struct Follow<'a> {
+    spec: &'a GraphSpec,
+    inbox: &'a mut TickInbox,
+    log: &'a mut VecDeque<Ticked>,
+    counts: &'a mut Counts,
+    end: &'a mut Option<RunEnd>,
+}
+
+impl EventPolicy<Follower> for Follow<'_> {
+    /// A report out of step: the run's end (its node's failure).
+    type Error = RunEnd;
+
+    fn take(&mut self, order: &mut Follower, index: u64, event: Event) -> Result<Taken, RunEnd> {
+        let spec = self.spec;
+        let (i, t) = event.node_at();
+        let Some(m) = self.inbox.take(index) else {
+            return Ok(Taken::NotYet);
+        };
+        let compute = check_tick_report(&m, index, event, spec)
+            .map_err(|message| failed(spec, i, t, message))?;
+        let c = &mut *self.counts;
+        if let Event::Start { .. } = event {
+            c.started += 1;
+        }
+        order.ran_elsewhere(event, compute);
+        if c.last_t != Some(t) {
+            c.instants += 1;
+            c.last_t = Some(t);
+        }
+        for &(topic, seq) in &m.published {
+            // Only a topic the node publishes (a report is untrusted input).
+            if spec.nodes[i].publishes.contains(&TopicId(topic)) {
+                c.published[topic] = Some(seq);
+            }
+        }
+        if let Some(message) = &m.failed {
+            *self.end = Some(failed(spec, i, t, message.clone()));
+        } else if m.stop {
+            *self.end = Some(RunEnd {
+                at: t,
+                reason: EndReason::NodeStopped,
+            });
+        }
+        let over = self.end.is_some();
+        self.log.push_back(m);
+        Ok(Taken::Ran { over })
+    }
 }
 
 impl Course {
-    /// Take every report whose turn has come, in the run's order, drawing each next event;
-    /// the end where one says so (a stop, a failure, a process out of step) or where the
-    /// run's duration is reached.
+    /// Take every report whose turn has come, in the run's order, drawing each next event
+    /// (the drive loop's event mode, [`Follow`]); the end where one says so (a stop, a
+    /// failure, a process out of step) or where the run's duration is reached.
     fn advance(&mut self, spec: &GraphSpec) {
-        while self.end.is_none() {
-            let event = match self.next {
-                Some(e) => e,
-                None => match self.order.next_event() {
-                    Some(e) => *self.next.insert(e),
-                    None => {
-                        self.end = Some(RunEnd {
-                            at: self.duration,
-                            reason: EndReason::Duration,
-                        });
-                        break;
-                    }
-                },
-            };
-            let (i, t) = event.node_at();
-            let Some(m) = self.inbox.take(self.index) else {
-                break;
-            };
-            let compute = match check_tick_report(&m, self.index, event, spec) {
-                Ok(c) => c,
-                Err(message) => {
-                    self.end = Some(failed(spec, i, t, message));
-                    break;
-                }
-            };
-            if let Event::Start { .. } = event {
-                self.started += 1;
-            }
-            self.order.ran_elsewhere(event, compute);
-            self.next = None;
-            self.index += 1;
-            if self.last_t != Some(t) {
-                self.instants += 1;
-                self.last_t = Some(t);
-            }
-            for &(topic, seq) in &m.published {
-                // Only a topic the node publishes (a report is untrusted input).
-                if spec.nodes[i].publishes.contains(&TopicId(topic)) {
-                    self.published[topic] = Some(seq);
-                }
-            }
-            if let Some(message) = &m.failed {
-                self.end = Some(failed(spec, i, t, message.clone()));
-            } else if m.stop {
+        if self.end.is_some() {
+            return;
+        }
+        let mut follow = Follow {
+            spec,
+            inbox: &mut self.inbox,
+            log: &mut self.log,
+            counts: &mut self.counts,
+            end: &mut self.end,
+        };
+        match drive_events(&mut self.order, &mut self.cursor, &mut follow, None) {
+            Ok(Drew::Exhausted) => {
                 self.end = Some(RunEnd {
-                    at: t,
-                    reason: EndReason::NodeStopped,
+                    at: self.duration,
+                    reason: EndReason::Duration,
                 });
             }
-            self.log.push_back(m);
+            Ok(Drew::Over | Drew::Waiting | Drew::Limit | Drew::Stopped) => {}
+            Err(end) => self.end = Some(end),
         }
     }
 
     /// The run cannot go on: `message`, at the next event (its node's failure).
     fn fail_next(&mut self, spec: &GraphSpec, message: String) {
         let (i, t) = self
-            .next
+            .cursor
+            .next()
             .map_or((spec.actuator.0, self.order.now()), |e| e.node_at());
         if self.end.is_none() {
             self.end = Some(failed(spec, i, t, message));
@@ -194,14 +222,14 @@ impl Course {
     fn due(&mut self, process_of: &[usize]) -> Vec<(usize, Vec<u8>)> {
         let mut out = Vec::new();
         if self.end.is_none() {
-            if let Some(e) = self.next {
+            if let Some(e) = self.cursor.next() {
                 if let Some(&p) = process_of.get(e.node_at().0) {
                     self.hand(p, process_of, &mut out);
                 }
             }
         }
         let waited: Vec<usize> = (self.given.iter().enumerate())
-            .filter(|(_, had)| self.index.saturating_sub(**had) >= MAX_RELAYED as u64)
+            .filter(|(_, had)| self.cursor.index().saturating_sub(**had) >= MAX_RELAYED as u64)
             .map(|(p, _)| p)
             .collect();
         for p in waited {
@@ -217,9 +245,10 @@ impl Course {
         let Some(given) = self.given.get_mut(p) else {
             return;
         };
+        let index = self.cursor.index();
         let from = (*given).max(self.log_from);
-        *given = self.index;
-        if from >= self.index {
+        *given = index;
+        if from >= index {
             return;
         }
         let skip = usize::try_from(from - self.log_from).unwrap_or(usize::MAX);
@@ -233,7 +262,12 @@ impl Course {
 
     /// Drop the reports every process has been handed.
     fn forget_handed(&mut self) {
-        let all_had = self.given.iter().copied().min().unwrap_or(self.index);
+        let all_had = self
+            .given
+            .iter()
+            .copied()
+            .min()
+            .unwrap_or(self.cursor.index());
         while self.log_from < all_had {
             if self.log.pop_front().is_none() {
                 self.log_from = all_had;
@@ -306,17 +340,16 @@ impl Relay {
             order,
             duration: cfg.duration,
             lookahead,
+            cursor: Cursor::default(),
             inbox: TickInbox::new(),
-            index: 0,
-            next: None,
             log: VecDeque::new(),
             log_from: 0,
             given: vec![0; self.outs.len()],
             horizon: None,
-            published: vec![None; self.spec.topics.len()],
-            started: 0,
-            instants: 0,
-            last_t: None,
+            counts: Counts {
+                published: vec![None; self.spec.topics.len()],
+                ..Counts::default()
+            },
             end: None,
         };
         course.advance(&self.spec);
@@ -340,7 +373,7 @@ impl Relay {
                 }
             }
             c.advance(&self.spec);
-            let low = match (c.horizon, c.next) {
+            let low = match (c.horizon, c.cursor.next()) {
                 (Some(h), Some(e)) => e.node_at().1 .0.saturating_add(c.lookahead / 2) > h,
                 _ => false,
             };
@@ -365,8 +398,8 @@ impl Relay {
     pub(super) fn progress(&self) -> Progress {
         match lock(&self.course).as_ref() {
             Some(c) => Progress {
-                index: c.index,
-                next: c.next.map(|e| e.node_at()),
+                index: c.cursor.index(),
+                next: c.cursor.next().map(|e| e.node_at()),
                 end: c.end.clone(),
             },
             None => Progress {
@@ -430,10 +463,10 @@ impl Relay {
     pub(super) fn tally(&self) -> Tally {
         match lock(&self.course).as_ref() {
             Some(c) => Tally {
-                events: c.index,
-                started: c.started,
-                instants: c.instants,
-                published: c.published.clone(),
+                events: c.cursor.index(),
+                started: c.counts.started,
+                instants: c.counts.instants,
+                published: c.counts.published.clone(),
             },
             None => Tally {
                 events: 0,
@@ -458,19 +491,15 @@ mod tests {
             order: Follower::new(&cfg).unwrap(),
             duration: cfg.duration,
             lookahead: 1,
+            cursor: Cursor::at(n),
             inbox: TickInbox::new(),
-            index: n,
-            next: None,
             log: (0..n)
                 .map(|k| report(&format!("p{}", k % 3), k, (k % 3) as usize))
                 .collect(),
             log_from: 0,
             given: vec![0; 3],
             horizon: None,
-            published: Vec::new(),
-            started: 0,
-            instants: 0,
-            last_t: None,
+            counts: Counts::default(),
             end: None,
         }
     }

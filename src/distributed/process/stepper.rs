@@ -1,7 +1,8 @@
 //! One process's part of the virtual clock's run ([`crate::lockstep`]): its graph in a run
 //! core, drawn event by event ([`RunCore::next_event`]), its own nodes' events run here
 //! ([`RunCore::run_event`]) and the others' taken from their reports
-//! ([`RunCore::ran_elsewhere`]), which the launcher hands on. A state machine advanced
+//! ([`RunCore::ran_elsewhere`]), which the launcher hands on: the drive loop's event mode
+//! ([`drive_events`]), whose event source here is [`Advance`]. A state machine advanced
 //! wherever what it waits for comes in: on Zenoh's receive thread when other processes'
 //! tick reports or an input sample arrive, on the process's main thread when the launcher
 //! moves the horizon on (or every 100 ms, to notice an input that never came). At the end
@@ -25,6 +26,7 @@ use ratelab_core::node::Flow;
 use ratelab_core::time::Nanos;
 use ratelab_runtime::graph::spec::GraphSpec;
 use ratelab_runtime::graph::TopicId;
+use ratelab_runtime::runcore::drive::{drive_events, Cursor, Drew, EventPolicy, Taken, Turn};
 use ratelab_runtime::runcore::RunCore;
 use ratelab_runtime::scheduler::{EndReason, Event, StopFlag};
 use ratelab_runtime::summary::GraphState;
@@ -155,6 +157,18 @@ pub(super) struct Stepper {
     /// The graph (the whole graph's, this process's nodes run here), drawn event by event
     /// on the whole graph's plan, as in one process: every process replays every executor.
     core: RunCore,
+    /// Where the run's order stands ([`Stepper::last`] sets its limit).
+    cursor: Cursor,
+    /// No more events here: the run is over for this process (its last event, a stop or a
+    /// failure), or the launcher ended it.
+    done: bool,
+    turns: Turns,
+}
+
+/// What decides an event's turn here and takes it ([`Advance`], the lockstep's
+/// [`EventPolicy`]): the horizon, this process's nodes and their inputs, the others'
+/// reports, and the reports this process sends.
+struct Turns {
     share: Arc<Share>,
     /// The topics whose counters this process holds.
     held: Vec<TopicId>,
@@ -162,22 +176,12 @@ pub(super) struct Stepper {
     local: Vec<usize>,
     /// The newest seq each topic's remote publisher sent, from its reports.
     sent: Vec<Option<u64>>,
-    /// The next event's place in the run's order.
-    index: u64,
-    /// The next event, once drawn from the scheduler and until it has run.
-    next: Option<Event>,
     /// How far the launcher lets the run go, ns.
     horizon_ns: Option<u64>,
-    /// No more events here: the run is over for this process (its last event, a stop or a
-    /// failure), or the launcher ended it.
-    done: bool,
     /// The input message the next event waits for, and since when.
     awaiting: Option<(TopicId, u64, Instant)>,
     /// Reports of this process's events not yet sent.
     outbox: Vec<Ticked>,
-    /// The run's events, once the launcher has said how many: none at or past this runs
-    /// here ([`Stepper::last`]).
-    limit: Option<u64>,
     /// Per node, how long its last tick here took, ns (`None`: it has not ticked here).
     tick_ns: Vec<Option<u64>>,
     /// Ticks may run in a Zenoh callback at all (not under `--ros2`: a ROS 2 node's tick
@@ -202,30 +206,32 @@ impl Stepper {
         callback_ticks: bool,
     ) -> Self {
         let held = held_topics(&share.cfg.graph, &share.mine);
-        Stepper {
-            core,
+        let turns = Turns {
             held,
             local: share.local(),
             sent: vec![None; share.cfg.graph.topics.len()],
-            index: 0,
-            next: None,
             horizon_ns: None,
-            done: false,
             awaiting: None,
             outbox: Vec::new(),
-            limit: None,
             tick_ns: vec![None; share.cfg.graph.nodes.len()],
             callback_ticks,
             kept_at: None,
             publisher,
             stop,
             share,
+        };
+        Stepper {
+            core,
+            cursor: Cursor::default(),
+            done: false,
+            turns,
         }
     }
 
     /// The launcher lets the run go up to run time `until_ns`.
     pub(super) fn horizon(&mut self, until_ns: u64) {
-        self.horizon_ns = Some(self.horizon_ns.unwrap_or(0).max(until_ns));
+        let h = &mut self.turns.horizon_ns;
+        *h = Some(h.unwrap_or(0).max(until_ns));
     }
 
     /// The launcher ended the run: nothing more runs here.
@@ -236,25 +242,27 @@ impl Stepper {
     /// The run had `events` events (the launcher's word at its end): take the reports of
     /// every one before it, run nothing at or past it.
     pub(super) fn last(&mut self, events: u64) {
-        self.limit = Some(events);
+        self.cursor.limit = Some(events);
     }
 
     /// The events of the run still to take here before it reports (0 without the
     /// launcher's word, or once the run is over here).
     fn left(&self) -> u64 {
-        match self.limit {
-            Some(l) if !self.done => l.saturating_sub(self.index),
-            _ => 0,
+        if self.done {
+            0
+        } else {
+            self.cursor.left()
         }
     }
 
     /// The figures at run time `at`, once the last messages sent here have arrived: the
     /// graph's executors' figures as in one process (every process replayed every one).
     pub(super) fn capture(&self, at: Nanos) -> GraphState {
-        let ticks: Vec<u64> = (self.share.ticks.iter())
+        let share = &self.turns.share;
+        let ticks: Vec<u64> = (share.ticks.iter())
             .map(|t| t.load(Ordering::Relaxed))
             .collect();
-        let mut state = GraphState::capture(&self.share.handles, at, &ticks, None);
+        let mut state = GraphState::capture(&share.handles, at, &ticks, None);
         state.exec = self.core.scheduler().figures(at);
         state
     }
@@ -266,10 +274,10 @@ impl Stepper {
     /// tick not known to be short ([`CALLBACK_TICK_NS`]), and return `true`: the main
     /// thread must go on (putting the held-back samples and then the reports).
     fn advance(&mut self, inbox: &Mutex<TickInbox>, on_main: bool) -> Result<bool, DistError> {
-        let spill = self.share.bridge.spill.clone();
+        let spill = self.turns.share.bridge.spill.clone();
         if on_main {
             spill.set_budget(None);
-            self.share.bridge.put_held()?;
+            self.turns.share.bridge.put_held()?;
         } else if !spill.is_empty() {
             return Ok(true);
         } else {
@@ -280,85 +288,120 @@ impl Stepper {
             // The reports follow their samples: both from the main thread.
             return ran.map(|_| true);
         }
-        self.flush()?;
+        self.turns.flush()?;
         ran
     }
 
-    /// Run events as [`Stepper::advance`] says; `true` when a callback (`on_main` false)
-    /// stopped before an event that is the main thread's to run.
+    /// Run events as [`Stepper::advance`] says, through the drive loop's event mode
+    /// ([`drive_events`]); `true` when a callback (`on_main` false) stopped before an
+    /// event that is the main thread's to run.
     fn run_events(&mut self, inbox: &Mutex<TickInbox>, on_main: bool) -> Result<bool, DistError> {
-        let share = self.share.clone();
-        let spec = &share.cfg.graph;
-        while !self.done {
-            if self.stop.is_stopped() {
-                return Err(DistError::Peer("interrupted".into()));
+        if self.done {
+            return Ok(false);
+        }
+        let stop = self.turns.stop.clone();
+        let mut turn = Advance {
+            turns: &mut self.turns,
+            inbox,
+            on_main,
+            to_main: false,
+        };
+        match drive_events(&mut self.core, &mut self.cursor, &mut turn, Some(&stop))? {
+            Drew::Waiting => Ok(turn.to_main),
+            Drew::Over | Drew::Exhausted => {
+                self.done = true;
+                Ok(false)
             }
-            if self.limit.is_some_and(|l| self.index >= l) {
-                break; // the run's last event is taken
-            }
-            let event = match self.next {
-                Some(e) => e,
-                None => match self.core.next_event() {
-                    Some(e) => *self.next.insert(e),
-                    None => {
-                        self.done = true;
-                        break;
-                    }
-                },
-            };
-            let (i, t) = event.node_at();
-            if self.horizon_ns.is_none_or(|h| h < t.0) {
-                break;
-            }
-            if self.outbox.len() >= wire::MAX_TICKS_PER_MESSAGE {
-                self.flush()?;
-            }
-            let over = if self.local.contains(&i) {
-                let start = matches!(event, Event::Start { .. });
-                let long = self.tick_ns[i].is_none_or(|ns| ns > CALLBACK_TICK_NS);
-                if !on_main && (!self.callback_ticks || (start && long)) {
-                    return Ok(true);
-                }
-                match self.run_here(event)? {
-                    Some(over) => over,
-                    None => break, // an input message is still on its way
-                }
-            } else {
-                let Some(m) = ratelab_runtime::graph::lock(inbox).take(self.index) else {
-                    break;
-                };
-                let compute =
-                    check_tick_report(&m, self.index, event, spec).map_err(DistError::Peer)?;
-                for &(topic, seq) in &m.published {
-                    // Only a topic the node publishes (a report is untrusted input).
-                    if spec.nodes[i].publishes.contains(&TopicId(topic)) {
-                        self.sent[topic] = Some(seq);
-                    }
-                }
-                self.core.ran_elsewhere(event, compute);
-                m.stop || m.failed.is_some()
-            };
-            self.next = None;
-            self.index += 1;
-            self.done = over;
-            if !share.bridge.spill.is_empty() {
-                break; // samples held back: the main thread goes on
-            }
-            if self
-                .kept_at
-                .is_some_and(|at| at.elapsed() >= MAX_REPORT_WAIT)
-            {
-                self.flush()?;
+            Drew::Limit => Ok(false), // the run's last event is taken
+            Drew::Stopped => Err(DistError::Peer("interrupted".into())),
+        }
+    }
+}
+
+/// One advance of the lockstep ([`Stepper::advance`]) as the drive loop's event source:
+/// an event's turn comes when the horizon reaches it (and, on a Zenoh callback, when it is
+/// not a tick for the main thread); this process's events run here, the others' are taken
+/// from their reports.
+struct Advance<'a> {
+    turns: &'a mut Turns,
+    inbox: &'a Mutex<TickInbox>,
+    on_main: bool,
+    /// A callback stopped before an event that is the main thread's to run.
+    to_main: bool,
+}
+
+impl EventPolicy<RunCore> for Advance<'_> {
+    type Error = DistError;
+
+    fn turn(&mut self, _index: u64, event: Event) -> Result<Turn, DistError> {
+        let t = &mut *self.turns;
+        let (i, at) = event.node_at();
+        if t.horizon_ns.is_none_or(|h| h < at.0) {
+            return Ok(Turn::Wait);
+        }
+        if t.outbox.len() >= wire::MAX_TICKS_PER_MESSAGE {
+            t.flush()?;
+        }
+        if t.local.contains(&i) && !self.on_main {
+            let start = matches!(event, Event::Start { .. });
+            let long = t.tick_ns[i].is_none_or(|ns| ns > CALLBACK_TICK_NS);
+            if !t.callback_ticks || (start && long) {
+                self.to_main = true;
+                return Ok(Turn::Wait);
             }
         }
-        Ok(false)
+        Ok(Turn::Go)
     }
 
-    /// Run `event`, this process's, and keep its report: `Some(over)` (the node stopped the
-    /// run or failed), or `None` while an input message it must see is still on its way
-    /// (a start sees exactly the messages it would see in one process). An input that does
-    /// not come within [`REPLY_TIMEOUT`] fails the tick.
-    fn run_here(&mut self, event: Event) -> Result<Option<bool>, DistError> {
+    fn take(&mut self, core: &mut RunCore, index: u64, event: Event) -> Result<Taken, DistError> {
+        let (i, _) = event.node_at();
+        let t = &mut *self.turns;
+        if t.local.contains(&i) {
+            return Ok(match t.run_here(core, index, event)? {
+                Some(over) => Taken::Ran { over },
+                None => Taken::NotYet, // an input message is still on its way
+            });
+        }
+        let Some(m) = ratelab_runtime::graph::lock(self.inbox).take(index) else {
+            return Ok(Taken::NotYet);
+        };
+        let spec = &t.share.cfg.graph;
+        let compute = check_tick_report(&m, index, event, spec).map_err(DistError::Peer)?;
+        for &(topic, seq) in &m.published {
+            // Only a topic the node publishes (a report is untrusted input).
+            if spec.nodes[i].publishes.contains(&TopicId(topic)) {
+                t.sent[topic] = Some(seq);
+            }
+        }
+        core.ran_elsewhere(event, compute);
+        Ok(Taken::Ran {
+            over: m.stop || m.failed.is_some(),
+        })
+    }
+
+    fn taken(&mut self, _index: u64, _event: Event) -> Result<Turn, DistError> {
+        let t = &mut *self.turns;
+        if !t.share.bridge.spill.is_empty() {
+            return Ok(Turn::Wait); // samples held back: the main thread goes on
+        }
+        if t.kept_at.is_some_and(|at| at.elapsed() >= MAX_REPORT_WAIT) {
+            t.flush()?;
+        }
+        Ok(Turn::Go)
+    }
+}
+
+impl Turns {
+    /// Run `event`, this process's, the run's `index`-th, on `core` and keep its report:
+    /// `Some(over)` (the node stopped the run or failed), or `None` while an input message
+    /// it must see is still on its way (a start sees exactly the messages it would see in
+    /// one process). An input that does not come within [`REPLY_TIMEOUT`] fails the tick.
+    fn run_here(
+        &mut self,
+        core: &mut RunCore,
+        index: u64,
+        event: Event,
+    ) -> Result<Option<bool>, DistError> {
         let share = self.share.clone();
         let spec = &share.cfg.graph;
         let (i, t) = event.node_at();
@@ -368,7 +411,7 @@ impl Stepper {
         match event {
             Event::Publish { .. } => {
                 // Publishing held outputs cannot fail or stop the run.
-                let _ = self.core.run_event(event);
+                let _ = core.run_event(event);
             }
             Event::Start { .. } => {
                 let inputs = spec.nodes[i].subscribes.iter();
@@ -396,7 +439,7 @@ impl Stepper {
                 self.awaiting = None;
                 if failed.is_none() {
                     let began = Instant::now();
-                    let ticked = self.core.run_event(event);
+                    let ticked = core.run_event(event);
                     let took = u64::try_from(began.elapsed().as_nanos()).unwrap_or(u64::MAX);
                     self.tick_ns[i] = Some(took);
                     match ticked {
@@ -405,7 +448,7 @@ impl Stepper {
                         Err(other) => failed = Some(other.to_string()),
                     }
                 } else {
-                    self.core.ran_elsewhere(event, Nanos::ZERO);
+                    core.ran_elsewhere(event, Nanos::ZERO);
                 }
                 share.ticks[i].fetch_add(1, Ordering::Relaxed);
             }
@@ -422,7 +465,7 @@ impl Stepper {
         self.kept_at.get_or_insert_with(Instant::now);
         self.outbox.push(Ticked {
             process: share.process.clone(),
-            index: self.index,
+            index,
             node: i,
             t_ns: t.0,
             stop: flow == Flow::Stop,

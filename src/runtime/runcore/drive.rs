@@ -9,8 +9,10 @@
 //! (`ratelab_drivers::session`). Under the real clock, [`drive_real`] is the same loop's
 //! other mode: the graph on the real clock's threads, the front end's controls taken on the
 //! calling thread ([`RealPolicy`]): the lab's real-clock stretches and each process of a
-//! launch. A run across processes under the virtual clock goes event by event and does not
-//! use it yet (docs/design/drive-loop.md).
+//! launch. A run across processes under the virtual clock goes event by event: its event
+//! mode, [`drive_events`], takes each event from a source an [`EventPolicy`] supplies (run
+//! here, or from another process's report), for a process's lockstep and for the launcher
+//! that follows the processes.
 //!
 //! # The order around an instant
 //! 1. The stop flag: set, the run ends as interrupted at the newest instant run.
@@ -32,7 +34,9 @@
 //! Pacing and `/clock` change only *when* an instant runs, never what it is: a driven run
 //! equals [`RunCore::step`] called to the end, byte for byte (tests below).
 
+mod events;
 mod real;
+pub use events::{drive_events, Cursor, Drew, EventOrder, EventPolicy, Taken, Turn};
 pub use real::{drive_real, RealPolicy};
 
 use super::{RunCore, Step};
