@@ -3,8 +3,9 @@
 //! (stdout), their progress (a spinner on stderr) and what their outcome means for the exit
 //! code.
 
-use anyhow::bail;
-use ratelab_exercises::{Progress, Setup};
+use ratelab::run_spec::GraphSettings;
+use ratelab::setting::Speech;
+use ratelab_exercises::{ExerciseSpec, Progress};
 use std::cell::RefCell;
 
 /// An exercise that ran to its end but did not pass: a check failed, or a prediction
@@ -88,7 +89,8 @@ pub fn run_from_args(args: &crate::cli::ExerciseArgs) -> anyhow::Result<()> {
 }
 
 /// `ratelab exercise`'s run, its report's lines through `out` and its findings returned:
-/// with `prediction` in place of the learner's file's when given.
+/// with `prediction` in place of the learner's file's when given. Its flags are read into
+/// the library's [`ExerciseSpec`], which runs it.
 ///
 /// # Errors
 /// What kept it from running: bad flags, no prediction, unreadable files or bands.
@@ -98,26 +100,11 @@ pub fn report_from_args(
     out: &mut dyn FnMut(&str),
     progress: &dyn ratelab_exercises::Progress,
 ) -> anyhow::Result<ratelab_exercises::Report> {
-    let mut graph = args.graph.clone();
-    if graph.graph.is_none() {
-        graph.graph = ratelab_exercises::default_graph(&args.which, &args.dir)?;
-    }
-    let g = crate::headless::graph_from_args(&graph)?;
-    if !crate::headless::faults_from_args(&graph).is_empty() {
-        bail!("--stall/--kill: the exercises inject no faults; use `ratelab run` or `ratelab lab` with them");
-    }
-    let exe = ratelab::distributed::launcher::Program::this()?;
-    let setup = Setup {
-        dir: &args.dir,
-        graph: &g,
-        graph_path: graph.graph.as_deref(),
-        exe: &exe,
-        prediction,
+    let spec = ExerciseSpec {
+        which: args.which.clone(),
+        dir: args.dir.clone(),
+        graph: GraphSettings::from(&args.graph),
+        prediction: prediction.cloned(),
     };
-    Ok(ratelab_exercises::run_report(
-        &args.which,
-        setup,
-        out,
-        progress,
-    )?)
+    spec.report(Speech::Flags, out, progress)
 }

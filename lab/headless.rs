@@ -35,11 +35,6 @@ pub fn warn_qos(spec: &GraphSpec) {
     }
 }
 
-/// The faults the flags inject (`--stall`, then `--kill`).
-pub fn faults_from_args(g: &GraphArgs) -> Vec<ratelab::qos::Fault> {
-    GraphSettings::from(g).faults()
-}
-
 /// The run settings the flags describe: [`RunSpec::config`] of `ratelab run`'s flags, in
 /// their words; the graph's QoS warnings on stderr.
 pub fn config_from_args(a: &RunArgs) -> anyhow::Result<RunConfig> {

@@ -5,7 +5,6 @@
 //! `main_with(|| {})`.
 #![warn(missing_docs)]
 
-pub mod api;
 mod bench;
 mod cli;
 mod exercise;

@@ -16,6 +16,9 @@
 # recordings/reference-virtual-control50-seed0.rrd (tests/it/recording.rs), not here: a
 # recording's bytes hold its own id and wall-clock times.
 #
+# With BYTE_IDENTITY_KEEP=DIR the two binaries are kept there (ratelab-base, ratelab-head),
+# for an A/B of their timings after.
+#
 # Run it once per change of the run core. Exit 0: identical; 1: something differs (named);
 # 2: a build failed. Both builds share cargo's target directory (only ratelab's own crates
 # are rebuilt for each).
@@ -53,6 +56,10 @@ build() { # DIR OUT
 }
 build "$work/base" "$work/ratelab-base"
 build "$root" "$work/ratelab-head"
+if [ -n "${BYTE_IDENTITY_KEEP:-}" ]; then
+    mkdir -p "$BYTE_IDENTITY_KEEP"
+    cp "$work/ratelab-base" "$work/ratelab-head" "$BYTE_IDENTITY_KEEP/"
+fi
 
 differ=0
 say_differs() { echo "DIFFERS: $*"; differ=1; }

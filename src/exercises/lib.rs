@@ -38,6 +38,8 @@
 //!   started again: the readings lost across its rejoin, and the held force's age.
 //! - [`ex13`], what ROS 2 sees: the chapter's graph offered with `--ros2`, its policy at
 //!   40 Hz: the node list, the topics' ROS 2 types, and how often `/clock` ticks.
+//! - [`spec`], an exercise's run as data ([`ExerciseSpec`]): what the command line's flags
+//!   and the Python package's keywords fill in.
 //! - [`ex14`], incompatible QoS: four requested/offered pairs on the chapter's `/action`,
 //!   which ROS 2 connects; and a node joining late under each durability: what it gets.
 #![warn(missing_docs)]
@@ -67,6 +69,7 @@ pub mod ex6;
 pub mod ex7;
 pub mod ex8;
 pub mod ex9;
+pub mod spec;
 
 pub use ex1::{check_ex1, measure_ex1, Ex1Bands, Ex1Outcome};
 pub use ex13::{check_ex13, measure_ex13, Ex13Bands, Ex13Outcome};
@@ -79,6 +82,7 @@ pub use ex6::{check_ex6, ex6_differences, measure_ex6, outcome_ex6, Ex6Bands, Ex
 pub use ex7::{check_ex7, measure_ex7, outcome_ex7, Ex7Bands, Ex7Case, Ex7Outcome, Ex7Run};
 pub use ex8::{check_ex8, first_fall_rad, measure_ex8, outcome_ex8, Ex8Bands, Ex8Outcome, Ex8Run};
 pub use ex9::{check_ex9, measure_ex9, outcome_ex9, Ex9Bands, Ex9Case, Ex9Outcome, Ex9Run};
+pub use spec::ExerciseSpec;
 
 use ratelab_core::metrics::Metrics;
 use ratelab_drivers::sweep::SweepError;

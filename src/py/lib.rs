@@ -288,23 +288,34 @@ fn cliff<'py>(
     done
 }
 
-/// `ratelab exercise WHICH FLAGS…` in this process, with `prediction_json` (a JSON object)
-/// in place of the learner's file's prediction when given. Returns a dict: `checks` (a list
-/// of `(name, passed)`), `reconcile` (sentences), `predictions` (a list of `(key, sentence,
-/// verdict)`, the verdict `right`, `missed`, `unreadable` or `open`), `checks_failed`,
-/// `predictions_missed` and `not_passed` (counts: missed counts the unreadable too, and
-/// not passed is both) and `lines` (the report `ratelab exercise` prints). Ctrl-C stops it.
+/// Exercise `which` in this process, as `ratelab exercise` runs it, with `settings` (a dict
+/// keyed by `ratelab.exercise`'s keywords: `dir`, `graph` and the graph's overrides) and
+/// `prediction_json` (a JSON object) in place of the learner's file's prediction when
+/// given. Returns a dict: `checks` (a list of `(name, passed)`), `reconcile` (sentences),
+/// `predictions` (a list of `(key, sentence, verdict)`, the verdict `right`, `missed`,
+/// `unreadable` or `open`), `checks_failed`, `predictions_missed` and `not_passed` (counts:
+/// missed counts the unreadable too, and not passed is both) and `lines` (the report
+/// `ratelab exercise` prints). Ctrl-C stops it.
 #[pyfunction]
-#[pyo3(signature = (which, flags, prediction_json=None))]
+#[pyo3(signature = (which, settings, prediction_json=None))]
 fn exercise<'py>(
     py: Python<'py>,
     which: String,
-    flags: Vec<String>,
+    settings: &Bound<'py, PyDict>,
     prediction_json: Option<String>,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let found = interruptibly(py, move |_stop| {
-        ratelab_lab::api::exercise(&which, &flags, prediction_json.as_deref())
+    let prediction: Option<toml::Table> = prediction_json
+        .map(|json| serde_json::from_str(&json))
+        .transpose()
+        .map_err(|e| PyValueError::new_err(format!("prediction: {e}")))?;
+    let spec = run_spec::exercise_from(which, settings, prediction)?;
+    let (report, lines) = interruptibly(py, move |_stop| {
+        let mut lines = Vec::new();
+        let mut out = |text: &str| lines.extend(text.lines().map(str::to_string));
+        let report = spec.report(Speech::Keywords, &mut out, &())?;
+        Ok((report, lines))
     })?;
+    let found = Found { report, lines };
     let out = PyDict::new(py);
     let checks: Vec<(String, bool)> = (found.report.checks.iter())
         .map(|c| (c.name.clone(), c.passed))
@@ -323,6 +334,12 @@ fn exercise<'py>(
     out.set_item("not_passed", found.report.not_passed)?;
     out.set_item("lines", found.lines)?;
     Ok(out)
+}
+
+/// What an exercise found, and the report it printed, a line each.
+struct Found {
+    report: ratelab_exercises::Report,
+    lines: Vec<String>,
 }
 
 /// Put ratelab's message classes (`State`, `Position`, `Force`, the types a program

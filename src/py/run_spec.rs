@@ -25,6 +25,7 @@ use ratelab::qos::Fault;
 use ratelab::run_spec::RunSpec;
 use ratelab::sweep_spec::{CliffSpec, SweepSpec};
 use ratelab::time::{Nanos, MAX_DURATION_S};
+use ratelab_exercises::ExerciseSpec;
 use std::path::PathBuf;
 
 /// Every key [`from_settings`] reads.
@@ -85,6 +86,20 @@ const CLIFF_KEYS: [&str; SHARED_KEYS.len() + 2] = {
     keys[i + 1] = "queue_depth";
     keys
 };
+
+/// `ratelab.exercise`'s keys ([`exercise_from`]): its folder and the graph's settings, no
+/// faults (an exercise injects its own) and none of a run's own (an exercise sets them).
+pub const EXERCISE_KEYS: [&str; 9] = [
+    "dir",
+    "graph",
+    "rate",
+    "depth",
+    "qos",
+    "link",
+    "lease_ms",
+    "compute_ms",
+    "executor",
+];
 
 /// A grid's keys ([`sweep_from`]).
 const GRID_KEYS: [&str; 5] = ["clock", "sensor_hz", "control_hz", "queue_depth", "seeds"];
@@ -153,6 +168,27 @@ fn fault_time(key: &str, node: &str, secs: f64) -> PyResult<Nanos> {
 pub fn from_settings(settings: &Bound<'_, PyDict>) -> PyResult<RunSpec> {
     known_keys(settings, "run", &KEYS)?;
     read_spec(settings)
+}
+
+/// Exercise `which`'s run from `settings` (a dict keyed by `ratelab.exercise`'s keywords,
+/// [`EXERCISE_KEYS`]; `dir` defaults to `exercises`), with `prediction` in place of the
+/// learner's file's when given.
+///
+/// # Errors
+/// As [`from_settings`], for `exercise()`.
+pub fn exercise_from(
+    which: String,
+    settings: &Bound<'_, PyDict>,
+    prediction: Option<toml::Table>,
+) -> PyResult<ExerciseSpec> {
+    known_keys(settings, "exercise", &EXERCISE_KEYS)?;
+    let dir = get::<PathBuf>(settings, "dir", "a path")?;
+    Ok(ExerciseSpec {
+        which,
+        dir: dir.unwrap_or_else(|| PathBuf::from("exercises")),
+        graph: read_spec(settings)?.graph,
+        prediction,
+    })
 }
 
 /// `settings` as a [`RunSpec`], its keys already known.

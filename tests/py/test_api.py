@@ -606,6 +606,15 @@ def test_an_unknown_keyword_names_the_nearest_one():
             function(flags=["--seeds", "0"])
     with pytest.raises(TypeError, match="did you mean 'dir'"):
         ratelab.exercise("ex1", dri="exercises")
+    # exercise() takes the graph's settings as keywords, not flags; no faults (an exercise
+    # injects its own); its refusals name the keyword, never a flag.
+    with pytest.raises(TypeError, match="'flags'"):
+        ratelab.exercise("ex1", flags=["--rate", "policy=10"])
+    with pytest.raises(TypeError, match="'stall'"):
+        ratelab.exercise("ex1", stall={"policy": (1.0, 0.5)})
+    with pytest.raises(ValueError, match="nobody") as e:
+        ratelab.exercise("ex1", {"fails_at_hz": 5, "why": "?"}, rate={"nobody": np.float64(10)})
+    assert "rate" in str(e.value) and "--" not in str(e.value), str(e.value)
     # No front end parses another's arguments: run() takes no flags.
     with pytest.raises(TypeError, match="'flags'"):
         ratelab.run(flags=["--executor", "single_threaded"])

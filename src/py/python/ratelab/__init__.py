@@ -1156,20 +1156,33 @@ def exercise(
     *,
     dir: PathLike = "exercises",
     graph: Optional[PathLike] = None,
-    flags: Sequence[str] = (),
+    rate: Union[None, Mapping[str, float], Sequence[Tuple[str, float]]] = None,
+    depth: Union[None, Mapping[str, int], Sequence[Tuple[str, int]]] = None,
+    qos: Union[None, str, Mapping[str, Union[str, Mapping[str, Any]]], Sequence[str]] = None,
+    link: Union[None, str, Mapping[str, Union[str, Mapping[str, Any]]], Sequence[str]] = None,
+    lease_ms: Union[None, Mapping[str, float], Sequence[Tuple[str, float]]] = None,
+    compute_ms: Union[None, Mapping[str, Union[float, str, Tuple[float, float]]]] = None,
+    executor: Optional[str] = None,
 ) -> Exercise:
     """Run exercise `which` ("ex1", …) as `ratelab exercise` does, with `prediction` (the keys
     its file's [prediction] asks for, and "why") in place of the learner's file's when given.
 
-    Raises NoPrediction (a ValueError) when there is no prediction yet, ValueError for an
-    unknown exercise or bad input, FileNotFoundError for a missing folder or file.
+    dir: the folder of the exercise files and bands.toml. graph: the graph to run it on
+    (default: the exercise's own, as its bands name it). rate, depth, qos, link, lease_ms,
+    compute_ms, executor: the graph's overrides, as `run` takes them. An exercise injects
+    its own faults and sets its own rates and clock, so `stall`, `kill`, `clock` and the
+    like are not settings of it.
+
+    Raises NoPrediction (a ValueError) when there is no prediction yet, SettingTypeError (a
+    TypeError) for an unknown keyword, ValueError for an unknown exercise or bad input,
+    FileNotFoundError for a missing folder or file.
     """
-    args: List[str] = ["--dir", _path("dir", dir)]
-    if graph is not None:
-        args += ["--graph", _path("graph", graph)]
-    args += [str(f) for f in flags]
+    settings = _graph_settings(
+        graph, rate, depth, qos, link, lease_ms, None, None, compute_ms, executor, None
+    )
+    settings["dir"] = _path("dir", dir)
     given = None if prediction is None else json.dumps(dict(prediction))
-    found = _native_call(_native.exercise, _text("which", which, '"ex1", …'), args, given)
+    found = _native_call(_native.exercise, _text("which", which, '"ex1", …'), settings, given)
     return Exercise(
         checks=[Check(name, passed) for name, passed in found["checks"]],
         reconcile=list(found["reconcile"]),

@@ -52,10 +52,13 @@ class TraceTooLarge(MemoryError):
     """A run whose trace, returned in memory, would pass MAX_HELD_TRACE_VALUES: refused
     before it starts."""
 
-def exercise(which: str, flags: List[str], prediction_json: Optional[str] = None) -> Dict[str, Any]:
-    """`ratelab exercise WHICH FLAGS...`: checks [(name, passed)], reconcile [sentence],
-    predictions [(key, sentence, verdict)], checks_failed, predictions_missed, not_passed,
-    lines."""
+def exercise(
+    which: str, settings: Dict[str, Any], prediction_json: Optional[str] = None
+) -> Dict[str, Any]:
+    """Exercise `which` with `settings` (`dir`, `graph` and the graph's overrides, as
+    `ratelab.exercise` reads them): checks [(name, passed)], reconcile [sentence],
+    predictions [(key, sentence, verdict)], counts and lines."""
+
 
 def exercises() -> List[Tuple[str, str, str]]:
     """The exercises in order: (id, file, title)."""
