@@ -6,12 +6,15 @@
 
 fn main() {
     // Every package of the workspace but the core builds with this script; the exercise
-    // files are at the repository's top, the nearest folder up that has them.
+    // files are at the repository's top, the nearest folder up that has them (by a file of
+    // theirs: `src/` has an `exercises` folder too, the crate's, and a path that names no
+    // file is never fresh, so every build would run this script and rebuild every crate
+    // above it).
     let manifest =
         std::path::PathBuf::from(std::env::var("CARGO_MANIFEST_DIR").unwrap_or_default());
     let root = manifest
         .ancestors()
-        .find(|d| d.join("exercises").is_dir())
+        .find(|d| d.join("exercises").join("bands.toml").is_file())
         .unwrap_or(&manifest)
         .to_path_buf();
     println!("cargo:rerun-if-env-changed=MUJOCO_DYNAMIC_LINK_DIR");
