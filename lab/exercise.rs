@@ -77,7 +77,7 @@ impl Progress for Spinner {
 /// the command line's overrides), then [`run_exercise`].
 pub fn run_from_args(args: &crate::cli::ExerciseArgs) -> anyhow::Result<()> {
     let mut out = |line: &str| println!("{line}");
-    let report = report_from_args(args, None, &mut out, &Spinner::default())?;
+    let report = report_from_args(args, &mut out, &Spinner::default())?;
     match report.not_passed {
         0 => Ok(()),
         _ => Err(NotPassed {
@@ -88,15 +88,13 @@ pub fn run_from_args(args: &crate::cli::ExerciseArgs) -> anyhow::Result<()> {
     }
 }
 
-/// `ratelab exercise`'s run, its report's lines through `out` and its findings returned:
-/// with `prediction` in place of the learner's file's when given. Its flags are read into
-/// the library's [`ExerciseSpec`], which runs it.
+/// `ratelab exercise`'s run, its report's lines through `out` and its findings returned.
+/// Its flags are read into the library's [`ExerciseSpec`], which runs it.
 ///
 /// # Errors
 /// What kept it from running: bad flags, no prediction, unreadable files or bands.
-pub fn report_from_args(
+fn report_from_args(
     args: &crate::cli::ExerciseArgs,
-    prediction: Option<&toml::Table>,
     out: &mut dyn FnMut(&str),
     progress: &dyn ratelab_exercises::Progress,
 ) -> anyhow::Result<ratelab_exercises::Report> {
@@ -104,7 +102,7 @@ pub fn report_from_args(
         which: args.which.clone(),
         dir: args.dir.clone(),
         graph: GraphSettings::from(&args.graph),
-        prediction: prediction.cloned(),
+        prediction: None,
     };
     spec.report(Speech::Flags, out, progress)
 }

@@ -44,16 +44,16 @@ impl ExerciseSpec {
         if graph.file.is_none() {
             graph.file = default_graph(&self.which, &self.dir)?;
         }
+        let spec = graph.graph(speech)?;
+        for w in spec.qos_warnings() {
+            eprintln!("[ratelab] {w}");
+        }
         if !graph.faults().is_empty() {
             anyhow::bail!(
                 "{}/{}: the exercises inject no faults; use `ratelab run` or `ratelab lab` with them",
                 speech.name(Setting::Stall),
                 speech.name(Setting::Kill)
             );
-        }
-        let spec = graph.graph(speech)?;
-        for w in spec.qos_warnings() {
-            eprintln!("[ratelab] {w}");
         }
         let exe = ratelab_runtime::program::Program::this()?;
         let setup = Setup {

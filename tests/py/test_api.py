@@ -610,8 +610,10 @@ def test_an_unknown_keyword_names_the_nearest_one():
     # injects its own); its refusals name the keyword, never a flag.
     with pytest.raises(TypeError, match="'flags'"):
         ratelab.exercise("ex1", flags=["--rate", "policy=10"])
-    with pytest.raises(TypeError, match="'stall'"):
+    with pytest.raises(TypeError, match="'stall': an exercise injects its own faults"):
         ratelab.exercise("ex1", stall={"policy": (1.0, 0.5)})
+    with pytest.raises(TypeError, match="'flags': each of `ratelab exercise`'s graph settings"):
+        ratelab.exercise("ex1", flags=["--graph", "graphs/estimator.toml"])
     with pytest.raises(ValueError, match="nobody") as e:
         ratelab.exercise("ex1", {"fails_at_hz": 5, "why": "?"}, rate={"nobody": np.float64(10)})
     assert "rate" in str(e.value) and "--" not in str(e.value), str(e.value)

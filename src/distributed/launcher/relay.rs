@@ -553,4 +553,133 @@ mod tests {
         assert_eq!(c.log.len(), 0, "all handed, all forgotten");
         assert_eq!(c.given, vec![n; 3]);
     }
+
+    /// A course of the chapter's graph for `duration_ms`, nothing taken yet, and the run's
+    /// events in order (drawn by a follower of its own).
+    fn following(duration_ms: u64) -> (Course, Vec<Event>, RunConfig) {
+        let cfg = RunConfig {
+            duration: Nanos(duration_ms * 1_000_000),
+            ..RunConfig::default()
+        };
+        let mut order = Follower::new(&cfg).unwrap();
+        let mut events = Vec::new();
+        while let Some(e) = order.next_event() {
+            order.ran_elsewhere(e, Nanos::ZERO);
+            events.push(e);
+        }
+        let course = Course {
+            order: Follower::new(&cfg).unwrap(),
+            cursor: Cursor::default(),
+            duration: cfg.duration,
+            lookahead: 1,
+            inbox: TickInbox::new(),
+            log: VecDeque::new(),
+            log_from: 0,
+            given: vec![0; 2],
+            horizon: None,
+            counts: Counts {
+                published: vec![None; cfg.graph.topics.len()],
+                ..Counts::default()
+            },
+            end: None,
+        };
+        (course, events, cfg)
+    }
+
+    /// The report of `event`, the run's `index`-th, as its node's process sends it.
+    fn report_of(spec: &GraphSpec, index: u64, event: Event) -> Ticked {
+        let (i, t) = event.node_at();
+        Ticked {
+            process: spec.process_of(NodeId(i)),
+            t_ns: t.0,
+            publish: matches!(event, Event::Publish { .. }),
+            ..report("", index, i)
+        }
+    }
+
+    #[test]
+    fn the_relay_follows_every_report_to_the_run_s_duration() {
+        let (mut c, events, cfg) = following(100);
+        let spec = &cfg.graph;
+        // The first half in: followed that far, and waiting.
+        let half = events.len() / 2;
+        for (k, e) in events.iter().enumerate().take(half) {
+            c.inbox.accept(report_of(spec, k as u64, *e), spec).unwrap();
+        }
+        c.advance(spec);
+        assert_eq!((c.cursor.index(), c.end.clone()), (half as u64, None));
+        assert_eq!(
+            c.cursor.next(),
+            Some(events[half]),
+            "the next event drawn, kept"
+        );
+        for (k, e) in events.iter().enumerate().skip(half) {
+            c.inbox.accept(report_of(spec, k as u64, *e), spec).unwrap();
+        }
+        c.advance(spec);
+        assert_eq!(c.cursor.index(), events.len() as u64);
+        assert_eq!(
+            c.end,
+            Some(RunEnd {
+                at: cfg.duration,
+                reason: EndReason::Duration
+            })
+        );
+        let starts = events.iter().filter(|e| matches!(e, Event::Start { .. }));
+        assert_eq!(c.counts.started, starts.count() as u64);
+        assert_eq!(c.counts.instants, 6, "0, 20, …, 100 ms");
+        assert_eq!(
+            c.log.len(),
+            events.len(),
+            "every report kept for the processes"
+        );
+    }
+
+    #[test]
+    fn a_report_out_of_step_ends_the_run_before_its_event_and_a_stop_after_it() {
+        let (mut c, events, cfg) = following(100);
+        let spec = &cfg.graph;
+        c.inbox.accept(report_of(spec, 0, events[0]), spec).unwrap();
+        let mut wrong = report_of(spec, 1, events[1]);
+        wrong.t_ns += 1;
+        c.inbox.accept(wrong, spec).unwrap();
+        c.advance(spec);
+        let (node, at) = events[1].node_at();
+        assert!(
+            matches!(
+                &c.end,
+                Some(RunEnd { at: t, reason: EndReason::NodeFailed { node: n, message } })
+                    if *t == at && *n == spec.nodes[node].name && message.contains("out of step")
+            ),
+            "{:?}",
+            c.end
+        );
+        assert_eq!(c.cursor.index(), 1, "the event out of step is not taken");
+        assert_eq!(c.cursor.next(), Some(events[1]));
+
+        let (mut c, events, cfg) = following(100);
+        let spec = &cfg.graph;
+        let stop_at = events
+            .iter()
+            .position(|e| matches!(e, Event::Start { .. }) && e.node_at().1 > Nanos::ZERO)
+            .unwrap();
+        for (k, e) in events.iter().enumerate().take(stop_at + 2) {
+            let mut m = report_of(spec, k as u64, *e);
+            m.stop = k == stop_at;
+            c.inbox.accept(m, spec).unwrap();
+        }
+        c.advance(spec);
+        assert_eq!(
+            c.end,
+            Some(RunEnd {
+                at: events[stop_at].node_at().1,
+                reason: EndReason::NodeStopped
+            })
+        );
+        assert_eq!(
+            c.cursor.index(),
+            stop_at as u64 + 1,
+            "the stop is taken, nothing after"
+        );
+    }
 }

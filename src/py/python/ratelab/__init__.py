@@ -368,6 +368,13 @@ _GONE = {
         "flags": "each of `ratelab cliff`'s settings is a keyword of cliff() of its own "
         "(rate=, stall=, executor=, …; help(ratelab.cliff) lists them)",
     },
+    "exercise": {
+        "flags": "each of `ratelab exercise`'s graph settings is a keyword of exercise() of "
+        "its own (graph=, rate=, qos=, executor=, …; help(ratelab.exercise) lists them)",
+        "stall": "an exercise injects its own faults; use ratelab.run(stall=…) for yours",
+        "kill": "an exercise injects its own faults; use ratelab.run(kill=…) for yours",
+        "clock": "an exercise sets the clock of each of its runs itself",
+    },
 }
 
 
@@ -1170,8 +1177,8 @@ def exercise(
     dir: the folder of the exercise files and bands.toml. graph: the graph to run it on
     (default: the exercise's own, as its bands name it). rate, depth, qos, link, lease_ms,
     compute_ms, executor: the graph's overrides, as `run` takes them. An exercise injects
-    its own faults and sets its own rates and clock, so `stall`, `kill`, `clock` and the
-    like are not settings of it.
+    its own faults and sets its own clock and the chain's rates (control_hz, sensor_hz,
+    queue_depth), so `stall`, `kill`, `clock` and those are not settings of it.
 
     Raises NoPrediction (a ValueError) when there is no prediction yet, SettingTypeError (a
     TypeError) for an unknown keyword, ValueError for an unknown exercise or bad input,

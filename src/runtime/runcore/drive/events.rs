@@ -21,7 +21,8 @@
 //!    duration reached ([`Drew::Exhausted`]).
 //! 4. [`EventPolicy::turn`]: `Wait` returns [`Drew::Waiting`].
 //! 5. [`EventPolicy::take`]: run here or from its report, or not yet
-//!    ([`Drew::Waiting`]); an error ends the loop with the cursor still on the event.
+//!    ([`Drew::Waiting`]); an error from `turn` or `take` ends the loop with the cursor
+//!    still on the event.
 //! 6. The cursor moves on, [`EventPolicy::taken`] is told, and an event that stopped the run
 //!    or failed ends it ([`Drew::Over`]).
 //!
@@ -162,8 +163,9 @@ pub trait EventPolicy<O: EventOrder + ?Sized> {
 /// (module docs for the order). Never blocks: [`Drew::Waiting`] returns to be called again.
 ///
 /// # Errors
-/// The policy's, from [`EventPolicy::turn`], [`EventPolicy::take`] or
-/// [`EventPolicy::taken`]; the cursor stays on the event that failed.
+/// The policy's, from [`EventPolicy::turn`] or [`EventPolicy::take`] (the cursor stays on
+/// the event, not taken) or from [`EventPolicy::taken`] (the event was taken; the cursor is
+/// past it). An event that ended the run and whose `taken` failed returns the error.
 pub fn drive_events<O, P>(
     order: &mut O,
     cursor: &mut Cursor,
@@ -298,6 +300,7 @@ mod tests {
     struct Reports {
         compute: Vec<Nanos>,
         late: Vec<u64>,
+        took: Vec<Event>,
     }
     impl<O: EventOrder> EventPolicy<O> for Reports {
         type Error = String;
@@ -308,6 +311,7 @@ mod tests {
             }
             let compute = *self.compute.get(index as usize).ok_or("no report")?;
             order.ran_elsewhere(event, compute);
+            self.took.push(event);
             Ok(Taken::Ran { over: false })
         }
     }
@@ -329,6 +333,7 @@ mod tests {
         let mut p = Reports {
             compute: compute.clone(),
             late: vec![3, 40],
+            took: vec![],
         };
         let mut waits = 0;
         let drew = loop {
@@ -342,6 +347,10 @@ mod tests {
             }
         };
         assert_eq!((drew, waits, cursor.index()), (Ok(Drew::Exhausted), 2, n));
+        assert_eq!(
+            p.took, events,
+            "the follower's order is the run's, event for event"
+        );
 
         let mut elsewhere = core(&cfg);
         let mut cursor = Cursor {
@@ -351,6 +360,7 @@ mod tests {
         let mut p = Reports {
             compute,
             late: vec![],
+            took: vec![],
         };
         let drew = drive_events(&mut elsewhere, &mut cursor, &mut p, None);
         assert_eq!(
@@ -363,6 +373,7 @@ mod tests {
         // Goes on from the limit, at the event after the last taken.
         let drew = drive_events(&mut elsewhere, &mut cursor, &mut p, None);
         assert_eq!((drew, cursor.index()), (Ok(Drew::Limit), n));
+        assert_eq!(p.took, events);
         // Run elsewhere, the executors' figures are the run here.
         assert_eq!(
             format!("{:?}", elsewhere.scheduler().figures(cfg.duration)),
@@ -378,6 +389,7 @@ mod tests {
         let mut p = Reports {
             compute: vec![Nanos::ZERO; 5],
             late: vec![],
+            took: vec![],
         };
         let drew = drive_events(&mut c, &mut cursor, &mut p, None);
         assert_eq!(drew, Err("no report".to_string()));
@@ -413,5 +425,61 @@ mod tests {
         let mut cursor = Cursor::default();
         let drew = drive_events(&mut c, &mut cursor, &mut StopAt(9), None);
         assert_eq!((drew, cursor.index()), (Ok(Drew::Over), 10));
+    }
+
+    /// Runs every event here; after taking the event at `hold`, asks to wait (samples held
+    /// back), ending the run there when `over`.
+    struct HoldAfter {
+        hold: u64,
+        over: bool,
+    }
+    impl EventPolicy<RunCore> for HoldAfter {
+        type Error = EndReason;
+        fn take(
+            &mut self,
+            core: &mut RunCore,
+            index: u64,
+            event: Event,
+        ) -> Result<Taken, EndReason> {
+            core.run_event(event)?;
+            Ok(Taken::Ran {
+                over: self.over && index == self.hold,
+            })
+        }
+        fn taken(&mut self, index: u64, _event: Event) -> Result<Turn, EndReason> {
+            Ok(if index == self.hold {
+                Turn::Wait
+            } else {
+                Turn::Go
+            })
+        }
+    }
+
+    #[test]
+    fn a_wait_after_an_event_returns_past_it_and_an_end_there_is_the_end() {
+        let cfg = chapter();
+        let mut c = core(&cfg);
+        let mut cursor = Cursor::default();
+        let mut p = HoldAfter {
+            hold: 4,
+            over: false,
+        };
+        let drew = drive_events(&mut c, &mut cursor, &mut p, None);
+        assert_eq!(
+            (drew, cursor.index(), cursor.next()),
+            (Ok(Drew::Waiting), 5, None)
+        );
+        p.hold = u64::MAX;
+        let drew = drive_events(&mut c, &mut cursor, &mut p, None);
+        assert_eq!(drew, Ok(Drew::Exhausted), "on from the event after it");
+
+        let mut c = core(&cfg);
+        let mut cursor = Cursor::default();
+        let mut p = HoldAfter {
+            hold: 4,
+            over: true,
+        };
+        let drew = drive_events(&mut c, &mut cursor, &mut p, None);
+        assert_eq!((drew, cursor.index()), (Ok(Drew::Over), 5));
     }
 }
