@@ -73,11 +73,22 @@ impl Progress for Spinner {
     }
 }
 
-/// `ratelab exercise`: the graph (the chapter's, or the one the exercise's bands name, with
-/// the command line's overrides), then [`run_exercise`].
+/// `ratelab exercise`: its flags read into the library's [`ExerciseSpec`] (the graph: the
+/// chapter's, or the one the exercise's bands name, with the command line's overrides),
+/// which runs it, its report on stdout and a spinner on stderr.
+///
+/// # Errors
+/// What kept it from running (bad flags, no prediction, unreadable files or bands), or
+/// [`NotPassed`].
 pub fn run_from_args(args: &crate::cli::ExerciseArgs) -> anyhow::Result<()> {
+    let spec = ExerciseSpec {
+        which: args.which.clone(),
+        dir: args.dir.clone(),
+        graph: GraphSettings::from(&args.graph),
+        prediction: None,
+    };
     let mut out = |line: &str| println!("{line}");
-    let report = report_from_args(args, &mut out, &Spinner::default())?;
+    let report = spec.report(Speech::Flags, &mut out, &Spinner::default())?;
     match report.not_passed {
         0 => Ok(()),
         _ => Err(NotPassed {
@@ -86,23 +97,4 @@ pub fn run_from_args(args: &crate::cli::ExerciseArgs) -> anyhow::Result<()> {
         }
         .into()),
     }
-}
-
-/// `ratelab exercise`'s run, its report's lines through `out` and its findings returned.
-/// Its flags are read into the library's [`ExerciseSpec`], which runs it.
-///
-/// # Errors
-/// What kept it from running: bad flags, no prediction, unreadable files or bands.
-fn report_from_args(
-    args: &crate::cli::ExerciseArgs,
-    out: &mut dyn FnMut(&str),
-    progress: &dyn ratelab_exercises::Progress,
-) -> anyhow::Result<ratelab_exercises::Report> {
-    let spec = ExerciseSpec {
-        which: args.which.clone(),
-        dir: args.dir.clone(),
-        graph: GraphSettings::from(&args.graph),
-        prediction: None,
-    };
-    spec.report(Speech::Flags, out, progress)
 }

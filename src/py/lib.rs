@@ -295,7 +295,8 @@ fn cliff<'py>(
 /// `predictions` (a list of `(key, sentence, verdict)`, the verdict `right`, `missed`,
 /// `unreadable` or `open`), `checks_failed`, `predictions_missed` and `not_passed` (counts:
 /// missed counts the unreadable too, and not passed is both) and `lines` (the report
-/// `ratelab exercise` prints). Ctrl-C stops it.
+/// `ratelab exercise` prints). Ctrl-C raises KeyboardInterrupt once the exercise's runs
+/// have ended: they take no stop flag yet.
 #[pyfunction]
 #[pyo3(signature = (which, settings, prediction_json=None))]
 fn exercise<'py>(
@@ -315,31 +316,22 @@ fn exercise<'py>(
         let report = spec.report(Speech::Keywords, &mut out, &())?;
         Ok((report, lines))
     })?;
-    let found = Found { report, lines };
     let out = PyDict::new(py);
-    let checks: Vec<(String, bool)> = (found.report.checks.iter())
+    let checks: Vec<(String, bool)> = (report.checks.iter())
         .map(|c| (c.name.clone(), c.passed))
         .collect();
     out.set_item("checks", checks)?;
-    let reconcile: Vec<String> = (found.report.reconcile.iter())
-        .map(|s| s.line.clone())
-        .collect();
+    let reconcile: Vec<String> = (report.reconcile.iter()).map(|s| s.line.clone()).collect();
     out.set_item("reconcile", reconcile)?;
-    let predictions: Vec<(String, String, &str)> = (found.report.reconcile.iter())
+    let predictions: Vec<(String, String, &str)> = (report.reconcile.iter())
         .map(|s| (s.key.clone(), s.line.clone(), s.verdict.name()))
         .collect();
     out.set_item("predictions", predictions)?;
-    out.set_item("checks_failed", found.report.checks_failed)?;
-    out.set_item("predictions_missed", found.report.predictions_missed)?;
-    out.set_item("not_passed", found.report.not_passed)?;
-    out.set_item("lines", found.lines)?;
+    out.set_item("checks_failed", report.checks_failed)?;
+    out.set_item("predictions_missed", report.predictions_missed)?;
+    out.set_item("not_passed", report.not_passed)?;
+    out.set_item("lines", lines)?;
     Ok(out)
-}
-
-/// What an exercise found, and the report it printed, a line each.
-struct Found {
-    report: ratelab_exercises::Report,
-    lines: Vec<String>,
 }
 
 /// Put ratelab's message classes (`State`, `Position`, `Force`, the types a program

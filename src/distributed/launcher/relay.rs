@@ -486,22 +486,13 @@ mod tests {
     /// A course of a graph of three processes, nodes 0, 1, 2 in processes 0, 1, 2, with
     /// `n` reports taken (node `k % 3`'s at index `k`), none handed on yet.
     fn course_with(n: u64) -> Course {
-        let cfg = RunConfig::default();
-        Course {
-            order: Follower::new(&cfg).unwrap(),
-            duration: cfg.duration,
-            lookahead: 1,
-            cursor: Cursor::at(n),
-            inbox: TickInbox::new(),
-            log: (0..n)
-                .map(|k| report(&format!("p{}", k % 3), k, (k % 3) as usize))
-                .collect(),
-            log_from: 0,
-            given: vec![0; 3],
-            horizon: None,
-            counts: Counts::default(),
-            end: None,
-        }
+        let (mut c, _, _) = following(100);
+        c.cursor = Cursor::at(n);
+        c.log = (0..n)
+            .map(|k| report(&format!("p{}", k % 3), k, (k % 3) as usize))
+            .collect();
+        c.given = vec![0; 3];
+        c
     }
 
     fn decoded(bytes: &[u8]) -> Vec<u64> {

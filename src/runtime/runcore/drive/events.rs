@@ -401,37 +401,12 @@ mod tests {
         assert_eq!((drew, cursor.index()), (Ok(Drew::Stopped), 5));
     }
 
-    /// Stops the run at the `n`-th event it runs here.
-    struct StopAt(u64);
-    impl EventPolicy<RunCore> for StopAt {
-        type Error = EndReason;
-        fn take(
-            &mut self,
-            core: &mut RunCore,
-            index: u64,
-            event: Event,
-        ) -> Result<Taken, EndReason> {
-            core.run_event(event)?;
-            Ok(Taken::Ran {
-                over: index == self.0,
-            })
-        }
-    }
-
-    #[test]
-    fn an_event_that_ends_the_run_is_taken_and_ends_the_loop() {
-        let cfg = chapter();
-        let mut c = core(&cfg);
-        let mut cursor = Cursor::default();
-        let drew = drive_events(&mut c, &mut cursor, &mut StopAt(9), None);
-        assert_eq!((drew, cursor.index()), (Ok(Drew::Over), 10));
-    }
-
-    /// Runs every event here; after taking the event at `hold`, asks to wait (samples held
-    /// back), ending the run there when `over`.
+    /// Runs every event here; the event at `hold` ends the run when `over`, and after
+    /// taking it the policy asks to wait (samples held back) when `wait`.
     struct HoldAfter {
         hold: u64,
         over: bool,
+        wait: bool,
     }
     impl EventPolicy<RunCore> for HoldAfter {
         type Error = EndReason;
@@ -447,12 +422,26 @@ mod tests {
             })
         }
         fn taken(&mut self, index: u64, _event: Event) -> Result<Turn, EndReason> {
-            Ok(if index == self.hold {
+            Ok(if self.wait && index == self.hold {
                 Turn::Wait
             } else {
                 Turn::Go
             })
         }
+    }
+
+    #[test]
+    fn an_event_that_ends_the_run_is_taken_and_ends_the_loop() {
+        let cfg = chapter();
+        let mut c = core(&cfg);
+        let mut cursor = Cursor::default();
+        let mut p = HoldAfter {
+            hold: 9,
+            over: true,
+            wait: false,
+        };
+        let drew = drive_events(&mut c, &mut cursor, &mut p, None);
+        assert_eq!((drew, cursor.index()), (Ok(Drew::Over), 10));
     }
 
     #[test]
@@ -463,6 +452,7 @@ mod tests {
         let mut p = HoldAfter {
             hold: 4,
             over: false,
+            wait: true,
         };
         let drew = drive_events(&mut c, &mut cursor, &mut p, None);
         assert_eq!(
@@ -478,6 +468,7 @@ mod tests {
         let mut p = HoldAfter {
             hold: 4,
             over: true,
+            wait: true,
         };
         let drew = drive_events(&mut c, &mut cursor, &mut p, None);
         assert_eq!((drew, cursor.index()), (Ok(Drew::Over), 5));
