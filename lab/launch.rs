@@ -261,8 +261,12 @@ fn wire_line(w: &ratelab::distributed::wire::WireLink) -> String {
     let since = w.since_ns.map_or(String::new(), |t| {
         format!(" since its rejoin at {:.3} s", t as f64 / 1e9)
     });
+    let in_place = match w.in_place {
+        0 => String::new(),
+        n => format!(" | {n} read in place from shared memory"),
+    };
     format!(
-        "wire {} into '{}': {} samples{since}, p50 {} µs | p99 {} µs | max {} µs",
+        "wire {} into '{}': {} samples{since}, p50 {} µs | p99 {} µs | max {} µs{in_place}",
         w.topic, w.process, w.samples, w.p50_us, w.p99_us, w.max_us
     )
 }

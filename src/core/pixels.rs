@@ -2,13 +2,21 @@
 //! messages ([`crate::msg`]) and their ROS 2 types ([`crate::ros_types`]), which hold them.
 //! Serialized as one run of bytes (postcard, CDR), or read from a sequence of numbers 0–255
 //! (a format without bytes, as JSON).
+//!
+//! Decoded inside [`decode_within`], pixels that lie in the buffer being decoded are not
+//! copied: they are a view of that buffer, which they keep alive. This is how a camera's
+//! frame that crossed processes through Zenoh's shared memory reaches its subscriber without
+//! a copy (issue 76).
 
+use bytes::Bytes;
 use serde::{Deserialize, Serialize};
-use std::sync::Arc;
+use std::cell::RefCell;
 
-/// An image's pixels: bytes shared by every holder (cloning it copies a pointer).
+/// An image's pixels: bytes shared by every holder (cloning it copies a pointer), held in
+/// memory of their own or, when decoded inside [`decode_within`], as a view of the buffer
+/// they were decoded from (a shared-memory sample's, kept mapped while any holder lives).
 #[derive(Clone, PartialEq, Eq, Default)]
-pub struct ImageData(pub Arc<[u8]>);
+pub struct ImageData(Bytes);
 
 impl ImageData {
     /// How many bytes.
@@ -23,12 +31,65 @@ impl ImageData {
     pub fn as_slice(&self) -> &[u8] {
         &self.0
     }
+    /// Whether `self` and `other` are the same bytes in memory (one a clone of the other, or
+    /// both views of one buffer), not only equal ones.
+    pub fn shares(&self, other: &ImageData) -> bool {
+        self.0.as_ptr() == other.0.as_ptr() && self.0.len() == other.0.len()
+    }
+    /// Whether these bytes lie inside `buffer` (a view of it, not a copy).
+    pub fn is_within(&self, buffer: &[u8]) -> bool {
+        within(buffer, &self.0)
+    }
 }
 
 impl From<Vec<u8>> for ImageData {
     fn from(v: Vec<u8>) -> ImageData {
-        ImageData(Arc::from(v))
+        ImageData(Bytes::from(v))
     }
+}
+
+impl From<&[u8]> for ImageData {
+    fn from(v: &[u8]) -> ImageData {
+        ImageData(Bytes::copy_from_slice(v))
+    }
+}
+
+thread_local! {
+    /// The buffer [`decode_within`] is decoding on this thread, if any.
+    static BACKING: RefCell<Option<Bytes>> = const { RefCell::new(None) };
+}
+
+/// `part` lies inside `whole` (an address range test; an empty `part` never does).
+fn within(whole: &[u8], part: &[u8]) -> bool {
+    let (w, p) = (whole.as_ptr_range(), part.as_ptr_range());
+    !part.is_empty() && w.start <= p.start && p.end <= w.end
+}
+
+/// Run `decode` (which decodes from `buffer`'s bytes) so that every [`ImageData`] it
+/// decodes from a borrowed run of bytes inside `buffer` is a view of `buffer` rather than a
+/// copy: it keeps `buffer`'s memory alive (a clone of `buffer` is a reference count, not a
+/// copy). Pixels from anywhere else, or decoded from a format that does not lend its bytes,
+/// are copied as always. Nested calls keep the outer buffer once the inner one returns.
+pub fn decode_within<R>(buffer: &Bytes, decode: impl FnOnce() -> R) -> R {
+    struct Restore(Option<Bytes>);
+    impl Drop for Restore {
+        fn drop(&mut self) {
+            let outer = self.0.take();
+            BACKING.with(|b| *b.borrow_mut() = outer);
+        }
+    }
+    let _restore = Restore(BACKING.with(|b| b.borrow_mut().replace(buffer.clone())));
+    decode()
+}
+
+/// `v` as pixels: a view of the buffer being decoded when it lies inside it, else a copy.
+fn borrowed(v: &[u8]) -> ImageData {
+    let view = BACKING.with(|b| {
+        let b = b.borrow();
+        let buffer = b.as_ref()?;
+        within(buffer, v).then(|| buffer.slice_ref(v))
+    });
+    ImageData(view.unwrap_or_else(|| Bytes::copy_from_slice(v)))
 }
 
 impl std::fmt::Debug for ImageData {
@@ -59,7 +120,10 @@ impl<'de> serde::de::Visitor<'de> for PixelsVisitor {
         f.write_str("an image's bytes")
     }
     fn visit_bytes<E: serde::de::Error>(self, v: &[u8]) -> Result<ImageData, E> {
-        Ok(ImageData(Arc::from(v)))
+        Ok(ImageData::from(v))
+    }
+    fn visit_borrowed_bytes<E: serde::de::Error>(self, v: &'de [u8]) -> Result<ImageData, E> {
+        Ok(borrowed(v))
     }
     fn visit_byte_buf<E: serde::de::Error>(self, v: Vec<u8>) -> Result<ImageData, E> {
         Ok(ImageData::from(v))
@@ -67,5 +131,44 @@ impl<'de> serde::de::Visitor<'de> for PixelsVisitor {
     fn visit_seq<A: serde::de::SeqAccess<'de>>(self, seq: A) -> Result<ImageData, A::Error> {
         serde_bytes::ByteBuf::deserialize(serde::de::value::SeqAccessDeserializer::new(seq))
             .map(|b| ImageData::from(b.into_vec()))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn pixels_decoded_within_their_buffer_are_a_view_of_it() {
+        let img = ImageData::from(vec![7u8; 1000]);
+        let wire = Bytes::from(postcard::to_allocvec(&img).unwrap());
+        let view: ImageData = decode_within(&wire, || postcard::from_bytes(&wire).unwrap());
+        assert_eq!(view, img);
+        assert!(view.is_within(&wire), "a view, not a copy");
+        // Outside decode_within, or from another buffer, the same bytes are copied.
+        let copy: ImageData = postcard::from_bytes(&wire).unwrap();
+        assert!(!copy.is_within(&wire));
+        let other = Bytes::from(wire.to_vec());
+        let copy: ImageData = decode_within(&other, || postcard::from_bytes(&wire).unwrap());
+        assert!(!copy.is_within(&wire) && !copy.is_within(&other));
+        assert_eq!(copy, img);
+    }
+
+    #[test]
+    fn a_view_keeps_its_buffer_alive_and_the_outer_buffer_comes_back() {
+        let img = ImageData::from(vec![1u8, 2, 3, 4]);
+        let outer = Bytes::from(postcard::to_allocvec(&img).unwrap());
+        let inner = Bytes::from(postcard::to_allocvec(&img).unwrap());
+        let (a, b): (ImageData, ImageData) = decode_within(&outer, || {
+            let a = decode_within(&inner, || postcard::from_bytes(&inner).unwrap());
+            (a, postcard::from_bytes(&outer).unwrap())
+        });
+        assert!(a.is_within(&inner) && b.is_within(&outer));
+        drop((outer, inner));
+        assert_eq!(a.as_slice(), &[1, 2, 3, 4]);
+        assert_eq!(b.as_slice(), &[1, 2, 3, 4]);
+        // An empty run is never a view; clones share their bytes.
+        assert!(!ImageData::default().is_within(&[0u8; 4]));
+        assert!(a.shares(&a.clone()) && !a.shares(&b));
     }
 }

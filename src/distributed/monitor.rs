@@ -1337,6 +1337,7 @@ mod tests {
             p50_us: 120.0,
             p99_us: 300.0,
             max_us: 400.0,
+            in_place: 0,
             since_ns: None,
         };
         let mut m = live("policy", vec![], vec![]);

@@ -20,7 +20,7 @@
 
 use super::credentials::{Credentials, Role};
 use super::lockstep;
-use super::wire::{self, ToLauncher, ToProcess, WireSample};
+use super::wire::{self, ToLauncher, ToProcess};
 use super::{check_endpoint, open_client, Access, DistError, Keys, REPLY_TIMEOUT};
 use crossbeam_channel::{Receiver, RecvTimeoutError};
 use ratelab_core::metrics::LatencyStats;
@@ -184,7 +184,7 @@ pub fn run_process(opts: &ProcessOptions, stop: &StopFlag) -> Result<(), DistErr
         "process '{me}' ready ({} clock): its run starts with the launcher's",
         cfg.clock.as_str()
     ));
-    let bridge = bridge_outbound(&spec, &handles, publishers);
+    let bridge = bridge_outbound(&spec, &handles, publishers, &session);
     let ticks: Arc<Vec<AtomicU64>> =
         Arc::new((0..spec.nodes.len()).map(|_| AtomicU64::new(0)).collect());
     let run_time = Arc::new(AtomicU64::new(0));
@@ -446,7 +446,7 @@ struct Share {
     /// The newest seq received on each inbound topic.
     arrivals: Arc<Arrivals>,
     /// Per inbound topic (in the order given), the over-the-wire latency of what arrived.
-    wire_latency: Arc<Vec<Mutex<LatencyStats>>>,
+    wire_latency: Arc<Vec<Mutex<bridge::Received>>>,
     /// The crossing topics it publishes: what a local node's event sent across the
     /// boundary, and the samples held back from Zenoh's receive thread.
     bridge: Arc<Bridge>,
@@ -514,7 +514,7 @@ impl Share {
 
 #[cfg(test)]
 mod tests {
-    use super::bridge::{crossings, too_large, Outlet, Spill};
+    use super::bridge::{crossings, too_large, Outlet, SharedPool, Spill};
     use super::real_clock::figures_time;
     use crate::wire::{WireSample, MAX_SENT_PER_TICK};
     use ratelab_core::msg::{force::ForceMsg, MsgData};
@@ -630,7 +630,12 @@ mod tests {
         let publisher = session.declare_publisher("t/action").wait().unwrap();
         let spill = Spill::unbounded();
         let bridge = super::Bridge {
-            outlets: vec![Some(Outlet::new(publisher, 0, "/action", spill.clone()))],
+            outlets: vec![Some(Outlet::new(
+                publisher,
+                0,
+                "/action",
+                (spill.clone(), SharedPool::of(None)),
+            ))],
             by_node: vec![vec![ratelab_runtime::graph::TopicId(0)], vec![]],
             spill: spill.clone(),
         };
@@ -641,7 +646,7 @@ mod tests {
                 .recv_timeout(std::time::Duration::from_secs(10))
                 .expect("the sample, before its tick ends")
                 .expect("a sample that decodes");
-            assert_eq!(s.seq, seq);
+            assert_eq!(s.head.seq, seq);
             s
         };
         // Nothing published in a tick: nothing to name.
@@ -649,7 +654,7 @@ mod tests {
         // Two in one tick: each is on the wire as it is published, before the tick ends.
         outlet.send(0, Nanos(20), Some(Nanos(10)), &force(1.5));
         let first = got(0);
-        assert_eq!((first.stamp_ns, first.origin_ns), (20, Some(10)));
+        assert_eq!((first.head.stamp_ns, first.head.origin_ns), (20, Some(10)));
         assert_eq!(
             first.data,
             force(1.5).to_bytes(),
@@ -710,10 +715,12 @@ mod tests {
         // even one that would fit, and the report names them as sent; the main thread puts
         // them.
         let len = WireSample {
-            seq: 503,
-            stamp_ns: 80,
-            origin_ns: None,
-            sent_mono_ns: crate::wire::mono_now_ns(),
+            head: crate::wire::SampleHead {
+                seq: 503,
+                stamp_ns: 80,
+                origin_ns: None,
+                sent_mono_ns: crate::wire::mono_now_ns(),
+            },
             data: force(0.0).to_bytes(),
         }
         .encode()

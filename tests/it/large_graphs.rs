@@ -427,6 +427,28 @@ fn a_megabyte_frame_crosses_processes_whole_with_its_counters_right() {
         assert!(out.contains("vision [vision]"), "{out}");
         let m2 = std::fs::read_to_string(many.join("metrics.json")).unwrap();
         assert_eq!(m1, m2, "metrics differ with shared memory {shm}");
+        // With shared memory the vision process reads the frames in place (issue 76): their
+        // pixels a view of the camera process's buffer, not a copy. The first frames may go
+        // before Zenoh has made the pool; without it, none is.
+        let line = out
+            .lines()
+            .find(|l| l.contains("wire /image into 'vision'"))
+            .unwrap_or_else(|| panic!("no wire line for /image: {out}"));
+        let in_place: u64 = line
+            .split(" | ")
+            .find_map(|part| part.strip_suffix(" read in place from shared memory"))
+            .map_or(0, |n| n.trim().parse().unwrap());
+        let samples: u64 = line
+            .split(": ")
+            .nth(1)
+            .and_then(|r| r.split(' ').next())
+            .and_then(|n| n.parse().ok())
+            .unwrap_or_else(|| panic!("{line}"));
+        if shm == "on" {
+            assert!(in_place > samples / 2 && in_place <= samples, "{line}");
+        } else {
+            assert_eq!(in_place, 0, "{line}");
+        }
     }
     assert!(t1.lines().count() > 30, "{t1:.300}");
     let m: serde_json::Value = serde_json::from_str(&m1).unwrap();

@@ -4,7 +4,7 @@
 
 use crate::distributed::{bin, free_port};
 use ratelab::distributed::credentials::{Credentials, Role};
-use ratelab::distributed::wire::{encode_json, ToProcess, WireSample};
+use ratelab::distributed::wire::{encode_json, SampleHead, ToProcess, WireSample};
 use ratelab::distributed::zenoh::{self, Wait};
 use ratelab::distributed::{open_session, Access, Keys};
 use ratelab::graph::spec::{GraphSpec, DEFAULT_GRAPH_TOML};
@@ -148,10 +148,12 @@ fn an_identity_publishes_only_what_the_graph_gives_it() {
         .wait()
         .unwrap();
     let force = WireSample {
-        seq: 0,
-        stamp_ns: 0,
-        origin_ns: None,
-        sent_mono_ns: 0,
+        head: SampleHead {
+            seq: 0,
+            stamp_ns: 0,
+            origin_ns: None,
+            sent_mono_ns: 0,
+        },
         data: MsgData::new(ForceMsg { newtons: 10.0 }).to_bytes(),
     }
     .encode();
@@ -328,10 +330,12 @@ fn forgeries_change_nothing_in_a_launch_and_refused_peers_are_said() {
             let mut seq = 0;
             while !done.load(Ordering::SeqCst) {
                 let force = WireSample {
-                    seq,
-                    stamp_ns: 0,
-                    origin_ns: None,
-                    sent_mono_ns: 0,
+                    head: SampleHead {
+                        seq,
+                        stamp_ns: 0,
+                        origin_ns: None,
+                        sent_mono_ns: 0,
+                    },
                     data: MsgData::new(ForceMsg { newtons: 10.0 }).to_bytes(),
                 };
                 let _ = forger.put(keys.topic("/action"), force.encode()).wait();

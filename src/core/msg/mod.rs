@@ -620,6 +620,8 @@ trait DynMessage: Any + Send + Sync + fmt::Debug {
     fn fields(&self) -> Vec<f64>;
     fn values(&self) -> Vec<Value>;
     fn to_bytes(&self) -> Vec<u8>;
+    fn encoded_len(&self) -> usize;
+    fn encode_into(&self, out: &mut [u8]) -> Result<usize, String>;
     fn eq_dyn(&self, other: &dyn DynMessage) -> bool;
 }
 
@@ -636,6 +638,14 @@ impl<M: Message> DynMessage for M {
     fn to_bytes(&self) -> Vec<u8> {
         // Plain values (numbers, text, bytes): serde cannot fail on them.
         postcard::to_allocvec(self).unwrap_or_default()
+    }
+    fn encoded_len(&self) -> usize {
+        postcard::experimental::serialized_size(self).unwrap_or(0)
+    }
+    fn encode_into(&self, out: &mut [u8]) -> Result<usize, String> {
+        postcard::to_slice(self, out)
+            .map(|written| written.len())
+            .map_err(|e| format!("a {} payload: {e}", M::NAME))
     }
     fn eq_dyn(&self, other: &dyn DynMessage) -> bool {
         other.as_any().downcast_ref::<M>() == Some(self)
@@ -669,6 +679,18 @@ impl MsgData {
     /// Its wire bytes (postcard; the inverse of [`MsgType::decode`]).
     pub fn to_bytes(&self) -> Vec<u8> {
         self.value.to_bytes()
+    }
+    /// How many bytes [`MsgData::to_bytes`] makes, found without making them.
+    pub fn encoded_len(&self) -> usize {
+        self.value.encoded_len()
+    }
+    /// Write [`MsgData::to_bytes`]'s bytes into the start of `out` (a shared-memory buffer,
+    /// say, so that a large message is written once): how many were written.
+    ///
+    /// # Errors
+    /// `out` is shorter than [`MsgData::encoded_len`].
+    pub fn encode_into(&self, out: &mut [u8]) -> Result<usize, String> {
+        self.value.encode_into(out)
     }
     /// One line for people: `force: newtons=1.5 N`; text quoted, bytes counted
     /// (`data=<307200 bytes>`).
@@ -1416,7 +1438,7 @@ mod tests {
         topic.publish(None, &data, Nanos(5), None).unwrap();
         let got = topic.read(Nanos(6)).unwrap();
         let got = got.data.get::<Scan>().unwrap();
-        assert!(Arc::ptr_eq(&got.ranges.0, &scan.ranges.0));
+        assert!(got.ranges.shares(&scan.ranges));
         // Across processes: encoded and decoded whole, its text and bytes included.
         let decoded = t.decode(&data.to_bytes()).unwrap();
         assert_eq!(decoded.get::<Scan>(), Some(&scan));

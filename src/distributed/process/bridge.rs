@@ -3,8 +3,102 @@
 //! on the wire as it is published, within the publishing tick; samples a lockstep advance
 //! holds back, [`Spill`]), and the receiving end of each inbound one (its subscription, the
 //! arrivals the lockstep waits for, its over-the-wire latency, the samples refused).
+//!
+//! A large sample (an image, a scan: [`SHM_THRESHOLD_BYTES`] or more) is written once,
+//! straight from the message into a buffer of the session's shared-memory pool
+//! ([`SharedPool`]), and read in place on arrival: its pixels stay a view of the shared
+//! buffer ([`shared_payload`]) unless the node must own a copy (issue 76).
 
 use super::*;
+use crate::wire::{SampleHead, SampleView};
+use crate::SHM_THRESHOLD_BYTES;
+use ratelab_core::msg::MsgData;
+use zenoh::bytes::ZBytes;
+use zenoh::shm::{
+    Defragment, GarbageCollect, PosixShmProviderBackend, ShmProvider, ShmProviderState, ZShmMut,
+};
+
+/// A session's shared-memory pool, as a sender of large samples uses it: Zenoh's own
+/// (the 16 MiB pool its transport creates for the first large sample, so writing into it
+/// costs no memory of its own), asked for on the first large sample.
+pub(super) struct SharedPool {
+    /// The session (`None`: never shared memory, as in tests without one).
+    session: Option<zenoh::Session>,
+    /// The pool once Zenoh has it ready (`Some(None)`: the session has none: shared memory
+    /// off, or the pool could not be made).
+    provider: std::sync::OnceLock<Option<Arc<ShmProvider<PosixShmProviderBackend>>>>,
+}
+
+impl SharedPool {
+    /// The pool of `session` (`None`: none).
+    pub(super) fn of(session: Option<&zenoh::Session>) -> Arc<SharedPool> {
+        Arc::new(SharedPool {
+            session: session.cloned(),
+            provider: std::sync::OnceLock::new(),
+        })
+    }
+
+    /// A buffer of `len` bytes in the pool, if it has room now: `None` when the sample is
+    /// small (under [`SHM_THRESHOLD_BYTES`], it crosses the socket as before), when the
+    /// session has no pool or it is still being made (the first large samples), or when the
+    /// pool is full even after reclaiming what receivers have let go (never blocks: the
+    /// sample then goes as ordinary bytes, which Zenoh may still copy into the pool).
+    fn buffer(&self, len: usize) -> Option<ZShmMut> {
+        if len < SHM_THRESHOLD_BYTES {
+            return None;
+        }
+        let provider = match self.provider.get() {
+            Some(p) => p.as_ref()?,
+            None => match self.session.as_ref()?.get_shm_provider() {
+                ShmProviderState::Initializing(_) => return None,
+                ShmProviderState::Ready(p) => self.provider.get_or_init(|| Some(p)).as_ref()?,
+                ShmProviderState::Disabled | ShmProviderState::Error => {
+                    self.provider.get_or_init(|| None);
+                    return None;
+                }
+            },
+        };
+        // Safe policies only: a buffer a receiver still reads is never reclaimed. Not
+        // blocking: a tick must not wait on a subscriber whose queue holds the pool's buffers.
+        provider
+            .alloc(len)
+            .with_policy::<Defragment<GarbageCollect>>()
+            .wait()
+            .ok()
+    }
+
+    /// The sample of `head` and `data` (`len` bytes, [`SampleHead::sample_len`]), written
+    /// once: into a buffer of the pool when [`SharedPool::buffer`] gives one, else into bytes
+    /// of its own. `None` only if `len` is not the sample's length.
+    fn written(&self, head: &SampleHead, data: &MsgData, len: usize) -> Option<ZBytes> {
+        if let Some(mut shared) = self.buffer(len) {
+            return head.write(data, &mut shared).ok().map(|()| shared.into());
+        }
+        let mut own = vec![0; len];
+        head.write(data, &mut own).ok().map(|()| own.into())
+    }
+}
+
+/// A sample that arrived in shared memory as bytes that keep its buffer mapped, so that the
+/// message's pixels can be a view of it ([`SampleView::deliver`]); `None` for any other
+/// sample (through the socket, in a receive batch Zenoh reuses: its pixels are copied).
+pub(super) fn shared_payload(payload: &ZBytes) -> Option<bytes::Bytes> {
+    payload.as_shm()?;
+    let mut slices = payload.slices();
+    match (slices.next(), slices.next()) {
+        (Some(_), None) => Some(bytes::Bytes::from_owner(OneSlice(payload.clone()))),
+        _ => None,
+    }
+}
+
+/// A payload of one run of bytes, as [`bytes::Bytes::from_owner`] takes it.
+struct OneSlice(ZBytes);
+
+impl AsRef<[u8]> for OneSlice {
+    fn as_ref(&self) -> &[u8] {
+        self.0.slices().next().unwrap_or_default()
+    }
+}
 
 /// One crossing topic's sending end in its publisher's process: the bridge element that
 /// puts each message on the wire as it is published, from the topic's tap, under the topic's
@@ -16,6 +110,8 @@ pub(super) struct Outlet {
     pub(super) topic: usize,
     /// Where a sample goes when the tick runs on Zenoh's receive thread past its budget.
     pub(super) spill: Arc<Spill>,
+    /// Where a large sample is written.
+    pub(super) pool: Arc<SharedPool>,
     /// The newest seq sent since the publishing tick ended last ([`NOT_SENT`]: none).
     pub(super) newest: AtomicU64,
     /// Messages offered since the publishing tick ended last.
@@ -46,12 +142,13 @@ impl Outlet {
         publisher: zenoh::pubsub::Publisher<'static>,
         topic: usize,
         name: &str,
-        spill: Arc<Spill>,
+        (spill, pool): (Arc<Spill>, Arc<SharedPool>),
     ) -> Self {
         Outlet {
             publisher,
             topic,
             spill,
+            pool,
             newest: AtomicU64::new(NOT_SENT),
             this_tick: AtomicU64::new(0),
             name: name.to_string(),
@@ -75,27 +172,30 @@ impl Outlet {
         if self.this_tick.fetch_add(1, Ordering::Relaxed) >= wire::MAX_SENT_PER_TICK as u64 {
             return;
         }
-        let sent_mono_ns = wire::mono_now_ns();
-        let payload = data.to_bytes();
-        if payload.len() > ratelab_core::msg::MAX_PAYLOAD_BYTES {
+        let head = SampleHead {
+            seq,
+            stamp_ns: stamp.0,
+            origin_ns: origin.map(|o| o.0),
+            sent_mono_ns: wire::mono_now_ns(),
+        };
+        let payload_len = data.encoded_len();
+        if payload_len > ratelab_core::msg::MAX_PAYLOAD_BYTES {
             if !self.said_too_large.swap(true, Ordering::Relaxed) {
                 eprintln!(
                     "[ratelab] {}: {}",
                     ratelab_core::text::printable(&self.name),
-                    too_large(payload.len())
+                    too_large(payload_len)
                 );
             }
             return;
         }
-        let sample = WireSample {
-            seq,
-            stamp_ns: stamp.0,
-            origin_ns: origin.map(|o| o.0),
-            sent_mono_ns,
-            data: payload,
+        // Written once, straight from the message: into the shared pool when it is large
+        // and the pool has room, else into bytes of its own.
+        let len = head.sample_len(data);
+        let Some(bytes) = self.pool.written(&head, data, len) else {
+            return; // never: `len` is the sample's (counted lost on the wire if it were)
         };
-        let bytes = sample.encode();
-        if self.spill.admit(bytes.len()) {
+        if self.spill.admit(len) {
             // Under congestion control `Block` a put fails only when the session is closed,
             // which the run notices on its own.
             let _ = self.publisher.put(bytes).wait();
@@ -117,7 +217,7 @@ pub(super) struct Spill {
     /// Bytes the current advance may still put itself (`i64::MAX`: no bound).
     pub(super) left: std::sync::atomic::AtomicI64,
     /// Samples held back, in publish order: (topic index, encoded sample).
-    pub(super) held: Mutex<std::collections::VecDeque<(usize, Vec<u8>)>>,
+    pub(super) held: Mutex<std::collections::VecDeque<(usize, ZBytes)>>,
 }
 
 impl Spill {
@@ -142,7 +242,7 @@ impl Spill {
         self.is_empty() && self.left.fetch_sub(len, Ordering::SeqCst) >= len
     }
 
-    pub(super) fn hold(&self, topic: usize, bytes: Vec<u8>) {
+    pub(super) fn hold(&self, topic: usize, bytes: ZBytes) {
         ratelab_runtime::graph::lock(&self.held).push_back((topic, bytes));
     }
 
@@ -320,10 +420,10 @@ pub(super) fn subscribe_inbound(
     });
     // One histogram per inbound topic only (about 270 KB each: one per topic of a
     // 1,000-topic graph held 280 MB in every process).
-    let wire_latency: Arc<Vec<Mutex<LatencyStats>>> = Arc::new(
+    let wire_latency: Arc<Vec<Mutex<Received>>> = Arc::new(
         inbound
             .iter()
-            .map(|_| Mutex::new(LatencyStats::default()))
+            .map(|_| Mutex::new(Received::default()))
             .collect(),
     );
     let mut subscribers = Vec::new();
@@ -340,18 +440,31 @@ pub(super) fn subscribe_inbound(
             session
                 .declare_subscriber(keys.topic(&spec.topic(t).name))
                 .callback(move |s| {
-                    let sample = match WireSample::decode(&s.payload().to_bytes()) {
+                    // Read in place: from the shared buffer itself when it came through
+                    // shared memory (its pixels then a view of it), else from Zenoh's bytes.
+                    let shared = shared_payload(s.payload());
+                    let copied;
+                    let bytes: &[u8] = match &shared {
+                        Some(shared) => shared,
+                        None => {
+                            copied = s.payload().to_bytes();
+                            &copied
+                        }
+                    };
+                    let sample = match SampleView::decode(bytes) {
                         Ok(sample) => sample,
                         Err(e) => return refusals.note(&process, topic.name(), &e),
                     };
-                    let (seq, sent) = (sample.seq, sample.sent_mono_ns);
-                    if let Err(e) =
-                        sample.deliver(&topic, &mut ratelab_runtime::graph::lock(&offset))
-                    {
+                    let (seq, sent) = (sample.head.seq, sample.head.sent_mono_ns);
+                    let offset = &mut ratelab_runtime::graph::lock(&offset);
+                    if let Err(e) = sample.deliver(&topic, offset, shared.as_ref()) {
                         return refusals.note(&process, topic.name(), &e);
                     }
                     let took = wire::mono_now_ns().saturating_sub(sent);
-                    ratelab_runtime::graph::lock(&lat[i]).record(Nanos(took));
+                    let mut got = ratelab_runtime::graph::lock(&lat[i]);
+                    got.latency.record(Nanos(took));
+                    got.in_place += u64::from(shared.is_some());
+                    drop(got);
                     {
                         let mut seqs = ratelab_runtime::graph::lock(&arrivals.seqs);
                         seqs[t.0] = Some(seq);
@@ -378,7 +491,7 @@ pub(super) struct Inbound {
     /// The newest seq received on each topic.
     pub(super) arrivals: Arc<Arrivals>,
     /// Per inbound topic (in the order given), the over-the-wire latency of what arrived.
-    pub(super) wire_latency: Arc<Vec<Mutex<LatencyStats>>>,
+    pub(super) wire_latency: Arc<Vec<Mutex<Received>>>,
 }
 
 /// Make each crossing topic whose publisher runs here a bridge element (`publishers`: the
@@ -389,11 +502,14 @@ pub(super) fn bridge_outbound(
     spec: &GraphSpec,
     handles: &ratelab_runtime::graph::GraphHandles,
     publishers: Vec<(TopicId, zenoh::pubsub::Publisher<'static>)>,
+    session: &zenoh::Session,
 ) -> Arc<Bridge> {
     let spill = Spill::unbounded();
+    let pool = SharedPool::of(Some(session));
     let mut outlets: Vec<Option<Outlet>> = (0..spec.topics.len()).map(|_| None).collect();
     for (t, p) in publishers {
-        outlets[t.0] = Some(Outlet::new(p, t.0, &spec.topic(t).name, spill.clone()));
+        let name = &spec.topic(t).name;
+        outlets[t.0] = Some(Outlet::new(p, t.0, name, (spill.clone(), pool.clone())));
     }
     // Per node, the crossing topics it publishes.
     let by_node: Vec<Vec<TopicId>> = (0..spec.nodes.len())
@@ -431,17 +547,27 @@ pub(super) fn bridge_outbound(
 
 /// The over-the-wire latency of each inbound topic so far (µs, to 0.1); `lat` holds one
 /// per inbound topic, in `inbound`'s order ([`subscribe_inbound`]).
+/// What one inbound topic received, for its [`wire::WireLink`].
+#[derive(Default)]
+pub(super) struct Received {
+    /// Each sample's time on the wire.
+    pub(super) latency: LatencyStats,
+    /// Samples read in place from shared memory ([`shared_payload`]).
+    pub(super) in_place: u64,
+}
+
 pub(super) fn wire_links(
     process: &str,
     spec: &GraphSpec,
     inbound: &[TopicId],
-    lat: &[Mutex<LatencyStats>],
+    lat: &[Mutex<Received>],
 ) -> Vec<wire::WireLink> {
     inbound
         .iter()
         .zip(lat)
         .map(|(&t, l)| {
-            let l = ratelab_runtime::graph::lock(l);
+            let got = ratelab_runtime::graph::lock(l);
+            let l = &got.latency;
             let us = |n: Option<Nanos>| {
                 n.map_or(0.0, |n| {
                     ratelab_core::metrics::round_to(n.as_micros_f64(), 1)
@@ -454,6 +580,7 @@ pub(super) fn wire_links(
                 p50_us: us(l.quantile(0.5)),
                 p99_us: us(l.quantile(0.99)),
                 max_us: us(l.max()),
+                in_place: got.in_place,
                 since_ns: None,
             }
         })
@@ -487,5 +614,138 @@ impl Refusals {
         {
             eprintln!("[ratelab] {process}: {topic}: refused {reason} ({n} refused so far)");
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use ratelab_core::msg::{AnyTopic, ImageMsg, Message};
+
+    /// A plain Zenoh session on this host (no TLS), with shared memory as ratelab's.
+    fn session(listen: &[String], connect: &[String]) -> zenoh::Session {
+        let mut config = zenoh::Config::default();
+        let json = |v: &[String]| serde_json::to_string(v).unwrap();
+        for (key, value) in [
+            ("listen/endpoints", json(listen)),
+            ("connect/endpoints", json(connect)),
+            ("scouting/multicast/enabled", "false".into()),
+            ("transport/shared_memory/enabled", "true".into()),
+            (
+                "transport/shared_memory/transport_optimization/message_size_threshold",
+                SHM_THRESHOLD_BYTES.to_string(),
+            ),
+        ] {
+            config.insert_json5(key, &value).expect("a Zenoh setting");
+        }
+        zenoh::open(config).wait().expect("a session")
+    }
+
+    /// A camera's frame crosses from one session to another without a copy of its pixels on
+    /// arrival: the receiver's message holds a view of the shared buffer the sender wrote the
+    /// sample into, once, straight from the message. A small message still crosses the
+    /// socket.
+    #[test]
+    fn a_large_message_is_written_into_shared_memory_once_and_read_in_place() {
+        let port = std::net::TcpListener::bind("127.0.0.1:0")
+            .and_then(|l| l.local_addr())
+            .expect("a free port")
+            .port();
+        let endpoint = format!("tcp/127.0.0.1:{port}");
+        let far = session(std::slice::from_ref(&endpoint), &[]);
+        let near = session(&[], std::slice::from_ref(&endpoint));
+        let topic = AnyTopic::new("/image", ImageMsg::TYPE, 4).unwrap();
+        let (tx, rx) = crossbeam_channel::unbounded();
+        let t = topic.clone();
+        let offset = Mutex::new(None);
+        let _sub = far
+            .declare_subscriber("t/image")
+            .callback(move |s| {
+                let shared = shared_payload(s.payload());
+                let bytes = s.payload().to_bytes().into_owned();
+                let read = match &shared {
+                    Some(b) => SampleView::decode(b),
+                    None => SampleView::decode(&bytes),
+                };
+                let view = read.expect("a sample");
+                let offset = &mut ratelab_runtime::graph::lock(&offset);
+                view.deliver(&t, offset, shared.as_ref())
+                    .expect("delivered");
+                let data = t.read(Nanos(u64::MAX / 2)).expect("published").data;
+                let _ = tx.send((view.head.seq, shared, data));
+            })
+            .wait()
+            .expect("a subscriber");
+        let publisher = near.declare_publisher("t/image").wait().unwrap();
+        let deadline = Instant::now() + Duration::from_secs(20);
+        while !publisher
+            .matching_status()
+            .wait()
+            .is_ok_and(|m| m.matching())
+        {
+            assert!(Instant::now() < deadline, "the subscriber was never seen");
+            std::thread::sleep(Duration::from_millis(10));
+        }
+        let pool = SharedPool::of(Some(&near));
+        let frame = |seq: u64| {
+            let pixels: Vec<u8> = (0..640 * 480u32).map(|i| (i as u64 + seq) as u8).collect();
+            MsgData::new(ImageMsg {
+                height: 480,
+                width: 640,
+                encoding: "mono8".into(),
+                step: 640,
+                data: pixels.into(),
+            })
+        };
+        // Zenoh makes its pool when first asked, in the background: until it is ready the
+        // frames go as ordinary bytes (and still arrive).
+        let mut seq = 0;
+        let (sent, got) = loop {
+            assert!(Instant::now() < deadline, "the pool was never ready");
+            let data = frame(seq);
+            let head = SampleHead {
+                seq,
+                stamp_ns: seq,
+                origin_ns: None,
+                sent_mono_ns: wire::mono_now_ns(),
+            };
+            let bytes = pool
+                .written(&head, &data, head.sample_len(&data))
+                .expect("written");
+            let in_pool = bytes.as_shm().is_some();
+            publisher.put(bytes).wait().unwrap();
+            let got = rx.recv_timeout(Duration::from_secs(10)).expect("arrived");
+            assert_eq!(got.0, seq);
+            assert_eq!(got.2, data, "the frame, whole");
+            if in_pool {
+                break (data, got);
+            }
+            seq += 1;
+            std::thread::sleep(Duration::from_millis(50));
+        };
+        let (_, shared, data) = got;
+        let shared = shared.expect("the frame arrived in shared memory");
+        let img = data.get::<ImageMsg>().unwrap();
+        assert!(
+            img.data.is_within(&shared),
+            "the pixels are a view of the shared buffer"
+        );
+        assert!(!img.data.shares(&sent.get::<ImageMsg>().unwrap().data));
+        // A small message (a force) is not put in the pool: it crosses the socket.
+        let force = MsgData::new(ratelab_core::msg::ForceMsg { newtons: 1.0 });
+        let head = SampleHead {
+            seq: 0,
+            stamp_ns: 0,
+            origin_ns: None,
+            sent_mono_ns: 0,
+        };
+        let small = pool
+            .written(&head, &force, head.sample_len(&force))
+            .unwrap();
+        assert!(small.as_shm().is_none());
+        // Without a session, or with shared memory off, nothing is put in a pool.
+        let big = frame(0);
+        let len = head.sample_len(&big);
+        assert!(SharedPool::of(None).buffer(len).is_none());
     }
 }

@@ -3,7 +3,9 @@
 //! A topic sample is [`WireSample`]: the publisher's `seq`, publish stamp and origin stamp
 //! (the same three numbers an in-process [`ratelab_core::topic::Message`] carries), the send time
 //! on the host's monotonic clock (for the over-the-wire latency) and the payload, encoded
-//! with `postcard` (serde's compact binary format). Control messages ([`ToProcess`],
+//! with `postcard` (serde's compact binary format). A sample is written in place from its
+//! [`SampleHead`] and the message (into a shared-memory buffer for a large one) and read in
+//! place ([`SampleView`]), the same bytes as [`WireSample::encode`]. Control messages ([`ToProcess`],
 //! [`ToLauncher`]) are JSON (`serde_json`): few, and readable when debugging with
 //! `z_sub`. Every decode is bounded ([`MAX_SAMPLE_BYTES`], [`MAX_CONTROL_BYTES`]): the
 //! bytes come from the network.
@@ -24,8 +26,8 @@ pub use launcher_to_process::{decode_relayed, encode_relayed, Setup, ToProcess, 
 pub use launcher_to_watcher::RunOver;
 pub use process_to_launcher::{ToLauncher, WireLink};
 pub use process_to_process::{
-    decode_reports, encode_reports, Ticked, WireSample, MAX_SAMPLE_BYTES, MAX_SENT_PER_TICK,
-    MAX_SEQ, MAX_SEQ_JUMP, MAX_TICKS_PER_MESSAGE, MAX_TICK_BYTES,
+    decode_reports, encode_reports, SampleHead, SampleView, Ticked, WireSample, MAX_SAMPLE_BYTES,
+    MAX_SENT_PER_TICK, MAX_SEQ, MAX_SEQ_JUMP, MAX_TICKS_PER_MESSAGE, MAX_TICK_BYTES,
 };
 
 use serde::{Deserialize, Serialize};
@@ -60,8 +62,8 @@ pub fn instant_at_mono(mono_ns: u64) -> std::time::Instant {
 
 /// Decode `bytes` (postcard) as a `T`, exactly: refused over `max` bytes, malformed, or
 /// with any byte after its end; `what` names it in the one-line error.
-fn decode_exact<T: for<'de> Deserialize<'de>>(
-    bytes: &[u8],
+fn decode_exact<'a, T: Deserialize<'a>>(
+    bytes: &'a [u8],
     max: usize,
     what: &str,
 ) -> Result<T, String> {
@@ -166,19 +168,19 @@ mod tests {
     #[test]
     fn a_sample_round_trips_and_hostile_bytes_are_refused() {
         let s = WireSample {
-            seq: 7,
-            stamp_ns: 20_000_000,
-            origin_ns: Some(0),
-            sent_mono_ns: 5,
+            head: SampleHead {
+                seq: 7,
+                stamp_ns: 20_000_000,
+                origin_ns: Some(0),
+                sent_mono_ns: 5,
+            },
             data: MsgData::new([0.1f32, -0.2, 1.0, 0.0, 3.5]).to_bytes(),
         };
         assert_eq!(WireSample::decode(&s.encode()).unwrap(), s);
         assert!(WireSample::decode(&[0xff; 3]).is_err());
         assert!(WireSample::decode(&vec![0; MAX_SAMPLE_BYTES + 1]).is_err());
-        let huge = WireSample {
-            seq: u64::MAX,
-            ..s.clone()
-        };
+        let mut huge = s.clone();
+        huge.head.seq = u64::MAX;
         assert!(WireSample::decode(&huge.encode()).is_err());
         // Exactly: a valid sample with a byte after it, or a run of zeros (which starts like
         // a sample numbered 0), is refused.
@@ -195,6 +197,63 @@ mod tests {
             decode_json::<ToProcess>(&taken).unwrap(),
             ToProcess::ReportTaken
         );
+    }
+
+    #[test]
+    fn a_sample_written_in_place_is_the_encoded_one_and_is_read_in_place() {
+        let image = MsgData::new(ratelab_core::msg::ImageMsg {
+            height: 300,
+            width: 400,
+            encoding: "mono8".into(),
+            step: 400,
+            data: (0..120_000u32)
+                .map(|i| (i % 251) as u8)
+                .collect::<Vec<_>>()
+                .into(),
+        });
+        for (payload, origin) in [
+            (image, Some(3)),
+            (MsgData::new(ForceMsg { newtons: -1.5 }), None),
+        ] {
+            let head = SampleHead {
+                seq: 300,
+                stamp_ns: 1 << 40,
+                origin_ns: origin,
+                sent_mono_ns: u64::MAX,
+            };
+            let owned = WireSample {
+                head,
+                data: payload.to_bytes(),
+            }
+            .encode();
+            assert_eq!(head.sample_len(&payload), owned.len());
+            let mut out = vec![0u8; owned.len()];
+            head.write(&payload, &mut out).unwrap();
+            assert_eq!(out, owned, "the same bytes as the owned sample's");
+            // Too short or too long a buffer is refused, not half written.
+            assert!(head.write(&payload, &mut vec![0; owned.len() - 1]).is_err());
+            assert!(head.write(&payload, &mut vec![0; owned.len() + 1]).is_err());
+            // Read in place: the payload is the arrived bytes themselves.
+            let arrived = bytes::Bytes::from(out);
+            let view = SampleView::decode(&arrived).unwrap();
+            assert_eq!(view.head, head);
+            assert_eq!(view.data, &payload.to_bytes()[..]);
+            assert!(arrived.as_ptr_range().contains(&view.data.as_ptr()));
+            // Delivered with its buffer, an image's pixels are a view of it; without, a copy.
+            let t = AnyTopic::new("/t", payload.msg_type(), 2).unwrap();
+            let mut off = None;
+            let now = ratelab_core::time::Nanos(1 << 41);
+            view.deliver(&t, &mut off, Some(&arrived)).unwrap();
+            let viewed = t.read(now).expect("delivered").data;
+            view.deliver(&t, &mut off, None).unwrap();
+            let copied = t.read(now).expect("delivered").data;
+            assert_eq!((&viewed, &copied), (&payload, &payload));
+            if let Some(img) = viewed.get::<ratelab_core::msg::ImageMsg>() {
+                assert!(img.data.is_within(&arrived), "a view of the arrived bytes");
+                let copy = copied.get::<ratelab_core::msg::ImageMsg>().unwrap();
+                assert!(!copy.data.is_within(&arrived), "a copy");
+            }
+        }
     }
 
     #[test]
@@ -248,10 +307,12 @@ mod tests {
     fn delivery_keeps_the_publishers_numbering_and_counts_gaps_as_lost() {
         let t = AnyTopic::new("/action", ForceMsg::TYPE, 1).unwrap();
         let sample = |seq| WireSample {
-            seq,
-            stamp_ns: seq * 20_000_000,
-            origin_ns: None,
-            sent_mono_ns: 0,
+            head: SampleHead {
+                seq,
+                stamp_ns: seq * 20_000_000,
+                origin_ns: None,
+                sent_mono_ns: 0,
+            },
             data: MsgData::new(ForceMsg { newtons: 1.0 }).to_bytes(),
         };
         let mut off = None;
@@ -294,10 +355,12 @@ mod tests {
         let mut off = None;
         for seq in [100, 101, 103] {
             WireSample {
-                seq,
-                stamp_ns: seq,
-                origin_ns: None,
-                sent_mono_ns: 0,
+                head: SampleHead {
+                    seq,
+                    stamp_ns: seq,
+                    origin_ns: None,
+                    sent_mono_ns: 0,
+                },
                 data: MsgData::new(ForceMsg { newtons: 0.0 }).to_bytes(),
             }
             .deliver(&t, &mut off)

@@ -55,6 +55,10 @@ impl ToLauncher {
     }
 }
 
+fn is_zero(n: &u64) -> bool {
+    *n == 0
+}
+
 /// The over-the-wire latency of one topic into one process: from the publisher's send to
 /// the subscriber's delivery, on the host's monotonic clock (exact on one host).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -71,6 +75,11 @@ pub struct WireLink {
     pub p99_us: f64,
     /// Latency max, µs.
     pub max_us: f64,
+    /// Of [`WireLink::samples`], those read in place: they arrived in Zenoh's shared memory
+    /// and the message's bytes stayed a view of the publisher's buffer, not a copy (0 when
+    /// none did, as for small messages; absent in a report from before it was counted).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub in_place: u64,
     /// Set by the launcher when the receiving process rejoined mid-run: the run time of its
     /// rejoin, ns. Its figures count from then (the process before it took its own with it).
     #[serde(default, skip_serializing_if = "Option::is_none")]

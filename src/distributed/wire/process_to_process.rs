@@ -2,11 +2,13 @@
 //! its publisher's process to its subscriber's, through the launcher's router) and, under
 //! the virtual clock, the tick reports of each process's events ([`Ticked`], several to a
 //! message, to the launcher, which hands them to the other processes in their turn). Both
-//! postcard, both bounded and decoded exactly.
+//! postcard, both bounded and decoded exactly. A sample is written from its head and its
+//! message without an intermediate copy ([`SampleHead::write`]) and read without copying its
+//! payload ([`SampleView`]).
 
 use super::decode_exact;
 use ratelab_core::limits;
-use ratelab_core::msg::AnyTopic;
+use ratelab_core::msg::{AnyTopic, MsgData};
 use ratelab_core::time::Nanos;
 use serde::{Deserialize, Serialize};
 
@@ -21,9 +23,12 @@ pub const MAX_SEQ: u64 = 1 << 40;
 /// ([`WireSample::deliver`]). A 10 000 Hz publisher takes 100 s to publish this many.
 pub const MAX_SEQ_JUMP: u64 = 1_000_000;
 
-/// One topic sample on the wire.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct WireSample {
+/// What a topic sample says before its payload: its numbers and stamps. Postcard writes a
+/// struct as its fields one after another, so a [`WireSample`] is this head, the payload's
+/// length and the payload, and a sample can be written in place ([`SampleHead::write`])
+/// or read in place ([`SampleView`]) with the same bytes on the wire.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct SampleHead {
     /// The publisher's sequence number for the topic (from 0).
     pub seq: u64,
     /// Run time of the publish, ns (the graph's processes share the run's clock).
@@ -33,6 +38,43 @@ pub struct WireSample {
     /// When it was sent, on the host's `CLOCK_MONOTONIC`, ns: receive time minus this is
     /// the over-the-wire latency (exact on one host; across hosts, see docs/distributed.md).
     pub sent_mono_ns: u64,
+}
+
+impl SampleHead {
+    /// The bytes of the sample this head and `payload` make ([`WireSample::encode`]'s
+    /// length), found without encoding the payload.
+    pub fn sample_len(&self, payload: &MsgData) -> usize {
+        let len = payload.encoded_len();
+        postcard::experimental::serialized_size(&(self, len)).unwrap_or(0) + len
+    }
+
+    /// Write the sample of this head and `payload` into `out`, which must be exactly
+    /// [`SampleHead::sample_len`] long (a shared-memory buffer, so that a large message is
+    /// written once, straight from the message): the same bytes as [`WireSample::encode`].
+    ///
+    /// # Errors
+    /// `out` is not [`SampleHead::sample_len`] long.
+    pub fn write(&self, payload: &MsgData, out: &mut [u8]) -> Result<(), String> {
+        let len = payload.encoded_len();
+        let head = postcard::to_slice(&(self, len), out)
+            .map_err(|e| format!("a sample's head: {e}"))?
+            .len();
+        let rest = &mut out[head..];
+        if rest.len() != len || payload.encode_into(rest)? != len {
+            return Err(format!(
+                "a sample's payload of {len} bytes in {}",
+                rest.len()
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// One topic sample on the wire, owning its payload: its [`SampleHead`], then the payload.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct WireSample {
+    /// Its numbers and stamps.
+    pub head: SampleHead,
     /// The payload: the message in its type's wire encoding ([`ratelab_core::msg::MsgData::to_bytes`]),
     /// decoded by the receiving topic's type ([`ratelab_core::msg::MsgType::decode`]), exactly.
     /// Written as one run of bytes (postcard's length and the bytes, as a sequence of bytes
@@ -41,7 +83,43 @@ pub struct WireSample {
     pub data: Vec<u8>,
 }
 
-impl WireSample {
+/// One topic sample read in place: its head, and its payload borrowed from the bytes that
+/// arrived ([`SampleView::decode`]), not copied.
+#[derive(Clone, Copy, Debug, PartialEq, Deserialize)]
+pub struct SampleView<'a> {
+    /// Its numbers and stamps.
+    pub head: SampleHead,
+    /// The payload, as in [`WireSample::data`].
+    pub data: &'a [u8],
+}
+
+impl<'a> SampleView<'a> {
+    /// Read a sample in place, refusing anything over [`MAX_SAMPLE_BYTES`] or malformed: it
+    /// must decode exactly (no byte after its end), and a `seq` beyond [`MAX_SEQ`] is
+    /// refused too (no run publishes that many, and counters must not overflow).
+    ///
+    /// # Errors
+    /// One line.
+    pub fn decode(bytes: &'a [u8]) -> Result<SampleView<'a>, String> {
+        if bytes.len() > MAX_SAMPLE_BYTES {
+            return Err(limits::refusal(
+                format_args!(
+                    "a sample of {} bytes (at most {MAX_SAMPLE_BYTES})",
+                    bytes.len()
+                ),
+                "MAX_SAMPLE_BYTES",
+            ));
+        }
+        let s: SampleView<'a> = decode_exact(bytes, MAX_SAMPLE_BYTES, "sample")?;
+        if s.head.seq > MAX_SEQ {
+            return Err(format!(
+                "a sample numbered {} (at most {MAX_SEQ})",
+                s.head.seq
+            ));
+        }
+        Ok(s)
+    }
+
     /// Publish this sample into the local copy `topic` of its topic, as its publisher did.
     /// `offset` (the publisher's `seq` minus the copy's, kept by the caller per topic, `None`
     /// before the first sample) lets a subscriber join late: what was published before its
@@ -51,17 +129,29 @@ impl WireSample {
     /// [`MAX_SEQ_JUMP`] ahead of the last is refused, not counted as lost: no publisher gets
     /// that far ahead of its subscriber in a run, and a forged number must not inflate `lost`.
     ///
+    /// `arrived`, the buffer the sample was read from when it can be shared (a shared-memory
+    /// sample's), lets the message's pixels be a view of it rather than a copy
+    /// ([`ratelab_core::pixels::decode_within`]); `None` copies them.
+    ///
     /// # Errors
     /// The payload's type is not the topic's (a graph that differs between processes), or its
     /// `seq` jumps too far ahead (nothing is published or counted).
-    pub fn deliver(self, topic: &AnyTopic, offset: &mut Option<i128>) -> Result<(), String> {
-        let stamp = Nanos(self.stamp_ns);
-        let origin = self.origin_ns.map(Nanos);
-        let seq = i128::from(self.seq);
-        let data = topic
-            .msg_type()
-            .decode(&self.data)
-            .map_err(|e| format!("a sample on {}: {e}", topic.name()))?;
+    pub fn deliver(
+        &self,
+        topic: &AnyTopic,
+        offset: &mut Option<i128>,
+        arrived: Option<&bytes::Bytes>,
+    ) -> Result<(), String> {
+        let head = self.head;
+        let stamp = Nanos(head.stamp_ns);
+        let origin = head.origin_ns.map(Nanos);
+        let seq = i128::from(head.seq);
+        let decode = || topic.msg_type().decode(self.data);
+        let data = match arrived {
+            Some(buffer) => ratelab_core::pixels::decode_within(buffer, decode),
+            None => decode(),
+        }
+        .map_err(|e| format!("a sample on {}: {e}", topic.name()))?;
         let next = i128::from(topic.next_seq());
         let off = match *offset {
             Some(off) if seq - off >= next - 1 => off,
@@ -79,33 +169,41 @@ impl WireSample {
         }
         topic.publish(None, &data, stamp, origin)
     }
+}
+
+impl WireSample {
+    /// Publish this sample into the local copy `topic` of its topic: [`SampleView::deliver`]
+    /// of its view, the pixels copied.
+    ///
+    /// # Errors
+    /// As [`SampleView::deliver`].
+    pub fn deliver(self, topic: &AnyTopic, offset: &mut Option<i128>) -> Result<(), String> {
+        self.view().deliver(topic, offset, None)
+    }
+
+    /// This sample read in place.
+    pub fn view(&self) -> SampleView<'_> {
+        SampleView {
+            head: self.head,
+            data: &self.data,
+        }
+    }
 
     /// Encode (postcard).
     pub fn encode(&self) -> Vec<u8> {
         postcard::to_allocvec(self).unwrap_or_default()
     }
 
-    /// Decode, refusing anything over [`MAX_SAMPLE_BYTES`] or malformed: it must decode
-    /// exactly (no byte after its end), and a `seq` beyond [`MAX_SEQ`] is refused too (no run
-    /// publishes that many, and counters must not overflow).
+    /// Decode, owning the payload: [`SampleView::decode`], its payload copied.
     ///
     /// # Errors
     /// One line.
     pub fn decode(bytes: &[u8]) -> Result<WireSample, String> {
-        if bytes.len() > MAX_SAMPLE_BYTES {
-            return Err(limits::refusal(
-                format_args!(
-                    "a sample of {} bytes (at most {MAX_SAMPLE_BYTES})",
-                    bytes.len()
-                ),
-                "MAX_SAMPLE_BYTES",
-            ));
-        }
-        let s: WireSample = decode_exact(bytes, MAX_SAMPLE_BYTES, "sample")?;
-        if s.seq > MAX_SEQ {
-            return Err(format!("a sample numbered {} (at most {MAX_SEQ})", s.seq));
-        }
-        Ok(s)
+        let view = SampleView::decode(bytes)?;
+        Ok(WireSample {
+            head: view.head,
+            data: view.data.to_vec(),
+        })
     }
 }
 

@@ -542,7 +542,7 @@ mod tests {
     #[test]
     fn answer_serves_a_frame_a_request_until_the_requests_end() {
         let g = FrameGeometry::new(32, 24);
-        let draw = |x: f64, theta: f64| Ok(g.frame(x, theta).data.0.to_vec());
+        let draw = |x: f64, theta: f64| Ok(g.frame(x, theta).data.as_slice().to_vec());
         let mut from = Vec::new();
         for (x, theta) in [(0.5f64, 0.1f64), (-1.0, -0.2)] {
             from.extend(x.to_le_bytes());
@@ -551,8 +551,8 @@ mod tests {
         from.extend([1, 2, 3]); // a request cut short ends the stream
         let mut to = Vec::new();
         answer(draw, &from[..], &mut to).unwrap();
-        let mut want = g.frame(0.5, 0.1).data.0.to_vec();
-        want.extend(g.frame(-1.0, -0.2).data.0.iter());
+        let mut want = g.frame(0.5, 0.1).data.as_slice().to_vec();
+        want.extend(g.frame(-1.0, -0.2).data.as_slice().iter());
         assert_eq!(to, want);
         // A request that is not a state is refused, and nothing is answered to it.
         let nan = [f64::NAN.to_le_bytes(), 0.0f64.to_le_bytes()];

@@ -29,8 +29,8 @@ fn field_slot_bytes(kind: FieldKind) -> u64 {
         FieldKind::Number | FieldKind::Integer => 8,
         // A `String`: pointer, capacity, length.
         FieldKind::Text => 24,
-        // An `Arc<[u8]>`: pointer, length.
-        FieldKind::Bytes => 16,
+        // An `ImageData` (a `bytes::Bytes`): pointer, length, owner, vtable.
+        FieldKind::Bytes => std::mem::size_of::<ratelab_core::msg::ImageData>() as u64,
     }
 }
 
@@ -268,7 +268,7 @@ mod tests {
     fn a_cameras_frame_is_the_size_its_node_gives() {
         let g = GraphSpec::parse(&camera_graph(640, 480, 1), "cam.toml").unwrap();
         let image = g.topic_id("/image").unwrap();
-        let slots = 2 * (8 + 8 + 24 + 8 + 16 + MESSAGE_STAMPS_BYTES);
+        let slots = 2 * (8 + 8 + 24 + 8 + 32 + MESSAGE_STAMPS_BYTES);
         assert_eq!(g.largest_message_bytes(image), slots + 640 * 480 + 16);
         // One queue (the vision node's) of depth 1, and the frame the camera holds.
         assert_eq!(g.topic_queue_bytes(image), 2 * (slots + 640 * 480 + 16));
