@@ -2,7 +2,8 @@
 //! a payload of `--bytes` (a 1 MiB frame by default) put `--rate-hz` times a second from one
 //! process to another, with Zenoh's session opened exactly as ratelab opens it (mutual TLS,
 //! the graph's access control, ratelab's runtime threads, and shared memory unless
-//! `RATELAB_SHARED_MEMORY=off`), and nothing else of ratelab's on the path.
+//! `RATELAB_SHARED_MEMORY=off`: each frame written once into a buffer of the publisher's
+//! pool, as ratelab writes a large sample), and nothing else of ratelab's on the path.
 //! `scripts/bench-image.py` runs it beside ratelab's own launch of a camera graph, in one
 //! sitting, with shared memory on and off.
 //!
@@ -25,7 +26,9 @@ mod floor;
 use hdrhistogram::Histogram;
 use ratelab::distributed::credentials::Credentials;
 use ratelab::distributed::wire::mono_now_ns;
-use ratelab::distributed::{shared_memory, zenoh::Wait};
+use ratelab::distributed::zenoh::bytes::ZBytes;
+use ratelab::distributed::zenoh::shm::{Defragment, GarbageCollect, ShmProviderBuilder};
+use ratelab::distributed::{shared_memory, zenoh::Wait, SHM_POOL_BYTES};
 use std::io::{BufRead, BufReader};
 use std::process::{Command, Stdio};
 use std::sync::{Arc, Mutex};
@@ -136,6 +139,13 @@ fn main() {
         .expect("a publisher");
     floor::wait_matched(&publisher);
     let cpu_before = cpu_ms().unwrap_or(0.0);
+    // The publisher's pool, as ratelab's processes make theirs (ratelab's sessions leave
+    // Zenoh's own copying of large payloads into shared memory off).
+    let pool = shared_memory().unwrap_or(true).then(|| {
+        ShmProviderBuilder::default_backend(SHM_POOL_BYTES)
+            .wait()
+            .expect("a shared-memory pool")
+    });
     let period = Duration::from_nanos(1_000_000_000 / opts.rate_hz);
     let start = Instant::now();
     for k in 0..opts.count {
@@ -143,9 +153,31 @@ fn main() {
         if let Some(wait) = due.checked_duration_since(Instant::now()) {
             std::thread::sleep(wait);
         }
-        // A new frame each time, as a camera writes one: its pixels, then its send time.
-        let mut frame = vec![(k % 251) as u8; bytes];
-        frame[..8].copy_from_slice(&mono_now_ns().to_le_bytes());
+        // A new frame each time, as a camera writes one: its pixels, then its send time,
+        // written once, into a buffer of the pool when it has room, else into memory of its
+        // own (then it crosses the socket).
+        let shade = (k % 251) as u8;
+        // Stamped before the frame is written: its one write counts, as ratelab's copy of
+        // a message into its pool does (stamped before the sample is written).
+        let sent = mono_now_ns().to_le_bytes();
+        let shared = pool.as_ref().and_then(|p| {
+            p.alloc(bytes)
+                .with_policy::<Defragment<GarbageCollect>>()
+                .wait()
+                .ok()
+        });
+        let frame: ZBytes = match shared {
+            Some(mut frame) => {
+                frame.fill(shade);
+                frame[..8].copy_from_slice(&sent);
+                frame.into()
+            }
+            None => {
+                let mut frame = vec![shade; bytes];
+                frame[..8].copy_from_slice(&sent);
+                frame.into()
+            }
+        };
         publisher.put(frame).wait().expect("a put");
     }
     std::thread::sleep(Duration::from_millis(200));

@@ -105,8 +105,9 @@ impl Serialize for ImageData {
 }
 
 impl<'de> Deserialize<'de> for ImageData {
-    /// From bytes (copied once, straight from a borrowed buffer: postcard's, CDR's) or a
-    /// sequence of numbers 0–255 (a format without bytes, as JSON).
+    /// From bytes (copied once, straight from a borrowed buffer: postcard's, CDR's; not
+    /// copied at all from the buffer [`decode_within`] names) or a sequence of numbers 0–255
+    /// (a format without bytes, as JSON).
     fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<ImageData, D::Error> {
         d.deserialize_bytes(PixelsVisitor)
     }
@@ -170,5 +171,15 @@ mod tests {
         // An empty run is never a view; clones share their bytes.
         assert!(!ImageData::default().is_within(&[0u8; 4]));
         assert!(a.shares(&a.clone()) && !a.shares(&b));
+    }
+
+    #[test]
+    fn a_decode_that_panics_leaves_no_buffer_behind() {
+        let img = ImageData::from(vec![9u8; 64]);
+        let wire = Bytes::from(postcard::to_allocvec(&img).unwrap());
+        let caught = std::panic::catch_unwind(|| decode_within(&wire, || panic!("a bad decode")));
+        assert!(caught.is_err());
+        let copy: ImageData = postcard::from_bytes(&wire).unwrap();
+        assert!(!copy.is_within(&wire), "no buffer is named after the panic");
     }
 }

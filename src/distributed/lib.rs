@@ -489,24 +489,28 @@ pub fn live_tokens(
 /// process it starts: `RATELAB_SHARED_MEMORY=off` (`on`, the default, leaves it on).
 pub const SHARED_MEMORY_ENV: &str = "RATELAB_SHARED_MEMORY";
 
-/// The smallest message Zenoh puts in shared memory by itself, bytes (its
-/// `transport_optimization/message_size_threshold`; Zenoh's default is 3072). A message that
-/// fits in one of Zenoh's batches (64 KiB) crosses the socket: the first message over the
-/// threshold makes its sender create Zenoh's 16 MiB pool, which Zenoh locks in memory in
-/// the sender and in every process that maps it, plus about 8 MiB of watchdog queues. At
-/// 3072 the plant's live figures (about 6 KB ten times a second) made the chapter's launch
-/// hold 46 MiB more than without shared memory (issue 76); camera frames (300 KiB and up)
-/// still go through it.
+/// The smallest sample a process writes into shared memory, bytes: a smaller one fits in
+/// one of Zenoh's batches (64 KiB) and crosses the socket. The first sample over it makes
+/// its sender create its pool ([`SHM_POOL_BYTES`]), which Zenoh locks in memory in the
+/// sender and in every process that maps it, plus about 8 MiB of watchdog queues. At Zenoh's
+/// own default (3072) the plant's live figures (about 6 KB ten times a second) made the
+/// chapter's launch hold 46 MiB more than without shared memory (issue 76); camera frames
+/// (300 KiB and up) go through it.
 pub const SHM_THRESHOLD_BYTES: usize = 64 * 1024;
+
+/// The size of a process's shared-memory pool, bytes (Zenoh's default pool size): made when
+/// the process first sends a sample of [`SHM_THRESHOLD_BYTES`] or more. A sample that finds
+/// no room in it (its subscribers still hold the earlier ones) crosses the socket.
+pub const SHM_POOL_BYTES: usize = 16 << 20;
 
 /// Whether [`open_session`] offers Zenoh's shared memory to its peers: on unless
 /// [`SHARED_MEMORY_ENV`] says `off` (unset or empty: on).
 ///
 /// With it on, two processes on one host that both offer it (every ratelab process does)
-/// pass a sample of [`SHM_THRESHOLD_BYTES`] or more (Zenoh's `message_size_threshold`)
-/// through a shared segment of a 16 MiB pool rather than through the socket: the receiver maps the bytes
-/// the sender wrote, so a camera frame crosses without the kernel's two copies
-/// (BENCHMARKS.md measures both). A larger sample than the pool has room for, a peer on
+/// pass a sample of [`SHM_THRESHOLD_BYTES`] or more through a shared segment of the
+/// sender's pool ([`SHM_POOL_BYTES`]) rather than through the socket: the sender writes the
+/// sample there once and the receiver reads it where it is, so a camera frame crosses
+/// without a copy (BENCHMARKS.md measures both). A larger sample than the pool has room for, a peer on
 /// another host, or a host without POSIX shared memory (`/dev/shm`) falls back to the
 /// socket, with the same QoS, counters and lockstep. The segment is readable by the
 /// user's own processes, as the launch's credentials are.
@@ -678,9 +682,14 @@ fn open_as(
             "transport/shared_memory/enabled",
             shared_memory()?.to_string(),
         ),
+        // Zenoh's own copying of large payloads into its pool is off: a process writes its
+        // large samples into a pool of its own (process/bridge.rs), which reclaims a buffer
+        // only when no process holds it. Zenoh's pool may reclaim a buffer a stalled
+        // receiver still holds (its watchdog, zenoh issue 2628), and a receiver keeps the
+        // buffer as the message's pixels.
         (
-            "transport/shared_memory/transport_optimization/message_size_threshold",
-            SHM_THRESHOLD_BYTES.to_string(),
+            "transport/shared_memory/transport_optimization/enabled",
+            "false".to_string(),
         ),
     ] {
         set(&mut config, k, &v)?;

@@ -184,7 +184,7 @@ pub fn run_process(opts: &ProcessOptions, stop: &StopFlag) -> Result<(), DistErr
         "process '{me}' ready ({} clock): its run starts with the launcher's",
         cfg.clock.as_str()
     ));
-    let bridge = bridge_outbound(&spec, &handles, publishers, &session);
+    let bridge = bridge_outbound(&spec, &handles, publishers);
     let ticks: Arc<Vec<AtomicU64>> =
         Arc::new((0..spec.nodes.len()).map(|_| AtomicU64::new(0)).collect());
     let run_time = Arc::new(AtomicU64::new(0));
@@ -445,7 +445,8 @@ struct Share {
     inbound: Vec<TopicId>,
     /// The newest seq received on each inbound topic.
     arrivals: Arc<Arrivals>,
-    /// Per inbound topic (in the order given), the over-the-wire latency of what arrived.
+    /// Per inbound topic (in the order given), the over-the-wire latency of what arrived and
+    /// how much was read in place.
     wire_latency: Arc<Vec<Mutex<bridge::Received>>>,
     /// The crossing topics it publishes: what a local node's event sent across the
     /// boundary, and the samples held back from Zenoh's receive thread.
@@ -634,7 +635,7 @@ mod tests {
                 publisher,
                 0,
                 "/action",
-                (spill.clone(), SharedPool::of(None)),
+                (spill.clone(), SharedPool::new(false)),
             ))],
             by_node: vec![vec![ratelab_runtime::graph::TopicId(0)], vec![]],
             spill: spill.clone(),

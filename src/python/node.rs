@@ -8,7 +8,11 @@
 //! `get_logger().info/warn/error`, `get_parameter(name).value` (the graph file's `params`),
 //! `get_name()`, `get_period()` (the node's tick, s: 1 / its `rate_hz` in this run) and `rng` (a NumPy `Generator` seeded from the run's seed and the node's
 //! name). Message classes, from `import ratelab` (number fields are floats in SI units; a
-//! text field is a `str`, a bytes field `bytes`):
+//! text field is a `str`; a bytes field, as it arrives, a read-only `memoryview` of the
+//! message's own bytes, not a copy ([`SharedBytes`]: a camera's frame that crossed processes
+//! in shared memory is read where it arrived; `numpy.frombuffer` reads it in place), and
+//! whatever a node sets it to when it builds a message: `bytes`, or any object that lends
+//! its bytes):
 //!
 //! | graph file type | class | fields |
 //! | --- | --- | --- |
@@ -255,8 +259,69 @@ fn read(t: &AnyTopic, now: Nanos) -> Option<(u64, Nanos, Fields)> {
     Some((m.seq, m.origin, m.data.values()))
 }
 
+/// A message's bytes lent to Python without a copy: they are exposed read-only through the
+/// buffer protocol (a `memoryview` of this object, which `numpy.frombuffer` reads in place)
+/// and kept alive while Python holds a view: a frame that arrived in another process's
+/// shared memory stays mapped as long (issue 76).
+#[pyclass(frozen, module = "ratelab")]
+pub struct SharedBytes(ratelab_core::msg::ImageData);
+
+#[pymethods]
+impl SharedBytes {
+    /// The buffer protocol: the bytes, read-only (a writable view is refused with
+    /// `BufferError`), one byte an item (`B`).
+    unsafe fn __getbuffer__(
+        slf: Bound<'_, Self>,
+        view: *mut pyo3::ffi::Py_buffer,
+        flags: std::ffi::c_int,
+    ) -> PyResult<()> {
+        let bytes = slf.get().0.as_slice();
+        let len = pyo3::ffi::Py_ssize_t::try_from(bytes.len())
+            .map_err(|_| pyo3::exceptions::PyBufferError::new_err("too many bytes"))?;
+        // SAFETY: `view` is the buffer CPython asks to fill; `PyBuffer_FillInfo` refuses a
+        // writable request, takes a new reference to `slf` (which owns the bytes, never
+        // moved or changed while it lives) into `view.obj`, and sets the format to `B` when
+        // asked; nothing is allocated that `__releasebuffer__` would free.
+        let rc = unsafe {
+            pyo3::ffi::PyBuffer_FillInfo(
+                view,
+                slf.as_ptr(),
+                bytes.as_ptr().cast_mut().cast(),
+                len,
+                1,
+                flags,
+            )
+        };
+        if rc == -1 {
+            return Err(PyErr::fetch(slf.py()));
+        }
+        Ok(())
+    }
+}
+
+/// `bytes` as Python reads a message's bytes field: a read-only `memoryview` of them, not a
+/// copy ([`SharedBytes`]).
+pub fn lend_bytes<'py>(
+    py: Python<'py>,
+    bytes: &ratelab_core::msg::ImageData,
+) -> PyResult<Bound<'py, PyAny>> {
+    let owner = Bound::new(py, SharedBytes(bytes.clone()))?;
+    Ok(pyo3::types::PyMemoryView::from(&owner)?.into_any())
+}
+
+/// A bytes field's value from Python: `bytes` copied once, or any object that lends its
+/// bytes through the buffer protocol (a `bytearray`, a `memoryview`, a contiguous NumPy
+/// array of bytes), copied once from its buffer.
+fn bytes_from_python(v: &Bound<'_, PyAny>) -> PyResult<ratelab_core::msg::ImageData> {
+    if let Ok(b) = v.cast::<PyBytes>() {
+        return Ok(ratelab_core::msg::ImageData::from(b.as_bytes()));
+    }
+    let buffer = pyo3::buffer::PyBuffer::<u8>::get(v)?;
+    Ok(buffer.to_vec(v.py())?.into())
+}
+
 /// A message's values (of fields `fields`) as a Python tuple: a whole-number field an
-/// `int`, bytes copied once into a Python `bytes`.
+/// `int`, a bytes field a read-only view of the message's bytes ([`lend_bytes`]).
 fn to_python_values<'py>(
     py: Python<'py>,
     fields: &[ratelab_core::msg::Field],
@@ -270,7 +335,7 @@ fn to_python_values<'py>(
             Value::Number(x) if f.kind == FieldKind::Integer => (*x as i64).into_bound_py_any(py),
             Value::Number(x) => x.into_bound_py_any(py),
             Value::Text(t) => t.into_bound_py_any(py),
-            Value::Bytes(b) => Ok(PyBytes::new(py, b.as_slice()).into_any()),
+            Value::Bytes(b) => lend_bytes(py, b),
         })
         .collect::<PyResult<_>>()?;
     PyTuple::new(py, items)
@@ -291,7 +356,7 @@ fn from_python_values(
             Ok(match f.kind {
                 FieldKind::Number | FieldKind::Integer => Value::Number(v.extract()?),
                 FieldKind::Text => Value::Text(v.extract()?),
-                FieldKind::Bytes => Value::Bytes(v.extract::<Vec<u8>>()?.into()),
+                FieldKind::Bytes => Value::Bytes(bytes_from_python(&v)?),
             })
         })
         .collect::<PyResult<_>>()?;

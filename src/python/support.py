@@ -256,10 +256,19 @@ def brain_caller(module, function, script):
 
 # ---- Python nodes (src/python/node.rs): an rclpy-shaped handle over one ratelab process -----
 
+def _is_lent(value):
+    """A read-only view of bytes, as a received message's bytes field is lent to Python (a
+    `memoryview` of the message's own bytes, src/python/node.rs `lend_bytes`): kept as it
+    is, not copied."""
+    return (type(value) is memoryview and value.readonly and value.format == "B"
+            and value.ndim == 1)
+
+
 def _as_kind(kind, value, name):
     """`value` as a field of `kind` holds it: `number` a float, `integer` an int, `text` a
     str, `bytes` bytes (from bytes, a bytearray or a contiguous NumPy array:
-    `arr.astype(np.uint8)`)."""
+    `arr.astype(np.uint8)`), or a read-only `memoryview` of bytes kept as it is (how a
+    received message's bytes arrive: a view of them where they arrived, not a copy)."""
     if kind == "text":
         if value is None:
             return ""
@@ -279,7 +288,7 @@ def _as_kind(kind, value, name):
     if kind == "bytes":
         if value is None:
             return b""
-        if type(value) is bytes:
+        if type(value) is bytes or _is_lent(value):
             return value  # as it came in: not copied again
         try:
             return bytes(memoryview(value))
@@ -316,7 +325,7 @@ class _Msg:
     def __repr__(self):
         def shown(k):
             v = getattr(self, k)
-            return f"<{len(v)} bytes>" if isinstance(v, bytes) else repr(v)
+            return f"<{len(v)} bytes>" if isinstance(v, (bytes, memoryview)) else repr(v)
         inner = ", ".join(f"{k}={shown(k)}" for k in self.FIELDS)
         return f"{type(self).__name__}({inner})"
 
@@ -407,8 +416,10 @@ class Force(_Msg):
 
 class Image(_Msg):
     """A camera's frame: height and width px, encoding (`mono8`: a byte of brightness a
-    pixel), step (bytes per row), data (the pixels, row after row, as bytes:
-    `np.frombuffer(img.data, np.uint8).reshape(img.height, img.step)`). ROS 2:
+    pixel), step (bytes per row), data (the pixels, row after row: bytes, or as a received
+    frame arrives, a read-only `memoryview` of the frame where it arrived, not a copy;
+    `np.frombuffer(img.data, np.uint8).reshape(img.height, img.step)` reads either in
+    place). ROS 2:
     `sensor_msgs/msg/Image` (multi-byte pixels little-endian)."""
 
     __slots__ = ("height", "width", "encoding", "step", "data")
@@ -418,7 +429,7 @@ class Image(_Msg):
 
     def to_ros(self):
         return {"height": self.height, "width": self.width, "encoding": self.encoding,
-                "is_bigendian": 0, "step": self.step, "data": self.data}
+                "is_bigendian": 0, "step": self.step, "data": bytes(self.data)}
 
     @classmethod
     def from_ros(cls, msg):

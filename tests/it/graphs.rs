@@ -118,6 +118,85 @@ fn a_numpy_vision_node_measures_every_frame_as_the_built_in_one_does() {
     assert!(deg < 0.01, "the two runs end {deg}° apart");
 }
 
+/// A Python node reads a frame's pixels where the frame is, read-only (issue 76 item 1): a
+/// bytes field arrives as a read-only `memoryview` of the message's own bytes, so two nodes
+/// reading the same frame read the same memory (a copy each would not), `numpy.frombuffer`
+/// reads it in place, and a write to it is refused. The node's checks raise, failing the
+/// run, if any of that is not so.
+#[test]
+fn a_python_node_reads_a_frames_pixels_in_place_read_only() {
+    ratelab::init();
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().to_str().unwrap();
+    std::fs::create_dir(dir.path().join("nodes")).unwrap();
+    std::fs::copy(
+        repo("graphs/nodes/image_estimator.py"),
+        dir.path().join("nodes/image_estimator.py"),
+    )
+    .unwrap();
+    let reader = r#"
+import os
+
+import numpy as np
+from ratelab import Image
+
+OUT = "@OUT@"
+
+
+class Reader:
+    def __init__(self, node):
+        self.node = node
+        self.out = open(os.path.join(OUT, node.get_name() + ".txt"), "w")
+        node.create_subscription(Image, "/image", self.on_image, 1)
+
+    def on_image(self, img):
+        assert type(img.data) is memoryview and img.data.readonly, type(img.data)
+        assert len(img.data) == img.step * img.height
+        px = np.frombuffer(img.data, np.uint8)
+        assert not px.flags.writeable
+        try:
+            px[0] = 1
+        except ValueError:
+            pass
+        else:
+            raise AssertionError("a received frame could be written")
+        # Built into a new message, the view is kept (copied once, when published).
+        again = Image(img.height, img.width, img.encoding, img.step, img.data)
+        assert again.data is img.data and bytes(again.data) == px.tobytes()
+        self.out.write(f"{self.node.get_clock().now().nanoseconds} {px.ctypes.data}\n")
+        self.out.flush()
+"#;
+    std::fs::write(
+        dir.path().join("nodes/reader.py"),
+        reader.replace("@OUT@", out),
+    )
+    .unwrap();
+    let mut graph = std::fs::read_to_string(repo("graphs/cartpole-camera-python.toml")).unwrap();
+    for who in ["a", "b"] {
+        graph.push_str(&format!(
+            "\n[[node]]\nname = \"{who}\"\nkind = \"python\"\nscript = \"nodes/reader.py\"\nrate_hz = 30\nsubscribes = \"/image\"\n"
+        ));
+    }
+    let file = dir.path().join("readers.toml");
+    std::fs::write(&file, &graph).unwrap();
+    let r = run(
+        &RunConfig {
+            clock: ClockKind::Virtual,
+            duration: Nanos(2 * Nanos::SECOND.0),
+            graph: GraphSpec::load(&file).unwrap(),
+            ..RunConfig::default()
+        },
+        Box::new(Scripted),
+        RunOptions::new(),
+    )
+    .unwrap();
+    assert!(r.metrics.balanced, "{:?}", r.metrics.fell_at_s);
+    let read = |who: &str| std::fs::read_to_string(dir.path().join(who)).unwrap();
+    let (a, b) = (read("a.txt"), read("b.txt"));
+    assert!(a.lines().count() >= 55, "{a}");
+    assert_eq!(a, b, "both nodes read every frame at the same address");
+}
+
 /// The camera's frames rendered by MuJoCo (issue 51 item 2) balance the pole as the drawn
 /// ones do and end within a degree of the drawn run; on a machine that cannot
 /// render (EGL told to find no driver), the camera says so in one log line and draws.

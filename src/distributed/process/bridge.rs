@@ -5,62 +5,69 @@
 //! arrivals the lockstep waits for, its over-the-wire latency, the samples refused).
 //!
 //! A large sample (an image, a scan: [`SHM_THRESHOLD_BYTES`] or more) is written once,
-//! straight from the message into a buffer of the session's shared-memory pool
+//! straight from the message into a buffer of the process's shared-memory pool
 //! ([`SharedPool`]), and read in place on arrival: its pixels stay a view of the shared
 //! buffer ([`shared_payload`]) unless the node must own a copy (issue 76).
 
 use super::*;
 use crate::wire::{SampleHead, SampleView};
-use crate::SHM_THRESHOLD_BYTES;
+use crate::{SHM_POOL_BYTES, SHM_THRESHOLD_BYTES};
 use ratelab_core::msg::MsgData;
 use zenoh::bytes::ZBytes;
 use zenoh::shm::{
-    Defragment, GarbageCollect, PosixShmProviderBackend, ShmProvider, ShmProviderState, ZShmMut,
+    Defragment, GarbageCollect, PosixShmProviderBackend, ShmProvider, ShmProviderBuilder, ZShmMut,
 };
 
-/// A session's shared-memory pool, as a sender of large samples uses it: Zenoh's own
-/// (the 16 MiB pool its transport creates for the first large sample, so writing into it
-/// costs no memory of its own), asked for on the first large sample.
+/// A process's shared-memory pool for its large samples: its own ([`SHM_POOL_BYTES`], made
+/// in the background when the first large sample is sent; Zenoh's copying of large payloads
+/// into a pool of its own is off, [`crate::open_session`]). A buffer returns to it only when
+/// no process holds it any more (Zenoh's safe garbage collection): a subscriber keeps a
+/// frame's buffer as long as it keeps the message, as its pixels ([`shared_payload`]), and
+/// the bytes must not change under it.
 pub(super) struct SharedPool {
-    /// The session (`None`: never shared memory, as in tests without one).
-    session: Option<zenoh::Session>,
-    /// The pool once Zenoh has it ready (`Some(None)`: the session has none: shared memory
-    /// off, or the pool could not be made).
-    provider: std::sync::OnceLock<Option<Arc<ShmProvider<PosixShmProviderBackend>>>>,
+    /// Shared memory is on ([`crate::shared_memory`]).
+    enabled: bool,
+    /// The pool once made (`Some(None)`: it could not be made; large samples cross the
+    /// socket).
+    provider: Arc<std::sync::OnceLock<Option<ShmProvider<PosixShmProviderBackend>>>>,
+    /// Whether the pool is being made.
+    started: std::sync::atomic::AtomicBool,
 }
 
 impl SharedPool {
-    /// The pool of `session` (`None`: none).
-    pub(super) fn of(session: Option<&zenoh::Session>) -> Arc<SharedPool> {
+    /// A pool, when `enabled` (shared memory on), made when first needed.
+    pub(super) fn new(enabled: bool) -> Arc<SharedPool> {
         Arc::new(SharedPool {
-            session: session.cloned(),
-            provider: std::sync::OnceLock::new(),
+            enabled,
+            provider: Arc::default(),
+            started: std::sync::atomic::AtomicBool::new(false),
         })
     }
 
     /// A buffer of `len` bytes in the pool, if it has room now: `None` when the sample is
-    /// small (under [`SHM_THRESHOLD_BYTES`], it crosses the socket as before), when the
-    /// session has no pool or it is still being made (the first large samples), or when the
-    /// pool is full even after reclaiming what receivers have let go (never blocks: the
-    /// sample then goes as ordinary bytes, which Zenoh may still copy into the pool).
+    /// small (under [`SHM_THRESHOLD_BYTES`], it crosses the socket), when shared memory is
+    /// off or the pool is still being made (the first large samples), or when the pool is
+    /// full even after reclaiming what every receiver has let go (never blocks: a tick must
+    /// not wait on a subscriber whose queue holds the pool's buffers; the sample then
+    /// crosses the socket).
     fn buffer(&self, len: usize) -> Option<ZShmMut> {
-        if len < SHM_THRESHOLD_BYTES {
+        if len < SHM_THRESHOLD_BYTES || !self.enabled {
             return None;
         }
-        let provider = match self.provider.get() {
-            Some(p) => p.as_ref()?,
-            None => match self.session.as_ref()?.get_shm_provider() {
-                ShmProviderState::Initializing(_) => return None,
-                ShmProviderState::Ready(p) => self.provider.get_or_init(|| Some(p)).as_ref()?,
-                ShmProviderState::Disabled | ShmProviderState::Error => {
-                    self.provider.get_or_init(|| None);
-                    return None;
-                }
-            },
+        let Some(provider) = self.provider.get() else {
+            // Made off the tick's thread: mapping and locking the pool takes a while.
+            if !self.started.swap(true, Ordering::SeqCst) {
+                let cell = self.provider.clone();
+                std::thread::spawn(move || {
+                    let made = ShmProviderBuilder::default_backend(SHM_POOL_BYTES).wait();
+                    let _ = cell.set(made.ok());
+                });
+            }
+            return None;
         };
-        // Safe policies only: a buffer a receiver still reads is never reclaimed. Not
-        // blocking: a tick must not wait on a subscriber whose queue holds the pool's buffers.
+        // Safe policies only: a buffer a receiver still holds is never reclaimed.
         provider
+            .as_ref()?
             .alloc(len)
             .with_policy::<Defragment<GarbageCollect>>()
             .wait()
@@ -82,6 +89,8 @@ impl SharedPool {
 /// A sample that arrived in shared memory as bytes that keep its buffer mapped, so that the
 /// message's pixels can be a view of it ([`SampleView::deliver`]); `None` for any other
 /// sample (through the socket, in a receive batch Zenoh reuses: its pixels are copied).
+/// Only a launch's processes may put on a topic's key (its access control), and each writes
+/// into a [`SharedPool`], whose buffers are never reclaimed while held: a view stays valid.
 pub(super) fn shared_payload(payload: &ZBytes) -> Option<bytes::Bytes> {
     payload.as_shm()?;
     let mut slices = payload.slices();
@@ -502,10 +511,9 @@ pub(super) fn bridge_outbound(
     spec: &GraphSpec,
     handles: &ratelab_runtime::graph::GraphHandles,
     publishers: Vec<(TopicId, zenoh::pubsub::Publisher<'static>)>,
-    session: &zenoh::Session,
 ) -> Arc<Bridge> {
     let spill = Spill::unbounded();
-    let pool = SharedPool::of(Some(session));
+    let pool = SharedPool::new(crate::shared_memory().unwrap_or(false));
     let mut outlets: Vec<Option<Outlet>> = (0..spec.topics.len()).map(|_| None).collect();
     for (t, p) in publishers {
         let name = &spec.topic(t).name;
@@ -545,17 +553,18 @@ pub(super) fn bridge_outbound(
     bridge
 }
 
-/// The over-the-wire latency of each inbound topic so far (µs, to 0.1); `lat` holds one
-/// per inbound topic, in `inbound`'s order ([`subscribe_inbound`]).
 /// What one inbound topic received, for its [`wire::WireLink`].
 #[derive(Default)]
 pub(super) struct Received {
     /// Each sample's time on the wire.
     pub(super) latency: LatencyStats,
-    /// Samples read in place from shared memory ([`shared_payload`]).
+    /// Samples that arrived in shared memory and were read there, in place
+    /// ([`shared_payload`]).
     pub(super) in_place: u64,
 }
 
+/// The over-the-wire latency of each inbound topic so far (µs, to 0.1); `lat` holds one
+/// per inbound topic, in `inbound`'s order ([`subscribe_inbound`]).
 pub(super) fn wire_links(
     process: &str,
     spec: &GraphSpec,
@@ -631,9 +640,11 @@ mod tests {
             ("connect/endpoints", json(connect)),
             ("scouting/multicast/enabled", "false".into()),
             ("transport/shared_memory/enabled", "true".into()),
+            // As ratelab's sessions: only what a process writes into its pool goes through
+            // shared memory, never Zenoh's own copy.
             (
-                "transport/shared_memory/transport_optimization/message_size_threshold",
-                SHM_THRESHOLD_BYTES.to_string(),
+                "transport/shared_memory/transport_optimization/enabled",
+                "false".into(),
             ),
         ] {
             config.insert_json5(key, &value).expect("a Zenoh setting");
@@ -686,7 +697,7 @@ mod tests {
             assert!(Instant::now() < deadline, "the subscriber was never seen");
             std::thread::sleep(Duration::from_millis(10));
         }
-        let pool = SharedPool::of(Some(&near));
+        let pool = SharedPool::new(true);
         let frame = |seq: u64| {
             let pixels: Vec<u8> = (0..640 * 480u32).map(|i| (i as u64 + seq) as u8).collect();
             MsgData::new(ImageMsg {
@@ -697,8 +708,8 @@ mod tests {
                 data: pixels.into(),
             })
         };
-        // Zenoh makes its pool when first asked, in the background: until it is ready the
-        // frames go as ordinary bytes (and still arrive).
+        // The pool is made when first asked, in the background: until it is ready the
+        // frames cross the socket (and still arrive).
         let mut seq = 0;
         let (sent, got) = loop {
             assert!(Instant::now() < deadline, "the pool was never ready");
@@ -743,9 +754,11 @@ mod tests {
             .written(&head, &force, head.sample_len(&force))
             .unwrap();
         assert!(small.as_shm().is_none());
-        // Without a session, or with shared memory off, nothing is put in a pool.
+        // With shared memory off, nothing is put in a pool.
         let big = frame(0);
         let len = head.sample_len(&big);
-        assert!(SharedPool::of(None).buffer(len).is_none());
+        let off = SharedPool::new(false);
+        assert!(off.buffer(len).is_none());
+        assert!(off.written(&head, &big, len).unwrap().as_shm().is_none());
     }
 }

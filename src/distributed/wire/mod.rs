@@ -230,9 +230,12 @@ mod tests {
             let mut out = vec![0u8; owned.len()];
             head.write(&payload, &mut out).unwrap();
             assert_eq!(out, owned, "the same bytes as the owned sample's");
-            // Too short or too long a buffer is refused, not half written.
-            assert!(head.write(&payload, &mut vec![0; owned.len() - 1]).is_err());
-            assert!(head.write(&payload, &mut vec![0; owned.len() + 1]).is_err());
+            // Too short or too long a buffer is refused before a byte is written.
+            for len in [owned.len() - 1, owned.len() + 1] {
+                let mut wrong = vec![7u8; len];
+                assert!(head.write(&payload, &mut wrong).is_err());
+                assert!(wrong.iter().all(|&b| b == 7), "nothing written");
+            }
             // Read in place: the payload is the arrived bytes themselves.
             let arrived = bytes::Bytes::from(out);
             let view = SampleView::decode(&arrived).unwrap();

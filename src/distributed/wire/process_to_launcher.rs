@@ -76,8 +76,9 @@ pub struct WireLink {
     /// Latency max, µs.
     pub max_us: f64,
     /// Of [`WireLink::samples`], those read in place: they arrived in Zenoh's shared memory
-    /// and the message's bytes stayed a view of the publisher's buffer, not a copy (0 when
-    /// none did, as for small messages; absent in a report from before it was counted).
+    /// and were read there, not copied out (a message's bytes fields stay a view of the
+    /// publisher's buffer). 0 when none did, as for small messages; absent from a report
+    /// made before it was counted.
     #[serde(default, skip_serializing_if = "is_zero")]
     pub in_place: u64,
     /// Set by the launcher when the receiving process rejoined mid-run: the run time of its

@@ -56,15 +56,18 @@ impl SampleHead {
     /// `out` is not [`SampleHead::sample_len`] long.
     pub fn write(&self, payload: &MsgData, out: &mut [u8]) -> Result<(), String> {
         let len = payload.encoded_len();
-        let head = postcard::to_slice(&(self, len), out)
-            .map_err(|e| format!("a sample's head: {e}"))?
-            .len();
-        let rest = &mut out[head..];
-        if rest.len() != len || payload.encode_into(rest)? != len {
+        let head_len = postcard::experimental::serialized_size(&(self, len)).unwrap_or(0);
+        if out.len() != head_len + len {
             return Err(format!(
-                "a sample's payload of {len} bytes in {}",
-                rest.len()
+                "a sample of {} bytes in {}",
+                head_len + len,
+                out.len()
             ));
+        }
+        let (head, rest) = out.split_at_mut(head_len);
+        postcard::to_slice(&(self, len), head).map_err(|e| format!("a sample's head: {e}"))?;
+        if payload.encode_into(rest)? != len {
+            return Err(format!("a sample's payload of {len} bytes"));
         }
         Ok(())
     }

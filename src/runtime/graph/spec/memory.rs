@@ -268,7 +268,8 @@ mod tests {
     fn a_cameras_frame_is_the_size_its_node_gives() {
         let g = GraphSpec::parse(&camera_graph(640, 480, 1), "cam.toml").unwrap();
         let image = g.topic_id("/image").unwrap();
-        let slots = 2 * (8 + 8 + 24 + 8 + 32 + MESSAGE_STAMPS_BYTES);
+        let pixels = std::mem::size_of::<ratelab_core::msg::ImageData>() as u64;
+        let slots = 2 * (8 + 8 + 24 + 8 + pixels + MESSAGE_STAMPS_BYTES);
         assert_eq!(g.largest_message_bytes(image), slots + 640 * 480 + 16);
         // One queue (the vision node's) of depth 1, and the frame the camera holds.
         assert_eq!(g.topic_queue_bytes(image), 2 * (slots + 640 * 480 + 16));
