@@ -684,9 +684,10 @@ fn open_as(
         ),
         // Zenoh's own copying of large payloads into its pool is off: a process writes its
         // large samples into a pool of its own (process/bridge.rs), which reclaims a buffer
-        // only when no process holds it. Zenoh's pool may reclaim a buffer a stalled
-        // receiver still holds (its watchdog, zenoh issue 2628), and a receiver keeps the
-        // buffer as the message's pixels.
+        // only when no process holds it. Zenoh's implicit copy allocates with an unsafe
+        // garbage collection that may reclaim a buffer a stalled receiver still holds (its
+        // watchdog lapsed: zenoh-transport's shm/interop.rs, `_wrap_in_place`; zenoh issue
+        // 2628), and a receiver keeps the buffer as the message's pixels.
         (
             "transport/shared_memory/transport_optimization/enabled",
             "false".to_string(),

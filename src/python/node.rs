@@ -293,6 +293,8 @@ impl SharedBytes {
             )
         };
         if rc == -1 {
+            // SAFETY: `view` is CPython's to fill; on failure it must not name an exporter.
+            unsafe { (*view).obj = std::ptr::null_mut() };
             return Err(PyErr::fetch(slf.py()));
         }
         Ok(())

@@ -260,15 +260,20 @@ def _is_lent(value):
     """A read-only view of bytes, as a received message's bytes field is lent to Python (a
     `memoryview` of the message's own bytes, src/python/node.rs `lend_bytes`): kept as it
     is, not copied."""
-    return (type(value) is memoryview and value.readonly and value.format == "B"
-            and value.ndim == 1)
+    if type(value) is not memoryview:
+        return False
+    try:
+        return (type(value.obj).__name__ == "SharedBytes" and value.readonly
+                and value.format == "B" and value.ndim == 1)
+    except ValueError:  # a released view
+        return False
 
 
 def _as_kind(kind, value, name):
     """`value` as a field of `kind` holds it: `number` a float, `integer` an int, `text` a
     str, `bytes` bytes (from bytes, a bytearray or a contiguous NumPy array:
-    `arr.astype(np.uint8)`), or a read-only `memoryview` of bytes kept as it is (how a
-    received message's bytes arrive: a view of them where they arrived, not a copy)."""
+    `arr.astype(np.uint8)`), or a received message's bytes kept as they are (a read-only
+    `memoryview` of them where they arrived, not a copy; any other view is copied)."""
     if kind == "text":
         if value is None:
             return ""

@@ -87,7 +87,8 @@ fn every_shipped_graph_balances_under_the_real_clock() {
     }
 }
 
-/// A camera's frames cross into a Python node as bytes and NumPy measures every one (issue
+/// A camera's frames cross into a Python node (a read-only view of each) and NumPy measures
+/// every one (issue
 /// 51 item 2): the built-in vision node's graph and the NumPy one's both balance, each
 /// publishes a measurement per frame, and the two measure the same poles (their runs agree
 /// to a hundredth of a degree at the end).

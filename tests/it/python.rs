@@ -1481,7 +1481,7 @@ fn a_python_node_that_never_declares_a_topic_its_file_gives_it_is_warned_about()
 }
 
 /// Bytes cross into and out of Python nodes (issue 51 item 2): a Python node publishes a
-/// NumPy array as an `Image`'s pixels, another reads them back with `np.frombuffer`, in one
+/// NumPy array as an `Image`'s pixels, another reads them back (a read-only view) with `np.frombuffer`, in one
 /// process and across processes (a node that finds a pixel wrong raises, and the run exits
 /// 2); a field of the wrong kind fails the node naming the field.
 #[test]
@@ -1513,7 +1513,8 @@ fn a_python_node_publishes_and_reads_an_image_s_bytes_in_one_process_and_across(
          \x20       self.pub = node.create_publisher(Force, '/action', 1)\n\
          \x20       node.create_subscription(Image, '/img', self.on_img, 1)\n\
          \x20   def on_img(self, img):\n\
-         \x20       assert isinstance(img.data, bytes) and img.encoding == 'mono8', repr(img)\n\
+         \x20       assert isinstance(img.data, memoryview) and img.data.readonly, repr(img)\n\
+         \x20       assert img.encoding == 'mono8', repr(img)\n\
          \x20       assert (img.height, img.width, img.step) == (3, 4, 4), repr(img)\n\
          \x20       px = np.frombuffer(img.data, np.uint8).reshape(img.height, img.step)\n\
          \x20       k = int(px[0, 1])\n\

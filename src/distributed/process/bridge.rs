@@ -58,10 +58,20 @@ impl SharedPool {
             // Made off the tick's thread: mapping and locking the pool takes a while.
             if !self.started.swap(true, Ordering::SeqCst) {
                 let cell = self.provider.clone();
-                std::thread::spawn(move || {
-                    let made = ShmProviderBuilder::default_backend(SHM_POOL_BYTES).wait();
-                    let _ = cell.set(made.ok());
-                });
+                let made = std::thread::Builder::new()
+                    .name("ratelab-shm-pool".into())
+                    .spawn(move || {
+                        let made = ShmProviderBuilder::default_backend(SHM_POOL_BYTES).wait();
+                        if let Err(e) = &made {
+                            eprintln!(
+                                "[ratelab] no shared-memory pool ({e}): large samples cross the socket"
+                            );
+                        }
+                        let _ = cell.set(made.ok());
+                    });
+                if made.is_err() {
+                    let _ = self.provider.set(None);
+                }
             }
             return None;
         };
