@@ -458,7 +458,8 @@ impl From<&crate::qos::Fault> for FaultMetrics {
 /// One node's figures in `metrics.json`.
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
 pub struct NodeMetrics {
-    /// `sensor`, `estimator`, `policy`, `safety` or `actuator`.
+    /// The node's kind, as the graph file names it (`sensor`, `policy`, … or a registered
+    /// kind's name: `ratelab kinds` lists them).
     pub kind: String,
     /// Tie-break rank: at a shared instant, lower ticks first.
     pub rank: usize,

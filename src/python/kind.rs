@@ -3,23 +3,21 @@
 
 use crate::brain::PythonBrain;
 use crate::node::PythonNode;
-use ratelab_core::node::Flow;
+use ratelab_core::ports::{AnyPorts, RustNode};
 use ratelab_core::rate::Rate;
 use ratelab_core::time::Nanos;
 use ratelab_runtime::graph::interpreter::Interpreter;
-use ratelab_runtime::graph::kind::{BuildContext, PythonCode, Work};
+use ratelab_runtime::graph::kind::{BuildContext, NodeOf, PythonCode};
 use ratelab_runtime::policy::Policy;
 
 /// The embedded interpreter (PyO3) as the runtime calls it.
 pub struct Embedded;
 
 impl Interpreter for Embedded {
-    fn node(&self, cx: &mut BuildContext<'_>, code: &PythonCode) -> Result<Box<dyn Work>, String> {
+    fn node(&self, cx: &mut BuildContext<'_>, code: &PythonCode) -> Result<NodeOf, String> {
         let node = PythonNode::load(cx, code).map_err(|e| e.to_string())?;
-        Ok(Box::new(Python {
-            node,
-            rate: cx.rate.clone(),
-        }))
+        let rate = cx.adapter.rate.clone();
+        NodeOf::bind(cx, Python { node, rate })
     }
 
     fn brain(&self, script: &str, function: &str) -> Result<Box<dyn Policy>, String> {
@@ -37,18 +35,21 @@ impl Interpreter for Embedded {
     }
 }
 
-/// A Python node with its rate (a timer's period is a whole number of ticks).
+/// A Python node with its rate (a timer's period is a whole number of ticks): an adapter
+/// whose topics are any ([`AnyPorts`]), read and published by the Python node itself.
 struct Python {
     node: PythonNode,
     rate: Rate,
 }
 
-impl Work for Python {
-    fn tick(&mut self, now: Nanos) -> Flow {
-        match self.node.tick(now, self.rate.period()) {
-            Ok(()) => Flow::Continue,
+impl RustNode for Python {
+    type Input = AnyPorts;
+    type Output = AnyPorts;
+
+    fn tick(&mut self, now: Nanos, (): ()) {
+        if let Err(e) = self.node.tick(now, self.rate.period()) {
             // The scheduler catches it and fails the node with this line.
-            Err(e) => panic!("{}", e.0),
+            panic!("{}", e.0);
         }
     }
 }

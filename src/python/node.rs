@@ -95,9 +95,13 @@ impl PythonNode {
     /// # Errors
     /// [`PythonError`]: see the module docs.
     pub fn load(cx: &BuildContext<'_>, code: &PythonCode) -> Result<PythonNode, PythonError> {
-        let (name, params, period, seed) = (cx.name, cx.params, cx.period(), cx.seed);
-        let (inputs, outputs, outbox) =
-            (cx.inputs.to_vec(), cx.outputs.to_vec(), cx.outbox.clone());
+        let node = &cx.node;
+        let (name, params, period, seed) = (node.name, node.params, node.period, node.seed);
+        let (inputs, outputs, outbox) = (
+            node.inputs.to_vec(),
+            node.outputs.to_vec(),
+            cx.outbox.clone(),
+        );
         let given = given_class(name);
         let script = code.script.as_str();
         // A class the caller gave needs no script: its own file names it in messages.

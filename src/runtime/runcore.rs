@@ -51,7 +51,7 @@
 //!   the commands applied and those still to come.
 //!
 //! When some part cannot be captured — a Python node's or brain's objects, a ROS 2 node's
-//! proxy, a program's own kind that does not implement [`crate::graph::kind::Work::save`] —
+//! proxy, a program's own kind that does not implement [`ratelab_core::ports::RustNode::save`] —
 //! the capture is a *replay*: the commands applied up to then. Restoring it builds the graph
 //! again from its settings (with the brain [`CoreOptions::remake_brain`] makes) and runs it
 //! from 0 to the captured instant under the virtual clock, which is deterministic: the same

@@ -2,10 +2,13 @@
 //! running on gives the uninterrupted run byte for byte (`metrics.json` and every step
 //! record), whatever ran or was changed in between; capturing changes nothing; a branch at
 //! the capture equals `replay` of the same command; a graph with a Python node restores by
-//! replaying.
+//! replaying, one with a program's own kind that says how to capture its state in place.
 
 use proptest::prelude::*;
+use ratelab::graph::registry::{Held, NodeContext, RustNode, Stamped};
 use ratelab::graph::GraphSpec;
+use ratelab::msg::{ForceMsg, StateMsg};
+use ratelab::node::NodeState;
 use ratelab::policy::Scripted;
 use ratelab::qos::Fault;
 use ratelab::run::{Command, TimedCommand};
@@ -52,7 +55,58 @@ fn configurations() -> Vec<(&'static str, RunConfig)> {
         ("estimator", cfg(file("graphs/cartpole-estimator.toml"), 0)),
         ("safety", cfg(file("graphs/cartpole-safety.toml"), 0)),
         ("executors", cfg(file("graphs/cartpole-executors.toml"), 0)),
+        ("a program's own kind", cfg(own_kind_graph(), 4)),
     ]
+}
+
+/// A program's own kind that keeps state and says how to capture it: a PD controller on
+/// the held state (`Held<StateMsg>`, the zero-order hold) whose force is low-passed, so a
+/// restore that lost its state, or its input's position, would not give the same run.
+struct SmoothPd {
+    force_n: f64,
+}
+
+impl RustNode for SmoothPd {
+    type Input = Held<StateMsg>;
+    type Output = ForceMsg;
+
+    fn tick(&mut self, _now: Nanos, state: Option<&Stamped<StateMsg>>) -> Option<ForceMsg> {
+        let [x, x_dot, cos_t, sin_t, theta_dot] = state?.data.map(f64::from);
+        let u = 10.0 * sin_t.atan2(cos_t) + 2.0 * theta_dot + 0.4 * x + 0.8 * x_dot;
+        let target = (u.clamp(-1.0, 1.0) as f32 as f64) * ratelab::plant::GEAR_N;
+        self.force_n += 0.7 * (target - self.force_n);
+        Some(ForceMsg {
+            newtons: self.force_n,
+        })
+    }
+
+    fn save(&self) -> Option<NodeState> {
+        Some(Box::new(self.force_n))
+    }
+
+    fn load(&mut self, state: &NodeState) -> bool {
+        let Some(f) = state.downcast_ref::<f64>() else {
+            return false;
+        };
+        self.force_n = *f;
+        true
+    }
+}
+
+/// The chapter's graph with its policy a [`SmoothPd`] (`kind = "smooth_pd"`, registered
+/// once).
+fn own_kind_graph() -> GraphSpec {
+    static REGISTERED: std::sync::Once = std::sync::Once::new();
+    REGISTERED.call_once(|| {
+        ratelab::graph::registry::register("smooth_pd", |_: &NodeContext<'_>| {
+            Ok(SmoothPd { force_n: 0.0 })
+        })
+        .unwrap();
+    });
+    let chapter = std::fs::read_to_string(repo("graphs/cartpole.toml")).unwrap();
+    let own = chapter.replace("kind = \"policy\"", "kind = \"smooth_pd\"");
+    assert_ne!(own, chapter);
+    GraphSpec::parse(&own, "cartpole.toml").unwrap()
 }
 
 fn core(cfg: &RunConfig, commands: Vec<TimedCommand>) -> RunCore {

@@ -7,7 +7,7 @@
 //! that runs Python nodes or brains through the library calls it too. Without it, a graph
 //! with a Python node or a Python brain is refused in one line ([`NOT_INSTALLED`]).
 
-use crate::graph::kind::{BuildContext, PythonCode, Work};
+use crate::graph::kind::{BuildContext, NodeOf, PythonCode};
 use crate::policy::Policy;
 use std::cell::RefCell;
 use std::collections::BTreeMap;
@@ -27,7 +27,7 @@ pub trait Interpreter: Send + Sync {
     /// # Errors
     /// The one-line reason it cannot start (the script unreadable, raising at import, a
     /// class or publisher that does not fit the graph file).
-    fn node(&self, cx: &mut BuildContext<'_>, code: &PythonCode) -> Result<Box<dyn Work>, String>;
+    fn node(&self, cx: &mut BuildContext<'_>, code: &PythonCode) -> Result<NodeOf, String>;
 
     /// The brain that calls `function` of `script` once per control tick.
     ///

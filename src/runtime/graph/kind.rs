@@ -1,15 +1,17 @@
 //! What a node kind is: the one definition a graph file's `kind = "…"` names
 //! ([`KindDef`]), and what making a node of it is given ([`BuildContext`]).
 //!
-//! Every kind — the built-in `sensor`, `estimator`, `policy`, `safety` and `actuator`
-//! (one file each in [`super::nodes`]), `python` (a learner's script), `external` (a ROS 2
-//! node) and the kinds a Rust program registers ([`super::registry`]) — is one [`KindDef`]
-//! in one registry ([`super::registry::kind`]). The graph file's rules ([`super::spec`])
-//! read only the definition: what the kind reads and publishes ([`Ports`]), how it touches
-//! the plant ([`Plant`]), whose code it runs ([`Code`]) and which parameters it takes
-//! ([`Params`]); [`super::Graph::build`] calls its `make`. Nothing else matches on a
-//! kind (the graph file's shorthand for the built-in kinds' parameters, `max_force_n = 8` as
-//! a key of the node's table, lists their names).
+//! Every kind — the built-in ones (one file each in [`super::nodes`]; `ratelab kinds`
+//! lists them) and the kinds a Rust program registers ([`super::registry`]) — is one
+//! [`KindDef`] in one registry ([`super::registry::kind`]), and every kind's node is a
+//! [`RustNode`] (typed inputs and outputs, one `tick`: [`ratelab_core::ports`]) bound to its
+//! topics ([`NodeOf::bind`]); a Python node and a ROS 2 node's proxy are adapters of it
+//! whose ports are any topics ([`ratelab_core::ports::AnyPorts`]). The graph file's rules
+//! ([`super::spec`]) read only the definition: what the kind reads and publishes
+//! ([`Ports`]), how it touches the plant ([`Plant`]), whose code it runs ([`Code`]) and
+//! which parameters it takes ([`Params`]); [`super::Graph::build`] calls its `make` with
+//! what each kind needs ([`BuildContext`]: [`NodeContext`] for every kind, [`RunParts`]
+//! for the chain's, [`AdapterParts`] for the adapters').
 //!
 //! A leaf of the graph module: it knows message types, topics and the plant, not the graph
 //! file or the graph built from it.
@@ -17,8 +19,10 @@
 use crate::plant::SharedPlant;
 use crate::policy::BrainSlot;
 use ratelab_core::ids::NodeId;
+use ratelab_core::limits::MAX_NODE_PORTS;
 use ratelab_core::msg::{AnyTopic, MsgType};
-use ratelab_core::node::Flow;
+use ratelab_core::node::{Flow, NodeState};
+use ratelab_core::ports::{Inputs, Outputs, RustNode};
 use ratelab_core::publisher::Outbox;
 use ratelab_core::qos::Liveliness;
 use ratelab_core::rate::Rate;
@@ -114,54 +118,139 @@ pub struct PythonCode {
     pub class: Option<String>,
 }
 
-/// A node at run time, of some kind: what it does on a tick.
-pub trait Work: Send {
-    /// One tick at run time `now`.
-    ///
-    /// # Panics
-    /// A node whose code failed (a Python callback raised) panics with its one-line
-    /// reason; the scheduler catches it and ends the run as "node X failed".
+/// A node at run time, its kind's [`RustNode`] bound to its topics ([`NodeOf::bind`]): what
+/// the graph's node runs on a tick. ratelab's side of [`RustNode`], never written by a kind.
+pub(crate) trait Work: Send {
+    /// One tick at run time `now` (a node whose code failed panics, see [`RustNode::tick`]).
     fn tick(&mut self, now: Nanos) -> Flow;
-    /// Does a tick assert the node's liveliness? An external node's proxy ticks whether or
-    /// not the ROS 2 node is there: it asserts it when a message arrives instead.
-    fn alive_by_ticking(&self) -> bool {
-        true
-    }
-    /// The node's own state now ([`ratelab_core::node::Node::save`]): `None` (the default) when it
-    /// cannot be captured, which makes a capture of its graph a replay
-    /// ([`crate::runcore`]). A kind whose `tick` keeps nothing between ticks returns
-    /// `Some(Box::new(()))`.
-    fn save(&self) -> Option<ratelab_core::node::NodeState> {
-        None
-    }
-    /// Take back what [`Work::save`] gave; false (nothing changed) when it is not this
-    /// kind's.
-    fn load(&mut self, _state: &ratelab_core::node::NodeState) -> bool {
-        false
+    /// [`RustNode::alive_by_ticking`].
+    fn alive_by_ticking(&self) -> bool;
+    /// The node's state and its inputs' positions ([`RustNode::save`]).
+    fn save(&self) -> Option<NodeState>;
+    /// Take back what [`Work::save`] gave.
+    fn load(&mut self, state: &NodeState) -> bool;
+}
+
+/// A node of a kind, bound to its topics: what a kind's `make` returns ([`NodeOf::bind`]).
+pub struct NodeOf(pub(crate) Box<dyn Work>);
+
+impl NodeOf {
+    /// `node` bound to the topics `cx` gives: each input read by its slot at every tick
+    /// ([`Inputs`]), what each tick returns published through `cx.outbox` with the oldest
+    /// origin its inputs delivered (its tick time for a source).
+    ///
+    /// # Errors
+    /// One line naming the node when its topics are not of `N`'s types (the graph file's
+    /// rules check them against the kind's [`Ports`] when it is read).
+    pub fn bind<N: RustNode>(cx: &BuildContext<'_>, node: N) -> Result<NodeOf, String> {
+        let (Some(inputs), Some(outputs)) = (
+            <N::Input as Inputs>::bind(cx.node.inputs),
+            <N::Output as Outputs>::bind(cx.node.outputs, cx.outbox),
+        ) else {
+            return Err(format!(
+                "node '{}': its topics are not of the types its kind reads and publishes",
+                cx.node.name
+            ));
+        };
+        Ok(NodeOf(Box::new(Bound::<N> {
+            node,
+            inputs,
+            outputs,
+        })))
     }
 }
 
-/// Everything making one node is given: the node's settings from the graph file, its
-/// topics, and the graph's shared parts.
-pub struct BuildContext<'a> {
-    /// The node's name.
+impl fmt::Debug for NodeOf {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str("NodeOf(..)")
+    }
+}
+
+/// A node with its topics.
+struct Bound<N: RustNode> {
+    node: N,
+    inputs: <N::Input as Inputs>::Ports,
+    outputs: <N::Output as Outputs>::Ports,
+}
+
+/// A bound node's state ([`Work::save`]): its own, and where its inputs stand.
+struct BoundState<M> {
+    node: NodeState,
+    marks: M,
+}
+
+impl<N: RustNode> Work for Bound<N> {
+    fn tick(&mut self, now: Nanos) -> Flow {
+        let delivered = <N::Input as Inputs>::read(&mut self.inputs, now);
+        let out = self.node.tick(now, delivered);
+        // The oldest origin its inputs delivered; a source's data begins at its tick.
+        let origin = if <N::Input as Inputs>::TYPES.is_empty() {
+            Some(now)
+        } else {
+            <N::Input as Inputs>::oldest_origin(&self.inputs).or(Some(now))
+        };
+        <N::Output as Outputs>::publish(&self.outputs, out, now, origin);
+        self.node.flow()
+    }
+    fn alive_by_ticking(&self) -> bool {
+        self.node.alive_by_ticking()
+    }
+    fn save(&self) -> Option<NodeState> {
+        Some(Box::new(BoundState {
+            node: self.node.save()?,
+            marks: <N::Input as Inputs>::marks(&self.inputs),
+        }))
+    }
+    fn load(&mut self, state: &NodeState) -> bool {
+        type Kept<N> = BoundState<<<N as RustNode>::Input as Inputs>::Marks>;
+        let Some(s) = state.downcast_ref::<Kept<N>>() else {
+            return false;
+        };
+        if !self.node.load(&s.node) {
+            return false;
+        }
+        <N::Input as Inputs>::set_marks(&mut self.inputs, &s.marks);
+        true
+    }
+}
+
+/// What every node is made from: its settings from the graph file and its topics. All a
+/// program's own kind is given ([`super::registry::register`]).
+#[derive(Debug)]
+pub struct NodeContext<'a> {
+    /// The node's name in the graph file.
     pub name: &'a str,
     /// Its index in the graph (its tie-break rank).
     pub id: NodeId,
-    /// Its rate (shared: it can change while the graph runs).
-    pub rate: &'a Rate,
-    /// The run's seed (derive any generator from it: virtual runs stay byte-identical).
+    /// Its period at the start of the run (1 / `rate_hz`).
+    pub period: Nanos,
+    /// The run's seed (for a node that draws random numbers: derive its generator from it,
+    /// and a virtual run stays byte-identical).
     pub seed: u64,
-    /// Its parameters: for [`Params::Numbers`], every declared one, checked.
+    /// The graph file's `params = { … }` for it: for [`Params::Numbers`], every declared
+    /// one, checked.
     pub params: &'a toml::Table,
-    /// A Python node's script and class.
-    pub python: Option<&'a PythonCode>,
-    /// The topics it reads, in the file's order, of the types its [`Ports`] allow.
+    /// The topics it reads, in the file's order, of the types its [`Ports`] allow (a kind
+    /// may keep one to ask its QoS: the actuator's deadline reaction).
     pub inputs: &'a [AnyTopic],
     /// The topics it publishes, likewise.
     pub outputs: &'a [AnyTopic],
-    /// Its outbox: publish through it (held during a tick with a compute time).
-    pub outbox: &'a Outbox,
+}
+
+impl NodeContext<'_> {
+    /// Parameter `key` as a number (an integer in the file is taken as one): its checked
+    /// value for a kind of [`Params::Numbers`], `default` when the file does not give it.
+    ///
+    /// # Errors
+    /// A one-line reason naming the node and the key when it is not a finite number.
+    pub fn param_f64(&self, key: &str, default: f64) -> Result<f64, String> {
+        param_f64(self.name, self.params, key, default)
+    }
+}
+
+/// The run's shared parts, for the kinds that touch the plant ([`Plant`]), run the brain
+/// or write the run's log: the chapter's chain.
+pub struct RunParts<'a> {
     /// The plant.
     pub plant: &'a SharedPlant,
     /// The run's brain (`--policy`).
@@ -176,28 +265,35 @@ pub struct BuildContext<'a> {
     /// The policy's queue of the chain's state estimate, when the graph has an estimator
     /// ([`crate::graph::GraphSpec::estimate_topic`]; the actuator watches it).
     pub estimate: Option<AnyTopic>,
-    /// The node's liveliness.
-    pub liveliness: &'a Arc<Liveliness>,
     /// Told of every actuator step (the actuator takes them).
     pub observers: &'a mut Option<Vec<Box<dyn StepSink>>>,
+}
+
+/// What an adapter of code that lives elsewhere is given beside its topics (a Python node,
+/// a ROS 2 node's proxy: kinds of [`AnyPorts`], which read and publish themselves).
+pub struct AdapterParts<'a> {
+    /// A Python node's script and class.
+    pub python: Option<&'a PythonCode>,
+    /// Its rate (shared: it can change while the graph runs).
+    pub rate: &'a Rate,
+    /// Its liveliness (a ROS 2 node's proxy asserts it when a message arrives).
+    pub liveliness: &'a Arc<Liveliness>,
     /// What the graph made for this node before it (an external node's port).
     pub attachment: Option<Arc<dyn Any + Send + Sync>>,
 }
 
-impl BuildContext<'_> {
-    /// Its period at the start of the run.
-    pub fn period(&self) -> Nanos {
-        self.rate.period()
-    }
-
-    /// Parameter `key` as a number: its checked value for a kind of [`Params::Numbers`],
-    /// `default` when the file does not give it.
-    ///
-    /// # Errors
-    /// A one-line reason naming the node and the key when it is not a finite number.
-    pub fn param_f64(&self, key: &str, default: f64) -> Result<f64, String> {
-        param_f64(self.name, self.params, key, default)
-    }
+/// Everything making one node is given, by what each kind needs: [`NodeContext`] (every
+/// kind), [`RunParts`] (the chain's kinds), [`AdapterParts`] (Python and ROS 2 adapters),
+/// and the outbox its publishers publish through.
+pub struct BuildContext<'a> {
+    /// The node's settings and topics.
+    pub node: NodeContext<'a>,
+    /// The run's plant, brain, log and watchers.
+    pub run: RunParts<'a>,
+    /// What an adapter is given.
+    pub adapter: AdapterParts<'a>,
+    /// Its outbox: publish through it (held during a tick with a compute time).
+    pub outbox: &'a Outbox,
 }
 
 /// `params[key]` as a number (an integer is taken as one), `default` when absent.
@@ -216,7 +312,7 @@ pub fn param_f64(name: &str, params: &toml::Table, key: &str, default: f64) -> R
 }
 
 /// Make a running node of a kind.
-pub type Make = dyn Fn(&mut BuildContext<'_>) -> Result<Box<dyn Work>, String> + Send + Sync;
+pub type Make = dyn Fn(&mut BuildContext<'_>) -> Result<NodeOf, String> + Send + Sync;
 
 /// A node kind: the one definition the graph file's rules and the graph's builder read.
 pub struct KindDef {
@@ -236,6 +332,53 @@ pub struct KindDef {
     pub uses_brain: bool,
     /// Make a node of it.
     pub make: Box<Make>,
+}
+
+impl KindDef {
+    /// Kind `name`, whose nodes are the [`RustNode`]s `make` makes, bound to their topics
+    /// ([`NodeOf::bind`]). Its ports are `N`'s: its input and output types, one topic each
+    /// ([`Ports::Fixed`]), or any topics up to [`MAX_NODE_PORTS`] each way for
+    /// [`ratelab_core::ports::AnyPorts`]. The rest are a program's kind's: no docs, no
+    /// plant, [`Code::Rust`], any table of parameters, no brain. A built-in kind sets its
+    /// own over these (`KindDef { plant: Plant::Reads, ..KindDef::of(…) }`).
+    pub fn of<N, F>(name: &str, make: F) -> KindDef
+    where
+        N: RustNode,
+        F: Fn(&mut BuildContext<'_>) -> Result<N, String> + Send + Sync + 'static,
+    {
+        KindDef {
+            name: Box::leak(name.to_string().into_boxed_str()),
+            doc: "",
+            ports: ports_of::<N>(),
+            plant: Plant::None,
+            code: Code::Rust,
+            params: Params::Free,
+            uses_brain: false,
+            make: Box::new(move |cx: &mut BuildContext<'_>| {
+                let node = make(cx)?;
+                NodeOf::bind(cx, node)
+            }),
+        }
+    }
+}
+
+/// The ports of a kind whose nodes are `N`s: one topic per input and output type, or
+/// [`Ports::Open`] for [`ratelab_core::ports::AnyPorts`].
+pub fn ports_of<N: RustNode>() -> Ports {
+    if <N::Input as Inputs>::OPEN || <N::Output as Outputs>::OPEN {
+        return Ports::Open {
+            max_inputs: MAX_NODE_PORTS,
+            min_outputs: 0,
+            max_outputs: MAX_NODE_PORTS,
+        };
+    }
+    let one = |types: &'static [MsgType]| -> Vec<&'static [MsgType]> {
+        types.iter().map(std::slice::from_ref).collect()
+    };
+    Ports::Fixed {
+        inputs: one(<N::Input as Inputs>::TYPES),
+        outputs: one(<N::Output as Outputs>::TYPES),
+    }
 }
 
 impl fmt::Debug for KindDef {

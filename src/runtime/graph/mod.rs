@@ -19,7 +19,7 @@ pub mod synthetic;
 use crate::plant::CartPole;
 pub use crate::plant::SharedPlant;
 use crate::policy::BrainSlot;
-use kind::{BuildContext, Code};
+use kind::{AdapterParts, BuildContext, Code, NodeContext, RunParts};
 pub use kind::{Kind, KindDef};
 use nodes::{ExternalPort, GraphNode, NodeCore};
 use ratelab_core::executor::ComputeDraw;
@@ -528,31 +528,38 @@ fn build_node(
         .ok()
         .map(|k| handles.external[k].clone() as Arc<dyn std::any::Any + Send + Sync>);
     let mut cx = BuildContext {
-        name: &n.name,
-        id: NodeId(i),
-        rate: &handles.rates[i],
-        seed,
-        params: &n.params,
-        python: n.python.as_ref(),
-        inputs: &inputs,
-        outputs: &outputs,
+        node: NodeContext {
+            name: &n.name,
+            id: NodeId(i),
+            period: handles.rates[i].period(),
+            seed,
+            params: &n.params,
+            inputs: &inputs,
+            outputs: &outputs,
+        },
+        run: RunParts {
+            plant: &handles.plant,
+            brain: &handles.brain,
+            log: &handles.log,
+            topics,
+            action: spec.chain.map(|c| &topics[c.action.0]),
+            estimate: spec.estimate_topic().zip(spec.chain).map(|(t, c)| {
+                // The policy's own queue of it, when the topic has several subscribers.
+                let subs = &spec.topic(t).subscribers;
+                match subs.binary_search(&c.policy).ok() {
+                    Some(k) if subs.len() > 1 => topics[t.0].subscription(k),
+                    _ => topics[t.0].clone(),
+                }
+            }),
+            observers,
+        },
+        adapter: AdapterParts {
+            python: n.python.as_ref(),
+            rate: &handles.rates[i],
+            liveliness: &handles.liveliness[i],
+            attachment,
+        },
         outbox: &outbox,
-        plant: &handles.plant,
-        brain: &handles.brain,
-        log: &handles.log,
-        topics,
-        action: spec.chain.map(|c| &topics[c.action.0]),
-        estimate: spec.estimate_topic().zip(spec.chain).map(|(t, c)| {
-            // The policy's own queue of it, when the topic has several subscribers.
-            let subs = &spec.topic(t).subscribers;
-            match subs.binary_search(&c.policy).ok() {
-                Some(k) if subs.len() > 1 => topics[t.0].subscription(k),
-                _ => topics[t.0].clone(),
-            }
-        }),
-        liveliness: &handles.liveliness[i],
-        observers,
-        attachment,
     };
     let work = (n.kind.def().make)(&mut cx).map_err(GraphError::Node)?;
     Ok(Box::new(GraphNode::new(core, work)) as Box<dyn Node>)

@@ -1,15 +1,18 @@
 //! The registry of node kinds: from the name a graph file gives as `kind` to the kind's one
 //! definition ([`super::kind::KindDef`]). Every kind comes in through [`register_kind`]: the
-//! built-in ones (`sensor`, `estimator`, `policy`, `safety`, `actuator`, `python`,
-//! `external`; one file each in [`super::nodes`], listed here one line each) and a Rust
-//! program's own, by the same rules; [`register`] is the short way for a kind written as a
-//! [`RustNode`], and [`rust_kind`] its definition, to give docs and parameters with units.
+//! built-in ones (one file each in [`super::nodes`], listed here one line each; `ratelab
+//! kinds` prints them) and a Rust program's own, by the same rules; [`register`] is the
+//! short way for a kind written as a [`RustNode`], and [`rust_kind`] its definition, to
+//! give docs and parameters with units.
 //!
-//! A kind written in Rust outside ratelab is a type implementing [`RustNode`] with typed inputs and outputs (copper-rs's
-//! `CuTask` is the model): each a [`Message`](ratelab_core::msg::Message) — any registered message type
-//! ([`ratelab_core::msg`]: the built-in `StateMsg`, `PositionMsg`, `ForceMsg`, or one of your own,
-//! which registering the kind registers too) — or a tuple of two to four of them, or `()`
-//! for none ([`Inputs`], [`Outputs`]). [`register`] it once, before the graph file is read; from then on
+//! Every kind's node is a [`RustNode`], the built-in ones included: typed inputs and
+//! outputs (copper-rs's `CuTask` is the model), each a
+//! [`Message`](ratelab_core::msg::Message) — any registered message type
+//! ([`ratelab_core::msg`]: the built-in `StateMsg`, `PositionMsg`, `ForceMsg`, or one of
+//! your own, which registering the kind registers too) or [`Held`] of one (every tick's
+//! read, stale ones included, with the message's stamps) — or a tuple of two to four of
+//! them, or `()` for none ([`Inputs`], [`Outputs`]). A kind written outside ratelab is one
+//! too: [`register`] it once, before the graph file is read; from then on
 //! `kind = "NAME"` in a graph file makes one, with the file's `params = { … }`:
 //!
 //! ```no_run
@@ -74,43 +77,19 @@
 //! `lab/` crate) gives it `launch` and every other front end, and
 //! `examples/custom_node_processes.rs` is one.
 
-use super::kind::{BuildContext, Code, Kind, KindDef, Params, Plant, Ports, Work};
+use super::kind::{Code, Kind, KindDef, Params, Plant, Ports};
 use super::nodes;
 use ratelab_core::msg::MsgType;
-use ratelab_core::node::Flow;
-use ratelab_core::time::Nanos;
 use std::sync::{LazyLock, RwLock};
 
 /// The most node kinds one process may have, the built-in ones included
 /// ([`ratelab_core::limits::MAX_NODE_KINDS`]).
 pub const MAX_KINDS: usize = ratelab_core::limits::MAX_NODE_KINDS;
 
-pub use ratelab_core::ports::{InPort, Inputs, Outputs, RustNode};
-
-/// What making a node is given: its name and settings from the graph file and the run.
-#[derive(Debug)]
-pub struct NodeContext<'a> {
-    /// The node's name in the graph file.
-    pub name: &'a str,
-    /// Its period at the start of the run (1 / `rate_hz`).
-    pub period: Nanos,
-    /// The run's seed (for a node that draws random numbers: derive its generator from it,
-    /// and a virtual run stays byte-identical).
-    pub seed: u64,
-    /// The graph file's `params = { … }` for it.
-    pub params: &'a toml::Table,
-}
-
-impl NodeContext<'_> {
-    /// Parameter `key` as a number (an integer in the file is taken as one), or `default`
-    /// when the file does not set it.
-    ///
-    /// # Errors
-    /// A one-line reason naming the node and the key when it is not a finite number.
-    pub fn param_f64(&self, key: &str, default: f64) -> Result<f64, String> {
-        crate::graph::kind::param_f64(self.name, self.params, key, default)
-    }
-}
+pub use super::kind::NodeContext;
+pub use ratelab_core::ports::{
+    AnyPorts, Held, InPort, InputSlot, Inputs, Outputs, RustNode, Stamped,
+};
 
 /// Why a kind cannot be registered.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
@@ -266,10 +245,10 @@ pub fn kinds_table() -> String {
 /// Register the node kind `def`: a graph file's `kind = "<def.name>"` then makes a node
 /// with `def.make`, and the graph file's rules read the rest (its ports, how it touches the
 /// plant, its parameters with units and ranges, its line of docs: `ratelab kinds` prints
-/// them). The built-in kinds are registered by this function's rules: `sensor`,
-/// `estimator`, `policy`, `safety`, `actuator`, `python` and `external` are each a `def()`
-/// in [`super::nodes`], made of this module's public parts only, and so are its examples
-/// (the sensor reads the plant through [`BuildContext::plant`]; the actuator steps it).
+/// them). The built-in kinds are registered by this function's rules: each is a `def()` in
+/// [`super::nodes`], made of this module's public parts only, and so are its examples
+/// (the sensor reads the plant through [`super::kind::RunParts::plant`]; the actuator
+/// steps it).
 /// Its message types are registered with it ([`ratelab_core::msg::register_type`]).
 ///
 /// # Errors
@@ -328,41 +307,9 @@ where
     N: RustNode,
     F: Fn(&NodeContext<'_>) -> Result<N, String> + Send + Sync + 'static,
 {
-    let make = move |cx: &mut BuildContext<'_>| {
-        let (Some(inputs), Some(outputs)) = (
-            <N::Input as Inputs>::bind(cx.inputs),
-            <N::Output as Outputs>::bind(cx.outputs, cx.outbox),
-        ) else {
-            // The graph file's types were checked against the kind's when it was read.
-            return Err(format!("node '{}': its topics' types changed", cx.name));
-        };
-        let node = make(&NodeContext {
-            name: cx.name,
-            period: cx.period(),
-            seed: cx.seed,
-            params: cx.params,
-        })?;
-        Ok(Box::new(Bound::<N> {
-            node,
-            inputs,
-            outputs,
-        }) as Box<dyn Work>)
-    };
-    let one = |types: &'static [MsgType]| -> Vec<&'static [MsgType]> {
-        types.iter().map(std::slice::from_ref).collect()
-    };
     KindDef {
-        name: Box::leak(kind.to_string().into_boxed_str()),
         doc: "a node kind the program registered in Rust",
-        ports: Ports::Fixed {
-            inputs: one(<N::Input as Inputs>::TYPES),
-            outputs: one(<N::Output as Outputs>::TYPES),
-        },
-        plant: Plant::None,
-        code: Code::Rust,
-        params: Params::Free,
-        uses_brain: false,
-        make: Box::new(make),
+        ..KindDef::of(kind, move |cx| make(&cx.node))
     }
 }
 
@@ -381,43 +328,24 @@ where
     register_kind(rust_kind(kind, make))
 }
 
-/// A node with its topics and what it has been given.
-struct Bound<N: RustNode> {
-    node: N,
-    inputs: <N::Input as Inputs>::Ports,
-    outputs: <N::Output as Outputs>::Ports,
-}
-
-impl<N: RustNode> Work for Bound<N> {
-    fn tick(&mut self, now: Nanos) -> Flow {
-        let delivered = <N::Input as Inputs>::read(&mut self.inputs, now);
-        let out = self.node.tick(now, delivered);
-        // The oldest origin its inputs delivered; a source's data begins at its tick.
-        let origin = if <N::Input as Inputs>::TYPES.is_empty() {
-            Some(now)
-        } else {
-            <N::Input as Inputs>::oldest_origin(&self.inputs).or(Some(now))
-        };
-        <N::Output as Outputs>::publish(&self.outputs, out, now, origin);
-        Flow::Continue
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::graph::kind::{AdapterParts, BuildContext, NodeOf, RunParts};
     use ratelab_core::msg::{AnyTopic, ForceMsg, Message, PositionMsg};
     use ratelab_core::publisher::Outbox;
+    use ratelab_core::time::Nanos;
     use std::sync::Arc;
 
-    /// Make a node of kind `kind` as the graph's builder would, around a fresh plant.
+    /// Make a node of kind `kind` as the graph's builder would, around a fresh plant,
+    /// named and paced as `cx` says, on `inputs` and `outputs`.
     fn make(
         kind: &str,
         cx: &NodeContext<'_>,
         inputs: &[AnyTopic],
         outputs: &[AnyTopic],
         outbox: &Outbox,
-    ) -> Result<Box<dyn Work>, String> {
+    ) -> Result<NodeOf, String> {
         let k = super::kind(kind).ok_or_else(|| format!("kind '{kind}' is not registered"))?;
         let plant = std::sync::Arc::new(std::sync::Mutex::new(
             crate::plant::CartPole::new().unwrap(),
@@ -430,25 +358,41 @@ mod tests {
         let rate = ratelab_core::rate::Rate::new(1e9 / cx.period.0 as f64).unwrap();
         let mut observers = None;
         (k.def().make)(&mut BuildContext {
-            name: cx.name,
-            id: ratelab_core::ids::NodeId(0),
-            rate: &rate,
-            seed: cx.seed,
-            params: cx.params,
-            python: None,
-            inputs,
-            outputs,
+            node: NodeContext {
+                inputs,
+                outputs,
+                ..*cx
+            },
+            run: RunParts {
+                plant: &plant,
+                brain: &brain,
+                log: &log,
+                topics: inputs,
+                action: None,
+                estimate: None,
+                observers: &mut observers,
+            },
+            adapter: AdapterParts {
+                python: None,
+                rate: &rate,
+                liveliness: &liveliness,
+                attachment: None,
+            },
             outbox,
-            plant: &plant,
-            brain: &brain,
-            log: &log,
-            topics: inputs,
-            action: None,
-            estimate: None,
-            liveliness: &liveliness,
-            observers: &mut observers,
-            attachment: None,
         })
+    }
+
+    /// A context for node `name` at 50 Hz, with no parameters and no topics.
+    fn context<'a>(name: &'a str, params: &'a toml::Table) -> NodeContext<'a> {
+        NodeContext {
+            name,
+            id: ratelab_core::ids::NodeId(0),
+            period: Nanos(20_000_000),
+            seed: 0,
+            params,
+            inputs: &[],
+            outputs: &[],
+        }
     }
 
     type Slots = Vec<&'static [MsgType]>;
@@ -519,12 +463,7 @@ mod tests {
             topic("/p2", PositionMsg::TYPE),
         ];
         let params = toml::Table::new();
-        let cx = NodeContext {
-            name: "m",
-            period: Nanos(20_000_000),
-            seed: 0,
-            params: &params,
-        };
+        let cx = context("m", &params);
         // The wrong number of topics is refused (the graph file is checked before).
         assert!(make("mix_bound", &cx, &inputs[..1], &outputs, &Outbox::new()).is_err());
         let mut node = make("mix_bound", &cx, &inputs, &outputs, &Outbox::new()).unwrap();
@@ -542,7 +481,7 @@ mod tests {
         };
         f.publish(ForceMsg { newtons: 1.0 }, Nanos(8), Some(Nanos(7)));
         p.publish(at(0.5), Nanos(3), None); // its own stamp is its origin
-        node.tick(Nanos(10));
+        node.0.tick(Nanos(10));
         let (mf, mp) = (f2.read(Nanos(10)).unwrap(), p2.read(Nanos(10)).unwrap());
         assert_eq!((mf.data.newtons, mp.data.cart_pos_m), (1.0, 0.5));
         assert_eq!(
@@ -551,13 +490,72 @@ mod tests {
         );
         // Only the force is new: only it is published, still with the older origin.
         f.publish(ForceMsg { newtons: 2.0 }, Nanos(28), Some(Nanos(27)));
-        node.tick(Nanos(30));
+        node.0.tick(Nanos(30));
         assert_eq!(f2.read(Nanos(30)).unwrap().origin_stamp, Some(Nanos(3)));
         assert_eq!(p2.stats().published, 1);
         // A newer position: now the force's origin (27) is the oldest.
         p.publish(at(0.7), Nanos(45), None);
-        node.tick(Nanos(50));
+        node.0.tick(Nanos(50));
         assert_eq!(p2.read(Nanos(50)).unwrap().origin_stamp, Some(Nanos(27)));
+    }
+
+    /// Keeps the newest force it was given, stamp included.
+    struct HeldEcho;
+    impl RustNode for HeldEcho {
+        type Input = Held<ForceMsg>;
+        type Output = ForceMsg;
+        fn tick(&mut self, _now: Nanos, input: Option<&Stamped<ForceMsg>>) -> Option<ForceMsg> {
+            let m = input?;
+            Some(ForceMsg {
+                newtons: m.data.newtons + m.stamp.0 as f64 + 100.0 * m.seq as f64,
+            })
+        }
+        fn save(&self) -> Option<ratelab_core::node::NodeState> {
+            Some(Box::new(()))
+        }
+        fn load(&mut self, state: &ratelab_core::node::NodeState) -> bool {
+            state.is::<()>()
+        }
+    }
+
+    /// A held input gives a tick what the topic's read gives, stale reads again, with the
+    /// message's stamps; the output carries the held message's origin; a capture takes the
+    /// input's position with the node's state.
+    #[test]
+    fn a_held_input_gives_every_read_with_its_stamps_and_is_captured() {
+        register("held_echo", |_: &NodeContext<'_>| Ok(HeldEcho)).unwrap();
+        let input = AnyTopic::new("/in", ForceMsg::TYPE, 1).unwrap();
+        let output = AnyTopic::new("/out", ForceMsg::TYPE, 1).unwrap();
+        let params = toml::Table::new();
+        let cx = context("h", &params);
+        let (inputs, outputs) = ([input.clone()], [output.clone()]);
+        let mut node = make("held_echo", &cx, &inputs, &outputs, &Outbox::new()).unwrap();
+        let (i, o) = (
+            input.typed::<ForceMsg>().unwrap(),
+            output.typed::<ForceMsg>().unwrap(),
+        );
+        node.0.tick(Nanos(1)); // nothing yet: nothing published
+        assert_eq!(o.stats().published, 0);
+        i.publish(ForceMsg { newtons: 3.0 }, Nanos(5), Some(Nanos(2)));
+        node.0.tick(Nanos(10));
+        let saved = node.0.save().expect("the node says how to capture it");
+        node.0.tick(Nanos(30)); // a stale read: the same message again
+        assert_eq!(o.stats().published, 2);
+        let m = o.read(Nanos(30)).unwrap();
+        assert_eq!(
+            (m.data.newtons, m.stamp, m.origin_stamp),
+            (8.0, Nanos(30), Some(Nanos(2)))
+        );
+        // A newer message moves the input on; taking the capture back puts it where it was,
+        // so the same message is new to it again.
+        i.publish(ForceMsg { newtons: 4.0 }, Nanos(35), None);
+        node.0.tick(Nanos(40));
+        let m = o.read(Nanos(40)).unwrap();
+        assert_eq!((m.data.newtons, m.origin_stamp), (139.0, Some(Nanos(35))));
+        assert!(node.0.load(&saved));
+        assert!(!node
+            .0
+            .load(&(Box::new(1u8) as ratelab_core::node::NodeState)));
     }
 
     #[test]
@@ -566,12 +564,7 @@ mod tests {
         let input = AnyTopic::new("/in", ForceMsg::TYPE, 1).unwrap();
         let output = AnyTopic::new("/out", ForceMsg::TYPE, 1).unwrap();
         let params = toml::Table::new();
-        let cx = NodeContext {
-            name: "e",
-            period: Nanos(20_000_000),
-            seed: 0,
-            params: &params,
-        };
+        let cx = context("e", &params);
         let (inputs, outputs) = ([input.clone()], [output.clone()]);
         let mut node = make("echo_bound", &cx, &inputs, &outputs, &Outbox::new()).unwrap();
         let (i, o) = (
@@ -579,14 +572,14 @@ mod tests {
             output.typed::<ForceMsg>().unwrap(),
         );
         i.publish(ForceMsg { newtons: 3.0 }, Nanos(5), Some(Nanos(1)));
-        node.tick(Nanos(10));
+        node.0.tick(Nanos(10));
         let m = o.read(Nanos(10)).unwrap();
         assert_eq!(
             (m.data.newtons, m.stamp, m.origin_stamp),
             (3.0, Nanos(10), Some(Nanos(1)))
         );
         // Nothing new: Echo publishes nothing.
-        node.tick(Nanos(30));
+        node.0.tick(Nanos(30));
         assert_eq!(o.stats().published, 1);
         assert!(make("nobody", &cx, &inputs, &outputs, &Outbox::new())
             .err()

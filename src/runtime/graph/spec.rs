@@ -9,8 +9,8 @@
 //!
 //! [[node]]
 //! name = "sensor"
-//! kind = "sensor"          # sensor | estimator | policy | safety | actuator | python
-//!                          # | external | a kind registered in Rust (crate::graph::registry)
+//! kind = "sensor"          # a built-in kind (`ratelab kinds` lists them) or one
+//!                          # registered in Rust (crate::graph::registry)
 //! rate_hz = 50
 //! publishes = "/obs"
 //!
@@ -36,16 +36,14 @@
 //! - at most [`MAX_NODES`](ratelab_core::limits::MAX_NODES) nodes, names unique; exactly one actuator (the kind that steps
 //!   the plant: it owns the plant step and the zero-order hold);
 //! - each node's `kind` is one the registry knows ([`crate::graph::registry`]: the
-//!   built-in `sensor`, `estimator`, `policy`, `safety`, `actuator`, `python`, `external`,
-//!   and any a Rust program registered), and its topics fit the kind's ports
-//!   ([`crate::graph::kind::Ports`]): a sensor publishes `state` or `position`; an
-//!   estimator reads `position` and publishes `state`; a policy reads `state` and publishes
-//!   `force`; a safety node reads `force` and publishes `force`; the actuator reads `force`;
-//!   a `python` node (the learner's, `ratelab::python::node`) reads and publishes any
-//!   number of topics, of any type (`subscribes = ["/obs", "/reference"]`: a topic or a
-//!   list), and names its `script` (relative to the graph file) and optional `class`; a
-//!   registered kind reads and publishes the types it was registered with, one topic each
-//!   in that order; an external node reads at most one topic and publishes one;
+//!   built-in kinds and any a Rust program registered; `ratelab kinds` prints them all,
+//!   with their ports), and its topics fit the kind's ports
+//!   ([`crate::graph::kind::Ports`]): of a kind of fixed ports, one topic per input and
+//!   output, in that order, each of a type the port accepts (a sensor publishes `state` or
+//!   `position`); of a kind of open ports (a `python` node, the learner's,
+//!   `ratelab::python::node`; an `external` node), any number of topics within its bounds,
+//!   of any type (`subscribes = ["/obs", "/reference"]`: a topic or a list). A `python`
+//!   node names its `script` (relative to the graph file) and optional `class`;
 //! - a node's parameters (`params = { … }`; the built-in kinds' also as keys of the node's
 //!   table, as the chapter's files write `max_force_n = 8`) are the kind's
 //!   ([`crate::graph::kind::Params`]): checked numbers with defaults, or a free table for
@@ -1329,20 +1327,31 @@ depth = 1
         );
     }
 
+    /// The registry's list of built-in kinds is the one list: every file of
+    /// `graph/nodes/` that defines a kind (`pub fn def() -> KindDef`) is registered under
+    /// its file's name, and every kind not registered by a program has its file.
     #[test]
-    fn every_built_in_kind_is_registered_under_its_name() {
-        for name in [
-            "sensor",
-            "estimator",
-            "policy",
-            "safety",
-            "actuator",
-            "python",
-            "external",
-        ] {
-            let kind = crate::graph::registry::kind(name).expect(name);
-            assert_eq!(kind.as_str(), name);
-        }
+    fn every_built_in_kind_is_registered_under_its_file_s_name() {
+        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("graph/nodes");
+        let mut files: Vec<String> = std::fs::read_dir(&dir)
+            .unwrap()
+            .map(|e| e.unwrap().path())
+            .filter(|p| {
+                std::fs::read_to_string(p)
+                    .unwrap()
+                    .contains("pub fn def() -> KindDef")
+            })
+            .map(|p| p.file_stem().unwrap().to_string_lossy().into_owned())
+            .collect();
+        files.sort();
+        let mut built_in: Vec<String> = crate::graph::registry::kinds()
+            .into_iter()
+            .filter(|k| k.code() != crate::graph::kind::Code::Rust)
+            .map(|k| k.as_str().to_string())
+            .collect();
+        built_in.sort();
+        assert!(files.len() >= 9, "{files:?}");
+        assert_eq!(files, built_in);
         assert_eq!(crate::graph::registry::kind("registered"), None);
     }
 

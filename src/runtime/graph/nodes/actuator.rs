@@ -3,12 +3,13 @@
 //! force is refused and the last good one held; a missed deadline gets the input topic's
 //! reaction (hold, zero, stop). It alone steps the plant; a fall stops the graph.
 
-use crate::graph::kind::{typed, BuildContext, Code, KindDef, Params, Plant, Ports, Work};
+use crate::graph::kind::{typed, Code, KindDef, Params, Plant};
 use crate::plant::{lock, SharedPlant, GEAR_N};
 use ratelab_core::estimate::EstimatePoint;
 use ratelab_core::ids::TopicId;
-use ratelab_core::msg::{AnyTopic, ForceMsg, Message, StateMsg};
-use ratelab_core::node::Flow;
+use ratelab_core::msg::{AnyTopic, ForceMsg, StateMsg};
+use ratelab_core::node::{Flow, NodeState};
+use ratelab_core::ports::{Held, RustNode, Stamped};
 use ratelab_core::qos::OnDeadlineMissed;
 use ratelab_core::runlog::{RunLog, StepRecord, StepSink, TopicCounters, INLINE_TOPICS};
 use ratelab_core::time::Nanos;
@@ -18,35 +19,31 @@ use std::sync::{Arc, Mutex};
 /// The kind: `force` in, nothing out; steps the plant (exactly one per graph).
 pub fn def() -> KindDef {
     KindDef {
-        name: "actuator",
         doc: "applies the newest force (zero-order hold) and steps the plant",
-        ports: Ports::Fixed {
-            inputs: vec![&[ForceMsg::TYPE]],
-            outputs: vec![],
-        },
         plant: Plant::Steps,
         code: Code::BuiltIn,
         params: Params::Numbers(&[]),
-        uses_brain: false,
-        make: Box::new(|cx: &mut BuildContext<'_>| {
-            Ok(Box::new(Actuator {
-                plant: cx.plant.clone(),
-                input: typed(cx.inputs.first())?,
-                topics: TopicWatch::new(cx.topics.to_vec()),
-                log: cx.log.clone(),
-                observers: cx.observers.take().unwrap_or_default(),
+        ..KindDef::of("actuator", |cx| {
+            let run = &mut cx.run;
+            Ok(Actuator {
+                plant: run.plant.clone(),
+                input: typed(cx.node.inputs.first())?,
+                topics: TopicWatch::new(run.topics.to_vec()),
+                log: run.log.clone(),
+                observers: run.observers.take().unwrap_or_default(),
                 held: None,
                 held_stamp: None,
-                policy_output: cx
+                policy_output: run
                     .action
                     .and_then(|t| t.subscription(0).typed::<ForceMsg>().cloned()),
                 reported: None,
-                estimate: cx
+                estimate: run
                     .estimate
                     .as_ref()
                     .and_then(|t| t.typed::<StateMsg>().cloned()),
-            }) as Box<dyn Work>)
-        }),
+                flow: Flow::Continue,
+            })
+        })
     }
 }
 
@@ -120,7 +117,8 @@ impl TopicWatch {
 pub struct Actuator {
     /// The plant it steps.
     pub plant: SharedPlant,
-    /// Its input.
+    /// Its input topic, for its QoS (the deadline reaction); its messages come through
+    /// its tick.
     pub input: Arc<Subscription<ForceMsg>>,
     /// Every topic of the graph, for the per-step counters.
     pub topics: TopicWatch,
@@ -140,15 +138,23 @@ pub struct Actuator {
     /// The chain's state estimate, when the graph has an estimator: the policy's queue of
     /// it, watched (never read) beside the plant's state ([`ratelab_core::estimate`]).
     pub estimate: Option<Arc<Subscription<StateMsg>>>,
+    /// What the last tick said: stop when the pole fell or the deadline's reaction stopped.
+    pub flow: Flow,
 }
 
-impl Work for Actuator {
-    fn save(&self) -> Option<ratelab_core::node::NodeState> {
+impl RustNode for Actuator {
+    type Input = Held<ForceMsg>;
+    type Output = ();
+
+    fn flow(&self) -> Flow {
+        self.flow
+    }
+    fn save(&self) -> Option<NodeState> {
         // The force it holds (zero-order hold), when it was published, and the newest
         // policy message it reported.
         Some(Box::new((self.held, self.reported, self.held_stamp)))
     }
-    fn load(&mut self, state: &ratelab_core::node::NodeState) -> bool {
+    fn load(&mut self, state: &NodeState) -> bool {
         type Kept = (Option<(f32, Option<Nanos>)>, Option<u64>, Option<Nanos>);
         let Some(&(held, reported, held_stamp)) = state.downcast_ref::<Kept>() else {
             return false;
@@ -157,9 +163,17 @@ impl Work for Actuator {
         true
     }
     /// One tick at `now`: apply, step, record.
-    fn tick(&mut self, now: Nanos) -> Flow {
+    fn tick(&mut self, now: Nanos, force: Option<&Stamped<ForceMsg>>) {
+        self.flow = self.step(now, force);
+    }
+}
+
+impl Actuator {
+    /// Apply the force, step the plant, record the step: [`Flow::Stop`] when the pole fell
+    /// or the deadline's reaction is to stop.
+    fn step(&mut self, now: Nanos, force: Option<&Stamped<ForceMsg>>) -> Flow {
         let mut nonfinite = false;
-        if let Some(msg) = self.input.read(now) {
+        if let Some(msg) = force {
             if msg.data.newtons.is_finite() {
                 // Exact: a brain's f32 command × 10 is exact in f64, and so is ÷ 10.
                 let command = (msg.data.newtons / GEAR_N) as f32;
@@ -234,7 +248,7 @@ impl Work for Actuator {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use ratelab_core::msg::MsgData;
+    use ratelab_core::msg::{Message, MsgData};
     use ratelab_core::qos::{History, Link, TopicQos};
 
     /// Topics of every QoS that changes how counters move: the chapter's, a deadline (its

@@ -9,13 +9,11 @@
 //! (`image_estimator.rs`) reads them back.
 
 pub use super::frame::{FrameGeometry, CART_HALF_M, POLE_LENGTH_M, SHADES};
-use crate::graph::kind::{
-    publisher, BuildContext, Code, KindDef, ParamDef, Params, Plant, Ports, Work,
-};
+use crate::graph::kind::{Code, KindDef, NodeContext, ParamDef, Params, Plant};
 use crate::plant::{lock, SharedPlant};
-use ratelab_core::msg::{ImageMsg, Message};
-use ratelab_core::node::Flow;
-use ratelab_core::publisher::Publisher;
+use ratelab_core::msg::ImageMsg;
+use ratelab_core::node::NodeState;
+use ratelab_core::ports::RustNode;
 use ratelab_core::time::Nanos;
 
 /// The smallest frame side, px.
@@ -74,51 +72,47 @@ pub const PARAMS: &[ParamDef] = &[
 /// The kind: no input; one `image` output; reads the plant.
 pub fn def() -> KindDef {
     KindDef {
-        name: NAME,
         doc: "reads the plant and publishes a frame of it (image, mono8: synthetic, or rendered by MuJoCo)",
-        ports: Ports::Fixed {
-            inputs: vec![],
-            outputs: vec![&[ImageMsg::TYPE]],
-        },
         plant: Plant::Reads,
         code: Code::BuiltIn,
         params: Params::Numbers(PARAMS),
-        uses_brain: false,
-        make: Box::new(|cx: &mut BuildContext<'_>| {
-            let (w, h) = (
-                cx.param_f64("width_px", 640.0)?,
-                cx.param_f64("height_px", 480.0)?,
-            );
-            let geometry = FrameGeometry::new(w.round() as u32, h.round() as u32);
-            let mujoco = cx.param_f64("mujoco", 0.0)?;
-            if mujoco != 0.0 && mujoco != 1.0 {
-                return Err(format!("{}: mujoco must be 0 or 1, got {mujoco}", cx.name));
-            }
-            let env = super::camera_render::RENDER_ENV;
-            match std::env::var(env).as_deref() {
-                Err(_) | Ok("" | "on" | "off") => {}
-                Ok(other) => return Err(format!("{env} must be on or off, got '{other}'")),
-            }
-            let render = (mujoco == 1.0)
-                .then(|| super::camera_render::Render::open(geometry))
-                .and_then(|opened| {
-                    opened
-                        .map_err(|e| {
-                            let line = format!("{e}: drawing synthetic frames instead");
-                            let warn = ratelab_core::textlog::Level::Warn;
-                            ratelab_core::textlog::emit_for(Some(cx.name), None, warn, &line);
-                        })
-                        .ok()
-                });
-            Ok(Box::new(Camera {
-                name: cx.name.to_string(),
-                plant: cx.plant.clone(),
-                output: publisher(cx.outputs.first(), cx.outbox)?,
-                geometry,
-                render,
-            }) as Box<dyn Work>)
-        }),
+        ..KindDef::of(NAME, |cx| make(&cx.node, cx.run.plant))
     }
+}
+
+/// A camera node named and set by `cx`, looking at `plant`.
+fn make(cx: &NodeContext<'_>, plant: &SharedPlant) -> Result<Camera, String> {
+    let (w, h) = (
+        cx.param_f64("width_px", 640.0)?,
+        cx.param_f64("height_px", 480.0)?,
+    );
+    let geometry = FrameGeometry::new(w.round() as u32, h.round() as u32);
+    let mujoco = cx.param_f64("mujoco", 0.0)?;
+    if mujoco != 0.0 && mujoco != 1.0 {
+        return Err(format!("{}: mujoco must be 0 or 1, got {mujoco}", cx.name));
+    }
+    let env = super::camera_render::RENDER_ENV;
+    match std::env::var(env).as_deref() {
+        Err(_) | Ok("" | "on" | "off") => {}
+        Ok(other) => return Err(format!("{env} must be on or off, got '{other}'")),
+    }
+    let render = (mujoco == 1.0)
+        .then(|| super::camera_render::Render::open(geometry))
+        .and_then(|opened| {
+            opened
+                .map_err(|e| {
+                    let line = format!("{e}: drawing synthetic frames instead");
+                    let warn = ratelab_core::textlog::Level::Warn;
+                    ratelab_core::textlog::emit_for(Some(cx.name), None, warn, &line);
+                })
+                .ok()
+        });
+    Ok(Camera {
+        name: cx.name.to_string(),
+        plant: plant.clone(),
+        geometry,
+        render,
+    })
 }
 
 /// A camera's state.
@@ -127,24 +121,25 @@ pub struct Camera {
     pub name: String,
     /// The plant it looks at.
     pub plant: SharedPlant,
-    /// Where it publishes.
-    pub output: Publisher<ImageMsg>,
     /// Its frame.
     pub geometry: FrameGeometry,
     /// MuJoCo's renderer (`mujoco = 1` on a machine that renders): `None` draws the frame.
     pub render: Option<super::camera_render::Render>,
 }
 
-impl Work for Camera {
-    fn save(&self) -> Option<ratelab_core::node::NodeState> {
+impl RustNode for Camera {
+    type Input = ();
+    type Output = ImageMsg;
+
+    fn save(&self) -> Option<NodeState> {
         // A camera keeps nothing between frames.
         Some(Box::new(()))
     }
-    fn load(&mut self, state: &ratelab_core::node::NodeState) -> bool {
-        state.downcast_ref::<()>().is_some()
+    fn load(&mut self, state: &NodeState) -> bool {
+        state.is::<()>()
     }
     /// One tick at `now`: read the plant, render or draw it, publish.
-    fn tick(&mut self, now: Nanos) -> Flow {
+    fn tick(&mut self, now: Nanos, (): ()) -> Option<ImageMsg> {
         let state = lock(&self.plant).state();
         let rendered = match self
             .render
@@ -165,7 +160,6 @@ impl Work for Camera {
             Some(px) => self.geometry.frame_of(px),
             None => self.geometry.frame(state.cart_pos, state.theta),
         };
-        self.output.publish(frame, now, Some(now));
-        Flow::Continue
+        Some(frame)
     }
 }

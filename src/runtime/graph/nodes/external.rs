@@ -22,11 +22,11 @@
 //! external node as across any node. The node counts as alive (its liveliness asserted)
 //! when it delivers.
 
-use crate::graph::kind::{BuildContext, Code, KindDef, ParamDef, Params, Plant, Ports, Work};
+use crate::graph::kind::{Code, KindDef, ParamDef, Params, Ports};
 use crossbeam_channel::{Receiver, RecvTimeoutError, Sender, TrySendError};
 use ratelab_core::ids::{NodeId, TopicId};
 use ratelab_core::msg::{AnyTopic, MsgData};
-use ratelab_core::node::Flow;
+use ratelab_core::ports::{AnyPorts, RustNode};
 use ratelab_core::publisher::Outbox;
 use ratelab_core::qos::Liveliness;
 use ratelab_core::time::Nanos;
@@ -57,36 +57,35 @@ pub const PARAMS: &[ParamDef] = &[
 /// a ROS 2 node's code.
 pub fn def() -> KindDef {
     KindDef {
-        name: "external",
         doc: "a ROS 2 node fills it over --ros2; ratelab runs its proxy",
         ports: Ports::Open {
             max_inputs: 1,
             min_outputs: 1,
             max_outputs: 1,
         },
-        plant: Plant::None,
         code: Code::Ros2,
         params: Params::Numbers(PARAMS),
-        uses_brain: false,
-        make: Box::new(|cx: &mut BuildContext<'_>| {
+        ..KindDef::of("external", |cx| {
             let port = cx
+                .adapter
                 .attachment
                 .take()
                 .and_then(|a| a.downcast::<ExternalPort>().ok())
-                .ok_or_else(|| format!("external node '{}' has no port", cx.name))?;
-            Ok(Box::new(External {
+                .ok_or_else(|| format!("external node '{}' has no port", cx.node.name))?;
+            Ok(External {
                 port,
-                input: cx.inputs.first().cloned(),
+                input: cx.node.inputs.first().cloned(),
                 output: cx
+                    .node
                     .outputs
                     .first()
                     .cloned()
                     .ok_or("an external node publishes one topic")?,
                 outbox: cx.outbox.clone(),
-                liveliness: cx.liveliness.clone(),
+                liveliness: cx.adapter.liveliness.clone(),
                 origin: None,
-            }) as Box<dyn Work>)
-        }),
+            })
+        })
     }
 }
 
@@ -298,16 +297,20 @@ impl External {
     }
 }
 
-impl Work for External {
+/// An adapter: its topics are any ([`AnyPorts`]), read and published by the proxy itself.
+impl RustNode for External {
+    type Input = AnyPorts;
+    type Output = AnyPorts;
+
     fn alive_by_ticking(&self) -> bool {
         false
     }
 
     /// One tick at `now` (see the module's header).
-    fn tick(&mut self, now: Nanos) -> Flow {
+    fn tick(&mut self, now: Nanos, (): ()) {
         self.read_input(now);
         let Some(link) = self.port.link.get() else {
-            return Flow::Continue; // not connected: nothing can come
+            return; // not connected: nothing can come
         };
         if link.lockstep {
             // Anything here before this tick's /clock answers an earlier one.
@@ -329,7 +332,6 @@ impl Work for External {
                 self.deliver(data, now);
             }
         }
-        Flow::Continue
     }
 }
 

@@ -8,36 +8,19 @@
 //! when the camera looked).
 
 use super::frame::{FrameGeometry, SHADES};
-use crate::graph::kind::{
-    publisher, typed, BuildContext, Code, KindDef, Params, Plant, Ports, Work,
-};
-use ratelab_core::msg::{ImageMsg, Message, PositionMsg};
-use ratelab_core::node::Flow;
-use ratelab_core::publisher::Publisher;
+use crate::graph::kind::{Code, KindDef, Params};
+use ratelab_core::msg::{ImageMsg, PositionMsg};
+use ratelab_core::node::NodeState;
+use ratelab_core::ports::RustNode;
 use ratelab_core::time::Nanos;
-use ratelab_core::topic::Subscription;
-use std::sync::Arc;
 
 /// The kind: `image` in, `position` out.
 pub fn def() -> KindDef {
     KindDef {
-        name: "image_estimator",
         doc: "measures the cart's position and the pole's angle from a camera's frame",
-        ports: Ports::Fixed {
-            inputs: vec![&[ImageMsg::TYPE]],
-            outputs: vec![&[PositionMsg::TYPE]],
-        },
-        plant: Plant::None,
         code: Code::BuiltIn,
         params: Params::Numbers(&[]),
-        uses_brain: false,
-        make: Box::new(|cx: &mut BuildContext<'_>| {
-            Ok(Box::new(ImageEstimator {
-                input: typed(cx.inputs.first())?,
-                output: publisher(cx.outputs.first(), cx.outbox)?,
-                last_seq: None,
-            }) as Box<dyn Work>)
-        }),
+        ..KindDef::of("image_estimator", |_| Ok(ImageEstimator))
     }
 }
 
@@ -104,38 +87,23 @@ pub fn measure(img: &ImageMsg) -> Option<PositionMsg> {
     })
 }
 
-/// An image estimator's state.
-pub struct ImageEstimator {
-    /// Input.
-    pub input: Arc<Subscription<ImageMsg>>,
-    /// Output.
-    pub output: Publisher<PositionMsg>,
-    /// `seq` of the last frame measured (a frame is measured once).
-    pub last_seq: Option<u64>,
-}
+/// An image estimator node: it keeps nothing between frames (a frame is measured once, when
+/// it is new).
+pub struct ImageEstimator;
 
-impl Work for ImageEstimator {
-    fn save(&self) -> Option<ratelab_core::node::NodeState> {
-        Some(Box::new(self.last_seq))
+impl RustNode for ImageEstimator {
+    type Input = ImageMsg;
+    type Output = PositionMsg;
+
+    fn tick(&mut self, _now: Nanos, frame: Option<&ImageMsg>) -> Option<PositionMsg> {
+        measure(frame?)
     }
-    fn load(&mut self, state: &ratelab_core::node::NodeState) -> bool {
-        let Some(seq) = state.downcast_ref::<Option<u64>>() else {
-            return false;
-        };
-        self.last_seq = *seq;
-        true
+
+    fn save(&self) -> Option<NodeState> {
+        Some(Box::new(()))
     }
-    fn tick(&mut self, now: Nanos) -> Flow {
-        if let Some(msg) = self.input.read(now) {
-            if self.last_seq != Some(msg.seq) {
-                self.last_seq = Some(msg.seq);
-                if let Some(m) = measure(&msg.data) {
-                    let origin = msg.origin_stamp.or(Some(msg.stamp));
-                    self.output.publish(m, now, origin);
-                }
-            }
-        }
-        Flow::Continue
+    fn load(&mut self, state: &NodeState) -> bool {
+        state.is::<()>()
     }
 }
 

@@ -4,8 +4,10 @@
 //! [`estimator`], [`image_estimator`], [`policy`], [`safety`], [`actuator`], [`python`] (a learner's script, run by
 //! `ratelab::python::node`) and [`external`] (a ROS 2 node's proxy) — each its one
 //! definition ([`crate::graph::kind::KindDef`]: ports, plant, parameters, `make`) and its
-//! tick ([`crate::graph::kind::Work`]). [`super::registry`] registers them; a kind written
-//! outside ratelab is registered the same way ([`super::registry::register`]).
+//! node, a [`ratelab_core::ports::RustNode`] like any program's (the Python node and the
+//! proxy are adapters whose topics are any, [`ratelab_core::ports::AnyPorts`]).
+//! [`super::registry`] registers them; a kind written outside ratelab is registered the
+//! same way ([`super::registry::register`]).
 //!
 //! A **python** node runs its subscription callbacks for what arrived, then its timers; a
 //! **registered** kind its `tick` for what arrived; what either published goes out with the
@@ -16,8 +18,8 @@
 //! from (of several inputs, the oldest), so the actuator measures sense→act latency
 //! (`now − origin`) across any chain.
 //!
-//! **Adding a built-in kind** is a file here (its `def()` and its [`Work`]) and its line in
-//! [`super::registry`]'s list; nothing else names a kind.
+//! **Adding a built-in kind** is a file here (its `def()` and its `RustNode`) and its line
+//! in [`super::registry`]'s list.
 
 pub mod actuator;
 pub mod camera;
@@ -33,7 +35,7 @@ pub mod sensor;
 
 pub use external::{ExternalNodeSpec, ExternalPort};
 
-use crate::graph::kind::Work;
+use crate::graph::kind::NodeOf;
 use ratelab_core::executor::ComputeDraw;
 use ratelab_core::ids::NodeId;
 use ratelab_core::node::{Flow, Node, NodeState};
@@ -65,12 +67,12 @@ pub struct NodeCore {
 /// A node of some kind around its [`NodeCore`]: what the scheduler runs.
 pub struct GraphNode {
     core: NodeCore,
-    work: Box<dyn Work>,
+    work: NodeOf,
 }
 
 impl GraphNode {
-    /// A node doing `work`.
-    pub fn new(core: NodeCore, work: Box<dyn Work>) -> GraphNode {
+    /// A node doing `work` (its kind's node, bound to its topics).
+    pub fn new(core: NodeCore, work: NodeOf) -> GraphNode {
         GraphNode { core, work }
     }
 }
@@ -90,11 +92,11 @@ impl Node for GraphNode {
             self.core.liveliness.fault_tick();
             return Flow::Continue; // stalled or killed: no work, no liveliness
         }
-        if self.work.alive_by_ticking() {
+        if self.work.0.alive_by_ticking() {
             // An external node is alive when it delivers, not when its proxy ticks.
             self.core.liveliness.assert_at(now);
         }
-        self.work.tick(now)
+        self.work.0.tick(now)
     }
     fn compute_time(&mut self) -> Nanos {
         self.core
@@ -110,7 +112,7 @@ impl Node for GraphNode {
     }
     fn save(&self) -> Option<NodeState> {
         Some(Box::new(Saved {
-            work: self.work.save()?,
+            work: self.work.0.save()?,
             outbox: self.core.outbox.save(),
             compute: self.core.compute.clone(),
         }))
@@ -119,7 +121,7 @@ impl Node for GraphNode {
         let Some(s) = state.downcast_ref::<Saved>() else {
             return false;
         };
-        if !self.work.load(&s.work) {
+        if !self.work.0.load(&s.work) {
             return false;
         }
         self.core.outbox.load(&s.outbox);

@@ -20,10 +20,12 @@ pub fn def() -> KindDef {
         code: Code::Python,
         params: Params::Free,
         uses_brain: false,
+        // The Python layer's adapter, a `RustNode` of any topics, bound by it.
         make: Box::new(|cx: &mut BuildContext<'_>| {
             let code = cx
+                .adapter
                 .python
-                .ok_or_else(|| format!("python node '{}' names no script", cx.name))?;
+                .ok_or_else(|| format!("python node '{}' names no script", cx.node.name))?;
             crate::graph::interpreter::installed()?.node(cx, code)
         }),
     }

@@ -1,16 +1,12 @@
-//! The **safety** kind: clamps the newest force to ±`max_force_n` and republishes it, with
-//! its origin.
+//! The **safety** kind: clamps the newest force (the last one again when nothing new came)
+//! to ±`max_force_n` and republishes it, with its origin.
 
-use crate::graph::kind::{
-    publisher, typed, BuildContext, Code, KindDef, ParamDef, Params, Plant, Ports, Work,
-};
+use crate::graph::kind::{Code, KindDef, ParamDef, Params};
 use crate::plant::GEAR_N;
-use ratelab_core::msg::{ForceMsg, Message};
-use ratelab_core::node::Flow;
-use ratelab_core::publisher::Publisher;
+use ratelab_core::msg::ForceMsg;
+use ratelab_core::node::NodeState;
+use ratelab_core::ports::{Held, RustNode, Stamped};
 use ratelab_core::time::Nanos;
-use ratelab_core::topic::Subscription;
-use std::sync::Arc;
 
 /// Its parameter: the clamp.
 pub const PARAMS: &[ParamDef] = &[ParamDef {
@@ -25,50 +21,39 @@ pub const PARAMS: &[ParamDef] = &[ParamDef {
 /// The kind: `force` in, `force` out.
 pub fn def() -> KindDef {
     KindDef {
-        name: "safety",
         doc: "clamps the newest force to ±max_force_n and passes it on",
-        ports: Ports::Fixed {
-            inputs: vec![&[ForceMsg::TYPE]],
-            outputs: vec![&[ForceMsg::TYPE]],
-        },
-        plant: Plant::None,
         code: Code::BuiltIn,
         params: Params::Numbers(PARAMS),
-        uses_brain: false,
-        make: Box::new(|cx: &mut BuildContext<'_>| {
-            Ok(Box::new(Safety {
-                input: typed(cx.inputs.first())?,
-                output: publisher(cx.outputs.first(), cx.outbox)?,
-                max_force_n: cx.param_f64("max_force_n", GEAR_N)?,
-            }) as Box<dyn Work>)
-        }),
+        ..KindDef::of("safety", |cx| {
+            Ok(Safety {
+                max_force_n: cx.node.param_f64("max_force_n", GEAR_N)?,
+            })
+        })
     }
 }
 
-/// A safety node's state.
+/// A safety node.
 pub struct Safety {
-    /// Input.
-    pub input: Arc<Subscription<ForceMsg>>,
-    /// Output.
-    pub output: Publisher<ForceMsg>,
     /// Largest magnitude passed on, N.
     pub max_force_n: f64,
 }
 
-impl Work for Safety {
-    // Nothing kept between ticks (the brain is the graph's, captured apart).
-    fn save(&self) -> Option<ratelab_core::node::NodeState> {
+impl RustNode for Safety {
+    type Input = Held<ForceMsg>;
+    type Output = ForceMsg;
+
+    fn tick(&mut self, _now: Nanos, force: Option<&Stamped<ForceMsg>>) -> Option<ForceMsg> {
+        let newtons = force?.data.newtons;
+        Some(ForceMsg {
+            newtons: newtons.clamp(-self.max_force_n, self.max_force_n),
+        })
+    }
+
+    // Nothing kept between ticks.
+    fn save(&self) -> Option<NodeState> {
         Some(Box::new(()))
     }
-    fn load(&mut self, state: &ratelab_core::node::NodeState) -> bool {
+    fn load(&mut self, state: &NodeState) -> bool {
         state.is::<()>()
-    }
-    fn tick(&mut self, now: Nanos) -> Flow {
-        if let Some(msg) = self.input.read(now) {
-            let newtons = msg.data.newtons.clamp(-self.max_force_n, self.max_force_n);
-            self.output
-                .publish(ForceMsg { newtons }, now, msg.origin_stamp);
-        }
-        Flow::Continue
     }
 }

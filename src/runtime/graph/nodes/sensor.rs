@@ -2,14 +2,15 @@
 //! chapter's observation) or a position measurement, with optional seeded Gaussian noise on
 //! the positions. Its message's origin stamp is its own stamp: the reading.
 
-use crate::graph::kind::{BuildContext, Code, KindDef, ParamDef, Params, Plant, Ports, Work};
-use crate::plant::{lock, SharedPlant};
+use crate::graph::kind::{BuildContext, Code, KindDef, NodeOf, ParamDef, Params, Plant, Ports};
+use crate::plant::{lock, CartPoleState, SharedPlant};
 use rand_distr::{Distribution, Normal};
 use ratelab_core::ids::NodeId;
 use ratelab_core::msg::{Message, PositionMsg, StateMsg};
-use ratelab_core::node::Flow;
-use ratelab_core::publisher::Publisher;
+use ratelab_core::node::NodeState;
+use ratelab_core::ports::RustNode;
 use ratelab_core::time::Nanos;
+use std::marker::PhantomData;
 
 /// Its parameters: noise on each measured position.
 pub const PARAMS: &[ParamDef] = &[
@@ -34,7 +35,6 @@ pub const PARAMS: &[ParamDef] = &[
 /// The kind: no input; one output of `state` or `position`; reads the plant.
 pub fn def() -> KindDef {
     KindDef {
-        name: "sensor",
         doc: "reads the plant and publishes the state or a position measurement",
         ports: Ports::Fixed {
             inputs: vec![],
@@ -43,49 +43,83 @@ pub fn def() -> KindDef {
         plant: Plant::Reads,
         code: Code::BuiltIn,
         params: Params::Numbers(PARAMS),
-        uses_brain: false,
+        // A sensor of the type its topic carries.
         make: Box::new(|cx: &mut BuildContext<'_>| {
-            let out = cx.outputs.first().ok_or("a sensor publishes one topic")?;
-            let output = match (
-                out.publisher::<StateMsg>(cx.outbox),
-                out.publisher::<PositionMsg>(cx.outbox),
-            ) {
-                (Some(p), _) => SensorOutput::State(p),
-                (None, Some(p)) => SensorOutput::Position(p),
-                (None, None) => {
-                    return Err(format!("sensor '{}' publishes state or position", cx.name))
-                }
-            };
-            let (pos, angle) = (
-                cx.param_f64("noise_pos_m", 0.0)?,
-                cx.param_f64("noise_angle_rad", 0.0)?,
-            );
-            Ok(Box::new(Sensor {
-                plant: cx.plant.clone(),
-                output,
-                noise: (pos > 0.0 || angle > 0.0)
-                    .then(|| SensorNoise::new(cx.seed, cx.id, pos, angle)),
-            }) as Box<dyn Work>)
+            let out = cx
+                .node
+                .outputs
+                .first()
+                .ok_or("a sensor publishes one topic")?;
+            if out.msg_type() == StateMsg::TYPE {
+                NodeOf::bind(cx, Sensor::<StateMsg>::new(cx)?)
+            } else {
+                NodeOf::bind(cx, Sensor::<PositionMsg>::new(cx)?)
+            }
         }),
+        name: "sensor",
+        uses_brain: false,
     }
 }
 
-/// A sensor's state.
-pub struct Sensor {
+/// A sensor node publishing readings of type `M` (the full state or a position).
+pub struct Sensor<M> {
     /// The plant it reads.
     pub plant: SharedPlant,
-    /// Where it publishes.
-    pub output: SensorOutput,
     /// Noise on (cart position, pole angle), with its generator; `None` when noiseless.
     pub noise: Option<SensorNoise>,
+    reading: PhantomData<fn() -> M>,
 }
 
-/// A sensor's topic: full state or positions.
-pub enum SensorOutput {
-    /// Publishes the full state.
-    State(Publisher<StateMsg>),
-    /// Publishes positions.
-    Position(Publisher<PositionMsg>),
+impl<M> Sensor<M> {
+    /// A sensor as `cx` sets it (its noise parameters, seeded by the run's seed and its rank).
+    ///
+    /// # Errors
+    /// One line naming the node when a noise parameter is not a number.
+    pub fn new(cx: &BuildContext<'_>) -> Result<Sensor<M>, String> {
+        let (pos, angle) = (
+            cx.node.param_f64("noise_pos_m", 0.0)?,
+            cx.node.param_f64("noise_angle_rad", 0.0)?,
+        );
+        Ok(Sensor {
+            plant: cx.run.plant.clone(),
+            noise: (pos > 0.0 || angle > 0.0)
+                .then(|| SensorNoise::new(cx.node.seed, cx.node.id, pos, angle)),
+            reading: PhantomData,
+        })
+    }
+}
+
+/// What a sensor can publish: a reading of the plant's state, with its noise.
+pub trait Reading: Message {
+    /// The reading of `state`, with `noise` drawn on the positions.
+    fn of(state: &CartPoleState, noise: Option<&mut SensorNoise>) -> Self;
+}
+
+impl Reading for StateMsg {
+    fn of(state: &CartPoleState, noise: Option<&mut SensorNoise>) -> StateMsg {
+        let mut obs = state.observation();
+        if let Some(n) = noise {
+            obs[0] = (state.cart_pos + n.pos.sample(&mut n.rng)) as f32;
+            let th = state.theta + n.angle.sample(&mut n.rng);
+            obs[2] = th.cos() as f32;
+            obs[3] = th.sin() as f32;
+        }
+        obs
+    }
+}
+
+impl Reading for PositionMsg {
+    fn of(state: &CartPoleState, noise: Option<&mut SensorNoise>) -> PositionMsg {
+        let (mut x, mut th) = (state.cart_pos, state.theta);
+        if let Some(n) = noise {
+            x += n.pos.sample(&mut n.rng);
+            th += n.angle.sample(&mut n.rng);
+        }
+        PositionMsg {
+            cart_pos_m: x,
+            pole_angle_rad: th,
+        }
+    }
 }
 
 /// Seeded Gaussian measurement noise.
@@ -112,12 +146,15 @@ impl SensorNoise {
     }
 }
 
-impl Work for Sensor {
-    fn save(&self) -> Option<ratelab_core::node::NodeState> {
+impl<M: Reading> RustNode for Sensor<M> {
+    type Input = ();
+    type Output = M;
+
+    fn save(&self) -> Option<NodeState> {
         // The noise's generator is all a sensor keeps between ticks.
         Some(Box::new(self.noise.as_ref().map(|n| n.rng.clone())))
     }
-    fn load(&mut self, state: &ratelab_core::node::NodeState) -> bool {
+    fn load(&mut self, state: &NodeState) -> bool {
         let Some(rng) = state.downcast_ref::<Option<rand_pcg::Pcg64>>() else {
             return false;
         };
@@ -126,33 +163,9 @@ impl Work for Sensor {
         }
         true
     }
-    /// One tick at `now`: read the plant, publish.
-    fn tick(&mut self, now: Nanos) -> Flow {
+    /// One tick: read the plant, publish (its reading's origin is the tick: the reading).
+    fn tick(&mut self, _now: Nanos, (): ()) -> Option<M> {
         let state = lock(&self.plant).state();
-        match &self.output {
-            SensorOutput::State(t) => {
-                let mut obs = state.observation();
-                if let Some(n) = &mut self.noise {
-                    obs[0] = (state.cart_pos + n.pos.sample(&mut n.rng)) as f32;
-                    let th = state.theta + n.angle.sample(&mut n.rng);
-                    obs[2] = th.cos() as f32;
-                    obs[3] = th.sin() as f32;
-                }
-                t.publish(obs, now, Some(now));
-            }
-            SensorOutput::Position(t) => {
-                let (mut x, mut th) = (state.cart_pos, state.theta);
-                if let Some(n) = &mut self.noise {
-                    x += n.pos.sample(&mut n.rng);
-                    th += n.angle.sample(&mut n.rng);
-                }
-                let m = PositionMsg {
-                    cart_pos_m: x,
-                    pole_angle_rad: th,
-                };
-                t.publish(m, now, Some(now));
-            }
-        }
-        Flow::Continue
+        Some(M::of(&state, self.noise.as_mut()))
     }
 }
