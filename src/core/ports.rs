@@ -21,15 +21,16 @@ use std::sync::Arc;
 pub type Stamped<M> = crate::topic::Message<M>;
 
 /// An input slot that gives a tick what its topic's read gives at every tick: the newest
-/// message (or the oldest unread, by the topic's QoS), or the one read before when nothing
-/// new came (a stale read: compare [`Stamped::seq`]), `None` only before the first message
-/// or when every buffered one expired (lifespan). With its stamps ([`Stamped`]): when it
+/// message (or the oldest unread, by the topic's QoS), or, when nothing new came, the
+/// newest one already read that is still buffered (a stale read: compare
+/// [`Stamped::seq`]); `None` only before the first message or when every buffered one
+/// expired (lifespan). With its stamps ([`Stamped`]): when it
 /// was published, and the origin of the reading it derives from. The chapter's nodes read
 /// this way (a policy acts on the last state it has; the actuator holds the last force).
 pub struct Held<M>(PhantomData<fn() -> M>);
 
-/// Where an input stands between ticks: the `seq` of the newest message it delivered and
-/// that message's origin stamp (its own stamp when it has none). Part of a node's captured
+/// Where an input stands between ticks: the `seq` of the last message that was new to it
+/// and that message's origin stamp (its own stamp when it has none). Part of a node's captured
 /// state (`RustNode::save`).
 pub type Mark = (Option<u64>, Option<Nanos>);
 
@@ -65,8 +66,8 @@ impl<M: Message> InputSlot for Held<M> {
 /// `subscribes` order), `()` for none (a source), or [`AnyPorts`].
 ///
 /// A tick is given [`Inputs::Delivered`]: per input, what its slot delivers — `Option<&M>`
-/// for one input of `M` (`None`: nothing new since the last tick), a tuple of them for
-/// several, `()` for none.
+/// for an input of `M` (`None`: nothing new since the last tick), `Option<&Stamped<M>>`
+/// for [`Held<M>`] — one of them for one input, a tuple of them for several, `()` for none.
 pub trait Inputs: 'static {
     /// The message types, in order (none for [`AnyPorts`]).
     const TYPES: &'static [MsgType];
@@ -96,6 +97,9 @@ pub trait Inputs: 'static {
     /// Put the inputs back where [`Inputs::marks`] said.
     #[doc(hidden)]
     fn set_marks(ports: &mut Self::Ports, marks: &Self::Marks);
+    /// Let go of what the tick was given (a frame's buffer is not held between ticks).
+    #[doc(hidden)]
+    fn release(_ports: &mut Self::Ports) {}
 }
 
 /// What a registered node publishes: one [`Message`] type, a tuple of two to four (one
@@ -122,8 +126,9 @@ pub trait Outputs: 'static {
 }
 
 /// Any topics, of any type, in and out: the ports of an adapter whose own code reads and
-/// publishes them (a Python node, a ROS 2 node's proxy), through the topics its maker is
-/// given. A tick is given `()` and returns `()`.
+/// publishes them (a Python node, a ROS 2 node's proxy), through the topics and the outbox
+/// its maker is given (a kind registered with `register_kind`, whose `make` is given the
+/// whole `BuildContext`). A tick is given `()` and returns `()`.
 pub struct AnyPorts;
 
 impl Inputs for AnyPorts {
@@ -237,6 +242,9 @@ impl<S: InputSlot> Inputs for S {
     fn set_marks(ports: &mut InPort<S::Msg>, marks: &Mark) {
         ports.set_mark(*marks);
     }
+    fn release(ports: &mut InPort<S::Msg>) {
+        ports.fresh = None;
+    }
 }
 
 impl Outputs for () {
@@ -292,6 +300,9 @@ macro_rules! tuple_ports {
             fn set_marks(ports: &mut Self::Ports, marks: &Self::Marks) {
                 $(ports.$i.set_mark(marks.$i);)+
             }
+            fn release(ports: &mut Self::Ports) {
+                $(ports.$i.fresh = None;)+
+            }
         }
 
         impl<$($m: Message),+> Outputs for ($($m,)+) {
@@ -336,7 +347,8 @@ pub trait RustNode: Send + 'static {
     /// One tick at run time `now`. `input` is, per input, what its slot delivered:
     /// `Option<&M>` for an input of `M` (`None`: nothing new since the last tick). What it
     /// returns (per output, `Option<M>` for one) is published now, carrying the oldest
-    /// origin among the newest messages its inputs delivered (its tick time for a source).
+    /// origin among the newest messages its inputs delivered (a message without an origin
+    /// counts from its own stamp; its tick time before any, and always for a source).
     ///
     /// # Panics
     /// A node whose code failed (a Python callback raised) panics with its one-line

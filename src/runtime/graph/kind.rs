@@ -9,9 +9,10 @@
 //! whose ports are any topics ([`ratelab_core::ports::AnyPorts`]). The graph file's rules
 //! ([`super::spec`]) read only the definition: what the kind reads and publishes
 //! ([`Ports`]), how it touches the plant ([`Plant`]), whose code it runs ([`Code`]) and
-//! which parameters it takes ([`Params`]); [`super::Graph::build`] calls its `make` with
-//! what each kind needs ([`BuildContext`]: [`NodeContext`] for every kind, [`RunParts`]
-//! for the chain's, [`AdapterParts`] for the adapters').
+//! which parameters it takes ([`Params`]); [`super::Graph::build`] calls its `make` with a
+//! [`BuildContext`] grouped by which kinds use what: [`NodeContext`] (every kind; all a
+//! program's kind made through `register` is given), [`RunParts`] (the chain's kinds:
+//! plant, brain, log) and [`AdapterParts`] (the Python and ROS 2 adapters).
 //!
 //! A leaf of the graph module: it knows message types, topics and the plant, not the graph
 //! file or the graph built from it.
@@ -190,6 +191,7 @@ impl<N: RustNode> Work for Bound<N> {
             <N::Input as Inputs>::oldest_origin(&self.inputs).or(Some(now))
         };
         <N::Output as Outputs>::publish(&self.outputs, out, now, origin);
+        <N::Input as Inputs>::release(&mut self.inputs);
         self.node.flow()
     }
     fn alive_by_ticking(&self) -> bool {

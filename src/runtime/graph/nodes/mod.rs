@@ -9,10 +9,11 @@
 //! [`super::registry`] registers them; a kind written outside ratelab is registered the
 //! same way ([`super::registry::register`]).
 //!
-//! A **python** node runs its subscription callbacks for what arrived, then its timers; a
-//! **registered** kind its `tick` for what arrived; what either published goes out with the
+//! A **python** node runs its subscription callbacks for what arrived, then its timers; any
+//! other kind its `tick`, given per input what its slot delivers (a new message, or every
+//! tick's read with [`ratelab_core::ports::Held`]); what either published goes out with the
 //! oldest origin among its inputs' newest messages (either may have several inputs and
-//! outputs; every other kind has at most one of each).
+//! outputs; the built-in kinds have at most one of each).
 //!
 //! Every node that publishes passes on the origin stamp of the message it derived its output
 //! from (of several inputs, the oldest), so the actuator measures sense→act latency

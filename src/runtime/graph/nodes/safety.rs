@@ -1,5 +1,8 @@
 //! The **safety** kind: clamps the newest force (the last one again when nothing new came)
-//! to ±`max_force_n` and republishes it, with its origin.
+//! to ±`max_force_n` and republishes it, with its origin (as every node passes an origin
+//! on, [`ratelab_core::ports::RustNode::tick`]: a force that has none, a Python node's
+//! before its first input, counts from its own stamp; before issue 71's one node trait the
+//! safety node passed on none).
 
 use crate::graph::kind::{Code, KindDef, ParamDef, Params};
 use crate::plant::GEAR_N;
