@@ -1,7 +1,7 @@
 //! The PD controller both node-kind examples register as `kind = "pd"`
 //! (`examples/custom_node.rs`, `examples/custom_node_processes.rs`).
 
-use ratelab::graph::registry::{register, NodeContext, RustNode};
+use ratelab::graph::registry::{register, Held, NodeContext, RustNode, Stamped};
 use ratelab::msg::{ForceMsg, StateMsg};
 use ratelab::plant::GEAR_N;
 use ratelab::Nanos;
@@ -12,20 +12,17 @@ pub struct Pd {
     kd_angle: f64,
     kp_pos: f64,
     kd_pos: f64,
-    /// The newest state received (the node acts on it every tick: a zero-order hold on
-    /// its input, as the chapter's policy node reads the latest message every tick).
-    state: Option<StateMsg>,
 }
 
 impl RustNode for Pd {
-    type Input = StateMsg;
+    /// The newest state, every tick (`Held`: a zero-order hold on its input, as the
+    /// chapter's policy node reads the latest message every tick; `StateMsg` alone would
+    /// give each new state once).
+    type Input = Held<StateMsg>;
     type Output = ForceMsg;
 
-    fn tick(&mut self, _now: Nanos, input: Option<&StateMsg>) -> Option<ForceMsg> {
-        if let Some(s) = input {
-            self.state = Some(*s);
-        }
-        let [x, x_dot, cos_t, sin_t, theta_dot] = self.state?.map(f64::from);
+    fn tick(&mut self, _now: Nanos, input: Option<&Stamped<StateMsg>>) -> Option<ForceMsg> {
+        let [x, x_dot, cos_t, sin_t, theta_dot] = input?.data.map(f64::from);
         let theta = sin_t.atan2(cos_t);
         let u = self.kp_angle * theta
             + self.kd_angle * theta_dot
@@ -48,7 +45,6 @@ pub fn register_pd() {
             kd_angle: cx.param_f64("kd_angle", 2.0)?,
             kp_pos: cx.param_f64("kp_pos", 0.4)?,
             kd_pos: cx.param_f64("kd_pos", 0.8)?,
-            state: None,
         })
     })
     .expect("'pd' is free");

@@ -144,20 +144,31 @@ impl NodeOf {
     /// One line naming the node when its topics are not of `N`'s types (the graph file's
     /// rules check them against the kind's [`Ports`] when it is read).
     pub fn bind<N: RustNode>(cx: &BuildContext<'_>, node: N) -> Result<NodeOf, String> {
-        let (Some(inputs), Some(outputs)) = (
-            <N::Input as Inputs>::bind(cx.node.inputs),
-            <N::Output as Outputs>::bind(cx.node.outputs, cx.outbox),
-        ) else {
-            return Err(format!(
-                "node '{}': its topics are not of the types its kind reads and publishes",
-                cx.node.name
-            ));
-        };
+        let (inputs, outputs) = ports::<N>(cx)?;
         Ok(NodeOf(Box::new(Bound::<N> {
             node,
             inputs,
             outputs,
         })))
+    }
+}
+
+/// `N`'s inputs and outputs bound to the topics `cx` gives.
+///
+/// # Errors
+/// One line naming the node when its topics are not of `N`'s types.
+fn ports<N: RustNode>(
+    cx: &BuildContext<'_>,
+) -> Result<(<N::Input as Inputs>::Ports, <N::Output as Outputs>::Ports), String> {
+    match (
+        <N::Input as Inputs>::bind(cx.node.inputs),
+        <N::Output as Outputs>::bind(cx.node.outputs, cx.outbox),
+    ) {
+        (Some(inputs), Some(outputs)) => Ok((inputs, outputs)),
+        _ => Err(format!(
+            "node '{}': its topics are not of the types its kind reads and publishes",
+            cx.node.name
+        )),
     }
 }
 
@@ -356,9 +367,15 @@ impl KindDef {
             code: Code::Rust,
             params: Params::Free,
             uses_brain: false,
+            // Its topics bound first: a node is made only for topics it can use.
             make: Box::new(move |cx: &mut BuildContext<'_>| {
+                let (inputs, outputs) = ports::<N>(cx)?;
                 let node = make(cx)?;
-                NodeOf::bind(cx, node)
+                Ok(NodeOf(Box::new(Bound::<N> {
+                    node,
+                    inputs,
+                    outputs,
+                })))
             }),
         }
     }
