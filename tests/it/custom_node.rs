@@ -576,7 +576,7 @@ fn a_graph_without_the_chapters_chain_runs_and_says_so() {
 
 /// The built-in kinds are made of the registry's public parts only: each `def()` registered
 /// again under another name through `register_kind`, as a program registers its own, runs
-/// the chapter's graph exactly as the built-in kinds do; and a kind of a program's own with
+/// the chapter's, a safety node's and a camera's graphs exactly as the built-in kinds do; and a kind of a program's own with
 /// docs and a parameter with its unit and range (`rust_kind`) is printed and checked like a
 /// built-in one.
 #[test]
@@ -584,28 +584,52 @@ fn the_built_in_kinds_are_registered_through_the_public_api_and_are_its_examples
     use ratelab::graph::kind::{KindDef, ParamDef, Params};
     use ratelab::graph::nodes;
     use ratelab::graph::registry::{kinds_table, register_kind, rust_kind};
+    // Every built-in kind of fixed ports (all but the Python and ROS 2 adapters), again.
+    let again: Vec<&str> = ratelab::graph::registry::kinds()
+        .into_iter()
+        .filter(|k| k.code() == ratelab::graph::kind::Code::BuiltIn)
+        .map(|k| k.as_str())
+        .collect();
+    assert!(again.len() >= 7, "{again:?}");
     for (name, def) in [
         ("sensor_again", nodes::sensor::def()),
+        ("camera_again", nodes::camera::def()),
+        ("image_estimator_again", nodes::image_estimator::def()),
+        ("estimator_again", nodes::estimator::def()),
         ("policy_again", nodes::policy::def()),
+        ("safety_again", nodes::safety::def()),
         ("actuator_again", nodes::actuator::def()),
     ] {
+        assert!(again.contains(&def.name), "{} is built in", def.name);
         register_kind(KindDef { name, ..def }).unwrap();
     }
-    let chapter = std::fs::read_to_string(crate::repo("graphs/cartpole.toml")).unwrap();
-    let again = chapter
-        .replace("kind = \"sensor\"", "kind = \"sensor_again\"")
-        .replace("kind = \"policy\"", "kind = \"policy_again\"")
-        .replace("kind = \"actuator\"", "kind = \"actuator_again\"");
-    assert_ne!(again, chapter);
-    let built_in = virtual_run(GraphSpec::parse(&chapter, "cartpole.toml").unwrap());
-    let registered = virtual_run(GraphSpec::parse(&again, "cartpole.toml").unwrap());
-    // Every figure the same; only the kinds' names differ.
-    assert_eq!(
-        serde_json::to_string(&registered)
-            .unwrap()
-            .replace("_again\"", "\""),
-        serde_json::to_string(&built_in).unwrap()
-    );
+    // The chapter's graph, a safety node's, and a camera's (camera, image estimator,
+    // estimator): every one of them.
+    for file in [
+        "graphs/cartpole.toml",
+        "graphs/cartpole-safety.toml",
+        "graphs/cartpole-camera.toml",
+    ] {
+        let text = std::fs::read_to_string(crate::repo(file)).unwrap();
+        let mut registered = text.clone();
+        for kind in &again {
+            registered = registered.replace(
+                &format!("kind = \"{kind}\""),
+                &format!("kind = \"{kind}_again\""),
+            );
+        }
+        assert_ne!(registered, text);
+        let built_in = virtual_run(GraphSpec::parse(&text, file).unwrap());
+        let registered = virtual_run(GraphSpec::parse(&registered, file).unwrap());
+        // Every figure the same; only the kinds' names differ.
+        assert_eq!(
+            serde_json::to_string(&registered)
+                .unwrap()
+                .replace("_again\"", "\""),
+            serde_json::to_string(&built_in).unwrap(),
+            "{file}"
+        );
+    }
     // A program's own kind, with what a built-in one carries: docs, a parameter with its
     // unit, default and range, checked when the graph file is read.
     static PUSH: [ParamDef; 1] = [ParamDef {
