@@ -153,13 +153,17 @@ impl NodeOf {
     }
 }
 
+/// A node's inputs and outputs, bound to their topics.
+type BoundPorts<N> = (
+    <<N as RustNode>::Input as Inputs>::Ports,
+    <<N as RustNode>::Output as Outputs>::Ports,
+);
+
 /// `N`'s inputs and outputs bound to the topics `cx` gives.
 ///
 /// # Errors
 /// One line naming the node when its topics are not of `N`'s types.
-fn ports<N: RustNode>(
-    cx: &BuildContext<'_>,
-) -> Result<(<N::Input as Inputs>::Ports, <N::Output as Outputs>::Ports), String> {
+fn ports<N: RustNode>(cx: &BuildContext<'_>) -> Result<BoundPorts<N>, String> {
     match (
         <N::Input as Inputs>::bind(cx.node.inputs),
         <N::Output as Outputs>::bind(cx.node.outputs, cx.outbox),
