@@ -84,15 +84,24 @@ impl SharedPool {
             .ok()
     }
 
-    /// The sample of `head` and `data` (`len` bytes, [`SampleHead::sample_len`]), written
-    /// once: into a buffer of the pool when [`SharedPool::buffer`] gives one, else into bytes
-    /// of its own. `None` only if `len` is not the sample's length.
-    fn written(&self, head: &SampleHead, data: &MsgData, len: usize) -> Option<ZBytes> {
+    /// The sample of `head` and `data` (its payload `payload_len` bytes,
+    /// [`MsgData::encoded_len`]), written once: into a buffer of the pool when
+    /// [`SharedPool::buffer`] gives one, else into bytes of its own; with its length.
+    /// `None` only if `payload_len` is not the payload's length.
+    fn written(
+        &self,
+        head: &SampleHead,
+        data: &MsgData,
+        payload_len: usize,
+    ) -> Option<(ZBytes, usize)> {
+        let len = head.sample_len(payload_len);
         if let Some(mut shared) = self.buffer(len) {
-            return head.write(data, &mut shared).ok().map(|()| shared.into());
+            let written = head.write(data, payload_len, &mut shared);
+            return written.ok().map(|()| (shared.into(), len));
         }
         let mut own = vec![0; len];
-        head.write(data, &mut own).ok().map(|()| own.into())
+        let written = head.write(data, payload_len, &mut own);
+        written.ok().map(|()| (own.into(), len))
     }
 }
 
@@ -210,9 +219,8 @@ impl Outlet {
         }
         // Written once, straight from the message: into the shared pool when it is large
         // and the pool has room, else into bytes of its own.
-        let len = head.sample_len(data);
-        let Some(bytes) = self.pool.written(&head, data, len) else {
-            return; // never: `len` is the sample's (counted lost on the wire if it were)
+        let Some((bytes, len)) = self.pool.written(&head, data, payload_len) else {
+            return; // never: the length is the payload's (counted lost on the wire if it were)
         };
         if self.spill.admit(len) {
             // Under congestion control `Block` a put fails only when the session is closed,
@@ -730,8 +738,8 @@ mod tests {
                 origin_ns: None,
                 sent_mono_ns: wire::mono_now_ns(),
             };
-            let bytes = pool
-                .written(&head, &data, head.sample_len(&data))
+            let (bytes, _) = pool
+                .written(&head, &data, data.encoded_len())
                 .expect("written");
             let in_pool = bytes.as_shm().is_some();
             publisher.put(bytes).wait().unwrap();
@@ -760,15 +768,16 @@ mod tests {
             origin_ns: None,
             sent_mono_ns: 0,
         };
-        let small = pool
-            .written(&head, &force, head.sample_len(&force))
-            .unwrap();
+        let (small, _) = pool.written(&head, &force, force.encoded_len()).unwrap();
         assert!(small.as_shm().is_none());
         // With shared memory off, nothing is put in a pool.
         let big = frame(0);
-        let len = head.sample_len(&big);
         let off = SharedPool::new(false);
-        assert!(off.buffer(len).is_none());
-        assert!(off.written(&head, &big, len).unwrap().as_shm().is_none());
+        assert!(off.buffer(head.sample_len(big.encoded_len())).is_none());
+        let (own, len) = off.written(&head, &big, big.encoded_len()).unwrap();
+        assert!(own.as_shm().is_none());
+        assert_eq!(len, head.sample_len(big.encoded_len()));
+        // A payload length that is not the payload's writes nothing.
+        assert!(off.written(&head, &big, big.encoded_len() + 1).is_none());
     }
 }

@@ -226,14 +226,15 @@ mod tests {
                 data: payload.to_bytes(),
             }
             .encode();
-            assert_eq!(head.sample_len(&payload), owned.len());
+            let payload_len = payload.encoded_len();
+            assert_eq!(head.sample_len(payload_len), owned.len());
             let mut out = vec![0u8; owned.len()];
-            head.write(&payload, &mut out).unwrap();
+            head.write(&payload, payload_len, &mut out).unwrap();
             assert_eq!(out, owned, "the same bytes as the owned sample's");
             // Too short or too long a buffer is refused before a byte is written.
             for len in [owned.len() - 1, owned.len() + 1] {
                 let mut wrong = vec![7u8; len];
-                assert!(head.write(&payload, &mut wrong).is_err());
+                assert!(head.write(&payload, payload_len, &mut wrong).is_err());
                 assert!(wrong.iter().all(|&b| b == 7), "nothing written");
             }
             // Read in place: the payload is the arrived bytes themselves.

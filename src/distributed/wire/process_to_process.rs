@@ -41,21 +41,28 @@ pub struct SampleHead {
 }
 
 impl SampleHead {
-    /// The bytes of the sample this head and `payload` make ([`WireSample::encode`]'s
-    /// length), found without encoding the payload.
-    pub fn sample_len(&self, payload: &MsgData) -> usize {
-        let len = payload.encoded_len();
-        postcard::experimental::serialized_size(&(self, len)).unwrap_or(0) + len
+    /// The bytes of the sample this head and a payload of `payload_len` bytes make
+    /// ([`WireSample::encode`]'s length; `payload_len` is [`MsgData::encoded_len`], found
+    /// without encoding the payload, once per sample by the caller).
+    pub fn sample_len(&self, payload_len: usize) -> usize {
+        postcard::experimental::serialized_size(&(self, payload_len)).unwrap_or(0) + payload_len
     }
 
-    /// Write the sample of this head and `payload` into `out`, which must be exactly
-    /// [`SampleHead::sample_len`] long (a shared-memory buffer, so that a large message is
-    /// written once, straight from the message): the same bytes as [`WireSample::encode`].
+    /// Write the sample of this head and `payload` (`payload_len` bytes encoded,
+    /// [`MsgData::encoded_len`]) into `out`, which must be exactly [`SampleHead::sample_len`]
+    /// long (a shared-memory buffer, so that a large message is written once, straight from
+    /// the message): the same bytes as [`WireSample::encode`].
     ///
     /// # Errors
-    /// `out` is not [`SampleHead::sample_len`] long.
-    pub fn write(&self, payload: &MsgData, out: &mut [u8]) -> Result<(), String> {
-        let len = payload.encoded_len();
+    /// `out` is not [`SampleHead::sample_len`] long, or the payload does not encode to
+    /// `payload_len` bytes.
+    pub fn write(
+        &self,
+        payload: &MsgData,
+        payload_len: usize,
+        out: &mut [u8],
+    ) -> Result<(), String> {
+        let len = payload_len;
         let head_len = postcard::experimental::serialized_size(&(self, len)).unwrap_or(0);
         if out.len() != head_len + len {
             return Err(format!(
