@@ -34,8 +34,17 @@ pub struct Held<M>(PhantomData<fn() -> M>);
 /// state (`RustNode::save`).
 pub type Mark = (Option<u64>, Option<Nanos>);
 
-/// One input slot of a node: a message type `M` (each new message once) or [`Held<M>`].
-pub trait InputSlot: 'static {
+/// The two kinds of input slot, and no others (ratelab reads them: a slot of one's own
+/// could not be read).
+mod sealed {
+    pub trait Sealed {}
+    impl<M: crate::msg::Message> Sealed for M {}
+    impl<M: crate::msg::Message> Sealed for super::Held<M> {}
+}
+
+/// One input slot of a node: a message type `M` (each new message once) or [`Held<M>`];
+/// sealed, as these two are all ratelab reads.
+pub trait InputSlot: sealed::Sealed + 'static {
     /// What a tick is given.
     type Delivered<'a>;
     /// Read at `now` (ratelab's side).
