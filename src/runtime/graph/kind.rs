@@ -144,12 +144,16 @@ impl NodeOf {
     /// One line naming the node when its topics are not of `N`'s types (the graph file's
     /// rules check them against the kind's [`Ports`] when it is read).
     pub fn bind<N: RustNode>(cx: &BuildContext<'_>, node: N) -> Result<NodeOf, String> {
-        let (inputs, outputs) = ports::<N>(cx)?;
-        Ok(NodeOf(Box::new(Bound::<N> {
+        Ok(NodeOf::of(node, ports::<N>(cx)?))
+    }
+
+    /// `node` on its bound ports.
+    fn of<N: RustNode>(node: N, (inputs, outputs): BoundPorts<N>) -> NodeOf {
+        NodeOf(Box::new(Bound::<N> {
             node,
             inputs,
             outputs,
-        })))
+        }))
     }
 }
 
@@ -373,13 +377,8 @@ impl KindDef {
             uses_brain: false,
             // Its topics bound first: a node is made only for topics it can use.
             make: Box::new(move |cx: &mut BuildContext<'_>| {
-                let (inputs, outputs) = ports::<N>(cx)?;
-                let node = make(cx)?;
-                Ok(NodeOf(Box::new(Bound::<N> {
-                    node,
-                    inputs,
-                    outputs,
-                })))
+                let ports = ports::<N>(cx)?;
+                Ok(NodeOf::of(make(cx)?, ports))
             }),
         }
     }

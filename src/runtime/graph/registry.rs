@@ -518,22 +518,36 @@ mod tests {
         }
     }
 
+    /// A node of kind `kind` named `name`, reading a force on `/in` and publishing one on
+    /// `/out`: the node, and the two topics typed.
+    fn force_to_force(
+        kind: &str,
+        name: &str,
+    ) -> (
+        NodeOf,
+        Arc<ratelab_core::topic::Subscription<ForceMsg>>,
+        Arc<ratelab_core::topic::Subscription<ForceMsg>>,
+    ) {
+        let input = AnyTopic::new("/in", ForceMsg::TYPE, 1).unwrap();
+        let output = AnyTopic::new("/out", ForceMsg::TYPE, 1).unwrap();
+        let params = toml::Table::new();
+        let cx = context(name, &params);
+        let (inputs, outputs) = ([input.clone()], [output.clone()]);
+        let node = make(kind, &cx, &inputs, &outputs, &Outbox::new()).unwrap();
+        (
+            node,
+            input.typed::<ForceMsg>().unwrap().clone(),
+            output.typed::<ForceMsg>().unwrap().clone(),
+        )
+    }
+
     /// A held input gives a tick what the topic's read gives, stale reads again, with the
     /// message's stamps; the output carries the held message's origin; a capture takes the
     /// input's position with the node's state.
     #[test]
     fn a_held_input_gives_every_read_with_its_stamps_and_is_captured() {
         register("held_echo", |_: &NodeContext<'_>| Ok(HeldEcho)).unwrap();
-        let input = AnyTopic::new("/in", ForceMsg::TYPE, 1).unwrap();
-        let output = AnyTopic::new("/out", ForceMsg::TYPE, 1).unwrap();
-        let params = toml::Table::new();
-        let cx = context("h", &params);
-        let (inputs, outputs) = ([input.clone()], [output.clone()]);
-        let mut node = make("held_echo", &cx, &inputs, &outputs, &Outbox::new()).unwrap();
-        let (i, o) = (
-            input.typed::<ForceMsg>().unwrap(),
-            output.typed::<ForceMsg>().unwrap(),
-        );
+        let (mut node, i, o) = force_to_force("held_echo", "h");
         node.0.tick(Nanos(1)); // nothing yet: nothing published
         assert_eq!(o.stats().published, 0);
         i.publish(ForceMsg { newtons: 3.0 }, Nanos(5), Some(Nanos(2)));
@@ -546,8 +560,8 @@ mod tests {
             (m.data.newtons, m.stamp, m.origin_stamp),
             (8.0, Nanos(30), Some(Nanos(2)))
         );
-        // A newer message moves the input on; taking the capture back puts it where it was,
-        // so the same message is new to it again.
+        // A newer message moves the input on (its origin is the new message's); the capture
+        // is taken back, and a state that is not the node's is refused.
         i.publish(ForceMsg { newtons: 4.0 }, Nanos(35), None);
         node.0.tick(Nanos(40));
         let m = o.read(Nanos(40)).unwrap();
@@ -561,16 +575,7 @@ mod tests {
     #[test]
     fn a_bound_node_gets_each_message_once_and_passes_its_origin_on() {
         register("echo_bound", |_: &NodeContext<'_>| Ok(Echo)).unwrap();
-        let input = AnyTopic::new("/in", ForceMsg::TYPE, 1).unwrap();
-        let output = AnyTopic::new("/out", ForceMsg::TYPE, 1).unwrap();
-        let params = toml::Table::new();
-        let cx = context("e", &params);
-        let (inputs, outputs) = ([input.clone()], [output.clone()]);
-        let mut node = make("echo_bound", &cx, &inputs, &outputs, &Outbox::new()).unwrap();
-        let (i, o) = (
-            input.typed::<ForceMsg>().unwrap(),
-            output.typed::<ForceMsg>().unwrap(),
-        );
+        let (mut node, i, o) = force_to_force("echo_bound", "e");
         i.publish(ForceMsg { newtons: 3.0 }, Nanos(5), Some(Nanos(1)));
         node.0.tick(Nanos(10));
         let m = o.read(Nanos(10)).unwrap();
@@ -581,9 +586,12 @@ mod tests {
         // Nothing new: Echo publishes nothing.
         node.0.tick(Nanos(30));
         assert_eq!(o.stats().published, 1);
-        assert!(make("nobody", &cx, &inputs, &outputs, &Outbox::new())
-            .err()
-            .unwrap()
-            .contains("kind 'nobody' is not registered"));
+        let params = toml::Table::new();
+        assert!(
+            make("nobody", &context("e", &params), &[], &[], &Outbox::new())
+                .err()
+                .unwrap()
+                .contains("kind 'nobody' is not registered")
+        );
     }
 }
