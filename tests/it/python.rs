@@ -487,9 +487,10 @@ fn a_failed_node_exits_2_in_every_layout() {
                     last.starts_with("error: node 'policy' failed at t=") && last.contains(needle),
                     "{what}: {err}"
                 );
+                let out = String::from_utf8_lossy(&o.stdout);
                 assert!(
-                    String::from_utf8_lossy(&o.stdout).contains("NODE FAILED"),
-                    "{what}: the summary says so"
+                    out.contains("NODE FAILED"),
+                    "{what}: the summary says so\n{out}\n{err}"
                 );
             }
         }

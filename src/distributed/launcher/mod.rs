@@ -285,6 +285,15 @@ fn merge_exec(
     Some(ratelab_core::executor::ExecFigures { nodes, executors })
 }
 
+/// The run time up to which a process's report may count, for [`check_report`]: the run's
+/// end, or under the real clock the time the launcher took the report (`taken_at`) when
+/// later. A real-clock process runs on until the launcher's stop reaches it (on a loaded
+/// machine, many of its nodes' periods after the end), and its nodes' ticks meanwhile are
+/// true ticks; none can come after its report did.
+pub fn report_time(end: &RunEnd, taken_at: Option<Nanos>) -> Nanos {
+    taken_at.map_or(end.at, |t| t.max(end.at))
+}
+
 /// Check that process `process`'s report could be true of a run that ended at `at`: its
 /// vectors have the graph's shape; its nodes ticked no more than their rates allow in that
 /// time (two more for phase and the tick at zero); the topics it holds received no more
@@ -531,14 +540,7 @@ pub fn launch(
                 .map_or(String::new(), |g| format!(" --graph {}", g.display()))
         ));
     }
-    // Watchers ask for the run's settings here (`ratelab lab --attach`).
-    let setup_json = wire::encode_json(&me.setup);
-    let _setup_queryable = session
-        .declare_queryable(keys.setup())
-        .callback(move |q| {
-            let _ = q.reply(q.key_expr().clone(), setup_json.clone()).wait();
-        })
-        .wait()?;
+    let _setup_queryable = serve_setup(&session, &keys, &me.setup)?;
     me.admit_until_ready(&mut children)?;
     if let Some(gate) = &opts.start_gate {
         wait_gate(gate, stop, &mut children)?;
@@ -550,23 +552,29 @@ pub fn launch(
     let mut carried = Carried::new(spec);
     // The processes killed on request (real clock), with when.
     let mut killed = Vec::new();
-    let (end, lockstep) = match &relaying {
-        Some(relaying) => me.run_lockstep(relaying, &gone_now, start, &mut reports, &mut wires)?,
-        None => (
-            me.supervise(
+    // Under the virtual clock every report is of the run up to its end; under the real
+    // clock, up to when it came (`taken_at`).
+    let (end, lockstep, taken_at) = match &relaying {
+        Some(relaying) => {
+            let (end, lockstep) =
+                me.run_lockstep(relaying, &gone_now, start, &mut reports, &mut wires)?;
+            (end, lockstep, BTreeMap::new())
+        }
+        None => {
+            let (end, taken_at) = me.supervise(
                 &gone_rx,
                 &mut children,
                 &mut carried,
                 &mut reports,
                 &mut wires,
                 &mut killed,
-            )?,
-            None,
-        ),
+            )?;
+            (end, None, taken_at)
+        }
     };
     let wall = start.elapsed();
     children.reap(Duration::from_secs(5));
-    let (metrics, missing) = me.conclude(&end, &mut reports, &carried)?;
+    let (metrics, missing) = me.conclude(&end, &mut reports, &taken_at, &carried)?;
     // In the graph's topic order, whichever process reported first.
     wires.sort_by_key(|w| spec.topics.iter().position(|t| t.name == w.topic));
     Ok(LaunchReport {
@@ -579,6 +587,25 @@ pub fn launch(
         lockstep,
         killed,
     })
+}
+
+/// Answer watchers that ask for the run's settings (`ratelab lab --attach`) on the graph's
+/// setup key, for as long as the returned queryable is kept.
+///
+/// # Errors
+/// [`DistError`] when the queryable cannot be declared.
+fn serve_setup(
+    session: &zenoh::Session,
+    keys: &Keys,
+    setup: &Setup,
+) -> Result<zenoh::query::Queryable<()>, DistError> {
+    let setup_json = wire::encode_json(setup);
+    Ok(session
+        .declare_queryable(keys.setup())
+        .callback(move |q| {
+            let _ = q.reply(q.key_expr().clone(), setup_json.clone()).wait();
+        })
+        .wait()?)
 }
 
 /// The run's settings as every process of the launch and every watcher is given them.
@@ -752,25 +779,34 @@ impl Launch<'_> {
     }
 
     /// The run's summary from the processes' `reports` (those whose figures cannot be
-    /// true of a run that ended at `end` are refused and said), `carried` on from
-    /// processes started again; published on the graph's ended key for watchers. Returns
-    /// it and the processes that did not report.
+    /// true of a run that ended at `end`, or for a report taken later under the real clock
+    /// at its `taken_at` run time, are refused and said), `carried` on from processes
+    /// started again; published on the graph's ended key for watchers. Returns it and the
+    /// processes that did not report.
     ///
     /// # Errors
-    /// [`DistError::Peer`] without the plant's process's report.
+    /// [`DistError::Peer`] without the plant's process's report (refused, or gone with it).
     fn conclude(
         &self,
         end: &RunEnd,
         reports: &mut BTreeMap<String, GraphState>,
+        taken_at: &BTreeMap<String, Nanos>,
         carried: &Carried,
     ) -> Result<(Metrics, Vec<String>), DistError> {
         let spec = self.spec;
+        let plant = spec.process_of(spec.actuator);
+        let mut plant_refused = None;
         // A report whose figures cannot be is not merged: its process counts as not reporting.
-        reports.retain(|p, st| match check_report(spec, p, st, end.at) {
-            Ok(()) => true,
-            Err(why) => {
-                self.say(&format!("refused the report of process '{p}': {why}"));
-                false
+        reports.retain(|p, st| {
+            match check_report(spec, p, st, report_time(end, taken_at.get(p).copied())) {
+                Ok(()) => true,
+                Err(why) => {
+                    self.say(&format!("refused the report of process '{p}': {why}"));
+                    if *p == plant {
+                        plant_refused = Some(why);
+                    }
+                    false
+                }
             }
         });
         let missing: Vec<String> = self
@@ -780,10 +816,12 @@ impl Launch<'_> {
             .cloned()
             .collect();
         let state = merge_states(spec, reports, carried).ok_or_else(|| {
-            let plant = spec.process_of(spec.actuator);
-            DistError::Peer(match &end.reason {
+            DistError::Peer(match (&end.reason, plant_refused) {
+                (_, Some(why)) => format!(
+                    "process '{plant}' (the actuator's) sent a report that cannot be true ({why}): no summary or metrics.json"
+                ),
                 // The plant's process died: say so, not just that it did not report.
-                EndReason::NodeFailed { node, message } => format!(
+                (EndReason::NodeFailed { node, message }, None) => format!(
                     "node '{node}' failed at t={:.2}s: {message}; no summary or metrics.json: \
                      the plant's figures went with its process",
                     end.at.as_secs_f64()
@@ -898,5 +936,32 @@ mod tests {
         st.ticks[1] = 999_999;
         assert_eq!(check_report(&spec, "robot", &st, ten_s), Ok(()));
         assert!(check_report(&spec, "policy", &st, ten_s).is_err());
+    }
+
+    /// A real-clock run ended at 10 s by another process (a node failed there), whose stop
+    /// reached the plant's process 200 ms late on a loaded machine: the plant's 10 ticks
+    /// meanwhile cannot be true of a run of 10 s, but are of the 10.2 s by which its report
+    /// came. A report taken before the end is bounded by the end.
+    #[test]
+    fn a_report_that_came_after_the_end_may_count_ticks_up_to_when_it_came() {
+        let (spec, mut late) = robot_report();
+        late.ticks[0] += 10;
+        late.ticks[2] += 10;
+        late.actuator.steps += 10;
+        let end = RunEnd {
+            at: Nanos(10_000_000_000),
+            reason: EndReason::NodeFailed {
+                node: "policy".into(),
+                message: "RuntimeError: gave up".into(),
+            },
+        };
+        assert!(check_report(&spec, "robot", &late, report_time(&end, None)).is_err());
+        let came = Nanos(10_200_000_000);
+        assert_eq!(report_time(&end, Some(came)), came);
+        assert_eq!(
+            check_report(&spec, "robot", &late, report_time(&end, Some(came))),
+            Ok(())
+        );
+        assert_eq!(report_time(&end, Some(Nanos(9_000_000_000))), end.at);
     }
 }

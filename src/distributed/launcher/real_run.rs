@@ -27,7 +27,10 @@ impl Launch<'_> {
     /// again in place on failure); `carried` keeps what a process started again had
     /// counted before. Every process's report lands in `reports` and `wires`; the processes
     /// killed on request ([`super::LaunchOptions::kill_processes`]) in `killed`, with the run
-    /// time each was killed at.
+    /// time each was killed at. Returns how the run ended and the run time each report
+    /// was taken at: a process's nodes run until its stop reaches it, so under load a
+    /// report counts ticks past the run's end, never past the time it came
+    /// ([`super::check_report`]'s bound).
     ///
     /// # Errors
     /// [`DistError`] when the start cannot be sent or the figures cannot be subscribed to.
@@ -39,7 +42,7 @@ impl Launch<'_> {
         reports: &mut BTreeMap<String, GraphState>,
         wires: &mut Vec<wire::WireLink>,
         killed: &mut Vec<(String, Nanos)>,
-    ) -> Result<RunEnd, DistError> {
+    ) -> Result<(RunEnd, BTreeMap<String, Nanos>), DistError> {
         // Every process's figures: when they stop, the process is silent; of the
         // processes that may be started again (all but the plant's), what one counted
         // before it was killed is carried into the summary, as the lab carries it
@@ -88,10 +91,11 @@ impl Launch<'_> {
             carried.see(self.spec, &m);
         }
         *killed = std::mem::take(&mut run.killed);
-        Ok(run.end.unwrap_or(RunEnd {
+        let end = run.end.unwrap_or(RunEnd {
             at: self.cfg.duration,
             reason: EndReason::Duration,
-        }))
+        });
+        Ok((end, run.taken_at))
     }
 }
 
@@ -126,6 +130,8 @@ struct Supervision {
     given_up: Vec<String>,
     /// The processes killed on request, with the run time of each kill.
     killed: Vec<(String, Nanos)>,
+    /// The run time each process's report was taken at (its last, for one started again).
+    taken_at: BTreeMap<String, Nanos>,
     /// When each process's figures last came.
     silence: Silence,
     /// Processes said to be silent.
@@ -147,6 +153,7 @@ impl Supervision {
             restarts: BTreeMap::new(),
             given_up: Vec::new(),
             killed: Vec::new(),
+            taken_at: BTreeMap::new(),
             silence: Silence::default(),
             silent: Vec::new(),
         }
@@ -442,6 +449,7 @@ impl Supervision {
                     since_ns: since,
                     ..w
                 }));
+                self.taken_at.insert(process.clone(), self.run_time());
                 reports.insert(process, *state);
             }
             _ => {}
