@@ -19,7 +19,8 @@ use zenoh::shm::{
 };
 
 /// A process's shared-memory pool for its large samples: its own ([`SHM_POOL_BYTES`], made
-/// in the background when the first large sample is sent; Zenoh's copying of large payloads
+/// in the background as the process starts when it publishes a topic whose messages may be
+/// large, else when the first large sample is sent; Zenoh's copying of large payloads
 /// into a pool of its own is off, [`crate::open_session`]). A buffer returns to it only when
 /// no process holds it any more (Zenoh's safe garbage collection): a subscriber keeps a
 /// frame's buffer as long as it keeps the message, as its pixels ([`shared_payload`]), and
@@ -44,6 +45,31 @@ impl SharedPool {
         })
     }
 
+    /// Start making the pool (once, when shared memory is on), off the caller's thread:
+    /// mapping and locking [`SHM_POOL_BYTES`] takes a while, longer on a loaded machine.
+    /// A process whose outbound topics may carry large samples calls it as it starts
+    /// ([`bridge_outbound`]), so that its first frames need not cross the socket.
+    pub(super) fn make(&self) {
+        if !self.enabled || self.started.swap(true, Ordering::SeqCst) {
+            return;
+        }
+        let cell = self.provider.clone();
+        let made = std::thread::Builder::new()
+            .name("ratelab-shm-pool".into())
+            .spawn(move || {
+                let made = ShmProviderBuilder::default_backend(SHM_POOL_BYTES).wait();
+                if let Err(e) = &made {
+                    eprintln!(
+                        "[ratelab] no shared-memory pool ({e}): large samples cross the socket"
+                    );
+                }
+                let _ = cell.set(made.ok());
+            });
+        if made.is_err() {
+            let _ = self.provider.set(None);
+        }
+    }
+
     /// A buffer of `len` bytes in the pool, if it has room now: `None` when the sample is
     /// small (under [`SHM_THRESHOLD_BYTES`], it crosses the socket), when shared memory is
     /// off or the pool is still being made (the first large samples), or when the pool is
@@ -55,24 +81,7 @@ impl SharedPool {
             return None;
         }
         let Some(provider) = self.provider.get() else {
-            // Made off the tick's thread: mapping and locking the pool takes a while.
-            if !self.started.swap(true, Ordering::SeqCst) {
-                let cell = self.provider.clone();
-                let made = std::thread::Builder::new()
-                    .name("ratelab-shm-pool".into())
-                    .spawn(move || {
-                        let made = ShmProviderBuilder::default_backend(SHM_POOL_BYTES).wait();
-                        if let Err(e) = &made {
-                            eprintln!(
-                                "[ratelab] no shared-memory pool ({e}): large samples cross the socket"
-                            );
-                        }
-                        let _ = cell.set(made.ok());
-                    });
-                if made.is_err() {
-                    let _ = self.provider.set(None);
-                }
-            }
+            self.make();
             return None;
         };
         // Safe policies only: a buffer a receiver still holds is never reclaimed.
@@ -532,6 +541,14 @@ pub(super) fn bridge_outbound(
 ) -> Arc<Bridge> {
     let spill = Spill::unbounded();
     let pool = SharedPool::new(crate::shared_memory().unwrap_or(false));
+    // A message with bytes (an image) may be large: its pool is made now, not at its
+    // first frame.
+    if publishers
+        .iter()
+        .any(|(t, _)| !spec.topic(*t).msg.is_numeric())
+    {
+        pool.make();
+    }
     let mut outlets: Vec<Option<Outlet>> = (0..spec.topics.len()).map(|_| None).collect();
     for (t, p) in publishers {
         let name = &spec.topic(t).name;
