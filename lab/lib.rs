@@ -282,8 +282,8 @@ fn quiet_hook() {
 }
 
 /// How long a Python callback may still run after Ctrl-C (or `q` in the lab) before it is
-/// interrupted.
-pub const PYTHON_GRACE: std::time::Duration = std::time::Duration::from_millis(300);
+/// interrupted: the Python layer's, for every front end.
+pub use ratelab::python::PYTHON_GRACE;
 
 /// Run ratelab's whole command line (the process's arguments) in a program that first
 /// registers its own node kinds and message types in `register`

@@ -1,9 +1,8 @@
-//! `ratelab._native`: ratelab inside the caller's Python interpreter, for the package in
-//! `python/ratelab/` (which is what a user imports).
+//! ratelab's Python API inside the caller's interpreter: what the wheel's extension module
+//! `ratelab._native` holds for the package in `python/ratelab/` (which is what a user
+//! imports), over the library alone (no terminal or command-line crate: the wheel's own
+//! crate, `src/wheel`, adds the `ratelab` command beside it).
 //!
-//! - `main`: the whole command line (`ratelab lab`, `run`, `launch`, …) in this process,
-//!   as the wheel's `ratelab` command and `python -m ratelab` run it. A launch's processes
-//!   are started as `python -m ratelab process …` (`Program::set_this`).
 //! - `run`: one run from `ratelab.run`'s settings (`run_spec`: a dict of its keywords,
 //!   read into the library's `RunSpec`, no argument list) and started as `ratelab run` starts
 //!   one (`RunSpec::start`, through `ratelab::held_run`), its files' contents returned;
@@ -15,7 +14,8 @@
 //!   this interpreter, a fresh wrapper of it per run, the runs on every core.
 //! - `exercise`: `ratelab exercise`, its checks returned (a prediction may be given).
 //!
-//! Errors become Python exceptions carrying the command line's one line: a missing file
+//! [`register`] adds them to a module and makes the interpreter ratelab's host ([`hosted`]).
+//! Errors become Python exceptions carrying the library's one line: a missing file
 //! `FileNotFoundError`, one refused for being there `FileExistsError`, a permission
 //! `PermissionError`, a run whose trace would not fit in memory `TraceTooLarge` (a
 //! `MemoryError`, raised before the run), anything else the caller gave wrong `ValueError`.
@@ -57,7 +57,10 @@ const SIGNAL_POLL: Duration = Duration::from_millis(50);
 /// ratelab in a host interpreter, once, when the module is imported: its Python is this
 /// one, a launch starts its processes as `sys.executable -m ratelab`, and the Python and ROS
 /// 2 layers are installed (`ratelab::init`).
-fn hosted(py: Python<'_>) -> PyResult<()> {
+///
+/// # Errors
+/// `sys.executable` cannot be read.
+pub fn hosted(py: Python<'_>) -> PyResult<()> {
     ratelab::python::host();
     ratelab::init();
     let exe: String = py.import("sys")?.getattr("executable")?.extract()?;
@@ -66,19 +69,6 @@ fn hosted(py: Python<'_>) -> PyResult<()> {
         args: vec!["-m".into(), "ratelab".into()],
     });
     Ok(())
-}
-
-/// Run ratelab's command line on `argv` (the program's name first) in this process and
-/// return its exit code (0 done, 1 an exercise not passed, 2 bad input or a failed run, 130
-/// interrupted). Ctrl-C is ratelab's from then on, as in the binary.
-#[pyfunction]
-fn main(py: Python<'_>, argv: Vec<String>) -> PyResult<u8> {
-    let args = argv.into_iter().map(Into::into).collect();
-    // The command's Python output goes to the run's text log, as the binary's does.
-    let capture = ratelab::python::capture_output().ok();
-    let code = py.detach(|| ratelab_lab::run_command_line(args, || {}));
-    drop(capture);
-    Ok(code)
 }
 
 /// The error `e` as the Python exception its cause calls for, with the command line's line.
@@ -173,7 +163,7 @@ fn interruptibly<T: Send + 'static>(
             if let Err(e) = py.check_signals() {
                 stop.stop();
                 // A Python callback that never returns would hold the run: interrupt it.
-                ratelab::python::interrupt_callbacks_after(ratelab_lab::PYTHON_GRACE);
+                ratelab::python::interrupt_callbacks_after(ratelab::python::PYTHON_GRACE);
                 interrupted = Some(e);
             }
         }
@@ -464,11 +454,15 @@ fn trace_columns(csv_text: &str) -> anyhow::Result<Vec<(String, &'static str, Ve
         .collect())
 }
 
-/// The extension module.
-#[pymodule]
-fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
+/// Add the Python API to `m` (the wheel's `ratelab._native`): `run`, `sweep`, `cliff`,
+/// `exercise`, `exercises`, `install_messages`, `__version__` and the exceptions
+/// `NoPrediction` and `TraceTooLarge`, this interpreter made ratelab's host first
+/// ([`hosted`]).
+///
+/// # Errors
+/// A function or attribute cannot be added; [`hosted`]'s.
+pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     hosted(m.py())?;
-    m.add_function(wrap_pyfunction!(main, m)?)?;
     m.add_function(wrap_pyfunction!(run, m)?)?;
     m.add_function(wrap_pyfunction!(sweep, m)?)?;
     m.add_function(wrap_pyfunction!(cliff, m)?)?;

@@ -613,6 +613,10 @@ fn start_watchdog() {
     });
 }
 
+/// How long a Python callback may still run after a stop (Ctrl-C, `q` in the lab) before it
+/// is interrupted ([`interrupt_callbacks_after`]), in every front end.
+pub const PYTHON_GRACE: Duration = Duration::from_millis(300);
+
 /// [`interrupt_callbacks`]`(grace)` on a thread of its own, `grace` from now: for a stop
 /// (Ctrl-C, quitting the lab) that must not wait on a callback that never returns.
 pub fn interrupt_callbacks_after(grace: Duration) {

@@ -393,11 +393,13 @@ const LAYERS: &[(&str, &str, &[&str])] = &[
         ],
     ),
     ("ratelab-lab", "lab", &["ratelab", "ratelab-exercises"]),
-    // The Python package's extension module: the command line as a library, in Python.
+    // The Python API, over the library: a front end beside the command line, not above it.
+    ("ratelab-py", "src/py", &["ratelab", "ratelab-exercises"]),
+    // The wheel's extension module: the Python API and the `ratelab` command it installs.
     (
-        "ratelab-py",
-        "src/py",
-        &["ratelab", "ratelab-exercises", "ratelab-lab"],
+        "ratelab-wheel",
+        "src/wheel",
+        &["ratelab", "ratelab-py", "ratelab-lab"],
     ),
 ];
 
@@ -509,11 +511,17 @@ fn the_core_builds_without_the_crates_that_talk_to_the_world() {
         lab.contains("ratatui") && lab.contains("crossterm"),
         "{lab:?}"
     );
-    // The lab's crate and the Python package's module above it hold the terminal lab.
-    let below_the_lab = |p: &&str| !matches!(*p, "ratelab-lab" | "ratelab-py");
+    // The lab's crate and the wheel's module above it hold the terminal lab and the command
+    // line; the Python API is built with neither (issue 71 item 3, `cargo tree`).
+    let below_the_lab = |p: &&str| !matches!(*p, "ratelab-lab" | "ratelab-wheel");
     for (package, dir, _) in LAYERS.iter().filter(|(p, ..)| below_the_lab(p)) {
         let deps = resolved_dependencies(package);
         assert!(!deps.contains("ratatui"), "{package} is built with ratatui");
+        assert!(!deps.contains("clap"), "{package} is built with clap");
+        assert!(
+            !deps.contains("ratelab-lab"),
+            "{package} is built with the terminal crate"
+        );
         assert!(
             !manifest_dependencies(dir).contains("crossterm"),
             "{package} depends on crossterm"

@@ -4,7 +4,7 @@ mujoco-rs links MuJoCo's shared library at build time from `.mujoco/lib`
 (`.cargo/config.toml`). The build environment holds the `mujoco==3.17.0` wheel (a
 build requirement in pyproject.toml), so its `libmujoco.so.3.17.0` is copied there first,
 with the `libmujoco.so` link the linker looks for. At run time the extension module loads
-the same library from the installed `mujoco` package (its rpath, src/py/build.rs).
+the same library from the installed `mujoco` package (its rpath, src/wheel/build.rs).
 """
 
 import importlib.util
