@@ -64,7 +64,9 @@ threading.Event.wait = _event_wait
 
 
 class _Lines:
-    """A text stream whose lines go to the run's text log at one level."""
+    """A text stream whose lines go to the run's text log at one level. Each thread has its
+    own partial line: `print` writes a line in pieces, and nodes on the real clock's threads
+    print at once (one buffer for all would splice one node's pieces into another's line)."""
 
     encoding = "utf-8"
     errors = "replace"
@@ -72,23 +74,34 @@ class _Lines:
 
     def __init__(self, level):
         self._level = level
-        self._buf = ""
+        self._partial = {}  # thread id -> its line so far
 
     def write(self, s):
         s = str(s)
-        self._buf += s
-        while "\n" in self._buf:
-            line, self._buf = self._buf.split("\n", 1)
+        key = threading.get_ident()
+        buf = self._partial.pop(key, "") + s
+        while "\n" in buf:
+            line, buf = buf.split("\n", 1)
             _log(self._level, line)
-        while len(self._buf) > self._MAX:
-            _log(self._level, self._buf[: self._MAX])
-            self._buf = self._buf[self._MAX :]
+        while len(buf) > self._MAX:
+            _log(self._level, buf[: self._MAX])
+            buf = buf[self._MAX :]
+        if buf:
+            self._partial[key] = buf
         return len(s)
 
     def flush(self):
-        if self._buf:
-            _log(self._level, self._buf)
-            self._buf = ""
+        """Log this thread's partial line (a `print(..., end="")` then `flush`)."""
+        buf = self._partial.pop(threading.get_ident(), "")
+        if buf:
+            _log(self._level, buf)
+
+    def flush_all(self):
+        """Log every thread's partial line (the run is over)."""
+        for key in list(self._partial):
+            buf = self._partial.pop(key, "")
+            if buf:
+                _log(self._level, buf)
 
     def writable(self):
         return True
@@ -109,7 +122,7 @@ def _restore_output(prev):
     """Put back what `_capture_output` returned, after the last partial lines are logged."""
     for stream in (sys.stdout, sys.stderr):
         if isinstance(stream, _Lines):
-            stream.flush()
+            stream.flush_all()
     sys.stdout, sys.stderr = prev
 
 

@@ -1587,3 +1587,76 @@ fn a_python_node_publishes_and_reads_an_image_s_bytes_in_one_process_and_across(
         "{err}"
     );
 }
+
+/// Under the real clock each node runs on its own thread, and `print` writes a line in
+/// pieces: one node's line stays whole while another prints between its pieces (each
+/// thread has its own partial line).
+#[test]
+fn lines_printed_at_once_by_two_nodes_stay_whole() {
+    let _m = crate::machine::shared();
+    let dir = tempfile::tempdir().unwrap();
+    // `slow` writes half a line, sleeps (the GIL let go) and ends it; `fast` prints whole
+    // lines meanwhile, at a rate that puts several of them inside each sleep.
+    script(
+        dir.path(),
+        "slow.py",
+        "import sys, time\n\
+         class Slow:\n\
+         \x20   def __init__(self, node):\n\
+         \x20       node.create_timer(node.get_period(), self.tick)\n\
+         \x20   def tick(self):\n\
+         \x20       sys.stdout.write('slow begins')\n\
+         \x20       time.sleep(0.03)\n\
+         \x20       sys.stdout.write(' and ends\\n')\n",
+    );
+    script(
+        dir.path(),
+        "fast.py",
+        "class Fast:\n\
+         \x20   def __init__(self, node):\n\
+         \x20       node.create_timer(node.get_period(), self.tick)\n\
+         \x20   def tick(self):\n\
+         \x20       print('fast', 'line')\n",
+    );
+    let graph = dir.path().join("g.toml");
+    std::fs::write(
+        &graph,
+        "name = \"g\"\n\
+         [[node]]\nname = \"sensor\"\nkind = \"sensor\"\nrate_hz = 50\npublishes = \"/obs\"\n\
+         [[node]]\nname = \"policy\"\nkind = \"policy\"\nrate_hz = 50\nsubscribes = \"/obs\"\npublishes = \"/action\"\n\
+         [[node]]\nname = \"actuator\"\nkind = \"actuator\"\nrate_hz = 50\nsubscribes = \"/action\"\n\
+         [[node]]\nname = \"slow\"\nkind = \"python\"\nscript = \"slow.py\"\nrate_hz = 10\n\
+         [[node]]\nname = \"fast\"\nkind = \"python\"\nscript = \"fast.py\"\nrate_hz = 200\n\
+         [[topic]]\nname = \"/obs\"\ntype = \"state\"\ndepth = 1\n\
+         [[topic]]\nname = \"/action\"\ntype = \"force\"\ndepth = 1\n",
+    )
+    .unwrap();
+    let o = ratelab(&[
+        "run",
+        "--clock",
+        "real",
+        "--duration",
+        "1",
+        "--graph",
+        graph.to_str().unwrap(),
+    ]);
+    let err = stderr(&o);
+    assert!(o.status.success(), "{err}");
+    let lines: Vec<&str> = err.lines().filter(|l| l.starts_with("[t=")).collect();
+    let said = |node: &str, text: &str| {
+        lines
+            .iter()
+            .filter(|l| l.contains(&format!(" {node}] ")) && l.ends_with(text))
+            .count()
+    };
+    let (slow, fast) = (
+        said("slow", "] slow begins and ends"),
+        said("fast", "] fast line"),
+    );
+    assert!(slow >= 3 && fast >= 20, "{slow} slow, {fast} fast: {err}");
+    // Every line is one of the two the nodes wrote, whole: nothing spliced.
+    for l in &lines {
+        let whole = l.ends_with(" slow] slow begins and ends") || l.ends_with(" fast] fast line");
+        assert!(whole, "a spliced line: {l:?}\n{err}");
+    }
+}
