@@ -177,6 +177,9 @@ pub fn run_process(opts: &ProcessOptions, stop: &StopFlag) -> Result<(), DistErr
         }
         None => None,
     };
+    // Its outbound topics' bridge, and the shared-memory pool of the large ones, before the
+    // run starts.
+    let bridge = bridge_outbound(&spec, &handles, publishers);
     send(&ToLauncher::Ready {
         process: opts.process.clone(),
     })?;
@@ -184,7 +187,6 @@ pub fn run_process(opts: &ProcessOptions, stop: &StopFlag) -> Result<(), DistErr
         "process '{me}' ready ({} clock): its run starts with the launcher's",
         cfg.clock.as_str()
     ));
-    let bridge = bridge_outbound(&spec, &handles, publishers);
     let ticks: Arc<Vec<AtomicU64>> =
         Arc::new((0..spec.nodes.len()).map(|_| AtomicU64::new(0)).collect());
     let run_time = Arc::new(AtomicU64::new(0));

@@ -19,8 +19,8 @@ use zenoh::shm::{
 };
 
 /// A process's shared-memory pool for its large samples: its own ([`SHM_POOL_BYTES`], made
-/// in the background as the process starts when it publishes a topic whose messages may be
-/// large, else when the first large sample is sent; Zenoh's copying of large payloads
+/// as the process starts when it publishes a topic whose messages may be large, else in the
+/// background when the first large sample is sent; Zenoh's copying of large payloads
 /// into a pool of its own is off, [`crate::open_session`]). A buffer returns to it only when
 /// no process holds it any more (Zenoh's safe garbage collection): a subscriber keeps a
 /// frame's buffer as long as it keeps the message, as its pixels ([`shared_payload`]), and
@@ -45,11 +45,19 @@ impl SharedPool {
         })
     }
 
-    /// Start making the pool (once, when shared memory is on), off the caller's thread:
-    /// mapping and locking [`SHM_POOL_BYTES`] takes a while, longer on a loaded machine.
-    /// A process whose outbound topics may carry large samples calls it as it starts
-    /// ([`bridge_outbound`]), so that its first frames need not cross the socket.
-    pub(super) fn make(&self) {
+    /// Make the pool now, on this thread (once, when shared memory is on): a process whose
+    /// outbound topics may carry large samples does so as it starts, before it says it is
+    /// ready ([`bridge_outbound`]), so that its first frame goes through shared memory
+    /// however long mapping [`SHM_POOL_BYTES`] takes on a loaded machine.
+    pub(super) fn make_now(&self) {
+        if self.enabled && !self.started.swap(true, Ordering::SeqCst) {
+            let _ = self.provider.set(Self::provider());
+        }
+    }
+
+    /// Start making the pool (once, when shared memory is on) off the caller's thread: a
+    /// tick's, which must not wait for the mapping.
+    fn make(&self) {
         if !self.enabled || self.started.swap(true, Ordering::SeqCst) {
             return;
         }
@@ -57,17 +65,21 @@ impl SharedPool {
         let made = std::thread::Builder::new()
             .name("ratelab-shm-pool".into())
             .spawn(move || {
-                let made = ShmProviderBuilder::default_backend(SHM_POOL_BYTES).wait();
-                if let Err(e) = &made {
-                    eprintln!(
-                        "[ratelab] no shared-memory pool ({e}): large samples cross the socket"
-                    );
-                }
-                let _ = cell.set(made.ok());
+                let _ = cell.set(Self::provider());
             });
         if made.is_err() {
             let _ = self.provider.set(None);
         }
+    }
+
+    /// A new pool of [`SHM_POOL_BYTES`], or `None` (said once) when it cannot be made:
+    /// large samples then cross the socket.
+    fn provider() -> Option<ShmProvider<PosixShmProviderBackend>> {
+        let made = ShmProviderBuilder::default_backend(SHM_POOL_BYTES).wait();
+        if let Err(e) = &made {
+            eprintln!("[ratelab] no shared-memory pool ({e}): large samples cross the socket");
+        }
+        made.ok()
     }
 
     /// A buffer of `len` bytes in the pool, if it has room now: `None` when the sample is
@@ -531,7 +543,9 @@ pub(super) struct Inbound {
 }
 
 /// Make each crossing topic whose publisher runs here a bridge element (`publishers`: the
-/// topic and its key's publisher): its tap sends each message as it is published. Returns
+/// topic and its key's publisher): its tap sends each message as it is published. Called
+/// before the process says it is ready: the shared-memory pool of a topic whose messages
+/// may be large is made here ([`SharedPool::make_now`]). Returns
 /// the bridge, which says after a local node's event what it published across the
 /// boundary and the newest seq sent on each.
 pub(super) fn bridge_outbound(
@@ -541,13 +555,13 @@ pub(super) fn bridge_outbound(
 ) -> Arc<Bridge> {
     let spill = Spill::unbounded();
     let pool = SharedPool::new(crate::shared_memory().unwrap_or(false));
-    // A message with bytes (an image) may be large: its pool is made now, not at its
-    // first frame.
+    // A message with bytes (an image) may be large: its pool is made now, before the run,
+    // not at its first frame.
     if publishers
         .iter()
         .any(|(t, _)| !spec.topic(*t).msg.is_numeric())
     {
-        pool.make();
+        pool.make_now();
     }
     let mut outlets: Vec<Option<Outlet>> = (0..spec.topics.len()).map(|_| None).collect();
     for (t, p) in publishers {
