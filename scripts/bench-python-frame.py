@@ -11,7 +11,8 @@ Zenoh's shared memory on. Its callback reads the frame with NumPy, one byte per 
 
   view   `np.frombuffer(img.data, np.uint8)`: the pixels where they arrived (a read-only
          view of the shared-memory buffer the camera's process wrote);
-  copy   `np.frombuffer(bytes(img.data), np.uint8)`: a copy first, as a node got before.
+  copy   `np.frombuffer(bytes(img.data), np.uint8)`: a copy first, within the callback (a
+         node got a copied `bytes` before, made outside it).
 
 Per configuration and round: the callback's own time (perf_counter_ns around the read,
 p50 and p99 over every frame), the vision node's thread CPU per tick (metrics.json's
@@ -46,8 +47,8 @@ COPY = {copy!r}
 
 class Reader:
     def __init__(self, node):
-        self.took_ns = []
         self.total = 0
+        self.out = open(OUT, "w")
         node.create_subscription(Image, "/image", self.on_image, 1)
 
     def on_image(self, img):
@@ -55,10 +56,10 @@ class Reader:
         data = bytes(img.data) if COPY else img.data
         px = np.frombuffer(data, np.uint8)
         self.total += int(px[::4096].sum())
-        self.took_ns.append(time.perf_counter_ns() - t0)
-        if len(self.took_ns) % 30 == 0:
-            with open(OUT, "w") as f:
-                f.write("\\n".join(map(str, self.took_ns)))
+        took = time.perf_counter_ns() - t0
+        # Every frame's time, written as it comes (outside the time measured).
+        self.out.write(f"{{took}}\\n")
+        self.out.flush()
 '''
 
 
@@ -97,6 +98,9 @@ def graph(folder, mib, copy):
 
 def launch(binary, duration, path, took):
     out_dir = tempfile.mkdtemp(prefix="bench-pyframe-out-")
+    # A round that read nothing must not report an earlier round's times.
+    if os.path.exists(took):
+        os.remove(took)
     before = children_cpu_s()
     p = subprocess.run([binary, "launch", path, "--processes", "--clock", "real", "--duration",
                         str(duration), "--headless", "--out", out_dir, "--force"],

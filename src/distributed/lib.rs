@@ -490,16 +490,18 @@ pub fn live_tokens(
 pub const SHARED_MEMORY_ENV: &str = "RATELAB_SHARED_MEMORY";
 
 /// The smallest sample a process writes into shared memory, bytes: a smaller one fits in
-/// one of Zenoh's batches (64 KiB) and crosses the socket. The first sample over it makes
-/// its sender create its pool ([`SHM_POOL_BYTES`]), which Zenoh locks in memory in the
+/// one of Zenoh's batches (64 KiB) and crosses the socket. A process whose outbound topics
+/// have a field of bytes makes its pool ([`SHM_POOL_BYTES`]) before the run; any other,
+/// at its first sample over the threshold. Zenoh locks the pool in memory in the
 /// sender and in every process that maps it, plus about 8 MiB of watchdog queues. At Zenoh's
 /// own default (3072) the plant's live figures (about 6 KB ten times a second) made the
 /// chapter's launch hold 46 MiB more than without shared memory (issue 76); camera frames
 /// (300 KiB and up) go through it.
 pub const SHM_THRESHOLD_BYTES: usize = 64 * 1024;
 
-/// The size of a process's shared-memory pool, bytes (Zenoh's default pool size): made when
-/// the process first sends a sample of [`SHM_THRESHOLD_BYTES`] or more. A sample that finds
+/// The size of a process's shared-memory pool, bytes (Zenoh's default pool size): made
+/// before the run by a process whose outbound topics have a field of bytes, else when the
+/// process first sends a sample of [`SHM_THRESHOLD_BYTES`] or more. A sample that finds
 /// no room in it (its subscribers still hold the earlier ones) crosses the socket.
 pub const SHM_POOL_BYTES: usize = 16 << 20;
 

@@ -71,7 +71,7 @@ pub fn hosted(py: Python<'_>) -> PyResult<()> {
     Ok(())
 }
 
-/// The error `e` as the Python exception its cause calls for, with the command line's line.
+/// The error `e` as the Python exception its cause calls for, with the library's one line.
 fn to_py(e: &anyhow::Error) -> PyErr {
     let text = match e.downcast_ref::<ratelab::graph::spec::SpecError>() {
         Some(spec) => spec.to_string(),

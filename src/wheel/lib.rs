@@ -1,6 +1,6 @@
 //! `ratelab._native`, the wheel's extension module: the Python API
 //! ([`ratelab_py::register`]: `run`, `sweep`, `cliff`, `exercise`, over the library) and the
-//! `ratelab` command the wheel installs ([`main`]: the command line and the terminal lab,
+//! `ratelab` command the wheel installs (`main`: the command line and the terminal lab,
 //! `ratelab-lab`), in one shared library loaded by the user's interpreter. The API does not
 //! depend on the command: this crate is where the two meet.
 #![warn(missing_docs)]

@@ -286,10 +286,11 @@ fn merge_exec(
 }
 
 /// The run time up to which a process's report may count, for [`check_report`]: the run's
-/// end, or under the real clock the time the launcher took the report (`taken_at`) when
-/// later. A real-clock process runs on until the launcher's stop reaches it (on a loaded
-/// machine, many of its nodes' periods after the end), and its nodes' ticks meanwhile are
-/// true ticks; none can come after its report did.
+/// end, or for a real-clock run the launcher stopped, the time it took the report
+/// (`taken_at`) when later. A real-clock process runs on until the launcher's stop reaches
+/// it (on a loaded machine, many of its nodes' periods after the end), and its nodes' ticks
+/// meanwhile are true ticks; none can come after its report did. The summary still divides
+/// by the run's end (`sim_time_s`), so its counts may include those few late ticks.
 pub fn report_time(end: &RunEnd, taken_at: Option<Nanos>) -> Nanos {
     taken_at.map_or(end.at, |t| t.max(end.at))
 }

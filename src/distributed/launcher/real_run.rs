@@ -27,10 +27,10 @@ impl Launch<'_> {
     /// again in place on failure); `carried` keeps what a process started again had
     /// counted before. Every process's report lands in `reports` and `wires`; the processes
     /// killed on request ([`super::LaunchOptions::kill_processes`]) in `killed`, with the run
-    /// time each was killed at. Returns how the run ended and the run time each report
-    /// was taken at: a process's nodes run until its stop reaches it, so under load a
-    /// report counts ticks past the run's end, never past the time it came
-    /// ([`super::check_report`]'s bound).
+    /// time each was killed at. Returns how the run ended and, for a run the launcher
+    /// stopped (a failure, a process gone, Ctrl-C), the run time each report was taken at:
+    /// a process's nodes run until the stop reaches it, so under load a report counts
+    /// ticks past the run's end, never past the time it came ([`super::report_time`]).
     ///
     /// # Errors
     /// [`DistError`] when the start cannot be sent or the figures cannot be subscribed to.
@@ -95,7 +95,14 @@ impl Launch<'_> {
             at: self.cfg.duration,
             reason: EndReason::Duration,
         });
-        Ok((end, run.taken_at))
+        // A run that ended at its duration needed no stop: each process ended there on its
+        // own, and the end bounds every report.
+        let taken_at = if run.stop_sent {
+            run.taken_at
+        } else {
+            BTreeMap::new()
+        };
+        Ok((end, taken_at))
     }
 }
 

@@ -19,8 +19,8 @@ use zenoh::shm::{
 };
 
 /// A process's shared-memory pool for its large samples: its own ([`SHM_POOL_BYTES`], made
-/// as the process starts when it publishes a topic whose messages may be large, else in the
-/// background when the first large sample is sent; Zenoh's copying of large payloads
+/// as the process starts when it publishes a topic whose message type has a field of bytes,
+/// else in the background when the first large sample is sent; Zenoh's copying of large payloads
 /// into a pool of its own is off, [`crate::open_session`]). A buffer returns to it only when
 /// no process holds it any more (Zenoh's safe garbage collection): a subscriber keeps a
 /// frame's buffer as long as it keeps the message, as its pixels ([`shared_payload`]), and
@@ -46,7 +46,7 @@ impl SharedPool {
     }
 
     /// Make the pool now, on this thread (once, when shared memory is on): a process whose
-    /// outbound topics may carry large samples does so as it starts, before it says it is
+    /// outbound topics carry a field of bytes (an image) does so as it starts, before it says it is
     /// ready ([`bridge_outbound`]), so that its first frame goes through shared memory
     /// however long mapping [`SHM_POOL_BYTES`] takes on a loaded machine.
     pub(super) fn make_now(&self) {
@@ -555,12 +555,13 @@ pub(super) fn bridge_outbound(
 ) -> Arc<Bridge> {
     let spill = Spill::unbounded();
     let pool = SharedPool::new(crate::shared_memory().unwrap_or(false));
-    // A message with bytes (an image) may be large: its pool is made now, before the run,
-    // not at its first frame.
-    if publishers
-        .iter()
-        .any(|(t, _)| !spec.topic(*t).msg.is_numeric())
-    {
+    // A message with a field of bytes (an image's pixels) may be large: its pool is made
+    // now, before the run, not at its first frame. No other process pays for a pool it may
+    // never use (Zenoh locks it in memory).
+    let may_be_large = |t: TopicId| {
+        (spec.topic(t).msg.fields().iter()).any(|f| f.kind == ratelab_core::msg::FieldKind::Bytes)
+    };
+    if publishers.iter().any(|(t, _)| may_be_large(*t)) {
         pool.make_now();
     }
     let mut outlets: Vec<Option<Outlet>> = (0..spec.topics.len()).map(|_| None).collect();
