@@ -177,9 +177,7 @@ pub fn run_process(opts: &ProcessOptions, stop: &StopFlag) -> Result<(), DistErr
         }
         None => None,
     };
-    // Its outbound topics' bridge, and the shared-memory pool of the large ones, before the
-    // run starts.
-    let bridge = bridge_outbound(&spec, &handles, publishers);
+    let bridge = bridge_outbound(&spec, &handles, publishers); // and its pool, before the run
     send(&ToLauncher::Ready {
         process: opts.process.clone(),
     })?;
