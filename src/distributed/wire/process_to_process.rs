@@ -45,7 +45,13 @@ impl SampleHead {
     /// ([`WireSample::encode`]'s length; `payload_len` is [`MsgData::encoded_len`], found
     /// without encoding the payload, once per sample by the caller).
     pub fn sample_len(&self, payload_len: usize) -> usize {
-        postcard::experimental::serialized_size(&(self, payload_len)).unwrap_or(0) + payload_len
+        self.head_len(payload_len) + payload_len
+    }
+
+    /// The bytes of the head before a payload of `payload_len` bytes (the head, then the
+    /// payload's length as postcard writes a sequence's).
+    fn head_len(&self, payload_len: usize) -> usize {
+        postcard::experimental::serialized_size(&(self, payload_len)).unwrap_or(0)
     }
 
     /// Write the sample of this head and `payload` (`payload_len` bytes encoded,
@@ -62,19 +68,19 @@ impl SampleHead {
         payload_len: usize,
         out: &mut [u8],
     ) -> Result<(), String> {
-        let len = payload_len;
-        let head_len = postcard::experimental::serialized_size(&(self, len)).unwrap_or(0);
-        if out.len() != head_len + len {
+        let head_len = self.head_len(payload_len);
+        if out.len() != head_len + payload_len {
             return Err(format!(
                 "a sample of {} bytes in {}",
-                head_len + len,
+                head_len + payload_len,
                 out.len()
             ));
         }
         let (head, rest) = out.split_at_mut(head_len);
-        postcard::to_slice(&(self, len), head).map_err(|e| format!("a sample's head: {e}"))?;
-        if payload.encode_into(rest)? != len {
-            return Err(format!("a sample's payload of {len} bytes"));
+        postcard::to_slice(&(self, payload_len), head)
+            .map_err(|e| format!("a sample's head: {e}"))?;
+        if payload.encode_into(rest)? != payload_len {
+            return Err(format!("a sample's payload of {payload_len} bytes"));
         }
         Ok(())
     }
