@@ -109,6 +109,9 @@ pub enum Command {
     /// old name).
     #[command(alias = "node")]
     Process(ProcessArgs),
+    /// Route a launch on another host: a Zenoh router linked to the launcher's, which this
+    /// host's processes link to (`ratelab process --connect` its `--listen`).
+    Router(RouterArgs),
     /// A table of a running multi-process graph: nodes, rates, topics, wire latency.
     Top(TopArgs),
     /// Write a checkpoint's tensors (.pt/.pth/.safetensors) as NumPy's .npz, for a Python
@@ -255,6 +258,25 @@ pub struct ProcessArgs {
     /// --export-credentials FILE`; the launcher gives the processes it starts their own).
     #[arg(long, value_name = "FILE")]
     pub credentials: Option<PathBuf>,
+}
+
+/// `ratelab router`.
+#[derive(Debug, Clone, Args)]
+pub struct RouterArgs {
+    /// The graph file (default: the chapter's); the launcher's, byte for byte, whose access
+    /// rules the router enforces on this host's processes.
+    #[arg(long, value_name = "FILE")]
+    pub graph: Option<PathBuf>,
+    /// The launcher's endpoint (repeatable): the router's one link off this host.
+    #[arg(long, value_name = "tls/HOST:PORT", required = true)]
+    pub connect: Vec<String>,
+    /// Where this host's processes and watchers link to the router (repeatable).
+    #[arg(long, value_name = "tls/HOST:PORT", default_value = ratelab::distributed::DEFAULT_ENDPOINT)]
+    pub listen: Vec<String>,
+    /// The launch's credentials (`launch --export-credentials FILE`), holding a host
+    /// router's identity.
+    #[arg(long, value_name = "FILE", required = true)]
+    pub credentials: PathBuf,
 }
 
 /// `ratelab top`.

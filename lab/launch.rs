@@ -1,7 +1,7 @@
 //! `ratelab launch`, `ratelab process` and `ratelab lab --attach`: the graph across processes
 //! ([`ratelab::distributed`]), from the command line.
 
-use crate::cli::{LaunchArgs, ProcessArgs};
+use crate::cli::{LaunchArgs, ProcessArgs, RouterArgs};
 use crate::headless;
 use ratelab::distributed::check_endpoint;
 use ratelab::distributed::credentials::{Credentials, Role};
@@ -595,4 +595,26 @@ pub fn run_process(a: &ProcessArgs, stop: StopFlag) -> anyhow::Result<()> {
     };
     ratelab::distributed::process::run_process(&opts, &stop)
         .map_err(|e| anyhow::anyhow!("process '{}': {e}", a.process))
+}
+
+/// `ratelab router --connect EP --credentials FILE`: this host's router of a launch
+/// ([`ratelab::distributed::host_router`]) until the launch ends or Ctrl-C.
+pub fn run_router(a: &RouterArgs, stop: StopFlag) -> anyhow::Result<()> {
+    use ratelab::distributed::host_router::{self, HostRouterOptions};
+    let origin = a.graph.as_ref().map_or_else(
+        || "graphs/cartpole.toml".to_string(),
+        |p| p.display().to_string(),
+    );
+    let opts = HostRouterOptions {
+        graph_bytes: graph_file_bytes(a.graph.as_deref())?,
+        graph_origin: origin,
+        connect: a.connect.clone(),
+        listen: a.listen.clone(),
+        credentials: Credentials::load(&a.credentials)?,
+        say: Some(|line| {
+            let _ = writeln!(std::io::stdout(), "[ratelab] {line}");
+        }),
+    };
+    host_router::serve(&opts, &stop).map_err(|e| anyhow::anyhow!("router: {e}"))?;
+    Ok(())
 }

@@ -421,6 +421,7 @@ pub fn run_command_line(args: Vec<std::ffi::OsString>, register: impl FnOnce()) 
         Some(Command::Cliff(args)) => sweep::run_cliff(args, &stop),
         Some(Command::Launch(args)) => launch::run_launch(args, cli.headless, stop),
         Some(Command::Process(args)) => launch::run_process(args, stop),
+        Some(Command::Router(args)) => launch::run_router(args, stop),
         Some(Command::Top(args)) => top::run_top(args, stop),
         Some(Command::Export(args)) => export(args),
         Some(Command::Kinds) => {

@@ -13,7 +13,7 @@
 //! | the launcher | control (`@ctl/*`), the end (`@ended`), progress lines (`@log`) | its token `@launcher`, the settings' queryable `@setup` (and its replies); subscribers to the launch's own traffic: reports (`@up`), ticks (`@ticked`), the samples it passes on (`@via`), control and relayed reports |
 //! | process `P` | the topics its nodes publish, on `@via/<topic>` for the launcher to pass on (a topic's own key is the router's), its reports `@up/P`, ticks `@ticked/P`, counters `@stats/P` | its nodes' tokens `@node/P/*`, their endpoints' `@pub`/`@sub` tokens; subscribers to its own control `@ctl/P` and relayed reports `@relayed/P` |
 //! | an observer | nothing | nothing more |
-//! | the launcher's router | anything on the graph's keys | anything on the graph's keys |
+//! | the launcher's router, a host's router | anything on the graph's keys | anything on the graph's keys |
 //!
 //! The launch's own traffic is the launcher's to hear: the router passes it on from the
 //! one thread Zenoh runs it on, waiting for room in every subscriber's link, so a
@@ -31,6 +31,13 @@
 //! drops it before any other process sees it. Nobody but the launcher holds the router's
 //! identity ([`super::credentials::Role::Router`]). Two sessions linked directly (a test,
 //! the transport-floor examples) check each other by the same rules.
+//!
+//! Across hosts, a router on each other host ([`super::host_router`]) is the one link its
+//! host's processes have: it checks each of them on arrival by these same rules, so what
+//! it passes on to the launcher's router (under its own identity,
+//! [`super::credentials::Role::HostRouter`], which may say anything on the graph's keys) is
+//! only what their identities allowed; what comes back from the launcher's router is
+//! trusted as the router's.
 //!
 //! A session that does not know the graph's shape (a watcher, before it asks the settings)
 //! lets every process publish on any topic and declare any endpoint token: what it
@@ -135,7 +142,12 @@ pub fn acl(keys: &Keys, processes: &[String], spec: Option<&GraphSpec>) -> Value
     let read_all = rule("launcher-read".into(), &READS, all_keys.clone());
     // The router passes on what it let in, and says what the launcher says.
     let routed = rule("router-routes".into(), &ALL_MESSAGES, all_keys);
-    let mut roles = vec![Role::Launcher, Role::Observer, Role::Router];
+    let mut roles = vec![
+        Role::Launcher,
+        Role::Observer,
+        Role::Router,
+        Role::HostRouter,
+    ];
     roles.extend(processes.iter().cloned().map(Role::Process));
     let subjects: Vec<Value> = roles
         .iter()
@@ -145,10 +157,14 @@ pub fn acl(keys: &Keys, processes: &[String], spec: Option<&GraphSpec>) -> Value
         "rules": [send, read],
         "subjects": roles.iter().map(subject_id).collect::<Vec<_>>(),
     }));
+    // The routers pass on what they let in (a host's router, its clients' messages).
+    policies.push(json!({
+        "rules": [routed],
+        "subjects": [subject_id(&Role::Router), subject_id(&Role::HostRouter)],
+    }));
     let mut own = |role: &Role, rules: Vec<String>| {
         policies.push(json!({ "rules": rules, "subjects": [subject_id(role)] }));
     };
-    own(&Role::Router, vec![routed]);
     let launcher = vec![
         read_all,
         rule(
@@ -220,13 +236,15 @@ pub fn acl(keys: &Keys, processes: &[String], spec: Option<&GraphSpec>) -> Value
     })
 }
 
-/// A role's subject id in the ACL: `launcher`, `observer`, `process-<NAME>`.
+/// A role's subject id in the ACL: `launcher`, `observer`, `process-<NAME>`, `router`,
+/// `host-router`.
 fn subject_id(role: &Role) -> String {
     match role {
         Role::Launcher => "launcher".into(),
         Role::Observer => "observer".into(),
         Role::Process(p) => format!("process-{p}"),
         Role::Router => "router".into(),
+        Role::HostRouter => "host-router".into(),
     }
 }
 
@@ -304,9 +322,11 @@ mod tests {
         // Only the router hands on the lockstep's reports; it may say anything on the
         // graph's keys (it passes on what it let in).
         let relayed = format!("{p}/@relayed/**");
-        let router_puts = allowed(&acl, &Role::Router, "put");
-        assert!(router_puts.contains(&relayed), "{router_puts:?}");
-        assert!(router_puts.contains(&format!("{p}/**")), "{router_puts:?}");
+        for router in [Role::Router, Role::HostRouter] {
+            let router_puts = allowed(&acl, &router, "put");
+            assert!(router_puts.contains(&relayed), "{router_puts:?}");
+            assert!(router_puts.contains(&format!("{p}/**")), "{router_puts:?}");
+        }
         for role in [
             Role::Launcher,
             Role::Observer,

@@ -34,9 +34,9 @@ use std::path::Path;
 pub const MAX_CREDENTIALS_BYTES: u64 =
     (MAX_PROCESSES as u64 + MORE_IDENTITIES as u64) * 2 * MAX_PEM_BYTES as u64 + 64 * 1024;
 
-/// The identities of a launch beside its processes': the launcher, an observer and the
-/// launcher's router.
-const MORE_IDENTITIES: usize = 3;
+/// The identities of a launch beside its processes': the launcher, an observer, the
+/// launcher's router and a host's router.
+const MORE_IDENTITIES: usize = 4;
 
 /// The largest certificate or private key in a credentials file, bytes of PEM.
 const MAX_PEM_BYTES: usize = 8 * 1024;
@@ -73,17 +73,24 @@ pub enum Role {
     /// it passes on what every other identity says, each message checked on arrival by the
     /// identity it came from, and what the launcher itself says. Only the launcher holds it.
     Router,
+    /// A router on another host (`ratelab router`, [`super::host_router`]): the processes
+    /// and watchers of its host link to it, and it links to the launcher's router, as Zenoh
+    /// deploys a system across hosts. It checks what each of its clients says on arrival,
+    /// as the launcher's router does, and passes on what it let in. Exported with the
+    /// launch's other identities (`launch --export-credentials`), since it is started by hand.
+    HostRouter,
 }
 
 impl Role {
     /// The certificate's common name: `ratelab-launcher`, `ratelab-process-<NAME>`,
-    /// `ratelab-observer`.
+    /// `ratelab-observer`, `ratelab-router`, `ratelab-host-router`.
     pub fn common_name(&self) -> String {
         match self {
             Role::Launcher => "ratelab-launcher".into(),
             Role::Process(p) => format!("ratelab-process-{p}"),
             Role::Observer => "ratelab-observer".into(),
             Role::Router => "ratelab-router".into(),
+            Role::HostRouter => "ratelab-host-router".into(),
         }
     }
 
@@ -94,6 +101,7 @@ impl Role {
             Role::Process(p) => format!("process '{p}'"),
             Role::Observer => "an observer".into(),
             Role::Router => "the launcher's router".into(),
+            Role::HostRouter => "a host's router".into(),
         }
     }
 }
@@ -160,8 +168,8 @@ fn check_certificate(pem: &str) -> Result<(), String> {
 }
 
 impl Credentials {
-    /// A new CA and an identity for the launcher, an observer, the launcher's router and
-    /// each of `processes`, for graph `graph`. The CA's private key is not kept.
+    /// A new CA and an identity for the launcher, an observer, the launcher's router, a
+    /// host's router and each of `processes`, for graph `graph`. The CA's private key is not kept.
     ///
     /// # Errors
     /// [`DistError::Usage`] when a key or certificate cannot be made (the system's
@@ -196,7 +204,12 @@ impl Credentials {
         let ca_key = KeyPair::generate().map_err(tls_error)?;
         let ca_cert = ca_params.self_signed(&ca_key).map_err(tls_error)?;
         let issuer = Issuer::new(ca_params, ca_key);
-        let mut roles = vec![Role::Launcher, Role::Observer, Role::Router];
+        let mut roles = vec![
+            Role::Launcher,
+            Role::Observer,
+            Role::Router,
+            Role::HostRouter,
+        ];
         roles.extend(processes.iter().cloned().map(Role::Process));
         let mut identities = BTreeMap::new();
         for role in roles {
@@ -467,6 +480,7 @@ mod tests {
         assert_eq!(
             c.identities.keys().cloned().collect::<Vec<_>>(),
             [
+                "ratelab-host-router",
                 "ratelab-launcher",
                 "ratelab-observer",
                 "ratelab-process-policy",
@@ -474,9 +488,11 @@ mod tests {
                 "ratelab-router"
             ]
         );
-        // Every identity but the router's, which never leaves the launcher.
+        // Every identity but the launcher's router's, which never leaves the launcher; a
+        // host's router's is exported, since it is started by hand.
         let back = Credentials::parse(&c.to_toml(), "x").unwrap();
         assert!(back.identity(&Role::Router).is_err());
+        assert!(back.identity(&Role::HostRouter).is_ok());
         let mut all_but_router = c.clone();
         all_but_router
             .identities

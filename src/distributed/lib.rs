@@ -14,6 +14,9 @@
 //!   the router drops what an identity may not say, by the identity of the link it came on
 //!   ([`access`]): a peer without the launch's credentials cannot connect, and a process
 //!   cannot publish another's topics, reports or tokens, nor the launcher's control.
+//! - **Across hosts** each other host runs a router of its own ([`host_router`], `ratelab
+//!   router`) linked to the launcher's, and its processes link to it: one link per host
+//!   across the network, as Zenoh deploys a system.
 //!
 //! - **Topics** are key expressions `ratelab/<graph>/<topic>` ([`Keys`]). Each process
 //!   builds the whole graph but ticks only its own nodes; a topic whose publisher and
@@ -44,6 +47,7 @@ use ratelab_runtime::ClockKind;
 
 pub mod access;
 pub mod credentials;
+pub mod host_router;
 pub mod launcher;
 pub mod lockstep;
 pub mod monitor;

@@ -1176,6 +1176,63 @@ fn a_kill_of_a_process_is_refused_where_it_cannot_be_done_in_one_line() {
     }
 }
 
+/// `ratelab router` refuses in one line, exit 2: a malformed endpoint, credentials of
+/// another graph or without a host router's identity, a port in use, nobody at the
+/// launcher's endpoint.
+#[test]
+fn a_router_refuses_bad_input_in_one_line() {
+    let _m = crate::machine::shared();
+    let dir = tempfile::tempdir().unwrap();
+    let creds = chapter_credentials(dir.path());
+    let creds = creds.to_str().unwrap();
+    let router = |args: &[&str]| ratelab(&[&["router", "--credentials", creds][..], args].concat());
+    for bad in [
+        "nope",
+        "tcp/127.0.0.1:7447",
+        "tls/127.0.0.1",
+        "tls/127.0.0.1:0",
+    ] {
+        assert_one_line_exit_2(&router(&["--connect", bad]), "--connect");
+        // Port 0 is any free port, where a router listens.
+        if !bad.ends_with(":0") {
+            let o = router(&["--connect", "tls/127.0.0.1:9", "--listen", bad]);
+            assert_one_line_exit_2(&o, "--listen");
+        }
+    }
+    let other = Path::new(REPO).join("graphs/cartpole-estimator.toml");
+    let o = router(&[
+        "--connect",
+        "tls/127.0.0.1:9",
+        "--graph",
+        other.to_str().unwrap(),
+    ]);
+    assert_one_line_exit_2(&o, "are for graph 'cartpole'");
+    // A process's own file (what a launcher hands its children) holds no router's identity.
+    let own = ratelab::distributed::credentials::Credentials::load(Path::new(creds))
+        .unwrap()
+        .only(&ratelab::distributed::credentials::Role::Process(
+            "robot".into(),
+        ))
+        .unwrap();
+    let own_file = dir.path().join("robot.toml");
+    own.write(&own_file, true).unwrap();
+    let o = ratelab(&[
+        "router",
+        "--connect",
+        "tls/127.0.0.1:9",
+        "--credentials",
+        own_file.to_str().unwrap(),
+    ]);
+    assert_one_line_exit_2(&o, "no identity for a host's router");
+    let busy = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let ep = format!("tls/127.0.0.1:{}", busy.local_addr().unwrap().port());
+    let o = router(&["--connect", "tls/127.0.0.1:9", "--listen", &ep]);
+    assert_one_line_exit_2(&o, "cannot open a Zenoh session");
+    let nobody = format!("tls/127.0.0.1:{}", free_port());
+    let o = router(&["--connect", &nobody, "--listen", "tls/127.0.0.1:0"]);
+    assert_one_line_exit_2(&o, "is the launch running there");
+}
+
 #[test]
 fn bad_endpoints_busy_ports_and_unknown_processes_exit_2() {
     let _m = crate::machine::shared();
@@ -2006,7 +2063,10 @@ impl TwoHosts {
 
     /// Make them, or say why not (not root, no `ip`, no network namespaces).
     fn new() -> Result<TwoHosts, String> {
-        let id = std::process::id();
+        // Unique to this process and this pair: two tests of one run make theirs at once.
+        static PAIRS: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+        let pair = PAIRS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        let id = format!("{}x{pair}", std::process::id());
         let hosts = TwoHosts {
             names: [format!("ratelab-a-{id}"), format!("ratelab-b-{id}")],
         };
@@ -2134,5 +2194,125 @@ fn a_launch_across_two_hosts_equals_the_in_process_run() {
     assert!(
         one == many,
         "the launch across two hosts differs from one process's run"
+    );
+}
+
+/// A launch across two hosts with a router on each (issue 76 item 2), as Zenoh deploys a
+/// system: the launcher's router on the first host; on the second, `ratelab router` linked
+/// to it and the robot's and the policy's processes linked to that router alone (`process
+/// --connect tls/127.0.0.1:7450`). The second host crosses the link once (the router's one
+/// connection to the launcher, the launcher's only link), its processes hold no socket to
+/// the first host, the run equals the in-process run byte for byte, and the router ends
+/// with the launch. Needs root for the namespaces, as the test above.
+#[test]
+fn a_launch_across_two_hosts_through_a_router_on_each_equals_the_in_process_run() {
+    let _m = crate::machine::shared();
+    let hosts = match TwoHosts::new() {
+        Ok(hosts) => hosts,
+        Err(why) => {
+            let required = std::env::var("RATELAB_REQUIRE_NETNS").is_ok_and(|v| v == "1");
+            assert!(!required, "RATELAB_REQUIRE_NETNS=1: {why}");
+            eprintln!("not checked: no network namespaces here ({why})");
+            return;
+        }
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let common = ["--clock", "virtual", "--duration", "2", "--seed", "7"];
+    let one = metrics_of(
+        &[&["run"][..], &common[..]].concat(),
+        &dir.path().join("one"),
+        None,
+    );
+    let ep = format!("tls/{}:7449", TwoHosts::FIRST);
+    let (creds, many) = (dir.path().join("creds.toml"), dir.path().join("many"));
+    let mut launcher = hosts
+        .ratelab(0, &["launch", "--processes", "--no-spawn", "--listen", &ep])
+        .args(common)
+        .arg("--export-credentials")
+        .arg(&creds)
+        .arg("--out")
+        .arg(&many)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let (rx, mut lines) = listening(&mut launcher);
+    // The second host's router, linked to the launcher's, listening on its own loopback.
+    let local = "tls/127.0.0.1:7450";
+    let mut router = hosts
+        .ratelab(1, &["router", "--connect", &ep, "--listen", local])
+        .arg("--credentials")
+        .arg(&creds)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let router_rx = stdout_lines(&mut router);
+    let mut router_lines = Vec::new();
+    assert!(
+        wait_line(&router_rx, &mut router_lines, "linked to the launcher", 30),
+        "{router_lines:?}"
+    );
+    let process = |name: &str| {
+        hosts
+            .ratelab(1, &["process", "--process", name, "--connect", local])
+            .arg("--credentials")
+            .arg(&creds)
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap()
+    };
+    // The robot's process first: joined, it waits for the policy's, and its links can be
+    // looked at while it waits.
+    let mut robot = process("robot");
+    let robot_rx = stdout_lines(&mut robot);
+    let mut robot_lines = Vec::new();
+    assert!(
+        wait_line(&robot_rx, &mut robot_lines, "joined graph", 30),
+        "{robot_lines:?}"
+    );
+    let established = |pid: u32| -> Vec<(u16, u16)> {
+        tcp_sockets(pid)
+            .into_iter()
+            .filter(|(state, ..)| state == "01")
+            .map(|(_, local, remote)| (local, remote))
+            .collect()
+    };
+    let robot_links = established(robot.id());
+    assert!(
+        !robot_links.is_empty() && robot_links.iter().all(|&(_, remote)| remote == 7450),
+        "the robot's process links to its host's router alone: {robot_links:?}"
+    );
+    let router_links = established(router.id());
+    let across: Vec<_> = router_links.iter().filter(|l| l.1 == 7449).collect();
+    assert_eq!(across.len(), 1, "the router's links: {router_links:?}");
+    let launcher_links = established(launcher.id());
+    let into_launcher: Vec<_> = launcher_links.iter().filter(|l| l.0 == 7449).collect();
+    assert_eq!(
+        into_launcher.len(),
+        1,
+        "one link into the launcher, the second host's router's: {launcher_links:?}"
+    );
+    let policy = process("policy");
+    let status = launcher.wait().unwrap();
+    lines.extend(rx.try_iter());
+    for p in [robot, policy] {
+        let p = p.wait_with_output().unwrap();
+        assert!(p.status.success(), "{}", text(&p.stderr));
+    }
+    assert!(status.success(), "{lines:?}");
+    // The router goes with the launch (the launcher's token withdrawn).
+    let ended = exit_within(&mut router, 15);
+    router_lines.extend(router_rx.try_iter());
+    assert!(ended.success(), "{router_lines:?}");
+    assert!(
+        router_lines.iter().any(|l| l.contains("the launch ended")),
+        "{router_lines:?}"
+    );
+    let many = std::fs::read_to_string(many.join("metrics.json")).unwrap();
+    assert!(
+        one == many,
+        "the launch through a router on each host differs from one process's run"
     );
 }
