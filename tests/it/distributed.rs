@@ -446,7 +446,7 @@ fn hand_started_by(
 }
 
 /// Wait up to `secs` for `child` to exit.
-fn exit_within(child: &mut Child, secs: u64) -> std::process::ExitStatus {
+pub(crate) fn exit_within(child: &mut Child, secs: u64) -> std::process::ExitStatus {
     let until = Instant::now() + Duration::from_secs(secs);
     loop {
         if let Some(s) = child.try_wait().unwrap() {

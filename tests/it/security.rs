@@ -292,6 +292,22 @@ fn only_the_launcher_hears_the_launch_s_own_traffic() {
 /// launcher says it refused connections.
 #[test]
 fn forgeries_change_nothing_in_a_launch_and_refused_peers_are_said() {
+    forgeries_change_nothing(false);
+}
+
+/// The same forgeries, and the processes, through a host's router (`ratelab router`,
+/// issue 76 item 2) linked to the launcher's: the router checks its clients by the graph's
+/// rules, so what it passes on under its own identity (which may say anything) is only
+/// what theirs allowed, and the run is still the undisturbed one, byte for byte.
+#[test]
+fn forgeries_through_a_host_s_router_change_nothing() {
+    forgeries_change_nothing(true);
+}
+
+/// A launch attacked as [`forgeries_change_nothing_in_a_launch_and_refused_peers_are_said`]
+/// says; `via_router`: the forger and the processes link to a host's router linked to the
+/// launcher's, not to the launcher's.
+fn forgeries_change_nothing(via_router: bool) {
     let _m = crate::machine::alone();
     let dir = tempfile::tempdir().unwrap();
     let creds_file = dir.path().join("creds.toml");
@@ -311,6 +327,30 @@ fn forgeries_change_nothing_in_a_launch_and_refused_peers_are_said() {
     // Peers without the launch's credentials.
     assert!(plain_peer(&format!("tcp/127.0.0.1:{port}"), &[]).is_err());
     let creds = Credentials::load(&creds_file).unwrap();
+    let router = via_router.then(|| {
+        let rep = format!("tls/127.0.0.1:{}", free_port());
+        let mut router = bin()
+            .args([
+                "router",
+                "--connect",
+                &ep,
+                "--listen",
+                &rep,
+                "--credentials",
+            ])
+            .arg(&creds_file)
+            .stdout(Stdio::piped())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap();
+        let rx = crate::distributed::stdout_lines(&mut router);
+        let mut said = Vec::new();
+        let linked = crate::distributed::wait_line(&rx, &mut said, "linked to the launcher", 30);
+        assert!(linked, "{said:?}");
+        (router, rep)
+    });
+    // Where the forger and the processes link: the launcher's router, or the host's.
+    let ep = router.as_ref().map_or(ep, |(_, rep)| rep.clone());
     let spec = GraphSpec::parse(DEFAULT_GRAPH_TOML, "chapter").unwrap();
     let keys = Keys::new(&spec.name);
     // A holder of the file forging, as the robot's identity, what the policy and the
@@ -373,6 +413,10 @@ fn forgeries_change_nothing_in_a_launch_and_refused_peers_are_said() {
     assert!(status.success(), "{lines:?}");
     for mut n in nodes {
         assert!(n.wait().unwrap().success());
+    }
+    if let Some((mut router, _)) = router {
+        let ended = crate::distributed::exit_within(&mut router, 15);
+        assert!(ended.success(), "the router ends with the launch");
     }
     // The refused peer is said (at once, then at most every 5 s, counted), with TLS's
     // reason; the launch's own processes and the forger (who holds the credentials) are
