@@ -314,6 +314,7 @@ fn exercises(c: &mut Criterion) {
                 ratelab_exercises::measure_ex1(
                     &bands.of().unwrap(),
                     &ratelab::graph::GraphSpec::chapter(),
+                    &ratelab::scheduler::StopFlag::new(),
                 )
                 .unwrap(),
             );
@@ -321,6 +322,7 @@ fn exercises(c: &mut Criterion) {
                 ratelab_exercises::measure_ex2(
                     &bands.of().unwrap(),
                     &ratelab::graph::GraphSpec::chapter(),
+                    &ratelab::scheduler::StopFlag::new(),
                 )
                 .unwrap(),
             );

@@ -78,9 +78,12 @@ impl Progress for Spinner {
 /// which runs it, its report on stdout and a spinner on stderr.
 ///
 /// # Errors
-/// What kept it from running (bad flags, no prediction, unreadable files or bands), or
-/// [`NotPassed`].
-pub fn run_from_args(args: &crate::cli::ExerciseArgs) -> anyhow::Result<()> {
+/// What kept it from running (bad flags, no prediction, unreadable files or bands), Ctrl-C
+/// (`stop`: the run in progress ends, nothing is graded), or [`NotPassed`].
+pub fn run_from_args(
+    args: &crate::cli::ExerciseArgs,
+    stop: &ratelab::scheduler::StopFlag,
+) -> anyhow::Result<()> {
     let spec = ExerciseSpec {
         which: args.which.clone(),
         dir: args.dir.clone(),
@@ -88,7 +91,7 @@ pub fn run_from_args(args: &crate::cli::ExerciseArgs) -> anyhow::Result<()> {
         prediction: None,
     };
     let mut out = |line: &str| println!("{line}");
-    let report = spec.report(Speech::Flags, &mut out, &Spinner::default())?;
+    let report = spec.report(Speech::Flags, &mut out, &Spinner::default(), stop)?;
     match report.not_passed {
         0 => Ok(()),
         _ => Err(NotPassed {

@@ -416,7 +416,7 @@ pub fn run_command_line(args: Vec<std::ffi::OsString>, register: impl FnOnce()) 
         Some(Command::Lab(args)) => lab(&args.run, stop),
         Some(Command::Replay(args)) => replay(args),
         Some(Command::Bench(args)) => bench::run_bench(args, stop),
-        Some(Command::Exercise(args)) => exercise::run_from_args(args),
+        Some(Command::Exercise(args)) => exercise::run_from_args(args, &stop),
         Some(Command::Sweep(args)) => sweep::run_sweep(args, &stop),
         Some(Command::Cliff(args)) => sweep::run_cliff(args, &stop),
         Some(Command::Launch(args)) => launch::run_launch(args, cli.headless, stop),

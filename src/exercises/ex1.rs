@@ -4,9 +4,10 @@
 use super::{check, scripted, threads, Check, Context, Exercise, ExerciseError};
 use super::{Reconcile, Said, Section};
 use ratelab_core::metrics::Metrics;
-use ratelab_drivers::sweep::{run_grid, Grid};
+use ratelab_drivers::sweep::{run_grid_until, Grid};
 use ratelab_runtime::config::{duration_from_secs, ClockKind, RunConfig};
 use ratelab_runtime::graph::GraphSpec;
+use ratelab_runtime::scheduler::StopFlag;
 use serde::Deserialize;
 
 /// ex1: the control-rate cliff.
@@ -46,7 +47,11 @@ pub struct Ex1Outcome {
 ///
 /// # Errors
 /// [`ExerciseError`] when a run cannot start.
-pub fn measure_ex1(b: &Ex1Bands, graph: &GraphSpec) -> Result<Vec<Metrics>, ExerciseError> {
+pub fn measure_ex1(
+    b: &Ex1Bands,
+    graph: &GraphSpec,
+    stop: &StopFlag,
+) -> Result<Vec<Metrics>, ExerciseError> {
     let grid = Grid {
         clocks: vec![ClockKind::Virtual],
         sensor_hz: vec![b.sensor_hz],
@@ -59,10 +64,9 @@ pub fn measure_ex1(b: &Ex1Bands, graph: &GraphSpec) -> Result<Vec<Metrics>, Exer
             ..RunConfig::default()
         },
     };
-    Ok(run_grid(&grid, &scripted, threads(), &|_, _| {})?
-        .into_iter()
-        .map(|(_, m)| m)
-        .collect())
+    let rows = run_grid_until(&grid, &scripted, threads(), &|_, _| {}, stop)?;
+    super::interrupted(stop)?;
+    Ok(rows.into_iter().map(|(_, m)| m).collect())
 }
 
 /// The runs of rate number `i` of the grid, one per seed.
@@ -159,7 +163,7 @@ impl Exercise for Ex1 {
 
     fn run(&self, cx: &mut Context<'_>) -> Result<(), ExerciseError> {
         let b: Ex1Bands = cx.bands()?;
-        let runs = cx.measure(|| measure_ex1(&b, cx.graph))?;
+        let runs = cx.measure(|stop| measure_ex1(&b, cx.graph, stop))?;
         say!(
             cx,
             "{:>9} | {} | mean sense->act latency",

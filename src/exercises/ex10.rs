@@ -8,6 +8,7 @@ use ratelab_core::qos::Fault;
 use ratelab_core::time::Nanos;
 use ratelab_runtime::config::{duration_from_secs, ClockKind, RunConfig};
 use ratelab_runtime::graph::GraphSpec;
+use ratelab_runtime::scheduler::StopFlag;
 use serde::Deserialize;
 
 /// ex10: the held force.
@@ -57,7 +58,11 @@ impl Ex10Outcome {
 ///
 /// # Errors
 /// [`ExerciseError`] when the graph has no such node or a run cannot start.
-pub fn measure_ex10(b: &Ex10Bands, graph: &GraphSpec) -> Result<Vec<Metrics>, ExerciseError> {
+pub fn measure_ex10(
+    b: &Ex10Bands,
+    graph: &GraphSpec,
+    stop: &StopFlag,
+) -> Result<Vec<Metrics>, ExerciseError> {
     let mut graph = graph.clone();
     graph.set_lease(&b.node, b.lease_ms)?;
     let kill = Fault {
@@ -76,7 +81,7 @@ pub fn measure_ex10(b: &Ex10Bands, graph: &GraphSpec) -> Result<Vec<Metrics>, Ex
                 faults: vec![kill.clone()],
                 ..RunConfig::default()
             };
-            super::run_scripted(&cfg)
+            super::run_scripted(&cfg, stop)
         })
         .collect()
 }
@@ -169,7 +174,7 @@ impl Exercise for Ex10 {
 
     fn run(&self, cx: &mut Context<'_>) -> Result<(), ExerciseError> {
         let b: Ex10Bands = cx.bands()?;
-        let runs = cx.measure(|| measure_ex10(&b, cx.graph))?;
+        let runs = cx.measure(|stop| measure_ex10(&b, cx.graph, stop))?;
         let outcome = outcome_ex10(&b, &runs);
         say!(
             cx,

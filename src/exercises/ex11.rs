@@ -6,6 +6,7 @@ use super::{check, threads, Check, Context, Exercise, ExerciseError, Reconcile, 
 use ratelab_drivers::sweep::{find_cliff, run_pool, Cliff};
 use ratelab_runtime::config::{duration_from_secs, ClockKind, RunConfig};
 use ratelab_runtime::graph::GraphSpec;
+use ratelab_runtime::scheduler::StopFlag;
 use serde::Deserialize;
 use std::path::Path;
 
@@ -58,6 +59,7 @@ pub fn measure_ex11(
     b: &Ex11Bands,
     graph: &GraphSpec,
     brain: &Path,
+    stop: &StopFlag,
 ) -> Result<Ex11Runs, ExerciseError> {
     let spec = brain.display().to_string();
     ratelab_runtime::checkpoint::load_policy(&spec)
@@ -72,16 +74,20 @@ pub fn measure_ex11(
                 graph: graph.clone(),
                 ..RunConfig::default()
             };
-            run_pool(&b.seeds, threads(), |&seed| {
+            // A seed's search not begun when `stop` is set is not begun; one under way
+            // finishes its scan (virtual runs of a few seconds each).
+            let found = run_pool(&b.seeds, threads(), |&seed| {
+                super::interrupted(stop)?;
                 let cfg = RunConfig {
                     seed,
                     ..base.clone()
                 };
-                find_cliff(&cfg, brain, b.min_hz, b.max_hz, b.step_hz)
+                Ok(find_cliff(&cfg, brain, b.min_hz, b.max_hz, b.step_hz)?)
             })
             .into_iter()
-            .map(|r| r.map_err(ExerciseError::from))
-            .collect()
+            .collect::<Result<Vec<Cliff>, ExerciseError>>()?;
+            super::interrupted(stop)?;
+            Ok(found)
         };
     Ok((cliffs(&mine)?, cliffs(&scripted)?))
 }
@@ -200,7 +206,7 @@ impl Exercise for Ex11 {
     fn run(&self, cx: &mut Context<'_>) -> Result<(), ExerciseError> {
         let b: Ex11Bands = cx.bands()?;
         let brain = cx.dir.join(BRAIN_FILE);
-        let runs = cx.measure(|| measure_ex11(&b, cx.graph, &brain))?;
+        let runs = cx.measure(|stop| measure_ex11(&b, cx.graph, &brain, stop))?;
         say!(
             cx,
             "{:>6} | {:>22} | {:>22}",

@@ -12,6 +12,7 @@ use ratelab_distributed::launcher::Program;
 use ratelab_runtime::config::{duration_from_secs, ClockKind, RunConfig};
 use ratelab_runtime::graph::spec::RestartPolicy;
 use ratelab_runtime::graph::GraphSpec;
+use ratelab_runtime::scheduler::StopFlag;
 use serde::Deserialize;
 use std::path::Path;
 
@@ -80,6 +81,7 @@ pub fn measure_ex12(
     graph: &GraphSpec,
     graph_path: Option<&Path>,
     exe: &Program,
+    stop: &StopFlag,
 ) -> Result<Ex12Run, ExerciseError> {
     if graph.restart.get(&b.process) != Some(&RestartPolicy::OnFailure) {
         return Err(ExerciseError::Launch(format!(
@@ -95,7 +97,7 @@ pub fn measure_ex12(
     };
     let kill_at = duration_from_secs(b.kill_at_s)?;
     let killed = vec![(b.process.clone(), kill_at)];
-    let report = super::launch_across(&cfg, graph_path, exe, killed)?;
+    let report = super::launch_across(&cfg, graph_path, exe, killed, stop)?;
     let rejoined_at = report
         .wire
         .iter()
@@ -255,7 +257,7 @@ impl Exercise for Ex12 {
             b.process,
             b.kill_at_s
         );
-        let run = cx.measure(|| measure_ex12(&b, cx.graph, cx.graph_path, cx.exe))?;
+        let run = cx.measure(|stop| measure_ex12(&b, cx.graph, cx.graph_path, cx.exe, stop))?;
         let o = outcome_ex12(&b, &run);
         let hz = reading_hz(cx.graph, &b.topic).unwrap_or(0.0);
         let m = &run.metrics;

@@ -52,7 +52,7 @@ pub struct Ex13Outcome {
 ///
 /// # Errors
 /// [`ExerciseError`] when the run cannot start.
-pub fn measure_ex13(cfg: &RunConfig) -> Result<Ex13Outcome, ExerciseError> {
+pub fn measure_ex13(cfg: &RunConfig, stop: &StopFlag) -> Result<Ex13Outcome, ExerciseError> {
     let offered = ratelab_ros2::offered::offered(&cfg.graph);
     let type_of = |name: &str| {
         offered
@@ -70,7 +70,8 @@ pub fn measure_ex13(cfg: &RunConfig) -> Result<Ex13Outcome, ExerciseError> {
         before: cfg.duration,
         told: Cell::new(0),
     };
-    drive(&mut core, &mut Unpaced, &StopFlag::new(), Some(&clock));
+    drive(&mut core, &mut Unpaced, stop, Some(&clock));
+    super::interrupted(stop)?;
     let instants = clock.told.get();
     Ok(Ex13Outcome {
         nodes: offered.nodes.clone(),
@@ -231,7 +232,7 @@ impl Exercise for Ex13 {
             ..RunConfig::default()
         };
         cfg.set_control_hz(b.control_hz)?;
-        let o = cx.measure(|| measure_ex13(&cfg))?;
+        let o = cx.measure(|stop| measure_ex13(&cfg, stop))?;
         say!(
             cx,
             "what ROS 2 sees of the chapter's graph, policy at {} Hz:",

@@ -7,6 +7,7 @@ use super::{check, Check, Context, Exercise, ExerciseError, Reconcile, Said, Sec
 use ratelab_core::metrics::Metrics;
 use ratelab_runtime::config::{duration_from_secs, ClockKind, RunConfig};
 use ratelab_runtime::graph::GraphSpec;
+use ratelab_runtime::scheduler::StopFlag;
 use serde::Deserialize;
 use std::path::Path;
 
@@ -87,6 +88,7 @@ pub fn measure_ex14(
     b: &Ex14Bands,
     graph: &GraphSpec,
     dir: &Path,
+    stop: &StopFlag,
 ) -> Result<Ex14Runs, ExerciseError> {
     let cfg = |graph: GraphSpec| -> Result<RunConfig, ExerciseError> {
         Ok(RunConfig {
@@ -104,7 +106,7 @@ pub fn measure_ex14(
             let mut g = graph.clone();
             g.set_qos(&b.topic, &p.offered)?;
             g.set_requested(&b.topic, &b.subscriber, &p.requested)?;
-            super::run_scripted(&cfg(g)?)
+            super::run_scripted(&cfg(g)?, stop)
         })
         .collect::<Result<Vec<_>, ExerciseError>>()?;
     let file = dir.join(&b.late_graph);
@@ -121,7 +123,7 @@ pub fn measure_ex14(
                 &b.late_topic,
                 &format!("depth={},durability={d}", b.late_depth),
             )?;
-            super::run_scripted(&cfg(g)?)
+            super::run_scripted(&cfg(g)?, stop)
         })
         .collect::<Result<Vec<_>, ExerciseError>>()?;
     Ok(Ex14Runs { pairs, late })
@@ -275,7 +277,7 @@ impl Exercise for Ex14 {
 
     fn run(&self, cx: &mut Context<'_>) -> Result<(), ExerciseError> {
         let b: Ex14Bands = cx.bands()?;
-        let runs = cx.measure(|| measure_ex14(&b, cx.graph, cx.dir))?;
+        let runs = cx.measure(|stop| measure_ex14(&b, cx.graph, cx.dir, stop))?;
         let outcome = outcome_ex14(&b, &runs);
         say!(
             cx,

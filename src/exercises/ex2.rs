@@ -4,9 +4,10 @@
 use super::{check, dash, scripted, threads, Check, Context, Exercise, ExerciseError};
 use super::{Reconcile, Said, Section};
 use ratelab_core::metrics::Metrics;
-use ratelab_drivers::sweep::{run_grid, Grid};
+use ratelab_drivers::sweep::{run_grid_until, Grid};
 use ratelab_runtime::config::{duration_from_secs, ClockKind, RunConfig};
 use ratelab_runtime::graph::GraphSpec;
+use ratelab_runtime::scheduler::StopFlag;
 use serde::Deserialize;
 
 /// ex2: the queue-depth trap.
@@ -50,6 +51,7 @@ pub struct Ex2Outcome {
 pub fn measure_ex2(
     b: &Ex2Bands,
     graph: &GraphSpec,
+    stop: &StopFlag,
 ) -> Result<Vec<(Metrics, Metrics)>, ExerciseError> {
     let grid = Grid {
         clocks: vec![ClockKind::Virtual],
@@ -63,10 +65,9 @@ pub fn measure_ex2(
             ..RunConfig::default()
         },
     };
-    let rows: Vec<Metrics> = run_grid(&grid, &scripted, threads(), &|_, _| {})?
-        .into_iter()
-        .map(|(_, m)| m)
-        .collect();
+    let rows = run_grid_until(&grid, &scripted, threads(), &|_, _| {}, stop)?;
+    super::interrupted(stop)?;
+    let rows: Vec<Metrics> = rows.into_iter().map(|(_, m)| m).collect();
     let n = b.seeds.len();
     Ok((0..n)
         .map(|i| (rows[i].clone(), rows[n + i].clone()))
@@ -163,7 +164,7 @@ impl Exercise for Ex2 {
 
     fn run(&self, cx: &mut Context<'_>) -> Result<(), ExerciseError> {
         let b: Ex2Bands = cx.bands()?;
-        let pairs = cx.measure(|| measure_ex2(&b, cx.graph))?;
+        let pairs = cx.measure(|stop| measure_ex2(&b, cx.graph, stop))?;
         say!(
             cx,
             "control {} Hz | seed | depth | /obs dropped | balanced | fell at step | mean latency",

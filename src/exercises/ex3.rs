@@ -8,6 +8,7 @@ use super::{Reconcile, Said, Section};
 use ratelab_core::metrics::Metrics;
 use ratelab_runtime::config::{duration_from_secs, phase_offset_from_ms, ClockKind, RunConfig};
 use ratelab_runtime::graph::GraphSpec;
+use ratelab_runtime::scheduler::StopFlag;
 use serde::Deserialize;
 
 /// ex3: jitter and phase offsets.
@@ -61,7 +62,11 @@ pub struct Ex3Outcome {
 ///
 /// # Errors
 /// [`ExerciseError`] when a run cannot start.
-pub fn measure_ex3(b: &Ex3Bands, graph: &GraphSpec) -> Result<(Metrics, Metrics), ExerciseError> {
+pub fn measure_ex3(
+    b: &Ex3Bands,
+    graph: &GraphSpec,
+    stop: &StopFlag,
+) -> Result<(Metrics, Metrics), ExerciseError> {
     let mut base = RunConfig {
         clock: ClockKind::Real,
         duration: duration_from_secs(b.duration_s)?,
@@ -75,11 +80,14 @@ pub fn measure_ex3(b: &Ex3Bands, graph: &GraphSpec) -> Result<(Metrics, Metrics)
         .iter()
         .map(|&ms| phase_offset_from_ms(ms))
         .collect::<Result<Vec<_>, _>>()?;
-    let matched = run_scripted(&base)?;
-    let offset = run_scripted(&RunConfig {
-        phase_offsets: offsets,
-        ..base
-    })?;
+    let matched = run_scripted(&base, stop)?;
+    let offset = run_scripted(
+        &RunConfig {
+            phase_offsets: offsets,
+            ..base
+        },
+        stop,
+    )?;
     Ok((matched, offset))
 }
 
@@ -171,7 +179,7 @@ impl Exercise for Ex3 {
             "Running {} s on the real clock twice (this takes real time)...",
             b.duration_s
         );
-        let (matched, offset) = cx.measure(|| measure_ex3(&b, cx.graph))?;
+        let (matched, offset) = cx.measure(|stop| measure_ex3(&b, cx.graph, stop))?;
         say!(cx, "offsets (ms)     | /obs dropped | /action dropped | balanced | latency mean |    p50 |    p99");
         for (label, m) in [
             ("none".to_string(), &matched),

@@ -8,6 +8,7 @@ use ratelab_core::qos::Delivery;
 use ratelab_drivers::sweep::run_pool;
 use ratelab_runtime::config::RunConfig;
 use ratelab_runtime::graph::GraphSpec;
+use ratelab_runtime::scheduler::StopFlag;
 use serde::Deserialize;
 
 /// ex4: the stale queue.
@@ -109,7 +110,11 @@ fn ex4_configs(b: &Ex4Bands) -> Vec<(Delivery, Option<f64>)> {
 ///
 /// # Errors
 /// [`ExerciseError`] when a setting does not fit `graph` or a run cannot start.
-pub fn measure_ex4(b: &Ex4Bands, graph: &GraphSpec) -> Result<Vec<Ex4Run>, ExerciseError> {
+pub fn measure_ex4(
+    b: &Ex4Bands,
+    graph: &GraphSpec,
+    stop: &StopFlag,
+) -> Result<Vec<Ex4Run>, ExerciseError> {
     let mut base = RunConfig {
         graph: graph.clone(),
         ..RunConfig::default()
@@ -136,7 +141,7 @@ pub fn measure_ex4(b: &Ex4Bands, graph: &GraphSpec) -> Result<Vec<Ex4Run>, Exerc
         }
     }
     run_pool(&jobs, threads(), |(delivery, lifespan, seed, g)| {
-        let r = run_virtual(g.clone(), *seed, b.duration_s)?;
+        let r = run_virtual(g.clone(), *seed, b.duration_s, stop)?;
         let latency_at_fall_ms = r
             .metrics
             .fell_at_s
@@ -328,7 +333,7 @@ impl Exercise for Ex4 {
 
     fn run(&self, cx: &mut Context<'_>) -> Result<(), ExerciseError> {
         let b: Ex4Bands = cx.bands()?;
-        let runs = cx.measure(|| measure_ex4(&b, cx.graph))?;
+        let runs = cx.measure(|stop| measure_ex4(&b, cx.graph, stop))?;
         table(cx, &b, &runs);
         let outcome = outcome_ex4(&b, &runs);
         cx.reconcile(&outcome);

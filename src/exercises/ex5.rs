@@ -7,6 +7,7 @@ use super::{ExerciseError, Reconcile, Said, Section, Verdict};
 use ratelab_core::metrics::Metrics;
 use ratelab_drivers::sweep::run_pool;
 use ratelab_runtime::graph::GraphSpec;
+use ratelab_runtime::scheduler::StopFlag;
 use serde::Deserialize;
 
 /// ex5: the watchdog.
@@ -151,7 +152,11 @@ impl Ex5Run {
 ///
 /// # Errors
 /// [`ExerciseError`] when a setting does not fit `graph` or a run cannot start.
-pub fn measure_ex5(b: &Ex5Bands, graph: &GraphSpec) -> Result<Vec<Ex5Run>, ExerciseError> {
+pub fn measure_ex5(
+    b: &Ex5Bands,
+    graph: &GraphSpec,
+    stop: &StopFlag,
+) -> Result<Vec<Ex5Run>, ExerciseError> {
     let mut jobs = Vec::new();
     for case in Ex5Case::ALL {
         let mut g = graph.clone();
@@ -163,7 +168,7 @@ pub fn measure_ex5(b: &Ex5Bands, graph: &GraphSpec) -> Result<Vec<Ex5Run>, Exerc
         }
     }
     run_pool(&jobs, threads(), |(case, seed, g)| {
-        let r = run_virtual(g.clone(), *seed, b.duration_s)?;
+        let r = run_virtual(g.clone(), *seed, b.duration_s, stop)?;
         let steps_without_command = r.trace.iter().filter(|s| s.latency.is_none()).count() as u64;
         Ok(Ex5Run {
             case: *case,
@@ -407,7 +412,7 @@ impl Exercise for Ex5 {
 
     fn run(&self, cx: &mut Context<'_>) -> Result<(), ExerciseError> {
         let b: Ex5Bands = cx.bands()?;
-        let runs = cx.measure(|| measure_ex5(&b, cx.graph))?;
+        let runs = cx.measure(|stop| measure_ex5(&b, cx.graph, stop))?;
         table(cx, &b, &runs);
         let outcome = outcome_ex5(&b, &runs);
         cx.reconcile(&outcome);

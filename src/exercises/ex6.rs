@@ -7,6 +7,7 @@ use super::{ExerciseError, Reconcile, Said, Section};
 use ratelab_core::metrics::Metrics;
 use ratelab_drivers::sweep::run_pool;
 use ratelab_runtime::graph::GraphSpec;
+use ratelab_runtime::scheduler::StopFlag;
 use serde::Deserialize;
 use std::path::Path;
 
@@ -101,6 +102,7 @@ pub fn measure_ex6(
     b: &Ex6Bands,
     graph: &GraphSpec,
     script: &Path,
+    stop: &StopFlag,
 ) -> Result<Vec<Ex6Run>, ExerciseError> {
     let mut jobs = Vec::new();
     for &clamp_n in &b.clamps_n {
@@ -116,7 +118,7 @@ pub fn measure_ex6(
             clamp_n: *clamp_n,
             seed: *seed,
             python: *python,
-            metrics: run_virtual(g.clone(), *seed, b.duration_s)?.metrics,
+            metrics: run_virtual(g.clone(), *seed, b.duration_s, stop)?.metrics,
         })
     };
     let (builtin, python): (Vec<_>, Vec<_>) = jobs.into_iter().partition(|j| !j.2);
@@ -258,7 +260,7 @@ impl Exercise for Ex6 {
         let b: Ex6Bands = cx.bands()?;
         let script = cx.dir.join(&b.script);
         refuse_the_template(&script)?;
-        let runs = cx.measure(|| measure_ex6(&b, cx.graph, &script))?;
+        let runs = cx.measure(|stop| measure_ex6(&b, cx.graph, &script, stop))?;
         table(cx, &b, &runs);
         let outcome = outcome_ex6(&runs);
         cx.reconcile(&outcome);

@@ -10,6 +10,7 @@ use super::{
 use ratelab_core::executor::ExecutorOverride;
 use ratelab_core::metrics::Metrics;
 use ratelab_runtime::graph::GraphSpec;
+use ratelab_runtime::scheduler::StopFlag;
 use serde::Deserialize;
 
 /// ex7: the slow callback.
@@ -137,7 +138,11 @@ fn case_graph(b: &Ex7Bands, graph: &GraphSpec, case: Ex7Case) -> Result<GraphSpe
 ///
 /// # Errors
 /// [`ExerciseError`] when the graph has no such sensor, or a run cannot start.
-pub fn measure_ex7(b: &Ex7Bands, graph: &GraphSpec) -> Result<Vec<Ex7Run>, ExerciseError> {
+pub fn measure_ex7(
+    b: &Ex7Bands,
+    graph: &GraphSpec,
+    stop: &StopFlag,
+) -> Result<Vec<Ex7Run>, ExerciseError> {
     let mut runs = Vec::new();
     for case in Ex7Case::ALL {
         let g = case_graph(b, graph, case)?;
@@ -145,7 +150,7 @@ pub fn measure_ex7(b: &Ex7Bands, graph: &GraphSpec) -> Result<Vec<Ex7Run>, Exerc
             runs.push(Ex7Run {
                 case,
                 seed,
-                metrics: run_virtual(g.clone(), seed, b.duration_s)?.metrics,
+                metrics: run_virtual(g.clone(), seed, b.duration_s, stop)?.metrics,
             });
         }
     }
@@ -318,7 +323,7 @@ impl Exercise for Ex7 {
     /// checks.
     fn run(&self, cx: &mut Context<'_>) -> Result<(), ExerciseError> {
         let b: Ex7Bands = cx.bands()?;
-        let runs = cx.measure(|| measure_ex7(&b, cx.graph))?;
+        let runs = cx.measure(|stop| measure_ex7(&b, cx.graph, stop))?;
         say!(
             cx,
             "{:<21} | seed | sensor Hz | skipped | policy response p50/max | executor busy | balanced",

@@ -10,6 +10,7 @@ use super::{
 };
 use ratelab_core::metrics::Metrics;
 use ratelab_runtime::graph::GraphSpec;
+use ratelab_runtime::scheduler::StopFlag;
 use serde::Deserialize;
 
 /// ex8: the noisy sensor.
@@ -94,7 +95,11 @@ fn case_graph(
 ///
 /// # Errors
 /// [`ExerciseError`] when the graph has no such sensor or estimator, or a run cannot start.
-pub fn measure_ex8(b: &Ex8Bands, graph: &GraphSpec) -> Result<Vec<Ex8Run>, ExerciseError> {
+pub fn measure_ex8(
+    b: &Ex8Bands,
+    graph: &GraphSpec,
+    stop: &StopFlag,
+) -> Result<Vec<Ex8Run>, ExerciseError> {
     let mut runs = Vec::new();
     for cutoff_hz in b.cutoffs_hz {
         for &noise_rad in &b.noise_grid_rad {
@@ -104,7 +109,7 @@ pub fn measure_ex8(b: &Ex8Bands, graph: &GraphSpec) -> Result<Vec<Ex8Run>, Exerc
                     cutoff_hz,
                     noise_rad,
                     seed,
-                    metrics: run_virtual(g.clone(), seed, b.duration_s)?.metrics,
+                    metrics: run_virtual(g.clone(), seed, b.duration_s, stop)?.metrics,
                 });
             }
         }
@@ -248,7 +253,7 @@ impl Exercise for Ex8 {
     /// latency), the reconcile and the checks.
     fn run(&self, cx: &mut Context<'_>) -> Result<(), ExerciseError> {
         let b: Ex8Bands = cx.bands()?;
-        let runs = cx.measure(|| measure_ex8(&b, cx.graph))?;
+        let runs = cx.measure(|stop| measure_ex8(&b, cx.graph, stop))?;
         say!(
             cx,
             "cut-off | angle noise | seeds: balanced (n@t: fell at t s) | latency mean"

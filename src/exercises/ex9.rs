@@ -11,6 +11,7 @@ use ratelab_core::metrics::Metrics;
 use ratelab_distributed::launcher::Program;
 use ratelab_runtime::config::{duration_from_secs, phase_offset_from_ms, ClockKind, RunConfig};
 use ratelab_runtime::graph::GraphSpec;
+use ratelab_runtime::scheduler::StopFlag;
 use serde::Deserialize;
 use std::path::Path;
 
@@ -106,6 +107,7 @@ pub fn measure_ex9(
     graph: &GraphSpec,
     graph_path: Option<&Path>,
     exe: &Program,
+    stop: &StopFlag,
 ) -> Result<Vec<Ex9Run>, ExerciseError> {
     let base = RunConfig {
         clock: ClockKind::Real,
@@ -119,7 +121,7 @@ pub fn measure_ex9(
         .map(|&ms| phase_offset_from_ms(ms))
         .collect::<Result<Vec<_>, _>>()?;
     let across = |cfg: &RunConfig| -> Result<(Metrics, Vec<(String, f64)>), ExerciseError> {
-        let report = super::launch_across(cfg, graph_path, exe, Vec::new())?;
+        let report = super::launch_across(cfg, graph_path, exe, Vec::new(), stop)?;
         if !report.missing.is_empty() {
             return Err(ExerciseError::Launch(format!(
                 "process(es) {} did not report",
@@ -138,7 +140,7 @@ pub fn measure_ex9(
     let mut runs = Vec::new();
     for case in Ex9Case::ALL {
         let (metrics, wire_p50_us) = match case {
-            Ex9Case::OneProcess => (super::run_scripted(&base)?, Vec::new()),
+            Ex9Case::OneProcess => (super::run_scripted(&base, stop)?, Vec::new()),
             Ex9Case::Across => across(&base)?,
             Ex9Case::AcrossWithOffsets => across(&RunConfig {
                 phase_offsets: offsets.clone(),
@@ -260,7 +262,7 @@ impl Exercise for Ex9 {
             "Running {} s on the real clock three times, twice across two processes (this takes real time)...",
             b.duration_s
         );
-        let runs = cx.measure(|| measure_ex9(&b, cx.graph, cx.graph_path, cx.exe))?;
+        let runs = cx.measure(|stop| measure_ex9(&b, cx.graph, cx.graph_path, cx.exe, stop))?;
         say!(cx, "case                   | latency mean |    p50 |    p99 | /obs dropped | /action dropped | wire p50");
         for case in Ex9Case::ALL {
             for r in runs.iter().filter(|r| r.case == case) {

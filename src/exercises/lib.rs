@@ -89,6 +89,7 @@ use ratelab_drivers::sweep::SweepError;
 use ratelab_runtime::config::{duration_from_secs, ClockKind, RunConfig};
 use ratelab_runtime::graph::GraphSpec;
 use ratelab_runtime::policy::{Policy, Scripted};
+use ratelab_runtime::scheduler::StopFlag;
 // One thread per core, as a sweep runs (`ratelab sweep`).
 use ratelab_drivers::sweep_spec::threads;
 use serde::de::DeserializeOwned;
@@ -217,6 +218,22 @@ pub enum ExerciseError {
     /// A launch across processes failed.
     #[error("launch: {0}")]
     Launch(String),
+    /// Stopped (Ctrl-C) before its runs ended: nothing is graded.
+    #[error("interrupted before its runs ended: nothing graded")]
+    Interrupted,
+}
+
+/// [`ExerciseError::Interrupted`] once `stop` is set: asked after each run, so a run that
+/// `stop` cut short is never graded.
+///
+/// # Errors
+/// [`ExerciseError::Interrupted`].
+pub fn interrupted(stop: &StopFlag) -> Result<(), ExerciseError> {
+    if stop.is_stopped() {
+        Err(ExerciseError::Interrupted)
+    } else {
+        Ok(())
+    }
 }
 
 /// `ex1, ex2, …, ex13 or ex14`.
@@ -640,6 +657,9 @@ pub struct Context<'a> {
     pub exe: &'a ratelab_distributed::launcher::Program,
     /// The learner's file.
     pub file: &'a ExerciseFile,
+    /// Set on Ctrl-C: the run in progress ends and the exercise returns
+    /// [`ExerciseError::Interrupted`].
+    pub stop: &'a StopFlag,
     /// `bands.toml`.
     pub bands: &'a Bands,
     out: &'a mut dyn FnMut(&str),
@@ -681,10 +701,10 @@ impl Context<'_> {
             .map_err(|e| ExerciseError::Bands(Box::new(e)))
     }
 
-    /// Run `f` (a measurement) with its progress shown.
-    pub fn measure<T>(&self, f: impl FnOnce() -> T) -> T {
+    /// Run `f` (a measurement, given the exercise's stop flag) with its progress shown.
+    pub fn measure<T>(&self, f: impl FnOnce(&StopFlag) -> T) -> T {
         self.progress.begin(&format!("measuring {}", self.id));
-        let out = f();
+        let out = f(self.stop);
         self.progress.end();
         out
     }
@@ -755,6 +775,9 @@ pub struct Setup<'a> {
     /// The prediction, in place of the one in the learner's file (`None`: the file's): the
     /// keys the exercise's file asks for, and `why`.
     pub prediction: Option<&'a toml::Table>,
+    /// Set on Ctrl-C: the run in progress ends and the exercise returns
+    /// [`ExerciseError::Interrupted`].
+    pub stop: &'a StopFlag,
 }
 
 /// Run exercise `which` as `ratelab exercise` does: refuse it without a prediction, print
@@ -807,6 +830,7 @@ pub fn run_report(
         graph_path: setup.graph_path,
         exe: setup.exe,
         file: &file,
+        stop: setup.stop,
         bands: &bands,
         out,
         progress,
@@ -840,8 +864,6 @@ fn scripted() -> Result<Box<dyn Policy>, String> {
     Ok(Box::new(Scripted))
 }
 
-/// One run of `cfg` with the scripted balancer, no trace kept (the real-clock exercises:
-/// ex3, ex9): its metrics.
 /// `cfg`'s graph launched across its processes with the scripted balancer (ex9, ex12): the
 /// processes started with `exe`, ratelab's command line, loading the graph file at
 /// `graph_path` (`None`: the chapter's, compiled in) under fresh credentials; the processes
@@ -849,12 +871,14 @@ fn scripted() -> Result<Box<dyn Policy>, String> {
 ///
 /// # Errors
 /// [`ExerciseError::Launch`] when the launch fails (a process that cannot be started, a
-/// port that cannot be listened on); the graph file's error when it cannot be read.
+/// port that cannot be listened on); the graph file's error when it cannot be read;
+/// [`ExerciseError::Interrupted`] when `stop` ended it.
 fn launch_across(
     cfg: &RunConfig,
     graph_path: Option<&Path>,
     exe: &ratelab_distributed::launcher::Program,
     kill_processes: Vec<(String, ratelab_core::time::Nanos)>,
+    stop: &StopFlag,
 ) -> Result<ratelab_distributed::launcher::LaunchReport, ExerciseError> {
     use ratelab_distributed::launcher::{launch, LaunchOptions};
     let names: Vec<String> = cfg.graph.placement().into_iter().map(|(p, _)| p).collect();
@@ -877,26 +901,34 @@ fn launch_across(
         ros2_domain: None,
         kill_processes,
     };
-    let stop = ratelab_runtime::scheduler::StopFlag::new();
-    launch(cfg, &opts, &stop, &|_| {}).map_err(launch_error)
+    let report = launch(cfg, &opts, stop, &|_| {}).map_err(launch_error)?;
+    interrupted(stop)?;
+    Ok(report)
 }
 
-fn run_scripted(cfg: &RunConfig) -> Result<Metrics, ExerciseError> {
+/// One run of `cfg` with the scripted balancer, no trace kept (the real-clock exercises:
+/// ex3, ex9): its metrics. `stop` ends it at once, as [`ExerciseError::Interrupted`].
+fn run_scripted(cfg: &RunConfig, stop: &StopFlag) -> Result<Metrics, ExerciseError> {
     let opts = ratelab_drivers::run::RunOptions {
         keep_trace: false,
+        stop: stop.clone(),
         ..Default::default()
     };
-    Ok(ratelab_drivers::run::run(cfg, Box::new(Scripted), opts)
+    let metrics = ratelab_drivers::run::run(cfg, Box::new(Scripted), opts)
         .map_err(SweepError::from)?
-        .metrics)
+        .metrics;
+    interrupted(stop)?;
+    Ok(metrics)
 }
 
 /// One virtual run of an exercise on `graph` with `seed`, keeping its trace (the latency at
-/// the fall and the steps without a command are read from it).
+/// the fall and the steps without a command are read from it). `stop` ends it at once, as
+/// [`ExerciseError::Interrupted`].
 fn run_virtual(
     graph: GraphSpec,
     seed: u64,
     duration_s: f64,
+    stop: &StopFlag,
 ) -> Result<ratelab_drivers::run::RunReport, ExerciseError> {
     let cfg = RunConfig {
         clock: ClockKind::Virtual,
@@ -905,12 +937,14 @@ fn run_virtual(
         seed,
         ..RunConfig::default()
     };
-    Ok(ratelab_drivers::run::run(
-        &cfg,
-        Box::new(Scripted),
-        ratelab_drivers::run::RunOptions::new(),
-    )
-    .map_err(SweepError::from)?)
+    let opts = ratelab_drivers::run::RunOptions {
+        stop: stop.clone(),
+        ..ratelab_drivers::run::RunOptions::new()
+    };
+    let report =
+        ratelab_drivers::run::run(&cfg, Box::new(Scripted), opts).map_err(SweepError::from)?;
+    interrupted(stop)?;
+    Ok(report)
 }
 
 /// A run's verdict in a table cell: `Y`, `n@0.34s` (fell at run time 0.34 s), or

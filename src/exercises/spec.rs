@@ -5,6 +5,7 @@
 
 use crate::{default_graph, run_report, Progress, Report, Setup};
 use ratelab_drivers::run_spec::GraphSettings;
+use ratelab_runtime::scheduler::StopFlag;
 use ratelab_runtime::setting::{Setting, Speech};
 use std::path::PathBuf;
 
@@ -27,18 +28,20 @@ pub struct ExerciseSpec {
 impl ExerciseSpec {
     /// Run it as `ratelab exercise` does ([`run_report`]): its report's lines through `out`,
     /// its progress through `progress`, its findings returned. The graph's QoS warnings go
-    /// to stderr, a `[ratelab]` line each.
+    /// to stderr, a `[ratelab]` line each. `stop` (Ctrl-C) ends the run in progress and
+    /// the exercise, ungraded.
     ///
     /// # Errors
     /// What kept it from running, in one line in `speech`'s words: an injected fault, a
     /// graph or override that does not fit, an unknown exercise, no prediction, unreadable
     /// files or bands ([`crate::ExerciseError`], kept as the error's source), a run that
-    /// cannot start.
+    /// cannot start, [`crate::ExerciseError::Interrupted`] once `stop` is set.
     pub fn report(
         &self,
         speech: Speech,
         out: &mut dyn FnMut(&str),
         progress: &dyn Progress,
+        stop: &StopFlag,
     ) -> anyhow::Result<Report> {
         let mut graph = self.graph.clone();
         if graph.file.is_none() {
@@ -62,6 +65,7 @@ impl ExerciseSpec {
             graph_path: graph.file.as_deref(),
             exe: &exe,
             prediction: self.prediction.as_ref(),
+            stop,
         };
         Ok(run_report(&self.which, setup, out, progress)?)
     }
@@ -85,7 +89,8 @@ mod tests {
 
     fn refusal(spec: &ExerciseSpec, speech: Speech) -> anyhow::Error {
         let mut out = |_: &str| {};
-        spec.report(speech, &mut out, &()).unwrap_err()
+        spec.report(speech, &mut out, &(), &StopFlag::new())
+            .unwrap_err()
     }
 
     #[test]

@@ -285,8 +285,8 @@ fn cliff<'py>(
 /// `predictions` (a list of `(key, sentence, verdict)`, the verdict `right`, `missed`,
 /// `unreadable` or `open`), `checks_failed`, `predictions_missed` and `not_passed` (counts:
 /// missed counts the unreadable too, and not passed is both) and `lines` (the report
-/// `ratelab exercise` prints). Ctrl-C raises KeyboardInterrupt once the exercise's runs
-/// have ended: they take no stop flag yet.
+/// `ratelab exercise` prints). Ctrl-C ends the run in progress and raises
+/// KeyboardInterrupt, nothing graded.
 #[pyfunction]
 #[pyo3(signature = (which, settings, prediction_json=None))]
 fn exercise<'py>(
@@ -300,10 +300,10 @@ fn exercise<'py>(
         .transpose()
         .map_err(|e| PyValueError::new_err(format!("prediction: {e}")))?;
     let spec = run_spec::exercise_from(which, settings, prediction)?;
-    let (report, lines) = interruptibly(py, move |_stop| {
+    let (report, lines) = interruptibly(py, move |stop| {
         let mut lines = Vec::new();
         let mut out = |text: &str| lines.extend(text.lines().map(str::to_string));
-        let report = spec.report(Speech::Keywords, &mut out, &())?;
+        let report = spec.report(Speech::Keywords, &mut out, &(), &stop)?;
         Ok((report, lines))
     })?;
     let out = PyDict::new(py);

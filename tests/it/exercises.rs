@@ -4,6 +4,7 @@
 //! measured outcome.
 
 use ratelab::graph::GraphSpec;
+use ratelab::scheduler::StopFlag;
 use ratelab_exercises::{
     check_ex1, check_ex2, check_ex3, check_ex4, check_ex5, check_ex6, default_graph, load_bands,
     measure_ex1, measure_ex2, measure_ex3, measure_ex4, measure_ex5, measure_ex6, outcome_ex4,
@@ -63,7 +64,7 @@ fn assert_all(checks: Vec<ratelab_exercises::Check>) {
 fn ex1_measurement_rate_cliff() {
     let _machine = crate::machine::shared();
     let b = bands();
-    let runs = measure_ex1(&b.ex1, &GraphSpec::chapter()).unwrap();
+    let runs = measure_ex1(&b.ex1, &GraphSpec::chapter(), &StopFlag::new()).unwrap();
     assert_eq!(runs.len(), b.ex1.control_hz.len() * b.ex1.seeds.len());
     assert_all(check_ex1(&b.ex1, &runs));
 }
@@ -72,7 +73,7 @@ fn ex1_measurement_rate_cliff() {
 fn ex2_measurement_queue_trap() {
     let _machine = crate::machine::shared();
     let b = bands();
-    let pairs = measure_ex2(&b.ex2, &GraphSpec::chapter()).unwrap();
+    let pairs = measure_ex2(&b.ex2, &GraphSpec::chapter(), &StopFlag::new()).unwrap();
     assert_eq!(pairs.len(), b.ex2.seeds.len());
     assert_all(check_ex2(&b.ex2, &pairs));
 }
@@ -81,7 +82,7 @@ fn ex2_measurement_queue_trap() {
 fn ex3_measurement_jitter_and_phase_offsets() {
     let _machine = crate::machine::alone();
     let b = bands();
-    let (matched, offset) = measure_ex3(&b.ex3, &GraphSpec::chapter()).unwrap();
+    let (matched, offset) = measure_ex3(&b.ex3, &GraphSpec::chapter(), &StopFlag::new()).unwrap();
     assert_all(check_ex3(&b.ex3, &matched, &offset));
 }
 
@@ -89,7 +90,7 @@ fn ex3_measurement_jitter_and_phase_offsets() {
 fn ex4_measurement_stale_queue() {
     let _machine = crate::machine::shared();
     let b = bands();
-    let runs = measure_ex4(&b.ex4, &GraphSpec::chapter()).unwrap();
+    let runs = measure_ex4(&b.ex4, &GraphSpec::chapter(), &StopFlag::new()).unwrap();
     assert_eq!(
         runs.len(),
         (2 + b.ex4.lifespan_ms.len()) * b.ex4.seeds.len()
@@ -109,7 +110,7 @@ fn ex4_measurement_stale_queue() {
     assert!(latest_balances && !fifo_balances && lifespan_balances);
     assert!(lo <= hi);
     // Virtual runs: the exercise measures the same thing twice.
-    let again = measure_ex4(&b.ex4, &GraphSpec::chapter()).unwrap();
+    let again = measure_ex4(&b.ex4, &GraphSpec::chapter(), &StopFlag::new()).unwrap();
     let json = |rs: &[ratelab_exercises::Ex4Run]| {
         rs.iter()
             .map(|r| serde_json::to_string(&r.metrics).unwrap())
@@ -120,7 +121,10 @@ fn ex4_measurement_stale_queue() {
     let mut g = GraphSpec::chapter();
     g.set_qos(&b.ex4.topic, "delivery=fifo,lifespan_ms=30,depth=5")
         .unwrap();
-    assert_eq!(json(&measure_ex4(&b.ex4, &g).unwrap()), json(&runs));
+    assert_eq!(
+        json(&measure_ex4(&b.ex4, &g, &StopFlag::new()).unwrap()),
+        json(&runs)
+    );
 }
 
 #[test]
@@ -132,7 +136,7 @@ fn ex5_measurement_watchdog() {
         .expect("ex5 names its graph");
     let g = GraphSpec::load(&graph).unwrap();
     assert_eq!(g.name, "cartpole-safety");
-    let runs = measure_ex5(&b.ex5, &g).unwrap();
+    let runs = measure_ex5(&b.ex5, &g, &StopFlag::new()).unwrap();
     assert_eq!(runs.len(), Ex5Case::ALL.len() * b.ex5.seeds.len());
     assert_all(check_ex5(&b.ex5, &runs));
     let Ex5Outcome {
@@ -158,10 +162,13 @@ fn ex5_measurement_watchdog() {
             .map(|r| serde_json::to_string(&r.metrics).unwrap())
             .collect::<Vec<_>>()
     };
-    assert_eq!(json(&measure_ex5(&b.ex5, &other).unwrap()), json(&runs));
+    assert_eq!(
+        json(&measure_ex5(&b.ex5, &other, &StopFlag::new()).unwrap()),
+        json(&runs)
+    );
     // The chapter's graph has no /cmd: ex5 needs its own, ex4 runs on the chapter's.
     assert!(default_graph("ex4", &path("")).unwrap().is_none());
-    assert!(measure_ex5(&b.ex5, &GraphSpec::chapter()).is_err());
+    assert!(measure_ex5(&b.ex5, &GraphSpec::chapter(), &StopFlag::new()).is_err());
 }
 
 #[test]
@@ -176,7 +183,7 @@ fn ex6_measurement_your_own_node() {
     assert_eq!(g.name, "cartpole-safety");
     // The checks run the reference limiter in the learner's place: they test the runtime.
     let reference = path(&b.ex6.reference_script);
-    let runs = measure_ex6(&b.ex6, &g, &reference).unwrap();
+    let runs = measure_ex6(&b.ex6, &g, &reference, &StopFlag::new()).unwrap();
     assert_eq!(runs.len(), 2 * b.ex6.clamps_n.len() * b.ex6.seeds.len());
     assert_all(check_ex6(&b.ex6, &runs));
     assert_eq!(
@@ -189,7 +196,7 @@ fn ex6_measurement_your_own_node() {
     // The shipped skeleton passes commands through unclamped: it differs from the built-in
     // node (which falls at the smallest clamps), and the check says so.
     let skeleton = path(&b.ex6.script);
-    let runs = measure_ex6(&b.ex6, &g, &skeleton).unwrap();
+    let runs = measure_ex6(&b.ex6, &g, &skeleton, &StopFlag::new()).unwrap();
     let Ex6Outcome {
         smallest_clamp_n,
         matches_builtin,
@@ -201,7 +208,7 @@ fn ex6_measurement_your_own_node() {
     );
     assert!(!check_ex6(&b.ex6, &runs)[1].passed);
     // A graph without the node the bands name is refused by name.
-    let err = measure_ex6(&b.ex6, &GraphSpec::chapter(), &reference)
+    let err = measure_ex6(&b.ex6, &GraphSpec::chapter(), &reference, &StopFlag::new())
         .unwrap_err()
         .to_string();
     assert!(err.contains("no node 'safety'"), "{err}");
@@ -216,7 +223,7 @@ fn ex7_measurement_slow_callback() {
         .expect("ex7 names its graph");
     let g = GraphSpec::load(&graph).unwrap();
     assert_eq!(g.name, "cartpole-executors");
-    let runs = measure_ex7(&b.ex7, &g).unwrap();
+    let runs = measure_ex7(&b.ex7, &g, &StopFlag::new()).unwrap();
     assert_eq!(runs.len(), Ex7Case::ALL.len() * b.ex7.seeds.len());
     assert_all(check_ex7(&b.ex7, &runs));
     let Ex7Outcome {
@@ -236,11 +243,14 @@ fn ex7_measurement_slow_callback() {
             .map(|r| serde_json::to_string(&r.metrics).unwrap())
             .collect::<Vec<_>>()
     };
-    assert_eq!(json(&runs), json(&measure_ex7(&b.ex7, &g).unwrap()));
+    assert_eq!(
+        json(&runs),
+        json(&measure_ex7(&b.ex7, &g, &StopFlag::new()).unwrap())
+    );
     // The checks fail off the measured shape: every node on a thread of its own.
     let mut free = g.clone();
     free.set_executor(ratelab::executor::ExecutorOverride::parse("per_node").unwrap());
-    let off = measure_ex7(&b.ex7, &free).unwrap();
+    let off = measure_ex7(&b.ex7, &free, &StopFlag::new()).unwrap();
     assert!(!check_ex7(&b.ex7, &off)[1].passed || !check_ex7(&b.ex7, &off)[0].passed);
     // The reconcile speaks to every key.
     let dir = tempfile::tempdir().unwrap();
@@ -283,7 +293,7 @@ fn ex8_measurement_noisy_sensor() {
         .expect("ex8 names its graph");
     let g = GraphSpec::load(&graph).unwrap();
     assert_eq!(g.name, "cartpole-estimator");
-    let runs = measure_ex8(&b.ex8, &g).unwrap();
+    let runs = measure_ex8(&b.ex8, &g, &StopFlag::new()).unwrap();
     assert_eq!(
         runs.len(),
         b.ex8.cutoffs_hz.len() * b.ex8.noise_grid_rad.len() * b.ex8.seeds.len()
@@ -313,11 +323,14 @@ fn ex8_measurement_noisy_sensor() {
             .map(|r| serde_json::to_string(&r.metrics).unwrap())
             .collect::<Vec<_>>()
     };
-    assert_eq!(json(&runs), json(&measure_ex8(&b.ex8, &g).unwrap()));
+    assert_eq!(
+        json(&runs),
+        json(&measure_ex8(&b.ex8, &g, &StopFlag::new()).unwrap())
+    );
     // The checks fail off the measured shape: a noiseless sensor never falls.
     let mut quiet = b.ex8.clone();
     quiet.noise_grid_rad = vec![0.0, 0.001];
-    let off = measure_ex8(&quiet, &g).unwrap();
+    let off = measure_ex8(&quiet, &g, &StopFlag::new()).unwrap();
     assert!(check_ex8(&quiet, &off).iter().all(|c| !c.passed));
     // The reconcile speaks to every key.
     let dir = tempfile::tempdir().unwrap();
@@ -355,7 +368,7 @@ fn ex9_measurement_crossing() {
     let exe = ratelab::distributed::launcher::Program::from(std::path::PathBuf::from(env!(
         "CARGO_BIN_EXE_ratelab"
     )));
-    let runs = measure_ex9(&b.ex9, &g, None, &exe).unwrap();
+    let runs = measure_ex9(&b.ex9, &g, None, &exe, &StopFlag::new()).unwrap();
     assert_eq!(
         runs.iter().map(|r| r.case).collect::<Vec<_>>(),
         Ex9Case::ALL
@@ -516,7 +529,7 @@ fn ex10_prediction_recorded() {
 fn ex10_measurement_held_force() {
     use ratelab_exercises::ex10::{check_ex10, measure_ex10, outcome_ex10, Ex10Bands};
     let b: Ex10Bands = load_bands(&path("bands.toml")).unwrap().of().unwrap();
-    let runs = measure_ex10(&b, &GraphSpec::chapter()).unwrap();
+    let runs = measure_ex10(&b, &GraphSpec::chapter(), &StopFlag::new()).unwrap();
     assert_eq!(runs.len(), b.seeds.len());
     for c in check_ex10(&b, &runs) {
         assert!(c.passed, "{}", c.name);
@@ -543,7 +556,13 @@ fn ex11_measurement_own_brain() {
     use ratelab_exercises::ex11::{check_ex11, measure_ex11, outcome_ex11, Ex11Bands, BRAIN_FILE};
     ratelab::init(); // the brain is Python
     let b: Ex11Bands = load_bands(&path("bands.toml")).unwrap().of().unwrap();
-    let runs = measure_ex11(&b, &GraphSpec::chapter(), &path(BRAIN_FILE)).unwrap();
+    let runs = measure_ex11(
+        &b,
+        &GraphSpec::chapter(),
+        &path(BRAIN_FILE),
+        &StopFlag::new(),
+    )
+    .unwrap();
     assert_eq!((runs.0.len(), runs.1.len()), (b.seeds.len(), b.seeds.len()));
     for c in check_ex11(&b, &runs) {
         assert!(c.passed, "{}", c.name);
@@ -577,7 +596,7 @@ fn ex12_measurement_restart() {
     let exe = ratelab::distributed::launcher::Program::from(std::path::PathBuf::from(env!(
         "CARGO_BIN_EXE_ratelab"
     )));
-    let run = measure_ex12(&b, &g, Some(&file), &exe).unwrap();
+    let run = measure_ex12(&b, &g, Some(&file), &exe, &StopFlag::new()).unwrap();
     let checks = check_ex12(&b, &g, &run);
     assert_all(checks.clone());
     let o = outcome_ex12(&b, &run);
@@ -609,7 +628,7 @@ fn ex12_measurement_restart() {
     }
     assert!(!check_ex12(&b, &g, &more)[2].passed);
     // A graph that does not restart the process is refused, in one line.
-    let e = measure_ex12(&b, &GraphSpec::chapter(), None, &exe).unwrap_err();
+    let e = measure_ex12(&b, &GraphSpec::chapter(), None, &exe, &StopFlag::new()).unwrap_err();
     assert!(e.to_string().contains("restart = \"on-failure\""), "{e}");
     let predicted: toml::Table =
         toml::from_str("readings_lost = 3\nlatency_max_ms = 60\nwhy = \"w\"").unwrap();
@@ -651,7 +670,7 @@ fn ex14_measurement_incompatible_qos() {
     use ratelab_exercises::Reconcile;
     ratelab::init(); // the late joiner is a Python node
     let b: Ex14Bands = load_bands(&path("bands.toml")).unwrap().of().unwrap();
-    let runs = measure_ex14(&b, &GraphSpec::chapter(), &path("")).unwrap();
+    let runs = measure_ex14(&b, &GraphSpec::chapter(), &path(""), &StopFlag::new()).unwrap();
     assert_eq!((runs.pairs.len(), runs.late.len()), (4, 2));
     for c in check_ex14(&b, &runs) {
         assert!(c.passed, "{}", c.name);

@@ -1208,6 +1208,52 @@ fn sigint_stops_a_real_clock_sweep_within_a_second_and_keeps_what_completed() {
     );
 }
 
+/// Ctrl-C during an exercise ends the run in progress and the exercise, ungraded, exit 130:
+/// ex3's two real-clock runs take 10 s, and the exercise used to run them out.
+#[test]
+fn sigint_stops_an_exercise_within_a_second_and_grades_nothing() {
+    let _machine = crate::machine::alone();
+    let dir = tempfile::tempdir().unwrap();
+    let repo = Path::new(crate::REPO).join("exercises");
+    let file = "ex3_jitter_phase.toml";
+    for f in ["bands.toml", file] {
+        std::fs::copy(repo.join(f), dir.path().join(f)).unwrap();
+    }
+    let learner = dir.path().join(file);
+    let text = std::fs::read_to_string(&learner)
+        .unwrap()
+        .replace("# matched_obs_drops =\n", "matched_obs_drops = 100\n")
+        .replace(
+            "why = \"\"",
+            "why = \"each reading comes just after the last was taken\"",
+        );
+    std::fs::write(&learner, text).unwrap();
+    let mut sent = None;
+    let o = run_child(
+        &["exercise", "ex3", "--dir", dir.path().to_str().unwrap()],
+        dir.path(),
+        Duration::from_secs(30),
+        |pid| {
+            std::thread::sleep(Duration::from_millis(1500));
+            sent = Some(Instant::now());
+            // SAFETY: signalling our own child.
+            unsafe { libc::kill(pid, libc::SIGINT) };
+        },
+    );
+    let after = sent.unwrap().elapsed();
+    assert_eq!(o.code, Some(130), "{o:?}");
+    assert!(o.stderr.contains("interrupted"), "{o:?}");
+    assert!(
+        !o.stdout.contains("[ok]") && !o.stdout.contains("[!!]"),
+        "{o:?}"
+    );
+    // The rest of the first 5 s run and the second one would be 8.5 s more.
+    assert!(
+        after < Duration::from_secs(3),
+        "stopped {after:?} after SIGINT"
+    );
+}
+
 #[test]
 fn durations_counts_and_margins_out_of_range_are_refused_with_the_range() {
     let dir = tempfile::tempdir().unwrap();
@@ -1391,8 +1437,12 @@ fn an_exercise_bands_file_with_an_endless_duration_is_refused() {
     std::fs::write(&p, edited).unwrap();
     let b = ratelab_exercises::load_bands(&p).unwrap();
     let start = Instant::now();
-    let e = ratelab_exercises::measure_ex1(&b.of().unwrap(), &ratelab::graph::GraphSpec::chapter())
-        .unwrap_err();
+    let e = ratelab_exercises::measure_ex1(
+        &b.of().unwrap(),
+        &ratelab::graph::GraphSpec::chapter(),
+        &ratelab::scheduler::StopFlag::new(),
+    )
+    .unwrap_err();
     assert!(e.to_string().contains("(0, 315360000]"), "{e}");
     assert!(start.elapsed() < Duration::from_secs(1));
 }

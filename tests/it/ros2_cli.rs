@@ -597,7 +597,7 @@ fn ex13_s_answers_are_what_the_wire_shows() {
         ..ratelab::RunConfig::default()
     };
     cfg.set_control_hz(40.0).unwrap();
-    let o = ratelab_exercises::measure_ex13(&cfg).unwrap();
+    let o = ratelab_exercises::measure_ex13(&cfg, &ratelab::scheduler::StopFlag::new()).unwrap();
     assert_eq!(o.clock_hz, 80.0);
     let run = Offering::start(&[
         "--clock",

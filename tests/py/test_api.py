@@ -259,6 +259,22 @@ def test_ctrl_c_stops_a_run():
     assert ratelab.run(duration_s=0.5, **VIRTUAL).metrics["steps"] == 26  # t = 0, 20, …, 500 ms
 
 
+def test_ctrl_c_stops_an_exercise():
+    # ex3 runs the real clock twice for 5 s; Ctrl-C ends the run in progress, grades nothing.
+    before = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        timer = threading.Timer(1.0, _thread.interrupt_main)
+        timer.start()
+        started = time.monotonic()
+        with pytest.raises(KeyboardInterrupt):
+            ratelab.exercise("ex3", {"matched_obs_drops": 100, "why": "a guess"},
+                             dir=ROOT / "exercises")
+        assert time.monotonic() - started < 4.0
+        timer.cancel()
+    finally:
+        signal.signal(signal.SIGINT, before)
+
+
 def test_the_installed_command_and_module():
     smoke = subprocess.run([str(COMMAND), "run", "--smoke"], capture_output=True, text=True,
                            timeout=120)

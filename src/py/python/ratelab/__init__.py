@@ -1182,7 +1182,8 @@ def exercise(
 
     Raises NoPrediction (a ValueError) when there is no prediction yet, SettingTypeError (a
     TypeError) for an unknown keyword, ValueError for an unknown exercise or bad input,
-    FileNotFoundError for a missing folder or file.
+    FileNotFoundError for a missing folder or file. Ctrl-C ends the run in progress and
+    raises KeyboardInterrupt, nothing graded.
     """
     settings = _graph_settings(
         graph, rate, depth, qos, link, lease_ms, None, None, compute_ms, executor, None
