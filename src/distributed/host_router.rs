@@ -169,7 +169,7 @@ pub fn serve(opts: &HostRouterOptions, stop: &StopFlag) -> Result<Served, DistEr
     ));
     loop {
         if gone.is_stopped() {
-            say("the launch ended".into());
+            say("the launch ended (or its host can no longer be reached): routing no more".into());
             return Ok(Served::LaunchEnded);
         }
         if stop.is_stopped() {

@@ -544,6 +544,9 @@ def test_an_exercise_returns_its_checks(tmp_path):
     with pytest.raises(ratelab.NoPrediction) as e:
         ratelab.exercise("ex1", dir=folder)
     assert "ex1_rate_cliff.toml" in str(e.value)
+    # One hierarchy: ratelab's own Error, and Python's ValueError, named where it is public.
+    assert isinstance(e.value, ratelab.Error) and isinstance(e.value, ValueError)
+    assert type(e.value).__module__ == "ratelab", type(e.value).__module__
     with pytest.raises(ValueError):
         ratelab.exercise("ex99", {"why": "?"}, dir=folder)
 

@@ -25,8 +25,9 @@ keyword, `FileNotFoundError` for a missing file, `FileExistsError` for an output
 (pass `force=True`), `NodeFailed` (a `RuntimeError`) when a node of the run failed (its
 `.run` holds the figures up to then), `TraceTooLarge` (a `MemoryError`) before a run whose
 trace would not fit in memory (keep one step in N with `trace_every=N`, or write the trace
-to a file as the run goes with the command `ratelab run --out DIR`). Ctrl-C
-(KeyboardInterrupt) stops a run.
+to a file as the run goes with the command `ratelab run --out DIR`), `NoPrediction` (a
+`ValueError`) for an exercise whose prediction is not written yet. Ctrl-C
+(KeyboardInterrupt) stops a run or an exercise.
 """
 
 from __future__ import annotations
@@ -92,15 +93,11 @@ __all__ = [
     "TRACE_COLUMNS",
 ]
 
-#: An exercise asked for before its prediction was written (a ValueError).
-NoPrediction = _native.NoPrediction
-
-
 class Error(Exception):
     """An error of ratelab's own kind. Each is also the Python exception of its cause: a bad
     setting a `ValueError` (`SettingError`) or a `TypeError` (`SettingTypeError`), a failed
     node a `RuntimeError` (`NodeFailed`), a trace too large a `MemoryError`
-    (`TraceTooLarge`)."""
+    (`TraceTooLarge`), an exercise without a prediction a `ValueError` (`NoPrediction`)."""
 
 
 class SettingError(Error, ValueError):
@@ -111,6 +108,11 @@ class SettingError(Error, ValueError):
 class SettingTypeError(Error, TypeError):
     """A setting of the wrong type (`run(control_hz="fast")`), or a keyword the function
     does not take (`run(contol_hz=5)`: the message names the nearest one it does take)."""
+
+
+class NoPrediction(Error, ValueError):
+    """An exercise asked for before its prediction was written (`ratelab exercise` refuses it
+    too): the message names the learner's file and the keys it asks for."""
 
 
 class TraceTooLarge(Error, MemoryError):
@@ -418,17 +420,19 @@ def _unknown_keyword(function: str, key: str, taken: List[str]) -> str:
 def _native_call(fn: Callable, *args: Any) -> Any:
     """`_native.fn(*args)`, its refusals as ratelab's exceptions: a bad setting (a plain
     ValueError or TypeError) a `SettingError` or `SettingTypeError`, a trace too large a
-    `TraceTooLarge`."""
+    `TraceTooLarge`, an exercise without a prediction a `NoPrediction`."""
     try:
         return fn(*args)
     except _native.TraceTooLarge as e:
         raise TraceTooLarge(str(e)) from None
+    except _native.NoPrediction as e:
+        raise NoPrediction(str(e)) from None
     except (ValueError, TypeError) as e:
         if type(e) is ValueError:
             raise SettingError(str(e)) from None
         if type(e) is TypeError:
             raise SettingTypeError(str(e)) from None
-        raise  # NoPrediction and the like: already of their own kind
+        raise  # already of their own kind
 
 
 # ---- what a run returns --------------------------------------------------------------------
