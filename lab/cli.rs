@@ -203,8 +203,8 @@ pub struct LaunchArgs {
     pub no_spawn: bool,
     /// Write the launch's credentials (its CA's certificate and every process's identity;
     /// a secret, mode 600) to FILE, for processes started by hand (`ratelab process
-    /// --credentials FILE`, also `top` and `lab --attach` on another host). An existing
-    /// FILE only with --force.
+    /// --credentials FILE`, also `top`, `lab --attach` and `ratelab router` on another
+    /// host). An existing FILE only with --force.
     #[arg(long, value_name = "FILE")]
     pub export_credentials: Option<PathBuf>,
     /// Kill a process of the graph at run time T, seconds, as a crash would (SIGKILL;
@@ -263,8 +263,9 @@ pub struct ProcessArgs {
 /// `ratelab router`.
 #[derive(Debug, Clone, Args)]
 pub struct RouterArgs {
-    /// The graph file (default: the chapter's); the launcher's, byte for byte, whose access
-    /// rules the router enforces on this host's processes.
+    /// The graph file (default: the chapter's): the launcher's, whose access rules the
+    /// router enforces on this host's processes (refused when its nodes' processes or its
+    /// topics' publishers differ from the launcher's graph).
     #[arg(long, value_name = "FILE")]
     pub graph: Option<PathBuf>,
     /// The launcher's endpoint (repeatable): the router's one link off this host.

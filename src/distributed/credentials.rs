@@ -9,7 +9,9 @@
 //! peer's identity, which Zenoh's access control ([`super::access`]) checks on every
 //! message: [`Role::common_name`]. The launcher's session, the router every other session
 //! links to, has an identity of its own ([`Role::Router`]) that never leaves the launcher:
-//! no file holds it ([`Credentials::to_toml`]), so nobody else can speak as the router.
+//! no file holds it ([`Credentials::to_toml`]), so nobody else can speak as the router. A
+//! host's router ([`Role::HostRouter`], started by hand on another host) has the same
+//! rights at the launcher's router and is exported: whoever holds an export can use them.
 //!
 //! [`Credentials::generate`] makes the CA and one certificate per identity (ECDSA P-256,
 //! by `rcgen`); the CA's private key is dropped at once, so nobody, not even the launcher,
@@ -29,7 +31,7 @@ use std::collections::BTreeMap;
 use std::path::Path;
 
 /// The largest credentials file read, bytes: room for every identity of the largest launch
-/// ([`MAX_PROCESSES`] and three more, each a certificate and a key of at most
+/// ([`MAX_PROCESSES`] and four more, each a certificate and a key of at most
 /// `MAX_PEM_BYTES`), and 64 KiB besides (about 4.1 MiB).
 pub const MAX_CREDENTIALS_BYTES: u64 =
     (MAX_PROCESSES as u64 + MORE_IDENTITIES as u64) * 2 * MAX_PEM_BYTES as u64 + 64 * 1024;

@@ -96,6 +96,11 @@ fn check_options(opts: &HostRouterOptions) -> Result<GraphSpec, DistError> {
     }
     for ep in &opts.listen {
         check_endpoint("--listen", ep, true)?;
+        if ep.ends_with(":0") {
+            return Err(DistError::Usage(format!(
+                "--listen {ep}: port 0 means any port, and this host's processes must know the router's: give one"
+            )));
+        }
     }
     Ok(spec)
 }
@@ -161,6 +166,7 @@ pub fn serve(opts: &HostRouterOptions, stop: &StopFlag) -> Result<Served, DistEr
         }
         std::thread::sleep(Duration::from_millis(20));
     }
+    same_rules(&session, &keys, &spec, opts)?;
     say(format!(
         "router for graph '{}' linked to the launcher at {}, listening on {}",
         spec.name,
@@ -177,4 +183,44 @@ pub fn serve(opts: &HostRouterOptions, stop: &StopFlag) -> Result<Served, DistEr
         }
         std::thread::sleep(Duration::from_millis(50));
     }
+}
+
+/// Are the access rules this router enforces, from its graph file, the launcher's? The
+/// rules follow the graph's shape (which process owns each node and publishes each topic);
+/// the launcher's graph comes from its settings (`@setup`), asked for up to
+/// [`LAUNCHER_WAIT`].
+///
+/// # Errors
+/// [`DistError::Usage`], one line: the launcher never said its settings, or its graph
+/// places nodes or topics otherwise than the router's file.
+fn same_rules(
+    session: &zenoh::Session,
+    keys: &Keys,
+    spec: &GraphSpec,
+    opts: &HostRouterOptions,
+) -> Result<(), DistError> {
+    let since = Instant::now();
+    let setup = loop {
+        if let Some(setup) = super::monitor::ask_setup(session, &keys.setup()) {
+            break setup;
+        }
+        if since.elapsed() > LAUNCHER_WAIT {
+            return Err(DistError::Usage(format!(
+                "the launcher at {} did not say its settings within {} s",
+                opts.connect.join(", "),
+                LAUNCHER_WAIT.as_secs()
+            )));
+        }
+    };
+    let theirs = GraphSpec::parse(&setup.graph_toml, "the launcher's graph")
+        .map_err(|e| DistError::Usage(e.to_string()))?;
+    let processes = &opts.credentials.processes;
+    let rules = |g: &GraphSpec| super::access::acl(keys, processes, Some(g));
+    if rules(spec) != rules(&theirs) {
+        return Err(DistError::Usage(format!(
+            "{}: its nodes' processes or its topics' publishers differ from the launcher's graph '{}': give the router the launcher's graph file",
+            opts.graph_origin, theirs.name
+        )));
+    }
+    Ok(())
 }

@@ -964,7 +964,7 @@ pub fn placed_processes(spec: &GraphSpec) -> Vec<PlacedProcess> {
 }
 
 /// Ask once (for up to a second) for a graph's settings; the first answer that decodes.
-fn ask_setup(session: &zenoh::Session, selector: &str) -> Option<Setup> {
+pub(crate) fn ask_setup(session: &zenoh::Session, selector: &str) -> Option<Setup> {
     let replies = session
         .get(selector)
         .timeout(Duration::from_secs(1))

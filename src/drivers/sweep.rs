@@ -156,9 +156,11 @@ pub fn run_grid_until(
             return Ok(None);
         }
         let b = brain().map_err(SweepError::Brain)?;
+        // The run's own flag: a fall under the real clock sets it to stop that run's
+        // threads, and must not end the points after it; Ctrl-C (`stop`) reaches it.
         let opts = RunOptions {
             keep_trace: false,
-            stop: stop.clone(),
+            stop: stop.child(),
             ..RunOptions::default()
         };
         let report = run(&grid.config(p)?, b, opts)?;

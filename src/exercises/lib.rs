@@ -223,8 +223,10 @@ pub enum ExerciseError {
     Interrupted,
 }
 
-/// [`ExerciseError::Interrupted`] once `stop` is set: asked after each run, so a run that
-/// `stop` cut short is never graded.
+/// [`ExerciseError::Interrupted`] once `stop` (Ctrl-C) is set: asked before and after each
+/// run, so no run starts after it and a run it cut short is never graded. Each run is given
+/// its own flag made from it ([`StopFlag::child`]), so what a run sets itself (a fall under
+/// the real clock) is never taken for Ctrl-C.
 ///
 /// # Errors
 /// [`ExerciseError::Interrupted`].
@@ -657,7 +659,8 @@ pub struct Context<'a> {
     pub exe: &'a ratelab_distributed::launcher::Program,
     /// The learner's file.
     pub file: &'a ExerciseFile,
-    /// Set on Ctrl-C: the run in progress ends and the exercise returns
+    /// Set on Ctrl-C: no run starts after it, the run in progress ends (a cliff search,
+    /// ex11, finishes the seed it is on), and the exercise returns
     /// [`ExerciseError::Interrupted`].
     pub stop: &'a StopFlag,
     /// `bands.toml`.
@@ -775,7 +778,8 @@ pub struct Setup<'a> {
     /// The prediction, in place of the one in the learner's file (`None`: the file's): the
     /// keys the exercise's file asks for, and `why`.
     pub prediction: Option<&'a toml::Table>,
-    /// Set on Ctrl-C: the run in progress ends and the exercise returns
+    /// Set on Ctrl-C: no run starts after it, the run in progress ends (a cliff search,
+    /// ex11, finishes the seed it is on), and the exercise returns
     /// [`ExerciseError::Interrupted`].
     pub stop: &'a StopFlag,
 }
@@ -901,17 +905,24 @@ fn launch_across(
         ros2_domain: None,
         kill_processes,
     };
-    let report = launch(cfg, &opts, stop, &|_| {}).map_err(launch_error)?;
     interrupted(stop)?;
-    Ok(report)
+    // Its own flag: what stops the launch from inside (a failed process) leaves the
+    // exercise's runs after it alone; Ctrl-C (`stop`) reaches it.
+    let report = launch(cfg, &opts, &stop.child(), &|_| {});
+    // A launch Ctrl-C cut short says so in its own words: the exercise's are the ones said.
+    interrupted(stop)?;
+    report.map_err(launch_error)
 }
 
 /// One run of `cfg` with the scripted balancer, no trace kept (the real-clock exercises:
 /// ex3, ex9): its metrics. `stop` ends it at once, as [`ExerciseError::Interrupted`].
 fn run_scripted(cfg: &RunConfig, stop: &StopFlag) -> Result<Metrics, ExerciseError> {
+    interrupted(stop)?;
+    // The run's own flag: a fall under the real clock sets it to stop the run's threads,
+    // and must not end the exercise's runs after it; Ctrl-C (`stop`) reaches it.
     let opts = ratelab_drivers::run::RunOptions {
         keep_trace: false,
-        stop: stop.clone(),
+        stop: stop.child(),
         ..Default::default()
     };
     let metrics = ratelab_drivers::run::run(cfg, Box::new(Scripted), opts)
@@ -937,8 +948,9 @@ fn run_virtual(
         seed,
         ..RunConfig::default()
     };
+    interrupted(stop)?;
     let opts = ratelab_drivers::run::RunOptions {
-        stop: stop.clone(),
+        stop: stop.child(),
         ..ratelab_drivers::run::RunOptions::new()
     };
     let report =

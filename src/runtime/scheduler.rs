@@ -36,9 +36,14 @@ use std::collections::BinaryHeap;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::Arc;
 
-/// A shared stop request: set by a fall, Ctrl-C, the lab, or a failed node.
+/// A shared stop request: set by a fall, Ctrl-C, the lab, or a failed node. Clones share
+/// it; a [`StopFlag::child`] also reads as set once its parent is, and is set alone.
 #[derive(Clone, Debug, Default)]
-pub struct StopFlag(Arc<AtomicBool>);
+pub struct StopFlag {
+    own: Arc<AtomicBool>,
+    /// The flag this one was made from, if any: set, this one reads as set too.
+    parent: Option<Arc<StopFlag>>,
+}
 
 impl StopFlag {
     /// A flag not yet set.
@@ -47,11 +52,20 @@ impl StopFlag {
     }
     /// Ask every node loop to stop.
     pub fn stop(&self) {
-        self.0.store(true, Ordering::SeqCst);
+        self.own.store(true, Ordering::SeqCst);
     }
-    /// Has a stop been asked for?
+    /// Has a stop been asked for, of this flag or of a flag it was made from?
     pub fn is_stopped(&self) -> bool {
-        self.0.load(Ordering::SeqCst)
+        self.own.load(Ordering::SeqCst) || self.parent.as_ref().is_some_and(|p| p.is_stopped())
+    }
+    /// A flag for one run among several that one stop ends (Ctrl-C during a sweep or an
+    /// exercise): set when this one is, while what sets it (a fall under the real clock,
+    /// which stops that run's threads) leaves this one, and so the other runs, alone.
+    pub fn child(&self) -> StopFlag {
+        StopFlag {
+            own: Arc::new(AtomicBool::new(false)),
+            parent: Some(Arc::new(self.clone())),
+        }
     }
 }
 
@@ -267,5 +281,28 @@ mod probes {
             }) as Box<dyn Node>
         })
         .collect()
+    }
+}
+
+#[cfg(test)]
+mod stop_flag_tests {
+    use super::StopFlag;
+
+    #[test]
+    fn a_child_reads_its_parent_s_stop_and_keeps_its_own_to_itself() {
+        let parent = StopFlag::new();
+        let (a, b) = (parent.child(), parent.child());
+        a.stop();
+        assert!(a.is_stopped() && a.clone().is_stopped());
+        assert!(
+            !parent.is_stopped() && !b.is_stopped(),
+            "a run's own stop stays its own"
+        );
+        let grandchild = b.child();
+        parent.stop();
+        assert!(
+            b.is_stopped() && grandchild.is_stopped(),
+            "Ctrl-C reaches every run"
+        );
     }
 }

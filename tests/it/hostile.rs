@@ -1208,6 +1208,44 @@ fn sigint_stops_a_real_clock_sweep_within_a_second_and_keeps_what_completed() {
     );
 }
 
+/// A fall under the real clock stops that run's threads through the run's own stop flag:
+/// the points after it still run (a sweep used to end at the first fall, as if Ctrl-C).
+#[test]
+fn a_fall_in_a_real_clock_sweep_ends_that_run_alone() {
+    let _machine = crate::machine::alone();
+    let dir = tempfile::tempdir().unwrap();
+    let o = run_child(
+        &[
+            "sweep",
+            "--clock",
+            "real",
+            "--control-hz",
+            "2,50",
+            "--seeds",
+            "0",
+            "--duration",
+            "2",
+        ],
+        dir.path(),
+        Duration::from_secs(60),
+        |_| {},
+    );
+    assert_eq!(o.code, Some(0), "{o:?}");
+    assert!(!o.stdout.contains("interrupted"), "{o:?}");
+    let rows: Vec<&str> = o
+        .stdout
+        .lines()
+        .filter(|l| l.starts_with("real "))
+        .collect();
+    assert_eq!(rows.len(), 2, "both points ran: {o:?}");
+    let fell = |r: &str| {
+        r.split('|')
+            .nth(1)
+            .is_some_and(|v| v.trim_start().starts_with('n'))
+    };
+    assert!(rows.iter().any(|r| fell(r)), "the 2 Hz point falls: {o:?}");
+}
+
 /// Ctrl-C during an exercise ends the run in progress and the exercise, ungraded, exit 130:
 /// ex3's two real-clock runs take 10 s, and the exercise used to run them out.
 #[test]

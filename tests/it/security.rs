@@ -354,61 +354,26 @@ fn forgeries_change_nothing(via_router: bool) {
     let spec = GraphSpec::parse(DEFAULT_GRAPH_TOML, "chapter").unwrap();
     let keys = Keys::new(&spec.name);
     // A holder of the file forging, as the robot's identity, what the policy and the
-    // launcher say, for the whole run.
-    let forger = session(
-        &creds,
-        Role::Process("robot".into()),
-        None,
-        &[],
-        std::slice::from_ref(&ep),
-    )
-    .unwrap();
+    // launcher say, for the whole run. (Not as a host's router, whose certificate the file
+    // holds too: the launcher's router lets that identity say anything on the graph's keys,
+    // docs/distributed.md.)
     let done = Arc::new(AtomicBool::new(false));
-    let forging = {
-        let (done, keys, forger) = (done.clone(), keys.clone(), forger.clone());
-        std::thread::spawn(move || {
-            let mut seq = 0;
-            while !done.load(Ordering::SeqCst) {
-                let force = WireSample {
-                    head: SampleHead {
-                        seq,
-                        stamp_ns: 0,
-                        origin_ns: None,
-                        sent_mono_ns: 0,
-                    },
-                    data: MsgData::new(ForceMsg { newtons: 10.0 }).to_bytes(),
-                };
-                let _ = forger.put(keys.topic("/action"), force.encode()).wait();
-                let stop = ToProcess::Stop {
-                    at_ns: 0,
-                    need: Vec::new(),
-                };
-                let _ = forger
-                    .put(keys.control("policy"), encode_json(&stop))
-                    .wait();
-                let _ = forger.put(keys.ended(), b"{}".to_vec()).wait();
-                let _ = forger
-                    .put(keys.ticked("policy"), br#"{"process":"policy","index":0,"node":1,"t_ns":0,"stop":true,"published":null,"failed":null}"#.to_vec())
-                    .wait();
-                // A node token under the policy's name, declared and withdrawn.
-                if let Ok(t) = forger
-                    .liveliness()
-                    .declare_token(keys.node_token("policy", "policy"))
-                    .wait()
-                {
-                    std::thread::sleep(Duration::from_millis(5));
-                    drop(t);
-                }
-                seq += 1;
-                std::thread::sleep(Duration::from_millis(5));
-            }
+    let forgers = vec![(Role::Process("robot".into()), ep.clone())];
+    let forging: Vec<_> = forgers
+        .into_iter()
+        .map(|(role, at)| {
+            let forger = session(&creds, role.clone(), None, &[], &[at]).unwrap();
+            let (done, keys) = (done.clone(), keys.clone());
+            std::thread::spawn(move || forge(&forger, &keys, &role, &done))
         })
-    };
+        .collect();
     std::thread::sleep(Duration::from_millis(300));
     let nodes = crate::distributed::hand_started(&ep, &creds_file, Stdio::null);
     let status = launcher.wait().unwrap();
     done.store(true, Ordering::SeqCst);
-    forging.join().unwrap();
+    for f in forging {
+        f.join().unwrap();
+    }
     lines.extend(rx.try_iter());
     assert!(status.success(), "{lines:?}");
     for mut n in nodes {
@@ -443,7 +408,51 @@ fn forgeries_change_nothing(via_router: bool) {
         dir.path(),
         "the forged run differs from the undisturbed one",
     );
-    drop(forger);
+}
+
+/// Forge, as `role`, until `done`: a force on `/action`'s own key, a stop of the policy's
+/// process, the launch's end and a relayed report; as a process also the policy's tick and
+/// a node token under the policy's name (what a host's router may pass on for a process,
+/// so not forged as one).
+fn forge(forger: &zenoh::Session, keys: &Keys, role: &Role, done: &AtomicBool) {
+    let mut seq = 0;
+    while !done.load(Ordering::SeqCst) {
+        let force = WireSample {
+            head: SampleHead {
+                seq,
+                stamp_ns: 0,
+                origin_ns: None,
+                sent_mono_ns: 0,
+            },
+            data: MsgData::new(ForceMsg { newtons: 10.0 }).to_bytes(),
+        };
+        let _ = forger.put(keys.topic("/action"), force.encode()).wait();
+        let stop = ToProcess::Stop {
+            at_ns: 0,
+            need: Vec::new(),
+        };
+        let _ = forger
+            .put(keys.control("policy"), encode_json(&stop))
+            .wait();
+        let _ = forger.put(keys.ended(), b"{}".to_vec()).wait();
+        let _ = forger.put(keys.relayed("robot"), vec![0u8; 16]).wait();
+        if matches!(role, Role::Process(_)) {
+            let _ = forger
+                .put(keys.ticked("policy"), br#"{"process":"policy","index":0,"node":1,"t_ns":0,"stop":true,"published":null,"failed":null}"#.to_vec())
+                .wait();
+            // A node token under the policy's name, declared and withdrawn.
+            if let Ok(t) = forger
+                .liveliness()
+                .declare_token(keys.node_token("policy", "policy"))
+                .wait()
+            {
+                std::thread::sleep(Duration::from_millis(5));
+                drop(t);
+            }
+        }
+        seq += 1;
+        std::thread::sleep(Duration::from_millis(5));
+    }
 }
 
 #[test]
