@@ -13,7 +13,9 @@
 //! | the launcher | control (`@ctl/*`), the end (`@ended`), progress lines (`@log`) | its token `@launcher`, the settings' queryable `@setup` (and its replies); subscribers to the launch's own traffic: reports (`@up`), ticks (`@ticked`), the samples it passes on (`@via`), control and relayed reports |
 //! | process `P` | the topics its nodes publish, on `@via/<topic>` for the launcher to pass on (a topic's own key is the router's), its reports `@up/P`, ticks `@ticked/P`, counters `@stats/P` | its nodes' tokens `@node/P/*`, their endpoints' `@pub`/`@sub` tokens; subscribers to its own control `@ctl/P` and relayed reports `@relayed/P` |
 //! | an observer | nothing | nothing more |
-//! | the launcher's router, a host's router | anything on the graph's keys | anything on the graph's keys |
+//! | the launcher's router | anything on the graph's keys | anything on the graph's keys |
+//! | a host's router, heard by the launcher's router | the processes' kinds of keys (`@up`, `@ticked`, `@via`, `@stats`) | node and endpoint tokens; reads of any key |
+//! | a host's router, heard by its clients | anything on the graph's keys | anything on the graph's keys |
 //!
 //! The launch's own traffic is the launcher's to hear: the router passes it on from the
 //! one thread Zenoh runs it on, waiting for room in every subscriber's link, so a
@@ -33,11 +35,13 @@
 //! the transport-floor examples) check each other by the same rules.
 //!
 //! Across hosts, a router on each other host ([`super::host_router`]) is the one link its
-//! host's processes have: it checks each of them on arrival by these same rules, so what
-//! it passes on to the launcher's router (under its own identity,
-//! [`super::credentials::Role::HostRouter`], which may say anything on the graph's keys) is
-//! only what their identities allowed; what comes back from the launcher's router is
-//! trusted as the router's.
+//! host's processes have: it checks each of them on arrival by these same rules, and
+//! passes on to the launcher's router, under its own identity
+//! ([`super::credentials::Role::HostRouter`]), only what their identities allowed. The
+//! launcher's router hears that identity as the processes behind it (their kinds of keys,
+//! never a topic's own key, a relayed report, control, the end or the settings), so its
+//! certificate, exported with the processes', adds no power to theirs there; its clients
+//! hear it as their router ([`acl`]'s `hearer`).
 //!
 //! A session that does not know the graph's shape (a watcher, before it asks the settings)
 //! lets every process publish on any topic and declare any endpoint token: what it
@@ -99,7 +103,9 @@ const ALL_MESSAGES: [&str; 9] = [
 /// Zenoh's `access_control` configuration (JSON) for a session of the graph whose keys are
 /// `keys`, placed in `processes`; `spec` gives which process publishes which topic and
 /// owns which node (`None`: a watcher that does not know yet, see the module's header).
-pub fn acl(keys: &Keys, processes: &[String], spec: Option<&GraphSpec>) -> Value {
+/// `hearer` is the session's own identity: the launcher's router ([`Role::Router`]) hears a
+/// host's router as the processes behind it, every other session as its router.
+pub fn acl(keys: &Keys, processes: &[String], spec: Option<&GraphSpec>, hearer: &Role) -> Value {
     let p = keys.prefix();
     let at = |k: &str| format!("{p}/{k}");
     let mut rules = Vec::new();
@@ -140,6 +146,7 @@ pub fn acl(keys: &Keys, processes: &[String], spec: Option<&GraphSpec>) -> Value
     ];
     let read = rule("read".into(), &READS, shared_reads);
     let read_all = rule("launcher-read".into(), &READS, all_keys.clone());
+    let all_keys_for_reads = all_keys.clone();
     // The router passes on what it let in, and says what the launcher says.
     let routed = rule("router-routes".into(), &ALL_MESSAGES, all_keys);
     let mut roles = vec![
@@ -156,11 +163,6 @@ pub fn acl(keys: &Keys, processes: &[String], spec: Option<&GraphSpec>) -> Value
     policies.push(json!({
         "rules": [send, read],
         "subjects": roles.iter().map(subject_id).collect::<Vec<_>>(),
-    }));
-    // The routers pass on what they let in (a host's router, its clients' messages).
-    policies.push(json!({
-        "rules": [routed],
-        "subjects": [subject_id(&Role::Router), subject_id(&Role::HostRouter)],
     }));
     let mut own = |role: &Role, rules: Vec<String>| {
         policies.push(json!({ "rules": rules, "subjects": [subject_id(role)] }));
@@ -184,6 +186,44 @@ pub fn acl(keys: &Keys, processes: &[String], spec: Option<&GraphSpec>) -> Value
         ),
     ];
     own(&Role::Launcher, launcher);
+    if *hearer != Role::Router {
+        // Its clients, and any session linked to it, hear it as their router.
+        own(&Role::HostRouter, vec![routed.clone()]);
+    }
+    own(&Role::Router, vec![routed]);
+    // What the launcher's router hears from a host's router: what its processes and
+    // watchers may say (it checked each message by its sender's rules on arrival), by kind
+    // of key, each with its bare prefix (a router forwards under declared prefixes), and
+    // reads of any key. Never a topic's own key, a relayed report, control, the end, the
+    // settings or the log: the host router's certificate, exported with the processes',
+    // adds nothing to theirs there.
+    let both = |k: &str| [at(&format!("{k}/**")), at(k)];
+    let hosted = vec![
+        rule(
+            "host-router-put".into(),
+            &["put"],
+            ["@up", "@ticked", "@via", "@stats"]
+                .iter()
+                .flat_map(|k| both(k))
+                .collect(),
+        ),
+        rule(
+            "host-router-token".into(),
+            &["liveliness_token"],
+            ["@node", "@pub", "@sub"]
+                .iter()
+                .flat_map(|k| both(k))
+                .collect(),
+        ),
+        rule("host-router-read".into(), &READS, {
+            let mut keys = all_keys_for_reads.clone();
+            keys.extend(AT_KEYS.iter().map(|k| at(k.trim_end_matches("/**"))));
+            keys
+        }),
+    ];
+    if *hearer == Role::Router {
+        own(&Role::HostRouter, hosted);
+    }
     for proc_name in processes {
         let mut puts = vec![
             keys.up_from(proc_name),
@@ -296,7 +336,7 @@ mod tests {
         let spec = chapter();
         let keys = Keys::new(&spec.name);
         let procs: Vec<String> = spec.placement().into_iter().map(|(p, _)| p).collect();
-        let acl = acl(&keys, &procs, Some(&spec));
+        let acl = acl(&keys, &procs, Some(&spec), &Role::Router);
         let p = keys.prefix();
         let robot = allowed(&acl, &Role::Process("robot".into()), "put");
         assert!(robot.contains(&format!("{p}/@via/obs")), "{robot:?}");
@@ -322,14 +362,35 @@ mod tests {
         // Only the router hands on the lockstep's reports; it may say anything on the
         // graph's keys (it passes on what it let in).
         let relayed = format!("{p}/@relayed/**");
-        for router in [Role::Router, Role::HostRouter] {
-            let router_puts = allowed(&acl, &router, "put");
-            assert!(router_puts.contains(&relayed), "{router_puts:?}");
-            assert!(router_puts.contains(&format!("{p}/**")), "{router_puts:?}");
+        let router_puts = allowed(&acl, &Role::Router, "put");
+        assert!(router_puts.contains(&relayed), "{router_puts:?}");
+        assert!(router_puts.contains(&format!("{p}/**")), "{router_puts:?}");
+        // The launcher's router hears a host's router as the processes behind it: their
+        // kinds of keys, never a topic's own key, a relayed report, control or the end.
+        let hosted = allowed(&acl, &Role::HostRouter, "put");
+        for k in ["@up/**", "@ticked/**", "@via/**", "@stats/**"] {
+            assert!(hosted.contains(&format!("{p}/{k}")), "{k}: {hosted:?}");
         }
+        for never in [
+            "**",
+            "obs",
+            "action",
+            "@relayed/**",
+            "@ctl/**",
+            "@ended",
+            "@setup",
+        ] {
+            let key = format!("{p}/{never}");
+            assert!(!hosted.contains(&key), "{key}: {hosted:?}");
+        }
+        // Its own clients hear it as their router.
+        let client = super::acl(&keys, &procs, Some(&spec), &Role::Process("robot".into()));
+        let from_it = allowed(&client, &Role::HostRouter, "put");
+        assert!(from_it.contains(&format!("{p}/**")), "{from_it:?}");
         for role in [
             Role::Launcher,
             Role::Observer,
+            Role::HostRouter,
             Role::Process("robot".into()),
             Role::Process("policy".into()),
         ] {
@@ -355,7 +416,7 @@ mod tests {
         let procs: Vec<String> = spec.placement().into_iter().map(|(p, _)| p).collect();
         let p = keys.prefix();
         for shape in [Some(&spec), None] {
-            let acl = acl(&keys, &procs, shape);
+            let acl = acl(&keys, &procs, shape, &Role::Router);
             let subs = |role: &Role| allowed(&acl, role, "declare_subscriber");
             let launcher = subs(&Role::Launcher);
             for k in ["@via/**", "@up/**", "@ticked/**", "@ctl/**", "@relayed/**"] {
@@ -391,8 +452,11 @@ mod tests {
         let procs: Vec<String> = spec.placement().into_iter().map(|(p, _)| p).collect();
         for shape in [Some(&spec), None] {
             let mut c = zenoh::Config::default();
-            c.insert_json5("access_control", &acl(&keys, &procs, shape).to_string())
-                .unwrap();
+            c.insert_json5(
+                "access_control",
+                &acl(&keys, &procs, shape, &Role::Router).to_string(),
+            )
+            .unwrap();
         }
     }
 }

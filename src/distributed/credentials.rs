@@ -10,8 +10,8 @@
 //! message: [`Role::common_name`]. The launcher's session, the router every other session
 //! links to, has an identity of its own ([`Role::Router`]) that never leaves the launcher:
 //! no file holds it ([`Credentials::to_toml`]), so nobody else can speak as the router. A
-//! host's router ([`Role::HostRouter`], started by hand on another host) has the same
-//! rights at the launcher's router and is exported: whoever holds an export can use them.
+//! host's router ([`Role::HostRouter`], started by hand on another host) is exported; the
+//! launcher's router hears it as the processes behind it, no more ([`super::access`]).
 //!
 //! [`Credentials::generate`] makes the CA and one certificate per identity (ECDSA P-256,
 //! by `rcgen`); the CA's private key is dropped at once, so nobody, not even the launcher,

@@ -215,7 +215,7 @@ fn same_rules(
     let theirs = GraphSpec::parse(&setup.graph_toml, "the launcher's graph")
         .map_err(|e| DistError::Usage(e.to_string()))?;
     let processes = &opts.credentials.processes;
-    let rules = |g: &GraphSpec| super::access::acl(keys, processes, Some(g));
+    let rules = |g: &GraphSpec| super::access::acl(keys, processes, Some(g), &Role::HostRouter);
     if rules(spec) != rules(&theirs) {
         return Err(DistError::Usage(format!(
             "{}: its nodes' processes or its topics' publishers differ from the launcher's graph '{}': give the router the launcher's graph file",

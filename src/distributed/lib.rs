@@ -705,7 +705,12 @@ fn open_as(
         set(&mut config, k, &v)?;
     }
     let keys = Keys::new(&access.credentials.graph);
-    let acl = access::acl(&keys, &access.credentials.processes, access.spec);
+    let acl = access::acl(
+        &keys,
+        &access.credentials.processes,
+        access.spec,
+        access.role,
+    );
     set(&mut config, "access_control", &acl.to_string())?;
     zenoh::open(config).wait().map_err(|e| {
         let first = zenoh_message(&e.to_string());

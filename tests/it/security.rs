@@ -354,11 +354,13 @@ fn forgeries_change_nothing(via_router: bool) {
     let spec = GraphSpec::parse(DEFAULT_GRAPH_TOML, "chapter").unwrap();
     let keys = Keys::new(&spec.name);
     // A holder of the file forging, as the robot's identity, what the policy and the
-    // launcher say, for the whole run. (Not as a host's router, whose certificate the file
-    // holds too: the launcher's router lets that identity say anything on the graph's keys,
-    // docs/distributed.md.)
+    // launcher say, for the whole run; and, at the launcher's router, as a host's router
+    // (whose certificate the file holds too) what no process may say.
     let done = Arc::new(AtomicBool::new(false));
-    let forgers = vec![(Role::Process("robot".into()), ep.clone())];
+    let mut forgers = vec![(Role::Process("robot".into()), ep.clone())];
+    if !via_router {
+        forgers.push((Role::HostRouter, ep.clone()));
+    }
     let forging: Vec<_> = forgers
         .into_iter()
         .map(|(role, at)| {
