@@ -197,63 +197,17 @@ pub fn acl(keys: &Keys, processes: &[String], spec: Option<&GraphSpec>, hearer: 
     // reads of any key. Never a topic's own key, a relayed report, control, the end, the
     // settings or the log: the host router's certificate, exported with the processes',
     // adds nothing to theirs there.
-    let both = |k: &str| [at(&format!("{k}/**")), at(k)];
+    let (puts, tokens, reads) = hosted_keys(keys, &all_keys_for_reads);
     let hosted = vec![
-        rule(
-            "host-router-put".into(),
-            &["put"],
-            ["@up", "@ticked", "@via", "@stats"]
-                .iter()
-                .flat_map(|k| both(k))
-                .collect(),
-        ),
-        rule(
-            "host-router-token".into(),
-            &["liveliness_token"],
-            ["@node", "@pub", "@sub"]
-                .iter()
-                .flat_map(|k| both(k))
-                .collect(),
-        ),
-        rule("host-router-read".into(), &READS, {
-            let mut keys = all_keys_for_reads.clone();
-            keys.extend(AT_KEYS.iter().map(|k| at(k.trim_end_matches("/**"))));
-            keys
-        }),
+        rule("host-router-put".into(), &["put"], puts),
+        rule("host-router-token".into(), &["liveliness_token"], tokens),
+        rule("host-router-read".into(), &READS, reads),
     ];
     if *hearer == Role::Router {
         own(&Role::HostRouter, hosted);
     }
     for proc_name in processes {
-        let mut puts = vec![
-            keys.up_from(proc_name),
-            keys.ticked(proc_name),
-            keys.stats(proc_name),
-        ];
-        let mut tokens = vec![format!("{p}/@node/{proc_name}/**")];
-        match spec {
-            Some(spec) => {
-                // On `@via` only: the router alone puts on a topic's key (from its outbox's
-                // thread, never from Zenoh's).
-                for t in &spec.topics {
-                    if spec.process_of(t.publisher) == *proc_name {
-                        puts.push(keys.via(&t.name));
-                    }
-                }
-                for (i, n) in spec.nodes.iter().enumerate() {
-                    if spec.process_of(NodeId(i)) == *proc_name {
-                        tokens.push(format!("{p}/@pub/**/{}", n.name));
-                        tokens.push(format!("{p}/@sub/**/{}", n.name));
-                    }
-                }
-            }
-            None => {
-                puts.push(format!("{p}/**"));
-                puts.push(at("@via/**"));
-                tokens.push(at("@pub/**"));
-                tokens.push(at("@sub/**"));
-            }
-        }
+        let (puts, tokens) = process_keys(keys, spec, proc_name);
         let role = Role::Process(proc_name.clone());
         let id = subject_id(&role);
         let mine = vec![
@@ -274,6 +228,67 @@ pub fn acl(keys: &Keys, processes: &[String], spec: Option<&GraphSpec>, hearer: 
         "subjects": subjects,
         "policies": policies,
     })
+}
+
+/// What the launcher's router hears from a host's router ([`acl`]): (puts, tokens, reads).
+/// The processes' kinds of keys, each with its bare prefix (a router forwards under
+/// declared prefixes), and reads of `all_keys` and the bare `@` prefixes.
+fn hosted_keys(keys: &Keys, all_keys: &[String]) -> (Vec<String>, Vec<String>, Vec<String>) {
+    let p = keys.prefix();
+    let both = |k: &&str| [format!("{p}/{k}/**"), format!("{p}/{k}")];
+    let puts = ["@up", "@ticked", "@via", "@stats"]
+        .iter()
+        .flat_map(both)
+        .collect();
+    let tokens = ["@node", "@pub", "@sub"].iter().flat_map(both).collect();
+    let mut reads = all_keys.to_vec();
+    reads.extend(
+        AT_KEYS
+            .iter()
+            .map(|k| format!("{p}/{}", k.trim_end_matches("/**"))),
+    );
+    (puts, tokens, reads)
+}
+
+/// Process `proc_name`'s own keys ([`acl`]): (puts, liveliness tokens). With the graph's
+/// shape, its reports, ticks, figures and its topics on `@via`, its nodes' tokens; without
+/// (a watcher that does not know yet), any topic and endpoint token.
+fn process_keys(
+    keys: &Keys,
+    spec: Option<&GraphSpec>,
+    proc_name: &str,
+) -> (Vec<String>, Vec<String>) {
+    let p = keys.prefix();
+    let mut puts = vec![
+        keys.up_from(proc_name),
+        keys.ticked(proc_name),
+        keys.stats(proc_name),
+    ];
+    let mut tokens = vec![format!("{p}/@node/{proc_name}/**")];
+    match spec {
+        Some(spec) => {
+            // On `@via` only: the router alone puts on a topic's key (from its outbox's
+            // thread, never from Zenoh's).
+            for t in &spec.topics {
+                if spec.process_of(t.publisher) == *proc_name {
+                    puts.push(keys.via(&t.name));
+                }
+            }
+            for (i, n) in spec.nodes.iter().enumerate() {
+                if spec.process_of(NodeId(i)) == *proc_name {
+                    tokens.push(format!("{p}/@pub/**/{}", n.name));
+                    tokens.push(format!("{p}/@sub/**/{}", n.name));
+                }
+            }
+        }
+        None => {
+            puts.push(format!("{p}/**"));
+            puts.push(format!("{p}/@via/**"));
+            tokens.push(format!("{p}/@pub/**"));
+            tokens.push(format!("{p}/@sub/**"));
+        }
+    }
+    (puts, tokens)
 }
 
 /// A role's subject id in the ACL: `launcher`, `observer`, `process-<NAME>`, `router`,
