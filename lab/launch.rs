@@ -575,23 +575,16 @@ pub fn run_process(a: &ProcessArgs, stop: StopFlag) -> anyhow::Result<()> {
     let credentials = a.credentials.as_deref().ok_or_else(|| {
         anyhow::anyhow!("--credentials FILE is required: a graph admits only processes holding its launch's credentials (`ratelab launch --processes --export-credentials FILE` writes them)")
     })?;
-    let origin = a.graph.as_ref().map_or_else(
-        || "graphs/cartpole.toml".to_string(),
-        |p| p.display().to_string(),
-    );
     let opts = ProcessOptions {
         graph_bytes: graph_file_bytes(a.graph.as_deref())?,
-        graph_origin: origin,
+        graph_origin: graph_origin(a.graph.as_deref()),
         process: a.process.clone(),
         connect: a.connect.clone(),
         listen: a.listen.clone(),
         credentials: Credentials::load(credentials)?,
         // On stdout: a process started by hand says what happens to it; a launcher's own
         // children have no stdout (their launcher says it).
-        say: Some(|line| {
-            // Never fatal: a node whose stdout was closed runs on, unheard.
-            let _ = writeln!(std::io::stdout(), "[ratelab] {line}");
-        }),
+        say: Some(say_on_stdout),
     };
     ratelab::distributed::process::run_process(&opts, &stop)
         .map_err(|e| anyhow::anyhow!("process '{}': {e}", a.process))
@@ -601,20 +594,29 @@ pub fn run_process(a: &ProcessArgs, stop: StopFlag) -> anyhow::Result<()> {
 /// ([`ratelab::distributed::host_router`]) until the launch ends or Ctrl-C.
 pub fn run_router(a: &RouterArgs, stop: StopFlag) -> anyhow::Result<()> {
     use ratelab::distributed::host_router::{self, HostRouterOptions};
-    let origin = a.graph.as_ref().map_or_else(
-        || "graphs/cartpole.toml".to_string(),
-        |p| p.display().to_string(),
-    );
     let opts = HostRouterOptions {
         graph_bytes: graph_file_bytes(a.graph.as_deref())?,
-        graph_origin: origin,
+        graph_origin: graph_origin(a.graph.as_deref()),
         connect: a.connect.clone(),
         listen: a.listen.clone(),
         credentials: Credentials::load(&a.credentials)?,
-        say: Some(|line| {
-            let _ = writeln!(std::io::stdout(), "[ratelab] {line}");
-        }),
+        say: Some(say_on_stdout),
     };
     host_router::serve(&opts, &stop).map_err(|e| anyhow::anyhow!("router: {e}"))?;
     Ok(())
+}
+
+/// How messages name the graph file of `ratelab process` or `ratelab router`: its path, or
+/// the chapter's graph file when none was given.
+fn graph_origin(graph: Option<&std::path::Path>) -> String {
+    graph.map_or_else(
+        || "graphs/cartpole.toml".to_string(),
+        |p| p.display().to_string(),
+    )
+}
+
+/// A line a process or router started by hand says on stdout (`[ratelab] …`). Never fatal:
+/// one whose stdout was closed runs on, unheard.
+fn say_on_stdout(line: &str) {
+    let _ = writeln!(std::io::stdout(), "[ratelab] {line}");
 }

@@ -2098,6 +2098,20 @@ impl TwoHosts {
         Ok(hosts)
     }
 
+    /// [`TwoHosts::new`], or `None` after saying why not, which fails the test where
+    /// `RATELAB_REQUIRE_NETNS=1` (CI sets it).
+    fn or_skip() -> Option<TwoHosts> {
+        match TwoHosts::new() {
+            Ok(hosts) => Some(hosts),
+            Err(why) => {
+                let required = std::env::var("RATELAB_REQUIRE_NETNS").is_ok_and(|v| v == "1");
+                assert!(!required, "RATELAB_REQUIRE_NETNS=1: {why}");
+                eprintln!("not checked: no network namespaces here ({why})");
+                None
+            }
+        }
+    }
+
     /// `ratelab args` on host `i` (0: the launcher's), from the repository's folder.
     fn ratelab(&self, i: usize, args: &[&str]) -> Command {
         let mut c = Command::new("ip");
@@ -2130,14 +2144,8 @@ impl Drop for TwoHosts {
 #[test]
 fn a_launch_across_two_hosts_equals_the_in_process_run() {
     let _m = crate::machine::shared();
-    let hosts = match TwoHosts::new() {
-        Ok(hosts) => hosts,
-        Err(why) => {
-            let required = std::env::var("RATELAB_REQUIRE_NETNS").is_ok_and(|v| v == "1");
-            assert!(!required, "RATELAB_REQUIRE_NETNS=1: {why}");
-            eprintln!("not checked: no network namespaces here ({why})");
-            return;
-        }
+    let Some(hosts) = TwoHosts::or_skip() else {
+        return;
     };
     let dir = tempfile::tempdir().unwrap();
     let common = ["--clock", "virtual", "--duration", "2", "--seed", "7"];
@@ -2205,14 +2213,8 @@ fn a_launch_across_two_hosts_equals_the_in_process_run() {
 #[test]
 fn a_launch_across_two_hosts_through_a_router_on_each_equals_the_in_process_run() {
     let _m = crate::machine::shared();
-    let hosts = match TwoHosts::new() {
-        Ok(hosts) => hosts,
-        Err(why) => {
-            let required = std::env::var("RATELAB_REQUIRE_NETNS").is_ok_and(|v| v == "1");
-            assert!(!required, "RATELAB_REQUIRE_NETNS=1: {why}");
-            eprintln!("not checked: no network namespaces here ({why})");
-            return;
-        }
+    let Some(hosts) = TwoHosts::or_skip() else {
+        return;
     };
     let dir = tempfile::tempdir().unwrap();
     let common = ["--clock", "virtual", "--duration", "2", "--seed", "7"];
