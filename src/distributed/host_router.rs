@@ -62,23 +62,8 @@ pub struct HostRouterOptions {
 /// # Errors
 /// [`DistError::Usage`], one line naming what is wrong.
 fn check_options(opts: &HostRouterOptions) -> Result<GraphSpec, DistError> {
-    let text = std::str::from_utf8(&opts.graph_bytes)
-        .map_err(|_| DistError::Usage(format!("{}: not UTF-8 text", opts.graph_origin)))?;
-    let spec =
-        GraphSpec::parse(text, &opts.graph_origin).map_err(|e| DistError::Usage(e.to_string()))?;
-    if opts.credentials.graph != spec.name {
-        return Err(DistError::Usage(format!(
-            "--credentials are for graph '{}', not '{}': were they exported by another launch?",
-            opts.credentials.graph, spec.name
-        )));
-    }
-    let placed: Vec<String> = spec.placement().into_iter().map(|(p, _)| p).collect();
-    if opts.credentials.processes != placed {
-        return Err(DistError::Usage(format!(
-            "--credentials are for processes {:?}, but the graph file places {placed:?}: were they exported by a launch of another version of it?",
-            opts.credentials.processes
-        )));
-    }
+    let spec = super::graph_file(&opts.graph_bytes, &opts.graph_origin)?;
+    super::credentials_fit(&opts.credentials, &spec)?;
     opts.credentials.identity(&Role::HostRouter)?;
     if opts.connect.is_empty() {
         return Err(DistError::Usage(

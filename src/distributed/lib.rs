@@ -489,6 +489,42 @@ pub fn live_tokens(
     keys
 }
 
+/// A graph file's bytes, read as untrusted input, parsed: what `ratelab process` and
+/// `ratelab router` are given (`origin` names it in errors).
+///
+/// # Errors
+/// [`DistError::Usage`], one line: not UTF-8, or not a graph file.
+pub(crate) fn graph_file(bytes: &[u8], origin: &str) -> Result<GraphSpec, DistError> {
+    let text = std::str::from_utf8(bytes)
+        .map_err(|_| DistError::Usage(format!("{origin}: not UTF-8 text")))?;
+    GraphSpec::parse(text, origin).map_err(|e| DistError::Usage(e.to_string()))
+}
+
+/// Are `credentials` those of a launch of `spec`: its graph's name and its processes, in
+/// placement order?
+///
+/// # Errors
+/// [`DistError::Usage`], one line, asking whether another launch exported them.
+pub(crate) fn credentials_fit(
+    credentials: &credentials::Credentials,
+    spec: &GraphSpec,
+) -> Result<(), DistError> {
+    if credentials.graph != spec.name {
+        return Err(DistError::Usage(format!(
+            "--credentials are for graph '{}', not '{}': were they exported by another launch?",
+            credentials.graph, spec.name
+        )));
+    }
+    let placed: Vec<String> = spec.placement().into_iter().map(|(p, _)| p).collect();
+    if credentials.processes != placed {
+        return Err(DistError::Usage(format!(
+            "--credentials are for processes {:?}, but the graph file places {placed:?}: were they exported by a launch of another version of it?",
+            credentials.processes
+        )));
+    }
+    Ok(())
+}
+
 /// The environment variable that turns Zenoh's shared memory off for a process and every
 /// process it starts: `RATELAB_SHARED_MEMORY=off` (`on`, the default, leaves it on).
 pub const SHARED_MEMORY_ENV: &str = "RATELAB_SHARED_MEMORY";

@@ -12,10 +12,7 @@ use super::*;
 /// # Errors
 /// [`DistError::Usage`], one line naming what is wrong.
 pub(super) fn check_options(opts: &ProcessOptions) -> Result<GraphSpec, DistError> {
-    let text = std::str::from_utf8(&opts.graph_bytes)
-        .map_err(|_| DistError::Usage(format!("{}: not UTF-8 text", opts.graph_origin)))?;
-    let file_spec =
-        GraphSpec::parse(text, &opts.graph_origin).map_err(|e| DistError::Usage(e.to_string()))?;
+    let file_spec = crate::graph_file(&opts.graph_bytes, &opts.graph_origin)?;
     let placement = file_spec.placement();
     if !placement.iter().any(|(p, _)| *p == opts.process) {
         let names: Vec<&str> = placement.iter().map(|(p, _)| p.as_str()).collect();
@@ -32,19 +29,7 @@ pub(super) fn check_options(opts: &ProcessOptions) -> Result<GraphSpec, DistErro
         ));
     }
     let role = Role::Process(opts.process.clone());
-    if opts.credentials.graph != file_spec.name {
-        return Err(DistError::Usage(format!(
-            "--credentials are for graph '{}', not '{}': were they exported by another launch?",
-            opts.credentials.graph, file_spec.name
-        )));
-    }
-    let placed: Vec<String> = placement.iter().map(|(p, _)| p.clone()).collect();
-    if opts.credentials.processes != placed {
-        return Err(DistError::Usage(format!(
-            "--credentials are for processes {:?}, but the graph file places {placed:?}: were they exported by a launch of another version of it?",
-            opts.credentials.processes
-        )));
-    }
+    crate::credentials_fit(&opts.credentials, &file_spec)?;
     opts.credentials.identity(&role)?;
     for ep in &opts.connect {
         check_endpoint("--connect", ep, false)?;
