@@ -79,29 +79,38 @@ impl Mark {
         }
     }
 
-    /// A legend's name for the mark, with the times it was set: `▲ trouble at 2.00, 2.04,
-    /// 2.30 s`, and past three `… (7 in all)`.
+    /// A legend's name for the mark, with the times it was set, to 10 ms: `▲ trouble at
+    /// 2.00, 2.04, 2.30 s`; events that read as one time named once with their count
+    /// (`0.08 (×2)`, two deadlines missed at one step); past three times, `… 7 in all`.
     pub(super) fn legend(self, times: &[Nanos]) -> String {
-        let shown: Vec<String> = times
-            .iter()
-            .take(3)
-            .map(|t| format!("{:.2}", t.as_secs_f64()))
-            .collect();
-        let more = if times.len() > 3 {
-            format!(", … ({} in all)", times.len())
+        let mut shown: Vec<(String, usize)> = Vec::new();
+        for t in times {
+            let at = format!("{:.2}", t.as_secs_f64());
+            match shown.last_mut() {
+                Some((last, n)) if *last == at => *n += 1,
+                _ => shown.push((at, 1)),
+            }
+        }
+        if shown.is_empty() {
+            return format!("{} {}", self.symbol(), self.words());
+        }
+        let more = if shown.len() > 3 {
+            format!(" … {} in all", times.len())
         } else {
             String::new()
         };
-        if shown.is_empty() {
-            format!("{} {}", self.symbol(), self.words())
-        } else {
-            format!(
-                "{} {} at {}{more} s",
-                self.symbol(),
-                self.words(),
-                shown.join(", ")
-            )
-        }
+        let listed: Vec<String> = (shown.iter().take(3))
+            .map(|(at, n)| match n {
+                1 => at.clone(),
+                n => format!("{at} (×{n})"),
+            })
+            .collect();
+        format!(
+            "{} {} at {} s{more}",
+            self.symbol(),
+            self.words(),
+            listed.join(", ")
+        )
     }
 }
 
@@ -426,7 +435,12 @@ mod tests {
         );
         assert_eq!(
             Mark::Recovery.legend(&[t(1), t(2), t(3), t(4)]),
-            "● recovered at 0.00, 0.00, 0.00, … (4 in all) s"
+            "● recovered at 0.00 (×4) s",
+            "times that read alike are named once"
+        );
+        assert_eq!(
+            Mark::Trouble.legend(&[t(80), t(80), t(100), t(2000), t(2300)]),
+            "▲ trouble at 0.08 (×2), 0.10, 2.00 s … 5 in all"
         );
     }
 
