@@ -543,7 +543,8 @@ fn parse_depth(s: &str) -> Result<usize, String> {
         .parse()
         .map_err(|_| format!("not a whole number: '{s}'"))?;
     if d == 0 {
-        return Err("--queue-depth must be at least 1, got 0".into());
+        // Clap names the flag ("invalid value '0' for '--depth <TOPIC=N>'"): not this line.
+        return Err("a history depth is at least 1, got 0".into());
     }
     Ok(d)
 }
@@ -603,8 +604,8 @@ pub struct RunArgs {
     /// Break the controller: control rate 5 Hz (the chapter's cliff demo).
     #[arg(long = "break")]
     pub break_: bool,
-    /// Quick deterministic check: virtual clock, 2 s.
-    #[arg(long)]
+    /// Quick deterministic check: virtual clock, 2 s (so not with --clock or --duration).
+    #[arg(long, conflicts_with_all = ["duration", "clock"])]
     pub smoke: bool,
     /// Write metrics.json (and trace.csv and log.txt in one process, and estimator.json
     /// with an estimator in the graph) into this folder.

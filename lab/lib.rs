@@ -145,14 +145,22 @@ fn replay(args: &cli::ReplayArgs) -> anyhow::Result<()> {
         }
         let metrics = replay_run(&log, i)?;
         let same = log.matches(i, &metrics);
+        let applied = run.applied();
         println!(
             "[ratelab] run {n}: seed {}, {} command(s) replayed",
             metrics.seed,
-            run.commands.len()
+            applied.len()
         );
+        let never = run.commands.len() - applied.len();
+        if never > 0 {
+            println!(
+                "[ratelab]   {never} command(s) logged after the run's end at {:.2} s set aside: the run ended before they took effect",
+                ratelab::Nanos(run.end_ns).as_secs_f64()
+            );
+        }
         // Each change at its run time (the summary gives only the start and the end: a depth
         // set to 2 and back to 1 reads as 1): the first REPLAY_SHOWN of them.
-        for c in run.commands.iter().take(REPLAY_SHOWN) {
+        for c in applied.iter().take(REPLAY_SHOWN) {
             println!(
                 "[ratelab]   at {:.2} s: {}",
                 ratelab::Nanos(c.at_ns).as_secs_f64(),
@@ -160,11 +168,8 @@ fn replay(args: &cli::ReplayArgs) -> anyhow::Result<()> {
                 printable(&ratelab::session::describe(&c.command))
             );
         }
-        if run.commands.len() > REPLAY_SHOWN {
-            println!(
-                "[ratelab]   … and {} more",
-                run.commands.len() - REPLAY_SHOWN
-            );
+        if applied.len() > REPLAY_SHOWN {
+            println!("[ratelab]   … and {} more", applied.len() - REPLAY_SHOWN);
         }
         for line in metrics.summary_lines(None).iter().skip(1) {
             println!("[ratelab]   {line}");
@@ -235,17 +240,25 @@ fn export(args: &cli::ExportArgs) -> anyhow::Result<()> {
 
 /// A clap error as one line that keeps its point: clap's first line names the flag, the
 /// value and the rule, except when it ends with a colon and lists its subject on the lines
-/// below (missing required arguments), which are then joined onto it.
+/// below (missing required arguments), which are then joined onto it; clap's tip of a near
+/// name follows in brackets (`error: unexpected argument '--contol-hz' found (a similar
+/// argument exists: '--control-hz')`).
 fn one_line(text: &str) -> String {
-    let mut lines = text.lines().map(str::trim).filter(|l| !l.is_empty());
-    let first = lines
-        .next()
-        .unwrap_or("error: invalid arguments")
-        .to_string();
+    let lines: Vec<&str> = (text.lines().map(str::trim))
+        .filter(|l| !l.is_empty())
+        .collect();
+    let first = lines.first().copied().unwrap_or("error: invalid arguments");
     if !first.ends_with(':') {
-        return first;
+        // Clap's suggestion of a near name ("tip: a similar argument exists: '--control-hz'").
+        let tip = (lines.iter())
+            .find_map(|l| l.strip_prefix("tip: "))
+            .filter(|t| t.contains("similar"));
+        return match tip {
+            Some(t) => format!("{first} ({t})"),
+            None => first.to_string(),
+        };
     }
-    let listed: Vec<&str> = lines
+    let listed: Vec<&str> = (lines.iter().skip(1).copied())
         .take_while(|l| {
             !l.starts_with("Usage:") && !l.starts_with("For more") && !l.starts_with("tip:")
         })

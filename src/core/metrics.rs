@@ -830,10 +830,18 @@ impl Metrics {
         if !topics.is_empty() {
             lines.push(format!("qos: {}", topics.join(" | ")));
         }
+        // A fault set at or after the run's end did nothing (its warning said so at the start):
+        // not listed as if it had happened.
+        let end_s = self.sim_time_s;
+        let took_effect = |f: &&FaultMetrics| f.at_s < end_s;
         let mut nodes: Vec<(&String, &NodeMetrics)> = self
             .nodes
             .iter()
-            .filter(|(_, n)| n.not_alive.is_some() || n.faulted_ticks.is_some())
+            .filter(|(_, n)| {
+                n.not_alive.is_some()
+                    || n.faulted_ticks.is_some_and(|f| f > 0)
+                    || n.faults.iter().any(|f| took_effect(&f))
+            })
             .collect();
         nodes.sort_by_key(|(_, n)| n.rank);
         if !nodes.is_empty() {
@@ -844,13 +852,13 @@ impl Metrics {
                     if let (Some(lease), Some(k)) = (n.liveliness_lease_ms, n.not_alive) {
                         p.push_str(&format!(" not alive {k}× (lease {lease} ms)"));
                     }
-                    if !n.faults.is_empty() {
+                    let faults: Vec<&FaultMetrics> = n.faults.iter().filter(took_effect).collect();
+                    if !faults.is_empty() {
                         let sep = if n.not_alive.is_some() { ", " } else { " " };
-                        let said: Vec<String> =
-                            n.faults.iter().map(FaultMetrics::describe).collect();
+                        let said: Vec<String> = faults.iter().map(|f| f.describe()).collect();
                         p.push_str(&format!("{sep}{}", said.join(", ")));
                     }
-                    match (n.faulted_ticks, n.faults.is_empty()) {
+                    match (n.faulted_ticks, faults.is_empty()) {
                         (Some(f), true) => p.push_str(&format!(" {f} ticks lost to faults")),
                         (Some(f), false) => p.push_str(&format!(": {f} ticks lost")),
                         (None, _) => {}

@@ -51,6 +51,43 @@ fn bad_depth_duration_clock_are_refused() {
     assert_usage_error(&["run", "--duration", "-1"], "--duration");
     assert_usage_error(&["run", "--duration", "inf"], "--duration");
     assert_usage_error(&["run", "--clock", "wall"], "--clock");
+    // A topic's depth is named by its own flag, not by --queue-depth's.
+    let o = ratelab(&["run", "--depth", "/obs=0"]);
+    assert_eq!(o.status.code(), Some(2));
+    assert_eq!(
+        stderr(&o).trim_end(),
+        "error: invalid value '/obs=0' for '--depth <TOPIC=N>': a history depth is at least 1, got 0"
+    );
+}
+
+#[test]
+fn smoke_is_refused_beside_a_clock_or_a_duration_it_would_override() {
+    assert_usage_error(
+        &["run", "--smoke", "--clock", "real"],
+        "error: the argument '--smoke' cannot be used with '--clock <CLOCK>'",
+    );
+    assert_usage_error(
+        &["run", "--smoke", "--duration", "5"],
+        "error: the argument '--smoke' cannot be used with '--duration <DURATION>'",
+    );
+}
+
+#[test]
+fn a_misspelled_flag_or_command_is_told_the_near_name_in_its_one_line() {
+    assert_usage_error(
+        &["run", "--contol-hz", "5"],
+        "error: unexpected argument '--contol-hz' found (a similar argument exists: '--control-hz')",
+    );
+    assert_usage_error(
+        &["runn"],
+        "error: unrecognized subcommand 'runn' (a similar subcommand exists: 'run')",
+    );
+    // Nothing near: the line alone.
+    let o = ratelab(&["run", "--zzzzzz"]);
+    assert_eq!(
+        stderr(&o).trim_end(),
+        "error: unexpected argument '--zzzzzz' found"
+    );
 }
 
 #[test]
@@ -703,6 +740,26 @@ fn conflicting_rates_are_refused_and_a_fault_after_the_end_is_warned_about() {
         stderr(&o).contains("warning: the --stall of 'policy' at 20 s starts after the run ends (2 s): it does nothing"),
         "{}",
         stderr(&o)
+    );
+    // Nor does the summary list it as if it had happened; one that did is listed.
+    let summary = String::from_utf8_lossy(&o.stdout);
+    assert!(!summary.contains("liveliness:"), "{summary}");
+    let o = ratelab(&[
+        "run",
+        "--clock",
+        "virtual",
+        "--duration",
+        "2",
+        "--stall",
+        "policy@1+0.2",
+        "--kill",
+        "sensor@20",
+    ]);
+    let summary = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        summary.contains("liveliness: policy stalled at 1.00 s for 0.20 s: ")
+            && !summary.contains("sensor killed"),
+        "{summary}"
     );
     // A launch says it too (one process, as `run`; the warning is given once the run's
     // duration is final: the lab and a launch on a terminal run until quit, and give none).

@@ -378,6 +378,49 @@ fn hand_edited_session_logs_are_checked_like_the_command_line() {
     }
 }
 
+/// `ratelab replay FILE`: (exit code, stdout, stderr).
+fn replay_out(file: &std::path::Path) -> (Option<i32>, String, String) {
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_ratelab"))
+        .arg("replay")
+        .arg(file)
+        .output()
+        .unwrap();
+    (
+        o.status.code(),
+        String::from_utf8_lossy(&o.stdout).into_owned(),
+        String::from_utf8_lossy(&o.stderr).into_owned(),
+    )
+}
+
+#[test]
+fn a_log_s_command_after_its_run_s_end_is_set_aside_not_refused() {
+    // An older lab logged a change made while paused, then a restart, at the instant after
+    // the run's end (`LoggedRun::ended_at` drops it now): the run ended before it took
+    // effect, so the live run never applied it and the replay must not either.
+    let dir = tempfile::tempdir().unwrap();
+    let mut v = valid_log(dir.path());
+    let end = v["runs"][0]["end_ns"].as_u64().unwrap();
+    let logged = v["runs"][0]["commands"].as_array().unwrap().len();
+    v["runs"][0]["commands"]
+        .as_array_mut()
+        .unwrap()
+        .push(serde_json::json!({"at_ns": end + 20_000_000, "cmd": "set_queue_depth", "depth": 9}));
+    let old = dir.path().join("old.json");
+    std::fs::write(&old, v.to_string()).unwrap();
+    let (code, out, err) = replay_out(&old);
+    assert_eq!(code, Some(0), "{err}");
+    assert!(
+        out.contains(&format!("{logged} command(s) replayed")),
+        "{out}"
+    );
+    let aside = format!(
+        "1 command(s) logged after the run's end at {:.2} s set aside",
+        end as f64 / 1e9
+    );
+    assert!(out.contains(&aside), "{out}");
+    assert!(out.contains("identical to the live run"), "{out}");
+}
+
 #[test]
 fn replay_refuses_what_is_not_a_regular_file_and_caps_the_size() {
     let dir = tempfile::tempdir().unwrap();
@@ -774,6 +817,41 @@ fn under_the_real_clock_an_executor_change_waits_for_the_next_run() {
             panic!("announced as a change of this run: {text}");
         }
     }
+    live.quit();
+}
+
+/// A fault injected while the run goes (the lab's `k`) is told as the fault itself, just
+/// before the change's words, so the lab marks its node while it lasts.
+#[test]
+fn an_injected_fault_is_told_as_a_fault_before_its_change() {
+    let live = LiveEngine::start(ClockKind::Virtual, Speed::Max);
+    let cmd = Command::InjectFault {
+        fault: "policy@0.5+0.25".into(),
+    };
+    live.ctl.send(Control::Apply(cmd)).unwrap();
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(20);
+    let mut faulted = None;
+    loop {
+        let left = deadline.saturating_duration_since(std::time::Instant::now());
+        match live.tel.recv_timeout(left) {
+            Ok(Telemetry::Faulted(f)) => faulted = Some(f),
+            Ok(Telemetry::Changed { text, .. }) => {
+                assert!(text.starts_with("fault → stall policy@"), "{text}");
+                break;
+            }
+            Ok(_) => {}
+            Err(_) => panic!("no change told"),
+        }
+    }
+    let f = faulted.expect("told before its change");
+    assert_eq!(
+        (f.node.as_str(), f.at, f.duration),
+        (
+            "policy",
+            ratelab::Nanos(500_000_000),
+            Some(ratelab::Nanos(250_000_000))
+        )
+    );
     live.quit();
 }
 

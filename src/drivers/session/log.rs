@@ -63,13 +63,31 @@ pub struct LoggedRun {
     pub policy: String,
     /// Run time at which the run ended (the last instant run), ns.
     pub end_ns: u64,
-    /// The commands, in order, with the virtual time they took effect.
+    /// The commands, in order, with the virtual time they took effect. One after `end_ns`
+    /// never took effect (the run ended first: a change made while paused, then a restart);
+    /// the lab no longer logs one, and a replay sets it aside ([`LoggedRun::applied`]).
     pub commands: Vec<TimedCommand>,
     /// The summary at the end, as the live run measured it.
     pub metrics: Option<Metrics>,
 }
 
 impl LoggedRun {
+    /// The commands that took effect: those at or before the run's end, in order. A log
+    /// written by a lab before 2026-11-30 may hold one after it (made while paused, the
+    /// run restarted before the next instant): the run ended first, so the live run never
+    /// applied it and a replay must not either.
+    pub fn applied(&self) -> &[TimedCommand] {
+        let n = self.commands.partition_point(|c| c.at_ns <= self.end_ns);
+        &self.commands[..n]
+    }
+
+    /// The run has ended at `end` (run time): its end and the commands that took effect,
+    /// dropping any logged for an instant that never ran.
+    pub fn ended_at(&mut self, end: Nanos) {
+        self.end_ns = end.0;
+        self.commands.retain(|c| c.at_ns <= end.0);
+    }
+
     /// A run about to start with `cfg` and brain `policy` (no commands, no end yet).
     pub fn starting(cfg: &RunConfig, policy: &str) -> LoggedRun {
         LoggedRun {
@@ -176,15 +194,6 @@ impl LoggedRun {
                 return Err(bad(
                     &field,
                     format!("at_ns {} is before the previous command's {at}", c.at_ns),
-                ));
-            }
-            if c.at_ns > self.end_ns {
-                return Err(bad(
-                    &field,
-                    format!(
-                        "at_ns {} is after the run's end_ns {}",
-                        c.at_ns, self.end_ns
-                    ),
                 ));
             }
             at = c.at_ns;
@@ -343,9 +352,36 @@ pub fn replay_run(log: &SessionLog, index: usize) -> Result<Metrics, ReplayError
     let cfg = r.config(&format!("run {}", index + 1))?;
     let brain = load_policy(&r.policy)?;
     let opts = RunOptions {
-        commands: r.commands.clone(),
+        commands: r.applied().to_vec(),
         keep_trace: false,
         ..RunOptions::default()
     };
     Ok(crate::run::run(&cfg, brain, opts)?.metrics)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use ratelab_runtime::command::Command;
+
+    #[test]
+    fn a_run_ended_keeps_only_the_commands_that_took_effect() {
+        let mut run = LoggedRun::starting(&RunConfig::default(), "scripted");
+        for at_ns in [100, 200, 300] {
+            run.commands.push(TimedCommand {
+                at_ns,
+                command: Command::SetQueueDepth { depth: 2 },
+            });
+        }
+        run.end_ns = 200;
+        let at: Vec<u64> = run.applied().iter().map(|c| c.at_ns).collect();
+        assert_eq!(
+            at,
+            [100, 200],
+            "one at the end took effect: it ran before that instant"
+        );
+        run.ended_at(Nanos(250));
+        assert_eq!((run.end_ns, run.commands.len()), (250, 2));
+        assert_eq!(run.applied().len(), 2);
+    }
 }
