@@ -259,6 +259,10 @@ pub struct App {
     ended_word: Option<String>,
     /// A seek back is folding the journal again (its start is not a new run).
     rewinding: bool,
+    /// Where the last seek sent asked the engine to put the run, until the engine says the
+    /// run is there ([`App::seek_answered`]): a burst of ← moves a step per key, each from
+    /// the one before, not all from the cursor the screen still shows.
+    seek_target: Option<Nanos>,
     /// Attached: the launch's endpoint.
     endpoint: Option<String>,
     /// Attached: each topic's over-the-wire latency (p50, p99 µs) when it crosses processes.
@@ -354,6 +358,7 @@ impl App {
             run_reload: None,
             ended_word: None,
             rewinding: false,
+            seek_target: None,
             endpoint: None,
             wire: Vec::new(),
             quit: false,
@@ -571,6 +576,9 @@ impl App {
                 self.note_phase(&text);
                 self.new_segment(at, text);
             }
+            // Marked on its node while it lasts, as a fault given at the start is; folded
+            // from the journal, so a seek back before it drops it with the branch.
+            Telemetry::Faulted(fault) => self.faults.push(fault),
             Telemetry::ClockSwitched { at, clock } => {
                 // The same run goes on: a new segment, as a change starts one.
                 self.clock = clock.to_string();
@@ -940,7 +948,8 @@ impl App {
             Msg::CyclePhase => self.cycle_phase(),
             Msg::Input(c) => {
                 if let Some(t) = &mut self.typing {
-                    if t.len() < 8 {
+                    // `10000.125` and a little more; past it, nothing a rate needs.
+                    if t.chars().count() < 16 {
                         t.push(c);
                     }
                 }
@@ -1036,15 +1045,31 @@ impl App {
             };
             ratelab::rate::period_for_hz(self.rate_of(node)).unwrap_or(Nanos::SECOND)
         };
+        let from = self.seek_target.unwrap_or(self.now);
         let to = if back {
-            self.now.saturating_sub(by)
+            from.saturating_sub(by)
         } else {
-            self.now.saturating_add(by)
+            from.saturating_add(by)
         };
         if self.reviewing() {
             self.review_to(to);
         } else {
+            self.seek_target = Some(to);
             self.send(Control::Seek(to));
+        }
+    }
+
+    /// Has the engine answered the last seek sent ([`App::seek_target`])? Its status at the
+    /// instant asked for, a run going again, a refusal or a note (a part the real clock ran
+    /// is skipped to where it began) each end the wait.
+    pub(super) fn seek_answered(&mut self, t: &Telemetry) {
+        let answered = match t {
+            Telemetry::Status { now, paused, .. } => !paused || self.seek_target == Some(*now),
+            Telemetry::Error(_) | Telemetry::Applied(_) | Telemetry::Started { .. } => true,
+            _ => false,
+        };
+        if answered {
+            self.seek_target = None;
         }
     }
 

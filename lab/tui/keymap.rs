@@ -392,8 +392,9 @@ pub fn map_key(key: KeyEvent, typing: Typing, scrubbing: bool) -> Option<Msg> {
     }
     if typing != Typing::No {
         return match key.code {
-            Char(c) if typing == Typing::Filter && !c.is_control() => Some(Msg::Input(c)),
-            Char(c) if c.is_ascii_digit() || c == '.' => Some(Msg::Input(c)),
+            // Every character typed is kept, a rate's too: `-5` or `x1` is refused whole on
+            // Enter, never read as the digits left (`5`, `1`).
+            Char(c) if !c.is_control() => Some(Msg::Input(c)),
             KeyCode::Backspace => Some(Msg::Backspace),
             KeyCode::Enter => Some(Msg::Submit),
             Esc => Some(Msg::Cancel),
@@ -735,7 +736,7 @@ mod tests {
     }
 
     #[test]
-    fn typing_mode_takes_digits_only() {
+    fn typing_mode_takes_every_character_for_enter_to_judge() {
         assert_eq!(
             map_key(key(KeyCode::Char('7')), Typing::Rate, false),
             Some(Msg::Input('7'))
@@ -744,7 +745,14 @@ mod tests {
             map_key(key(KeyCode::Char('.')), Typing::Rate, false),
             Some(Msg::Input('.'))
         );
-        assert_eq!(map_key(key(KeyCode::Char('q')), Typing::Rate, false), None);
+        // Not a digit: typed too (Enter refuses `-5` whole), not dropped nor a lab key.
+        for c in ['q', '-', 'x', 'e'] {
+            assert_eq!(
+                map_key(key(KeyCode::Char(c)), Typing::Rate, false),
+                Some(Msg::Input(c))
+            );
+        }
+        assert_eq!(map_key(key(KeyCode::Up), Typing::Rate, false), None);
         assert_eq!(
             map_key(key(KeyCode::Enter), Typing::Rate, false),
             Some(Msg::Submit)

@@ -498,6 +498,50 @@ mod tests {
         assert_eq!(text.matches("dropped ✓").count(), 1, "{text}");
     }
 
+    /// The lab's `k` mid-run (a fault injected as a change, not at the start) marks its node
+    /// while it lasts, as a fault given at the start does; a seek back before it drops it.
+    #[test]
+    fn a_stall_injected_mid_run_shows_while_it_lasts_and_goes_with_a_seek_back() {
+        let cfg = virtual_cfg(50.0, 3);
+        let report = run(&cfg, Box::new(Scripted), RunOptions::new()).unwrap();
+        let at = ratelab::Nanos(1_000_000_000);
+        let (mut app, _rx) = told(&cfg, &report.trace, at);
+        let fault = ratelab::run::Command::InjectFault {
+            fault: "policy@1.000+0.5".into(),
+        };
+        // As the engine tells it (`Engine::apply_with`).
+        app.on_telemetry(Telemetry::Faulted(
+            ratelab::command::parse_fault("policy@1.000+0.5").unwrap(),
+        ));
+        app.on_telemetry(Telemetry::Changed {
+            at,
+            text: ratelab::session::describe(&fault),
+        });
+        let feed = |app: &mut App, from: f64, to: f64| {
+            for s in (report.trace.iter())
+                .filter(|s| s.t.as_secs_f64() > from && s.t.as_secs_f64() <= to)
+            {
+                app.on_telemetry(Telemetry::Step(Box::new(s.clone())));
+            }
+        };
+        feed(&mut app, 1.0, 1.2);
+        for (w, h) in [(80, 24), (120, 40)] {
+            let text = render(&app, w, h);
+            assert_eq!(text.matches("✗ STALLED").count(), 1, "{w}x{h}:\n{text}");
+            assert!(!text.contains("dropped ✓"), "{w}x{h}:\n{text}");
+        }
+        feed(&mut app, 1.2, 1.6);
+        let text = render(&app, 120, 40);
+        assert!(!text.contains("STALLED"), "over at 1.5 s:\n{text}");
+        // Back before it: the branch has no fault.
+        app.on_telemetry(Telemetry::Rewound {
+            at: ratelab::Nanos(500_000_000),
+        });
+        feed(&mut app, 0.5, 1.2);
+        let text = render(&app, 120, 40);
+        assert!(!text.contains("STALLED"), "{text}");
+    }
+
     /// The verdict reads whole in the narrow cartpole panel (80 columns): the panel's name
     /// gives way first (#25).
     #[test]
@@ -1836,6 +1880,17 @@ mod tests {
         assert_eq!(at, ratelab::Nanos(2_980_000_000));
         // The engine ran the run again to there, and says so.
         app.on_telemetry(Telemetry::Rewound { at });
+        // Paused through the rewind, before the engine's status comes: a second ← pressed
+        // now is a seek, not the rate down it is while the run goes (which would branch it).
+        assert!(app.scrubbing(), "still paused after the rewind");
+        assert_eq!(
+            super::keymap::map_key(
+                crossterm::event::KeyEvent::from(crossterm::event::KeyCode::Left),
+                app.typing(),
+                app.scrubbing()
+            ),
+            Some(Msg::SeekBack { second: false })
+        );
         app.on_telemetry(paused(at));
         let rec = report.trace.iter().rev().find(|s| s.t <= at).unwrap();
         let obs = rec.topics.get(ratelab::graph::TopicId(0));
@@ -1868,6 +1923,21 @@ mod tests {
             wide.contains("t=2.980 s · θ ") && wide.contains(&counts),
             "{wide}"
         );
+        // A burst of ← before the engine answers: a tick per key, each from the one before
+        // (not three asks for the same tick).
+        for _ in 0..3 {
+            app.on_msg(Msg::SeekBack { second: false });
+        }
+        let ms = |ms: u64| Control::Seek(ratelab::Nanos(ms * 1_000_000));
+        let asked: Vec<Control> = rx.try_iter().collect();
+        assert_eq!(asked, vec![ms(2960), ms(2940), ms(2920)]);
+        // Answered (the status at the last one asked): the next ← is from the cursor again.
+        app.on_telemetry(Telemetry::Rewound {
+            at: ratelab::Nanos(2_920_000_000),
+        });
+        app.on_telemetry(paused(ratelab::Nanos(2_920_000_000)));
+        app.on_msg(Msg::SeekBack { second: false });
+        assert_eq!(rx.try_recv().ok(), Some(ms(2900)));
     }
 
     #[test]
@@ -1936,6 +2006,16 @@ mod tests {
         app.on_msg(Msg::TypeRate);
         app.on_msg(Msg::Input('0'));
         app.on_msg(Msg::Submit); // 0 Hz: refused, nothing sent
+        app.on_msg(Msg::TypeRate);
+        for c in "-5".chars() {
+            app.on_msg(Msg::Input(c));
+        }
+        app.on_msg(Msg::Submit); // refused whole, never read as 5 Hz
+        assert!(
+            (app.view().message.unwrap()).contains("not a rate in (0, 10000] Hz: '-5'"),
+            "{:?}",
+            app.view().message
+        );
         app.on_msg(Msg::SwapBrain); // no --policy file: refused with a message
         app.on_msg(Msg::Faster);
         // `k` on the selected node (the first: the sensor): a stall from the run's now.

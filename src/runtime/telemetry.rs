@@ -155,6 +155,10 @@ pub enum Telemetry {
         /// The change in words ([`describe`]).
         text: String,
     },
+    /// A fault was injected while the run goes ([`Command::InjectFault`]: the lab's `k`, a
+    /// session log's `inject_fault`), told just before its [`Telemetry::Changed`]: the
+    /// front end marks its node while it lasts, as it marks one given at the start.
+    Faulted(ratelab_core::qos::Fault),
     /// The running graph changed clocks in place at run time `at` ([`Control::SwitchClock`]
     /// on a run that has not ended; `ratelab::runcore::RunCore::run_real`): the same run
     /// goes on under `clock`, its nodes, topics, counters and plant as they were. Like

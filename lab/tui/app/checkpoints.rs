@@ -337,6 +337,7 @@ impl App {
             journal_full: _,
             checkpoints: _,
             rewinding: _,
+            seek_target: _,
             // What keys asked for and no status has shown yet: a seek back drops it, as a
             // run's start does (the engine's run core is put back before it too).
             pending_rates: _,

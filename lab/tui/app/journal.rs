@@ -14,6 +14,9 @@ impl App {
         if self.held_for_review(&t) {
             return;
         }
+        if !self.rewinding {
+            self.seek_answered(&t);
+        }
         match t {
             Telemetry::Rewound { at } => {
                 self.rewind(at);
@@ -87,6 +90,10 @@ impl App {
             ));
             return;
         }
+        // Paused it stays: what the journal folds again is the run as it ran (unpaused), and
+        // a key pressed before the engine's next status must still move through the run (a
+        // second ← read as "rate down" would branch it).
+        let paused = self.paused;
         let upto = self.journal.partition_point(|(t, _)| *t <= at);
         // From the nearest checkpoint of the folded view at or before `at` (or from the
         // run's start): the messages after it, up to `at`, are folded again.
@@ -105,6 +112,7 @@ impl App {
         }
         self.checkpoints.hold(false);
         self.rewinding = false;
+        self.paused = paused;
         self.now = at;
         self.say(format!(
             "back at t={:.3} s: a change or space branches the run here",

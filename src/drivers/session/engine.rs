@@ -419,10 +419,12 @@ impl Engine {
         if let Some(r) = &recording {
             finish_recording(r, &next, &metrics, &end);
         }
-        let current = self.log.runs.last_mut().expect("pushed above");
-        current.end_ns = end.at.0;
-        current.metrics = Some(metrics);
+        // The brain the next run starts with: a swap made while paused counts, though this
+        // run ended before it took effect (its log then sets it aside).
         let last_policy = self.current_policy_spec(policy);
+        let current = self.log.runs.last_mut().expect("pushed above");
+        current.ended_at(end.at);
+        current.metrics = Some(metrics);
         self.save_log();
         Ok(RunOutcome {
             next,
@@ -696,6 +698,12 @@ impl Engine {
                 if let Some(r) = recording {
                     record_change(r, at, &cmd, &text, from_ros2);
                 }
+                let faulted = match &cmd {
+                    Command::InjectFault { fault } => {
+                        ratelab_runtime::command::parse_fault(fault).ok()
+                    }
+                    _ => None,
+                };
                 self.log
                     .runs
                     .last_mut()
@@ -707,6 +715,9 @@ impl Engine {
                     });
                 self.save_log();
                 if now {
+                    if let Some(f) = faulted {
+                        let _ = self.tx.send(Telemetry::Faulted(f));
+                    }
                     let _ = self.tx.send(Telemetry::Changed { at, text });
                 }
                 true

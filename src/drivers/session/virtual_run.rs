@@ -146,7 +146,10 @@ impl Engine {
             return;
         }
         if !back && ended.is_some() {
-            return; // nothing runs after the end
+            // Nothing runs after the end: the run stays where it is, and says so (a front
+            // end waiting for the seek's answer takes it from the status).
+            self.tell_status(core, true);
+            return;
         }
         self.muted.store(back, Ordering::Relaxed);
         let mut result = core.seek(to.min(cfg.duration));
