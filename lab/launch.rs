@@ -115,7 +115,12 @@ pub fn run_launch(a: &LaunchArgs, force_headless: bool, stop: StopFlag) -> anyho
         if placed == 1 { "" } else { "es" },
         placement_line(&cfg.graph)
     );
-    let recording = ratelab::outputs::open_recording(&outputs, &cfg, &brain.label())?;
+    let recording = ratelab::outputs::open_recording(
+        &outputs,
+        &cfg,
+        &brain.label(),
+        ratelab::setting::Speech::Flags,
+    )?;
     let report = if on_terminal || recording.is_some() {
         launch_watched(cfg, opts, &stop, on_terminal, recording.as_ref())?
     } else {

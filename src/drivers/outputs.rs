@@ -11,9 +11,12 @@
 use crate::run::RunReport;
 use crate::trace_csv::TraceFile;
 use anyhow::Context;
-use ratelab_recording::{check_output_path, default_path, RecordOptions, Recording};
+use ratelab_recording::{
+    check_output_path, default_path, RecordOptions, Recording, RecordingError,
+};
 use ratelab_runtime::graph::GraphSpec;
 use ratelab_runtime::scheduler::{EndReason, StopFlag};
+use ratelab_runtime::setting::{Setting, Speech};
 use ratelab_runtime::RunConfig;
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
@@ -128,10 +131,15 @@ pub fn open_ros2(stop: &StopFlag) -> anyhow::Result<ratelab_ros2::session::Ros2S
 ///
 /// # Errors
 /// The folder cannot be made, or a file is there without `--force`.
-pub fn check_out(a: &Outputs, graph: &GraphSpec) -> anyhow::Result<()> {
+pub fn check_out(a: &Outputs, graph: &GraphSpec, speech: Speech) -> anyhow::Result<()> {
     if let Some(dir) = &a.out {
-        std::fs::create_dir_all(dir)
-            .with_context(|| format!("cannot create --out folder {}", dir.display()))?;
+        std::fs::create_dir_all(dir).with_context(|| {
+            format!(
+                "cannot create {} folder {}",
+                speech.name(Setting::Out),
+                dir.display()
+            )
+        })?;
         // Refuse before the run, not after it: the outputs will not be writable.
         let estimator = graph.estimate_topic().map(|_| ESTIMATOR_JSON);
         for name in ["metrics.json", "trace.csv"].into_iter().chain(estimator) {
@@ -219,7 +227,12 @@ pub fn open_recording(
     a: &Outputs,
     cfg: &RunConfig,
     policy: &str,
+    speech: Speech,
 ) -> anyhow::Result<Option<Recording>> {
+    let refused = |cause: RecordingError| RecordRefused {
+        line: cause.said(speech),
+        cause,
+    };
     if a.record.is_none() && !a.spawn {
         return Ok(None);
     }
@@ -227,7 +240,7 @@ pub fn open_recording(
         Some(p) => p,
         None => default_path(Path::new("recordings"), cfg),
     };
-    check_output_path(&path, a.force)?;
+    check_output_path(&path, a.force).map_err(refused)?;
     let (recording, notice) = Recording::create_with(
         &path,
         cfg,
@@ -241,12 +254,34 @@ pub fn open_recording(
             bag: a.bag.clone().filter(|_| a.ros2.is_some()),
         },
         a.force,
-    )?;
+    )
+    .map_err(refused)?;
     if let Some(n) = notice {
         eprintln!("[ratelab] {n}");
     }
     Ok(Some(recording))
 }
+
+/// A recording that cannot be opened ([`open_recording`]): its line in the front end's words
+/// (`--record …` or `record: …`, [`RecordingError::said`]), and its cause, which says what
+/// kind of refusal it is (a Python front end raises `FileExistsError` for
+/// [`RecordingError::Exists`]).
+#[derive(Debug)]
+pub struct RecordRefused {
+    /// The refusal, in the front end's words.
+    pub line: String,
+    /// What refused it.
+    pub cause: RecordingError,
+}
+
+impl std::fmt::Display for RecordRefused {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.line)
+    }
+}
+
+// No `source`: the line already says the cause, and a chain would say it twice.
+impl std::error::Error for RecordRefused {}
 
 /// `trace.csv` as [`write_outputs`] puts it in place.
 pub enum TraceCsv<'a> {

@@ -164,7 +164,7 @@ impl RunSpec {
             None => ratelab_runtime::checkpoint::load_policy(&self.policy)?,
         };
         let a = self.outputs;
-        check_out(&a, &cfg.graph)?;
+        check_out(&a, &cfg.graph, speech)?;
         let trace = match (trace, &a.out) {
             // Held in memory: the caller's to return.
             (TraceTo::Memory, _) => {
@@ -182,7 +182,7 @@ impl RunSpec {
         };
         // Refused before anything is opened.
         let ros2 = ros2_options(&a, &cfg.graph)?;
-        let recording = open_recording(&a, &cfg, &brain.label())?;
+        let recording = open_recording(&a, &cfg, &brain.label(), speech)?;
         Ok(StartedRun {
             cfg,
             outputs: a,

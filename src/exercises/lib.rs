@@ -200,6 +200,10 @@ pub enum ExerciseError {
         /// The keys it needs, comma-separated.
         keys: String,
     },
+    /// A prediction given in place of the learner's file's (Python's `prediction=`) that
+    /// lacks a key the exercise asks for, or holds one it does not.
+    #[error("prediction: {0}")]
+    GivenPrediction(String),
     /// What the learner must do first, in one line (ex6's untouched template).
     #[error("{0}")]
     NotReady(String),
@@ -802,6 +806,46 @@ pub fn run(
     run_report(which, setup, out, progress).map(|r| r.not_passed)
 }
 
+/// A prediction given in place of the file's: every key exercise `id` asks for (`required`)
+/// and a `why` that says something, and no other key (a misspelt key would otherwise be
+/// graded as left out).
+///
+/// # Errors
+/// [`ExerciseError::GivenPrediction`] naming the first key missing or not the exercise's.
+fn check_given_prediction(
+    id: &str,
+    required: &[&str],
+    given: &toml::Table,
+) -> Result<(), ExerciseError> {
+    let keys = || format!("{} and why", required.join(", "));
+    if let Some(k) = given
+        .keys()
+        .find(|k| *k != "why" && !required.contains(&k.as_str()))
+    {
+        return Err(ExerciseError::GivenPrediction(format!(
+            "'{}' is not a key of {id}'s prediction ({})",
+            ratelab_core::text::printable(k),
+            keys()
+        )));
+    }
+    let said_why = given
+        .get("why")
+        .and_then(toml::Value::as_str)
+        .is_some_and(|w| !w.trim().is_empty());
+    let missing: Vec<&str> = (required.iter().copied())
+        .filter(|k| !given.contains_key(*k))
+        .chain((!said_why).then_some("why"))
+        .collect();
+    if !missing.is_empty() {
+        return Err(ExerciseError::GivenPrediction(format!(
+            "missing {} ({id} asks for {})",
+            missing.join(", "),
+            keys()
+        )));
+    }
+    Ok(())
+}
+
 /// [`run`], returning what the exercise found: its checks and graded reconcile sentences as
 /// well as how many did not pass (what `ratelab.exercise` in Python returns).
 ///
@@ -817,6 +861,7 @@ pub fn run_report(
     let path = setup.dir.join(exercise.file());
     let mut file = ExerciseFile::load(&path)?;
     if let Some(prediction) = setup.prediction {
+        check_given_prediction(exercise.id(), exercise.required_keys(), prediction)?;
         file.prediction = prediction.clone();
     }
     if !file.has_prediction(exercise.required_keys()) {

@@ -23,8 +23,8 @@
 #![warn(missing_docs)]
 
 use pyo3::exceptions::{
-    PyFileExistsError, PyFileNotFoundError, PyKeyboardInterrupt, PyMemoryError, PyPermissionError,
-    PyValueError,
+    PyFileExistsError, PyFileNotFoundError, PyIsADirectoryError, PyKeyboardInterrupt,
+    PyMemoryError, PyNotADirectoryError, PyOSError, PyPermissionError, PyValueError,
 };
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -105,6 +105,15 @@ fn to_py(e: &anyhow::Error) -> PyErr {
                 _ => {}
             }
         }
+        if let Some(r) = cause.downcast_ref::<ratelab::outputs::RecordRefused>() {
+            use ratelab::recording::RecordingError;
+            return match r.cause {
+                RecordingError::Exists(_) => PyFileExistsError::new_err(text),
+                RecordingError::IsDirectory(_) => PyIsADirectoryError::new_err(text),
+                RecordingError::Unwritable { .. } => PyOSError::new_err(text),
+                _ => PyValueError::new_err(text),
+            };
+        }
         if let Some(o) = cause.downcast_ref::<ratelab::output::OutputError>() {
             if let ratelab::output::OutputError::Exists(path) = o {
                 // In Python's words: the keyword, not the flag.
@@ -120,7 +129,10 @@ fn to_py(e: &anyhow::Error) -> PyErr {
             match io.kind() {
                 std::io::ErrorKind::NotFound => return PyFileNotFoundError::new_err(text),
                 std::io::ErrorKind::PermissionDenied => return PyPermissionError::new_err(text),
-                _ => {}
+                std::io::ErrorKind::IsADirectory => return PyIsADirectoryError::new_err(text),
+                std::io::ErrorKind::NotADirectory => return PyNotADirectoryError::new_err(text),
+                // The file system refused (a full disk, a read-only one): not a setting.
+                _ => return PyOSError::new_err(text),
             }
         }
     }

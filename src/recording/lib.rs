@@ -365,6 +365,31 @@ pub enum RecordingError {
     },
 }
 
+impl RecordingError {
+    /// The refusal in `speech`'s words: the command line's as [`std::fmt::Display`] says it
+    /// (`--record file exists: r.rrd (pass --force to overwrite)`), Python's naming the
+    /// keyword (`record: r.rrd: file exists (pass force=True to overwrite)`).
+    pub fn said(&self, speech: ratelab_runtime::setting::Speech) -> String {
+        use ratelab_runtime::setting::{Setting, Speech};
+        if speech == Speech::Flags {
+            return self.to_string();
+        }
+        let record = speech.name(Setting::Record);
+        match self {
+            RecordingError::Output(o) => format!("{record}: {o}"),
+            RecordingError::IsDirectory(p) => {
+                format!("{record}: {} is a directory, not a file", p.display())
+            }
+            RecordingError::Exists(p) => format!(
+                "{record}: {}: file exists (pass {} to overwrite)",
+                p.display(),
+                speech.force()
+            ),
+            other => other.to_string(),
+        }
+    }
+}
+
 impl From<ratelab_core::output::OutputError> for RecordingError {
     fn from(e: ratelab_core::output::OutputError) -> Self {
         use ratelab_core::output::OutputError;

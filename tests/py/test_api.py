@@ -193,6 +193,26 @@ def test_an_output_is_not_replaced_without_force(tmp_path):
     ratelab.run(duration_s=0.5, out=tmp_path, force=True, **VIRTUAL)
 
 
+def test_a_recording_or_out_folder_refused_names_the_keyword_and_raises_its_kind(tmp_path):
+    existing = tmp_path / "r.rrd"
+    existing.write_bytes(b"not ours")
+    with pytest.raises(FileExistsError) as e:
+        ratelab.run(duration_s=0.2, record=existing, **VIRTUAL)
+    line = str(e.value)
+    assert line.startswith("record: ") and "force=True" in line, line
+    assert "--record" not in line and "--force" not in line, line
+    assert existing.read_bytes() == b"not ours", "never overwritten"
+    with pytest.raises(IsADirectoryError) as e:
+        ratelab.run(duration_s=0.2, record=tmp_path, **VIRTUAL)
+    assert str(e.value).startswith("record: ") and "--record" not in str(e.value), str(e.value)
+    blocker = tmp_path / "a-file"
+    blocker.write_bytes(b"")
+    with pytest.raises(OSError) as e:
+        ratelab.run(duration_s=0.2, out=blocker / "sub", **VIRTUAL)
+    assert "cannot create out folder" in str(e.value), str(e.value)
+    assert "--out" not in str(e.value), str(e.value)
+
+
 def test_a_brain_that_raises_fails_its_node_and_keeps_the_figures():
     ticks = []
 
@@ -549,6 +569,18 @@ def test_an_exercise_returns_its_checks(tmp_path):
     assert type(e.value).__module__ == "ratelab", type(e.value).__module__
     with pytest.raises(ValueError):
         ratelab.exercise("ex99", {"why": "?"}, dir=folder)
+    # A prediction given here is judged here: the keyword named, never the learner's file.
+    for given, line in [
+        ({"fails_at_hz": 5}, "prediction: missing why (ex1 asks for fails_at_hz and why)"),
+        ({"fail_at_hz": 5, "why": "slow"},
+         "prediction: 'fail_at_hz' is not a key of ex1's prediction (fails_at_hz and why)"),
+        ({"fails_at_hz": 5, "why": "slow", "extra": 1},
+         "prediction: 'extra' is not a key of ex1's prediction (fails_at_hz and why)"),
+    ]:
+        with pytest.raises(ratelab.SettingError) as e:
+            ratelab.exercise("ex1", given, dir=folder)
+        assert str(e.value) == line, str(e.value)
+        assert not isinstance(e.value, ratelab.NoPrediction)
 
 
 def test_the_exercises_run_as_pytest_tests_on_the_learner_s_predictions(tmp_path):

@@ -22,7 +22,8 @@ Errors are exceptions carrying ratelab's one line, which names the Python parame
 `ratelab.Error` each where it is ratelab's own. `SettingError` (a `ValueError`) for a bad
 value, `SettingTypeError` (a `TypeError`) for a value of the wrong type or an unknown
 keyword, `FileNotFoundError` for a missing file, `FileExistsError` for an output that exists
-(pass `force=True`), `NodeFailed` (a `RuntimeError`) when a node of the run failed (its
+(pass `force=True`), `IsADirectoryError` for a recording given a folder, `OSError` where the
+file system refuses an output, `NodeFailed` (a `RuntimeError`) when a node of the run failed (its
 `.run` holds the figures up to then), `TraceTooLarge` (a `MemoryError`) before a run whose
 trace would not fit in memory (keep one step in N with `trace_every=N`, or write the trace
 to a file as the run goes with the command `ratelab run --out DIR`), `NoPrediction` (a
@@ -868,6 +869,7 @@ def run(
     Numbers may be NumPy scalars and lists NumPy arrays. An unknown keyword raises
     SettingTypeError (a TypeError) naming the nearest one; a bad value SettingError (a
     ValueError) naming the parameter. Also raises FileNotFoundError, FileExistsError,
+    IsADirectoryError (`record=` a folder), OSError (an output the file system refuses),
     NodeFailed, KeyboardInterrupt, and TraceTooLarge (a MemoryError) before a run whose
     trace would not fit in memory.
     """
