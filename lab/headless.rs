@@ -47,7 +47,7 @@ pub fn config_from_args(a: &RunArgs) -> anyhow::Result<RunConfig> {
 /// run ends, so does nothing ([`late_fault_warnings`]). Call it once the run's duration is
 /// final (the lab and a launch on a terminal run until quit, with no end to be after).
 pub fn warn_late_faults(cfg: &RunConfig) {
-    for line in late_fault_warnings(cfg) {
+    for line in late_fault_warnings(cfg, Speech::Flags) {
         eprintln!("[ratelab] {line}");
     }
 }

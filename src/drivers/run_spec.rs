@@ -31,22 +31,24 @@ pub const DEFAULT_CLOCK: ClockKind = ClockKind::Real;
 pub const DEFAULT_POLICY: &str = "scripted";
 
 /// A warning for each injected fault (`--stall`, `--kill`) of `cfg` that starts after its
-/// run ends, so does nothing: a line each, without a prefix. None for a run with no end
-/// ([`ratelab_runtime::telemetry::UNBOUNDED`]: the lab and a launch on a terminal run until
-/// quit). Ask once the run's duration is final.
-pub fn late_fault_warnings(cfg: &RunConfig) -> Vec<String> {
+/// run ends, so does nothing: a line each, without a prefix, naming the setting in
+/// `speech`'s words (`the --stall of 'policy'`, `the stall of 'policy'`). None for a run with
+/// no end ([`ratelab_runtime::telemetry::UNBOUNDED`]: the lab and a launch on a terminal run
+/// until quit). Ask once the run's duration is final.
+pub fn late_fault_warnings(cfg: &RunConfig, speech: Speech) -> Vec<String> {
     if cfg.duration == ratelab_runtime::telemetry::UNBOUNDED {
         return Vec::new();
     }
     (cfg.faults.iter().filter(|f| f.at >= cfg.duration))
         .map(|f| {
+            let setting = if f.duration.is_some() {
+                Setting::Stall
+            } else {
+                Setting::Kill
+            };
             format!(
                 "warning: the {} of '{}' at {} s starts after the run ends ({} s): it does nothing",
-                if f.duration.is_some() {
-                    "--stall"
-                } else {
-                    "--kill"
-                },
+                speech.name(setting),
                 f.node,
                 f.at.as_secs_f64(),
                 cfg.duration.as_secs_f64()

@@ -152,7 +152,7 @@ impl RunSpec {
             eprintln!("[ratelab] {w}");
         }
         if echo {
-            for line in late_fault_warnings(&cfg) {
+            for line in late_fault_warnings(&cfg, speech) {
                 eprintln!("[ratelab] {line}");
             }
         }

@@ -384,10 +384,16 @@ fn run<'py>(
     };
     // An earlier run's failure is not this one's.
     drop(ratelab::python::take_failure());
+    // Faults set after the run ends, which do nothing: Python warns of them (RuntimeWarning).
+    // Settings that cannot be used are the run's to refuse, below.
+    let late = (spec.config(Speech::Keywords).ok())
+        .map(|cfg| ratelab::run_spec::late_fault_warnings(&cfg, Speech::Keywords))
+        .unwrap_or_default();
     let files = interruptibly(py, move |stop| {
         ratelab::held_run::run(&spec, brain, &classes, Speech::Keywords, stop)
     })?;
     let out = PyDict::new(py);
+    out.set_item("warnings", late)?;
     out.set_item("metrics_json", files.metrics_json)?;
     out.set_item("estimator_json", files.estimator_json)?;
     // A long run's trace is the largest thing here: its text goes to Python first and the

@@ -193,6 +193,16 @@ def test_an_output_is_not_replaced_without_force(tmp_path):
     ratelab.run(duration_s=0.5, out=tmp_path, force=True, **VIRTUAL)
 
 
+def test_a_fault_after_the_run_s_end_warns_in_python_s_words_and_is_not_summed_up():
+    with pytest.warns(RuntimeWarning) as said:
+        run = ratelab.run(duration_s=0.5, kill={"policy": 30.0}, **VIRTUAL)
+    assert [str(w.message) for w in said] == [
+        "the kill of 'policy' at 30 s starts after the run ends (0.5 s): it does nothing"
+    ]
+    assert said[0].filename == __file__, "said at the caller's line"
+    assert not any(line.startswith("liveliness:") for line in run.summary), run.summary
+
+
 def test_a_recording_or_out_folder_refused_names_the_keyword_and_raises_its_kind(tmp_path):
     existing = tmp_path / "r.rrd"
     existing.write_bytes(b"not ours")

@@ -40,6 +40,7 @@ import io
 import json
 import numbers
 import os
+import warnings
 from dataclasses import dataclass
 from typing import (
     TYPE_CHECKING,
@@ -922,6 +923,9 @@ def run(
         if files["estimator_json"] is None
         else json.loads(files["estimator_json"]),
     )
+    for line in files["warnings"]:
+        # A fault set after the run ends does nothing: said where the caller's line is.
+        warnings.warn(line.removeprefix("warning: "), RuntimeWarning, stacklevel=3)
     if files["failed"] is not None:
         cause = files.get("failed_exception")
         if cause is not None:
