@@ -631,7 +631,8 @@ pub struct RunArgs {
     /// whole run, and the recording says which span its plots hold. Needs --record.
     #[arg(long, value_name = "FROM:UNTIL", value_parser = ratelab::recording::RecordWindow::parse, requires = "record")]
     pub record_window: Option<ratelab::recording::RecordWindow>,
-    /// Lab: save the session's command log here (default: beside the recording).
+    /// Lab: save the session's command log here (default: beside the recording); a
+    /// headless run refuses it (it takes no keys to log).
     #[arg(long, value_name = "FILE")]
     pub session: Option<PathBuf>,
     /// Real clock: spin this many µs before each deadline instead of sleeping (below every

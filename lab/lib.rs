@@ -33,6 +33,10 @@ const EXIT_INTERRUPTED: u8 = 130;
 
 /// A headless run; its summary, outputs and recording are complete even when interrupted.
 fn headless(args: &cli::RunArgs, stop: StopFlag) -> anyhow::Result<()> {
+    if args.session.is_some() {
+        // Accepted silently, it wrote nothing: the log is of a lab's keys.
+        anyhow::bail!("--session is the lab's log of the keys pressed in it; a headless run takes none (run `ratelab lab --session FILE`, or give the changes at the start)");
+    }
     headless::run_headless(args, stop).map(|_| ())
 }
 

@@ -43,6 +43,18 @@ impl ExerciseSpec {
         progress: &dyn Progress,
         stop: &StopFlag,
     ) -> anyhow::Result<Report> {
+        if !self.dir.is_dir() {
+            // Said before any of its files is looked for: the folder is what is missing.
+            let (dir, given) = match speech {
+                Speech::Flags => ("--dir FOLDER", "from the ratelab repository"),
+                Speech::Keywords => ("dir=FOLDER", "from the ratelab repository"),
+            };
+            let why = format!(
+                "the exercises folder {} is not there: run {given} (its exercises/ folder), or give the folder with {dir}",
+                self.dir.display()
+            );
+            return Err(std::io::Error::new(std::io::ErrorKind::NotFound, why).into());
+        }
         let mut graph = self.graph.clone();
         if graph.file.is_none() {
             graph.file = default_graph(&self.which, &self.dir)?;
@@ -134,16 +146,40 @@ mod tests {
             dir: std::env::temp_dir().join("ratelab-no-such-exercises-folder"),
             ..spec("ex1")
         };
-        // The bands cannot be read from a folder that is not there: refused, nothing run.
+        // A folder that is not there: said as the folder, with where to run or what to give
+        // (a missing file for Python), nothing run.
         let e = refusal(&s, Speech::Keywords);
-        assert!(e.downcast_ref::<ExerciseError>().is_some(), "{e:#}");
+        let io = e
+            .downcast_ref::<std::io::Error>()
+            .expect("a missing folder");
+        assert_eq!(io.kind(), std::io::ErrorKind::NotFound);
+        assert!(
+            e.to_string().contains("give the folder with dir=FOLDER"),
+            "{e}"
+        );
+        assert!(
+            refusal(&s, Speech::Flags)
+                .to_string()
+                .contains("--dir FOLDER"),
+            "{e}"
+        );
+        // The repository's exercise file holds no prediction yet: refused, naming it.
+        let e = refusal(&spec("ex1"), Speech::Keywords);
+        assert!(
+            matches!(
+                e.downcast_ref::<ExerciseError>(),
+                Some(ExerciseError::NoPrediction { .. })
+            ),
+            "{e:#}"
+        );
+        // One given in its place that lacks its keys: refused, naming what is missing.
         let mut s = spec("ex1");
         s.prediction = Some(toml::Table::new());
         let e = refusal(&s, Speech::Keywords);
         assert!(
             matches!(
                 e.downcast_ref::<ExerciseError>(),
-                Some(ExerciseError::NoPrediction { .. })
+                Some(ExerciseError::GivenPrediction(why)) if why == "missing fails_at_hz, why (ex1 asks for fails_at_hz and why)"
             ),
             "{e:#}"
         );

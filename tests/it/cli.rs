@@ -73,6 +73,25 @@ fn smoke_is_refused_beside_a_clock_or_a_duration_it_would_override() {
 }
 
 #[test]
+fn a_headless_run_refuses_the_lab_s_session_log_it_would_not_write() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("s.json");
+    assert_usage_error(
+        &["run", "--smoke", "--session", file.to_str().unwrap()],
+        "error: --session is the lab's log of the keys pressed in it; a headless run takes none",
+    );
+    assert!(!file.exists());
+}
+
+#[test]
+fn an_exercise_without_its_folder_says_where_to_run_it_or_what_to_give() {
+    assert_usage_error(
+        &["exercise", "ex1", "--dir", "/nonexistent/exercises"],
+        "error: the exercises folder /nonexistent/exercises is not there: run from the ratelab repository (its exercises/ folder), or give the folder with --dir FOLDER",
+    );
+}
+
+#[test]
 fn a_misspelled_flag_or_command_is_told_the_near_name_in_its_one_line() {
     assert_usage_error(
         &["run", "--contol-hz", "5"],

@@ -246,6 +246,27 @@ def test_a_brain_that_raises_fails_its_node_and_keeps_the_figures():
     assert frames[-1].filename == __file__, frames
 
 
+def test_a_brain_or_node_class_that_cannot_take_its_argument_is_refused_naming_it():
+    def act(obs, gain):
+        return gain * obs[1]
+
+    with pytest.raises(ratelab.SettingTypeError) as e:
+        ratelab.run(policy=act, **VIRTUAL)
+    line = str(e.value)
+    assert line.startswith("policy: a brain is called with one argument"), line
+    assert "act(obs, gain) cannot take it" in line and "<ratelab>" not in line, line
+
+    class NoHandle:
+        def __init__(self):
+            pass
+
+    with pytest.raises(ratelab.SettingTypeError) as e:
+        ratelab.run(graph="graphs/cartpole-python.toml", nodes={"policy": NoHandle}, **VIRTUAL)
+    line = str(e.value)
+    assert line.startswith("nodes['policy']: a node class is made with one argument"), line
+    assert "NoHandle() cannot take it" in line, line
+
+
 def test_a_node_class_that_raises_is_the_cause_with_its_traceback():
     with pytest.raises(ratelab.NodeFailed) as e:
         ratelab.run(graph="graphs/cartpole-python.toml", nodes={"policy": _RaisingBalancer},
@@ -579,6 +600,10 @@ def test_an_exercise_returns_its_checks(tmp_path):
     assert type(e.value).__module__ == "ratelab", type(e.value).__module__
     with pytest.raises(ValueError):
         ratelab.exercise("ex99", {"why": "?"}, dir=folder)
+    # No folder: said as the folder, with the keyword to give it.
+    with pytest.raises(FileNotFoundError) as e:
+        ratelab.exercise("ex1", {"fails_at_hz": 5, "why": "slow"}, dir=tmp_path / "none")
+    assert "give the folder with dir=FOLDER" in str(e.value), str(e.value)
     # A prediction given here is judged here: the keyword named, never the learner's file.
     for given, line in [
         ({"fails_at_hz": 5}, "prediction: missing why (ex1 asks for fails_at_hz and why)"),

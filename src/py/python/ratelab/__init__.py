@@ -780,10 +780,27 @@ def _brain(settings: Dict[str, Any], policy: Any) -> Optional[Callable[[Any], An
     """`policy=`: a callable brain, returned (it runs in this interpreter); else a name or a
     file, put in `settings` (None: the default, the scripted balancer)."""
     if callable(policy):
+        _takes("policy", policy, "a brain is called with one argument, the observation "
+               "(act(obs) -> action)")
         return policy
     if policy is not None:
         settings["policy"] = _path("policy", policy)
     return None
+
+
+def _takes(name: str, fn: Callable, contract: str) -> None:
+    """Refuse `fn` (given as `name`) up front when it cannot be called with one argument, as
+    the run will call it: the error names the parameter and your function's own signature,
+    not a line inside ratelab. One without a signature Python can read is judged when called."""
+    try:
+        sig = inspect.signature(fn)
+    except (TypeError, ValueError):
+        return
+    try:
+        sig.bind(None)
+    except TypeError:
+        what = getattr(fn, "__name__", type(fn).__name__)
+        raise SettingTypeError(f"{name}: {contract}; {what}{sig} cannot take it") from None
 
 
 # ---- run -------------------------------------------------------------------------------------
@@ -908,6 +925,9 @@ def run(
                 raise SettingTypeError(
                     f"nodes[{node!r}] must be a class, got {type(cls).__name__}"
                 )
+            _takes(f"nodes[{node!r}]", cls,
+                   "a node class is made with one argument, its node handle "
+                   "(def __init__(self, node))")
             classes.append((node, cls))
     files = _native_call(_native.run, settings, brain, classes)
     result = Run(
