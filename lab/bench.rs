@@ -3,12 +3,13 @@
 //! Python costs per tick. `--render` times the lab's frames, `--scrub` its time scrubbing.
 
 use crate::cli::BenchArgs;
-use ratelab::config::duration_from_secs;
 use ratelab::metrics::NodeTiming;
 use ratelab::node::{Flow, Node};
 use ratelab::policy::Scripted;
 use ratelab::rate::Rate;
+use ratelab::run_spec::{GraphSettings, RunSpec};
 use ratelab::scheduler::{run_real, RealOptions, StopFlag};
+use ratelab::setting::Speech;
 use ratelab::{run, ClockKind, Nanos, RunConfig, RunOptions};
 use std::time::Duration;
 
@@ -203,8 +204,24 @@ pub fn run_bench(a: &BenchArgs, stop: StopFlag) -> anyhow::Result<()> {
     if a.scrub {
         return scrub_bench(100);
     }
-    let duration = duration_from_secs(a.duration)?;
-    let graph = crate::headless::graph_from_args(&a.graph)?;
+    // What every timing run shares, by a run's own rules (RunSpec): the graph and its
+    // overrides, the real clock, the duration and the priority. Faults are refused: a
+    // stalled tick still counts as a tick here, so the table would not show them.
+    let base = RunSpec {
+        graph: GraphSettings::from(&a.graph),
+        clock: ClockKind::Real,
+        duration_s: Some(a.duration),
+        rt_priority: a.rt_priority,
+        ..RunSpec::default()
+    }
+    .config(Speech::Flags)?;
+    crate::headless::warn_qos(&base.graph);
+    if !base.faults.is_empty() {
+        anyhow::bail!(
+            "--stall/--kill: the bench times every tick, a faulted one too, so its table would not show them; use `ratelab run` or `ratelab lab` with them"
+        );
+    }
+    let duration = base.duration;
     if let Some(us) = a.spin_margin_us {
         for &hz in &a.hz {
             let period = Rate::new(hz)?.period();
@@ -266,24 +283,17 @@ pub fn run_bench(a: &BenchArgs, stop: StopFlag) -> anyhow::Result<()> {
         }
         // Every node at `hz`, the actuator too: a timing run, not a physical one (the
         // plant still steps 20 ms per actuator tick), so the graph file's 50 Hz rule for
-        // the actuator is deliberately set aside here.
-        let mut graph = graph.clone();
-        for n in &mut graph.nodes {
+        // the actuator is deliberately set aside here, after the settings' rules.
+        let mut cfg = base.clone();
+        for n in &mut cfg.graph.nodes {
             n.rate_hz = hz;
         }
-        let count = graph.nodes.len() as u64;
-        let cfg = RunConfig {
-            clock: ClockKind::Real,
-            duration,
-            graph,
-            spin_margin,
-            rt_priority: a.rt_priority,
-            phase_offsets: if a.stagger {
-                (0..count).map(|i| Nanos(i * period.0 / count)).collect()
-            } else {
-                Vec::new()
-            },
-            ..RunConfig::default()
+        let count = cfg.graph.nodes.len() as u64;
+        cfg.spin_margin = spin_margin;
+        cfg.phase_offsets = if a.stagger {
+            (0..count).map(|i| Nanos(i * period.0 / count)).collect()
+        } else {
+            Vec::new()
         };
         let opts = RunOptions {
             stop: stop.clone(),

@@ -275,7 +275,9 @@ fn on_terminal(
             }
         })
         .context("spawning the input thread")?;
-    let mut terminal = ratatui::try_init().context("cannot open the terminal")?;
+    let mut terminal = ratatui::try_init().context(
+        "cannot open the terminal (the lab draws on one; `ratelab run` runs the graph headless)",
+    )?;
     // ratatui's hook restores the terminal on a panic; keep that for the UI thread only.
     // A node's panic is caught by the executor and shown in the lab (NODE FAILED), so it
     // must neither restore the terminal under the running UI nor print over it.

@@ -372,6 +372,16 @@ fn bench_scrub_times_both_halves_of_reaching_an_instant() {
 }
 
 #[test]
+fn bench_takes_a_run_s_settings_by_its_rules_and_refuses_faults_it_would_not_show() {
+    assert_usage_error(
+        &["bench", "--stall", "policy@1+0.5"],
+        "error: --stall/--kill: the bench times every tick",
+    );
+    // The graph's overrides are a run's, checked as `run` checks them.
+    assert_usage_error(&["bench", "--rate", "nobody=10"], "--rate nobody=10: ");
+}
+
+#[test]
 fn bench_prints_the_bare_wait_floor_then_each_node() {
     // Shape only: timings on a shared machine are not asserted anywhere.
     let o = ratelab(&["bench", "--hz", "200", "--duration", "0.5", "--stagger"]);
