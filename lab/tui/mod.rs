@@ -1569,6 +1569,44 @@ mod tests {
         }
     }
 
+    /// After a change, the real clock's measured rate is the new setting's, not a mix with
+    /// the one before (which read 20.6 Hz just after a change from 50 Hz to 5 Hz).
+    #[test]
+    fn a_real_clock_measured_rate_counts_from_the_last_change() {
+        let (tx, _rx) = crossbeam_channel::unbounded();
+        let mut app = App::new(tx, "scripted".into(), None, Speed::Times(1.0));
+        app.on_telemetry(Telemetry::Started {
+            cfg: RunConfig {
+                clock: ClockKind::Real,
+                ..virtual_cfg(50.0, 2)
+            },
+            policy: "scripted".into(),
+            recording: None,
+        });
+        let tick = |app: &mut App, ms: u64| {
+            app.on_telemetry(Telemetry::NodeTick {
+                node: 1,
+                now: ratelab::Nanos(ms * 1_000_000),
+                lateness: ratelab::Nanos(5_000),
+                took: ratelab::Nanos(30_000),
+            })
+        };
+        for k in 0..50 {
+            tick(&mut app, k * 20);
+        }
+        app.on_telemetry(Telemetry::Changed {
+            at: ratelab::Nanos(1_000_000_000),
+            text: "control rate → 5 Hz".into(),
+        });
+        for k in 0..3 {
+            tick(&mut app, 1_000 + k * 200);
+        }
+        let hz = app.view().nodes[1]
+            .measured_hz
+            .expect("two ticks since the change");
+        assert!((hz - 5.0).abs() < 1e-9, "{hz}");
+    }
+
     #[test]
     fn a_real_clock_node_box_shows_the_median_time_of_its_ticks() {
         let (tx, _rx) = crossbeam_channel::unbounded();
