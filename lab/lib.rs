@@ -155,13 +155,6 @@ fn replay(args: &cli::ReplayArgs) -> anyhow::Result<()> {
             metrics.seed,
             applied.len()
         );
-        let never = run.commands.len() - applied.len();
-        if never > 0 {
-            println!(
-                "[ratelab]   {never} command(s) logged after the run's end at {:.2} s set aside: the run ended before they took effect",
-                ratelab::Nanos(run.end_ns).as_secs_f64()
-            );
-        }
         // Each change at its run time (the summary gives only the start and the end: a depth
         // set to 2 and back to 1 reads as 1): the first REPLAY_SHOWN of them.
         for c in applied.iter().take(REPLAY_SHOWN) {
@@ -174,6 +167,22 @@ fn replay(args: &cli::ReplayArgs) -> anyhow::Result<()> {
         }
         if applied.len() > REPLAY_SHOWN {
             println!("[ratelab]   … and {} more", applied.len() - REPLAY_SHOWN);
+        }
+        // Changes made after its last instant (paused, or with the restart that ended it):
+        // they set what it ended with, and ran no tick.
+        let after = run.after_end();
+        if !after.is_empty() {
+            println!(
+                "[ratelab]   after its last instant ({:.2} s), applied to the settings it ended with as in the live run:",
+                ratelab::Nanos(run.end_ns).as_secs_f64()
+            );
+            for c in after.iter().take(REPLAY_SHOWN) {
+                let said = ratelab::session::describe(&c.command);
+                println!("[ratelab]     {}", printable(&said));
+            }
+            if after.len() > REPLAY_SHOWN {
+                println!("[ratelab]     … and {} more", after.len() - REPLAY_SHOWN);
+            }
         }
         for line in metrics.summary_lines(None).iter().skip(1) {
             println!("[ratelab]   {line}");

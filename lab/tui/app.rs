@@ -27,8 +27,10 @@ mod hang;
 mod journal;
 mod log;
 mod review;
+mod scrub;
 mod settings;
 mod views;
+use views::Faults;
 
 /// Told each new run's graph ([`App::on_graph`]): `Some(line)` to say.
 pub type GraphHook = Box<dyn Fn(&GraphSpec) -> Option<String> + Send>;
@@ -152,8 +154,9 @@ pub struct App {
     lost_at_last_step: Vec<u64>,
     /// Each node's liveliness, by node index (`None`: no lease).
     alive: Vec<Option<bool>>,
-    /// The run's injected faults (`--stall`, `--kill`).
-    faults: Vec<ratelab::qos::Fault>,
+    /// The run's injected faults: given at the start (`--stall`, `--kill`) and injected
+    /// while it goes (`k`).
+    faults: Faults,
     /// Virtual clock with executors: each node's ticks and skipped ticks, as counted at the
     /// run times they come with, over the arrows' window ([`super::live::WINDOW`]) and the
     /// count just before it.
@@ -259,10 +262,10 @@ pub struct App {
     ended_word: Option<String>,
     /// A seek back is folding the journal again (its start is not a new run).
     rewinding: bool,
-    /// Where the last seek sent asked the engine to put the run, until the engine says the
-    /// run is there ([`App::seek_answered`]): a burst of ← moves a step per key, each from
-    /// the one before, not all from the cursor the screen still shows.
-    seek_target: Option<Nanos>,
+    /// Where the last seek sent asked the engine to put the run, and how many seeks it has
+    /// not answered yet ([`Telemetry::Sought`]): while any is out, a burst of ← moves a step
+    /// per key, each from the one before, not all from the cursor the screen still shows.
+    seek_target: Option<(Nanos, usize)>,
     /// Attached: the launch's endpoint.
     endpoint: Option<String>,
     /// Attached: each topic's over-the-wire latency (p50, p99 µs) when it crosses processes.
@@ -309,7 +312,7 @@ impl App {
             lost_before_reliable: Vec::new(),
             lost_at_last_step: Vec::new(),
             alive: Vec::new(),
-            faults: Vec::new(),
+            faults: Faults::default(),
             exec: VecDeque::new(),
             selected: None,
             nav: super::navigate::Navigation::default(),
@@ -533,7 +536,7 @@ impl App {
     /// Fold one telemetry message into what the lab shows.
     fn fold(&mut self, t: Telemetry) {
         match t {
-            Telemetry::Rewound { .. } => {}
+            Telemetry::Rewound { .. } | Telemetry::Sought { .. } => {}
             Telemetry::Started {
                 cfg,
                 policy,
@@ -578,7 +581,7 @@ impl App {
             }
             // Marked on its node while it lasts, as a fault given at the start is; folded
             // from the journal, so a seek back before it drops it with the branch.
-            Telemetry::Faulted(fault) => self.faults.push(fault),
+            Telemetry::Faulted(fault) => self.faults.injected.push(fault),
             Telemetry::ClockSwitched { at, clock } => {
                 // The same run goes on: a new segment, as a change starts one.
                 self.clock = clock.to_string();
@@ -656,7 +659,10 @@ impl App {
         self.explained_losses.clear();
         self.lost_before_reliable.clear();
         self.lost_at_last_step.clear();
-        self.faults = cfg.faults.clone();
+        self.faults = Faults {
+            given: cfg.faults.clone(),
+            injected: Vec::new(),
+        };
         self.alive = cfg
             .graph
             .nodes
@@ -1035,46 +1041,6 @@ impl App {
         {
             Ok(hz) => self.set_rate(self.rate_target(), hz),
             Err(()) => self.say(format!("not a rate in (0, 10000] Hz: '{text}'")),
-        }
-    }
-
-    /// Seek a second back or forward (`second`), else a period of the selected node (the
-    /// actuator's when none is).
-    fn seek(&mut self, back: bool, second: bool) {
-        let by = if second {
-            Nanos::SECOND
-        } else {
-            let node = match self.selected {
-                Some(Selected::Node(n)) => n,
-                _ => self.graph.actuator,
-            };
-            ratelab::rate::period_for_hz(self.rate_of(node)).unwrap_or(Nanos::SECOND)
-        };
-        let from = self.seek_target.unwrap_or(self.now);
-        let to = if back {
-            from.saturating_sub(by)
-        } else {
-            from.saturating_add(by)
-        };
-        if self.reviewing() {
-            self.review_to(to);
-        } else {
-            self.seek_target = Some(to);
-            self.send(Control::Seek(to));
-        }
-    }
-
-    /// Has the engine answered the last seek sent ([`App::seek_target`])? Its status at the
-    /// instant asked for, a run going again, a refusal or a note (a part the real clock ran
-    /// is skipped to where it began) each end the wait.
-    pub(super) fn seek_answered(&mut self, t: &Telemetry) {
-        let answered = match t {
-            Telemetry::Status { now, paused, .. } => !paused || self.seek_target == Some(*now),
-            Telemetry::Error(_) | Telemetry::Applied(_) | Telemetry::Started { .. } => true,
-            _ => false,
-        };
-        if answered {
-            self.seek_target = None;
         }
     }
 

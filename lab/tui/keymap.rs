@@ -374,7 +374,8 @@ pub const HELP_NOTES: [(&str, &str); 5] = [
 pub enum Typing {
     /// Nothing: keys act.
     No,
-    /// An exact rate: digits and `.` only.
+    /// An exact rate: every character is typed, and Enter judges the whole (`-5` is refused,
+    /// not read as 5).
     Rate,
     /// The graph panel's filter: any printable character.
     Filter,

@@ -542,6 +542,19 @@ mod tests {
         feed(&mut app, 0.5, 1.2);
         let text = render(&app, 120, 40);
         assert!(!text.contains("STALLED"), "{text}");
+        // Injected paused at 1.2 s, it takes effect at the next instant (1.22 s): a seek
+        // back to 1.2 s, where the lab heard of it, is before it and drops it.
+        app.on_telemetry(Telemetry::Faulted(
+            ratelab::command::parse_fault("policy@1.22+0.48").unwrap(),
+        ));
+        let text = render(&app, 120, 40);
+        assert!(!text.contains("STALLED"), "not yet at 1.2 s: {text}");
+        app.on_telemetry(Telemetry::Rewound {
+            at: ratelab::Nanos(1_200_000_000),
+        });
+        feed(&mut app, 1.2, 1.4);
+        let text = render(&app, 120, 40);
+        assert!(!text.contains("STALLED"), "the branch has no fault: {text}");
     }
 
     /// The verdict reads whole in the narrow cartpole panel (80 columns): the panel's name
@@ -1932,6 +1945,7 @@ mod tests {
             Some(Msg::SeekBack { second: false })
         );
         app.on_telemetry(paused(at));
+        app.on_telemetry(Telemetry::Sought { at });
         let rec = report.trace.iter().rev().find(|s| s.t <= at).unwrap();
         let obs = rec.topics.get(ratelab::graph::TopicId(0));
         let r = app.view().readout.expect("paused: the readout");
@@ -1971,13 +1985,24 @@ mod tests {
         let ms = |ms: u64| Control::Seek(ratelab::Nanos(ms * 1_000_000));
         let asked: Vec<Control> = rx.try_iter().collect();
         assert_eq!(asked, vec![ms(2960), ms(2940), ms(2920)]);
-        // Answered (the status at the last one asked): the next ← is from the cursor again.
-        app.on_telemetry(Telemetry::Rewound {
-            at: ratelab::Nanos(2_920_000_000),
-        });
-        app.on_telemetry(paused(ratelab::Nanos(2_920_000_000)));
+        // The engine answers each (its status and `Sought`); while one is out, a ← goes on
+        // from the last asked.
+        let answer = |app: &mut App, at_ms: u64| {
+            let at = ratelab::Nanos(at_ms * 1_000_000);
+            app.on_telemetry(Telemetry::Rewound { at });
+            app.on_telemetry(paused(at));
+            app.on_telemetry(Telemetry::Sought { at });
+        };
+        answer(&mut app, 2960);
+        answer(&mut app, 2940);
         app.on_msg(Msg::SeekBack { second: false });
-        assert_eq!(rx.try_recv().ok(), Some(ms(2900)));
+        assert_eq!(rx.try_recv().ok(), Some(ms(2900)), "one still out");
+        answer(&mut app, 2920);
+        // A seek that lands short of its target (the last instant at or before it): once
+        // every seek is answered, the next ← is from where the run is.
+        answer(&mut app, 2880);
+        app.on_msg(Msg::SeekBack { second: false });
+        assert_eq!(rx.try_recv().ok(), Some(ms(2860)));
     }
 
     #[test]

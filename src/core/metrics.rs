@@ -830,10 +830,10 @@ impl Metrics {
         if !topics.is_empty() {
             lines.push(format!("qos: {}", topics.join(" | ")));
         }
-        // A fault set at or after the run's end did nothing (its warning said so at the start):
-        // not listed as if it had happened.
+        // A fault set after the run's end did nothing (its warning said so at the start): not
+        // listed as if it had happened. One at the end itself took that last instant.
         let end_s = self.sim_time_s;
-        let took_effect = |f: &&FaultMetrics| f.at_s < end_s;
+        let took_effect = |f: &&FaultMetrics| f.at_s <= end_s;
         let mut nodes: Vec<(&String, &NodeMetrics)> = self
             .nodes
             .iter()
@@ -859,9 +859,11 @@ impl Metrics {
                         p.push_str(&format!("{sep}{}", said.join(", ")));
                     }
                     match (n.faulted_ticks, faults.is_empty()) {
-                        (Some(f), true) => p.push_str(&format!(" {f} ticks lost to faults")),
+                        (Some(f), true) if f > 0 => {
+                            p.push_str(&format!(" {f} ticks lost to faults"))
+                        }
                         (Some(f), false) => p.push_str(&format!(": {f} ticks lost")),
-                        (None, _) => {}
+                        _ => {}
                     }
                     p
                 })

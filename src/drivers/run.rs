@@ -47,6 +47,11 @@ pub struct RunOptions {
     pub trace_every: u64,
     /// Commands to apply at run times (sorted by `at_ns`; virtual clock).
     pub commands: Vec<TimedCommand>,
+    /// Commands applied once the run has ended, before its summary (virtual clock): what a
+    /// lab's user changed after the run's last instant, paused, before a restart or quit.
+    /// They set the settings the run ended with (the summary's end rates), as they did in
+    /// the live run, and no tick (`replay`).
+    pub after_end: Vec<Command>,
     /// Offer the graph to ROS 2 while it runs ([`ratelab_ros2`]). Under the virtual clock the
     /// run then keeps pace with the wall clock (one second of run time per second), so
     /// that ROS 2's tools see the graph's rates; its results are unchanged. The session
@@ -232,6 +237,10 @@ fn run_end_to_end(
             Drove::Ended(end) => end,
             Drove::Left => core.interrupt(), // a pacer never leaves
         };
+        for c in &opts.after_end {
+            // One refused here was refused in the live run too, when made: never logged.
+            let _ = core.apply_after_end(c);
+        }
         let exec = core.scheduler().figures(end.at);
         (end, core.scheduler().ticks().to_vec(), None, exec)
     } else {

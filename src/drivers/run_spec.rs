@@ -39,7 +39,8 @@ pub fn late_fault_warnings(cfg: &RunConfig, speech: Speech) -> Vec<String> {
     if cfg.duration == ratelab_runtime::telemetry::UNBOUNDED {
         return Vec::new();
     }
-    (cfg.faults.iter().filter(|f| f.at >= cfg.duration))
+    // One at the duration itself takes the run's last instant (which runs at it).
+    (cfg.faults.iter().filter(|f| f.at > cfg.duration))
         .map(|f| {
             let setting = if f.duration.is_some() {
                 Setting::Stall

@@ -557,6 +557,19 @@ impl RunCore {
 
     /// Take what commands asked of the scheduler: an executor plan, phase changes (from the
     /// next instant on).
+    /// Apply `command` to a run that has ended, as a lab's user does after its last instant
+    /// (paused, before a restart): it sets what the run ended with (its rates, a new
+    /// executor plan, which the executors' figures then count in) and runs nothing; not
+    /// logged. A replay takes the session's such commands up so ([`Command::apply`]).
+    ///
+    /// # Errors
+    /// As [`Command::apply`]'s.
+    pub fn apply_after_end(&mut self, command: &Command) -> Result<(), String> {
+        command.apply(&self.handles)?;
+        self.take_plan();
+        Ok(())
+    }
+
     fn take_plan(&mut self) {
         let asked = lock(&self.handles.plan_request).take();
         if let Some(plan) = asked {

@@ -156,9 +156,18 @@ pub enum Telemetry {
         text: String,
     },
     /// A fault was injected while the run goes ([`Command::InjectFault`]: the lab's `k`, a
-    /// session log's `inject_fault`), told just before its [`Telemetry::Changed`]: the
-    /// front end marks its node while it lasts, as it marks one given at the start.
+    /// session log's `inject_fault`), told just before its [`Telemetry::Changed`], as it
+    /// takes effect: from the instant the command was applied before when it was given an
+    /// earlier time. The front end marks its node while it lasts, as it marks one given at
+    /// the start.
     Faulted(ratelab_core::qos::Fault),
+    /// The engine has taken a [`Control::Seek`] (whether it moved the run or not: past the
+    /// end, or not paused): the run is at `at`. A front end that sends seeks faster than
+    /// they are answered counts these to know when its cursor is the engine's again.
+    Sought {
+        /// Run time the run is at after the seek.
+        at: Nanos,
+    },
     /// The running graph changed clocks in place at run time `at` ([`Control::SwitchClock`]
     /// on a run that has not ended; `ratelab::runcore::RunCore::run_real`): the same run
     /// goes on under `clock`, its nodes, topics, counters and plant as they were. Like

@@ -15,7 +15,7 @@
 use super::{App, GhostStep, Live, StepRecord, Verdict};
 use ratelab::graph::spec::ExecutorSpec;
 use ratelab::graph::TopicId;
-use ratelab::qos::{Fault, TopicQos};
+use ratelab::qos::TopicQos;
 use ratelab::session::{Speed, Telemetry};
 use ratelab::Nanos;
 use std::collections::{BTreeMap, VecDeque};
@@ -49,7 +49,7 @@ pub(super) struct Folded {
     lost_before_reliable: Vec<Option<(Nanos, u64)>>,
     lost_at_last_step: Vec<u64>,
     alive: Vec<Option<bool>>,
-    faults: Vec<Fault>,
+    faults: super::Faults,
     exec: VecDeque<(Nanos, Vec<(u64, u64)>)>,
     live: Live,
     history: VecDeque<(f64, f64)>,

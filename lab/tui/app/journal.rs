@@ -18,6 +18,8 @@ impl App {
             self.seek_answered(&t);
         }
         match t {
+            // Counted by `seek_answered` above; nothing to show.
+            Telemetry::Sought { .. } => {}
             Telemetry::Rewound { at } => {
                 self.rewind(at);
                 // Only the virtual clock scrubs in the engine: a run started under the real
@@ -82,6 +84,9 @@ impl App {
     /// was then, by folding again what the run told up to then (what the screen showed at
     /// that run time, the clock it was under included).
     pub(super) fn rewind(&mut self, at: Nanos) {
+        // A fault injected at an instant after `at` is not the branch's (the engine's log
+        // keeps only the commands up to `at`), though the lab heard of it before `at` ran.
+        self.faults.injected.retain(|f| f.at <= at);
         if self.journal_full {
             self.say(format!(
                 "back at t={:.2} s: the run is too long to show as it was (its journal is full: {MAX_JOURNAL} messages or {} MiB); the figures go on from here",
@@ -113,6 +118,8 @@ impl App {
         self.checkpoints.hold(false);
         self.rewinding = false;
         self.paused = paused;
+        // Folded again, the journal told of it: not the branch's (above).
+        self.faults.injected.retain(|f| f.at <= at);
         self.now = at;
         self.say(format!(
             "back at t={:.3} s: a change or space branches the run here",

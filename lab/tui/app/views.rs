@@ -567,3 +567,20 @@ fn staircase(points: &[(f64, f64)]) -> Vec<(f64, f64)> {
         .flat_map(|w| [(w[0].0, w[0].1), (w[1].0, w[0].1)])
         .collect()
 }
+
+/// A run's faults as the lab shows them on their nodes.
+#[derive(Clone, Debug, Default)]
+pub(super) struct Faults {
+    /// Given at the start (`--stall`, `--kill`): the run's from its first instant.
+    pub(super) given: Vec<ratelab::qos::Fault>,
+    /// Injected while the run went (`k`, a session log's `inject_fault`), each from the
+    /// instant it took effect ([`ratelab::session::Telemetry::Faulted`]): a seek back before that drops it.
+    pub(super) injected: Vec<ratelab::qos::Fault>,
+}
+
+impl Faults {
+    /// Every fault, given first.
+    pub(super) fn iter(&self) -> impl Iterator<Item = &ratelab::qos::Fault> {
+        self.given.iter().chain(&self.injected)
+    }
+}

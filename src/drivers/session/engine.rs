@@ -419,12 +419,10 @@ impl Engine {
         if let Some(r) = &recording {
             finish_recording(r, &next, &metrics, &end);
         }
-        // The brain the next run starts with: a swap made while paused counts, though this
-        // run ended before it took effect (its log then sets it aside).
-        let last_policy = self.current_policy_spec(policy);
         let current = self.log.runs.last_mut().expect("pushed above");
-        current.ended_at(end.at);
+        current.end_ns = end.at.0;
         current.metrics = Some(metrics);
+        let last_policy = self.current_policy_spec(policy);
         self.save_log();
         Ok(RunOutcome {
             next,
@@ -698,9 +696,21 @@ impl Engine {
                 if let Some(r) = recording {
                     record_change(r, at, &cmd, &text, from_ros2);
                 }
+                // The fault as it takes effect: from `at` (the instant it was applied before)
+                // when it was given an earlier time, as a time already past covers the ticks
+                // from now on; a stall ends when it was set to.
                 let faulted = match &cmd {
                     Command::InjectFault { fault } => {
-                        ratelab_runtime::command::parse_fault(fault).ok()
+                        ratelab_runtime::command::parse_fault(fault).ok().map(|f| {
+                            let from = f.at.max(at);
+                            ratelab_core::qos::Fault {
+                                duration: f
+                                    .duration
+                                    .map(|d| f.at.saturating_add(d).saturating_sub(from)),
+                                at: from,
+                                node: f.node,
+                            }
+                        })
                     }
                     _ => None,
                 };

@@ -64,28 +64,30 @@ pub struct LoggedRun {
     /// Run time at which the run ended (the last instant run), ns.
     pub end_ns: u64,
     /// The commands, in order, with the virtual time they took effect. One after `end_ns`
-    /// never took effect (the run ended first: a change made while paused, then a restart);
-    /// the lab no longer logs one, and a replay sets it aside ([`LoggedRun::applied`]).
+    /// was made after the run's last instant (while paused, then a restart or quit): it
+    /// changed the settings the run ended with, not a tick of it ([`LoggedRun::after_end`]).
     pub commands: Vec<TimedCommand>,
     /// The summary at the end, as the live run measured it.
     pub metrics: Option<Metrics>,
 }
 
 impl LoggedRun {
-    /// The commands that took effect: those at or before the run's end, in order. A log
-    /// written by a lab before 2026-11-30 may hold one after it (made while paused, the
-    /// run restarted before the next instant): the run ended first, so the live run never
-    /// applied it and a replay must not either.
+    /// The commands applied between instants of the run, in order: those at or before its
+    /// end.
     pub fn applied(&self) -> &[TimedCommand] {
-        let n = self.commands.partition_point(|c| c.at_ns <= self.end_ns);
-        &self.commands[..n]
+        &self.commands[..self.after_end_from()]
     }
 
-    /// The run has ended at `end` (run time): its end and the commands that took effect,
-    /// dropping any logged for an instant that never ran.
-    pub fn ended_at(&mut self, end: Nanos) {
-        self.end_ns = end.0;
-        self.commands.retain(|c| c.at_ns <= end.0);
+    /// The commands made after the run's last instant (while paused, then a restart or
+    /// quit): logged for the instant after it, which never ran. They changed the settings
+    /// the run ended with (its summary's end rates), not a tick: a replay applies them once
+    /// the run has ended ([`crate::run::RunOptions::after_end`]), as the live run did.
+    pub fn after_end(&self) -> &[TimedCommand] {
+        &self.commands[self.after_end_from()..]
+    }
+
+    fn after_end_from(&self) -> usize {
+        self.commands.partition_point(|c| c.at_ns <= self.end_ns)
     }
 
     /// A run about to start with `cfg` and brain `policy` (no commands, no end yet).
@@ -353,6 +355,7 @@ pub fn replay_run(log: &SessionLog, index: usize) -> Result<Metrics, ReplayError
     let brain = load_policy(&r.policy)?;
     let opts = RunOptions {
         commands: r.applied().to_vec(),
+        after_end: r.after_end().iter().map(|c| c.command.clone()).collect(),
         keep_trace: false,
         ..RunOptions::default()
     };
@@ -365,7 +368,7 @@ mod tests {
     use ratelab_runtime::command::Command;
 
     #[test]
-    fn a_run_ended_keeps_only_the_commands_that_took_effect() {
+    fn commands_after_the_last_instant_are_told_apart() {
         let mut run = LoggedRun::starting(&RunConfig::default(), "scripted");
         for at_ns in [100, 200, 300] {
             run.commands.push(TimedCommand {
@@ -374,14 +377,14 @@ mod tests {
             });
         }
         run.end_ns = 200;
-        let at: Vec<u64> = run.applied().iter().map(|c| c.at_ns).collect();
+        let at = |c: &[TimedCommand]| c.iter().map(|c| c.at_ns).collect::<Vec<_>>();
         assert_eq!(
-            at,
+            at(run.applied()),
             [100, 200],
-            "one at the end took effect: it ran before that instant"
+            "at the end: before its instant ran"
         );
-        run.ended_at(Nanos(250));
-        assert_eq!((run.end_ns, run.commands.len()), (250, 2));
-        assert_eq!(run.applied().len(), 2);
+        assert_eq!(at(run.after_end()), [300]);
+        run.end_ns = 300;
+        assert!(run.after_end().is_empty());
     }
 }

@@ -181,7 +181,11 @@ impl Engine {
                 ));
                 None
             }
-            Ok(Control::Step | Control::Seek(_) | Control::SetSpeed(_)) => {
+            Ok(c @ (Control::Step | Control::Seek(_) | Control::SetSpeed(_))) => {
+                if let Control::Seek(_) = c {
+                    // Every seek is answered (a front end counts them); this one stays put.
+                    let _ = self.tx.send(Telemetry::Sought { at: now });
+                }
                 let _ = self.tx.send(Telemetry::Error(
                     "single-step, scrubbing and speed apply to the virtual clock only (c switches clock)".into(),
                 ));

@@ -146,10 +146,7 @@ impl Engine {
             return;
         }
         if !back && ended.is_some() {
-            // Nothing runs after the end: the run stays where it is, and says so (a front
-            // end waiting for the seek's answer takes it from the status).
-            self.tell_status(core, true);
-            return;
+            return; // nothing runs after the end
         }
         self.muted.store(back, Ordering::Relaxed);
         let mut result = core.seek(to.min(cfg.duration));
@@ -327,6 +324,8 @@ impl Paced<'_> {
                     );
                     self.handles = core.handles().clone();
                 }
+                // Taken, moved or not: a front end counts these answers.
+                let _ = e.tx.send(Telemetry::Sought { at: core.now() });
             }
             Control::SetSpeed(s) => {
                 e.speed = s;
