@@ -113,10 +113,27 @@ fn lab(args: &cli::RunArgs, stop: StopFlag) -> anyhow::Result<()> {
     tui::run_lab(settings, code, stop)
 }
 
-/// Re-run a session's virtual runs and compare with what the live runs measured.
+/// The first [`REPLAY_SHOWN`] of a logged run's `commands`, a line each (`indent`, then
+/// `when`'s words for it, then the command described), and how many more.
+fn list_commands(
+    commands: &[ratelab::run::TimedCommand],
+    indent: &str,
+    when: impl Fn(&ratelab::run::TimedCommand) -> String,
+) {
+    for c in commands.iter().take(REPLAY_SHOWN) {
+        // A log is a file from anywhere: its text reaches the terminal escaped.
+        let said = ratelab::session::describe(&c.command);
+        println!("{indent}{}{}", when(c), printable(&said));
+    }
+    if commands.len() > REPLAY_SHOWN {
+        println!("{indent}… and {} more", commands.len() - REPLAY_SHOWN);
+    }
+}
+
 /// The most commands `replay` lists per run (a session may hold thousands).
 const REPLAY_SHOWN: usize = 20;
 
+/// Re-run a session's virtual runs and compare with what the live runs measured.
 fn replay(args: &cli::ReplayArgs) -> anyhow::Result<()> {
     use ratelab::session::{replay_run, SessionLog};
     let log = SessionLog::load(&args.file)?;
@@ -156,18 +173,10 @@ fn replay(args: &cli::ReplayArgs) -> anyhow::Result<()> {
             applied.len()
         );
         // Each change at its run time (the summary gives only the start and the end: a depth
-        // set to 2 and back to 1 reads as 1): the first REPLAY_SHOWN of them.
-        for c in applied.iter().take(REPLAY_SHOWN) {
-            println!(
-                "[ratelab]   at {:.2} s: {}",
-                ratelab::Nanos(c.at_ns).as_secs_f64(),
-                // A log is a file from anywhere: its text reaches the terminal escaped.
-                printable(&ratelab::session::describe(&c.command))
-            );
-        }
-        if applied.len() > REPLAY_SHOWN {
-            println!("[ratelab]   … and {} more", applied.len() - REPLAY_SHOWN);
-        }
+        // set to 2 and back to 1 reads as 1).
+        list_commands(applied, "[ratelab]   ", |c| {
+            format!("at {:.2} s: ", ratelab::Nanos(c.at_ns).as_secs_f64())
+        });
         // Changes made after its last instant (paused, or with the restart that ended it):
         // they set what it ended with, and ran no tick.
         let after = run.after_end();
@@ -176,13 +185,7 @@ fn replay(args: &cli::ReplayArgs) -> anyhow::Result<()> {
                 "[ratelab]   after its last instant ({:.2} s), applied to the settings it ended with as in the live run:",
                 ratelab::Nanos(run.end_ns).as_secs_f64()
             );
-            for c in after.iter().take(REPLAY_SHOWN) {
-                let said = ratelab::session::describe(&c.command);
-                println!("[ratelab]     {}", printable(&said));
-            }
-            if after.len() > REPLAY_SHOWN {
-                println!("[ratelab]     … and {} more", after.len() - REPLAY_SHOWN);
-            }
+            list_commands(after, "[ratelab]     ", |_| String::new());
         }
         for line in metrics.summary_lines(None).iter().skip(1) {
             println!("[ratelab]   {line}");

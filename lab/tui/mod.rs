@@ -1586,16 +1586,11 @@ mod tests {
     /// the one before (which read 20.6 Hz just after a change from 50 Hz to 5 Hz).
     #[test]
     fn a_real_clock_measured_rate_counts_from_the_last_change() {
-        let (tx, _rx) = crossbeam_channel::unbounded();
-        let mut app = App::new(tx, "scripted".into(), None, Speed::Times(1.0));
-        app.on_telemetry(Telemetry::Started {
-            cfg: RunConfig {
-                clock: ClockKind::Real,
-                ..virtual_cfg(50.0, 2)
-            },
-            policy: "scripted".into(),
-            recording: None,
-        });
+        let cfg = RunConfig {
+            clock: ClockKind::Real,
+            ..virtual_cfg(50.0, 2)
+        };
+        let (mut app, _rx) = told(&cfg, &[], ratelab::Nanos::ZERO);
         let tick = |app: &mut App, ms: u64| {
             app.on_telemetry(Telemetry::NodeTick {
                 node: 1,
@@ -1622,16 +1617,11 @@ mod tests {
 
     #[test]
     fn a_real_clock_node_box_shows_the_median_time_of_its_ticks() {
-        let (tx, _rx) = crossbeam_channel::unbounded();
-        let mut app = App::new(tx, "scripted".into(), None, Speed::Times(1.0));
-        app.on_telemetry(Telemetry::Started {
-            cfg: RunConfig {
-                clock: ClockKind::Real,
-                ..virtual_cfg(50.0, 1)
-            },
-            policy: "scripted".into(),
-            recording: None,
-        });
+        let cfg = RunConfig {
+            clock: ClockKind::Real,
+            ..virtual_cfg(50.0, 1)
+        };
+        let (mut app, _rx) = told(&cfg, &[], ratelab::Nanos::ZERO);
         // Ticks of the policy (node 1) every 20 ms taking 30, 40 … 130 µs: the median of the
         // last second's is 80 µs.
         for k in 0..11u64 {
@@ -1666,16 +1656,11 @@ mod tests {
     /// A tick time past 999 µs reads whole in a narrow box: in ms where µs would not fit.
     #[test]
     fn a_long_tick_time_reads_whole_in_a_narrow_box() {
-        let (tx, _rx) = crossbeam_channel::unbounded();
-        let mut app = App::new(tx, "scripted".into(), None, Speed::Times(1.0));
-        app.on_telemetry(Telemetry::Started {
-            cfg: RunConfig {
-                clock: ClockKind::Real,
-                ..graph_cfg("graphs/cartpole-estimator.toml", 1)
-            },
-            policy: "scripted".into(),
-            recording: None,
-        });
+        let cfg = RunConfig {
+            clock: ClockKind::Real,
+            ..graph_cfg("graphs/cartpole-estimator.toml", 1)
+        };
+        let (mut app, _rx) = told(&cfg, &[], ratelab::Nanos::ZERO);
         // The policy (node 2) computes 2 ms a tick.
         for k in 0..11u64 {
             app.on_telemetry(Telemetry::NodeTick {

@@ -429,7 +429,7 @@ impl ExerciseFile {
 
     /// Is the prediction filled in: every `required` key present and a non-empty `why`?
     pub fn has_prediction(&self, required: &[&str]) -> bool {
-        !self.why().is_empty() && required.iter().all(|k| self.prediction.contains_key(*k))
+        missing_from(required, &self.prediction).is_empty()
     }
 
     /// The prediction as `key = value` text, for display beside the outcome.
@@ -806,6 +806,17 @@ pub fn run(
     run_report(which, setup, out, progress).map(|r| r.not_passed)
 }
 
+/// What `prediction` lacks of what an exercise asks for: each `required` key not there, then
+/// `why` when it is not a string that says something. Empty: the prediction is filled in.
+fn missing_from<'a>(required: &[&'a str], prediction: &toml::Table) -> Vec<&'a str> {
+    let said_why =
+        (prediction.get("why").and_then(toml::Value::as_str)).is_some_and(|w| !w.trim().is_empty());
+    (required.iter().copied())
+        .filter(|k| !prediction.contains_key(*k))
+        .chain((!said_why).then_some("why"))
+        .collect()
+}
+
 /// A prediction given in place of the file's: every key exercise `id` asks for (`required`)
 /// and a `why` that says something, and no other key (a misspelt key would otherwise be
 /// graded as left out).
@@ -828,14 +839,7 @@ fn check_given_prediction(
             keys()
         )));
     }
-    let said_why = given
-        .get("why")
-        .and_then(toml::Value::as_str)
-        .is_some_and(|w| !w.trim().is_empty());
-    let missing: Vec<&str> = (required.iter().copied())
-        .filter(|k| !given.contains_key(*k))
-        .chain((!said_why).then_some("why"))
-        .collect();
+    let missing = missing_from(required, given);
     if !missing.is_empty() {
         return Err(ExerciseError::GivenPrediction(format!(
             "missing {} ({id} asks for {})",

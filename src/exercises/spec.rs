@@ -45,12 +45,12 @@ impl ExerciseSpec {
     ) -> anyhow::Result<Report> {
         if !self.dir.is_dir() {
             // Said before any of its files is looked for: the folder is what is missing.
-            let (dir, given) = match speech {
-                Speech::Flags => ("--dir FOLDER", "from the ratelab repository"),
-                Speech::Keywords => ("dir=FOLDER", "from the ratelab repository"),
+            let dir = match speech {
+                Speech::Flags => "--dir FOLDER",
+                Speech::Keywords => "dir=FOLDER",
             };
             let why = format!(
-                "the exercises folder {} is not there: run {given} (its exercises/ folder), or give the folder with {dir}",
+                "the exercises folder {} is not there: run from the ratelab repository (its exercises/ folder), or give the folder with {dir}",
                 self.dir.display()
             );
             return Err(std::io::Error::new(std::io::ErrorKind::NotFound, why).into());
