@@ -3,8 +3,9 @@
 //! Python costs per tick. `--render` times the lab's frames, `--scrub` its time scrubbing.
 
 use crate::cli::BenchArgs;
+use ratelab::graph::nodes::GraphNode;
+use ratelab::ids::NodeId;
 use ratelab::metrics::NodeTiming;
-use ratelab::node::{Flow, Node};
 use ratelab::policy::Scripted;
 use ratelab::rate::Rate;
 use ratelab::run_spec::{GraphSettings, RunSpec};
@@ -160,25 +161,6 @@ pub fn scrub_bench(seeks: usize) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// The bare wait: a node with no work, so that [`run_real`] alone, with the same waiter,
-/// margin and policy as the graph's nodes, measures the machine's own floor.
-struct BareWait(Rate);
-
-impl Node for BareWait {
-    fn name(&self) -> &str {
-        "bare wait"
-    }
-    fn priority(&self) -> u32 {
-        0
-    }
-    fn rate(&self) -> &Rate {
-        &self.0
-    }
-    fn tick(&mut self, _now: Nanos) -> Flow {
-        Flow::Continue
-    }
-}
-
 /// One table row: a node's tick timing at `hz`, CPU as a share of `wall`.
 fn print_row(hz: f64, t: &NodeTiming, wall: Duration) {
     println!(
@@ -269,7 +251,9 @@ pub fn run_bench(a: &BenchArgs, stop: StopFlag) -> anyhow::Result<()> {
         let period = rate.period();
         let spin_margin = margin_for(period);
         let floor = run_real(
-            vec![Box::new(BareWait(rate))],
+            // The bare wait: a node with no work, so that `run_real` alone, with the same
+            // waiter, margin and policy as the graph's nodes, measures the machine's floor.
+            vec![GraphNode::idle("bare wait", NodeId(0), rate)],
             duration,
             &stop,
             &RealOptions {

@@ -19,7 +19,7 @@
 //!   (ROS 2's QoS), [`topic`] (a subscription's queue and its drop rule), [`msg`] (message
 //!   types and their registry, with [`ros_types`], their ROS 2 side, and [`pixels`], an
 //!   image's shared bytes), [`publisher`],
-//!   [`node`] and [`ports`] (the node traits), [`executor`] (ROS 2's executors as rules),
+//!   [`node`] and [`ports`] (the node trait, [`ports::RustNode`]), [`executor`] (ROS 2's executors as rules),
 //!   [`runlog`], [`estimate`] (an estimator against the truth), [`metrics`];
 //! - **runtime** (`ratelab_runtime`, `src/runtime/`): [`plant`] (the MuJoCo cartpole),
 //!   [`policy`] (brains; + [`checkpoint`] for trained ones; [`graph::interpreter`],

@@ -107,6 +107,10 @@ fn trim_ms(n: Nanos) -> String {
     s.trim_end_matches('0').trim_end_matches('.').to_string()
 }
 
+/// Where a command leaves a plan for the virtual scheduler to take at its next instant
+/// (`ratelab::scheduler::VirtualScheduler::take_plans_from`): the graph's handles hold it.
+pub type PlanRequest = std::sync::Arc<std::sync::Mutex<Option<ExecutionPlan>>>;
+
 /// A node's compute-time generator: [`ComputeTime`] with its seeded draws.
 #[derive(Clone, Debug)]
 pub struct ComputeDraw {

@@ -65,6 +65,7 @@
 
 use crate::command::{Command, TimedCommand};
 use crate::config::RunConfig;
+use crate::graph::nodes::GraphNode;
 use crate::graph::{lock, Graph, GraphHandles, StepObserver};
 use crate::plant::PlantState;
 use crate::plant::{CartPole, PlantError};
@@ -73,7 +74,7 @@ use crate::scheduler::{EndReason, Event, InstantOutcome, RunEnd, StopFlag, Virtu
 use ratelab_core::executor::{ExecutionPlan, ExecutorOverride};
 use ratelab_core::msg::TopicSnapshot;
 use ratelab_core::node::Flow;
-use ratelab_core::node::{Node, NodeState};
+use ratelab_core::node::NodeState;
 use ratelab_core::qos::LivelinessState;
 use ratelab_core::runlog::RunLog;
 use ratelab_core::time::Nanos;
@@ -144,10 +145,7 @@ pub fn build_validated_graph(
 /// The virtual-clock executor for `cfg`'s graph: its phase offsets and execution plan
 /// (executors, callback groups); response times are measured when the graph has executors
 /// or compute times.
-pub fn virtual_scheduler(
-    cfg: &RunConfig,
-    nodes: &[Box<dyn ratelab_core::node::Node>],
-) -> VirtualScheduler {
+pub fn virtual_scheduler(cfg: &RunConfig, nodes: &[GraphNode]) -> VirtualScheduler {
     VirtualScheduler::with_plan(
         nodes,
         &cfg.first_deadlines(),
@@ -238,7 +236,7 @@ pub struct RunCore {
     /// This graph's number in the process (a new one for each graph built).
     graph_id: u64,
     cfg: RunConfig,
-    nodes: Vec<Box<dyn Node>>,
+    nodes: Vec<GraphNode>,
     handles: GraphHandles,
     sched: VirtualScheduler,
     /// Commands given in advance, sorted by `at_ns`.

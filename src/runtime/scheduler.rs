@@ -23,12 +23,13 @@ pub use real_clock::{
 };
 pub use virtual_clock::{Event, InstantOutcome, PlanRequest, VirtualScheduler};
 
+use crate::graph::nodes::GraphNode;
 use ratelab_core::executor::{
     CallbackSpan, Dispatch, ExecFigures, ExecutionPlan, ExecutorFigures, ExecutorKind,
     NodeExecFigures,
 };
 use ratelab_core::metrics::{LatencyStats, NodeTiming};
-use ratelab_core::node::{Flow, Node};
+use ratelab_core::node::Flow;
 use ratelab_core::rate::{first_on_grid, next_deadline, DeadlineWaiter};
 use ratelab_core::time::Nanos;
 use std::cmp::Reverse;
@@ -230,29 +231,29 @@ pub fn panic_message(p: &(dyn std::any::Any + Send)) -> String {
 #[cfg(test)]
 mod probes {
     use super::*;
+    use crate::graph::kind::NodeOf;
+    use ratelab_core::ids::NodeId;
+    use ratelab_core::ports::RustNode;
     use ratelab_core::rate::Rate;
     use std::sync::Mutex;
-    pub(super) struct Probe {
-        pub(super) name: &'static str,
-        pub(super) prio: u32,
-        pub(super) rate: Rate,
-        pub(super) log: Arc<Mutex<Vec<(u64, &'static str)>>>,
-        pub(super) stop_at: Option<Nanos>,
+
+    /// Logs each tick; stops the run from `stop_at` on.
+    struct Probe {
+        name: &'static str,
+        log: Arc<Mutex<Vec<(u64, &'static str)>>>,
+        stop_at: Option<Nanos>,
+        last: Nanos,
     }
 
-    impl Node for Probe {
-        fn name(&self) -> &str {
-            self.name
-        }
-        fn priority(&self) -> u32 {
-            self.prio
-        }
-        fn rate(&self) -> &Rate {
-            &self.rate
-        }
-        fn tick(&mut self, now: Nanos) -> Flow {
+    impl RustNode for Probe {
+        type Input = ();
+        type Output = ();
+        fn tick(&mut self, now: Nanos, _: ()) {
+            self.last = now;
             self.log.lock().unwrap().push((now.0, self.name));
-            if self.stop_at.is_some_and(|t| now >= t) {
+        }
+        fn flow(&self) -> Flow {
+            if self.stop_at.is_some_and(|t| self.last >= t) {
                 Flow::Stop
             } else {
                 Flow::Continue
@@ -260,10 +261,27 @@ mod probes {
         }
     }
 
+    /// A node named `name` of rank `rank` at `hz`, logging its ticks into `log` and
+    /// stopping the run from `stop_at` on.
+    pub(super) fn probe(
+        (name, rank, hz): (&'static str, usize, f64),
+        log: &Arc<Mutex<Vec<(u64, &'static str)>>>,
+        stop_at: Option<Nanos>,
+    ) -> GraphNode {
+        let work = NodeOf::unbound(Probe {
+            name,
+            log: log.clone(),
+            stop_at,
+            last: Nanos::ZERO,
+        });
+        GraphNode::alone(name, NodeId(rank), Rate::new(hz).unwrap(), |_| work)
+    }
+
+    /// Actuator, sensor and policy at `hz` (sensor, policy, actuator), logging into `log`.
     pub(super) fn probes(
         log: &Arc<Mutex<Vec<(u64, &'static str)>>>,
         hz: [f64; 3],
-    ) -> Vec<Box<dyn Node>> {
+    ) -> Vec<GraphNode> {
         // Deliberately listed out of priority order: the heap must sort by (due, priority).
         [
             ("actuator", 2, hz[2]),
@@ -271,15 +289,7 @@ mod probes {
             ("policy", 1, hz[1]),
         ]
         .into_iter()
-        .map(|(name, prio, hz)| {
-            Box::new(Probe {
-                name,
-                prio,
-                rate: Rate::new(hz).unwrap(),
-                log: log.clone(),
-                stop_at: None,
-            }) as Box<dyn Node>
-        })
+        .map(|node| probe(node, log, None))
         .collect()
     }
 }

@@ -971,3 +971,66 @@ fn every_crate_warns_of_a_public_item_without_docs() {
         );
     }
 }
+
+/// Every trait in `file` (at any depth of inline modules, `#[cfg(test)]` items left out) that
+/// declares a method named `tick`, as `Trait (pub)` or `Trait`.
+fn traits_with_a_tick(items: &[syn::Item], out: &mut Vec<String>) {
+    for item in items {
+        if is_cfg_test(attrs(item)) {
+            continue;
+        }
+        match item {
+            syn::Item::Trait(t) => {
+                let ticks = t.items.iter().any(|i| match i {
+                    syn::TraitItem::Fn(f) => f.sig.ident == "tick",
+                    _ => false,
+                });
+                if ticks {
+                    let public = matches!(t.vis, syn::Visibility::Public(_));
+                    out.push(format!("{}{}", t.ident, if public { " (pub)" } else { "" }));
+                }
+            }
+            syn::Item::Mod(m) => {
+                if let Some((_, inner)) = &m.content {
+                    traits_with_a_tick(inner, out);
+                }
+            }
+            _ => {}
+        }
+    }
+}
+
+/// One node trait (issue "One front-end kit…", item 4): the only public trait in the library
+/// and the lab that declares a `tick` is `ratelab_core::ports::RustNode`, which every kind
+/// implements, built in or a program's own; the schedulers run one concrete type around it
+/// (`GraphNode`). The one other trait with a `tick` is the graph's type-erased side of a
+/// `RustNode` (`graph::kind::Work`, crate-private, never written by a kind).
+#[test]
+fn one_node_trait_is_public() {
+    let mut found = Vec::new();
+    for (_, dir, _) in LAYERS {
+        let mut files = Vec::new();
+        rust_files(&crate::repo(dir), &mut files);
+        for path in files {
+            let text = std::fs::read_to_string(&path).unwrap();
+            let file = syn::parse_file(&text).unwrap();
+            let mut traits = Vec::new();
+            traits_with_a_tick(&file.items, &mut traits);
+            let rel = path
+                .strip_prefix(crate::repo(""))
+                .unwrap_or(&path)
+                .display();
+            found.extend(traits.into_iter().map(|t| format!("{rel}: {t}")));
+        }
+    }
+    found.sort();
+    found.dedup(); // the facade's folder holds the other crates' folders
+    assert_eq!(
+        found,
+        [
+            "src/core/ports.rs: RustNode (pub)",
+            "src/runtime/graph/kind.rs: Work"
+        ],
+        "a trait with a tick other than RustNode and the graph's Work"
+    );
+}

@@ -147,6 +147,12 @@ impl NodeOf {
         Ok(NodeOf::of(node, ports::<N>(cx)?))
     }
 
+    /// `node`, which reads and publishes nothing, bound to no topics
+    /// ([`super::nodes::GraphNode::idle`], the schedulers' tests).
+    pub(crate) fn unbound<N: RustNode<Input = (), Output = ()>>(node: N) -> NodeOf {
+        NodeOf::of(node, ((), ()))
+    }
+
     /// `node` on its bound ports.
     fn of<N: RustNode>(node: N, (inputs, outputs): BoundPorts<N>) -> NodeOf {
         NodeOf(Box::new(Bound::<N> {

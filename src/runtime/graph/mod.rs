@@ -24,7 +24,6 @@ pub use kind::{Kind, KindDef};
 use nodes::{ExternalPort, GraphNode, NodeCore};
 use ratelab_core::executor::ComputeDraw;
 use ratelab_core::msg::AnyTopic;
-use ratelab_core::node::Node;
 use ratelab_core::publisher::Outbox;
 use ratelab_core::qos::{Fault, Liveliness};
 use ratelab_core::rate::{InvalidRate, Rate};
@@ -78,7 +77,7 @@ pub struct GraphHandles {
     /// [`GraphHandles::current_spec`]…
     pub executor: Arc<Mutex<Option<ratelab_core::executor::ExecutorOverride>>>,
     /// …and the plan the virtual scheduler takes at its next instant.
-    pub plan_request: crate::scheduler::PlanRequest,
+    pub plan_request: ratelab_core::executor::PlanRequest,
     /// The phase changes asked for while running (`Command::SetPhase`), which the virtual
     /// scheduler takes before its next instant.
     pub phase_request: Arc<PhaseRequests>,
@@ -267,7 +266,7 @@ impl GraphHandles {
 /// A built graph: the nodes (in tie-break order) plus the handles.
 pub struct Graph {
     /// The nodes, by [`NodeId`].
-    pub nodes: Vec<Box<dyn Node>>,
+    pub nodes: Vec<GraphNode>,
     /// Handles into the running graph.
     pub handles: GraphHandles,
 }
@@ -477,7 +476,7 @@ impl Graph {
         handles: &GraphHandles,
         seed: u64,
         i: usize,
-    ) -> Result<Box<dyn Node>, GraphError> {
+    ) -> Result<GraphNode, GraphError> {
         if i >= handles.spec.nodes.len() {
             return Err(GraphError::Node(format!("no node {i} in the graph")));
         }
@@ -492,7 +491,7 @@ fn build_node(
     seed: u64,
     i: usize,
     observers: &mut Option<Vec<Box<dyn StepSink>>>,
-) -> Result<Box<dyn Node>, GraphError> {
+) -> Result<GraphNode, GraphError> {
     let spec = &handles.spec;
     let topics = &handles.topics;
     let n = &spec.nodes[i];
@@ -562,5 +561,5 @@ fn build_node(
         outbox: &outbox,
     };
     let work = (n.kind.def().make)(&mut cx).map_err(GraphError::Node)?;
-    Ok(Box::new(GraphNode::new(core, work)) as Box<dyn Node>)
+    Ok(GraphNode::new(core, work))
 }

@@ -5,36 +5,15 @@
 //! executors' rules; only the ticks are elsewhere.
 
 use crate::config::RunConfig;
+use crate::graph::nodes::GraphNode;
 use crate::scheduler::{Event, VirtualScheduler};
-use ratelab_core::node::{Flow, Node};
+use ratelab_core::ids::NodeId;
 use ratelab_core::rate::{InvalidRate, Rate};
 use ratelab_core::time::Nanos;
 
-/// A node as a follower sees it: its name, tie-break rank and rate. It never ticks here.
-struct Stand {
-    name: String,
-    rank: u32,
-    rate: Rate,
-}
-
-impl Node for Stand {
-    fn name(&self) -> &str {
-        &self.name
-    }
-    fn priority(&self) -> u32 {
-        self.rank
-    }
-    fn rate(&self) -> &Rate {
-        &self.rate
-    }
-    fn tick(&mut self, _now: Nanos) -> Flow {
-        Flow::Continue // never called: every tick runs elsewhere
-    }
-}
-
 /// A run's order of events, its ticks run elsewhere (module docs).
 pub struct Follower {
-    nodes: Vec<Box<dyn Node>>,
+    nodes: Vec<GraphNode>,
     sched: VirtualScheduler,
     duration: Nanos,
 }
@@ -52,11 +31,8 @@ impl Follower {
             .iter()
             .enumerate()
             .map(|(i, n)| {
-                Ok(Box::new(Stand {
-                    name: n.name.clone(),
-                    rank: i as u32,
-                    rate: Rate::new(n.rate_hz)?,
-                }) as Box<dyn Node>)
+                // A stand-in: it never ticks here, every tick runs elsewhere.
+                Ok(GraphNode::idle(&n.name, NodeId(i), Rate::new(n.rate_hz)?))
             })
             .collect::<Result<Vec<_>, InvalidRate>>()?;
         let sched = VirtualScheduler::with_plan(

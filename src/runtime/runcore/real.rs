@@ -5,10 +5,10 @@
 //! [`super::RunCore::step`] and [`super::RunCore::next_event`].
 
 use super::RunCore;
+use crate::graph::nodes::GraphNode;
 use crate::scheduler::{run_real, EndReason, RealOptions, RunEnd, StopFlag, TickReport};
 use ratelab_core::executor::ExecFigures;
 use ratelab_core::metrics::NodeTiming;
-use ratelab_core::node::Node;
 use ratelab_core::time::Nanos;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
@@ -81,7 +81,7 @@ impl RunCore {
         let resumed = from > Nanos::ZERO || self.sched.ticks().iter().any(|&t| t > 0);
         let deadlines = self.sched.hand_over(&mut self.nodes);
         let all = std::mem::take(&mut self.nodes);
-        let mut slots: Vec<Option<Box<dyn Node>>> = all.into_iter().map(Some).collect();
+        let mut slots: Vec<Option<GraphNode>> = all.into_iter().map(Some).collect();
         let index: Vec<usize> = match part {
             Some(p) => p.iter().copied().filter(|&i| i < slots.len()).collect(),
             None => (0..slots.len()).collect(),
@@ -127,7 +127,7 @@ impl RunCore {
                 hook(t);
             }
         }));
-        let running: Vec<Box<dyn Node>> = index.iter().filter_map(|&i| slots[i].take()).collect();
+        let running: Vec<GraphNode> = index.iter().filter_map(|&i| slots[i].take()).collect();
         let count = running.len();
         let run = run_real(running, self.cfg.duration, stop, &opts);
         // Back in their places, by name (unique in a graph): a node whose thread died (it

@@ -85,7 +85,7 @@ pub struct RealRun {
     /// panicking, has an empty one).
     pub timing: Vec<NodeTiming>,
     /// The nodes, returned for reuse or inspection (a node whose thread died is not).
-    pub nodes: Vec<Box<dyn Node>>,
+    pub nodes: Vec<GraphNode>,
     /// What the executors measured, when [`RealOptions::track`] (and no node thread died).
     pub exec: Option<ExecFigures>,
 }
@@ -161,7 +161,7 @@ fn burn(cpu: Nanos, stop: &StopFlag) {
 /// held while it burns that much CPU, then published at the clock's time. Returns the flow
 /// and the time its outputs went out.
 fn real_tick(
-    node: &mut dyn Node,
+    node: &mut GraphNode,
     now: Nanos,
     clock: &MonotonicClock,
     stop: &StopFlag,
@@ -180,11 +180,11 @@ fn real_tick(
 
 /// What a node's own thread gives back when it ends: the node, its timing, its executor
 /// figures, and its panic's message if it panicked.
-type OwnThreadEnd = (Box<dyn Node>, NodeTiming, NodeExecStats, Option<String>);
+type OwnThreadEnd = (GraphNode, NodeTiming, NodeExecStats, Option<String>);
 
 /// A node [`spawn_own_thread`] could not start: the node back (when it could be taken
 /// back), and the machine's refusal.
-type NotStarted = (Option<Box<dyn Node>>, std::io::Error);
+type NotStarted = (Option<Box<GraphNode>>, std::io::Error);
 
 /// Start node `i` on a thread of its own (a per-node executor): it ticks on its grid from
 /// its phase offset until the run's end or `stop` (a pause holds it; a tick that says stop
@@ -197,7 +197,7 @@ type NotStarted = (Option<Box<dyn Node>>, std::io::Error);
 /// threads, no memory for its stack).
 fn spawn_own_thread(
     i: usize,
-    node: Box<dyn Node>,
+    node: GraphNode,
     opts: &RealOptions,
     (clock, waiter, duration): (MonotonicClock, DeadlineWaiter, Nanos),
     (stop, stop_at): (&StopFlag, &Arc<AtomicU64>),
@@ -211,7 +211,7 @@ fn spawn_own_thread(
     let pause = opts.pause.clone();
     let rt_priority = opts.rt_priority;
     // Handed over through a cell, so that a thread that cannot start gives the node back.
-    let cell: Arc<std::sync::Mutex<Option<Box<dyn Node>>>> =
+    let cell: Arc<std::sync::Mutex<Option<GraphNode>>> =
         Arc::new(std::sync::Mutex::new(Some(node)));
     let handed = cell.clone();
     let spawned = std::thread::Builder::new()
@@ -257,7 +257,7 @@ fn spawn_own_thread(
                 let late = now.saturating_sub(deadline);
                 lateness.record(late);
                 ticks += 1;
-                let (flow, done) = real_tick(&mut *node, now, &clock, &stop);
+                let (flow, done) = real_tick(&mut node, now, &clock, &stop);
                 if track {
                     exec.record(deadline, done, done.saturating_sub(now));
                 }
@@ -294,7 +294,7 @@ fn spawn_own_thread(
         });
     spawned.map_err(|e| {
         let node = cell.lock().unwrap_or_else(|p| p.into_inner()).take();
-        (node, e)
+        (node.map(Box::new), e)
     })
 }
 
@@ -313,7 +313,7 @@ fn spawn_own_thread(
 /// are joined, and ends the run as that node's failure: every node that did not run comes
 /// back untouched.
 pub fn run_real(
-    nodes: Vec<Box<dyn Node>>,
+    nodes: Vec<GraphNode>,
     duration: Nanos,
     stop: &StopFlag,
     opts: &RealOptions,
@@ -338,14 +338,14 @@ pub fn run_real(
     }
     let mut slots: Vec<Option<shared::Finished>> = (0..names.len()).map(|_| None).collect();
     // A node that did not run comes back as it was, with no ticks.
-    let unrun = |i: usize, node: Box<dyn Node>| -> shared::Finished {
+    let unrun = |i: usize, node: GraphNode| -> shared::Finished {
         let timing = NodeTiming {
             node: names[i].clone(),
             ..NodeTiming::default()
         };
         (node, timing, NodeExecStats::default())
     };
-    let mut shared_nodes: Vec<Option<Box<dyn Node>>> = Vec::new();
+    let mut shared_nodes: Vec<Option<GraphNode>> = Vec::new();
     let mut handles = Vec::new();
     // The first node whose thread the machine would not start, and why: the run stops
     // there (the threads started are stopped and joined), and ends as that node's failure.
@@ -366,7 +366,7 @@ pub fn run_real(
             Err((node, e)) => {
                 stop.stop();
                 if let Some(node) = node {
-                    slots[i] = Some(unrun(i, node));
+                    slots[i] = Some(unrun(i, *node));
                 }
                 refused = Some((i, not_started("its thread", &e)));
             }
@@ -451,7 +451,7 @@ pub fn run_real(
 fn gather(
     slots: Vec<Option<shared::Finished>>,
     names: &[String],
-) -> (Vec<Box<dyn Node>>, Vec<NodeTiming>, Vec<NodeExecStats>) {
+) -> (Vec<GraphNode>, Vec<NodeTiming>, Vec<NodeExecStats>) {
     let mut nodes = Vec::new();
     let mut timing = Vec::new();
     let mut stats = Vec::new();
@@ -505,8 +505,11 @@ fn real_end(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::graph::kind::NodeOf;
     use crate::scheduler::probes::probes;
+    use ratelab_core::ids::NodeId;
     use ratelab_core::limits::MAX_REAL_CLOCK_THREADS;
+    use ratelab_core::ports::RustNode;
     use ratelab_core::rate::Rate;
     use std::sync::Mutex;
 
@@ -524,23 +527,19 @@ mod tests {
         assert_eq!(run.timing.len(), 3);
         assert!(run.timing.iter().all(|t| t.ticks >= 5), "{:?}", run.timing);
 
-        struct Boom(Rate);
-        impl Node for Boom {
-            fn name(&self) -> &str {
-                "boom"
-            }
-            fn priority(&self) -> u32 {
-                0
-            }
-            fn rate(&self) -> &Rate {
-                &self.0
-            }
-            fn tick(&mut self, _: Nanos) -> Flow {
+        /// Its tick panics.
+        struct Boom;
+        impl RustNode for Boom {
+            type Input = ();
+            type Output = ();
+            fn tick(&mut self, _: Nanos, _: ()) {
                 panic!("sensor cable unplugged")
             }
         }
         // The failed node first: the nodes after it keep their own timing.
-        let mut nodes: Vec<Box<dyn Node>> = vec![Box::new(Boom(Rate::new(50.0).unwrap()))];
+        let rate = Rate::new(50.0).unwrap();
+        let boom = GraphNode::alone("boom", NodeId(0), rate, |_| NodeOf::unbound(Boom));
+        let mut nodes: Vec<GraphNode> = vec![boom];
         nodes.extend(probes(&log, [100.0, 100.0, 100.0]));
         let run = run_real(
             nodes,
@@ -557,23 +556,6 @@ mod tests {
         );
         let named: Vec<&str> = run.timing.iter().map(|t| t.node.as_str()).collect();
         assert_eq!(named, ["boom", "actuator", "sensor", "policy"]);
-    }
-
-    /// A node that never ticks (a real-clock run that starts no thread never calls it).
-    struct Idle(String, Rate);
-    impl Node for Idle {
-        fn name(&self) -> &str {
-            &self.0
-        }
-        fn priority(&self) -> u32 {
-            0
-        }
-        fn rate(&self) -> &Rate {
-            &self.1
-        }
-        fn tick(&mut self, _: Nanos) -> Flow {
-            Flow::Continue
-        }
     }
 
     #[test]
@@ -608,8 +590,8 @@ mod tests {
 
     #[test]
     fn a_real_clock_run_past_the_thread_bound_starts_none_and_gives_every_node_back() {
-        let nodes: Vec<Box<dyn Node>> = (0..=MAX_REAL_CLOCK_THREADS)
-            .map(|i| Box::new(Idle(format!("n{i}"), Rate::new(10.0).unwrap())) as Box<dyn Node>)
+        let nodes: Vec<GraphNode> = (0..=MAX_REAL_CLOCK_THREADS)
+            .map(|i| GraphNode::idle(&format!("n{i}"), NodeId(i), Rate::new(10.0).unwrap()))
             .collect();
         let stop = StopFlag::new();
         let run = run_real(nodes, Nanos::SECOND, &stop, &RealOptions::default());

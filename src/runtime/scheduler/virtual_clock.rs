@@ -49,9 +49,7 @@ impl Event {
     }
 }
 
-/// Where a command leaves a plan for the virtual scheduler to take at its next instant
-/// ([`VirtualScheduler::take_plans_from`]).
-pub type PlanRequest = Arc<std::sync::Mutex<Option<ExecutionPlan>>>;
+pub use ratelab_core::executor::PlanRequest;
 
 /// The virtual-clock executor, steppable one instant at a time (the lab paces it against
 /// the wall clock for display; pacing never changes the order of ticks). Every virtual run
@@ -106,12 +104,12 @@ pub struct VirtualScheduler {
 
 impl VirtualScheduler {
     /// Every node due at `t = 0`, on a thread of its own.
-    pub fn new(nodes: &[Box<dyn Node>]) -> Self {
+    pub fn new(nodes: &[GraphNode]) -> Self {
         Self::with_offsets(nodes, &[])
     }
 
     /// Node `i` first due at `offsets[i]` (missing offsets are 0), on a thread of its own.
-    pub fn with_offsets(nodes: &[Box<dyn Node>], offsets: &[Nanos]) -> Self {
+    pub fn with_offsets(nodes: &[GraphNode], offsets: &[Nanos]) -> Self {
         let names: Vec<&str> = nodes.iter().map(|n| n.name()).collect();
         Self::with_plan(nodes, offsets, ExecutionPlan::per_node(&names), false)
     }
@@ -123,7 +121,7 @@ impl VirtualScheduler {
     /// [`VirtualScheduler::with_offsets`] make) an instant is the chapter's loop, with no
     /// compute time asked and no bookkeeping.
     pub fn with_plan(
-        nodes: &[Box<dyn Node>],
+        nodes: &[GraphNode],
         offsets: &[Nanos],
         plan: ExecutionPlan,
         track: bool,
@@ -320,7 +318,7 @@ impl VirtualScheduler {
     /// A panic in the node propagates; [`VirtualScheduler::run_instant`] catches it.
     /// For the default plan only (one thread per node, no compute time);
     /// [`VirtualScheduler::run_instant`] applies any plan.
-    fn tick_next(&mut self, nodes: &mut [Box<dyn Node>]) -> Option<(Nanos, usize, Flow)> {
+    fn tick_next(&mut self, nodes: &mut [GraphNode]) -> Option<(Nanos, usize, Flow)> {
         let Reverse((due, prio, i)) = self.releases.pop()?;
         self.now = due;
         self.ticks[i] += 1;
@@ -337,7 +335,7 @@ impl VirtualScheduler {
     /// Run the next instant: the ends of ticks computing until then, the timers due then,
     /// every tick that can start then (see the type's docs). A node that panics is caught,
     /// named, and ends the graph ([`InstantOutcome::Failed`]).
-    pub fn run_instant(&mut self, nodes: &mut [Box<dyn Node>]) -> InstantOutcome {
+    pub fn run_instant(&mut self, nodes: &mut [GraphNode]) -> InstantOutcome {
         self.instant_open = false;
         if !self.general {
             return self.run_plain_instant(nodes);
@@ -431,7 +429,7 @@ impl VirtualScheduler {
     /// The node panicked: [`EndReason::NodeFailed`] naming it (the graph must stop).
     pub fn start_here(
         &mut self,
-        nodes: &mut [Box<dyn Node>],
+        nodes: &mut [GraphNode],
         node: usize,
     ) -> Result<(Flow, Nanos), EndReason> {
         let t = self.now;
@@ -463,7 +461,7 @@ impl VirtualScheduler {
     /// Node `node`'s tick of the [`Event::Start`] just taken runs in another process and
     /// computes for `compute` (as that process reports it); `nodes[node]` gives its period
     /// only.
-    pub fn start_elsewhere(&mut self, nodes: &[Box<dyn Node>], node: usize, compute: Nanos) {
+    pub fn start_elsewhere(&mut self, nodes: &[GraphNode], node: usize, compute: Nanos) {
         self.started(node, nodes[node].rate().period(), compute);
     }
 
@@ -509,7 +507,7 @@ impl VirtualScheduler {
 
     /// An instant of the default plan: every node due ticks, in tie-break order (the
     /// executors' rules reduce to this when every node has a thread and ticks take no time).
-    fn run_plain_instant(&mut self, nodes: &mut [Box<dyn Node>]) -> InstantOutcome {
+    fn run_plain_instant(&mut self, nodes: &mut [GraphNode]) -> InstantOutcome {
         let Some(t) = self.next_due() else {
             return InstantOutcome::Ran { ticked: 0 };
         };
@@ -547,7 +545,7 @@ impl VirtualScheduler {
     #[cfg(test)]
     fn run(
         &mut self,
-        nodes: &mut [Box<dyn Node>],
+        nodes: &mut [GraphNode],
         duration: Nanos,
         stop: &StopFlag,
         before_instant: &mut dyn FnMut(Nanos),
@@ -599,8 +597,13 @@ impl VirtualScheduler {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::scheduler::probes::{probes, Probe};
+    use crate::graph::kind::NodeOf;
+    use crate::scheduler::probes::{probe, probes};
+    use ratelab_core::ids::NodeId;
+    use ratelab_core::ports::RustNode;
+    use ratelab_core::publisher::Outbox;
     use ratelab_core::rate::Rate;
+    use ratelab_core::topic::Subscription;
     use std::sync::Mutex;
 
     #[test]
@@ -631,13 +634,7 @@ mod tests {
     fn a_stop_halts_the_world() {
         let log = Arc::new(Mutex::new(Vec::new()));
         let mut nodes = probes(&log, [50.0, 50.0, 50.0]);
-        let sensor = Box::new(Probe {
-            name: "sensor",
-            prio: 0,
-            rate: Rate::new(50.0).unwrap(),
-            log: log.clone(),
-            stop_at: Some(Nanos(40_000_000)),
-        });
+        let sensor = probe(("sensor", 0, 50.0), &log, Some(Nanos(40_000_000)));
         nodes[1] = sensor;
         let end = VirtualScheduler::new(&nodes).run(
             &mut nodes,
@@ -657,27 +654,24 @@ mod tests {
 
     #[test]
     fn a_panicking_node_under_the_virtual_clock_is_named_not_fatal() {
-        struct Flaky(Rate, &'static str, bool);
-        impl Node for Flaky {
-            fn name(&self) -> &str {
-                self.1
-            }
-            fn priority(&self) -> u32 {
-                u32::from(self.2)
-            }
-            fn rate(&self) -> &Rate {
-                &self.0
-            }
-            fn tick(&mut self, now: Nanos) -> Flow {
-                assert!(!(self.2 && now > Nanos::ZERO), "policy exploded");
-                Flow::Continue
+        /// Its tick panics after the first when it is the policy.
+        struct Flaky(bool);
+        impl RustNode for Flaky {
+            type Input = ();
+            type Output = ();
+            fn tick(&mut self, now: Nanos, _: ()) {
+                assert!(!(self.0 && now > Nanos::ZERO), "policy exploded");
             }
         }
-        let nodes = || -> Vec<Box<dyn Node>> {
-            vec![
-                Box::new(Flaky(Rate::new(50.0).unwrap(), "sensor", false)),
-                Box::new(Flaky(Rate::new(50.0).unwrap(), "policy", true)),
-            ]
+        let nodes = || -> Vec<GraphNode> {
+            [("sensor", false), ("policy", true)]
+                .into_iter()
+                .enumerate()
+                .map(|(i, (name, fails))| {
+                    let rate = Rate::new(50.0).unwrap();
+                    GraphNode::alone(name, NodeId(i), rate, |_| NodeOf::unbound(Flaky(fails)))
+                })
+                .collect()
         };
         let mut n = nodes();
         let mut sched = VirtualScheduler::new(&n);
@@ -717,39 +711,26 @@ mod tests {
         assert_eq!(policy_ticks, 1, "ticks once at 0, next due never");
     }
 
-    /// A node that logs its starts and the ends of its held ticks, with a compute time.
+    /// A node that logs its starts, and the ends of its held ticks (what it publishes
+    /// through its outbox while held, on a topic that logs each message as it goes out).
     struct Worker {
         name: &'static str,
-        rate: Rate,
-        compute: Nanos,
         log: WorkLog,
+        outbox: Outbox,
+        topic: Arc<Subscription<()>>,
     }
 
-    impl Node for Worker {
-        fn name(&self) -> &str {
-            self.name
-        }
-        fn priority(&self) -> u32 {
-            0
-        }
-        fn rate(&self) -> &Rate {
-            &self.rate
-        }
-        fn tick(&mut self, now: Nanos) -> Flow {
+    impl RustNode for Worker {
+        type Input = ();
+        type Output = ();
+        fn tick(&mut self, now: Nanos, _: ()) {
             self.log
                 .lock()
                 .unwrap()
                 .push((now.0 / 1_000_000, self.name, "start"));
-            Flow::Continue
-        }
-        fn compute_time(&mut self) -> Nanos {
-            self.compute
-        }
-        fn publish_held(&mut self, at: Nanos) {
-            self.log
-                .lock()
-                .unwrap()
-                .push((at.0 / 1_000_000, self.name, "end"));
+            if self.outbox.is_holding() {
+                self.outbox.publish(&self.topic, (), now, None);
+            }
         }
     }
 
@@ -758,15 +739,31 @@ mod tests {
     /// Sensor and policy at 50 Hz, the policy computing `policy_ms`, on `plan`, for 100 ms.
     fn two_workers(plan: ExecutionPlan, policy_ms: u64) -> (WorkLog, VirtualScheduler, RunEnd) {
         let log: WorkLog = Arc::new(Mutex::new(Vec::new()));
-        let mut nodes: Vec<Box<dyn Node>> = [("sensor", 0), ("policy", policy_ms)]
+        let mut nodes: Vec<GraphNode> = [("sensor", 0), ("policy", policy_ms)]
             .into_iter()
-            .map(|(name, ms)| {
-                Box::new(Worker {
-                    name,
-                    rate: Rate::new(50.0).unwrap(),
-                    compute: Nanos::from_millis(ms),
-                    log: log.clone(),
-                }) as Box<dyn Node>
+            .enumerate()
+            .map(|(i, (name, ms))| {
+                let topic = Arc::new(Subscription::new(name, 1).unwrap());
+                let ends = log.clone();
+                topic.add_tap(Box::new(move |m| {
+                    ends.lock()
+                        .unwrap()
+                        .push((m.stamp.0 / 1_000_000, name, "end"));
+                }));
+                let rate = Rate::new(50.0).unwrap();
+                let log = log.clone();
+                let mut node = GraphNode::alone(name, NodeId(i), rate, |outbox| {
+                    NodeOf::unbound(Worker {
+                        name,
+                        log,
+                        outbox: outbox.clone(),
+                        topic,
+                    })
+                });
+                if ms > 0 {
+                    node.set_compute(Nanos::from_millis(ms));
+                }
+                node
             })
             .collect();
         let mut sched = VirtualScheduler::with_plan(&nodes, &[], plan, true);

@@ -39,7 +39,7 @@ pub use external::{ExternalNodeSpec, ExternalPort};
 use crate::graph::kind::NodeOf;
 use ratelab_core::executor::ComputeDraw;
 use ratelab_core::ids::NodeId;
-use ratelab_core::node::{Flow, Node, NodeState};
+use ratelab_core::node::{Flow, NodeState};
 use ratelab_core::publisher::Outbox;
 use ratelab_core::qos::Liveliness;
 use ratelab_core::rate::Rate;
@@ -65,7 +65,21 @@ pub struct NodeCore {
     pub compute: Option<ComputeDraw>,
 }
 
-/// A node of some kind around its [`NodeCore`]: what the scheduler runs.
+/// A node of the graph: its kind's node (a [`ratelab_core::ports::RustNode`] bound to its
+/// topics, [`NodeOf`]) around its [`NodeCore`]. What a scheduler runs (virtual or real,
+/// `crate::scheduler`): it calls [`GraphNode::tick`] at the node's rate, on the thread its
+/// executor gives it ([`ratelab_core::executor`]); a tick with a compute time publishes at
+/// its end ([`GraphNode::hold_outputs`], [`GraphNode::publish_held`]). The rank breaks ties
+/// between nodes due at the same instant: lower first, so the chapter's sensor (0) → policy
+/// (1) → actuator (2) samples, thinks, then acts.
+///
+/// A node may also give its state at an instant ([`GraphNode::save`]) and take it back
+/// ([`GraphNode::load`]): what the run core's capture and restore are made of
+/// (`crate::runcore`). One whose kind cannot (a Python node's objects, a ROS 2 node's
+/// proxy, a program's own kind that does not say how) makes a capture a replay.
+///
+/// There is no other node type for a scheduler: every kind, built in or a program's own,
+/// is a `RustNode` made into one of these by the graph ([`crate::graph::Graph::build`]).
 pub struct GraphNode {
     core: NodeCore,
     work: NodeOf,
@@ -76,19 +90,67 @@ impl GraphNode {
     pub fn new(core: NodeCore, work: NodeOf) -> GraphNode {
         GraphNode { core, work }
     }
-}
 
-impl Node for GraphNode {
-    fn name(&self) -> &str {
+    /// A node named `name` of rank `rank` at `rate` that does nothing when it ticks, with
+    /// no topics, faults or compute time: the stand-in of a node whose ticks run in another
+    /// process (the launcher's `crate::runcore::Follower`), and the bench's bare wait (the
+    /// real clock's own floor, `ratelab bench`).
+    pub fn idle(name: &str, rank: NodeId, rate: Rate) -> GraphNode {
+        GraphNode::alone(name, rank, rate, |_| NodeOf::unbound(Idle))
+    }
+
+    /// A node around the work `make` gives (given the node's outbox), with liveliness and
+    /// faults of its own (none shared with a graph): [`GraphNode::idle`], and the
+    /// schedulers' tests.
+    pub(crate) fn alone(
+        name: &str,
+        rank: NodeId,
+        rate: Rate,
+        make: impl FnOnce(&Outbox) -> NodeOf,
+    ) -> GraphNode {
+        // A book of no faults: it covers no node.
+        let faults = crate::graph::faults::FaultBook::new(0, &[], |_| None);
+        let outbox = Outbox::new();
+        let work = make(&outbox);
+        GraphNode::new(
+            NodeCore {
+                name: name.to_string(),
+                id: rank,
+                rate,
+                liveliness: Arc::new(Liveliness::new(None)),
+                faults: Arc::new(faults),
+                outbox,
+                compute: None,
+            },
+            work,
+        )
+    }
+
+    /// Its name (from the graph file: `sensor`, `policy`, `actuator`, …).
+    pub fn name(&self) -> &str {
         &self.core.name
     }
-    fn priority(&self) -> u32 {
+
+    /// Its tie-break rank among nodes due at the same instant, lower first: its index in the
+    /// graph (`crate::graph::spec`'s tie-break order).
+    pub fn priority(&self) -> u32 {
         self.core.id.0 as u32
     }
-    fn rate(&self) -> &Rate {
+
+    /// Its rate (shared with the graph's handles: it can change while the graph runs).
+    pub fn rate(&self) -> &Rate {
         &self.core.rate
     }
-    fn tick(&mut self, now: Nanos) -> Flow {
+
+    /// One tick at run time `now`: nothing while a fault covers it (stalled or killed: no
+    /// work, no liveliness), else its liveliness asserted (unless its kind is alive by what
+    /// it delivers, a ROS 2 node's proxy) and its kind's tick run. [`Flow::Stop`] ends the
+    /// run.
+    ///
+    /// # Panics
+    /// When its kind's code failed ([`ratelab_core::ports::RustNode::tick`]); the
+    /// schedulers catch it and end the run as "node X failed".
+    pub fn tick(&mut self, now: Nanos) -> Flow {
         if self.core.faults.covers(self.core.id, now) {
             self.core.liveliness.fault_tick();
             return Flow::Continue; // stalled or killed: no work, no liveliness
@@ -99,26 +161,40 @@ impl Node for GraphNode {
         }
         self.work.0.tick(now)
     }
-    fn compute_time(&mut self) -> Nanos {
+
+    /// The compute time of the tick about to run, drawn per tick
+    /// ([`ratelab_core::executor::ComputeTime`]); zero (none given) publishes at once.
+    pub fn compute_time(&mut self) -> Nanos {
         self.core
             .compute
             .as_mut()
             .map_or(Nanos::ZERO, ComputeDraw::draw)
     }
-    fn hold_outputs(&mut self) {
+
+    /// Hold what the next tick publishes until [`GraphNode::publish_held`] (the executor
+    /// calls it before a tick with a compute time; see [`ratelab_core::publisher`]).
+    pub fn hold_outputs(&mut self) {
         self.core.outbox.hold();
     }
-    fn publish_held(&mut self, at: Nanos) {
+
+    /// Publish what the held tick published, stamped `at` (the tick's end).
+    pub fn publish_held(&mut self, at: Nanos) {
         self.core.outbox.release(at);
     }
-    fn save(&self) -> Option<NodeState> {
+
+    /// Its state now, between two instants, or `None` when its kind cannot say (see the
+    /// type's docs). Topics, rates and liveliness are the graph's, captured apart.
+    pub fn save(&self) -> Option<NodeState> {
         Some(Box::new(Saved {
             work: self.work.0.save()?,
             outbox: self.core.outbox.save(),
             compute: self.core.compute.clone(),
         }))
     }
-    fn load(&mut self, state: &NodeState) -> bool {
+
+    /// Take back a state [`GraphNode::save`] gave. False (and nothing changed) when `state`
+    /// is not one of this node's.
+    pub fn load(&mut self, state: &NodeState) -> bool {
         let Some(s) = state.downcast_ref::<Saved>() else {
             return false;
         };
@@ -129,9 +205,34 @@ impl Node for GraphNode {
         self.core.compute.clone_from(&s.compute);
         true
     }
+
+    /// Give its ticks a compute time of `each` (the schedulers' tests).
+    #[cfg(test)]
+    pub(crate) fn set_compute(&mut self, each: Nanos) {
+        let time = ratelab_core::executor::ComputeTime {
+            mean: each,
+            jitter: Nanos::ZERO,
+        };
+        self.core.compute = Some(ComputeDraw::new(time, 0, self.core.id.0));
+    }
 }
 
-/// A [`GraphNode`]'s state ([`Node::save`]): its kind's, what its outbox holds, and its
+/// The kind of [`GraphNode::idle`]: no topics, no work, nothing kept.
+struct Idle;
+
+impl ratelab_core::ports::RustNode for Idle {
+    type Input = ();
+    type Output = ();
+    fn tick(&mut self, _now: Nanos, _input: ()) {}
+    fn save(&self) -> Option<NodeState> {
+        Some(Box::new(()))
+    }
+    fn load(&mut self, state: &NodeState) -> bool {
+        state.is::<()>()
+    }
+}
+
+/// A [`GraphNode`]'s state ([`GraphNode::save`]): its kind's, what its outbox holds, and its
 /// compute-time generator. Its name, rank and handles never change; its rate, liveliness
 /// and faults are the graph's ([`crate::runcore`] captures them).
 struct Saved {

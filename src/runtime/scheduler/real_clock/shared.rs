@@ -8,10 +8,11 @@ use super::{
     catch_quietly, next_deadline, node_timing, panic_message, real_tick, thread_cpu_time,
     LatencyStats, NodeExecStats, RealOptions, StopFlag,
 };
+use crate::graph::nodes::GraphNode;
 use ratelab_core::clock::{Clock, MonotonicClock};
 use ratelab_core::executor::{Dispatch, ExecutionPlan, ExecutorKind};
 use ratelab_core::metrics::NodeTiming;
-use ratelab_core::node::{Flow, Node};
+use ratelab_core::node::Flow;
 use ratelab_core::time::Nanos;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Condvar, Mutex, MutexGuard};
@@ -34,7 +35,7 @@ struct State {
     released: Vec<bool>,
     /// The nodes of shared executors, `None` while a thread runs its tick (and for nodes on
     /// threads of their own).
-    slots: Vec<Option<Box<dyn Node>>>,
+    slots: Vec<Option<GraphNode>>,
     stats: Vec<NodeExecStats>,
     lateness: Vec<LatencyStats>,
     ticks: Vec<u64>,
@@ -67,7 +68,7 @@ pub(super) struct SharedExecutors {
 }
 
 /// A node handed back at the end, with its timing and figures.
-pub(super) type Finished = (Box<dyn Node>, NodeTiming, NodeExecStats);
+pub(super) type Finished = (GraphNode, NodeTiming, NodeExecStats);
 
 /// What the shared executors hand back: by node index, the nodes they ran with their timing
 /// and figures (`None` for nodes on threads of their own), and the node that failed.
@@ -82,7 +83,7 @@ impl SharedExecutors {
     /// threads started end, and [`SharedExecutors::join`] gives it as the failure of the
     /// executor's first node.
     pub(super) fn start(
-        nodes: Vec<Option<Box<dyn Node>>>,
+        nodes: Vec<Option<GraphNode>>,
         plan: &ExecutionPlan,
         cx: Context,
     ) -> SharedExecutors {
@@ -287,7 +288,7 @@ fn worker(inner: &Inner, e: usize) {
         st.lateness[i].record(late);
         drop(st);
         let cpu0 = thread_cpu_time();
-        let result = catch_quietly(|| real_tick(&mut *node, now, &cx.clock, &cx.stop));
+        let result = catch_quietly(|| real_tick(&mut node, now, &cx.clock, &cx.stop));
         let cpu = thread_cpu_time().saturating_sub(cpu0);
         if let Some(hook) = &cx.opts.on_tick {
             hook(&super::TickReport {

@@ -3,10 +3,10 @@
 //! one line that refuses a plan past it or a thread the machine would not start.
 
 use super::{EndReason, RealRun, RunEnd};
+use crate::graph::nodes::GraphNode;
 use ratelab_core::executor::{ExecutionPlan, ExecutorKind};
 use ratelab_core::limits::MAX_REAL_CLOCK_THREADS;
 use ratelab_core::metrics::NodeTiming;
-use ratelab_core::node::Node;
 use ratelab_core::time::Nanos;
 
 /// The threads [`run_real`](super::run_real) starts for `plan`: one per node on a per-node executor, and
@@ -61,7 +61,7 @@ pub(super) fn not_started(what: &str, e: &std::io::Error) -> String {
 /// [`MAX_REAL_CLOCK_THREADS`]): it ends at `at` as the failure of the first node past the
 /// bound, with `line` ([`check_real_clock_threads`]'s), every node back untouched.
 pub(super) fn none_started(
-    nodes: Vec<Box<dyn Node>>,
+    nodes: Vec<GraphNode>,
     names: &[String],
     own_thread: &[bool],
     line: String,

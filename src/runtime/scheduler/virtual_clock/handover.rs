@@ -8,8 +8,8 @@
 //! needs back is the time the real clock stopped at and each node's ticks there.
 
 use super::VirtualScheduler;
+use crate::graph::nodes::GraphNode;
 use ratelab_core::executor::{Dispatch, ExecutionPlan};
-use ratelab_core::node::Node;
 use ratelab_core::rate::first_on_grid;
 use ratelab_core::time::Nanos;
 use std::cmp::Reverse;
@@ -34,7 +34,7 @@ impl VirtualScheduler {
     /// virtual clock) publishes its held outputs now, stamped now: the other clock has no
     /// event to end it at. Every thread is then free. The scheduler is left as it was
     /// otherwise; [`Self::take_over`] makes it current again.
-    pub fn hand_over(&mut self, nodes: &mut [Box<dyn Node>]) -> Vec<Nanos> {
+    pub fn hand_over(&mut self, nodes: &mut [GraphNode]) -> Vec<Nanos> {
         let now = self.now;
         while let Some(Reverse((_, i))) = self.completions.pop() {
             if let Some(n) = nodes.get_mut(i) {
