@@ -677,6 +677,7 @@ impl From<&GraphArgs> for GraphSettings {
     fn from(g: &GraphArgs) -> GraphSettings {
         GraphSettings {
             file: g.graph.clone(),
+            inline: None,
             rates: g.rates.clone(),
             depths: g.depths.clone(),
             qos: g.qos.clone(),
@@ -698,6 +699,7 @@ impl From<&RunArgs> for RunSpec {
             graph: GraphSettings::from(&a.graph),
             seed: a.seed,
             duration_s: a.duration,
+            duration_ns: None,
             clock: a.clock,
             sensor_hz: a.sensor_hz,
             control_hz: a.control_hz,
@@ -708,6 +710,8 @@ impl From<&RunArgs> for RunSpec {
             spin_margin_us: a.spin_margin_us,
             rt_priority: a.rt_priority,
             policy: a.policy.clone(),
+            // Scheduled changes are the lab's (its keys) and a replay's (its session log).
+            commands: Vec::new(),
             outputs: Outputs {
                 out: a.out.clone(),
                 trace_every: a.trace_every,

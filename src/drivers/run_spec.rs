@@ -11,6 +11,7 @@ use crate::outputs::Outputs;
 use ratelab_core::executor::{ComputeTime, ExecutorOverride};
 use ratelab_core::qos::Fault;
 use ratelab_core::time::Nanos;
+use ratelab_runtime::command::{Command, TimedCommand};
 use ratelab_runtime::config::{check_rate, duration_from_secs, ConfigError};
 use ratelab_runtime::config::{phase_offsets_from_ms, BREAK_CONTROL_HZ};
 use ratelab_runtime::graph::GraphSpec;
@@ -58,12 +59,45 @@ pub fn late_fault_warnings(cfg: &RunConfig, speech: Speech) -> Vec<String> {
         .collect()
 }
 
+/// Scheduled commands checked: in order of time, each one the graph can take
+/// ([`Command::validate`]), refused as `commands[i]: …`.
+fn check_commands(commands: &[TimedCommand], graph: &GraphSpec) -> anyhow::Result<()> {
+    if commands.len() > MAX_COMMANDS {
+        anyhow::bail!(
+            "commands: {}",
+            ratelab_core::limits::refusal(
+                format_args!("at most {MAX_COMMANDS} commands, got {}", commands.len()),
+                "MAX_COMMANDS"
+            )
+        );
+    }
+    let mut at = 0;
+    for (i, c) in commands.iter().enumerate() {
+        if c.at_ns < at {
+            anyhow::bail!(
+                "commands[{i}]: at_ns {} is before the previous command's {at}",
+                c.at_ns
+            );
+        }
+        at = c.at_ns;
+        (c.command.validate(graph)).map_err(|e| anyhow::anyhow!("commands[{i}]: {e}"))?;
+    }
+    Ok(())
+}
+
+/// The most commands a run takes scheduled ([`RunSpec::commands`]): a session log's run
+/// may hold this many.
+pub const MAX_COMMANDS: usize = 10_000;
+
 /// The graph to run and the overrides of its nodes and topics, in the order given.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct GraphSettings {
-    /// The graph file; `None` for the chapter's (sensor → /obs → policy → /action →
-    /// actuator).
+    /// The graph file; `None` for `inline`'s, or else the chapter's (sensor → /obs →
+    /// policy → /action → actuator).
     pub file: Option<PathBuf>,
+    /// A graph file's text given whole, in place of a file: `(text, origin)`, `origin`
+    /// naming it in errors (a session log's run: `run 2: graph`). Refused beside `file`.
+    pub inline: Option<(String, String)>,
     /// Node rates, Hz: `(node, hz)`.
     pub rates: Vec<(String, f64)>,
     /// Topic history depths, messages: `(topic, depth)`.
@@ -94,9 +128,16 @@ impl GraphSettings {
     /// A graph file that cannot be read, or the first override that does not fit, in one
     /// line naming it in `speech`'s words.
     pub fn graph(&self, speech: Speech) -> anyhow::Result<GraphSpec> {
-        let mut spec = match &self.file {
-            Some(path) => GraphSpec::load(path)?,
-            None => GraphSpec::chapter(),
+        let mut spec = match (&self.file, &self.inline) {
+            (Some(path), None) => GraphSpec::load(path)?,
+            (None, Some((text, origin))) => GraphSpec::parse(text, origin)?,
+            (None, None) => GraphSpec::chapter(),
+            (Some(path), Some((_, origin))) => {
+                anyhow::bail!(
+                    "two graphs given: {} and {origin}; give one",
+                    path.display()
+                )
+            }
         };
         let entry =
             |s: Setting, key: &str, value: &dyn std::fmt::Display| speech.entry(s, key, value);
@@ -187,6 +228,10 @@ pub struct RunSpec {
     /// Run time, s, in (0, [`ratelab_core::time::MAX_DURATION_S`]]; `None` is
     /// [`DEFAULT_DURATION_S`].
     pub duration_s: Option<f64>,
+    /// Run time to the ns, in place of `duration_s` (a session log's run replayed for as
+    /// long as it ran: a time no `f64` of seconds holds exactly past 2^51 ns). Refused
+    /// beside `duration_s`; in (0, [`ratelab_core::time::MAX_DURATION`]].
+    pub duration_ns: Option<u64>,
     /// The clock ([`DEFAULT_CLOCK`] unless asked).
     pub clock: ClockKind,
     /// The chain sensor's rate, Hz.
@@ -210,6 +255,13 @@ pub struct RunSpec {
     /// The brain: `scripted`, `FILE.py[:FUNCTION]` or a checkpoint path. A front end may
     /// supply a brain object instead (a Python callable); this then only names the default.
     pub policy: String,
+    /// Changes scheduled at run times, in order of `at_ns` (ns): each applied between
+    /// instants, before the first instant at or after its time, as the lab's keys apply
+    /// them and its session log keeps them ([`TimedCommand`]). One after the run's end
+    /// changes the settings the run ends with (its summary's end rates), not a tick: as a
+    /// change made in the lab after a run's last instant, which a replay applies once the
+    /// run has ended.
+    pub commands: Vec<TimedCommand>,
     /// Where the results go.
     pub outputs: Outputs,
 }
@@ -222,6 +274,7 @@ impl Default for RunSpec {
             graph: GraphSettings::default(),
             seed: 0,
             duration_s: None,
+            duration_ns: None,
             clock: DEFAULT_CLOCK,
             sensor_hz: None,
             control_hz: None,
@@ -232,6 +285,7 @@ impl Default for RunSpec {
             spin_margin_us: None,
             rt_priority: None,
             policy: DEFAULT_POLICY.to_string(),
+            commands: Vec::new(),
             outputs: Outputs::default(),
         }
     }
@@ -251,10 +305,21 @@ impl RunSpec {
         if self.outputs.trace_every == 0 {
             anyhow::bail!("{} must be at least 1, got 0", name(Setting::TraceEvery));
         }
-        let duration_s = self.duration_s.unwrap_or(DEFAULT_DURATION_S);
+        let duration = match (self.duration_s, self.duration_ns) {
+            (s, None) => duration_from_secs(s.unwrap_or(DEFAULT_DURATION_S)).map_err(said)?,
+            (None, Some(ns)) if ns > 0 && ns <= ratelab_core::time::MAX_DURATION.0 => Nanos(ns),
+            (None, Some(ns)) => anyhow::bail!(
+                "duration_ns must be in (0, {}], got {ns}",
+                ratelab_core::time::MAX_DURATION.0
+            ),
+            (Some(_), Some(_)) => anyhow::bail!(
+                "{} and duration_ns both set the run's duration; give one",
+                name(Setting::Duration)
+            ),
+        };
         let mut cfg = RunConfig {
             seed: self.seed,
-            duration: duration_from_secs(duration_s).map_err(said)?,
+            duration,
             graph: self.graph.graph(speech)?,
             clock: self.clock,
             spin_margin: Nanos(self.spin_margin_us.unwrap_or(0).saturating_mul(1_000)),
@@ -283,7 +348,19 @@ impl RunSpec {
             cfg.spin_margin = cfg.default_spin_margin();
         }
         cfg.validate().map_err(said)?;
+        check_commands(&self.commands, &cfg.graph)?;
         Ok(cfg)
+    }
+
+    /// Its commands split at the run's end `duration`: those applied between its instants,
+    /// and those made after its last one (applied once it has ended).
+    pub fn commands_at(&self, duration: Nanos) -> (Vec<TimedCommand>, Vec<Command>) {
+        let (during, after): (Vec<&TimedCommand>, Vec<&TimedCommand>) =
+            (self.commands.iter()).partition(|c| c.at_ns <= duration.0);
+        (
+            during.into_iter().cloned().collect(),
+            after.into_iter().map(|c| c.command.clone()).collect(),
+        )
     }
 
     /// A brain is what a built-in policy node runs: refused by name for a graph whose
@@ -494,4 +571,31 @@ mod tests {
             "trace_every must be at least 1, got 0"
         );
     }
+
+    #[test]
+    fn a_duration_to_the_ns_is_exact_and_refused_beside_one_in_seconds() {
+        let exact = RunSpec {
+            duration_ns: Some((1 << 53) + 1),
+            ..spec()
+        };
+        assert_eq!(
+            exact.config(Speech::Keywords).unwrap().duration,
+            Nanos((1 << 53) + 1)
+        );
+        let both = RunSpec {
+            duration_s: Some(1.0),
+            ..exact.clone()
+        };
+        assert_eq!(
+            both.config(Speech::Keywords).unwrap_err().to_string(),
+            "duration_s and duration_ns both set the run's duration; give one"
+        );
+        let zero = RunSpec {
+            duration_ns: Some(0),
+            ..spec()
+        };
+        let line = zero.config(Speech::Flags).unwrap_err().to_string();
+        assert!(line.starts_with("duration_ns must be in (0, "), "{line}");
+    }
+
 }

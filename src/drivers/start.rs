@@ -120,6 +120,11 @@ pub struct StartedRun {
     trace: Option<Trace>,
     recording: Option<Recording>,
     ros2: Option<ratelab_ros2::Ros2Options>,
+    /// The spec's commands: those between instants, and those after the run's end.
+    commands: (
+        Vec<ratelab_runtime::command::TimedCommand>,
+        Vec<ratelab_runtime::command::Command>,
+    ),
     /// The front end's own observers ([`StartedRun::observe`]).
     observers: Vec<Box<dyn RunObserver>>,
 }
@@ -148,6 +153,7 @@ impl RunSpec {
             echo,
         } = opts;
         let cfg = self.config(speech)?;
+        let commands = self.commands_at(cfg.duration);
         for w in cfg.graph.qos_warnings() {
             eprintln!("[ratelab] {w}");
         }
@@ -185,6 +191,7 @@ impl RunSpec {
         let recording = open_recording(&a, &cfg, &brain.label(), speech)?;
         Ok(StartedRun {
             cfg,
+            commands,
             outputs: a,
             brain,
             stop,
@@ -228,6 +235,7 @@ impl StartedRun {
             trace,
             recording,
             ros2,
+            commands: (commands, after_end),
             mut observers,
         } = self;
         observers.extend(trace.as_ref().map(Trace::observer));
@@ -240,6 +248,8 @@ impl StartedRun {
             ros2,
             keep_trace: false,
             trace_every: outputs.trace_every,
+            commands,
+            after_end,
             ..RunOptions::new()
         };
         // What nodes' code writes (ratelab_core::textlog): told to the observers (the

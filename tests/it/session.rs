@@ -1007,7 +1007,8 @@ fn restarting_at_a_rate_reached_through_another_gives_the_headless_result() {
         "the restart starts the graph afresh"
     );
     assert_eq!(
-        cfg.phase_offsets, fresh.phase_offsets,
+        cfg.first_deadlines(),
+        fresh.first_deadlines(),
         "no phase carried over"
     );
     let headless = ratelab::run(

@@ -1,14 +1,16 @@
 //! The session log (JSON): every run of a lab session with the commands applied and the
 //! virtual instants they took effect at, and its exact replay.
 
-use crate::run::{RunOptions, TimedCommand};
+use crate::run::TimedCommand;
+use crate::run_spec::RunSpec;
+use crate::start::StartOptions;
 use ratelab_core::metrics::Metrics;
 use ratelab_core::plant::ACTUATOR_HZ;
 use ratelab_core::time::Nanos;
 use ratelab_core::time::MAX_DURATION;
-use ratelab_runtime::checkpoint::load_policy;
 use ratelab_runtime::config::{ClockKind, RunConfig};
-use ratelab_runtime::graph::GraphSpec;
+use ratelab_runtime::scheduler::StopFlag;
+use ratelab_runtime::setting::Speech;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
@@ -110,35 +112,40 @@ impl LoggedRun {
         }
     }
 
-    /// The settings to replay it with: duration = its end time. `origin` names the run in
+    /// The run to replay it with, as every front end describes a run ([`RunSpec`]): its
+    /// graph's text (version 2) or the chapter's graph at its logged rates and depth
+    /// (version 1), its seed, clock, phase offsets, faults and brain, its duration its end
+    /// time, and its commands at their times (those after its end applied once it has
+    /// ended). Checks here what only the log can get wrong, naming the log's fields; the
+    /// rest is [`RunSpec::config`]'s ([`LoggedRun::config`]). `origin` names the run in
     /// errors (`FILE: run N`).
     ///
     /// # Errors
-    /// [`ReplayError::Invalid`] for a graph or a value the command line would refuse.
-    pub fn config(&self, origin: &str) -> Result<RunConfig, ReplayError> {
+    /// [`ReplayError::Invalid`] for a run with both or neither graph forms, an actuator rate
+    /// other than the chapter's, a phase offset of a second or more, an end past the
+    /// longest run, too many faults, or kills listed before stalls.
+    pub fn spec(&self, origin: &str) -> Result<RunSpec, ReplayError> {
         let bad = |field: &str, reason: String| {
             ReplayError::Invalid(format!("{origin}: {field}: {reason}"))
         };
-        let mut cfg = RunConfig {
+        let mut spec = RunSpec {
             clock: self.clock,
             seed: self.seed,
-            duration: Nanos(self.end_ns),
-            phase_offsets: self.phase_offsets_ns.iter().map(|&n| Nanos(n)).collect(),
-            faults: self.faults.clone(),
-            ..RunConfig::default()
+            policy: self.policy.clone(),
+            commands: self.commands.clone(),
+            ..RunSpec::default()
         };
         match (&self.graph, self.sensor_hz, self.control_hz, self.queue_depth) {
             (Some(text), None, None, None) => {
-                cfg.graph = GraphSpec::parse(text, &format!("{origin}: graph"))
-                    .map_err(|e| ReplayError::Invalid(e.to_string()))?;
+                spec.graph.inline = Some((text.clone(), "graph".into()));
             }
             (None, Some(sensor), Some(control), Some(depth)) => {
                 if self.actuator_hz.is_some_and(|a| a != ACTUATOR_HZ) {
                     return Err(bad("actuator_hz", format!("must be {ACTUATOR_HZ} Hz")));
                 }
-                cfg.set_sensor_hz(sensor).map_err(|e| bad("sensor_hz", e.to_string()))?;
-                cfg.set_control_hz(control).map_err(|e| bad("control_hz", e.to_string()))?;
-                cfg.set_queue_depth(depth).map_err(|e| bad("queue_depth", e.to_string()))?;
+                spec.sensor_hz = Some(sensor);
+                spec.control_hz = Some(control);
+                spec.queue_depth = Some(depth);
             }
             _ => {
                 return Err(bad(
@@ -147,22 +154,22 @@ impl LoggedRun {
                 ))
             }
         }
-        if cfg.phase_offsets.len() > cfg.graph.nodes.len() {
+        if let Some(&o) = self
+            .phase_offsets_ns
+            .iter()
+            .find(|&&o| o >= Nanos::SECOND.0)
+        {
             return Err(bad(
                 "phase_offsets_ns",
-                format!(
-                    "{} values for {} nodes",
-                    cfg.phase_offsets.len(),
-                    cfg.graph.nodes.len()
-                ),
+                format!("{o} ns is not below one second"),
             ));
         }
-        if let Some(o) = cfg.phase_offsets.iter().find(|o| **o >= Nanos::SECOND) {
-            return Err(bad(
-                "phase_offsets_ns",
-                format!("{} ns is not below one second", o.0),
-            ));
-        }
+        // Exact: a whole number of ns below a second goes to ms and back unchanged (tests).
+        spec.phase_offset_ms = self
+            .phase_offsets_ns
+            .iter()
+            .map(|&n| n as f64 / 1e6)
+            .collect();
         if self.end_ns > MAX_DURATION.0 {
             return Err(bad(
                 "end_ns",
@@ -172,6 +179,9 @@ impl LoggedRun {
                 ),
             ));
         }
+        // A run that ended before its first instant keeps the default duration: its
+        // settings are checked all the same, and there is nothing to replay (`replay_run`).
+        spec.duration_ns = (self.end_ns > 0).then_some(self.end_ns);
         if self.faults.len() > ratelab_runtime::config::MAX_FAULTS {
             return Err(bad(
                 "faults",
@@ -181,27 +191,31 @@ impl LoggedRun {
                 ),
             ));
         }
-        for (i, f) in self.faults.iter().enumerate() {
-            if cfg.graph.node_id(&f.node).is_none() {
-                return Err(bad(
-                    &format!("faults[{i}]"),
-                    format!("unknown node '{}'", f.node),
-                ));
-            }
+        let (stalls, kills) = self
+            .faults
+            .iter()
+            .cloned()
+            .partition(|f| f.duration.is_some());
+        (spec.graph.stalls, spec.graph.kills) = (stalls, kills);
+        if spec.graph.faults() != self.faults {
+            // Every run gives its stalls, then its kills; in another order its summary
+            // would list them otherwise than the replay's.
+            return Err(bad(
+                "faults",
+                "the stalls are listed before the kills, as a run gives them".into(),
+            ));
         }
-        let mut at = 0;
-        for (i, c) in self.commands.iter().enumerate() {
-            let field = format!("commands[{i}]");
-            if c.at_ns < at {
-                return Err(bad(
-                    &field,
-                    format!("at_ns {} is before the previous command's {at}", c.at_ns),
-                ));
-            }
-            at = c.at_ns;
-            c.command.validate(&cfg.graph).map_err(|e| bad(&field, e))?;
-        }
-        Ok(cfg)
+        Ok(spec)
+    }
+
+    /// The settings to replay it with ([`LoggedRun::spec`], then [`RunSpec::config`]'s rules
+    /// in the log's words: its keys are the Python package's).
+    ///
+    /// # Errors
+    /// [`ReplayError::Invalid`], one line starting with `origin`.
+    pub fn config(&self, origin: &str) -> Result<RunConfig, ReplayError> {
+        (self.spec(origin)?.config(Speech::Keywords))
+            .map_err(|e| ReplayError::Invalid(format!("{origin}: {e}")))
     }
 }
 
@@ -229,7 +243,8 @@ pub enum ReplayError {
         /// The parser's complaint.
         detail: String,
     },
-    /// A value the command line would refuse, or an unknown version.
+    /// A value a run's settings refuse ([`RunSpec::config`]), an unknown version, or a run
+    /// that cannot start (its brain or graph not loaded): one line.
     #[error("{0}")]
     Invalid(String),
     /// Real-clock runs are not reproducible.
@@ -244,12 +259,6 @@ pub enum ReplayError {
         /// When it first switched, run time, s.
         at_s: f64,
     },
-    /// A run could not start.
-    #[error(transparent)]
-    Run(#[from] crate::run::RunError),
-    /// The brain could not be loaded.
-    #[error(transparent)]
-    Policy(#[from] ratelab_runtime::checkpoint::PolicyError),
 }
 
 impl SessionLog {
@@ -336,10 +345,12 @@ impl SessionLog {
     }
 }
 
-/// Re-run logged run `index` headless under the virtual clock.
+/// Re-run logged run `index` headless under the virtual clock, as any run starts
+/// ([`LoggedRun::spec`], [`RunSpec::start`]): its brain loaded, nothing written.
 ///
 /// # Errors
-/// [`ReplayError`]; real-clock runs are refused.
+/// [`ReplayError`]; real-clock runs are refused, and a run that ended before its first
+/// instant (nothing to replay).
 pub fn replay_run(log: &SessionLog, index: usize) -> Result<Metrics, ReplayError> {
     let r = &log.runs[index];
     if r.clock != ClockKind::Virtual {
@@ -351,15 +362,21 @@ pub fn replay_run(log: &SessionLog, index: usize) -> Result<Metrics, ReplayError
             at_s: Nanos(at).as_secs_f64(),
         });
     }
-    let cfg = r.config(&format!("run {}", index + 1))?;
-    let brain = load_policy(&r.policy)?;
-    let opts = RunOptions {
-        commands: r.applied().to_vec(),
-        after_end: r.after_end().iter().map(|c| c.command.clone()).collect(),
-        keep_trace: false,
-        ..RunOptions::default()
+    if r.end_ns == 0 {
+        return Err(ReplayError::Invalid(format!(
+            "run {} ended before its first instant: nothing to replay",
+            index + 1
+        )));
+    }
+    let origin = format!("run {}", index + 1);
+    let said = |e: anyhow::Error| ReplayError::Invalid(format!("{origin}: {e}"));
+    let opts = StartOptions {
+        speech: Speech::Keywords,
+        echo: false,
+        ..StartOptions::command_line(StopFlag::new())
     };
-    Ok(crate::run::run(&cfg, brain, opts)?.metrics)
+    let run = r.spec(&origin)?.start(opts).map_err(said)?;
+    Ok(run.wait().map_err(said)?.report.metrics)
 }
 
 #[cfg(test)]
@@ -386,5 +403,96 @@ mod tests {
         assert_eq!(at(run.after_end()), [300]);
         run.end_ns = 300;
         assert!(run.after_end().is_empty());
+    }
+
+    #[test]
+    fn a_logged_run_s_spec_gives_back_its_exact_times_graph_faults_and_commands() {
+        let mut cfg = RunConfig {
+            clock: ClockKind::Virtual,
+            seed: 7,
+            phase_offsets: vec![Nanos(1), Nanos(999_999_999), Nanos(123_456_789)],
+            faults: vec![
+                ratelab_core::qos::Fault {
+                    node: "policy".into(),
+                    at: Nanos(1_000_000_001),
+                    duration: Some(Nanos(3)),
+                },
+                ratelab_core::qos::Fault {
+                    node: "sensor".into(),
+                    at: Nanos(2_000_000_003),
+                    duration: None,
+                },
+            ],
+            ..RunConfig::default()
+        };
+        cfg.set_control_hz(33.0).unwrap();
+        let mut run = LoggedRun::starting(&cfg, "scripted");
+        run.commands = vec![
+            TimedCommand {
+                at_ns: 500_000_001,
+                command: Command::SetQueueDepth { depth: 2 },
+            },
+            TimedCommand {
+                at_ns: 9_000_000_000,
+                command: Command::SetSensorHz { hz: 40.0 },
+            },
+        ];
+        // Every end a run can have, the longest too, comes back to the ns.
+        for end_ns in [
+            1,
+            999_999_999,
+            1_234_567_891,
+            (1 << 53) + 1,
+            MAX_DURATION.0 - 1,
+        ] {
+            run.end_ns = end_ns;
+            let spec = run.spec("run 1").unwrap();
+            let back = spec.config(Speech::Keywords).unwrap();
+            assert_eq!(back.duration, Nanos(end_ns));
+            assert_eq!(back.phase_offsets, cfg.phase_offsets);
+            assert_eq!(back.faults, cfg.faults);
+            assert_eq!(back.graph, cfg.graph);
+            assert_eq!((back.seed, back.clock), (7, ClockKind::Virtual));
+            let (during, after) = spec.commands_at(back.duration);
+            let split = (run.applied(), run.after_end());
+            assert_eq!(during, split.0);
+            assert_eq!(after.len(), split.1.len());
+        }
+        // A kill listed before a stall: the replay's summary would list them otherwise.
+        run.faults.reverse();
+        let err = run.spec("run 1").unwrap_err().to_string();
+        assert_eq!(
+            err,
+            "run 1: faults: the stalls are listed before the kills, as a run gives them"
+        );
+    }
+
+    #[test]
+    fn a_logged_run_s_commands_are_checked_by_the_run_s_rules_in_order_and_by_the_graph() {
+        let mut run = LoggedRun::starting(&RunConfig::default(), "scripted");
+        run.end_ns = 1_000_000_000;
+        run.commands = vec![
+            TimedCommand {
+                at_ns: 200,
+                command: Command::SetQueueDepth { depth: 2 },
+            },
+            TimedCommand {
+                at_ns: 100,
+                command: Command::SetQueueDepth { depth: 3 },
+            },
+        ];
+        let err = run.config("f: run 1").unwrap_err().to_string();
+        assert_eq!(
+            err,
+            "f: run 1: commands[1]: at_ns 100 is before the previous command's 200"
+        );
+        run.commands[1].at_ns = 300;
+        run.commands[1].command = Command::SetNodeHz {
+            node: "planner".into(),
+            hz: 5.0,
+        };
+        let err = run.config("f: run 1").unwrap_err().to_string();
+        assert!(err.starts_with("f: run 1: commands[1]: "), "{err}");
+        assert!(err.contains("planner"), "{err}");
     }
 }
