@@ -597,5 +597,4 @@ mod tests {
         let line = zero.config(Speech::Flags).unwrap_err().to_string();
         assert!(line.starts_with("duration_ns must be in (0, "), "{line}");
     }
-
 }
