@@ -581,6 +581,53 @@ mod tests {
         );
     }
 
+    /// While the run goes on with its actuator killed (or stalled now), the plant stands
+    /// still: the badge says so, not BALANCED; before the fault, and after a stall, it is
+    /// balanced again.
+    #[test]
+    fn a_run_going_on_with_its_actuator_killed_or_stalled_is_not_balanced() {
+        for (fault, kill, at_1_2, at_2_5) in [
+            (
+                "actuator@1",
+                true,
+                "ACTUATOR KILLED at t=1.00s",
+                "ACTUATOR KILLED",
+            ),
+            (
+                "actuator@1+0.5",
+                false,
+                "ACTUATOR STALLED at t=1.00s",
+                "BALANCED ✓",
+            ),
+        ] {
+            let mut cfg = virtual_cfg(50.0, 3);
+            cfg.faults = vec![ratelab::qos::Fault::parse(fault, kill).unwrap()];
+            let report = run(&cfg, Box::new(Scripted), RunOptions::new()).unwrap();
+            let trace = report.trace;
+            for (upto, want) in [(0.9, "BALANCED ✓"), (1.2, at_1_2), (2.5, at_2_5)] {
+                let at = ratelab::Nanos::from_secs_f64(upto).unwrap();
+                let (mut app, _rx) = told(&cfg, &trace, at);
+                // The engine's status tells the time on: a killed actuator steps no more.
+                let mut status = chapter_status(
+                    vec![ratelab::qos::TopicQos::default(); 2],
+                    vec![Some(true); 3],
+                );
+                if let Telemetry::Status { now, .. } = &mut status {
+                    *now = at;
+                }
+                app.on_telemetry(status);
+                // Whole in the narrow panel too.
+                let narrow = render(&app, 80, 24);
+                assert!(narrow.contains(want), "{fault} at {upto} s: {narrow}");
+                let text = render(&app, 120, 40);
+                assert!(text.contains(want), "{fault} at {upto} s: {text}");
+                if want != "BALANCED ✓" {
+                    assert!(!text.contains("BALANCED"), "{fault} at {upto} s: {text}");
+                }
+            }
+        }
+    }
+
     /// A watchdog's stop is not a fall: the footer says which ended the run (#25).
     #[test]
     fn a_watchdog_stop_is_not_called_a_fall() {

@@ -306,6 +306,10 @@ pub enum Verdict {
     /// The run could not start ([`ratelab::session::Telemetry::NotStarted`]): no run is
     /// going; the footer says why, until a save, `r` or `c` starts one.
     NotStarted,
+    /// The run goes on with its actuator killed or stalled now: the plant stands still, the
+    /// pole neither balanced nor fallen (`ACTUATOR KILLED at t=1.00s`, `ACTUATOR STALLED at
+    /// t=1.00s`).
+    Still(String),
     /// The run ended neither fallen nor balanced the whole run: the summary's headline
     /// ([`ratelab::metrics::Metrics::headline`], e.g. `STOPPED BY WATCHDOG at t=2.04s (…)`).
     Stopped(String),
@@ -864,6 +868,7 @@ fn badge(v: &View) -> Span<'static> {
         .white()
         .on_red()
         .bold(),
+        Verdict::Still(what) => Span::from(format!(" {what} ")).black().on_yellow().bold(),
         // The headline up to its parenthesis: "STOPPED BY WATCHDOG at t=2.04s".
         Verdict::Stopped(headline) => Span::from(format!(
             " {} ",
@@ -1009,7 +1014,10 @@ fn leading_notice(v: &View) -> Option<(&str, usize)> {
     }
     let m = v.message.as_deref()?;
     // A hung callback is no end: the run goes on once it returns.
-    let ended = !matches!(v.verdict, Verdict::Balanced | Verdict::Hung { .. });
+    let ended = !matches!(
+        v.verdict,
+        Verdict::Balanced | Verdict::Hung { .. } | Verdict::Still(_)
+    );
     if ended {
         Some((m, 1))
     } else if v.message_fresh {

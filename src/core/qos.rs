@@ -587,6 +587,22 @@ pub struct Fault {
 }
 
 impl Fault {
+    /// This fault as it takes effect when applied before the instant at `from` (run time),
+    /// while the run goes on: from its own time when that is later, else from `from`, a
+    /// stall still ending when it was set to (a time already past covers the ticks from
+    /// `from` on that it would have covered; one whose end has passed covers none). What
+    /// a run's fault book holds, so its summary and its telemetry give the same start.
+    pub fn from_instant(&self, from: Nanos) -> Fault {
+        let at = self.at.max(from);
+        Fault {
+            node: self.node.clone(),
+            at,
+            duration: self
+                .duration
+                .map(|d| self.at.saturating_add(d).saturating_sub(at)),
+        }
+    }
+
     /// True when a tick at `now` is swallowed.
     pub fn covers(&self, now: Nanos) -> bool {
         now >= self.at
@@ -668,6 +684,29 @@ mod tests {
             apply_key(&mut q, &mut d, k, v)?;
         }
         Ok((q, d))
+    }
+
+    #[test]
+    fn a_fault_takes_effect_from_its_instant_a_stall_ending_when_set_to() {
+        let ms = |m: u64| Nanos(m * 1_000_000);
+        let stall = Fault::parse("policy@2+0.5", false).unwrap();
+        let later = stall.from_instant(ms(2_200));
+        assert_eq!((later.at, later.duration), (ms(2_200), Some(ms(300))));
+        assert_eq!(
+            stall.from_instant(ms(1_000)),
+            stall,
+            "its own time, when later"
+        );
+        let over = stall.from_instant(ms(3_000));
+        assert_eq!(over.duration, Some(Nanos::ZERO));
+        assert!(
+            !(over.covers(ms(3_000))),
+            "a stall whose end has passed covers nothing"
+        );
+        let kill = Fault::parse("sensor@1", true)
+            .unwrap()
+            .from_instant(ms(4_000));
+        assert_eq!((kill.at, kill.duration), (ms(4_000), None));
     }
 
     #[test]

@@ -50,8 +50,9 @@ pub struct RunOptions {
     /// Commands applied once the run has ended, before its summary (virtual clock): what a
     /// lab's user changed after the run's last instant, paused, before a restart or quit.
     /// They set the settings the run ended with (the summary's end rates), as they did in
-    /// the live run, and no tick (`replay`).
-    pub after_end: Vec<Command>,
+    /// the live run, and no tick (`replay`). Each at the time it was logged (an injected
+    /// fault is booked from it, [`ratelab_runtime::command::Command::apply`]).
+    pub after_end: Vec<TimedCommand>,
     /// Offer the graph to ROS 2 while it runs ([`ratelab_ros2`]). Under the virtual clock the
     /// run then keeps pace with the wall clock (one second of run time per second), so
     /// that ROS 2's tools see the graph's rates; its results are unchanged. The session

@@ -11,7 +11,7 @@ use crate::outputs::Outputs;
 use ratelab_core::executor::{ComputeTime, ExecutorOverride};
 use ratelab_core::qos::Fault;
 use ratelab_core::time::Nanos;
-use ratelab_runtime::command::{Command, TimedCommand};
+use ratelab_runtime::command::TimedCommand;
 use ratelab_runtime::config::{check_rate, duration_from_secs, ConfigError};
 use ratelab_runtime::config::{phase_offsets_from_ms, BREAK_CONTROL_HZ};
 use ratelab_runtime::graph::GraphSpec;
@@ -57,6 +57,26 @@ pub fn late_fault_warnings(cfg: &RunConfig, speech: Speech) -> Vec<String> {
             )
         })
         .collect()
+}
+
+/// A node killed twice is refused, naming both: it would be killed at the first, and the
+/// summary would name a kill that never was.
+fn check_kills(kills: &[Fault], speech: Speech) -> anyhow::Result<()> {
+    for (i, k) in kills.iter().enumerate() {
+        if let Some(first) = kills[..i].iter().find(|f| f.node == k.node) {
+            let given = |f: &Fault| match speech {
+                Speech::Flags => format!("--kill {}@{}", f.node, f.at.as_secs_f64()),
+                Speech::Keywords => speech.entry(Setting::Kill, &f.node, &f.at.as_secs_f64()),
+            };
+            anyhow::bail!(
+                "{} and {} both kill node '{}'; give one",
+                given(first),
+                given(k),
+                k.node
+            );
+        }
+    }
+    Ok(())
 }
 
 /// Scheduled commands checked: in order of time, each one the graph can take
@@ -348,19 +368,15 @@ impl RunSpec {
             cfg.spin_margin = cfg.default_spin_margin();
         }
         cfg.validate().map_err(said)?;
+        check_kills(&self.graph.kills, speech)?;
         check_commands(&self.commands, &cfg.graph)?;
         Ok(cfg)
     }
 
     /// Its commands split at the run's end `duration`: those applied between its instants,
     /// and those made after its last one (applied once it has ended).
-    pub fn commands_at(&self, duration: Nanos) -> (Vec<TimedCommand>, Vec<Command>) {
-        let (during, after): (Vec<&TimedCommand>, Vec<&TimedCommand>) =
-            (self.commands.iter()).partition(|c| c.at_ns <= duration.0);
-        (
-            during.into_iter().cloned().collect(),
-            after.into_iter().map(|c| c.command.clone()).collect(),
-        )
+    pub fn commands_at(&self, duration: Nanos) -> (Vec<TimedCommand>, Vec<TimedCommand>) {
+        (self.commands.iter().cloned()).partition(|c| c.at_ns <= duration.0)
     }
 
     /// A brain is what a built-in policy node runs: refused by name for a graph whose
@@ -596,5 +612,23 @@ mod tests {
         };
         let line = zero.config(Speech::Flags).unwrap_err().to_string();
         assert!(line.starts_with("duration_ns must be in (0, "), "{line}");
+    }
+
+    #[test]
+    fn a_node_killed_twice_is_refused_naming_both() {
+        let mut s = spec();
+        for at in [3, 2] {
+            s.graph.kills.push(Fault {
+                node: "actuator".into(),
+                at: Nanos(at * Nanos::SECOND.0),
+                duration: None,
+            });
+        }
+        assert_eq!(
+            s.config(Speech::Flags).unwrap_err().to_string(),
+            "--kill actuator@3 and --kill actuator@2 both kill node 'actuator'; give one"
+        );
+        s.graph.kills[1].node = "sensor".into();
+        assert!(s.config(Speech::Flags).is_ok());
     }
 }

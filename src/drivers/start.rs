@@ -123,7 +123,7 @@ pub struct StartedRun {
     /// The spec's commands: those between instants, and those after the run's end.
     commands: (
         Vec<ratelab_runtime::command::TimedCommand>,
-        Vec<ratelab_runtime::command::Command>,
+        Vec<ratelab_runtime::command::TimedCommand>,
     ),
     /// The front end's own observers ([`StartedRun::observe`]).
     observers: Vec<Box<dyn RunObserver>>,

@@ -157,12 +157,14 @@ impl Command {
         Ok(())
     }
 
-    /// Apply to a running graph.
+    /// Apply to a running graph, before its instant at `at` (run time): the instant it takes
+    /// effect at, and is logged at. An injected fault given an earlier time is booked from
+    /// `at` ([`ratelab_core::qos::Fault::from_instant`]); a stall over before `at` is refused.
     ///
     /// # Errors
     /// A one-line description when the value is invalid or the brain cannot be loaded
     /// (the graph is unchanged).
-    pub fn apply(&self, h: &GraphHandles) -> Result<(), String> {
+    pub fn apply(&self, h: &GraphHandles, at: ratelab_core::time::Nanos) -> Result<(), String> {
         match self {
             Command::SetControlHz { hz } => h
                 .control_rate()
@@ -218,7 +220,17 @@ impl Command {
             }
             Command::InjectFault { fault } => {
                 let (id, f) = fault_node(&h.spec, fault)?;
-                h.faults.inject(id, f)
+                let from = f.from_instant(at);
+                if from.duration == Some(ratelab_core::time::Nanos::ZERO) {
+                    // Over before it could start: it would name a stall that never was.
+                    return Err(format!(
+                        "{f}: over at {} s, before the instant it would take effect ({} s)",
+                        f.at.saturating_add(f.duration.unwrap_or_default())
+                            .as_secs_f64(),
+                        at.as_secs_f64()
+                    ));
+                }
+                h.faults.inject(id, from)
             }
             Command::SetPhase { node, phase_ms } => {
                 let (id, phase) = phase_node(&h.spec, node, *phase_ms)?;

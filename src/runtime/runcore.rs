@@ -487,7 +487,7 @@ impl RunCore {
                 break;
             }
             // Commands were validated when logged; a failure here changes nothing.
-            let _ = c.command.apply(&self.handles);
+            let _ = c.command.apply(&self.handles, Nanos(c.at_ns));
             self.applied.push(c.clone());
             self.next_scheduled += 1;
         }
@@ -541,8 +541,8 @@ impl RunCore {
         if self.end.is_some() {
             return Err("the run has ended".into());
         }
-        command.apply(&self.handles)?;
         let at = self.sched.next_due().unwrap_or(self.sched.now());
+        command.apply(&self.handles, at)?;
         let c = TimedCommand {
             at_ns: at.0,
             command,
@@ -558,12 +558,13 @@ impl RunCore {
     /// Apply `command` to a run that has ended, as a lab's user does after its last instant
     /// (paused, before a restart): it sets what the run ended with (its rates, a new
     /// executor plan, which the executors' figures then count in) and runs nothing; not
-    /// logged. A replay takes the session's such commands up so ([`Command::apply`]).
+    /// logged. A replay takes the session's such commands up so ([`Command::apply`], at
+    /// the time the session logged: the instant after the run's last, which never ran).
     ///
     /// # Errors
     /// As [`Command::apply`]'s.
-    pub fn apply_after_end(&mut self, command: &Command) -> Result<(), String> {
-        command.apply(&self.handles)?;
+    pub fn apply_after_end(&mut self, c: &TimedCommand) -> Result<(), String> {
+        c.command.apply(&self.handles, Nanos(c.at_ns))?;
         self.take_plan();
         Ok(())
     }

@@ -134,7 +134,7 @@ fn a_live_qos_change_connects_and_disconnects_the_subscription() {
             topic: "/action".into(),
             pairs: pairs.into(),
         }
-        .apply(h)
+        .apply(h, ratelab::Nanos::ZERO)
         .unwrap();
     };
     set("reliability=reliable");

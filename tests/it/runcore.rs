@@ -519,6 +519,54 @@ fn a_fault_injected_by_command_is_the_fault_given_at_the_start() {
     assert!(refused(&mut c, "policy@9+0.1").contains("at most"));
 }
 
+/// A fault injected with a time already past is booked from the instant it takes effect (a
+/// stall still ending when it was set to): the run, its summary too, is that of the fault
+/// given at the start from that instant; the summary never names a start it did not have.
+#[test]
+fn a_fault_given_a_past_time_is_booked_from_the_instant_it_takes_effect() {
+    let _machine = crate::machine::shared();
+    let (_, given) = configurations()
+        .into_iter()
+        .find(|(label, _)| *label == "faults")
+        .unwrap();
+    let bare = RunConfig {
+        faults: Vec::new(),
+        ..given.clone()
+    };
+    let late = TimedCommand {
+        at_ns: 2_200 * Nanos::MILLISECOND.0,
+        command: Command::InjectFault {
+            fault: "policy@2+0.5".into(),
+        },
+    };
+    let from_its_instant = RunConfig {
+        faults: vec![ratelab::qos::Fault::parse("policy@2.2+0.3", false).unwrap()],
+        ..bare.clone()
+    };
+    let mut c = core(&bare, vec![late.clone()]);
+    c.run_to_end(&StopFlag::new());
+    let summary = c.metrics().summary_lines(None).join("\n");
+    assert!(
+        summary.contains("stalled at 2.20 s for 0.30 s"),
+        "{summary}"
+    );
+    assert_eq!(
+        finish(core(&bare, vec![late])),
+        finish(core(&from_its_instant, Vec::new()))
+    );
+    // A stall over before the instant it would take effect is refused: it would name a
+    // stall that never was.
+    let mut c = core(&bare, Vec::new());
+    c.run_until(Nanos(3 * Nanos::SECOND.0));
+    let err = c
+        .apply(Command::InjectFault {
+            fault: "sensor@0.5+0.2".into(),
+        })
+        .unwrap_err();
+    assert!(err.contains("over at 0.7 s, before the instant"), "{err}");
+    assert!(c.applied().is_empty(), "not logged");
+}
+
 /// A phase change by command at the start is the run started at that phase offset, byte
 /// for byte; mid-run it puts the node's ticks on the new grid from the next instant on,
 /// rate unchanged; a bad node or offset is refused in one line.

@@ -284,6 +284,38 @@ fn replay_path(file: &std::path::Path) -> (Option<i32>, String) {
     )
 }
 
+/// A session that started no run replays to a line saying so, not to silence; a node
+/// killed twice, and a stall over before the instant it was injected at, are refused.
+#[test]
+fn an_empty_session_says_so_and_a_double_kill_or_a_stall_already_over_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("empty.json");
+    std::fs::write(&file, r#"{"version": 2, "runs": []}"#).unwrap();
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_ratelab"))
+        .arg("replay")
+        .arg(&file)
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(0));
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(out.contains("no runs to replay"), "{out}");
+
+    let log = valid_log(dir.path());
+    let mut v = log.clone();
+    v["runs"][0]["faults"] = serde_json::json!([
+        {"node": "actuator", "at": 3_000_000_000u64, "duration": null},
+        {"node": "actuator", "at": 2_000_000_000u64, "duration": null},
+    ]);
+    let (code, err) = replay_text(dir.path(), &v.to_string());
+    assert_eq!(code, Some(2), "{err}");
+    assert!(
+        err.contains(
+            r#"kill["actuator"]=3 and kill["actuator"]=2 both kill node 'actuator'; give one"#
+        ),
+        "{err}"
+    );
+}
+
 #[test]
 fn hand_edited_session_logs_are_checked_like_the_command_line() {
     let dir = tempfile::tempdir().unwrap();

@@ -99,6 +99,22 @@ impl App {
         }
     }
 
+    /// The verdict while the run goes on with its actuator under a fault (killed, or stalled
+    /// now): the plant stands still, so the pole is neither balanced nor fallen. `None` when
+    /// no actuator is under a fault now.
+    fn actuator_still(&self) -> Option<Verdict> {
+        let f = self.faults.iter().find(|f| {
+            f.covers(self.now)
+                && (self.graph.node_id(&f.node))
+                    .is_some_and(|id| self.graph.node(id).kind.is_actuator())
+        })?;
+        let at_s = f.at.as_secs_f64();
+        Some(Verdict::Still(match f.duration {
+            None => format!("ACTUATOR KILLED at t={at_s:.2}s"),
+            Some(_) => format!("ACTUATOR STALLED at t={at_s:.2}s"),
+        }))
+    }
+
     /// The injected fault node `id` is under now: `STALLED` or `KILLED`.
     pub(super) fn fault_of(&self, id: NodeId) -> Option<&'static str> {
         let name = &self.graph.node(id).name;
@@ -459,6 +475,7 @@ impl App {
                         self.now.as_secs_f64()
                     },
                 },
+                (Verdict::Balanced, None) => self.actuator_still().unwrap_or(Verdict::Balanced),
                 (v, _) => v.clone(),
             },
             angle_history: self.in_chart_window(&self.history, |&(t, a, _)| (t, a)),

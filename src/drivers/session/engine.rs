@@ -667,7 +667,7 @@ impl Engine {
         recording: &Option<Recording>,
         now: bool,
     ) -> bool {
-        self.apply_with(cmd, at, recording, now, |c| c.apply(h))
+        self.apply_with(cmd, at, recording, now, |c| c.apply(h, at))
     }
 
     /// Apply `cmd` with `apply` (to the graph's handles, or through the run core), then log
@@ -696,22 +696,11 @@ impl Engine {
                 if let Some(r) = recording {
                     record_change(r, at, &cmd, &text, from_ros2);
                 }
-                // The fault as it takes effect: from `at` (the instant it was applied before)
-                // when it was given an earlier time, as a time already past covers the ticks
-                // from now on; a stall ends when it was set to.
+                // The fault as it takes effect, as the graph's fault book holds it.
                 let faulted = match &cmd {
-                    Command::InjectFault { fault } => {
-                        ratelab_runtime::command::parse_fault(fault).ok().map(|f| {
-                            let from = f.at.max(at);
-                            ratelab_core::qos::Fault {
-                                duration: f
-                                    .duration
-                                    .map(|d| f.at.saturating_add(d).saturating_sub(from)),
-                                at: from,
-                                node: f.node,
-                            }
-                        })
-                    }
+                    Command::InjectFault { fault } => ratelab_runtime::command::parse_fault(fault)
+                        .ok()
+                        .map(|f| f.from_instant(at)),
                     _ => None,
                 };
                 self.log

@@ -175,7 +175,7 @@ impl RunCore {
         while let Some(due) = self.next_instant().filter(|&due| due <= t) {
             while let Some(c) = again.next_if(|c| c.at_ns <= due.0) {
                 // It was applied once; the graph is as it was then.
-                let _ = c.command.apply(&self.handles);
+                let _ = c.command.apply(&self.handles, Nanos(c.at_ns));
                 self.applied.push(c.clone());
                 self.by_hand.push(c);
             }
@@ -343,7 +343,7 @@ impl RunCore {
         // Commands applied after the captured instant ran (logged at the next one).
         while let Some(c) = fresh.scheduled.get(fresh.next_scheduled) {
             c.command
-                .apply(&fresh.handles)
+                .apply(&fresh.handles, Nanos(c.at_ns))
                 .map_err(|e| failed(e.clone()))?;
             fresh.next_scheduled += 1;
         }
