@@ -351,8 +351,9 @@ pub struct GraphArgs {
     /// its tick starts; its executor's thread is busy meanwhile.
     #[arg(long = "compute", value_name = "NODE=MS", value_parser = parse_compute)]
     pub computes: Vec<(String, ratelab::executor::ComputeTime)>,
-    /// Run every node on one executor: single_threaded, multi_threaded:N (N threads) or
-    /// per_node (a thread each, the default); replaces the graph file's [executors].
+    /// Run every node but the actuator (it steps the plant, on a thread of its own) on one
+    /// executor: single_threaded, multi_threaded:N (N threads) or per_node (a thread each,
+    /// the default); replaces the graph file's [executors].
     #[arg(long, value_name = "KIND", value_parser = ratelab::executor::ExecutorOverride::parse)]
     pub executor: Option<ratelab::executor::ExecutorOverride>,
 }

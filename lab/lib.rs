@@ -144,6 +144,12 @@ fn replay(args: &cli::ReplayArgs) -> anyhow::Result<()> {
             ratelab::output::check_target(&dir.join(format!("metrics-{n}.json")), args.force)?;
         }
     }
+    if log.runs.is_empty() {
+        println!(
+            "[ratelab] {}: no runs to replay (the session started none)",
+            args.file.display()
+        );
+    }
     let mut mismatches = 0;
     for (i, run) in log.runs.iter().enumerate() {
         let n = i + 1;

@@ -30,6 +30,17 @@ pub fn printable(text: &str) -> Cow<'_, str> {
     )
 }
 
+/// A number as a refusal quotes it, short: Rust's own form up to 15 digits either side of
+/// the point, scientific past them (`1e300`, not its 301 digits; `1e-12`).
+pub fn number(x: f64) -> String {
+    let a = x.abs();
+    if a != 0.0 && a.is_finite() && !(1e-6..1e15).contains(&a) {
+        format!("{x:e}")
+    } else {
+        format!("{x}")
+    }
+}
+
 /// Does `text` hold a control character (what [`printable`] would write out)?
 pub fn has_control(text: &str) -> bool {
     text.chars().any(char::is_control)
@@ -85,5 +96,16 @@ mod tests {
             .any(char::is_control));
         assert!(has_control("x\u{1b}"));
         assert!(!has_control("x y"));
+    }
+
+    #[test]
+    fn a_number_is_quoted_short() {
+        assert_eq!(number(1e300), "1e300");
+        assert_eq!(number(-2.5e-9), "-2.5e-9");
+        assert_eq!(number(0.0), "0");
+        assert_eq!(number(12.5), "12.5");
+        assert_eq!(number(10000.0), "10000");
+        assert_eq!(number(f64::NAN), "NaN");
+        assert_eq!(number(f64::INFINITY), "inf");
     }
 }

@@ -94,6 +94,7 @@ impl ConfigError {
                     other if speech == Speech::Keywords => other.replace('-', "_"),
                     other => format!("--{other}"),
                 };
+                let hz = ratelab_core::text::number(*hz);
                 format!("{named} must be a finite rate in (0, {MAX_HZ}] Hz, got {hz}")
             }
             ConfigError::Depth(d) => {

@@ -452,9 +452,10 @@ impl Ctx<'_> {
 }
 
 fn check_rate_hz(hz: f64) -> Result<(), String> {
-    period_for_hz(hz)
-        .map(|_| ())
-        .map_err(|_| format!("rate_hz must be a finite rate in (0, {MAX_HZ}] Hz, got {hz}"))
+    period_for_hz(hz).map(|_| ()).map_err(|_| {
+        let hz = ratelab_core::text::number(hz);
+        format!("rate_hz must be a finite rate in (0, {MAX_HZ}] Hz, got {hz}")
+    })
 }
 
 fn check_actuator_rate(hz: f64) -> Result<(), String> {

@@ -868,8 +868,9 @@ def run(
     kill: per-node kills, s of run time ({"policy": 3.0}).
     compute_ms: per-node compute time of a tick, ms ({"policy": 30}; with uniform jitter
         {"policy": (30, 5)} or {"policy": "30±5"}).
-    executor: every node on one executor: "single_threaded", "multi_threaded:N" or
-        "per_node" (replaces the graph file's [executors]).
+    executor: every node but the actuator (which steps the plant, on a thread of its
+        own) on one executor: "single_threaded", "multi_threaded:N" or "per_node"
+        (replaces the graph file's [executors]).
     phase_offset_ms: first-tick offsets, ms, one per node in tie-break order ([0, 5, 10],
         or a NumPy array).
     policy: the brain: "scripted" (default), a checkpoint path, "FILE.py[:FUNCTION]", or a
