@@ -220,23 +220,6 @@ pub fn run_bench(a: &BenchArgs, stop: StopFlag) -> anyhow::Result<()> {
         Some(us) => Nanos(us.saturating_mul(1_000)),
         None => ratelab::rate::DEFAULT_SPIN_MARGIN.min(Nanos(period.0 / 2)),
     };
-    println!(
-        "real-clock timing: every node at one rate{}, {} s each, spin margin {} µs, {} cores",
-        if a.stagger { ", staggered by P/n" } else { "" },
-        a.duration,
-        a.spin_margin_us.map_or_else(
-            || format!(
-                "{} (at most P/2)",
-                ratelab::rate::DEFAULT_SPIN_MARGIN.0 / 1_000
-            ),
-            |us| us.to_string()
-        ),
-        ratelab::sweep_spec::threads()
-    );
-    println!(
-        "{:>8}  {:<10} {:>7} {:>9} {:>9} {:>9} {:>9} {:>8}  policy",
-        "rate Hz", "node", "ticks", "p50 µs", "p99 µs", "max µs", "cpu %", "skipped"
-    );
     // What a Python brain or node adds to a tick (docs/python.md): its call, measured here.
     match ratelab::python::brain::call_cost(20_000) {
         Ok((p50, p99)) => println!(
@@ -246,6 +229,31 @@ pub fn run_bench(a: &BenchArgs, stop: StopFlag) -> anyhow::Result<()> {
         ),
         Err(e) => println!("Python: not measured ({e})"),
     }
+    // The margin each rate is timed with, as used.
+    let margins: Vec<String> = (a.hz.iter())
+        .map(|&hz| {
+            let us = Rate::new(hz).map_or(0, |r| margin_for(r.period()).0 / 1_000);
+            format!("{us} µs at {hz} Hz")
+        })
+        .collect();
+    println!(
+        "real-clock timing: every node at one rate{}, {} s each, spin margin {}{}, {} cores",
+        if a.stagger { ", staggered by P/n" } else { "" },
+        a.duration,
+        margins.join(", "),
+        match a.spin_margin_us {
+            None => format!(
+                " ({} µs, at most P/2)",
+                ratelab::rate::DEFAULT_SPIN_MARGIN.0 / 1_000
+            ),
+            Some(_) => String::new(),
+        },
+        ratelab::sweep_spec::threads()
+    );
+    println!(
+        "{:>8}  {:<10} {:>7} {:>9} {:>9} {:>9} {:>9} {:>8}  policy",
+        "rate Hz", "node", "ticks", "p50 µs", "p99 µs", "max µs", "cpu %", "skipped"
+    );
     for &hz in &a.hz {
         let rate = Rate::new(hz)?;
         let period = rate.period();

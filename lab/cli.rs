@@ -772,6 +772,17 @@ impl From<&CliffArgs> for CliffSpec {
     }
 }
 
+/// `ratelab bench`'s settings of its real-clock timing, which `--render` and `--scrub` do not
+/// take (refused beside them, not ignored).
+const REAL_CLOCK_TIMING: [&str; 6] = [
+    "hz",
+    "duration",
+    "spin_margin_us",
+    "rt_priority",
+    "stagger",
+    "graph",
+];
+
 /// Settings of the real-clock timing benchmark.
 #[derive(Debug, Clone, Args)]
 pub struct BenchArgs {
@@ -792,12 +803,14 @@ pub struct BenchArgs {
     /// 0, policy P/3, actuator 2P/3) so that no two are due at once.
     #[arg(long)]
     pub stagger: bool,
-    /// Instead: time the lab's frame rendering at 120×40 (view model + draw).
-    #[arg(long)]
+    /// Instead: time the lab's frame rendering at 120×40 (view model + draw). Takes none of
+    /// the real-clock timing's settings.
+    #[arg(long, conflicts_with_all = REAL_CLOCK_TIMING)]
     pub render: bool,
     /// Instead: time reaching instants of a 10-minute virtual run as the lab's scrubbing
-    /// does (the engine's seek and the lab's fold of what it was told).
-    #[arg(long, conflicts_with = "render")]
+    /// does (the engine's seek and the lab's fold of what it was told). Takes none of the
+    /// real-clock timing's settings.
+    #[arg(long, conflicts_with = "render", conflicts_with_all = REAL_CLOCK_TIMING)]
     pub scrub: bool,
     /// The graph whose nodes are timed (every node at each --hz).
     #[command(flatten)]

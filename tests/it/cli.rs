@@ -379,6 +379,16 @@ fn bench_takes_a_run_s_settings_by_its_rules_and_refuses_faults_it_would_not_sho
     );
     // The graph's overrides are a run's, checked as `run` checks them.
     assert_usage_error(&["bench", "--rate", "nobody=10"], "--rate nobody=10: ");
+    // The frame and scrub timings take none of the real-clock timing's settings: refused
+    // beside them, not ignored.
+    assert_usage_error(
+        &["bench", "--render", "--hz", "50"],
+        "error: the argument '--render' cannot be used with '--hz <HZ>'",
+    );
+    assert_usage_error(
+        &["bench", "--scrub", "--duration", "3"],
+        "error: the argument '--scrub' cannot be used with '--duration <DURATION>'",
+    );
 }
 
 #[test]
@@ -388,6 +398,17 @@ fn bench_prints_the_bare_wait_floor_then_each_node() {
     assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
     let out = String::from_utf8_lossy(&o.stdout);
     assert!(out.contains("staggered by P/n"), "{out}");
+    // The margin the rate is timed with, as used: the default, below half of 5 ms.
+    assert!(
+        out.contains("spin margin 300 µs at 200 Hz (300 µs, at most P/2)"),
+        "{out}"
+    );
+    // Python's line (measured or not) comes before the table, not among its rows.
+    let python = out.lines().position(|l| l.starts_with("Python: "));
+    let header = out
+        .lines()
+        .position(|l| l.trim_start().starts_with("rate Hz"));
+    assert!(python.is_some() && python < header, "{out}");
     let rows: Vec<Vec<&str>> = out
         .lines()
         .filter(|l| l.trim_start().starts_with("200 "))
