@@ -906,6 +906,9 @@ fn an_injected_fault_is_told_as_a_fault_before_its_change() {
             Ok(Telemetry::Faulted(f)) => faulted = Some(f),
             Ok(Telemetry::Changed { text, .. }) => {
                 assert!(text.starts_with("fault → stall policy@"), "{text}");
+                // The words name the fault as it took effect, the one told just before.
+                let told = faulted.as_ref().expect("told before its change");
+                assert_eq!(text, format!("fault → {told}"));
                 break;
             }
             Ok(_) => {}

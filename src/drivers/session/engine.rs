@@ -692,17 +692,21 @@ impl Engine {
         };
         match apply(&cmd) {
             Ok(()) => {
-                let text = describe(&cmd);
-                if let Some(r) = recording {
-                    record_change(r, at, &cmd, &text, from_ros2);
-                }
-                // The fault as it takes effect, as the graph's fault book holds it.
+                // The fault as it takes effect, as the graph's fault book holds it, and said
+                // so: `k` at 9.36 s takes effect at the next instant, 9.38 s.
                 let faulted = match &cmd {
                     Command::InjectFault { fault } => ratelab_runtime::command::parse_fault(fault)
                         .ok()
                         .map(|f| f.from_instant(at)),
                     _ => None,
                 };
+                let text = match &faulted {
+                    Some(f) => format!("fault → {}", ratelab_core::text::printable(&f.to_string())),
+                    None => describe(&cmd),
+                };
+                if let Some(r) = recording {
+                    record_change(r, at, &cmd, &text, from_ros2);
+                }
                 self.log
                     .runs
                     .last_mut()
