@@ -473,12 +473,8 @@ fn a_real_clock_run_gives_its_nodes_back_to_the_core_and_ends_it() {
     assert_eq!(c.now(), Nanos(200 * Nanos::MILLISECOND.0));
 }
 
-/// The faults configuration's faults (a policy stall, a sensor kill) injected by command
-/// as the run goes on, instead of given at the start: the same run, byte for byte. And a
-/// fault that names no node, or one past the run's bound, is refused in one line.
-#[test]
-fn a_fault_injected_by_command_is_the_fault_given_at_the_start() {
-    let _machine = crate::machine::shared();
+/// The faults configuration, and the same without its faults.
+fn faults_and_bare() -> (RunConfig, RunConfig) {
     let (_, given) = configurations()
         .into_iter()
         .find(|(label, _)| *label == "faults")
@@ -487,6 +483,16 @@ fn a_fault_injected_by_command_is_the_fault_given_at_the_start() {
         faults: Vec::new(),
         ..given.clone()
     };
+    (given, bare)
+}
+
+/// The faults configuration's faults (a policy stall, a sensor kill) injected by command
+/// as the run goes on, instead of given at the start: the same run, byte for byte. And a
+/// fault that names no node, or one past the run's bound, is refused in one line.
+#[test]
+fn a_fault_injected_by_command_is_the_fault_given_at_the_start() {
+    let _machine = crate::machine::shared();
+    let (given, bare) = faults_and_bare();
     let inject = |at_ms: u64, fault: &str| TimedCommand {
         at_ns: at_ms * Nanos::MILLISECOND.0,
         command: Command::InjectFault {
@@ -525,14 +531,7 @@ fn a_fault_injected_by_command_is_the_fault_given_at_the_start() {
 #[test]
 fn a_fault_given_a_past_time_is_booked_from_the_instant_it_takes_effect() {
     let _machine = crate::machine::shared();
-    let (_, given) = configurations()
-        .into_iter()
-        .find(|(label, _)| *label == "faults")
-        .unwrap();
-    let bare = RunConfig {
-        faults: Vec::new(),
-        ..given.clone()
-    };
+    let (_, bare) = faults_and_bare();
     let late = TimedCommand {
         at_ns: 2_200 * Nanos::MILLISECOND.0,
         command: Command::InjectFault {
