@@ -780,7 +780,7 @@ const REAL_CLOCK_TIMING: [&str; 6] = [
     "spin_margin_us",
     "rt_priority",
     "stagger",
-    "graph",
+    "GraphArgs", // the graph and every override of it
 ];
 
 /// Settings of the real-clock timing benchmark.

@@ -33,6 +33,10 @@
 //! | [`MAX_HELD_TRACE_VALUES`] | 64 Mi | the trace a run returns in memory (`ratelab.run`): rows × columns, checked before it starts |
 //! | [`MAX_REAL_CLOCK_THREADS`] | 1024 | the threads a real-clock run starts (one per node on a thread of its own, and the shared executors'), checked before any starts |
 
+/// The most commands a run takes scheduled at run times (`ratelab::run_spec::RunSpec`'s
+/// `commands`: a session log's run).
+pub const MAX_COMMANDS: usize = 10_000;
+
 /// The most nodes a graph may have: 65 536. A node costs its scheduler entry, its queues
 /// and its counters (about a kilobyte), so the bound keeps a hostile graph file's graph
 /// under a few hundred MB; a program that needs larger graphs raises it and rebuilds.

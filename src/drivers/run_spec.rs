@@ -11,7 +11,7 @@ use crate::outputs::Outputs;
 use ratelab_core::executor::{ComputeTime, ExecutorOverride};
 use ratelab_core::qos::Fault;
 use ratelab_core::time::Nanos;
-use ratelab_runtime::command::TimedCommand;
+use ratelab_runtime::command::{Command, TimedCommand};
 use ratelab_runtime::config::{check_rate, duration_from_secs, ConfigError};
 use ratelab_runtime::config::{phase_offsets_from_ms, BREAK_CONTROL_HZ};
 use ratelab_runtime::graph::GraphSpec;
@@ -101,13 +101,24 @@ fn check_commands(commands: &[TimedCommand], graph: &GraphSpec) -> anyhow::Resul
         }
         at = c.at_ns;
         (c.command.validate(graph)).map_err(|e| anyhow::anyhow!("commands[{i}]: {e}"))?;
+        // A stall over before the instant it would take effect would name a stall that
+        // never was: refused here, as a run refuses it when applied.
+        if let Command::InjectFault { fault } = &c.command {
+            let f = ratelab_runtime::command::parse_fault(fault).map_err(anyhow::Error::msg)?;
+            let effect = Nanos(c.at_ns);
+            if f.from_instant(effect).duration == Some(Nanos::ZERO) {
+                anyhow::bail!(
+                    "commands[{i}]: {f}: over at {} s, before the instant it would take effect ({} s)",
+                    f.at.saturating_add(f.duration.unwrap_or_default()).as_secs_f64(),
+                    effect.as_secs_f64()
+                );
+            }
+        }
     }
     Ok(())
 }
 
-/// The most commands a run takes scheduled ([`RunSpec::commands`]): a session log's run
-/// may hold this many.
-pub const MAX_COMMANDS: usize = 10_000;
+pub use ratelab_core::limits::MAX_COMMANDS;
 
 /// The graph to run and the overrides of its nodes and topics, in the order given.
 #[derive(Clone, Debug, Default, PartialEq)]

@@ -79,6 +79,14 @@ pub enum Command {
         /// The fault, `NODE@T+D` or `NODE@T`.
         fault: String,
     },
+    /// [`Command::InjectFault`] as a session log of version 2 or before holds it: booked at
+    /// the time it was given, not from the instant it took effect, as those runs booked it
+    /// (their summaries list that time, which a replay compares). Read from such a log
+    /// only (`ratelab::session::LoggedRun::spec`); never written.
+    InjectFaultAsGiven {
+        /// The fault, `NODE@T+D` or `NODE@T`.
+        fault: String,
+    },
 }
 
 /// `NODE@T+D` (a stall) or `NODE@T` (a kill), as [`Command::InjectFault`] gives it.
@@ -140,7 +148,9 @@ impl Command {
             // Checked, not kept: the next run starts at its settings' phase offsets.
             Command::SetPhase { node, phase_ms } => phase_node(graph, node, *phase_ms).map(|_| ()),
             // Checked, not kept: a fault is an event of its run.
-            Command::InjectFault { fault } => fault_node(graph, fault).map(|_| ()),
+            Command::InjectFault { fault } | Command::InjectFaultAsGiven { fault } => {
+                fault_node(graph, fault).map(|_| ())
+            }
         }
     }
 
@@ -231,6 +241,10 @@ impl Command {
                     ));
                 }
                 h.faults.inject(id, from)
+            }
+            Command::InjectFaultAsGiven { fault } => {
+                let (id, f) = fault_node(&h.spec, fault)?;
+                h.faults.inject(id, f)
             }
             Command::SetPhase { node, phase_ms } => {
                 let (id, phase) = phase_node(&h.spec, node, *phase_ms)?;

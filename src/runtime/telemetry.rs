@@ -272,10 +272,12 @@ pub fn describe(cmd: &Command) -> String {
         Command::SetPhase { node, phase_ms } => {
             format!("phase {} → {phase_ms} ms", shown(node))
         }
-        Command::InjectFault { fault } => match parse_fault(fault) {
-            Ok(f) => format!("fault → {}", shown(&f.to_string())),
-            Err(_) => format!("fault → {}", shown(fault)),
-        },
+        Command::InjectFault { fault } | Command::InjectFaultAsGiven { fault } => {
+            match parse_fault(fault) {
+                Ok(f) => format!("fault → {}", shown(&f.to_string())),
+                Err(_) => format!("fault → {}", shown(fault)),
+            }
+        }
     }
 }
 

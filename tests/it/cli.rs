@@ -389,6 +389,11 @@ fn bench_takes_a_run_s_settings_by_its_rules_and_refuses_faults_it_would_not_sho
         &["bench", "--scrub", "--duration", "3"],
         "error: the argument '--scrub' cannot be used with '--duration <DURATION>'",
     );
+    // Every override of the graph too, not only the file.
+    assert_usage_error(
+        &["bench", "--render", "--rate", "policy=5"],
+        "error: the argument '--render' cannot be used with: --graph <FILE>, --rate <NODE=HZ>",
+    );
 }
 
 #[test]

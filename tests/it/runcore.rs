@@ -564,6 +564,21 @@ fn a_fault_given_a_past_time_is_booked_from_the_instant_it_takes_effect() {
         .unwrap_err();
     assert!(err.contains("over at 0.7 s, before the instant"), "{err}");
     assert!(c.applied().is_empty(), "not logged");
+    // As a session log of version 2 or before holds it: booked at its given time, as those
+    // runs booked it.
+    let legacy = TimedCommand {
+        at_ns: 2_200 * Nanos::MILLISECOND.0,
+        command: Command::InjectFaultAsGiven {
+            fault: "policy@2+0.5".into(),
+        },
+    };
+    let mut c = core(&bare, vec![legacy]);
+    c.run_to_end(&StopFlag::new());
+    let summary = c.metrics().summary_lines(None).join("\n");
+    assert!(
+        summary.contains("stalled at 2.00 s for 0.50 s"),
+        "{summary}"
+    );
 }
 
 /// A phase change by command at the start is the run started at that phase offset, byte

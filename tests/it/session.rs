@@ -314,13 +314,25 @@ fn an_empty_session_says_so_and_a_double_kill_or_a_stall_already_over_is_refused
         ),
         "{err}"
     );
+    // A stall over before the instant it was logged for.
+    let mut v = log.clone();
+    v["runs"][0]["commands"][0] = serde_json::json!(
+        {"at_ns": 3_000_000_000u64, "cmd": "inject_fault", "fault": "sensor@0.5+0.2"}
+    );
+    let (code, err) = replay_text(dir.path(), &v.to_string());
+    assert_eq!(code, Some(2), "{err}");
+    assert!(err.contains("commands[0]: stall sensor@"), "{err}");
+    assert!(
+        err.contains("over at 0.7 s, before the instant it would take effect (3 s)"),
+        "{err}"
+    );
 }
 
 #[test]
 fn hand_edited_session_logs_are_checked_like_the_command_line() {
     let dir = tempfile::tempdir().unwrap();
     let log = valid_log(dir.path());
-    assert_eq!(log["version"], 2);
+    assert_eq!(log["version"], 3);
     let (code, err) = replay_text(dir.path(), &log.to_string());
     assert_eq!(code, Some(0), "the unedited log replays: {err}");
     type Edit = fn(&mut serde_json::Value);

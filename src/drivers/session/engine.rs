@@ -751,8 +751,9 @@ fn record_change(r: &Recording, at: Nanos, cmd: &Command, text: &str, from_ros2:
     match cmd {
         Command::SetPolicy { .. } => r.change(at, text),
         Command::InjectFault { fault } => {
+            // As it took effect, as the run's fault book holds it.
             if let Ok(f) = ratelab_runtime::command::parse_fault(fault) {
-                r.injected_fault(at, &f);
+                r.injected_fault(at, &f.from_instant(at));
             }
         }
         Command::SetNodeHz { node, hz } if from_ros2 => r.parameter_set(at, node, *hz),

@@ -8,6 +8,7 @@ use ratelab_core::metrics::Metrics;
 use ratelab_core::plant::ACTUATOR_HZ;
 use ratelab_core::time::Nanos;
 use ratelab_core::time::MAX_DURATION;
+use ratelab_runtime::command::Command;
 use ratelab_runtime::config::{ClockKind, RunConfig};
 use ratelab_runtime::scheduler::StopFlag;
 use ratelab_runtime::setting::Speech;
@@ -15,8 +16,10 @@ use serde::{Deserialize, Serialize};
 use std::path::Path;
 
 /// The session-log format this version writes. Version 1 (before graphs were data) named
-/// the chapter's rates and depth; version 2 stores each run's graph as a graph file.
-pub const SESSION_VERSION: u32 = 2;
+/// the chapter's rates and depth; version 2 stores each run's graph as a graph file;
+/// version 3 books an injected fault from the instant it took effect (before, at the time
+/// it was given: a replay of an older log books it so, [`Command::InjectFaultAsGiven`]).
+pub const SESSION_VERSION: u32 = 3;
 
 /// A session log larger than this is refused before it is read, bytes (a long lab session
 /// logs kilobytes).
@@ -71,6 +74,10 @@ pub struct LoggedRun {
     pub commands: Vec<TimedCommand>,
     /// The summary at the end, as the live run measured it.
     pub metrics: Option<Metrics>,
+    /// Read from a log of version 2 or before, whose runs booked an injected fault at the
+    /// time it was given ([`SESSION_VERSION`]); never written.
+    #[serde(skip)]
+    pub faults_as_given: bool,
 }
 
 impl LoggedRun {
@@ -109,6 +116,7 @@ impl LoggedRun {
             end_ns: 0,
             commands: Vec::new(),
             metrics: None,
+            faults_as_given: false,
         }
     }
 
@@ -135,6 +143,15 @@ impl LoggedRun {
             commands: self.commands.clone(),
             ..RunSpec::default()
         };
+        if self.faults_as_given {
+            // Booked as that run booked them (its summary lists their given times).
+            for c in &mut spec.commands {
+                if let Command::InjectFault { fault } = &c.command {
+                    let fault = fault.clone();
+                    c.command = Command::InjectFaultAsGiven { fault };
+                }
+            }
+        }
         match (&self.graph, self.sensor_hz, self.control_hz, self.queue_depth) {
             (Some(text), None, None, None) => {
                 spec.graph.inline = Some((text.clone(), "graph".into()));
@@ -223,7 +240,7 @@ impl LoggedRun {
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct SessionLog {
-    /// Format version: 1 or 2 (`SESSION_VERSION`).
+    /// Format version: 1 to 3 (`SESSION_VERSION`).
     pub version: u32,
     /// The runs.
     pub runs: Vec<LoggedRun>,
@@ -284,7 +301,7 @@ impl SessionLog {
             path: shown.clone(),
             detail: "not UTF-8 text".into(),
         })?;
-        let log: SessionLog = serde_json::from_str(&text).map_err(|e| ReplayError::Parse {
+        let mut log: SessionLog = serde_json::from_str(&text).map_err(|e| ReplayError::Parse {
             path: shown.clone(),
             detail: e.to_string(),
         })?;
@@ -303,6 +320,9 @@ impl SessionLog {
             return Err(ReplayError::Invalid(format!(
                 "{shown}: more than {MAX_LOGGED} runs, commands or clock switches"
             )));
+        }
+        for r in &mut log.runs {
+            r.faults_as_given = log.version < 3;
         }
         for (i, r) in log.runs.iter().enumerate() {
             r.config(&format!("{shown}: run {}", i + 1))?;
@@ -382,7 +402,6 @@ pub fn replay_run(log: &SessionLog, index: usize) -> Result<Metrics, ReplayError
 #[cfg(test)]
 mod tests {
     use super::*;
-    use ratelab_runtime::command::Command;
 
     #[test]
     fn commands_after_the_last_instant_are_told_apart() {
@@ -494,5 +513,43 @@ mod tests {
         let err = run.config("f: run 1").unwrap_err().to_string();
         assert!(err.starts_with("f: run 1: commands[1]: "), "{err}");
         assert!(err.contains("planner"), "{err}");
+    }
+
+    #[test]
+    fn an_older_log_s_injected_faults_are_booked_as_its_runs_booked_them() {
+        let mut run = LoggedRun::starting(&RunConfig::default(), "scripted");
+        run.end_ns = 5_000_000_000;
+        let stall = Command::InjectFault {
+            fault: "policy@1+0.5".into(),
+        };
+        run.commands = vec![TimedCommand {
+            at_ns: 1_200_000_000,
+            command: stall.clone(),
+        }];
+        let now = run.spec("run 1").unwrap();
+        assert_eq!(
+            now.commands[0].command, stall,
+            "this version's: from its instant"
+        );
+        run.faults_as_given = true;
+        let older = run.spec("run 1").unwrap();
+        assert_eq!(
+            older.commands[0].command,
+            Command::InjectFaultAsGiven {
+                fault: "policy@1+0.5".into()
+            }
+        );
+        // Read from a version-2 file, so; from a file of this version, not.
+        let dir = tempfile::tempdir().unwrap();
+        for (version, as_given) in [(2, true), (SESSION_VERSION, false)] {
+            let log = SessionLog {
+                version,
+                runs: vec![run.clone()],
+            };
+            let file = dir.path().join(format!("v{version}.json"));
+            log.save(&file).unwrap();
+            let read = SessionLog::load(&file).unwrap();
+            assert_eq!(read.runs[0].faults_as_given, as_given, "version {version}");
+        }
     }
 }
