@@ -101,18 +101,11 @@ fn check_commands(commands: &[TimedCommand], graph: &GraphSpec) -> anyhow::Resul
         }
         at = c.at_ns;
         (c.command.validate(graph)).map_err(|e| anyhow::anyhow!("commands[{i}]: {e}"))?;
-        // A stall over before the instant it would take effect would name a stall that
-        // never was: refused here, as a run refuses it when applied.
+        // Refused here as a run refuses it when applied (a stall already over).
         if let Command::InjectFault { fault } = &c.command {
             let f = ratelab_runtime::command::parse_fault(fault).map_err(anyhow::Error::msg)?;
-            let effect = Nanos(c.at_ns);
-            if f.from_instant(effect).duration == Some(Nanos::ZERO) {
-                anyhow::bail!(
-                    "commands[{i}]: {f}: over at {} s, before the instant it would take effect ({} s)",
-                    f.at.saturating_add(f.duration.unwrap_or_default()).as_secs_f64(),
-                    effect.as_secs_f64()
-                );
-            }
+            (ratelab_runtime::command::taking_effect(&f, Nanos(c.at_ns)))
+                .map_err(|e| anyhow::anyhow!("commands[{i}]: {e}"))?;
         }
     }
     Ok(())

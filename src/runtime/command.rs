@@ -89,6 +89,28 @@ pub enum Command {
     },
 }
 
+/// Fault `f` injected before the instant at `at` (run time), as it takes effect
+/// ([`ratelab_core::qos::Fault::from_instant`]): what a run's fault book holds, its summary
+/// and its telemetry give.
+///
+/// # Errors
+/// One line for a stall over before `at`: it would name a stall that never was.
+pub fn taking_effect(
+    f: &ratelab_core::qos::Fault,
+    at: ratelab_core::time::Nanos,
+) -> Result<ratelab_core::qos::Fault, String> {
+    let from = f.from_instant(at);
+    if from.duration == Some(ratelab_core::time::Nanos::ZERO) {
+        return Err(format!(
+            "{f}: over at {} s, before the instant it would take effect ({} s)",
+            f.at.saturating_add(f.duration.unwrap_or_default())
+                .as_secs_f64(),
+            at.as_secs_f64()
+        ));
+    }
+    Ok(from)
+}
+
 /// `NODE@T+D` (a stall) or `NODE@T` (a kill), as [`Command::InjectFault`] gives it.
 ///
 /// # Errors
@@ -230,17 +252,7 @@ impl Command {
             }
             Command::InjectFault { fault } => {
                 let (id, f) = fault_node(&h.spec, fault)?;
-                let from = f.from_instant(at);
-                if from.duration == Some(ratelab_core::time::Nanos::ZERO) {
-                    // Over before it could start: it would name a stall that never was.
-                    return Err(format!(
-                        "{f}: over at {} s, before the instant it would take effect ({} s)",
-                        f.at.saturating_add(f.duration.unwrap_or_default())
-                            .as_secs_f64(),
-                        at.as_secs_f64()
-                    ));
-                }
-                h.faults.inject(id, from)
+                h.faults.inject(id, taking_effect(&f, at)?)
             }
             Command::InjectFaultAsGiven { fault } => {
                 let (id, f) = fault_node(&h.spec, fault)?;

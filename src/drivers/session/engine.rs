@@ -697,7 +697,7 @@ impl Engine {
                 let faulted = match &cmd {
                     Command::InjectFault { fault } => ratelab_runtime::command::parse_fault(fault)
                         .ok()
-                        .map(|f| f.from_instant(at)),
+                        .and_then(|f| ratelab_runtime::command::taking_effect(&f, at).ok()),
                     _ => None,
                 };
                 let text = match &faulted {
@@ -705,7 +705,7 @@ impl Engine {
                     None => describe(&cmd),
                 };
                 if let Some(r) = recording {
-                    record_change(r, at, &cmd, &text, from_ros2);
+                    record_change(r, at, &cmd, (&text, faulted.as_ref()), from_ros2);
                 }
                 self.log
                     .runs
@@ -744,16 +744,22 @@ fn finish_recording(r: &Recording, next: &Next, metrics: &Metrics, end: &RunEnd)
 }
 
 /// Record a command applied at run time `at` that the graph's own rows do not show as an
-/// event with a mark: a brain swap (`text`), a fault injected (the stall key `k`), a rate
-/// set from ROS 2 (`from_ros2`). Rates, depths and QoS changed from the keys are the
-/// graph's, recorded by its observer.
-fn record_change(r: &Recording, at: Nanos, cmd: &Command, text: &str, from_ros2: bool) {
+/// event with a mark: a brain swap (`text`), a fault injected (the stall key `k`; `faulted`,
+/// as it took effect, as the run's fault book holds it), a rate set from ROS 2
+/// (`from_ros2`). Rates, depths and QoS changed from the keys are the graph's, recorded by
+/// its observer.
+fn record_change(
+    r: &Recording,
+    at: Nanos,
+    cmd: &Command,
+    (text, faulted): (&str, Option<&ratelab_core::qos::Fault>),
+    from_ros2: bool,
+) {
     match cmd {
         Command::SetPolicy { .. } => r.change(at, text),
-        Command::InjectFault { fault } => {
-            // As it took effect, as the run's fault book holds it.
-            if let Ok(f) = ratelab_runtime::command::parse_fault(fault) {
-                r.injected_fault(at, &f.from_instant(at));
+        Command::InjectFault { .. } => {
+            if let Some(f) = faulted {
+                r.injected_fault(at, f);
             }
         }
         Command::SetNodeHz { node, hz } if from_ros2 => r.parameter_set(at, node, *hz),
