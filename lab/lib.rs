@@ -347,6 +347,19 @@ pub fn main_with(register: impl FnOnce()) -> ExitCode {
     ExitCode::from(run_command_line(std::env::args_os().collect(), register))
 }
 
+/// A graph file's error as the command line prints it: `FILE:LINE:COL: error: reason`, as
+/// gcc and clang print theirs, or `error: FILE: reason` for what concerns the whole file
+/// (not found, not UTF-8, too large). One line: [`SpecError`](ratelab::graph::spec::SpecError)'s
+/// parts have their control characters written out.
+fn spec_error_line(spec: &ratelab::graph::spec::SpecError) -> String {
+    let origin = printable(&spec.origin);
+    let reason = printable(&spec.reason);
+    match spec.line {
+        0 => format!("error: {origin}: {reason}"),
+        line => format!("{origin}:{line}:{}: error: {reason}", spec.col),
+    }
+}
+
 /// What Ctrl-C and SIGTERM stop: the command running now (its stop flag, the flag set only
 /// by a signal, and whether a second signal is said), one at a time per process.
 static SIGNALLED: std::sync::Mutex<Option<(StopFlag, StopFlag, bool)>> =
@@ -488,7 +501,7 @@ pub fn run_command_line(args: Vec<std::ffi::OsString>, register: impl FnOnce()) 
             .downcast_ref::<ros2::Interrupted>()
             .map_or(EXIT_INTERRUPTED, |i| i.0),
         Err(e) => {
-            // A graph file's error is `FILE:LINE:COL: reason`, as compilers print them.
+            // A graph file's error is `FILE:LINE:COL: error: reason`, as compilers print them.
             // Not `eprintln!`: stderr may be a terminal that hung up (SIGHUP).
             let mut err = std::io::stderr();
             // What ros2cli refuses with its message alone and exit 1 (`ratelab ros2`).
@@ -503,7 +516,7 @@ pub fn run_command_line(args: Vec<std::ffi::OsString>, register: impl FnOnce()) 
             // One line whatever the error quotes (a flag's value, a file's text, a peer's
             // name, a learner's exception): its control characters are written out.
             let _ = match e.downcast_ref::<ratelab::graph::spec::SpecError>() {
-                Some(spec) => writeln!(err, "{spec}"),
+                Some(spec) => writeln!(err, "{}", spec_error_line(spec)),
                 None => writeln!(err, "error: {}", printable(&format!("{e:#}"))),
             };
             // Whatever failed after a Ctrl-C failed because of it.

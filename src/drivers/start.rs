@@ -15,12 +15,12 @@
 use crate::observer::{steps, Observers, Recorded, RunObserver};
 use crate::outputs::{
     check_out, finish_recording, log_text, open_recording, ros2_options, write_outputs, KeptLog,
-    Outputs, TraceCsv, MAX_LOG_LINES,
+    Outputs, RecordRefused, TraceCsv, MAX_LOG_LINES,
 };
 use crate::run::{RunOptions, RunReport};
 use crate::run_spec::{late_fault_warnings, RunSpec};
 use crate::trace_csv::{TraceFile, TraceStream};
-use ratelab_recording::{Recording, RecordingError};
+use ratelab_recording::Recording;
 use ratelab_runtime::policy::Policy;
 use ratelab_runtime::scheduler::StopFlag;
 use ratelab_runtime::setting::Speech;
@@ -117,6 +117,8 @@ pub struct StartedRun {
     brain: Box<dyn Policy>,
     stop: StopFlag,
     echo: bool,
+    /// Whose words a recording that cannot be finished is refused in.
+    speech: Speech,
     trace: Option<Trace>,
     recording: Option<Recording>,
     ros2: Option<ratelab_ros2::Ros2Options>,
@@ -196,6 +198,7 @@ impl RunSpec {
             brain,
             stop,
             echo,
+            speech,
             trace,
             recording,
             ros2,
@@ -232,6 +235,7 @@ impl StartedRun {
             brain,
             stop,
             echo,
+            speech,
             trace,
             recording,
             ros2,
@@ -261,7 +265,11 @@ impl StartedRun {
         // The observers' handles on the recording go before it is finished.
         drop(observers);
         let report = report?;
-        let unrecorded = finish_recording(&outputs, recording.as_ref(), &report);
+        let unrecorded =
+            finish_recording(&outputs, recording.as_ref(), &report).map(|cause| RecordRefused {
+                line: cause.said(speech),
+                cause,
+            });
         Ok(FinishedRun {
             report,
             log: log_text(&kept),
@@ -283,9 +291,9 @@ pub struct FinishedRun {
     pub log: String,
     /// The recording written, finished, when one was asked for.
     pub recording: Option<Recording>,
-    /// Why the recording could not be finished (a full disk), which fails the run once its
-    /// summary and other files are out ([`finish_recording`]).
-    pub unrecorded: Option<RecordingError>,
+    /// Why the recording could not be finished (a full disk), in the front end's words,
+    /// which fails the run once its summary and other files are out ([`finish_recording`]).
+    pub unrecorded: Option<RecordRefused>,
     trace: Option<Trace>,
     outputs: Outputs,
 }

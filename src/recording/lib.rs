@@ -1167,6 +1167,40 @@ mod tests {
     use super::*;
 
     #[test]
+    fn a_recording_refused_speaks_the_front_ends_words() {
+        use ratelab_core::output::OutputError;
+        use ratelab_runtime::setting::Speech;
+        let p = || PathBuf::from("r.rrd");
+        let exists = RecordingError::Exists(p());
+        assert_eq!(
+            exists.said(Speech::Flags),
+            "--record file exists: r.rrd (pass --force to overwrite)"
+        );
+        assert_eq!(
+            exists.said(Speech::Keywords),
+            "record: r.rrd: file exists (pass force=True to overwrite)"
+        );
+        // A move into place that failed as the run ended (a full disk): no flag in Python.
+        let moved = RecordingError::Output(OutputError::Io {
+            path: p(),
+            detail: "No space left on device".into(),
+        });
+        assert!(moved.said(Speech::Flags).starts_with("--record "));
+        let said = moved.said(Speech::Keywords);
+        assert_eq!(said, "record: cannot write r.rrd: No space left on device");
+        let rerun = RecordingError::Rerun {
+            path: p(),
+            detail: "closed".into(),
+        };
+        for speech in [Speech::Flags, Speech::Keywords] {
+            assert!(!rerun.said(speech).contains("--"), "{}", rerun.said(speech));
+            assert!(!rerun.said(speech).contains("record:"));
+        }
+        let dir = RecordingError::IsDirectory(p()).said(Speech::Keywords);
+        assert_eq!(dir, "record: r.rrd is a directory, not a file");
+    }
+
+    #[test]
     fn a_plot_from_zero_reaches_a_labelled_step() {
         // A real-clock latency of 80 ms: 0–100, so "100" is labelled, not "0" alone.
         assert_eq!(label_top(80.0), 100.0);

@@ -691,7 +691,7 @@ fn assert_refused(text: &str, line: usize, col: usize, reason: &str) {
     let (code, err) = run_graph_file(text, &[]);
     assert_eq!(code, 2, "{err}");
     assert_eq!(err.lines().count(), 1, "one line: {err}");
-    let want = format!("g.toml:{line}:{col}: ");
+    let want = format!("g.toml:{line}:{col}: error: ");
     assert!(err.starts_with(&want), "want {want}…, got {err}");
     assert!(err.contains(reason), "want '{reason}' in {err}");
     assert!(!err.contains("panicked"), "{err}");
@@ -806,7 +806,7 @@ fn bad_graph_files_exit_2_with_file_line_col() {
     assert_eq!(o.status.code(), Some(2));
     assert_eq!(
         String::from_utf8_lossy(&o.stderr).trim_end(),
-        "/nonexistent/g.toml: not found"
+        "error: /nonexistent/g.toml: not found"
     );
 }
 

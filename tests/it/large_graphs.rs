@@ -184,7 +184,7 @@ fn every_bound_refuses_in_one_line_naming_it() {
     std::fs::write(&wide, topics).unwrap();
     let o = ratelab(&["run", "--graph", &wide, "--clock", "virtual"]);
     for needle in [
-        &format!("wide.toml:{culprit}:1: "),
+        &format!("wide.toml:{culprit}:1: error: "),
         "a graph has at most 65536 topics",
         "ratelab::limits::MAX_TOPICS",
     ] {
