@@ -923,13 +923,13 @@ impl App {
             }
             Msg::Stall => {
                 let n = self.rate_target();
-                let fault = format!(
-                    "{}@{:.3}+{}",
-                    self.graph.node(n).name,
-                    self.now.as_secs_f64(),
-                    super::keymap::STALL_S
-                );
-                self.apply(Command::InjectFault { fault });
+                // From the run's next instant, not the time drawn, which trails it at ×8 and
+                // at max speed (the engine books the fault as it takes effect).
+                self.send(Control::Stall {
+                    node: self.graph.node(n).name.clone(),
+                    duration: ratelab::Nanos::from_secs_f64(super::keymap::STALL_S)
+                        .unwrap_or_default(),
+                });
             }
             Msg::SensorDown => {
                 let n = self.rate_target_of_chain(|c| c.sensor);

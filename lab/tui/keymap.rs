@@ -49,8 +49,9 @@ pub enum Msg {
     SelectPrev,
     /// Control rate to 5 Hz.
     Break,
-    /// Stall the selected node (else the chain's policy) for [`STALL_S`] from now: a fault
-    /// injected into the run (`Command::InjectFault`).
+    /// Stall the selected node (else the chain's policy) for [`STALL_S`] from the instant the
+    /// run takes up next (`Control::Stall`): a fault injected into the run
+    /// (`Command::InjectFault`), at any speed.
     Stall,
     /// Pause / resume (virtual clock); review a real-clock run that has ended.
     TogglePause,

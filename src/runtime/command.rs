@@ -111,6 +111,23 @@ pub fn taking_effect(
     Ok(from)
 }
 
+/// A stall of `node` for `duration` from run time `at`, as the command that injects it:
+/// `NODE@T+D`, both times in seconds to the nanosecond (`policy@9.380000000+0.500000000`),
+/// which [`parse_fault`] reads back exactly for run times below 2^53 ns (104 days; past
+/// that, to within the nearest `f64`).
+pub fn stall_from(
+    node: &str,
+    at: ratelab_core::time::Nanos,
+    duration: ratelab_core::time::Nanos,
+) -> Command {
+    let secs = |t: ratelab_core::time::Nanos| {
+        format!("{}.{:09}", t.0 / 1_000_000_000, t.0 % 1_000_000_000)
+    };
+    Command::InjectFault {
+        fault: format!("{node}@{}+{}", secs(at), secs(duration)),
+    }
+}
+
 /// `NODE@T+D` (a stall) or `NODE@T` (a kill), as [`Command::InjectFault`] gives it.
 ///
 /// # Errors
@@ -302,4 +319,38 @@ pub struct TimedCommand {
     /// The change.
     #[serde(flatten)]
     pub command: Command,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use ratelab_core::time::Nanos;
+
+    #[test]
+    fn a_stall_from_an_instant_reads_back_to_the_nanosecond() {
+        let d = Nanos(500_000_000);
+        // Instants of a 50 Hz grid, odd nanoseconds, and a run of 100 days (below 2^53 ns).
+        for at in [
+            0,
+            20_000_000,
+            9_380_000_000,
+            123_456_789_123,
+            (1u64 << 53) - 1,
+            8_640_000_000_000_000,
+        ] {
+            let Command::InjectFault { fault } = stall_from("policy", Nanos(at), d) else {
+                panic!("not a fault");
+            };
+            let f = parse_fault(&fault).unwrap();
+            assert_eq!(
+                (f.node.as_str(), f.at, f.duration),
+                ("policy", Nanos(at), Some(d)),
+                "{fault}"
+            );
+        }
+        let Command::InjectFault { fault } = stall_from("sensor", Nanos(9_380_000_000), d) else {
+            panic!("not a fault");
+        };
+        assert_eq!(fault, "sensor@9.380000000+0.500000000");
+    }
 }

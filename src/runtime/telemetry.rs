@@ -49,6 +49,18 @@ impl std::fmt::Display for Speed {
 pub enum Control {
     /// Change the graph (rates, depth, brain).
     Apply(Command),
+    /// Stall `node` for `duration` from the next instant the run takes up (the lab's `k`):
+    /// applied, told and booked as the [`Command::InjectFault`] it becomes there
+    /// ([`crate::command::stall_from`]), so a session log replays it as it ran. Where the
+    /// front end's clock trails the run's (the lab at ×8 or at max speed draws what has
+    /// already run), a stall from the front end's time could be over before the run takes
+    /// it up.
+    Stall {
+        /// The node's name.
+        node: String,
+        /// How long its ticks are swallowed.
+        duration: Nanos,
+    },
     /// Pause or resume.
     TogglePause,
     /// While paused (virtual clock): run until the next actuator tick.

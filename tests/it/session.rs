@@ -1706,3 +1706,81 @@ fn after_a_save_not_taken_up_the_next_run_has_the_code_before() {
         "the first run, three with `r`, the reload"
     );
 }
+
+/// The lab's `k` (`Control::Stall`) stalls a node from the instant the run takes up next,
+/// whatever the lab has drawn: booked as the fault it became there (`NODE@T+D`, T that
+/// instant, to the nanosecond), which a replay runs as it ran; and never refused as over at
+/// max speed, where the run is far ahead of what the lab draws.
+#[test]
+fn the_stall_key_stalls_from_the_runs_next_instant_at_any_speed() {
+    let stall = || Control::Stall {
+        node: "policy".into(),
+        duration: ratelab::Nanos(200_000_000),
+    };
+    // Paused and stepped: the instant is known.
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("session.json");
+    let mut script = steps(50);
+    script.push(stall());
+    script.extend(steps(20));
+    script.push(Control::Quit);
+    let log = drive(&script, &file);
+    let run = &log.runs[0];
+    assert_eq!(run.commands.len(), 1, "{:?}", run.commands);
+    let Command::InjectFault { fault } = &run.commands[0].command else {
+        panic!("{:?}", run.commands[0]);
+    };
+    let at = ratelab::Nanos(run.commands[0].at_ns);
+    assert!(
+        at.0 > 0 && at.0 % 20_000_000 == 0,
+        "an instant of the grid: {at:?}"
+    );
+    assert_eq!(
+        fault,
+        &format!(
+            "policy@{}.{:09}+0.200000000",
+            at.0 / 1_000_000_000,
+            at.0 % 1_000_000_000
+        )
+    );
+    let replayed = serde_json::to_string(&replay_run(&log, 0).unwrap()).unwrap();
+    assert_eq!(
+        replayed,
+        serde_json::to_string(run.metrics.as_ref().unwrap()).unwrap()
+    );
+
+    // Running at max speed, never paused: the run is ahead of anything a lab would draw.
+    let (ctl_tx, ctl_rx) = unbounded();
+    let (tel_tx, tel_rx) = unbounded::<Telemetry>();
+    let s = settings(
+        ClockKind::Virtual,
+        0,
+        false,
+        Speed::Max,
+        &dir.path().join("max.json"),
+    );
+    let engine = Engine::new(s, ctl_rx, tel_tx).spawn();
+    std::thread::sleep(std::time::Duration::from_millis(300));
+    ctl_tx.send(stall()).unwrap();
+    std::thread::sleep(std::time::Duration::from_millis(100));
+    ctl_tx.send(Control::Quit).unwrap();
+    let log = engine.join().unwrap();
+    let errors: Vec<String> = tel_rx
+        .try_iter()
+        .filter_map(|t| match t {
+            Telemetry::Error(e) => Some(e),
+            _ => None,
+        })
+        .collect();
+    assert!(errors.is_empty(), "{errors:?}");
+    let c = &log.runs[0].commands;
+    assert_eq!(c.len(), 1, "{c:?}");
+    let Command::InjectFault { fault } = &c[0].command else {
+        panic!("{c:?}");
+    };
+    let f = ratelab::command::parse_fault(fault).unwrap();
+    assert_eq!(
+        (f.at.0, f.duration),
+        (c[0].at_ns, Some(ratelab::Nanos(200_000_000)))
+    );
+}

@@ -171,6 +171,16 @@ impl Engine {
                 }
                 None
             }
+            Ok(Control::Stall { node, duration }) => {
+                // From the run time the wall gives now, as `apply_real` applies it.
+                let cmd = ratelab_runtime::command::stall_from(&node, now, duration);
+                if !ran.ended {
+                    self.apply_real(cmd, now, ran.cfg, ran.handles, ran.recording);
+                } else {
+                    self.defer(cmd, ran.handles);
+                }
+                None
+            }
             Ok(Control::TogglePause) => {
                 // Wall time cannot stop: a paused real-clock run would only skip
                 // ticks while its clock (and every latency) ran on. Refused, and

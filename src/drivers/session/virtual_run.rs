@@ -307,6 +307,16 @@ impl Paced<'_> {
                     e.defer(cmd, &self.handles);
                 }
             }
+            Control::Stall { node, duration } => {
+                // From the instant the run takes up next, as `apply_live` applies it.
+                let at = core.scheduler().next_due().unwrap_or(core.now());
+                let cmd = ratelab_runtime::command::stall_from(&node, at, duration);
+                if self.ended.is_none() {
+                    e.apply_live(core, cmd, self.cfg, self.recording, &self.handles);
+                } else {
+                    e.defer(cmd, &self.handles);
+                }
+            }
             Control::TogglePause => {
                 self.paused = !self.paused;
                 self.pacer.anchor(core.now());
