@@ -589,6 +589,15 @@ impl Engine {
         next
     }
 
+    /// The lab's `k` after the run has ended: nothing to stall (a fault is an event of a run,
+    /// not a setting of the next, [`Engine::defer`]).
+    pub(super) fn stall_after_end(&self, node: &str) {
+        let _ = self.tx.send(Telemetry::Error(format!(
+            "stall {}: the run has ended (r starts the next)",
+            ratelab_core::text::printable(node)
+        )));
+    }
+
     /// A change made while the run is frozen: checked now, applied when the next run starts
     /// (r, R or c), so the keys still work after a fall.
     pub(super) fn defer(&mut self, cmd: Command, h: &GraphHandles) {

@@ -173,11 +173,11 @@ impl Engine {
             }
             Ok(Control::Stall { node, duration }) => {
                 // From the run time the wall gives now, as `apply_real` applies it.
-                let cmd = ratelab_runtime::command::stall_from(&node, now, duration);
                 if !ran.ended {
+                    let cmd = ratelab_runtime::command::stall_from(&node, now, duration);
                     self.apply_real(cmd, now, ran.cfg, ran.handles, ran.recording);
                 } else {
-                    self.defer(cmd, ran.handles);
+                    self.stall_after_end(&node);
                 }
                 None
             }

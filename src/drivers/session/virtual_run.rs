@@ -309,12 +309,12 @@ impl Paced<'_> {
             }
             Control::Stall { node, duration } => {
                 // From the instant the run takes up next, as `apply_live` applies it.
-                let at = core.scheduler().next_due().unwrap_or(core.now());
-                let cmd = ratelab_runtime::command::stall_from(&node, at, duration);
                 if self.ended.is_none() {
+                    let at = core.scheduler().next_due().unwrap_or(core.now());
+                    let cmd = ratelab_runtime::command::stall_from(&node, at, duration);
                     e.apply_live(core, cmd, self.cfg, self.recording, &self.handles);
                 } else {
-                    e.defer(cmd, &self.handles);
+                    e.stall_after_end(&node);
                 }
             }
             Control::TogglePause => {
