@@ -370,6 +370,18 @@ impl RunConfig {
             )));
         }
         for f in &self.faults {
+            // The bound `--stall`'s text is read with, for a fault given as data (a session
+            // log's): one past it could never take effect.
+            let max = ratelab_core::time::MAX_DURATION;
+            if f.at > max || f.duration.is_some_and(|d| d > max) {
+                return Err(ConfigError::Fault(ratelab_core::limits::refusal(
+                    format_args!(
+                        "{f}: its times must be in [0, {}] s",
+                        ratelab_core::limits::MAX_DURATION_S
+                    ),
+                    "MAX_DURATION_S",
+                )));
+            }
             if self.graph.node_id(&f.node).is_none() {
                 return Err(ConfigError::Fault(format!(
                     "{f}: unknown node '{}' (nodes: {})",

@@ -484,6 +484,19 @@ mod tests {
             err,
             "run 1: faults: the stalls must come before the kills (a run lists them so)"
         );
+        run.faults.reverse();
+        // A fault past the longest run (10^19 ns): it could never take effect.
+        for (at, duration) in [(10_000_000_000_000_000_000, None), (1, Some(u64::MAX))] {
+            run.faults[1].at = Nanos(at);
+            run.faults[0].duration = duration.map(Nanos);
+            let err = match run.spec("run 1") {
+                Err(e) => e.to_string(),
+                Ok(s) => s.config(Speech::Keywords).unwrap_err().to_string(),
+            };
+            assert!(err.contains("ratelab::limits::MAX_DURATION_S"), "{err}");
+            run.faults[1].at = Nanos(2_000_000_003);
+            run.faults[0].duration = Some(Nanos(3));
+        }
     }
 
     #[test]
