@@ -630,6 +630,19 @@ impl Fault {
             } else {
                 (t, 1.0)
             };
+            // Plain decimals to the nanosecond are read exactly (a booked `k`'s
+            // `9.380000000`): through an `f64`, a time past 2^51 ns could land 1 ns off.
+            let (unit_ns, decimals) = if scale == 1.0 {
+                (1_000_000_000, 9)
+            } else {
+                (1_000_000, 6)
+            };
+            if let Some(ns) = exact_ns(num.trim(), unit_ns, decimals) {
+                if ns > crate::time::MAX_DURATION.0 {
+                    return Err(format!("time '{t}' must be in [0, {}] s", MAX_DURATION_S));
+                }
+                return Ok(Nanos(ns));
+            }
             let secs = num
                 .trim()
                 .parse::<f64>()
@@ -661,6 +674,27 @@ impl Fault {
             duration,
         })
     }
+}
+
+/// `num` in units of `unit_ns` nanoseconds, exactly, when it is plain decimal digits with at
+/// most `decimals` of them after the point (`9.380000000` seconds: `unit_ns` 10^9, 9
+/// decimals); `None` for any other form (an exponent, a sign, more decimals), which the
+/// caller reads as an `f64`, or on overflow.
+fn exact_ns(num: &str, unit_ns: u64, decimals: u32) -> Option<u64> {
+    let (whole, frac) = num.split_once('.').unwrap_or((num, ""));
+    let digits = |d: &str| d.bytes().all(|b| b.is_ascii_digit());
+    if whole.is_empty() || !digits(whole) || !digits(frac) || frac.len() > decimals as usize {
+        return None;
+    }
+    let part = match frac {
+        "" => 0,
+        f => f.parse::<u64>().ok()? * 10u64.pow(decimals - f.len() as u32),
+    };
+    whole
+        .parse::<u64>()
+        .ok()?
+        .checked_mul(unit_ns)?
+        .checked_add(part)
 }
 
 impl std::fmt::Display for Fault {
@@ -833,8 +867,32 @@ mod tests {
             "policy@1+0",
             "policy@-1+1",
             "policy@1e9+1",
+            "policy@315360000.000000001+1",
         ] {
             assert!(Fault::parse(bad, false).is_err(), "{bad}");
+        }
+    }
+
+    #[test]
+    fn plain_decimal_times_are_read_to_the_nanosecond() {
+        let at = |t: &str| Fault::parse(&format!("p@{t}"), true).unwrap().at.0;
+        // 48.5 days of 20 ms instants: through an f64, this one came back 1 ns late.
+        assert_eq!(at("4194304.280000000"), 4_194_304_280_000_000);
+        assert_eq!(at("12.5ms"), 12_500_000);
+        assert_eq!(at("0.000000001"), 1);
+        assert_eq!(at("315360000"), crate::time::MAX_DURATION.0);
+        // Other forms still read as f64: an exponent, more decimals than a nanosecond.
+        assert_eq!(at("1e-3"), 1_000_000);
+        assert_eq!(at("0.0000000014"), 1);
+        // Every nanosecond of [2^51, 2^53) sampled, written as `stall_from` writes it.
+        let mut x = 0x9E37_79B9_7F4A_7C15_u64;
+        for _ in 0..10_000 {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            let ns = (1u64 << 51) + x % (3u64 << 51);
+            let t = format!("{}.{:09}", ns / 1_000_000_000, ns % 1_000_000_000);
+            assert_eq!(at(&t), ns, "{t}");
         }
     }
 }

@@ -110,7 +110,10 @@ fn to_py(e: &anyhow::Error) -> PyErr {
             return match r.cause {
                 RecordingError::Exists(_) => PyFileExistsError::new_err(text),
                 RecordingError::IsDirectory(_) => PyIsADirectoryError::new_err(text),
-                RecordingError::Unwritable { .. } => PyOSError::new_err(text),
+                // A disk that filled, rerun failing to write: the system's, not a setting.
+                RecordingError::Unwritable { .. } | RecordingError::Rerun { .. } => {
+                    PyOSError::new_err(text)
+                }
                 _ => PyValueError::new_err(text),
             };
         }

@@ -1180,14 +1180,26 @@ mod tests {
             exists.said(Speech::Keywords),
             "record: r.rrd: file exists (pass force=True to overwrite)"
         );
-        // A move into place that failed as the run ended (a full disk): no flag in Python.
-        let moved = RecordingError::Output(OutputError::Io {
+        // A symbolic link put at the final name while the run went, found as the recording
+        // is moved into place when it ends: no flag in Python.
+        let moved = RecordingError::from(OutputError::Symlink(p()));
+        assert!(moved.said(Speech::Flags).starts_with("--record "));
+        let said = moved.said(Speech::Keywords);
+        assert_eq!(
+            said,
+            "record: r.rrd: is a symbolic link; refusing to write through it"
+        );
+        // A full disk: the file named, in any front end's words.
+        let full = RecordingError::from(OutputError::Io {
             path: p(),
             detail: "No space left on device".into(),
         });
-        assert!(moved.said(Speech::Flags).starts_with("--record "));
-        let said = moved.said(Speech::Keywords);
-        assert_eq!(said, "record: cannot write r.rrd: No space left on device");
+        for speech in [Speech::Flags, Speech::Keywords] {
+            assert_eq!(
+                full.said(speech),
+                "cannot write recording r.rrd: No space left on device"
+            );
+        }
         let rerun = RecordingError::Rerun {
             path: p(),
             detail: "closed".into(),

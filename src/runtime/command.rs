@@ -113,8 +113,7 @@ pub fn taking_effect(
 
 /// A stall of `node` for `duration` from run time `at`, as the command that injects it:
 /// `NODE@T+D`, both times in seconds to the nanosecond (`policy@9.380000000+0.500000000`),
-/// which [`parse_fault`] reads back exactly for run times below 2^53 ns (104 days; past
-/// that, to within the nearest `f64`).
+/// which [`parse_fault`] reads back exactly.
 pub fn stall_from(
     node: &str,
     at: ratelab_core::time::Nanos,
@@ -329,14 +328,17 @@ mod tests {
     #[test]
     fn a_stall_from_an_instant_reads_back_to_the_nanosecond() {
         let d = Nanos(500_000_000);
-        // Instants of a 50 Hz grid, odd nanoseconds, and a run of 100 days (below 2^53 ns).
+        // Instants of a 50 Hz grid, odd nanoseconds, one 48.5 days in that an `f64` would
+        // read 1 ns late, a run of 100 days, the longest run.
         for at in [
             0,
             20_000_000,
             9_380_000_000,
             123_456_789_123,
+            4_194_304_280_000_000,
             (1u64 << 53) - 1,
             8_640_000_000_000_000,
+            ratelab_core::time::MAX_DURATION.0,
         ] {
             let Command::InjectFault { fault } = stall_from("policy", Nanos(at), d) else {
                 panic!("not a fault");

@@ -371,7 +371,8 @@ impl RunConfig {
         }
         for f in &self.faults {
             // The bound `--stall`'s text is read with, for a fault given as data (a session
-            // log's): one past it could never take effect.
+            // log's): a fault from past the longest run could never take effect, and a
+            // stall longer than it is refused as `--stall` refuses it.
             let max = ratelab_core::time::MAX_DURATION;
             if f.at > max || f.duration.is_some_and(|d| d > max) {
                 return Err(ConfigError::Fault(ratelab_core::limits::refusal(

@@ -1784,3 +1784,55 @@ fn the_stall_key_stalls_from_the_runs_next_instant_at_any_speed() {
         (c[0].at_ns, Some(ratelab::Nanos(200_000_000)))
     );
 }
+
+/// `k` once the run has ended (it fell) stalls nothing: said so, naming the node, and
+/// nothing is booked.
+#[test]
+fn the_stall_key_after_the_run_has_ended_says_so() {
+    let dir = tempfile::tempdir().unwrap();
+    let (ctl_tx, ctl_rx) = unbounded();
+    let (tel_tx, tel_rx) = unbounded::<Telemetry>();
+    let s = settings(
+        ClockKind::Virtual,
+        1,
+        true,
+        Speed::Max,
+        &dir.path().join("s.json"),
+    );
+    let engine = Engine::new(s, ctl_rx, tel_tx).spawn();
+    let mut script = steps(10);
+    script.push(Control::Apply(Command::SetControlHz { hz: 5.0 }));
+    script.extend(steps(200)); // falls on the way; later steps are ignored while frozen
+    script.push(Control::Stall {
+        node: "policy".into(),
+        duration: ratelab::Nanos(500_000_000),
+    });
+    script.push(Control::Quit);
+    for c in script {
+        ctl_tx.send(c).unwrap();
+    }
+    let log = engine.join().unwrap();
+    assert!(
+        !log.runs[0].metrics.as_ref().unwrap().balanced,
+        "5 Hz falls"
+    );
+    let errors: Vec<String> = tel_rx
+        .try_iter()
+        .filter_map(|t| match t {
+            Telemetry::Error(e) => Some(e),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(
+        errors,
+        vec!["stall policy: the run has ended (r starts the next)".to_string()]
+    );
+    assert!(
+        log.runs[0]
+            .commands
+            .iter()
+            .all(|c| !matches!(c.command, Command::InjectFault { .. })),
+        "{:?}",
+        log.runs[0].commands
+    );
+}

@@ -702,7 +702,8 @@ impl Engine {
         match apply(&cmd) {
             Ok(()) => {
                 // The fault as it takes effect, as the graph's fault book holds it, and said
-                // so: `k` at 9.36 s takes effect at the next instant, 9.38 s.
+                // so: a logged `policy@9.36+0.5` applied before the instant at 9.38 s takes
+                // effect there, until 9.86 s (the lab's `k` is booked at that instant already).
                 let faulted = match &cmd {
                     Command::InjectFault { fault } => ratelab_runtime::command::parse_fault(fault)
                         .ok()

@@ -485,17 +485,31 @@ mod tests {
             "run 1: faults: the stalls must come before the kills (a run lists them so)"
         );
         run.faults.reverse();
-        // A fault past the longest run (10^19 ns): it could never take effect.
-        for (at, duration) in [(10_000_000_000_000_000_000, None), (1, Some(u64::MAX))] {
-            run.faults[1].at = Nanos(at);
-            run.faults[0].duration = duration.map(Nanos);
-            let err = match run.spec("run 1") {
-                Err(e) => e.to_string(),
-                Ok(s) => s.config(Speech::Keywords).unwrap_err().to_string(),
-            };
-            assert!(err.contains("ratelab::limits::MAX_DURATION_S"), "{err}");
-            run.faults[1].at = Nanos(2_000_000_003);
-            run.faults[0].duration = Some(Nanos(3));
+        // A kill from past the longest run (MAX_DURATION, 10 years) could never take effect;
+        // a stall longer than it is refused as `--stall` refuses it. At the bound: accepted.
+        let max = MAX_DURATION.0;
+        let checked = |run: &LoggedRun| match run.spec("run 1") {
+            Err(e) => Err(e.to_string()),
+            Ok(s) => s
+                .config(Speech::Keywords)
+                .map(|_| ())
+                .map_err(|e| e.to_string()),
+        };
+        for (kill_at, stall_ns, ok) in [
+            (max, max, true),
+            (max + 1, 3, false),
+            (10_000_000_000_000_000_000, 3, false),
+            (2_000_000_003, max + 1, false),
+        ] {
+            run.faults[1].at = Nanos(kill_at);
+            run.faults[0].duration = Some(Nanos(stall_ns));
+            match checked(&run) {
+                Ok(()) => assert!(ok, "{kill_at} {stall_ns}: accepted"),
+                Err(e) => {
+                    assert!(!ok, "{kill_at} {stall_ns}: {e}");
+                    assert!(e.contains("ratelab::limits::MAX_DURATION_S"), "{e}");
+                }
+            }
         }
     }
 
