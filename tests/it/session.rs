@@ -39,16 +39,31 @@ fn settings(
 }
 
 pub(crate) fn drive(script: &[Control], file: &std::path::Path) -> SessionLog {
+    let settings = settings(ClockKind::Virtual, 1, true, Speed::Max, file);
+    driven(settings, script).0
+}
+
+/// An engine with `settings` driven by `script` (sent at once, taken in order) to its end:
+/// its session log and everything it told.
+fn driven(settings: SessionSettings, script: &[Control]) -> (SessionLog, Vec<Telemetry>) {
     let (ctl_tx, ctl_rx) = unbounded();
     let (tel_tx, tel_rx) = unbounded::<Telemetry>();
-    let settings = settings(ClockKind::Virtual, 1, true, Speed::Max, file);
     let engine = Engine::new(settings, ctl_rx, tel_tx).spawn();
     for c in script {
         ctl_tx.send(c.clone()).unwrap();
     }
     let log = engine.join().unwrap();
-    drop(tel_rx);
-    log
+    (log, tel_rx.try_iter().collect())
+}
+
+/// The errors among what an engine told.
+fn errors(told: impl IntoIterator<Item = Telemetry>) -> Vec<String> {
+    told.into_iter()
+        .filter_map(|t| match t {
+            Telemetry::Error(e) => Some(e),
+            _ => None,
+        })
+        .collect()
 }
 
 pub(crate) fn steps(n: usize) -> Vec<Control> {
@@ -721,8 +736,6 @@ fn qos_changes_and_faults_are_logged_and_replay_byte_for_byte() {
 /// The `Applied` notes of a paused virtual session driven by `script`.
 fn notes(script: &[Control]) -> Vec<String> {
     let dir = tempfile::tempdir().unwrap();
-    let (ctl_tx, ctl_rx) = unbounded();
-    let (tel_tx, tel_rx) = unbounded::<Telemetry>();
     let settings = settings(
         ClockKind::Virtual,
         0,
@@ -730,13 +743,8 @@ fn notes(script: &[Control]) -> Vec<String> {
         Speed::Max,
         &dir.path().join("s.json"),
     );
-    let engine = Engine::new(settings, ctl_rx, tel_tx).spawn();
-    for c in script {
-        ctl_tx.send(c.clone()).unwrap();
-    }
-    engine.join().unwrap();
-    tel_rx
-        .try_iter()
+    let (_, told) = driven(settings, script);
+    told.into_iter()
         .filter_map(|t| match t {
             Telemetry::Applied(text) => Some(text),
             _ => None,
@@ -1084,8 +1092,6 @@ fn restarting_at_a_rate_reached_through_another_gives_the_headless_result() {
 fn a_lab_session_s_recording_reads_at_a_glance_and_is_named_for_its_rates() {
     let dir = tempfile::tempdir().unwrap();
     let rrd = dir.path().join("lab.rrd");
-    let (ctl_tx, ctl_rx) = unbounded();
-    let (tel_tx, tel_rx) = unbounded::<Telemetry>();
     let mut s = settings(
         ClockKind::Virtual,
         0,
@@ -1094,7 +1100,6 @@ fn a_lab_session_s_recording_reads_at_a_glance_and_is_named_for_its_rates() {
         &dir.path().join("s.json"),
     );
     s.record = Some(rrd.clone());
-    let engine = Engine::new(s, ctl_rx, tel_tx).spawn();
     let mut script = steps(50);
     script.push(Control::Apply(Command::SetQueueDepth { depth: 5 }));
     script.extend(steps(50));
@@ -1105,11 +1110,7 @@ fn a_lab_session_s_recording_reads_at_a_glance_and_is_named_for_its_rates() {
     }));
     script.extend(steps(50));
     script.push(Control::Quit);
-    for c in script {
-        ctl_tx.send(c).unwrap();
-    }
-    engine.join().unwrap();
-    drop(tel_rx);
+    driven(s, &script);
     crate::recording::check_views(&rrd);
     let all = crate::recording::chunks(&rrd);
     let marks = |entity: &str| -> usize {
@@ -1467,8 +1468,6 @@ fn a_lab_session_s_recording_carries_what_its_nodes_print() {
     let dir = tempfile::tempdir().unwrap();
     let g = crate::loud_python_graph(dir.path(), "print('tick here')");
     let rrd = dir.path().join("lab.rrd");
-    let (ctl_tx, ctl_rx) = unbounded();
-    let (tel_tx, tel_rx) = unbounded::<Telemetry>();
     let mut s = settings(
         ClockKind::Virtual,
         0,
@@ -1478,14 +1477,9 @@ fn a_lab_session_s_recording_carries_what_its_nodes_print() {
     );
     s.cfg.graph = ratelab::graph::GraphSpec::load(&g).unwrap();
     s.record = Some(rrd.clone());
-    let engine = Engine::new(s, ctl_rx, tel_tx).spawn();
     let mut script = steps(50);
     script.push(Control::Quit);
-    for c in script {
-        ctl_tx.send(c).unwrap();
-    }
-    engine.join().unwrap();
-    drop(tel_rx);
+    driven(s, &script);
     let lines: Vec<String> = crate::recording::chunks(&rrd)
         .iter()
         .filter(|c| c.entity_path().to_string() == "/log/policy")
@@ -1765,13 +1759,7 @@ fn the_stall_key_stalls_from_the_runs_next_instant_at_any_speed() {
     std::thread::sleep(std::time::Duration::from_millis(100));
     ctl_tx.send(Control::Quit).unwrap();
     let log = engine.join().unwrap();
-    let errors: Vec<String> = tel_rx
-        .try_iter()
-        .filter_map(|t| match t {
-            Telemetry::Error(e) => Some(e),
-            _ => None,
-        })
-        .collect();
+    let errors = errors(tel_rx.try_iter());
     assert!(errors.is_empty(), "{errors:?}");
     let c = &log.runs[0].commands;
     assert_eq!(c.len(), 1, "{c:?}");
@@ -1790,8 +1778,6 @@ fn the_stall_key_stalls_from_the_runs_next_instant_at_any_speed() {
 #[test]
 fn the_stall_key_after_the_run_has_ended_says_so() {
     let dir = tempfile::tempdir().unwrap();
-    let (ctl_tx, ctl_rx) = unbounded();
-    let (tel_tx, tel_rx) = unbounded::<Telemetry>();
     let s = settings(
         ClockKind::Virtual,
         1,
@@ -1799,7 +1785,6 @@ fn the_stall_key_after_the_run_has_ended_says_so() {
         Speed::Max,
         &dir.path().join("s.json"),
     );
-    let engine = Engine::new(s, ctl_rx, tel_tx).spawn();
     let mut script = steps(10);
     script.push(Control::Apply(Command::SetControlHz { hz: 5.0 }));
     script.extend(steps(200)); // falls on the way; later steps are ignored while frozen
@@ -1808,23 +1793,13 @@ fn the_stall_key_after_the_run_has_ended_says_so() {
         duration: ratelab::Nanos(500_000_000),
     });
     script.push(Control::Quit);
-    for c in script {
-        ctl_tx.send(c).unwrap();
-    }
-    let log = engine.join().unwrap();
+    let (log, told) = driven(s, &script);
     assert!(
         !log.runs[0].metrics.as_ref().unwrap().balanced,
         "5 Hz falls"
     );
-    let errors: Vec<String> = tel_rx
-        .try_iter()
-        .filter_map(|t| match t {
-            Telemetry::Error(e) => Some(e),
-            _ => None,
-        })
-        .collect();
     assert_eq!(
-        errors,
+        errors(told),
         vec!["stall policy: the run has ended (r starts the next)".to_string()]
     );
     assert!(
