@@ -842,10 +842,9 @@ fn bag(verb: &BagVerb, stop: &StopFlag) -> Result<()> {
                         ),
                     };
                     let head = format!(
-                        "# {} at {}.{:09} s\n",
+                        "# {} at {} s\n",
                         ratelab::text::printable(m.topic),
-                        m.log_time / 1_000_000_000,
-                        m.log_time % 1_000_000_000
+                        ratelab::Nanos(m.log_time).secs_exact()
                     );
                     if let Err(e) = writeln!(out, "{head}{text}---") {
                         failed = Some(e);

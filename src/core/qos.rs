@@ -891,7 +891,7 @@ mod tests {
             x ^= x >> 7;
             x ^= x << 17;
             let ns = (1u64 << 51) + x % (3u64 << 51);
-            let t = format!("{}.{:09}", ns / 1_000_000_000, ns % 1_000_000_000);
+            let t = Nanos(ns).secs_exact();
             assert_eq!(at(&t), ns, "{t}");
         }
     }

@@ -47,6 +47,13 @@ impl Nanos {
         Nanos(ms * 1_000_000)
     }
 
+    /// Seconds to the nanosecond, nine decimals, as text (`9.380000000`): exact where
+    /// [`Nanos::as_secs_f64`] rounds, and read back exactly as a fault's time
+    /// ([`crate::qos::Fault::parse`]).
+    pub fn secs_exact(self) -> String {
+        format!("{}.{:09}", self.0 / 1_000_000_000, self.0 % 1_000_000_000)
+    }
+
     /// Seconds as `f64` (for display and reports only; never accumulated).
     pub fn as_secs_f64(self) -> f64 {
         self.0 as f64 / 1e9

@@ -655,7 +655,7 @@ impl Walk<'_, '_> {
 
 /// `9.980000000` (s, nine decimals).
 fn seconds(ns: u64) -> String {
-    format!("{}.{:09}", ns / 1_000_000_000, ns % 1_000_000_000)
+    ratelab_core::time::Nanos(ns).secs_exact()
 }
 
 /// `Jan  1 1970 00:00:00.020000000 (0.020000000)`, in UTC.

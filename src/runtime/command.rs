@@ -119,11 +119,8 @@ pub fn stall_from(
     at: ratelab_core::time::Nanos,
     duration: ratelab_core::time::Nanos,
 ) -> Command {
-    let secs = |t: ratelab_core::time::Nanos| {
-        format!("{}.{:09}", t.0 / 1_000_000_000, t.0 % 1_000_000_000)
-    };
     Command::InjectFault {
-        fault: format!("{node}@{}+{}", secs(at), secs(duration)),
+        fault: format!("{node}@{}+{}", at.secs_exact(), duration.secs_exact()),
     }
 }
 
