@@ -29,13 +29,21 @@
 //! answer, as a hop carries a sample and its tick's report) and `--reply-in-callback` (the
 //! far side answers inside Zenoh's receive callback, with no hand-off to a thread).
 //! `--transport` and `--round-trips N` narrow a sitting to one transport's round trips.
+//!
+//! `--transport zenoh-router` measures the round trip of a launch's star (issue 76 item 2):
+//! a third copy runs the launcher's Zenoh router alone (`--router ENDPOINT CREDENTIALS`, as
+//! [`ratelab::distributed::open_router`] opens it: mutual TLS, access control), and both
+//! sides are its clients ([`ratelab::distributed::open_client`]), so every message crosses
+//! two links, as a sample and a report between two processes of a launch do. It is not
+//! among the transports measured by default.
 
 #[path = "common/floor.rs"]
 mod floor;
 
 use hdrhistogram::Histogram;
-use ratelab::distributed::credentials::Credentials;
+use ratelab::distributed::credentials::{Credentials, Role};
 use ratelab::distributed::wire::mono_now_ns;
+use ratelab::distributed::{open_client, open_router, Access};
 use ratelab::distributed::{zenoh, zenoh::Wait};
 use std::io::{BufRead, BufReader, Read, Write};
 use std::process::{Command, Stdio};
@@ -56,8 +64,8 @@ const FILLER: u8 = 3;
 #[derive(clap::Parser, Clone, Debug)]
 #[command(about = "The transport's floor on this host (BENCHMARKS.md)")]
 struct Opts {
-    /// Only this transport: zenoh-tls, zenoh-tcp or tcp.
-    #[arg(long, value_parser = ["zenoh-tls", "zenoh-tcp", "tcp"])]
+    /// Only this transport: zenoh-tls, zenoh-tcp, tcp, or zenoh-router (through a router).
+    #[arg(long, value_parser = ["zenoh-tls", "zenoh-tcp", "tcp", "zenoh-router"])]
     transport: Option<String>,
     /// Round trips per transport; the one-way measures run only with the default.
     #[arg(long, default_value_t = DEFAULT_ROUND_TRIPS, value_parser = clap::value_parser!(u64).range(1..=10_000_000))]
@@ -74,6 +82,10 @@ struct Opts {
     /// Run as the far side: TRANSPORT ENDPOINT CREDENTIALS (the near side starts it).
     #[arg(long, num_args = 3, hide = true)]
     far: Option<Vec<String>>,
+    /// Run as the router of `--transport zenoh-router`: ENDPOINT CREDENTIALS (the near side
+    /// starts it, and it runs until its standard input closes).
+    #[arg(long, num_args = 2, hide = true)]
+    router: Option<Vec<String>>,
 }
 
 impl Opts {
@@ -192,6 +204,10 @@ fn session(
     if transport == "zenoh-tls" {
         return floor::tls_session(listen, connect, creds, who);
     }
+    if transport == "zenoh-router" {
+        let endpoint = listen.first().or(connect.first()).expect("an endpoint");
+        return star_session(endpoint, creds, who);
+    }
     let mut c = zenoh::Config::default();
     let json = |v: &[String]| serde_json::to_string(v).expect("JSON");
     for (k, v) in [
@@ -227,12 +243,39 @@ fn answer(
     Some(kind == 2)
 }
 
+/// A Zenoh session of the launch's star, as ratelab opens its own: `who` `"router"` is a
+/// router listening on `endpoint` (Zenoh's settings of the launcher's router; the identity of
+/// a host's router, [`Role::HostRouter`], since the launcher's own never leaves it), any
+/// other name a process that is its client (connecting to `endpoint`), with the credentials
+/// at `creds`.
+///
+/// # Panics
+/// As [`floor::tls_session`].
+fn star_session(endpoint: &str, creds: &str, who: &str) -> zenoh::Session {
+    let credentials = Credentials::load(std::path::Path::new(creds)).expect("credentials");
+    let role = match who {
+        "router" => Role::HostRouter,
+        p => Role::Process(p.into()),
+    };
+    let access = Access {
+        credentials: &credentials,
+        role: &role,
+        spec: None,
+    };
+    let at = [endpoint.to_string()];
+    match role {
+        Role::HostRouter => open_router(&at, access),
+        _ => open_client(&at, access),
+    }
+    .expect("a session")
+}
+
 /// The far process: stamp each message on arrival; send echoes back from a thread (or, with
 /// `--reply-in-callback`, from Zenoh's receive callback), and a one-way message's receive
 /// stamp back too (so the near side learns the one-way time).
 fn far(opts: &Opts, transport: &str, endpoint: &str, creds: &str) {
     match transport {
-        "zenoh-tls" | "zenoh-tcp" => {
+        "zenoh-tls" | "zenoh-tcp" | "zenoh-router" => {
             let session = session(transport, &[endpoint.to_string()], &[], creds, "far");
             let publisher = session
                 .declare_publisher("ratelab/floor/back")
@@ -350,22 +393,48 @@ fn main() {
     if let Some([transport, endpoint, creds]) = opts.far.as_deref() {
         return far(&opts, transport, endpoint, creds);
     }
+    if let Some([endpoint, creds]) = opts.router.as_deref() {
+        let _router = star_session(endpoint, creds, "router");
+        println!("ready");
+        // Route until the near side closes this process's standard input.
+        let _ = std::io::stdin().read_to_end(&mut Vec::new());
+        return;
+    }
     let me = std::env::current_exe().expect("this program's path");
     let private = ratelab::distributed::credentials::PrivateDir::new().expect("a folder");
     let creds =
         Credentials::generate("floor", &["near".into(), "far".into()]).expect("credentials");
     let creds = private.write("floor", &creds).expect("written");
     let creds = creds.to_string_lossy().into_owned();
-    for transport in ["zenoh-tls", "zenoh-tcp", "tcp"] {
-        if opts.transport.as_ref().is_some_and(|t| t != transport) {
+    for transport in ["zenoh-tls", "zenoh-tcp", "tcp", "zenoh-router"] {
+        let chosen = opts.transport.as_deref();
+        // The star is measured only when asked for.
+        if chosen.is_some_and(|t| t != transport)
+            || (chosen.is_none() && transport == "zenoh-router")
+        {
             continue;
         }
         let addr = format!("127.0.0.1:{}", free_port());
         let endpoint = match transport {
             "zenoh-tls" => format!("tls/{addr}"),
             "zenoh-tcp" => format!("tcp/{addr}"),
+            "zenoh-router" => format!("tls/{addr}"),
             _ => addr.clone(),
         };
+        // The star's router, as a process of its own (the launcher's), before either side.
+        let router = (transport == "zenoh-router").then(|| {
+            let mut r = Command::new(&me)
+                .args(["--router", &endpoint, &creds])
+                .stdin(Stdio::piped())
+                .stdout(Stdio::piped())
+                .spawn()
+                .expect("the router process starts");
+            let mut ready = String::new();
+            BufReader::new(r.stdout.take().expect("its stdout"))
+                .read_line(&mut ready)
+                .ok();
+            r
+        });
         let mut child = Command::new(&me)
             .args(opts.for_far())
             .args(["--far", transport, &endpoint, &creds])
@@ -376,7 +445,7 @@ fn main() {
         let stdout = child.stdout.take().expect("its stdout");
         BufReader::new(stdout).read_line(&mut ready).ok();
         let mut link: Box<dyn Link> = match transport {
-            "zenoh-tls" | "zenoh-tcp" => {
+            "zenoh-tls" | "zenoh-tcp" | "zenoh-router" => {
                 let session = session(
                     transport,
                     &[],
@@ -411,6 +480,9 @@ fn main() {
         let label = match transport {
             "zenoh-tls" => "bare Zenoh (ratelab's session config: mutual TLS, access control)",
             "zenoh-tcp" => "bare Zenoh (peer mode on plain TCP, no authentication)",
+            "zenoh-router" => {
+                "bare Zenoh through a router (two clients of it, ratelab's session config)"
+            }
             _ => "bare TCP socket (nodelay, blocking)",
         };
         if opts.round_trips == DEFAULT_ROUND_TRIPS {
@@ -420,5 +492,9 @@ fn main() {
         round_trips(link.as_mut(), label, opts.round_trips, &opts, child.id());
         link.send(encode(2, 0, 0));
         let _ = child.wait();
+        if let Some(mut r) = router {
+            drop(r.stdin.take());
+            let _ = r.wait();
+        }
     }
 }
