@@ -26,8 +26,9 @@
 //! each report to every other process cost P (P − 1). A process runs its events on the
 //! thread that receives what they wait for (Zenoh's receive callback; the process's
 //! `stepper`): between two events of different processes there is one report message to
-//! the launcher and one from it, and one hand-off between threads on the way (to the
-//! launcher's outbox, which sends for it: Zenoh's one thread must never wait to send). The launcher
+//! the launcher and one from it, which the launcher puts from the thread that received what
+//! made it due (its outbox's direct lane; the outbox's own thread when something waits
+//! there: Zenoh's one thread must never wait to send, `launcher/outbox.rs`). The launcher
 //! is also the time authority: it lets the processes run up to a horizon
 //! ([`wire::ToProcess::Horizon`]), [`HORIZON_PERIODS`] periods of the fastest node ahead of
 //! the events it has seen reported, and ends the run early by not moving it on (a Ctrl-C).

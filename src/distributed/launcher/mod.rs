@@ -515,8 +515,8 @@ pub fn launch(
     // when it is full under the real clock only); under the virtual clock every process's
     // tick reports too, to follow the run and hand each process the others' in its turn
     // ([`relay`]). Heard before any process starts.
-    let outboxes = outbox::Outboxes::start(&processes)?;
     let real = cfg.clock == ClockKind::Real;
+    let outboxes = outbox::Outboxes::start(&processes, !real)?;
     let _forwarded = outbox::forward_topics(&session, &keys, spec, &outboxes, real)?;
     let relaying = (!real)
         .then(|| relay::Relay::start(&session, &keys, spec, (&processes[..], &outboxes)))

@@ -16,6 +16,19 @@
 //!
 //! With shared memory the sample stays a reference to the publisher's segment all the way.
 //!
+//! Under the virtual clock a small message ([`MAX_DIRECT_BYTES`]) is put straight from
+//! Zenoh's thread when nothing waits in its process's outbox and its process has been sent
+//! under [`MAX_DIRECT_UNANSWERED_BYTES`] in all (either way) since it last reported
+//! ([`Outbox::answered`]): the hand-off to the outbox's thread cost an instant of the
+//! chapter's launch about a third of its time (BENCHMARKS.md, issue 76 item 4). A link's
+//! queue at the router (16 batches of 64 KiB a priority, [`crate::open_router`]) does not
+//! fill with so few bytes to a process that keeps reading, and a process in the lockstep
+//! reports in every turn it takes. Past the bound, or with anything queued (whose order a
+//! message must keep), the message takes the outbox. Were the queue full all the same (a
+//! process alive but reading slower than a quarter of its queue in a turn), Zenoh's thread
+//! would wait its 5 s for room, then close that process's link, and the run would end with
+//! the process gone: a failed run, never a wrong one.
+//!
 //! There is an outbox, with its thread, per process the launch passes messages on to
 //! ([`Outboxes`]): a process that stops reading (frozen, or slower than its topics) holds
 //! only what goes to it, never what goes to the others. Each queue is bounded by bytes
@@ -46,6 +59,15 @@ pub const MAX_QUEUED_BYTES_PER_PROCESS: usize = 64 * 1024 * 1024;
 /// Zenoh's receive batches (64 KiB) however small it is.
 pub const MIN_CHARGE_BYTES: usize = 64 * 1024;
 
+/// The largest message put straight from Zenoh's thread (under the virtual clock), bytes: a
+/// report or a small sample, never more than a sixteenth of one of Zenoh's batches.
+pub const MAX_DIRECT_BYTES: usize = 4 * 1024;
+
+/// The most bytes put straight from Zenoh's thread to one process since it last reported,
+/// a quarter of the router's queue for a link (16 batches of 64 KiB); past it, messages to
+/// the process take its outbox until it reports again.
+pub const MAX_DIRECT_UNANSWERED_BYTES: usize = 256 * 1024;
+
 /// What `payload` is charged against [`MAX_QUEUED_BYTES`].
 fn charge(payload: &ZBytes) -> usize {
     payload.len().max(MIN_CHARGE_BYTES)
@@ -72,17 +94,54 @@ pub(super) struct Outbox {
     queued: (Arc<AtomicUsize>, Arc<AtomicUsize>),
     /// Whether a dropped sample was said (once).
     said_full: AtomicBool,
+    /// Whether small messages may be put straight from the caller's thread (the virtual
+    /// clock, where nothing is dropped), and what decides it ([`Lane`]).
+    direct: Option<Arc<std::sync::Mutex<Lane>>>,
+}
+
+/// What decides whether a message may skip the outbox's thread: it may when nothing is
+/// queued ahead of it, and its process has not been sent too much that way since it last
+/// reported. Its lock is held across a direct put, so that messages handed in on two
+/// threads keep one order.
+#[derive(Debug, Default)]
+struct Lane {
+    /// Messages handed to the outbox's thread and not yet put.
+    queued: usize,
+    /// Bytes handed in for the process (put directly or queued) since it last reported
+    /// ([`Outbox::answered`]).
+    unanswered_bytes: usize,
+}
+
+impl Lane {
+    /// Whether a message of `len` bytes may be put directly now; if so, it is counted.
+    fn take_direct(&mut self, len: usize) -> bool {
+        let fits = len <= MAX_DIRECT_BYTES
+            && self.queued == 0
+            && self.unanswered_bytes + len <= MAX_DIRECT_UNANSWERED_BYTES;
+        if fits {
+            self.unanswered_bytes += len;
+        }
+        fits
+    }
 }
 
 impl Outbox {
-    /// An outbox for `process` and its thread; `all` counts the bytes every outbox holds.
+    /// An outbox for `process` and its thread; `all` counts the bytes every outbox holds;
+    /// `direct`: small messages may skip the thread (the virtual clock, see the module's
+    /// header).
     ///
     /// # Errors
     /// [`DistError::Usage`] when the thread cannot start.
-    fn start(process: &str, all: &Arc<AtomicUsize>) -> Result<Arc<Outbox>, DistError> {
+    fn start(
+        process: &str,
+        all: &Arc<AtomicUsize>,
+        direct: bool,
+    ) -> Result<Arc<Outbox>, DistError> {
         let (tx, rx) = crossbeam_channel::unbounded::<Job>();
         let queued = (Arc::new(AtomicUsize::new(0)), all.clone());
         let counted = queued.clone();
+        let direct = direct.then(|| Arc::new(std::sync::Mutex::new(Lane::default())));
+        let lane = direct.clone();
         // Detached: it ends once the outbox is dropped (its channel closed).
         let _detached = std::thread::Builder::new()
             .name(format!("outbox {process}"))
@@ -94,6 +153,10 @@ impl Outbox {
                     let _ = job.out.put(job.payload).wait();
                     counted.0.fetch_sub(bytes, Ordering::SeqCst);
                     counted.1.fetch_sub(bytes, Ordering::SeqCst);
+                    if let Some(lane) = &lane {
+                        let mut lane = ratelab_runtime::graph::lock(lane);
+                        lane.queued = lane.queued.saturating_sub(1);
+                    }
                 }
             })
             .map_err(|e| DistError::Usage(format!("cannot start the launcher's outbox: {e}")))?;
@@ -102,7 +165,16 @@ impl Outbox {
             tx,
             queued,
             said_full: AtomicBool::new(false),
+            direct,
         }))
+    }
+
+    /// The process reported (the launcher heard from it): what was put directly to it
+    /// before is taken as read, and the bound on direct puts starts again.
+    pub(super) fn answered(&self) {
+        if let Some(lane) = &self.direct {
+            ratelab_runtime::graph::lock(lane).unanswered_bytes = 0;
+        }
     }
 
     /// Hand in `payload` to put on `out` (from any thread, never waiting). A `sample` is
@@ -121,12 +193,33 @@ impl Outbox {
             }
             return;
         }
+        // Under the lane's lock, so that what another thread hands in meanwhile keeps the
+        // order (a direct put cannot wait for room: see the module's header).
+        let mut lane = self
+            .direct
+            .as_ref()
+            .map(|l| ratelab_runtime::graph::lock(l));
+        if let Some(l) = lane.as_deref_mut() {
+            if l.take_direct(payload.len()) {
+                // Under congestion control `Block` a put fails only when the session is
+                // closed: the launch is over.
+                let _ = out.put(payload).wait();
+                self.queued.0.fetch_sub(len, Ordering::SeqCst);
+                self.queued.1.fetch_sub(len, Ordering::SeqCst);
+                return;
+            }
+            l.queued += 1;
+            l.unanswered_bytes = l.unanswered_bytes.saturating_add(payload.len());
+        }
         let job = Job {
             out: out.clone(),
             payload,
             sample,
         };
         if self.tx.send(job).is_err() {
+            if let Some(l) = lane.as_deref_mut() {
+                l.queued = l.queued.saturating_sub(1);
+            }
             // The thread is gone (it never ends before the outbox): nothing to count.
             self.queued.0.fetch_sub(len, Ordering::SeqCst);
             self.queued.1.fetch_sub(len, Ordering::SeqCst);
@@ -152,15 +245,16 @@ fn admit(queued: &(Arc<AtomicUsize>, Arc<AtomicUsize>), len: usize) -> bool {
 pub(super) struct Outboxes(BTreeMap<String, Arc<Outbox>>);
 
 impl Outboxes {
-    /// An outbox for each of `processes`.
+    /// An outbox for each of `processes`; `direct`: small messages may skip its thread
+    /// (the virtual clock: see the module's header).
     ///
     /// # Errors
     /// [`DistError::Usage`] when a thread cannot start.
-    pub(super) fn start(processes: &[String]) -> Result<Outboxes, DistError> {
+    pub(super) fn start(processes: &[String], direct: bool) -> Result<Outboxes, DistError> {
         let all = Arc::new(AtomicUsize::new(0));
         processes
             .iter()
-            .map(|p| Ok((p.clone(), Outbox::start(p, &all)?)))
+            .map(|p| Ok((p.clone(), Outbox::start(p, &all, direct)?)))
             .collect::<Result<_, DistError>>()
             .map(Outboxes)
     }
@@ -249,6 +343,42 @@ mod tests {
         assert_eq!(all.load(Ordering::SeqCst), MAX_QUEUED_BYTES);
         assert!(!admit(&queue(), mib), "past the bound of all");
         assert_eq!(all.load(Ordering::SeqCst), MAX_QUEUED_BYTES);
+    }
+
+    /// A message skips the outbox's thread only when small, with nothing queued ahead of it
+    /// (the order), and within what its process may be sent unanswered.
+    #[test]
+    fn the_direct_lane_keeps_order_and_its_bound() {
+        let mut lane = Lane::default();
+        assert!(lane.take_direct(100));
+        assert!(!lane.take_direct(MAX_DIRECT_BYTES + 1), "too large");
+        lane.queued = 1;
+        assert!(!lane.take_direct(100), "something is queued ahead of it");
+        lane.queued = 0;
+        assert_eq!(lane.unanswered_bytes, 100, "only what it took counts");
+        while lane.take_direct(MAX_DIRECT_BYTES) {}
+        assert!(lane.unanswered_bytes <= MAX_DIRECT_UNANSWERED_BYTES);
+        assert!(lane.unanswered_bytes + MAX_DIRECT_BYTES > MAX_DIRECT_UNANSWERED_BYTES);
+        assert!(
+            !lane.take_direct(MAX_DIRECT_BYTES),
+            "over the bound until it answers"
+        );
+        lane.unanswered_bytes = 0; // what Outbox::answered does
+        assert!(lane.take_direct(MAX_DIRECT_BYTES));
+    }
+
+    /// Only an outbox under the virtual clock has a direct lane, and a report from its
+    /// process starts its bound again.
+    #[test]
+    fn only_the_virtual_clock_s_outbox_has_a_direct_lane() {
+        let all = Arc::new(AtomicUsize::new(0));
+        let real = Outbox::start("p", &all, false).unwrap();
+        assert!(real.direct.is_none());
+        let virt = Outbox::start("p", &all, true).unwrap();
+        let lane = virt.direct.as_ref().unwrap();
+        ratelab_runtime::graph::lock(lane).unanswered_bytes = 7;
+        virt.answered();
+        assert_eq!(ratelab_runtime::graph::lock(lane).unanswered_bytes, 0);
     }
 
     #[test]

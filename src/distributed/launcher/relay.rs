@@ -367,6 +367,12 @@ impl Relay {
                 return;
             }
             for m in ms {
+                // Its process reported: it reads what it is sent.
+                if let Some((_, outbox)) =
+                    (self.process_of.get(m.node)).and_then(|&p| self.outs.get(p))
+                {
+                    outbox.answered();
+                }
                 if let Err(e) = c.inbox.accept(m, &self.spec) {
                     c.fail_next(&self.spec, e.to_string());
                     break;
