@@ -293,8 +293,10 @@ pub(super) fn render_node(n: &NodeView, area: Rect, buf: &mut Buffer, real: bool
     if let (Some(b), false) = (n.badge, badge_in_title) {
         lines.insert(1, Line::from(b.words().0).cyan());
     }
-    // What a tick costs, last: only where the box has a row left for it.
-    if let Some(t) = n.tick_p50_us {
+    // What a tick costs, last: only where the box has a row left for it, and not while an
+    // alarm is raised, whose row it gives up (so the box keeps its height: the graph panel
+    // does not grow for the half second of a stall, [`node_rows`]).
+    if let (Some(t), None) = (n.tick_p50_us, alarm(n)) {
         if lines.len() < usize::from(area.height.saturating_sub(2)) {
             // Whole, in ms past 999 µs where µs would not fit (a 2 ms compute time).
             let ms = t / 1000.0;
@@ -928,7 +930,8 @@ pub(super) fn alarm(n: &NodeView) -> Option<&'static str> {
 }
 
 /// The rows a node's box would fill inside its border: its rate, what it measured (or ran,
-/// or sent), its compute time, badge, tick time and liveliness.
+/// or sent), its compute time, badge, and its tick time or, in its place, its alarm
+/// ([`alarm`]: a node that has a tick time keeps its height when one is raised).
 pub(super) fn node_rows(n: &NodeView) -> usize {
     let status = match (n.published_hz, n.measured_hz, n.lateness_p99_us) {
         (None, Some(_), Some(_)) => 2,
@@ -937,8 +940,7 @@ pub(super) fn node_rows(n: &NodeView) -> usize {
     1 + status
         + usize::from(n.compute.is_some())
         + usize::from(n.badge.is_some())
-        + usize::from(n.tick_p50_us.is_some())
-        + usize::from(alarm(n).is_some())
+        + usize::from(n.tick_p50_us.is_some() || alarm(n).is_some())
 }
 
 /// The graph panel's height: 7 rows, more when an arrow's QoS lines or a column of node
@@ -1019,6 +1021,57 @@ mod tests {
         // At 80 columns with 9 columns of boxes and arrows (an arrow 9 wide).
         assert_eq!(first(8), "/meas →2");
         assert_eq!(first(5), "/meas");
+    }
+
+    /// Under the real clock a node's box ends with its tick time; a stall raised on it takes
+    /// that row, so the box (and the graph panel sized from it) keeps its height: a user saw
+    /// the whole screen below the graph jump a row for the stall's half second.
+    #[test]
+    fn an_alarm_takes_the_tick_time_s_row_and_the_box_keeps_its_height() {
+        let ticking = NodeView {
+            name: "policy".into(),
+            set_hz: 50.0,
+            measured_hz: Some(50.0),
+            lateness_p99_us: Some(51.0),
+            tick_p50_us: Some(11.0),
+            ..NodeView::default()
+        };
+        let stalled = NodeView {
+            fault: Some("STALLED"),
+            ..ticking.clone()
+        };
+        assert_eq!(node_rows(&ticking), node_rows(&stalled));
+        let area = Rect::new(0, 0, 24, 2 + node_rows(&ticking) as u16);
+        let drawn = |n: &NodeView| {
+            let mut buf = Buffer::empty(area);
+            render_node(n, area, &mut buf, true);
+            (0..area.height)
+                .map(|y| {
+                    (0..area.width)
+                        .map(|x| buf[(x, y)].symbol())
+                        .collect::<String>()
+                })
+                .collect::<Vec<_>>()
+                .join("\n")
+        };
+        let (before, during) = (drawn(&ticking), drawn(&stalled));
+        assert!(before.contains("tick p50 11 µs"), "{before}");
+        assert!(during.contains("✗ STALLED"), "{during}");
+        assert!(!during.contains("tick p50"), "{during}");
+        // Every row of the box as before is still there, but the tick time's.
+        for row in ["50 Hz set", "50.0 Hz meas", "p99 51 µs late"] {
+            assert!(during.contains(row), "{row}: {during}");
+        }
+        // A node without a tick time (the virtual clock) gains the alarm's row.
+        let plain = NodeView {
+            tick_p50_us: None,
+            ..ticking.clone()
+        };
+        let plain_stalled = NodeView {
+            fault: Some("STALLED"),
+            ..plain.clone()
+        };
+        assert_eq!(node_rows(&plain_stalled), node_rows(&plain) + 1);
     }
 
     #[test]
