@@ -1052,6 +1052,16 @@ impl App {
         } else {
             (i + 1).min(SPEEDS.len() - 1)
         };
+        // At either end of the ladder under the virtual clock, said rather than sent again
+        // (the key did nothing you could see). The real clock's refusal is the engine's.
+        if j == i && self.clock == "virtual" {
+            let (end, other) = if slower {
+                ("slowest", "> speeds up")
+            } else {
+                ("fastest", "< slows down")
+            };
+            return self.say(format!("already the {end} speed ({}): {other}", SPEEDS[i]));
+        }
         self.speed = SPEEDS[j];
         self.send(Control::SetSpeed(self.speed));
     }

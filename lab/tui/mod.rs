@@ -2089,6 +2089,41 @@ mod tests {
         assert!(render(&app, 80, 24).contains("cartpole"));
     }
 
+    /// `>` at max and `<` at ×0.25 say so (a user pressed them and saw nothing happen), and
+    /// send nothing more.
+    #[test]
+    fn the_speed_keys_say_when_the_ladder_ends() {
+        let (mut app, rx) = app_after(virtual_cfg(50.0, 1), false);
+        for _ in 0..ratelab::session::SPEEDS.len() {
+            app.on_msg(Msg::Faster);
+        }
+        let sent: Vec<Control> = rx.try_iter().collect();
+        assert_eq!(
+            sent.last(),
+            Some(&Control::SetSpeed(Speed::Max)),
+            "{sent:?}"
+        );
+        let said = app.view().message.unwrap_or_default();
+        assert_eq!(said, "already the fastest speed (max): < slows down");
+        assert_eq!(
+            sent.len(),
+            ratelab::session::SPEEDS.len() - 3,
+            "×1 to max: {sent:?}"
+        );
+        for _ in 0..ratelab::session::SPEEDS.len() {
+            app.on_msg(Msg::Slower);
+        }
+        let sent: Vec<Control> = rx.try_iter().collect();
+        assert_eq!(sent.last(), Some(&Control::SetSpeed(Speed::Times(0.25))));
+        assert_eq!(
+            sent.len(),
+            ratelab::session::SPEEDS.len() - 1,
+            "max to ×0.25: {sent:?}"
+        );
+        let said = app.view().message.unwrap_or_default();
+        assert_eq!(said, "already the slowest speed (×0.25): > speeds up");
+    }
+
     #[test]
     fn keys_become_engine_controls() {
         let (mut app, rx) = app_after(virtual_cfg(50.0, 1), false);
