@@ -592,7 +592,7 @@ pub fn run_process(a: &ProcessArgs, stop: StopFlag) -> anyhow::Result<()> {
         say: Some(say_on_stdout),
     };
     ratelab::distributed::process::run_process(&opts, &stop)
-        .map_err(|e| anyhow::anyhow!("process '{}': {e}", a.process))
+        .map_err(|e| said_as(e, &format!("process '{}'", a.process)))
 }
 
 /// `ratelab router --connect EP --credentials FILE`: this host's router of a launch
@@ -607,8 +607,17 @@ pub fn run_router(a: &RouterArgs, stop: StopFlag) -> anyhow::Result<()> {
         credentials: Credentials::load(&a.credentials)?,
         say: Some(say_on_stdout),
     };
-    host_router::serve(&opts, &stop).map_err(|e| anyhow::anyhow!("router: {e}"))?;
+    host_router::serve(&opts, &stop).map_err(|e| said_as(e, "router"))?;
     Ok(())
+}
+
+/// `e` as `who` says it (`process 'robot': …`), but a graph file's error as itself, so it
+/// prints as `FILE:LINE:COL: error: reason` as every other command prints one.
+fn said_as(e: ratelab::distributed::DistError, who: &str) -> anyhow::Error {
+    match e {
+        ratelab::distributed::DistError::Graph(spec) => spec.into(),
+        e => anyhow::anyhow!("{who}: {e}"),
+    }
 }
 
 /// How messages name the graph file of `ratelab process` or `ratelab router`: its path, or

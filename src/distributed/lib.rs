@@ -216,6 +216,10 @@ pub enum DistError {
     /// The run could not be built.
     #[error(transparent)]
     Run(#[from] ratelab_runtime::runcore::RunError),
+    /// The graph file given is not a graph (`FILE:LINE:COL` and why: a front end prints it
+    /// as a compiler prints its errors, not behind the command's name).
+    #[error(transparent)]
+    Graph(#[from] ratelab_runtime::graph::spec::SpecError),
 }
 
 impl From<zenoh::Error> for DistError {
@@ -495,9 +499,15 @@ pub fn live_tokens(
 /// # Errors
 /// [`DistError::Usage`], one line: not UTF-8, or not a graph file.
 pub(crate) fn graph_file(bytes: &[u8], origin: &str) -> Result<GraphSpec, DistError> {
-    let text = std::str::from_utf8(bytes)
-        .map_err(|_| DistError::Usage(format!("{origin}: not UTF-8 text")))?;
-    GraphSpec::parse(text, origin).map_err(|e| DistError::Usage(e.to_string()))
+    let text = std::str::from_utf8(bytes).map_err(|_| {
+        DistError::Graph(ratelab_runtime::graph::spec::SpecError {
+            origin: origin.to_string(),
+            line: 0,
+            col: 0,
+            reason: "not UTF-8 text".into(),
+        })
+    })?;
+    Ok(GraphSpec::parse(text, origin)?)
 }
 
 /// Are `credentials` those of a launch of `spec`: its graph's name and its processes, in

@@ -1231,6 +1231,41 @@ fn a_router_refuses_bad_input_in_one_line() {
     assert_one_line_exit_2(&o, "is the launch running there");
 }
 
+/// A graph file that is not a graph is said by `ratelab process` and `ratelab router` as
+/// every command says one, `FILE:LINE:COL: error: reason` (or `error: FILE: reason` for the
+/// whole file), not behind the command's name (`error: process 'robot': FILE:…`).
+#[test]
+fn process_and_router_say_a_broken_graph_file_as_every_command_does() {
+    let _m = crate::machine::shared();
+    let dir = tempfile::tempdir().unwrap();
+    let creds = chapter_credentials(dir.path());
+    let creds = creds.to_str().unwrap();
+    let broken = dir.path().join("broken.toml");
+    std::fs::write(&broken, "name = \"x\"\n[[node]\n").unwrap();
+    let binary = dir.path().join("binary.toml");
+    std::fs::write(&binary, b"name = \"\xff\"\n").unwrap();
+    let (broken, binary) = (broken.to_str().unwrap(), binary.to_str().unwrap());
+    let connect = ["--connect", "tls/127.0.0.1:9", "--credentials", creds];
+    for (file, said) in [
+        (broken, format!("{broken}:2:8: error: ")),
+        (binary, format!("error: {binary}: not UTF-8 text")),
+    ] {
+        let process = ratelab(
+            &[
+                &["process", "--process", "robot", "--graph", file][..],
+                &connect,
+            ]
+            .concat(),
+        );
+        let router = ratelab(&[&["router", "--graph", file][..], &connect].concat());
+        for o in [process, router] {
+            assert_one_line_exit_2(&o, &said);
+            let err = text(&o.stderr);
+            assert!(err.starts_with(&said), "{err}");
+        }
+    }
+}
+
 #[test]
 fn bad_endpoints_busy_ports_and_unknown_processes_exit_2() {
     let _m = crate::machine::shared();
