@@ -20,9 +20,12 @@
 //! The launch's own traffic is the launcher's to hear: the router passes it on from the
 //! one thread Zenoh runs it on, waiting for room in every subscriber's link, so a
 //! subscriber that stops reading it (a frozen watcher) would hold the whole star. The
-//! topics' own keys stay readable by everyone: the launcher puts them from a thread per
-//! receiving process (its outbox), so a frozen watcher subscribed to a topic holds only
-//! that topic's process's outbox (under the virtual clock, the lockstep with it).
+//! topics' own keys stay readable by everyone: under the real clock the launcher puts them
+//! from a thread per receiving process (its outbox), so a frozen watcher subscribed to a
+//! topic holds only that topic's process's outbox. Under the virtual clock a small sample
+//! is put from Zenoh's thread (the outbox's direct lane, `launcher/outbox.rs`), so a
+//! frozen watcher subscribed to it holds the whole star, as it held the lockstep before,
+//! until Zenoh closes its link (5 s).
 //!
 //! A launch is a star ([`super::open_router`]): every process and watcher links to the
 //! launcher's router alone, so the check that matters is the router's, on each message
@@ -267,8 +270,8 @@ fn process_keys(
     let mut tokens = vec![format!("{p}/@node/{proc_name}/**")];
     match spec {
         Some(spec) => {
-            // On `@via` only: the router alone puts on a topic's key (from its outbox's
-            // thread, never from Zenoh's).
+            // On `@via` only: the router alone puts on a topic's key (through its outbox,
+            // `launcher/outbox.rs`).
             for t in &spec.topics {
                 if spec.process_of(t.publisher) == *proc_name {
                     puts.push(keys.via(&t.name));

@@ -1,5 +1,6 @@
-//! What the launcher passes on to the processes from Zenoh's thread, sent from a thread of
-//! its own: the crossing topics' samples and the lockstep's relayed reports.
+//! What the launcher passes on to the processes from Zenoh's thread (the crossing topics'
+//! samples and the lockstep's relayed reports): sent from a thread of its own, or under the
+//! virtual clock, for a small message with nothing queued ahead of it, put there and then.
 //!
 //! The launcher's session is the router of the launch's star, and Zenoh runs it on one
 //! thread ([`crate::ZENOH_RUNTIME`]): the thread that receives a message is the one that
@@ -16,18 +17,27 @@
 //!
 //! With shared memory the sample stays a reference to the publisher's segment all the way.
 //!
-//! Under the virtual clock a small message ([`MAX_DIRECT_BYTES`]) is put straight from
-//! Zenoh's thread when nothing waits in its process's outbox and its process has been sent
-//! under [`MAX_DIRECT_UNANSWERED_BYTES`] in all (either way) since it last reported
+//! Under the virtual clock a small message ([`MAX_DIRECT_BYTES`]) is put straight from the
+//! thread that hands it in (Zenoh's, or the launcher's main thread at the run's end) when
+//! nothing waits in its process's outbox and the process has been handed under
+//! [`MAX_DIRECT_UNANSWERED_BYTES`] in all (put directly or queued) since it last reported
 //! ([`Outbox::answered`]): the hand-off to the outbox's thread cost an instant of the
 //! chapter's launch about a third of its time (BENCHMARKS.md, issue 76 item 4). A link's
 //! queue at the router (16 batches of 64 KiB a priority, [`crate::open_router`]) does not
 //! fill with so few bytes to a process that keeps reading, and a process in the lockstep
 //! reports in every turn it takes. Past the bound, or with anything queued (whose order a
-//! message must keep), the message takes the outbox. Were the queue full all the same (a
-//! process alive but reading slower than a quarter of its queue in a turn), Zenoh's thread
-//! would wait its 5 s for room, then close that process's link, and the run would end with
-//! the process gone: a failed run, never a wrong one.
+//! message must keep), the message takes the outbox.
+//!
+//! What the bound does not cover, and what then happens: a sample put on a topic's key also
+//! goes to any watcher subscribed to it (an observer may read the topics, [`crate::access`]),
+//! and processes behind one host's router share one link from here ([`crate::host_router`]).
+//! Were such a link's queue full all the same (a watcher that stopped reading; a host's
+//! router stalled), Zenoh's thread would wait its 5 s for room, then close that link: the
+//! whole star waits those 5 s, where before only the outbox's thread (and, under the
+//! virtual clock, the lockstep with it) did. The run goes on, or ends with the processes
+//! behind that link gone: a stalled or failed run, never a wrong one. The real clock, whose
+//! samples may be dropped and whose processes do not wait for each other, keeps every
+//! message on the outbox's thread.
 //!
 //! There is an outbox, with its thread, per process the launch passes messages on to
 //! ([`Outboxes`]): a process that stops reading (frozen, or slower than its topics) holds
@@ -100,28 +110,60 @@ pub(super) struct Outbox {
 }
 
 /// What decides whether a message may skip the outbox's thread: it may when nothing is
-/// queued ahead of it, and its process has not been sent too much that way since it last
+/// queued ahead of it, and its process has not been handed too much since it last
 /// reported. Its lock is held across a direct put, so that messages handed in on two
 /// threads keep one order.
 #[derive(Debug, Default)]
 struct Lane {
     /// Messages handed to the outbox's thread and not yet put.
     queued: usize,
-    /// Bytes handed in for the process (put directly or queued) since it last reported
-    /// ([`Outbox::answered`]).
+    /// Bytes handed in for the process (put directly or queued, each charged
+    /// [`PER_MESSAGE_BYTES`] more) since it last reported ([`Lane::answered`]).
     unanswered_bytes: usize,
 }
 
+/// What a message handed in takes ([`Lane::hand_in`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Route {
+    /// Put from the caller's thread, now.
+    Direct,
+    /// Queued for the outbox's thread.
+    Queue,
+}
+
+/// What a message costs in a link's queue beyond its payload (its key and Zenoh's
+/// framing), charged against [`MAX_DIRECT_UNANSWERED_BYTES`].
+const PER_MESSAGE_BYTES: usize = 64;
+
 impl Lane {
-    /// Whether a message of `len` bytes may be put directly now; if so, it is counted.
-    fn take_direct(&mut self, len: usize) -> bool {
-        let fits = len <= MAX_DIRECT_BYTES
+    /// A message of `len` bytes handed in: [`Route::Direct`] when it is small, nothing is
+    /// queued ahead of it and it keeps the process within [`MAX_DIRECT_UNANSWERED_BYTES`];
+    /// else [`Route::Queue`] (counted until [`Lane::put_done`]). Either way it is charged.
+    fn hand_in(&mut self, len: usize) -> Route {
+        let charged = self
+            .unanswered_bytes
+            .saturating_add(len.saturating_add(PER_MESSAGE_BYTES));
+        let route = if len <= MAX_DIRECT_BYTES
             && self.queued == 0
-            && self.unanswered_bytes + len <= MAX_DIRECT_UNANSWERED_BYTES;
-        if fits {
-            self.unanswered_bytes += len;
-        }
-        fits
+            && charged <= MAX_DIRECT_UNANSWERED_BYTES
+        {
+            Route::Direct
+        } else {
+            self.queued += 1;
+            Route::Queue
+        };
+        self.unanswered_bytes = charged;
+        route
+    }
+
+    /// The outbox's thread put a queued message (or it could not be queued).
+    fn put_done(&mut self) {
+        self.queued = self.queued.saturating_sub(1);
+    }
+
+    /// The process reported: what it was handed before is taken as read.
+    fn answered(&mut self) {
+        self.unanswered_bytes = 0;
     }
 }
 
@@ -154,8 +196,7 @@ impl Outbox {
                     counted.0.fetch_sub(bytes, Ordering::SeqCst);
                     counted.1.fetch_sub(bytes, Ordering::SeqCst);
                     if let Some(lane) = &lane {
-                        let mut lane = ratelab_runtime::graph::lock(lane);
-                        lane.queued = lane.queued.saturating_sub(1);
+                        ratelab_runtime::graph::lock(lane).put_done();
                     }
                 }
             })
@@ -169,17 +210,20 @@ impl Outbox {
         }))
     }
 
-    /// The process reported (the launcher heard from it): what was put directly to it
-    /// before is taken as read, and the bound on direct puts starts again.
+    /// The process reported (the launcher heard from it): what it was handed before is taken
+    /// as read, and the bound on direct puts starts again ([`Lane::answered`]).
     pub(super) fn answered(&self) {
         if let Some(lane) = &self.direct {
-            ratelab_runtime::graph::lock(lane).unanswered_bytes = 0;
+            ratelab_runtime::graph::lock(lane).answered();
         }
     }
 
-    /// Hand in `payload` to put on `out` (from any thread, never waiting). A `sample` is
-    /// dropped when [`MAX_QUEUED_BYTES_PER_PROCESS`] of samples wait for this process
-    /// already, or [`MAX_QUEUED_BYTES`] for all (said once, on stderr).
+    /// Hand in `payload` to put on `out`, from any thread. Without a direct lane (the real
+    /// clock) it never waits; with one (the virtual clock) a small message is put here and
+    /// now ([`Lane::hand_in`]), which waits on the lane's lock and, were the link's queue
+    /// full, for room (see the module's header). A `sample` is dropped when
+    /// [`MAX_QUEUED_BYTES_PER_PROCESS`] of samples wait for this process already, or
+    /// [`MAX_QUEUED_BYTES`] for all (said once, on stderr).
     pub(super) fn put(&self, out: &Out, payload: ZBytes, sample: bool) {
         let len = if sample { charge(&payload) } else { 0 };
         if sample && !admit(&self.queued, len) {
@@ -200,7 +244,7 @@ impl Outbox {
             .as_ref()
             .map(|l| ratelab_runtime::graph::lock(l));
         if let Some(l) = lane.as_deref_mut() {
-            if l.take_direct(payload.len()) {
+            if l.hand_in(payload.len()) == Route::Direct {
                 // Under congestion control `Block` a put fails only when the session is
                 // closed: the launch is over.
                 let _ = out.put(payload).wait();
@@ -208,8 +252,6 @@ impl Outbox {
                 self.queued.1.fetch_sub(len, Ordering::SeqCst);
                 return;
             }
-            l.queued += 1;
-            l.unanswered_bytes = l.unanswered_bytes.saturating_add(payload.len());
         }
         let job = Job {
             out: out.clone(),
@@ -218,7 +260,7 @@ impl Outbox {
         };
         if self.tx.send(job).is_err() {
             if let Some(l) = lane.as_deref_mut() {
-                l.queued = l.queued.saturating_sub(1);
+                l.put_done();
             }
             // The thread is gone (it never ends before the outbox): nothing to count.
             self.queued.0.fetch_sub(len, Ordering::SeqCst);
@@ -346,25 +388,43 @@ mod tests {
     }
 
     /// A message skips the outbox's thread only when small, with nothing queued ahead of it
-    /// (the order), and within what its process may be sent unanswered.
+    /// (the order), and within what its process may be handed unanswered.
     #[test]
     fn the_direct_lane_keeps_order_and_its_bound() {
         let mut lane = Lane::default();
-        assert!(lane.take_direct(100));
-        assert!(!lane.take_direct(MAX_DIRECT_BYTES + 1), "too large");
-        lane.queued = 1;
-        assert!(!lane.take_direct(100), "something is queued ahead of it");
-        lane.queued = 0;
-        assert_eq!(lane.unanswered_bytes, 100, "only what it took counts");
-        while lane.take_direct(MAX_DIRECT_BYTES) {}
-        assert!(lane.unanswered_bytes <= MAX_DIRECT_UNANSWERED_BYTES);
-        assert!(lane.unanswered_bytes + MAX_DIRECT_BYTES > MAX_DIRECT_UNANSWERED_BYTES);
-        assert!(
-            !lane.take_direct(MAX_DIRECT_BYTES),
-            "over the bound until it answers"
-        );
-        lane.unanswered_bytes = 0; // what Outbox::answered does
-        assert!(lane.take_direct(MAX_DIRECT_BYTES));
+        assert_eq!(lane.hand_in(100), Route::Direct);
+        assert_eq!(lane.unanswered_bytes, 100 + PER_MESSAGE_BYTES);
+        // A large message is queued; a small one after it waits behind it, until the
+        // outbox's thread has put it.
+        assert_eq!(lane.hand_in(MAX_DIRECT_BYTES + 1), Route::Queue);
+        assert_eq!(lane.hand_in(10), Route::Queue, "behind the large one");
+        lane.put_done();
+        assert_eq!(lane.hand_in(10), Route::Queue, "one still queued");
+        lane.put_done();
+        assert_eq!(lane.hand_in(10), Route::Queue, "one still queued");
+        lane.put_done();
+        lane.put_done();
+        assert_eq!(lane.queued, 0);
+        assert_eq!(lane.hand_in(10), Route::Direct, "nothing ahead of it");
+        // Queued messages count against the bound too.
+        lane.answered();
+        for _ in 0..MAX_DIRECT_UNANSWERED_BYTES / (MAX_DIRECT_BYTES + 1) {
+            lane.hand_in(MAX_DIRECT_BYTES + 1);
+            lane.put_done();
+        }
+        assert_eq!(lane.hand_in(10), Route::Queue, "over the bound: {lane:?}");
+        lane.put_done();
+        lane.answered();
+        assert_eq!(lane.hand_in(10), Route::Direct, "answered");
+        // At the bound exactly, direct; one byte past it, queued.
+        lane.answered();
+        let exact = MAX_DIRECT_UNANSWERED_BYTES - PER_MESSAGE_BYTES;
+        lane.unanswered_bytes = exact - MAX_DIRECT_BYTES;
+        assert_eq!(lane.hand_in(MAX_DIRECT_BYTES), Route::Direct);
+        assert_eq!(lane.unanswered_bytes, MAX_DIRECT_UNANSWERED_BYTES);
+        lane.answered();
+        lane.unanswered_bytes = exact - MAX_DIRECT_BYTES + 1;
+        assert_eq!(lane.hand_in(MAX_DIRECT_BYTES), Route::Queue);
     }
 
     /// Only an outbox under the virtual clock has a direct lane, and a report from its

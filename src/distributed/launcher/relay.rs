@@ -12,9 +12,11 @@
 //!
 //! So an instant in which P processes each run an event costs P messages in and P out,
 //! where each process sending its reports to every other cost P (P − 1). The messages go
-//! out through the launcher's outbox ([`super::outbox`]: Zenoh's one thread must never wait
-//! to send), after any sample handed in before them; the callback tells the launcher's
-//! main thread when the horizon must move on.
+//! out through the launcher's outbox ([`super::outbox`]: from its own thread, as Zenoh's
+//! one thread must not wait to send, or when small and nothing is queued, at once), after
+//! any sample handed in before them; a process's report also tells its outbox that it
+//! reads ([`Outbox::answered`]). The callback tells the launcher's main thread when the
+//! horizon must move on.
 
 use super::outbox::{Out, Outbox, Outboxes};
 use crate::lockstep::{check_tick_report, subscribe_reports, TickInbox, HORIZON_PERIODS};
@@ -55,6 +57,8 @@ pub(super) struct Relay {
     outs: Vec<(Out, Arc<Outbox>)>,
     /// Per node of the graph, its process's place in `outs`.
     process_of: Vec<usize>,
+    /// The processes' names, in `outs`'s order.
+    names: Vec<String>,
     /// The run as followed so far (`None` before it starts: what comes then is not a
     /// report).
     course: Mutex<Option<Course>>,
@@ -315,6 +319,7 @@ impl Relay {
             spec: spec.clone(),
             outs,
             process_of,
+            names: names.to_vec(),
             course: Mutex::new(None),
             nudge,
         });
@@ -360,6 +365,15 @@ impl Relay {
     /// Take in a process's message of reports (on Zenoh's receive thread), follow the run
     /// as far as they let it go, and hand the next event's process what it waits for.
     fn take(&self, ms: Vec<Ticked>) {
+        // Its process reported (the message's key names it, and only it may put there,
+        // `crate::access`; every report in it is that process's, `decode_report`): it
+        // reads what it is handed.
+        if let Some(p) = (ms.first()).and_then(|m| self.names.iter().position(|n| *n == m.process))
+        {
+            if let Some((_, outbox)) = self.outs.get(p) {
+                outbox.answered();
+            }
+        }
         let (due, wake) = {
             let mut guard = lock(&self.course);
             let Some(c) = guard.as_mut() else { return };
@@ -367,12 +381,6 @@ impl Relay {
                 return;
             }
             for m in ms {
-                // Its process reported: it reads what it is sent.
-                if let Some((_, outbox)) =
-                    (self.process_of.get(m.node)).and_then(|&p| self.outs.get(p))
-                {
-                    outbox.answered();
-                }
                 if let Err(e) = c.inbox.accept(m, &self.spec) {
                     c.fail_next(&self.spec, e.to_string());
                     break;
