@@ -30,8 +30,8 @@
 //! made it due (its outbox's direct lane; the outbox's own thread when something waits
 //! there: Zenoh's one thread must never wait to send, `launcher/outbox.rs`). The launcher
 //! is also the time authority: it lets the processes run up to a horizon
-//! ([`wire::ToProcess::Horizon`]), [`HORIZON_PERIODS`] periods of the fastest node ahead of
-//! the events it has seen reported, and ends the run early by not moving it on (a Ctrl-C).
+//! ([`wire::ToProcess::Horizon`]), [`horizon_periods`] periods of the fastest node ahead of
+//! the events it has seen reported (8 when a lab paces the run; up to 64 otherwise), and ends the run early by not moving it on (a Ctrl-C).
 //! Following the reports, it knows the end (a stop, a failure, a process gone) and the
 //! last seq of every topic before the processes report.
 //!
@@ -51,12 +51,40 @@ use std::collections::BTreeMap;
 use zenoh::Wait;
 
 /// How far ahead of the ticks it has seen reported the launcher lets the processes run, in
-/// periods of the graph's fastest node (the horizon is moved on when half of it is used).
+/// periods of the graph's fastest node (the horizon is moved on when half of it is used),
+/// when it paces the run (a lab follows it), and at least ([`horizon_periods`]).
 pub const HORIZON_PERIODS: u64 = 8;
+
+/// How far ahead the horizon reaches at most, in periods of the fastest node, when nothing
+/// paces the run: each move of the horizon wakes the launcher's main thread and sends every
+/// process a message, which at 8 periods cost an instant of the chapter's launch about a
+/// tenth of its time (BENCHMARKS.md, issue 76 item 4).
+pub const HORIZON_PERIODS_UNPACED: u64 = 64;
+
+/// The periods of the fastest node the horizon reaches ahead for the run `order` follows:
+/// [`HORIZON_PERIODS`] when `paced`; else the most up to [`HORIZON_PERIODS_UNPACED`] (halving
+/// from it) whose ticks, two events each, fill at most a quarter of [`MAX_AHEAD`], so that
+/// what a process or the launcher keeps ahead of its turn stays far within it whatever the
+/// graph's size.
+pub fn horizon_periods(order: &ratelab_runtime::runcore::Follower, paced: bool) -> u64 {
+    if paced {
+        return HORIZON_PERIODS;
+    }
+    let shortest = order.shortest_period();
+    let mut periods = HORIZON_PERIODS_UNPACED;
+    while periods > HORIZON_PERIODS {
+        let span = Nanos(shortest.0.saturating_mul(periods));
+        if order.ticks_within(span).saturating_mul(2) <= (MAX_AHEAD / 4) as u64 {
+            break;
+        }
+        periods /= 2;
+    }
+    periods
+}
 
 /// The most reports of other processes' ticks one process (or the launcher) keeps ahead of
 /// their turn (each process runs at most to the horizon, so a run holds at most the other
-/// processes' ticks of one horizon: [`HORIZON_PERIODS`] periods of the fastest node).
+/// processes' ticks of one horizon, [`horizon_periods`]).
 pub const MAX_AHEAD: usize = 65_536;
 
 /// The other processes' tick reports, handed out in the run's order.
@@ -252,6 +280,42 @@ pub(crate) mod tests {
             failed: None,
             publish: false,
             compute_ns: 0,
+        }
+    }
+
+    /// The horizon reaches 64 periods ahead for the chapter's graph, 8 when paced, and
+    /// fewer for a graph whose ticks in 64 periods would fill more than a quarter of what a
+    /// process keeps ahead ([`MAX_AHEAD`]), never fewer than 8.
+    #[test]
+    fn the_horizon_reaches_as_far_as_the_graph_s_size_allows() {
+        use ratelab_runtime::config::RunConfig;
+        use ratelab_runtime::graph::synthetic::graph_toml;
+        use ratelab_runtime::runcore::Follower;
+        let periods = |toml: &str, paced: bool| {
+            let cfg = RunConfig {
+                graph: GraphSpec::parse(toml, "t").expect("a graph"),
+                ..RunConfig::default()
+            };
+            let order = Follower::new(&cfg).expect("its rates");
+            let p = horizon_periods(&order, paced);
+            let span = Nanos(order.shortest_period().0 * p);
+            (p, order.ticks_within(span))
+        };
+        assert_eq!(
+            periods(DEFAULT_GRAPH_TOML, false).0,
+            HORIZON_PERIODS_UNPACED
+        );
+        assert_eq!(periods(DEFAULT_GRAPH_TOML, true).0, HORIZON_PERIODS);
+        // The chapter's three nodes at 50 Hz: 65 ticks each in 64 periods.
+        assert_eq!(periods(DEFAULT_GRAPH_TOML, false).1, 3 * 65);
+        for nodes in [1_000, 10_000] {
+            let (p, ticks) = periods(&graph_toml(nodes, 2), false);
+            assert!(p < HORIZON_PERIODS_UNPACED, "{nodes} nodes: {p}");
+            assert!(p >= HORIZON_PERIODS, "{nodes} nodes: {p}");
+            assert!(
+                p == HORIZON_PERIODS || ticks * 2 <= (MAX_AHEAD / 4) as u64,
+                "{nodes} nodes: {p} periods, {ticks} ticks"
+            );
         }
     }
 

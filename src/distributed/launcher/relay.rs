@@ -19,7 +19,7 @@
 //! horizon must move on.
 
 use super::outbox::{Out, Outbox, Outboxes};
-use crate::lockstep::{check_tick_report, subscribe_reports, TickInbox, HORIZON_PERIODS};
+use crate::lockstep::{check_tick_report, horizon_periods, subscribe_reports, TickInbox};
 use crate::wire::{self, Ticked, MAX_RELAYED};
 use crate::{DistError, Keys};
 use crossbeam_channel::{Receiver, Sender};
@@ -334,13 +334,15 @@ impl Relay {
 
     /// Begin following the run of `cfg` (every process ready, none run yet: anything that
     /// came before is not a report): its first event drawn. Returns how far the horizon
-    /// reaches ahead, ns ([`HORIZON_PERIODS`] periods of the fastest node).
+    /// reaches ahead, ns ([`horizon_periods`] periods of the fastest node; `paced`: a lab
+    /// follows the run at a pace).
     ///
     /// # Errors
     /// [`DistError::Usage`] for a node rate a graph file should not have let through.
-    pub(super) fn begin(&self, cfg: &RunConfig) -> Result<u64, DistError> {
+    pub(super) fn begin(&self, cfg: &RunConfig, paced: bool) -> Result<u64, DistError> {
         let order = Follower::new(cfg).map_err(|e| DistError::Usage(e.to_string()))?;
-        let lookahead = order.shortest_period().0.saturating_mul(HORIZON_PERIODS);
+        let periods = horizon_periods(&order, paced);
+        let lookahead = order.shortest_period().0.saturating_mul(periods);
         let mut course = Course {
             order,
             duration: cfg.duration,

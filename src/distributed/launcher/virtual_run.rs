@@ -38,7 +38,7 @@ impl Launch<'_> {
     ) -> Result<(RunEnd, Option<LockstepCost>), DistError> {
         let (spec, names, link) = (self.spec, &self.names, &self.link);
         let relay = &relaying.relay;
-        let lookahead = relay.begin(self.cfg)?;
+        let lookahead = relay.begin(self.cfg, self.opts.pace.is_some())?;
         let end = self.follow(relay, &relaying.nudged, gone_now, lookahead)?;
         let tally = relay.tally();
         // Paced, the wall time is the pace's, not the lockstep's cost.
@@ -79,7 +79,7 @@ impl Launch<'_> {
     }
 
     /// Follow the run to its end as the relay takes the reports: move the horizon on
-    /// [`crate::lockstep::HORIZON_PERIODS`] periods of the fastest node (`lookahead`, ns)
+    /// [`crate::lockstep::horizon_periods`] periods of the fastest node (`lookahead`, ns)
     /// ahead of the next event (paced: of the wall time, too), and end the run when the
     /// relay does, when a process of the graph is gone, when the next
     /// event's process does not answer within twice [`REPLY_TIMEOUT`], or on Ctrl-C (at

@@ -81,4 +81,13 @@ impl Follower {
             .min()
             .unwrap_or(Nanos(1))
     }
+
+    /// The most ticks the graph's nodes start within any `span` of run time: each node's
+    /// span over its period, rounded up, plus one (a tick at each end).
+    pub fn ticks_within(&self, span: Nanos) -> u64 {
+        self.nodes
+            .iter()
+            .map(|n| span.0 / n.rate().period().0.max(1) + 1)
+            .fold(0u64, u64::saturating_add)
+    }
 }
