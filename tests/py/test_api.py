@@ -855,3 +855,14 @@ def test_errors_name_python_parameters_never_flags(settings, name):
     line = str(e.value)
     assert name in line and not FLAG.search(line), line
     assert isinstance(e.value, ratelab.Error)
+
+
+def test_dir_lists_the_public_api_not_the_imports():
+    """`dir(ratelab)` (tab completion) offers the API and the message classes, not the
+    modules and typing names the package imports (a learner's trial saw `csv`, `Any`)."""
+    names = dir(ratelab)
+    for public in ratelab.__all__ + ["State", "Force", "__version__"]:
+        assert public in names, public
+        assert hasattr(ratelab, public), public
+    for private in ["csv", "json", "os", "functools", "Any", "Callable", "dataclass"]:
+        assert private not in names, private

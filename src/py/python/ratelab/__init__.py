@@ -73,6 +73,12 @@ def __getattr__(name: str) -> Any:
 
 __version__: str = _native.__version__
 
+
+def __dir__() -> List[str]:
+    # What `dir(ratelab)` and tab completion offer: the public API and the message classes,
+    # not the modules and typing names this file imports.
+    return sorted(set(__all__) | {"__version__", "State", "Position", "Force", "Time"})
+
 __all__ = [
     "Run",
     "Table",
