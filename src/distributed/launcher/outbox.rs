@@ -210,6 +210,11 @@ impl Outbox {
         }))
     }
 
+    /// The process it passes messages on to.
+    pub(super) fn process(&self) -> &str {
+        &self.process
+    }
+
     /// The process reported (the launcher heard from it): what it was handed before is taken
     /// as read, and the bound on direct puts starts again ([`Lane::answered`]).
     pub(super) fn answered(&self) {

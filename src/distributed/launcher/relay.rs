@@ -57,8 +57,6 @@ pub(super) struct Relay {
     outs: Vec<(Out, Arc<Outbox>)>,
     /// Per node of the graph, its process's place in `outs`.
     process_of: Vec<usize>,
-    /// The processes' names, in `outs`'s order.
-    names: Vec<String>,
     /// The run as followed so far (`None` before it starts: what comes then is not a
     /// report).
     course: Mutex<Option<Course>>,
@@ -319,7 +317,6 @@ impl Relay {
             spec: spec.clone(),
             outs,
             process_of,
-            names: names.to_vec(),
             course: Mutex::new(None),
             nudge,
         });
@@ -370,9 +367,8 @@ impl Relay {
         // Its process reported (the message's key names it, and only it may put there,
         // `crate::access`; every report in it is that process's, `decode_report`): it
         // reads what it is handed.
-        if let Some(p) = (ms.first()).and_then(|m| self.names.iter().position(|n| *n == m.process))
-        {
-            if let Some((_, outbox)) = self.outs.get(p) {
+        if let Some(m) = ms.first() {
+            if let Some((_, outbox)) = self.outs.iter().find(|(_, o)| o.process() == m.process) {
                 outbox.answered();
             }
         }
