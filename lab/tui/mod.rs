@@ -318,6 +318,20 @@ fn hung_up(e: &anyhow::Error) -> bool {
     })
 }
 
+/// What a widget drew into `buf`, as text: its rows, one a line (the symbols of its cells).
+#[cfg(test)]
+pub(crate) fn buffer_text(buf: &ratatui::buffer::Buffer) -> String {
+    let area = buf.area;
+    (area.top()..area.bottom())
+        .map(|y| {
+            (area.left()..area.right())
+                .map(|x| buf[(x, y)].symbol())
+                .collect::<String>()
+        })
+        .collect::<Vec<_>>()
+        .join("\n")
+}
+
 #[cfg(test)]
 mod tests {
     use super::app::App;

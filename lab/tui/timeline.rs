@@ -384,14 +384,7 @@ mod tests {
         let v = t.view(&g, &plan, &[50.0; 3], now);
         let mut buf = Buffer::empty(Rect::new(0, 0, 60, 8));
         render(&v, true, buf.area, &mut buf);
-        let text: String = (0..8)
-            .map(|y| {
-                (0..60)
-                    .map(|x| buf[(x, y)].symbol().to_string())
-                    .collect::<String>()
-                    + "\n"
-            })
-            .collect();
+        let text = crate::tui::buffer_text(&buf);
         // At 60 columns the title is the short one, whole: every node's letter and "red".
         assert!(
             text.contains("┌ timeline │ s sensor · p policy · a actuator │ red: late ─┐"),
@@ -404,10 +397,7 @@ mod tests {
         let empty = Timeline::default().view(&g, &plan, &[50.0; 3], now);
         let mut buf = Buffer::empty(Rect::new(0, 0, 60, 8));
         render(&empty, true, buf.area, &mut buf);
-        let text: String = (0..8)
-            .flat_map(|y| (0..60).map(move |x| (x, y)))
-            .map(|p| buf[p].symbol().to_string())
-            .collect();
+        let text = crate::tui::buffer_text(&buf);
         assert!(text.contains("compute_ms"), "{text}");
     }
 }

@@ -1045,14 +1045,7 @@ mod tests {
         let drawn = |n: &NodeView| {
             let mut buf = Buffer::empty(area);
             render_node(n, area, &mut buf, true);
-            (0..area.height)
-                .map(|y| {
-                    (0..area.width)
-                        .map(|x| buf[(x, y)].symbol())
-                        .collect::<String>()
-                })
-                .collect::<Vec<_>>()
-                .join("\n")
+            crate::tui::buffer_text(&buf)
         };
         let (before, during) = (drawn(&ticking), drawn(&stalled));
         assert!(before.contains("tick p50 11 µs"), "{before}");
