@@ -15,6 +15,11 @@ and the CPU time of every process of the run (getrusage of the children, start-u
   one       the camera graph and the chapter's in one process (no --processes): what
             crossing costs ratelab in CPU is (camera − one) − (chapter − chapter in one),
             per frame, against bare Zenoh's CPU per frame.
+            The vision node ticks half a period after the camera (--vision-phase-ms, its
+            `start_ms`), as the chapter's phase offsets teach a consumer to: ticking with the
+            camera, its scan of the last frame (about 1 ms at 4 MiB) ran on this 2-core host
+            while the next one crossed, and was counted in the wire's latency (bare Zenoh's
+            subscriber does no work). --aligned-too measures that case as well.
   dora      dora-rs 1.1 (`dora run benches/dora/dataflow.yml`, two Python nodes; optional:
             --dora DIR names a folder with its `dora` and a Python that imports `dora`,
             e.g. a venv with `pip install dora-rs-cli==1.1.0 dora-rs==1.1.0 pyarrow numpy`).
@@ -22,7 +27,7 @@ and the CPU time of every process of the run (getrusage of the children, start-u
 ratelab and bare run with Zenoh's shared memory on and off (RATELAB_SHARED_MEMORY), each
 configuration ROUNDS times, alternated. Usage:
   scripts/bench-image.py [--ratelab BIN] [--floor BIN] [--dora DIR] [--duration S] [--rounds N]
-                         [--sizes 1,4] [--no-off]
+                         [--sizes 1,4] [--no-off] [--vision-phase-ms MS] [--aligned-too]
 """
 
 import argparse
@@ -54,13 +59,18 @@ def run(cmd, env=None, cwd=ROOT):
     return p.stdout + p.stderr, children_cpu_s() - before
 
 
-def camera_graph(mib, folder):
-    """benches/graphs/camera-beside.toml with frames of `mib` MiB (a square mono8 frame)."""
+def camera_graph(mib, folder, vision_phase_ms):
+    """benches/graphs/camera-beside.toml with frames of `mib` MiB (a square mono8 frame), its
+    vision node's ticks `vision_phase_ms` after the camera's (its `start_ms`; 0: with them)."""
     side = int(round(1024 * mib ** 0.5))
     text = open(os.path.join(ROOT, "benches", "graphs", "camera-beside.toml")).read()
     text = text.replace("width_px = 1024, height_px = 1024",
                         f"width_px = {side}, height_px = {side}")
-    path = os.path.join(folder, f"camera-{mib}mib.toml")
+    vision = 'name = "vision"\nkind = "image_estimator"\nrate_hz = 30\n'
+    assert vision in text, "camera-beside.toml's vision node changed"
+    if vision_phase_ms:
+        text = text.replace(vision, f"{vision}start_ms = {vision_phase_ms}\n")
+    path = os.path.join(folder, f"camera-{mib}mib-phase{vision_phase_ms}.toml")
     with open(path, "w") as f:
         f.write(text)
     return path
@@ -118,12 +128,17 @@ def main():
     a.add_argument("--rounds", type=int, default=3)
     a.add_argument("--sizes", default="1,4", help="frame sizes, MiB, comma-separated")
     a.add_argument("--no-off", action="store_true", help="shared memory on only")
+    a.add_argument("--vision-phase-ms", type=float, default=16.5,
+                   help="the vision node's ticks this long after the camera's (0: with them)")
+    a.add_argument("--aligned-too", action="store_true",
+                   help="also ratelab with the vision node ticking with the camera")
     o = a.parse_args()
     sizes = [int(m) for m in o.sizes.split(",")]
     shms = ("on",) if o.no_off else ("on", "off")
     rows = {}
     tmp = tempfile.mkdtemp(prefix="bench-image-")
-    graphs = {mib: camera_graph(mib, tmp) for mib in sizes}
+    graphs = {mib: camera_graph(mib, tmp, o.vision_phase_ms) for mib in sizes}
+    aligned = {mib: camera_graph(mib, tmp, 0) for mib in sizes}
 
     def add(key, r, label):
         rows.setdefault(key, []).append(r)
@@ -136,6 +151,10 @@ def main():
                     f"ratelab {mib} MiB shm {shm}")
                 add((f"bare Zenoh, {mib} MiB", shm), bare(o.floor, o.duration, shm, mib),
                     f"bare {mib} MiB shm {shm}")
+                if o.aligned_too and o.vision_phase_ms:
+                    add((f"ratelab, {mib} MiB, vision ticking with the camera", shm),
+                        ratelab(o.ratelab, o.duration, shm, aligned[mib]),
+                        f"ratelab {mib} MiB shm {shm}, vision aligned")
             add((f"ratelab, {mib} MiB, one process", "-"),
                 chapter(o.ratelab, o.duration, graphs[mib], processes=False),
                 f"ratelab {mib} MiB in one process")
