@@ -327,7 +327,7 @@ impl Keys {
     /// Where a topic's publisher's process puts its samples for the launcher, which passes
     /// each on to the topic's key ([`Keys::topic`]) through its outbox (`launcher/outbox.rs`:
     /// from a thread of its own, as Zenoh's one thread must not wait to send, or a small
-    /// one under the virtual clock at once): `ratelab/<graph>/@via/obs`.
+    /// one at once): `ratelab/<graph>/@via/obs`.
     pub fn via(&self, name: &str) -> String {
         format!("{}/@via/{}", self.prefix, name.trim_matches('/'))
     }
@@ -698,7 +698,7 @@ fn open_as(
         // must find room in a link's queue, or that thread would wait for room only it can
         // make: Zenoh's most batches a priority (16 of 64 KiB, allocated as used) rather
         // than 2. Samples and reports go out through the launcher's outbox (its own thread,
-        // or a small one under the virtual clock at once: `launcher/outbox.rs`).
+        // or a small one at once: `launcher/outbox.rs`).
         let sixteen = r#"{"control": 16, "real_time": 16, "interactive_high": 16,
             "interactive_low": 16, "data_high": 16, "data": 16, "data_low": 16,
             "background": 16}"#;

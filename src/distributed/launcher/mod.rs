@@ -477,6 +477,8 @@ pub fn launch(
     let (session, endpoint) = listen(spec, opts)?;
     let keys = Keys::new(&spec.name);
     let (_up_sub, up_rx) = hear_processes(&session, &keys)?;
+    // What the launcher passes on to each process ([`outbox`]).
+    let outboxes = outbox::Outboxes::start(&processes)?;
     let me = Launch {
         cfg,
         opts,
@@ -498,6 +500,7 @@ pub fn launch(
         last_join_line: RefCell::new(String::new()),
         refusals: RefCell::new(refusals),
         relays: processes::Relays::default(),
+        outboxes: &outboxes,
     };
     let endpoint = me.endpoint.clone();
     me.say(&format!("listening on {endpoint}"));
@@ -511,12 +514,11 @@ pub fn launch(
         let _ = tx.send(endpoint.clone());
     }
     let (_live_sub, gone_rx, gone_now) = watch_gone(&session, &keys)?;
-    // The crossing topics' samples, passed on from the outbox's thread ([`outbox`]; dropped
+    // The crossing topics' samples, passed on by each process's outbox ([`outbox`]; dropped
     // when it is full under the real clock only); under the virtual clock every process's
     // tick reports too, to follow the run and hand each process the others' in its turn
     // ([`relay`]). Heard before any process starts.
     let real = cfg.clock == ClockKind::Real;
-    let outboxes = outbox::Outboxes::start(&processes, !real)?;
     let _forwarded = outbox::forward_topics(&session, &keys, spec, &outboxes, real)?;
     let relaying = (!real)
         .then(|| relay::Relay::start(&session, &keys, spec, (&processes[..], &outboxes)))
@@ -750,6 +752,9 @@ struct Launch<'a> {
     /// The threads passing the started processes' stderr on ([`processes`]): waited for
     /// (briefly) when the launch ends, so a process's last words are not lost.
     relays: processes::Relays,
+    /// What the launcher passes on to each process ([`outbox`]): under the real clock each
+    /// process's live figures tell its outbox it was heard from ([`outbox::Outbox::answered`]).
+    outboxes: &'a outbox::Outboxes,
 }
 
 impl Launch<'_> {

@@ -1,6 +1,6 @@
 //! What the launcher passes on to the processes from Zenoh's thread (the crossing topics'
-//! samples and the lockstep's relayed reports): sent from a thread of its own, or under the
-//! virtual clock, for a small message with nothing queued ahead of it, put there and then.
+//! samples and the lockstep's relayed reports): sent from a thread of its own, or, for a
+//! small message with nothing queued ahead of it, put there and then.
 //!
 //! The launcher's session is the router of the launch's star, and Zenoh runs it on one
 //! thread ([`crate::ZENOH_RUNTIME`]): the thread that receives a message is the one that
@@ -17,16 +17,20 @@
 //!
 //! With shared memory the sample stays a reference to the publisher's segment all the way.
 //!
-//! Under the virtual clock a small message ([`MAX_DIRECT_BYTES`]) is put straight from the
-//! thread that hands it in (Zenoh's, or the launcher's main thread at the run's end) when
-//! nothing waits in its process's outbox and the process has been handed under
-//! [`MAX_DIRECT_UNANSWERED_BYTES`] in all (put directly or queued) since it last reported
-//! ([`Outbox::answered`]): the hand-off to the outbox's thread cost an instant of the
-//! chapter's launch about a third of its time (BENCHMARKS.md, issue 76 item 4). A link's
-//! queue at the router (16 batches of 64 KiB a priority, [`crate::open_router`]) does not
-//! fill with so few bytes to a process that keeps reading, and a process in the lockstep
-//! reports in every turn it takes. Past the bound, or with anything queued (whose order a
-//! message must keep), the message takes the outbox.
+//! A small message ([`MAX_DIRECT_BYTES`] on the wire: a sample in shared memory is a
+//! reference to its buffer there, [`wire_bytes`]) is put straight from the thread that hands
+//! it in (Zenoh's, or the launcher's main thread at the run's end) when nothing waits in its
+//! process's outbox and the process has been handed under [`MAX_DIRECT_UNANSWERED_BYTES`] in
+//! all (put directly or queued) since the launcher last heard from it
+//! ([`Outbox::answered`]: under the virtual clock each of its reports, in every turn it
+//! takes; under the real clock its live figures, every [`crate::process::STATS_PERIOD`]).
+//! The hand-off to the outbox's thread cost an instant of the chapter's launch about a third
+//! of its time, and a frame in shared memory the same hop again (BENCHMARKS.md, issue 76
+//! items 1 and 4). A link's queue at the router (16 batches of 64 KiB a priority,
+//! [`crate::open_router`]) does not fill with so few bytes to a process that keeps reading.
+//! Past the bound, or with anything queued (whose order a message must keep), the message
+//! takes the outbox: a process that stopped (frozen, gone) is soon handed everything there,
+//! where under the real clock its samples are dropped once its outbox is full.
 //!
 //! What the bound does not cover, and what then happens: a sample put on a topic's key also
 //! goes to any watcher subscribed to it (an observer may read the topics, [`crate::access`]),
@@ -35,9 +39,7 @@
 //! router stalled), Zenoh's thread would wait its 5 s for room, then close that link: the
 //! whole star waits those 5 s, where before only the outbox's thread (and, under the
 //! virtual clock, the lockstep with it) did. The run goes on, or ends with the processes
-//! behind that link gone: a stalled or failed run, never a wrong one. The real clock, whose
-//! samples may be dropped and whose processes do not wait for each other, keeps every
-//! message on the outbox's thread.
+//! behind that link gone: a stalled or failed run, never a wrong one.
 //!
 //! There is an outbox, with its thread, per process the launch passes messages on to
 //! ([`Outboxes`]): a process that stops reading (frozen, or slower than its topics) holds
@@ -69,8 +71,9 @@ pub const MAX_QUEUED_BYTES_PER_PROCESS: usize = 64 * 1024 * 1024;
 /// Zenoh's receive batches (64 KiB) however small it is.
 pub const MIN_CHARGE_BYTES: usize = 64 * 1024;
 
-/// The largest message put straight from Zenoh's thread (under the virtual clock), bytes: a
-/// report or a small sample, never more than a sixteenth of one of Zenoh's batches.
+/// The largest message put straight from Zenoh's thread, bytes on the wire ([`wire_bytes`]):
+/// a report, a small sample or a reference to a sample in shared memory, never more than a
+/// sixteenth of one of Zenoh's batches.
 pub const MAX_DIRECT_BYTES: usize = 4 * 1024;
 
 /// The most bytes put straight from Zenoh's thread to one process since it last reported,
@@ -78,7 +81,23 @@ pub const MAX_DIRECT_BYTES: usize = 4 * 1024;
 /// the process take its outbox until it reports again.
 pub const MAX_DIRECT_UNANSWERED_BYTES: usize = 256 * 1024;
 
-/// What `payload` is charged against [`MAX_QUEUED_BYTES`].
+/// What a reference to a buffer in shared memory takes on the wire, bytes (Zenoh's
+/// `ShmBufInfo`: a segment and chunk id, an offset, a length, a generation; about 40).
+pub const SHM_REFERENCE_BYTES: usize = 64;
+const _: () = assert!(SHM_REFERENCE_BYTES <= MAX_DIRECT_BYTES);
+
+/// What `payload` takes on the wire, bytes: [`SHM_REFERENCE_BYTES`] for one buffer in shared
+/// memory (its bytes stay in the publisher's pool), else its length.
+fn wire_bytes(payload: &ZBytes) -> usize {
+    if payload.as_shm().is_some() {
+        SHM_REFERENCE_BYTES
+    } else {
+        payload.len()
+    }
+}
+
+/// What `payload` is charged against [`MAX_QUEUED_BYTES`] (in shared memory or not: a
+/// queued sample holds its buffer in its publisher's pool).
 fn charge(payload: &ZBytes) -> usize {
     payload.len().max(MIN_CHARGE_BYTES)
 }
@@ -104,9 +123,8 @@ pub(super) struct Outbox {
     queued: (Arc<AtomicUsize>, Arc<AtomicUsize>),
     /// Whether a dropped sample was said (once).
     said_full: AtomicBool,
-    /// Whether small messages may be put straight from the caller's thread (the virtual
-    /// clock, where nothing is dropped), and what decides it ([`Lane`]).
-    direct: Option<Arc<std::sync::Mutex<Lane>>>,
+    /// What decides whether a message may be put straight from the caller's thread.
+    lane: Arc<std::sync::Mutex<Lane>>,
 }
 
 /// What decides whether a message may skip the outbox's thread: it may when nothing is
@@ -168,22 +186,16 @@ impl Lane {
 }
 
 impl Outbox {
-    /// An outbox for `process` and its thread; `all` counts the bytes every outbox holds;
-    /// `direct`: small messages may skip the thread (the virtual clock, see the module's
-    /// header).
+    /// An outbox for `process` and its thread; `all` counts the bytes every outbox holds.
     ///
     /// # Errors
     /// [`DistError::Usage`] when the thread cannot start.
-    fn start(
-        process: &str,
-        all: &Arc<AtomicUsize>,
-        direct: bool,
-    ) -> Result<Arc<Outbox>, DistError> {
+    fn start(process: &str, all: &Arc<AtomicUsize>) -> Result<Arc<Outbox>, DistError> {
         let (tx, rx) = crossbeam_channel::unbounded::<Job>();
         let queued = (Arc::new(AtomicUsize::new(0)), all.clone());
         let counted = queued.clone();
-        let direct = direct.then(|| Arc::new(std::sync::Mutex::new(Lane::default())));
-        let lane = direct.clone();
+        let lane = Arc::new(std::sync::Mutex::new(Lane::default()));
+        let done = lane.clone();
         // Detached: it ends once the outbox is dropped (its channel closed).
         let _detached = std::thread::Builder::new()
             .name(format!("outbox {process}"))
@@ -195,9 +207,7 @@ impl Outbox {
                     let _ = job.out.put(job.payload).wait();
                     counted.0.fetch_sub(bytes, Ordering::SeqCst);
                     counted.1.fetch_sub(bytes, Ordering::SeqCst);
-                    if let Some(lane) = &lane {
-                        ratelab_runtime::graph::lock(lane).put_done();
-                    }
+                    ratelab_runtime::graph::lock(&done).put_done();
                 }
             })
             .map_err(|e| DistError::Usage(format!("cannot start the launcher's outbox: {e}")))?;
@@ -206,7 +216,7 @@ impl Outbox {
             tx,
             queued,
             said_full: AtomicBool::new(false),
-            direct,
+            lane,
         }))
     }
 
@@ -215,18 +225,17 @@ impl Outbox {
         &self.process
     }
 
-    /// The process reported (the launcher heard from it): what it was handed before is taken
-    /// as read, and the bound on direct puts starts again ([`Lane::answered`]).
+    /// The launcher heard from the process (a report of its turn under the virtual clock,
+    /// its live figures under the real clock): what it was handed before is taken as read,
+    /// and the bound on direct puts starts again ([`Lane::answered`]).
     pub(super) fn answered(&self) {
-        if let Some(lane) = &self.direct {
-            ratelab_runtime::graph::lock(lane).answered();
-        }
+        ratelab_runtime::graph::lock(&self.lane).answered();
     }
 
-    /// Hand in `payload` to put on `out`, from any thread. Without a direct lane (the real
-    /// clock) it never waits; with one (the virtual clock) a small message is put here and
+    /// Hand in `payload` to put on `out`, from any thread. A small message is put here and
     /// now ([`Lane::hand_in`]), which waits on the lane's lock and, were the link's queue
-    /// full, for room (see the module's header). A `sample` is dropped when
+    /// full, for room (see the module's header); any other is queued for the outbox's
+    /// thread, without waiting. A `sample` is dropped when
     /// [`MAX_QUEUED_BYTES_PER_PROCESS`] of samples wait for this process already, or
     /// [`MAX_QUEUED_BYTES`] for all (said once, on stderr).
     pub(super) fn put(&self, out: &Out, payload: ZBytes, sample: bool) {
@@ -244,19 +253,14 @@ impl Outbox {
         }
         // Under the lane's lock, so that what another thread hands in meanwhile keeps the
         // order (a direct put cannot wait for room: see the module's header).
-        let mut lane = self
-            .direct
-            .as_ref()
-            .map(|l| ratelab_runtime::graph::lock(l));
-        if let Some(l) = lane.as_deref_mut() {
-            if l.hand_in(payload.len()) == Route::Direct {
-                // Under congestion control `Block` a put fails only when the session is
-                // closed: the launch is over.
-                let _ = out.put(payload).wait();
-                self.queued.0.fetch_sub(len, Ordering::SeqCst);
-                self.queued.1.fetch_sub(len, Ordering::SeqCst);
-                return;
-            }
+        let mut lane = ratelab_runtime::graph::lock(&self.lane);
+        if lane.hand_in(wire_bytes(&payload)) == Route::Direct {
+            // Under congestion control `Block` a put fails only when the session is closed:
+            // the launch is over.
+            let _ = out.put(payload).wait();
+            self.queued.0.fetch_sub(len, Ordering::SeqCst);
+            self.queued.1.fetch_sub(len, Ordering::SeqCst);
+            return;
         }
         let job = Job {
             out: out.clone(),
@@ -264,9 +268,7 @@ impl Outbox {
             sample,
         };
         if self.tx.send(job).is_err() {
-            if let Some(l) = lane.as_deref_mut() {
-                l.put_done();
-            }
+            lane.put_done();
             // The thread is gone (it never ends before the outbox): nothing to count.
             self.queued.0.fetch_sub(len, Ordering::SeqCst);
             self.queued.1.fetch_sub(len, Ordering::SeqCst);
@@ -292,16 +294,15 @@ fn admit(queued: &(Arc<AtomicUsize>, Arc<AtomicUsize>), len: usize) -> bool {
 pub(super) struct Outboxes(BTreeMap<String, Arc<Outbox>>);
 
 impl Outboxes {
-    /// An outbox for each of `processes`; `direct`: small messages may skip its thread
-    /// (the virtual clock: see the module's header).
+    /// An outbox for each of `processes`.
     ///
     /// # Errors
     /// [`DistError::Usage`] when a thread cannot start.
-    pub(super) fn start(processes: &[String], direct: bool) -> Result<Outboxes, DistError> {
+    pub(super) fn start(processes: &[String]) -> Result<Outboxes, DistError> {
         let all = Arc::new(AtomicUsize::new(0));
         processes
             .iter()
-            .map(|p| Ok((p.clone(), Outbox::start(p, &all, direct)?)))
+            .map(|p| Ok((p.clone(), Outbox::start(p, &all)?)))
             .collect::<Result<_, DistError>>()
             .map(Outboxes)
     }
@@ -432,18 +433,39 @@ mod tests {
         assert_eq!(lane.hand_in(MAX_DIRECT_BYTES), Route::Queue);
     }
 
-    /// Only an outbox under the virtual clock has a direct lane, and a report from its
-    /// process starts its bound again.
+    /// Hearing from its process starts an outbox's bound again.
     #[test]
-    fn only_the_virtual_clock_s_outbox_has_a_direct_lane() {
+    fn hearing_from_the_process_starts_the_bound_again() {
         let all = Arc::new(AtomicUsize::new(0));
-        let real = Outbox::start("p", &all, false).unwrap();
-        assert!(real.direct.is_none());
-        let virt = Outbox::start("p", &all, true).unwrap();
-        let lane = virt.direct.as_ref().unwrap();
-        ratelab_runtime::graph::lock(lane).unanswered_bytes = 7;
-        virt.answered();
-        assert_eq!(ratelab_runtime::graph::lock(lane).unanswered_bytes, 0);
+        let outbox = Outbox::start("p", &all).unwrap();
+        ratelab_runtime::graph::lock(&outbox.lane).unanswered_bytes = 7;
+        outbox.answered();
+        assert_eq!(
+            ratelab_runtime::graph::lock(&outbox.lane).unanswered_bytes,
+            0
+        );
+    }
+
+    /// A sample in shared memory is charged the lane its reference, not its bytes; any
+    /// other payload its length.
+    #[test]
+    fn a_sample_in_shared_memory_is_a_reference_on_the_wire() {
+        use zenoh::shm::{Defragment, GarbageCollect, ShmProviderBuilder};
+        assert_eq!(wire_bytes(&ZBytes::from(vec![0u8; 100_000])), 100_000);
+        let Ok(pool) = ShmProviderBuilder::default_backend(1 << 20).wait() else {
+            eprintln!("no shared memory here: the reference's charge is not checked");
+            return;
+        };
+        let buffer = pool
+            .alloc(256 * 1024)
+            .with_policy::<Defragment<GarbageCollect>>()
+            .wait()
+            .unwrap();
+        let payload = ZBytes::from(buffer);
+        assert_eq!(payload.len(), 256 * 1024);
+        assert_eq!(wire_bytes(&payload), SHM_REFERENCE_BYTES);
+        // So a frame in shared memory takes the direct lane, however large.
+        assert_eq!(Lane::default().hand_in(wire_bytes(&payload)), Route::Direct);
     }
 
     #[test]

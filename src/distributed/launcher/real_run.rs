@@ -51,12 +51,18 @@ impl Launch<'_> {
         let mut _stats_subs = Vec::new();
         for p in &self.names {
             let tx = stats_tx.clone();
+            // Its figures say the process is running: its outbox's bound on direct puts
+            // starts again ([`super::outbox`]).
+            let outbox = self.outboxes.of(p).cloned();
             _stats_subs.push(
                 self.link
                     .session
                     .declare_subscriber(self.link.keys.stats(p))
                     .callback(move |s| {
                         if let Some(m) = LiveStats::from_sample(&s) {
+                            if let Some(outbox) = &outbox {
+                                outbox.answered();
+                            }
                             let _ = tx.try_send(m);
                         }
                     })
