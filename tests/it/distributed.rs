@@ -1967,7 +1967,7 @@ fn a_launch_of_256_processes_equals_the_in_process_run() {
 }
 
 /// A process that stops reading holds only what goes to it (the launcher's outbox per
-/// process): the chapter's chain beside a camera whose 900 KiB frames go to a process of
+/// process): the chapter's chain beside a camera whose 300 KiB frames go to a process of
 /// their own, `viewer`, without shared memory (so each frame fills the viewer's link).
 /// Frozen (SIGSTOP) for 3 s mid-run, the viewer's link fills and the launcher waits to
 /// pass it frames; the chain's samples, which go to `policy` and `robot`, still cross at
@@ -1975,6 +1975,23 @@ fn a_launch_of_256_processes_equals_the_in_process_run() {
 /// the freeze.
 #[test]
 fn a_frozen_process_holds_only_what_goes_to_it() {
+    frozen_viewer(false);
+}
+
+/// As [`a_frozen_process_holds_only_what_goes_to_it`], with shared memory on: each frame
+/// crosses as a reference to its buffer, which the launcher puts on the viewer's link
+/// itself (the outbox's direct lane, under the real clock too) until the viewer has gone
+/// unheard for 256 KiB of them; the frozen viewer holds the camera's buffers (its pool
+/// full, later frames cross the socket through the outbox). The chain never waits.
+#[test]
+fn a_frozen_process_holds_only_what_goes_to_it_with_shared_memory() {
+    frozen_viewer(true);
+}
+
+/// The chapter's chain beside a camera whose frames go to `viewer`, frozen for 3 s
+/// mid-run under the real clock, with or without shared memory: the chain's wire never
+/// waits for as long as the freeze, and the run balances.
+fn frozen_viewer(shared_memory: bool) {
     let _m = crate::machine::alone();
     let dir = tempfile::tempdir().unwrap();
     let graph = dir.path().join("viewer.toml");
@@ -2006,7 +2023,10 @@ fn a_frozen_process_holds_only_what_goes_to_it() {
         ])
         .args(["--listen", &ep])
         .arg(&graph)
-        .env(ratelab::distributed::SHARED_MEMORY_ENV, "off")
+        .env(
+            ratelab::distributed::SHARED_MEMORY_ENV,
+            if shared_memory { "on" } else { "off" },
+        )
         .stdout(Stdio::piped())
         .stderr(Stdio::null())
         .spawn()
@@ -2045,6 +2065,21 @@ fn a_frozen_process_holds_only_what_goes_to_it() {
             max_us < 1e6,
             "{topic} waited behind the frozen viewer: {line}"
         );
+    }
+    if shared_memory {
+        // The frames went by reference (the direct lane's case), at least until the frozen
+        // viewer held the pool's buffers.
+        let image = lines
+            .iter()
+            .find(|l| l.contains("wire /image into"))
+            .unwrap_or_else(|| panic!("no wire line for /image:\n{out}"));
+        let in_place: u64 = image
+            .split(" read in place")
+            .next()
+            .and_then(|h| h.rsplit(' ').next())
+            .and_then(|n| n.parse().ok())
+            .unwrap_or_else(|| panic!("no frames read in place: {image}"));
+        assert!(in_place > 0, "{image}");
     }
     assert_none_left(port, Duration::ZERO);
 }
