@@ -34,9 +34,13 @@
 //!
 //! What the bound does not cover, and what then happens: a sample put on a topic's key also
 //! goes to any watcher subscribed to it (an observer may read the topics, [`crate::access`]),
-//! and processes behind one host's router share one link from here ([`crate::host_router`]).
+//! and processes behind one host's router share one link from here ([`crate::host_router`]);
+//! and hearing from a process says it runs, not that it has read what it was handed (under
+//! the real clock its figures would keep coming were its subscribers' callbacks blocked;
+//! in a ratelab process they wait only on their topic's lock, which a node holds only to
+//! read it).
 //! Were such a link's queue full all the same (a watcher that stopped reading; a host's
-//! router stalled), Zenoh's thread would wait its 5 s for room, then close that link: the
+//! router stalled; a process receiving nothing while it reports), Zenoh's thread would wait its 5 s for room, then close that link: the
 //! whole star waits those 5 s, where before only the outbox's thread (and, under the
 //! virtual clock, the lockstep with it) did. The run goes on, or ends with the processes
 //! behind that link gone: a stalled or failed run, never a wrong one.
