@@ -105,9 +105,10 @@ pub enum Served {
 /// `stop` is set.
 ///
 /// # Errors
-/// [`DistError::Usage`], one line: bad options ([`check_options`]), an endpoint that cannot
-/// be listened on, nobody (or another launch) at `connect`, no launcher of this graph
-/// there within [`LAUNCHER_WAIT`]; else [`DistError::Zenoh`].
+/// [`DistError::Usage`], one line: bad options (the graph does not parse, the credentials
+/// are not a host router's of this graph, an endpoint is malformed), an endpoint that
+/// cannot be listened on, nobody (or another launch) at `connect`, no launcher of this
+/// graph there within [`LAUNCHER_WAIT`]; else [`DistError::Zenoh`].
 pub fn serve(opts: &HostRouterOptions, stop: &StopFlag) -> Result<Served, DistError> {
     let spec = check_options(opts)?;
     super::refusals::install();
