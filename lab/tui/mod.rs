@@ -1223,6 +1223,29 @@ mod tests {
         );
     }
 
+    /// A 5 Hz policy's `/action` has one message until 0.2 s: its arrow says `measuring`
+    /// (as the policy's box does under the real clock), not `0.0 msg/s`, which would say
+    /// nothing was published; from its second message on, its rate. A run that ended with
+    /// its window full says no `measuring`.
+    #[test]
+    fn a_slow_topic_reads_measuring_until_its_second_message() {
+        let cfg = virtual_cfg(5.0, 2);
+        let report = run(&cfg, Box::new(Scripted), RunOptions::new()).unwrap();
+        let (app, _rx) = told(&cfg, &report.trace, ratelab::Nanos(100_000_000));
+        let v = app.view();
+        let (obs, action) = (&v.topics[0], &v.topics[1]);
+        assert!(action.measuring && !obs.measuring, "{action:?} {obs:?}");
+        let text = render(&app, 120, 40);
+        assert!(text.contains("measuring"), "{text}");
+        assert!(!text.contains(" 0.0 msg/s"), "{text}");
+        let (app, _rx) = told(&cfg, &report.trace, ratelab::Nanos(700_000_000));
+        let action = &app.view().topics[1];
+        assert!(!action.measuring, "{action:?}");
+        assert_eq!(action.msg_per_s, 5.0);
+        let (app, _rx) = app_after(cfg, true);
+        assert!(app.view().topics.iter().all(|t| !t.measuring));
+    }
+
     #[test]
     fn msg_per_s_comes_from_stamps_and_a_slow_sensor_shows_stale_reads() {
         // A 5 Hz policy publishes exactly 5 /action messages a second, a 50 Hz sensor 50.

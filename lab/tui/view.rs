@@ -194,6 +194,12 @@ pub struct TopicView {
     /// alive (its subscriber's): they stopped with it, so its msg/s is not known (`? msg/s`,
     /// not a 0.0 that says nothing was published).
     pub uncounted: bool,
+    /// Its rate is not known: a healthy topic with fewer than two messages published in a
+    /// window shorter than [`super::live::WINDOW`] (the run's start, or right after a
+    /// change: a 3 Hz topic's first third of a second; or a run that ended that soon, as a
+    /// 2 Hz policy's falls). Its arrow says `measuring`, as a node's box does, not a 0.0
+    /// that says nothing was published.
+    pub measuring: bool,
     /// Reads within the window that found nothing new (the mirror of a drop).
     pub stale_reads: u64,
     /// Any stale reads within the window (the subscriber is re-reading old data).

@@ -37,6 +37,15 @@ impl App {
             .into_iter()
             .map(|(_, node, m)| (node, m))
             .collect();
+        let unhealthy = !incompatible.is_empty()
+            || dead(spec.publisher)
+            || spec.subscribers.iter().any(|&n| dead(n))
+            || self.live.window_counter(id, QosCounter::Lost) > 0
+            || self
+                .live
+                .window_counter(id, QosCounter::RequestedDeadlineMissed)
+                > 0;
+        let uncounted = self.attached.is_some() && dead(spec.holder());
         TopicView {
             name: spec.name.clone(),
             // The filter decides ([`App::graph_views`]).
@@ -56,15 +65,12 @@ impl App {
             dropped: window.dropped,
             // A topic nobody reads evicts every message unread: not a drop anyone suffers.
             dropping: spec.subscriber().is_some() && window.dropped > 0,
-            unhealthy: !incompatible.is_empty()
-                || dead(spec.publisher)
-                || spec.subscribers.iter().any(|&n| dead(n))
-                || self.live.window_counter(id, QosCounter::Lost) > 0
-                || self
-                    .live
-                    .window_counter(id, QosCounter::RequestedDeadlineMissed)
-                    > 0,
-            uncounted: self.attached.is_some() && dead(spec.holder()),
+            unhealthy,
+            uncounted,
+            measuring: !unhealthy
+                && !uncounted
+                && window.published < 2
+                && !self.live.window_span().1,
             stale_reads: window.stale_reads,
             staling: window.stale_reads > 0,
             segment_dropped: ended.map_or(segment.dropped, |t| t.dropped),

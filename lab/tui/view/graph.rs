@@ -667,9 +667,14 @@ fn qos_figures(
     let counters = qos_counters(t, w);
     let one_line = (4 + counters.len() > rows && !t.uncounted)
         .then(|| {
+            let rate = if t.measuring {
+                MEASURING.to_string()
+            } else {
+                format!("{:.0}/s", t.msg_per_s)
+            };
             [
-                format!("{} drop{drop_mark} {:.0}/s", t.dropped, t.msg_per_s),
-                format!("{}{drop_mark} {:.0}/s", t.dropped, t.msg_per_s),
+                format!("{} drop{drop_mark} {rate}", t.dropped),
+                format!("{}{drop_mark} {rate}", t.dropped),
             ]
             .into_iter()
             .find(|l| l.chars().count() <= w + 1)
@@ -738,7 +743,7 @@ fn incompatible_arrow(
             .take(room)
             .map(|l| Line::from(Span::styled(l, Style::new().fg(Color::Red))).centered()),
     );
-    lines.push(Line::from(format!("{:.1} msg/s", t.msg_per_s).dim()).centered());
+    lines.push(Line::from(rate_text(t).dim()).centered());
     lines
 }
 
@@ -771,21 +776,33 @@ fn unsubscribed_arrow(t: &TopicView, w: usize, rows: usize) -> Vec<Line<'static>
     ]
 }
 
-/// A topic's rate as its arrow gives it: `50.0 msg/s`.
+/// What an arrow says of a rate not known yet ([`TopicView::measuring`]).
+const MEASURING: &str = "measuring";
+
+/// A topic's rate as its arrow gives it: `50.0 msg/s` (or `measuring`).
 fn rate_text(t: &TopicView) -> String {
-    format!("{:.1} msg/s", t.msg_per_s)
+    rate_forms(t)[0].clone()
+}
+
+/// A topic's rate, longest form first: `50.0 msg/s`, `50 msg/s`, `50/s` (or `measuring`
+/// alone).
+fn rate_forms(t: &TopicView) -> Vec<String> {
+    if t.measuring {
+        return vec![MEASURING.to_string()];
+    }
+    vec![
+        format!("{:.1} msg/s", t.msg_per_s),
+        format!("{:.0} msg/s", t.msg_per_s),
+        format!("{:.0}/s", t.msg_per_s),
+    ]
 }
 
 /// The rate in the first form that fits on a shaft `w` wide with a bar either side
 /// (`─ 50.0 msg/s ─▶`, `─ 50 msg/s ─▶`, `─ 50/s ─▶`); `None` when none does.
 fn shaft_rate(t: &TopicView, w: usize) -> Option<String> {
-    [
-        rate_text(t),
-        format!("{:.0} msg/s", t.msg_per_s),
-        format!("{:.0}/s", t.msg_per_s),
-    ]
-    .into_iter()
-    .find(|r| r.chars().count() + 5 <= w)
+    rate_forms(t)
+        .into_iter()
+        .find(|r| r.chars().count() + 5 <= w)
 }
 
 /// An arrow's shaft `w` wide with `label` on it (`── dl 40 ms ──▶`, `╌ 50.0 msg/s ╌▷`):
@@ -841,6 +858,8 @@ fn arrow_rate(t: &TopicView, w: usize, style: Style) -> Line<'static> {
             Span::styled("✗", style),
         ])
         .centered()
+    } else if t.measuring {
+        Line::from(MEASURING.dim()).centered()
     } else {
         Line::from(format!("{:.1} msg/s", t.msg_per_s)).centered()
     }

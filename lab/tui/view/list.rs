@@ -59,6 +59,16 @@ fn node_trouble(n: &NodeView) -> Option<String> {
     })
 }
 
+/// A topic's rate to `decimals` places (`50/s`, `50.0/s`), or `measuring` while it is not
+/// known yet ([`TopicView::measuring`]).
+fn topic_rate(t: &TopicView, decimals: usize) -> String {
+    if t.measuring {
+        "measuring".to_string()
+    } else {
+        format!("{:.*}/s", decimals, t.msg_per_s)
+    }
+}
+
 /// What is wrong with a topic, in a few words (`3 drop`, `41 lost ✗`, `incompatible QoS`).
 fn topic_trouble(t: &TopicView) -> Option<String> {
     let mut parts = Vec::new();
@@ -175,8 +185,7 @@ pub(super) fn render_names(v: &View, area: Rect, buf: &mut Buffer) {
                 }
                 NameRow::Topic(i) => {
                     let t = &v.topics[i];
-                    let figure =
-                        topic_trouble(t).unwrap_or_else(|| format!("{:.0}/s", t.msg_per_s));
+                    let figure = topic_trouble(t).unwrap_or_else(|| topic_rate(t, 0));
                     let name_w = w.saturating_sub(figure.chars().count() + 4).max(w / 2);
                     let text = format!(" ▶ {} {figure}", cut(&t.name, name_w));
                     Line::from(cut(&text, w)).style(row_style(t.selected, t.in_trouble()))
@@ -255,9 +264,9 @@ fn list_rows(v: &View, w: usize) -> Vec<(String, Style, bool)> {
         };
         let from = v.nodes.get(t.publisher).map_or("", |n| n.name.as_str());
         let mut text = format!(
-            "{:<name_w$} {from}→{to} {:.1}/s depth {}",
+            "{:<name_w$} {from}→{to} {} depth {}",
             cut(&t.name, name_w),
-            t.msg_per_s,
+            topic_rate(t, 1),
             t.depth
         );
         if let Some(trouble) = topic_trouble(t) {
