@@ -226,7 +226,21 @@ pub struct TopicView {
     pub incompatible: Vec<(String, Vec<ratelab::qos::compat::Mismatch>)>,
 }
 
+/// What the lab says of a rate not measured yet: a node's under the real clock before it
+/// ticked twice, a topic's ([`TopicView::measuring`]).
+pub const MEASURING: &str = "measuring";
+
 impl TopicView {
+    /// Its rate per second to `decimals` places (`50/s`, `50.0/s`), or [`MEASURING`] while it
+    /// is not known.
+    pub fn per_s(&self, decimals: usize) -> String {
+        if self.measuring {
+            MEASURING.to_string()
+        } else {
+            format!("{:.*}/s", decimals, self.msg_per_s)
+        }
+    }
+
     /// In trouble: it drops messages a subscriber misses or is read stale over the window,
     /// loses messages or misses deadlines (its ✗), or offers a QoS a subscriber cannot take
     /// (the graph panel's `!` filter, and the list's alarm colour).

@@ -465,7 +465,7 @@ fn rate_figures(n: &NodeView, width: u16, real: bool) -> Vec<Line<'static>> {
                 let line = Line::from(text);
                 lines.push(if skipped > 0 { line.yellow() } else { line });
             }
-            None if real => lines.push(Line::from("measuring").dim()),
+            None if real => lines.push(Line::from(MEASURING).dim()),
             None => lines.push(Line::from(if wide { "virtual time" } else { "virtual" }).dim()),
         },
     }
@@ -667,11 +667,7 @@ fn qos_figures(
     let counters = qos_counters(t, w);
     let one_line = (4 + counters.len() > rows && !t.uncounted)
         .then(|| {
-            let rate = if t.measuring {
-                MEASURING.to_string()
-            } else {
-                format!("{:.0}/s", t.msg_per_s)
-            };
+            let rate = t.per_s(0);
             [
                 format!("{} drop{drop_mark} {rate}", t.dropped),
                 format!("{}{drop_mark} {rate}", t.dropped),
@@ -775,9 +771,6 @@ fn unsubscribed_arrow(t: &TopicView, w: usize, rows: usize) -> Vec<Line<'static>
         Line::from(Span::styled("no subscriber", grey)).centered(),
     ]
 }
-
-/// What an arrow says of a rate not known yet ([`TopicView::measuring`]).
-const MEASURING: &str = "measuring";
 
 /// A topic's rate as its arrow gives it: `50.0 msg/s` (or `measuring`).
 fn rate_text(t: &TopicView) -> String {

@@ -59,16 +59,6 @@ fn node_trouble(n: &NodeView) -> Option<String> {
     })
 }
 
-/// A topic's rate to `decimals` places (`50/s`, `50.0/s`), or `measuring` while it is not
-/// known yet ([`TopicView::measuring`]).
-fn topic_rate(t: &TopicView, decimals: usize) -> String {
-    if t.measuring {
-        "measuring".to_string()
-    } else {
-        format!("{:.*}/s", decimals, t.msg_per_s)
-    }
-}
-
 /// What is wrong with a topic, in a few words (`3 drop`, `41 lost ✗`, `incompatible QoS`).
 fn topic_trouble(t: &TopicView) -> Option<String> {
     let mut parts = Vec::new();
@@ -185,7 +175,7 @@ pub(super) fn render_names(v: &View, area: Rect, buf: &mut Buffer) {
                 }
                 NameRow::Topic(i) => {
                     let t = &v.topics[i];
-                    let figure = topic_trouble(t).unwrap_or_else(|| topic_rate(t, 0));
+                    let figure = topic_trouble(t).unwrap_or_else(|| t.per_s(0));
                     let name_w = w.saturating_sub(figure.chars().count() + 4).max(w / 2);
                     let text = format!(" ▶ {} {figure}", cut(&t.name, name_w));
                     Line::from(cut(&text, w)).style(row_style(t.selected, t.in_trouble()))
@@ -266,7 +256,7 @@ fn list_rows(v: &View, w: usize) -> Vec<(String, Style, bool)> {
         let mut text = format!(
             "{:<name_w$} {from}→{to} {} depth {}",
             cut(&t.name, name_w),
-            topic_rate(t, 1),
+            t.per_s(1),
             t.depth
         );
         if let Some(trouble) = topic_trouble(t) {

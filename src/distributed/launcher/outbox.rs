@@ -40,9 +40,10 @@
 //! in a ratelab process they wait only on their topic's lock, which a node holds only to
 //! read it).
 //! Were such a link's queue full all the same (a watcher that stopped reading; a host's
-//! router stalled; a process receiving nothing while it reports), Zenoh's thread would wait its 5 s for room, then close that link: the
-//! whole star waits those 5 s, where before only the outbox's thread (and, under the
-//! virtual clock, the lockstep with it) did. The run goes on, or ends with the processes
+//! router stalled; a process receiving nothing while it reports), Zenoh's thread would
+//! wait its 5 s for room, then close that link: the whole star waits those 5 s, where
+//! before only the outbox's thread (and, under the virtual clock, the lockstep with it)
+//! did. The run goes on, or ends with the processes
 //! behind that link gone: a stalled or failed run, never a wrong one.
 //!
 //! There is an outbox, with its thread, per process the launch passes messages on to
