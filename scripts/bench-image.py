@@ -28,6 +28,9 @@ ratelab and bare run with Zenoh's shared memory on and off (RATELAB_SHARED_MEMOR
 configuration ROUNDS times, alternated. Usage:
   scripts/bench-image.py [--ratelab BIN] [--floor BIN] [--dora DIR] [--duration S] [--rounds N]
                          [--sizes 1,4] [--no-off] [--vision-phase-ms MS] [--aligned-too]
+  scripts/bench-image.py --write-graphs DIR [--sizes 1,4] [--vision-phase-ms MS]
+            writes the camera graph of each size into DIR, prints their paths and stops
+            (scripts/bench-image-ab.sh launches them)
 """
 
 import argparse
@@ -132,8 +135,18 @@ def main():
                    help="the vision node's ticks this long after the camera's (0: with them)")
     a.add_argument("--aligned-too", action="store_true",
                    help="also ratelab with the vision node ticking with the camera")
+    a.add_argument("--write-graphs", metavar="DIR",
+                   help="write the camera graph of each size into DIR, print their paths, stop")
     o = a.parse_args()
-    sizes = [int(m) for m in o.sizes.split(",")]
+    try:
+        sizes = [int(m) for m in o.sizes.split(",")]
+    except ValueError:
+        a.error(f"--sizes: whole MiB, comma-separated (1,4), not {o.sizes!r}")
+    if o.write_graphs:
+        os.makedirs(o.write_graphs, exist_ok=True)
+        for mib in sizes:
+            print(camera_graph(mib, o.write_graphs, o.vision_phase_ms))
+        return
     shms = ("on",) if o.no_off else ("on", "off")
     rows = {}
     tmp = tempfile.mkdtemp(prefix="bench-image-")
