@@ -2073,13 +2073,7 @@ fn frozen_viewer(shared_memory: bool) {
             .iter()
             .find(|l| l.contains("wire /image into"))
             .unwrap_or_else(|| panic!("no wire line for /image:\n{out}"));
-        let in_place: u64 = image
-            .split(" read in place")
-            .next()
-            .and_then(|h| h.rsplit(' ').next())
-            .and_then(|n| n.parse().ok())
-            .unwrap_or_else(|| panic!("no frames read in place: {image}"));
-        assert!(in_place > 0, "{image}");
+        assert!(crate::read_in_place(image) > 0, "{image}");
     }
     assert_none_left(port, Duration::ZERO);
 }

@@ -437,10 +437,7 @@ fn a_megabyte_frame_crosses_processes_whole_with_its_counters_right() {
             .lines()
             .find(|l| l.contains("wire /image into 'vision'"))
             .unwrap_or_else(|| panic!("no wire line for /image: {out}"));
-        let in_place: u64 = line
-            .split(" | ")
-            .find_map(|part| part.strip_suffix(" read in place from shared memory"))
-            .map_or(0, |n| n.trim().parse().unwrap());
+        let in_place = crate::read_in_place(line);
         let samples: u64 = line
             .split(": ")
             .nth(1)

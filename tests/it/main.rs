@@ -66,6 +66,16 @@ pub fn metrics_without_names(mut m: serde_json::Value) -> String {
     serde_json::to_string_pretty(&m).unwrap()
 }
 
+/// How many samples a launch's wire line (`wire /image into 'vision': 91 samples, … | 90
+/// read in place from shared memory`) says were read in place: 0 when it says none (shared
+/// memory off).
+pub fn read_in_place(wire_line: &str) -> u64 {
+    wire_line
+        .split(" | ")
+        .find_map(|part| part.strip_suffix(" read in place from shared memory"))
+        .map_or(0, |n| n.trim().parse().unwrap())
+}
+
 pub fn ratelab_in_repo(args: &[&str]) -> (i32, String, String) {
     ratelab_in_repo_with(
         args,
