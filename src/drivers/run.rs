@@ -14,7 +14,7 @@ use ratelab_core::time::Nanos;
 use ratelab_runtime::config::{ClockKind, RunConfig};
 use ratelab_runtime::graph::lock;
 use ratelab_runtime::policy::Policy;
-use ratelab_runtime::runcore::drive::{drive, ClockOut, Drove, Pacer};
+use ratelab_runtime::runcore::drive::{drive, ClockOut, Cursor, Drove, Pacer};
 use ratelab_runtime::runcore::{CoreOptions, RunCore};
 use ratelab_runtime::scheduler::{RealOptions, RunEnd, StopFlag};
 use std::time::{Duration, Instant};
@@ -233,10 +233,11 @@ fn run_end_to_end(
         // otherwise it runs unpaced.
         let mut pacer = Pacer::new(Nanos::ZERO, bridge.map(|_| 1.0));
         let clock = bridge.map(|b| b as &dyn ClockOut);
-        let drove = drive(&mut core, &mut pacer, &opts.stop, clock);
+        let mut cursor = Cursor::<Nanos>::default();
+        let drove = drive(&mut core, &mut cursor, &mut pacer, Some(&opts.stop), clock);
         let end = match drove {
-            Drove::Ended(end) => end,
-            Drove::Left => core.interrupt(), // a pacer never leaves
+            Ok(Drove::Ended(end)) => end,
+            _ => core.interrupt(), // a pacer, instant by instant: it ends or is stopped
         };
         for c in &opts.after_end {
             // One refused here was refused in the live run too, when made: never logged.

@@ -4,21 +4,21 @@
 //! on gives, byte for byte, the run's own continuation.
 //!
 //! Every run of a graph goes through it; its drivers are thin:
-//! - instant by instant ([`RunCore::step`]), through one loop, [`drive::drive`], under a
-//!   policy that supplies the pace, the commands and what is told after each instant:
-//!   `ratelab::run::run` under the virtual clock (and so the headless run, `sweep`,
-//!   `cliff`, the exercises, `bench` and `replay`), the lab's trial judge and the lab's
-//!   engine, which paces it against the wall clock (`ratelab::session`);
-//! - event by event ([`RunCore::next_event`], [`RunCore::run_event`],
-//!   [`RunCore::ran_elsewhere`]): each process of a launch under the virtual clock, which
-//!   runs its own nodes' events and takes the others' from their reports
-//!   (`ratelab::distributed`); the launcher follows the same order without ticks
-//!   ([`Follower`]);
+//! - under the virtual clock, through one loop, [`drive::drive`], under a policy that
+//!   supplies the pace, the commands and the event source:
+//!   - instant by instant ([`RunCore::step`]'s instants): `ratelab::run::run` (and so the
+//!     headless run, `sweep`, `cliff`, the exercises, `bench` and `replay`), the lab's
+//!     trial judge and the lab's engine, which paces it against the wall clock
+//!     (`ratelab::session`);
+//!   - event by event ([`RunCore::next_event`], [`RunCore::run_event`],
+//!     [`RunCore::ran_elsewhere`]): each process of a launch, which runs its own nodes'
+//!     events and takes the others' from their reports (`ratelab::distributed`); the
+//!     launcher follows the same order without ticks ([`Follower`]);
 //! - under the real clock ([`RunCore::run_real`]): the headless run, the lab's engine and
 //!   each process of a launch hand the core's graph to the real-clock executor's threads
 //!   ([`crate::scheduler::run_real`]) and take it back at the end; the lab's engine and a
-//!   launch's process through the drive loop's real-clock mode ([`drive::drive_real`]),
-//!   which takes their controls on the calling thread meanwhile.
+//!   launch's process through [`drive::watch_real`], which takes their controls on the
+//!   calling thread meanwhile.
 //!
 //! # A clock switch in place
 //! One run may change clocks as it goes (the lab's `c`): [`RunCore::run_real`] from the
@@ -515,9 +515,10 @@ impl RunCore {
     /// interrupted at the newest instant run): [`drive::drive`] with nothing paced or taken in
     /// between ([`drive::Unpaced`]).
     pub fn run_to_end(&mut self, stop: &StopFlag) -> RunEnd {
-        match drive::drive(self, &mut drive::Unpaced, stop, None) {
-            drive::Drove::Ended(end) => end,
-            drive::Drove::Left => self.interrupt(), // Unpaced never leaves
+        let mut cursor = drive::Cursor::<Nanos>::default();
+        match drive::drive(self, &mut cursor, &mut drive::Unpaced, Some(stop), None) {
+            Ok(drive::Drove::Ended(end)) => end,
+            _ => self.interrupt(), // unpaced, instant by instant: it ends or is stopped
         }
     }
 

@@ -3,7 +3,7 @@
 //! Each process sends the reports of its events once, to the launcher ([`Keys::ticked`]),
 //! whose session is the router of the launch's star. The launcher follows the run's one
 //! order of events as the reports come in ([`Follower`], on the thread that receives them:
-//! Zenoh's, through the drive loop's event mode, `drive_events`) and, when an event is
+//! Zenoh's, through the one drive loop, `drive`, taking events) and, when an event is
 //! next, sends its node's process every report that process has not had, in one message on
 //! the process's own key ([`Keys::relayed`]): before its turn a process must know every
 //! event before it ([`crate::lockstep`]). A process that has [`MAX_RELAYED`] reports waiting
@@ -28,7 +28,7 @@ use ratelab_runtime::config::RunConfig;
 use ratelab_runtime::graph::lock;
 use ratelab_runtime::graph::spec::GraphSpec;
 use ratelab_runtime::graph::{NodeId, TopicId};
-use ratelab_runtime::runcore::drive::{drive_events, Cursor, Drew, EventPolicy, Taken};
+use ratelab_runtime::runcore::drive::{drive, Cursor, DrivePolicy, Drove, Taken};
 use ratelab_runtime::runcore::Follower;
 use ratelab_runtime::scheduler::{EndReason, Event, RunEnd};
 use std::collections::VecDeque;
@@ -101,7 +101,7 @@ struct Course {
     order: Follower,
     /// Events taken (its index: the next one's) and the next event, once drawn and until
     /// its report is taken.
-    cursor: Cursor,
+    cursor: Cursor<Event>,
     duration: Nanos,
     /// How far the horizon reaches ahead, ns (its move is due at half of it).
     lookahead: u64,
@@ -127,7 +127,7 @@ struct Counts {
     last_t: Option<Nanos>,
 }
 
-/// The relay's event source for the drive loop's event mode ([`drive_events`]): every
+/// The relay's event source for the drive loop ([`drive`], taking events): every
 /// event is taken from its process's report, once it is in; a report out of step, a stop
 /// or a failure ends the run.
 struct Follow<'a> {
@@ -138,7 +138,7 @@ struct Follow<'a> {
     end: &'a mut Option<RunEnd>,
 }
 
-impl EventPolicy<Follower> for Follow<'_> {
+impl DrivePolicy<Event, Follower> for Follow<'_> {
     /// A report out of step: the run's end (its node's failure).
     type Error = RunEnd;
 
@@ -175,13 +175,13 @@ impl EventPolicy<Follower> for Follow<'_> {
         }
         let over = self.end.is_some();
         self.log.push_back(m);
-        Ok(Taken::Ran { over })
+        Ok(Taken::Ran { over, ticked: 0 })
     }
 }
 
 impl Course {
     /// Take every report whose turn has come, in the run's order, drawing each next event
-    /// (the drive loop's event mode, [`Follow`]); the end where one says so (a stop, a
+    /// (the drive loop, [`Follow`] its event source); the end where one says so (a stop, a
     /// failure, a process out of step) or where the run's duration is reached.
     fn advance(&mut self, spec: &GraphSpec) {
         if self.end.is_some() {
@@ -194,14 +194,14 @@ impl Course {
             counts: &mut self.counts,
             end: &mut self.end,
         };
-        match drive_events(&mut self.order, &mut self.cursor, &mut follow, None) {
-            Ok(Drew::Exhausted) => {
+        match drive(&mut self.order, &mut self.cursor, &mut follow, None, None) {
+            Ok(Drove::Exhausted) => {
                 self.end = Some(RunEnd {
                     at: self.duration,
                     reason: EndReason::Duration,
                 });
             }
-            Ok(Drew::Over | Drew::Waiting | Drew::Limit | Drew::Stopped) => {}
+            Ok(_) => {} // over, waiting, at the limit: the reports say the end
             Err(end) => self.end = Some(end),
         }
     }

@@ -7,7 +7,7 @@ use super::{wire, DistError, GraphState, NodeId, Share, StopFlag, ToLauncher, To
 use crossbeam_channel::{Receiver, RecvTimeoutError};
 use ratelab_core::metrics::NodeTiming;
 use ratelab_core::time::Nanos;
-use ratelab_runtime::runcore::drive::{drive_real, Intake, RealPolicy};
+use ratelab_runtime::runcore::drive::{watch_real, Intake, RealPolicy};
 use ratelab_runtime::runcore::{RealEnd, RunCore};
 use ratelab_runtime::scheduler::RealOptions;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -66,7 +66,7 @@ pub(super) fn real_clock(
         start,
         end: share.cfg.duration.0,
     };
-    let Some(r) = drive_real(&mut core, Some(&index), &real, &mut watch, &StopFlag::new()) else {
+    let Some(r) = watch_real(&mut core, Some(&index), &real, &mut watch, &StopFlag::new()) else {
         return Err(DistError::Peer(format!(
             "process '{}': the real clock's runner failed; its nodes are gone",
             share.process
@@ -144,7 +144,7 @@ fn tick_hook(
     })
 }
 
-/// Watches the launcher while the nodes run ([`drive_real`]'s policy): its stop (another
+/// Watches the launcher while the nodes run ([`watch_real`]'s policy): its stop (another
 /// process ended the run, or Ctrl-C there) stops the run, with its run time kept
 /// (`launcher_at`); so does a local stop or the launcher going away (without a time). It
 /// keeps the figures' run time at now, short of a tick that may be in progress.

@@ -1,8 +1,8 @@
 //! One process's part of the virtual clock's run ([`crate::lockstep`]): its graph in a run
 //! core, drawn event by event ([`RunCore::next_event`]), its own nodes' events run here
 //! ([`RunCore::run_event`]) and the others' taken from their reports
-//! ([`RunCore::ran_elsewhere`]), which the launcher hands on: the drive loop's event mode
-//! ([`drive_events`]), whose event source here is [`Advance`]. A state machine advanced
+//! ([`RunCore::ran_elsewhere`]), which the launcher hands on: the one drive loop
+//! ([`drive`]) taking events, whose event source here is [`Advance`]. A state machine advanced
 //! wherever what it waits for comes in: on Zenoh's receive thread when other processes'
 //! tick reports or an input sample arrive, on the process's main thread when the launcher
 //! moves the horizon on (or every 100 ms, to notice an input that never came). At the end
@@ -26,7 +26,7 @@ use ratelab_core::node::Flow;
 use ratelab_core::time::Nanos;
 use ratelab_runtime::graph::spec::GraphSpec;
 use ratelab_runtime::graph::TopicId;
-use ratelab_runtime::runcore::drive::{drive_events, Cursor, Drew, EventPolicy, Taken, Turn};
+use ratelab_runtime::runcore::drive::{drive, Cursor, DrivePolicy, Drove, Taken, Turn};
 use ratelab_runtime::runcore::RunCore;
 use ratelab_runtime::scheduler::{EndReason, Event, StopFlag};
 use ratelab_runtime::summary::GraphState;
@@ -158,7 +158,7 @@ pub(super) struct Stepper {
     /// on the whole graph's plan, as in one process: every process replays every executor.
     core: RunCore,
     /// Where the run's order stands ([`Stepper::last`] sets its limit).
-    cursor: Cursor,
+    cursor: Cursor<Event>,
     /// No more events here: the run is over for this process (its last event, a stop or a
     /// failure), or the launcher ended it.
     done: bool,
@@ -166,7 +166,7 @@ pub(super) struct Stepper {
 }
 
 /// What decides an event's turn here and takes it ([`Advance`], the lockstep's
-/// [`EventPolicy`]): the horizon, this process's nodes and their inputs, the others'
+/// [`DrivePolicy`]): the horizon, this process's nodes and their inputs, the others'
 /// reports, and the reports this process sends.
 struct Turns {
     share: Arc<Share>,
@@ -292,8 +292,7 @@ impl Stepper {
         ran
     }
 
-    /// Run events as [`Stepper::advance`] says, through the drive loop's event mode
-    /// ([`drive_events`]); `true` when a callback (`on_main` false) stopped before an
+    /// Run events as [`Stepper::advance`] says, through the drive loop ([`drive`]); `true` when a callback (`on_main` false) stopped before an
     /// event that is the main thread's to run.
     fn run_events(&mut self, inbox: &Mutex<TickInbox>, on_main: bool) -> Result<bool, DistError> {
         if self.done {
@@ -306,14 +305,21 @@ impl Stepper {
             on_main,
             to_main: false,
         };
-        match drive_events(&mut self.core, &mut self.cursor, &mut turn, Some(&stop))? {
-            Drew::Waiting => Ok(turn.to_main),
-            Drew::Over | Drew::Exhausted => {
+        match drive(
+            &mut self.core,
+            &mut self.cursor,
+            &mut turn,
+            Some(&stop),
+            None,
+        )? {
+            Drove::Waiting => Ok(turn.to_main),
+            Drove::Over | Drove::Ended(_) | Drove::Exhausted => {
                 self.done = true;
                 Ok(false)
             }
-            Drew::Limit => Ok(false), // the run's last event is taken
-            Drew::Stopped => Err(DistError::Peer("interrupted".into())),
+            Drove::Limit => Ok(false), // the run's last event is taken
+            Drove::Stopped => Err(DistError::Peer("interrupted".into())),
+            Drove::Left => Ok(false), // never: this policy takes no intake
         }
     }
 }
@@ -330,7 +336,7 @@ struct Advance<'a> {
     to_main: bool,
 }
 
-impl EventPolicy<RunCore> for Advance<'_> {
+impl DrivePolicy<Event, RunCore> for Advance<'_> {
     type Error = DistError;
 
     fn turn(&mut self, _index: u64, event: Event) -> Result<Turn, DistError> {
@@ -358,7 +364,7 @@ impl EventPolicy<RunCore> for Advance<'_> {
         let t = &mut *self.turns;
         if t.local.contains(&i) {
             return Ok(match t.run_here(core, index, event)? {
-                Some(over) => Taken::Ran { over },
+                Some(over) => Taken::Ran { over, ticked: 0 },
                 None => Taken::NotYet, // an input message is still on its way
             });
         }
@@ -376,10 +382,17 @@ impl EventPolicy<RunCore> for Advance<'_> {
         core.ran_elsewhere(event, compute);
         Ok(Taken::Ran {
             over: m.stop || m.failed.is_some(),
+            ticked: 0,
         })
     }
 
-    fn taken(&mut self, _index: u64, _event: Event) -> Result<Turn, DistError> {
+    fn taken(
+        &mut self,
+        _core: &mut RunCore,
+        _index: u64,
+        _event: Event,
+        _ticked: u64,
+    ) -> Result<Turn, DistError> {
         let t = &mut *self.turns;
         if !t.share.bridge.spill.is_empty() {
             return Ok(Turn::Wait); // samples held back: the main thread goes on

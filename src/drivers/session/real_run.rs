@@ -12,7 +12,7 @@ use ratelab_core::metrics::NodeTiming;
 use ratelab_core::time::Nanos;
 use ratelab_recording::Recording;
 use ratelab_runtime::config::RunConfig;
-use ratelab_runtime::runcore::drive::{drive_real, Intake, RealPolicy};
+use ratelab_runtime::runcore::drive::{watch_real, Intake, RealPolicy};
 use ratelab_runtime::runcore::{RealEnd, RunCore};
 use ratelab_runtime::scheduler::{EndReason, RealOptions, RunEnd, StopFlag};
 use ratelab_runtime::telemetry::{Control, Telemetry};
@@ -67,7 +67,7 @@ impl Engine {
 
     /// One stretch of [`Engine::real_run`]: the real clock from where the core is, until
     /// the user moves on or a save restarts nodes in place: the drive loop's real-clock mode
-    /// ([`drive_real`]) under the lab's policy ([`RealPaced`]).
+    /// ([`watch_real`]) under the lab's policy ([`RealPaced`]).
     fn real_once(
         &mut self,
         core: &mut RunCore,
@@ -121,7 +121,7 @@ impl Engine {
             engine: self,
         };
         // No stop of its own: the lab's run is left by its controls.
-        let ran = drive_real(core, None, &opts, &mut policy, &StopFlag::new());
+        let ran = watch_real(core, None, &opts, &mut policy, &StopFlag::new());
         let now = policy.now();
         let RealPaced {
             told,
@@ -295,7 +295,7 @@ impl Engine {
 /// and the executors' figures.
 type Told = (RunEnd, Option<Vec<NodeTiming>>, Option<ExecFigures>);
 
-/// The lab's policy for a stretch of the real clock ([`drive_real`]): the keys' controls
+/// The lab's policy for a stretch of the real clock ([`watch_real`]): the keys' controls
 /// applied at once to the running graph, a save's code taken up when it has loaded, the
 /// status every 33 ms, and an ended run held (its clock stopped where it ended) until the
 /// user moves on.

@@ -24,9 +24,10 @@ use ratelab_core::time::Nanos;
 use ratelab_runtime::checkpoint::load_policy;
 use ratelab_runtime::config::RunConfig;
 use ratelab_runtime::graph::{Graph, GraphHandles, GraphSpec};
-use ratelab_runtime::runcore::drive::{drive, DrivePolicy};
+use ratelab_runtime::runcore::drive::{drive, Cursor, DrivePolicy, Turn};
 use ratelab_runtime::runcore::{CoreOptions, RunCore};
 use ratelab_runtime::scheduler::StopFlag;
+use std::convert::Infallible;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -214,10 +215,13 @@ struct Judged<'a> {
     watch: &'a mut Stopwatch,
 }
 
-impl DrivePolicy for Judged<'_> {
-    fn starting(&mut self, t: Nanos) {
+impl DrivePolicy<Nanos, RunCore> for Judged<'_> {
+    type Error = Infallible;
+
+    fn turn(&mut self, _index: u64, t: Nanos) -> Result<Turn, Infallible> {
         self.progress.store(t.0, Ordering::Relaxed);
         self.watch.next(Some(t));
+        Ok(Turn::Go)
     }
 }
 
@@ -238,7 +242,13 @@ impl Job {
                     progress,
                     watch: &mut watch,
                 };
-                drive(&mut core, &mut judged, stop, None);
+                let _ = drive(
+                    &mut core,
+                    &mut Cursor::default(),
+                    &mut judged,
+                    Some(stop),
+                    None,
+                );
                 watch.next(None);
                 let topics = core.handles().spec.topics.iter();
                 let topics = topics.map(|t| t.name.clone()).collect();

@@ -10,10 +10,13 @@ use ratelab_core::time::Nanos;
 use ratelab_recording::Recording;
 use ratelab_runtime::config::RunConfig;
 use ratelab_runtime::graph::GraphHandles;
-use ratelab_runtime::runcore::drive::{drive, ClockOut, DrivePolicy, Intake, Pace, Pacer, Ran};
+use ratelab_runtime::runcore::drive::{
+    drive, ClockOut, Cursor, DrivePolicy, Intake, Pace, Pacer, Turn,
+};
 use ratelab_runtime::runcore::{RestoreError, RunCore};
-use ratelab_runtime::scheduler::{EndReason, RunEnd, StopFlag, VirtualScheduler};
+use ratelab_runtime::scheduler::{EndReason, RunEnd, VirtualScheduler};
 use ratelab_runtime::telemetry::{Control, Speed, Telemetry};
+use std::convert::Infallible;
 use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
@@ -46,7 +49,7 @@ impl Engine {
         let clock = ros2.map(|b| b as &dyn ClockOut);
         // No stop flag of its own: the lab's run is left by its controls (`Paced::leave`),
         // and an ended run is kept, to be scrubbed, until then.
-        drive(core, &mut paced, &StopFlag::new(), clock);
+        let _ = drive(core, &mut Cursor::default(), &mut paced, None, clock);
         // `drive` leaves only from an intake, which has taken up an end first: `ended` has it.
         let Paced { next, ended, .. } = paced;
         self.leave(next.unwrap_or(Next::Quit), core.scheduler(), ended)
@@ -357,7 +360,9 @@ impl Paced<'_> {
     }
 }
 
-impl DrivePolicy for Paced<'_> {
+impl DrivePolicy<Nanos, RunCore> for Paced<'_> {
+    type Error = Infallible;
+
     /// The run's end first, if the last instant ended it (so that no control is taken as
     /// if it ran on); then the controls that have come (waiting up to 30 ms for one while
     /// paused, with no step pending, or ended), a save whose code has loaded, the status
@@ -418,11 +423,18 @@ impl DrivePolicy for Paced<'_> {
     }
 
     /// A step is done once the actuator has ticked.
-    fn ran(&mut self, _core: &mut RunCore, ran: Ran) {
+    fn taken(
+        &mut self,
+        _core: &mut RunCore,
+        _index: u64,
+        _t: Nanos,
+        ticked: u64,
+    ) -> Result<Turn, Infallible> {
         let actuator_bit = 1u64 << (self.handles.spec.actuator.0 % 64);
-        if ran.ticked & actuator_bit != 0 {
+        if ticked & actuator_bit != 0 {
             self.step_pending = false;
         }
+        Ok(Turn::Go)
     }
 
     /// The run is told it ended, and held: frozen, and scrubbed until the user moves on

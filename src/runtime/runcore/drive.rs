@@ -1,587 +1,422 @@
-//! One drive loop for a run under the virtual clock, instant by instant: [`drive`] owns the
-//! order of what happens around an instant (the stop flag, the commands taken between
-//! instants, pacing against the wall, `/clock`, the end), and a [`DrivePolicy`] supplies only
-//! what differs between front ends — which commands come in, how fast, what is told after.
+//! One drive loop for a run under the virtual clock: [`drive`] owns the order of what
+//! happens around each unit of a run it takes — the stop flag, the commands taken between
+//! units, pacing against the wall, `/clock`, the end — and a [`DrivePolicy`] supplies only
+//! what differs between front ends: its pacing, its commands and its event source (whether
+//! a unit's turn has come, and whether it runs here or is taken from another process's
+//! report).
 //!
-//! Every front end that steps a [`RunCore`] goes through it: the headless run and everything
-//! built on it (`ratelab_drivers::run`: `sweep`, `cliff`, `bench`, `replay`, the exercises), the
-//! lab's trial judge, ex13's count of `/clock` and the lab's paced session
-//! (`ratelab_drivers::session`). Under the real clock, [`drive_real`] is the same loop's
-//! other mode: the graph on the real clock's threads, the front end's controls taken on the
-//! calling thread ([`RealPolicy`]): the lab's real-clock stretches and each process of a
-//! launch. A run across processes under the virtual clock goes event by event: its event
-//! mode, [`drive_events`], takes each event from a source an [`EventPolicy`] supplies (run
-//! here, or from another process's report), for a process's lockstep and for the launcher
-//! that follows the processes.
+//! A unit ([`Unit`]) is what the loop takes in one turn, drawn from a [`Course`]:
+//! - **an instant** (`Nanos`) of a [`RunCore`], run whole: the headless run and everything
+//!   built on it (`ratelab_drivers::run`: `sweep`, `cliff`, `bench`, `replay`, the
+//!   exercises), the lab's trial judge, ex13's count of `/clock` and the lab's paced
+//!   session (`ratelab_drivers::session`);
+//! - **an event** ([`Event`]: a tick's start, or its held outputs going out) of a
+//!   [`RunCore`] or a [`Follower`], for a run across processes, where each event's node
+//!   runs in one process and the others take it from its report: a process's lockstep
+//!   (`ratelab_distributed::process`) and the launcher that follows its processes.
 //!
-//! # The order around an instant
-//! 1. The stop flag: set, the run ends as interrupted at the newest instant run.
-//! 2. [`DrivePolicy::intake`]: commands and controls, applied between instants (a command
-//!    applied here takes effect before the next instant and is logged at it,
-//!    [`RunCore::apply`]). `Hold` goes back to 1 (the policy waited), `Leave` returns
-//!    [`Drove::Left`] with the run *not* ended (the lab's clock switch goes on with it).
-//! 3. The end: once the run has ended, [`DrivePolicy::at_end`] says whether to hold (the lab
-//!    keeps an ended run, which a seek back can take up again) or to return.
-//! 4. Pacing ([`DrivePolicy::pace`]) for the next instant; a sleep goes back to 1, so commands
-//!    and the stop flag are seen while waiting.
-//! 5. The instant made ready: the commands scheduled at or before it applied
-//!    ([`crate::command::TimedCommand`]). A phase change may move it later; then it is paced
-//!    again, with no intake, since a command taken now would be logged after the scheduled
-//!    ones of its instant, where a replay puts it before them.
-//! 6. [`DrivePolicy::starting`] and `/clock` ([`ClockOut`]) told the instant that runs,
-//!    the instant run, and [`DrivePolicy::ran`] told which nodes ticked.
+//! The loop blocks only where its policy asks it to: a pacing sleep ([`Pace::Sleep`], at
+//! most [`MAX_PACING_SLEEP`]) or a policy's own wait for its controls. A lockstep's policy
+//! never does: it runs on Zenoh's receive thread too, and where an event's input or report
+//! is not here yet the loop returns [`Drove::Waiting`], the [`Cursor`] keeping its place, and
+//! is called again when something comes in.
 //!
-//! Pacing and `/clock` change only *when* an instant runs, never what it is: a driven run
-//! equals [`RunCore::step`] called to the end, byte for byte (tests below).
+//! Under the real clock the graph runs on the executor's threads, not unit by unit: the
+//! front end's controls are taken meanwhile by [`watch_real`] ([`RealPolicy`]).
+//!
+//! # The order around a unit
+//! 1. The stop flag: set, a run taken instant by instant ends as interrupted at the newest
+//!    instant run ([`Drove::Ended`]); one taken event by event returns [`Drove::Stopped`]
+//!    (what a stop means is the caller's: a process's error, the launcher's grace period).
+//! 2. The limit ([`Cursor::limit`]): the run's count of units, once known; none at or past
+//!    it is taken ([`Drove::Limit`]).
+//! 3. When no unit is drawn yet (between units):
+//!    1. [`DrivePolicy::intake`]: commands and controls (a command applied here takes effect
+//!       before the next instant and is logged at it, [`RunCore::apply`]). `Hold` goes back
+//!       to 1 (the policy waited), `Leave` returns [`Drove::Left`] with the run *not*
+//!       ended (the lab's clock switch goes on with it).
+//!    2. The end: once the run has ended, [`DrivePolicy::at_end`] says whether to hold (the
+//!       lab keeps an ended run, which a seek back can take up again) or to return it.
+//!    3. Pacing ([`DrivePolicy::pace`]) for the next unit's time where the course can tell
+//!       it before drawing it ([`Course::peek`]: an instant's); a sleep goes back to 1, so
+//!       commands and the stop flag are seen while waiting.
+//!    4. The unit drawn ([`Course::draw`]): an instant made ready (the commands scheduled
+//!       at or before it applied, [`crate::command::TimedCommand`]), or the next event. None
+//!       left: a run taken instant by instant ends at its duration (back to 1, for its
+//!       end); otherwise [`Drove::Exhausted`].
+//! 4. A unit drawn at another time than was paced (a scheduled phase change moved the
+//!    instant later, or an event) is paced now, with no intake: a command taken now would
+//!    be logged after the scheduled ones of its instant, where a replay puts it before them.
+//!    A drawn unit is kept in the cursor until it is taken, through any wait.
+//! 5. [`DrivePolicy::turn`]: the event source's say (the launcher's horizon, which thread
+//!    may run it); `Wait` returns [`Drove::Waiting`].
+//! 6. `/clock` ([`ClockOut`]) told the unit's time, and the unit taken
+//!    ([`DrivePolicy::take`]): run here ([`Course::run_here`], the default), or from its
+//!    report, or not yet ([`Drove::Waiting`]).
+//! 7. The cursor moves on and [`DrivePolicy::taken`] is told. A unit that stopped the run or
+//!    failed ends it: [`DrivePolicy::at_end`] for a course that knows its end, else
+//!    [`Drove::Over`].
+//!
+//! An error from the policy ends the loop ([`drive`]'s errors). Pacing and `/clock` change
+//! only *when* a unit is taken, never what it is: a driven run equals [`RunCore::step`]
+//! called to the end, byte for byte, and a run taken event by event, here or from reports,
+//! equals the one process's run (`drive/tests.rs`; across processes,
+//! `tests/it/distributed.rs`).
 
-mod events;
+mod course;
+mod pacer;
 mod real;
-pub use events::{drive_events, Cursor, Drew, EventOrder, EventPolicy, Taken, Turn};
-pub use real::{drive_real, RealPolicy};
+#[cfg(test)]
+mod tests;
 
-use super::{RunCore, Step};
-use crate::scheduler::{RunEnd, StopFlag};
+pub use pacer::Pacer;
+pub use real::{watch_real, RealPolicy};
+
+#[cfg(doc)]
+use super::{Follower, RunCore};
+use crate::scheduler::{Event, RunEnd, StopFlag};
 use ratelab_core::time::Nanos;
-use std::time::{Duration, Instant};
+use std::convert::Infallible;
+use std::time::Duration;
 
 /// The longest a pacing sleep lasts before the loop looks at its stop flag and commands
 /// again: 10 ms.
 pub const MAX_PACING_SLEEP: Duration = Duration::from_millis(10);
 
 /// Where a run's time goes out as it advances: ROS 2's `/clock` (`ratelab_ros2::Bridge`),
-/// or a count of it (ex13). Told each instant's run time just before the instant runs.
+/// or a count of it (ex13). Told each unit's run time just before it is taken: each
+/// instant's, for a run taken instant by instant (a launch's processes, taken event by
+/// event, are given none: `docs/design/drive-loop.md`, risk 2).
 pub trait ClockOut {
     /// The run is about to run the instant at `t` (run time, ns).
     fn clock(&self, t: Nanos);
 }
 
-/// What [`DrivePolicy::intake`], [`DrivePolicy::ran`] and [`DrivePolicy::at_end`] ask of
-/// the loop.
+/// What the drive loop takes in one turn: an instant (its run time, `Nanos`) or an event
+/// ([`Event`]).
+pub trait Unit: Copy {
+    /// Its run time (ns).
+    fn at(&self) -> Nanos;
+}
+
+impl Unit for Nanos {
+    fn at(&self) -> Nanos {
+        *self
+    }
+}
+
+impl Unit for Event {
+    fn at(&self) -> Nanos {
+        self.node_at().1
+    }
+}
+
+/// What the drive loop draws its units `U` from (implemented in `drive/course.rs`): a
+/// [`RunCore`] instant by instant (`Course<Nanos>`) or event by event (`Course<Event>`), or
+/// a [`Follower`] (`Course<Event>`), which draws a run's order of events and runs none.
+pub trait Course<U: Unit> {
+    /// How the run ended, once it has; `None` for a course that does not know (a
+    /// follower: its policy learns the end from the reports).
+    fn end(&self) -> Option<RunEnd>;
+
+    /// The next unit's time where it is known before the unit is drawn (an instant's,
+    /// before the commands scheduled at it apply), so that it is paced with commands still
+    /// taken; `None`: known once drawn, or none left.
+    fn peek(&self) -> Option<Nanos> {
+        None
+    }
+
+    /// The next unit, made ready (an instant: the commands scheduled at or before it
+    /// applied; an event: the clock moved on to it); `None` past the run's end or duration.
+    fn draw(&mut self) -> Option<U>;
+
+    /// Nothing left to draw: `true` when the course has ended the run at its duration (a
+    /// run core taken instant by instant; the loop goes on to its end), `false` when that is
+    /// the caller's to say ([`Drove::Exhausted`]).
+    fn exhausted(&mut self) -> bool;
+
+    /// The stop flag is set: the run's end, when the course ends it (interrupted at the
+    /// newest instant run, instant by instant); `None`: the caller's ([`Drove::Stopped`]).
+    fn stopped(&mut self) -> Option<RunEnd>;
+
+    /// Take `unit` by running it here (the default of [`DrivePolicy::take`]).
+    fn run_here(&mut self, unit: U) -> Taken;
+}
+
+/// What [`DrivePolicy::intake`] and [`DrivePolicy::at_end`] ask of the loop.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Intake {
     /// Go on.
     Go,
-    /// Run nothing now, and come back (through the stop flag) to intake. A policy that holds
-    /// has waited for its controls (at most a few tens of ms), so the loop does not spin.
+    /// Take nothing now, and come back (through the stop flag) to intake. A policy that
+    /// holds has waited for its controls (at most a few tens of ms), so the loop does not
+    /// spin.
     Hold,
     /// Return [`Drove::Left`]; the run is not ended.
     Leave,
 }
 
-/// What [`DrivePolicy::pace`] asks before an instant.
+/// What [`DrivePolicy::pace`] asks before a unit.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Pace {
-    /// Run it now.
+    /// Take it now.
     Now,
     /// Not yet: sleep this long (the loop caps it at [`MAX_PACING_SLEEP`]), then look again.
     Sleep(Duration),
 }
 
-/// An instant that ran.
+/// What [`DrivePolicy::turn`] and [`DrivePolicy::taken`] ask of the loop.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct Ran {
-    /// Its run time.
-    pub at: Nanos,
-    /// The nodes that ticked, as bits (bit `i % 64` for node `i`, [`Step::Ran`]).
-    pub ticked: u64,
+pub enum Turn {
+    /// Go on.
+    Go,
+    /// Return [`Drove::Waiting`]; the caller calls again when what it waits for comes.
+    Wait,
+}
+
+/// How a unit was taken ([`DrivePolicy::take`], [`Course::run_here`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Taken {
+    /// Taken: run here, or from its report.
+    Ran {
+        /// The run ends with this unit: its node stopped the run or failed.
+        over: bool,
+        /// The nodes that ticked in it, as bits (bit `i % 64` for node `i`, as
+        /// [`super::Step::Ran`]); 0 where not known (an event taken from a report).
+        ticked: u64,
+    },
+    /// Not yet: an input it must see, or its report, is still on its way.
+    NotYet,
 }
 
 /// How [`drive`] returned.
 #[derive(Clone, Debug, PartialEq)]
 pub enum Drove {
-    /// The run ended (at its duration, a node stopped it or failed, or the stop flag).
+    /// The run ended (at its duration, a node stopped it or failed, or the stop flag), and
+    /// the policy let it go ([`DrivePolicy::at_end`]).
     Ended(RunEnd),
     /// The policy left ([`Intake::Leave`]) with the run not ended.
     Left,
+    /// Waiting: for the policy's turn, an input or a report. Call again when it comes.
+    Waiting,
+    /// The unit just taken stopped the run or failed, in a course that does not know its
+    /// end (a follower's, or an event taken from a report).
+    Over,
+    /// No unit left, in a course that leaves its end to the caller ([`Course::exhausted`]).
+    Exhausted,
+    /// Every unit up to [`Cursor::limit`] is taken.
+    Limit,
+    /// The stop flag was set, in a course that leaves what it means to the caller
+    /// ([`Course::stopped`]).
+    Stopped,
 }
 
-/// What a front end supplies to [`drive`]: its commands, its pace and what it tells after
-/// each instant. Every method has a default, so a policy writes only what differs: the
-/// headless run's is its [`Pacer`] when offered to ROS 2, and nothing ([`Unpaced`]) otherwise.
-pub trait DrivePolicy {
-    /// Between instants: take commands and controls (apply them with [`RunCore::apply`]).
-    /// Called before every instant, and after a [`Intake::Hold`] or a pacing sleep.
-    fn intake(&mut self, _core: &mut RunCore) -> Intake {
+/// Where a run stands between calls of [`drive`]: the next unit's place in the run's order,
+/// the unit once drawn and until it is taken, the time last paced, and the run's count of
+/// units once it is known.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Cursor<U> {
+    index: u64,
+    next: Option<U>,
+    paced: Option<Nanos>,
+    /// The run's units, once known (the launcher's word at a run's end): none at or past
+    /// this index is taken.
+    pub limit: Option<u64>,
+}
+
+impl<U> Default for Cursor<U> {
+    fn default() -> Self {
+        Cursor {
+            index: 0,
+            next: None,
+            paced: None,
+            limit: None,
+        }
+    }
+}
+
+impl<U: Copy> Cursor<U> {
+    /// A cursor at the run's `index`-th unit, none drawn: where a run whose first `index`
+    /// units were taken stands.
+    pub fn at(index: u64) -> Cursor<U> {
+        Cursor {
+            index,
+            ..Cursor::default()
+        }
+    }
+
+    /// The next unit's place in the run's order (0-based): the units taken so far.
+    pub fn index(&self) -> u64 {
+        self.index
+    }
+
+    /// The next unit, once drawn and until it is taken.
+    pub fn next(&self) -> Option<U> {
+        self.next
+    }
+
+    /// Units still to take before the limit (0 without one).
+    pub fn left(&self) -> u64 {
+        self.limit.map_or(0, |l| l.saturating_sub(self.index))
+    }
+}
+
+/// What a front end supplies to [`drive`] for units `U` drawn from `C`: its pacing, its
+/// commands and its event source (module docs for when each is asked). Every method but
+/// the error's type has a default, so a policy writes only what differs: the headless
+/// run's is its [`Pacer`] when offered to ROS 2, and nothing ([`Unpaced`]) otherwise.
+pub trait DrivePolicy<U: Unit, C: Course<U> + ?Sized> {
+    /// Why the run cannot go on (a report out of step, a report that cannot be sent);
+    /// [`Infallible`] for a run in one process.
+    type Error;
+
+    /// Between units: take commands and controls (apply them with [`RunCore::apply`]).
+    /// Called before every unit is drawn, and after a [`Intake::Hold`] or a pacing sleep.
+    fn intake(&mut self, _course: &mut C) -> Intake {
         Intake::Go
     }
 
-    /// The next instant is at `t`: run it now, or sleep first.
+    /// The next unit is at `t`: take it now, or sleep first.
     fn pace(&mut self, _t: Nanos) -> Pace {
         Pace::Now
     }
 
-    /// The instant at `t` runs now: paced, made ready (it is where a scheduled phase
-    /// change put it), just before `/clock` is told it. Called once per instant.
-    fn starting(&mut self, _t: Nanos) {}
+    /// The unit at `index`, drawn and paced, is next: take it now, or wait (past the
+    /// launcher's horizon; on a thread that may not run it). Asked again after each wait.
+    fn turn(&mut self, _index: u64, _unit: U) -> Result<Turn, Self::Error> {
+        Ok(Turn::Go)
+    }
 
-    /// An instant ran.
-    fn ran(&mut self, _core: &mut RunCore, _ran: Ran) {}
+    /// Take the unit at `index`: run it here (the default), or take it from its report
+    /// (`RunCore::ran_elsewhere`), or say it is not here yet.
+    fn take(&mut self, course: &mut C, _index: u64, unit: U) -> Result<Taken, Self::Error> {
+        Ok(course.run_here(unit))
+    }
+
+    /// The unit at `index` was taken, `ticked` the nodes that ticked in it ([`Taken`]): go
+    /// on, or wait (samples held back that must go out first).
+    fn taken(
+        &mut self,
+        _course: &mut C,
+        _index: u64,
+        _unit: U,
+        _ticked: u64,
+    ) -> Result<Turn, Self::Error> {
+        Ok(Turn::Go)
+    }
 
     /// The run has ended (`end`): [`Intake::Leave`] (the default) returns
     /// [`Drove::Ended`]; [`Intake::Hold`] (and `Go`, the same here) keeps the ended run. It
     /// is asked again after each intake that returns `Go`, so a policy that holds an ended
     /// run should return `Hold` from `intake` (after waiting for its controls) until it
     /// leaves.
-    fn at_end(&mut self, _core: &mut RunCore, _end: &RunEnd) -> Intake {
+    fn at_end(&mut self, _course: &mut C, _end: &RunEnd) -> Intake {
         Intake::Leave
     }
 }
 
-/// The policy with nothing to add: every instant as fast as it runs, no commands.
+/// The policy with nothing to add: every unit as fast as it runs, here, no commands.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct Unpaced;
 
-impl DrivePolicy for Unpaced {}
-
-/// Keeps pace with the wall clock at a speed: run time `anchor` is the wall instant the
-/// pacer was anchored at, and run time passes `speed` times as fast as the wall's (`None`:
-/// as fast as the instants run). The headless run offered to ROS 2 runs at ×1; the lab at
-/// the speed its keys chose, anchored again when paused, resumed or sped up; a launch the
-/// lab follows keeps its lockstep's horizon within the run time due
-/// ([`Pacer::run_time_now`]).
-#[derive(Clone, Copy, Debug)]
-pub struct Pacer {
-    anchor_run: Nanos,
-    anchor_wall: Instant,
-    speed: Option<f64>,
+impl<U: Unit, C: Course<U> + ?Sized> DrivePolicy<U, C> for Unpaced {
+    type Error = Infallible;
 }
 
-impl Pacer {
-    /// Run time `at` is now on the wall; run time then passes at `speed` (× the wall's;
-    /// `None`: no pacing). A speed that is not finite and positive paces nothing.
-    pub fn new(at: Nanos, speed: Option<f64>) -> Pacer {
-        Pacer {
-            anchor_run: at,
-            anchor_wall: Instant::now(),
-            speed: speed.filter(|x| x.is_finite() && *x > 0.0),
-        }
-    }
-
-    /// Anchor again: run time `at` is now (after a pause, a seek or a change of speed).
-    pub fn anchor(&mut self, at: Nanos) {
-        self.anchor_run = at;
-        self.anchor_wall = Instant::now();
-    }
-
-    /// A new speed from run time `at`, now ([`Pacer::new`]'s rule).
-    pub fn set_speed(&mut self, at: Nanos, speed: Option<f64>) {
-        *self = Pacer::new(at, speed);
-    }
-
-    /// The wall instant at which run time `t` is due (`None`: unpaced).
-    pub fn due(&self, t: Nanos) -> Option<Instant> {
-        let x = self.speed?;
-        let ahead_ns = t.saturating_sub(self.anchor_run).0 as f64 / x;
-        Some(self.anchor_wall + Duration::from_nanos(ahead_ns as u64))
-    }
-
-    /// The run time due now: how far the wall clock has come since the anchor, at the
-    /// speed (`None`: unpaced, nothing holds the run back).
-    pub fn run_time_now(&self) -> Option<Nanos> {
-        let x = self.speed?;
-        let ahead_ns = self.anchor_wall.elapsed().as_secs_f64() * x * 1e9;
-        Some(
-            self.anchor_run
-                .saturating_add(Nanos(ahead_ns.min(u64::MAX as f64) as u64)),
-        )
-    }
-
-    /// Run `t` now when it is due, else sleep until it is (at most [`MAX_PACING_SLEEP`]).
-    pub fn pace(&self, t: Nanos) -> Pace {
-        match self.due(t) {
-            Some(due) => match due.checked_duration_since(Instant::now()) {
-                Some(wait) if !wait.is_zero() => Pace::Sleep(wait.min(MAX_PACING_SLEEP)),
-                _ => Pace::Now,
-            },
-            None => Pace::Now,
-        }
-    }
-}
-
-impl DrivePolicy for Pacer {
-    fn pace(&mut self, t: Nanos) -> Pace {
-        Pacer::pace(self, t)
-    }
-}
-
-/// Drive `core` under the virtual clock, instant by instant, with `policy` (module docs for
-/// the order), until the run ends and the policy lets it go, or the policy leaves. `stop`
-/// set ends the run as interrupted; `clock` is told each instant's time before it runs.
+/// Drive `course` from where `cursor` stands with `policy` (module docs for the order),
+/// until the run ends and the policy lets it go, the policy leaves, or the loop must wait.
+/// `stop` set ends the run ([`Course::stopped`]); `clock` is told each unit's time before it
+/// is taken.
 ///
-/// Generic over the policy, so the headless run's loop pays no dynamic call per instant.
-pub fn drive<P: DrivePolicy + ?Sized>(
-    core: &mut RunCore,
+/// Generic over the course and the policy, so the headless run's loop pays no dynamic call
+/// per instant.
+///
+/// # Errors
+/// The policy's, from [`DrivePolicy::turn`] or [`DrivePolicy::take`] (the cursor stays on the
+/// unit, not taken) or from [`DrivePolicy::taken`] (the unit was taken; the cursor is past
+/// it). A unit that ended the run and whose `taken` failed returns the error.
+pub fn drive<U, C, P>(
+    course: &mut C,
+    cursor: &mut Cursor<U>,
     policy: &mut P,
-    stop: &StopFlag,
+    stop: Option<&StopFlag>,
     clock: Option<&dyn ClockOut>,
-) -> Drove {
+) -> Result<Drove, P::Error>
+where
+    U: Unit,
+    C: Course<U> + ?Sized,
+    P: DrivePolicy<U, C> + ?Sized,
+{
     loop {
-        if stop.is_stopped() {
-            return Drove::Ended(core.interrupt());
+        if stop.is_some_and(StopFlag::is_stopped) {
+            return Ok(course.stopped().map_or(Drove::Stopped, Drove::Ended));
         }
-        match policy.intake(core) {
-            Intake::Go => {}
-            Intake::Hold => continue,
-            Intake::Leave => return Drove::Left,
+        if cursor.limit.is_some_and(|l| cursor.index >= l) {
+            return Ok(Drove::Limit);
         }
-        if let Some(end) = core.end().cloned() {
-            match policy.at_end(core, &end) {
-                Intake::Leave => return Drove::Ended(end),
-                Intake::Go | Intake::Hold => continue,
-            }
-        }
-        let Some(next) = core.next_instant() else {
-            core.finish_at_duration();
-            continue;
-        };
-        if let Pace::Sleep(wait) = policy.pace(next) {
-            std::thread::sleep(wait.min(MAX_PACING_SLEEP));
-            continue;
-        }
-        let Some(t) = core.prepare_instant() else {
-            continue; // a phase change moved it past the duration: the end, next time round
-        };
-        if t != next {
-            // Moved later by a scheduled phase change: waited for without intake (module docs).
-            while let Pace::Sleep(wait) = policy.pace(t) {
-                if stop.is_stopped() {
-                    return Drove::Ended(core.interrupt());
+        let unit = match cursor.next {
+            Some(unit) => unit,
+            None => {
+                match policy.intake(course) {
+                    Intake::Go => {}
+                    Intake::Hold => continue,
+                    Intake::Leave => return Ok(Drove::Left),
                 }
-                std::thread::sleep(wait.min(MAX_PACING_SLEEP));
+                if let Some(end) = course.end() {
+                    match policy.at_end(course, &end) {
+                        Intake::Leave => return Ok(Drove::Ended(end)),
+                        Intake::Go | Intake::Hold => continue,
+                    }
+                }
+                let peeked = course.peek();
+                if let Some(t) = peeked {
+                    if let Pace::Sleep(wait) = policy.pace(t) {
+                        std::thread::sleep(wait.min(MAX_PACING_SLEEP));
+                        continue;
+                    }
+                }
+                cursor.paced = peeked;
+                match course.draw() {
+                    Some(unit) => *cursor.next.insert(unit),
+                    None if course.exhausted() => continue, // its end, next time round
+                    None => return Ok(Drove::Exhausted),
+                }
             }
+        };
+        let t = unit.at();
+        if cursor.paced != Some(t) {
+            // Drawn at another time than paced: paced now, without intake (module docs).
+            if let Pace::Sleep(wait) = policy.pace(t) {
+                std::thread::sleep(wait.min(MAX_PACING_SLEEP));
+                continue;
+            }
+            cursor.paced = Some(t);
         }
-        policy.starting(t);
+        let index = cursor.index;
+        if policy.turn(index, unit)? == Turn::Wait {
+            return Ok(Drove::Waiting);
+        }
         if let Some(out) = clock {
             out.clock(t);
         }
-        if let Step::Ran { at, ticked } = core.run_prepared(t) {
-            policy.ran(core, Ran { at, ticked });
-        }
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::command::{Command, TimedCommand};
-    use crate::config::RunConfig;
-    use crate::runcore::CoreOptions;
-    use crate::scheduler::EndReason;
-    use std::cell::RefCell;
-
-    fn core(cfg: &RunConfig, commands: Vec<TimedCommand>) -> RunCore {
-        let opts = CoreOptions {
-            keep_trace: true,
-            commands,
-            history_every: Some(Nanos(100_000_000)),
-            ..CoreOptions::default()
+        let (over, ticked) = match policy.take(course, index, unit)? {
+            Taken::Ran { over, ticked } => (over, ticked),
+            Taken::NotYet => return Ok(Drove::Waiting),
         };
-        RunCore::new(cfg, Box::new(crate::policy::Scripted), opts).unwrap()
-    }
-
-    fn secs(s: f64) -> Nanos {
-        Nanos((s * 1e9).round() as u64)
-    }
-
-    fn chapter(duration_s: f64) -> RunConfig {
-        RunConfig {
-            duration: secs(duration_s),
-            ..RunConfig::default()
-        }
-    }
-
-    /// Records the instants `/clock` is told.
-    #[derive(Default)]
-    struct Clocks(RefCell<Vec<Nanos>>);
-    impl ClockOut for Clocks {
-        fn clock(&self, t: Nanos) {
-            self.0.borrow_mut().push(t);
-        }
-    }
-
-    /// Records the instants that ran, and applies a command after the `at`-th.
-    #[derive(Default)]
-    struct Script {
-        ran: Vec<Nanos>,
-        apply_after: Option<(usize, Command)>,
-        intakes: usize,
-    }
-    impl DrivePolicy for Script {
-        fn intake(&mut self, core: &mut RunCore) -> Intake {
-            self.intakes += 1;
-            if let Some((n, _)) = &self.apply_after {
-                if *n == self.ran.len() {
-                    let (_, c) = self.apply_after.take().unwrap();
-                    core.apply(c).unwrap();
-                }
-            }
-            Intake::Go
-        }
-        fn ran(&mut self, _core: &mut RunCore, ran: Ran) {
-            self.ran.push(ran.at);
-        }
-    }
-
-    fn stepped_to_end(mut c: RunCore) -> (RunEnd, String, Vec<TimedCommand>) {
-        let end = loop {
-            if let Step::Ended(end) = c.step() {
-                break end;
-            }
-        };
-        (end, format!("{:?}", c.metrics()), c.applied().to_vec())
-    }
-
-    #[test]
-    fn a_driven_run_is_the_stepped_run_and_clock_is_told_each_instant_that_ran() {
-        let cfg = chapter(1.0);
-        let (end, metrics, _) = stepped_to_end(core(&cfg, vec![]));
-        let mut c = core(&cfg, vec![]);
-        let clocks = Clocks::default();
-        let mut script = Script::default();
-        let drove = drive(&mut c, &mut script, &StopFlag::new(), Some(&clocks));
-        assert_eq!(drove, Drove::Ended(end.clone()));
-        assert_eq!(end.reason, EndReason::Duration);
-        assert_eq!(format!("{:?}", c.metrics()), metrics);
-        assert_eq!(
-            *clocks.0.borrow(),
-            script.ran,
-            "/clock: each instant that ran, in order"
-        );
-        assert!(script.ran.windows(2).all(|w| w[0] < w[1]));
-        assert!(
-            script.intakes > script.ran.len(),
-            "intake before every instant"
-        );
-    }
-
-    #[test]
-    fn a_command_taken_between_instants_is_logged_at_the_next_before_its_scheduled_ones() {
-        let cfg = chapter(1.0);
-        // The instants of the run, to schedule a command on the 41st.
-        let mut plain = Script::default();
-        drive(&mut core(&cfg, vec![]), &mut plain, &StopFlag::new(), None);
-        let scheduled = TimedCommand {
-            at_ns: plain.ran[40].0,
-            command: Command::SetSensorHz { hz: 40.0 },
-        };
-        let mut c = core(&cfg, vec![scheduled.clone()]);
-        let mut script = Script {
-            apply_after: Some((40, Command::SetControlHz { hz: 25.0 })),
-            ..Script::default()
-        };
-        drive(&mut c, &mut script, &StopFlag::new(), None);
-        let applied = c.applied().to_vec();
-        assert_eq!(applied.len(), 2);
-        assert_eq!(script.ran[40], plain.ran[40]);
-        // Taken before the instant was made ready: logged at it, before the scheduled one,
-        // the order a seek and a replay apply them in.
-        assert_eq!(Nanos(applied[0].at_ns), script.ran[40]);
-        assert_eq!(applied[0].command, Command::SetControlHz { hz: 25.0 });
-        assert_eq!(applied[1], scheduled);
-        let driven = format!("{:?}", c.metrics());
-        // The same command, scheduled: the same run.
-        let (_, replayed, _) = stepped_to_end(core(&cfg, applied));
-        assert_eq!(driven, replayed);
-    }
-
-    #[test]
-    fn clock_is_told_the_instant_a_scheduled_phase_change_moved_to_not_the_one_it_left() {
-        let cfg = chapter(1.0);
-        // Every node's ticks moved 7 ms off their grid from 0.5 s: the instant at 0.5 s no
-        // longer runs.
-        let names: Vec<String> = cfg.graph.nodes.iter().map(|n| n.name.clone()).collect();
-        let commands: Vec<TimedCommand> = names
-            .iter()
-            .map(|node| TimedCommand {
-                at_ns: 500_000_000,
-                command: Command::SetPhase {
-                    node: node.clone(),
-                    phase_ms: 7.0,
-                },
-            })
-            .collect();
-        let mut c = core(&cfg, commands.clone());
-        let clocks = Clocks::default();
-        let mut script = Script::default();
-        drive(&mut c, &mut script, &StopFlag::new(), Some(&clocks));
-        assert_eq!(*clocks.0.borrow(), script.ran);
-        assert!(!script.ran.contains(&Nanos(500_000_000)));
-        let (_, stepped, _) = stepped_to_end(core(&cfg, commands));
-        assert_eq!(format!("{:?}", c.metrics()), stepped);
-    }
-
-    /// Sleeps once before the instant `moved`, counting the intakes until it has run.
-    struct WaitAtMoved {
-        moved: Nanos,
-        slept: bool,
-        ran_moved: bool,
-        intakes_while_waiting: usize,
-    }
-    impl DrivePolicy for WaitAtMoved {
-        fn intake(&mut self, _core: &mut RunCore) -> Intake {
-            if self.slept && !self.ran_moved {
-                self.intakes_while_waiting += 1;
-            }
-            Intake::Go
-        }
-        fn pace(&mut self, t: Nanos) -> Pace {
-            if t == self.moved && !self.slept {
-                self.slept = true;
-                return Pace::Sleep(Duration::from_millis(1));
-            }
-            Pace::Now
-        }
-        fn ran(&mut self, _core: &mut RunCore, ran: Ran) {
-            self.ran_moved |= ran.at == self.moved;
-        }
-    }
-
-    #[test]
-    fn an_instant_a_phase_change_moved_is_waited_for_without_intake() {
-        let cfg = chapter(1.0);
-        let commands: Vec<TimedCommand> = (cfg.graph.nodes.iter())
-            .map(|n| TimedCommand {
-                at_ns: 500_000_000,
-                command: Command::SetPhase {
-                    node: n.name.clone(),
-                    phase_ms: 7.0,
-                },
-            })
-            .collect();
-        let mut p = WaitAtMoved {
-            moved: Nanos(507_000_000),
-            slept: false,
-            ran_moved: false,
-            intakes_while_waiting: 0,
-        };
-        drive(&mut core(&cfg, commands), &mut p, &StopFlag::new(), None);
-        assert!(
-            p.slept && p.ran_moved,
-            "the instant moved to 507 ms, and ran"
-        );
-        assert_eq!(p.intakes_while_waiting, 0);
-    }
-
-    /// Stops after `n` instants; holds once the run has ended.
-    struct StopAfter {
-        n: usize,
-        ran: usize,
-        stop: StopFlag,
-        leave: bool,
-    }
-    impl DrivePolicy for StopAfter {
-        fn intake(&mut self, _core: &mut RunCore) -> Intake {
-            if self.leave && self.ran == self.n {
-                Intake::Leave
-            } else {
-                Intake::Go
+        cursor.next = None;
+        cursor.index += 1;
+        let then = policy.taken(course, index, unit, ticked)?;
+        if over {
+            let Some(end) = course.end() else {
+                return Ok(Drove::Over);
+            };
+            match policy.at_end(course, &end) {
+                Intake::Leave => return Ok(Drove::Ended(end)),
+                Intake::Go | Intake::Hold => continue,
             }
         }
-        fn ran(&mut self, _core: &mut RunCore, _ran: Ran) {
-            self.ran += 1;
-            if !self.leave && self.ran == self.n {
-                self.stop.stop();
-            }
-        }
-    }
-
-    #[test]
-    fn a_stop_interrupts_the_run_and_leaving_does_not() {
-        let cfg = chapter(1.0);
-        let stop = StopFlag::new();
-        let mut c = core(&cfg, vec![]);
-        let mut p = StopAfter {
-            n: 10,
-            ran: 0,
-            stop: stop.clone(),
-            leave: false,
-        };
-        let Drove::Ended(end) = drive(&mut c, &mut p, &stop, None) else {
-            panic!("a stop ends the run")
-        };
-        assert_eq!(end.reason, EndReason::Interrupted);
-        assert_eq!(end.at, c.now());
-        assert_eq!(p.ran, 10);
-
-        let mut c = core(&cfg, vec![]);
-        let mut p = StopAfter {
-            n: 10,
-            ran: 0,
-            stop: StopFlag::new(),
-            leave: true,
-        };
-        assert_eq!(drive(&mut c, &mut p, &StopFlag::new(), None), Drove::Left);
-        assert!(
-            c.end().is_none(),
-            "left, not ended: the run goes on from here"
-        );
-        p.leave = false;
-        let Drove::Ended(end) = drive(&mut c, &mut p, &StopFlag::new(), None) else {
-            unreachable!()
-        };
-        assert_eq!(end.reason, EndReason::Duration);
-        let (stepped, metrics, _) = stepped_to_end(core(&cfg, vec![]));
-        assert_eq!(end, stepped);
-        assert_eq!(format!("{:?}", c.metrics()), metrics);
-    }
-
-    /// Holds the ended run once, seeks back into it, and lets it end again.
-    struct HoldThenSeek {
-        ends: Vec<RunEnd>,
-        back_to: Nanos,
-    }
-    impl DrivePolicy for HoldThenSeek {
-        fn at_end(&mut self, core: &mut RunCore, end: &RunEnd) -> Intake {
-            self.ends.push(end.clone());
-            if self.ends.len() == 1 {
-                core.seek(self.back_to).unwrap();
-                Intake::Hold
-            } else {
-                Intake::Leave
-            }
-        }
-    }
-
-    #[test]
-    fn an_ended_run_held_and_sought_back_runs_on_to_the_same_end() {
-        let cfg = chapter(0.6);
-        let mut c = core(&cfg, vec![]);
-        let mut p = HoldThenSeek {
-            ends: vec![],
-            back_to: secs(0.2),
-        };
-        let drove = drive(&mut c, &mut p, &StopFlag::new(), None);
-        assert_eq!(p.ends.len(), 2);
-        assert_eq!(drove, Drove::Ended(p.ends[0].clone()));
-        let (_, metrics, _) = stepped_to_end(core(&cfg, vec![]));
-        assert_eq!(format!("{:?}", c.metrics()), metrics);
-    }
-
-    #[test]
-    fn the_pacer_runs_what_is_due_and_sleeps_at_most_the_cap_for_the_rest() {
-        let p = Pacer::new(secs(1.0), Some(2.0));
-        assert_eq!(p.pace(secs(0.5)), Pace::Now, "behind: now");
-        assert_eq!(p.pace(secs(1.0)), Pace::Now);
-        match p.pace(secs(1.004)) {
-            Pace::Sleep(d) => assert!(d <= Duration::from_millis(2), "4 ms at ×2 is 2 ms: {d:?}"),
-            Pace::Now => panic!("not yet due"),
-        }
-        assert_eq!(p.pace(secs(60.0)), Pace::Sleep(MAX_PACING_SLEEP));
-        let now = p.run_time_now().unwrap();
-        assert!(now >= secs(1.0) && now < secs(3.0), "{now:?}");
-        assert_eq!(Pacer::new(Nanos::ZERO, None).run_time_now(), None);
-        let due = p.due(secs(3.0)).unwrap();
-        let ahead = due.duration_since(p.anchor_wall);
-        assert_eq!(ahead, Duration::from_secs(1), "2 s of run time at ×2");
-        for speed in [
-            None,
-            Some(0.0),
-            Some(-1.0),
-            Some(f64::NAN),
-            Some(f64::INFINITY),
-        ] {
-            let p = Pacer::new(Nanos::ZERO, speed);
-            assert_eq!(p.pace(secs(1e6)), Pace::Now, "{speed:?}");
+        if then == Turn::Wait {
+            return Ok(Drove::Waiting);
         }
     }
 }

@@ -1,8 +1,9 @@
-//! The drive loop's real-clock mode: the graph handed to the real clock's threads
-//! ([`RunCore::run_real`], on a runner thread of its own), while the calling thread takes the
-//! front end's controls ([`RealPolicy`]) until the run ends and the policy lets it go, or the
-//! policy leaves (which stops the run). The lab's real-clock stretches and each process of
-//! a launch under the real clock go through it.
+//! A run under the real clock, watched: the graph handed to the real clock's threads
+//! ([`RunCore::run_real`], on a runner thread of its own), which run it tick by tick with no
+//! drive loop, while the calling thread takes the front end's controls ([`RealPolicy`])
+//! until the run ends and the policy lets it go, or the policy leaves (which stops the
+//! run). The lab's real-clock stretches and each process of a launch under the real clock
+//! go through it.
 //!
 //! Commands cannot go through the core here (the runner has it): a policy applies them to
 //! the graph's handles ([`crate::graph::GraphHandles`], cloned before), at the run time the
@@ -12,7 +13,7 @@ use super::Intake;
 use crate::runcore::{RealEnd, RunCore};
 use crate::scheduler::{RealOptions, StopFlag};
 
-/// What a front end supplies to [`drive_real`].
+/// What a front end supplies to [`watch_real`].
 pub trait RealPolicy {
     /// While the graph runs (`ended`: the runner has returned, and the policy holds the
     /// ended run): take controls, waiting for them at most a few tens of ms.
@@ -33,7 +34,7 @@ pub trait RealPolicy {
 /// takes controls on this thread ([`RealPolicy`]); `stop` set from outside stops the run as
 /// the policy leaving does. Returns how the run went, or `None` when the runner failed: the
 /// core is then ended as interrupted ([`RunCore::interrupt`]), its nodes gone.
-pub fn drive_real<P: RealPolicy + ?Sized>(
+pub fn watch_real<P: RealPolicy + ?Sized>(
     core: &mut RunCore,
     part: Option<&[usize]>,
     opts: &RealOptions,
@@ -158,7 +159,7 @@ mod tests {
             ends: vec![],
             hold: 3,
         };
-        let r = drive_real(&mut c, None, &real, &mut p, &StopFlag::new()).unwrap();
+        let r = watch_real(&mut c, None, &real, &mut p, &StopFlag::new()).unwrap();
         assert_eq!(r.end.reason, EndReason::Duration);
         assert_eq!(p.ends, vec![Some(EndReason::Duration)], "told once");
         assert_eq!(p.hold, 0, "held for three intakes after the end");
@@ -175,7 +176,7 @@ mod tests {
             hold: 0,
         };
         let began = Instant::now();
-        let r = drive_real(
+        let r = watch_real(
             &mut c,
             None,
             &RealOptions::default(),
@@ -201,7 +202,7 @@ mod tests {
             ends: vec![],
             hold: 0,
         };
-        let r = drive_real(&mut c, None, &RealOptions::default(), &mut p, &stop).unwrap();
+        let r = watch_real(&mut c, None, &RealOptions::default(), &mut p, &stop).unwrap();
         assert_eq!(
             r.end.reason,
             EndReason::Interrupted,

@@ -1,0 +1,108 @@
+//! The courses the drive loop draws from ([`Course`]): a run core instant by instant, a
+//! run core event by event, and a follower, which draws a run's order of events and runs
+//! none of them.
+
+use super::{Course, Taken};
+use crate::runcore::{Follower, RunCore, Step};
+use crate::scheduler::{Event, RunEnd};
+use ratelab_core::node::Flow;
+use ratelab_core::time::Nanos;
+
+/// A run in this process, instant by instant ([`RunCore::step`]'s instants): paced before
+/// it is made ready, ended at its duration or as interrupted by the loop.
+impl Course<Nanos> for RunCore {
+    fn end(&self) -> Option<RunEnd> {
+        RunCore::end(self).cloned()
+    }
+
+    fn peek(&self) -> Option<Nanos> {
+        self.next_instant()
+    }
+
+    fn draw(&mut self) -> Option<Nanos> {
+        self.prepare_instant()
+    }
+
+    fn exhausted(&mut self) -> bool {
+        self.finish_at_duration();
+        true
+    }
+
+    fn stopped(&mut self) -> Option<RunEnd> {
+        Some(self.interrupt())
+    }
+
+    fn run_here(&mut self, t: Nanos) -> Taken {
+        match self.run_prepared(t) {
+            Step::Ran { ticked, .. } => Taken::Ran {
+                over: false,
+                ticked,
+            },
+            Step::Ended(_) => Taken::Ran {
+                over: true,
+                ticked: 0,
+            },
+        }
+    }
+}
+
+/// A run across processes, this process's share of it, event by event
+/// ([`RunCore::next_event`]): each event run here ([`RunCore::run_event`]) or taken from its
+/// report ([`RunCore::ran_elsewhere`], the policy's). What a stop or the run's last event
+/// means is the caller's.
+impl Course<Event> for RunCore {
+    fn end(&self) -> Option<RunEnd> {
+        RunCore::end(self).cloned()
+    }
+
+    fn draw(&mut self) -> Option<Event> {
+        self.next_event()
+    }
+
+    fn exhausted(&mut self) -> bool {
+        false
+    }
+
+    fn stopped(&mut self) -> Option<RunEnd> {
+        None
+    }
+
+    fn run_here(&mut self, event: Event) -> Taken {
+        let ticked = match event {
+            Event::Start { node, .. } => 1u64 << (node % 64),
+            Event::Publish { .. } => 0,
+        };
+        match self.run_event(event) {
+            Ok((flow, _)) => Taken::Ran {
+                over: flow == Flow::Stop,
+                ticked,
+            },
+            Err(_) => Taken::Ran { over: true, ticked }, // the core has ended: failed
+        }
+    }
+}
+
+/// The launcher's order of a run across processes: every event taken from its process's
+/// report (the policy's [`super::DrivePolicy::take`]); a follower runs none here.
+impl Course<Event> for Follower {
+    fn end(&self) -> Option<RunEnd> {
+        None
+    }
+
+    fn draw(&mut self) -> Option<Event> {
+        self.next_event()
+    }
+
+    fn exhausted(&mut self) -> bool {
+        false
+    }
+
+    fn stopped(&mut self) -> Option<RunEnd> {
+        None
+    }
+
+    /// A follower runs no node: an event is here only once its report is.
+    fn run_here(&mut self, _event: Event) -> Taken {
+        Taken::NotYet
+    }
+}
