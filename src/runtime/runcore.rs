@@ -40,8 +40,8 @@
 //! # Capture and restore
 //! [`RunCore::capture`] takes the run's complete state between two instants:
 //! - the plant's (MuJoCo's integration state, `mj_getState`, and its step count);
-//! - every node's ([`Node::save`]: held forces, filters, noise and compute-time generators,
-//!   publishes held by a tick still computing);
+//! - every node's ([`GraphNode::save`]: held forces, filters, noise and compute-time
+//!   generators, publishes held by a tick still computing);
 //! - every topic's, each subscription's queue (messages buffered and on the link, depth,
 //!   QoS, the link's generator, counters, deadline timers);
 //! - each node's rate and liveliness, the faults injected by command, the brain in the slot

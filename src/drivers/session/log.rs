@@ -75,7 +75,7 @@ pub struct LoggedRun {
     /// The summary at the end, as the live run measured it.
     pub metrics: Option<Metrics>,
     /// Read from a log of version 2 or before, whose runs booked an injected fault at the
-    /// time it was given ([`SESSION_VERSION`]); never written.
+    /// time it was given (`SESSION_VERSION`); never written.
     #[serde(skip)]
     pub faults_as_given: bool,
 }

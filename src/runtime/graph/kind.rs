@@ -297,7 +297,8 @@ pub struct RunParts<'a> {
 }
 
 /// What an adapter of code that lives elsewhere is given beside its topics (a Python node,
-/// a ROS 2 node's proxy: kinds of [`AnyPorts`], which read and publish themselves).
+/// a ROS 2 node's proxy: kinds of [`AnyPorts`](ratelab_core::ports::AnyPorts), which read
+/// and publish themselves).
 pub struct AdapterParts<'a> {
     /// A Python node's script and class.
     pub python: Option<&'a PythonCode>,

@@ -391,10 +391,12 @@ impl VirtualScheduler {
     /// released.
     ///
     /// The scheduler's side of the event is done when this returns (a thread freed, a
-    /// thread taken); the node's side is the caller's: [`Node::publish_held`] for a publish
-    /// where the node runs, and for a start exactly one of [`VirtualScheduler::start_here`]
-    /// (the node ticks here) or [`VirtualScheduler::start_elsewhere`] (it ticks in another
-    /// process, `ratelab::distributed::lockstep`), before the next call.
+    /// thread taken); the node's side is the caller's:
+    /// [`GraphNode::publish_held`](crate::graph::nodes::GraphNode::publish_held) for a
+    /// publish where the node runs, and for a start exactly one of
+    /// [`VirtualScheduler::start_here`] (the node ticks here) or
+    /// [`VirtualScheduler::start_elsewhere`] (it ticks in another process,
+    /// `ratelab::distributed::lockstep`), before the next call.
     pub fn event_now(&mut self) -> Option<Event> {
         let t = self.now;
         if let Some(&Reverse((at, i))) = self.completions.peek() {
